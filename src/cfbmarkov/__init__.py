@@ -1,0 +1,29 @@
+"""cfbmarkov: Markov chain models of particle motion in circulating fluidized bed risers.
+
+The pipeline, data flowing one way::
+
+    config -> simulate (CFD-DEM) -> trajectories (HDF5) <- io (CSV, LAMMPS dumps)
+    trajectories -> markov (states, estimate, model, Monte Carlo) -> trajectories
+    trajectories x2 -> analysis (RTD, mixing, metrics) -> report (figures)
+"""
+
+import os as _os
+
+# Numba's default threading layer (tbb) gives almost no speed-up for the short parallel
+# loops of this package; OpenMP gives about 1.9x on 2 cores (see docs/performance.md).
+# It must be chosen before numba compiles anything; a user's explicit choice wins.
+_os.environ.setdefault("NUMBA_THREADING_LAYER", "omp")
+
+__version__ = "0.1.0"
+
+from cfbmarkov.errors import CfbmarkovError, InputError  # noqa: E402
+from cfbmarkov.trajectories import Trajectories, TrajectoryWriter, write_trajectories  # noqa: E402
+
+__all__ = [
+    "CfbmarkovError",
+    "InputError",
+    "Trajectories",
+    "TrajectoryWriter",
+    "write_trajectories",
+    "__version__",
+]

@@ -1,0 +1,5 @@
+import sys
+
+from cfbmarkov.cli import main
+
+sys.exit(main())

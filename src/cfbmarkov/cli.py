@@ -1,0 +1,229 @@
+"""Command line: ``cfbmarkov VERB ...``; every verb is a thin layer over the Python API.
+
+Errors in the input (files, options) are reported as one line on stderr with exit code 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from cfbmarkov.errors import CfbmarkovError, InputError
+
+
+# -- option parsers ------------------------------------------------------------------------
+def parse_window(text: str) -> tuple[float, float]:
+    """'10:15' -> (10.0, 15.0) seconds."""
+    try:
+        a, b = text.split(":")
+        start, stop = float(a), float(b)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"window '{text}' is not START:STOP in seconds") from None
+    if not stop > start:
+        raise argparse.ArgumentTypeError(f"window '{text}' is empty: STOP must exceed START")
+    return start, stop
+
+
+def parse_cells(text: str) -> tuple[int, int]:
+    """'6x38' -> (6 columns, 38 rows)."""
+    try:
+        a, b = text.lower().split("x")
+        m, n = int(a), int(b)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"cells '{text}' is not COLUMNSxROWS (for example 6x38)") from None
+    if m < 1 or n < 1:
+        raise argparse.ArgumentTypeError(f"cells '{text}' needs at least one column and one row")
+    return m, n
+
+
+def _positive_float(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be positive")
+    return value
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit code 2
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+# -- verbs -----------------------------------------------------------------------------------
+def _cmd_import(args) -> int:
+    from cfbmarkov.io import import_file
+
+    path = import_file(args.source, args.format, args.output, width=args.width,
+                       height=args.height, time_step=args.time_step)
+    print(path)
+    return 0
+
+
+def _cmd_fit(args) -> int:
+    from cfbmarkov.markov import CellGrid, estimator_from_name
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(args.run) as run:
+        grid = CellGrid(args.cells[0], args.cells[1], run.width, run.height)
+        estimator = estimator_from_name(args.estimator, state_space=grid, lag=args.lag)
+        model = estimator.fit(run, window=args.window)
+    model.save(args.output)
+    print(model.summary())
+    print(args.output)
+    return 0
+
+
+def _cmd_predict(args) -> int:
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    model = MarkovModel.load(args.model)
+    with Trajectories(args.init) as run:
+        model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
+                      output=args.output, progress=not args.quiet)
+    print(args.output)
+    return 0
+
+
+def _cmd_compare(args) -> int:
+    from cfbmarkov.report.compare import compare
+
+    summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
+                      bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures)
+    print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
+          f"{summary['model']['rt_mean']:.4g} s (PD {summary['pd_rt_mean']:+.2f} %); "
+          f"SD(RT) PD {summary['pd_rt_sd']:+.2f} %; MD {summary['md_rtd']:.4g}; "
+          f"mixing RMS {summary['mixing_rms']:.4g}")
+    print(Path(args.output) / "summary.json")
+    return 0
+
+
+def _cmd_rtd(args) -> int:
+    from cfbmarkov.markov import MarkovModel
+
+    model = MarkovModel.load(args.model)
+    rtd = model.rtd(window=args.window_length)
+    print(f"E(RT) = {rtd.mean:.6g} s, SD(RT) = {rtd.sd:.6g} s "
+          f"({'window ' + format(args.window_length, 'g') + ' s' if args.window_length else 'intrinsic'}, "
+          f"unresolved mass {rtd.unresolved:.2g})")
+    return 0
+
+
+def _cmd_info(args) -> int:
+    import h5py
+
+    from cfbmarkov.trajectories import _open_h5
+
+    with _open_h5(args.file) as f:
+        fmt = f.attrs.get("format")
+    if fmt == "cfbmarkov.model":
+        from cfbmarkov.markov import MarkovModel
+
+        print(MarkovModel.load(args.file).summary())
+    else:
+        from cfbmarkov.trajectories import Trajectories
+
+        with Trajectories(args.file) as t:
+            print(t)
+    del h5py
+    return 0
+
+
+def _cmd_bench(args) -> int:
+    from cfbmarkov.bench import run_benchmarks
+
+    for name, value, unit in run_benchmarks(only=args.only, repeat=args.repeat,
+                                            particles=args.particles):
+        print(f"{name}: {value:.4g} {unit}", flush=True)
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    from cfbmarkov import __version__
+
+    p = _Parser(prog="cfbmarkov", description="Markov chain models of particle motion in CFB risers.")
+    p.add_argument("--version", action="version", version=f"cfbmarkov {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+
+    s = sub.add_parser("import", help="import CSV or LAMMPS/LIGGGHTS dumps as a trajectory file")
+    s.add_argument("source", help="input file (.csv, dump, optionally .gz)")
+    s.add_argument("--format", required=True, choices=["csv", "lammps"])
+    s.add_argument("-o", "--output", required=True, help="output trajectory file (.h5)")
+    s.add_argument("--width", type=_positive_float, default=None,
+                   help="riser width W, m (default: the dump's box, else 0.09)")
+    s.add_argument("--height", type=_positive_float, default=None,
+                   help="riser height H, m (default: the dump's box, else 0.95)")
+    s.add_argument("--time-step", type=_positive_float, default=None,
+                   help="LAMMPS time step, s, for dumps without ITEM: TIME")
+    s.set_defaults(func=_cmd_import)
+
+    s = sub.add_parser("fit", help="fit a Markov chain model on a window of a trajectory file")
+    s.add_argument("run", help="trajectory file")
+    s.add_argument("--cells", type=parse_cells, default=(6, 38), help="COLUMNSxROWS (default 6x38)")
+    s.add_argument("--lag", type=_positive_float, default=0.025, help="lag, s (default 0.025)")
+    s.add_argument("--window", type=parse_window, default=(10.0, 15.0),
+                   help="fitting window START:STOP, s (default 10:15)")
+    s.add_argument("--estimator", choices=["paper", "mle"], default="paper")
+    s.add_argument("-o", "--output", required=True, help="model file (.h5)")
+    s.set_defaults(func=_cmd_fit)
+
+    s = sub.add_parser("predict", help="Monte Carlo prediction from a run's state at a start time")
+    s.add_argument("model")
+    s.add_argument("--init", required=True, help="trajectory file giving the initial state")
+    s.add_argument("--start", type=float, required=True, help="initial frame time, s")
+    s.add_argument("--duration", type=_positive_float, required=True, help="simulated time, s")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("-o", "--output", required=True, help="prediction trajectory file (.h5)")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_predict)
+
+    s = sub.add_parser("compare", help="compare two trajectory files: RTD, mixing, figures")
+    s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
+    s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
+    s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
+    s.add_argument("-o", "--output", required=True, help="output directory")
+    s.add_argument("--bin-width", type=_positive_float, default=0.025, help="RTD bin width, s")
+    s.add_argument("--md-order", type=_positive_float, default=2.0, help="Minkowski order k")
+    s.add_argument("--no-figures", action="store_true", help="write summary.json only")
+    s.set_defaults(func=_cmd_compare)
+
+    s = sub.add_parser("rtd", help="exact residence-time distribution of a model")
+    s.add_argument("model")
+    s.add_argument("--window-length", type=_positive_float, default=None,
+                   help="observation window, s: the RTD as seen in such a window")
+    s.set_defaults(func=_cmd_rtd)
+
+    s = sub.add_parser("info", help="describe a trajectory or model file")
+    s.add_argument("file")
+    s.set_defaults(func=_cmd_info)
+
+    s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
+    s.add_argument("--only", action="append", default=None, help="run only this benchmark")
+    s.add_argument("--repeat", type=int, default=5, help="repetitions (median reported)")
+    s.add_argument("--particles", type=int, default=27000)
+    s.set_defaults(func=_cmd_bench)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except CfbmarkovError as exc:
+        print(f"cfbmarkov {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"cfbmarkov {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
+
+
+__all__ = ["main", "build_parser", "parse_cells", "parse_window", "InputError"]

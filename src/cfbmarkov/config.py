@@ -1,0 +1,148 @@
+"""Case configuration: TOML files validated by pydantic models.
+
+Every parameter of the paper's Table 1 (and the contact law of Table 2) has a named field;
+units are given in each field's description. Defaults are the paper's values
+(``../shared/SPEC.md`` section 1).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Annotated
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from cfbmarkov.errors import InputError
+
+Positive = Annotated[float, Field(gt=0)]
+
+
+class _Model(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+class RiserConfig(_Model):
+    """Geometry of the 2D riser: x across (walls at 0 and W), y up (periodic, 0 <= y < H)."""
+
+    width: Positive = Field(0.09, description="riser width W, m (Table 1: bed size 0.09 m)")
+    height: Positive = Field(0.95, description="riser height H, m (Table 1: bed size 0.95 m)")
+    gravity: float = Field(9.81, ge=0, description="gravitational acceleration, m/s^2, acting in -y")
+
+
+class ParticleConfig(_Model):
+    number: int = Field(27000, gt=0, description="number of particles (Table 1: 27000)")
+    diameter: Positive = Field(0.001, description="particle diameter d, m (Table 1: 0.001 m)")
+    density: Positive = Field(2600.0, description="particle density, kg/m^3 (Table 1: 2600)")
+
+    @property
+    def mass(self) -> float:
+        """Sphere mass, kg."""
+        return self.density * math.pi * self.diameter**3 / 6.0
+
+    @property
+    def moment_of_inertia(self) -> float:
+        """Sphere moment of inertia 2/5 m r^2, kg m^2."""
+        return 0.1 * self.mass * self.diameter**2
+
+
+class GasConfig(_Model):
+    density: Positive = Field(1.205, description="gas density, kg/m^3 (air)")
+    viscosity: Positive = Field(1.8e-5, description="gas dynamic viscosity, Pa s (air)")
+    superficial_velocity: Positive = Field(
+        6.0, description="inlet air velocity U: cross-section mean of void_fraction*v_gas, m/s "
+        "(Table 1: 3, 4, 6 or 8 m/s)")
+    minimum_fluidization_velocity: Positive = Field(
+        0.44, description="minimum fluidization velocity, m/s (Table 1: 0.44; reported only)")
+
+
+class ContactConfig(_Model):
+    """Linear spring-dashpot contact with tangential history and Coulomb cap (Table 2)."""
+
+    normal_stiffness: Positive = Field(10000.0, description="kn, N/m (Table 1: 10000)")
+    tangential_stiffness: Positive = Field(2857.0, description="kt, N/m (Table 1: 2857)")
+    normal_restitution: float = Field(0.97, gt=0, le=1, description="en, - (Table 1: 0.97)")
+    tangential_restitution: float = Field(0.33, gt=0, le=1, description="et, - (Table 1: 0.33)")
+    friction_coefficient: float = Field(0.1, ge=0, description="Coulomb friction mu_f, - (Table 1: 0.1)")
+
+
+class NumericsConfig(_Model):
+    cfd_cells: tuple[int, int] = Field((9, 95), description="gas grid cells (across, up), - (Table 1: 9 x 95)")
+    dem_cells: tuple[int, int] = Field((30, 351), description="DEM neighbour-search cells (across, up), - (Table 1: 30 x 351)")
+    cfd_time_step: Positive = Field(5e-5, description="gas time step, s (Table 1: 5e-5)")
+    dem_time_step: Positive = Field(5e-6, description="particle time step, s (Table 1: 5e-6)")
+
+    @model_validator(mode="after")
+    def _steps_commensurate(self):
+        ratio = self.cfd_time_step / self.dem_time_step
+        if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+            raise ValueError(
+                f"cfd_time_step {self.cfd_time_step:g} s must be a whole multiple of "
+                f"dem_time_step {self.dem_time_step:g} s")
+        return self
+
+    @property
+    def dem_steps_per_cfd_step(self) -> int:
+        return int(round(self.cfd_time_step / self.dem_time_step))
+
+
+class OutputConfig(_Model):
+    end_time: Positive = Field(20.0, description="simulated time to reach, s (paper: 20)")
+    frame_interval: Positive = Field(0.025, description="time between stored frames, s")
+
+
+class MarkovConfig(_Model):
+    columns: int = Field(6, gt=0, description="cell columns m across the riser, - (paper: 6)")
+    rows: int = Field(38, gt=0, description="cell rows n up the riser, - (paper: 38)")
+    lag: Positive = Field(0.025, description="transition time step, s (paper: 0.025)")
+    fit_window: tuple[float, float] = Field((10.0, 15.0), description="fitting window A:B, s")
+    predict_window: tuple[float, float] = Field((15.0, 20.0), description="prediction/comparison window, s")
+
+
+class CaseConfig(_Model):
+    name: str = Field("custom", description="case name")
+    seed: int = Field(0, ge=0, description="random seed (initial placement, Monte Carlo)")
+    riser: RiserConfig = RiserConfig()
+    particles: ParticleConfig = ParticleConfig()
+    gas: GasConfig = GasConfig()
+    contact: ContactConfig = ContactConfig()
+    numerics: NumericsConfig = NumericsConfig()
+    output: OutputConfig = OutputConfig()
+    markov: MarkovConfig = MarkovConfig()
+
+
+def _format_validation_error(err: ValidationError, source: str) -> str:
+    first = err.errors()[0]
+    loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
+    return f"{source}: invalid configuration at '{loc}': {first['msg']}"
+
+
+def load_case(source: str | Path) -> CaseConfig:
+    """Load a case from a TOML file path or a shipped case name (see :func:`case_names`)."""
+    text: str
+    path = Path(source)
+    if path.suffix == ".toml" or path.exists():
+        try:
+            text = path.read_text()
+        except OSError as exc:
+            raise InputError(f"cannot read case file {source}: {exc.strerror}") from None
+    elif str(source) in case_names():
+        text = resources.files("cfbmarkov.cases").joinpath(f"{source}.toml").read_text()
+    else:
+        raise InputError(f"unknown case '{source}': not a file, and not one of {', '.join(case_names())}")
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{source}: not valid TOML: {exc}") from None
+    try:
+        return CaseConfig.model_validate(data)
+    except ValidationError as exc:
+        raise InputError(_format_validation_error(exc, str(source))) from None
+
+
+def case_names() -> list[str]:
+    """Names of the shipped cases (``paper-u3`` ...)."""
+    folder = resources.files("cfbmarkov.cases")
+    return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))

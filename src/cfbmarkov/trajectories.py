@@ -1,0 +1,477 @@
+"""The trajectory store: one HDF5 layout for CFD-DEM runs, imported data and predictions.
+
+Layout (H5MD-like, every array in SI units)::
+
+    /                       attrs: format, version, width, height, length_unit, time_unit,
+                                   frame_interval, source, parameters (JSON), created,
+                                   cfbmarkov_version
+    /particles/id           [N]      int64    particle ids (the column order of every frame)
+    /frames/time            [T]      float64  s
+    /frames/position        [T,N,2]  float64  m, chunked one frame per chunk
+    /frames/velocity        [T,N,2]  float64  m/s (optional)
+    /frames/lap             [T,N]    int32    lap counter: +1 per pass up through the top,
+                                              -1 per pass down through the bottom
+    /events/time            [E]      float64  exact pass events (optional)
+    /events/particle        [E]      int32    index into /particles/id
+    /events/direction       [E]      int8     +1 up through the top, -1 down through the bottom
+    /provenance/<name>/...  groups a producer attaches (e.g. the model behind a prediction)
+
+Every file is written under a temporary name and renamed when complete, so a reader never
+sees a half-written file. Frames are read one at a time or by window without loading the
+whole file (:meth:`Trajectories.positions` with a slice).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Iterator
+
+import h5py
+import numpy as np
+
+from cfbmarkov.errors import InputError
+
+FORMAT = "cfbmarkov.trajectories"
+VERSION = 1
+#: relative tolerance on frame spacing and on matching a requested time to a frame
+TIME_TOLERANCE = 1e-6
+#: positions may lie this far outside the domain (m) before they are refused (round-off)
+POSITION_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class PassEvents:
+    """Passes through the periodic boundary: time (s), particle index, direction (+1/-1)."""
+
+    time: np.ndarray
+    particle: np.ndarray
+    direction: np.ndarray
+
+    def __len__(self) -> int:
+        return int(self.time.size)
+
+
+def lap_increments(previous_y: np.ndarray, y: np.ndarray, height: float) -> np.ndarray:
+    """Boundary passes between two frames by the minimal-image rule on y (SPEC section 2).
+
+    Returns +1 where a particle passed up through the top (y dropped by more than H/2),
+    -1 where it passed down through the bottom, 0 elsewhere.
+    """
+    dy = y - previous_y
+    return (dy < -0.5 * height).astype(np.int32) - (dy > 0.5 * height).astype(np.int32)
+
+
+def _open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: empty file")
+    try:
+        return h5py.File(path, mode)
+    except OSError:
+        raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format)") from None
+
+
+class Trajectories:
+    """Read access to a trajectory file. Open with ``Trajectories(path)`` or as a context manager.
+
+    Small metadata (times, ids, domain) is loaded on open; frames are read on demand.
+    """
+
+    def __init__(self, path: str | os.PathLike):
+        self.path = Path(path)
+        self._file = _open_h5(self.path)
+        try:
+            self._validate()
+        except InputError:
+            self._file.close()
+            raise
+        except (KeyError, OSError, ValueError, TypeError) as exc:
+            self._file.close()
+            raise InputError(f"{self.path}: damaged trajectory file ({exc})") from None
+
+    # -- opening and validation -------------------------------------------------------
+    def _validate(self) -> None:
+        f = self._file
+        fmt = f.attrs.get("format")
+        if isinstance(fmt, bytes):
+            fmt = fmt.decode()
+        if fmt != FORMAT:
+            what = "a cfbmarkov model file" if fmt == "cfbmarkov.model" else "a cfbmarkov trajectory file"
+            raise InputError(f"{self.path}: not {what} (format attribute is {fmt!r})"
+                             if fmt else f"{self.path}: not a cfbmarkov trajectory file "
+                             "(no 'format' attribute)")
+        for name in ("particles/id", "frames/time", "frames/position", "frames/lap"):
+            if name not in f:
+                raise InputError(f"{self.path}: damaged trajectory file (no '{name}' dataset)")
+        self.ids = f["particles/id"][()]
+        self.times = f["frames/time"][()]
+        n, t = self.ids.size, self.times.size
+        if f["frames/position"].shape != (t, n, 2) or f["frames/lap"].shape != (t, n):
+            raise InputError(f"{self.path}: damaged trajectory file (frame arrays do not match "
+                             f"{t} times x {n} particles)")
+        if t == 0:
+            raise InputError(f"{self.path}: trajectory file holds no frames")
+        self.width = float(f.attrs["width"])
+        self.height = float(f.attrs["height"])
+        self.source = str(f.attrs.get("source", "unknown"))
+        self.parameters: dict[str, Any] = json.loads(f.attrs.get("parameters", "{}"))
+        self.frame_interval = float(f.attrs.get("frame_interval", np.nan))
+        if not np.isfinite(self.frame_interval) and t > 1:
+            self.frame_interval = float(self.times[1] - self.times[0])
+
+    def close(self) -> None:
+        self._file.close()
+
+    def __enter__(self) -> "Trajectories":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        span = f"{self.times[0]:g}..{self.times[-1]:g} s"
+        return (f"Trajectories({str(self.path)!r}: {self.n_particles} particles x {self.n_frames} "
+                f"frames, {span}, every {self.frame_interval:g} s, source={self.source!r})")
+
+    # -- metadata --------------------------------------------------------------------
+    @property
+    def n_frames(self) -> int:
+        return int(self.times.size)
+
+    @property
+    def n_particles(self) -> int:
+        return int(self.ids.size)
+
+    @property
+    def has_velocity(self) -> bool:
+        return "frames/velocity" in self._file
+
+    @property
+    def has_events(self) -> bool:
+        return "events/time" in self._file
+
+    @property
+    def attrs(self) -> dict[str, Any]:
+        return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in self._file.attrs.items()}
+
+    # -- locating frames -------------------------------------------------------------
+    def _tolerance(self) -> float:
+        interval = self.frame_interval if np.isfinite(self.frame_interval) else 1.0
+        return max(TIME_TOLERANCE * max(abs(self.times[-1]), 1.0), 1e-3 * interval)
+
+    def frame_index(self, time: float) -> int:
+        """Index of the frame at ``time`` (s); an error if no frame lies there."""
+        i = int(np.argmin(np.abs(self.times - time)))
+        if abs(self.times[i] - time) > self._tolerance():
+            raise InputError(
+                f"{self.path}: no frame at t = {time:g} s (frames span {self.times[0]:g} to "
+                f"{self.times[-1]:g} s every {self.frame_interval:g} s)")
+        return i
+
+    def window(self, start: float, stop: float) -> slice:
+        """Frames with start <= t <= stop, as a slice; an error if the window leaves the data."""
+        if not stop > start:
+            raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
+        tol = self._tolerance()
+        if start < self.times[0] - tol or stop > self.times[-1] + tol:
+            raise InputError(
+                f"window {start:g}:{stop:g} s lies outside the data of {self.path} "
+                f"({self.times[0]:g} to {self.times[-1]:g} s)")
+        i0 = int(np.searchsorted(self.times, start - tol, side="left"))
+        i1 = int(np.searchsorted(self.times, stop + tol, side="right"))
+        if i1 - i0 < 1:
+            raise InputError(f"window {start:g}:{stop:g} s holds no frame of {self.path}")
+        return slice(i0, i1)
+
+    def lag_frames(self, lag: float) -> int:
+        """The lag (s) as a whole number of frame intervals; an error if it is not one."""
+        if not lag > 0:
+            raise InputError(f"lag {lag:g} s must be positive")
+        ratio = lag / self.frame_interval
+        k = int(round(ratio))
+        if k < 1 or abs(ratio - k) > 1e-6 * max(ratio, 1.0):
+            raise InputError(f"lag {lag:g} s is not a whole multiple of the frame interval "
+                             f"{self.frame_interval:g} s of {self.path}")
+        return k
+
+    # -- reading frames --------------------------------------------------------------
+    def positions(self, frames: int | slice = slice(None)) -> np.ndarray:
+        """Positions (m): [N, 2] for one frame index, [T, N, 2] for a slice."""
+        return self._file["frames/position"][frames]
+
+    def velocities(self, frames: int | slice = slice(None)) -> np.ndarray | None:
+        """Velocities (m/s) like :meth:`positions`, or None when the source had none."""
+        if not self.has_velocity:
+            return None
+        return self._file["frames/velocity"][frames]
+
+    def laps(self, frames: int | slice = slice(None)) -> np.ndarray:
+        """Lap counters: [N] for one frame index, [T, N] for a slice."""
+        return self._file["frames/lap"][frames]
+
+    def iter_frames(self, frames: slice = slice(None), block: int = 64
+                    ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
+        """Yield (times, positions, laps) in blocks of at most ``block`` frames."""
+        start, stop, step = frames.indices(self.n_frames)
+        if step != 1:
+            raise ValueError("iter_frames takes a contiguous slice")
+        for i in range(start, stop, block):
+            j = min(i + block, stop)
+            yield self.times[i:j], self.positions(slice(i, j)), self.laps(slice(i, j))
+
+    def events(self) -> PassEvents | None:
+        """Exact pass events, sorted by time, or None when the source logged none."""
+        if not self.has_events:
+            return None
+        g = self._file["events"]
+        return PassEvents(g["time"][()], g["particle"][()], g["direction"][()])
+
+    def group(self, name: str) -> h5py.Group | None:
+        """A provenance group attached by the producer (e.g. ``'model'``), or None."""
+        key = f"provenance/{name}"
+        return self._file[key] if key in self._file else None
+
+
+class TrajectoryWriter:
+    """Write a trajectory file frame by frame; the file appears under its name only when closed.
+
+    Every frame is validated (finite, inside the domain, times increasing and evenly spaced);
+    the lap counter is derived from the positions by the minimal-image rule when not given.
+    On an error, or when used as a context manager that exits by an exception, the partial
+    file is removed.
+    """
+
+    def __init__(self, path: str | os.PathLike, ids, *, width: float, height: float,
+                 source: str, parameters: dict[str, Any] | None = None,
+                 with_velocity: bool = False, frame_interval: float | None = None,
+                 label: str | None = None):
+        self.path = Path(path)
+        self.ids = np.asarray(ids, dtype=np.int64)
+        if self.ids.ndim != 1 or self.ids.size == 0:
+            raise InputError("a trajectory needs at least one particle id")
+        if np.unique(self.ids).size != self.ids.size:
+            raise InputError("particle ids are not unique")
+        if not (width > 0 and height > 0):
+            raise InputError(f"domain {width:g} x {height:g} m must have positive size")
+        self.width, self.height = float(width), float(height)
+        self.with_velocity = with_velocity
+        self._label = label or str(self.path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        n = self.ids.size
+        self._file = h5py.File(self._tmp, "w")
+        f = self._file
+        f.attrs.update({
+            "format": FORMAT, "version": VERSION, "width": self.width, "height": self.height,
+            "length_unit": "m", "time_unit": "s", "source": source,
+            "parameters": json.dumps(parameters or {}, default=_json_default),
+            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "cfbmarkov_version": _version(),
+        })
+        if frame_interval is not None:
+            f.attrs["frame_interval"] = float(frame_interval)
+        f.create_dataset("particles/id", data=self.ids)
+        f.create_dataset("frames/time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(4096,))
+        f.create_dataset("frames/position", shape=(0, n, 2), maxshape=(None, n, 2), dtype="f8",
+                         chunks=(1, n, 2))
+        f.create_dataset("frames/lap", shape=(0, n), maxshape=(None, n), dtype="i4", chunks=(1, n))
+        if with_velocity:
+            f.create_dataset("frames/velocity", shape=(0, n, 2), maxshape=(None, n, 2),
+                             dtype="f8", chunks=(1, n, 2))
+        self._n_frames = 0
+        self._first_time = self._last_time = None
+        self._interval = frame_interval
+        self._last_y: np.ndarray | None = None
+        self._last_lap: np.ndarray | None = None
+        self._closed = False
+
+    # -- context manager ---------------------------------------------------------------
+    def __enter__(self) -> "TrajectoryWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+    @property
+    def n_frames(self) -> int:
+        return self._n_frames
+
+    # -- validation --------------------------------------------------------------------
+    def _check_times(self, times: np.ndarray) -> None:
+        if not np.all(np.isfinite(times)):
+            raise InputError(f"{self._label}: frame time is not a finite number")
+        allt = times if self._last_time is None else np.concatenate([[self._last_time], times])
+        if allt.size < 2:
+            return
+        steps = np.diff(allt)
+        if np.any(steps <= 0):
+            k = int(np.argmax(steps <= 0))
+            raise InputError(f"{self._label}: time does not increase at t = {allt[k + 1]:g} s "
+                             f"(after {allt[k]:g} s)")
+        interval = self._interval if self._interval is not None else steps[0]
+        tol = max(TIME_TOLERANCE * max(abs(allt[-1]), 1.0), 1e-4 * interval)
+        bad = np.abs(steps - interval) > tol
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise InputError(f"{self._label}: frames unevenly spaced: {steps[k]:g} s between "
+                             f"t = {allt[k]:g} and {allt[k + 1]:g} s, expected {interval:g} s")
+        if self._interval is None:
+            self._interval = float(interval)
+            self._file.attrs["frame_interval"] = self._interval
+
+    def _check_array(self, name: str, values: np.ndarray, times: np.ndarray) -> None:
+        finite = np.isfinite(values)
+        if not finite.all():
+            t_idx, p_idx = np.argwhere(~finite.all(axis=-1))[0]
+            raise InputError(f"{self._label}: {name} of particle {self.ids[p_idx]} at t = "
+                             f"{times[t_idx]:g} s is not a finite number")
+
+    def _check_domain(self, positions: np.ndarray, times: np.ndarray) -> None:
+        tol = POSITION_TOLERANCE
+        x, y = positions[..., 0], positions[..., 1]
+        outside = (x < -tol) | (x > self.width + tol) | (y < -tol) | (y > self.height + tol)
+        if outside.any():
+            t_idx, p_idx = np.argwhere(outside)[0]
+            raise InputError(
+                f"{self._label}: particle {self.ids[p_idx]} at t = {times[t_idx]:g} s lies outside "
+                f"the domain 0..{self.width:g} x 0..{self.height:g} m at ({x[t_idx, p_idx]:g}, "
+                f"{y[t_idx, p_idx]:g})")
+
+    # -- writing -----------------------------------------------------------------------
+    def append(self, time: float, position, velocity=None, lap=None) -> None:
+        """Append one frame: position [N, 2] (m), optional velocity [N, 2] and lap [N]."""
+        self.append_frames(np.asarray([time], dtype=float), np.asarray(position)[None],
+                           None if velocity is None else np.asarray(velocity)[None],
+                           None if lap is None else np.asarray(lap)[None])
+
+    def append_frames(self, times, positions, velocities=None, laps=None) -> None:
+        """Append a block of frames: times [T], positions [T, N, 2], velocities, laps [T, N]."""
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
+        positions = np.asarray(positions, dtype=np.float64)
+        n = self.ids.size
+        t = times.size
+        if positions.shape != (t, n, 2):
+            raise InputError(f"{self._label}: expected positions of shape ({t}, {n}, 2), "
+                             f"got {positions.shape}")
+        self._check_times(times)
+        self._check_array("position", positions, times)
+        self._check_domain(positions, times)
+        if self.with_velocity:
+            if velocities is None:
+                raise InputError(f"{self._label}: this file stores velocities; none were given")
+            velocities = np.asarray(velocities, dtype=np.float64)
+            if velocities.shape != (t, n, 2):
+                raise InputError(f"{self._label}: expected velocities of shape ({t}, {n}, 2)")
+            self._check_array("velocity", velocities, times)
+        if laps is None:
+            laps = np.empty((t, n), dtype=np.int32)
+            prev_y, prev_lap = self._last_y, self._last_lap
+            for k in range(t):
+                y = positions[k, :, 1]
+                laps[k] = 0 if prev_y is None else prev_lap + lap_increments(prev_y, y, self.height)
+                prev_y, prev_lap = y, laps[k]
+        else:
+            laps = np.asarray(laps, dtype=np.int32).reshape(t, n)
+        f = self._file
+        i0, i1 = self._n_frames, self._n_frames + t
+        for name in ("frames/time", "frames/position", "frames/lap") + (
+                ("frames/velocity",) if self.with_velocity else ()):
+            f[name].resize(i1, axis=0)
+        f["frames/time"][i0:i1] = times
+        f["frames/position"][i0:i1] = positions
+        f["frames/lap"][i0:i1] = laps
+        if self.with_velocity:
+            f["frames/velocity"][i0:i1] = velocities
+        self._n_frames = i1
+        self._last_time = float(times[-1])
+        self._last_y = positions[-1, :, 1].copy()
+        self._last_lap = laps[-1].copy()
+
+    def add_events(self, times, particles, directions) -> None:
+        """Store exact pass events (time s, particle index, direction +1/-1), any order."""
+        times = np.asarray(times, dtype=np.float64)
+        order = np.argsort(times, kind="stable")
+        g = self._file.require_group("events")
+        g.attrs["exact"] = True
+        for name, values, dtype in (("time", times, "f8"), ("particle", particles, "i4"),
+                                    ("direction", directions, "i1")):
+            data = np.asarray(values)[order].astype(dtype)
+            if name in g:
+                old = g[name]
+                old.resize(old.shape[0] + data.size, axis=0)
+                old[-data.size:] = data
+            else:
+                g.create_dataset(name, data=data, maxshape=(None,), chunks=True)
+
+    def attach(self, name: str, datasets: dict[str, np.ndarray], attrs: dict[str, Any] | None = None
+               ) -> None:
+        """Attach a provenance group ``/provenance/<name>`` (datasets and attributes)."""
+        g = self._file.create_group(f"provenance/{name}")
+        for key, value in datasets.items():
+            g.create_dataset(key, data=value)
+        for key, value in (attrs or {}).items():
+            g.attrs[key] = value
+
+    def close(self) -> Path:
+        """Finish the file and move it to its final name."""
+        if self._closed:
+            return self.path
+        if self._n_frames == 0:
+            self.abort()
+            raise InputError(f"{self._label}: no frames to write")
+        self._file.close()
+        os.replace(self._tmp, self.path)
+        self._closed = True
+        return self.path
+
+    def abort(self) -> None:
+        """Discard the partial file."""
+        if self._closed:
+            return
+        try:
+            self._file.close()
+        finally:
+            self._tmp.unlink(missing_ok=True)
+            self._closed = True
+
+
+def write_trajectories(path: str | os.PathLike, times, positions, *, width: float, height: float,
+                       ids=None, velocities=None, laps=None, source: str = "arrays",
+                       parameters: dict[str, Any] | None = None, events: PassEvents | None = None
+                       ) -> Path:
+    """Write whole arrays (times [T], positions [T, N, 2], ...) as a trajectory file."""
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim != 3 or positions.shape[-1] != 2:
+        raise InputError(f"positions must have shape (T, N, 2), got {positions.shape}")
+    ids = np.arange(positions.shape[1]) if ids is None else ids
+    with TrajectoryWriter(path, ids, width=width, height=height, source=source,
+                          parameters=parameters, with_velocity=velocities is not None) as w:
+        w.append_frames(times, positions, velocities, laps)
+        if events is not None:
+            w.add_events(events.time, events.particle, events.direction)
+    return Path(path)
+
+
+def _json_default(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.integer, np.floating)):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
+
+
+def _version() -> str:
+    from cfbmarkov import __version__
+
+    return __version__
