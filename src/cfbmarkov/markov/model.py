@@ -1,0 +1,344 @@
+"""The fitted Markov chain model: immutable, saved as HDF5, answering questions.
+
+A :class:`MarkovModel` holds the transition matrix P (S x S), the pooled counts of the
+fitting window, the counts of transitions that passed up through the top or down through
+the bottom of the periodic riser, and its state space. It answers:
+
+- :meth:`propagate` (Eq. 5-6), with or without outflow through the top, and
+  :meth:`batch_injection_maps` (Eq. 8, the paper's Fig. 4-7);
+- :meth:`rtd`: the exact residence-time distribution (first passage of the lap counter);
+- :meth:`simulate` / :meth:`predict`: Monte Carlo of every particle (Eq. 7) with lap
+  counters, :meth:`predict` writing a trajectory file like any other.
+
+File layout (``format = "cfbmarkov.model"``): datasets ``transition_matrix`` [S, S] float64,
+``counts``, ``counts_up``, ``counts_down`` [S, S] int64, ``unvisited_states`` [U] int64;
+attributes ``state_space`` (JSON), ``lag`` (s), ``window`` (s), ``estimator``, ``source``,
+``frame_pairs``, ``n_transitions``, ``created``, ``cfbmarkov_version``.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any, Sequence
+
+import h5py
+import numpy as np
+
+from cfbmarkov._atomic import atomic_path
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov.montecarlo import SparseChain, run_chain
+from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
+from cfbmarkov.markov.states import StateSpace, place_in_cells
+
+MODEL_FORMAT = "cfbmarkov.model"
+_DATASETS = ("transition_matrix", "counts", "counts_up", "counts_down")
+
+
+@dataclass(frozen=True, eq=False)
+class MarkovModel:
+    transition_matrix: np.ndarray
+    counts: np.ndarray
+    counts_up: np.ndarray
+    counts_down: np.ndarray
+    state_space: StateSpace
+    lag: float
+    estimator: str = "mle"
+    window: tuple[float, float] | None = None
+    source: Any = ""
+    frame_pairs: int = 0
+    #: (up, down) fractions of each i -> j transition passing the boundary; from counts if None
+    pass_fractions: tuple[np.ndarray, np.ndarray] | None = None
+    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def __post_init__(self):
+        s = self.state_space.n_states
+        for name in _DATASETS:
+            value = np.array(getattr(self, name), dtype=np.float64 if name == "transition_matrix"
+                             else np.int64)
+            if value.shape != (s, s):
+                raise InputError(f"model {name} has shape {value.shape}, expected ({s}, {s}) "
+                                 f"for {self.state_space.describe()}")
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        p = self.transition_matrix
+        if not np.all(np.isfinite(p)) or p.min() < 0:
+            raise InputError("transition matrix holds negative or non-finite entries")
+        if not np.allclose(p.sum(axis=1), 1.0, atol=1e-9):
+            raise InputError("transition matrix rows do not sum to 1")
+        if self.pass_fractions is not None:
+            fractions = tuple(np.array(f, dtype=np.float64) for f in self.pass_fractions)
+            if any(f.shape != (s, s) for f in fractions):
+                raise InputError(f"pass fractions must have shape ({s}, {s})")
+            for f in fractions:
+                f.setflags(write=False)
+            object.__setattr__(self, "pass_fractions", fractions)
+
+    # -- derived quantities ------------------------------------------------------------
+    @property
+    def n_states(self) -> int:
+        return self.state_space.n_states
+
+    @property
+    def n_transitions(self) -> int:
+        return int(self.counts.sum())
+
+    @cached_property
+    def unvisited_states(self) -> np.ndarray:
+        """States with no outgoing transition in the window (kept in place, P_ii = 1)."""
+        if self.n_transitions == 0:      # a model given by its matrix, not fitted
+            return np.zeros(0, np.int64)
+        return np.flatnonzero(self.counts.sum(axis=1) == 0)
+
+    @cached_property
+    def up_fraction(self) -> np.ndarray:
+        """Fraction of the i -> j transitions that passed up through the top."""
+        if self.pass_fractions is not None:
+            return self.pass_fractions[0]
+        c = self.counts.astype(np.float64)
+        return np.divide(self.counts_up, c, out=np.zeros_like(c), where=c > 0)
+
+    @cached_property
+    def down_fraction(self) -> np.ndarray:
+        """Fraction of the i -> j transitions that passed down through the bottom."""
+        if self.pass_fractions is not None:
+            return self.pass_fractions[1]
+        c = self.counts.astype(np.float64)
+        return np.divide(self.counts_down, c, out=np.zeros_like(c), where=c > 0)
+
+    @cached_property
+    def _chain(self) -> SparseChain:
+        return SparseChain.from_matrix(self.transition_matrix, self.up_fraction, self.down_fraction)
+
+    @cached_property
+    def stationary_distribution(self) -> np.ndarray:
+        """Left eigenvector of P for eigenvalue 1, normalised (pi P = pi)."""
+        values, vectors = np.linalg.eig(self.transition_matrix.T)
+        lead = int(np.argmin(np.abs(values - 1.0)))
+        pi = np.abs(vectors[:, lead].real)
+        return pi / pi.sum()
+
+    # -- propagation (Eq. 5, 6, 8) -----------------------------------------------------
+    def propagate(self, initial, steps: int, outflow: bool = False) -> np.ndarray:
+        """State vectors [steps+1, S] from ``initial`` [S] by S(t+lag) = S(t) P.
+
+        With ``outflow`` the transitions up through the top are taken out, so the total
+        mass is the fraction still in the riser (a batch leaving through the outlet).
+        """
+        s0 = np.asarray(initial, dtype=np.float64)
+        if s0.shape != (self.n_states,):
+            raise InputError(f"initial distribution has shape {s0.shape}, expected ({self.n_states},)")
+        p = self.transition_matrix * (1.0 - self.up_fraction) if outflow else self.transition_matrix
+        out = np.empty((int(steps) + 1, self.n_states))
+        out[0] = s0
+        for k in range(1, int(steps) + 1):   # one S x S product per lag, not per particle
+            out[k] = out[k - 1] @ p
+        return out
+
+    def steps_for(self, time: float) -> int:
+        """Number of lags in ``time`` s; an error unless it is a whole multiple."""
+        k = int(round(time / self.lag))
+        if k < 0 or abs(k * self.lag - time) > 1e-6 * max(self.lag, abs(time)):
+            raise InputError(f"time {time:g} s is not a whole multiple of the lag {self.lag:g} s")
+        return k
+
+    def batch_injection_maps(self, times: Sequence[float], outflow: bool = False) -> np.ndarray:
+        """Eq. (8): a batch fed evenly over the inlet cells at t = 0; probability per cell
+        at each of ``times`` (s), as maps [len(times), rows, columns]."""
+        steps = [self.steps_for(t) for t in times]
+        history = self.propagate(self.state_space.inlet_distribution(), max(steps, default=0),
+                                 outflow=outflow)
+        return self.state_space.cell_maps(history[steps])
+
+    # -- residence times ---------------------------------------------------------------
+    def rtd(self, window: float | None = None) -> ResidenceTimeDistribution:
+        """Exact RTD (no sampling noise); ``window`` (s) gives the RTD as seen in an analysis
+        window of that length, the quantity a sample-based RTD estimates."""
+        if "rtd" not in self._cache:
+            self._cache["rtd"] = exact_rtd(self.transition_matrix, self.up_fraction,
+                                           self.down_fraction, self.lag)
+        intrinsic = self._cache["rtd"]
+        return intrinsic if window is None else intrinsic.in_window(window)
+
+    # -- Monte Carlo -------------------------------------------------------------------
+    def simulate(self, initial_states, n_steps: int, seed: int = 0, initial_laps=None
+                 ) -> tuple[np.ndarray, np.ndarray]:
+        """Monte Carlo (Eq. 7): states and lap counters [n_steps+1, N] from initial states."""
+        initial_states = np.asarray(initial_states)
+        if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
+            raise InputError("initial states outside the model's state space")
+        return run_chain(self._chain, initial_states, n_steps, seed, initial_laps)
+
+    def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """States, positions and laps of the particles of ``trajectories`` at ``start`` (s)."""
+        space = self.state_space
+        if not (np.isclose(space.width, trajectories.width) and np.isclose(space.height, trajectories.height)):
+            raise InputError(f"model covers {space.width:g} x {space.height:g} m but "
+                             f"{trajectories.path} is {trajectories.width:g} x {trajectories.height:g} m")
+        i = trajectories.frame_index(start)
+        lag_frames = trajectories.lag_frames(self.lag)
+        first = i - space.memory_lags * lag_frames
+        if first < 0:
+            raise InputError(f"state space {space.kind} needs {space.memory_lags} lag(s) of "
+                             f"history before t = {start:g} s")
+        frames = slice(first, i + 1)
+        positions = trajectories.positions(frames)
+        velocities = trajectories.velocities(frames) if space.needs_velocity else None
+        states = space.discretize(positions, velocities, lag_frames)[-1]
+        return states, positions[-1], trajectories.laps(i)
+
+    def predict(self, trajectories, start: float, duration: float, seed: int = 0,
+                output: str | os.PathLike | None = None, progress: bool = False):
+        """Monte Carlo prediction from the particles' states in the frame at ``start`` (s)
+        for ``duration`` (s); writes a trajectory file when ``output`` is given and returns
+        its path, else returns (times, states, laps)."""
+        from cfbmarkov.trajectories import Trajectories, TrajectoryWriter
+
+        own = not isinstance(trajectories, Trajectories)
+        traj = Trajectories(trajectories) if own else trajectories
+        try:
+            n_steps = self.steps_for(duration)
+            if n_steps < 1:
+                raise InputError(f"duration {duration:g} s is shorter than one lag ({self.lag:g} s)")
+            states0, positions0, laps0 = self.initial_states(traj, start)
+            states, laps = self.simulate(states0, n_steps, seed, laps0)
+            times = start + self.lag * np.arange(n_steps + 1)
+            if output is None:
+                return times, states, laps
+            parameters = {"model": self.describe(), "seed": int(seed), "start": float(start),
+                          "duration": float(duration), "initial_frames": str(traj.path),
+                          "columns": self.state_space.columns, "rows": self.state_space.rows}
+            with TrajectoryWriter(output, traj.ids, width=traj.width, height=traj.height,
+                                  source="markov-prediction", parameters=parameters,
+                                  frame_interval=self.lag) as writer:
+                writer.attach("model", *self._datasets_and_attrs())
+                bar = _progress(progress, duration)
+                writer.append(times[0], positions0, lap=laps[0])
+                cells = self.state_space.cell_of_state
+                for k in range(1, n_steps + 1):
+                    positions = place_in_cells(cells[states[k]], self.state_space, seed, k)
+                    writer.append(times[k], positions, lap=laps[k])
+                    if bar is not None:
+                        bar.update(self.lag)
+                if bar is not None:
+                    bar.close()
+            return Path(output)
+        finally:
+            if own:
+                traj.close()
+
+    # -- description -------------------------------------------------------------------
+    def describe(self) -> dict[str, Any]:
+        return {"estimator": self.estimator, "lag": self.lag,
+                "window": list(self.window) if self.window else None,
+                "state_space": self.state_space.to_attrs(), "source": self.source}
+
+    def summary(self) -> str:
+        lines = [
+            f"Markov chain model: {self.state_space.describe()}, lag {self.lag:g} s, "
+            f"estimator '{self.estimator}'",
+            f"  fitted on {self.source} window "
+            f"{'all' if self.window is None else f'{self.window[0]:g}:{self.window[1]:g} s'}: "
+            f"{self.n_transitions} transitions over {self.frame_pairs} frame pairs",
+            f"  passes through the periodic boundary: {int(self.counts_up.sum())} up, "
+            f"{int(self.counts_down.sum())} down",
+            f"  states never visited: {self.unvisited_states.size}"
+            + (f" ({_short_list(self.unvisited_states)})" if self.unvisited_states.size else ""),
+        ]
+        try:
+            r = self.rtd()
+            lines.append(f"  exact residence time: E(RT) = {r.mean:.4g} s, SD(RT) = {r.sd:.4g} s")
+        except Exception as exc:  # a model without exits still has a summary
+            lines.append(f"  exact residence time: none ({exc})")
+        return "\n".join(lines)
+
+    def __repr__(self) -> str:
+        return (f"MarkovModel({self.state_space.describe()}, lag={self.lag:g} s, "
+                f"estimator={self.estimator!r}, transitions={self.n_transitions})")
+
+    # -- persistence -------------------------------------------------------------------
+    def _datasets_and_attrs(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        datasets = {name: getattr(self, name) for name in _DATASETS}
+        datasets["unvisited_states"] = self.unvisited_states
+        datasets["pass_up_fraction"] = self.up_fraction
+        datasets["pass_down_fraction"] = self.down_fraction
+        attrs = {
+            "format": MODEL_FORMAT, "version": 1,
+            "state_space": json.dumps(self.state_space.to_attrs()),
+            "columns": self.state_space.columns, "rows": self.state_space.rows,
+            "lag": self.lag, "estimator": self.estimator,
+            "window": np.asarray(self.window if self.window else [np.nan, np.nan], dtype=float),
+            "source": json.dumps(self.source), "frame_pairs": int(self.frame_pairs),
+            "n_transitions": self.n_transitions, "n_unvisited_states": int(self.unvisited_states.size),
+            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "cfbmarkov_version": _version(),
+        }
+        return datasets, attrs
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the model as HDF5 (atomically: no partial file on failure)."""
+        datasets, attrs = self._datasets_and_attrs()
+        with atomic_path(path) as tmp:
+            with h5py.File(tmp, "w") as f:
+                for name, value in datasets.items():
+                    f.create_dataset(name, data=value)
+                f.attrs.update(attrs)
+        return Path(path)
+
+    @classmethod
+    def from_group(cls, group: h5py.Group | h5py.File, label: str = "") -> "MarkovModel":
+        """Rebuild a model from an HDF5 group written by :meth:`save` (or attached to a
+        prediction as ``/provenance/model``)."""
+        label = label or getattr(group.file, "filename", "")
+        fmt = group.attrs.get("format")
+        if fmt != MODEL_FORMAT:
+            raise InputError(f"{label}: not a cfbmarkov model file (format attribute is {fmt!r})")
+        try:
+            window = np.asarray(group.attrs["window"], dtype=float)
+            return cls(**{name: group[name][()] for name in _DATASETS},
+                       state_space=StateSpace.from_attrs(group.attrs["state_space"]),
+                       lag=float(group.attrs["lag"]), estimator=str(group.attrs["estimator"]),
+                       window=None if np.isnan(window).any() else (float(window[0]), float(window[1])),
+                       source=json.loads(group.attrs.get("source", '""')),
+                       frame_pairs=int(group.attrs.get("frame_pairs", 0)),
+                       pass_fractions=(group["pass_up_fraction"][()], group["pass_down_fraction"][()])
+                       if "pass_up_fraction" in group else None)
+        except KeyError as exc:
+            raise InputError(f"{label}: damaged model file (missing {exc})") from None
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> "MarkovModel":
+        from cfbmarkov.trajectories import _open_h5
+
+        with _open_h5(path) as f:
+            return cls.from_group(f, str(path))
+
+    @classmethod
+    def from_trajectories(cls, trajectories) -> "MarkovModel | None":
+        """The model attached to a prediction file, or None."""
+        group = trajectories.group("model")
+        return None if group is None else cls.from_group(group, str(trajectories.path))
+
+
+def _short_list(values: np.ndarray, limit: int = 12) -> str:
+    text = ", ".join(str(v) for v in values[:limit])
+    return text + (", ..." if values.size > limit else "")
+
+
+def _progress(enabled: bool, duration: float):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=duration, unit="s", unit_scale=False, desc="Monte Carlo (simulated s)",
+                bar_format="{desc}: {n:.3f}/{total:.3f} s [{elapsed}<{remaining}, {rate_fmt}]")
+
+
+def _version() -> str:
+    from cfbmarkov import __version__
+
+    return __version__

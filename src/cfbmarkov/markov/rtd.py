@@ -1,0 +1,170 @@
+"""Exact residence-time distribution of a Markov model (no Monte Carlo noise).
+
+SPEC section 3 defines a residence as the time between two consecutive upward passes that
+lift the lap counter L to a value it has not had before. In the chain this is a first-passage
+problem on the states augmented with the lap deficit l = L - L_entry in {0, -1, ..., -K}:
+
+- a transition i -> j without a pass keeps l; a pass down through the bottom lowers it;
+- a pass up through the top raises it, and from l = 0 it ends the residence (absorption),
+  the landing state j being the entry state of the next residence.
+
+Entry states are distributed as the stationary distribution nu of the embedded chain of
+landing states (entry -> next entry), found from the absorption probabilities B = (I-Q)^-1 R
+by a sparse LU solve. The residence-time probabilities f(k) = P(RT = k lag) follow by
+propagating nu through Q. The result is exact up to the lap-deficit truncation K and the
+tail cut-off, both reported as ``unresolved`` mass.
+
+A residence can only be observed inside an analysis window of length W if it starts and ends
+in it: in a stationary process a residence of k lags fits in n_W - k of the n_W = W/lag
+frame positions, so the RTD seen in the window is f(k)(n_W - k)+ renormalised
+(:meth:`ResidenceTimeDistribution.in_window`). This is what a sample-based RTD on a window
+(CFD-DEM or Monte Carlo) estimates.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numba as nb
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from cfbmarkov.errors import CfbmarkovError
+
+
+@dataclass(frozen=True)
+class ResidenceTimeDistribution:
+    """f(k) = probability that a residence lasts k lags (k = 1, 2, ...)."""
+
+    lag: float
+    probability: np.ndarray   # [K]: index 0 is k = 1
+    unresolved: float         # mass not resolved (lap-deficit truncation, traps, tail cut)
+    entry_distribution: np.ndarray  # [S] stationary distribution of entry states
+    window: float | None = None     # observation window length, s (None: intrinsic RTD)
+
+    @property
+    def times(self) -> np.ndarray:
+        """Residence times k*lag (s) of :attr:`probability`."""
+        return self.lag * np.arange(1, self.probability.size + 1)
+
+    @property
+    def mean(self) -> float:
+        """E(RT), s."""
+        w = self.probability / self.probability.sum()
+        return float(np.sum(w * self.times))
+
+    @property
+    def sd(self) -> float:
+        """SD(RT), s (of the distribution; samples use ddof = 1)."""
+        w = self.probability / self.probability.sum()
+        m = np.sum(w * self.times)
+        return float(np.sqrt(max(np.sum(w * (self.times - m) ** 2), 0.0)))
+
+    def in_window(self, window: float) -> "ResidenceTimeDistribution":
+        """The RTD as observed in an analysis window of ``window`` s (see module doc)."""
+        n_window = int(round(window / self.lag))
+        k = np.arange(1, self.probability.size + 1)
+        weights = np.clip(n_window - k, 0, None).astype(np.float64)
+        observed = self.probability * weights
+        if observed.sum() <= 0:
+            raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s")
+        observed = observed[: max(n_window - 1, 1)]
+        return ResidenceTimeDistribution(self.lag, observed / observed.sum(), self.unresolved,
+                                         self.entry_distribution, float(window))
+
+    def histogram(self, bin_width: float, upper: float) -> tuple[np.ndarray, np.ndarray]:
+        """Probability per bin on edges 0, bin_width, ..., upper (s)."""
+        edges = np.arange(0.0, upper + 0.5 * bin_width, bin_width)
+        prob, _ = np.histogram(self.times, bins=edges, weights=self.probability / self.probability.sum())
+        return edges, prob
+
+
+@nb.njit(cache=True)
+def _first_passage(indptr, indices, data, exit_probability, start, tol, max_steps, out):
+    """f(k) for k = 1.. by propagating ``start`` through Q (CSR of Q transposed). Returns
+    the number of steps taken."""
+    v = start.copy()
+    w = np.empty_like(v)
+    n = v.size
+    for k in range(max_steps):
+        absorbed = 0.0
+        for i in range(n):
+            absorbed += v[i] * exit_probability[i]
+        out[k] = absorbed
+        remaining = 0.0
+        for j in range(n):
+            acc = 0.0
+            for q in range(indptr[j], indptr[j + 1]):
+                acc += data[q] * v[indices[q]]
+            w[j] = acc
+            remaining += acc
+        v, w = w, v
+        if remaining < tol:
+            return k + 1
+    return max_steps
+
+
+def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray, lag: float,
+              deficit_levels: int = 8, tol: float = 1e-10, max_steps: int = 200_000
+              ) -> ResidenceTimeDistribution:
+    """Exact intrinsic RTD of a chain with transition matrix P and pass fractions (see module)."""
+    s = matrix.shape[0]
+    p_up = sp.csr_matrix(matrix * up_fraction)
+    p_down = sp.csr_matrix(matrix * down_fraction)
+    p_stay = sp.csr_matrix(matrix * (1.0 - up_fraction - down_fraction))
+    levels = deficit_levels + 1
+    # level index g = -l: a down pass moves g -> g+1, an up pass g -> g-1 (g = 0: exit)
+    lower = sp.diags(np.ones(levels - 1), 1, shape=(levels, levels))
+    raise_ = sp.diags(np.ones(levels - 1), -1, shape=(levels, levels))
+    q = (sp.kron(sp.identity(levels), p_stay) + sp.kron(lower, p_down)
+         + sp.kron(raise_, p_up)).tocsr()
+    exit_probability = np.zeros(s * levels)
+    exit_probability[:s] = np.asarray(p_up.sum(axis=1)).ravel()
+    entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
+    if entries.size == 0:
+        raise CfbmarkovError("the model has no transition up through the top: particles never "
+                             "leave, so there is no residence time")
+    # keep the states from which an exit can be reached (others trap their mass)
+    live = exit_probability > 0
+    while True:
+        grown = live | (q @ live.astype(np.float64) > 0)
+        if grown.sum() == live.sum():
+            break
+        live = grown
+    idx = np.flatnonzero(live)
+    position = -np.ones(s * levels, np.int64)
+    position[idx] = np.arange(idx.size)
+    q_live = q[idx][:, idx]
+    lu = splu(sp.csc_matrix(sp.identity(idx.size) - q_live))
+    # absorption into entry e' starting from entry e at level 0: B = (I-Q)^-1 R
+    r = np.zeros((idx.size, entries.size))
+    top_rows = idx[idx < s]
+    r[position[top_rows], :] = p_up[top_rows][:, entries].toarray()
+    entries_live = entries[live[entries]]
+    b = lu.solve(r)
+    embedded = np.zeros((entries.size, entries.size))
+    rows_in = np.isin(entries, entries_live)
+    embedded[rows_in] = b[position[entries[rows_in]]]
+    nu = _stationary(embedded)
+    start = np.zeros(idx.size)
+    ok = live[entries]
+    start[position[entries[ok]]] = nu[ok]
+    qt = sp.csr_matrix(q_live.T)
+    out = np.zeros(max_steps)
+    steps = _first_passage(qt.indptr, qt.indices, qt.data, exit_probability[idx], start, tol,
+                           max_steps, out)
+    f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
+    entry = np.zeros(s)
+    entry[entries] = nu
+    return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
+
+
+def _stationary(embedded: np.ndarray) -> np.ndarray:
+    """Stationary distribution of a (sub)stochastic matrix's dominant left eigenvector."""
+    rows = embedded.sum(axis=1, keepdims=True)
+    k = np.divide(embedded, rows, out=np.zeros_like(embedded), where=rows > 0)
+    values, vectors = np.linalg.eig(k.T)
+    lead = int(np.argmax(values.real))
+    nu = np.abs(vectors[:, lead].real)
+    return nu / nu.sum()

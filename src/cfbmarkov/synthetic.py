@@ -1,0 +1,141 @@
+"""Synthetic riser-like trajectories with a known generator, for tests, benchmarks and the demo.
+
+The generator is a Markov chain on cells x {rising, falling}: particles in the core mostly
+rise, near the walls mostly fall (a core-annulus structure), each keeps its direction with
+some persistence, drifts vertically by a discretised normal displacement per lag and steps
+sideways to neighbouring columns. Only positions are written, so a model on cells alone
+does not see the hidden direction, as with CFD-DEM clusters. With ``persistence=0`` (no
+hidden direction) the generator is itself a chain on cells and a fitted model must
+recover it exactly (:func:`cell_chain`).
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cfbmarkov.markov.montecarlo import SparseChain, run_chain
+from cfbmarkov.markov.states import CellGrid, place_in_cells
+
+
+@dataclass(frozen=True)
+class RiserFlow:
+    """Parameters of the synthetic core-annulus flow (velocities in m/s)."""
+
+    columns: int = 6
+    rows: int = 38
+    width: float = 0.09
+    height: float = 0.95
+    lag: float = 0.025
+    rise_velocity: float = 2.0       # mean upward velocity of rising particles in the core
+    fall_velocity: float = -0.8      # mean velocity of falling particles
+    vertical_spread: float = 0.6     # SD of the vertical displacement per lag, in cells
+    lateral_probability: float = 0.15  # probability of stepping to each neighbouring column
+    switch_probability: float = 0.08   # base probability per lag of changing direction
+    persistence: bool = True           # False: no hidden direction (a pure chain on cells)
+
+    @property
+    def grid(self) -> CellGrid:
+        return CellGrid(self.columns, self.rows, self.width, self.height)
+
+
+def _vertical_kernel(mean_rows: float, spread: float, reach: int) -> np.ndarray:
+    d = np.arange(-reach, reach + 1)
+    w = np.exp(-0.5 * ((d - mean_rows) / max(spread, 1e-3)) ** 2)
+    return w / w.sum()
+
+
+def generator(flow: RiserFlow) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Transition matrix of the generator on hidden states, the up/down pass indicator of
+    each transition, and the cell of each hidden state: (P, up, down, cell_of_state)."""
+    m, n = flow.columns, flow.rows
+    cell_h = flow.height / n
+    reach = n // 2 - 2
+    regimes = 2 if flow.persistence else 1
+    s = m * n * regimes
+    p = np.zeros((s, s))
+    up = np.zeros((s, s))
+    down = np.zeros((s, s))
+    centre = (np.arange(m) + 0.5) / m - 0.5            # -0.5..0.5 across
+    wall_weight = np.clip(np.abs(centre) * 2.0, 0, 1) ** 2   # 0 in the core, 1 at walls
+    for g in range(regimes):
+        for c in range(m):
+            if flow.persistence:
+                velocity = flow.rise_velocity * (1.3 - 0.6 * wall_weight[c]) if g == 0 else flow.fall_velocity
+                to_fall = flow.switch_probability * (0.3 + 1.4 * wall_weight[c])
+                to_rise = flow.switch_probability * (1.7 - 1.4 * wall_weight[c])
+                switch = np.array([[1 - to_fall, to_fall], [to_rise, 1 - to_rise]])
+            else:
+                mix = 0.35 + 0.4 * wall_weight[c]
+                velocity = (1 - mix) * flow.rise_velocity * (1.3 - 0.6 * wall_weight[c]) + mix * flow.fall_velocity
+                switch = np.ones((1, 1))
+            vertical = _vertical_kernel(velocity * flow.lag / cell_h, flow.vertical_spread, reach)
+            lateral = np.zeros(m)
+            for dc, prob in ((-1, flow.lateral_probability), (1, flow.lateral_probability)):
+                lateral[min(max(c + dc, 0), m - 1)] += prob
+            lateral[c] += 1 - 2 * flow.lateral_probability
+            for r in range(n):
+                i = (g * n + r) * m + c
+                for k, pv in enumerate(vertical):
+                    target = r + k - reach
+                    row = target % n
+                    for c2 in np.flatnonzero(lateral):
+                        for g2 in range(regimes):
+                            j = (g2 * n + row) * m + c2
+                            p[i, j] += pv * lateral[c2] * switch[g, g2]
+                            if target >= n:
+                                up[i, j] = 1.0
+                            elif target < 0:
+                                down[i, j] = 1.0
+    cell_of_state = np.arange(s) % (m * n)
+    return p, up, down, cell_of_state
+
+
+def cell_chain(flow: RiserFlow):
+    """The generator as a :class:`MarkovModel` on cells (needs ``persistence=False``)."""
+    from cfbmarkov.markov.model import MarkovModel
+
+    if flow.persistence:
+        raise ValueError("a generator with a hidden direction is not a chain on cells")
+    p, up, down, _ = generator(flow)
+    zeros = np.zeros_like(p, dtype=np.int64)
+    return MarkovModel(p, zeros, zeros, zeros, flow.grid, flow.lag, estimator="synthetic",
+                       source="synthetic", pass_fractions=(up, down))
+
+
+def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
+               start_time: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Times [T], cells [T, N], positions [T, N, 2] and laps [T, N] of a synthetic run."""
+    p, up, down, cell_of_state = generator(flow)
+    chain = SparseChain.from_matrix(p, up, down)
+    # start from the stationary distribution of the generator
+    values, vectors = np.linalg.eig(p.T)
+    pi = np.abs(vectors[:, int(np.argmin(np.abs(values - 1)))].real)
+    rng = np.random.default_rng(seed)
+    initial = rng.choice(p.shape[0], size=n_particles, p=pi / pi.sum())
+    hidden, laps = run_chain(chain, initial, n_frames - 1, seed + 1)
+    cells = cell_of_state[hidden]
+    grid = flow.grid
+    positions = np.empty((n_frames, n_particles, 2))
+    for k in range(n_frames):      # one vectorised placement per frame
+        positions[k] = place_in_cells(cells[k], grid, seed + 2, k)
+    times = start_time + flow.lag * np.arange(n_frames)
+    return times, cells, positions, laps
+
+
+def write_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, duration: float,
+              seed: int = 0, start_time: float = 0.0) -> Path:
+    """Write a synthetic run of ``duration`` s (frames every ``flow.lag``) as trajectories."""
+    from cfbmarkov.trajectories import TrajectoryWriter
+
+    n_frames = int(round(duration / flow.lag)) + 1
+    times, _, positions, laps = sample_run(flow, n_particles, n_frames, seed, start_time)
+    params = {k: getattr(flow, k) for k in flow.__dataclass_fields__}
+    params["seed"] = seed
+    with TrajectoryWriter(path, np.arange(n_particles), width=flow.width, height=flow.height,
+                          source="synthetic", parameters=params, frame_interval=flow.lag) as w:
+        w.append_frames(times, positions, laps=laps)
+    return Path(path)

@@ -1,0 +1,179 @@
+"""The model: exact RTD against analytical and Monte Carlo results, propagation, Monte Carlo,
+prediction files, persistence."""
+
+import numba
+import numpy as np
+import pytest
+from scipy import stats
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov import CellGrid, MarkovModel, MaximumLikelihoodEstimator
+from cfbmarkov.trajectories import Trajectories, lap_increments
+
+
+def ladder_model(rows, p_up, p_fall=0.0, lag=0.01):
+    """1 column: move one row up with p_up, from row 0 fall through the bottom with
+    p_fall, else stay. Row rows-1 -> 0 passes up through the top."""
+    s = rows
+    p = np.zeros((s, s))
+    up = np.zeros((s, s))
+    down = np.zeros((s, s))
+    for r in range(rows):
+        p[r, (r + 1) % rows] += p_up
+        if r == 0 and p_fall > 0:
+            p[0, rows - 1] += p_fall
+            down[0, rows - 1] = 1.0
+        p[r, r] += 1.0 - p_up - (p_fall if r == 0 else 0.0)
+    up[rows - 1, 0] = 1.0
+    zeros = np.zeros((s, s), np.int64)
+    return MarkovModel(p, zeros, zeros, zeros, CellGrid(1, rows, 0.1, 1.0), lag,
+                       estimator="given", pass_fractions=(up, down))
+
+
+def test_exact_rtd_is_negative_binomial_for_a_ladder():
+    n, p, lag = 10, 0.4, 0.01
+    model = ladder_model(n, p, lag=lag)
+    rtd = model.rtd()
+    k = np.arange(1, rtd.probability.size + 1)
+    expected = stats.nbinom.pmf(k - n, n, p)     # k trials for n successes
+    np.testing.assert_allclose(rtd.probability, expected, atol=1e-12)
+    assert rtd.mean == pytest.approx(lag * n / p, rel=1e-8)
+    assert rtd.sd == pytest.approx(lag * np.sqrt(n * (1 - p)) / p, rel=1e-6)
+    assert rtd.unresolved < 1e-9
+    assert rtd.entry_distribution[0] == pytest.approx(1.0)
+
+
+def _samples_from_laps(laps, lag):
+    """Residence times from lap counters [T, N] by SPEC section 3, written independently."""
+    out = []
+    for series in laps.T:
+        best, last = series[0], None
+        for t in range(1, series.size):
+            while series[t] > best:
+                best += 1
+                if last is not None:
+                    out.append((t - last) * lag)
+                last = t
+    return np.asarray(out)
+
+
+def test_exact_rtd_with_falls_matches_monte_carlo_in_a_window():
+    model = ladder_model(8, 0.5, p_fall=0.15, lag=0.01)
+    n_steps = 300
+    rng = np.random.default_rng(3)
+    start = rng.choice(model.n_states, size=4000, p=model.stationary_distribution)
+    _, laps = model.simulate(start, n_steps, seed=5)
+    samples = _samples_from_laps(laps, model.lag)
+    exact = model.rtd(window=n_steps * model.lag)
+    se = samples.std(ddof=1) / np.sqrt(samples.size)
+    assert abs(samples.mean() - exact.mean) < 5 * se
+    assert samples.std(ddof=1) == pytest.approx(exact.sd, rel=0.05)
+    # the whole distribution: Kolmogorov distance between sample and exact CDFs
+    cdf_exact = np.cumsum(exact.probability)
+    k = np.rint(samples / model.lag).astype(int)
+    cdf_sample = np.cumsum(np.bincount(k, minlength=cdf_exact.size + 1)[1:]) / k.size
+    assert np.max(np.abs(cdf_sample[: cdf_exact.size] - cdf_exact)) < 1.63 / np.sqrt(k.size) * 1.5
+    # falling out of the bottom lengthens residences beyond the no-fall ladder
+    assert model.rtd().mean > ladder_model(8, 0.5, lag=0.01).rtd().mean
+
+
+def test_window_censoring_weights_short_residences():
+    model = ladder_model(10, 0.4)
+    intrinsic, seen = model.rtd(), model.rtd(window=0.5)
+    assert seen.mean < intrinsic.mean
+    assert seen.times.max() < 0.5
+    with pytest.raises(Exception, match="fits in a window"):
+        model.rtd(window=0.05)
+
+
+def test_propagation_eq6_and_outflow_matches_rtd():
+    model = ladder_model(6, 0.3)
+    s0 = np.zeros(6)
+    s0[0] = 1.0
+    hist = model.propagate(s0, 25)
+    np.testing.assert_allclose(hist[25], s0 @ np.linalg.matrix_power(model.transition_matrix, 25))
+    np.testing.assert_allclose(hist.sum(axis=1), 1.0)
+    remaining = model.propagate(s0, 60, outflow=True).sum(axis=1)
+    cdf = np.concatenate([[0.0], np.cumsum(model.rtd().probability)])[:61]
+    np.testing.assert_allclose(remaining, 1.0 - cdf, atol=1e-12)
+
+
+def test_batch_injection_maps(markov_flow, markov_run):
+    model = MaximumLikelihoodEstimator(markov_flow.grid, markov_flow.lag).fit(markov_run)
+    maps = model.batch_injection_maps([0.0, 0.1, 0.25])
+    assert maps.shape == (3, markov_flow.rows, markov_flow.columns)
+    np.testing.assert_allclose(maps[0, 0], 1.0 / markov_flow.columns)
+    assert maps[0, 1:].sum() == 0
+    np.testing.assert_allclose(maps.sum(axis=(1, 2)), 1.0)
+    rows_mean = [(m.sum(axis=1) * np.arange(markov_flow.rows)).sum() for m in maps]
+    assert rows_mean[0] < rows_mean[1] < rows_mean[2]       # the batch rises
+    with pytest.raises(InputError, match="whole multiple of the lag"):
+        model.batch_injection_maps([0.01])
+
+
+def test_monte_carlo_follows_the_matrix_and_is_reproducible(markov_flow, markov_run):
+    model = MaximumLikelihoodEstimator(markov_flow.grid, markov_flow.lag).fit(markov_run)
+    start = np.random.default_rng(0).integers(0, model.n_states, 20000)
+    states, laps = model.simulate(start, 50, seed=9)
+    again, laps_again = model.simulate(start, 50, seed=9)
+    np.testing.assert_array_equal(states, again)
+    np.testing.assert_array_equal(laps, laps_again)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        single, _ = model.simulate(start, 50, seed=9)
+    finally:
+        numba.set_num_threads(threads)
+    np.testing.assert_array_equal(states, single)
+    assert not np.array_equal(states, model.simulate(start, 50, seed=10)[0])
+    counts = np.zeros((model.n_states, model.n_states))
+    np.add.at(counts, (states[:-1].ravel(), states[1:].ravel()), 1)
+    n_i = counts.sum(axis=1, keepdims=True)
+    p = model.transition_matrix
+    sigma = np.sqrt(p * (1 - p) / np.maximum(n_i, 1)) + 1e-12
+    busy = n_i[:, 0] > 500
+    assert np.max(np.abs(counts / np.maximum(n_i, 1) - p)[busy] / sigma[busy]) < 6.0
+
+
+def test_predict_writes_a_trajectory_file(tmp_path, markov_flow, markov_run):
+    model = MaximumLikelihoodEstimator(markov_flow.grid, markov_flow.lag).fit(markov_run, (0, 4))
+    out = model.predict(markov_run, start=4.0, duration=1.0, seed=7, output=tmp_path / "pred.h5")
+    with Trajectories(out) as pred, Trajectories(markov_run) as run:
+        assert pred.n_frames == 41 and pred.source == "markov-prediction"
+        np.testing.assert_allclose(pred.times, 4.0 + 0.025 * np.arange(41))
+        np.testing.assert_array_equal(pred.ids, run.ids)
+        np.testing.assert_array_equal(pred.positions(0), run.positions(run.frame_index(4.0)))
+        np.testing.assert_array_equal(pred.laps(0), run.laps(run.frame_index(4.0)))
+        # Monte Carlo lap counters agree with the boundary passes of the written positions
+        y, laps = pred.positions()[:, :, 1], pred.laps()
+        passes = np.array([lap_increments(y[k - 1], y[k], pred.height) for k in range(1, 41)])
+        np.testing.assert_array_equal(np.diff(laps, axis=0), passes)
+        assert np.abs(np.diff(laps, axis=0)).sum() > 100
+        attached = MarkovModel.from_trajectories(pred)
+        np.testing.assert_array_equal(attached.transition_matrix, model.transition_matrix)
+        assert pred.parameters["seed"] == 7
+    times, states, _ = model.predict(markov_run, start=4.0, duration=1.0, seed=7)
+    np.testing.assert_array_equal(model.state_space.discretize(Trajectories(out).positions(5)),
+                                  states[5])
+    with pytest.raises(InputError, match="no frame at t = 4.01"):
+        model.predict(markov_run, start=4.01, duration=1.0, output=tmp_path / "bad.h5")
+    assert not (tmp_path / "bad.h5").exists()
+
+
+def test_save_load_round_trip_and_bad_files(tmp_path, markov_flow, markov_run):
+    model = MaximumLikelihoodEstimator(markov_flow.grid, markov_flow.lag).fit(markov_run, (1, 3))
+    path = model.save(tmp_path / "m.h5")
+    back = MarkovModel.load(path)
+    for name in ("transition_matrix", "counts", "counts_up", "counts_down"):
+        np.testing.assert_array_equal(getattr(back, name), getattr(model, name))
+    assert back.state_space == model.state_space and back.window == (1.0, 3.0)
+    assert back.lag == model.lag and back.estimator == "mle"
+    assert back.rtd().mean == pytest.approx(model.rtd().mean, rel=1e-12)
+    with pytest.raises(ValueError):
+        model.transition_matrix[0, 0] = 0.5            # immutable
+    with pytest.raises(InputError, match="not a cfbmarkov model file"):
+        MarkovModel.load(markov_run)
+    truncated = tmp_path / "t.h5"
+    truncated.write_bytes(path.read_bytes()[:1000])
+    with pytest.raises(InputError, match="not a readable HDF5 file"):
+        MarkovModel.load(truncated)
