@@ -211,7 +211,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    try:
+        args = parser.parse_args(argv)
+    except SystemExit as exc:      # usage errors (2), --help and --version (0)
+        return int(exc.code or 0)
     try:
         return int(args.func(args) or 0)
     except CfbmarkovError as exc:

@@ -1,0 +1,83 @@
+"""Benchmarks behind ``cfbmarkov bench``: each yields (name, median value, unit).
+
+The Markov-chain figures are measured at the paper's scale on synthetic riser-like data
+(27000 particles, 201 frames every 0.025 s = 200 lags, 6 x 38 cells):
+
+- ``mcm-fit``: reading the window from the trajectory file, assigning states and
+  estimating P (paper estimator), 5.4 M transitions;
+- ``mcm-predict``: Monte Carlo of 27000 particles x 200 steps with lap counting;
+- ``mcm-predict-file``: the same plus placing particles in their cells and writing the
+  prediction file;
+- ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model.
+
+Times are medians over ``repeat`` runs after one warm-up run (numba compilation excluded).
+"""
+
+from __future__ import annotations
+
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable, Iterator
+
+
+def _median_time(fn: Callable[[], object], repeat: int) -> float:
+    fn()  # warm-up (compilation, file cache)
+    samples = []
+    for _ in range(max(1, repeat)):
+        t0 = time.perf_counter()
+        fn()
+        samples.append(time.perf_counter() - t0)
+    return statistics.median(samples)
+
+
+def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | None = None
+                      ) -> Iterator[tuple[str, float, str]]:
+    from cfbmarkov import synthetic
+    from cfbmarkov.markov import CellGrid, PaperEstimator, exact_rtd
+    from cfbmarkov.trajectories import Trajectories
+
+    with tempfile.TemporaryDirectory(dir=workdir) as tmp:
+        run = Path(tmp) / "bench-run.h5"
+        flow = synthetic.RiserFlow()
+        synthetic.write_run(run, flow, particles, 5.0, seed=1, start_time=10.0)
+        estimator = PaperEstimator(CellGrid(6, 38, flow.width, flow.height), lag=0.025)
+        yield "mcm-fit", _median_time(lambda: estimator.fit(run, window=(10.0, 15.0)), repeat), "s"
+        model = estimator.fit(run, window=(10.0, 15.0))
+        with Trajectories(run) as traj:
+            states0, _, laps0 = model.initial_states(traj, 10.0)
+        yield "mcm-predict", _median_time(lambda: model.simulate(states0, 200, 7, laps0), repeat), "s"
+        pred = Path(tmp) / "bench-pred.h5"
+        yield "mcm-predict-file", _median_time(
+            lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat), "s"
+        yield "mcm-exact-rtd", _median_time(
+            lambda: exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
+                              model.lag), repeat), "s"
+
+
+BENCHMARKS = {"mcm": markov_benchmarks}
+
+
+def _simulation_benchmarks(repeat: int, particles: int) -> Iterator[tuple[str, float, str]]:
+    try:
+        from cfbmarkov.simulate.bench import simulation_benchmarks
+    except ImportError:
+        return
+    yield from simulation_benchmarks(repeat=repeat, particles=particles)
+
+
+def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: int = 27000
+                   ) -> Iterator[tuple[str, float, str]]:
+    """All benchmarks, or those whose names start with one of ``only``."""
+    def wanted(name: str) -> bool:
+        return not only or any(name.startswith(o) or o.startswith(name) for o in only)
+
+    if wanted("mcm"):
+        for row in markov_benchmarks(repeat, particles):
+            if wanted(row[0]):
+                yield row
+    if wanted("dem") or wanted("cfd-dem"):
+        for row in _simulation_benchmarks(repeat, particles):
+            if wanted(row[0]):
+                yield row

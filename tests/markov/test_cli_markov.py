@@ -1,0 +1,99 @@
+"""The fit / predict / rtd / info verbs through cfbmarkov.cli.main, and their bad input."""
+
+import h5py
+import numpy as np
+import pytest
+
+from cfbmarkov.cli import main
+from cfbmarkov.markov import MarkovModel
+from cfbmarkov.trajectories import Trajectories
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def assert_clean_failure(code, err, *absent):
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    for path in absent:
+        assert not path.exists()
+        assert not any(p.name.startswith(f".{path.name}") for p in path.parent.iterdir())
+
+
+def test_fit_predict_rtd_info(tmp_path, capsys, markov_run):
+    model_path = tmp_path / "model.h5"
+    code, out, _ = run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--lag", "0.05",
+                           "--window", "1:5", "--estimator", "mle", "-o", model_path)
+    assert code == 0 and "estimator 'mle'" in out and "states never visited: 0" in out
+    model = MarkovModel.load(model_path)
+    assert (model.state_space.columns, model.state_space.rows) == (4, 16)
+    assert model.lag == 0.05 and model.window == (1.0, 5.0)
+    assert model.frame_pairs == 4 / 0.025 + 1 - 2      # 161 frames, lag of 2 frames
+    pred = tmp_path / "pred.h5"
+    code, out, _ = run_cli(capsys, "predict", model_path, "--init", markov_run, "--start", 5,
+                           "--duration", 2, "--seed", 7, "-o", pred, "-q")
+    assert code == 0
+    with Trajectories(pred) as t:
+        assert t.n_frames == 41 and t.frame_interval == pytest.approx(0.05)
+        first = t.positions()
+    code, *_ = run_cli(capsys, "predict", model_path, "--init", markov_run, "--start", 5,
+                       "--duration", 2, "--seed", 7, "-o", tmp_path / "again.h5", "-q")
+    with Trajectories(tmp_path / "again.h5") as t:
+        np.testing.assert_array_equal(t.positions(), first)        # seeded, reproducible
+    code, out, _ = run_cli(capsys, "rtd", model_path, "--window-length", 5)
+    assert code == 0 and "E(RT) =" in out
+    code, out, _ = run_cli(capsys, "info", model_path)
+    assert code == 0 and "Markov chain model" in out
+    code, out, _ = run_cli(capsys, "info", pred)
+    assert code == 0 and "markov-prediction" in out
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--cells", "6by38"], "cells '6by38' is not COLUMNSxROWS"),
+    (["--cells", "0x38"], "at least one column"),
+    (["--lag", "0.03"], "not a whole multiple of the frame interval"),
+    (["--lag", "-1"], "must be positive"),
+    (["--window", "7:12"], "outside the data"),
+    (["--window", "5:2"], "STOP must exceed START"),
+    (["--window", "a:b"], "is not START:STOP"),
+])
+def test_fit_bad_options(tmp_path, capsys, markov_run, argv, message):
+    out = tmp_path / "m.h5"
+    code, _, err = run_cli(capsys, "fit", markov_run, "--cells", "4x16", *argv, "-o", out)
+    assert message in err
+    assert_clean_failure(code, err, out)
+
+
+def test_fit_bad_files(tmp_path, capsys, markov_run):
+    out = tmp_path / "m.h5"
+    truncated = tmp_path / "cut.h5"
+    truncated.write_bytes(markov_run.read_bytes()[:5000])
+    foreign = tmp_path / "foreign.h5"
+    with h5py.File(foreign, "w") as f:
+        f["data"] = np.arange(3)
+    empty = tmp_path / "empty.h5"
+    empty.write_bytes(b"")
+    for src, message in ((truncated, "not a readable HDF5 file"),
+                         (foreign, "not a cfbmarkov trajectory file"),
+                         (empty, "empty file"), (tmp_path / "none.h5", "no such file")):
+        code, _, err = run_cli(capsys, "fit", src, "-o", out)
+        assert message in err
+        assert_clean_failure(code, err, out)
+
+
+def test_predict_bad_start(tmp_path, capsys, markov_run):
+    model_path = tmp_path / "model.h5"
+    run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--window", "1:5", "-o", model_path)
+    out = tmp_path / "p.h5"
+    code, _, err = run_cli(capsys, "predict", model_path, "--init", markov_run, "--start", 9.5,
+                           "--duration", 1, "-o", out)
+    assert "no frame at t = 9.5" in err
+    assert_clean_failure(code, err, out)
+    code, _, err = run_cli(capsys, "predict", markov_run, "--init", markov_run, "--start", 5,
+                           "--duration", 1, "-o", out)
+    assert "not a cfbmarkov model file" in err
+    assert_clean_failure(code, err, out)
