@@ -70,14 +70,17 @@ def _simulation_benchmarks(repeat: int, particles: int) -> Iterator[tuple[str, f
 def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: int = 27000
                    ) -> Iterator[tuple[str, float, str]]:
     """All benchmarks, or those whose names start with one of ``only``."""
-    def wanted(name: str) -> bool:
-        return not only or any(name.startswith(o) or o.startswith(name) for o in only)
+    def group_wanted(group: str) -> bool:
+        return not only or any(o.startswith(group) or group.startswith(o) for o in only)
 
-    if wanted("mcm"):
+    def wanted(name: str) -> bool:
+        return not only or any(name.startswith(o) for o in only)
+
+    if group_wanted("mcm"):
         for row in markov_benchmarks(repeat, particles):
             if wanted(row[0]):
                 yield row
-    if wanted("dem") or wanted("cfd-dem"):
+    if group_wanted("dem") or group_wanted("cfd-dem"):
         for row in _simulation_benchmarks(repeat, particles):
             if wanted(row[0]):
                 yield row

@@ -97,3 +97,13 @@ def test_predict_bad_start(tmp_path, capsys, markov_run):
                            "--duration", 1, "-o", out)
     assert "not a cfbmarkov model file" in err
     assert_clean_failure(code, err, out)
+
+
+def test_bench_prints_one_line_per_figure(capsys):
+    code, out, _ = run_cli(capsys, "bench", "--only", "mcm", "--repeat", "1", "--particles", "300")
+    assert code == 0
+    names = [line.split(":")[0] for line in out.strip().splitlines()]
+    assert names == ["mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd"]
+    for line in out.strip().splitlines():
+        value, unit = line.split(": ")[1].split()
+        assert float(value) > 0 and unit == "s"

@@ -219,11 +219,15 @@ class MarkovModel:
                 bar = _progress(progress, duration)
                 writer.append(times[0], positions0, lap=laps[0])
                 cells = self.state_space.cell_of_state
-                for k in range(1, n_steps + 1):
-                    positions = place_in_cells(cells[states[k]], self.state_space, seed, k)
-                    writer.append(times[k], positions, lap=laps[k])
+                block = 32
+                for k0 in range(1, n_steps + 1, block):
+                    ks = range(k0, min(k0 + block, n_steps + 1))
+                    positions = np.stack([place_in_cells(cells[states[k]], self.state_space,
+                                                         seed, k) for k in ks])
+                    writer.append_frames(times[ks.start:ks.stop], positions,
+                                         laps=laps[ks.start:ks.stop])
                     if bar is not None:
-                        bar.update(self.lag)
+                        bar.update(self.lag * len(ks))
                 if bar is not None:
                     bar.close()
             return Path(output)
