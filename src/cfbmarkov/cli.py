@@ -120,6 +120,8 @@ def _cmd_info(args) -> int:
 
     with _open_h5(args.file) as f:
         fmt = f.attrs.get("format")
+    if isinstance(fmt, bytes):
+        fmt = fmt.decode()
     if fmt == "cfbmarkov.model":
         from cfbmarkov.markov import MarkovModel
 
@@ -130,6 +132,14 @@ def _cmd_info(args) -> int:
         with Trajectories(args.file) as t:
             print(t)
     del h5py
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    from cfbmarkov.demo import run_demo
+
+    out = run_demo(args.output, particles=args.particles, seed=args.seed)
+    print(out)
     return 0
 
 
@@ -200,6 +210,12 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("info", help="describe a trajectory or model file")
     s.add_argument("file")
     s.set_defaults(func=_cmd_info)
+
+    s = sub.add_parser("demo", help="the pipeline end to end on a small riser, with figures")
+    s.add_argument("-o", "--output", default="demo-out", help="output directory")
+    s.add_argument("--particles", type=int, default=6000)
+    s.add_argument("--seed", type=int, default=1)
+    s.set_defaults(func=_cmd_demo)
 
     s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
     s.add_argument("--only", action="append", default=None, help="run only this benchmark")

@@ -26,6 +26,7 @@ from __future__ import annotations
 import datetime as _dt
 import json
 import os
+import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
@@ -102,10 +103,10 @@ class Trajectories:
         if isinstance(fmt, bytes):
             fmt = fmt.decode()
         if fmt != FORMAT:
-            what = "a cfbmarkov model file" if fmt == "cfbmarkov.model" else "a cfbmarkov trajectory file"
-            raise InputError(f"{self.path}: not {what} (format attribute is {fmt!r})"
-                             if fmt else f"{self.path}: not a cfbmarkov trajectory file "
-                             "(no 'format' attribute)")
+            if fmt == "cfbmarkov.model":
+                raise InputError(f"{self.path}: a cfbmarkov model file, not a trajectory file")
+            raise InputError(f"{self.path}: not a cfbmarkov trajectory file "
+                             + (f"(format attribute is {fmt!r})" if fmt else "(no 'format' attribute)"))
         for name in ("particles/id", "frames/time", "frames/position", "frames/lap"):
             if name not in f:
                 raise InputError(f"{self.path}: damaged trajectory file (no '{name}' dataset)")
@@ -136,8 +137,9 @@ class Trajectories:
 
     def __repr__(self) -> str:
         span = f"{self.times[0]:g}..{self.times[-1]:g} s"
+        every = (f", every {self.frame_interval:g} s" if np.isfinite(self.frame_interval) else "")
         return (f"Trajectories({str(self.path)!r}: {self.n_particles} particles x {self.n_frames} "
-                f"frames, {span}, every {self.frame_interval:g} s, source={self.source!r})")
+                f"frames, {span}{every}, source={self.source!r})")
 
     # -- metadata --------------------------------------------------------------------
     @property
@@ -263,7 +265,9 @@ class TrajectoryWriter:
         self.with_velocity = with_velocity
         self._label = label or str(self.path)
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        self._tmp = self.path.with_name(f".{self.path.name}.{os.getpid()}.tmp")
+        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
+        os.close(fd)
+        self._tmp = Path(tmp)
         n = self.ids.size
         self._file = h5py.File(self._tmp, "w")
         f = self._file
@@ -429,8 +433,13 @@ class TrajectoryWriter:
             self.abort()
             raise InputError(f"{self._label}: no frames to write")
         self._file.close()
-        os.replace(self._tmp, self.path)
-        self._closed = True
+        try:
+            os.replace(self._tmp, self.path)
+        except OSError as exc:
+            self._tmp.unlink(missing_ok=True)
+            raise InputError(f"{self.path}: cannot write ({exc.strerror or exc})") from None
+        finally:
+            self._closed = True
         return self.path
 
     def abort(self) -> None:

@@ -1,0 +1,44 @@
+"""Importers: CSV files and LAMMPS/LIGGGHTS text dumps -> trajectory files (HDF5).
+
+Both read their input a frame at a time and write through
+:class:`~cfbmarkov.trajectories.TrajectoryWriter`, which validates every frame and derives the
+lap counter; bad input raises :class:`~cfbmarkov.errors.InputError` and leaves no output file.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.io.csv import import_csv
+from cfbmarkov.io.lammps import import_lammps
+
+FORMATS = ("csv", "lammps")
+
+
+def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, *,
+                width: float | None = None, height: float | None = None,
+                time_step: float | None = None) -> Path:
+    """Import ``source`` in format ``fmt`` ('csv' or 'lammps') as the trajectory file ``output``.
+
+    ``width``/``height`` (m) set the domain (CSV default: the paper's 0.09 x 0.95 m riser;
+    LAMMPS default: the dump's box). ``time_step`` (s) dates LAMMPS frames that carry no
+    ``ITEM: TIME``; a CSV file carries its times in column t and takes no time step.
+    Returns the path written.
+    """
+    fmt = str(fmt).lower()
+    if fmt not in FORMATS:
+        raise InputError(f"unknown import format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    for name, value in (("width", width), ("height", height), ("time step", time_step)):
+        if value is not None and not float(value) > 0:
+            raise InputError(f"{name} {value} must be a positive number")
+    if fmt == "csv":
+        if time_step is not None:
+            raise InputError("--time-step applies to LAMMPS dumps only; a CSV file gives its "
+                             "times in column t")
+        return import_csv(source, output, width=width, height=height)
+    return import_lammps(source, output, width=width, height=height, time_step=time_step)
+
+
+__all__ = ["FORMATS", "import_csv", "import_file", "import_lammps"]

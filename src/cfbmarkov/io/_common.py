@@ -1,0 +1,144 @@
+"""Helpers shared by the importers: opening (possibly gzipped) text, mapping read failures
+to :class:`~cfbmarkov.errors.InputError`, putting a frame's rows into the reference id
+order, progress bars, and cleaning up on failure."""
+
+from __future__ import annotations
+
+import contextlib
+import gzip
+import os
+import sys
+import zlib
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any, TextIO
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.trajectories import TrajectoryWriter
+
+GZIP_MAGIC = b"\x1f\x8b"
+
+
+def check_source(source: str | os.PathLike) -> Path:
+    """The input file as a Path; an InputError if it is missing, a folder or empty."""
+    path = Path(source)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: empty file")
+    return path
+
+
+def check_output(output: str | os.PathLike, source: Path) -> Path:
+    """The output path; an InputError if it is a folder or the input file itself."""
+    path = Path(output)
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder; give the name of the .h5 file to write")
+    if path.exists() and path.resolve() == source.resolve():
+        raise InputError(f"{path}: the output would overwrite the input file")
+    return path
+
+
+def open_text(path: Path) -> TextIO:
+    """Open a text file for reading, decompressing it when it starts with the gzip magic bytes."""
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(2)
+        if magic == GZIP_MAGIC:
+            return gzip.open(path, "rt", encoding="utf-8")
+        return open(path, encoding="utf-8")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot open ({exc.strerror or exc})") from None
+
+
+@contextlib.contextmanager
+def reading(label: str):
+    """Turn low-level read failures (cut compressed stream, binary data) into InputError."""
+    try:
+        yield
+    except EOFError:
+        raise InputError(f"{label}: file is truncated (the compressed stream ends early)") from None
+    except (gzip.BadGzipFile, zlib.error) as exc:
+        raise InputError(f"{label}: damaged gzip data ({exc})") from None
+    except UnicodeDecodeError:
+        raise InputError(f"{label}: not a text file (it holds bytes that are not UTF-8 text)"
+                         ) from None
+
+
+@contextlib.contextmanager
+def removing_new_folders(output: Path):
+    """On an error, remove the folders above ``output`` that the import created (if empty)."""
+    new = [p for p in output.resolve().parents if not p.exists()]
+    try:
+        yield
+    except BaseException:
+        for folder in new:  # deepest first
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+
+
+def create_writer(output: Path, ids: np.ndarray, **options: Any) -> TrajectoryWriter:
+    """A TrajectoryWriter on ``output``; an InputError if the file cannot be created."""
+    try:
+        return TrajectoryWriter(output, ids, **options)
+    except OSError as exc:
+        raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
+
+
+def frame_order(ids: np.ndarray, reference: np.ndarray, where: str,
+                hint: str = "") -> np.ndarray | None:
+    """Row order that puts a frame's particle ids onto ``reference`` (sorted ids).
+
+    Returns None when the rows are already in that order. Raises InputError naming the first
+    repeated, missing or unknown id; ``where`` says which frame, ``hint`` ends the message when
+    the frame has fewer rows than the reference.
+    """
+    if ids.size == reference.size and np.array_equal(ids, reference):
+        return None
+    order = np.argsort(ids, kind="stable")
+    ordered = ids[order]
+    if ids.size == reference.size and np.array_equal(ordered, reference):
+        return order
+    raise InputError(_id_mismatch(ordered, reference, where)
+                     + (hint if ids.size < reference.size else ""))
+
+
+def _id_mismatch(ordered: np.ndarray, reference: np.ndarray, where: str) -> str:
+    repeated = ordered[1:][ordered[1:] == ordered[:-1]]
+    if repeated.size:
+        return f"{where}: particle id {repeated[0]} appears more than once"
+    missing = np.setdiff1d(reference, ordered, assume_unique=True)
+    extra = np.setdiff1d(ordered, reference, assume_unique=True)
+    if extra.size:
+        instead = f" (and id {missing[0]} is missing)" if missing.size else ""
+        return f"{where}: particle id {extra[0]} is not in the first frame{instead}"
+    more = f" and {missing.size - 1} more" if missing.size > 1 else ""
+    return (f"{where}: particle id {missing[0]}{more} missing ({ordered.size} of "
+            f"{reference.size} particles of the first frame present)")
+
+
+def whole_ids(values: np.ndarray, where: str) -> np.ndarray:
+    """Particle ids parsed as floats -> int64; an InputError if one is not a whole number."""
+    finite = np.isfinite(values)
+    ids = np.where(finite, values, 0.0).astype(np.int64)
+    bad = ~finite | (ids != values)
+    if bad.any():
+        raise InputError(f"{where}: particle id {values[np.argmax(bad)]:g} is not a whole number")
+    return ids
+
+
+def progress(frames: Iterable, label: str) -> Iterable:
+    """Wrap an iterator of frames in a tqdm bar on stderr, shown only on a terminal."""
+    if not sys.stderr.isatty():
+        return frames
+    from tqdm import tqdm
+
+    return tqdm(frames, desc=f"import {Path(label).name}", unit="frame", file=sys.stderr,
+                delay=1.0, leave=False)
+
+

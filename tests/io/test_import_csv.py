@@ -1,0 +1,262 @@
+"""CSV import: round trips, lap counters, compression, and every kind of bad input through the
+Python API and through ``cfbmarkov import``."""
+
+from __future__ import annotations
+
+import gzip
+
+import numpy as np
+import pytest
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.io import import_csv, import_file
+from cfbmarkov.trajectories import Trajectories
+
+
+def read_back(path):
+    with Trajectories(path) as t:
+        return (t.times, t.ids, t.positions(), t.velocities(), t.laps(), t.source, t.parameters,
+                (t.width, t.height), t.frame_interval)
+
+
+# -- round trips ----------------------------------------------------------------------------
+@pytest.mark.parametrize("columns", [("t", "id", "x", "y", "vx", "vy"),
+                                     ("vy", "x", "id", "vx", "t", "y")])
+def test_round_trip_with_velocities(tmp_path, run, make_csv, save, columns):
+    source = save(tmp_path / "run.csv", make_csv(run, columns))
+    out = import_file(source, "csv", tmp_path / "run.h5")
+    assert out == tmp_path / "run.h5"
+    times, ids, pos, vel, laps, src, params, domain, interval = read_back(out)
+    np.testing.assert_array_equal(ids, run.ids)
+    np.testing.assert_array_equal(times, run.times)
+    np.testing.assert_array_equal(pos, run.positions)
+    np.testing.assert_array_equal(vel, run.velocities)
+    np.testing.assert_array_equal(laps, run.laps)
+    assert src == "import:csv"
+    assert params["format"] == "csv" and params["source_file"] == "run.csv"
+    assert params["columns"] == list(columns)
+    assert domain == (0.09, 0.95)
+    assert interval == pytest.approx(0.025)
+
+
+def test_laps_of_a_particle_crossing_top_and_bottom(tmp_path, run, make_csv, save):
+    out = import_csv(save(tmp_path / "run.csv", make_csv(run)), tmp_path / "run.h5")
+    laps = read_back(out)[4][:, 0]
+    steps = np.diff(laps)
+    assert (steps == 1).sum() == 1 and (steps == -1).sum() == 2
+    assert laps.max() == 1 and laps[-1] == -1
+    crossing_up = int(np.argmax(steps == 1)) + 1
+    assert run.positions[crossing_up, 0, 1] < run.positions[crossing_up - 1, 0, 1]
+
+
+def test_round_trip_without_velocities_and_sorted_rows(tmp_path, run, make_csv, save):
+    text = make_csv(run, ("t", "id", "x", "y"), shuffle=False)
+    out = import_csv(save(tmp_path / "run.csv", text), tmp_path / "run.h5")
+    times, ids, pos, vel, laps, *_ = read_back(out)
+    np.testing.assert_array_equal(times, run.times)
+    np.testing.assert_array_equal(ids, run.ids)
+    assert vel is None
+    np.testing.assert_array_equal(pos, run.positions)
+    np.testing.assert_array_equal(laps, run.laps)
+
+
+@pytest.mark.parametrize("name", ["run.csv.gz", "run.csv"])
+def test_gzip_detected_by_magic_bytes(tmp_path, run, make_csv, save, name):
+    source = save(tmp_path / name, make_csv(run), gz=True)
+    out = import_csv(source, tmp_path / "run.h5")
+    np.testing.assert_array_equal(read_back(out)[2], run.positions)
+
+
+def test_domain_from_options(tmp_path, make_run, make_csv, save):
+    run = make_run(width=0.2, height=2.0)
+    out = import_file(save(tmp_path / "run.csv", make_csv(run)), "csv", tmp_path / "run.h5",
+                      width=0.2, height=2.0)
+    *_, domain, _ = read_back(out)
+    assert domain == (0.2, 2.0)
+    np.testing.assert_array_equal(read_back(out)[4], run.laps)
+
+
+def test_windows_line_ends_spaces_and_comments(tmp_path):
+    text = ("\ufeff# made by hand\r\n t , id , x , y \r\n0.0, 2, 0.01, 0.5\r\n0.0, 1, 0.02, 0.6\r\n"
+            "\r\n0.1, 1, 0.03, 0.7\r\n0.1, 2, 0.04, 0.8\r\n")
+    source = tmp_path / "hand.csv"
+    source.write_bytes(text.encode())
+    times, ids, pos, *_ = read_back(import_csv(source, tmp_path / "hand.h5"))
+    np.testing.assert_array_equal(ids, [1, 2])
+    np.testing.assert_array_equal(times, [0.0, 0.1])
+    np.testing.assert_array_equal(pos, [[[0.02, 0.6], [0.01, 0.5]], [[0.03, 0.7], [0.04, 0.8]]])
+
+
+def test_frames_spanning_read_blocks(tmp_path, make_run, make_csv, save, monkeypatch):
+    import cfbmarkov.io.csv as csv_module
+
+    monkeypatch.setattr(csv_module, "CHUNK_CHARS", 300)  # a few rows per block
+    run = make_run(n_particles=7, n_frames=9)
+    out = import_csv(save(tmp_path / "run.csv", make_csv(run)), tmp_path / "run.h5")
+    times, ids, pos, vel, laps, *_ = read_back(out)
+    np.testing.assert_array_equal(times, run.times)
+    np.testing.assert_array_equal(pos, run.positions)
+    np.testing.assert_array_equal(vel, run.velocities)
+    np.testing.assert_array_equal(ids, run.ids)
+    np.testing.assert_array_equal(laps, run.laps)
+
+
+def test_cli_import_prints_the_output(tmp_path, run, make_csv, save, cli):
+    source = save(tmp_path / "run.csv", make_csv(run))
+    code, out, err = cli("import", source, "--format", "csv", "-o", tmp_path / "o" / "run.h5")
+    assert code == 0, err
+    assert out.strip() == str(tmp_path / "o" / "run.h5")
+    assert err == ""
+    assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["run.h5"]
+
+
+# -- bad input ----------------------------------------------------------------------------------
+HEADER = "t,id,x,y"
+FRAMES = [[(0.0, 1, 0.01, 0.10), (0.0, 2, 0.02, 0.20), (0.0, 3, 0.03, 0.30)],
+          [(0.025, 3, 0.03, 0.31), (0.025, 1, 0.01, 0.11), (0.025, 2, 0.02, 0.21)],
+          [(0.05, 1, 0.01, 0.12), (0.05, 2, 0.02, 0.22), (0.05, 3, 0.03, 0.32)]]
+
+
+def table(frames=FRAMES, header=HEADER) -> str:
+    rows = (",".join(str(v) for v in row) for frame in frames for row in frame)
+    return header + "\n" + "\n".join(rows) + "\n"
+
+
+def changed(frame: int, row: int, **values) -> list:
+    """FRAMES with some fields of one row replaced (t, id, x, y)."""
+    frames = [list(f) for f in FRAMES]
+    names = ("t", "id", "x", "y")
+    old = dict(zip(names, frames[frame][row]))
+    old.update(values)
+    frames[frame][row] = tuple(old[n] for n in names)
+    return frames
+
+
+LONG = table([[(0.025 * k, i, 0.01 * i, 0.1 * i) for i in (1, 2, 3)] for k in range(400)])
+
+BAD_CSV = {
+    "missing-column": (table(header="t,id,x"), r"missing column 'y'"),
+    "misnamed-column": (table(header="time,id,x,y"),
+                        r"missing column 't' in the header 'time,id,x,y'"),
+    "unknown-column": (table(header="t,id,x,y,z"), r"unknown column 'z'"),
+    "duplicate-column": (table(header="t,id,x,y,x"), r"column 'x' appears twice"),
+    "half-velocity": (table(header="t,id,x,y,vx"), r"only one of vx, vy"),
+    "no-header": (table().split("\n", 1)[1], r"line 1 is not a header"),
+    "non-numeric": (table(changed(1, 1, x="abc")), r"line 6: 'abc' in column 'x' is not a number"),
+    "empty-value": (table(changed(1, 1, y="")), r"line 6: column 'y' is empty"),
+    "nan-position": (table(changed(1, 1, x="nan")),
+                     r"position of particle 1 at t = 0.025 s is not a finite number"),
+    "inf-position": (table(changed(2, 0, y="inf")), r"position of particle 1 at t = 0.05 s"),
+    "nan-time": (table(changed(1, 0, t="nan")), r"line 5: time t = nan is not a finite number"),
+    "fractional-id": (table(changed(1, 0, id=2.5)), r"line 5: particle id 2.5 is not a whole"),
+    "time-not-increasing": (table([FRAMES[0], FRAMES[2], FRAMES[1]]),
+                            r"time does not increase at t = 0.025 s"),
+    "frame-repeated": (table([FRAMES[0], FRAMES[1], FRAMES[2], FRAMES[1]]),
+                       (r"time does not increase at t = 0.025 s \(after 0.05 s\); the rows of "
+                        r"a frame must come together and the frames in time order")),
+    "uneven-frames": (table(FRAMES[:2] + [[(0.06,) + r[1:] for r in FRAMES[2]]]),
+                      r"frames unevenly spaced: 0.035 s between t = 0.025 and 0.06 s"),
+    "missing-id": (table([FRAMES[0], FRAMES[1][:2], FRAMES[2]]),
+                   r"frame at t = 0.025 s: particle id 2 missing \(2 of 3 particles"),
+    "extra-id": (table([FRAMES[0], FRAMES[1] + [(0.025, 9, 0.04, 0.4)], FRAMES[2]]),
+                 r"frame at t = 0.025 s: particle id 9 is not in the first frame"),
+    "replaced-id": (table(changed(1, 0, id=7)), r"particle id 7 is not in the first frame"),
+    "duplicate-id": (table(changed(1, 0, id=2)), r"particle id 2 appears more than once"),
+    "duplicate-id-first-frame": (table(changed(0, 2, id=2)), r"id 2 appears more than once"),
+    "outside-width": (table(changed(1, 1, x=0.1)),
+                      r"particle 1 at t = 0.025 s lies outside the domain 0..0.09 x 0..0.95 m"),
+    "outside-height": (table(changed(2, 2, y=-0.01)), r"particle 3 at t = 0.05 s lies outside"),
+    "empty-file": ("", r"empty file"),
+    "blank-file": ("\n \n", r"empty file \(no header line\)"),
+    "header-only": (HEADER + "\n", r"no data rows after the header"),
+    "truncated-mid-row": (table()[:-9], (r"line 10: 3 values, the header names 4 columns "
+                                         r"\(the file ends inside this row: truncated\?\)")),
+    "truncated-frame": (table()[: table().rindex("0.05,3")],
+                        r"t = 0.05 s: particle id 3 missing.*truncated\?"),
+    "binary-file": (b"\x89HDF\r\n\x1a\n\x00\x00\xff\xfe", r"not a text file"),
+    "truncated-gzip": (gzip.compress(LONG.encode())[: len(gzip.compress(LONG.encode())) // 2],
+                       r"file is truncated \(the compressed stream ends early\)"),
+}
+
+
+def write_case(tmp_path, content):
+    source = tmp_path / "bad.csv"
+    if isinstance(content, bytes):
+        source.write_bytes(content)
+    else:
+        source.write_text(content)
+    return source
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CSV))
+def test_bad_csv_raises_input_error(tmp_path, case):
+    content, match = BAD_CSV[case]
+    source = write_case(tmp_path, content)
+    output = tmp_path / "out" / "run.h5"
+    with pytest.raises(InputError, match=match):
+        import_csv(source, output)
+    assert not output.exists() and not output.parent.exists()
+
+
+@pytest.mark.parametrize("case", sorted(BAD_CSV))
+def test_bad_csv_through_cli(tmp_path, assert_clean_failure, case):
+    content, match = BAD_CSV[case]
+    source = write_case(tmp_path, content)
+    output = tmp_path / "out" / "run.h5"
+    line = assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+                                match=match)
+    assert line.startswith("cfbmarkov import: error: ")
+
+
+def test_missing_input_file(tmp_path, assert_clean_failure):
+    output = tmp_path / "out" / "run.h5"
+    with pytest.raises(InputError, match=r"nowhere.csv: no such file"):
+        import_file(tmp_path / "nowhere.csv", "csv", output)
+    assert_clean_failure("import", tmp_path / "nowhere.csv", "--format", "csv", "-o", output,
+                         output=output, match=r"no such file")
+
+
+def test_options_that_do_not_apply(tmp_path, run, make_csv, save):
+    source = save(tmp_path / "run.csv", make_csv(run))
+    with pytest.raises(InputError, match=r"--time-step applies to LAMMPS dumps only"):
+        import_file(source, "csv", tmp_path / "run.h5", time_step=1e-5)
+    with pytest.raises(InputError, match=r"unknown import format 'vtk'"):
+        import_file(source, "vtk", tmp_path / "run.h5")
+    with pytest.raises(InputError, match=r"width -1 must be a positive number"):
+        import_file(source, "csv", tmp_path / "run.h5", width=-1)
+    with pytest.raises(InputError, match=r"is a folder"):
+        import_file(source, "csv", tmp_path)
+    with pytest.raises(InputError, match=r"would overwrite the input"):
+        import_file(source, "csv", source)
+    with pytest.raises(InputError, match=r"cannot write"):
+        import_file(source, "csv", source / "run.h5")
+    assert not (tmp_path / "run.h5").exists()
+
+
+def test_domain_too_small_for_the_data(tmp_path, run, make_csv, save, assert_clean_failure):
+    source = save(tmp_path / "run.csv", make_csv(run))
+    output = tmp_path / "out" / "run.h5"
+    assert_clean_failure("import", source, "--format", "csv", "-o", output, "--height", "0.5",
+                         output=output, match=r"lies outside the domain 0..0.09 x 0..0.5 m")
+
+
+def test_failed_import_keeps_an_existing_output(tmp_path, run, make_csv, save):
+    output = tmp_path / "run.h5"
+    import_csv(save(tmp_path / "good.csv", make_csv(run)), output)
+    before = output.read_bytes()
+    with pytest.raises(InputError):
+        import_csv(write_case(tmp_path, BAD_CSV["missing-id"][0]), output)
+    assert output.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv", "good.csv", "run.h5"]
+
+
+def test_progress_bar_only_on_a_terminal(tmp_path, run, make_csv, save, capsys, monkeypatch):
+    import sys
+
+    source = save(tmp_path / "run.csv", make_csv(run))
+    import_csv(source, tmp_path / "a.h5")
+    assert capsys.readouterr().err == ""
+    monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
+    import_csv(source, tmp_path / "b.h5")  # short: the bar waits a second before it shows
+    assert capsys.readouterr().err == ""
+    np.testing.assert_array_equal(read_back(tmp_path / "b.h5")[2], run.positions)

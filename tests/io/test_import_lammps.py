@@ -1,0 +1,322 @@
+"""LAMMPS/LIGGGHTS dump import: round trips of generated dumps, the real engine files in
+shared/data, and every kind of bad input through the Python API and ``cfbmarkov import``."""
+
+from __future__ import annotations
+
+import gzip
+import itertools
+
+import numpy as np
+import pytest
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.io import import_file, import_lammps
+from cfbmarkov.trajectories import Trajectories
+
+SHUFFLED = ("vy", "x", "radius", "id", "y", "z", "vx", "type")
+
+
+def read_back(path):
+    with Trajectories(path) as t:
+        return {"times": t.times, "ids": t.ids, "positions": t.positions(),
+                "velocities": t.velocities(), "laps": t.laps(), "source": t.source,
+                "parameters": t.parameters, "domain": (t.width, t.height)}
+
+
+# -- round trips of generated dumps -------------------------------------------------------------
+@pytest.mark.parametrize("with_time", [True, False])
+@pytest.mark.parametrize("gz", [False, True])
+def test_round_trip_shuffled_columns_unsorted_ids(tmp_path, run, make_dump, save, with_time, gz):
+    text = make_dump(run, columns=SHUFFLED, with_time=with_time)
+    source = save(tmp_path / ("run.dump.gz" if gz else "run.dump"), text, gz=gz)
+    out = import_file(source, "lammps", tmp_path / "run.h5",
+                      time_step=None if with_time else 5e-6)
+    got = read_back(out)
+    np.testing.assert_array_equal(got["ids"], run.ids)
+    if with_time:
+        np.testing.assert_array_equal(got["times"], run.times)
+    else:
+        np.testing.assert_allclose(got["times"], run.times, rtol=1e-12)
+    np.testing.assert_array_equal(got["positions"], run.positions)
+    np.testing.assert_array_equal(got["velocities"], run.velocities)
+    np.testing.assert_array_equal(got["laps"], run.laps)
+    assert got["source"] == "import:lammps"
+    assert got["domain"] == (0.09, 0.95)
+    params = got["parameters"]
+    assert params["columns"] == list(SHUFFLED)
+    assert params["position_columns"] == ["x", "y"] and params["velocity_columns"] == ["vx", "vy"]
+    assert params["format"] == "lammps" and params["source_file"] == source.name
+    assert params["time_from"] == ("ITEM: TIME" if with_time else "timestep x time_step")
+    assert params["time_step"] == (None if with_time else 5e-6)
+    assert params["units"] == "si"
+    assert params["box"] == [[0.0, 0.09], [0.0, 0.95], [-0.0005, 0.0005]]
+
+
+@pytest.mark.parametrize("kind", [("x", "y"), ("xs", "ys"), ("xu", "yu")])
+def test_position_columns_and_shifted_box(tmp_path, run, make_dump, save, kind):
+    box = ((-0.045, 0.045), (0.2, 1.15), (-0.0005, 0.0005))
+    text = make_dump(run, columns=("id",) + kind + ("vx", "vy"), box=box, units=None)
+    out = import_lammps(save(tmp_path / "run.dump", text), tmp_path / "run.h5")
+    got = read_back(out)
+    np.testing.assert_allclose(got["positions"], run.positions, rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(got["laps"], run.laps)
+    assert got["domain"] == pytest.approx((0.09, 0.95))
+    assert got["parameters"]["origin_shift"] == [-0.045, 0.2]
+    assert got["parameters"]["position_columns"] == list(kind)
+    assert got["parameters"]["units"] is None
+
+
+def test_unwrapped_heights_are_wrapped_into_the_box(tmp_path, run, make_dump, save):
+    assert run.unwrapped_y.max() > run.height and run.unwrapped_y.min() < 0
+    text = make_dump(run, columns=("id", "xu", "yu"))
+    got = read_back(import_lammps(save(tmp_path / "run.dump", text), tmp_path / "run.h5"))
+    assert got["velocities"] is None
+    assert got["positions"][..., 1].min() >= 0 and got["positions"][..., 1].max() < run.height
+    np.testing.assert_array_equal(got["laps"], run.laps)
+
+
+def test_positions_just_outside_a_periodic_box_are_wrapped(tmp_path):
+    """LAMMPS writes atoms a little outside a periodic box between re-neighbourings."""
+    frames = [(0, ["1 0.01 0.9499", "2 0.02 0.0001"]), (1000, ["1 0.01 0.95003", "2 0.02 -0.00002"]),
+              (2000, ["1 0.01 0.0002", "2 0.02 0.9498"])]
+    text = "".join(f"ITEM: TIMESTEP\n{ts}\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS ff pp pp\n"
+                   "0 0.09\n0 0.95\n-0.0005 0.0005\nITEM: ATOMS id x y\n" + "\n".join(rows) + "\n"
+                   for ts, rows in frames)
+    source = tmp_path / "edge.dump"
+    source.write_text(text)
+    got = read_back(import_lammps(source, tmp_path / "edge.h5", time_step=1e-5))
+    np.testing.assert_allclose(got["positions"][1, :, 1], [0.00003, 0.95 - 0.00002], atol=1e-12)
+    np.testing.assert_array_equal(got["laps"], [[0, 0], [1, -1], [1, -1]])
+    np.testing.assert_allclose(got["times"], [0.0, 0.01, 0.02])
+
+
+def test_two_line_box_trailing_spaces_and_domain_override(tmp_path, run, make_dump, save):
+    text = make_dump(run, box=((0.0, 0.09), (0.0, 0.95)), boundary="ff pp", trailing_space=True,
+                     columns=("id", "x", "y"))
+    source = save(tmp_path / "run.dump", text)
+    got = read_back(import_lammps(source, tmp_path / "a.h5"))
+    np.testing.assert_array_equal(got["positions"], run.positions)
+    got = read_back(import_lammps(source, tmp_path / "b.h5", width=0.1, height=0.95))
+    assert got["domain"] == (0.1, 0.95)
+    np.testing.assert_array_equal(got["laps"], run.laps)
+
+
+def test_box_bounds_without_flags(tmp_path, run, make_dump, save):
+    text = make_dump(run, boundary="", columns=("id", "x", "y")).replace("BOX BOUNDS \n",
+                                                                         "BOX BOUNDS\n")
+    got = read_back(import_lammps(save(tmp_path / "run.dump", text), tmp_path / "run.h5"))
+    np.testing.assert_array_equal(got["positions"], run.positions)
+    assert got["parameters"]["boundary"] == []
+
+
+def test_cli_import_of_a_dump(tmp_path, run, make_dump, save, cli):
+    source = save(tmp_path / "run.dump.gz", make_dump(run, with_time=False), gz=True)
+    output = tmp_path / "o" / "run.h5"
+    code, out, err = cli("import", source, "--format", "lammps", "-o", output,
+                         "--time-step", "5e-6")
+    assert code == 0, err
+    assert out.strip() == str(output) and err == ""
+    code, out, err = cli("info", output)
+    assert code == 0 and "6 particles x 16 frames" in out and "import:lammps" in out
+
+
+# -- the real engine files ------------------------------------------------------------------------
+def raw_dump_heights(path):
+    """y of every atom per frame, by id, read with plain string handling: {time: {id: y}}."""
+    frames, lines = {}, path.read_text().splitlines()
+    k = 0
+    while k < len(lines):
+        if lines[k] == "ITEM: TIME":
+            time = float(lines[k + 1])
+        if lines[k] == "ITEM: NUMBER OF ATOMS":
+            count = int(lines[k + 1])
+        if lines[k].startswith("ITEM: ATOMS"):
+            names = lines[k].split()[2:]
+            rows = [line.split() for line in lines[k + 1:k + 1 + count]]
+            frames[time] = {int(r[names.index("id")]): float(r[names.index("y")]) for r in rows}
+            k += count
+        k += 1
+    return frames
+
+
+def test_real_lammps_riser_dump(tmp_path, shared_data):
+    source = shared_data / "lammps-riser-300.dump"
+    got = read_back(import_lammps(source, tmp_path / "riser.h5"))
+    assert got["positions"].shape == (81, 300, 2)
+    np.testing.assert_array_equal(got["ids"], np.arange(1, 301))
+    np.testing.assert_allclose(got["times"], 0.5 + 0.025 * np.arange(81), rtol=0, atol=1e-12)
+    assert got["domain"] == pytest.approx((0.09, 0.95))
+    assert got["velocities"] is not None
+    y = got["positions"][..., 1]
+    assert y.min() >= 0 and y.max() <= 0.95
+    np.testing.assert_array_equal(got["laps"][0], 0)
+    steps = np.diff(got["laps"], axis=0)
+    up, down = int((steps == 1).sum()), int((steps == -1).sum())
+    assert np.abs(steps).max() <= 1
+
+    raw = raw_dump_heights(source)
+    times = sorted(raw)
+    assert len(times) == 81
+    raw_up = raw_down = 0
+    for a, b in itertools.pairwise(times):
+        dy = np.array([raw[b][i] - raw[a][i] for i in range(1, 301)])
+        raw_up += int((dy < -0.475).sum())
+        raw_down += int((dy > 0.475).sum())
+    assert (up, down) == (raw_up, raw_down)
+    assert abs(up - 1130) <= 60 and abs(down - 180) <= 20, (up, down)
+    np.testing.assert_array_equal(got["laps"][-1], got["laps"][-1].astype(int))
+    assert got["laps"][-1].sum() == up - down
+
+
+def test_real_liggghts_sample(tmp_path, shared_data, assert_clean_failure):
+    source = shared_data / "liggghts-3.8.0-sample.dump"
+    output = tmp_path / "out" / "sample.h5"
+    with pytest.raises(InputError, match=r"no ITEM: TIME; give .* --time-step"):
+        import_lammps(source, output)
+    assert_clean_failure("import", source, "--format", "lammps", "-o", output, output=output,
+                         match=r"--time-step")
+    got = read_back(import_lammps(source, output, time_step=1e-5))
+    np.testing.assert_array_equal(got["ids"], [1, 2, 3])
+    np.testing.assert_array_equal(got["times"], [0.0])
+    np.testing.assert_array_equal(got["positions"], [[[0.02, 0.05], [0.05, 0.06], [0.07, 0.08]]])
+    np.testing.assert_array_equal(got["velocities"], np.zeros((1, 3, 2)))
+    assert got["domain"] == (0.09, 0.2)
+    assert got["parameters"]["boundary"] == ["ff", "ff", "pp"]
+
+
+# -- bad input ------------------------------------------------------------------------------------
+BOX = "0 0.09\n0 0.95\n-0.0005 0.0005\n"
+ATOMS = [["1 1 0.01 0.10 0 1", "2 1 0.02 0.20 0 1", "3 1 0.03 0.30 0 1"],
+         ["3 1 0.03 0.31 0 1", "1 1 0.01 0.11 0 1", "2 1 0.02 0.21 0 1"],
+         ["1 1 0.01 0.12 0 1", "2 1 0.02 0.22 0 1", "3 1 0.03 0.32 0 1"]]
+
+
+def frame(k: int, rows=None, *, time: float | None = None, natoms: int | None = None,
+          box: str = BOX, flags: str = "ff pp pp", columns: str = "id type x y vx vy") -> str:
+    rows = ATOMS[k] if rows is None else rows
+    time = 0.5 + 0.025 * k if time is None else time
+    head = "" if time is False else f"ITEM: TIME\n{time}\n"
+    return (f"{head}ITEM: TIMESTEP\n{5000 * k}\nITEM: NUMBER OF ATOMS\n"
+            f"{len(rows) if natoms is None else natoms}\nITEM: BOX BOUNDS {flags}\n{box}"
+            f"ITEM: ATOMS {columns}\n" + "".join(row + "\n" for row in rows))
+
+
+def dump(*frames: str) -> str:
+    return "".join(frames) if frames else frame(0) + frame(1) + frame(2)
+
+
+GOOD = dump()
+LONG = "".join(frame(k, ATOMS[k % 3], time=0.5 + 0.025 * k) for k in range(300))
+BAD_DUMPS = {
+    "triclinic-flags": (dump(frame(0, flags="xy xz yz ff pp pp",
+                                   box="0 0.09 0\n0 0.95 0\n0 1 0\n")),
+                        r"line 7: triclinic box \(BOX BOUNDS xy xz yz ff pp pp\) is not supported"),
+    "triclinic-bounds": (dump(frame(0, box="0 0.09 0.01\n0 0.95 0\n0 1 0\n")),
+                         r"line 8: box bounds with a tilt factor: triclinic box"),
+    "non-si-units": ("ITEM: UNITS\nlj\n" + GOOD, r"line 2: units are 'lj', not SI"),
+    "no-time": (dump(*(frame(k, time=False) for k in range(3))),
+                (r"timestep 0 \(line 9\): the dump has no ITEM: TIME; give the simulation "
+                 r"time step with --time-step \(s\)")),
+    "time-in-first-frame-only": (dump(frame(0), frame(1, time=False)),
+                                 r"timestep 5000 \(line 23\): the dump has no ITEM: TIME"),
+    "truncated-mid-frame": (GOOD[: GOOD.rindex("3 1 0.03 0.32")],
+                            (r"file ends inside the atoms of timestep 10000: 2 of 3 atom "
+                             r"lines \(truncated\?\)")),
+    "truncated-mid-line": (GOOD[:-11], (r"line 42: 3 values, ITEM: ATOMS names 6 columns "
+                                        r"\(the file ends inside this line: truncated\?\)")),
+    "truncated-in-header": (GOOD[: GOOD.rindex("ITEM: BOX")],
+                            r"file ends inside the header of a frame at line 34 \(truncated\?\)"),
+    "truncated-after-item": (GOOD[: GOOD.rindex("ITEM: BOX") - 2],
+                             r"no value after 'ITEM: NUMBER OF ATOMS' \(truncated\?\)"),
+    "truncated-gzip": (gzip.compress(LONG.encode())[: len(gzip.compress(LONG.encode())) // 2],
+                       r"file is truncated \(the compressed stream ends early\)"),
+    "no-id-column": (dump(frame(0, [r[2:] for r in ATOMS[0]], columns="type x y vx vy")),
+                     r"ITEM: ATOMS has no 'id' column \(type x y vx vy\)"),
+    "no-position-columns": (dump(frame(0, columns="id type a b vx vy")),
+                            r"no position columns \(x y, xu yu, xs ys or xsu ysu\)"),
+    "unknown-item": (GOOD.replace("ITEM: TIMESTEP\n5000", "ITEM: ENTRIES c_1\n5000"),
+                     r"line 17: unknown item 'ITEM: ENTRIES c_1'"),
+    "atoms-without-count": (GOOD.replace("ITEM: NUMBER OF ATOMS\n3\n", "", 1),
+                            r"line 9: ITEM: ATOMS without a preceding ITEM: NUMBER OF ATOMS"),
+    "box-changes": (dump(frame(0), frame(1, box="0 0.09\n0 1.0\n-0.0005 0.0005\n"), frame(2)),
+                    r"timestep 5000 \(line 25\): the box changes"),
+    "columns-change": (dump(frame(0), frame(1, [r[:-4] for r in ATOMS[1]], columns="id type x y")),
+                       r"ITEM: ATOMS columns change \(id type x y\)"),
+    "non-numeric": (dump(frame(0), frame(1, ["3 1 0.03 0.31 0 1", "1 1 abc 0.11 0 1",
+                                             "2 1 0.02 0.21 0 1"])),
+                    r"line 27: 'abc' in column 'x' is not a number"),
+    "bad-timestep": (GOOD.replace("TIMESTEP\n5000", "TIMESTEP\n5e3"),
+                     r"line 18: ITEM: TIMESTEP value '5e3' is not a whole number"),
+    "fewer-atoms-than-declared": (dump(frame(0, natoms=4), frame(1)),
+                                  (r"line 15: 'ITEM: TIME' inside the atoms of timestep 0: "
+                                   r"fewer atom lines \(3\) than NUMBER OF ATOMS \(4\)")),
+    "more-atoms-than-declared": (dump(frame(0, natoms=2), frame(1)),
+                                 r"line 14: expected an 'ITEM:' line, found '3 1 0.03 0.30 0 1'"),
+    "missing-id": (dump(frame(0), frame(1, ATOMS[1][:2])),
+                   r"timestep 5000 \(line 25\), t = 0.525 s: particle id 2 missing"),
+    "duplicate-id": (dump(frame(0), frame(1, ATOMS[1][:2] + ["1 1 0.02 0.21 0 1"])),
+                     r"particle id 1 appears more than once"),
+    "fractional-id": (dump(frame(0), frame(1, ATOMS[1][:2] + ["2.5 1 0.02 0.21 0 1"])),
+                      r"particle id 2.5 is not a whole number"),
+    "time-not-increasing": (dump(frame(0), frame(1, time=0.55), frame(2, time=0.525)),
+                            r"time does not increase at t = 0.525 s \(after 0.55 s\)"),
+    "uneven-frames": (dump(frame(0), frame(1), frame(2, time=0.56)),
+                      r"frames unevenly spaced: 0.035 s between t = 0.525 and 0.56 s"),
+    "nan-position": (dump(frame(0), frame(1, ["3 1 0.03 0.31 0 1", "1 1 nan 0.11 0 1",
+                                              "2 1 0.02 0.21 0 1"])),
+                     r"position of particle 1 at t = 0.525 s is not a finite number"),
+    "inf-velocity": (dump(frame(0), frame(1, ["3 1 0.03 0.31 0 inf", "1 1 0.01 0.11 0 1",
+                                              "2 1 0.02 0.21 0 1"])),
+                     r"velocity of particle 3 at t = 0.525 s is not a finite number"),
+    "outside-domain": (dump(frame(0), frame(1, ["3 1 0.03 0.31 0 1", "1 1 0.095 0.11 0 1",
+                                                "2 1 0.02 0.21 0 1"])),
+                       r"particle 1 at t = 0.525 s lies outside the domain 0..0.09 x 0..0.95 m"),
+    "not-a-dump": ("t,id,x,y\n0,1,0.01,0.1\n",
+                   r"line 1: expected an 'ITEM:' line, found 't,id,x,y'"),
+    "no-frames": ("ITEM: UNITS\nsi\n", r"no frames \(no 'ITEM: ATOMS' block\)"),
+    "empty-file": ("", r"empty file"),
+    "binary-file": (b"\x00\x01\x02\xff\xfe\x80", r"not a text file"),
+}
+
+
+def write_case(tmp_path, content):
+    source = tmp_path / "bad.dump"
+    if isinstance(content, bytes):
+        source.write_bytes(content)
+    else:
+        source.write_text(content)
+    return source
+
+
+@pytest.mark.parametrize("case", sorted(BAD_DUMPS))
+def test_bad_dump_raises_input_error(tmp_path, case):
+    content, match = BAD_DUMPS[case]
+    output = tmp_path / "out" / "run.h5"
+    with pytest.raises(InputError, match=match):
+        import_lammps(write_case(tmp_path, content), output)
+    assert not output.exists() and not output.parent.exists()
+
+
+@pytest.mark.parametrize("case", sorted(BAD_DUMPS))
+def test_bad_dump_through_cli(tmp_path, assert_clean_failure, case):
+    content, match = BAD_DUMPS[case]
+    output = tmp_path / "out" / "run.h5"
+    line = assert_clean_failure("import", write_case(tmp_path, content), "--format", "lammps",
+                                "-o", output, output=output, match=match)
+    assert line.startswith("cfbmarkov import: error: ")
+
+
+def test_good_reference_dump_imports(tmp_path):
+    """The text that the bad cases alter is itself valid."""
+    got = read_back(import_lammps(write_case(tmp_path, GOOD), tmp_path / "good.h5"))
+    np.testing.assert_array_equal(got["positions"][1], [[0.01, 0.11], [0.02, 0.21], [0.03, 0.31]])
+    got = read_back(import_lammps(write_case(tmp_path, LONG), tmp_path / "long.h5"))
+    assert got["times"].size == 300
+
+
+def test_missing_dump(tmp_path, assert_clean_failure):
+    output = tmp_path / "out" / "run.h5"
+    with pytest.raises(InputError, match=r"none.dump: no such file"):
+        import_lammps(tmp_path / "none.dump", output)
+    assert_clean_failure("import", tmp_path / "none.dump", "--format", "lammps", "-o", output,
+                         output=output, match=r"no such file")
