@@ -70,7 +70,8 @@ def generator(flow: RiserFlow) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
                 switch = np.array([[1 - to_fall, to_fall], [to_rise, 1 - to_rise]])
             else:
                 mix = 0.35 + 0.4 * wall_weight[c]
-                velocity = (1 - mix) * flow.rise_velocity * (1.3 - 0.6 * wall_weight[c]) + mix * flow.fall_velocity
+                rising = flow.rise_velocity * (1.3 - 0.6 * wall_weight[c])
+                velocity = (1 - mix) * rising + mix * flow.fall_velocity
                 switch = np.ones((1, 1))
             vertical = _vertical_kernel(velocity * flow.lag / cell_h, flow.vertical_spread, reach)
             lateral = np.zeros(m)

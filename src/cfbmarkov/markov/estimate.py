@@ -22,7 +22,7 @@ from __future__ import annotations
 import os
 from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import Iterable
+from typing import TYPE_CHECKING, Iterable
 
 import numba as nb
 import numpy as np
@@ -30,6 +30,9 @@ import numpy as np
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.states import StateSpace
 from cfbmarkov.trajectories import Trajectories
+
+if TYPE_CHECKING:
+    from cfbmarkov.markov.model import MarkovModel
 
 
 @nb.njit(cache=True)
@@ -159,7 +162,6 @@ class TransitionEstimator:
     def fit(self, data, window: tuple[float, float] | None = None):
         """Fit on a trajectory file (path or :class:`Trajectories`), or a list of them,
         using the frames of ``window`` = (A, B) in s (all frames when None)."""
-        from cfbmarkov.markov.model import MarkovModel
 
         counts, info = gather_counts(self.state_space, data, self.lag, window)
         return self.fit_counts(counts, window=window, source=info["source"])

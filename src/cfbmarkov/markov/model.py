@@ -176,7 +176,8 @@ class MarkovModel:
     def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """States, positions and laps of the particles of ``trajectories`` at ``start`` (s)."""
         space = self.state_space
-        if not (np.isclose(space.width, trajectories.width) and np.isclose(space.height, trajectories.height)):
+        if not (np.isclose(space.width, trajectories.width)
+                and np.isclose(space.height, trajectories.height)):
             raise InputError(f"model covers {space.width:g} x {space.height:g} m but "
                              f"{trajectories.path} is {trajectories.width:g} x {trajectories.height:g} m")
         i = trajectories.frame_index(start)

@@ -1,0 +1,66 @@
+"""Comparison metrics: percentage difference, Minkowski distance (Eq. 9), mixing RMS."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+
+
+def percentage_difference(model, reference):
+    """PD = 100 (model - reference) / reference, in % (NaN where the reference is 0 or NaN).
+
+    Scalars give a float, arrays an array.
+    """
+    m = np.asarray(model, dtype=np.float64)
+    r = np.asarray(reference, dtype=np.float64)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        pd = np.where(r != 0, 100.0 * (m - r) / np.where(r != 0, r, 1.0), np.nan)
+    return float(pd) if pd.ndim == 0 else pd
+
+
+def minkowski_distance(e, f, order: float = 2.0) -> float:
+    """Eq. (9): MD = (sum_j |e_j - f_j|^k)^(1/k) of two equally long arrays; ``order`` k > 0
+    (``np.inf`` gives the largest difference)."""
+    e = np.asarray(e, dtype=np.float64).reshape(-1)
+    f = np.asarray(f, dtype=np.float64).reshape(-1)
+    if e.shape != f.shape:
+        raise InputError(f"Minkowski distance of arrays of different lengths ({e.size} and {f.size})")
+    if not order > 0:
+        raise InputError(f"Minkowski order {order:g} must be positive")
+    d = np.abs(e - f)
+    if d.size == 0:
+        return 0.0
+    if np.isinf(order):
+        return float(d.max())
+    return float(np.sum(d ** order) ** (1.0 / order))
+
+
+def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
+    """RMS difference of two mixing curves on the model's frames (a fraction).
+
+    The reference is evaluated at the model's frame times by linear interpolation; the
+    model's times must lie inside the reference's range (to round-off).
+    """
+    rt = np.asarray(ref_times, dtype=np.float64).reshape(-1)
+    rf = np.asarray(ref_fraction, dtype=np.float64).reshape(-1)
+    mt = np.asarray(model_times, dtype=np.float64).reshape(-1)
+    mf = np.asarray(model_fraction, dtype=np.float64).reshape(-1)
+    if rt.size != rf.size or mt.size != mf.size:
+        raise InputError("mixing curve times and fractions differ in length")
+    if rt.size == 0 or mt.size == 0:
+        raise InputError("mixing RMS of an empty curve")
+    if np.any(np.diff(rt) <= 0):
+        raise InputError("reference mixing curve times do not increase")
+    span = max(rt[-1] - rt[0], abs(rt[-1]), 1.0)
+    tol = 1e-9 * span
+    if rt.size > 1:
+        tol = max(tol, 1e-6 * float(np.min(np.diff(rt))))
+    if mt.min() < rt[0] - tol or mt.max() > rt[-1] + tol:
+        raise InputError(f"model frames {mt.min():g} to {mt.max():g} s leave the reference's "
+                         f"{rt[0]:g} to {rt[-1]:g} s")
+    ref_at_model = np.interp(np.clip(mt, rt[0], rt[-1]), rt, rf)
+    return float(np.sqrt(np.mean((mf - ref_at_model) ** 2)))
+
+
+__all__ = ["minkowski_distance", "mixing_rms", "percentage_difference"]

@@ -1,0 +1,286 @@
+"""Figures of the comparison report, one function per figure (the paper's Fig. 3-11).
+
+Every function takes plain arrays and an output path and writes one PNG atomically (a
+temporary name in the same folder, then a rename). Figures are drawn on bare
+:class:`matplotlib.figure.Figure` objects rendered by Agg, so no GUI backend is touched and
+pyplot's global state is never used (safe in scripts, servers and tests).
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+from matplotlib.colors import LogNorm, Normalize
+from matplotlib.figure import Figure
+
+from cfbmarkov._atomic import atomic_path
+from cfbmarkov.errors import InputError
+
+DPI = 120
+PURPLE = "#6c2a91"
+GREEN = "#1a9641"
+REFERENCE_COLOUR = "#1f4e79"
+MODEL_COLOUR = "#d35400"
+
+
+def _save(fig: Figure, path: str | os.PathLike) -> Path:
+    path = Path(path)
+    with atomic_path(path, suffix=".png") as tmp:
+        fig.savefig(tmp, dpi=DPI, format="png")
+    return path
+
+
+def _riser_axes(ax, width: float, height: float, *, xlabel: bool = True, ylabel: bool = True):
+    ax.set_xlim(0.0, width)
+    ax.set_ylim(0.0, height)
+    ax.set_aspect("equal")
+    ax.set_xticks([0.0, width])
+    ax.set_xticklabels(["0", f"{width:g}"], fontsize=8)
+    for label, align in zip(ax.get_xticklabels(), ("left", "right")):
+        label.set_horizontalalignment(align)  # keep both labels inside a narrow panel
+    if xlabel:
+        ax.set_xlabel("x (m)")
+    if ylabel:
+        ax.set_ylabel("y (m)")
+    else:
+        ax.tick_params(labelleft=False)
+
+
+# -- transition matrix (Fig. 3) --------------------------------------------------------------
+def plot_transition_matrix(P, columns: int, rows: int, path, *, title: str | None = None,
+                           grid: bool = False) -> Path:
+    """Heatmap of the S x S transition matrix: from state i (rows, top to bottom) to state j
+    (columns), nonzero entries on a log colour scale, zeros blank. When S = columns x rows
+    the top and right axes give the riser row of the state (s = row*m + col); ``grid`` draws
+    a line between every row of cells."""
+    P = np.asarray(P, dtype=np.float64)
+    if P.ndim != 2 or P.shape[0] != P.shape[1] or P.shape[0] == 0:
+        raise InputError(f"transition matrix must be square, got shape {P.shape}")
+    s = P.shape[0]
+    positive = P[P > 0]
+    vmin = max(float(positive.min()) if positive.size else 1e-3, 1e-6)
+    vmax = max(float(positive.max()) if positive.size else 1.0, vmin * 10)
+    fig = Figure(figsize=(7.6, 6.6), layout="constrained")
+    ax = fig.add_subplot()
+    image = ax.imshow(np.ma.masked_less_equal(P, 0.0), origin="upper", interpolation="nearest",
+                      norm=LogNorm(vmin=vmin, vmax=vmax), cmap="viridis",
+                      extent=(-0.5, s - 0.5, s - 0.5, -0.5))
+    ax.set_facecolor("white")
+    ax.set_xlabel("to state j (0-based, s = row·m + col)")
+    ax.set_ylabel("from state i (0-based)")
+    bar = fig.colorbar(image, ax=ax, shrink=0.85, pad=0.02)
+    bar.set_label("transition probability $P_{ij}$ (log scale; blank = 0)")
+    cells = columns * rows == s
+    if cells and rows > 1:
+        step = max(1, int(np.ceil(rows / 10)))
+        row_ticks = np.arange(0, rows, step)
+        centre = row_ticks * columns + 0.5 * (columns - 1)
+        top = ax.secondary_xaxis("top")
+        top.set_xticks(centre)
+        top.set_xticklabels([str(r) for r in row_ticks])
+        top.set_xlabel(f"riser row of state j (0 = bottom, {columns} columns per row)")
+        if grid:
+            for r in range(1, rows):
+                ax.axhline(r * columns - 0.5, color="0.85", lw=0.3, zorder=0)
+                ax.axvline(r * columns - 0.5, color="0.85", lw=0.3, zorder=0)
+    nonzero = int(np.count_nonzero(P))
+    ax.set_title(title or f"Transition probability matrix ({s} states, {columns} x {rows} cells, "
+                 f"{nonzero} nonzero)", fontsize=11)
+    return _save(fig, path)
+
+
+def plot_transition_bars(P, path, *, title: str | None = None, min_probability: float = 0.0
+                         ) -> Path:
+    """The paper's Fig. 3 bar view: a vertical stem of height P_ij at (state i, state j) for
+    every nonzero entry (above ``min_probability``), coloured by its value."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    P = np.asarray(P, dtype=np.float64)
+    if P.ndim != 2 or P.shape[0] != P.shape[1] or P.shape[0] == 0:
+        raise InputError(f"transition matrix must be square, got shape {P.shape}")
+    s = P.shape[0]
+    i, j = np.nonzero(P > min_probability)
+    p = P[i, j]
+    fig = Figure(figsize=(8.0, 6.6), layout="constrained")
+    ax = fig.add_subplot(projection="3d")
+    norm = Normalize(vmin=0.0, vmax=max(float(p.max()) if p.size else 1.0, 1e-12))
+    order = np.argsort(p)              # tall stems drawn last
+    segments = np.stack([np.c_[i, j, np.zeros_like(p)], np.c_[i, j, p]], axis=1)[order]
+    stems = Line3DCollection(segments, cmap="viridis", norm=norm, linewidths=0.8)
+    stems.set_array(p[order])
+    ax.add_collection3d(stems)
+    ax.set_xlim(0, s - 1)
+    ax.set_ylim(0, s - 1)
+    ax.set_zlim(0, norm.vmax)
+    ax.set_xlabel("state number i (from)")
+    ax.set_ylabel("transition number j (to)")
+    ax.set_zlabel("$P_{ij}$")
+    ax.view_init(elev=52, azim=-60)   # all three regions of Fig. 3 in view
+    bar = fig.colorbar(stems, ax=ax, shrink=0.6, pad=0.08)
+    bar.set_label("transition probability $P_{ij}$")
+    ax.set_title(title or f"Transition probabilities as bars ({p.size} nonzero of {s} x {s})",
+                 fontsize=11)
+    return _save(fig, path)
+
+
+# -- batch injection maps (Fig. 4-7) ---------------------------------------------------------
+def plot_probability_maps(maps, times: Sequence[float], width: float, height: float, path,
+                          title: str | None = None) -> Path:
+    """Panels side by side of the probability per cell over the riser (maps [k, rows,
+    columns], row 0 at the bottom), one per time (s), on one shared colour scale."""
+    maps = np.asarray(maps, dtype=np.float64)
+    if maps.ndim == 2:
+        maps = maps[None]
+    if maps.ndim != 3 or maps.shape[0] == 0:
+        raise InputError(f"probability maps must have shape (k, rows, columns), got {maps.shape}")
+    k = maps.shape[0]
+    if len(times) != k:
+        raise InputError(f"{k} probability maps but {len(times)} times")
+    vmax = float(maps.max()) if maps.size and maps.max() > 0 else 1.0
+    panel_h = 6.2
+    panel_w = panel_h * width / height
+    fig = Figure(figsize=(2.2 + k * (panel_w + 0.5), panel_h + 1.4), layout="constrained")
+    axes = np.atleast_1d(fig.subplots(1, k, sharey=True, squeeze=False)[0])
+    image = None
+    for n, (ax, m, t) in enumerate(zip(axes, maps, times)):
+        image = ax.imshow(m, origin="lower", extent=(0.0, width, 0.0, height), cmap="YlOrRd",
+                          vmin=0.0, vmax=vmax, interpolation="nearest")
+        _riser_axes(ax, width, height, ylabel=n == 0)
+        total = float(m.sum())
+        ax.set_title(f"t = {t:g} s" + (f"\nin riser: {total:.2f}" if abs(total - 1) > 5e-4
+                                       else ""), fontsize=9)
+    bar = fig.colorbar(image, ax=list(axes), shrink=0.8, pad=0.04)
+    bar.set_label("probability per cell")
+    fig.suptitle(title or "Batch fed over the inlet at t = 0", fontsize=11)
+    return _save(fig, path)
+
+
+# -- residence-time distributions (Fig. 8-9) ----------------------------------------------------
+def _stats(stats) -> tuple[float, float, int | None]:
+    if isinstance(stats, Mapping):
+        mean = stats.get("mean", stats.get("rt_mean"))
+        sd = stats.get("sd", stats.get("rt_sd"))
+        count = stats.get("count", stats.get("rt_count"))
+    else:
+        mean, sd, *rest = tuple(stats)
+        count = rest[0] if rest else None
+    mean = float("nan") if mean is None else float(mean)
+    sd = float("nan") if sd is None else float(sd)
+    return mean, sd, None if count is None else int(count)
+
+
+def plot_rtd(edges, prob_reference, prob_model, stats_ref, stats_model, path, *,
+             labels: tuple[str, str] = ("reference", "model"), title: str | None = None) -> Path:
+    """Both RTDs as probability per bin on shared ``edges`` (s); the legend gives E(RT) and
+    SD(RT) (``stats_*``: a mapping with mean, sd [, count], or a (mean, sd[, count]) tuple)."""
+    edges = np.asarray(edges, dtype=np.float64)
+    pr = np.asarray(prob_reference, dtype=np.float64)
+    pm = np.asarray(prob_model, dtype=np.float64)
+    if edges.ndim != 1 or pr.shape != (edges.size - 1,) or pm.shape != pr.shape:
+        raise InputError(f"RTD arrays do not match {edges.size - 1} bins")
+    fig = Figure(figsize=(8.0, 4.8), layout="constrained")
+    ax = fig.add_subplot()
+    for prob, stats, label, colour, filled in ((pr, stats_ref, labels[0], REFERENCE_COLOUR, True),
+                                               (pm, stats_model, labels[1], MODEL_COLOUR, False)):
+        mean, sd, count = _stats(stats)
+        text = f"{label}: E(RT) = {mean:.3f} s, SD(RT) = {sd:.3f} s"
+        if count is not None:
+            text += f", n = {count}"
+        if filled:
+            ax.stairs(prob, edges, fill=True, color=colour, alpha=0.35, label=text)
+            ax.stairs(prob, edges, color=colour, lw=0.8)
+        else:
+            ax.stairs(prob, edges, color=colour, lw=1.6, label=text)
+        if np.isfinite(mean):
+            ax.axvline(mean, color=colour, ls="--", lw=1.0)
+    support = np.flatnonzero((pr > 0) | (pm > 0))
+    right = edges[-1] if support.size == 0 else min(edges[-1], edges[support[-1] + 1] * 1.08)
+    ax.set_xlim(0.0, right)
+    ax.set_ylim(0.0, max(float(pr.max(initial=0)), float(pm.max(initial=0)), 1e-3) * 1.4)
+    width = edges[1] - edges[0] if edges.size > 1 else float("nan")
+    ax.set_xlabel("residence time (s)")
+    ax.set_ylabel(f"probability per bin ({width:g} s)")
+    ax.legend(loc="upper right", fontsize=8.5, framealpha=0.9, edgecolor="none",
+              title="dashed lines: E(RT)", title_fontsize=8)
+    ax.set_title(title or "Residence-time distribution", fontsize=11)
+    return _save(fig, path)
+
+
+# -- snapshots (Fig. 10) -----------------------------------------------------------------------
+def plot_snapshots(positions_ref, positions_model, purple_mask_ref, purple_mask_model,
+                   times: Sequence[float], width: float, height: float, path, *,
+                   labels: tuple[str, str] = ("reference", "model"), title: str | None = None
+                   ) -> Path:
+    """k snapshot pairs like the paper's Fig. 10: top row reference, bottom row model,
+    particles purple (x < W/2 at the window start) or green. ``positions_*`` [k, N, 2] (m)."""
+    pref = np.asarray(positions_ref, dtype=np.float64)
+    pmod = np.asarray(positions_model, dtype=np.float64)
+    if pref.ndim == 2:
+        pref, pmod = pref[None], pmod[None]
+    k = len(times)
+    if pref.ndim != 3 or pmod.ndim != 3 or pref.shape[0] != k or pmod.shape[0] != k:
+        raise InputError(f"snapshot positions must have shape ({k}, N, 2)")
+    masks = (np.asarray(purple_mask_ref, dtype=bool), np.asarray(purple_mask_model, dtype=bool))
+    if masks[0].shape != (pref.shape[1],) or masks[1].shape != (pmod.shape[1],):
+        raise InputError("purple masks do not match the particles of the snapshots")
+    panel_h = 5.0
+    panel_w = panel_h * width / height
+    fig = Figure(figsize=(1.1 + k * (panel_w + 0.32), 2 * panel_h + 1.4), layout="constrained")
+    area = (72 * panel_w) * (72 * panel_h)      # panel area in points squared
+    axes = fig.subplots(2, k, squeeze=False, sharex=True, sharey=True)
+    rng = np.random.default_rng(0)     # interleave colours so neither is drawn on top
+    for r, (pos, mask, label) in enumerate(((pref, masks[0], labels[0]),
+                                            (pmod, masks[1], labels[1]))):
+        n = pos.shape[1]
+        order = rng.permutation(n)
+        colours = np.where(mask, PURPLE, GREEN)[order]
+        size = float(np.clip(0.4 * area / max(n, 1), 0.1, 8.0))   # ~40 % of the area inked
+        for c in range(k):
+            ax = axes[r, c]
+            ax.scatter(pos[c, order, 0], pos[c, order, 1], s=size, c=colours, linewidths=0,
+                       rasterized=True)
+            _riser_axes(ax, width, height, xlabel=r == 1, ylabel=c == 0)
+            if r == 0:
+                ax.set_title(f"t = {times[c]:g} s", fontsize=9)
+            if c == 0:
+                ax.set_ylabel(f"{label}\ny (m)", fontsize=9)
+    fig.suptitle(title or "Particle snapshots: purple = left half (x < W/2) at the window start, "
+                 "green = right half", fontsize=10)
+    return _save(fig, path)
+
+
+# -- mixing curves (Fig. 11) -------------------------------------------------------------------
+def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
+                labels: tuple[str, str] = ("reference", "model"), title: str | None = None,
+                well_mixed: float | None = None) -> Path:
+    """Fraction of all particles that are purple and in the left half, against time, for
+    both sides; ``well_mixed`` draws the level of a fully mixed bed as a dotted line."""
+    fig = Figure(figsize=(8.0, 4.6), layout="constrained")
+    ax = fig.add_subplot()
+    tr, fr = np.asarray(times_ref, float), np.asarray(frac_ref, float)
+    tm, fm = np.asarray(times_model, float), np.asarray(frac_model, float)
+    ax.plot(tr, fr, color=REFERENCE_COLOUR, lw=1.2, label=labels[0])
+    ax.plot(tm, fm, color=MODEL_COLOUR, lw=1.6, label=labels[1])
+    if well_mixed is not None and np.isfinite(well_mixed):
+        ax.axhline(well_mixed, color="0.4", ls=":", lw=1.0,
+                   label=f"fully mixed: (purple fraction)² = {well_mixed:.3f}")
+    top = max(float(np.nanmax(fr, initial=0)), float(np.nanmax(fm, initial=0)), 0.05)
+    ax.set_ylim(0.0, min(1.0, 1.15 * top))
+    lo = min(tr.min(initial=np.inf), tm.min(initial=np.inf))
+    hi = max(tr.max(initial=-np.inf), tm.max(initial=-np.inf))
+    if np.isfinite(lo) and hi > lo:
+        ax.set_xlim(lo, hi)
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("purple particles in left half / all particles")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="upper right", fontsize=9, frameon=False)
+    ax.set_title(title or "Radial mixing: purple = left half (x < W/2) at the window start",
+                 fontsize=11)
+    return _save(fig, path)
+
+
+__all__ = ["plot_mixing", "plot_probability_maps", "plot_rtd", "plot_snapshots",
+           "plot_transition_bars", "plot_transition_matrix"]

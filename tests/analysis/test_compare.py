@@ -1,0 +1,205 @@
+"""``compare`` end to end on small generated files, its errors, the command line, and the
+figure functions."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cfbmarkov.analysis.metrics import minkowski_distance, mixing_rms, percentage_difference
+from cfbmarkov.analysis.mixing import mixing_curve_of
+from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
+from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
+from cfbmarkov.report import figures as fg
+from cfbmarkov.report.compare import compare
+from cfbmarkov.trajectories import Trajectories, write_trajectories
+
+PNG = b"\x89PNG\r\n\x1a\n"
+WINDOW = (0.5, 3.0)
+SPEC_KEYS = {"window", "reference", "model", "pd_rt_mean", "pd_rt_sd", "md_rtd", "md_order",
+             "mixing_rms"}
+
+
+def assert_png(path):
+    data = path.read_bytes()
+    assert data[:8] == PNG and len(data) > 5000, path
+
+
+def test_summary_matches_direct_calls(pair, tmp_path):
+    ref_path, pred_path = pair
+    out = tmp_path / "report"
+    summary = compare(ref_path, pred_path, window=WINDOW, output=out, bin_width=0.05,
+                      md_order=3.0)
+    saved = json.loads((out / "summary.json").read_text())
+    assert SPEC_KEYS <= saved.keys()
+    assert saved["window"] == [0.5, 3.0]
+    for side in ("reference", "model"):
+        assert {"rt_mean", "rt_sd", "rt_count"} <= saved[side].keys()
+    with Trajectories(ref_path) as ref, Trajectories(pred_path) as pred:
+        rt_ref, rt_mod = residence_times(ref, WINDOW), residence_times(pred, WINDOW)
+        _, p_ref = rtd_histogram(rt_ref.samples, 0.05, window_length=2.5)
+        _, p_mod = rtd_histogram(rt_mod.samples, 0.05, window_length=2.5)
+        rms = mixing_rms(*mixing_curve_of(ref, WINDOW), *mixing_curve_of(pred, WINDOW))
+    assert rt_ref.count > 30 and rt_mod.count > 30
+    assert saved["reference"]["rt_count"] == rt_ref.count
+    assert saved["model"]["rt_count"] == rt_mod.count
+    assert saved["reference"]["rt_mean"] == pytest.approx(rt_ref.mean)
+    assert saved["reference"]["rt_sd"] == pytest.approx(rt_ref.sd)
+    assert saved["model"]["rt_mean"] == pytest.approx(rt_mod.mean)
+    assert saved["model"]["rt_sd"] == pytest.approx(rt_mod.sd)
+    assert saved["pd_rt_mean"] == pytest.approx(percentage_difference(rt_mod.mean, rt_ref.mean))
+    assert saved["pd_rt_sd"] == pytest.approx(percentage_difference(rt_mod.sd, rt_ref.sd))
+    assert saved["md_rtd"] == pytest.approx(minkowski_distance(p_ref, p_mod, 3.0))
+    assert saved["md_order"] == 3.0
+    assert saved["mixing_rms"] == pytest.approx(rms)
+    assert saved["bin_width"] == 0.05
+    assert saved["exact_events"] == {"reference": False, "model": False}
+    assert saved["same_purple_particles"] is True
+    assert saved["model_columns"] == 6
+    # the model rises more slowly: longer residence times
+    assert saved["pd_rt_mean"] > 0
+    assert summary["pd_rt_mean"] == saved["pd_rt_mean"]
+    for name in ("rtd.png", "snapshots.png", "mixing.png"):
+        assert_png(out / name)
+    assert set(saved["figures"]) == {"rtd.png", "snapshots.png", "mixing.png"}
+    assert not list(out.glob(".*tmp*")), "temporary files left behind"
+
+
+def test_no_figures_and_objects_accepted(pair, tmp_path):
+    ref_path, pred_path = pair
+    out = tmp_path / "plain"
+    with Trajectories(ref_path) as ref, Trajectories(pred_path) as pred:
+        summary = compare(ref, pred, window=WINDOW, output=out, figures=False)
+        assert ref.n_frames > 0          # still open: compare does not close what it got
+    assert sorted(p.name for p in out.iterdir()) == ["summary.json"]
+    assert summary["figures"] == []
+
+
+def test_exact_events_are_reported(tmp_path, make_run, events_of):
+    run = make_run(n_particles=40, seed=8)
+    ref = write_trajectories(tmp_path / "ref.h5", run.times, run.positions, width=0.09,
+                             height=0.95, events=events_of(run))
+    pred = write_trajectories(tmp_path / "pred.h5", run.times, run.positions, width=0.09,
+                              height=0.95)
+    saved = compare(ref, pred, window=WINDOW, output=tmp_path / "o", figures=False)
+    assert saved["reference"]["exact_events"] and not saved["model"]["exact_events"]
+    assert saved["exact_events"] == {"reference": True, "model": False}
+    assert saved["mixing_rms"] == 0.0
+    assert any("exact pass events" in w for w in saved["warnings"])
+
+
+def test_odd_column_count_is_refused(tmp_path, make_run):
+    run = make_run(n_particles=10, seed=9)
+    ref = write_trajectories(tmp_path / "ref.h5", run.times, run.positions, width=0.09,
+                             height=0.95)
+    pred = write_trajectories(tmp_path / "pred.h5", run.times, run.positions, width=0.09,
+                              height=0.95, parameters={"columns": 5, "rows": 38})
+    with pytest.raises(InputError, match="odd column count"):
+        compare(ref, pred, window=WINDOW, output=tmp_path / "o")
+    assert not (tmp_path / "o" / "summary.json").exists()
+
+
+def test_windows_outside_either_file_are_refused(pair, tmp_path):
+    ref_path, pred_path = pair
+    with pytest.raises(InputError, match="outside"):
+        compare(ref_path, pred_path, window=(0.0, 3.0), output=tmp_path / "o")  # model from 0.5
+    with pytest.raises(InputError, match="outside"):
+        compare(ref_path, pred_path, window=(1.0, 4.0), output=tmp_path / "o")
+    with pytest.raises(InputError, match="empty"):
+        compare(ref_path, pred_path, window=(2.0, 1.0), output=tmp_path / "o")
+    assert not (tmp_path / "o").exists()
+
+
+def test_different_particles_are_refused(tmp_path, make_run):
+    run = make_run(n_particles=10, seed=10)
+    ref = write_trajectories(tmp_path / "ref.h5", run.times, run.positions, width=0.09,
+                             height=0.95)
+    pred = write_trajectories(tmp_path / "pred.h5", run.times, run.positions, width=0.09,
+                              height=0.95, ids=np.arange(10) + 100)
+    with pytest.raises(InputError, match="same particle ids"):
+        compare(ref, pred, window=WINDOW, output=tmp_path / "o")
+
+
+def test_too_short_a_window_gives_nulls_and_warnings(pair, tmp_path):
+    ref_path, pred_path = pair
+    summary = compare(ref_path, pred_path, window=(0.5, 0.55), output=tmp_path / "o",
+                      figures=False)
+    saved = json.loads((tmp_path / "o" / "summary.json").read_text())
+    assert saved["reference"]["rt_count"] == 0 and saved["reference"]["rt_mean"] is None
+    assert saved["md_rtd"] is None and saved["pd_rt_mean"] is None
+    assert np.isnan(summary["pd_rt_mean"])
+    assert saved["warnings"]
+
+
+def test_cli_compare(pair, tmp_path, capsys):
+    ref_path, pred_path = pair
+    out = tmp_path / "cli"
+    assert main(["compare", str(ref_path), str(pred_path), "--window", "0.5:3",
+                 "-o", str(out), "--no-figures"]) == 0
+    assert "E(RT) reference" in capsys.readouterr().out
+    assert (out / "summary.json").exists()
+    bad = tmp_path / "cli-bad"
+    assert main(["compare", str(ref_path), str(pred_path), "--window", "5:9",
+                 "-o", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "outside" in err and err.count("\n") == 1
+    assert not (bad / "summary.json").exists()
+
+
+def test_model_figures_from_an_attached_model(tmp_path, make_run, write_run):
+    markov = pytest.importorskip("cfbmarkov.markov")
+    run = make_run(n_particles=300, t1=3.0, seed=11)
+    ref = write_run(tmp_path / "ref.h5", run, source="cfd-dem")
+    grid = markov.CellGrid(6, 38, 0.09, 0.95)
+    model = markov.estimator_from_name("mle", state_space=grid, lag=0.025).fit(
+        ref, window=(0.0, 1.0))
+    pred = model.predict(ref, start=1.0, duration=2.0, seed=3, output=tmp_path / "pred.h5")
+    out = tmp_path / "report"
+    saved = compare(ref, pred, window=(1.0, 3.0), output=out)
+    for name in ("rtd.png", "snapshots.png", "mixing.png", "transition_matrix.png",
+                 "transition_bars.png", "probability_maps.png"):
+        assert_png(out / name)
+        assert name in saved["figures"]
+    assert saved["same_purple_particles"] is True
+    assert saved["model_columns"] == 6
+
+
+# -- figure functions on plain arrays ---------------------------------------------------------
+def test_figure_functions_write_pngs(tmp_path):
+    rng = np.random.default_rng(0)
+    s = 24
+    P = np.zeros((s, s))
+    for i in range(s):
+        P[i, [(i + 4) % s, (i + 5) % s, i]] = [0.6, 0.3, 0.1]
+    fg.plot_transition_matrix(P, 4, 6, tmp_path / "tm.png", grid=True)
+    fg.plot_transition_bars(P, tmp_path / "tb.png")
+    maps = rng.random((3, 6, 4))
+    fg.plot_probability_maps(maps / maps.sum(axis=(1, 2), keepdims=True), [0.05, 0.1, 0.15],
+                             0.09, 0.95, tmp_path / "pm.png", "maps")
+    edges = 0.025 * np.arange(41)
+    pr, pm = rng.random(40), rng.random(40)
+    fg.plot_rtd(edges, pr / pr.sum(), pm / pm.sum(), (0.4, 0.2, 100), {"mean": 0.5, "sd": 0.1},
+                tmp_path / "rtd.png")
+    pos = rng.uniform(0, 1, (3, 200, 2)) * [0.09, 0.95]
+    fg.plot_snapshots(pos, pos[::-1], pos[0, :, 0] < 0.045, pos[2, :, 0] < 0.045,
+                      [15.0, 15.1, 15.2], 0.09, 0.95, tmp_path / "snap.png")
+    t = np.linspace(15, 20, 50)
+    fg.plot_mixing(t, 0.5 * np.exp(-(t - 15)) + 0.25, t, 0.5 * np.exp(-(t - 15) / 1.2) + 0.25,
+                   tmp_path / "mix.png", well_mixed=0.25)
+    for name in ("tm", "tb", "pm", "rtd", "snap", "mix"):
+        assert_png(tmp_path / f"{name}.png")
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        f"{n}.png" for n in ("tm", "tb", "pm", "rtd", "snap", "mix"))
+
+
+def test_figure_functions_refuse_bad_shapes(tmp_path):
+    with pytest.raises(InputError):
+        fg.plot_transition_matrix(np.zeros((3, 4)), 1, 3, tmp_path / "x.png")
+    with pytest.raises(InputError):
+        fg.plot_probability_maps(np.zeros((2, 3, 2)), [0.1], 0.09, 0.95, tmp_path / "x.png")
+    with pytest.raises(InputError):
+        fg.plot_rtd([0, 1, 2], [0.5, 0.5], [1.0], (1, 1), (1, 1), tmp_path / "x.png")
+    assert not list(tmp_path.iterdir())
