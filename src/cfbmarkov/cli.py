@@ -113,6 +113,32 @@ def _cmd_rtd(args) -> int:
     return 0
 
 
+def _cmd_maps(args) -> int:
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.report.figures import plot_probability_maps
+
+    model = MarkovModel.load(args.model)
+    maps = model.batch_injection_maps(args.times, outflow=args.outflow)
+    space = model.state_space
+    title = (f"Batch fed over the inlet at t = 0 ({space.describe()}, lag {model.lag:g} s"
+             + (", outflow through the top removed)" if args.outflow else ")"))
+    plot_probability_maps(maps, args.times, space.width, space.height, args.output, title=title)
+    for t, m in zip(args.times, maps):
+        print(f"t = {t:g} s: fraction in riser {m.sum():.4f}")
+    print(args.output)
+    return 0
+
+
+def _parse_times(text: str) -> list[float]:
+    try:
+        times = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"times '{text}' are not comma-separated seconds") from None
+    if not times or min(times) < 0:
+        raise argparse.ArgumentTypeError(f"times '{text}' must be one or more values >= 0 s")
+    return times
+
+
 def _cmd_info(args) -> int:
     import h5py
 
@@ -206,6 +232,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--window-length", type=_positive_float, default=None,
                    help="observation window, s: the RTD as seen in such a window")
     s.set_defaults(func=_cmd_rtd)
+
+    s = sub.add_parser("maps", help="batch-injection probability maps (Eq. 8, Fig. 4-7)")
+    s.add_argument("model")
+    s.add_argument("--times", type=_parse_times, default=[0.05, 0.1, 0.15],
+                   help="comma-separated times after injection, s (default 0.05,0.1,0.15)")
+    s.add_argument("--outflow", action="store_true",
+                   help="remove what passes up through the top (fraction still in the riser)")
+    s.add_argument("-o", "--output", required=True, help="PNG file")
+    s.set_defaults(func=_cmd_maps)
 
     s = sub.add_parser("info", help="describe a trajectory or model file")
     s.add_argument("file")

@@ -46,6 +46,14 @@ def test_fit_predict_rtd_info(tmp_path, capsys, markov_run):
         np.testing.assert_array_equal(t.positions(), first)        # seeded, reproducible
     code, out, _ = run_cli(capsys, "rtd", model_path, "--window-length", 5)
     assert code == 0 and "E(RT) =" in out
+    code, out, _ = run_cli(capsys, "maps", model_path, "--times", "0,0.1,0.5", "--outflow",
+                           "-o", tmp_path / "maps.png")
+    fractions = [float(line.split()[-1]) for line in out.splitlines()[:3]]
+    assert code == 0 and fractions[0] == 1.0 and fractions[2] < fractions[1] <= 1.0
+    assert (tmp_path / "maps.png").stat().st_size > 5000
+    code, _, err = run_cli(capsys, "maps", model_path, "--times", "0.07", "-o", tmp_path / "x.png")
+    assert "not a whole multiple of the lag" in err
+    assert_clean_failure(code, err, tmp_path / "x.png")
     code, out, _ = run_cli(capsys, "info", model_path)
     assert code == 0 and "Markov chain model" in out
     code, out, _ = run_cli(capsys, "info", pred)
