@@ -1,0 +1,775 @@
+"""Locally volume-averaged incompressible gas on the staggered grid (SPEC section 1).
+
+Equations (rho constant, eps the void fraction given each step from the particles)::
+
+    d(eps)/dt + div(eps u) = 0
+    d(eps rho u)/dt + div(eps rho u u) = -w grad p + div(eps mu grad u) + eps rho g - f + w G y^
+
+* ``formulation="A"`` (default; "model A" / "set II" of Zhou et al., J. Fluid Mech. 661
+  (2010) 482): ``w = eps``. The particles must then also feel the pressure-gradient force
+  ``-Vp grad p_total`` (``p_total = p - G y``, so this includes ``+Vp G`` upwards), and a
+  drag consistent with Ergun's pressure drop is ``eps * beta`` with the Table 2 beta.
+* ``formulation="B"`` ("model B" / "set I"): ``w = 1``; ``f`` is the whole fluid force on
+  the particles, and the Table 2 beta as it stands (SPEC section 1) reproduces Ergun's
+  pressure drop. See :mod:`cfbmarkov.simulate.cfd.drag` for why.
+
+``f`` is the drag force per unit volume that the gas exerts on the particles (x on the
+x-faces, y on the y-faces), ``G`` a uniform driving pressure gradient (Pa/m, +y), so that the
+full pressure is ``p_total(x, y) = p(x, y) - G y`` with ``p`` periodic in y (zero mean).
+``G`` includes the weight of the gas (eps rho g), so a gas-only channel has
+``G = rho g + 12 mu U / W^2``. The viscous stress is the usual CFD-DEM simplification
+``div(eps mu grad u)``: the transpose and dilatation parts of ``div(eps tau)`` are dropped
+(they vanish for eps = const).
+
+Discretisation and step (all in one numba kernel, serial: 9 x 95 cells are too few for
+threads to pay):
+
+1. Predictor for the face mass fluxes ``m = eps_face u`` (eps_face the mean of the two
+   cells beside the face): ``R = m^n + dt (-div(eps u u) + nu div(eps grad u) - f / rho +
+   K u^n / rho) - dt eps_face^{n+1} g``. Advection is flux-form on the staggered control
+   volumes with van Leer-limited (TVD, second order where smooth) or first-order upwind
+   face values; forward Euler. ``K >= 0`` (optional ``drag_jacobian``, kg/(m^3 s)) makes the
+   drag semi-implicit, ``f -> f + K (u^{n+1} - u^n)``: then ``m* = a R`` with
+   ``a = eps/(eps + dt K/rho)``, else ``a = 1``.
+2. Projection: ``m^{n+1} = m* + c (g' y^ - grad phi)``, ``c = a w``, ``phi = dt p / rho``,
+   ``g' = dt G / rho``. Continuity ``div m^{n+1} = -(eps^{n+1} - eps^n)/dt`` gives the
+   variable-coefficient Poisson equation ``div(c grad phi) = div m* + deps/dt + g' div(c y^)``,
+   periodic in y, zero normal flux at the walls (``c = 0`` on the wall faces). It is linear
+   in the unknown ``g'``: ``phi = phi_a + g' phi_b``, both solved with one banded Cholesky
+   factorisation (one cell pinned to remove the constant null space; ``p`` is then shifted
+   to zero mean). The factorisation is redone only when ``c`` changes.
+3. ``g'`` is then fixed so that the domain mean of ``eps v`` over all y-faces equals U
+   exactly (to round-off). With continuity satisfied, the mean over one cross-section row of
+   faces differs from U only by the rate of change of the gas volume between the rows
+   (:func:`cross_section_flux`); averaged over the domain, or over time at one section, it is U.
+4. The continuity residual ``max |div m^{n+1} + deps/dt|`` is computed over every cell and
+   compared with ``residual_tolerance`` times a rate scale; a failure raises
+   :class:`PressureSolveError`.
+
+A void fraction field whose total changes between steps cannot be followed by an
+incompressible gas in a closed periodic box: the mean of ``deps/dt`` is removed before the
+solve and reported as ``continuity_defect`` (1/s); it is zero when the solid volume is
+conserved (no clipping at the void fraction floor).
+
+The explicit step is stable under :func:`gas_stability_limit`; a larger step is refused
+with an :class:`~cfbmarkov.errors.InputError`. An explicit drag (no ``K``) adds the limit
+``dt K / (eps rho) < 2`` (< 1 to avoid oscillation), which this solver cannot check: in
+the dense regions of the paper's riser K ~ 1e4 kg/(m^3 s) and dt = 5e-5 s give about 1
+(a test with 27000 particles and a dense cluster diverged at once), so a coupled run
+should pass ``drag_jacobian`` (see :func:`~cfbmarkov.simulate.cfd.coupling.deposit_drag_jacobian`).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.simulate.cfd._banded import band_cholesky, band_solve2, cell_numbering
+from cfbmarkov.simulate.cfd.grid import GasGrid
+
+#: Courant number of the advective limit (forward Euler with a van Leer-limited scheme)
+ADVECTIVE_COURANT = 0.5
+
+SCHEMES = {"upwind": 0, "vanleer": 1}
+FORMULATIONS = ("A", "B")
+
+_OK, _UNSTABLE, _BAD_VOID, _NOT_SPD, _RESIDUAL, _BAD_FLUX, _BAD_INPUT = range(7)
+# info slots
+(_I_G, _I_RES_REL, _I_RES_ABS, _I_DEFECT, _I_UMAX, _I_VMAX, _I_DTMAX, _I_DTADV, _I_DTVIS,
+ _I_FLUXERR, _I_PIVOT, _I_REFACTORED, _I_BADCELL) = range(13)
+_INFO_SIZE = 13
+
+
+class PressureSolveError(CfbmarkovError):
+    """The pressure equation could not be solved to its tolerance (or its matrix is not SPD)."""
+
+
+# --------------------------------------------------------------------------- stability
+
+def _stability_limits(dx, dy, nu, umax, vmax):
+    rate = umax / dx + vmax / dy
+    dt_adv = ADVECTIVE_COURANT / rate if rate > 0 else math.inf
+    dt_visc = 1.0 / (2.0 * nu * (1.0 / dx ** 2 + 1.0 / dy ** 2))
+    return 1.0 / (1.0 / dt_adv + 1.0 / dt_visc), dt_adv, dt_visc
+
+
+_stability_limits_jit = nb.njit(cache=True)(_stability_limits)
+
+
+def gas_stability_limit(grid: GasGrid, gas, max_velocity) -> float:
+    """Largest stable gas time step (s) of the explicit scheme.
+
+    ``max_velocity`` is either one speed (m/s, used for both directions) or a pair
+    ``(max |u|, max |v|)``. Advective limit ``dt_a = 0.5 / (|u|/dx + |v|/dy)`` (forward Euler
+    with a TVD scheme), viscous limit ``dt_v = 1 / (2 nu (1/dx^2 + 1/dy^2))``; both acting
+    together: ``dt_max = 1 / (1/dt_a + 1/dt_v)``. (The eps-weighted viscous term can be up to
+    eps_max/eps_min stiffer at a void-fraction jump; at the paper's scale dt_v ~ 1.7 s, far
+    from binding.)
+    """
+    try:
+        umax, vmax = (float(abs(max_velocity[0])), float(abs(max_velocity[1])))
+    except (TypeError, IndexError):
+        umax = vmax = float(abs(max_velocity))
+    nu = float(gas.viscosity) / float(gas.density)
+    return _stability_limits(grid.dx, grid.dy, nu, umax, vmax)[0]
+
+
+# --------------------------------------------------------------------------- kernels
+
+@nb.njit(cache=True, inline="always")
+def _limited(up, upup, down, scheme):
+    """Face value from the upwind cell: first-order upwind or van Leer (TVD)."""
+    if scheme == 0:
+        return up
+    a = up - upup
+    b = down - up
+    ab = a * b
+    if ab > 0.0:
+        return up + ab / (a + b)
+    return up
+
+
+@nb.njit(cache=True)
+def _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps, tend_u, tend_v):
+    """tend = -div(eps u u) + nu div(eps grad u) on the faces (m/s^2; 0 on the wall faces).
+
+    Advection is flux form on the staggered control volumes: mass fluxes eps_face u
+    averaged to the control-volume faces, transported velocity from the upwind side
+    (first-order upwind or van Leer limited). Ghost values at the walls: u beyond a wall
+    is -u (no penetration), v is -v (no slip).
+    """
+    for i in range(nx + 1):
+        for j in range(ny):
+            tend_u[i, j] = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            tend_v[i, j] = 0.0
+    # u-momentum, x-fluxes at cell centres c (between u-faces c and c+1)
+    for c in range(nx):
+        for j in range(ny):
+            mc0 = 0.0 if (c == 0) else 0.5 * (eps[c - 1, j] + eps[c, j]) * u[c, j]
+            mc1 = 0.0 if (c == nx - 1) else 0.5 * (eps[c, j] + eps[c + 1, j]) * u[c + 1, j]
+            F = 0.5 * (mc0 + mc1)
+            if F >= 0.0:
+                upv = u[c, j]
+                uu = u[c - 1, j] if c >= 1 else -u[1, j]
+                dn = u[c + 1, j]
+            else:
+                upv = u[c + 1, j]
+                uu = u[c + 2, j] if c + 2 <= nx else -u[nx - 1, j]
+                dn = u[c, j]
+            flux = F * _limited(upv, uu, dn, scheme) / dx
+            tend_u[c, j] -= flux
+            tend_u[c + 1, j] += flux
+    # u-momentum, y-fluxes at corners (x_i, y_j), interior i
+    for i in range(1, nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            jmm = jm - 1 if jm >= 1 else ny - 1
+            jp = j + 1 if j + 1 < ny else 0
+            mvl = 0.5 * (eps[i - 1, jm] + eps[i - 1, j]) * v[i - 1, j]
+            mvr = 0.5 * (eps[i, jm] + eps[i, j]) * v[i, j]
+            F = 0.5 * (mvl + mvr)
+            if F >= 0.0:
+                face = _limited(u[i, jm], u[i, jmm], u[i, j], scheme)
+            else:
+                face = _limited(u[i, j], u[i, jp], u[i, jm], scheme)
+            flux = F * face / dy
+            tend_u[i, jm] -= flux
+            tend_u[i, j] += flux
+    # v-momentum, y-fluxes at cell centres (i, j) (between v-faces j and j+1)
+    for i in range(nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            jp = j + 1 if j + 1 < ny else 0
+            jpp = jp + 1 if jp + 1 < ny else 0
+            m0 = 0.5 * (eps[i, jm] + eps[i, j]) * v[i, j]
+            m1 = 0.5 * (eps[i, j] + eps[i, jp]) * v[i, jp]
+            F = 0.5 * (m0 + m1)
+            if F >= 0.0:
+                face = _limited(v[i, j], v[i, jm], v[i, jp], scheme)
+            else:
+                face = _limited(v[i, jp], v[i, jpp], v[i, j], scheme)
+            flux = F * face / dy
+            tend_v[i, j] -= flux
+            tend_v[i, jp] += flux
+    # v-momentum, x-fluxes at corners (x_i, y_j), interior i (zero mass flux on the walls)
+    for i in range(1, nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            mub = 0.5 * (eps[i - 1, jm] + eps[i, jm]) * u[i, jm]
+            mut = 0.5 * (eps[i - 1, j] + eps[i, j]) * u[i, j]
+            F = 0.5 * (mub + mut)
+            if F >= 0.0:
+                uu = v[i - 2, j] if i >= 2 else -v[0, j]
+                face = _limited(v[i - 1, j], uu, v[i, j], scheme)
+            else:
+                uu = v[i + 1, j] if i + 1 < nx else -v[nx - 1, j]
+                face = _limited(v[i, j], uu, v[i - 1, j], scheme)
+            flux = F * face / dx
+            tend_v[i - 1, j] -= flux
+            tend_v[i, j] += flux
+    # viscous term nu div(eps grad u) (the usual CFD-DEM simplification of div(eps tau))
+    idx2 = 1.0 / (dx * dx)
+    idy2 = 1.0 / (dy * dy)
+    for i in range(1, nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            jp = j + 1 if j + 1 < ny else 0
+            # corner eps at (x_i, y_j) and (x_i, y_{j+1})
+            ec_s = 0.25 * (eps[i - 1, jm] + eps[i, jm] + eps[i - 1, j] + eps[i, j])
+            ec_n = 0.25 * (eps[i - 1, j] + eps[i, j] + eps[i - 1, jp] + eps[i, jp])
+            visc = ((eps[i, j] * (u[i + 1, j] - u[i, j])
+                     - eps[i - 1, j] * (u[i, j] - u[i - 1, j])) * idx2
+                    + (ec_n * (u[i, jp] - u[i, j]) - ec_s * (u[i, j] - u[i, jm])) * idy2)
+            tend_u[i, j] += nu * visc
+    for j in range(ny):
+        tend_u[0, j] = 0.0
+        tend_u[nx, j] = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            jp = j + 1 if j + 1 < ny else 0
+            if i == 0:  # wall: ghost v = -v, corner eps from the wall cells
+                ec_w = 0.5 * (eps[0, jm] + eps[0, j])
+                vw = -v[0, j]
+            else:
+                ec_w = 0.25 * (eps[i - 1, jm] + eps[i, jm] + eps[i - 1, j] + eps[i, j])
+                vw = v[i - 1, j]
+            if i == nx - 1:
+                ec_e = 0.5 * (eps[nx - 1, jm] + eps[nx - 1, j])
+                ve = -v[nx - 1, j]
+            else:
+                ec_e = 0.25 * (eps[i, jm] + eps[i + 1, jm] + eps[i, j] + eps[i + 1, j])
+                ve = v[i + 1, j]
+            visc = ((ec_e * (ve - v[i, j]) - ec_w * (v[i, j] - vw)) * idx2
+                    + (eps[i, j] * (v[i, jp] - v[i, j])
+                       - eps[i, jm] * (v[i, j] - v[i, jm])) * idy2)
+            tend_v[i, j] += nu * visc
+
+
+@nb.njit(cache=True)
+def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol,
+                 u, v, eps_old, eps_new, fu, fv, ku, kv, has_k,
+                 u_out, v_out, p_out,
+                 mu_s, mv_s, cu, cv, cu_fac, cv_fac, band, invdiag, ra, rb, numbering,
+                 tend_u, tend_v, factor_state, info):
+    """One gas step; see the module docstring. Returns a status code (0 = success)."""
+    # ---- 1. stability of the explicit step, from the current velocities
+    umax = 0.0
+    vmax = 0.0
+    for i in range(nx + 1):
+        for j in range(ny):
+            a = abs(u[i, j])
+            if a > umax or a != a:  # a NaN sticks
+                umax = a
+    for i in range(nx):
+        for j in range(ny):
+            a = abs(v[i, j])
+            if a > vmax or a != a:
+                vmax = a
+    dtmax, dtadv, dtvis = _stability_limits_jit(dx, dy, nu, umax, vmax)
+    info[_I_UMAX] = umax
+    info[_I_VMAX] = vmax
+    info[_I_DTMAX] = dtmax
+    info[_I_DTADV] = dtadv
+    info[_I_DTVIS] = dtvis
+    if not dt <= dtmax * (1.0 + 1e-12):
+        return _UNSTABLE
+    # ---- 2. the new void fraction must be usable
+    for i in range(nx):
+        for j in range(ny):
+            e = eps_new[i, j]
+            if not (e > 0.0 and e <= 1.0 + 1e-12):
+                info[_I_BADCELL] = i * ny + j
+                return _BAD_VOID
+    if has_k:
+        for i in range(nx + 1):
+            for j in range(ny):
+                if not ku[i, j] >= 0.0:
+                    return _BAD_INPUT
+        for i in range(nx):
+            for j in range(ny):
+                if not kv[i, j] >= 0.0:
+                    return _BAD_INPUT
+    idx2 = 1.0 / (dx * dx)
+    idy2 = 1.0 / (dy * dy)
+    # ---- 3. advection and viscous tendencies from the old velocities and void fraction
+    _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps_old, tend_u, tend_v)
+    # ---- 4. predictor R and the projection weights
+    inv_rho = 1.0 / rho
+    dtk = dt * inv_rho
+    for i in range(1, nx):
+        for j in range(ny):
+            ef_old = 0.5 * (eps_old[i - 1, j] + eps_old[i, j])
+            ef_new = 0.5 * (eps_new[i - 1, j] + eps_new[i, j])
+            r = ef_old * u[i, j] + dt * (tend_u[i, j] - fu[i, j] * inv_rho)
+            w = ef_new if model_a else 1.0
+            if has_k:
+                r += dtk * ku[i, j] * u[i, j]
+                alpha = ef_new / (ef_new + dtk * ku[i, j])
+            else:
+                alpha = 1.0
+            mu_s[i, j] = alpha * r
+            cu[i, j] = alpha * w
+    for j in range(ny):
+        mu_s[0, j] = 0.0
+        mu_s[nx, j] = 0.0
+        cu[0, j] = 0.0
+        cu[nx, j] = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            ef_old = 0.5 * (eps_old[i, jm] + eps_old[i, j])
+            ef_new = 0.5 * (eps_new[i, jm] + eps_new[i, j])
+            r = (ef_old * v[i, j] + dt * (tend_v[i, j] - fv[i, j] * inv_rho)
+                 - dt * ef_new * gravity)
+            w = ef_new if model_a else 1.0
+            if has_k:
+                r += dtk * kv[i, j] * v[i, j]
+                alpha = ef_new / (ef_new + dtk * kv[i, j])
+            else:
+                alpha = 1.0
+            mv_s[i, j] = alpha * r
+            cv[i, j] = alpha * w
+    # ---- 5. (re)factorise the pressure matrix if its coefficients changed
+    same = factor_state[0] == 1
+    if same:
+        for i in range(nx + 1):
+            for j in range(ny):
+                if cu[i, j] != cu_fac[i, j]:
+                    same = False
+                    break
+            if not same:
+                break
+    if same:
+        for i in range(nx):
+            for j in range(ny):
+                if cv[i, j] != cv_fac[i, j]:
+                    same = False
+                    break
+            if not same:
+                break
+    info[_I_REFACTORED] = 0.0
+    if not same:
+        factor_state[0] = 0
+        n = nx * ny
+        b = band.shape[1] - 1
+        for k in range(n):
+            for o in range(b + 1):
+                band[k, o] = 0.0
+        # matrix of -div(c grad .) (SPD on the complement of the constants)
+        for i in range(nx):
+            for j in range(ny):
+                k = numbering[i, j]
+                jp = j + 1 if j + 1 < ny else 0
+                band[k, 0] += (cu[i, j] + cu[i + 1, j]) * idx2 + (cv[i, j] + cv[i, jp]) * idy2
+                if i + 1 < nx:
+                    k2 = numbering[i + 1, j]
+                    lo = k if k < k2 else k2
+                    band[lo, abs(k2 - k)] -= cu[i + 1, j] * idx2
+                k2 = numbering[i, jp]
+                lo = k if k < k2 else k2
+                band[lo, abs(k2 - k)] -= cv[i, jp] * idy2
+        # pin unknown 0 (cell (0, 0)): drop its couplings, keep its diagonal
+        for o in range(1, b + 1):
+            band[0, o] = 0.0
+        piv = band_cholesky(band, invdiag)
+        if piv >= 0:
+            info[_I_PIVOT] = piv
+            return _NOT_SPD
+        for i in range(nx + 1):
+            for j in range(ny):
+                cu_fac[i, j] = cu[i, j]
+        for i in range(nx):
+            for j in range(ny):
+                cv_fac[i, j] = cv[i, j]
+        factor_state[0] = 1
+        info[_I_REFACTORED] = 1.0
+    # ---- 6. right-hand sides: -L phi_a = -(div m* + deps/dt'), -L phi_b = -div(c y^)
+    inv_dt = 1.0 / dt
+    defect = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            defect += eps_new[i, j] - eps_old[i, j]
+    defect *= inv_dt / (nx * ny)
+    suma = 0.0
+    sumb = 0.0
+    scale_div = 0.0
+    scale_et = 0.0
+    scale_c = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            jp = j + 1 if j + 1 < ny else 0
+            k = numbering[i, j]
+            div = (mu_s[i + 1, j] - mu_s[i, j]) / dx + (mv_s[i, jp] - mv_s[i, j]) / dy
+            et = (eps_new[i, j] - eps_old[i, j]) * inv_dt - defect
+            dc = (cv[i, jp] - cv[i, j]) / dy
+            ra[k] = -(div + et)
+            rb[k] = -dc
+            suma += ra[k]
+            sumb += rb[k]
+            scale_div = max(scale_div, abs(div))
+            scale_et = max(scale_et, abs(et))
+            scale_c = max(scale_c, abs(dc))
+    n = nx * ny
+    suma /= n
+    sumb /= n
+    for k in range(n):
+        ra[k] -= suma
+        rb[k] -= sumb
+    ra[0] = 0.0
+    rb[0] = 0.0
+    band_solve2(band, invdiag, ra, rb)
+    # ---- 7. driving pressure gradient from the mean flux, then the corrected fluxes
+    qa = 0.0
+    qb = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            ka = numbering[i, j]
+            km = numbering[i, jm]
+            qa += mv_s[i, j] - cv[i, j] * (ra[ka] - ra[km]) / dy
+            qb += cv[i, j] * (1.0 - (rb[ka] - rb[km]) / dy)
+    qa /= n
+    qb /= n
+    if not qb > 0.0:
+        return _BAD_FLUX
+    gp = (U - qa) / qb
+    info[_I_G] = gp * rho * inv_dt
+    # phi = phi_a + g' phi_b (into ra)
+    for k in range(n):
+        ra[k] += gp * rb[k]
+    # new mass fluxes into the output arrays (as m), then divide by eps_face
+    for j in range(ny):
+        u_out[0, j] = 0.0
+        u_out[nx, j] = 0.0
+    for i in range(1, nx):
+        for j in range(ny):
+            u_out[i, j] = mu_s[i, j] - cu[i, j] * (ra[numbering[i, j]] - ra[numbering[i - 1, j]]) / dx
+    flux = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            m = mv_s[i, j] + cv[i, j] * (gp - (ra[numbering[i, j]] - ra[numbering[i, jm]]) / dy)
+            v_out[i, j] = m
+            flux += m
+    info[_I_FLUXERR] = flux / n - U
+    # ---- 8. continuity residual on every cell
+    res = 0.0
+    for i in range(nx):
+        for j in range(ny):
+            jp = j + 1 if j + 1 < ny else 0
+            r = ((u_out[i + 1, j] - u_out[i, j]) / dx + (v_out[i, jp] - v_out[i, j]) / dy
+                 + (eps_new[i, j] - eps_old[i, j]) * inv_dt - defect)
+            a = abs(r)
+            if a > res or a != a:
+                res = a
+    scale = scale_div + scale_et + abs(gp) * scale_c
+    floor = abs(U) / min(dx, dy)
+    if scale < floor:
+        scale = floor
+    info[_I_RES_ABS] = res
+    info[_I_RES_REL] = res / scale
+    info[_I_DEFECT] = defect
+    if not res <= rtol * scale:
+        return _RESIDUAL
+    # ---- 9. velocities and pressure (zero mean)
+    for i in range(1, nx):
+        for j in range(ny):
+            u_out[i, j] /= 0.5 * (eps_new[i - 1, j] + eps_new[i, j])
+    for i in range(nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            v_out[i, j] /= 0.5 * (eps_new[i, jm] + eps_new[i, j])
+    pmean = 0.0
+    for k in range(n):
+        pmean += ra[k]
+    pmean /= n
+    pf = rho * inv_dt
+    for i in range(nx):
+        for j in range(ny):
+            p_out[i, j] = (ra[numbering[i, j]] - pmean) * pf
+    return _OK
+
+
+# --------------------------------------------------------------------------- state
+
+@dataclass(eq=False)
+class GasState:
+    """The gas at one time (all arrays float64, indexed [i, j]; see :mod:`.grid`).
+
+    ``u`` (nx+1, ny) and ``v`` (nx, ny) are interstitial gas velocities (m/s) on the faces,
+    ``p`` (nx, ny) the periodic part of the pressure (Pa, zero mean; the full pressure is
+    ``p - G y``), ``void_fraction`` (nx, ny) the eps these velocities belong to,
+    ``driving_pressure_gradient`` G (Pa/m), ``pressure_residual`` the relative continuity
+    residual of the last projection (-), ``continuity_defect`` the mean deps/dt removed
+    before it (1/s), ``time`` (s) and ``steps`` since the initial state.
+    """
+
+    u: np.ndarray
+    v: np.ndarray
+    p: np.ndarray
+    void_fraction: np.ndarray
+    driving_pressure_gradient: float = 0.0
+    pressure_residual: float = 0.0
+    continuity_defect: float = 0.0
+    time: float = 0.0
+    steps: int = 0
+    diagnostics: dict[str, float] = field(default_factory=dict, compare=False)
+
+    _ARRAYS = ("u", "v", "p", "void_fraction")
+    _SCALARS = ("driving_pressure_gradient", "pressure_residual", "continuity_defect", "time")
+
+    def state_dict(self) -> dict[str, Any]:
+        """Arrays (copied) and scalars for a checkpoint; :meth:`from_state_dict` restores it."""
+        d: dict[str, Any] = {k: np.array(getattr(self, k), dtype=np.float64, copy=True)
+                             for k in self._ARRAYS}
+        for k in self._SCALARS:
+            d[k] = float(getattr(self, k))
+        d["steps"] = int(self.steps)
+        return d
+
+    @classmethod
+    def from_state_dict(cls, d: dict[str, Any]) -> "GasState":
+        try:
+            arrays = {k: np.array(d[k], dtype=np.float64, copy=True, order="C") for k in cls._ARRAYS}
+            scalars = {k: float(d[k]) for k in cls._SCALARS}
+            steps = int(d["steps"])
+        except KeyError as exc:
+            raise InputError(f"gas state checkpoint lacks '{exc.args[0]}'") from None
+        return cls(**arrays, **scalars, steps=steps)
+
+    def mean_gas_flux(self) -> float:
+        """Domain mean of eps_face * v over all y-faces (m/s): U after every step."""
+        e = self.void_fraction
+        return float(np.mean(0.5 * (np.roll(e, 1, axis=1) + e) * self.v))
+
+
+def cross_section_flux(state: GasState) -> np.ndarray:
+    """Mean of eps_face * v over each row of y-faces (shape (ny,), m/s).
+
+    Row j lies at y = j dy. These differ from each other by the rate of change of the gas
+    volume between the rows; their mean is U.
+    """
+    e = state.void_fraction
+    return np.mean(0.5 * (np.roll(e, 1, axis=1) + e) * state.v, axis=0)
+
+
+def continuity_residual(grid: GasGrid, old: GasState, new: GasState, time_step: float) -> np.ndarray:
+    """div(eps u) + deps/dt - continuity_defect per cell (1/s), recomputed with numpy."""
+    e0, e1 = old.void_fraction, new.void_fraction
+    eu = np.zeros(grid.u_shape)
+    eu[1:-1] = 0.5 * (e1[1:] + e1[:-1]) * new.u[1:-1]
+    ev = 0.5 * (np.roll(e1, 1, axis=1) + e1) * new.v
+    div = (eu[1:] - eu[:-1]) / grid.dx + (np.roll(ev, -1, axis=1) - ev) / grid.dy
+    return div + (e1 - e0) / time_step - new.continuity_defect
+
+
+def momentum_tendency(grid: GasGrid, u, v, void_fraction, kinematic_viscosity: float,
+                      scheme: str = "vanleer") -> tuple[np.ndarray, np.ndarray]:
+    """The explicit part ``-div(eps u u) + nu div(eps grad u)`` of a step, on the faces (m/s^2).
+
+    This is what :meth:`GasSolver.step` adds, times dt, to eps u (before drag, gravity and
+    the pressure); exposed for verification and diagnostics.
+    """
+    if scheme not in SCHEMES:
+        raise InputError(f"advection scheme must be one of {tuple(SCHEMES)}, got {scheme!r}")
+    tu = np.zeros(grid.u_shape)
+    tv = np.zeros(grid.v_shape)
+    _momentum_tendency(grid.nx, grid.ny, grid.dx, grid.dy, float(kinematic_viscosity),
+                       SCHEMES[scheme], np.ascontiguousarray(u, dtype=np.float64),
+                       np.ascontiguousarray(v, dtype=np.float64),
+                       np.ascontiguousarray(void_fraction, dtype=np.float64), tu, tv)
+    return tu, tv
+
+
+# --------------------------------------------------------------------------- solver
+
+class GasSolver:
+    """Advances a :class:`GasState` by one gas step at a time (see the module docstring).
+
+    Parameters are SI: ``density`` kg/m^3, ``viscosity`` Pa s, ``superficial_velocity`` U
+    (m/s; the domain mean of eps v), ``gravity`` m/s^2 acting in -y, ``time_step`` s.
+    ``scheme`` is ``"vanleer"`` (default) or ``"upwind"``; ``formulation`` ``"A"`` (default)
+    or ``"B"``; ``residual_tolerance`` the relative continuity residual at which a step is
+    refused with :class:`PressureSolveError`.
+
+    :meth:`step` returns a new state and leaves its argument untouched. The solver keeps
+    only workspace and the last factorisation (a cache: results do not depend on it), so a
+    state saved with :meth:`GasState.state_dict` continues bit-identically in a new solver.
+    """
+
+    def __init__(self, grid: GasGrid, density: float = 1.205, viscosity: float = 1.8e-5,
+                 superficial_velocity: float = 6.0, gravity: float = 9.81,
+                 time_step: float = 5e-5, *, formulation: str = "A", scheme: str = "vanleer",
+                 residual_tolerance: float = 1e-9):
+        for name, val in (("density", density), ("viscosity", viscosity),
+                          ("time_step", time_step), ("residual_tolerance", residual_tolerance)):
+            if not (np.isfinite(val) and val > 0):
+                raise InputError(f"gas solver {name} must be positive and finite, got {val}")
+        if not (np.isfinite(superficial_velocity) and np.isfinite(gravity)):
+            raise InputError("gas solver superficial_velocity and gravity must be finite")
+        if formulation not in FORMULATIONS:
+            raise InputError(f"gas formulation must be one of {FORMULATIONS}, got {formulation!r}")
+        if scheme not in SCHEMES:
+            raise InputError(f"advection scheme must be one of {tuple(SCHEMES)}, got {scheme!r}")
+        self.grid = grid
+        self.density = float(density)
+        self.viscosity = float(viscosity)
+        self.superficial_velocity = float(superficial_velocity)
+        self.gravity = float(gravity)
+        self.time_step = float(time_step)
+        self.formulation = formulation
+        self.scheme = scheme
+        self.residual_tolerance = float(residual_tolerance)
+        nx, ny = grid.nx, grid.ny
+        n = nx * ny
+        self._numbering = cell_numbering(nx, ny)
+        self._band = np.zeros((n, 2 * nx + 1))
+        self._invdiag = np.zeros(n)
+        self._ra = np.zeros(n)
+        self._rb = np.zeros(n)
+        self._mu_s = np.zeros(grid.u_shape)
+        self._mv_s = np.zeros(grid.v_shape)
+        self._cu = np.zeros(grid.u_shape)
+        self._cv = np.zeros(grid.v_shape)
+        self._cu_fac = np.zeros(grid.u_shape)
+        self._cv_fac = np.zeros(grid.v_shape)
+        self._tend_u = np.zeros(grid.u_shape)
+        self._tend_v = np.zeros(grid.v_shape)
+        self._factor_state = np.zeros(1, dtype=np.int64)
+        self._zero_u = np.zeros(grid.u_shape)
+        self._zero_v = np.zeros(grid.v_shape)
+        self._info = np.zeros(_INFO_SIZE)
+        #: number of factorisations done (diagnostic)
+        self.factorisations = 0
+
+    @classmethod
+    def from_config(cls, case, **kwargs) -> "GasSolver":
+        """A solver for a :class:`cfbmarkov.config.CaseConfig` (Table 1 values)."""
+        return cls(GasGrid.from_config(case), density=case.gas.density,
+                   viscosity=case.gas.viscosity,
+                   superficial_velocity=case.gas.superficial_velocity,
+                   gravity=case.riser.gravity, time_step=case.numerics.cfd_time_step, **kwargs)
+
+    @property
+    def kinematic_viscosity(self) -> float:
+        return self.viscosity / self.density
+
+    def stability_limit(self, state: GasState) -> float:
+        """:func:`gas_stability_limit` at the state's largest |u| and |v| (s)."""
+        return gas_stability_limit(self.grid, self, (np.max(np.abs(state.u)), np.max(np.abs(state.v))))
+
+    # ----------------------------------------------------------------- helpers
+    def _field(self, arr, shape, name) -> np.ndarray:
+        a = np.ascontiguousarray(arr, dtype=np.float64)
+        if a.shape != shape:
+            raise InputError(f"{name} must have shape {shape}, got {a.shape}")
+        return a
+
+    def _void_fraction(self, eps) -> np.ndarray:
+        e = self._field(eps, self.grid.cell_shape, "void fraction")
+        if not (np.all(np.isfinite(e)) and e.min() > 0.0 and e.max() <= 1.0 + 1e-12):
+            raise InputError(
+                f"void fraction must lie in (0, 1], got values in [{np.nanmin(e):g}, {np.nanmax(e):g}]")
+        return e
+
+    def initial_state(self, void_fraction) -> GasState:
+        """Plug flow at U: u = 0 and eps_face v = U on every y-face (so v = U / eps_face).
+
+        This field satisfies continuity for a steady eps and has the right mean flux; the
+        no-slip walls act from the first step on. ``p`` and ``G`` start at zero (they are
+        outputs of a step, not inputs).
+        """
+        e = self._void_fraction(void_fraction).copy()
+        ev = 0.5 * (np.roll(e, 1, axis=1) + e)
+        v = self.superficial_velocity / ev
+        return GasState(u=np.zeros(self.grid.u_shape), v=v, p=np.zeros(self.grid.cell_shape),
+                        void_fraction=e)
+
+    def step(self, state: GasState, void_fraction, drag_force_u, drag_force_v,
+             drag_jacobian_u=None, drag_jacobian_v=None) -> GasState:
+        """Advance ``state`` by one time step to the void fraction ``void_fraction``.
+
+        ``drag_force_u`` (nx+1, ny) and ``drag_force_v`` (nx, ny): the drag force per unit
+        volume exerted by the gas on the particles (N/m^3) on the x- and y-faces; the gas
+        feels its reaction. Optional ``drag_jacobian_u/v`` (same shapes, kg/(m^3 s), >= 0):
+        d f / d u_gas, for a semi-implicit drag (the drag the gas feels becomes
+        ``f + K (u^{n+1} - u^n)``). Returns a new :class:`GasState`.
+        """
+        g = self.grid
+        eps_new = self._field(void_fraction, g.cell_shape, "void fraction")
+        fu = self._field(drag_force_u, g.u_shape, "drag_force_u")
+        fv = self._field(drag_force_v, g.v_shape, "drag_force_v")
+        if (drag_jacobian_u is None) != (drag_jacobian_v is None):
+            raise InputError("give both drag_jacobian_u and drag_jacobian_v, or neither")
+        has_k = drag_jacobian_u is not None
+        if has_k:
+            ku = self._field(drag_jacobian_u, g.u_shape, "drag_jacobian_u")
+            kv = self._field(drag_jacobian_v, g.v_shape, "drag_jacobian_v")
+        else:
+            ku, kv = self._zero_u, self._zero_v
+        u_new = np.empty(g.u_shape)
+        v_new = np.empty(g.v_shape)
+        p_new = np.empty(g.cell_shape)
+        info = self._info
+        code = _step_kernel(
+            g.nx, g.ny, g.dx, g.dy, self.time_step, self.density, self.kinematic_viscosity,
+            self.gravity, self.superficial_velocity, self.formulation == "A",
+            SCHEMES[self.scheme], self.residual_tolerance,
+            state.u, state.v, state.void_fraction, eps_new, fu, fv, ku, kv, has_k,
+            u_new, v_new, p_new,
+            self._mu_s, self._mv_s, self._cu, self._cv, self._cu_fac, self._cv_fac,
+            self._band, self._invdiag, self._ra, self._rb, self._numbering,
+            self._tend_u, self._tend_v, self._factor_state, info)
+        if code != _OK:
+            self._raise(code, info, eps_new, fu, fv)
+        if info[_I_REFACTORED]:
+            self.factorisations += 1
+        return GasState(
+            u=u_new, v=v_new, p=p_new, void_fraction=eps_new.copy(),
+            driving_pressure_gradient=float(info[_I_G]),
+            pressure_residual=float(info[_I_RES_REL]),
+            continuity_defect=float(info[_I_DEFECT]),
+            time=state.time + self.time_step, steps=state.steps + 1,
+            diagnostics={"continuity_residual": float(info[_I_RES_ABS]),
+                         "flux_error": float(info[_I_FLUXERR]),
+                         "max_u": float(info[_I_UMAX]), "max_v": float(info[_I_VMAX]),
+                         "dt_max": float(info[_I_DTMAX])})
+
+    def _raise(self, code, info, eps_new, fu, fv):
+        dt = self.time_step
+        if code == _UNSTABLE and not (np.isfinite(info[_I_UMAX]) and np.isfinite(info[_I_VMAX])):
+            raise PressureSolveError("the gas velocity of the state is not finite (the run diverged)")
+        if code == _UNSTABLE:
+            raise InputError(
+                f"gas time step {dt:.6g} s exceeds the stability limit {info[_I_DTMAX]:.6g} s "
+                f"(advective limit {info[_I_DTADV]:.6g} s at max |u| = {info[_I_UMAX]:.6g} m/s, "
+                f"max |v| = {info[_I_VMAX]:.6g} m/s, Courant {ADVECTIVE_COURANT}; "
+                f"viscous limit {info[_I_DTVIS]:.6g} s)")
+        if code == _BAD_VOID:
+            k = int(info[_I_BADCELL])
+            i, j = divmod(k, self.grid.ny)
+            raise InputError(
+                f"void fraction must lie in (0, 1]; cell ({i}, {j}) has {float(eps_new[i, j])!r}")
+        if code == _BAD_INPUT:
+            raise InputError("drag_jacobian must be finite and non-negative")
+        if code == _NOT_SPD:
+            raise PressureSolveError(
+                f"pressure matrix not positive definite at unknown {int(info[_I_PIVOT])} "
+                "(non-finite void fraction or drag jacobian?)")
+        if code == _BAD_FLUX:
+            raise PressureSolveError("driving pressure gradient undefined (zero flux response)")
+        if code == _RESIDUAL:
+            finite = bool(np.all(np.isfinite(fu)) and np.all(np.isfinite(fv)))
+            raise PressureSolveError(
+                f"pressure solve failed: relative continuity residual {info[_I_RES_REL]:.3g} "
+                f"exceeds {self.residual_tolerance:.3g} (absolute {info[_I_RES_ABS]:.3g} 1/s)"
+                + ("" if finite else "; the drag force field is not finite"))
+        raise PressureSolveError(f"gas step failed with code {code}")
