@@ -1,0 +1,7 @@
+"""2D DEM engine (discs with sphere mass, linear spring-dashpot contacts with tangential
+history, walls at x = 0 and W, periodic in y); see :mod:`.system` and :mod:`.kernels`."""
+
+from cfbmarkov.simulate.dem.law import ContactLaw, damping_ratio
+from cfbmarkov.simulate.dem.system import ContactTimes, DEMSystem, SimulationBlowUp
+
+__all__ = ["ContactLaw", "ContactTimes", "DEMSystem", "SimulationBlowUp", "damping_ratio"]

@@ -1,0 +1,104 @@
+"""The linear spring-dashpot contact law with tangential history (paper Table 2, SPEC §1)."""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from cfbmarkov.errors import InputError
+
+
+def damping_ratio(restitution: float) -> float:
+    """|ln e| / sqrt(pi^2 + ln^2 e): the damping ratio of a linear oscillator that rebounds
+    with coefficient of restitution ``e`` (0 for e = 1)."""
+    le = math.log(restitution)
+    return abs(le) / math.sqrt(math.pi**2 + le * le)
+
+
+@dataclass(frozen=True)
+class ContactLaw:
+    """Linear spring-dashpot normal force, tangential spring with history and Coulomb cap.
+
+    Normal (magnitude, repulsive): ``Fn = kn*delta + eta_n*v_n`` with ``v_n`` the approach
+    speed, clamped at 0 (no tensile force: when the dashpot would pull during separation the
+    contact simply carries no force). ``eta_n = 2*sqrt(m_ab*kn)*|ln en|/sqrt(pi^2+ln^2 en)``.
+
+    Tangential: spring ``delta_t`` (sum of v_t*dt over the contact, projected on the current
+    tangent each step), ``Ft = -kt*delta_t - eta_t*v_t`` with
+    ``eta_t = 2*sqrt(2/7*m_ab*kt)*|ln et|/sqrt(pi^2+ln^2 et)``; if ``|Ft| > mu*Fn`` it is
+    scaled to ``mu*Fn`` and the spring reset to ``-(Ft + eta_t*v_t)/kt`` (LAMMPS
+    gran/hooke/history). ``m_ab`` is the reduced mass; against a wall it is the particle mass.
+
+    ``mass`` (optional) is a reference particle mass, set by :meth:`from_config` from the
+    diameter and density, used as the default of :meth:`contact_times`.
+    """
+
+    kn: float = 10000.0
+    kt: float = 2857.0
+    en: float = 0.97
+    et: float = 0.33
+    mu: float = 0.1
+    mass: float | None = None
+
+    def __post_init__(self):
+        for name in ("kn", "kt"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise InputError(f"contact law: {name} must be a positive number, got {v!r}")
+        for name in ("en", "et"):
+            v = getattr(self, name)
+            if not (0 < v <= 1):
+                raise InputError(f"contact law: {name} must be in (0, 1], got {v!r}")
+        if not (math.isfinite(self.mu) and self.mu >= 0):
+            raise InputError(f"contact law: mu must be >= 0, got {self.mu!r}")
+        if self.mass is not None and not (math.isfinite(self.mass) and self.mass > 0):
+            raise InputError(f"contact law: mass must be positive, got {self.mass!r}")
+
+    @classmethod
+    def from_config(cls, config, diameter: float | None = None,
+                    density: float | None = None) -> ContactLaw:
+        """From a :class:`cfbmarkov.config.ContactConfig`; with ``diameter`` (m) and
+        ``density`` (kg/m^3) the sphere mass is kept as the reference mass."""
+        mass = None
+        if diameter is not None or density is not None:
+            if diameter is None or density is None:
+                raise InputError("contact law: give both diameter and density, or neither")
+            if not (diameter > 0 and density > 0):
+                raise InputError(
+                    f"contact law: diameter and density must be positive, got {diameter!r}, "
+                    f"{density!r}")
+            mass = density * math.pi * diameter**3 / 6.0
+        return cls(kn=config.normal_stiffness, kt=config.tangential_stiffness,
+                   en=config.normal_restitution, et=config.tangential_restitution,
+                   mu=config.friction_coefficient, mass=mass)
+
+    # damping coefficients: eta = c * sqrt(m_ab)
+    @property
+    def normal_damping_factor(self) -> float:
+        """c_n with eta_n = c_n*sqrt(m_ab)."""
+        return 2.0 * math.sqrt(self.kn) * damping_ratio(self.en)
+
+    @property
+    def tangential_damping_factor(self) -> float:
+        """c_t with eta_t = c_t*sqrt(m_ab) (includes the 2/7 of m'_ab)."""
+        return 2.0 * math.sqrt(2.0 / 7.0 * self.kt) * damping_ratio(self.et)
+
+    def normal_damping(self, m_ab: float) -> float:
+        return self.normal_damping_factor * math.sqrt(m_ab)
+
+    def tangential_damping(self, m_ab: float) -> float:
+        return self.tangential_damping_factor * math.sqrt(m_ab)
+
+    def contact_time(self, m_ab: float) -> float:
+        """Duration of a linear spring-dashpot normal contact of reduced mass ``m_ab``:
+        pi / sqrt(kn/m_ab - (eta_n/(2 m_ab))^2)."""
+        eta = self.normal_damping(m_ab)
+        return math.pi / math.sqrt(self.kn / m_ab - (eta / (2.0 * m_ab)) ** 2)
+
+    def contact_times(self, mass: float | None = None) -> tuple[float, float]:
+        """(particle-particle, particle-wall) contact durations for equal particles of
+        ``mass`` (default: the reference mass)."""
+        m = self.mass if mass is None else mass
+        if m is None:
+            raise InputError("contact law: no particle mass given")
+        return self.contact_time(0.5 * m), self.contact_time(m)

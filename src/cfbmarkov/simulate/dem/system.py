@@ -1,0 +1,579 @@
+"""DEMSystem: the orchestration object of the 2D DEM engine (kernels in :mod:`.kernels`).
+
+Geometry: discs in the plane, x across between contact walls at x = 0 and x = W, y up and
+periodic with period H (positions kept in [0, H), minimal image for contacts). With
+``bottom_wall=True`` y is not periodic and a contact wall sits at y = 0 instead (a floor for
+settled beds; nothing bounds the top). Mass and inertia are those of spheres:
+m = rho*pi*d^3/6, I = m*d^2/10.
+
+Time integration is leapfrog: ``velocities`` and ``angular_velocities`` are the half-step
+values v(t - dt/2) that the next step's forces use (the sequence LAMMPS's velocity Verlet
+produces; in free flight they equal v(t)). Initial velocities are taken as these values.
+
+Laps: ``laps[i]`` counts passes up through the top (+1) and down through the bottom (-1);
+the unwrapped height is ``y + laps*H`` (initial positions outside [0, H) are wrapped and
+their laps set accordingly). Each pass is also logged as an event (time, particle,
+direction) with the time interpolated inside the DEM step (the motion in one step is a
+straight line); :meth:`DEMSystem.drain_pass_events` hands them over.
+
+Determinism: each pair force is computed once and each particle sums its pairs in a fixed
+order (no atomics), so results are bit-identical for any number of threads, and
+:meth:`state` / :meth:`from_state` continue a run bit for bit (the state holds the internal
+cell order, the neighbour and pair lists and their springs). Systems of fewer than
+``serial_below`` (default 2000) particles run on one thread: the parallel start-up costs more
+than it saves there, and it changes no result.
+
+Performance (2-core machine, 27000 particles, paper's law and step): see ``bench.py``.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from typing import NamedTuple
+
+import numba
+import numpy as np
+
+from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.simulate.dem import kernels as K
+from cfbmarkov.simulate.dem.law import ContactLaw
+
+STATE_VERSION = 1
+MAX_OVERLAP = 0.1  # blow-up: an overlap above this fraction of the (mean) diameter
+# systems smaller than this run on one thread (parallel start-up costs more than it saves;
+# results are bit-identical for any thread count)
+SERIAL_BELOW = 2000
+
+
+class SimulationBlowUp(CfbmarkovError):
+    """The DEM state became unphysical (NaN, a particle through a wall, a huge overlap)."""
+
+    def __init__(self, message: str, step: int, particle: int, reason: str):
+        super().__init__(message)
+        self.step = step
+        self.particle = particle
+        self.reason = reason
+
+
+class ContactTimes(NamedTuple):
+    particle_particle: float
+    particle_wall: float
+
+
+_REASONS = {K.BAD_NAN: "has a non-finite position or velocity",
+            K.BAD_WALL: "is outside a wall by more than its radius",
+            K.BAD_OVERLAP: f"overlaps a neighbour or wall by more than {MAX_OVERLAP:.0%} of d",
+            K.BAD_RANGE: "moved by more than the period in one step"}
+
+
+def _as_per_particle(value, n, name):
+    a = np.asarray(value, dtype=np.float64)
+    if a.ndim == 0:
+        a = np.full(n, float(a))
+    if a.shape != (n,):
+        raise InputError(f"{name}: expected a number or {n} values, got shape {a.shape}")
+    if not np.all(np.isfinite(a)) or np.any(a <= 0):
+        raise InputError(f"{name}: values must be positive and finite")
+    return a
+
+
+class DEMSystem:
+    """A 2D DEM system of discs between two walls, periodic in y (see the module doc).
+
+    Parameters
+    ----------
+    positions, velocities : (N, 2) arrays, m and m/s (velocities at t - dt/2).
+    radius, density : number or (N,) array, m and kg/m^3.
+    law : ContactLaw
+    width, height : W and H, m.
+    gravity : m/s^2 acting in -y (0 switches it off).
+    time_step : DEM step, s.
+    search_cells : (nx, ny) cells of the neighbour-search grid, or None for the finest grid
+        whose cells are no smaller than the list cutoff (2 R_max + skin).
+    skin : Verlet skin, m; the list is rebuilt (and particles re-sorted into cell order)
+        when a particle has moved more than skin/2 since the last build.
+    angular_velocities : (N,) rad/s, default 0.
+    bottom_wall : contact wall at y = 0 instead of periodicity in y.
+    time : starting time, s.
+    """
+
+    def __init__(self, positions, velocities, radius, density, law: ContactLaw, width, height,
+                 gravity=9.81, time_step=5e-6, search_cells=(30, 351), skin=3e-4,
+                 angular_velocities=None, *, bottom_wall=False, time=0.0):
+        pos = np.array(positions, dtype=np.float64)
+        vel = np.array(velocities, dtype=np.float64)
+        if pos.ndim != 2 or pos.shape[1] != 2 or pos.shape[0] < 1:
+            raise InputError(f"positions: expected an (N, 2) array, got shape {pos.shape}")
+        n = pos.shape[0]
+        if vel.shape != (n, 2):
+            raise InputError(f"velocities: expected shape {(n, 2)}, got {vel.shape}")
+        if not (np.all(np.isfinite(pos)) and np.all(np.isfinite(vel))):
+            raise InputError("positions and velocities must be finite")
+        rad = _as_per_particle(radius, n, "radius")
+        rho = _as_per_particle(density, n, "density")
+        if angular_velocities is None:
+            om = np.zeros(n)
+        else:
+            om = np.array(angular_velocities, dtype=np.float64).reshape(-1)
+            if om.shape != (n,) or not np.all(np.isfinite(om)):
+                raise InputError(f"angular_velocities: expected {n} finite values")
+        if not isinstance(law, ContactLaw):
+            raise InputError("law: expected a ContactLaw")
+        width = float(width)
+        height = float(height)
+        gravity = float(gravity)
+        dt = float(time_step)
+        skin = float(skin)
+        for name, v in (("width", width), ("height", height), ("time_step", dt), ("skin", skin)):
+            if not (math.isfinite(v) and v > 0):
+                raise InputError(f"{name} must be a positive number, got {v!r}")
+        if not math.isfinite(gravity):
+            raise InputError(f"gravity must be finite, got {gravity!r}")
+        periodic = not bottom_wall
+        x = pos[:, 0]
+        if np.any(x < -rad) or np.any(x > width + rad):
+            i = int(np.flatnonzero((x < -rad) | (x > width + rad))[0])
+            raise InputError(f"particle {i} at x = {x[i]:g} m is outside the walls "
+                             f"(0 <= x <= {width:g} m) by more than its radius")
+        laps = np.zeros(n, np.int64)
+        if periodic:
+            laps = np.floor(pos[:, 1] / height).astype(np.int64)
+            pos[:, 1] -= laps * height
+            pos[:, 1] = np.where(pos[:, 1] >= height, 0.0, pos[:, 1])
+        elif np.any(pos[:, 1] < -rad):
+            i = int(np.flatnonzero(pos[:, 1] < -rad)[0])
+            raise InputError(f"particle {i} at y = {pos[i, 1]:g} m is below the bottom wall")
+        rmax = float(rad.max())
+        cut = 2.0 * rmax + skin
+        if search_cells is None:
+            ncx = max(1, int(width / cut))
+            ncy = max(1, int(height / cut))
+        else:
+            try:
+                ncx, ncy = (int(c) for c in search_cells)
+            except (TypeError, ValueError):
+                raise InputError(f"search_cells: expected two integers, got {search_cells!r}") from None
+            if ncx < 1 or ncy < 1:
+                raise InputError(f"search_cells must be positive, got {search_cells!r}")
+        cw, ch = width / ncx, height / ncy
+        if min(cw, ch) < cut * (1 - 1e-12):
+            raise InputError(
+                f"search cells {ncx} x {ncy} are {cw * 1e3:.4g} x {ch * 1e3:.4g} mm, smaller "
+                f"than the neighbour cutoff 2*R_max + skin = {cut * 1e3:.4g} mm; use fewer "
+                f"cells (at most {int(width / cut)} x {int(height / cut)}) or search_cells=None")
+        if periodic and ncy < 3:
+            raise InputError(f"a periodic height needs at least 3 search-cell rows (the period "
+                             f"H = {height:g} m must be at least 3 cutoffs of {cut:g} m)")
+
+        mass = rho * math.pi * (2 * rad) ** 3 / 6.0
+        inertia = 0.1 * mass * (2 * rad) ** 2
+        mono = bool(np.all(rad == rad[0]) and np.all(rho == rho[0]))
+        mmin = float(mass.min())
+
+        self._law = law
+        self._n = n
+        self._width, self._height, self._gravity, self._dt = width, height, gravity, dt
+        self._skin = skin
+        self._cells = (ncx, ncy)
+        self._bottom_wall = bool(bottom_wall)
+        self._density = rho
+        self._mono = mono
+        self._min_mass = mmin
+        self._check_steps_per_contact()
+
+        st = np.zeros((2, n, 8))
+        st[0, :, 0:2] = pos
+        st[0, :, 2:4] = vel
+        st[0, :, 4] = rad * om  # surface speed R*omega (see kernels)
+        st[0, :, 5] = rad
+        st[0, :, 6] = 1.0 / mass
+        st[0, :, 7] = rad / inertia
+        st[1] = st[0]
+        aux = np.zeros((2, n, 4))
+        aux[0, :, 0:2] = pos
+        ids = np.zeros((2, n), np.int64)
+        ids[0] = np.arange(n)
+        lp = np.zeros((2, n), np.int64)
+        lp[0] = laps
+        ctl = np.zeros(K.N_C, np.int64)
+        ctl[K.C_REBUILD] = 1
+        self._arrays = dict(st=st, aux=aux, wh=np.zeros((2, n, 3)), ids=ids, laps=lp, ctl=ctl)
+        self._lists = [K.empty_list(n, 4), K.empty_list(n, 4)]
+        self._pf = np.zeros((self._lists[0][4].shape[0], 3))
+        self._t0 = float(time)
+        self.serial_below = SERIAL_BELOW
+        self._P, self._IP = self._parameters()
+        self._alloc_scratch(capacity=max(4 * n, 4096))
+
+    # ------------------------------------------------------------------ set-up helpers
+    def _parameters(self):
+        law = self._law
+        P = np.zeros(K.N_P)
+        P[K.P_DT] = self._dt
+        P[K.P_W] = self._width
+        P[K.P_H] = self._height
+        P[K.P_G] = self._gravity
+        P[K.P_KN] = law.kn
+        P[K.P_KT] = law.kt
+        P[K.P_MU] = law.mu
+        m = self._min_mass  # all particles share it when mono
+        P[K.P_ETAN_PP] = law.normal_damping(0.5 * m)
+        P[K.P_ETAT_PP] = law.tangential_damping(0.5 * m)
+        P[K.P_ETAN_PW] = law.normal_damping(m)
+        P[K.P_ETAT_PW] = law.tangential_damping(m)
+        P[K.P_CN] = law.normal_damping_factor
+        P[K.P_CT] = law.tangential_damping_factor
+        P[K.P_SKIN] = self._skin
+        P[K.P_CW] = self._width / self._cells[0]
+        P[K.P_CH] = self._height / self._cells[1]
+        P[K.P_RMAX] = float(self._arrays["st"][0, :, 5].max())
+        P[K.P_OVL] = MAX_OVERLAP
+        P[K.P_T0] = self._t0
+        IP = np.zeros(K.N_I, np.int64)
+        IP[K.I_NCX], IP[K.I_NCY] = self._cells
+        IP[K.I_PERIODIC] = 0 if self._bottom_wall else 1
+        IP[K.I_FLOOR] = 1 if self._bottom_wall else 0
+        IP[K.I_MONO] = 1 if self._mono else 0
+        return P, IP
+
+    def _alloc_scratch(self, capacity):
+        n = self._n
+        ncell = self._cells[0] * self._cells[1]
+        self._scratch = dict(evf=np.zeros(n, np.int8), bad=np.zeros(n, np.int8),
+                             key=np.zeros(n, np.int64), cstart=np.zeros(ncell + 1, np.int64),
+                             cfill=np.zeros(ncell, np.int64), perm=np.zeros(n, np.int64),
+                             invperm=np.zeros(n, np.int64))
+        self._ev = (np.zeros(capacity), np.zeros(capacity, np.int64), np.zeros(capacity, np.int8))
+        self._ext_set = False
+
+    def _check_steps_per_contact(self):
+        spc = self.steps_per_contact()
+        worst = min(spc)
+        msg = (f"DEM time step {self._dt:g} s resolves a contact in {spc.particle_particle:.2f} "
+               f"steps (particle-particle, t_c = {self.contact_time().particle_particle:.4g} s) "
+               f"and {spc.particle_wall:.2f} steps (particle-wall, t_c = "
+               f"{self.contact_time().particle_wall:.4g} s)")
+        if worst < 5:
+            raise InputError(msg + "; at least 5 are needed (10 or more recommended)")
+        if worst < 10:
+            warnings.warn(msg + "; 10 or more are recommended", stacklevel=3)
+
+    # ------------------------------------------------------------------ information
+    def contact_time(self) -> ContactTimes:
+        """Linear spring-dashpot contact durations (particle-particle, particle-wall) of the
+        lightest particle, s."""
+        pp, pw = self._law.contact_times(self._min_mass)
+        return ContactTimes(pp, pw)
+
+    def steps_per_contact(self) -> ContactTimes:
+        pp, pw = self.contact_time()
+        return ContactTimes(pp / self._dt, pw / self._dt)
+
+    @property
+    def n_particles(self) -> int:
+        return self._n
+
+    @property
+    def law(self) -> ContactLaw:
+        return self._law
+
+    @property
+    def time_step(self) -> float:
+        return self._dt
+
+    @property
+    def width(self) -> float:
+        return self._width
+
+    @property
+    def height(self) -> float:
+        return self._height
+
+    @property
+    def search_cells(self) -> tuple[int, int]:
+        return self._cells
+
+    @property
+    def steps_done(self) -> int:
+        return int(self._arrays["ctl"][K.C_STEP])
+
+    @property
+    def time(self) -> float:
+        return self._t0 + self.steps_done * self._dt
+
+    @property
+    def n_rebuilds(self) -> int:
+        """Neighbour-list builds so far (each also re-sorts the particles)."""
+        return int(self._arrays["ctl"][K.C_NREBUILD])
+
+    def _cur(self):
+        a = self._arrays
+        ctl = a["ctl"]
+        return a["st"][ctl[K.C_ST]], a["ids"][ctl[K.C_PA]], ctl[K.C_PA]
+
+    def _to_caller(self, values):
+        st, ids, _ = self._cur()
+        out = np.empty_like(values)
+        out[ids] = values
+        return out
+
+    @property
+    def positions(self) -> np.ndarray:
+        """(N, 2) positions, caller's order (a copy)."""
+        return self._to_caller(self._cur()[0][:, 0:2])
+
+    @property
+    def velocities(self) -> np.ndarray:
+        """(N, 2) half-step velocities v(t - dt/2), caller's order (a copy)."""
+        return self._to_caller(self._cur()[0][:, 2:4])
+
+    @property
+    def angular_velocities(self) -> np.ndarray:
+        st = self._cur()[0]
+        return self._to_caller(st[:, 4] / st[:, 5])
+
+    @property
+    def radius(self) -> np.ndarray:
+        return self._to_caller(self._cur()[0][:, 5])
+
+    @property
+    def mass(self) -> np.ndarray:
+        return self._to_caller(1.0 / self._cur()[0][:, 6])
+
+    @property
+    def moment_of_inertia(self) -> np.ndarray:
+        st = self._cur()[0]
+        return self._to_caller(st[:, 5] / st[:, 7])
+
+    @property
+    def laps(self) -> np.ndarray:
+        a = self._arrays
+        return self._to_caller(a["laps"][a["ctl"][K.C_PA]])
+
+    @property
+    def order(self) -> np.ndarray:
+        """Caller's index of each particle in the internal (cell) order."""
+        return self._cur()[1].copy()
+
+    def kinetic_energy(self) -> float:
+        """Translational plus rotational kinetic energy from the half-step velocities, J."""
+        st = self._cur()[0]
+        return float(0.5 * np.sum((st[:, 2] ** 2 + st[:, 3] ** 2) / st[:, 6])
+                     + 0.5 * np.sum(st[:, 4] ** 2 / (st[:, 5] * st[:, 7])))
+
+    def overlaps(self) -> np.ndarray:
+        """Overlap of every pair in contact and every wall contact (diagnostics; O(N) with
+        the neighbour list when it is current, else a brute-force O(N^2) check)."""
+        st = self._cur()[0]
+        x, y, r = st[:, 0], st[:, 1], st[:, 5]
+        out = [np.maximum(r - x, 0.0), np.maximum(x + r - self._width, 0.0)]
+        if self._bottom_wall:
+            out.append(np.maximum(r - y, 0.0))
+        n = self._n
+        for i0 in range(0, n, 2048):
+            sl = slice(i0, min(n, i0 + 2048))
+            dx = x[None, :] - x[sl, None]
+            dy = y[None, :] - y[sl, None]
+            if not self._bottom_wall:
+                dy -= self._height * np.round(dy / self._height)
+            d = r[None, :] + r[sl, None] - np.hypot(dx, dy)
+            idx = np.arange(sl.start, sl.stop)
+            d[np.arange(len(idx)), idx] = 0.0
+            out.append(d[d > 0])
+        return np.concatenate([o[o > 0] for o in out])
+
+    # ------------------------------------------------------------------ running
+    def step(self, n_steps: int = 1, external_force=None) -> None:
+        """Advance ``n_steps`` DEM steps. ``external_force`` (N, 2), N, caller's order, is added
+        to every particle's force during these steps (e.g. drag and pressure gradient)."""
+        n_steps = int(n_steps)
+        if n_steps < 0:
+            raise InputError(f"n_steps must be >= 0, got {n_steps}")
+        a = self._arrays
+        ctl = a["ctl"]
+        aux_cur = a["aux"][ctl[K.C_PA]]
+        if external_force is not None:
+            ext = np.ascontiguousarray(external_force, dtype=np.float64)
+            if ext.shape != (self._n, 2):
+                raise InputError(f"external_force: expected shape {(self._n, 2)}, got {ext.shape}")
+            K.scatter_external(ext, a["ids"][ctl[K.C_PA]], aux_cur)
+            self._ext_set = True
+        elif self._ext_set:
+            K.clear_external(aux_cur)
+            self._ext_set = False
+        threads = numba.get_num_threads()
+        if self._n < self.serial_below and threads > 1:
+            numba.set_num_threads(1)  # results do not depend on it; small systems run faster
+        try:
+            self._advance(n_steps)
+        finally:
+            if numba.get_num_threads() != threads:
+                numba.set_num_threads(threads)
+
+    def _advance(self, n_steps):
+        a = self._arrays
+        ctl = a["ctl"]
+        left = n_steps
+        sc = self._scratch
+        while left > 0:
+            done, status, info = K.advance(
+                a["st"], a["aux"], a["wh"], a["ids"], a["laps"], self._lists[0], self._lists[1],
+                self._pf, ctl, sc["evf"], sc["bad"], sc["key"], sc["cstart"], sc["cfill"],
+                sc["perm"], sc["invperm"], self._P, self._IP, left, *self._ev)
+            left -= done
+            if status == K.ST_OK:
+                continue
+            if status == K.ST_STRIDE:
+                new = 1 if ctl[K.C_LIST] == 0 else 0
+                self._lists[new] = K.empty_list(self._n, int(info) + 2)
+                cap = max(lst[4].shape[0] for lst in self._lists)
+                if self._pf.shape[0] < cap:
+                    self._pf = np.zeros((cap, 3))
+            elif status == K.ST_EVENTS:
+                n_ev = int(ctl[K.C_NEV])
+                cap = max(2 * self._ev[0].shape[0], n_ev + 4 * self._n)
+                self._ev = tuple(np.concatenate([e[:n_ev], np.zeros(cap - n_ev, e.dtype)])
+                                 for e in self._ev)
+            elif status == K.ST_BLOWUP:
+                self._raise_blowup()
+
+    def _raise_blowup(self):
+        bad = self._scratch["bad"]
+        st, ids, _ = self._cur()
+        where = np.flatnonzero(bad)
+        # report the particle with the smallest caller index, for a stable message
+        k = int(where[np.argmin(ids[where])])
+        code = int(bad[k])
+        step = self.steps_done - 1
+        pid = int(ids[k])
+        msg = (f"DEM blow-up in step {step} (t = {self._t0 + (step + 1) * self._dt:.9g} s): "
+               f"particle {pid} {_REASONS.get(code, 'is invalid')} (x = {st[k, 0]:.6g} m, "
+               f"y = {st[k, 1]:.6g} m, v = ({st[k, 2]:.4g}, {st[k, 3]:.4g}) m/s); "
+               f"{len(where)} particle(s) affected. Reduce the time step or check the input.")
+        raise SimulationBlowUp(msg, step=step, particle=pid, reason=_REASONS.get(code, "invalid"))
+
+    def drain_pass_events(self):
+        """(time, particle, direction) of the boundary passes since the last drain, sorted by
+        time (stable); direction +1 up through the top, -1 down through the bottom."""
+        ctl = self._arrays["ctl"]
+        n = int(ctl[K.C_NEV])
+        t, p, d = (e[:n].copy() for e in self._ev)
+        ctl[K.C_NEV] = 0
+        o = np.argsort(t, kind="stable")
+        return t[o], p[o], d[o]
+
+    # ------------------------------------------------------------------ checkpoints
+    def state(self) -> dict:
+        """Everything needed to continue bit for bit, as a dict of numpy arrays (scalars are
+        0-d arrays; writable to HDF5 as is). ``positions``, ``velocities``,
+        ``angular_velocities`` and ``laps`` are in the caller's order for convenience; the
+        ``internal_*`` arrays are in the engine's cell order."""
+        a = self._arrays
+        ctl = a["ctl"]
+        cs, cp, cl = ctl[K.C_ST], ctl[K.C_PA], ctl[K.C_LIST]
+        nnb, nown, nbr, pstart, pi, pj, hist, lowstart, lowpid = self._lists[cl]
+        stride = nbr.shape[0] // self._n
+        npairs = int(pstart[-1])
+        law = self._law
+        n_ev = int(ctl[K.C_NEV])
+        return {
+            "version": np.asarray(STATE_VERSION),
+            "positions": self.positions, "velocities": self.velocities,
+            "angular_velocities": self.angular_velocities, "laps": self.laps,
+            "density": self._density.copy(),
+            "width": np.asarray(self._width), "height": np.asarray(self._height),
+            "gravity": np.asarray(self._gravity), "time_step": np.asarray(self._dt),
+            "skin": np.asarray(self._skin), "search_cells": np.asarray(self._cells, np.int64),
+            "bottom_wall": np.asarray(self._bottom_wall),
+            "law": np.asarray([law.kn, law.kt, law.en, law.et, law.mu]),
+            "law_mass": np.asarray(np.nan if law.mass is None else law.mass),
+            "start_time": np.asarray(self._t0), "time": np.asarray(self.time),
+            "internal_state": a["st"][cs].copy(), "internal_aux": a["aux"][cp].copy(),
+            "internal_wall_springs": a["wh"][cp].copy(), "internal_order": a["ids"][cp].copy(),
+            "internal_laps": a["laps"][cp].copy(),
+            "internal_control": ctl.copy(),
+            "internal_neighbour_count": nnb.copy(),
+            "internal_neighbour_count_own": nown.copy(),
+            "internal_neighbours": nbr.reshape(self._n, stride).copy(),
+            "internal_pair_start": pstart.copy(), "internal_pair_first": pi[:npairs].copy(),
+            "internal_pair_second": pj[:npairs].copy(),
+            "internal_springs": hist[:npairs].copy(),
+            "internal_second_start": lowstart.copy(),
+            "internal_second_pairs": lowpid[:npairs].copy(),
+            "pending_event_time": self._ev[0][:n_ev].copy(),
+            "pending_event_particle": self._ev[1][:n_ev].copy(),
+            "pending_event_direction": self._ev[2][:n_ev].copy(),
+        }
+
+    @classmethod
+    def from_state(cls, state: dict) -> DEMSystem:
+        """Rebuild a system from :meth:`state`; it continues exactly as the original would."""
+        try:
+            version = int(np.asarray(state["version"]))
+            if version != STATE_VERSION:
+                raise InputError(f"DEM state version {version} is not supported "
+                                 f"(expected {STATE_VERSION})")
+            st = np.asarray(state["internal_state"], np.float64)
+            n = st.shape[0]
+            law_v = [float(v) for v in np.asarray(state["law"])]
+            lm = float(np.asarray(state["law_mass"]))
+            law = ContactLaw(*law_v, mass=None if math.isnan(lm) else lm)
+            self = cls.__new__(cls)
+            self._law = law
+            self._n = n
+            self._width = float(np.asarray(state["width"]))
+            self._height = float(np.asarray(state["height"]))
+            self._gravity = float(np.asarray(state["gravity"]))
+            self._dt = float(np.asarray(state["time_step"]))
+            self._skin = float(np.asarray(state["skin"]))
+            self._cells = tuple(int(c) for c in np.asarray(state["search_cells"]))
+            self._bottom_wall = bool(np.asarray(state["bottom_wall"]))
+            self._density = np.asarray(state["density"], np.float64).copy()
+            rad = st[:, 5]
+            self._mono = bool(np.all(rad == rad[0]) and np.all(self._density == self._density[0]))
+            self._min_mass = float(np.min(1.0 / st[:, 6]))
+            self._t0 = float(np.asarray(state["start_time"]))
+            self.serial_below = SERIAL_BELOW
+            ctl = np.asarray(state["internal_control"], np.int64).copy()
+            ctl[K.C_ST] = 0
+            ctl[K.C_PA] = 0
+            ctl[K.C_LIST] = 0
+            sta = np.zeros((2, n, 8))
+            sta[0] = st
+            sta[1] = st
+            aux = np.zeros((2, n, 4))
+            aux[0] = np.asarray(state["internal_aux"], np.float64)
+            wh = np.zeros((2, n, 3))
+            wh[0] = np.asarray(state["internal_wall_springs"], np.float64)
+            ids = np.zeros((2, n), np.int64)
+            ids[0] = np.asarray(state["internal_order"], np.int64)
+            lp = np.zeros((2, n), np.int64)
+            lp[0] = np.asarray(state["internal_laps"], np.int64)
+            self._arrays = dict(st=sta, aux=aux, wh=wh, ids=ids, laps=lp, ctl=ctl)
+            nbr = np.ascontiguousarray(state["internal_neighbours"], np.int32)
+            stride = nbr.shape[1]
+            lst = K.empty_list(n, stride)
+            npairs = int(np.asarray(state["internal_pair_start"])[-1])
+            lst[0][:] = state["internal_neighbour_count"]
+            lst[1][:] = state["internal_neighbour_count_own"]
+            lst[2][:] = nbr.reshape(-1)
+            lst[3][:] = state["internal_pair_start"]
+            lst[4][:npairs] = state["internal_pair_first"]
+            lst[5][:npairs] = state["internal_pair_second"]
+            lst[6][:npairs] = state["internal_springs"]
+            lst[7][:] = state["internal_second_start"]
+            lst[8][:npairs] = state["internal_second_pairs"]
+            self._lists = [lst, K.empty_list(n, stride)]
+            self._pf = np.zeros((lst[4].shape[0], 3))
+            self._P, self._IP = self._parameters()
+            ev_t = np.asarray(state["pending_event_time"], np.float64)
+            self._alloc_scratch(capacity=max(4 * n, 4096, 2 * ev_t.shape[0]))
+            k = ev_t.shape[0]
+            self._ev[0][:k] = ev_t
+            self._ev[1][:k] = np.asarray(state["pending_event_particle"], np.int64)
+            self._ev[2][:k] = np.asarray(state["pending_event_direction"], np.int8)
+            ctl[K.C_NEV] = k
+        except KeyError as exc:
+            raise InputError(f"DEM state: missing entry {exc.args[0]!r}") from None
+        return self

@@ -1,0 +1,263 @@
+"""The CFD-DEM run: orchestration of the DEM, the gas and the output (no maths here).
+
+:class:`CoupledRiser` holds a DEM system and a gas state and advances them one gas step at a
+time (the coupling kernels are in :mod:`cfbmarkov.simulate.coupling`). :func:`simulate` runs
+a case to its end time, writing frames every ``output.frame_interval`` s with exact pass
+events, showing progress (simulated time, particle-steps/s, ETA), writing atomic checkpoints,
+and resuming a killed run so that the result equals an uninterrupted run bit for bit.
+
+Files of a run ``RUN.h5``: while it runs, ``RUN.h5.parts/`` holds complete trajectory
+segments and ``checkpoint.h5`` (written atomically after its segment is closed); at the end
+the segments are merged into ``RUN.h5`` and the folder is removed.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import sys
+import time as _time
+import warnings
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from cfbmarkov._atomic import atomic_path
+from cfbmarkov.config import CaseConfig
+from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.simulate.cfd import (GasGrid, GasSolver, GasState, deposit_drag_jacobian,
+                                    deposit_drag_reaction, void_fraction_field)
+from cfbmarkov.simulate.coupling import (drag_coefficients, drag_force_at_new_gas,
+                                         place_without_overlap)
+from cfbmarkov.simulate.dem import ContactLaw, DEMSystem
+from cfbmarkov.trajectories import SegmentedTrajectoryWriter
+
+CHECKPOINT_VERSION = 1
+
+
+class CoupledRiser:
+    """DEM particles and the gas of the periodic riser, advanced one gas step at a time."""
+
+    def __init__(self, case: CaseConfig, dem: DEMSystem, gas: GasState, cfd_steps: int = 0):
+        self.case = case
+        self.dem = dem
+        self.gas = gas
+        self.cfd_steps = int(cfd_steps)
+        self.grid = GasGrid.from_config(case)
+        self.solver = GasSolver.from_config(case, formulation="B")
+        self.dem_steps_per_cfd = case.numerics.dem_steps_per_cfd_step
+        n = dem.n_particles
+        self._coefficient = np.empty(n)
+        self._force = np.empty((n, 2))
+
+    # -- construction ----------------------------------------------------------------
+    @classmethod
+    def initial(cls, case: CaseConfig) -> "CoupledRiser":
+        """Particles on random lattice sites without overlap, at rest; gas at U (plug flow)."""
+        p, r = case.particles, case.riser
+        positions = place_without_overlap(p.number, p.diameter, r.width, r.height, case.seed)
+        law = ContactLaw.from_config(case.contact, p.diameter, p.density)
+        dem = DEMSystem(positions, np.zeros_like(positions), 0.5 * p.diameter, p.density, law,
+                        r.width, r.height, gravity=r.gravity,
+                        time_step=case.numerics.dem_time_step,
+                        search_cells=tuple(case.numerics.dem_cells))
+        grid = GasGrid.from_config(case)
+        eps = void_fraction_field(grid, positions[:, 0], positions[:, 1], p.diameter)
+        gas = GasSolver.from_config(case, formulation="B").initial_state(eps)
+        return cls(case, dem, gas)
+
+    # -- stepping ----------------------------------------------------------------------
+    @property
+    def time(self) -> float:
+        return self.cfd_steps * self.case.numerics.cfd_time_step
+
+    def step(self) -> None:
+        """One gas step and the DEM steps inside it."""
+        case, grid = self.case, self.grid
+        d = case.particles.diameter
+        positions, velocities = self.dem.positions, self.dem.velocities
+        x, y = positions[:, 0], positions[:, 1]
+        eps = void_fraction_field(grid, x, y, d)
+        drag_coefficients(positions, velocities, self.gas.u, self.gas.v, eps, grid.dx,
+                          grid.dy, d, case.gas.density, case.gas.viscosity,
+                          self._coefficient, self._force)
+        fu, fv = deposit_drag_reaction(grid, x, y, self._force[:, 0], self._force[:, 1], d)
+        ku, kv = deposit_drag_jacobian(grid, x, y, self._coefficient, d)
+        self.gas = self.solver.step(self.gas, eps, fu, fv, ku, kv)
+        drag_force_at_new_gas(positions, velocities, self.gas.u, self.gas.v, grid.dx, grid.dy,
+                              self._coefficient, self._force)
+        self.dem.step(self.dem_steps_per_cfd, external_force=self._force)
+        self.cfd_steps += 1
+
+    # -- checkpoints -----------------------------------------------------------------
+    def state(self) -> dict[str, dict[str, np.ndarray] | int]:
+        return {"dem": self.dem.state(), "gas": self.gas.state_dict(), "cfd_steps": self.cfd_steps}
+
+    @classmethod
+    def from_state(cls, case: CaseConfig, state: dict) -> "CoupledRiser":
+        return cls(case, DEMSystem.from_state(state["dem"]),
+                   GasState.from_state_dict(state["gas"]), int(state["cfd_steps"]))
+
+
+def _write_group(group: h5py.Group, values: dict) -> None:
+    for key, value in values.items():
+        if isinstance(value, dict):
+            _write_group(group.create_group(key), value)
+        else:
+            group.create_dataset(key, data=np.asarray(value))
+
+
+def _read_group(group: h5py.Group) -> dict:
+    return {k: (_read_group(v) if isinstance(v, h5py.Group) else v[()]) for k, v in group.items()}
+
+
+def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: int,
+                     wall_time: float) -> None:
+    """Atomically write everything needed to continue the run bit for bit."""
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            f.attrs.update({"version": CHECKPOINT_VERSION, "n_segments": n_segments,
+                            "frames": frames, "wall_time": wall_time,
+                            "case": riser.case.model_dump_json()})
+            state = riser.state()
+            _write_group(f.create_group("dem"), state["dem"])
+            _write_group(f.create_group("gas"), state["gas"])
+            f.attrs["cfd_steps"] = state["cfd_steps"]
+
+
+def read_checkpoint(path: Path, case: CaseConfig) -> tuple[CoupledRiser, int, int, float]:
+    try:
+        with h5py.File(path, "r") as f:
+            saved = CaseConfig.model_validate_json(f.attrs["case"])
+            if saved != case:
+                raise InputError(f"{path}: the checkpoint was made with another configuration; "
+                                 "run without --resume to start again")
+            state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
+                     "cfd_steps": int(f.attrs["cfd_steps"])}
+            meta = int(f.attrs["n_segments"]), int(f.attrs["frames"]), float(f.attrs["wall_time"])
+    except (OSError, KeyError) as exc:
+        raise InputError(f"{path}: unreadable checkpoint ({exc})") from None
+    return (CoupledRiser.from_state(case, state), *meta)
+
+
+class _Progress:
+    """tqdm bar in simulated seconds with particle-steps/s; quiet when disabled."""
+
+    def __init__(self, enabled: bool, start: float, end: float, particles: int):
+        self.bar = None
+        if enabled:
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=round(end - start, 6), initial=0, unit="s", file=sys.stderr,
+                            desc="CFD-DEM (simulated s)", mininterval=1.0 if sys.stderr.isatty() else 30.0,
+                            bar_format="{desc}: {n:.3f}/{total:.3f} [{elapsed}<{remaining}{postfix}]")
+        self.particles = particles
+        self.t_wall = _time.perf_counter()
+
+    def update(self, simulated: float, dem_steps: int) -> None:
+        if self.bar is None:
+            return
+        now = _time.perf_counter()
+        rate = self.particles * dem_steps / max(now - self.t_wall, 1e-9)
+        self.t_wall = now
+        self.bar.set_postfix_str(f"{rate:.3g} particle-steps/s")
+        self.bar.update(simulated)
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+
+
+def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None = None,
+             checkpoint_every: float = 1.0, resume: bool = False, progress: bool = True,
+             stop_after_frames: int | None = None) -> Path:
+    """Run a case from t = 0 (or the last checkpoint with ``resume``) to ``until`` (default:
+    the case's end time) and write the trajectory file ``output``.
+
+    ``stop_after_frames`` ends the process's work early, as a kill would, after that many
+    frames (for tests of resume); the run is then left to be resumed.
+    """
+    output = Path(output)
+    end = case.output.end_time if until is None else float(until)
+    frame_dt = case.output.frame_interval
+    cfd_dt = case.numerics.cfd_time_step
+    steps_per_frame = frame_dt / cfd_dt
+    if abs(steps_per_frame - round(steps_per_frame)) > 1e-6 * steps_per_frame:
+        raise InputError(f"frame interval {frame_dt:g} s is not a whole number of gas steps "
+                         f"({cfd_dt:g} s)")
+    steps_per_frame = int(round(steps_per_frame))
+    steps_per_checkpoint = max(1, int(round(checkpoint_every / frame_dt))) * steps_per_frame
+    total_steps = int(round(end / cfd_dt))
+    if total_steps < steps_per_frame:
+        raise InputError(f"run length {end:g} s is shorter than one frame ({frame_dt:g} s)")
+    parts = output.with_name(output.name + ".parts")
+    checkpoint = parts / "checkpoint.h5"
+    writer_options = dict(
+        ids=np.arange(case.particles.number), width=case.riser.width, height=case.riser.height,
+        source="cfd-dem", parameters=json.loads(case.model_dump_json()), with_velocity=True,
+        frame_interval=frame_dt)
+    if resume:
+        if not checkpoint.exists():
+            raise InputError(f"nothing to resume: {checkpoint} does not exist")
+        riser, n_segments, frames, wall_time = read_checkpoint(checkpoint, case)
+        writer = SegmentedTrajectoryWriter.resume(output, n_segments, **writer_options)
+    else:
+        if parts.exists() and checkpoint.exists():
+            raise InputError(f"{parts} holds an interrupted run: add --resume to continue it, "
+                             "or delete the folder to start again")
+        _check_safety(case)
+        riser = CoupledRiser.initial(case)
+        writer = SegmentedTrajectoryWriter(output, **writer_options)
+        writer.append(0.0, riser.dem.positions, riser.dem.velocities, riser.dem.laps)
+        frames, wall_time = 1, 0.0
+    bar = _Progress(progress, riser.time, end, case.particles.number)
+    started = _time.perf_counter() - wall_time
+    try:
+        while riser.cfd_steps < total_steps:
+            for _ in range(steps_per_frame):
+                riser.step()
+            t, p, d = riser.dem.drain_pass_events()
+            writer.add_events(t, p, d)
+            writer.append(riser.time, riser.dem.positions, riser.dem.velocities, riser.dem.laps)
+            frames += 1
+            bar.update(frame_dt, steps_per_frame * riser.dem_steps_per_cfd)
+            if riser.cfd_steps % steps_per_checkpoint == 0 or riser.cfd_steps >= total_steps:
+                n_segments = writer.close_segment()
+                write_checkpoint(checkpoint, riser, n_segments, frames,
+                                 _time.perf_counter() - started)
+            if stop_after_frames is not None and frames >= stop_after_frames:
+                writer.abort()
+                return output
+    except CfbmarkovError as exc:
+        writer.abort()
+        kept = f"; the last good checkpoint is in {checkpoint}" if checkpoint.exists() else ""
+        raise type(exc)(f"{exc} (at t = {riser.time:.6g} s){kept}") from None
+    except BaseException:
+        writer.abort()
+        raise
+    finally:
+        bar.close()
+    wall = _time.perf_counter() - started
+    run_info = {"wall_time_s": wall, "simulated_s": end, "particles": case.particles.number,
+                "particle_steps_per_s": case.particles.number * total_steps
+                * riser.dem_steps_per_cfd / max(wall, 1e-9),
+                "exact_pass_events": True}
+    writer.finish(attach={"run": ({}, run_info)})
+    return output
+
+
+def _check_safety(case: CaseConfig) -> None:
+    """Refuse a gas step beyond its stability limit at the expected velocities."""
+    from cfbmarkov.simulate.cfd import gas_stability_limit
+
+    grid = GasGrid.from_config(case)
+    expected = 2.0 * case.gas.superficial_velocity / 0.5       # slip through dense clusters
+    limit = gas_stability_limit(grid, case.gas, (expected, expected))
+    if case.numerics.cfd_time_step > limit:
+        raise InputError(f"gas time step {case.numerics.cfd_time_step:g} s exceeds its stability "
+                         f"limit {limit:.3g} s at velocities up to {expected:g} m/s "
+                         f"(grid {grid.nx} x {grid.ny})")
+    if not math.isfinite(limit):
+        warnings.warn("gas stability limit could not be evaluated", stacklevel=2)

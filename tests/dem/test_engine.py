@@ -1,0 +1,401 @@
+"""DEM engine: periodic boundary, conservation, determinism, checkpoints, safety, beds."""
+
+import math
+import warnings
+
+import numba
+import numpy as np
+import pytest
+
+import cfbmarkov  # noqa: F401
+from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.simulate.dem import ContactLaw, DEMSystem, SimulationBlowUp
+
+D, RHO = 1e-3, 2600.0
+R = D / 2
+M = RHO * math.pi * D**3 / 6
+LAW = ContactLaw()
+
+
+def make(pos, vel, W=0.01, H=0.02, dt=1e-6, law=LAW, g=0.0, cells=None, om=None, **kw):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        return DEMSystem(np.asarray(pos, float), np.asarray(vel, float), kw.pop("radius", R),
+                         kw.pop("density", RHO), law, W, H, gravity=g, time_step=dt,
+                         search_cells=cells, skin=3e-4, angular_velocities=om, **kw)
+
+
+def gas(n, W, H, seed, speed=1.0, frac=0.8, radius=None):
+    """n non-overlapping particles on a jittered lattice, random velocities."""
+    rng = np.random.default_rng(seed)
+    ncol = int(W / (1.2 * D))
+    nrow = math.ceil(n / ncol)
+    sx, sy = W / ncol, H / nrow
+    assert min(sx, sy) > 1.02 * D
+    ix, iy = np.meshgrid(np.arange(ncol), np.arange(nrow))
+    jit = 0.45 * (min(sx, sy) - D)
+    pos = np.column_stack([(ix.ravel()[:n] + 0.5) * sx, (iy.ravel()[:n] + 0.5) * sy])
+    pos += rng.uniform(-jit, jit, pos.shape)
+    vel = rng.normal(0, speed / math.sqrt(2), (n, 2))
+    om = rng.normal(0, 100.0, n)
+    return pos, vel, om
+
+
+# ---------------------------------------------------------------- periodic boundary
+def test_pass_through_top_and_bottom():
+    H = 0.02
+    s = make([[0.003, H - 0.0005], [0.007, 0.0004]], [[0, 1.0], [0, -2.0]], H=H, dt=1e-6)
+    s.step(1000)
+    assert list(s.laps) == [1, -1]
+    y = s.positions[:, 1]
+    assert y[0] == pytest.approx(0.0005, abs=1e-12)
+    assert y[1] == pytest.approx(H - 0.0016, abs=1e-12)
+    t, p, d = s.drain_pass_events()
+    assert list(p) == [1, 0] and list(d) == [-1, 1]
+    assert t[0] == pytest.approx(0.0002, abs=1e-6)  # within one DEM step
+    assert t[1] == pytest.approx(0.0005, abs=1e-6)
+    assert np.all(np.abs(t - [0.0002, 0.0005]) < 1e-9)  # interpolated inside the step
+    assert s.drain_pass_events()[0].size == 0
+    # unwrapped height = y + laps * H
+    assert y[0] + s.laps[0] * H == pytest.approx(H + 0.0005)
+
+
+def test_initial_positions_are_wrapped():
+    s = make([[0.005, 0.025], [0.005, -0.001]], [[0, 0], [0, 0]], H=0.02)
+    assert list(s.laps) == [1, -1]
+    assert np.allclose(s.positions[:, 1], [0.005, 0.019])
+
+
+def test_collision_across_periodic_boundary():
+    H = 0.02
+    gap = 0.000213  # not a whole number of steps: the first touch is not a rounding tie
+
+    def run(y0):
+        ya = (y0 - (D + gap) / 2) % H
+        yb = (y0 + (D + gap) / 2) % H
+        s = make([[0.005, ya], [0.005, yb]], [[0, 1.0], [0, -1.0]], H=H, dt=2e-7,
+                 om=[0, 0])
+        s.step(1000)
+        return s
+
+    across = run(0.0)
+    middle = run(H / 2)
+    v = across.velocities
+    assert v[0, 1] == pytest.approx(-0.97, abs=0.002) and v[1, 1] == pytest.approx(0.97, abs=0.002)
+    assert np.allclose(v, middle.velocities, rtol=0, atol=1e-9)
+    assert list(across.laps) == [0, 0]  # they bounced back before passing the boundary
+
+
+# ---------------------------------------------------------------- conservation
+def total_energy(s):
+    """Kinetic plus normal-spring energy (mu = 0: no tangential springs)."""
+    pos, r = s.positions, s.radius
+    e = s.kinetic_energy()
+    dx = pos[None, :, 0] - pos[:, None, 0]
+    dy = pos[None, :, 1] - pos[:, None, 1]
+    dy -= s.height * np.round(dy / s.height)
+    ov = np.triu(np.maximum(r[None, :] + r[:, None] - np.hypot(dx, dy), 0), 1)
+    wall = np.maximum(r - pos[:, 0], 0) + np.maximum(pos[:, 0] + r - s.width, 0)
+    return e + 0.5 * s.law.kn * (np.sum(ov**2) + np.sum(wall**2))
+
+
+def test_energy_conserved_elastic_frictionless():
+    law = ContactLaw(en=1.0, et=1.0, mu=0.0)
+    W, H = 0.02, 0.03
+    pos, vel, om = gas(150, W, H, seed=3)
+    dt = law.contact_time(M / 2) / 50
+    s = make(pos, vel, W, H, dt=dt, law=law, om=om)
+    om = s.angular_velocities
+    e0 = total_energy(s)
+    contacts = 0
+    for _ in range(40):
+        s.step(250)
+        contacts += s.overlaps().size
+    e1 = total_energy(s)
+    print(f"energy drift {e1 / e0 - 1:.2e} over {s.steps_done} steps "
+          f"({s.time * 1e3:.1f} ms, ~{s.time * 1.0 / 2e-3:.0f} free paths per particle)")
+    assert contacts > 0
+    assert abs(e1 / e0 - 1) < 1e-3
+    # omega is untouched without friction
+    assert np.array_equal(s.angular_velocities, om)
+
+
+def test_momentum_conserved_with_friction():
+    """Pair forces are exact negatives: total momentum is conserved to rounding when no
+    wall is touched (gravity off)."""
+    W, H = 0.06, 0.03
+    pos, vel, om = gas(400, 0.02, H, seed=5, speed=1.0)
+    pos[:, 0] += 0.02
+    vel[:, 0] *= 0.05
+    s = make(pos, vel, W, H, dt=2e-6, om=om)
+    m = s.mass
+    p0 = (m[:, None] * s.velocities).sum(0)
+    scale = (m[:, None] * np.abs(s.velocities)).sum(0)
+    contacts = 0
+    for _ in range(20):
+        s.step(100)
+        contacts += s.overlaps().size
+        x = s.positions[:, 0]
+        assert x.min() > R + 1e-4 and x.max() < W - R - 1e-4  # no wall contact
+    assert contacts > 20
+    p1 = (m[:, None] * s.velocities).sum(0)
+    assert np.all(np.abs(p1 - p0) <= 1e-13 * scale)
+    assert s.kinetic_energy() < 0.5 * np.sum(m * (vel**2).sum(1)) + 0.5 * np.sum(
+        s.moment_of_inertia * om**2)  # dissipative
+
+
+# ---------------------------------------------------------------- determinism
+def dense_mix(seed=1, n=500):
+    W, H = 0.02, 0.04
+    pos, vel, om = gas(n, W, H, seed=seed, speed=1.0)
+    return make(pos, vel, W, H, dt=2e-6, g=9.81, om=om)
+
+
+def snapshot(s):
+    return [s.positions, s.velocities, s.angular_velocities, s.laps, *s.drain_pass_events()]
+
+
+def same(a, b):
+    return all(np.array_equal(x, y) and x.dtype == y.dtype for x, y in zip(a, b))
+
+
+def test_same_run_twice_identical():
+    a, b = dense_mix(), dense_mix()
+    a.step(300)
+    b.step(300)
+    assert a.n_rebuilds > 2
+    assert same(snapshot(a), snapshot(b))
+
+
+def test_checkpoint_continues_bit_for_bit():
+    a = dense_mix()
+    a.step(200)
+    b = dense_mix()
+    b.step(100)
+    st = b.state()
+    assert all(isinstance(v, np.ndarray) for v in st.values())
+    c = DEMSystem.from_state({k: v.copy() for k, v in st.items()})
+    c.step(100)
+    b.step(100)
+    assert same(snapshot(a), snapshot(c))
+    assert same(snapshot(a), snapshot(b))
+
+
+def test_thread_count_does_not_change_results():
+    n0 = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        a = dense_mix()
+        a.step(300)
+        ra = snapshot(a)
+        numba.set_num_threads(2)
+        b = dense_mix()
+        b.serial_below = 0  # really use both threads on this small system
+        b.step(300)
+        assert same(ra, snapshot(b))
+    finally:
+        numba.set_num_threads(n0)
+
+
+def test_pair_lists_are_consistent():
+    """Every touching pair is listed exactly once (first member < second), each particle
+    sees each of its pairs once (as first or second member), also after rebuilds and with
+    polydisperse particles; springs live only on touching pairs."""
+    rng = np.random.default_rng(2)
+    for poly in (False, True):
+        W, H = 0.02, 0.04
+        sp = D - 1e-7  # a slightly compressed hexagonal block: contacts everywhere at once
+        pos = np.array([[(0.5 + c + 0.5 * (r % 2)) * sp + 1e-4, (0.5 + r * 0.866) * sp]
+                        for r in range(12) for c in range(19)])
+        vel = rng.normal(0, 0.3, pos.shape)
+        om = rng.normal(0, 300.0, len(pos))
+        rad = rng.uniform(0.4998e-3, 0.5e-3, len(pos)) if poly else R
+        s = make(pos, vel, W, H, dt=2e-6, g=9.81, om=om, radius=rad, bottom_wall=True)
+        for n_steps, min_springs in ((5, 200), (1000, 1)):
+            s.step(n_steps)
+            st = s.state()
+            x = st["internal_state"]
+            pi, pj = st["internal_pair_first"], st["internal_pair_second"]
+            springs = st["internal_springs"]
+            assert np.all(pi < pj)
+            pairs = set(zip(pi.tolist(), pj.tolist()))
+            assert len(pairs) == len(pi)
+            d = np.hypot(x[pj, 0] - x[pi, 0], x[pj, 1] - x[pi, 1])
+            near = d < x[pi, 5] + x[pj, 5] + 1e-6  # springs are from the last force pass
+            assert np.all(springs[~near] == 0)
+            assert np.count_nonzero(np.any(springs != 0, axis=1)) >= min_springs
+            # brute force: every touching pair is in the list
+            dd = np.hypot(x[:, None, 0] - x[None, :, 0], x[:, None, 1] - x[None, :, 1])
+            ii, jj = np.nonzero(np.triu(dd < x[:, None, 5] + x[None, :, 5], 1))
+            assert set(zip(ii.tolist(), jj.tolist())) <= pairs
+            # second-member lists point at the right pairs
+            ls, lp = st["internal_second_start"], st["internal_second_pairs"]
+            for k in range(len(x)):
+                assert np.all(pj[lp[ls[k]:ls[k + 1]]] == k)
+            assert ls[-1] == len(pi)
+        assert s.n_rebuilds > 1
+
+
+# ---------------------------------------------------------------- independent reference
+def reference_run(pos, vel, om, rad, law, W, H, g, dt, nsteps):
+    """Plain numpy/Python implementation of the same model (pair loop i < j, dict history)."""
+    pos, vel, om = pos.copy(), vel.copy(), om.copy()
+    n = len(pos)
+    m = RHO * math.pi * (2 * rad) ** 3 / 6
+    inertia = 0.1 * m * (2 * rad) ** 2
+    hist, whist = {}, {}
+    for _ in range(nsteps):
+        f = np.zeros((n, 2))
+        tq = np.zeros(n)
+        for i in range(n):
+            for j in range(i + 1, n):
+                d = pos[j] - pos[i]
+                d[1] -= H * round(d[1] / H)
+                r = math.hypot(*d)
+                if r >= rad[i] + rad[j]:
+                    hist.pop((i, j), None)
+                    continue
+                nv = d / r
+                mab = m[i] * m[j] / (m[i] + m[j])
+                vr = vel[i] - vel[j] + (rad[i] * om[i] + rad[j] * om[j]) * np.array([-nv[1], nv[0]])
+                vn = vr @ nv
+                vt = vr - vn * nv
+                fn = max(law.kn * (rad[i] + rad[j] - r) + law.normal_damping(mab) * vn, 0.0)
+                h = hist.get((i, j), np.zeros(2)) + vt * dt
+                h -= (h @ nv) * nv
+                etat = law.tangential_damping(mab)
+                ft = -law.kt * h - etat * vt
+                if np.hypot(*ft) > law.mu * fn:
+                    ft *= law.mu * fn / np.hypot(*ft)
+                    h = -(ft + etat * vt) / law.kt
+                hist[(i, j)] = h
+                fi = ft - fn * nv
+                f[i] += fi
+                f[j] -= fi
+                c = nv[0] * ft[1] - nv[1] * ft[0]
+                tq[i] += rad[i] * c
+                tq[j] += rad[j] * c
+            for side, (delta, nvec) in enumerate(((rad[i] - pos[i, 0], (-1.0, 0.0)),
+                                                  (pos[i, 0] + rad[i] - W, (1.0, 0.0)))):
+                if delta <= 0:
+                    whist.pop((i, side), None)
+                    continue
+                nv = np.array(nvec)
+                vr = vel[i] + rad[i] * om[i] * np.array([-nv[1], nv[0]])
+                vn = vr @ nv
+                vt = vr[1]
+                fn = max(law.kn * delta + law.normal_damping(m[i]) * vn, 0.0)
+                h = whist.get((i, side), 0.0) + vt * dt
+                etat = law.tangential_damping(m[i])
+                ft = -law.kt * h - etat * vt
+                if abs(ft) > law.mu * fn:
+                    ft = math.copysign(law.mu * fn, ft)
+                    h = -(ft + etat * vt) / law.kt
+                whist[(i, side)] = h
+                f[i] += [-fn * nv[0], ft]
+                tq[i] += rad[i] * nv[0] * ft
+        vel += dt * (f / m[:, None] - [0.0, g])
+        om += dt * tq / inertia
+        pos += dt * vel
+        pos[:, 1] %= H
+    return pos, vel, om
+
+
+def test_matches_independent_reference():
+    """Lists, cell reordering, spring carry-over, periodic images, walls and polydispersity
+    against a straightforward O(N^2) implementation of the same equations."""
+    W, H = 0.006, 0.005
+    rng = np.random.default_rng(7)
+    pos, vel, om = gas(14, W, H, seed=7, speed=1.5)
+    rad = rng.uniform(0.42e-3, 0.5e-3, len(pos))
+    s = make(pos, vel, W, H, dt=1e-6, g=9.81, om=om, radius=rad)
+    s.step(400)
+    rp, rv, ro = reference_run(pos, vel, om, rad, LAW, W, H, 9.81, 1e-6, 400)
+    assert s.n_rebuilds >= 3
+    dy = s.positions[:, 1] - rp[:, 1]
+    dy -= H * np.round(dy / H)
+    assert np.max(np.abs(s.positions[:, 0] - rp[:, 0])) < 1e-12
+    assert np.max(np.abs(dy)) < 1e-12
+    assert np.max(np.abs(s.velocities - rv)) < 1e-8
+    assert np.max(np.abs(s.angular_velocities - ro)) < 1e-4
+
+
+# ---------------------------------------------------------------- external force
+def test_external_force_in_callers_order_through_rebuilds():
+    W, H = 0.02, 0.02
+    pos, _, _ = gas(100, W, H, seed=4)
+    vel = np.tile([0.0, 4.0], (100, 1))  # all move together: no collisions
+    s = make(pos, vel, W, H, dt=2e-6, om=np.zeros(100))
+    f = np.random.default_rng(1).uniform(-1, 1, (100, 2)) * 1e-6  # ~0.7 m/s^2
+    s.step(500, external_force=f)
+    assert s.n_rebuilds > 5 and not np.array_equal(s.order, np.arange(100))
+    dv = s.velocities - vel
+    assert np.allclose(dv, f / M * 500 * 2e-6, rtol=1e-9, atol=1e-12)
+    s.step(10)  # no force now
+    assert np.allclose(s.velocities - vel, f / M * 500 * 2e-6, rtol=1e-9, atol=1e-12)
+
+
+def test_gravity_free_fall():
+    s = make([[0.005, 0.015]], [[0.0, 0.0]], H=0.02, dt=2e-6, g=9.81)
+    s.step(100)
+    # leapfrog: v_{n-1/2} = -g n dt, y_n = y0 - g dt^2 n(n+1)/2
+    assert s.velocities[0, 1] == pytest.approx(-9.81 * 2e-4, rel=1e-12)
+    assert s.positions[0, 1] == pytest.approx(0.015 - 9.81 * 4e-12 * 100 * 101 / 2, rel=1e-12)
+
+
+# ---------------------------------------------------------------- safety
+def test_steps_per_contact_checks():
+    with pytest.warns(UserWarning, match=r"5\.18 steps"):
+        DEMSystem([[0.005, 0.005]], [[0, 0]], R, RHO, LAW, 0.01, 0.02, time_step=5e-6,
+                  search_cells=None)
+    with pytest.raises(InputError, match=r"4\.32 steps .* at least 5"):
+        DEMSystem([[0.005, 0.005]], [[0, 0]], R, RHO, LAW, 0.01, 0.02, time_step=6e-6,
+                  search_cells=None)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        DEMSystem([[0.005, 0.005]], [[0, 0]], R, RHO, LAW, 0.01, 0.02, time_step=2e-6,
+                  search_cells=None)
+
+
+def test_bad_input():
+    with pytest.raises(InputError, match="search cells"):
+        make([[0.005, 0.005]], [[0, 0]], cells=(30, 351))  # 0.33 mm cells in a 1 cm box
+    with pytest.raises(InputError, match="outside the walls"):
+        make([[0.02, 0.005]], [[0, 0]])
+    with pytest.raises(InputError):
+        make([[0.005, 0.005]], [[np.nan, 0]])
+    s = make([[0.005, 0.005]], [[0, 0]])
+    with pytest.raises(InputError, match="external_force"):
+        s.step(1, external_force=np.zeros((2, 2)))
+
+
+def test_blow_up_is_reported():
+    s = make([[0.003, 0.005], [0.007, 0.01]], [[0, 0], [-2000.0, 0]], dt=1e-6)
+    with pytest.raises(SimulationBlowUp, match=r"step \d+ .*particle 1") as exc:
+        s.step(100)
+    assert isinstance(exc.value, CfbmarkovError) and exc.value.particle == 1
+    s = make([[0.005, 0.005], [0.005, 0.0058]], [[0, 0], [0, 0]])  # 20 % overlap
+    with pytest.raises(SimulationBlowUp, match=r"step 0 .*overlaps") as exc:
+        s.step(1)
+    assert exc.value.step == 0
+
+
+def test_settled_bed_is_stable():
+    """A bed poured between the walls onto a floor (``bottom_wall``: without gas nothing else
+    carries it) settles and stays put at the paper's time step and contact law."""
+    W, H = 0.015, 0.1
+    n = 200
+    pos, vel, om = gas(n, W, 0.02, seed=9, speed=0.1)
+    s = make(pos, vel, W, H, dt=5e-6, g=9.81, om=om, bottom_wall=True)
+    s.step(40000)  # 0.2 s
+    ov = s.overlaps()
+    y = s.positions[:, 1]
+    ke = s.kinetic_energy() / (n * M)
+    print(f"bed: top {y.max() * 1e3:.2f} mm, max overlap {ov.max() / D:.2%} of d, "
+          f"{ov.size} contacts, KE/m {ke:.2e} m^2/s^2")
+    assert ov.max() < 0.1 * D and ov.max() < 0.01 * D
+    assert ke < 1e-5
+    top = y.max()
+    s.step(5000)
+    assert abs(s.positions[:, 1].max() - top) < 0.05 * D
+    assert s.overlaps().max() < 0.01 * D

@@ -1,0 +1,125 @@
+"""The coupled CFD-DEM run end to end: output, exact events, checkpoint/resume bit for bit
+(also after kill -9), configuration errors."""
+
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+
+from cfbmarkov.cli import main
+from cfbmarkov.config import CaseConfig
+from cfbmarkov.simulate.run import simulate
+from cfbmarkov.trajectories import Trajectories
+
+SMALL = """
+name = "small"
+seed = 3
+[riser]
+width = 0.09
+height = 0.2
+[particles]
+number = {n}
+[gas]
+superficial_velocity = 6.0
+[numerics]
+cfd_cells = [9, 20]
+dem_cells = [30, 74]
+[output]
+end_time = {end}
+"""
+
+
+def small_case(tmp_path, n=600, end=0.1):
+    path = tmp_path / "small.toml"
+    path.write_text(SMALL.format(n=n, end=end))
+    return path
+
+
+def load(path):
+    from cfbmarkov.config import load_case
+
+    return load_case(path)
+
+
+def arrays(path):
+    with Trajectories(path) as t:
+        ev = t.events()
+        return (t.times, t.positions(), t.velocities(), t.laps(), ev.time, ev.particle,
+                ev.direction)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("sim")
+    case = load(small_case(tmp))
+    out = simulate(case, tmp / "ref.h5", checkpoint_every=0.025, progress=False)
+    return case, out
+
+
+def test_small_riser_end_to_end(reference):
+    case, out = reference
+    assert not out.with_name(out.name + ".parts").exists()
+    with Trajectories(out) as t:
+        assert t.n_frames == 5 and t.n_particles == case.particles.number
+        assert t.source == "cfd-dem" and t.has_velocity and t.has_events
+        assert t.parameters["gas"]["superficial_velocity"] == 6.0
+        pos = t.positions()
+        assert np.all((pos[..., 0] >= 0) & (pos[..., 0] <= case.riser.width))
+        # exact events account for every change of the lap counters
+        ev = t.events()
+        net = np.zeros(t.n_particles, int)
+        np.add.at(net, ev.particle, ev.direction)
+        np.testing.assert_array_equal(net, t.laps(-1) - t.laps(0))
+        assert len(ev) > 0 and np.all(np.diff(ev.time) >= 0)
+        assert t.group("run").attrs["particle_steps_per_s"] > 0
+
+
+def test_resume_equals_uninterrupted_run(tmp_path, reference):
+    case, ref = reference
+    out = tmp_path / "b.h5"
+    simulate(case, out, checkpoint_every=0.025, progress=False, stop_after_frames=3)
+    assert not out.exists() and (tmp_path / "b.h5.parts" / "checkpoint.h5").exists()
+    with pytest.raises(Exception, match="add --resume"):
+        simulate(case, out, progress=False)
+    simulate(case, out, checkpoint_every=0.025, progress=False, resume=True)
+    for a, b in zip(arrays(ref), arrays(out)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_resume_after_kill_9(tmp_path, reference):
+    case, ref = reference
+    toml = small_case(tmp_path)
+    out = tmp_path / "k.h5"
+    cmd = [sys.executable, "-m", "cfbmarkov", "simulate", str(toml), "-o", str(out),
+           "--checkpoint-every", "0.025", "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    checkpoint = tmp_path / "k.h5.parts" / "checkpoint.h5"
+    deadline = time.time() + 120
+    while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.005)
+    os.kill(proc.pid, signal.SIGKILL)       # at once: the run is between checkpoints
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL and not out.exists()
+    assert main(["simulate", str(toml), "-o", str(out), "--checkpoint-every", "0.025",
+                 "--resume", "-q"]) == 0
+    for a, b in zip(arrays(ref), arrays(out)):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_configuration_errors(tmp_path, capsys):
+    bad = tmp_path / "bad.toml"     # 2e-5 s resolves a contact in 1.3 steps: refused
+    bad.write_text(SMALL.format(n=100, end=0.05).replace(
+        "[numerics]", "[numerics]\ndem_time_step = 2e-5\ncfd_time_step = 4e-5"))
+    assert main(["simulate", str(bad), "-o", str(tmp_path / "x.h5"), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "steps" in err and "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "x.h5").exists()
+    unknown = tmp_path / "u.toml"
+    unknown.write_text("[gas]\nvelocity = 3\n")
+    assert main(["simulate", str(unknown), "-o", str(tmp_path / "x.h5")]) == 2
+    assert "gas.velocity" in capsys.readouterr().err
+    assert CaseConfig().particles.number == 27000
