@@ -73,6 +73,8 @@ class NumericsConfig(_Model):
         (9, 95), description="gas grid cells (across, up), - (Table 1: 9 x 95)")
     dem_cells: tuple[int, int] = Field(
         (30, 351), description="DEM neighbour-search cells (across, up), - (Table 1: 30 x 351)")
+    dem_skin: Positive = Field(
+        4e-4, description="Verlet neighbour-list skin, m (not in the paper; affects speed only)")
     cfd_time_step: Positive = Field(5e-5, description="gas time step, s (Table 1: 5e-5)")
     dem_time_step: Positive = Field(5e-6, description="particle time step, s (Table 1: 5e-6)")
 

@@ -22,6 +22,7 @@ import warnings
 from pathlib import Path
 
 import h5py
+import numba
 import numpy as np
 
 from cfbmarkov._atomic import atomic_path
@@ -58,11 +59,21 @@ class CoupledRiser:
         """Particles on random lattice sites without overlap, at rest; gas at U (plug flow)."""
         p, r = case.particles, case.riser
         positions = place_without_overlap(p.number, p.diameter, r.width, r.height, case.seed)
+        return cls.from_particles(case, positions, np.zeros_like(positions))
+
+    @classmethod
+    def from_particles(cls, case: CaseConfig, positions, velocities, *, bottom_wall: bool = False,
+                       angular_velocities=None) -> "CoupledRiser":
+        """Given particles; gas at U (plug flow). ``bottom_wall`` puts a contact floor at y = 0
+        for the particles (the gas stays periodic, as through a distributor): packed beds."""
+        p, r = case.particles, case.riser
+        positions = np.asarray(positions, dtype=np.float64)
         law = ContactLaw.from_config(case.contact, p.diameter, p.density)
-        dem = DEMSystem(positions, np.zeros_like(positions), 0.5 * p.diameter, p.density, law,
+        dem = DEMSystem(positions, velocities, 0.5 * p.diameter, p.density, law,
                         r.width, r.height, gravity=r.gravity,
                         time_step=case.numerics.dem_time_step,
-                        search_cells=tuple(case.numerics.dem_cells))
+                        search_cells=tuple(case.numerics.dem_cells), skin=case.numerics.dem_skin,
+                        angular_velocities=angular_velocities, bottom_wall=bottom_wall)
         grid = GasGrid.from_config(case)
         eps = void_fraction_field(grid, positions[:, 0], positions[:, 1], p.diameter)
         gas = GasSolver.from_config(case, formulation="B").initial_state(eps)
@@ -73,8 +84,22 @@ class CoupledRiser:
     def time(self) -> float:
         return self.cfd_steps * self.case.numerics.cfd_time_step
 
+    #: below this many particles the coupling kernels run on one thread (thread start-up
+    #: costs more than the work; results do not depend on it)
+    serial_below = 2000
+
     def step(self) -> None:
         """One gas step and the DEM steps inside it."""
+        threads = numba.get_num_threads()
+        if self.dem.n_particles < self.serial_below and threads > 1:
+            numba.set_num_threads(1)
+        try:
+            self._step()
+        finally:
+            if numba.get_num_threads() != threads:
+                numba.set_num_threads(threads)
+
+    def _step(self) -> None:
         case, grid = self.case, self.grid
         d = case.particles.diameter
         positions, velocities = self.dem.positions, self.dem.velocities
@@ -162,7 +187,7 @@ class _Progress:
         now = _time.perf_counter()
         rate = self.particles * dem_steps / max(now - self.t_wall, 1e-9)
         self.t_wall = now
-        self.bar.set_postfix_str(f"{rate:.3g} particle-steps/s")
+        self.bar.set_postfix_str(f"{rate:.3g} particle-steps/s", refresh=False)
         self.bar.update(simulated)
 
     def close(self) -> None:

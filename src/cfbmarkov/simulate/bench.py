@@ -1,0 +1,78 @@
+"""Simulation benchmarks for ``cfbmarkov bench`` (particle-steps per second, medians).
+
+- ``dem-throughput``: pure DEM, 27000 particles spread over the 0.09 x 0.95 m riser with
+  random ~1 m/s velocities, no gravity (the peers' dilute problem; LAMMPS about 4e7 on
+  2 MPI ranks here).
+- ``dem-throughput-dense``: a settled bed of 27000 particles on a floor, gravity on (LAMMPS
+  about 9e6 on one core). The bed is settled once and cached (see
+  :func:`cfbmarkov.simulate.dem.bench.settled_bed`).
+- ``cfd-dem-throughput``: the coupled CFD-DEM of the paper's case at U = 6 m/s in a
+  fluidized state: the state after 0.5 s of simulated time from the initial placement,
+  computed once and cached in ``~/.cache/cfbmarkov`` (or ``$CFBMARKOV_CACHE``).
+
+DEM steps count as particle-steps (a gas step holds 10 DEM steps); times exclude numba
+compilation.
+"""
+
+from __future__ import annotations
+
+import statistics
+import time
+import warnings
+from typing import Iterator
+
+from cfbmarkov.simulate.dem.bench import _cache_dir, make_system
+
+
+def _dem_rate(state: str, particles: int, repeat: int, steps: int = 300) -> float:
+    system = make_system(state, particles, search_cells=(30, 351), skin=4e-4)
+    system.step(50)
+    rates = []
+    for _ in range(max(1, repeat)):
+        t0 = time.perf_counter()
+        system.step(steps)
+        rates.append(particles * steps / (time.perf_counter() - t0))
+    return statistics.median(rates)
+
+
+def fluidized_riser(particles: int = 27000, develop: float = 0.5):
+    """The paper's U = 6 m/s case after ``develop`` s of simulated time (cached on disk)."""
+    from cfbmarkov.config import load_case
+    from cfbmarkov.simulate.run import CoupledRiser, read_checkpoint, write_checkpoint
+
+    case = load_case("paper-u6")
+    if particles != case.particles.number:
+        case = case.model_copy(update={"particles": case.particles.model_copy(
+            update={"number": particles})})
+    path = _cache_dir() / f"fluidized-u6-{particles}-{develop:g}s.h5"
+    if path.exists():
+        try:
+            return read_checkpoint(path, case)[0]
+        except Exception:
+            path.unlink()
+    riser = CoupledRiser.initial(case)
+    steps = int(round(develop / case.numerics.cfd_time_step))
+    for _ in range(steps):
+        riser.step()
+    write_checkpoint(path, riser, 0, 0, 0.0)
+    return riser
+
+
+def simulation_benchmarks(repeat: int = 5, particles: int = 27000
+                          ) -> Iterator[tuple[str, float, str]]:
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")     # the paper's DEM step warning
+        yield "dem-throughput", _dem_rate("dilute", particles, repeat), "particle-steps/s"
+        yield ("dem-throughput-dense", _dem_rate("dense", particles, repeat),
+               "particle-steps/s")
+        riser = fluidized_riser(particles)
+        gas_steps = 50
+        riser.step()
+        rates = []
+        for _ in range(max(1, repeat)):
+            t0 = time.perf_counter()
+            for _ in range(gas_steps):
+                riser.step()
+            rates.append(particles * gas_steps * riser.dem_steps_per_cfd
+                         / (time.perf_counter() - t0))
+        yield "cfd-dem-throughput", statistics.median(rates), "particle-steps/s"

@@ -1,0 +1,99 @@
+"""Coupled CFD-DEM against analytical references: terminal slip of a single particle,
+gas flux held at U, gas momentum balance of a particle bed."""
+
+import math
+import warnings
+
+import numpy as np
+import pytest
+from scipy.optimize import brentq
+
+from cfbmarkov.config import CaseConfig
+from cfbmarkov.simulate.cfd import cross_section_flux, particle_drag_force
+from cfbmarkov.simulate.coupling import _cell_value
+from cfbmarkov.simulate.run import CoupledRiser
+
+D, RHO_P, RHO_G, MU, G = 1e-3, 2600.0, 1.205, 1.8e-5, 9.81
+
+
+def small_case(n, u, height=0.2):
+    return CaseConfig.model_validate({
+        "riser": {"width": 0.09, "height": height}, "particles": {"number": n},
+        "gas": {"superficial_velocity": u},
+        "numerics": {"cfd_cells": [9, int(round(height / 0.01))], "dem_cells": [30, 74]}})
+
+
+def test_single_particle_reaches_terminal_slip():
+    """One particle in a uniform 10 m/s upflow: the slip u_gas - v_p tends to the root of
+    drag(slip) = m g of the drag law at the particle's void fraction (model B: the
+    particle feels drag and gravity only). The gas is held uniform (one-way coupling: in
+    the pseudo-2D riser a single particle decelerates its own gas column noticeably, which
+    is physics of the model, not of this check). Started 10 % off, checked after 1 s
+    (about 2 relaxation times: the remaining error is about 1 %)."""
+    case = small_case(1, 10.0)
+    m = RHO_P * math.pi * D**3 / 6
+    eps_p = 1.0 - (math.pi * D**3 / 6) / (0.01 * 0.01 * D) * 0.25   # CIC share in 4 cells
+
+    def balance(slip):
+        return particle_drag_force(eps_p, 0.0, slip, 0.0, 0.0, D, RHO_G, MU)[1] - m * G
+
+    slip_expected = brentq(balance, 0.1, 50.0, xtol=1e-12)
+    start = np.array([[0.045, 0.1]])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        riser = CoupledRiser.from_particles(case, start, [[0.0, 10.0 - 1.1 * slip_expected]])
+    riser.solver.step = lambda state, *args, **kwargs: state      # uniform upflow, held
+    for _ in range(20000):
+        riser.step()
+    p, v = riser.dem.positions[0], riser.dem.velocities[0]
+    from cfbmarkov.simulate.cfd import interpolate_gas_velocity
+
+    ux, uy = interpolate_gas_velocity(riser.grid, riser.gas.u, riser.gas.v, p[:1], p[1:])
+    eps_here = _cell_value(riser.gas.void_fraction, riser.grid.dx, riser.grid.dy, p[0], p[1])
+    slip_here = brentq(lambda s: particle_drag_force(eps_here, 0.0, s, 0.0, 0.0, D, RHO_G, MU)[1]
+                       - m * G, 0.1, 50.0, xtol=1e-12)
+    assert abs(uy[0] - v[1] - slip_here) / slip_here < 0.02
+    assert abs(slip_here - slip_expected) / slip_expected < 0.01
+    assert 6.0 < slip_here < 8.0
+
+
+@pytest.fixture(scope="module")
+def bed_run():
+    n = 3000
+    case = small_case(n, 0.3)
+    s = 1.01 * D
+    ncol = int((0.09 - D) / s)
+    j, i = np.divmod(np.arange(n), ncol)
+    pos = np.stack([(i + 0.5 + 0.5 * (j % 2)) * s + 0.2 * D,
+                    (0.5 + j * math.sqrt(3) / 2) * s], axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        riser = CoupledRiser.from_particles(case, pos, np.zeros_like(pos), bottom_wall=True)
+    top = riser.dem.positions[:, 1].max()
+    fluxes, gradients, drags = [], [], []
+    for k in range(400):
+        riser.step()
+        fluxes.append(cross_section_flux(riser.gas).mean())
+        if k >= 200:
+            gradients.append(riser.gas.driving_pressure_gradient)
+            drags.append(riser._force[:, 1].sum())
+    return case, riser, np.array(fluxes), np.mean(gradients), np.mean(drags), top
+
+
+def test_gas_flux_held_at_superficial_velocity(bed_run):
+    case, _, fluxes, _, _, _ = bed_run
+    np.testing.assert_allclose(fluxes, case.gas.superficial_velocity, rtol=0.01)
+
+
+def test_pressure_drop_carries_the_drag_on_the_bed(bed_run):
+    """Below minimum fluidization the bed rests on its floor; the gas pressure drop over
+    the period equals the drag the bed receives per unit cross-section (gas momentum
+    balance of model B), and the particle count is unchanged."""
+    case, riser, _, gradient, drag, top = bed_run
+    h, w = case.riser.height, case.riser.width
+    dp = (gradient - RHO_G * G * riser.gas.void_fraction.mean()) * h
+    assert dp == pytest.approx(drag / (w * D), rel=0.01)
+    weight = case.particles.number * case.particles.mass * G / (w * D)
+    assert 0 < dp < weight                       # not fluidized: the floor carries the rest
+    assert riser.dem.positions.shape == (case.particles.number, 2)
+    assert abs(riser.dem.positions[:, 1].max() - top) < 2e-3     # the bed stays put
