@@ -183,6 +183,25 @@ def flag_overlaps(st, npairs, pi, pj, bad, P, IP):
             bad[j] = BAD_OVERLAP
 
 
+@njit(cache=True, inline="always", fastmath=_FM)
+def _wall_contact(delta, vn, vt, spring, kn, kt, etan, etat, mu, dt, inv_kt):
+    """Spring-dashpot contact with a wall (Table 2, LAMMPS rescaling at the Coulomb cap).
+
+    ``delta`` overlap (m), ``vn`` velocity along the wall's normal into the domain, ``vt``
+    tangential velocity of the contact point, ``spring`` the tangential spring before the
+    step. Returns (normal force >= 0 along the normal, tangential force, new spring)."""
+    fn = kn * delta - etan * vn
+    if fn < 0.0:
+        fn = 0.0
+    h = spring + vt * dt
+    ft = -kt * h - etat * vt
+    fc = mu * fn
+    if ft * ft > fc * fc:
+        ft = fc if ft > 0.0 else -fc
+        h = -(ft + etat * vt) * inv_kt
+    return fn, ft, h
+
+
 @njit(parallel=True, cache=True, error_model="numpy", fastmath=_FM)
 def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P, IP):
     """Sum the pair forces ``pf`` of each particle (pairs where it comes second, then pairs
@@ -249,17 +268,8 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
                 delta = Ri - xi
                 if delta > 2.0 * ovl * Ri:
                     isbad = BAD_OVERLAP
-                vt = vyi - ui
-                fn = kn * delta - etan * vxi
-                if fn < 0.0:
-                    fn = 0.0
-                h = wh[i, 0] + vt * dt
-                ft = -kt * h - etat * vt
-                fc = mu * fn
-                if ft * ft > fc * fc:
-                    ft = fc if ft > 0.0 else -fc
-                    h = -(ft + etat * vt) * inv_kt
-                wh[i, 0] = h
+                fn, ft, wh[i, 0] = _wall_contact(delta, vxi, vyi - ui, wh[i, 0], kn, kt, etan,
+                                                 etat, mu, dt, inv_kt)
                 fx += fn
                 fy += ft
                 tq -= Ri * ft
@@ -269,17 +279,8 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
                 delta = xi + Ri - W
                 if delta > 2.0 * ovl * Ri:
                     isbad = BAD_OVERLAP
-                vt = vyi + ui
-                fn = kn * delta + etan * vxi
-                if fn < 0.0:
-                    fn = 0.0
-                h = wh[i, 1] + vt * dt
-                ft = -kt * h - etat * vt
-                fc = mu * fn
-                if ft * ft > fc * fc:
-                    ft = fc if ft > 0.0 else -fc
-                    h = -(ft + etat * vt) * inv_kt
-                wh[i, 1] = h
+                fn, ft, wh[i, 1] = _wall_contact(delta, -vxi, vyi + ui, wh[i, 1], kn, kt, etan,
+                                                 etat, mu, dt, inv_kt)
                 fx -= fn
                 fy += ft
                 tq += Ri * ft
@@ -289,17 +290,8 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
                 delta = Ri - yi
                 if delta > 2.0 * ovl * Ri:
                     isbad = BAD_OVERLAP
-                vt = vxi + ui
-                fn = kn * delta - etan * vyi
-                if fn < 0.0:
-                    fn = 0.0
-                h = wh[i, 2] + vt * dt
-                ft = -kt * h - etat * vt
-                fc = mu * fn
-                if ft * ft > fc * fc:
-                    ft = fc if ft > 0.0 else -fc
-                    h = -(ft + etat * vt) * inv_kt
-                wh[i, 2] = h
+                fn, ft, wh[i, 2] = _wall_contact(delta, vyi, vxi + ui, wh[i, 2], kn, kt, etan,
+                                                 etat, mu, dt, inv_kt)
                 fy += fn
                 fx += ft
                 tq += Ri * ft
