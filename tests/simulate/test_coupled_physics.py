@@ -127,3 +127,41 @@ def test_packed_bed_pressure_drop_matches_ergun():
                    + 1.75 * (1 - eps) * RHO_G * u**2 / (eps**3 * D))
     assert 0.38 < eps < 0.44
     assert dp == pytest.approx(ergun, rel=0.05)
+
+
+def test_riser_momentum_balance_closes():
+    """Vertical momentum of gas plus solids in the periodic riser: over a window, its change
+    equals the impulse of the driving pressure gradient minus the weights of solids and gas
+    (and wall friction). With frictionless particle-wall contacts the particles feel no
+    vertical wall force, and the gas wall shear is below 0.1 % here, so the balance must
+    close to within 1 % of the weight's impulse: a test that drag and its reaction are
+    exchanged exactly and that G does what it should."""
+    case = CaseConfig.model_validate({
+        "seed": 2, "riser": {"width": 0.09, "height": 0.2}, "particles": {"number": 2000},
+        "gas": {"superficial_velocity": 6.0}, "contact": {"friction_coefficient": 0.0},
+        "numerics": {"cfd_cells": [9, 20], "dem_cells": [30, 74]}})
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        riser = CoupledRiser.initial(case)
+    grid, dt = riser.grid, case.numerics.cfd_time_step
+    cell = grid.dx * grid.dy * D
+    volume = 0.09 * 0.2 * D
+    m, n = case.particles.mass, case.particles.number
+
+    def momentum():
+        eps = riser.gas.void_fraction
+        eps_face = 0.5 * (np.roll(eps, 1, axis=1) + eps)
+        return (RHO_G * (eps_face * riser.gas.v).sum() * cell
+                + m * riser.dem.velocities[:, 1].sum())
+
+    for _ in range(1000):
+        riser.step()
+    start, impulse = momentum(), 0.0
+    steps = 2000
+    for _ in range(steps):
+        riser.step()
+        gas_mass = RHO_G * riser.gas.void_fraction.sum() * cell
+        impulse += dt * (riser.gas.driving_pressure_gradient * volume - (n * m + gas_mass) * G)
+    weight_impulse = n * m * G * steps * dt
+    assert abs(momentum() - start - impulse) < 0.01 * weight_impulse
+    assert abs(momentum() - start) > 0.01 * weight_impulse      # the test is not trivial
