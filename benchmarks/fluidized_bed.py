@@ -8,7 +8,6 @@ bed should carry its weight (ratio 1); a slugging narrow bed rests part of the t
 floor and the walls. Measured (8000 particles, 1.6 s): 0.91 at 1.0 m/s, 0.95 at 1.6 m/s.
 """
 
-import math
 import sys
 import time
 import warnings
@@ -16,6 +15,7 @@ import warnings
 import numpy as np
 
 from cfbmarkov.config import CaseConfig
+from cfbmarkov.simulate.coupling import hexagonal_bed
 from cfbmarkov.simulate.run import CoupledRiser
 
 
@@ -25,11 +25,7 @@ def main(n: int = 8000, u: float = 1.6, duration: float = 1.6) -> None:
         "riser": {"width": width, "height": height}, "particles": {"number": n},
         "gas": {"superficial_velocity": u},
         "numerics": {"cfd_cells": [9, 30], "dem_cells": [30, 111]}})
-    s = 1.01 * d
-    ncol = int((width - d) / s)
-    j, i = np.divmod(np.arange(n), ncol)
-    pos = np.stack([(i + 0.5 + 0.5 * (j % 2)) * s + 0.2 * d,
-                    (0.5 + j * math.sqrt(3) / 2) * s], axis=1)
+    pos = hexagonal_bed(n, d, width)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         riser = CoupledRiser.from_particles(case, pos, np.zeros_like(pos), bottom_wall=True)

@@ -10,7 +10,7 @@ from scipy.optimize import brentq
 
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.simulate.cfd import cross_section_flux, particle_drag_force
-from cfbmarkov.simulate.coupling import _cell_value
+from cfbmarkov.simulate.coupling import _cell_value, hexagonal_bed
 from cfbmarkov.simulate.run import CoupledRiser
 
 D, RHO_P, RHO_G, MU, G = 1e-3, 2600.0, 1.205, 1.8e-5, 9.81
@@ -61,11 +61,7 @@ def test_single_particle_reaches_terminal_slip():
 def bed_run():
     n = 3000
     case = small_case(n, 0.3)
-    s = 1.01 * D
-    ncol = int((0.09 - D) / s)
-    j, i = np.divmod(np.arange(n), ncol)
-    pos = np.stack([(i + 0.5 + 0.5 * (j % 2)) * s + 0.2 * D,
-                    (0.5 + j * math.sqrt(3) / 2) * s], axis=1)
+    pos = hexagonal_bed(n, D, 0.09)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         riser = CoupledRiser.from_particles(case, pos, np.zeros_like(pos), bottom_wall=True)
@@ -107,11 +103,7 @@ def test_packed_bed_pressure_drop_matches_ergun():
     fraction; see docs/simulation.md.)"""
     n, u, height = 20000, 0.3, 0.3
     case = small_case(n, u, height=height)
-    s = 1.01 * D
-    ncol = int((0.09 - D) / s)
-    j, i = np.divmod(np.arange(n), ncol)
-    pos = np.stack([(i + 0.5 + 0.5 * (j % 2)) * s + 0.2 * D,
-                    (0.5 + j * math.sqrt(3) / 2) * s], axis=1)
+    pos = hexagonal_bed(n, D, 0.09)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         riser = CoupledRiser.from_particles(case, pos, np.zeros_like(pos), bottom_wall=True)

@@ -94,3 +94,13 @@ def place_without_overlap(n: int, diameter: float, width: float, height: float,
     y = (iy + 0.5) * spacing + rng.uniform(-jitter, jitter, n)
     x = np.clip(x, 0.5 * diameter, width - 0.5 * diameter)
     return np.stack([x, y % height], axis=1)
+
+
+def hexagonal_bed(n: int, diameter: float, width: float, gap: float = 0.01) -> np.ndarray:
+    """Positions [n, 2] (m) of a packed bed on the floor: hexagonal rows of spacing
+    (1 + gap) d, filled from y = 0 up (for packed- and fluidized-bed checks)."""
+    spacing = (1.0 + gap) * diameter
+    per_row = int((width - diameter) / spacing)
+    row, col = np.divmod(np.arange(n), per_row)
+    return np.stack([(col + 0.5 + 0.5 * (row % 2)) * spacing + 0.2 * diameter,
+                     (0.5 + row * np.sqrt(3.0) / 2.0) * spacing], axis=1)
