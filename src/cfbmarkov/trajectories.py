@@ -234,6 +234,35 @@ class Trajectories:
         g = self._file["events"]
         return PassEvents(g["time"][()], g["particle"][()], g["direction"][()])
 
+    # -- gas fields (CFD-DEM runs) ---------------------------------------------------------
+    @property
+    def has_fields(self) -> bool:
+        """Whether the file holds gas fields (``/fields``, written by CFD-DEM runs)."""
+        return "fields" in self._file and "time" in self._file["fields"]
+
+    @property
+    def field_names(self) -> list[str]:
+        return sorted(set(self._file["fields"]) - {"time"}) if self.has_fields else []
+
+    @property
+    def field_times(self) -> np.ndarray:
+        """Times (s) of the gas-field frames."""
+        return self._file["fields/time"][()] if self.has_fields else np.empty(0)
+
+    @property
+    def field_spacing(self) -> tuple[float, float]:
+        """(dx, dy) of the cell-centred gas grid, m; cell (j, i) is centred at
+        ((i + 1/2) dx, (j + 1/2) dy)."""
+        dx, dy = self._file["fields"].attrs["spacing"]
+        return float(dx), float(dy)
+
+    def field(self, name: str, frames: int | slice = slice(None)) -> np.ndarray:
+        """Gas field ``name`` at field frame(s): [ny, nx] or [ny, nx, 2] per frame (float32)."""
+        if name not in self.field_names:
+            raise InputError(f"{self.path}: no gas field '{name}' (has: "
+                             f"{', '.join(self.field_names) or 'none'})")
+        return self._file["fields"][name][frames]
+
     def group(self, name: str) -> h5py.Group | None:
         """A provenance group attached by the producer (e.g. ``'model'``), or None."""
         key = f"provenance/{name}"
@@ -400,6 +429,39 @@ class TrajectoryWriter:
         self._last_y = positions[-1, :, 1].copy()
         self._last_lap = laps[-1].copy()
 
+    def append_fields(self, time: float, spacing, **fields) -> None:
+        """Append one frame of gas fields on a cell-centred grid to ``/fields``.
+
+        ``spacing`` = (dx, dy) in m; each field is an array [ny, nx] (scalar) or
+        [ny, nx, 2] (vector) stored as float32: ``void_fraction`` (-), ``gas_velocity``
+        (m/s), ``pressure`` (Pa). Every frame must carry the same fields.
+        """
+        g = self._file.require_group("fields")
+        first = "time" not in g
+        arrays = {name: np.asarray(value, dtype=np.float32) for name, value in fields.items()}
+        if first:
+            shapes = {a.shape[:2] for a in arrays.values()}
+            if len(shapes) != 1:
+                raise InputError(f"{self._label}: gas fields of different grids {sorted(shapes)}")
+            ny, nx = shapes.pop()
+            g.attrs.update({"spacing": np.asarray(spacing, dtype=np.float64),
+                            "origin": np.zeros(2), "shape": np.asarray([nx, ny]),
+                            "units": json.dumps({"void_fraction": "-", "gas_velocity": "m/s",
+                                                 "pressure": "Pa"})})
+            g.create_dataset("time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
+            for name, a in arrays.items():
+                g.create_dataset(name, shape=(0, *a.shape), maxshape=(None, *a.shape),
+                                 dtype="f4", chunks=(1, *a.shape))
+        elif set(arrays) != set(g) - {"time"}:
+            raise InputError(f"{self._label}: gas fields {sorted(arrays)} differ from those of "
+                             f"earlier frames {sorted(set(g) - {'time'})}")
+        k = g["time"].shape[0]
+        g["time"].resize(k + 1, axis=0)
+        g["time"][k] = float(time)
+        for name, a in arrays.items():
+            g[name].resize(k + 1, axis=0)
+            g[name][k] = a
+
     def add_events(self, times, particles, directions) -> None:
         """Store exact pass events (time s, particle index, direction +1/-1), any order."""
         times = np.asarray(times, dtype=np.float64)
@@ -552,6 +614,9 @@ class SegmentedTrajectoryWriter:
         if len(times):
             self._writer().add_events(times, particles, directions)
 
+    def append_fields(self, time: float, spacing, **fields) -> None:
+        self._writer().append_fields(time, spacing, **fields)
+
     def close_segment(self) -> int:
         """Close the current segment (if it holds frames); returns the number of complete
         segments, the figure a checkpoint must record."""
@@ -591,6 +656,11 @@ class SegmentedTrajectoryWriter:
                     events = seg.events()
                     if events is not None and len(events):
                         merged.add_events(events.time, events.particle, events.direction)
+                    if seg.has_fields:
+                        spacing = seg.field_spacing
+                        for k, t in enumerate(seg.field_times):
+                            merged.append_fields(t, spacing, **{name: seg.field(name, k)
+                                                                for name in seg.field_names})
             for name, (datasets, attrs) in (attach or {}).items():
                 merged.attach(name, datasets, attrs)
         for path in paths:

@@ -49,7 +49,7 @@ def arrays(path):
     with Trajectories(path) as t:
         ev = t.events()
         return (t.times, t.positions(), t.velocities(), t.laps(), ev.time, ev.particle,
-                ev.direction)
+                ev.direction, t.field_times, *(t.field(name) for name in t.field_names))
 
 
 @pytest.fixture(scope="module")
@@ -76,6 +76,27 @@ def test_small_riser_end_to_end(reference):
         np.testing.assert_array_equal(net, t.laps(-1) - t.laps(0))
         assert len(ev) > 0 and np.all(np.diff(ev.time) >= 0)
         assert t.group("run").attrs["particle_steps_per_s"] > 0
+        history = t.group("run")["wall_history"][()]
+        np.testing.assert_allclose(history[:, 0], t.times)          # a checkpoint per frame
+        assert np.all(np.diff(history[:, 1]) > 0)
+        # gas fields with every frame, cell-centred [ny, nx]
+        assert t.field_names == ["gas_velocity", "pressure", "void_fraction"]
+        np.testing.assert_array_equal(t.field_times, t.times)
+        nx, ny = case.numerics.cfd_cells
+        assert t.field("void_fraction").shape == (t.n_frames, ny, nx)
+        assert t.field("gas_velocity", 0).shape == (ny, nx, 2)
+        eps = t.field("void_fraction")
+        assert np.all((eps > 0.2) & (eps <= 1.0))
+        # the stored void fraction is that of the particles in the frame: the solids volume
+        # it accounts for equals the particles' volume (pseudo-2D cells dx dy d)
+        d = case.particles.diameter
+        dx, dy = t.field_spacing
+        solids = ((1.0 - eps[-1].astype(float)) * dx * dy * d).sum()
+        assert solids == pytest.approx(case.particles.number * np.pi * d**3 / 6, rel=1e-4)
+        # cross-section mean of eps * v_gas is U (float32 storage, face-to-centre averaging)
+        vg = t.field("gas_velocity", -1)[..., 1].astype(float)
+        flux = (eps[-1] * vg).mean()
+        assert flux == pytest.approx(case.gas.superficial_velocity, rel=0.03)
 
 
 def test_resume_equals_uninterrupted_run(tmp_path, reference):

@@ -116,6 +116,16 @@ class CoupledRiser:
         self.dem.step(self.dem_steps_per_cfd, external_force=self._force)
         self.cfd_steps += 1
 
+    def gas_fields(self) -> dict[str, np.ndarray]:
+        """The gas at cell centres, arrays [ny, nx] (row 0 at the bottom): ``void_fraction``,
+        ``gas_velocity`` [ny, nx, 2] (interstitial, m/s) and ``pressure`` (periodic part, Pa)."""
+        u, v = self.gas.u, self.gas.v
+        uc = 0.5 * (u[:-1] + u[1:])
+        vc = 0.5 * (v + np.roll(v, -1, axis=1))
+        return {"void_fraction": self.gas.void_fraction.T,
+                "gas_velocity": np.stack([uc.T, vc.T], axis=-1),
+                "pressure": self.gas.p.T}
+
     # -- checkpoints -----------------------------------------------------------------
     def state(self) -> dict[str, dict[str, np.ndarray] | int]:
         return {"dem": self.dem.state(), "gas": self.gas.state_dict(), "cfd_steps": self.cfd_steps}
@@ -139,20 +149,25 @@ def _read_group(group: h5py.Group) -> dict:
 
 
 def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: int,
-                     wall_time: float) -> None:
-    """Atomically write everything needed to continue the run bit for bit."""
+                     wall_time: float, wall_history=None) -> None:
+    """Atomically write everything needed to continue the run bit for bit (and, in
+    ``wall_history``, rows of (simulated time s, wall time s) at each checkpoint)."""
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs.update({"version": CHECKPOINT_VERSION, "n_segments": n_segments,
                             "frames": frames, "wall_time": wall_time,
                             "case": riser.case.model_dump_json()})
+            f.create_dataset("wall_history", data=np.asarray(
+                wall_history if wall_history is not None else np.empty((0, 2)),
+                dtype=np.float64).reshape(-1, 2))
             state = riser.state()
             _write_group(f.create_group("dem"), state["dem"])
             _write_group(f.create_group("gas"), state["gas"])
             f.attrs["cfd_steps"] = state["cfd_steps"]
 
 
-def read_checkpoint(path: Path, case: CaseConfig) -> tuple[CoupledRiser, int, int, float]:
+def read_checkpoint(path: Path, case: CaseConfig
+                    ) -> tuple[CoupledRiser, int, int, float, np.ndarray]:
     try:
         with h5py.File(path, "r") as f:
             saved = CaseConfig.model_validate_json(f.attrs["case"])
@@ -162,9 +177,11 @@ def read_checkpoint(path: Path, case: CaseConfig) -> tuple[CoupledRiser, int, in
             state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
                      "cfd_steps": int(f.attrs["cfd_steps"])}
             meta = int(f.attrs["n_segments"]), int(f.attrs["frames"]), float(f.attrs["wall_time"])
+            history = (f["wall_history"][()] if "wall_history" in f
+                       else np.empty((0, 2)))
     except (OSError, KeyError) as exc:
         raise InputError(f"{path}: unreadable checkpoint ({exc})") from None
-    return (CoupledRiser.from_state(case, state), *meta)
+    return (CoupledRiser.from_state(case, state), *meta, history)
 
 
 class _Progress:
@@ -197,12 +214,15 @@ class _Progress:
 
 def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None = None,
              checkpoint_every: float = 1.0, resume: bool = False, progress: bool = True,
-             stop_after_frames: int | None = None) -> Path:
+             stop_after_frames: int | None = None, fields: bool = True) -> Path:
     """Run a case from t = 0 (or the last checkpoint with ``resume``) to ``until`` (default:
     the case's end time) and write the trajectory file ``output``.
 
     ``stop_after_frames`` ends the process's work early, as a kill would, after that many
-    frames (for tests of resume); the run is then left to be resumed.
+    frames (for tests of resume); the run is then left to be resumed. ``fields`` stores the
+    gas (void fraction, velocity, pressure at cell centres) with every frame under ``/fields``.
+    ``/provenance/run`` records the wall time, and ``wall_history`` rows of (simulated time,
+    wall time since the start) at every checkpoint.
     """
     output = Path(output)
     end = case.output.end_time if until is None else float(until)
@@ -219,6 +239,8 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
         raise InputError(f"run length {end:g} s is shorter than one frame ({frame_dt:g} s)")
     parts = output.with_name(output.name + ".parts")
     checkpoint = parts / "checkpoint.h5"
+    grid = GasGrid.from_config(case)
+    spacing = (grid.dx, grid.dy)
     writer_options = dict(
         ids=np.arange(case.particles.number), width=case.riser.width, height=case.riser.height,
         source="cfd-dem", parameters=json.loads(case.model_dump_json()), with_velocity=True,
@@ -226,7 +248,8 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
     if resume:
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist")
-        riser, n_segments, frames, wall_time = read_checkpoint(checkpoint, case)
+        riser, n_segments, frames, wall_time, history = read_checkpoint(checkpoint, case)
+        wall_history = [tuple(row) for row in history]
         writer = SegmentedTrajectoryWriter.resume(output, n_segments, **writer_options)
     else:
         if parts.exists() and checkpoint.exists():
@@ -236,7 +259,10 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
         riser = CoupledRiser.initial(case)
         writer = SegmentedTrajectoryWriter(output, **writer_options)
         writer.append(0.0, riser.dem.positions, riser.dem.velocities, riser.dem.laps)
+        if fields:
+            writer.append_fields(0.0, spacing, **riser.gas_fields())
         frames, wall_time = 1, 0.0
+        wall_history = [(0.0, 0.0)]
     bar = _Progress(progress, riser.time, end, case.particles.number)
     started = _time.perf_counter() - wall_time
     try:
@@ -246,12 +272,15 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
             t, p, d = riser.dem.drain_pass_events()
             writer.add_events(t, p, d)
             writer.append(riser.time, riser.dem.positions, riser.dem.velocities, riser.dem.laps)
+            if fields:
+                writer.append_fields(riser.time, spacing, **riser.gas_fields())
             frames += 1
             bar.update(frame_dt, steps_per_frame * riser.dem_steps_per_cfd)
             if riser.cfd_steps % steps_per_checkpoint == 0 or riser.cfd_steps >= total_steps:
                 n_segments = writer.close_segment()
-                write_checkpoint(checkpoint, riser, n_segments, frames,
-                                 _time.perf_counter() - started)
+                elapsed = _time.perf_counter() - started
+                wall_history.append((riser.time, elapsed))
+                write_checkpoint(checkpoint, riser, n_segments, frames, elapsed, wall_history)
             if stop_after_frames is not None and frames >= stop_after_frames:
                 writer.abort()
                 return output
@@ -269,7 +298,8 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
                 "particle_steps_per_s": case.particles.number * total_steps
                 * riser.dem_steps_per_cfd / max(wall, 1e-9),
                 "exact_pass_events": True}
-    writer.finish(attach={"run": ({}, run_info)})
+    writer.finish(attach={"run": ({"wall_history": np.asarray(wall_history, dtype=np.float64)},
+                                  run_info)})
     return output
 
 
