@@ -8,7 +8,7 @@ from cfbmarkov.cli import main
 
 def test_demo_end_to_end(tmp_path, capsys):
     out = tmp_path / "demo"
-    assert main(["demo", "-o", str(out), "--particles", "1500"]) == 0
+    assert main(["demo", "--synthetic", "-o", str(out), "--particles", "1500"]) == 0
     rows = json.loads((out / "demo.json").read_text())
     for name in ("paper", "mle"):
         summary = json.loads((out / f"compare-{name}" / "summary.json").read_text())

@@ -161,11 +161,60 @@ def _cmd_info(args) -> int:
     return 0
 
 
-def _cmd_demo(args) -> int:
-    from cfbmarkov.demo import run_demo
+def _parse_velocities(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"velocities '{text}' are not comma-separated numbers "
+                                         "in m/s") from None
+    if not values or any(not v > 0 for v in values):
+        raise argparse.ArgumentTypeError(f"velocities '{text}' must be positive numbers in m/s")
+    return values
 
-    out = run_demo(args.output, particles=args.particles, seed=args.seed)
-    print(out)
+
+def _parse_names(text: str) -> list[str]:
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("no names given")
+    return names
+
+
+def _cmd_reproduce(args) -> int:
+    from cfbmarkov.reproduce import load_overrides, reproduce
+
+    overrides = load_overrides(args.overrides) if args.overrides else None
+    report = reproduce(args.output, args.scale, args.velocities, overrides=overrides,
+                       estimators=args.estimators, scheduler=args.scheduler, jobs=args.jobs,
+                       progress=not args.quiet, log=lambda line: print(line, flush=True))
+    print(report)
+    return 0
+
+
+def _cmd_demo(args) -> int:
+    if args.synthetic:
+        from cfbmarkov.demo import run_demo
+
+        out = run_demo(args.output, particles=args.particles, seed=args.seed)
+        print(out)
+        return 0
+    from cfbmarkov.reproduce import reproduce
+
+    report = reproduce(args.output, "quick", jobs=args.jobs, progress=not args.quiet,
+                       log=lambda line: print(line, flush=True))
+    print(f"report: {report}")
+    return 0
+
+
+def _cmd_export_vtk(args) -> int:
+    from cfbmarkov.io.vtk import export_vtk_summary
+
+    done = export_vtk_summary(args.run, args.output, start=args.start, stop=args.stop,
+                              every=args.every, fields=not args.no_fields,
+                              progress=not args.quiet)
+    gas = f", {done.n_gas_files} gas field frames" if done.n_gas_files else ""
+    missing = f" ({done.n_gas_missing} frames without gas fields)" if done.n_gas_missing else ""
+    print(f"{done.n_particle_files} particle frames{gas}{missing}: open "
+          f"{done.output / 'particles.pvd'} in ParaView")
     return 0
 
 
@@ -284,11 +333,48 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("cases", help="list the shipped cases")
     s.set_defaults(func=_cmd_cases)
 
-    s = sub.add_parser("demo", help="the pipeline end to end on a small riser, with figures")
-    s.add_argument("-o", "--output", default="demo-out", help="output directory")
-    s.add_argument("--particles", type=int, default=6000)
-    s.add_argument("--seed", type=int, default=1)
+    s = sub.add_parser("reproduce", help="the paper end to end at U = 3, 4, 6, 8 m/s: CFD-DEM, "
+                       "Markov models, predictions, comparison, report")
+    s.add_argument("--scale", choices=["paper", "quick"], default="quick",
+                   help="paper: the paper's riser and 0-20 s (hours); quick: a reduced riser "
+                        "(minutes); default quick")
+    s.add_argument("-o", "--output", required=True, help="output directory (rerun to resume)")
+    s.add_argument("--velocities", type=_parse_velocities, default=[3.0, 4.0, 6.0, 8.0],
+                   help="comma-separated superficial gas velocities U, m/s (default 3,4,6,8)")
+    s.add_argument("--estimators", type=_parse_names, default=["paper", "mle"],
+                   help="comma-separated estimators (default paper,mle)")
+    s.add_argument("--overrides", default=None,
+                   help="TOML file of changes applied to every case (same tables as a case file)")
+    s.add_argument("--jobs", type=int, default=None,
+                   help="local worker processes (default: min(cases, cores))")
+    s.add_argument("--scheduler", default=None,
+                   help="address of a Dask distributed scheduler (tcp://host:8786) to run the "
+                        "cases on; the workers must see the output directory")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    s.set_defaults(func=_cmd_reproduce)
+
+    s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
+                       "(about 6 min on 2 cores), ending with the path of its report")
+    s.add_argument("-o", "--output", default="cfbmarkov-demo", help="output directory")
+    s.add_argument("--jobs", type=int, default=None, help="local worker processes")
+    s.add_argument("--synthetic", action="store_true",
+                   help="instead, the Markov part alone on synthetic core-annulus trajectories "
+                        "(30 s)")
+    s.add_argument("--particles", type=int, default=6000, help="with --synthetic: particles")
+    s.add_argument("--seed", type=int, default=1, help="with --synthetic: seed")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     s.set_defaults(func=_cmd_demo)
+
+    s = sub.add_parser("export-vtk", help="ParaView files: particle frames and gas fields with "
+                       ".pvd time series")
+    s.add_argument("run", help="trajectory file")
+    s.add_argument("-o", "--output", required=True, help="output directory")
+    s.add_argument("--start", type=float, default=None, help="first time, s")
+    s.add_argument("--stop", type=float, default=None, help="last time, s")
+    s.add_argument("--every", type=int, default=1, help="export every k-th frame")
+    s.add_argument("--no-fields", action="store_true", help="particles only")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_cmd_export_vtk)
 
     s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
     s.add_argument("--only", action="append", default=None, help="run only this benchmark")

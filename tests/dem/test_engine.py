@@ -399,3 +399,42 @@ def test_settled_bed_is_stable():
     s.step(5000)
     assert abs(s.positions[:, 1].max() - top) < 0.05 * D
     assert s.overlaps().max() < 0.01 * D
+
+
+# ---------------------------------------------------------------- wall forces (diagnostics)
+@pytest.mark.parametrize("push, sticking", [(10.0, True), (0.5, False)])
+def test_wall_impulse_of_friction_sticking_and_sliding(push, sticking):
+    """A particle pressed against the left wall by an external force F (x, in units of its
+    weight) under gravity rolls down the wall. Rolling without slip needs a friction force
+    of m g I / (I + m R^2) = 2/7 m g (a sphere's inertia): when mu F exceeds it the wall's
+    vertical impulse is that; when mu F is smaller the particle slides and the wall carries
+    mu F (Coulomb)."""
+    g = 9.81
+    law = ContactLaw()                                   # mu = 0.1
+    s = make([[R, 0.01]], [[0.0, 0.0]], W=0.01, H=0.02, dt=1e-6, g=g, law=law)
+    force = np.array([[-push * M * g, 0.0]])
+    s.step(20000, external_force=force)                   # settle the contact (20 ms)
+    s.reset_wall_impulse()
+    v0 = s.velocities[0, 1]
+    steps = 20000
+    s.step(steps, external_force=force)
+    t = steps * 1e-6
+    side, floor = s.wall_impulse
+    assert floor == 0.0
+    expected = 2.0 / 7.0 * M * g if sticking else law.mu * push * M * g
+    assert side == pytest.approx(expected * t, rel=0.02)
+    # the particle's momentum change closes the balance: wall + gravity
+    assert M * (s.velocities[0, 1] - v0) == pytest.approx(side - M * g * t, abs=0.02 * M * g * t)
+
+
+def test_floor_carries_a_settled_column():
+    """Particles resting on the floor: the floor's impulse equals their weight's."""
+    g = 9.81
+    pos = np.array([[0.005, R * (1 + 2 * k) * 1.001] for k in range(5)])
+    s = make(pos, np.zeros_like(pos), W=0.01, H=0.02, dt=1e-6, g=g, bottom_wall=True)
+    s.step(60000)
+    s.reset_wall_impulse()
+    s.step(20000)
+    side, floor = s.wall_impulse
+    assert floor == pytest.approx(5 * M * g * 0.02, rel=0.01)
+    assert abs(side) < 1e-3 * floor

@@ -187,13 +187,13 @@ def read_checkpoint(path: Path, case: CaseConfig
 class _Progress:
     """tqdm bar in simulated seconds with particle-steps/s; quiet when disabled."""
 
-    def __init__(self, enabled: bool, start: float, end: float, particles: int):
+    def __init__(self, enabled: bool, start: float, end: float, particles: int, label: str = ""):
         self.bar = None
         if enabled:
             from tqdm import tqdm
 
             self.bar = tqdm(total=round(end - start, 6), initial=0, unit="s", file=sys.stderr,
-                            desc="CFD-DEM (simulated s)", mininterval=1.0 if sys.stderr.isatty() else 30.0,
+                            desc=f"{label} CFD-DEM (simulated s)".lstrip(), mininterval=1.0 if sys.stderr.isatty() else 30.0,
                             bar_format="{desc}: {n:.3f}/{total:.3f} [{elapsed}<{remaining}{postfix}]")
         self.particles = particles
         self.t_wall = _time.perf_counter()
@@ -214,7 +214,8 @@ class _Progress:
 
 def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None = None,
              checkpoint_every: float = 1.0, resume: bool = False, progress: bool = True,
-             stop_after_frames: int | None = None, fields: bool = True) -> Path:
+             stop_after_frames: int | None = None, fields: bool = True, label: str = ""
+             ) -> Path:
     """Run a case from t = 0 (or the last checkpoint with ``resume``) to ``until`` (default:
     the case's end time) and write the trajectory file ``output``.
 
@@ -263,7 +264,7 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
             writer.append_fields(0.0, spacing, **riser.gas_fields())
         frames, wall_time = 1, 0.0
         wall_history = [(0.0, 0.0)]
-    bar = _Progress(progress, riser.time, end, case.particles.number)
+    bar = _Progress(progress, riser.time, end, case.particles.number, label)
     started = _time.perf_counter() - wall_time
     try:
         while riser.cfd_steps < total_steps:

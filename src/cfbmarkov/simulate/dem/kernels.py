@@ -207,7 +207,8 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
     """Sum the pair forces ``pf`` of each particle (pairs where it comes second, then pairs
     where it comes first: a fixed order), add walls, external force and gravity, integrate,
     and write ``so``. Returns (particles moved beyond skin/2, boundary passes, bad
-    particles)."""
+    particles, vertical force of the side walls on the particles, force of the floor on
+    them (N); the forces are diagnostics, summed in any order)."""
     N = st.shape[0]
     dt = P[P_DT]
     W = P[P_W]
@@ -232,6 +233,8 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
     nmove = 0
     nev = 0
     nbad = 0
+    wall_fy = 0.0
+    floor_fy = 0.0
     for i in prange(N):
         xi = st[i, 0]
         yi = st[i, 1]
@@ -273,6 +276,7 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
                 fx += fn
                 fy += ft
                 tq -= Ri * ft
+                wall_fy += ft
             elif wh[i, 0] != 0.0:
                 wh[i, 0] = 0.0
             if xi > W - Ri:  # right wall, n = (1, 0)
@@ -284,6 +288,7 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
                 fx -= fn
                 fy += ft
                 tq += Ri * ft
+                wall_fy += ft
             elif wh[i, 1] != 0.0:
                 wh[i, 1] = 0.0
             if floor and yi < Ri:  # floor, n = (0, -1)
@@ -295,6 +300,7 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
                 fy += fn
                 fx += ft
                 tq += Ri * ft
+                floor_fy += fn
             elif wh[i, 2] != 0.0:
                 wh[i, 2] = 0.0
         # integrate (leapfrog)
@@ -344,7 +350,7 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, P,
         so[i, 5] = Ri
         so[i, 6] = imi
         so[i, 7] = rIi
-    return nmove, nev, nbad
+    return nmove, nev, nbad, wall_fy, floor_fy
 
 
 @njit(parallel=True, cache=True)
@@ -639,8 +645,9 @@ def _record_events(st_old, st_new, ids, evf, step, P, ev_t, ev_p, ev_d, ctl):
 
 @njit(cache=True)
 def advance(st, aux, wh, ids, laps, LA, LB, pf, ctl, evf, bad, key, cstart, cfill, perm,
-            invperm, P, IP, nsteps, ev_t, ev_p, ev_d):
-    """Advance up to ``nsteps`` steps. Returns (steps done, status, info): status ST_OK;
+            invperm, P, IP, nsteps, ev_t, ev_p, ev_d, wall_impulse):
+    """Advance up to ``nsteps`` steps, adding the walls' vertical impulse on the particles
+    to ``wall_impulse`` ([side walls, floor], N s). Returns (steps done, status, info): status ST_OK;
     ST_STRIDE (info = stride the next list needs); ST_EVENTS (event buffer needs room);
     ST_BLOWUP (the step just done produced a bad particle, flagged in ``bad``)."""
     N = st.shape[1]
@@ -659,8 +666,10 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, ctl, evf, bad, key, cstart, cfil
         pstart = L[3]
         npairs = pstart[N]
         nbad_pairs = pair_forces(st[cs], npairs, L[4], L[5], L[6], pf, P, IP)
-        nmove, nev, nbad = fused_step(st[cs], st[1 - cs], aux[cp], wh[cp], laps[cp], pstart,
-                                      L[7], L[8], pf, evf, bad, P, IP)
+        nmove, nev, nbad, wall_fy, floor_fy = fused_step(
+            st[cs], st[1 - cs], aux[cp], wh[cp], laps[cp], pstart, L[7], L[8], pf, evf, bad, P, IP)
+        wall_impulse[0] += P[P_DT] * wall_fy
+        wall_impulse[1] += P[P_DT] * floor_fy
         if nbad_pairs > 0:
             flag_overlaps(st[cs], npairs, L[4], L[5], bad, P, IP)
             nbad += nbad_pairs

@@ -246,6 +246,7 @@ class DEMSystem:
                              invperm=np.zeros(n, np.int64))
         self._ev = (np.zeros(capacity), np.zeros(capacity, np.int64), np.zeros(capacity, np.int8))
         self._ext_set = False
+        self._wall_impulse = np.zeros(2)
 
     def _check_steps_per_contact(self):
         spc = self.steps_per_contact()
@@ -420,7 +421,8 @@ class DEMSystem:
             done, status, info = K.advance(
                 a["st"], a["aux"], a["wh"], a["ids"], a["laps"], self._lists[0], self._lists[1],
                 self._pf, ctl, sc["evf"], sc["bad"], sc["key"], sc["cstart"], sc["cfill"],
-                sc["perm"], sc["invperm"], self._P, self._IP, left, *self._ev)
+                sc["perm"], sc["invperm"], self._P, self._IP, left, *self._ev,
+                self._wall_impulse)
             left -= done
             if status == K.ST_OK:
                 continue
@@ -452,6 +454,16 @@ class DEMSystem:
                f"y = {st[k, 1]:.6g} m, v = ({st[k, 2]:.4g}, {st[k, 3]:.4g}) m/s); "
                f"{len(where)} particle(s) affected. Reduce the time step or check the input.")
         raise SimulationBlowUp(msg, step=step, particle=pid, reason=_REASONS.get(code, "invalid"))
+
+    @property
+    def wall_impulse(self) -> np.ndarray:
+        """Vertical impulse the walls gave the particles since the last
+        :meth:`reset_wall_impulse` (or since this object was made; not part of the state):
+        [side walls (friction and tangential damping), floor (normal)], N s."""
+        return self._wall_impulse.copy()
+
+    def reset_wall_impulse(self) -> None:
+        self._wall_impulse[:] = 0.0
 
     def drain_pass_events(self):
         """(time, particle, direction) of the boundary passes since the last drain, sorted by

@@ -1,0 +1,407 @@
+"""ParaView export: a trajectory file -> VTK XML files and ``.pvd`` time series (via pyevtk).
+
+``export_vtk(run, output)`` writes into the folder ``output``:
+
+``particles_NNNNNN.vtu``
+    One unstructured grid of vertices per exported frame. Points are (x, y, 0) m in the
+    particle order of the file. Point data: ``colour_group`` (int8; 1 = "purple", the
+    particles with x < W/2 in the *first exported frame*, 0 = "yellow", the mixing definition
+    of :func:`cfbmarkov.analysis.mixing.purple_mask`), ``id`` (int64), ``lap`` (int32) and,
+    when the file stores velocities, ``speed`` (float64, m/s) and ``velocity`` (3 components,
+    z = 0, m/s). ``colour_group`` comes first so that ParaView colours by it when opened.
+``gas_NNNNNN.vtr``
+    When the file has a ``/fields`` group (CFD-DEM runs) and ``fields=True``: one rectilinear
+    grid per exported frame that has a gas frame at the same time, cell data
+    ``void_fraction``, ``pressure`` (Pa) and ``gas_velocity`` (3 components, z = 0, m/s).
+``particles.pvd``, ``gas.pvd``
+    ParaView collections (open these), timestep = simulated time in s. ``gas.pvd`` is
+    written only when at least one gas file is.
+
+``NNNNNN`` is the frame's index in the trajectory file (not its rank in the export), so a
+particle and a gas file of the same frame share the number, and a frame keeps its name
+whatever window or stride is exported.
+
+The gas grid is flat: node coordinates are the cell edges x = x0 + dx * arange(nx + 1),
+y = y0 + dy * arange(ny + 1) and a single z node, z = [0]. VTK counts the cells of a
+structured grid along the axes with more than one node only, so the grid holds nx x ny
+2D cells (VTK_PIXEL) carrying the cell data, lying in the plane z = 0 of the particles
+(ParaView draws points over coincident surfaces). A slab z = [0, dz] would instead hide
+the particles behind its top face in the default 2D view (camera on +z) and give the
+fields a thickness that the 2D model does not have.
+
+Gas frames are matched to particle frames by time (relative tolerance 1e-9, on a 1 s
+scale near t = 0). Exported frames with no gas frame get no gas file; their number is
+reported in :class:`VtkExport` and by a warning, not raised.
+
+The export is atomic: everything is written into a temporary sibling folder
+``<output>.tmp-XXXX`` that is renamed to ``output`` when complete. A folder left by a
+previous export (only these files in it), or an empty folder, is replaced only then; any
+other existing folder is refused. On any error no partial output and no temporary folder
+remain.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import re
+import secrets
+import shutil
+import sys
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Iterable, Iterator
+
+import h5py
+import numpy as np
+
+from cfbmarkov.analysis.mixing import purple_mask
+from cfbmarkov.errors import InputError
+from cfbmarkov.trajectories import Trajectories
+
+#: relative tolerance (on max(|t|, 1 s)) for matching a gas frame to a particle frame
+FIELD_TIME_TOLERANCE = 1e-9
+PARTICLES = "particles"
+GAS = "gas"
+#: the names an export writes; a folder holding only these may be replaced by a new export
+_EXPORT_NAME = re.compile(r"^(particles\.pvd|gas\.pvd|particles_\d{6,}\.vtu|gas_\d{6,}\.vtr)$")
+
+
+@dataclass(frozen=True)
+class VtkExport:
+    """What :func:`export_vtk_summary` wrote."""
+
+    output: Path
+    #: times (s) of the exported frames
+    times: np.ndarray
+    #: indices of the exported frames in the trajectory file
+    frames: np.ndarray
+    n_particle_files: int
+    n_gas_files: int
+    #: exported frames whose gas file was skipped (the file has fields, none at that time)
+    n_gas_missing: int
+
+
+# -- the gas-field group ----------------------------------------------------------------------
+@dataclass(frozen=True)
+class GasFields:
+    """The optional ``/fields`` group of a trajectory file (read lazily, frame by frame).
+
+    Node coordinates (cell edges) ``x_edges`` [nx+1] and ``y_edges`` [ny+1] in m; arrays
+    ``void_fraction``, ``pressure`` [T, ny, nx] and ``gas_velocity`` [T, ny, nx, 2] stay
+    h5py datasets (None when absent).
+    """
+
+    times: np.ndarray
+    x_edges: np.ndarray
+    y_edges: np.ndarray
+    void_fraction: h5py.Dataset | None
+    gas_velocity: h5py.Dataset | None
+    pressure: h5py.Dataset | None
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """(nx, ny) cells."""
+        return self.x_edges.size - 1, self.y_edges.size - 1
+
+    def match(self, times: np.ndarray) -> np.ndarray:
+        """For each time, the index of the gas frame at that time, or -1 if there is none."""
+        times = np.asarray(times, dtype=np.float64)
+        last = self.times.size - 1
+        if last < 0:
+            return np.full(times.size, -1, dtype=np.int64)
+        k = np.searchsorted(self.times, times)
+        lower, upper = np.clip(k - 1, 0, last), np.clip(k, 0, last)
+        nearest = np.where(np.abs(self.times[lower] - times) <= np.abs(self.times[upper] - times),
+                           lower, upper)
+        tol = FIELD_TIME_TOLERANCE * np.maximum(np.abs(times), 1.0)
+        return np.where(np.abs(self.times[nearest] - times) <= tol, nearest, -1).astype(np.int64)
+
+
+def read_gas_fields(traj: Trajectories) -> GasFields | None:
+    """The ``/fields`` group of ``traj``, checked against the layout, or None if absent."""
+    # Trajectories has no public accessor for groups outside /provenance; opening the path a
+    # second time with h5py is unsafe (closing one handle closes the other's objects).
+    f: h5py.File = traj._file
+    if "fields" not in f:
+        return None
+    g = f["fields"]
+    where = f"{traj.path}: damaged /fields group"
+    try:
+        spacing = np.asarray(g.attrs["spacing"], dtype=np.float64).reshape(-1)
+        origin = np.asarray(g.attrs.get("origin", (0.0, 0.0)), dtype=np.float64).reshape(-1)
+        shape = np.asarray(g.attrs["shape"]).reshape(-1)
+    except KeyError as exc:
+        raise InputError(f"{where} (no attribute {exc.args[0]!r})") from None
+    except (TypeError, ValueError):
+        raise InputError(f"{where} (attributes spacing, origin, shape are not numbers)") from None
+    if spacing.size != 2 or origin.size != 2 or shape.size != 2:
+        raise InputError(f"{where} (spacing, origin and shape must have two entries each)")
+    if not (np.all(np.isfinite(spacing)) and np.all(spacing > 0) and np.all(np.isfinite(origin))):
+        raise InputError(f"{where} (spacing {spacing.tolist()} m must be positive)")
+    if not (np.all(shape == np.round(shape)) and np.all(shape >= 1)):
+        raise InputError(f"{where} (shape {shape.tolist()} must be whole numbers >= 1)")
+    nx, ny = int(shape[0]), int(shape[1])
+    if "time" not in g or not isinstance(g["time"], h5py.Dataset):
+        raise InputError(f"{where} (no 'time' dataset)")
+    times = np.asarray(g["time"][()], dtype=np.float64).reshape(-1)
+    if times.ndim != 1 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+        raise InputError(f"{where} (times are not finite and increasing)")
+    arrays = {}
+    for name, tail in (("void_fraction", ()), ("gas_velocity", (2,)), ("pressure", ())):
+        ds = g.get(name)
+        if ds is not None:
+            expected = (times.size, ny, nx) + tail
+            if not isinstance(ds, h5py.Dataset) or ds.shape != expected:
+                got = ds.shape if isinstance(ds, h5py.Dataset) else "a group"
+                raise InputError(f"{where} ('{name}' has shape {got}, expected {expected} "
+                                 f"for {times.size} times on {nx} x {ny} cells)")
+        arrays[name] = ds
+    if all(ds is None for ds in arrays.values()):
+        raise InputError(f"{where} (none of void_fraction, gas_velocity, pressure)")
+    return GasFields(times=times,
+                     x_edges=origin[0] + spacing[0] * np.arange(nx + 1, dtype=np.float64),
+                     y_edges=origin[1] + spacing[1] * np.arange(ny + 1, dtype=np.float64),
+                     **arrays)
+
+
+# -- the export ---------------------------------------------------------------------------------
+def export_vtk(run: str | os.PathLike | Trajectories, output: str | os.PathLike, *,
+               start: float | None = None, stop: float | None = None, every: int = 1,
+               fields: bool = True, progress: bool = False) -> Path:
+    """Export the frames of ``run`` with start <= t <= stop (s), every ``every``-th, as VTK
+    files for ParaView into the folder ``output`` (see the module docstring). ``run`` is a
+    trajectory file path or an open :class:`Trajectories` (left open). Gas fields are written
+    when the file has them and ``fields`` is true; ``progress`` shows a bar on stderr.
+    Returns the output folder; raises InputError on bad arguments and leaves no output."""
+    return export_vtk_summary(run, output, start=start, stop=stop, every=every, fields=fields,
+                              progress=progress).output
+
+
+def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.PathLike, *,
+                       start: float | None = None, stop: float | None = None, every: int = 1,
+                       fields: bool = True, progress: bool = False) -> VtkExport:
+    """:func:`export_vtk`, returning what was written (files, frames, gas frames missing)."""
+    hl = _pyevtk()
+    every = _check_every(every)
+    output = Path(output)
+    with _opened(run) as traj:
+        frames = _select_frames(traj, start, stop, every)
+        _check_output(output, traj.path)
+        gas = read_gas_fields(traj) if fields else None
+        times = traj.times[frames]
+        gas_index = gas.match(times) if gas is not None else np.full(frames.size, -1)
+        with _atomic_folder(output) as tmp:
+            n_gas = _write(hl, traj, gas, frames, gas_index, tmp, progress)
+    missing = int(np.count_nonzero(gas_index < 0)) if gas is not None else 0
+    if missing:
+        warnings.warn(f"{missing} of {frames.size} exported frames have no gas field at their "
+                      f"time; their gas files were skipped", stacklevel=2)
+    return VtkExport(output=output, times=times, frames=frames, n_particle_files=int(frames.size),
+                     n_gas_files=n_gas, n_gas_missing=missing)
+
+
+def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
+           gas_index: np.ndarray, folder: Path, progress: bool) -> int:
+    """Write the files of the export into ``folder``; returns the number of gas files."""
+    from pyevtk.vtk import VtkGroup
+
+    n = traj.n_particles
+    zeros = np.zeros(n, dtype=np.float64)
+    ids = np.ascontiguousarray(traj.ids, dtype=np.int64)
+    colour = None
+    particle_files: list[tuple[str, float]] = []
+    gas_files: list[tuple[str, float]] = []
+    for frame, g in _progress(zip(frames.tolist(), gas_index.tolist()), frames.size, progress):
+        t = float(traj.times[frame])
+        position = traj.positions(frame)
+        x = np.ascontiguousarray(position[:, 0], dtype=np.float64)
+        y = np.ascontiguousarray(position[:, 1], dtype=np.float64)
+        if colour is None:
+            colour = purple_mask(x, 0.5 * traj.width).astype(np.int8)
+        data = {"colour_group": colour, "id": ids,
+                "lap": np.ascontiguousarray(traj.laps(frame), dtype=np.int32)}
+        velocity = traj.velocities(frame)
+        if velocity is not None:
+            vx = np.ascontiguousarray(velocity[:, 0], dtype=np.float64)
+            vy = np.ascontiguousarray(velocity[:, 1], dtype=np.float64)
+            data["speed"] = np.hypot(vx, vy)
+            data["velocity"] = (vx, vy, zeros)
+        name = f"{PARTICLES}_{frame:06d}"
+        hl.pointsToVTK(str(folder / name), x, y, zeros, data=data)
+        particle_files.append((name + ".vtu", t))
+        if gas is not None and g >= 0:
+            name = f"{GAS}_{frame:06d}"
+            _write_gas(hl, gas, g, folder / name)
+            gas_files.append((name + ".vtr", t))
+    for stem, files in ((PARTICLES, particle_files), (GAS, gas_files)):
+        if files:
+            group = VtkGroup(str(folder / stem))
+            for name, t in files:
+                group.addFile(filepath=str(folder / name), sim_time=t)
+            group.save()
+    return len(gas_files)
+
+
+def _write_gas(hl, gas: GasFields, index: int, path: Path) -> None:
+    """One gas frame as a flat rectilinear grid with cell data (see the module docstring)."""
+    cells: dict = {}
+
+    def cell_array(values: np.ndarray) -> np.ndarray:
+        # [ny, nx] (row j = y) -> [nx, ny, 1], written in Fortran order: x runs fastest, as
+        # VTK numbers the cells
+        return np.asfortranarray(np.asarray(values).T[:, :, None])
+
+    if gas.void_fraction is not None:
+        cells["void_fraction"] = cell_array(gas.void_fraction[index])
+    if gas.pressure is not None:
+        cells["pressure"] = cell_array(gas.pressure[index])
+    if gas.gas_velocity is not None:
+        u = gas.gas_velocity[index]
+        ux, uy = cell_array(u[..., 0]), cell_array(u[..., 1])
+        cells["gas_velocity"] = (ux, uy, np.zeros_like(ux, order="F"))
+    hl.gridToVTK(str(path), gas.x_edges, gas.y_edges, np.zeros(1, dtype=np.float64),
+                 cellData=cells)
+
+
+# -- arguments ----------------------------------------------------------------------------------
+def _pyevtk():
+    try:
+        from pyevtk import hl
+    except ImportError:
+        raise InputError("the VTK export needs the package pyevtk "
+                         "(pip install 'cfbmarkov[vtk]')") from None
+    return hl
+
+
+def _check_every(every) -> int:
+    if isinstance(every, bool) or not isinstance(every, (int, np.integer)) or every < 1:
+        raise InputError(f"every {every!r} must be a whole number >= 1 (export every n-th frame)")
+    return int(every)
+
+
+def _select_frames(traj: Trajectories, start: float | None, stop: float | None,
+                   every: int) -> np.ndarray:
+    """Indices of the frames with start <= t <= stop, every ``every``-th from the first."""
+    for name, value in (("start", start), ("stop", stop)):
+        if value is not None and not np.isfinite(_as_float(name, value)):
+            raise InputError(f"{name} time {value} s is not a finite number")
+    t0 = float(traj.times[0]) if start is None else float(start)
+    t1 = float(traj.times[-1]) if stop is None else float(stop)
+    if t0 > t1 and (start is None or stop is None):   # one bound given, beyond the data
+        raise InputError(f"window {t0:g}:{t1:g} s lies outside the data of {traj.path} "
+                         f"({traj.times[0]:g} to {traj.times[-1]:g} s)")
+    if t0 == t1:
+        window = slice(traj.frame_index(t0), traj.frame_index(t0) + 1)
+    else:
+        window = traj.window(t0, t1)
+    frames = np.arange(window.start, window.stop, every, dtype=np.int64)
+    if frames.size == 0:  # pragma: no cover - window() refuses empty windows
+        raise InputError(f"window {t0:g}:{t1:g} s holds no frame of {traj.path}")
+    return frames
+
+
+def _as_float(name: str, value) -> float:
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} time {value!r} is not a number") from None
+
+
+@contextlib.contextmanager
+def _opened(run: str | os.PathLike | Trajectories) -> Iterator[Trajectories]:
+    if isinstance(run, Trajectories):
+        yield run
+    else:
+        with Trajectories(run) as traj:
+            yield traj
+
+
+def _check_output(output: Path, source: Path) -> None:
+    if output.exists() and not output.is_dir():
+        if output.resolve() == source.resolve():
+            raise InputError(f"{output}: the output would overwrite the input file")
+        raise InputError(f"{output}: exists and is a file; give a folder for the VTK export")
+    if output.is_dir():
+        foreign = sorted(p.name for p in output.iterdir() if not _EXPORT_NAME.match(p.name)
+                         or not p.is_file())
+        if foreign:
+            raise InputError(f"{output}: folder holds {foreign[0]!r}, which is not part of a "
+                             f"VTK export; refusing to replace it (give a new or empty folder)")
+
+
+@contextlib.contextmanager
+def _atomic_folder(output: Path) -> Iterator[Path]:
+    """Yield a new temporary sibling folder ``<output>.tmp-XXXX``; on success it replaces
+    ``output``. On any error the temporary folder, and the parent folders created for it,
+    are removed, and a previous ``output`` is left as it was."""
+    new_parents = [p for p in output.absolute().parents if not p.exists()]
+    try:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        tmp = _new_folder(output.parent, f"{output.name}.tmp-")
+    except OSError as exc:
+        _remove_folders(new_parents)
+        raise InputError(f"{output}: cannot create ({exc.strerror or exc})") from None
+    try:
+        try:
+            yield tmp
+        except OSError as exc:
+            raise InputError(f"{output}: export failed ({exc.strerror or exc})") from None
+        _replace(tmp, output)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        _remove_folders(new_parents)
+        raise
+
+
+def _new_folder(parent: Path, prefix: str) -> Path:
+    """Create a folder ``prefix`` + random hex in ``parent`` (with the umask's permissions,
+    unlike tempfile.mkdtemp, so the renamed export is readable as usual)."""
+    for _ in range(100):
+        path = parent / f"{prefix}{secrets.token_hex(4)}"
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+        return path
+    raise FileExistsError(f"no free temporary name {prefix}XXXX in {parent}")
+
+
+def _replace(tmp: Path, output: Path) -> None:
+    """Move the complete folder ``tmp`` onto ``output``; a previous export there is moved
+    aside first and deleted only once the new one is in place (put back on failure)."""
+    old = None
+    try:
+        if output.is_dir():
+            old = _new_folder(output.parent, f"{output.name}.old-")
+            os.replace(output, old)   # rename onto the empty folder
+        os.replace(tmp, output)
+    except OSError as exc:
+        if old is not None and not output.exists():
+            with contextlib.suppress(OSError):
+                os.replace(old, output)
+                old = None
+        if old is not None and not any(old.iterdir()):
+            old.rmdir()
+            old = None
+        raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _remove_folders(folders: list[Path]) -> None:
+    for folder in folders:  # deepest first
+        with contextlib.suppress(OSError):
+            folder.rmdir()
+
+
+def _progress(items: Iterable, total: int, enabled: bool) -> Iterable:
+    if not enabled:
+        return items
+    from tqdm import tqdm
+
+    return tqdm(items, total=total, desc="export vtk", unit="frame", file=sys.stderr, leave=False)
+
+
+__all__ = ["GasFields", "VtkExport", "export_vtk", "export_vtk_summary", "read_gas_fields"]

@@ -1,0 +1,421 @@
+"""``cfbmarkov reproduce``: the paper end to end, one file per stage, through an executor.
+
+For each fluidizing velocity U (3, 4, 6 and 8 m/s by default) a *case* runs these stages in
+its own folder ``DIR/u<U>/``; every stage is a file, written atomically, so a rerun skips
+what is done and resumes what was interrupted (the CFD-DEM from its last checkpoint)::
+
+    case.json                   the exact configuration (a rerun with another one is refused)
+    cfd-dem.h5                  CFD-DEM 0..end (frames, exact pass events, gas fields)
+    model-<estimator>.h5        Markov model fitted on the fitting window (paper, mle)
+    prediction-<estimator>.h5   Monte Carlo over the prediction window, started from the
+                                CFD-DEM state at its start
+    compare-<estimator>/        RTD, mixing and figures against the CFD-DEM (summary.json)
+    timings.json                wall times of the stages (s)
+
+``DIR/reproduce.json`` names the scale and cases; ``DIR/report.html`` (with ``report.md``
+and ``figures/``) is written when every case is done.
+
+Cases run through a :class:`concurrent.futures.Executor`: in this process for one worker,
+a process pool on the local machine by default, or any executor given, such as a Dask
+cluster's (``dask.distributed.Client(address).get_executor()``, ``--scheduler ADDRESS``);
+the workers must see ``DIR`` on a shared file system.
+
+Scales (:data:`SCALES`): ``paper`` is the paper's riser and times; ``quick`` is a reduced
+riser that keeps the particles, gas, hold-up, cell size and contact-time resolution of the
+paper (see :data:`QUICK_REDUCTIONS`), so that the whole pipeline runs in minutes.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import contextlib
+import json
+import math
+import os
+import time as _time
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Sequence
+
+from cfbmarkov._atomic import write_text_atomic
+from cfbmarkov.config import CaseConfig, load_case
+from cfbmarkov.errors import CfbmarkovError, InputError
+
+VELOCITIES = (3.0, 4.0, 6.0, 8.0)
+ESTIMATORS = ("paper", "mle")
+
+
+@dataclass(frozen=True)
+class Scale:
+    """A set of changes applied to the paper's cases (nested dict, as in a case TOML)."""
+
+    name: str
+    description: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+    reductions: tuple[str, ...] = ()
+
+
+#: The quick scale's reductions and their reasons (shown in the docs and the report).
+QUICK_REDUCTIONS = (
+    "riser 0.04 m x 0.30 m instead of 0.09 m x 0.95 m, with 3789 particles instead of 27000: "
+    "the same solids hold-up (16.5 % by volume in the pseudo-2D cells), so clusters, wall "
+    "layers and back-mixing form as in the paper's riser; 40 particle diameters across still "
+    "leaves a core and two wall layers",
+    "gas cells of 10 mm x 10 mm as in the paper (4 x 30 cells)",
+    "contact springs 4 times softer (kn 2500 N/m, kt 714 N/m) and a DEM step twice as long "
+    "(1e-5 s): a contact still takes 5.2 DEM steps as in the paper, and restitution and "
+    "friction are unchanged; overlaps at a given impact velocity are twice the paper's "
+    "(1.7 % of d at 1 m/s instead of 0.8 %)",
+    "0-5 s of CFD-DEM, the model fitted on 1.5-3.5 s and compared on 3.5-5 s: in the "
+    "shorter riser the flow develops within a second and residence times are about a third "
+    "of the paper's",
+    "frames, lag and RTD bins of 0.01 s, and 4 x 12 cells of 10 mm x 25 mm, so that a mean "
+    "residence time still spans about ten lags, as 0.025 s does in the paper's riser",
+)
+
+SCALES: dict[str, Scale] = {
+    "paper": Scale("paper", "the paper's riser: 27000 particles, 0.09 m x 0.95 m, 0-20 s, "
+                   "fitted on 10-15 s, compared on 15-20 s, 6 x 38 cells, lag 0.025 s"),
+    "quick": Scale(
+        "quick", "a reduced riser (3789 particles, 0.04 m x 0.30 m, 0-5 s) that runs the "
+        "whole pipeline in minutes on 2 cores",
+        {"riser": {"width": 0.04, "height": 0.30},
+         "particles": {"number": 3789},
+         "contact": {"normal_stiffness": 2500.0, "tangential_stiffness": 714.25},
+         "numerics": {"cfd_cells": [4, 30], "dem_cells": [13, 100], "dem_time_step": 1e-5},
+         "output": {"end_time": 5.0, "frame_interval": 0.01},
+         "markov": {"columns": 4, "rows": 12, "lag": 0.01, "fit_window": [1.5, 3.5],
+                    "predict_window": [3.5, 5.0]}},
+        QUICK_REDUCTIONS),
+}
+
+
+# -- cases -------------------------------------------------------------------------------------
+def case_name(velocity: float) -> str:
+    """Folder name of a velocity: 6.0 -> 'u6', 2.5 -> 'u2.5'."""
+    return f"u{velocity:g}"
+
+
+def _merge(base: dict, changes: dict) -> dict:
+    out = dict(base)
+    for key, value in changes.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def _as_scale(scale: str | Scale) -> Scale:
+    if isinstance(scale, Scale):
+        return scale
+    if scale not in SCALES:
+        raise InputError(f"unknown scale '{scale}': choose one of {', '.join(SCALES)}")
+    return SCALES[scale]
+
+
+def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELOCITIES,
+                overrides: dict[str, Any] | None = None) -> list[CaseConfig]:
+    """The cases of a scale: the paper's case at each velocity (``paper-u<U>``, or ``paper-u6``
+    with U replaced), changed by the scale and then by ``overrides`` (a nested dict)."""
+    scale = _as_scale(scale)
+    cases = []
+    velocities = [float(u) for u in velocities]
+    if not velocities:
+        raise InputError("no velocities given")
+    for u in velocities:
+        if not (math.isfinite(u) and u > 0):
+            raise InputError(f"velocity {u:g} m/s must be positive")
+        name = f"paper-u{u:g}"
+        try:
+            base = load_case(name)
+        except InputError:
+            base = load_case("paper-u6")
+        data = _merge(json.loads(base.model_dump_json()), {
+            "name": f"{scale.name}-{case_name(u)}", "gas": {"superficial_velocity": u}})
+        data = _merge(_merge(data, scale.overrides), overrides or {})
+        try:
+            cases.append(CaseConfig.model_validate(data))
+        except Exception as exc:         # pydantic's ValidationError, one line
+            first = getattr(exc, "errors", lambda: [{"loc": (), "msg": str(exc)}])()[0]
+            loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
+            raise InputError(f"invalid configuration at '{loc}' for U = {u:g} m/s: "
+                             f"{first['msg']}") from None
+    return cases
+
+
+def load_overrides(path: str | os.PathLike) -> dict[str, Any]:
+    """A TOML file of changes to apply to every case (same tables as a case file)."""
+    import tomllib
+
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except OSError as exc:
+        raise InputError(f"cannot read overrides {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML: {exc}") from None
+
+
+# -- one case ---------------------------------------------------------------------------------
+def _read_json(path: Path) -> dict:
+    try:
+        return json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _record(folder: Path, stage: str, values: dict) -> None:
+    timings = _read_json(folder / "timings.json")
+    timings[stage] = values
+    write_text_atomic(folder / "timings.json", json.dumps(timings, indent=2) + "\n")
+
+
+def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict[str, Any]:
+    """Wall time of a CFD-DEM file's run, in all and for ``window`` (s): from its checkpoint
+    wall-time history where it covers the window, else pro rata (``estimated``)."""
+    import numpy as np
+
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(path) as traj:
+        group = traj.group("run")
+        if group is None:
+            return {}
+        attrs = dict(group.attrs)
+        history = group["wall_history"][()] if "wall_history" in group else np.empty((0, 2))
+    wall, simulated = float(attrs.get("wall_time_s", float("nan"))), float(attrs.get("simulated_s", float("nan")))
+    out = {"wall_s": wall, "simulated_s": simulated,
+           "particles": int(attrs.get("particles", 0)),
+           "particle_steps_per_s": float(attrs.get("particle_steps_per_s", float("nan")))}
+    a, b = window
+    times = history[:, 0] if history.size else np.empty(0)
+    if times.size >= 2 and times[0] <= a + 1e-9 and times[-1] >= b - 1e-9:
+        out["predict_window_wall_s"] = float(np.interp(b, times, history[:, 1])
+                                             - np.interp(a, times, history[:, 1]))
+        out["predict_window_estimated"] = False
+    else:
+        out["predict_window_wall_s"] = wall * (b - a) / simulated if simulated > 0 else float("nan")
+        out["predict_window_estimated"] = True
+    return out
+
+
+def run_case(case_json: str, directory: str, estimators: Sequence[str] = ESTIMATORS,
+             progress: bool = True, threads: int | None = None,
+             checkpoint_every: float = 0.5) -> dict[str, Any]:
+    """Run (or finish) every stage of one case in ``directory``; returns what each stage did
+    ("done" or "skipped") and the comparison summaries. A module-level function, so that
+    any executor (process pool, Dask) can run it."""
+    import numba
+
+    from cfbmarkov.markov import CellGrid, MarkovModel, estimator_from_name
+    from cfbmarkov.report.compare import SUMMARY, compare
+    from cfbmarkov.simulate.run import simulate
+    from cfbmarkov.trajectories import Trajectories
+
+    if threads:
+        numba.set_num_threads(max(1, min(int(threads), numba.config.NUMBA_NUM_THREADS)))
+    case = CaseConfig.model_validate_json(case_json)
+    folder = Path(directory)
+    folder.mkdir(parents=True, exist_ok=True)
+    label = folder.name
+    stages: dict[str, str] = {}
+
+    saved = folder / "case.json"
+    if saved.exists():
+        try:
+            previous = CaseConfig.model_validate_json(saved.read_text())
+        except (OSError, ValueError):
+            raise InputError(f"{saved}: unreadable case file; delete it to start this case "
+                             "again") from None
+        if previous != case:
+            raise InputError(f"{folder} holds a run of another configuration ({saved}); use "
+                             "another output directory or delete that folder")
+    else:
+        write_text_atomic(saved, case.model_dump_json(indent=2) + "\n")
+
+    m = case.markov
+    reference = folder / "cfd-dem.h5"
+    if reference.exists():
+        stages["cfd-dem"] = "skipped"
+    else:
+        checkpoint = folder / "cfd-dem.h5.parts" / "checkpoint.h5"
+        resume = checkpoint.exists()
+        simulate(case, reference, checkpoint_every=checkpoint_every, resume=resume,
+                 progress=progress, label=label)
+        stages["cfd-dem"] = "resumed" if resume else "done"
+    _record(folder, "cfd_dem", cfd_dem_timing(reference, m.predict_window))
+
+    summaries = {}
+    with Trajectories(reference) as ref:
+        grid = CellGrid(m.columns, m.rows, ref.width, ref.height)
+        start, stop = m.predict_window
+        for name in estimators:
+            model_path = folder / f"model-{name}.h5"
+            if model_path.exists():
+                model = MarkovModel.load(model_path)
+                stages[f"fit-{name}"] = "skipped"
+            else:
+                t0 = _time.perf_counter()
+                model = estimator_from_name(name, grid, m.lag).fit(ref, window=m.fit_window)
+                model.save(model_path)
+                _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0})
+                stages[f"fit-{name}"] = "done"
+            prediction = folder / f"prediction-{name}.h5"
+            if prediction.exists():
+                stages[f"predict-{name}"] = "skipped"
+            else:
+                t0 = _time.perf_counter()
+                model.predict(ref, start=start, duration=stop - start, seed=case.seed,
+                              output=prediction)
+                _record(folder, f"predict-{name}", {"wall_s": _time.perf_counter() - t0})
+                stages[f"predict-{name}"] = "done"
+            out = folder / f"compare-{name}"
+            if (out / SUMMARY).exists():
+                summaries[name] = _read_json(out / SUMMARY)
+                stages[f"compare-{name}"] = "skipped"
+            else:
+                summaries[name] = compare(ref, prediction, window=(start, stop), output=out,
+                                          bin_width=m.lag)
+                stages[f"compare-{name}"] = "done"
+    return {"case": label, "velocity": case.gas.superficial_velocity, "stages": stages,
+            "summaries": summaries}
+
+
+# -- executors ---------------------------------------------------------------------------------
+class InlineExecutor(cf.Executor):
+    """Runs each call at once in this process (one worker; errors surface in the future)."""
+
+    def submit(self, fn, /, *args, **kwargs):
+        future: cf.Future = cf.Future()
+        try:
+            future.set_result(fn(*args, **kwargs))
+        except BaseException as exc:      # noqa: B036 - handed to the caller via the future
+            if isinstance(exc, KeyboardInterrupt):
+                raise
+            future.set_exception(exc)
+        return future
+
+
+def _limit_threads(threads: int) -> None:
+    import numba
+
+    numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+
+
+def local_executor(jobs: int | None = None, n_cases: int = 1) -> tuple[cf.Executor, int]:
+    """Executor on this machine: in-process for one job, else a process pool of ``jobs``
+    workers (default: min(cases, cores)); returns it and the Numba threads per worker."""
+    cores = os.cpu_count() or 1
+    jobs = min(n_cases, cores) if jobs is None else int(jobs)
+    if jobs < 1:
+        raise InputError(f"--jobs {jobs} must be at least 1")
+    threads = max(1, cores // jobs)
+    if jobs == 1:
+        return InlineExecutor(), threads
+    import multiprocessing
+
+    return cf.ProcessPoolExecutor(max_workers=jobs, mp_context=multiprocessing.get_context("spawn"),
+                                  initializer=_limit_threads, initargs=(threads,)), threads
+
+
+def dask_executor(address: str) -> tuple[cf.Executor, Any]:
+    """A Dask distributed cluster's executor (and its client, to close afterwards)."""
+    try:
+        from dask.distributed import Client
+    except ImportError:
+        raise InputError("--scheduler needs dask.distributed: pip install 'cfbmarkov[distributed]'"
+                         ) from None
+    try:
+        client = Client(address, timeout=30)
+    except (OSError, TimeoutError) as exc:
+        raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+    return client.get_executor(pure=False), client
+
+
+# -- the whole reproduction --------------------------------------------------------------------
+def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
+              velocities: Iterable[float] = VELOCITIES, *, overrides: dict | None = None,
+              estimators: Sequence[str] = ESTIMATORS, executor: cf.Executor | None = None,
+              scheduler: str | None = None, jobs: int | None = None, progress: bool = True,
+              report: bool = True, log: Callable[[str], None] = print) -> Path:
+    """Run every case of ``scale`` at ``velocities`` into ``directory`` (resuming what is
+    there) and write the report; returns the path of ``report.html`` (or of the directory
+    with ``report=False``). Cases go to ``executor`` if given, else to the Dask cluster at
+    ``scheduler``, else to :func:`local_executor` with ``jobs`` workers."""
+    from cfbmarkov.markov.estimate import ESTIMATORS as KNOWN
+
+    for name in estimators:
+        if name not in KNOWN:
+            raise InputError(f"unknown estimator '{name}': choose from {', '.join(KNOWN)}")
+    scale = _as_scale(scale)
+    cases = scale_cases(scale, velocities, overrides)
+    names = [case_name(c.gas.superficial_velocity) for c in cases]
+    if len(set(names)) != len(names):
+        raise InputError(f"velocities repeat: {', '.join(names)}")
+    out = Path(directory)
+    if out.exists() and not out.is_dir():
+        raise InputError(f"output {out} exists and is not a directory")
+    out.mkdir(parents=True, exist_ok=True)
+    from cfbmarkov import __version__
+
+    manifest = {"scale": scale.name, "description": scale.description,
+                "reductions": list(scale.reductions), "overrides": overrides or {},
+                "cases": names, "estimators": list(estimators), "version": __version__}
+    write_text_atomic(out / "reproduce.json", json.dumps(manifest, indent=2) + "\n")
+
+    client = None
+    threads = None
+    own = executor is None
+    if executor is None and scheduler:
+        executor, client = dask_executor(scheduler)
+    elif executor is None:
+        executor, threads = local_executor(jobs, len(cases))
+    log(f"reproduce ({scale.name} scale): {len(cases)} case(s) {', '.join(names)} in {out}")
+    started = _time.perf_counter()
+    failures: list[str] = []
+    try:
+        futures = {executor.submit(run_case, case.model_dump_json(), str(out / name),
+                                   tuple(estimators), progress, threads): name
+                   for case, name in zip(cases, names)}
+        for future in cf.as_completed(futures):
+            name = futures[future]
+            try:
+                result = future.result()
+            except CfbmarkovError as exc:
+                failures.append(f"{name}: {exc}")
+                log(f"{name}: failed: {exc}")
+                continue
+            done = ", ".join(f"{k} {v}" for k, v in result["stages"].items())
+            log(f"{name}: {done}")
+            for est, s in result["summaries"].items():
+                log(f"{name} {est:>5}: PD E(RT) {_fmt(s.get('pd_rt_mean'), '+.1f')} %, PD SD(RT) "
+                    f"{_fmt(s.get('pd_rt_sd'), '+.1f')} %, MD {_fmt(s.get('md_rtd'), '.3g')}, "
+                    f"mixing RMS {_fmt(s.get('mixing_rms'), '.3g')}")
+    finally:
+        if own:
+            try:
+                executor.shutdown(wait=True, cancel_futures=True)
+            except TypeError:             # Dask's ClientExecutor has no cancel_futures
+                executor.shutdown(wait=True)
+        if client is not None:
+            with contextlib.suppress(Exception):
+                client.close()
+    if failures:
+        raise InputError(f"{len(failures)} case(s) failed; rerun to resume: " + "; ".join(failures))
+    log(f"all cases done in {_time.perf_counter() - started:.0f} s")
+    if not report:
+        return out
+    from cfbmarkov.report.reproduction import write_report
+
+    return write_report(out)
+
+
+def _fmt(value, spec: str) -> str:
+    if value is None or (isinstance(value, float) and not math.isfinite(value)):
+        return "n/a"
+    return format(value, spec)
+
+
+__all__ = ["ESTIMATORS", "InlineExecutor", "QUICK_REDUCTIONS", "SCALES", "Scale", "VELOCITIES",
+           "case_name", "cfd_dem_timing", "dask_executor", "load_overrides", "local_executor",
+           "reproduce", "run_case", "scale_cases"]

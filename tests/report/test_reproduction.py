@@ -1,0 +1,212 @@
+"""The reproduction report (paper §3): files, self-containment, sections, Table 3 against the
+compare summaries, unfinished cases, errors and re-runs."""
+
+from __future__ import annotations
+
+import base64
+import json
+import re
+import shutil
+
+import pytest
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.report.reproduction import (
+    PAPER_TABLE3,
+    _estimator_names,
+    _map_numbers,
+    _map_times,
+    write_report,
+)
+
+PNG = b"\x89PNG\r\n\x1a\n"
+EXPECTED_FIGURES = {"fig03-transition-matrices.png", "fig04-maps-u3.png", "fig05-maps-u6.png",
+                    "fig08-rtd-cfd-dem.png", "fig09-rtd-mcm.png", "fig10-snapshots.png",
+                    "fig11-mixing.png", "plausibility.png"}
+HEADINGS = ("Table 3", "Computing time", "Fig. 3", "Fig. 4", "Fig. 8", "Fig. 9", "Fig. 10",
+            "Fig. 11", "Plausibility", "Warnings", "Not finished")
+
+
+def md_headings(md: str) -> list[str]:
+    return [line.lstrip("#").strip() for line in md.splitlines() if line.startswith("#")]
+
+
+def table_row(md: str, u: str, estimator: str) -> list[str]:
+    rows = [line for line in md.splitlines() if line.startswith(f"| {u} | {estimator} |")]
+    assert len(rows) == 1, f"expected one Table 3 row for U = {u}, {estimator}"
+    return [cell.strip() for cell in rows[0].strip("|").split("|")]
+
+
+def test_report_files_and_self_contained_html(report_of_template):
+    root, html_path = report_of_template
+    assert html_path == root / "report.html"
+    html = html_path.read_text(encoding="utf-8")
+    assert html.startswith("<!DOCTYPE html>") and "<style>" in html
+    assert 'src="figures/' not in html
+    # every src/href is a data: URI: no file, http or protocol-relative resource
+    assert not re.findall(r"""(?:src|href)\s*=\s*["'](?!data:)""", html)
+    assert "<link" not in html and "<script" not in html and "url(" not in html
+    uris = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', html)
+    assert len(uris) == len(EXPECTED_FIGURES)
+    embedded = {base64.b64decode(u) for u in uris}
+    on_disk = {(root / "figures" / name).read_bytes() for name in EXPECTED_FIGURES}
+    assert embedded == on_disk
+    assert not list(root.rglob("*.tmp*")), "temporary files left behind"
+
+
+def test_sections_and_paper_numbers(report_of_template):
+    root, html_path = report_of_template
+    md = (root / "report.md").read_text(encoding="utf-8")
+    html = html_path.read_text(encoding="utf-8")
+    headings = md_headings(md)
+    html_headings = re.findall(r"<h[1-3]>(.*?)</h[1-3]>", html)
+    for wanted in HEADINGS:
+        assert any(h.startswith(wanted) for h in headings), wanted
+        assert any(h.startswith(wanted) for h in html_headings), wanted
+    # the paper's Table 3 beside ours, for each U the paper has (U = 3, 6 finished; 8 not)
+    for u in ("3", "6", "8"):
+        for estimator in ("paper", "mle"):
+            row = table_row(md, u, estimator)
+            assert row[-3:] == list(PAPER_TABLE3[float(u)]), (u, estimator, row)
+    assert "0.380" in md and "11.89" in html and "-45.16" in html
+    assert not [line for line in md.splitlines() if line.startswith("| 4 |")]   # no U = 4
+    # the paper's computing time (§3.1)
+    assert "about 50 h" in md and "about 30 min" in md and "about 100" in md
+    assert "(estimated)" in md     # u6's CFD-DEM time of the predict window is an estimate
+    # header
+    for text in ("Scale: quick", "fit 2–4 s, predict 4–6 s", "Lag: 0.025 s",
+                 "6 columns x 12 rows", "Particles: 400", "0.09 m wide x 0.95 m high",
+                 "cfbmarkov version: "):
+        assert text in md, text
+
+
+def test_table3_quotes_the_summaries(report_of_template):
+    root, _ = report_of_template
+    md = (root / "report.md").read_text(encoding="utf-8")
+    for case, u in (("u3", "3"), ("u6", "6")):
+        for estimator in ("paper", "mle"):
+            s = json.loads((root / case / f"compare-{estimator}" / "summary.json").read_text())
+            row = table_row(md, u, estimator)
+            assert row[2] == f"{s['reference']['rt_mean']:.3f}"
+            assert row[3] == f"{s['model']['rt_mean']:.3f}"
+            assert row[4] == f"{s['pd_rt_mean']:.2f}"
+            assert row[5] == f"{s['reference']['rt_sd']:.3f}"
+            assert row[7] == f"{s['pd_rt_sd']:.2f}"
+            assert row[8] == f"{s['md_rtd']:.3g}"
+            assert row[9] == f"{s['mixing_rms']:.3g}"
+    # the MD footnote states the order and the bins
+    assert "order k = 2" in md and "0.025 s bin" in md and "'%' heading" in md
+
+
+def test_every_figure_linked_and_valid(report_of_template):
+    root, _ = report_of_template
+    md = (root / "report.md").read_text(encoding="utf-8")
+    linked = re.findall(r"!\[[^\]]+\]\(figures/([^)]+)\)", md)
+    assert set(linked) == EXPECTED_FIGURES and len(linked) == len(EXPECTED_FIGURES)
+    assert {p.name for p in (root / "figures").iterdir()} == EXPECTED_FIGURES
+    for name in linked:
+        data = (root / "figures" / name).read_bytes()
+        assert data[:8] == PNG and len(data) > 10_000, name
+    # Fig. 10 is the snapshot figure of the case nearest 6 m/s
+    assert (root / "figures" / "fig10-snapshots.png").read_bytes() == \
+        (root / "u6" / "compare-paper" / "snapshots.png").read_bytes()
+    # one sentence under every figure, generated from the numbers
+    captions = re.findall(r"^\*\*(Fig\. \d+|Plausibility)[^*]*\*\* (.+)$", md, flags=re.M)
+    assert len(captions) == len(EXPECTED_FIGURES)
+    assert all(len(text) > 40 for _, text in captions)
+    assert "widest at U = 3 m/s" in md
+    assert "falls as U rises" in md
+
+
+def test_unfinished_case_is_reported(report_of_template):
+    root, _ = report_of_template
+    md = (root / "report.md").read_text(encoding="utf-8")
+    section = md.split("## Not finished", 1)[1].split("\n## ", 1)[0]
+    assert "u8 (U = 8 m/s): not finished" in section
+    assert "no compare-paper/summary.json" in section and "no model-mle.h5" in section
+    row = table_row(md, "8", "paper")
+    assert row[2:10] == ["not finished"] * 8
+    assert "u8" not in " ".join(re.findall(r"figures/\S+", md))
+
+
+def test_no_finished_case_is_an_input_error(reproduction):
+    for compare_dir in reproduction.glob("u*/compare-*"):
+        shutil.rmtree(compare_dir)
+    with pytest.raises(InputError, match="no finished case") as info:
+        write_report(reproduction)
+    assert "\n" not in str(info.value) and str(reproduction) in str(info.value)
+    assert not (reproduction / "report.html").exists()
+
+
+def test_unusable_inputs_name_the_file(reproduction, tmp_path):
+    with pytest.raises(InputError, match="reproduce.json: no such file"):
+        write_report(tmp_path)
+    with pytest.raises(InputError, match="no such directory"):
+        write_report(tmp_path / "absent")
+    summary = reproduction / "u3" / "compare-mle" / "summary.json"
+    text = summary.read_text()
+    summary.write_text(text[: len(text) // 2])
+    with pytest.raises(InputError, match=re.escape(str(summary)) + ": not valid JSON"):
+        write_report(reproduction)
+    summary.write_text(text)
+    case = reproduction / "u6" / "case.json"
+    case.write_text(case.read_text().replace('"number": 400', '"number": -1'))
+    with pytest.raises(InputError, match=re.escape(str(case)) + ".*particles.number") as info:
+        write_report(reproduction)
+    assert "\n" not in str(info.value)
+    assert not (reproduction / "report.html").exists()
+
+
+def test_rerun_overwrites_cleanly(reproduction):
+    first = write_report(reproduction, title="First title")
+    md_first = (reproduction / "report.md").read_text(encoding="utf-8")
+    assert "<title>First title</title>" in first.read_text(encoding="utf-8")
+    # u3 loses its comparisons and timings; a stray figure of an older run lies around
+    for compare_dir in (reproduction / "u3").glob("compare-*"):
+        shutil.rmtree(compare_dir)
+    (reproduction / "u6" / "timings.json").unlink()
+    (reproduction / "figures" / "fig07-maps-u9.png").write_bytes(PNG)
+    (reproduction / "figures" / "notes.txt").write_text("mine")
+    second = write_report(reproduction)
+    assert second == first
+    html = second.read_text(encoding="utf-8")
+    md = (reproduction / "report.md").read_text(encoding="utf-8")
+    assert md != md_first and "First title" not in html
+    names = {p.name for p in (reproduction / "figures").iterdir()}
+    assert "fig04-maps-u3.png" not in names and "fig07-maps-u9.png" not in names
+    assert "notes.txt" in names                  # not ours: left alone
+    assert "fig05-maps-u6.png" in names
+    assert "u3 (U = 3 m/s): not finished" in md
+    assert table_row(md, "6", "paper")[1:2] == ["paper"]
+    timing_rows = [line for line in md.splitlines() if line.startswith("| 6 | n/a |")]
+    assert len(timing_rows) == 2                 # no timings.json: n/a, not a crash
+    assert not list(reproduction.rglob(".*.tmp*"))
+    linked = re.findall(r"\]\(figures/([^)]+)\)", md)
+    assert len(re.findall("data:image/png;base64,", html)) == len(linked)
+
+
+def test_estimators_discovered_in_order(tmp_path):
+    a, b = tmp_path / "u3", tmp_path / "u4"
+    a.mkdir()
+    b.mkdir()
+    for path in (a / "model-auto.h5", a / "model-mle.h5", b / "prediction-paper.h5",
+                 b / "notes-x.h5"):
+        path.write_bytes(b"")
+    (b / "compare-zeta").mkdir()
+    assert _estimator_names([a, b, tmp_path / "absent"]) == ["paper", "mle", "auto", "zeta"]
+
+
+def test_map_times_and_numbers():
+    assert _map_times(3.0, 0.025)[1:] == ([0.25, 0.5, 0.75], False)
+    wanted, used, rounded = _map_times(6.0, 0.04)
+    assert wanted == [0.05, 0.10, 0.15] and rounded
+    assert used == pytest.approx([0.04, 0.12, 0.16])
+
+    class Case:
+        def __init__(self, u):
+            self.name, self.velocity = f"u{u:g}", u
+
+    few = [Case(u) for u in (2.5, 3.0, 8.0)]
+    assert _map_numbers(few) == {"u2.5": 4, "u3": 5, "u8": 6}
+    many = [Case(u) for u in (2.5, 3.0, 4.0, 5.0, 6.0, 8.0)]
+    assert _map_numbers(many) == {"u2.5": 4, "u3": 4, "u4": 5, "u5": 5, "u6": 6, "u8": 7}

@@ -1,0 +1,251 @@
+"""``cfbmarkov reproduce`` in miniature: every stage a file, skip and resume, the report, the
+local and Dask executors, and the scales' claims (hold-up, contact resolution, windows)."""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cfbmarkov.cli import main
+from cfbmarkov.config import load_case
+from cfbmarkov.reproduce import SCALES, reproduce, scale_cases
+from cfbmarkov.simulate.dem import ContactLaw
+from cfbmarkov.trajectories import Trajectories
+
+TINY = """
+[riser]
+width = 0.03
+height = 0.12
+[particles]
+number = 240
+[numerics]
+cfd_cells = [3, 12]
+dem_cells = [10, 40]
+[output]
+end_time = 0.8
+[markov]
+columns = 2
+rows = 6
+fit_window = [0.2, 0.5]
+predict_window = [0.5, 0.8]
+"""
+STAGES = ["case.json", "cfd-dem.h5", "model-paper.h5", "model-mle.h5", "prediction-paper.h5",
+          "prediction-mle.h5", "compare-paper/summary.json", "compare-mle/summary.json",
+          "timings.json"]
+
+
+def tiny(tmp_path) -> Path:
+    path = tmp_path / "tiny.toml"
+    path.write_text(TINY)
+    return path
+
+
+def run_arrays(path):
+    with Trajectories(path) as t:
+        out = [t.times, t.positions(), t.laps()]
+        if t.has_velocity:
+            out.append(t.velocities())
+        ev = t.events()
+        if ev is not None:
+            out += [ev.time, ev.particle, ev.direction]
+        return out
+
+
+def assert_same_files(a: Path, b: Path, names=("cfd-dem.h5", "prediction-paper.h5",
+                                                "prediction-mle.h5")):
+    for name in names:
+        for x, y in zip(run_arrays(a / name), run_arrays(b / name)):
+            np.testing.assert_array_equal(x, y)
+
+
+@pytest.fixture(scope="module")
+def reference(tmp_path_factory):
+    """An uninterrupted miniature reproduction at 8 m/s (inline executor)."""
+    tmp = tmp_path_factory.mktemp("repro")
+    overrides = tiny(tmp)
+    out = tmp / "ref"
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities",
+                 "8", "-o", str(out), "--jobs", "1", "-q"]) == 0
+    return out, overrides
+
+
+def test_every_stage_is_a_file_and_the_report_has_every_section(reference, capsys):
+    out, _ = reference
+    manifest = json.loads((out / "reproduce.json").read_text())
+    assert manifest["scale"] == "quick" and manifest["cases"] == ["u8"]
+    for name in STAGES:
+        assert (out / "u8" / name).exists(), name
+    timings = json.loads((out / "u8" / "timings.json").read_text())
+    cfd = timings["cfd_dem"]
+    # the wall time of the prediction window comes from the checkpoint history, not pro rata
+    assert cfd["predict_window_estimated"] is False
+    assert 0 < cfd["predict_window_wall_s"] < cfd["wall_s"]
+    for stage in ("fit-paper", "predict-paper", "fit-mle", "predict-mle"):
+        assert timings[stage]["wall_s"] > 0
+    summary = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
+    assert summary["window"] == [0.5, 0.8] and summary["same_purple_particles"]
+    assert summary["reference"]["exact_events"]
+    html = (out / "report.html").read_text()
+    for heading in ("Table 3", "Computing time", "Fig. 3", "Fig. 8", "Fig. 9", "Fig. 11"):
+        assert heading in html, heading
+    assert "data:image/png;base64," in html and 'src="figures/' not in html
+    assert (out / "report.md").exists()
+
+
+def test_rerun_skips_what_is_done(reference, capsys):
+    out, overrides = reference
+    before = {n: (out / "u8" / n).stat().st_mtime_ns for n in STAGES if n != "timings.json"}
+    capsys.readouterr()
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities",
+                 "8", "-o", str(out), "--jobs", "1", "-q"]) == 0
+    log = capsys.readouterr().out
+    assert "cfd-dem skipped" in log and "fit-paper skipped" in log and "compare-mle skipped" in log
+    after = {n: (out / "u8" / n).stat().st_mtime_ns for n in before}
+    assert before == after
+
+
+def test_other_configuration_in_the_same_folder_is_refused(reference, tmp_path, capsys):
+    out, _ = reference
+    other = tmp_path / "other.toml"
+    other.write_text(TINY.replace("number = 240", "number = 200"))
+    capsys.readouterr()
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(other), "--velocities", "8",
+                 "-o", str(out), "--jobs", "1", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another configuration" in err[0]
+
+
+def test_resume_after_kill_mid_simulation_equals_uninterrupted(reference, tmp_path):
+    ref, overrides = reference
+    out = tmp_path / "killed"
+    cmd = [sys.executable, "-m", "cfbmarkov", "reproduce", "--scale", "quick", "--overrides",
+           str(overrides), "--velocities", "8", "-o", str(out), "--jobs", "1", "-q"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                            start_new_session=True)
+    checkpoint = out / "u8" / "cfd-dem.h5.parts" / "checkpoint.h5"
+    deadline = time.time() + 180
+    while not checkpoint.exists() and time.time() < deadline and proc.poll() is None:
+        time.sleep(0.005)
+    os.killpg(proc.pid, signal.SIGKILL)
+    proc.wait()
+    assert checkpoint.exists() and not (out / "u8" / "cfd-dem.h5").exists()
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities",
+                 "8", "-o", str(out), "--jobs", "1", "-q"]) == 0
+    assert_same_files(ref / "u8", out / "u8")
+    a = json.loads((ref / "u8" / "compare-paper" / "summary.json").read_text())
+    b = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
+    assert a["pd_rt_mean"] == b["pd_rt_mean"] and a["mixing_rms"] == b["mixing_rms"]
+
+
+def test_dask_cluster_gives_the_same_result(reference, tmp_path):
+    distributed = pytest.importorskip("dask.distributed")
+    ref, overrides = reference
+    from cfbmarkov.reproduce import load_overrides
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=False,
+                                  dashboard_address=None) as cluster:
+        out = reproduce(tmp_path / "dask", "quick", [8.0], overrides=load_overrides(overrides),
+                        scheduler=cluster.scheduler_address, progress=False, report=False,
+                        log=lambda line: None)
+        with distributed.Client(cluster.scheduler_address) as client:
+            # the cluster ran the case: its worker holds the task's record
+            assert any("run_case" in str(k) for k in client.run_on_scheduler(
+                lambda dask_scheduler: list(dask_scheduler.task_prefixes)))
+    assert_same_files(ref / "u8", out / "u8")
+
+
+def test_process_pool_runs_cases_in_parallel(tmp_path):
+    overrides = tiny(tmp_path)
+    text = overrides.read_text().replace("end_time = 0.8", "end_time = 0.3").replace(
+        "fit_window = [0.2, 0.5]", "fit_window = [0.05, 0.2]").replace(
+        "predict_window = [0.5, 0.8]", "predict_window = [0.2, 0.3]")
+    overrides.write_text(text)
+    from cfbmarkov.reproduce import load_overrides
+
+    out = reproduce(tmp_path / "pool", "quick", [4.0, 6.0], overrides=load_overrides(overrides),
+                    jobs=2, progress=False, report=False, log=lambda line: None)
+    for case in ("u4", "u6"):
+        assert (out / case / "compare-mle" / "summary.json").exists()
+        saved = json.loads((out / case / "case.json").read_text())
+        assert saved["gas"]["superficial_velocity"] == float(case[1:])
+
+
+@pytest.mark.parametrize("argv, message", [
+    (["--velocities", "3,-4"], "must be positive"),
+    (["--estimators", "paper,best"], "unknown estimator 'best'"),
+    (["--overrides", "missing.toml"], "cannot read overrides"),
+    (["--jobs", "0"], "must be at least 1"),
+])
+def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, message, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert main(["reproduce", "-o", str(tmp_path / "x"), *argv]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0]
+
+
+def test_bad_override_value_names_the_field(tmp_path, capsys):
+    path = tmp_path / "bad.toml"
+    path.write_text("[particles]\nnumber = -5\n")
+    assert main(["reproduce", "--overrides", str(path), "-o", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "particles.number" in err and "\n" not in err
+
+
+# -- the scales' claims ------------------------------------------------------------------
+def _holdup(case) -> float:
+    d = case.particles.diameter
+    return case.particles.number * math.pi * d**3 / 6 / (case.riser.width * case.riser.height * d)
+
+
+@pytest.mark.parametrize("scale", ["paper", "quick"])
+def test_scales_keep_the_papers_physics(scale):
+    paper = load_case("paper-u6")
+    for u, case in zip((3, 4, 6, 8), scale_cases(scale)):
+        assert case.gas.superficial_velocity == u
+        assert case.particles.diameter == paper.particles.diameter
+        assert case.particles.density == paper.particles.density
+        assert _holdup(case) == pytest.approx(_holdup(paper), rel=2e-3)
+        law = ContactLaw.from_config(case.contact, case.particles.diameter, case.particles.density)
+        steps = law.contact_times()[0] / case.numerics.dem_time_step
+        assert steps >= 5.0
+        c = case.contact
+        assert (c.normal_restitution, c.friction_coefficient) == (0.97, 0.1)
+        assert c.tangential_stiffness / c.normal_stiffness == pytest.approx(0.2857, rel=1e-3)
+        nx, ny = case.numerics.cfd_cells
+        assert case.riser.width / nx == pytest.approx(0.01, rel=0.12)
+        assert case.riser.height / ny == pytest.approx(0.01, rel=0.12)
+        m = case.markov
+        assert 0 < m.fit_window[0] < m.fit_window[1] <= m.predict_window[0]
+        assert m.predict_window[1] <= case.output.end_time
+        assert m.columns % 2 == 0
+        assert case.output.frame_interval <= m.lag
+    if scale == "paper":
+        assert [c.output.end_time for c in scale_cases(scale)] == [20.0] * 4
+        assert SCALES["paper"].overrides == {}
+
+
+def test_export_vtk_of_a_cfd_dem_stage(reference, tmp_path, capsys):
+    """The CLI exports the reproduction's CFD-DEM run (particles and gas) for ParaView."""
+    out, _ = reference
+    run = out / "u8" / "cfd-dem.h5"
+    with Trajectories(run) as t:
+        n_frames = t.n_frames
+        assert t.has_fields
+    vtk = tmp_path / "vtk"
+    capsys.readouterr()
+    assert main(["export-vtk", str(run), "-o", str(vtk), "--every", "2", "-q"]) == 0
+    assert f"{(n_frames + 1) // 2} particle frames" in capsys.readouterr().out
+    assert len(list(vtk.glob("particles_*.vtu"))) == (n_frames + 1) // 2
+    assert len(list(vtk.glob("gas_*.vtr"))) == (n_frames + 1) // 2
+    assert (vtk / "particles.pvd").exists() and (vtk / "gas.pvd").exists()
+    assert main(["export-vtk", str(run), "-o", str(tmp_path / "bad"), "--start", "50"]) == 2
+    assert not (tmp_path / "bad").exists()
