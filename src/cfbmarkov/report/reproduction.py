@@ -294,8 +294,9 @@ class _Analysis:
     edges: np.ndarray
     reference: _Side
     models: dict[str, _Side]
-    band_heights: np.ndarray      # centres (m)
-    solids_fraction: np.ndarray   # time-averaged solids volume fraction per band
+    band_positions: np.ndarray    # bin centres across the riser, x (m)
+    solids_fraction: np.ndarray   # time-averaged solids volume fraction per bin
+    solids_velocity: np.ndarray   # mean vertical solids velocity per bin (m/s)
     model_name: str | None = None
     model: Any = None             # MarkovModel used for Fig. 3-7
 
@@ -310,20 +311,32 @@ def _side(traj, window, bin_width) -> _Side:
     return _Side(rt, prob, t, f)
 
 
-def _solids_profile(traj, window, config) -> tuple[np.ndarray, np.ndarray]:
-    """Time-averaged solids volume fraction per height band (the model's rows) over the
-    window, pseudo-2D as in SPEC §1: N pi d^3/6 over W dy d."""
-    bands = int(config.markov.rows)
-    edges = np.linspace(0.0, traj.height, bands + 1)
-    counts = np.zeros(bands)
+def _solids_profile(traj, window, config) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Radial (across the riser) profiles over the window: bin centres x (m), time-averaged
+    solids volume fraction (pseudo-2D as in SPEC §1: N pi d^3/6 over H dx d) and the
+    solids' mean vertical velocity (m/s; NaN where no particle passed, or without
+    velocities). Two bins per gas cell across."""
+    bins = 2 * int(config.numerics.cfd_cells[0])
+    edges = np.linspace(0.0, traj.width, bins + 1)
+    counts = np.zeros(bins)
+    momentum = np.zeros(bins)
     frames = traj.window(*window)
     n_frames = 0
-    for _, positions, _ in traj.iter_frames(frames, block=32):
-        counts += np.histogram(positions[..., 1], bins=edges)[0]
+    for k0 in range(frames.start, frames.stop, 32):
+        block = slice(k0, min(k0 + 32, frames.stop))
+        positions = traj.positions(block)
+        x = positions[..., 0].ravel()
+        counts += np.histogram(x, bins=edges)[0]
+        velocities = traj.velocities(block)
+        if velocities is not None:
+            momentum += np.histogram(x, bins=edges, weights=velocities[..., 1].ravel())[0]
         n_frames += positions.shape[0]
     d = float(config.particles.diameter)
-    fraction = counts / max(n_frames, 1) * (math.pi * d * d / 6.0) / (traj.width * np.diff(edges))
-    return 0.5 * (edges[:-1] + edges[1:]), fraction
+    fraction = counts / max(n_frames, 1) * (math.pi * d * d / 6.0) / (traj.height * np.diff(edges))
+    velocity = np.divide(momentum, counts, out=np.full(bins, np.nan), where=counts > 0)
+    if not traj.has_velocity:
+        velocity[:] = np.nan
+    return 0.5 * (edges[:-1] + edges[1:]), fraction, velocity
 
 
 def _analyse(case: _Case, notes: list[str]) -> _Analysis:
@@ -341,13 +354,14 @@ def _analyse(case: _Case, notes: list[str]) -> _Analysis:
                          f"from the case's predict window {window[0]:g}-{window[1]:g} s")
     with _reading(case.reference), Trajectories(case.reference) as ref:
         reference = _side(ref, window, bin_width)
-        heights, solids = _solids_profile(ref, window, case.config)
+        across, solids, solids_velocity = _solids_profile(ref, window, case.config)
     edges, _ = rtd_histogram(np.zeros(0), bin_width, window_length=window[1] - window[0])
     models = {}
     for e in case.finished:
         with _reading(e.prediction), Trajectories(e.prediction) as pred:
             models[e.name] = _side(pred, window, bin_width)
-    analysis = _Analysis(window, bin_width, edges, reference, models, heights, solids)
+    analysis = _Analysis(window, bin_width, edges, reference, models, across, solids,
+                         solids_velocity)
     chosen = case.finished[0]
     analysis.model_name = chosen.name
     with _reading(chosen.model):
@@ -491,13 +505,14 @@ def _plot_mixing_grid(panels, path, title: str) -> Path:
 
 def _plot_plausibility(velocities, means, sds, model_means, profiles, path, title: str) -> Path:
     """(a) E(RT) and SD(RT) of the CFD-DEM (and E(RT) of each estimator) against U; (b)
-    solids volume fraction against height, one line per U."""
+    solids volume fraction and (c) mean vertical solids velocity across the riser, one line
+    per U (the core-annulus structure)."""
     from matplotlib.figure import Figure
 
     from cfbmarkov.report.figures import _save
 
-    fig = Figure(figsize=(11.0, 4.6), layout="constrained")
-    ax, bx = fig.subplots(1, 2)
+    fig = Figure(figsize=(15.0, 4.6), layout="constrained")
+    ax, bx, cx = fig.subplots(1, 3)
     u = np.asarray(velocities, float)
     ax.plot(u, means, "o-", color=_CFD_DEM_COLOUR, label="E(RT), CFD-DEM")
     ax.plot(u, sds, "s--", color=_CFD_DEM_COLOUR, mfc="white", label="SD(RT), CFD-DEM")
@@ -511,16 +526,22 @@ def _plot_plausibility(velocities, means, sds, model_means, profiles, path, titl
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, frameon=False)
     ax.set_title("(a) residence time against U", fontsize=10)
-    for (label, heights, fraction), colour in zip(
-            profiles, ("#1f4e79", "#d35400", "#1a9641", "#7b3294", "#c51b7d", "#4d4d4d",
-                       "#b8860b", "#2c7fb8") * 4):
-        bx.plot(fraction, heights, "-", color=colour, lw=1.4, label=label)
-    bx.set_xlabel("solids volume fraction (-), averaged over the window")
-    bx.set_ylabel("height y (m)")
-    bx.set_xlim(left=0.0)
+    colours = ("#1f4e79", "#d35400", "#1a9641", "#7b3294", "#c51b7d", "#4d4d4d",
+               "#b8860b", "#2c7fb8") * 4
+    for (label, across, fraction, velocity), colour in zip(profiles, colours):
+        bx.plot(1e3 * across, fraction, "-", color=colour, lw=1.4, label=label)
+        cx.plot(1e3 * across, velocity, "-", color=colour, lw=1.4, label=label)
+    bx.set_xlabel("distance from the left wall x (mm)")
+    bx.set_ylabel("solids volume fraction (-), window average")
+    bx.set_ylim(bottom=0.0)
     bx.grid(alpha=0.3)
     bx.legend(fontsize=8, frameon=False)
-    bx.set_title("(b) axial solids profile, CFD-DEM", fontsize=10)
+    bx.set_title("(b) radial solids profile, CFD-DEM", fontsize=10)
+    cx.axhline(0.0, color="0.4", lw=0.8)
+    cx.set_xlabel("distance from the left wall x (mm)")
+    cx.set_ylabel("mean vertical solids velocity (m/s)")
+    cx.grid(alpha=0.3)
+    cx.set_title("(c) radial solids velocity, CFD-DEM (< 0: falling)", fontsize=10)
     fig.suptitle(title, fontsize=11)
     return _save(fig, path)
 
@@ -1048,10 +1069,11 @@ def _plausibility_blocks(done, analyses, estimators, figures_dir: Path,
     model_means = {n: [analyses[c.name].models[n].rt.mean if n in analyses[c.name].models
                        else math.nan for c in done] for n in estimators
                    if any(n in analyses[c.name].models for c in done)}
-    profiles = [(c.label, analyses[c.name].band_heights, analyses[c.name].solids_fraction)
-                for c in done]
+    profiles = [(c.label, analyses[c.name].band_positions, analyses[c.name].solids_fraction,
+                 analyses[c.name].solids_velocity) for c in done]
     _plot_plausibility(u, means, sds, model_means, profiles, figures_dir / name,
-                       "Plausibility of the CFD-DEM: residence time against U, solids profile")
+                       "Plausibility of the CFD-DEM: residence time against U, core-annulus "
+                       "profiles")
     written.append(name)
     finite = [(c, m) for c, m in zip(done, means) if math.isfinite(m)]
     trend = " → ".join(f"{m:.3f} s" for _, m in finite)
@@ -1066,17 +1088,23 @@ def _plausibility_blocks(done, analyses, estimators, figures_dir: Path,
                    "the paper reports a steady fall (Fig. 8).")
     ratios = []
     for c in done:
-        frac = analyses[c.name].solids_fraction
-        k = max(1, frac.size // 5)
-        low, high = float(frac[:k].mean()), float(frac[-k:].mean())
-        ratios.append(f"{c.label}: mean {float(frac.mean()):.3g}, bottom/top fifth "
-                      + (f"{low / high:.2f}" if high > 0 else "n/a"))
+        a = analyses[c.name]
+        k = max(1, a.solids_fraction.size // 6)
+        wall = float(np.r_[a.solids_fraction[:k], a.solids_fraction[-k:]].mean())
+        core = float(a.solids_fraction[k:-k].mean()) if a.solids_fraction.size > 2 * k else wall
+        v_wall = float(np.nanmean(np.r_[a.solids_velocity[:k], a.solids_velocity[-k:]]))
+        v_core = (float(np.nanmean(a.solids_velocity[k:-k])) if a.solids_velocity.size > 2 * k
+                  else v_wall)
+        ratios.append(f"{c.label}: solids fraction wall/core {wall:.3g}/{core:.3g}, velocity "
+                      f"wall/core {v_wall:+.2f}/{v_core:+.2f} m/s")
     sentence = ("(a) E(RT) and SD(RT) of the CFD-DEM, and E(RT) of each MCM, against U; (b) "
-                "solids volume fraction of the CFD-DEM per cell row (pseudo-2D, one particle "
-                f"diameter thick), averaged over the predict window ({'; '.join(ratios)}).")
+                "solids volume fraction and (c) mean vertical solids velocity of the CFD-DEM "
+                "across the riser (pseudo-2D, one particle diameter thick), averaged over the "
+                f"predict window; a core-annulus flow has denser, slower or falling wall layers "
+                f"({'; '.join(ratios)}).")
     return [_Heading(2, "Plausibility"),
             _Para(verdict),
-            _Fig(name, "Plausibility: E(RT) and SD(RT) against U, axial solids profile",
+            _Fig(name, "Plausibility: E(RT) and SD(RT) against U, radial solids profiles",
                  sentence)]
 
 
