@@ -1060,6 +1060,11 @@ def _mixing_blocks(done, analyses, estimators, figures_dir: Path, written: list[
                  "left half, CFD-DEM against each estimator; " + "; ".join(parts) + ".")]
 
 
+def _nanmean(values: np.ndarray) -> float:
+    finite = values[np.isfinite(values)]
+    return float(finite.mean()) if finite.size else math.nan
+
+
 def _plausibility_blocks(done, analyses, estimators, figures_dir: Path,
                          written: list[str]) -> list:
     name = "plausibility.png"
@@ -1092,9 +1097,8 @@ def _plausibility_blocks(done, analyses, estimators, figures_dir: Path,
         k = max(1, a.solids_fraction.size // 6)
         wall = float(np.r_[a.solids_fraction[:k], a.solids_fraction[-k:]].mean())
         core = float(a.solids_fraction[k:-k].mean()) if a.solids_fraction.size > 2 * k else wall
-        v_wall = float(np.nanmean(np.r_[a.solids_velocity[:k], a.solids_velocity[-k:]]))
-        v_core = (float(np.nanmean(a.solids_velocity[k:-k])) if a.solids_velocity.size > 2 * k
-                  else v_wall)
+        v_wall = _nanmean(np.r_[a.solids_velocity[:k], a.solids_velocity[-k:]])
+        v_core = _nanmean(a.solids_velocity[k:-k]) if a.solids_velocity.size > 2 * k else v_wall
         ratios.append(f"{c.label}: solids fraction wall/core {wall:.3g}/{core:.3g}, velocity "
                       f"wall/core {v_wall:+.2f}/{v_core:+.2f} m/s")
     sentence = ("(a) E(RT) and SD(RT) of the CFD-DEM, and E(RT) of each MCM, against U; (b) "
