@@ -189,6 +189,9 @@ class MarkovModel:
         frames = slice(first, i + 1)
         positions = trajectories.positions(frames)
         velocities = trajectories.velocities(frames) if space.needs_velocity else None
+        if space.needs_velocity and velocities is None:
+            raise InputError(f"state space {space.kind} needs velocities; {trajectories.path} "
+                             "has none")
         states = space.discretize(positions, velocities, lag_frames)[-1]
         return states, positions[-1], trajectories.laps(i)
 

@@ -1,0 +1,324 @@
+"""State spaces with memory (issue 5): direction, velocity bins, previous cell.
+
+Hand-made frames check the discretisation (periodic boundary, bin edges, clipping); the
+synthetic core-annulus flow, whose particles carry a hidden direction, checks that memory
+recovers the spread of residence times that the paper's chain on cells misses; and every
+space goes through the whole pipeline (fit, save/load, propagate, exact RTD, Monte Carlo
+prediction, compare).
+"""
+
+import contextlib
+import json
+
+import numpy as np
+import pytest
+
+from cfbmarkov import synthetic
+from cfbmarkov.analysis.rtd import residence_times
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov import (STATE_SPACES, CellGrid, DirectionCells, MarkovModel,
+                              MaximumLikelihoodEstimator, PaperEstimator, PreviousCellCells,
+                              StateSpace, VelocityCells, cell_index, estimator_from_name,
+                              state_space_from_name)
+from cfbmarkov.report.compare import compare
+from cfbmarkov.trajectories import Trajectories, lap_increments, write_trajectories
+
+try:
+    from threadpoolctl import threadpool_limits
+except ImportError:  # pragma: no cover
+    threadpool_limits = None
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _one_blas_thread():
+    """np.linalg.eig (synthetic stationary start, exact RTD) is ~100x slower with two
+    OpenBLAS threads on a busy 2-core machine; one thread keeps these tests fast."""
+    with (threadpool_limits(1) if threadpool_limits else contextlib.nullcontext()):
+        yield
+
+
+# -- hand-made frames -------------------------------------------------------------------------
+def _frames(*ys, x=0.25):
+    """Positions [T, N, 2] with the given y per frame (one tuple per frame)."""
+    y = np.asarray(ys, dtype=np.float64)
+    return np.stack([np.full_like(y, x), y], axis=-1)
+
+
+def test_direction_from_displacement_through_the_periodic_boundary():
+    space = DirectionCells(2, 4, width=1.0, height=1.0)
+    assert space.n_states == 16 and space.memory_lags == 1 and not space.needs_velocity
+    # particles: up through the top, down through the bottom, still, falling, rising,
+    # exactly +H/2 and exactly -H/2 (both wrap to +H/2: rising)
+    pos = _frames((0.95, 0.05, 0.30, 0.60, 0.40, 0.25, 0.75),
+                  (0.05, 0.95, 0.30, 0.40, 0.60, 0.75, 0.25))
+    states = space.discretize(pos, None, lag_frames=1)
+    cells = cell_index(pos, 1.0, 1.0, 2, 4)
+    falling = np.array([0, 1, 0, 1, 0, 0, 0])
+    np.testing.assert_array_equal(states[1], 2 * cells[1] + falling)
+    np.testing.assert_array_equal(space.falling(states[1]), falling == 1)
+    np.testing.assert_array_equal(states[0], 2 * cells[0])        # no history: rising
+    np.testing.assert_array_equal(space.cell_of_state[states], cells)
+    # a lag of two frames compares frames t and t-2
+    pos3 = _frames((0.50, 0.50), (0.90, 0.10), (0.40, 0.60))
+    states3 = space.discretize(pos3, None, lag_frames=2)
+    np.testing.assert_array_equal(space.falling(states3[2]), [True, False])
+    np.testing.assert_array_equal(space.falling(states3[:2]), False)
+    # a single frame has no history
+    np.testing.assert_array_equal(space.discretize(pos[1]), 2 * cells[1])
+
+
+def test_direction_from_velocity_needs_velocities():
+    space = DirectionCells(2, 4, 1.0, 1.0, source="velocity")
+    assert space.memory_lags == 0 and space.needs_velocity
+    assert CellGrid(2, 4).needs_velocity is False and DirectionCells.needs_velocity is False
+    pos = _frames((0.1, 0.3, 0.6, 0.9))
+    vel = np.zeros_like(pos)
+    vel[0, :, 1] = [2.0, -0.1, 0.0, -3.0]
+    states = space.discretize(pos, vel, 1)
+    np.testing.assert_array_equal(states[0], 2 * cell_index(pos[0], 1.0, 1.0, 2, 4) + [0, 1, 0, 1])
+    with pytest.raises(InputError, match="needs velocities"):
+        space.discretize(pos, None, 1)
+
+
+def test_velocity_bins_from_displacement_and_from_velocity():
+    lag = 0.5
+    space = VelocityCells(1, 4, width=1.0, height=4.0, edges=(-1.0, 0.0, 1.0, 3.0), lag=lag)
+    assert space.n_states == 20 and space.per_cell == 5 and space.memory_lags == 1
+    # v = dy / lag: -1.2 (bin 0), -1 (edge: bin 1), -0.2 (1), 0 (2), 0.5 (2), 1 (3),
+    # 2.9 (3), 3 (4); and 3.75 -> 0.25 up through the top: dy = +0.5, v = 1 (bin 3)
+    dy = np.array([-0.6, -0.5, -0.1, 0.0, 0.25, 0.5, 1.45, 1.5])
+    y0 = np.append(np.full(dy.size, 2.0), 3.75)
+    y1 = np.append(2.0 + dy, 0.25)
+    pos = _frames(tuple(y0), tuple(y1))
+    states = space.discretize(pos, None, lag_frames=1)
+    cells = cell_index(pos, 1.0, 4.0, 1, 4)
+    bins = np.array([0, 1, 1, 2, 2, 3, 3, 4, 3])
+    np.testing.assert_array_equal(states[1], 5 * cells[1] + bins)
+    np.testing.assert_array_equal(space.velocity_bin(states[1]), bins)
+    np.testing.assert_array_equal(space.velocity_bin(states[0]), 2)     # no history: v = 0
+    np.testing.assert_array_equal(space.cell_of_state[states], cells)
+    # from velocities: the frame's own v_y, no history, lag unused
+    from_v = VelocityCells(1, 4, 1.0, 4.0, edges=(0.0, 2.0), source="velocity")
+    assert from_v.needs_velocity and from_v.memory_lags == 0 and from_v.n_states == 12
+    vel = np.zeros_like(pos)
+    vel[..., 1] = [[-5.0, 0.0, 1.9, 2.0, 7.0, -0.01, 0, 0, 0]] * 2
+    np.testing.assert_array_equal(from_v.velocity_bin(from_v.discretize(pos, vel)[0]),
+                                  [0, 1, 1, 2, 2, 0, 1, 1, 1])
+    for bad in ((), (1.0, 1.0), (2.0, 1.0), (np.nan,), ("a",)):
+        with pytest.raises(InputError, match="edges"):
+            VelocityCells(1, 4, edges=bad)
+    with pytest.raises(InputError, match="lag"):
+        VelocityCells(1, 4, lag=0.0)
+
+
+def test_previous_cell_offsets_wrap_and_clip():
+    space = PreviousCellCells(1, 10, width=1.0, height=10.0, reach=2)
+    assert space.per_cell == 5 and space.n_states == 50 and space.memory_lags == 1
+    # (previous row, current row): 5->6, 9->0 (up through the top), 0->9 (down through the
+    # bottom), 2->7 (exactly n/2: +5, clipped to +2), 7->2 (+5 -> +2), 1->5 (-4 -> -2), 3->3
+    prev = np.array([5, 9, 0, 2, 7, 1, 3])
+    cur = np.array([6, 0, 9, 7, 2, 5, 3])
+    pos = _frames(tuple(prev + 0.5), tuple(cur + 0.5), x=0.5)
+    states = space.discretize(pos, None, lag_frames=1)
+    drow, dcol = space.offsets(states[1])
+    np.testing.assert_array_equal(drow, [-1, -1, 1, 2, 2, -2, 0])
+    np.testing.assert_array_equal(dcol, 0)
+    np.testing.assert_array_equal(space.cell_of_state[states[1]], cur)
+    np.testing.assert_array_equal(space.offsets(states[0])[0], 0)        # no history
+    # columns: previous minus current column, clipped to the column reach
+    wide = PreviousCellCells(3, 10, width=3.0, height=10.0, reach=1, column_reach=1)
+    assert wide.per_cell == 9 and wide.n_states == 270
+    x0, x1 = np.array([0.5, 0.5, 2.5, 1.5]), np.array([2.5, 1.5, 1.5, 1.5])
+    y0, y1 = np.array([0.5, 4.5, 8.5, 3.5]), np.array([0.5, 2.5, 8.5, 3.5])
+    pos = np.stack([np.stack([x0, y0], -1), np.stack([x1, y1], -1)])
+    states = wide.discretize(pos, None, 1)
+    drow, dcol = wide.offsets(states[1])
+    np.testing.assert_array_equal(drow, [0, 1, 0, 0])
+    np.testing.assert_array_equal(dcol, [-1, -1, 1, 0])
+    np.testing.assert_array_equal(wide.cell_of_state[states], cell_index(pos, 3.0, 10.0, 3, 10))
+    # default: 7 sub-states per cell, 1596 states on the paper's grid
+    assert PreviousCellCells(6, 38).n_states == 1596
+    with pytest.raises(InputError, match="reach"):
+        PreviousCellCells(6, 38, reach=-1)
+
+
+@pytest.mark.parametrize("name", STATE_SPACES)
+def test_cell_of_state_matches_cell_index_and_attrs_round_trip(name):
+    space = state_space_from_name(name, 6, 38, 0.09, 0.95)
+    rng = np.random.default_rng(1)
+    pos = rng.uniform([0, 0], [0.09, 0.95], size=(5, 300, 2))
+    pos[-1, :10] = [0.09, 0.95]                              # far edges go inside
+    states = space.discretize(pos, pos * 10.0, lag_frames=2)
+    assert states.shape == (5, 300) and states.dtype == np.int32
+    assert states.min() >= 0 and states.max() < space.n_states
+    np.testing.assert_array_equal(space.cell_of_state[states], cell_index(pos, 0.09, 0.95, 6, 38))
+    attrs = space.to_attrs()
+    assert attrs["kind"] == name
+    back = StateSpace.from_attrs(json.dumps(attrs))
+    assert type(back) is type(space) and back == space and back.to_attrs() == attrs
+    assert StateSpace.from_attrs(attrs) == space and hash(back) == hash(space)
+    assert back.memory_lags == space.memory_lags and back.needs_velocity == space.needs_velocity
+    inlet = space.inlet_distribution()
+    assert inlet.sum() == pytest.approx(1.0)
+    np.testing.assert_allclose(space.cell_maps(inlet)[0], 1 / 6)
+
+
+def test_spaces_by_name_and_bad_names():
+    assert state_space_from_name("cells", 6, 38) == CellGrid(6, 38)
+    assert isinstance(state_space_from_name("cells-direction", 6, 38), DirectionCells)
+    assert state_space_from_name("cells-velocity", 6, 38, lag=0.05).lag == 0.05
+    assert state_space_from_name("cells-previous", 6, 38).reach == 3
+    with pytest.raises(InputError) as err:
+        state_space_from_name("cells-bogus", 6, 38)
+    message = str(err.value)
+    assert "\n" not in message and all(n in message for n in STATE_SPACES)
+    with pytest.raises(InputError, match="source"):
+        DirectionCells(6, 38, source="guess")
+    with pytest.raises(InputError, match="unknown state space kind"):
+        StateSpace.from_attrs({"kind": "cells-bogus"})
+
+
+def test_velocity_source_fits_from_files_with_velocities(tmp_path):
+    # 1 column x 4 rows; 2 particles: one rising (v > 0) in row 0, one falling in row 3
+    pos = np.tile([[[0.05, 0.1], [0.05, 0.9]]], (6, 1, 1))
+    vel = np.tile([[[0.0, 1.0], [0.0, -1.0]]], (6, 1, 1))
+    with_v = write_trajectories(tmp_path / "v.h5", np.arange(6.0), pos, width=0.1, height=1.0,
+                                velocities=vel)
+    no_v = write_trajectories(tmp_path / "nv.h5", np.arange(6.0), pos, width=0.1, height=1.0)
+    space = DirectionCells(1, 4, 0.1, 1.0, source="velocity")
+    model = MaximumLikelihoodEstimator(space, lag=1.0).fit(with_v, window=(0, 5))
+    assert model.counts[0, 0] == 5 and model.counts[7, 7] == 5 and model.n_transitions == 10
+    with Trajectories(with_v) as t:
+        np.testing.assert_array_equal(model.initial_states(t, 0.0)[0], [0, 7])
+    with pytest.raises(InputError, match="needs velocities"):
+        MaximumLikelihoodEstimator(space, lag=1.0).fit(no_v)
+    with pytest.raises(InputError, match="needs velocities"):
+        model.predict(no_v, start=1.0, duration=1.0)
+    # displacement-based spaces need one lag of history before the window
+    with pytest.raises(InputError, match="history"):
+        MaximumLikelihoodEstimator(DirectionCells(1, 4, 0.1, 1.0), lag=1.0).fit(with_v, (0, 5))
+
+
+# -- the synthetic core-annulus flow ----------------------------------------------------------
+#: The generator writes each particle at a uniformly random point of its cell in every frame,
+#: which adds an apparent vertical velocity noise of 0.41 m/s (difference of two uniforms,
+#: one cell per lag) that a CFD-DEM trajectory does not have. With the default vertical
+#: spread of 0.6 cells per lag, 27 % of the hidden steps of falling particles (0.8 m/s, 0.8
+#: cells per lag) stay in their row, their displacement is then pure placement noise, and
+#: 14 % of falling particles read as rising: a one-lag displacement cannot resolve the hidden
+#: direction there (see test_default_flow_direction_is_only_partly_resolved). With a spread
+#: of 0.25 cells the written positions still fluctuate by 0.42 m/s per lag, but the hidden
+#: direction is visible in the displacement, which is what the direction space assumes.
+RESOLVED = synthetic.RiserFlow(vertical_spread=0.25)
+DEFAULT = synthetic.RiserFlow()
+FIT, PREDICT = (0.5, 4.5), (4.5, 8.5)
+
+
+def _write(tmp_path_factory, flow, name, seed):
+    path = tmp_path_factory.mktemp("memory") / name
+    synthetic.write_run(path, flow, 2000, PREDICT[1], seed=seed)
+    return path
+
+
+@pytest.fixture(scope="module")
+def resolved_run(tmp_path_factory):
+    return _write(tmp_path_factory, RESOLVED, "resolved.h5", seed=1)
+
+
+@pytest.fixture(scope="module")
+def default_run(tmp_path_factory):
+    return _write(tmp_path_factory, DEFAULT, "default.h5", seed=0)
+
+
+def _errors(run, flow, names):
+    """PD (%) of E(RT) and SD(RT) of each space's exact RTD in the window vs the samples."""
+    with Trajectories(run) as traj:
+        ref = residence_times(traj, PREDICT)
+    length = PREDICT[1] - PREDICT[0]
+    out = {}
+    for name in names:
+        space = state_space_from_name(name, flow.columns, flow.rows, flow.width, flow.height)
+        exact = MaximumLikelihoodEstimator(space, flow.lag).fit(run, FIT).rtd(window=length)
+        out[name] = (100 * (exact.mean / ref.mean - 1), 100 * (exact.sd / ref.sd - 1))
+    return out
+
+
+def test_direction_memory_recovers_the_spread_of_residence_times(resolved_run):
+    err = _errors(resolved_run, RESOLVED, ("cells", "cells-direction"))
+    assert err["cells"][1] < -25.0                          # the paper's weakness
+    e_mean, e_sd = err["cells-direction"]
+    assert abs(e_mean) < 3.0 and abs(e_sd) < 10.0, err
+
+
+def test_default_flow_direction_is_only_partly_resolved(default_run):
+    """On the default flow the one-lag direction is blurred (see RESOLVED): it still halves
+    the SD(RT) error of the cells model, and the previous-cell space, which keeps how far
+    the particle moved, is within 3 % (E) and 10 % (SD)."""
+    err = _errors(default_run, DEFAULT, STATE_SPACES)
+    assert err["cells"][1] < -25.0
+    assert abs(err["cells-direction"][1]) < 0.5 * abs(err["cells"][1])
+    assert abs(err["cells-direction"][0]) < abs(err["cells"][0])
+    assert abs(err["cells-velocity"][1]) < abs(err["cells-direction"][1])
+    assert abs(err["cells-previous"][0]) < 3.0 and abs(err["cells-previous"][1]) < 10.0, err
+
+
+@pytest.mark.parametrize("name", STATE_SPACES)
+def test_every_space_through_the_pipeline(name, resolved_run, tmp_path):
+    flow = RESOLVED
+    space = state_space_from_name(name, flow.columns, flow.rows, flow.width, flow.height)
+    model = PaperEstimator(space, flow.lag).fit(resolved_run, FIT)
+    assert model.state_space is space and model.n_transitions == 2000 * 160
+    # save / load
+    back = MarkovModel.load(model.save(tmp_path / "model.h5"))
+    assert back.state_space == space and type(back.state_space) is type(space)
+    np.testing.assert_array_equal(back.transition_matrix, model.transition_matrix)
+    np.testing.assert_array_equal(back.counts_up, model.counts_up)
+    # propagation, maps, exact RTD
+    maps = back.batch_injection_maps([0.0, 0.25], outflow=True)
+    assert maps.shape == (2, flow.rows, flow.columns)
+    np.testing.assert_allclose(maps[0, 0], 1 / flow.columns)
+    assert 0 < maps[1].sum() <= 1.0
+    rtd = back.rtd(window=4.0)
+    assert rtd.mean == pytest.approx(model.rtd(window=4.0).mean, rel=1e-12)
+    assert 0.4 < rtd.mean < 1.2 and rtd.unresolved < 1e-6
+    # initial states are the discretisation of the frames ending at the start
+    with Trajectories(resolved_run) as traj:
+        i, lag_frames = traj.frame_index(PREDICT[0]), traj.lag_frames(flow.lag)
+        frames = traj.positions(slice(i - lag_frames * space.memory_lags, i + 1))
+        states0, positions0, _ = model.initial_states(traj, PREDICT[0])
+        np.testing.assert_array_equal(states0, space.discretize(frames, None, lag_frames)[-1])
+        np.testing.assert_array_equal(space.cell_of_state[states0], cell_index(
+            positions0, flow.width, flow.height, flow.columns, flow.rows))
+    # Monte Carlo prediction written as a trajectory file, compared with the reference
+    out = back.predict(resolved_run, start=PREDICT[0], duration=4.0, seed=3,
+                       output=tmp_path / "pred.h5")
+    _, states, _ = back.predict(resolved_run, start=PREDICT[0], duration=4.0, seed=3)
+    with Trajectories(out) as pred:
+        assert pred.n_frames == 161 and pred.source == "markov-prediction"
+        assert MarkovModel.from_trajectories(pred).state_space == space
+        pos, laps = pred.positions(), pred.laps()
+        np.testing.assert_array_equal(
+            cell_index(pos[1:], flow.width, flow.height, flow.columns, flow.rows),
+            space.cell_of_state[states[1:]])
+        passes = np.array([lap_increments(pos[k - 1, :, 1], pos[k, :, 1], pred.height)
+                           for k in range(1, 161)])
+        np.testing.assert_array_equal(np.diff(laps, axis=0), passes)
+    summary = compare(resolved_run, out, window=PREDICT, output=tmp_path / "cmp", figures=False)
+    assert summary["model"]["rt_count"] > 1000 and np.isfinite(summary["pd_rt_sd"])
+    if name == "cells":
+        assert summary["pd_rt_sd"] < -25.0
+    else:
+        assert abs(summary["pd_rt_mean"]) < 6.0 and abs(summary["pd_rt_sd"]) < 12.0, summary
+
+
+def test_estimators_agree_on_memory_spaces(resolved_run):
+    space = DirectionCells(6, 38, RESOLVED.width, RESOLVED.height)
+    mle = estimator_from_name("mle", space, 0.05).fit(resolved_run, FIT)     # lag of 2 frames
+    paper = estimator_from_name("paper", space, 0.05).fit(resolved_run, FIT)
+    np.testing.assert_array_equal(mle.counts, paper.counts)
+    assert mle.rtd().mean == pytest.approx(paper.rtd().mean, rel=0.02)
+    # a rising state mostly moves up, a falling one down: the memory is in P
+    falling = space.falling(np.arange(space.n_states))
+    p = mle.transition_matrix
+    assert p[np.ix_(falling, falling)].sum(axis=1).mean() > 0.6
+    assert p[np.ix_(~falling, ~falling)].sum(axis=1).mean() > 0.8
