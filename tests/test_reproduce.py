@@ -181,7 +181,7 @@ def test_process_pool_runs_cases_in_parallel(tmp_path):
 
 @pytest.mark.parametrize("argv, message", [
     (["--velocities", "3,-4"], "must be positive"),
-    (["--estimators", "paper,best"], "unknown estimator 'best'"),
+    (["--models", "paper,best"], "unknown model 'best'"),
     (["--overrides", "missing.toml"], "cannot read overrides"),
     (["--jobs", "0"], "must be at least 1"),
 ])

@@ -64,13 +64,20 @@ def _cmd_import(args) -> int:
 
 
 def _cmd_fit(args) -> int:
-    from cfbmarkov.markov import CellGrid, estimator_from_name
+    from cfbmarkov.markov import estimator_from_name, state_space_from_name
+    from cfbmarkov.markov.select import select_model
     from cfbmarkov.trajectories import Trajectories
 
+    columns, rows = args.cells
     with Trajectories(args.run) as run:
-        grid = CellGrid(args.cells[0], args.cells[1], run.width, run.height)
-        estimator = estimator_from_name(args.estimator, state_space=grid, lag=args.lag)
-        model = estimator.fit(run, window=args.window)
+        if args.states == "auto":
+            model = select_model(run, window=args.window, columns=columns, rows=rows,
+                                 lag=args.lag, estimator=args.estimator)
+        else:
+            space = state_space_from_name(args.states, columns, rows, run.width, run.height,
+                                          args.lag)
+            estimator = estimator_from_name(args.estimator, state_space=space, lag=args.lag)
+            model = estimator.fit(run, window=args.window)
     model.save(args.output)
     print(model.summary())
     print(args.output)
@@ -184,7 +191,7 @@ def _cmd_reproduce(args) -> int:
 
     overrides = load_overrides(args.overrides) if args.overrides else None
     report = reproduce(args.output, args.scale, args.velocities, overrides=overrides,
-                       estimators=args.estimators, scheduler=args.scheduler, jobs=args.jobs,
+                       models=args.models, scheduler=args.scheduler, jobs=args.jobs,
                        progress=not args.quiet, log=lambda line: print(line, flush=True))
     print(report)
     return 0
@@ -277,6 +284,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--window", type=parse_window, default=(10.0, 15.0),
                    help="fitting window START:STOP, s (default 10:15)")
     s.add_argument("--estimator", choices=["paper", "mle"], default="paper")
+    s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
+                                        "cells-previous", "auto"], default="cells",
+                   help="state space: the paper's cells, cells x direction of motion, cells x "
+                        "vertical-velocity bins, cells x previous-cell offset (second order), "
+                        "or auto: chosen with the lag on held-out frames of the window "
+                        "(default cells)")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
     s.set_defaults(func=_cmd_fit)
 
@@ -341,8 +354,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-o", "--output", required=True, help="output directory (rerun to resume)")
     s.add_argument("--velocities", type=_parse_velocities, default=[3.0, 4.0, 6.0, 8.0],
                    help="comma-separated superficial gas velocities U, m/s (default 3,4,6,8)")
-    s.add_argument("--estimators", type=_parse_names, default=["paper", "mle"],
-                   help="comma-separated estimators (default paper,mle)")
+    s.add_argument("--models", type=_parse_names, default=["paper", "mle", "auto"],
+                   help="comma-separated models: paper, mle (the paper's cells with that "
+                        "estimator), auto (state space and lag chosen on the fitting window), "
+                        "or STATES[:ESTIMATOR] (default paper,mle,auto)")
     s.add_argument("--overrides", default=None,
                    help="TOML file of changes applied to every case (same tables as a case file)")
     s.add_argument("--jobs", type=int, default=None,

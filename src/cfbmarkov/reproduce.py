@@ -6,10 +6,10 @@ what is done and resumes what was interrupted (the CFD-DEM from its last checkpo
 
     case.json                   the exact configuration (a rerun with another one is refused)
     cfd-dem.h5                  CFD-DEM 0..end (frames, exact pass events, gas fields)
-    model-<estimator>.h5        Markov model fitted on the fitting window (paper, mle)
-    prediction-<estimator>.h5   Monte Carlo over the prediction window, started from the
+    model-<name>.h5             Markov model fitted on the fitting window (paper, mle, auto)
+    prediction-<name>.h5        Monte Carlo over the prediction window, started from the
                                 CFD-DEM state at its start
-    compare-<estimator>/        RTD, mixing and figures against the CFD-DEM (summary.json)
+    compare-<name>/             RTD, mixing and figures against the CFD-DEM (summary.json)
     timings.json                wall times of the stages (s)
 
 ``DIR/reproduce.json`` names the scale and cases; ``DIR/report.html`` (with ``report.md``
@@ -42,7 +42,9 @@ from cfbmarkov.config import CaseConfig, load_case
 from cfbmarkov.errors import CfbmarkovError, InputError
 
 VELOCITIES = (3.0, 4.0, 6.0, 8.0)
-ESTIMATORS = ("paper", "mle")
+#: the models of a reproduction: the paper's (cells, Eq. 2-4), cells with the pooled MLE, and
+#: the state space and lag chosen from the fitting window (cfbmarkov.markov.select)
+MODELS = ("paper", "mle", "auto")
 
 
 @dataclass(frozen=True)
@@ -199,7 +201,7 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
     return out
 
 
-def run_case(case_json: str, directory: str, estimators: Sequence[str] = ESTIMATORS,
+def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
              progress: bool = True, threads: int | None = None,
              checkpoint_every: float = 0.5) -> dict[str, Any]:
     """Run (or finish) every stage of one case in ``directory``; returns what each stage did
@@ -207,7 +209,8 @@ def run_case(case_json: str, directory: str, estimators: Sequence[str] = ESTIMAT
     any executor (process pool, Dask) can run it."""
     import numba
 
-    from cfbmarkov.markov import CellGrid, MarkovModel, estimator_from_name
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.select import fit_by_name
     from cfbmarkov.report.compare import SUMMARY, compare
     from cfbmarkov.simulate.run import simulate
     from cfbmarkov.trajectories import Trajectories
@@ -247,16 +250,16 @@ def run_case(case_json: str, directory: str, estimators: Sequence[str] = ESTIMAT
 
     summaries = {}
     with Trajectories(reference) as ref:
-        grid = CellGrid(m.columns, m.rows, ref.width, ref.height)
         start, stop = m.predict_window
-        for name in estimators:
+        for name in models:
             model_path = folder / f"model-{name}.h5"
             if model_path.exists():
                 model = MarkovModel.load(model_path)
                 stages[f"fit-{name}"] = "skipped"
             else:
                 t0 = _time.perf_counter()
-                model = estimator_from_name(name, grid, m.lag).fit(ref, window=m.fit_window)
+                model = fit_by_name(name, ref, window=m.fit_window, columns=m.columns,
+                                    rows=m.rows, lag=m.lag)
                 model.save(model_path)
                 _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0})
                 stages[f"fit-{name}"] = "done"
@@ -335,18 +338,17 @@ def dask_executor(address: str) -> tuple[cf.Executor, Any]:
 # -- the whole reproduction --------------------------------------------------------------------
 def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
               velocities: Iterable[float] = VELOCITIES, *, overrides: dict | None = None,
-              estimators: Sequence[str] = ESTIMATORS, executor: cf.Executor | None = None,
+              models: Sequence[str] = MODELS, executor: cf.Executor | None = None,
               scheduler: str | None = None, jobs: int | None = None, progress: bool = True,
               report: bool = True, log: Callable[[str], None] = print) -> Path:
     """Run every case of ``scale`` at ``velocities`` into ``directory`` (resuming what is
     there) and write the report; returns the path of ``report.html`` (or of the directory
     with ``report=False``). Cases go to ``executor`` if given, else to the Dask cluster at
     ``scheduler``, else to :func:`local_executor` with ``jobs`` workers."""
-    from cfbmarkov.markov.estimate import ESTIMATORS as KNOWN
+    from cfbmarkov.markov.select import parse_model_name
 
-    for name in estimators:
-        if name not in KNOWN:
-            raise InputError(f"unknown estimator '{name}': choose from {', '.join(KNOWN)}")
+    for name in models:
+        parse_model_name(name)
     scale = _as_scale(scale)
     cases = scale_cases(scale, velocities, overrides)
     names = [case_name(c.gas.superficial_velocity) for c in cases]
@@ -360,7 +362,7 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
 
     manifest = {"scale": scale.name, "description": scale.description,
                 "reductions": list(scale.reductions), "overrides": overrides or {},
-                "cases": names, "estimators": list(estimators), "version": __version__}
+                "cases": names, "models": list(models), "version": __version__}
     write_text_atomic(out / "reproduce.json", json.dumps(manifest, indent=2) + "\n")
 
     client = None
@@ -375,7 +377,7 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     failures: list[str] = []
     try:
         futures = {executor.submit(run_case, case.model_dump_json(), str(out / name),
-                                   tuple(estimators), progress, threads): name
+                                   tuple(models), progress, threads): name
                    for case, name in zip(cases, names)}
         for future in cf.as_completed(futures):
             name = futures[future]
@@ -416,6 +418,6 @@ def _fmt(value, spec: str) -> str:
     return format(value, spec)
 
 
-__all__ = ["ESTIMATORS", "InlineExecutor", "QUICK_REDUCTIONS", "SCALES", "Scale", "VELOCITIES",
+__all__ = ["MODELS", "InlineExecutor", "QUICK_REDUCTIONS", "SCALES", "Scale", "VELOCITIES",
            "case_name", "cfd_dem_timing", "dask_executor", "load_overrides", "local_executor",
            "reproduce", "run_case", "scale_cases"]

@@ -271,7 +271,7 @@ def _pyevtk():
         from pyevtk import hl
     except ImportError:
         raise InputError("the VTK export needs the package pyevtk "
-                         "(pip install 'cfbmarkov[vtk]')") from None
+                         "(pip install pyevtk)") from None
     return hl
 
 

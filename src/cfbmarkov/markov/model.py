@@ -18,6 +18,8 @@ attributes ``state_space`` (JSON), ``lag`` (s), ``window`` (s), ``estimator``, `
 
 from __future__ import annotations
 
+import dataclasses
+
 import datetime as _dt
 import json
 import os
@@ -28,6 +30,7 @@ from typing import Any, Sequence
 
 import h5py
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from cfbmarkov._atomic import atomic_path
 from cfbmarkov.errors import InputError
@@ -53,6 +56,8 @@ class MarkovModel:
     frame_pairs: int = 0
     #: (up, down) fractions of each i -> j transition passing the boundary; from counts if None
     pass_fractions: tuple[np.ndarray, np.ndarray] | None = None
+    #: how the state space and lag were chosen (``--states auto``), JSON-serialisable
+    selection: dict | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -117,7 +122,8 @@ class MarkovModel:
     @cached_property
     def stationary_distribution(self) -> np.ndarray:
         """Left eigenvector of P for eigenvalue 1, normalised (pi P = pi)."""
-        values, vectors = np.linalg.eig(self.transition_matrix.T)
+        with threadpool_limits(1):          # BLAS threads only contend on a dense eig here
+            values, vectors = np.linalg.eig(self.transition_matrix.T)
         lead = int(np.argmin(np.abs(values - 1.0)))
         pi = np.abs(vectors[:, lead].real)
         return pi / pi.sum()
@@ -158,6 +164,14 @@ class MarkovModel:
     def rtd(self, window: float | None = None) -> ResidenceTimeDistribution:
         """Exact RTD (no sampling noise); ``window`` (s) gives the RTD as seen in an analysis
         window of that length, the quantity a sample-based RTD estimates."""
+        if window is not None and "rtd" not in self._cache:
+            # a window of n lags sees residence times below n lags only: propagate no further
+            steps = max(2, int(round(window / self.lag)))
+            key = ("rtd-steps", steps)
+            if key not in self._cache:
+                self._cache[key] = exact_rtd(self.transition_matrix, self.up_fraction,
+                                             self.down_fraction, self.lag, max_steps=steps)
+            return self._cache[key].in_window(window)
         if "rtd" not in self._cache:
             self._cache["rtd"] = exact_rtd(self.transition_matrix, self.up_fraction,
                                            self.down_fraction, self.lag)
@@ -239,11 +253,18 @@ class MarkovModel:
             if own:
                 traj.close()
 
+    def with_selection(self, selection: dict) -> "MarkovModel":
+        """The same model, recording how its state space and lag were chosen."""
+        return dataclasses.replace(self, selection=dict(selection), _cache={})
+
     # -- description -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:
-        return {"estimator": self.estimator, "lag": self.lag,
-                "window": list(self.window) if self.window else None,
-                "state_space": self.state_space.to_attrs(), "source": self.source}
+        out = {"estimator": self.estimator, "lag": self.lag,
+               "window": list(self.window) if self.window else None,
+               "state_space": self.state_space.to_attrs(), "source": self.source}
+        if self.selection:
+            out["selection"] = self.selection
+        return out
 
     def summary(self) -> str:
         lines = [
@@ -257,6 +278,8 @@ class MarkovModel:
             f"  states never visited: {self.unvisited_states.size}"
             + (f" ({_short_list(self.unvisited_states)})" if self.unvisited_states.size else ""),
         ]
+        if self.selection:
+            lines.append(f"  chosen automatically: {self.selection.get('reason', '')}")
         try:
             r = self.rtd()
             lines.append(f"  exact residence time: E(RT) = {r.mean:.4g} s, SD(RT) = {r.sd:.4g} s")
@@ -285,6 +308,8 @@ class MarkovModel:
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "cfbmarkov_version": _version(),
         }
+        if self.selection:
+            attrs["selection"] = json.dumps(self.selection)
         return datasets, attrs
 
     def save(self, path: str | os.PathLike) -> Path:
@@ -314,7 +339,9 @@ class MarkovModel:
                        source=json.loads(group.attrs.get("source", '""')),
                        frame_pairs=int(group.attrs.get("frame_pairs", 0)),
                        pass_fractions=(group["pass_up_fraction"][()], group["pass_down_fraction"][()])
-                       if "pass_up_fraction" in group else None)
+                       if "pass_up_fraction" in group else None,
+                       selection=json.loads(group.attrs["selection"])
+                       if "selection" in group.attrs else None)
         except KeyError as exc:
             raise InputError(f"{label}: damaged model file (missing {exc})") from None
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
+from threadpoolctl import threadpool_limits
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
@@ -39,7 +40,8 @@ class ResidenceTimeDistribution:
 
     lag: float
     probability: np.ndarray   # [K]: index 0 is k = 1
-    unresolved: float         # mass not resolved (lap-deficit truncation, traps, tail cut)
+    unresolved: float         # mass not resolved (lap-deficit truncation, traps, tail cut;
+    #                           for an RTD computed only as far as a window: the rest too)
     entry_distribution: np.ndarray  # [S] stationary distribution of entry states
     window: float | None = None     # observation window length, s (None: intrinsic RTD)
 
@@ -137,16 +139,17 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     position[idx] = np.arange(idx.size)
     q_live = q[idx][:, idx]
     lu = splu(sp.csc_matrix(sp.identity(idx.size) - q_live))
-    # absorption into entry e' starting from entry e at level 0: B = (I-Q)^-1 R
-    r = np.zeros((idx.size, entries.size))
+    # absorption into entry e' starting from entry e at level 0: B = (I-Q)^-1 R; its
+    # stationary distribution nu (the entry states of a steady riser) by power iteration,
+    # one transposed solve per step: nu B = ((I-Q)^-T nu)^T R
     top_rows = idx[idx < s]
-    r[position[top_rows], :] = p_up[top_rows][:, entries].toarray()
-    entries_live = entries[live[entries]]
-    b = lu.solve(r)
-    embedded = np.zeros((entries.size, entries.size))
-    rows_in = np.isin(entries, entries_live)
-    embedded[rows_in] = b[position[entries[rows_in]]]
-    nu = _stationary(embedded)
+    r = sp.csr_matrix((p_up[top_rows][:, entries].tocoo().data,
+                       (position[top_rows][p_up[top_rows][:, entries].tocoo().row],
+                        p_up[top_rows][:, entries].tocoo().col)),
+                      shape=(idx.size, entries.size))
+    rt = r.T.tocsr()
+    live_entries = live[entries]
+    nu = _embedded_stationary(lu, rt, position, entries, live_entries, idx.size)
     start = np.zeros(idx.size)
     ok = live[entries]
     start[position[entries[ok]]] = nu[ok]
@@ -160,11 +163,45 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
 
 
+def _embedded_stationary(lu, rt, position, entries, live_entries, n) -> np.ndarray:
+    """Stationary distribution of the embedded entry chain B = (I-Q)^-1 R: its dominant left
+    eigenvector by ARPACK, one transposed sparse solve per product (no dense B); a dense
+    eigenvector where ARPACK does not converge or the chain is tiny."""
+    from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigs
+
+    m = entries.size
+    rows = position[entries[live_entries]]
+    x = np.zeros(n)
+
+    def left_product(v):
+        x[:] = 0.0
+        x[rows] = np.real(v).ravel()[live_entries]
+        return rt @ lu.solve(x, trans="T")
+
+    if m > 8:
+        try:
+            with threadpool_limits(1):
+                values, vectors = eigs(LinearOperator((m, m), matvec=left_product,
+                                                      dtype=np.float64),
+                                       k=1, which="LM", tol=1e-12, maxiter=5000,
+                                       v0=live_entries.astype(np.float64) + 1e-3)
+            nu = np.abs(vectors[:, 0].real)
+            if abs(values[0] - 1.0) < 1e-6 and nu.sum() > 0:
+                return nu / nu.sum()
+        except (ArpackError, ArpackNoConvergence):
+            pass
+    dense = np.zeros((m, m))
+    solved = lu.solve(rt.T.toarray())
+    dense[live_entries] = solved[rows]
+    return _stationary(dense)
+
+
 def _stationary(embedded: np.ndarray) -> np.ndarray:
     """Stationary distribution of a (sub)stochastic matrix's dominant left eigenvector."""
     rows = embedded.sum(axis=1, keepdims=True)
     k = np.divide(embedded, rows, out=np.zeros_like(embedded), where=rows > 0)
-    values, vectors = np.linalg.eig(k.T)
+    with threadpool_limits(1):    # a small dense eig: threads only contend (100x slower
+        values, vectors = np.linalg.eig(k.T)             # on a busy 2-core machine)
     lead = int(np.argmax(values.real))
     nu = np.abs(vectors[:, lead].real)
     return nu / nu.sum()
