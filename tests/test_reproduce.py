@@ -38,8 +38,9 @@ rows = 6
 fit_window = [0.2, 0.5]
 predict_window = [0.5, 0.8]
 """
-STAGES = ["case.json", "cfd-dem.h5", "model-paper.h5", "model-mle.h5", "prediction-paper.h5",
-          "prediction-mle.h5", "compare-paper/summary.json", "compare-mle/summary.json",
+STAGES = ["case.json", "cfd-dem.h5", "model-paper.h5", "model-mle.h5", "model-auto.h5",
+          "prediction-paper.h5", "prediction-mle.h5", "prediction-auto.h5",
+          "compare-paper/summary.json", "compare-mle/summary.json", "compare-auto/summary.json",
           "timings.json"]
 
 
@@ -95,8 +96,13 @@ def test_every_stage_is_a_file_and_the_report_has_every_section(reference, capsy
     assert summary["window"] == [0.5, 0.8] and summary["same_purple_particles"]
     assert summary["reference"]["exact_events"]
     html = (out / "report.html").read_text()
-    for heading in ("Table 3", "Computing time", "Fig. 3", "Fig. 8", "Fig. 9", "Fig. 11"):
+    for heading in ("Table 3", "Computing time", "Fig. 3", "Fig. 8", "Fig. 9", "Fig. 11",
+                    "Beyond the paper", "Implied timescales", "Chapman-Kolmogorov"):
         assert heading in html, heading
+    # the three models of a reproduction, the automatic one with its reason
+    for model in ("paper", "mle", "auto"):
+        assert (out / "u8" / f"compare-{model}" / "summary.json").exists()
+    assert "Chosen: " in (out / "report.md").read_text()
     assert "data:image/png;base64," in html and 'src="figures/' not in html
     assert (out / "report.md").exists()
 

@@ -84,7 +84,7 @@ DEFAULT_BIN_WIDTH = 0.025
 _CFD_DEM_COLOUR = "#1f4e79"
 _ESTIMATOR_COLOURS = {"paper": "#d35400", "mle": "#7b3294"}
 _OTHER_COLOURS = ("#1a9641", "#c51b7d", "#4d4d4d", "#b8860b", "#2c7fb8")
-_STALE_FIGURE = re.compile(r"^(fig\d\d-.*|plausibility)\.png$")
+_STALE_FIGURE = re.compile(r"^(fig\d\d-.*|plausibility|its-.*|ck-.*)\.png$")
 
 
 # -- reading the directory -------------------------------------------------------------------
@@ -1112,6 +1112,103 @@ def _plausibility_blocks(done, analyses, estimators, figures_dir: Path,
                  sentence)]
 
 
+def _diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
+    """Beyond the paper (issue 5): why the automatic model chose its state space and lag,
+    implied timescales against lag, and the Chapman-Kolmogorov test of each model on height
+    thirds and core/annulus, all on the fitting window."""
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.diagnostics import (core_annulus, ck_test, height_bands,
+                                              implied_timescales)
+    from cfbmarkov.markov.states import CellGrid
+    from cfbmarkov.report.diagnostics import plot_ck_test, plot_implied_timescales
+    from cfbmarkov.trajectories import Trajectories
+
+    blocks: list = [_Heading(2, "Beyond the paper: memory states and lag diagnostics"),
+                    _Para("The paper's chain on cells forgets how a particle was moving; the "
+                          "'auto' model chooses a state space with memory (direction, "
+                          "velocity bins or previous cell) and its lag on held-out frames of "
+                          "the fitting window alone (docs/method.md). Implied timescales that "
+                          "change with the lag, and Chapman-Kolmogorov errors, show the memory "
+                          "a chain on cells misses.")]
+    ck_rows = []
+    for c in done:
+        m = c.config.markov
+        window = tuple(float(v) for v in m.fit_window)
+        auto_path = c.path / "model-auto.h5"
+        models = {}
+        for e in c.finished:
+            with _reading(e.model):
+                models[e.name] = MarkovModel.load(e.model)
+        if auto_path.is_file() and "auto" in models and models["auto"].selection:
+            sel = models["auto"].selection
+            blocks.append(_Heading(3, f"{c.label}: the automatic choice"))
+            blocks.append(_Para(f"Chosen: {sel.get('reason', 'n/a')}."))
+            rows = [[cand["states"], f"{cand['lag']:g}", str(cand["n_states"]),
+                     _num(cand.get("pd_rt_mean"), "+.1f"), _num(cand.get("pd_rt_sd"), "+.1f"),
+                     _num(cand.get("md_rtd"), ".3g"), _num(cand.get("score"), ".3g")]
+                    for cand in sel.get("candidates", [])]
+            if rows:
+                held = sel.get("held_out", [math.nan, math.nan])
+                blocks.append(_Table(
+                    ["states", "lag (s)", "states S", "PD E(RT) (%)", "PD SD(RT) (%)",
+                     "MD", "score"], rows,
+                    [f"Fitted on {sel['fit'][0]:g}-{sel['fit'][1]:g} s, judged on the held-out "
+                     f"{held[0]:g}-{held[1]:g} s: score = |PD E|/2 + |PD SD|/10 + MD/MD(cells)."]))
+        with _reading(c.reference), Trajectories(c.reference) as ref:
+            lags = [m.lag * k for k in (1, 2, 4)]
+            grid = CellGrid(m.columns, m.rows, ref.width, ref.height)
+            try:
+                its = implied_timescales(ref, grid, lags, window=window, k=4)
+            except (InputError, ValueError) as exc:
+                blocks.append(_Para(f"{c.label}: implied timescales not computed ({exc})."))
+                its = None
+            if its is not None:
+                name = f"its-{c.name}.png"
+                plot_implied_timescales(its, figures_dir / name,
+                                        title=f"Implied timescales, cells, {c.label}")
+                written.append(name)
+                slow = its.timescales[:, 0]
+                trend = " → ".join(f"{t:.3g} s" for t in slow)
+                blocks.append(_Fig(name, f"Implied timescales against lag, {c.label}",
+                                   f"The slowest processes of the chain on cells at lags "
+                                   f"{', '.join(f'{v:g}' for v in lags)} s (fitting window "
+                                   f"{window[0]:g}-{window[1]:g} s); a Markov chain would give "
+                                   f"the same timescales at every lag, here the slowest goes "
+                                   f"{trend}."))
+            for name_m, model in models.items():
+                try:
+                    bands = ck_test(ref, model, height_bands(model.state_space, 3), steps=4,
+                                    window=window)
+                    radial = ck_test(ref, model, core_annulus(model.state_space), steps=4,
+                                     window=window)
+                except (InputError, ValueError) as exc:
+                    ck_rows.append([c.label, name_m, f"not computed ({exc})", "", "", ""])
+                    continue
+                b, r = bands.summary(), radial.summary()
+                ck_rows.append([f"{c.velocity:g}", name_m, model.state_space.describe(),
+                                f"{model.lag:g}", _num(b["max_abs_error"], ".3f"),
+                                _num(r["max_abs_error"], ".3f")])
+                if name_m == ("auto" if "auto" in models else "paper"):
+                    fig = f"ck-{c.name}.png"
+                    plot_ck_test(bands, figures_dir / fig,
+                                 title=f"Chapman-Kolmogorov test, {name_m} model, {c.label}")
+                    written.append(fig)
+                    blocks.append(_Fig(fig, f"Chapman-Kolmogorov test on height thirds, "
+                                            f"{name_m} model, {c.label}",
+                                       f"Probability to be in each third of the riser k lags "
+                                       f"after being in it: data of the fitting window "
+                                       f"(points) against P^k of the {name_m} model (lines); "
+                                       f"largest difference {b['max_abs_error']:.3f}."))
+    if ck_rows:
+        blocks.append(_Heading(3, "Chapman-Kolmogorov errors"))
+        blocks.append(_Table(["U (m/s)", "model", "states", "lag (s)",
+                              "max |error|, height thirds", "max |error|, core/annulus"],
+                             ck_rows,
+                             ["Max over 1-4 lags and all group pairs of |P_model(A→B, kτ) − "
+                              "P_data(A→B, kτ)|, on the fitting window."]))
+    return blocks
+
+
 def _warning_blocks(cases: list[_Case], notes: list[str]) -> list:
     items = []
     for c in cases:
@@ -1159,6 +1256,7 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None) -> P
     blocks += _snapshot_blocks(done, analyses, figures_dir, written)
     blocks += _mixing_blocks(done, analyses, estimators, figures_dir, written)
     blocks += _plausibility_blocks(done, analyses, estimators, figures_dir, written)
+    blocks += _diagnostics_blocks(done, figures_dir, written)
     blocks += _warning_blocks(cases, notes)
 
     # figures of an earlier run that this run did not draw (e.g. a case since removed)
