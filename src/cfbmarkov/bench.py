@@ -8,7 +8,10 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict``: Monte Carlo of 27000 particles x 200 steps with lap counting;
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
-- ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model.
+- ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
+- ``mcm-fit-auto``: ``--states auto``, choosing among 4 state spaces x 2 lags on the
+  held-out third of the window and refitting the chosen one; ``mcm-fit-chosen``: fitting
+  the chosen state space alone; ``mcm-predict-file-auto``: its prediction file.
 
 Times are medians over ``repeat`` runs after one warm-up run (numba compilation excluded).
 """
@@ -54,6 +57,27 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         yield "mcm-exact-rtd", _median_time(
             lambda: exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
                               model.lag), repeat), "s"
+        # beyond the paper: the automatic choice of state space and lag (8 candidates judged
+        # on the held-out last third of the window), then the chosen model's prediction
+        from cfbmarkov.markov.select import select_model
+
+        def choose():
+            return select_model(run, window=(10.0, 15.0), columns=6, rows=38, lag=0.025)
+
+        yield "mcm-fit-auto", _median_time(choose, max(1, repeat // 2)), "s"
+        chosen = choose()
+        yield f"mcm-fit-chosen-{chosen.state_space.kind}", _median_time(
+            lambda: _refit(chosen, run), repeat), "s"
+        pred_auto = Path(tmp) / "bench-pred-auto.h5"
+        yield "mcm-predict-file-auto", _median_time(
+            lambda: chosen.predict(run, 10.0, 5.0, seed=7, output=pred_auto), repeat), "s"
+
+
+def _refit(model, run):
+    from cfbmarkov.markov import estimator_from_name
+
+    return estimator_from_name(model.estimator, model.state_space, model.lag).fit(
+        run, window=model.window)
 
 
 BENCHMARKS = {"mcm": markov_benchmarks}

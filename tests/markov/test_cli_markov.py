@@ -111,7 +111,9 @@ def test_bench_prints_one_line_per_figure(capsys):
     code, out, _ = run_cli(capsys, "bench", "--only", "mcm", "--repeat", "1", "--particles", "300")
     assert code == 0
     names = [line.split(":")[0] for line in out.strip().splitlines()]
-    assert names == ["mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd"]
+    assert names[:4] == ["mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd"]
+    assert names[4] == "mcm-fit-auto" and names[5].startswith("mcm-fit-chosen-cells")
+    assert names[6:] == ["mcm-predict-file-auto"]
     for line in out.strip().splitlines():
         value, unit = line.split(": ")[1].split()
         assert float(value) > 0 and unit == "s"
