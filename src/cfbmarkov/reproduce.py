@@ -60,9 +60,10 @@ class Scale:
 #: The quick scale's reductions and their reasons (shown in the docs and the report).
 QUICK_REDUCTIONS = (
     "riser 0.04 m x 0.30 m instead of 0.09 m x 0.95 m, with 3789 particles instead of 27000: "
-    "the same solids hold-up (16.5 % by volume in the pseudo-2D cells), so clusters, wall "
-    "layers and back-mixing form as in the paper's riser; 40 particle diameters across still "
-    "leaves a core and two wall layers",
+    "the same solids hold-up (16.5 % by volume in the pseudo-2D cells), so the drag on a "
+    "particle in the suspension (Wen & Yu's voidage factor) is the paper's and at 3 and "
+    "4 m/s the solids are carried only where they gather, with back-mixing along the walls; "
+    "40 particle diameters across still leave a core and two wall layers",
     "gas cells of 10 mm x 10 mm as in the paper (4 x 30 cells)",
     "contact springs 4 times softer (kn 2500 N/m, kt 714 N/m) and a DEM step twice as long "
     "(1e-5 s): a contact still takes 5.2 DEM steps as in the paper, and restitution and "
