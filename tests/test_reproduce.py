@@ -255,3 +255,26 @@ def test_export_vtk_of_a_cfd_dem_stage(reference, tmp_path, capsys):
     assert (vtk / "particles.pvd").exists() and (vtk / "gas.pvd").exists()
     assert main(["export-vtk", str(run), "-o", str(tmp_path / "bad"), "--start", "50"]) == 2
     assert not (tmp_path / "bad").exists()
+
+
+def test_a_dropped_in_cfd_dem_file_must_match_the_case(reference, tmp_path, capsys):
+    """A CFD-DEM file put in place (e.g. made by 'cfbmarkov simulate') is used only if its
+    physics is the case's and it covers the prediction window."""
+    import shutil
+
+    ref, overrides = reference
+    (tmp_path / "d" / "u6").mkdir(parents=True)
+    shutil.copy(ref / "u8" / "cfd-dem.h5", tmp_path / "d" / "u6" / "cfd-dem.h5")
+    capsys.readouterr()
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities",
+                 "6", "-o", str(tmp_path / "d"), "--jobs", "1", "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "simulated with other gas" in err and "\n" not in err
+    longer = tmp_path / "longer.toml"
+    longer.write_text(TINY.replace("predict_window = [0.5, 0.8]", "predict_window = [0.5, 0.9]")
+                      .replace("end_time = 0.8", "end_time = 0.9"))
+    (tmp_path / "e" / "u8").mkdir(parents=True)
+    shutil.copy(ref / "u8" / "cfd-dem.h5", tmp_path / "e" / "u8" / "cfd-dem.h5")
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(longer), "--velocities",
+                 "8", "-o", str(tmp_path / "e"), "--jobs", "1", "-q"]) == 2
+    assert "before the end of the prediction window" in capsys.readouterr().err

@@ -240,6 +240,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     m = case.markov
     reference = folder / "cfd-dem.h5"
     if reference.exists():
+        _check_reference(reference, case)
         stages["cfd-dem"] = "skipped"
     else:
         checkpoint = folder / "cfd-dem.h5.parts" / "checkpoint.h5"
@@ -283,6 +284,33 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 stages[f"compare-{name}"] = "done"
     return {"case": label, "velocity": case.gas.superficial_velocity, "stages": stages,
             "summaries": summaries}
+
+
+#: the parts of a case that make the CFD-DEM (the Markov model and output times may differ)
+PHYSICS = ("seed", "riser", "particles", "gas", "contact", "numerics")
+
+
+def _check_reference(path: Path, case: CaseConfig) -> None:
+    """A CFD-DEM file found in place must come from this case's physics and cover its
+    prediction window (one made by ``cfbmarkov simulate`` may be dropped in)."""
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(path) as traj:
+        made_by, last = traj.parameters, float(traj.times[-1])
+    wanted = json.loads(case.model_dump_json())
+    if made_by:
+        try:
+            made = json.loads(CaseConfig.model_validate(made_by).model_dump_json())
+        except Exception:               # not a case: another source, e.g. imported data
+            made = None
+        if made is not None:
+            differs = [k for k in PHYSICS if made.get(k) != wanted.get(k)]
+            if differs:
+                raise InputError(f"{path} was simulated with other {', '.join(differs)} than "
+                                 f"case {case.name}; move it away or use another directory")
+    if last < case.markov.predict_window[1] - 1e-9:
+        raise InputError(f"{path} ends at {last:g} s, before the end of the prediction window "
+                         f"({case.markov.predict_window[1]:g} s)")
 
 
 # -- executors ---------------------------------------------------------------------------------
