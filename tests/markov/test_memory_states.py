@@ -322,3 +322,31 @@ def test_estimators_agree_on_memory_spaces(resolved_run):
     p = mle.transition_matrix
     assert p[np.ix_(falling, falling)].sum(axis=1).mean() > 0.6
     assert p[np.ix_(~falling, ~falling)].sum(axis=1).mean() > 0.8
+
+
+def test_a_state_never_left_moves_as_its_cell_did():
+    """A rare sub-state seen only at the end of the window has no outgoing transition: it
+    takes its cell's pooled row and pass fractions instead of trapping its particles; a
+    state whose whole cell was never left stays in place (P_ii = 1)."""
+    from cfbmarkov.markov.estimate import TransitionCounts
+
+    space = DirectionCells(1, 3, 1.0, 1.0)                  # states 2*cell + falling
+    s = space.n_states
+    counts = np.zeros((s, s), np.int64)
+    up = np.zeros_like(counts)
+    counts[0, 2] = 3            # cell 0 rising -> cell 1 rising
+    counts[0, 4] = 1            # cell 0 rising -> cell 2 rising
+    counts[2, 0] = 2            # cell 1 rising -> cell 0 rising, through the top
+    up[2, 0] = 2
+    # state 1 (cell 0 falling), 3 (cell 1 falling): never left; cell 2 never left at all
+    gathered = TransitionCounts(counts, up, np.zeros_like(counts), counts.astype(float), np.ones(s, np.int64), 1)
+    for estimator in (MaximumLikelihoodEstimator(space, 0.025), PaperEstimator(space, 0.025)):
+        model = estimator.fit_counts(gathered)
+        P = model.transition_matrix
+        np.testing.assert_allclose(P[1], [0, 0, 0.75, 0, 0.25, 0])
+        np.testing.assert_allclose(P[3], [1, 0, 0, 0, 0, 0])
+        np.testing.assert_allclose(model.up_fraction[3], [1, 0, 0, 0, 0, 0])
+        assert P[4, 4] == 1.0 and P[5, 5] == 1.0
+        assert list(model.unvisited_states) == [1, 3, 4, 5]
+        rtd = model.rtd()
+        assert 0 < rtd.mean < np.inf

@@ -14,7 +14,9 @@ an immutable :class:`~cfbmarkov.markov.model.MarkovModel`:
 Both count every pair of frames (t, t + lag) with A <= t and t + lag <= B for every particle
 (sliding window) and record the direction of each transition through the periodic boundary
 by the minimal-image rule on y. A state with no outgoing transition in the window keeps its
-particles in place (P_ii = 1); the model lists such states.
+particles in place (P_ii = 1) when it is the only state of its cell (cells); in a state
+space with memory it moves as the other states of its cell did (their pooled counts). The
+model lists such states.
 """
 
 from __future__ import annotations
@@ -171,14 +173,47 @@ class TransitionEstimator:
 
         matrix = self.transition_matrix(counts)
         unvisited = np.flatnonzero(counts.counts.sum(axis=1) == 0)
-        matrix[unvisited, :] = 0.0
-        matrix[unvisited, unvisited] = 1.0
+        fractions = _fill_from_cells(matrix, counts, self.state_space, unvisited)
+        stuck = unvisited[matrix[unvisited].sum(axis=1) == 0]
+        matrix[stuck, :] = 0.0
+        matrix[stuck, stuck] = 1.0
         return MarkovModel(
             transition_matrix=matrix, counts=counts.counts, counts_up=counts.counts_up,
             counts_down=counts.counts_down, state_space=self.state_space, lag=self.lag,
             estimator=self.name, window=tuple(window) if window is not None else None,
             source=os.fspath(source) if isinstance(source, (str, os.PathLike)) else list(source),
-            frame_pairs=counts.frame_pairs)
+            frame_pairs=counts.frame_pairs, pass_fractions=fractions)
+
+
+def _fill_from_cells(matrix: np.ndarray, counts: TransitionCounts, space: StateSpace,
+                     unvisited: np.ndarray) -> tuple[np.ndarray, np.ndarray] | None:
+    """In a state space with several states per cell, a state never left in the window
+    (e.g. a rare velocity class) moves as the other states of its cell did: its row of P
+    and its pass fractions are those of the cell's pooled counts. Fills ``matrix`` in place
+    and returns the pass fractions (None when nothing was filled; then the counts give
+    them). States whose whole cell was never left stay in place (P_ii = 1) as for cells."""
+    cell = np.asarray(space.cell_of_state)
+    if unvisited.size == 0 or np.unique(cell).size == cell.size:
+        return None
+    c = counts.counts.astype(np.float64)
+    pooled = np.zeros((space.n_cells, c.shape[1]))
+    pooled_up = np.zeros_like(pooled)
+    pooled_down = np.zeros_like(pooled)
+    np.add.at(pooled, cell, c)
+    np.add.at(pooled_up, cell, counts.counts_up)
+    np.add.at(pooled_down, cell, counts.counts_down)
+    up = np.divide(counts.counts_up, c, out=np.zeros_like(c), where=c > 0)
+    down = np.divide(counts.counts_down, c, out=np.zeros_like(c), where=c > 0)
+    rows = pooled[cell[unvisited]]
+    totals = rows.sum(axis=1)
+    fill = unvisited[totals > 0]
+    if fill.size == 0:
+        return None
+    rows, totals = rows[totals > 0], totals[totals > 0]
+    matrix[fill] = rows / totals[:, None]
+    up[fill] = np.divide(pooled_up[cell[fill]], rows, out=np.zeros_like(rows), where=rows > 0)
+    down[fill] = np.divide(pooled_down[cell[fill]], rows, out=np.zeros_like(rows), where=rows > 0)
+    return up, down
 
 
 class MaximumLikelihoodEstimator(TransitionEstimator):
