@@ -48,9 +48,10 @@ def test_auto_chooses_memory_and_predicts_the_later_spread(run, tmp_path):
     chosen = model.selection["chosen"]
     assert chosen["states"] != "cells" and model.state_space.kind == chosen["states"]
     assert model.lag == pytest.approx(chosen["lag"]) and model.window == FIT
-    # only the fitting window was used: the held-out part lies inside it
-    held = model.selection["held_out"]
-    assert FIT[0] < held[0] < held[1] == FIT[1]
+    # only the fitting window was used: its blocks tile it
+    blocks = model.selection["blocks"]
+    assert len(blocks) == 3 and blocks[0][0] == FIT[0] and blocks[-1][1] == FIT[1]
+    assert all(x[1] == y[0] for x, y in zip(blocks, blocks[1:]))
     candidates = model.selection["candidates"]
     assert {c["states"] for c in candidates} == {"cells", "cells-direction", "cells-velocity",
                                                  "cells-previous"}
@@ -67,7 +68,7 @@ def test_auto_chooses_memory_and_predicts_the_later_spread(run, tmp_path):
     model.save(tmp_path / "auto.h5")
     loaded = MarkovModel.load(tmp_path / "auto.h5")
     assert loaded.selection == json.loads(json.dumps(model.selection))
-    assert chosen["states"] in loaded.summary() and "lowest score" in loaded.summary()
+    assert chosen["states"] in loaded.summary() and "cross-validation" in loaded.summary()
 
 
 def test_too_few_residence_times_keep_the_papers_cells(run):
