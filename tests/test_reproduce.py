@@ -269,7 +269,7 @@ def test_a_dropped_in_cfd_dem_file_must_match_the_case(reference, tmp_path, caps
     assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities",
                  "6", "-o", str(tmp_path / "d"), "--jobs", "1", "-q"]) == 2
     err = capsys.readouterr().err.strip()
-    assert "simulated with other gas" in err and "\n" not in err
+    assert "simulated with other seed, gas" in err and "\n" not in err
     longer = tmp_path / "longer.toml"
     longer.write_text(TINY.replace("predict_window = [0.5, 0.8]", "predict_window = [0.5, 0.9]")
                       .replace("end_time = 0.8", "end_time = 0.9"))

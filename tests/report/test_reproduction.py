@@ -22,9 +22,12 @@ from cfbmarkov.report.reproduction import (
 PNG = b"\x89PNG\r\n\x1a\n"
 EXPECTED_FIGURES = {"fig03-transition-matrices.png", "fig04-maps-u3.png", "fig05-maps-u6.png",
                     "fig08-rtd-cfd-dem.png", "fig09-rtd-mcm.png", "fig10-snapshots.png",
-                    "fig11-mixing.png", "plausibility.png"}
+                    "fig11-mixing.png", "plausibility.png",
+                    # beyond the paper: implied timescales and CK test per finished case
+                    "its-u3.png", "its-u6.png", "ck-u3.png", "ck-u6.png"}
 HEADINGS = ("Table 3", "Computing time", "Fig. 3", "Fig. 4", "Fig. 8", "Fig. 9", "Fig. 10",
-            "Fig. 11", "Plausibility", "Warnings", "Not finished")
+            "Fig. 11", "Plausibility", "Beyond the paper", "Chapman-Kolmogorov errors",
+            "Warnings", "Not finished")
 
 
 def md_headings(md: str) -> list[str]:
@@ -111,7 +114,8 @@ def test_every_figure_linked_and_valid(report_of_template):
     assert (root / "figures" / "fig10-snapshots.png").read_bytes() == \
         (root / "u6" / "compare-paper" / "snapshots.png").read_bytes()
     # one sentence under every figure, generated from the numbers
-    captions = re.findall(r"^\*\*(Fig\. \d+|Plausibility)[^*]*\*\* (.+)$", md, flags=re.M)
+    captions = re.findall(r"^\*\*(Fig\. \d+|Plausibility|Implied timescales|Chapman-Kolmogorov)"
+                          r"[^*]*\*\* (.+)$", md, flags=re.M)
     assert len(captions) == len(EXPECTED_FIGURES)
     assert all(len(text) > 40 for _, text in captions)
     assert "widest at U = 3 m/s" in md

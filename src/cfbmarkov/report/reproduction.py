@@ -1186,7 +1186,7 @@ def _diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
                     ck_rows.append([c.label, name_m, f"not computed ({exc})", "", "", ""])
                     continue
                 b, r = bands.summary(), radial.summary()
-                ck_rows.append([f"{c.velocity:g}", name_m, model.state_space.describe(),
+                ck_rows.append([c.label, name_m, model.state_space.describe(),
                                 f"{model.lag:g}", _num(b["max_abs_error"], ".3f"),
                                 _num(r["max_abs_error"], ".3f")])
                 if name_m == ("auto" if "auto" in models else "paper"):
@@ -1202,7 +1202,7 @@ def _diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
                                        f"largest difference {b['max_abs_error']:.3f}."))
     if ck_rows:
         blocks.append(_Heading(3, "Chapman-Kolmogorov errors"))
-        blocks.append(_Table(["U (m/s)", "model", "states", "lag (s)",
+        blocks.append(_Table(["case", "model", "states", "lag (s)",
                               "max |error|, height thirds", "max |error|, core/annulus"],
                              ck_rows,
                              ["Max over 1-4 lags and all group pairs of |P_model(A→B, kτ) − "
