@@ -100,3 +100,14 @@ def test_model_names():
     for bad in ("best", "cells:bayes", "cells-sideways"):
         with pytest.raises(InputError, match="unknown model"):
             parse_model_name(bad)
+
+
+def test_memory_candidates_work_when_the_window_starts_at_the_first_frame(tmp_path):
+    """Spaces with memory need one lag before the window: at the file's first frame they
+    start one lag later instead of failing (and so are still candidates)."""
+    path = tmp_path / "early.h5"
+    synthetic.write_run(path, FLOW, 1500, 4.0, seed=5)
+    model = select_model(path, window=(0.0, 4.0), columns=FLOW.columns, rows=FLOW.rows,
+                         lag=FLOW.lag, lag_multiples=(1,))
+    errors = {c["states"]: c["error"] for c in model.selection["candidates"]}
+    assert errors == {name: "" for name in errors} and len(errors) == 4

@@ -74,6 +74,13 @@ def _exact_histogram(rtd, bin_width: float, n_bins: int) -> np.ndarray:
     return counts / total if total > 0 else counts
 
 
+def _with_history(traj, space, lag: float, window: tuple[float, float]) -> tuple[float, float]:
+    """The window, its start moved past the history a state space with memory needs when
+    the window begins at the file's first frames."""
+    earliest = float(traj.times[0]) + space.memory_lags * lag
+    return (max(window[0], earliest), window[1])
+
+
 def _sum_counts(parts):
     from cfbmarkov.markov.estimate import TransitionCounts
 
@@ -128,7 +135,9 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                 space = state_space_from_name(name, columns, rows, traj.width, traj.height, tau)
                 est = estimator_from_name(estimator, space, tau)
                 try:
-                    parts = [gather_counts(space, traj, tau, block)[0] for block in blocks]
+                    parts = [gather_counts(space, traj, tau, _with_history(traj, space, tau,
+                                                                          block))[0]
+                             for block in blocks]
                     rows_ = []
                     for k, block in enumerate(blocks):
                         model = est.fit_counts(_sum_counts(parts[:k] + parts[k + 1:]))
@@ -166,7 +175,8 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         best = min(usable, key=lambda c: c.score)
         space = state_space_from_name(best.states, columns, rows, traj.width, traj.height,
                                       best.lag)
-        model = estimator_from_name(estimator, space, best.lag).fit(traj, window=(a, b))
+        model = estimator_from_name(estimator, space, best.lag).fit(
+            traj, window=_with_history(traj, space, best.lag, (a, b)))
     finally:
         if own:
             traj.close()
