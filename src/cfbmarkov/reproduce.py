@@ -37,6 +37,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
+from pydantic import ValidationError
+
 from cfbmarkov._atomic import write_text_atomic
 from cfbmarkov.config import CaseConfig, load_case
 from cfbmarkov.errors import CfbmarkovError, InputError
@@ -139,8 +141,8 @@ def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELO
         data = _merge(_merge(data, scale.overrides), overrides or {})
         try:
             cases.append(CaseConfig.model_validate(data))
-        except Exception as exc:         # pydantic's ValidationError, one line
-            first = getattr(exc, "errors", lambda: [{"loc": (), "msg": str(exc)}])()[0]
+        except ValidationError as exc:   # one line
+            first = exc.errors()[0]
             loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
             raise InputError(f"invalid configuration at '{loc}' for U = {u:g} m/s: "
                              f"{first['msg']}") from None
@@ -186,7 +188,8 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
             return {}
         attrs = dict(group.attrs)
         history = group["wall_history"][()] if "wall_history" in group else np.empty((0, 2))
-    wall, simulated = float(attrs.get("wall_time_s", float("nan"))), float(attrs.get("simulated_s", float("nan")))
+    wall = float(attrs.get("wall_time_s", float("nan")))
+    simulated = float(attrs.get("simulated_s", float("nan")))
     out = {"wall_s": wall, "simulated_s": simulated,
            "particles": int(attrs.get("particles", 0)),
            "particle_steps_per_s": float(attrs.get("particle_steps_per_s", float("nan")))}
@@ -301,7 +304,7 @@ def _check_reference(path: Path, case: CaseConfig) -> None:
     if made_by:
         try:
             made = json.loads(CaseConfig.model_validate(made_by).model_dump_json())
-        except Exception:               # not a case: another source, e.g. imported data
+        except ValidationError:         # not a case: another source, e.g. imported data
             made = None
         if made is not None:
             differs = [k for k in PHYSICS if made.get(k) != wanted.get(k)]

@@ -339,7 +339,8 @@ def test_a_state_never_left_moves_as_its_cell_did():
     counts[2, 0] = 2            # cell 1 rising -> cell 0 rising, through the top
     up[2, 0] = 2
     # state 1 (cell 0 falling), 3 (cell 1 falling): never left; cell 2 never left at all
-    gathered = TransitionCounts(counts, up, np.zeros_like(counts), counts.astype(float), np.ones(s, np.int64), 1)
+    gathered = TransitionCounts(counts, up, np.zeros_like(counts), counts.astype(float),
+                                np.ones(s, np.int64), 1)
     for estimator in (MaximumLikelihoodEstimator(space, 0.025), PaperEstimator(space, 0.025)):
         model = estimator.fit_counts(gathered)
         P = model.transition_matrix

@@ -8,7 +8,6 @@ memory, from the fitting window alone, that predicts the RTD of a *later* window
 import contextlib
 import json
 
-import numpy as np
 import pytest
 
 from cfbmarkov import synthetic

@@ -13,10 +13,10 @@ i.e. the model's bias in units of the project's goal for it (2 % and 10 %) plus 
 Minkowski distance relative to that of the paper's state space on the same data, so that
 every term is about 1 at the edge of what is acceptable. The PDs are averaged with their
 signs: how one block's RTD differs from another's (clusters come and go over seconds) is
-noise that no stationary model can predict, what the state space can fix is the bias. The candidate with the lowest score wins and
-is refitted on the whole window; the model records every candidate's numbers and why it
-was chosen (``model.selection``, saved with it). Every block is judged once, so a riser
-whose clusters come and go over seconds is not judged on one unrepresentative stretch (a
+noise that no stationary model can predict, what the state space can fix is the bias.
+The candidate with the lowest score wins and is refitted on the whole window; the model
+records every candidate's numbers and why it was chosen (``model.selection``, saved with
+it). Every block is judged once, so a riser whose clusters come and go over seconds is not judged on one unrepresentative stretch (a
 single held-out block at the end of the window did exactly that on the project's 6 m/s
 run).
 
@@ -26,7 +26,6 @@ window afterwards without fooling oneself.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from typing import Any, Sequence
@@ -232,9 +231,5 @@ def fit_by_name(name: str, data, *, window: tuple[float, float], columns: int, r
             traj.close()
 
 
-def selection_json(model) -> str:
-    return json.dumps(getattr(model, "selection", None) or {}, indent=2)
-
-
 __all__ = ["DEFAULT_LAG_MULTIPLES", "DEFAULT_STATES", "CandidateScore", "fit_by_name",
-           "parse_model_name", "select_model", "selection_json"]
+           "parse_model_name", "select_model"]

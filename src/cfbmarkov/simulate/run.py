@@ -193,7 +193,8 @@ class _Progress:
             from tqdm import tqdm
 
             self.bar = tqdm(total=round(end - start, 6), initial=0, unit="s", file=sys.stderr,
-                            desc=f"{label} CFD-DEM (simulated s)".lstrip(), mininterval=1.0 if sys.stderr.isatty() else 30.0,
+                            desc=f"{label} CFD-DEM (simulated s)".lstrip(),
+                            mininterval=1.0 if sys.stderr.isatty() else 30.0,
                             bar_format="{desc}: {n:.3f}/{total:.3f} [{elapsed}<{remaining}{postfix}]")
         self.particles = particles
         self.t_wall = _time.perf_counter()
