@@ -16,9 +16,9 @@ signs: how one block's RTD differs from another's (clusters come and go over sec
 noise that no stationary model can predict, what the state space can fix is the bias.
 The candidate with the lowest score wins and is refitted on the whole window; the model
 records every candidate's numbers and why it was chosen (``model.selection``, saved with
-it). Every block is judged once, so a riser whose clusters come and go over seconds is not judged on one unrepresentative stretch (a
-single held-out block at the end of the window did exactly that on the project's 6 m/s
-run).
+it). Every block is judged once, so a riser whose clusters come and go over seconds is
+not judged on one unrepresentative stretch (a single held-out block at the end of the
+window did exactly that on the project's 6 m/s run).
 
 Nothing outside the fitting window is used, so the choice can be checked on the prediction
 window afterwards without fooling oneself.
