@@ -92,12 +92,26 @@ def plot_transition_matrix(P, columns: int, rows: int, path, *, title: str | Non
     return _save(fig, path)
 
 
+def draw_stems(ax, i, j, p, n_states: int, norm, linewidth: float = 0.8):
+    """Vertical stems of height p at (i, j) on 3D axes, coloured by p (tallest drawn last);
+    the axes span the n_states x n_states matrix. Returns the collection (for a colour bar)."""
+    from mpl_toolkits.mplot3d.art3d import Line3DCollection
+
+    order = np.argsort(p)
+    segments = np.stack([np.c_[i, j, np.zeros_like(p)], np.c_[i, j, p]], axis=1)[order]
+    stems = Line3DCollection(segments, cmap="viridis", norm=norm, linewidths=linewidth)
+    stems.set_array(p[order])
+    ax.add_collection3d(stems)
+    ax.set_xlim(0, n_states - 1)
+    ax.set_ylim(0, n_states - 1)
+    ax.set_zlim(0, norm.vmax)
+    return stems
+
+
 def plot_transition_bars(P, path, *, title: str | None = None, min_probability: float = 0.0
                          ) -> Path:
     """The paper's Fig. 3 bar view: a vertical stem of height P_ij at (state i, state j) for
     every nonzero entry (above ``min_probability``), coloured by its value."""
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection
-
     P = np.asarray(P, dtype=np.float64)
     if P.ndim != 2 or P.shape[0] != P.shape[1] or P.shape[0] == 0:
         raise InputError(f"transition matrix must be square, got shape {P.shape}")
@@ -107,14 +121,7 @@ def plot_transition_bars(P, path, *, title: str | None = None, min_probability: 
     fig = Figure(figsize=(8.0, 6.6), layout="constrained")
     ax = fig.add_subplot(projection="3d")
     norm = Normalize(vmin=0.0, vmax=max(float(p.max()) if p.size else 1.0, 1e-12))
-    order = np.argsort(p)              # tall stems drawn last
-    segments = np.stack([np.c_[i, j, np.zeros_like(p)], np.c_[i, j, p]], axis=1)[order]
-    stems = Line3DCollection(segments, cmap="viridis", norm=norm, linewidths=0.8)
-    stems.set_array(p[order])
-    ax.add_collection3d(stems)
-    ax.set_xlim(0, s - 1)
-    ax.set_ylim(0, s - 1)
-    ax.set_zlim(0, norm.vmax)
+    stems = draw_stems(ax, i, j, p, s, norm, linewidth=0.8)
     ax.set_xlabel("state number i (from)")
     ax.set_ylabel("transition number j (to)")
     ax.set_zlabel("$P_{ij}$")

@@ -393,9 +393,8 @@ def _plot_transition_bars_grid(panels: Sequence[tuple[str, np.ndarray]], path, t
     shared colour scale (the style of figures.plot_transition_bars)."""
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
-    from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
-    from cfbmarkov.report.figures import _save
+    from cfbmarkov.report.figures import _save, draw_stems
 
     nrows, ncols = _grid(len(panels))
     vmax = max((float(P.max()) for _, P in panels), default=1.0)
@@ -407,14 +406,7 @@ def _plot_transition_bars_grid(panels: Sequence[tuple[str, np.ndarray]], path, t
         s = P.shape[0]
         i, j = np.nonzero(P > 0)
         p = P[i, j]
-        order = np.argsort(p)
-        segments = np.stack([np.c_[i, j, np.zeros_like(p)], np.c_[i, j, p]], axis=1)[order]
-        stems = Line3DCollection(segments, cmap="viridis", norm=norm, linewidths=0.7)
-        stems.set_array(p[order])
-        ax.add_collection3d(stems)
-        ax.set_xlim(0, s - 1)
-        ax.set_ylim(0, s - 1)
-        ax.set_zlim(0, norm.vmax)
+        draw_stems(ax, i, j, p, s, norm, linewidth=0.7)
         ax.set_xlabel("state number i, from (-)", fontsize=8)
         ax.set_ylabel("transition number j, to (-)", fontsize=8)
         ax.set_zlabel("$P_{ij}$ (-)", fontsize=8)
