@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov import CellGrid, MarkovModel, MaximumLikelihoodEstimator
 from cfbmarkov.trajectories import Trajectories, lap_increments
 
@@ -75,6 +75,27 @@ def test_exact_rtd_with_falls_matches_monte_carlo_in_a_window():
     assert np.max(np.abs(cdf_sample[: cdf_exact.size] - cdf_exact)) < 1.63 / np.sqrt(k.size) * 1.5
     # falling out of the bottom lengthens residences beyond the no-fall ladder
     assert model.rtd().mean > ladder_model(8, 0.5, lag=0.01).rtd().mean
+
+
+def test_exact_rtd_from_a_given_entry_distribution():
+    """Started from the chain's own stationary entry distribution, the RTD is the default one;
+    from another entry distribution (a particle entering lower rungs) it differs."""
+    from cfbmarkov.markov import exact_rtd
+
+    model = ladder_model(8, 0.5, p_fall=0.15, lag=0.01)
+    own = model.rtd()
+    given = exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
+                      model.lag, entry=own.entry_distribution * 7.0)   # normalised inside
+    np.testing.assert_allclose(given.probability, own.probability, atol=1e-12)
+    np.testing.assert_allclose(given.entry_distribution, own.entry_distribution, atol=1e-12)
+    lower = np.zeros(model.n_states)
+    lower[model.n_states // 2] = 1.0
+    later = exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
+                      model.lag, entry=lower)
+    assert later.mean < own.mean - 0.01      # halfway up, a residence is shorter
+    with pytest.raises(CfbmarkovError, match="entry distribution"):
+        exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction, model.lag,
+                  entry=np.zeros(model.n_states))
 
 
 def test_window_censoring_weights_short_residences():

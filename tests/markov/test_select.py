@@ -8,6 +8,7 @@ memory, from the fitting window alone, that predicts the RTD of a *later* window
 import contextlib
 import json
 
+import numpy as np
 import pytest
 
 from cfbmarkov import synthetic
@@ -68,6 +69,12 @@ def test_auto_chooses_memory_and_predicts_the_later_spread(run, tmp_path):
     loaded = MarkovModel.load(tmp_path / "auto.h5")
     assert loaded.selection == json.loads(json.dumps(model.selection))
     assert chosen["states"] in loaded.summary() and "cross-validation" in loaded.summary()
+    # the chosen model, formed from the counts of the cached frames, is the model that
+    # fitting its state space on the window gives
+    direct = fit_by_name(chosen["states"], run, window=FIT, columns=FLOW.columns,
+                         rows=FLOW.rows, lag=chosen["lag"])
+    np.testing.assert_array_equal(model.counts, direct.counts)
+    np.testing.assert_allclose(model.transition_matrix, direct.transition_matrix, atol=0)
 
 
 def test_too_few_residence_times_keep_the_papers_cells(run):

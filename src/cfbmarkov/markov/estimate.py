@@ -28,6 +28,7 @@ from typing import TYPE_CHECKING, Iterable
 
 import numba as nb
 import numpy as np
+import scipy.sparse as sp
 
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.states import StateSpace
@@ -87,6 +88,21 @@ class TransitionCounts:
     @property
     def n_transitions(self) -> int:
         return int(self.counts.sum())
+
+
+def count_states(states: np.ndarray, y: np.ndarray, lag_frames: int, height: float,
+                 n_states: int) -> TransitionCounts:
+    """Transition counts of discrete trajectories already in memory: ``states`` int32 [T, N]
+    and ``y`` (m) [T, N] of the same frames (the kernel :func:`count_transitions`)."""
+    counts = np.zeros((n_states, n_states), np.int64)
+    up = np.zeros((n_states, n_states), np.int64)
+    down = np.zeros((n_states, n_states), np.int64)
+    frame_sum = np.zeros((n_states, n_states), np.float64)
+    occupied = np.zeros(n_states, np.int64)
+    pairs = count_transitions(np.ascontiguousarray(states, dtype=np.int32),
+                              np.ascontiguousarray(y, dtype=np.float64), int(lag_frames),
+                              float(height), n_states, counts, up, down, frame_sum, occupied)
+    return TransitionCounts(counts, up, down, frame_sum, occupied, pairs)
 
 
 def gather_counts(space: StateSpace, data, lag: float, window: tuple[float, float] | None
@@ -168,15 +184,22 @@ class TransitionEstimator:
         counts, info = gather_counts(self.state_space, data, self.lag, window)
         return self.fit_counts(counts, window=window, source=info["source"])
 
-    def fit_counts(self, counts: TransitionCounts, window=None, source="") -> "MarkovModel":
-        from cfbmarkov.markov.model import MarkovModel
-
+    def chain(self, counts: TransitionCounts
+              ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
+        """The stochastic matrix and, where states were filled from their cell, the pass
+        fractions (None: the counts give them) that :meth:`fit_counts` puts in a model."""
         matrix = self.transition_matrix(counts)
         unvisited = np.flatnonzero(counts.counts.sum(axis=1) == 0)
         fractions = _fill_from_cells(matrix, counts, self.state_space, unvisited)
         stuck = unvisited[matrix[unvisited].sum(axis=1) == 0]
         matrix[stuck, :] = 0.0
         matrix[stuck, stuck] = 1.0
+        return matrix, fractions
+
+    def fit_counts(self, counts: TransitionCounts, window=None, source="") -> "MarkovModel":
+        from cfbmarkov.markov.model import MarkovModel
+
+        matrix, fractions = self.chain(counts)
         return MarkovModel(
             transition_matrix=matrix, counts=counts.counts, counts_up=counts.counts_up,
             counts_down=counts.counts_down, state_space=self.state_space, lag=self.lag,
@@ -195,24 +218,30 @@ def _fill_from_cells(matrix: np.ndarray, counts: TransitionCounts, space: StateS
     cell = np.asarray(space.cell_of_state)
     if unvisited.size == 0 or np.unique(cell).size == cell.size:
         return None
+    # pool the rows of the cells that need it: a sparse (cells x states) indicator times
+    # the counts (np.add.at over a dense S x S array was most of an auto fit's time)
+    needed = np.unique(cell[unvisited])
+    slot = -np.ones(space.n_cells, np.int64)
+    slot[needed] = np.arange(needed.size)
+    members = np.flatnonzero(slot[cell] >= 0)
+    indicator = sp.csr_matrix((np.ones(members.size), (slot[cell[members]], members)),
+                              shape=(needed.size, cell.size))
+    pooled = indicator @ counts.counts.astype(np.float64)
+    totals = pooled.sum(axis=1)
     c = counts.counts.astype(np.float64)
-    pooled = np.zeros((space.n_cells, c.shape[1]))
-    pooled_up = np.zeros_like(pooled)
-    pooled_down = np.zeros_like(pooled)
-    np.add.at(pooled, cell, c)
-    np.add.at(pooled_up, cell, counts.counts_up)
-    np.add.at(pooled_down, cell, counts.counts_down)
     up = np.divide(counts.counts_up, c, out=np.zeros_like(c), where=c > 0)
     down = np.divide(counts.counts_down, c, out=np.zeros_like(c), where=c > 0)
-    rows = pooled[cell[unvisited]]
-    totals = rows.sum(axis=1)
-    fill = unvisited[totals > 0]
+    fill = unvisited[totals[slot[cell[unvisited]]] > 0]
     if fill.size == 0:
         return None
-    rows, totals = rows[totals > 0], totals[totals > 0]
-    matrix[fill] = rows / totals[:, None]
-    up[fill] = np.divide(pooled_up[cell[fill]], rows, out=np.zeros_like(rows), where=rows > 0)
-    down[fill] = np.divide(pooled_down[cell[fill]], rows, out=np.zeros_like(rows), where=rows > 0)
+    rows = pooled[slot[cell[fill]]]
+    matrix[fill] = rows / rows.sum(axis=1)[:, None]
+    pooled_up = indicator @ counts.counts_up.astype(np.float64)
+    pooled_down = indicator @ counts.counts_down.astype(np.float64)
+    up[fill] = np.divide(pooled_up[slot[cell[fill]]], rows, out=np.zeros_like(rows),
+                         where=rows > 0)
+    down[fill] = np.divide(pooled_down[slot[cell[fill]]], rows, out=np.zeros_like(rows),
+                           where=rows > 0)
     return up, down
 
 

@@ -108,9 +108,13 @@ def _first_passage(indptr, indices, data, exit_probability, start, tol, max_step
 
 
 def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray, lag: float,
-              deficit_levels: int = 8, tol: float = 1e-10, max_steps: int = 200_000
-              ) -> ResidenceTimeDistribution:
-    """Exact intrinsic RTD of a chain with transition matrix P and pass fractions (see module)."""
+              deficit_levels: int = 8, tol: float = 1e-10, max_steps: int = 200_000,
+              entry: np.ndarray | None = None) -> ResidenceTimeDistribution:
+    """Exact intrinsic RTD of a chain with transition matrix P and pass fractions (see module).
+
+    ``entry`` [S] (optional): the distribution of the states particles enter in, e.g. the
+    observed one (column sums of the up-pass counts); by default the chain's own stationary
+    entry distribution, which costs a sparse LU factorisation and an eigenvector."""
     s = matrix.shape[0]
     p_up = sp.csr_matrix(matrix * up_fraction)
     p_down = sp.csr_matrix(matrix * down_fraction)
@@ -138,6 +142,16 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     position = -np.ones(s * levels, np.int64)
     position[idx] = np.arange(idx.size)
     q_live = q[idx][:, idx]
+    if entry is not None:
+        entry = np.asarray(entry, dtype=np.float64)
+        if entry.shape != (s,) or entry.min() < 0 or not entry[live[:s]].sum() > 0:
+            raise CfbmarkovError("entry distribution must be [S], non-negative, and put mass "
+                                 "on states from which the top can be reached")
+        start = np.zeros(idx.size)
+        start[position[np.flatnonzero(live[:s])]] = entry[live[:s]]
+        start /= start.sum()
+        return _finish(q_live, exit_probability[idx], start, tol, max_steps, lag,
+                       entry / entry.sum())
     lu = splu(sp.csc_matrix(sp.identity(idx.size) - q_live))
     # absorption into entry e' starting from entry e at level 0: B = (I-Q)^-1 R; its
     # stationary distribution nu (the entry states of a steady riser) by power iteration,
@@ -153,13 +167,18 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     start = np.zeros(idx.size)
     ok = live[entries]
     start[position[entries[ok]]] = nu[ok]
-    qt = sp.csr_matrix(q_live.T)
-    out = np.zeros(max_steps)
-    steps = _first_passage(qt.indptr, qt.indices, qt.data, exit_probability[idx], start, tol,
-                           max_steps, out)
-    f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
     entry = np.zeros(s)
     entry[entries] = nu
+    return _finish(q_live, exit_probability[idx], start, tol, max_steps, lag, entry)
+
+
+def _finish(q_live, exit_probability, start, tol, max_steps, lag, entry
+            ) -> ResidenceTimeDistribution:
+    qt = sp.csr_matrix(q_live.T)
+    out = np.zeros(max_steps)
+    steps = _first_passage(qt.indptr, qt.indices, qt.data, exit_probability, start, tol,
+                           max_steps, out)
+    f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
     return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
 
 
