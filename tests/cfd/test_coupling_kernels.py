@@ -101,3 +101,30 @@ def test_void_fraction_conserves_solid_volume():
     xs = np.full(2000, 0.045)
     ys = np.full(2000, 0.5)
     assert void_fraction_field(g, xs, ys, D).min() == 0.35
+
+
+def test_void_fraction_of_a_bed_on_a_floor_does_not_cross_the_seam():
+    """Periodic in y, a particle just above y = 0 shares its volume with the top row; on a
+    floor (``periodic_y=False``) that share stays in the bottom row, and the drag kernels
+    read the bottom row's void fraction there, not a mean with the empty top."""
+    from cfbmarkov.simulate.coupling import drag_coefficients
+
+    g = GRID
+    x, y = np.array([0.045]), np.array([0.2 * g.dy])
+    periodic = void_fraction_field(g, x, y, D, floor=0.0)
+    floor = void_fraction_field(g, x, y, D, floor=0.0, periodic_y=False)
+    solid = 1.0 - floor
+    assert solid[:, -1].sum() == 0.0 and (1.0 - periodic)[:, -1].sum() > 0
+    assert solid.sum() == pytest.approx((1.0 - periodic).sum(), rel=1e-12)
+    # a bed filling the bottom row: the particles in its lower half see its void fraction
+    eps = np.ones(g.cell_shape)
+    eps[:, 0] = 0.4
+    u, v = np.zeros(g.u_shape), np.full(g.v_shape, 1.0)
+    out = {}
+    for periodic_y in (True, False):
+        k, f = np.zeros(1), np.zeros((1, 2))
+        drag_coefficients(np.array([[0.045, 0.1 * g.dy]]), np.zeros((1, 2)), u, v, eps, g.dx,
+                          g.dy, D, 1.205, 1.8e-5, k, f, periodic_y)
+        out[periodic_y] = k[0]
+    # denser gas-solid mixture, more drag per particle at the same slip
+    assert out[False] > 1.5 * out[True]

@@ -25,8 +25,9 @@ from cfbmarkov.simulate.cfd.drag import particle_drag_jacobian
 
 
 @nb.njit(cache=True, inline="always")
-def _cell_value(field, dx, dy, x, y):
-    """Bilinear interpolation of a cell-centred field (nx, ny), periodic in y, constant
+def _cell_value(field, dx, dy, x, y, periodic_y=True):
+    """Bilinear interpolation of a cell-centred field (nx, ny), periodic in y (or, with
+    ``periodic_y=False``, constant extrapolation to the floor and top too), constant
     extrapolation to the walls."""
     nx, ny = field.shape
     fx = x / dx - 0.5
@@ -38,6 +39,11 @@ def _cell_value(field, dx, dy, x, y):
     i0 = min(int(fx), nx - 2) if nx > 1 else 0
     wx = fx - i0 if nx > 1 else 0.0
     i1 = i0 + 1 if nx > 1 else 0
+    if not periodic_y:
+        if fy < 0.0:
+            fy = 0.0
+        elif fy > ny - 1:
+            fy = ny - 1.0
     j = np.floor(fy)
     wy = fy - j
     j0 = int(j) % ny
@@ -48,14 +54,15 @@ def _cell_value(field, dx, dy, x, y):
 
 @nb.njit(cache=True, parallel=True)
 def drag_coefficients(positions, velocities, u, v, void_fraction, dx, dy, diameter,
-                      gas_density, gas_viscosity, coefficient, force):
+                      gas_density, gas_viscosity, coefficient, force, periodic_y=True):
     """Per particle: K_p = beta Vp / (1 - eps) (kg/s) and the drag force K_p (u_gas - v_p)
-    (N), with the gas velocity and void fraction interpolated to the particle centre."""
+    (N), with the gas velocity and void fraction interpolated to the particle centre
+    (the void fraction across the seam only where the particles are periodic in y)."""
     for p in nb.prange(positions.shape[0]):
         x = positions[p, 0]
         y = positions[p, 1]
         ux, uy = gas_velocity_at(u, v, dx, dy, x, y)
-        eps = _cell_value(void_fraction, dx, dy, x, y)
+        eps = _cell_value(void_fraction, dx, dy, x, y, periodic_y)
         sx = ux - velocities[p, 0]
         sy = uy - velocities[p, 1]
         k = particle_drag_jacobian(eps, np.sqrt(sx * sx + sy * sy), diameter, gas_density,

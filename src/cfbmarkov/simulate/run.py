@@ -75,7 +75,8 @@ class CoupledRiser:
                         search_cells=tuple(case.numerics.dem_cells), skin=case.numerics.dem_skin,
                         angular_velocities=angular_velocities, bottom_wall=bottom_wall)
         grid = GasGrid.from_config(case)
-        eps = void_fraction_field(grid, positions[:, 0], positions[:, 1], p.diameter)
+        eps = void_fraction_field(grid, positions[:, 0], positions[:, 1], p.diameter,
+                                  periodic_y=not bottom_wall)
         gas = GasSolver.from_config(case, formulation="B").initial_state(eps)
         return cls(case, dem, gas)
 
@@ -104,10 +105,11 @@ class CoupledRiser:
         d = case.particles.diameter
         positions, velocities = self.dem.positions, self.dem.velocities
         x, y = positions[:, 0], positions[:, 1]
-        eps = void_fraction_field(grid, x, y, d)
+        periodic_y = not self.dem.bottom_wall
+        eps = void_fraction_field(grid, x, y, d, periodic_y=periodic_y)
         drag_coefficients(positions, velocities, self.gas.u, self.gas.v, eps, grid.dx,
                           grid.dy, d, case.gas.density, case.gas.viscosity,
-                          self._coefficient, self._force)
+                          self._coefficient, self._force, periodic_y)
         fu, fv = deposit_drag_reaction(grid, x, y, self._force[:, 0], self._force[:, 1], d)
         ku, kv = deposit_drag_jacobian(grid, x, y, self._coefficient, d)
         self.gas = self.solver.step(self.gas, eps, fu, fv, ku, kv)

@@ -187,8 +187,10 @@ def _deposit_forces_kernel(x, y, fx, fy, dx, dy, inv_volume, fu, fv):
 
 
 @nb.njit(cache=True)
-def deposit_solid_volume(x, y, volume, dx, dy, solid):
-    """Add each particle's solid volume (m^3, scalar) to ``solid`` (nx, ny) by cloud-in-cell."""
+def deposit_solid_volume(x, y, volume, dx, dy, solid, periodic_y=True):
+    """Add each particle's solid volume (m^3, scalar) to ``solid`` (nx, ny) by cloud-in-cell.
+    ``periodic_y=False`` (a bed on a floor): the share beyond the bottom (top) row is folded
+    back into it, as at the side walls, instead of going across the periodic seam."""
     nx = solid.shape[0]
     ny = solid.shape[1]
     idx = 1.0 / dx
@@ -210,8 +212,12 @@ def deposit_solid_volume(x, y, volume, dx, dy, solid):
         fj = y[p] * idy - 0.5
         jfl = math.floor(fj)
         wy = fj - jfl
-        j0 = _wrap_index(int(jfl), ny)
-        j1 = j0 + 1 if j0 + 1 < ny else 0
+        if periodic_y:
+            j0 = _wrap_index(int(jfl), ny)
+            j1 = j0 + 1 if j0 + 1 < ny else 0
+        else:
+            j0 = min(max(int(jfl), 0), ny - 1)
+            j1 = min(max(int(jfl) + 1, 0), ny - 1)
         solid[i0, j0] += (1.0 - wx) * (1.0 - wy) * volume
         solid[i1, j0] += wx * (1.0 - wy) * volume
         solid[i0, j1] += (1.0 - wx) * wy * volume
@@ -276,12 +282,16 @@ def deposit_drag_jacobian(grid: GasGrid, x, y, coefficient, thickness: float):
 
 
 def void_fraction_field(grid: GasGrid, x, y, diameter: float,
-                        floor: float = VOID_FRACTION_FLOOR) -> np.ndarray:
-    """Void fraction on the cells (nx, ny) from particle centres, pseudo-2D cells dx dy d."""
+                        floor: float = VOID_FRACTION_FLOOR, periodic_y: bool = True
+                        ) -> np.ndarray:
+    """Void fraction on the cells (nx, ny) from particle centres, pseudo-2D cells dx dy d
+    (``floor``: its lower bound; ``periodic_y=False``: a bed on a floor, see
+    :func:`deposit_solid_volume`)."""
     x, y = _positions(x, y)
     if not diameter > 0:
         raise InputError(f"particle diameter must be positive, got {diameter}")
     solid = np.zeros(grid.cell_shape)
-    deposit_solid_volume(x, y, math.pi * diameter ** 3 / 6.0, grid.dx, grid.dy, solid)
+    deposit_solid_volume(x, y, math.pi * diameter ** 3 / 6.0, grid.dx, grid.dy, solid,
+                         bool(periodic_y))
     eps = 1.0 - solid / grid.cell_volume(diameter)
     return np.maximum(eps, floor)

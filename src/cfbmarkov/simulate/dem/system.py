@@ -292,6 +292,11 @@ class DEMSystem:
         return self._height
 
     @property
+    def bottom_wall(self) -> bool:
+        """A contact floor at y = 0 instead of periodicity in y."""
+        return self._bottom_wall
+
+    @property
     def search_cells(self) -> tuple[int, int]:
         return self._cells
 
