@@ -40,14 +40,15 @@ if TYPE_CHECKING:
 
 @nb.njit(cache=True)
 def count_transitions(states, y, lag_frames, height, n_states, counts, counts_up, counts_down,
-                      frame_average, occupied_frames):
+                      frame_average, occupied_frames, with_frame_average=True):
     """Accumulate transition counts of discrete trajectories (kernel).
 
     states int32 [T, N], y float64 [T, N] (m). For every frame pair (t, t+lag) adds to
     ``counts[i, j]`` (pooled), ``counts_up``/``counts_down`` (passes up through the top /
     down through the bottom, minimal image on y), ``frame_average[i, j] += N_ij(t)/N_i(t)``
     (the sum of the per-frame matrices of Eq. 2) and ``occupied_frames[i] += 1`` where
-    N_i(t) > 0. Returns the number of frame pairs.
+    N_i(t) > 0 (``with_frame_average=False``: ``frame_average`` is left alone, for the
+    pooled estimator). Returns the number of frame pairs.
     """
     n_frames, n_particles = states.shape
     half = 0.5 * height
@@ -64,7 +65,8 @@ def count_transitions(states, y, lag_frames, height, n_states, counts, counts_up
             i = states[t, p]
             j = states[t + lag_frames, p]
             counts[i, j] += 1
-            frame_average[i, j] += 1.0 / occupancy[i]
+            if with_frame_average:
+                frame_average[i, j] += 1.0 / occupancy[i]
             dy = y[t + lag_frames, p] - y[t, p]
             if dy < -half:
                 counts_up[i, j] += 1
@@ -81,7 +83,7 @@ class TransitionCounts:
     counts: np.ndarray           # [S, S] int64, pooled
     counts_up: np.ndarray        # [S, S] int64, passes up through the top
     counts_down: np.ndarray      # [S, S] int64, passes down through the bottom
-    frame_average_sum: np.ndarray  # [S, S] float64, sum over frames of P'(t)
+    frame_average_sum: np.ndarray | None  # [S, S] float64, sum over frames of P'(t)
     occupied_frames: np.ndarray  # [S] int64, frames in which each state was occupied
     frame_pairs: int             # number of frame pairs (t, t+lag) counted
 
@@ -91,18 +93,23 @@ class TransitionCounts:
 
 
 def count_states(states: np.ndarray, y: np.ndarray, lag_frames: int, height: float,
-                 n_states: int) -> TransitionCounts:
+                 n_states: int, frame_average: bool = True) -> TransitionCounts:
     """Transition counts of discrete trajectories already in memory: ``states`` int32 [T, N]
-    and ``y`` (m) [T, N] of the same frames (the kernel :func:`count_transitions`)."""
+    and ``y`` (m) [T, N] of the same frames (the kernel :func:`count_transitions`).
+    ``frame_average=False`` skips the sum of the per-frame matrices that only the paper's
+    estimator needs (its field is then None)."""
     counts = np.zeros((n_states, n_states), np.int64)
     up = np.zeros((n_states, n_states), np.int64)
     down = np.zeros((n_states, n_states), np.int64)
-    frame_sum = np.zeros((n_states, n_states), np.float64)
+    frame_sum = (np.zeros((n_states, n_states), np.float64) if frame_average
+                 else np.zeros((1, 1), np.float64))
     occupied = np.zeros(n_states, np.int64)
     pairs = count_transitions(np.ascontiguousarray(states, dtype=np.int32),
                               np.ascontiguousarray(y, dtype=np.float64), int(lag_frames),
-                              float(height), n_states, counts, up, down, frame_sum, occupied)
-    return TransitionCounts(counts, up, down, frame_sum, occupied, pairs)
+                              float(height), n_states, counts, up, down, frame_sum, occupied,
+                              bool(frame_average))
+    return TransitionCounts(counts, up, down, frame_sum if frame_average else None, occupied,
+                            pairs)
 
 
 def gather_counts(space: StateSpace, data, lag: float, window: tuple[float, float] | None
@@ -262,6 +269,9 @@ class PaperEstimator(TransitionEstimator):
     name = "paper"
 
     def transition_matrix(self, counts):
+        if counts.frame_average_sum is None:
+            raise InputError("the paper's estimator needs the per-frame matrices; these counts "
+                             "were gathered without them")
         if counts.frame_pairs == 0:
             return np.zeros_like(counts.frame_average_sum)
         plain_average = counts.frame_average_sum / counts.frame_pairs   # Eq. (4)

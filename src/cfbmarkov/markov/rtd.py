@@ -116,9 +116,21 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     observed one (column sums of the up-pass counts); by default the chain's own stationary
     entry distribution, which costs a sparse LU factorisation and an eigenvector."""
     s = matrix.shape[0]
-    p_up = sp.csr_matrix(matrix * up_fraction)
-    p_down = sp.csr_matrix(matrix * down_fraction)
-    p_stay = sp.csr_matrix(matrix * (1.0 - up_fraction - down_fraction))
+    # split P by pass direction on its non-zeros only (one scan of the dense matrix)
+    chain = sp.csr_matrix(matrix)
+    rows = np.repeat(np.arange(s), np.diff(chain.indptr))
+    up_part = chain.data * up_fraction[rows, chain.indices]
+    down_part = chain.data * down_fraction[rows, chain.indices]
+
+    stay_part = chain.data - up_part - down_part
+
+    def _part(values):      # own copies: eliminate_zeros compacts its arrays in place
+        part = sp.csr_matrix((values, chain.indices.copy(), chain.indptr.copy()),
+                             shape=(s, s))
+        part.eliminate_zeros()
+        return part
+
+    p_up, p_down, p_stay = _part(up_part), _part(down_part), _part(stay_part)
     levels = deficit_levels + 1
     # level index g = -l: a down pass moves g -> g+1, an up pass g -> g-1 (g = 0: exit)
     lower = sp.diags(np.ones(levels - 1), 1, shape=(levels, levels))

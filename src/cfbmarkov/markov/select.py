@@ -89,9 +89,10 @@ def _with_history(traj, space, lag: float, window: tuple[float, float]) -> tuple
 def _sum_counts(parts):
     from cfbmarkov.markov.estimate import TransitionCounts
 
+    averages = [c.frame_average_sum for c in parts]
     return TransitionCounts(sum(c.counts for c in parts), sum(c.counts_up for c in parts),
                             sum(c.counts_down for c in parts),
-                            sum(c.frame_average_sum for c in parts),
+                            None if any(a is None for a in averages) else sum(averages),
                             sum(c.occupied_frames for c in parts),
                             sum(c.frame_pairs for c in parts))
 
@@ -118,7 +119,8 @@ class _WindowFrames:
                              "has none")
         return space.discretize(self.positions, self.velocities, lag_frames)
 
-    def counts(self, space, states: np.ndarray, lag_frames: int, window: tuple[float, float]):
+    def counts(self, space, states: np.ndarray, lag_frames: int, window: tuple[float, float],
+               frame_average: bool = True):
         """Counts of ``window`` (a block, or the whole fitting window) from the states of
         :meth:`states`, the window's start moved past the history the space needs."""
         from cfbmarkov.markov.estimate import count_states
@@ -130,7 +132,7 @@ class _WindowFrames:
                              f"frames one lag apart")
         rows = slice(start - self.first, stop - self.first)
         return count_states(states[rows], self.y[rows], lag_frames, self.traj.height,
-                            space.n_states)
+                            space.n_states, frame_average)
 
 
 def _entry_distribution(counts) -> np.ndarray:
@@ -185,7 +187,8 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
             try:
                 lag_frames = traj.lag_frames(tau)
                 discrete = cached.states(space, lag_frames)
-                parts = [cached.counts(space, discrete, lag_frames, block) for block in blocks]
+                parts = [cached.counts(space, discrete, lag_frames, block,
+                                       frame_average=estimator == "paper") for block in blocks]
                 rows_ = []
                 for k, block in enumerate(blocks):
                     # fitted on the other blocks; its RTD from where particles entered there
