@@ -77,10 +77,29 @@ def test_auto_chooses_memory_and_predicts_the_later_spread(run, tmp_path):
     np.testing.assert_allclose(model.transition_matrix, direct.transition_matrix, atol=0)
 
 
-def test_too_few_residence_times_keep_the_papers_cells(run):
+def test_too_short_blocks_keep_the_papers_cells(run):
     model = select_model(run, window=(0.5, 0.8), columns=FLOW.columns, rows=FLOW.rows,
                          lag=FLOW.lag)
-    assert model.state_space.kind == "cells" and "too few" in model.selection["reason"]
+    assert model.state_space.kind == "cells" and "too short" in model.selection["reason"]
+    with pytest.raises(InputError, match="too few"):
+        select_model(run, window=(0.5, 0.8), columns=FLOW.columns, rows=FLOW.rows,
+                     lag=FLOW.lag, criterion="rtd")
+
+
+def test_held_out_ck_test_finds_the_hidden_direction(run):
+    """Where blocks hold too few complete residences (at low gas velocity) the held-out
+    Chapman-Kolmogorov test judges instead; on the synthetic flow it too prefers memory."""
+    model = select_model(run, window=FIT, columns=FLOW.columns, rows=FLOW.rows,
+                         lag=FLOW.lag, criterion="ck")
+    selection = model.selection
+    assert "Chapman-Kolmogorov" in selection["method"]
+    assert "Chapman-Kolmogorov error" in selection["reason"]
+    scores = {(c["states"], c["lag"]): c for c in selection["candidates"]}
+    cells = scores[("cells", FLOW.lag)]
+    assert cells["score"] == pytest.approx(1.0) and cells["ck_error"] > 0
+    assert model.state_space.kind != "cells"
+    chosen = scores[(selection["chosen"]["states"], selection["chosen"]["lag"])]
+    assert chosen["ck_error"] < 0.8 * cells["ck_error"]
 
 
 def test_cli_fit_with_auto_and_named_states(run, tmp_path, capsys):

@@ -23,6 +23,14 @@ it). Every block is judged once, so a riser whose clusters come and go over seco
 not judged on one unrepresentative stretch (a single held-out block at the end of the
 window did exactly that on the project's 6 m/s run).
 
+When a block holds fewer than ``MIN_RESIDENCES`` (30) complete residences (at low gas
+velocity a residence can outlast a block), the RTD cannot judge, and the candidates are
+judged instead by the Chapman-Kolmogorov test on the held-out block: fitted on the other
+blocks, each predicts where the particles of each coarse group (height thirds x core /
+annulus) are found after t = 2, 4, ..., 20 base lags, from the occupancy of its states at
+the start frames; the score is the mean absolute difference from the fractions observed in
+the block, relative to that of the paper's cells.
+
 Nothing outside the fitting window is used, so the choice can be checked on the prediction
 window afterwards without fooling oneself. The window's frames are read once, every
 candidate is discretised once and counted block by block from memory, and the chosen model
@@ -49,8 +57,10 @@ from cfbmarkov.trajectories import Trajectories
 DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-previous")
 #: lags tried, in multiples of the base lag
 DEFAULT_LAG_MULTIPLES = (1, 2)
-#: fewer residence times than this in the held-out part: keep the paper's cells
+#: fewer residence times than this in a block: judge by the CK test instead of the RTD
 MIN_RESIDENCES = 30
+#: the CK criterion's times, in base lags
+CK_LAG_MULTIPLES = np.arange(2, 21, 2)
 
 
 @dataclass(frozen=True)
@@ -65,6 +75,8 @@ class CandidateScore:
     md_rtd: float
     score: float
     error: str = ""
+    #: held-out Chapman-Kolmogorov error (the criterion when residences are too few)
+    ck_error: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
@@ -143,9 +155,12 @@ def _entry_distribution(counts) -> np.ndarray:
 def select_model(data, *, window: tuple[float, float], columns: int, rows: int, lag: float,
                  states: Sequence[str] = DEFAULT_STATES,
                  lag_multiples: Sequence[int] = DEFAULT_LAG_MULTIPLES,
-                 estimator: str = "mle", folds: int = 3):
+                 estimator: str = "mle", folds: int = 3, criterion: str = "auto"):
     """Choose, fit on ``window`` and return the best model (see the module doc); its
-    ``selection`` attribute holds the candidates' scores and the reason."""
+    ``selection`` attribute holds the candidates' scores and the reason. ``criterion``:
+    ``rtd``, ``ck``, or ``auto`` (the RTD where every block holds enough residences)."""
+    if criterion not in ("auto", "rtd", "ck"):
+        raise InputError(f"auto: unknown criterion '{criterion}' (rtd, ck or auto)")
     if int(folds) < 2:
         raise InputError(f"auto: {folds} folds; cross-validation needs at least 2")
     folds = int(folds)
@@ -162,19 +177,14 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         blocks = [(float(edges[k]), float(edges[k + 1])) for k in range(folds)]
         observed = [residence_times(traj, block) for block in blocks]
         fewest = min(o.count for o in observed)
-        if fewest < MIN_RESIDENCES:
-            space = state_space_from_name("cells", columns, rows, traj.width, traj.height, lag)
-            model = estimator_from_name(estimator, space, lag).fit(traj, window=(a, b))
-            return model.with_selection({
-                "method": f"{folds}-fold blocked cross-validation of the RTD",
-                "blocks": [list(x) for x in blocks], "estimator": estimator,
-                "chosen": {"states": "cells", "lag": lag},
-                "reason": f"a block of the fitting window holds only {fewest} residence times "
-                          f"(fewer than {MIN_RESIDENCES}): too few to choose, so the paper's "
-                          "cells were kept",
-                "candidates": []})
-        histograms = [rtd_histogram(o.samples, lag, window_length=blk[1] - blk[0])[1]
-                      for o, blk in zip(observed, blocks)]
+        if criterion == "auto":
+            criterion = "rtd" if fewest >= MIN_RESIDENCES else "ck"
+        elif criterion == "rtd" and fewest < MIN_RESIDENCES:
+            raise InputError(f"auto: a block holds only {fewest} residence times, too few "
+                             "to judge by the RTD")
+        histograms = ([rtd_histogram(o.samples, lag, window_length=blk[1] - blk[0])[1]
+                       for o, blk in zip(observed, blocks)] if criterion == "rtd" else [])
+        ck_times = CK_LAG_MULTIPLES * lag
         spaces = {(name, lag * int(m)): state_space_from_name(
             name, columns, rows, traj.width, traj.height, lag * int(m))
             for name in states for m in lag_multiples}
@@ -194,6 +204,10 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                     # fitted on the other blocks; its RTD from where particles entered there
                     training = _sum_counts(parts[:k] + parts[k + 1:])
                     matrix, fractions = est.chain(training)
+                    if criterion == "ck":
+                        rows_.append((_held_out_ck_error(cached, space, discrete, matrix, tau,
+                                                         block, ck_times),))
+                        continue
                     up, down = fractions if fractions is not None else _pass_fractions(training)
                     steps = max(2, int(round((block[1] - block[0]) / tau)))
                     rtd = exact_rtd(matrix, up, down, tau, max_steps=steps,
@@ -208,14 +222,21 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                 raw.append((name, tau, space.n_states, None, str(exc)))
                 continue
             raw.append((name, tau, space.n_states, np.asarray(rows_), ""))
-        cells_md = next((float(r[3][:, 2].mean()) for r in raw
+        column = 2 if criterion == "rtd" else 0
+        cells_md = next((float(r[3][:, column].mean()) for r in raw
                          if r[0] == "cells" and r[1] == lag and r[3] is not None), math.nan)
         reference_md = cells_md if math.isfinite(cells_md) and cells_md > 0 else 1.0
         final: list[CandidateScore] = []
         for name, tau, n_states, table, error in raw:
-            if table is None:
+            if table is None or not np.all(np.isfinite(table[:, column])):
                 final.append(CandidateScore(name, tau, n_states, math.nan, math.nan, math.nan,
-                                            math.nan, math.nan, math.inf, error))
+                                            math.nan, math.nan, math.inf,
+                                            error or "no held-out comparison"))
+                continue
+            if criterion == "ck":
+                ck = float(table[:, 0].mean())
+                final.append(CandidateScore(name, tau, n_states, math.nan, math.nan, math.nan,
+                                            math.nan, math.nan, ck / reference_md, ck_error=ck))
                 continue
             # the bias over the blocks: how the blocks' RTDs differ from one another (a
             # riser's clusters come and go) is noise no stationary model can predict
@@ -226,6 +247,18 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                                         float(table[:, 1].mean()), float(table[:, 2].mean()),
                                         float(value)))
         usable = [c for c in final if math.isfinite(c.score)]
+        if not usable and criterion == "ck":
+            space = state_space_from_name("cells", columns, rows, traj.width, traj.height, lag)
+            model = estimator_from_name(estimator, space, lag).fit(traj, window=(a, b))
+            return model.with_selection({
+                "method": f"{folds}-fold blocked cross-validation",
+                "blocks": [list(x) for x in blocks], "estimator": estimator,
+                "chosen": {"states": "cells", "lag": lag},
+                "reason": f"the blocks of the fitting window are too short to judge: a block "
+                          f"holds only {fewest} residence times (fewer than {MIN_RESIDENCES}) "
+                          f"and is shorter than the CK test's {ck_times.max():g} s, so the "
+                          "paper's cells were kept",
+                "candidates": [c.as_dict() for c in final]})
         if not usable:
             raise InputError("auto: no candidate state space could be fitted: "
                              + "; ".join(f"{c.states} lag {c.lag:g}: {c.error}" for c in final))
@@ -239,18 +272,82 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         if own:
             traj.close()
     cells = next((c for c in usable if c.states == "cells" and c.lag == lag), None)
-    reason = (f"{best.states} at lag {best.lag:g} s had the lowest score {best.score:.3g} in "
-              f"{folds}-fold blocked cross-validation over {a:g}-{b:g} s (mean PD E(RT) "
-              f"{best.pd_rt_mean:+.1f} %, SD(RT) {best.pd_rt_sd:+.1f} %, MD {best.md_rtd:.3g}")
-    reason += (f"; cells: {cells.pd_rt_mean:+.1f} %, {cells.pd_rt_sd:+.1f} %, MD "
-               f"{cells.md_rtd:.3g}, score {cells.score:.3g})" if cells is not None else ")")
-    selection = {"method": f"{folds}-fold blocked cross-validation of the RTD",
+    if criterion == "ck":
+        why = (f"a block of the fitting window holds only {fewest} complete residences "
+               f"(fewer than {MIN_RESIDENCES}), so the RTD could not judge; "
+               if fewest < MIN_RESIDENCES else "")
+        reason = (f"{why}{best.states} "
+                  f"at lag {best.lag:g} s had the lowest held-out Chapman-Kolmogorov error "
+                  f"{best.ck_error:.4f} in {folds}-fold blocked cross-validation over "
+                  f"{a:g}-{b:g} s")
+        reason += (f" (cells: {cells.ck_error:.4f})" if cells is not None else "")
+        method = f"{folds}-fold blocked cross-validation of the Chapman-Kolmogorov test"
+    else:
+        reason = (f"{best.states} at lag {best.lag:g} s had the lowest score {best.score:.3g} "
+                  f"in {folds}-fold blocked cross-validation over {a:g}-{b:g} s (mean PD "
+                  f"E(RT) {best.pd_rt_mean:+.1f} %, SD(RT) {best.pd_rt_sd:+.1f} %, MD "
+                  f"{best.md_rtd:.3g}")
+        reason += (f"; cells: {cells.pd_rt_mean:+.1f} %, {cells.pd_rt_sd:+.1f} %, MD "
+                   f"{cells.md_rtd:.3g}, score {cells.score:.3g})" if cells is not None else ")")
+        method = f"{folds}-fold blocked cross-validation of the RTD"
+    selection = {"method": method,
                  "blocks": [list(x) for x in blocks],
                  "observed": [{"rt_mean": o.mean, "rt_sd": o.sd, "rt_count": o.count}
                               for o in observed],
                  "estimator": estimator, "chosen": {"states": best.states, "lag": best.lag},
                  "reason": reason, "candidates": [c.as_dict() for c in final]}
     return model.with_selection(selection)
+
+
+def _held_out_ck_error(cached: _WindowFrames, space, states: np.ndarray, matrix: np.ndarray,
+                       lag: float, block: tuple[float, float], times: np.ndarray) -> float:
+    """Mean |P_model(A -> B, t) - P_observed(A -> B, t)| over the coarse groups (height
+    thirds x core/annulus) and ``times`` (s) in the frames of ``block``. Every time uses the
+    same start frames (those at least the longest time before the block's end), and the
+    model starts from the occupancy of its states in each group there (as :func:`ck_test`);
+    NaN when the block is shorter than the longest time."""
+    import scipy.sparse as sp
+
+    from cfbmarkov.markov.diagnostics import (core_annulus, group_labels, height_bands,
+                                              product_groups)
+
+    traj = cached.traj
+    lag_frames = traj.lag_frames(lag)
+    start, stop, _ = traj.window(*block).indices(traj.n_frames)
+    start = max(start, cached.first + space.memory_lags * lag_frames)
+    block_states = states[start - cached.first:stop - cached.first]
+    steps = np.rint(np.asarray(times, dtype=np.float64) / lag).astype(np.int64)
+    if steps.min() < 1 or np.any(np.abs(steps * lag - times) > 1e-9):
+        return math.nan                     # the times are not whole multiples of this lag
+    n_start = block_states.shape[0] - int(steps.max()) * lag_frames
+    if n_start <= 0:
+        return math.nan
+    _, cell_label = group_labels(space, product_groups(height_bands(space, 3),
+                                                       core_annulus(space)))
+    state_group = cell_label[space.cell_of_state]
+    g, s = int(state_group.max()) + 1, space.n_states
+    labels = state_group[block_states]
+    member = np.zeros((s, g))
+    member[np.arange(s), state_group] = 1.0
+    occupancy = np.bincount(block_states[:n_start].ravel(), minlength=s).astype(np.float64)
+    start_distribution = occupancy[:, None] * member                       # [S, G]
+    mass = start_distribution.sum(axis=0, keepdims=True)
+    x = np.divide(start_distribution, mass, out=np.zeros_like(start_distribution),
+                  where=mass > 0)
+    transposed = sp.csr_matrix(matrix.T)
+    errors, done = [], 0
+    for k in np.sort(steps):
+        for _ in range(int(k) - done):
+            x = transposed @ x                         # each group's distribution, k lags on
+        done = int(k)
+        shift = int(k) * lag_frames
+        pairs = np.bincount((labels[:n_start] * g + labels[shift:shift + n_start]).ravel(),
+                            minlength=g * g).reshape(g, g).astype(np.float64)
+        n_a = pairs.sum(axis=1)
+        ok = n_a > 0
+        predicted = (member.T @ x).T                   # [G from, G to]
+        errors.append(np.abs(predicted[ok] - pairs[ok] / n_a[ok, None]).mean())
+    return float(np.mean(errors))
 
 
 def _pass_fractions(counts) -> tuple[np.ndarray, np.ndarray]:

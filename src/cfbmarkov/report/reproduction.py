@@ -1135,11 +1135,23 @@ def _diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
             sel = models["auto"].selection
             blocks.append(_Heading(3, f"{c.label}: the automatic choice"))
             blocks.append(_Para(f"Chosen: {sel.get('reason', 'n/a')}."))
+            by_ck = "Chapman-Kolmogorov" in sel.get("method", "")
             rows = [[cand["states"], f"{cand['lag']:g}", str(cand["n_states"]),
+                     _num(cand.get("ck_error"), ".4f"), _num(cand.get("score"), ".3g")]
+                    if by_ck else
+                    [cand["states"], f"{cand['lag']:g}", str(cand["n_states"]),
                      _num(cand.get("pd_rt_mean"), "+.1f"), _num(cand.get("pd_rt_sd"), "+.1f"),
                      _num(cand.get("md_rtd"), ".3g"), _num(cand.get("score"), ".3g")]
                     for cand in sel.get("candidates", [])]
-            if rows:
+            if rows and by_ck:
+                parts = ", ".join(f"{x:g}-{y:g} s" for x, y in sel.get("blocks", []))
+                blocks.append(_Table(
+                    ["states", "lag (s)", "states S", "mean CK error", "score"], rows,
+                    [f"{sel.get('method')} over the blocks {parts}: each block predicted by "
+                     "the model fitted on the others; CK error = mean |P_model(A -> B, t) - "
+                     "P_observed| over height thirds x core/annulus at t = 2 to 20 lags; "
+                     "score = CK error / CK error(cells)."]))
+            elif rows:
                 parts = ", ".join(f"{x:g}-{y:g} s" for x, y in sel.get("blocks", []))
                 blocks.append(_Table(
                     ["states", "lag (s)", "states S", "mean PD E(RT) (%)",
