@@ -9,8 +9,8 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
 - ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
-- ``mcm-fit-auto``: ``--states auto``, choosing among 4 state spaces x 2 lags on the
-  held-out third of the window and refitting the chosen one; ``mcm-fit-chosen``: fitting
+- ``mcm-fit-auto``: ``--states auto``, choosing among 4 state spaces x 2 lags by 3-fold
+  blocked cross-validation on the window and forming the chosen one; ``mcm-fit-chosen``: fitting
   the chosen state space alone; ``mcm-predict-file-auto``: its prediction file.
 
 Times are medians over ``repeat`` runs after one warm-up run (numba compilation excluded).
@@ -58,8 +58,8 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         yield "mcm-exact-rtd", _median_time(
             lambda: exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
                               model.lag), repeat), "s"
-        # beyond the paper: the automatic choice of state space and lag (8 candidates judged
-        # on the held-out last third of the window), then the chosen model's prediction
+        # beyond the paper: the automatic choice of state space and lag (8 candidates, 3-fold
+        # blocked cross-validation on the window), then the chosen model's prediction
         from cfbmarkov.markov.select import select_model
 
         def choose():
