@@ -3,7 +3,6 @@ against the laps kernel, the file wrapper, the histogram and a statistical check
 
 from __future__ import annotations
 
-import time
 
 import numpy as np
 import pytest
@@ -244,16 +243,16 @@ def test_constant_speed_gives_the_period(tmp_path, period, events_of):
     np.testing.assert_allclose(exact.samples, period, atol=1e-9)
 
 
-def test_kernel_speed_27000_particles():
+def test_kernel_at_paper_size_counts_every_completed_lap():
+    """27000 particles x 201 frames (speed is measured by ``cfbmarkov bench``, not here):
+    every lap completed after a particle's first lap in the window is one sample."""
     rng = np.random.default_rng(0)
     laps = np.cumsum(rng.random((201, 27000)) < 0.04, axis=0).astype(np.int32)
     times = 15.0 + 0.025 * np.arange(201)
-    residence_times_from_laps(times[:3], laps[:3])        # compile / load the cache
-    t0 = time.perf_counter()
     samples = residence_times_from_laps(times, laps)
-    elapsed = time.perf_counter() - t0
-    assert samples.size > 100000
-    assert elapsed < 0.2, f"{elapsed:.3f} s for 27000 x 201"
+    gained = laps[-1] - laps[0]
+    assert samples.size == int(np.clip(gained - 1, 0, None).sum())
+    assert np.all(samples > 0) and samples.max() <= times[-1] - times[0]
 
 
 # -- histogram --------------------------------------------------------------------------------
