@@ -9,7 +9,7 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
 - ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
-- ``mcm-fit-auto``: ``--states auto``, choosing among 4 state spaces x 2 lags by 3-fold
+- ``mcm-fit-auto``: ``--states auto``, choosing among 4 state spaces by 3-fold
   blocked cross-validation on the window and forming the chosen one; ``mcm-fit-chosen``: fitting
   the chosen state space alone; ``mcm-predict-file-auto``: its prediction file.
 
@@ -58,7 +58,7 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         yield "mcm-exact-rtd", _median_time(
             lambda: exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
                               model.lag), repeat), "s"
-        # beyond the paper: the automatic choice of state space and lag (8 candidates, 3-fold
+        # beyond the paper: the automatic choice of state space (4 candidates, 3-fold
         # blocked cross-validation on the window), then the chosen model's prediction
         from cfbmarkov.markov.select import select_model
 
