@@ -1118,8 +1118,10 @@ def _diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
     blocks: list = [_Heading(2, "Beyond the paper: memory states and lag diagnostics"),
                     _Para("The paper's chain on cells forgets how a particle was moving; the "
                           "'auto' model chooses a state space with memory (direction, "
-                          "velocity bins or previous cell) and its lag on held-out frames of "
-                          "the fitting window alone (docs/method.md). Implied timescales that "
+                          "velocity bins or previous cell) on held-out frames of the fitting "
+                          "window alone, by the RTD or, where the blocks hold too few "
+                          "residences, by the Chapman-Kolmogorov test (docs/method.md). "
+                          "Implied timescales that "
                           "change with the lag, and Chapman-Kolmogorov errors, show the memory "
                           "a chain on cells misses.")]
     ck_rows = []
