@@ -375,6 +375,20 @@ def _grid(n: int) -> tuple[int, int]:
     return math.ceil(n / cols), cols
 
 
+def _panel_axes(n: int, panel_width: float, panel_height: float):
+    """A constrained figure of ``n`` 2D panels on the :func:`_grid` layout, unused slots
+    hidden: (figure, the first ``n`` axes)."""
+    from matplotlib.figure import Figure
+
+    nrows, ncols = _grid(n)
+    fig = Figure(figsize=(0.6 + panel_width * ncols, 0.7 + panel_height * nrows),
+                 layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return fig, axes[:n]
+
+
 def _letter(k: int) -> str:
     return f"({chr(ord('a') + k)})" if k < 26 else f"({k + 1})"
 
@@ -425,15 +439,9 @@ def _plot_transition_bars_grid(panels: Sequence[tuple[str, np.ndarray]], path, t
 def _plot_rtd_grid(panels, path, title: str) -> Path:
     """Fig. 8/9: one RTD panel per velocity. ``panels``: (label, edges, series) with series
     (name, probability, ResidenceTimes, colour, filled)."""
-    from matplotlib.figure import Figure
-
     from cfbmarkov.report.figures import _save
 
-    nrows, ncols = _grid(len(panels))
-    fig = Figure(figsize=(0.6 + 5.6 * ncols, 0.7 + 3.9 * nrows), layout="constrained")
-    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
-    for ax in axes[len(panels):]:
-        ax.set_visible(False)
+    fig, axes = _panel_axes(len(panels), 5.6, 3.9)
     for k, (ax, (label, edges, series)) in enumerate(zip(axes, panels)):
         top, right = 1e-3, 0.0
         for name, prob, rt, colour, filled in series:
@@ -464,15 +472,9 @@ def _plot_rtd_grid(panels, path, title: str) -> Path:
 def _plot_mixing_grid(panels, path, title: str) -> Path:
     """Fig. 11: one mixing panel per velocity. ``panels``: (label, series, well_mixed) with
     series (name, times, fraction, colour, line width)."""
-    from matplotlib.figure import Figure
-
     from cfbmarkov.report.figures import _save
 
-    nrows, ncols = _grid(len(panels))
-    fig = Figure(figsize=(0.6 + 5.4 * ncols, 0.7 + 3.7 * nrows), layout="constrained")
-    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
-    for ax in axes[len(panels):]:
-        ax.set_visible(False)
+    fig, axes = _panel_axes(len(panels), 5.4, 3.7)
     for k, (ax, (label, series, well_mixed)) in enumerate(zip(axes, panels)):
         top, lo, hi = 0.05, math.inf, -math.inf
         for name, t, f, colour, lw in series:
