@@ -1,6 +1,6 @@
 """Fluidized bed on a floor: time-averaged gas pressure drop against the bed weight.
 
-    python benchmarks/fluidized_bed.py [PARTICLES] [U m/s] [SECONDS] [HEIGHT m]
+    python benchmarks/fluidized_bed.py [PARTICLES] [U m/s] [SECONDS] [HEIGHT m] [CELL m] [WIDTH m]
 
 Prints, every 0.1 s of simulated time, the pressure drop over the period divided by the
 bed weight per unit cross-section (block mean and running mean from 0.3 s), and the share
@@ -24,13 +24,14 @@ from cfbmarkov.simulate.coupling import hexagonal_bed
 from cfbmarkov.simulate.run import CoupledRiser
 
 
-def main(n: int = 8000, u: float = 1.6, duration: float = 1.6, height: float = 0.3) -> None:
-    d, width = 1e-3, 0.09
+def main(n: int = 8000, u: float = 1.6, duration: float = 1.6, height: float = 0.3,
+         cell: float = 0.01, width: float = 0.09) -> None:
+    d = 1e-3
     case = CaseConfig.model_validate({
         "riser": {"width": width, "height": height}, "particles": {"number": n},
         "gas": {"superficial_velocity": u},
-        "numerics": {"cfd_cells": [9, int(round(height / 0.01))],
-                     "dem_cells": [30, int(height / 0.0027)]}})
+        "numerics": {"cfd_cells": [int(round(width / cell)), int(round(height / cell))],
+                     "dem_cells": [int(width / 0.003), int(height / 0.0027)]}})
     pos = hexagonal_bed(n, d, width)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
@@ -59,4 +60,4 @@ def main(n: int = 8000, u: float = 1.6, duration: float = 1.6, height: float = 0
 
 
 if __name__ == "__main__":
-    main(*(t(a) for t, a in zip((int, float, float, float), sys.argv[1:])))
+    main(*(t(a) for t, a in zip((int, float, float, float, float, float), sys.argv[1:])))

@@ -46,8 +46,9 @@ class CoupledRiser:
         self.dem = dem
         self.gas = gas
         self.cfd_steps = int(cfd_steps)
-        self.grid = GasGrid.from_config(case)
-        self.solver = GasSolver.from_config(case, formulation="B")
+        # a bed on a floor: the gas enters through a distributor at y = 0 (see .cfd.grid)
+        self.solver = GasSolver.from_config(case, distributor=dem.bottom_wall, formulation="B")
+        self.grid = self.solver.grid
         self.dem_steps_per_cfd = case.numerics.dem_steps_per_cfd_step
         n = dem.n_particles
         self._coefficient = np.empty(n)
@@ -77,7 +78,8 @@ class CoupledRiser:
         grid = GasGrid.from_config(case)
         eps = void_fraction_field(grid, positions[:, 0], positions[:, 1], p.diameter,
                                   periodic_y=not bottom_wall)
-        gas = GasSolver.from_config(case, formulation="B").initial_state(eps)
+        gas = GasSolver.from_config(case, distributor=bottom_wall,
+                                    formulation="B").initial_state(eps)
         return cls(case, dem, gas)
 
     # -- stepping ----------------------------------------------------------------------

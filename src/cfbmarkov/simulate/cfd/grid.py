@@ -11,6 +11,13 @@ penetration). The y-direction is periodic: y-face ``j = 0`` lies at y = 0 = H, b
 cell row ``ny - 1`` (below, through the periodic boundary) and cell row 0. The no-slip
 condition for ``v`` at the walls is imposed through a ghost value ``v_ghost = -v`` half a
 cell outside the wall, i.e. v = 0 on the wall by linear interpolation.
+
+A y-face's void fraction (which turns the mass flux eps v into the interstitial velocity v)
+is the mean of the two cells beside it. On a grid with ``distributor=True`` (a bed standing
+on a floor at y = 0, through which the gas enters as through a distributor plate) the face
+j = 0 takes the void fraction of the cell above it instead: the gas leaves the distributor
+into the bed at U / eps_bed, not at U over the mean of the bed and the empty freeboard
+across the periodic seam.
 """
 
 from __future__ import annotations
@@ -24,12 +31,14 @@ from cfbmarkov.errors import InputError
 
 @dataclass(frozen=True)
 class GasGrid:
-    """A uniform staggered grid of ``nx`` x ``ny`` cells over [0, width] x [0, height)."""
+    """A uniform staggered grid of ``nx`` x ``ny`` cells over [0, width] x [0, height)
+    (``distributor``: the face at y = 0 is a distributor under a bed, see the module)."""
 
     nx: int
     ny: int
     width: float
     height: float
+    distributor: bool = False
 
     def __post_init__(self) -> None:
         if int(self.nx) != self.nx or int(self.ny) != self.ny:
@@ -45,12 +54,14 @@ class GasGrid:
         object.__setattr__(self, "ny", int(self.ny))
         object.__setattr__(self, "width", float(self.width))
         object.__setattr__(self, "height", float(self.height))
+        object.__setattr__(self, "distributor", bool(self.distributor))
 
     @classmethod
-    def from_config(cls, case) -> "GasGrid":
+    def from_config(cls, case, distributor: bool = False) -> "GasGrid":
         """The grid of a :class:`cfbmarkov.config.CaseConfig` (riser size, ``numerics.cfd_cells``)."""
         nx, ny = case.numerics.cfd_cells
-        return cls(nx=nx, ny=ny, width=case.riser.width, height=case.riser.height)
+        return cls(nx=nx, ny=ny, width=case.riser.width, height=case.riser.height,
+                   distributor=distributor)
 
     @property
     def dx(self) -> float:
@@ -93,6 +104,16 @@ class GasGrid:
     def y_faces(self) -> np.ndarray:
         """y of the y-faces (v points), m, shape (ny,)."""
         return np.arange(self.ny) * self.dy
+
+    def y_face_void_fraction(self, void_fraction) -> np.ndarray:
+        """Void fraction on the y-faces (nx, ny) from the cells' (nx, ny): the mean of the
+        cells below and above (across the periodic seam at j = 0), or on a ``distributor``
+        grid the cell above at j = 0."""
+        e = np.asarray(void_fraction, dtype=np.float64)
+        face = 0.5 * (np.roll(e, 1, axis=1) + e)
+        if self.distributor:
+            face[:, 0] = e[:, 0]
+        return face
 
     def cell_volume(self, thickness: float) -> float:
         """Volume of one cell of the pseudo-2D grid, dx*dy*thickness (SPEC section 1), m^3."""

@@ -25,7 +25,8 @@ Discretisation and step (all in one numba kernel, serial: 9 x 95 cells are too f
 threads to pay):
 
 1. Predictor for the face mass fluxes ``m = eps_face u`` (eps_face the mean of the two
-   cells beside the face): ``R = m^n + dt (-div(eps u u) + nu div(eps grad u) - f / rho +
+   cells beside the face; on a grid with a ``distributor`` the y-face at the floor takes
+   the cell above it, see :mod:`.grid`): ``R = m^n + dt (-div(eps u u) + nu div(eps grad u) - f / rho +
    K u^n / rho) - dt eps_face^{n+1} g``. Advection is flux-form on the staggered control
    volumes with van Leer-limited (TVD, second order where smooth) or first-order upwind
    face values; forward Euler. ``K >= 0`` (optional ``drag_jacobian``, kg/(m^3 s)) makes the
@@ -135,8 +136,23 @@ def _limited(up, upup, down, scheme):
 
 
 @nb.njit(cache=True)
-def _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps, tend_u, tend_v):
+def _y_face_void_fraction(eps, distributor, out):
+    """Void fraction on the y-faces into ``out``: the mean of the cells below and above
+    (across the periodic seam at j = 0), or with ``distributor`` the cell above at j = 0."""
+    nx, ny = eps.shape
+    for i in range(nx):
+        for j in range(ny):
+            jm = j - 1 if j >= 1 else ny - 1
+            out[i, j] = 0.5 * (eps[i, jm] + eps[i, j])
+        if distributor:
+            out[i, 0] = eps[i, 0]
+
+
+@nb.njit(cache=True)
+def _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps, eps_y, tend_u, tend_v):
     """tend = -div(eps u u) + nu div(eps grad u) on the faces (m/s^2; 0 on the wall faces).
+
+    ``eps_y`` is the void fraction on the y-faces (:func:`_y_face_void_fraction`).
 
     Advection is flux form on the staggered control volumes: mass fluxes eps_face u
     averaged to the control-volume faces, transported velocity from the upwind side
@@ -172,8 +188,8 @@ def _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps, tend_u, tend_v):
             jm = j - 1 if j >= 1 else ny - 1
             jmm = jm - 1 if jm >= 1 else ny - 1
             jp = j + 1 if j + 1 < ny else 0
-            mvl = 0.5 * (eps[i - 1, jm] + eps[i - 1, j]) * v[i - 1, j]
-            mvr = 0.5 * (eps[i, jm] + eps[i, j]) * v[i, j]
+            mvl = eps_y[i - 1, j] * v[i - 1, j]
+            mvr = eps_y[i, j] * v[i, j]
             F = 0.5 * (mvl + mvr)
             if F >= 0.0:
                 face = _limited(u[i, jm], u[i, jmm], u[i, j], scheme)
@@ -188,8 +204,8 @@ def _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps, tend_u, tend_v):
             jm = j - 1 if j >= 1 else ny - 1
             jp = j + 1 if j + 1 < ny else 0
             jpp = jp + 1 if jp + 1 < ny else 0
-            m0 = 0.5 * (eps[i, jm] + eps[i, j]) * v[i, j]
-            m1 = 0.5 * (eps[i, j] + eps[i, jp]) * v[i, jp]
+            m0 = eps_y[i, j] * v[i, j]
+            m1 = eps_y[i, jp] * v[i, jp]
             F = 0.5 * (m0 + m1)
             if F >= 0.0:
                 face = _limited(v[i, j], v[i, jm], v[i, jp], scheme)
@@ -254,11 +270,11 @@ def _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps, tend_u, tend_v):
 
 
 @nb.njit(cache=True)
-def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol,
+def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol, distributor,
                  u, v, eps_old, eps_new, fu, fv, ku, kv, has_k,
                  u_out, v_out, p_out,
                  mu_s, mv_s, cu, cv, cu_fac, cv_fac, band, invdiag, ra, rb, numbering,
-                 tend_u, tend_v, factor_state, info):
+                 tend_u, tend_v, ey_old, ey_new, factor_state, info):
     """One gas step; see the module docstring. Returns a status code (0 = success)."""
     # ---- 1. stability of the explicit step, from the current velocities
     umax = 0.0
@@ -300,7 +316,9 @@ def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol,
     idx2 = 1.0 / (dx * dx)
     idy2 = 1.0 / (dy * dy)
     # ---- 3. advection and viscous tendencies from the old velocities and void fraction
-    _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps_old, tend_u, tend_v)
+    _y_face_void_fraction(eps_old, distributor, ey_old)
+    _y_face_void_fraction(eps_new, distributor, ey_new)
+    _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps_old, ey_old, tend_u, tend_v)
     # ---- 4. predictor R and the projection weights
     inv_rho = 1.0 / rho
     dtk = dt * inv_rho
@@ -324,9 +342,8 @@ def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol,
         cu[nx, j] = 0.0
     for i in range(nx):
         for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            ef_old = 0.5 * (eps_old[i, jm] + eps_old[i, j])
-            ef_new = 0.5 * (eps_new[i, jm] + eps_new[i, j])
+            ef_old = ey_old[i, j]
+            ef_new = ey_new[i, j]
             r = (ef_old * v[i, j] + dt * (tend_v[i, j] - fv[i, j] * inv_rho)
                  - dt * ef_new * gravity)
             w = ef_new if model_a else 1.0
@@ -485,8 +502,7 @@ def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol,
             u_out[i, j] /= 0.5 * (eps_new[i - 1, j] + eps_new[i, j])
     for i in range(nx):
         for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            v_out[i, j] /= 0.5 * (eps_new[i, jm] + eps_new[i, j])
+            v_out[i, j] /= ey_new[i, j]
     pmean = 0.0
     for k in range(n):
         pmean += ra[k]
@@ -545,20 +561,27 @@ class GasState:
             raise InputError(f"gas state checkpoint lacks '{exc.args[0]}'") from None
         return cls(**arrays, **scalars, steps=steps)
 
-    def mean_gas_flux(self) -> float:
-        """Domain mean of eps_face * v over all y-faces (m/s): U after every step."""
-        e = self.void_fraction
-        return float(np.mean(0.5 * (np.roll(e, 1, axis=1) + e) * self.v))
+    def mean_gas_flux(self, grid: GasGrid | None = None) -> float:
+        """Domain mean of eps_face * v over all y-faces (m/s): U after every step. Pass the
+        solver's ``grid`` where it has a ``distributor`` (its face void fraction differs)."""
+        return float(np.mean(cross_section_flux(self, grid)))
 
 
-def cross_section_flux(state: GasState) -> np.ndarray:
+def _y_faces(state: GasState, grid: GasGrid | None) -> np.ndarray:
+    if grid is None:
+        e = state.void_fraction
+        return 0.5 * (np.roll(e, 1, axis=1) + e)
+    return grid.y_face_void_fraction(state.void_fraction)
+
+
+def cross_section_flux(state: GasState, grid: GasGrid | None = None) -> np.ndarray:
     """Mean of eps_face * v over each row of y-faces (shape (ny,), m/s).
 
     Row j lies at y = j dy. These differ from each other by the rate of change of the gas
-    volume between the rows; their mean is U.
+    volume between the rows; their mean is U. Pass the solver's ``grid`` where it has a
+    ``distributor`` (the face void fraction at j = 0 differs there).
     """
-    e = state.void_fraction
-    return np.mean(0.5 * (np.roll(e, 1, axis=1) + e) * state.v, axis=0)
+    return np.mean(_y_faces(state, grid) * state.v, axis=0)
 
 
 def continuity_residual(grid: GasGrid, old: GasState, new: GasState, time_step: float) -> np.ndarray:
@@ -566,7 +589,7 @@ def continuity_residual(grid: GasGrid, old: GasState, new: GasState, time_step: 
     e0, e1 = old.void_fraction, new.void_fraction
     eu = np.zeros(grid.u_shape)
     eu[1:-1] = 0.5 * (e1[1:] + e1[:-1]) * new.u[1:-1]
-    ev = 0.5 * (np.roll(e1, 1, axis=1) + e1) * new.v
+    ev = grid.y_face_void_fraction(e1) * new.v
     div = (eu[1:] - eu[:-1]) / grid.dx + (np.roll(ev, -1, axis=1) - ev) / grid.dy
     return div + (e1 - e0) / time_step - new.continuity_defect
 
@@ -582,10 +605,11 @@ def momentum_tendency(grid: GasGrid, u, v, void_fraction, kinematic_viscosity: f
         raise InputError(f"advection scheme must be one of {tuple(SCHEMES)}, got {scheme!r}")
     tu = np.zeros(grid.u_shape)
     tv = np.zeros(grid.v_shape)
+    eps = np.ascontiguousarray(void_fraction, dtype=np.float64)
     _momentum_tendency(grid.nx, grid.ny, grid.dx, grid.dy, float(kinematic_viscosity),
                        SCHEMES[scheme], np.ascontiguousarray(u, dtype=np.float64),
-                       np.ascontiguousarray(v, dtype=np.float64),
-                       np.ascontiguousarray(void_fraction, dtype=np.float64), tu, tv)
+                       np.ascontiguousarray(v, dtype=np.float64), eps,
+                       grid.y_face_void_fraction(eps), tu, tv)
     return tu, tv
 
 
@@ -643,6 +667,8 @@ class GasSolver:
         self._cv_fac = np.zeros(grid.v_shape)
         self._tend_u = np.zeros(grid.u_shape)
         self._tend_v = np.zeros(grid.v_shape)
+        self._ey_old = np.zeros(grid.v_shape)
+        self._ey_new = np.zeros(grid.v_shape)
         self._factor_state = np.zeros(1, dtype=np.int64)
         self._zero_u = np.zeros(grid.u_shape)
         self._zero_v = np.zeros(grid.v_shape)
@@ -651,9 +677,10 @@ class GasSolver:
         self.factorisations = 0
 
     @classmethod
-    def from_config(cls, case, **kwargs) -> "GasSolver":
-        """A solver for a :class:`cfbmarkov.config.CaseConfig` (Table 1 values)."""
-        return cls(GasGrid.from_config(case), density=case.gas.density,
+    def from_config(cls, case, *, distributor: bool = False, **kwargs) -> "GasSolver":
+        """A solver for a :class:`cfbmarkov.config.CaseConfig` (Table 1 values);
+        ``distributor``: the gas enters a bed on a floor at y = 0 (see :mod:`.grid`)."""
+        return cls(GasGrid.from_config(case, distributor=distributor), density=case.gas.density,
                    viscosity=case.gas.viscosity,
                    superficial_velocity=case.gas.superficial_velocity,
                    gravity=case.riser.gravity, time_step=case.numerics.cfd_time_step, **kwargs)
@@ -688,8 +715,7 @@ class GasSolver:
         outputs of a step, not inputs).
         """
         e = self._void_fraction(void_fraction).copy()
-        ev = 0.5 * (np.roll(e, 1, axis=1) + e)
-        v = self.superficial_velocity / ev
+        v = self.superficial_velocity / self.grid.y_face_void_fraction(e)
         return GasState(u=np.zeros(self.grid.u_shape), v=v, p=np.zeros(self.grid.cell_shape),
                         void_fraction=e)
 
@@ -722,12 +748,12 @@ class GasSolver:
         code = _step_kernel(
             g.nx, g.ny, g.dx, g.dy, self.time_step, self.density, self.kinematic_viscosity,
             self.gravity, self.superficial_velocity, self.formulation == "A",
-            SCHEMES[self.scheme], self.residual_tolerance,
+            SCHEMES[self.scheme], self.residual_tolerance, g.distributor,
             state.u, state.v, state.void_fraction, eps_new, fu, fv, ku, kv, has_k,
             u_new, v_new, p_new,
             self._mu_s, self._mv_s, self._cu, self._cv, self._cu_fac, self._cv_fac,
             self._band, self._invdiag, self._ra, self._rb, self._numbering,
-            self._tend_u, self._tend_v, self._factor_state, info)
+            self._tend_u, self._tend_v, self._ey_old, self._ey_new, self._factor_state, info)
         if code != _OK:
             self._raise(code, info, eps_new, fu, fv)
         if info[_I_REFACTORED]:
