@@ -30,6 +30,10 @@ class RiserConfig(_Model):
     width: Positive = Field(0.09, description="riser width W, m (Table 1: bed size 0.09 m)")
     height: Positive = Field(0.95, description="riser height H, m (Table 1: bed size 0.95 m)")
     gravity: float = Field(9.81, ge=0, description="gravitational acceleration, m/s^2, acting in -y")
+    distributor_pressure_drop: float = Field(
+        0.0, ge=0, description="pressure drop of the gas distributor under a bed standing on a "
+        "floor (verification beds only; the periodic riser has none), Pa at the superficial "
+        "velocity, linear in each column's gas flux; 0: no distributor resistance")
 
 
 class ParticleConfig(_Model):

@@ -2,7 +2,9 @@
 
 import numpy as np
 import pytest
+from scipy.optimize import brentq
 
+from cfbmarkov.errors import InputError
 from cfbmarkov.simulate.cfd import (
     GasGrid,
     GasSolver,
@@ -107,3 +109,51 @@ def test_pressure_residual_is_checked():
     bad[2, 3] = np.nan
     with pytest.raises(PressureSolveError, match="not finite"):
         ok.step(state, eps, np.zeros(grid.u_shape), bad)
+
+
+@pytest.mark.parametrize("plate", [0.0, 1000.0])
+def test_distributor_spreads_the_gas_over_the_columns(plate):
+    """Columns of a bed that fills the whole height, one of them loose (eps 0.7, next to
+    beds at 0.45), held by a fully implicit linear drag K_i (kg/(m^3 s)) as from particles
+    at rest, and kept apart by a large drag on the x-faces (as by thin partitions). Each
+    column is then a 1D channel, and in the steady state its gas flux
+    m_i = eps_i v_i follows from the resistance network
+    ``G H - eps_i rho g H = m_i (K_i H / eps_i + dp_d / U)`` with mean(m_i) = U. Without a
+    distributor plate the gas channels through the loose column; with one (dp_d = 1000 Pa
+    at U) the fluxes are spread as the network says, and the solver reports the plate's
+    mean pressure drop."""
+    u_s, rho, mu, d = 1.0, 1.205, 1.8e-5, 1e-3
+    grid = GasGrid(nx=9, ny=20, width=0.09, height=0.2, distributor=True)
+    solver = GasSolver(grid, density=rho, viscosity=mu, superficial_velocity=u_s,
+                       time_step=5e-5, formulation="B", distributor_pressure_drop=plate)
+    eps_col = np.full(grid.nx, 0.45)
+    eps_col[4] = 0.7
+    k_col = 150.0 * (1.0 - eps_col) ** 2 * mu / (eps_col * d**2)
+    eps = np.repeat(eps_col[:, None], grid.ny, axis=1)
+    kv = np.repeat(k_col[:, None], grid.ny, axis=1)
+    ku = np.full(grid.u_shape, 1e7)
+    state = solver.initial_state(eps)
+    for _ in range(1000):     # 20 relaxation times rho eps / K of the loose column
+        state = solver.step(state, eps, ku * state.u, kv * state.v, ku, kv)
+    flux = grid.y_face_void_fraction(eps) * state.v
+    h = grid.height
+    resistance = k_col * h / eps_col + plate / u_s
+    driving = brentq(lambda gh: np.mean((gh - eps_col * rho * 9.81 * h) / resistance) - u_s,
+                     0.0, 1e7)
+    expected = (driving - eps_col * rho * 9.81 * h) / resistance
+    # (the gas viscosity couples neighbouring columns: 0.2 % next to the loose one)
+    np.testing.assert_allclose(flux[:, 0], expected, rtol=5e-3)
+    np.testing.assert_allclose(flux, np.broadcast_to(flux[:, :1], flux.shape), rtol=0.02)
+    assert state.distributor_pressure_drop == pytest.approx(plate, rel=1e-9, abs=1e-12)
+    assert state.driving_pressure_gradient * h == pytest.approx(driving, rel=2e-3)
+    share = flux[4, 0] / u_s
+    assert share > 4.0 if plate == 0 else share < 2.0            # channelling, or not
+
+
+def test_distributor_pressure_drop_needs_a_distributor():
+    grid = GasGrid(nx=9, ny=20, width=0.09, height=0.2)
+    with pytest.raises(InputError, match="distributor"):
+        GasSolver(grid, distributor_pressure_drop=100.0)
+    with pytest.raises(InputError, match="non-negative"):
+        GasSolver(GasGrid(nx=9, ny=20, width=0.09, height=0.2, distributor=True),
+                  distributor_pressure_drop=-1.0)

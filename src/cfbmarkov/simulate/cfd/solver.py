@@ -523,7 +523,8 @@ class GasState:
     ``u`` (nx+1, ny) and ``v`` (nx, ny) are interstitial gas velocities (m/s) on the faces,
     ``p`` (nx, ny) the periodic part of the pressure (Pa, zero mean; the full pressure is
     ``p - G y``), ``void_fraction`` (nx, ny) the eps these velocities belong to,
-    ``driving_pressure_gradient`` G (Pa/m), ``pressure_residual`` the relative continuity
+    ``driving_pressure_gradient`` G (Pa/m), ``distributor_pressure_drop`` the mean pressure
+    drop across a distributor (Pa; 0 without one), ``pressure_residual`` the relative continuity
     residual of the last projection (-), ``continuity_defect`` the mean deps/dt removed
     before it (1/s), ``time`` (s) and ``steps`` since the initial state.
     """
@@ -536,6 +537,7 @@ class GasState:
     pressure_residual: float = 0.0
     continuity_defect: float = 0.0
     time: float = 0.0
+    distributor_pressure_drop: float = 0.0
     steps: int = 0
     diagnostics: dict[str, float] = field(default_factory=dict, compare=False)
 
@@ -546,7 +548,7 @@ class GasState:
         """Arrays (copied) and scalars for a checkpoint; :meth:`from_state_dict` restores it."""
         d: dict[str, Any] = {k: np.array(getattr(self, k), dtype=np.float64, copy=True)
                              for k in self._ARRAYS}
-        for k in self._SCALARS:
+        for k in self._SCALARS + ("distributor_pressure_drop",):
             d[k] = float(getattr(self, k))
         d["steps"] = int(self.steps)
         return d
@@ -556,6 +558,8 @@ class GasState:
         try:
             arrays = {k: np.array(d[k], dtype=np.float64, copy=True, order="C") for k in cls._ARRAYS}
             scalars = {k: float(d[k]) for k in cls._SCALARS}
+            # absent from checkpoints written before distributors existed
+            scalars["distributor_pressure_drop"] = float(d.get("distributor_pressure_drop", 0.0))
             steps = int(d["steps"])
         except KeyError as exc:
             raise InputError(f"gas state checkpoint lacks '{exc.args[0]}'") from None
@@ -624,6 +628,15 @@ class GasSolver:
     or ``"B"``; ``residual_tolerance`` the relative continuity residual at which a step is
     refused with :class:`PressureSolveError`.
 
+    ``distributor_pressure_drop`` (Pa, on a grid with a ``distributor`` only): a porous plate
+    at the floor face whose pressure drop is this at the superficial velocity U and linear in
+    each column's flux (``dp_i = distributor_pressure_drop * eps v / U``). It acts on the gas
+    as an implicit resistance at the faces j = 0, like a drag with no particle, and spreads
+    the gas evenly over the columns as a real distributor does (without it the gas channels
+    through one loose column and the rest of the bed rests on the floor). Its mean is
+    reported as :attr:`GasState.distributor_pressure_drop`; the bed's own pressure drop is
+    ``(G - rho g <eps>) H`` minus it.
+
     :meth:`step` returns a new state and leaves its argument untouched. The solver keeps
     only workspace and the last factorisation (a cache: results do not depend on it), so a
     state saved with :meth:`GasState.state_dict` continues bit-identically in a new solver.
@@ -632,7 +645,15 @@ class GasSolver:
     def __init__(self, grid: GasGrid, density: float = 1.205, viscosity: float = 1.8e-5,
                  superficial_velocity: float = 6.0, gravity: float = 9.81,
                  time_step: float = 5e-5, *, formulation: str = "A", scheme: str = "vanleer",
-                 residual_tolerance: float = 1e-9):
+                 residual_tolerance: float = 1e-9, distributor_pressure_drop: float = 0.0):
+        if not (np.isfinite(distributor_pressure_drop) and distributor_pressure_drop >= 0):
+            raise InputError("distributor pressure drop must be finite and non-negative, "
+                             f"got {distributor_pressure_drop}")
+        if distributor_pressure_drop > 0 and not grid.distributor:
+            raise InputError("a distributor pressure drop needs a grid with a distributor "
+                             "(a bed on a floor)")
+        if distributor_pressure_drop > 0 and not superficial_velocity > 0:
+            raise InputError("a distributor pressure drop needs a positive superficial velocity")
         for name, val in (("density", density), ("viscosity", viscosity),
                           ("time_step", time_step), ("residual_tolerance", residual_tolerance)):
             if not (np.isfinite(val) and val > 0):
@@ -652,6 +673,7 @@ class GasSolver:
         self.formulation = formulation
         self.scheme = scheme
         self.residual_tolerance = float(residual_tolerance)
+        self.distributor_pressure_drop = float(distributor_pressure_drop)
         nx, ny = grid.nx, grid.ny
         n = nx * ny
         self._numbering = cell_numbering(nx, ny)
@@ -679,7 +701,10 @@ class GasSolver:
     @classmethod
     def from_config(cls, case, *, distributor: bool = False, **kwargs) -> "GasSolver":
         """A solver for a :class:`cfbmarkov.config.CaseConfig` (Table 1 values);
-        ``distributor``: the gas enters a bed on a floor at y = 0 (see :mod:`.grid`)."""
+        ``distributor``: the gas enters a bed on a floor at y = 0 (see :mod:`.grid`), through
+        a plate with the case's ``riser.distributor_pressure_drop``."""
+        if distributor:
+            kwargs.setdefault("distributor_pressure_drop", case.riser.distributor_pressure_drop)
         return cls(GasGrid.from_config(case, distributor=distributor), density=case.gas.density,
                    viscosity=case.gas.viscosity,
                    superficial_velocity=case.gas.superficial_velocity,
@@ -741,6 +766,17 @@ class GasSolver:
             kv = self._field(drag_jacobian_v, g.v_shape, "drag_jacobian_v")
         else:
             ku, kv = self._zero_u, self._zero_v
+        plate = None
+        if self.distributor_pressure_drop > 0:
+            # K v = dp_d (eps_face v / U) / dy on the floor faces, fully implicit:
+            # explicit part K v^n here, K (v^{n+1} - v^n) through the jacobian
+            plate = (self.distributor_pressure_drop / (self.superficial_velocity * g.dy)
+                     * g.y_face_void_fraction(eps_new)[:, 0])
+            fv = fv.copy()
+            fv[:, 0] += plate * state.v[:, 0]
+            kv = kv.copy()
+            kv[:, 0] += plate
+            has_k = True
         u_new = np.empty(g.u_shape)
         v_new = np.empty(g.v_shape)
         p_new = np.empty(g.cell_shape)
@@ -764,6 +800,8 @@ class GasSolver:
             pressure_residual=float(info[_I_RES_REL]),
             continuity_defect=float(info[_I_DEFECT]),
             time=state.time + self.time_step, steps=state.steps + 1,
+            distributor_pressure_drop=(0.0 if plate is None
+                                       else float(np.mean(plate * v_new[:, 0]) * g.dy)),
             diagnostics={"continuity_residual": float(info[_I_RES_ABS]),
                          "flux_error": float(info[_I_FLUXERR]),
                          "max_u": float(info[_I_UMAX]), "max_v": float(info[_I_VMAX]),
