@@ -10,11 +10,10 @@ Prints, every 0.1 s of simulated time, the pressure drop over the period divided
 bed weight per unit cross-section (block mean and running mean from 0.3 s), and the share
 of the weight the floor and the side walls carried in the block (their impulse on the
 particles over the block's weight impulse). A fluidized bed should carry its weight (ratio
-1); a slugging narrow bed rests part of the time on the floor and the walls. Measured
-(8000 particles, 1.6 s, height 0.3 m, before the floor fix of session 3): 0.91 at 1.0 m/s,
-0.95 at 1.6 m/s. Session 3 (3000 particles, 1.0 m/s, 1.0 s, height 0.2 m): dp / weight
-0.816 from 0.3 s, floor 16-18 % per block (0.76 and 23-25 % with the void fraction across
-the seam).
+1); without a distributor plate the gas channels through one loose column and the floor
+carries 5-20 % (docs/simulation.md has the measured table). Session 4, with the plate at 0.3:
+8000 particles, 1.6 m/s, 4 s, 0.3 m: dp / weight 0.985, floor 2.0 %; 4000 particles, 1.3 m/s,
+2 s, 0.25 m, 1 cm cells, 6 cm wide (the pytest case): 0.985, floor 2.4 %.
 """
 
 import sys

@@ -146,7 +146,7 @@ def test_fluidized_bed_pressure_drop_carries_its_weight():
     0.3 of the bed weight per area, as real beds are built; without one, the gas channels
     through one loose column and the floor carries 5-10 %. The bed slugs (block means
     swing by +-25 % with a period near 0.3 s), so the mean is taken over 0.3-2.0 s.
-    Measured: 0.985, floor 2.5 %, walls 0.1 % (docs/simulation.md)."""
+    Measured: 0.985, floor 2.4 %, walls -0.1 % (docs/simulation.md)."""
     n, u, width, height = 4000, 1.3, 0.06, 0.25
     mass = RHO_P * math.pi * D**3 / 6
     weight = n * mass * G / (width * D)
