@@ -10,6 +10,10 @@
   fluidized state: the state after 0.5 s of simulated time from the initial placement,
   computed once and cached in ``~/.cache/cfbmarkov`` (or ``$CFBMARKOV_CACHE``).
 
+Where LAMMPS is installed (:mod:`cfbmarkov.simulate.dem.lammps`), each DEM line is followed
+by LAMMPS's rate on the same problem (``dem-throughput-lammps-Nranks``) and ours over it
+(``dem-throughput-over-lammps``).
+
 DEM steps count as particle-steps (a gas step holds 10 DEM steps); times exclude numba
 compilation.
 """
@@ -58,13 +62,33 @@ def fluidized_riser(particles: int = 27000, develop: float = 0.5):
     return riser
 
 
+def _lammps_lines(name: str, state: str, ours: float, particles: int, repeat: int
+                  ) -> Iterator[tuple[str, float, str]]:
+    """LAMMPS on the same problem and our rate over it, where LAMMPS is installed."""
+    import subprocess
+    import sys
+
+    from cfbmarkov.simulate.dem.lammps import find_lammps, lammps_throughput
+
+    if find_lammps() is None:
+        return
+    try:
+        rate, ranks = lammps_throughput(state, particles, repeat=repeat)
+    except (RuntimeError, OSError, subprocess.SubprocessError) as exc:
+        print(f"warning: LAMMPS beside {name} failed: {exc}", file=sys.stderr)
+        return
+    yield f"{name}-lammps-{ranks}rank{'s' if ranks > 1 else ''}", rate, "particle-steps/s"
+    yield f"{name}-over-lammps", ours / rate, "x"
+
+
 def simulation_benchmarks(repeat: int = 5, particles: int = 27000
                           ) -> Iterator[tuple[str, float, str]]:
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")     # the paper's DEM step warning
-        yield "dem-throughput", _dem_rate("dilute", particles, repeat), "particle-steps/s"
-        yield ("dem-throughput-dense", _dem_rate("dense", particles, repeat),
-               "particle-steps/s")
+        for name, state in (("dem-throughput", "dilute"), ("dem-throughput-dense", "dense")):
+            ours = _dem_rate(state, particles, repeat)
+            yield name, ours, "particle-steps/s"
+            yield from _lammps_lines(name, state, ours, particles, repeat)
         riser = fluidized_riser(particles)
         gas_steps = 50
         riser.step()
