@@ -106,15 +106,20 @@ class GasGrid:
         return np.arange(self.ny) * self.dy
 
     def y_face_void_fraction(self, void_fraction) -> np.ndarray:
-        """Void fraction on the y-faces (nx, ny) from the cells' (nx, ny): the mean of the
-        cells below and above (across the periodic seam at j = 0), or on a ``distributor``
-        grid the cell above at j = 0."""
-        e = np.asarray(void_fraction, dtype=np.float64)
-        face = 0.5 * (np.roll(e, 1, axis=1) + e)
-        if self.distributor:
-            face[:, 0] = e[:, 0]
-        return face
+        """:func:`y_face_void_fraction` on this grid."""
+        return y_face_void_fraction(void_fraction, self.distributor)
 
     def cell_volume(self, thickness: float) -> float:
         """Volume of one cell of the pseudo-2D grid, dx*dy*thickness (SPEC section 1), m^3."""
         return self.dx * self.dy * thickness
+
+
+def y_face_void_fraction(void_fraction, distributor: bool = False) -> np.ndarray:
+    """Void fraction on the y-faces (nx, ny) from the cells' (nx, ny): the mean of the cells
+    below and above (across the periodic seam at j = 0), or with a ``distributor`` the cell
+    above at j = 0."""
+    e = np.asarray(void_fraction, dtype=np.float64)
+    face = 0.5 * (np.roll(e, 1, axis=1) + e)
+    if distributor:
+        face[:, 0] = e[:, 0]
+    return face

@@ -26,8 +26,9 @@ threads to pay):
 
 1. Predictor for the face mass fluxes ``m = eps_face u`` (eps_face the mean of the two
    cells beside the face; on a grid with a ``distributor`` the y-face at the floor takes
-   the cell above it, see :mod:`.grid`): ``R = m^n + dt (-div(eps u u) + nu div(eps grad u) - f / rho +
-   K u^n / rho) - dt eps_face^{n+1} g``. Advection is flux-form on the staggered control
+   the cell above it, see :mod:`.grid`):
+   ``R = m^n + dt (-div(eps u u) + nu div(eps grad u) - f / rho + K u^n / rho)
+   - dt eps_face^{n+1} g``. Advection is flux-form on the staggered control
    volumes with van Leer-limited (TVD, second order where smooth) or first-order upwind
    face values; forward Euler. ``K >= 0`` (optional ``drag_jacobian``, kg/(m^3 s)) makes the
    drag semi-implicit, ``f -> f + K (u^{n+1} - u^n)``: then ``m* = a R`` with
@@ -71,7 +72,7 @@ import numpy as np
 
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.simulate.cfd._banded import band_cholesky, band_solve2, cell_numbering
-from cfbmarkov.simulate.cfd.grid import GasGrid
+from cfbmarkov.simulate.cfd.grid import GasGrid, y_face_void_fraction
 
 #: Courant number of the advective limit (forward Euler with a van Leer-limited scheme)
 ADVECTIVE_COURANT = 0.5
@@ -571,13 +572,6 @@ class GasState:
         return float(np.mean(cross_section_flux(self, grid)))
 
 
-def _y_faces(state: GasState, grid: GasGrid | None) -> np.ndarray:
-    if grid is None:
-        e = state.void_fraction
-        return 0.5 * (np.roll(e, 1, axis=1) + e)
-    return grid.y_face_void_fraction(state.void_fraction)
-
-
 def cross_section_flux(state: GasState, grid: GasGrid | None = None) -> np.ndarray:
     """Mean of eps_face * v over each row of y-faces (shape (ny,), m/s).
 
@@ -585,7 +579,8 @@ def cross_section_flux(state: GasState, grid: GasGrid | None = None) -> np.ndarr
     volume between the rows; their mean is U. Pass the solver's ``grid`` where it has a
     ``distributor`` (the face void fraction at j = 0 differs there).
     """
-    return np.mean(_y_faces(state, grid) * state.v, axis=0)
+    faces = y_face_void_fraction(state.void_fraction, grid is not None and grid.distributor)
+    return np.mean(faces * state.v, axis=0)
 
 
 def continuity_residual(grid: GasGrid, old: GasState, new: GasState, time_step: float) -> np.ndarray:
