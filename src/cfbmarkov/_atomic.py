@@ -1,4 +1,10 @@
-"""Atomic file output: write to a temporary name beside the target, then rename."""
+"""Atomic file output: write to a temporary name beside the target, then rename.
+
+Every writer of the package (trajectory files, models, reports, figures) goes through
+:func:`temporary_path` and :func:`publish`, or the context manager :func:`atomic_path` that
+pairs them, so that a failed or interrupted writer never leaves a half-written output
+under the final name.
+"""
 
 from __future__ import annotations
 
@@ -7,29 +13,70 @@ import os
 import tempfile
 from pathlib import Path
 
+from cfbmarkov.errors import InputError
 
-@contextlib.contextmanager
-def atomic_path(target: str | os.PathLike, suffix: str = ""):
-    """Yield a temporary path beside ``target``; rename it onto ``target`` on success.
 
-    On any exception the temporary file is removed and ``target`` is left untouched, so a
-    failed or interrupted writer never leaves a half-written output file.
+def temporary_path(target: str | os.PathLike, suffix: str = "") -> Path:
+    """Create an empty temporary file beside ``target`` and return its path.
+
+    Parameters
+    ----------
+    target : str or os.PathLike
+        The final output path; its folder is created if missing.
+    suffix : str
+        Appended after ``.tmp`` (e.g. ``".png"`` for writers that look at the extension).
+
+    Returns
+    -------
+    Path
+        A hidden file ``.<name>.<random>.tmp<suffix>`` in the target's folder (same file
+        system, so the final rename is atomic).
     """
     target = Path(target)
     target.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + suffix,
                                dir=target.parent)
     os.close(fd)
-    tmp = Path(tmp)
+    return Path(tmp)
+
+
+def publish(tmp: str | os.PathLike, target: str | os.PathLike) -> Path:
+    """Move the finished temporary file ``tmp`` onto ``target`` (atomic rename).
+
+    Raises
+    ------
+    InputError
+        If the rename fails (the temporary file is removed first).
+    """
+    try:
+        os.replace(tmp, target)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        raise InputError(f"{target}: cannot write ({exc.strerror or exc})") from None
+    return Path(target)
+
+
+def discard(tmp: str | os.PathLike) -> None:
+    """Remove a temporary file if it is still there."""
+    Path(tmp).unlink(missing_ok=True)
+
+
+@contextlib.contextmanager
+def atomic_path(target: str | os.PathLike, suffix: str = ""):
+    """Yield a temporary path beside ``target``; rename it onto ``target`` on success.
+
+    On any exception the temporary file is removed and ``target`` is left untouched.
+    """
+    tmp = temporary_path(target, suffix)
     try:
         yield tmp
-        os.replace(tmp, target)
     except BaseException:
-        with contextlib.suppress(FileNotFoundError):
-            tmp.unlink()
+        discard(tmp)
         raise
+    publish(tmp, target)
 
 
 def write_text_atomic(target: str | os.PathLike, text: str) -> None:
+    """Write ``text`` to ``target`` atomically."""
     with atomic_path(target) as tmp:
         tmp.write_text(text)

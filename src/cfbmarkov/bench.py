@@ -38,20 +38,23 @@ def _median_time(fn: Callable[[], object], repeat: int) -> float:
 def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | None = None
                       ) -> Iterator[tuple[str, float, str]]:
     from cfbmarkov import synthetic
-    from cfbmarkov.markov import CellGrid, PaperEstimator, exact_rtd
-    from cfbmarkov.trajectories import Trajectories
+    from cfbmarkov.markov import CellGrid, PaperEstimator, discretize, exact_rtd
 
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         run = Path(tmp) / "bench-run.h5"
         flow = synthetic.RiserFlow()
         # 10-15 s with 0.1 s before it: the history states with memory need at 10 s
         synthetic.write_run(run, flow, particles, 5.1, seed=1, start_time=9.9)
-        estimator = PaperEstimator(CellGrid(6, 38, flow.width, flow.height), lag=0.025)
-        yield "mcm-fit", _median_time(lambda: estimator.fit(run, window=(10.0, 15.0)), repeat), "s"
-        model = estimator.fit(run, window=(10.0, 15.0))
-        with Trajectories(run) as traj:
-            states0, _, laps0 = model.initial_states(traj, 10.0)
-        yield "mcm-predict", _median_time(lambda: model.simulate(states0, 200, 7, laps0), repeat), "s"
+        grid = CellGrid(6, 38, flow.width, flow.height)
+        estimator = PaperEstimator(grid, lag=0.025)
+
+        def fit():      # read the window, discretise, count, estimate
+            return estimator.fit(discretize(run, grid, 0.025, (10.0, 15.0)))
+
+        yield "mcm-fit", _median_time(fit, repeat), "s"
+        model = fit()
+        states0, _, laps0 = model.initial_states(run, 10.0)
+        yield "mcm-predict", _median_time(lambda: model.monte_carlo(states0, 200, 7, laps0), repeat), "s"
         pred = Path(tmp) / "bench-pred.h5"
         yield "mcm-predict-file", _median_time(
             lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat), "s"
@@ -75,10 +78,9 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
 
 
 def _refit(model, run):
-    from cfbmarkov.markov import estimator_from_name
+    from cfbmarkov.markov import fit_model
 
-    return estimator_from_name(model.estimator, model.state_space, model.lag).fit(
-        run, window=model.window)
+    return fit_model(run, model.state_space, model.lag, model.window, model.estimator)
 
 
 BENCHMARKS = {"mcm": markov_benchmarks}

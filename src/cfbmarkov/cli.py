@@ -64,7 +64,7 @@ def _cmd_import(args) -> int:
 
 
 def _cmd_fit(args) -> int:
-    from cfbmarkov.markov import estimator_from_name, state_space_from_name
+    from cfbmarkov.markov import fit_model, state_space_from_name
     from cfbmarkov.markov.select import select_model
     from cfbmarkov.trajectories import Trajectories
 
@@ -74,10 +74,8 @@ def _cmd_fit(args) -> int:
             model = select_model(run, window=args.window, columns=columns, rows=rows,
                                  lag=args.lag, estimator=args.estimator)
         else:
-            space = state_space_from_name(args.states, columns, rows, run.width, run.height,
-                                          args.lag)
-            estimator = estimator_from_name(args.estimator, state_space=space, lag=args.lag)
-            model = estimator.fit(run, window=args.window)
+            space = state_space_from_name(args.states, columns, rows, run.width, run.height)
+            model = fit_model(run, space, args.lag, args.window, args.estimator)
     model.save(args.output)
     print(model.summary())
     print(args.output)

@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 
 from cfbmarkov import synthetic
-from cfbmarkov.markov import CellGrid, estimator_from_name
+from cfbmarkov.markov import CellGrid, fit_model
 
 
 def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print) -> Path:
@@ -29,7 +29,7 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
     grid = CellGrid(6, 38, flow.width, flow.height)
     rows = {}
     for name in ("paper", "mle"):
-        model = estimator_from_name(name, grid, 0.025).fit(reference, window=(10.0, 15.0))
+        model = fit_model(reference, grid, 0.025, (10.0, 15.0), name)
         model.save(out / f"model-{name}.h5")
         prediction = model.predict(reference, start=15.0, duration=5.0, seed=seed,
                                    output=out / f"prediction-{name}.h5")

@@ -23,10 +23,10 @@ whole file (:meth:`Trajectories.positions` with a slice).
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
 import json
 import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
@@ -34,6 +34,7 @@ from typing import Any, Iterator
 import h5py
 import numpy as np
 
+from cfbmarkov._atomic import discard, publish, temporary_path
 from cfbmarkov.errors import InputError
 
 FORMAT = "cfbmarkov.trajectories"
@@ -76,6 +77,25 @@ def _open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
         return h5py.File(path, mode)
     except OSError:
         raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format)") from None
+
+
+@contextlib.contextmanager
+def opened(source: "str | os.PathLike | Trajectories") -> Iterator["Trajectories"]:
+    """An open :class:`Trajectories` for ``source``, a path or an already open file.
+
+    A file opened here is closed on leaving the block; an open file given by the caller
+    stays open. This is the one place where "a path or an open file" is decided.
+
+    Raises
+    ------
+    InputError
+        If a path does not name a readable trajectory file.
+    """
+    if isinstance(source, Trajectories):
+        yield source
+        return
+    with Trajectories(source) as traj:
+        yield traj
 
 
 class Trajectories:
@@ -293,10 +313,7 @@ class TrajectoryWriter:
         self.width, self.height = float(width), float(height)
         self.with_velocity = with_velocity
         self._label = label or str(self.path)
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".tmp", dir=self.path.parent)
-        os.close(fd)
-        self._tmp = Path(tmp)
+        self._tmp = temporary_path(self.path)
         n = self.ids.size
         self._file = h5py.File(self._tmp, "w")
         f = self._file
@@ -337,6 +354,32 @@ class TrajectoryWriter:
     @property
     def n_frames(self) -> int:
         return self._n_frames
+
+    @property
+    def last_frame(self) -> tuple[float, np.ndarray, np.ndarray] | None:
+        """(time in s, heights y [N] in m, laps [N]) of the last frame written, or None."""
+        if self._last_time is None:
+            return None
+        return self._last_time, self._last_y, self._last_lap
+
+    def continue_after(self, time: float, heights: np.ndarray, laps: np.ndarray,
+                       frame_interval: float | None = None) -> None:
+        """Continue a series written by another writer whose last frame was ``time`` (s)
+        with heights ``heights`` [N] (m) and lap counters ``laps`` [N]: the next frame must
+        follow it at the frame interval, and its laps count on from ``laps``.
+
+        Raises
+        ------
+        InputError
+            If frames were already written by this writer.
+        """
+        if self._n_frames:
+            raise InputError(f"{self._label}: cannot continue a series after writing frames")
+        self._last_time = float(time)
+        self._last_y = np.asarray(heights, dtype=np.float64).copy()
+        self._last_lap = np.asarray(laps, dtype=np.int32).copy()
+        if frame_interval is not None:
+            self._interval = float(frame_interval)
 
     # -- validation --------------------------------------------------------------------
     def _check_times(self, times: np.ndarray) -> None:
@@ -496,10 +539,7 @@ class TrajectoryWriter:
             raise InputError(f"{self._label}: no frames to write")
         self._file.close()
         try:
-            os.replace(self._tmp, self.path)
-        except OSError as exc:
-            self._tmp.unlink(missing_ok=True)
-            raise InputError(f"{self.path}: cannot write ({exc.strerror or exc})") from None
+            publish(self._tmp, self.path)
         finally:
             self._closed = True
         return self.path
@@ -511,7 +551,7 @@ class TrajectoryWriter:
         try:
             self._file.close()
         finally:
-            self._tmp.unlink(missing_ok=True)
+            discard(self._tmp)
             self._closed = True
 
 
@@ -546,126 +586,3 @@ def _version() -> str:
     from cfbmarkov import __version__
 
     return __version__
-
-
-class SegmentedTrajectoryWriter:
-    """Crash-safe output for long runs: frames go to a series of complete segment files.
-
-    HDF5 files are not safe against a kill in the middle of a write, so a long run writes
-    its frames to ``<output>.parts/segment-NNNNN.h5``, each closed (renamed into place
-    atomically) at a checkpoint. :meth:`finish` merges the segments into ``output`` (again
-    atomically) and removes the folder. After a crash, :meth:`resume` keeps exactly the first
-    ``n_segments`` segments named by the last checkpoint and discards the rest, so the run
-    continues from a consistent state.
-    """
-
-    def __init__(self, output: str | os.PathLike, ids, *, width: float, height: float,
-                 source: str, parameters: dict[str, Any] | None = None,
-                 with_velocity: bool = False, frame_interval: float | None = None,
-                 n_segments: int = 0):
-        self.output = Path(output)
-        self.parts = self.output.with_name(self.output.name + ".parts")
-        self.parts.mkdir(parents=True, exist_ok=True)
-        self._options = dict(ids=np.asarray(ids, dtype=np.int64), width=width, height=height,
-                             source=source, parameters=parameters,
-                             with_velocity=with_velocity, frame_interval=frame_interval)
-        self.n_segments = int(n_segments)
-        self._current: TrajectoryWriter | None = None
-        self._last: tuple[float, np.ndarray, np.ndarray] | None = None
-
-    @classmethod
-    def resume(cls, output: str | os.PathLike, n_segments: int, **options) -> "SegmentedTrajectoryWriter":
-        """Continue after a crash: keep segments 0..n_segments-1, remove any later ones."""
-        writer = cls(output, n_segments=n_segments, **options)
-        for path in writer.parts.glob("segment-*.h5"):
-            if int(path.stem.split("-")[1]) >= n_segments:
-                path.unlink()
-        for path in writer.parts.glob(".segment-*"):
-            path.unlink()
-        missing = [p for p in writer.segment_paths() if not p.exists()]
-        if missing:
-            raise InputError(f"cannot resume {output}: segment {missing[0].name} is missing")
-        if n_segments:
-            with Trajectories(writer.segment_paths()[-1]) as last:
-                writer._last = (float(last.times[-1]), last.positions(-1)[:, 1].copy(), last.laps(-1))
-        return writer
-
-    def segment_paths(self) -> list[Path]:
-        return [self.parts / f"segment-{k:05d}.h5" for k in range(self.n_segments)]
-
-    def _writer(self) -> TrajectoryWriter:
-        if self._current is None:
-            o = self._options
-            self._current = TrajectoryWriter(
-                self.parts / f"segment-{self.n_segments:05d}.h5", o["ids"], width=o["width"],
-                height=o["height"], source=o["source"], parameters=o["parameters"],
-                with_velocity=o["with_velocity"], frame_interval=o["frame_interval"],
-                label=str(self.output))
-            if self._last is not None:     # continue validation and laps across segments
-                w = self._current
-                w._last_time, w._last_y, w._last_lap = self._last
-                w._interval = o["frame_interval"] or w._interval
-        return self._current
-
-    def append(self, time: float, position, velocity=None, lap=None) -> None:
-        self._writer().append(time, position, velocity, lap)
-
-    def add_events(self, times, particles, directions) -> None:
-        if len(times):
-            self._writer().add_events(times, particles, directions)
-
-    def append_fields(self, time: float, spacing, **fields) -> None:
-        self._writer().append_fields(time, spacing, **fields)
-
-    def close_segment(self) -> int:
-        """Close the current segment (if it holds frames); returns the number of complete
-        segments, the figure a checkpoint must record."""
-        w = self._current
-        if w is not None:
-            if w.n_frames == 0:
-                w.abort()
-            else:
-                self._last = (w._last_time, w._last_y, w._last_lap)
-                w.close()
-                self.n_segments += 1
-            self._current = None
-        return self.n_segments
-
-    def abort(self) -> None:
-        if self._current is not None:
-            self._current.abort()
-            self._current = None
-
-    def finish(self, attach: dict[str, tuple[dict, dict]] | None = None) -> Path:
-        """Merge the segments into the output file and remove the parts folder."""
-        self.close_segment()
-        paths = self.segment_paths()
-        if not paths:
-            raise InputError(f"{self.output}: no frames were written")
-        o = self._options
-        with TrajectoryWriter(self.output, o["ids"], width=o["width"], height=o["height"],
-                              source=o["source"], parameters=o["parameters"],
-                              with_velocity=o["with_velocity"],
-                              frame_interval=o["frame_interval"]) as merged:
-            for path in paths:
-                with Trajectories(path) as seg:
-                    for i in range(0, seg.n_frames, 64):
-                        frames = slice(i, min(i + 64, seg.n_frames))
-                        merged.append_frames(seg.times[frames], seg.positions(frames),
-                                             seg.velocities(frames), seg.laps(frames))
-                    events = seg.events()
-                    if events is not None and len(events):
-                        merged.add_events(events.time, events.particle, events.direction)
-                    if seg.has_fields:
-                        spacing = seg.field_spacing
-                        for k, t in enumerate(seg.field_times):
-                            merged.append_fields(t, spacing, **{name: seg.field(name, k)
-                                                                for name in seg.field_names})
-            for name, (datasets, attrs) in (attach or {}).items():
-                merged.attach(name, datasets, attrs)
-        for path in paths:
-            path.unlink()
-        for path in self.parts.iterdir():
-            path.unlink()
-        self.parts.rmdir()
-        return self.output

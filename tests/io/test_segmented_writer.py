@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import SegmentedTrajectoryWriter, Trajectories
+from cfbmarkov.segmented import SegmentedTrajectoryWriter
+from cfbmarkov.trajectories import Trajectories
 
 W, H = 0.09, 0.95
 

@@ -6,7 +6,7 @@ import pytest
 
 from cfbmarkov import synthetic
 from cfbmarkov.errors import InputError
-from cfbmarkov.markov import CellGrid, MarkovModel, MaximumLikelihoodEstimator
+from cfbmarkov.markov import CellGrid, MarkovModel, discretize, fit_model
 from cfbmarkov.markov.diagnostics import (active_set, ck_test, core_annulus, group_labels,
                                           height_bands, implied_timescales, model_timescales,
                                           product_groups)
@@ -41,8 +41,8 @@ def results(runs):
     for persistence, path in runs.items():
         grid = _flow(persistence).grid
         its = implied_timescales(path, grid, LAGS, k=4)
-        model = MaximumLikelihoodEstimator(grid, 0.025).fit(path)
-        ck = ck_test(path, model, height_bands(grid, 3), steps=8)
+        model = fit_model(path, grid, 0.025)
+        ck = ck_test(discretize(path, grid, 0.025), model, height_bands(grid, 3), steps=8)
         out[persistence] = its, model, ck
     return out
 
@@ -140,7 +140,8 @@ def test_core_annulus_is_markov_even_with_hidden_direction(runs, results):
     Markov and a core/annulus CK test cannot see the hidden state: the choice of groups
     matters."""
     model = results[True][1]
-    s = ck_test(runs[True], model, core_annulus(model.state_space), steps=8).summary()
+    s = ck_test(discretize(runs[True], model.state_space, model.lag), model,
+                core_annulus(model.state_space), steps=8).summary()
     assert s["max_abs_error"] < 0.01
 
 
@@ -159,7 +160,7 @@ def test_ck_test_by_hand(tmp_path, write_states):
     p = rng.random((4, 4))
     p /= p.sum(axis=1, keepdims=True)
     model = MarkovModel(p, *(np.zeros((4, 4), np.int64),) * 3, state_space=grid, lag=1.0)
-    ck = ck_test(path, model, height_bands(grid, 2), steps=(1, 2))
+    ck = ck_test(discretize(path, grid, 1.0), model, height_bands(grid, 2), steps=(1, 2))
     assert ck.group_names == ["bottom", "top"]
     # step 1: start frames 0, 1; low holds 0, 1 (t = 0) and 1 (t = 1): w_low = [1, 2, 0, 0]/3
     np.testing.assert_array_equal(ck.counts, [[3, 1], [2, 0]])
@@ -200,7 +201,7 @@ class _DirectionSpace(StateSpace):
     def cell_of_state(self):
         return np.arange(self.n_states, dtype=np.int64) // 2
 
-    def discretize(self, positions, velocities=None, lag_frames=1):
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
         cells = cell_index(positions, self.width, self.height, self.columns, self.rows)
         if self.needs_velocity:
             falling = velocities[..., 1] < 0
@@ -228,17 +229,19 @@ def test_ck_step_one_of_fitted_mle_is_exact_for_spaces_with_memory(tmp_path, vel
     space = _DirectionSpace(flow.grid, velocity)
     window = (0.1, 1.0)
     lag = 0.05                                   # two frames
-    model = MaximumLikelihoodEstimator(space, lag).fit(path, window=window)
-    ck = ck_test(path, model, product_groups(height_bands(space, 2), core_annulus(space)),
-                 steps=3, window=window)
+    model = fit_model(path, space, lag, window)
+    ck = ck_test(discretize(path, space, lag, window), model,
+                 product_groups(height_bands(space, 2), core_annulus(space)), steps=3)
     np.testing.assert_allclose(ck.predicted[0], ck.estimated[0], atol=1e-12)
     assert ck.summary()["max_abs_error"] > 1e-4           # later steps are not exact
     if not velocity:
         with pytest.raises(InputError, match="history"):
-            ck_test(path, model, height_bands(space, 2), window=(0.0, 1.0))
+            discretize(path, space, lag, (0.0, 1.0))
         # no window: every frame that has the history
-        assert ck_test(path, model, height_bands(space, 2), steps=1).counts[0].sum() \
-            == 300 * (41 - 2 - 2)
+        assert ck_test(discretize(path, space, lag), model, height_bands(space, 2),
+                       steps=1).counts[0].sum() == 300 * (41 - 2 - 2)
+    with pytest.raises(InputError, match="state space and lag"):
+        ck_test(discretize(path, space, 0.025, window), model, height_bands(space, 2))
 
 
 # -- groups -------------------------------------------------------------------------------------

@@ -5,14 +5,15 @@ import pytest
 
 from cfbmarkov import synthetic
 from cfbmarkov.errors import InputError
-from cfbmarkov.markov import (CellGrid, MaximumLikelihoodEstimator, PaperEstimator,
-                              discrete_trajectories, estimator_from_name)
+from cfbmarkov.markov import (CellGrid, MaximumLikelihoodEstimator, PaperEstimator, discretize,
+                              estimator_from_name, fit_model)
 
 
 def test_mle_recovers_known_chain_within_sampling_error(markov_flow, markov_run):
     true = synthetic.cell_chain(markov_flow)
     grid = markov_flow.grid
-    model = MaximumLikelihoodEstimator(grid, markov_flow.lag).fit(markov_run, window=(0, 8))
+    model = MaximumLikelihoodEstimator(grid, markov_flow.lag).fit(
+        discretize(markov_run, grid, markov_flow.lag, (0, 8)))
     n_i = model.counts.sum(axis=1, keepdims=True)
     p = true.transition_matrix
     sigma = np.sqrt(p * (1 - p) / np.maximum(n_i, 1)) + 1e-12
@@ -27,7 +28,7 @@ def test_mle_recovers_known_chain_within_sampling_error(markov_flow, markov_run)
 def test_fitted_model_exact_rtd_matches_generator(markov_flow, markov_run):
     true = synthetic.cell_chain(markov_flow)
     for name in ("mle", "paper"):
-        model = estimator_from_name(name, markov_flow.grid, markov_flow.lag).fit(markov_run)
+        model = fit_model(markov_run, markov_flow.grid, markov_flow.lag, estimator=name)
         assert model.rtd().mean == pytest.approx(true.rtd().mean, rel=0.02)
         assert model.rtd().sd == pytest.approx(true.rtd().sd, rel=0.05)
 
@@ -47,8 +48,9 @@ def test_paper_estimator_hand_worked(tmp_path, write_states):
     [1/4, 3/4]. The pooled counts give [1/3, 2/3] instead."""
     path = _hand_example(tmp_path, write_states)
     grid = CellGrid(1, 2, width=1.0, height=2.0)
-    paper = PaperEstimator(grid, lag=1.0).fit(path)
-    mle = MaximumLikelihoodEstimator(grid, lag=1.0).fit(path)
+    discrete = discretize(path, grid, 1.0)
+    paper = PaperEstimator(grid, lag=1.0).fit(discrete)
+    mle = MaximumLikelihoodEstimator(grid, lag=1.0).fit(discrete)
     np.testing.assert_allclose(paper.transition_matrix, [[0.25, 0.75], [0.0, 1.0]])
     np.testing.assert_allclose(mle.transition_matrix, [[1 / 3, 2 / 3], [0.0, 1.0]])
     np.testing.assert_array_equal(paper.counts, [[1, 2], [0, 6]])
@@ -58,7 +60,7 @@ def test_paper_estimator_hand_worked(tmp_path, write_states):
 
 def test_lag_of_two_frames_counts_sliding_pairs(tmp_path, write_states):
     path = _hand_example(tmp_path, write_states)
-    model = MaximumLikelihoodEstimator(CellGrid(1, 2, 1.0, 2.0), lag=2.0).fit(path)
+    model = fit_model(path, CellGrid(1, 2, 1.0, 2.0), 2.0)
     # pairs (0,2) and (1,3): 0->1, 0->1, 1->1 ; 0->1, 1->1, 1->1
     np.testing.assert_array_equal(model.counts, [[0, 3], [0, 3]])
 
@@ -66,7 +68,7 @@ def test_lag_of_two_frames_counts_sliding_pairs(tmp_path, write_states):
 def test_unvisited_states_stay_in_place_and_are_reported(tmp_path, write_states):
     states = [[0, 1], [1, 0], [0, 1]]          # state 2 and 3 never visited (2x2 grid)
     path = write_states(tmp_path / "u.h5", states, columns=2, rows=2)
-    model = MaximumLikelihoodEstimator(CellGrid(2, 2, 1.0, 2.0), lag=1.0).fit(path)
+    model = fit_model(path, CellGrid(2, 2, 1.0, 2.0), 1.0)
     np.testing.assert_array_equal(model.unvisited_states, [2, 3])
     assert model.transition_matrix[2, 2] == 1 and model.transition_matrix[3, 3] == 1
     assert "states never visited: 2 (2, 3)" in model.summary()
@@ -76,7 +78,7 @@ def test_boundary_passes_are_counted_by_direction(tmp_path, write_states):
     # 1 x 4 grid; particle 0 rises 3 -> 0 through the top, particle 1 falls 0 -> 3
     states = [[3, 0], [0, 3], [1, 3]]
     path = write_states(tmp_path / "p.h5", states, columns=1, rows=4, height=4.0)
-    model = MaximumLikelihoodEstimator(CellGrid(1, 4, 1.0, 4.0), lag=1.0).fit(path)
+    model = fit_model(path, CellGrid(1, 4, 1.0, 4.0), 1.0)
     assert model.counts_up[3, 0] == 1 and model.counts_up.sum() == 1
     assert model.counts_down[0, 3] == 1 and model.counts_down.sum() == 1
     assert model.up_fraction[3, 0] == 1.0 and model.up_fraction[0, 1] == 0.0
@@ -88,8 +90,9 @@ def test_mle_equals_deeptime(markov_flow, markov_run):
     from deeptime.markov.msm import MaximumLikelihoodMSM
 
     grid = markov_flow.grid
-    ours = MaximumLikelihoodEstimator(grid, 2 * markov_flow.lag).fit(markov_run, window=(1, 5))
-    dtrajs = discrete_trajectories(grid, [markov_run], window=(1, 5))
+    discrete = discretize(markov_run, grid, 2 * markov_flow.lag, (1, 5))
+    ours = MaximumLikelihoodEstimator(grid, 2 * markov_flow.lag).fit(discrete)
+    dtrajs = discrete.trajectories()
     counts = TransitionCountEstimator(lagtime=2, count_mode="sliding",
                                       n_states=grid.n_states).fit(dtrajs).fetch_model()
     np.testing.assert_array_equal(counts.count_matrix, ours.counts)
@@ -101,13 +104,28 @@ def test_mle_equals_deeptime(markov_flow, markov_run):
 
 
 def test_bad_lag_and_window(markov_run, markov_flow):
-    est = MaximumLikelihoodEstimator(markov_flow.grid, lag=0.03)
     with pytest.raises(InputError, match="not a whole multiple of the frame interval"):
-        est.fit(markov_run)
-    est = MaximumLikelihoodEstimator(markov_flow.grid, lag=0.025)
+        fit_model(markov_run, markov_flow.grid, 0.03)
     with pytest.raises(InputError, match="outside the data"):
-        est.fit(markov_run, window=(5, 12))
+        fit_model(markov_run, markov_flow.grid, 0.025, (5, 12))
     with pytest.raises(InputError, match="domain|covers"):
-        MaximumLikelihoodEstimator(CellGrid(4, 16, 0.1, 0.95), 0.025).fit(markov_run)
+        fit_model(markov_run, CellGrid(4, 16, 0.1, 0.95), 0.025)
     with pytest.raises(InputError, match="unknown estimator"):
         estimator_from_name("bayes", markov_flow.grid)
+
+
+def test_estimators_take_discrete_trajectories_made_at_their_lag(markov_run, markov_flow):
+    """Arrays in, model out: a path is refused with the way to discretise it, and discrete
+    trajectories made at another lag or in another state space are refused, not refitted."""
+    grid = markov_flow.grid
+    est = MaximumLikelihoodEstimator(grid, lag=0.025)
+    with pytest.raises(InputError, match="discretize"):
+        est.fit(markov_run)
+    with pytest.raises(InputError, match="lag of 0.05 s"):
+        est.fit(discretize(markov_run, grid, 0.05, (0, 4)))
+    with pytest.raises(InputError, match="state space"):
+        est.fit(discretize(markov_run, CellGrid(2, 8, grid.width, grid.height), 0.025, (0, 4)))
+    # two windows pool their counts exactly
+    a, b = (discretize(markov_run, grid, 0.025, w) for w in ((0, 2), (3, 5)))
+    both = est.fit([a, b])
+    np.testing.assert_array_equal(both.counts, est.fit(a).counts + est.fit(b).counts)

@@ -17,9 +17,9 @@ from cfbmarkov import synthetic
 from cfbmarkov.analysis.rtd import residence_times
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov import (STATE_SPACES, CellGrid, DirectionCells, MarkovModel,
-                              MaximumLikelihoodEstimator, PaperEstimator, PreviousCellCells,
-                              StateSpace, VelocityCells, cell_index, estimator_from_name,
-                              state_space_from_name)
+                              MaximumLikelihoodEstimator, PaperEstimator, SecondOrderCells,
+                              StateSpace, VelocityCells, cell_index, discretize,
+                              estimator_from_name, fit_model, state_space_from_name)
 from cfbmarkov.report.compare import compare
 from cfbmarkov.trajectories import Trajectories, lap_increments, write_trajectories
 
@@ -82,7 +82,7 @@ def test_direction_from_velocity_needs_velocities():
 
 def test_velocity_bins_from_displacement_and_from_velocity():
     lag = 0.5
-    space = VelocityCells(1, 4, width=1.0, height=4.0, edges=(-1.0, 0.0, 1.0, 3.0), lag=lag)
+    space = VelocityCells(1, 4, width=1.0, height=4.0, edges=(-1.0, 0.0, 1.0, 3.0))
     assert space.n_states == 20 and space.per_cell == 5 and space.memory_lags == 1
     # v = dy / lag: -1.2 (bin 0), -1 (edge: bin 1), -0.2 (1), 0 (2), 0.5 (2), 1 (3),
     # 2.9 (3), 3 (4); and 3.75 -> 0.25 up through the top: dy = +0.5, v = 1 (bin 3)
@@ -90,7 +90,7 @@ def test_velocity_bins_from_displacement_and_from_velocity():
     y0 = np.append(np.full(dy.size, 2.0), 3.75)
     y1 = np.append(2.0 + dy, 0.25)
     pos = _frames(tuple(y0), tuple(y1))
-    states = space.discretize(pos, None, lag_frames=1)
+    states = space.discretize(pos, None, lag_frames=1, frame_interval=lag)
     cells = cell_index(pos, 1.0, 4.0, 1, 4)
     bins = np.array([0, 1, 1, 2, 2, 3, 3, 4, 3])
     np.testing.assert_array_equal(states[1], 5 * cells[1] + bins)
@@ -107,12 +107,12 @@ def test_velocity_bins_from_displacement_and_from_velocity():
     for bad in ((), (1.0, 1.0), (2.0, 1.0), (np.nan,), ("a",)):
         with pytest.raises(InputError, match="edges"):
             VelocityCells(1, 4, edges=bad)
-    with pytest.raises(InputError, match="lag"):
-        VelocityCells(1, 4, lag=0.0)
+    with pytest.raises(InputError, match="frame interval"):
+        space.discretize(pos, None, lag_frames=1)
 
 
 def test_previous_cell_offsets_wrap_and_clip():
-    space = PreviousCellCells(1, 10, width=1.0, height=10.0, reach=2)
+    space = SecondOrderCells(1, 10, width=1.0, height=10.0, reach=2)
     assert space.per_cell == 5 and space.n_states == 50 and space.memory_lags == 1
     # (previous row, current row): 5->6, 9->0 (up through the top), 0->9 (down through the
     # bottom), 2->7 (exactly n/2: +5, clipped to +2), 7->2 (+5 -> +2), 1->5 (-4 -> -2), 3->3
@@ -126,7 +126,7 @@ def test_previous_cell_offsets_wrap_and_clip():
     np.testing.assert_array_equal(space.cell_of_state[states[1]], cur)
     np.testing.assert_array_equal(space.offsets(states[0])[0], 0)        # no history
     # columns: previous minus current column, clipped to the column reach
-    wide = PreviousCellCells(3, 10, width=3.0, height=10.0, reach=1, column_reach=1)
+    wide = SecondOrderCells(3, 10, width=3.0, height=10.0, reach=1, column_reach=1)
     assert wide.per_cell == 9 and wide.n_states == 270
     x0, x1 = np.array([0.5, 0.5, 2.5, 1.5]), np.array([2.5, 1.5, 1.5, 1.5])
     y0, y1 = np.array([0.5, 4.5, 8.5, 3.5]), np.array([0.5, 2.5, 8.5, 3.5])
@@ -137,9 +137,9 @@ def test_previous_cell_offsets_wrap_and_clip():
     np.testing.assert_array_equal(dcol, [-1, -1, 1, 0])
     np.testing.assert_array_equal(wide.cell_of_state[states], cell_index(pos, 3.0, 10.0, 3, 10))
     # default: 7 sub-states per cell, 1596 states on the paper's grid
-    assert PreviousCellCells(6, 38).n_states == 1596
+    assert SecondOrderCells(6, 38).n_states == 1596
     with pytest.raises(InputError, match="reach"):
-        PreviousCellCells(6, 38, reach=-1)
+        SecondOrderCells(6, 38, reach=-1)
 
 
 @pytest.mark.parametrize("name", STATE_SPACES)
@@ -148,7 +148,7 @@ def test_cell_of_state_matches_cell_index_and_attrs_round_trip(name):
     rng = np.random.default_rng(1)
     pos = rng.uniform([0, 0], [0.09, 0.95], size=(5, 300, 2))
     pos[-1, :10] = [0.09, 0.95]                              # far edges go inside
-    states = space.discretize(pos, pos * 10.0, lag_frames=2)
+    states = space.discretize(pos, pos * 10.0, lag_frames=2, frame_interval=0.01)
     assert states.shape == (5, 300) and states.dtype == np.int32
     assert states.min() >= 0 and states.max() < space.n_states
     np.testing.assert_array_equal(space.cell_of_state[states], cell_index(pos, 0.09, 0.95, 6, 38))
@@ -166,7 +166,7 @@ def test_cell_of_state_matches_cell_index_and_attrs_round_trip(name):
 def test_spaces_by_name_and_bad_names():
     assert state_space_from_name("cells", 6, 38) == CellGrid(6, 38)
     assert isinstance(state_space_from_name("cells-direction", 6, 38), DirectionCells)
-    assert state_space_from_name("cells-velocity", 6, 38, lag=0.05).lag == 0.05
+    assert isinstance(state_space_from_name("cells-velocity", 6, 38), VelocityCells)
     assert state_space_from_name("cells-previous", 6, 38).reach == 3
     with pytest.raises(InputError) as err:
         state_space_from_name("cells-bogus", 6, 38)
@@ -186,17 +186,17 @@ def test_velocity_source_fits_from_files_with_velocities(tmp_path):
                                 velocities=vel)
     no_v = write_trajectories(tmp_path / "nv.h5", np.arange(6.0), pos, width=0.1, height=1.0)
     space = DirectionCells(1, 4, 0.1, 1.0, source="velocity")
-    model = MaximumLikelihoodEstimator(space, lag=1.0).fit(with_v, window=(0, 5))
+    model = fit_model(with_v, space, 1.0, (0, 5))
     assert model.counts[0, 0] == 5 and model.counts[7, 7] == 5 and model.n_transitions == 10
     with Trajectories(with_v) as t:
         np.testing.assert_array_equal(model.initial_states(t, 0.0)[0], [0, 7])
     with pytest.raises(InputError, match="needs velocities"):
-        MaximumLikelihoodEstimator(space, lag=1.0).fit(no_v)
+        fit_model(no_v, space, 1.0)
     with pytest.raises(InputError, match="needs velocities"):
         model.predict(no_v, start=1.0, duration=1.0)
     # displacement-based spaces need one lag of history before the window
     with pytest.raises(InputError, match="history"):
-        MaximumLikelihoodEstimator(DirectionCells(1, 4, 0.1, 1.0), lag=1.0).fit(with_v, (0, 5))
+        fit_model(with_v, DirectionCells(1, 4, 0.1, 1.0), 1.0, (0, 5))
 
 
 # -- the synthetic core-annulus flow ----------------------------------------------------------
@@ -238,7 +238,7 @@ def _errors(run, flow, names):
     out = {}
     for name in names:
         space = state_space_from_name(name, flow.columns, flow.rows, flow.width, flow.height)
-        exact = MaximumLikelihoodEstimator(space, flow.lag).fit(run, FIT).rtd(window=length)
+        exact = fit_model(run, space, flow.lag, FIT).rtd(window=length)
         out[name] = (100 * (exact.mean / ref.mean - 1), 100 * (exact.sd / ref.sd - 1))
     return out
 
@@ -266,7 +266,7 @@ def test_default_flow_direction_is_only_partly_resolved(default_run):
 def test_every_space_through_the_pipeline(name, resolved_run, tmp_path):
     flow = RESOLVED
     space = state_space_from_name(name, flow.columns, flow.rows, flow.width, flow.height)
-    model = PaperEstimator(space, flow.lag).fit(resolved_run, FIT)
+    model = PaperEstimator(space, flow.lag).fit(discretize(resolved_run, space, flow.lag, FIT))
     assert model.state_space is space and model.n_transitions == 2000 * 160
     # save / load
     back = MarkovModel.load(model.save(tmp_path / "model.h5"))
@@ -286,7 +286,8 @@ def test_every_space_through_the_pipeline(name, resolved_run, tmp_path):
         i, lag_frames = traj.frame_index(PREDICT[0]), traj.lag_frames(flow.lag)
         frames = traj.positions(slice(i - lag_frames * space.memory_lags, i + 1))
         states0, positions0, _ = model.initial_states(traj, PREDICT[0])
-        np.testing.assert_array_equal(states0, space.discretize(frames, None, lag_frames)[-1])
+        np.testing.assert_array_equal(states0, space.discretize(
+            frames, None, lag_frames, traj.frame_interval)[-1])
         np.testing.assert_array_equal(space.cell_of_state[states0], cell_index(
             positions0, flow.width, flow.height, flow.columns, flow.rows))
     # Monte Carlo prediction written as a trajectory file, compared with the reference
@@ -313,8 +314,9 @@ def test_every_space_through_the_pipeline(name, resolved_run, tmp_path):
 
 def test_estimators_agree_on_memory_spaces(resolved_run):
     space = DirectionCells(6, 38, RESOLVED.width, RESOLVED.height)
-    mle = estimator_from_name("mle", space, 0.05).fit(resolved_run, FIT)     # lag of 2 frames
-    paper = estimator_from_name("paper", space, 0.05).fit(resolved_run, FIT)
+    discrete = discretize(resolved_run, space, 0.05, FIT)                 # lag of 2 frames
+    mle = estimator_from_name("mle", space, 0.05).fit(discrete)
+    paper = estimator_from_name("paper", space, 0.05).fit(discrete)
     np.testing.assert_array_equal(mle.counts, paper.counts)
     assert mle.rtd().mean == pytest.approx(paper.rtd().mean, rel=0.02)
     # a rising state mostly moves up, a falling one down: the memory is in P
@@ -351,3 +353,25 @@ def test_a_state_never_left_moves_as_its_cell_did():
         assert list(model.unvisited_states) == [1, 3, 4, 5]
         rtd = model.rtd()
         assert 0 < rtd.mean < np.inf
+
+
+def test_velocity_bins_use_the_models_lag_not_a_lag_of_their_own(tmp_path):
+    """The lag exists once, in frames: a particle rising at 1.5 m/s, sampled every 0.025 s
+    and fitted at a lag of two frames (0.05 s), is in the 1-3 m/s bin. A velocity space
+    that kept its own lag (0.025 s by default) divided the 0.075 m displacement by 0.025 s
+    and put it in the >= 3 m/s bin, silently."""
+    dt, n = 0.025, 41
+    y = (0.1 + 1.5 * dt * np.arange(n)) % 4.0
+    pos = np.stack([np.full(n, 0.05), y], axis=-1)[:, None, :]
+    run = write_trajectories(tmp_path / "rise.h5", dt * np.arange(n), pos, width=0.1,
+                             height=4.0)
+    space = VelocityCells(1, 4, 0.1, 4.0)                     # edges -1, 0, 1, 3 m/s
+    discrete = discretize(run, space, 0.05, (0.1, 1.0))
+    assert discrete.lag_frames == 2 and discrete.lag == pytest.approx(0.05)
+    np.testing.assert_array_equal(space.velocity_bin(discrete.states), 3)
+    model = fit_model(run, space, 0.05, (0.1, 1.0))
+    visited = np.flatnonzero(model.counts.sum(axis=1))
+    np.testing.assert_array_equal(space.velocity_bin(visited), 3)
+    # the same at a lag of one frame: the velocity does not depend on the lag
+    np.testing.assert_array_equal(
+        space.velocity_bin(discretize(run, space, 0.025, (0.1, 1.0)).states), 3)

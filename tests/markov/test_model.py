@@ -7,7 +7,7 @@ import pytest
 from scipy import stats
 
 from cfbmarkov.errors import CfbmarkovError, InputError
-from cfbmarkov.markov import CellGrid, MarkovModel, MaximumLikelihoodEstimator
+from cfbmarkov.markov import CellGrid, MarkovModel, fit_model
 from cfbmarkov.trajectories import Trajectories, lap_increments
 
 
@@ -62,7 +62,7 @@ def test_exact_rtd_with_falls_matches_monte_carlo_in_a_window():
     n_steps = 300
     rng = np.random.default_rng(3)
     start = rng.choice(model.n_states, size=4000, p=model.stationary_distribution)
-    _, laps = model.simulate(start, n_steps, seed=5)
+    _, laps = model.monte_carlo(start, n_steps, seed=5)
     samples = _samples_from_laps(laps, model.lag)
     exact = model.rtd(window=n_steps * model.lag)
     se = samples.std(ddof=1) / np.sqrt(samples.size)
@@ -120,7 +120,7 @@ def test_propagation_eq6_and_outflow_matches_rtd():
 
 
 def test_batch_injection_maps(markov_flow, markov_run):
-    model = MaximumLikelihoodEstimator(markov_flow.grid, markov_flow.lag).fit(markov_run)
+    model = fit_model(markov_run, markov_flow.grid, markov_flow.lag)
     maps = model.batch_injection_maps([0.0, 0.1, 0.25])
     assert maps.shape == (3, markov_flow.rows, markov_flow.columns)
     np.testing.assert_allclose(maps[0, 0], 1.0 / markov_flow.columns)
@@ -133,20 +133,20 @@ def test_batch_injection_maps(markov_flow, markov_run):
 
 
 def test_monte_carlo_follows_the_matrix_and_is_reproducible(markov_flow, markov_run):
-    model = MaximumLikelihoodEstimator(markov_flow.grid, markov_flow.lag).fit(markov_run)
+    model = fit_model(markov_run, markov_flow.grid, markov_flow.lag)
     start = np.random.default_rng(0).integers(0, model.n_states, 20000)
-    states, laps = model.simulate(start, 50, seed=9)
-    again, laps_again = model.simulate(start, 50, seed=9)
+    states, laps = model.monte_carlo(start, 50, seed=9)
+    again, laps_again = model.monte_carlo(start, 50, seed=9)
     np.testing.assert_array_equal(states, again)
     np.testing.assert_array_equal(laps, laps_again)
     threads = numba.get_num_threads()
     numba.set_num_threads(1)
     try:
-        single, _ = model.simulate(start, 50, seed=9)
+        single, _ = model.monte_carlo(start, 50, seed=9)
     finally:
         numba.set_num_threads(threads)
     np.testing.assert_array_equal(states, single)
-    assert not np.array_equal(states, model.simulate(start, 50, seed=10)[0])
+    assert not np.array_equal(states, model.monte_carlo(start, 50, seed=10)[0])
     counts = np.zeros((model.n_states, model.n_states))
     np.add.at(counts, (states[:-1].ravel(), states[1:].ravel()), 1)
     n_i = counts.sum(axis=1, keepdims=True)
@@ -157,7 +157,7 @@ def test_monte_carlo_follows_the_matrix_and_is_reproducible(markov_flow, markov_
 
 
 def test_predict_writes_a_trajectory_file(tmp_path, markov_flow, markov_run):
-    model = MaximumLikelihoodEstimator(markov_flow.grid, markov_flow.lag).fit(markov_run, (0, 4))
+    model = fit_model(markov_run, markov_flow.grid, markov_flow.lag, (0, 4))
     out = model.predict(markov_run, start=4.0, duration=1.0, seed=7, output=tmp_path / "pred.h5")
     with Trajectories(out) as pred, Trajectories(markov_run) as run:
         assert pred.n_frames == 41 and pred.source == "markov-prediction"
@@ -182,7 +182,7 @@ def test_predict_writes_a_trajectory_file(tmp_path, markov_flow, markov_run):
 
 
 def test_save_load_round_trip_and_bad_files(tmp_path, markov_flow, markov_run):
-    model = MaximumLikelihoodEstimator(markov_flow.grid, markov_flow.lag).fit(markov_run, (1, 3))
+    model = fit_model(markov_run, markov_flow.grid, markov_flow.lag, (1, 3))
     path = model.save(tmp_path / "m.h5")
     back = MarkovModel.load(path)
     for name in ("transition_matrix", "counts", "counts_up", "counts_down"):

@@ -15,7 +15,7 @@ import pytest
 
 from cfbmarkov import synthetic
 from cfbmarkov.config import CaseConfig
-from cfbmarkov.markov import CellGrid, estimator_from_name
+from cfbmarkov.markov import CellGrid, fit_model
 from cfbmarkov.report.compare import compare
 
 PARTICLES = 400
@@ -54,7 +54,7 @@ def build_case(root: Path, u: float, rise: float, *, estimators=ESTIMATORS, comp
                            "predict_window_wall_s": 1200.0 * u,
                            "predict_window_estimated": u > 4}}
     for k, name in enumerate(estimators):
-        model = estimator_from_name(name, grid, LAG).fit(reference, window=FIT)
+        model = fit_model(reference, grid, LAG, FIT, name)
         model.save(case / f"model-{name}.h5")
         prediction = model.predict(reference, start=PREDICT[0], duration=PREDICT[1] - PREDICT[0],
                                    seed=7, output=case / f"prediction-{name}.h5")

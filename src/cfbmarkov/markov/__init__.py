@@ -1,5 +1,19 @@
-"""Markov chain models: state spaces, estimators, the fitted model, Monte Carlo, exact RTD."""
+"""Markov chain models: state spaces, discrete trajectories, estimators, the fitted model,
+Monte Carlo and the exact residence-time distribution.
 
+The data flow one way: a trajectory file -> :func:`discretize` (states of one window, in
+memory) -> an estimator's ``fit`` -> an immutable :class:`MarkovModel` that answers
+questions (propagation, exact RTD, Monte Carlo, predictions written as trajectory files).
+"""
+
+from cfbmarkov.markov.discrete import (
+    ABSENT,
+    DiscreteTrajectories,
+    WindowFrames,
+    discretize,
+    discretize_frame,
+    read_frames,
+)
 from cfbmarkov.markov.estimate import (
     ESTIMATORS,
     MaximumLikelihoodEstimator,
@@ -7,8 +21,8 @@ from cfbmarkov.markov.estimate import (
     TransitionCounts,
     TransitionEstimator,
     count_transitions,
-    discrete_trajectories,
     estimator_from_name,
+    fit_model,
 )
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
@@ -16,7 +30,7 @@ from cfbmarkov.markov.states import (
     STATE_SPACES,
     CellGrid,
     DirectionCells,
-    PreviousCellCells,
+    SecondOrderCells,
     StateSpace,
     VelocityCells,
     cell_index,
@@ -25,9 +39,10 @@ from cfbmarkov.markov.states import (
 )
 
 __all__ = [
-    "CellGrid", "DirectionCells", "ESTIMATORS", "MarkovModel", "MaximumLikelihoodEstimator",
-    "PaperEstimator", "PreviousCellCells", "ResidenceTimeDistribution", "STATE_SPACES",
-    "StateSpace", "TransitionCounts", "TransitionEstimator", "VelocityCells", "cell_index",
-    "count_transitions", "discrete_trajectories", "estimator_from_name", "exact_rtd",
-    "place_in_cells", "state_space_from_name",
+    "ABSENT", "CellGrid", "DirectionCells", "DiscreteTrajectories", "ESTIMATORS", "MarkovModel",
+    "MaximumLikelihoodEstimator", "PaperEstimator", "ResidenceTimeDistribution",
+    "STATE_SPACES", "SecondOrderCells", "StateSpace", "TransitionCounts", "TransitionEstimator",
+    "VelocityCells", "WindowFrames", "cell_index", "count_transitions", "discretize",
+    "discretize_frame", "estimator_from_name", "exact_rtd", "fit_model", "place_in_cells",
+    "read_frames", "state_space_from_name",
 ]

@@ -54,10 +54,11 @@ from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.markov.estimate import _check_domain, estimator_from_name
+from cfbmarkov.markov.discrete import as_discrete_list, discretize
+from cfbmarkov.markov.estimate import estimator_from_name
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.states import StateSpace
-from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectories import opened
 
 
 # -- implied timescales ----------------------------------------------------------------------
@@ -155,21 +156,44 @@ def model_timescales(model: MarkovModel | Sequence[MarkovModel], k: int = 6,
 def implied_timescales(data, state_space: StateSpace, lags: Sequence[float],
                        window: tuple[float, float] | None = None, estimator: str = "mle",
                        k: int = 6, connected: bool = True) -> ImpliedTimescales:
-    """Fit a model at every lag (s) on ``data`` (a trajectory path, :class:`Trajectories`,
-    or a list of them) and return its implied timescales.
+    """Fit a model at every lag and return its implied timescales.
 
-    Every lag must be a whole multiple of the frame interval of the data. Files given by
-    path are opened once for all lags.
+    Parameters
+    ----------
+    data : str, os.PathLike, Trajectories, or a list of them
+        The trajectory file(s); each is opened once for all lags and discretised at each
+        lag by :func:`~cfbmarkov.markov.discretize`.
+    state_space : StateSpace
+        The states.
+    lags : sequence of float
+        Lags tau (s), each a whole multiple of the frame interval.
+    window : tuple of float, optional
+        The fitting window (A, B) in s (None: every frame).
+    estimator : {"mle", "paper"}
+        The estimator of every model.
+    k : int
+        Number of timescales after the stationary one.
+    connected : bool
+        Restrict P to its largest strongly connected set first.
+
+    Returns
+    -------
+    ImpliedTimescales
+
+    Raises
+    ------
+    InputError
+        If no lag is given or a file or lag does not fit.
     """
     lags = [float(v) for v in lags]
     if not lags:
         raise InputError("no lag given")
     runs = data if isinstance(data, (list, tuple)) else [data]
     with ExitStack() as stack:
-        opened = [r if isinstance(r, Trajectories) else stack.enter_context(Trajectories(r))
-                  for r in runs]
-        models = [estimator_from_name(estimator, state_space, lag).fit(opened, window=window)
-                  for lag in lags]
+        opened_runs = [stack.enter_context(opened(r)) for r in runs]
+        models = [estimator_from_name(estimator, state_space, lag).fit(
+            [discretize(run, state_space, lag, window) for run in opened_runs])
+            for lag in lags]
     return model_timescales(models, k=k, connected=connected)
 
 
@@ -298,39 +322,31 @@ class CKTest:
                 "counts": self.counts.tolist()}
 
 
-def _window_states(space: StateSpace, traj: Trajectories, lag_frames: int,
-                   window: tuple[float, float] | None) -> np.ndarray:
-    """States [T, N] of the window's frames, discretised with the history that the state
-    space needs (as ``gather_counts`` does). With no window: all frames that have it."""
-    _check_domain(space, traj)
-    history = space.memory_lags * lag_frames
-    if window is None:
-        start, stop = history, traj.n_frames
-    else:
-        start, stop, _ = traj.window(*window).indices(traj.n_frames)
-    first = start - history
-    if first < 0:
-        raise InputError(f"state space {space.kind} needs {space.memory_lags} lag(s) of "
-                         f"history before the window start")
-    if stop <= start:
-        return np.zeros((0, traj.n_particles), np.int32)
-    positions = traj.positions(slice(first, stop))
-    velocities = traj.velocities(slice(first, stop)) if space.needs_velocity else None
-    if space.needs_velocity and velocities is None:
-        raise InputError(f"state space {space.kind} needs velocities; {traj.path} has none")
-    states = space.discretize(positions, velocities, lag_frames)
-    return np.asarray(states[start - first:])
-
-
 def ck_test(data, model: MarkovModel, groups: Mapping[str, Sequence[int]],
-            steps: Sequence[int] | int = 5, window: tuple[float, float] | None = None
-            ) -> CKTest:
-    """Chapman-Kolmogorov test of ``model`` against ``data`` (trajectory path,
-    :class:`Trajectories` or a list of them) on a partition of the cells.
+            steps: Sequence[int] | int = 5) -> CKTest:
+    """Chapman-Kolmogorov test of ``model`` against discrete trajectories on a partition
+    of the cells (see the module docstring for the estimate, prediction and error).
 
-    ``steps``: the multiples k of the model's lag (an int K means 1..K). ``window`` (s): the
-    frames used (None: all frames, after the history a state space with memory needs). The
-    model's lag must be a whole multiple of the frame interval of the data.
+    Parameters
+    ----------
+    data : DiscreteTrajectories or sequence of them
+        Made with the model's state space and lag (:func:`~cfbmarkov.markov.discretize`).
+    model : MarkovModel
+        The model to test.
+    groups : mapping of str to sequence of int
+        A partition of the cells (e.g. :func:`height_bands`, :func:`core_annulus`).
+    steps : int or sequence of int
+        The multiples k of the lag (an int K means 1..K).
+
+    Returns
+    -------
+    CKTest
+
+    Raises
+    ------
+    InputError
+        If the data do not match the model, the groups are not a partition, or no pair of
+        frames k lags apart is present.
     """
     space = model.state_space
     steps = np.arange(1, int(steps) + 1) if np.isscalar(steps) else np.asarray(steps, np.int64)
@@ -345,34 +361,33 @@ def ck_test(data, model: MarkovModel, groups: Mapping[str, Sequence[int]],
     pair_counts = np.zeros((k_count, g, g), np.int64)
     occupancy = np.zeros((k_count, s), np.float64)
     spans = []
-    runs = data if isinstance(data, (list, tuple)) else [data]
     sources = []
-    for run in runs:
-        own = not isinstance(run, Trajectories)
-        traj = Trajectories(run) if own else run
-        try:
-            lag_frames = traj.lag_frames(model.lag)
-            spans.append(lag_frames)
-            states = _window_states(space, traj, lag_frames, window)
-            n_frames = states.shape[0]
-            labels = state_group[states]                   # [T, N]
-            # per-frame state occupancy, then cumulative sums for any range of start frames
-            per_frame = np.zeros((n_frames + 1, s), np.float64)
-            for t in range(n_frames):
-                per_frame[t + 1] = np.bincount(states[t], minlength=s)
-            cumulative = np.cumsum(per_frame, axis=0)
-            for i, k in enumerate(steps):
-                shift = int(k) * lag_frames
-                n_start = n_frames - shift
-                if n_start <= 0:
-                    continue
-                pair = labels[:n_start] * g + labels[shift:]
-                pair_counts[i] += np.bincount(pair.ravel(), minlength=g * g).reshape(g, g)
-                occupancy[i] += cumulative[n_start]
-            sources.append(str(traj.path))
-        finally:
-            if own:
-                traj.close()
+    windows = as_discrete_list(data)
+    for discrete in windows:
+        if discrete.state_space != space or abs(discrete.lag - model.lag) > 1e-6 * model.lag:
+            raise InputError(f"CK test: the discrete trajectories ({discrete.state_space.describe()}"
+                             f", lag {discrete.lag:g} s) were not made with the model's state "
+                             f"space and lag ({space.describe()}, {model.lag:g} s)")
+        lag_frames = discrete.lag_frames
+        spans.append(lag_frames)
+        states = discrete.states
+        n_frames = states.shape[0]
+        labels = state_group[states]                   # [T, N]
+        # per-frame state occupancy, then cumulative sums for any range of start frames
+        per_frame = np.zeros((n_frames + 1, s), np.float64)
+        for t in range(n_frames):
+            per_frame[t + 1] = np.bincount(states[t], minlength=s)
+        cumulative = np.cumsum(per_frame, axis=0)
+        for i, k in enumerate(steps):
+            shift = int(k) * lag_frames
+            n_start = n_frames - shift
+            if n_start <= 0:
+                continue
+            pair = labels[:n_start] * g + labels[shift:]
+            pair_counts[i] += np.bincount(pair.ravel(), minlength=g * g).reshape(g, g)
+            occupancy[i] += cumulative[n_start]
+        sources.append(discrete.source)
+    window = windows[0].window
     if len(set(spans)) > 1:
         raise InputError(f"the runs have different frame intervals (lag = {spans} frames); "
                          f"the effective counts need one")

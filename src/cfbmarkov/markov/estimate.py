@@ -1,7 +1,9 @@
-"""Estimators of the transition matrix (paper Eq. 2-4; SPEC section 2).
+"""Estimators of the transition matrix (paper Eq. 2-4; ``docs/definitions.md``, States and
+transitions).
 
-An estimator is configured with a state space and a lag, then ``fit(trajectories)`` returns
-an immutable :class:`~cfbmarkov.markov.model.MarkovModel`:
+An estimator is configured with a state space and a lag, then ``fit(discrete)`` on
+discrete trajectories (:mod:`cfbmarkov.markov.discrete`) returns an immutable
+:class:`~cfbmarkov.markov.model.MarkovModel`:
 
 - :class:`PaperEstimator` (``paper``): the plain average over the frames t_c of the
   row-normalised per-frame matrices P'(t_c), Eq. (2)-(4), a row of P'(t_c) being all zero
@@ -22,33 +24,33 @@ model lists such states.
 from __future__ import annotations
 
 import os
-from contextlib import nullcontext
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Iterable
+from typing import TYPE_CHECKING
 
 import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.discrete import as_discrete_list, discretize
 from cfbmarkov.markov.states import StateSpace
-from cfbmarkov.trajectories import Trajectories
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
 
 
 @nb.njit(cache=True)
-def count_transitions(states, y, lag_frames, height, n_states, counts, counts_up, counts_down,
-                      frame_average, occupied_frames, with_frame_average=True):
-    """Accumulate transition counts of discrete trajectories (kernel).
+def _count_kernel(states, vertical, lag_frames, height, n_states, counts, counts_up,
+                  counts_down, frame_average, occupied_frames, with_frame_average):
+    """Accumulate the transition counts of discrete trajectories (Numba kernel).
 
-    states int32 [T, N], y float64 [T, N] (m). For every frame pair (t, t+lag) adds to
-    ``counts[i, j]`` (pooled), ``counts_up``/``counts_down`` (passes up through the top /
-    down through the bottom, minimal image on y), ``frame_average[i, j] += N_ij(t)/N_i(t)``
-    (the sum of the per-frame matrices of Eq. 2) and ``occupied_frames[i] += 1`` where
-    N_i(t) > 0 (``with_frame_average=False``: ``frame_average`` is left alone, for the
-    pooled estimator). Returns the number of frame pairs.
+    ``states`` int32 [T, N] (-1: absent), ``vertical`` float64 [T, N] heights (m). For
+    every frame pair (t, t + lag) whose two ends are present, adds to ``counts[i, j]``
+    (pooled), ``counts_up`` / ``counts_down`` (passes up through the top / down through the
+    bottom: the height dropped / rose by more than H/2, the minimal-image rule),
+    ``frame_average[i, j] += N_ij(t) / N_i(t)`` (the sum of the per-frame matrices P'(t)
+    of the paper's Eq. 2; skipped unless ``with_frame_average``) and
+    ``occupied_frames[i] += 1`` where N_i(t) > 0. Returns the number of frame pairs.
     """
     n_frames, n_particles = states.shape
     half = 0.5 * height
@@ -57,17 +59,21 @@ def count_transitions(states, y, lag_frames, height, n_states, counts, counts_up
     for t in range(n_frames - lag_frames):
         occupancy[:] = 0
         for p in range(n_particles):
-            occupancy[states[t, p]] += 1
+            i = states[t, p]
+            if i >= 0 and states[t + lag_frames, p] >= 0:
+                occupancy[i] += 1
         for i in range(n_states):
             if occupancy[i] > 0:
                 occupied_frames[i] += 1
         for p in range(n_particles):
             i = states[t, p]
             j = states[t + lag_frames, p]
+            if i < 0 or j < 0:
+                continue
             counts[i, j] += 1
             if with_frame_average:
                 frame_average[i, j] += 1.0 / occupancy[i]
-            dy = y[t + lag_frames, p] - y[t, p]
+            dy = vertical[t + lag_frames, p] - vertical[t, p]
             if dy < -half:
                 counts_up[i, j] += 1
             elif dy > half:
@@ -78,93 +84,85 @@ def count_transitions(states, y, lag_frames, height, n_states, counts, counts_up
 
 @dataclass(frozen=True)
 class TransitionCounts:
-    """Everything an estimator gathers from the data before it forms P."""
+    """Everything an estimator gathers from the data before it forms P.
 
-    counts: np.ndarray           # [S, S] int64, pooled
-    counts_up: np.ndarray        # [S, S] int64, passes up through the top
-    counts_down: np.ndarray      # [S, S] int64, passes down through the bottom
-    frame_average_sum: np.ndarray | None  # [S, S] float64, sum over frames of P'(t)
-    occupied_frames: np.ndarray  # [S] int64, frames in which each state was occupied
-    frame_pairs: int             # number of frame pairs (t, t+lag) counted
+    Attributes
+    ----------
+    counts : ndarray of int64, shape (S, S)
+        Pooled transition counts C_ij.
+    counts_up, counts_down : ndarray of int64, shape (S, S)
+        The transitions among them that passed up through the top / down through the
+        bottom of the periodic riser.
+    frame_average_sum : ndarray of float64, shape (S, S), or None
+        Sum over the frame pairs of the per-frame row-normalised matrices P'(t) (paper
+        Eq. 2-4); None where it was not gathered (only the paper's estimator needs it).
+    occupied_frames : ndarray of int64, shape (S,)
+        Frame pairs in which each state was occupied.
+    frame_pairs : int
+        Number of frame pairs (t, t + lag) counted.
+    """
+
+    counts: np.ndarray
+    counts_up: np.ndarray
+    counts_down: np.ndarray
+    frame_average_sum: np.ndarray | None
+    occupied_frames: np.ndarray
+    frame_pairs: int
 
     @property
     def n_transitions(self) -> int:
         return int(self.counts.sum())
 
-
-def count_states(states: np.ndarray, y: np.ndarray, lag_frames: int, height: float,
-                 n_states: int, frame_average: bool = True) -> TransitionCounts:
-    """Transition counts of discrete trajectories already in memory: ``states`` int32 [T, N]
-    and ``y`` (m) [T, N] of the same frames (the kernel :func:`count_transitions`).
-    ``frame_average=False`` skips the sum of the per-frame matrices that only the paper's
-    estimator needs (its field is then None)."""
-    counts = np.zeros((n_states, n_states), np.int64)
-    up = np.zeros((n_states, n_states), np.int64)
-    down = np.zeros((n_states, n_states), np.int64)
-    frame_sum = (np.zeros((n_states, n_states), np.float64) if frame_average
-                 else np.zeros((1, 1), np.float64))
-    occupied = np.zeros(n_states, np.int64)
-    pairs = count_transitions(np.ascontiguousarray(states, dtype=np.int32),
-                              np.ascontiguousarray(y, dtype=np.float64), int(lag_frames),
-                              float(height), n_states, counts, up, down, frame_sum, occupied,
-                              bool(frame_average))
-    return TransitionCounts(counts, up, down, frame_sum if frame_average else None, occupied,
-                            pairs)
+    def __add__(self, other: "TransitionCounts") -> "TransitionCounts":
+        """The counts of two sets of data together (e.g. the training blocks of a fold)."""
+        averages = (None if self.frame_average_sum is None or other.frame_average_sum is None
+                    else self.frame_average_sum + other.frame_average_sum)
+        return TransitionCounts(self.counts + other.counts, self.counts_up + other.counts_up,
+                                self.counts_down + other.counts_down, averages,
+                                self.occupied_frames + other.occupied_frames,
+                                self.frame_pairs + other.frame_pairs)
 
 
-def gather_counts(space: StateSpace, data, lag: float, window: tuple[float, float] | None
-                  ) -> tuple[TransitionCounts, dict]:
-    """Count transitions of one trajectory file (path or :class:`Trajectories`) or several."""
-    runs = data if isinstance(data, (list, tuple)) else [data]
+def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
+    """Count the transitions of discrete trajectories.
+
+    Parameters
+    ----------
+    data : DiscreteTrajectories or sequence of them
+        The windows to count (all in one state space, at one lag).
+    frame_average : bool
+        Also sum the per-frame matrices P'(t) that only the paper's estimator needs
+        (``frame_average_sum`` is None otherwise).
+
+    Returns
+    -------
+    TransitionCounts
+
+    Raises
+    ------
+    InputError
+        If the windows differ in state space or lag.
+    """
+    windows = as_discrete_list(data)
+    space = windows[0].state_space
     s = space.n_states
     counts = np.zeros((s, s), np.int64)
     up = np.zeros((s, s), np.int64)
     down = np.zeros((s, s), np.int64)
-    frame_sum = np.zeros((s, s), np.float64)
+    frame_sum = np.zeros((s, s) if frame_average else (1, 1), np.float64)
     occupied = np.zeros(s, np.int64)
     pairs = 0
-    sources = []
-    for run in runs:
-        own = not isinstance(run, Trajectories)
-        traj = Trajectories(run) if own else run
-        try:
-            _check_domain(space, traj)
-            lag_frames = traj.lag_frames(lag)
-            frames = traj.window(*window) if window is not None else slice(0, traj.n_frames)
-            start, stop, _ = frames.indices(traj.n_frames)
-            if stop - start <= lag_frames:
-                raise InputError(f"window {_fmt_window(window)} of {traj.path} holds fewer than "
-                                 f"two frames one lag ({lag:g} s) apart")
-            first = start - space.memory_lags * lag_frames
-            if first < 0:
-                raise InputError(f"state space {space.kind} needs {space.memory_lags} lag(s) of "
-                                 f"history before the window start")
-            positions = traj.positions(slice(first, stop))
-            velocities = traj.velocities(slice(first, stop)) if space.needs_velocity else None
-            if space.needs_velocity and velocities is None:
-                raise InputError(f"state space {space.kind} needs velocities; {traj.path} has none")
-            states = space.discretize(positions, velocities, lag_frames)
-            offset = start - first
-            states = np.ascontiguousarray(states[offset:])
-            y = np.ascontiguousarray(positions[offset:, :, 1])
-            pairs += count_transitions(states, y, lag_frames, traj.height, s, counts, up, down,
-                                       frame_sum, occupied)
-            sources.append(str(traj.path))
-        finally:
-            if own:
-                traj.close()
-    gathered = TransitionCounts(counts, up, down, frame_sum, occupied, pairs)
-    return gathered, {"source": sources[0] if len(sources) == 1 else sources}
-
-
-def _fmt_window(window) -> str:
-    return "(all)" if window is None else f"{window[0]:g}:{window[1]:g} s"
-
-
-def _check_domain(space: StateSpace, traj: Trajectories) -> None:
-    if not (np.isclose(space.width, traj.width) and np.isclose(space.height, traj.height)):
-        raise InputError(f"state space covers {space.width:g} x {space.height:g} m but "
-                         f"{traj.path} is {traj.width:g} x {traj.height:g} m")
+    for window in windows:
+        if window.state_space != space or window.lag_frames * window.frame_interval \
+                != windows[0].lag_frames * windows[0].frame_interval:
+            raise InputError("discrete trajectories counted together must share the state "
+                             "space and the lag")
+        pairs += _count_kernel(np.ascontiguousarray(window.states, dtype=np.int32),
+                               np.ascontiguousarray(window.vertical, dtype=np.float64),
+                               int(window.lag_frames), float(window.height), s, counts, up,
+                               down, frame_sum, occupied, bool(frame_average))
+    return TransitionCounts(counts, up, down, frame_sum if frame_average else None, occupied,
+                            pairs)
 
 
 class TransitionEstimator:
@@ -184,12 +182,39 @@ class TransitionEstimator:
     def transition_matrix(self, counts: TransitionCounts) -> np.ndarray:
         raise NotImplementedError
 
-    def fit(self, data, window: tuple[float, float] | None = None):
-        """Fit on a trajectory file (path or :class:`Trajectories`), or a list of them,
-        using the frames of ``window`` = (A, B) in s (all frames when None)."""
+    def fit(self, data) -> "MarkovModel":
+        """Fit on discrete trajectories (arrays in, model out, as deeptime's estimators).
 
-        counts, info = gather_counts(self.state_space, data, self.lag, window)
-        return self.fit_counts(counts, window=window, source=info["source"])
+        Parameters
+        ----------
+        data : DiscreteTrajectories or sequence of them
+            Made by :func:`cfbmarkov.markov.discretize` with this estimator's state space
+            and lag (or use :func:`cfbmarkov.markov.fit_model` to fit from a file).
+
+        Returns
+        -------
+        MarkovModel
+
+        Raises
+        ------
+        InputError
+            If ``data`` is not discrete trajectories, or was made with another state space
+            or lag, or holds no transition.
+        """
+        windows = as_discrete_list(data)
+        for window in windows:
+            if window.state_space != self.state_space:
+                raise InputError(f"discrete trajectories are in {window.state_space.describe()}"
+                                 f", the estimator's state space is "
+                                 f"{self.state_space.describe()}")
+            if abs(window.lag - self.lag) > 1e-6 * self.lag:
+                raise InputError(f"discrete trajectories have a lag of {window.lag:g} s "
+                                 f"({window.lag_frames} frames), the estimator's is "
+                                 f"{self.lag:g} s")
+        counts = count_transitions(windows, frame_average=self.name == "paper")
+        sources = [w.source for w in windows]
+        return self.fit_counts(counts, window=windows[0].window,
+                               source=sources[0] if len(sources) == 1 else sources)
 
     def chain(self, counts: TransitionCounts
               ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
@@ -291,14 +316,34 @@ def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025
         raise InputError(f"unknown estimator '{name}' (choose from {', '.join(ESTIMATORS)})") from None
 
 
-def discrete_trajectories(space: StateSpace, runs: Iterable, window=None) -> list[np.ndarray]:
-    """Per-particle state sequences (list of int32 arrays) of the window, e.g. for deeptime."""
-    out = []
-    for run in runs:
-        with (Trajectories(run) if not isinstance(run, Trajectories) else nullcontext(run)) as t:
-            frames = t.window(*window) if window is not None else slice(None)
-            states = space.discretize(t.positions(frames), t.velocities(frames))
-            out.extend(np.ascontiguousarray(states.T))
-    return out
+def fit_model(source, state_space: StateSpace, lag: float,
+              window: tuple[float, float] | None = None, estimator: str = "mle"
+              ) -> "MarkovModel":
+    """Fit a model on a trajectory file: :func:`~cfbmarkov.markov.discretize`, then the
+    estimator's ``fit`` (the one convenience wrapper that takes a file).
 
+    Parameters
+    ----------
+    source : str, os.PathLike or Trajectories
+        The trajectory file (path or open).
+    state_space : StateSpace
+        The states.
+    lag : float
+        The lag (s), a whole multiple of the file's frame interval.
+    window : tuple of float, optional
+        The fitting window (A, B) in s; None: every frame.
+    estimator : {"paper", "mle"}
+        Paper Eq. 2-4, or the pooled maximum-likelihood estimate.
 
+    Returns
+    -------
+    MarkovModel
+
+    Raises
+    ------
+    InputError
+        On an unreadable file, a window outside the data, a lag that is not a whole number
+        of frames, or an unknown estimator.
+    """
+    fitter = estimator_from_name(estimator, state_space, lag)
+    return fitter.fit(discretize(source, state_space, lag, window))

@@ -7,7 +7,7 @@ the bottom of the periodic riser, and its state space. It answers:
 - :meth:`propagate` (Eq. 5-6), with or without outflow through the top, and
   :meth:`batch_injection_maps` (Eq. 8, the paper's Fig. 4-7);
 - :meth:`rtd`: the exact residence-time distribution (first passage of the lap counter);
-- :meth:`simulate` / :meth:`predict`: Monte Carlo of every particle (Eq. 7) with lap
+- :meth:`monte_carlo` / :meth:`predict`: Monte Carlo of every particle (Eq. 7) with lap
   counters, :meth:`predict` writing a trajectory file like any other.
 
 File layout (``format = "cfbmarkov.model"``): datasets ``transition_matrix`` [S, S] float64,
@@ -34,6 +34,7 @@ from threadpoolctl import threadpool_limits
 
 from cfbmarkov._atomic import atomic_path
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
 from cfbmarkov.markov.states import StateSpace, place_in_cells
@@ -179,51 +180,82 @@ class MarkovModel:
         return intrinsic if window is None else intrinsic.in_window(window)
 
     # -- Monte Carlo -------------------------------------------------------------------
-    def simulate(self, initial_states, n_steps: int, seed: int = 0, initial_laps=None
-                 ) -> tuple[np.ndarray, np.ndarray]:
-        """Monte Carlo (Eq. 7): states and lap counters [n_steps+1, N] from initial states."""
+    def monte_carlo(self, initial_states, n_steps: int, seed: int = 0, initial_laps=None
+                    ) -> tuple[np.ndarray, np.ndarray]:
+        """Monte Carlo of the chain (paper Eq. 7): every particle draws its next state from
+        its row of P, lag by lag, and carries a lap counter.
+
+        Parameters
+        ----------
+        initial_states : array_like of int, shape (N,)
+            States at the start.
+        n_steps : int
+            Number of lags to run.
+        seed : int
+            Seed of the counter-based generator: the run depends only on (seed, particle,
+            step), whatever the thread count.
+        initial_laps : array_like of int, shape (N,), optional
+            Lap counters at the start (0 when None).
+
+        Returns
+        -------
+        states, laps : ndarray of int32, shape (n_steps + 1, N)
+
+        Raises
+        ------
+        InputError
+            If an initial state lies outside the state space.
+        """
         initial_states = np.asarray(initial_states)
         if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
             raise InputError("initial states outside the model's state space")
         return run_chain(self._chain, initial_states, n_steps, seed, initial_laps)
 
     def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """States, positions and laps of the particles of ``trajectories`` at ``start`` (s)."""
-        space = self.state_space
-        if not (np.isclose(space.width, trajectories.width)
-                and np.isclose(space.height, trajectories.height)):
-            raise InputError(f"model covers {space.width:g} x {space.height:g} m but "
-                             f"{trajectories.path} is {trajectories.width:g} x {trajectories.height:g} m")
-        i = trajectories.frame_index(start)
-        lag_frames = trajectories.lag_frames(self.lag)
-        first = i - space.memory_lags * lag_frames
-        if first < 0:
-            raise InputError(f"state space {space.kind} needs {space.memory_lags} lag(s) of "
-                             f"history before t = {start:g} s")
-        frames = slice(first, i + 1)
-        positions = trajectories.positions(frames)
-        velocities = trajectories.velocities(frames) if space.needs_velocity else None
-        if space.needs_velocity and velocities is None:
-            raise InputError(f"state space {space.kind} needs velocities; {trajectories.path} "
-                             "has none")
-        states = space.discretize(positions, velocities, lag_frames)[-1]
-        return states, positions[-1], trajectories.laps(i)
+        """States, positions (m) and laps [N] of the particles of ``trajectories`` (a path or
+        an open :class:`~cfbmarkov.trajectories.Trajectories`) in the frame at ``start`` (s),
+        discretised with the history the state space needs.
+
+        Raises
+        ------
+        InputError
+            If the file does not fit the model's domain, has no frame at ``start``, lacks
+            the history before it, or the lag is not a whole number of its frames.
+        """
+        frame = discretize_frame(trajectories, self.state_space, self.lag, start)
+        return frame.states[-1], frame.positions[-1], frame.laps[-1]
 
     def predict(self, trajectories, start: float, duration: float, seed: int = 0,
                 output: str | os.PathLike | None = None, progress: bool = False):
-        """Monte Carlo prediction from the particles' states in the frame at ``start`` (s)
-        for ``duration`` (s); writes a trajectory file when ``output`` is given and returns
-        its path, else returns (times, states, laps)."""
-        from cfbmarkov.trajectories import Trajectories, TrajectoryWriter
+        """Monte Carlo prediction from the particles' states in the frame at ``start``.
 
-        own = not isinstance(trajectories, Trajectories)
-        traj = Trajectories(trajectories) if own else trajectories
-        try:
+        Parameters
+        ----------
+        trajectories : str, os.PathLike or Trajectories
+            The file whose frame at ``start`` gives the initial states.
+        start, duration : float
+            Start time and length of the prediction (s); ``duration`` a whole number of lags.
+        seed : int
+            Seed of the Monte Carlo.
+        output : str or os.PathLike, optional
+            Write the prediction as a trajectory file (positions drawn uniformly inside the
+            cells, the model attached as ``/provenance/model``).
+        progress : bool
+            Show a progress bar while writing.
+
+        Returns
+        -------
+        Path or tuple
+            The output path, or (times [K+1] s, states [K+1, N], laps [K+1, N]) without one.
+        """
+        from cfbmarkov.trajectories import TrajectoryWriter, opened
+
+        with opened(trajectories) as traj:
             n_steps = self.steps_for(duration)
             if n_steps < 1:
                 raise InputError(f"duration {duration:g} s is shorter than one lag ({self.lag:g} s)")
             states0, positions0, laps0 = self.initial_states(traj, start)
-            states, laps = self.simulate(states0, n_steps, seed, laps0)
+            states, laps = self.monte_carlo(states0, n_steps, seed, laps0)
             times = start + self.lag * np.arange(n_steps + 1)
             if output is None:
                 return times, states, laps
@@ -249,9 +281,6 @@ class MarkovModel:
                 if bar is not None:
                     bar.close()
             return Path(output)
-        finally:
-            if own:
-                traj.close()
 
     def with_selection(self, selection: dict) -> "MarkovModel":
         """The same model, recording how its state space and lag were chosen."""

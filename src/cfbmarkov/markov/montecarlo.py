@@ -51,7 +51,7 @@ class SparseChain:
 
 
 @nb.njit(cache=True, parallel=True)
-def simulate_chain(initial_states, initial_laps, row_start, column, cumulative, up_probability,
+def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulative, up_probability,
                    down_probability, n_steps, seed, states_out, laps_out):
     """Advance every particle n_steps transitions (kernel).
 
@@ -99,7 +99,7 @@ def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initi
              else np.ascontiguousarray(initial_laps, dtype=np.int32))
     states = np.empty((n_steps + 1, n), np.int32)
     laps = np.empty((n_steps + 1, n), np.int32)
-    simulate_chain(initial_states, laps0, chain.row_start, chain.column, chain.cumulative,
+    monte_carlo_steps(initial_states, laps0, chain.row_start, chain.column, chain.cumulative,
                    chain.up_probability, chain.down_probability, int(n_steps),
                    np.uint64(seed), states, laps)
     return states, laps

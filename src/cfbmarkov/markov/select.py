@@ -8,7 +8,7 @@ windowed RTD (:func:`~cfbmarkov.markov.rtd.exact_rtd`, no Monte Carlo noise), st
 the entry states observed in the training blocks (the landing states of their up passes;
 this spares the chain's own stationary entry distribution, a sparse LU and an eigenvector
 per fit, most of the selection's time), against the residence times observed in the
-held-out block (SPEC section 3). Averaged over the blocks,
+held-out block (``docs/definitions.md``, Residence time). Averaged over the blocks,
 
     score = |mean PD E(RT)| / 2 % + |mean PD SD(RT)| / 10 % + mean MD / mean MD(cells)
 
@@ -39,7 +39,9 @@ is formed from those counts: the same model as fitting its state space on the wi
 
 from __future__ import annotations
 
+import functools
 import math
+import operator
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -48,10 +50,11 @@ import numpy as np
 from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
 from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
-from cfbmarkov.markov.estimate import estimator_from_name
+from cfbmarkov.markov.discrete import DiscreteTrajectories, read_frames
+from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, fit_model
 from cfbmarkov.markov.rtd import exact_rtd
 from cfbmarkov.markov.states import state_space_from_name
-from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectories import opened
 
 #: state spaces tried by default (names of :func:`state_space_from_name`)
 DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-previous")
@@ -95,62 +98,6 @@ def _exact_histogram(rtd, bin_width: float, n_bins: int) -> np.ndarray:
     return counts / total if total > 0 else counts
 
 
-def _with_history(traj, space, lag: float, window: tuple[float, float]) -> tuple[float, float]:
-    """The window, its start moved past the history a state space with memory needs when
-    the window begins at the file's first frames."""
-    earliest = float(traj.times[0]) + space.memory_lags * lag
-    return (max(window[0], earliest), window[1])
-
-
-def _sum_counts(parts):
-    from cfbmarkov.markov.estimate import TransitionCounts
-
-    averages = [c.frame_average_sum for c in parts]
-    return TransitionCounts(sum(c.counts for c in parts), sum(c.counts_up for c in parts),
-                            sum(c.counts_down for c in parts),
-                            None if any(a is None for a in averages) else sum(averages),
-                            sum(c.occupied_frames for c in parts),
-                            sum(c.frame_pairs for c in parts))
-
-
-class _WindowFrames:
-    """The frames of a fitting window (and the history before it that memory states need),
-    read from the file once: every candidate is discretised on them once and counted on
-    each block without going back to the file."""
-
-    def __init__(self, traj, window: tuple[float, float], history_frames: int,
-                 needs_velocity: bool):
-        frames = traj.window(*window)
-        self.start, self.stop, _ = frames.indices(traj.n_frames)
-        self.first = max(0, self.start - history_frames)
-        self.traj = traj
-        self.positions = traj.positions(slice(self.first, self.stop))
-        self.velocities = (traj.velocities(slice(self.first, self.stop))
-                           if needs_velocity and traj.has_velocity else None)
-        self.y = np.ascontiguousarray(self.positions[:, :, 1])
-
-    def states(self, space, lag_frames: int) -> np.ndarray:
-        if space.needs_velocity and self.velocities is None:
-            raise InputError(f"state space {space.kind} needs velocities; {self.traj.path} "
-                             "has none")
-        return space.discretize(self.positions, self.velocities, lag_frames)
-
-    def counts(self, space, states: np.ndarray, lag_frames: int, window: tuple[float, float],
-               frame_average: bool = True):
-        """Counts of ``window`` (a block, or the whole fitting window) from the states of
-        :meth:`states`, the window's start moved past the history the space needs."""
-        from cfbmarkov.markov.estimate import count_states
-
-        start, stop, _ = self.traj.window(*window).indices(self.traj.n_frames)
-        start = max(start, self.first + space.memory_lags * lag_frames)
-        if stop - start <= lag_frames:
-            raise InputError(f"window {window[0]:g}:{window[1]:g} s holds fewer than two "
-                             f"frames one lag apart")
-        rows = slice(start - self.first, stop - self.first)
-        return count_states(states[rows], self.y[rows], lag_frames, self.traj.height,
-                            space.n_states, frame_average)
-
-
 def _entry_distribution(counts) -> np.ndarray:
     """Where particles entered in the counted data: the landing states of up passes."""
     return counts.counts_up.sum(axis=0).astype(np.float64)
@@ -169,9 +116,7 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         raise InputError(f"auto: {folds} folds; cross-validation needs at least 2")
     folds = int(folds)
     a, b = (float(v) for v in window)
-    own = not isinstance(data, Trajectories)
-    traj = Trajectories(data) if own else data
-    try:
+    with opened(data) as traj:
         step = lag * max(int(m) for m in lag_multiples)      # block edges on whole lags
         n_steps = int(math.floor((b - a) / step + 1e-9))
         if n_steps < 2 * folds:
@@ -190,27 +135,31 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                        for o, blk in zip(observed, blocks)] if criterion == "rtd" else [])
         ck_times = CK_LAG_MULTIPLES * lag
         spaces = {(name, lag * int(m)): state_space_from_name(
-            name, columns, rows, traj.width, traj.height, lag * int(m))
+            name, columns, rows, traj.width, traj.height)
             for name in states for m in lag_multiples}
         history = max(sp_.memory_lags * traj.lag_frames(tau) for (_, tau), sp_ in spaces.items())
-        cached = _WindowFrames(traj, (a, b), history,
-                               any(sp_.needs_velocity for sp_ in spaces.values()))
+        # the window's frames are read once; every candidate is discretised on them
+        frames = read_frames(traj, (a, b), history, short_history="skip",
+                             velocities=traj.has_velocity and any(
+                                 sp_.needs_velocity for sp_ in spaces.values()))
         raw = []
+        discrete_of = {}
         for (name, tau), space in spaces.items():
             est = estimator_from_name(estimator, space, tau)
             try:
-                lag_frames = traj.lag_frames(tau)
-                discrete = cached.states(space, lag_frames)
-                parts = [cached.counts(space, discrete, lag_frames, block,
-                                       frame_average=estimator == "paper") for block in blocks]
+                discrete = frames.discretize(space, traj.lag_frames(tau))
+                discrete_of[(name, tau)] = discrete
+                parts = [count_transitions(discrete.block(*block),
+                                           frame_average=estimator == "paper")
+                         for block in blocks]
                 rows_ = []
                 for k, block in enumerate(blocks):
                     # fitted on the other blocks; its RTD from where particles entered there
-                    training = _sum_counts(parts[:k] + parts[k + 1:])
+                    training = functools.reduce(operator.add, parts[:k] + parts[k + 1:])
                     matrix, fractions = est.chain(training)
                     if criterion == "ck":
-                        rows_.append((_held_out_ck_error(cached, space, discrete, matrix, tau,
-                                                         block, ck_times),))
+                        rows_.append((_held_out_ck_error(discrete.block(*block), matrix,
+                                                         ck_times),))
                         continue
                     up, down = fractions if fractions is not None else _pass_fractions(training)
                     steps = max(2, int(round((block[1] - block[0]) / tau)))
@@ -252,8 +201,8 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                                         float(value)))
         usable = [c for c in final if math.isfinite(c.score)]
         if not usable and criterion == "ck":
-            space = state_space_from_name("cells", columns, rows, traj.width, traj.height, lag)
-            model = estimator_from_name(estimator, space, lag).fit(traj, window=(a, b))
+            space = state_space_from_name("cells", columns, rows, traj.width, traj.height)
+            model = fit_model(traj, space, lag, (a, b), estimator)
             return model.with_selection({
                 "method": f"{folds}-fold blocked cross-validation",
                 "blocks": [list(x) for x in blocks], "estimator": estimator,
@@ -267,14 +216,9 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
             raise InputError("auto: no candidate state space could be fitted: "
                              + "; ".join(f"{c.states} lag {c.lag:g}: {c.error}" for c in final))
         best = min(usable, key=lambda c: c.score)
-        space = spaces[(best.states, best.lag)]
-        lag_frames = traj.lag_frames(best.lag)
-        counts = cached.counts(space, cached.states(space, lag_frames), lag_frames, (a, b))
-        model = estimator_from_name(estimator, space, best.lag).fit_counts(
-            counts, window=_with_history(traj, space, best.lag, (a, b)), source=traj.path)
-    finally:
-        if own:
-            traj.close()
+        chosen = discrete_of[(best.states, best.lag)]
+        model = estimator_from_name(estimator, chosen.state_space, best.lag).fit_counts(
+            count_transitions(chosen), window=chosen.window, source=traj.path)
     cells = next((c for c in usable if c.states == "cells" and c.lag == lag), None)
     if criterion == "ck":
         why = (f"a block of the fitting window holds only {fewest} complete residences "
@@ -303,10 +247,10 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
     return model.with_selection(selection)
 
 
-def _held_out_ck_error(cached: _WindowFrames, space, states: np.ndarray, matrix: np.ndarray,
-                       lag: float, block: tuple[float, float], times: np.ndarray) -> float:
+def _held_out_ck_error(block: DiscreteTrajectories, matrix: np.ndarray, times: np.ndarray
+                       ) -> float:
     """Mean |P_model(A -> B, t) - P_observed(A -> B, t)| over the coarse groups (height
-    thirds x core/annulus) and ``times`` (s) in the frames of ``block``. Every time uses the
+    thirds x core/annulus) and ``times`` (s) in the held-out ``block``. Every time uses the
     same start frames (those at least the longest time before the block's end), and the
     model starts from the occupancy of its states in each group there (as :func:`ck_test`);
     NaN when the block is shorter than the longest time."""
@@ -315,11 +259,8 @@ def _held_out_ck_error(cached: _WindowFrames, space, states: np.ndarray, matrix:
     from cfbmarkov.markov.diagnostics import (core_annulus, group_labels, height_bands,
                                               product_groups)
 
-    traj = cached.traj
-    lag_frames = traj.lag_frames(lag)
-    start, stop, _ = traj.window(*block).indices(traj.n_frames)
-    start = max(start, cached.first + space.memory_lags * lag_frames)
-    block_states = states[start - cached.first:stop - cached.first]
+    space, lag, lag_frames = block.state_space, block.lag, block.lag_frames
+    block_states = block.states
     steps = np.rint(np.asarray(times, dtype=np.float64) / lag).astype(np.int64)
     if steps.min() < 1 or np.any(np.abs(steps * lag - times) > 1e-9):
         return math.nan                     # the times are not whole multiples of this lag
@@ -382,19 +323,15 @@ def parse_model_name(name: str) -> tuple[str, str]:
 
 def fit_by_name(name: str, data, *, window: tuple[float, float], columns: int, rows: int,
                 lag: float):
-    """Fit the model ``name`` (see :func:`parse_model_name`) on ``window`` of ``data``."""
+    """Fit the model ``name`` (see :func:`parse_model_name`) on ``window`` of ``data`` (a
+    trajectory path or an open file) on an m x n = ``columns`` x ``rows`` grid at ``lag`` s."""
     states, estimator = parse_model_name(name)
     if states == "auto":
         return select_model(data, window=window, columns=columns, rows=rows, lag=lag,
                             estimator=estimator)
-    own = not isinstance(data, Trajectories)
-    traj = Trajectories(data) if own else data
-    try:
-        space = state_space_from_name(states, columns, rows, traj.width, traj.height, lag)
-        return estimator_from_name(estimator, space, lag).fit(traj, window=window)
-    finally:
-        if own:
-            traj.close()
+    with opened(data) as traj:
+        space = state_space_from_name(states, columns, rows, traj.width, traj.height)
+        return fit_model(traj, space, lag, window, estimator)
 
 
 __all__ = ["DEFAULT_LAG_MULTIPLES", "DEFAULT_STATES", "CandidateScore", "fit_by_name",

@@ -6,9 +6,12 @@ serialises itself to attributes so that a saved model can rebuild it. :class:`Ce
 the paper's space: m columns x n rows of equal cells, state s = row*m + col (SPEC section 2).
 State spaces that carry more than the position subclass :class:`StateSpace` and register
 under their ``kind``: :class:`DirectionCells` (cell x {rising, falling}),
-:class:`VelocityCells` (cell x vertical-velocity bins) and :class:`PreviousCellCells` (cell x
-offset of the previous cell, a second-order chain); :func:`state_space_from_name` builds
-them by name.
+:class:`VelocityCells` (cell x vertical-velocity bins) and :class:`SecondOrderCells` (cell x
+offset of the previous cell: the second-order chain on cells, kind ``cells-previous``);
+:func:`state_space_from_name` builds them by name.
+
+Turning trajectory frames into states goes through :mod:`cfbmarkov.markov.discrete`, which
+gives :meth:`StateSpace.discretize` the frames, the lag in frames and the frame interval.
 """
 
 from __future__ import annotations
@@ -68,8 +71,26 @@ class StateSpace(ABC):
 
     @abstractmethod
     def discretize(self, positions: np.ndarray, velocities: np.ndarray | None = None,
-                   lag_frames: int = 1) -> np.ndarray:
-        """States int32 [T, N] of frames positions [T, N, 2] (m) (and velocities, m/s)."""
+                   lag_frames: int = 1, frame_interval: float | None = None) -> np.ndarray:
+        """States of frames (a kernel on arrays; :func:`cfbmarkov.markov.discretize` is the
+        way from a trajectory file).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, 2) or (N, 2)
+            Positions (m) of consecutive frames; a space with memory reads the first
+            ``memory_lags * lag_frames`` frames as history only.
+        velocities : ndarray, shape like ``positions``, optional
+            Velocities (m/s), for spaces with ``needs_velocity``.
+        lag_frames : int
+            The lag in frames.
+        frame_interval : float, optional
+            Time between frames (s), for spaces that turn displacements into velocities.
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N) or (N,)
+        """
 
     @abstractmethod
     def to_attrs(self) -> dict[str, Any]:
@@ -168,7 +189,7 @@ class CellGrid(StateSpace):
     def cell_of_state(self) -> np.ndarray:
         return np.arange(self.n_states, dtype=np.int64)
 
-    def discretize(self, positions, velocities=None, lag_frames=1):
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
         return cell_index(positions, self.width, self.height, self.columns, self.rows)
 
     def to_attrs(self):
@@ -204,8 +225,8 @@ def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int) -
 #
 # Spaces whose sub-state comes from the displacement over the previous lag have
 # ``memory_lags = 1``: ``discretize`` is then given frames that start one lag (``lag_frames``
-# frames) before the first frame whose state is wanted (see ``gather_counts`` and
-# ``MarkovModel.initial_states``), returns states for every frame, and the state of frame t
+# frames) before the first frame whose state is wanted (:mod:`cfbmarkov.markov.discrete`
+# reads them and drops them again), returns states for every frame, and the state of frame t
 # uses the frames t - lag_frames and t. The first ``lag_frames`` frames have no previous
 # frame; they get the sub-state of a zero displacement (any valid state: callers drop them).
 # Vertical displacements take the minimal image through the periodic boundary, wrapped into
@@ -370,7 +391,7 @@ class DirectionCells(_CellProductSpace):
         self.memory_lags = 1 if self.source == "displacement" else 0
         self.needs_velocity = self.source == "velocity"
 
-    def discretize(self, positions, velocities=None, lag_frames=1):
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
         cells = self._cells(positions)
         vertical = self._vertical(positions, velocities, lag_frames, self.source)
         out = np.empty_like(cells)
@@ -399,16 +420,20 @@ class VelocityCells(_CellProductSpace):
     ``edges`` are the B interior bin edges (m/s, strictly increasing); bin b holds
     edges[b-1] <= v < edges[b] (bin 0: v < edges[0], bin B: v >= edges[-1]).
     ``source="displacement"`` (default): v = (wrapped vertical displacement over the
-    previous lag) / ``lag``, so ``lag`` (s) must be the lag of the model that uses the space
-    (the frames given to ``discretize`` carry no times; the default is the paper's 0.025 s);
-    ``memory_lags = 1``. ``source="velocity"``: v = v_y of the frame (``needs_velocity``,
-    ``lag`` unused). The first frames (no previous frame) get v = 0.
+    previous lag) / lag, with the lag = ``lag_frames * frame_interval`` that
+    :meth:`discretize` is given (the lag of the model being fitted, so the two cannot
+    disagree); ``memory_lags = 1``. ``source="velocity"``: v = v_y of the frame
+    (``needs_velocity``). The first frames (no previous frame) get v = 0.
+
+    Model files written before the lag lived in one place stored it here as ``lag``; it is
+    accepted on loading and ignored (the model's own lag is the one used).
     """
 
     kind = "cells-velocity"
 
     def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
-                 edges=(-1.0, 0.0, 1.0, 3.0), source: str = "displacement", lag: float = 0.025):
+                 edges=(-1.0, 0.0, 1.0, 3.0), source: str = "displacement",
+                 lag: float | None = None):
         super().__init__(columns, rows, width, height)
         try:
             edges = np.asarray(edges, dtype=np.float64).ravel()
@@ -417,11 +442,9 @@ class VelocityCells(_CellProductSpace):
         if edges.size < 1 or not np.all(np.isfinite(edges)) or np.any(np.diff(edges) <= 0):
             raise InputError(f"{self.kind}: velocity bin edges must be one or more finite, "
                              f"strictly increasing values (m/s), got {edges.tolist()}")
-        if not (np.isfinite(lag) and lag > 0):
-            raise InputError(f"{self.kind}: lag {lag!r} s must be positive")
+        del lag     # stored by older model files; the lag now comes with the frames
         self.edges = tuple(float(e) for e in edges)
         self.source = _check_source(self.kind, source)
-        self.lag = float(lag)
         self.memory_lags = 1 if self.source == "displacement" else 0
         self.needs_velocity = self.source == "velocity"
 
@@ -429,10 +452,15 @@ class VelocityCells(_CellProductSpace):
     def per_cell(self) -> int:
         return len(self.edges) + 1
 
-    def discretize(self, positions, velocities=None, lag_frames=1):
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
         cells = self._cells(positions)
         vertical = self._vertical(positions, velocities, lag_frames, self.source)
-        scale = 1.0 / self.lag if self.source == "displacement" else 1.0
+        scale = 1.0
+        if self.source == "displacement":
+            if frame_interval is None or not (np.isfinite(frame_interval) and frame_interval > 0):
+                raise InputError(f"{self.kind}: velocities from displacements need the frame "
+                                 f"interval (s), got {frame_interval!r}")
+            scale = 1.0 / (int(lag_frames) * float(frame_interval))
         out = np.empty_like(cells)
         _binned_states(cells, vertical, scale, np.asarray(self.edges, dtype=np.float64), out)
         return out
@@ -442,8 +470,7 @@ class VelocityCells(_CellProductSpace):
         return self.sub_state(states)
 
     def to_attrs(self):
-        return {**self._base_attrs(), "edges": list(self.edges), "source": self.source,
-                "lag": self.lag}
+        return {**self._base_attrs(), "edges": list(self.edges), "source": self.source}
 
     def describe(self) -> str:
         return (f"{self.kind} {self.columns}x{self.rows}x{self.per_cell} ({self.n_states} "
@@ -452,11 +479,10 @@ class VelocityCells(_CellProductSpace):
 
     def __repr__(self) -> str:
         return (f"VelocityCells({self.columns}, {self.rows}, width={self.width:g}, "
-                f"height={self.height:g}, edges={self.edges}, source={self.source!r}, "
-                f"lag={self.lag:g})")
+                f"height={self.height:g}, edges={self.edges}, source={self.source!r})")
 
 
-class PreviousCellCells(_CellProductSpace):
+class SecondOrderCells(_CellProductSpace):
     """The second-order chain on cells, with the previous cell stored relative to the
     current one: state = cell*K + (dcol + Rc)*(2R + 1) + (drow + R), K = (2R+1)(2Rc+1).
 
@@ -489,7 +515,7 @@ class PreviousCellCells(_CellProductSpace):
     def per_cell(self) -> int:
         return (2 * self.reach + 1) * (2 * self.column_reach + 1)
 
-    def discretize(self, positions, velocities=None, lag_frames=1):
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
         cells = self._cells(positions)
         lag_frames = int(lag_frames)
         if lag_frames < 1:
@@ -520,7 +546,7 @@ class PreviousCellCells(_CellProductSpace):
                 "column(s))")
 
     def __repr__(self) -> str:
-        return (f"PreviousCellCells({self.columns}, {self.rows}, width={self.width:g}, "
+        return (f"SecondOrderCells({self.columns}, {self.rows}, width={self.width:g}, "
                 f"height={self.height:g}, reach={self.reach}, "
                 f"column_reach={self.column_reach})")
 
@@ -530,16 +556,35 @@ STATE_SPACES = ("cells", "cells-direction", "cells-velocity", "cells-previous")
 
 
 def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.09,
-                          height: float = 0.95, lag: float = 0.025) -> StateSpace:
-    """A state space by name with its defaults: ``cells`` (the paper's), ``cells-direction``
-    (direction from the displacement), ``cells-velocity`` (v_y bins from the displacement
-    over ``lag`` s, the model's lag), ``cells-previous`` (previous cell within 3 rows)."""
+                          height: float = 0.95) -> StateSpace:
+    """A state space by name with its defaults.
+
+    Parameters
+    ----------
+    name : {"cells", "cells-direction", "cells-velocity", "cells-previous"}
+        ``cells`` (the paper's), ``cells-direction`` (direction from the displacement),
+        ``cells-velocity`` (v_y bins from the displacement over the model's lag),
+        ``cells-previous`` (the second-order chain: previous cell within 3 rows).
+    columns, rows : int
+        The cell grid m x n.
+    width, height : float
+        The riser W x H (m).
+
+    Returns
+    -------
+    StateSpace
+
+    Raises
+    ------
+    InputError
+        For an unknown name or a bad grid.
+    """
     if name == "cells":
         return CellGrid(columns, rows, width, height)
     if name == "cells-direction":
         return DirectionCells(columns, rows, width, height)
     if name == "cells-velocity":
-        return VelocityCells(columns, rows, width, height, lag=lag)
+        return VelocityCells(columns, rows, width, height)
     if name == "cells-previous":
-        return PreviousCellCells(columns, rows, width, height)
+        return SecondOrderCells(columns, rows, width, height)
     raise InputError(f"unknown state space '{name}' (choose from {', '.join(STATE_SPACES)})")

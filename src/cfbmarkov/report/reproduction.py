@@ -1110,7 +1110,7 @@ def _diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
     """Beyond the paper (issue 5): why the automatic model chose its state space and lag,
     implied timescales against lag, and the Chapman-Kolmogorov test of each model on height
     thirds and core/annulus, all on the fitting window."""
-    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov import MarkovModel, discretize
     from cfbmarkov.markov.diagnostics import (core_annulus, ck_test, height_bands,
                                               implied_timescales)
     from cfbmarkov.markov.states import CellGrid
@@ -1186,10 +1186,9 @@ def _diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
                                    f"{trend}."))
             for name_m, model in models.items():
                 try:
-                    bands = ck_test(ref, model, height_bands(model.state_space, 3), steps=4,
-                                    window=window)
-                    radial = ck_test(ref, model, core_annulus(model.state_space), steps=4,
-                                     window=window)
+                    discrete = discretize(ref, model.state_space, model.lag, window)
+                    bands = ck_test(discrete, model, height_bands(model.state_space, 3), steps=4)
+                    radial = ck_test(discrete, model, core_annulus(model.state_space), steps=4)
                 except (InputError, ValueError) as exc:
                     ck_rows.append([c.label, name_m, f"not computed ({exc})", "", "", ""])
                     continue

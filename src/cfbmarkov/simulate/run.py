@@ -33,7 +33,7 @@ from cfbmarkov.simulate.cfd import (GasGrid, GasSolver, GasState, deposit_drag_j
 from cfbmarkov.simulate.coupling import (drag_coefficients, drag_force_at_new_gas,
                                          place_without_overlap)
 from cfbmarkov.simulate.dem import ContactLaw, DEMSystem
-from cfbmarkov.trajectories import SegmentedTrajectoryWriter
+from cfbmarkov.segmented import SegmentedTrajectoryWriter
 
 CHECKPOINT_VERSION = 1
 

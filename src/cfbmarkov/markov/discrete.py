@@ -1,0 +1,382 @@
+"""Discrete trajectories: the one step from trajectory frames to Markov states.
+
+Everything in :mod:`cfbmarkov.markov` that learns from data (the estimators, the automatic
+choice of the state space, the lag diagnostics, the initial states of a prediction) works
+on a :class:`DiscreteTrajectories`: the states of every particle in every frame of one
+analysis window, held in memory, with the lag in frames and the frame interval it was made
+with. This module is the only code that turns frames into states, and so the only code
+that knows about *history frames*: a state space with memory (``memory_lags > 0``, e.g.
+the direction of motion over the previous lag) needs ``memory_lags * lag_frames`` frames
+before the window's first frame; they are read, used to discretise and dropped.
+
+The lag exists once, in frames (``lag_frames``); seconds appear only at the edge
+(``lag = lag_frames * frame_interval``), and a state space that needs a time (velocity bins
+from displacements) takes the frame interval from here, so the lag it uses cannot
+disagree with the model's.
+
+Absent particles: a state of ``-1`` (:data:`ABSENT`) marks a particle that is not present
+in a frame; counting skips every transition with an absent end. Files written today hold
+every particle in every frame, so no state is ``-1`` yet; the layout is ready for data in
+which particles come and go.
+
+Layout of the arrays (T frames of the window, N particles)::
+
+    states    int32   [T, N]   state of each particle in each frame (-1: absent)
+    vertical  float64 [T, N]   height of each particle (m), for the boundary passes
+    times     float64 [T]      frame times (s)
+
+See ``docs/definitions.md`` (States and transitions) for the definitions.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov.states import StateSpace
+from cfbmarkov.trajectories import TIME_TOLERANCE, Trajectories, opened
+
+#: the state of a particle that is absent in a frame
+ABSENT = -1
+
+
+@dataclass(frozen=True, eq=False)
+class DiscreteTrajectories:
+    """The discrete trajectories of one analysis window, in memory.
+
+    Parameters
+    ----------
+    states : ndarray of int32, shape (T, N)
+        State of particle p in frame t of the window (``ABSENT`` = -1 where absent).
+    vertical : ndarray of float64, shape (T, N)
+        Height y (m) of each particle in each frame; the pass through the periodic
+        boundary of a transition is taken from it by the minimal-image rule.
+    times : ndarray of float64, shape (T,)
+        Times (s) of the frames.
+    lag_frames : int
+        The lag, in frames (>= 1).
+    frame_interval : float
+        Time between frames (s).
+    height : float
+        Height H of the riser (m), the period of the vertical axis.
+    state_space : StateSpace
+        The state space the states belong to.
+    window : tuple of float or None
+        The analysis window (A, B) in s as asked for (None: all frames).
+    source : str
+        Where the frames came from (a file path, or a description).
+    positions : ndarray of float64, shape (T, N, 2), optional
+        Positions (m), kept only where asked for (e.g. to place a prediction's first frame).
+    laps : ndarray of int64, shape (T, N), optional
+        Lap counters, kept only where asked for.
+    """
+
+    states: np.ndarray
+    vertical: np.ndarray
+    times: np.ndarray
+    lag_frames: int
+    frame_interval: float
+    height: float
+    state_space: StateSpace
+    window: tuple[float, float] | None = None
+    source: str = ""
+    positions: np.ndarray | None = field(default=None, repr=False)
+    laps: np.ndarray | None = field(default=None, repr=False)
+
+    def __post_init__(self):
+        if self.states.ndim != 2 or self.vertical.shape != self.states.shape:
+            raise InputError(f"discrete trajectories: states {self.states.shape} and heights "
+                             f"{self.vertical.shape} must both be [T, N]")
+        if self.times.shape != (self.states.shape[0],):
+            raise InputError(f"discrete trajectories: {self.times.size} times for "
+                             f"{self.states.shape[0]} frames")
+        if int(self.lag_frames) < 1:
+            raise InputError(f"lag of {self.lag_frames} frames: must be at least 1")
+        if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
+            raise InputError(f"frame interval {self.frame_interval!r} s must be positive")
+
+    @property
+    def lag(self) -> float:
+        """The lag in s (``lag_frames * frame_interval``)."""
+        return self.lag_frames * self.frame_interval
+
+    @property
+    def n_frames(self) -> int:
+        return int(self.states.shape[0])
+
+    @property
+    def n_particles(self) -> int:
+        return int(self.states.shape[1])
+
+    def _tolerance(self) -> float:
+        # as Trajectories.window, so that a block selects the frames the file would
+        last = abs(float(self.times[-1])) if self.n_frames else 0.0
+        return max(TIME_TOLERANCE * max(last, 1.0), 1e-3 * self.frame_interval)
+
+    def block(self, start: float, stop: float) -> "DiscreteTrajectories":
+        """The frames with ``start <= t <= stop`` (s), e.g. one fold of a cross-validation.
+
+        Raises
+        ------
+        InputError
+            If the block holds fewer than two frames one lag apart.
+        """
+        tol = self._tolerance()
+        i0 = int(np.searchsorted(self.times, start - tol, side="left"))
+        i1 = int(np.searchsorted(self.times, stop + tol, side="right"))
+        if i1 - i0 <= self.lag_frames:
+            raise InputError(f"window {start:g}:{stop:g} s holds fewer than two frames one "
+                             f"lag ({self.lag:g} s) apart")
+        rows = slice(i0, i1)
+        return replace(self, states=self.states[rows], vertical=self.vertical[rows],
+                       times=self.times[rows], window=(float(start), float(stop)),
+                       positions=None if self.positions is None else self.positions[rows],
+                       laps=None if self.laps is None else self.laps[rows])
+
+    def trajectories(self) -> list[np.ndarray]:
+        """Per-particle state sequences (a list of N int32 arrays of length T), the layout
+        deeptime's estimators take."""
+        return list(np.ascontiguousarray(self.states.T))
+
+    def __repr__(self) -> str:
+        span = (f"{self.times[0]:g}..{self.times[-1]:g} s" if self.n_frames else "no frames")
+        return (f"DiscreteTrajectories({self.state_space.describe()}, {self.n_particles} "
+                f"particles x {self.n_frames} frames, {span}, lag {self.lag_frames} frames = "
+                f"{self.lag:g} s)")
+
+
+@dataclass(frozen=True, eq=False)
+class WindowFrames:
+    """The frames of one window and the history before it, read from a file once, so that
+    several state spaces (the candidates of ``--states auto``) are discretised on the same
+    frames without going back to the file.
+
+    ``positions`` [F, N, 2] (m), ``velocities`` [F, N, 2] (m/s) or None, ``times`` [F] (s)
+    cover the frames ``first .. stop - 1`` of the file; the window's own frames start at
+    row ``history`` (``first + history`` in the file).
+    """
+
+    positions: np.ndarray
+    velocities: np.ndarray | None
+    times: np.ndarray
+    laps: np.ndarray | None
+    history: int
+    frame_interval: float
+    width: float
+    height: float
+    window: tuple[float, float] | None
+    source: str
+
+    def discretize(self, state_space: StateSpace, lag_frames: int, *,
+                   keep_positions: bool = False) -> DiscreteTrajectories:
+        """The discrete trajectories of the window for ``state_space`` at ``lag_frames``.
+
+        Where the frames read hold less history than the state space needs, the window's
+        start moves past it (only :func:`read_frames` with ``short_history="skip"`` reads
+        such frames).
+
+        Raises
+        ------
+        InputError
+            If the state space does not cover the frames' domain, needs velocities the
+            frames lack, or the window holds fewer than two frames one lag apart.
+        """
+        check_domain(state_space, self.width, self.height, self.source)
+        lag_frames = int(lag_frames)
+        if state_space.needs_velocity and self.velocities is None:
+            raise InputError(f"state space {state_space.kind} needs velocities; {self.source} "
+                             "has none")
+        need = state_space.memory_lags * lag_frames
+        first = self.history - need
+        window = self.window
+        if first < 0:              # too little history: the window starts where it has it
+            first, start = 0, need
+            if window is not None and start < self.times.size:
+                window = (max(window[0], float(self.times[start])), window[1])
+        else:
+            start = self.history
+        frames = slice(first, None)
+        states = state_space.discretize(
+            self.positions[frames], None if self.velocities is None else self.velocities[frames],
+            lag_frames, self.frame_interval)
+        offset = start - first
+        rows = slice(start, None)
+        return DiscreteTrajectories(
+            states=np.ascontiguousarray(states[offset:]),
+            vertical=np.ascontiguousarray(self.positions[rows, :, 1]),
+            times=self.times[rows], lag_frames=lag_frames, frame_interval=self.frame_interval,
+            height=self.height, state_space=state_space, window=window, source=self.source,
+            positions=self.positions[rows] if keep_positions else None,
+            laps=None if (self.laps is None or not keep_positions) else self.laps[rows])
+
+
+def _describe(window) -> str:
+    return "(all)" if window is None else f"{window[0]:g}:{window[1]:g} s"
+
+
+def check_domain(state_space: StateSpace, width: float, height: float, source: str = "") -> None:
+    """Raise :class:`InputError` unless ``state_space`` covers a W x H = ``width`` x
+    ``height`` (m) riser."""
+    if not (np.isclose(state_space.width, width) and np.isclose(state_space.height, height)):
+        raise InputError(f"state space covers {state_space.width:g} x {state_space.height:g} m "
+                         f"but {source} is {width:g} x {height:g} m")
+
+
+def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
+               window: tuple[float, float] | None, velocities: bool, laps: bool,
+               short_history: str) -> WindowFrames:
+    """Frames ``start .. stop - 1`` of the file and ``history`` frames before them."""
+    first = start - int(history)
+    if first < 0:
+        if short_history != "skip":
+            where = (f"the window start {_describe(window)}" if window is not None
+                     else f"t = {trajectories.times[start]:g} s")
+            raise InputError(f"the state space needs {history} frame(s) of history before "
+                             f"{where}; {trajectories.path} has {start}")
+        first = 0
+    rows = slice(first, stop)
+    return WindowFrames(
+        positions=trajectories.positions(rows),
+        velocities=trajectories.velocities(rows) if velocities else None,
+        times=trajectories.times[rows], laps=trajectories.laps(rows) if laps else None,
+        history=start - first, frame_interval=trajectories.frame_interval,
+        width=trajectories.width, height=trajectories.height,
+        window=None if window is None else (float(window[0]), float(window[1])),
+        source=str(trajectories.path))
+
+
+def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
+                history: int = 0, *, velocities: bool = False, laps: bool = False,
+                short_history: str = "error") -> WindowFrames:
+    """Read the frames of ``window`` and ``history`` frames before it.
+
+    Parameters
+    ----------
+    trajectories : Trajectories
+        An open trajectory file.
+    window : tuple of float or None
+        (A, B) in s: the frames with A <= t <= B. None: every frame of the file after the
+        history.
+    history : int
+        Frames needed before the window's first frame (``memory_lags * lag_frames``).
+    velocities, laps : bool
+        Also read velocities / lap counters.
+    short_history : {"error", "skip"}
+        What to do when the file holds fewer than ``history`` frames before the window:
+        raise, or move the window's start later (the window then starts at the first frame
+        that has its history).
+
+    Returns
+    -------
+    WindowFrames
+
+    Raises
+    ------
+    InputError
+        If the window lies outside the data, or (``short_history="error"``) the history
+        is missing.
+    """
+    if window is None:
+        start, stop = min(int(history), trajectories.n_frames), trajectories.n_frames
+    else:
+        start, stop, _ = trajectories.window(*window).indices(trajectories.n_frames)
+    return _read_rows(trajectories, start, stop, history, window, velocities, laps,
+                      short_history)
+
+
+def _prepare(traj: Trajectories, state_space: StateSpace, lag: float) -> int:
+    """Check that ``state_space`` fits the file and return the lag in frames."""
+    check_domain(state_space, traj.width, traj.height, str(traj.path))
+    lag_frames = traj.lag_frames(lag)
+    if state_space.needs_velocity and not traj.has_velocity:
+        raise InputError(f"state space {state_space.kind} needs velocities; {traj.path} "
+                         "has none")
+    return lag_frames
+
+
+def discretize(source, state_space: StateSpace, lag: float,
+               window: tuple[float, float] | None = None, *, keep_positions: bool = False,
+               short_history: str = "error") -> DiscreteTrajectories:
+    """Turn the frames of ``window`` into discrete trajectories (the convenience wrapper
+    that opens files).
+
+    Parameters
+    ----------
+    source : str, os.PathLike or Trajectories
+        A trajectory file, by path or open.
+    state_space : StateSpace
+        How positions (and motion) become states.
+    lag : float
+        The lag (s); a whole multiple of the file's frame interval.
+    window : tuple of float or None
+        (A, B) in s; None: all frames that have the history the state space needs.
+    keep_positions : bool
+        Keep positions and laps of the window's frames.
+    short_history : {"error", "skip"}
+        See :func:`read_frames` (None as the window always skips).
+
+    Returns
+    -------
+    DiscreteTrajectories
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read, the lag is not a whole number of frames, the window
+        lies outside the data, lacks history or holds fewer than two frames one lag apart,
+        or the state space does not fit the file.
+    """
+    with opened(source) as traj:
+        lag_frames = _prepare(traj, state_space, lag)
+        frames = read_frames(traj, window, state_space.memory_lags * lag_frames,
+                             velocities=state_space.needs_velocity, laps=keep_positions,
+                             short_history="skip" if window is None else short_history)
+        discrete = frames.discretize(state_space, lag_frames, keep_positions=keep_positions)
+    if discrete.n_frames <= lag_frames:
+        raise InputError(f"window {_describe(window)} of {discrete.source} holds fewer than "
+                         f"two frames one lag ({lag:g} s) apart")
+    return discrete
+
+
+def discretize_frame(source, state_space: StateSpace, lag: float, time: float
+                     ) -> DiscreteTrajectories:
+    """The one frame at ``time`` (s), discretised with the history its state space needs,
+    positions and laps kept: the initial states of a prediction.
+
+    Raises
+    ------
+    InputError
+        If no frame lies at ``time`` or the history before it is missing.
+    """
+    with opened(source) as traj:
+        lag_frames = _prepare(traj, state_space, lag)
+        i = traj.frame_index(time)
+        frames = _read_rows(traj, i, i + 1, state_space.memory_lags * lag_frames, None,
+                            state_space.needs_velocity, True, "error")
+    return frames.discretize(state_space, lag_frames, keep_positions=True)
+
+
+def as_discrete_list(data) -> list[DiscreteTrajectories]:
+    """``data`` (one :class:`DiscreteTrajectories` or a sequence of them) as a list.
+
+    Raises
+    ------
+    InputError
+        If anything else is given (a path or an open file: discretise it first).
+    """
+    items = list(data) if isinstance(data, (list, tuple)) else [data]
+    if not items:
+        raise InputError("no discrete trajectories given")
+    for item in items:
+        if not isinstance(item, DiscreteTrajectories):
+            raise InputError(
+                f"expected discrete trajectories, got {type(item).__name__}: make them with "
+                "cfbmarkov.markov.discretize(trajectories, state_space, lag, window) or fit "
+                "from a file with cfbmarkov.markov.fit_model(...)")
+    return items
+
+
+__all__ = ["ABSENT", "DiscreteTrajectories", "WindowFrames", "as_discrete_list",
+           "check_domain", "discretize", "discretize_frame", "read_frames"]

@@ -1,0 +1,138 @@
+"""Crash-safe output of long runs: a trajectory file written as a series of segments.
+
+HDF5 files are not safe against a kill in the middle of a write, so a long CFD-DEM run
+writes its frames to complete segment files, closed at every checkpoint, and merges them
+into one trajectory file at the end (see :class:`SegmentedTrajectoryWriter`).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.trajectories import Trajectories, TrajectoryWriter
+
+
+class SegmentedTrajectoryWriter:
+    """Crash-safe output for long runs: frames go to a series of complete segment files.
+
+    HDF5 files are not safe against a kill in the middle of a write, so a long run writes
+    its frames to ``<output>.parts/segment-NNNNN.h5``, each closed (renamed into place
+    atomically) at a checkpoint. :meth:`finish` merges the segments into ``output`` (again
+    atomically) and removes the folder. After a crash, :meth:`resume` keeps exactly the first
+    ``n_segments`` segments named by the last checkpoint and discards the rest, so the run
+    continues from a consistent state.
+    """
+
+    def __init__(self, output: str | os.PathLike, ids, *, width: float, height: float,
+                 source: str, parameters: dict[str, Any] | None = None,
+                 with_velocity: bool = False, frame_interval: float | None = None,
+                 n_segments: int = 0):
+        self.output = Path(output)
+        self.parts = self.output.with_name(self.output.name + ".parts")
+        self.parts.mkdir(parents=True, exist_ok=True)
+        self._options = dict(ids=np.asarray(ids, dtype=np.int64), width=width, height=height,
+                             source=source, parameters=parameters,
+                             with_velocity=with_velocity, frame_interval=frame_interval)
+        self.n_segments = int(n_segments)
+        self._current: TrajectoryWriter | None = None
+        self._last: tuple[float, np.ndarray, np.ndarray] | None = None
+
+    @classmethod
+    def resume(cls, output: str | os.PathLike, n_segments: int, **options) -> "SegmentedTrajectoryWriter":
+        """Continue after a crash: keep segments 0..n_segments-1, remove any later ones."""
+        writer = cls(output, n_segments=n_segments, **options)
+        for path in writer.parts.glob("segment-*.h5"):
+            if int(path.stem.split("-")[1]) >= n_segments:
+                path.unlink()
+        for path in writer.parts.glob(".segment-*"):
+            path.unlink()
+        missing = [p for p in writer.segment_paths() if not p.exists()]
+        if missing:
+            raise InputError(f"cannot resume {output}: segment {missing[0].name} is missing")
+        if n_segments:
+            with Trajectories(writer.segment_paths()[-1]) as last:
+                writer._last = (float(last.times[-1]), last.positions(-1)[:, 1].copy(), last.laps(-1))
+        return writer
+
+    def segment_paths(self) -> list[Path]:
+        return [self.parts / f"segment-{k:05d}.h5" for k in range(self.n_segments)]
+
+    def _writer(self) -> TrajectoryWriter:
+        if self._current is None:
+            o = self._options
+            self._current = TrajectoryWriter(
+                self.parts / f"segment-{self.n_segments:05d}.h5", o["ids"], width=o["width"],
+                height=o["height"], source=o["source"], parameters=o["parameters"],
+                with_velocity=o["with_velocity"], frame_interval=o["frame_interval"],
+                label=str(self.output))
+            if self._last is not None:     # continue validation and laps across segments
+                self._current.continue_after(*self._last, frame_interval=o["frame_interval"])
+        return self._current
+
+    def append(self, time: float, position, velocity=None, lap=None) -> None:
+        self._writer().append(time, position, velocity, lap)
+
+    def add_events(self, times, particles, directions) -> None:
+        if len(times):
+            self._writer().add_events(times, particles, directions)
+
+    def append_fields(self, time: float, spacing, **fields) -> None:
+        self._writer().append_fields(time, spacing, **fields)
+
+    def close_segment(self) -> int:
+        """Close the current segment (if it holds frames); returns the number of complete
+        segments, the figure a checkpoint must record."""
+        w = self._current
+        if w is not None:
+            if w.n_frames == 0:
+                w.abort()
+            else:
+                self._last = w.last_frame
+                w.close()
+                self.n_segments += 1
+            self._current = None
+        return self.n_segments
+
+    def abort(self) -> None:
+        if self._current is not None:
+            self._current.abort()
+            self._current = None
+
+    def finish(self, attach: dict[str, tuple[dict, dict]] | None = None) -> Path:
+        """Merge the segments into the output file and remove the parts folder."""
+        self.close_segment()
+        paths = self.segment_paths()
+        if not paths:
+            raise InputError(f"{self.output}: no frames were written")
+        o = self._options
+        with TrajectoryWriter(self.output, o["ids"], width=o["width"], height=o["height"],
+                              source=o["source"], parameters=o["parameters"],
+                              with_velocity=o["with_velocity"],
+                              frame_interval=o["frame_interval"]) as merged:
+            for path in paths:
+                with Trajectories(path) as seg:
+                    for i in range(0, seg.n_frames, 64):
+                        frames = slice(i, min(i + 64, seg.n_frames))
+                        merged.append_frames(seg.times[frames], seg.positions(frames),
+                                             seg.velocities(frames), seg.laps(frames))
+                    events = seg.events()
+                    if events is not None and len(events):
+                        merged.add_events(events.time, events.particle, events.direction)
+                    if seg.has_fields:
+                        spacing = seg.field_spacing
+                        for k, t in enumerate(seg.field_times):
+                            merged.append_fields(t, spacing, **{name: seg.field(name, k)
+                                                                for name in seg.field_names})
+            for name, (datasets, attrs) in (attach or {}).items():
+                merged.attach(name, datasets, attrs)
+        for path in paths:
+            path.unlink()
+        for path in self.parts.iterdir():
+            path.unlink()
+        self.parts.rmdir()
+        return self.output
