@@ -2,7 +2,7 @@
 
 Every parameter of the paper's Table 1 (and the contact law of Table 2) has a named field;
 units are given in each field's description. Defaults are the paper's values
-(``../shared/SPEC.md`` section 1).
+(docs/definitions.md, Riser).
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""CSV import (SPEC section 5): rows ``t,id,x,y`` with optional ``vx,vy``, in SI units.
+"""CSV import (docs/definitions.md, CSV import): rows ``t,id,x,y`` with optional ``vx,vy``, in SI units.
 
 One row per particle and frame: time t (s), particle id, position x, y (m) and, when the
 header names them, velocity vx, vy (m/s). Columns may come in any order. The rows of one
@@ -38,7 +38,7 @@ from cfbmarkov.io._common import (
 )
 from cfbmarkov.trajectories import TrajectoryWriter
 
-#: the paper's riser (SPEC section 1): width W and height H, m
+#: the paper's riser (docs/definitions.md, Riser): width W and height H, m
 DEFAULT_WIDTH = 0.09
 DEFAULT_HEIGHT = 0.95
 REQUIRED_COLUMNS = ("t", "id", "x", "y")

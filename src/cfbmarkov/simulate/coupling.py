@@ -2,7 +2,7 @@
 
 The gas runs the "model B" form (Zhou et al. 2010, set I): the gas momentum equation
 carries ``-grad p`` and minus the whole particle-fluid force, and each particle receives
-``F = beta Vp / (1 - eps) (u_gas - v_p)`` with the paper's Table 2 beta (SPEC section 1).
+``F = beta Vp / (1 - eps) (u_gas - v_p)`` with the paper's Table 2 beta (docs/definitions.md, Drag).
 Table 2's beta is Gidaspow's Ergun/Wen-Yu coefficient divided by eps, which is exactly the
 form that reproduces Ergun's pressure drop in model B: the pressure-gradient (buoyancy)
 force on the particles is contained in F, so no separate ``-Vp grad p`` term is added (it
