@@ -53,9 +53,28 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
                width: float | None = None, height: float | None = None) -> Path:
     """Import a CSV file of ``t,id,x,y[,vx,vy]`` rows (SI units) as a trajectory file.
 
-    ``width`` and ``height`` (m) give the domain, by default the paper's 0.09 x 0.95 m riser.
-    The lap counter is derived from the positions by the minimal-image rule on y. Returns the
-    path written; raises InputError (and leaves no file) on bad input.
+    The lap counter is derived from the positions by the minimal-image rule on y
+    (docs/definitions.md, Pass direction).
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        The CSV file, plain or gzip-compressed; format in docs/definitions.md, CSV import.
+    output : str or os.PathLike
+        The trajectory file (HDF5) to write; it appears only when complete.
+    width, height : float, optional
+        Domain width W and height H, m; by default the paper's 0.09 x 0.95 m riser.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        On bad input (a malformed header or row, times that do not increase, a particle
+        missing from a frame, a position outside the domain, ...); no file is left behind.
     """
     path = check_source(source)
     output = check_output(output, path)
