@@ -65,7 +65,25 @@ def discard(tmp: str | os.PathLike) -> None:
 def atomic_path(target: str | os.PathLike, suffix: str = ""):
     """Yield a temporary path beside ``target``; rename it onto ``target`` on success.
 
-    On any exception the temporary file is removed and ``target`` is left untouched.
+    On any exception the temporary file is removed and ``target`` is left untouched, so a
+    failed or interrupted writer never leaves a half-written output file.
+
+    Parameters
+    ----------
+    target : str or os.PathLike
+        The file to write; its folder is created if needed.
+    suffix : str, optional
+        Added after ``.tmp`` to the temporary name (e.g. ``.png`` for tools that look at it).
+
+    Yields
+    ------
+    pathlib.Path
+        The temporary path to write to.
+
+    Raises
+    ------
+    InputError
+        If the final rename fails.
     """
     tmp = temporary_path(target, suffix)
     try:
@@ -77,6 +95,14 @@ def atomic_path(target: str | os.PathLike, suffix: str = ""):
 
 
 def write_text_atomic(target: str | os.PathLike, text: str) -> None:
-    """Write ``text`` to ``target`` atomically."""
+    """Write ``text`` to ``target`` atomically (see :func:`atomic_path`).
+
+    Parameters
+    ----------
+    target : str or os.PathLike
+        The file to write.
+    text : str
+        Its content.
+    """
     with atomic_path(target) as tmp:
         tmp.write_text(text)

@@ -37,6 +37,22 @@ def _median_time(fn: Callable[[], object], repeat: int) -> float:
 
 def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | None = None
                       ) -> Iterator[tuple[str, float, str]]:
+    """The ``mcm-*`` figures (module docstring; docs/performance.md).
+
+    Parameters
+    ----------
+    repeat : int, optional
+        Timed runs per figure (the median is reported), after one warm-up run.
+    particles : int, optional
+        Particles of the synthetic run.
+    workdir : pathlib.Path, optional
+        Folder for the temporary trajectory and prediction files (default: the system's).
+
+    Yields
+    ------
+    tuple of (str, float, str)
+        (name, median seconds, ``'s'``).
+    """
     from cfbmarkov import synthetic
     from cfbmarkov.markov import CellGrid, PaperEstimator, discretize, exact_rtd
 
@@ -96,7 +112,22 @@ def _simulation_benchmarks(repeat: int, particles: int) -> Iterator[tuple[str, f
 
 def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: int = 27000
                    ) -> Iterator[tuple[str, float, str]]:
-    """All benchmarks, or those whose names start with one of ``only``."""
+    """All benchmarks, or those whose names start with one of ``only`` (``cfbmarkov bench``).
+
+    Parameters
+    ----------
+    only : list of str, optional
+        Name prefixes to keep (e.g. ``['mcm']``, ``['dem', 'cfd-dem']``); all when None.
+    repeat : int, optional
+        Timed runs per figure (the median is reported).
+    particles : int, optional
+        Number of particles (default the paper's 27000).
+
+    Yields
+    ------
+    tuple of (str, float, str)
+        (name, value, unit), one per figure; see docs/performance.md.
+    """
     def group_wanted(group: str) -> bool:
         return not only or any(o.startswith(group) or group.startswith(o) for o in only)
 

@@ -14,7 +14,23 @@ from cfbmarkov.errors import CfbmarkovError, InputError
 
 # -- option parsers ------------------------------------------------------------------------
 def parse_window(text: str) -> tuple[float, float]:
-    """'10:15' -> (10.0, 15.0) seconds."""
+    """Parse a time window: ``'10:15'`` -> (10.0, 15.0).
+
+    Parameters
+    ----------
+    text : str
+        ``START:STOP`` in seconds.
+
+    Returns
+    -------
+    tuple of float
+        (start, stop), s.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        When ``text`` is not two numbers or the window is empty.
+    """
     try:
         a, b = text.split(":")
         start, stop = float(a), float(b)
@@ -26,7 +42,23 @@ def parse_window(text: str) -> tuple[float, float]:
 
 
 def parse_cells(text: str) -> tuple[int, int]:
-    """'6x38' -> (6 columns, 38 rows)."""
+    """Parse a cell grid: ``'6x38'`` -> (6 columns, 38 rows).
+
+    Parameters
+    ----------
+    text : str
+        ``COLUMNSxROWS``.
+
+    Returns
+    -------
+    tuple of int
+        (columns m, rows n).
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        When ``text`` is not two whole numbers of at least 1.
+    """
     try:
         a, b = text.lower().split("x")
         m, n = int(a), int(b)
@@ -257,6 +289,13 @@ def _cmd_bench(args) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``cfbmarkov`` with all its verbs.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        A parser whose usage errors exit with code 2; each verb sets ``func``.
+    """
     from cfbmarkov import __version__
 
     p = _Parser(prog="cfbmarkov", description="Markov chain models of particle motion in CFB risers.")
@@ -398,6 +437,20 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run ``cfbmarkov`` with ``argv`` (default: the process's arguments).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name.
+
+    Returns
+    -------
+    int
+        The exit code: 0 on success, 2 on a usage error or a
+        :class:`~cfbmarkov.errors.CfbmarkovError` (reported as one line on stderr), 130 when
+        interrupted.
+    """
     parser = build_parser()
     try:
         args = parser.parse_args(argv)

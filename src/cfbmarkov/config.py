@@ -2,7 +2,7 @@
 
 Every parameter of the paper's Table 1 (and the contact law of Table 2) has a named field;
 units are given in each field's description. Defaults are the paper's values
-(``../shared/SPEC.md`` section 1).
+(docs/definitions.md, Riser).
 """
 
 from __future__ import annotations
@@ -128,7 +128,24 @@ def _format_validation_error(err: ValidationError, source: str) -> str:
 
 
 def load_case(source: str | Path) -> CaseConfig:
-    """Load a case from a TOML file path or a shipped case name (see :func:`case_names`)."""
+    """Load a case from a TOML file path or a shipped case name.
+
+    Parameters
+    ----------
+    source : str or pathlib.Path
+        A ``.toml`` file, or the name of a shipped case (:func:`case_names`).
+
+    Returns
+    -------
+    CaseConfig
+        The validated case; parameters not given keep the paper's values.
+
+    Raises
+    ------
+    InputError
+        When the file cannot be read, is not valid TOML, or fails validation (the message
+        names the first offending field), or the name is unknown.
+    """
     text: str
     path = Path(source)
     if path.suffix == ".toml" or path.exists():
@@ -151,6 +168,12 @@ def load_case(source: str | Path) -> CaseConfig:
 
 
 def case_names() -> list[str]:
-    """Names of the shipped cases (``paper-u3`` ...)."""
+    """Names of the shipped cases.
+
+    Returns
+    -------
+    list of str
+        Sorted names (``paper-u3``, ``paper-u4``, ``paper-u6``, ``paper-u8``).
+    """
     folder = resources.files("cfbmarkov.cases")
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))

@@ -17,6 +17,28 @@ from cfbmarkov.markov import CellGrid, fit_model
 
 
 def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print) -> Path:
+    """Run the Markov-chain pipeline on a synthetic reference (``cfbmarkov demo --synthetic``).
+
+    Writes into ``output``: ``reference.h5`` (kept and reused if present), and per estimator
+    (``paper``, ``mle``) ``model-NAME.h5``, ``prediction-NAME.h5`` and ``compare-NAME/``,
+    plus ``demo.json`` with the comparison summaries and the models' exact E(RT), SD(RT).
+
+    Parameters
+    ----------
+    output : str or pathlib.Path
+        Output folder (created if needed).
+    particles : int, optional
+        Number of particles of the synthetic reference.
+    seed : int, optional
+        Seed of the reference and of the Monte Carlo predictions.
+    log : callable, optional
+        Called with one line of progress per step (default :func:`print`).
+
+    Returns
+    -------
+    pathlib.Path
+        The output folder.
+    """
     from cfbmarkov.report.compare import compare
 
     out = Path(output)

@@ -23,7 +23,29 @@ from cfbmarkov.markov.states import CellGrid, place_in_cells
 
 @dataclass(frozen=True)
 class RiserFlow:
-    """Parameters of the synthetic core-annulus flow (velocities in m/s)."""
+    """Parameters of the synthetic core-annulus flow.
+
+    Attributes
+    ----------
+    columns, rows : int
+        Cells m across and n up (default the paper's 6 x 38).
+    width, height : float
+        Riser width W and height H, m.
+    lag : float
+        Time between frames and transition step, s.
+    rise_velocity : float
+        Mean upward velocity of rising particles in the core, m/s.
+    fall_velocity : float
+        Mean velocity of falling particles, m/s (negative: downward).
+    vertical_spread : float
+        Standard deviation of the vertical displacement per lag, in cells.
+    lateral_probability : float
+        Probability per lag of stepping to each neighbouring column.
+    switch_probability : float
+        Base probability per lag of changing direction (more towards the walls).
+    persistence : bool
+        True: particles carry a hidden direction; False: a pure chain on cells.
+    """
 
     columns: int = 6
     rows: int = 38
@@ -39,6 +61,7 @@ class RiserFlow:
 
     @property
     def grid(self) -> CellGrid:
+        """The cells of the flow as a :class:`~cfbmarkov.markov.states.CellGrid`."""
         return CellGrid(self.columns, self.rows, self.width, self.height)
 
 
@@ -49,8 +72,24 @@ def _vertical_kernel(mean_rows: float, spread: float, reach: int) -> np.ndarray:
 
 
 def generator(flow: RiserFlow) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Transition matrix of the generator on hidden states, the up/down pass indicator of
-    each transition, and the cell of each hidden state: (P, up, down, cell_of_state)."""
+    """The generator as a Markov chain on hidden states (cell x direction).
+
+    Parameters
+    ----------
+    flow : RiserFlow
+        The flow parameters.
+
+    Returns
+    -------
+    P : numpy.ndarray
+        [S, S] transition matrix on the hidden states (S = 2 m n, or m n without
+        persistence).
+    up, down : numpy.ndarray
+        [S, S] indicators (0 or 1) of the transitions that pass up through the top / down
+        through the bottom of the periodic riser.
+    cell_of_state : numpy.ndarray
+        [S] the cell s = row*m + col of each hidden state.
+    """
     m, n = flow.columns, flow.rows
     cell_h = flow.height / n
     reach = n // 2 - 2
@@ -96,7 +135,24 @@ def generator(flow: RiserFlow) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.n
 
 
 def cell_chain(flow: RiserFlow):
-    """The generator as a :class:`MarkovModel` on cells (needs ``persistence=False``)."""
+    """The generator as a :class:`~cfbmarkov.markov.model.MarkovModel` on cells.
+
+    Parameters
+    ----------
+    flow : RiserFlow
+        Flow parameters with ``persistence=False``.
+
+    Returns
+    -------
+    MarkovModel
+        The exact chain on cells (estimator ``'synthetic'``, zero counts).
+
+    Raises
+    ------
+    ValueError
+        When ``flow.persistence`` is true: with a hidden direction the generator is not a
+        chain on cells.
+    """
     from cfbmarkov.markov.model import MarkovModel
 
     if flow.persistence:
@@ -109,7 +165,32 @@ def cell_chain(flow: RiserFlow):
 
 def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
                start_time: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Times [T], cells [T, N], positions [T, N, 2] and laps [T, N] of a synthetic run."""
+    """A synthetic run in memory, started from the generator's stationary distribution.
+
+    Parameters
+    ----------
+    flow : RiserFlow
+        The flow parameters.
+    n_particles : int
+        Number of particles N.
+    n_frames : int
+        Number of frames T, ``flow.lag`` apart.
+    seed : int, optional
+        Random seed; the same seed gives the same run.
+    start_time : float, optional
+        Time of the first frame, s.
+
+    Returns
+    -------
+    times : numpy.ndarray
+        [T] frame times, s.
+    cells : numpy.ndarray
+        [T, N] cell of each particle.
+    positions : numpy.ndarray
+        [T, N, 2] positions, m, uniform inside the cells.
+    laps : numpy.ndarray
+        [T, N] lap counters.
+    """
     p, up, down, cell_of_state = generator(flow)
     chain = SparseChain.from_matrix(p, up, down)
     # start from the stationary distribution of the generator
@@ -129,7 +210,29 @@ def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
 
 def write_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, duration: float,
               seed: int = 0, start_time: float = 0.0) -> Path:
-    """Write a synthetic run of ``duration`` s (frames every ``flow.lag``) as trajectories."""
+    """Write a synthetic run as a trajectory file (source ``'synthetic'``).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The trajectory file to write.
+    flow : RiserFlow
+        The flow parameters (stored in the file's ``parameters``).
+    n_particles : int
+        Number of particles.
+    duration : float
+        Simulated time, s; frames every ``flow.lag`` from ``start_time`` to
+        ``start_time + duration``.
+    seed : int, optional
+        Random seed.
+    start_time : float, optional
+        Time of the first frame, s.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+    """
     from cfbmarkov.trajectories import TrajectoryWriter
 
     n_frames = int(round(duration / flow.lag)) + 1

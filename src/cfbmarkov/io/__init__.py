@@ -22,10 +22,31 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                 time_step: float | None = None) -> Path:
     """Import ``source`` in format ``fmt`` ('csv' or 'lammps') as the trajectory file ``output``.
 
-    ``width``/``height`` (m) set the domain (CSV default: the paper's 0.09 x 0.95 m riser;
-    LAMMPS default: the dump's box). ``time_step`` (s) dates LAMMPS frames that carry no
-    ``ITEM: TIME``; a CSV file carries its times in column t and takes no time step.
-    Returns the path written.
+    Parameters
+    ----------
+    source : str or os.PathLike
+        The file to import (optionally gzip-compressed).
+    fmt : {'csv', 'lammps'}
+        Its format (case-insensitive).
+    output : str or os.PathLike
+        The trajectory file (HDF5) to write.
+    width, height : float, optional
+        The domain, m (CSV default: the paper's 0.09 x 0.95 m riser; LAMMPS default: the
+        dump's box).
+    time_step : float, optional
+        Simulation time step, s, that dates LAMMPS frames carrying no ``ITEM: TIME``; a CSV
+        file carries its times in column t and takes no time step.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        For an unknown format, a non-positive size or time step, a time step given with a
+        CSV file, or bad input (see :func:`import_csv` and :func:`import_lammps`).
     """
     fmt = str(fmt).lower()
     if fmt not in FORMATS:

@@ -22,7 +22,23 @@ GZIP_MAGIC = b"\x1f\x8b"
 
 
 def check_source(source: str | os.PathLike) -> Path:
-    """The input file as a Path; an InputError if it is missing, a folder or empty."""
+    """The input file as a Path.
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        The file to read.
+
+    Returns
+    -------
+    pathlib.Path
+        The same path.
+
+    Raises
+    ------
+    InputError
+        If it is missing, a folder or empty.
+    """
     path = Path(source)
     if not path.exists():
         raise InputError(f"{path}: no such file")
@@ -34,7 +50,25 @@ def check_source(source: str | os.PathLike) -> Path:
 
 
 def check_output(output: str | os.PathLike, source: Path) -> Path:
-    """The output path; an InputError if it is a folder or the input file itself."""
+    """The output path.
+
+    Parameters
+    ----------
+    output : str or os.PathLike
+        The file to write.
+    source : pathlib.Path
+        The input file.
+
+    Returns
+    -------
+    pathlib.Path
+        The output path.
+
+    Raises
+    ------
+    InputError
+        If it is a folder or the input file itself.
+    """
     path = Path(output)
     if path.is_dir():
         raise InputError(f"{path}: is a folder; give the name of the .h5 file to write")
@@ -44,7 +78,23 @@ def check_output(output: str | os.PathLike, source: Path) -> Path:
 
 
 def open_text(path: Path) -> TextIO:
-    """Open a text file for reading, decompressing it when it starts with the gzip magic bytes."""
+    """Open a text file for reading, decompressing it when it starts with the gzip magic bytes.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file (UTF-8 text, plain or gzip-compressed).
+
+    Returns
+    -------
+    TextIO
+        The open text stream.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be opened.
+    """
     try:
         with open(path, "rb") as fh:
             magic = fh.read(2)
@@ -83,7 +133,27 @@ def removing_new_folders(output: Path):
 
 
 def create_writer(output: Path, ids: np.ndarray, **options: Any) -> TrajectoryWriter:
-    """A TrajectoryWriter on ``output``; an InputError if the file cannot be created."""
+    """A TrajectoryWriter on ``output``.
+
+    Parameters
+    ----------
+    output : pathlib.Path
+        The trajectory file to write.
+    ids : numpy.ndarray
+        [N] particle ids.
+    **options
+        Passed on to :class:`~cfbmarkov.trajectories.TrajectoryWriter`.
+
+    Returns
+    -------
+    TrajectoryWriter
+        The open writer.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be created.
+    """
     try:
         return TrajectoryWriter(output, ids, **options)
     except OSError as exc:
@@ -94,9 +164,26 @@ def frame_order(ids: np.ndarray, reference: np.ndarray, where: str,
                 hint: str = "") -> np.ndarray | None:
     """Row order that puts a frame's particle ids onto ``reference`` (sorted ids).
 
-    Returns None when the rows are already in that order. Raises InputError naming the first
-    repeated, missing or unknown id; ``where`` says which frame, ``hint`` ends the message when
-    the frame has fewer rows than the reference.
+    Parameters
+    ----------
+    ids : numpy.ndarray
+        [N] the frame's ids, in row order.
+    reference : numpy.ndarray
+        [N] the sorted ids of the first frame.
+    where : str
+        Which frame, to start an error message.
+    hint : str, optional
+        Ends the message when the frame has fewer rows than the reference.
+
+    Returns
+    -------
+    numpy.ndarray or None
+        The row order, or None when the rows are already in that order.
+
+    Raises
+    ------
+    InputError
+        Naming the first repeated, missing or unknown id.
     """
     if ids.size == reference.size and np.array_equal(ids, reference):
         return None
@@ -123,7 +210,25 @@ def _id_mismatch(ordered: np.ndarray, reference: np.ndarray, where: str) -> str:
 
 
 def whole_ids(values: np.ndarray, where: str) -> np.ndarray:
-    """Particle ids parsed as floats -> int64; an InputError if one is not a whole number."""
+    """Particle ids parsed as floats, as int64.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        The ids as floats.
+    where : str
+        Which frame or line, to start an error message.
+
+    Returns
+    -------
+    numpy.ndarray
+        The ids, int64.
+
+    Raises
+    ------
+    InputError
+        If one is not a finite whole number.
+    """
     finite = np.isfinite(values)
     ids = np.where(finite, values, 0.0).astype(np.int64)
     bad = ~finite | (ids != values)
@@ -133,7 +238,20 @@ def whole_ids(values: np.ndarray, where: str) -> np.ndarray:
 
 
 def progress(frames: Iterable, label: str) -> Iterable:
-    """Wrap an iterator of frames in a tqdm bar on stderr, shown only on a terminal."""
+    """Wrap an iterator of frames in a tqdm bar on stderr, shown only on a terminal.
+
+    Parameters
+    ----------
+    frames : Iterable
+        The frames.
+    label : str
+        The input file's name, shown in the bar.
+
+    Returns
+    -------
+    Iterable
+        ``frames``, wrapped when stderr is a terminal.
+    """
     if not sys.stderr.isatty():
         return frames
     from tqdm import tqdm

@@ -1,4 +1,4 @@
-"""CSV import (SPEC section 5): rows ``t,id,x,y`` with optional ``vx,vy``, in SI units.
+"""CSV import (docs/definitions.md, CSV import): rows ``t,id,x,y`` with optional ``vx,vy``, in SI units.
 
 One row per particle and frame: time t (s), particle id, position x, y (m) and, when the
 header names them, velocity vx, vy (m/s). Columns may come in any order. The rows of one
@@ -38,7 +38,7 @@ from cfbmarkov.io._common import (
 )
 from cfbmarkov.trajectories import TrajectoryWriter
 
-#: the paper's riser (SPEC section 1): width W and height H, m
+#: the paper's riser (docs/definitions.md, Riser): width W and height H, m
 DEFAULT_WIDTH = 0.09
 DEFAULT_HEIGHT = 0.95
 REQUIRED_COLUMNS = ("t", "id", "x", "y")
@@ -53,9 +53,28 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
                width: float | None = None, height: float | None = None) -> Path:
     """Import a CSV file of ``t,id,x,y[,vx,vy]`` rows (SI units) as a trajectory file.
 
-    ``width`` and ``height`` (m) give the domain, by default the paper's 0.09 x 0.95 m riser.
-    The lap counter is derived from the positions by the minimal-image rule on y. Returns the
-    path written; raises InputError (and leaves no file) on bad input.
+    The lap counter is derived from the positions by the minimal-image rule on y
+    (docs/definitions.md, Pass direction).
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        The CSV file, plain or gzip-compressed; format in docs/definitions.md, CSV import.
+    output : str or os.PathLike
+        The trajectory file (HDF5) to write; it appears only when complete.
+    width, height : float, optional
+        Domain width W and height H, m; by default the paper's 0.09 x 0.95 m riser.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        On bad input (a malformed header or row, times that do not increase, a particle
+        missing from a frame, a position outside the domain, ...); no file is left behind.
     """
     path = check_source(source)
     output = check_output(output, path)

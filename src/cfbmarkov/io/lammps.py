@@ -56,7 +56,25 @@ BOX_TOLERANCE = 1e-9
 
 @dataclass(frozen=True)
 class DumpFrame:
-    """One frame of a dump as written: box bounds [D, 2] (m), atom table [N, columns]."""
+    """One frame of a dump as written.
+
+    Attributes
+    ----------
+    timestep : int
+        The frame's ``ITEM: TIMESTEP``.
+    time : float or None
+        Its ``ITEM: TIME``, s, when the dump has one.
+    box : numpy.ndarray
+        Box bounds [D, 2] (lo, hi per dimension, D = 2 or 3), m.
+    boundary : tuple of str
+        The BOX BOUNDS flags, e.g. ``('ff', 'pp', 'pp')``.
+    columns : tuple of str
+        The names on the ``ITEM: ATOMS`` line.
+    atoms : numpy.ndarray
+        The atom table [N, len(columns)], float64.
+    line : int
+        Line number of the frame's ``ITEM: ATOMS`` block, for messages.
+    """
 
     timestep: int
     time: float | None
@@ -67,12 +85,25 @@ class DumpFrame:
     line: int
 
     def where(self, label: str) -> str:
+        """``label`` with the frame's timestep and line, to start an error message."""
         return f"{label}: timestep {self.timestep} (line {self.line})"
 
 
 @dataclass(frozen=True)
 class AtomColumns:
-    """Where an ``ITEM: ATOMS`` line puts the id, the position pair and the velocity pair."""
+    """Where an ``ITEM: ATOMS`` line puts the id, the position pair and the velocity pair.
+
+    Attributes
+    ----------
+    id : int
+        Column of the atom id.
+    position : tuple of int
+        Columns of the position pair.
+    position_names : tuple of str
+        Their names: ``('x', 'y')``, ``('xu', 'yu')``, ``('xs', 'ys')`` or ``('xsu', 'ysu')``.
+    velocity : tuple of int or None
+        Columns of ``vx``, ``vy``, or None when the dump has no velocities.
+    """
 
     id: int
     position: tuple[int, int]
@@ -81,6 +112,14 @@ class AtomColumns:
 
     @classmethod
     def find(cls, names: tuple[str, ...], where: str) -> AtomColumns:
+        """The layout of the column ``names``; positions are the first pair present among
+        x y, xu yu, xs ys, xsu ysu.
+
+        Raises
+        ------
+        InputError
+            Without an ``id`` column or any position pair (``where`` starts the message).
+        """
         if "id" not in names:
             raise InputError(f"{where}: ITEM: ATOMS has no 'id' column ({' '.join(names)})")
         for pair in POSITION_COLUMNS:
@@ -97,11 +136,25 @@ class AtomColumns:
 
     @property
     def scaled(self) -> bool:
+        """Whether positions are fractions of the box (``xs``/``xsu`` columns)."""
         return self.position_names[0].startswith("xs")
 
 
 class DumpReader:
-    """Iterate over the frames of a LAMMPS text dump, one :class:`DumpFrame` at a time."""
+    """Iterate over the frames of a LAMMPS text dump, one :class:`DumpFrame` at a time.
+
+    Parameters
+    ----------
+    fh : TextIO
+        The open dump.
+    label : str
+        Name of the dump in error messages.
+
+    Raises
+    ------
+    InputError
+        While iterating, on a malformed or truncated frame.
+    """
 
     def __init__(self, fh: TextIO, label: str):
         self._fh = fh
@@ -284,10 +337,29 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
                   time_step: float | None = None) -> Path:
     """Import a LAMMPS/LIGGGHTS text dump (optionally gzipped, SI units) as a trajectory file.
 
-    ``time_step`` (s) gives the time of frames without ``ITEM: TIME`` (timestep x time_step).
-    ``width``/``height`` (m) override the domain, which is by default the dump's box with its
-    lower corner moved to 0. Returns the path written; raises InputError (and leaves no file)
-    on bad input.
+    Parameters
+    ----------
+    source : str or os.PathLike
+        The dump (``dump custom`` or ``dump atom``; format in the module docstring).
+    output : str or os.PathLike
+        The trajectory file (HDF5) to write; it appears only when complete.
+    width, height : float, optional
+        Override the domain, m, which is by default the dump's box with its lower corner
+        moved to 0.
+    time_step : float, optional
+        Simulation time step, s: the time of frames without ``ITEM: TIME`` is
+        timestep x time_step.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+
+    Raises
+    ------
+    InputError
+        On bad input (no frames, no time, a changing or triclinic box, particles missing
+        from a frame, units other than SI, ...); no file is left behind.
     """
     path = check_source(source)
     output = check_output(output, path)
@@ -327,7 +399,27 @@ def _provenance(path: Path, first: DumpFrame, layout: AtomColumns, units: str | 
 
 
 def frame_time(frame: DumpFrame, time_step: float | None, label: str) -> float:
-    """Time of a frame (s): ITEM: TIME, else timestep x time_step; an InputError if neither."""
+    """Time of a frame: ITEM: TIME, else timestep x ``time_step``.
+
+    Parameters
+    ----------
+    frame : DumpFrame
+        The frame.
+    time_step : float or None
+        Simulation time step, s.
+    label : str
+        Name of the dump in error messages.
+
+    Returns
+    -------
+    float
+        The time, s.
+
+    Raises
+    ------
+    InputError
+        When the frame has no ITEM: TIME and no ``time_step`` is given.
+    """
     if frame.time is not None:
         return frame.time
     if time_step is None:
@@ -337,7 +429,18 @@ def frame_time(frame: DumpFrame, time_step: float | None, label: str) -> float:
 
 
 def periodic_axes(boundary: tuple[str, ...]) -> tuple[bool, bool]:
-    """Whether x and y are periodic, from BOX BOUNDS flags such as ('ff', 'pp', 'pp')."""
+    """Whether x and y are periodic.
+
+    Parameters
+    ----------
+    boundary : tuple of str
+        BOX BOUNDS flags such as ``('ff', 'pp', 'pp')``.
+
+    Returns
+    -------
+    tuple of bool
+        (x periodic, y periodic); both False with fewer than two flags.
+    """
     if len(boundary) < 2:
         return False, False
     return boundary[0].startswith("p"), boundary[1].startswith("p")
@@ -345,9 +448,23 @@ def periodic_axes(boundary: tuple[str, ...]) -> tuple[bool, bool]:
 
 def box_positions(raw: np.ndarray, scaled: bool, box: np.ndarray,
                   periodic: tuple[bool, bool]) -> np.ndarray:
-    """Positions (m) from the box's lower corner, wrapped into the box where periodic.
+    """Positions from the box's lower corner, wrapped into the box where periodic.
 
-    ``raw`` [N, 2] holds x, y in m, or fractions of the box when ``scaled``.
+    Parameters
+    ----------
+    raw : numpy.ndarray
+        [N, 2] x, y in m, or fractions of the box when ``scaled``.
+    scaled : bool
+        Whether ``raw`` holds fractions of the box.
+    box : numpy.ndarray
+        Box bounds [D, 2], m.
+    periodic : tuple of bool
+        Whether x and y are periodic (:func:`periodic_axes`).
+
+    Returns
+    -------
+    numpy.ndarray
+        [N, 2] positions, m, measured from the box's lower corner.
     """
     lo, length = box[:2, 0], box[:2, 1] - box[:2, 0]
     offset = raw * length if scaled else raw - lo

@@ -22,7 +22,7 @@ Choices (where the brief leaves room):
   reported as "not finished"; files that exist but cannot be read are an
   :class:`~cfbmarkov.errors.InputError` naming the file, as is a directory without any
   finished case.
-- Estimators are those with any file in any case (model-*, prediction-*, compare-*), ordered
+- Estimators are those with any file in any case (``model-*``, ``prediction-*``, ``compare-*``), ordered
   paper, mle, then the rest alphabetically; an estimator missing from a case makes that
   case's row "not finished".
 - Figures 4-7 are numbered by the position of the case among all cases sorted by U (4, 5,

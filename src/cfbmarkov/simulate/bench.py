@@ -40,7 +40,21 @@ def _dem_rate(state: str, particles: int, repeat: int, steps: int = 300) -> floa
 
 
 def fluidized_riser(particles: int = 27000, develop: float = 0.5):
-    """The paper's U = 6 m/s case after ``develop`` s of simulated time (cached on disk)."""
+    """The paper's U = 6 m/s case after ``develop`` s of simulated time (cached on disk).
+
+    Parameters
+    ----------
+    particles : int, optional
+        Number of particles (the case's 27000 by default).
+    develop : float, optional
+        Simulated time from the initial placement, s.
+
+    Returns
+    -------
+    CoupledRiser
+        The developed riser, read from ``$CFBMARKOV_CACHE`` or ``~/.cache/cfbmarkov`` when
+        computed before.
+    """
     from cfbmarkov.config import load_case
     from cfbmarkov.simulate.run import CoupledRiser, read_checkpoint, write_checkpoint
 
@@ -83,6 +97,20 @@ def _lammps_lines(name: str, state: str, ours: float, particles: int, repeat: in
 
 def simulation_benchmarks(repeat: int = 5, particles: int = 27000
                           ) -> Iterator[tuple[str, float, str]]:
+    """The ``dem-*`` and ``cfd-dem-*`` figures (module docstring; docs/performance.md).
+
+    Parameters
+    ----------
+    repeat : int, optional
+        Timed runs per figure (the median is reported).
+    particles : int, optional
+        Number of particles.
+
+    Yields
+    ------
+    tuple of (str, float, str)
+        (name, value, unit): particle-steps/s, or ``'x'`` for the ratio over LAMMPS.
+    """
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")     # the paper's DEM step warning
         for name, state in (("dem-throughput", "dilute"), ("dem-throughput-dense", "dense")):

@@ -2,17 +2,27 @@
 
 The gas runs the "model B" form (Zhou et al. 2010, set I): the gas momentum equation
 carries ``-grad p`` and minus the whole particle-fluid force, and each particle receives
-``F = beta Vp / (1 - eps) (u_gas - v_p)`` with the paper's Table 2 beta (SPEC section 1).
+``F = beta Vp / (1 - eps) (u_gas - v_p)`` with the paper's Table 2 beta (docs/definitions.md, Drag).
 Table 2's beta is Gidaspow's Ergun/Wen-Yu coefficient divided by eps, which is exactly the
 form that reproduces Ergun's pressure drop in model B: the pressure-gradient (buoyancy)
 force on the particles is contained in F, so no separate ``-Vp grad p`` term is added (it
 would count it twice). The packed-bed test checks the pressure drop against Ergun.
+The definitions are in docs/definitions.md (Drag), the choices in docs/simulation.md.
 
 The drag is semi-implicit for the gas (see :class:`~cfbmarkov.simulate.cfd.GasSolver`):
 with K_p = beta Vp / (1 - eps) frozen over a gas step, the gas feels
 ``sum_p w_p (F_p^n + K_p (u^{n+1} - u^n))`` and the particles then receive
 ``K_p (u^{n+1}(x_p) - v_p)``, so the momentum given to the particles is exactly the
 momentum taken from the gas (the deposit is the transpose of the interpolation).
+
+References
+----------
+- The paper, Table 2: *Markov Chain Based Statistic Model for Predicting Particle Movement
+  in Circulating Fluidized Bed (CFB) Risers*, Preprints.org 202407.1963 (2024); Y. Zhuang,
+  Processes 13(3), 614 (2025), https://doi.org/10.3390/pr13030614.
+- Z. Y. Zhou, S. B. Kuang, K. W. Chu, A. B. Yu, Discrete particle simulation of
+  particle-fluid flow: model formulations and their applicability, J. Fluid Mech. 661,
+  482-510 (2010): model B.
 """
 
 from __future__ import annotations
@@ -57,7 +67,35 @@ def drag_coefficients(positions, velocities, u, v, void_fraction, dx, dy, diamet
                       gas_density, gas_viscosity, coefficient, force, periodic_y=True):
     """Per particle: K_p = beta Vp / (1 - eps) (kg/s) and the drag force K_p (u_gas - v_p)
     (N), with the gas velocity and void fraction interpolated to the particle centre
-    (the void fraction across the seam only where the particles are periodic in y)."""
+    (the void fraction across the seam only where the particles are periodic in y).
+
+    Parameters
+    ----------
+    positions, velocities : numpy.ndarray
+        [N, 2] particle centres (m) and velocities (m/s).
+    u, v : numpy.ndarray
+        Interstitial gas velocity on the staggered grid, m/s: u on the x faces [nx + 1, ny],
+        v on the y faces [nx, ny].
+    void_fraction : numpy.ndarray
+        [nx, ny] gas void fraction eps at the cell centres.
+    dx, dy : float
+        Gas cell size, m.
+    diameter : float
+        Particle diameter d, m.
+    gas_density, gas_viscosity : float
+        rho_g (kg/m^3) and mu_g (Pa s).
+    coefficient : numpy.ndarray
+        [N] output: K_p, kg/s.
+    force : numpy.ndarray
+        [N, 2] output: the drag force, N.
+    periodic_y : bool, optional
+        Whether the void fraction is interpolated across the periodic seam.
+
+    References
+    ----------
+    Table 2 of the paper (beta: Ergun for eps <= 0.8, Wen & Yu above); docs/definitions.md,
+    Drag.
+    """
     for p in nb.prange(positions.shape[0]):
         x = positions[p, 0]
         y = positions[p, 1]
@@ -74,7 +112,21 @@ def drag_coefficients(positions, velocities, u, v, void_fraction, dx, dy, diamet
 
 @nb.njit(cache=True, parallel=True)
 def drag_force_at_new_gas(positions, velocities, u, v, dx, dy, coefficient, force):
-    """F_p = K_p (u_gas^{n+1}(x_p) - v_p): the force the particles receive for a gas step."""
+    """F_p = K_p (u_gas^{n+1}(x_p) - v_p): the force the particles receive for a gas step.
+
+    Parameters
+    ----------
+    positions, velocities : numpy.ndarray
+        [N, 2] particle centres (m) and velocities (m/s).
+    u, v : numpy.ndarray
+        The new gas velocity on the staggered grid, m/s (as in :func:`drag_coefficients`).
+    dx, dy : float
+        Gas cell size, m.
+    coefficient : numpy.ndarray
+        [N] K_p from :func:`drag_coefficients`, kg/s.
+    force : numpy.ndarray
+        [N, 2] output: the force, N.
+    """
     for p in nb.prange(positions.shape[0]):
         ux, uy = gas_velocity_at(u, v, dx, dy, positions[p, 0], positions[p, 1])
         force[p, 0] = coefficient[p] * (ux - velocities[p, 0])
@@ -83,9 +135,32 @@ def drag_force_at_new_gas(positions, velocities, u, v, dx, dy, coefficient, forc
 
 def place_without_overlap(n: int, diameter: float, width: float, height: float,
                           seed: int, gap: float = 0.1) -> np.ndarray:
-    """Positions [n, 2] (m) of discs that do not overlap: random sites of a square lattice of
-    spacing (1 + gap) d over the riser, each moved by a random offset that keeps the gap
-    positive. Refuses a packing denser than the lattice allows."""
+    """Positions of discs that do not overlap: random sites of a square lattice of spacing
+    (1 + gap) d over the riser, each moved by a random offset that keeps the gap positive.
+
+    Parameters
+    ----------
+    n : int
+        Number of discs.
+    diameter : float
+        Disc diameter d, m.
+    width, height : float
+        The riser, m.
+    seed : int
+        Random seed.
+    gap : float, optional
+        Lattice spacing beyond one diameter, as a fraction of d.
+
+    Returns
+    -------
+    numpy.ndarray
+        [n, 2] positions, m.
+
+    Raises
+    ------
+    ValueError
+        When ``n`` discs do not fit on the lattice (a packing denser than it allows).
+    """
     spacing = (1.0 + gap) * diameter
     nx = int(np.floor((width - diameter) / spacing)) + 1
     ny = int(np.floor(height / spacing))
@@ -104,8 +179,25 @@ def place_without_overlap(n: int, diameter: float, width: float, height: float,
 
 
 def hexagonal_bed(n: int, diameter: float, width: float, gap: float = 0.01) -> np.ndarray:
-    """Positions [n, 2] (m) of a packed bed on the floor: hexagonal rows of spacing
-    (1 + gap) d, filled from y = 0 up (for packed- and fluidized-bed checks)."""
+    """A packed bed on the floor: hexagonal rows of spacing (1 + gap) d, filled from y = 0 up
+    (for packed- and fluidized-bed checks).
+
+    Parameters
+    ----------
+    n : int
+        Number of discs.
+    diameter : float
+        Disc diameter d, m.
+    width : float
+        The riser width, m.
+    gap : float, optional
+        Spacing beyond one diameter, as a fraction of d.
+
+    Returns
+    -------
+    numpy.ndarray
+        [n, 2] positions, m.
+    """
     spacing = (1.0 + gap) * diameter
     per_row = int((width - diameter) / spacing)
     row, col = np.divmod(np.arange(n), per_row)

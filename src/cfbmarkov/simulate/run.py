@@ -39,7 +39,19 @@ CHECKPOINT_VERSION = 1
 
 
 class CoupledRiser:
-    """DEM particles and the gas of the periodic riser, advanced one gas step at a time."""
+    """DEM particles and the gas of the periodic riser, advanced one gas step at a time.
+
+    Parameters
+    ----------
+    case : CaseConfig
+        The case (riser, particles, gas, contact law, numerics).
+    dem : DEMSystem
+        The particles.
+    gas : GasState
+        The gas on the staggered grid.
+    cfd_steps : int, optional
+        Gas steps already taken (the time is ``cfd_steps`` x the gas step).
+    """
 
     def __init__(self, case: CaseConfig, dem: DEMSystem, gas: GasState, cfd_steps: int = 0):
         self.case = case
@@ -57,7 +69,18 @@ class CoupledRiser:
     # -- construction ----------------------------------------------------------------
     @classmethod
     def initial(cls, case: CaseConfig) -> "CoupledRiser":
-        """Particles on random lattice sites without overlap, at rest; gas at U (plug flow)."""
+        """Particles on random lattice sites without overlap, at rest; gas at U (plug flow).
+
+        Parameters
+        ----------
+        case : CaseConfig
+            The case; ``case.seed`` seeds the placement.
+
+        Returns
+        -------
+        CoupledRiser
+            The riser at t = 0.
+        """
         p, r = case.particles, case.riser
         positions = place_without_overlap(p.number, p.diameter, r.width, r.height, case.seed)
         return cls.from_particles(case, positions, np.zeros_like(positions))
@@ -65,8 +88,25 @@ class CoupledRiser:
     @classmethod
     def from_particles(cls, case: CaseConfig, positions, velocities, *, bottom_wall: bool = False,
                        angular_velocities=None) -> "CoupledRiser":
-        """Given particles; gas at U (plug flow). ``bottom_wall`` puts a contact floor at y = 0
-        for the particles (the gas stays periodic, as through a distributor): packed beds."""
+        """Given particles; gas at U (plug flow).
+
+        Parameters
+        ----------
+        case : CaseConfig
+            The case.
+        positions, velocities : array_like
+            [N, 2] particle centres (m) and velocities (m/s).
+        bottom_wall : bool, optional
+            Put a contact floor at y = 0 for the particles (the gas stays periodic, as
+            through a distributor): packed beds.
+        angular_velocities : array_like, optional
+            [N] spins, rad/s (default 0).
+
+        Returns
+        -------
+        CoupledRiser
+            The riser at t = 0.
+        """
         p, r = case.particles, case.riser
         positions = np.asarray(positions, dtype=np.float64)
         law = ContactLaw.from_config(case.contact, p.diameter, p.density)
@@ -85,6 +125,7 @@ class CoupledRiser:
     # -- stepping ----------------------------------------------------------------------
     @property
     def time(self) -> float:
+        """Simulated time, s."""
         return self.cfd_steps * self.case.numerics.cfd_time_step
 
     #: below this many particles the coupling kernels run on one thread (thread start-up
@@ -132,10 +173,12 @@ class CoupledRiser:
 
     # -- checkpoints -----------------------------------------------------------------
     def state(self) -> dict[str, dict[str, np.ndarray] | int]:
+        """Everything needed to continue bit for bit: ``{'dem': ..., 'gas': ..., 'cfd_steps': k}``."""
         return {"dem": self.dem.state(), "gas": self.gas.state_dict(), "cfd_steps": self.cfd_steps}
 
     @classmethod
     def from_state(cls, case: CaseConfig, state: dict) -> "CoupledRiser":
+        """The riser saved by :meth:`state` (with the same ``case``)."""
         return cls(case, DEMSystem.from_state(state["dem"]),
                    GasState.from_state_dict(state["gas"]), int(state["cfd_steps"]))
 
@@ -154,8 +197,21 @@ def _read_group(group: h5py.Group) -> dict:
 
 def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: int,
                      wall_time: float, wall_history=None) -> None:
-    """Atomically write everything needed to continue the run bit for bit (and, in
-    ``wall_history``, rows of (simulated time s, wall time s) at each checkpoint)."""
+    """Atomically write everything needed to continue the run bit for bit.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The checkpoint file (HDF5).
+    riser : CoupledRiser
+        The state to save, with its case.
+    n_segments, frames : int
+        Trajectory segments closed and frames written so far.
+    wall_time : float
+        Wall time spent so far, s.
+    wall_history : array_like, optional
+        Rows of (simulated time s, wall time s) at each checkpoint.
+    """
     with atomic_path(path) as tmp:
         with h5py.File(tmp, "w") as f:
             f.attrs.update({"version": CHECKPOINT_VERSION, "n_segments": n_segments,
@@ -172,6 +228,31 @@ def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: i
 
 def read_checkpoint(path: Path, case: CaseConfig
                     ) -> tuple[CoupledRiser, int, int, float, np.ndarray]:
+    """Read a checkpoint written by :func:`write_checkpoint`.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The checkpoint file.
+    case : CaseConfig
+        The case being run; it must equal the one saved.
+
+    Returns
+    -------
+    riser : CoupledRiser
+        The saved state.
+    n_segments, frames : int
+        Segments closed and frames written.
+    wall_time : float
+        Wall time spent, s.
+    wall_history : numpy.ndarray
+        [K, 2] (simulated time s, wall time s) at each checkpoint.
+
+    Raises
+    ------
+    InputError
+        When the file cannot be read or was made with another configuration.
+    """
     try:
         with h5py.File(path, "r") as f:
             saved = CaseConfig.model_validate_json(f.attrs["case"])
@@ -224,11 +305,45 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
     """Run a case from t = 0 (or the last checkpoint with ``resume``) to ``until`` (default:
     the case's end time) and write the trajectory file ``output``.
 
-    ``stop_after_frames`` ends the process's work early, as a kill would, after that many
-    frames (for tests of resume); the run is then left to be resumed. ``fields`` stores the
-    gas (void fraction, velocity, pressure at cell centres) with every frame under ``/fields``.
     ``/provenance/run`` records the wall time, and ``wall_history`` rows of (simulated time,
     wall time since the start) at every checkpoint.
+
+    Parameters
+    ----------
+    case : CaseConfig
+        The case to run.
+    output : str or os.PathLike
+        The trajectory file (layout in docs/definitions.md, Trajectory files).
+    until : float, optional
+        Simulated time to reach, s (default ``case.output.end_time``).
+    checkpoint_every : float, optional
+        Simulated time between checkpoints, s.
+    resume : bool, optional
+        Continue from the last checkpoint of an interrupted run.
+    progress : bool, optional
+        Show a progress bar on stderr.
+    stop_after_frames : int, optional
+        End the process's work early, as a kill would, after that many frames (for tests of
+        resume); the run is then left to be resumed.
+    fields : bool, optional
+        Store the gas (void fraction, velocity, pressure at cell centres) with every frame
+        under ``/fields``.
+    label : str, optional
+        Prefix of the progress bar.
+
+    Returns
+    -------
+    pathlib.Path
+        The trajectory file (when the run is complete).
+
+    Raises
+    ------
+    InputError
+        For settings that do not fit (a frame interval that is not a whole number of gas
+        steps, a gas step beyond its stability limit, nothing to resume, an interrupted run
+        without ``resume``).
+    CfbmarkovError
+        When the simulation fails (e.g. a blow-up); the last good checkpoint stays on disk.
     """
     output = Path(output)
     end = case.output.end_time if until is None else float(until)
