@@ -1,7 +1,7 @@
 """Exact residence-time distribution of a Markov model (no Monte Carlo noise).
 
-SPEC section 3 defines a residence as the time between two consecutive upward passes that
-lift the lap counter L to a value it has not had before. In the chain this is a first-passage
+``docs/definitions.md`` (Residence time) defines a residence as the time between two
+consecutive upward passes that lift the lap counter L to a value it has not had before. In the chain this is a first-passage
 problem on the states augmented with the lap deficit l = L - L_entry in {0, -1, ..., -K}:
 
 - a transition i -> j without a pass keeps l; a pass down through the bottom lowers it;

@@ -3,7 +3,7 @@
 A :class:`StateSpace` maps frames of a trajectory to integer states, knows which cell of the
 riser each state lies in (for probability maps and for placing Monte Carlo particles), and
 serialises itself to attributes so that a saved model can rebuild it. :class:`CellGrid` is
-the paper's space: m columns x n rows of equal cells, state s = row*m + col (SPEC section 2).
+the paper's space: m columns x n rows of equal cells, state s = row*m + col (docs/definitions.md, States and transitions).
 State spaces that carry more than the position subclass :class:`StateSpace` and register
 under their ``kind``: :class:`DirectionCells` (cell x {rising, falling}),
 :class:`VelocityCells` (cell x vertical-velocity bins) and :class:`SecondOrderCells` (cell x
@@ -201,7 +201,7 @@ class CellGrid(StateSpace):
 
 
 def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int) -> np.ndarray:
-    """Positions [N, 2] (m) drawn uniformly inside the given cells (Monte Carlo, SPEC §2).
+    """Positions [N, 2] (m) drawn uniformly inside the given cells (Monte Carlo; docs/definitions.md, Monte Carlo).
 
     The draw depends only on (seed, particle index, step), so it is reproducible.
     """
@@ -230,7 +230,7 @@ def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int) -
 # uses the frames t - lag_frames and t. The first ``lag_frames`` frames have no previous
 # frame; they get the sub-state of a zero displacement (any valid state: callers drop them).
 # Vertical displacements take the minimal image through the periodic boundary, wrapped into
-# (-H/2, H/2] (a particle moves less than H/2 in one lag, SPEC section 2).
+# (-H/2, H/2] (a particle moves less than H/2 in one lag, docs/definitions.md, Pass direction).
 
 
 @nb.njit(cache=True, parallel=True)
