@@ -58,7 +58,8 @@ class PassEvents:
 
 
 def lap_increments(previous_y: np.ndarray, y: np.ndarray, height: float) -> np.ndarray:
-    """Boundary passes between two frames by the minimal-image rule on y (docs/definitions.md, Pass direction).
+    """Boundary passes between two frames by the minimal-image rule on y
+    (``docs/definitions.md``, Pass direction).
 
     Returns +1 where a particle passed up through the top (y dropped by more than H/2),
     -1 where it passed down through the bottom, 0 elsewhere.

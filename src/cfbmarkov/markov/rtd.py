@@ -1,8 +1,9 @@
 """Exact residence-time distribution of a Markov model (no Monte Carlo noise).
 
 ``docs/definitions.md`` (Residence time) defines a residence as the time between two
-consecutive upward passes that lift the lap counter L to a value it has not had before. In the chain this is a first-passage
-problem on the states augmented with the lap deficit l = L - L_entry in {0, -1, ..., -K}:
+consecutive upward passes that lift the lap counter L to a value it has not had before. In
+the chain this is a first-passage problem on the states augmented with the lap deficit
+l = L - L_entry in {0, -1, ..., -K}:
 
 - a transition i -> j without a pass keeps l; a pass down through the bottom lowers it;
 - a pass up through the top raises it, and from l = 0 it ends the residence (absorption),

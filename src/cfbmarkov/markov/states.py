@@ -3,7 +3,8 @@
 A :class:`StateSpace` maps frames of a trajectory to integer states, knows which cell of the
 riser each state lies in (for probability maps and for placing Monte Carlo particles), and
 serialises itself to attributes so that a saved model can rebuild it. :class:`CellGrid` is
-the paper's space: m columns x n rows of equal cells, state s = row*m + col (docs/definitions.md, States and transitions).
+the paper's space: m columns x n rows of equal cells, state s = row*m + col
+(``docs/definitions.md``, States and transitions).
 State spaces that carry more than the position subclass :class:`StateSpace` and register
 under their ``kind``: :class:`DirectionCells` (cell x {rising, falling}),
 :class:`VelocityCells` (cell x vertical-velocity bins) and :class:`SecondOrderCells` (cell x
@@ -201,7 +202,8 @@ class CellGrid(StateSpace):
 
 
 def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int) -> np.ndarray:
-    """Positions [N, 2] (m) drawn uniformly inside the given cells (Monte Carlo; docs/definitions.md, Monte Carlo).
+    """Positions [N, 2] (m) drawn uniformly inside the given cells (``docs/definitions.md``,
+    Monte Carlo).
 
     The draw depends only on (seed, particle index, step), so it is reproducible.
     """
