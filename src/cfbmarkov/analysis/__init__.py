@@ -17,6 +17,6 @@ from cfbmarkov.analysis.rtd import (
 
 __all__ = [
     "ResidenceTimes", "left_tracer_group", "minkowski_distance", "mixing_curve",
-    "mixing_curve_of", "mixing_rms", "percentage_difference", "residence_times", "residence_times_from_events",
-    "residence_times_from_laps", "rtd_histogram",
+    "mixing_curve_of", "mixing_rms", "percentage_difference", "residence_times",
+    "residence_times_from_events", "residence_times_from_laps", "rtd_histogram",
 ]
