@@ -140,8 +140,8 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     width_text = ", ".join(f"{w:g}" for w in sorted(widths)) or f"{DEFAULT_BIN_WIDTH:g}"
     notes = [
         "PD = 100 (MCM − CFD-DEM) / CFD-DEM, in % (docs/definitions.md, residence time); "
-        "E(RT) and SD(RT) over the predict window, SD with ddof = 1. The paper's columns quote its Table 3; '—' where the paper "
-        "has no case at this U.",
+        "E(RT) and SD(RT) over the predict window, SD with ddof = 1. The paper's columns quote "
+        "its Table 3; '—' where the paper has no case at this U.",
         "The paper reports MD under a '%' heading. Our MD is Eq. 9 of order k = "
         f"{order_text} (md_order of the compare summaries) on the RTD probabilities per "
         f"{width_text} s bin (bins from 0 to the window length), a dimensionless distance; "
