@@ -303,7 +303,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_predict)
 
-    s = sub.add_parser("compare", help="compare two trajectory files: RTD, mixing of the two tracer groups, figures")
+    s = sub.add_parser("compare", help="compare two trajectory files: RTD, mixing of the two "
+                       "tracer groups, figures")
     s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
     s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
     s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
