@@ -93,7 +93,7 @@ def test_every_stage_is_a_file_and_the_report_has_every_section(reference, capsy
     for stage in ("fit-paper", "predict-paper", "fit-mle", "predict-mle"):
         assert timings[stage]["wall_s"] > 0
     summary = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
-    assert summary["window"] == [0.5, 0.8] and summary["same_purple_particles"]
+    assert summary["window"] == [0.5, 0.8] and summary["same_tracer_groups"]
     assert summary["reference"]["exact_events"]
     html = (out / "report.html").read_text()
     for heading in ("Table 3", "Computing time", "Fig. 3", "Fig. 8", "Fig. 9", "Fig. 11",

@@ -340,7 +340,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_predict)
 
-    s = sub.add_parser("compare", help="compare two trajectory files: RTD, mixing, figures")
+    s = sub.add_parser("compare", help="compare two trajectory files: RTD, mixing of the two "
+                       "tracer groups, figures")
     s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
     s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
     s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
@@ -417,8 +418,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     s.set_defaults(func=_cmd_demo)
 
-    s = sub.add_parser("export-vtk", help="ParaView files: particle frames and gas fields with "
-                       ".pvd time series")
+    s = sub.add_parser("export-vtk", help="ParaView files: particle frames (with their tracer "
+                       "group, colour_group) and gas fields with .pvd time series")
     s.add_argument("run", help="trajectory file")
     s.add_argument("-o", "--output", required=True, help="output directory")
     s.add_argument("--start", type=float, default=None, help="first time, s")

@@ -4,7 +4,9 @@ For each fluidizing velocity U (3, 4, 6 and 8 m/s by default) a *case* runs thes
 its own folder ``DIR/u<U>/``; every stage is a file, written atomically, so a rerun skips
 what is done and resumes what was interrupted (the CFD-DEM from its last checkpoint)::
 
-    case.json                   the exact configuration (a rerun with another one is refused)
+    case.json                   the exact configuration, U included (a rerun with another one
+                                is refused; a rerun of a folder without it writes it): the
+                                report reads U from here, not from the folder name
     cfd-dem.h5                  CFD-DEM 0..end (frames, exact pass events, gas fields)
     model-<name>.h5             Markov model fitted on the fitting window (paper, mle, auto)
     prediction-<name>.h5        Monte Carlo over the prediction window, started from the

@@ -8,6 +8,7 @@ import json
 import numpy as np
 import pytest
 
+from cfbmarkov.analysis.compare import RunComparison, compare_runs, map_times
 from cfbmarkov.analysis.metrics import minkowski_distance, mixing_rms, percentage_difference
 from cfbmarkov.analysis.mixing import mixing_curve_of
 from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
@@ -57,7 +58,8 @@ def test_summary_matches_direct_calls(pair, tmp_path):
     assert saved["mixing_rms"] == pytest.approx(rms)
     assert saved["bin_width"] == 0.05
     assert saved["exact_events"] == {"reference": False, "model": False}
-    assert saved["same_purple_particles"] is True
+    assert saved["same_tracer_groups"] is True
+    assert saved["same_purple_particles"] is True          # the former name, kept
     assert saved["model_columns"] == 6
     # the model rises more slowly: longer residence times
     assert saved["pd_rt_mean"] > 0
@@ -162,7 +164,7 @@ def test_model_figures_from_an_attached_model(tmp_path, make_run, write_run):
                  "transition_bars.png", "probability_maps.png"):
         assert_png(out / name)
         assert name in saved["figures"]
-    assert saved["same_purple_particles"] is True
+    assert saved["same_tracer_groups"] is True
     assert saved["model_columns"] == 6
 
 
@@ -202,3 +204,29 @@ def test_figure_functions_refuse_bad_shapes(tmp_path):
     with pytest.raises(InputError):
         fg.plot_rtd([0, 1, 2], [0.5, 0.5], [1.0], (1, 1), (1, 1), tmp_path / "x.png")
     assert not list(tmp_path.iterdir())
+
+
+def test_compare_runs_returns_the_numbers_of_the_summary(pair, tmp_path):
+    ref_path, pred_path = pair
+    summary = compare(ref_path, pred_path, window=WINDOW, output=tmp_path / "out",
+                      figures=False)
+    with Trajectories(ref_path) as ref, Trajectories(pred_path) as pred:
+        comparison = compare_runs(ref, pred, WINDOW)
+        numbers = comparison.summary()
+    assert isinstance(comparison, RunComparison)
+    assert comparison.edges.size == comparison.reference.rtd.size + 1
+    assert comparison.reference.left_group.dtype == bool
+    assert comparison.same_tracer_groups
+    for key in ("pd_rt_mean", "pd_rt_sd", "md_rtd", "mixing_rms", "bin_width", "md_order"):
+        assert numbers[key] == summary[key]
+    for side in ("reference", "model"):
+        assert numbers[side]["left_group_fraction"] == numbers[side]["purple_fraction"]
+        assert numbers[side]["rt_mean"] == summary[side]["rt_mean"]
+    # drawing adds only the files and warnings
+    assert set(summary) - set(numbers) == {"figures", "warnings"}
+
+
+def test_map_times_in_whole_lags():
+    assert map_times(0.4, 0.025) == pytest.approx([0.1, 0.2, 0.3])
+    assert map_times(float("nan"), 0.025) == pytest.approx([0.05, 0.1, 0.15])
+    assert map_times(0.02, 0.025) == pytest.approx([0.05, 0.1, 0.15])

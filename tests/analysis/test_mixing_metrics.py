@@ -16,14 +16,14 @@ WIDTH, HEIGHT = 0.09, 0.95
 
 def test_mixing_curve_by_hand():
     half = WIDTH / 2
-    x = np.array([[0.01, 0.02, 0.06, 0.08],     # purple: particles 0 and 1 -> 2/4
-                  [0.01, 0.07, 0.02, 0.08],     # purple on the left: 0 only -> 1/4
-                  [0.05, 0.07, 0.01, 0.02],     # none (the left holds two green) -> 0
-                  [0.03, 0.04, 0.01, 0.02]])    # both purple back, all four left -> 2/4
+    x = np.array([[0.01, 0.02, 0.06, 0.08],     # left group: particles 0 and 1 -> 2/4
+                  [0.01, 0.07, 0.02, 0.08],     # left group on the left: 0 only -> 1/4
+                  [0.05, 0.07, 0.01, 0.02],     # none (the left holds two of the right group) -> 0
+                  [0.03, 0.04, 0.01, 0.02]])    # both of the left group back, all four left -> 2/4
     np.testing.assert_allclose(mixing_curve(x, half), [0.5, 0.25, 0.0, 0.5])
 
 
-def test_mixing_curve_starts_at_the_purple_fraction():
+def test_mixing_curve_starts_at_the_left_group_share():
     rng = np.random.default_rng(0)
     x = rng.uniform(0, WIDTH, (5, 1000))
     curve = mixing_curve(x, WIDTH / 2)
@@ -32,10 +32,10 @@ def test_mixing_curve_starts_at_the_purple_fraction():
 
 
 def test_mixing_curve_edge_and_given_mask():
-    # x exactly at W/2 is green (x < W/2 is purple)
+    # x exactly at W/2 is in the right group (x < W/2 is the left group)
     np.testing.assert_allclose(mixing_curve(np.array([[0.045, 0.01]]), 0.045), [0.5])
-    purple = np.array([True, True])
-    np.testing.assert_allclose(mixing_curve(np.array([[0.045, 0.01]]), 0.045, purple), [0.5])
+    left_group = np.array([True, True])
+    np.testing.assert_allclose(mixing_curve(np.array([[0.045, 0.01]]), 0.045, left_group), [0.5])
     with pytest.raises(InputError):
         mixing_curve(np.zeros(3), 0.045)
 

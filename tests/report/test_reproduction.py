@@ -11,13 +11,11 @@ import shutil
 import pytest
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.report.reproduction import (
-    PAPER_TABLE3,
-    _estimator_names,
-    _map_numbers,
-    _map_times,
-    write_report,
-)
+from cfbmarkov.analysis.reproduction import paper_map_times
+from cfbmarkov.report.figure_sections import map_numbers
+from cfbmarkov.report.reproduction import write_report
+from cfbmarkov.report.run_folder import estimator_names
+from cfbmarkov.report.sections import PAPER_TABLE3
 
 PNG = b"\x89PNG\r\n\x1a\n"
 EXPECTED_FIGURES = {"fig03-transition-matrices.png", "fig04-maps-u3.png", "fig05-maps-u6.png",
@@ -197,12 +195,12 @@ def test_estimators_discovered_in_order(tmp_path):
                  b / "notes-x.h5"):
         path.write_bytes(b"")
     (b / "compare-zeta").mkdir()
-    assert _estimator_names([a, b, tmp_path / "absent"]) == ["paper", "mle", "auto", "zeta"]
+    assert estimator_names([a, b, tmp_path / "absent"]) == ["paper", "mle", "auto", "zeta"]
 
 
 def test_map_times_and_numbers():
-    assert _map_times(3.0, 0.025)[1:] == ([0.25, 0.5, 0.75], False)
-    wanted, used, rounded = _map_times(6.0, 0.04)
+    assert paper_map_times(3.0, 0.025)[1:] == ([0.25, 0.5, 0.75], False)
+    wanted, used, rounded = paper_map_times(6.0, 0.04)
     assert wanted == [0.05, 0.10, 0.15] and rounded
     assert used == pytest.approx([0.04, 0.12, 0.16])
 
@@ -211,6 +209,6 @@ def test_map_times_and_numbers():
             self.name, self.velocity = f"u{u:g}", u
 
     few = [Case(u) for u in (2.5, 3.0, 8.0)]
-    assert _map_numbers(few) == {"u2.5": 4, "u3": 5, "u8": 6}
+    assert map_numbers(few) == {"u2.5": 4, "u3": 5, "u8": 6}
     many = [Case(u) for u in (2.5, 3.0, 4.0, 5.0, 6.0, 8.0)]
-    assert _map_numbers(many) == {"u2.5": 4, "u3": 4, "u4": 5, "u5": 5, "u6": 6, "u8": 7}
+    assert map_numbers(many) == {"u2.5": 4, "u3": 4, "u4": 5, "u5": 5, "u6": 6, "u8": 7}

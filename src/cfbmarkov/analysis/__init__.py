@@ -1,8 +1,12 @@
-"""Analysis of trajectory files: residence times (SPEC section 3), radial mixing (section 4)
-and the comparison metrics of the paper (PD, Minkowski distance, mixing RMS)."""
+"""Analysis of trajectory files: residence times, radial mixing of the tracer groups, the
+comparison metrics of the paper (PD, Minkowski distance, mixing RMS), the comparison of a
+model with a reference (:mod:`cfbmarkov.analysis.compare`) and the measures of the
+reproduction report (:mod:`cfbmarkov.analysis.reproduction`).
+
+See docs/definitions.md, sections "residence time" and "mixing"."""
 
 from cfbmarkov.analysis.metrics import minkowski_distance, mixing_rms, percentage_difference
-from cfbmarkov.analysis.mixing import mixing_curve, mixing_curve_of, purple_mask
+from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve, mixing_curve_of
 from cfbmarkov.analysis.rtd import (
     ResidenceTimes,
     residence_times,
@@ -12,7 +16,7 @@ from cfbmarkov.analysis.rtd import (
 )
 
 __all__ = [
-    "ResidenceTimes", "minkowski_distance", "mixing_curve", "mixing_curve_of", "mixing_rms",
-    "percentage_difference", "purple_mask", "residence_times", "residence_times_from_events",
-    "residence_times_from_laps", "rtd_histogram",
+    "ResidenceTimes", "left_tracer_group", "minkowski_distance", "mixing_curve",
+    "mixing_curve_of", "mixing_rms", "percentage_difference", "residence_times",
+    "residence_times_from_events", "residence_times_from_laps", "rtd_histogram",
 ]

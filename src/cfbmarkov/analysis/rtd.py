@@ -1,4 +1,5 @@
-"""Residence times from lap counters or exact pass events (SPEC section 3).
+"""Residence times from lap counters or exact pass events (docs/definitions.md, section
+"residence time").
 
 Every particle carries a lap counter L (+1 per pass up through the top, -1 per pass down
 through the bottom). Inside an analysis window [A, B], L is counted from its value at A;

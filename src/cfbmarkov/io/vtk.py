@@ -4,9 +4,11 @@
 
 ``particles_NNNNNN.vtu``
     One unstructured grid of vertices per exported frame. Points are (x, y, 0) m in the
-    particle order of the file. Point data: ``colour_group`` (int8; 1 = "purple", the
-    particles with x < W/2 in the *first exported frame*, 0 = "yellow", the mixing definition
-    of :func:`cfbmarkov.analysis.mixing.purple_mask`), ``id`` (int64), ``lap`` (int32) and,
+    particle order of the file. Point data: ``colour_group`` (int8; the tracer group of the
+    mixing definition, :func:`cfbmarkov.analysis.mixing.left_tracer_group`: 1 = the left
+    tracer group, the particles with x < W/2 in the *first exported frame*, 0 = the right
+    tracer group; the array keeps its name ``colour_group``, by which ParaView colours the
+    particles), ``id`` (int64), ``lap`` (int32) and,
     when the file stores velocities, ``speed`` (float64, m/s) and ``velocity`` (3 components,
     z = 0, m/s). ``colour_group`` comes first so that ParaView colours by it when opened.
 ``gas_NNNNNN.vtr``
@@ -56,7 +58,7 @@ from typing import Iterable, Iterator
 import h5py
 import numpy as np
 
-from cfbmarkov.analysis.mixing import purple_mask
+from cfbmarkov.analysis.mixing import left_tracer_group
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 
@@ -210,7 +212,7 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
     n = traj.n_particles
     zeros = np.zeros(n, dtype=np.float64)
     ids = np.ascontiguousarray(traj.ids, dtype=np.int64)
-    colour = None
+    tracer_group = None
     particle_files: list[tuple[str, float]] = []
     gas_files: list[tuple[str, float]] = []
     for frame, g in _progress(zip(frames.tolist(), gas_index.tolist()), frames.size, progress):
@@ -218,18 +220,18 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
         position = traj.positions(frame)
         x = np.ascontiguousarray(position[:, 0], dtype=np.float64)
         y = np.ascontiguousarray(position[:, 1], dtype=np.float64)
-        if colour is None:
-            colour = purple_mask(x, 0.5 * traj.width).astype(np.int8)
-        data = {"colour_group": colour, "id": ids,
+        if tracer_group is None:
+            tracer_group = left_tracer_group(x, 0.5 * traj.width).astype(np.int8)
+        point_data = {"colour_group": tracer_group, "id": ids,
                 "lap": np.ascontiguousarray(traj.laps(frame), dtype=np.int32)}
         velocity = traj.velocities(frame)
         if velocity is not None:
             vx = np.ascontiguousarray(velocity[:, 0], dtype=np.float64)
             vy = np.ascontiguousarray(velocity[:, 1], dtype=np.float64)
-            data["speed"] = np.hypot(vx, vy)
-            data["velocity"] = (vx, vy, zeros)
+            point_data["speed"] = np.hypot(vx, vy)
+            point_data["velocity"] = (vx, vy, zeros)
         name = f"{PARTICLES}_{frame:06d}"
-        hl.pointsToVTK(str(folder / name), x, y, zeros, data=data)
+        hl.pointsToVTK(str(folder / name), x, y, zeros, data=point_data)
         particle_files.append((name + ".vtu", t))
         if gas is not None and g >= 0:
             name = f"{GAS}_{frame:06d}"

@@ -217,12 +217,13 @@ def plot_rtd(edges, prob_reference, prob_model, stats_ref, stats_model, path, *,
 
 
 # -- snapshots (Fig. 10) -----------------------------------------------------------------------
-def plot_snapshots(positions_ref, positions_model, purple_mask_ref, purple_mask_model,
+def plot_snapshots(positions_ref, positions_model, left_group_ref, left_group_model,
                    times: Sequence[float], width: float, height: float, path, *,
                    labels: tuple[str, str] = ("reference", "model"), title: str | None = None
                    ) -> Path:
     """k snapshot pairs like the paper's Fig. 10: top row reference, bottom row model,
-    particles purple (x < W/2 at the window start) or green. ``positions_*`` [k, N, 2] (m)."""
+    particles of the left tracer group (x < W/2 at the window start, ``left_group_*`` [N]
+    bool) drawn purple, the others green. ``positions_*`` [k, N, 2] (m)."""
     pref = np.asarray(positions_ref, dtype=np.float64)
     pmod = np.asarray(positions_model, dtype=np.float64)
     if pref.ndim == 2:
@@ -230,9 +231,9 @@ def plot_snapshots(positions_ref, positions_model, purple_mask_ref, purple_mask_
     k = len(times)
     if pref.ndim != 3 or pmod.ndim != 3 or pref.shape[0] != k or pmod.shape[0] != k:
         raise InputError(f"snapshot positions must have shape ({k}, N, 2)")
-    masks = (np.asarray(purple_mask_ref, dtype=bool), np.asarray(purple_mask_model, dtype=bool))
+    masks = (np.asarray(left_group_ref, dtype=bool), np.asarray(left_group_model, dtype=bool))
     if masks[0].shape != (pref.shape[1],) or masks[1].shape != (pmod.shape[1],):
-        raise InputError("purple masks do not match the particles of the snapshots")
+        raise InputError("tracer group masks do not match the particles of the snapshots")
     panel_h = 5.0
     panel_w = panel_h * width / height
     fig = Figure(figsize=(1.1 + k * (panel_w + 0.32), 2 * panel_h + 1.4), layout="constrained")
@@ -263,7 +264,8 @@ def plot_snapshots(positions_ref, positions_model, purple_mask_ref, purple_mask_
 def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
                 labels: tuple[str, str] = ("reference", "model"), title: str | None = None,
                 well_mixed: float | None = None) -> Path:
-    """Fraction of all particles that are purple and in the left half, against time, for
+    """Fraction of all particles that are in the left tracer group (drawn purple) and in the
+    left half, against time, for
     both sides; ``well_mixed`` draws the level of a fully mixed bed as a dotted line."""
     fig = Figure(figsize=(8.0, 4.6), layout="constrained")
     ax = fig.add_subplot()

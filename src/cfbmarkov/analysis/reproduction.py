@@ -1,0 +1,357 @@
+"""The numbers of the reproduction report, recomputed from the trajectory files of a case.
+
+For each finished case of a run folder the report needs, over the case's predict window,
+the residence times and RTD of the CFD-DEM and of each estimator's prediction (Fig. 8-9),
+their mixing curves (Fig. 11), the CFD-DEM's radial solids profiles (plausibility), and
+from the chosen Markov model the batch-injection maps (Fig. 4-7) and the mean vertical
+velocity implied by its transition matrix (Fig. 3). :func:`measure_case` computes them;
+:mod:`cfbmarkov.report` only draws and writes.
+
+References
+----------
+docs/definitions.md, sections "riser", "states and transitions", "residence time" and
+"mixing".
+"""
+
+from __future__ import annotations
+
+import contextlib
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+
+
+@contextlib.contextmanager
+def reading_errors(path: str | os.PathLike):
+    """Turn low-level read failures of ``path`` into one InputError line naming it.
+
+    HDF5 errors (OSError) and missing datasets (KeyError) become ``InputError("PATH:
+    cannot be used (...)")``; InputErrors pass unchanged.
+    """
+    try:
+        yield
+    except InputError:
+        raise
+    except (OSError, KeyError) as exc:
+        raise InputError(f"{path}: cannot be used ({' '.join(f'{type(exc).__name__}: {exc}'.split())})"
+                         ) from None
+
+
+@dataclass
+class RunMeasures:
+    """Residence times, RTD and mixing curve of one trajectory file over a window.
+
+    Attributes
+    ----------
+    rt : cfbmarkov.analysis.rtd.ResidenceTimes
+        Residence-time samples, s.
+    prob : numpy.ndarray, shape (B,)
+        RTD as probability per bin (bins of :attr:`CaseMeasures.edges`).
+    mix_t : numpy.ndarray, shape (T,)
+        Frame times of the mixing curve, s.
+    mix_f : numpy.ndarray, shape (T,)
+        Fraction of all particles in the left tracer group and at x < W/2 (-).
+    """
+
+    rt: Any
+    prob: np.ndarray
+    mix_t: np.ndarray
+    mix_f: np.ndarray
+
+
+@dataclass
+class CaseMeasures:
+    """The recomputed numbers of one finished case.
+
+    Attributes
+    ----------
+    window : (float, float)
+        The predict window, s.
+    bin_width : float
+        RTD bin width, s.
+    edges : numpy.ndarray, shape (B + 1,)
+        RTD bin edges, s.
+    reference : RunMeasures
+        The CFD-DEM.
+    models : dict of str to RunMeasures
+        Each estimator's prediction.
+    band_positions : numpy.ndarray, shape (K,)
+        Bin centres across the riser, x (m).
+    solids_fraction : numpy.ndarray, shape (K,)
+        Time-averaged solids volume fraction per bin (-).
+    solids_velocity : numpy.ndarray, shape (K,)
+        Mean vertical solids velocity per bin, m/s (NaN where no particle passed).
+    model_name : str or None
+        Estimator of the model used for Fig. 3-7.
+    model : MarkovModel or None
+        That model.
+    """
+
+    window: tuple[float, float]
+    bin_width: float
+    edges: np.ndarray
+    reference: RunMeasures
+    models: dict[str, RunMeasures]
+    band_positions: np.ndarray
+    solids_fraction: np.ndarray
+    solids_velocity: np.ndarray
+    model_name: str | None = None
+    model: Any = None
+
+
+def measure_run(traj, window: tuple[float, float], bin_width: float) -> RunMeasures:
+    """Residence times, RTD and mixing curve of an open trajectory file.
+
+    Parameters
+    ----------
+    traj : cfbmarkov.trajectories.Trajectories
+    window : (float, float)
+        (start, stop), s.
+    bin_width : float
+        RTD bin width, s.
+
+    Returns
+    -------
+    RunMeasures
+    """
+    from cfbmarkov.analysis.mixing import mixing_curve_of
+    from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
+
+    rt = residence_times(traj, window)
+    _, prob = rtd_histogram(rt.samples, bin_width, window_length=window[1] - window[0])
+    t, f = mixing_curve_of(traj, window)
+    return RunMeasures(rt, prob, t, f)
+
+
+def solids_profile(traj, window: tuple[float, float], config
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Radial (across the riser) solids profiles over a window, two bins per gas cell.
+
+    Parameters
+    ----------
+    traj : cfbmarkov.trajectories.Trajectories
+        An open CFD-DEM file.
+    window : (float, float)
+        (start, stop), s.
+    config : cfbmarkov.config.CaseConfig
+        The case (gas cells across, particle diameter d in m).
+
+    Returns
+    -------
+    centres : numpy.ndarray, shape (K,)
+        Bin centres x, m.
+    fraction : numpy.ndarray, shape (K,)
+        Time-averaged solids volume fraction, pseudo-2D: N pi d^3 / 6 over H dx d (-).
+    velocity : numpy.ndarray, shape (K,)
+        Mean vertical solids velocity, m/s; NaN where no particle passed or the file has
+        no velocities.
+
+    References
+    ----------
+    docs/definitions.md, section "riser" (the pseudo-2D solids fraction).
+    """
+    bins = 2 * int(config.numerics.cfd_cells[0])
+    edges = np.linspace(0.0, traj.width, bins + 1)
+    counts = np.zeros(bins)
+    momentum = np.zeros(bins)
+    frames = traj.window(*window)
+    n_frames = 0
+    for k0 in range(frames.start, frames.stop, 32):
+        block = slice(k0, min(k0 + 32, frames.stop))
+        positions = traj.positions(block)
+        x = positions[..., 0].ravel()
+        counts += np.histogram(x, bins=edges)[0]
+        velocities = traj.velocities(block)
+        if velocities is not None:
+            momentum += np.histogram(x, bins=edges, weights=velocities[..., 1].ravel())[0]
+        n_frames += positions.shape[0]
+    d = float(config.particles.diameter)
+    fraction = counts / max(n_frames, 1) * (math.pi * d * d / 6.0) / (traj.height * np.diff(edges))
+    velocity = np.divide(momentum, counts, out=np.full(bins, np.nan), where=counts > 0)
+    if not traj.has_velocity:
+        velocity[:] = np.nan
+    return 0.5 * (edges[:-1] + edges[1:]), fraction, velocity
+
+
+def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[str, Path],
+                 window: tuple[float, float], bin_width: float, config) -> CaseMeasures:
+    """The recomputed numbers of one case.
+
+    Parameters
+    ----------
+    reference : pathlib.Path
+        The CFD-DEM trajectory file.
+    predictions : mapping of str to pathlib.Path
+        Each estimator's prediction file.
+    model : (str, pathlib.Path)
+        Estimator name and model file of the model drawn in Fig. 3-7.
+    window : (float, float)
+        The predict window, s.
+    bin_width : float
+        RTD bin width, s.
+    config : cfbmarkov.config.CaseConfig
+        The case.
+
+    Returns
+    -------
+    CaseMeasures
+
+    Raises
+    ------
+    InputError
+        Naming the file that cannot be read.
+    """
+    from cfbmarkov.analysis.rtd import rtd_histogram
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    with reading_errors(reference), Trajectories(reference) as ref:
+        measured = measure_run(ref, window, bin_width)
+        across, solids, solids_velocity = solids_profile(ref, window, config)
+    edges, _ = rtd_histogram(np.zeros(0), bin_width, window_length=window[1] - window[0])
+    models = {}
+    for name, path in predictions.items():
+        with reading_errors(path), Trajectories(path) as pred:
+            models[name] = measure_run(pred, window, bin_width)
+    measures = CaseMeasures(window, bin_width, edges, measured, models, across, solids,
+                            solids_velocity)
+    measures.model_name = model[0]
+    with reading_errors(model[1]):
+        measures.model = MarkovModel.load(model[1])
+    return measures
+
+
+def implied_vertical_velocity(model) -> float:
+    """Mean vertical particle velocity implied by a model's transition matrix.
+
+    Parameters
+    ----------
+    model : cfbmarkov.markov.MarkovModel
+
+    Returns
+    -------
+    float
+        The stationary average of the expected row displacement per lag, passes through
+        the periodic boundary included, in m/s.
+
+    References
+    ----------
+    docs/definitions.md, section "states and transitions".
+    """
+    space = model.state_space
+    P = np.asarray(model.transition_matrix)
+    row = space.cell_of_state // space.columns
+    shift = (row[None, :] - row[:, None]) + space.rows * (model.up_fraction - model.down_fraction)
+    per_state = (P * shift).sum(axis=1)
+    return float(model.stationary_distribution @ per_state) * (space.height / space.rows) \
+        / model.lag
+
+
+def paper_map_times(velocity: float, lag: float) -> tuple[list[float], list[float], bool]:
+    """Times of the batch-injection maps of the paper's Fig. 4-7, in whole lags.
+
+    Parameters
+    ----------
+    velocity : float
+        Superficial gas velocity U, m/s: the paper shows 0.25, 0.5, 0.75 s below 3.5 m/s,
+        else 0.05, 0.10, 0.15 s.
+    lag : float
+        The model's lag, s.
+
+    Returns
+    -------
+    wanted : list of float
+        The paper's times, s.
+    used : list of float
+        Each rounded to the nearest whole lag (halves up, at least one lag), s.
+    rounded : bool
+        Whether any time was changed.
+    """
+    wanted = [0.25, 0.5, 0.75] if velocity < 3.5 else [0.05, 0.10, 0.15]
+    used = [max(1, math.floor(t / lag + 0.5 + 1e-9)) * lag for t in wanted]   # halves up
+    rounded = any(abs(a - b) > 1e-9 * max(1.0, b) for a, b in zip(used, wanted))
+    return wanted, used, rounded
+
+
+@dataclass
+class BatchInjection:
+    """A batch fed evenly over the inlet cells at t = 0 (Eq. 8), at some times.
+
+    Attributes
+    ----------
+    maps : numpy.ndarray, shape (K, rows, columns)
+        Probability per cell (what leaves through the top re-enters at the bottom).
+    inside : numpy.ndarray, shape (K, rows, columns)
+        The same with what leaves through the top taken out.
+    mean_heights : list of float
+        Mean height of the part still inside at each time, m.
+    left_share : float
+        Share of the batch that has left through the top by the last time (-).
+    """
+
+    maps: np.ndarray
+    inside: np.ndarray
+    mean_heights: list[float]
+    left_share: float
+
+
+def batch_injection(model, times) -> BatchInjection:
+    """Batch-injection maps of a model (Eq. 5-6, 8) and where the batch is.
+
+    Parameters
+    ----------
+    model : cfbmarkov.markov.MarkovModel
+    times : sequence of float
+        Times after injection, whole multiples of the lag, s.
+
+    Returns
+    -------
+    BatchInjection
+    """
+    maps = np.asarray(model.batch_injection_maps(times), dtype=np.float64)
+    inside = np.asarray(model.batch_injection_maps(times, outflow=True), dtype=np.float64)
+    space = model.state_space
+    centres = (np.arange(space.rows) + 0.5) * space.height / space.rows
+    heights = [float((m.sum(axis=1) * centres).sum() / max(m.sum(), 1e-300)) for m in inside]
+    return BatchInjection(maps, inside, heights, 1.0 - float(inside[-1].sum()))
+
+
+def nanmean(values: np.ndarray) -> float:
+    """Mean of the finite values (NaN when there is none)."""
+    finite = values[np.isfinite(values)]
+    return float(finite.mean()) if finite.size else math.nan
+
+
+def wall_core_contrast(fraction: np.ndarray, velocity: np.ndarray
+                       ) -> tuple[float, float, float, float]:
+    """Wall and core averages of radial solids profiles (the core-annulus structure).
+
+    Parameters
+    ----------
+    fraction, velocity : numpy.ndarray, shape (K,)
+        Solids volume fraction (-) and mean vertical solids velocity (m/s) across the riser
+        (:func:`solids_profile`).
+
+    Returns
+    -------
+    (float, float, float, float)
+        Solids fraction at the walls and in the core, velocity (m/s) at the walls and in
+        the core; the walls are the outer sixth of the bins on each side.
+    """
+    k = max(1, fraction.size // 6)
+    wall = float(np.r_[fraction[:k], fraction[-k:]].mean())
+    core = float(fraction[k:-k].mean()) if fraction.size > 2 * k else wall
+    v_wall = nanmean(np.r_[velocity[:k], velocity[-k:]])
+    v_core = nanmean(velocity[k:-k]) if velocity.size > 2 * k else v_wall
+    return wall, core, v_wall, v_core
+
+
+__all__ = ["BatchInjection", "CaseMeasures", "RunMeasures", "batch_injection",
+           "implied_vertical_velocity", "measure_case", "measure_run", "nanmean",
+           "paper_map_times", "reading_errors", "solids_profile", "wall_core_contrast"]

@@ -1,0 +1,177 @@
+"""The report as a list of blocks (headings, paragraphs, lists, tables, figures) and its
+rendering to Markdown and to self-contained HTML (PNGs embedded as base64 ``data:`` URIs,
+inline CSS), written atomically."""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from cfbmarkov._atomic import atomic_path
+
+FIGURES = "figures"
+
+
+def finite_or_none(value) -> float | None:
+    """``value`` as a finite float, or None."""
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        return None
+    return v if math.isfinite(v) else None
+
+@dataclass
+class Heading:
+    """A heading of ``level`` 2 or 3."""
+
+    level: int
+    text: str
+
+
+@dataclass
+class Para:
+    """A paragraph (``css``: an HTML class, e.g. warn)."""
+
+    text: str
+    css: str = ""
+
+
+@dataclass
+class Bullets:
+    """A bulleted list."""
+
+    items: list[str]
+
+
+@dataclass
+class Table:
+    """A table with numbered notes below it."""
+
+    header: list[str]
+    rows: list[list[str]]
+    notes: list[str] = field(default_factory=list)
+
+
+@dataclass
+class FigureBlock:
+    """A figure: PNG file name in figures/, title and caption sentence."""
+
+    file: str
+    title: str
+    sentence: str
+
+
+def number_text(value, spec: str, unit: str = "") -> str:
+    """``value`` formatted with ``spec`` (and ``unit``), or "n/a" when it is not finite."""
+    v = finite_or_none(value)
+    return "n/a" if v is None else f"{v:{spec}}{unit}"
+
+
+def duration_text(seconds) -> str:
+    """A wall time in s, min or h (3 significant digits), or "n/a"."""
+    s = finite_or_none(seconds)
+    if s is None:
+        return "n/a"
+    if s < 120:
+        return f"{s:.3g} s"
+    if s < 7200:
+        return f"{s / 60:.3g} min"
+    return f"{s / 3600:.3g} h"
+
+
+def _md_cell(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def render_markdown(title: str, blocks) -> str:
+    """The blocks as Markdown, figures linked as ``figures/NAME.png``."""
+    out = [f"# {title}", ""]
+    for b in blocks:
+        if isinstance(b, Heading):
+            out += ["#" * b.level + " " + b.text, ""]
+        elif isinstance(b, Para):
+            out += [b.text, ""]
+        elif isinstance(b, Bullets):
+            out += [f"- {item}" for item in b.items] + [""]
+        elif isinstance(b, Table):
+            out.append("| " + " | ".join(_md_cell(h) for h in b.header) + " |")
+            out.append("|" + "|".join("---" for _ in b.header) + "|")
+            out += ["| " + " | ".join(_md_cell(c) for c in row) + " |" for row in b.rows]
+            out.append("")
+            if b.notes:
+                out += [f"{k + 1}. {note}" for k, note in enumerate(b.notes)] + [""]
+        elif isinstance(b, FigureBlock):
+            out += [f"![{b.title}]({FIGURES}/{b.file})", "", f"**{b.title}.** {b.sentence}", ""]
+    return "\n".join(out).rstrip() + "\n"
+
+
+_CSS = """
+body { font-family: -apple-system, "Segoe UI", Helvetica, Arial, sans-serif; color: #222;
+       max-width: 1180px; margin: 2em auto; padding: 0 1.2em; line-height: 1.45; }
+h1 { font-size: 1.7em; border-bottom: 2px solid #1f4e79; padding-bottom: .2em; }
+h2 { font-size: 1.3em; margin-top: 2em; color: #1f4e79; border-bottom: 1px solid #ccd; }
+h3 { font-size: 1.08em; margin-top: 1.4em; }
+div.wide { overflow-x: auto; }
+table { border-collapse: collapse; margin: .8em 0; font-size: .88em; }
+th, td { border: 1px solid #bbc; padding: .25em .55em; text-align: right; }
+th { background: #eef2f7; text-align: center; }
+td:first-child, td:nth-child(2) { text-align: left; }
+tr:nth-child(even) td { background: #fafbfd; }
+ol.notes { font-size: .85em; color: #444; }
+figure { margin: 1em 0 1.6em 0; }
+figure img { max-width: 100%; height: auto; border: 1px solid #e3e3e3; }
+figcaption { font-size: .92em; margin-top: .3em; }
+p.warn { color: #8a4b00; }
+"""
+
+
+def render_html(title: str, blocks, figures_dir: Path) -> str:
+    """The blocks as one self-contained HTML page (figures read from ``figures_dir``)."""
+    e = html.escape
+    out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
+           f"<title>{e(title)}</title>", f"<style>{_CSS}</style>", "</head>", "<body>",
+           f"<h1>{e(title)}</h1>"]
+    for b in blocks:
+        if isinstance(b, Heading):
+            out.append(f"<h{b.level}>{e(b.text)}</h{b.level}>")
+        elif isinstance(b, Para):
+            out.append(f'<p class="{b.css}">{e(b.text)}</p>' if b.css else f"<p>{e(b.text)}</p>")
+        elif isinstance(b, Bullets):
+            out.append("<ul>" + "".join(f"<li>{e(i)}</li>" for i in b.items) + "</ul>")
+        elif isinstance(b, Table):
+            out.append('<div class="wide"><table><thead><tr>' + "".join(f"<th>{e(h)}</th>" for h in b.header)
+                       + "</tr></thead><tbody>")
+            out += ["<tr>" + "".join(f"<td>{e(c)}</td>" for c in row) + "</tr>" for row in b.rows]
+            out.append("</tbody></table></div>")
+            if b.notes:
+                out.append('<ol class="notes">' + "".join(f"<li>{e(n)}</li>" for n in b.notes)
+                           + "</ol>")
+        elif isinstance(b, FigureBlock):
+            encoded = base64.b64encode((figures_dir / b.file).read_bytes()).decode("ascii")
+            out.append(f'<figure><img src="data:image/png;base64,{encoded}" alt="{e(b.title)}">'
+                       f"<figcaption><b>{e(b.title)}.</b> {e(b.sentence)}</figcaption></figure>")
+    out += ["</body>", "</html>", ""]
+    return "\n".join(out)
+
+
+def readable_mode() -> int:
+    """rw for everyone the umask allows (temporary files of atomic_path are 0600)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def write_utf8(path: Path, text: str) -> None:
+    """Write ``text`` to ``path`` atomically, readable as the umask allows."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+        os.chmod(tmp, readable_mode())
+
+
+__all__ = ["FIGURES", "Bullets", "FigureBlock", "Heading", "Para", "Table", "duration_text",
+           "finite_or_none", "number_text", "readable_mode", "render_html", "render_markdown",
+           "write_utf8"]

@@ -1,0 +1,280 @@
+"""The report's sections with figures: the paper's Fig. 3-11 and the plausibility of the
+CFD-DEM. Each builder draws its PNGs into the figures folder (appending their names to
+``written``) and returns its document blocks; the numbers come from
+:mod:`cfbmarkov.analysis.reproduction`.
+
+Choices:
+
+- Figures 4-7 are numbered by the position of the case among all cases sorted by U (4, 5,
+  6, 7) when there are at most four cases; with more cases a case at one of the paper's U
+  (3, 4, 6, 8 m/s) takes the paper's number and any other case the number of the paper's
+  nearest U (the file name always carries the case name).
+- Fig. 3 and Fig. 4-7 use the ``paper`` estimator's model (else the first finished one, and
+  the caption says so). Batch-injection times that are not whole multiples of the model's
+  lag are rounded to the nearest whole lag (at least one) and the caption says so.
+- In Fig. 10-11 the left tracer group (x < W/2 at the window start) is drawn purple.
+"""
+
+from __future__ import annotations
+
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+
+from cfbmarkov._atomic import atomic_path
+from cfbmarkov.analysis.reproduction import (
+    RunMeasures,
+    batch_injection,
+    implied_vertical_velocity,
+    paper_map_times,
+    wall_core_contrast,
+)
+from cfbmarkov.report.document import FigureBlock, Heading, Para, number_text
+from cfbmarkov.report.figures import plot_probability_maps
+from cfbmarkov.report.paper_figures import (
+    CFD_DEM_COLOUR,
+    estimator_colour,
+    plot_mixing_grid,
+    plot_plausibility,
+    plot_rtd_grid,
+    plot_transition_bars_grid,
+)
+from cfbmarkov.report.run_folder import Case, input_error
+from cfbmarkov.report.sections import shared_text, window_text
+
+#: the paper's batch-injection figure of each of its velocities (Fig. 4-7)
+PAPER_MAP_FIGURE: dict[float, int] = {3.0: 4, 4.0: 5, 6.0: 6, 8.0: 7}
+#: Fig. 10 is drawn at this velocity (m/s), or the case nearest to it
+SNAPSHOT_VELOCITY = 6.0
+#: snapshots span window start + 0 ... 0.7 s
+SNAPSHOT_SPAN = 0.7
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+def fig3_blocks(done, measures, figures_dir: Path, written: list[str]) -> list:
+    name = "fig03-transition-matrices.png"
+    panels, velocities = [], []
+    for c in done:
+        measured = measures[c.name]
+        suffix = "" if measured.model_name == "paper" else f", {measured.model_name} estimator"
+        panels.append((f"{c.label}{suffix}", np.asarray(measured.model.transition_matrix)))
+        velocities.append((c, implied_vertical_velocity(measured.model)))
+    plot_transition_bars_grid(panels, figures_dir / name,
+                               "Fig. 3: transition probability matrices as bar graphs")
+    written.append(name)
+    vel = ", ".join(f"{v:+.2f} m/s at {c.label}" for c, v in velocities)
+    sentence = (f"Each panel shows the nonzero P_ij of one velocity as a stem at (state i, "
+                f"state j); the stationary mean vertical particle velocity implied by P is {vel}"
+                + (", rising with U." if len(velocities) > 1 and all(
+                    b[1] > a[1] for a, b in zip(velocities, velocities[1:])) else "."))
+    return [Heading(2, "Fig. 3: Transition probability matrices"),
+            FigureBlock(name, "Fig. 3: transition probability matrices, paper estimator", sentence)]
+
+
+def map_numbers(cases: list[Case]) -> dict[str, int]:
+    if len(cases) <= 4:
+        return {c.name: 4 + k for k, c in enumerate(cases)}
+    papers = sorted(PAPER_MAP_FIGURE)
+    out = {}
+    for c in cases:
+        if not math.isfinite(c.velocity):
+            out[c.name] = 7
+            continue
+        nearest = min(papers, key=lambda u: (abs(u - c.velocity), u))
+        out[c.name] = PAPER_MAP_FIGURE[nearest]
+    return out
+
+
+def maps_blocks(cases, done, measures, figures_dir: Path, written: list[str]) -> list:
+
+    numbers = map_numbers(cases)
+    blocks = [Heading(2, "Fig. 4–7: Batch-injection probability maps"),
+              Para("A batch fed evenly over the inlet cells at t = 0 (Eq. 8), propagated by "
+                    "S(t + lag) = S(t) P (Eq. 5-6); probability per cell at the paper's times "
+                    "(0.25, 0.5, 0.75 s below 3.5 m/s, else 0.05, 0.10, 0.15 s).")]
+    for c in done:
+        measured = measures[c.name]
+        model = measured.model
+        number = numbers[c.name]
+        wanted, used, rounded = paper_map_times(c.velocity, model.lag)
+        batch = batch_injection(model, used)
+        name = f"fig{number:02d}-maps-{c.name}.png"
+        space = model.state_space
+        plot_probability_maps(
+            batch.maps, used, space.width, space.height, figures_dir / name,
+            title=f"Fig. {number}: batch fed over the inlet\nat t = 0, {c.label}\n"
+                  f"{measured.model_name} estimator, {space.columns} x {space.rows} cells,\n"
+                  f"lag {model.lag:g} s")
+        written.append(name)
+        sentence = (f"At t = {', '.join(f'{t:g}' for t in used)} s the mean height of the part of "
+                    f"the batch that has not yet left through the top is "
+                    f"{', '.join(f'{h:.2f}' for h in batch.mean_heights)} m (riser {space.height:g} m high); "
+                    f"{100 * batch.left_share:.1f} % of the batch has left through the top by {used[-1]:g} s "
+                    "(the maps, like the paper's, keep it: it re-enters at the bottom).")
+        if rounded:
+            sentence += (f" The paper's times {', '.join(f'{t:g}' for t in wanted)} s are not "
+                         f"whole multiples of the lag {model.lag:g} s and were rounded to the "
+                         "nearest whole lag.")
+        paper_u = [u for u, n in PAPER_MAP_FIGURE.items() if n == number]
+        if paper_u and not math.isclose(paper_u[0], c.velocity):
+            sentence += f" (The paper's Fig. {number} is at U = {paper_u[0]:g} m/s.)"
+        blocks += [Heading(3, f"Fig. {number}: {c.label} ({c.name})"),
+                   FigureBlock(name, f"Fig. {number}: batch-injection maps, {c.label}", sentence)]
+    return blocks
+
+
+def rtd_blocks(done, measures, estimators, figures_dir: Path, written: list[str]) -> list:
+    panels8, panels9 = [], []
+    for c in done:
+        measured = measures[c.name]
+        panels8.append((c.label, measured.edges,
+                        [("CFD-DEM", measured.reference.prob, measured.reference.rt, CFD_DEM_COLOUR, True)]))
+        series = [("CFD-DEM (Fig. 8)", measured.reference.prob, measured.reference.rt, "0.7", True)]
+        series += [(f"MCM, {n}", side.prob, side.rt, estimator_colour(n, estimators), False)
+                   for n, side in measured.models.items()]
+        panels9.append((c.label, measured.edges, series))
+    window_texts = shared_text({c.name: window_text(measures[c.name].window) for c in done})
+    plot_rtd_grid(panels8, figures_dir / "fig08-rtd-cfd-dem.png",
+                   f"Fig. 8: residence-time distributions of the CFD-DEM, window {window_texts}")
+    plot_rtd_grid(panels9, figures_dir / "fig09-rtd-mcm.png",
+                   f"Fig. 9: residence-time distributions of the MCM, window {window_texts}")
+    written += ["fig08-rtd-cfd-dem.png", "fig09-rtd-mcm.png"]
+
+    sds = [(c, measures[c.name].reference.rt.sd) for c in done
+           if math.isfinite(measures[c.name].reference.rt.sd)]
+    means = ", ".join(f"{number_text(measures[c.name].reference.rt.mean, '.3f')} s at {c.label}"
+                      for c in done)
+    if len(sds) > 1:
+        widest = max(sds, key=lambda x: x[1])
+        narrowest = min(sds, key=lambda x: x[1])
+        s8 = (f"The CFD-DEM RTD is widest at {widest[0].label} (SD(RT) = {widest[1]:.3f} s) and "
+              f"narrowest at {narrowest[0].label} ({narrowest[1]:.3f} s); E(RT) is {means}.")
+    else:
+        s8 = f"The CFD-DEM RTD has E(RT) = {means}."
+    narrower, total = 0, 0
+    for c in done:
+        measured = measures[c.name]
+        for side in measured.models.values():
+            if math.isfinite(side.rt.sd) and math.isfinite(measured.reference.rt.sd):
+                total += 1
+                narrower += side.rt.sd < measured.reference.rt.sd
+    s9 = (f"The MCM RTDs (grey: the CFD-DEM's) are narrower than the CFD-DEM's in {narrower} of "
+          f"{total} velocity-estimator pairs; the paper found them narrower at all four "
+          "velocities.")
+    return [Heading(2, "Fig. 8: RTD of the CFD-DEM"),
+            FigureBlock("fig08-rtd-cfd-dem.png", "Fig. 8: CFD-DEM residence-time distributions", s8),
+            Heading(2, "Fig. 9: RTD of the MCM"),
+            FigureBlock("fig09-rtd-mcm.png", "Fig. 9: MCM residence-time distributions", s9)]
+
+
+def snapshot_blocks(done, measures, figures_dir: Path, written: list[str]) -> list:
+    name = "fig10-snapshots.png"
+    blocks: list = [Heading(2, "Fig. 10: Particle snapshots")]
+    candidates = []
+    for c in done:
+        for e in c.finished:
+            png = e.compare_dir / "snapshots.png"
+            if png.is_file():
+                candidates.append((abs(c.velocity - SNAPSHOT_VELOCITY), c.velocity, c, e, png))
+                break
+    if not candidates:
+        blocks.append(Para("Not available: no finished case has a compare-*/snapshots.png.",
+                            css="warn"))
+        return blocks
+    _, _, c, e, png = min(candidates, key=lambda x: (x[0], x[1]))
+    if png.read_bytes()[:8] != PNG_SIGNATURE:
+        raise input_error(png, "not a PNG image")
+    with atomic_path(figures_dir / name, suffix=".png") as tmp:
+        shutil.copyfile(png, tmp)
+    written.append(name)
+    measured = measures[c.name]
+    t0 = measured.window[0]
+    at = t0 + SNAPSHOT_SPAN
+    ref, mod = measured.reference, measured.models[e.name]
+
+    def _at(side: RunMeasures) -> str:
+        """The mixing curve of ``side`` at the end of the snapshots, or n/a."""
+        if side.mix_t.size == 0 or at > side.mix_t[-1] + 1e-9:
+            return "n/a"
+        return f"{float(np.interp(at, side.mix_t, side.mix_f)):.3f}"
+
+    sentence = (f"Snapshots at {c.label} (nearest to the paper's {SNAPSHOT_VELOCITY:g} m/s) from "
+                f"{t0:g} to {at:g} s, CFD-DEM above and MCM ({e.name}) below, purple = x < W/2 at "
+                f"{t0:g} s; the share of all particles that are purple and in the left half goes "
+                f"from {number_text(ref.mix_f[0] if ref.mix_f.size else None, '.3f')} to {_at(ref)} "
+                f"(CFD-DEM) and {_at(mod)} (MCM) by {at:g} s.")
+    blocks.append(FigureBlock(name, f"Fig. 10: particle snapshots, {c.label}", sentence))
+    return blocks
+
+
+def mixing_blocks(done, measures, estimators, figures_dir: Path, written: list[str]) -> list:
+    name = "fig11-mixing.png"
+    panels, parts = [], []
+    for c in done:
+        measured = measures[c.name]
+        f0 = float(measured.reference.mix_f[0]) if measured.reference.mix_f.size else math.nan
+        series = [("CFD-DEM", measured.reference.mix_t, measured.reference.mix_f, CFD_DEM_COLOUR, 1.1)]
+        series += [(f"MCM, {n}", s.mix_t, s.mix_f, estimator_colour(n, estimators), 1.6)
+                   for n, s in measured.models.items()]
+        panels.append((c.label, series, f0 * f0))
+        end = float(measured.reference.mix_f[-1]) if measured.reference.mix_f.size else math.nan
+        rms = [number_text(e.summary.get("mixing_rms"), ".3g") for e in c.finished]
+        parts.append(f"{c.label}: CFD-DEM ends at {end:.3f} against a well-mixed {f0 * f0:.3f}, "
+                     f"RMS difference {', '.join(rms)} "
+                     f"({', '.join(e.name for e in c.finished)})")
+    plot_mixing_grid(panels, figures_dir / name,
+                      "Fig. 11: purple particles in the left half of the riser / all particles")
+    written.append(name)
+    return [Heading(2, "Fig. 11: Radial mixing"),
+            FigureBlock(name, "Fig. 11: radial mixing curves",
+                 "Share of all particles that are purple (x < W/2 at the window start) and in the "
+                 "left half, CFD-DEM against each estimator; " + "; ".join(parts) + ".")]
+
+
+def plausibility_blocks(done, measures, estimators, figures_dir: Path,
+                         written: list[str]) -> list:
+    name = "plausibility.png"
+    u = [c.velocity for c in done]
+    means = [measures[c.name].reference.rt.mean for c in done]
+    sds = [measures[c.name].reference.rt.sd for c in done]
+    model_means = {n: [measures[c.name].models[n].rt.mean if n in measures[c.name].models
+                       else math.nan for c in done] for n in estimators
+                   if any(n in measures[c.name].models for c in done)}
+    profiles = [(c.label, measures[c.name].band_positions, measures[c.name].solids_fraction,
+                 measures[c.name].solids_velocity) for c in done]
+    plot_plausibility(u, means, sds, model_means, profiles, figures_dir / name,
+                       "Plausibility of the CFD-DEM: residence time against U, core-annulus "
+                       "profiles")
+    written.append(name)
+    finite = [(c, m) for c, m in zip(done, means) if math.isfinite(m)]
+    trend = " → ".join(f"{m:.3f} s" for _, m in finite)
+    span = f"{finite[0][0].velocity:g} → {finite[-1][0].velocity:g} m/s" if finite else ""
+    if len(finite) < 2:
+        verdict = "Only one finished case: no trend of E(RT) with U can be judged."
+    elif all(b[1] < a[1] for a, b in zip(finite, finite[1:])):
+        verdict = (f"E(RT) of the CFD-DEM falls as U rises ({span}: {trend}), as the paper "
+                   "reports (Fig. 8).")
+    else:
+        verdict = (f"E(RT) of the CFD-DEM does NOT fall steadily as U rises ({span}: {trend}); "
+                   "the paper reports a steady fall (Fig. 8).")
+    ratios = []
+    for c in done:
+        measured = measures[c.name]
+        wall, core, v_wall, v_core = wall_core_contrast(measured.solids_fraction, measured.solids_velocity)
+        ratios.append(f"{c.label}: solids fraction wall/core {wall:.3g}/{core:.3g}, velocity "
+                      f"wall/core {v_wall:+.2f}/{v_core:+.2f} m/s")
+    sentence = ("(a) E(RT) and SD(RT) of the CFD-DEM, and E(RT) of each MCM, against U; (b) "
+                "solids volume fraction and (c) mean vertical solids velocity of the CFD-DEM "
+                "across the riser (pseudo-2D, one particle diameter thick), averaged over the "
+                f"predict window; a core-annulus flow has denser, slower or falling wall layers "
+                f"({'; '.join(ratios)}).")
+    return [Heading(2, "Plausibility"),
+            Para(verdict),
+            FigureBlock(name, "Plausibility: E(RT) and SD(RT) against U, radial solids profiles",
+                 sentence)]
+
+
+__all__ = ["PAPER_MAP_FIGURE", "fig3_blocks", "map_numbers", "maps_blocks", "mixing_blocks",
+           "plausibility_blocks", "rtd_blocks", "snapshot_blocks"]

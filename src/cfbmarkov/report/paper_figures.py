@@ -1,0 +1,193 @@
+"""Figures of the reproduction report (matplotlib, no pyplot): one panel per case for the
+paper's Fig. 3, 8-9 and 11, and the plausibility figure. The data come ready from
+:mod:`cfbmarkov.analysis.reproduction`; these functions only draw and save."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from cfbmarkov.report.document import number_text
+
+CFD_DEM_COLOUR = "#1f4e79"
+ESTIMATOR_COLOURS = {"paper": "#d35400", "mle": "#7b3294"}
+OTHER_COLOURS = ("#1a9641", "#c51b7d", "#4d4d4d", "#b8860b", "#2c7fb8")
+
+def _grid(n: int) -> tuple[int, int]:
+    """(rows, columns) of a near-square layout of ``n`` panels."""
+    cols = max(1, math.ceil(math.sqrt(n)))
+    return math.ceil(n / cols), cols
+
+
+def _panel_axes(n: int, panel_width: float, panel_height: float):
+    """A constrained figure of ``n`` 2D panels on the :func:`_grid` layout, unused slots
+    hidden: (figure, the first ``n`` axes)."""
+    from matplotlib.figure import Figure
+
+    nrows, ncols = _grid(n)
+    fig = Figure(figsize=(0.6 + panel_width * ncols, 0.7 + panel_height * nrows),
+                 layout="constrained")
+    axes = fig.subplots(nrows, ncols, squeeze=False).ravel()
+    for ax in axes[n:]:
+        ax.set_visible(False)
+    return fig, axes[:n]
+
+
+def _letter(k: int) -> str:
+    """Panel letter: (a), (b), ..."""
+    return f"({chr(ord('a') + k)})" if k < 26 else f"({k + 1})"
+
+
+def estimator_colour(name: str, names: Sequence[str]) -> str:
+    """Line colour of an estimator (fixed for paper and mle, else by position in ``names``)."""
+    if name in ESTIMATOR_COLOURS:
+        return ESTIMATOR_COLOURS[name]
+    others = [n for n in names if n not in ESTIMATOR_COLOURS]
+    return OTHER_COLOURS[others.index(name) % len(OTHER_COLOURS)] if name in others \
+        else OTHER_COLOURS[0]
+
+
+def plot_transition_bars_grid(panels: Sequence[tuple[str, np.ndarray]], path, title: str
+                               ) -> Path:
+    """Fig. 3: one 3D bar (stem) panel per velocity, P_ij at (state i, state j), on one
+    shared colour scale (the style of figures.plot_transition_bars)."""
+    from matplotlib.colors import Normalize
+    from matplotlib.figure import Figure
+
+    from cfbmarkov.report.figures import _save, draw_stems
+
+    nrows, ncols = _grid(len(panels))
+    vmax = max((float(P.max()) for _, P in panels), default=1.0)
+    norm = Normalize(vmin=0.0, vmax=max(vmax, 1e-12))
+    fig = Figure(figsize=(0.6 + 5.4 * ncols, 0.9 + 4.8 * nrows), layout="constrained")
+    axes, stems = [], None
+    for k, (label, P) in enumerate(panels):
+        ax = fig.add_subplot(nrows, ncols, k + 1, projection="3d")
+        s = P.shape[0]
+        i, j = np.nonzero(P > 0)
+        p = P[i, j]
+        draw_stems(ax, i, j, p, s, norm, linewidth=0.7)
+        ax.set_xlabel("state number i, from (-)", fontsize=8)
+        ax.set_ylabel("transition number j, to (-)", fontsize=8)
+        ax.set_zlabel("$P_{ij}$ (-)", fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.view_init(elev=52, azim=-60)
+        ax.set_box_aspect(None, zoom=0.86)      # room for the axis labels
+        ax.set_title(f"{_letter(k)} {label}: {p.size} nonzero of {s} x {s}", fontsize=9)
+        axes.append(ax)
+    if stems is not None:
+        bar = fig.colorbar(stems, ax=axes, shrink=0.6, pad=0.04)
+        bar.set_label("transition probability $P_{ij}$ (-)")
+    fig.suptitle(title, fontsize=11)
+    return _save(fig, path)
+
+
+def plot_rtd_grid(panels, path, title: str) -> Path:
+    """Fig. 8/9: one RTD panel per velocity. ``panels``: (label, edges, series) with series
+    (name, probability, ResidenceTimes, colour, filled)."""
+    from cfbmarkov.report.figures import _save
+
+    fig, axes = _panel_axes(len(panels), 5.6, 3.9)
+    for k, (ax, (label, edges, series)) in enumerate(zip(axes, panels)):
+        top, right = 1e-3, 0.0
+        for name, prob, rt, colour, filled in series:
+            text = (f"{name}: E(RT) = {number_text(rt.mean, '.3f')} s, "
+                    f"SD(RT) = {number_text(rt.sd, '.3f')} s, n = {rt.count}")
+            if filled:
+                ax.stairs(prob, edges, fill=True, color=colour, alpha=0.3, label=text)
+                ax.stairs(prob, edges, color=colour, lw=0.8)
+            else:
+                ax.stairs(prob, edges, color=colour, lw=1.4, label=text)
+            if math.isfinite(rt.mean):
+                ax.axvline(rt.mean, color=colour, ls="--", lw=0.9)
+            top = max(top, float(prob.max(initial=0)))
+            support = np.flatnonzero(prob > 0)
+            if support.size:
+                right = max(right, float(edges[support[-1] + 1]))
+        ax.set_xlim(0.0, min(float(edges[-1]), right * 1.08) if right > 0 else float(edges[-1]))
+        ax.set_ylim(0.0, top * 1.45)
+        ax.set_xlabel("residence time (s)")
+        ax.set_ylabel(f"probability per bin ({edges[1] - edges[0]:g} s)")
+        ax.legend(loc="upper right", fontsize=7.5, framealpha=0.9, edgecolor="none",
+                  title="dashed lines: E(RT)", title_fontsize=7)
+        ax.set_title(f"{_letter(k)} {label}", fontsize=10)
+    fig.suptitle(title, fontsize=11)
+    return _save(fig, path)
+
+
+def plot_mixing_grid(panels, path, title: str) -> Path:
+    """Fig. 11: one mixing panel per velocity. ``panels``: (label, series, well_mixed) with
+    series (name, times, fraction, colour, line width)."""
+    from cfbmarkov.report.figures import _save
+
+    fig, axes = _panel_axes(len(panels), 5.4, 3.7)
+    for k, (ax, (label, series, well_mixed)) in enumerate(zip(axes, panels)):
+        top, lo, hi = 0.05, math.inf, -math.inf
+        for name, t, f, colour, lw in series:
+            ax.plot(t, f, color=colour, lw=lw, label=name)
+            top = max(top, float(np.nanmax(f, initial=0)))
+            if t.size:
+                lo, hi = min(lo, float(t[0])), max(hi, float(t[-1]))
+        if well_mixed is not None and math.isfinite(well_mixed):
+            ax.axhline(well_mixed, color="0.35", ls="--", lw=1.0,
+                       label=f"well mixed: $f_0^2$ = {well_mixed:.3f}")
+        ax.set_ylim(0.0, min(1.0, 1.2 * top))
+        if hi > lo:
+            ax.set_xlim(lo, hi)
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("purple in left half / all (-)")
+        ax.grid(alpha=0.3)
+        ax.legend(loc="upper right", fontsize=8, frameon=False)
+        ax.set_title(f"{_letter(k)} {label}", fontsize=10)
+    fig.suptitle(title, fontsize=11)
+    return _save(fig, path)
+
+
+def plot_plausibility(velocities, means, sds, model_means, profiles, path, title: str) -> Path:
+    """(a) E(RT) and SD(RT) of the CFD-DEM (and E(RT) of each estimator) against U; (b)
+    solids volume fraction and (c) mean vertical solids velocity across the riser, one line
+    per U (the core-annulus structure)."""
+    from matplotlib.figure import Figure
+
+    from cfbmarkov.report.figures import _save
+
+    fig = Figure(figsize=(15.0, 4.6), layout="constrained")
+    ax, bx, cx = fig.subplots(1, 3)
+    u = np.asarray(velocities, float)
+    ax.plot(u, means, "o-", color=CFD_DEM_COLOUR, label="E(RT), CFD-DEM")
+    ax.plot(u, sds, "s--", color=CFD_DEM_COLOUR, mfc="white", label="SD(RT), CFD-DEM")
+    names = list(model_means)
+    for name, values in model_means.items():
+        ax.plot(u, values, "^", color=estimator_colour(name, names), mfc="none", ms=8,
+                label=f"E(RT), MCM ({name})")
+    ax.set_xlabel("superficial gas velocity U (m/s)")
+    ax.set_ylabel("residence time (s)")
+    ax.set_ylim(bottom=0.0)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, frameon=False)
+    ax.set_title("(a) residence time against U", fontsize=10)
+    colours = ("#1f4e79", "#d35400", "#1a9641", "#7b3294", "#c51b7d", "#4d4d4d",
+               "#b8860b", "#2c7fb8") * 4
+    for (label, across, fraction, velocity), colour in zip(profiles, colours):
+        bx.plot(1e3 * across, fraction, "-", color=colour, lw=1.4, label=label)
+        cx.plot(1e3 * across, velocity, "-", color=colour, lw=1.4, label=label)
+    bx.set_xlabel("distance from the left wall x (mm)")
+    bx.set_ylabel("solids volume fraction (-), window average")
+    bx.set_ylim(bottom=0.0)
+    bx.grid(alpha=0.3)
+    bx.legend(fontsize=8, frameon=False)
+    bx.set_title("(b) radial solids profile, CFD-DEM", fontsize=10)
+    cx.axhline(0.0, color="0.4", lw=0.8)
+    cx.set_xlabel("distance from the left wall x (mm)")
+    cx.set_ylabel("mean vertical solids velocity (m/s)")
+    cx.grid(alpha=0.3)
+    cx.set_title("(c) radial solids velocity, CFD-DEM (< 0: falling)", fontsize=10)
+    fig.suptitle(title, fontsize=11)
+    return _save(fig, path)
+
+
+__all__ = ["CFD_DEM_COLOUR", "estimator_colour", "plot_mixing_grid", "plot_plausibility",
+           "plot_rtd_grid", "plot_transition_bars_grid"]

@@ -1,0 +1,234 @@
+"""The report's sections of text and tables: the run, the unfinished cases, the paper's
+Table 3 (quoted from the compare summaries), computing time and warnings. Each builder
+returns document blocks (:mod:`cfbmarkov.report.document`).
+
+References
+----------
+docs/definitions.md, sections "residence time" (PD, Minkowski distance, Eq. 9) and "mixing".
+"""
+
+from __future__ import annotations
+
+import math
+
+from cfbmarkov.report.document import (
+    Bullets,
+    Heading,
+    Para,
+    Table,
+    duration_text,
+    finite_or_none,
+    number_text,
+)
+from cfbmarkov.report.run_folder import Case
+
+#: the paper's Table 3 as printed: U (m/s) -> (PD of E(RT) %, PD of SD(RT) %, MD of RTD)
+PAPER_TABLE3: dict[float, tuple[str, str, str]] = {
+    3.0: ("11.89", "-50.55", "0.0185"),
+    4.0: ("1.57", "-37.84", "0.238"),
+    6.0: ("2.45", "-41.67", "0.380"),
+    8.0: ("0.54", "-45.16", "0.328"),
+}
+#: the paper's §3.1: CFD-DEM of the 5 s predict window about 50 h, the MCM about 30 min
+PAPER_CFD_DEM_S = 50 * 3600.0
+PAPER_MCM_S = 30 * 60.0
+PAPER_SPEEDUP = 100.0
+#: RTD bin width (s) when no compare summary gives one
+DEFAULT_BIN_WIDTH = 0.025
+
+
+def shared_text(values: dict[str, str]) -> str:
+    """One value when all cases agree, else 'case: value' for each."""
+    distinct = list(dict.fromkeys(values.values()))
+    if len(distinct) == 1:
+        return distinct[0]
+    return "; ".join(f"{case}: {value}" for case, value in values.items())
+
+
+def window_text(window) -> str:
+    """A window (start, stop) in s as text."""
+    return f"{float(window[0]):g}–{float(window[1]):g} s"
+
+
+def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
+    """The run: scale, cases, riser, windows, lag, cells, estimators, version."""
+    from cfbmarkov import __version__
+
+    configured = [c for c in cases if c.config is not None]
+    done = [c for c in cases if c.complete]
+    pending = [c for c in cases if not c.complete]
+    cfg = {c.name: c.config for c in configured}
+    items = [
+        f"Scale: {meta.get('scale', 'n/a')}",
+        "Cases: " + ", ".join(f"{c.name} ({c.label})" for c in cases)
+        + f" — {len(done)} finished" + (f", {len(pending)} not finished ("
+                                         + ", ".join(c.name for c in pending) + ")"
+                                         if pending else ""),
+        "Riser: " + shared_text({n: f"{c.riser.width:g} m wide x {c.riser.height:g} m high"
+                             for n, c in cfg.items()}),
+        "Particles: " + shared_text({n: f"{c.particles.number}" for n, c in cfg.items()}),
+        "Windows: " + shared_text({n: f"fit {window_text(c.markov.fit_window)}, predict "
+                                  f"{window_text(c.markov.predict_window)}"
+                               for n, c in cfg.items()}),
+        "Lag: " + shared_text({n: f"{c.markov.lag:g} s" for n, c in cfg.items()}),
+        "Cells: " + shared_text({n: f"{c.markov.columns} columns x {c.markov.rows} rows"
+                             for n, c in cfg.items()}),
+        "Estimators: " + (", ".join(estimators) or "none"),
+        f"cfbmarkov version: {__version__}"
+        + (f" (pipeline recorded {meta['version']})" if meta.get("version") not in (None, "")
+           else ""),
+    ]
+    return [Heading(2, "Reproduction"), Bullets(items)]
+
+
+def not_finished_blocks(cases: list[Case]) -> list:
+    """The cases and estimators that have not completed every stage."""
+    pending = [c for c in cases if not c.complete or c.reasons]
+    if not pending:
+        return []
+    items = []
+    for c in pending:
+        state = "not finished" if not c.complete else "partly finished; not finished"
+        items.append(f"{c.name} ({c.label}): {state}: " + "; ".join(c.reasons))
+    return [Heading(2, "Not finished"),
+            Para("These cases or estimators have not completed every stage of the pipeline; "
+                  "they are left out of the figures and shown as 'not finished' in the "
+                  "tables."),
+            Bullets(items)]
+
+
+def paper_row(u: float) -> tuple[str, str, str]:
+    """The paper's Table 3 values at U (m/s), or dashes."""
+    values = PAPER_TABLE3.get(round(u, 6)) if math.isfinite(u) else None
+    return values if values is not None else ("—", "—", "—")
+
+
+def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
+    """The paper's Table 3 from the compare summaries, beside the paper's values."""
+    header = ["U (m/s)", "Estimator", "E(RT) CFD-DEM (s)", "E(RT) MCM (s)", "PD of E(RT) (%)",
+              "SD(RT) CFD-DEM (s)", "SD(RT) MCM (s)", "PD of SD(RT) (%)", "MD of RTD",
+              "Mixing RMS", "Paper: PD of E(RT) (%)", "Paper: PD of SD(RT) (%)",
+              "Paper: MD of RTD"]
+    rows, pd_sd, pd_mean, orders, widths, exact = [], [], [], set(), set(), {}
+    for c in cases:
+        paper = paper_row(c.velocity)
+        u = f"{c.velocity:g}" if math.isfinite(c.velocity) else c.name
+        for e in c.estimators if c.estimators else [None]:
+            s = e.summary if e is not None and not c.problems else None
+            if s is None:
+                rows.append([u, e.name if e else "—"] + ["not finished"] * 8 + list(paper))
+                continue
+            ref, mod = s["reference"], s["model"]
+            rows.append([u, e.name, number_text(ref.get("rt_mean"), ".3f"),
+                         number_text(mod.get("rt_mean"), ".3f"),
+                         number_text(s.get("pd_rt_mean"), ".2f"), number_text(ref.get("rt_sd"), ".3f"),
+                         number_text(mod.get("rt_sd"), ".3f"), number_text(s.get("pd_rt_sd"), ".2f"),
+                         number_text(s.get("md_rtd"), ".3g"), number_text(s.get("mixing_rms"), ".3g")]
+                        + list(paper))
+            if (v := finite_or_none(s.get("pd_rt_sd"))) is not None:
+                pd_sd.append(v)
+            if (v := finite_or_none(s.get("pd_rt_mean"))) is not None:
+                pd_mean.append(v)
+            if (v := finite_or_none(s.get("md_order"))) is not None:
+                orders.add(v)
+            if (v := finite_or_none(s.get("bin_width"))) is not None:
+                widths.add(v)
+            ex = s.get("exact_events") or {}
+            exact.setdefault("CFD-DEM: exact pass events" if ex.get("reference")
+                             else "CFD-DEM: frame times", set()).add(c.name)
+    order_text = ", ".join(f"{k:g}" for k in sorted(orders)) or "n/a"
+    width_text = ", ".join(f"{w:g}" for w in sorted(widths)) or f"{DEFAULT_BIN_WIDTH:g}"
+    notes = [
+        "PD = 100 (MCM − CFD-DEM) / CFD-DEM, in % (docs/definitions.md, residence time); "
+        "E(RT) and SD(RT) over the predict window, SD with ddof = 1. The paper's columns quote "
+        "its Table 3; '—' where the paper has no case at this U.",
+        "The paper reports MD under a '%' heading. Our MD is Eq. 9 of order k = "
+        f"{order_text} (md_order of the compare summaries) on the RTD probabilities per "
+        f"{width_text} s bin (bins from 0 to the window length), a dimensionless distance; "
+        "compare its size with the paper's only loosely.",
+        "Mixing RMS: root-mean-square difference of the MCM and CFD-DEM mixing curves on the "
+        "model's frames, as a fraction of all particles (no paper value).",
+    ]
+    if exact:
+        notes.append("Residence-time moments: " + "; ".join(
+            f"{k} ({', '.join(sorted(v))})" for k, v in exact.items())
+            + "; MCM predictions: frame times.")
+    blocks = [Heading(2, "Table 3: RTD of the CFD-DEM and the MCM"), Table(header, rows, notes)]
+    if pd_mean:
+        under = sum(v < 0 for v in pd_sd)
+        blocks.append(Para(
+            f"PD of E(RT) ranges from {min(pd_mean):.2f} to {max(pd_mean):.2f} % (paper: 0.54 to "
+            f"11.89 %); the MCM's SD(RT) is smaller than the CFD-DEM's in {under} of "
+            f"{len(pd_sd)} comparisons (paper: all four, by 38 to 51 %)."))
+    return blocks
+
+
+def computing_blocks(cases: list[Case]) -> list:
+    """Computing times of the CFD-DEM and the MCM (the paper's §3.1)."""
+    header = ["U (m/s)", "CFD-DEM, predict window (wall)", "CFD-DEM run (wall / simulated)",
+              "CFD-DEM particle-steps/s", "Estimator", "MCM fit (wall)", "MCM predict (wall)",
+              "MCM fit + predict", "CFD-DEM / MCM"]
+    rows, ratios = [], []
+    for c in cases:
+        if not c.complete:
+            continue
+        t = c.timings
+        cfd = t.get("cfd_dem") if isinstance(t.get("cfd_dem"), dict) else {}
+        window_wall = finite_or_none(cfd.get("predict_window_wall_s"))
+        window_text = duration_text(window_wall)
+        if window_wall is not None and cfd.get("predict_window_estimated"):
+            window_text += " (estimated)"
+        wall, simulated = finite_or_none(cfd.get("wall_s")), finite_or_none(cfd.get("simulated_s"))
+        run_text = (f"{duration_text(wall)} / {simulated:g} s" if wall is not None
+                    and simulated is not None else "n/a")
+        particles = finite_or_none(cfd.get("particles"))
+        rate = "n/a"
+        if particles and simulated and wall and wall > 0:
+            steps = simulated / float(c.config.numerics.dem_time_step)
+            rate = f"{particles * steps / wall:.3g}"
+        for e in c.finished:
+            fit = finite_or_none((t.get(f"fit-{e.name}") or {}).get("wall_s")
+                          if isinstance(t.get(f"fit-{e.name}"), dict) else None)
+            pred = finite_or_none((t.get(f"predict-{e.name}") or {}).get("wall_s")
+                           if isinstance(t.get(f"predict-{e.name}"), dict) else None)
+            total = fit + pred if fit is not None and pred is not None else None
+            ratio = window_wall / total if window_wall is not None and total else None
+            if ratio is not None:
+                ratios.append(ratio)
+            rows.append([f"{c.velocity:g}", window_text, run_text, rate, e.name, duration_text(fit),
+                         duration_text(pred), duration_text(total), number_text(ratio, ".3g")])
+    rows.append(["paper (3–8)", f"about {duration_text(PAPER_CFD_DEM_S)} (5 s, 27000 particles)",
+                 "—", "—", "MCM", "—", "—", f"about {duration_text(PAPER_MCM_S)}",
+                 f"about {PAPER_SPEEDUP:g}"])
+    notes = ["Wall times as recorded in each case's timings.json ('n/a' where not recorded); "
+             "'estimated' marks a CFD-DEM time for the predict window extrapolated from a "
+             "shorter run.",
+             "Particle-steps/s = particles x (simulated time / DEM time step) / wall time of the "
+             "CFD-DEM run."]
+    blocks = [Heading(2, "Computing time (paper §3.1)"), Table(header, rows, notes)]
+    if ratios:
+        blocks.append(Para(
+            f"Over the predict window the MCM (fit + predict) is {min(ratios):.3g} to "
+            f"{max(ratios):.3g} times faster than the CFD-DEM (paper: about "
+            f"{PAPER_SPEEDUP:g} times, 50 h against 30 min)."))
+    else:
+        blocks.append(Para("No speed-up can be given: the wall times of the CFD-DEM over the "
+                            "predict window or of the MCM were not recorded."))
+    return blocks
+
+
+def warning_blocks(cases: list[Case], notes: list[str]) -> list:
+    """The warnings of the compare summaries and the report's own notes."""
+    items = []
+    for c in cases:
+        for e in c.finished:
+            for w in e.summary.get("warnings") or []:
+                items.append(f"{c.name} / {e.name}: {w}")
+    items += [f"report: {n}" for n in notes]
+    return [Heading(2, "Warnings"),
+            Bullets(items) if items else Para("No warnings from the comparisons.")]
+
+
+__all__ = ["DEFAULT_BIN_WIDTH", "PAPER_TABLE3", "computing_blocks", "header_blocks",
+           "not_finished_blocks", "paper_row", "shared_text", "table3_blocks", "warning_blocks",
+           "window_text"]
