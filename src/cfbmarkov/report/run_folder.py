@@ -24,7 +24,7 @@ Choices:
   estimator has its model, prediction and compare summary. Missing files of a case or an
   estimator are reported as "not finished"; files that exist but cannot be read are an
   InputError naming the file, as is a folder without any finished case.
-- Estimators are those with any file in any case (model-*, prediction-*, compare-*),
+- Estimators are those with any file in any case (``model-*``, ``prediction-*``, ``compare-*``),
   ordered paper, mle, then the rest alphabetically; an estimator missing from a case makes
   that case's row "not finished".
 
