@@ -64,7 +64,21 @@ def check_window(window) -> tuple[float, float]:
 
 
 def check_parameters(window, bin_width: float, md_order: float) -> tuple[float, float]:
-    """Check the parameters of a comparison; returns the window as (start, stop), s.
+    """Check the parameters of a comparison.
+
+    Parameters
+    ----------
+    window : sequence of two numbers
+        Analysis window (start, stop), s.
+    bin_width : float
+        RTD bin width, s.
+    md_order : float
+        Order k of the Minkowski distance (Eq. 9).
+
+    Returns
+    -------
+    (float, float)
+        The window as (start, stop), s.
 
     Raises
     ------
@@ -141,7 +155,20 @@ class ComparedRun:
         return float(self.mixing_fraction[0])
 
     def summary(self) -> dict[str, Any]:
-        """This side's part of summary.json (key order as written)."""
+        """This side's part of summary.json.
+
+        Returns
+        -------
+        dict
+            ``rt_mean`` and ``rt_sd`` (s), ``rt_count``, ``exact_events``, ``path``,
+            ``source``, ``n_particles``, ``frames``, ``frame_interval`` (s),
+            ``purple_fraction`` and ``left_group_fraction`` (the left tracer group's share,
+            -), in the key order written.
+
+        References
+        ----------
+        ``docs/definitions.md`` (File formats, Comparison summary).
+        """
         rt, traj = self.residence, self.traj
         return {"rt_mean": rt.mean, "rt_sd": rt.sd, "rt_count": rt.count,
                 "exact_events": rt.exact, "path": str(traj.path), "source": traj.source,
@@ -204,11 +231,23 @@ class RunComparison:
         return percentage_difference(self.model.residence.sd, self.reference.residence.sd)
 
     def summary(self) -> dict[str, Any]:
-        """The summary as a dict, in the key order of summary.json (undefined values NaN;
-        the ``figures`` and ``warnings`` keys are added by the writer).
+        """The summary as a dict, in the key order of summary.json.
 
         ``purple_fraction`` (per side) and ``same_purple_particles`` are the former names of
         ``left_group_fraction`` and ``same_tracer_groups`` and hold the same values.
+
+        Returns
+        -------
+        dict
+            Window (s), both sides (:meth:`ComparedRun.summary`), ``pd_rt_mean`` and
+            ``pd_rt_sd`` (%), ``md_rtd`` and ``md_order``, ``mixing_rms`` (fraction of all
+            particles), the RTD bins (s), the source of the pass times, the mixing frames,
+            the tracer-group check, the model's columns and the units. Undefined values are
+            NaN; the ``figures`` and ``warnings`` keys are added by the writer.
+
+        References
+        ----------
+        ``docs/definitions.md`` (File formats, Comparison summary); the paper's Table 3.
         """
         ref, mod = self.reference.residence, self.model.residence
         start, stop = self.window
@@ -264,6 +303,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     docs/definitions.md, sections "residence time" and "mixing": PD = 100 (MCM - CFD-DEM) /
     CFD-DEM (Table 3), MD = (sum_j |e_j - f_j|^k)^(1/k) on the RTD probabilities per bin
     (Eq. 9), mixing curves of Fig. 11.
+    The paper: Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614.
     """
     start, stop = check_parameters(window, bin_width, md_order)
     warnings: list[str] = []
@@ -335,6 +375,10 @@ def snapshot_frames(ref: Trajectories, pred: Trajectories, start: float, stop: f
     list of (float, int, int)
         (time s, frame index in ``ref``, frame index in ``pred``) at start + 0, 0.1, ...
         0.7 s inside the window, where both files have a frame.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 10.
     """
     chosen = []
     for offset in SNAPSHOT_OFFSETS:

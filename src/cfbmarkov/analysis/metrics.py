@@ -8,9 +8,27 @@ from cfbmarkov.errors import InputError
 
 
 def percentage_difference(model, reference):
-    """PD = 100 (model - reference) / reference, in % (NaN where the reference is 0 or NaN).
+    """Percentage difference PD = 100 (model - reference) / reference, in %.
 
-    Scalars give a float, arrays an array.
+    Parameters
+    ----------
+    model : float or array_like
+        The model's value(s), e.g. E(RT) or SD(RT) of a prediction, in any unit (s for
+        residence times).
+    reference : float or array_like
+        The reference value(s) (e.g. the CFD-DEM), in the same unit; broadcast against
+        ``model``.
+
+    Returns
+    -------
+    float or numpy.ndarray
+        PD in %; a float for scalar inputs, an array of the broadcast shape otherwise. NaN
+        where the reference is 0 or NaN.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3;
+    ``docs/definitions.md`` (Metrics, Percentage difference).
     """
     m = np.asarray(model, dtype=np.float64)
     r = np.asarray(reference, dtype=np.float64)
@@ -20,8 +38,31 @@ def percentage_difference(model, reference):
 
 
 def minkowski_distance(e, f, order: float = 2.0) -> float:
-    """Eq. (9): MD = (sum_j |e_j - f_j|^k)^(1/k) of two equally long arrays; ``order`` k > 0
-    (``np.inf`` gives the largest difference)."""
+    """Minkowski distance MD = (sum_j |e_j - f_j|^k)^(1/k) of two equally long arrays (Eq. 9).
+
+    Parameters
+    ----------
+    e, f : array_like
+        The two arrays, flattened; of equal size. For RTDs: probability per bin on shared
+        bins, shape (B,).
+    order : float, optional
+        The order k > 0; ``numpy.inf`` gives the largest absolute difference.
+
+    Returns
+    -------
+    float
+        The distance, in the unit of ``e`` and ``f`` (0 for empty arrays).
+
+    Raises
+    ------
+    InputError
+        When ``e`` and ``f`` differ in size, or ``order`` is not positive.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Eq. 9;
+    ``docs/definitions.md`` (Metrics, Minkowski distance).
+    """
     e = np.asarray(e, dtype=np.float64).reshape(-1)
     f = np.asarray(f, dtype=np.float64).reshape(-1)
     if e.shape != f.shape:
@@ -41,6 +82,33 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
 
     The reference is evaluated at the model's frame times by linear interpolation; the
     model's times must lie inside the reference's range (to round-off).
+
+    Parameters
+    ----------
+    ref_times : array_like, shape (T_ref,)
+        Frame times of the reference curve, s, strictly increasing.
+    ref_fraction : array_like, shape (T_ref,)
+        The reference mixing curve (fraction of all particles, -).
+    model_times : array_like, shape (T,)
+        Frame times of the model curve, s.
+    model_fraction : array_like, shape (T,)
+        The model mixing curve (fraction of all particles, -).
+
+    Returns
+    -------
+    float
+        sqrt(mean((model - reference)^2)) over the model's frames, a fraction of all
+        particles.
+
+    Raises
+    ------
+    InputError
+        When times and fractions of a curve differ in length, a curve is empty, the
+        reference times do not increase, or the model's times leave the reference's range.
+
+    References
+    ----------
+    ``docs/definitions.md`` (Metrics, Mixing RMS); the paper's Fig. 11.
     """
     rt = np.asarray(ref_times, dtype=np.float64).reshape(-1)
     rf = np.asarray(ref_fraction, dtype=np.float64).reshape(-1)

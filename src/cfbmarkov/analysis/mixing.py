@@ -106,6 +106,16 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
         Frame times, s.
     fraction : numpy.ndarray, shape (T,)
         The mixing curve of :func:`mixing_curve` (dimensionless).
+
+    Raises
+    ------
+    InputError
+        When the window is empty, leaves the file's frames or holds no frame.
+
+    References
+    ----------
+    ``docs/definitions.md`` (Mixing);
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 10-11.
     """
     frames = traj.window(float(window[0]), float(window[1]))
     half = 0.5 * traj.width

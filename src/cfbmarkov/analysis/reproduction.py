@@ -29,10 +29,25 @@ from cfbmarkov.errors import InputError
 
 @contextlib.contextmanager
 def reading_errors(path: str | os.PathLike):
-    """Turn low-level read failures of ``path`` into one InputError line naming it.
+    """Context manager: turn low-level read failures of ``path`` into one InputError line.
 
     HDF5 errors (OSError) and missing datasets (KeyError) become ``InputError("PATH:
     cannot be used (...)")``; InputErrors pass unchanged.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file being read, named in the error.
+
+    Returns
+    -------
+    contextlib.AbstractContextManager
+        A context manager that yields None.
+
+    Raises
+    ------
+    InputError
+        When the body raises OSError or KeyError (or an InputError, passed on).
     """
     try:
         yield
@@ -119,6 +134,12 @@ def measure_run(traj, window: tuple[float, float], bin_width: float) -> RunMeasu
     Returns
     -------
     RunMeasures
+
+    Raises
+    ------
+    InputError
+        When the window is empty or leaves the file's frames, or the file's pass events
+        are damaged (:func:`cfbmarkov.analysis.rtd.residence_times`).
     """
     from cfbmarkov.analysis.mixing import mixing_curve_of
     from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
@@ -151,6 +172,11 @@ def solids_profile(traj, window: tuple[float, float], config
     velocity : numpy.ndarray, shape (K,)
         Mean vertical solids velocity, m/s; NaN where no particle passed or the file has
         no velocities.
+
+    Raises
+    ------
+    InputError
+        When the window is empty or leaves the file's frames.
 
     References
     ----------
@@ -205,7 +231,12 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
     Raises
     ------
     InputError
-        Naming the file that cannot be read.
+        Naming the file that cannot be read (HDF5 error, missing dataset, damaged pass
+        events), or when the window leaves a file's frames.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 3-9 and 11.
     """
     from cfbmarkov.analysis.rtd import rtd_histogram
     from cfbmarkov.markov import MarkovModel
@@ -242,7 +273,8 @@ def implied_vertical_velocity(model) -> float:
 
     References
     ----------
-    docs/definitions.md, section "states and transitions".
+    docs/definitions.md, section "states and transitions";
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 3.
     """
     space = model.state_space
     P = np.asarray(model.transition_matrix)
@@ -272,6 +304,10 @@ def paper_map_times(velocity: float, lag: float) -> tuple[list[float], list[floa
         Each rounded to the nearest whole lag (halves up, at least one lag), s.
     rounded : bool
         Whether any time was changed.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 4-7.
     """
     wanted = [0.25, 0.5, 0.75] if velocity < 3.5 else [0.05, 0.10, 0.15]
     used = [max(1, math.floor(t / lag + 0.5 + 1e-9)) * lag for t in wanted]   # halves up
@@ -313,6 +349,11 @@ def batch_injection(model, times) -> BatchInjection:
     Returns
     -------
     BatchInjection
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Eqs. 5-6 and 8, Figs. 4-7;
+    ``docs/definitions.md`` (States and transitions, Batch injection).
     """
     maps = np.asarray(model.batch_injection_maps(times), dtype=np.float64)
     inside = np.asarray(model.batch_injection_maps(times, outflow=True), dtype=np.float64)
@@ -323,7 +364,18 @@ def batch_injection(model, times) -> BatchInjection:
 
 
 def nanmean(values: np.ndarray) -> float:
-    """Mean of the finite values (NaN when there is none)."""
+    """Mean of the finite values.
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        Any shape; NaN and infinite entries are ignored.
+
+    Returns
+    -------
+    float
+        The mean of the finite entries (NaN when there is none).
+    """
     finite = values[np.isfinite(values)]
     return float(finite.mean()) if finite.size else math.nan
 

@@ -62,12 +62,34 @@ def _new_levels_bound(laps: np.ndarray, running_max: np.ndarray) -> int:
 
 
 def residence_times_from_laps(times, laps) -> np.ndarray:
-    """Residence-time samples (s) from frames: ``times`` [T] (s), ``laps`` [T, N].
+    """Residence-time samples (s) from frames.
 
     The window is the span of the given frames: L is counted from its value in the first
     frame, and each frame time at which L exceeds its running maximum is a record (twice if
     L jumped by 2). Samples are the differences between consecutive records of the same
     particle, in the order in which they complete (by frame, then particle index).
+
+    Parameters
+    ----------
+    times : array_like, shape (T,)
+        Frame times, s.
+    laps : array_like of int, shape (T, N)
+        Lap counter L of each particle in each frame.
+
+    Returns
+    -------
+    numpy.ndarray, shape (K,)
+        Residence-time samples, s (empty for T = 0).
+
+    Raises
+    ------
+    InputError
+        When ``laps`` is not of shape (T, N) with T the number of ``times``, or its dtype
+        is not an integer type.
+
+    References
+    ----------
+    ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
     times = np.ascontiguousarray(times, dtype=np.float64)
     laps = np.asarray(laps)
@@ -118,11 +140,38 @@ def residence_times_from_events(lap_at_start, event_time, event_particle, event_
                                 start: float, stop: float) -> np.ndarray:
     """Residence-time samples (s) from exact pass events.
 
-    ``lap_at_start`` [N] is each particle's lap counter at ``start`` (s); the events (time s,
-    particle index, direction +1 up through the top / -1 down through the bottom), sorted by
-    time, are applied for ``start < t <= stop``. Each event that lifts a particle's counter
-    above its running maximum since ``start`` is a record; samples are the differences of
-    consecutive records of the same particle, in order of completion.
+    The events, sorted by time, are applied for ``start < t <= stop``. Each event that lifts
+    a particle's counter above its running maximum since ``start`` is a record; samples are
+    the differences of consecutive records of the same particle, in order of completion.
+
+    Parameters
+    ----------
+    lap_at_start : array_like of int, shape (N,)
+        Each particle's lap counter L at ``start``.
+    event_time : array_like, shape (E,)
+        Event times, s, sorted (non-decreasing).
+    event_particle : array_like of int, shape (E,)
+        Particle index (0 .. N - 1) of each event.
+    event_direction : array_like of int, shape (E,)
+        +1 for a pass up through the top, -1 for a pass down through the bottom.
+    start, stop : float
+        The window, s (``stop > start``).
+
+    Returns
+    -------
+    numpy.ndarray, shape (K,)
+        Residence-time samples, s.
+
+    Raises
+    ------
+    InputError
+        When the event arrays differ in length, the window is empty (``stop <= start``),
+        the events are not sorted by time, a particle index lies outside 0 .. N - 1, or a
+        direction is not +1 or -1.
+
+    References
+    ----------
+    ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
     lap_at_start = np.ascontiguousarray(lap_at_start, dtype=np.int64).reshape(-1)
     event_time = np.ascontiguousarray(event_time, dtype=np.float64).reshape(-1)
@@ -151,7 +200,17 @@ def residence_times_from_events(lap_at_start, event_time, event_particle, event_
 # -- wrapper -------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class ResidenceTimes:
-    """Residence-time samples (s) of one trajectory file in one window."""
+    """Residence-time samples (s) of one trajectory file in one window.
+
+    Attributes
+    ----------
+    samples : numpy.ndarray, shape (K,)
+        Residence-time samples, s.
+    exact : bool
+        True when exact pass events were used, False when frame times were.
+    window : (float, float)
+        The analysis window (start, stop), s.
+    """
 
     samples: np.ndarray
     #: True when exact pass events were used, False when frame times were
@@ -160,6 +219,7 @@ class ResidenceTimes:
 
     @property
     def count(self) -> int:
+        """Number of samples."""
         return int(self.samples.size)
 
     @property
@@ -179,11 +239,36 @@ class ResidenceTimes:
 
 
 def residence_times(traj, window: tuple[float, float], use_events: bool = True) -> ResidenceTimes:
-    """Residence-time samples of ``traj`` in ``window`` = (start, stop) s.
+    """Residence-time samples of a trajectory file in a window.
 
     Uses the file's exact pass events when it has them and ``use_events`` is true (counted
     from the lap counter of the window's first frame, events with t_first < t <= stop);
     otherwise the lap counters frame by frame, read in blocks.
+
+    Parameters
+    ----------
+    traj : cfbmarkov.trajectories.Trajectories
+        An open trajectory file.
+    window : (float, float)
+        Analysis window (start, stop), s.
+    use_events : bool, optional
+        Use the file's exact pass events (``/events``) when it has them.
+
+    Returns
+    -------
+    ResidenceTimes
+        The samples (s), whether exact events were used, and the window.
+
+    Raises
+    ------
+    InputError
+        When the window is empty, lies outside the file's frames or holds no frame
+        (:meth:`~cfbmarkov.trajectories.Trajectories.window`), or the file's pass events are
+        damaged (unsorted, unequal lengths, bad particle index or direction).
+
+    References
+    ----------
+    ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
     start, stop = float(window[0]), float(window[1])
     frames = traj.window(start, stop)
@@ -217,13 +302,40 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True) 
 
 def rtd_histogram(samples, bin_width: float = 0.025, *, window_length: float
                   ) -> tuple[np.ndarray, np.ndarray]:
-    """RTD as probability per bin: (edges [B+1] s, probability [B]).
+    """Residence-time distribution (RTD) as probability per bin.
 
     Bins are ``bin_width`` wide from 0 up to the window length (the last edge is the first
     multiple of the bin width at or above it), half-open [a, b). Samples lying within 1e-6
     bin widths below an edge count as on it, so frame-based samples that are whole multiples
-    of the bin width fall in the same bin whatever their round-off. The probabilities sum to
-    1 over the samples in range (all zero when there are none).
+    of the bin width fall in the same bin whatever their round-off. A sample exactly at the
+    window length falls in the last bin; samples outside the bins are dropped.
+
+    Parameters
+    ----------
+    samples : array_like
+        Residence-time samples, s (flattened).
+    bin_width : float, optional
+        Bin width, s.
+    window_length : float
+        Length of the analysis window, s (keyword only).
+
+    Returns
+    -------
+    edges : numpy.ndarray, shape (B + 1,)
+        Bin edges, s, from 0.
+    probability : numpy.ndarray, shape (B,)
+        Probability per bin (-), summing to 1 over the samples in range (all zero when
+        there are none).
+
+    Raises
+    ------
+    InputError
+        When ``bin_width`` or ``window_length`` is not finite and positive.
+
+    References
+    ----------
+    ``docs/definitions.md`` (Residence time, Residence-time distribution); the paper's
+    Figs. 8-9.
     """
     samples = np.asarray(samples, dtype=np.float64).reshape(-1)
     if not (np.isfinite(bin_width) and bin_width > 0):

@@ -18,9 +18,31 @@ from cfbmarkov.report.document import FigureBlock, Heading, Para, Table, number_
 
 
 def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
-    """Beyond the paper (issue 5): why the automatic model chose its state space and lag,
-    implied timescales against lag, and the Chapman-Kolmogorov test of each model on height
-    thirds and core/annulus, all on the fitting window."""
+    """Beyond the paper: memory states and lag diagnostics of each finished case.
+
+    Why the automatic model chose its state space and lag, implied timescales against lag,
+    and the Chapman-Kolmogorov test of each model on height thirds and core/annulus, all on
+    the fitting window.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    figures_dir : pathlib.Path
+        Folder the PNGs are written into.
+    written : list of str
+        Receives the file names of the PNGs written.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`).
+
+    Raises
+    ------
+    InputError
+        When a model file cannot be read (named in the message).
+    """
     from cfbmarkov.markov import MarkovModel, discretize
     from cfbmarkov.markov.diagnostics import (core_annulus, ck_test, height_bands,
                                               implied_timescales)

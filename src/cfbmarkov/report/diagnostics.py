@@ -24,6 +24,26 @@ def plot_implied_timescales(its: ImpliedTimescales, path, title: str | None = No
     The region t <= tau is shaded: a process faster than the lag is not resolved by the
     model. Lines that level off with the lag show Markovian dynamics on the states; for a
     non-reversible chain the timescales may approach their limit from above or below.
+
+    Parameters
+    ----------
+    its : cfbmarkov.markov.diagnostics.ImpliedTimescales
+        Implied timescales: ``lags`` shape (L,) s, ``timescales`` and ``eigenvalues``
+        shape (L, k).
+    path : str or os.PathLike
+        Output PNG file.
+    title : str, optional
+        Figure title; by default one naming the estimator and state space.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    Raises
+    ------
+    InputError
+        When ``its.timescales`` is not of shape (L, k) for the L >= 1 lags.
     """
     lags = np.asarray(its.lags, dtype=np.float64)
     ts = np.asarray(its.timescales, dtype=np.float64)
@@ -67,10 +87,34 @@ def plot_implied_timescales(its: ImpliedTimescales, path, title: str | None = No
 
 
 def plot_ck_test(ck: CKTest, path, title: str | None = None, full: bool = False) -> Path:
-    """Chapman-Kolmogorov test: per group A the probability to be in A (``full``: in every
-    group B) a time k·tau after being in A, from the data (points, ±1 standard error) and
-    predicted by the model's P^k (line), against the time k·tau (s). At t = 0 both are 1
-    (A -> A) or 0."""
+    """Chapman-Kolmogorov test, written as a PNG.
+
+    Per group A the probability to be in A (``full``: in every group B) a time k·tau after
+    being in A, from the data (points, ±1 standard error) and predicted by the model's P^k
+    (line), against the time k·tau (s). At t = 0 both are 1 (A -> A) or 0.
+
+    Parameters
+    ----------
+    ck : cfbmarkov.markov.diagnostics.CKTest
+        The test: ``predicted``, ``estimated`` and ``stderr`` of shape (K, G, G) for K
+        steps and G groups, ``times`` shape (K,) s.
+    path : str or os.PathLike
+        Output PNG file.
+    title : str, optional
+        Figure title; by default one naming the lag.
+    full : bool, optional
+        Draw every pair A -> B (a G x G grid) instead of A -> A only.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    Raises
+    ------
+    InputError
+        When ``ck.predicted`` or ``ck.estimated`` is not of shape (K, G, G).
+    """
     g = len(ck.group_names)
     k = ck.steps.size
     if ck.predicted.shape != (k, g, g) or ck.estimated.shape != (k, g, g):

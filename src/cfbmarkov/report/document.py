@@ -17,7 +17,18 @@ FIGURES = "figures"
 
 
 def finite_or_none(value) -> float | None:
-    """``value`` as a finite float, or None."""
+    """A value as a finite float, or None.
+
+    Parameters
+    ----------
+    value : object
+        Anything ``float()`` accepts.
+
+    Returns
+    -------
+    float or None
+        ``float(value)``; None when it cannot be converted or is not finite.
+    """
     try:
         v = float(value)
     except (TypeError, ValueError):
@@ -26,7 +37,15 @@ def finite_or_none(value) -> float | None:
 
 @dataclass
 class Heading:
-    """A heading of ``level`` 2 or 3."""
+    """A heading.
+
+    Attributes
+    ----------
+    level : int
+        2 or 3.
+    text : str
+        The heading text.
+    """
 
     level: int
     text: str
@@ -34,7 +53,15 @@ class Heading:
 
 @dataclass
 class Para:
-    """A paragraph (``css``: an HTML class, e.g. warn)."""
+    """A paragraph.
+
+    Attributes
+    ----------
+    text : str
+        The paragraph text.
+    css : str
+        An HTML class, e.g. ``warn`` (empty: none).
+    """
 
     text: str
     css: str = ""
@@ -42,14 +69,30 @@ class Para:
 
 @dataclass
 class Bullets:
-    """A bulleted list."""
+    """A bulleted list.
+
+    Attributes
+    ----------
+    items : list of str
+        The items.
+    """
 
     items: list[str]
 
 
 @dataclass
 class Table:
-    """A table with numbered notes below it."""
+    """A table with numbered notes below it.
+
+    Attributes
+    ----------
+    header : list of str
+        Column headings.
+    rows : list of list of str
+        The cells, row by row.
+    notes : list of str
+        Notes printed below the table, numbered from 1.
+    """
 
     header: list[str]
     rows: list[list[str]]
@@ -58,7 +101,17 @@ class Table:
 
 @dataclass
 class FigureBlock:
-    """A figure: PNG file name in figures/, title and caption sentence."""
+    """A figure.
+
+    Attributes
+    ----------
+    file : str
+        PNG file name in ``figures/``.
+    title : str
+        Figure title.
+    sentence : str
+        Caption sentence.
+    """
 
     file: str
     title: str
@@ -66,13 +119,38 @@ class FigureBlock:
 
 
 def number_text(value, spec: str, unit: str = "") -> str:
-    """``value`` formatted with ``spec`` (and ``unit``), or "n/a" when it is not finite."""
+    """A number as text, or "n/a" when it is not finite.
+
+    Parameters
+    ----------
+    value : object
+        The number (see :func:`finite_or_none`).
+    spec : str
+        Format specification, e.g. ``".3f"``.
+    unit : str, optional
+        Appended after the number, e.g. ``" s"``.
+
+    Returns
+    -------
+    str
+    """
     v = finite_or_none(value)
     return "n/a" if v is None else f"{v:{spec}}{unit}"
 
 
 def duration_text(seconds) -> str:
-    """A wall time in s, min or h (3 significant digits), or "n/a"."""
+    """A wall time in s, min or h (3 significant digits), or "n/a".
+
+    Parameters
+    ----------
+    seconds : object
+        The duration, s (see :func:`finite_or_none`).
+
+    Returns
+    -------
+    str
+        Seconds below 120 s, minutes below 2 h, else hours; "n/a" when not finite.
+    """
     s = finite_or_none(seconds)
     if s is None:
         return "n/a"
@@ -88,7 +166,21 @@ def _md_cell(text: str) -> str:
 
 
 def render_markdown(title: str, blocks) -> str:
-    """The blocks as Markdown, figures linked as ``figures/NAME.png``."""
+    """The blocks as Markdown, figures linked as ``figures/NAME.png``.
+
+    Parameters
+    ----------
+    title : str
+        Document title (the level-1 heading).
+    blocks : iterable
+        :class:`Heading`, :class:`Para`, :class:`Bullets`, :class:`Table` and
+        :class:`FigureBlock` objects.
+
+    Returns
+    -------
+    str
+        The Markdown text, ending in a newline.
+    """
     out = [f"# {title}", ""]
     for b in blocks:
         if isinstance(b, Heading):
@@ -130,7 +222,25 @@ p.warn { color: #8a4b00; }
 
 
 def render_html(title: str, blocks, figures_dir: Path) -> str:
-    """The blocks as one self-contained HTML page (figures read from ``figures_dir``)."""
+    """The blocks as one self-contained HTML page.
+
+    Figures are embedded as base64 ``data:`` URIs, styles inline.
+
+    Parameters
+    ----------
+    title : str
+        Document title.
+    blocks : iterable
+        :class:`Heading`, :class:`Para`, :class:`Bullets`, :class:`Table` and
+        :class:`FigureBlock` objects.
+    figures_dir : pathlib.Path
+        Folder the figures' PNGs are read from.
+
+    Returns
+    -------
+    str
+        The HTML text.
+    """
     e = html.escape
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
            f"<title>{e(title)}</title>", f"<style>{_CSS}</style>", "</head>", "<body>",
@@ -159,14 +269,28 @@ def render_html(title: str, blocks, figures_dir: Path) -> str:
 
 
 def readable_mode() -> int:
-    """rw for everyone the umask allows (temporary files of atomic_path are 0600)."""
+    """File mode rw for everyone the umask allows (temporary files of atomic_path are 0600).
+
+    Returns
+    -------
+    int
+        ``0o666`` less the current umask.
+    """
     mask = os.umask(0o022)
     os.umask(mask)
     return 0o666 & ~mask
 
 
 def write_utf8(path: Path, text: str) -> None:
-    """Write ``text`` to ``path`` atomically, readable as the umask allows."""
+    """Write text to a file atomically, readable as the umask allows.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file.
+    text : str
+        Written as UTF-8.
+    """
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
         os.chmod(tmp, readable_mode())

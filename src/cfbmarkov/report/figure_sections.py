@@ -54,6 +54,28 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def fig3_blocks(done, measures, figures_dir: Path, written: list[str]) -> list:
+    """Fig. 3: the transition matrices of all finished cases as bar graphs.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+    figures_dir : pathlib.Path
+        Folder the PNGs are written into.
+    written : list of str
+        Receives the file names of the PNGs written.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`).
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 3.
+    """
     name = "fig03-transition-matrices.png"
     panels, velocities = [], []
     for c in done:
@@ -74,6 +96,25 @@ def fig3_blocks(done, measures, figures_dir: Path, written: list[str]) -> list:
 
 
 def map_numbers(cases: list[Case]) -> dict[str, int]:
+    """Figure number (4-7) of each case's batch-injection maps.
+
+    With at most four cases, by position among the cases sorted by U (4, 5, 6, 7); with
+    more, the number of the paper's nearest U (3, 4, 6, 8 m/s; 7 when U is not finite).
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+
+    Returns
+    -------
+    dict of str to int
+        Figure number by case name.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 4-7.
+    """
     if len(cases) <= 4:
         return {c.name: 4 + k for k, c in enumerate(cases)}
     papers = sorted(PAPER_MAP_FIGURE)
@@ -88,6 +129,30 @@ def map_numbers(cases: list[Case]) -> dict[str, int]:
 
 
 def maps_blocks(cases, done, measures, figures_dir: Path, written: list[str]) -> list:
+    """Fig. 4-7: batch-injection probability maps of each finished case.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U (they number the figures, :func:`map_numbers`).
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+    figures_dir : pathlib.Path
+        Folder the PNGs are written into.
+    written : list of str
+        Receives the file names of the PNGs written.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`).
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Eqs. 5-6 and 8, Figs. 4-7.
+    """
 
     numbers = map_numbers(cases)
     blocks = [Heading(2, "Fig. 4–7: Batch-injection probability maps"),
@@ -126,6 +191,30 @@ def maps_blocks(cases, done, measures, figures_dir: Path, written: list[str]) ->
 
 
 def rtd_blocks(done, measures, estimators, figures_dir: Path, written: list[str]) -> list:
+    """Fig. 8-9: RTDs of the CFD-DEM and of each estimator's prediction.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+    estimators : list of str
+        The estimators of the run, in report order.
+    figures_dir : pathlib.Path
+        Folder the PNGs are written into.
+    written : list of str
+        Receives the file names of the PNGs written.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`).
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 8-9.
+    """
     panels8, panels9 = [], []
     for c in done:
         measured = measures[c.name]
@@ -170,6 +259,33 @@ def rtd_blocks(done, measures, estimators, figures_dir: Path, written: list[str]
 
 
 def snapshot_blocks(done, measures, figures_dir: Path, written: list[str]) -> list:
+    """Fig. 10: the particle snapshots of the case nearest to U = 6 m/s.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+    figures_dir : pathlib.Path
+        Folder the PNGs are written into.
+    written : list of str
+        Receives the file names of the PNGs written.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`).
+
+    Raises
+    ------
+    InputError
+        When the copied ``compare-*/snapshots.png`` is not a PNG image.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 10.
+    """
     name = "fig10-snapshots.png"
     blocks: list = [Heading(2, "Fig. 10: Particle snapshots")]
     candidates = []
@@ -210,6 +326,30 @@ def snapshot_blocks(done, measures, figures_dir: Path, written: list[str]) -> li
 
 
 def mixing_blocks(done, measures, estimators, figures_dir: Path, written: list[str]) -> list:
+    """Fig. 11: mixing curves of the CFD-DEM and of each estimator's prediction.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+    estimators : list of str
+        The estimators of the run, in report order.
+    figures_dir : pathlib.Path
+        Folder the PNGs are written into.
+    written : list of str
+        Receives the file names of the PNGs written.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`).
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 11.
+    """
     name = "fig11-mixing.png"
     panels, parts = [], []
     for c in done:
@@ -235,6 +375,26 @@ def mixing_blocks(done, measures, estimators, figures_dir: Path, written: list[s
 
 def plausibility_blocks(done, measures, estimators, figures_dir: Path,
                          written: list[str]) -> list:
+    """Plausibility of the CFD-DEM: E(RT) and SD(RT) against U, and radial solids profiles.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+    estimators : list of str
+        The estimators of the run, in report order.
+    figures_dir : pathlib.Path
+        Folder the PNGs are written into.
+    written : list of str
+        Receives the file names of the PNGs written.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`).
+    """
     name = "plausibility.png"
     u = [c.velocity for c in done]
     means = [measures[c.name].reference.rt.mean for c in done]

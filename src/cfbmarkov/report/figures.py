@@ -52,10 +52,39 @@ def _riser_axes(ax, width: float, height: float, *, xlabel: bool = True, ylabel:
 # -- transition matrix (Fig. 3) --------------------------------------------------------------
 def plot_transition_matrix(P, columns: int, rows: int, path, *, title: str | None = None,
                            grid: bool = False) -> Path:
-    """Heatmap of the S x S transition matrix: from state i (rows, top to bottom) to state j
-    (columns), nonzero entries on a log colour scale, zeros blank. When S = columns x rows
-    the top and right axes give the riser row of the state (s = row*m + col); ``grid`` draws
-    a line between every row of cells."""
+    """Heatmap of the S x S transition matrix, written as a PNG.
+
+    From state i (rows, top to bottom) to state j (columns), nonzero entries on a log colour
+    scale, zeros blank. When S = columns x rows the top axis gives the riser row of the
+    state (s = row*m + col).
+
+    Parameters
+    ----------
+    P : array_like, shape (S, S)
+        Transition matrix, P_ij the probability to go from state i to state j in one lag.
+    columns, rows : int
+        Cells across (m) and along the riser.
+    path : str or os.PathLike
+        Output PNG file.
+    title : str, optional
+        Figure title; by default one naming the states, cells and nonzero entries.
+    grid : bool, optional
+        Draw a line between every row of cells.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    Raises
+    ------
+    InputError
+        When ``P`` is not a non-empty square matrix.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 3.
+    """
     P = np.asarray(P, dtype=np.float64)
     if P.ndim != 2 or P.shape[0] != P.shape[1] or P.shape[0] == 0:
         raise InputError(f"transition matrix must be square, got shape {P.shape}")
@@ -93,8 +122,28 @@ def plot_transition_matrix(P, columns: int, rows: int, path, *, title: str | Non
 
 
 def draw_stems(ax, i, j, p, n_states: int, norm, linewidth: float = 0.8):
-    """Vertical stems of height p at (i, j) on 3D axes, coloured by p (tallest drawn last);
-    the axes span the n_states x n_states matrix. Returns the collection (for a colour bar)."""
+    """Vertical stems of height p at (i, j) on 3D axes, coloured by p (tallest drawn last).
+
+    Parameters
+    ----------
+    ax : mpl_toolkits.mplot3d.axes3d.Axes3D
+        The 3D axes; their limits are set to span the n_states x n_states matrix.
+    i, j : numpy.ndarray of int, shape (K,)
+        From-state and to-state of each stem.
+    p : numpy.ndarray, shape (K,)
+        Stem heights (transition probabilities, -).
+    n_states : int
+        Number of states S.
+    norm : matplotlib.colors.Normalize
+        Colour normalisation; its ``vmax`` is also the height of the z axis.
+    linewidth : float, optional
+        Stem line width, points.
+
+    Returns
+    -------
+    mpl_toolkits.mplot3d.art3d.Line3DCollection
+        The stems (for a colour bar).
+    """
     from mpl_toolkits.mplot3d.art3d import Line3DCollection
 
     order = np.argsort(p)
@@ -110,8 +159,36 @@ def draw_stems(ax, i, j, p, n_states: int, norm, linewidth: float = 0.8):
 
 def plot_transition_bars(P, path, *, title: str | None = None, min_probability: float = 0.0
                          ) -> Path:
-    """The paper's Fig. 3 bar view: a vertical stem of height P_ij at (state i, state j) for
-    every nonzero entry (above ``min_probability``), coloured by its value."""
+    """The paper's Fig. 3 bar view of a transition matrix, written as a PNG.
+
+    A vertical stem of height P_ij at (state i, state j) for every entry above
+    ``min_probability``, coloured by its value.
+
+    Parameters
+    ----------
+    P : array_like, shape (S, S)
+        Transition matrix.
+    path : str or os.PathLike
+        Output PNG file.
+    title : str, optional
+        Figure title.
+    min_probability : float, optional
+        Entries at or below this probability are not drawn.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    Raises
+    ------
+    InputError
+        When ``P`` is not a non-empty square matrix.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 3.
+    """
     P = np.asarray(P, dtype=np.float64)
     if P.ndim != 2 or P.shape[0] != P.shape[1] or P.shape[0] == 0:
         raise InputError(f"transition matrix must be square, got shape {P.shape}")
@@ -136,8 +213,39 @@ def plot_transition_bars(P, path, *, title: str | None = None, min_probability: 
 # -- batch injection maps (Fig. 4-7) ---------------------------------------------------------
 def plot_probability_maps(maps, times: Sequence[float], width: float, height: float, path,
                           title: str | None = None) -> Path:
-    """Panels side by side of the probability per cell over the riser (maps [k, rows,
-    columns], row 0 at the bottom), one per time (s), on one shared colour scale."""
+    """Batch-injection maps: panels side by side of the probability per cell over the riser.
+
+    One panel per time, on one shared colour scale; a panel whose total differs from 1
+    gives the share still in the riser.
+
+    Parameters
+    ----------
+    maps : array_like, shape (K, rows, columns) or (rows, columns)
+        Probability per cell (-), row 0 at the bottom.
+    times : sequence of float, length K
+        Time of each map, s.
+    width, height : float
+        Riser width W and height H, m.
+    path : str or os.PathLike
+        Output PNG file.
+    title : str, optional
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    Raises
+    ------
+    InputError
+        When ``maps`` is not of shape (K, rows, columns) with K >= 1, or ``times`` does not
+        have K entries.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 4-7.
+    """
     maps = np.asarray(maps, dtype=np.float64)
     if maps.ndim == 2:
         maps = maps[None]
@@ -181,8 +289,42 @@ def _stats(stats) -> tuple[float, float, int | None]:
 
 def plot_rtd(edges, prob_reference, prob_model, stats_ref, stats_model, path, *,
              labels: tuple[str, str] = ("reference", "model"), title: str | None = None) -> Path:
-    """Both RTDs as probability per bin on shared ``edges`` (s); the legend gives E(RT) and
-    SD(RT) (``stats_*``: a mapping with mean, sd [, count], or a (mean, sd[, count]) tuple)."""
+    """Both RTDs as probability per bin on shared bins, written as a PNG.
+
+    The legend gives E(RT) and SD(RT); dashed lines mark the means.
+
+    Parameters
+    ----------
+    edges : array_like, shape (B + 1,)
+        Bin edges, s.
+    prob_reference, prob_model : array_like, shape (B,)
+        Probability per bin (-) of the reference and the model.
+    stats_ref, stats_model : mapping or tuple
+        E(RT), SD(RT) (s) and optionally the sample count: a mapping with ``mean``, ``sd``
+        [, ``count``] (or ``rt_mean``, ``rt_sd``, ``rt_count``), or a tuple
+        (mean, sd[, count]).
+    path : str or os.PathLike
+        Output PNG file.
+    labels : (str, str), optional
+        Legend names of the reference and the model.
+    title : str, optional
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    Raises
+    ------
+    InputError
+        When ``edges`` is not 1D or the probabilities do not have B = ``edges.size - 1``
+        entries each.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 8-9.
+    """
     edges = np.asarray(edges, dtype=np.float64)
     pr = np.asarray(prob_reference, dtype=np.float64)
     pm = np.asarray(prob_model, dtype=np.float64)
@@ -221,9 +363,43 @@ def plot_snapshots(positions_ref, positions_model, left_group_ref, left_group_mo
                    times: Sequence[float], width: float, height: float, path, *,
                    labels: tuple[str, str] = ("reference", "model"), title: str | None = None
                    ) -> Path:
-    """k snapshot pairs like the paper's Fig. 10: top row reference, bottom row model,
-    particles of the left tracer group (x < W/2 at the window start, ``left_group_*`` [N]
-    bool) drawn purple, the others green. ``positions_*`` [k, N, 2] (m)."""
+    """K snapshot pairs like the paper's Fig. 10, written as a PNG.
+
+    Top row reference, bottom row model; particles of the left tracer group (x < W/2 at the
+    window start) are drawn purple, the others green.
+
+    Parameters
+    ----------
+    positions_ref, positions_model : array_like, shape (K, N, 2) or (N, 2)
+        Particle positions (x, y), m, of the reference and the model at each time.
+    left_group_ref, left_group_model : array_like of bool, shape (N,)
+        Left tracer group of each side.
+    times : sequence of float, length K
+        Snapshot times, s.
+    width, height : float
+        Riser width W and height H, m.
+    path : str or os.PathLike
+        Output PNG file.
+    labels : (str, str), optional
+        Row names of the reference and the model.
+    title : str, optional
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    Raises
+    ------
+    InputError
+        When the positions are not of shape (K, N, 2) with K the number of ``times``, or a
+        tracer-group mask does not have one entry per particle of its side.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 10; ``docs/definitions.md`` (Mixing).
+    """
     pref = np.asarray(positions_ref, dtype=np.float64)
     pmod = np.asarray(positions_model, dtype=np.float64)
     if pref.ndim == 2:
@@ -264,9 +440,35 @@ def plot_snapshots(positions_ref, positions_model, left_group_ref, left_group_mo
 def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
                 labels: tuple[str, str] = ("reference", "model"), title: str | None = None,
                 well_mixed: float | None = None) -> Path:
-    """Fraction of all particles that are in the left tracer group (drawn purple) and in the
-    left half, against time, for
-    both sides; ``well_mixed`` draws the level of a fully mixed bed as a dotted line."""
+    """Mixing curves of both sides against time, written as a PNG.
+
+    The fraction of all particles that are in the left tracer group (drawn purple) and in
+    the left half (x < W/2).
+
+    Parameters
+    ----------
+    times_ref, frac_ref : array_like, shape (T_ref,)
+        Frame times (s) and mixing curve (-) of the reference.
+    times_model, frac_model : array_like, shape (T,)
+        Frame times (s) and mixing curve (-) of the model.
+    path : str or os.PathLike
+        Output PNG file.
+    labels : (str, str), optional
+        Legend names of the reference and the model.
+    title : str, optional
+        Figure title.
+    well_mixed : float, optional
+        Level of a fully mixed bed (-), drawn as a dotted line when given and finite.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 11; ``docs/definitions.md`` (Mixing).
+    """
     fig = Figure(figsize=(8.0, 4.6), layout="constrained")
     ax = fig.add_subplot()
     tr, fr = np.asarray(times_ref, float), np.asarray(frac_ref, float)

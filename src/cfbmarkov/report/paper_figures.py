@@ -42,7 +42,21 @@ def _letter(k: int) -> str:
 
 
 def estimator_colour(name: str, names: Sequence[str]) -> str:
-    """Line colour of an estimator (fixed for paper and mle, else by position in ``names``)."""
+    """Line colour of an estimator.
+
+    Parameters
+    ----------
+    name : str
+        The estimator.
+    names : sequence of str
+        All estimators of the report; estimators other than ``paper`` and ``mle`` take
+        their colour by position among the others.
+
+    Returns
+    -------
+    str
+        A matplotlib colour (hex), fixed for ``paper`` and ``mle``.
+    """
     if name in ESTIMATOR_COLOURS:
         return ESTIMATOR_COLOURS[name]
     others = [n for n in names if n not in ESTIMATOR_COLOURS]
@@ -52,8 +66,29 @@ def estimator_colour(name: str, names: Sequence[str]) -> str:
 
 def plot_transition_bars_grid(panels: Sequence[tuple[str, np.ndarray]], path, title: str
                                ) -> Path:
-    """Fig. 3: one 3D bar (stem) panel per velocity, P_ij at (state i, state j), on one
-    shared colour scale (the style of figures.plot_transition_bars)."""
+    """Fig. 3: one 3D bar (stem) panel per velocity, written as a PNG.
+
+    P_ij drawn as a stem at (state i, state j), on one colour scale shared by all panels
+    (the style of :func:`cfbmarkov.report.figures.plot_transition_bars`).
+
+    Parameters
+    ----------
+    panels : sequence of (str, numpy.ndarray)
+        Per panel its label and transition matrix, shape (S, S).
+    path : str or os.PathLike
+        Output PNG file.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 3.
+    """
     from matplotlib.colors import Normalize
     from matplotlib.figure import Figure
 
@@ -86,8 +121,28 @@ def plot_transition_bars_grid(panels: Sequence[tuple[str, np.ndarray]], path, ti
 
 
 def plot_rtd_grid(panels, path, title: str) -> Path:
-    """Fig. 8/9: one RTD panel per velocity. ``panels``: (label, edges, series) with series
-    (name, probability, ResidenceTimes, colour, filled)."""
+    """Fig. 8/9: one RTD panel per velocity, written as a PNG.
+
+    Parameters
+    ----------
+    panels : sequence of (str, numpy.ndarray, sequence)
+        Per panel (label, edges, series): bin edges shape (B + 1,) in s, and series of
+        (name, probability per bin shape (B,), :class:`~cfbmarkov.analysis.rtd.ResidenceTimes`,
+        colour, filled).
+    path : str or os.PathLike
+        Output PNG file.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 8-9.
+    """
     from cfbmarkov.report.figures import _save
 
     fig, axes = _panel_axes(len(panels), 5.6, 3.9)
@@ -119,8 +174,28 @@ def plot_rtd_grid(panels, path, title: str) -> Path:
 
 
 def plot_mixing_grid(panels, path, title: str) -> Path:
-    """Fig. 11: one mixing panel per velocity. ``panels``: (label, series, well_mixed) with
-    series (name, times, fraction, colour, line width)."""
+    """Fig. 11: one mixing panel per velocity, written as a PNG.
+
+    Parameters
+    ----------
+    panels : sequence of (str, sequence, float or None)
+        Per panel (label, series, well_mixed): series of (name, frame times shape (T,) in s,
+        mixing curve shape (T,) (-), colour, line width); ``well_mixed`` (-) is drawn as a
+        dashed line when given and finite.
+    path : str or os.PathLike
+        Output PNG file.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 11; ``docs/definitions.md`` (Mixing).
+    """
     from cfbmarkov.report.figures import _save
 
     fig, axes = _panel_axes(len(panels), 5.4, 3.7)
@@ -147,9 +222,33 @@ def plot_mixing_grid(panels, path, title: str) -> Path:
 
 
 def plot_plausibility(velocities, means, sds, model_means, profiles, path, title: str) -> Path:
-    """(a) E(RT) and SD(RT) of the CFD-DEM (and E(RT) of each estimator) against U; (b)
+    """The plausibility figure of the CFD-DEM, written as a PNG.
+
+    (a) E(RT) and SD(RT) of the CFD-DEM (and E(RT) of each estimator) against U; (b)
     solids volume fraction and (c) mean vertical solids velocity across the riser, one line
-    per U (the core-annulus structure)."""
+    per U (the core-annulus structure).
+
+    Parameters
+    ----------
+    velocities : sequence of float, length C
+        Superficial gas velocity U of each case, m/s.
+    means, sds : sequence of float, length C
+        E(RT) and SD(RT) of the CFD-DEM, s.
+    model_means : dict of str to sequence of float
+        E(RT) of each estimator's prediction per case, s (NaN where missing).
+    profiles : sequence of (str, numpy.ndarray, numpy.ndarray, numpy.ndarray)
+        Per case (label, bin centres x in m, solids volume fraction (-), mean vertical
+        solids velocity in m/s), each array of shape (K,).
+    path : str or os.PathLike
+        Output PNG file.
+    title : str
+        Figure title.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``, where the PNG was written.
+    """
     from matplotlib.figure import Figure
 
     from cfbmarkov.report.figures import _save

@@ -53,12 +53,35 @@ REFERENCE = "cfd-dem.h5"
 
 
 def input_error(path: Path, what: str) -> InputError:
-    """A one-line InputError naming ``path``."""
+    """A one-line InputError naming a file.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The file or folder at fault.
+    what : str
+        What is wrong with it (whitespace runs become single spaces).
+
+    Returns
+    -------
+    InputError
+        ``InputError("PATH: WHAT")``, to be raised by the caller.
+    """
     return InputError(f"{path}: {' '.join(str(what).split())}")
 
 
 def read_json(path: Path) -> Any:
     """The JSON value of a file.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        A UTF-8 JSON file.
+
+    Returns
+    -------
+    object
+        The decoded value.
 
     Raises
     ------
@@ -85,6 +108,16 @@ def _config_error(path: Path, exc) -> InputError:
 
 def read_config(path: Path):
     """The :class:`~cfbmarkov.config.CaseConfig` of a ``case.json``.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The ``case.json`` file.
+
+    Returns
+    -------
+    CaseConfig
+        The validated case.
 
     Raises
     ------
@@ -142,7 +175,19 @@ def config_of_reference(path: Path):
 
 
 def estimator_names(case_dirs: Sequence[Path]) -> list[str]:
-    """Estimators with any file in any of ``case_dirs``: paper, mle, then the rest sorted."""
+    """Estimators with any file in any of the case folders.
+
+    Parameters
+    ----------
+    case_dirs : sequence of pathlib.Path
+        Case folders; those that do not exist are skipped.
+
+    Returns
+    -------
+    list of str
+        Names from ``model-*.h5``, ``prediction-*.h5`` and ``compare-*/``: paper, mle, then
+        the rest sorted.
+    """
     names: set[str] = set()
     for d in case_dirs:
         if not d.is_dir():
@@ -158,7 +203,21 @@ def estimator_names(case_dirs: Sequence[Path]) -> list[str]:
 
 @dataclass
 class EstimatorRun:
-    """The files of one estimator ("model") in one case, and its compare summary once read."""
+    """The files of one estimator ("model") in one case, and its compare summary once read.
+
+    Attributes
+    ----------
+    name : str
+        The estimator.
+    model : pathlib.Path
+        ``model-<name>.h5``.
+    prediction : pathlib.Path
+        ``prediction-<name>.h5``.
+    summary_path : pathlib.Path
+        ``compare-<name>/summary.json``.
+    summary : dict or None
+        The compare summary once read (None: not finished).
+    """
 
     name: str
     model: Path
@@ -168,6 +227,7 @@ class EstimatorRun:
 
     @property
     def compare_dir(self) -> Path:
+        """The folder ``compare-<name>`` of the compare output."""
         return self.summary_path.parent
 
     @property
@@ -214,22 +274,27 @@ class Case:
 
     @property
     def reference(self) -> Path:
+        """The CFD-DEM trajectory file ``cfd-dem.h5`` of the case."""
         return self.path / REFERENCE
 
     @property
     def finished(self) -> list[EstimatorRun]:
+        """The estimators whose compare summary has been read."""
         return [e for e in self.estimators if e.summary is not None]
 
     @property
     def complete(self) -> bool:
+        """Whether the case has no case-level problem and at least one finished estimator."""
         return not self.problems and bool(self.finished)
 
     @property
     def reasons(self) -> list[str]:
+        """Why the case or any of its estimators is not finished (empty when all are)."""
         return self.problems + [m for e in self.estimators if (m := e.missing)]
 
     @property
     def label(self) -> str:
+        """"U = ... m/s" for the report, or the folder name when U is unknown."""
         return f"U = {self.velocity:g} m/s" if math.isfinite(self.velocity) else self.name
 
 
@@ -240,6 +305,7 @@ class RunFolder:
     Attributes
     ----------
     root : pathlib.Path
+        The run folder.
     manifest : dict
         reproduce.json.
     cases : list of Case
@@ -255,6 +321,7 @@ class RunFolder:
 
     @property
     def finished(self) -> list[Case]:
+        """The complete cases (:attr:`Case.complete`), sorted by U."""
         return [c for c in self.cases if c.complete]
 
 

@@ -38,7 +38,17 @@ DEFAULT_BIN_WIDTH = 0.025
 
 
 def shared_text(values: dict[str, str]) -> str:
-    """One value when all cases agree, else 'case: value' for each."""
+    """One value when all cases agree, else 'case: value' for each.
+
+    Parameters
+    ----------
+    values : dict of str to str
+        A text per case name.
+
+    Returns
+    -------
+    str
+    """
     distinct = list(dict.fromkeys(values.values()))
     if len(distinct) == 1:
         return distinct[0]
@@ -46,12 +56,39 @@ def shared_text(values: dict[str, str]) -> str:
 
 
 def window_text(window) -> str:
-    """A window (start, stop) in s as text."""
+    """A window (start, stop) in s as text.
+
+    Parameters
+    ----------
+    window : sequence of two numbers
+        (start, stop), s.
+
+    Returns
+    -------
+    str
+        E.g. "5–10 s".
+    """
     return f"{float(window[0]):g}–{float(window[1]):g} s"
 
 
 def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
-    """The run: scale, cases, riser, windows, lag, cells, estimators, version."""
+    """The run: scale, cases, riser, windows, lag, cells, estimators, version.
+
+    Parameters
+    ----------
+    meta : dict
+        The run's ``reproduce.json``.
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+    estimators : list of str
+        The estimators of the run, in report order.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`; empty when there
+        is nothing to say).
+    """
     from cfbmarkov import __version__
 
     configured = [c for c in cases if c.config is not None]
@@ -82,7 +119,19 @@ def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
 
 
 def not_finished_blocks(cases: list[Case]) -> list:
-    """The cases and estimators that have not completed every stage."""
+    """The cases and estimators that have not completed every stage.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`; empty when there
+        is nothing to say).
+    """
     pending = [c for c in cases if not c.complete or c.reasons]
     if not pending:
         return []
@@ -98,13 +147,48 @@ def not_finished_blocks(cases: list[Case]) -> list:
 
 
 def paper_row(u: float) -> tuple[str, str, str]:
-    """The paper's Table 3 values at U (m/s), or dashes."""
+    """The paper's Table 3 values at a velocity, or dashes.
+
+    Parameters
+    ----------
+    u : float
+        Superficial gas velocity U, m/s.
+
+    Returns
+    -------
+    (str, str, str)
+        PD of E(RT) (%), PD of SD(RT) (%) and MD of the RTD as printed in the paper;
+        ("—", "—", "—") where the paper has no case at U.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3.
+    """
     values = PAPER_TABLE3.get(round(u, 6)) if math.isfinite(u) else None
     return values if values is not None else ("—", "—", "—")
 
 
 def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
-    """The paper's Table 3 from the compare summaries, beside the paper's values."""
+    """The paper's Table 3 from the compare summaries, beside the paper's values.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+    estimators : list of str
+        The estimators of the run, in report order.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`; empty when there
+        is nothing to say).
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3 and Eq. 9;
+    ``docs/definitions.md`` (Metrics).
+    """
     header = ["U (m/s)", "Estimator", "E(RT) CFD-DEM (s)", "E(RT) MCM (s)", "PD of E(RT) (%)",
               "SD(RT) CFD-DEM (s)", "SD(RT) MCM (s)", "PD of SD(RT) (%)", "MD of RTD",
               "Mixing RMS", "Paper: PD of E(RT) (%)", "Paper: PD of SD(RT) (%)",
@@ -164,7 +248,23 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
 
 
 def computing_blocks(cases: list[Case]) -> list:
-    """Computing times of the CFD-DEM and the MCM (the paper's §3.1)."""
+    """Computing times of the CFD-DEM and the MCM (the paper's §3.1).
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`; empty when there
+        is nothing to say).
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Section 3.1.
+    """
     header = ["U (m/s)", "CFD-DEM, predict window (wall)", "CFD-DEM run (wall / simulated)",
               "CFD-DEM particle-steps/s", "Estimator", "MCM fit (wall)", "MCM predict (wall)",
               "MCM fit + predict", "CFD-DEM / MCM"]
@@ -218,7 +318,21 @@ def computing_blocks(cases: list[Case]) -> list:
 
 
 def warning_blocks(cases: list[Case], notes: list[str]) -> list:
-    """The warnings of the compare summaries and the report's own notes."""
+    """The warnings of the compare summaries and the report's own notes.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+    notes : list of str
+        The report's own notes.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`; empty when there
+        is nothing to say).
+    """
     items = []
     for c in cases:
         for e in c.finished:
