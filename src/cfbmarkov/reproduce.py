@@ -53,7 +53,19 @@ MODELS = ("paper", "mle", "auto")
 
 @dataclass(frozen=True)
 class Scale:
-    """A set of changes applied to the paper's cases (nested dict, as in a case TOML)."""
+    """A set of changes applied to the paper's cases (nested dict, as in a case TOML).
+
+    Attributes
+    ----------
+    name : str
+        The scale's name (``paper``, ``quick``).
+    description : str
+        One line for the manifest and the report.
+    overrides : dict
+        Changes to every case, as nested tables of a case file.
+    reductions : tuple of str
+        What the scale reduces against the paper, and why.
+    """
 
     name: str
     description: str
@@ -99,7 +111,17 @@ SCALES: dict[str, Scale] = {
 
 # -- cases -------------------------------------------------------------------------------------
 def case_name(velocity: float) -> str:
-    """Folder name of a velocity: 6.0 -> 'u6', 2.5 -> 'u2.5'."""
+    """Folder name of a velocity: 6.0 -> 'u6', 2.5 -> 'u2.5'.
+
+    Parameters
+    ----------
+    velocity : float
+        Superficial gas velocity U, m/s.
+
+    Returns
+    -------
+    str
+    """
     return f"u{velocity:g}"
 
 
@@ -123,8 +145,35 @@ def _as_scale(scale: str | Scale) -> Scale:
 
 def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELOCITIES,
                 overrides: dict[str, Any] | None = None) -> list[CaseConfig]:
-    """The cases of a scale: the paper's case at each velocity (``paper-u<U>``, or ``paper-u6``
-    with U replaced), changed by the scale and then by ``overrides`` (a nested dict)."""
+    """The cases of a scale at the given velocities.
+
+    The paper's case at each velocity (``paper-u<U>``, or ``paper-u6`` with U replaced),
+    changed by the scale and then by ``overrides``.
+
+    Parameters
+    ----------
+    scale : str or Scale, optional
+        A name in :data:`SCALES` or a scale.
+    velocities : iterable of float, optional
+        Superficial gas velocities U, m/s.
+    overrides : dict, optional
+        Changes to every case (nested tables of a case file).
+
+    Returns
+    -------
+    list of CaseConfig
+        One case per velocity, named ``<scale>-u<U>``.
+
+    Raises
+    ------
+    InputError
+        For an unknown scale name, no velocities, a velocity that is not finite and
+        positive, or changes that make an invalid configuration.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Section 2.
+    """
     scale = _as_scale(scale)
     cases = []
     velocities = [float(u) for u in velocities]
@@ -152,7 +201,23 @@ def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELO
 
 
 def load_overrides(path: str | os.PathLike) -> dict[str, Any]:
-    """A TOML file of changes to apply to every case (same tables as a case file)."""
+    """A TOML file of changes to apply to every case (same tables as a case file).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML file.
+
+    Returns
+    -------
+    dict
+        The nested tables.
+
+    Raises
+    ------
+    InputError
+        When the file cannot be read or is not valid TOML.
+    """
     import tomllib
 
     try:
@@ -178,8 +243,25 @@ def _record(folder: Path, stage: str, values: dict) -> None:
 
 
 def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict[str, Any]:
-    """Wall time of a CFD-DEM file's run, in all and for ``window`` (s): from its checkpoint
-    wall-time history where it covers the window, else pro rata (``estimated``)."""
+    """Wall time of a CFD-DEM file's run, in all and for a window.
+
+    The window's wall time comes from the run's checkpoint wall-time history where it covers
+    the window, else pro rata (``predict_window_estimated`` true).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A CFD-DEM trajectory file.
+    window : (float, float)
+        (start, stop), s of simulated time.
+
+    Returns
+    -------
+    dict
+        ``wall_s`` and ``simulated_s`` (s), ``particles``, ``particle_steps_per_s``,
+        ``predict_window_wall_s`` (s) and ``predict_window_estimated``; empty when the file
+        has no ``/provenance/run`` group.
+    """
     import numpy as np
 
     from cfbmarkov.trajectories import Trajectories
@@ -210,9 +292,38 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
 def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
              progress: bool = True, threads: int | None = None,
              checkpoint_every: float = 0.5) -> dict[str, Any]:
-    """Run (or finish) every stage of one case in ``directory``; returns what each stage did
-    ("done" or "skipped") and the comparison summaries. A module-level function, so that
-    any executor (process pool, Dask) can run it."""
+    """Run (or finish) every stage of one case in a folder.
+
+    A module-level function, so that any executor (process pool, Dask) can run it.
+
+    Parameters
+    ----------
+    case_json : str
+        The case (a :class:`~cfbmarkov.config.CaseConfig` as JSON).
+    directory : str
+        The case folder (created).
+    models : sequence of str, optional
+        The models to fit, predict with and compare.
+    progress : bool, optional
+        Show the CFD-DEM's progress.
+    threads : int, optional
+        Numba threads of this worker.
+    checkpoint_every : float, optional
+        Simulated time between CFD-DEM checkpoints, s.
+
+    Returns
+    -------
+    dict
+        ``case`` (folder name), ``velocity`` (m/s), ``stages`` (stage -> "done",
+        "resumed" or "skipped") and ``summaries`` (model -> compare summary).
+
+    Raises
+    ------
+    InputError
+        When the folder's ``case.json`` is unreadable or holds another configuration, a
+        ``cfd-dem.h5`` in place comes from other physics or ends before the prediction
+        window, or a stage refuses its input.
+    """
     import numba
 
     from cfbmarkov.markov import MarkovModel
@@ -323,6 +434,20 @@ class InlineExecutor(cf.Executor):
     """Runs each call at once in this process (one worker; errors surface in the future)."""
 
     def submit(self, fn, /, *args, **kwargs):
+        """Run ``fn(*args, **kwargs)`` now.
+
+        Parameters
+        ----------
+        fn : callable
+            The call.
+        *args, **kwargs
+            Its arguments.
+
+        Returns
+        -------
+        concurrent.futures.Future
+            Done, holding the result or the exception (KeyboardInterrupt is raised).
+        """
         future: cf.Future = cf.Future()
         try:
             future.set_result(fn(*args, **kwargs))
@@ -340,8 +465,27 @@ def _limit_threads(threads: int) -> None:
 
 
 def local_executor(jobs: int | None = None, n_cases: int = 1) -> tuple[cf.Executor, int]:
-    """Executor on this machine: in-process for one job, else a process pool of ``jobs``
-    workers (default: min(cases, cores)); returns it and the Numba threads per worker."""
+    """Executor on this machine: in-process for one job, else a process pool.
+
+    Parameters
+    ----------
+    jobs : int, optional
+        Workers (default: min(cases, cores)).
+    n_cases : int, optional
+        Number of cases to run.
+
+    Returns
+    -------
+    executor : concurrent.futures.Executor
+        :class:`InlineExecutor` for one job, else a spawn-based process pool.
+    threads : int
+        Numba threads per worker (cores // jobs, at least 1).
+
+    Raises
+    ------
+    InputError
+        When ``jobs`` is less than 1.
+    """
     cores = os.cpu_count() or 1
     jobs = min(n_cases, cores) if jobs is None else int(jobs)
     if jobs < 1:
@@ -356,7 +500,25 @@ def local_executor(jobs: int | None = None, n_cases: int = 1) -> tuple[cf.Execut
 
 
 def dask_executor(address: str) -> tuple[cf.Executor, Any]:
-    """A Dask distributed cluster's executor (and its client, to close afterwards)."""
+    """A Dask distributed cluster's executor.
+
+    Parameters
+    ----------
+    address : str
+        The scheduler's address.
+
+    Returns
+    -------
+    executor : concurrent.futures.Executor
+        The client's executor.
+    client : dask.distributed.Client
+        The client, to close afterwards.
+
+    Raises
+    ------
+    InputError
+        When dask.distributed is not installed or the scheduler cannot be reached.
+    """
     try:
         from dask.distributed import Client
     except ImportError:
@@ -375,10 +537,52 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
               models: Sequence[str] = MODELS, executor: cf.Executor | None = None,
               scheduler: str | None = None, jobs: int | None = None, progress: bool = True,
               report: bool = True, log: Callable[[str], None] = print) -> Path:
-    """Run every case of ``scale`` at ``velocities`` into ``directory`` (resuming what is
-    there) and write the report; returns the path of ``report.html`` (or of the directory
-    with ``report=False``). Cases go to ``executor`` if given, else to the Dask cluster at
-    ``scheduler``, else to :func:`local_executor` with ``jobs`` workers."""
+    """Run every case of a scale into a folder (resuming what is there) and write the report.
+
+    Cases go to ``executor`` if given, else to the Dask cluster at ``scheduler``, else to
+    :func:`local_executor` with ``jobs`` workers.
+
+    Parameters
+    ----------
+    directory : str or os.PathLike
+        The run folder (created).
+    scale : str or Scale, optional
+        A name in :data:`SCALES` or a scale.
+    velocities : iterable of float, optional
+        Superficial gas velocities U, m/s.
+    overrides : dict, optional
+        Changes to every case (nested tables of a case file).
+    models : sequence of str, optional
+        The models of each case.
+    executor : concurrent.futures.Executor, optional
+        Runs the cases (left open).
+    scheduler : str, optional
+        Address of a Dask scheduler.
+    jobs : int, optional
+        Local workers.
+    progress : bool, optional
+        Show the CFD-DEM's progress.
+    report : bool, optional
+        Write ``report.html`` when every case is done.
+    log : callable, optional
+        Receives one line per event.
+
+    Returns
+    -------
+    pathlib.Path
+        ``report.html`` (the folder with ``report=False``).
+
+    Raises
+    ------
+    InputError
+        For an unknown model name or scale, unusable velocities or overrides, repeated
+        velocities, an output that exists and is not a directory, an unusable executor
+        setting, a failed case, or a report that cannot be written.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Section 3; ``docs/reproduce.md``.
+    """
     from cfbmarkov.markov.select import parse_model_name
 
     for name in models:

@@ -107,7 +107,24 @@ def open_text(path: Path) -> TextIO:
 
 @contextlib.contextmanager
 def reading(label: str):
-    """Turn low-level read failures (cut compressed stream, binary data) into InputError."""
+    """Context manager: turn low-level read failures into InputError.
+
+    Parameters
+    ----------
+    label : str
+        Names the file (and position) in the message.
+
+    Returns
+    -------
+    contextlib.AbstractContextManager
+        A context manager that yields None.
+
+    Raises
+    ------
+    InputError
+        When the body raises EOFError (a cut compressed stream), a gzip or zlib error
+        (damaged gzip data) or UnicodeDecodeError (not a text file).
+    """
     try:
         yield
     except EOFError:
@@ -121,7 +138,19 @@ def reading(label: str):
 
 @contextlib.contextmanager
 def removing_new_folders(output: Path):
-    """On an error, remove the folders above ``output`` that the import created (if empty)."""
+    """Context manager: on an error, remove the folders above ``output`` that the import created.
+
+    Parameters
+    ----------
+    output : pathlib.Path
+        The file being written; its missing parent folders are noted on entry and removed
+        (deepest first, only if empty) when the body raises. The error is re-raised.
+
+    Returns
+    -------
+    contextlib.AbstractContextManager
+        A context manager that yields None.
+    """
     new = [p for p in output.resolve().parents if not p.exists()]
     try:
         yield

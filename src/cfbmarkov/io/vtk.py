@@ -72,7 +72,23 @@ _EXPORT_NAME = re.compile(r"^(particles\.pvd|gas\.pvd|particles_\d{6,}\.vtu|gas_
 
 @dataclass(frozen=True)
 class VtkExport:
-    """What :func:`export_vtk_summary` wrote."""
+    """What :func:`export_vtk_summary` wrote.
+
+    Attributes
+    ----------
+    output : pathlib.Path
+        The output folder.
+    times : numpy.ndarray, shape (F,)
+        Times of the exported frames, s.
+    frames : numpy.ndarray of int, shape (F,)
+        Indices of the exported frames in the trajectory file.
+    n_particle_files : int
+        Particle files written (``particles_NNNNNN.vtu``).
+    n_gas_files : int
+        Gas files written (``gas_NNNNNN.vtr``).
+    n_gas_missing : int
+        Exported frames whose gas file was skipped (the file has fields, none at that time).
+    """
 
     output: Path
     #: times (s) of the exported frames
@@ -108,7 +124,19 @@ class GasFields:
         return self.x_edges.size - 1, self.y_edges.size - 1
 
     def match(self, times: np.ndarray) -> np.ndarray:
-        """For each time, the index of the gas frame at that time, or -1 if there is none."""
+        """For each time, the index of the gas frame at that time, or -1 if there is none.
+
+        Parameters
+        ----------
+        times : array_like, shape (F,)
+            Particle frame times, s.
+
+        Returns
+        -------
+        numpy.ndarray of int64, shape (F,)
+            Index into :attr:`times` of the gas frame within the relative tolerance
+            :data:`FIELD_TIME_TOLERANCE` (on max(|t|, 1 s)), else -1.
+        """
         times = np.asarray(times, dtype=np.float64)
         last = self.times.size - 1
         if last < 0:
@@ -122,7 +150,31 @@ class GasFields:
 
 
 def read_gas_fields(traj: Trajectories) -> GasFields | None:
-    """The ``/fields`` group of ``traj``, checked against the layout, or None if absent."""
+    """The ``/fields`` group of a trajectory file, checked against the layout.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+
+    Returns
+    -------
+    GasFields or None
+        The gas fields (datasets read lazily), None when the file has no ``/fields``.
+
+    Raises
+    ------
+    InputError
+        When the group is damaged: ``spacing``, ``origin`` or ``shape`` attributes missing,
+        not numbers or not two entries each, a spacing that is not positive, a shape that
+        is not whole numbers >= 1, no ``time`` dataset or times not finite and increasing,
+        a field of the wrong shape, or none of ``void_fraction``, ``gas_velocity``,
+        ``pressure``.
+
+    References
+    ----------
+    ``docs/definitions.md`` (File formats, Trajectory files).
+    """
     # Trajectories has no public accessor for groups outside /provenance; opening the path a
     # second time with h5py is unsafe (closing one handle closes the other's objects).
     f: h5py.File = traj._file
@@ -172,11 +224,37 @@ def read_gas_fields(traj: Trajectories) -> GasFields | None:
 def export_vtk(run: str | os.PathLike | Trajectories, output: str | os.PathLike, *,
                start: float | None = None, stop: float | None = None, every: int = 1,
                fields: bool = True, progress: bool = False) -> Path:
-    """Export the frames of ``run`` with start <= t <= stop (s), every ``every``-th, as VTK
-    files for ParaView into the folder ``output`` (see the module docstring). ``run`` is a
-    trajectory file path or an open :class:`Trajectories` (left open). Gas fields are written
-    when the file has them and ``fields`` is true; ``progress`` shows a bar on stderr.
-    Returns the output folder; raises InputError on bad arguments and leaves no output."""
+    """Export frames of a trajectory file as VTK files for ParaView (see the module docstring).
+
+    Parameters
+    ----------
+    run : str, os.PathLike or Trajectories
+        A trajectory file path or an open :class:`~cfbmarkov.trajectories.Trajectories`
+        (left open).
+    output : str or os.PathLike
+        The output folder (new, empty, or holding only a previous export).
+    start, stop : float, optional
+        Export the frames with start <= t <= stop, s (default: all).
+    every : int, optional
+        Export every ``every``-th of those frames (>= 1).
+    fields : bool, optional
+        Write the gas fields when the file has them.
+    progress : bool, optional
+        Show a progress bar on stderr.
+
+    Returns
+    -------
+    pathlib.Path
+        The output folder.
+
+    Raises
+    ------
+    InputError
+        When pyevtk is missing, ``every`` is not a whole number >= 1, ``start``/``stop`` are
+        not finite numbers or select no frame of the file, ``output`` is a file (or the
+        input) or a folder holding other files, the ``/fields`` group is damaged, or the
+        output cannot be created or written. No output is left behind.
+    """
     return export_vtk_summary(run, output, start=start, stop=stop, every=every, fields=fields,
                               progress=progress).output
 
@@ -184,7 +262,37 @@ def export_vtk(run: str | os.PathLike | Trajectories, output: str | os.PathLike,
 def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.PathLike, *,
                        start: float | None = None, stop: float | None = None, every: int = 1,
                        fields: bool = True, progress: bool = False) -> VtkExport:
-    """:func:`export_vtk`, returning what was written (files, frames, gas frames missing)."""
+    """:func:`export_vtk`, returning what was written (files, frames, gas frames missing).
+
+    Parameters
+    ----------
+    run : str, os.PathLike or Trajectories
+        A trajectory file path or an open :class:`~cfbmarkov.trajectories.Trajectories`
+        (left open).
+    output : str or os.PathLike
+        The output folder (new, empty, or holding only a previous export).
+    start, stop : float, optional
+        Export the frames with start <= t <= stop, s (default: all).
+    every : int, optional
+        Export every ``every``-th of those frames (>= 1).
+    fields : bool, optional
+        Write the gas fields when the file has them.
+    progress : bool, optional
+        Show a progress bar on stderr.
+
+    Returns
+    -------
+    VtkExport
+        The output folder, the exported frames and their times, and the files written.
+
+    Raises
+    ------
+    InputError
+        When pyevtk is missing, ``every`` is not a whole number >= 1, ``start``/``stop`` are
+        not finite numbers or select no frame of the file, ``output`` is a file (or the
+        input) or a folder holding other files, the ``/fields`` group is damaged, or the
+        output cannot be created or written. No output is left behind.
+    """
     hl = _pyevtk()
     every = _check_every(every)
     output = Path(output)

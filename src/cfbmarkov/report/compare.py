@@ -145,7 +145,8 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025,
 
     References
     ----------
-    docs/definitions.md, section "file formats" (summary.json keys).
+    docs/definitions.md, section "file formats" (summary.json keys);
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3, Eq. 9 and Figs. 3-11.
     """
     check_parameters(window, bin_width, md_order)
     out = Path(output)

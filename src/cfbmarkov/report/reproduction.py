@@ -92,6 +92,11 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None) -> P
         that exists cannot be read, when a case folder has neither case.json nor a case
         stored in its cfd-dem.h5, or when no case is finished. Unfinished cases are listed
         as "not finished".
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Section 3: Table 3,
+    Figs. 3-11; ``docs/definitions.md`` (Residence time, Mixing, Metrics).
     """
     folder = read_run_folder(directory)
     root, meta, cases, estimators = folder.root, folder.manifest, folder.cases, folder.estimators
