@@ -28,7 +28,7 @@ def temporary_path(target: str | os.PathLike, suffix: str = "") -> Path:
 
     Returns
     -------
-    Path
+    pathlib.Path
         A hidden file ``.<name>.<random>.tmp<suffix>`` in the target's folder (same file
         system, so the final rename is atomic).
     """
@@ -42,6 +42,18 @@ def temporary_path(target: str | os.PathLike, suffix: str = "") -> Path:
 
 def publish(tmp: str | os.PathLike, target: str | os.PathLike) -> Path:
     """Move the finished temporary file ``tmp`` onto ``target`` (atomic rename).
+
+    Parameters
+    ----------
+    tmp : str or os.PathLike
+        The finished temporary file (from :func:`temporary_path`).
+    target : str or os.PathLike
+        The final name; an existing file of that name is replaced.
+
+    Returns
+    -------
+    pathlib.Path
+        ``target``.
 
     Raises
     ------
@@ -57,7 +69,13 @@ def publish(tmp: str | os.PathLike, target: str | os.PathLike) -> Path:
 
 
 def discard(tmp: str | os.PathLike) -> None:
-    """Remove a temporary file if it is still there."""
+    """Remove a temporary file if it is still there.
+
+    Parameters
+    ----------
+    tmp : str or os.PathLike
+        The temporary file; nothing happens if it no longer exists.
+    """
     Path(tmp).unlink(missing_ok=True)
 
 
@@ -103,6 +121,11 @@ def write_text_atomic(target: str | os.PathLike, text: str) -> None:
         The file to write.
     text : str
         Its content.
+
+    Raises
+    ------
+    InputError
+        If the final rename fails (the target is then left untouched).
     """
     with atomic_path(target) as tmp:
         tmp.write_text(text)

@@ -31,7 +31,33 @@ def _mix64(z):
 
 @nb.njit(cache=True, inline="always")
 def uniform(seed, stream, particle, step):
-    """A uniform double in [0, 1) determined by its four integer coordinates."""
+    """A uniform double in [0, 1) determined by its four integer coordinates.
+
+    The same four integers always give the same number, whichever thread asks and in
+    whichever order, which makes every Monte Carlo run reproducible bit for bit.
+
+    Parameters
+    ----------
+    seed : int
+        The run's seed (non-negative, taken as uint64).
+    stream : int
+        Which kind of draw (e.g. next state, x or y placement, pass direction), so that
+        the draws of one particle and step are independent of one another.
+    particle : int
+        Index of the particle.
+    step : int
+        Index of the step (lag) of the run.
+
+    Returns
+    -------
+    float
+        A number u with 0 <= u < 1, on a grid of 2**-53.
+
+    References
+    ----------
+    G. L. Steele, D. Lea and C. H. Flood, "Fast splittable pseudorandom number
+    generators", OOPSLA 2014, doi:10.1145/2660193.2660195 (the SplitMix64 mixer).
+    """
     z = _mix64(np.uint64(seed) * _GOLDEN + np.uint64(stream) * _P1)
     z = _mix64(z ^ (np.uint64(particle) * _P2))
     z = _mix64(z ^ (np.uint64(step) * _P3 + _GOLDEN))

@@ -26,6 +26,34 @@ class SegmentedTrajectoryWriter:
     atomically) and removes the folder. After a crash, :meth:`resume` keeps exactly the first
     ``n_segments`` segments named by the last checkpoint and discards the rest, so the run
     continues from a consistent state.
+
+    Parameters
+    ----------
+    output : str or os.PathLike
+        The final trajectory file.
+    ids : array_like of int, shape (N,)
+        Particle ids.
+    width, height : float
+        The riser W x H (m).
+    source : str
+        What produces the file.
+    parameters : dict, optional
+        The producer's parameters.
+    with_velocity : bool, optional
+        Store velocities.
+    frame_interval : float, optional
+        Time between frames (s).
+    n_segments : int, optional
+        Complete segments already written (see :meth:`resume`).
+
+    Attributes
+    ----------
+    output : pathlib.Path
+        The final trajectory file.
+    parts : pathlib.Path
+        The folder of the segments, ``<output>.parts``.
+    n_segments : int
+        Number of complete segments.
     """
 
     def __init__(self, output: str | os.PathLike, ids, *, width: float, height: float,
@@ -44,7 +72,27 @@ class SegmentedTrajectoryWriter:
 
     @classmethod
     def resume(cls, output: str | os.PathLike, n_segments: int, **options) -> "SegmentedTrajectoryWriter":
-        """Continue after a crash: keep segments 0..n_segments-1, remove any later ones."""
+        """Continue after a crash: keep segments 0..n_segments-1, remove any later ones.
+
+        Parameters
+        ----------
+        output : str or os.PathLike
+            The final trajectory file.
+        n_segments : int
+            Complete segments recorded by the last checkpoint.
+        **options
+            The other constructor arguments (ids, width, height, source, ...).
+
+        Returns
+        -------
+        SegmentedTrajectoryWriter
+            Continues the series after the last kept segment.
+
+        Raises
+        ------
+        InputError
+            If one of the kept segments is missing or cannot be read.
+        """
         writer = cls(output, n_segments=n_segments, **options)
         for path in writer.parts.glob("segment-*.h5"):
             if int(path.stem.split("-")[1]) >= n_segments:
@@ -60,6 +108,7 @@ class SegmentedTrajectoryWriter:
         return writer
 
     def segment_paths(self) -> list[Path]:
+        """Paths of the complete segments, in order."""
         return [self.parts / f"segment-{k:05d}.h5" for k in range(self.n_segments)]
 
     def _writer(self) -> TrajectoryWriter:
@@ -75,18 +124,41 @@ class SegmentedTrajectoryWriter:
         return self._current
 
     def append(self, time: float, position, velocity=None, lap=None) -> None:
+        """Append one frame to the current segment.
+
+        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.append` for the arguments and
+        the errors.
+        """
         self._writer().append(time, position, velocity, lap)
 
     def add_events(self, times, particles, directions) -> None:
+        """Store exact pass events in the current segment (nothing if there are none).
+
+        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.add_events`.
+        """
         if len(times):
             self._writer().add_events(times, particles, directions)
 
     def append_fields(self, time: float, spacing, **fields) -> None:
+        """Append one frame of gas fields to the current segment.
+
+        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.append_fields`.
+        """
         self._writer().append_fields(time, spacing, **fields)
 
     def close_segment(self) -> int:
-        """Close the current segment (if it holds frames); returns the number of complete
-        segments, the figure a checkpoint must record."""
+        """Close the current segment (if it holds frames; an empty one is discarded).
+
+        Returns
+        -------
+        int
+            The number of complete segments, the figure a checkpoint must record.
+
+        Raises
+        ------
+        InputError
+            If the segment cannot be put in place.
+        """
         w = self._current
         if w is not None:
             if w.n_frames == 0:
@@ -99,12 +171,29 @@ class SegmentedTrajectoryWriter:
         return self.n_segments
 
     def abort(self) -> None:
+        """Discard the current, unfinished segment (complete segments stay)."""
         if self._current is not None:
             self._current.abort()
             self._current = None
 
     def finish(self, attach: dict[str, tuple[dict, dict]] | None = None) -> Path:
-        """Merge the segments into the output file and remove the parts folder."""
+        """Merge the segments into the output file and remove the parts folder.
+
+        Parameters
+        ----------
+        attach : dict of str to (dict, dict), optional
+            Provenance groups to attach: name to (datasets, attributes).
+
+        Returns
+        -------
+        pathlib.Path
+            The output file.
+
+        Raises
+        ------
+        InputError
+            If no frame was written, or the output cannot be written.
+        """
         self.close_segment()
         paths = self.segment_paths()
         if not paths:

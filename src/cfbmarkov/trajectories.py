@@ -37,7 +37,9 @@ import numpy as np
 from cfbmarkov._atomic import discard, publish, temporary_path
 from cfbmarkov.errors import InputError
 
+#: the ``format`` attribute of a trajectory file
 FORMAT = "cfbmarkov.trajectories"
+#: the layout's version (the ``version`` attribute)
 VERSION = 1
 #: relative tolerance on frame spacing and on matching a requested time to a frame
 TIME_TOLERANCE = 1e-6
@@ -47,7 +49,17 @@ POSITION_TOLERANCE = 1e-9
 
 @dataclass(frozen=True)
 class PassEvents:
-    """Passes through the periodic boundary: time (s), particle index, direction (+1/-1)."""
+    """Exact passes through the periodic boundary, sorted by time.
+
+    Attributes
+    ----------
+    time : ndarray of float64, shape (E,)
+        Times of the passes (s).
+    particle : ndarray of int32, shape (E,)
+        Index of the particle (into the file's ids).
+    direction : ndarray of int8, shape (E,)
+        +1 up through the top, -1 down through the bottom.
+    """
 
     time: np.ndarray
     particle: np.ndarray
@@ -61,8 +73,18 @@ def lap_increments(previous_y: np.ndarray, y: np.ndarray, height: float) -> np.n
     """Boundary passes between two frames by the minimal-image rule on y
     (``docs/definitions.md``, Pass direction).
 
-    Returns +1 where a particle passed up through the top (y dropped by more than H/2),
-    -1 where it passed down through the bottom, 0 elsewhere.
+    Parameters
+    ----------
+    previous_y, y : ndarray of float64, shape (N,) (or any matching shape)
+        Heights (m) in the earlier and the later frame.
+    height : float
+        Height H of the riser (m).
+
+    Returns
+    -------
+    ndarray of int32
+        +1 where a particle passed up through the top (y dropped by more than H/2), -1
+        where it passed down through the bottom, 0 elsewhere.
     """
     dy = y - previous_y
     return (dy < -0.5 * height).astype(np.int32) - (dy > 0.5 * height).astype(np.int32)
@@ -87,6 +109,15 @@ def opened(source: "str | os.PathLike | Trajectories") -> Iterator["Trajectories
     A file opened here is closed on leaving the block; an open file given by the caller
     stays open. This is the one place where "a path or an open file" is decided.
 
+    Parameters
+    ----------
+    source : str, os.PathLike or Trajectories
+        A path, or an open file.
+
+    Yields
+    ------
+    Trajectories
+
     Raises
     ------
     InputError
@@ -103,6 +134,38 @@ class Trajectories:
     """Read access to a trajectory file. Open with ``Trajectories(path)`` or as a context manager.
 
     Small metadata (times, ids, domain) is loaded on open; frames are read on demand.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The trajectory file.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The file.
+    ids : ndarray of int64, shape (N,)
+        Particle ids, the column order of every frame.
+    times : ndarray of float64, shape (T,)
+        Frame times (s).
+    width, height : float
+        The riser W x H (m).
+    frame_interval : float
+        Time between frames (s).
+    source : str
+        What produced the file.
+    parameters : dict
+        The producer's parameters.
+
+    Raises
+    ------
+    InputError
+        If the file is missing, empty, not HDF5, a model file, not a trajectory file,
+        damaged (datasets missing or of mismatched shapes) or holds no frames.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (File formats, Trajectory files).
     """
 
     def __init__(self, path: str | os.PathLike):
@@ -148,6 +211,7 @@ class Trajectories:
             self.frame_interval = float(self.times[1] - self.times[0])
 
     def close(self) -> None:
+        """Close the file."""
         self._file.close()
 
     def __enter__(self) -> "Trajectories":
@@ -165,22 +229,27 @@ class Trajectories:
     # -- metadata --------------------------------------------------------------------
     @property
     def n_frames(self) -> int:
+        """Number of frames T."""
         return int(self.times.size)
 
     @property
     def n_particles(self) -> int:
+        """Number of particles N."""
         return int(self.ids.size)
 
     @property
     def has_velocity(self) -> bool:
+        """Whether the file stores velocities."""
         return "frames/velocity" in self._file
 
     @property
     def has_events(self) -> bool:
+        """Whether the file stores exact pass events."""
         return "events/time" in self._file
 
     @property
     def attrs(self) -> dict[str, Any]:
+        """The root attributes of the file (bytes decoded to str)."""
         return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in self._file.attrs.items()}
 
     # -- locating frames -------------------------------------------------------------
@@ -189,7 +258,22 @@ class Trajectories:
         return max(TIME_TOLERANCE * max(abs(self.times[-1]), 1.0), 1e-3 * interval)
 
     def frame_index(self, time: float) -> int:
-        """Index of the frame at ``time`` (s); an error if no frame lies there."""
+        """Index of the frame at ``time``.
+
+        Parameters
+        ----------
+        time : float
+            A frame time (s), matched within a small tolerance.
+
+        Returns
+        -------
+        int
+
+        Raises
+        ------
+        InputError
+            If no frame lies at ``time``.
+        """
         i = int(np.argmin(np.abs(self.times - time)))
         if abs(self.times[i] - time) > self._tolerance():
             raise InputError(
@@ -198,7 +282,22 @@ class Trajectories:
         return i
 
     def window(self, start: float, stop: float) -> slice:
-        """Frames with start <= t <= stop, as a slice; an error if the window leaves the data."""
+        """Frames with start <= t <= stop, as a slice.
+
+        Parameters
+        ----------
+        start, stop : float
+            The window (s), matched to frames within a small tolerance.
+
+        Returns
+        -------
+        slice
+
+        Raises
+        ------
+        InputError
+            If the window is empty, leaves the data, or holds no frame.
+        """
         if not stop > start:
             raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
         tol = self._tolerance()
@@ -213,7 +312,23 @@ class Trajectories:
         return slice(i0, i1)
 
     def lag_frames(self, lag: float) -> int:
-        """The lag (s) as a whole number of frame intervals; an error if it is not one."""
+        """The lag as a whole number of frame intervals.
+
+        Parameters
+        ----------
+        lag : float
+            The lag (s).
+
+        Returns
+        -------
+        int
+            ``lag / frame_interval`` (>= 1).
+
+        Raises
+        ------
+        InputError
+            If the lag is not positive or not a whole multiple of the frame interval.
+        """
         if not lag > 0:
             raise InputError(f"lag {lag:g} s must be positive")
         ratio = lag / self.frame_interval
@@ -225,22 +340,76 @@ class Trajectories:
 
     # -- reading frames --------------------------------------------------------------
     def positions(self, frames: int | slice = slice(None)) -> np.ndarray:
-        """Positions (m): [N, 2] for one frame index, [T, N, 2] for a slice."""
+        """Positions of one frame or a range of frames.
+
+        Parameters
+        ----------
+        frames : int or slice, optional
+            A frame index, or a slice of frames (default: all).
+
+        Returns
+        -------
+        ndarray of float64, shape (N, 2) or (T, N, 2)
+            Positions (m).
+        """
         return self._file["frames/position"][frames]
 
     def velocities(self, frames: int | slice = slice(None)) -> np.ndarray | None:
-        """Velocities (m/s) like :meth:`positions`, or None when the source had none."""
+        """Velocities like :meth:`positions`, or None when the source had none.
+
+        Parameters
+        ----------
+        frames : int or slice, optional
+            A frame index, or a slice of frames (default: all).
+
+        Returns
+        -------
+        ndarray of float64, shape (N, 2) or (T, N, 2), or None
+            Velocities (m/s).
+        """
         if not self.has_velocity:
             return None
         return self._file["frames/velocity"][frames]
 
     def laps(self, frames: int | slice = slice(None)) -> np.ndarray:
-        """Lap counters: [N] for one frame index, [T, N] for a slice."""
+        """Lap counters of one frame or a range of frames.
+
+        Parameters
+        ----------
+        frames : int or slice, optional
+            A frame index, or a slice of frames (default: all).
+
+        Returns
+        -------
+        ndarray of int32, shape (N,) or (T, N)
+        """
         return self._file["frames/lap"][frames]
 
     def iter_frames(self, frames: slice = slice(None), block: int = 64
                     ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
-        """Yield (times, positions, laps) in blocks of at most ``block`` frames."""
+        """Read frames block by block.
+
+        Parameters
+        ----------
+        frames : slice, optional
+            A contiguous range of frames (default: all).
+        block : int, optional
+            Most frames per block.
+
+        Yields
+        ------
+        times : ndarray of float64, shape (B,)
+            Times (s).
+        positions : ndarray of float64, shape (B, N, 2)
+            Positions (m).
+        laps : ndarray of int32, shape (B, N)
+            Lap counters.
+
+        Raises
+        ------
+        ValueError
+            If ``frames`` has a step other than 1.
+        """
         start, stop, step = frames.indices(self.n_frames)
         if step != 1:
             raise ValueError("iter_frames takes a contiguous slice")
@@ -249,7 +418,12 @@ class Trajectories:
             yield self.times[i:j], self.positions(slice(i, j)), self.laps(slice(i, j))
 
     def events(self) -> PassEvents | None:
-        """Exact pass events, sorted by time, or None when the source logged none."""
+        """Exact pass events, sorted by time, or None when the source logged none.
+
+        Returns
+        -------
+        PassEvents or None
+        """
         if not self.has_events:
             return None
         g = self._file["events"]
@@ -263,6 +437,7 @@ class Trajectories:
 
     @property
     def field_names(self) -> list[str]:
+        """Names of the gas fields (sorted; empty without fields)."""
         return sorted(set(self._file["fields"]) - {"time"}) if self.has_fields else []
 
     @property
@@ -278,14 +453,42 @@ class Trajectories:
         return float(dx), float(dy)
 
     def field(self, name: str, frames: int | slice = slice(None)) -> np.ndarray:
-        """Gas field ``name`` at field frame(s): [ny, nx] or [ny, nx, 2] per frame (float32)."""
+        """Gas field ``name`` at one or more field frames.
+
+        Parameters
+        ----------
+        name : str
+            ``void_fraction`` (-), ``gas_velocity`` (m/s) or ``pressure`` (Pa), as stored.
+        frames : int or slice, optional
+            Field frame index or slice (default: all).
+
+        Returns
+        -------
+        ndarray of float32, shape (ny, nx) or (ny, nx, 2) per frame
+            With a leading frame axis for a slice.
+
+        Raises
+        ------
+        InputError
+            If the file holds no field ``name``.
+        """
         if name not in self.field_names:
             raise InputError(f"{self.path}: no gas field '{name}' (has: "
                              f"{', '.join(self.field_names) or 'none'})")
         return self._file["fields"][name][frames]
 
     def group(self, name: str) -> h5py.Group | None:
-        """A provenance group attached by the producer (e.g. ``'model'``), or None."""
+        """A provenance group attached by the producer, or None.
+
+        Parameters
+        ----------
+        name : str
+            The group's name under ``/provenance`` (e.g. ``'model'``).
+
+        Returns
+        -------
+        h5py.Group or None
+        """
         key = f"provenance/{name}"
         return self._file[key] if key in self._file else None
 
@@ -297,6 +500,35 @@ class TrajectoryWriter:
     the lap counter is derived from the positions by the minimal-image rule when not given.
     On an error, or when used as a context manager that exits by an exception, the partial
     file is removed.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write; its folder is created if needed.
+    ids : array_like of int, shape (N,)
+        Unique particle ids, the column order of every frame.
+    width, height : float
+        The riser W x H (m), positive.
+    source : str
+        What produces the file (e.g. ``cfd-dem``, ``markov-prediction``).
+    parameters : dict, optional
+        The producer's parameters, stored as JSON.
+    with_velocity : bool, optional
+        Store velocities (then every frame must carry them).
+    frame_interval : float, optional
+        Time between frames (s); by default taken from the first two frames.
+    label : str, optional
+        Names the file in error messages (default: ``path``).
+
+    Raises
+    ------
+    InputError
+        If there is no particle id, the ids are not unique, or the domain is not of
+        positive size.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (File formats, Trajectory files; Lap counter).
     """
 
     def __init__(self, path: str | os.PathLike, ids, *, width: float, height: float,
@@ -354,6 +586,7 @@ class TrajectoryWriter:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames written so far."""
         return self._n_frames
 
     @property
@@ -368,6 +601,17 @@ class TrajectoryWriter:
         """Continue a series written by another writer whose last frame was ``time`` (s)
         with heights ``heights`` [N] (m) and lap counters ``laps`` [N]: the next frame must
         follow it at the frame interval, and its laps count on from ``laps``.
+
+        Parameters
+        ----------
+        time : float
+            Time of the last frame of the earlier series (s).
+        heights : array_like of float, shape (N,)
+            Heights y of that frame (m).
+        laps : array_like of int, shape (N,)
+            Lap counters of that frame.
+        frame_interval : float, optional
+            The series' frame interval (s), if known.
 
         Raises
         ------
@@ -425,13 +669,49 @@ class TrajectoryWriter:
 
     # -- writing -----------------------------------------------------------------------
     def append(self, time: float, position, velocity=None, lap=None) -> None:
-        """Append one frame: position [N, 2] (m), optional velocity [N, 2] and lap [N]."""
+        """Append one frame.
+
+        Parameters
+        ----------
+        time : float
+            Frame time (s).
+        position : array_like, shape (N, 2)
+            Positions (m).
+        velocity : array_like, shape (N, 2), optional
+            Velocities (m/s); required when the file stores velocities.
+        lap : array_like of int, shape (N,), optional
+            Lap counters (derived by the minimal-image rule when None).
+
+        Raises
+        ------
+        InputError
+            As :meth:`append_frames`.
+        """
         self.append_frames(np.asarray([time], dtype=float), np.asarray(position)[None],
                            None if velocity is None else np.asarray(velocity)[None],
                            None if lap is None else np.asarray(lap)[None])
 
     def append_frames(self, times, positions, velocities=None, laps=None) -> None:
-        """Append a block of frames: times [T], positions [T, N, 2], velocities, laps [T, N]."""
+        """Append a block of frames.
+
+        Parameters
+        ----------
+        times : array_like, shape (T,)
+            Frame times (s), increasing, evenly spaced, following the last frame.
+        positions : array_like, shape (T, N, 2)
+            Positions (m), inside the domain.
+        velocities : array_like, shape (T, N, 2), optional
+            Velocities (m/s); required when the file stores velocities.
+        laps : array_like of int, shape (T, N), optional
+            Lap counters (derived by the minimal-image rule when None).
+
+        Raises
+        ------
+        InputError
+            If an array has the wrong shape, a value is not finite, a position lies
+            outside the domain, the times do not increase or are unevenly spaced, or
+            velocities are missing.
+        """
         times = np.asarray(times, dtype=np.float64).reshape(-1)
         positions = np.asarray(positions, dtype=np.float64)
         n = self.ids.size
@@ -476,9 +756,21 @@ class TrajectoryWriter:
     def append_fields(self, time: float, spacing, **fields) -> None:
         """Append one frame of gas fields on a cell-centred grid to ``/fields``.
 
-        ``spacing`` = (dx, dy) in m; each field is an array [ny, nx] (scalar) or
-        [ny, nx, 2] (vector) stored as float32: ``void_fraction`` (-), ``gas_velocity``
-        (m/s), ``pressure`` (Pa). Every frame must carry the same fields.
+        Parameters
+        ----------
+        time : float
+            Time of the field frame (s).
+        spacing : tuple of float
+            (dx, dy) of the grid (m).
+        **fields : array_like, shape (ny, nx) or (ny, nx, 2)
+            Stored as float32: ``void_fraction`` (-), ``gas_velocity`` (m/s),
+            ``pressure`` (Pa). Every frame must carry the same fields.
+
+        Raises
+        ------
+        InputError
+            If the fields of the first frame are on different grids, or a later frame
+            carries other fields.
         """
         g = self._file.require_group("fields")
         first = "time" not in g
@@ -507,7 +799,17 @@ class TrajectoryWriter:
             g[name][k] = a
 
     def add_events(self, times, particles, directions) -> None:
-        """Store exact pass events (time s, particle index, direction +1/-1), any order."""
+        """Store exact pass events, in any order.
+
+        Parameters
+        ----------
+        times : array_like of float, shape (E,)
+            Times of the passes (s).
+        particles : array_like of int, shape (E,)
+            Particle indices (into ``ids``).
+        directions : array_like of int, shape (E,)
+            +1 up through the top, -1 down through the bottom.
+        """
         times = np.asarray(times, dtype=np.float64)
         order = np.argsort(times, kind="stable")
         g = self._file.require_group("events")
@@ -524,7 +826,17 @@ class TrajectoryWriter:
 
     def attach(self, name: str, datasets: dict[str, np.ndarray], attrs: dict[str, Any] | None = None
                ) -> None:
-        """Attach a provenance group ``/provenance/<name>`` (datasets and attributes)."""
+        """Attach a provenance group ``/provenance/<name>``.
+
+        Parameters
+        ----------
+        name : str
+            The group's name.
+        datasets : dict of str to ndarray
+            Datasets of the group.
+        attrs : dict, optional
+            Attributes of the group.
+        """
         g = self._file.create_group(f"provenance/{name}")
         for key, value in datasets.items():
             g.create_dataset(key, data=value)
@@ -532,7 +844,18 @@ class TrajectoryWriter:
             g.attrs[key] = value
 
     def close(self) -> Path:
-        """Finish the file and move it to its final name."""
+        """Finish the file and move it to its final name (nothing if already closed).
+
+        Returns
+        -------
+        pathlib.Path
+            The final path.
+
+        Raises
+        ------
+        InputError
+            If no frame was written (the partial file is discarded) or the rename fails.
+        """
         if self._closed:
             return self.path
         if self._n_frames == 0:
@@ -560,7 +883,41 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
                        ids=None, velocities=None, laps=None, source: str = "arrays",
                        parameters: dict[str, Any] | None = None, events: PassEvents | None = None
                        ) -> Path:
-    """Write whole arrays (times [T], positions [T, N, 2], ...) as a trajectory file."""
+    """Write whole arrays as a trajectory file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    times : array_like, shape (T,)
+        Frame times (s), increasing and evenly spaced.
+    positions : array_like, shape (T, N, 2)
+        Positions (m).
+    width, height : float
+        The riser W x H (m).
+    ids : array_like of int, shape (N,), optional
+        Particle ids (0 .. N-1 by default).
+    velocities : array_like, shape (T, N, 2), optional
+        Velocities (m/s).
+    laps : array_like of int, shape (T, N), optional
+        Lap counters (derived by the minimal-image rule when None).
+    source : str, optional
+        What produced the data.
+    parameters : dict, optional
+        The producer's parameters.
+    events : PassEvents, optional
+        Exact pass events.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    InputError
+        If ``positions`` is not (T, N, 2), or as :class:`TrajectoryWriter`.
+    """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim != 3 or positions.shape[-1] != 2:
         raise InputError(f"positions must have shape (T, N, 2), got {positions.shape}")

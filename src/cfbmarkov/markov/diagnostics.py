@@ -64,7 +64,29 @@ from cfbmarkov.trajectories import opened
 # -- implied timescales ----------------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class ImpliedTimescales:
-    """Implied timescales t_i = -tau / ln|lambda_i| of models at several lags."""
+    """Implied timescales t_i = -tau / ln|lambda_i| of models at several lags.
+
+    Attributes
+    ----------
+    lags : ndarray of float64, shape (L,)
+        The lags tau (s).
+    timescales : ndarray of float64, shape (L, k)
+        t_i (s): inf for |lambda| = 1, NaN where the active set has fewer than k + 1
+        states.
+    eigenvalues : ndarray of complex128, shape (L, k)
+        lambda_i, largest modulus first, the stationary one left out.
+    n_active : ndarray of int64, shape (L,)
+        States in the largest strongly connected set.
+    estimator : str
+        The estimator of the models.
+    state_space : str
+        Description of the state space.
+
+    References
+    ----------
+    J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
+    validation", J. Chem. Phys. 134, 174105 (2011) (implied timescales).
+    """
 
     lags: np.ndarray            # [L] s
     timescales: np.ndarray      # [L, k] s (inf for |lambda| = 1, nan where S - 1 < k)
@@ -75,6 +97,7 @@ class ImpliedTimescales:
 
     @property
     def k(self) -> int:
+        """Number of timescales per lag."""
         return int(self.timescales.shape[1])
 
     def as_dict(self) -> dict[str, Any]:
@@ -88,7 +111,17 @@ class ImpliedTimescales:
                 "state_space": self.state_space}
 
     def table(self, digits: int = 4) -> str:
-        """Plain-text table: one row per lag, one column per process (s)."""
+        """Plain-text table: one row per lag, one column per process (s).
+
+        Parameters
+        ----------
+        digits : int, optional
+            Significant digits of the timescales.
+
+        Returns
+        -------
+        str
+        """
         head = ["lag (s)"] + [f"t{i + 2} (s)" for i in range(self.k)]
         rows = [[f"{lag:g}"] + [f"{t:.{digits}g}" if np.isfinite(t) else str(t) for t in ts]
                 for lag, ts in zip(self.lags, self.timescales)]
@@ -98,7 +131,18 @@ class ImpliedTimescales:
 
 
 def active_set(matrix: np.ndarray) -> np.ndarray:
-    """States of the largest strongly connected set of the graph P_ij > 0 (sorted)."""
+    """States of the largest strongly connected set of the graph P_ij > 0.
+
+    Parameters
+    ----------
+    matrix : array_like, shape (S, S)
+        A transition matrix P.
+
+    Returns
+    -------
+    ndarray of int, shape (S_active,)
+        The states, sorted.
+    """
     p = np.asarray(matrix)
     n, labels = connected_components(csr_matrix(p > 0), directed=True, connection="strong")
     if n == 1:
@@ -132,8 +176,29 @@ def model_timescales(model: MarkovModel | Sequence[MarkovModel], k: int = 6,
                      connected: bool = True) -> ImpliedTimescales:
     """Implied timescales of one fitted model (or of several, one row per model).
 
-    ``connected`` restricts P to its largest strongly connected set first (see the module
-    docstring); with False the eigenvalues of the whole matrix are used.
+    Parameters
+    ----------
+    model : MarkovModel or sequence of MarkovModel
+        The model(s), usually one state space at several lags.
+    k : int, optional
+        Number of timescales after the stationary one (>= 1).
+    connected : bool, optional
+        Restrict P to its largest strongly connected set first, rows renormalised (see
+        the module docstring); with False the eigenvalues of the whole matrix are used.
+
+    Returns
+    -------
+    ImpliedTimescales
+
+    Raises
+    ------
+    InputError
+        If no model is given or ``k < 1``.
+
+    References
+    ----------
+    J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
+    validation", J. Chem. Phys. 134, 174105 (2011) (implied timescales).
     """
     models = [model] if isinstance(model, MarkovModel) else list(model)
     if not models:
@@ -183,7 +248,13 @@ def implied_timescales(data, state_space: StateSpace, lags: Sequence[float],
     Raises
     ------
     InputError
-        If no lag is given or a file or lag does not fit.
+        If no lag is given, ``k < 1``, the estimator is unknown, or a file or lag does not
+        fit.
+
+    References
+    ----------
+    J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
+    validation", J. Chem. Phys. 134, 174105 (2011) (implied timescales).
     """
     lags = [float(v) for v in lags]
     if not lags:
@@ -204,8 +275,28 @@ def _band_names(n: int) -> list[str] | None:
 
 
 def height_bands(state_space: StateSpace, n_bands: int = 3) -> dict[str, np.ndarray]:
-    """Partition of the cells into ``n_bands`` horizontal bands of whole rows, as equal as
-    possible, bottom first (names bottom/middle/top for 3 bands, else rows a-b)."""
+    """Partition of the cells into ``n_bands`` horizontal bands of whole rows.
+
+    The bands are as equal as possible, bottom first, named bottom/middle/top for 3 bands
+    (bottom/top for 2, four names for 4, ``rows a-b`` otherwise).
+
+    Parameters
+    ----------
+    state_space : StateSpace
+        Gives the cell grid.
+    n_bands : int, optional
+        Number of bands, 1 .. rows.
+
+    Returns
+    -------
+    dict of str to ndarray of int64
+        The cells (row*m + col) of each band.
+
+    Raises
+    ------
+    InputError
+        If ``n_bands`` is not between 1 and the number of rows.
+    """
     rows, m = state_space.rows, state_space.columns
     n_bands = int(n_bands)
     if not 1 <= n_bands <= rows:
@@ -219,8 +310,25 @@ def height_bands(state_space: StateSpace, n_bands: int = 3) -> dict[str, np.ndar
 
 
 def core_annulus(state_space: StateSpace, wall_columns: int = 1) -> dict[str, np.ndarray]:
-    """Partition of the cells into the annulus (the ``wall_columns`` outer columns on each
-    side, next to the walls at x = 0 and x = W) and the core (the columns between)."""
+    """Partition of the cells into the core and the annulus next to the walls.
+
+    Parameters
+    ----------
+    state_space : StateSpace
+        Gives the cell grid.
+    wall_columns : int, optional
+        Columns on each side, next to the walls at x = 0 and x = W, that form the annulus.
+
+    Returns
+    -------
+    dict of str to ndarray of int64
+        ``core`` and ``annulus``: their cells (row*m + col).
+
+    Raises
+    ------
+    InputError
+        If ``wall_columns < 1`` or the annulus leaves no core column.
+    """
     m, rows = state_space.columns, state_space.rows
     wall_columns = int(wall_columns)
     if wall_columns < 1 or 2 * wall_columns >= m:
@@ -233,8 +341,19 @@ def core_annulus(state_space: StateSpace, wall_columns: int = 1) -> dict[str, np
 
 def product_groups(first: Mapping[str, Sequence[int]], second: Mapping[str, Sequence[int]]
                    ) -> dict[str, np.ndarray]:
-    """Intersections of two partitions, e.g. height bands x core/annulus ("bottom core", ...);
-    empty intersections are left out."""
+    """Intersections of two partitions, e.g. height bands x core/annulus ("bottom core", ...).
+
+    Parameters
+    ----------
+    first, second : mapping of str to sequence of int
+        Two partitions of the cells.
+
+    Returns
+    -------
+    dict of str to ndarray of int64
+        ``"<first name> <second name>"`` to the cells of both; empty intersections are
+        left out.
+    """
     out = {}
     for a, ca in first.items():
         for b, cb in second.items():
@@ -246,8 +365,28 @@ def product_groups(first: Mapping[str, Sequence[int]], second: Mapping[str, Sequ
 
 def group_labels(state_space: StateSpace, groups: Mapping[str, Sequence[int]]
                  ) -> tuple[list[str], np.ndarray]:
-    """Names and the group of every cell [n_cells]; an error unless ``groups`` is a partition
-    of the cells of ``state_space``."""
+    """Names and the group of every cell.
+
+    Parameters
+    ----------
+    state_space : StateSpace
+        Gives the cells.
+    groups : mapping of str to sequence of int
+        Name to cells (row*m + col); must be a partition of the cells.
+
+    Returns
+    -------
+    names : list of str
+        The group names, in the mapping's order.
+    labels : ndarray of int64, shape (n_cells,)
+        Index into ``names`` of every cell.
+
+    Raises
+    ------
+    InputError
+        If ``groups`` is not a non-empty mapping, a group is empty, names cells outside
+        the grid or overlaps another, or a cell is left unassigned.
+    """
     if not isinstance(groups, Mapping) or len(groups) < 1:
         raise InputError("groups must be a non-empty mapping name -> cell indices")
     n_cells = state_space.n_cells
@@ -270,7 +409,36 @@ def group_labels(state_space: StateSpace, groups: Mapping[str, Sequence[int]]
 # -- Chapman-Kolmogorov test -----------------------------------------------------------------
 @dataclass(frozen=True, eq=False)
 class CKTest:
-    """Chapman-Kolmogorov test of a model on coarse groups of cells."""
+    """Chapman-Kolmogorov test of a model on coarse groups of cells.
+
+    Attributes
+    ----------
+    lag : float
+        The model's lag (s).
+    steps : ndarray of int64, shape (K,)
+        The multiples k of the lag.
+    group_names : list of str
+        The G groups.
+    predicted : ndarray of float64, shape (K, G, G)
+        Model: P(A -> B, k lag) (NaN where A was never occupied).
+    estimated : ndarray of float64, shape (K, G, G)
+        Data: the observed fraction.
+    stderr : ndarray of float64, shape (K, G, G)
+        Binomial standard error with the effective count.
+    counts : ndarray of int64, shape (K, G)
+        Particle-frames in A at the start frames of step k.
+    effective_counts : ndarray of float64, shape (K, G)
+        ``counts / (k * lag_frames)``.
+    window : tuple of float or None
+        The window (A, B) of the data in s.
+    info : dict
+        Source, state space, estimator, lag in frames and how the error was formed.
+
+    References
+    ----------
+    J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
+    validation", J. Chem. Phys. 134, 174105 (2011) (the Chapman-Kolmogorov test).
+    """
 
     lag: float                  # s
     steps: np.ndarray           # [K] multiples of the lag
@@ -285,7 +453,7 @@ class CKTest:
 
     @property
     def times(self) -> np.ndarray:
-        """k * lag (s)."""
+        """The times k * lag (s), float64 [K]."""
         return self.steps * self.lag
 
     @property
@@ -294,7 +462,15 @@ class CKTest:
         return self.predicted - self.estimated
 
     def summary(self) -> dict[str, Any]:
-        """max and RMS of |predicted - estimated| over k, A, B (and over A -> A only)."""
+        """max and RMS of |predicted - estimated| over k, A, B (and over A -> A only).
+
+        Returns
+        -------
+        dict
+            ``max_abs_error``, ``rms_error``, their ``_diagonal`` versions, ``max_z``
+            (largest error in standard errors), ``lag``, ``steps``, ``groups``,
+            ``window``; NaN where nothing was finite.
+        """
         err = np.abs(self.error)
         diag = np.abs(np.diagonal(self.error, axis1=1, axis2=2))
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -314,7 +490,14 @@ class CKTest:
                 "window": list(self.window) if self.window is not None else None}
 
     def as_dict(self) -> dict[str, Any]:
-        """JSON-serialisable arrays and the summary."""
+        """JSON-serialisable arrays and the summary.
+
+        Returns
+        -------
+        dict
+            ``summary``, ``times`` (s), ``predicted``, ``estimated``, ``stderr`` (NaN
+            written as -1) and ``counts``.
+        """
         return {"summary": self.summary(), "times": [float(t) for t in self.times],
                 "predicted": np.nan_to_num(self.predicted, nan=-1.0).tolist(),
                 "estimated": np.nan_to_num(self.estimated, nan=-1.0).tolist(),
@@ -345,8 +528,14 @@ def ck_test(data, model: MarkovModel, groups: Mapping[str, Sequence[int]],
     Raises
     ------
     InputError
-        If the data do not match the model, the groups are not a partition, or no pair of
-        frames k lags apart is present.
+        If the steps are not positive, the data are not discrete trajectories or do not
+        match the model's state space and lag, the runs differ in frame interval, the
+        groups are not a partition, or no pair of frames k lags apart is present.
+
+    References
+    ----------
+    J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
+    validation", J. Chem. Phys. 134, 174105 (2011) (the Chapman-Kolmogorov test).
     """
     space = model.state_space
     steps = np.arange(1, int(steps) + 1) if np.isscalar(steps) else np.asarray(steps, np.int64)

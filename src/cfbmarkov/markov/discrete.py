@@ -71,6 +71,21 @@ class DiscreteTrajectories:
         Positions (m), kept only where asked for (e.g. to place a prediction's first frame).
     laps : ndarray of int64, shape (T, N), optional
         Lap counters, kept only where asked for.
+
+    Raises
+    ------
+    InputError
+        If ``states`` is not 2-D, ``vertical`` has another shape, ``times`` does not hold
+        one time per frame, ``lag_frames < 1``, or ``frame_interval`` is not a positive
+        finite number.
+
+    See Also
+    --------
+    discretize : makes them from a trajectory file.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (Discrete trajectories).
     """
 
     states: np.ndarray
@@ -104,10 +119,12 @@ class DiscreteTrajectories:
 
     @property
     def n_frames(self) -> int:
+        """Number of frames T of the window."""
         return int(self.states.shape[0])
 
     @property
     def n_particles(self) -> int:
+        """Number of particles N."""
         return int(self.states.shape[1])
 
     def _tolerance(self) -> float:
@@ -117,6 +134,18 @@ class DiscreteTrajectories:
 
     def block(self, start: float, stop: float) -> "DiscreteTrajectories":
         """The frames with ``start <= t <= stop`` (s), e.g. one fold of a cross-validation.
+
+        Parameters
+        ----------
+        start, stop : float
+            The block's first and last time (s), matched to frames within the tolerance
+            of :meth:`cfbmarkov.trajectories.Trajectories.window`.
+
+        Returns
+        -------
+        DiscreteTrajectories
+            The same trajectories restricted to those frames (views, no copy), with
+            ``window = (start, stop)``.
 
         Raises
         ------
@@ -136,8 +165,13 @@ class DiscreteTrajectories:
                        laps=None if self.laps is None else self.laps[rows])
 
     def trajectories(self) -> list[np.ndarray]:
-        """Per-particle state sequences (a list of N int32 arrays of length T), the layout
-        deeptime's estimators take."""
+        """Per-particle state sequences, the layout deeptime's estimators take.
+
+        Returns
+        -------
+        list of ndarray of int32, shape (T,)
+            One array per particle (N in all).
+        """
         return list(np.ascontiguousarray(self.states.T))
 
     def __repr__(self) -> str:
@@ -149,13 +183,33 @@ class DiscreteTrajectories:
 
 @dataclass(frozen=True, eq=False)
 class WindowFrames:
-    """The frames of one window and the history before it, read from a file once, so that
-    several state spaces (the candidates of ``--states auto``) are discretised on the same
-    frames without going back to the file.
+    """The frames of one window and the history before it, read from a file once.
 
-    ``positions`` [F, N, 2] (m), ``velocities`` [F, N, 2] (m/s) or None, ``times`` [F] (s)
-    cover the frames ``first .. stop - 1`` of the file; the window's own frames start at
-    row ``history`` (``first + history`` in the file).
+    Several state spaces (the candidates of ``--states auto``) are then discretised on the
+    same frames without going back to the file. The arrays cover the frames
+    ``first .. stop - 1`` of the file; the window's own frames start at row ``history``
+    (``first + history`` in the file). Made by :func:`read_frames`.
+
+    Parameters
+    ----------
+    positions : ndarray of float64, shape (F, N, 2)
+        Positions (m) of the frames read.
+    velocities : ndarray of float64, shape (F, N, 2), or None
+        Velocities (m/s), or None where they were not read.
+    times : ndarray of float64, shape (F,)
+        Times (s) of the frames read.
+    laps : ndarray of int32, shape (F, N), or None
+        Lap counters, or None where they were not read.
+    history : int
+        Number of history rows before the window's first frame.
+    frame_interval : float
+        Time between frames (s).
+    width, height : float
+        The riser W x H (m).
+    window : tuple of float or None
+        The analysis window (A, B) in s as asked for (None: all frames).
+    source : str
+        The file the frames came from.
     """
 
     positions: np.ndarray
@@ -176,6 +230,20 @@ class WindowFrames:
         Where the frames read hold less history than the state space needs, the window's
         start moves past it (only :func:`read_frames` with ``short_history="skip"`` reads
         such frames).
+
+        Parameters
+        ----------
+        state_space : StateSpace
+            How positions (and motion) become states; it needs
+            ``state_space.memory_lags * lag_frames`` frames of history.
+        lag_frames : int
+            The lag, in frames.
+        keep_positions : bool, optional
+            Keep the positions (and laps, where read) of the window's frames.
+
+        Returns
+        -------
+        DiscreteTrajectories
 
         Raises
         ------
@@ -217,8 +285,23 @@ def _describe(window) -> str:
 
 
 def check_domain(state_space: StateSpace, width: float, height: float, source: str = "") -> None:
-    """Raise :class:`InputError` unless ``state_space`` covers a W x H = ``width`` x
-    ``height`` (m) riser."""
+    """Check that ``state_space`` covers a riser of W x H = ``width`` x ``height`` (m).
+
+    Parameters
+    ----------
+    state_space : StateSpace
+        The state space to check.
+    width, height : float
+        The riser's width W and height H (m), e.g. those of a trajectory file.
+    source : str, optional
+        Named in the error message (e.g. the file's path).
+
+    Raises
+    ------
+    InputError
+        If the state space's width or height differ from ``width`` or ``height``
+        (beyond :func:`numpy.isclose`).
+    """
     if not (np.isclose(state_space.width, width) and np.isclose(state_space.height, height)):
         raise InputError(f"state space covers {state_space.width:g} x {state_space.height:g} m "
                          f"but {source} is {width:g} x {height:g} m")
@@ -275,8 +358,8 @@ def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
     Raises
     ------
     InputError
-        If the window lies outside the data, or (``short_history="error"``) the history
-        is missing.
+        If the window is empty, lies outside the data or holds no frame, or
+        (``short_history="error"``) the history is missing.
     """
     if window is None:
         start, stop = min(int(history), trajectories.n_frames), trajectories.n_frames
@@ -326,7 +409,12 @@ def discretize(source, state_space: StateSpace, lag: float,
     InputError
         If the file cannot be read, the lag is not a whole number of frames, the window
         lies outside the data, lacks history or holds fewer than two frames one lag apart,
-        or the state space does not fit the file.
+        or the state space does not fit the file (domain, or velocities it needs and the
+        file lacks).
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (Discrete trajectories; Lag and fitting window).
     """
     with opened(source) as traj:
         lag_frames = _prepare(traj, state_space, lag)
@@ -342,13 +430,32 @@ def discretize(source, state_space: StateSpace, lag: float,
 
 def discretize_frame(source, state_space: StateSpace, lag: float, time: float
                      ) -> DiscreteTrajectories:
-    """The one frame at ``time`` (s), discretised with the history its state space needs,
-    positions and laps kept: the initial states of a prediction.
+    """The one frame at ``time`` (s), discretised with the history its state space needs.
+
+    Positions and laps are kept: these are the initial states of a prediction.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or Trajectories
+        A trajectory file, by path or open.
+    state_space : StateSpace
+        How positions (and motion) become states.
+    lag : float
+        The lag (s); a whole multiple of the file's frame interval.
+    time : float
+        Time of the frame (s).
+
+    Returns
+    -------
+    DiscreteTrajectories
+        One frame (T = 1) with ``positions`` and ``laps``.
 
     Raises
     ------
     InputError
-        If no frame lies at ``time`` or the history before it is missing.
+        If the file cannot be read, the state space does not fit it, the lag is not a
+        whole number of frames, no frame lies at ``time`` or the history before it is
+        missing.
     """
     with opened(source) as traj:
         lag_frames = _prepare(traj, state_space, lag)
@@ -361,10 +468,20 @@ def discretize_frame(source, state_space: StateSpace, lag: float, time: float
 def as_discrete_list(data) -> list[DiscreteTrajectories]:
     """``data`` (one :class:`DiscreteTrajectories` or a sequence of them) as a list.
 
+    Parameters
+    ----------
+    data : DiscreteTrajectories or list or tuple of them
+        The discrete trajectories.
+
+    Returns
+    -------
+    list of DiscreteTrajectories
+
     Raises
     ------
     InputError
-        If anything else is given (a path or an open file: discretise it first).
+        If the sequence is empty, or anything else is given (a path or an open file:
+        discretise it first).
     """
     items = list(data) if isinstance(data, (list, tuple)) else [data]
     if not items:

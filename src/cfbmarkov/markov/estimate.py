@@ -111,6 +111,7 @@ class TransitionCounts:
 
     @property
     def n_transitions(self) -> int:
+        """Total number of transitions counted, sum of C_ij."""
         return int(self.counts.sum())
 
     def __add__(self, other: "TransitionCounts") -> "TransitionCounts":
@@ -141,7 +142,14 @@ def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
     Raises
     ------
     InputError
-        If the windows differ in state space or lag.
+        If ``data`` is empty or not discrete trajectories, or the windows differ in state
+        space or lag.
+
+    Notes
+    -----
+    Every frame pair (t, t + lag) of every particle is counted (sliding window); a pair
+    with an absent end is skipped. A pass through the periodic boundary is told by the
+    minimal-image rule on y (``docs/definitions.md``, Pass direction).
     """
     windows = as_discrete_list(data)
     space = windows[0].state_space
@@ -166,7 +174,30 @@ def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
 
 
 class TransitionEstimator:
-    """Base estimator: configure with a state space and a lag (s), then :meth:`fit`."""
+    """Base estimator: configure with a state space and a lag (s), then :meth:`fit`.
+
+    Parameters
+    ----------
+    state_space : StateSpace
+        The states of the models it fits.
+    lag : float, optional
+        The lag tau (s), positive.
+
+    Attributes
+    ----------
+    name : str
+        The estimator's name (``paper``, ``mle``), recorded in its models; a class
+        attribute.
+
+    Raises
+    ------
+    InputError
+        If ``lag`` is not positive.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (Estimators; Unvisited states).
+    """
 
     name: str = ""
 
@@ -180,6 +211,23 @@ class TransitionEstimator:
         return f"{type(self).__name__}({self.state_space!r}, lag={self.lag:g})"
 
     def transition_matrix(self, counts: TransitionCounts) -> np.ndarray:
+        """The estimate of P from the counts, before unvisited states are filled.
+
+        Parameters
+        ----------
+        counts : TransitionCounts
+            Counts gathered by :func:`count_transitions`.
+
+        Returns
+        -------
+        ndarray of float64, shape (S, S)
+            Rows of states never left are all zero.
+
+        Raises
+        ------
+        NotImplementedError
+            In the base class: the subclasses implement it.
+        """
         raise NotImplementedError
 
     def fit(self, data) -> "MarkovModel":
@@ -218,8 +266,24 @@ class TransitionEstimator:
 
     def chain(self, counts: TransitionCounts
               ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
-        """The stochastic matrix and, where states were filled from their cell, the pass
-        fractions (None: the counts give them) that :meth:`fit_counts` puts in a model."""
+        """The stochastic matrix and pass fractions that :meth:`fit_counts` puts in a model.
+
+        A state never left in the counts moves as the other states of its cell did (their
+        pooled counts); where its whole cell was never left it stays in place (P_ii = 1).
+
+        Parameters
+        ----------
+        counts : TransitionCounts
+            Counts gathered by :func:`count_transitions`.
+
+        Returns
+        -------
+        matrix : ndarray of float64, shape (S, S)
+            The row-stochastic transition matrix P.
+        fractions : tuple of two ndarrays of shape (S, S), or None
+            (up, down) fractions of each i -> j transition that passed the boundary, where
+            states were filled from their cell; None: the counts give them.
+        """
         matrix = self.transition_matrix(counts)
         unvisited = np.flatnonzero(counts.counts.sum(axis=1) == 0)
         fractions = _fill_from_cells(matrix, counts, self.state_space, unvisited)
@@ -229,6 +293,27 @@ class TransitionEstimator:
         return matrix, fractions
 
     def fit_counts(self, counts: TransitionCounts, window=None, source="") -> "MarkovModel":
+        """Form the model from counts already gathered (e.g. by cross-validation).
+
+        Parameters
+        ----------
+        counts : TransitionCounts
+            Counts gathered with this estimator's state space and lag.
+        window : tuple of float, optional
+            The fitting window (A, B) in s, recorded in the model.
+        source : str, os.PathLike or list, optional
+            Where the data came from, recorded in the model.
+
+        Returns
+        -------
+        MarkovModel
+
+        Raises
+        ------
+        InputError
+            If the counts do not fit the state space, or (paper estimator) were gathered
+            without the per-frame matrices.
+        """
         from cfbmarkov.markov.model import MarkovModel
 
         matrix, fractions = self.chain(counts)
@@ -278,22 +363,69 @@ def _fill_from_cells(matrix: np.ndarray, counts: TransitionCounts, space: StateS
 
 
 class MaximumLikelihoodEstimator(TransitionEstimator):
-    """``mle``: P_ij = C_ij / sum_j C_ij from the pooled counts."""
+    """``mle``: P_ij = C_ij / sum_j C_ij from the pooled counts.
+
+    The maximum-likelihood estimate of a non-reversible chain. Parameters as for
+    :class:`TransitionEstimator`.
+
+    References
+    ----------
+    J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
+    validation", J. Chem. Phys. 134, 174105 (2011) (the non-reversible maximum-likelihood estimate).
+    """
 
     name = "mle"
 
     def transition_matrix(self, counts):
+        """P_ij = C_ij / sum_j C_ij (rows of states never left: zero).
+
+        Parameters
+        ----------
+        counts : TransitionCounts
+            Counts gathered by :func:`count_transitions`.
+
+        Returns
+        -------
+        ndarray of float64, shape (S, S)
+        """
         c = counts.counts.astype(np.float64)
         rows = c.sum(axis=1, keepdims=True)
         return np.divide(c, rows, out=np.zeros_like(c), where=rows > 0)
 
 
 class PaperEstimator(TransitionEstimator):
-    """``paper``: average of the per-frame row-normalised matrices P'(t_c), Eq. (2)-(4)."""
+    """``paper``: average of the per-frame row-normalised matrices P'(t_c), Eq. (2)-(4).
+
+    Parameters as for :class:`TransitionEstimator`. The plain average has row sums equal to
+    the fraction of frames in which a state was occupied; each row is divided by its sum,
+    which equals averaging P' over the frames in which the state was occupied.
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 2-4).
+    """
 
     name = "paper"
 
     def transition_matrix(self, counts):
+        """The average of the per-frame matrices P'(t), rows renormalised.
+
+        Parameters
+        ----------
+        counts : TransitionCounts
+            Counts gathered with ``frame_average=True``.
+
+        Returns
+        -------
+        ndarray of float64, shape (S, S)
+
+        Raises
+        ------
+        InputError
+            If the counts were gathered without the per-frame matrices.
+        """
         if counts.frame_average_sum is None:
             raise InputError("the paper's estimator needs the per-frame matrices; these counts "
                              "were gathered without them")
@@ -310,6 +442,26 @@ ESTIMATORS: dict[str, type[TransitionEstimator]] = {
 
 def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025
                         ) -> TransitionEstimator:
+    """An estimator by name.
+
+    Parameters
+    ----------
+    name : {"paper", "mle"}
+        A key of ``ESTIMATORS``.
+    state_space : StateSpace
+        The states of the models it fits.
+    lag : float, optional
+        The lag (s).
+
+    Returns
+    -------
+    TransitionEstimator
+
+    Raises
+    ------
+    InputError
+        For an unknown name or a lag that is not positive.
+    """
     try:
         return ESTIMATORS[name](state_space, lag)
     except KeyError:
@@ -343,7 +495,13 @@ def fit_model(source, state_space: StateSpace, lag: float,
     ------
     InputError
         On an unreadable file, a window outside the data, a lag that is not a whole number
-        of frames, or an unknown estimator.
+        of frames, a state space that does not fit the file, or an unknown estimator.
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 2-4, the paper estimator).
     """
     fitter = estimator_from_name(estimator, state_space, lag)
     return fitter.fit(discretize(source, state_space, lag, window))

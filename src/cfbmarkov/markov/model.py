@@ -39,12 +39,64 @@ from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
 from cfbmarkov.markov.states import StateSpace, place_in_cells
 
+#: the ``format`` attribute of a model file
 MODEL_FORMAT = "cfbmarkov.model"
 _DATASETS = ("transition_matrix", "counts", "counts_up", "counts_down")
 
 
 @dataclass(frozen=True, eq=False)
 class MarkovModel:
+    """A fitted Markov chain model of particle motion; immutable.
+
+    Made by an estimator (:meth:`~cfbmarkov.markov.estimate.TransitionEstimator.fit`,
+    :func:`~cfbmarkov.markov.fit_model`) or read by :meth:`load`. The arrays are stored
+    as read-only copies.
+
+    Attributes
+    ----------
+    transition_matrix : ndarray of float64, shape (S, S)
+        The row-stochastic transition matrix P over one lag.
+    counts : ndarray of int64, shape (S, S)
+        Pooled transition counts C_ij of the fitting window.
+    counts_up, counts_down : ndarray of int64, shape (S, S)
+        The transitions among them that passed up through the top / down through the
+        bottom of the periodic riser.
+    state_space : StateSpace
+        The states.
+    lag : float
+        The lag tau (s).
+    estimator : str
+        Name of the estimator (``paper`` or ``mle``).
+    window : tuple of float or None
+        The fitting window (A, B) in s (None: every frame).
+    source : str or list of str
+        The trajectory file(s) it was fitted on.
+    frame_pairs : int
+        Number of frame pairs (t, t + lag) counted.
+    pass_fractions : tuple of two ndarrays of shape (S, S), or None
+        (up, down) fractions of each i -> j transition that pass the boundary; None: taken
+        from the counts.
+    selection : dict or None
+        How the state space and lag were chosen (``--states auto``), JSON-serialisable.
+
+    Raises
+    ------
+    InputError
+        If an array does not have shape (S, S) for the state space, P holds negative or
+        non-finite entries, its rows do not sum to 1, or the pass fractions have the
+        wrong shape.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (Estimators; Propagation; File formats, Model files).
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 1-8).
+    """
+
     transition_matrix: np.ndarray
     counts: np.ndarray
     counts_up: np.ndarray
@@ -55,9 +107,9 @@ class MarkovModel:
     window: tuple[float, float] | None = None
     source: Any = ""
     frame_pairs: int = 0
-    #: (up, down) fractions of each i -> j transition passing the boundary; from counts if None
+    # (up, down) fractions of each i -> j transition passing the boundary; from counts if None
     pass_fractions: tuple[np.ndarray, np.ndarray] | None = None
-    #: how the state space and lag were chosen (``--states auto``), JSON-serialisable
+    # how the state space and lag were chosen (``--states auto``), JSON-serialisable
     selection: dict | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
@@ -87,22 +139,29 @@ class MarkovModel:
     # -- derived quantities ------------------------------------------------------------
     @property
     def n_states(self) -> int:
+        """Number of states S."""
         return self.state_space.n_states
 
     @property
     def n_transitions(self) -> int:
+        """Number of transitions counted in the fitting window (0 for a model given by its
+        matrix)."""
         return int(self.counts.sum())
 
     @cached_property
     def unvisited_states(self) -> np.ndarray:
-        """States with no outgoing transition in the window (kept in place, P_ii = 1)."""
+        """States with no outgoing transition in the window, int64 [U].
+
+        They stay in place (P_ii = 1) or move as the other states of their cell
+        (``docs/definitions.md``, Unvisited states).
+        """
         if self.n_transitions == 0:      # a model given by its matrix, not fitted
             return np.zeros(0, np.int64)
         return np.flatnonzero(self.counts.sum(axis=1) == 0)
 
     @cached_property
     def up_fraction(self) -> np.ndarray:
-        """Fraction of the i -> j transitions that passed up through the top."""
+        """Fraction of the i -> j transitions that passed up through the top, float64 [S, S]."""
         if self.pass_fractions is not None:
             return self.pass_fractions[0]
         c = self.counts.astype(np.float64)
@@ -110,7 +169,8 @@ class MarkovModel:
 
     @cached_property
     def down_fraction(self) -> np.ndarray:
-        """Fraction of the i -> j transitions that passed down through the bottom."""
+        """Fraction of the i -> j transitions that passed down through the bottom, float64
+        [S, S]."""
         if self.pass_fractions is not None:
             return self.pass_fractions[1]
         c = self.counts.astype(np.float64)
@@ -122,7 +182,18 @@ class MarkovModel:
 
     @cached_property
     def stationary_distribution(self) -> np.ndarray:
-        """Left eigenvector of P for eigenvalue 1, normalised (pi P = pi)."""
+        """Left eigenvector of P for eigenvalue 1, normalised (pi P = pi).
+
+        Returns
+        -------
+        ndarray of float64, shape (S,)
+            Non-negative, sums to 1. Unique only where the chain has one closed class.
+
+        References
+        ----------
+        J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
+        (1960) (Ch. IV-V, regular and ergodic chains).
+        """
         with threadpool_limits(1):          # BLAS threads only contend on a dense eig here
             values, vectors = np.linalg.eig(self.transition_matrix.T)
         lead = int(np.argmin(np.abs(values - 1.0)))
@@ -131,10 +202,36 @@ class MarkovModel:
 
     # -- propagation (Eq. 5, 6, 8) -----------------------------------------------------
     def propagate(self, initial, steps: int, outflow: bool = False) -> np.ndarray:
-        """State vectors [steps+1, S] from ``initial`` [S] by S(t+lag) = S(t) P.
+        """State vectors from ``initial`` by S(t + lag) = S(t) P, lag by lag.
 
         With ``outflow`` the transitions up through the top are taken out, so the total
         mass is the fraction still in the riser (a batch leaving through the outlet).
+
+        Parameters
+        ----------
+        initial : array_like, shape (S,)
+            The state vector S(0) (e.g. :meth:`StateSpace.inlet_distribution
+            <cfbmarkov.markov.states.StateSpace.inlet_distribution>`).
+        steps : int
+            Number of lags to propagate.
+        outflow : bool, optional
+            Remove the mass that passes up through the top.
+
+        Returns
+        -------
+        ndarray of float64, shape (steps + 1, S)
+            S(k lag) for k = 0 .. steps; row 0 is ``initial``.
+
+        Raises
+        ------
+        InputError
+            If ``initial`` does not have shape (S,).
+
+        References
+        ----------
+        Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+        Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+        doi:10.3390/pr13030614 (Eq. 5-6).
         """
         s0 = np.asarray(initial, dtype=np.float64)
         if s0.shape != (self.n_states,):
@@ -147,15 +244,54 @@ class MarkovModel:
         return out
 
     def steps_for(self, time: float) -> int:
-        """Number of lags in ``time`` s; an error unless it is a whole multiple."""
+        """Number of lags in ``time``.
+
+        Parameters
+        ----------
+        time : float
+            A time (s), a whole multiple of the lag.
+
+        Returns
+        -------
+        int
+            ``time / lag``, >= 0.
+
+        Raises
+        ------
+        InputError
+            If ``time`` is negative or not a whole multiple of the lag.
+        """
         k = int(round(time / self.lag))
         if k < 0 or abs(k * self.lag - time) > 1e-6 * max(self.lag, abs(time)):
             raise InputError(f"time {time:g} s is not a whole multiple of the lag {self.lag:g} s")
         return k
 
     def batch_injection_maps(self, times: Sequence[float], outflow: bool = False) -> np.ndarray:
-        """Eq. (8): a batch fed evenly over the inlet cells at t = 0; probability per cell
-        at each of ``times`` (s), as maps [len(times), rows, columns]."""
+        """Eq. (8): where a batch fed evenly over the inlet cells at t = 0 is at ``times``.
+
+        Parameters
+        ----------
+        times : sequence of float
+            Times (s) after the injection, whole multiples of the lag.
+        outflow : bool, optional
+            Remove the mass that leaves up through the top (see :meth:`propagate`).
+
+        Returns
+        -------
+        ndarray of float64, shape (len(times), rows, columns)
+            Probability per cell at each time; row 0 is the bottom (the paper's Fig. 4-7).
+
+        Raises
+        ------
+        InputError
+            If a time is negative or not a whole multiple of the lag.
+
+        References
+        ----------
+        Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+        Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+        doi:10.3390/pr13030614 (Eq. 5-6 and Eq. 8).
+        """
         steps = [self.steps_for(t) for t in times]
         history = self.propagate(self.state_space.inlet_distribution(), max(steps, default=0),
                                  outflow=outflow)
@@ -163,8 +299,34 @@ class MarkovModel:
 
     # -- residence times ---------------------------------------------------------------
     def rtd(self, window: float | None = None) -> ResidenceTimeDistribution:
-        """Exact RTD (no sampling noise); ``window`` (s) gives the RTD as seen in an analysis
-        window of that length, the quantity a sample-based RTD estimates."""
+        """Exact residence-time distribution (no sampling noise), cached.
+
+        Parameters
+        ----------
+        window : float, optional
+            Length (s) of an analysis window: the RTD as seen in it, the quantity a
+            sample-based RTD estimates (None: the intrinsic RTD).
+
+        Returns
+        -------
+        ResidenceTimeDistribution
+
+        Raises
+        ------
+        CfbmarkovError
+            If the model has no transition up through the top (no residence ends), or no
+            residence fits in ``window``.
+
+        Notes
+        -----
+        See :func:`~cfbmarkov.markov.rtd.exact_rtd` and ``docs/definitions.md`` (Residence
+        time).
+
+        References
+        ----------
+        J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
+        (1960) (Ch. III, absorbing chains).
+        """
         if window is not None and "rtd" not in self._cache:
             # a window of n lags sees residence times below n lags only: propagate no further
             steps = max(2, int(round(window / self.lag)))
@@ -205,6 +367,12 @@ class MarkovModel:
         ------
         InputError
             If an initial state lies outside the state space.
+
+        References
+        ----------
+        Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+        Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+        doi:10.3390/pr13030614 (Eq. 7, the cumulative rule).
         """
         initial_states = np.asarray(initial_states)
         if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
@@ -212,9 +380,23 @@ class MarkovModel:
         return run_chain(self._chain, initial_states, n_steps, seed, initial_laps)
 
     def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """States, positions (m) and laps [N] of the particles of ``trajectories`` (a path or
-        an open :class:`~cfbmarkov.trajectories.Trajectories`) in the frame at ``start`` (s),
-        discretised with the history the state space needs.
+        """States, positions and laps of the particles in the frame at ``start``.
+
+        The frame is discretised with the history the state space needs.
+
+        Parameters
+        ----------
+        trajectories : str, os.PathLike or Trajectories
+            A trajectory file, by path or open.
+        start : float
+            Time of the frame (s).
+
+        Returns
+        -------
+        states : ndarray of int32, shape (N,)
+        positions : ndarray of float64, shape (N, 2)
+            Positions (m).
+        laps : ndarray of int32, shape (N,)
 
         Raises
         ------
@@ -245,8 +427,21 @@ class MarkovModel:
 
         Returns
         -------
-        Path or tuple
+        pathlib.Path or tuple
             The output path, or (times [K+1] s, states [K+1, N], laps [K+1, N]) without one.
+
+        Raises
+        ------
+        InputError
+            If the file cannot be read or does not fit the model, has no frame at
+            ``start`` (or lacks the history before it), ``duration`` is not a whole number
+            of lags or is shorter than one, or the output cannot be written.
+
+        References
+        ----------
+        Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+        Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+        doi:10.3390/pr13030614 (Eq. 7).
         """
         from cfbmarkov.trajectories import TrajectoryWriter, opened
 
@@ -283,11 +478,29 @@ class MarkovModel:
             return Path(output)
 
     def with_selection(self, selection: dict) -> "MarkovModel":
-        """The same model, recording how its state space and lag were chosen."""
+        """The same model, recording how its state space and lag were chosen.
+
+        Parameters
+        ----------
+        selection : dict
+            JSON-serialisable record (candidates, scores, reason).
+
+        Returns
+        -------
+        MarkovModel
+            A copy with ``selection`` set.
+        """
         return dataclasses.replace(self, selection=dict(selection), _cache={})
 
     # -- description -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:
+        """Estimator, lag (s), window (s), state space, source and selection.
+
+        Returns
+        -------
+        dict
+            JSON-serialisable.
+        """
         out = {"estimator": self.estimator, "lag": self.lag,
                "window": list(self.window) if self.window else None,
                "state_space": self.state_space.to_attrs(), "source": self.source}
@@ -296,6 +509,13 @@ class MarkovModel:
         return out
 
     def summary(self) -> str:
+        """A few lines of text: state space, lag, fitting data, passes, unvisited states
+        and the exact E(RT) and SD(RT).
+
+        Returns
+        -------
+        str
+        """
         lines = [
             f"Markov chain model: {self.state_space.describe()}, lag {self.lag:g} s, "
             f"estimator '{self.estimator}'",
@@ -342,7 +562,28 @@ class MarkovModel:
         return datasets, attrs
 
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the model as HDF5 (atomically: no partial file on failure)."""
+        """Write the model as HDF5 (atomically: no partial file on failure).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The model file; its folder is created if needed.
+
+        Returns
+        -------
+        pathlib.Path
+            ``path``.
+
+        Raises
+        ------
+        InputError
+            If the file cannot be put in place.
+
+        Notes
+        -----
+        The layout is described in the module docstring and ``docs/definitions.md`` (File
+        formats, Model files).
+        """
         datasets, attrs = self._datasets_and_attrs()
         with atomic_path(path) as tmp:
             with h5py.File(tmp, "w") as f:
@@ -353,8 +594,26 @@ class MarkovModel:
 
     @classmethod
     def from_group(cls, group: h5py.Group | h5py.File, label: str = "") -> "MarkovModel":
-        """Rebuild a model from an HDF5 group written by :meth:`save` (or attached to a
-        prediction as ``/provenance/model``)."""
+        """Rebuild a model from an HDF5 group written by :meth:`save`.
+
+        Parameters
+        ----------
+        group : h5py.Group or h5py.File
+            The model file, or the group attached to a prediction as
+            ``/provenance/model``.
+        label : str, optional
+            Names the source in error messages (default: the file's name).
+
+        Returns
+        -------
+        MarkovModel
+
+        Raises
+        ------
+        InputError
+            If the group is not a cfbmarkov model, misses a dataset or attribute, or holds
+            an invalid model.
+        """
         label = label or getattr(group.file, "filename", "")
         fmt = group.attrs.get("format")
         if fmt != MODEL_FORMAT:
@@ -376,6 +635,22 @@ class MarkovModel:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "MarkovModel":
+        """Read a model file written by :meth:`save`.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The model file.
+
+        Returns
+        -------
+        MarkovModel
+
+        Raises
+        ------
+        InputError
+            If the file is missing, empty, not HDF5, not a model file, or damaged.
+        """
         from cfbmarkov.trajectories import _open_h5
 
         with _open_h5(path) as f:
@@ -383,7 +658,23 @@ class MarkovModel:
 
     @classmethod
     def from_trajectories(cls, trajectories) -> "MarkovModel | None":
-        """The model attached to a prediction file, or None."""
+        """The model attached to a prediction file, or None.
+
+        Parameters
+        ----------
+        trajectories : Trajectories
+            An open trajectory file.
+
+        Returns
+        -------
+        MarkovModel or None
+            None where the file has no ``/provenance/model`` group.
+
+        Raises
+        ------
+        InputError
+            If the attached group is not a valid model.
+        """
         group = trajectories.group("model")
         return None if group is None else cls.from_group(group, str(trajectories.path))
 

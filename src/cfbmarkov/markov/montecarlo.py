@@ -22,8 +22,29 @@ STREAM_STATE, STREAM_DIRECTION = 0, 3
 
 @dataclass(frozen=True)
 class SparseChain:
-    """Rows of P in compressed form for sampling: cumulative probabilities per row, and for
-    each nonzero the probability that the transition passes up / down the boundary."""
+    """Rows of P in compressed form for sampling by the cumulative rule of Eq. (7).
+
+    Cumulative probabilities per row (CSR layout, nonzero entries only), and for each
+    nonzero the probability that the transition passes up / down the boundary.
+
+    Attributes
+    ----------
+    row_start : ndarray of int64, shape (S + 1,)
+        Row i's entries are ``row_start[i]:row_start[i + 1]``.
+    column : ndarray of int32, shape (nnz,)
+        Target state j of each entry.
+    cumulative : ndarray of float64, shape (nnz,)
+        Cumulative probability within the row; the last entry of each row is exactly 1.
+    up_probability, down_probability : ndarray of float64, shape (nnz,)
+        Probability that the transition passes up through the top / down through the
+        bottom.
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 7).
+    """
 
     row_start: np.ndarray    # [S+1] int64
     column: np.ndarray       # [nnz] int32
@@ -34,6 +55,19 @@ class SparseChain:
     @classmethod
     def from_matrix(cls, matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray
                     ) -> "SparseChain":
+        """Compress a transition matrix and its pass fractions.
+
+        Parameters
+        ----------
+        matrix : ndarray of float64, shape (S, S)
+            Row-stochastic transition matrix P (rows of all zeros keep particles in place).
+        up_fraction, down_fraction : ndarray of float64, shape (S, S)
+            Fraction of each i -> j transition that passes up / down the boundary.
+
+        Returns
+        -------
+        SparseChain
+        """
         rows, cols = np.nonzero(matrix > 0)
         values = matrix[rows, cols]
         row_start = np.zeros(matrix.shape[0] + 1, np.int64)
@@ -53,10 +87,31 @@ class SparseChain:
 @nb.njit(cache=True, parallel=True)
 def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulative, up_probability,
                    down_probability, n_steps, seed, states_out, laps_out):
-    """Advance every particle n_steps transitions (kernel).
+    """Advance every particle ``n_steps`` transitions (Numba kernel, parallel over particles).
 
-    Writes states_out/laps_out [n_steps+1, N] (row 0 = the initial values). A row with no
-    nonzero entry keeps the particle where it is.
+    Each step draws u in [0, 1) and takes the first entry of the row whose cumulative
+    probability exceeds u (Eq. 7); where the transition can pass the boundary a second
+    draw decides the direction and moves the lap counter by +1 (up) or -1 (down). A row
+    with no nonzero entry keeps the particle where it is.
+
+    Parameters
+    ----------
+    initial_states, initial_laps : ndarray of int32, shape (N,)
+        States and lap counters at the start.
+    row_start, column, cumulative, up_probability, down_probability : ndarray
+        The arrays of a :class:`SparseChain`.
+    n_steps : int
+        Number of lags to run.
+    seed : numpy.uint64
+        Seed of the counter-based generator (:func:`cfbmarkov._random.uniform`).
+    states_out, laps_out : ndarray of int32, shape (n_steps + 1, N)
+        Filled in place; row 0 holds the initial values.
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 7).
     """
     n_particles = initial_states.size
     for p in nb.prange(n_particles):
@@ -92,7 +147,32 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
 
 def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initial_laps=None
               ) -> tuple[np.ndarray, np.ndarray]:
-    """States and laps [n_steps+1, N] of a Monte Carlo run from ``initial_states``."""
+    """States and laps of a Monte Carlo run from ``initial_states``.
+
+    Parameters
+    ----------
+    chain : SparseChain
+        The chain to sample.
+    initial_states : array_like of int, shape (N,)
+        States at the start (0 <= s < S; not checked here).
+    n_steps : int
+        Number of lags to run.
+    seed : int
+        Seed: the run depends only on (seed, particle, step), whatever the thread count.
+    initial_laps : array_like of int, shape (N,), optional
+        Lap counters at the start (0 when None).
+
+    Returns
+    -------
+    states, laps : ndarray of int32, shape (n_steps + 1, N)
+        Row 0 holds the initial values.
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 7).
+    """
     initial_states = np.ascontiguousarray(initial_states, dtype=np.int32)
     n = initial_states.size
     laps0 = (np.zeros(n, np.int32) if initial_laps is None

@@ -37,12 +37,31 @@ from cfbmarkov.errors import CfbmarkovError
 
 @dataclass(frozen=True)
 class ResidenceTimeDistribution:
-    """f(k) = probability that a residence lasts k lags (k = 1, 2, ...)."""
+    """f(k) = probability that a residence lasts k lags (k = 1, 2, ...).
+
+    Attributes
+    ----------
+    lag : float
+        The lag (s).
+    probability : ndarray of float64, shape (K,)
+        f(k); index 0 is k = 1.
+    unresolved : float
+        Mass not resolved (lap-deficit truncation, traps, tail cut-off; for an RTD
+        computed only as far as a window, the rest too).
+    entry_distribution : ndarray of float64, shape (S,)
+        The distribution of the states residences start in.
+    window : float or None
+        Length of the observation window (s); None for the intrinsic RTD.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (Residence time; Exact RTD of a model).
+    """
 
     lag: float
     probability: np.ndarray   # [K]: index 0 is k = 1
     unresolved: float         # mass not resolved (lap-deficit truncation, traps, tail cut;
-    #                           for an RTD computed only as far as a window: the rest too)
+    # for an RTD computed only as far as a window: the rest too)
     entry_distribution: np.ndarray  # [S] stationary distribution of entry states
     window: float | None = None     # observation window length, s (None: intrinsic RTD)
 
@@ -53,7 +72,7 @@ class ResidenceTimeDistribution:
 
     @property
     def mean(self) -> float:
-        """E(RT), s."""
+        """E(RT) (s), of the resolved mass renormalised."""
         w = self.probability / self.probability.sum()
         return float(np.sum(w * self.times))
 
@@ -65,7 +84,26 @@ class ResidenceTimeDistribution:
         return float(np.sqrt(max(np.sum(w * (self.times - m) ** 2), 0.0)))
 
     def in_window(self, window: float) -> "ResidenceTimeDistribution":
-        """The RTD as observed in an analysis window of ``window`` s (see module doc)."""
+        """The RTD as observed in an analysis window of ``window`` s.
+
+        A residence of k lags fits in n_W - k of the n_W = window / lag frame positions, so
+        the observed RTD is f(k) (n_W - k)+ renormalised (see the module docstring).
+
+        Parameters
+        ----------
+        window : float
+            Length of the analysis window (s).
+
+        Returns
+        -------
+        ResidenceTimeDistribution
+            With ``window`` set and residences longer than the window left out.
+
+        Raises
+        ------
+        CfbmarkovError
+            If no residence fits in the window.
+        """
         n_window = int(round(window / self.lag))
         k = np.arange(1, self.probability.size + 1)
         weights = np.clip(n_window - k, 0, None).astype(np.float64)
@@ -77,7 +115,22 @@ class ResidenceTimeDistribution:
                                          self.entry_distribution, float(window))
 
     def histogram(self, bin_width: float, upper: float) -> tuple[np.ndarray, np.ndarray]:
-        """Probability per bin on edges 0, bin_width, ..., upper (s)."""
+        """Probability per bin on edges 0, bin_width, ..., upper (s).
+
+        Parameters
+        ----------
+        bin_width : float
+            Width of the bins (s).
+        upper : float
+            Upper edge of the last bin (s).
+
+        Returns
+        -------
+        edges : ndarray of float64, shape (B + 1,)
+            Bin edges (s).
+        probability : ndarray of float64, shape (B,)
+            Probability per bin (of the resolved mass renormalised).
+        """
         edges = np.arange(0.0, upper + 0.5 * bin_width, bin_width)
         prob, _ = np.histogram(self.times, bins=edges, weights=self.probability / self.probability.sum())
         return edges, prob
@@ -111,11 +164,51 @@ def _first_passage(indptr, indices, data, exit_probability, start, tol, max_step
 def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray, lag: float,
               deficit_levels: int = 8, tol: float = 1e-10, max_steps: int = 200_000,
               entry: np.ndarray | None = None) -> ResidenceTimeDistribution:
-    """Exact intrinsic RTD of a chain with transition matrix P and pass fractions (see module).
+    """Exact intrinsic RTD of a chain with transition matrix P and pass fractions.
 
-    ``entry`` [S] (optional): the distribution of the states particles enter in, e.g. the
-    observed one (column sums of the up-pass counts); by default the chain's own stationary
-    entry distribution, which costs a sparse LU factorisation and an eigenvector."""
+    A first-passage problem on the states augmented with the lap deficit (see the module
+    docstring): the up passes from deficit 0 are absorbing, Q is the transient part.
+
+    Parameters
+    ----------
+    matrix : ndarray of float64, shape (S, S)
+        The transition matrix P.
+    up_fraction, down_fraction : ndarray of float64, shape (S, S)
+        Fraction of each i -> j transition that passes up through the top / down through
+        the bottom.
+    lag : float
+        The lag (s).
+    deficit_levels : int, optional
+        K, the deepest lap deficit kept (mass beyond it counts as unresolved).
+    tol : float, optional
+        Stop when the mass not yet absorbed falls below this.
+    max_steps : int, optional
+        Propagate at most this many lags (the rest counts as unresolved).
+    entry : ndarray of float64, shape (S,), optional
+        The distribution of the states particles enter in, e.g. the observed one (column
+        sums of the up-pass counts); by default the chain's own stationary entry
+        distribution, which costs a sparse LU factorisation and an eigenvector.
+
+    Returns
+    -------
+    ResidenceTimeDistribution
+        The intrinsic RTD (``window`` None).
+
+    Raises
+    ------
+    CfbmarkovError
+        If the chain has no transition up through the top, or ``entry`` is not a
+        non-negative [S] vector with mass on states from which the top can be reached.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (Exact RTD of a model).
+
+    References
+    ----------
+    J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
+    (1960) (Ch. III, absorbing chains: absorption probabilities B = (I - Q)^-1 R).
+    """
     s = matrix.shape[0]
     # split P by pass direction on its non-zeros only (one scan of the dense matrix)
     chain = sp.csr_matrix(matrix)

@@ -72,6 +72,33 @@ CK_LAG_MULTIPLES = np.arange(2, 21, 2)
 
 @dataclass(frozen=True)
 class CandidateScore:
+    """How one candidate (state space x lag) fared in the cross-validation.
+
+    Attributes
+    ----------
+    states : str
+        Name of the state space (:func:`~cfbmarkov.markov.states.state_space_from_name`).
+    lag : float
+        The lag (s).
+    n_states : int
+        Number of states S.
+    rt_mean, rt_sd : float
+        The model's windowed E(RT) and SD(RT) (s), averaged over the blocks (NaN under
+        the CK criterion).
+    pd_rt_mean, pd_rt_sd : float
+        Percentage differences (%) of E(RT) and SD(RT) from the held-out blocks, averaged
+        with their signs.
+    md_rtd : float
+        Mean Minkowski distance (p = 2) between the model's and the held-out RTD
+        histograms.
+    score : float
+        The criterion (lower is better; inf where the candidate failed).
+    error : str
+        Why the candidate could not be judged ("" if it could).
+    ck_error : float
+        Held-out Chapman-Kolmogorov error (the criterion when residences are too few).
+    """
+
     states: str
     lag: float
     n_states: int
@@ -82,10 +109,11 @@ class CandidateScore:
     md_rtd: float
     score: float
     error: str = ""
-    #: held-out Chapman-Kolmogorov error (the criterion when residences are too few)
+    # held-out Chapman-Kolmogorov error (the criterion when residences are too few)
     ck_error: float = math.nan
 
     def as_dict(self) -> dict[str, Any]:
+        """The fields as a JSON-serialisable dict (non-finite numbers as None)."""
         return {k: (None if isinstance(v, float) and not math.isfinite(v) else v)
                 for k, v in self.__dict__.items()}
 
@@ -107,9 +135,52 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                  states: Sequence[str] = DEFAULT_STATES,
                  lag_multiples: Sequence[int] = DEFAULT_LAG_MULTIPLES,
                  estimator: str = "mle", folds: int = 3, criterion: str = "auto"):
-    """Choose, fit on ``window`` and return the best model (see the module doc); its
-    ``selection`` attribute holds the candidates' scores and the reason. ``criterion``:
-    ``rtd``, ``ck``, or ``auto`` (the RTD where every block holds enough residences)."""
+    """Choose, fit on ``window`` and return the best model (see the module docstring).
+
+    Parameters
+    ----------
+    data : str, os.PathLike or Trajectories
+        The trajectory file, by path or open.
+    window : tuple of float
+        The fitting window (A, B) in s; nothing outside it is used.
+    columns, rows : int
+        The cell grid m x n of every candidate.
+    lag : float
+        The base lag (s), a whole multiple of the frame interval.
+    states : sequence of str, optional
+        Names of the candidate state spaces.
+    lag_multiples : sequence of int, optional
+        Candidate lags, in multiples of ``lag``.
+    estimator : {"mle", "paper"}, optional
+        The estimator of every candidate.
+    folds : int, optional
+        Number of blocks of the cross-validation (>= 2).
+    criterion : {"auto", "rtd", "ck"}, optional
+        Judge by the held-out RTD, by the held-out Chapman-Kolmogorov error, or ``auto``:
+        the RTD where every block holds at least ``MIN_RESIDENCES`` residences.
+
+    Returns
+    -------
+    MarkovModel
+        The chosen model, fitted on the whole window; its ``selection`` attribute holds
+        the candidates' scores and the reason.
+
+    Raises
+    ------
+    InputError
+        For an unknown criterion, fewer than 2 folds, a window too short for the blocks,
+        ``criterion="rtd"`` with too few residences in a block, a file, window or lag that
+        does not fit, or when no candidate can be fitted.
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 9, the Minkowski distance).
+
+    J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
+    validation", J. Chem. Phys. 134, 174105 (2011) (the Chapman-Kolmogorov test).
+    """
     if criterion not in ("auto", "rtd", "ck"):
         raise InputError(f"auto: unknown criterion '{criterion}' (rtd, ck or auto)")
     if int(folds) < 2:
@@ -302,9 +373,29 @@ def _pass_fractions(counts) -> tuple[np.ndarray, np.ndarray]:
 
 
 def parse_model_name(name: str) -> tuple[str, str]:
-    """A model's name in a reproduction -> (state space, estimator): ``paper`` and ``mle``
-    are the paper's cells with that estimator, ``auto`` is :func:`select_model`, and
-    ``STATES`` or ``STATES:ESTIMATOR`` names a state space (estimator ``mle`` by default)."""
+    """A model's name in a reproduction, as (state space, estimator).
+
+    ``paper`` and ``mle`` are the paper's cells with that estimator, ``auto`` is
+    :func:`select_model`, and ``STATES`` or ``STATES:ESTIMATOR`` names a state space
+    (estimator ``mle`` by default).
+
+    Parameters
+    ----------
+    name : str
+        The model's name.
+
+    Returns
+    -------
+    states : str
+        A name of :data:`~cfbmarkov.markov.states.STATE_SPACES`, or ``auto``.
+    estimator : str
+        ``paper`` or ``mle``.
+
+    Raises
+    ------
+    InputError
+        For an unknown state space or estimator.
+    """
     from cfbmarkov.markov.estimate import ESTIMATORS
     from cfbmarkov.markov.states import STATE_SPACES
 
@@ -323,8 +414,31 @@ def parse_model_name(name: str) -> tuple[str, str]:
 
 def fit_by_name(name: str, data, *, window: tuple[float, float], columns: int, rows: int,
                 lag: float):
-    """Fit the model ``name`` (see :func:`parse_model_name`) on ``window`` of ``data`` (a
-    trajectory path or an open file) on an m x n = ``columns`` x ``rows`` grid at ``lag`` s."""
+    """Fit the model ``name`` (see :func:`parse_model_name`) on ``window`` of ``data``.
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``paper``, ``mle``, ``auto``, ``STATES[:ESTIMATOR]``).
+    data : str, os.PathLike or Trajectories
+        The trajectory file, by path or open.
+    window : tuple of float
+        The fitting window (A, B) in s.
+    columns, rows : int
+        The cell grid m x n.
+    lag : float
+        The lag (s), a whole multiple of the frame interval.
+
+    Returns
+    -------
+    MarkovModel
+
+    Raises
+    ------
+    InputError
+        For an unknown name, or a file, window or lag that does not fit (and as
+        :func:`select_model` for ``auto``).
+    """
     states, estimator = parse_model_name(name)
     if states == "auto":
         return select_model(data, window=window, columns=columns, rows=rows, lag=lag,

@@ -34,7 +34,29 @@ class StateSpace(ABC):
     """A discretisation of the riser into Markov states.
 
     Every state lies in one cell of an underlying m x n cell grid (``cell_of_state``), so
-    maps, placement and mixing by halves work for any state space.
+    maps, placement and mixing by halves work for any state space. Subclasses that set a
+    class attribute ``kind`` are registered under it, so that :meth:`from_attrs` can
+    rebuild them from a saved model.
+
+    Attributes
+    ----------
+    kind : str
+        The name of the state space (``cells``, ``cells-direction``, ...), a class
+        attribute.
+    columns, rows : int
+        The cell grid m x n.
+    width, height : float
+        The riser W x H (m) the grid covers.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (States and transitions).
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 1, the state vector over the cells).
     """
 
     kind: ClassVar[str]
@@ -63,6 +85,7 @@ class StateSpace(ABC):
 
     @property
     def n_cells(self) -> int:
+        """Number of cells m x n of the underlying grid."""
         return self.columns * self.rows
 
     @property
@@ -95,10 +118,33 @@ class StateSpace(ABC):
 
     @abstractmethod
     def to_attrs(self) -> dict[str, Any]:
-        """JSON-serialisable description; ``StateSpace.from_attrs`` rebuilds the space."""
+        """JSON-serialisable description; ``StateSpace.from_attrs`` rebuilds the space.
+
+        Returns
+        -------
+        dict
+            ``kind`` and the constructor's arguments.
+        """
 
     @staticmethod
     def from_attrs(attrs: dict[str, Any] | str) -> "StateSpace":
+        """Rebuild a state space from :meth:`to_attrs` (as a dict or as JSON text).
+
+        Parameters
+        ----------
+        attrs : dict or str
+            The description, e.g. a model file's ``state_space`` attribute.
+
+        Returns
+        -------
+        StateSpace
+
+        Raises
+        ------
+        InputError
+            If the kind is unknown, or the arguments make no valid state space (e.g. a bad
+            grid).
+        """
         if isinstance(attrs, (str, bytes)):
             attrs = json.loads(attrs)
         attrs = dict(attrs)
@@ -108,7 +154,21 @@ class StateSpace(ABC):
         return _REGISTRY[kind](**attrs)
 
     def inlet_distribution(self) -> np.ndarray:
-        """Eq. (8): a batch spread evenly over the bottom row of cells, as a state vector."""
+        """Eq. (8): a batch spread evenly over the bottom row of cells, as a state vector.
+
+        Each of the m bottom cells gets 1/m, split evenly over the states that lie in it.
+
+        Returns
+        -------
+        ndarray of float64, shape (S,)
+            The initial state vector S(0); it sums to 1.
+
+        References
+        ----------
+        Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+        Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+        doi:10.3390/pr13030614 (Eq. 8, batch injection).
+        """
         cell = self.cell_of_state
         bottom = cell < self.columns
         dist = np.zeros(self.n_states)
@@ -118,7 +178,18 @@ class StateSpace(ABC):
         return dist
 
     def cell_maps(self, distributions: np.ndarray) -> np.ndarray:
-        """Sum state vectors [..., S] into cell maps [..., rows, columns]."""
+        """Sum state vectors into cell maps.
+
+        Parameters
+        ----------
+        distributions : array_like, shape (..., S)
+            State vectors (probabilities or counts per state).
+
+        Returns
+        -------
+        ndarray of float64, shape (..., rows, columns)
+            The sum over the states of each cell; row 0 is the bottom of the riser.
+        """
         distributions = np.asarray(distributions, dtype=np.float64)
         lead = distributions.shape[:-1]
         flat = distributions.reshape(-1, self.n_states)
@@ -127,6 +198,7 @@ class StateSpace(ABC):
         return maps.reshape(*lead, self.rows, self.columns)
 
     def describe(self) -> str:
+        """A one-line description, e.g. ``cells 6x38 (228 states)``."""
         return f"{self.kind} {self.columns}x{self.rows} ({self.n_states} states)"
 
     def __eq__(self, other) -> bool:
@@ -152,7 +224,22 @@ def _cell_index(positions, width, height, columns, rows, out):
 
 def cell_index(positions: np.ndarray, width: float, height: float, columns: int, rows: int
                ) -> np.ndarray:
-    """Cell number row*m + col of positions [..., 2] (m); points on the far edges go inside."""
+    """Cell number row*m + col of positions; points on the far edges go inside.
+
+    Parameters
+    ----------
+    positions : array_like, shape (..., 2)
+        Positions (x, y) in m; points outside the domain are clipped into the nearest cell.
+    width, height : float
+        The riser W x H (m).
+    columns, rows : int
+        The cell grid m x n.
+
+    Returns
+    -------
+    ndarray of int32, shape (...)
+        The cell of each position.
+    """
     positions = np.ascontiguousarray(positions, dtype=np.float64)
     out = np.empty(positions.shape[:-1], dtype=np.int32)
     _cell_index(positions, float(width), float(height), int(columns), int(rows), out)
@@ -170,7 +257,29 @@ def _place_in_cells(cells, columns, cell_width, cell_height, seed, step, out):
 
 
 class CellGrid(StateSpace):
-    """The paper's states: m columns x n rows of equal cells over W x H (Fig. 1)."""
+    """The paper's states: m columns x n rows of equal cells over W x H (Fig. 1).
+
+    State s = row*m + col, row 0 at the bottom (``docs/definitions.md``, Cells and state
+    numbers).
+
+    Parameters
+    ----------
+    columns, rows : int
+        The cell grid m x n (at least 1 x 1).
+    width, height : float, optional
+        The riser W x H (m); the paper's 0.09 x 0.95 m by default.
+
+    Raises
+    ------
+    InputError
+        If the grid has fewer than 1 x 1 cells or the domain is not of positive size.
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Fig. 1 and Eq. 1).
+    """
 
     kind = "cells"
 
@@ -184,16 +293,33 @@ class CellGrid(StateSpace):
 
     @property
     def n_states(self) -> int:
+        """Number of states S = m x n."""
         return self.columns * self.rows
 
     @property
     def cell_of_state(self) -> np.ndarray:
+        """Cell of every state, int64 [S]: the state itself."""
         return np.arange(self.n_states, dtype=np.int64)
 
     def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+        """The cell of each position (see :meth:`StateSpace.discretize`).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, 2) or (N, 2)
+            Positions (m).
+        velocities, lag_frames, frame_interval
+            Ignored (the cells need neither motion nor history).
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N) or (N,)
+        """
         return cell_index(positions, self.width, self.height, self.columns, self.rows)
 
     def to_attrs(self):
+        """``kind``, ``columns``, ``rows``, ``width`` and ``height`` (see
+        :meth:`StateSpace.to_attrs`)."""
         return {"kind": self.kind, "columns": self.columns, "rows": self.rows,
                 "width": self.width, "height": self.height}
 
@@ -202,10 +328,25 @@ class CellGrid(StateSpace):
 
 
 def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int) -> np.ndarray:
-    """Positions [N, 2] (m) drawn uniformly inside the given cells (``docs/definitions.md``,
-    Monte Carlo).
+    """Positions drawn uniformly inside the given cells (``docs/definitions.md``, Monte Carlo).
 
     The draw depends only on (seed, particle index, step), so it is reproducible.
+
+    Parameters
+    ----------
+    cells : array_like of int, shape (N,)
+        The cell (row*m + col) of each particle.
+    space : StateSpace
+        Gives the grid and the riser's size.
+    seed : int
+        Seed of the counter-based generator (:func:`cfbmarkov._random.uniform`).
+    step : int
+        The step (lag) of the run, so that every step draws afresh.
+
+    Returns
+    -------
+    ndarray of float64, shape (N, 2)
+        Positions (x, y) in m.
     """
     cells = np.ascontiguousarray(cells, dtype=np.int64)
     out = np.empty((cells.size, 2))
@@ -328,7 +469,18 @@ class _CellProductSpace(StateSpace):
         return np.arange(self.n_states, dtype=np.int64) // self.per_cell
 
     def sub_state(self, states: np.ndarray) -> np.ndarray:
-        """The sub-state (0..K-1) of states."""
+        """The sub-state (0..K-1) of states.
+
+        Parameters
+        ----------
+        states : array_like of int
+            States of this space.
+
+        Returns
+        -------
+        ndarray of int
+            ``states % K``, same shape.
+        """
         return np.asarray(states) % self.per_cell
 
     def _cells(self, positions: np.ndarray) -> np.ndarray:
@@ -380,6 +532,29 @@ class DirectionCells(_CellProductSpace):
     stayed at the same height (dy = 0, e.g. the first frames) counts as rising.
     ``source="velocity"``: the sign of v_y in the frame itself (``needs_velocity``; no
     history); v_y = 0 counts as rising.
+
+    Parameters
+    ----------
+    columns, rows : int
+        The cell grid m x n.
+    width, height : float, optional
+        The riser W x H (m).
+    source : {"displacement", "velocity"}, optional
+        Where the direction comes from.
+
+    Attributes
+    ----------
+    RISING, FALLING : int
+        The two sub-states (0 and 1).
+
+    Raises
+    ------
+    InputError
+        For a bad grid or an unknown ``source``.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (Pass direction) for the minimal-image rule.
     """
 
     kind = "cells-direction"
@@ -394,6 +569,30 @@ class DirectionCells(_CellProductSpace):
         self.needs_velocity = self.source == "velocity"
 
     def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+        """States of frames (see :meth:`StateSpace.discretize`).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, 2) or (N, 2)
+            Positions (m); with ``memory_lags = 1`` the first ``lag_frames`` frames are
+            history.
+        velocities : ndarray, shape like ``positions``, optional
+            Velocities (m/s), needed with ``source="velocity"``.
+        lag_frames : int
+            The lag in frames (>= 1).
+        frame_interval : float, optional
+            Time between frames (s); not used.
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N) or (N,)
+
+        Raises
+        ------
+        InputError
+            If ``source="velocity"`` and the velocities are missing or do not match the
+            positions' shape, or ``lag_frames < 1``.
+        """
         cells = self._cells(positions)
         vertical = self._vertical(positions, velocities, lag_frames, self.source)
         out = np.empty_like(cells)
@@ -401,13 +600,26 @@ class DirectionCells(_CellProductSpace):
         return out
 
     def falling(self, states: np.ndarray) -> np.ndarray:
-        """True where a state is a falling one."""
+        """True where a state is a falling one.
+
+        Parameters
+        ----------
+        states : array_like of int
+            States of this space.
+
+        Returns
+        -------
+        ndarray of bool
+            Same shape as ``states``.
+        """
         return self.sub_state(states) == self.FALLING
 
     def to_attrs(self):
+        """The grid and ``source`` (see :meth:`StateSpace.to_attrs`)."""
         return {**self._base_attrs(), "source": self.source}
 
     def describe(self) -> str:
+        """A one-line description, with the source of the direction."""
         return (f"{self.kind} {self.columns}x{self.rows}x2 ({self.n_states} states, direction "
                 f"from {self.source})")
 
@@ -429,6 +641,25 @@ class VelocityCells(_CellProductSpace):
 
     Model files written before the lag lived in one place stored it here as ``lag``; it is
     accepted on loading and ignored (the model's own lag is the one used).
+
+    Parameters
+    ----------
+    columns, rows : int
+        The cell grid m x n.
+    width, height : float, optional
+        The riser W x H (m).
+    edges : sequence of float, optional
+        The B interior bin edges of v_y (m/s), finite and strictly increasing.
+    source : {"displacement", "velocity"}, optional
+        Where v_y comes from.
+    lag : float, optional
+        Accepted from old model files and ignored.
+
+    Raises
+    ------
+    InputError
+        For a bad grid, edges that are not numbers or not finite and strictly increasing,
+        or an unknown ``source``.
     """
 
     kind = "cells-velocity"
@@ -452,9 +683,35 @@ class VelocityCells(_CellProductSpace):
 
     @property
     def per_cell(self) -> int:
+        """Sub-states per cell, K = B + 1 velocity bins."""
         return len(self.edges) + 1
 
     def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+        """States of frames (see :meth:`StateSpace.discretize`).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, 2) or (N, 2)
+            Positions (m); with ``memory_lags = 1`` the first ``lag_frames`` frames are
+            history.
+        velocities : ndarray, shape like ``positions``, optional
+            Velocities (m/s), needed with ``source="velocity"``.
+        lag_frames : int
+            The lag in frames (>= 1).
+        frame_interval : float, optional
+            Time between frames (s); required with ``source="displacement"`` (v = dy / lag).
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N) or (N,)
+
+        Raises
+        ------
+        InputError
+            If ``source="velocity"`` and the velocities are missing or do not match the
+            positions' shape, or (``source="displacement"``) ``lag_frames < 1`` or the
+            frame interval is missing or not positive.
+        """
         cells = self._cells(positions)
         vertical = self._vertical(positions, velocities, lag_frames, self.source)
         scale = 1.0
@@ -468,13 +725,26 @@ class VelocityCells(_CellProductSpace):
         return out
 
     def velocity_bin(self, states: np.ndarray) -> np.ndarray:
-        """The velocity bin (0..B) of states."""
+        """The velocity bin (0..B) of states.
+
+        Parameters
+        ----------
+        states : array_like of int
+            States of this space.
+
+        Returns
+        -------
+        ndarray of int
+            Same shape as ``states``.
+        """
         return self.sub_state(states)
 
     def to_attrs(self):
+        """The grid, ``edges`` and ``source`` (see :meth:`StateSpace.to_attrs`)."""
         return {**self._base_attrs(), "edges": list(self.edges), "source": self.source}
 
     def describe(self) -> str:
+        """A one-line description, with the bin edges (m/s) and their source."""
         return (f"{self.kind} {self.columns}x{self.rows}x{self.per_cell} ({self.n_states} "
                 f"states, v_y bins at {', '.join(f'{e:g}' for e in self.edges)} m/s from "
                 f"{self.source})")
@@ -499,6 +769,22 @@ class SecondOrderCells(_CellProductSpace):
     came from is forgotten (only vertical memory is kept). Within the reach the chain is
     the exact second-order chain on cells. The first frames (no previous frame) get
     drow = dcol = 0.
+
+    Parameters
+    ----------
+    columns, rows : int
+        The cell grid m x n.
+    width, height : float, optional
+        The riser W x H (m).
+    reach : int, optional
+        R, the row offsets kept (whole number >= 0).
+    column_reach : int, optional
+        Rc, the column offsets kept (whole number >= 0).
+
+    Raises
+    ------
+    InputError
+        For a bad grid, or ``reach`` or ``column_reach`` not whole numbers >= 0.
     """
 
     kind = "cells-previous"
@@ -515,9 +801,30 @@ class SecondOrderCells(_CellProductSpace):
 
     @property
     def per_cell(self) -> int:
+        """Sub-states per cell, K = (2R + 1)(2Rc + 1)."""
         return (2 * self.reach + 1) * (2 * self.column_reach + 1)
 
     def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+        """States of frames (see :meth:`StateSpace.discretize`).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, 2) or (N, 2)
+            Positions (m); the first ``lag_frames`` frames are history.
+        velocities, frame_interval
+            Ignored.
+        lag_frames : int
+            The lag in frames (>= 1).
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N) or (N,)
+
+        Raises
+        ------
+        InputError
+            If ``lag_frames < 1``.
+        """
         cells = self._cells(positions)
         lag_frames = int(lag_frames)
         if lag_frames < 1:
@@ -534,15 +841,28 @@ class SecondOrderCells(_CellProductSpace):
         return out
 
     def offsets(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(drow, dcol) of states: previous minus current, as clipped."""
+        """(drow, dcol) of states: previous minus current, as clipped.
+
+        Parameters
+        ----------
+        states : array_like of int
+            States of this space.
+
+        Returns
+        -------
+        drow, dcol : ndarray of int
+            Row and column offsets, same shape as ``states``.
+        """
         sub = self.sub_state(states)
         span = 2 * self.reach + 1
         return sub % span - self.reach, sub // span - self.column_reach
 
     def to_attrs(self):
+        """The grid, ``reach`` and ``column_reach`` (see :meth:`StateSpace.to_attrs`)."""
         return {**self._base_attrs(), "reach": self.reach, "column_reach": self.column_reach}
 
     def describe(self) -> str:
+        """A one-line description, with the reach of the memory."""
         return (f"{self.kind} {self.columns}x{self.rows}x{self.per_cell} ({self.n_states} "
                 f"states, previous cell within {self.reach} row(s), {self.column_reach} "
                 "column(s))")
@@ -580,6 +900,10 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
     ------
     InputError
         For an unknown name or a bad grid.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (States and transitions).
     """
     if name == "cells":
         return CellGrid(columns, rows, width, height)
