@@ -17,7 +17,8 @@ _os.environ.setdefault("NUMBA_THREADING_LAYER", "omp")
 __version__ = "0.1.0"
 
 from cfbmarkov.errors import CfbmarkovError, InputError  # noqa: E402
-from cfbmarkov.trajectories import Trajectories, TrajectoryWriter, write_trajectories  # noqa: E402
+from cfbmarkov.trajectories import Trajectories  # noqa: E402
+from cfbmarkov.trajectory_writer import TrajectoryWriter, write_trajectories  # noqa: E402
 
 __all__ = [
     "CfbmarkovError",

@@ -14,7 +14,8 @@ from typing import Any
 import numpy as np
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import Trajectories, TrajectoryWriter
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 
 class SegmentedTrajectoryWriter:

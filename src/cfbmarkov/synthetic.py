@@ -233,7 +233,7 @@ def write_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, durati
     pathlib.Path
         The path written.
     """
-    from cfbmarkov.trajectories import TrajectoryWriter
+    from cfbmarkov.trajectory_writer import TrajectoryWriter
 
     n_frames = int(round(duration / flow.lag)) + 1
     times, _, positions, laps = sample_run(flow, n_particles, n_frames, seed, start_time)

@@ -16,7 +16,8 @@ from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.report import figures as fg
 from cfbmarkov.report.compare import compare
-from cfbmarkov.trajectories import Trajectories, write_trajectories
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
 
 PNG = b"\x89PNG\r\n\x1a\n"
 WINDOW = (0.5, 3.0)

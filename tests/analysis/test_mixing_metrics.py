@@ -9,7 +9,8 @@ from cfbmarkov.analysis import mixing as mixing_module
 from cfbmarkov.analysis.metrics import minkowski_distance, mixing_rms, percentage_difference
 from cfbmarkov.analysis.mixing import mixing_curve, mixing_curve_of
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import Trajectories, write_trajectories
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
 
 WIDTH, HEIGHT = 0.09, 0.95
 

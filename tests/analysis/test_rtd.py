@@ -16,7 +16,8 @@ from cfbmarkov.analysis.rtd import (
     rtd_histogram,
 )
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import PassEvents, Trajectories, write_trajectories
+from cfbmarkov.trajectories import PassEvents, Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
 
 WIDTH, HEIGHT = 0.09, 0.95
 

@@ -10,14 +10,8 @@ import numpy as np
 import pytest
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import (
-    FORMAT,
-    PassEvents,
-    Trajectories,
-    TrajectoryWriter,
-    lap_increments,
-    write_trajectories,
-)
+from cfbmarkov.trajectories import FORMAT, PassEvents, Trajectories, lap_increments
+from cfbmarkov.trajectory_writer import TrajectoryWriter, write_trajectories
 
 
 def write_run(path, run, **kwargs):

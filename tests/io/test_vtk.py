@@ -16,7 +16,8 @@ import pyevtk.hl  # noqa: E402
 
 from cfbmarkov.errors import InputError  # noqa: E402
 from cfbmarkov.io.vtk import export_vtk, export_vtk_summary  # noqa: E402
-from cfbmarkov.trajectories import Trajectories, write_trajectories  # noqa: E402
+from cfbmarkov.trajectories import Trajectories  # noqa: E402
+from cfbmarkov.trajectory_writer import write_trajectories  # noqa: E402
 
 W, H = 0.09, 0.95
 T, N = 10, 50

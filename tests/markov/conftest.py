@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from cfbmarkov import synthetic
-from cfbmarkov.trajectories import write_trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
 
 
 @pytest.fixture(scope="session")

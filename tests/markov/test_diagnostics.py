@@ -11,7 +11,7 @@ from cfbmarkov.markov.diagnostics import (active_set, ck_test, core_annulus, gro
                                           height_bands, implied_timescales, model_timescales,
                                           product_groups)
 from cfbmarkov.markov.states import StateSpace, cell_index
-from cfbmarkov.trajectories import write_trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
 
 LAGS = (0.025, 0.05, 0.1, 0.2)
 

@@ -12,7 +12,8 @@ import pytest
 
 from cfbmarkov.errors import InputError
 from cfbmarkov.report.run_folder import read_run_folder
-from cfbmarkov.trajectories import Trajectories, write_trajectories
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
 
 
 def test_velocity_and_paths_from_case_json(reproduction):

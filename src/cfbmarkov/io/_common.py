@@ -16,7 +16,7 @@ from typing import Any, TextIO
 import numpy as np
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import TrajectoryWriter
+from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 GZIP_MAGIC = b"\x1f\x8b"
 

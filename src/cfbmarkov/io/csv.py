@@ -36,7 +36,7 @@ from cfbmarkov.io._common import (
     removing_new_folders,
     whole_ids,
 )
-from cfbmarkov.trajectories import TrajectoryWriter
+from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 #: the paper's riser (docs/definitions.md, Riser): width W and height H, m
 DEFAULT_WIDTH = 0.09

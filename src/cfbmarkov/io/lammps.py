@@ -45,7 +45,7 @@ from cfbmarkov.io._common import (
     removing_new_folders,
     whole_ids,
 )
-from cfbmarkov.trajectories import TrajectoryWriter
+from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 #: position column pairs, in order of preference
 POSITION_COLUMNS = (("x", "y"), ("xu", "yu"), ("xs", "ys"), ("xsu", "ysu"))

@@ -26,13 +26,11 @@ from cfbmarkov.markov.estimate import (
 )
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
+from cfbmarkov.markov.memory_states import DirectionCells, SecondOrderCells, VelocityCells
 from cfbmarkov.markov.states import (
     STATE_SPACES,
     CellGrid,
-    DirectionCells,
-    SecondOrderCells,
     StateSpace,
-    VelocityCells,
     cell_index,
     place_in_cells,
     state_space_from_name,

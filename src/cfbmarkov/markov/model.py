@@ -10,18 +10,13 @@ the bottom of the periodic riser, and its state space. It answers:
 - :meth:`monte_carlo` / :meth:`predict`: Monte Carlo of every particle (Eq. 7) with lap
   counters, :meth:`predict` writing a trajectory file like any other.
 
-File layout (``format = "cfbmarkov.model"``): datasets ``transition_matrix`` [S, S] float64,
-``counts``, ``counts_up``, ``counts_down`` [S, S] int64, ``unvisited_states`` [U] int64;
-attributes ``state_space`` (JSON), ``lag`` (s), ``window`` (s), ``estimator``, ``source``,
-``frame_pairs``, ``n_transitions``, ``created``, ``cfbmarkov_version``.
+The file layout and its reading and writing are in :mod:`cfbmarkov.markov.model_file`.
 """
 
 from __future__ import annotations
 
 import dataclasses
 
-import datetime as _dt
-import json
 import os
 from dataclasses import dataclass, field
 from functools import cached_property
@@ -32,12 +27,11 @@ import h5py
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from cfbmarkov._atomic import atomic_path
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
-from cfbmarkov.markov.states import StateSpace, place_in_cells
+from cfbmarkov.markov.states import StateSpace
 
 #: the ``format`` attribute of a model file
 MODEL_FORMAT = "cfbmarkov.model"
@@ -443,7 +437,7 @@ class MarkovModel:
         Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
         doi:10.3390/pr13030614 (Eq. 7).
         """
-        from cfbmarkov.trajectories import TrajectoryWriter, opened
+        from cfbmarkov.trajectories import opened
 
         with opened(trajectories) as traj:
             n_steps = self.steps_for(duration)
@@ -454,28 +448,10 @@ class MarkovModel:
             times = start + self.lag * np.arange(n_steps + 1)
             if output is None:
                 return times, states, laps
-            parameters = {"model": self.describe(), "seed": int(seed), "start": float(start),
-                          "duration": float(duration), "initial_frames": str(traj.path),
-                          "columns": self.state_space.columns, "rows": self.state_space.rows}
-            with TrajectoryWriter(output, traj.ids, width=traj.width, height=traj.height,
-                                  source="markov-prediction", parameters=parameters,
-                                  frame_interval=self.lag) as writer:
-                writer.attach("model", *self._datasets_and_attrs())
-                bar = _progress(progress, duration)
-                writer.append(times[0], positions0, lap=laps[0])
-                cells = self.state_space.cell_of_state
-                block = 32
-                for k0 in range(1, n_steps + 1, block):
-                    ks = range(k0, min(k0 + block, n_steps + 1))
-                    positions = np.stack([place_in_cells(cells[states[k]], self.state_space,
-                                                         seed, k) for k in ks])
-                    writer.append_frames(times[ks.start:ks.stop], positions,
-                                         laps=laps[ks.start:ks.stop])
-                    if bar is not None:
-                        bar.update(self.lag * len(ks))
-                if bar is not None:
-                    bar.close()
-            return Path(output)
+            from cfbmarkov.markov.model_file import write_prediction
+
+            return write_prediction(self, traj, times, states, laps, positions0, seed, output,
+                                    progress, duration=duration)
 
     def with_selection(self, selection: dict) -> "MarkovModel":
         """The same model, recording how its state space and lag were chosen.
@@ -540,29 +516,9 @@ class MarkovModel:
         return (f"MarkovModel({self.state_space.describe()}, lag={self.lag:g} s, "
                 f"estimator={self.estimator!r}, transitions={self.n_transitions})")
 
-    # -- persistence -------------------------------------------------------------------
-    def _datasets_and_attrs(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-        datasets = {name: getattr(self, name) for name in _DATASETS}
-        datasets["unvisited_states"] = self.unvisited_states
-        datasets["pass_up_fraction"] = self.up_fraction
-        datasets["pass_down_fraction"] = self.down_fraction
-        attrs = {
-            "format": MODEL_FORMAT, "version": 1,
-            "state_space": json.dumps(self.state_space.to_attrs()),
-            "columns": self.state_space.columns, "rows": self.state_space.rows,
-            "lag": self.lag, "estimator": self.estimator,
-            "window": np.asarray(self.window if self.window else [np.nan, np.nan], dtype=float),
-            "source": json.dumps(self.source), "frame_pairs": int(self.frame_pairs),
-            "n_transitions": self.n_transitions, "n_unvisited_states": int(self.unvisited_states.size),
-            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            "cfbmarkov_version": _version(),
-        }
-        if self.selection:
-            attrs["selection"] = json.dumps(self.selection)
-        return datasets, attrs
-
+    # -- persistence (the file layout lives in cfbmarkov.markov.model_file) --------------
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the model as HDF5 (atomically: no partial file on failure).
+        """Write the model as HDF5, atomically (see :func:`~cfbmarkov.markov.model_file.write_model`).
 
         Parameters
         ----------
@@ -578,60 +534,25 @@ class MarkovModel:
         ------
         InputError
             If the file cannot be put in place.
-
-        Notes
-        -----
-        The layout is described in the module docstring and ``docs/definitions.md`` (File
-        formats, Model files).
         """
-        datasets, attrs = self._datasets_and_attrs()
-        with atomic_path(path) as tmp:
-            with h5py.File(tmp, "w") as f:
-                for name, value in datasets.items():
-                    f.create_dataset(name, data=value)
-                f.attrs.update(attrs)
-        return Path(path)
+        from cfbmarkov.markov.model_file import write_model
+
+        return write_model(self, path)
 
     @classmethod
     def from_group(cls, group: h5py.Group | h5py.File, label: str = "") -> "MarkovModel":
-        """Rebuild a model from an HDF5 group written by :meth:`save`.
-
-        Parameters
-        ----------
-        group : h5py.Group or h5py.File
-            The model file, or the group attached to a prediction as
-            ``/provenance/model``.
-        label : str, optional
-            Names the source in error messages (default: the file's name).
-
-        Returns
-        -------
-        MarkovModel
+        """Rebuild a model from an HDF5 group written by :meth:`save` (or attached to a
+        prediction as ``/provenance/model``); see
+        :func:`~cfbmarkov.markov.model_file.read_model_group`.
 
         Raises
         ------
         InputError
-            If the group is not a cfbmarkov model, misses a dataset or attribute, or holds
-            an invalid model.
+            If the group is not a cfbmarkov model, or is damaged or invalid.
         """
-        label = label or getattr(group.file, "filename", "")
-        fmt = group.attrs.get("format")
-        if fmt != MODEL_FORMAT:
-            raise InputError(f"{label}: not a cfbmarkov model file (format attribute is {fmt!r})")
-        try:
-            window = np.asarray(group.attrs["window"], dtype=float)
-            return cls(**{name: group[name][()] for name in _DATASETS},
-                       state_space=StateSpace.from_attrs(group.attrs["state_space"]),
-                       lag=float(group.attrs["lag"]), estimator=str(group.attrs["estimator"]),
-                       window=None if np.isnan(window).any() else (float(window[0]), float(window[1])),
-                       source=json.loads(group.attrs.get("source", '""')),
-                       frame_pairs=int(group.attrs.get("frame_pairs", 0)),
-                       pass_fractions=(group["pass_up_fraction"][()], group["pass_down_fraction"][()])
-                       if "pass_up_fraction" in group else None,
-                       selection=json.loads(group.attrs["selection"])
-                       if "selection" in group.attrs else None)
-        except KeyError as exc:
-            raise InputError(f"{label}: damaged model file (missing {exc})") from None
+        from cfbmarkov.markov.model_file import read_model_group
+
+        return read_model_group(group, label)
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "MarkovModel":
@@ -651,24 +572,14 @@ class MarkovModel:
         InputError
             If the file is missing, empty, not HDF5, not a model file, or damaged.
         """
-        from cfbmarkov.trajectories import _open_h5
+        from cfbmarkov.markov.model_file import read_model
 
-        with _open_h5(path) as f:
-            return cls.from_group(f, str(path))
+        return read_model(path)
 
     @classmethod
     def from_trajectories(cls, trajectories) -> "MarkovModel | None":
-        """The model attached to a prediction file, or None.
-
-        Parameters
-        ----------
-        trajectories : Trajectories
-            An open trajectory file.
-
-        Returns
-        -------
-        MarkovModel or None
-            None where the file has no ``/provenance/model`` group.
+        """The model attached to a prediction file (an open
+        :class:`~cfbmarkov.trajectories.Trajectories`), or None where it has none.
 
         Raises
         ------
@@ -682,18 +593,3 @@ class MarkovModel:
 def _short_list(values: np.ndarray, limit: int = 12) -> str:
     text = ", ".join(str(v) for v in values[:limit])
     return text + (", ..." if values.size > limit else "")
-
-
-def _progress(enabled: bool, duration: float):
-    if not enabled:
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=duration, unit="s", unit_scale=False, desc="Monte Carlo (simulated s)",
-                bar_format="{desc}: {n:.3f}/{total:.3f} s [{elapsed}<{remaining}, {rate_fmt}]")
-
-
-def _version() -> str:
-    from cfbmarkov import __version__
-
-    return __version__

@@ -1,0 +1,208 @@
+"""The scales and cases of a reproduction (``cfbmarkov reproduce``): the paper's riser and
+times (``paper``), and a reduced riser that keeps the paper's particles, gas, hold-up, cell
+size and contact-time resolution (``quick``, see :data:`QUICK_REDUCTIONS`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable
+
+from pydantic import ValidationError
+
+from cfbmarkov.config import CaseConfig, load_case
+from cfbmarkov.errors import InputError
+
+
+VELOCITIES = (3.0, 4.0, 6.0, 8.0)
+#: the models of a reproduction: the paper's (cells, Eq. 2-4), cells with the pooled MLE, and
+#: the state space and lag chosen from the fitting window (cfbmarkov.markov.select)
+MODELS = ("paper", "mle", "auto")
+
+
+@dataclass(frozen=True)
+class Scale:
+    """A set of changes applied to the paper's cases (nested dict, as in a case TOML).
+
+    Attributes
+    ----------
+    name : str
+        The scale's name (``paper``, ``quick``).
+    description : str
+        One line for the manifest and the report.
+    overrides : dict
+        Changes to every case, as nested tables of a case file.
+    reductions : tuple of str
+        What the scale reduces against the paper, and why.
+    """
+
+    name: str
+    description: str
+    overrides: dict[str, Any] = field(default_factory=dict)
+    reductions: tuple[str, ...] = ()
+
+
+#: The quick scale's reductions and their reasons (shown in the docs and the report).
+QUICK_REDUCTIONS = (
+    "riser 0.04 m x 0.30 m instead of 0.09 m x 0.95 m, with 3789 particles instead of 27000: "
+    "the same solids hold-up (16.5 % by volume in the pseudo-2D cells), so the drag on a "
+    "particle in the suspension (Wen & Yu's voidage factor) is the paper's and at 3 and "
+    "4 m/s the solids are carried only where they gather, with back-mixing along the walls; "
+    "40 particle diameters across still leave a core and two wall layers",
+    "gas cells of 10 mm x 10 mm as in the paper (4 x 30 cells)",
+    "contact springs 4 times softer (kn 2500 N/m, kt 714 N/m) and a DEM step twice as long "
+    "(1e-5 s): a contact still takes 5.2 DEM steps as in the paper, and restitution and "
+    "friction are unchanged; overlaps at a given impact velocity are twice the paper's "
+    "(1.7 % of d at 1 m/s instead of 0.8 %)",
+    "0-5 s of CFD-DEM, the model fitted on 1-3 s and compared on 3-5 s: in the shorter "
+    "riser the flow develops within half a second (the solids' mean velocity is steady "
+    "from 0.5 s at 6 and 8 m/s) and residence times are a third of the paper's",
+    "frames, lag and RTD bins of 0.01 s, and 4 x 12 cells of 10 mm x 25 mm, so that a mean "
+    "residence time still spans about ten lags, as 0.025 s does in the paper's riser",
+)
+
+SCALES: dict[str, Scale] = {
+    "paper": Scale("paper", "the paper's riser: 27000 particles, 0.09 m x 0.95 m, 0-20 s, "
+                   "fitted on 10-15 s, compared on 15-20 s, 6 x 38 cells, lag 0.025 s"),
+    "quick": Scale(
+        "quick", "a reduced riser (3789 particles, 0.04 m x 0.30 m, 0-5 s) that runs the "
+        "whole pipeline in minutes on 2 cores",
+        {"riser": {"width": 0.04, "height": 0.30},
+         "particles": {"number": 3789},
+         "contact": {"normal_stiffness": 2500.0, "tangential_stiffness": 714.25},
+         "numerics": {"cfd_cells": [4, 30], "dem_cells": [13, 100], "dem_time_step": 1e-5},
+         "output": {"end_time": 5.0, "frame_interval": 0.01},
+         "markov": {"columns": 4, "rows": 12, "lag": 0.01, "fit_window": [1.0, 3.0],
+                    "predict_window": [3.0, 5.0]}},
+        QUICK_REDUCTIONS),
+}
+
+
+# -- cases -------------------------------------------------------------------------------------
+def case_name(velocity: float) -> str:
+    """Folder name of a velocity: 6.0 -> 'u6', 2.5 -> 'u2.5'.
+
+    Parameters
+    ----------
+    velocity : float
+        Superficial gas velocity U, m/s.
+
+    Returns
+    -------
+    str
+    """
+    return f"u{velocity:g}"
+
+
+def _merge(base: dict, changes: dict) -> dict:
+    out = dict(base)
+    for key, value in changes.items():
+        if isinstance(value, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], value)
+        else:
+            out[key] = value
+    return out
+
+
+def as_scale(scale: str | Scale) -> Scale:
+    """The :class:`Scale` named ``scale`` (``paper`` or ``quick``), or ``scale`` itself.
+
+    Raises
+    ------
+    InputError
+        For an unknown name.
+    """
+    if isinstance(scale, Scale):
+        return scale
+    if scale not in SCALES:
+        raise InputError(f"unknown scale '{scale}': choose one of {', '.join(SCALES)}")
+    return SCALES[scale]
+
+
+def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELOCITIES,
+                overrides: dict[str, Any] | None = None) -> list[CaseConfig]:
+    """The cases of a scale at the given velocities.
+
+    The paper's case at each velocity (``paper-u<U>``, or ``paper-u6`` with U replaced),
+    changed by the scale and then by ``overrides``.
+
+    Parameters
+    ----------
+    scale : str or Scale, optional
+        A name in :data:`SCALES` or a scale.
+    velocities : iterable of float, optional
+        Superficial gas velocities U, m/s.
+    overrides : dict, optional
+        Changes to every case (nested tables of a case file).
+
+    Returns
+    -------
+    list of CaseConfig
+        One case per velocity, named ``<scale>-u<U>``.
+
+    Raises
+    ------
+    InputError
+        For an unknown scale name, no velocities, a velocity that is not finite and
+        positive, or changes that make an invalid configuration.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Section 2.
+    """
+    scale = as_scale(scale)
+    cases = []
+    velocities = [float(u) for u in velocities]
+    if not velocities:
+        raise InputError("no velocities given")
+    for u in velocities:
+        if not (math.isfinite(u) and u > 0):
+            raise InputError(f"velocity {u:g} m/s must be positive")
+        name = f"paper-u{u:g}"
+        try:
+            base = load_case(name)
+        except InputError:
+            base = load_case("paper-u6")
+        data = _merge(json.loads(base.model_dump_json()), {
+            "name": f"{scale.name}-{case_name(u)}", "gas": {"superficial_velocity": u}})
+        data = _merge(_merge(data, scale.overrides), overrides or {})
+        try:
+            cases.append(CaseConfig.model_validate(data))
+        except ValidationError as exc:   # one line
+            first = exc.errors()[0]
+            loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
+            raise InputError(f"invalid configuration at '{loc}' for U = {u:g} m/s: "
+                             f"{first['msg']}") from None
+    return cases
+
+
+def load_overrides(path: str | os.PathLike) -> dict[str, Any]:
+    """A TOML file of changes to apply to every case (same tables as a case file).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TOML file.
+
+    Returns
+    -------
+    dict
+        The nested tables.
+
+    Raises
+    ------
+    InputError
+        When the file cannot be read or is not valid TOML.
+    """
+    import tomllib
+
+    try:
+        return tomllib.loads(Path(path).read_text())
+    except OSError as exc:
+        raise InputError(f"cannot read overrides {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise InputError(f"{path}: not valid TOML: {exc}") from None

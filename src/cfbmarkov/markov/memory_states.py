@@ -1,0 +1,536 @@
+"""State spaces with memory: the cell of the paper's chain plus a sub-state that carries
+some memory of the motion (direction, vertical-velocity bin, previous cell).
+
+The paper's chain on cells forgets which way a particle was moving, so it spreads residence
+times too little; these spaces keep the cell and add that memory (see ``docs/method.md``).
+They register under their ``kind`` with :class:`~cfbmarkov.markov.states.StateSpace`, so
+saved models rebuild them by name.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numba as nb
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov.states import CellGrid, StateSpace, cell_index
+
+
+# -- state spaces with memory (issue 5) ----------------------------------------------------
+#
+# The paper's chain on cells forgets which way a particle was moving, so it spreads residence
+# times too little (SD(RT) about -40...-50 %). The spaces below keep the cell and add a
+# sub-state that carries some memory of the motion. They all share one layout:
+#
+#     state = cell * K + sub,   cell = row*m + col (CellGrid's numbering), 0 <= sub < K,
+#
+# so ``cell_of_state = state // K`` and everything that works on cells (maps, Monte Carlo
+# placement, mixing by halves, the inlet distribution of Eq. 8) works unchanged.
+#
+# Spaces whose sub-state comes from the displacement over the previous lag have
+# ``memory_lags = 1``: ``discretize`` is then given frames that start one lag (``lag_frames``
+# frames) before the first frame whose state is wanted (:mod:`cfbmarkov.markov.discrete`
+# reads them and drops them again), returns states for every frame, and the state of frame t
+# uses the frames t - lag_frames and t. The first ``lag_frames`` frames have no previous
+# frame; they get the sub-state of a zero displacement (any valid state: callers drop them).
+# Vertical displacements take the minimal image through the periodic boundary, wrapped into
+# (-H/2, H/2] (a particle moves less than H/2 in one lag, docs/definitions.md, Pass direction).
+
+
+@nb.njit(cache=True, parallel=True)
+def _wrapped_step(y, lag_frames, height, out):
+    """out[t, p] = y[t, p] - y[t - lag_frames, p] wrapped into (-H/2, H/2]; 0 where
+    t < lag_frames (no previous frame)."""
+    n_frames, n = y.shape
+    half = 0.5 * height
+    for k in nb.prange(n_frames * n):
+        t = k // n
+        p = k - t * n
+        if t < lag_frames:
+            out[t, p] = 0.0
+        else:
+            d = y[t, p] - y[t - lag_frames, p]
+            if d > half:
+                d -= height
+            elif d <= -half:
+                d += height
+            out[t, p] = d
+
+
+@nb.njit(cache=True, parallel=True)
+def _direction_states(cells, vertical, out):
+    """out = 2*cell + (1 if vertical < 0 else 0): rising (including 0) or falling."""
+    flat_c = cells.reshape(-1)
+    flat_v = vertical.reshape(-1)
+    flat_out = out.reshape(-1)
+    for k in nb.prange(flat_out.size):
+        flat_out[k] = 2 * flat_c[k] + (1 if flat_v[k] < 0.0 else 0)
+
+
+@nb.njit(cache=True, parallel=True)
+def _binned_states(cells, vertical, scale, edges, out):
+    """out = cell*(B+1) + bin, bin = number of edges <= vertical*scale (B = len(edges))."""
+    flat_c = cells.reshape(-1)
+    flat_v = vertical.reshape(-1)
+    flat_out = out.reshape(-1)
+    n_bins = edges.size + 1
+    for k in nb.prange(flat_out.size):
+        v = flat_v[k] * scale
+        b = 0
+        while b < edges.size and edges[b] <= v:
+            b += 1
+        flat_out[k] = flat_c[k] * n_bins + b
+
+
+@nb.njit(cache=True, parallel=True)
+def _previous_cell_states(cells, lag_frames, columns, rows, reach, column_reach, out):
+    """out = cell*K + (dcol + Rc)*(2R + 1) + (drow + R), K = (2R+1)(2Rc+1), where drow and
+    dcol are the row and column of the cell one lag earlier minus the current ones, drow by
+    the minimal image on the periodic rows (wrapped into (-n/2, n/2]), both clipped to the
+    reach; 0 where t < lag_frames."""
+    n_frames, n = cells.shape
+    span = 2 * reach + 1
+    per_cell = span * (2 * column_reach + 1)
+    for k in nb.prange(n_frames * n):
+        t = k // n
+        p = k - t * n
+        c = cells[t, p]
+        drow = 0
+        dcol = 0
+        if t >= lag_frames:
+            prev = cells[t - lag_frames, p]
+            row = c // columns
+            prow = prev // columns
+            drow = (prow - row) % rows          # 0..n-1 (Python-style modulo in numba)
+            if 2 * drow > rows:
+                drow -= rows                     # into (-n/2, n/2]
+            dcol = (prev - prow * columns) - (c - row * columns)
+            drow = min(max(drow, -reach), reach)
+            dcol = min(max(dcol, -column_reach), column_reach)
+        out[t, p] = c * per_cell + (dcol + column_reach) * span + (drow + reach)
+
+
+class _CellProductSpace(StateSpace):
+    """Cells x K sub-states: state = cell*K + sub (see the section comment above)."""
+
+    def __init__(self, columns: int, rows: int, width: float, height: float):
+        self._grid = CellGrid(columns, rows, width, height)      # validates the grid
+        self.columns, self.rows = self._grid.columns, self._grid.rows
+        self.width, self.height = self._grid.width, self._grid.height
+
+    #: sub-states per cell, K
+    per_cell: int
+
+    @property
+    def n_states(self) -> int:
+        return self.n_cells * self.per_cell
+
+    @property
+    def cell_of_state(self) -> np.ndarray:
+        return np.arange(self.n_states, dtype=np.int64) // self.per_cell
+
+    def sub_state(self, states: np.ndarray) -> np.ndarray:
+        """The sub-state (0..K-1) of states.
+
+        Parameters
+        ----------
+        states : array_like of int
+            States of this space.
+
+        Returns
+        -------
+        ndarray of int
+            ``states % K``, same shape.
+        """
+        return np.asarray(states) % self.per_cell
+
+    def _cells(self, positions: np.ndarray) -> np.ndarray:
+        return cell_index(positions, self.width, self.height, self.columns, self.rows)
+
+    def _vertical(self, positions: np.ndarray, velocities, lag_frames: int, source: str
+                  ) -> np.ndarray:
+        """Vertical motion per frame [T, N]: wrapped dy over the previous lag (m) for
+        ``source="displacement"``, v_y (m/s) for ``source="velocity"``."""
+        if source == "velocity":
+            if velocities is None:
+                raise InputError(f"state space {self.kind} with source='velocity' needs "
+                                 "velocities; the trajectories have none")
+            velocities = np.asarray(velocities, dtype=np.float64)
+            if velocities.shape != np.shape(positions):
+                raise InputError(f"velocities have shape {velocities.shape}, positions "
+                                 f"{np.shape(positions)}")
+            return np.ascontiguousarray(velocities[..., 1])
+        lag_frames = int(lag_frames)
+        if lag_frames < 1:
+            raise InputError(f"lag of {lag_frames} frames: must be at least 1")
+        y = np.ascontiguousarray(np.asarray(positions, dtype=np.float64)[..., 1])
+        if y.ndim == 1:      # a single frame has no previous frame
+            return np.zeros_like(y)
+        out = np.empty_like(y)
+        _wrapped_step(y, lag_frames, self.height, out)
+        return out
+
+    def _base_attrs(self) -> dict[str, Any]:
+        return {"kind": self.kind, "columns": self.columns, "rows": self.rows,
+                "width": self.width, "height": self.height}
+
+
+_SOURCES = ("displacement", "velocity")
+
+
+def _check_source(kind: str, source: str) -> str:
+    if source not in _SOURCES:
+        raise InputError(f"{kind}: unknown source {source!r} (choose from {', '.join(_SOURCES)})")
+    return str(source)
+
+
+class DirectionCells(_CellProductSpace):
+    """Cells x {rising, falling}: state = 2*cell + (1 if falling else 0).
+
+    ``source="displacement"`` (default): the direction is the sign of the vertical
+    displacement over the previous lag (minimal image through the periodic boundary), so the
+    space needs one lag of history (``memory_lags = 1``) and no velocities; a particle that
+    stayed at the same height (dy = 0, e.g. the first frames) counts as rising.
+    ``source="velocity"``: the sign of v_y in the frame itself (``needs_velocity``; no
+    history); v_y = 0 counts as rising.
+
+    Parameters
+    ----------
+    columns, rows : int
+        The cell grid m x n.
+    width, height : float, optional
+        The riser W x H (m).
+    source : {"displacement", "velocity"}, optional
+        Where the direction comes from.
+
+    Attributes
+    ----------
+    RISING, FALLING : int
+        The two sub-states (0 and 1).
+
+    Raises
+    ------
+    InputError
+        For a bad grid or an unknown ``source``.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (Pass direction) for the minimal-image rule.
+    """
+
+    kind = "cells-direction"
+    per_cell = 2
+    RISING, FALLING = 0, 1
+
+    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+                 source: str = "displacement"):
+        super().__init__(columns, rows, width, height)
+        self.source = _check_source(self.kind, source)
+        self.memory_lags = 1 if self.source == "displacement" else 0
+        self.needs_velocity = self.source == "velocity"
+
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+        """States of frames (see :meth:`StateSpace.discretize`).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, 2) or (N, 2)
+            Positions (m); with ``memory_lags = 1`` the first ``lag_frames`` frames are
+            history.
+        velocities : ndarray, shape like ``positions``, optional
+            Velocities (m/s), needed with ``source="velocity"``.
+        lag_frames : int
+            The lag in frames (>= 1).
+        frame_interval : float, optional
+            Time between frames (s); not used.
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N) or (N,)
+
+        Raises
+        ------
+        InputError
+            If ``source="velocity"`` and the velocities are missing or do not match the
+            positions' shape, or ``lag_frames < 1``.
+        """
+        cells = self._cells(positions)
+        vertical = self._vertical(positions, velocities, lag_frames, self.source)
+        out = np.empty_like(cells)
+        _direction_states(cells, vertical, out)
+        return out
+
+    def falling(self, states: np.ndarray) -> np.ndarray:
+        """True where a state is a falling one.
+
+        Parameters
+        ----------
+        states : array_like of int
+            States of this space.
+
+        Returns
+        -------
+        ndarray of bool
+            Same shape as ``states``.
+        """
+        return self.sub_state(states) == self.FALLING
+
+    def to_attrs(self):
+        """The grid and ``source`` (see :meth:`StateSpace.to_attrs`)."""
+        return {**self._base_attrs(), "source": self.source}
+
+    def describe(self) -> str:
+        """A one-line description, with the source of the direction."""
+        return (f"{self.kind} {self.columns}x{self.rows}x2 ({self.n_states} states, direction "
+                f"from {self.source})")
+
+    def __repr__(self) -> str:
+        return (f"DirectionCells({self.columns}, {self.rows}, width={self.width:g}, "
+                f"height={self.height:g}, source={self.source!r})")
+
+
+class VelocityCells(_CellProductSpace):
+    """Cells x bins of the vertical velocity: state = cell*(B+1) + bin.
+
+    ``edges`` are the B interior bin edges (m/s, strictly increasing); bin b holds
+    edges[b-1] <= v < edges[b] (bin 0: v < edges[0], bin B: v >= edges[-1]).
+    ``source="displacement"`` (default): v = (wrapped vertical displacement over the
+    previous lag) / lag, with the lag = ``lag_frames * frame_interval`` that
+    :meth:`discretize` is given (the lag of the model being fitted, so the two cannot
+    disagree); ``memory_lags = 1``. ``source="velocity"``: v = v_y of the frame
+    (``needs_velocity``). The first frames (no previous frame) get v = 0.
+
+    Model files written before the lag lived in one place stored it here as ``lag``; it is
+    accepted on loading and ignored (the model's own lag is the one used).
+
+    Parameters
+    ----------
+    columns, rows : int
+        The cell grid m x n.
+    width, height : float, optional
+        The riser W x H (m).
+    edges : sequence of float, optional
+        The B interior bin edges of v_y (m/s), finite and strictly increasing.
+    source : {"displacement", "velocity"}, optional
+        Where v_y comes from.
+    lag : float, optional
+        Accepted from old model files and ignored.
+
+    Raises
+    ------
+    InputError
+        For a bad grid, edges that are not numbers or not finite and strictly increasing,
+        or an unknown ``source``.
+    """
+
+    kind = "cells-velocity"
+
+    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+                 edges=(-1.0, 0.0, 1.0, 3.0), source: str = "displacement",
+                 lag: float | None = None):
+        super().__init__(columns, rows, width, height)
+        try:
+            edges = np.asarray(edges, dtype=np.float64).ravel()
+        except (TypeError, ValueError):
+            raise InputError(f"{self.kind}: velocity bin edges {edges!r} are not numbers") from None
+        if edges.size < 1 or not np.all(np.isfinite(edges)) or np.any(np.diff(edges) <= 0):
+            raise InputError(f"{self.kind}: velocity bin edges must be one or more finite, "
+                             f"strictly increasing values (m/s), got {edges.tolist()}")
+        del lag     # stored by older model files; the lag now comes with the frames
+        self.edges = tuple(float(e) for e in edges)
+        self.source = _check_source(self.kind, source)
+        self.memory_lags = 1 if self.source == "displacement" else 0
+        self.needs_velocity = self.source == "velocity"
+
+    @property
+    def per_cell(self) -> int:
+        """Sub-states per cell, K = B + 1 velocity bins."""
+        return len(self.edges) + 1
+
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+        """States of frames (see :meth:`StateSpace.discretize`).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, 2) or (N, 2)
+            Positions (m); with ``memory_lags = 1`` the first ``lag_frames`` frames are
+            history.
+        velocities : ndarray, shape like ``positions``, optional
+            Velocities (m/s), needed with ``source="velocity"``.
+        lag_frames : int
+            The lag in frames (>= 1).
+        frame_interval : float, optional
+            Time between frames (s); required with ``source="displacement"`` (v = dy / lag).
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N) or (N,)
+
+        Raises
+        ------
+        InputError
+            If ``source="velocity"`` and the velocities are missing or do not match the
+            positions' shape, or (``source="displacement"``) ``lag_frames < 1`` or the
+            frame interval is missing or not positive.
+        """
+        cells = self._cells(positions)
+        vertical = self._vertical(positions, velocities, lag_frames, self.source)
+        scale = 1.0
+        if self.source == "displacement":
+            if frame_interval is None or not (np.isfinite(frame_interval) and frame_interval > 0):
+                raise InputError(f"{self.kind}: velocities from displacements need the frame "
+                                 f"interval (s), got {frame_interval!r}")
+            scale = 1.0 / (int(lag_frames) * float(frame_interval))
+        out = np.empty_like(cells)
+        _binned_states(cells, vertical, scale, np.asarray(self.edges, dtype=np.float64), out)
+        return out
+
+    def velocity_bin(self, states: np.ndarray) -> np.ndarray:
+        """The velocity bin (0..B) of states.
+
+        Parameters
+        ----------
+        states : array_like of int
+            States of this space.
+
+        Returns
+        -------
+        ndarray of int
+            Same shape as ``states``.
+        """
+        return self.sub_state(states)
+
+    def to_attrs(self):
+        """The grid, ``edges`` and ``source`` (see :meth:`StateSpace.to_attrs`)."""
+        return {**self._base_attrs(), "edges": list(self.edges), "source": self.source}
+
+    def describe(self) -> str:
+        """A one-line description, with the bin edges (m/s) and their source."""
+        return (f"{self.kind} {self.columns}x{self.rows}x{self.per_cell} ({self.n_states} "
+                f"states, v_y bins at {', '.join(f'{e:g}' for e in self.edges)} m/s from "
+                f"{self.source})")
+
+    def __repr__(self) -> str:
+        return (f"VelocityCells({self.columns}, {self.rows}, width={self.width:g}, "
+                f"height={self.height:g}, edges={self.edges}, source={self.source!r})")
+
+
+class SecondOrderCells(_CellProductSpace):
+    """The second-order chain on cells, with the previous cell stored relative to the
+    current one: state = cell*K + (dcol + Rc)*(2R + 1) + (drow + R), K = (2R+1)(2Rc+1).
+
+    drow = (row one lag earlier) - (row now), by the minimal image on the periodic rows,
+    clipped to [-R, R] (R = ``reach``); dcol = (column one lag earlier) - (column now),
+    clipped to [-Rc, Rc] (Rc = ``column_reach``). ``memory_lags = 1``. The defaults (R = 3,
+    Rc = 0) give 7 sub-states per cell, 1596 states on 6 x 38.
+
+    What clipping loses: a particle that moved more than R rows in one lag (faster than
+    R*cell height/lag: 0.075 m / 0.025 s = 3 m/s for the paper's grid and R = 3) is
+    remembered only as "came from R or more rows below/above"; with Rc = 0 the column it
+    came from is forgotten (only vertical memory is kept). Within the reach the chain is
+    the exact second-order chain on cells. The first frames (no previous frame) get
+    drow = dcol = 0.
+
+    Parameters
+    ----------
+    columns, rows : int
+        The cell grid m x n.
+    width, height : float, optional
+        The riser W x H (m).
+    reach : int, optional
+        R, the row offsets kept (whole number >= 0).
+    column_reach : int, optional
+        Rc, the column offsets kept (whole number >= 0).
+
+    Raises
+    ------
+    InputError
+        For a bad grid, or ``reach`` or ``column_reach`` not whole numbers >= 0.
+    """
+
+    kind = "cells-previous"
+
+    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+                 reach: int = 3, column_reach: int = 0):
+        super().__init__(columns, rows, width, height)
+        if int(reach) != reach or int(column_reach) != column_reach \
+                or reach < 0 or column_reach < 0:
+            raise InputError(f"{self.kind}: reach {reach!r} and column_reach {column_reach!r} "
+                             "must be whole numbers >= 0")
+        self.reach, self.column_reach = int(reach), int(column_reach)
+        self.memory_lags = 1
+
+    @property
+    def per_cell(self) -> int:
+        """Sub-states per cell, K = (2R + 1)(2Rc + 1)."""
+        return (2 * self.reach + 1) * (2 * self.column_reach + 1)
+
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+        """States of frames (see :meth:`StateSpace.discretize`).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, 2) or (N, 2)
+            Positions (m); the first ``lag_frames`` frames are history.
+        velocities, frame_interval
+            Ignored.
+        lag_frames : int
+            The lag in frames (>= 1).
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N) or (N,)
+
+        Raises
+        ------
+        InputError
+            If ``lag_frames < 1``.
+        """
+        cells = self._cells(positions)
+        lag_frames = int(lag_frames)
+        if lag_frames < 1:
+            raise InputError(f"lag of {lag_frames} frames: must be at least 1")
+        if cells.ndim == 1:                   # a single frame: no previous frame
+            cells = cells[None]
+            out = np.empty_like(cells)
+            _previous_cell_states(cells, lag_frames, self.columns, self.rows, self.reach,
+                                  self.column_reach, out)
+            return out[0]
+        out = np.empty_like(cells)
+        _previous_cell_states(cells, lag_frames, self.columns, self.rows, self.reach,
+                              self.column_reach, out)
+        return out
+
+    def offsets(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(drow, dcol) of states: previous minus current, as clipped.
+
+        Parameters
+        ----------
+        states : array_like of int
+            States of this space.
+
+        Returns
+        -------
+        drow, dcol : ndarray of int
+            Row and column offsets, same shape as ``states``.
+        """
+        sub = self.sub_state(states)
+        span = 2 * self.reach + 1
+        return sub % span - self.reach, sub // span - self.column_reach
+
+    def to_attrs(self):
+        """The grid, ``reach`` and ``column_reach`` (see :meth:`StateSpace.to_attrs`)."""
+        return {**self._base_attrs(), "reach": self.reach, "column_reach": self.column_reach}
+
+    def describe(self) -> str:
+        """A one-line description, with the reach of the memory."""
+        return (f"{self.kind} {self.columns}x{self.rows}x{self.per_cell} ({self.n_states} "
+                f"states, previous cell within {self.reach} row(s), {self.column_reach} "
+                "column(s))")
+
+    def __repr__(self) -> str:
+        return (f"SecondOrderCells({self.columns}, {self.rows}, width={self.width:g}, "
+                f"height={self.height:g}, reach={self.reach}, "
+                f"column_reach={self.column_reach})")

@@ -1,0 +1,247 @@
+"""The model file: a fitted :class:`~cfbmarkov.markov.model.MarkovModel` as HDF5.
+
+Any HDF5 reader can use the file (``docs/definitions.md``, Model files). S is the number of
+states:
+
+- datasets ``transition_matrix`` [S, S] float64; ``counts``, ``counts_up``, ``counts_down``
+  [S, S] int64; ``pass_up_fraction``, ``pass_down_fraction`` [S, S] float64;
+  ``unvisited_states`` [U] int64;
+- attributes ``format = "cfbmarkov.model"``, ``version``, ``state_space`` (JSON), ``columns``,
+  ``rows``, ``lag`` (s), ``window`` (s, NaN for none), ``estimator``, ``source`` (JSON),
+  ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
+  ``cfbmarkov_version`` and, for a model chosen by ``--states auto``, ``selection`` (JSON).
+
+A prediction carries the same group as ``/provenance/model``. The model class itself never
+opens a file; this module does it for it.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import h5py
+import numpy as np
+
+from cfbmarkov._atomic import atomic_path
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov.model import _DATASETS, MODEL_FORMAT
+from cfbmarkov.markov.states import StateSpace
+
+if TYPE_CHECKING:
+    from cfbmarkov.markov.model import MarkovModel
+
+
+def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """The datasets and attributes that store ``model`` (the layout in the module docstring).
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    datasets : dict of str to ndarray
+    attrs : dict of str to value
+    """
+    datasets = {name: getattr(model, name) for name in _DATASETS}
+    datasets["unvisited_states"] = model.unvisited_states
+    datasets["pass_up_fraction"] = model.up_fraction
+    datasets["pass_down_fraction"] = model.down_fraction
+    attrs = {
+        "format": MODEL_FORMAT, "version": 1,
+        "state_space": json.dumps(model.state_space.to_attrs()),
+        "columns": model.state_space.columns, "rows": model.state_space.rows,
+        "lag": model.lag, "estimator": model.estimator,
+        "window": np.asarray(model.window if model.window else [np.nan, np.nan], dtype=float),
+        "source": json.dumps(model.source), "frame_pairs": int(model.frame_pairs),
+        "n_transitions": model.n_transitions,
+        "n_unvisited_states": int(model.unvisited_states.size),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "cfbmarkov_version": _version(),
+    }
+    if model.selection:
+        attrs["selection"] = json.dumps(model.selection)
+    return datasets, attrs
+
+
+def write_model(model: "MarkovModel", path: str | os.PathLike) -> Path:
+    """Write ``model`` as an HDF5 file, atomically (no partial file on failure).
+
+    Parameters
+    ----------
+    model : MarkovModel
+    path : str or os.PathLike
+        The model file; its folder is created if needed.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be put in place.
+    """
+    datasets, attrs = model_datasets_and_attrs(model)
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as f:
+            for name, value in datasets.items():
+                f.create_dataset(name, data=value)
+            f.attrs.update(attrs)
+    return Path(path)
+
+
+def read_model_group(group: h5py.Group | h5py.File, label: str = "") -> "MarkovModel":
+    """Rebuild a model from an HDF5 group written by :func:`write_model`.
+
+    Parameters
+    ----------
+    group : h5py.Group or h5py.File
+        The model file, or the group attached to a prediction as ``/provenance/model``.
+    label : str, optional
+        Names the source in error messages (default: the file's name).
+
+    Returns
+    -------
+    MarkovModel
+
+    Raises
+    ------
+    InputError
+        If the group is not a cfbmarkov model, misses a dataset or attribute, or holds an
+        invalid model.
+    """
+    from cfbmarkov.markov.model import MarkovModel
+
+    label = label or getattr(group.file, "filename", "")
+    fmt = group.attrs.get("format")
+    if fmt != MODEL_FORMAT:
+        raise InputError(f"{label}: not a cfbmarkov model file (format attribute is {fmt!r})")
+    try:
+        window = np.asarray(group.attrs["window"], dtype=float)
+        return MarkovModel(
+            **{name: group[name][()] for name in _DATASETS},
+            state_space=StateSpace.from_attrs(group.attrs["state_space"]),
+            lag=float(group.attrs["lag"]), estimator=str(group.attrs["estimator"]),
+            window=None if np.isnan(window).any() else (float(window[0]), float(window[1])),
+            source=json.loads(group.attrs.get("source", '""')),
+            frame_pairs=int(group.attrs.get("frame_pairs", 0)),
+            pass_fractions=(group["pass_up_fraction"][()], group["pass_down_fraction"][()])
+            if "pass_up_fraction" in group else None,
+            selection=json.loads(group.attrs["selection"])
+            if "selection" in group.attrs else None)
+    except KeyError as exc:
+        raise InputError(f"{label}: damaged model file (missing {exc})") from None
+
+
+def read_model(path: str | os.PathLike) -> "MarkovModel":
+    """Read a model file written by :func:`write_model`.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+
+    Returns
+    -------
+    MarkovModel
+
+    Raises
+    ------
+    InputError
+        If the file is missing, empty, not HDF5, not a model file, or damaged.
+    """
+    from cfbmarkov.trajectories import _open_h5
+
+    with _open_h5(path) as f:
+        return read_model_group(f, str(path))
+
+
+def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
+                     states: np.ndarray, laps: np.ndarray, first_positions: np.ndarray,
+                     seed: int, output: str | os.PathLike, progress: bool = False,
+                     duration: float | None = None) -> Path:
+    """Write a Monte Carlo run of ``model`` as a trajectory file (a prediction).
+
+    The first frame keeps the actual positions it started from; later frames place each
+    particle uniformly inside the cell of its state (seeded by (seed, particle, step)). The
+    model is attached as ``/provenance/model``.
+
+    Parameters
+    ----------
+    model : MarkovModel
+    trajectories : Trajectories
+        The open file the run started from (ids, domain, provenance).
+    times : ndarray of float64, shape (K + 1,)
+        Frame times (s), one lag apart.
+    states, laps : ndarray of int32, shape (K + 1, N)
+        The Monte Carlo states and lap counters.
+    first_positions : ndarray of float64, shape (N, 2)
+        Positions (m) of the first frame.
+    seed : int
+        The seed of the run (also seeds the placement inside cells).
+    output : str or os.PathLike
+        The trajectory file to write (atomically).
+    progress : bool
+        Show a progress bar in simulated seconds.
+    duration : float, optional
+        The prediction's length as asked for (s), recorded in the file's parameters
+        (default: K lags).
+
+    Returns
+    -------
+    pathlib.Path
+        ``output``.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be written.
+    """
+    from cfbmarkov.markov.states import place_in_cells
+    from cfbmarkov.trajectory_writer import TrajectoryWriter
+
+    traj = trajectories
+    n_steps = times.size - 1
+    duration = float(n_steps * model.lag if duration is None else duration)
+    start = float(times[0])
+    parameters = {"model": model.describe(), "seed": int(seed), "start": start,
+                  "duration": duration, "initial_frames": str(traj.path),
+                  "columns": model.state_space.columns, "rows": model.state_space.rows}
+    with TrajectoryWriter(output, traj.ids, width=traj.width, height=traj.height,
+                          source="markov-prediction", parameters=parameters,
+                          frame_interval=model.lag) as writer:
+        writer.attach("model", *model_datasets_and_attrs(model))
+        bar = _progress(progress, duration)
+        writer.append(times[0], first_positions, lap=laps[0])
+        cells = model.state_space.cell_of_state
+        block = 32
+        for k0 in range(1, n_steps + 1, block):
+            ks = range(k0, min(k0 + block, n_steps + 1))
+            positions = np.stack([place_in_cells(cells[states[k]], model.state_space, seed, k)
+                                  for k in ks])
+            writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop])
+            if bar is not None:
+                bar.update(model.lag * len(ks))
+        if bar is not None:
+            bar.close()
+    return Path(output)
+
+
+def _progress(enabled: bool, duration: float):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=duration, unit="s", unit_scale=False, desc="Monte Carlo (simulated s)",
+                bar_format="{desc}: {n:.3f}/{total:.3f} s [{elapsed}<{remaining}, {rate_fmt}]")
+
+
+def _version() -> str:
+    from cfbmarkov import __version__
+
+    return __version__

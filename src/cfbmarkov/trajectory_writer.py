@@ -1,0 +1,477 @@
+"""Writing trajectory files: frame by frame (:class:`TrajectoryWriter`) or whole arrays
+(:func:`write_trajectories`), in the layout that :mod:`cfbmarkov.trajectories` reads
+(``docs/definitions.md``, Trajectory files).
+
+Every frame is validated as it is written (finite, inside the domain, evenly spaced
+increasing times), and the file appears under its name only when complete: it is written
+under a temporary name beside it and renamed (:mod:`cfbmarkov._atomic`).
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import json
+import os
+from pathlib import Path
+from typing import Any
+
+import h5py
+import numpy as np
+
+from cfbmarkov._atomic import discard, publish, temporary_path
+from cfbmarkov.errors import InputError
+from cfbmarkov.trajectories import (FORMAT, POSITION_TOLERANCE, TIME_TOLERANCE, VERSION,
+                                    PassEvents, lap_increments)
+
+
+class TrajectoryWriter:
+    """Write a trajectory file frame by frame; the file appears under its name only when closed.
+
+    Every frame is validated (finite, inside the domain, times increasing and evenly spaced);
+    the lap counter is derived from the positions by the minimal-image rule when not given.
+    On an error, or when used as a context manager that exits by an exception, the partial
+    file is removed.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write; its folder is created if needed.
+    ids : array_like of int, shape (N,)
+        Unique particle ids, the column order of every frame.
+    width, height : float
+        The riser W x H (m), positive.
+    source : str
+        What produces the file (e.g. ``cfd-dem``, ``markov-prediction``).
+    parameters : dict, optional
+        The producer's parameters, stored as JSON.
+    with_velocity : bool, optional
+        Store velocities (then every frame must carry them).
+    frame_interval : float, optional
+        Time between frames (s); by default taken from the first two frames.
+    label : str, optional
+        Names the file in error messages (default: ``path``).
+
+    Raises
+    ------
+    InputError
+        If there is no particle id, the ids are not unique, or the domain is not of
+        positive size.
+
+    Notes
+    -----
+    See ``docs/definitions.md`` (File formats, Trajectory files; Lap counter).
+    """
+
+    def __init__(self, path: str | os.PathLike, ids, *, width: float, height: float,
+                 source: str, parameters: dict[str, Any] | None = None,
+                 with_velocity: bool = False, frame_interval: float | None = None,
+                 label: str | None = None):
+        self.path = Path(path)
+        self.ids = np.asarray(ids, dtype=np.int64)
+        if self.ids.ndim != 1 or self.ids.size == 0:
+            raise InputError("a trajectory needs at least one particle id")
+        if np.unique(self.ids).size != self.ids.size:
+            raise InputError("particle ids are not unique")
+        if not (width > 0 and height > 0):
+            raise InputError(f"domain {width:g} x {height:g} m must have positive size")
+        self.width, self.height = float(width), float(height)
+        self.with_velocity = with_velocity
+        self._label = label or str(self.path)
+        self._tmp = temporary_path(self.path)
+        n = self.ids.size
+        self._file = h5py.File(self._tmp, "w")
+        f = self._file
+        f.attrs.update({
+            "format": FORMAT, "version": VERSION, "width": self.width, "height": self.height,
+            "length_unit": "m", "time_unit": "s", "source": source,
+            "parameters": json.dumps(parameters or {}, default=_json_default),
+            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+            "cfbmarkov_version": _version(),
+        })
+        if frame_interval is not None:
+            f.attrs["frame_interval"] = float(frame_interval)
+        f.create_dataset("particles/id", data=self.ids)
+        f.create_dataset("frames/time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(4096,))
+        f.create_dataset("frames/position", shape=(0, n, 2), maxshape=(None, n, 2), dtype="f8",
+                         chunks=(1, n, 2))
+        f.create_dataset("frames/lap", shape=(0, n), maxshape=(None, n), dtype="i4", chunks=(1, n))
+        if with_velocity:
+            f.create_dataset("frames/velocity", shape=(0, n, 2), maxshape=(None, n, 2),
+                             dtype="f8", chunks=(1, n, 2))
+        self._n_frames = 0
+        self._first_time = self._last_time = None
+        self._interval = frame_interval
+        self._last_y: np.ndarray | None = None
+        self._last_lap: np.ndarray | None = None
+        self._closed = False
+
+    # -- context manager ---------------------------------------------------------------
+    def __enter__(self) -> "TrajectoryWriter":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            self.close()
+        else:
+            self.abort()
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames written so far."""
+        return self._n_frames
+
+    @property
+    def last_frame(self) -> tuple[float, np.ndarray, np.ndarray] | None:
+        """(time in s, heights y [N] in m, laps [N]) of the last frame written, or None."""
+        if self._last_time is None:
+            return None
+        return self._last_time, self._last_y, self._last_lap
+
+    def continue_after(self, time: float, heights: np.ndarray, laps: np.ndarray,
+                       frame_interval: float | None = None) -> None:
+        """Continue a series written by another writer whose last frame was ``time`` (s)
+        with heights ``heights`` [N] (m) and lap counters ``laps`` [N]: the next frame must
+        follow it at the frame interval, and its laps count on from ``laps``.
+
+        Parameters
+        ----------
+        time : float
+            Time of the last frame of the earlier series (s).
+        heights : array_like of float, shape (N,)
+            Heights y of that frame (m).
+        laps : array_like of int, shape (N,)
+            Lap counters of that frame.
+        frame_interval : float, optional
+            The series' frame interval (s), if known.
+
+        Raises
+        ------
+        InputError
+            If frames were already written by this writer.
+        """
+        if self._n_frames:
+            raise InputError(f"{self._label}: cannot continue a series after writing frames")
+        self._last_time = float(time)
+        self._last_y = np.asarray(heights, dtype=np.float64).copy()
+        self._last_lap = np.asarray(laps, dtype=np.int32).copy()
+        if frame_interval is not None:
+            self._interval = float(frame_interval)
+
+    # -- validation --------------------------------------------------------------------
+    def _check_times(self, times: np.ndarray) -> None:
+        if not np.all(np.isfinite(times)):
+            raise InputError(f"{self._label}: frame time is not a finite number")
+        allt = times if self._last_time is None else np.concatenate([[self._last_time], times])
+        if allt.size < 2:
+            return
+        steps = np.diff(allt)
+        if np.any(steps <= 0):
+            k = int(np.argmax(steps <= 0))
+            raise InputError(f"{self._label}: time does not increase at t = {allt[k + 1]:g} s "
+                             f"(after {allt[k]:g} s)")
+        interval = self._interval if self._interval is not None else steps[0]
+        tol = max(TIME_TOLERANCE * max(abs(allt[-1]), 1.0), 1e-4 * interval)
+        bad = np.abs(steps - interval) > tol
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise InputError(f"{self._label}: frames unevenly spaced: {steps[k]:g} s between "
+                             f"t = {allt[k]:g} and {allt[k + 1]:g} s, expected {interval:g} s")
+        if self._interval is None:
+            self._interval = float(interval)
+            self._file.attrs["frame_interval"] = self._interval
+
+    def _check_array(self, name: str, values: np.ndarray, times: np.ndarray) -> None:
+        finite = np.isfinite(values)
+        if not finite.all():
+            t_idx, p_idx = np.argwhere(~finite.all(axis=-1))[0]
+            raise InputError(f"{self._label}: {name} of particle {self.ids[p_idx]} at t = "
+                             f"{times[t_idx]:g} s is not a finite number")
+
+    def _check_domain(self, positions: np.ndarray, times: np.ndarray) -> None:
+        tol = POSITION_TOLERANCE
+        x, y = positions[..., 0], positions[..., 1]
+        outside = (x < -tol) | (x > self.width + tol) | (y < -tol) | (y > self.height + tol)
+        if outside.any():
+            t_idx, p_idx = np.argwhere(outside)[0]
+            raise InputError(
+                f"{self._label}: particle {self.ids[p_idx]} at t = {times[t_idx]:g} s lies outside "
+                f"the domain 0..{self.width:g} x 0..{self.height:g} m at ({x[t_idx, p_idx]:g}, "
+                f"{y[t_idx, p_idx]:g})")
+
+    # -- writing -----------------------------------------------------------------------
+    def append(self, time: float, position, velocity=None, lap=None) -> None:
+        """Append one frame.
+
+        Parameters
+        ----------
+        time : float
+            Frame time (s).
+        position : array_like, shape (N, 2)
+            Positions (m).
+        velocity : array_like, shape (N, 2), optional
+            Velocities (m/s); required when the file stores velocities.
+        lap : array_like of int, shape (N,), optional
+            Lap counters (derived by the minimal-image rule when None).
+
+        Raises
+        ------
+        InputError
+            As :meth:`append_frames`.
+        """
+        self.append_frames(np.asarray([time], dtype=float), np.asarray(position)[None],
+                           None if velocity is None else np.asarray(velocity)[None],
+                           None if lap is None else np.asarray(lap)[None])
+
+    def append_frames(self, times, positions, velocities=None, laps=None) -> None:
+        """Append a block of frames.
+
+        Parameters
+        ----------
+        times : array_like, shape (T,)
+            Frame times (s), increasing, evenly spaced, following the last frame.
+        positions : array_like, shape (T, N, 2)
+            Positions (m), inside the domain.
+        velocities : array_like, shape (T, N, 2), optional
+            Velocities (m/s); required when the file stores velocities.
+        laps : array_like of int, shape (T, N), optional
+            Lap counters (derived by the minimal-image rule when None).
+
+        Raises
+        ------
+        InputError
+            If an array has the wrong shape, a value is not finite, a position lies
+            outside the domain, the times do not increase or are unevenly spaced, or
+            velocities are missing.
+        """
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
+        positions = np.asarray(positions, dtype=np.float64)
+        n = self.ids.size
+        t = times.size
+        if positions.shape != (t, n, 2):
+            raise InputError(f"{self._label}: expected positions of shape ({t}, {n}, 2), "
+                             f"got {positions.shape}")
+        self._check_times(times)
+        self._check_array("position", positions, times)
+        self._check_domain(positions, times)
+        if self.with_velocity:
+            if velocities is None:
+                raise InputError(f"{self._label}: this file stores velocities; none were given")
+            velocities = np.asarray(velocities, dtype=np.float64)
+            if velocities.shape != (t, n, 2):
+                raise InputError(f"{self._label}: expected velocities of shape ({t}, {n}, 2)")
+            self._check_array("velocity", velocities, times)
+        if laps is None:
+            laps = np.empty((t, n), dtype=np.int32)
+            prev_y, prev_lap = self._last_y, self._last_lap
+            for k in range(t):
+                y = positions[k, :, 1]
+                laps[k] = 0 if prev_y is None else prev_lap + lap_increments(prev_y, y, self.height)
+                prev_y, prev_lap = y, laps[k]
+        else:
+            laps = np.asarray(laps, dtype=np.int32).reshape(t, n)
+        f = self._file
+        i0, i1 = self._n_frames, self._n_frames + t
+        for name in ("frames/time", "frames/position", "frames/lap") + (
+                ("frames/velocity",) if self.with_velocity else ()):
+            f[name].resize(i1, axis=0)
+        f["frames/time"][i0:i1] = times
+        f["frames/position"][i0:i1] = positions
+        f["frames/lap"][i0:i1] = laps
+        if self.with_velocity:
+            f["frames/velocity"][i0:i1] = velocities
+        self._n_frames = i1
+        self._last_time = float(times[-1])
+        self._last_y = positions[-1, :, 1].copy()
+        self._last_lap = laps[-1].copy()
+
+    def append_fields(self, time: float, spacing, **fields) -> None:
+        """Append one frame of gas fields on a cell-centred grid to ``/fields``.
+
+        Parameters
+        ----------
+        time : float
+            Time of the field frame (s).
+        spacing : tuple of float
+            (dx, dy) of the grid (m).
+        **fields : array_like, shape (ny, nx) or (ny, nx, 2)
+            Stored as float32: ``void_fraction`` (-), ``gas_velocity`` (m/s),
+            ``pressure`` (Pa). Every frame must carry the same fields.
+
+        Raises
+        ------
+        InputError
+            If the fields of the first frame are on different grids, or a later frame
+            carries other fields.
+        """
+        g = self._file.require_group("fields")
+        first = "time" not in g
+        arrays = {name: np.asarray(value, dtype=np.float32) for name, value in fields.items()}
+        if first:
+            shapes = {a.shape[:2] for a in arrays.values()}
+            if len(shapes) != 1:
+                raise InputError(f"{self._label}: gas fields of different grids {sorted(shapes)}")
+            ny, nx = shapes.pop()
+            g.attrs.update({"spacing": np.asarray(spacing, dtype=np.float64),
+                            "origin": np.zeros(2), "shape": np.asarray([nx, ny]),
+                            "units": json.dumps({"void_fraction": "-", "gas_velocity": "m/s",
+                                                 "pressure": "Pa"})})
+            g.create_dataset("time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
+            for name, a in arrays.items():
+                g.create_dataset(name, shape=(0, *a.shape), maxshape=(None, *a.shape),
+                                 dtype="f4", chunks=(1, *a.shape))
+        elif set(arrays) != set(g) - {"time"}:
+            raise InputError(f"{self._label}: gas fields {sorted(arrays)} differ from those of "
+                             f"earlier frames {sorted(set(g) - {'time'})}")
+        k = g["time"].shape[0]
+        g["time"].resize(k + 1, axis=0)
+        g["time"][k] = float(time)
+        for name, a in arrays.items():
+            g[name].resize(k + 1, axis=0)
+            g[name][k] = a
+
+    def add_events(self, times, particles, directions) -> None:
+        """Store exact pass events, in any order.
+
+        Parameters
+        ----------
+        times : array_like of float, shape (E,)
+            Times of the passes (s).
+        particles : array_like of int, shape (E,)
+            Particle indices (into ``ids``).
+        directions : array_like of int, shape (E,)
+            +1 up through the top, -1 down through the bottom.
+        """
+        times = np.asarray(times, dtype=np.float64)
+        order = np.argsort(times, kind="stable")
+        g = self._file.require_group("events")
+        g.attrs["exact"] = True
+        for name, values, dtype in (("time", times, "f8"), ("particle", particles, "i4"),
+                                    ("direction", directions, "i1")):
+            data = np.asarray(values)[order].astype(dtype)
+            if name in g:
+                old = g[name]
+                old.resize(old.shape[0] + data.size, axis=0)
+                old[-data.size:] = data
+            else:
+                g.create_dataset(name, data=data, maxshape=(None,), chunks=True)
+
+    def attach(self, name: str, datasets: dict[str, np.ndarray], attrs: dict[str, Any] | None = None
+               ) -> None:
+        """Attach a provenance group ``/provenance/<name>``.
+
+        Parameters
+        ----------
+        name : str
+            The group's name.
+        datasets : dict of str to ndarray
+            Datasets of the group.
+        attrs : dict, optional
+            Attributes of the group.
+        """
+        g = self._file.create_group(f"provenance/{name}")
+        for key, value in datasets.items():
+            g.create_dataset(key, data=value)
+        for key, value in (attrs or {}).items():
+            g.attrs[key] = value
+
+    def close(self) -> Path:
+        """Finish the file and move it to its final name (nothing if already closed).
+
+        Returns
+        -------
+        pathlib.Path
+            The final path.
+
+        Raises
+        ------
+        InputError
+            If no frame was written (the partial file is discarded) or the rename fails.
+        """
+        if self._closed:
+            return self.path
+        if self._n_frames == 0:
+            self.abort()
+            raise InputError(f"{self._label}: no frames to write")
+        self._file.close()
+        try:
+            publish(self._tmp, self.path)
+        finally:
+            self._closed = True
+        return self.path
+
+    def abort(self) -> None:
+        """Discard the partial file."""
+        if self._closed:
+            return
+        try:
+            self._file.close()
+        finally:
+            discard(self._tmp)
+            self._closed = True
+
+
+def write_trajectories(path: str | os.PathLike, times, positions, *, width: float, height: float,
+                       ids=None, velocities=None, laps=None, source: str = "arrays",
+                       parameters: dict[str, Any] | None = None, events: PassEvents | None = None
+                       ) -> Path:
+    """Write whole arrays as a trajectory file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    times : array_like, shape (T,)
+        Frame times (s), increasing and evenly spaced.
+    positions : array_like, shape (T, N, 2)
+        Positions (m).
+    width, height : float
+        The riser W x H (m).
+    ids : array_like of int, shape (N,), optional
+        Particle ids (0 .. N-1 by default).
+    velocities : array_like, shape (T, N, 2), optional
+        Velocities (m/s).
+    laps : array_like of int, shape (T, N), optional
+        Lap counters (derived by the minimal-image rule when None).
+    source : str, optional
+        What produced the data.
+    parameters : dict, optional
+        The producer's parameters.
+    events : PassEvents, optional
+        Exact pass events.
+
+    Returns
+    -------
+    pathlib.Path
+        ``path``.
+
+    Raises
+    ------
+    InputError
+        If ``positions`` is not (T, N, 2), or as :class:`TrajectoryWriter`.
+    """
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim != 3 or positions.shape[-1] != 2:
+        raise InputError(f"positions must have shape (T, N, 2), got {positions.shape}")
+    ids = np.arange(positions.shape[1]) if ids is None else ids
+    with TrajectoryWriter(path, ids, width=width, height=height, source=source,
+                          parameters=parameters, with_velocity=velocities is not None) as w:
+        w.append_frames(times, positions, velocities, laps)
+        if events is not None:
+            w.add_events(events.time, events.particle, events.direction)
+    return Path(path)
+
+
+def _json_default(obj):
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.integer, np.floating)):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
+
+
+def _version() -> str:
+    from cfbmarkov import __version__
+
+    return __version__
