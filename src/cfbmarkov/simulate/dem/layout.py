@@ -39,9 +39,10 @@ BAD_NAN, BAD_WALL, BAD_OVERLAP, BAD_RANGE = 1, 2, 3, 4
 class DEMParams(NamedTuple):
     """Constant parameters of a DEM system, passed by value into the numba kernels.
 
-    A heterogeneous named tuple: numba passes it as a struct, so a field read costs the
-    same as a local variable (measured against the former float/int slot arrays and a
-    ``structref``; see ``docs`` of :mod:`.system`).
+    A heterogeneous named tuple: numba passes it by value as a struct (no load through a
+    pointer, as from a parameter array, a ``structref`` or a jitclass), and cached
+    compilation (``cache=True``) works with it. Kernels read the fields they need into
+    locals before their loops.
 
     Attributes
     ----------
