@@ -4,10 +4,12 @@ A wall is a partner of infinite mass at rest, without spin, whose surface is the
 plane: particle i touching the left wall with overlap d feels exactly what it feels from a
 particle j with 1/m_j = 0, R_j/I_j = 0, placed so that the two overlap by d along -x. The
 damping then uses m_ab = m_i in both (1/sqrt(1/m_i + 0)). The geometry below is dyadic, so
-that the pair's normal is exactly (-1, 0) and the two overlaps are exactly equal; every
-other operation is the same in both paths, so the results must agree bit for bit, except
-at the Coulomb cap: there the wall clamps its one tangential component to exactly +-mu*Fn
-where the pair scales its force vector by mu*Fn/|Ft| (equal up to round-off).
+that the pair's normal is exactly (-1, 0) and the two overlaps are exactly equal. The law
+takes the wall's tangential quantities as floats (1D) and the pair's as (x, y); for an
+axis-aligned normal the 2D projection and the zero component only add zeros, so the
+results must agree bit for bit, except at the Coulomb cap: there the wall sets its force
+to exactly +-mu*Fn where the pair scales its force vector by mu*Fn/|Ft| (equal up to
+round-off).
 """
 
 import math

@@ -23,6 +23,8 @@ import math
 
 import numpy as np
 from numba import njit, prange
+from numba.core import types
+from numba.extending import overload
 
 from cfbmarkov.simulate.dem.layout import BAD_OVERLAP
 
@@ -31,45 +33,120 @@ from cfbmarkov.simulate.dem.layout import BAD_OVERLAP
 FASTMATH = {"contract", "arcp", "afn"}
 
 
+# -- the tangential algebra, for a 1D tangent (floats: a wall, whose tangent is a fixed
+# coordinate axis) and a 2D one (2-tuples (x, y): a pair, whose tangent turns). Numba picks
+# the form from the argument types when it compiles the law; both are inlined.
+
+def _advance_spring(h, vt, n, dt):
+    """The spring after the step, ``h + vt*dt``, on the current tangent (normal ``n``)."""
+
+
+@overload(_advance_spring, inline="always")
+def _advance_spring_impl(h, vt, n, dt):
+    if isinstance(h, types.Float):
+        return lambda h, vt, n, dt: h + vt * dt
+
+    def impl(h, vt, n, dt):
+        hx = h[0] + vt[0] * dt
+        hy = h[1] + vt[1] * dt
+        hn = hx * n[0] + hy * n[1]
+        return hx - hn * n[0], hy - hn * n[1]
+    return impl
+
+
+def _spring_dashpot(h, vt, kt, etat):
+    """Tangential force ``-kt*h - etat*vt``."""
+
+
+@overload(_spring_dashpot, inline="always")
+def _spring_dashpot_impl(h, vt, kt, etat):
+    if isinstance(h, types.Float):
+        return lambda h, vt, kt, etat: -kt * h - etat * vt
+    return lambda h, vt, kt, etat: (-kt * h[0] - etat * vt[0], -kt * h[1] - etat * vt[1])
+
+
+def _square(f):
+    """``|f|^2``."""
+
+
+@overload(_square, inline="always")
+def _square_impl(f):
+    if isinstance(f, types.Float):
+        return lambda f: f * f
+    return lambda f: f[0] * f[0] + f[1] * f[1]
+
+
+def _cap(f, f2, fc):
+    """``f`` scaled to magnitude ``fc`` (``f2 = |f|^2 > fc^2``)."""
+
+
+@overload(_cap, inline="always")
+def _cap_impl(f, f2, fc):
+    if isinstance(f, types.Float):  # exactly +-fc (f != 0 here)
+        return lambda f, f2, fc: math.copysign(fc, f)
+
+    def impl(f, f2, fc):
+        sc = fc / math.sqrt(f2)
+        return f[0] * sc, f[1] * sc
+    return impl
+
+
+def _spring_of(ft, vt, etat, inv_kt):
+    """The spring that gives the force ``ft``: ``-(ft + etat*vt)/kt``."""
+
+
+@overload(_spring_of, inline="always")
+def _spring_of_impl(ft, vt, etat, inv_kt):
+    if isinstance(ft, types.Float):
+        return lambda ft, vt, etat, inv_kt: -(ft + etat * vt) * inv_kt
+    return lambda ft, vt, etat, inv_kt: (-(ft[0] + etat * vt[0]) * inv_kt,
+                                         -(ft[1] + etat * vt[1]) * inv_kt)
+
+
 @njit(cache=True, inline="always", fastmath=FASTMATH)
-def contact_force(delta, vn, nx, ny, vtx, vty, hx, hy, etan, etat, prm, axis_tangent):
+def contact_force(delta, vn, n, vt, h, kn, kt, inv_kt, etan, etat, mu, dt):
     """Force of one contact: linear spring-dashpot, tangential spring, Coulomb cap.
 
     Normal force ``Fn = max(kn*delta + eta_n*v_n, 0)`` (repulsive, no tension). Tangential
-    spring ``h <- h + v_t*dt``, projected on the current tangent (the contact may have
-    turned); trial force ``Ft = -kt*h - eta_t*v_t``; if ``|Ft| > mu*Fn`` it is scaled to
-    ``mu*Fn`` and the spring reset to ``-(Ft + eta_t*v_t)/kt``, so that it holds the force
-    the cap allows.
+    spring ``h <- h + v_t*dt``, projected on the current tangent (a pair's contact turns);
+    trial force ``Ft = -kt*h - eta_t*v_t``; if ``|Ft| > mu*Fn`` it is scaled to ``mu*Fn``
+    and the spring reset to ``-(Ft + eta_t*v_t)/kt``, the spring that gives the capped force.
+
+    The tangential quantities ``vt``, ``h`` (and the returned ``ft``, ``h``) are 2-tuples
+    (x, y) for a pair, or floats for a wall (the component along the wall, whose tangent
+    does not turn: no projection, and the cap sets exactly ``+-mu*Fn``, which the scaling
+    ``Ft*mu*Fn/|Ft|`` equals only up to round-off).
 
     Parameters
     ----------
     delta : float
         Overlap, m (> 0 in contact).
     vn : float
-        Approach speed along the normal (relative velocity dotted with ``n``), m/s.
-    nx, ny : float
-        Unit normal from the particle to its partner (into the wall for a wall), -.
-    vtx, vty : float
+        Approach speed: the relative velocity of the contact point along the normal, m/s.
+    n : (float, float) or None
+        Unit normal from the particle to its partner, -; unused (None) for a wall.
+    vt : (float, float) or float
         Tangential relative velocity of the contact point (normal part removed), m/s.
-    hx, hy : float
+    h : (float, float) or float
         Tangential spring before the step, m.
+    kn, kt : float
+        Normal and tangential stiffness, N/m.
+    inv_kt : float
+        1/kt, m/N.
     etan, etat : float
         Normal and tangential damping coefficients eta_n, eta_t of this contact, kg/s.
-    prm : DEMParams
-        Uses ``kn``, ``kt``, ``inv_kt`` (N/m, m/N), ``mu`` (-), ``dt`` (s).
-    axis_tangent : bool
-        The tangent is a coordinate axis and only its component of ``vt`` and ``h`` is
-        non-zero (a wall; pass a constant). The cap then sets that component to exactly
-        ``+-mu*Fn``, which the scaling ``Ft*mu*Fn/|Ft|`` equals only up to round-off.
-        Everything else is exact for such a tangent (the projection only adds zeros).
+    mu : float
+        Friction coefficient, -.
+    dt : float
+        Time step, s.
 
     Returns
     -------
     fn : float
         Normal force magnitude, N (>= 0); the force on the particle is ``-fn*n``.
-    ftx, fty : float
+    ft : (float, float) or float
         Tangential force on the particle, N.
-    hx, hy : float
+    h : (float, float) or float
         Tangential spring after the step, m.
 
     References
@@ -80,32 +157,17 @@ def contact_force(delta, vn, nx, ny, vtx, vty, hx, hy, etan, etat, prm, axis_tan
     Coulomb cap and spring rescaling as in LAMMPS ``pair_style gran/hooke/history``
     (Silbert et al., Phys. Rev. E 64 (2001) 051302; LAMMPS documentation).
     """
-    kt = prm.kt
-    fn = prm.kn * delta + etan * vn
+    fn = kn * delta + etan * vn
     if fn < 0.0:
         fn = 0.0
-    dt = prm.dt
-    hx = hx + vtx * dt
-    hy = hy + vty * dt
-    hn = hx * nx + hy * ny
-    hx -= hn * nx
-    hy -= hn * ny
-    ftx = -kt * hx - etat * vtx
-    fty = -kt * hy - etat * vty
-    ft2 = ftx * ftx + fty * fty
-    fc = prm.mu * fn
+    h = _advance_spring(h, vt, n, dt)
+    ft = _spring_dashpot(h, vt, kt, etat)
+    ft2 = _square(ft)
+    fc = mu * fn
     if ft2 > fc * fc:
-        if axis_tangent:
-            ftx = min(max(ftx, -fc), fc)
-            fty = min(max(fty, -fc), fc)
-        else:
-            sc = fc / math.sqrt(ft2)
-            ftx *= sc
-            fty *= sc
-        inv_kt = prm.inv_kt
-        hx = -(ftx + etat * vtx) * inv_kt
-        hy = -(fty + etat * vty) * inv_kt
-    return fn, ftx, fty, hx, hy
+        ft = _cap(ft, ft2, fc)
+        h = _spring_of(ft, vt, etat, inv_kt)
+    return fn, ft, h
 
 
 @njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
@@ -136,8 +198,13 @@ def pair_forces(st, npairs, pi, pj, springs, pf, prm):
     int
         Number of pairs overlapping by more than ``max_overlap*(R_i + R_j)`` (blow-up).
     """
+    dt = prm.dt
     H = prm.height
     halfH = 0.5 * H
+    kn = prm.kn
+    kt = prm.kt
+    inv_kt = prm.inv_kt
+    mu = prm.mu
     etan_pp = prm.etan_pp
     etat_pp = prm.etat_pp
     cn = prm.cn
@@ -186,8 +253,9 @@ def pair_forces(st, npairs, pi, pj, springs, pf, prm):
             sm = 1.0 / math.sqrt(st[i, 6] + st[j, 6])
             etan = cn * sm
             etat = ct * sm
-        fn, ftx, fty, hx, hy = contact_force(delta, vn, nx, ny, vtx, vty, springs[p, 0],
-                                             springs[p, 1], etan, etat, prm, False)
+        fn, (ftx, fty), (hx, hy) = contact_force(delta, vn, (nx, ny), (vtx, vty),
+                                                 (springs[p, 0], springs[p, 1]), kn, kt, inv_kt,
+                                                 etan, etat, mu, dt)
         springs[p, 0] = hx
         springs[p, 1] = hy
         pf[p, 0] = ftx - fn * nx

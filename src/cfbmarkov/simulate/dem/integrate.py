@@ -78,6 +78,10 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
     H = prm.height
     halfH = 0.5 * H
     g = prm.gravity
+    kn = prm.kn
+    kt = prm.kt
+    inv_kt = prm.inv_kt
+    mu = prm.mu
     etan_pw = prm.etan_pw
     etat_pw = prm.etat_pw
     cn = prm.cn
@@ -106,8 +110,6 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
         fx = aux[i, 2]
         fy = aux[i, 3]
         tq = 0.0
-        wfy = 0.0  # this particle's share of wall_fy, floor_fy
-        ffy = 0.0
         isbad = 0
         for q in range(lowstart[i], lowstart[i + 1]):
             p = lowpid[q]
@@ -128,46 +130,45 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
                 sm = 1.0 / math.sqrt(imi)
                 etan = cn * sm
                 etat = ct * sm
-            # a wall is a partner at rest without spin: the relative velocity of the
-            # contact point is (vx - u ny, vy + u nx), the approach speed its normal part
+            # a wall is a partner of infinite mass (m_ab = m) at rest without spin: the
+            # relative velocity of the contact point is (vx - u ny, vy + u nx), the approach
+            # speed its part along n, the tangential velocity (1D) its part along the wall
             if xi < Ri:  # left wall, n = (-1, 0)
                 delta = Ri - xi
                 if delta > 2.0 * ovl * Ri:
                     isbad = BAD_OVERLAP
-                fn, _, ft, _, wh[i, 0] = contact_force(delta, -vxi, -1.0, 0.0, 0.0, vyi - ui,
-                                                       0.0, wh[i, 0], etan, etat, prm, True)
+                fn, ft, wh[i, 0] = contact_force(delta, -vxi, None, vyi - ui, wh[i, 0], kn, kt,
+                                                 inv_kt, etan, etat, mu, dt)
                 fx += fn
                 fy += ft
                 tq -= Ri * ft
-                wfy += ft
+                wall_fy += ft
             elif wh[i, 0] != 0.0:
                 wh[i, 0] = 0.0
             if xi > W - Ri:  # right wall, n = (1, 0)
                 delta = xi + Ri - W
                 if delta > 2.0 * ovl * Ri:
                     isbad = BAD_OVERLAP
-                fn, _, ft, _, wh[i, 1] = contact_force(delta, vxi, 1.0, 0.0, 0.0, vyi + ui,
-                                                       0.0, wh[i, 1], etan, etat, prm, True)
+                fn, ft, wh[i, 1] = contact_force(delta, vxi, None, vyi + ui, wh[i, 1], kn, kt,
+                                                 inv_kt, etan, etat, mu, dt)
                 fx -= fn
                 fy += ft
                 tq += Ri * ft
-                wfy += ft
+                wall_fy += ft
             elif wh[i, 1] != 0.0:
                 wh[i, 1] = 0.0
             if floor and yi < Ri:  # floor, n = (0, -1)
                 delta = Ri - yi
                 if delta > 2.0 * ovl * Ri:
                     isbad = BAD_OVERLAP
-                fn, ft, _, wh[i, 2], _ = contact_force(delta, -vyi, 0.0, -1.0, vxi + ui, 0.0,
-                                                       wh[i, 2], 0.0, etan, etat, prm, True)
+                fn, ft, wh[i, 2] = contact_force(delta, -vyi, None, vxi + ui, wh[i, 2], kn, kt,
+                                                 inv_kt, etan, etat, mu, dt)
                 fy += fn
                 fx += ft
                 tq += Ri * ft
-                ffy += fn
+                floor_fy += fn
             elif wh[i, 2] != 0.0:
                 wh[i, 2] = 0.0
-        wall_fy += wfy
-        floor_fy += ffy
         # integrate (leapfrog)
         vxn = vxi + dt * (fx * imi)
         vyn = vyi + dt * (fy * imi - g)
