@@ -33,14 +33,28 @@ _stability_limits_jit = nb.njit(cache=True)(_stability_limits)
 
 
 def gas_stability_limit(grid: GasGrid, gas, max_velocity) -> float:
-    """Largest stable gas time step (s) of the explicit scheme.
+    """Largest stable gas time step of the explicit scheme.
 
-    ``max_velocity`` is either one speed (m/s, used for both directions) or a pair
-    ``(max |u|, max |v|)``. Advective limit ``dt_a = 0.5 / (|u|/dx + |v|/dy)`` (forward Euler
-    with a TVD scheme), viscous limit ``dt_v = 1 / (2 nu (1/dx^2 + 1/dy^2))``; both acting
-    together: ``dt_max = 1 / (1/dt_a + 1/dt_v)``. (The eps-weighted viscous term can be up to
+    Advective limit ``dt_a = 0.5 / (|u|/dx + |v|/dy)`` (forward Euler with a TVD scheme),
+    viscous limit ``dt_v = 1 / (2 nu (1/dx^2 + 1/dy^2))``; both acting together:
+    ``dt_max = 1 / (1/dt_a + 1/dt_v)``. (The eps-weighted viscous term can be up to
     eps_max/eps_min stiffer at a void-fraction jump; at the paper's scale dt_v ~ 1.7 s, far
     from binding.)
+
+    Parameters
+    ----------
+    grid : GasGrid
+        Uses ``dx``, ``dy`` (m).
+    gas : object
+        Anything with ``viscosity`` (Pa s) and ``density`` (kg/m^3), e.g. a
+        :class:`~cfbmarkov.simulate.cfd.solver.GasSolver` or a case's gas config.
+    max_velocity : float or (float, float)
+        One speed used for both directions, or ``(max |u|, max |v|)``, m/s.
+
+    Returns
+    -------
+    float
+        dt_max, s.
     """
     try:
         umax, vmax = (float(abs(max_velocity[0])), float(abs(max_velocity[1])))
@@ -198,10 +212,32 @@ def _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps, eps_y, tend_u, ten
 
 def momentum_tendency(grid: GasGrid, u, v, void_fraction, kinematic_viscosity: float,
                       scheme: str = "vanleer") -> tuple[np.ndarray, np.ndarray]:
-    """The explicit part ``-div(eps u u) + nu div(eps grad u)`` of a step, on the faces (m/s^2).
+    """The explicit part ``-div(eps u u) + nu div(eps grad u)`` of a step, on the faces.
 
     This is what :meth:`GasSolver.step` adds, times dt, to eps u (before drag, gravity and
     the pressure); exposed for verification and diagnostics.
+
+    Parameters
+    ----------
+    grid : GasGrid
+    u, v : array_like (nx+1, ny), (nx, ny)
+        Gas velocities on the x- and y-faces, m/s.
+    void_fraction : array_like (nx, ny)
+        eps at the cell centres, -.
+    kinematic_viscosity : float
+        nu, m^2/s.
+    scheme : {"vanleer", "upwind"}
+        Face values of the advected velocity.
+
+    Returns
+    -------
+    tend_u, tend_v : ndarray (nx+1, ny), (nx, ny)
+        The tendency on the x- and y-faces, m/s^2 (0 on the wall faces).
+
+    Raises
+    ------
+    InputError
+        Unknown ``scheme``.
     """
     if scheme not in SCHEMES:
         raise InputError(f"advection scheme must be one of {tuple(SCHEMES)}, got {scheme!r}")

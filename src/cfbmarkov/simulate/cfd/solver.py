@@ -346,11 +346,32 @@ class GasSolver:
              drag_jacobian_u=None, drag_jacobian_v=None) -> GasState:
         """Advance ``state`` by one time step to the void fraction ``void_fraction``.
 
-        ``drag_force_u`` (nx+1, ny) and ``drag_force_v`` (nx, ny): the drag force per unit
-        volume exerted by the gas on the particles (N/m^3) on the x- and y-faces; the gas
-        feels its reaction. Optional ``drag_jacobian_u/v`` (same shapes, kg/(m^3 s), >= 0):
-        d f / d u_gas, for a semi-implicit drag (the drag the gas feels becomes
-        ``f + K (u^{n+1} - u^n)``). Returns a new :class:`GasState`.
+        Parameters
+        ----------
+        state : GasState
+            The gas now (not modified).
+        void_fraction : array_like (nx, ny)
+            eps after the step, in (0, 1].
+        drag_force_u, drag_force_v : array_like (nx+1, ny), (nx, ny)
+            Drag force per unit volume exerted by the gas on the particles, on the x- and
+            y-faces, N/m^3; the gas feels its reaction.
+        drag_jacobian_u, drag_jacobian_v : array_like, same shapes, optional
+            K = d f / d u_gas >= 0, kg/(m^3 s), for a semi-implicit drag (the drag the gas
+            feels becomes ``f + K (u^{n+1} - u^n)``). Both or neither.
+
+        Returns
+        -------
+        GasState
+            The gas after the step.
+
+        Raises
+        ------
+        InputError
+            Wrong shapes, a void fraction outside (0, 1], a negative or non-finite jacobian,
+            or a time step above the stability limit (:func:`gas_stability_limit`).
+        PressureSolveError
+            The pressure equation could not be solved to ``residual_tolerance`` (or its
+            matrix is not positive definite, or the state's velocity is not finite).
         """
         g = self.grid
         eps_new = self._field(void_fraction, g.cell_shape, "void fraction")

@@ -381,8 +381,24 @@ class DEMSystem:
 
     # ------------------------------------------------------------------ running
     def step(self, n_steps: int = 1, external_force=None) -> None:
-        """Advance ``n_steps`` DEM steps. ``external_force`` (N, 2), N, caller's order, is added
-        to every particle's force during these steps (e.g. drag and pressure gradient)."""
+        """Advance ``n_steps`` DEM steps.
+
+        Parameters
+        ----------
+        n_steps : int
+            Steps to do (>= 0).
+        external_force : array_like (N, 2), optional
+            Force on each particle (caller's order), N, added during these steps (e.g. drag
+            and pressure gradient); None: no external force.
+
+        Raises
+        ------
+        InputError
+            Negative ``n_steps`` or a wrong ``external_force`` shape.
+        SimulationBlowUp
+            A particle became unphysical (NaN, through a wall, a huge overlap); the state
+            is that after the bad step.
+        """
         n_steps = int(n_steps)
         if n_steps < 0:
             raise InputError(f"n_steps must be >= 0, got {n_steps}")
