@@ -1,8 +1,6 @@
-"""DEMSystem: the orchestration object of the 2D DEM engine.
-
-The numba kernels: :mod:`.contact` (the contact law, pair forces), :mod:`.neighbours`
-(cell sort, Verlet and pair lists), :mod:`.integrate` (the fused step, the advance loop);
-the arrays they share are described in :mod:`.layout`.
+"""DEMSystem: the orchestration object of the 2D DEM engine. Kernels: :mod:`.contact` (law,
+pair forces), :mod:`.neighbours` (cell sort, lists), :mod:`.integrate` (step, advance loop);
+their arrays: :mod:`.layout`.
 
 Geometry: discs in the plane, x across between contact walls at x = 0 and x = W, y up and
 periodic with period H (positions kept in [0, H), minimal image for contacts). With
@@ -388,16 +386,14 @@ class DEMSystem:
         n_steps : int
             Steps to do (>= 0).
         external_force : array_like (N, 2), optional
-            Force on each particle (caller's order), N, added during these steps (e.g. drag
-            and pressure gradient); None: no external force.
+            Force on each particle (caller's order), N, added during these steps (e.g. drag).
 
         Raises
         ------
         InputError
             Negative ``n_steps`` or a wrong ``external_force`` shape.
         SimulationBlowUp
-            A particle became unphysical (NaN, through a wall, a huge overlap); the state
-            is that after the bad step.
+            A particle became unphysical; the state is that after the bad step.
         """
         n_steps = int(n_steps)
         if n_steps < 0:
