@@ -1,5 +1,9 @@
 """Gas phase of the CFD-DEM riser: staggered-grid solver, drag law, grid-particle transfers.
 
+Modules: :mod:`.grid` (the staggered grid), :mod:`.solver` (the gas step), :mod:`.momentum`
+(advection, viscous term, stability), :mod:`.pressure` (the projection), :mod:`.state`
+(:class:`GasState`), :mod:`.drag` (drag law), :mod:`.coupling` (grid <-> particles).
+
 Typical use (the coupling calls ``step`` once per gas step)::
 
     from cfbmarkov.simulate.cfd import GasGrid, GasSolver
@@ -30,15 +34,9 @@ from cfbmarkov.simulate.cfd.drag import (
     terminal_velocity,
 )
 from cfbmarkov.simulate.cfd.grid import GasGrid
-from cfbmarkov.simulate.cfd.solver import (
-    GasSolver,
-    GasState,
-    PressureSolveError,
-    continuity_residual,
-    cross_section_flux,
-    gas_stability_limit,
-    momentum_tendency,
-)
+from cfbmarkov.simulate.cfd.momentum import gas_stability_limit, momentum_tendency
+from cfbmarkov.simulate.cfd.solver import GasSolver, PressureSolveError
+from cfbmarkov.simulate.cfd.state import GasState, continuity_residual, cross_section_flux
 
 __all__ = [
     "GasGrid",

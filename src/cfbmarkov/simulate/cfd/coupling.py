@@ -11,7 +11,7 @@
   ``sum_k f_k dx dy d = sum_p F_p``. The share a wall node would receive (u on a wall face;
   the wall value of v) is given to the interior node of the same pair, so no momentum
   goes into the walls: the total is conserved to round-off. ``d`` is the pseudo-2D
-  thickness (one particle diameter, SPEC section 1).
+  thickness (one particle diameter, ``docs/definitions.md``, riser).
 * :func:`deposit_solid_volume` / :func:`void_fraction_field`: the solid volume of each
   particle (sphere volume pi d^3 / 6) is spread over the cells by area weighting
   (cloud-in-cell: a cell-sized square centred on the particle, i.e. bilinear weights on

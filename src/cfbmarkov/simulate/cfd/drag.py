@@ -1,4 +1,4 @@
-"""Gas-particle drag law of the paper's Table 2 (SPEC section 1), as numba kernels.
+"""Gas-particle drag law of the paper's Table 2 (``docs/definitions.md``, section riser), as numba kernels.
 
     beta = (1 - eps) / (eps^2 d) * (150 (1 - eps) mu / d + 1.75 rho eps |u - v|)   eps <= 0.8  (Ergun)
     beta = 3/4 C_D rho |u - v| (1 - eps) / d * eps^-2.7                            eps >  0.8  (Wen & Yu)
@@ -36,7 +36,7 @@ from cfbmarkov.errors import InputError
 ERGUN_SWITCH_VOID_FRACTION = 0.8
 #: particle Reynolds number above which C_D is constant
 NEWTON_SWITCH_REYNOLDS = 1000.0
-#: C_D in the Newton regime (SPEC section 1: the common 0.44; the paper prints 0.43)
+#: C_D in the Newton regime (``docs/definitions.md``, riser: the common 0.44; the paper prints 0.43)
 NEWTON_DRAG_COEFFICIENT = 0.44
 
 
@@ -129,7 +129,7 @@ def terminal_velocity(diameter: float, density: float, gas, gravity: float = 9.8
     """Terminal velocity (m/s) of a single sphere falling in still gas (eps -> 1).
 
     Root of ``drag(u) = (rho_p - rho_g) Vp g`` with the Table 2 drag at eps = 1 (the
-    Schiller-Naumann C_D, 0.44 above Re = 1000), by Brent's method. SPEC: about 7 m/s for
+    Schiller-Naumann C_D, 0.44 above Re = 1000), by Brent's method. ``docs/definitions.md``: about 7 m/s for
     the paper's particles.
     """
     rho, mu = _gas_properties(gas)
@@ -159,7 +159,7 @@ def minimum_fluidization_velocity(diameter: float, density: float, gas, voidage:
     :func:`interphase_momentum_coefficient`). The paper's 0.44 m/s needs e ~ 0.36.
 
     Without: the Wen & Yu (1966) correlation ``Re_mf = sqrt(33.7^2 + 0.0408 Ar) - 33.7``
-    (SPEC: about 0.55 m/s for the paper's particles).
+    (``docs/definitions.md``: about 0.55 m/s for the paper's particles).
     """
     rho, mu = _gas_properties(gas)
     if not (diameter > 0 and density > rho and gravity > 0):

@@ -110,7 +110,7 @@ class GasGrid:
         return y_face_void_fraction(void_fraction, self.distributor)
 
     def cell_volume(self, thickness: float) -> float:
-        """Volume of one cell of the pseudo-2D grid, dx*dy*thickness (SPEC section 1), m^3."""
+        """Volume of one cell of the pseudo-2D grid, dx*dy*thickness (``docs/definitions.md``, riser), m^3."""
         return self.dx * self.dy * thickness
 
 

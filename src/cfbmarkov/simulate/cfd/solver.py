@@ -1,4 +1,6 @@
-"""Locally volume-averaged incompressible gas on the staggered grid (SPEC section 1).
+"""Locally volume-averaged incompressible gas on the staggered grid.
+
+The model is that of ``docs/definitions.md`` (section riser).
 
 Equations (rho constant, eps the void fraction given each step from the particles)::
 
@@ -10,7 +12,7 @@ Equations (rho constant, eps the void fraction given each step from the particle
   ``-Vp grad p_total`` (``p_total = p - G y``, so this includes ``+Vp G`` upwards), and a
   drag consistent with Ergun's pressure drop is ``eps * beta`` with the Table 2 beta.
 * ``formulation="B"`` ("model B" / "set I"): ``w = 1``; ``f`` is the whole fluid force on
-  the particles, and the Table 2 beta as it stands (SPEC section 1) reproduces Ergun's
+  the particles, and the Table 2 beta as it stands (``docs/definitions.md``, riser) reproduces Ergun's
   pressure drop. See :mod:`cfbmarkov.simulate.cfd.drag` for why.
 
 ``f`` is the drag force per unit volume that the gas exerts on the particles (x on the
@@ -21,8 +23,10 @@ full pressure is ``p_total(x, y) = p(x, y) - G y`` with ``p`` periodic in y (zer
 ``div(eps mu grad u)``: the transpose and dilatation parts of ``div(eps tau)`` are dropped
 (they vanish for eps = const).
 
-Discretisation and step (all in one numba kernel, serial: 9 x 95 cells are too few for
-threads to pay):
+Discretisation and step (numba kernels, serial: 9 x 95 cells are too few for threads to
+pay; :func:`_step_kernel` here checks the input and forms the predictor of step 1 with the
+explicit terms of :mod:`.momentum`; :mod:`.pressure` does steps 2-4; :mod:`.state` holds
+:class:`GasState`):
 
 1. Predictor for the face mass fluxes ``m = eps_face u`` (eps_face the mean of the two
    cells beside the face; on a grid with a ``distributor`` the y-face at the floor takes
@@ -63,212 +67,60 @@ should pass ``drag_jacobian`` (see :func:`~cfbmarkov.simulate.cfd.coupling.depos
 
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass, field
-from typing import Any
-
 import numba as nb
 import numpy as np
 
 from cfbmarkov.errors import CfbmarkovError, InputError
-from cfbmarkov.simulate.cfd._banded import band_cholesky, band_solve2, cell_numbering
-from cfbmarkov.simulate.cfd.grid import GasGrid, y_face_void_fraction
+from cfbmarkov.simulate.cfd._banded import cell_numbering
+from cfbmarkov.simulate.cfd.grid import GasGrid
+from cfbmarkov.simulate.cfd.momentum import (  # noqa: F401  (momentum_tendency re-exported)
+    ADVECTIVE_COURANT,
+    SCHEMES,
+    _momentum_tendency,
+    _stability_limits_jit,
+    _y_face_void_fraction,
+    gas_stability_limit,
+    momentum_tendency,
+)
+from cfbmarkov.simulate.cfd.pressure import (
+    _BAD_FLUX,
+    _BAD_INPUT,
+    _BAD_VOID,
+    _I_BADCELL,
+    _I_DEFECT,
+    _I_DTADV,
+    _I_DTMAX,
+    _I_DTVIS,
+    _I_FLUXERR,
+    _I_G,
+    _I_PIVOT,
+    _I_REFACTORED,
+    _I_RES_ABS,
+    _I_RES_REL,
+    _I_UMAX,
+    _I_VMAX,
+    _INFO_SIZE,
+    _NOT_SPD,
+    _OK,
+    _RESIDUAL,
+    _UNSTABLE,
+    factorise_if_changed,
+    project,
+)
+from cfbmarkov.simulate.cfd.state import (  # noqa: F401  (re-exported)
+    GasState,
+    continuity_residual,
+    cross_section_flux,
+)
 
-#: Courant number of the advective limit (forward Euler with a van Leer-limited scheme)
-ADVECTIVE_COURANT = 0.5
-
-SCHEMES = {"upwind": 0, "vanleer": 1}
 FORMULATIONS = ("A", "B")
-
-_OK, _UNSTABLE, _BAD_VOID, _NOT_SPD, _RESIDUAL, _BAD_FLUX, _BAD_INPUT = range(7)
-# info slots
-(_I_G, _I_RES_REL, _I_RES_ABS, _I_DEFECT, _I_UMAX, _I_VMAX, _I_DTMAX, _I_DTADV, _I_DTVIS,
- _I_FLUXERR, _I_PIVOT, _I_REFACTORED, _I_BADCELL) = range(13)
-_INFO_SIZE = 13
 
 
 class PressureSolveError(CfbmarkovError):
     """The pressure equation could not be solved to its tolerance (or its matrix is not SPD)."""
 
 
-# --------------------------------------------------------------------------- stability
-
-def _stability_limits(dx, dy, nu, umax, vmax):
-    rate = umax / dx + vmax / dy
-    dt_adv = ADVECTIVE_COURANT / rate if rate > 0 else math.inf
-    dt_visc = 1.0 / (2.0 * nu * (1.0 / dx ** 2 + 1.0 / dy ** 2))
-    return 1.0 / (1.0 / dt_adv + 1.0 / dt_visc), dt_adv, dt_visc
-
-
-_stability_limits_jit = nb.njit(cache=True)(_stability_limits)
-
-
-def gas_stability_limit(grid: GasGrid, gas, max_velocity) -> float:
-    """Largest stable gas time step (s) of the explicit scheme.
-
-    ``max_velocity`` is either one speed (m/s, used for both directions) or a pair
-    ``(max |u|, max |v|)``. Advective limit ``dt_a = 0.5 / (|u|/dx + |v|/dy)`` (forward Euler
-    with a TVD scheme), viscous limit ``dt_v = 1 / (2 nu (1/dx^2 + 1/dy^2))``; both acting
-    together: ``dt_max = 1 / (1/dt_a + 1/dt_v)``. (The eps-weighted viscous term can be up to
-    eps_max/eps_min stiffer at a void-fraction jump; at the paper's scale dt_v ~ 1.7 s, far
-    from binding.)
-    """
-    try:
-        umax, vmax = (float(abs(max_velocity[0])), float(abs(max_velocity[1])))
-    except (TypeError, IndexError):
-        umax = vmax = float(abs(max_velocity))
-    nu = float(gas.viscosity) / float(gas.density)
-    return _stability_limits(grid.dx, grid.dy, nu, umax, vmax)[0]
-
-
-# --------------------------------------------------------------------------- kernels
-
-@nb.njit(cache=True, inline="always")
-def _limited(up, upup, down, scheme):
-    """Face value from the upwind cell: first-order upwind or van Leer (TVD)."""
-    if scheme == 0:
-        return up
-    a = up - upup
-    b = down - up
-    ab = a * b
-    if ab > 0.0:
-        return up + ab / (a + b)
-    return up
-
-
-@nb.njit(cache=True)
-def _y_face_void_fraction(eps, distributor, out):
-    """Void fraction on the y-faces into ``out``: the mean of the cells below and above
-    (across the periodic seam at j = 0), or with ``distributor`` the cell above at j = 0."""
-    nx, ny = eps.shape
-    for i in range(nx):
-        for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            out[i, j] = 0.5 * (eps[i, jm] + eps[i, j])
-        if distributor:
-            out[i, 0] = eps[i, 0]
-
-
-@nb.njit(cache=True)
-def _momentum_tendency(nx, ny, dx, dy, nu, scheme, u, v, eps, eps_y, tend_u, tend_v):
-    """tend = -div(eps u u) + nu div(eps grad u) on the faces (m/s^2; 0 on the wall faces).
-
-    ``eps_y`` is the void fraction on the y-faces (:func:`_y_face_void_fraction`).
-
-    Advection is flux form on the staggered control volumes: mass fluxes eps_face u
-    averaged to the control-volume faces, transported velocity from the upwind side
-    (first-order upwind or van Leer limited). Ghost values at the walls: u beyond a wall
-    is -u (no penetration), v is -v (no slip).
-    """
-    for i in range(nx + 1):
-        for j in range(ny):
-            tend_u[i, j] = 0.0
-    for i in range(nx):
-        for j in range(ny):
-            tend_v[i, j] = 0.0
-    # u-momentum, x-fluxes at cell centres c (between u-faces c and c+1)
-    for c in range(nx):
-        for j in range(ny):
-            mc0 = 0.0 if (c == 0) else 0.5 * (eps[c - 1, j] + eps[c, j]) * u[c, j]
-            mc1 = 0.0 if (c == nx - 1) else 0.5 * (eps[c, j] + eps[c + 1, j]) * u[c + 1, j]
-            F = 0.5 * (mc0 + mc1)
-            if F >= 0.0:
-                upv = u[c, j]
-                uu = u[c - 1, j] if c >= 1 else -u[1, j]
-                dn = u[c + 1, j]
-            else:
-                upv = u[c + 1, j]
-                uu = u[c + 2, j] if c + 2 <= nx else -u[nx - 1, j]
-                dn = u[c, j]
-            flux = F * _limited(upv, uu, dn, scheme) / dx
-            tend_u[c, j] -= flux
-            tend_u[c + 1, j] += flux
-    # u-momentum, y-fluxes at corners (x_i, y_j), interior i
-    for i in range(1, nx):
-        for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            jmm = jm - 1 if jm >= 1 else ny - 1
-            jp = j + 1 if j + 1 < ny else 0
-            mvl = eps_y[i - 1, j] * v[i - 1, j]
-            mvr = eps_y[i, j] * v[i, j]
-            F = 0.5 * (mvl + mvr)
-            if F >= 0.0:
-                face = _limited(u[i, jm], u[i, jmm], u[i, j], scheme)
-            else:
-                face = _limited(u[i, j], u[i, jp], u[i, jm], scheme)
-            flux = F * face / dy
-            tend_u[i, jm] -= flux
-            tend_u[i, j] += flux
-    # v-momentum, y-fluxes at cell centres (i, j) (between v-faces j and j+1)
-    for i in range(nx):
-        for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            jp = j + 1 if j + 1 < ny else 0
-            jpp = jp + 1 if jp + 1 < ny else 0
-            m0 = eps_y[i, j] * v[i, j]
-            m1 = eps_y[i, jp] * v[i, jp]
-            F = 0.5 * (m0 + m1)
-            if F >= 0.0:
-                face = _limited(v[i, j], v[i, jm], v[i, jp], scheme)
-            else:
-                face = _limited(v[i, jp], v[i, jpp], v[i, j], scheme)
-            flux = F * face / dy
-            tend_v[i, j] -= flux
-            tend_v[i, jp] += flux
-    # v-momentum, x-fluxes at corners (x_i, y_j), interior i (zero mass flux on the walls)
-    for i in range(1, nx):
-        for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            mub = 0.5 * (eps[i - 1, jm] + eps[i, jm]) * u[i, jm]
-            mut = 0.5 * (eps[i - 1, j] + eps[i, j]) * u[i, j]
-            F = 0.5 * (mub + mut)
-            if F >= 0.0:
-                uu = v[i - 2, j] if i >= 2 else -v[0, j]
-                face = _limited(v[i - 1, j], uu, v[i, j], scheme)
-            else:
-                uu = v[i + 1, j] if i + 1 < nx else -v[nx - 1, j]
-                face = _limited(v[i, j], uu, v[i - 1, j], scheme)
-            flux = F * face / dx
-            tend_v[i - 1, j] -= flux
-            tend_v[i, j] += flux
-    # viscous term nu div(eps grad u) (the usual CFD-DEM simplification of div(eps tau))
-    idx2 = 1.0 / (dx * dx)
-    idy2 = 1.0 / (dy * dy)
-    for i in range(1, nx):
-        for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            jp = j + 1 if j + 1 < ny else 0
-            # corner eps at (x_i, y_j) and (x_i, y_{j+1})
-            ec_s = 0.25 * (eps[i - 1, jm] + eps[i, jm] + eps[i - 1, j] + eps[i, j])
-            ec_n = 0.25 * (eps[i - 1, j] + eps[i, j] + eps[i - 1, jp] + eps[i, jp])
-            visc = ((eps[i, j] * (u[i + 1, j] - u[i, j])
-                     - eps[i - 1, j] * (u[i, j] - u[i - 1, j])) * idx2
-                    + (ec_n * (u[i, jp] - u[i, j]) - ec_s * (u[i, j] - u[i, jm])) * idy2)
-            tend_u[i, j] += nu * visc
-    for j in range(ny):
-        tend_u[0, j] = 0.0
-        tend_u[nx, j] = 0.0
-    for i in range(nx):
-        for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            jp = j + 1 if j + 1 < ny else 0
-            if i == 0:  # wall: ghost v = -v, corner eps from the wall cells
-                ec_w = 0.5 * (eps[0, jm] + eps[0, j])
-                vw = -v[0, j]
-            else:
-                ec_w = 0.25 * (eps[i - 1, jm] + eps[i, jm] + eps[i - 1, j] + eps[i, j])
-                vw = v[i - 1, j]
-            if i == nx - 1:
-                ec_e = 0.5 * (eps[nx - 1, jm] + eps[nx - 1, j])
-                ve = -v[nx - 1, j]
-            else:
-                ec_e = 0.25 * (eps[i, jm] + eps[i + 1, jm] + eps[i, j] + eps[i + 1, j])
-                ve = v[i + 1, j]
-            visc = ((ec_e * (ve - v[i, j]) - ec_w * (v[i, j] - vw)) * idx2
-                    + (eps[i, j] * (v[i, jp] - v[i, j])
-                       - eps[i, jm] * (v[i, j] - v[i, jm])) * idy2)
-            tend_v[i, j] += nu * visc
-
+# --------------------------------------------------------------------------- step kernel
 
 @nb.njit(cache=True)
 def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol, distributor,
@@ -314,8 +166,6 @@ def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol,
             for j in range(ny):
                 if not kv[i, j] >= 0.0:
                     return _BAD_INPUT
-    idx2 = 1.0 / (dx * dx)
-    idy2 = 1.0 / (dy * dy)
     # ---- 3. advection and viscous tendencies from the old velocities and void fraction
     _y_face_void_fraction(eps_old, distributor, ey_old)
     _y_face_void_fraction(eps_new, distributor, ey_new)
@@ -356,260 +206,13 @@ def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol,
             mv_s[i, j] = alpha * r
             cv[i, j] = alpha * w
     # ---- 5. (re)factorise the pressure matrix if its coefficients changed
-    same = factor_state[0] == 1
-    if same:
-        for i in range(nx + 1):
-            for j in range(ny):
-                if cu[i, j] != cu_fac[i, j]:
-                    same = False
-                    break
-            if not same:
-                break
-    if same:
-        for i in range(nx):
-            for j in range(ny):
-                if cv[i, j] != cv_fac[i, j]:
-                    same = False
-                    break
-            if not same:
-                break
-    info[_I_REFACTORED] = 0.0
-    if not same:
-        factor_state[0] = 0
-        n = nx * ny
-        b = band.shape[1] - 1
-        for k in range(n):
-            for o in range(b + 1):
-                band[k, o] = 0.0
-        # matrix of -div(c grad .) (SPD on the complement of the constants)
-        for i in range(nx):
-            for j in range(ny):
-                k = numbering[i, j]
-                jp = j + 1 if j + 1 < ny else 0
-                band[k, 0] += (cu[i, j] + cu[i + 1, j]) * idx2 + (cv[i, j] + cv[i, jp]) * idy2
-                if i + 1 < nx:
-                    k2 = numbering[i + 1, j]
-                    lo = k if k < k2 else k2
-                    band[lo, abs(k2 - k)] -= cu[i + 1, j] * idx2
-                k2 = numbering[i, jp]
-                lo = k if k < k2 else k2
-                band[lo, abs(k2 - k)] -= cv[i, jp] * idy2
-        # pin unknown 0 (cell (0, 0)): drop its couplings, keep its diagonal
-        for o in range(1, b + 1):
-            band[0, o] = 0.0
-        piv = band_cholesky(band, invdiag)
-        if piv >= 0:
-            info[_I_PIVOT] = piv
-            return _NOT_SPD
-        for i in range(nx + 1):
-            for j in range(ny):
-                cu_fac[i, j] = cu[i, j]
-        for i in range(nx):
-            for j in range(ny):
-                cv_fac[i, j] = cv[i, j]
-        factor_state[0] = 1
-        info[_I_REFACTORED] = 1.0
-    # ---- 6. right-hand sides: -L phi_a = -(div m* + deps/dt'), -L phi_b = -div(c y^)
-    inv_dt = 1.0 / dt
-    defect = 0.0
-    for i in range(nx):
-        for j in range(ny):
-            defect += eps_new[i, j] - eps_old[i, j]
-    defect *= inv_dt / (nx * ny)
-    suma = 0.0
-    sumb = 0.0
-    scale_div = 0.0
-    scale_et = 0.0
-    scale_c = 0.0
-    for i in range(nx):
-        for j in range(ny):
-            jp = j + 1 if j + 1 < ny else 0
-            k = numbering[i, j]
-            div = (mu_s[i + 1, j] - mu_s[i, j]) / dx + (mv_s[i, jp] - mv_s[i, j]) / dy
-            et = (eps_new[i, j] - eps_old[i, j]) * inv_dt - defect
-            dc = (cv[i, jp] - cv[i, j]) / dy
-            ra[k] = -(div + et)
-            rb[k] = -dc
-            suma += ra[k]
-            sumb += rb[k]
-            scale_div = max(scale_div, abs(div))
-            scale_et = max(scale_et, abs(et))
-            scale_c = max(scale_c, abs(dc))
-    n = nx * ny
-    suma /= n
-    sumb /= n
-    for k in range(n):
-        ra[k] -= suma
-        rb[k] -= sumb
-    ra[0] = 0.0
-    rb[0] = 0.0
-    band_solve2(band, invdiag, ra, rb)
-    # ---- 7. driving pressure gradient from the mean flux, then the corrected fluxes
-    qa = 0.0
-    qb = 0.0
-    for i in range(nx):
-        for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            ka = numbering[i, j]
-            km = numbering[i, jm]
-            qa += mv_s[i, j] - cv[i, j] * (ra[ka] - ra[km]) / dy
-            qb += cv[i, j] * (1.0 - (rb[ka] - rb[km]) / dy)
-    qa /= n
-    qb /= n
-    if not qb > 0.0:
-        return _BAD_FLUX
-    gp = (U - qa) / qb
-    info[_I_G] = gp * rho * inv_dt
-    # phi = phi_a + g' phi_b (into ra)
-    for k in range(n):
-        ra[k] += gp * rb[k]
-    # new mass fluxes into the output arrays (as m), then divide by eps_face
-    for j in range(ny):
-        u_out[0, j] = 0.0
-        u_out[nx, j] = 0.0
-    for i in range(1, nx):
-        for j in range(ny):
-            u_out[i, j] = mu_s[i, j] - cu[i, j] * (ra[numbering[i, j]] - ra[numbering[i - 1, j]]) / dx
-    flux = 0.0
-    for i in range(nx):
-        for j in range(ny):
-            jm = j - 1 if j >= 1 else ny - 1
-            m = mv_s[i, j] + cv[i, j] * (gp - (ra[numbering[i, j]] - ra[numbering[i, jm]]) / dy)
-            v_out[i, j] = m
-            flux += m
-    info[_I_FLUXERR] = flux / n - U
-    # ---- 8. continuity residual on every cell
-    res = 0.0
-    for i in range(nx):
-        for j in range(ny):
-            jp = j + 1 if j + 1 < ny else 0
-            r = ((u_out[i + 1, j] - u_out[i, j]) / dx + (v_out[i, jp] - v_out[i, j]) / dy
-                 + (eps_new[i, j] - eps_old[i, j]) * inv_dt - defect)
-            a = abs(r)
-            if a > res or a != a:
-                res = a
-    scale = scale_div + scale_et + abs(gp) * scale_c
-    floor = abs(U) / min(dx, dy)
-    if scale < floor:
-        scale = floor
-    info[_I_RES_ABS] = res
-    info[_I_RES_REL] = res / scale
-    info[_I_DEFECT] = defect
-    if not res <= rtol * scale:
-        return _RESIDUAL
-    # ---- 9. velocities and pressure (zero mean)
-    for i in range(1, nx):
-        for j in range(ny):
-            u_out[i, j] /= 0.5 * (eps_new[i - 1, j] + eps_new[i, j])
-    for i in range(nx):
-        for j in range(ny):
-            v_out[i, j] /= ey_new[i, j]
-    pmean = 0.0
-    for k in range(n):
-        pmean += ra[k]
-    pmean /= n
-    pf = rho * inv_dt
-    for i in range(nx):
-        for j in range(ny):
-            p_out[i, j] = (ra[numbering[i, j]] - pmean) * pf
-    return _OK
-
-
-# --------------------------------------------------------------------------- state
-
-@dataclass(eq=False)
-class GasState:
-    """The gas at one time (all arrays float64, indexed [i, j]; see :mod:`.grid`).
-
-    ``u`` (nx+1, ny) and ``v`` (nx, ny) are interstitial gas velocities (m/s) on the faces,
-    ``p`` (nx, ny) the periodic part of the pressure (Pa, zero mean; the full pressure is
-    ``p - G y``), ``void_fraction`` (nx, ny) the eps these velocities belong to,
-    ``driving_pressure_gradient`` G (Pa/m), ``distributor_pressure_drop`` the mean pressure
-    drop across a distributor (Pa; 0 without one), ``pressure_residual`` the relative continuity
-    residual of the last projection (-), ``continuity_defect`` the mean deps/dt removed
-    before it (1/s), ``time`` (s) and ``steps`` since the initial state.
-    """
-
-    u: np.ndarray
-    v: np.ndarray
-    p: np.ndarray
-    void_fraction: np.ndarray
-    driving_pressure_gradient: float = 0.0
-    pressure_residual: float = 0.0
-    continuity_defect: float = 0.0
-    time: float = 0.0
-    distributor_pressure_drop: float = 0.0
-    steps: int = 0
-    diagnostics: dict[str, float] = field(default_factory=dict, compare=False)
-
-    _ARRAYS = ("u", "v", "p", "void_fraction")
-    _SCALARS = ("driving_pressure_gradient", "pressure_residual", "continuity_defect", "time")
-
-    def state_dict(self) -> dict[str, Any]:
-        """Arrays (copied) and scalars for a checkpoint; :meth:`from_state_dict` restores it."""
-        d: dict[str, Any] = {k: np.array(getattr(self, k), dtype=np.float64, copy=True)
-                             for k in self._ARRAYS}
-        for k in self._SCALARS + ("distributor_pressure_drop",):
-            d[k] = float(getattr(self, k))
-        d["steps"] = int(self.steps)
-        return d
-
-    @classmethod
-    def from_state_dict(cls, d: dict[str, Any]) -> "GasState":
-        try:
-            arrays = {k: np.array(d[k], dtype=np.float64, copy=True, order="C") for k in cls._ARRAYS}
-            scalars = {k: float(d[k]) for k in cls._SCALARS}
-            # absent from checkpoints written before distributors existed
-            scalars["distributor_pressure_drop"] = float(d.get("distributor_pressure_drop", 0.0))
-            steps = int(d["steps"])
-        except KeyError as exc:
-            raise InputError(f"gas state checkpoint lacks '{exc.args[0]}'") from None
-        return cls(**arrays, **scalars, steps=steps)
-
-    def mean_gas_flux(self, grid: GasGrid | None = None) -> float:
-        """Domain mean of eps_face * v over all y-faces (m/s): U after every step. Pass the
-        solver's ``grid`` where it has a ``distributor`` (its face void fraction differs)."""
-        return float(np.mean(cross_section_flux(self, grid)))
-
-
-def cross_section_flux(state: GasState, grid: GasGrid | None = None) -> np.ndarray:
-    """Mean of eps_face * v over each row of y-faces (shape (ny,), m/s).
-
-    Row j lies at y = j dy. These differ from each other by the rate of change of the gas
-    volume between the rows; their mean is U. Pass the solver's ``grid`` where it has a
-    ``distributor`` (the face void fraction at j = 0 differs there).
-    """
-    faces = y_face_void_fraction(state.void_fraction, grid is not None and grid.distributor)
-    return np.mean(faces * state.v, axis=0)
-
-
-def continuity_residual(grid: GasGrid, old: GasState, new: GasState, time_step: float) -> np.ndarray:
-    """div(eps u) + deps/dt - continuity_defect per cell (1/s), recomputed with numpy."""
-    e0, e1 = old.void_fraction, new.void_fraction
-    eu = np.zeros(grid.u_shape)
-    eu[1:-1] = 0.5 * (e1[1:] + e1[:-1]) * new.u[1:-1]
-    ev = grid.y_face_void_fraction(e1) * new.v
-    div = (eu[1:] - eu[:-1]) / grid.dx + (np.roll(ev, -1, axis=1) - ev) / grid.dy
-    return div + (e1 - e0) / time_step - new.continuity_defect
-
-
-def momentum_tendency(grid: GasGrid, u, v, void_fraction, kinematic_viscosity: float,
-                      scheme: str = "vanleer") -> tuple[np.ndarray, np.ndarray]:
-    """The explicit part ``-div(eps u u) + nu div(eps grad u)`` of a step, on the faces (m/s^2).
-
-    This is what :meth:`GasSolver.step` adds, times dt, to eps u (before drag, gravity and
-    the pressure); exposed for verification and diagnostics.
-    """
-    if scheme not in SCHEMES:
-        raise InputError(f"advection scheme must be one of {tuple(SCHEMES)}, got {scheme!r}")
-    tu = np.zeros(grid.u_shape)
-    tv = np.zeros(grid.v_shape)
-    eps = np.ascontiguousarray(void_fraction, dtype=np.float64)
-    _momentum_tendency(grid.nx, grid.ny, grid.dx, grid.dy, float(kinematic_viscosity),
-                       SCHEMES[scheme], np.ascontiguousarray(u, dtype=np.float64),
-                       np.ascontiguousarray(v, dtype=np.float64), eps,
-                       grid.y_face_void_fraction(eps), tu, tv)
-    return tu, tv
+    code = factorise_if_changed(nx, ny, dx, dy, cu, cv, cu_fac, cv_fac, band, invdiag,
+                                numbering, factor_state, info)
+    if code != _OK:
+        return code
+    # ---- 6.-9. pressure, corrected fluxes, continuity check, velocities
+    return project(nx, ny, dx, dy, dt, rho, U, rtol, eps_old, eps_new, ey_new, mu_s, mv_s,
+                   cu, cv, band, invdiag, ra, rb, numbering, u_out, v_out, p_out, info)
 
 
 # --------------------------------------------------------------------------- solver
@@ -743,11 +346,32 @@ class GasSolver:
              drag_jacobian_u=None, drag_jacobian_v=None) -> GasState:
         """Advance ``state`` by one time step to the void fraction ``void_fraction``.
 
-        ``drag_force_u`` (nx+1, ny) and ``drag_force_v`` (nx, ny): the drag force per unit
-        volume exerted by the gas on the particles (N/m^3) on the x- and y-faces; the gas
-        feels its reaction. Optional ``drag_jacobian_u/v`` (same shapes, kg/(m^3 s), >= 0):
-        d f / d u_gas, for a semi-implicit drag (the drag the gas feels becomes
-        ``f + K (u^{n+1} - u^n)``). Returns a new :class:`GasState`.
+        Parameters
+        ----------
+        state : GasState
+            The gas now (not modified).
+        void_fraction : array_like (nx, ny)
+            eps after the step, in (0, 1].
+        drag_force_u, drag_force_v : array_like (nx+1, ny), (nx, ny)
+            Drag force per unit volume exerted by the gas on the particles, on the x- and
+            y-faces, N/m^3; the gas feels its reaction.
+        drag_jacobian_u, drag_jacobian_v : array_like, same shapes, optional
+            K = d f / d u_gas >= 0, kg/(m^3 s), for a semi-implicit drag (the drag the gas
+            feels becomes ``f + K (u^{n+1} - u^n)``). Both or neither.
+
+        Returns
+        -------
+        GasState
+            The gas after the step.
+
+        Raises
+        ------
+        InputError
+            Wrong shapes, a void fraction outside (0, 1], a negative or non-finite jacobian,
+            or a time step above the stability limit (:func:`gas_stability_limit`).
+        PressureSolveError
+            The pressure equation could not be solved to ``residual_tolerance`` (or its
+            matrix is not positive definite, or the state's velocity is not finite).
         """
         g = self.grid
         eps_new = self._field(void_fraction, g.cell_shape, "void fraction")

@@ -1,5 +1,6 @@
 """2D DEM engine (discs with sphere mass, linear spring-dashpot contacts with tangential
-history, walls at x = 0 and W, periodic in y); see :mod:`.system` and :mod:`.kernels`."""
+history, walls at x = 0 and W, periodic in y); see :mod:`.system` (kernels in
+:mod:`.contact`, :mod:`.neighbours`, :mod:`.integrate`; data layout in :mod:`.layout`)."""
 
 from cfbmarkov.simulate.dem.law import ContactLaw, damping_ratio
 from cfbmarkov.simulate.dem.system import ContactTimes, DEMSystem, SimulationBlowUp

@@ -1,4 +1,5 @@
-"""The linear spring-dashpot contact law with tangential history (paper Table 2, SPEC §1)."""
+"""The linear spring-dashpot contact law with tangential history (paper Table 2;
+``docs/definitions.md``, section riser); the numba form is :func:`.contact.contact_force`."""
 
 from __future__ import annotations
 

@@ -1,4 +1,6 @@
-"""DEMSystem: the orchestration object of the 2D DEM engine (kernels in :mod:`.kernels`).
+"""DEMSystem: the orchestration object of the 2D DEM engine. Kernels: :mod:`.contact` (law,
+pair forces), :mod:`.neighbours` (cell sort, lists), :mod:`.integrate` (step, advance loop);
+their arrays: :mod:`.layout`.
 
 Geometry: discs in the plane, x across between contact walls at x = 0 and x = W, y up and
 periodic with period H (positions kept in [0, H), minimal image for contacts). With
@@ -36,7 +38,9 @@ import numba
 import numpy as np
 
 from cfbmarkov.errors import CfbmarkovError, InputError
-from cfbmarkov.simulate.dem import kernels as K
+from cfbmarkov.simulate.dem import integrate
+from cfbmarkov.simulate.dem import layout as L
+from cfbmarkov.simulate.dem.layout import DEMParams, empty_list
 from cfbmarkov.simulate.dem.law import ContactLaw
 
 STATE_VERSION = 1
@@ -61,10 +65,10 @@ class ContactTimes(NamedTuple):
     particle_wall: float
 
 
-_REASONS = {K.BAD_NAN: "has a non-finite position or velocity",
-            K.BAD_WALL: "is outside a wall by more than its radius",
-            K.BAD_OVERLAP: f"overlaps a neighbour or wall by more than {MAX_OVERLAP:.0%} of d",
-            K.BAD_RANGE: "moved by more than the period in one step"}
+_REASONS = {L.BAD_NAN: "has a non-finite position or velocity",
+            L.BAD_WALL: "is outside a wall by more than its radius",
+            L.BAD_OVERLAP: f"overlaps a neighbour or wall by more than {MAX_OVERLAP:.0%} of d",
+            L.BAD_RANGE: "moved by more than the period in one step"}
 
 
 def _as_per_particle(value, n, name):
@@ -185,7 +189,7 @@ class DEMSystem:
         st = np.zeros((2, n, 8))
         st[0, :, 0:2] = pos
         st[0, :, 2:4] = vel
-        st[0, :, 4] = rad * om  # surface speed R*omega (see kernels)
+        st[0, :, 4] = rad * om  # surface speed R*omega (see .layout)
         st[0, :, 5] = rad
         st[0, :, 6] = 1.0 / mass
         st[0, :, 7] = rad / inertia
@@ -196,46 +200,30 @@ class DEMSystem:
         ids[0] = np.arange(n)
         lp = np.zeros((2, n), np.int64)
         lp[0] = laps
-        ctl = np.zeros(K.N_C, np.int64)
-        ctl[K.C_REBUILD] = 1
+        ctl = np.zeros(L.N_C, np.int64)
+        ctl[L.C_REBUILD] = 1
         self._arrays = dict(st=st, aux=aux, wh=np.zeros((2, n, 3)), ids=ids, laps=lp, ctl=ctl)
-        self._lists = [K.empty_list(n, 4), K.empty_list(n, 4)]
-        self._pf = np.zeros((self._lists[0][4].shape[0], 3))
+        self._lists = [empty_list(n, 4), empty_list(n, 4)]
+        self._pf = np.zeros((self._lists[0].pi.shape[0], 3))
         self._t0 = float(time)
         self.serial_below = SERIAL_BELOW
-        self._P, self._IP = self._parameters()
+        self._prm = self._parameters()
         self._alloc_scratch(capacity=max(4 * n, 4096))
 
     # ------------------------------------------------------------------ set-up helpers
-    def _parameters(self):
+    def _parameters(self) -> DEMParams:
         law = self._law
-        P = np.zeros(K.N_P)
-        P[K.P_DT] = self._dt
-        P[K.P_W] = self._width
-        P[K.P_H] = self._height
-        P[K.P_G] = self._gravity
-        P[K.P_KN] = law.kn
-        P[K.P_KT] = law.kt
-        P[K.P_MU] = law.mu
         m = self._min_mass  # all particles share it when mono
-        P[K.P_ETAN_PP] = law.normal_damping(0.5 * m)
-        P[K.P_ETAT_PP] = law.tangential_damping(0.5 * m)
-        P[K.P_ETAN_PW] = law.normal_damping(m)
-        P[K.P_ETAT_PW] = law.tangential_damping(m)
-        P[K.P_CN] = law.normal_damping_factor
-        P[K.P_CT] = law.tangential_damping_factor
-        P[K.P_SKIN] = self._skin
-        P[K.P_CW] = self._width / self._cells[0]
-        P[K.P_CH] = self._height / self._cells[1]
-        P[K.P_RMAX] = float(self._arrays["st"][0, :, 5].max())
-        P[K.P_OVL] = MAX_OVERLAP
-        P[K.P_T0] = self._t0
-        IP = np.zeros(K.N_I, np.int64)
-        IP[K.I_NCX], IP[K.I_NCY] = self._cells
-        IP[K.I_PERIODIC] = 0 if self._bottom_wall else 1
-        IP[K.I_FLOOR] = 1 if self._bottom_wall else 0
-        IP[K.I_MONO] = 1 if self._mono else 0
-        return P, IP
+        return DEMParams(
+            dt=self._dt, width=self._width, height=self._height, gravity=self._gravity,
+            kn=float(law.kn), kt=float(law.kt), inv_kt=1.0 / float(law.kt), mu=float(law.mu),
+            etan_pp=law.normal_damping(0.5 * m), etat_pp=law.tangential_damping(0.5 * m),
+            etan_pw=law.normal_damping(m), etat_pw=law.tangential_damping(m),
+            cn=law.normal_damping_factor, ct=law.tangential_damping_factor, skin=self._skin,
+            cell_w=self._width / self._cells[0], cell_h=self._height / self._cells[1],
+            rmax=float(self._arrays["st"][0, :, 5].max()), max_overlap=MAX_OVERLAP,
+            t0=self._t0, ncx=int(self._cells[0]), ncy=int(self._cells[1]),
+            periodic=not self._bottom_wall, floor=self._bottom_wall, mono=self._mono)
 
     def _alloc_scratch(self, capacity):
         n = self._n
@@ -302,7 +290,7 @@ class DEMSystem:
 
     @property
     def steps_done(self) -> int:
-        return int(self._arrays["ctl"][K.C_STEP])
+        return int(self._arrays["ctl"][L.C_STEP])
 
     @property
     def time(self) -> float:
@@ -311,12 +299,12 @@ class DEMSystem:
     @property
     def n_rebuilds(self) -> int:
         """Neighbour-list builds so far (each also re-sorts the particles)."""
-        return int(self._arrays["ctl"][K.C_NREBUILD])
+        return int(self._arrays["ctl"][L.C_NREBUILD])
 
     def _cur(self):
         a = self._arrays
         ctl = a["ctl"]
-        return a["st"][ctl[K.C_ST]], a["ids"][ctl[K.C_PA]], ctl[K.C_PA]
+        return a["st"][ctl[L.C_ST]], a["ids"][ctl[L.C_PA]], ctl[L.C_PA]
 
     def _to_caller(self, values):
         st, ids, _ = self._cur()
@@ -355,7 +343,7 @@ class DEMSystem:
     @property
     def laps(self) -> np.ndarray:
         a = self._arrays
-        return self._to_caller(a["laps"][a["ctl"][K.C_PA]])
+        return self._to_caller(a["laps"][a["ctl"][L.C_PA]])
 
     @property
     def order(self) -> np.ndarray:
@@ -391,22 +379,36 @@ class DEMSystem:
 
     # ------------------------------------------------------------------ running
     def step(self, n_steps: int = 1, external_force=None) -> None:
-        """Advance ``n_steps`` DEM steps. ``external_force`` (N, 2), N, caller's order, is added
-        to every particle's force during these steps (e.g. drag and pressure gradient)."""
+        """Advance ``n_steps`` DEM steps.
+
+        Parameters
+        ----------
+        n_steps : int
+            Steps to do (>= 0).
+        external_force : array_like (N, 2), optional
+            Force on each particle (caller's order), N, added during these steps (e.g. drag).
+
+        Raises
+        ------
+        InputError
+            Negative ``n_steps`` or a wrong ``external_force`` shape.
+        SimulationBlowUp
+            A particle became unphysical; the state is that after the bad step.
+        """
         n_steps = int(n_steps)
         if n_steps < 0:
             raise InputError(f"n_steps must be >= 0, got {n_steps}")
         a = self._arrays
         ctl = a["ctl"]
-        aux_cur = a["aux"][ctl[K.C_PA]]
+        aux_cur = a["aux"][ctl[L.C_PA]]
         if external_force is not None:
             ext = np.ascontiguousarray(external_force, dtype=np.float64)
             if ext.shape != (self._n, 2):
                 raise InputError(f"external_force: expected shape {(self._n, 2)}, got {ext.shape}")
-            K.scatter_external(ext, a["ids"][ctl[K.C_PA]], aux_cur)
+            integrate.scatter_external(ext, a["ids"][ctl[L.C_PA]], aux_cur)
             self._ext_set = True
         elif self._ext_set:
-            K.clear_external(aux_cur)
+            integrate.clear_external(aux_cur)
             self._ext_set = False
         threads = numba.get_num_threads()
         if self._n < self.serial_below and threads > 1:
@@ -423,26 +425,26 @@ class DEMSystem:
         left = n_steps
         sc = self._scratch
         while left > 0:
-            done, status, info = K.advance(
+            done, status, info = integrate.advance(
                 a["st"], a["aux"], a["wh"], a["ids"], a["laps"], self._lists[0], self._lists[1],
                 self._pf, ctl, sc["evf"], sc["bad"], sc["key"], sc["cstart"], sc["cfill"],
-                sc["perm"], sc["invperm"], self._P, self._IP, left, *self._ev,
+                sc["perm"], sc["invperm"], self._prm, left, *self._ev,
                 self._wall_impulse)
             left -= done
-            if status == K.ST_OK:
+            if status == L.ST_OK:
                 continue
-            if status == K.ST_STRIDE:
-                new = 1 if ctl[K.C_LIST] == 0 else 0
-                self._lists[new] = K.empty_list(self._n, int(info) + 2)
-                cap = max(lst[4].shape[0] for lst in self._lists)
+            if status == L.ST_STRIDE:
+                new = 1 if ctl[L.C_LIST] == 0 else 0
+                self._lists[new] = empty_list(self._n, int(info) + 2)
+                cap = max(lst.pi.shape[0] for lst in self._lists)
                 if self._pf.shape[0] < cap:
                     self._pf = np.zeros((cap, 3))
-            elif status == K.ST_EVENTS:
-                n_ev = int(ctl[K.C_NEV])
+            elif status == L.ST_EVENTS:
+                n_ev = int(ctl[L.C_NEV])
                 cap = max(2 * self._ev[0].shape[0], n_ev + 4 * self._n)
                 self._ev = tuple(np.concatenate([e[:n_ev], np.zeros(cap - n_ev, e.dtype)])
                                  for e in self._ev)
-            elif status == K.ST_BLOWUP:
+            elif status == L.ST_BLOWUP:
                 self._raise_blowup()
 
     def _raise_blowup(self):
@@ -474,9 +476,9 @@ class DEMSystem:
         """(time, particle, direction) of the boundary passes since the last drain, sorted by
         time (stable); direction +1 up through the top, -1 down through the bottom."""
         ctl = self._arrays["ctl"]
-        n = int(ctl[K.C_NEV])
+        n = int(ctl[L.C_NEV])
         t, p, d = (e[:n].copy() for e in self._ev)
-        ctl[K.C_NEV] = 0
+        ctl[L.C_NEV] = 0
         o = np.argsort(t, kind="stable")
         return t[o], p[o], d[o]
 
@@ -488,12 +490,12 @@ class DEMSystem:
         ``internal_*`` arrays are in the engine's cell order."""
         a = self._arrays
         ctl = a["ctl"]
-        cs, cp, cl = ctl[K.C_ST], ctl[K.C_PA], ctl[K.C_LIST]
+        cs, cp, cl = ctl[L.C_ST], ctl[L.C_PA], ctl[L.C_LIST]
         nnb, nown, nbr, pstart, pi, pj, hist, lowstart, lowpid = self._lists[cl]
         stride = nbr.shape[0] // self._n
         npairs = int(pstart[-1])
         law = self._law
-        n_ev = int(ctl[K.C_NEV])
+        n_ev = int(ctl[L.C_NEV])
         return {
             "version": np.asarray(STATE_VERSION),
             "positions": self.positions, "velocities": self.velocities,
@@ -553,9 +555,9 @@ class DEMSystem:
             self._t0 = float(np.asarray(state["start_time"]))
             self.serial_below = SERIAL_BELOW
             ctl = np.asarray(state["internal_control"], np.int64).copy()
-            ctl[K.C_ST] = 0
-            ctl[K.C_PA] = 0
-            ctl[K.C_LIST] = 0
+            ctl[L.C_ST] = 0
+            ctl[L.C_PA] = 0
+            ctl[L.C_LIST] = 0
             sta = np.zeros((2, n, 8))
             sta[0] = st
             sta[1] = st
@@ -570,27 +572,27 @@ class DEMSystem:
             self._arrays = dict(st=sta, aux=aux, wh=wh, ids=ids, laps=lp, ctl=ctl)
             nbr = np.ascontiguousarray(state["internal_neighbours"], np.int32)
             stride = nbr.shape[1]
-            lst = K.empty_list(n, stride)
+            lst = empty_list(n, stride)
             npairs = int(np.asarray(state["internal_pair_start"])[-1])
-            lst[0][:] = state["internal_neighbour_count"]
-            lst[1][:] = state["internal_neighbour_count_own"]
-            lst[2][:] = nbr.reshape(-1)
-            lst[3][:] = state["internal_pair_start"]
-            lst[4][:npairs] = state["internal_pair_first"]
-            lst[5][:npairs] = state["internal_pair_second"]
-            lst[6][:npairs] = state["internal_springs"]
-            lst[7][:] = state["internal_second_start"]
-            lst[8][:npairs] = state["internal_second_pairs"]
-            self._lists = [lst, K.empty_list(n, stride)]
-            self._pf = np.zeros((lst[4].shape[0], 3))
-            self._P, self._IP = self._parameters()
+            lst.nnb[:] = state["internal_neighbour_count"]
+            lst.nown[:] = state["internal_neighbour_count_own"]
+            lst.nbr[:] = nbr.reshape(-1)
+            lst.pstart[:] = state["internal_pair_start"]
+            lst.pi[:npairs] = state["internal_pair_first"]
+            lst.pj[:npairs] = state["internal_pair_second"]
+            lst.springs[:npairs] = state["internal_springs"]
+            lst.lowstart[:] = state["internal_second_start"]
+            lst.lowpid[:npairs] = state["internal_second_pairs"]
+            self._lists = [lst, empty_list(n, stride)]
+            self._pf = np.zeros((lst.pi.shape[0], 3))
+            self._prm = self._parameters()
             ev_t = np.asarray(state["pending_event_time"], np.float64)
             self._alloc_scratch(capacity=max(4 * n, 4096, 2 * ev_t.shape[0]))
             k = ev_t.shape[0]
             self._ev[0][:k] = ev_t
             self._ev[1][:k] = np.asarray(state["pending_event_particle"], np.int64)
             self._ev[2][:k] = np.asarray(state["pending_event_direction"], np.int8)
-            ctl[K.C_NEV] = k
+            ctl[L.C_NEV] = k
         except KeyError as exc:
             raise InputError(f"DEM state: missing entry {exc.args[0]!r}") from None
         return self

@@ -1,0 +1,294 @@
+"""The contact law of the 2D DEM engine and the pair-force kernel (numba).
+
+One function, :func:`contact_force`, holds the law; it is inlined (``inline="always"``)
+into both the pair loop (:func:`pair_forces`) and the wall loop
+(:func:`cfbmarkov.simulate.dem.integrate.fused_step`). A wall contact is the contact with a
+mirror particle of infinite mass at rest, without spin: the normal points from the particle
+into the wall, the relative velocity is the particle's own contact-point velocity, and the
+damping uses ``m_ab = m``.
+
+The law is the linear spring-dashpot with tangential history of the paper's Table 2
+(:class:`cfbmarkov.simulate.dem.law.ContactLaw`; ``docs/definitions.md``, section riser),
+with the Coulomb cap of LAMMPS ``pair_style gran/hooke/history``.
+
+Pair forces: a step computes every pair force once (:func:`pair_forces`, into ``pf``);
+each particle then sums its pairs' forces in a fixed order inside the fused integration, so
+the two members of a pair get exactly opposite forces (one spring per contact, so there are
+no two copies to keep consistent).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+from numba.core import types
+from numba.extending import overload
+
+from cfbmarkov.simulate.dem.layout import BAD_OVERLAP
+
+#: fast-math flags of the force kernels: no nnan/ninf (the NaN checks must work) and no
+#: reassoc (results must not depend on how the compiler groups a sum)
+FASTMATH = {"contract", "arcp", "afn"}
+
+
+# -- the tangential algebra, for a 1D tangent (floats: a wall, whose tangent is a fixed
+# coordinate axis) and a 2D one (2-tuples (x, y): a pair, whose tangent turns). Numba picks
+# the form from the argument types when it compiles the law; both are inlined.
+
+def _advance_spring(h, vt, n, dt):
+    """The spring after the step, ``h + vt*dt``, on the current tangent (normal ``n``)."""
+
+
+@overload(_advance_spring, inline="always")
+def _advance_spring_impl(h, vt, n, dt):
+    if isinstance(h, types.Float):
+        return lambda h, vt, n, dt: h + vt * dt
+
+    def impl(h, vt, n, dt):
+        hx = h[0] + vt[0] * dt
+        hy = h[1] + vt[1] * dt
+        hn = hx * n[0] + hy * n[1]
+        return hx - hn * n[0], hy - hn * n[1]
+    return impl
+
+
+def _spring_dashpot(h, vt, kt, etat):
+    """Tangential force ``-kt*h - etat*vt``."""
+
+
+@overload(_spring_dashpot, inline="always")
+def _spring_dashpot_impl(h, vt, kt, etat):
+    if isinstance(h, types.Float):
+        return lambda h, vt, kt, etat: -kt * h - etat * vt
+    return lambda h, vt, kt, etat: (-kt * h[0] - etat * vt[0], -kt * h[1] - etat * vt[1])
+
+
+def _square(f):
+    """``|f|^2``."""
+
+
+@overload(_square, inline="always")
+def _square_impl(f):
+    if isinstance(f, types.Float):
+        return lambda f: f * f
+    return lambda f: f[0] * f[0] + f[1] * f[1]
+
+
+def _cap(f, f2, fc):
+    """``f`` scaled to magnitude ``fc`` (``f2 = |f|^2 > fc^2``)."""
+
+
+@overload(_cap, inline="always")
+def _cap_impl(f, f2, fc):
+    if isinstance(f, types.Float):  # exactly +-fc (f != 0 here)
+        return lambda f, f2, fc: math.copysign(fc, f)
+
+    def impl(f, f2, fc):
+        sc = fc / math.sqrt(f2)
+        return f[0] * sc, f[1] * sc
+    return impl
+
+
+def _spring_of(ft, vt, etat, inv_kt):
+    """The spring that gives the force ``ft``: ``-(ft + etat*vt)/kt``."""
+
+
+@overload(_spring_of, inline="always")
+def _spring_of_impl(ft, vt, etat, inv_kt):
+    if isinstance(ft, types.Float):
+        return lambda ft, vt, etat, inv_kt: -(ft + etat * vt) * inv_kt
+    return lambda ft, vt, etat, inv_kt: (-(ft[0] + etat * vt[0]) * inv_kt,
+                                         -(ft[1] + etat * vt[1]) * inv_kt)
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def contact_force(delta, vn, n, vt, h, kn, kt, inv_kt, etan, etat, mu, dt):
+    """Force of one contact: linear spring-dashpot, tangential spring, Coulomb cap.
+
+    Normal force ``Fn = max(kn*delta + eta_n*v_n, 0)`` (repulsive, no tension). Tangential
+    spring ``h <- h + v_t*dt``, projected on the current tangent (a pair's contact turns);
+    trial force ``Ft = -kt*h - eta_t*v_t``; if ``|Ft| > mu*Fn`` it is scaled to ``mu*Fn``
+    and the spring reset to ``-(Ft + eta_t*v_t)/kt``, the spring that gives the capped force.
+
+    The tangential quantities ``vt``, ``h`` (and the returned ``ft``, ``h``) are 2-tuples
+    (x, y) for a pair, or floats for a wall (the component along the wall, whose tangent
+    does not turn: no projection, and the cap sets exactly ``+-mu*Fn``, which the scaling
+    ``Ft*mu*Fn/|Ft|`` equals only up to round-off).
+
+    Parameters
+    ----------
+    delta : float
+        Overlap, m (> 0 in contact).
+    vn : float
+        Approach speed: the relative velocity of the contact point along the normal, m/s.
+    n : (float, float) or None
+        Unit normal from the particle to its partner, -; unused (None) for a wall.
+    vt : (float, float) or float
+        Tangential relative velocity of the contact point (normal part removed), m/s.
+    h : (float, float) or float
+        Tangential spring before the step, m.
+    kn, kt : float
+        Normal and tangential stiffness, N/m.
+    inv_kt : float
+        1/kt, m/N.
+    etan, etat : float
+        Normal and tangential damping coefficients eta_n, eta_t of this contact, kg/s.
+    mu : float
+        Friction coefficient, -.
+    dt : float
+        Time step, s.
+
+    Returns
+    -------
+    fn : float
+        Normal force magnitude, N (>= 0); the force on the particle is ``-fn*n``.
+    ft : (float, float) or float
+        Tangential force on the particle, N.
+    h : (float, float) or float
+        Tangential spring after the step, m.
+
+    References
+    ----------
+    Table 2 of the paper (contact law and its values); ``docs/definitions.md`` (riser).
+    Damping ``eta_n = 2 sqrt(m_ab kn)|ln en|/sqrt(pi^2 + ln^2 en)``, ``eta_t`` the same with
+    ``2/7 m_ab``, ``kt``, ``et`` (:class:`~cfbmarkov.simulate.dem.law.ContactLaw`).
+    Coulomb cap and spring rescaling as in LAMMPS ``pair_style gran/hooke/history``
+    (Silbert et al., Phys. Rev. E 64 (2001) 051302; LAMMPS documentation).
+    """
+    fn = kn * delta + etan * vn
+    if fn < 0.0:
+        fn = 0.0
+    h = _advance_spring(h, vt, n, dt)
+    ft = _spring_dashpot(h, vt, kt, etat)
+    ft2 = _square(ft)
+    fc = mu * fn
+    if ft2 > fc * fc:
+        ft = _cap(ft, ft2, fc)
+        h = _spring_of(ft, vt, etat, inv_kt)
+    return fn, ft, h
+
+
+@njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
+def pair_forces(st, npairs, pi, pj, springs, pf, prm):
+    """Force of every listed pair (i < j), computed once.
+
+    Branch-free apart from the contact test (contact or not, capped or not are selects),
+    so the loop can use SIMD.
+
+    Parameters
+    ----------
+    st : float64 (N, 8)
+        Particle records (see :mod:`.layout`).
+    npairs : int
+        Number of pairs in the list.
+    pi, pj : int32 (>= npairs,)
+        First and second member of each pair.
+    springs : float64 (>= npairs, 2)
+        Tangential springs (m), updated in place (cleared for pairs not in contact).
+    pf : float64 (>= npairs, 3)
+        Output: ``pf[p] = (fx, fy, c)`` with (fx, fy) the force on i (N; j gets the
+        opposite) and ``c = n x Ft`` (N), so that the torque on either particle is its
+        radius times c.
+    prm : DEMParams
+
+    Returns
+    -------
+    int
+        Number of pairs overlapping by more than ``max_overlap*(R_i + R_j)`` (blow-up).
+    """
+    dt = prm.dt
+    H = prm.height
+    halfH = 0.5 * H
+    kn = prm.kn
+    kt = prm.kt
+    inv_kt = prm.inv_kt
+    mu = prm.mu
+    etan_pp = prm.etan_pp
+    etat_pp = prm.etat_pp
+    cn = prm.cn
+    ct = prm.ct
+    ovl = prm.max_overlap
+    periodic = prm.periodic
+    mono = prm.mono
+    nbad = 0
+    for p in prange(npairs):
+        i = pi[p]
+        j = pj[p]
+        dx = st[j, 0] - st[i, 0]
+        dy = st[j, 1] - st[i, 1]
+        if periodic:
+            if dy > halfH:
+                dy -= H
+            elif dy < -halfH:
+                dy += H
+        rs = st[i, 5] + st[j, 5]
+        r2 = dx * dx + dy * dy
+        if r2 >= rs * rs:
+            if springs[p, 0] != 0.0 or springs[p, 1] != 0.0:
+                springs[p, 0] = 0.0
+                springs[p, 1] = 0.0
+            pf[p, 0] = 0.0
+            pf[p, 1] = 0.0
+            pf[p, 2] = 0.0
+            continue
+        r = math.sqrt(r2)
+        inv_r = 1.0 / r
+        nx = dx * inv_r
+        ny = dy * inv_r
+        delta = rs - r
+        if delta > ovl * rs:
+            nbad += 1
+        wsum = st[i, 4] + st[j, 4]
+        vrx = (st[i, 2] - st[j, 2]) - wsum * ny
+        vry = (st[i, 3] - st[j, 3]) + wsum * nx
+        vn = vrx * nx + vry * ny
+        vtx = vrx - vn * nx
+        vty = vry - vn * ny
+        if mono:
+            etan = etan_pp
+            etat = etat_pp
+        else:
+            sm = 1.0 / math.sqrt(st[i, 6] + st[j, 6])
+            etan = cn * sm
+            etat = ct * sm
+        fn, (ftx, fty), (hx, hy) = contact_force(delta, vn, (nx, ny), (vtx, vty),
+                                                 (springs[p, 0], springs[p, 1]), kn, kt, inv_kt,
+                                                 etan, etat, mu, dt)
+        springs[p, 0] = hx
+        springs[p, 1] = hy
+        pf[p, 0] = ftx - fn * nx
+        pf[p, 1] = fty - fn * ny
+        pf[p, 2] = nx * fty - ny * ftx
+    return nbad
+
+
+@njit(cache=True)
+def flag_overlaps(st, npairs, pi, pj, bad, prm):
+    """Mark the particles of pairs overlapping beyond the blow-up limit (after a bad step).
+
+    Parameters
+    ----------
+    st : float64 (N, 8)
+        Particle records.
+    npairs : int
+        Number of pairs.
+    pi, pj : int32 (>= npairs,)
+        Pair members.
+    bad : int8 (N,)
+        Set to ``BAD_OVERLAP`` for both members of such a pair.
+    prm : DEMParams
+    """
+    H = prm.height
+    for p in range(npairs):
+        i = pi[p]
+        j = pj[p]
+        dx = st[j, 0] - st[i, 0]
+        dy = st[j, 1] - st[i, 1]
+        if prm.periodic:
+            dy -= H * np.round(dy / H)
+        rs = st[i, 5] + st[j, 5]
+        if rs - math.sqrt(dx * dx + dy * dy) > prm.max_overlap * rs:
+            bad[i] = BAD_OVERLAP
+            bad[j] = BAD_OVERLAP

@@ -1,0 +1,344 @@
+"""Time integration of the 2D DEM engine: the fused step and the advance loop (numba).
+
+Per step: 2 parallel loops, :func:`.contact.pair_forces` (every pair force once, into
+``pf``) and :func:`fused_step` (each particle sums its pairs' forces, adds its wall
+contacts, the external force and gravity, integrates and checks itself); a list rebuild
+(:func:`.neighbours.rebuild`) before a step whose particles may have left their lists.
+
+Determinism: each particle sums its pairs in a fixed order (pairs where it is the second
+member, then those where it is the first), with no atomics and no shared accumulators, so
+the results do not depend on the thread count. (The wall-force diagnostics are the only
+sums in any order.)
+
+Integrator: leapfrog (symplectic Euler on staggered velocities). Velocities are the
+half-step values v(t - dt/2); a step is ``v += dt F(x, v)/m``, ``x += dt v``. This produces
+exactly the position and half-step-velocity sequence of LAMMPS's velocity Verlet (which
+also evaluates the dashpot with v(t - dt/2)), with force evaluation and integration fused
+in one pass.
+"""
+
+from __future__ import annotations
+
+import math
+
+from numba import njit, prange
+
+from cfbmarkov.simulate.dem.contact import FASTMATH, contact_force, flag_overlaps, pair_forces
+from cfbmarkov.simulate.dem.layout import (BAD_NAN, BAD_OVERLAP, BAD_RANGE, BAD_WALL, C_LIST,
+                                           C_NEV, C_PA, C_REBUILD, C_ST, C_STEP, ST_BLOWUP,
+                                           ST_EVENTS, ST_OK, ST_STRIDE)
+from cfbmarkov.simulate.dem.neighbours import rebuild
+
+
+@njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
+def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, prm):
+    """Sum the forces on each particle, add walls, external force and gravity, integrate.
+
+    The pair forces ``pf`` are summed in a fixed order (pairs where the particle comes
+    second, then pairs where it comes first). The wall contacts use
+    :func:`.contact.contact_force` with the wall as a mirror particle of infinite mass.
+
+    Parameters
+    ----------
+    st : float64 (N, 8)
+        Particle records at the start of the step (read).
+    so : float64 (N, 8)
+        Particle records after the step (written).
+    aux : float64 (N, 4)
+        Reference positions (m) and external force (N) of each particle.
+    wh : float64 (N, 3)
+        Wall tangential springs (left, right, floor), m; updated.
+    laps : int64 (N,)
+        Passes through the top (+1) / bottom (-1); updated.
+    pstart, lowstart, lowpid : int64 arrays
+        Pair-list index arrays (see :class:`.layout.PairList`).
+    pf : float64 (npairs, 3)
+        Pair forces from :func:`.contact.pair_forces`.
+    evf : int8 (N,)
+        Set to +1/-1 for a particle that passed the top/bottom in this step.
+    bad : int8 (N,)
+        Set to a ``BAD_*`` reason for a particle that became unphysical.
+    prm : DEMParams
+
+    Returns
+    -------
+    nmove : int
+        Particles moved beyond skin/2 since the last list build.
+    nev : int
+        Boundary passes.
+    nbad : int
+        Bad particles.
+    wall_fy, floor_fy : float
+        Vertical force of the side walls and of the floor on the particles, N
+        (diagnostics, summed in any order).
+    """
+    N = st.shape[0]
+    dt = prm.dt
+    W = prm.width
+    H = prm.height
+    halfH = 0.5 * H
+    g = prm.gravity
+    kn = prm.kn
+    kt = prm.kt
+    inv_kt = prm.inv_kt
+    mu = prm.mu
+    etan_pw = prm.etan_pw
+    etat_pw = prm.etat_pw
+    cn = prm.cn
+    ct = prm.ct
+    skin = prm.skin
+    hs = 0.5 * skin
+    hs2 = hs * hs
+    ovl = prm.max_overlap
+    periodic = prm.periodic
+    floor = prm.floor
+    mono = prm.mono
+    nmove = 0
+    nev = 0
+    nbad = 0
+    wall_fy = 0.0
+    floor_fy = 0.0
+    for i in prange(N):
+        xi = st[i, 0]
+        yi = st[i, 1]
+        vxi = st[i, 2]
+        vyi = st[i, 3]
+        ui = st[i, 4]
+        Ri = st[i, 5]
+        imi = st[i, 6]
+        rIi = st[i, 7]
+        fx = aux[i, 2]
+        fy = aux[i, 3]
+        tq = 0.0
+        isbad = 0
+        for q in range(lowstart[i], lowstart[i + 1]):
+            p = lowpid[q]
+            fx -= pf[p, 0]
+            fy -= pf[p, 1]
+            tq += Ri * pf[p, 2]
+        for p in range(pstart[i], pstart[i + 1]):
+            fx += pf[p, 0]
+            fy += pf[p, 1]
+            tq += Ri * pf[p, 2]
+        # near a wall (within the skin): contact, or a spring to clear (a particle cannot
+        # leave a contact by more than the skin in one step without tripping the checks)
+        if xi < Ri + skin or xi > W - Ri - skin or (floor and yi < Ri + skin):
+            if mono:
+                etan = etan_pw
+                etat = etat_pw
+            else:
+                sm = 1.0 / math.sqrt(imi)
+                etan = cn * sm
+                etat = ct * sm
+            # a wall is a partner of infinite mass (m_ab = m) at rest without spin: the
+            # relative velocity of the contact point is (vx - u ny, vy + u nx), the approach
+            # speed its part along n, the tangential velocity (1D) its part along the wall
+            if xi < Ri:  # left wall, n = (-1, 0)
+                delta = Ri - xi
+                if delta > 2.0 * ovl * Ri:
+                    isbad = BAD_OVERLAP
+                fn, ft, wh[i, 0] = contact_force(delta, -vxi, None, vyi - ui, wh[i, 0], kn, kt,
+                                                 inv_kt, etan, etat, mu, dt)
+                fx += fn
+                fy += ft
+                tq -= Ri * ft
+                wall_fy += ft
+            elif wh[i, 0] != 0.0:
+                wh[i, 0] = 0.0
+            if xi > W - Ri:  # right wall, n = (1, 0)
+                delta = xi + Ri - W
+                if delta > 2.0 * ovl * Ri:
+                    isbad = BAD_OVERLAP
+                fn, ft, wh[i, 1] = contact_force(delta, vxi, None, vyi + ui, wh[i, 1], kn, kt,
+                                                 inv_kt, etan, etat, mu, dt)
+                fx -= fn
+                fy += ft
+                tq += Ri * ft
+                wall_fy += ft
+            elif wh[i, 1] != 0.0:
+                wh[i, 1] = 0.0
+            if floor and yi < Ri:  # floor, n = (0, -1)
+                delta = Ri - yi
+                if delta > 2.0 * ovl * Ri:
+                    isbad = BAD_OVERLAP
+                fn, ft, wh[i, 2] = contact_force(delta, -vyi, None, vxi + ui, wh[i, 2], kn, kt,
+                                                 inv_kt, etan, etat, mu, dt)
+                fy += fn
+                fx += ft
+                tq += Ri * ft
+                floor_fy += fn
+            elif wh[i, 2] != 0.0:
+                wh[i, 2] = 0.0
+        # integrate (leapfrog)
+        vxn = vxi + dt * (fx * imi)
+        vyn = vyi + dt * (fy * imi - g)
+        wn = ui + dt * (tq * rIi)
+        xn = xi + dt * vxn
+        yn = yi + dt * vyn
+        if periodic:
+            if yn >= H:
+                yn -= H
+                laps[i] += 1
+                evf[i] = 1
+                nev += 1
+            elif yn < 0.0:
+                yn += H
+                if yn >= H:  # a step of -1e-17 rounds to H: that is the point 0
+                    yn = 0.0
+                laps[i] -= 1
+                evf[i] = -1
+                nev += 1
+            if not (yn >= 0.0 and yn < H):
+                isbad = BAD_RANGE
+        elif yn < -Ri:
+            isbad = BAD_WALL
+        if xn < -Ri or xn > W + Ri:
+            isbad = BAD_WALL
+        if not (xn == xn and yn == yn and wn == wn and vxn == vxn and vyn == vyn):
+            isbad = BAD_NAN
+        if isbad != 0:
+            bad[i] = isbad
+            nbad += 1
+        ddx = xn - aux[i, 0]
+        ddy = yn - aux[i, 1]
+        if periodic:
+            if ddy > halfH:
+                ddy -= H
+            elif ddy < -halfH:
+                ddy += H
+        if ddx * ddx + ddy * ddy > hs2:
+            nmove += 1
+        so[i, 0] = xn
+        so[i, 1] = yn
+        so[i, 2] = vxn
+        so[i, 3] = vyn
+        so[i, 4] = wn
+        so[i, 5] = Ri
+        so[i, 6] = imi
+        so[i, 7] = rIi
+    return nmove, nev, nbad, wall_fy, floor_fy
+
+
+@njit(cache=True)
+def _record_events(st_old, st_new, ids, evf, step, prm, ev_t, ev_p, ev_d, ctl):
+    """Log the boundary passes flagged in ``evf`` (and clear the flags): time interpolated
+    inside the step (straight-line motion), caller's particle index, direction."""
+    N = st_old.shape[0]
+    dt = prm.dt
+    H = prm.height
+    t0 = prm.t0
+    n = ctl[C_NEV]
+    for i in range(N):
+        d = evf[i]
+        if d != 0:
+            evf[i] = 0
+            y0 = st_old[i, 1]
+            dy = dt * st_new[i, 3]
+            if d > 0:
+                frac = (H - y0) / dy if dy > 0.0 else 1.0
+            else:
+                frac = -y0 / dy if dy < 0.0 else 1.0
+            if not (frac >= 0.0):
+                frac = 0.0
+            elif frac > 1.0:
+                frac = 1.0
+            ev_t[n] = t0 + (step + frac) * dt
+            ev_p[n] = ids[i]
+            ev_d[n] = d
+            n += 1
+    ctl[C_NEV] = n
+
+
+@njit(cache=True)
+def advance(st, aux, wh, ids, laps, LA, LB, pf, ctl, evf, bad, key, cstart, cfill, perm,
+            invperm, prm, nsteps, ev_t, ev_p, ev_d, wall_impulse):
+    """Advance up to ``nsteps`` steps (rebuilding the lists when needed).
+
+    Parameters
+    ----------
+    st, aux, wh, ids, laps : arrays
+        The double-buffered particle arrays (see :mod:`.layout`).
+    LA, LB : PairList
+        The two list buffers.
+    pf : float64 (>= npairs, 3)
+        Pair-force scratch.
+    ctl : int64 (N_C,)
+        Control slots.
+    evf, bad : int8 (N,)
+        Event flags and bad-particle reasons.
+    key, cstart, cfill, perm, invperm : int64 arrays
+        Rebuild scratch (see :func:`.neighbours.rebuild`).
+    prm : DEMParams
+    nsteps : int
+        Steps to do.
+    ev_t, ev_p, ev_d : float64, int64, int8 (capacity,)
+        Event buffer (time s, particle, direction); ``ctl[C_NEV]`` entries are used.
+    wall_impulse : float64 (2,)
+        The walls' vertical impulse on the particles is added here ([side walls, floor],
+        N s).
+
+    Returns
+    -------
+    done : int
+        Steps done.
+    status : int
+        ``ST_OK``; ``ST_STRIDE`` (a list needs a larger stride, given as ``info``);
+        ``ST_EVENTS`` (the event buffer needs room); ``ST_BLOWUP`` (the step just done
+        produced a bad particle, flagged in ``bad``).
+    info : int
+        See ``status``.
+    """
+    N = st.shape[1]
+    done = 0
+    while done < nsteps:
+        if ctl[C_REBUILD] != 0:
+            need = rebuild(st, aux, wh, ids, laps, LA, LB, ctl, key, cstart, cfill, perm,
+                           invperm, prm)
+            if need > 0:
+                return done, ST_STRIDE, need
+        if ev_t.shape[0] - ctl[C_NEV] < N:
+            return done, ST_EVENTS, 0
+        cs = ctl[C_ST]
+        cp = ctl[C_PA]
+        L = LA if ctl[C_LIST] == 0 else LB
+        npairs = L.pstart[N]
+        nbad_pairs = pair_forces(st[cs], npairs, L.pi, L.pj, L.springs, pf, prm)
+        nmove, nev, nbad, wall_fy, floor_fy = fused_step(
+            st[cs], st[1 - cs], aux[cp], wh[cp], laps[cp], L.pstart, L.lowstart, L.lowpid, pf,
+            evf, bad, prm)
+        wall_impulse[0] += prm.dt * wall_fy
+        wall_impulse[1] += prm.dt * floor_fy
+        if nbad_pairs > 0:
+            flag_overlaps(st[cs], npairs, L.pi, L.pj, bad, prm)
+            nbad += nbad_pairs
+        step = ctl[C_STEP]
+        ctl[C_ST] = 1 - cs
+        ctl[C_STEP] = step + 1
+        done += 1
+        if nev > 0:
+            _record_events(st[cs], st[1 - cs], ids[cp], evf, step, prm, ev_t, ev_p, ev_d, ctl)
+        if nbad > 0:
+            return done, ST_BLOWUP, 0
+        if nmove > 0:
+            ctl[C_REBUILD] = 1
+    return done, ST_OK, 0
+
+
+@njit(parallel=True, cache=True)
+def scatter_external(ext, ids, aux):
+    """``aux[k, 2:4] = ext[ids[k]]``: external force (N, (N, 2)) from the caller's order to
+    cell order."""
+    N = ids.shape[0]
+    for k in prange(N):
+        i = ids[k]
+        aux[k, 2] = ext[i, 0]
+        aux[k, 3] = ext[i, 1]
+
+
+@njit(parallel=True, cache=True)
+def clear_external(aux):
+    """Zero the external force columns of ``aux`` (N, 4)."""
+    N = aux.shape[0]
+    for k in prange(N):
+        aux[k, 2] = 0.0
+        aux[k, 3] = 0.0

@@ -1,0 +1,328 @@
+"""Neighbour search of the 2D DEM engine: cell sort, Verlet list, pair list, springs (numba).
+
+A rebuild (:func:`rebuild`; when a particle has moved more than skin/2 since the last one)
+computes cell keys, does a serial stable counting sort, gathers the particles into the new
+(cell) order, builds the full Verlet list (neighbour rows are contiguous ranges of the
+sorted particles), derives the pair list from it (see :class:`.layout.PairList`) and moves
+each contact's tangential spring to the new pair list (negated when the members swap order
+under the new numbering). The sort is stable and every loop writes only its own rows, so
+the lists do not depend on the thread count.
+"""
+
+from __future__ import annotations
+
+from numba import njit, prange
+
+from cfbmarkov.simulate.dem.layout import C_LIST, C_NREBUILD, C_PA, C_REBUILD, C_ST
+
+
+@njit(cache=True, inline="always")
+def _cell_of(x, y, inv_cw, inv_ch, ncx, ncy):
+    ix = int(x * inv_cw) if x > 0.0 else 0
+    iy = int(y * inv_ch) if y > 0.0 else 0
+    if ix >= ncx:
+        ix = ncx - 1
+    if iy >= ncy:
+        iy = ncy - 1
+    return iy * ncx + ix
+
+
+@njit(parallel=True, cache=True)
+def _cell_keys(st, key, prm):
+    N = st.shape[0]
+    inv_cw = 1.0 / prm.cell_w
+    inv_ch = 1.0 / prm.cell_h
+    ncx = prm.ncx
+    ncy = prm.ncy
+    for i in prange(N):
+        key[i] = _cell_of(st[i, 0], st[i, 1], inv_cw, inv_ch, ncx, ncy)
+
+
+@njit(cache=True)
+def _counting_sort(key, cstart, cfill, perm, invperm):
+    """Stable counting sort by cell: perm[new] = old, invperm[old] = new; cstart[c] = first
+    new index of cell c (cstart has ncells + 1 entries)."""
+    N = key.shape[0]
+    nc = cstart.shape[0] - 1
+    cstart[:] = 0
+    for i in range(N):
+        cstart[key[i] + 1] += 1
+    for c in range(nc):
+        cstart[c + 1] += cstart[c]
+    for c in range(nc):
+        cfill[c] = cstart[c]
+    for i in range(N):
+        c = key[i]
+        k = cfill[c]
+        cfill[c] = k + 1
+        perm[k] = i
+        invperm[i] = k
+
+
+@njit(parallel=True, cache=True)
+def _gather_st(st, so, perm):
+    N = st.shape[0]
+    for k in prange(N):
+        i = perm[k]
+        for c in range(8):
+            so[k, c] = st[i, c]
+
+
+@njit(parallel=True, cache=True)
+def _gather_rest(st, aux, auxo, wh, who, ids, idso, laps, lapso, perm, prm):
+    """Per-particle arrays in the new order: reference positions (= current ones), external
+    force, wall springs (cleared for particles farther than the skin from every wall: covers
+    a particle that left a wall by more than the skin in one step), ids, laps."""
+    N = st.shape[0]
+    W = prm.width
+    skin = prm.skin
+    floor = prm.floor
+    for k in prange(N):
+        i = perm[k]
+        x = st[i, 0]
+        R = st[i, 5]
+        auxo[k, 0] = x
+        auxo[k, 1] = st[i, 1]
+        auxo[k, 2] = aux[i, 2]
+        auxo[k, 3] = aux[i, 3]
+        who[k, 0] = wh[i, 0] if x < R + skin else 0.0
+        who[k, 1] = wh[i, 1] if x > W - R - skin else 0.0
+        who[k, 2] = wh[i, 2] if (floor and st[i, 1] < R + skin) else 0.0
+        idso[k] = ids[i]
+        lapso[k] = laps[i]
+
+
+@njit(parallel=True, cache=True, error_model="numpy")
+def _build_list(so, cstart, nnb, nown, nbr, S, prm):
+    """Full Verlet list of the sorted particles ``so`` (cutoff R_i + R_j + skin).
+
+    Cells are numbered row by row, so the (up to) three cells of a neighbour row hold one
+    contiguous range of sorted particles; rows and columns that cannot hold a particle within
+    the cutoff (from the particle's place in its cell) are skipped.
+
+    Parameters
+    ----------
+    so : float64 (N, 8)
+        Particle records in cell order.
+    cstart : int64 (ncells + 1,)
+        First sorted particle of each cell.
+    nnb, nown : int32 (N,)
+        Output: neighbour count of each particle, and how many come after it.
+    nbr : int32 (N*S,)
+        Output: neighbours, row k at ``k*S`` (at most S written per row).
+    S : int
+        Stride of ``nbr``.
+    prm : DEMParams
+
+    Returns
+    -------
+    int
+        S when every row fits, else the largest count (grow to it and rebuild).
+    """
+    N = so.shape[0]
+    H = prm.height
+    halfH = 0.5 * H
+    skin = prm.skin
+    cw = prm.cell_w
+    ch = prm.cell_h
+    inv_cw = 1.0 / cw
+    inv_ch = 1.0 / ch
+    rmax = prm.rmax
+    ncx = prm.ncx
+    ncy = prm.ncy
+    periodic = prm.periodic
+    mono = prm.mono
+    rc_mono = 2.0 * rmax + skin
+    rc2_mono = rc_mono * rc_mono
+    nover = 0
+    for k in prange(N):
+        x = so[k, 0]
+        y = so[k, 1]
+        Rk = so[k, 5]
+        cut = Rk + rmax + skin
+        ix = int(x * inv_cw) if x > 0.0 else 0
+        iy = int(y * inv_ch) if y > 0.0 else 0
+        if ix >= ncx:
+            ix = ncx - 1
+        if iy >= ncy:
+            iy = ncy - 1
+        fxc = x - ix * cw
+        fyc = y - iy * ch
+        # neighbour columns/rows that can hold a particle within the cutoff
+        c0 = ix - 1 if (ix > 0 and (fxc < cut or fxc > cw)) else ix
+        c1 = ix + 1 if (ix < ncx - 1 and (cw - fxc < cut or fxc < 0.0)) else ix
+        r0 = iy - 1 if (fyc < cut or fyc > ch) else iy
+        r1 = iy + 1 if (ch - fyc < cut or fyc < 0.0) else iy
+        cnt = 0
+        own = 0
+        base = k * S
+        for rr in range(r0, r1 + 1):
+            row = rr
+            wrapped = False
+            if row < 0:
+                if not periodic:
+                    continue
+                row += ncy
+                wrapped = True
+            elif row >= ncy:
+                if not periodic:
+                    continue
+                row -= ncy
+                wrapped = True
+            first = cstart[row * ncx + c0]
+            last = cstart[row * ncx + c1 + 1]
+            for jj in range(first, last):
+                dx = so[jj, 0] - x
+                dy = so[jj, 1] - y
+                if wrapped:
+                    if dy > halfH:
+                        dy -= H
+                    elif dy < -halfH:
+                        dy += H
+                d2 = dx * dx + dy * dy
+                if mono:
+                    inside = d2 < rc2_mono
+                else:
+                    rc = Rk + so[jj, 5] + skin
+                    inside = d2 < rc * rc
+                if inside and jj != k:
+                    if cnt < S:
+                        nbr[base + cnt] = jj
+                    cnt += 1
+                    if jj > k:
+                        own += 1
+        nnb[k] = cnt
+        nown[k] = own
+        if cnt > S:
+            nover += 1
+    if nover == 0:
+        return S
+    m = 0
+    for k in range(N):
+        if nnb[k] > m:
+            m = nnb[k]
+    return m
+
+
+@njit(cache=True)
+def _prefix(nnb, nown, pstart, lowstart):
+    N = nnb.shape[0]
+    pstart[0] = 0
+    lowstart[0] = 0
+    for k in range(N):
+        pstart[k + 1] = pstart[k] + nown[k]
+        lowstart[k + 1] = lowstart[k] + (nnb[k] - nown[k])
+
+
+@njit(parallel=True, cache=True)
+def _fill_pairs(nnb, nbr, S, pstart, pi, pj, springs, lowstart, lowpid):
+    """Pairs (k, j > k) in the order the search met them (springs zeroed), and for each
+    particle the pairs in which it is the second member: pair (j, k) with j < k is number
+    pstart[j] + (how many neighbours of j above j come before k in j's list)."""
+    N = nnb.shape[0]
+    for k in prange(N):
+        p = pstart[k]
+        q = lowstart[k]
+        for s in range(k * S, k * S + nnb[k]):
+            jj = nbr[s]
+            if jj > k:
+                pi[p] = k
+                pj[p] = jj
+                springs[p, 0] = 0.0
+                springs[p, 1] = 0.0
+                p += 1
+            else:
+                c = pstart[jj]
+                for s2 in range(jj * S, jj * S + nnb[jj]):
+                    e = nbr[s2]
+                    if e == k:
+                        break
+                    if e > jj:
+                        c += 1
+                lowpid[q] = c
+                q += 1
+
+
+@njit(parallel=True, cache=True)
+def _carry_springs(perm, invperm, pstart_o, pj_o, springs_o, pstart_n, pj_n, springs_n):
+    """Copy each contact's tangential spring from the old pair list to the new one (negated
+    when the pair's order of members flips with the new numbering)."""
+    N = perm.shape[0]
+    for k in prange(N):
+        i = perm[k]
+        for po in range(pstart_o[i], pstart_o[i + 1]):
+            hx = springs_o[po, 0]
+            hy = springs_o[po, 1]
+            if hx != 0.0 or hy != 0.0:
+                jj = invperm[pj_o[po]]
+                kk = invperm[i]  # == k, typed like jj (a prange index may be unsigned)
+                if kk < jj:
+                    own = kk
+                    oth = jj
+                else:
+                    own = jj
+                    oth = kk
+                    hx = -hx
+                    hy = -hy
+                for p in range(pstart_n[own], pstart_n[own + 1]):
+                    if pj_n[p] == oth:
+                        springs_n[p, 0] = hx
+                        springs_n[p, 1] = hy
+                        break
+
+
+@njit(cache=True)
+def rebuild(st, aux, wh, ids, laps, LA, LB, ctl, key, cstart, cfill, perm, invperm, prm):
+    """Sort the particles into cell order and build a new neighbour/pair list.
+
+    The tangential springs are carried over. Commits (swaps the buffers) only on success.
+
+    Parameters
+    ----------
+    st, aux, wh, ids, laps : arrays
+        The double-buffered particle arrays (see :mod:`.layout`).
+    LA, LB : PairList
+        The two list buffers; the one not current (``ctl[C_LIST]``) receives the new list.
+    ctl : int64 (N_C,)
+        Control slots, updated on success.
+    key, cstart, cfill, perm, invperm : int64 arrays
+        Scratch: cell keys (N,), cell starts (ncells + 1,), fill counters (ncells,), the
+        permutation new -> old and its inverse (N,).
+    prm : DEMParams
+
+    Returns
+    -------
+    int
+        0, or the stride the new list needs when it does not fit (nothing changed then).
+    """
+    cs = ctl[C_ST]
+    cp = ctl[C_PA]
+    cur = st[cs]
+    new = st[1 - cs]
+    N = cur.shape[0]
+    _cell_keys(cur, key, prm)
+    _counting_sort(key, cstart, cfill, perm, invperm)
+    _gather_st(cur, new, perm)
+    if ctl[C_LIST] == 0:
+        old_l = LA
+        new_l = LB
+    else:
+        old_l = LB
+        new_l = LA
+    S = new_l.nbr.shape[0] // N
+    need = _build_list(new, cstart, new_l.nnb, new_l.nown, new_l.nbr, S, prm)
+    if need > S:
+        return need
+    _prefix(new_l.nnb, new_l.nown, new_l.pstart, new_l.lowstart)
+    _fill_pairs(new_l.nnb, new_l.nbr, S, new_l.pstart, new_l.pi, new_l.pj, new_l.springs,
+                new_l.lowstart, new_l.lowpid)
+    _carry_springs(perm, invperm, old_l.pstart, old_l.pj, old_l.springs, new_l.pstart,
+                   new_l.pj, new_l.springs)
+    _gather_rest(cur, aux[cp], aux[1 - cp], wh[cp], wh[1 - cp], ids[cp], ids[1 - cp], laps[cp],
+                 laps[1 - cp], perm, prm)
+    ctl[C_ST] = 1 - cs
+    ctl[C_PA] = 1 - cp
+    ctl[C_LIST] = 1 - ctl[C_LIST]
+    ctl[C_REBUILD] = 0
+    ctl[C_NREBUILD] += 1
+    return 0
