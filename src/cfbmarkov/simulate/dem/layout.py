@@ -5,20 +5,22 @@ arrays and on the named parameter tuple :class:`DEMParams`; :mod:`.system` owns 
 All per-particle arrays are in *cell order*, i.e. sorted by search cell at the last list
 build (:func:`.neighbours.rebuild`).
 
-``st``   float64 (2, N, 8): two buffers of one 64-byte record per particle,
-         ``x, y, vx, vy, u = R*omega, R, 1/m, R/I`` (u, the surface speed, is what the
-         contact kinematics needs: ``R_a*omega_a + R_b*omega_b = u_a + u_b``). A step reads
-         buffer ``ctl[C_ST]`` and writes the other one, then the buffers swap (no particle
-         reads a half-updated neighbour).
-``aux``  float64 (2, N, 4): ``x_ref, y_ref`` (position at the last list build), external
-         force ``fx, fy``; ``wh`` float64 (2, N, 3) wall tangential springs (left, right,
-         floor); ``ids`` int64 (2, N) caller's index of each sorted particle; ``laps``
-         int64 (2, N). These swap buffers at each rebuild (``ctl[C_PA]``).
-lists    two :class:`PairList` buffers A/B (``ctl[C_LIST]`` says which is current): the
-         full Verlet list of each particle (fixed stride S, used while building) and the
-         *pair list* derived from it (see :class:`PairList`).
-``ctl``  int64 (N_C,): the mutable control slots ``C_*`` (saved with a checkpoint).
-``prm``  :class:`DEMParams`: the constant parameters of a system (floats, ints, flags).
+Arrays (N particles)::
+
+    st    float64 (2, N, 8): two buffers of one 64-byte record per particle,
+          x, y, vx, vy, u = R*omega, R, 1/m, R/I (u, the surface speed, is what the
+          contact kinematics needs: R_a*omega_a + R_b*omega_b = u_a + u_b). A step reads
+          buffer ctl[C_ST] and writes the other one, then the buffers swap (no particle
+          reads a half-updated neighbour).
+    aux   float64 (2, N, 4): x_ref, y_ref (position at the last list build), external
+          force fx, fy; wh float64 (2, N, 3) wall tangential springs (left, right,
+          floor); ids int64 (2, N) caller's index of each sorted particle; laps
+          int64 (2, N). These swap buffers at each rebuild (ctl[C_PA]).
+    lists two PairList buffers A/B (ctl[C_LIST] says which is current): the full
+          Verlet list of each particle (fixed stride S, used while building) and the
+          pair list derived from it (see PairList).
+    ctl   int64 (N_C,): the mutable control slots C_* (saved with a checkpoint).
+    prm   DEMParams: the constant parameters of a system (floats, ints, flags).
 """
 
 from __future__ import annotations
