@@ -130,6 +130,7 @@ def test_other_configuration_in_the_same_folder_is_refused(reference, tmp_path, 
     assert len(err) == 1 and "another configuration" in err[0]
 
 
+@pytest.mark.slow
 def test_resume_after_kill_mid_simulation_equals_uninterrupted(reference, tmp_path):
     ref, overrides = reference
     out = tmp_path / "killed"
@@ -152,6 +153,7 @@ def test_resume_after_kill_mid_simulation_equals_uninterrupted(reference, tmp_pa
     assert a["pd_rt_mean"] == b["pd_rt_mean"] and a["mixing_rms"] == b["mixing_rms"]
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_same_result(reference, tmp_path):
     distributed = pytest.importorskip("dask.distributed")
     ref, overrides = reference
@@ -169,6 +171,7 @@ def test_dask_cluster_gives_the_same_result(reference, tmp_path):
     assert_same_files(ref / "u8", out / "u8")
 
 
+@pytest.mark.slow
 def test_process_pool_runs_cases_in_parallel(tmp_path):
     overrides = tiny(tmp_path)
     text = overrides.read_text().replace("end_time = 0.8", "end_time = 0.3").replace(

@@ -135,6 +135,7 @@ def test_packed_bed_pressure_drop_matches_ergun():
     assert dp == pytest.approx(ergun, rel=0.05)
 
 
+@pytest.mark.slow
 def test_fluidized_bed_pressure_drop_carries_its_weight():
     """A bubbling bed above minimum fluidization carries its weight on the gas: the time
     mean of the bed's pressure drop equals the bed weight per unit cross-section within

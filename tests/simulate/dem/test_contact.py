@@ -70,6 +70,7 @@ def analytic_contact_time(m_ab, law=LAW):
     return math.pi / math.sqrt(k / m_ab - (eta / (2 * m_ab)) ** 2)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("kind,m_ab", [("pp", M / 2), ("pw", M)])
 def test_head_on_fine_step(kind, m_ab):
     tc = analytic_contact_time(m_ab)
