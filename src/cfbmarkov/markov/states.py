@@ -18,6 +18,7 @@ gives :meth:`StateSpace.discretize` the frames, the lag in frames and the frame 
 from __future__ import annotations
 
 import json
+import math
 from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
@@ -210,6 +211,21 @@ class StateSpace(ABC):
         return hash(json.dumps(self.to_attrs(), sort_keys=True))
 
 
+#: a position within this relative distance (in cells) below a cell edge counts as on the
+#: edge, so in the cell above it: 0.29 m on a grid of 0.01 m rows is 28.999999999999996
+#: rows by floating point, and lands in row 29 as written (about 1e-11 m on the paper's grid)
+EDGE_TOLERANCE = 1e-9
+
+
+@nb.njit(cache=True, inline="always")
+def _index_along(coordinate, scale, n):
+    """floor(coordinate * scale), a value a round-off below an edge taken as on it, clipped
+    to 0..n-1."""
+    v = coordinate * scale
+    k = int(math.floor(v + EDGE_TOLERANCE * max(1.0, abs(v))))
+    return min(max(k, 0), n - 1)
+
+
 @nb.njit(cache=True, parallel=True)
 def _cell_index(positions, width, height, columns, rows, out):
     flat_pos = positions.reshape(-1, 2)
@@ -217,16 +233,18 @@ def _cell_index(positions, width, height, columns, rows, out):
     sx = columns / width
     sy = rows / height
     for k in nb.prange(flat_out.size):
-        col = int(flat_pos[k, 0] * sx)
-        row = int(flat_pos[k, 1] * sy)
-        col = min(max(col, 0), columns - 1)
-        row = min(max(row, 0), rows - 1)
+        col = _index_along(flat_pos[k, 0], sx, columns)
+        row = _index_along(flat_pos[k, 1], sy, rows)
         flat_out[k] = row * columns + col
 
 
 def cell_index(positions: np.ndarray, width: float, height: float, columns: int, rows: int
                ) -> np.ndarray:
     """Cell number row*m + col of positions; points on the far edges go inside.
+
+    A position on a cell edge belongs to the cell above (right of) it, also where floating
+    point puts it a round-off below the edge (0.29 m on 0.01 m rows is 28.999999999999996
+    rows): values within ``EDGE_TOLERANCE`` cells below an edge count as on it.
 
     Parameters
     ----------
