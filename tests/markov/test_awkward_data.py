@@ -30,3 +30,22 @@ def test_positions_on_decimal_edges_land_in_the_cell_above(columns, rows, width,
     assert cell_index(np.array([[0.005, edge - 1e-8]]), 0.09, 0.95, 9, 95)[0] // 9 == 28
     assert CellGrid(9, 95).discretize(np.array([[0.005, 0.57], [0.005, 0.58]])).tolist() \
         == [57 * 9, 58 * 9]
+
+
+@pytest.mark.parametrize("matrix, expected", [
+    ([[0.0, 1.0], [1.0, 0.0]], [np.inf]),                              # periodic: lambda = -1
+    ([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [1.0, 0.0, 0.0]], [np.inf, np.inf]),   # period 3
+    ([[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.3, 0.3, 0.4]],              # two absorbing states
+     [np.inf, -0.05 / np.log(0.4)]),
+])
+def test_implied_timescale_of_a_unit_eigenvalue_is_plus_infinity(matrix, expected):
+    """-lag / ln|lambda| with |lambda| = 1 is +inf (a mode that never decays), not -inf."""
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.diagnostics import model_timescales
+
+    p = np.asarray(matrix)
+    zeros = np.zeros_like(p, dtype=np.int64)
+    model = MarkovModel(p, zeros, zeros, zeros, CellGrid(1, p.shape[0], 0.1, 1.0), 0.05)
+    its = model_timescales(model, k=len(expected), connected=False)
+    np.testing.assert_allclose(its.timescales[0], expected, rtol=1e-12)
+    assert np.all(its.timescales[0] > 0)

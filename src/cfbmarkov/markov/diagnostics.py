@@ -152,6 +152,10 @@ def active_set(matrix: np.ndarray) -> np.ndarray:
     return np.flatnonzero(labels == int(np.argmax(sizes)))
 
 
+#: eigenvalues this close to modulus 1 count as 1 (a mode that does not decay, t_i = +inf)
+UNIT_MODULUS_TOLERANCE = 1e-12
+
+
 def _eigen_timescales(matrix: np.ndarray, lag: float, k: int, connected: bool
                       ) -> tuple[np.ndarray, np.ndarray, int]:
     p = np.asarray(matrix, dtype=np.float64)
@@ -166,9 +170,13 @@ def _eigen_timescales(matrix: np.ndarray, lag: float, k: int, connected: bool
     rest = rest[np.argsort(-np.abs(rest), kind="stable")][:k]
     eig = np.full(k, np.nan + 0j, dtype=np.complex128)
     eig[:rest.size] = rest
-    modulus = np.minimum(np.abs(eig), 1.0)        # round-off above 1 means "does not decay"
+    modulus = np.abs(eig)
+    # |lambda| = 1 (to round-off: periodic and absorbing chains) does not decay: +inf, not
+    # -lag / ln 1 = -lag / +0.0 = -inf; |lambda| = 0 decays at once
+    unit = modulus >= 1.0 - UNIT_MODULUS_TOLERANCE
     with np.errstate(divide="ignore", invalid="ignore"):
-        ts = -lag / np.log(modulus)
+        ts = -lag / np.log(np.where(unit, 0.5, modulus))
+    ts[unit] = np.inf
     ts[modulus == 0] = 0.0
     return ts, eig, p.shape[0]
 
