@@ -131,9 +131,11 @@ def _cmd_compare(args) -> int:
 
     summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
                       bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures)
+    from cfbmarkov.analysis.metrics import percentage_text as pd_text
+
     print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
-          f"{summary['model']['rt_mean']:.4g} s (PD {summary['pd_rt_mean']:+.2f} %); "
-          f"SD(RT) PD {summary['pd_rt_sd']:+.2f} %; MD {summary['md_rtd']:.4g}; "
+          f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
+          f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
           f"mixing RMS {summary['mixing_rms']:.4g}")
     print(Path(args.output) / "summary.json")
     return 0

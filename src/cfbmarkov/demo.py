@@ -13,6 +13,7 @@ import json
 from pathlib import Path
 
 from cfbmarkov import synthetic
+from cfbmarkov.analysis.metrics import percentage_text
 from cfbmarkov.markov import CellGrid, fit_model
 
 
@@ -60,7 +61,8 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
         rows[name] = {**summary, "exact_model_rt_mean": exact.mean, "exact_model_rt_sd": exact.sd}
         log(f"{name:>5}: E(RT) reference {summary['reference']['rt_mean']:.3f} s, model "
             f"{summary['model']['rt_mean']:.3f} s (exact {exact.mean:.3f} s), PD E(RT) "
-            f"{summary['pd_rt_mean']:+.1f} %, PD SD(RT) {summary['pd_rt_sd']:+.1f} %, "
+            f"{percentage_text(summary['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
+            f"{percentage_text(summary['pd_rt_sd'], '+.1f')} %, "
             f"MD {summary['md_rtd']:.3g}, mixing RMS {summary['mixing_rms']:.3g}")
     (out / "demo.json").write_text(json.dumps(rows, indent=2))
     return out

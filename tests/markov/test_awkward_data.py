@@ -49,3 +49,38 @@ def test_implied_timescale_of_a_unit_eigenvalue_is_plus_infinity(matrix, expecte
     its = model_timescales(model, k=len(expected), connected=False)
     np.testing.assert_allclose(its.timescales[0], expected, rtol=1e-12)
     assert np.all(its.timescales[0] > 0)
+
+
+def _one_tracer(path, period, n=400, dt=0.01):
+    """One particle rising one H = 1 m lap every ``period`` frames: all residence times
+    are equal, and their SD is round-off (about 1.5e-16 s)."""
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    y = (np.arange(n) % period + 0.5) / period
+    pos = np.stack([np.full(n, 0.05), y], axis=-1)[:, None, :]
+    return write_trajectories(path, dt * np.arange(n), pos, width=0.1, height=1.0)
+
+
+def test_percentage_difference_of_round_off_is_undefined(tmp_path, capsys):
+    """A reference SD(RT) that is zero to round-off has no PD: null in summary.json, 'n/d'
+    in the CLI line, a warning that says why; the PD of E(RT) stays a number."""
+    import json
+
+    from cfbmarkov.analysis.metrics import percentage_difference
+    from cfbmarkov.cli import main
+    from cfbmarkov.report.compare import compare
+
+    assert np.isnan(percentage_difference(1.9e-16, 2.2e-16, scale=0.37))
+    assert percentage_difference(0.3, 0.2, scale=0.37) == pytest.approx(50.0)
+    assert np.isnan(percentage_difference(1.0, 0.0))
+    ref, pred = _one_tracer(tmp_path / "ref.h5", 37), _one_tracer(tmp_path / "pred.h5", 29)
+    summary = compare(ref, pred, window=(0.0, 3.99), output=tmp_path / "cmp", figures=False)
+    assert 0 < summary["reference"]["rt_sd"] < 1e-15
+    assert np.isnan(summary["pd_rt_sd"])
+    assert summary["pd_rt_mean"] == pytest.approx(100 * (0.29 / 0.37 - 1))
+    saved = json.loads((tmp_path / "cmp" / "summary.json").read_text())
+    assert saved["pd_rt_sd"] is None
+    assert any("zero to round-off" in w for w in saved["warnings"])
+    assert main(["compare", str(ref), str(pred), "--window", "0:3.99", "-o",
+                 str(tmp_path / "cli"), "--no-figures"]) == 0
+    assert "SD(RT) PD n/d %" in capsys.readouterr().out

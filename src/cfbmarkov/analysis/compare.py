@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from cfbmarkov.analysis.metrics import minkowski_distance, mixing_rms, percentage_difference
+from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
+                                        percentage_difference)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.rtd import ResidenceTimes, residence_times, rtd_histogram
 from cfbmarkov.errors import InputError
@@ -228,7 +229,8 @@ class RunComparison:
     @property
     def pd_rt_sd(self) -> float:
         """PD of SD(RT), % (model against reference)."""
-        return percentage_difference(self.model.residence.sd, self.reference.residence.sd)
+        return percentage_difference(self.model.residence.sd, self.reference.residence.sd,
+                                     scale=self.reference.residence.mean)
 
     def summary(self) -> dict[str, Any]:
         """The summary as a dict, in the key order of summary.json.
@@ -336,6 +338,10 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         md = minkowski_distance(p_ref, p_mod, md_order)
     else:
         md = float("nan")
+    for what, value in (("E(RT)", rt_ref.mean), ("SD(RT)", rt_ref.sd)):
+        if rt_ref.count >= 2 and abs(value) <= ROUNDOFF * abs(rt_ref.mean):
+            warnings.append(f"the reference {what} is zero to round-off ({value:.3g} s): its "
+                            "percentage difference is undefined (null; n/d in tables)")
     if rt_ref.exact != rt_mod.exact:
         warnings.append("residence times use exact pass events on one side and frame times "
                         "on the other")

@@ -7,7 +7,11 @@ import numpy as np
 from cfbmarkov.errors import InputError
 
 
-def percentage_difference(model, reference):
+#: a reference within this fraction of its scale is zero to round-off: its PD is undefined
+ROUNDOFF = 1e-9
+
+
+def percentage_difference(model, reference, scale=None):
     """Percentage difference PD = 100 (model - reference) / reference, in %.
 
     Parameters
@@ -18,12 +22,19 @@ def percentage_difference(model, reference):
     reference : float or array_like
         The reference value(s) (e.g. the CFD-DEM), in the same unit; broadcast against
         ``model``.
+    scale : float or array_like, optional
+        The magnitude against which a reference counts as zero: where |reference| <=
+        ``ROUNDOFF`` x |scale| the reference is zero to round-off and the PD is undefined
+        (NaN). For SD(RT) pass E(RT): residence times that are all equal give an SD of
+        about 1e-16 s, whose PD would be a number made of round-off. Default: only an exact
+        zero is undefined.
 
     Returns
     -------
     float or numpy.ndarray
         PD in %; a float for scalar inputs, an array of the broadcast shape otherwise. NaN
-        where the reference is 0 or NaN.
+        where the reference is zero (to round-off) or NaN; ``summary.json`` writes it as
+        null and the report's tables as "n/d".
 
     References
     ----------
@@ -32,9 +43,30 @@ def percentage_difference(model, reference):
     """
     m = np.asarray(model, dtype=np.float64)
     r = np.asarray(reference, dtype=np.float64)
+    limit = 0.0 if scale is None else ROUNDOFF * np.abs(np.asarray(scale, dtype=np.float64))
+    defined = np.abs(r) > limit
     with np.errstate(divide="ignore", invalid="ignore"):
-        pd = np.where(r != 0, 100.0 * (m - r) / np.where(r != 0, r, 1.0), np.nan)
+        pd = np.where(defined, 100.0 * (m - r) / np.where(defined, r, 1.0), np.nan)
     return float(pd) if pd.ndim == 0 else pd
+
+
+def percentage_text(value, spec: str = "+.2f") -> str:
+    """A PD as text: formatted with ``spec``, or "n/d" where it is undefined (None or NaN).
+
+    Parameters
+    ----------
+    value : float or None
+        The PD (%).
+    spec : str
+        A format spec.
+
+    Returns
+    -------
+    str
+    """
+    if value is None or not np.isfinite(value):
+        return "n/d"
+    return f"{value:{spec}}"
 
 
 def minkowski_distance(e, f, order: float = 2.0) -> float:
@@ -131,4 +163,5 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
     return float(np.sqrt(np.mean((mf - ref_at_model) ** 2)))
 
 
-__all__ = ["minkowski_distance", "mixing_rms", "percentage_difference"]
+__all__ = ["ROUNDOFF", "minkowski_distance", "mixing_rms", "percentage_difference",
+           "percentage_text"]

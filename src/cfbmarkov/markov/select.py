@@ -238,7 +238,8 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                                     entry=_entry_distribution(training)
                                     ).in_window(block[1] - block[0])
                     rows_.append((percentage_difference(rtd.mean, observed[k].mean),
-                                  percentage_difference(rtd.sd, observed[k].sd),
+                                  percentage_difference(rtd.sd, observed[k].sd,
+                                                        scale=observed[k].mean),
                                   minkowski_distance(histograms[k], _exact_histogram(
                                       rtd, lag, histograms[k].size), 2.0),
                                   rtd.mean, rtd.sd))

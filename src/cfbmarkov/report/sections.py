@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 
+from cfbmarkov.analysis.metrics import percentage_text
 from cfbmarkov.report.document import (
     Bullets,
     Heading,
@@ -205,8 +206,9 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
             ref, mod = s["reference"], s["model"]
             rows.append([u, e.name, number_text(ref.get("rt_mean"), ".3f"),
                          number_text(mod.get("rt_mean"), ".3f"),
-                         number_text(s.get("pd_rt_mean"), ".2f"), number_text(ref.get("rt_sd"), ".3f"),
-                         number_text(mod.get("rt_sd"), ".3f"), number_text(s.get("pd_rt_sd"), ".2f"),
+                         percentage_text(s.get("pd_rt_mean"), ".2f"),
+                         number_text(ref.get("rt_sd"), ".3f"), number_text(mod.get("rt_sd"), ".3f"),
+                         percentage_text(s.get("pd_rt_sd"), ".2f"),
                          number_text(s.get("md_rtd"), ".3g"), number_text(s.get("mixing_rms"), ".3g")]
                         + list(paper))
             if (v := finite_or_none(s.get("pd_rt_sd"))) is not None:
@@ -233,6 +235,10 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
         "Mixing RMS: root-mean-square difference of the MCM and CFD-DEM mixing curves on the "
         "model's frames, as a fraction of all particles (no paper value).",
     ]
+    if any(row[4] == "n/d" or row[7] == "n/d" for row in rows):
+        notes.append("n/d: the percentage difference is undefined because the CFD-DEM value "
+                     "is zero to round-off (e.g. SD(RT) of residence times that are all "
+                     "equal), or missing.")
     if exact:
         notes.append("Residence-time moments: " + "; ".join(
             f"{k} ({', '.join(sorted(v))})" for k, v in exact.items())
