@@ -100,14 +100,28 @@ def _cmd_fit(args) -> int:
     from cfbmarkov.markov.select import select_model
     from cfbmarkov.trajectories import Trajectories
 
+    from cfbmarkov.markov.rtd import TrappedResidences
+
     columns, rows = args.cells
     with Trajectories(args.run) as run:
         if args.states == "auto":
             model = select_model(run, window=args.window, columns=columns, rows=rows,
                                  lag=args.lag, estimator=args.estimator)
+            if args.connected:     # the chosen space, refitted on its largest connected set
+                model = fit_model(run, model.state_space, model.lag, args.window,
+                                  args.estimator, connected=True).with_selection(model.selection)
         else:
             space = state_space_from_name(args.states, columns, rows, run.width, run.height)
-            model = fit_model(run, space, args.lag, args.window, args.estimator)
+            model = fit_model(run, space, args.lag, args.window, args.estimator,
+                              connected=args.connected)
+    try:
+        model.rtd()
+    except TrappedResidences as exc:
+        raise InputError(f"{args.run}: {exc}") from None
+    except CfbmarkovError:
+        pass                       # no circulation at all: a model without residence times
+    for line in model.warnings():
+        print(f"warning: {line.strip()}", file=sys.stderr)
     model.save(args.output)
     print(model.summary())
     print(args.output)
@@ -329,6 +343,10 @@ def build_parser() -> argparse.ArgumentParser:
                         "vertical-velocity bins, cells x previous-cell offset (second order), "
                         "or auto: chosen with the lag on held-out frames of the window "
                         "(default cells)")
+    s.add_argument("--connected", action="store_true",
+                   help="fit on the largest strongly connected set of the counts (transitions "
+                        "out of it removed, as deeptime and PyEMMA do): states entered but "
+                        "never left then trap no particle")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
     s.set_defaults(func=_cmd_fit)
 

@@ -84,3 +84,154 @@ def test_percentage_difference_of_round_off_is_undefined(tmp_path, capsys):
     assert main(["compare", str(ref), str(pred), "--window", "0:3.99", "-o",
                  str(tmp_path / "cli"), "--no-figures"]) == 0
     assert "SD(RT) PD n/d %" in capsys.readouterr().out
+
+
+# -- reducible chains, traps and trapped residences ------------------------------------------
+def _two_speed_run(tmp_path, write_states, frames=800):
+    """Two particles that never share a cell of a 2 x 38 grid (0.09 x 0.95 m, frames every
+    0.025 s): one rises 2 rows per frame in column 0 (a lap every 0.475 s), the other 1 row
+    per frame in column 1 (0.95 s)."""
+    t = np.arange(frames)
+    states = np.stack([((2 * t) % 38) * 2, (t % 38) * 2 + 1], axis=1)
+    return write_states(tmp_path / "two.h5", states, columns=2, rows=38, width=0.09,
+                        height=0.95, dt=0.025)
+
+
+def test_reducible_chain_exact_rtd_weights_classes_by_their_flux(tmp_path, write_states):
+    """The right E(RT) is the flux-weighted mean of 0.475 s and 0.95 s: the fast particle
+    completes twice as many residences, so 2/(1/0.475 + 1/0.95) = 0.6333 s (SD 0.2239 s);
+    an arbitrary eigenvector of the reducible entry chain gave 0.475 s, SD 0."""
+    from cfbmarkov.markov import fit_model
+
+    run = _two_speed_run(tmp_path, write_states)
+    model = fit_model(run, CellGrid(2, 38, 0.09, 0.95), 0.025)
+    assert [c.size for c in model.closed_classes] == [38, 19]
+    rtd = model.rtd()
+    assert rtd.closed_classes == 2
+    # observed entries: 42 of the fast particle, 21 of the slow one in 799 transitions
+    harmonic = (42 * 0.475 + 21 * 0.95) / 63
+    assert rtd.mean == pytest.approx(harmonic, rel=1e-9)
+    assert rtd.mean == pytest.approx(0.6333, abs=1e-4)
+    assert rtd.sd == pytest.approx(np.sqrt((42 * (0.475 - harmonic) ** 2
+                                            + 21 * (0.95 - harmonic) ** 2) / 63), rel=1e-9)
+    assert model.rtd(window=20.0).mean == pytest.approx(0.631, abs=2e-3)
+    assert "closed classes: 2 (sizes 38, 19)" in model.summary()
+    assert "E(RT) = 0.6333 s" in model.summary()
+
+
+def test_state_entered_in_the_last_frame_is_reported_and_connected_set_frees_it(
+        tmp_path, write_states, capsys):
+    """Particle 1 steps into column 1 (state 5) in the last frame: state 5 is entered but
+    never left, a trap (P_55 = 1) that every state of the ring can reach; --connected fits on
+    the largest strongly connected set (the ring of column 0) and nothing is trapped."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.markov import fit_model
+
+    t = np.arange(41)
+    states = np.stack([(t % 4) * 2, ((t + 2) % 4) * 2], axis=1)      # column 0 ring
+    states[-1, 1] = 5                                                 # row 2, column 1
+    path = write_states(tmp_path / "last.h5", states, columns=2, rows=4)
+    grid = CellGrid(2, 4, 1.0, 2.0)
+    model = fit_model(path, grid, 1.0)
+    assert model.entered_never_left.tolist() == [5]
+    assert model.transition_matrix[5, 5] == 1.0
+    assert model.trap_share == pytest.approx(1.0)
+    pi = model.stationary_distribution
+    assert pi[5] == pytest.approx(1.0)                 # the trap takes all the mass
+    text = model.summary()
+    assert "states entered but never left: 1 (5)" in text
+    assert "states never visited: 3 (1, 3, 7)" in text
+    connected = fit_model(path, grid, 1.0, connected=True)
+    assert connected.connected and connected.trap_share == 0.0
+    assert connected.transition_matrix[:, 5].sum() == 1.0      # only its own row, P_55
+    assert connected.stationary_distribution[[0, 2, 4, 6]].sum() == pytest.approx(1.0)
+    # the CLI warns in fit (exit 0) and info, and --connected is recorded in the file
+    out = tmp_path / "m.h5"
+    assert main(["fit", str(path), "--cells", "2x4", "--lag", "1", "--window", "0:40",
+                 "-o", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert "warning: states entered but never left: 1 (5)" in err and "100.0 %" in err
+    assert main(["info", str(out)]) == 0
+    assert "entered but never left" in capsys.readouterr().out
+    assert main(["fit", str(path), "--cells", "2x4", "--lag", "1", "--window", "0:40",
+                 "--connected", "-o", str(out)]) == 0
+    assert "warning" not in capsys.readouterr().err
+    from cfbmarkov.markov import MarkovModel
+    assert MarkovModel.load(out).connected
+
+
+def test_every_residence_trapped_is_one_line_and_exit_2(tmp_path, write_states, capsys):
+    """A particle rises through column 0 and passes the top into column 1 in the last
+    frame: the only entry state is never left, so no residence can end."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.markov import MarkovModel, fit_model
+    from cfbmarkov.markov.rtd import TrappedResidences
+
+    states = np.array([[0], [2], [4], [6], [1]])
+    path = write_states(tmp_path / "trap.h5", states, columns=2, rows=4)
+    model = fit_model(path, CellGrid(2, 4, 1.0, 2.0), 1.0)
+    with pytest.raises(TrappedResidences, match="every residence is trapped"):
+        model.rtd()
+    assert main(["fit", str(path), "--cells", "2x4", "--lag", "1", "--window", "0:4",
+                 "-o", str(tmp_path / "m.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "every residence is trapped" in err and "nan" not in err
+    assert not (tmp_path / "m.h5").exists()
+    saved = model.save(tmp_path / "given.h5")
+    assert main(["rtd", str(saved)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "every residence is trapped" in err
+    assert "exact residence time: none (every residence is trapped" in \
+        MarkovModel.load(saved).summary()
+
+
+def _ring(rows, up, down, stay_first=0):
+    """A ring of ``rows`` states: up one row with ``up``, down with ``down``, else stay; the
+    wrap from the top row up is a pass up through the top."""
+    p = np.zeros((rows, rows))
+    pass_up = np.zeros((rows, rows))
+    pass_down = np.zeros((rows, rows))
+    for r in range(rows):
+        p[r, (r + 1) % rows] += up
+        p[r, (r - 1) % rows] += down
+        p[r, r] += 1 - up - down
+    pass_up[rows - 1, 0] = 1.0
+    pass_down[0, rows - 1] = 1.0
+    return p, pass_up, pass_down
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("reducible", [False, True])
+def test_exact_rtd_mean_equals_monte_carlo_for_random_chains(seed, reducible):
+    """Random small ring chains, one closed class or two: the exact windowed RTD's mean
+    equals the Monte Carlo's within sampling error, the classes weighted by the flux
+    observed in that same Monte Carlo run."""
+    from scipy.linalg import block_diag
+
+    from cfbmarkov.markov import MarkovModel
+
+    rng = np.random.default_rng(seed)
+    parts = [_ring(int(rng.integers(4, 9)), rng.uniform(0.4, 0.8), rng.uniform(0.0, 0.15))
+             for _ in range(2 if reducible else 1)]
+    p, up, down = (block_diag(*[part[k] for part in parts]) for k in range(3))
+    s = p.shape[0]
+    zeros = np.zeros((s, s), np.int64)
+    grid = CellGrid(1, s, 0.1, 1.0)
+    lag, n_steps = 0.01, 400
+    given = MarkovModel(p, zeros, zeros, zeros, grid, lag, pass_fractions=(up, down))
+    start = rng.integers(0, s, size=3000)
+    states, laps = given.monte_carlo(start, n_steps, seed=seed)
+    # the passes this run observed: landing states of the passes up through the top and
+    # departure states of the passes down through the bottom (net entries per class)
+    step = np.diff(laps, axis=0)
+    counts_up = np.diag(np.bincount(states[1:][step > 0], minlength=s)).astype(np.int64)
+    counts_down = np.diag(np.bincount(states[:-1][step < 0], minlength=s)).astype(np.int64)
+    model = MarkovModel(p, zeros, counts_up, counts_down, grid, lag,
+                        pass_fractions=(up, down))
+    assert model.rtd().closed_classes == (2 if reducible else 1)
+    from cfbmarkov.analysis.rtd import residence_times_from_laps
+
+    samples = residence_times_from_laps(lag * np.arange(n_steps + 1), laps)
+    exact = model.rtd(window=n_steps * lag)
+    se = samples.std(ddof=1) / np.sqrt(samples.size)
+    assert abs(samples.mean() - exact.mean) < 5 * se, (samples.mean(), exact.mean, se)

@@ -32,6 +32,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.connectivity import largest_connected_set, restrict_to_set
 from cfbmarkov.markov.discrete import as_discrete_list, discretize
 from cfbmarkov.markov.states import StateSpace
 
@@ -182,6 +183,11 @@ class TransitionEstimator:
         The states of the models it fits.
     lag : float, optional
         The lag tau (s), positive.
+    connected : bool, optional
+        Remove the transitions that leave the largest strongly connected set of the counts
+        (and renormalise those rows), as deeptime and PyEMMA do by default: a state first
+        entered in the window's last frame then traps no particle. Off by default (the
+        paper's chain keeps every observed transition).
 
     Attributes
     ----------
@@ -201,14 +207,16 @@ class TransitionEstimator:
 
     name: str = ""
 
-    def __init__(self, state_space: StateSpace, lag: float = 0.025):
+    def __init__(self, state_space: StateSpace, lag: float = 0.025, connected: bool = False):
         if not lag > 0:
             raise InputError(f"lag {lag:g} s must be positive")
         self.state_space = state_space
         self.lag = float(lag)
+        self.connected = bool(connected)
 
     def __repr__(self) -> str:
-        return f"{type(self).__name__}({self.state_space!r}, lag={self.lag:g})"
+        extra = ", connected=True" if self.connected else ""
+        return f"{type(self).__name__}({self.state_space!r}, lag={self.lag:g}{extra})"
 
     def transition_matrix(self, counts: TransitionCounts) -> np.ndarray:
         """The estimate of P from the counts, before unvisited states are filled.
@@ -290,6 +298,8 @@ class TransitionEstimator:
         stuck = unvisited[matrix[unvisited].sum(axis=1) == 0]
         matrix[stuck, :] = 0.0
         matrix[stuck, stuck] = 1.0
+        if self.connected:      # deeptime's default: no transition leaves the largest set
+            matrix = restrict_to_set(matrix, largest_connected_set(counts.counts))
         return matrix, fractions
 
     def fit_counts(self, counts: TransitionCounts, window=None, source="") -> "MarkovModel":
@@ -322,7 +332,7 @@ class TransitionEstimator:
             counts_down=counts.counts_down, state_space=self.state_space, lag=self.lag,
             estimator=self.name, window=tuple(window) if window is not None else None,
             source=os.fspath(source) if isinstance(source, (str, os.PathLike)) else list(source),
-            frame_pairs=counts.frame_pairs, pass_fractions=fractions)
+            frame_pairs=counts.frame_pairs, pass_fractions=fractions, connected=self.connected)
 
 
 def _fill_from_cells(matrix: np.ndarray, counts: TransitionCounts, space: StateSpace,
@@ -440,7 +450,8 @@ ESTIMATORS: dict[str, type[TransitionEstimator]] = {
     "paper": PaperEstimator, "mle": MaximumLikelihoodEstimator}
 
 
-def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025
+def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025,
+                        connected: bool = False
                         ) -> TransitionEstimator:
     """An estimator by name.
 
@@ -452,6 +463,8 @@ def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025
         The states of the models it fits.
     lag : float, optional
         The lag (s).
+    connected : bool, optional
+        Restrict to the largest strongly connected set (see :class:`TransitionEstimator`).
 
     Returns
     -------
@@ -463,14 +476,14 @@ def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025
         For an unknown name or a lag that is not positive.
     """
     try:
-        return ESTIMATORS[name](state_space, lag)
+        return ESTIMATORS[name](state_space, lag, connected)
     except KeyError:
         raise InputError(f"unknown estimator '{name}' (choose from {', '.join(ESTIMATORS)})") from None
 
 
 def fit_model(source, state_space: StateSpace, lag: float,
-              window: tuple[float, float] | None = None, estimator: str = "mle"
-              ) -> "MarkovModel":
+              window: tuple[float, float] | None = None, estimator: str = "mle",
+              connected: bool = False) -> "MarkovModel":
     """Fit a model on a trajectory file: :func:`~cfbmarkov.markov.discretize`, then the
     estimator's ``fit`` (the one convenience wrapper that takes a file).
 
@@ -486,6 +499,8 @@ def fit_model(source, state_space: StateSpace, lag: float,
         The fitting window (A, B) in s; None: every frame.
     estimator : {"paper", "mle"}
         Paper Eq. 2-4, or the pooled maximum-likelihood estimate.
+    connected : bool, optional
+        Restrict to the largest strongly connected set (see :class:`TransitionEstimator`).
 
     Returns
     -------
@@ -503,5 +518,5 @@ def fit_model(source, state_space: StateSpace, lag: float,
     Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
     doi:10.3390/pr13030614 (Eq. 2-4, the paper estimator).
     """
-    fitter = estimator_from_name(estimator, state_space, lag)
+    fitter = estimator_from_name(estimator, state_space, lag, connected)
     return fitter.fit(discretize(source, state_space, lag, window))

@@ -28,6 +28,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.connectivity import (closed_classes, long_run_distribution,
+                                           states_reaching)
 from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
@@ -72,6 +74,8 @@ class MarkovModel:
         from the counts.
     selection : dict or None
         How the state space and lag were chosen (``--states auto``), JSON-serialisable.
+    connected : bool
+        Fitted on the largest strongly connected set (transitions leaving it removed).
 
     Raises
     ------
@@ -105,6 +109,7 @@ class MarkovModel:
     pass_fractions: tuple[np.ndarray, np.ndarray] | None = None
     # how the state space and lag were chosen (``--states auto``), JSON-serialisable
     selection: dict | None = None
+    connected: bool = False
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -154,6 +159,38 @@ class MarkovModel:
         return np.flatnonzero(self.counts.sum(axis=1) == 0)
 
     @cached_property
+    def entered_never_left(self) -> np.ndarray:
+        """States entered in the fitting window but never left (e.g. first entered in its
+        last frame), int64 [E]: a subset of :attr:`unvisited_states` that is not "never
+        visited"."""
+        entered = self.counts.sum(axis=0) > 0
+        return self.unvisited_states[entered[self.unvisited_states]]
+
+    @cached_property
+    def trap_share(self) -> float:
+        """Share of the fitting window's particle-frames in states from which the chain can
+        reach a state entered but never left that keeps its particles (P_ii = 1)."""
+        traps = [i for i in self.entered_never_left if self.transition_matrix[i, i] == 1.0]
+        occupancy = self.counts.sum(axis=1).astype(np.float64)
+        if not traps or occupancy.sum() == 0:
+            return 0.0
+        return float(occupancy[states_reaching(self.transition_matrix, traps)].sum()
+                     / occupancy.sum())
+
+    @cached_property
+    def closed_classes(self) -> list[np.ndarray]:
+        """Closed classes of P with two or more states, largest first: more than one means a
+        reducible chain (particles in one never reach the other's states)."""
+        return closed_classes(self.transition_matrix, min_size=2)
+
+    @property
+    def _entry_flux(self) -> np.ndarray | None:
+        # net entries through the inlet per state: landings of up passes minus departures of
+        # down passes (a particle that falls out and comes back starts no new residence)
+        flux = (self.counts_up.sum(axis=0) - self.counts_down.sum(axis=1)).astype(np.float64)
+        return flux if flux.sum() > 0 else None
+
+    @cached_property
     def up_fraction(self) -> np.ndarray:
         """Fraction of the i -> j transitions that passed up through the top, float64 [S, S]."""
         if self.pass_fractions is not None:
@@ -176,18 +213,24 @@ class MarkovModel:
 
     @cached_property
     def stationary_distribution(self) -> np.ndarray:
-        """Left eigenvector of P for eigenvalue 1, normalised (pi P = pi).
+        """The long-run distribution over the states, float64 [S], summing to 1 (pi P = pi).
 
-        Returns
-        -------
-        ndarray of float64, shape (S,)
-            Non-negative, sums to 1. Unique only where the chain has one closed class.
+        One closed class: the left eigenvector of P for eigenvalue 1. A reducible chain
+        (several closed classes, traps P_ii = 1 included) has no unique one: the particle-
+        frames observed in the fitting window (uniform for a model given by its matrix) are
+        carried into the closed classes by their absorption probabilities, and each class
+        holds its own stationary distribution with that mass
+        (:func:`~cfbmarkov.markov.connectivity.long_run_distribution`).
 
         References
         ----------
         J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
-        (1960) (Ch. IV-V, regular and ergodic chains).
+        (1960) (Ch. III absorbing chains, IV-V regular and ergodic chains).
         """
+        classes = closed_classes(self.transition_matrix)
+        if len(classes) > 1:
+            occupancy = self.counts.sum(axis=1).astype(np.float64)
+            return long_run_distribution(self.transition_matrix, classes, occupancy)
         with threadpool_limits(1):          # BLAS threads only contend on a dense eig here
             values, vectors = np.linalg.eig(self.transition_matrix.T)
         lead = int(np.argmin(np.abs(values - 1.0)))
@@ -327,11 +370,13 @@ class MarkovModel:
             key = ("rtd-steps", steps)
             if key not in self._cache:
                 self._cache[key] = exact_rtd(self.transition_matrix, self.up_fraction,
-                                             self.down_fraction, self.lag, max_steps=steps)
+                                             self.down_fraction, self.lag, max_steps=steps,
+                                             entry_flux=self._entry_flux)
             return self._cache[key].in_window(window)
         if "rtd" not in self._cache:
             self._cache["rtd"] = exact_rtd(self.transition_matrix, self.up_fraction,
-                                           self.down_fraction, self.lag)
+                                           self.down_fraction, self.lag,
+                                           entry_flux=self._entry_flux)
         intrinsic = self._cache["rtd"]
         return intrinsic if window is None else intrinsic.in_window(window)
 
@@ -403,55 +448,13 @@ class MarkovModel:
 
     def predict(self, trajectories, start: float, duration: float, seed: int = 0,
                 output: str | os.PathLike | None = None, progress: bool = False):
-        """Monte Carlo prediction from the particles' states in the frame at ``start``.
+        """Monte Carlo prediction (Eq. 7) from the particles' states in the frame at
+        ``start`` (s) for ``duration`` (s), written as a trajectory file when ``output`` is
+        given; see :func:`cfbmarkov.markov.prediction.predict` for the parameters, the
+        returned values and the errors raised."""
+        from cfbmarkov.markov.prediction import predict
 
-        Parameters
-        ----------
-        trajectories : str, os.PathLike or Trajectories
-            The file whose frame at ``start`` gives the initial states.
-        start, duration : float
-            Start time and length of the prediction (s); ``duration`` a whole number of lags.
-        seed : int
-            Seed of the Monte Carlo.
-        output : str or os.PathLike, optional
-            Write the prediction as a trajectory file (positions drawn uniformly inside the
-            cells, the model attached as ``/provenance/model``).
-        progress : bool
-            Show a progress bar while writing.
-
-        Returns
-        -------
-        pathlib.Path or tuple
-            The output path, or (times [K+1] s, states [K+1, N], laps [K+1, N]) without one.
-
-        Raises
-        ------
-        InputError
-            If the file cannot be read or does not fit the model, has no frame at
-            ``start`` (or lacks the history before it), ``duration`` is not a whole number
-            of lags or is shorter than one, or the output cannot be written.
-
-        References
-        ----------
-        Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
-        Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
-        doi:10.3390/pr13030614 (Eq. 7).
-        """
-        from cfbmarkov.trajectories import opened
-
-        with opened(trajectories) as traj:
-            n_steps = self.steps_for(duration)
-            if n_steps < 1:
-                raise InputError(f"duration {duration:g} s is shorter than one lag ({self.lag:g} s)")
-            states0, positions0, laps0 = self.initial_states(traj, start)
-            states, laps = self.monte_carlo(states0, n_steps, seed, laps0)
-            times = start + self.lag * np.arange(n_steps + 1)
-            if output is None:
-                return times, states, laps
-            from cfbmarkov.markov.model_file import write_prediction
-
-            return write_prediction(self, traj, times, states, laps, positions0, seed, output,
-                                    progress, duration=duration)
+        return predict(self, trajectories, start, duration, seed, output, progress)
 
     def with_selection(self, selection: dict) -> "MarkovModel":
         """The same model, recording how its state space and lag were chosen.
@@ -484,6 +487,16 @@ class MarkovModel:
             out["selection"] = self.selection
         return out
 
+    def warnings(self) -> list[str]:
+        """Lines about states entered but never left (traps), for ``fit`` and ``info``."""
+        trapped = self.entered_never_left
+        if not trapped.size or self.trap_share == 0.0:
+            return []
+        return [f"  states entered but never left: {trapped.size} ({_short_list(trapped)}): "
+                f"they keep their particles (P_ii = 1) or move as their cell; "
+                f"{100 * self.trap_share:.1f} % of the particle-frames are in states that "
+                "can reach a trap (fit --connected leaves them out)"]
+
     def summary(self) -> str:
         """A few lines of text: state space, lag, fitting data, passes, unvisited states
         and the exact E(RT) and SD(RT).
@@ -500,9 +513,22 @@ class MarkovModel:
             f"{self.n_transitions} transitions over {self.frame_pairs} frame pairs",
             f"  passes through the periodic boundary: {int(self.counts_up.sum())} up, "
             f"{int(self.counts_down.sum())} down",
-            f"  states never visited: {self.unvisited_states.size}"
-            + (f" ({_short_list(self.unvisited_states)})" if self.unvisited_states.size else ""),
         ]
+        never = np.setdiff1d(self.unvisited_states, self.entered_never_left)
+        lines.append(f"  states never visited: {never.size}"
+                     + (f" ({_short_list(never)})" if never.size else ""))
+        lines.extend(self.warnings())
+        if self.entered_never_left.size and self.trap_share == 0.0:
+            lines.append(f"  states entered but never left: {self.entered_never_left.size} "
+                         f"({_short_list(self.entered_never_left)}): no state leads to them")
+        if self.connected:
+            lines.append("  fitted on the largest strongly connected set of the counts")
+        classes = self.closed_classes
+        if len(classes) > 1:
+            lines.append(f"  closed classes: {len(classes)} (sizes "
+                         f"{', '.join(str(c.size) for c in classes[:6])}"
+                         f"{', ...' if len(classes) > 6 else ''}): a reducible chain; the "
+                         "exact RTD weights each class by its observed entry flux")
         if self.selection:
             lines.append(f"  chosen automatically: {self.selection.get('reason', '')}")
         try:
@@ -518,23 +544,9 @@ class MarkovModel:
 
     # -- persistence (the file layout lives in cfbmarkov.markov.model_file) --------------
     def save(self, path: str | os.PathLike) -> Path:
-        """Write the model as HDF5, atomically (see :func:`~cfbmarkov.markov.model_file.write_model`).
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            The model file; its folder is created if needed.
-
-        Returns
-        -------
-        pathlib.Path
-            ``path``.
-
-        Raises
-        ------
-        InputError
-            If the file cannot be put in place.
-        """
+        """Write the model as an HDF5 file at ``path``, atomically, and return the path
+        (:func:`~cfbmarkov.markov.model_file.write_model`; InputError if it cannot be put
+        in place)."""
         from cfbmarkov.markov.model_file import write_model
 
         return write_model(self, path)
@@ -556,22 +568,9 @@ class MarkovModel:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "MarkovModel":
-        """Read a model file written by :meth:`save`.
-
-        Parameters
-        ----------
-        path : str or os.PathLike
-            The model file.
-
-        Returns
-        -------
-        MarkovModel
-
-        Raises
-        ------
-        InputError
-            If the file is missing, empty, not HDF5, not a model file, or damaged.
-        """
+        """Read a model file written by :meth:`save`
+        (:func:`~cfbmarkov.markov.model_file.read_model`; InputError if the file is
+        missing, empty, not HDF5, not a model file, or damaged)."""
         from cfbmarkov.markov.model_file import read_model
 
         return read_model(path)

@@ -9,7 +9,8 @@ states:
 - attributes ``format = "cfbmarkov.model"``, ``version``, ``state_space`` (JSON), ``columns``,
   ``rows``, ``lag`` (s), ``window`` (s, NaN for none), ``estimator``, ``source`` (JSON),
   ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
-  ``cfbmarkov_version`` and, for a model chosen by ``--states auto``, ``selection`` (JSON).
+  ``cfbmarkov_version``; for a model chosen by ``--states auto``, ``selection`` (JSON); for
+a model fitted on the largest strongly connected set, ``connected = 1``.
 
 A prediction carries the same group as ``/provenance/model``. The model class itself never
 opens a file; this module does it for it.
@@ -65,6 +66,8 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
     }
     if model.selection:
         attrs["selection"] = json.dumps(model.selection)
+    if model.connected:
+        attrs["connected"] = 1
     return datasets, attrs
 
 
@@ -134,7 +137,8 @@ def read_model_group(group: h5py.Group | h5py.File, label: str = "") -> "MarkovM
             pass_fractions=(group["pass_up_fraction"][()], group["pass_down_fraction"][()])
             if "pass_up_fraction" in group else None,
             selection=json.loads(group.attrs["selection"])
-            if "selection" in group.attrs else None)
+            if "selection" in group.attrs else None,
+            connected=bool(group.attrs.get("connected", 0)))
     except KeyError as exc:
         raise InputError(f"{label}: damaged model file (missing {exc})") from None
 
@@ -159,86 +163,6 @@ def read_model(path: str | os.PathLike) -> "MarkovModel":
 
     with _open_h5(path) as f:
         return read_model_group(f, str(path))
-
-
-def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
-                     states: np.ndarray, laps: np.ndarray, first_positions: np.ndarray,
-                     seed: int, output: str | os.PathLike, progress: bool = False,
-                     duration: float | None = None) -> Path:
-    """Write a Monte Carlo run of ``model`` as a trajectory file (a prediction).
-
-    The first frame keeps the actual positions it started from; later frames place each
-    particle uniformly inside the cell of its state (seeded by (seed, particle, step)). The
-    model is attached as ``/provenance/model``.
-
-    Parameters
-    ----------
-    model : MarkovModel
-    trajectories : Trajectories
-        The open file the run started from (ids, domain, provenance).
-    times : ndarray of float64, shape (K + 1,)
-        Frame times (s), one lag apart.
-    states, laps : ndarray of int32, shape (K + 1, N)
-        The Monte Carlo states and lap counters.
-    first_positions : ndarray of float64, shape (N, 2)
-        Positions (m) of the first frame.
-    seed : int
-        The seed of the run (also seeds the placement inside cells).
-    output : str or os.PathLike
-        The trajectory file to write (atomically).
-    progress : bool
-        Show a progress bar in simulated seconds.
-    duration : float, optional
-        The prediction's length as asked for (s), recorded in the file's parameters
-        (default: K lags).
-
-    Returns
-    -------
-    pathlib.Path
-        ``output``.
-
-    Raises
-    ------
-    InputError
-        If the file cannot be written.
-    """
-    from cfbmarkov.markov.states import place_in_cells
-    from cfbmarkov.trajectory_writer import TrajectoryWriter
-
-    traj = trajectories
-    n_steps = times.size - 1
-    duration = float(n_steps * model.lag if duration is None else duration)
-    start = float(times[0])
-    parameters = {"model": model.describe(), "seed": int(seed), "start": start,
-                  "duration": duration, "initial_frames": str(traj.path),
-                  "columns": model.state_space.columns, "rows": model.state_space.rows}
-    with TrajectoryWriter(output, traj.ids, width=traj.width, height=traj.height,
-                          source="markov-prediction", parameters=parameters,
-                          frame_interval=model.lag) as writer:
-        writer.attach("model", *model_datasets_and_attrs(model))
-        bar = _progress(progress, duration)
-        writer.append(times[0], first_positions, lap=laps[0])
-        cells = model.state_space.cell_of_state
-        block = 32
-        for k0 in range(1, n_steps + 1, block):
-            ks = range(k0, min(k0 + block, n_steps + 1))
-            positions = np.stack([place_in_cells(cells[states[k]], model.state_space, seed, k)
-                                  for k in ks])
-            writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop])
-            if bar is not None:
-                bar.update(model.lag * len(ks))
-        if bar is not None:
-            bar.close()
-    return Path(output)
-
-
-def _progress(enabled: bool, duration: float):
-    if not enabled:
-        return None
-    from tqdm import tqdm
-
-    return tqdm(total=duration, unit="s", unit_scale=False, desc="Monte Carlo (simulated s)",
-                bar_format="{desc}: {n:.3f}/{total:.3f} s [{elapsed}<{remaining}, {rate_fmt}]")
 
 
 def _version() -> str:

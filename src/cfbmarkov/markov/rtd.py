@@ -35,6 +35,11 @@ from scipy.sparse.linalg import splu
 from cfbmarkov.errors import CfbmarkovError
 
 
+class TrappedResidences(CfbmarkovError):
+    """Every residence of the chain is trapped: no particle that enters can reach the top
+    again (the states it enters lead only to states that are never left)."""
+
+
 @dataclass(frozen=True)
 class ResidenceTimeDistribution:
     """f(k) = probability that a residence lasts k lags (k = 1, 2, ...).
@@ -64,6 +69,7 @@ class ResidenceTimeDistribution:
     # for an RTD computed only as far as a window: the rest too)
     entry_distribution: np.ndarray  # [S] stationary distribution of entry states
     window: float | None = None     # observation window length, s (None: intrinsic RTD)
+    closed_classes: int = 1         # closed classes of the chain that residences run in
 
     @property
     def times(self) -> np.ndarray:
@@ -112,7 +118,8 @@ class ResidenceTimeDistribution:
             raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s")
         observed = observed[: max(n_window - 1, 1)]
         return ResidenceTimeDistribution(self.lag, observed / observed.sum(), self.unresolved,
-                                         self.entry_distribution, float(window))
+                                         self.entry_distribution, float(window),
+                                         self.closed_classes)
 
     def histogram(self, bin_width: float, upper: float) -> tuple[np.ndarray, np.ndarray]:
         """Probability per bin on edges 0, bin_width, ..., upper (s).
@@ -163,7 +170,8 @@ def _first_passage(indptr, indices, data, exit_probability, start, tol, max_step
 
 def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray, lag: float,
               deficit_levels: int = 8, tol: float = 1e-10, max_steps: int = 200_000,
-              entry: np.ndarray | None = None) -> ResidenceTimeDistribution:
+              entry: np.ndarray | None = None, entry_flux: np.ndarray | None = None
+              ) -> ResidenceTimeDistribution:
     """Exact intrinsic RTD of a chain with transition matrix P and pass fractions.
 
     A first-passage problem on the states augmented with the lap deficit (see the module
@@ -188,6 +196,14 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
         The distribution of the states particles enter in, e.g. the observed one (column
         sums of the up-pass counts); by default the chain's own stationary entry
         distribution, which costs a sparse LU factorisation and an eigenvector.
+    entry_flux : ndarray of float64, shape (S,), optional
+        Observed net entries through the inlet per state (landings of up passes minus
+        departures of down passes: a particle that falls out of the bottom and comes back
+        starts no new residence). Used only where the chain is reducible: when residences
+        run in several closed classes (particles that never share a state, say), the
+        stationary entry distribution is not unique; each class then gets its own
+        stationary entry distribution, weighted by the class's share of the observed net
+        entry flux (equal weights where no flux is given).
 
     Returns
     -------
@@ -248,6 +264,11 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     position = -np.ones(s * levels, np.int64)
     position[idx] = np.arange(idx.size)
     q_live = q[idx][:, idx]
+    if not live[entries].any():
+        raise TrappedResidences(
+            f"every residence is trapped: from none of the {entries.size} state(s) particles "
+            "enter through the inlet can the chain reach the top again (they lead to states "
+            "that are never left; fit with --connected, or on a longer window)")
     if entry is not None:
         entry = np.asarray(entry, dtype=np.float64)
         if entry.shape != (s,) or entry.min() < 0 or not entry[live[:s]].sum() > 0:
@@ -269,13 +290,60 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
                       shape=(idx.size, entries.size))
     rt = r.T.tocsr()
     live_entries = live[entries]
-    nu = _embedded_stationary(lu, rt, position, entries, live_entries, idx.size)
+    classes = _closed_entry_classes(chain, entries)
+    if len(classes) > 1:
+        # reducible: one stationary entry distribution per closed class, weighted by the
+        # class's observed entry flux (the chain alone cannot say how much flows in each)
+        flux = (np.zeros(s) if entry_flux is None
+                else np.asarray(entry_flux, dtype=np.float64).ravel())
+        label = -np.ones(s, np.int64)
+        for k, members in enumerate(_classes_of_states(chain)):
+            label[members] = k
+        weights = np.array([max(flux[label == label[entries[c[0]]]].sum(), 0.0)
+                            for c in classes])
+        weights = weights / weights.sum() if weights.sum() > 0 else np.ones(len(classes))
+        weights /= weights.sum()
+        nu = np.zeros(entries.size)
+        for c, w in zip(classes, weights):
+            nu[c] = w * _embedded_stationary(lu, rt[c], position, entries[c],
+                                             live_entries[c], idx.size)
+    else:
+        nu = _embedded_stationary(lu, rt, position, entries, live_entries, idx.size)
     start = np.zeros(idx.size)
     ok = live[entries]
     start[position[entries[ok]]] = nu[ok]
+    if not start.sum() > 0:
+        raise TrappedResidences("every residence is trapped: the chain's entries carry no "
+                             "stationary mass from which the top can be reached")
     entry = np.zeros(s)
     entry[entries] = nu
-    return _finish(q_live, exit_probability[idx], start, tol, max_steps, lag, entry)
+    rtd = _finish(q_live, exit_probability[idx], start, tol, max_steps, lag, entry)
+    return ResidenceTimeDistribution(rtd.lag, rtd.probability, rtd.unresolved,
+                                     rtd.entry_distribution, None, max(1, len(classes)))
+
+
+def _classes_of_states(chain: sp.csr_matrix) -> list[np.ndarray]:
+    from cfbmarkov.markov.connectivity import closed_classes
+
+    return closed_classes(chain)
+
+
+def _closed_entry_classes(chain: sp.csr_matrix, entries: np.ndarray) -> list[np.ndarray]:
+    """The closed classes of the graph P_ij > 0 that hold entry states, each as positions
+    into ``entries``; transient entry states belong to none (they carry no stationary
+    mass). One class: all entries (the irreducible case, computed as before)."""
+    from cfbmarkov.markov.connectivity import closed_classes
+
+    classes = closed_classes(chain)
+    if len(classes) <= 1:
+        return [np.arange(entries.size)]
+    label = -np.ones(chain.shape[0], np.int64)
+    for k, members in enumerate(classes):
+        label[members] = k
+    of_entry = label[entries]
+    found = [np.flatnonzero(of_entry == k) for k in range(len(classes))]
+    found = [c for c in found if c.size]
+    return found if len(found) > 1 else [np.arange(entries.size)]
 
 
 def _finish(q_live, exit_probability, start, tol, max_steps, lag, entry

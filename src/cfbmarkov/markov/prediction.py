@@ -1,0 +1,152 @@
+"""Predictions: a Monte Carlo run of a fitted model from the state of a trajectory file
+at a given time, returned as arrays or written as a trajectory file like any other (the
+model attached as ``/provenance/model``).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov.model_file import model_datasets_and_attrs
+
+if TYPE_CHECKING:
+    from cfbmarkov.markov.model import MarkovModel
+
+
+def predict(model: "MarkovModel", trajectories, start: float, duration: float, seed: int = 0,
+            output: str | os.PathLike | None = None, progress: bool = False):
+    """Monte Carlo prediction of ``model`` from the particles' states in the frame at
+    ``start``.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted model.
+    trajectories : str, os.PathLike or Trajectories
+        The file whose frame at ``start`` gives the initial states.
+    start, duration : float
+        Start time and length of the prediction (s); ``duration`` a whole number of lags.
+    seed : int
+        Seed of the Monte Carlo.
+    output : str or os.PathLike, optional
+        Write the prediction as a trajectory file (positions drawn uniformly inside the
+        cells, the model attached as ``/provenance/model``).
+    progress : bool
+        Show a progress bar while writing.
+
+    Returns
+    -------
+    pathlib.Path or tuple
+        The output path, or (times [K+1] s, states [K+1, N], laps [K+1, N]) without one.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be read or does not fit the model, has no frame at
+        ``start`` (or lacks the history before it), ``duration`` is not a whole number
+        of lags or is shorter than one, or the output cannot be written.
+
+    References
+    ----------
+    Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in
+    Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
+    doi:10.3390/pr13030614 (Eq. 7).
+    """
+    from cfbmarkov.trajectories import opened
+
+    with opened(trajectories) as traj:
+        n_steps = model.steps_for(duration)
+        if n_steps < 1:
+            raise InputError(f"duration {duration:g} s is shorter than one lag ({model.lag:g} s)")
+        states0, positions0, laps0 = model.initial_states(traj, start)
+        states, laps = model.monte_carlo(states0, n_steps, seed, laps0)
+        times = start + model.lag * np.arange(n_steps + 1)
+        if output is None:
+            return times, states, laps
+        return write_prediction(model, traj, times, states, laps, positions0, seed, output,
+                                progress, duration=duration)
+
+
+def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
+                     states: np.ndarray, laps: np.ndarray, first_positions: np.ndarray,
+                     seed: int, output: str | os.PathLike, progress: bool = False,
+                     duration: float | None = None) -> Path:
+    """Write a Monte Carlo run of ``model`` as a trajectory file (a prediction).
+
+    The first frame keeps the actual positions it started from; later frames place each
+    particle uniformly inside the cell of its state (seeded by (seed, particle, step)). The
+    model is attached as ``/provenance/model``.
+
+    Parameters
+    ----------
+    model : MarkovModel
+    trajectories : Trajectories
+        The open file the run started from (ids, domain, provenance).
+    times : ndarray of float64, shape (K + 1,)
+        Frame times (s), one lag apart.
+    states, laps : ndarray of int32, shape (K + 1, N)
+        The Monte Carlo states and lap counters.
+    first_positions : ndarray of float64, shape (N, 2)
+        Positions (m) of the first frame.
+    seed : int
+        The seed of the run (also seeds the placement inside cells).
+    output : str or os.PathLike
+        The trajectory file to write (atomically).
+    progress : bool
+        Show a progress bar in simulated seconds.
+    duration : float, optional
+        The prediction's length as asked for (s), recorded in the file's parameters
+        (default: K lags).
+
+    Returns
+    -------
+    pathlib.Path
+        ``output``.
+
+    Raises
+    ------
+    InputError
+        If the file cannot be written.
+    """
+    from cfbmarkov.markov.states import place_in_cells
+    from cfbmarkov.trajectory_writer import TrajectoryWriter
+
+    traj = trajectories
+    n_steps = times.size - 1
+    duration = float(n_steps * model.lag if duration is None else duration)
+    start = float(times[0])
+    parameters = {"model": model.describe(), "seed": int(seed), "start": start,
+                  "duration": duration, "initial_frames": str(traj.path),
+                  "columns": model.state_space.columns, "rows": model.state_space.rows}
+    with TrajectoryWriter(output, traj.ids, width=traj.width, height=traj.height,
+                          source="markov-prediction", parameters=parameters,
+                          frame_interval=model.lag) as writer:
+        writer.attach("model", *model_datasets_and_attrs(model))
+        bar = _progress(progress, duration)
+        writer.append(times[0], first_positions, lap=laps[0])
+        cells = model.state_space.cell_of_state
+        block = 32
+        for k0 in range(1, n_steps + 1, block):
+            ks = range(k0, min(k0 + block, n_steps + 1))
+            positions = np.stack([place_in_cells(cells[states[k]], model.state_space, seed, k)
+                                  for k in ks])
+            writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop])
+            if bar is not None:
+                bar.update(model.lag * len(ks))
+        if bar is not None:
+            bar.close()
+    return Path(output)
+
+
+def _progress(enabled: bool, duration: float):
+    if not enabled:
+        return None
+    from tqdm import tqdm
+
+    return tqdm(total=duration, unit="s", unit_scale=False, desc="Monte Carlo (simulated s)",
+                bar_format="{desc}: {n:.3f}/{total:.3f} s [{elapsed}<{remaining}, {rate_fmt}]")
