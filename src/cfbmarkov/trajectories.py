@@ -19,6 +19,11 @@ Layout (H5MD-like, every array in SI units)::
 Files are written by :mod:`cfbmarkov.trajectory_writer`, under a temporary name and renamed
 when complete, so a reader never sees a half-written file. Frames are read one at a time or
 by window without loading the whole file (:meth:`Trajectories.positions` with a slice).
+
+Frames are evenly spaced within :data:`FRAME_SPACING_TOLERANCE` (1 %) of the frame interval,
+whatever the time origin, so times printed to a few decimals are accepted. A file of one
+frame has no ``frame_interval`` unless its producer gave one; then :meth:`Trajectories.lag_frames`
+refuses it (``docs/definitions.md``, File formats, Frame times).
 """
 
 from __future__ import annotations
@@ -39,8 +44,13 @@ from cfbmarkov.errors import InputError
 FORMAT = "cfbmarkov.trajectories"
 #: the layout's version (the ``version`` attribute)
 VERSION = 1
-#: relative tolerance on frame spacing and on matching a requested time to a frame
+#: relative tolerance (on max(|t|, 1 s)) for matching a requested time to the frame of a
+#: file that holds one frame, and so has no frame interval to scale a tolerance
 TIME_TOLERANCE = 1e-6
+#: relative tolerance on frame spacing: every step between frames lies within this fraction
+#: of the file's frame interval (``docs/definitions.md``, File formats, Frame times); a
+#: requested time or lag matches a frame within half of it, in frame intervals
+FRAME_SPACING_TOLERANCE = 0.01
 #: positions may lie this far outside the domain (m) before they are refused (round-off)
 POSITION_TOLERANCE = 1e-9
 
@@ -86,6 +96,32 @@ def lap_increments(previous_y: np.ndarray, y: np.ndarray, height: float) -> np.n
     """
     dy = y - previous_y
     return (dy < -0.5 * height).astype(np.int32) - (dy > 0.5 * height).astype(np.int32)
+
+
+def estimate_frame_interval(times) -> float:
+    """The frame interval of evenly spaced frame times: the least-squares slope of t_k
+    against k.
+
+    With times rounded to q s (printed to a few decimals) the slope is off by about
+    q / T^1.5 s, far less than a single step (off by up to q) or the median step; it does
+    not depend on the time origin.
+
+    Parameters
+    ----------
+    times : array_like of float, shape (T,)
+        Frame times (s), increasing.
+
+    Returns
+    -------
+    float
+        The interval (s); NaN for fewer than two times.
+    """
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    n = times.size
+    if n < 2:
+        return float("nan")
+    k = np.arange(n, dtype=np.float64) - 0.5 * (n - 1)
+    return float(np.dot(k, times - times[0]) / np.dot(k, k))
 
 
 def _open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
@@ -149,7 +185,9 @@ class Trajectories:
     width, height : float
         The riser W x H (m).
     frame_interval : float
-        Time between frames (s).
+        Time between frames (s): the file's ``frame_interval`` attribute or, for a file
+        without one, :func:`estimate_frame_interval` of its times; NaN for a file of one
+        frame without the attribute (then :meth:`lag_frames` raises).
     source : str
         What produced the file.
     parameters : dict
@@ -205,8 +243,8 @@ class Trajectories:
         self.source = str(f.attrs.get("source", "unknown"))
         self.parameters: dict[str, Any] = json.loads(f.attrs.get("parameters", "{}"))
         self.frame_interval = float(f.attrs.get("frame_interval", np.nan))
-        if not np.isfinite(self.frame_interval) and t > 1:
-            self.frame_interval = float(self.times[1] - self.times[0])
+        if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
+            self.frame_interval = estimate_frame_interval(self.times)
 
     def close(self) -> None:
         """Close the file."""
@@ -251,9 +289,24 @@ class Trajectories:
         return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in self._file.attrs.items()}
 
     # -- locating frames -------------------------------------------------------------
-    def _tolerance(self) -> float:
-        interval = self.frame_interval if np.isfinite(self.frame_interval) else 1.0
-        return max(TIME_TOLERANCE * max(abs(self.times[-1]), 1.0), 1e-3 * interval)
+    @property
+    def time_tolerance(self) -> float:
+        """How far (s) a frame may lie from a requested time and still be the frame at it.
+
+        Half of :data:`FRAME_SPACING_TOLERANCE` of the frame interval: frame times rounded
+        to q s lie within q/2 of the exact times, and the spacing check accepts q up to
+        the spacing tolerance of an interval. It does not depend on the time origin. A file
+        of one frame has no interval: then ``TIME_TOLERANCE * max(|t|, 1 s)`` (round-off).
+        """
+        if np.isfinite(self.frame_interval):
+            return 0.5 * FRAME_SPACING_TOLERANCE * self.frame_interval
+        return TIME_TOLERANCE * max(abs(float(self.times[-1])), 1.0)
+
+    def _frames_text(self) -> str:
+        if self.n_frames == 1:
+            return f"{self.path} holds one frame, at t = {_t(self.times[0])} s"
+        return (f"frames span {_t(self.times[0])} to {_t(self.times[-1])} s every "
+                f"{_t(self.frame_interval)} s")
 
     def frame_index(self, time: float) -> int:
         """Index of the frame at ``time``.
@@ -261,7 +314,7 @@ class Trajectories:
         Parameters
         ----------
         time : float
-            A frame time (s), matched within a small tolerance.
+            A frame time (s), matched within :attr:`time_tolerance`.
 
         Returns
         -------
@@ -273,10 +326,8 @@ class Trajectories:
             If no frame lies at ``time``.
         """
         i = int(np.argmin(np.abs(self.times - time)))
-        if abs(self.times[i] - time) > self._tolerance():
-            raise InputError(
-                f"{self.path}: no frame at t = {time:g} s (frames span {self.times[0]:g} to "
-                f"{self.times[-1]:g} s every {self.frame_interval:g} s)")
+        if not abs(self.times[i] - time) <= self.time_tolerance:
+            raise InputError(f"{self.path}: no frame at t = {_t(time)} s ({self._frames_text()})")
         return i
 
     def window(self, start: float, stop: float) -> slice:
@@ -285,7 +336,7 @@ class Trajectories:
         Parameters
         ----------
         start, stop : float
-            The window (s), matched to frames within a small tolerance.
+            The window (s), matched to frames within :attr:`time_tolerance`.
 
         Returns
         -------
@@ -298,11 +349,11 @@ class Trajectories:
         """
         if not stop > start:
             raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
-        tol = self._tolerance()
+        tol = self.time_tolerance
         if start < self.times[0] - tol or stop > self.times[-1] + tol:
             raise InputError(
                 f"window {start:g}:{stop:g} s lies outside the data of {self.path} "
-                f"({self.times[0]:g} to {self.times[-1]:g} s)")
+                f"({_t(self.times[0])} to {_t(self.times[-1])} s)")
         i0 = int(np.searchsorted(self.times, start - tol, side="left"))
         i1 = int(np.searchsorted(self.times, stop + tol, side="right"))
         if i1 - i0 < 1:
@@ -315,25 +366,30 @@ class Trajectories:
         Parameters
         ----------
         lag : float
-            The lag (s).
+            The lag (s), matched to a whole number of frame intervals within
+            :attr:`time_tolerance`.
 
         Returns
         -------
         int
-            ``lag / frame_interval`` (>= 1).
+            ``lag / frame_interval`` rounded (>= 1).
 
         Raises
         ------
         InputError
-            If the lag is not positive or not a whole multiple of the frame interval.
+            If the lag is not positive, the file has no frame interval (one frame and no
+            ``frame_interval`` attribute), or the lag is not a whole multiple of the frame
+            interval.
         """
         if not lag > 0:
             raise InputError(f"lag {lag:g} s must be positive")
-        ratio = lag / self.frame_interval
-        k = int(round(ratio))
-        if k < 1 or abs(ratio - k) > 1e-6 * max(ratio, 1.0):
+        if not np.isfinite(self.frame_interval):
+            raise InputError(f"{self.path} holds one frame: no frame interval, so no transition "
+                             f"can be counted (lag {lag:g} s)")
+        k = int(round(lag / self.frame_interval))
+        if k < 1 or not abs(lag - k * self.frame_interval) <= self.time_tolerance:
             raise InputError(f"lag {lag:g} s is not a whole multiple of the frame interval "
-                             f"{self.frame_interval:g} s of {self.path}")
+                             f"{_t(self.frame_interval)} s of {self.path}")
         return k
 
     # -- reading frames --------------------------------------------------------------
@@ -489,3 +545,8 @@ class Trajectories:
         """
         key = f"provenance/{name}"
         return self._file[key] if key in self._file else None
+
+
+def _t(value: float) -> str:
+    """A time for a message: up to 10 significant digits (10.00833, not 10.0083)."""
+    return f"{float(value):.10g}"

@@ -5,6 +5,14 @@
 Every frame is validated as it is written (finite, inside the domain, evenly spaced
 increasing times), and the file appears under its name only when complete: it is written
 under a temporary name beside it and renamed (:mod:`cfbmarkov._atomic`).
+
+Even spacing is judged relative to the frame interval, independent of the time origin:
+every step between frames must lie within :data:`~cfbmarkov.trajectories.FRAME_SPACING_TOLERANCE`
+(1 %) of the reference interval, the caller's ``frame_interval`` when given, else the
+median step (``docs/definitions.md``, File formats, Frame times). 1 % accepts times printed
+to 5 decimals at frame rates up to 1 kHz: rounding to q s moves a step by at most q
+(1e-5 s, 1 % of 1 ms) and still refuses a missing frame (100 %) or a step a few per cent
+off.
 """
 
 from __future__ import annotations
@@ -20,8 +28,13 @@ import numpy as np
 
 from cfbmarkov._atomic import discard, publish, temporary_path
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import (FORMAT, POSITION_TOLERANCE, TIME_TOLERANCE, VERSION,
-                                    PassEvents, lap_increments)
+from cfbmarkov.trajectories import (FORMAT, FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE, VERSION,
+                                    PassEvents, _t, estimate_frame_interval, lap_increments)
+
+#: steps before a block that join its own in the median a block's steps are judged against
+RECENT_STEPS = 64
+#: elements an [S, S]-like array must have before :func:`create_array_dataset` compresses it
+COMPRESS_MIN_SIZE = 4096
 
 
 class TrajectoryWriter:
@@ -31,6 +44,15 @@ class TrajectoryWriter:
     the lap counter is derived from the positions by the minimal-image rule when not given.
     On an error, or when used as a context manager that exits by an exception, the partial
     file is removed.
+
+    Even spacing: every step between frames must lie within
+    :data:`~cfbmarkov.trajectories.FRAME_SPACING_TOLERANCE` (1 %) of the reference
+    interval, whatever the time origin. The reference is ``frame_interval`` when given;
+    otherwise the median of the steps: of each block with the steps just before it as it is
+    written (the first step while fewer than three are known), and of all steps when the
+    file is closed. The stored ``frame_interval`` is then the least-squares slope of the
+    times (:func:`~cfbmarkov.trajectories.estimate_frame_interval`), exact to far below one
+    rounding step for times printed to a few decimals.
 
     Parameters
     ----------
@@ -47,15 +69,16 @@ class TrajectoryWriter:
     with_velocity : bool, optional
         Store velocities (then every frame must carry them).
     frame_interval : float, optional
-        Time between frames (s); by default taken from the first two frames.
+        Time between frames (s), the reference for the spacing check and stored as is; by
+        default estimated from the times when the file is closed.
     label : str, optional
         Names the file in error messages (default: ``path``).
 
     Raises
     ------
     InputError
-        If there is no particle id, the ids are not unique, or the domain is not of
-        positive size.
+        If there is no particle id, the ids are not unique, the domain is not of positive
+        size, or ``frame_interval`` is not a positive number.
 
     Notes
     -----
@@ -74,6 +97,8 @@ class TrajectoryWriter:
             raise InputError("particle ids are not unique")
         if not (width > 0 and height > 0):
             raise InputError(f"domain {width:g} x {height:g} m must have positive size")
+        if frame_interval is not None and not (np.isfinite(frame_interval) and frame_interval > 0):
+            raise InputError(f"frame interval {frame_interval!r} s must be a positive number")
         self.width, self.height = float(width), float(height)
         self.with_velocity = with_velocity
         self._label = label or str(self.path)
@@ -99,8 +124,10 @@ class TrajectoryWriter:
             f.create_dataset("frames/velocity", shape=(0, n, 2), maxshape=(None, n, 2),
                              dtype="f8", chunks=(1, n, 2))
         self._n_frames = 0
-        self._first_time = self._last_time = None
-        self._interval = frame_interval
+        self._last_time: float | None = None
+        self._continued_from: float | None = None   # last time of the series continued
+        self._interval = None if frame_interval is None else float(frame_interval)
+        self._recent_steps = np.zeros(0)
         self._last_y: np.ndarray | None = None
         self._last_lap: np.ndarray | None = None
         self._closed = False
@@ -151,7 +178,7 @@ class TrajectoryWriter:
         """
         if self._n_frames:
             raise InputError(f"{self._label}: cannot continue a series after writing frames")
-        self._last_time = float(time)
+        self._last_time = self._continued_from = float(time)
         self._last_y = np.asarray(heights, dtype=np.float64).copy()
         self._last_lap = np.asarray(laps, dtype=np.int32).copy()
         if frame_interval is not None:
@@ -167,18 +194,28 @@ class TrajectoryWriter:
         steps = np.diff(allt)
         if np.any(steps <= 0):
             k = int(np.argmax(steps <= 0))
-            raise InputError(f"{self._label}: time does not increase at t = {allt[k + 1]:g} s "
-                             f"(after {allt[k]:g} s)")
-        interval = self._interval if self._interval is not None else steps[0]
-        tol = max(TIME_TOLERANCE * max(abs(allt[-1]), 1.0), 1e-4 * interval)
-        bad = np.abs(steps - interval) > tol
+            raise InputError(f"{self._label}: time does not increase at t = {_t(allt[k + 1])} s "
+                             f"(after {_t(allt[k])} s)")
+        known = np.concatenate([self._recent_steps, steps])
+        self._check_spacing(allt, known, known.size - steps.size)
+        self._recent_steps = known[-RECENT_STEPS:]
+
+    def _check_spacing(self, times: np.ndarray, steps: np.ndarray, first: int = 0) -> None:
+        """Refuse the first of ``steps[first:]`` (between ``times[i - first]`` and the
+        next) more than FRAME_SPACING_TOLERANCE off the reference interval."""
+        if self._interval is not None:
+            reference, what = self._interval, "the frame interval"
+        elif steps.size >= 3:
+            reference, what = float(np.median(steps)), "the median step"
+        else:
+            reference, what = float(steps[0]), "the first step"
+        bad = np.abs(steps[first:] - reference) > FRAME_SPACING_TOLERANCE * reference
         if np.any(bad):
             k = int(np.argmax(bad))
-            raise InputError(f"{self._label}: frames unevenly spaced: {steps[k]:g} s between "
-                             f"t = {allt[k]:g} and {allt[k + 1]:g} s, expected {interval:g} s")
-        if self._interval is None:
-            self._interval = float(interval)
-            self._file.attrs["frame_interval"] = self._interval
+            raise InputError(
+                f"{self._label}: frames unevenly spaced: {_t(steps[first + k])} s between "
+                f"t = {_t(times[k])} and {_t(times[k + 1])} s, expected {_t(reference)} s "
+                f"({what}, within {FRAME_SPACING_TOLERANCE:.0%})")
 
     def _check_array(self, name: str, values: np.ndarray, times: np.ndarray) -> None:
         finite = np.isfinite(values)
@@ -364,13 +401,14 @@ class TrajectoryWriter:
         name : str
             The group's name.
         datasets : dict of str to ndarray
-            Datasets of the group.
+            Datasets of the group, written by :func:`create_array_dataset` (arrays of two or
+            more dimensions compressed).
         attrs : dict, optional
             Attributes of the group.
         """
         g = self._file.create_group(f"provenance/{name}")
         for key, value in datasets.items():
-            g.create_dataset(key, data=value)
+            create_array_dataset(g, key, value)
         for key, value in (attrs or {}).items():
             g.attrs[key] = value
 
@@ -392,12 +430,30 @@ class TrajectoryWriter:
         if self._n_frames == 0:
             self.abort()
             raise InputError(f"{self._label}: no frames to write")
+        try:
+            self._finish_times()
+        except BaseException:
+            self.abort()
+            raise
         self._file.close()
         try:
             publish(self._tmp, self.path)
         finally:
             self._closed = True
         return self.path
+
+    def _finish_times(self) -> None:
+        """Check the spacing of all frames against their median step and store the frame
+        interval estimated from them (when the caller gave none)."""
+        if self._interval is not None:
+            return      # every step was checked against it as it was written
+        times = self._file["frames/time"][()]
+        if self._continued_from is not None:
+            times = np.concatenate([[self._continued_from], times])
+        if times.size < 2:
+            return      # one frame: no interval
+        self._check_spacing(times, np.diff(times))
+        self._file.attrs["frame_interval"] = estimate_frame_interval(times)
 
     def abort(self) -> None:
         """Discard the partial file."""
@@ -408,6 +464,39 @@ class TrajectoryWriter:
         finally:
             discard(self._tmp)
             self._closed = True
+
+
+def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
+    """Write ``value`` as dataset ``name`` of ``group``, compressed where it pays.
+
+    An array of two or more dimensions with at least :data:`COMPRESS_MIN_SIZE` elements
+    (the [S, S] matrices of a model) is stored chunked in blocks of whole rows of about
+    1 MiB and compressed with gzip (deflate) at level 1; anything else is stored plain.
+    Deflate is built into every HDF5 library, so any reader still reads the dataset as a
+    plain dense array. Level 1 without the shuffle filter: on the sparse matrices of a
+    model it gave the smallest file and the fastest load of the settings tried (shuffle
+    and higher levels gave larger or slower files).
+
+    Parameters
+    ----------
+    group : h5py.Group
+        Where to create the dataset.
+    name : str
+        The dataset's name.
+    value : array_like
+        Its data (stored with its own dtype and shape).
+
+    Returns
+    -------
+    h5py.Dataset
+    """
+    value = np.asarray(value)
+    if value.ndim < 2 or value.size < COMPRESS_MIN_SIZE:
+        return group.create_dataset(name, data=value)
+    row = int(np.prod(value.shape[1:])) * value.dtype.itemsize
+    rows = int(min(value.shape[0], max(1, (1 << 20) // max(row, 1))))
+    return group.create_dataset(name, data=value, chunks=(rows, *value.shape[1:]),
+                                compression="gzip", compression_opts=1)
 
 
 def write_trajectories(path: str | os.PathLike, times, positions, *, width: float, height: float,
