@@ -106,7 +106,9 @@ def test_cli_fit_on_one_frame_is_one_line_and_exit_2(tmp_path, capsys, one_frame
     assert_one_line_exit_2(code, err, out)
 
 
-def test_cli_predict_from_one_frame_is_one_line_and_exit_2(tmp_path, capsys, one_frame):
+def test_cli_predict_from_one_frame(tmp_path, capsys, one_frame):
+    """A one-frame file is an initial condition: a model on cells predicts from it (its
+    state needs no frame before), a model with memory cannot (one line, exit 2)."""
     run = write(tmp_path / "run.h5", 0.025 * np.arange(41))
     model = tmp_path / "m.h5"
     code, _, err = run_cli(capsys, "fit", run, "--cells", "3x5", "--lag", "0.025", "--window",
@@ -114,6 +116,17 @@ def test_cli_predict_from_one_frame_is_one_line_and_exit_2(tmp_path, capsys, one
     assert code == 0, err
     pred = tmp_path / "p.h5"
     code, _, err = run_cli(capsys, "predict", model, "--init", one_frame, "--start", 0.5,
+                           "--duration", 0.1, "-o", pred, "-q")
+    assert code == 0, err
+    with Trajectories(pred) as p, Trajectories(one_frame) as first:
+        assert p.n_frames == 5
+        np.testing.assert_array_equal(p.positions(0), first.positions(0))
+    memory = tmp_path / "memory.h5"
+    code, _, err = run_cli(capsys, "fit", run, "--cells", "3x5", "--lag", "0.025", "--window",
+                           "0.025:1", "--states", "cells-direction", "-o", memory)
+    assert code == 0, err
+    pred = tmp_path / "p2.h5"
+    code, _, err = run_cli(capsys, "predict", memory, "--init", one_frame, "--start", 0.5,
                            "--duration", 0.1, "-o", pred, "-q")
     assert "holds one frame: no frame interval" in err
     assert_one_line_exit_2(code, err, pred)

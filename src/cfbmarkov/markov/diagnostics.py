@@ -424,7 +424,7 @@ def ck_test(data, model: MarkovModel, groups: Mapping[str, Sequence[int]],
     sources = []
     windows = as_discrete_list(data)
     for discrete in windows:
-        if discrete.state_space != space or abs(discrete.lag - model.lag) > 1e-6 * model.lag:
+        if discrete.state_space != space or not discrete.matches_lag(model.lag):
             raise InputError(f"CK test: the discrete trajectories ({discrete.state_space.describe()}"
                              f", lag {discrete.lag:g} s) were not made with the model's state "
                              f"space and lag ({space.describe()}, {model.lag:g} s)")

@@ -36,7 +36,7 @@ import numpy as np
 
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.states import StateSpace
-from cfbmarkov.trajectories import TIME_TOLERANCE, Trajectories, opened
+from cfbmarkov.trajectories import FRAME_SPACING_TOLERANCE, Trajectories, opened
 
 #: the state of a particle that is absent in a frame
 ABSENT = -1
@@ -128,9 +128,13 @@ class DiscreteTrajectories:
         return int(self.states.shape[1])
 
     def _tolerance(self) -> float:
-        # as Trajectories.window, so that a block selects the frames the file would
-        last = abs(float(self.times[-1])) if self.n_frames else 0.0
-        return max(TIME_TOLERANCE * max(last, 1.0), 1e-3 * self.frame_interval)
+        # as Trajectories.window (half the frame-spacing tolerance of an interval), so that
+        # a block selects the frames the file would
+        return 0.5 * FRAME_SPACING_TOLERANCE * self.frame_interval
+
+    def matches_lag(self, lag: float) -> bool:
+        """Whether ``lag`` (s) is this window's lag, to the frame-time tolerance."""
+        return abs(self.lag - float(lag)) <= self._tolerance()
 
     def block(self, start: float, stop: float) -> "DiscreteTrajectories":
         """The frames with ``start <= t <= stop`` (s), e.g. one fold of a cross-validation.
@@ -370,9 +374,10 @@ def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
 
 
 def _prepare(traj: Trajectories, state_space: StateSpace, lag: float) -> int:
-    """Check that ``state_space`` fits the file and return the lag in frames."""
+    """Check that ``state_space`` fits the file and return the lag in frames (NaN as the
+    lag: check the fit only, return 0)."""
     check_domain(state_space, traj.width, traj.height, str(traj.path))
-    lag_frames = traj.lag_frames(lag)
+    lag_frames = traj.lag_frames(lag) if np.isfinite(lag) else 0
     if state_space.needs_velocity and not traj.has_velocity:
         raise InputError(f"state space {state_space.kind} needs velocities; {traj.path} "
                          "has none")
@@ -458,10 +463,17 @@ def discretize_frame(source, state_space: StateSpace, lag: float, time: float
         missing.
     """
     with opened(source) as traj:
-        lag_frames = _prepare(traj, state_space, lag)
+        if state_space.memory_lags == 0 and traj.n_frames == 1:
+            # a one-frame file has no frame interval, and a state without memory needs none
+            _prepare(traj, state_space, float("nan"))
+            lag_frames, interval = 1, float(lag)
+        else:
+            lag_frames, interval = _prepare(traj, state_space, lag), None
         i = traj.frame_index(time)
         frames = _read_rows(traj, i, i + 1, state_space.memory_lags * lag_frames, None,
                             state_space.needs_velocity, True, "error")
+    if interval is not None:
+        frames = replace(frames, frame_interval=interval)
     return frames.discretize(state_space, lag_frames, keep_positions=True)
 
 

@@ -162,8 +162,7 @@ def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
     occupied = np.zeros(s, np.int64)
     pairs = 0
     for window in windows:
-        if window.state_space != space or window.lag_frames * window.frame_interval \
-                != windows[0].lag_frames * windows[0].frame_interval:
+        if window.state_space != space or not window.matches_lag(windows[0].lag):
             raise InputError("discrete trajectories counted together must share the state "
                              "space and the lag")
         pairs += _count_kernel(np.ascontiguousarray(window.states, dtype=np.int32),
@@ -263,7 +262,7 @@ class TransitionEstimator:
                 raise InputError(f"discrete trajectories are in {window.state_space.describe()}"
                                  f", the estimator's state space is "
                                  f"{self.state_space.describe()}")
-            if abs(window.lag - self.lag) > 1e-6 * self.lag:
+            if not window.matches_lag(self.lag):
                 raise InputError(f"discrete trajectories have a lag of {window.lag:g} s "
                                  f"({window.lag_frames} frames), the estimator's is "
                                  f"{self.lag:g} s")

@@ -10,7 +10,7 @@ states:
   ``rows``, ``lag`` (s), ``window`` (s, NaN for none), ``estimator``, ``source`` (JSON),
   ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
   ``cfbmarkov_version``; for a model chosen by ``--states auto``, ``selection`` (JSON); for
-a model fitted on the largest strongly connected set, ``connected = 1``.
+  a model fitted on the largest strongly connected set, ``connected = 1``.
 
 The [S, S] datasets are stored chunked (blocks of whole rows, about 1 MiB) and compressed
 with gzip (deflate, level 1; :func:`~cfbmarkov.trajectory_writer.create_array_dataset`): the
