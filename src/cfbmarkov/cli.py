@@ -6,6 +6,7 @@ Errors in the input (files, options) are reported as one line on stderr with exi
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -39,6 +40,34 @@ def parse_window(text: str) -> tuple[float, float]:
     if not stop > start:
         raise argparse.ArgumentTypeError(f"window '{text}' is empty: STOP must exceed START")
     return start, stop
+
+
+def parse_region(text: str) -> tuple[tuple[float, float], ...]:
+    """Parse a region: ``'-0.001:0.091,0:0.95'`` -> ((-0.001, 0.091), (0.0, 0.95)).
+
+    Parameters
+    ----------
+    text : str
+        Two or three ``LO:HI`` ranges (m), for x, y (, z), separated by commas.
+
+    Returns
+    -------
+    tuple of (float, float)
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        When a range is not two finite numbers with HI > LO, or there are not 2 or 3.
+    """
+    try:
+        ranges = tuple(tuple(float(v) for v in part.split(":")) for part in text.split(","))
+    except ValueError:
+        ranges = ()
+    if not 2 <= len(ranges) <= 3 or any(
+            len(r) != 2 or not all(map(math.isfinite, r)) or not r[1] > r[0] for r in ranges):
+        raise argparse.ArgumentTypeError(
+            f"region '{text}' is not XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX] in m (finite, MAX > MIN)")
+    return ranges
 
 
 def parse_cells(text: str) -> tuple[int, int]:
@@ -90,7 +119,8 @@ def _cmd_import(args) -> int:
     from cfbmarkov.io import import_file
 
     path = import_file(args.source, args.format, args.output, width=args.width,
-                       height=args.height, time_step=args.time_step)
+                       height=args.height, time_step=args.time_step,
+                       vertical_axis=args.vertical_axis, region=args.region)
     print(path)
     return 0
 
@@ -323,11 +353,19 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--format", required=True, choices=["csv", "lammps"])
     s.add_argument("-o", "--output", required=True, help="output trajectory file (.h5)")
     s.add_argument("--width", type=_positive_float, default=None,
-                   help="riser width W, m (default: the dump's box, else 0.09)")
+                   help="riser width W, m: the riser is 0..W across in the source's own "
+                        "coordinates (default: the dump's box, else 0.09)")
     s.add_argument("--height", type=_positive_float, default=None,
-                   help="riser height H, m (default: the dump's box, else 0.95)")
+                   help="riser height H, m: 0..H vertically in the source's coordinates "
+                        "(default: the dump's box, else 0.95)")
     s.add_argument("--time-step", type=_positive_float, default=None,
                    help="LAMMPS time step, s, for dumps without ITEM: TIME")
+    s.add_argument("--vertical-axis", choices=["x", "y", "z"], default=None,
+                   help="the source's vertical axis (gravity along minus it); required for a "
+                        "3D dump, which is projected on (across, vertical)")
+    s.add_argument("--region", type=parse_region, default=None,
+                   help="the riser in the source's coordinates and units (m): "
+                        "XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX]")
     s.set_defaults(func=_cmd_import)
 
     s = sub.add_parser("fit", help="fit a Markov chain model on a window of a trajectory file")

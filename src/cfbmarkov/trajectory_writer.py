@@ -33,6 +33,9 @@ from cfbmarkov.trajectories import (FORMAT, FRAME_SPACING_TOLERANCE, POSITION_TO
 
 #: steps before a block that join its own in the median a block's steps are judged against
 RECENT_STEPS = 64
+#: laps from wrapped heights: the largest step between frames (fraction of H) that the
+#: importers accept; beyond a quarter a coarse output of a fast particle is likely
+IMPORT_MAX_STEP = 0.25
 #: elements an [S, S]-like array must have before :func:`create_array_dataset` compresses it
 COMPRESS_MIN_SIZE = 4096
 
@@ -73,6 +76,11 @@ class TrajectoryWriter:
         default estimated from the times when the file is closed.
     label : str, optional
         Names the file in error messages (default: ``path``).
+    max_step : float, optional
+        Where laps are derived from the heights (none given), the largest step a particle
+        may make between frames, as a fraction of the height H (default 0.5: beyond it the
+        minimal-image rule cannot work; the importers use ``IMPORT_MAX_STEP`` = 0.25); a
+        larger step is refused, naming the particle and the times.
 
     Raises
     ------
@@ -88,8 +96,9 @@ class TrajectoryWriter:
     def __init__(self, path: str | os.PathLike, ids, *, width: float, height: float,
                  source: str, parameters: dict[str, Any] | None = None,
                  with_velocity: bool = False, frame_interval: float | None = None,
-                 label: str | None = None):
+                 label: str | None = None, max_step: float = 0.5):
         self.path = Path(path)
+        self.max_step = float(max_step)
         self.ids = np.asarray(ids, dtype=np.int64)
         if self.ids.ndim != 1 or self.ids.size == 0:
             raise InputError("a trajectory needs at least one particle id")
@@ -235,6 +244,22 @@ class TrajectoryWriter:
                 f"the domain 0..{self.width:g} x 0..{self.height:g} m at ({x[t_idx, p_idx]:g}, "
                 f"{y[t_idx, p_idx]:g})")
 
+    def _check_minimal_image(self, previous_y: np.ndarray, y: np.ndarray, t0, t1) -> None:
+        """Laps from wrapped heights need small steps: refuse a particle that moved more
+        than ``max_step`` of the height between two frames (by the minimal image; beyond
+        half the height its pass through the periodic boundary, or not, cannot be told from
+        the positions at all)."""
+        step = np.abs(y - previous_y)
+        step = np.minimum(step, self.height - step)          # the minimal image
+        worst = int(np.argmax(step))
+        if step[worst] > self.max_step * self.height:
+            raise InputError(
+                f"{self._label}: particle {int(self.ids[worst])} moved {step[worst]:.4g} m "
+                f"(more than {self.max_step:g} of the height {self.height:g} m) between t = {t0:g} "
+                f"and {t1:g} s: the lap counter cannot be inferred from wrapped positions; "
+                "write frames more often, or give unwrapped coordinates (xu yu) or image "
+                "flags (ix iy)")
+
     # -- writing -----------------------------------------------------------------------
     def append(self, time: float, position, velocity=None, lap=None) -> None:
         """Append one frame.
@@ -300,10 +325,13 @@ class TrajectoryWriter:
         if laps is None:
             laps = np.empty((t, n), dtype=np.int32)
             prev_y, prev_lap = self._last_y, self._last_lap
+            prev_t = self._last_time
             for k in range(t):
                 y = positions[k, :, 1]
+                if prev_y is not None:
+                    self._check_minimal_image(prev_y, y, prev_t, times[k])
                 laps[k] = 0 if prev_y is None else prev_lap + lap_increments(prev_y, y, self.height)
-                prev_y, prev_lap = y, laps[k]
+                prev_y, prev_lap, prev_t = y, laps[k], times[k]
         else:
             laps = np.asarray(laps, dtype=np.int32).reshape(t, n)
         f = self._file

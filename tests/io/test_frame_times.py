@@ -28,6 +28,8 @@ def printed(t0: float, rate: float, n_frames: int, decimals: int = 5) -> np.ndar
 
 
 def write(path, times, **options):
+    # random positions jump about: give the laps (0), they cannot come from the positions
+    options.setdefault("laps", np.zeros((len(times), 4), np.int32))
     return write_trajectories(path, times, positions(len(times)), width=WIDTH, height=HEIGHT,
                               **options)
 

@@ -19,7 +19,8 @@ FORMATS = ("csv", "lammps")
 
 def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, *,
                 width: float | None = None, height: float | None = None,
-                time_step: float | None = None) -> Path:
+                time_step: float | None = None, vertical_axis: str | None = None,
+                region: tuple[tuple[float, float], ...] | None = None) -> Path:
     """Import ``source`` in format ``fmt`` ('csv' or 'lammps') as the trajectory file ``output``.
 
     Parameters
@@ -36,6 +37,10 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
     time_step : float, optional
         Simulation time step, s, that dates LAMMPS frames carrying no ``ITEM: TIME``; a CSV
         file carries its times in column t and takes no time step.
+    vertical_axis : {"x", "y", "z"}, optional
+        The source's vertical axis (LAMMPS dumps; required for a 3D dump).
+    region : sequence of (lo, hi), optional
+        The riser in the source's coordinates, one range per axis x, y (, z) (LAMMPS dumps).
 
     Returns
     -------
@@ -58,8 +63,13 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
         if time_step is not None:
             raise InputError("--time-step applies to LAMMPS dumps only; a CSV file gives its "
                              "times in column t")
+        if vertical_axis not in (None, "y") or region is not None:
+            raise InputError("--vertical-axis and --region apply to LAMMPS dumps only so far; "
+                             "a CSV file gives x across and y up, measured from the riser's "
+                             "lower-left corner")
         return import_csv(source, output, width=width, height=height)
-    return import_lammps(source, output, width=width, height=height, time_step=time_step)
+    return import_lammps(source, output, width=width, height=height, time_step=time_step,
+                         vertical_axis=vertical_axis, region=region)
 
 
 __all__ = ["FORMATS", "import_csv", "import_file", "import_lammps"]

@@ -9,16 +9,30 @@ A dump is a sequence of frames::
     ITEM: BOX BOUNDS [flags]   then one 'lo hi' line per dimension (2 or 3)
     ITEM: ATOMS id ... x y ... then one line per atom, columns in any order
 
-Positions are read from ``x y``, unwrapped ``xu yu``, scaled ``xs ys`` or scaled unwrapped
-``xsu ysu`` (the first pair present, in that order), velocities from ``vx vy`` when present.
-Positions are measured from the box's lower corner (the domain starts at 0) and wrapped into
-the box in every periodic direction: LAMMPS writes atoms slightly outside a periodic box
-between re-neighbourings, and unwrapped coordinates far outside it. The box must stay the same
-in every frame and be orthogonal (a triclinic box is refused).
+Positions are read from unwrapped ``xu yu`` (or scaled ``xsu ysu``) where the dump has them,
+else from ``x y`` (or scaled ``xs ys``), each with its z where present; velocities from
+``vx vy (vz)``, image flags from ``ix iy (iz)``.
 
-The time of a frame is ``ITEM: TIME`` when present, else timestep x ``time_step`` (s). The
-domain is the box unless ``width``/``height`` (m) override it. Frames are parsed and written
-one at a time, so memory stays at a few frames whatever the length of the dump.
+The riser: a 2D dump (no z, or all atoms at one z) has x across and y vertical; a 3D dump
+(atoms spread over x, y and z) is refused unless its vertical axis is given
+(``vertical_axis``), never guessed; it is then projected on (across, vertical), across being
+the first other axis, and the depth axis dropped (recorded in the provenance). The riser's
+region in the dump's own coordinates is ``region`` (one range per axis), else 0..``width``
+across and 0..``height`` vertically where those are given, else the box; positions are
+measured from the region's lower corner, so a box wider than the riser shifts nothing, and
+a particle outside the region is refused with its coordinate as the dump writes it. Without
+a region the box must stay the same in every frame; with one, it may change (shrink-wrapped
+``m`` boundaries).
+
+Laps on a periodic vertical axis are exact where the dump allows: floor(yu / H) from
+unwrapped coordinates, the image flag iy from wrapped ones; otherwise they follow the
+minimal-image rule, and a particle that moves more than a quarter of the height between
+frames is refused (coarse output of a fast particle), naming the particle, the step and
+the fix. A triclinic box is refused.
+
+The time of a frame is ``ITEM: TIME`` when present, else timestep x ``time_step`` (s).
+Frames are parsed and written one at a time, so memory stays at a few frames whatever the
+length of the dump.
 """
 
 from __future__ import annotations
@@ -45,11 +59,15 @@ from cfbmarkov.io._common import (
     removing_new_folders,
     whole_ids,
 )
-from cfbmarkov.trajectory_writer import TrajectoryWriter
+from cfbmarkov.trajectory_writer import IMPORT_MAX_STEP, TrajectoryWriter
 
-#: position column pairs, in order of preference
-POSITION_COLUMNS = (("x", "y"), ("xu", "yu"), ("xs", "ys"), ("xsu", "ysu"))
-VELOCITY_COLUMNS = ("vx", "vy")
+#: position column families, in order of preference: unwrapped first (exact laps), then
+#: wrapped (laps from image flags where present, else from the minimal-image rule)
+POSITION_COLUMNS = (("xu", "yu", "zu"), ("xsu", "ysu", "zsu"), ("x", "y", "z"),
+                    ("xs", "ys", "zs"))
+VELOCITY_COLUMNS = ("vx", "vy", "vz")
+IMAGE_COLUMNS = ("ix", "iy", "iz")
+AXES = "xyz"
 #: relative change of the box bounds between frames that is taken as round-off
 BOX_TOLERANCE = 1e-9
 
@@ -91,29 +109,32 @@ class DumpFrame:
 
 @dataclass(frozen=True)
 class AtomColumns:
-    """Where an ``ITEM: ATOMS`` line puts the id, the position pair and the velocity pair.
+    """Where an ``ITEM: ATOMS`` line puts the id, the positions, velocities and image flags.
 
     Attributes
     ----------
     id : int
         Column of the atom id.
     position : tuple of int
-        Columns of the position pair.
+        Columns of the position family, x y (and z where present).
     position_names : tuple of str
-        Their names: ``('x', 'y')``, ``('xu', 'yu')``, ``('xs', 'ys')`` or ``('xsu', 'ysu')``.
-    velocity : tuple of int or None
-        Columns of ``vx``, ``vy``, or None when the dump has no velocities.
+        Their names, e.g. ``('xu', 'yu', 'zu')``, ``('x', 'y')``.
+    velocity : tuple of (int or None) or None
+        Columns of vx, vy, vz (None for a missing one), or None when the dump has none.
+    image : tuple of (int or None) or None
+        Columns of the image flags ix, iy, iz (None for a missing one), or None.
     """
 
     id: int
-    position: tuple[int, int]
-    position_names: tuple[str, str]
-    velocity: tuple[int, int] | None
+    position: tuple[int, ...]
+    position_names: tuple[str, ...]
+    velocity: tuple[int, ...] | None
+    image: tuple[int, ...] | None
 
     @classmethod
     def find(cls, names: tuple[str, ...], where: str) -> AtomColumns:
-        """The layout of the column ``names``; positions are the first pair present among
-        x y, xu yu, xs ys, xsu ysu.
+        """The layout of the column ``names``: positions are the first family present
+        among xu yu, xsu ysu, x y, xs ys (each with its z where present).
 
         Raises
         ------
@@ -122,22 +143,71 @@ class AtomColumns:
         """
         if "id" not in names:
             raise InputError(f"{where}: ITEM: ATOMS has no 'id' column ({' '.join(names)})")
-        for pair in POSITION_COLUMNS:
-            if pair[0] in names and pair[1] in names:
+        for family in POSITION_COLUMNS:
+            if family[0] in names and family[1] in names:
                 break
         else:
-            raise InputError(f"{where}: ITEM: ATOMS has no position columns (x y, xu yu, xs ys "
-                             f"or xsu ysu) among: {' '.join(names)}")
-        velocity = None
-        if all(v in names for v in VELOCITY_COLUMNS):
-            velocity = (names.index("vx"), names.index("vy"))
-        return cls(names.index("id"), (names.index(pair[0]), names.index(pair[1])), pair,
-                   velocity)
+            raise InputError(f"{where}: ITEM: ATOMS has no position columns (xu yu, xsu ysu, "
+                             f"x y or xs ys) among: {' '.join(names)}")
+        present = family if family[2] in names else family[:2]
+
+        def columns(group):         # per source axis; None where the column is missing
+            found = tuple(names.index(n) if n in names else None for n in group)
+            return found if any(c is not None for c in found) else None
+
+        return cls(names.index("id"), tuple(names.index(n) for n in present), present,
+                   columns(VELOCITY_COLUMNS), columns(IMAGE_COLUMNS))
+
+    def velocity_columns(self, across: int, vertical: int) -> tuple[int, int] | None:
+        """Columns of the across and vertical velocity, or None where either is missing."""
+        if self.velocity is None or None in (self.velocity[across], self.velocity[vertical]):
+            return None
+        return self.velocity[across], self.velocity[vertical]
 
     @property
     def scaled(self) -> bool:
         """Whether positions are fractions of the box (``xs``/``xsu`` columns)."""
         return self.position_names[0].startswith("xs")
+
+    @property
+    def unwrapped(self) -> bool:
+        """Whether positions are unwrapped (``xu``/``xsu`` columns)."""
+        return self.position_names[0].endswith("u")
+
+
+@dataclass(frozen=True)
+class RiserFrame:
+    """How the dump's coordinates map onto the riser: which source axis is vertical and
+    which is across, and the region (in the source's coordinates) that is the riser.
+
+    Attributes
+    ----------
+    across, vertical : int
+        Source axis (0, 1, 2 for x, y, z) of the riser's x and y.
+    region : numpy.ndarray
+        [[across lo, hi], [vertical lo, hi]] in m, source coordinates.
+    from_box : bool
+        Whether the region is the dump's box (then the box must not change).
+    periodic : tuple of bool
+        Whether the across and the vertical axis are periodic in the dump.
+    depth : int or None
+        The source axis dropped (a 3D dump projected on across x vertical).
+    """
+
+    across: int
+    vertical: int
+    region: np.ndarray
+    from_box: bool
+    periodic: tuple[bool, bool]
+    depth: int | None
+
+    @property
+    def width(self) -> float:
+        return float(self.region[0, 1] - self.region[0, 0])
+
+    @property
+    def height(self) -> float:
+        return float(self.region[1, 1] - self.region[1, 0])
 
 
 class DumpReader:
@@ -334,7 +404,8 @@ class DumpReader:
 # -- the importer -----------------------------------------------------------------------------
 def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
                   width: float | None = None, height: float | None = None,
-                  time_step: float | None = None) -> Path:
+                  time_step: float | None = None, vertical_axis: str | None = None,
+                  region: tuple[tuple[float, float], ...] | None = None) -> Path:
     """Import a LAMMPS/LIGGGHTS text dump (optionally gzipped, SI units) as a trajectory file.
 
     Parameters
@@ -344,11 +415,20 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
     output : str or os.PathLike
         The trajectory file (HDF5) to write; it appears only when complete.
     width, height : float, optional
-        Override the domain, m, which is by default the dump's box with its lower corner
-        moved to 0.
+        The riser is 0..width across and 0..height vertically in the dump's own
+        coordinates (m); by default it is the dump's box. A box wider than the riser does
+        not shift the positions.
     time_step : float, optional
         Simulation time step, s: the time of frames without ``ITEM: TIME`` is
         timestep x time_step.
+    vertical_axis : {"x", "y", "z"}, optional
+        The dump's vertical axis (gravity along minus it); required for a 3D dump (atoms
+        spread over x, y and z), which is then projected on (across, vertical), across
+        being the first other axis. Default y for a 2D dump.
+    region : sequence of (lo, hi), optional
+        The riser in the dump's coordinates (m), one range per source axis x, y (, z); it
+        overrides ``width``/``height`` and the box, and the box may then change between
+        frames (shrink-wrapped boundaries).
 
     Returns
     -------
@@ -358,8 +438,10 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
     Raises
     ------
     InputError
-        On bad input (no frames, no time, a changing or triclinic box, particles missing
-        from a frame, units other than SI, ...); no file is left behind.
+        On bad input (no frames, no time, a changing or triclinic box without a region, a
+        3D dump without ``vertical_axis``, a particle outside the riser, particles missing
+        from a frame, laps that cannot be inferred, units other than SI, ...); no file is
+        left behind.
     """
     path = check_source(source)
     output = check_output(output, path)
@@ -374,25 +456,97 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
         reference = np.unique(whole_ids(first.atoms[:, layout.id], first.where(label)))
         if reference.size == 0:
             raise InputError(f"{first.where(label)}: the first frame holds no atoms")
-        domain = (float(np.ptp(first.box[0])) if width is None else float(width),
-                  float(np.ptp(first.box[1])) if height is None else float(height))
+        riser = riser_frame(first, layout, label, width=width, height=height,
+                            vertical_axis=vertical_axis, region=region)
         frame_time(first, time_step, label)  # refuse a dump without time before writing
-        parameters = _provenance(path, first, layout, reader.units, time_step)
-        with create_writer(output, reference, width=domain[0], height=domain[1],
+        parameters = _provenance(path, first, layout, reader.units, time_step, riser)
+        with create_writer(output, reference, max_step=IMPORT_MAX_STEP, width=riser.width,
+                           height=riser.height,
                            source="import:lammps", parameters=parameters,
-                           with_velocity=layout.velocity is not None, label=label) as writer:
+                           with_velocity=layout.velocity_columns(riser.across, riser.vertical)
+                           is not None, label=label) as writer:
             for frame in progress(itertools.chain([first], frames), label):
-                _append_frame(writer, frame, first, layout, reference, time_step, label)
+                _append_frame(writer, frame, first, layout, reference, time_step, label, riser)
     return output
 
 
+def _extents(box: np.ndarray) -> str:
+    return ", ".join(f"{AXES[k]} {lo:g}..{hi:g}" for k, (lo, hi) in enumerate(box))
+
+
+def riser_frame(first: DumpFrame, layout: AtomColumns, label: str, *,
+                width: float | None = None, height: float | None = None,
+                vertical_axis: str | None = None,
+                region: tuple[tuple[float, float], ...] | None = None) -> RiserFrame:
+    """The riser's axes and region in the dump's coordinates (see :func:`import_lammps`).
+
+    Raises
+    ------
+    InputError
+        For a 3D dump without ``vertical_axis`` (the message lists the box and the axis a
+        guess would take), an axis the dump does not have, or a region that does not fit.
+    """
+    where = first.where(label)
+    n_axes = min(len(layout.position), first.box.shape[0])
+    spread = (n_axes == 3 and float(np.ptp(first.atoms[:, layout.position[2]])) > 0.0)
+    if vertical_axis is None:
+        if spread:
+            longest = AXES[int(np.argmax(np.diff(first.box[:3], axis=1)))]
+            raise InputError(
+                f"{where}: a 3D dump (box {_extents(first.box[:3])} m, atoms spread over "
+                f"x, y and z): say which axis is vertical with --vertical-axis x|y|z (a guess "
+                f"would take the longest, {longest}; LIGGGHTS puts gravity along -z)")
+        vertical_axis = "y"
+    if vertical_axis not in AXES:
+        raise InputError(f"--vertical-axis {vertical_axis!r}: choose x, y or z")
+    vertical = AXES.index(vertical_axis)
+    if vertical >= n_axes:
+        raise InputError(f"{where}: --vertical-axis {vertical_axis} but the dump has no "
+                         f"{vertical_axis} positions ({' '.join(layout.position_names)})")
+    others = [k for k in range(3 if spread else 2) if k != vertical and k < n_axes]
+    across = others[0]
+    depth = others[1] if len(others) > 1 else None
+    flags = first.boundary
+    periodic = tuple(len(flags) > k and flags[k].startswith("p") for k in (across, vertical))
+    if region is not None:
+        ranges = [tuple(float(v) for v in r) for r in region]
+        if len(ranges) < 2 or len(ranges) > 3:
+            raise InputError(f"--region needs 2 or 3 ranges (x, y[, z]), got {len(ranges)}")
+        if any(not (np.isfinite(lo) and np.isfinite(hi) and hi > lo) for lo, hi in ranges):
+            raise InputError(f"--region {ranges}: every range must be LO:HI with HI > LO")
+        if max(across, vertical) >= len(ranges):
+            raise InputError(f"--region gives {len(ranges)} ranges but the vertical axis is "
+                             f"{AXES[vertical]}: give x, y and z ranges")
+        bounds = np.array([ranges[across], ranges[vertical]])
+        from_box = False
+    else:
+        box = first.box
+        bounds = np.array([(0.0, float(width)) if width is not None else box[across],
+                           (0.0, float(height)) if height is not None else box[vertical]],
+                          dtype=np.float64)
+        from_box = width is None and height is None
+    return RiserFrame(across, vertical, bounds, from_box, periodic, depth)
+
+
 def _provenance(path: Path, first: DumpFrame, layout: AtomColumns, units: str | None,
-                time_step: float | None) -> dict:
+                time_step: float | None, riser: RiserFrame) -> dict:
+    has_image = layout.image is not None and layout.image[riser.vertical] is not None
+    laps_from = ("unwrapped coordinates" if layout.unwrapped and riser.periodic[1]
+                 else "image flags" if has_image and riser.periodic[1]
+                 else "minimal-image rule" if riser.periodic[1] else "none (not periodic)")
     return {
         "source_file": path.name, "format": "lammps", "box": first.box.tolist(),
-        "boundary": list(first.boundary), "origin_shift": first.box[:2, 0].tolist(),
-        "columns": list(first.columns), "position_columns": list(layout.position_names),
-        "velocity_columns": list(VELOCITY_COLUMNS) if layout.velocity else [],
+        "boundary": list(first.boundary), "origin_shift": riser.region[:, 0].tolist(),
+        "region": riser.region.tolist(), "vertical_axis": AXES[riser.vertical],
+        "across_axis": AXES[riser.across],
+        "depth_axis_dropped": None if riser.depth is None else AXES[riser.depth],
+        "columns": list(first.columns),
+        "position_columns": [layout.position_names[riser.across],
+                             layout.position_names[riser.vertical]],
+        "velocity_columns": ([VELOCITY_COLUMNS[riser.across], VELOCITY_COLUMNS[riser.vertical]]
+                             if layout.velocity_columns(riser.across, riser.vertical)
+                             else []),
+        "laps_from": laps_from,
         "units": units, "time_step": time_step, "first_timestep": first.timestep,
         "time_from": "ITEM: TIME" if first.time is not None else "timestep x time_step",
     }
@@ -446,52 +600,74 @@ def periodic_axes(boundary: tuple[str, ...]) -> tuple[bool, bool]:
     return boundary[0].startswith("p"), boundary[1].startswith("p")
 
 
-def box_positions(raw: np.ndarray, scaled: bool, box: np.ndarray,
-                  periodic: tuple[bool, bool]) -> np.ndarray:
-    """Positions from the box's lower corner, wrapped into the box where periodic.
+def riser_positions(frame: DumpFrame, atoms: np.ndarray, layout: AtomColumns,
+                    riser: RiserFrame) -> tuple[np.ndarray, np.ndarray | None]:
+    """Riser positions [N, 2] (m, from the region's lower corner) and exact laps [N] (None
+    where they must come from the minimal-image rule) of one frame's (ordered) atoms.
 
-    Parameters
-    ----------
-    raw : numpy.ndarray
-        [N, 2] x, y in m, or fractions of the box when ``scaled``.
-    scaled : bool
-        Whether ``raw`` holds fractions of the box.
-    box : numpy.ndarray
-        Box bounds [D, 2], m.
-    periodic : tuple of bool
-        Whether x and y are periodic (:func:`periodic_axes`).
-
-    Returns
-    -------
-    numpy.ndarray
-        [N, 2] positions, m, measured from the box's lower corner.
+    Unwrapped coordinates on a periodic vertical axis give laps = floor(y / H) and the
+    wrapped height; image flags give laps = the vertical image flag (plus any wrap of an atom
+    written just outside the box); wrapped coordinates are wrapped into the riser. Across,
+    a periodic axis is wrapped.
     """
-    lo, length = box[:2, 0], box[:2, 1] - box[:2, 0]
-    offset = raw * length if scaled else raw - lo
-    for axis in (0, 1):
-        if periodic[axis]:
-            wrapped = np.mod(offset[:, axis], length[axis])
-            wrapped[wrapped >= length[axis]] = 0.0  # round-off of a tiny negative offset
-            offset[:, axis] = wrapped
-    return offset
+    raw = atoms[:, list(layout.position)]
+    if layout.scaled:
+        lo = frame.box[:raw.shape[1], 0]
+        raw = lo + raw * (frame.box[:raw.shape[1], 1] - lo)
+    a = raw[:, riser.across] - riser.region[0, 0]
+    v = raw[:, riser.vertical] - riser.region[1, 0]
+    width, height = riser.width, riser.height
+    laps = None
+    if riser.periodic[1]:
+        k = np.floor(v / height)
+        v = v - k * height
+        v[v >= height] = 0.0          # round-off of a tiny negative height
+        if layout.unwrapped:
+            laps = k.astype(np.int64)
+        elif layout.image is not None and layout.image[riser.vertical] is not None:
+            laps = atoms[:, layout.image[riser.vertical]].astype(np.int64) + k.astype(np.int64)
+    if riser.periodic[0]:
+        a = np.mod(a, width)
+        a[a >= width] = 0.0
+    return np.stack([a, v], axis=1), laps
+
+
+def _check_inside(position: np.ndarray, atoms: np.ndarray, layout: AtomColumns,
+                  riser: RiserFrame, ids: np.ndarray, where: str) -> None:
+    """Refuse a particle outside the riser, naming its coordinate as the dump writes it."""
+    tol = 1e-9
+    outside = ((position[:, 0] < -tol) | (position[:, 0] > riser.width + tol)
+               | (position[:, 1] < -tol) | (position[:, 1] > riser.height + tol))
+    if outside.any():
+        p = int(np.argmax(outside))
+        axis = riser.across if not (-tol <= position[p, 0] <= riser.width + tol) else riser.vertical
+        k = 0 if axis == riser.across else 1
+        value = atoms[p, layout.position[axis]]
+        raise InputError(
+            f"{where}: particle {int(ids[p])} at {layout.position_names[axis]} = {value:g} lies "
+            f"outside the riser {riser.region[k, 0]:g}..{riser.region[k, 1]:g} m "
+            f"({AXES[axis]}); give the riser's region with --region, or (until particles may "
+            "leave it) cut the dump to particles inside")
 
 
 def _append_frame(writer: TrajectoryWriter, frame: DumpFrame, first: DumpFrame,
                   layout: AtomColumns, reference: np.ndarray, time_step: float | None,
-                  label: str) -> None:
+                  label: str, riser: RiserFrame) -> None:
     """Check one frame against the first, order its atoms by id and append it."""
     where = frame.where(label)
-    _check_same_box(frame, first, where)
+    if riser.from_box:
+        _check_same_box(frame, first, where)
     if frame.columns != first.columns:
         layout = _same_layout(frame, layout, where)
     time = frame_time(frame, time_step, label)
     ids = whole_ids(frame.atoms[:, layout.id], where)
     order = frame_order(ids, reference, f"{where}, t = {time:g} s")
     atoms = frame.atoms if order is None else frame.atoms[order]
-    position = box_positions(atoms[:, list(layout.position)], layout.scaled, first.box,
-                             periodic_axes(first.boundary))
-    velocity = atoms[:, list(layout.velocity)] if layout.velocity else None
-    writer.append(time, position, velocity)
+    position, laps = riser_positions(frame, atoms, layout, riser)
+    _check_inside(position, atoms, layout, riser, reference, f"{where}, t = {time:g} s")
+    columns = layout.velocity_columns(riser.across, riser.vertical)
+    velocity = atoms[:, list(columns)] if writer.with_velocity and columns else None
+    writer.append(time, position, velocity, laps)
 
 
 def _check_same_box(frame: DumpFrame, first: DumpFrame, where: str) -> None:
@@ -506,7 +682,7 @@ def _same_layout(frame: DumpFrame, layout: AtomColumns, where: str) -> AtomColum
     """The column layout of a frame whose ATOMS line differs from the first frame's."""
     new = AtomColumns.find(frame.columns, where)
     if new.position_names != layout.position_names or (new.velocity is None) != (
-            layout.velocity is None):
+            layout.velocity is None) or (new.image is None) != (layout.image is None):
         raise InputError(f"{where}: ITEM: ATOMS columns change ({' '.join(frame.columns)}); "
                          "every frame must carry the same position and velocity columns")
     return new

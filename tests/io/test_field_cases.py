@@ -1,0 +1,165 @@
+"""Field cases: small dumps with the quirks of real data (copied into tests/io/field/) that
+used to be stored wrong without a word. Right values from the cases' descriptions:
+
+- ``unwrapped-coarse.dump`` / ``unwrapped-fine.dump``: unwrapped ``xu yu zu`` on a periodic
+  y, frames 0.1 s / 0.025 s apart; laps = floor(yu / H) (the ``.laps.npy`` beside them),
+  wrapped y = yu mod 0.95. In the coarse one two particles move more than H/2 between
+  frames, where the minimal-image rule gave laps -3 instead of 7 and 0 instead of 10.
+- ``box-wider-than-riser.dump``: the box is -0.001..0.091 m across, the riser 0..0.09 m;
+  positions = ``box-wider-than-riser.xy.npy`` exactly (``--width`` shifted them by 1 mm).
+- ``liggghts-dump800.newModels``: a LIGGGHTS 3D dump, gravity along -z, box -0.05..0.05 x
+  -0.05..0.05 x 0..0.15 m (was stored as an x-y riser 0.1 m high with z dropped).
+"""
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
+from cfbmarkov.io import import_file
+from cfbmarkov.trajectories import Trajectories
+
+FIELD = Path(__file__).parent / "field"
+H = 0.95
+
+
+def _read(path):
+    with Trajectories(path) as t:
+        return t.times, t.positions(), t.laps(), t.width, t.height, t.parameters
+
+
+def _unwrapped_heights(path):
+    """yu of every atom per frame, read with plain string handling, sorted by id."""
+    frames, lines = [], Path(path).read_text().splitlines()
+    for k, line in enumerate(lines):
+        if line.startswith("ITEM: ATOMS"):
+            names = line.split()[2:]
+            n = int(lines[k - 5])
+            rows = sorted((int(r.split()[names.index("id")]), float(r.split()[names.index("yu")]))
+                          for r in lines[k + 1:k + 1 + n])
+            frames.append([y for _, y in rows])
+    return np.asarray(frames)
+
+
+@pytest.mark.parametrize("name", ["unwrapped-coarse", "unwrapped-fine"])
+def test_unwrapped_coordinates_give_exact_laps(tmp_path, name):
+    out = import_file(FIELD / f"{name}.dump", "lammps", tmp_path / "u.h5", time_step=5e-6)
+    _, pos, laps, width, height, params = _read(out)
+    expected = np.load(FIELD / f"{name}.laps.npy")
+    np.testing.assert_array_equal(laps, expected)
+    yu = _unwrapped_heights(FIELD / f"{name}.dump")
+    np.testing.assert_allclose(pos[..., 1], np.mod(yu, H), rtol=0, atol=1e-12)
+    assert (width, height) == (0.09, 0.95)
+    assert params["laps_from"] == "unwrapped coordinates"
+
+
+def test_coarse_wrapped_output_is_refused_and_image_flags_give_the_laps(tmp_path, capsys):
+    """The same coarse motion written as wrapped y: the minimal-image rule cannot tell the
+    laps (steps up to 0.95 m in 0.1 s), so import refuses, naming the particle, the step and
+    the fix; written as wrapped y with image flags iy, the laps are exact again."""
+    text = (FIELD / "unwrapped-coarse.dump").read_text()
+    yu = _unwrapped_heights(FIELD / "unwrapped-coarse.dump")
+    wrapped_lines, image_lines, frame = [], [], -1
+    for line in text.splitlines():
+        if line.startswith("ITEM: ATOMS"):
+            frame += 1
+            atom = 0
+            wrapped_lines.append("ITEM: ATOMS id type x y z")
+            image_lines.append("ITEM: ATOMS id type x y z ix iy iz")
+            continue
+        parts = line.split()
+        if len(parts) == 5 and frame >= 0 and wrapped_lines[-1].startswith(("ITEM: ATOMS", "1 ",
+                                                                            "2 ", "3 ", "4 ")):
+            pid = int(parts[0])
+            y = float(yu[frame, pid - 1])
+            lap = int(np.floor(y / H))
+            wrapped_lines.append(f"{pid} 1 {parts[2]} {y - lap * H!r} 0")
+            image_lines.append(f"{pid} 1 {parts[2]} {y - lap * H!r} 0 0 {lap} 0")
+            atom += 1
+            continue
+        wrapped_lines.append(line)
+        image_lines.append(line)
+    wrapped = tmp_path / "wrapped.dump"
+    wrapped.write_text("\n".join(wrapped_lines) + "\n")
+    with pytest.raises(InputError, match=r"particle \d moved 0\.\d+ m \(more than 0.25 of the "
+                                         r"height 0.95 m\).*unwrapped coordinates \(xu yu\)"):
+        import_file(wrapped, "lammps", tmp_path / "w.h5", time_step=5e-6)
+    assert not (tmp_path / "w.h5").exists()
+    assert main(["import", str(wrapped), "--format", "lammps", "--time-step", "5e-6", "-o",
+                 str(tmp_path / "w.h5")]) == 2
+    assert capsys.readouterr().err.count("\n") == 1
+    flagged = tmp_path / "image.dump"
+    flagged.write_text("\n".join(image_lines) + "\n")
+    _, _, laps, *_, params = _read(import_file(flagged, "lammps", tmp_path / "i.h5",
+                                               time_step=5e-6))
+    np.testing.assert_array_equal(laps, np.load(FIELD / "unwrapped-coarse.laps.npy"))
+    assert params["laps_from"] == "image flags"
+
+
+@pytest.mark.parametrize("options", [
+    {"region": ((0.0, 0.09), (0.0, 0.95))},
+    {"width": 0.09, "height": 0.95},
+], ids=["region", "width-height"])
+def test_box_wider_than_the_riser_does_not_shift_positions(tmp_path, options):
+    out = import_file(FIELD / "box-wider-than-riser.dump", "lammps", tmp_path / "b.h5",
+                      time_step=5e-6, **options)
+    _, pos, _, width, height, params = _read(out)
+    # exact to the dump's 8 printed digits: no 1 mm shift
+    np.testing.assert_allclose(pos, np.load(FIELD / "box-wider-than-riser.xy.npy"), rtol=0,
+                               atol=5e-9)
+    assert (width, height) == (0.09, 0.95)
+    assert params["region"] == [[0.0, 0.09], [0.0, 0.95]]
+    # without a region the box (lower corner at -0.001 m) is the domain, as the file says
+    _, pos_box, _, width_box, *_ = _read(import_file(FIELD / "box-wider-than-riser.dump",
+                                                     "lammps", tmp_path / "box.h5",
+                                                     time_step=5e-6))
+    assert width_box == pytest.approx(0.092)
+    np.testing.assert_allclose(pos_box[..., 0], pos[..., 0] + 0.001, rtol=0, atol=1e-15)
+
+
+def test_particle_outside_the_region_is_named_with_its_file_coordinate(tmp_path, capsys):
+    code = main(["import", str(FIELD / "box-wider-than-riser.dump"), "--format", "lammps",
+                 "--time-step", "5e-6", "--region", "0.05:0.09,0:0.95", "-o",
+                 str(tmp_path / "r.h5")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    # the coordinate in the message is the one the dump holds, not a shifted one
+    value = float(err.split(" at x = ")[1].split()[0])
+    assert value < 0.05 and f"{value:g}" in (FIELD / "box-wider-than-riser.dump").read_text()
+    assert not (tmp_path / "r.h5").exists()
+
+
+def test_3d_dump_needs_its_vertical_axis(tmp_path, capsys):
+    source = FIELD / "liggghts-dump800.newModels"
+    code = main(["import", str(source), "--format", "lammps", "--time-step", "1e-5", "-o",
+                 str(tmp_path / "g.h5")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert "3D dump" in err and "--vertical-axis" in err and "z 0..0.15" in err
+    assert "the longest, z" in err
+    assert not (tmp_path / "g.h5").exists()
+    out = import_file(source, "lammps", tmp_path / "g.h5", time_step=1e-5, vertical_axis="z")
+    times, pos, laps, width, height, params = _read(out)
+    assert (width, height) == pytest.approx((0.1, 0.15))
+    assert times.tolist() == pytest.approx([0.008])
+    raw = np.loadtxt(source, skiprows=9, usecols=(2, 3, 4))
+    np.testing.assert_allclose(pos[0, :, 1], raw[:, 2], atol=1e-15)          # heights are z
+    np.testing.assert_allclose(pos[0, :, 0], raw[:, 0] + 0.05, atol=1e-15)   # across is x
+    assert params["vertical_axis"] == "z" and params["across_axis"] == "x"
+    assert params["depth_axis_dropped"] == "y"
+    assert params["laps_from"] == "none (not periodic)" and laps.max() == 0
+    with pytest.raises(InputError, match="vertical axis is z: give x, y and z ranges"):
+        import_file(source, "lammps", tmp_path / "x.h5", time_step=1e-5, vertical_axis="z",
+                    region=((-0.05, 0.05), (-0.05, 0.05)))
+    with pytest.raises(InputError, match="choose x, y or z"):
+        import_file(source, "lammps", tmp_path / "x.h5", time_step=1e-5, vertical_axis="w")
+
+
+def test_region_option_is_checked(tmp_path, capsys):
+    for bad in ("0:0.09", "0:0.09,0.95:0", "a:b,0:1", "0:1,0:1,0:1,0:1", "0:inf,0:1"):
+        code = main(["import", str(FIELD / "box-wider-than-riser.dump"), "--format", "lammps",
+                     "--region", bad, "-o", str(tmp_path / "x.h5")])
+        err = capsys.readouterr().err
+        assert code == 2 and "region" in err and err.count("\n") == 1, (bad, err)
