@@ -163,3 +163,49 @@ def test_region_option_is_checked(tmp_path, capsys):
                      "--region", bad, "-o", str(tmp_path / "x.h5")])
         err = capsys.readouterr().err
         assert code == 2 and "region" in err and err.count("\n") == 1, (bad, err)
+
+
+def test_liggghts_one_file_per_timestep_by_glob_in_timestep_order(tmp_path, capsys):
+    """13 files dump0 ... dump9600 (name order puts dump800 after dump7200); dump0 holds no
+    atom; 3D with gravity along -z: 12 frames at t = 0.008 ... 0.096 s of 6 particles, the
+    heights the files' z, across x (0.1 m wide box), depth y."""
+    pattern = str(FIELD / "liggghts-per-timestep" / "post" / "dump*.newModels")
+    out = tmp_path / "l.h5"
+    code = main(["import", pattern, "--format", "lammps", "--time-step", "1e-5",
+                 "--vertical-axis", "z", "-o", str(out)])
+    assert code == 0, capsys.readouterr().err
+    times, pos, laps, width, height, params = _read(out)
+    np.testing.assert_allclose(times, 0.008 * np.arange(1, 13), rtol=1e-12)
+    assert pos.shape == (12, 6, 2) and (width, height) == pytest.approx((0.1, 0.15))
+    for k, timestep in enumerate(range(800, 9601, 800)):
+        raw = np.loadtxt(FIELD / "liggghts-per-timestep" / "post" / f"dump{timestep}.newModels",
+                         skiprows=9, usecols=(0, 2, 4))
+        raw = raw[np.argsort(raw[:, 0])]
+        np.testing.assert_allclose(pos[k, :, 1], raw[:, 2], atol=1e-15)
+        np.testing.assert_allclose(pos[k, :, 0], raw[:, 1] + 0.05, atol=1e-15)
+    assert params["frames_without_atoms_skipped"] == 1 and len(params["source_files"]) == 13
+    assert params["source_files"][1] == "dump800.newModels"
+    assert laps.max() == 0 and params["laps_from"] == "none (not periodic)"
+    assert main(["import", str(FIELD / "nothing*.dump"), "--format", "lammps", "-o",
+                 str(tmp_path / "n.h5")]) == 2
+    assert "no file matches" in capsys.readouterr().err
+
+
+def test_triclinic_box_with_zero_tilt_reads_as_orthogonal(tmp_path):
+    _, pos, _, width, height, _ = _read(import_file(FIELD / "triclinic-zero-tilt.dump", "lammps",
+                                                    tmp_path / "t.h5", time_step=1e-5))
+    assert (width, height) == (0.09, 0.95)
+    np.testing.assert_allclose(pos[0], [[0.02, 0.3], [0.06, 0.7]], atol=1e-15)
+    assert pos.shape == (3, 2, 2)
+
+
+def test_shrink_wrapped_box_is_accepted_with_a_region(tmp_path):
+    source = FIELD / "shrinkwrap-box.dump"
+    with pytest.raises(InputError, match="the box changes"):
+        import_file(source, "lammps", tmp_path / "s.h5", time_step=1e-5)
+    out = import_file(source, "lammps", tmp_path / "s.h5", time_step=1e-5,
+                      region=((0.0, 0.09), (0.0, 0.95)))
+    _, pos, _, width, height, params = _read(out)
+    assert (width, height) == (0.09, 0.95) and params["region"] == [[0.0, 0.09], [0.0, 0.95]]
+    first = np.loadtxt(source, skiprows=9, max_rows=5, usecols=(0, 2, 3))
+    np.testing.assert_allclose(pos[0], first[np.argsort(first[:, 0])][:, 1:], atol=1e-15)

@@ -209,10 +209,10 @@ GOOD = dump()
 LONG = "".join(frame(k, ATOMS[k % 3], time=0.5 + 0.025 * k) for k in range(300))
 BAD_DUMPS = {
     "triclinic-flags": (dump(frame(0, flags="xy xz yz ff pp pp",
-                                   box="0 0.09 0\n0 0.95 0\n0 1 0\n")),
-                        r"line 7: triclinic box \(BOX BOUNDS xy xz yz ff pp pp\) is not supported"),
+                                   box="0 0.09 0\n0 0.95 0.02\n0 1 0\n")),
+                        r"line 9: box bounds with a tilt factor 0.02: a tilted \(triclinic\) box"),
     "triclinic-bounds": (dump(frame(0, box="0 0.09 0.01\n0 0.95 0\n0 1 0\n")),
-                         r"line 8: box bounds with a tilt factor: triclinic box"),
+                         r"line 8: box bounds with a tilt factor 0.01: a tilted \(triclinic\)"),
     "non-si-units": ("ITEM: UNITS\nlj\n" + GOOD, r"line 2: units are 'lj', not SI"),
     "no-time": (dump(*(frame(k, time=False) for k in range(3))),
                 (r"timestep 0 \(line 9\): the dump has no ITEM: TIME; give the simulation "
@@ -273,7 +273,7 @@ BAD_DUMPS = {
                        r"t = 0.525 s: particle 1 at x = 0.095 lies outside the riser 0..0.09 m \(x\)"),
     "not-a-dump": ("t,id,x,y\n0,1,0.01,0.1\n",
                    r"line 1: expected an 'ITEM:' line, found 't,id,x,y'"),
-    "no-frames": ("ITEM: UNITS\nsi\n", r"no frames \(no 'ITEM: ATOMS' block\)"),
+    "no-frames": ("ITEM: UNITS\nsi\n", r"no frames with atoms \(no 'ITEM: ATOMS' block\)"),
     "empty-file": ("", r"empty file"),
     "binary-file": (b"\x00\x01\x02\xff\xfe\x80", r"not a text file"),
 }

@@ -30,6 +30,11 @@ minimal-image rule, and a particle that moves more than a quarter of the height 
 frames is refused (coarse output of a fast particle), naming the particle, the step and
 the fix. A triclinic box is refused.
 
+Several files (a list, or a glob such as ``'post/dump*.liggghts'``, one file per timestep
+as LIGGGHTS writes them) are read in the order of their first timestep, not of their
+names; empty files, and frames before the first that holds atoms, are skipped. A triclinic
+box whose tilt factors are all zero is read as orthogonal.
+
 The time of a frame is ``ITEM: TIME`` when present, else timestep x ``time_step`` (s).
 Frames are parsed and written one at a time, so memory stays at a few frames whatever the
 length of the dump.
@@ -37,6 +42,7 @@ length of the dump.
 
 from __future__ import annotations
 
+import glob
 import itertools
 import os
 import warnings
@@ -310,15 +316,16 @@ class DumpReader:
         self.units = units
 
     def _box(self, item: str) -> tuple[np.ndarray, tuple[str, ...]]:
-        """Bounds [D, 2] (m) and boundary flags of an orthogonal box."""
-        flags = tuple(item.split()[2:])
+        """Bounds [D, 2] (m) and boundary flags of an orthogonal box; a triclinic box
+        (``xy xz yz`` and a tilt factor on each bounds line) is read as orthogonal where
+        every tilt is zero, and refused otherwise."""
+        words = item.split()[2:]
+        tilted = any(tilt in words for tilt in ("xy", "xz", "yz"))
+        flags = tuple(w for w in words if w not in ("xy", "xz", "yz"))
         where = f"{self.label}: line {self.line}"
-        if any(tilt in flags for tilt in ("xy", "xz", "yz")):
-            raise InputError(f"{where}: triclinic box ({item}) is not supported; the riser "
-                             "needs an orthogonal box")
         rows = []
         while (line := self._readline()) is not None and not line.lstrip().startswith("ITEM:"):
-            rows.append(self._bounds(line))
+            rows.append(self._bounds(line, tilted))
             if flags and len(rows) == len(flags):
                 break
         else:
@@ -329,12 +336,19 @@ class DumpReader:
                              f"(found {len(rows)}; truncated?)")
         return np.asarray(rows), flags
 
-    def _bounds(self, line: str) -> tuple[float, float]:
+    def _bounds(self, line: str, tilted: bool = False) -> tuple[float, float]:
         fields = line.split()
         where = f"{self.label}: line {self.line}"
         if len(fields) == 3:
-            raise InputError(f"{where}: box bounds with a tilt factor: triclinic box is not "
-                             "supported; the riser needs an orthogonal box")
+            try:
+                tilt = float(fields[2])
+            except ValueError:
+                tilt = float("nan")
+            if not tilted or tilt != 0.0:
+                raise InputError(f"{where}: box bounds with a tilt factor {fields[2]}: a tilted "
+                                 "(triclinic) box is not supported; the riser needs an "
+                                 "orthogonal box")
+            fields = fields[:2]
         try:
             lo, hi = (float(v) for v in fields)
         except ValueError:
@@ -410,8 +424,9 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
 
     Parameters
     ----------
-    source : str or os.PathLike
-        The dump (``dump custom`` or ``dump atom``; format in the module docstring).
+    source : str, os.PathLike or sequence of them
+        The dump (``dump custom`` or ``dump atom``; format in the module docstring), several
+        files, or a glob pattern (:func:`dump_files`).
     output : str or os.PathLike
         The trajectory file (HDF5) to write; it appears only when complete.
     width, height : float, optional
@@ -443,31 +458,116 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
         from a frame, laps that cannot be inferred, units other than SI, ...); no file is
         left behind.
     """
-    path = check_source(source)
-    output = check_output(output, path)
-    label = str(path)
-    with removing_new_folders(output), reading(label), open_text(path) as fh:
-        reader = DumpReader(fh, label)
-        frames = iter(reader)
-        first = next(frames, None)
+    paths = dump_files(source)
+    output = Path(output)
+    for path in paths:
+        check_output(output, path)
+    label = str(paths[0]) if len(paths) == 1 else f"{paths[0].parent}/ ({len(paths)} files)"
+    with removing_new_folders(output), reading(label):
+        units: list = []
+        skipped = [0]
+        frames = _frames_of(paths, units, skipped)
+        first_label, first = next(frames, (label, None))
         if first is None:
-            raise InputError(f"{label}: no frames (no 'ITEM: ATOMS' block)")
-        layout = AtomColumns.find(first.columns, first.where(label))
-        reference = np.unique(whole_ids(first.atoms[:, layout.id], first.where(label)))
-        if reference.size == 0:
-            raise InputError(f"{first.where(label)}: the first frame holds no atoms")
-        riser = riser_frame(first, layout, label, width=width, height=height,
+            raise InputError(f"{label}: no frames with atoms (no 'ITEM: ATOMS' block)")
+        layout = AtomColumns.find(first.columns, first.where(first_label))
+        reference = np.unique(whole_ids(first.atoms[:, layout.id], first.where(first_label)))
+        riser = riser_frame(first, layout, first_label, width=width, height=height,
                             vertical_axis=vertical_axis, region=region)
-        frame_time(first, time_step, label)  # refuse a dump without time before writing
-        parameters = _provenance(path, first, layout, reader.units, time_step, riser)
+        frame_time(first, time_step, first_label)  # refuse a dump without time before writing
+        parameters = _provenance(paths[0], first, layout, units[0] if units else None,
+                                 time_step, riser)
+        if len(paths) > 1:
+            parameters["source_files"] = [p.name for p in paths]
+        parameters["frames_without_atoms_skipped"] = skipped[0]
         with create_writer(output, reference, max_step=IMPORT_MAX_STEP, width=riser.width,
                            height=riser.height,
                            source="import:lammps", parameters=parameters,
                            with_velocity=layout.velocity_columns(riser.across, riser.vertical)
                            is not None, label=label) as writer:
-            for frame in progress(itertools.chain([first], frames), label):
-                _append_frame(writer, frame, first, layout, reference, time_step, label, riser)
+            for frame_label, frame in progress(itertools.chain([(first_label, first)], frames),
+                                               label):
+                _append_frame(writer, frame, first, layout, reference, time_step, frame_label,
+                              riser)
     return output
+
+
+def dump_files(source) -> list[Path]:
+    """The dump file(s) of ``source``, ordered by their first timestep.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or sequence of them
+        A file, several files, or a glob pattern such as ``'post/dump*.liggghts'`` (one
+        file per timestep, as LIGGGHTS writes them).
+
+    Returns
+    -------
+    list of pathlib.Path
+        Ordered by the first ``ITEM: TIMESTEP`` of each file, not by name
+        (``dump800`` before ``dump7200``).
+
+    Raises
+    ------
+    InputError
+        If a file is missing, a folder or empty, or a pattern matches no file.
+    """
+    if isinstance(source, (list, tuple)):
+        paths = [Path(p) for p in source]
+    else:
+        text = os.fspath(source)
+        if not Path(text).exists() and any(c in text for c in "*?["):
+            paths = [Path(p) for p in sorted(glob.glob(text))]
+            if not paths:
+                raise InputError(f"{text}: no file matches this pattern")
+        else:
+            paths = [Path(text)]
+    if not paths:
+        raise InputError("no dump file given")
+    if len(paths) == 1:
+        return [check_source(paths[0])]
+    for path in paths:
+        if not path.exists() or path.is_dir():
+            check_source(path)
+    kept = [p for p in paths if p.stat().st_size > 0]      # empty files are skipped
+    if not kept:
+        raise InputError(f"{paths[0].parent}: all {len(paths)} dump files are empty")
+    return sorted(kept, key=_first_timestep)
+
+
+def _first_timestep(path: Path) -> tuple[int, str]:
+    """(first ITEM: TIMESTEP, name) of a dump, to order files; files that do not say come
+    last (the reader then reports what is wrong)."""
+    try:
+        with open_text(path) as fh:
+            for _ in range(50):
+                line = fh.readline()
+                if not line:
+                    break
+                if line.strip() == "ITEM: TIMESTEP":
+                    return int(fh.readline().split()[0]), path.name
+    except (OSError, ValueError, IndexError, UnicodeDecodeError):
+        pass
+    return 2 ** 62, path.name
+
+
+def _frames_of(paths: list[Path], units: list, skipped: list) -> Iterator[tuple[str, DumpFrame]]:
+    """(label, frame) of every frame, file after file, from the first frame that holds
+    atoms; the frames before it (the empty first file of a LIGGGHTS run, say) are counted
+    in ``skipped[0]``."""
+    started = False
+    for path in paths:
+        label = str(path)
+        with open_text(path) as fh:
+            reader = DumpReader(fh, label)
+            for frame in reader:
+                if not units and reader.units:
+                    units.append(reader.units)
+                if not started and frame.atoms.shape[0] == 0:
+                    skipped[0] += 1         # before any atom exists: nothing to store
+                    continue
+                started = True
+                yield label, frame
 
 
 def _extents(box: np.ndarray) -> str:
