@@ -236,10 +236,10 @@ def _cmd_info(args) -> int:
 
         print(MarkovModel.load(args.file).summary())
     else:
-        from cfbmarkov.trajectories import Trajectories
+        from cfbmarkov.trajectories import Trajectories, describe
 
         with Trajectories(args.file) as t:
-            print(t)
+            print("\n".join(describe(t)))
     del h5py
     return 0
 

@@ -550,3 +550,55 @@ class Trajectories:
 def _t(value: float) -> str:
     """A time for a message: up to 10 significant digits (10.00833, not 10.0083)."""
     return f"{float(value):.10g}"
+
+
+def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
+    """Lines that show at a glance what a trajectory file holds and how it was made:
+    domain, axes and region of an import, boundary, particles per frame, passes through
+    the periodic boundary (from the lap counters, read block by block) and where the laps
+    came from.
+
+    Parameters
+    ----------
+    trajectories : Trajectories
+        An open file.
+    block : int
+        Frames read at a time.
+
+    Returns
+    -------
+    list of str
+    """
+    t = trajectories
+    p = t.parameters
+    flags = p.get("boundary") or []
+    vertical = "xyz".index(p.get("vertical_axis", "y"))
+    open_source = len(flags) > vertical and not str(flags[vertical]).startswith("p")
+    boundary = (f"open in the source (flag {flags[vertical]}): heights are stored as they are, "
+                "and a particle that left would have been refused" if open_source else
+                "periodic (what leaves the top re-enters the bottom)")
+    lines = [repr(t), f"  domain: {t.width:g} m across x {t.height:g} m high (2D); vertical "
+                      f"boundary {boundary}"]
+    if "vertical_axis" in p:
+        dropped = p.get("depth_axis_dropped")
+        lines.append(f"  from the source: vertical axis {p['vertical_axis']}, across "
+                     f"{p.get('across_axis', '?')}"
+                     + (f", depth axis {dropped} dropped (projection)" if dropped else "")
+                     + (f"; riser region {p['region']} m in the source's coordinates"
+                        if "region" in p else ""))
+    if "laps_from" in p:
+        lines.append(f"  laps from: {p['laps_from']}")
+    lines.append(f"  particles present per frame: min {t.n_particles}, max {t.n_particles} "
+                 "(every particle in every frame)")
+    up = down = 0
+    previous = None
+    for i in range(0, t.n_frames, block):
+        laps = t.laps(slice(i, min(i + block, t.n_frames))).astype(np.int64)
+        if previous is not None:
+            laps = np.concatenate([previous[None], laps])
+        step = np.diff(laps, axis=0)
+        up += int(step[step > 0].sum())
+        down += int(-step[step < 0].sum())
+        previous = laps[-1]
+    lines.append(f"  passes through the periodic boundary: {up} up, {down} down")
+    return lines

@@ -209,3 +209,23 @@ def test_shrink_wrapped_box_is_accepted_with_a_region(tmp_path):
     assert (width, height) == (0.09, 0.95) and params["region"] == [[0.0, 0.09], [0.0, 0.95]]
     first = np.loadtxt(source, skiprows=9, max_rows=5, usecols=(0, 2, 3))
     np.testing.assert_allclose(pos[0], first[np.argsort(first[:, 0])][:, 1:], atol=1e-15)
+
+
+def test_info_shows_a_wrong_import_at_a_glance(tmp_path, capsys):
+    lig = tmp_path / "lig.h5"
+    assert main(["import", str(FIELD / "liggghts-per-timestep" / "post" / "dump*.newModels"),
+                 "--format", "lammps", "--time-step", "1e-5", "--vertical-axis", "z", "-o",
+                 str(lig)]) == 0
+    coarse = import_file(FIELD / "unwrapped-coarse.dump", "lammps", tmp_path / "uc.h5",
+                         time_step=5e-6)
+    capsys.readouterr()
+    assert main(["info", str(lig)]) == 0
+    text = capsys.readouterr().out
+    assert "0.1 m across x 0.15 m high" in text and "vertical axis z, across x" in text
+    assert "depth axis y dropped" in text and "open in the source" in text
+    assert "particles present per frame: min 6, max 6" in text
+    assert main(["info", str(coarse)]) == 0
+    text = capsys.readouterr().out
+    laps = np.load(FIELD / "unwrapped-coarse.laps.npy")
+    assert "laps from: unwrapped coordinates" in text
+    assert f"passes through the periodic boundary: {laps[-1].sum()} up, 0 down" in text
