@@ -409,7 +409,7 @@ def read_layout(fh: TextIO, label: str, *, length_unit: str | None = None,
     for k, name in enumerate(header):
         key, unit = _canonical(name)
         if key is None:
-            ignored.append(name or f"column {k + 1} (no name)")
+            ignored.append((k, name or f"column {k + 1} (no name)"))
             continue
         if key in canonical:
             raise InputError(f"{label}: column {key!r} appears twice in the header {shown!r} "
@@ -426,25 +426,26 @@ def read_layout(fh: TextIO, label: str, *, length_unit: str | None = None,
                              f"v{vertical} (velocity across and along the vertical axis "
                              f"{vertical}); give both or neither")
     keep = {"t", "id", across, vertical, f"v{across}", f"v{vertical}"}
-    for key in sorted(set(canonical) - keep, key=lambda n: canonical[n]):
-        ignored.append(header[canonical.pop(key)] + " (depth axis)")
+    for key in set(canonical) - keep:
+        k = canonical.pop(key)
+        ignored.append((k, header[k] + " (depth axis)"))
         units.pop(key)
     used = sorted(canonical, key=canonical.get)
     si, divisors = _units(used, units, length_unit, time_unit, header, canonical, label)
+    unit_from = {name: "header" if units[name] else "option" if (
+        length_unit if name in AXES else time_unit) else "default" for name in used}
     return CsvLayout(header=header, delimiter=delimiter, decimal_comma=decimal_comma, used=used,
                      usecols=[canonical[n] for n in used], divisors=divisors, units=si,
-                     ignored=ignored, vertical=vertical, across=across, depth=depth,
-                     header_line=header_line, first_data_line=first_data_line, pending=pending,
-                     unit_from={name: "header" if units[name] else "option" if (
-                         length_unit if name in AXES else time_unit) else "default"
-                         for name in used})
+                     ignored=[name for _, name in sorted(ignored)], vertical=vertical,
+                     across=across, depth=depth, header_line=header_line,
+                     first_data_line=first_data_line, unit_from=unit_from, pending=pending)
 
 
 def _find_header(fh: TextIO, label: str) -> tuple[str, int, list[str], int]:
     """The header text, its line number, the data lines read ahead and the first one's number.
 
     The header is the first non-blank line not starting with '#'; where that line is a row of
-    numbers, the last '#' line before it (without the '#') when it names columns.
+    numbers, the last '#' line before it that names columns (without the '#').
     """
     line_no, comment, comment_no = 0, None, 0
     while line := fh.readline():
@@ -453,11 +454,12 @@ def _find_header(fh: TextIO, label: str) -> tuple[str, int, list[str], int]:
         if not text:
             continue
         if text.startswith("#"):
-            comment, comment_no = text.lstrip("#").strip(), line_no
+            if _names_columns(text.lstrip("#")):
+                comment, comment_no = text.lstrip("#").strip(), line_no
             continue
         if not _is_data(text):
             return text, line_no, _read_ahead(fh, []), line_no + 1
-        if comment is not None and _names_columns(comment):
+        if comment is not None:
             return comment, comment_no, _read_ahead(fh, [line]), line_no
         raise InputError(f"{label}: line {line_no} is not a header ({text!r}); {_EXPECTED}")
     raise InputError(f"{label}: empty file (no header line)")
