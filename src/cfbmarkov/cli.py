@@ -120,7 +120,8 @@ def _cmd_import(args) -> int:
 
     path = import_file(args.source, args.format, args.output, width=args.width,
                        height=args.height, time_step=args.time_step,
-                       vertical_axis=args.vertical_axis, region=args.region)
+                       vertical_axis=args.vertical_axis, region=args.region,
+                       length_unit=args.length_unit, time_unit=args.time_unit)
     print(path)
     return 0
 
@@ -366,6 +367,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--region", type=parse_region, default=None,
                    help="the riser in the source's coordinates and units (m): "
                         "XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX]")
+    s.add_argument("--length-unit", choices=["m", "cm", "mm"], default=None,
+                   help="CSV: unit of positions (and, per --time-unit, velocities) in columns "
+                        "whose header names none (default m)")
+    s.add_argument("--time-unit", choices=["s", "ms"], default=None,
+                   help="CSV: unit of t where the header names none (default s)")
     s.set_defaults(func=_cmd_import)
 
     s = sub.add_parser("fit", help="fit a Markov chain model on a window of a trajectory file")

@@ -20,7 +20,8 @@ FORMATS = ("csv", "lammps")
 def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, *,
                 width: float | None = None, height: float | None = None,
                 time_step: float | None = None, vertical_axis: str | None = None,
-                region: tuple[tuple[float, float], ...] | None = None) -> Path:
+                region: tuple[tuple[float, float], ...] | None = None,
+                length_unit: str | None = None, time_unit: str | None = None) -> Path:
     """Import ``source`` in format ``fmt`` ('csv' or 'lammps') as the trajectory file ``output``.
 
     Parameters
@@ -38,9 +39,15 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
         Simulation time step, s, that dates LAMMPS frames carrying no ``ITEM: TIME``; a CSV
         file carries its times in column t and takes no time step.
     vertical_axis : {"x", "y", "z"}, optional
-        The source's vertical axis (LAMMPS dumps; required for a 3D dump).
+        The source's vertical axis; required for a 3D dump and for a CSV file with a z
+        column (default y otherwise).
     region : sequence of (lo, hi), optional
         The riser in the source's coordinates, one range per axis x, y (, z) (LAMMPS dumps).
+    length_unit : {"m", "cm", "mm"}, optional
+        Unit of a CSV file's positions (and, over ``time_unit``, velocities) where its header
+        gives none; default m (CSV only).
+    time_unit : {"s", "ms"}, optional
+        Unit of a CSV file's times where its header gives none; default s (CSV only).
 
     Returns
     -------
@@ -50,8 +57,9 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
     Raises
     ------
     InputError
-        For an unknown format, a non-positive size or time step, a time step given with a
-        CSV file, or bad input (see :func:`import_csv` and :func:`import_lammps`).
+        For an unknown format, a non-positive size or time step, a time step or region given
+        with a CSV file, a length or time unit given with a dump, or bad input (see
+        :func:`import_csv` and :func:`import_lammps`).
     """
     fmt = str(fmt).lower()
     if fmt not in FORMATS:
@@ -63,11 +71,15 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
         if time_step is not None:
             raise InputError("--time-step applies to LAMMPS dumps only; a CSV file gives its "
                              "times in column t")
-        if vertical_axis not in (None, "y") or region is not None:
-            raise InputError("--vertical-axis and --region apply to LAMMPS dumps only so far; "
-                             "a CSV file gives x across and y up, measured from the riser's "
-                             "lower-left corner")
-        return import_csv(source, output, width=width, height=height)
+        if region is not None:
+            raise InputError("--region applies to LAMMPS dumps only so far; a CSV file gives "
+                             "positions measured from the riser's lower corner (0..W across, "
+                             "0..H vertically; set them with --width and --height)")
+        return import_csv(source, output, width=width, height=height, length_unit=length_unit,
+                          time_unit=time_unit, vertical_axis=vertical_axis)
+    if length_unit is not None or time_unit is not None:
+        raise InputError("--length-unit and --time-unit apply to CSV files only; a LAMMPS dump "
+                         "must be in SI units (ITEM: UNITS si)")
     return import_lammps(source, output, width=width, height=height, time_step=time_step,
                          vertical_axis=vertical_axis, region=region)
 

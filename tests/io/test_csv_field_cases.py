@@ -1,0 +1,225 @@
+"""CSV field cases: small exports with the quirks of real data (copied into tests/io/field/
+from the shared field data), with their right values from the cases' descriptions:
+
+- ``semicolon-decimal-comma.csv``: ``t;id;x;y``, ``0,000;1;0,020;0,100``: 3 frames (0, 0.025,
+  0.05 s) x 3 particles, x = 0.02 id m, y = 0.1 + 0.05 frame m.
+- ``spreadsheet-style-headers.csv``: ``Time (s),Particle ID,Position X (m),...`` with z and
+  velocities: the same positions, velocity (0, 2) m/s; the z column needs --vertical-axis.
+- ``pept-pointdata.csv``: ``# t x y z error``, space-delimited, mm and ms, one tracer,
+  irregular times and a gap: refused (no resampling yet), never stored.
+- ``ptv-enter-leave.csv``: particle 5 enters at the third frame, particle 2 leaves after the
+  fourth: refused (no presence mask yet), naming the particle and the frame.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.io import import_csv, import_file
+from cfbmarkov.trajectories import Trajectories
+
+FIELD = Path(__file__).parent / "field"
+
+
+def _read(path):
+    with Trajectories(path) as t:
+        return t.times, t.ids, t.positions(), t.velocities(), t.parameters
+
+
+def _three_by_three(times, ids, pos):
+    np.testing.assert_allclose(times, [0.0, 0.025, 0.05], rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(ids, [1, 2, 3])
+    np.testing.assert_allclose(pos[..., 0], np.tile(0.02 * ids, (3, 1)), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(pos[..., 1], np.repeat(0.1 + 0.05 * np.arange(3), 3).reshape(3, 3),
+                               rtol=0, atol=1e-15)
+
+
+# -- semicolon and decimal comma -------------------------------------------------------------------
+def test_semicolon_and_decimal_comma(tmp_path, cli):
+    code, out, err = cli("import", FIELD / "semicolon-decimal-comma.csv", "--format", "csv",
+                         "-o", tmp_path / "s.h5")
+    assert code == 0, err
+    times, ids, pos, vel, params = _read(tmp_path / "s.h5")
+    _three_by_three(times, ids, pos)
+    assert vel is None
+    assert params["delimiter"] == "semicolon" and params["decimal_mark"] == "comma"
+    assert params["columns"] == ["t", "id", "x", "y"] and params["ignored_columns"] == []
+
+
+@pytest.mark.parametrize("delimiter", ["\t", "  ", ";"])
+def test_other_delimiters_with_either_decimal_mark(tmp_path, delimiter):
+    rows = [f"{0.025 * k:.3f}{delimiter}{i}{delimiter}{0.02 * i:.3f}{delimiter}{0.1 + 0.05 * k:.3f}"
+            for k in range(3) for i in (3, 1, 2)]
+    for comma in (False, True):
+        text = "\n".join([delimiter.join(["t", "id", "x", "y"]), *rows]) + "\n"
+        if comma:
+            text = text.replace(".", ",")
+        source = tmp_path / f"d{comma}.csv"
+        source.write_text(text)
+        times, ids, pos, _, params = _read(import_csv(source, tmp_path / f"d{comma}.h5"))
+        _three_by_three(times, ids, pos)
+        assert params["decimal_mark"] == ("comma" if comma else "point")
+
+
+def test_decimal_comma_with_a_comma_delimiter_is_refused_by_line(tmp_path, assert_clean_failure):
+    source = tmp_path / "bad.csv"
+    source.write_text("t,id,x,y\n0,1,0.02,0.1\n0.025,1,0,02,0.1\n")
+    assert_clean_failure("import", source, "--format", "csv", "-o", tmp_path / "o" / "b.h5",
+                         output=tmp_path / "o" / "b.h5", match=r"line 3: 5 values, the header "
+                                                               r"names 4 columns")
+
+
+# -- spreadsheet-style headers -------------------------------------------------------------------
+def test_spreadsheet_headers_need_the_vertical_axis_then_map(tmp_path, assert_clean_failure):
+    source = FIELD / "spreadsheet-style-headers.csv"
+    output = tmp_path / "o" / "e.h5"
+    line = assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+                                match=r"has a z column \(3D positions\): say which axis is "
+                                      r"vertical with --vertical-axis x\|y\|z")
+    assert "nothing is guessed" in line
+    times, ids, pos, vel, params = _read(import_file(source, "csv", tmp_path / "e.h5",
+                                                     vertical_axis="y"))
+    _three_by_three(times, ids, pos)
+    np.testing.assert_array_equal(vel, np.broadcast_to([0.0, 2.0], (3, 3, 2)))
+    assert params["vertical_axis"] == "y" and params["across_axis"] == "x"
+    assert params["depth_axis_dropped"] == "z"
+    assert params["ignored_columns"] == ["Position Z (m) (depth axis)",
+                                         "Velocity Z (m/s) (depth axis)"]
+    assert params["units"] == {"t": "s", "x": "m", "y": "m", "vx": "m/s", "vy": "m/s"}
+
+
+def test_header_units_are_honoured_and_not_contradicted(tmp_path, assert_clean_failure):
+    source = tmp_path / "mm.csv"
+    source.write_text("Time [ms],Particle_ID,Position X (mm),Position Y (mm),Velocity X (mm/s),"
+                      "Velocity Y (mm/s),Mass (kg)\n"
+                      + "".join(f"{25 * k},{i},{20 * i},{100 + 50 * k},{1000 * i},-500,1e-6\n"
+                                for k in range(3) for i in (1, 2, 3)))
+    times, ids, pos, vel, params = _read(import_csv(source, tmp_path / "mm.h5"))
+    _three_by_three(times, ids, pos)
+    np.testing.assert_allclose(vel[..., 0], np.tile([1.0, 2.0, 3.0], (3, 1)), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(vel[..., 1], -0.5, rtol=0, atol=1e-15)
+    assert params["units"]["x"] == "mm" and params["units"]["t"] == "ms"
+    assert params["units"]["vx"] == "mm/s"
+    assert params["ignored_columns"] == ["Mass (kg)"]
+    output = tmp_path / "o" / "x.h5"
+    assert_clean_failure("import", source, "--format", "csv", "--length-unit", "cm", "-o", output,
+                         output=output, match=r"'Position X \(mm\)' is in mm but --length-unit "
+                                              r"cm was given")
+    source.write_text(source.read_text().replace("(mm)", "(in)", 1))
+    assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+                         match=r"'Position X \(in\)': unit 'in' is not known; --length-unit "
+                               r"takes m, cm, mm")
+
+
+def test_unknown_names_are_refused_naming_the_columns_expected(tmp_path, assert_clean_failure):
+    source = tmp_path / "odd.csv"
+    source.write_text("Zeit,Teilchen,PosX,PosY\n0,1,0.02,0.1\n")
+    output = tmp_path / "o" / "x.h5"
+    assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+                         match=r"missing column 't' in the header 'Zeit,Teilchen,PosX,PosY'; "
+                               r"expected t, x, y and optionally id.*'Time \(s\)'")
+
+
+# -- 3D files and the vertical axis ----------------------------------------------------------------
+def test_vertical_axis_z_takes_heights_from_z(tmp_path):
+    source = tmp_path / "z.csv"
+    source.write_text("t,id,x,y,z,vx,vy,vz\n" + "".join(
+        f"{0.025 * k},{i},{0.02 * i},0.004,{0.1 + 0.05 * k},0.5,9,-1.5\n"
+        for k in range(3) for i in (1, 2, 3)))
+    times, ids, pos, vel, params = _read(import_file(source, "csv", tmp_path / "z.h5",
+                                                     vertical_axis="z"))
+    _three_by_three(times, ids, pos)
+    np.testing.assert_array_equal(vel, np.broadcast_to([0.5, -1.5], (3, 3, 2)))
+    assert (params["vertical_axis"], params["across_axis"]) == ("z", "x")
+    assert params["depth_axis_dropped"] == "y"
+    assert params["velocity_columns"] == ["vx", "vz"]
+    with pytest.raises(InputError, match=r"--vertical-axis z but the header 't;id;x;y' has no z"):
+        import_file(FIELD / "semicolon-decimal-comma.csv", "csv", tmp_path / "n.h5",
+                    vertical_axis="z")
+
+
+# -- PEPT and PTV: refused until the store has a presence mask ----------------------------------
+def test_pept_point_data_is_refused_with_the_option_that_is_missing(tmp_path,
+                                                                    assert_clean_failure):
+    source = FIELD / "pept-pointdata.csv"
+    output = tmp_path / "o" / "p.h5"
+    base = ("import", source, "--format", "csv", "-o", output)
+    assert_clean_failure(*base, output=output, match=r"header 't x y z error' has a z column.*"
+                                                     r"--vertical-axis")
+    assert_clean_failure(*base, "--vertical-axis", "y", output=output,
+                         match=r"particle 0 at t = 0.459185 s lies outside the domain .*'x' = "
+                               r"45.1837 m.*give --length-unit cm\|mm")
+    line = assert_clean_failure(*base, "--vertical-axis", "y", "--length-unit", "mm",
+                                "--time-unit", "ms", output=output,
+                                match=r"frames unevenly spaced: 0.002244815 s between t = "
+                                      r"0.001535799 and 0.003780614 s")
+    assert "resampling with --resample DT --max-gap G, which is not available yet" in line
+
+
+def test_pept_style_file_at_even_times_reads_right(tmp_path):
+    """The pept layout ('# t x y z error', spaces, mm and ms, no id) where the times are even."""
+    t = np.arange(0.0, 50.0, 2.0)                       # ms
+    x, y = 45 + 20 * np.sin(t / 50), np.mod(2.5 * t, 950)  # mm
+    source = tmp_path / "pept.csv"
+    source.write_text("# written by pept\n# t x y z error\n" + "".join(
+        f"{a:.6e} {b:.6e} {c:.6e} 5.000000e-01 1.2\n" for a, b, c in zip(t, x, y)))
+    times, ids, pos, vel, params = _read(import_file(
+        source, "csv", tmp_path / "p.h5", length_unit="mm", time_unit="ms", vertical_axis="y"))
+    np.testing.assert_array_equal(ids, [0])
+    np.testing.assert_allclose(times, t / 1000, rtol=1e-6)
+    np.testing.assert_allclose(pos[:, 0, 0], x / 1000, rtol=1e-6)
+    np.testing.assert_allclose(pos[:, 0, 1], y / 1000, rtol=1e-6)
+    assert params["id_column"] is False and params["delimiter"] == "whitespace"
+    assert params["ignored_columns"] == ["z (depth axis)", "error"]
+    assert params["units"] == {"t": "ms", "x": "mm", "y": "mm"}
+
+
+def test_two_rows_at_one_time_without_id(tmp_path, assert_clean_failure):
+    source = tmp_path / "two.csv"
+    source.write_text("t,x,y\n0,0.01,0.1\n0,0.02,0.2\n")
+    output = tmp_path / "o" / "x.h5"
+    assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+                         match=r"2 rows at this time, but the file has no id column")
+
+
+def test_ptv_particles_entering_and_leaving_are_refused(tmp_path, assert_clean_failure):
+    output = tmp_path / "o" / "v.h5"
+    assert_clean_failure("import", FIELD / "ptv-enter-leave.csv", "--format", "csv", "-o", output,
+                         output=output,
+                         match=r"frame at t = 0.004 s: particle id 5 is not in the first frame; "
+                               r"particles that enter or leave the view are not supported yet")
+    leaving = tmp_path / "leave.csv"
+    leaving.write_text("".join(line for line in (FIELD / "ptv-enter-leave.csv").open()
+                               if ",5," not in line))
+    assert_clean_failure("import", leaving, "--format", "csv", "-o", output, output=output,
+                         match=r"frame at t = 0.008 s: particle id 2 missing \(3 of 4 particles.*"
+                               r"particles that enter or leave the view are not supported yet")
+
+
+# -- the new options, given wrong ----------------------------------------------------------------
+@pytest.mark.parametrize("args, match", [
+    (("--length-unit", "km"), r"argument --length-unit: invalid choice: 'km'"),
+    (("--time-unit", "h"), r"argument --time-unit: invalid choice: 'h'"),
+    (("--vertical-axis", "w"), r"argument --vertical-axis: invalid choice: 'w'"),
+    (("--region", "0:0.09,0:0.95"), r"--region applies to LAMMPS dumps only so far"),
+])
+def test_wrong_option_values_give_one_line(tmp_path, assert_clean_failure, args, match):
+    output = tmp_path / "o" / "x.h5"
+    assert_clean_failure("import", FIELD / "semicolon-decimal-comma.csv", "--format", "csv",
+                         *args, "-o", output, output=output, match=match)
+
+
+def test_wrong_option_values_through_the_api(tmp_path):
+    source = FIELD / "semicolon-decimal-comma.csv"
+    for options, match in (({"length_unit": "km"}, r"--length-unit 'km': choose m, cm or mm"),
+                           ({"time_unit": "min"}, r"--time-unit 'min': choose s or ms"),
+                           ({"vertical_axis": "w"}, r"--vertical-axis 'w': choose x, y or z")):
+        with pytest.raises(InputError, match=match):
+            import_file(source, "csv", tmp_path / "x.h5", **options)
+    with pytest.raises(InputError, match=r"--length-unit and --time-unit apply to CSV files only"):
+        import_file(FIELD / "unwrapped-fine.dump", "lammps", tmp_path / "x.h5", length_unit="mm")
+    assert not (tmp_path / "x.h5").exists()
