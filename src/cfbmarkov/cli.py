@@ -363,7 +363,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="LAMMPS time step, s, for dumps without ITEM: TIME")
     s.add_argument("--vertical-axis", choices=["x", "y", "z"], default=None,
                    help="the source's vertical axis (gravity along minus it); required for a "
-                        "3D dump, which is projected on (across, vertical)")
+                        "3D dump or a CSV file with a z column, which are projected on "
+                        "(across, vertical)")
     s.add_argument("--region", type=parse_region, default=None,
                    help="the riser in the source's coordinates and units (m): "
                         "XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX]")

@@ -224,7 +224,9 @@ class TrajectoryWriter:
             raise InputError(
                 f"{self._label}: frames unevenly spaced: {_t(steps[first + k])} s between "
                 f"t = {_t(times[k])} and {_t(times[k + 1])} s, expected {_t(reference)} s "
-                f"({what}, within {FRAME_SPACING_TOLERANCE:.0%})")
+                f"({what}, within {FRAME_SPACING_TOLERANCE:.0%}); irregular frame times (a "
+                "missing frame, or tracking data such as PEPT) would need resampling with "
+                "--resample DT --max-gap G, which is not available yet")
 
     def _check_array(self, name: str, values: np.ndarray, times: np.ndarray) -> None:
         finite = np.isfinite(values)

@@ -80,8 +80,8 @@ from cfbmarkov.io._common import (
     removing_new_folders,
     whole_ids,
 )
-from cfbmarkov.trajectories import FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE, _t
-from cfbmarkov.trajectory_writer import RECENT_STEPS, TrajectoryWriter
+from cfbmarkov.trajectories import POSITION_TOLERANCE
+from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 #: the paper's riser (docs/definitions.md, Riser): width W and height H, m
 DEFAULT_WIDTH = 0.09
@@ -273,21 +273,18 @@ def _write(output: Path, path: Path, layout: CsvLayout, blocks: Iterator[np.ndar
         "id_column": layout.has_id, "row_order": row_order,
         "width": width, "height": height,
     }
-    spacing = _Spacing(label)
     with create_writer(output, reference, width=width, height=height, source="import:csv",
                        parameters=parameters, with_velocity=velocity is not None,
                        label=label) as writer:
         for rows, last in progress(itertools.chain([first], frames), label):
-            _append_frame(writer, rows, layout, reference, label, last, spacing)
-        spacing.check_all()
+            _append_frame(writer, rows, layout, reference, label, last)
 
 
 def _append_frame(writer: TrajectoryWriter, rows: np.ndarray, layout: CsvLayout,
-                  reference: np.ndarray, label: str, last: bool, spacing: _Spacing) -> None:
+                  reference: np.ndarray, label: str, last: bool) -> None:
     """Put one frame's rows into the reference id order and append it."""
     time = float(rows[0, layout.index("t")])
     where = f"{label}: frame at t = {time:g} s"
-    spacing.add(time)
     if layout.has_id:
         ids = whole_ids(rows[:, layout.index("id")], where)
         try:
@@ -331,43 +328,6 @@ def _check_inside(position: np.ndarray, writer: TrajectoryWriter, layout: CsvLay
         f"0..{writer.width:g} x 0..{writer.height:g} m: {layout.column(axis)!r} = {written:g} "
         f"{unit}; positions are measured from the riser's lower corner, {layout.across} across "
         f"and {layout.vertical} vertical (set the riser with --width and --height){hint}")
-
-
-class _Spacing:
-    """The trajectory store's even-spacing rule (docs/definitions.md, Frame times), checked
-    here first so that irregular frame times get a message that says what is missing."""
-
-    def __init__(self, label: str):
-        self.label = label
-        self.times: list[float] = []
-        self.recent = np.zeros(0)
-
-    def add(self, time: float) -> None:
-        if self.times and time > self.times[-1]:
-            known = np.append(self.recent, time - self.times[-1])
-            self._check(np.array(self.times[-known.size:] + [time]), known, known.size - 1)
-            self.recent = known[-RECENT_STEPS:]
-        self.times.append(time)
-
-    def check_all(self) -> None:
-        if len(self.times) > 2:
-            times = np.array(self.times)
-            self._check(times, np.diff(times), 0)
-
-    def _check(self, times: np.ndarray, steps: np.ndarray, first: int) -> None:
-        if steps.size >= 3:
-            reference, what = float(np.median(steps)), "the median step"
-        else:
-            reference, what = float(steps[0]), "the first step"
-        bad = np.abs(steps[first:] - reference) > FRAME_SPACING_TOLERANCE * reference
-        if np.any(bad):
-            k = first + int(np.argmax(bad))
-            raise InputError(
-                f"{self.label}: frames unevenly spaced: {_t(steps[k])} s between t = "
-                f"{_t(times[k])} and {_t(times[k + 1])} s, expected {_t(reference)} s ({what}, "
-                f"within {FRAME_SPACING_TOLERANCE:.0%}); irregular frame times (a missing frame, "
-                "or tracking data such as PEPT) would need resampling with --resample DT "
-                "--max-gap G, which is not available yet")
 
 
 # -- the header ---------------------------------------------------------------------------------
