@@ -60,7 +60,7 @@ import numpy as np
 
 from cfbmarkov.analysis.mixing import left_tracer_group
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectories import Trajectories, opened
 
 #: relative tolerance (on max(|t|, 1 s)) for matching a gas frame to a particle frame
 FIELD_TIME_TOLERANCE = 1e-9
@@ -296,7 +296,7 @@ def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.P
     hl = _pyevtk()
     every = _check_every(every)
     output = Path(output)
-    with _opened(run) as traj:
+    with opened(run) as traj:
         frames = _select_frames(traj, start, stop, every)
         _check_output(output, traj.path)
         gas = read_gas_fields(traj) if fields else None
@@ -417,15 +417,6 @@ def _as_float(name: str, value) -> float:
         return float(value)
     except (TypeError, ValueError):
         raise InputError(f"{name} time {value!r} is not a number") from None
-
-
-@contextlib.contextmanager
-def _opened(run: str | os.PathLike | Trajectories) -> Iterator[Trajectories]:
-    if isinstance(run, Trajectories):
-        yield run
-    else:
-        with Trajectories(run) as traj:
-            yield traj
 
 
 def _check_output(output: Path, source: Path) -> None:

@@ -35,15 +35,13 @@ from cfbmarkov.analysis.compare import (
     snapshot_frames,
 )
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectories import Trajectories, opened
 
 SUMMARY = "summary.json"
 
 
 def _open(source, stack: contextlib.ExitStack) -> Trajectories:
-    if isinstance(source, Trajectories):
-        return source
-    return stack.enter_context(Trajectories(source))
+    return stack.enter_context(opened(source))
 
 
 def _jsonable(value):
