@@ -761,7 +761,13 @@ def _append_frame(writer: TrajectoryWriter, frame: DumpFrame, first: DumpFrame,
         layout = _same_layout(frame, layout, where)
     time = frame_time(frame, time_step, label)
     ids = whole_ids(frame.atoms[:, layout.id], where)
-    order = frame_order(ids, reference, f"{where}, t = {time:g} s")
+    try:
+        order = frame_order(ids, reference, f"{where}, t = {time:g} s")
+    except InputError as exc:
+        if np.unique(ids).size != ids.size:
+            raise
+        raise InputError(f"{exc}; atoms inserted or deleted between frames (an open riser, "
+                         "insert/stream, an outlet) are not supported yet") from None
     atoms = frame.atoms if order is None else frame.atoms[order]
     position, laps = riser_positions(frame, atoms, layout, riser)
     _check_inside(position, atoms, layout, riser, reference, f"{where}, t = {time:g} s")
