@@ -1,0 +1,228 @@
+"""Resampling of particle tracks at irregular times onto a uniform time grid.
+
+Positron emission particle tracking (PEPT) and similar methods give one location of a tracer
+every few milliseconds at irregular times, with gaps where the tracer left the field of view.
+:func:`resample_tracks` puts such rows onto the grid ``start + k * interval`` (``start`` the
+earliest time of any row) with the *presence rule*: a grid time ``t`` is present for a
+particle if and only if
+
+- the particle has a sample at ``t`` (within ``1e-9 * interval``), or
+- it has two consecutive samples ``ta < t < tb`` with ``tb - ta <= max_gap``.
+
+Everywhere else (before its first sample, after its last, inside a gap longer than
+``max_gap``) the particle is absent: NaN positions, ``present`` False, lap 0. Samples no
+further apart than ``max_gap`` form a *stretch*; present positions are linear interpolations
+inside a stretch. This is a pure kernel: no file I/O, no printing.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+
+__all__ = ["ResampledTracks", "resample_tracks"]
+
+#: relative tolerance (of the interval) within which a sample counts as lying on a grid time
+_TOL = 1e-9
+
+
+@dataclass(frozen=True)
+class ResampledTracks:
+    """Tracks on a uniform time grid.
+
+    Attributes
+    ----------
+    times : numpy.ndarray
+        [T] float64, s: ``start + k * interval``.
+    ids : numpy.ndarray
+        [N] int64, the sorted unique particle ids.
+    positions : numpy.ndarray
+        [T, N, D] float64, m; NaN where absent. With a periodic height the vertical column
+        lies in [0, H).
+    present : numpy.ndarray
+        [T, N] bool, the presence rule of the module docstring.
+    laps : numpy.ndarray
+        [T, N] int32 lap counters (passes up through the top minus passes down through the
+        bottom); 0 where absent and everywhere for an open riser.
+    """
+
+    times: np.ndarray
+    ids: np.ndarray
+    positions: np.ndarray
+    present: np.ndarray
+    laps: np.ndarray
+
+
+def _positive(value, what: str) -> float:
+    try:
+        value = float(value)
+    except (TypeError, ValueError):
+        raise InputError(f"{what} must be a positive number of seconds, not {value!r}") from None
+    if not (math.isfinite(value) and value > 0):
+        raise InputError(f"{what} must be a positive finite number, not {value!r}")
+    return value
+
+
+def resample_tracks(times, particles, positions, *, interval, max_gap=None, height=None,
+                    vertical=1, max_step=0.25, label="tracks") -> ResampledTracks:
+    """Resample rows ``(time, particle, position)`` onto the grid ``start + k * interval``.
+
+    Present grid times (module docstring) get positions by linear interpolation between the
+    two samples around them, ``x = xa + (t - ta) / (tb - ta) * (xb - xa)``; a sample on a grid
+    time is copied exactly. With a periodic vertical axis (``height`` = H) the interpolation
+    runs in the unwrapped height: between consecutive samples of one stretch the vertical step
+    ``dy`` is taken by the minimal-image rule (``dy < -H/2``: passed up through the top, +H;
+    ``dy > H/2``: passed down through the bottom, -H; Allen & Tildesley, *Computer Simulation
+    of Liquids*, section 1.5.2). The stored height is the unwrapped one mod H and the lap is
+    ``floor(unwrapped / H)``, counted from 0 at the particle's first sample. Across a gap
+    (longer than ``max_gap``) no pass can be seen, so the next stretch's laps continue from
+    the last lap of the previous stretch.
+
+    Rows may come in any order (they are sorted by particle, then time, stably). The work is
+    one loop over particles, each handled with vectorized numpy (``np.searchsorted``,
+    ``np.cumsum``); there is no Python loop over rows or grid times, so 1e6 rows of one tracer
+    take well under a second.
+
+    Parameters
+    ----------
+    times : array_like
+        [R] float, s, the time of each row.
+    particles : array_like
+        [R] int, the particle id of each row.
+    positions : array_like
+        [R, D] float, m, D = 2 or 3.
+    interval : float
+        s, the grid step (``--resample``); at most the span ``t_max - t_min`` of the data.
+    max_gap : float, optional
+        s, the longest time between two samples that is interpolated across
+        (``--max-gap``); default ``interval``. It may be smaller than ``interval``.
+    height : float, optional
+        m, the period H of a periodic vertical axis (a circulating riser); None (default) for
+        an open riser: no unwrapping, laps all 0.
+    vertical : int, optional
+        The column of ``positions`` that holds the height; default 1.
+    max_step : float, optional
+        The largest minimal-image vertical step between consecutive samples, as a fraction
+        of H, that is trusted; default 0.25.
+    label : str, optional
+        The name of the data in error messages.
+
+    Returns
+    -------
+    ResampledTracks
+        Times [T], ids [N], positions [T, N, D], present [T, N] and laps [T, N].
+
+    Raises
+    ------
+    InputError
+        If there are no rows, shapes disagree, a time or position is not finite, a particle
+        has two rows at one time, ``interval``, ``max_gap``, ``height`` or ``max_step`` is
+        not a positive finite number, ``interval`` is larger than the span of the data, a
+        minimal-image vertical step exceeds ``max_step * H``, or no grid time is present for
+        any particle.
+    """
+    interval = _positive(interval, "--resample (the resample step)")
+    max_gap = interval if max_gap is None else _positive(max_gap, "--max-gap")
+    max_step = _positive(max_step, "max_step")
+    period = None if height is None else _positive(height, "the riser height")
+    t = np.asarray(times, dtype=np.float64)
+    pos = np.asarray(positions, dtype=np.float64)
+    ids_in = np.asarray(particles)
+    if t.ndim != 1 or t.size == 0:
+        raise InputError(f"{label}: no rows to resample (--resample needs at least two times)")
+    if ids_in.shape != t.shape or pos.ndim != 2 or len(pos) != len(t) or pos.shape[1] not in (2, 3):
+        raise InputError(f"{label}: times {t.shape}, particles {ids_in.shape} and positions "
+                         f"{pos.shape} do not agree as [R], [R] and [R, 2 or 3]")
+    if not 0 <= vertical < pos.shape[1]:
+        raise InputError(f"{label}: vertical column {vertical} is not one of the "
+                         f"{pos.shape[1]} position columns")
+    if not (np.issubdtype(ids_in.dtype, np.integer)
+            or (np.all(np.isfinite(ids_in)) and np.all(ids_in == np.round(ids_in)))):
+        raise InputError(f"{label}: particle ids must be whole numbers")
+    pid = ids_in.astype(np.int64)
+    for name, values in (("time", t), ("position", pos)):
+        bad = np.flatnonzero(~np.isfinite(values.reshape(len(t), -1)).all(axis=1))
+        if bad.size:
+            raise InputError(f"{label}: {bad.size} row(s) have a non-finite {name}, the first "
+                             f"of particle {pid[bad[0]]} at row {bad[0]}")
+    start, span = float(t.min()), float(t.max() - t.min())
+    if interval > span:
+        raise InputError(f"{label}: --resample step {interval:g} s is larger than the span "
+                         f"{span:g} s of the data")
+
+    order = np.lexsort((t, pid))
+    t, pid, pos = t[order], pid[order], pos[order]
+    same = np.flatnonzero((pid[1:] == pid[:-1]) & (t[1:] == t[:-1]))
+    if same.size:
+        raise InputError(f"{label}: particle {pid[same[0]]} has two rows at t = {t[same[0]]:g} s")
+    ids, first = np.unique(pid, return_index=True)
+    bounds = np.append(first, len(t))
+
+    n_times = int(math.floor(span / interval + _TOL)) + 1
+    grid = start + np.arange(n_times) * interval
+    out = np.full((n_times, len(ids), pos.shape[1]), np.nan)
+    present = np.zeros((n_times, len(ids)), dtype=bool)
+    laps = np.zeros((n_times, len(ids)), dtype=np.int32)
+    tol = _TOL * interval
+    for j, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
+        ts, xs = t[a:b], pos[a:b].copy()
+        joined = np.diff(ts) <= max_gap + tol        # consecutive samples in one stretch
+        lap = np.zeros(len(ts), dtype=np.int64)
+        if period is not None:
+            y = np.mod(xs[:, vertical], period)
+            y[y >= period] = 0.0                     # np.mod(-tiny, H) can round to H
+            xs[:, vertical] = y
+            wrap = -np.round(np.diff(y) / period)    # +1: up through the top, -1: down
+            step = np.diff(y) + wrap * period        # the minimal-image step, |step| <= H/2
+            coarse = np.flatnonzero(joined & (np.abs(step) > max_step * period))
+            if coarse.size:
+                k = coarse[0]
+                raise InputError(
+                    f"{label}: particle {ids[j]} moves {step[k]:+.4g} m vertically between t = "
+                    f"{ts[k]:.9g} and {ts[k + 1]:.9g} s, more than max_step {max_step:g} x height "
+                    f"{period:g} m, so its passes through the top cannot be counted; sample more "
+                    f"often or give unwrapped coordinates")
+            lap[1:] = np.cumsum(np.where(joined, wrap, 0).astype(np.int64))
+        k0 = max(int(math.ceil((ts[0] - start) / interval - _TOL)), 0)
+        k1 = min(int(math.floor((ts[-1] - start) / interval + _TOL)), n_times - 1)
+        if k1 < k0:
+            continue
+        g = grid[k0:k1 + 1]
+        i = np.minimum(np.searchsorted(ts, g - tol, side="left"), len(ts) - 1)
+        exact = np.abs(ts[i] - g) <= tol
+        ia = np.maximum(i - 1, 0)
+        joined_at = np.append(joined, False)        # [n]: sample k and k + 1 in one stretch
+        between = ~exact & (i >= 1) & joined_at[ia] & (ts[ia] < g) & (g < ts[i])
+        here = exact | between
+        ke, kb = np.flatnonzero(exact), np.flatnonzero(between)
+        rows_b, rows_a = i[kb], ia[kb]
+        w = ((g[kb] - ts[rows_a]) / (ts[rows_b] - ts[rows_a]))[:, None]
+        values = np.full((len(g), pos.shape[1]), np.nan)
+        values[ke] = xs[i[ke]]
+        dx = xs[rows_b] - xs[rows_a]
+        glap = np.zeros(len(g), dtype=np.int64)
+        glap[ke] = lap[i[ke]]
+        if period is not None:                       # interpolate in the unwrapped height
+            dx[:, vertical] += (lap[rows_b] - lap[rows_a]) * period
+        values[kb] = xs[rows_a] + w * dx
+        if period is not None:
+            shift = np.floor(values[kb, vertical] / period).astype(np.int64)
+            height_in = values[kb, vertical] - shift * period
+            low = height_in < 0                      # rounding can leave it a hair outside [0, H)
+            height_in[low], shift[low] = height_in[low] + period, shift[low] - 1
+            high = height_in >= period
+            height_in[high], shift[high] = height_in[high] - period, shift[high] + 1
+            values[kb, vertical] = height_in
+            glap[kb] = lap[rows_a] + shift
+        out[k0:k1 + 1, j][here] = values[here]
+        present[k0:k1 + 1, j] = here
+        laps[k0:k1 + 1, j] = np.where(here, glap, 0)
+    if not present.any():  # a guard: the earliest row lies on grid time 0, so this cannot happen now
+        raise InputError(f"{label}: no grid time is present for any particle with --max-gap "
+                         f"{max_gap:g} s (the samples are further apart than that); give a larger "
+                         f"--max-gap")
+    return ResampledTracks(times=grid, ids=ids, positions=out, present=present, laps=laps)
