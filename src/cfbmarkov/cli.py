@@ -121,7 +121,9 @@ def _cmd_import(args) -> int:
     path = import_file(args.source, args.format, args.output, width=args.width,
                        height=args.height, time_step=args.time_step,
                        vertical_axis=args.vertical_axis, region=args.region,
-                       length_unit=args.length_unit, time_unit=args.time_unit)
+                       length_unit=args.length_unit, time_unit=args.time_unit,
+                       boundary=args.boundary, drop_depth=args.drop_depth,
+                       resample=args.resample, max_gap=args.max_gap)
     print(path)
     return 0
 
@@ -363,11 +365,20 @@ def build_parser() -> argparse.ArgumentParser:
                    help="LAMMPS time step, s, for dumps without ITEM: TIME")
     s.add_argument("--vertical-axis", choices=["x", "y", "z"], default=None,
                    help="the source's vertical axis (gravity along minus it); required for a "
-                        "3D dump or a CSV file with a z column, which are projected on "
-                        "(across, vertical)")
+                        "3D dump or a CSV file with a z column")
+    s.add_argument("--drop-depth", action="store_true",
+                   help="store 3D positions projected on (across, vertical)")
     s.add_argument("--region", type=parse_region, default=None,
-                   help="the riser in the source's coordinates and units (m): "
-                        "XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX]")
+                   help="the riser in the source's coordinates and units: "
+                        "XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX]; particles outside it are absent")
+    s.add_argument("--boundary", choices=["periodic", "open"], default=None,
+                   help="the vertical boundary (default: the dump's box flag on the vertical "
+                        "axis; periodic for CSV)")
+    s.add_argument("--resample", type=_positive_float, default=None, metavar="DT",
+                   help="CSV: interpolate tracks at irregular times (PEPT) onto frames DT s apart")
+    s.add_argument("--max-gap", type=_positive_float, default=None, metavar="G",
+                   help="with --resample: a particle is absent between samples more than G s "
+                        "apart (default DT)")
     s.add_argument("--length-unit", choices=["m", "cm", "mm"], default=None,
                    help="CSV: unit of positions (and, per --time-unit, velocities) in columns "
                         "whose header names none (default m)")

@@ -1,20 +1,31 @@
 """The trajectory store: one HDF5 layout for CFD-DEM runs, imported data and predictions.
 
-Layout (H5MD-like, every array in SI units)::
+Layout, version 2 (H5MD-like, every array in SI units)::
 
-    /                       attrs: format, version, width, height, length_unit, time_unit,
-                                   frame_interval, source, parameters (JSON), created,
-                                   cfbmarkov_version
+    /                       attrs: format, version (2), width, height, depth (3D only),
+                                   dimensions (D = 2 or 3), boundary ("periodic" | "open"),
+                                   across_axis, vertical_axis, depth_axis (the source's axis
+                                   letters), region_origin [D] (source coordinates of the
+                                   stored origin, m), length_unit, time_unit, frame_interval,
+                                   source, parameters (JSON), created, cfbmarkov_version
     /particles/id           [N]      int64    particle ids (the column order of every frame)
     /frames/time            [T]      float64  s
-    /frames/position        [T,N,2]  float64  m, chunked one frame per chunk
-    /frames/velocity        [T,N,2]  float64  m/s (optional)
+    /frames/position        [T,N,D]  float64  m: across, vertical (height) [, depth], from
+                                              the region's origin; NaN where absent;
+                                              chunked one frame per chunk
+    /frames/velocity        [T,N,D]  float64  m/s (optional); NaN where absent
     /frames/lap             [T,N]    int32    lap counter: +1 per pass up through the top,
-                                              -1 per pass down through the bottom
+                                              -1 per pass down through the bottom (0 where
+                                              absent; all 0 for an open riser)
+    /frames/present         [T,N]    bool     which particles are in each frame (only in a
+                                              file where some particle is absent somewhere)
     /events/time            [E]      float64  exact pass events (optional)
     /events/particle        [E]      int32    index into /particles/id
     /events/direction       [E]      int8     +1 up through the top, -1 down through the bottom
     /provenance/<name>/...  groups a producer attaches (e.g. the model behind a prediction)
+
+Version-1 files (2D, periodic, every particle in every frame, none of the new attributes)
+read as version 2 with those defaults.
 
 Files are written by :mod:`cfbmarkov.trajectory_writer`, under a temporary name and renamed
 when complete, so a reader never sees a half-written file. Frames are read one at a time or
@@ -42,8 +53,10 @@ from cfbmarkov.errors import InputError
 
 #: the ``format`` attribute of a trajectory file
 FORMAT = "cfbmarkov.trajectories"
-#: the layout's version (the ``version`` attribute)
-VERSION = 1
+#: the layout's version (the ``version`` attribute); version 1 files still read
+VERSION = 2
+#: the vertical boundaries a riser may have
+BOUNDARIES = ("periodic", "open")
 #: relative tolerance (on max(|t|, 1 s)) for matching a requested time to the frame of a
 #: file that holds one frame, and so has no frame interval to scale a tolerance
 TIME_TOLERANCE = 1e-6
@@ -184,6 +197,19 @@ class Trajectories:
         Frame times (s).
     width, height : float
         The riser W x H (m).
+    depth : float or None
+        The riser's depth (m) of a 3D file; None in 2D.
+    dimensions : int
+        D, the coordinates per position: 2 (across, vertical) or 3 (across, vertical, depth).
+    boundary : {"periodic", "open"}
+        The vertical boundary.
+    axes : dict of str to str
+        The source's axis letter of each stored axis (keys ``across``, ``vertical``,
+        ``depth``; ``depth`` is empty in 2D).
+    region_origin : ndarray of float64, shape (D,)
+        Source coordinates (m) of the stored origin, in the stored axis order.
+    version : int
+        The file's layout version (1 or 2).
     frame_interval : float
         Time between frames (s): the file's ``frame_interval`` attribute or, for a file
         without one, :func:`estimate_frame_interval` of its times; NaN for a file of one
@@ -227,19 +253,36 @@ class Trajectories:
                 raise InputError(f"{self.path}: a cfbmarkov model file, not a trajectory file")
             raise InputError(f"{self.path}: not a cfbmarkov trajectory file "
                              + (f"(format attribute is {fmt!r})" if fmt else "(no 'format' attribute)"))
+        version = int(f.attrs.get("version", 1))
+        if version > VERSION:
+            raise InputError(f"{self.path}: trajectory file of layout version {version}, written by a "
+                             f"newer cfbmarkov (this one reads up to {VERSION}); upgrade cfbmarkov")
+        self.version = version
         for name in ("particles/id", "frames/time", "frames/position", "frames/lap"):
             if name not in f:
                 raise InputError(f"{self.path}: damaged trajectory file (no '{name}' dataset)")
         self.ids = f["particles/id"][()]
         self.times = f["frames/time"][()]
-        n, t = self.ids.size, self.times.size
-        if f["frames/position"].shape != (t, n, 2) or f["frames/lap"].shape != (t, n):
+        self.dimensions = int(f.attrs.get("dimensions", 2))
+        n, t, d = self.ids.size, self.times.size, self.dimensions
+        if d not in (2, 3):
+            raise InputError(f"{self.path}: damaged trajectory file (dimensions {d})")
+        if f["frames/position"].shape != (t, n, d) or f["frames/lap"].shape != (t, n) or (
+                "frames/present" in f and f["frames/present"].shape != (t, n)):
             raise InputError(f"{self.path}: damaged trajectory file (frame arrays do not match "
-                             f"{t} times x {n} particles)")
+                             f"{t} times x {n} particles x {d} coordinates)")
         if t == 0:
             raise InputError(f"{self.path}: trajectory file holds no frames")
         self.width = float(f.attrs["width"])
         self.height = float(f.attrs["height"])
+        self.depth = float(f.attrs["depth"]) if d == 3 else None
+        boundary = f.attrs.get("boundary", "periodic")
+        self.boundary = boundary.decode() if isinstance(boundary, bytes) else str(boundary)
+        if self.boundary not in BOUNDARIES:
+            raise InputError(f"{self.path}: damaged trajectory file (boundary {self.boundary!r})")
+        self.axes = {key: str(f.attrs.get(f"{key}_axis", default)) for key, default in
+                     (("across", "x"), ("vertical", "y"), ("depth", "z" if d == 3 else ""))}
+        self.region_origin = np.asarray(f.attrs.get("region_origin", np.zeros(d)), dtype=np.float64)
         self.source = str(f.attrs.get("source", "unknown"))
         self.parameters: dict[str, Any] = json.loads(f.attrs.get("parameters", "{}"))
         self.frame_interval = float(f.attrs.get("frame_interval", np.nan))
@@ -277,6 +320,48 @@ class Trajectories:
     def has_velocity(self) -> bool:
         """Whether the file stores velocities."""
         return "frames/velocity" in self._file
+
+    @property
+    def has_absences(self) -> bool:
+        """Whether some particle is absent from some frame (the file has a presence mask)."""
+        return "frames/present" in self._file
+
+    def unsupported(self) -> list[str]:
+        """What in this file the periodic 2D Markov pipeline cannot use yet: 3D positions,
+        particles absent from frames, an open vertical boundary (empty for the paper's data).
+
+        Returns
+        -------
+        list of str
+        """
+        reasons = []
+        if self.dimensions == 3:
+            reasons.append("3D positions")
+        if self.has_absences:
+            reasons.append("particles absent from some frames")
+        if self.boundary == "open":
+            reasons.append("an open riser (particles enter and leave)")
+        return reasons
+
+    def require_supported(self, purpose: str) -> None:
+        """Refuse, in one line, a file that :meth:`unsupported` finds something in.
+
+        Parameters
+        ----------
+        purpose : str
+            What was asked (e.g. ``"fitting a Markov model"``), for the message.
+
+        Raises
+        ------
+        InputError
+            Naming the file, the purpose and what it cannot use yet.
+        """
+        reasons = self.unsupported()
+        if reasons:
+            hint = (" (a 3D dump imported with --drop-depth gives 2D positions)"
+                    if self.dimensions == 3 else "")
+            raise InputError(f"{self.path}: {purpose} cannot use {' and '.join(reasons)} yet; "
+                             f"it takes 2D periodic runs with every particle in every frame{hint}")
 
     @property
     def has_events(self) -> bool:
@@ -403,10 +488,29 @@ class Trajectories:
 
         Returns
         -------
-        ndarray of float64, shape (N, 2) or (T, N, 2)
-            Positions (m).
+        ndarray of float64, shape (N, D) or (T, N, D)
+            Positions (m): across, vertical [, depth]; NaN where a particle is absent.
         """
         return self._file["frames/position"][frames]
+
+    def present(self, frames: int | slice = slice(None)) -> np.ndarray:
+        """Which particles are in one frame or a range of frames.
+
+        Parameters
+        ----------
+        frames : int or slice, optional
+            A frame index, or a slice of frames (default: all).
+
+        Returns
+        -------
+        ndarray of bool, shape (N,) or (T, N)
+            All True in a file without absences.
+        """
+        if self.has_absences:
+            return self._file["frames/present"][frames]
+        if isinstance(frames, slice):
+            return np.ones((len(range(*frames.indices(self.n_frames))), self.n_particles), bool)
+        return np.ones(self.n_particles, dtype=bool)
 
     def velocities(self, frames: int | slice = slice(None)) -> np.ndarray | None:
         """Velocities like :meth:`positions`, or None when the source had none.
@@ -418,8 +522,8 @@ class Trajectories:
 
         Returns
         -------
-        ndarray of float64, shape (N, 2) or (T, N, 2), or None
-            Velocities (m/s).
+        ndarray of float64, shape (N, D) or (T, N, D), or None
+            Velocities (m/s); NaN where a particle is absent.
         """
         if not self.has_velocity:
             return None
@@ -454,7 +558,7 @@ class Trajectories:
         ------
         times : ndarray of float64, shape (B,)
             Times (s).
-        positions : ndarray of float64, shape (B, N, 2)
+        positions : ndarray of float64, shape (B, N, D)
             Positions (m).
         laps : ndarray of int32, shape (B, N)
             Lap counters.
@@ -554,9 +658,10 @@ def _t(value: float) -> str:
 
 def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     """Lines that show at a glance what a trajectory file holds and how it was made:
-    domain, axes and region of an import, boundary, particles per frame, passes through
-    the periodic boundary (from the lap counters, read block by block) and where the laps
-    came from.
+    domain, axes and region, boundary, particles present per frame, passes through the
+    periodic boundary (from the lap counters between consecutive frames where a particle is
+    present), entries and exits (a particle absent in one frame and present in the next, or
+    the reverse) and where the laps came from. Frames are read block by block.
 
     Parameters
     ----------
@@ -571,34 +676,45 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     """
     t = trajectories
     p = t.parameters
-    flags = p.get("boundary") or []
-    vertical = "xyz".index(p.get("vertical_axis", "y"))
-    open_source = len(flags) > vertical and not str(flags[vertical]).startswith("p")
-    boundary = (f"open in the source (flag {flags[vertical]}): heights are stored as they are, "
-                "and a particle that left would have been refused" if open_source else
-                "periodic (what leaves the top re-enters the bottom)")
-    lines = [repr(t), f"  domain: {t.width:g} m across x {t.height:g} m high (2D); vertical "
-                      f"boundary {boundary}"]
-    if "vertical_axis" in p:
-        dropped = p.get("depth_axis_dropped")
-        lines.append(f"  from the source: vertical axis {p['vertical_axis']}, across "
-                     f"{p.get('across_axis', '?')}"
-                     + (f", depth axis {dropped} dropped (projection)" if dropped else "")
-                     + (f"; riser region {p['region']} m in the source's coordinates"
-                        if "region" in p else ""))
+    d = t.dimensions
+    size = f"{t.width:g} m across x {t.height:g} m high" + (
+        f" x {t.depth:g} m deep (3D)" if d == 3 else " (2D)")
+    boundary = ("periodic (what leaves the top re-enters the bottom)" if t.boundary == "periodic"
+                else "open (inlet at the bottom, outlet at the top; particles enter and leave)")
+    lines = [repr(t), f"  domain: {size}; vertical boundary {boundary}"]
+    axes = f"vertical {t.axes['vertical']}, across {t.axes['across']}" + (
+        f", depth {t.axes['depth']}" if d == 3 else "")
+    dropped = p.get("depth_axis_dropped")
+    origin = ", ".join(f"{v:g}" for v in t.region_origin)
+    lines.append(f"  axes from the source: {axes}"
+                 + (f", depth axis {dropped} dropped (projection)" if dropped else "")
+                 + f"; origin at ({origin}) m in the source's coordinates"
+                 + (f"; riser region {p['region']} m" if "region" in p else ""))
     if "laps_from" in p:
         lines.append(f"  laps from: {p['laps_from']}")
-    lines.append(f"  particles present per frame: min {t.n_particles}, max {t.n_particles} "
-                 "(every particle in every frame)")
-    up = down = 0
-    previous = None
+    counts = []
+    up = down = entries = exits = 0
+    previous = previous_present = None
     for i in range(0, t.n_frames, block):
-        laps = t.laps(slice(i, min(i + block, t.n_frames))).astype(np.int64)
+        frames = slice(i, min(i + block, t.n_frames))
+        laps = t.laps(frames).astype(np.int64)
+        present = t.present(frames)
+        counts.append(present.sum(axis=1))
         if previous is not None:
             laps = np.concatenate([previous[None], laps])
-        step = np.diff(laps, axis=0)
+            present = np.concatenate([previous_present[None], present])
+        step = np.where(present[1:] & present[:-1], np.diff(laps, axis=0), 0)
         up += int(step[step > 0].sum())
         down += int(-step[step < 0].sum())
-        previous = laps[-1]
-    lines.append(f"  passes through the periodic boundary: {up} up, {down} down")
+        entries += int((present[1:] & ~present[:-1]).sum())
+        exits += int((~present[1:] & present[:-1]).sum())
+        previous, previous_present = laps[-1], present[-1]
+    counts = np.concatenate(counts)
+    every = " (every particle in every frame)" if not t.has_absences else ""
+    lines.append(f"  particles present per frame: min {int(counts.min())}, max {int(counts.max())}"
+                 f" of {t.n_particles}{every}")
+    if t.boundary == "periodic":
+        lines.append(f"  passes through the periodic boundary: {up} up, {down} down"
+                     + (" (not counted across a particle's absence)" if t.has_absences else ""))
+    lines.append(f"  entries {entries}, exits {exits} (after the first frame)")
     return lines

@@ -28,8 +28,8 @@ import numpy as np
 
 from cfbmarkov._atomic import discard, publish, temporary_path
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import (FORMAT, FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE, VERSION,
-                                    PassEvents, _t, estimate_frame_interval, lap_increments)
+from cfbmarkov.trajectories import (BOUNDARIES, FORMAT, FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE,
+                                    VERSION, PassEvents, _t, estimate_frame_interval, lap_increments)
 
 #: steps before a block that join its own in the median a block's steps are judged against
 RECENT_STEPS = 64
@@ -38,6 +38,8 @@ RECENT_STEPS = 64
 IMPORT_MAX_STEP = 0.25
 #: elements an [S, S]-like array must have before :func:`create_array_dataset` compresses it
 COMPRESS_MIN_SIZE = 4096
+#: fewest particles per chunk of a frame (a file whose particles grow by insertion)
+MIN_CHUNK_PARTICLES = 256
 
 
 class TrajectoryWriter:
@@ -57,14 +59,34 @@ class TrajectoryWriter:
     times (:func:`~cfbmarkov.trajectories.estimate_frame_interval`), exact to far below one
     rounding step for times printed to a few decimals.
 
+    Particles may be absent from frames (inserted later, deleted at an outlet, out of a
+    camera's view): give ``present`` to :meth:`append_frames`, and :meth:`add_particles` for
+    ids that appear after the first frame. Absent positions and velocities are stored as NaN
+    and absent laps as 0; the presence mask ``/frames/present`` is written only when some
+    particle is absent from some frame. Laps are counted between consecutive frames in which
+    a particle is present: no pass is seen across a gap, and the counter carries on from its
+    last value when the particle reappears (``docs/definitions.md``, Presence).
+
     Parameters
     ----------
     path : str or os.PathLike
         The file to write; its folder is created if needed.
     ids : array_like of int, shape (N,)
-        Unique particle ids, the column order of every frame.
+        Unique particle ids, the column order of every frame (N may be 0 when every
+        particle is added later by :meth:`add_particles`).
     width, height : float
         The riser W x H (m), positive.
+    depth : float, optional
+        The riser's depth (m) for 3D positions (across, vertical, depth); 2D when None.
+    boundary : {"periodic", "open"}, optional
+        The vertical boundary: ``periodic`` (what leaves the top re-enters at the bottom;
+        laps counted) or ``open`` (inlet at the bottom, outlet at the top; laps are 0).
+    axes : dict, optional
+        The source's axis letter of each stored axis, keys ``across``, ``vertical`` and (3D)
+        ``depth``; default x, y (, z).
+    region_origin : array_like of float, shape (D,), optional
+        Source coordinates (m) of the stored origin, in the stored axis order (across,
+        vertical[, depth]); default zeros.
     source : str
         What produces the file (e.g. ``cfd-dem``, ``markov-prediction``).
     parameters : dict, optional
@@ -85,8 +107,8 @@ class TrajectoryWriter:
     Raises
     ------
     InputError
-        If there is no particle id, the ids are not unique, the domain is not of positive
-        size, or ``frame_interval`` is not a positive number.
+        If the ids are not unique, the domain is not of positive size, the boundary is
+        unknown, or ``frame_interval`` is not a positive number.
 
     Notes
     -----
@@ -96,49 +118,72 @@ class TrajectoryWriter:
     def __init__(self, path: str | os.PathLike, ids, *, width: float, height: float,
                  source: str, parameters: dict[str, Any] | None = None,
                  with_velocity: bool = False, frame_interval: float | None = None,
-                 label: str | None = None, max_step: float = 0.5):
+                 label: str | None = None, max_step: float = 0.5, depth: float | None = None,
+                 boundary: str = "periodic", axes: dict[str, str] | None = None,
+                 region_origin=None):
         self.path = Path(path)
         self.max_step = float(max_step)
-        self.ids = np.asarray(ids, dtype=np.int64)
-        if self.ids.ndim != 1 or self.ids.size == 0:
-            raise InputError("a trajectory needs at least one particle id")
+        self.ids = np.asarray(ids, dtype=np.int64).reshape(-1)
         if np.unique(self.ids).size != self.ids.size:
             raise InputError("particle ids are not unique")
-        if not (width > 0 and height > 0):
-            raise InputError(f"domain {width:g} x {height:g} m must have positive size")
+        if not (width > 0 and height > 0) or (depth is not None and not depth > 0):
+            size = f"{width:g} x {height:g}" + ("" if depth is None else f" x {depth:g}")
+            raise InputError(f"domain {size} m must have positive size")
+        if boundary not in BOUNDARIES:
+            raise InputError(f"boundary {boundary!r}: choose periodic or open")
         if frame_interval is not None and not (np.isfinite(frame_interval) and frame_interval > 0):
             raise InputError(f"frame interval {frame_interval!r} s must be a positive number")
         self.width, self.height = float(width), float(height)
+        self.depth = None if depth is None else float(depth)
+        self.dimensions = 2 if depth is None else 3
+        self.boundary = boundary
         self.with_velocity = with_velocity
         self._label = label or str(self.path)
+        axes = dict(axes or {})
+        axes = {"across": axes.get("across", "x"), "vertical": axes.get("vertical", "y"),
+                "depth": axes.get("depth", "z") if self.dimensions == 3 else ""}
+        origin = np.zeros(self.dimensions) if region_origin is None else np.asarray(
+            region_origin, dtype=np.float64).reshape(-1)
+        if origin.size != self.dimensions:
+            raise InputError(f"region origin {origin.tolist()} needs {self.dimensions} coordinates")
         self._tmp = temporary_path(self.path)
-        n = self.ids.size
+        n, d = self.ids.size, self.dimensions
         self._file = h5py.File(self._tmp, "w")
         f = self._file
         f.attrs.update({
             "format": FORMAT, "version": VERSION, "width": self.width, "height": self.height,
+            "dimensions": d, "boundary": boundary, "across_axis": axes["across"],
+            "vertical_axis": axes["vertical"], "depth_axis": axes["depth"],
+            "region_origin": origin,
             "length_unit": "m", "time_unit": "s", "source": source,
             "parameters": json.dumps(parameters or {}, default=_json_default),
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
             "cfbmarkov_version": _version(),
         })
+        if self.depth is not None:
+            f.attrs["depth"] = self.depth
         if frame_interval is not None:
             f.attrs["frame_interval"] = float(frame_interval)
-        f.create_dataset("particles/id", data=self.ids)
+        chunk = max(n, MIN_CHUNK_PARTICLES)
+        f.create_dataset("particles/id", data=self.ids, maxshape=(None,), chunks=(max(n, 1024),))
         f.create_dataset("frames/time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(4096,))
-        f.create_dataset("frames/position", shape=(0, n, 2), maxshape=(None, n, 2), dtype="f8",
-                         chunks=(1, n, 2))
-        f.create_dataset("frames/lap", shape=(0, n), maxshape=(None, n), dtype="i4", chunks=(1, n))
+        f.create_dataset("frames/position", shape=(0, n, d), maxshape=(None, None, d), dtype="f8",
+                         chunks=(1, chunk, d), fillvalue=np.nan)
+        f.create_dataset("frames/lap", shape=(0, n), maxshape=(None, None), dtype="i4",
+                         chunks=(1, chunk))
         if with_velocity:
-            f.create_dataset("frames/velocity", shape=(0, n, 2), maxshape=(None, n, 2),
-                             dtype="f8", chunks=(1, n, 2))
+            f.create_dataset("frames/velocity", shape=(0, n, d), maxshape=(None, None, d),
+                             dtype="f8", chunks=(1, chunk, d), fillvalue=np.nan)
+        self._chunk = chunk
         self._n_frames = 0
         self._last_time: float | None = None
         self._continued_from: float | None = None   # last time of the series continued
         self._interval = None if frame_interval is None else float(frame_interval)
         self._recent_steps = np.zeros(0)
-        self._last_y: np.ndarray | None = None
-        self._last_lap: np.ndarray | None = None
+        self._last_y: np.ndarray | None = None       # last height seen of each particle
+        self._last_lap: np.ndarray | None = None     # its lap counter then
+        self._last_present: np.ndarray | None = None  # present in the last frame written
+        self._any_present = False
         self._closed = False
 
     # -- context manager ---------------------------------------------------------------
@@ -155,6 +200,11 @@ class TrajectoryWriter:
     def n_frames(self) -> int:
         """Number of frames written so far."""
         return self._n_frames
+
+    @property
+    def any_present(self) -> bool:
+        """Whether some particle was present in some frame written so far."""
+        return self._any_present
 
     @property
     def last_frame(self) -> tuple[float, np.ndarray, np.ndarray] | None:
@@ -190,6 +240,7 @@ class TrajectoryWriter:
         self._last_time = self._continued_from = float(time)
         self._last_y = np.asarray(heights, dtype=np.float64).copy()
         self._last_lap = np.asarray(laps, dtype=np.int32).copy()
+        self._last_present = np.ones(self.ids.size, dtype=bool)
         if frame_interval is not None:
             self._interval = float(frame_interval)
 
@@ -224,37 +275,42 @@ class TrajectoryWriter:
             raise InputError(
                 f"{self._label}: frames unevenly spaced: {_t(steps[first + k])} s between "
                 f"t = {_t(times[k])} and {_t(times[k + 1])} s, expected {_t(reference)} s "
-                f"({what}, within {FRAME_SPACING_TOLERANCE:.0%}); irregular frame times (a "
-                "missing frame, or tracking data such as PEPT) would need resampling with "
-                "--resample DT --max-gap G, which is not available yet")
+                f"({what}, within {FRAME_SPACING_TOLERANCE:.0%}); for irregular frame times "
+                "(tracking data such as PEPT, or missing frames) resample them with --resample "
+                "DT --max-gap G")
 
-    def _check_array(self, name: str, values: np.ndarray, times: np.ndarray) -> None:
-        finite = np.isfinite(values)
+    def _check_array(self, name: str, values: np.ndarray, times: np.ndarray,
+                     present: np.ndarray) -> None:
+        finite = np.isfinite(values).all(axis=-1) | ~present
         if not finite.all():
-            t_idx, p_idx = np.argwhere(~finite.all(axis=-1))[0]
+            t_idx, p_idx = np.argwhere(~finite)[0]
             raise InputError(f"{self._label}: {name} of particle {self.ids[p_idx]} at t = "
                              f"{times[t_idx]:g} s is not a finite number")
 
-    def _check_domain(self, positions: np.ndarray, times: np.ndarray) -> None:
+    def _check_domain(self, positions: np.ndarray, times: np.ndarray, present: np.ndarray) -> None:
         tol = POSITION_TOLERANCE
-        x, y = positions[..., 0], positions[..., 1]
-        outside = (x < -tol) | (x > self.width + tol) | (y < -tol) | (y > self.height + tol)
+        limits = [self.width, self.height] + ([] if self.depth is None else [self.depth])
+        with np.errstate(invalid="ignore"):
+            outside = ((positions < -tol) | (positions > np.asarray(limits) + tol)).any(axis=-1)
+        outside &= present
         if outside.any():
             t_idx, p_idx = np.argwhere(outside)[0]
+            where = ", ".join(f"{v:g}" for v in positions[t_idx, p_idx])
+            size = " x ".join(f"0..{v:g}" for v in limits)
             raise InputError(
                 f"{self._label}: particle {self.ids[p_idx]} at t = {times[t_idx]:g} s lies outside "
-                f"the domain 0..{self.width:g} x 0..{self.height:g} m at ({x[t_idx, p_idx]:g}, "
-                f"{y[t_idx, p_idx]:g})")
+                f"the domain {size} m at ({where})")
 
-    def _check_minimal_image(self, previous_y: np.ndarray, y: np.ndarray, t0, t1) -> None:
+    def _check_minimal_image(self, previous_y: np.ndarray, y: np.ndarray, t0, t1,
+                             both: np.ndarray) -> None:
         """Laps from wrapped heights need small steps: refuse a particle that moved more
         than ``max_step`` of the height between two frames (by the minimal image; beyond
         half the height its pass through the periodic boundary, or not, cannot be told from
         the positions at all)."""
-        step = np.abs(y - previous_y)
+        step = np.where(both, np.abs(y - previous_y), 0.0)
         step = np.minimum(step, self.height - step)          # the minimal image
-        worst = int(np.argmax(step))
-        if step[worst] > self.max_step * self.height:
+        worst = int(np.argmax(step)) if step.size else 0
+        if step.size and step[worst] > self.max_step * self.height:
             raise InputError(
                 f"{self._label}: particle {int(self.ids[worst])} moved {step[worst]:.4g} m "
                 f"(more than {self.max_step:g} of the height {self.height:g} m) between t = {t0:g} "
@@ -263,19 +319,70 @@ class TrajectoryWriter:
                 "flags (ix iy)")
 
     # -- writing -----------------------------------------------------------------------
-    def append(self, time: float, position, velocity=None, lap=None) -> None:
+    def add_particles(self, ids) -> None:
+        """Add particles that appear after the first frame (inserted, entering the view):
+        new columns, absent from every frame written so far.
+
+        Parameters
+        ----------
+        ids : array_like of int, shape (M,)
+            New ids, none already in the file.
+
+        Raises
+        ------
+        InputError
+            If an id is already in the file or given twice.
+        """
+        new = np.asarray(ids, dtype=np.int64).reshape(-1)
+        if new.size == 0:
+            return
+        if np.unique(new).size != new.size or np.isin(new, self.ids).any():
+            raise InputError(f"{self._label}: particle ids added twice")
+        n0, n1 = self.ids.size, self.ids.size + new.size
+        f = self._file
+        f["particles/id"].resize(n1, axis=0)
+        f["particles/id"][n0:] = new
+        names = ["frames/position", "frames/lap"] + (["frames/velocity"] if self.with_velocity else [])
+        if "frames/present" in f:
+            names.append("frames/present")
+        for name in names:
+            f[name].resize(n1, axis=1)
+        self.ids = np.concatenate([self.ids, new])
+        if self._n_frames:
+            self._mark_absent()       # the new particles are absent from the frames so far
+        if self._last_y is not None:
+            self._last_y = np.concatenate([self._last_y, np.full(new.size, np.nan)])
+            self._last_lap = np.concatenate([self._last_lap, np.zeros(new.size, np.int32)])
+            self._last_present = np.concatenate([self._last_present, np.zeros(new.size, bool)])
+
+    def _mark_absent(self) -> None:
+        """Create the presence mask on the first absence: every earlier entry present, except
+        particles added since (fill value False)."""
+        f = self._file
+        if "frames/present" in f:
+            return
+        n = self.ids.size
+        ds = f.create_dataset("frames/present", shape=(self._n_frames, n), maxshape=(None, None),
+                              dtype="?", chunks=(1, self._chunk), fillvalue=False)
+        for i in range(0, self._n_frames, 1024):
+            j = min(i + 1024, self._n_frames)
+            ds[i:j] = np.isfinite(f["frames/position"][i:j, :, 0])
+
+    def append(self, time: float, position, velocity=None, lap=None, present=None) -> None:
         """Append one frame.
 
         Parameters
         ----------
         time : float
             Frame time (s).
-        position : array_like, shape (N, 2)
-            Positions (m).
-        velocity : array_like, shape (N, 2), optional
+        position : array_like, shape (N, D)
+            Positions (m); D = 2, or 3 with a depth.
+        velocity : array_like, shape (N, D), optional
             Velocities (m/s); required when the file stores velocities.
         lap : array_like of int, shape (N,), optional
             Lap counters (derived by the minimal-image rule when None).
+        present : array_like of bool, shape (N,), optional
+            Which particles are in the frame (default: all).
 
         Raises
         ------
@@ -284,72 +391,118 @@ class TrajectoryWriter:
         """
         self.append_frames(np.asarray([time], dtype=float), np.asarray(position)[None],
                            None if velocity is None else np.asarray(velocity)[None],
-                           None if lap is None else np.asarray(lap)[None])
+                           None if lap is None else np.asarray(lap)[None],
+                           None if present is None else np.asarray(present)[None])
 
-    def append_frames(self, times, positions, velocities=None, laps=None) -> None:
+    def append_frames(self, times, positions, velocities=None, laps=None, present=None) -> None:
         """Append a block of frames.
 
         Parameters
         ----------
         times : array_like, shape (T,)
             Frame times (s), increasing, evenly spaced, following the last frame.
-        positions : array_like, shape (T, N, 2)
-            Positions (m), inside the domain.
-        velocities : array_like, shape (T, N, 2), optional
+        positions : array_like, shape (T, N, D)
+            Positions (m), inside the domain where present (anything, NaN included, where
+            absent); D = 2, or 3 with a depth.
+        velocities : array_like, shape (T, N, D), optional
             Velocities (m/s); required when the file stores velocities.
         laps : array_like of int, shape (T, N), optional
-            Lap counters (derived by the minimal-image rule when None).
+            Lap counters (derived by the minimal-image rule when None; 0 for an open riser).
+        present : array_like of bool, shape (T, N), optional
+            Which particles are in each frame (default: all).
 
         Raises
         ------
         InputError
-            If an array has the wrong shape, a value is not finite, a position lies
-            outside the domain, the times do not increase or are unevenly spaced, or
-            velocities are missing.
+            If an array has the wrong shape, a present value is not finite, a present
+            position lies outside the domain, the times do not increase or are unevenly
+            spaced, velocities are missing, or (laps derived) a particle moved more than
+            ``max_step`` of the height between frames.
         """
         times = np.asarray(times, dtype=np.float64).reshape(-1)
         positions = np.asarray(positions, dtype=np.float64)
-        n = self.ids.size
+        n, d = self.ids.size, self.dimensions
         t = times.size
-        if positions.shape != (t, n, 2):
-            raise InputError(f"{self._label}: expected positions of shape ({t}, {n}, 2), "
+        if positions.shape != (t, n, d):
+            raise InputError(f"{self._label}: expected positions of shape ({t}, {n}, {d}), "
                              f"got {positions.shape}")
+        present = np.ones((t, n), dtype=bool) if present is None else np.asarray(
+            present, dtype=bool).reshape(t, n)
+        absent = not present.all()
         self._check_times(times)
-        self._check_array("position", positions, times)
-        self._check_domain(positions, times)
+        self._check_array("position", positions, times, present)
+        self._check_domain(positions, times, present)
         if self.with_velocity:
             if velocities is None:
                 raise InputError(f"{self._label}: this file stores velocities; none were given")
             velocities = np.asarray(velocities, dtype=np.float64)
-            if velocities.shape != (t, n, 2):
-                raise InputError(f"{self._label}: expected velocities of shape ({t}, {n}, 2)")
-            self._check_array("velocity", velocities, times)
-        if laps is None:
-            laps = np.empty((t, n), dtype=np.int32)
-            prev_y, prev_lap = self._last_y, self._last_lap
-            prev_t = self._last_time
-            for k in range(t):
-                y = positions[k, :, 1]
-                if prev_y is not None:
-                    self._check_minimal_image(prev_y, y, prev_t, times[k])
-                laps[k] = 0 if prev_y is None else prev_lap + lap_increments(prev_y, y, self.height)
-                prev_y, prev_lap, prev_t = y, laps[k], times[k]
-        else:
-            laps = np.asarray(laps, dtype=np.int32).reshape(t, n)
+            if velocities.shape != (t, n, d):
+                raise InputError(f"{self._label}: expected velocities of shape ({t}, {n}, {d})")
+            self._check_array("velocity", velocities, times, present)
+        if absent:
+            positions = np.where(present[..., None], positions, np.nan)
+            if self.with_velocity:
+                velocities = np.where(present[..., None], velocities, np.nan)
+        laps = self._laps(times, positions, present, laps)
         f = self._file
+        if absent:
+            self._mark_absent()
         i0, i1 = self._n_frames, self._n_frames + t
-        for name in ("frames/time", "frames/position", "frames/lap") + (
-                ("frames/velocity",) if self.with_velocity else ()):
+        names = ["frames/time", "frames/position", "frames/lap"] + (
+            ["frames/velocity"] if self.with_velocity else [])
+        if "frames/present" in f:
+            names.append("frames/present")
+        for name in names:
             f[name].resize(i1, axis=0)
         f["frames/time"][i0:i1] = times
         f["frames/position"][i0:i1] = positions
         f["frames/lap"][i0:i1] = laps
         if self.with_velocity:
             f["frames/velocity"][i0:i1] = velocities
+        if "frames/present" in f:
+            f["frames/present"][i0:i1] = present
         self._n_frames = i1
         self._last_time = float(times[-1])
-        self._last_y = positions[-1, :, 1].copy()
-        self._last_lap = laps[-1].copy()
+        self._any_present = self._any_present or bool(present.any())
+
+    def _laps(self, times, positions, present, laps) -> np.ndarray:
+        """The lap counters of a block: given, 0 for an open riser, or by the minimal-image
+        rule between consecutive frames where a particle is present (carried over gaps);
+        updates the last height, lap and presence of every particle."""
+        t, n = present.shape
+        if laps is not None:
+            laps = np.where(present, np.asarray(laps, dtype=np.int32).reshape(t, n), 0)
+            if self._last_y is None:
+                self._last_y = np.full(n, np.nan)
+                self._last_lap = np.zeros(n, np.int32)
+            seen = present.any(axis=0)
+            last = t - 1 - np.argmax(present[::-1], axis=0)
+            cols = np.arange(n)
+            self._last_y = np.where(seen, positions[last, cols, 1], self._last_y)
+            self._last_lap = np.where(seen, laps[last, cols], self._last_lap).astype(np.int32)
+            self._last_present = present[-1].copy()
+            return laps
+        if self.boundary == "open":
+            return np.zeros((t, n), dtype=np.int32)
+        out = np.zeros((t, n), dtype=np.int32)
+        prev_y, prev_lap, prev_present = self._last_y, self._last_lap, self._last_present
+        prev_t = self._last_time
+        for k in range(t):
+            y = positions[k, :, 1]
+            if prev_y is None:
+                lap = np.zeros(n, dtype=np.int32)
+                prev_y = np.full(n, np.nan)
+            else:
+                both = present[k] & prev_present
+                self._check_minimal_image(prev_y, y, prev_t, times[k], both)
+                with np.errstate(invalid="ignore"):
+                    step = lap_increments(prev_y, y, self.height)
+                lap = prev_lap + np.where(both, step, 0).astype(np.int32)
+            out[k] = np.where(present[k], lap, 0)
+            prev_y = np.where(present[k], y, prev_y)
+            prev_lap, prev_present, prev_t = lap, present[k], times[k]
+        self._last_y, self._last_lap, self._last_present = prev_y, prev_lap, prev_present
+        return out
 
     def append_fields(self, time: float, spacing, **fields) -> None:
         """Append one frame of gas fields on a cell-centred grid to ``/fields``.
@@ -453,13 +606,15 @@ class TrajectoryWriter:
         Raises
         ------
         InputError
-            If no frame was written (the partial file is discarded) or the rename fails.
+            If no frame or no particle was written (the partial file is discarded) or the
+            rename fails.
         """
         if self._closed:
             return self.path
-        if self._n_frames == 0:
+        if self._n_frames == 0 or self.ids.size == 0:
             self.abort()
-            raise InputError(f"{self._label}: no frames to write")
+            raise InputError(f"{self._label}: no " + ("frames" if self._n_frames == 0 else
+                                                      "particle in any frame") + " to write")
         try:
             self._finish_times()
         except BaseException:
@@ -531,8 +686,9 @@ def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
 
 def write_trajectories(path: str | os.PathLike, times, positions, *, width: float, height: float,
                        ids=None, velocities=None, laps=None, source: str = "arrays",
-                       parameters: dict[str, Any] | None = None, events: PassEvents | None = None
-                       ) -> Path:
+                       parameters: dict[str, Any] | None = None, events: PassEvents | None = None,
+                       present=None, depth: float | None = None, boundary: str = "periodic",
+                       axes: dict[str, str] | None = None, region_origin=None) -> Path:
     """Write whole arrays as a trajectory file.
 
     Parameters
@@ -541,8 +697,8 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
         The file to write.
     times : array_like, shape (T,)
         Frame times (s), increasing and evenly spaced.
-    positions : array_like, shape (T, N, 2)
-        Positions (m).
+    positions : array_like, shape (T, N, D)
+        Positions (m); D = 2, or 3 with ``depth``.
     width, height : float
         The riser W x H (m).
     ids : array_like of int, shape (N,), optional
@@ -557,6 +713,10 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
         The producer's parameters.
     events : PassEvents, optional
         Exact pass events.
+    present : array_like of bool, shape (T, N), optional
+        Which particles are in each frame (default: all).
+    depth, boundary, axes, region_origin : optional
+        As :class:`TrajectoryWriter`.
 
     Returns
     -------
@@ -566,15 +726,18 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
     Raises
     ------
     InputError
-        If ``positions`` is not (T, N, 2), or as :class:`TrajectoryWriter`.
+        If ``positions`` is not (T, N, D) with D = 2 (3 with a depth), or as
+        :class:`TrajectoryWriter`.
     """
     positions = np.asarray(positions, dtype=np.float64)
-    if positions.ndim != 3 or positions.shape[-1] != 2:
-        raise InputError(f"positions must have shape (T, N, 2), got {positions.shape}")
+    d = 2 if depth is None else 3
+    if positions.ndim != 3 or positions.shape[-1] != d:
+        raise InputError(f"positions must have shape (T, N, {d}), got {positions.shape}")
     ids = np.arange(positions.shape[1]) if ids is None else ids
     with TrajectoryWriter(path, ids, width=width, height=height, source=source,
-                          parameters=parameters, with_velocity=velocities is not None) as w:
-        w.append_frames(times, positions, velocities, laps)
+                          parameters=parameters, with_velocity=velocities is not None, depth=depth,
+                          boundary=boundary, axes=axes, region_origin=region_origin) as w:
+        w.append_frames(times, positions, velocities, laps, present)
         if events is not None:
             w.add_events(events.time, events.particle, events.direction)
     return Path(path)

@@ -18,9 +18,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from cfbmarkov.cli import main as cli_main
 from cfbmarkov.errors import InputError
 from cfbmarkov.io import import_csv, import_file
-from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectories import Trajectories, describe
 
 FIELD = Path(__file__).parent / "field"
 
@@ -81,8 +82,11 @@ def test_spreadsheet_headers_need_the_vertical_axis_then_map(tmp_path, assert_cl
                                 match=r"has a z column \(3D positions\): say which axis is "
                                       r"vertical with --vertical-axis x\|y\|z")
     assert "nothing is guessed" in line
+    assert_clean_failure("import", source, "--format", "csv", "--vertical-axis", "y", "-o", output,
+                         output=output, match=r"3D positions \(x across, y vertical, z depth\): "
+                                              r"give the riser with --region .* or --drop-depth")
     times, ids, pos, vel, params = _read(import_file(source, "csv", tmp_path / "e.h5",
-                                                     vertical_axis="y"))
+                                                     vertical_axis="y", drop_depth=True))
     _three_by_three(times, ids, pos)
     np.testing.assert_array_equal(vel, np.broadcast_to([0.0, 2.0], (3, 3, 2)))
     assert params["vertical_axis"] == "y" and params["across_axis"] == "x"
@@ -131,33 +135,68 @@ def test_vertical_axis_z_takes_heights_from_z(tmp_path):
         f"{0.025 * k},{i},{0.02 * i},0.004,{0.1 + 0.05 * k},0.5,9,-1.5\n"
         for k in range(3) for i in (1, 2, 3)))
     times, ids, pos, vel, params = _read(import_file(source, "csv", tmp_path / "z.h5",
-                                                     vertical_axis="z"))
+                                                     vertical_axis="z", drop_depth=True))
     _three_by_three(times, ids, pos)
     np.testing.assert_array_equal(vel, np.broadcast_to([0.5, -1.5], (3, 3, 2)))
     assert (params["vertical_axis"], params["across_axis"]) == ("z", "x")
     assert params["depth_axis_dropped"] == "y"
     assert params["velocity_columns"] == ["vx", "vz"]
+    # kept in 3D with the riser's region (x, y, z ranges): depth y measured from its lower bound
+    times, ids, pos3, vel3, params = _read(import_file(
+        source, "csv", tmp_path / "z3.h5", vertical_axis="z",
+        region=((0.0, 0.09), (0.0, 0.01), (0.0, 0.95))))
+    np.testing.assert_array_equal(pos3[..., :2], pos)
+    np.testing.assert_allclose(pos3[..., 2], 0.004, rtol=0, atol=1e-15)
+    np.testing.assert_array_equal(vel3, np.broadcast_to([0.5, -1.5, 9.0], (3, 3, 3)))
+    with Trajectories(tmp_path / "z3.h5") as t:
+        assert (t.dimensions, t.depth) == (3, 0.01)
+        assert t.axes == {"across": "x", "vertical": "z", "depth": "y"}
     with pytest.raises(InputError, match=r"--vertical-axis z but the header 't;id;x;y' has no z"):
         import_file(FIELD / "semicolon-decimal-comma.csv", "csv", tmp_path / "n.h5",
                     vertical_axis="z")
 
 
-# -- PEPT and PTV: refused until the store has a presence mask ----------------------------------
-def test_pept_point_data_is_refused_with_the_option_that_is_missing(tmp_path,
-                                                                    assert_clean_failure):
+# -- PEPT and PTV: resampling and presence ----------------------------------------------------
+def test_pept_point_data_needs_resampling_and_then_gives_the_right_track(tmp_path,
+                                                                         assert_clean_failure):
+    """README: one tracer; y = (2.5 mm/ms t) mod 950 mm, x = 45 + 20 sin(t / 50 ms) mm;
+    resampled onto 5 ms it is present on 0-300 ms and from 420 ms on, absent in the gap."""
     source = FIELD / "pept-pointdata.csv"
     output = tmp_path / "o" / "p.h5"
     base = ("import", source, "--format", "csv", "-o", output)
     assert_clean_failure(*base, output=output, match=r"header 't x y z error' has a z column.*"
                                                      r"--vertical-axis")
-    assert_clean_failure(*base, "--vertical-axis", "y", output=output,
+    units = ("--vertical-axis", "y", "--drop-depth")
+    assert_clean_failure(*base, *units, output=output,
                          match=r"particle 0 at t = 0.459185 s lies outside the domain .*'x' = "
                                r"45.1837 m.*give --length-unit cm\|mm")
-    line = assert_clean_failure(*base, "--vertical-axis", "y", "--length-unit", "mm",
-                                "--time-unit", "ms", output=output,
+    units += ("--length-unit", "mm", "--time-unit", "ms")
+    line = assert_clean_failure(*base, *units, output=output,
                                 match=r"frames unevenly spaced: 0.002244815 s between t = "
                                       r"0.001535799 and 0.003780614 s")
-    assert "resampling with --resample DT --max-gap G, which is not available yet" in line
+    assert "resample them with --resample DT --max-gap G" in line
+    for bad, match in ((("--resample", "0"), r"argument --resample: '0' must be positive"),
+                       (("--resample", "5"), r"--resample step 5 s is larger than the span"),
+                       (("--max-gap", "0.1"), r"--max-gap applies with --resample only"),
+                       (("--resample", "0.005", "--max-gap", "-1"), r"--max-gap: '-1' must be")):
+        assert_clean_failure(*base, *units, *bad, output=output, match=match)
+    out = tmp_path / "p.h5"
+    assert cli_main(["import", str(source), "--format", "csv", "-o", str(out), *units,
+                     "--resample", "0.005", "--max-gap", "0.1"]) == 0
+    with Trajectories(out) as t:
+        times, pos, present, laps = t.times, t.positions()[:, 0], t.present()[:, 0], t.laps()[:, 0]
+        assert t.frame_interval == 0.005 and t.parameters["resample"] == 0.005
+    ms = times * 1000
+    assert ms[0] == pytest.approx(0.459185, abs=1e-6)
+    gap = (ms > 297.2) & (ms < 420.4)
+    np.testing.assert_array_equal(present, ~gap)
+    assert np.isnan(pos[gap]).all()
+    x, y = 45 + 20 * np.sin(ms / 50), np.mod(2.5 * ms, 950)
+    np.testing.assert_allclose(pos[~gap, 0] * 1000, x[~gap], atol=0.5)
+    dy = np.abs(pos[~gap, 1] * 1000 - y[~gap])
+    assert np.minimum(dy, 950 - dy).max() < 0.5
+    # the pass at 380 ms is inside the gap, unseen; the one at 760 ms is counted
+    assert laps[ms < 750].max() == 0 and laps[-1] == 1
 
 
 def test_pept_style_file_at_even_times_reads_right(tmp_path):
@@ -168,7 +207,8 @@ def test_pept_style_file_at_even_times_reads_right(tmp_path):
     source.write_text("# written by pept\n# t x y z error\n" + "".join(
         f"{a:.6e} {b:.6e} {c:.6e} 5.000000e-01 1.2\n" for a, b, c in zip(t, x, y)))
     times, ids, pos, vel, params = _read(import_file(
-        source, "csv", tmp_path / "p.h5", length_unit="mm", time_unit="ms", vertical_axis="y"))
+        source, "csv", tmp_path / "p.h5", length_unit="mm", time_unit="ms", vertical_axis="y",
+        drop_depth=True))
     np.testing.assert_array_equal(ids, [0])
     np.testing.assert_allclose(times, t / 1000, rtol=1e-6)
     np.testing.assert_allclose(pos[:, 0, 0], x / 1000, rtol=1e-6)
@@ -186,18 +226,26 @@ def test_two_rows_at_one_time_without_id(tmp_path, assert_clean_failure):
                          match=r"2 rows at this time, but the file has no id column")
 
 
-def test_ptv_particles_entering_and_leaving_are_refused(tmp_path, assert_clean_failure):
-    output = tmp_path / "o" / "v.h5"
-    assert_clean_failure("import", FIELD / "ptv-enter-leave.csv", "--format", "csv", "-o", output,
-                         output=output,
-                         match=r"frame at t = 0.004 s: particle id 5 is not in the first frame; "
-                               r"particles that enter or leave the view are not supported yet")
-    leaving = tmp_path / "leave.csv"
-    leaving.write_text("".join(line for line in (FIELD / "ptv-enter-leave.csv").open()
-                               if ",5," not in line))
-    assert_clean_failure("import", leaving, "--format", "csv", "-o", output, output=output,
-                         match=r"frame at t = 0.008 s: particle id 2 missing \(3 of 4 particles.*"
-                               r"particles that enter or leave the view are not supported yet")
+def test_ptv_particles_entering_and_leaving_are_present_as_in_the_file(tmp_path):
+    """Particle 5 enters the view at the third frame, particle 2 leaves after the fourth."""
+    source = FIELD / "ptv-enter-leave.csv"
+    rows = np.loadtxt(source, delimiter=",", skiprows=1)
+    out = import_file(source, "csv", tmp_path / "v.h5")
+    with Trajectories(out) as t:
+        ids, times, present, pos = t.ids, t.times, t.present(), t.positions()
+        lines = describe(t)
+    frame_times = np.unique(rows[:, 0])
+    np.testing.assert_allclose(times, frame_times)
+    for k, time in enumerate(frame_times):
+        expected = set(rows[rows[:, 0] == time, 1].astype(int))
+        assert set(ids[present[k]]) == expected
+        for r in rows[rows[:, 0] == time]:
+            np.testing.assert_array_equal(pos[k, list(ids).index(int(r[1]))], r[2:4])
+    assert present[:2, list(ids).index(5)].tolist() == [False, False]
+    assert present[4:, list(ids).index(2)].sum() == 0
+    text = "\n".join(lines)
+    assert "particles present per frame: min 4, max 5 of 5" in text
+    assert "entries 1, exits 1" in text
 
 
 # -- the new options, given wrong ----------------------------------------------------------------
@@ -205,7 +253,9 @@ def test_ptv_particles_entering_and_leaving_are_refused(tmp_path, assert_clean_f
     (("--length-unit", "km"), r"argument --length-unit: invalid choice: 'km'"),
     (("--time-unit", "h"), r"argument --time-unit: invalid choice: 'h'"),
     (("--vertical-axis", "w"), r"argument --vertical-axis: invalid choice: 'w'"),
-    (("--region", "0:0.09,0:0.95"), r"--region applies to LAMMPS dumps only so far"),
+    (("--region", "0:0.09"), r"argument --region"),
+    (("--boundary", "closed"), r"argument --boundary: invalid choice: 'closed'"),
+    (("--region", "0.5:0.9,0:0.95"), r"holds no particle in any frame"),
 ])
 def test_wrong_option_values_give_one_line(tmp_path, assert_clean_failure, args, match):
     output = tmp_path / "o" / "x.h5"

@@ -119,16 +119,25 @@ def test_box_wider_than_the_riser_does_not_shift_positions(tmp_path, options):
     np.testing.assert_allclose(pos_box[..., 0], pos[..., 0] + 0.001, rtol=0, atol=1e-15)
 
 
-def test_particle_outside_the_region_is_named_with_its_file_coordinate(tmp_path, capsys):
+def test_particles_outside_the_region_are_absent_and_an_empty_region_is_refused(tmp_path, capsys):
+    """A region narrower than the riser keeps the particles inside it, measured from its own
+    lower corner; the others are absent from the frames where they lie outside it."""
+    out = import_file(FIELD / "box-wider-than-riser.dump", "lammps", tmp_path / "r.h5",
+                      time_step=5e-6, region=((0.05, 0.09), (0.0, 0.95)))
+    truth = np.load(FIELD / "box-wider-than-riser.xy.npy")
+    inside = truth[..., 0] >= 0.05
+    assert 0 < inside.sum() < inside.size
+    with Trajectories(out) as t:
+        present, pos = t.present(), t.positions()
+        order = np.argsort(t.ids)
+    np.testing.assert_array_equal(present[:, order], inside)
+    np.testing.assert_allclose(pos[:, order][inside][:, 0], truth[inside][:, 0] - 0.05, atol=5e-9)
+    assert np.isnan(pos[:, order][~inside]).all()
     code = main(["import", str(FIELD / "box-wider-than-riser.dump"), "--format", "lammps",
-                 "--time-step", "5e-6", "--region", "0.05:0.09,0:0.95", "-o",
-                 str(tmp_path / "r.h5")])
+                 "--time-step", "5e-6", "--region", "0.5:0.9,0:0.95", "-o", str(tmp_path / "e.h5")])
     err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1
-    # the coordinate in the message is the one the dump holds, not a shifted one
-    value = float(err.split(" at x = ")[1].split()[0])
-    assert value < 0.05 and f"{value:g}" in (FIELD / "box-wider-than-riser.dump").read_text()
-    assert not (tmp_path / "r.h5").exists()
+    assert code == 2 and err.count("\n") == 1 and "holds no particle" in err
+    assert not (tmp_path / "e.h5").exists()
 
 
 def test_3d_dump_needs_its_vertical_axis(tmp_path, capsys):
@@ -137,7 +146,7 @@ def test_3d_dump_needs_its_vertical_axis(tmp_path, capsys):
                  str(tmp_path / "g.h5")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1
-    assert "3D dump" in err and "--vertical-axis" in err and "z 0..0.15" in err
+    assert "3D positions" in err and "--vertical-axis" in err and "z 0..0.15" in err
     assert "the longest, z" in err
     assert not (tmp_path / "g.h5").exists()
     out = import_file(source, "lammps", tmp_path / "g.h5", time_step=1e-5, vertical_axis="z")
@@ -147,10 +156,21 @@ def test_3d_dump_needs_its_vertical_axis(tmp_path, capsys):
     raw = np.loadtxt(source, skiprows=9, usecols=(2, 3, 4))
     np.testing.assert_allclose(pos[0, :, 1], raw[:, 2], atol=1e-15)          # heights are z
     np.testing.assert_allclose(pos[0, :, 0], raw[:, 0] + 0.05, atol=1e-15)   # across is x
+    np.testing.assert_allclose(pos[0, :, 2], raw[:, 1] + 0.05, atol=1e-15)   # depth is y
+    with Trajectories(out) as t:
+        assert (t.dimensions, t.depth, t.boundary) == (3, pytest.approx(0.1), "open")
+        assert t.axes == {"across": "x", "vertical": "z", "depth": "y"}
+        np.testing.assert_allclose(t.region_origin, [-0.05, 0.0, -0.05])
     assert params["vertical_axis"] == "z" and params["across_axis"] == "x"
-    assert params["depth_axis_dropped"] == "y"
-    assert params["laps_from"] == "none (not periodic)" and laps.max() == 0
-    with pytest.raises(InputError, match="vertical axis is z: give x, y and z ranges"):
+    assert params["depth_axis"] == "y" and params["depth_axis_dropped"] is None
+    assert params["laps_from"] == "none (open riser)" and laps.max() == 0
+    # projected on (across, vertical) on request
+    flat = import_file(source, "lammps", tmp_path / "f.h5", time_step=1e-5, vertical_axis="z",
+                       drop_depth=True)
+    _, pos2, *_, params2 = _read(flat)
+    assert pos2.shape[-1] == 2 and params2["depth_axis_dropped"] == "y"
+    np.testing.assert_array_equal(pos2, pos[..., :2])
+    with pytest.raises(InputError, match="the z axis: give x, y and z ranges"):
         import_file(source, "lammps", tmp_path / "x.h5", time_step=1e-5, vertical_axis="z",
                     region=((-0.05, 0.05), (-0.05, 0.05)))
     with pytest.raises(InputError, match="choose x, y or z"):
@@ -176,7 +196,7 @@ def test_liggghts_one_file_per_timestep_by_glob_in_timestep_order(tmp_path, caps
     assert code == 0, capsys.readouterr().err
     times, pos, laps, width, height, params = _read(out)
     np.testing.assert_allclose(times, 0.008 * np.arange(1, 13), rtol=1e-12)
-    assert pos.shape == (12, 6, 2) and (width, height) == pytest.approx((0.1, 0.15))
+    assert pos.shape == (12, 6, 3) and (width, height) == pytest.approx((0.1, 0.15))
     for k, timestep in enumerate(range(800, 9601, 800)):
         raw = np.loadtxt(FIELD / "liggghts-per-timestep" / "post" / f"dump{timestep}.newModels",
                          skiprows=9, usecols=(0, 2, 4))
@@ -185,7 +205,7 @@ def test_liggghts_one_file_per_timestep_by_glob_in_timestep_order(tmp_path, caps
         np.testing.assert_allclose(pos[k, :, 0], raw[:, 1] + 0.05, atol=1e-15)
     assert params["frames_without_atoms_skipped"] == 1 and len(params["source_files"]) == 13
     assert params["source_files"][1] == "dump800.newModels"
-    assert laps.max() == 0 and params["laps_from"] == "none (not periodic)"
+    assert laps.max() == 0 and params["laps_from"] == "none (open riser)"
     assert main(["import", str(FIELD / "nothing*.dump"), "--format", "lammps", "-o",
                  str(tmp_path / "n.h5")]) == 2
     assert "no file matches" in capsys.readouterr().err
@@ -221,8 +241,8 @@ def test_info_shows_a_wrong_import_at_a_glance(tmp_path, capsys):
     capsys.readouterr()
     assert main(["info", str(lig)]) == 0
     text = capsys.readouterr().out
-    assert "0.1 m across x 0.15 m high" in text and "vertical axis z, across x" in text
-    assert "depth axis y dropped" in text and "open in the source" in text
+    assert "0.1 m across x 0.15 m high x 0.1 m deep (3D)" in text
+    assert "vertical z, across x, depth y" in text and "vertical boundary open" in text
     assert "particles present per frame: min 6, max 6" in text
     assert main(["info", str(coarse)]) == 0
     text = capsys.readouterr().out

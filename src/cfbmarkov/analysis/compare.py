@@ -308,6 +308,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     The paper: Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614.
     """
     start, stop = check_parameters(window, bin_width, md_order)
+    ref.require_supported("comparing runs")
+    pred.require_supported("comparing runs")
     warnings: list[str] = []
     ref_frames = ref.window(start, stop)
     pred_frames = pred.window(start, stop)

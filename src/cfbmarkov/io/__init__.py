@@ -10,6 +10,8 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import numpy as np
+
 from cfbmarkov.errors import InputError
 from cfbmarkov.io.csv import import_csv
 from cfbmarkov.io.lammps import import_lammps
@@ -21,7 +23,9 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                 width: float | None = None, height: float | None = None,
                 time_step: float | None = None, vertical_axis: str | None = None,
                 region: tuple[tuple[float, float], ...] | None = None,
-                length_unit: str | None = None, time_unit: str | None = None) -> Path:
+                length_unit: str | None = None, time_unit: str | None = None,
+                boundary: str | None = None, drop_depth: bool = False,
+                resample: float | None = None, max_gap: float | None = None) -> Path:
     """Import ``source`` in format ``fmt`` ('csv' or 'lammps') as the trajectory file ``output``.
 
     Parameters
@@ -42,7 +46,17 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
         The source's vertical axis; required for a 3D dump and for a CSV file with a z
         column (default y otherwise).
     region : sequence of (lo, hi), optional
-        The riser in the source's coordinates, one range per axis x, y (, z) (LAMMPS dumps).
+        The riser in the source's coordinates and length unit, one range per axis x, y (, z);
+        particles outside it are absent.
+    boundary : {"periodic", "open"}, optional
+        The vertical boundary (default: the dump's box flag on the vertical axis; periodic
+        for CSV).
+    drop_depth : bool, optional
+        Store 3D positions projected on (across, vertical).
+    resample : float, optional
+        CSV: interpolate tracks with irregular times onto frames this far apart (s).
+    max_gap : float, optional
+        With ``resample``: a particle is absent between samples further apart (s).
     length_unit : {"m", "cm", "mm"}, optional
         Unit of a CSV file's positions (and, over ``time_unit``, velocities) where its header
         gives none; default m (CSV only).
@@ -57,31 +71,35 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
     Raises
     ------
     InputError
-        For an unknown format, a non-positive size or time step, a time step or region given
-        with a CSV file, a length or time unit given with a dump, or bad input (see
+        For an unknown format, a non-positive size, time step, resample step or gap, a time
+        step given with a CSV file, a length or time unit or resampling given with a dump,
+        or bad input (see
         :func:`import_csv` and :func:`import_lammps`).
     """
     fmt = str(fmt).lower()
     if fmt not in FORMATS:
         raise InputError(f"unknown import format {fmt!r}; choose one of {', '.join(FORMATS)}")
-    for name, value in (("width", width), ("height", height), ("time step", time_step)):
-        if value is not None and not float(value) > 0:
+    for name, value in (("--width", width), ("--height", height), ("--time-step", time_step),
+                        ("--resample", resample), ("--max-gap", max_gap)):
+        if value is not None and not (np.isfinite(float(value)) and float(value) > 0):
             raise InputError(f"{name} {value} must be a positive number")
     if fmt == "csv":
         if time_step is not None:
             raise InputError("--time-step applies to LAMMPS dumps only; a CSV file gives its "
                              "times in column t")
-        if region is not None:
-            raise InputError("--region applies to LAMMPS dumps only so far; a CSV file gives "
-                             "positions measured from the riser's lower corner (0..W across, "
-                             "0..H vertically; set them with --width and --height)")
         return import_csv(source, output, width=width, height=height, length_unit=length_unit,
-                          time_unit=time_unit, vertical_axis=vertical_axis)
+                          time_unit=time_unit, vertical_axis=vertical_axis, region=region,
+                          boundary=boundary, drop_depth=drop_depth, resample=resample,
+                          max_gap=max_gap)
     if length_unit is not None or time_unit is not None:
         raise InputError("--length-unit and --time-unit apply to CSV files only; a LAMMPS dump "
                          "must be in SI units (ITEM: UNITS si)")
+    if resample is not None or max_gap is not None:
+        raise InputError("--resample and --max-gap apply to CSV files (tracks at irregular "
+                         "times); a LAMMPS dump is written every so many timesteps")
     return import_lammps(source, output, width=width, height=height, time_step=time_step,
-                         vertical_axis=vertical_axis, region=region)
+                         vertical_axis=vertical_axis, region=region, boundary=boundary,
+                         drop_depth=drop_depth)
 
 
 __all__ = ["FORMATS", "import_csv", "import_file", "import_lammps"]

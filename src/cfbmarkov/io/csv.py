@@ -59,10 +59,8 @@ from __future__ import annotations
 
 import itertools
 import os
-import re
 import warnings
 from collections.abc import Iterator
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TextIO
 
@@ -73,100 +71,47 @@ from cfbmarkov.io._common import (
     check_output,
     check_source,
     create_writer,
-    frame_order,
     open_text,
     progress,
     reading,
     removing_new_folders,
     whole_ids,
 )
-from cfbmarkov.trajectories import POSITION_TOLERANCE
+from cfbmarkov.io.csv_layout import (
+    AXES,
+    CHUNK_CHARS,
+    DEFAULT_HEIGHT,
+    DEFAULT_WIDTH,
+    LENGTH_UNITS,
+    TIME_UNITS,
+    _DELIMITERS,
+    CsvLayout,
+    _split,
+    read_layout,
+)
+from cfbmarkov.io.resample import resample_tracks
+from cfbmarkov.io.riser import FrameColumns, RiserFrame
+from cfbmarkov.trajectories import BOUNDARIES
 from cfbmarkov.trajectory_writer import TrajectoryWriter
-
-#: the paper's riser (docs/definitions.md, Riser): width W and height H, m
-DEFAULT_WIDTH = 0.09
-DEFAULT_HEIGHT = 0.95
-AXES = ("x", "y", "z")
-#: length and time units: the number a value is divided by to give m or s
-LENGTH_UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0}
-TIME_UNITS = {"s": 1.0, "ms": 1000.0}
-#: characters of text parsed per call (about 70000 rows of six columns)
-CHUNK_CHARS = 1 << 22
-#: data rows read after the header to tell the delimiter and the decimal mark
-SNIFF_ROWS = 5
-_EXPECTED = ("expected t, x, y and optionally id, z, vx, vy, vz (or spreadsheet names such as "
-             "'Time (s)', 'Particle ID', 'Position X (m)'); other columns are ignored")
-_ALIASES = {"t": "t", "time": "t", "id": "id", "particle id": "id", "particleid": "id",
-            "pid": "id"}
-for _axis in AXES:
-    _ALIASES.update({_axis: _axis, f"position {_axis}": _axis, f"pos {_axis}": _axis,
-                     f"v{_axis}": f"v{_axis}", f"velocity {_axis}": f"v{_axis}",
-                     f"vel {_axis}": f"v{_axis}", f"v {_axis}": f"v{_axis}"})
-_UNIT = re.compile(r"^(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]$")
-_DELIMITERS = {";": "semicolon", "\t": "tab", ",": "comma", None: "whitespace"}
 
 
 class _Unsorted(Exception):
     """The times of the rows decrease somewhere: read the file whole and sort it."""
 
 
-@dataclass
-class CsvLayout:
-    """How to read a CSV file: delimiter, decimal mark, used columns, units and axes.
-
-    ``used`` lists the canonical names of the columns parsed, in file order; ``usecols``
-    their positions in a row; ``divisors`` the number each is divided by for SI units.
-    """
-
-    header: list[str]
-    delimiter: str | None
-    decimal_comma: bool
-    used: list[str]
-    usecols: list[int]
-    divisors: list[float]
-    units: dict[str, str]
-    ignored: list[str]
-    vertical: str
-    across: str
-    depth: str | None
-    header_line: int
-    first_data_line: int
-    unit_from: dict[str, str] = field(default_factory=dict)
-    pending: list[str] = field(default_factory=list)
-
-    def column(self, name: str) -> str:
-        """The header name of canonical column ``name``, as written."""
-        return self.header[self.usecols[self.used.index(name)]]
-
-    def index(self, name: str) -> int:
-        """Position of canonical column ``name`` in a parsed row."""
-        return self.used.index(name)
-
-    @property
-    def has_id(self) -> bool:
-        return "id" in self.used
-
-    @property
-    def velocity(self) -> tuple[str, str] | None:
-        names = (f"v{self.across}", f"v{self.vertical}")
-        return names if all(n in self.used for n in names) else None
-
-    def shown(self) -> str:
-        return (self.delimiter or " ").join(self.header)
-
-
-# -- the CSV importer -------------------------------------------------------------------------
 def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
                width: float | None = None, height: float | None = None,
                length_unit: str | None = None, time_unit: str | None = None,
-               vertical_axis: str | None = None) -> Path:
+               vertical_axis: str | None = None, region=None, boundary: str | None = None,
+               drop_depth: bool = False, resample: float | None = None,
+               max_gap: float | None = None) -> Path:
     """Import a CSV file of particle positions (one row per particle and frame) as a
     trajectory file.
 
     The format (header names, delimiter, decimal comma, units, axes, row order) is described
     in the module docstring and docs/definitions.md, CSV import. The lap counter is derived
-    from the positions by the minimal-image rule on the vertical axis (docs/definitions.md,
-    Pass direction).
+    from the positions by the minimal-image rule on a periodic vertical axis
+    (docs/definitions.md, Pass direction).
 
     Parameters
     ----------
@@ -175,8 +120,8 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
     output : str or os.PathLike
         The trajectory file (HDF5) to write; it appears only when complete.
     width, height : float, optional
-        Riser width W and height H, m (whatever the file's unit); by default the paper's
-        0.09 x 0.95 m riser. Positions must lie in 0..W across and 0..H vertically.
+        Riser width W and height H, m (whatever the file's unit); the riser is 0..W across
+        and 0..H vertically. By default the paper's 0.09 x 0.95 m riser.
     length_unit : {"m", "cm", "mm"}, optional
         Unit of positions (and, over ``time_unit``, velocities) in columns whose header
         gives none; default m.
@@ -184,6 +129,19 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
         Unit of t where the header gives none; default s.
     vertical_axis : {"x", "y", "z"}, optional
         The file's vertical axis; required for a file with a z column (default y otherwise).
+    region : sequence of (lo, hi), optional
+        The riser in the file's coordinates and length unit, one range per axis x, y (, z);
+        required for 3D positions (a z column) unless ``drop_depth``.
+    boundary : {"periodic", "open"}, optional
+        The vertical boundary (default periodic).
+    drop_depth : bool, optional
+        Store 3D positions projected on (across, vertical).
+    resample : float, optional
+        Interpolate tracks with irregular times (PEPT) onto frames this far apart (s), with
+        :func:`~cfbmarkov.io.resample.resample_tracks`; velocities are then not stored.
+    max_gap : float, optional
+        With ``resample``: a particle is absent between two of its samples further apart
+        than this (s); default ``resample``.
 
     Returns
     -------
@@ -194,36 +152,46 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
     ------
     InputError
         On bad input (a malformed header or row, an unknown unit, a z column without
-        ``vertical_axis``, a particle missing from a frame or entering later, unevenly
-        spaced frames, a position outside the riser, ...); no file is left behind.
+        ``vertical_axis``, unevenly spaced frames without ``resample``, a position outside
+        the default riser, a region that holds no particle, ...); no file is left behind.
     """
     path = check_source(source)
     output = check_output(output, path)
     label = str(path)
-    width = DEFAULT_WIDTH if width is None else float(width)
-    height = DEFAULT_HEIGHT if height is None else float(height)
     check_units(length_unit, time_unit)
     if vertical_axis is not None and vertical_axis not in AXES:
         raise InputError(f"--vertical-axis {vertical_axis!r}: choose x, y or z")
+    if boundary is not None and boundary not in BOUNDARIES:
+        raise InputError(f"--boundary {boundary!r}: choose periodic or open")
+    if max_gap is not None and resample is None:
+        raise InputError("--max-gap applies with --resample only")
     options = {"length_unit": length_unit, "time_unit": time_unit,
-               "vertical_axis": vertical_axis}
+               "vertical_axis": vertical_axis, "keep_depth": not drop_depth}
+    geometry = {"width": width, "height": height, "region": region,
+                "boundary": boundary or "periodic"}
     with removing_new_folders(output), reading(label):
-        try:
-            with open_text(path) as fh:
-                layout = read_layout(fh, label, **options)
-                blocks = _row_blocks(fh, layout, label, streaming=True)
-                _write(output, path, layout, blocks, width, height, "as written")
-            return output
-        except _Unsorted:
-            pass
-        with open_text(path) as fh:     # rows out of time order: read whole, sort, write
+        if resample is None:
+            try:
+                with open_text(path) as fh:
+                    layout = read_layout(fh, label, **options)
+                    riser = csv_riser(layout, label, **geometry)
+                    blocks = _row_blocks(fh, layout, label, streaming=True)
+                    _write(output, path, layout, riser, blocks, "as written")
+                return output
+            except _Unsorted:
+                pass
+        with open_text(path) as fh:     # read whole: rows out of time order, or resampling
             layout = read_layout(fh, label, **options)
+            riser = csv_riser(layout, label, **geometry)
             rows = list(_row_blocks(fh, layout, label, streaming=False))
         rows = np.concatenate(rows) if rows else np.empty((0, len(layout.used)))
+        if resample is not None:
+            _write_resampled(output, path, layout, riser, rows, resample, max_gap)
+            return output
         keys = (rows[:, layout.index("id")], rows[:, layout.index("t")]) if layout.has_id else (
             rows[:, layout.index("t")],)
         rows = rows[np.lexsort(keys)]
-        _write(output, path, layout, iter([rows]), width, height,
+        _write(output, path, layout, riser, iter([rows]),
                "sorted by time and id (rows out of time order; the whole file read into memory)")
     return output
 
@@ -249,8 +217,76 @@ def check_units(length_unit: str | None, time_unit: str | None) -> None:
         raise InputError(f"--time-unit {time_unit!r}: choose s or ms")
 
 
-def _write(output: Path, path: Path, layout: CsvLayout, blocks: Iterator[np.ndarray],
-           width: float, height: float, row_order: str) -> None:
+def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: float | None,
+              region, boundary: str) -> RiserFrame:
+    """The riser of a CSV file: axes from the layout; region from ``region`` (in the file's
+    length unit, converted to m), else 0..W x 0..H (the paper's riser by default).
+
+    Parameters
+    ----------
+    layout : CsvLayout
+        The file's columns and axes.
+    label : str
+        Names the file in error messages.
+    width, height : float or None
+        The riser (m) when no region is given.
+    region : sequence of (lo, hi) or None
+        One range per axis x, y (, z), in the file's length unit.
+    boundary : {"periodic", "open"}
+        The vertical boundary.
+
+    Returns
+    -------
+    RiserFrame
+        ``from_box`` is True where the region is the default riser (nothing given): a
+        position outside it is then refused instead of absent (a unit may be wrong).
+
+    Raises
+    ------
+    InputError
+        For 3D positions without a region, or a region without the riser's axes.
+    """
+    axes = [AXES.index(layout.across), AXES.index(layout.vertical)]
+    if layout.depth is not None:
+        axes.append(AXES.index(layout.depth))
+    if region is not None:
+        ranges = np.asarray(region, dtype=np.float64)
+        if max(axes) >= ranges.shape[0]:
+            raise InputError(f"--region gives {ranges.shape[0]} ranges but the riser uses the "
+                             f"{AXES[max(axes)]} axis: give x, y and z ranges")
+        divisor = LENGTH_UNITS[layout.units[layout.vertical]]
+        bounds = ranges[axes] / divisor
+        given = True
+    elif layout.depth is not None:
+        raise InputError(f"{label}: 3D positions ({layout.across} across, {layout.vertical} "
+                         f"vertical, {layout.depth} depth): give the riser with --region "
+                         "XMIN:XMAX,YMIN:YMAX,ZMIN:ZMAX in the file's units, or --drop-depth")
+    else:
+        bounds = np.array([(0.0, DEFAULT_WIDTH if width is None else float(width)),
+                           (0.0, DEFAULT_HEIGHT if height is None else float(height))])
+        given = width is not None or height is not None
+    periodic = (False, boundary == "periodic") + ((False,) if len(axes) == 3 else ())
+    return RiserFrame(tuple(axes), bounds, not given, periodic, boundary)
+
+
+def _parameters(path: Path, layout: CsvLayout, riser: RiserFrame, row_order: str) -> dict:
+    velocity = layout.velocity
+    return {
+        "source_file": path.name, "format": "csv", "columns": layout.header,
+        "delimiter": _DELIMITERS[layout.delimiter],
+        "decimal_mark": "comma" if layout.decimal_comma else "point",
+        "units": layout.units, "ignored_columns": layout.ignored,
+        **riser.provenance(),
+        "depth_axis_dropped": layout.dropped,
+        "position_columns": list(layout.axes),
+        "velocity_columns": list(velocity) if velocity else [],
+        "id_column": layout.has_id, "row_order": row_order,
+        "width": riser.width, "height": riser.height,
+    }
+
+
+def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
+           blocks: Iterator[np.ndarray], row_order: str) -> None:
     """Split row blocks into frames and write them (the writer is discarded on an error)."""
     label = str(path)
     it = layout.index("t")
@@ -260,302 +296,134 @@ def _write(output: Path, path: Path, layout: CsvLayout, blocks: Iterator[np.ndar
         raise InputError(f"{label}: no data rows after the header")
     reference = (np.unique(whole_ids(first[0][:, layout.index("id")], label)) if layout.has_id
                  else np.zeros(1, dtype=np.int64))
-    velocity = layout.velocity
-    parameters = {
-        "source_file": path.name, "format": "csv", "columns": layout.header,
-        "delimiter": _DELIMITERS[layout.delimiter],
-        "decimal_mark": "comma" if layout.decimal_comma else "point",
-        "units": layout.units, "ignored_columns": layout.ignored,
-        "vertical_axis": layout.vertical, "across_axis": layout.across,
-        "depth_axis_dropped": layout.depth,
-        "position_columns": [layout.across, layout.vertical],
-        "velocity_columns": list(velocity) if velocity else [],
-        "id_column": layout.has_id, "row_order": row_order,
-        "width": width, "height": height,
-    }
-    with create_writer(output, reference, width=width, height=height, source="import:csv",
-                       parameters=parameters, with_velocity=velocity is not None,
-                       label=label) as writer:
+    parameters = _parameters(path, layout, riser, row_order)
+    periodic = riser.boundary == "periodic"
+    parameters["laps_from"] = "minimal-image rule" if periodic else "none (open riser)"
+    with create_writer(output, reference, source="import:csv", parameters=parameters,
+                       with_velocity=layout.velocity is not None, label=label,
+                       **riser.writer_options()) as writer:
+        columns = FrameColumns(writer)
         for rows, last in progress(itertools.chain([first], frames), label):
-            _append_frame(writer, rows, layout, reference, label, last)
+            _append_frame(writer, columns, rows, layout, riser, label)
+        _check_some_present(writer, riser, label)
 
 
-def _append_frame(writer: TrajectoryWriter, rows: np.ndarray, layout: CsvLayout,
-                  reference: np.ndarray, label: str, last: bool) -> None:
-    """Put one frame's rows into the reference id order and append it."""
+def _check_some_present(writer: TrajectoryWriter, riser: RiserFrame, label: str) -> None:
+    if not writer.any_present:
+        raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no particle "
+                         "in any frame; check --region and --length-unit")
+
+
+def _append_frame(writer: TrajectoryWriter, columns: FrameColumns, rows: np.ndarray,
+                  layout: CsvLayout, riser: RiserFrame, label: str) -> None:
+    """Map one frame's rows onto the riser and append it (particles not in the frame, or
+    outside a given region, are absent)."""
     time = float(rows[0, layout.index("t")])
     where = f"{label}: frame at t = {time:g} s"
     if layout.has_id:
         ids = whole_ids(rows[:, layout.index("id")], where)
-        try:
-            order = frame_order(ids, reference, where,
-                                "; the file ends there (truncated?)" if last else "")
-        except InputError as exc:
-            if np.unique(ids).size != ids.size:
-                raise InputError(f"{exc} (two rows for one particle at one time)") from None
-            raise InputError(f"{exc}; particles that enter or leave the view are not "
-                             "supported yet") from None
-        if order is not None:
-            rows = rows[order]
     elif rows.shape[0] > 1:
         raise InputError(f"{where}: {rows.shape[0]} rows at this time, but the file has no id "
                          "column, so it is read as one tracer; add an id column for several "
                          "particles")
-    position = rows[:, [layout.index(layout.across), layout.index(layout.vertical)]]
-    _check_inside(position, writer, layout, reference, time, label)
+    else:
+        ids = np.zeros(1, dtype=np.int64)
+    positions, inside = _riser_positions(rows, layout, riser, ids, label)
     velocity = layout.velocity
     velocity = rows[:, [layout.index(v) for v in velocity]] if velocity else None
-    writer.append(time, position, velocity)
+    full, vel, _, present = columns.frame(ids, positions, inside, velocity, None, where)
+    writer.append(time, full, vel, None, present)
 
 
-def _check_inside(position: np.ndarray, writer: TrajectoryWriter, layout: CsvLayout,
-                  ids: np.ndarray, time: float, label: str) -> None:
-    """Refuse a particle outside 0..W x 0..H, naming the column and the value as written."""
-    tol = POSITION_TOLERANCE
-    limits = np.array([writer.width, writer.height])
-    with np.errstate(invalid="ignore"):     # not finite: refused by the writer, by name
-        outside = np.isfinite(position) & ((position < -tol) | (position > limits + tol))
-    if not outside.any():
-        return
-    p, k = (int(v) for v in np.argwhere(outside)[0])
-    axis = (layout.across, layout.vertical)[k]
+def _riser_positions(rows: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids: np.ndarray,
+                     label: str) -> tuple[np.ndarray, np.ndarray]:
+    """Stored positions [M, D] (m, from the region's lower corner) and which rows lie in the
+    region. Refused: a position that is not finite; outside the default riser (no region
+    given: a wrong unit is likelier); a height outside a periodic riser (it has no outside
+    vertically)."""
+    t = rows[:, layout.index("t")]
+    raw = _source_positions(rows, layout)[:, list(riser.axes)]
+    bad = ~np.isfinite(raw).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise InputError(f"{label}: position of particle {int(ids[k])} at t = {t[k]:g} s is not "
+                         "a finite number")
+    relative = raw - riser.region[:, 0]
+    extent = riser.region[:, 1] - riser.region[:, 0]
+    tol = 1e-9
+    within = (relative >= -tol) & (relative <= extent + tol)
+    inside = within.all(axis=1)
+    strict = ~within[:, 1] if riser.boundary == "periodic" else np.zeros(len(rows), bool)
+    if riser.from_box:
+        strict = ~inside
+    if strict.any():
+        k = int(np.argmax(strict))
+        _refuse_outside(rows[k:k + 1], layout, riser, ids[k:k + 1], float(t[k]), label)
+    return np.clip(relative, 0.0, extent), inside
+
+
+def _source_positions(rows: np.ndarray, layout: CsvLayout) -> np.ndarray:
+    """[M, 3] source positions x, y, z (m) of a block of rows (NaN for a missing axis)."""
+    raw = np.full((rows.shape[0], 3), np.nan)
+    for k, axis in enumerate(AXES):
+        if axis in layout.used:
+            raw[:, k] = rows[:, layout.index(axis)]
+    return raw
+
+
+def _refuse_outside(row: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids: np.ndarray,
+                    time: float, label: str) -> None:
+    """Refuse a row outside the riser, naming the column and the value as written."""
+    p = 0
+    raw = _source_positions(row, layout)[0]
+    k = next(k for k, a in enumerate(riser.axes)
+             if not riser.region[k, 0] - 1e-9 <= raw[a] <= riser.region[k, 1] + 1e-9)
+    axis = AXES[riser.axes[k]]
     unit = layout.units[axis]
-    written = position[p, k] * LENGTH_UNITS[unit]
+    written = raw[riser.axes[k]] * LENGTH_UNITS[unit]
     hint = ("; if the file is not in m, give --length-unit cm|mm" if layout.unit_from[axis] ==
             "default" else "")
     raise InputError(
         f"{label}: particle {int(ids[p])} at t = {time:g} s lies outside the domain "
-        f"0..{writer.width:g} x 0..{writer.height:g} m: {layout.column(axis)!r} = {written:g} "
+        f"0..{riser.width:g} x 0..{riser.height:g} m: {layout.column(axis)!r} = {written:g} "
         f"{unit}; positions are measured from the riser's lower corner, {layout.across} across "
-        f"and {layout.vertical} vertical (set the riser with --width and --height){hint}")
+        f"and {layout.vertical} vertical (set the riser with --width and --height, or give "
+        f"--region to keep only the particles inside it){hint}")
 
 
-# -- the header ---------------------------------------------------------------------------------
-def read_layout(fh: TextIO, label: str, *, length_unit: str | None = None,
-                time_unit: str | None = None, vertical_axis: str | None = None) -> CsvLayout:
-    """Read the header (and a few data rows) of an open CSV file and tell how to read it.
-
-    Parameters
-    ----------
-    fh : TextIO
-        The file, at its start; left after the rows returned in ``pending``.
-    label : str
-        Names the file in error messages.
-    length_unit, time_unit, vertical_axis : str, optional
-        As for :func:`import_csv`.
-
-    Returns
-    -------
-    CsvLayout
-        Delimiter, decimal mark, columns, units and axes; ``pending`` holds the data lines
-        read ahead (from ``first_data_line`` on).
-
-    Raises
-    ------
-    InputError
-        For no header, a missing or repeated column, an unknown or contradicting unit, a z
-        column without ``vertical_axis``, or a vertical axis the file does not have.
-    """
-    header_text, header_line, pending, first_data_line = _find_header(fh, label)
-    data = [line for line in pending if line.split("#", 1)[0].strip()]
-    delimiter = _delimiter(header_text, data[0] if data else None)
-    decimal_comma = delimiter != "," and any("," in line.split("#", 1)[0] for line in data)
-    header = [name.strip().strip('"').strip("'").strip() for name in _split(header_text,
-                                                                               delimiter)]
-    shown = (delimiter or " ").join(header)
-    canonical: dict[str, int] = {}
-    units: dict[str, str | None] = {}
-    ignored = []
-    for k, name in enumerate(header):
-        key, unit = _canonical(name)
-        if key is None:
-            ignored.append((k, name or f"column {k + 1} (no name)"))
-            continue
-        if key in canonical:
-            raise InputError(f"{label}: column {key!r} appears twice in the header {shown!r} "
-                             f"({header[canonical[key]]!r} and {name!r})")
-        canonical[key] = k
-        units[key] = unit
-    if "t" not in canonical:
-        raise InputError(f"{label}: missing column 't' in the header {shown!r}; {_EXPECTED}")
-    vertical, across, depth = _axes(canonical, vertical_axis, shown, label)
-    for v in (f"v{across}", f"v{vertical}"):
-        other = f"v{across}" if v == f"v{vertical}" else f"v{vertical}"
-        if v in canonical and other not in canonical:
-            raise InputError(f"{label}: the header {shown!r} has only one of v{across}, "
-                             f"v{vertical} (velocity across and along the vertical axis "
-                             f"{vertical}); give both or neither")
-    keep = {"t", "id", across, vertical, f"v{across}", f"v{vertical}"}
-    for key in set(canonical) - keep:
-        k = canonical.pop(key)
-        ignored.append((k, header[k] + " (depth axis)"))
-        units.pop(key)
-    used = sorted(canonical, key=canonical.get)
-    si, divisors = _units(used, units, length_unit, time_unit, header, canonical, label)
-    unit_from = {name: "header" if units[name] else "option" if (
-        length_unit if name in AXES else time_unit) else "default" for name in used}
-    return CsvLayout(header=header, delimiter=delimiter, decimal_comma=decimal_comma, used=used,
-                     usecols=[canonical[n] for n in used], divisors=divisors, units=si,
-                     ignored=[name for _, name in sorted(ignored)], vertical=vertical,
-                     across=across, depth=depth, header_line=header_line,
-                     first_data_line=first_data_line, unit_from=unit_from, pending=pending)
+def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
+                     rows: np.ndarray, interval: float, max_gap: float | None) -> None:
+    """Resample every track onto frames ``interval`` apart and write them."""
+    label = str(path)
+    if rows.shape[0] == 0:
+        raise InputError(f"{label}: no data rows after the header")
+    ids = (whole_ids(rows[:, layout.index("id")], label) if layout.has_id
+           else np.zeros(rows.shape[0], dtype=np.int64))
+    order = np.argsort(rows[:, layout.index("t")], kind="stable")
+    rows, ids = rows[order], ids[order]
+    relative, inside = _riser_positions(rows, layout, riser, ids, label)
+    extent = riser.region[:, 1] - riser.region[:, 0]
+    periodic = riser.boundary == "periodic"
+    keep = inside
+    if not keep.any():
+        raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
+                         "particle in any row; check --region and --length-unit")
+    tracks = resample_tracks(rows[keep, layout.index("t")], ids[keep], relative[keep],
+                             interval=interval, max_gap=max_gap,
+                             height=riser.height if periodic else None, vertical=1,
+                             label=label)
+    positions = np.clip(tracks.positions, 0.0, extent)
+    parameters = _parameters(path, layout, riser, "resampled")
+    parameters.update({"resample": interval, "max_gap": interval if max_gap is None else max_gap,
+                       "velocity_columns": [], "samples": int(keep.sum()),
+                       "laps_from": ("minimal-image rule between samples" if periodic
+                                     else "none (open riser)")})
+    with create_writer(output, tracks.ids, source="import:csv", parameters=parameters,
+                       label=label, frame_interval=interval, **riser.writer_options()) as writer:
+        writer.append_frames(tracks.times, positions, None, tracks.laps, tracks.present)
+        _check_some_present(writer, riser, label)
 
 
-def _find_header(fh: TextIO, label: str) -> tuple[str, int, list[str], int]:
-    """The header text, its line number, the data lines read ahead and the first one's number.
-
-    The header is the first non-blank line not starting with '#'; where that line is a row of
-    numbers, the last '#' line before it that names columns (without the '#').
-    """
-    line_no, comment, comment_no = 0, None, 0
-    while line := fh.readline():
-        line_no += 1
-        text = line.lstrip("\ufeff").strip()
-        if not text:
-            continue
-        if text.startswith("#"):
-            if _names_columns(text.lstrip("#")):
-                comment, comment_no = text.lstrip("#").strip(), line_no
-            continue
-        if not _is_data(text):
-            return text, line_no, _read_ahead(fh, []), line_no + 1
-        if comment is not None:
-            return comment, comment_no, _read_ahead(fh, [line]), line_no
-        raise InputError(f"{label}: line {line_no} is not a header ({text!r}); {_EXPECTED}")
-    raise InputError(f"{label}: empty file (no header line)")
-
-
-def _read_ahead(fh: TextIO, lines: list[str]) -> list[str]:
-    """Read lines until SNIFF_ROWS data rows (or the end) are in ``lines``."""
-    while sum(1 for line in lines if line.split("#", 1)[0].strip()) < SNIFF_ROWS:
-        line = fh.readline()
-        if not line:
-            break
-        lines.append(line)
-    return lines
-
-
-def _is_data(text: str) -> bool:
-    """Whether a line is a row of numbers (any delimiter, either decimal mark)."""
-    fields = [f for f in re.split(r"[;,\s]+", text) if f]
-    return bool(fields) and all(_is_number(f) for f in fields)
-
-
-def _names_columns(text: str) -> bool:
-    """Whether a '#' line names columns: t and at least two known position columns."""
-    keys = {_canonical(name)[0] for name in _split(text, _delimiter(text, None))}
-    return "t" in keys and len(keys & set(AXES)) >= 2
-
-
-def _delimiter(header: str, data: str | None) -> str | None:
-    """The delimiter: the first of ';', tab, ',' in the header under which the first data row
-    has as many fields as the header (None: whitespace)."""
-    candidates = [d for d in (";", "\t", ",") if d in header] + [None]
-    if data is None:
-        return candidates[0]
-    data = data.split("#", 1)[0]
-    for delimiter in candidates + [d for d in (";", "\t", ",", None) if d not in candidates]:
-        n = len(_split(header, delimiter))
-        if n >= 2 and len(_split(data, delimiter)) == n:
-            return delimiter
-    return candidates[0]     # the rows are then refused line by line
-
-
-def _split(text: str, delimiter: str | None) -> list[str]:
-    return text.split() if delimiter is None else text.strip("\r\n").split(delimiter)
-
-
-def _canonical(name: str) -> tuple[str | None, str | None]:
-    """(canonical column name or None, unit written in the header or None)."""
-    unit = None
-    match = _UNIT.match(name)
-    if match:
-        name, unit = match.group(1), match.group(2).strip() or None
-    key = " ".join(name.strip().strip('"').strip("'").replace("_", " ").lower().split())
-    return _ALIASES.get(key), unit
-
-
-def _axes(canonical: dict[str, int], vertical_axis: str | None, shown: str,
-          label: str) -> tuple[str, str, str | None]:
-    """(vertical, across, depth) axis names; refuses a z column without a vertical axis."""
-    present = [a for a in AXES if a in canonical]
-    if vertical_axis is None:
-        if "z" in present:
-            raise InputError(
-                f"{label}: the header {shown!r} has a z column (3D positions): say which axis "
-                "is vertical with --vertical-axis x|y|z (nothing is guessed; a 2D file would "
-                "take y, LIGGGHTS and EDEM usually put gravity along -z)")
-        vertical_axis = "y"
-    if vertical_axis not in AXES:
-        raise InputError(f"--vertical-axis {vertical_axis!r}: choose x, y or z")
-    if vertical_axis not in present:
-        if vertical_axis == "y" and "z" not in present:
-            raise InputError(f"{label}: missing column 'y' in the header {shown!r}; {_EXPECTED}")
-        raise InputError(f"{label}: --vertical-axis {vertical_axis} but the header {shown!r} has "
-                         f"no {vertical_axis} column")
-    others = [a for a in present if a != vertical_axis]
-    if not others:
-        missing = "x" if vertical_axis != "x" else "y"
-        raise InputError(f"{label}: missing column {missing!r} in the header {shown!r} (no "
-                         f"position across the riser); {_EXPECTED}")
-    return vertical_axis, others[0], others[1] if len(others) > 1 else None
-
-
-def _units(used: list[str], units: dict[str, str | None], length_unit: str | None,
-           time_unit: str | None, header: list[str], canonical: dict[str, int],
-           label: str) -> tuple[dict[str, str], list[float]]:
-    """Each used column's unit (as recorded) and divisor to SI; refuses unknown or
-    contradicting units."""
-    recorded, divisors = {}, []
-    for name in used:
-        written = units[name]
-        if name == "id":
-            divisors.append(1.0)
-            continue
-        column = header[canonical[name]]
-        if name == "t":
-            unit = _unit(written, TIME_UNITS, time_unit, "--time-unit", column, label)
-            divisor = TIME_UNITS[unit]
-        elif name in AXES:
-            unit = _unit(written, LENGTH_UNITS, length_unit, "--length-unit", column, label)
-            divisor = LENGTH_UNITS[unit]
-        else:
-            length, time = length_unit or "m", time_unit or "s"
-            if written is not None:
-                parts = written.replace(" ", "").split("/")
-                if len(parts) != 2 or parts[0] not in LENGTH_UNITS or parts[1] not in TIME_UNITS:
-                    raise InputError(f"{label}: column {column!r}: unit {written!r} is not "
-                                     "known; velocities in m/s, cm/s or mm/s (or per ms)")
-                length, time = parts
-            unit = f"{length}/{time}"
-            divisor = LENGTH_UNITS[length] / TIME_UNITS[time]
-        recorded[name] = unit
-        divisors.append(divisor)
-    return recorded, divisors
-
-
-def _unit(written: str | None, known: dict[str, float], option: str | None, flag: str,
-          column: str, label: str) -> str:
-    if written is None:
-        return option or next(iter(known))
-    if written not in known:
-        raise InputError(f"{label}: column {column!r}: unit {written!r} is not known; "
-                         f"{flag} takes {', '.join(known)}")
-    if option is not None and option != written:
-        raise InputError(f"{label}: column {column!r} is in {written} but {flag} {option} was "
-                         f"given; drop {flag} or correct the header")
-    return written
-
-
-def _is_number(text: str) -> bool:
-    try:
-        float(text.replace(",", "."))
-    except ValueError:
-        return False
-    return True
-
-
-# -- the rows -----------------------------------------------------------------------------------
 def _row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
                 ) -> Iterator[np.ndarray]:
     """Parse the data rows in blocks of about CHUNK_CHARS characters: arrays [rows, used

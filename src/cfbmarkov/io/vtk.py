@@ -297,6 +297,7 @@ def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.P
     every = _check_every(every)
     output = Path(output)
     with opened(run) as traj:
+        traj.require_supported("VTK export")
         frames = _select_frames(traj, start, stop, every)
         _check_output(output, traj.path)
         gas = read_gas_fields(traj) if fields else None

@@ -376,6 +376,7 @@ def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
 def _prepare(traj: Trajectories, state_space: StateSpace, lag: float) -> int:
     """Check that ``state_space`` fits the file and return the lag in frames (NaN as the
     lag: check the fit only, return 0)."""
+    traj.require_supported("a Markov model")
     check_domain(state_space, traj.width, traj.height, str(traj.path))
     lag_frames = traj.lag_frames(lag) if np.isfinite(lag) else 0
     if state_space.needs_velocity and not traj.has_velocity:

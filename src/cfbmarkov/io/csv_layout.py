@@ -1,0 +1,317 @@
+"""Reading a CSV file's header: columns, delimiter, decimal mark, units and axes (the rules
+are in :mod:`cfbmarkov.io.csv`)."""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass, field
+from typing import TextIO
+
+from cfbmarkov.errors import InputError
+
+#: the paper's riser (docs/definitions.md, Riser): width W and height H, m
+DEFAULT_WIDTH = 0.09
+DEFAULT_HEIGHT = 0.95
+AXES = ("x", "y", "z")
+#: length and time units: the number a value is divided by to give m or s
+LENGTH_UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0}
+TIME_UNITS = {"s": 1.0, "ms": 1000.0}
+#: characters of text parsed per call (about 70000 rows of six columns)
+CHUNK_CHARS = 1 << 22
+#: data rows read after the header to tell the delimiter and the decimal mark
+SNIFF_ROWS = 5
+_EXPECTED = ("expected t, x, y and optionally id, z, vx, vy, vz (or spreadsheet names such as "
+             "'Time (s)', 'Particle ID', 'Position X (m)'); other columns are ignored")
+_ALIASES = {"t": "t", "time": "t", "id": "id", "particle id": "id", "particleid": "id",
+            "pid": "id"}
+for _axis in AXES:
+    _ALIASES.update({_axis: _axis, f"position {_axis}": _axis, f"pos {_axis}": _axis,
+                     f"v{_axis}": f"v{_axis}", f"velocity {_axis}": f"v{_axis}",
+                     f"vel {_axis}": f"v{_axis}", f"v {_axis}": f"v{_axis}"})
+_UNIT = re.compile(r"^(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]$")
+_DELIMITERS = {";": "semicolon", "\t": "tab", ",": "comma", None: "whitespace"}
+
+
+@dataclass
+class CsvLayout:
+    """How to read a CSV file: delimiter, decimal mark, used columns, units and axes.
+
+    ``used`` lists the canonical names of the columns parsed, in file order; ``usecols``
+    their positions in a row; ``divisors`` the number each is divided by for SI units.
+    """
+
+    header: list[str]
+    delimiter: str | None
+    decimal_comma: bool
+    used: list[str]
+    usecols: list[int]
+    divisors: list[float]
+    units: dict[str, str]
+    ignored: list[str]
+    vertical: str
+    across: str
+    depth: str | None
+    header_line: int
+    first_data_line: int
+    unit_from: dict[str, str] = field(default_factory=dict)
+    pending: list[str] = field(default_factory=list)
+    dropped: str | None = None
+
+    def column(self, name: str) -> str:
+        """The header name of canonical column ``name``, as written."""
+        return self.header[self.usecols[self.used.index(name)]]
+
+    def index(self, name: str) -> int:
+        """Position of canonical column ``name`` in a parsed row."""
+        return self.used.index(name)
+
+    @property
+    def has_id(self) -> bool:
+        return "id" in self.used
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        """The stored axes: (across, vertical[, depth])."""
+        return (self.across, self.vertical) + ((self.depth,) if self.depth else ())
+
+    @property
+    def velocity(self) -> tuple[str, ...] | None:
+        """Velocity columns along the stored axes, or None where the file has none."""
+        names = tuple(f"v{a}" for a in self.axes)
+        return names if all(n in self.used for n in names) else None
+
+    def shown(self) -> str:
+        return (self.delimiter or " ").join(self.header)
+
+
+def read_layout(fh: TextIO, label: str, *, length_unit: str | None = None,
+                time_unit: str | None = None, vertical_axis: str | None = None,
+                keep_depth: bool = True) -> CsvLayout:
+    """Read the header (and a few data rows) of an open CSV file and tell how to read it.
+
+    Parameters
+    ----------
+    fh : TextIO
+        The file, at its start; left after the rows returned in ``pending``.
+    label : str
+        Names the file in error messages.
+    length_unit, time_unit, vertical_axis : str, optional
+        As for :func:`~cfbmarkov.io.csv.import_csv`.
+    keep_depth : bool, optional
+        Keep the depth axis of 3D positions (else it is dropped and recorded).
+
+    Returns
+    -------
+    CsvLayout
+        Delimiter, decimal mark, columns, units and axes; ``pending`` holds the data lines
+        read ahead (from ``first_data_line`` on).
+
+    Raises
+    ------
+    InputError
+        For no header, a missing or repeated column, an unknown or contradicting unit, a z
+        column without ``vertical_axis``, or a vertical axis the file does not have.
+    """
+    header_text, header_line, pending, first_data_line = _find_header(fh, label)
+    data = [line for line in pending if line.split("#", 1)[0].strip()]
+    delimiter = _delimiter(header_text, data[0] if data else None)
+    decimal_comma = delimiter != "," and any("," in line.split("#", 1)[0] for line in data)
+    header = [name.strip().strip('"').strip("'").strip() for name in _split(header_text,
+                                                                               delimiter)]
+    shown = (delimiter or " ").join(header)
+    canonical: dict[str, int] = {}
+    units: dict[str, str | None] = {}
+    ignored = []
+    for k, name in enumerate(header):
+        key, unit = _canonical(name)
+        if key is None:
+            ignored.append((k, name or f"column {k + 1} (no name)"))
+            continue
+        if key in canonical:
+            raise InputError(f"{label}: column {key!r} appears twice in the header {shown!r} "
+                             f"({header[canonical[key]]!r} and {name!r})")
+        canonical[key] = k
+        units[key] = unit
+    if "t" not in canonical:
+        raise InputError(f"{label}: missing column 't' in the header {shown!r}; {_EXPECTED}")
+    vertical, across, depth = _axes(canonical, vertical_axis, shown, label)
+    for v in (f"v{across}", f"v{vertical}"):
+        other = f"v{across}" if v == f"v{vertical}" else f"v{vertical}"
+        if v in canonical and other not in canonical:
+            raise InputError(f"{label}: the header {shown!r} has only one of v{across}, "
+                             f"v{vertical} (velocity across and along the vertical axis "
+                             f"{vertical}); give both or neither")
+    dropped = None
+    if depth is not None and not keep_depth:
+        depth, dropped = None, depth
+    keep = {"t", "id", across, vertical, f"v{across}", f"v{vertical}"}
+    if depth is not None:
+        keep |= {depth, f"v{depth}"}
+    for key in set(canonical) - keep:
+        k = canonical.pop(key)
+        ignored.append((k, header[k] + " (depth axis)"))
+        units.pop(key)
+    used = sorted(canonical, key=canonical.get)
+    si, divisors = _units(used, units, length_unit, time_unit, header, canonical, label)
+    unit_from = {name: "header" if units[name] else "option" if (
+        length_unit if name in AXES else time_unit) else "default" for name in used}
+    return CsvLayout(header=header, delimiter=delimiter, decimal_comma=decimal_comma, used=used,
+                     usecols=[canonical[n] for n in used], divisors=divisors, units=si,
+                     ignored=[name for _, name in sorted(ignored)], vertical=vertical,
+                     across=across, depth=depth, header_line=header_line,
+                     first_data_line=first_data_line, unit_from=unit_from, pending=pending,
+                     dropped=dropped)
+
+
+def _find_header(fh: TextIO, label: str) -> tuple[str, int, list[str], int]:
+    """The header text, its line number, the data lines read ahead and the first one's number.
+
+    The header is the first non-blank line not starting with '#'; where that line is a row of
+    numbers, the last '#' line before it that names columns (without the '#').
+    """
+    line_no, comment, comment_no = 0, None, 0
+    while line := fh.readline():
+        line_no += 1
+        text = line.lstrip("\ufeff").strip()
+        if not text:
+            continue
+        if text.startswith("#"):
+            if _names_columns(text.lstrip("#")):
+                comment, comment_no = text.lstrip("#").strip(), line_no
+            continue
+        if not _is_data(text):
+            return text, line_no, _read_ahead(fh, []), line_no + 1
+        if comment is not None:
+            return comment, comment_no, _read_ahead(fh, [line]), line_no
+        raise InputError(f"{label}: line {line_no} is not a header ({text!r}); {_EXPECTED}")
+    raise InputError(f"{label}: empty file (no header line)")
+
+
+def _read_ahead(fh: TextIO, lines: list[str]) -> list[str]:
+    """Read lines until SNIFF_ROWS data rows (or the end) are in ``lines``."""
+    while sum(1 for line in lines if line.split("#", 1)[0].strip()) < SNIFF_ROWS:
+        line = fh.readline()
+        if not line:
+            break
+        lines.append(line)
+    return lines
+
+
+def _is_data(text: str) -> bool:
+    """Whether a line is a row of numbers (any delimiter, either decimal mark)."""
+    fields = [f for f in re.split(r"[;,\s]+", text) if f]
+    return bool(fields) and all(_is_number(f) for f in fields)
+
+
+def _names_columns(text: str) -> bool:
+    """Whether a '#' line names columns: t and at least two known position columns."""
+    keys = {_canonical(name)[0] for name in _split(text, _delimiter(text, None))}
+    return "t" in keys and len(keys & set(AXES)) >= 2
+
+
+def _delimiter(header: str, data: str | None) -> str | None:
+    """The delimiter: the first of ';', tab, ',' in the header under which the first data row
+    has as many fields as the header (None: whitespace)."""
+    candidates = [d for d in (";", "\t", ",") if d in header] + [None]
+    if data is None:
+        return candidates[0]
+    data = data.split("#", 1)[0]
+    for delimiter in candidates + [d for d in (";", "\t", ",", None) if d not in candidates]:
+        n = len(_split(header, delimiter))
+        if n >= 2 and len(_split(data, delimiter)) == n:
+            return delimiter
+    return candidates[0]     # the rows are then refused line by line
+
+
+def _split(text: str, delimiter: str | None) -> list[str]:
+    return text.split() if delimiter is None else text.strip("\r\n").split(delimiter)
+
+
+def _canonical(name: str) -> tuple[str | None, str | None]:
+    """(canonical column name or None, unit written in the header or None)."""
+    unit = None
+    match = _UNIT.match(name)
+    if match:
+        name, unit = match.group(1), match.group(2).strip() or None
+    key = " ".join(name.strip().strip('"').strip("'").replace("_", " ").lower().split())
+    return _ALIASES.get(key), unit
+
+
+def _axes(canonical: dict[str, int], vertical_axis: str | None, shown: str,
+          label: str) -> tuple[str, str, str | None]:
+    """(vertical, across, depth) axis names; refuses a z column without a vertical axis."""
+    present = [a for a in AXES if a in canonical]
+    if vertical_axis is None:
+        if "z" in present:
+            raise InputError(
+                f"{label}: the header {shown!r} has a z column (3D positions): say which axis "
+                "is vertical with --vertical-axis x|y|z (nothing is guessed; a 2D file would "
+                "take y, LIGGGHTS and EDEM usually put gravity along -z)")
+        vertical_axis = "y"
+    if vertical_axis not in AXES:
+        raise InputError(f"--vertical-axis {vertical_axis!r}: choose x, y or z")
+    if vertical_axis not in present:
+        if vertical_axis == "y" and "z" not in present:
+            raise InputError(f"{label}: missing column 'y' in the header {shown!r}; {_EXPECTED}")
+        raise InputError(f"{label}: --vertical-axis {vertical_axis} but the header {shown!r} has "
+                         f"no {vertical_axis} column")
+    others = [a for a in present if a != vertical_axis]
+    if not others:
+        missing = "x" if vertical_axis != "x" else "y"
+        raise InputError(f"{label}: missing column {missing!r} in the header {shown!r} (no "
+                         f"position across the riser); {_EXPECTED}")
+    return vertical_axis, others[0], others[1] if len(others) > 1 else None
+
+
+def _units(used: list[str], units: dict[str, str | None], length_unit: str | None,
+           time_unit: str | None, header: list[str], canonical: dict[str, int],
+           label: str) -> tuple[dict[str, str], list[float]]:
+    """Each used column's unit (as recorded) and divisor to SI; refuses unknown or
+    contradicting units."""
+    recorded, divisors = {}, []
+    for name in used:
+        written = units[name]
+        if name == "id":
+            divisors.append(1.0)
+            continue
+        column = header[canonical[name]]
+        if name == "t":
+            unit = _unit(written, TIME_UNITS, time_unit, "--time-unit", column, label)
+            divisor = TIME_UNITS[unit]
+        elif name in AXES:
+            unit = _unit(written, LENGTH_UNITS, length_unit, "--length-unit", column, label)
+            divisor = LENGTH_UNITS[unit]
+        else:
+            length, time = length_unit or "m", time_unit or "s"
+            if written is not None:
+                parts = written.replace(" ", "").split("/")
+                if len(parts) != 2 or parts[0] not in LENGTH_UNITS or parts[1] not in TIME_UNITS:
+                    raise InputError(f"{label}: column {column!r}: unit {written!r} is not "
+                                     "known; velocities in m/s, cm/s or mm/s (or per ms)")
+                length, time = parts
+            unit = f"{length}/{time}"
+            divisor = LENGTH_UNITS[length] / TIME_UNITS[time]
+        recorded[name] = unit
+        divisors.append(divisor)
+    return recorded, divisors
+
+
+def _unit(written: str | None, known: dict[str, float], option: str | None, flag: str,
+          column: str, label: str) -> str:
+    if written is None:
+        return option or next(iter(known))
+    if written not in known:
+        raise InputError(f"{label}: column {column!r}: unit {written!r} is not known; "
+                         f"{flag} takes {', '.join(known)}")
+    if option is not None and option != written:
+        raise InputError(f"{label}: column {column!r} is in {written} but {flag} {option} was "
+                         f"given; drop {flag} or correct the header")
+    return written
+
+
+def _is_number(text: str) -> bool:
+    try:
+        float(text.replace(",", "."))
+    except ValueError:
+        return False
+    return True

@@ -1,0 +1,425 @@
+"""Reading LAMMPS / LIGGGHTS text dumps (``dump custom`` / ``dump atom``) frame by frame.
+
+A dump is a sequence of frames::
+
+    ITEM: UNITS            (optional, once; must be 'si')
+    ITEM: TIME             (optional; simulated time, s)
+    ITEM: TIMESTEP
+    ITEM: NUMBER OF ATOMS
+    ITEM: BOX BOUNDS [flags]   then one 'lo hi' line per dimension (2 or 3)
+    ITEM: ATOMS id ... x y ... then one line per atom, columns in any order
+
+Positions are read from unwrapped ``xu yu`` (or scaled ``xsu ysu``) where the dump has them,
+else from ``x y`` (or scaled ``xs ys``), each with its z where present; velocities from
+``vx vy (vz)``, image flags from ``ix iy (iz)``. A triclinic box whose tilt factors are all
+zero is read as orthogonal; a tilted one is refused. Several files (one per timestep, as
+LIGGGHTS writes them) are ordered by their first timestep (:func:`dump_files`). What the
+frames mean for the riser is :mod:`cfbmarkov.io.lammps`.
+"""
+
+from __future__ import annotations
+
+import glob
+import itertools
+import os
+import warnings
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TextIO
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.io._common import check_source, open_text
+
+#: position column families, in order of preference: unwrapped first (exact laps), then
+#: wrapped (laps from image flags where present, else from the minimal-image rule)
+POSITION_COLUMNS = (("xu", "yu", "zu"), ("xsu", "ysu", "zsu"), ("x", "y", "z"),
+                    ("xs", "ys", "zs"))
+VELOCITY_COLUMNS = ("vx", "vy", "vz")
+IMAGE_COLUMNS = ("ix", "iy", "iz")
+AXES = "xyz"
+
+
+@dataclass(frozen=True)
+class DumpFrame:
+    """One frame of a dump as written.
+
+    Attributes
+    ----------
+    timestep : int
+        The frame's ``ITEM: TIMESTEP``.
+    time : float or None
+        Its ``ITEM: TIME``, s, when the dump has one.
+    box : numpy.ndarray
+        Box bounds [D, 2] (lo, hi per dimension, D = 2 or 3), m.
+    boundary : tuple of str
+        The BOX BOUNDS flags, e.g. ``('ff', 'pp', 'pp')``.
+    columns : tuple of str
+        The names on the ``ITEM: ATOMS`` line.
+    atoms : numpy.ndarray
+        The atom table [N, len(columns)], float64.
+    line : int
+        Line number of the frame's ``ITEM: ATOMS`` block, for messages.
+    """
+
+    timestep: int
+    time: float | None
+    box: np.ndarray
+    boundary: tuple[str, ...]
+    columns: tuple[str, ...]
+    atoms: np.ndarray
+    line: int
+
+    def where(self, label: str) -> str:
+        """``label`` with the frame's timestep and line, to start an error message."""
+        return f"{label}: timestep {self.timestep} (line {self.line})"
+
+
+@dataclass(frozen=True)
+class AtomColumns:
+    """Where an ``ITEM: ATOMS`` line puts the id, the positions, velocities and image flags.
+
+    Attributes
+    ----------
+    id : int
+        Column of the atom id.
+    position : tuple of int
+        Columns of the position family, x y (and z where present).
+    position_names : tuple of str
+        Their names, e.g. ``('xu', 'yu', 'zu')``, ``('x', 'y')``.
+    velocity : tuple of (int or None) or None
+        Columns of vx, vy, vz (None for a missing one), or None when the dump has none.
+    image : tuple of (int or None) or None
+        Columns of the image flags ix, iy, iz (None for a missing one), or None.
+    """
+
+    id: int
+    position: tuple[int, ...]
+    position_names: tuple[str, ...]
+    velocity: tuple[int, ...] | None
+    image: tuple[int, ...] | None
+
+    @classmethod
+    def find(cls, names: tuple[str, ...], where: str) -> AtomColumns:
+        """The layout of the column ``names``: positions are the first family present
+        among xu yu, xsu ysu, x y, xs ys (each with its z where present).
+
+        Raises
+        ------
+        InputError
+            Without an ``id`` column or any position pair (``where`` starts the message).
+        """
+        if "id" not in names:
+            raise InputError(f"{where}: ITEM: ATOMS has no 'id' column ({' '.join(names)})")
+        for family in POSITION_COLUMNS:
+            if family[0] in names and family[1] in names:
+                break
+        else:
+            raise InputError(f"{where}: ITEM: ATOMS has no position columns (xu yu, xsu ysu, "
+                             f"x y or xs ys) among: {' '.join(names)}")
+        present = family if family[2] in names else family[:2]
+
+        def columns(group):         # per source axis; None where the column is missing
+            found = tuple(names.index(n) if n in names else None for n in group)
+            return found if any(c is not None for c in found) else None
+
+        return cls(names.index("id"), tuple(names.index(n) for n in present), present,
+                   columns(VELOCITY_COLUMNS), columns(IMAGE_COLUMNS))
+
+    def velocity_columns(self, axes: tuple[int, ...]) -> tuple[int, ...] | None:
+        """Columns of the velocity along the source ``axes`` (0, 1, 2 for x, y, z), or None
+        where any is missing."""
+        if self.velocity is None or any(self.velocity[k] is None for k in axes):
+            return None
+        return tuple(self.velocity[k] for k in axes)
+
+    @property
+    def scaled(self) -> bool:
+        """Whether positions are fractions of the box (``xs``/``xsu`` columns)."""
+        return self.position_names[0].startswith("xs")
+
+    @property
+    def unwrapped(self) -> bool:
+        """Whether positions are unwrapped (``xu``/``xsu`` columns)."""
+        return self.position_names[0].endswith("u")
+
+
+
+class DumpReader:
+    """Iterate over the frames of a LAMMPS text dump, one :class:`DumpFrame` at a time.
+
+    Parameters
+    ----------
+    fh : TextIO
+        The open dump.
+    label : str
+        Name of the dump in error messages.
+
+    Raises
+    ------
+    InputError
+        While iterating, on a malformed or truncated frame.
+    """
+
+    def __init__(self, fh: TextIO, label: str):
+        self._fh = fh
+        self.label = label
+        self.line = 0
+        self.units: str | None = None
+        self._pushed: str | None = None
+
+    # -- lines -------------------------------------------------------------------------
+    def _readline(self) -> str | None:
+        if self._pushed is not None:
+            line, self._pushed = self._pushed, None
+        else:
+            line = self._fh.readline()
+            if not line:
+                return None
+        self.line += 1
+        return line
+
+    def _unread(self, line: str) -> None:
+        self._pushed = line
+        self.line -= 1
+
+    def _value(self, item: str) -> str:
+        line = self._readline()
+        if line is None or not line.strip():
+            raise InputError(f"{self.label}: line {self.line}: no value after 'ITEM: {item}' "
+                             "(truncated?)")
+        return line.strip()
+
+    def _number(self, item: str, kind: type):
+        text = self._value(item)
+        try:
+            return kind(text)
+        except ValueError:
+            what = "a whole number" if kind is int else "a number"
+            raise InputError(f"{self.label}: line {self.line}: ITEM: {item} value {text!r} is "
+                             f"not {what}") from None
+
+    # -- frames ------------------------------------------------------------------------
+    def __iter__(self) -> Iterator[DumpFrame]:
+        header: dict = {}
+        after_atoms = False
+        while (line := self._readline()) is not None:
+            text = line.strip()
+            if not text:
+                continue
+            if not text.startswith("ITEM:"):
+                hint = ("more atom lines than NUMBER OF ATOMS?" if after_atoms
+                        else "not a LAMMPS text dump?")
+                raise InputError(f"{self.label}: line {self.line}: expected an 'ITEM:' line, "
+                                 f"found {text[:40]!r} ({hint})")
+            item = text[5:].strip()
+            after_atoms = item.startswith("ATOMS")
+            if after_atoms:
+                yield self._atoms(item, header)
+                header = {}
+            else:
+                self._header_item(item, header)
+        if header:
+            raise InputError(f"{self.label}: file ends inside the header of a frame at line "
+                             f"{self.line} (truncated?)")
+
+    def _header_item(self, item: str, header: dict) -> None:
+        if item == "TIMESTEP":
+            header["timestep"] = self._number(item, int)
+        elif item == "TIME":
+            header["time"] = self._number(item, float)
+        elif item == "NUMBER OF ATOMS":
+            header["atoms"] = self._number(item, int)
+        elif item.startswith("BOX BOUNDS"):
+            header["box"], header["boundary"] = self._box(item)
+        elif item == "UNITS":
+            self._units(self._value(item))
+        else:
+            raise InputError(f"{self.label}: line {self.line}: unknown item 'ITEM: {item}' "
+                             "(not a LAMMPS atom dump?)")
+
+    def _units(self, units: str) -> None:
+        if units.lower() != "si":
+            raise InputError(f"{self.label}: line {self.line}: units are {units!r}, not SI; "
+                             "write the dump with 'units si' (m, s)")
+        self.units = units
+
+    def _box(self, item: str) -> tuple[np.ndarray, tuple[str, ...]]:
+        """Bounds [D, 2] (m) and boundary flags of an orthogonal box; a triclinic box
+        (``xy xz yz`` and a tilt factor on each bounds line) is read as orthogonal where
+        every tilt is zero, and refused otherwise."""
+        words = item.split()[2:]
+        tilted = any(tilt in words for tilt in ("xy", "xz", "yz"))
+        flags = tuple(w for w in words if w not in ("xy", "xz", "yz"))
+        where = f"{self.label}: line {self.line}"
+        rows = []
+        while (line := self._readline()) is not None and not line.lstrip().startswith("ITEM:"):
+            rows.append(self._bounds(line, tilted))
+            if flags and len(rows) == len(flags):
+                break
+        else:
+            if line is not None:
+                self._unread(line)
+        if len(rows) < 2:
+            raise InputError(f"{where}: ITEM: BOX BOUNDS needs a 'lo hi' line for x and for y "
+                             f"(found {len(rows)}; truncated?)")
+        return np.asarray(rows), flags
+
+    def _bounds(self, line: str, tilted: bool = False) -> tuple[float, float]:
+        fields = line.split()
+        where = f"{self.label}: line {self.line}"
+        if len(fields) == 3:
+            try:
+                tilt = float(fields[2])
+            except ValueError:
+                tilt = float("nan")
+            if not tilted or tilt != 0.0:
+                raise InputError(f"{where}: box bounds with a tilt factor {fields[2]}: a tilted "
+                                 "(triclinic) box is not supported; the riser needs an "
+                                 "orthogonal box")
+            fields = fields[:2]
+        try:
+            lo, hi = (float(v) for v in fields)
+        except ValueError:
+            raise InputError(f"{where}: box bounds {line.strip()!r} are not two numbers 'lo hi'"
+                             ) from None
+        if not (np.isfinite(lo) and np.isfinite(hi) and hi > lo):
+            raise InputError(f"{where}: box bounds {lo:g} {hi:g} do not make a box")
+        return lo, hi
+
+    def _atoms(self, item: str, header: dict) -> DumpFrame:
+        where = f"{self.label}: line {self.line}"
+        for key, name in (("timestep", "TIMESTEP"), ("atoms", "NUMBER OF ATOMS"),
+                          ("box", "BOX BOUNDS")):
+            if key not in header:
+                raise InputError(f"{where}: ITEM: ATOMS without a preceding ITEM: {name}")
+        columns = tuple(item.split()[1:])
+        if not columns:
+            raise InputError(f"{where}: ITEM: ATOMS names no columns")
+        line = self.line
+        atoms = self._atom_table(header["atoms"], columns, header["timestep"])
+        return DumpFrame(header["timestep"], header.get("time"), header["box"], header["boundary"],
+                         columns, atoms, line)
+
+    def _atom_table(self, count: int, columns: tuple[str, ...], timestep: int) -> np.ndarray:
+        """The next ``count`` atom lines as an array [count, columns]."""
+        first = self.line + 1
+        lines = list(itertools.islice(self._fh, count))
+        self.line += len(lines)
+        if len(lines) < count:
+            raise InputError(f"{self.label}: file ends inside the atoms of timestep {timestep}: "
+                             f"{len(lines)} of {count} atom lines (truncated?)")
+        if count == 0:
+            return np.empty((0, len(columns)))
+        try:
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore", UserWarning)  # blank lines only
+                atoms = np.loadtxt(lines, dtype=np.float64, ndmin=2, comments=None)
+        except ValueError as exc:
+            raise InputError(self._bad_atom_line(lines, first, columns, timestep, exc)) from None
+        if atoms.shape != (count, len(columns)):
+            raise InputError(f"{self.label}: line {first}: timestep {timestep} has atom lines of "
+                             f"{atoms.shape[1] if atoms.size else 0} values for {count} atoms, "
+                             f"ITEM: ATOMS names {len(columns)} columns")
+        return atoms
+
+    def _bad_atom_line(self, lines: list[str], first: int, columns: tuple[str, ...],
+                       timestep: int, exc: Exception) -> str:
+        """Message naming the first atom line that numpy could not parse."""
+        for k, line in enumerate(lines):
+            fields = line.split()
+            where = f"{self.label}: line {first + k}"
+            if line.startswith("ITEM:"):
+                return (f"{where}: {line.strip()!r} inside the atoms of timestep {timestep}: "
+                        f"fewer atom lines ({k}) than NUMBER OF ATOMS ({len(lines)})")
+            cut = "" if line.endswith("\n") else " (the file ends inside this line: truncated?)"
+            if len(fields) != len(columns):
+                return (f"{where}: {len(fields)} values, ITEM: ATOMS names {len(columns)} "
+                        f"columns{cut}")
+            for name, field in zip(columns, fields):
+                try:
+                    float(field)
+                except ValueError:
+                    return f"{where}: {field!r} in column {name!r} is not a number{cut}"
+        return f"{self.label}: atoms of timestep {timestep}: {exc}"
+
+
+# -- the importer -----------------------------------------------------------------------------
+def dump_files(source) -> list[Path]:
+    """The dump file(s) of ``source``, ordered by their first timestep.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or sequence of them
+        A file, several files, or a glob pattern such as ``'post/dump*.liggghts'`` (one
+        file per timestep, as LIGGGHTS writes them).
+
+    Returns
+    -------
+    list of pathlib.Path
+        Ordered by the first ``ITEM: TIMESTEP`` of each file, not by name
+        (``dump800`` before ``dump7200``).
+
+    Raises
+    ------
+    InputError
+        If a file is missing, a folder or empty, or a pattern matches no file.
+    """
+    if isinstance(source, (list, tuple)):
+        paths = [Path(p) for p in source]
+    else:
+        text = os.fspath(source)
+        if not Path(text).exists() and any(c in text for c in "*?["):
+            paths = [Path(p) for p in sorted(glob.glob(text))]
+            if not paths:
+                raise InputError(f"{text}: no file matches this pattern")
+        else:
+            paths = [Path(text)]
+    if not paths:
+        raise InputError("no dump file given")
+    if len(paths) == 1:
+        return [check_source(paths[0])]
+    for path in paths:
+        if not path.exists() or path.is_dir():
+            check_source(path)
+    kept = [p for p in paths if p.stat().st_size > 0]      # empty files are skipped
+    if not kept:
+        raise InputError(f"{paths[0].parent}: all {len(paths)} dump files are empty")
+    return sorted(kept, key=_first_timestep)
+
+
+def _first_timestep(path: Path) -> tuple[int, str]:
+    """(first ITEM: TIMESTEP, name) of a dump, to order files; files that do not say come
+    last (the reader then reports what is wrong)."""
+    try:
+        with open_text(path) as fh:
+            for _ in range(50):
+                line = fh.readline()
+                if not line:
+                    break
+                if line.strip() == "ITEM: TIMESTEP":
+                    return int(fh.readline().split()[0]), path.name
+    except (OSError, ValueError, IndexError, UnicodeDecodeError):
+        pass
+    return 2 ** 62, path.name
+
+
+def _frames_of(paths: list[Path], units: list, skipped: list) -> Iterator[tuple[str, DumpFrame]]:
+    """(label, frame) of every frame, file after file, from the first frame that holds
+    atoms; the frames before it (the empty first file of a LIGGGHTS run, say) are counted
+    in ``skipped[0]``."""
+    started = False
+    for path in paths:
+        label = str(path)
+        with open_text(path) as fh:
+            reader = DumpReader(fh, label)
+            for frame in reader:
+                if not units and reader.units:
+                    units.append(reader.units)
+                if not started and frame.atoms.shape[0] == 0:
+                    skipped[0] += 1         # before any atom exists: nothing to store
+                    continue
+                started = True
+                yield label, frame
