@@ -19,7 +19,7 @@ import pytest
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.io import import_file
-from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectories import Trajectories, describe
 
 FIELD = Path(__file__).parent / "field"
 H = 0.95
@@ -249,3 +249,65 @@ def test_info_shows_a_wrong_import_at_a_glance(tmp_path, capsys):
     laps = np.load(FIELD / "unwrapped-coarse.laps.npy")
     assert "laps from: unwrapped coordinates" in text
     assert f"passes through the periodic boundary: {laps[-1].sum()} up, 0 down" in text
+
+
+# -- particles that come and go ----------------------------------------------------------------
+def _ids_per_frame(path):
+    with Trajectories(path) as t:
+        return [set(t.ids[p].tolist()) for p in t.present()], t
+
+
+def test_outlet_deletion_and_reinsertion_under_a_new_id(tmp_path):
+    """`ff ff pp`: y is not periodic, so the riser is open; particle 3 leaves through the
+    outlet and particle 6 is inserted: ids {1-5}, {1-5}, {1,2,4,5}, {1,2,4,5,6}."""
+    out = import_file(FIELD / "outlet-delete-reinsert.dump", "lammps", tmp_path / "o.h5",
+                      time_step=1e-5)
+    present, _ = _ids_per_frame(out)
+    assert present == [{1, 2, 3, 4, 5}, {1, 2, 3, 4, 5}, {1, 2, 4, 5}, {1, 2, 4, 5, 6}]
+    with Trajectories(out) as t:
+        assert t.boundary == "open" and t.laps().max() == 0
+        np.testing.assert_array_equal(t.ids, [1, 2, 3, 4, 5, 6])
+        np.testing.assert_allclose(t.positions(3)[5], [0.06, 0.2])
+        text = "\n".join(describe(t))
+    assert "entries 1, exits 1" in text and "min 4, max 5 of 6" in text
+    assert "vertical boundary open" in text and "passes through" not in text
+    # the same file declared periodic counts laps instead (particle 5: 0.9 -> 0 passes up)
+    out = import_file(FIELD / "outlet-delete-reinsert.dump", "lammps", tmp_path / "p.h5",
+                      time_step=1e-5, boundary="periodic")
+    with Trajectories(out) as t:
+        assert t.boundary == "periodic" and t.laps()[2:, 4].tolist() == [1, 1]
+
+
+def test_insert_stream_growing_atom_count_with_image_flags(tmp_path):
+    """LIGGGHTS insert/stream: the atom count grows; a duplicated `type` column; image flags.
+    Every id is present from the frame where it first appears."""
+    source = FIELD / "insert-stream-growing.dump"
+    text = source.read_text().split("ITEM: TIMESTEP")[1:]
+    expected = [{int(line.split()[0]) for line in frame.split("ITEM: ATOMS")[1].splitlines()[1:]
+                 if line.strip()} for frame in text]
+    assert len(expected[-1]) > len(expected[0])
+    out = import_file(source, "lammps", tmp_path / "s.h5", time_step=1e-5)
+    present, _ = _ids_per_frame(out)
+    assert present == expected
+    with Trajectories(out) as t:
+        assert t.parameters["laps_from"] == "image flags" and t.boundary == "periodic"
+        first = {int(i): k for k, i in enumerate(t.ids)}
+        for k, frame in enumerate(text):
+            for line in frame.split("ITEM: ATOMS")[1].splitlines()[1:]:
+                if line.strip():
+                    v = line.split()
+                    np.testing.assert_allclose(t.positions(k)[first[int(v[0])]],
+                                               [float(v[3]), float(v[4])], atol=1e-15)
+
+
+def test_a_region_that_holds_no_particle_and_bad_new_options(tmp_path, capsys):
+    dump = str(FIELD / "outlet-delete-reinsert.dump")
+    for args, match in ((["--region", "0.5:0.6,0:0.95"], "holds no particle in any frame"),
+                        (["--boundary", "shut"], "argument --boundary: invalid choice"),
+                        (["--resample", "0.01"], "--resample and --max-gap apply to CSV files"),
+                        (["--region", "0:0.09,0.95:0"], "region")):
+        code = main(["import", dump, "--format", "lammps", "--time-step", "1e-5", *args, "-o",
+                     str(tmp_path / "x.h5")])
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1 and match in err, (args, err)
+    assert not (tmp_path / "x.h5").exists()

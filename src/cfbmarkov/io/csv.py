@@ -303,7 +303,7 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
                        with_velocity=layout.velocity is not None, label=label,
                        **riser.writer_options()) as writer:
         columns = FrameColumns(writer)
-        for rows, last in progress(itertools.chain([first], frames), label):
+        for rows, _last in progress(itertools.chain([first], frames), label):
             _append_frame(writer, columns, rows, layout, riser, label)
         _check_some_present(writer, riser, label)
 
