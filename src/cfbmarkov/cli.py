@@ -239,7 +239,8 @@ def _cmd_info(args) -> int:
 
         print(MarkovModel.load(args.file).summary())
     else:
-        from cfbmarkov.trajectories import Trajectories, describe
+        from cfbmarkov.trajectories import Trajectories
+        from cfbmarkov.trajectory_info import describe
 
         with Trajectories(args.file) as t:
             print("\n".join(describe(t)))

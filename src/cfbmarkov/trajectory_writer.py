@@ -27,6 +27,7 @@ import h5py
 import numpy as np
 
 from cfbmarkov._atomic import discard, publish, temporary_path
+from cfbmarkov._hdf5 import create_array_dataset, json_default, package_version
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import (BOUNDARIES, FORMAT, FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE,
                                     VERSION, PassEvents, _t, estimate_frame_interval, lap_increments)
@@ -36,8 +37,6 @@ RECENT_STEPS = 64
 #: laps from wrapped heights: the largest step between frames (fraction of H) that the
 #: importers accept; beyond a quarter a coarse output of a fast particle is likely
 IMPORT_MAX_STEP = 0.25
-#: elements an [S, S]-like array must have before :func:`create_array_dataset` compresses it
-COMPRESS_MIN_SIZE = 4096
 #: fewest particles per chunk of a frame (a file whose particles grow by insertion)
 MIN_CHUNK_PARTICLES = 256
 
@@ -156,9 +155,9 @@ class TrajectoryWriter:
             "vertical_axis": axes["vertical"], "depth_axis": axes["depth"],
             "region_origin": origin,
             "length_unit": "m", "time_unit": "s", "source": source,
-            "parameters": json.dumps(parameters or {}, default=_json_default),
+            "parameters": json.dumps(parameters or {}, default=json_default),
             "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            "cfbmarkov_version": _version(),
+            "cfbmarkov_version": package_version(),
         })
         if self.depth is not None:
             f.attrs["depth"] = self.depth
@@ -651,39 +650,6 @@ class TrajectoryWriter:
             self._closed = True
 
 
-def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
-    """Write ``value`` as dataset ``name`` of ``group``, compressed where it pays.
-
-    An array of two or more dimensions with at least :data:`COMPRESS_MIN_SIZE` elements
-    (the [S, S] matrices of a model) is stored chunked in blocks of whole rows of about
-    1 MiB and compressed with gzip (deflate) at level 1; anything else is stored plain.
-    Deflate is built into every HDF5 library, so any reader still reads the dataset as a
-    plain dense array. Level 1 without the shuffle filter: on the sparse matrices of a
-    model it gave the smallest file and the fastest load of the settings tried (shuffle
-    and higher levels gave larger or slower files).
-
-    Parameters
-    ----------
-    group : h5py.Group
-        Where to create the dataset.
-    name : str
-        The dataset's name.
-    value : array_like
-        Its data (stored with its own dtype and shape).
-
-    Returns
-    -------
-    h5py.Dataset
-    """
-    value = np.asarray(value)
-    if value.ndim < 2 or value.size < COMPRESS_MIN_SIZE:
-        return group.create_dataset(name, data=value)
-    row = int(np.prod(value.shape[1:])) * value.dtype.itemsize
-    rows = int(min(value.shape[0], max(1, (1 << 20) // max(row, 1))))
-    return group.create_dataset(name, data=value, chunks=(rows, *value.shape[1:]),
-                                compression="gzip", compression_opts=1)
-
-
 def write_trajectories(path: str | os.PathLike, times, positions, *, width: float, height: float,
                        ids=None, velocities=None, laps=None, source: str = "arrays",
                        parameters: dict[str, Any] | None = None, events: PassEvents | None = None,
@@ -741,19 +707,3 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
         if events is not None:
             w.add_events(events.time, events.particle, events.direction)
     return Path(path)
-
-
-def _json_default(obj):
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, (np.integer, np.floating)):
-        return obj.item()
-    if isinstance(obj, Path):
-        return str(obj)
-    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
-
-
-def _version() -> str:
-    from cfbmarkov import __version__
-
-    return __version__

@@ -21,7 +21,8 @@ import pytest
 from cfbmarkov.cli import main as cli_main
 from cfbmarkov.errors import InputError
 from cfbmarkov.io import import_csv, import_file
-from cfbmarkov.trajectories import Trajectories, describe
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_info import describe
 
 FIELD = Path(__file__).parent / "field"
 

@@ -10,7 +10,8 @@ import pytest
 
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import VERSION, Trajectories, describe
+from cfbmarkov.trajectories import VERSION, Trajectories
+from cfbmarkov.trajectory_info import describe
 from cfbmarkov.trajectory_writer import TrajectoryWriter, write_trajectories
 
 W, H = 0.09, 0.95

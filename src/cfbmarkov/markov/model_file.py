@@ -13,7 +13,7 @@ states:
   a model fitted on the largest strongly connected set, ``connected = 1``.
 
 The [S, S] datasets are stored chunked (blocks of whole rows, about 1 MiB) and compressed
-with gzip (deflate, level 1; :func:`~cfbmarkov.trajectory_writer.create_array_dataset`): the
+with gzip (deflate, level 1; :func:`~cfbmarkov._hdf5.create_array_dataset`): the
 matrices are sparse, so a 1596-state model takes under 1 MB instead of 122 MB, and it loads
 in about a tenth of a second. Deflate is built into every HDF5 library, so any HDF5 reader
 (h5py, h5dump, MATLAB, ...) still reads them as plain dense arrays; the layout and its
@@ -38,7 +38,7 @@ from cfbmarkov._atomic import atomic_path
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.model import _DATASETS, MODEL_FORMAT
 from cfbmarkov.markov.states import StateSpace
-from cfbmarkov.trajectory_writer import create_array_dataset
+from cfbmarkov._hdf5 import create_array_dataset
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel

@@ -1,0 +1,63 @@
+"""HDF5 helpers shared by the file writers: compressed array datasets, JSON attributes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+#: elements an [S, S]-like array must have before :func:`create_array_dataset` compresses it
+COMPRESS_MIN_SIZE = 4096
+
+
+def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
+    """Write ``value`` as dataset ``name`` of ``group``, compressed where it pays.
+
+    An array of two or more dimensions with at least :data:`COMPRESS_MIN_SIZE` elements
+    (the [S, S] matrices of a model) is stored chunked in blocks of whole rows of about
+    1 MiB and compressed with gzip (deflate) at level 1; anything else is stored plain.
+    Deflate is built into every HDF5 library, so any reader still reads the dataset as a
+    plain dense array. Level 1 without the shuffle filter: on the sparse matrices of a
+    model it gave the smallest file and the fastest load of the settings tried (shuffle
+    and higher levels gave larger or slower files).
+
+    Parameters
+    ----------
+    group : h5py.Group
+        Where to create the dataset.
+    name : str
+        The dataset's name.
+    value : array_like
+        Its data (stored with its own dtype and shape).
+
+    Returns
+    -------
+    h5py.Dataset
+    """
+    value = np.asarray(value)
+    if value.ndim < 2 or value.size < COMPRESS_MIN_SIZE:
+        return group.create_dataset(name, data=value)
+    row = int(np.prod(value.shape[1:])) * value.dtype.itemsize
+    rows = int(min(value.shape[0], max(1, (1 << 20) // max(row, 1))))
+    return group.create_dataset(name, data=value, chunks=(rows, *value.shape[1:]),
+                                compression="gzip", compression_opts=1)
+
+
+
+def json_default(obj):
+    """``json.dumps`` default: numpy arrays and scalars, paths."""
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, (np.integer, np.floating)):
+        return obj.item()
+    if isinstance(obj, Path):
+        return str(obj)
+    raise TypeError(f"not JSON serializable: {type(obj).__name__}")
+
+
+def package_version() -> str:
+    """The installed cfbmarkov version."""
+    from cfbmarkov import __version__
+
+    return __version__

@@ -1,0 +1,72 @@
+"""What a trajectory file holds, in lines for ``cfbmarkov info``: a wrong import must be
+visible at a glance (``docs/definitions.md``, Boundary and presence)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cfbmarkov.trajectories import Trajectories
+
+
+def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
+    """Lines that show at a glance what a trajectory file holds and how it was made:
+    domain, axes and region, boundary, particles present per frame, passes through the
+    periodic boundary (from the lap counters between consecutive frames where a particle is
+    present), entries and exits (a particle absent in one frame and present in the next, or
+    the reverse) and where the laps came from. Frames are read block by block.
+
+    Parameters
+    ----------
+    trajectories : Trajectories
+        An open file.
+    block : int
+        Frames read at a time.
+
+    Returns
+    -------
+    list of str
+    """
+    t = trajectories
+    p = t.parameters
+    d = t.dimensions
+    size = f"{t.width:g} m across x {t.height:g} m high" + (
+        f" x {t.depth:g} m deep (3D)" if d == 3 else " (2D)")
+    boundary = ("periodic (what leaves the top re-enters the bottom)" if t.boundary == "periodic"
+                else "open (inlet at the bottom, outlet at the top; particles enter and leave)")
+    lines = [repr(t), f"  domain: {size}; vertical boundary {boundary}"]
+    axes = f"vertical {t.axes['vertical']}, across {t.axes['across']}" + (
+        f", depth {t.axes['depth']}" if d == 3 else "")
+    dropped = p.get("depth_axis_dropped")
+    origin = ", ".join(f"{v:g}" for v in t.region_origin)
+    lines.append(f"  axes from the source: {axes}"
+                 + (f", depth axis {dropped} dropped (projection)" if dropped else "")
+                 + f"; origin at ({origin}) m in the source's coordinates"
+                 + (f"; riser region {p['region']} m" if "region" in p else ""))
+    if "laps_from" in p:
+        lines.append(f"  laps from: {p['laps_from']}")
+    counts = []
+    up = down = entries = exits = 0
+    previous = previous_present = None
+    for i in range(0, t.n_frames, block):
+        frames = slice(i, min(i + block, t.n_frames))
+        laps = t.laps(frames).astype(np.int64)
+        present = t.present(frames)
+        counts.append(present.sum(axis=1))
+        if previous is not None:
+            laps = np.concatenate([previous[None], laps])
+            present = np.concatenate([previous_present[None], present])
+        step = np.where(present[1:] & present[:-1], np.diff(laps, axis=0), 0)
+        up += int(step[step > 0].sum())
+        down += int(-step[step < 0].sum())
+        entries += int((present[1:] & ~present[:-1]).sum())
+        exits += int((~present[1:] & present[:-1]).sum())
+        previous, previous_present = laps[-1], present[-1]
+    counts = np.concatenate(counts)
+    every = " (every particle in every frame)" if not t.has_absences else ""
+    lines.append(f"  particles present per frame: min {int(counts.min())}, max {int(counts.max())}"
+                 f" of {t.n_particles}{every}")
+    if t.boundary == "periodic":
+        lines.append(f"  passes through the periodic boundary: {up} up, {down} down"
+                     + (" (not counted across a particle's absence)" if t.has_absences else ""))
+    lines.append(f"  entries {entries}, exits {exits} (after the first frame)")
+    return lines
