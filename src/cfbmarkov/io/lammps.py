@@ -108,7 +108,7 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
         where = first.where(first_label)
         layout = AtomColumns.find(first.columns, where)
         n_axes = min(len(layout.position), first.box.shape[0])
-        spread = n_axes == 3 and float(np.ptp(first.atoms[:, layout.position[2]])) > 0.0
+        spread, frames = _depth_spread(first, frames, layout, n_axes)
         riser = riser_frame(n_axes=n_axes, spread=spread, vertical_axis=vertical_axis,
                             flags=first.boundary, box=first.box[:n_axes], region=region,
                             width=width, height=height, boundary=boundary,
@@ -135,6 +135,27 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
                                  "particle in any frame; check --region (or --width/--height) "
                                  "against the box")
     return output
+
+
+def _depth_spread(first: DumpFrame, frames, layout: AtomColumns, n_axes: int):
+    """Whether positions vary along z (a 3D dump), and ``frames`` as they were. One atom
+    cannot show it (a pour that inserts one atom at a time starts so): the frames after
+    the first are read ahead, and put back, until one holds two atoms or z varies."""
+    if n_axes < 3:
+        return False, frames
+    column = layout.position[2]
+    z0 = first.atoms[0, column]
+    spread = bool(np.any(first.atoms[:, column] != z0))
+    ahead: list = []
+    count = first.atoms.shape[0]
+    while not spread and count < 2:
+        following = next(frames, None)
+        if following is None:
+            break
+        ahead.append(following)
+        z = following[1].atoms[:, column]
+        spread, count = bool(np.any(z != z0)), z.size
+    return spread, itertools.chain(ahead, frames)
 
 
 def _provenance(path: Path, first: DumpFrame, layout: AtomColumns, units: str | None,
