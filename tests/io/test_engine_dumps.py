@@ -15,7 +15,8 @@ import pytest
 from cfbmarkov.errors import InputError
 from cfbmarkov.io import import_file
 from cfbmarkov.simulate.dem.lammps import find_lammps, run_lammps
-from cfbmarkov.trajectories import Trajectories, describe
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_info import describe
 
 DT = 1e-5
 EVERY = 500                 # steps between dumps (and thermo lines)

@@ -312,3 +312,26 @@ def test_a_region_that_holds_no_particle_and_bad_new_options(tmp_path, capsys):
         err = capsys.readouterr().err
         assert code == 2 and err.count("\n") == 1 and match in err, (args, err)
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_a_dump_flat_in_z_at_first_that_spreads_later_is_refused(tmp_path, capsys):
+    """insert/stream from an inlet face at one height: the first frame's atoms all lie at one
+    z, so the dump looks 2D; where atoms leave that z it is 3D, and import refuses instead
+    of dropping z."""
+    frames = []
+    for k, zs in enumerate(([0.05, 0.05], [0.05, 0.04, 0.05])):
+        atoms = "".join(f"{i + 1} 1 {0.01 * (i + 1)} 0.02 {z}\n" for i, z in enumerate(zs))
+        frames.append(f"ITEM: TIMESTEP\n{1000 * k}\nITEM: NUMBER OF ATOMS\n{len(zs)}\n"
+                      "ITEM: BOX BOUNDS ff ff ff\n0 0.05\n0 0.05\n0 0.06\n"
+                      f"ITEM: ATOMS id type x y z\n{atoms}")
+    source = tmp_path / "flat.dump"
+    source.write_text("".join(frames))
+    code = main(["import", str(source), "--format", "lammps", "--time-step", "1e-5", "-o",
+                 str(tmp_path / "f.h5")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert "particle 2 at z = 0.04 m" in err and "--vertical-axis" in err
+    assert not (tmp_path / "f.h5").exists()
+    out = import_file(source, "lammps", tmp_path / "g.h5", time_step=1e-5, vertical_axis="z")
+    with Trajectories(out) as t:
+        assert t.dimensions == 3 and t.present().tolist() == [[True, True, False], [True] * 3]

@@ -126,10 +126,12 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
                            with_velocity=velocity is not None, label=label,
                            **riser.writer_options()) as writer:
             columns = FrameColumns(writer)
+            flat_z = (float(first.atoms[0, layout.position[2]])
+                      if n_axes == 3 and len(riser.axes) == 2 and riser.dropped is None else None)
             for frame_label, frame in progress(itertools.chain([(first_label, first)], frames),
                                                label):
                 _append_frame(writer, columns, frame, first, layout, time_step, frame_label,
-                              riser)
+                              riser, flat_z)
             if not writer.any_present:
                 raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
                                  "particle in any frame; check --region (or --width/--height) "
@@ -211,8 +213,10 @@ def frame_time(frame: DumpFrame, time_step: float | None, label: str) -> float:
 
 def _append_frame(writer, columns: FrameColumns, frame: DumpFrame, first: DumpFrame,
                   layout: AtomColumns, time_step: float | None, label: str,
-                  riser: RiserFrame) -> None:
-    """Map one frame onto the riser and append it (new ids become new particles)."""
+                  riser: RiserFrame, flat_z: float | None = None) -> None:
+    """Map one frame onto the riser and append it (new ids become new particles). A dump
+    taken as 2D because its first frames held every atom at one z (``flat_z``) is refused
+    where atoms leave that z: it is 3D (an inlet face at one height inserts so)."""
     where = frame.where(label)
     if riser.from_box:
         _check_same_box(frame, first, where)
@@ -230,6 +234,12 @@ def _append_frame(writer, columns: FrameColumns, frame: DumpFrame, first: DumpFr
         k = int(np.argmax(bad))
         raise InputError(f"{where}: position of particle {int(ids[k])} at t = {time:g} s is not "
                          "a finite number")
+    if flat_z is not None and np.any(raw[:, 2] != flat_z):
+        k = int(np.argmax(raw[:, 2] != flat_z))
+        raise InputError(
+            f"{where}: particle {int(ids[k])} at z = {raw[k, 2]:g} m, while every atom of the "
+            f"first frame lay at z = {flat_z:g} m: a 3D dump; say which axis is vertical with "
+            "--vertical-axis x|y|z (or --drop-depth with it for a projection)")
     image = None
     if layout.image is not None and layout.image[riser.vertical] is not None:
         image = atoms[:, layout.image[riser.vertical]]
