@@ -326,42 +326,51 @@ class Trajectories:
         """Whether some particle is absent from some frame (the file has a presence mask)."""
         return "frames/present" in self._file
 
-    def unsupported(self) -> list[str]:
-        """What in this file the periodic 2D Markov pipeline cannot use yet: 3D positions,
-        particles absent from frames, an open vertical boundary (empty for the paper's data).
+    def unsupported(self, *, three_d: bool = False, absent: bool = False,
+                    open_boundary: bool = False) -> list[str]:
+        """What in this file a consumer cannot use: 3D positions, particles absent from
+        frames, an open vertical boundary (empty for the paper's periodic 2D data).
+
+        Parameters
+        ----------
+        three_d, absent, open_boundary : bool, optional
+            What the consumer can use (then it is not listed).
 
         Returns
         -------
         list of str
         """
         reasons = []
-        if self.dimensions == 3:
+        if self.dimensions == 3 and not three_d:
             reasons.append("3D positions")
-        if self.has_absences:
+        if self.has_absences and not absent:
             reasons.append("particles absent from some frames")
-        if self.boundary == "open":
+        if self.boundary == "open" and not open_boundary:
             reasons.append("an open riser (particles enter and leave)")
         return reasons
 
-    def require_supported(self, purpose: str) -> None:
-        """Refuse, in one line, a file that :meth:`unsupported` finds something in.
+    def require_supported(self, purpose: str, *, three_d: bool = False, absent: bool = False,
+                          open_boundary: bool = False) -> None:
+        """Refuse, in one line, a file that holds what the consumer cannot use yet
+        (:meth:`unsupported`).
 
         Parameters
         ----------
         purpose : str
             What was asked (e.g. ``"fitting a Markov model"``), for the message.
+        three_d, absent, open_boundary : bool, optional
+            What the consumer can use.
 
         Raises
         ------
         InputError
             Naming the file, the purpose and what it cannot use yet.
         """
-        reasons = self.unsupported()
+        reasons = self.unsupported(three_d=three_d, absent=absent, open_boundary=open_boundary)
         if reasons:
             hint = (" (a 3D dump imported with --drop-depth gives 2D positions)"
-                    if self.dimensions == 3 else "")
-            raise InputError(f"{self.path}: {purpose} cannot use {' and '.join(reasons)} yet; "
-                             f"it takes 2D periodic runs with every particle in every frame{hint}")
+                    if self.dimensions == 3 and not three_d else "")
+            raise InputError(f"{self.path}: {purpose} cannot use {' and '.join(reasons)} yet{hint}")
 
     @property
     def has_events(self) -> bool:
