@@ -54,6 +54,73 @@ def _scan_laps(times, laps, running_max, last_record, out):
     return n_out
 
 
+@nb.njit(cache=True)
+def _scan_open(times, present, vertical, band, height, was_present, last_height, entered,
+               out):
+    """Advance the residences of an open riser over a block of frames; write samples into
+    ``out`` and return how many.
+
+    Per particle: ``was_present`` [N] (int8: 1 present, 0 absent, -1 before the window's
+    first frame), ``last_height`` [N] (its height when last present) and ``entered`` [N]
+    (time of the entry of its current residence, NaN outside one) carry over between
+    blocks. An entry is a frame where the particle is present, was absent in the frame
+    before and lies within ``band`` of the inlet (height <= band); an exit is a frame where
+    it is absent, was present before and was within ``band`` of the outlet (height >=
+    H - band). A residence runs from an entry to the next exit; other absences (back out
+    through the inlet, out of view) do not end it.
+    """
+    n_frames, n_particles = present.shape
+    n_out = 0
+    for k in range(n_frames):
+        t = times[k]
+        for p in range(n_particles):
+            now = present[k, p]
+            before = was_present[p]
+            if now and before == 0 and vertical[k, p] <= band and np.isnan(entered[p]):
+                entered[p] = t
+            elif not now and before == 1 and last_height[p] >= height - band:
+                if not np.isnan(entered[p]):
+                    out[n_out] = t - entered[p]
+                    n_out += 1
+                entered[p] = np.nan
+            if now:
+                last_height[p] = vertical[k, p]
+            was_present[p] = 1 if now else 0
+    return n_out
+
+
+def open_residence_times(times, present, vertical, band: float, height: float) -> np.ndarray:
+    """Residence-time samples of an open riser from frames (``docs/definitions.md``,
+    Residence time in an open riser).
+
+    Parameters
+    ----------
+    times : array_like of float, shape (T,)
+        Frame times (s) of the analysis window.
+    present : array_like of bool, shape (T, N)
+        Which particles are in each frame.
+    vertical : array_like of float, shape (T, N)
+        Heights (m); ignored where absent.
+    band : float
+        How close to a face (m) a particle must appear or vanish to have crossed it.
+    height : float
+        The riser's height H (m).
+
+    Returns
+    -------
+    numpy.ndarray of float64
+        The time from each entry through the inlet to the next exit through the outlet,
+        both inside the window (s): the first frame present to the first frame absent.
+    """
+    present = np.ascontiguousarray(present, dtype=np.bool_)
+    n = present.shape[1]
+    out = np.empty(present.size)
+    k = _scan_open(np.ascontiguousarray(times, dtype=np.float64), present,
+                   np.ascontiguousarray(vertical, dtype=np.float64), float(band), float(height),
+                   np.full(n, -1, np.int8), np.full(n, np.nan), np.full(n, np.nan), out)
+    return out[:k].copy()
+
+
 def _new_levels_bound(laps: np.ndarray, running_max: np.ndarray) -> int:
     """Upper bound on the records in a block: new levels reached per particle, summed."""
     if laps.shape[0] == 0:
@@ -238,7 +305,12 @@ class ResidenceTimes:
                 f"{'exact events' if self.exact else 'frame times'})")
 
 
-def residence_times(traj, window: tuple[float, float], use_events: bool = True) -> ResidenceTimes:
+#: rows of the paper's cell grid: an open riser's face band defaults to H / 38 (one cell)
+DEFAULT_FACE_ROWS = 38
+
+
+def residence_times(traj, window: tuple[float, float], use_events: bool = True,
+                    face_band: float | None = None) -> ResidenceTimes:
     """Residence-time samples of a trajectory file in a window.
 
     Uses the file's exact pass events when it has them and ``use_events`` is true (counted
@@ -253,11 +325,16 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True) 
         Analysis window (start, stop), s.
     use_events : bool, optional
         Use the file's exact pass events (``/events``) when it has them.
+    face_band : float, optional
+        Open riser: how close to a face (m) a particle must appear or vanish to have
+        crossed it (a model's cell height; default H / 38, the paper's rows).
 
     Returns
     -------
     ResidenceTimes
-        The samples (s), whether exact events were used, and the window.
+        The samples (s), whether exact events were used, and the window. For an open
+        riser: from entries through the inlet to exits through the outlet, from frames
+        (:func:`open_residence_times`).
 
     Raises
     ------
@@ -270,10 +347,25 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True) 
     ----------
     ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
-    traj.require_supported("residence times")
+    traj.require_supported("residence times", absent=traj.boundary == "open",
+                           open_boundary=True)
     start, stop = float(window[0]), float(window[1])
     frames = traj.window(start, stop)
     i0, i1 = frames.start, frames.stop
+    if traj.boundary == "open":
+        band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
+        n = traj.n_particles
+        was, last, entered, chunks = np.full(n, -1, np.int8), np.full(n, np.nan), np.full(n, np.nan), []
+        for k in range(i0, i1, _BLOCK_FRAMES):
+            block = slice(k, min(k + _BLOCK_FRAMES, i1))
+            present = np.ascontiguousarray(traj.present(block))
+            out = np.empty(present.size)
+            m = _scan_open(np.ascontiguousarray(traj.times[block], dtype=np.float64), present,
+                           np.ascontiguousarray(traj.positions(block)[..., 1]), band, traj.height,
+                           was, last, entered, out)
+            chunks.append(out[:m])
+        return ResidenceTimes(np.concatenate(chunks) if chunks else np.zeros(0), False,
+                              (start, stop))
     if use_events and traj.has_events:
         events = traj.events()
         t_first = float(traj.times[i0])

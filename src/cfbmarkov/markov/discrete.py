@@ -71,6 +71,10 @@ class DiscreteTrajectories:
         Positions (m), kept only where asked for (e.g. to place a prediction's first frame).
     laps : ndarray of int64, shape (T, N), optional
         Lap counters, kept only where asked for.
+    boundary : {"periodic", "open"}, optional
+        The riser's vertical boundary: on an open one, a particle that vanishes within one
+        cell of the outlet face has left, one that appears within one cell of the inlet
+        face has entered (``docs/definitions.md``, Open risers).
 
     Raises
     ------
@@ -99,8 +103,11 @@ class DiscreteTrajectories:
     source: str = ""
     positions: np.ndarray | None = field(default=None, repr=False)
     laps: np.ndarray | None = field(default=None, repr=False)
+    boundary: str = "periodic"
 
     def __post_init__(self):
+        if self.boundary not in ("periodic", "open"):
+            raise InputError(f"boundary {self.boundary!r}: choose periodic or open")
         if self.states.ndim != 2 or self.vertical.shape != self.states.shape:
             raise InputError(f"discrete trajectories: states {self.states.shape} and heights "
                              f"{self.vertical.shape} must both be [T, N]")
@@ -214,6 +221,10 @@ class WindowFrames:
         The analysis window (A, B) in s as asked for (None: all frames).
     source : str
         The file the frames came from.
+    present : ndarray of bool, shape (F, N), or None
+        Which particles are in each frame read; None: every particle in every frame.
+    boundary : {"periodic", "open"}
+        The riser's vertical boundary.
     """
 
     positions: np.ndarray
@@ -226,6 +237,8 @@ class WindowFrames:
     height: float
     window: tuple[float, float] | None
     source: str
+    present: np.ndarray | None = None
+    boundary: str = "periodic"
 
     def discretize(self, state_space: StateSpace, lag_frames: int, *,
                    keep_positions: bool = False) -> DiscreteTrajectories:
@@ -270,9 +283,15 @@ class WindowFrames:
         else:
             start = self.history
         frames = slice(first, None)
-        states = state_space.discretize(
-            self.positions[frames], None if self.velocities is None else self.velocities[frames],
-            lag_frames, self.frame_interval)
+        positions = self.positions[frames]
+        velocities = None if self.velocities is None else self.velocities[frames]
+        if self.present is not None:            # absent: NaN, placed anywhere, then masked
+            positions = np.where(self.present[frames, :, None], positions, 0.0)
+            if velocities is not None:
+                velocities = np.where(self.present[frames, :, None], velocities, 0.0)
+        states = state_space.discretize(positions, velocities, lag_frames, self.frame_interval)
+        if self.present is not None:
+            states = np.where(_known(self.present[frames], need, lag_frames), states, ABSENT)
         offset = start - first
         rows = slice(start, None)
         return DiscreteTrajectories(
@@ -281,7 +300,18 @@ class WindowFrames:
             times=self.times[rows], lag_frames=lag_frames, frame_interval=self.frame_interval,
             height=self.height, state_space=state_space, window=window, source=self.source,
             positions=self.positions[rows] if keep_positions else None,
-            laps=None if (self.laps is None or not keep_positions) else self.laps[rows])
+            laps=None if (self.laps is None or not keep_positions) else self.laps[rows],
+            boundary=self.boundary)
+
+
+def _known(present: np.ndarray, history: int, lag_frames: int) -> np.ndarray:
+    """Where a state is defined: the particle is present in the frame and in every frame
+    its state looks back to (t - lag, t - 2 lag, ... within ``history`` frames)."""
+    known = present.copy()
+    for back in range(lag_frames, history + 1, lag_frames):
+        known[back:] &= present[:-back]
+        known[:back] = False
+    return known
 
 
 def _describe(window) -> str:
@@ -331,7 +361,9 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
         history=start - first, frame_interval=trajectories.frame_interval,
         width=trajectories.width, height=trajectories.height,
         window=None if window is None else (float(window[0]), float(window[1])),
-        source=str(trajectories.path))
+        source=str(trajectories.path),
+        present=trajectories.present(rows) if trajectories.has_absences else None,
+        boundary=trajectories.boundary)
 
 
 def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
@@ -376,7 +408,7 @@ def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
 def _prepare(traj: Trajectories, state_space: StateSpace, lag: float) -> int:
     """Check that ``state_space`` fits the file and return the lag in frames (NaN as the
     lag: check the fit only, return 0)."""
-    traj.require_supported("a Markov model")
+    traj.require_supported("a Markov model", absent=True, open_boundary=True)
     check_domain(state_space, traj.width, traj.height, str(traj.path))
     lag_frames = traj.lag_frames(lag) if np.isfinite(lag) else 0
     if state_space.needs_velocity and not traj.has_velocity:

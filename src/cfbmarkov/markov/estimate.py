@@ -83,6 +83,61 @@ def _count_kernel(states, vertical, lag_frames, height, n_states, counts, counts
     return pairs
 
 
+@nb.njit(cache=True)
+def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, vanished,
+                 appeared):
+    """Count what crosses the faces of an open riser (Numba kernel).
+
+    For every frame pair (t, t + lag) of a particle: present then absent is an exit
+    (``exits[i] += 1``) when its height at t lies within ``band`` (one cell) of the outlet
+    face at H, else a disappearance (``vanished[i]``); absent then present is an entry
+    (``entries[j] += 1``) when its height at t + lag lies within ``band`` of the inlet face
+    at 0, else an appearance (``appeared[j]``). Returns nothing; arrays are updated.
+    """
+    n_frames, n_particles = states.shape
+    for t in range(n_frames - lag_frames):
+        for p in range(n_particles):
+            i = states[t, p]
+            j = states[t + lag_frames, p]
+            if i >= 0 and j < 0:
+                if vertical[t, p] >= height - band:
+                    exits[i] += 1
+                else:
+                    vanished[i] += 1
+            elif i < 0 and j >= 0:
+                if vertical[t + lag_frames, p] <= band:
+                    entries[j] += 1
+                else:
+                    appeared[j] += 1
+
+
+@dataclass(frozen=True)
+class FaceCounts:
+    """What crossed the faces of an open riser (``docs/definitions.md``, Open risers).
+
+    Attributes
+    ----------
+    exits : ndarray of int64, shape (S,)
+        Transitions from each state to the outside through the outlet face (present, then
+        absent one lag later, within one cell of the outlet).
+    entries : ndarray of int64, shape (S,)
+        Entries through the inlet face into each state (absent, then present within one
+        cell of the inlet).
+    vanished, appeared : ndarray of int64, shape (S,)
+        Tracks that ended or began elsewhere (out of a camera's view, a gap): not counted
+        as transitions, exits or entries (censored).
+    """
+
+    exits: np.ndarray
+    entries: np.ndarray
+    vanished: np.ndarray
+    appeared: np.ndarray
+
+    def __add__(self, other: "FaceCounts") -> "FaceCounts":
+        return FaceCounts(self.exits + other.exits, self.entries + other.entries,
+                          self.vanished + other.vanished, self.appeared + other.appeared)
+
+
 @dataclass(frozen=True)
 class TransitionCounts:
     """Everything an estimator gathers from the data before it forms P.
@@ -101,6 +156,8 @@ class TransitionCounts:
         Frame pairs in which each state was occupied.
     frame_pairs : int
         Number of frame pairs (t, t + lag) counted.
+    faces : FaceCounts or None
+        Exits and entries of an open riser; None for a periodic one.
     """
 
     counts: np.ndarray
@@ -109,6 +166,7 @@ class TransitionCounts:
     frame_average_sum: np.ndarray | None
     occupied_frames: np.ndarray
     frame_pairs: int
+    faces: FaceCounts | None = None
 
     @property
     def n_transitions(self) -> int:
@@ -119,10 +177,12 @@ class TransitionCounts:
         """The counts of two sets of data together (e.g. the training blocks of a fold)."""
         averages = (None if self.frame_average_sum is None or other.frame_average_sum is None
                     else self.frame_average_sum + other.frame_average_sum)
+        faces = (None if self.faces is None or other.faces is None
+                 else self.faces + other.faces)
         return TransitionCounts(self.counts + other.counts, self.counts_up + other.counts_up,
                                 self.counts_down + other.counts_down, averages,
                                 self.occupied_frames + other.occupied_frames,
-                                self.frame_pairs + other.frame_pairs)
+                                self.frame_pairs + other.frame_pairs, faces)
 
 
 def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
@@ -161,16 +221,76 @@ def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
     frame_sum = np.zeros((s, s) if frame_average else (1, 1), np.float64)
     occupied = np.zeros(s, np.int64)
     pairs = 0
+    open_riser = windows[0].boundary == "open"
+    faces = FaceCounts(*(np.zeros(s, np.int64) for _ in range(4))) if open_riser else None
     for window in windows:
         if window.state_space != space or not window.matches_lag(windows[0].lag):
             raise InputError("discrete trajectories counted together must share the state "
                              "space and the lag")
+        if (window.boundary == "open") != open_riser:
+            raise InputError("discrete trajectories counted together must share the boundary "
+                             "(periodic or open)")
+        if open_riser:
+            _open_kernel(np.ascontiguousarray(window.states, dtype=np.int32),
+                         np.ascontiguousarray(window.vertical, dtype=np.float64),
+                         int(window.lag_frames), face_band(space), float(window.height),
+                         faces.exits, faces.entries, faces.vanished, faces.appeared)
         pairs += _count_kernel(np.ascontiguousarray(window.states, dtype=np.int32),
                                np.ascontiguousarray(window.vertical, dtype=np.float64),
                                int(window.lag_frames), float(window.height), s, counts, up,
                                down, frame_sum, occupied, bool(frame_average))
     return TransitionCounts(counts, up, down, frame_sum if frame_average else None, occupied,
-                            pairs)
+                            pairs, faces)
+
+
+def open_chain(counts: TransitionCounts) -> dict:
+    """The open riser's part of a model from its counts (pooled, maximum likelihood).
+
+    Each state i leaves to the outside with probability r_i = X_i / (sum_j C_ij + X_i)
+    (X: exits through the outlet); otherwise it moves by the row-stochastic P (the
+    transition matrix given that it stays), so the sub-stochastic matrix of the open chain
+    is Q = diag(1 - r) P. Entries through the inlet give the entry distribution
+    e_j = N_j / sum N and the inflow, entries per lag. Tracks that vanish or appear away
+    from the faces are censored: neither transitions nor exits nor entries.
+
+    Parameters
+    ----------
+    counts : TransitionCounts
+        Counts of an open riser (``faces`` not None).
+
+    Returns
+    -------
+    dict
+        ``boundary``, ``exit_probability`` [S], ``exit_counts`` [S], ``entry_counts`` [S] and
+        ``inflow_per_lag`` for :class:`~cfbmarkov.markov.model.MarkovModel`.
+
+    References
+    ----------
+    J. G. Kemeny and J. L. Snell, Finite Markov Chains (1960), Ch. III (absorbing chains).
+    """
+    faces = counts.faces
+    stayed = counts.counts.sum(axis=1).astype(np.float64)
+    total = stayed + faces.exits
+    exit_probability = np.divide(faces.exits, total, out=np.zeros(total.size), where=total > 0)
+    return {"boundary": "open", "exit_probability": exit_probability,
+            "exit_counts": faces.exits.copy(), "entry_counts": faces.entries.copy(),
+            "inflow_per_lag": float(faces.entries.sum()) / max(counts.frame_pairs, 1)}
+
+
+def face_band(space: StateSpace) -> float:
+    """How close to a face (m) a particle must vanish or appear to have crossed it: one
+    cell height, H / rows (``docs/definitions.md``, Open risers).
+
+    Parameters
+    ----------
+    space : StateSpace
+        A cell-based state space (with ``height`` and ``rows``).
+
+    Returns
+    -------
+    float
+    """
+    return float(space.height) / int(space.rows)
 
 
 class TransitionEstimator:
@@ -266,6 +386,9 @@ class TransitionEstimator:
                 raise InputError(f"discrete trajectories have a lag of {window.lag:g} s "
                                  f"({window.lag_frames} frames), the estimator's is "
                                  f"{self.lag:g} s")
+        if self.name == "paper" and windows[0].boundary == "open":
+            raise InputError("the paper's estimator (Eq. 2-4) averages per-frame matrices of a "
+                             "closed (periodic) riser; fit an open riser with --estimator mle")
         counts = count_transitions(windows, frame_average=self.name == "paper")
         sources = [w.source for w in windows]
         return self.fit_counts(counts, window=windows[0].window,
@@ -326,7 +449,10 @@ class TransitionEstimator:
         from cfbmarkov.markov.model import MarkovModel
 
         matrix, fractions = self.chain(counts)
-        return MarkovModel(
+        open_flow = {}
+        if counts.faces is not None:
+            open_flow = open_chain(counts)
+        return MarkovModel(**open_flow,
             transition_matrix=matrix, counts=counts.counts, counts_up=counts.counts_up,
             counts_down=counts.counts_down, state_space=self.state_space, lag=self.lag,
             estimator=self.name, window=tuple(window) if window is not None else None,

@@ -76,13 +76,25 @@ class MarkovModel:
         How the state space and lag were chosen (``--states auto``), JSON-serialisable.
     connected : bool
         Fitted on the largest strongly connected set (transitions leaving it removed).
+    boundary : {"periodic", "open"}
+        The riser's vertical boundary. An open riser's chain is absorbing: each lag a
+        particle in state i leaves through the outlet with probability ``exit_probability[i]``,
+        else moves by P; particles enter through the inlet (``docs/definitions.md``, Open
+        risers).
+    exit_probability : ndarray of float64, shape (S,), or None
+        r_i (open riser; None for a periodic one).
+    exit_counts, entry_counts : ndarray of int64, shape (S,), or None
+        Exits from / entries into each state observed in the fitting window (open riser).
+    inflow_per_lag : float
+        Mean number of particles entering through the inlet per lag (open riser).
 
     Raises
     ------
     InputError
         If an array does not have shape (S, S) for the state space, P holds negative or
-        non-finite entries, its rows do not sum to 1, or the pass fractions have the
-        wrong shape.
+        non-finite entries, its rows do not sum to 1, the pass fractions have the wrong
+        shape, or an open riser's exit probabilities are not probabilities, its counts are
+        negative or it has no entry.
 
     Notes
     -----
@@ -110,6 +122,11 @@ class MarkovModel:
     # how the state space and lag were chosen (``--states auto``), JSON-serialisable
     selection: dict | None = None
     connected: bool = False
+    boundary: str = "periodic"
+    exit_probability: np.ndarray | None = None
+    exit_counts: np.ndarray | None = None
+    entry_counts: np.ndarray | None = None
+    inflow_per_lag: float = 0.0
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -134,6 +151,53 @@ class MarkovModel:
             for f in fractions:
                 f.setflags(write=False)
             object.__setattr__(self, "pass_fractions", fractions)
+        self._check_open(s)
+
+    def _check_open(self, s: int) -> None:
+        if self.boundary not in ("periodic", "open"):
+            raise InputError(f"model boundary {self.boundary!r}: periodic or open")
+        if self.boundary == "periodic":
+            return
+        for name, dtype in (("exit_probability", np.float64), ("exit_counts", np.int64),
+                            ("entry_counts", np.int64)):
+            value = getattr(self, name)
+            if value is None:
+                raise InputError(f"an open riser's model needs {name}")
+            value = np.array(value, dtype=dtype)
+            if value.shape != (s,) or not np.all(np.isfinite(value)) or value.min() < 0:
+                raise InputError(f"model {name} must be {s} non-negative numbers")
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        if self.exit_probability.max() > 1.0:
+            raise InputError("model exit probabilities exceed 1")
+        if self.entry_counts.sum() == 0:
+            raise InputError("an open riser's model without any entry through the inlet: the "
+                             "fitting window saw no particle enter (its entry distribution is "
+                             "empty)")
+        if not (np.isfinite(self.inflow_per_lag) and self.inflow_per_lag >= 0):
+            raise InputError(f"model inflow {self.inflow_per_lag!r} per lag must be >= 0")
+
+    @property
+    def entry_distribution(self) -> np.ndarray | None:
+        """Where particles enter an open riser: the observed entries per state, normalised,
+        float64 [S] (None for a periodic riser)."""
+        if self.entry_counts is None:
+            return None
+        return self.entry_counts / self.entry_counts.sum()
+
+    @cached_property
+    def absorbing_matrix(self) -> np.ndarray:
+        """Q = diag(1 - r) P, the sub-stochastic matrix of an open riser's chain (the
+        transitions among the states; r leaves through the outlet), float64 [S, S].
+
+        Raises
+        ------
+        InputError
+            For a periodic riser's model (no outlet).
+        """
+        if self.exit_probability is None:
+            raise InputError("a periodic riser's model has no outlet (no absorbing matrix)")
+        return (1.0 - self.exit_probability)[:, None] * self.transition_matrix
 
     # -- derived quantities ------------------------------------------------------------
     @property
@@ -364,6 +428,8 @@ class MarkovModel:
         J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
         (1960) (Ch. III, absorbing chains).
         """
+        if self.boundary == "open":
+            return self._open_rtd(window)
         if window is not None and "rtd" not in self._cache:
             # a window of n lags sees residence times below n lags only: propagate no further
             steps = max(2, int(round(window / self.lag)))
@@ -378,6 +444,17 @@ class MarkovModel:
                                            self.down_fraction, self.lag,
                                            entry_flux=self._entry_flux)
         intrinsic = self._cache["rtd"]
+        return intrinsic if window is None else intrinsic.in_window(window)
+
+    def _open_rtd(self, window: float | None) -> ResidenceTimeDistribution:
+        """First passage to the outside from the entry distribution (fundamental matrix of
+        the absorbing chain): f(k) = e Q^(k-1) r."""
+        from cfbmarkov.markov.rtd import open_rtd
+
+        if "open-rtd" not in self._cache:
+            self._cache["open-rtd"] = open_rtd(self.absorbing_matrix, self.exit_probability,
+                                               self.entry_distribution, self.lag)
+        intrinsic = self._cache["open-rtd"]
         return intrinsic if window is None else intrinsic.in_window(window)
 
     # -- Monte Carlo -------------------------------------------------------------------

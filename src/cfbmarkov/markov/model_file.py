@@ -76,6 +76,11 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         attrs["selection"] = json.dumps(model.selection)
     if model.connected:
         attrs["connected"] = 1
+    if model.boundary == "open":
+        attrs["boundary"] = "open"
+        attrs["inflow_per_lag"] = float(model.inflow_per_lag)
+        for name in _OPEN_DATASETS:
+            datasets[name] = getattr(model, name)
     return datasets, attrs
 
 
@@ -146,9 +151,23 @@ def read_model_group(group: h5py.Group | h5py.File, label: str = "") -> "MarkovM
             if "pass_up_fraction" in group else None,
             selection=json.loads(group.attrs["selection"])
             if "selection" in group.attrs else None,
-            connected=bool(group.attrs.get("connected", 0)))
+            connected=bool(group.attrs.get("connected", 0)),
+            **_open_fields(group))
     except KeyError as exc:
         raise InputError(f"{label}: damaged model file (missing {exc})") from None
+
+
+_OPEN_DATASETS = ("exit_probability", "exit_counts", "entry_counts")
+
+
+def _open_fields(group) -> dict:
+    """An open riser's fields from a model group (nothing for a periodic riser's)."""
+    boundary = group.attrs.get("boundary", "periodic")
+    boundary = boundary.decode() if isinstance(boundary, bytes) else str(boundary)
+    if boundary != "open":
+        return {"boundary": boundary}
+    return {"boundary": boundary, "inflow_per_lag": float(group.attrs["inflow_per_lag"]),
+            **{name: group[name][()] for name in _OPEN_DATASETS}}
 
 
 def read_model(path: str | os.PathLike) -> "MarkovModel":

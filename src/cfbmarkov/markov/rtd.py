@@ -322,6 +322,55 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
                                      rtd.entry_distribution, None, max(1, len(classes)))
 
 
+def open_rtd(absorbing: np.ndarray, exit_probability: np.ndarray, entry: np.ndarray, lag: float,
+             tol: float = 1e-10, max_steps: int = 200_000) -> ResidenceTimeDistribution:
+    """Exact RTD of an open riser: first passage to the outside from the entry distribution.
+
+    f(k) = e Q^(k-1) r for k = 1, 2, ...: the probability that a particle entering in state j
+    (with probability e_j) leaves through the outlet on its k-th transition. Its mean is
+    e (I - Q)^-1 1 lags (the fundamental matrix N = (I - Q)^-1).
+
+    Parameters
+    ----------
+    absorbing : ndarray of float64, shape (S, S)
+        Q = diag(1 - r) P, the sub-stochastic matrix among the states.
+    exit_probability : ndarray of float64, shape (S,)
+        r, the probability of leaving through the outlet within one lag.
+    entry : ndarray of float64, shape (S,)
+        e, the entry distribution (sums to 1).
+    lag : float
+        The lag (s).
+    tol : float, optional
+        Stop when the mass still inside is below this.
+    max_steps : int, optional
+        Most lags followed; the rest is ``unresolved``.
+
+    Returns
+    -------
+    ResidenceTimeDistribution
+        ``unresolved`` holds the mass that never leaves (traps) or is still inside at
+        ``max_steps``.
+
+    Raises
+    ------
+    TrappedResidences
+        If no particle that enters can ever leave.
+
+    References
+    ----------
+    J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton (1960),
+    Ch. III (absorbing chains, the fundamental matrix).
+    """
+    exit_probability = np.ascontiguousarray(exit_probability, dtype=np.float64)
+    entry = np.ascontiguousarray(entry, dtype=np.float64)
+    result = _finish(sp.csr_matrix(absorbing), exit_probability, entry, tol, max_steps, lag,
+                     entry)
+    if result.probability.sum() <= 0:
+        raise TrappedResidences("no particle that enters the open riser can reach the outlet "
+                                "in the model: every residence is trapped")
+    return result
+
+
 def _classes_of_states(chain: sp.csr_matrix) -> list[np.ndarray]:
     from cfbmarkov.markov.connectivity import closed_classes
 

@@ -1,0 +1,104 @@
+"""Open risers: particles enter through the inlet and leave through the outlet. A known open
+chain on 6 x 38 cells, drawn and written as a LAMMPS dump with `ff` bounds, gives back its
+matrix within sampling error; the reference RTD from frames equals the one computed by hand;
+the model's exact RTD equals the chain's fundamental-matrix result to round-off."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cfbmarkov.analysis.rtd import residence_times
+from cfbmarkov.errors import InputError
+from cfbmarkov.io import import_file
+from cfbmarkov.markov import CellGrid, MarkovModel, fit_model
+from cfbmarkov.markov.estimate import MaximumLikelihoodEstimator, PaperEstimator
+from cfbmarkov.trajectories import Trajectories
+
+from .open_chain import H, W, draw, lammps_dump, open_chain, positions_of
+
+LAG = 0.02
+STEP = 1e-5
+
+
+@pytest.fixture(scope="module")
+def open_run(tmp_path_factory):
+    q, r, e = open_chain()
+    states, ids = draw(q, r, e, n_steps=400, inflow=6.0, n_start=150, seed=11)
+    pos = positions_of(states, seed=12)
+    times = np.arange(states.shape[0]) * LAG
+    folder = tmp_path_factory.mktemp("open")
+    dump = folder / "open.dump"
+    dump.write_text(lammps_dump(times, ids, pos, STEP))
+    run = import_file(dump, "lammps", folder / "open.h5", time_step=STEP)
+    return {"q": q, "r": r, "e": e, "states": states, "ids": ids, "times": times, "run": run,
+            "pos": pos}
+
+
+def test_import_marks_the_riser_open_and_the_particles_that_come_and_go(open_run):
+    with Trajectories(open_run["run"]) as t:
+        assert t.boundary == "open" and t.has_absences
+        order = np.argsort(t.ids)
+        present = t.present()[:, order]
+    np.testing.assert_array_equal(t.ids[order], open_run["ids"])
+    np.testing.assert_array_equal(present, open_run["states"] >= 0)
+
+
+def test_fit_gives_back_the_open_chain_within_sampling_error(open_run):
+    space = CellGrid(6, 38, W, H)
+    model = fit_model(open_run["run"], space, LAG, estimator="mle")
+    assert model.boundary == "open"
+    q_hat = model.absorbing_matrix
+    visits = model.counts.sum(axis=1) + model.exit_counts
+    well = visits > 400
+    assert well.sum() > 100
+    sigma = np.sqrt(open_run["q"] * (1 - open_run["q"]) / np.maximum(visits, 1)[:, None])
+    z = np.abs(q_hat - open_run["q"])[well] / np.maximum(sigma[well], 1e-12)
+    assert z.max() < 5.0
+    r_sigma = np.sqrt(open_run["r"] * (1 - open_run["r"]) / np.maximum(visits, 1))
+    assert (np.abs(model.exit_probability - open_run["r"])[well] <= 5 * r_sigma[well] + 1e-12).all()
+    # entries only into the bottom row, evenly
+    np.testing.assert_array_equal(np.flatnonzero(model.entry_counts), np.arange(6))
+    assert model.inflow_per_lag == pytest.approx(6.0, rel=0.1)
+    # saved and loaded unchanged
+    with pytest.raises(InputError, match="paper's estimator .* --estimator mle"):
+        fit_model(open_run["run"], space, LAG, estimator="paper")
+
+
+def test_exact_rtd_is_the_fundamental_matrix_result(open_run, tmp_path):
+    model = fit_model(open_run["run"], CellGrid(6, 38, W, H), LAG, estimator="mle")
+    path = model.save(tmp_path / "m.h5")
+    loaded = MarkovModel.load(path)
+    np.testing.assert_array_equal(loaded.exit_probability, model.exit_probability)
+    np.testing.assert_array_equal(loaded.entry_counts, model.entry_counts)
+    assert loaded.inflow_per_lag == model.inflow_per_lag and loaded.boundary == "open"
+    q, r, e = model.absorbing_matrix, model.exit_probability, model.entry_distribution
+    fundamental = np.linalg.inv(np.eye(q.shape[0]) - q)
+    mean_lags = e @ fundamental @ np.ones(q.shape[0])
+    second = e @ fundamental @ (2 * fundamental - np.eye(q.shape[0])) @ np.ones(q.shape[0])
+    rtd = loaded.rtd()
+    assert rtd.unresolved < 1e-9
+    assert rtd.mean == pytest.approx(mean_lags * LAG, rel=1e-8)
+    assert rtd.sd == pytest.approx(np.sqrt(second - mean_lags ** 2) * LAG, rel=1e-6)
+    v = e.copy()
+    for k in range(5):                      # f(k) = e Q^(k-1) r
+        assert rtd.probability[k] == pytest.approx(v @ r, abs=1e-15)
+        v = v @ q
+
+
+def test_reference_rtd_from_frames_equals_the_hand_count(open_run):
+    states, times = open_run["states"], open_run["times"]
+    window = (2.0, 7.0)
+    inside = (times >= window[0] - 1e-9) & (times <= window[1] + 1e-9)
+    k0, k1 = np.flatnonzero(inside)[[0, -1]]
+    by_hand = []
+    for p in range(states.shape[1]):
+        alive = np.flatnonzero(states[:, p] >= 0)
+        first, last = alive[0], alive[-1]
+        exited = last + 1 < states.shape[0] and states[last, p] // 6 == 37
+        if first > k0 and exited and last + 1 <= k1 and states[first, p] // 6 == 0:
+            by_hand.append(times[last + 1] - times[first])
+    with Trajectories(open_run["run"]) as t:
+        samples = residence_times(t, window, face_band=H / 38).samples
+    assert len(by_hand) > 100
+    np.testing.assert_allclose(np.sort(samples), np.sort(by_hand), rtol=0, atol=1e-9)
