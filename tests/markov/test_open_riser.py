@@ -12,7 +12,6 @@ from cfbmarkov.analysis.rtd import residence_times
 from cfbmarkov.errors import InputError
 from cfbmarkov.io import import_file
 from cfbmarkov.markov import CellGrid, MarkovModel, fit_model
-from cfbmarkov.markov.estimate import MaximumLikelihoodEstimator, PaperEstimator
 from cfbmarkov.trajectories import Trajectories
 
 from .open_chain import H, W, draw, lammps_dump, open_chain, positions_of
@@ -102,3 +101,48 @@ def test_reference_rtd_from_frames_equals_the_hand_count(open_run):
         samples = residence_times(t, window, face_band=H / 38).samples
     assert len(by_hand) > 100
     np.testing.assert_allclose(np.sort(samples), np.sort(by_hand), rtol=0, atol=1e-9)
+
+
+def test_monte_carlo_of_the_open_riser_agrees_with_the_exact_rtd(open_run, tmp_path):
+    """Particles present at the start move by the chain, newcomers enter at the fitted rate
+    from the entry distribution, absorbed ones leave: the RTD of the prediction's frames
+    agrees with the model's exact RTD in the window within sampling error, the inflow
+    matches, and the run is the same for the same seed."""
+    model = fit_model(open_run["run"], CellGrid(6, 38, W, H), LAG, estimator="mle")
+    out = model.predict(open_run["run"], start=1.0, duration=7.0, seed=5, output=tmp_path / "p.h5")
+    window = (1.0, 8.0)
+    with Trajectories(out) as t:
+        assert t.boundary == "open" and t.has_absences
+        present = t.present()
+        samples = residence_times(t, window, face_band=H / 38).samples
+        with Trajectories(open_run["run"]) as ref:
+            start_ids = ref.ids[ref.present(ref.frame_index(1.0))]
+        np.testing.assert_array_equal(t.ids[present[0]], start_ids)
+        entered = (present[1:] & ~present[:-1]).sum()
+        assert entered / (t.n_frames - 1) == pytest.approx(model.inflow_per_lag, rel=0.1)
+    exact = model.rtd(window[1] - window[0])
+    assert samples.size > 500
+    se = samples.std(ddof=1) / np.sqrt(samples.size)
+    assert abs(samples.mean() - exact.mean) < 4 * se
+    again = model.predict(open_run["run"], start=1.0, duration=7.0, seed=5)
+    states, _ = model.monte_carlo(np.zeros(0, np.int32), 3, seed=5)
+    assert states.shape[0] == 4
+    np.testing.assert_array_equal(again[1] >= 0, present)
+
+
+def test_open_and_periodic_models_and_data_do_not_mix(open_run, tmp_path, capsys):
+    from cfbmarkov.cli import main
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    periodic = write_run(tmp_path / "per.h5", RiserFlow(), 50, 1.0, seed=1)
+    open_model = fit_model(open_run["run"], CellGrid(6, 38, W, H), LAG, estimator="mle")
+    open_model.save(tmp_path / "open.h5")
+    fit_model(periodic, CellGrid(6, 38, W, H), 0.025, estimator="mle").save(tmp_path / "per-model.h5")
+    for model, data, match in (("open.h5", periodic, "periodic riser; the model is of an open one"),
+                               ("per-model.h5", open_run["run"], "open riser; the model is of a "
+                                                                 "periodic one")):
+        code = main(["predict", str(tmp_path / model), "--init", str(data), "--start", "0.5",
+                     "--duration", "0.2", "-o", str(tmp_path / "x.h5")])
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1 and match in err, err
+    assert not (tmp_path / "x.h5").exists()

@@ -478,6 +478,11 @@ class MarkovModel:
         Returns
         -------
         states, laps : ndarray of int32, shape (n_steps + 1, N)
+            For an open riser N = N0 + M: the initial particles, then the M that entered
+            through the inlet during the run (Poisson, ``inflow_per_lag`` per lag, states
+            from the entry distribution), in order of entry; -1 where absent (not yet
+            entered, or left through the outlet with the state's exit probability); laps 0
+            (:mod:`cfbmarkov.markov.open_montecarlo`).
 
         Raises
         ------
@@ -493,6 +498,13 @@ class MarkovModel:
         initial_states = np.asarray(initial_states)
         if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
             raise InputError("initial states outside the model's state space")
+        if self.boundary == "open":
+            from cfbmarkov.markov.open_montecarlo import run_open_chain
+
+            states, _ = run_open_chain(self._chain, self.exit_probability,
+                                       self.entry_distribution, self.inflow_per_lag,
+                                       initial_states, n_steps, seed)
+            return states, np.zeros_like(states)
         return run_chain(self._chain, initial_states, n_steps, seed, initial_laps)
 
     def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

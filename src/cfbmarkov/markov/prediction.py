@@ -63,19 +63,33 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         n_steps = model.steps_for(duration)
         if n_steps < 1:
             raise InputError(f"duration {duration:g} s is shorter than one lag ({model.lag:g} s)")
+        if model.boundary == "open" and traj.boundary != "open":
+            raise InputError(f"{traj.path} is a periodic riser; the model is of an open one "
+                             "(fit it on this file, or predict from an open riser's file)")
+        if model.boundary != "open" and traj.boundary == "open":
+            raise InputError(f"{traj.path} is an open riser; the model is of a periodic one "
+                             "(fit a model on open data)")
         states0, positions0, laps0 = model.initial_states(traj, start)
+        ids = traj.ids
+        present0 = states0 >= 0
+        if not present0.all():          # only the particles present at the start move
+            states0, positions0, laps0, ids = (states0[present0], positions0[present0],
+                                               laps0[present0], ids[present0])
         states, laps = model.monte_carlo(states0, n_steps, seed, laps0)
         times = start + model.lag * np.arange(n_steps + 1)
+        if states.shape[1] > ids.size:      # newcomers through the inlet: new ids
+            first = int(traj.ids.max()) + 1 if traj.ids.size else 0
+            ids = np.concatenate([ids, first + np.arange(states.shape[1] - ids.size)])
         if output is None:
             return times, states, laps
         return write_prediction(model, traj, times, states, laps, positions0, seed, output,
-                                progress, duration=duration)
+                                progress, duration=duration, ids=ids)
 
 
 def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                      states: np.ndarray, laps: np.ndarray, first_positions: np.ndarray,
                      seed: int, output: str | os.PathLike, progress: bool = False,
-                     duration: float | None = None) -> Path:
+                     duration: float | None = None, ids: np.ndarray | None = None) -> Path:
     """Write a Monte Carlo run of ``model`` as a trajectory file (a prediction).
 
     The first frame keeps the actual positions it started from; later frames place each
@@ -102,6 +116,10 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
     duration : float, optional
         The prediction's length as asked for (s), recorded in the file's parameters
         (default: K lags).
+    ids : ndarray of int64, shape (N,), optional
+        The particles' ids (default: the file's). Where a state is -1 the particle is
+        absent (an open riser's newcomers before they enter, particles after they leave);
+        the first frame's positions are those of the first ``first_positions.shape[0]``.
 
     Returns
     -------
@@ -123,19 +141,25 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
     parameters = {"model": model.describe(), "seed": int(seed), "start": start,
                   "duration": duration, "initial_frames": str(traj.path),
                   "columns": model.state_space.columns, "rows": model.state_space.rows}
-    with TrajectoryWriter(output, traj.ids, width=traj.width, height=traj.height,
+    ids = traj.ids if ids is None else ids
+    some_absent = bool((states < 0).any())
+    with TrajectoryWriter(output, ids, width=traj.width, height=traj.height,
                           source="markov-prediction", parameters=parameters,
-                          frame_interval=model.lag) as writer:
+                          frame_interval=model.lag, boundary=model.boundary) as writer:
         writer.attach("model", *model_datasets_and_attrs(model))
         bar = _progress(progress, duration)
-        writer.append(times[0], first_positions, lap=laps[0])
+        first = np.full((ids.size, first_positions.shape[1]), np.nan)
+        first[:first_positions.shape[0]] = first_positions
+        writer.append(times[0], first, lap=laps[0],
+                      present=(states[0] >= 0) if some_absent else None)
         cells = model.state_space.cell_of_state
         block = 32
         for k0 in range(1, n_steps + 1, block):
             ks = range(k0, min(k0 + block, n_steps + 1))
-            positions = np.stack([place_in_cells(cells[states[k]], model.state_space, seed, k)
-                                  for k in ks])
-            writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop])
+            positions = np.stack([place_in_cells(cells[np.maximum(states[k], 0)],
+                                                 model.state_space, seed, k) for k in ks])
+            writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop],
+                                 present=(states[ks.start:ks.stop] >= 0) if some_absent else None)
             if bar is not None:
                 bar.update(model.lag * len(ks))
         if bar is not None:
