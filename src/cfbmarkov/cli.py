@@ -137,6 +137,8 @@ def _cmd_fit(args) -> int:
 
     columns, rows = args.cells
     with Trajectories(args.run) as run:
+        if args.estimator is None:
+            args.estimator = "mle" if run.boundary == "open" else "paper"
         if args.states == "auto":
             model = select_model(run, window=args.window, columns=columns, rows=rows,
                                  lag=args.lag, estimator=args.estimator)
@@ -393,7 +395,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--lag", type=_positive_float, default=0.025, help="lag, s (default 0.025)")
     s.add_argument("--window", type=parse_window, default=(10.0, 15.0),
                    help="fitting window START:STOP, s (default 10:15)")
-    s.add_argument("--estimator", choices=["paper", "mle"], default="paper")
+    s.add_argument("--estimator", choices=["paper", "mle"], default=None,
+                   help="paper (Eq. 2-4; the default for a periodic riser) or mle (pooled "
+                        "counts; the default, and the only choice, for an open riser)")
     s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
                                         "cells-previous", "auto"], default="cells",
                    help="state space: the paper's cells, cells x direction of motion, cells x "

@@ -132,11 +132,10 @@ def test_version_1_files_still_read_and_a_newer_version_is_refused(tmp_path, cap
 
 
 @pytest.mark.parametrize("argv, purpose", [
-    (["fit", "{f}", "--lag", "0.02", "-o", "{o}"], "a Markov model"),
     (["export-vtk", "{f}", "-o", "{o}"], "VTK export"),
     (["compare", "{f}", "{f}", "--window", "0:0.1", "-o", "{o}"], "comparing runs"),
 ])
-def test_the_periodic_2d_pipeline_refuses_absent_particles_in_one_line(tmp_path, capsys, argv,
+def test_what_cannot_use_absent_particles_refuses_them_in_one_line(tmp_path, capsys, argv,
                                                                        purpose):
     rng = np.random.default_rng(3)
     pos = rng.uniform([0.001, 0.001], [W - 0.001, H - 0.001], size=(6, 5, 2))

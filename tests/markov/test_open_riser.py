@@ -146,3 +146,29 @@ def test_open_and_periodic_models_and_data_do_not_mix(open_run, tmp_path, capsys
         err = capsys.readouterr().err
         assert code == 2 and err.count("\n") == 1 and match in err, err
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys):
+    """fit (mle by default), info, rtd, predict, compare and maps on open data."""
+    from cfbmarkov.cli import main
+
+    run, model = str(open_run["run"]), str(tmp_path / "m.h5")
+    assert main(["fit", run, "--lag", "0.02", "--window", "0:4", "-o", model]) == 0
+    out = capsys.readouterr().out
+    assert "estimator 'mle'" in out and "open riser:" in out and "exits through the outlet" in out
+    assert main(["rtd", model, "--window-length", "3"]) == 0
+    assert "E(RT)" in capsys.readouterr().out
+    pred = str(tmp_path / "p.h5")
+    assert main(["predict", model, "--init", run, "--start", "4", "--duration", "3", "--seed",
+                 "2", "-o", pred, "--quiet"]) == 0
+    assert main(["compare", run, pred, "--window", "4:7", "-o", str(tmp_path / "cmp"),
+                 "--no-figures"]) == 0
+    import json
+
+    summary = json.loads((tmp_path / "cmp" / "summary.json").read_text())
+    assert summary["reference"]["rt_count"] > 50 and summary["model"]["rt_count"] > 50
+    assert abs(summary["model"]["rt_mean"] / summary["reference"]["rt_mean"] - 1) < 0.15
+    assert main(["maps", model, "--times", "0.1,0.2", "-o", str(tmp_path / "maps.png")]) == 0
+    capsys.readouterr()
+    assert main(["info", pred]) == 0
+    assert "vertical boundary open" in capsys.readouterr().out

@@ -27,7 +27,7 @@ import numpy as np
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
-from cfbmarkov.analysis.rtd import ResidenceTimes, residence_times, rtd_histogram
+from cfbmarkov.analysis.rtd import DEFAULT_FACE_ROWS, ResidenceTimes, residence_times, rtd_histogram
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 
@@ -308,8 +308,13 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     The paper: Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614.
     """
     start, stop = check_parameters(window, bin_width, md_order)
-    ref.require_supported("comparing runs")
-    pred.require_supported("comparing runs")
+    for run in (ref, pred):
+        run.require_supported("comparing runs", absent=run.boundary == "open",
+                              open_boundary=True)
+    if ref.boundary != pred.boundary:
+        raise InputError(f"{ref.path} is a{'n open' if ref.boundary == 'open' else ' periodic'} "
+                         f"riser and {pred.path} a{'n open' if pred.boundary == 'open' else ' periodic'}"
+                         " one: compare runs of the same kind")
     warnings: list[str] = []
     ref_frames = ref.window(start, stop)
     pred_frames = pred.window(start, stop)
@@ -320,15 +325,19 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     if not (np.isclose(ref.width, pred.width) and np.isclose(ref.height, pred.height)):
         raise InputError(f"domains differ: {ref.path} is {ref.width:g} x {ref.height:g} m, "
                          f"{pred.path} is {pred.width:g} x {pred.height:g} m")
-    if ref.n_particles != pred.n_particles or not np.array_equal(np.sort(ref.ids),
-                                                                  np.sort(pred.ids)):
+    if ref.boundary == "open":
+        _check_same_start(ref, pred, ref_frames.start, pred_frames.start)
+    elif ref.n_particles != pred.n_particles or not np.array_equal(np.sort(ref.ids),
+                                                                    np.sort(pred.ids)):
         raise InputError(f"{ref.path} ({ref.n_particles} particles) and {pred.path} "
                          f"({pred.n_particles}) do not hold the same particle ids; mixing "
                          "needs the same particles on both sides")
 
-    # residence times
-    rt_ref = residence_times(ref, (start, stop))
-    rt_mod = residence_times(pred, (start, stop))
+    # residence times (an open riser: entries and exits within one cell of the faces)
+    rows = pred.parameters.get("rows") or DEFAULT_FACE_ROWS
+    band = ref.height / float(rows)
+    rt_ref = residence_times(ref, (start, stop), face_band=band)
+    rt_mod = residence_times(pred, (start, stop), face_band=band)
     length = stop - start
     edges, p_ref = rtd_histogram(rt_ref.samples, bin_width, window_length=length)
     _, p_mod = rtd_histogram(rt_mod.samples, bin_width, window_length=length)
@@ -354,7 +363,12 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     rms = mixing_rms(t_ref, f_ref, t_mod, f_mod)
     left_ref = left_tracer_group(ref.positions(ref_frames.start)[:, 0], 0.5 * ref.width)
     left_mod = left_tracer_group(pred.positions(pred_frames.start)[:, 0], 0.5 * pred.width)
-    same = bool(np.array_equal(left_ref[np.argsort(ref.ids)], left_mod[np.argsort(pred.ids)]))
+    if ref.boundary == "open":      # the tracers: the particles present at the window start
+        left_ref = left_ref & ref.present(ref_frames.start)
+        left_mod = left_mod & pred.present(pred_frames.start)
+        same = bool(np.array_equal(np.sort(ref.ids[left_ref]), np.sort(pred.ids[left_mod])))
+    else:
+        same = bool(np.array_equal(left_ref[np.argsort(ref.ids)], left_mod[np.argsort(pred.ids)]))
     if not same:
         warnings.append("the two files' first frames of the window disagree on which "
                         "particles are in the left tracer group (x < W/2): the prediction did "
@@ -365,6 +379,17 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         model=ComparedRun(pred, pred_frames, rt_mod, p_mod, t_mod, f_mod, left_mod),
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
         warnings=warnings)
+
+
+def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:
+    """Open risers: the particles present at the window's first frame must be the same on
+    both sides (the prediction started from the reference's state); newcomers may differ."""
+    a = np.sort(ref.ids[ref.present(i_ref)])
+    b = np.sort(pred.ids[pred.present(i_pred)])
+    if not np.array_equal(a, b):
+        raise InputError(f"{ref.path} ({a.size} particles present at the window start) and "
+                         f"{pred.path} ({b.size}) do not start from the same particles; mixing "
+                         "needs the same tracers on both sides")
 
 
 def snapshot_frames(ref: Trajectories, pred: Trajectories, start: float, stop: float

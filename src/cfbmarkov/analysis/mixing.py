@@ -117,9 +117,11 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
     ``docs/definitions.md`` (Mixing);
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 10-11.
     """
-    traj.require_supported("the mixing curve")
+    traj.require_supported("the mixing curve", absent=True, open_boundary=True)
     frames = traj.window(float(window[0]), float(window[1]))
     half = 0.5 * traj.width
+    if traj.has_absences:
+        return _mixing_of_present(traj, frames, half, block)
     left_group = None
     times, parts = [], []
     for t, positions, _ in traj.iter_frames(frames, block=block):
@@ -128,6 +130,30 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
             left_group = x[0] < half
         times.append(t)
         parts.append(mixing_curve(x, half, left_group))
+    return np.concatenate(times).astype(np.float64), np.concatenate(parts)
+
+
+def _mixing_of_present(traj, frames: slice, half: float, block: int
+                       ) -> tuple[np.ndarray, np.ndarray]:
+    """The mixing curve where particles come and go (``docs/definitions.md``, Mixing in an
+    open riser): the particles present at the window's first frame are the tracers; at each
+    frame the fraction of those still present that belong to the left group and lie at
+    x < W/2 (NaN once none is left)."""
+    cohort = left = None
+    times, parts = [], []
+    for i in range(frames.start, frames.stop, block):
+        rows = slice(i, min(i + block, frames.stop))
+        x = traj.positions(rows)[..., 0]
+        present = traj.present(rows)
+        if cohort is None:
+            cohort = present[0].copy()
+            left = cohort & (np.where(cohort, x[0], np.inf) < half)
+        still = present & cohort
+        inside = still & left & (np.where(still, x, np.inf) < half)
+        count = still.sum(axis=1)
+        parts.append(np.divide(inside.sum(axis=1), count, out=np.full(count.size, np.nan),
+                               where=count > 0))
+        times.append(traj.times[rows])
     return np.concatenate(times).astype(np.float64), np.concatenate(parts)
 
 

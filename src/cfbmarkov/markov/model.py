@@ -220,7 +220,10 @@ class MarkovModel:
         """
         if self.n_transitions == 0:      # a model given by its matrix, not fitted
             return np.zeros(0, np.int64)
-        return np.flatnonzero(self.counts.sum(axis=1) == 0)
+        left = self.counts.sum(axis=1)
+        if self.exit_counts is not None:   # leaving through the outlet is leaving too
+            left = left + self.exit_counts
+        return np.flatnonzero(left == 0)
 
     @cached_property
     def entered_never_left(self) -> np.ndarray:
@@ -306,7 +309,9 @@ class MarkovModel:
         """State vectors from ``initial`` by S(t + lag) = S(t) P, lag by lag.
 
         With ``outflow`` the transitions up through the top are taken out, so the total
-        mass is the fraction still in the riser (a batch leaving through the outlet).
+        mass is the fraction still in the riser (a batch leaving through the outlet). An
+        open riser's model always propagates by its absorbing matrix Q = diag(1 - r) P:
+        what leaves through the outlet is gone.
 
         Parameters
         ----------
@@ -338,6 +343,8 @@ class MarkovModel:
         if s0.shape != (self.n_states,):
             raise InputError(f"initial distribution has shape {s0.shape}, expected ({self.n_states},)")
         p = self.transition_matrix * (1.0 - self.up_fraction) if outflow else self.transition_matrix
+        if self.boundary == "open":
+            p = self.absorbing_matrix
         out = np.empty((int(steps) + 1, self.n_states))
         out[0] = s0
         for k in range(1, int(steps) + 1):   # one S x S product per lag, not per particle
@@ -601,7 +608,11 @@ class MarkovModel:
             f"{'all' if self.window is None else f'{self.window[0]:g}:{self.window[1]:g} s'}: "
             f"{self.n_transitions} transitions over {self.frame_pairs} frame pairs",
             f"  passes through the periodic boundary: {int(self.counts_up.sum())} up, "
-            f"{int(self.counts_down.sum())} down",
+            f"{int(self.counts_down.sum())} down" if self.boundary == "periodic" else
+            f"  open riser: {int(self.exit_counts.sum())} exits through the outlet, "
+            f"{int(self.entry_counts.sum())} entries through the inlet "
+            f"({self.inflow_per_lag:.4g} per lag) into "
+            f"{int(np.count_nonzero(self.entry_counts))} states",
         ]
         never = np.setdiff1d(self.unvisited_states, self.entered_never_left)
         lines.append(f"  states never visited: {never.size}"
