@@ -298,7 +298,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     ------
     InputError
         For unusable parameters, a model with an odd column count (mixing by halves is
-        undefined), different riser domains or different particle ids.
+        undefined), different riser domains (size, 2D against 3D, or depth) or different
+        particle ids.
 
     References
     ----------
@@ -308,8 +309,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     The paper: Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614.
     """
     start, stop = check_parameters(window, bin_width, md_order)
-    ref.require_supported("comparing runs")
-    pred.require_supported("comparing runs")
+    ref.require_supported("comparing runs", three_d=True)
+    pred.require_supported("comparing runs", three_d=True)
     warnings: list[str] = []
     ref_frames = ref.window(start, stop)
     pred_frames = pred.window(start, stop)
@@ -320,6 +321,12 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     if not (np.isclose(ref.width, pred.width) and np.isclose(ref.height, pred.height)):
         raise InputError(f"domains differ: {ref.path} is {ref.width:g} x {ref.height:g} m, "
                          f"{pred.path} is {pred.width:g} x {pred.height:g} m")
+    if ref.dimensions != pred.dimensions or (ref.depth is not None
+                                             and not np.isclose(ref.depth, pred.depth)):
+        raise InputError(f"domains differ: {ref.path} is {ref.dimensions}D"
+                         + (f" ({ref.depth:g} m deep)" if ref.depth is not None else "")
+                         + f", {pred.path} is {pred.dimensions}D"
+                         + (f" ({pred.depth:g} m deep)" if pred.depth is not None else ""))
     if ref.n_particles != pred.n_particles or not np.array_equal(np.sort(ref.ids),
                                                                   np.sort(pred.ids)):
         raise InputError(f"{ref.path} ({ref.n_particles} particles) and {pred.path} "

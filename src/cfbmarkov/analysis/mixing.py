@@ -117,7 +117,7 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
     ``docs/definitions.md`` (Mixing);
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 10-11.
     """
-    traj.require_supported("the mixing curve")
+    traj.require_supported("the mixing curve", three_d=True)     # the across coordinate only
     frames = traj.window(float(window[0]), float(window[1]))
     half = 0.5 * traj.width
     left_group = None

@@ -270,7 +270,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True) 
     ----------
     ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
-    traj.require_supported("residence times")
+    traj.require_supported("residence times", three_d=True)      # laps only: any dimension
     start, stop = float(window[0]), float(window[1])
     frames = traj.window(start, stop)
     i0, i1 = frames.start, frames.stop
