@@ -99,7 +99,8 @@ def parse_cells(text: str) -> tuple[int, int] | tuple[int, int, int]:
             f"cells '{text}' is not COLUMNSxROWS or COLUMNSxDEPTHxROWS (for example 6x38 or "
             "6x3x38)")
     if min(values) < 1:
-        raise argparse.ArgumentTypeError(f"cells '{text}' needs at least one cell along each axis")
+        axes = "column and one row" if len(values) == 2 else "column, depth column and row"
+        raise argparse.ArgumentTypeError(f"cells '{text}' needs at least one {axes}")
     return values
 
 
