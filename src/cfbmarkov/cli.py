@@ -70,33 +70,38 @@ def parse_region(text: str) -> tuple[tuple[float, float], ...]:
     return ranges
 
 
-def parse_cells(text: str) -> tuple[int, int]:
-    """Parse a cell grid: ``'6x38'`` -> (6 columns, 38 rows).
+def parse_cells(text: str) -> tuple[int, int] | tuple[int, int, int]:
+    """Parse a cell grid: ``'6x38'`` -> (6 columns, 38 rows); ``'6x3x38'`` -> (6 columns,
+    3 depth columns, 38 rows), a 3D grid for 3D data (``docs/definitions.md``, Cells and
+    state numbers).
 
     Parameters
     ----------
     text : str
-        ``COLUMNSxROWS``.
+        ``COLUMNSxROWS`` or ``COLUMNSxDEPTHxROWS``.
 
     Returns
     -------
     tuple of int
-        (columns m, rows n).
+        (columns m, rows n), or (columns m, depth columns d, rows n).
 
     Raises
     ------
     argparse.ArgumentTypeError
-        When ``text`` is not two whole numbers of at least 1.
+        When ``text`` is not two or three whole numbers of at least 1.
     """
     try:
-        a, b = text.lower().split("x")
-        m, n = int(a), int(b)
+        values = tuple(int(v) for v in text.lower().split("x"))
     except ValueError:
+        values = ()
+    if len(values) not in (2, 3):
         raise argparse.ArgumentTypeError(
-            f"cells '{text}' is not COLUMNSxROWS (for example 6x38)") from None
-    if m < 1 or n < 1:
-        raise argparse.ArgumentTypeError(f"cells '{text}' needs at least one column and one row")
-    return m, n
+            f"cells '{text}' is not COLUMNSxROWS or COLUMNSxDEPTHxROWS (for example 6x38 or "
+            "6x3x38)")
+    if min(values) < 1:
+        axes = "column and one row" if len(values) == 2 else "column, depth column and row"
+        raise argparse.ArgumentTypeError(f"cells '{text}' needs at least one {axes}")
+    return values
 
 
 def _positive_float(text: str) -> float:
@@ -135,10 +140,16 @@ def _cmd_fit(args) -> int:
 
     from cfbmarkov.markov.rtd import TrappedResidences
 
-    columns, rows = args.cells
+    columns, rows = args.cells[0], args.cells[-1]
+    depth_columns = args.cells[1] if len(args.cells) == 3 else None
     with Trajectories(args.run) as run:
         if args.estimator is None:
             args.estimator = "mle" if run.boundary == "open" else "paper"
+        if depth_columns is not None and run.dimensions != 3:
+            raise InputError(f"{args.run} is 2D: cells {'x'.join(map(str, args.cells))} with "
+                             "depth columns need 3D data (use COLUMNSxROWS)")
+        if args.states == "auto" and depth_columns is not None:
+            raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
         if args.states == "auto":
             model = select_model(run, window=args.window, columns=columns, rows=rows,
                                  lag=args.lag, estimator=args.estimator)
@@ -146,7 +157,8 @@ def _cmd_fit(args) -> int:
                 model = fit_model(run, model.state_space, model.lag, args.window,
                                   args.estimator, connected=True).with_selection(model.selection)
         else:
-            space = state_space_from_name(args.states, columns, rows, run.width, run.height)
+            space = state_space_from_name(args.states, columns, rows, run.width, run.height,
+                                          depth_columns, run.depth)
             model = fit_model(run, space, args.lag, args.window, args.estimator,
                               connected=args.connected)
     try:
@@ -208,7 +220,8 @@ def _cmd_maps(args) -> int:
     model = MarkovModel.load(args.model)
     maps = model.batch_injection_maps(args.times, outflow=args.outflow)
     space = model.state_space
-    title = (f"Batch fed over the inlet at t = 0 ({space.describe()}, lag {model.lag:g} s"
+    title = (f"Batch fed over the inlet at t = 0 ({space.describe()}"
+             + (", summed over the depth" if space.depth_columns > 1 else "") + f", lag {model.lag:g} s"
              + (", outflow through the top removed)" if args.outflow else ")"))
     plot_probability_maps(maps, args.times, space.width, space.height, args.output, title=title)
     for t, m in zip(args.times, maps):
@@ -391,7 +404,9 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("fit", help="fit a Markov chain model on a window of a trajectory file")
     s.add_argument("run", help="trajectory file")
-    s.add_argument("--cells", type=parse_cells, default=(6, 38), help="COLUMNSxROWS (default 6x38)")
+    s.add_argument("--cells", type=parse_cells, default=(6, 38),
+                   help="COLUMNSxROWS, or COLUMNSxDEPTHxROWS for 3D data (depth columns; "
+                        "COLUMNSxROWS projects 3D data on across x vertical) (default 6x38)")
     s.add_argument("--lag", type=_positive_float, default=0.025, help="lag, s (default 0.025)")
     s.add_argument("--window", type=parse_window, default=(10.0, 15.0),
                    help="fitting window START:STOP, s (default 10:15)")

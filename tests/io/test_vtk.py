@@ -307,3 +307,19 @@ def test_error_mid_export_leaves_no_partial_output(run, tmp_path, monkeypatch, p
     else:
         assert not out.exists()
     assert leftovers(tmp_path) == []
+
+
+def test_3d_file_exports_depth_as_z(tmp_path):
+    """A 3D file: points (x, y, z) with z the depth, velocity with its z component."""
+    rng = np.random.default_rng(3)
+    depth = 0.02
+    times = T0 + DT * np.arange(3)
+    pos = rng.uniform(0, 1, (3, N, 3)) * [W, H, depth]
+    vel = rng.normal(0.0, 1.0, (3, N, 3))
+    path = write_trajectories(tmp_path / "run3.h5", times, pos, width=W, height=H, depth=depth,
+                              velocities=vel)
+    out = export_vtk(path, tmp_path / "vtk")
+    _, arrays = read_vtk(out / "particles_000001.vtu")
+    np.testing.assert_array_equal(arrays["points"], pos[1])
+    np.testing.assert_array_equal(arrays["velocity"], vel[1])
+    np.testing.assert_allclose(arrays["speed"], np.linalg.norm(vel[1], axis=-1), rtol=1e-15)

@@ -298,7 +298,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     ------
     InputError
         For unusable parameters, a model with an odd column count (mixing by halves is
-        undefined), different riser domains or different particle ids.
+        undefined), different riser domains (size, 2D against 3D, or depth) or different
+        particle ids.
 
     References
     ----------
@@ -309,7 +310,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     """
     start, stop = check_parameters(window, bin_width, md_order)
     for run in (ref, pred):
-        run.require_supported("comparing runs", absent=run.boundary == "open",
+        run.require_supported("comparing runs", three_d=True, absent=run.boundary == "open",
                               open_boundary=True)
     if ref.boundary != pred.boundary:
         raise InputError(f"{ref.path} is a{'n open' if ref.boundary == 'open' else ' periodic'} "
@@ -325,6 +326,12 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     if not (np.isclose(ref.width, pred.width) and np.isclose(ref.height, pred.height)):
         raise InputError(f"domains differ: {ref.path} is {ref.width:g} x {ref.height:g} m, "
                          f"{pred.path} is {pred.width:g} x {pred.height:g} m")
+    if ref.dimensions != pred.dimensions or (ref.depth is not None
+                                             and not np.isclose(ref.depth, pred.depth)):
+        raise InputError(f"domains differ: {ref.path} is {ref.dimensions}D"
+                         + (f" ({ref.depth:g} m deep)" if ref.depth is not None else "")
+                         + f", {pred.path} is {pred.dimensions}D"
+                         + (f" ({pred.depth:g} m deep)" if pred.depth is not None else ""))
     if ref.boundary == "open":
         _check_same_start(ref, pred, ref_frames.start, pred_frames.start)
     elif ref.n_particles != pred.n_particles or not np.array_equal(np.sort(ref.ids),

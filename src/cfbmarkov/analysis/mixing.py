@@ -117,7 +117,8 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
     ``docs/definitions.md`` (Mixing);
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 10-11.
     """
-    traj.require_supported("the mixing curve", absent=True, open_boundary=True)
+    traj.require_supported("the mixing curve", three_d=True, absent=True,
+                           open_boundary=True)     # the across coordinate only
     frames = traj.window(float(window[0]), float(window[1]))
     half = 0.5 * traj.width
     if traj.has_absences:

@@ -278,7 +278,7 @@ def implied_vertical_velocity(model) -> float:
     """
     space = model.state_space
     P = np.asarray(model.transition_matrix)
-    row = space.cell_of_state // space.columns
+    row = space.cell_of_state // space.cells_per_row
     shift = (row[None, :] - row[:, None]) + space.rows * (model.up_fraction - model.down_fraction)
     per_state = (P * shift).sum(axis=1)
     return float(model.stationary_distribution @ per_state) * (space.height / space.rows) \

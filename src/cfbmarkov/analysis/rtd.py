@@ -347,7 +347,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     ----------
     ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
-    traj.require_supported("residence times", absent=traj.boundary == "open",
+    traj.require_supported("residence times", three_d=True, absent=traj.boundary == "open",
                            open_boundary=True)
     start, stop = float(window[0]), float(window[1])
     frames = traj.window(start, stop)

@@ -4,13 +4,14 @@
 
 ``particles_NNNNNN.vtu``
     One unstructured grid of vertices per exported frame. Points are (x, y, 0) m in the
-    particle order of the file. Point data: ``colour_group`` (int8; the tracer group of the
-    mixing definition, :func:`cfbmarkov.analysis.mixing.left_tracer_group`: 1 = the left
+    particle order of the file ((x, y, z) with z the depth in a 3D file). Point data:
+    ``colour_group`` (int8; the tracer group of the mixing definition,
+    :func:`cfbmarkov.analysis.mixing.left_tracer_group`: 1 = the left
     tracer group, the particles with x < W/2 in the *first exported frame*, 0 = the right
     tracer group; the array keeps its name ``colour_group``, by which ParaView colours the
     particles), ``id`` (int64), ``lap`` (int32) and,
     when the file stores velocities, ``speed`` (float64, m/s) and ``velocity`` (3 components,
-    z = 0, m/s). ``colour_group`` comes first so that ParaView colours by it when opened.
+    z = 0 in 2D, m/s). ``colour_group`` comes first so that ParaView colours by it when opened.
 ``gas_NNNNNN.vtr``
     When the file has a ``/fields`` group (CFD-DEM runs) and ``fields=True``: one rectilinear
     grid per exported frame that has a gas frame at the same time, cell data
@@ -297,7 +298,7 @@ def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.P
     every = _check_every(every)
     output = Path(output)
     with opened(run) as traj:
-        traj.require_supported("VTK export")
+        traj.require_supported("VTK export", three_d=True)
         frames = _select_frames(traj, start, stop, every)
         _check_output(output, traj.path)
         gas = read_gas_fields(traj) if fields else None
@@ -329,6 +330,7 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
         position = traj.positions(frame)
         x = np.ascontiguousarray(position[:, 0], dtype=np.float64)
         y = np.ascontiguousarray(position[:, 1], dtype=np.float64)
+        z = np.ascontiguousarray(position[:, 2], dtype=np.float64) if position.shape[1] == 3 else zeros
         if tracer_group is None:
             tracer_group = left_tracer_group(x, 0.5 * traj.width).astype(np.int8)
         point_data = {"colour_group": tracer_group, "id": ids,
@@ -337,10 +339,15 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
         if velocity is not None:
             vx = np.ascontiguousarray(velocity[:, 0], dtype=np.float64)
             vy = np.ascontiguousarray(velocity[:, 1], dtype=np.float64)
-            point_data["speed"] = np.hypot(vx, vy)
-            point_data["velocity"] = (vx, vy, zeros)
+            if velocity.shape[1] == 3:
+                vz = np.ascontiguousarray(velocity[:, 2], dtype=np.float64)
+                point_data["speed"] = np.sqrt(vx * vx + vy * vy + vz * vz)
+            else:
+                vz = zeros
+                point_data["speed"] = np.hypot(vx, vy)
+            point_data["velocity"] = (vx, vy, vz)
         name = f"{PARTICLES}_{frame:06d}"
-        hl.pointsToVTK(str(folder / name), x, y, zeros, data=point_data)
+        hl.pointsToVTK(str(folder / name), x, y, z, data=point_data)
         particle_files.append((name + ".vtu", t))
         if gas is not None and g >= 0:
             name = f"{GAS}_{frame:06d}"

@@ -67,8 +67,9 @@ class DiscreteTrajectories:
         The analysis window (A, B) in s as asked for (None: all frames).
     source : str
         Where the frames came from (a file path, or a description).
-    positions : ndarray of float64, shape (T, N, 2), optional
-        Positions (m), kept only where asked for (e.g. to place a prediction's first frame).
+    positions : ndarray of float64, shape (T, N, D), optional
+        Positions (m; D = 3 in a 3D file), kept only where asked for (e.g. to place a
+        prediction's first frame).
     laps : ndarray of int64, shape (T, N), optional
         Lap counters, kept only where asked for.
     boundary : {"periodic", "open"}, optional
@@ -203,9 +204,9 @@ class WindowFrames:
 
     Parameters
     ----------
-    positions : ndarray of float64, shape (F, N, 2)
-        Positions (m) of the frames read.
-    velocities : ndarray of float64, shape (F, N, 2), or None
+    positions : ndarray of float64, shape (F, N, D)
+        Positions (m) of the frames read, D = 2, or 3 in a 3D file.
+    velocities : ndarray of float64, shape (F, N, D), or None
         Velocities (m/s), or None where they were not read.
     times : ndarray of float64, shape (F,)
         Times (s) of the frames read.
@@ -225,6 +226,8 @@ class WindowFrames:
         Which particles are in each frame read; None: every particle in every frame.
     boundary : {"periodic", "open"}
         The riser's vertical boundary.
+    depth : float or None, optional
+        The riser's depth (m) of a 3D file; None in 2D.
     """
 
     positions: np.ndarray
@@ -239,6 +242,7 @@ class WindowFrames:
     source: str
     present: np.ndarray | None = None
     boundary: str = "periodic"
+    depth: float | None = None
 
     def discretize(self, state_space: StateSpace, lag_frames: int, *,
                    keep_positions: bool = False) -> DiscreteTrajectories:
@@ -268,7 +272,7 @@ class WindowFrames:
             If the state space does not cover the frames' domain, needs velocities the
             frames lack, or the window holds fewer than two frames one lag apart.
         """
-        check_domain(state_space, self.width, self.height, self.source)
+        check_domain(state_space, self.width, self.height, self.source, self.depth)
         lag_frames = int(lag_frames)
         if state_space.needs_velocity and self.velocities is None:
             raise InputError(f"state space {state_space.kind} needs velocities; {self.source} "
@@ -318,8 +322,13 @@ def _describe(window) -> str:
     return "(all)" if window is None else f"{window[0]:g}:{window[1]:g} s"
 
 
-def check_domain(state_space: StateSpace, width: float, height: float, source: str = "") -> None:
-    """Check that ``state_space`` covers a riser of W x H = ``width`` x ``height`` (m).
+def check_domain(state_space: StateSpace, width: float, height: float, source: str = "",
+                 depth: float | None = None) -> None:
+    """Check that ``state_space`` covers a riser of W x H = ``width`` x ``height`` (m)
+    [x ``depth``].
+
+    A 2D state space fits 3D data (it uses the projection on across x vertical); a 3D one
+    (with depth columns) needs 3D data of its depth.
 
     Parameters
     ----------
@@ -329,16 +338,26 @@ def check_domain(state_space: StateSpace, width: float, height: float, source: s
         The riser's width W and height H (m), e.g. those of a trajectory file.
     source : str, optional
         Named in the error message (e.g. the file's path).
+    depth : float, optional
+        The riser's depth (m) of 3D data; None for 2D data.
 
     Raises
     ------
     InputError
         If the state space's width or height differ from ``width`` or ``height``
-        (beyond :func:`numpy.isclose`).
+        (beyond :func:`numpy.isclose`), or it has a depth and the data have none or
+        another one.
     """
     if not (np.isclose(state_space.width, width) and np.isclose(state_space.height, height)):
         raise InputError(f"state space covers {state_space.width:g} x {state_space.height:g} m "
                          f"but {source} is {width:g} x {height:g} m")
+    if state_space.depth is not None:
+        if depth is None:
+            raise InputError(f"state space {state_space.describe()} has depth columns but "
+                             f"{source} is 2D (use COLUMNSxROWS cells)")
+        if not np.isclose(state_space.depth, depth):
+            raise InputError(f"state space covers a depth of {state_space.depth:g} m but "
+                             f"{source} is {depth:g} m deep")
 
 
 def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
@@ -363,7 +382,7 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
         window=None if window is None else (float(window[0]), float(window[1])),
         source=str(trajectories.path),
         present=trajectories.present(rows) if trajectories.has_absences else None,
-        boundary=trajectories.boundary)
+        boundary=trajectories.boundary, depth=trajectories.depth)
 
 
 def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
@@ -408,8 +427,9 @@ def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
 def _prepare(traj: Trajectories, state_space: StateSpace, lag: float) -> int:
     """Check that ``state_space`` fits the file and return the lag in frames (NaN as the
     lag: check the fit only, return 0)."""
-    traj.require_supported("a Markov model", absent=True, open_boundary=True)
-    check_domain(state_space, traj.width, traj.height, str(traj.path))
+    traj.require_supported("a Markov model", three_d=True, absent=True,
+                           open_boundary=True)   # a 2D grid projects 3D data
+    check_domain(state_space, traj.width, traj.height, str(traj.path), traj.depth)
     lag_frames = traj.lag_frames(lag) if np.isfinite(lag) else 0
     if state_space.needs_velocity and not traj.has_velocity:
         raise InputError(f"state space {state_space.kind} needs velocities; {traj.path} "

@@ -36,14 +36,14 @@ def height_bands(state_space: StateSpace, n_bands: int = 3) -> dict[str, np.ndar
     Returns
     -------
     dict of str to ndarray of int64
-        The cells (row*m + col) of each band.
+        The cells (row*m + col; (row*d + k)*m + col with depth columns) of each band.
 
     Raises
     ------
     InputError
         If ``n_bands`` is not between 1 and the number of rows.
     """
-    rows, m = state_space.rows, state_space.columns
+    rows, m = state_space.rows, state_space.cells_per_row     # m*d cells per row in 3D
     n_bands = int(n_bands)
     if not 1 <= n_bands <= rows:
         raise InputError(f"{n_bands} height bands do not fit {rows} rows of cells")
@@ -68,18 +68,19 @@ def core_annulus(state_space: StateSpace, wall_columns: int = 1) -> dict[str, np
     Returns
     -------
     dict of str to ndarray of int64
-        ``core`` and ``annulus``: their cells (row*m + col).
+        ``core`` and ``annulus``: their cells (row*m + col; (row*d + k)*m + col with
+        depth columns, every depth column alike).
 
     Raises
     ------
     InputError
         If ``wall_columns < 1`` or the annulus leaves no core column.
     """
-    m, rows = state_space.columns, state_space.rows
+    m = state_space.columns
     wall_columns = int(wall_columns)
     if wall_columns < 1 or 2 * wall_columns >= m:
         raise InputError(f"{wall_columns} wall column(s) per side leave no core in {m} columns")
-    col = np.arange(rows * m) % m
+    col = np.arange(state_space.n_cells) % m      # also (row*d + k)*m + col in 3D
     wall = (col < wall_columns) | (col >= m - wall_columns)
     return {"core": np.flatnonzero(~wall).astype(np.int64),
             "annulus": np.flatnonzero(wall).astype(np.int64)}

@@ -94,7 +94,8 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
 
     The first frame keeps the actual positions it started from; later frames place each
     particle uniformly inside the cell of its state (seeded by (seed, particle, step)). The
-    model is attached as ``/provenance/model``.
+    model is attached as ``/provenance/model``. From a 3D file the prediction is 3D (same
+    depth); a 2D grid's cell spans the whole depth, so there the depth is drawn uniformly.
 
     Parameters
     ----------
@@ -105,8 +106,8 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
         Frame times (s), one lag apart.
     states, laps : ndarray of int32, shape (K + 1, N)
         The Monte Carlo states and lap counters.
-    first_positions : ndarray of float64, shape (N, 2)
-        Positions (m) of the first frame.
+    first_positions : ndarray of float64, shape (N, D)
+        Positions (m) of the first frame (D = 3 from a 3D file).
     seed : int
         The seed of the run (also seeds the placement inside cells).
     output : str or os.PathLike
@@ -141,10 +142,12 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
     parameters = {"model": model.describe(), "seed": int(seed), "start": start,
                   "duration": duration, "initial_frames": str(traj.path),
                   "columns": model.state_space.columns, "rows": model.state_space.rows}
+    if model.state_space.is_3d:
+        parameters["depth_columns"] = model.state_space.depth_columns
     ids = traj.ids if ids is None else ids
     some_absent = bool((states < 0).any())
     with TrajectoryWriter(output, ids, width=traj.width, height=traj.height,
-                          source="markov-prediction", parameters=parameters,
+                          depth=traj.depth, source="markov-prediction", parameters=parameters,
                           frame_interval=model.lag, boundary=model.boundary) as writer:
         writer.attach("model", *model_datasets_and_attrs(model))
         bar = _progress(progress, duration)
@@ -157,7 +160,8 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
         for k0 in range(1, n_steps + 1, block):
             ks = range(k0, min(k0 + block, n_steps + 1))
             positions = np.stack([place_in_cells(cells[np.maximum(states[k], 0)],
-                                                 model.state_space, seed, k) for k in ks])
+                                                 model.state_space, seed, k, traj.depth)
+                                  for k in ks])
             writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop],
                                  present=(states[ks.start:ks.stop] >= 0) if some_absent else None)
             if bar is not None:

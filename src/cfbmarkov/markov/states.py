@@ -4,7 +4,8 @@ A :class:`StateSpace` maps frames of a trajectory to integer states, knows which
 riser each state lies in (for probability maps and for placing Monte Carlo particles), and
 serialises itself to attributes so that a saved model can rebuild it. :class:`CellGrid` is
 the paper's space: m columns x n rows of equal cells, state s = row*m + col
-(``docs/definitions.md``, States and transitions).
+(``docs/definitions.md``, States and transitions); with d > 1 depth columns (3D data) the
+cell is s = (row*d + k)*m + col, k the depth column.
 State spaces that carry more than the position subclass :class:`StateSpace` and register
 under their ``kind``: :class:`DirectionCells` (cell x {rising, falling}),
 :class:`VelocityCells` (cell x vertical-velocity bins) and :class:`SecondOrderCells` (cell x
@@ -34,8 +35,9 @@ _REGISTRY: dict[str, type["StateSpace"]] = {}
 class StateSpace(ABC):
     """A discretisation of the riser into Markov states.
 
-    Every state lies in one cell of an underlying m x n cell grid (``cell_of_state``), so
-    maps, placement and mixing by halves work for any state space. Subclasses that set a
+    Every state lies in one cell of an underlying m x n cell grid, or m x d x n with d depth
+    columns (``cell_of_state``), so maps, placement and mixing by halves work for any state
+    space. Subclasses that set a
     class attribute ``kind`` are registered under it, so that :meth:`from_attrs` can
     rebuild them from a saved model.
 
@@ -48,10 +50,15 @@ class StateSpace(ABC):
         The cell grid m x n.
     width, height : float
         The riser W x H (m) the grid covers.
+    depth_columns : int
+        Cells along the depth, d (1 for a 2D grid, a class default).
+    depth : float or None
+        The riser's depth (m) a 3D grid covers; None for a 2D grid, which uses only the
+        (across, vertical) coordinates of 3D positions (a class default).
 
     Notes
     -----
-    See ``docs/definitions.md`` (States and transitions).
+    See ``docs/definitions.md`` (States and transitions; Cells and state numbers).
 
     References
     ----------
@@ -78,6 +85,8 @@ class StateSpace(ABC):
     rows: int
     width: float
     height: float
+    depth_columns: int = 1
+    depth: float | None = None
 
     @property
     @abstractmethod
@@ -85,14 +94,24 @@ class StateSpace(ABC):
         """Number of states S."""
 
     @property
+    def is_3d(self) -> bool:
+        """Whether the grid has a depth (it then needs 3D positions)."""
+        return self.depth is not None
+
+    @property
+    def cells_per_row(self) -> int:
+        """Cells in one row of the grid, m x d (cells 0 .. m*d - 1 are the bottom row)."""
+        return self.columns * self.depth_columns
+
+    @property
     def n_cells(self) -> int:
-        """Number of cells m x n of the underlying grid."""
-        return self.columns * self.rows
+        """Number of cells m x d x n of the underlying grid (m x n in 2D)."""
+        return self.columns * self.depth_columns * self.rows
 
     @property
     @abstractmethod
     def cell_of_state(self) -> np.ndarray:
-        """Cell index (row*m + col) of every state, int64 [S]."""
+        """Cell index ((row*d + k)*m + col; row*m + col in 2D) of every state, int64 [S]."""
 
     @abstractmethod
     def discretize(self, positions: np.ndarray, velocities: np.ndarray | None = None,
@@ -102,9 +121,11 @@ class StateSpace(ABC):
 
         Parameters
         ----------
-        positions : ndarray, shape (T, N, 2) or (N, 2)
-            Positions (m) of consecutive frames; a space with memory reads the first
-            ``memory_lags * lag_frames`` frames as history only.
+        positions : ndarray, shape (T, N, D) or (N, D)
+            Positions (m) of consecutive frames, D = 2 (across, vertical) or 3 (and depth);
+            a 2D grid uses the first two coordinates of 3D positions, a 3D grid needs D = 3.
+            A space with memory reads the first ``memory_lags * lag_frames`` frames as
+            history only.
         velocities : ndarray, shape like ``positions``, optional
             Velocities (m/s), for spaces with ``needs_velocity``.
         lag_frames : int
@@ -159,7 +180,8 @@ class StateSpace(ABC):
     def inlet_distribution(self) -> np.ndarray:
         """Eq. (8): a batch spread evenly over the bottom row of cells, as a state vector.
 
-        Each of the m bottom cells gets 1/m, split evenly over the states that lie in it.
+        Each of the m (m x d with depth columns) bottom cells gets an equal share, split
+        evenly over the states that lie in it.
 
         Returns
         -------
@@ -173,24 +195,33 @@ class StateSpace(ABC):
         doi:10.3390/pr13030614 (Eq. 8, batch injection).
         """
         cell = self.cell_of_state
-        bottom = cell < self.columns
+        n_bottom = self.cells_per_row
+        bottom = cell < n_bottom
         dist = np.zeros(self.n_states)
-        # each bottom cell gets 1/m, split evenly over the states that lie in it
-        per_cell = np.bincount(cell[bottom], minlength=self.columns)
-        dist[bottom] = 1.0 / self.columns / per_cell[cell[bottom]]
+        # each bottom cell gets 1/(m d), split evenly over the states that lie in it
+        per_cell = np.bincount(cell[bottom], minlength=n_bottom)
+        dist[bottom] = 1.0 / n_bottom / per_cell[cell[bottom]]
         return dist
 
-    def cell_maps(self, distributions: np.ndarray) -> np.ndarray:
+    def cell_maps(self, distributions: np.ndarray, *, by_depth: bool = False) -> np.ndarray:
         """Sum state vectors into cell maps.
+
+        With depth columns (d > 1) the maps are summed over the depth: entry (row, col) is
+        the probability (or count) in the whole depth of that cell column, so a map of a
+        distribution still sums to its total (``docs/definitions.md``, Cells and state
+        numbers). ``by_depth=True`` keeps the depth columns apart instead.
 
         Parameters
         ----------
         distributions : array_like, shape (..., S)
             State vectors (probabilities or counts per state).
+        by_depth : bool, optional
+            Return one map per depth column.
 
         Returns
         -------
-        ndarray of float64, shape (..., rows, columns)
+        ndarray of float64, shape (..., rows, columns), or (..., d, rows, columns) with
+        ``by_depth``
             The sum over the states of each cell; row 0 is the bottom of the riser.
         """
         distributions = np.asarray(distributions, dtype=np.float64)
@@ -198,11 +229,24 @@ class StateSpace(ABC):
         flat = distributions.reshape(-1, self.n_states)
         maps = np.zeros((flat.shape[0], self.n_cells))
         np.add.at(maps.T, self.cell_of_state, flat.T)
+        if by_depth:
+            maps = maps.reshape(-1, self.rows, self.depth_columns, self.columns)
+            return np.moveaxis(maps, 2, 1).reshape(*lead, self.depth_columns, self.rows,
+                                                   self.columns)
+        if self.depth_columns > 1:
+            maps = maps.reshape(-1, self.rows, self.depth_columns, self.columns).sum(axis=2)
         return maps.reshape(*lead, self.rows, self.columns)
 
+    def grid_text(self) -> str:
+        """The grid as ``--cells`` writes it: ``6x38``, or ``6x3x38`` with depth columns."""
+        if self.is_3d:
+            return f"{self.columns}x{self.depth_columns}x{self.rows}"
+        return f"{self.columns}x{self.rows}"
+
     def describe(self) -> str:
-        """A one-line description, e.g. ``cells 6x38 (228 states)``."""
-        return f"{self.kind} {self.columns}x{self.rows} ({self.n_states} states)"
+        """A one-line description, e.g. ``cells 6x38 (228 states)`` or ``cells 6x3x38 (684
+        states)``."""
+        return f"{self.kind} {self.grid_text()} ({self.n_states} states)"
 
     def __eq__(self, other) -> bool:
         return isinstance(other, StateSpace) and self.to_attrs() == other.to_attrs()
@@ -227,6 +271,20 @@ def _index_along(coordinate, scale, n):
 
 
 @nb.njit(cache=True, parallel=True)
+def _cell_index_3d(positions, width, height, depth, columns, rows, depth_columns, out):
+    flat_pos = positions.reshape(-1, 3)
+    flat_out = out.reshape(-1)
+    sx = columns / width
+    sy = rows / height
+    sz = depth_columns / depth
+    for k in nb.prange(flat_out.size):
+        col = _index_along(flat_pos[k, 0], sx, columns)
+        row = _index_along(flat_pos[k, 1], sy, rows)
+        lay = _index_along(flat_pos[k, 2], sz, depth_columns)
+        flat_out[k] = (row * depth_columns + lay) * columns + col
+
+
+@nb.njit(cache=True, parallel=True)
 def _cell_index(positions, width, height, columns, rows, out):
     flat_pos = positions.reshape(-1, 2)
     flat_out = out.reshape(-1)
@@ -238,9 +296,10 @@ def _cell_index(positions, width, height, columns, rows, out):
         flat_out[k] = row * columns + col
 
 
-def cell_index(positions: np.ndarray, width: float, height: float, columns: int, rows: int
-               ) -> np.ndarray:
-    """Cell number row*m + col of positions; points on the far edges go inside.
+def cell_index(positions: np.ndarray, width: float, height: float, columns: int, rows: int,
+               depth: float | None = None, depth_columns: int = 1) -> np.ndarray:
+    """Cell number row*m + col of positions (``(row*d + k)*m + col`` with a depth); points
+    on the far edges go inside.
 
     A position on a cell edge belongs to the cell above (right of) it, also where floating
     point puts it a round-off below the edge (0.29 m on 0.01 m rows is 28.999999999999996
@@ -248,20 +307,41 @@ def cell_index(positions: np.ndarray, width: float, height: float, columns: int,
 
     Parameters
     ----------
-    positions : array_like, shape (..., 2)
-        Positions (x, y) in m; points outside the domain are clipped into the nearest cell.
+    positions : array_like, shape (..., 2) or (..., 3)
+        Positions (across, vertical[, depth]) in m; points outside the domain are clipped
+        into the nearest cell. Without ``depth``, 3D positions are projected on (across,
+        vertical).
     width, height : float
         The riser W x H (m).
     columns, rows : int
         The cell grid m x n.
+    depth : float, optional
+        The riser's depth (m): cells also along the depth (needs 3D positions).
+    depth_columns : int, optional
+        Cells along the depth, d.
 
     Returns
     -------
     ndarray of int32, shape (...)
         The cell of each position.
+
+    Raises
+    ------
+    InputError
+        If positions are not 2D or 3D, or a depth is given for 2D positions.
     """
-    positions = np.ascontiguousarray(positions, dtype=np.float64)
+    positions = np.asarray(positions, dtype=np.float64)
+    if positions.ndim < 1 or positions.shape[-1] not in (2, 3):
+        raise InputError(f"positions of shape {positions.shape} are neither 2D nor 3D")
     out = np.empty(positions.shape[:-1], dtype=np.int32)
+    if depth is not None:
+        if positions.shape[-1] != 3:
+            raise InputError(f"a grid with {depth_columns} depth column(s) needs 3D positions, "
+                             "got 2D ones")
+        _cell_index_3d(np.ascontiguousarray(positions), float(width), float(height),
+                       float(depth), int(columns), int(rows), int(depth_columns), out)
+        return out
+    positions = np.ascontiguousarray(positions[..., :2])
     _cell_index(positions, float(width), float(height), int(columns), int(rows), out)
     return out
 
@@ -276,11 +356,31 @@ def _place_in_cells(cells, columns, cell_width, cell_height, seed, step, out):
         out[p, 1] = (row + uniform(seed, 2, p, step)) * cell_height
 
 
-class CellGrid(StateSpace):
-    """The paper's states: m columns x n rows of equal cells over W x H (Fig. 1).
+@nb.njit(cache=True, parallel=True)
+def _place_in_cells_3d(cells, columns, depth_columns, cell_width, cell_height, cell_depth,
+                       seed, step, out):
+    """As :func:`_place_in_cells`, cells (row*d + k)*m + col, depth from stream 3 (with
+    d = 1 and cell_depth = the riser's depth: uniform over the depth)."""
+    for p in nb.prange(cells.size):
+        c = cells[p]
+        col = c % columns
+        rest = c // columns
+        row = rest // depth_columns
+        lay = rest - row * depth_columns
+        out[p, 0] = (col + uniform(seed, 1, p, step)) * cell_width
+        out[p, 1] = (row + uniform(seed, 2, p, step)) * cell_height
+        out[p, 2] = (lay + uniform(seed, 3, p, step)) * cell_depth
 
-    State s = row*m + col, row 0 at the bottom (``docs/definitions.md``, Cells and state
-    numbers).
+
+class CellGrid(StateSpace):
+    """The paper's states: m columns x n rows of equal cells over W x H (Fig. 1), and
+    optionally d depth columns over the riser's depth (3D data).
+
+    State s = row*m + col, row 0 at the bottom; with a depth (a 3D grid, ``6x3x38`` on the
+    command line) s = (row*d + k)*m + col, k = 0 .. d-1 the depth column from depth 0, so a
+    row of cells is still one block of m*d states and the bottom row is 0 .. m*d - 1. A 2D
+    grid (no depth) on 3D positions uses their (across, vertical) coordinates only: the
+    projection. ``docs/definitions.md``, Cells and state numbers.
 
     Parameters
     ----------
@@ -288,11 +388,17 @@ class CellGrid(StateSpace):
         The cell grid m x n (at least 1 x 1).
     width, height : float, optional
         The riser W x H (m); the paper's 0.09 x 0.95 m by default.
+    depth_columns : int, optional
+        Cells along the depth, d (at least 1; more than 1 needs ``depth``).
+    depth : float, optional
+        The riser's depth (m): makes the grid 3D (it then needs 3D positions). None: a 2D
+        grid, saved exactly as before depth columns existed.
 
     Raises
     ------
     InputError
-        If the grid has fewer than 1 x 1 cells or the domain is not of positive size.
+        If the grid has fewer than 1 x 1 (x 1) cells, the domain is not of positive size,
+        or depth columns are asked for without a depth.
 
     References
     ----------
@@ -303,18 +409,25 @@ class CellGrid(StateSpace):
 
     kind = "cells"
 
-    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95):
-        if int(columns) < 1 or int(rows) < 1:
-            raise InputError(f"a cell grid needs at least 1x1 cells, got {columns}x{rows}")
-        if not (width > 0 and height > 0):
-            raise InputError(f"domain {width:g} x {height:g} m must have positive size")
+    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+                 depth_columns: int = 1, depth: float | None = None):
+        if int(columns) < 1 or int(rows) < 1 or int(depth_columns) < 1:
+            grid = f"{columns}x{depth_columns}x{rows}" if depth is not None else f"{columns}x{rows}"
+            raise InputError(f"a cell grid needs at least 1x1 cells, got {grid}")
+        if int(depth_columns) > 1 and depth is None:
+            raise InputError(f"{depth_columns} depth columns need the riser's depth")
+        if not (width > 0 and height > 0) or (depth is not None and not depth > 0):
+            size = f"{width:g} x {height:g}" + ("" if depth is None else f" x {depth:g}")
+            raise InputError(f"domain {size} m must have positive size")
         self.columns, self.rows = int(columns), int(rows)
         self.width, self.height = float(width), float(height)
+        self.depth_columns = int(depth_columns)
+        self.depth = None if depth is None else float(depth)
 
     @property
     def n_states(self) -> int:
-        """Number of states S = m x n."""
-        return self.columns * self.rows
+        """Number of states S = m x n (m x d x n with depth columns)."""
+        return self.n_cells
 
     @property
     def cell_of_state(self) -> np.ndarray:
@@ -326,49 +439,78 @@ class CellGrid(StateSpace):
 
         Parameters
         ----------
-        positions : ndarray, shape (T, N, 2) or (N, 2)
-            Positions (m).
+        positions : ndarray, shape (T, N, D) or (N, D)
+            Positions (m), D = 2 or 3; a 2D grid projects 3D positions on (across,
+            vertical), a 3D grid needs D = 3.
         velocities, lag_frames, frame_interval
             Ignored (the cells need neither motion nor history).
 
         Returns
         -------
         ndarray of int32, shape (T, N) or (N,)
+
+        Raises
+        ------
+        InputError
+            If a 3D grid is given 2D positions.
         """
-        return cell_index(positions, self.width, self.height, self.columns, self.rows)
+        return cell_index(positions, self.width, self.height, self.columns, self.rows,
+                          self.depth, self.depth_columns)
 
     def to_attrs(self):
-        """``kind``, ``columns``, ``rows``, ``width`` and ``height`` (see
-        :meth:`StateSpace.to_attrs`)."""
-        return {"kind": self.kind, "columns": self.columns, "rows": self.rows,
-                "width": self.width, "height": self.height}
+        """``kind``, ``columns``, ``rows``, ``width`` and ``height``, and for a 3D grid
+        ``depth_columns`` and ``depth`` (see :meth:`StateSpace.to_attrs`)."""
+        attrs = {"kind": self.kind, "columns": self.columns, "rows": self.rows,
+                 "width": self.width, "height": self.height}
+        if self.is_3d:
+            attrs.update(depth_columns=self.depth_columns, depth=self.depth)
+        return attrs
 
     def __repr__(self) -> str:
+        if self.is_3d:
+            return (f"CellGrid({self.columns}, {self.rows}, width={self.width:g}, "
+                    f"height={self.height:g}, depth_columns={self.depth_columns}, "
+                    f"depth={self.depth:g})")
         return f"CellGrid({self.columns}, {self.rows}, width={self.width:g}, height={self.height:g})"
 
 
-def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int) -> np.ndarray:
+def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int,
+                   depth: float | None = None) -> np.ndarray:
     """Positions drawn uniformly inside the given cells (``docs/definitions.md``, Monte Carlo).
 
-    The draw depends only on (seed, particle index, step), so it is reproducible.
+    The draw depends only on (seed, particle index, step), so it is reproducible. A 3D grid
+    gives 3D positions inside its cells; a 2D grid gives 2D positions, or with ``depth`` 3D
+    positions whose depth is drawn uniformly over 0 .. ``depth`` (a 2D cell spans the whole
+    depth). The across and vertical coordinates are the same draws in all cases.
 
     Parameters
     ----------
     cells : array_like of int, shape (N,)
-        The cell (row*m + col) of each particle.
+        The cell (row*m + col, or (row*d + k)*m + col with depth columns) of each particle.
     space : StateSpace
         Gives the grid and the riser's size.
     seed : int
         Seed of the counter-based generator (:func:`cfbmarkov._random.uniform`).
     step : int
         The step (lag) of the run, so that every step draws afresh.
+    depth : float, optional
+        The riser's depth (m), for 3D positions from a 2D grid; ignored by a 3D grid (it
+        has its own depth).
 
     Returns
     -------
-    ndarray of float64, shape (N, 2)
-        Positions (x, y) in m.
+    ndarray of float64, shape (N, 2) or (N, 3)
+        Positions (across, vertical[, depth]) in m.
     """
     cells = np.ascontiguousarray(cells, dtype=np.int64)
+    if space.is_3d or depth is not None:
+        d = space.depth_columns if space.is_3d else 1
+        out = np.empty((cells.size, 3))
+        _place_in_cells_3d(cells, space.columns, d, space.width / space.columns,
+                           space.height / space.rows,
+                           (space.depth if space.is_3d else float(depth)) / d,
+                           np.uint64(seed), np.uint64(step), out)
+        return out
     out = np.empty((cells.size, 2))
     _place_in_cells(cells, space.columns, space.width / space.columns,
                     space.height / space.rows, np.uint64(seed), np.uint64(step), out)
@@ -380,7 +522,8 @@ STATE_SPACES = ("cells", "cells-direction", "cells-velocity", "cells-previous")
 
 
 def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.09,
-                          height: float = 0.95) -> StateSpace:
+                          height: float = 0.95, depth_columns: int | None = None,
+                          depth: float | None = None) -> StateSpace:
     """A state space by name with its defaults.
 
     Parameters
@@ -393,6 +536,11 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
         The cell grid m x n.
     width, height : float
         The riser W x H (m).
+    depth_columns : int, optional
+        Cells along the depth, d: a 3D grid (needs ``depth``; only ``cells`` has depth
+        columns yet). None: a 2D grid, which projects 3D positions.
+    depth : float, optional
+        The riser's depth (m), for a 3D grid.
 
     Returns
     -------
@@ -401,7 +549,8 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
     Raises
     ------
     InputError
-        For an unknown name or a bad grid.
+        For an unknown name, a bad grid, depth columns without a depth, or depth columns
+        for a state space with memory.
 
     Notes
     -----
@@ -409,6 +558,15 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
     """
     from cfbmarkov.markov.memory_states import DirectionCells, SecondOrderCells, VelocityCells
 
+    if depth_columns is not None:
+        if name not in STATE_SPACES:
+            raise InputError(f"unknown state space '{name}' (choose from {', '.join(STATE_SPACES)})")
+        if name != "cells":
+            raise InputError(f"state space {name} has no depth columns yet: use --states cells "
+                             "with COLUMNSxDEPTHxROWS, or COLUMNSxROWS (the projection)")
+        if depth is None:
+            raise InputError(f"{depth_columns} depth column(s) need 3D data (the riser's depth)")
+        return CellGrid(columns, rows, width, height, depth_columns, depth)
     if name == "cells":
         return CellGrid(columns, rows, width, height)
     if name == "cells-direction":
