@@ -323,3 +323,25 @@ def test_3d_file_exports_depth_as_z(tmp_path):
     np.testing.assert_array_equal(arrays["points"], pos[1])
     np.testing.assert_array_equal(arrays["velocity"], vel[1])
     np.testing.assert_allclose(arrays["speed"], np.linalg.norm(vel[1], axis=-1), rtol=1e-15)
+
+
+def test_absent_particles_are_left_out_of_their_frames(tmp_path):
+    """An open riser: each frame's points are the particles present in it; a particle absent
+    from the first exported frame has no tracer group (-1)."""
+    rng = np.random.default_rng(4)
+    times = T0 + DT * np.arange(3)
+    pos = rng.uniform(0, 1, (3, N, 2)) * [W, H]
+    present = np.ones((3, N), bool)
+    present[0, 1] = False                # enters at the second frame
+    present[2, 0] = False                # leaves after the second frame
+    path = write_trajectories(tmp_path / "open.h5", times, pos, width=W, height=H,
+                              present=present, boundary="open")
+    out = export_vtk(path, tmp_path / "vtk")
+    for k in range(3):
+        _, arrays = read_vtk(out / f"particles_{k:06d}.vtu")
+        np.testing.assert_array_equal(arrays["id"], np.flatnonzero(present[k]))
+        np.testing.assert_array_equal(arrays["points"][:, :2], pos[k][present[k]])
+    _, arrays = read_vtk(out / "particles_000001.vtu")
+    expected = (pos[0, :, 0] < W / 2).astype(int)
+    expected[1] = -1
+    np.testing.assert_array_equal(arrays["colour_group"], expected[present[1]])

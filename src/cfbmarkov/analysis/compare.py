@@ -345,6 +345,10 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     band = ref.height / float(rows)
     rt_ref = residence_times(ref, (start, stop), face_band=band)
     rt_mod = residence_times(pred, (start, stop), face_band=band)
+    if ref.boundary == "open" and rt_ref.count == 0:
+        raise InputError(f"window {start:g}:{stop:g} s of {ref.path} holds no complete residence "
+                         "(an entry through the inlet and the next exit through the outlet "
+                         "inside the window): compare over a longer window")
     length = stop - start
     edges, p_ref = rtd_histogram(rt_ref.samples, bin_width, window_length=length)
     _, p_mod = rtd_histogram(rt_mod.samples, bin_width, window_length=length)

@@ -130,7 +130,8 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
     -------
     float
         sqrt(mean((model - reference)^2)) over the model's frames, a fraction of all
-        particles.
+        particles; frames where a curve is NaN (an open riser whose tracers have all left)
+        are skipped, and NaN is returned when none is left to compare.
 
     Raises
     ------
@@ -159,8 +160,17 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
     if mt.min() < rt[0] - tol or mt.max() > rt[-1] + tol:
         raise InputError(f"model frames {mt.min():g} to {mt.max():g} s leave the reference's "
                          f"{rt[0]:g} to {rt[-1]:g} s")
-    ref_at_model = np.interp(np.clip(mt, rt[0], rt[-1]), rt, rf)
-    return float(np.sqrt(np.mean((mf - ref_at_model) ** 2)))
+    at = np.clip(mt, rt[0], rt[-1])
+    finite = np.isfinite(rf)
+    if finite.all() and np.isfinite(mf).all():
+        return float(np.sqrt(np.mean((mf - np.interp(at, rt, rf)) ** 2)))
+    # an open riser: a curve is NaN where none of its tracers is left; only frames where
+    # both are defined (the reference on both sides of the time) are compared
+    ok = np.isfinite(mf) & (np.interp(at, rt, finite.astype(np.float64)) == 1.0)
+    if not ok.any():
+        return float("nan")
+    ref_at_model = np.interp(at[ok], rt[finite], rf[finite])
+    return float(np.sqrt(np.mean((mf[ok] - ref_at_model) ** 2)))
 
 
 __all__ = ["ROUNDOFF", "minkowski_distance", "mixing_rms", "percentage_difference",

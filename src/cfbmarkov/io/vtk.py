@@ -8,10 +8,13 @@
     ``colour_group`` (int8; the tracer group of the mixing definition,
     :func:`cfbmarkov.analysis.mixing.left_tracer_group`: 1 = the left
     tracer group, the particles with x < W/2 in the *first exported frame*, 0 = the right
-    tracer group; the array keeps its name ``colour_group``, by which ParaView colours the
-    particles), ``id`` (int64), ``lap`` (int32) and,
+    tracer group, -1 = not in the first exported frame; the array keeps its name
+    ``colour_group``, by which ParaView colours the particles), ``id`` (int64), ``lap``
+    (int32) and,
     when the file stores velocities, ``speed`` (float64, m/s) and ``velocity`` (3 components,
     z = 0 in 2D, m/s). ``colour_group`` comes first so that ParaView colours by it when opened.
+    Where particles come and go (an open riser, tracks), a frame's points are the particles
+    present in it, so the point count varies from frame to frame.
 ``gas_NNNNNN.vtr``
     When the file has a ``/fields`` group (CFD-DEM runs) and ``fields=True``: one rectilinear
     grid per exported frame that has a gas frame at the same time, cell data
@@ -298,7 +301,7 @@ def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.P
     every = _check_every(every)
     output = Path(output)
     with opened(run) as traj:
-        traj.require_supported("VTK export", three_d=True)
+        traj.require_supported("VTK export", three_d=True, absent=True, open_boundary=True)
         frames = _select_frames(traj, start, stop, every)
         _check_output(output, traj.path)
         gas = read_gas_fields(traj) if fields else None
@@ -331,8 +334,11 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
         x = np.ascontiguousarray(position[:, 0], dtype=np.float64)
         y = np.ascontiguousarray(position[:, 1], dtype=np.float64)
         z = np.ascontiguousarray(position[:, 2], dtype=np.float64) if position.shape[1] == 3 else zeros
+        keep = traj.present(frame) if traj.has_absences else None
         if tracer_group is None:
             tracer_group = left_tracer_group(x, 0.5 * traj.width).astype(np.int8)
+            if keep is not None:         # absent from the first frame: no tracer group
+                tracer_group[~keep] = -1
         point_data = {"colour_group": tracer_group, "id": ids,
                 "lap": np.ascontiguousarray(traj.laps(frame), dtype=np.int32)}
         velocity = traj.velocities(frame)
@@ -346,6 +352,11 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
                 vz = zeros
                 point_data["speed"] = np.hypot(vx, vy)
             point_data["velocity"] = (vx, vy, vz)
+        if keep is not None:             # only the particles in the frame are points
+            x, y, z = (np.ascontiguousarray(a[keep]) for a in (x, y, z))
+            point_data = {key: (tuple(np.ascontiguousarray(c[keep]) for c in value)
+                                if isinstance(value, tuple) else np.ascontiguousarray(value[keep]))
+                          for key, value in point_data.items()}
         name = f"{PARTICLES}_{frame:06d}"
         hl.pointsToVTK(str(folder / name), x, y, z, data=point_data)
         particle_files.append((name + ".vtu", t))
