@@ -12,6 +12,11 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-fit-auto``: ``--states auto``, choosing among 4 state spaces by 3-fold
   blocked cross-validation on the window and forming the chosen one; ``mcm-fit-chosen``: fitting
   the chosen state space alone; ``mcm-predict-file-auto``: its prediction file.
+- ``mcm-fit-open``, ``mcm-predict-open``: the same fit (pooled counts, exits and entries)
+  and prediction file for an open riser (:func:`cfbmarkov.synthetic.write_open_run`: the
+  same flow and particle-frames, every pass through a face a visit outside), and their
+  ratios over the periodic ``mcm-fit`` (same estimator) and ``mcm-predict-file``
+  (``mcm-fit-open-ratio``, ``mcm-predict-open-ratio``; goal <= 1.5).
 
 Times are medians over ``repeat`` runs after one warm-up run (numba compilation excluded).
 """
@@ -77,6 +82,7 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         yield "mcm-exact-rtd", _median_time(
             lambda: exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
                               model.lag), repeat), "s"
+        yield from _open_benchmarks(Path(tmp), flow, grid, particles, repeat, run, pred)
         # beyond the paper: the automatic choice of state space (4 candidates, 3-fold
         # blocked cross-validation on the window), then the chosen model's prediction
         from cfbmarkov.markov.select import select_model
@@ -91,6 +97,32 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         pred_auto = Path(tmp) / "bench-pred-auto.h5"
         yield "mcm-predict-file-auto", _median_time(
             lambda: chosen.predict(run, 10.0, 5.0, seed=7, output=pred_auto), repeat), "s"
+
+
+def _open_benchmarks(tmp: Path, flow, grid, particles: int, repeat: int, run: Path,
+                     pred: Path) -> Iterator[tuple[str, float, str]]:
+    """``mcm-fit-open`` and ``mcm-predict-open`` beside their periodic peers (pooled counts
+    on both sides: the paper's estimator is for periodic risers)."""
+    from cfbmarkov import synthetic
+    from cfbmarkov.markov import MaximumLikelihoodEstimator, discretize
+
+    open_run = tmp / "bench-open.h5"
+    synthetic.write_open_run(open_run, flow, particles, 5.1, seed=1, start_time=9.9)
+    estimator = MaximumLikelihoodEstimator(grid, lag=0.025)
+    periodic = _median_time(lambda: estimator.fit(discretize(run, grid, 0.025, (10.0, 15.0))),
+                            repeat)
+    opened = _median_time(lambda: estimator.fit(discretize(open_run, grid, 0.025, (10.0, 15.0))),
+                          repeat)
+    yield "mcm-fit-open", opened, "s"
+    yield "mcm-fit-open-ratio", opened / periodic, "x"
+    model = estimator.fit(discretize(run, grid, 0.025, (10.0, 15.0)))
+    open_model = estimator.fit(discretize(open_run, grid, 0.025, (10.0, 15.0)))
+    open_pred = tmp / "bench-pred-open.h5"
+    periodic = _median_time(lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat)
+    opened = _median_time(lambda: open_model.predict(open_run, 10.0, 5.0, seed=7,
+                                                     output=open_pred), repeat)
+    yield "mcm-predict-open", opened, "s"
+    yield "mcm-predict-open-ratio", opened / periodic, "x"
 
 
 def _refit(model, run):

@@ -243,3 +243,38 @@ def write_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, durati
                           source="synthetic", parameters=params, frame_interval=flow.lag) as w:
         w.append_frames(times, positions, laps=laps)
     return Path(path)
+
+
+def write_open_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, duration: float,
+                   seed: int = 0, start_time: float = 0.0) -> Path:
+    """Write the synthetic flow as an *open* riser (source ``'synthetic-open'``).
+
+    The periodic run of :func:`write_run` with each pass through the top or the bottom
+    turned into a visit outside: the particle is absent from the frame after the pass (it
+    left through the outlet, or fell back out through the inlet) and present again from the
+    next one (re-inserted at the inlet, or back from below). Particle-frames, and so the work
+    of a fit or a prediction, stay those of the periodic run; the vertical boundary is open.
+
+    Parameters
+    ----------
+    path, flow, n_particles, duration, seed, start_time
+        As for :func:`write_run`.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+    """
+    from cfbmarkov.trajectory_writer import TrajectoryWriter
+
+    n_frames = int(round(duration / flow.lag)) + 1
+    times, _, positions, laps = sample_run(flow, n_particles, n_frames, seed, start_time)
+    present = np.ones(laps.shape, dtype=bool)
+    present[1:] = laps[1:] == laps[:-1]
+    params = {k: getattr(flow, k) for k in flow.__dataclass_fields__}
+    params["seed"] = seed
+    with TrajectoryWriter(path, np.arange(n_particles), width=flow.width, height=flow.height,
+                          source="synthetic-open", parameters=params, frame_interval=flow.lag,
+                          boundary="open") as w:
+        w.append_frames(times, positions, present=present)
+    return Path(path)

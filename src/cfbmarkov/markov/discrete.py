@@ -289,13 +289,11 @@ class WindowFrames:
         frames = slice(first, None)
         positions = self.positions[frames]
         velocities = None if self.velocities is None else self.velocities[frames]
-        if self.present is not None:            # absent: NaN, placed anywhere, then masked
-            positions = np.where(self.present[frames, :, None], positions, 0.0)
-            if velocities is not None:
-                velocities = np.where(self.present[frames, :, None], velocities, 0.0)
+        # absent particles (NaN) get some state, masked here with those whose history is
+        # incomplete
         states = state_space.discretize(positions, velocities, lag_frames, self.frame_interval)
         if self.present is not None:
-            states = np.where(_known(self.present[frames], need, lag_frames), states, ABSENT)
+            states[~_known(self.present[frames], need, lag_frames)] = ABSENT
         offset = start - first
         rows = slice(start, None)
         return DiscreteTrajectories(

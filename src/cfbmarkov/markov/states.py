@@ -264,8 +264,10 @@ EDGE_TOLERANCE = 1e-9
 @nb.njit(cache=True, inline="always")
 def _index_along(coordinate, scale, n):
     """floor(coordinate * scale), a value a round-off below an edge taken as on it, clipped
-    to 0..n-1."""
+    to 0..n-1 (0 for NaN: an absent particle, whose state the caller masks)."""
     v = coordinate * scale
+    if v != v:
+        return 0
     k = int(math.floor(v + EDGE_TOLERANCE * max(1.0, abs(v))))
     return min(max(k, 0), n - 1)
 
