@@ -112,8 +112,11 @@ def test_bench_prints_one_line_per_figure(capsys):
     assert code == 0
     names = [line.split(":")[0] for line in out.strip().splitlines()]
     assert names[:4] == ["mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd"]
-    assert names[4] == "mcm-fit-auto" and names[5].startswith("mcm-fit-chosen-cells")
-    assert names[6:] == ["mcm-predict-file-auto"]
+    assert names[4:8] == ["mcm-fit-open", "mcm-fit-open-ratio", "mcm-predict-open",
+                          "mcm-predict-open-ratio"]
+    assert names[8] == "mcm-fit-auto" and names[9].startswith("mcm-fit-chosen-cells")
+    assert names[10:] == ["mcm-predict-file-auto"]
     for line in out.strip().splitlines():
+        name = line.split(":")[0]
         value, unit = line.split(": ")[1].split()
-        assert float(value) > 0 and unit == "s"
+        assert float(value) > 0 and unit == ("x" if name.endswith("-ratio") else "s")
