@@ -194,6 +194,8 @@ def _cmd_compare(args) -> int:
                       bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures)
     from cfbmarkov.analysis.metrics import percentage_text as pd_text
 
+    for line in summary.get("warnings", []):
+        print(f"warning: {line.strip()}", file=sys.stderr)
     print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "

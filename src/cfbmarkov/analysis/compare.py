@@ -372,6 +372,13 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     t_ref, f_ref = mixing_curve_of(ref, (start, stop))
     t_mod, f_mod = mixing_curve_of(pred, (start, stop))
     rms = mixing_rms(t_ref, f_ref, t_mod, f_mod)
+    if not np.isfinite(rms):
+        ends = [f"{name} at {times[~np.isfinite(curve)][0]:g} s"
+                for name, times, curve in (("reference", t_ref, f_ref), ("model", t_mod, f_mod))
+                if not np.isfinite(curve).all()]
+        warnings.append("the mixing curve is undefined where no tracer (a particle present at "
+                        f"the window start) is left ({', '.join(ends)}): the mixing RMS is "
+                        "undefined (null); a window that ends before that gives one")
     left_ref = left_tracer_group(ref.positions(ref_frames.start)[:, 0], 0.5 * ref.width)
     left_mod = left_tracer_group(pred.positions(pred_frames.start)[:, 0], 0.5 * pred.width)
     if ref.boundary == "open":      # the tracers: the particles present at the window start
