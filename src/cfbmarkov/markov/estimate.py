@@ -261,8 +261,9 @@ def open_chain(counts: TransitionCounts) -> dict:
     Returns
     -------
     dict
-        ``boundary``, ``exit_probability`` [S], ``exit_counts`` [S], ``entry_counts`` [S] and
-        ``inflow_per_lag`` for :class:`~cfbmarkov.markov.model.MarkovModel`.
+        ``boundary``, ``exit_probability`` [S], ``exit_counts`` [S], ``entry_counts`` [S],
+        ``inflow_per_lag`` and ``censored_tracks`` (vanished, appeared) for
+        :class:`~cfbmarkov.markov.model.MarkovModel`.
 
     References
     ----------
@@ -274,7 +275,8 @@ def open_chain(counts: TransitionCounts) -> dict:
     exit_probability = np.divide(faces.exits, total, out=np.zeros(total.size), where=total > 0)
     return {"boundary": "open", "exit_probability": exit_probability,
             "exit_counts": faces.exits.copy(), "entry_counts": faces.entries.copy(),
-            "inflow_per_lag": float(faces.entries.sum()) / max(counts.frame_pairs, 1)}
+            "inflow_per_lag": float(faces.entries.sum()) / max(counts.frame_pairs, 1),
+            "censored_tracks": (int(faces.vanished.sum()), int(faces.appeared.sum()))}
 
 
 def face_band(space: StateSpace) -> float:

@@ -38,6 +38,9 @@ from cfbmarkov.markov.states import StateSpace
 #: the ``format`` attribute of a model file
 MODEL_FORMAT = "cfbmarkov.model"
 _DATASETS = ("transition_matrix", "counts", "counts_up", "counts_down")
+#: share of an open riser's tracks ending (beginning) away from the outlet (inlet) above
+#: which :meth:`MarkovModel.warnings` says so
+CENSORED_SHARE = 0.05
 
 
 @dataclass(frozen=True, eq=False)
@@ -87,6 +90,9 @@ class MarkovModel:
         Exits from / entries into each state observed in the fitting window (open riser).
     inflow_per_lag : float
         Mean number of particles entering through the inlet per lag (open riser).
+    censored_tracks : tuple of int
+        (vanished, appeared): tracks of an open riser that ended or began more than one cell
+        from the outlet or inlet face, left out as censored.
 
     Raises
     ------
@@ -127,6 +133,7 @@ class MarkovModel:
     exit_counts: np.ndarray | None = None
     entry_counts: np.ndarray | None = None
     inflow_per_lag: float = 0.0
+    censored_tracks: tuple[int, int] = (0, 0)
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -584,11 +591,23 @@ class MarkovModel:
         return out
 
     def warnings(self) -> list[str]:
-        """Lines about states entered but never left (traps), for ``fit`` and ``info``."""
+        """Lines about states entered but never left (traps) and, for an open riser, about
+        many tracks that ended or began away from the faces, for ``fit`` and ``info``."""
+        lines = []
+        if self.boundary == "open":
+            for what, censored, counted, face in (
+                    ("ended", self.censored_tracks[0], int(self.exit_counts.sum()), "outlet"),
+                    ("began", self.censored_tracks[1], int(self.entry_counts.sum()), "inlet")):
+                if censored > CENSORED_SHARE * (censored + counted):
+                    lines.append(
+                        f"  {censored} tracks {what} more than one cell from the {face} "
+                        f"({100 * censored / (censored + counted):.0f} % of those that {what} "
+                        f"near it or not) and were left out as censored; if particles cross the "
+                        "face farther than a cell per lag, use taller cells or a shorter lag")
         trapped = self.entered_never_left
         if not trapped.size or self.trap_share == 0.0:
-            return []
-        return [f"  states entered but never left: {trapped.size} ({_short_list(trapped)}): "
+            return lines
+        return lines + [f"  states entered but never left: {trapped.size} ({_short_list(trapped)}): "
                 f"they keep their particles (P_ii = 1) or move as their cell; "
                 f"{100 * self.trap_share:.1f} % of the particle-frames are in states that "
                 "can reach a trap (fit --connected leaves them out)"]
@@ -612,7 +631,8 @@ class MarkovModel:
             f"  open riser: {int(self.exit_counts.sum())} exits through the outlet, "
             f"{int(self.entry_counts.sum())} entries through the inlet "
             f"({self.inflow_per_lag:.4g} per lag) into "
-            f"{int(np.count_nonzero(self.entry_counts))} states",
+            f"{int(np.count_nonzero(self.entry_counts))} states; tracks censored (ended or "
+            f"began away from the faces): {self.censored_tracks[0]}, {self.censored_tracks[1]}",
         ]
         never = np.setdiff1d(self.unvisited_states, self.entered_never_left)
         lines.append(f"  states never visited: {never.size}"

@@ -79,6 +79,7 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
     if model.boundary == "open":
         attrs["boundary"] = "open"
         attrs["inflow_per_lag"] = float(model.inflow_per_lag)
+        attrs["censored_tracks"] = np.asarray(model.censored_tracks, dtype=np.int64)
         for name in _OPEN_DATASETS:
             datasets[name] = getattr(model, name)
     return datasets, attrs
@@ -166,7 +167,9 @@ def _open_fields(group) -> dict:
     boundary = boundary.decode() if isinstance(boundary, bytes) else str(boundary)
     if boundary != "open":
         return {"boundary": boundary}
+    censored = group.attrs.get("censored_tracks", (0, 0))
     return {"boundary": boundary, "inflow_per_lag": float(group.attrs["inflow_per_lag"]),
+            "censored_tracks": (int(censored[0]), int(censored[1])),
             **{name: group[name][()] for name in _OPEN_DATASETS}}
 
 

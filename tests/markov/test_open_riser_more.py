@@ -1,0 +1,123 @@
+"""Open risers beyond the plain case: tracks that leave the view at a side (censored), 3D
+cells, and one long tracer resampled from irregular times (PEPT-like) in a periodic loop."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cfbmarkov.analysis.rtd import residence_times
+from cfbmarkov.io import import_file
+from cfbmarkov.markov import CellGrid, fit_model
+from cfbmarkov.synthetic import RiserFlow, sample_run
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
+
+from .open_chain import H, W, draw, open_chain, positions_of
+
+LAG = 0.02
+
+
+def _open_states(seed=21, n_steps=400):
+    q, r, e = open_chain()
+    states, ids = draw(q, r, e, n_steps=n_steps, inflow=6.0, n_start=150, seed=seed)
+    return q, r, e, states, ids
+
+
+def test_tracks_leaving_the_view_at_a_side_are_censored_not_exits(tmp_path):
+    """A fifth of the tracks are cut at a random frame (out of a camera's view): the chain is
+    still recovered within sampling error, the cut tracks are counted as censored (and a
+    warning says so), and none of them is a residence-time sample."""
+    q, r, e, states, ids = _open_states()
+    rng = np.random.default_rng(5)
+    cut = rng.random(states.shape[1]) < 0.2
+    alive = states >= 0
+    first = alive.argmax(axis=0)
+    last = states.shape[0] - 1 - alive[::-1].argmax(axis=0)
+    cut_at = first + 1 + (rng.random(states.shape[1]) * np.maximum(last - first, 1)).astype(int)
+    truncated = states.copy()
+    for p in np.flatnonzero(cut):
+        truncated[cut_at[p]:, p] = -1
+    mid_row = (states >= 0) & (states // 6 >= 3) & (states // 6 <= 34)
+    lost = [p for p in np.flatnonzero(cut) if mid_row[cut_at[p] - 1, p]]
+    pos = positions_of(truncated, seed=6)
+    times = np.arange(states.shape[0]) * LAG
+    path = write_trajectories(tmp_path / "cut.h5", times, pos, width=W, height=H, ids=ids,
+                              present=truncated >= 0, boundary="open")
+    model = fit_model(path, CellGrid(6, 38, W, H), LAG, estimator="mle")
+    assert model.censored_tracks[0] >= len(lost) > 20
+    assert any("left out as censored" in line for line in model.warnings())
+    visits = model.counts.sum(axis=1) + model.exit_counts
+    well = visits > 400
+    sigma = np.sqrt(q * (1 - q) / np.maximum(visits, 1)[:, None])
+    assert (np.abs(model.absorbing_matrix - q)[well] / np.maximum(sigma[well], 1e-12)).max() < 5
+    with Trajectories(path) as t:
+        samples = residence_times(t, (1.0, 7.0), face_band=H / 38).samples
+    full = write_trajectories(tmp_path / "full.h5", times, positions_of(states, seed=6),
+                              width=W, height=H, ids=ids, present=states >= 0, boundary="open")
+    with Trajectories(full) as t:
+        all_samples = residence_times(t, (1.0, 7.0), face_band=H / 38).samples
+    assert 0 < samples.size < all_samples.size
+
+
+def test_open_riser_in_3d_cells(tmp_path):
+    """A depth coordinate added: 6x38 cells project (the same counts as in 2D); 6x2x38 cells
+    give an exact RTD equal to the fundamental-matrix mean, matched by Monte Carlo."""
+    q, r, e, states, ids = _open_states(seed=31)
+    pos = positions_of(states, seed=7)
+    rng = np.random.default_rng(8)
+    depth = np.where(states[..., None] >= 0, rng.uniform(0, 0.01, states.shape + (1,)), np.nan)
+    times = np.arange(states.shape[0]) * LAG
+    flat = write_trajectories(tmp_path / "2d.h5", times, pos, width=W, height=H, ids=ids,
+                              present=states >= 0, boundary="open")
+    deep = write_trajectories(tmp_path / "3d.h5", times, np.concatenate([pos, depth], -1),
+                              width=W, height=H, depth=0.01, ids=ids, present=states >= 0,
+                              boundary="open")
+    projected = fit_model(deep, CellGrid(6, 38, W, H), LAG, estimator="mle")
+    plain = fit_model(flat, CellGrid(6, 38, W, H), LAG, estimator="mle")
+    np.testing.assert_array_equal(projected.counts, plain.counts)
+    np.testing.assert_array_equal(projected.exit_counts, plain.exit_counts)
+    grid = CellGrid(6, 38, W, H, depth_columns=2, depth=0.01)
+    model = fit_model(deep, grid, LAG, estimator="mle")
+    assert model.n_states == 6 * 2 * 38
+    np.testing.assert_array_equal(np.flatnonzero(model.entry_counts), np.arange(12))
+    qm = model.absorbing_matrix
+    mean = model.entry_distribution @ np.linalg.solve(np.eye(qm.shape[0]) - qm, np.ones(qm.shape[0]))
+    assert model.rtd().mean == pytest.approx(mean * LAG, rel=1e-8)
+    out = model.predict(deep, start=1.0, duration=7.0, seed=3, output=tmp_path / "p.h5")
+    with Trajectories(out) as t:
+        assert t.dimensions == 3 and t.boundary == "open"
+        samples = residence_times(t, (1.0, 8.0), face_band=H / 38).samples
+    exact = model.rtd(7.0)
+    assert abs(samples.mean() - exact.mean) < 4 * samples.std(ddof=1) / np.sqrt(samples.size)
+
+
+def test_one_long_pept_like_tracer_gives_the_model_of_many_particles(tmp_path):
+    """One tracer of the synthetic periodic flow for 200 s, located at irregular times (a
+    fifth of the frames missing) with a 2 s gap out of the field of view, written as the pept
+    library writes (mm, ms, '# t x y z error'), resampled onto the frame interval: its model's
+    E(RT) matches the one fitted on many particles of the same process."""
+    flow = RiserFlow()
+    times, _, pos, _ = sample_run(flow, 1, 8001, seed=4)
+    rng = np.random.default_rng(9)
+    keep = rng.random(times.size) > 0.2
+    keep[(times > 100) & (times < 102)] = False                # out of the field of view
+    keep[[0, -1]] = True
+    t_ms = times[keep] * 1000
+    rows = "".join(f"{a:.6f} {x * 1000:.6f} {y * 1000:.6f} 0.5 1.0\n"
+                   for a, (x, y) in zip(t_ms, pos[keep, 0]))
+    source = tmp_path / "pept.csv"
+    source.write_text("# t x y z error\n" + rows)
+    tracer = import_file(source, "csv", tmp_path / "tracer.h5", length_unit="mm", time_unit="ms",
+                         vertical_axis="y", drop_depth=True, resample=flow.lag, max_gap=0.06)
+    with Trajectories(tracer) as t:
+        present = t.present()[:, 0]
+        assert not present[(t.times > 100.05) & (t.times < 101.95)].any()
+        assert present.mean() > 0.9
+    single = fit_model(tracer, CellGrid(6, 38, flow.width, flow.height), flow.lag, estimator="mle")
+    many_times, _, many_pos, many_laps = sample_run(flow, 300, 801, seed=5)
+    many = write_trajectories(tmp_path / "many.h5", many_times, many_pos, width=flow.width,
+                              height=flow.height, laps=many_laps)
+    reference = fit_model(many, CellGrid(6, 38, flow.width, flow.height), flow.lag,
+                          estimator="mle")
+    assert single.rtd().mean == pytest.approx(reference.rtd().mean, rel=0.1)
