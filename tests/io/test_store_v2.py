@@ -132,7 +132,6 @@ def test_version_1_files_still_read_and_a_newer_version_is_refused(tmp_path, cap
 
 
 @pytest.mark.parametrize("argv, purpose", [
-    (["export-vtk", "{f}", "-o", "{o}"], "VTK export"),
     (["compare", "{f}", "{f}", "--window", "0:0.1", "-o", "{o}"], "comparing runs"),
 ])
 def test_what_cannot_use_absent_particles_refuses_them_in_one_line(tmp_path, capsys, argv,
