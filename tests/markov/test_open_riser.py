@@ -172,3 +172,37 @@ def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys):
     capsys.readouterr()
     assert main(["info", pred]) == 0
     assert "vertical boundary open" in capsys.readouterr().out
+
+
+def test_no_entry_in_the_window_and_no_complete_residence_are_refused(open_run, tmp_path, capsys):
+    """An open riser's window in which no particle enters (an empty entry distribution) and a
+    comparison window without a complete residence: one line, exit 2, nothing written."""
+    from cfbmarkov.cli import main
+
+    with Trajectories(open_run["run"]) as t:
+        pos, present, times = t.positions(), t.present(), t.times
+        ids = t.ids
+    present = present.copy()
+    born = present.argmax(axis=0)
+    present[:, born > 0] = False            # only the particles there from the start
+    path = tmp_path / "closed-inlet.h5"
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    write_trajectories(path, times, np.where(present[..., None], pos, np.nan), width=W, height=H,
+                       ids=ids, present=present, boundary="open")
+    code = main(["fit", str(path), "--lag", "0.02", "--window", "0:4", "-o", str(tmp_path / "m.h5")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "entry distribution is empty" in err
+    assert not (tmp_path / "m.h5").exists()
+    model = tmp_path / "ok.h5"
+    assert main(["fit", str(open_run["run"]), "--lag", "0.02", "--window", "0:4", "-o",
+                 str(model)]) == 0
+    pred = tmp_path / "p.h5"
+    assert main(["predict", str(model), "--init", str(open_run["run"]), "--start", "4",
+                 "--duration", "0.1", "-o", str(pred), "--quiet"]) == 0
+    capsys.readouterr()
+    code = main(["compare", str(open_run["run"]), str(pred), "--window", "4:4.1", "-o",
+                 str(tmp_path / "cmp")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "holds no complete residence" in err
+    assert not (tmp_path / "cmp").exists()
