@@ -191,7 +191,8 @@ def _cmd_compare(args) -> int:
     from cfbmarkov.report.compare import compare
 
     summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
-                      bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures)
+                      bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
+                      basis=args.basis)
     from cfbmarkov.analysis.metrics import percentage_text as pd_text
 
     for line in summary.get("warnings", []):
@@ -200,6 +201,11 @@ def _cmd_compare(args) -> int:
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
           f"mixing RMS {summary['mixing_rms']:.4g}")
+    exact = summary.get("exact_reference")
+    if exact:
+        print(f"  (residence times from frames at the model's lag on both sides; the reference's "
+              f"exact pass events give E(RT) {exact['rt_mean']:.4g} s, PD "
+              f"{pd_text(exact['pd_rt_mean'])} %, SD(RT) PD {pd_text(exact['pd_rt_sd'])} %)")
     print(Path(args.output) / "summary.json")
     return 0
 
@@ -447,6 +453,10 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--bin-width", type=_positive_float, default=0.025, help="RTD bin width, s")
     s.add_argument("--md-order", type=_positive_float, default=2.0, help="Minkowski order k")
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
+    s.add_argument("--basis", choices=["frames", "events"], default="frames",
+                   help="residence times of both sides from frames at the model's lag (like "
+                        "for like, the default; the reference's exact-event figures are shown "
+                        "beside), or the reference's exact pass events")
     s.set_defaults(func=_cmd_compare)
 
     s = sub.add_parser("rtd", help="exact residence-time distribution of a model")

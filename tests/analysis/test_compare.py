@@ -87,11 +87,39 @@ def test_exact_events_are_reported(tmp_path, make_run, events_of):
                              height=0.95, events=events_of(run))
     pred = write_trajectories(tmp_path / "pred.h5", run.times, run.positions, width=0.09,
                               height=0.95)
-    saved = compare(ref, pred, window=WINDOW, output=tmp_path / "o", figures=False)
+    saved = compare(ref, pred, window=WINDOW, output=tmp_path / "o", figures=False,
+                    basis="events")
     assert saved["reference"]["exact_events"] and not saved["model"]["exact_events"]
     assert saved["exact_events"] == {"reference": True, "model": False}
     assert saved["mixing_rms"] == 0.0
     assert any("exact pass events" in w for w in saved["warnings"])
+    assert saved["basis"] == "events" and saved["exact_reference"] is None
+
+
+def test_like_for_like_basis_by_default_with_the_exact_figures_beside(tmp_path, make_run,
+                                                                       events_of):
+    """The default basis: the same frames on both sides (identical files give PD 0 and
+    MD 0, where the exact events would not), and the exact-event figures reported beside."""
+    run = make_run(n_particles=40, seed=8)
+    ref = write_trajectories(tmp_path / "ref.h5", run.times, run.positions, width=0.09,
+                             height=0.95, events=events_of(run))
+    pred = write_trajectories(tmp_path / "pred.h5", run.times, run.positions, width=0.09,
+                              height=0.95)
+    saved = compare(ref, pred, window=WINDOW, output=tmp_path / "o", figures=False)
+    assert saved["basis"] == "frames" and saved["reference_frame_stride"] == 1
+    assert saved["exact_events"] == {"reference": False, "model": False}
+    assert saved["pd_rt_mean"] == 0.0 and saved["md_rtd"] == 0.0
+    exact = saved["exact_reference"]
+    events = compare(ref, pred, window=WINDOW, output=tmp_path / "e", figures=False,
+                     basis="events")
+    assert exact["rt_mean"] == events["reference"]["rt_mean"]
+    assert exact["pd_rt_mean"] == events["pd_rt_mean"] != 0.0
+    # a model at twice the reference's frame interval: the reference's frames every second
+    half = write_trajectories(tmp_path / "half.h5", run.times[::2], run.positions[::2],
+                              width=0.09, height=0.95)
+    strided = compare(ref, half, window=WINDOW, output=tmp_path / "h", figures=False)
+    assert strided["reference_frame_stride"] == 2
+    assert strided["reference"]["rt_mean"] == strided["model"]["rt_mean"]
 
 
 def test_odd_column_count_is_refused(tmp_path, make_run):

@@ -207,6 +207,15 @@ class RunComparison:
         Cell columns of the model behind the prediction, when known.
     warnings : list of str
         Warnings of the computation (figures may add more).
+    basis : str
+        ``frames``: both sides' residence times from frames at the model's lag (the
+        reference's frames taken every ``stride``-th); ``events``: the reference's exact
+        pass events where it has them (``docs/definitions.md``, Comparison basis).
+    stride : int
+        Reference frames per model lag used on the ``frames`` basis.
+    exact_reference : ResidenceTimes or None
+        The reference's residence times from its exact pass events, reported beside the
+        ``frames`` basis (None where it has none, or on the ``events`` basis).
     """
 
     window: tuple[float, float]
@@ -220,6 +229,9 @@ class RunComparison:
     same_tracer_groups: bool
     model_columns: int | None
     warnings: list[str] = field(default_factory=list)
+    basis: str = "events"
+    stride: int = 1
+    exact_reference: ResidenceTimes | None = None
 
     @property
     def pd_rt_mean(self) -> float:
@@ -270,12 +282,24 @@ class RunComparison:
             "same_purple_particles": bool(self.same_tracer_groups),
             "same_tracer_groups": bool(self.same_tracer_groups),
             "model_columns": self.model_columns,
+            "basis": self.basis,
+            "reference_frame_stride": int(self.stride),
+            "exact_reference": None if self.exact_reference is None else {
+                "rt_mean": self.exact_reference.mean, "rt_sd": self.exact_reference.sd,
+                "rt_count": self.exact_reference.count,
+                "pd_rt_mean": percentage_difference(mod.mean, self.exact_reference.mean),
+                "pd_rt_sd": percentage_difference(mod.sd, self.exact_reference.sd,
+                                                  scale=self.exact_reference.mean)},
             "units": {"time": "s", "pd": "%", "mixing_rms": "fraction of all particles"},
         }
 
 
+#: the time bases of a comparison's residence times
+BASES = ("frames", "events")
+
+
 def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: float = 0.025,
-                 md_order: float = 2.0) -> RunComparison:
+                 md_order: float = 2.0, basis: str = "frames") -> RunComparison:
     """Compare a model's trajectories with a reference over a window.
 
     Parameters
@@ -289,6 +313,10 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         RTD bin width, s (bins from 0 to the window length).
     md_order : float, optional
         Order k > 0 of the Minkowski distance (``inf``: largest difference).
+    basis : {"frames", "events"}, optional
+        ``frames`` (default): like for like, both sides' residence times from frames at the
+        model's lag (the prediction's frame interval), the reference's exact-event figures
+        reported beside; ``events``: the reference's exact pass events where it has them.
 
     Returns
     -------
@@ -340,11 +368,28 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
                          f"({pred.n_particles}) do not hold the same particle ids; mixing "
                          "needs the same particles on both sides")
 
-    # residence times (an open riser: entries and exits within one cell of the faces)
+    # residence times (an open riser: entries and exits within one cell of the faces), on
+    # one time basis: frames at the model's lag, or the reference's exact events
+    if basis not in BASES:
+        raise InputError(f"comparison basis {basis!r}: choose frames or events")
     rows = pred.parameters.get("rows") or DEFAULT_FACE_ROWS
     band = ref.height / float(rows)
-    rt_ref = residence_times(ref, (start, stop), face_band=band)
-    rt_mod = residence_times(pred, (start, stop), face_band=band)
+    stride = 1
+    if basis == "frames":
+        ratio = pred.frame_interval / ref.frame_interval
+        if round(ratio) >= 1 and abs(ratio - round(ratio)) <= 0.01 * ratio:
+            stride = int(round(ratio))
+        else:
+            warnings.append(f"the model's lag {pred.frame_interval:g} s is not a whole number "
+                            f"of the reference's frames ({ref.frame_interval:g} s): its "
+                            "residence times use every frame")
+    events = basis == "events"
+    rt_ref = residence_times(ref, (start, stop), use_events=events, face_band=band,
+                             stride=stride)
+    rt_mod = residence_times(pred, (start, stop), use_events=events, face_band=band)
+    exact_reference = None
+    if not events and ref.has_events and ref.boundary == "periodic":
+        exact_reference = residence_times(ref, (start, stop), use_events=True)
     if ref.boundary == "open" and rt_ref.count == 0:
         raise InputError(f"window {start:g}:{stop:g} s of {ref.path} holds no complete residence "
                          "(an entry through the inlet and the next exit through the outlet "
@@ -396,7 +441,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         reference=ComparedRun(ref, ref_frames, rt_ref, p_ref, t_ref, f_ref, left_ref),
         model=ComparedRun(pred, pred_frames, rt_mod, p_mod, t_mod, f_mod, left_mod),
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
-        warnings=warnings)
+        warnings=warnings, basis=basis, stride=stride, exact_reference=exact_reference)
 
 
 def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:

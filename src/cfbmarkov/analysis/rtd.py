@@ -310,7 +310,7 @@ DEFAULT_FACE_ROWS = 38
 
 
 def residence_times(traj, window: tuple[float, float], use_events: bool = True,
-                    face_band: float | None = None) -> ResidenceTimes:
+                    face_band: float | None = None, stride: int = 1) -> ResidenceTimes:
     """Residence-time samples of a trajectory file in a window.
 
     Uses the file's exact pass events when it has them and ``use_events`` is true (counted
@@ -328,6 +328,10 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     face_band : float, optional
         Open riser: how close to a face (m) a particle must appear or vanish to have
         crossed it (a model's cell height; default H / 38, the paper's rows).
+    stride : int, optional
+        From frames: use every ``stride``-th frame of the window from its first (a model's
+        lag when the file's frames are finer), so that both sides of a comparison see
+        passes on the same time basis (``docs/definitions.md``, Comparison basis).
 
     Returns
     -------
@@ -352,12 +356,16 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     start, stop = float(window[0]), float(window[1])
     frames = traj.window(start, stop)
     i0, i1 = frames.start, frames.stop
+    stride = int(stride)
+    if stride < 1:
+        raise InputError(f"frame stride {stride} must be at least 1")
+    span = _BLOCK_FRAMES * stride
     if traj.boundary == "open":
         band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
         n = traj.n_particles
         was, last, entered, chunks = np.full(n, -1, np.int8), np.full(n, np.nan), np.full(n, np.nan), []
-        for k in range(i0, i1, _BLOCK_FRAMES):
-            block = slice(k, min(k + _BLOCK_FRAMES, i1))
+        for k in range(i0, i1, span):
+            block = slice(k, min(k + span, i1), stride)
             present = np.ascontiguousarray(traj.present(block))
             out = np.empty(present.size)
             m = _scan_open(np.ascontiguousarray(traj.times[block], dtype=np.float64), present,
@@ -366,7 +374,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
             chunks.append(out[:m])
         return ResidenceTimes(np.concatenate(chunks) if chunks else np.zeros(0), False,
                               (start, stop))
-    if use_events and traj.has_events:
+    if use_events and traj.has_events and stride == 1:
         events = traj.events()
         t_first = float(traj.times[i0])
         if not stop > t_first:                   # a window of a single frame
@@ -380,8 +388,8 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     running_max = None
     last_record = np.full(traj.n_particles, np.nan)
     chunks = []
-    for k in range(i0, i1, _BLOCK_FRAMES):
-        block = slice(k, min(k + _BLOCK_FRAMES, i1))
+    for k in range(i0, i1, span):
+        block = slice(k, min(k + span, i1), stride)
         laps = np.ascontiguousarray(traj.laps(block))
         if running_max is None:
             running_max = laps[0].astype(np.int64)

@@ -106,7 +106,7 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
     return written
 
 
-def compare(reference, prediction, *, window, output, bin_width: float = 0.025,
+def compare(reference, prediction, *, window, output, bin_width: float = 0.025, basis: str = "frames",
             md_order: float = 2.0, figures: bool = True) -> dict[str, Any]:
     """Compare ``prediction`` (the model) with ``reference`` on a window; write the results.
 
@@ -123,6 +123,9 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025,
         RTD bin width, s.
     md_order : float, optional
         Order k of the Minkowski distance (Eq. 9).
+    basis : {"frames", "events"}, optional
+        The residence times' time basis (:func:`cfbmarkov.analysis.compare.compare_runs`):
+        frames at the model's lag on both sides (default), or the reference's exact events.
     figures : bool, optional
         Draw ``rtd.png``, ``snapshots.png``, ``mixing.png`` and, when the prediction carries
         its model, ``transition_matrix.png``, ``transition_bars.png`` and
@@ -153,7 +156,8 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025,
     with contextlib.ExitStack() as stack:
         ref = _open(reference, stack)
         pred = _open(prediction, stack)
-        comparison = compare_runs(ref, pred, window, bin_width=bin_width, md_order=md_order)
+        comparison = compare_runs(ref, pred, window, bin_width=bin_width, md_order=md_order,
+                                  basis=basis)
         summary = comparison.summary()
         warnings = list(comparison.warnings)
         out.mkdir(parents=True, exist_ok=True)

@@ -220,8 +220,19 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
             if (v := finite_or_none(s.get("bin_width"))) is not None:
                 widths.add(v)
             ex = s.get("exact_events") or {}
-            exact.setdefault("CFD-DEM: exact pass events" if ex.get("reference")
-                             else "CFD-DEM: frame times", set()).add(c.name)
+            if s.get("basis") == "frames":
+                stride = s.get("reference_frame_stride") or 1
+                key = ("like for like: both sides from frames at the model's lag (CFD-DEM "
+                       f"frames every {stride})")
+                er = s.get("exact_reference")
+                if er:
+                    key += (f"; from the CFD-DEM's exact pass events the PD of E(RT) would be "
+                            f"{percentage_text(er.get('pd_rt_mean'), '.2f')} % and of SD(RT) "
+                            f"{percentage_text(er.get('pd_rt_sd'), '.2f')} % at {u} m/s")
+                exact.setdefault(key, set()).add(c.name)
+            else:
+                exact.setdefault("CFD-DEM: exact pass events" if ex.get("reference")
+                                 else "CFD-DEM: frame times", set()).add(c.name)
     order_text = ", ".join(f"{k:g}" for k in sorted(orders)) or "n/a"
     width_text = ", ".join(f"{w:g}" for w in sorted(widths)) or f"{DEFAULT_BIN_WIDTH:g}"
     notes = [
@@ -240,9 +251,9 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                      "is zero to round-off (e.g. SD(RT) of residence times that are all "
                      "equal), or missing.")
     if exact:
-        notes.append("Residence-time moments: " + "; ".join(
+        notes.append("Residence-time basis: " + "; ".join(
             f"{k} ({', '.join(sorted(v))})" for k, v in exact.items())
-            + "; MCM predictions: frame times.")
+            + "; MCM predictions: frame times (docs/definitions.md, Comparison basis).")
     blocks = [Heading(2, "Table 3: RTD of the CFD-DEM and the MCM"), Table(header, rows, notes)]
     if pd_mean:
         under = sum(v < 0 for v in pd_sd)
