@@ -259,3 +259,43 @@ def test_map_times_in_whole_lags():
     assert map_times(0.4, 0.025) == pytest.approx([0.1, 0.2, 0.3])
     assert map_times(float("nan"), 0.025) == pytest.approx([0.05, 0.1, 0.15])
     assert map_times(0.02, 0.025) == pytest.approx([0.05, 0.1, 0.15])
+
+
+def test_persistence_baseline_and_natural_variability_stand_beside_the_model(tmp_path):
+    """A prediction carries its model's fitting window: the reference's RTD there, taken as
+    the prediction of the analysis window, is the persistence baseline; the reference's two
+    halves of the window are its natural variability. Both on the comparison's basis."""
+    from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
+    from cfbmarkov.analysis.metrics import minkowski_distance
+    from cfbmarkov.markov import CellGrid, fit_model
+    from cfbmarkov.synthetic import RiserFlow, write_run
+    from cfbmarkov.trajectories import Trajectories
+
+    run = write_run(tmp_path / "run.h5", RiserFlow(), 300, 4.0, seed=2)
+    model = fit_model(run, CellGrid(6, 38), 0.025, (0.5, 2.0), "mle")
+    pred = model.predict(run, 2.0, 2.0, seed=1, output=tmp_path / "p.h5")
+    saved = compare(run, pred, window=(2.0, 4.0), output=tmp_path / "o", figures=False)
+    base, halves = saved["baseline"], saved["natural_variability"]
+    assert base["windows"] == [[0.5, 2.0], [2.0, 4.0]]
+    assert halves["windows"] == [[2.0, 3.0], [3.0, 4.0]]
+    with Trajectories(run) as t:
+        fit_rt = residence_times(t, (0.5, 2.0), use_events=False)
+        window_rt = residence_times(t, (2.0, 4.0), use_events=False)
+    assert base["rt_mean"] == pytest.approx(fit_rt.mean, rel=1e-12)
+    assert base["pd_rt_mean"] == pytest.approx(100 * (fit_rt.mean - window_rt.mean)
+                                               / window_rt.mean, rel=1e-9)
+    _, p_fit = rtd_histogram(fit_rt.samples, 0.025, window_length=2.0)
+    _, p_win = rtd_histogram(window_rt.samples, 0.025, window_length=2.0)
+    assert base["md_rtd"] == pytest.approx(minkowski_distance(p_fit, p_win, 2.0), rel=1e-12)
+    assert np.isfinite(halves["md_rtd"]) and halves["rt_count"] > 0
+    # a prediction without its model (plain arrays): no baseline, halves still given
+    bare = write_trajectories(tmp_path / "bare.h5", *_frames(pred), width=0.09, height=0.95)
+    plain = compare(run, bare, window=(2.0, 4.0), output=tmp_path / "b", figures=False)
+    assert plain["baseline"] is None and plain["natural_variability"] is not None
+
+
+def _frames(path):
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(path) as t:
+        return t.times, t.positions()

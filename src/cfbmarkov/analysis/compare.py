@@ -24,6 +24,7 @@ from typing import Any
 
 import numpy as np
 
+from cfbmarkov.analysis.baseline import WindowDifference, fitting_window, window_difference
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
@@ -216,6 +217,12 @@ class RunComparison:
     exact_reference : ResidenceTimes or None
         The reference's residence times from its exact pass events, reported beside the
         ``frames`` basis (None where it has none, or on the ``events`` basis).
+    baseline : WindowDifference or None
+        The persistence baseline: the reference's RTD in the model's fitting window taken
+        as the prediction (None where the fitting window is unknown or outside the
+        reference).
+    natural_variability : WindowDifference or None
+        The reference's first half of the window against its second half.
     """
 
     window: tuple[float, float]
@@ -232,6 +239,8 @@ class RunComparison:
     basis: str = "events"
     stride: int = 1
     exact_reference: ResidenceTimes | None = None
+    baseline: WindowDifference | None = None
+    natural_variability: WindowDifference | None = None
 
     @property
     def pd_rt_mean(self) -> float:
@@ -290,6 +299,9 @@ class RunComparison:
                 "pd_rt_mean": percentage_difference(mod.mean, self.exact_reference.mean),
                 "pd_rt_sd": percentage_difference(mod.sd, self.exact_reference.sd,
                                                   scale=self.exact_reference.mean)},
+            "baseline": None if self.baseline is None else self.baseline.summary(),
+            "natural_variability": (None if self.natural_variability is None
+                                    else self.natural_variability.summary()),
             "units": {"time": "s", "pd": "%", "mixing_rms": "fraction of all particles"},
         }
 
@@ -390,6 +402,18 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     exact_reference = None
     if not events and ref.has_events and ref.boundary == "periodic":
         exact_reference = residence_times(ref, (start, stop), use_events=True)
+    basis_args = {"bin_width": bin_width, "md_order": md_order, "use_events": events,
+                  "stride": stride, "face_band": band, "window_length": stop - start}
+    baseline = None
+    fitted = fitting_window(pred)
+    if fitted is not None and fitted[0] >= ref.times[0] - ref.time_tolerance and (
+            fitted[1] <= ref.times[-1] + ref.time_tolerance):
+        with contextlib.suppress(InputError):     # a window without frames: no baseline
+            baseline = window_difference(ref, fitted, (start, stop), **basis_args)
+    middle = 0.5 * (start + stop)
+    variability = None
+    with contextlib.suppress(InputError):
+        variability = window_difference(ref, (start, middle), (middle, stop), **basis_args)
     if ref.boundary == "open" and rt_ref.count == 0:
         raise InputError(f"window {start:g}:{stop:g} s of {ref.path} holds no complete residence "
                          "(an entry through the inlet and the next exit through the outlet "
@@ -441,7 +465,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         reference=ComparedRun(ref, ref_frames, rt_ref, p_ref, t_ref, f_ref, left_ref),
         model=ComparedRun(pred, pred_frames, rt_mod, p_mod, t_mod, f_mod, left_mod),
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
-        warnings=warnings, basis=basis, stride=stride, exact_reference=exact_reference)
+        warnings=warnings, basis=basis, stride=stride, exact_reference=exact_reference,
+        baseline=baseline, natural_variability=variability)
 
 
 def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:

@@ -169,6 +169,14 @@ def paper_row(u: float) -> tuple[str, str, str]:
     return values if values is not None else ("—", "—", "—")
 
 
+def _difference_text(d) -> str:
+    """'PD E / PD SD / MD' of a baseline or variability summary, or n/a."""
+    if not d:
+        return "n/a"
+    return (f"{percentage_text(d.get('pd_rt_mean'), '.1f')} / "
+            f"{percentage_text(d.get('pd_rt_sd'), '.1f')} / {number_text(d.get('md_rtd'), '.3g')}")
+
+
 def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     """The paper's Table 3 from the compare summaries, beside the paper's values.
 
@@ -192,8 +200,8 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     """
     header = ["U (m/s)", "Estimator", "E(RT) CFD-DEM (s)", "E(RT) MCM (s)", "PD of E(RT) (%)",
               "SD(RT) CFD-DEM (s)", "SD(RT) MCM (s)", "PD of SD(RT) (%)", "MD of RTD",
-              "Mixing RMS", "Paper: PD of E(RT) (%)", "Paper: PD of SD(RT) (%)",
-              "Paper: MD of RTD"]
+              "Mixing RMS", "Baseline: PD E / PD SD / MD", "CFD-DEM halves: PD E / PD SD / MD",
+              "Paper: PD of E(RT) (%)", "Paper: PD of SD(RT) (%)", "Paper: MD of RTD"]
     rows, pd_sd, pd_mean, orders, widths, exact = [], [], [], set(), set(), {}
     for c in cases:
         paper = paper_row(c.velocity)
@@ -201,7 +209,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
         for e in c.estimators if c.estimators else [None]:
             s = e.summary if e is not None and not c.problems else None
             if s is None:
-                rows.append([u, e.name if e else "—"] + ["not finished"] * 8 + list(paper))
+                rows.append([u, e.name if e else "—"] + ["not finished"] * 10 + list(paper))
                 continue
             ref, mod = s["reference"], s["model"]
             rows.append([u, e.name, number_text(ref.get("rt_mean"), ".3f"),
@@ -209,7 +217,9 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                          percentage_text(s.get("pd_rt_mean"), ".2f"),
                          number_text(ref.get("rt_sd"), ".3f"), number_text(mod.get("rt_sd"), ".3f"),
                          percentage_text(s.get("pd_rt_sd"), ".2f"),
-                         number_text(s.get("md_rtd"), ".3g"), number_text(s.get("mixing_rms"), ".3g")]
+                         number_text(s.get("md_rtd"), ".3g"), number_text(s.get("mixing_rms"), ".3g"),
+                         _difference_text(s.get("baseline")),
+                         _difference_text(s.get("natural_variability"))]
                         + list(paper))
             if (v := finite_or_none(s.get("pd_rt_sd"))) is not None:
                 pd_sd.append(v)
@@ -245,6 +255,10 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
         "compare its size with the paper's only loosely.",
         "Mixing RMS: root-mean-square difference of the MCM and CFD-DEM mixing curves on the "
         "model's frames, as a fraction of all particles (no paper value).",
+        "Baseline: the CFD-DEM's own RTD in the fitting window taken as the prediction "
+        "(persistence); a model is only worth its name where it beats it. CFD-DEM halves: "
+        "the first half of the predict window against the second, the CFD-DEM's natural "
+        "variability at that scale (docs/definitions.md, Baseline and natural variability).",
     ]
     if any(row[4] == "n/d" or row[7] == "n/d" for row in rows):
         notes.append("n/d: the percentage difference is undefined because the CFD-DEM value "

@@ -1,0 +1,108 @@
+"""What a model must beat: the persistence baseline and the reference's natural variability
+(``docs/definitions.md``, Baseline and natural variability).
+
+- The *persistence baseline* uses the reference's own RTD observed in the model's fitting
+  window as the prediction of the analysis window: a model is only worth its name where it
+  beats it.
+- The *natural variability* is the reference's difference between the two halves of the
+  analysis window: how much the "truth" itself moves at that scale (sampling noise and
+  non-stationarity), the floor below which no model can be judged.
+
+Both use the comparison's time basis (frames at the model's lag, or exact events) and its
+RTD bins, so their PD and MD stand beside the model's in Table 3.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
+from cfbmarkov.analysis.rtd import ResidenceTimes, residence_times, rtd_histogram
+
+
+@dataclass(frozen=True)
+class WindowDifference:
+    """The difference between two RTDs of the reference, as PD of E(RT) and SD(RT) and MD.
+
+    Attributes
+    ----------
+    windows : tuple of two (float, float)
+        The window standing in for the prediction, and the window it is judged against (s).
+    predicted, observed : ResidenceTimes
+        Their residence-time samples.
+    pd_rt_mean, pd_rt_sd : float
+        PD (%) of the first against the second (NaN where undefined).
+    md_rtd : float
+        Minkowski distance of their RTDs on the comparison's bins (NaN without samples).
+    """
+
+    windows: tuple[tuple[float, float], tuple[float, float]]
+    predicted: ResidenceTimes
+    observed: ResidenceTimes
+    pd_rt_mean: float
+    pd_rt_sd: float
+    md_rtd: float
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: windows (s), E(RT) and SD(RT) of the stand-in (s), counts, PD (%), MD."""
+        return {"windows": [list(w) for w in self.windows],
+                "rt_mean": self.predicted.mean, "rt_sd": self.predicted.sd,
+                "rt_count": self.predicted.count, "pd_rt_mean": self.pd_rt_mean,
+                "pd_rt_sd": self.pd_rt_sd, "md_rtd": self.md_rtd}
+
+
+def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, float], *,
+                      bin_width: float, md_order: float, use_events: bool, stride: int,
+                      face_band: float | None, window_length: float) -> WindowDifference:
+    """The reference's RTD in ``stand_in`` taken as the prediction of ``judged``.
+
+    Parameters
+    ----------
+    ref : Trajectories
+        The reference file.
+    stand_in, judged : (float, float)
+        The two windows (s).
+    bin_width, md_order : float
+        The comparison's RTD bins (s) and Minkowski order.
+    use_events, stride, face_band
+        The comparison's basis (:func:`cfbmarkov.analysis.rtd.residence_times`).
+    window_length : float
+        Length (s) whose bins both RTDs use (the analysis window's).
+
+    Returns
+    -------
+    WindowDifference
+    """
+    kwargs = {"use_events": use_events, "stride": stride, "face_band": face_band}
+    a = residence_times(ref, stand_in, **kwargs)
+    b = residence_times(ref, judged, **kwargs)
+    _, pa = rtd_histogram(a.samples, bin_width, window_length=window_length)
+    _, pb = rtd_histogram(b.samples, bin_width, window_length=window_length)
+    md = minkowski_distance(pa, pb, md_order) if pa.sum() > 0 and pb.sum() > 0 else float("nan")
+    return WindowDifference((tuple(stand_in), tuple(judged)), a, b,
+                            percentage_difference(a.mean, b.mean),
+                            percentage_difference(a.sd, b.sd, scale=b.mean), md)
+
+
+def fitting_window(pred) -> tuple[float, float] | None:
+    """The fitting window (A, B) of the model behind a prediction, or None.
+
+    Parameters
+    ----------
+    pred : Trajectories
+        A prediction (its ``/provenance/model`` group holds the window).
+
+    Returns
+    -------
+    (float, float) or None
+    """
+    group = pred.group("model")
+    if group is None or "window" not in group.attrs:
+        return None
+    window = np.asarray(group.attrs["window"], dtype=float)
+    if window.shape != (2,) or not np.all(np.isfinite(window)) or not window[1] > window[0]:
+        return None
+    return float(window[0]), float(window[1])
