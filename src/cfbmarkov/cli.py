@@ -114,6 +114,16 @@ def _positive_float(text: str) -> float:
     return value
 
 
+def _level(text: str) -> float:
+    try:
+        value = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"'{text}' must lie between 0 and 1")
+    return value
+
+
 class _Parser(argparse.ArgumentParser):
     def error(self, message: str):  # one line, exit code 2
         self.exit(2, f"{self.prog}: error: {message}\n")
@@ -192,7 +202,7 @@ def _cmd_compare(args) -> int:
 
     summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
                       bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
-                      basis=args.basis)
+                      basis=args.basis, level=args.level, resamples=args.resamples)
     from cfbmarkov.analysis.metrics import percentage_text as pd_text
 
     for line in summary.get("warnings", []):
@@ -201,6 +211,11 @@ def _cmd_compare(args) -> int:
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
           f"mixing RMS {summary['mixing_rms']:.4g}")
+    model = summary["model"]
+    if "rt_mean_interval" in model:
+        (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
+        print(f"  model {100 * summary['level']:g} % intervals: E(RT) {m0:.4g}-{m1:.4g} s, "
+              f"SD(RT) {s0:.4g}-{s1:.4g} s")
     exact = summary.get("exact_reference")
     if exact:
         print(f"  (residence times from frames at the model's lag on both sides; the reference's "
@@ -453,6 +468,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--bin-width", type=_positive_float, default=0.025, help="RTD bin width, s")
     s.add_argument("--md-order", type=_positive_float, default=2.0, help="Minkowski order k")
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
+    s.add_argument("--level", type=_level, default=0.9,
+                   help="coverage of the prediction's intervals (default 0.9)")
+    s.add_argument("--resamples", type=int, default=100,
+                   help="bootstrap resamples of the model's fitting window for the intervals "
+                        "(0: no intervals; default 100)")
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
                    help="residence times of both sides from frames at the model's lag (like "
                         "for like, the default; the reference's exact-event figures are shown "

@@ -107,6 +107,10 @@ class MarkovConfig(_Model):
     lag: Positive = Field(0.025, description="transition time step, s (paper: 0.025)")
     fit_window: tuple[float, float] = Field((10.0, 15.0), description="fitting window A:B, s")
     predict_window: tuple[float, float] = Field((15.0, 20.0), description="prediction/comparison window, s")
+    interval_level: float = Field(0.9, gt=0.0, lt=1.0,
+                                  description="coverage of the prediction's intervals, -")
+    interval_resamples: int = Field(100, ge=0, description="bootstrap resamples of the fitting "
+                                    "window for the intervals (0: none), -")
 
 
 class CaseConfig(_Model):

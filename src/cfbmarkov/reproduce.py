@@ -229,7 +229,8 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 stages[f"compare-{name}"] = "skipped"
             else:
                 summaries[name] = compare(ref, prediction, window=(start, stop), output=out,
-                                          bin_width=m.lag)
+                                          bin_width=m.lag, level=m.interval_level,
+                                          resamples=m.interval_resamples)
                 stages[f"compare-{name}"] = "done"
     return {"case": label, "velocity": case.gas.superficial_velocity, "stages": stages,
             "summaries": summaries}

@@ -299,3 +299,38 @@ def _frames(path):
 
     with Trajectories(path) as t:
         return t.times, t.positions()
+
+
+def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_path):
+    """Block-bootstrap and Monte Carlo intervals: around the prediction's value, narrower at a
+    lower level, wider for a model fitted on less data; none when resamples = 0."""
+    from cfbmarkov.markov import CellGrid, fit_model
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    run = write_run(tmp_path / "run.h5", RiserFlow(), 200, 5.0, seed=3)
+    widths = {}
+    for name, fit_window in (("long", (0.5, 3.0)), ("short", (2.5, 3.0))):
+        model = fit_model(run, CellGrid(6, 38), 0.025, fit_window, "mle")
+        pred = model.predict(run, 3.0, 2.0, seed=1, output=tmp_path / f"{name}.h5")
+        saved = compare(run, pred, window=(3.0, 5.0), output=tmp_path / name, figures=False,
+                        resamples=30)
+        lo, hi = saved["model"]["rt_mean_interval"]
+        assert saved["level"] == 0.9 and lo < saved["model"]["rt_mean"] < hi
+        s_lo, s_hi = saved["model"]["rt_sd_interval"]
+        assert s_lo < saved["model"]["rt_sd"] < s_hi
+        band = np.asarray(saved["model"]["rtd_interval"])
+        assert band.shape == (2, len(saved_bins(saved))) and (band[0] <= band[1]).all()
+        widths[name] = hi - lo
+        if name == "long":
+            half = compare(run, pred, window=(3.0, 5.0), output=tmp_path / "half",
+                           figures=False, level=0.5, resamples=30)
+            assert half["model"]["rt_mean_interval"][1] - half["model"]["rt_mean_interval"][0] \
+                < widths["long"]
+            none = compare(run, pred, window=(3.0, 5.0), output=tmp_path / "none",
+                           figures=False, resamples=0)
+            assert "rt_mean_interval" not in none["model"] and "level" not in none
+    assert widths["short"] > widths["long"]
+
+
+def saved_bins(saved):
+    return range(saved["rtd_bins"]["count"])

@@ -223,6 +223,9 @@ class RunComparison:
         reference).
     natural_variability : WindowDifference or None
         The reference's first half of the window against its second half.
+    intervals : PredictionIntervals or None
+        The prediction's intervals, set by the report where they can be formed
+        (:mod:`cfbmarkov.analysis.intervals`).
     """
 
     window: tuple[float, float]
@@ -241,6 +244,7 @@ class RunComparison:
     exact_reference: ResidenceTimes | None = None
     baseline: WindowDifference | None = None
     natural_variability: WindowDifference | None = None
+    intervals: Any = None
 
     @property
     def pd_rt_mean(self) -> float:

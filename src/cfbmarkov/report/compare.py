@@ -59,6 +59,28 @@ def _jsonable(value):
     return value
 
 
+def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
+               warnings: list[str]):
+    """The prediction's intervals, or None (with a warning saying why) where they cannot be
+    formed: no model attached, its fitting data unreadable, too few residences."""
+    if not resamples:
+        return None
+    from cfbmarkov.analysis.intervals import prediction_intervals
+    from cfbmarkov.markov import MarkovModel
+
+    try:
+        model = MarkovModel.from_trajectories(pred)
+        if model is None:
+            warnings.append("no intervals: the prediction carries no model")
+            return None
+        start, stop = comparison.window
+        return prediction_intervals(model, comparison.model.residence.samples, comparison.edges,
+                                    stop - start, level=level, resamples=resamples)
+    except InputError as exc:
+        warnings.append(f"no intervals: {exc}")
+        return None
+
+
 def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str]:
     """Draw the figures of a comparison into ``out``; returns the file names written."""
     from cfbmarkov.report import figures as fg
@@ -72,6 +94,8 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
                 {"mean": rt_ref.mean, "sd": rt_ref.sd, "count": rt_ref.count},
                 {"mean": rt_mod.mean, "sd": rt_mod.sd, "count": rt_mod.count},
                 out / "rtd.png", labels=labels,
+                band=None if getattr(comparison, "intervals", None) is None
+                else (comparison.intervals.rtd, comparison.intervals.level),
                 title=f"Residence-time distribution, window {start:g}-{stop:g} s "
                       f"(bins {comparison.bin_width:g} s; MD = {comparison.md_rtd:.3g}, order "
                       f"{comparison.md_order:g})")
@@ -107,6 +131,7 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
 
 
 def compare(reference, prediction, *, window, output, bin_width: float = 0.025, basis: str = "frames",
+            level: float = 0.9, resamples: int = 100,
             md_order: float = 2.0, figures: bool = True) -> dict[str, Any]:
     """Compare ``prediction`` (the model) with ``reference`` on a window; write the results.
 
@@ -126,6 +151,10 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
     basis : {"frames", "events"}, optional
         The residence times' time basis (:func:`cfbmarkov.analysis.compare.compare_runs`):
         frames at the model's lag on both sides (default), or the reference's exact events.
+    level : float, optional
+        Coverage of the prediction's intervals (``docs/definitions.md``, Intervals).
+    resamples : int, optional
+        Bootstrap resamples of the model's fitting window for the intervals (0: none).
     figures : bool, optional
         Draw ``rtd.png``, ``snapshots.png``, ``mixing.png`` and, when the prediction carries
         its model, ``transition_matrix.png``, ``transition_bars.png`` and
@@ -160,6 +189,17 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
                                   basis=basis)
         summary = comparison.summary()
         warnings = list(comparison.warnings)
+        intervals = _intervals(pred, comparison, level, resamples, warnings)
+        if intervals is not None:
+            summary["level"] = intervals.level
+            summary["model"]["rt_mean_interval"] = list(intervals.rt_mean)
+            summary["model"]["rt_sd_interval"] = list(intervals.rt_sd)
+            summary["model"]["rtd_interval"] = intervals.rtd.tolist()
+            summary["intervals"] = {"resamples": intervals.resamples,
+                                    "blocks": intervals.blocks,
+                                    "method": "block bootstrap of the fitting window and "
+                                              "Monte Carlo noise, in quadrature"}
+        comparison.intervals = intervals
         out.mkdir(parents=True, exist_ok=True)
         with contextlib.suppress(FileNotFoundError):   # never leave a stale summary beside
             (out / SUMMARY).unlink()                     # figures of this run

@@ -230,6 +230,8 @@ def plot_probability_maps(maps, times: Sequence[float], width: float, height: fl
         Output PNG file.
     title : str, optional
         Figure title.
+    band : (ndarray of shape (2, B), float), optional
+        The model's interval per bin (lower, upper) and its level, drawn as a band.
 
     Returns
     -------
@@ -288,7 +290,8 @@ def _stats(stats) -> tuple[float, float, int | None]:
 
 
 def plot_rtd(edges, prob_reference, prob_model, stats_ref, stats_model, path, *,
-             labels: tuple[str, str] = ("reference", "model"), title: str | None = None) -> Path:
+             labels: tuple[str, str] = ("reference", "model"), title: str | None = None,
+             band=None) -> Path:
     """Both RTDs as probability per bin on shared bins, written as a PNG.
 
     The legend gives E(RT) and SD(RT); dashed lines mark the means.
@@ -345,6 +348,11 @@ def plot_rtd(edges, prob_reference, prob_model, stats_ref, stats_model, path, *,
             ax.stairs(prob, edges, color=colour, lw=1.6, label=text)
         if np.isfinite(mean):
             ax.axvline(mean, color=colour, ls="--", lw=1.0)
+    if band is not None:
+        (lower, upper), level = np.asarray(band[0], dtype=np.float64), float(band[1])
+        if lower.shape == pm.shape:
+            ax.stairs(upper, edges, baseline=lower, fill=True, color=MODEL_COLOUR, alpha=0.2,
+                      label=f"model, {100 * level:g} % interval per bin")
     support = np.flatnonzero((pr > 0) | (pm > 0))
     right = edges[-1] if support.size == 0 else min(edges[-1], edges[support[-1] + 1] * 1.08)
     ax.set_xlim(0.0, right)
