@@ -56,7 +56,8 @@ class WindowDifference:
 
 def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, float], *,
                       bin_width: float, md_order: float, use_events: bool, stride: int,
-                      face_band: float | None, window_length: float) -> WindowDifference:
+                      face_band: float | None, window_length: float,
+                      direction: str = "up") -> WindowDifference:
     """The reference's RTD in ``stand_in`` taken as the prediction of ``judged``.
 
     Parameters
@@ -67,8 +68,8 @@ def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, f
         The two windows (s).
     bin_width, md_order : float
         The comparison's RTD bins (s) and Minkowski order.
-    use_events, stride, face_band
-        The comparison's basis (:func:`cfbmarkov.analysis.rtd.residence_times`).
+    use_events, stride, face_band, direction
+        The comparison's basis and direction (:func:`cfbmarkov.analysis.rtd.residence_times`).
     window_length : float
         Length (s) whose bins both RTDs use (the analysis window's).
 
@@ -76,7 +77,8 @@ def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, f
     -------
     WindowDifference
     """
-    kwargs = {"use_events": use_events, "stride": stride, "face_band": face_band}
+    kwargs = {"use_events": use_events, "stride": stride, "face_band": face_band,
+              "direction": direction}
     a = residence_times(ref, stand_in, **kwargs)
     b = residence_times(ref, judged, **kwargs)
     _, pa = rtd_histogram(a.samples, bin_width, window_length=window_length)

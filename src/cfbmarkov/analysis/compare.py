@@ -28,7 +28,8 @@ from cfbmarkov.analysis.baseline import WindowDifference, fitting_window, window
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
-from cfbmarkov.analysis.rtd import DEFAULT_FACE_ROWS, ResidenceTimes, residence_times, rtd_histogram
+from cfbmarkov.analysis.rtd import (DEFAULT_FACE_ROWS, ResidenceTimes, net_passes, residence_times,
+                                    rtd_histogram)
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 
@@ -226,6 +227,9 @@ class RunComparison:
     intervals : PredictionIntervals or None
         The prediction's intervals, set by the report where they can be formed
         (:mod:`cfbmarkov.analysis.intervals`).
+    direction : {"up", "down"}
+        The direction residences are counted in: down where the reference's net solids
+        flow over the window is downward.
     """
 
     window: tuple[float, float]
@@ -245,6 +249,7 @@ class RunComparison:
     baseline: WindowDifference | None = None
     natural_variability: WindowDifference | None = None
     intervals: Any = None
+    direction: str = "up"
 
     @property
     def pd_rt_mean(self) -> float:
@@ -296,6 +301,7 @@ class RunComparison:
             "same_tracer_groups": bool(self.same_tracer_groups),
             "model_columns": self.model_columns,
             "basis": self.basis,
+            "direction": self.direction,
             "reference_frame_stride": int(self.stride),
             "exact_reference": None if self.exact_reference is None else {
                 "rt_mean": self.exact_reference.mean, "rt_sd": self.exact_reference.sd,
@@ -400,14 +406,22 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
                             f"of the reference's frames ({ref.frame_interval:g} s): its "
                             "residence times use every frame")
     events = basis == "events"
+    direction = "up"
+    if ref.boundary == "periodic" and net_passes(ref, (start, stop)) < 0:
+        direction = "down"
+        warnings.append("the solids' net flow over the window is downward: residence times "
+                        "run from entries through the top to exits through the bottom")
     rt_ref = residence_times(ref, (start, stop), use_events=events, face_band=band,
-                             stride=stride)
-    rt_mod = residence_times(pred, (start, stop), use_events=events, face_band=band)
+                             stride=stride, direction=direction)
+    rt_mod = residence_times(pred, (start, stop), use_events=events, face_band=band,
+                             direction=direction)
     exact_reference = None
     if not events and ref.has_events and ref.boundary == "periodic":
-        exact_reference = residence_times(ref, (start, stop), use_events=True)
+        exact_reference = residence_times(ref, (start, stop), use_events=True,
+                                          direction=direction)
     basis_args = {"bin_width": bin_width, "md_order": md_order, "use_events": events,
-                  "stride": stride, "face_band": band, "window_length": stop - start}
+                  "stride": stride, "face_band": band, "window_length": stop - start,
+                  "direction": direction}
     baseline = None
     fitted = fitting_window(pred)
     if fitted is not None and fitted[0] >= ref.times[0] - ref.time_tolerance and (
@@ -470,7 +484,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         model=ComparedRun(pred, pred_frames, rt_mod, p_mod, t_mod, f_mod, left_mod),
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
         warnings=warnings, basis=basis, stride=stride, exact_reference=exact_reference,
-        baseline=baseline, natural_variability=variability)
+        baseline=baseline, natural_variability=variability, direction=direction)
 
 
 def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:

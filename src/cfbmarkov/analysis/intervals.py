@@ -71,7 +71,7 @@ class PredictionIntervals:
 
 def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_length: float, *,
                          level: float = 0.9, blocks: int = 10, resamples: int = 100,
-                         seed: int = 0) -> PredictionIntervals:
+                         seed: int = 0, direction: str = "up") -> PredictionIntervals:
     """Intervals of a prediction's E(RT), SD(RT) and RTD (module docstring).
 
     Parameters
@@ -93,6 +93,8 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         Bootstrap resamples (at least 10).
     seed : int, optional
         Seed of the resampling.
+    direction : {"up", "down"}, optional
+        The direction residences are counted in (:meth:`MarkovModel.rtd`).
 
     Returns
     -------
@@ -135,7 +137,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         for k in picked[1:]:
             total = total + counts[k]
         try:
-            rtd = estimator.fit_counts(total).rtd(window_length)
+            rtd = estimator.fit_counts(total).rtd(window_length, direction)
         except (CfbmarkovError, ValueError):
             continue                 # a resample without residences: no figure
         means.append(rtd.mean)
@@ -143,7 +145,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         rtds.append(_binned(rtd, edges))
     if len(means) < 10:
         raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
-    exact = model.rtd(window_length)
+    exact = model.rtd(window_length, direction)
     exact_hist = _binned(exact, edges)
     lo_q, hi_q = 0.5 * (1 - level), 0.5 * (1 + level)
     z = float(norm.ppf(hi_q))

@@ -309,8 +309,30 @@ class ResidenceTimes:
 DEFAULT_FACE_ROWS = 38
 
 
+def net_passes(traj, window: tuple[float, float]) -> int:
+    """Net passes through the periodic boundary in a window: the lap counters' change from
+    its first to its last frame, summed over the particles (negative: net downflow).
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open periodic trajectory file.
+    window : (float, float)
+        The window (s).
+
+    Returns
+    -------
+    int
+    """
+    frames = traj.window(float(window[0]), float(window[1]))
+    first = traj.laps(frames.start).astype(np.int64)
+    last = traj.laps(frames.stop - 1).astype(np.int64)
+    return int((last - first).sum())
+
+
 def residence_times(traj, window: tuple[float, float], use_events: bool = True,
-                    face_band: float | None = None, stride: int = 1) -> ResidenceTimes:
+                    face_band: float | None = None, stride: int = 1,
+                    direction: str = "up") -> ResidenceTimes:
     """Residence-time samples of a trajectory file in a window.
 
     Uses the file's exact pass events when it has them and ``use_events`` is true (counted
@@ -332,6 +354,11 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         From frames: use every ``stride``-th frame of the window from its first (a model's
         lag when the file's frames are finer), so that both sides of a comparison see
         passes on the same time basis (``docs/definitions.md``, Comparison basis).
+    direction : {"up", "down"}, optional
+        Periodic riser: residences from passes up through the top (the solids' net flow
+        upward, the default) or, where the net flow is downward, down through the bottom
+        (entries through the top, exits through the bottom; ``docs/definitions.md``, Net
+        downflow).
 
     Returns
     -------
@@ -359,6 +386,9 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     stride = int(stride)
     if stride < 1:
         raise InputError(f"frame stride {stride} must be at least 1")
+    if direction not in ("up", "down"):
+        raise InputError(f"residence direction {direction!r}: up or down")
+    sign = 1 if direction == "up" else -1
     span = _BLOCK_FRAMES * stride
     if traj.boundary == "open":
         band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
@@ -380,8 +410,10 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         if not stop > t_first:                   # a window of a single frame
             return ResidenceTimes(np.zeros(0), True, (start, stop))
         try:
-            samples = residence_times_from_events(traj.laps(i0), events.time, events.particle,
-                                                  events.direction, t_first, stop)
+            samples = residence_times_from_events(sign * traj.laps(i0).astype(np.int64),
+                                                  events.time, events.particle,
+                                                  sign * events.direction.astype(np.int64),
+                                                  t_first, stop)
         except InputError as exc:
             raise InputError(f"{traj.path}: damaged pass events ({exc})") from None
         return ResidenceTimes(samples, True, (start, stop))
@@ -390,7 +422,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     chunks = []
     for k in range(i0, i1, span):
         block = slice(k, min(k + span, i1), stride)
-        laps = np.ascontiguousarray(traj.laps(block))
+        laps = np.ascontiguousarray(traj.laps(block) if sign == 1 else -traj.laps(block))
         if running_max is None:
             running_max = laps[0].astype(np.int64)
         out = np.empty(_new_levels_bound(laps, running_max))

@@ -413,7 +413,7 @@ class MarkovModel:
         return self.state_space.cell_maps(history[steps])
 
     # -- residence times ---------------------------------------------------------------
-    def rtd(self, window: float | None = None) -> ResidenceTimeDistribution:
+    def rtd(self, window: float | None = None, direction: str = "up") -> ResidenceTimeDistribution:
         """Exact residence-time distribution (no sampling noise), cached.
 
         Parameters
@@ -421,6 +421,10 @@ class MarkovModel:
         window : float, optional
             Length (s) of an analysis window: the RTD as seen in it, the quantity a
             sample-based RTD estimates (None: the intrinsic RTD).
+        direction : {"up", "down"}, optional
+            A periodic riser's residences from passes up through the top (default) or, for
+            a net downflow, down through the bottom (the pass fractions swapped;
+            ``docs/definitions.md``, Net downflow).
 
         Returns
         -------
@@ -444,6 +448,10 @@ class MarkovModel:
         """
         if self.boundary == "open":
             return self._open_rtd(window)
+        if direction not in ("up", "down"):
+            raise InputError(f"residence direction {direction!r}: up or down")
+        if direction == "down":
+            return self._down_rtd(window)
         if window is not None and "rtd" not in self._cache:
             # a window of n lags sees residence times below n lags only: propagate no further
             steps = max(2, int(round(window / self.lag)))
@@ -458,6 +466,16 @@ class MarkovModel:
                                            self.down_fraction, self.lag,
                                            entry_flux=self._entry_flux)
         intrinsic = self._cache["rtd"]
+        return intrinsic if window is None else intrinsic.in_window(window)
+
+    def _down_rtd(self, window: float | None) -> ResidenceTimeDistribution:
+        """Residences of a net downflow: entries through the top, exits through the bottom."""
+        if "rtd-down" not in self._cache:
+            flux = (self.counts_down.sum(axis=0) - self.counts_up.sum(axis=1)).astype(np.float64)
+            self._cache["rtd-down"] = exact_rtd(self.transition_matrix, self.down_fraction,
+                                                self.up_fraction, self.lag,
+                                                entry_flux=flux if flux.sum() > 0 else None)
+        intrinsic = self._cache["rtd-down"]
         return intrinsic if window is None else intrinsic.in_window(window)
 
     def _open_rtd(self, window: float | None) -> ResidenceTimeDistribution:

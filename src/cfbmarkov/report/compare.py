@@ -75,7 +75,8 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
             return None
         start, stop = comparison.window
         return prediction_intervals(model, comparison.model.residence.samples, comparison.edges,
-                                    stop - start, level=level, resamples=resamples)
+                                    stop - start, level=level, resamples=resamples,
+                                    direction=comparison.direction)
     except InputError as exc:
         warnings.append(f"no intervals: {exc}")
         return None

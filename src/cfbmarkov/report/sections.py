@@ -203,6 +203,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
               "Mixing RMS", "Baseline: PD E / PD SD / MD", "CFD-DEM halves: PD E / PD SD / MD",
               "Paper: PD of E(RT) (%)", "Paper: PD of SD(RT) (%)", "Paper: MD of RTD"]
     rows, pd_sd, pd_mean, orders, widths, exact = [], [], [], set(), set(), {}
+    downward: set[str] = set()
     for c in cases:
         paper = paper_row(c.velocity)
         u = f"{c.velocity:g}" if math.isfinite(c.velocity) else c.name
@@ -229,6 +230,8 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                 orders.add(v)
             if (v := finite_or_none(s.get("bin_width"))) is not None:
                 widths.add(v)
+            if s.get("direction") == "down":
+                downward.add(u)
             ex = s.get("exact_events") or {}
             if s.get("basis") == "frames":
                 stride = s.get("reference_frame_stride") or 1
@@ -268,6 +271,10 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
         notes.append("Residence-time basis: " + "; ".join(
             f"{k} ({', '.join(sorted(v))})" for k, v in exact.items())
             + "; MCM predictions: frame times (docs/definitions.md, Comparison basis).")
+    if downward:
+        notes.append(f"At U = {', '.join(sorted(downward))} m/s the solids' net flow over the "
+                     "predict window is downward: residence times run from entries through the "
+                     "top to exits through the bottom (docs/definitions.md, Net downflow).")
     blocks = [Heading(2, "Table 3: RTD of the CFD-DEM and the MCM"), Table(header, rows, notes)]
     if pd_mean:
         under = sum(v < 0 for v in pd_sd)
