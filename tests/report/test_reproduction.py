@@ -212,3 +212,18 @@ def test_map_times_and_numbers():
     assert map_numbers(few) == {"u2.5": 4, "u3": 5, "u8": 6}
     many = [Case(u) for u in (2.5, 3.0, 4.0, 5.0, 6.0, 8.0)]
     assert map_numbers(many) == {"u2.5": 4, "u3": 4, "u4": 5, "u5": 5, "u6": 6, "u8": 7}
+
+
+def test_trust_paragraph_is_written_from_the_numbers():
+    from cfbmarkov.report.sections import trust_text
+
+    summary = {"md_rtd": 0.33, "baseline": {"md_rtd": 0.076}, "natural_variability":
+               {"md_rtd": 0.05}, "level": 0.9, "reference": {"rt_mean": 0.86},
+               "model": {"rt_mean_interval": [0.9, 1.1]}}
+    text = trust_text("6", "paper", summary)
+    assert "does not beat" in text and "6.6 times" in text and "outside the model's 90 %" in text
+    summary.update(md_rtd=0.04, model={"rt_mean_interval": [0.8, 0.9]})
+    text = trust_text("6", "auto", summary)
+    assert "beats simply" in text and "within the reference's own variability" in text
+    assert "inside" in text
+    assert "too few residences" in trust_text("3", "mle", {"md_rtd": None})

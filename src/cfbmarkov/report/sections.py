@@ -282,7 +282,81 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
             f"PD of E(RT) ranges from {min(pd_mean):.2f} to {max(pd_mean):.2f} % (paper: 0.54 to "
             f"11.89 %); the MCM's SD(RT) is smaller than the CFD-DEM's in {under} of "
             f"{len(pd_sd)} comparisons (paper: all four, by 38 to 51 %)."))
+    blocks.extend(trust_blocks(cases))
     return blocks
+
+
+def trust_text(u: str, estimator: str, summary: dict) -> str:
+    """One paragraph: how far to trust this prediction, written from its numbers (the model
+    against the persistence baseline and the CFD-DEM's own variability, and its interval).
+
+    Parameters
+    ----------
+    u : str
+        The case's velocity as written in the table.
+    estimator : str
+        The model's name.
+    summary : dict
+        The compare summary.
+
+    Returns
+    -------
+    str
+    """
+    md = finite_or_none(summary.get("md_rtd"))
+    base = summary.get("baseline") or {}
+    halves = summary.get("natural_variability") or {}
+    md_base, md_halves = finite_or_none(base.get("md_rtd")), finite_or_none(halves.get("md_rtd"))
+    parts = [f"U = {u} m/s, {estimator}:"]
+    if md is None:
+        return " ".join(parts + ["no RTD to judge (too few residences in the window)."])
+    if md_base is not None:
+        verdict = ("beats" if md < md_base else "does not beat")
+        parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD), where the persistence "
+                     f"baseline is {md_base:.3g}: the model {verdict} simply reusing the "
+                     "fitting window's RTD.")
+    else:
+        parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD); no persistence baseline "
+                     "(the fitting window is not in the reference file).")
+    if md_halves is not None:
+        scale = ("within" if md <= md_halves else f"{md / md_halves:.1f} times")
+        parts.append(f"The CFD-DEM's two halves of the window differ by {md_halves:.3g}: the "
+                     f"model's error is {scale} the reference's own variability"
+                     + ("." if md <= md_halves else "; the difference is the model's."))
+    model = summary.get("model") or {}
+    ref = summary.get("reference") or {}
+    interval = model.get("rt_mean_interval")
+    if interval and finite_or_none(ref.get("rt_mean")) is not None:
+        inside = interval[0] <= ref["rt_mean"] <= interval[1]
+        level = 100 * float(summary.get("level", 0.9))
+        parts.append(f"The CFD-DEM's E(RT) {ref['rt_mean']:.3g} s lies "
+                     f"{'inside' if inside else 'outside'} the model's {level:g} % interval "
+                     f"{interval[0]:.3g}-{interval[1]:.3g} s.")
+    return " ".join(parts)
+
+
+def trust_blocks(cases: list[Case]) -> list:
+    """"How far to trust this prediction": one paragraph per velocity and estimator.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run.
+
+    Returns
+    -------
+    list
+        Document blocks (empty without summaries).
+    """
+    texts = []
+    for c in cases:
+        u = f"{c.velocity:g}" if math.isfinite(c.velocity) else c.name
+        for e in c.estimators or []:
+            if e.summary is not None and not c.problems:
+                texts.append(trust_text(u, e.name, e.summary))
+    if not texts:
+        return []
+    return [Heading(3, "How far to trust these predictions")] + [Para(t) for t in texts]
 
 
 def computing_blocks(cases: list[Case]) -> list:
