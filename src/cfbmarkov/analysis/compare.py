@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from cfbmarkov.analysis.baseline import WindowDifference, fitting_window, window_difference
+from cfbmarkov.analysis.clusters import cluster_index
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
@@ -230,6 +231,9 @@ class RunComparison:
     direction : {"up", "down"}
         The direction residences are counted in: down where the reference's net solids
         flow over the window is downward.
+    cluster : dict or None
+        The cluster index of each side's snapshots (mean and SD over the window's frames,
+        :func:`cfbmarkov.analysis.clusters.cluster_index`) and the grid it was counted on.
     """
 
     window: tuple[float, float]
@@ -250,6 +254,7 @@ class RunComparison:
     natural_variability: WindowDifference | None = None
     intervals: Any = None
     direction: str = "up"
+    cluster: dict | None = None
 
     @property
     def pd_rt_mean(self) -> float:
@@ -302,6 +307,7 @@ class RunComparison:
             "model_columns": self.model_columns,
             "basis": self.basis,
             "direction": self.direction,
+            "cluster_index": self.cluster,
             "reference_frame_stride": int(self.stride),
             "exact_reference": None if self.exact_reference is None else {
                 "rt_mean": self.exact_reference.mean, "rt_sd": self.exact_reference.sd,
@@ -484,7 +490,18 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         model=ComparedRun(pred, pred_frames, rt_mod, p_mod, t_mod, f_mod, left_mod),
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
         warnings=warnings, basis=basis, stride=stride, exact_reference=exact_reference,
-        baseline=baseline, natural_variability=variability, direction=direction)
+        baseline=baseline, natural_variability=variability, direction=direction,
+        cluster=_clusters(ref, pred, ref_frames, pred_frames, columns))
+
+
+def _clusters(ref, pred, ref_frames: slice, pred_frames: slice, columns: int | None) -> dict:
+    """Both sides' cluster index on the model's grid (else the paper's 6 x 38)."""
+    rows = pred.parameters.get("rows") if isinstance(pred.parameters, dict) else None
+    columns, rows = (columns or 6), int(rows or DEFAULT_FACE_ROWS)
+    r_mean, r_sd = cluster_index(ref, ref_frames, columns, rows)
+    m_mean, m_sd = cluster_index(pred, pred_frames, columns, rows)
+    return {"grid": [columns, rows], "reference": {"mean": r_mean, "sd": r_sd},
+            "model": {"mean": m_mean, "sd": m_sd}}
 
 
 def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:

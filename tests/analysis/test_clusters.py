@@ -1,0 +1,38 @@
+"""The cluster index of snapshots: exact for constructed frames, about 1 for independent
+uniform particles, and reported by compare for both sides."""
+
+import numpy as np
+import pytest
+
+from cfbmarkov.analysis.clusters import cluster_index
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
+
+W, H = 0.09, 0.95
+
+
+def test_index_of_dispersion_is_exact_for_constructed_frames(tmp_path):
+    columns, rows, n = 3, 4, 24
+    clump = np.tile([[0.01, 0.01]], (n, 1))                     # every particle in one cell
+    centres = np.array([[(c + 0.5) * W / columns, (r + 0.5) * H / rows]
+                        for r in range(rows) for c in range(columns)])
+    even = np.concatenate([centres, centres])                    # two per cell
+    path = write_trajectories(tmp_path / "c.h5", [0.0, 0.1], np.stack([clump, even]),
+                              width=W, height=H)
+    with Trajectories(path) as t:
+        one = cluster_index(t, slice(0, 1), columns, rows)[0]
+        two = cluster_index(t, slice(1, 2), columns, rows)[0]
+        both = cluster_index(t, slice(0, 2), columns, rows)
+    cells = columns * rows
+    assert one == pytest.approx((n / cells) * (cells - 1), rel=1e-12)
+    assert two == 0.0
+    assert both[0] == pytest.approx(0.5 * one) and both[1] == pytest.approx(one / np.sqrt(2))
+
+
+def test_independent_uniform_particles_give_about_one(tmp_path):
+    rng = np.random.default_rng(1)
+    pos = rng.uniform([0, 0], [W, H], size=(40, 2000, 2))
+    path = write_trajectories(tmp_path / "u.h5", np.arange(40) * 0.01, pos, width=W, height=H)
+    with Trajectories(path) as t:
+        mean, sd = cluster_index(t, slice(0, 40), 6, 38)
+    assert mean == pytest.approx(1.0, abs=0.05) and 0 < sd < 0.3
