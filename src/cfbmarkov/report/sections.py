@@ -323,6 +323,12 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
         parts.append(f"The CFD-DEM's two halves of the window differ by {md_halves:.3g}: the "
                      f"model's error is {scale} the reference's own variability"
                      + ("." if md <= md_halves else "; the difference is the model's."))
+    cluster = summary.get("cluster_index") or {}
+    c_ref = finite_or_none((cluster.get("reference") or {}).get("mean"))
+    c_mod = finite_or_none((cluster.get("model") or {}).get("mean"))
+    if c_ref is not None and c_mod is not None:
+        parts.append(f"Cluster index of the snapshots (1: independent particles): CFD-DEM "
+                     f"{c_ref:.3g}, model {c_mod:.3g}.")
     model = summary.get("model") or {}
     ref = summary.get("reference") or {}
     interval = model.get("rt_mean_interval")
