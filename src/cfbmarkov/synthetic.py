@@ -208,6 +208,15 @@ def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
     return times, cells, positions, laps
 
 
+def _sampled(flow: RiserFlow, n_particles: int, duration: float, seed: int, start_time: float):
+    """(times, positions, laps, parameters) of a sampled run for the writers."""
+    n_frames = int(round(duration / flow.lag)) + 1
+    times, _, positions, laps = sample_run(flow, n_particles, n_frames, seed, start_time)
+    params = {k: getattr(flow, k) for k in flow.__dataclass_fields__}
+    params["seed"] = seed
+    return times, positions, laps, params
+
+
 def write_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, duration: float,
               seed: int = 0, start_time: float = 0.0) -> Path:
     """Write a synthetic run as a trajectory file (source ``'synthetic'``).
@@ -235,10 +244,7 @@ def write_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, durati
     """
     from cfbmarkov.trajectory_writer import TrajectoryWriter
 
-    n_frames = int(round(duration / flow.lag)) + 1
-    times, _, positions, laps = sample_run(flow, n_particles, n_frames, seed, start_time)
-    params = {k: getattr(flow, k) for k in flow.__dataclass_fields__}
-    params["seed"] = seed
+    times, positions, laps, params = _sampled(flow, n_particles, duration, seed, start_time)
     with TrajectoryWriter(path, np.arange(n_particles), width=flow.width, height=flow.height,
                           source="synthetic", parameters=params, frame_interval=flow.lag) as w:
         w.append_frames(times, positions, laps=laps)
@@ -267,12 +273,9 @@ def write_open_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, d
     """
     from cfbmarkov.trajectory_writer import TrajectoryWriter
 
-    n_frames = int(round(duration / flow.lag)) + 1
-    times, _, positions, laps = sample_run(flow, n_particles, n_frames, seed, start_time)
+    times, positions, laps, params = _sampled(flow, n_particles, duration, seed, start_time)
     present = np.ones(laps.shape, dtype=bool)
     present[1:] = laps[1:] == laps[:-1]
-    params = {k: getattr(flow, k) for k in flow.__dataclass_fields__}
-    params["seed"] = seed
     with TrajectoryWriter(path, np.arange(n_particles), width=flow.width, height=flow.height,
                           source="synthetic-open", parameters=params, frame_interval=flow.lag,
                           boundary="open") as w:

@@ -84,6 +84,19 @@ class SparseChain:
                    down_fraction[rows, cols].astype(np.float64))
 
 
+@nb.njit(cache=True, inline="always")
+def first_above(cumulative, lo, hi, u):
+    """The first index in ``lo..hi`` whose cumulative probability exceeds ``u`` (bisection;
+    the cumulative rule of Eq. 7); ``hi`` where none does before it."""
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if cumulative[mid] > u:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo
+
+
 @nb.njit(cache=True, parallel=True)
 def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulative, up_probability,
                    down_probability, n_steps, seed, states_out, laps_out):
@@ -123,15 +136,7 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
             a = row_start[s]
             b = row_start[s + 1]
             if b > a:
-                u = uniform(seed, STREAM_STATE, p, k)
-                lo = a
-                hi = b - 1
-                while lo < hi:             # first entry with cumulative > u (Eq. 7)
-                    mid = (lo + hi) >> 1
-                    if cumulative[mid] > u:
-                        hi = mid
-                    else:
-                        lo = mid + 1
+                lo = first_above(cumulative, a, b - 1, uniform(seed, STREAM_STATE, p, k))
                 pu = up_probability[lo]
                 pd = down_probability[lo]
                 if pu > 0.0 or pd > 0.0:

@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from cfbmarkov._random import uniform
-from cfbmarkov.markov.montecarlo import STREAM_STATE, SparseChain
+from cfbmarkov.markov.montecarlo import STREAM_STATE, SparseChain, first_above
 
 #: random-number streams of the open riser (the periodic ones use 0-3)
 STREAM_EXIT, STREAM_INFLOW, STREAM_ENTRY = 4, 5, 6
@@ -44,15 +44,8 @@ def _entry_states(seed, cumulative, first, out):
     """States of the newcomers ``first``, ``first + 1``, ... drawn from the entry
     distribution (its cumulative sums)."""
     for q in range(out.size):
-        u = uniform(seed, STREAM_ENTRY, first + q, 0)
-        lo, hi = 0, cumulative.size - 1
-        while lo < hi:
-            mid = (lo + hi) >> 1
-            if cumulative[mid] > u:
-                hi = mid
-            else:
-                lo = mid + 1
-        out[q] = lo
+        out[q] = first_above(cumulative, 0, cumulative.size - 1,
+                             uniform(seed, STREAM_ENTRY, first + q, 0))
 
 
 @nb.njit(cache=True, parallel=True)
@@ -93,16 +86,8 @@ def open_steps(initial_states, start_step, exit_probability, row_start, column, 
                     a = row_start[s]
                     b = row_start[s + 1]
                     if b > a:
-                        u = uniform(seed, STREAM_STATE, p, k)
-                        lo = a
-                        hi = b - 1
-                        while lo < hi:
-                            mid = (lo + hi) >> 1
-                            if cumulative[mid] > u:
-                                hi = mid
-                            else:
-                                lo = mid + 1
-                        s = column[lo]
+                        s = column[first_above(cumulative, a, b - 1,
+                                               uniform(seed, STREAM_STATE, p, k))]
             states_out[k, p] = s
 
 
