@@ -147,6 +147,38 @@ def writing(target: str | os.PathLike):
         raise write_error(late, target) from None
 
 
+@contextlib.contextmanager
+def h5_file(path: str | os.PathLike, target: str | os.PathLike):
+    """``h5py.File(path, "w")`` as a context manager that maps a failed write to one
+    InputError naming ``target``, and then leaves the file unclosed (HDF5 may crash when it
+    closes a file whose writes failed; the command line ends with os._exit)."""
+    import h5py
+
+    try:
+        f = h5py.File(path, "w")
+    except (OSError, RuntimeError) as exc:
+        raise write_error(exc, target) from None
+    try:
+        yield f
+        late = late_write_failure()
+        if late is None:
+            f.close()
+    except (OSError, RuntimeError) as exc:
+        if not is_write_failure(exc):
+            f.close()
+            raise
+        late = exc
+    except BaseException:
+        f.close()
+        raise
+    if late is not None:
+        _UNCLOSED.append(f)
+        raise write_error(late, target) from None
+
+
+_UNCLOSED: list = []
+
+
 def late_write_failure() -> BaseException | None:
     """The first write failure HDF5 reported while freeing an object (where Python could
     not raise it), once; None if there was none."""

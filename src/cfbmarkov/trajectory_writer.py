@@ -44,6 +44,10 @@ IMPORT_MAX_STEP = 0.25
 MIN_CHUNK_PARTICLES = 256
 
 
+#: files whose writes failed: kept referenced so that they are never closed or freed
+_FAILED_FILES: list = []
+
+
 def _writes(method):
     """Method decorator: a failed write (no space left, file too large, ...) discards the
     partial file and becomes one InputError naming the output and the cause."""
@@ -694,13 +698,12 @@ class TrajectoryWriter:
             self._closed = True
 
     def _fail(self) -> None:
-        """After a failed write: close the file once (HDF5 may crash on a second try) and
-        discard it."""
+        """After a failed write: discard the file without closing it (HDF5 may crash when
+        it closes a file whose writes failed; the command line then ends with os._exit)."""
         if self._closed:
             return
         self._closed = True
-        with contextlib.suppress(Exception):
-            self._file.close()
+        _FAILED_FILES.append(self._file)    # never freed, never closed
         discard(self._tmp)
 
 
