@@ -1,5 +1,9 @@
 import sys
 
-from cfbmarkov.cli import main
+try:
+    from cfbmarkov.cli import main
+except KeyboardInterrupt:      # Ctrl-C while the modules load: one line, exit 130
+    print("cfbmarkov: interrupted", file=sys.stderr)
+    sys.exit(130)
 
 sys.exit(main())

@@ -9,7 +9,10 @@ under the final name.
 from __future__ import annotations
 
 import contextlib
+import errno as _errno
 import os
+import re
+import sys
 import tempfile
 from pathlib import Path
 
@@ -33,11 +36,197 @@ def temporary_path(target: str | os.PathLike, suffix: str = "") -> Path:
         system, so the final rename is atomic).
     """
     target = Path(target)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + suffix,
-                               dir=target.parent)
+    catch_late_write_failures()
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + suffix,
+                                   dir=target.parent)
+    except OSError as exc:
+        raise write_error(exc, target) from None
+    try:
+        os.fchmod(fd, file_mode())      # mkstemp makes 0600 files: give the umask's mode
+    except (OSError, AttributeError):   # pragma: no cover - no fchmod (Windows)
+        pass
     os.close(fd)
     return Path(tmp)
+
+
+def file_mode(folder: bool = False) -> int:
+    """The mode a new file (``0o666``) or folder (``0o777``) gets under the current umask.
+
+    Parameters
+    ----------
+    folder : bool, optional
+        For a folder.
+
+    Returns
+    -------
+    int
+    """
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return (0o777 if folder else 0o666) & ~mask
+
+
+_HDF5_ERRNO = re.compile(r"errno = (\d+)")
+
+#: set once an HDF5 write has failed in this process: the HDF5 library may then crash when
+#: the interpreter ends, so the command line leaves with os._exit (see cfbmarkov.cli.main)
+HDF5_WRITE_FAILED = False
+#: write failures HDF5 reported where Python could not raise them (freeing a dataset)
+_LATE_FAILURES: list[BaseException] = []
+
+
+def error_number(exc: BaseException) -> int | None:
+    """The errno of an OSError, or the one HDF5 quotes in the text of an h5py error."""
+    number = getattr(exc, "errno", None)
+    if isinstance(number, int) and number:
+        return number
+    match = _HDF5_ERRNO.search(str(exc))
+    return int(match.group(1)) if match else None
+
+
+def is_write_failure(exc: BaseException) -> bool:
+    """Whether ``exc`` is a failed write: an OSError, or an h5py error whose text names an
+    errno or a failed write."""
+    if isinstance(exc, OSError):
+        return True
+    return isinstance(exc, RuntimeError) and (
+        error_number(exc) is not None or "write failed" in str(exc))
+
+
+def write_error(exc: BaseException, target: str | os.PathLike) -> InputError:
+    """The one-line error for a write of ``target`` that failed with ``exc``.
+
+    Parameters
+    ----------
+    exc : BaseException
+        An OSError, or an h5py OSError/RuntimeError that quotes an errno.
+    target : str or os.PathLike
+        The output being written.
+
+    Returns
+    -------
+    InputError
+        ``"<target>: cannot write (No space left on device)"`` and the like.
+    """
+    global HDF5_WRITE_FAILED
+    number = error_number(exc)
+    if "h5py" in type(exc).__module__ or _HDF5_ERRNO.search(str(exc)) or isinstance(
+            exc, RuntimeError):
+        HDF5_WRITE_FAILED = True
+    if number is not None:
+        cause = os.strerror(number)
+    else:
+        cause = (getattr(exc, "strerror", None) or str(exc).splitlines()[0]
+                 if str(exc) else type(exc).__name__)
+    return InputError(f"{target}: cannot write ({cause})")
+
+
+@contextlib.contextmanager
+def writing(target: str | os.PathLike):
+    """Context manager: a failed write in the body (OSError, or an h5py error quoting an
+    errno: no space left, file too large, permission denied, read-only file system ...)
+    becomes one :class:`~cfbmarkov.errors.InputError` naming ``target`` and the cause.
+
+    Parameters
+    ----------
+    target : str or os.PathLike
+        The output being written, named in the message.
+    """
+    try:
+        yield
+        late = late_write_failure()
+    except InputError:
+        raise
+    except (OSError, RuntimeError) as exc:
+        if not is_write_failure(exc):
+            raise
+        raise write_error(exc, target) from None
+    if late is not None:
+        raise write_error(late, target) from None
+
+
+@contextlib.contextmanager
+def h5_file(path: str | os.PathLike, target: str | os.PathLike):
+    """``h5py.File(path, "w")`` as a context manager that maps a failed write to one
+    InputError naming ``target``, and then leaves the file unclosed (HDF5 may crash when it
+    closes a file whose writes failed; the command line ends with os._exit)."""
+    import h5py
+
+    try:
+        f = h5py.File(path, "w")
+    except (OSError, RuntimeError) as exc:
+        raise write_error(exc, target) from None
+    try:
+        yield f
+        late = late_write_failure()
+        if late is None:
+            f.close()
+    except (OSError, RuntimeError) as exc:
+        if not is_write_failure(exc):
+            f.close()
+            raise
+        late = exc
+    except BaseException:
+        f.close()
+        raise
+    if late is not None:
+        _UNCLOSED.append(f)
+        raise write_error(late, target) from None
+
+
+_UNCLOSED: list = []
+
+
+def late_write_failure() -> BaseException | None:
+    """The first write failure HDF5 reported while freeing an object (where Python could
+    not raise it), once; None if there was none."""
+    if _LATE_FAILURES:
+        exc = _LATE_FAILURES[0]
+        _LATE_FAILURES.clear()
+        return exc
+    return None
+
+
+def _late_failure(exc) -> bool:
+    """Record ``exc`` if it is an HDF5 write failure reported while freeing an object."""
+    global HDF5_WRITE_FAILED
+    if exc is None or not isinstance(exc, (OSError, RuntimeError)) or not (
+            "write failed" in str(exc) or "decrement id ref count" in str(exc)):
+        return False
+    HDF5_WRITE_FAILED = True
+    if not _LATE_FAILURES:
+        _LATE_FAILURES.append(exc)
+    return True
+
+
+def _unraisable(hook):
+    def handle(info):
+        if not _late_failure(info.exc_value):
+            hook(info)
+    handle.cfbmarkov = True
+    return handle
+
+
+def _excepthook(hook):
+    # h5py (Cython) prints a failure in a destructor through sys.excepthook, then as
+    # unraisable: both are recorded, not printed
+    def handle(exc_type, exc, tb):
+        if not _late_failure(exc):
+            hook(exc_type, exc, tb)
+    handle.cfbmarkov = True
+    return handle
+
+
+def catch_late_write_failures() -> None:
+    """Route HDF5 write failures raised while freeing objects (printed by Python as
+    "Exception ignored in ...", thousands of times on a full disk) to
+    :func:`late_write_failure` instead of stderr. Idempotent."""
+    if not getattr(sys.unraisablehook, "cfbmarkov", False):
+        sys.unraisablehook = _unraisable(sys.unraisablehook)
+    if not getattr(sys.excepthook, "cfbmarkov", False):
+        sys.excepthook = _excepthook(sys.excepthook)
 
 
 def publish(tmp: str | os.PathLike, target: str | os.PathLike) -> Path:
@@ -64,7 +253,7 @@ def publish(tmp: str | os.PathLike, target: str | os.PathLike) -> Path:
         os.replace(tmp, target)
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
-        raise InputError(f"{target}: cannot write ({exc.strerror or exc})") from None
+        raise write_error(exc, target) from None
     return Path(target)
 
 
@@ -76,7 +265,8 @@ def discard(tmp: str | os.PathLike) -> None:
     tmp : str or os.PathLike
         The temporary file; nothing happens if it no longer exists.
     """
-    Path(tmp).unlink(missing_ok=True)
+    with contextlib.suppress(OSError):
+        Path(tmp).unlink(missing_ok=True)
 
 
 @contextlib.contextmanager
@@ -105,7 +295,8 @@ def atomic_path(target: str | os.PathLike, suffix: str = ""):
     """
     tmp = temporary_path(target, suffix)
     try:
-        yield tmp
+        with writing(target):
+            yield tmp
     except BaseException:
         discard(tmp)
         raise

@@ -6,7 +6,9 @@ Errors in the input (files, options) are reported as one line on stderr with exi
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import os
 import sys
 from pathlib import Path
 
@@ -562,6 +564,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--repeat", type=int, default=5, help="repetitions (median reported)")
     s.add_argument("--particles", type=int, default=27000)
     s.set_defaults(func=_cmd_bench)
+    for name, verb in sub.choices.items():
+        if name in OUTPUTS:
+            verb.add_argument("--force", action="store_true",
+                              help="replace an existing output of another kind (a file of "
+                                   "another format, a FIFO, an empty folder, ...)")
     return p
 
 
@@ -580,19 +587,72 @@ def main(argv: list[str] | None = None) -> int:
         :class:`~cfbmarkov.errors.CfbmarkovError` (reported as one line on stderr), 130 when
         interrupted.
     """
-    parser = build_parser()
     try:
-        args = parser.parse_args(argv)
-    except SystemExit as exc:      # usage errors (2), --help and --version (0)
-        return int(exc.code or 0)
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as exc:      # usage errors (2), --help and --version (0)
+            return int(exc.code or 0)
+    except KeyboardInterrupt:
+        print("cfbmarkov: interrupted", file=sys.stderr)
+        return 130
+    code = _run(args)
+    from cfbmarkov import _atomic
+
+    if _atomic.HDF5_WRITE_FAILED:      # HDF5 may crash at exit after a failed write
+        from cfbmarkov._outputs import release_all
+
+        release_all()
+        with contextlib.suppress(Exception):
+            sys.stdout.flush()
+            sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+#: the output each writing verb claims: kind, and the arguments naming its inputs
+OUTPUTS = {"import": ("trajectory", ("source",)), "fit": ("model", ("run",)),
+           "predict": ("trajectory", ("model", "init")),
+           "compare": ("folder", ("reference", "prediction")), "maps": ("png", ("model",)),
+           "simulate": ("trajectory", ("case",)), "reproduce": ("folder", ("overrides",)),
+           "demo": ("folder", ()), "export-vtk": ("folder", ("run",))}
+
+
+def _run(args) -> int:
+    """Run the verb of ``args`` with its output claimed; errors become one line."""
     try:
+        if args.command in OUTPUTS:
+            from cfbmarkov._outputs import claim_output
+
+            kind, inputs = OUTPUTS[args.command]
+            with claim_output(args.output, args.command, kind,
+                              [getattr(args, name, None) for name in inputs],
+                              force=getattr(args, "force", False)):
+                return int(args.func(args) or 0)
         return int(args.func(args) or 0)
     except CfbmarkovError as exc:
         print(f"cfbmarkov {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print(f"cfbmarkov {args.command}: interrupted", file=sys.stderr)
+        print(f"cfbmarkov {args.command}: interrupted{_resumable(args)}", file=sys.stderr)
         return 130
+    except OSError as exc:             # a write that failed outside the writers' mapping
+        from cfbmarkov._atomic import write_error
+
+        name = exc.filename or getattr(args, "output", "")
+        print(f"cfbmarkov {args.command}: error: {write_error(exc, name)}", file=sys.stderr)
+        return 2
+
+
+def _resumable(args) -> str:
+    """What an interrupted verb can be resumed with."""
+    if args.command == "simulate":
+        checkpoint = Path(str(args.output) + ".parts") / "checkpoint.h5"
+        if checkpoint.exists():
+            return "; the run can be resumed with --resume (from its last checkpoint)"
+    if args.command in ("reproduce", "demo") and not getattr(args, "synthetic", False):
+        return "; rerun the same command to resume"
+    return ""
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -429,6 +429,22 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     out = Path(directory)
     if out.exists() and not out.is_dir():
         raise InputError(f"output {out} exists and is not a directory")
+    from cfbmarkov._outputs import claim_output
+
+    with claim_output(out, "reproduce", "folder"):    # lock and folder before any work
+        return _reproduce(out, scale, cases, names, overrides, models, executor, scheduler,
+                          jobs, progress, report, log)
+
+
+def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executor, scheduler,
+               jobs, progress, report, log) -> Path:
+    client = None
+    threads = None
+    own = executor is None
+    if executor is None and scheduler:      # refused settings leave no folder behind
+        executor, client = dask_executor(scheduler)
+    elif executor is None:
+        executor, threads = local_executor(jobs, len(cases))
     out.mkdir(parents=True, exist_ok=True)
     from cfbmarkov import __version__
 
@@ -436,14 +452,6 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
                 "reductions": list(scale.reductions), "overrides": overrides or {},
                 "cases": names, "models": list(models), "version": __version__}
     write_text_atomic(out / "reproduce.json", json.dumps(manifest, indent=2) + "\n")
-
-    client = None
-    threads = None
-    own = executor is None
-    if executor is None and scheduler:
-        executor, client = dask_executor(scheduler)
-    elif executor is None:
-        executor, threads = local_executor(jobs, len(cases))
     log(f"reproduce ({scale.name} scale): {len(cases)} case(s) {', '.join(names)} in {out}")
     started = _time.perf_counter()
     failures: list[str] = []

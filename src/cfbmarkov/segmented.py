@@ -220,9 +220,12 @@ class SegmentedTrajectoryWriter:
                                                                 for name in seg.field_names})
             for name, (datasets, attrs) in (attach or {}).items():
                 merged.attach(name, datasets, attrs)
+        # the output is in place: remove the checkpoint first (a kill from here on leaves
+        # segments without a checkpoint, which a rerun or --resume clears), then the rest
+        (self.parts / "checkpoint.h5").unlink(missing_ok=True)
         for path in paths:
-            path.unlink()
+            path.unlink(missing_ok=True)
         for path in self.parts.iterdir():
-            path.unlink()
+            path.unlink(missing_ok=True)
         self.parts.rmdir()
         return self.output

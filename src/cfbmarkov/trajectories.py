@@ -40,6 +40,7 @@ refuses it (``docs/definitions.md``, File formats, Frame times).
 from __future__ import annotations
 
 import contextlib
+import errno
 import json
 import os
 from dataclasses import dataclass
@@ -145,7 +146,14 @@ def _open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
         raise InputError(f"{path}: empty file")
     try:
         return h5py.File(path, mode)
-    except OSError:
+    except OSError as exc:
+        text = str(exc).lower()
+        if isinstance(exc, PermissionError) or "permission denied" in text or \
+                getattr(exc, "errno", None) in (errno.EACCES, errno.EPERM):
+            raise InputError(f"{path}: cannot read (permission denied)") from None
+        if "unable to lock file" in text:
+            raise InputError(f"{path}: locked by another program that is writing it (HDF5 "
+                             "file lock); wait for it to end") from None
         raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format)") from None
 
 

@@ -17,7 +17,9 @@ off.
 
 from __future__ import annotations
 
+import contextlib
 import datetime as _dt
+import functools
 import json
 import os
 from pathlib import Path
@@ -26,7 +28,8 @@ from typing import Any
 import h5py
 import numpy as np
 
-from cfbmarkov._atomic import discard, publish, temporary_path
+from cfbmarkov._atomic import (discard, is_write_failure, late_write_failure, publish,
+                               temporary_path, write_error)
 from cfbmarkov._hdf5 import create_array_dataset, json_default, package_version
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import (BOUNDARIES, FORMAT, FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE,
@@ -39,6 +42,29 @@ RECENT_STEPS = 64
 IMPORT_MAX_STEP = 0.25
 #: fewest particles per chunk of a frame (a file whose particles grow by insertion)
 MIN_CHUNK_PARTICLES = 256
+
+
+#: files whose writes failed: kept referenced so that they are never closed or freed
+_FAILED_FILES: list = []
+
+
+def _writes(method):
+    """Method decorator: a failed write (no space left, file too large, ...) discards the
+    partial file and becomes one InputError naming the output and the cause."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            result = method(self, *args, **kwargs)
+            late = late_write_failure()
+        except (OSError, RuntimeError) as exc:
+            if not is_write_failure(exc):
+                raise
+            late = exc
+        if late is not None:
+            self._fail()
+            raise write_error(late, self.path) from None
+        return result
+    return wrapper
 
 
 class TrajectoryWriter:
@@ -146,8 +172,17 @@ class TrajectoryWriter:
         if origin.size != self.dimensions:
             raise InputError(f"region origin {origin.tolist()} needs {self.dimensions} coordinates")
         self._tmp = temporary_path(self.path)
+        self._closed = False
         n, d = self.ids.size, self.dimensions
-        self._file = h5py.File(self._tmp, "w")
+        try:
+            self._file = h5py.File(self._tmp, "w")
+        except (OSError, RuntimeError) as exc:
+            discard(self._tmp)
+            raise write_error(exc, self.path) from None
+        self._create(n, d, source, parameters, origin, axes, boundary, frame_interval)
+
+    @_writes
+    def _create(self, n, d, source, parameters, origin, axes, boundary, frame_interval) -> None:
         f = self._file
         f.attrs.update({
             "format": FORMAT, "version": VERSION, "width": self.width, "height": self.height,
@@ -170,7 +205,7 @@ class TrajectoryWriter:
                          chunks=(1, chunk, d), fillvalue=np.nan)
         f.create_dataset("frames/lap", shape=(0, n), maxshape=(None, None), dtype="i4",
                          chunks=(1, chunk))
-        if with_velocity:
+        if self.with_velocity:
             f.create_dataset("frames/velocity", shape=(0, n, d), maxshape=(None, None, d),
                              dtype="f8", chunks=(1, chunk, d), fillvalue=np.nan)
         self._chunk = chunk
@@ -183,7 +218,6 @@ class TrajectoryWriter:
         self._last_lap: np.ndarray | None = None     # its lap counter then
         self._last_present: np.ndarray | None = None  # present in the last frame written
         self._any_present = False
-        self._closed = False
 
     # -- context manager ---------------------------------------------------------------
     def __enter__(self) -> "TrajectoryWriter":
@@ -318,6 +352,7 @@ class TrajectoryWriter:
                 "flags (ix iy)")
 
     # -- writing -----------------------------------------------------------------------
+    @_writes
     def add_particles(self, ids) -> None:
         """Add particles that appear after the first frame (inserted, entering the view):
         new columns, absent from every frame written so far.
@@ -393,6 +428,7 @@ class TrajectoryWriter:
                            None if lap is None else np.asarray(lap)[None],
                            None if present is None else np.asarray(present)[None])
 
+    @_writes
     def append_frames(self, times, positions, velocities=None, laps=None, present=None) -> None:
         """Append a block of frames.
 
@@ -503,6 +539,7 @@ class TrajectoryWriter:
         self._last_y, self._last_lap, self._last_present = prev_y, prev_lap, prev_present
         return out
 
+    @_writes
     def append_fields(self, time: float, spacing, **fields) -> None:
         """Append one frame of gas fields on a cell-centred grid to ``/fields``.
 
@@ -548,6 +585,7 @@ class TrajectoryWriter:
             g[name].resize(k + 1, axis=0)
             g[name][k] = a
 
+    @_writes
     def add_events(self, times, particles, directions) -> None:
         """Store exact pass events, in any order.
 
@@ -574,6 +612,7 @@ class TrajectoryWriter:
             else:
                 g.create_dataset(name, data=data, maxshape=(None,), chunks=True)
 
+    @_writes
     def attach(self, name: str, datasets: dict[str, np.ndarray], attrs: dict[str, Any] | None = None
                ) -> None:
         """Attach a provenance group ``/provenance/<name>``.
@@ -594,6 +633,7 @@ class TrajectoryWriter:
         for key, value in (attrs or {}).items():
             g.attrs[key] = value
 
+    @_writes
     def close(self) -> Path:
         """Finish the file and move it to its final name (nothing if already closed).
 
@@ -619,7 +659,12 @@ class TrajectoryWriter:
         except BaseException:
             self.abort()
             raise
-        self._file.close()
+        try:
+            self._file.close()
+        except BaseException:
+            self._closed = True     # never close twice: HDF5 may crash after a failed close
+            discard(self._tmp)
+            raise
         try:
             publish(self._tmp, self.path)
         finally:
@@ -645,9 +690,21 @@ class TrajectoryWriter:
             return
         try:
             self._file.close()
+        except (OSError, RuntimeError) as exc:
+            if not is_write_failure(exc):
+                raise
         finally:
             discard(self._tmp)
             self._closed = True
+
+    def _fail(self) -> None:
+        """After a failed write: discard the file without closing it (HDF5 may crash when
+        it closes a file whose writes failed; the command line then ends with os._exit)."""
+        if self._closed:
+            return
+        self._closed = True
+        _FAILED_FILES.append(self._file)    # never freed, never closed
+        discard(self._tmp)
 
 
 def write_trajectories(path: str | os.PathLike, times, positions, *, width: float, height: float,

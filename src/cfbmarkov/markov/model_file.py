@@ -34,7 +34,7 @@ from typing import TYPE_CHECKING, Any
 import h5py
 import numpy as np
 
-from cfbmarkov._atomic import atomic_path
+from cfbmarkov._atomic import atomic_path, h5_file
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.model import _DATASETS, MODEL_FORMAT
 from cfbmarkov.markov.states import StateSpace
@@ -106,7 +106,7 @@ def write_model(model: "MarkovModel", path: str | os.PathLike) -> Path:
     """
     datasets, attrs = model_datasets_and_attrs(model)
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as f:
+        with h5_file(tmp, path) as f:
             for name, value in datasets.items():
                 create_array_dataset(f, name, value)
             f.attrs.update(attrs)

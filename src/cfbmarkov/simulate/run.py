@@ -13,9 +13,11 @@ the segments are merged into ``RUN.h5`` and the folder is removed.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
+import shutil
 import sys
 import time as _time
 import warnings
@@ -25,7 +27,8 @@ import h5py
 import numba
 import numpy as np
 
-from cfbmarkov._atomic import atomic_path
+from cfbmarkov._atomic import atomic_path, h5_file
+from cfbmarkov._outputs import claim_output
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.simulate.cfd import (GasGrid, GasSolver, GasState, deposit_drag_jacobian,
@@ -213,7 +216,7 @@ def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: i
         Rows of (simulated time s, wall time s) at each checkpoint.
     """
     with atomic_path(path) as tmp:
-        with h5py.File(tmp, "w") as f:
+        with h5_file(tmp, path) as f:
             f.attrs.update({"version": CHECKPOINT_VERSION, "n_segments": n_segments,
                             "frames": frames, "wall_time": wall_time,
                             "case": riser.case.model_dump_json()})
@@ -346,6 +349,13 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
         When the simulation fails (e.g. a blow-up); the last good checkpoint stays on disk.
     """
     output = Path(output)
+    with claim_output(output, "simulate", "trajectory"):   # before any work: lock, folder
+        return _simulate(case, output, until, checkpoint_every, resume, progress,
+                         stop_after_frames, fields, label)
+
+
+def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, progress,
+              stop_after_frames, fields, label) -> Path:
     end = case.output.end_time if until is None else float(until)
     frame_dt = case.output.frame_interval
     cfd_dt = case.numerics.cfd_time_step
@@ -366,6 +376,11 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
         ids=np.arange(case.particles.number), width=case.riser.width, height=case.riser.height,
         source="cfd-dem", parameters=json.loads(case.model_dump_json()), with_velocity=True,
         frame_interval=frame_dt)
+    if resume and not checkpoint.exists() and _complete(output, case, end):
+        _remove_parts(parts)     # killed while cleaning up after the final rename
+        return output
+    if not checkpoint.exists() and parts.is_dir():
+        _remove_parts(parts)     # segments of a run whose checkpoint is gone: useless
     if resume:
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist")
@@ -422,6 +437,26 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
     writer.finish(attach={"run": ({"wall_history": np.asarray(wall_history, dtype=np.float64)},
                                   run_info)})
     return output
+
+
+def _complete(output: Path, case: CaseConfig, end: float) -> bool:
+    """Whether ``output`` is the finished run of ``case`` up to ``end``."""
+    if not output.is_file():
+        return False
+    try:
+        with h5py.File(output, "r") as f:
+            same = json.loads(f.attrs["parameters"]) == json.loads(case.model_dump_json())
+            last = float(f["frames/time"][-1])
+    except (OSError, KeyError, ValueError, IndexError):
+        return False
+    return same and abs(last - end) <= 0.5 * case.output.frame_interval
+
+
+def _remove_parts(parts: Path) -> None:
+    """Remove the checkpoint folder (checkpoint first, so no state names missing segments)."""
+    with contextlib.suppress(OSError):
+        (parts / "checkpoint.h5").unlink()
+    shutil.rmtree(parts, ignore_errors=True)
 
 
 def _check_safety(case: CaseConfig) -> None:

@@ -1,0 +1,362 @@
+"""Claiming an output before writing it: one writer at a time, never over an input, never
+over a file of another kind unless forced, and the temporaries of dead writers removed.
+
+:func:`claim_output` is the one place every writing verb goes through (the command line
+claims each verb's ``-o`` output; :func:`cfbmarkov.simulate.run.simulate` claims its output
+and checkpoint folder itself). The lock is an OS advisory lock (``fcntl.flock``) on a hidden
+file ``.NAME.lock`` beside the output, held for the life of the claim: the kernel releases it
+when the process dies, so a ``kill -9`` leaves no stale lock (the file left behind is reused
+and removed by the next writer). Where ``fcntl`` is missing (Windows) the lock file is created
+exclusively and holds the writer's pid; it is taken over when that process is gone.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import glob
+import json
+import os
+import re
+import shutil
+import socket
+from pathlib import Path
+
+from cfbmarkov.errors import InputError
+
+try:
+    import fcntl
+except ImportError:  # pragma: no cover - Windows
+    fcntl = None
+
+#: kinds of output: what an existing file must hold to be replaced without --force
+KINDS = ("trajectory", "model", "png", "folder")
+_HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+_PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+_FORMATS = {"trajectory": "cfbmarkov.trajectories", "model": "cfbmarkov.model"}
+
+#: locks held by this process: lock file -> [fd, count]
+_HELD: dict[str, list] = {}
+
+
+def lock_path(target: str | os.PathLike) -> Path:
+    """The lock file of an output: ``.NAME.lock`` beside it."""
+    target = Path(target)
+    return target.parent / f".{target.name}.lock"
+
+
+def _holder_text(lock: Path) -> str:
+    try:
+        info = json.loads(lock.read_text() or "{}")
+    except (OSError, ValueError):
+        info = {}
+    if not info:
+        return "another process"
+    return (f"pid {info.get('pid', '?')} on {info.get('host', '?')} "
+            f"(cfbmarkov {info.get('verb', '?')} since {info.get('since', '?')})")
+
+
+def _busy(target: Path, lock: Path) -> InputError:
+    return InputError(f"{target}: being written by {_holder_text(lock)}; wait for it to "
+                      "end or choose another output")
+
+
+def _acquire(target: Path, verb: str) -> None:
+    lock = lock_path(target)
+    key = str(lock.absolute())
+    if key in _HELD:
+        _HELD[key][1] += 1
+        return
+    info = json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "verb": verb,
+                       "since": _dt.datetime.now().astimezone().isoformat(timespec="seconds")})
+    for _ in range(50):
+        try:
+            if fcntl is None:  # pragma: no cover - Windows
+                fd = _acquire_exclusive(target, lock)
+            else:
+                fd = os.open(lock, os.O_RDWR | os.O_CREAT, 0o666)
+        except OSError as exc:
+            raise InputError(f"{target}: cannot write in {target.parent} "
+                             f"({exc.strerror or exc})") from None
+        if fcntl is not None:
+            try:
+                fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            except OSError:
+                os.close(fd)
+                raise _busy(target, lock) from None
+            try:        # the previous holder may have removed the file meanwhile
+                same = os.path.samestat(os.fstat(fd), os.stat(lock))
+            except OSError:
+                same = False
+            if not same:
+                os.close(fd)
+                continue
+        os.ftruncate(fd, 0)
+        os.write(fd, info.encode())
+        _HELD[key] = [fd, 1]
+        return
+    raise _busy(target, lock)  # pragma: no cover
+
+
+def _acquire_exclusive(target: Path, lock: Path) -> int:  # pragma: no cover - Windows
+    """Lock without fcntl: create the lock file exclusively; take over a dead holder's."""
+    while True:
+        try:
+            return os.open(lock, os.O_RDWR | os.O_CREAT | os.O_EXCL, 0o666)
+        except FileExistsError:
+            try:
+                info = json.loads(lock.read_text() or "{}")
+            except (OSError, ValueError):
+                info = {}
+            if info.get("host") == socket.gethostname() and not _alive(int(info.get("pid", 0))):
+                lock.unlink(missing_ok=True)
+                continue
+            raise _busy(target, lock) from None
+
+
+def _alive(pid: int) -> bool:  # pragma: no cover - Windows
+    if pid <= 0:
+        return False
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:
+        return True
+    return True
+
+
+def _release(target: Path) -> None:
+    lock = lock_path(target)
+    key = str(lock.absolute())
+    held = _HELD.get(key)
+    if held is None:
+        return
+    held[1] -= 1
+    if held[1] > 0:
+        return
+    del _HELD[key]
+    with contextlib.suppress(OSError):
+        lock.unlink()           # unlinked while still locked: no one can take a stale file
+    with contextlib.suppress(OSError):
+        os.close(held[0])
+
+
+def release_all() -> None:
+    """Release every lock of this process (before ``os._exit``)."""
+    for key in list(_HELD):
+        lock = Path(key)
+        with contextlib.suppress(OSError):
+            lock.unlink()
+        with contextlib.suppress(OSError):
+            os.close(_HELD.pop(key)[0])
+
+
+def _describe(path: Path) -> str:
+    """What an existing path holds, in words."""
+    import stat
+
+    try:
+        mode = path.stat().st_mode
+    except OSError as exc:
+        return f"unreadable ({exc.strerror or exc})"
+    if stat.S_ISDIR(mode):
+        return "a folder"
+    if stat.S_ISFIFO(mode):
+        return "a FIFO (named pipe)"
+    if stat.S_ISCHR(mode) or stat.S_ISBLK(mode):
+        return "a device"
+    if stat.S_ISSOCK(mode):
+        return "a socket"
+    if not stat.S_ISREG(mode):
+        return "not a regular file"
+    if path.stat().st_size == 0:
+        return "empty"
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError as exc:
+        return f"unreadable ({exc.strerror or exc})"
+    if head == _PNG_MAGIC:
+        return "png"
+    if head != _HDF5_MAGIC:
+        return "a file of another format"
+    try:
+        import h5py
+
+        with h5py.File(path, "r") as f:
+            fmt = f.attrs.get("format")
+    except (OSError, RuntimeError):
+        return "a damaged or locked HDF5 file"
+    fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+    for kind, name in _FORMATS.items():
+        if fmt == name:
+            return kind
+    return "an HDF5 file of another format"
+
+
+_KIND_TEXT = {"trajectory": "a trajectory file", "model": "a model file", "png": "a PNG image",
+              "folder": "a folder"}
+
+
+def _check_kind(target: Path, kind: str, force: bool) -> None:
+    """Refuse an existing ``target`` of another kind than ``kind`` unless ``force``
+    (which removes it; a non-empty folder is never removed)."""
+    if not (target.exists() or target.is_symlink()):
+        return
+    what = _describe(target)
+    if what == kind or what == "empty" and kind != "folder" or (
+            kind == "folder" and what == "a folder"):
+        return
+    if what == "a folder":
+        if not force:
+            raise InputError(f"{target}: is a folder, not {_KIND_TEXT[kind]}; give another "
+                             "output name (or add --force to replace an empty folder)")
+        try:
+            target.rmdir()
+        except OSError:
+            raise InputError(f"{target}: is a folder that is not empty; --force replaces "
+                             "only an empty folder") from None
+        return
+    shown = _KIND_TEXT.get(what, what)
+    if not force:
+        raise InputError(f"{target}: exists and is {shown}, not {_KIND_TEXT[kind]}; add --force "
+                         "to replace it, or give another output name")
+    if kind == "folder":
+        try:
+            target.unlink()
+        except OSError as exc:
+            raise InputError(f"{target}: cannot remove ({exc.strerror or exc})") from None
+
+
+def _check_inputs(target: Path, inputs) -> None:
+    for source in inputs:
+        if source is None:
+            continue
+        names = glob.glob(str(source)) if glob.has_magic(str(source)) else [str(source)]
+        for name in names:
+            with contextlib.suppress(OSError):
+                if target.exists() and os.path.samefile(target, name):
+                    raise InputError(f"{target}: is one of the inputs ({name}); the output "
+                                     "would overwrite it: give another output name")
+
+
+#: mkstemp's random part (see :func:`cfbmarkov._atomic.temporary_path`)
+_RANDOM = r"[a-z0-9_]{8}"
+
+
+def temporary_patterns(target: Path) -> list[re.Pattern]:
+    """Name patterns of the temporaries of ``target`` in its folder: files of
+    :func:`~cfbmarkov._atomic.temporary_path` and the VTK export's folders."""
+    name = re.escape(target.name)
+    return [re.compile(rf"^\.{name}\.{_RANDOM}\.tmp(\.\w+)?$"),
+            re.compile(rf"^{name}\.(tmp|old)-[0-9a-f]{{8}}$")]
+
+
+_ANY_TEMPORARY = re.compile(rf"^\..+\.{_RANDOM}\.tmp(\.\w+)?$")
+
+
+def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
+    """Remove what dead writers of ``target`` left: its temporaries beside it, and inside
+    the output folder or its ``.parts`` checkpoint folder, every hidden temporary file.
+    Call only while holding the output's lock (no live writer).
+
+    Returns
+    -------
+    list of pathlib.Path
+        What was removed.
+    """
+    target = Path(target)
+    removed = []
+    patterns = temporary_patterns(target)
+    with contextlib.suppress(OSError):
+        for entry in target.parent.iterdir():
+            if any(p.match(entry.name) for p in patterns):
+                removed.append(entry)
+                if entry.is_dir() and not entry.is_symlink():
+                    shutil.rmtree(entry, ignore_errors=True)
+                else:
+                    with contextlib.suppress(OSError):
+                        entry.unlink()
+    for folder in (target, target.with_name(target.name + ".parts")):
+        if not folder.is_dir() or folder.is_symlink():
+            continue
+        for root, _dirs, files in os.walk(folder):
+            for name in files:
+                if _ANY_TEMPORARY.match(name):
+                    path = Path(root) / name
+                    with contextlib.suppress(OSError):
+                        path.unlink()
+                        removed.append(path)
+    return removed
+
+
+@contextlib.contextmanager
+def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
+                 force: bool = False):
+    """Claim ``target`` for writing for the duration of the block.
+
+    In order: the folder is created if missing (and removed again, if still empty, when the
+    block fails); ``target`` must not be one of ``inputs`` (same file, also through links);
+    the lock is taken (refused naming the holder: pid, host, verb, since when); an existing
+    ``target`` of another kind is refused unless ``force``; the temporaries of dead writers
+    of ``target`` are removed. Re-entrant within a process.
+
+    Parameters
+    ----------
+    target : str or os.PathLike
+        The output file or folder.
+    verb : str
+        The writing verb, recorded in the lock.
+    kind : {"trajectory", "model", "png", "folder"}
+        What is written.
+    inputs : iterable of str or os.PathLike, optional
+        The verb's input files (glob patterns are expanded).
+    force : bool, optional
+        Replace an existing output of another kind.
+
+    Raises
+    ------
+    InputError
+        When the output cannot be claimed.
+    """
+    target = Path(target)
+    key = str(lock_path(target).absolute())
+    if key in _HELD:        # claimed by this process already (the command line, then the API)
+        _HELD[key][1] += 1
+        try:
+            yield target
+        finally:
+            _release(target)
+        return
+    _check_inputs(target, inputs)
+    new = [p for p in target.absolute().parents if not p.exists()]
+    try:
+        target.parent.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{target}: cannot create its folder {target.parent} "
+                         f"({exc.strerror or exc})") from None
+    created = False
+    try:
+        _acquire(target, verb)
+        try:
+            _check_kind(target, kind, force)
+            remove_stale_temporaries(target)
+            created = kind == "folder" and not target.exists()
+            yield target
+        except BaseException:
+            if created:
+                with contextlib.suppress(OSError):
+                    target.rmdir()          # only if the failed verb left it empty
+            raise
+        finally:
+            _release(target)
+    except BaseException:
+        for folder in new:                  # deepest first, only if empty
+            with contextlib.suppress(OSError):
+                folder.rmdir()
+        raise
+
+
+__all__ = ["KINDS", "claim_output", "lock_path", "release_all", "remove_stale_temporaries",
+           "temporary_patterns"]
