@@ -9,7 +9,6 @@ under the final name.
 from __future__ import annotations
 
 import contextlib
-import errno as _errno
 import os
 import re
 import sys

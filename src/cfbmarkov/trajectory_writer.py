@@ -17,7 +17,6 @@ off.
 
 from __future__ import annotations
 
-import contextlib
 import datetime as _dt
 import functools
 import json
