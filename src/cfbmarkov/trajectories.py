@@ -419,6 +419,8 @@ class Trajectories:
         InputError
             If no frame lies at ``time``.
         """
+        if not np.isfinite(time):
+            raise InputError(f"time {time:g} s is not a finite number")
         i = int(np.argmin(np.abs(self.times - time)))
         if not abs(self.times[i] - time) <= self.time_tolerance:
             raise InputError(f"{self.path}: no frame at t = {_t(time)} s ({self._frames_text()})")
@@ -441,6 +443,8 @@ class Trajectories:
         InputError
             If the window is empty, leaves the data, or holds no frame.
         """
+        if not (np.isfinite(start) and np.isfinite(stop)):
+            raise InputError(f"window {start:g}:{stop:g} s is not finite")
         if not stop > start:
             raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
         tol = self.time_tolerance
@@ -475,8 +479,8 @@ class Trajectories:
             ``frame_interval`` attribute), or the lag is not a whole multiple of the frame
             interval.
         """
-        if not lag > 0:
-            raise InputError(f"lag {lag:g} s must be positive")
+        if not (np.isfinite(lag) and lag > 0):
+            raise InputError(f"lag {lag:g} s must be a positive finite number")
         if not np.isfinite(self.frame_interval):
             raise InputError(f"{self.path} holds one frame: no frame interval, so no transition "
                              f"can be counted (lag {lag:g} s)")

@@ -376,6 +376,8 @@ class MarkovModel:
         InputError
             If ``time`` is negative or not a whole multiple of the lag.
         """
+        if not np.isfinite(time):
+            raise InputError(f"time {time:g} s is not a finite number")
         k = int(round(time / self.lag))
         if k < 0 or abs(k * self.lag - time) > 1e-6 * max(self.lag, abs(time)):
             raise InputError(f"time {time:g} s is not a whole multiple of the lag {self.lag:g} s")
@@ -407,7 +409,15 @@ class MarkovModel:
         Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
         doi:10.3390/pr13030614 (Eq. 5-6 and Eq. 8).
         """
+        from cfbmarkov.limits import MAX_STEPS, check_memory
+
         steps = [self.steps_for(t) for t in times]
+        last = max(steps, default=0)
+        if last > MAX_STEPS:
+            raise InputError(f"time {max(times):g} s is {last} lags of {self.lag:g} s, more than "
+                             f"{MAX_STEPS} to propagate; give earlier --times")
+        check_memory(8.0 * (last + 1) * self.n_states, f"maps up to {max(times):g} s "
+                     f"({last} lags x {self.n_states} states)", "give earlier --times")
         history = self.propagate(self.state_space.inlet_distribution(), max(steps, default=0),
                                  outflow=outflow)
         return self.state_space.cell_maps(history[steps])
@@ -442,6 +452,13 @@ class MarkovModel:
         J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
         (1960) (Ch. III, absorbing chains).
         """
+        if window is not None:
+            from cfbmarkov.limits import MAX_STEPS, check_finite
+
+            window = check_finite(window, "--window-length", "s", positive=True)
+            if window / self.lag > MAX_STEPS:
+                raise InputError(f"--window-length {window:g} s is {window / self.lag:.3g} lags "
+                                 f"of {self.lag:g} s, more than {MAX_STEPS}")
         if self.boundary == "open":
             return self._open_rtd(window)
         if window is not None and "rtd" not in self._cache:
@@ -509,6 +526,9 @@ class MarkovModel:
         Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
         doi:10.3390/pr13030614 (Eq. 7, the cumulative rule).
         """
+        from cfbmarkov.limits import check_seed
+
+        seed = check_seed(seed)
         initial_states = np.asarray(initial_states)
         if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
             raise InputError("initial states outside the model's state space")
