@@ -139,25 +139,51 @@ class MarkovModel:
     def __post_init__(self):
         s = self.state_space.n_states
         for name in _DATASETS:
-            value = np.array(getattr(self, name), dtype=np.float64 if name == "transition_matrix"
+            given = np.asarray(getattr(self, name))
+            if name != "transition_matrix" and given.dtype.kind not in "iub" and not (
+                    np.all(np.isfinite(given)) and np.all(given == np.round(given))):
+                raise InputError(f"model {name} holds values that are not whole counts")
+            value = np.array(given, dtype=np.float64 if name == "transition_matrix"
                              else np.int64)
             if value.shape != (s, s):
                 raise InputError(f"model {name} has shape {value.shape}, expected ({s}, {s}) "
                                  f"for {self.state_space.describe()}")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        if not (isinstance(self.lag, (int, float, np.number)) and np.isfinite(self.lag)
+                and self.lag > 0):
+            raise InputError(f"model lag {self.lag!r} s must be a positive finite number")
         p = self.transition_matrix
-        if not np.all(np.isfinite(p)) or p.min() < 0:
+        if not np.all(np.isfinite(p)) or (p.size and p.min() < 0):
             raise InputError("transition matrix holds negative or non-finite entries")
-        if not np.allclose(p.sum(axis=1), 1.0, atol=1e-9):
-            raise InputError("transition matrix rows do not sum to 1")
+        rows = p.sum(axis=1)
+        if not np.allclose(rows, 1.0, atol=1e-9):
+            k = int(np.argmax(np.abs(rows - 1.0)))
+            raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to {rows[k]:.6g})")
+        for name in ("counts", "counts_up", "counts_down"):
+            value = getattr(self, name)
+            if value.size and value.min() < 0:
+                raise InputError(f"model {name} holds negative counts")
         if self.pass_fractions is not None:
+            if len(self.pass_fractions) != 2:
+                raise InputError("pass fractions must be (up, down)")
             fractions = tuple(np.array(f, dtype=np.float64) for f in self.pass_fractions)
             if any(f.shape != (s, s) for f in fractions):
                 raise InputError(f"pass fractions must have shape ({s}, {s})")
+            up, down = fractions
+            if not (np.all(np.isfinite(up)) and np.all(np.isfinite(down))) or (up.size and (
+                    min(up.min(), down.min()) < 0 or (up + down).max() > 1.0 + 1e-9)):
+                worst = float(max(np.nanmax(np.abs(up)), np.nanmax(np.abs(down)))) if up.size else 0
+                raise InputError("pass fractions must lie in [0, 1] with up + down <= 1 for each "
+                                 f"transition (largest {worst:.6g})")
             for f in fractions:
                 f.setflags(write=False)
             object.__setattr__(self, "pass_fractions", fractions)
+        if not (isinstance(self.frame_pairs, (int, np.integer)) and self.frame_pairs >= 0):
+            raise InputError(f"model frame_pairs {self.frame_pairs!r} must be a count >= 0")
+        if self.window is not None and not (len(self.window) == 2 and all(
+                np.isfinite(self.window)) and self.window[1] > self.window[0]):
+            raise InputError(f"model window {self.window!r} is not two finite times (A < B)")
         self._check_open(s)
 
     def _check_open(self, s: int) -> None:
