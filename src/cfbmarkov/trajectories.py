@@ -421,14 +421,12 @@ class Trajectories:
             if step == 1:
                 self._check_frames(start, stop, **{name: data})
                 return
-            r = range(start, stop, step)
-            if len(r):
-                self._check_frames(min(r), max(r) + 1)
-            return
-        index = np.asarray(frames).reshape(-1)          # a list or array of frames
-        if index.size:
+            index = np.arange(start, stop, step)
+        else:
+            index = np.asarray(frames).reshape(-1)      # a list or array of frames
             index = np.where(index < 0, index + self.n_frames, index)
-            self._check_frames(int(index.min()), int(index.max()) + 1)
+        for i in np.unique(index).tolist():             # frame by frame, not the span
+            self._check_frames(i, i + 1)
 
     def close(self) -> None:
         """Close the file."""
