@@ -158,9 +158,10 @@ def _count(low: int, high: int):
     """An argparse type: a whole number in low .. high."""
     def parse(text: str) -> int:
         value = _whole(text)
-        if not low <= value <= high:
-            raise argparse.ArgumentTypeError(f"'{text}' must lie in {low} .. {high:,}"
-                                             .replace(",", " "))
+        if value < low:
+            raise argparse.ArgumentTypeError(f"'{text}' must be at least {low}")
+        if value > high:
+            raise argparse.ArgumentTypeError(f"'{text}' must be at most {high}")
         return value
     parse.__name__ = "count"
     return parse
