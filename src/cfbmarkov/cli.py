@@ -32,13 +32,15 @@ def parse_window(text: str) -> tuple[float, float]:
     Raises
     ------
     argparse.ArgumentTypeError
-        When ``text`` is not two numbers or the window is empty.
+        When ``text`` is not two finite numbers or the window is empty.
     """
     try:
         a, b = text.split(":")
         start, stop = float(a), float(b)
     except ValueError:
         raise argparse.ArgumentTypeError(f"window '{text}' is not START:STOP in seconds") from None
+    if not (math.isfinite(start) and math.isfinite(stop)):
+        raise argparse.ArgumentTypeError(f"window '{text}' is not two finite times")
     if not stop > start:
         raise argparse.ArgumentTypeError(f"window '{text}' is empty: STOP must exceed START")
     return start, stop
@@ -106,11 +108,24 @@ def parse_cells(text: str) -> tuple[int, int] | tuple[int, int, int]:
     return values
 
 
-def _positive_float(text: str) -> float:
+def _number(text: str) -> float:
     try:
-        value = float(text)
+        return float(text)
     except ValueError:
         raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+
+
+def _finite_float(text: str) -> float:
+    """A finite number (a time, s)."""
+    value = _number(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a finite number")
+    return value
+
+
+def _positive_float(text: str) -> float:
+    """A finite number > 0."""
+    value = _finite_float(text)
     if not value > 0:
         raise argparse.ArgumentTypeError(f"'{text}' must be positive")
     return value
@@ -124,6 +139,51 @@ def _level(text: str) -> float:
     if not 0.0 < value < 1.0:
         raise argparse.ArgumentTypeError(f"'{text}' must lie between 0 and 1")
     return value
+
+
+
+def _minkowski_order(text: str) -> float:
+    """A Minkowski order k > 0; ``inf`` (the largest difference) is allowed, NaN is not."""
+    value = _number(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be positive (or inf)")
+    return value
+
+
+def _whole(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+
+
+def _seed(text: str) -> int:
+    """A seed of the counter-based generator: a whole number in 0 .. 2^64 - 1."""
+    from cfbmarkov.limits import MAX_SEED
+
+    value = _whole(text)
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"'{text}' must lie in 0 .. 2^64 - 1")
+    return value
+
+
+def _count(low: int, high: int):
+    """An argparse type: a whole number in low .. high."""
+    def parse(text: str) -> int:
+        value = _whole(text)
+        if value < low:
+            raise argparse.ArgumentTypeError(f"'{text}' must be at least {low}")
+        if value > high:
+            raise argparse.ArgumentTypeError(f"'{text}' must be at most {high}")
+        return value
+    parse.__name__ = "count"
+    return parse
+
+
+#: the most particles a synthetic demo, a case or a benchmark may be given
+MAX_PARTICLES = 10_000_000
+#: the most worker processes
+MAX_JOBS = 1024
 
 
 class _Parser(argparse.ArgumentParser):
@@ -260,6 +320,8 @@ def _parse_times(text: str) -> list[float]:
         times = [float(v) for v in text.split(",") if v.strip()]
     except ValueError:
         raise argparse.ArgumentTypeError(f"times '{text}' are not comma-separated seconds") from None
+    if not all(map(math.isfinite, times)):
+        raise argparse.ArgumentTypeError(f"times '{text}' must be finite numbers of seconds")
     if not times or min(times) < 0:
         raise argparse.ArgumentTypeError(f"times '{text}' must be one or more values >= 0 s")
     return times
@@ -294,7 +356,7 @@ def _parse_velocities(text: str) -> list[float]:
     except ValueError:
         raise argparse.ArgumentTypeError(f"velocities '{text}' are not comma-separated numbers "
                                          "in m/s") from None
-    if not values or any(not v > 0 for v in values):
+    if not values or any(not (v > 0 and math.isfinite(v)) for v in values):
         raise argparse.ArgumentTypeError(f"velocities '{text}' must be positive numbers in m/s")
     return values
 
@@ -454,9 +516,9 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("predict", help="Monte Carlo prediction from a run's state at a start time")
     s.add_argument("model")
     s.add_argument("--init", required=True, help="trajectory file giving the initial state")
-    s.add_argument("--start", type=float, required=True, help="initial frame time, s")
+    s.add_argument("--start", type=_finite_float, required=True, help="initial frame time, s")
     s.add_argument("--duration", type=_positive_float, required=True, help="simulated time, s")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=_seed, default=0, help="0 .. 2^64 - 1 (default 0)")
     s.add_argument("-o", "--output", required=True, help="prediction trajectory file (.h5)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_predict)
@@ -468,11 +530,12 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
     s.add_argument("-o", "--output", required=True, help="output directory")
     s.add_argument("--bin-width", type=_positive_float, default=0.025, help="RTD bin width, s")
-    s.add_argument("--md-order", type=_positive_float, default=2.0, help="Minkowski order k")
+    s.add_argument("--md-order", type=_minkowski_order, default=2.0,
+                   help="Minkowski order k > 0 (inf: the largest difference)")
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
     s.add_argument("--level", type=_level, default=0.9,
                    help="coverage of the prediction's intervals (default 0.9)")
-    s.add_argument("--resamples", type=int, default=100,
+    s.add_argument("--resamples", type=_count(0, 100000), default=100,
                    help="bootstrap resamples of the model's fitting window for the intervals "
                         "(0: no intervals; default 100)")
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
@@ -507,7 +570,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--checkpoint-every", type=_positive_float, default=1.0,
                    help="simulated seconds between checkpoints (default 1)")
     s.add_argument("--resume", action="store_true", help="continue an interrupted run")
-    s.add_argument("--particles", type=int, default=None, help="override the number of particles")
+    s.add_argument("--particles", type=_count(1, MAX_PARTICLES), default=None,
+                   help="override the number of particles")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_simulate)
 
@@ -528,7 +592,7 @@ def build_parser() -> argparse.ArgumentParser:
                         "or STATES[:ESTIMATOR] (default paper,mle,auto)")
     s.add_argument("--overrides", default=None,
                    help="TOML file of changes applied to every case (same tables as a case file)")
-    s.add_argument("--jobs", type=int, default=None,
+    s.add_argument("--jobs", type=_count(1, MAX_JOBS), default=None,
                    help="local worker processes (default: min(cases, cores))")
     s.add_argument("--scheduler", default=None,
                    help="address of a Dask distributed scheduler (tcp://host:8786) to run the "
@@ -539,12 +603,14 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
                        "(about 6 min on 2 cores), ending with the path of its report")
     s.add_argument("-o", "--output", default="cfbmarkov-demo", help="output directory")
-    s.add_argument("--jobs", type=int, default=None, help="local worker processes")
+    s.add_argument("--jobs", type=_count(1, MAX_JOBS), default=None,
+                   help="local worker processes")
     s.add_argument("--synthetic", action="store_true",
                    help="instead, the Markov part alone on synthetic core-annulus trajectories "
                         "(30 s)")
-    s.add_argument("--particles", type=int, default=6000, help="with --synthetic: particles")
-    s.add_argument("--seed", type=int, default=1, help="with --synthetic: seed")
+    s.add_argument("--particles", type=_count(1, MAX_PARTICLES), default=6000,
+                   help="with --synthetic: particles")
+    s.add_argument("--seed", type=_seed, default=1, help="with --synthetic: seed")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
     s.set_defaults(func=_cmd_demo)
 
@@ -552,17 +618,19 @@ def build_parser() -> argparse.ArgumentParser:
                        "group, colour_group) and gas fields with .pvd time series")
     s.add_argument("run", help="trajectory file")
     s.add_argument("-o", "--output", required=True, help="output directory")
-    s.add_argument("--start", type=float, default=None, help="first time, s")
-    s.add_argument("--stop", type=float, default=None, help="last time, s")
-    s.add_argument("--every", type=int, default=1, help="export every k-th frame")
+    s.add_argument("--start", type=_finite_float, default=None, help="first time, s")
+    s.add_argument("--stop", type=_finite_float, default=None, help="last time, s")
+    s.add_argument("--every", type=_count(1, 2 ** 31 - 1), default=1,
+                   help="export every k-th frame")
     s.add_argument("--no-fields", action="store_true", help="particles only")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_cmd_export_vtk)
 
     s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
     s.add_argument("--only", action="append", default=None, help="run only this benchmark")
-    s.add_argument("--repeat", type=int, default=5, help="repetitions (median reported)")
-    s.add_argument("--particles", type=int, default=27000)
+    s.add_argument("--repeat", type=_count(1, 1000), default=5,
+                   help="repetitions (median reported)")
+    s.add_argument("--particles", type=_count(1, MAX_PARTICLES), default=27000)
     s.set_defaults(func=_cmd_bench)
     for name, verb in sub.choices.items():
         if name in OUTPUTS:

@@ -261,7 +261,7 @@ class Trajectories:
                 raise InputError(f"{self.path}: a cfbmarkov model file, not a trajectory file")
             raise InputError(f"{self.path}: not a cfbmarkov trajectory file "
                              + (f"(format attribute is {fmt!r})" if fmt else "(no 'format' attribute)"))
-        version = int(f.attrs.get("version", 1))
+        version = _whole_attr(f.attrs.get("version", 1), "version", self.path)
         if version > VERSION:
             raise InputError(f"{self.path}: trajectory file of layout version {version}, written by a "
                              f"newer cfbmarkov (this one reads up to {VERSION}); upgrade cfbmarkov")
@@ -271,7 +271,7 @@ class Trajectories:
                 raise InputError(f"{self.path}: damaged trajectory file (no '{name}' dataset)")
         self.ids = f["particles/id"][()]
         self.times = f["frames/time"][()]
-        self.dimensions = int(f.attrs.get("dimensions", 2))
+        self.dimensions = _whole_attr(f.attrs.get("dimensions", 2), "dimensions", self.path)
         n, t, d = self.ids.size, self.times.size, self.dimensions
         if d not in (2, 3):
             raise InputError(f"{self.path}: damaged trajectory file (dimensions {d})")
@@ -281,9 +281,10 @@ class Trajectories:
                              f"{t} times x {n} particles x {d} coordinates)")
         if t == 0:
             raise InputError(f"{self.path}: trajectory file holds no frames")
-        self.width = float(f.attrs["width"])
-        self.height = float(f.attrs["height"])
-        self.depth = float(f.attrs["depth"]) if d == 3 else None
+        self._check_arrays()
+        self.width = self._length_attr("width")
+        self.height = self._length_attr("height")
+        self.depth = self._length_attr("depth") if d == 3 else None
         boundary = f.attrs.get("boundary", "periodic")
         self.boundary = boundary.decode() if isinstance(boundary, bytes) else str(boundary)
         if self.boundary not in BOUNDARIES:
@@ -291,11 +292,149 @@ class Trajectories:
         self.axes = {key: str(f.attrs.get(f"{key}_axis", default)) for key, default in
                      (("across", "x"), ("vertical", "y"), ("depth", "z" if d == 3 else ""))}
         self.region_origin = np.asarray(f.attrs.get("region_origin", np.zeros(d)), dtype=np.float64)
+        if self.region_origin.shape != (d,) or not np.all(np.isfinite(self.region_origin)):
+            raise InputError(f"{self.path}: damaged trajectory file (region_origin "
+                             f"{self.region_origin.tolist()} is not {d} finite numbers)")
         self.source = str(f.attrs.get("source", "unknown"))
-        self.parameters: dict[str, Any] = json.loads(f.attrs.get("parameters", "{}"))
-        self.frame_interval = float(f.attrs.get("frame_interval", np.nan))
-        if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
+        try:
+            self.parameters: dict[str, Any] = json.loads(f.attrs.get("parameters", "{}"))
+        except (ValueError, TypeError):
+            raise InputError(f"{self.path}: damaged trajectory file (the 'parameters' attribute "
+                             "is not JSON)") from None
+        if "frame_interval" in f.attrs:
+            self.frame_interval = _float_attr(f.attrs["frame_interval"])
+            if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
+                raise InputError(f"{self.path}: damaged trajectory file (frame_interval "
+                                 f"{f.attrs['frame_interval']!r} is not a positive number of s)")
+        else:
             self.frame_interval = estimate_frame_interval(self.times)
+        self._check_times()
+        #: frames whose positions and laps have passed the per-frame checks
+        self._checked = np.zeros(t, dtype=bool)
+
+    def _length_attr(self, name: str) -> float:
+        if name not in self._file.attrs:
+            raise InputError(f"{self.path}: damaged trajectory file (no '{name}' attribute)")
+        value = _float_attr(self._file.attrs[name])
+        if not (np.isfinite(value) and value > 0):
+            raise InputError(f"{self.path}: damaged trajectory file ({name} "
+                             f"{self._file.attrs[name]!r} is not a positive length in m)")
+        return value
+
+    def _check_arrays(self) -> None:
+        """Types of the datasets and unique ids (cheap: no frame is read)."""
+        f = self._file
+        kinds = {"particles/id": "iu", "frames/time": "f", "frames/position": "f",
+                 "frames/lap": "iu", "frames/present": "b", "frames/velocity": "f"}
+        for name, kind in kinds.items():
+            if name in f and (not isinstance(f[name], h5py.Dataset) or f[name].dtype.kind not in kind):
+                raise InputError(f"{self.path}: damaged trajectory file ('{name}' holds "
+                                 f"{getattr(f[name], 'dtype', 'a group')}, not "
+                                 f"{'whole numbers' if kind == 'iu' else 'booleans' if kind == 'b' else 'numbers'})")
+        if self.ids.ndim != 1 or self.times.ndim != 1:
+            raise InputError(f"{self.path}: damaged trajectory file (ids or times are not 1-D)")
+        if "frames/velocity" in f and f["frames/velocity"].shape != f["frames/position"].shape:
+            raise InputError(f"{self.path}: damaged trajectory file (velocities of shape "
+                             f"{f['frames/velocity'].shape}, positions {f['frames/position'].shape})")
+        if np.unique(self.ids).size != self.ids.size:
+            srt = np.sort(self.ids)
+            raise InputError(f"{self.path}: damaged trajectory file (particle id "
+                             f"{srt[1:][srt[1:] == srt[:-1]][0]} appears twice)")
+
+    def _check_times(self) -> None:
+        """Frame times finite, increasing and evenly spaced within twice
+        FRAME_SPACING_TOLERANCE of the frame interval (the writer holds them to once; the
+        margin covers a median interval when written against the slope when read)."""
+        t = self.times
+        bad = ~np.isfinite(t)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise InputError(f"{self.path}: damaged trajectory file (frame {k} has time {t[k]}; "
+                             "frame times must be finite)")
+        if t.size < 2:
+            return
+        steps = np.diff(t)
+        fi = self.frame_interval
+        off = ~(np.abs(steps - fi) <= 2 * FRAME_SPACING_TOLERANCE * fi)
+        if off.any() or not fi > 0:
+            k = int(np.argmax(off))
+            kind = ("do not increase" if not steps[k] > 0 else
+                    f"are not evenly spaced (step {_t(steps[k])} s, frame interval {_t(fi)} s)")
+            raise InputError(f"{self.path}: damaged trajectory file (frame times "
+                             f"{_t(t[k])} and {_t(t[k + 1])} s {kind})")
+
+    def _check_frames(self, i0: int, i1: int, positions: np.ndarray | None = None,
+                      laps: np.ndarray | None = None) -> None:
+        """Per-frame checks of frames i0 .. i1 - 1, each frame once (docs/definitions.md,
+        File formats, What is checked): positions finite and inside the domain (within
+        POSITION_TOLERANCE) where present; on a periodic riser, between consecutive frames
+        where a particle is present, the unwrapped displacement y1 - y0 + (L1 - L0) H is at
+        most H (no lap jump of more than 1, none against the motion); on an open riser laps
+        are 0 where present. ``positions`` / ``laps`` are those frames when already read."""
+        if i1 <= i0 or self._checked[i0:i1].all():
+            return
+        f = self._file
+        lo = i0 - 1 if i0 > 0 else i0
+        pos = f["frames/position"][i0:i1] if positions is None else positions
+        lap = f["frames/lap"][i0:i1] if laps is None else laps
+        if lo < i0:
+            pos = np.concatenate([f["frames/position"][lo:i0], pos])
+            lap = np.concatenate([f["frames/lap"][lo:i0], lap])
+        present = self.present(slice(lo, i1))
+        extent = np.array([self.width, self.height] + ([self.depth] if self.dimensions == 3 else []))
+        tol = POSITION_TOLERANCE
+        with np.errstate(invalid="ignore"):
+            finite = np.isfinite(pos).all(axis=-1)
+            outside = ~((pos >= -tol) & (pos <= extent + tol)).all(axis=-1)
+        for bad, what in ((present & ~finite, "is not a finite number"),
+                          (present & finite & outside, "lies outside the domain 0.." + " x 0..".join(
+                              f"{v:g}" for v in extent) + " m")):
+            if bad.any():
+                k, n = np.unravel_index(int(np.argmax(bad)), bad.shape)
+                raise InputError(f"{self.path}: damaged trajectory file (position "
+                                 f"{pos[k, n].tolist()} of particle {self.ids[n]} at t = "
+                                 f"{_t(self.times[lo + k])} s {what})")
+        lap = lap.astype(np.int64)
+        if self.boundary == "open":
+            bad = present & (lap != 0)
+            if bad.any():
+                k, n = np.unravel_index(int(np.argmax(bad)), bad.shape)
+                raise InputError(f"{self.path}: damaged trajectory file (an open riser, but particle "
+                                 f"{self.ids[n]} has lap {lap[k, n]} at t = {_t(self.times[lo + k])} s)")
+        elif lap.shape[0] > 1:
+            both = present[1:] & present[:-1]
+            h = self.height
+            moved = pos[1:, :, 1] - pos[:-1, :, 1] + (lap[1:] - lap[:-1]) * h
+            with np.errstate(invalid="ignore"):
+                bad = both & ~(np.abs(moved) <= h + 2 * tol)
+            if bad.any():
+                k, n = np.unravel_index(int(np.argmax(bad)), bad.shape)
+                raise InputError(
+                    f"{self.path}: damaged trajectory file (lap counter of particle {self.ids[n]} "
+                    f"goes from {lap[k, n]} to {lap[k + 1, n]} between t = {_t(self.times[lo + k])} "
+                    f"and {_t(self.times[lo + k + 1])} s while its height goes from "
+                    f"{pos[k, n, 1]:.6g} to {pos[k + 1, n, 1]:.6g} m: laps inconsistent with the "
+                    "positions)")
+        self._checked[i0:i1] = True
+
+    def _check_read(self, frames, data: np.ndarray, name: str) -> None:
+        """Run the per-frame checks on what positions() or laps() just read."""
+        if isinstance(frames, (int, np.integer)):
+            i = int(frames) + (self.n_frames if frames < 0 else 0)
+            if 0 <= i < self.n_frames:
+                self._check_frames(i, i + 1, **{name: data[None]})
+            return
+        if isinstance(frames, slice):
+            start, stop, step = frames.indices(self.n_frames)
+            if step == 1:
+                self._check_frames(start, stop, **{name: data})
+                return
+            index = np.arange(start, stop, step)
+        else:
+            index = np.asarray(frames).reshape(-1)      # a list or array of frames
+            index = np.where(index < 0, index + self.n_frames, index)
+        for i in np.unique(index).tolist():             # frame by frame, not the span
+            self._check_frames(i, i + 1)
 
     def close(self) -> None:
         """Close the file."""
@@ -427,6 +566,8 @@ class Trajectories:
         InputError
             If no frame lies at ``time``.
         """
+        if not np.isfinite(time):
+            raise InputError(f"time {time:g} s is not a finite number")
         i = int(np.argmin(np.abs(self.times - time)))
         if not abs(self.times[i] - time) <= self.time_tolerance:
             raise InputError(f"{self.path}: no frame at t = {_t(time)} s ({self._frames_text()})")
@@ -449,6 +590,8 @@ class Trajectories:
         InputError
             If the window is empty, leaves the data, or holds no frame.
         """
+        if not (np.isfinite(start) and np.isfinite(stop)):
+            raise InputError(f"window {start:g}:{stop:g} s is not finite")
         if not stop > start:
             raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
         tol = self.time_tolerance
@@ -483,8 +626,8 @@ class Trajectories:
             ``frame_interval`` attribute), or the lag is not a whole multiple of the frame
             interval.
         """
-        if not lag > 0:
-            raise InputError(f"lag {lag:g} s must be positive")
+        if not (np.isfinite(lag) and lag > 0):
+            raise InputError(f"lag {lag:g} s must be a positive finite number")
         if not np.isfinite(self.frame_interval):
             raise InputError(f"{self.path} holds one frame: no frame interval, so no transition "
                              f"can be counted (lag {lag:g} s)")
@@ -507,8 +650,17 @@ class Trajectories:
         -------
         ndarray of float64, shape (N, D) or (T, N, D)
             Positions (m): across, vertical [, depth]; NaN where a particle is absent.
+
+        Raises
+        ------
+        InputError
+            If a frame read fails the per-frame checks (a present position not finite or
+            outside the domain, laps inconsistent with the positions; see
+            :meth:`_check_frames`).
         """
-        return self._file["frames/position"][frames]
+        data = self._file["frames/position"][frames]
+        self._check_read(frames, data, "positions")
+        return data
 
     def present(self, frames: int | slice = slice(None)) -> np.ndarray:
         """Which particles are in one frame or a range of frames.
@@ -557,8 +709,15 @@ class Trajectories:
         Returns
         -------
         ndarray of int32, shape (N,) or (T, N)
+
+        Raises
+        ------
+        InputError
+            If a frame read fails the per-frame checks (as :meth:`positions`).
         """
-        return self._file["frames/lap"][frames]
+        data = self._file["frames/lap"][frames]
+        self._check_read(frames, data, "laps")
+        return data
 
     def iter_frames(self, frames: slice = slice(None), block: int = 64
                     ) -> Iterator[tuple[np.ndarray, np.ndarray, np.ndarray]]:
@@ -602,7 +761,16 @@ class Trajectories:
         if not self.has_events:
             return None
         g = self._file["events"]
-        return PassEvents(g["time"][()], g["particle"][()], g["direction"][()])
+        events = PassEvents(g["time"][()], g["particle"][()], g["direction"][()])
+        e = events.time.shape
+        if (events.particle.shape != e or events.direction.shape != e or len(e) != 1
+                or not np.all(np.isfinite(events.time))
+                or (e[0] and (events.particle.min() < 0 or events.particle.max() >= self.n_particles
+                              or not np.all(np.abs(events.direction) == 1)))):
+            raise InputError(f"{self.path}: damaged trajectory file (pass events: times, "
+                             "particles and directions must be equally long, times finite, "
+                             "particles indices of /particles/id and directions +1 or -1)")
+        return events
 
     # -- gas fields (CFD-DEM runs) ---------------------------------------------------------
     @property
@@ -666,6 +834,22 @@ class Trajectories:
         """
         key = f"provenance/{name}"
         return self._file[key] if key in self._file else None
+
+
+def _float_attr(value) -> float:
+    """An attribute as a float (NaN where it is not one number)."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        return float("nan")
+    return float(array) if array.size == 1 else float("nan")
+
+
+def _whole_attr(value, name: str, path) -> int:
+    number = _float_attr(value)
+    if not (np.isfinite(number) and number == round(number)):
+        raise InputError(f"{path}: damaged trajectory file ({name} {value!r} is not a whole number)")
+    return int(number)
 
 
 def _t(value: float) -> str:

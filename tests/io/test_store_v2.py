@@ -6,6 +6,8 @@ from __future__ import annotations
 
 import h5py
 import numpy as np
+
+from cfbmarkov.trajectories import lap_increments
 import pytest
 
 from cfbmarkov.cli import main
@@ -115,7 +117,8 @@ def _write_version_1(path, times, positions, laps):
 def test_version_1_files_still_read_and_a_newer_version_is_refused(tmp_path, capsys):
     rng = np.random.default_rng(2)
     pos = rng.uniform([0, 0], [W, H], size=(5, 4, 2))
-    laps = rng.integers(-1, 2, size=(5, 4)).astype(np.int32)
+    laps = np.concatenate([np.zeros((1, 4), int), np.cumsum(  # consistent with the positions
+        lap_increments(pos[:-1, :, 1], pos[1:, :, 1], H), axis=0)]).astype(np.int32)
     _write_version_1(tmp_path / "v1.h5", np.arange(5) * 0.02, pos, laps)
     with Trajectories(tmp_path / "v1.h5") as t:
         assert (t.version, t.dimensions, t.boundary, t.depth) == (1, 2, "periodic", None)

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
+from cfbmarkov.trajectories import lap_increments
 import pytest
 
 pytest.importorskip("pyevtk")
@@ -35,7 +37,10 @@ def make_run(path: Path, *, velocities: bool = True, fields: bool = True,
     times = T0 + DT * np.arange(T)
     pos = np.stack([rng.uniform(0, W, (T, N)), rng.uniform(0, H, (T, N))], axis=-1)
     vel = rng.normal(0.0, 1.0, (T, N, 2))
-    laps = rng.integers(-3, 4, (T, N)).astype(np.int32)
+    # laps consistent with the positions (minimal-image passes), from random starting laps
+    steps = lap_increments(pos[:-1, :, 1], pos[1:, :, 1], H)
+    laps = (rng.integers(-3, 4, (1, N))
+            + np.concatenate([np.zeros((1, N), int), np.cumsum(steps, axis=0)])).astype(np.int32)
     ids = 1000 + 7 * rng.permutation(N)          # not sorted: the file's order must be kept
     write_trajectories(path, times, pos, width=W, height=H, ids=ids,
                        velocities=vel if velocities else None, laps=laps)

@@ -93,6 +93,11 @@ def check_parameters(window, bin_width: float, md_order: float) -> tuple[float, 
     start, stop = check_window(window)
     if not (math.isfinite(bin_width) and bin_width > 0):
         raise InputError(f"RTD bin width {bin_width:g} s must be positive")
+    from cfbmarkov.limits import MAX_BINS
+
+    if (stop - start) / bin_width > MAX_BINS:
+        raise InputError(f"RTD bin width {bin_width:g} s makes {(stop - start) / bin_width:.3g} "
+                         f"bins over the window, more than {MAX_BINS}; give a larger --bin-width")
     if not md_order > 0:
         raise InputError(f"Minkowski order {md_order:g} must be positive")
     return start, stop

@@ -99,14 +99,17 @@ def minkowski_distance(e, f, order: float = 2.0) -> float:
     f = np.asarray(f, dtype=np.float64).reshape(-1)
     if e.shape != f.shape:
         raise InputError(f"Minkowski distance of arrays of different lengths ({e.size} and {f.size})")
-    if not order > 0:
+    if not order > 0:   # NaN fails too; inf is the largest difference
         raise InputError(f"Minkowski order {order:g} must be positive")
     d = np.abs(e - f)
     if d.size == 0:
         return 0.0
-    if np.isinf(order):
-        return float(d.max())
-    return float(np.sum(d ** order) ** (1.0 / order))
+    scale = float(d.max())
+    if np.isinf(order) or scale == 0.0 or not np.isfinite(scale):
+        return scale
+    # scaled by the largest difference before powering, so that a large order (1000) does
+    # not underflow every term to 0: MD = max|d| (sum (|d| / max|d|)^k)^(1/k)
+    return scale * float(np.sum((d / scale) ** order) ** (1.0 / order))
 
 
 def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:

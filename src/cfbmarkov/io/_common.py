@@ -5,8 +5,10 @@ order, progress bars, and cleaning up on failure."""
 from __future__ import annotations
 
 import contextlib
+import decimal
 import gzip
 import os
+import re
 import sys
 import zlib
 from collections.abc import Iterable
@@ -264,6 +266,100 @@ def whole_ids(values: np.ndarray, where: str) -> np.ndarray:
     if bad.any():
         raise InputError(f"{where}: particle id {values[np.argmax(bad)]:g} is not a whole number")
     return ids
+
+
+#: float64 holds every whole number below 2^53 in magnitude exactly; ids from there on are
+#: parsed from their text
+EXACT_FLOAT_INTEGER = 2.0 ** 53
+_INTEGER_TEXT = re.compile(r"[+-]?[0-9]+\Z")
+
+
+def id_from_text(text: str, where: str) -> int:
+    """A particle id parsed exactly from its text (``9007199254740993``, ``1.0e3``).
+
+    Raises
+    ------
+    InputError
+        If it is not a whole number or lies outside int64.
+    """
+    token = text.strip()
+    try:
+        if _INTEGER_TEXT.match(token):
+            value = int(token)
+        else:
+            number = decimal.Decimal(token)
+            if not number.is_finite() or number != number.to_integral_value():
+                raise ValueError
+            if number.adjusted() > 19:
+                raise OverflowError
+            value = int(number)
+    except OverflowError:
+        value = 2 ** 64
+    except (ValueError, decimal.InvalidOperation):
+        raise InputError(f"{where}: particle id {token[:40]!r} is not a whole number") from None
+    if not -2 ** 63 <= value < 2 ** 63:
+        raise InputError(f"{where}: particle id {token[:40]} lies outside the 64-bit integers")
+    return value
+
+
+def exact_ids(values: np.ndarray, texts, where: str) -> np.ndarray:
+    """Particle ids, exact: from the floats where they hold the id exactly (magnitude below
+    2^53), else from the text (2^53 + 1 stays 2^53 + 1).
+
+    Parameters
+    ----------
+    values : numpy.ndarray
+        The ids as parsed to float64.
+    texts : callable
+        Returns the ids' texts, in the same order (called only when some id is that large).
+    where : str
+        Starts an error message.
+
+    Returns
+    -------
+    numpy.ndarray of int64
+
+    Raises
+    ------
+    InputError
+        If an id is not a whole number or lies outside int64.
+    """
+    values = np.asarray(values, dtype=np.float64)
+    with np.errstate(invalid="ignore"):
+        small = np.isfinite(values) & (np.abs(values) < EXACT_FLOAT_INTEGER)
+    if small.all():
+        return whole_ids(values, where)
+    tokens = texts()
+    ids = whole_ids(np.where(small, values, 0.0), where)
+    for k in np.flatnonzero(~small):
+        ids[k] = id_from_text(tokens[k], where)
+    return ids
+
+
+class IdCodes:
+    """Exact int64 particle ids carried through float64 row arrays as small codes (the
+    order of first appearance), so that no id is rounded."""
+
+    def __init__(self):
+        self._code: dict[int, int] = {}
+        self._ids: list[int] = []
+
+    def encode(self, ids: np.ndarray) -> np.ndarray:
+        """Codes (float64) of int64 ``ids``."""
+        unique, inverse = np.unique(ids, return_inverse=True)
+        codes = np.empty(unique.size, dtype=np.float64)
+        for k, value in enumerate(unique.tolist()):
+            code = self._code.get(value)
+            if code is None:
+                code = self._code[value] = len(self._ids)
+                self._ids.append(value)
+            codes[k] = code
+        return codes[inverse.reshape(-1)]
+
+    def decode(self, codes: np.ndarray) -> np.ndarray:
+        """The int64 ids of ``codes``."""
+        table = np.asarray(self._ids, dtype=np.int64)
+        return table[np.asarray(codes).astype(np.int64)]
 
 
 def progress(frames: Iterable, label: str) -> Iterable:

@@ -75,7 +75,7 @@ from cfbmarkov.io._common import (
     progress,
     reading,
     removing_new_folders,
-    whole_ids,
+    exact_ids,
 )
 from cfbmarkov.io.csv_layout import (
     AXES,
@@ -188,7 +188,7 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
         if resample is not None:
             _write_resampled(output, path, layout, riser, rows, resample, max_gap)
             return output
-        keys = (rows[:, layout.index("id")], rows[:, layout.index("t")]) if layout.has_id else (
+        keys = (layout.ids(rows), rows[:, layout.index("t")]) if layout.has_id else (
             rows[:, layout.index("t")],)
         rows = rows[np.lexsort(keys)]
         _write(output, path, layout, riser, iter([rows]),
@@ -294,7 +294,7 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
     first = next(frames, None)
     if first is None:
         raise InputError(f"{label}: no data rows after the header")
-    reference = (np.unique(whole_ids(first[0][:, layout.index("id")], label)) if layout.has_id
+    reference = (np.unique(layout.ids(first[0])) if layout.has_id
                  else np.zeros(1, dtype=np.int64))
     parameters = _parameters(path, layout, riser, row_order)
     periodic = riser.boundary == "periodic"
@@ -321,7 +321,7 @@ def _append_frame(writer: TrajectoryWriter, columns: FrameColumns, rows: np.ndar
     time = float(rows[0, layout.index("t")])
     where = f"{label}: frame at t = {time:g} s"
     if layout.has_id:
-        ids = whole_ids(rows[:, layout.index("id")], where)
+        ids = layout.ids(rows)
     elif rows.shape[0] > 1:
         raise InputError(f"{where}: {rows.shape[0]} rows at this time, but the file has no id "
                          "column, so it is read as one tracer; add an id column for several "
@@ -397,7 +397,7 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     label = str(path)
     if rows.shape[0] == 0:
         raise InputError(f"{label}: no data rows after the header")
-    ids = (whole_ids(rows[:, layout.index("id")], label) if layout.has_id
+    ids = (layout.ids(rows) if layout.has_id
            else np.zeros(rows.shape[0], dtype=np.int64))
     order = np.argsort(rows[:, layout.index("t")], kind="stable")
     rows, ids = rows[order], ids[order]
@@ -432,9 +432,16 @@ def _row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
     iid = layout.index("id") if layout.has_id else None
     line_no, last = layout.first_data_line, None
     lines = layout.pending
+    shortest: dict = {}
     while lines or (lines := fh.readlines(CHUNK_CHARS)):
+        if not lines[-1].endswith("\n"):          # the file's last line, unterminated
+            _check_last_line(lines, line_no, layout, label, shortest)
         values = _parse_rows(lines, line_no, layout, label)
         _check_keys(values, it, iid, lines, line_no, label)
+        if iid is not None:
+            values[:, iid] = layout.id_codes.encode(_exact_block_ids(values[:, iid], lines,
+                                                                     line_no, layout, label))
+        _note_last_field(lines, layout, shortest)
         if streaming and values.shape[0]:
             t = values[:, it]
             if (last is not None and t[0] < last) or np.any(t[1:] < t[:-1]):
@@ -519,7 +526,8 @@ def _check_keys(values: np.ndarray, it: int, iid: int | None, lines: list[str], 
         ids = t
     else:
         ids = values[:, iid]
-        bad_id = ~np.isfinite(ids) | (ids != np.round(ids))
+        with np.errstate(invalid="ignore"):     # large ids are checked from their text
+            bad_id = (~np.isfinite(ids) | (ids != np.round(ids))) & ~(np.abs(ids) >= 2.0 ** 53)
     if not (bad_t.any() or bad_id.any()):
         return
     rows = _data_line_numbers(lines, line_no)
@@ -528,6 +536,58 @@ def _check_keys(values: np.ndarray, it: int, iid: int | None, lines: list[str], 
         raise InputError(f"{label}: line {rows[k]}: time t = {t[k]:g} is not a finite number")
     k = int(np.argmax(bad_id))
     raise InputError(f"{label}: line {rows[k]}: particle id {ids[k]:g} is not a whole number")
+
+
+def _exact_block_ids(values: np.ndarray, lines: list[str], line_no: int, layout: CsvLayout,
+                     label: str) -> np.ndarray:
+    """The ids of a block of rows, exact (from the text where 2^53 or more)."""
+    def texts() -> list[str]:
+        col = layout.usecols[layout.index("id")]
+        rows = [line.split("#", 1)[0].strip() for line in lines]
+        return [_split(row, layout.delimiter)[col] for row in rows if row]
+
+    return exact_ids(values, texts, f"{label}: lines {line_no}-{line_no + len(lines) - 1}")
+
+
+def _note_last_field(lines: list[str], layout: CsvLayout, shortest: dict) -> None:
+    """Remember the shortest text of the last field over the last rows read (for
+    :func:`_check_last_line`)."""
+    n = len(layout.header)
+    lengths = []
+    for line in lines[-64:]:
+        content = line.split("#", 1)[0].strip()
+        if content:
+            fields = _split(content, layout.delimiter)
+            if len(fields) == n:
+                lengths.append(len(fields[-1].strip()))
+    if lengths:
+        shortest["last"] = min(lengths)
+
+
+def _check_last_line(lines: list[str], line_no: int, layout: CsvLayout, label: str,
+                     shortest: dict) -> None:
+    """Refuse a file cut inside its last row: the last line has no final newline and
+    fewer fields than the header, or a last value that cannot be complete (empty, ending in
+    '.', 'e', '+' or '-'), or one shorter than that column's value in every one of the
+    (up to 64) rows before it (``0.12345`` cut to ``0``)."""
+    _note_last_field(lines[:-1], layout, shortest)
+    content = lines[-1].split("#", 1)[0].strip()
+    if not content:
+        return
+    where = f"{label}: line {line_no + len(lines) - 1}"
+    fields = _split(content, layout.delimiter)
+    n = len(layout.header)
+    tail = ("(the file ends inside this row: truncated?; if the row is complete, end the "
+            "file with a newline)")
+    if len(fields) < n:
+        raise InputError(f"{where}: {len(fields)} values, the header names {n} columns "
+                         "(the file ends inside this row: truncated?)")
+    value = fields[n - 1].strip()
+    if not value or value[-1] in ".eE+-,":
+        raise InputError(f"{where}: last value {value!r} is incomplete {tail}")
+    if len(value) < shortest.get("last", 0):
+        raise InputError(f"{where}: last value {value!r} is shorter than in every row before "
+                         f"it {tail}")
 
 
 def _frames(blocks: Iterator[np.ndarray], it: int) -> Iterator[tuple[np.ndarray, bool]]:

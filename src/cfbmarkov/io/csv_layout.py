@@ -8,6 +8,7 @@ from dataclasses import dataclass, field
 from typing import TextIO
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.io._common import IdCodes
 
 #: the paper's riser (docs/definitions.md, Riser): width W and height H, m
 DEFAULT_WIDTH = 0.09
@@ -56,6 +57,12 @@ class CsvLayout:
     unit_from: dict[str, str] = field(default_factory=dict)
     pending: list[str] = field(default_factory=list)
     dropped: str | None = None
+    #: the exact ids behind the codes that the id column of parsed rows holds
+    id_codes: IdCodes = field(default_factory=IdCodes, repr=False)
+
+    def ids(self, rows: np.ndarray) -> np.ndarray:
+        """The exact int64 particle ids of parsed rows (their id column holds codes)."""
+        return self.id_codes.decode(rows[:, self.index("id")])
 
     def column(self, name: str) -> str:
         """The header name of canonical column ``name``, as written."""

@@ -120,7 +120,7 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
             parameters["source_files"] = [p.name for p in paths]
         parameters["frames_without_atoms_skipped"] = skipped[0]
         velocity = layout.velocity_columns(riser.axes)
-        first_ids = np.unique(whole_ids(first.atoms[:, layout.id], where))
+        first_ids = np.unique(_frame_ids(first, layout, where))
         with create_writer(output, first_ids, max_step=IMPORT_MAX_STEP,
                            source="import:lammps", parameters=parameters,
                            with_velocity=velocity is not None, label=label,
@@ -224,7 +224,7 @@ def _append_frame(writer, columns: FrameColumns, frame: DumpFrame, first: DumpFr
         layout = _same_layout(frame, layout, where)
     time = frame_time(frame, time_step, label)
     atoms = frame.atoms
-    ids = whole_ids(atoms[:, layout.id], where)
+    ids = _frame_ids(frame, layout, where)
     raw = atoms[:, list(layout.position)]
     if layout.scaled:
         lo = frame.box[:raw.shape[1], 0]
@@ -270,3 +270,10 @@ def _same_layout(frame: DumpFrame, layout: AtomColumns, where: str) -> AtomColum
 
 
 __all__ = ["AXES", "BOX_TOLERANCE", "dump_files", "frame_time", "import_lammps"]
+
+
+def _frame_ids(frame, layout, where: str) -> np.ndarray:
+    """The frame's particle ids, exact (the reader parses ids of 2^53 and more from text)."""
+    if frame.ids is not None and layout.id == frame.columns.index("id"):
+        return frame.ids
+    return whole_ids(frame.atoms[:, layout.id], where)

@@ -31,7 +31,7 @@ from typing import TextIO
 import numpy as np
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.io._common import check_source, open_text
+from cfbmarkov.io._common import check_source, exact_ids, open_text
 
 #: position column families, in order of preference: unwrapped first (exact laps), then
 #: wrapped (laps from image flags where present, else from the minimal-image rule)
@@ -40,6 +40,8 @@ POSITION_COLUMNS = (("xu", "yu", "zu"), ("xsu", "ysu", "zsu"), ("x", "y", "z"),
 VELOCITY_COLUMNS = ("vx", "vy", "vz")
 IMAGE_COLUMNS = ("ix", "iy", "iz")
 AXES = "xyz"
+#: the most atoms a frame's ITEM: NUMBER OF ATOMS may announce
+MAX_ATOMS = 2 ** 31 - 1
 
 
 @dataclass(frozen=True)
@@ -62,6 +64,9 @@ class DumpFrame:
         The atom table [N, len(columns)], float64.
     line : int
         Line number of the frame's ``ITEM: ATOMS`` block, for messages.
+    ids : numpy.ndarray of int64 or None
+        The ``id`` column parsed exactly (ids of 2^53 and more from their text; the float
+        table rounds them), None where there is no ``id`` column.
     """
 
     timestep: int
@@ -71,6 +76,7 @@ class DumpFrame:
     columns: tuple[str, ...]
     atoms: np.ndarray
     line: int
+    ids: np.ndarray | None = None
 
     def where(self, label: str) -> str:
         """``label`` with the frame's timestep and line, to start an error message."""
@@ -192,6 +198,13 @@ class DumpReader:
                              "(truncated?)")
         return line.strip()
 
+    def _bounded(self, item: str, value: int, low: int, high: int) -> int:
+        if not low <= value <= high:
+            shown = str(value) if len(str(value)) <= 30 else f"of {len(str(value))} digits"
+            raise InputError(f"{self.label}: line {self.line}: ITEM: {item} value {shown} is "
+                             f"outside {low} .. {high}")
+        return value
+
     def _number(self, item: str, kind: type):
         text = self._value(item)
         try:
@@ -227,11 +240,15 @@ class DumpReader:
 
     def _header_item(self, item: str, header: dict) -> None:
         if item == "TIMESTEP":
-            header["timestep"] = self._number(item, int)
+            header["timestep"] = self._bounded(item, self._number(item, int), 0, 2 ** 63 - 1)
         elif item == "TIME":
-            header["time"] = self._number(item, float)
+            time = self._number(item, float)
+            if not np.isfinite(time):
+                raise InputError(f"{self.label}: line {self.line}: ITEM: TIME value {time} is "
+                                 "not a finite number")
+            header["time"] = time
         elif item == "NUMBER OF ATOMS":
-            header["atoms"] = self._number(item, int)
+            header["atoms"] = self._bounded(item, self._number(item, int), 0, MAX_ATOMS)
         elif item.startswith("BOX BOUNDS"):
             header["box"], header["boundary"] = self._box(item)
         elif item == "UNITS":
@@ -299,12 +316,13 @@ class DumpReader:
         if not columns:
             raise InputError(f"{where}: ITEM: ATOMS names no columns")
         line = self.line
-        atoms = self._atom_table(header["atoms"], columns, header["timestep"])
+        atoms, ids = self._atom_table(header["atoms"], columns, header["timestep"])
         return DumpFrame(header["timestep"], header.get("time"), header["box"], header["boundary"],
-                         columns, atoms, line)
+                         columns, atoms, line, ids)
 
     def _atom_table(self, count: int, columns: tuple[str, ...], timestep: int) -> np.ndarray:
-        """The next ``count`` atom lines as an array [count, columns]."""
+        """The next ``count`` atom lines as an array [count, columns], and their exact ids
+        (None without an ``id`` column)."""
         first = self.line + 1
         lines = list(itertools.islice(self._fh, count))
         self.line += len(lines)
@@ -312,7 +330,7 @@ class DumpReader:
             raise InputError(f"{self.label}: file ends inside the atoms of timestep {timestep}: "
                              f"{len(lines)} of {count} atom lines (truncated?)")
         if count == 0:
-            return np.empty((0, len(columns)))
+            return np.empty((0, len(columns))), (np.empty(0, np.int64) if "id" in columns else None)
         try:
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", UserWarning)  # blank lines only
@@ -323,7 +341,21 @@ class DumpReader:
             raise InputError(f"{self.label}: line {first}: timestep {timestep} has atom lines of "
                              f"{atoms.shape[1] if atoms.size else 0} values for {count} atoms, "
                              f"ITEM: ATOMS names {len(columns)} columns")
-        return atoms
+        last = lines[-1]
+        if not last.endswith("\n") and last.split() and last.split()[-1][-1] in ".eE+-":
+            raise InputError(f"{self.label}: line {first + count - 1}: last value "
+                             f"{last.split()[-1]!r} is incomplete: the file ends inside this "
+                             "line (truncated?)")
+        return atoms, self._exact_ids(atoms, lines, columns, first)
+
+    def _exact_ids(self, atoms: np.ndarray, lines: list[str], columns: tuple[str, ...],
+                   first: int) -> np.ndarray | None:
+        """The ``id`` column, exact (from the text where 2^53 or more)."""
+        if "id" not in columns:
+            return None
+        col = columns.index("id")
+        return exact_ids(atoms[:, col], lambda: [line.split()[col] for line in lines if line.split()],
+                         f"{self.label}: lines {first}-{first + len(lines) - 1}")
 
     def _bad_atom_line(self, lines: list[str], first: int, columns: tuple[str, ...],
                        timestep: int, exc: Exception) -> str:

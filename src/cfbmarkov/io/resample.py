@@ -162,6 +162,11 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
     ids, first = np.unique(pid, return_index=True)
     bounds = np.append(first, len(t))
 
+    from cfbmarkov.limits import check_memory
+
+    frames = span / interval + 1
+    check_memory(frames * ids.size * (8.0 * pos.shape[1] + 5), f"{label}: resampling "
+                 f"{ids.size} particles onto {frames:.3g} frames", "use a larger --resample step")
     n_times = int(math.floor(span / interval + _TOL)) + 1
     grid = start + np.arange(n_times) * interval
     out = np.full((n_times, len(ids), pos.shape[1]), np.nan)

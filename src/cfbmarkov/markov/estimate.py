@@ -329,8 +329,11 @@ class TransitionEstimator:
     name: str = ""
 
     def __init__(self, state_space: StateSpace, lag: float = 0.025, connected: bool = False):
-        if not lag > 0:
-            raise InputError(f"lag {lag:g} s must be positive")
+        from cfbmarkov.limits import check_fit
+
+        if not (np.isfinite(lag) and lag > 0):
+            raise InputError(f"lag {lag:g} s must be a positive finite number")
+        check_fit(state_space)          # refuse before counting: the dense [S, S] arrays
         self.state_space = state_space
         self.lag = float(lag)
         self.connected = bool(connected)

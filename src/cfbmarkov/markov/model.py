@@ -139,25 +139,51 @@ class MarkovModel:
     def __post_init__(self):
         s = self.state_space.n_states
         for name in _DATASETS:
-            value = np.array(getattr(self, name), dtype=np.float64 if name == "transition_matrix"
+            given = np.asarray(getattr(self, name))
+            if name != "transition_matrix" and given.dtype.kind not in "iub" and not (
+                    np.all(np.isfinite(given)) and np.all(given == np.round(given))):
+                raise InputError(f"model {name} holds values that are not whole counts")
+            value = np.array(given, dtype=np.float64 if name == "transition_matrix"
                              else np.int64)
             if value.shape != (s, s):
                 raise InputError(f"model {name} has shape {value.shape}, expected ({s}, {s}) "
                                  f"for {self.state_space.describe()}")
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        if not (isinstance(self.lag, (int, float, np.number)) and np.isfinite(self.lag)
+                and self.lag > 0):
+            raise InputError(f"model lag {self.lag!r} s must be a positive finite number")
         p = self.transition_matrix
-        if not np.all(np.isfinite(p)) or p.min() < 0:
+        if not np.all(np.isfinite(p)) or (p.size and p.min() < 0):
             raise InputError("transition matrix holds negative or non-finite entries")
-        if not np.allclose(p.sum(axis=1), 1.0, atol=1e-9):
-            raise InputError("transition matrix rows do not sum to 1")
+        rows = p.sum(axis=1)
+        if not np.allclose(rows, 1.0, atol=1e-9):
+            k = int(np.argmax(np.abs(rows - 1.0)))
+            raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to {rows[k]:.6g})")
+        for name in ("counts", "counts_up", "counts_down"):
+            value = getattr(self, name)
+            if value.size and value.min() < 0:
+                raise InputError(f"model {name} holds negative counts")
         if self.pass_fractions is not None:
+            if len(self.pass_fractions) != 2:
+                raise InputError("pass fractions must be (up, down)")
             fractions = tuple(np.array(f, dtype=np.float64) for f in self.pass_fractions)
             if any(f.shape != (s, s) for f in fractions):
                 raise InputError(f"pass fractions must have shape ({s}, {s})")
+            up, down = fractions
+            if not (np.all(np.isfinite(up)) and np.all(np.isfinite(down))) or (up.size and (
+                    min(up.min(), down.min()) < 0 or (up + down).max() > 1.0 + 1e-9)):
+                worst = float(max(np.nanmax(np.abs(up)), np.nanmax(np.abs(down)))) if up.size else 0
+                raise InputError("pass fractions must lie in [0, 1] with up + down <= 1 for each "
+                                 f"transition (largest {worst:.6g})")
             for f in fractions:
                 f.setflags(write=False)
             object.__setattr__(self, "pass_fractions", fractions)
+        if not (isinstance(self.frame_pairs, (int, np.integer)) and self.frame_pairs >= 0):
+            raise InputError(f"model frame_pairs {self.frame_pairs!r} must be a count >= 0")
+        if self.window is not None and not (len(self.window) == 2 and all(
+                np.isfinite(self.window)) and self.window[1] > self.window[0]):
+            raise InputError(f"model window {self.window!r} is not two finite times (A < B)")
         self._check_open(s)
 
     def _check_open(self, s: int) -> None:
@@ -376,6 +402,8 @@ class MarkovModel:
         InputError
             If ``time`` is negative or not a whole multiple of the lag.
         """
+        if not np.isfinite(time):
+            raise InputError(f"time {time:g} s is not a finite number")
         k = int(round(time / self.lag))
         if k < 0 or abs(k * self.lag - time) > 1e-6 * max(self.lag, abs(time)):
             raise InputError(f"time {time:g} s is not a whole multiple of the lag {self.lag:g} s")
@@ -407,7 +435,15 @@ class MarkovModel:
         Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
         doi:10.3390/pr13030614 (Eq. 5-6 and Eq. 8).
         """
+        from cfbmarkov.limits import MAX_STEPS, check_memory
+
         steps = [self.steps_for(t) for t in times]
+        last = max(steps, default=0)
+        if last > MAX_STEPS:
+            raise InputError(f"time {max(times):g} s is {last} lags of {self.lag:g} s, more than "
+                             f"{MAX_STEPS} to propagate; give earlier --times")
+        check_memory(8.0 * (last + 1) * self.n_states, f"maps up to {max(times):g} s "
+                     f"({last} lags x {self.n_states} states)", "give earlier --times")
         history = self.propagate(self.state_space.inlet_distribution(), max(steps, default=0),
                                  outflow=outflow)
         return self.state_space.cell_maps(history[steps])
@@ -446,6 +482,13 @@ class MarkovModel:
         J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
         (1960) (Ch. III, absorbing chains).
         """
+        if window is not None:
+            from cfbmarkov.limits import MAX_STEPS, check_finite
+
+            window = check_finite(window, "--window-length", "s", positive=True)
+            if window / self.lag > MAX_STEPS:
+                raise InputError(f"--window-length {window:g} s is {window / self.lag:.3g} lags "
+                                 f"of {self.lag:g} s, more than {MAX_STEPS}")
         if self.boundary == "open":
             return self._open_rtd(window)
         if direction not in ("up", "down"):
@@ -527,6 +570,9 @@ class MarkovModel:
         Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
         doi:10.3390/pr13030614 (Eq. 7, the cumulative rule).
         """
+        from cfbmarkov.limits import check_seed
+
+        seed = check_seed(seed)
         initial_states = np.asarray(initial_states)
         if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
             raise InputError("initial states outside the model's state space")

@@ -137,25 +137,59 @@ def read_model_group(group: h5py.Group | h5py.File, label: str = "") -> "MarkovM
 
     label = label or getattr(group.file, "filename", "")
     fmt = group.attrs.get("format")
+    if isinstance(fmt, bytes):
+        fmt = fmt.decode(errors="replace")
     if fmt != MODEL_FORMAT:
         raise InputError(f"{label}: not a cfbmarkov model file (format attribute is {fmt!r})")
     try:
-        window = np.asarray(group.attrs["window"], dtype=float)
-        return MarkovModel(
-            **{name: group[name][()] for name in _DATASETS},
-            state_space=StateSpace.from_attrs(group.attrs["state_space"]),
-            lag=float(group.attrs["lag"]), estimator=str(group.attrs["estimator"]),
-            window=None if np.isnan(window).any() else (float(window[0]), float(window[1])),
-            source=json.loads(group.attrs.get("source", '""')),
-            frame_pairs=int(group.attrs.get("frame_pairs", 0)),
-            pass_fractions=(group["pass_up_fraction"][()], group["pass_down_fraction"][()])
-            if "pass_up_fraction" in group else None,
-            selection=json.loads(group.attrs["selection"])
-            if "selection" in group.attrs else None,
-            connected=bool(group.attrs.get("connected", 0)),
-            **_open_fields(group))
+        return _read_model_group(group, MarkovModel)
     except KeyError as exc:
         raise InputError(f"{label}: damaged model file (missing {exc})") from None
+    except InputError as exc:
+        raise InputError(f"{label}: damaged model file ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise InputError(f"{label}: damaged model file (an attribute that should be JSON is "
+                         f"not: {exc.msg})") from None
+    except (ValueError, TypeError, OSError, AttributeError) as exc:
+        raise InputError(f"{label}: damaged model file ({type(exc).__name__}: {exc})") from None
+
+
+def _read_model_group(group, MarkovModel) -> "MarkovModel":
+    """The model of a group whose format has been checked (errors raised as they come)."""
+    version = _attr_number(group.attrs.get("version", 1), "version")
+    if version > 1:
+        raise InputError(f"model file layout version {version:g}, written by a newer cfbmarkov "
+                         "(this one reads version 1); upgrade cfbmarkov")
+    window = np.asarray(group.attrs["window"], dtype=float)
+    if window.shape != (2,):
+        raise InputError(f"window attribute of shape {window.shape}, not 2 times")
+    frame_pairs = _attr_number(group.attrs.get("frame_pairs", 0), "frame_pairs")
+    if not (np.isfinite(frame_pairs) and frame_pairs >= 0 and frame_pairs == round(frame_pairs)):
+        raise InputError(f"frame_pairs {frame_pairs:g} is not a count")
+    return MarkovModel(
+        **{name: group[name][()] for name in _DATASETS},
+        state_space=StateSpace.from_attrs(group.attrs["state_space"]),
+        lag=_attr_number(group.attrs["lag"], "lag"), estimator=str(group.attrs["estimator"]),
+        window=None if np.isnan(window).any() else (float(window[0]), float(window[1])),
+        source=json.loads(group.attrs.get("source", '""')),
+        frame_pairs=int(frame_pairs),
+        pass_fractions=(group["pass_up_fraction"][()], group["pass_down_fraction"][()])
+        if "pass_up_fraction" in group else None,
+        selection=json.loads(group.attrs["selection"])
+        if "selection" in group.attrs else None,
+        connected=bool(group.attrs.get("connected", 0)),
+        **_open_fields(group))
+
+
+def _attr_number(value, name: str) -> float:
+    """A numeric attribute as a float; refused where it is not one number."""
+    try:
+        array = np.asarray(value, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"{name} attribute {value!r} is not a number") from None
+    if array.size != 1:
+        raise InputError(f"{name} attribute holds {array.size} values, not one number")
+    return float(array.reshape(()))
 
 
 _OPEN_DATASETS = ("exit_probability", "exit_counts", "entry_counts")

@@ -60,9 +60,20 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
     from cfbmarkov.trajectories import opened
 
     with opened(trajectories) as traj:
+        from cfbmarkov.limits import check_finite, check_memory, check_seed
+
+        seed = check_seed(seed)
+        duration = check_finite(duration, "duration", "s", positive=True)
+        check_finite(start, "start time", "s")
         n_steps = model.steps_for(duration)
         if n_steps < 1:
             raise InputError(f"duration {duration:g} s is shorter than one lag ({model.lag:g} s)")
+        particles = traj.n_particles + (model.inflow_per_lag * n_steps
+                                        if model.boundary == "open" else 0)
+        # states and laps (int32 each) of every particle at every lag, and the positions
+        check_memory((n_steps + 1.0) * particles * 8 + 8.0 * particles * traj.dimensions,
+                     f"a prediction of {duration:g} s ({n_steps} lags of {model.lag:g} s x "
+                     f"{particles:.0f} particles)", "shorten --duration")
         if model.boundary == "open" and traj.boundary != "open":
             raise InputError(f"{traj.path} is a periodic riser; the model is of an open one "
                              "(fit it on this file, or predict from an open riser's file)")
