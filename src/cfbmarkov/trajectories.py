@@ -328,9 +328,10 @@ class Trajectories:
                  "frames/lap": "iu", "frames/present": "b", "frames/velocity": "f"}
         for name, kind in kinds.items():
             if name in f and (not isinstance(f[name], h5py.Dataset) or f[name].dtype.kind not in kind):
+                wanted = ("whole numbers" if kind == "iu" else "booleans" if kind == "b"
+                          else "numbers")
                 raise InputError(f"{self.path}: damaged trajectory file ('{name}' holds "
-                                 f"{getattr(f[name], 'dtype', 'a group')}, not "
-                                 f"{'whole numbers' if kind == 'iu' else 'booleans' if kind == 'b' else 'numbers'})")
+                                 f"{getattr(f[name], 'dtype', 'a group')}, not {wanted})")
         if self.ids.ndim != 1 or self.times.ndim != 1:
             raise InputError(f"{self.path}: damaged trajectory file (ids or times are not 1-D)")
         if "frames/velocity" in f and f["frames/velocity"].shape != f["frames/position"].shape:

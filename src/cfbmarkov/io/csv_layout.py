@@ -7,6 +7,8 @@ import re
 from dataclasses import dataclass, field
 from typing import TextIO
 
+import numpy as np
+
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import IdCodes
 
