@@ -34,6 +34,21 @@ from cfbmarkov.analysis.rtd import rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
 
 
+def _resampled_rtd(model, window_length: float, direction: str, entry):
+    """A resampled model's RTD in the window, from the fitted model's entry distribution
+    (one sparse LU per resample saved: the spread of the entry distribution is left out,
+    that of the transitions kept)."""
+    if model.boundary == "open" or entry is None:
+        return model.rtd(window_length, direction)
+    from cfbmarkov.markov.rtd import exact_rtd
+
+    up, down = ((model.up_fraction, model.down_fraction) if direction == "up"
+                else (model.down_fraction, model.up_fraction))
+    steps = max(2, int(round(window_length / model.lag)))
+    return exact_rtd(model.transition_matrix, up, down, model.lag, max_steps=steps,
+                     entry=entry).in_window(window_length)
+
+
 def _binned(rtd, edges: np.ndarray) -> np.ndarray:
     """An exact RTD's probability per bin of ``edges``, with the sample histogram's rule
     for times on an edge (whole lags on bins of one lag fall in the bin they start)."""
@@ -131,13 +146,15 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
                                     connected=model.connected)
     rng = np.random.default_rng(seed)
     means, sds, rtds = [], [], []
+    exact = model.rtd(window_length, direction)
+    entry = exact.entry_distribution
     for _ in range(int(resamples)):
         picked = rng.integers(0, len(counts), len(counts))
         total = counts[picked[0]]
         for k in picked[1:]:
             total = total + counts[k]
         try:
-            rtd = estimator.fit_counts(total).rtd(window_length, direction)
+            rtd = _resampled_rtd(estimator.fit_counts(total), window_length, direction, entry)
         except (CfbmarkovError, ValueError):
             continue                 # a resample without residences: no figure
         means.append(rtd.mean)
@@ -145,7 +162,6 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         rtds.append(_binned(rtd, edges))
     if len(means) < 10:
         raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
-    exact = model.rtd(window_length, direction)
     exact_hist = _binned(exact, edges)
     lo_q, hi_q = 0.5 * (1 - level), 0.5 * (1 + level)
     z = float(norm.ppf(hi_q))
