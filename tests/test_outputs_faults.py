@@ -331,3 +331,20 @@ def test_simulate_killed_during_final_cleanup_is_accepted(tmp_path, monkeypatch,
     assert not (tmp_path / "s.h5.parts").exists()
     assert stray(tmp_path, ["small.toml", "s.h5"]) == []
     assert len((tmp_path / "s.h5").read_bytes()) == len(first)
+
+
+@pytest.mark.slow
+def test_ctrl_c_of_a_reproduce_with_two_workers_is_one_line(tmp_path):
+    """Ctrl-C while two worker processes simulate: the workers are stopped (no traceback of
+    theirs), the parent says so in one line and exits with 130."""
+    tiny = Path(__file__).parent / "test_reproduce.py"
+    text = tiny.read_text().split('TINY = """', 1)[1].split('"""', 1)[0]
+    (tmp_path / "tiny.toml").write_text(text.replace("end_time = 0.8", "end_time = 3.0"))
+    p = cli("reproduce", "--scale", "quick", "--overrides", "tiny.toml", "--velocities", "6,8",
+            "-o", "out", "--jobs", "2", "-q", cwd=tmp_path)
+    time.sleep(5.0)
+    p.send_signal(signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    assert p.returncode == 130, err
+    assert err.strip().splitlines() == ["cfbmarkov reproduce: interrupted; rerun the same "
+                                        "command to resume"]

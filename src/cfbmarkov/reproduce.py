@@ -293,9 +293,22 @@ class InlineExecutor(cf.Executor):
 
 
 def _limit_threads(threads: int) -> None:
+    """Worker initializer: the thread count, and Ctrl-C left to the parent (which stops the
+    workers and says so in one line) instead of a traceback from every worker."""
+    import signal
+
     import numba
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+
+
+def _stop_workers(executor) -> None:
+    """Terminate a process pool's workers now (Ctrl-C: their cases resume from their last
+    checkpoint on a rerun)."""
+    for process in list(getattr(executor, "_processes", {}).values()):
+        with contextlib.suppress(Exception):
+            process.terminate()
 
 
 def local_executor(jobs: int | None = None, n_cases: int = 1) -> tuple[cf.Executor, int]:
@@ -473,6 +486,10 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                 log(f"{name} {est:>5}: PD E(RT) {_fmt(s.get('pd_rt_mean'), '+.1f')} %, PD SD(RT) "
                     f"{_fmt(s.get('pd_rt_sd'), '+.1f')} %, MD {_fmt(s.get('md_rtd'), '.3g')}, "
                     f"mixing RMS {_fmt(s.get('mixing_rms'), '.3g')}")
+    except KeyboardInterrupt:
+        if own:
+            _stop_workers(executor)
+        raise
     finally:
         if own:
             try:
