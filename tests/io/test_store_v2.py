@@ -153,3 +153,27 @@ def test_what_cannot_use_absent_particles_refuses_them_in_one_line(tmp_path, cap
     assert code == 2 and err.count("\n") == 1, err
     assert f"{purpose} cannot use particles absent from some frames yet" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("error, message", [
+    (PermissionError(13, "Permission denied"), "cannot read (permission denied)"),
+    (OSError("Unable to synchronously open file (unable to lock file, errno = 11, error "
+             "message = 'Resource temporarily unavailable')"), "locked by another program"),
+    (OSError("Unable to synchronously open file (file signature not found)"),
+     "not a readable HDF5 file (truncated, or another format)"),
+])
+def test_open_errors_say_what_happened(tmp_path, monkeypatch, capsys, error, message):
+    """A file unreadable for lack of permission, or locked by a writer, is not called
+    damaged (this machine runs as root, so the errors are raised by a stand-in)."""
+    import h5py
+
+    path = write_trajectories(tmp_path / "a.h5", [0.0, 0.02], np.full((2, 1, 2), 0.05),
+                              width=W, height=H)
+
+    def refuse(*args, **kwargs):
+        raise error
+
+    monkeypatch.setattr(h5py, "File", refuse)
+    assert main(["info", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err
