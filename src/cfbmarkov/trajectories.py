@@ -694,10 +694,23 @@ class Trajectories:
         -------
         ndarray of float64, shape (N, D) or (T, N, D), or None
             Velocities (m/s); NaN where a particle is absent.
+
+        Raises
+        ------
+        InputError
+            If a present particle's velocity is not a finite number (a damaged file).
         """
         if not self.has_velocity:
             return None
-        return self._file["frames/velocity"][frames]
+        values = self._file["frames/velocity"][frames]
+        with np.errstate(invalid="ignore"):
+            bad = self.present(frames) & ~np.isfinite(values).all(axis=-1)
+        if bad.any():
+            where = np.unravel_index(int(np.argmax(bad)), bad.shape)
+            n = int(where[-1])
+            raise InputError(f"{self.path}: damaged trajectory file (velocity of particle "
+                             f"{self.ids[n]} is not a finite number)")
+        return values
 
     def laps(self, frames: int | slice = slice(None)) -> np.ndarray:
         """Lap counters of one frame or a range of frames.

@@ -177,3 +177,17 @@ def test_open_errors_say_what_happened(tmp_path, monkeypatch, capsys, error, mes
     assert main(["info", str(path)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err
+
+
+def test_a_non_finite_velocity_is_refused_when_read(tmp_path):
+    import h5py
+
+    vel = np.zeros((2, 2, 2))
+    path = write_trajectories(tmp_path / "v.h5", [0.0, 0.02], np.full((2, 2, 2), 0.05),
+                              width=W, height=H, velocities=vel)
+    with h5py.File(path, "r+") as f:
+        f["frames/velocity"][1, 1, 0] = np.inf
+    with Trajectories(path) as t:
+        assert np.isfinite(t.velocities(0)).all()
+        with pytest.raises(InputError, match="velocity of particle 1 is not a finite number"):
+            t.velocities()
