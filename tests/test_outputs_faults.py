@@ -183,8 +183,8 @@ def test_full_disk_markov_verbs(data, tmp_path, verb):
 
 # -- 4. kills at random points, stale temporaries --------------------------------------------
 def test_kill_at_random_points_then_rerun_is_clean(data, tmp_path):
-    """kill -9 of import, fit, predict and compare at random moments: the rerun succeeds and
-    leaves nothing but its output."""
+    """kill -9 of import, fit, predict, compare (with figures), maps and export-vtk at random
+    moments: the rerun succeeds and leaves nothing but its output."""
     rng = random.Random(16)
     csv = tmp_path / "in.csv"
     with open(csv, "w") as f:
@@ -198,7 +198,9 @@ def test_kill_at_random_points_then_rerun_is_clean(data, tmp_path):
             ("pred.h5", ["predict", data / "model.h5", "--init", data / "run.h5", "--start",
                          "0.5", "--duration", "1", "-q", "-o", "pred.h5"]),
             ("cmp", ["compare", data / "run.h5", data / "run.h5", "--window", "0:1.5",
-                     "--no-figures", "-o", "cmp"])]
+                     "-o", "cmp"]),
+            ("maps.png", ["maps", data / "model.h5", "--times", "0.05,0.1", "-o", "maps.png"]),
+            ("vtk", ["export-vtk", data / "run.h5", "-o", "vtk"])]
     for name, args in jobs:
         p = cli(*args, cwd=tmp_path)
         time.sleep(rng.uniform(0.5, 2.5))
@@ -206,7 +208,8 @@ def test_kill_at_random_points_then_rerun_is_clean(data, tmp_path):
         p.communicate()
         rc, _, err = run_cli(*args, cwd=tmp_path)
         assert rc == 0, err
-        assert stray(tmp_path, ["in.csv", "imp.h5", "fit.h5", "pred.h5", "cmp"]) == [], name
+        assert stray(tmp_path, ["in.csv", "imp.h5", "fit.h5", "pred.h5", "cmp", "maps.png",
+                                "vtk"]) == [], name
     assert (tmp_path / "cmp" / "summary.json").exists()
 
 
