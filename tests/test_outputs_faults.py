@@ -203,7 +203,7 @@ def test_kill_at_random_points_then_rerun_is_clean(data, tmp_path):
             ("vtk", ["export-vtk", data / "run.h5", "-o", "vtk"])]
     for name, args in jobs:
         p = cli(*args, cwd=tmp_path)
-        time.sleep(rng.uniform(0.5, 2.5))
+        time.sleep(rng.uniform(0.3, 1.5))
         p.kill()
         p.communicate()
         rc, _, err = run_cli(*args, cwd=tmp_path)
