@@ -48,6 +48,7 @@ from pathlib import Path
 from typing import Any, Iterator
 
 import h5py
+import numba as nb
 import numpy as np
 
 from cfbmarkov.errors import InputError
@@ -155,6 +156,35 @@ def _open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
             raise InputError(f"{path}: locked by another program that is writing it (HDF5 "
                              "file lock); wait for it to end") from None
         raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format)") from None
+
+
+@nb.njit(cache=True)
+def _frame_problem(pos, lap, present, extent, tol, height, open_riser):
+    """The first problem of a block of frames, in one pass without temporaries: (code,
+    frame, particle) with code 0 none, 1 a present position not finite, 2 outside the
+    domain (beyond ``tol``), 3 a non-zero lap on an open riser, 4 (periodic) between
+    consecutive present frames |dy + dL H| > H + 2 tol (laps inconsistent with positions).
+    Codes 1-2 are found before 3-4 for the same frame and particle (docs/definitions.md,
+    File formats, What is checked)."""
+    n_frames, n_particles, d = pos.shape
+    for k in range(n_frames):
+        for p in range(n_particles):
+            if not present[k, p]:
+                continue
+            for c in range(d):
+                v = pos[k, p, c]
+                if not np.isfinite(v):
+                    return 1, k, p
+                if v < -tol or v > extent[c] + tol:
+                    return 2, k, p
+            if open_riser:
+                if lap[k, p] != 0:
+                    return 3, k, p
+            elif k > 0 and present[k - 1, p]:
+                moved = pos[k, p, 1] - pos[k - 1, p, 1] + (lap[k, p] - lap[k - 1, p]) * height
+                if not abs(moved) <= height + 2 * tol:
+                    return 4, k - 1, p
+    return 0, 0, 0
 
 
 @contextlib.contextmanager
@@ -384,38 +414,26 @@ class Trajectories:
         present = self.present(slice(lo, i1))
         extent = np.array([self.width, self.height] + ([self.depth] if self.dimensions == 3 else []))
         tol = POSITION_TOLERANCE
-        with np.errstate(invalid="ignore"):
-            finite = np.isfinite(pos).all(axis=-1)
-            outside = ~((pos >= -tol) & (pos <= extent + tol)).all(axis=-1)
-        for bad, what in ((present & ~finite, "is not a finite number"),
-                          (present & finite & outside, "lies outside the domain 0.." + " x 0..".join(
-                              f"{v:g}" for v in extent) + " m")):
-            if bad.any():
-                k, n = np.unravel_index(int(np.argmax(bad)), bad.shape)
-                raise InputError(f"{self.path}: damaged trajectory file (position "
-                                 f"{pos[k, n].tolist()} of particle {self.ids[n]} at t = "
-                                 f"{_t(self.times[lo + k])} s {what})")
-        lap = lap.astype(np.int64)
-        if self.boundary == "open":
-            bad = present & (lap != 0)
-            if bad.any():
-                k, n = np.unravel_index(int(np.argmax(bad)), bad.shape)
-                raise InputError(f"{self.path}: damaged trajectory file (an open riser, but particle "
-                                 f"{self.ids[n]} has lap {lap[k, n]} at t = {_t(self.times[lo + k])} s)")
-        elif lap.shape[0] > 1:
-            both = present[1:] & present[:-1]
-            h = self.height
-            moved = pos[1:, :, 1] - pos[:-1, :, 1] + (lap[1:] - lap[:-1]) * h
-            with np.errstate(invalid="ignore"):
-                bad = both & ~(np.abs(moved) <= h + 2 * tol)
-            if bad.any():
-                k, n = np.unravel_index(int(np.argmax(bad)), bad.shape)
-                raise InputError(
-                    f"{self.path}: damaged trajectory file (lap counter of particle {self.ids[n]} "
-                    f"goes from {lap[k, n]} to {lap[k + 1, n]} between t = {_t(self.times[lo + k])} "
-                    f"and {_t(self.times[lo + k + 1])} s while its height goes from "
-                    f"{pos[k, n, 1]:.6g} to {pos[k + 1, n, 1]:.6g} m: laps inconsistent with the "
-                    "positions)")
+        code, k, n = _frame_problem(np.ascontiguousarray(pos, dtype=np.float64),
+                                    np.ascontiguousarray(lap, dtype=np.int64),
+                                    np.ascontiguousarray(present, dtype=np.bool_), extent, tol,
+                                    self.height, self.boundary == "open")
+        if code == 1 or code == 2:
+            what = ("is not a finite number" if code == 1 else "lies outside the domain 0.."
+                    + " x 0..".join(f"{v:g}" for v in extent) + " m")
+            raise InputError(f"{self.path}: damaged trajectory file (position "
+                             f"{pos[k, n].tolist()} of particle {self.ids[n]} at t = "
+                             f"{_t(self.times[lo + k])} s {what})")
+        if code == 3:
+            raise InputError(f"{self.path}: damaged trajectory file (an open riser, but particle "
+                             f"{self.ids[n]} has lap {lap[k, n]} at t = {_t(self.times[lo + k])} s)")
+        if code == 4:
+            raise InputError(
+                f"{self.path}: damaged trajectory file (lap counter of particle {self.ids[n]} "
+                f"goes from {lap[k, n]} to {lap[k + 1, n]} between t = {_t(self.times[lo + k])} "
+                f"and {_t(self.times[lo + k + 1])} s while its height goes from "
+                f"{pos[k, n, 1]:.6g} to {pos[k + 1, n, 1]:.6g} m: laps inconsistent with the "
+                "positions)")
         self._checked[i0:i1] = True
 
     def _check_read(self, frames, data: np.ndarray, name: str) -> None:
