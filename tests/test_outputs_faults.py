@@ -233,14 +233,19 @@ def test_refused_reproduce_creates_no_folder(tmp_path):
 
 # -- 5. Ctrl-C ------------------------------------------------------------------------------
 def test_ctrl_c_exit_130_one_line_no_temporary(data, tmp_path):
+    """Ctrl-C while the prediction is being written (its temporary exists): exit 130, one
+    line, the temporary removed."""
     p = cli("predict", data / "model.h5", "--init", data / "run.h5", "--start", "0.5",
-            "--duration", "300", "-q", "-o", "pred.h5", cwd=tmp_path)
-    time.sleep(2.5)
+            "--duration", "3000", "-q", "-o", "pred.h5", cwd=tmp_path)
+    deadline = time.monotonic() + 60
+    while not list(tmp_path.glob(".pred.h5.*.tmp")):
+        assert p.poll() is None, "the prediction ended before its file was being written"
+        assert time.monotonic() < deadline
+        time.sleep(0.05)
+    time.sleep(0.2)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)
-    if p.returncode == 0:           # finished before the signal: nothing to check
-        pytest.skip("the prediction ended before Ctrl-C")
-    assert p.returncode == 130
+    assert p.returncode == 130, err
     assert err.splitlines() == ["cfbmarkov predict: interrupted"]
     assert stray(tmp_path, []) == []
 

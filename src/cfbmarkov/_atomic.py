@@ -247,7 +247,15 @@ def publish(tmp: str | os.PathLike, target: str | os.PathLike) -> Path:
     ------
     InputError
         If the rename fails (the temporary file is removed first).
+    KeyboardInterrupt
+        If Ctrl-C was pressed while the output was written, even where the interrupt was
+        swallowed (:mod:`cfbmarkov._interrupt`; the temporary file is removed).
     """
+    from cfbmarkov import _interrupt
+
+    if _interrupt.requested:          # Ctrl-C swallowed on the way: never publish
+        Path(tmp).unlink(missing_ok=True)
+        raise KeyboardInterrupt
     try:
         os.replace(tmp, target)
     except OSError as exc:

@@ -688,16 +688,11 @@ OUTPUTS = {"import": ("trajectory", ("source",)), "fit": ("model", ("run",)),
 
 def _run(args) -> int:
     """Run the verb of ``args`` with its output claimed; errors become one line."""
-    try:
-        if args.command in OUTPUTS:
-            from cfbmarkov._outputs import claim_output
+    from cfbmarkov import _interrupt
 
-            kind, inputs = OUTPUTS[args.command]
-            with claim_output(args.output, args.command, kind,
-                              [getattr(args, name, None) for name in inputs],
-                              force=getattr(args, "force", False)):
-                return int(args.func(args) or 0)
-        return int(args.func(args) or 0)
+    try:
+        with _interrupt.installed():
+            return _run_claimed(args)
     except CfbmarkovError as exc:
         print(f"cfbmarkov {args.command}: error: {exc}", file=sys.stderr)
         return 2
@@ -710,6 +705,24 @@ def _run(args) -> int:
         name = exc.filename or getattr(args, "output", "")
         print(f"cfbmarkov {args.command}: error: {write_error(exc, name)}", file=sys.stderr)
         return 2
+
+
+def _run_claimed(args) -> int:
+    """The verb with its output claimed; a Ctrl-C swallowed on the way is raised at the end."""
+    from cfbmarkov import _interrupt
+
+    try:
+        if args.command in OUTPUTS:
+            from cfbmarkov._outputs import claim_output
+
+            kind, inputs = OUTPUTS[args.command]
+            with claim_output(args.output, args.command, kind,
+                              [getattr(args, name, None) for name in inputs],
+                              force=getattr(args, "force", False)):
+                return int(args.func(args) or 0)
+        return int(args.func(args) or 0)
+    finally:
+        _interrupt.check()
 
 
 def _resumable(args) -> str:

@@ -27,6 +27,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from cfbmarkov import _interrupt
 from cfbmarkov._atomic import (discard, is_write_failure, late_write_failure, publish,
                                temporary_path, write_error)
 from cfbmarkov._hdf5 import create_array_dataset, json_default, package_version
@@ -453,6 +454,7 @@ class TrajectoryWriter:
             spaced, velocities are missing, or (laps derived) a particle moved more than
             ``max_step`` of the height between frames.
         """
+        _interrupt.check()            # a Ctrl-C swallowed by a finalizer stops here
         times = np.asarray(times, dtype=np.float64).reshape(-1)
         positions = np.asarray(positions, dtype=np.float64)
         n, d = self.ids.size, self.dimensions

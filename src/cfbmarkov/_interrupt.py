@@ -1,0 +1,70 @@
+"""Ctrl-C that is never swallowed.
+
+Python delivers SIGINT as a KeyboardInterrupt wherever the main thread happens to be; when
+that is inside a finalizer or a weakref callback (h5py objects are collected all the time),
+the interpreter prints "Exception ignored" and carries on, so a verb could finish as if
+nothing had been asked. The command line installs :func:`handler`, which also records the
+request; the writers call :func:`check` before each block of frames and before an output is
+renamed into place, so a swallowed interrupt is raised again at the next of those points and
+the output is never published. While a verb runs, such a swallowed KeyboardInterrupt is
+not printed ("Exception ignored ...", a traceback): the one line comes when it is raised
+again.
+"""
+
+from __future__ import annotations
+
+import signal
+import sys
+import threading
+
+#: whether Ctrl-C was pressed since the verb started
+requested = False
+
+
+def handler(signum, frame) -> None:
+    """SIGINT handler: record the request and interrupt (KeyboardInterrupt)."""
+    global requested
+    requested = True
+    raise KeyboardInterrupt
+
+
+def check() -> None:
+    """Raise KeyboardInterrupt if Ctrl-C was pressed (and perhaps swallowed) earlier.
+
+    Raises
+    ------
+    KeyboardInterrupt
+    """
+    if requested:
+        raise KeyboardInterrupt
+
+
+class installed:
+    """Context manager: :func:`handler` for SIGINT while a verb runs (main thread only), the
+    previous handler and a cleared request afterwards."""
+
+    def __enter__(self):
+        global requested
+        requested = False
+        self._previous = None
+        self._hook = sys.unraisablehook
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, handler)
+            previous_hook = self._hook
+
+            def quiet(unraisable):          # swallowed there, raised again at check()
+                if unraisable.exc_type is not None and issubclass(unraisable.exc_type,
+                                                                  KeyboardInterrupt):
+                    return
+                previous_hook(unraisable)
+
+            sys.unraisablehook = quiet
+        return self
+
+    def __exit__(self, *exc):
+        global requested
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            sys.unraisablehook = self._hook
+        requested = False
+        return False
