@@ -501,11 +501,13 @@ def build_parser() -> argparse.ArgumentParser:
                    help="paper (Eq. 2-4; the default for a periodic riser) or mle (pooled "
                         "counts; the default, and the only choice, for an open riser)")
     s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
-                                        "cells-previous", "auto"], default="cells",
+                                        "cells-previous", "cells-regime",
+                                        "cells-direction-regime", "auto"], default="cells",
                    help="state space: the paper's cells, cells x direction of motion, cells x "
                         "vertical-velocity bins, cells x previous-cell offset (second order), "
-                        "or auto: chosen with the lag on held-out frames of the window "
-                        "(default cells)")
+                        "cells x 2 regimes of the solids flux (the regime model; with "
+                        "direction: x direction too), or auto: chosen with the lag on held-out "
+                        "frames of the window (default cells)")
     s.add_argument("--connected", action="store_true",
                    help="fit on the largest strongly connected set of the counts (transitions "
                         "out of it removed, as deeptime and PyEMMA do): states entered but "

@@ -281,3 +281,117 @@ def write_open_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, d
                           boundary="open") as w:
         w.append_frames(times, positions, present=present)
     return Path(path)
+
+
+# -- a riser with a hidden global regime (issue 14: the regime model's test case) ------------
+#
+# Two chains on cells (two RiserFlow's without persistence, e.g. a dilute rise and a
+# collapse) and a regime chain G that switches between them; all particles share one regime
+# path. With the regime of frame t taken as that of the step t-1 -> t (what the flux over the
+# previous lag reveals), the pair (cell, regime) is a Markov chain,
+#
+#     J[(c, r), (c', r')] = G[r, r'] K_r'[c, c'],      state = c * R + r,
+#
+# the layout of cfbmarkov.markov.regimes.RegimeCells without direction.
+
+
+def regime_generator(flows, switching) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The joint chain J of a riser whose particles follow a common hidden regime.
+
+    Parameters
+    ----------
+    flows : sequence of RiserFlow
+        One flow per regime, each with ``persistence=False`` and the same grid and lag.
+    switching : array_like, shape (R, R)
+        The regime chain G per lag, row-stochastic.
+
+    Returns
+    -------
+    J : numpy.ndarray
+        [S, S] joint transition matrix on (cell, regime), S = m n R, state = cell*R + r.
+    up, down : numpy.ndarray
+        [S, S] indicators of the transitions passing up through the top / down through the
+        bottom.
+
+    Raises
+    ------
+    ValueError
+        If a flow has persistence, the grids differ, or G is not R x R row-stochastic.
+    """
+    g = np.asarray(switching, dtype=np.float64)
+    r = len(flows)
+    if g.shape != (r, r) or np.any(g < 0) or not np.allclose(g.sum(axis=1), 1.0):
+        raise ValueError(f"switching must be a {r} x {r} row-stochastic matrix")
+    if any(f.persistence for f in flows) or len({(f.columns, f.rows, f.width, f.height, f.lag)
+                                                 for f in flows}) != 1:
+        raise ValueError("regime flows need persistence=False and one grid and lag")
+    chains = [generator(f)[:3] for f in flows]
+    n = chains[0][0].shape[0]
+    joint = np.zeros((n * r, n * r))
+    up = np.zeros_like(joint)
+    down = np.zeros_like(joint)
+    for a in range(r):
+        for b in range(r):       # R x R blocks of (cells x cells)
+            joint[a::r, b::r] = g[a, b] * chains[b][0]
+            up[a::r, b::r] = chains[b][1]
+            down[a::r, b::r] = chains[b][2]
+    return joint, up, down
+
+
+def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int,
+                     duration: float, seed: int = 0) -> Path:
+    """Write a periodic run whose particles share one hidden regime path (source
+    ``'synthetic-regimes'``).
+
+    The regime path is drawn from G (stationary start); at each step every particle moves
+    by the cell chain of the step's regime. Only positions and laps are written.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The trajectory file to write.
+    flows, switching
+        As :func:`regime_generator`.
+    n_particles : int
+        Number of particles.
+    duration : float
+        Simulated time (s); frames every ``flows[0].lag``.
+    seed : int, optional
+        Random seed.
+
+    Returns
+    -------
+    pathlib.Path
+        The path written.
+    """
+    from cfbmarkov.trajectory_writer import TrajectoryWriter
+
+    regime_generator(flows, switching)      # validates
+    flow = flows[0]
+    g = np.asarray(switching, dtype=np.float64)
+    blocks = [generator(f)[:3] for f in flows]
+    cells_n = blocks[0][0].shape[0]
+    stacked = SparseChain.from_matrix(np.vstack([b[0] for b in blocks]),
+                                      np.vstack([b[1] for b in blocks]),
+                                      np.vstack([b[2] for b in blocks]))
+    n_frames = int(round(duration / flow.lag)) + 1
+    rng = np.random.default_rng(seed)
+    values, vectors = np.linalg.eig(g.T)
+    pi = np.abs(vectors[:, int(np.argmin(np.abs(values - 1)))].real)
+    path_ = np.empty(n_frames, np.int64)
+    path_[0] = rng.choice(len(flows), p=pi / pi.sum())
+    for k in range(1, n_frames):         # one draw per frame (the regime path), not per particle
+        path_[k] = rng.choice(len(flows), p=g[path_[k - 1]])
+    initial = rng.integers(0, cells_n, n_particles)
+    cells, laps = run_chain(stacked, initial, n_frames - 1, seed + 1, row_offset=path_ * cells_n)
+    positions = np.empty((n_frames, n_particles, 2))
+    for k in range(n_frames):      # one vectorised placement per frame
+        positions[k] = place_in_cells(cells[k], flow.grid, seed + 2, k)
+    times = flow.lag * np.arange(n_frames)
+    params = {"flows": [{k: getattr(f, k) for k in f.__dataclass_fields__} for f in flows],
+              "switching": g.tolist(), "seed": seed}
+    with TrajectoryWriter(path, np.arange(n_particles), width=flow.width, height=flow.height,
+                          source="synthetic-regimes", parameters=params,
+                          frame_interval=flow.lag) as w:
+        w.append_frames(times, positions, laps=laps)
+    return Path(path)

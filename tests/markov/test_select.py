@@ -16,7 +16,7 @@ from cfbmarkov.analysis.rtd import residence_times
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov import MarkovModel
-from cfbmarkov.markov.select import fit_by_name, parse_model_name, select_model
+from cfbmarkov.markov.select import DEFAULT_STATES, fit_by_name, parse_model_name, select_model
 from cfbmarkov.trajectories import Trajectories
 
 try:
@@ -53,8 +53,8 @@ def test_auto_chooses_memory_and_predicts_the_later_spread(run, tmp_path):
     assert len(blocks) == 3 and blocks[0][0] == FIT[0] and blocks[-1][1] == FIT[1]
     assert all(x[1] == y[0] for x, y in zip(blocks, blocks[1:]))
     candidates = model.selection["candidates"]
-    assert {c["states"] for c in candidates} == {"cells", "cells-direction", "cells-velocity",
-                                                 "cells-previous"}
+    assert {c["states"] for c in candidates} == set(DEFAULT_STATES)
+    assert {"cells-regime", "cells-direction-regime"} <= set(DEFAULT_STATES)
     assert min(c["score"] for c in candidates) == pytest.approx(
         next(c["score"] for c in candidates if c["states"] == chosen["states"]
              and c["lag"] == chosen["lag"]))
@@ -135,4 +135,4 @@ def test_memory_candidates_work_when_the_window_starts_at_the_first_frame(tmp_pa
     model = select_model(path, window=(0.0, 4.0), columns=FLOW.columns, rows=FLOW.rows,
                          lag=FLOW.lag, lag_multiples=(1,))
     errors = {c["states"]: c["error"] for c in model.selection["candidates"]}
-    assert errors == {name: "" for name in errors} and len(errors) == 4
+    assert errors == {name: "" for name in errors} and len(errors) == len(DEFAULT_STATES)

@@ -27,6 +27,7 @@ from cfbmarkov.markov.estimate import (
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
 from cfbmarkov.markov.memory_states import DirectionCells, SecondOrderCells, VelocityCells
+from cfbmarkov.markov.regimes import DirectionRegimeCells, RegimeCells
 from cfbmarkov.markov.states import (
     STATE_SPACES,
     CellGrid,
@@ -37,8 +38,9 @@ from cfbmarkov.markov.states import (
 )
 
 __all__ = [
-    "ABSENT", "CellGrid", "DirectionCells", "DiscreteTrajectories", "ESTIMATORS", "MarkovModel",
-    "MaximumLikelihoodEstimator", "PaperEstimator", "ResidenceTimeDistribution",
+    "ABSENT", "CellGrid", "DirectionCells", "DirectionRegimeCells", "DiscreteTrajectories",
+    "ESTIMATORS", "MarkovModel",
+    "MaximumLikelihoodEstimator", "PaperEstimator", "RegimeCells", "ResidenceTimeDistribution",
     "STATE_SPACES", "SecondOrderCells", "StateSpace", "TransitionCounts", "TransitionEstimator",
     "VelocityCells", "WindowFrames", "cell_index", "count_transitions", "discretize",
     "discretize_frame", "estimator_from_name", "exact_rtd", "fit_model", "place_in_cells",

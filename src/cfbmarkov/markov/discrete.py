@@ -289,6 +289,8 @@ class WindowFrames:
         frames = slice(first, None)
         positions = self.positions[frames]
         velocities = None if self.velocities is None else self.velocities[frames]
+        # a space that learns from the fitting window (regime edges) learns it here
+        state_space = state_space.fit_to_frames(positions, lag_frames, self.frame_interval)
         # absent particles (NaN) get some state, masked here with those whose history is
         # incomplete
         states = state_space.discretize(positions, velocities, lag_frames, self.frame_interval)

@@ -382,6 +382,10 @@ class TransitionEstimator:
             or lag, or holds no transition.
         """
         windows = as_discrete_list(data)
+        fitted = windows[0].state_space
+        if fitted != self.state_space and self.state_space.accepts(fitted):
+            # an unfitted regime space: the discretisation fitted its edges on the window
+            return type(self)(fitted, self.lag, self.connected).fit(windows)
         for window in windows:
             if window.state_space != self.state_space:
                 raise InputError(f"discrete trajectories are in {window.state_space.describe()}"

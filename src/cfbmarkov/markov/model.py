@@ -312,6 +312,25 @@ class MarkovModel:
         return SparseChain.from_matrix(self.transition_matrix, self.up_fraction, self.down_fraction)
 
     @cached_property
+    def regime_chain(self) -> np.ndarray | None:
+        """The regime chain G (R x R) of a regime model, read off its counts
+        (:func:`~cfbmarkov.markov.regimes.regime_matrix`; from P itself for a model without
+        counts); None for other state spaces."""
+        from cfbmarkov.markov.regimes import RegimeCells, regime_matrix
+
+        if not isinstance(self.state_space, RegimeCells):
+            return None
+        weights = self.counts if self.n_transitions else self.transition_matrix
+        return regime_matrix(weights, self.state_space)
+
+    @cached_property
+    def _conditional_chain(self) -> SparseChain:
+        from cfbmarkov.markov.regimes import conditional_chain
+
+        return conditional_chain(self.transition_matrix, self.up_fraction, self.down_fraction,
+                                 self.state_space)
+
+    @cached_property
     def stationary_distribution(self) -> np.ndarray:
         """The long-run distribution over the states, float64 [S], summing to 1 (pi P = pi).
 
@@ -576,14 +595,26 @@ class MarkovModel:
         initial_states = np.asarray(initial_states)
         if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
             raise InputError("initial states outside the model's state space")
+        chain, offset, retag = self._chain, None, None
+        if self.regime_chain is not None:
+            # one regime path for every particle, each moving by the chain conditioned on it
+            from cfbmarkov.markov.regimes import regime_path, start_regime, with_regime
+
+            space = self.state_space
+            path = regime_path(self.regime_chain, start_regime(initial_states, space), n_steps,
+                               seed)
+            chain, offset = self._conditional_chain, path * self.n_states
+
+            def retag(states, steps):
+                return with_regime(states, path[steps], space)
         if self.boundary == "open":
             from cfbmarkov.markov.open_montecarlo import run_open_chain
 
-            states, _ = run_open_chain(self._chain, self.exit_probability,
+            states, _ = run_open_chain(chain, self.exit_probability,
                                        self.entry_distribution, self.inflow_per_lag,
-                                       initial_states, n_steps, seed)
+                                       initial_states, n_steps, seed, offset, retag)
             return states, np.zeros_like(states)
-        return run_chain(self._chain, initial_states, n_steps, seed, initial_laps)
+        return run_chain(chain, initial_states, n_steps, seed, initial_laps, offset)
 
     def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """States, positions and laps of the particles in the frame at ``start``.

@@ -99,7 +99,7 @@ def first_above(cumulative, lo, hi, u):
 
 @nb.njit(cache=True, parallel=True)
 def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulative, up_probability,
-                   down_probability, n_steps, seed, states_out, laps_out):
+                      down_probability, row_offset, n_steps, seed, states_out, laps_out):
     """Advance every particle ``n_steps`` transitions (Numba kernel, parallel over particles).
 
     Each step draws u in [0, 1) and takes the first entry of the row whose cumulative
@@ -113,6 +113,9 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
         States and lap counters at the start.
     row_start, column, cumulative, up_probability, down_probability : ndarray
         The arrays of a :class:`SparseChain`.
+    row_offset : ndarray of int64, shape (n_steps + 1,)
+        Step k draws from row ``row_offset[k] + s`` of the chain (all zeros for one chain;
+        a regime model's stacked conditional chains, :mod:`cfbmarkov.markov.regimes`).
     n_steps : int
         Number of lags to run.
     seed : numpy.uint64
@@ -133,8 +136,8 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
         states_out[0, p] = s
         laps_out[0, p] = lap
         for k in range(1, n_steps + 1):
-            a = row_start[s]
-            b = row_start[s + 1]
+            a = row_start[row_offset[k] + s]
+            b = row_start[row_offset[k] + s + 1]
             if b > a:
                 lo = first_above(cumulative, a, b - 1, uniform(seed, STREAM_STATE, p, k))
                 pu = up_probability[lo]
@@ -150,8 +153,8 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
             laps_out[k, p] = lap
 
 
-def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initial_laps=None
-              ) -> tuple[np.ndarray, np.ndarray]:
+def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initial_laps=None,
+              row_offset=None) -> tuple[np.ndarray, np.ndarray]:
     """States and laps of a Monte Carlo run from ``initial_states``.
 
     Parameters
@@ -166,6 +169,9 @@ def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initi
         Seed: the run depends only on (seed, particle, step), whatever the thread count.
     initial_laps : array_like of int, shape (N,), optional
         Lap counters at the start (0 when None).
+    row_offset : array_like of int, shape (n_steps + 1,), optional
+        Step k draws from row ``row_offset[k] + s`` (a regime model's common regime path
+        times S, :mod:`cfbmarkov.markov.regimes`); None: zeros.
 
     Returns
     -------
@@ -184,7 +190,9 @@ def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initi
              else np.ascontiguousarray(initial_laps, dtype=np.int32))
     states = np.empty((n_steps + 1, n), np.int32)
     laps = np.empty((n_steps + 1, n), np.int32)
+    offset = (np.zeros(n_steps + 1, np.int64) if row_offset is None
+              else np.ascontiguousarray(row_offset, dtype=np.int64))
     monte_carlo_steps(initial_states, laps0, chain.row_start, chain.column, chain.cumulative,
-                   chain.up_probability, chain.down_probability, int(n_steps),
-                   np.uint64(seed), states, laps)
+                      chain.up_probability, chain.down_probability, offset, int(n_steps),
+                      np.uint64(seed), states, laps)
     return states, laps

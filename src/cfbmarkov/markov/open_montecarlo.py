@@ -50,7 +50,7 @@ def _entry_states(seed, cumulative, first, out):
 
 @nb.njit(cache=True, parallel=True)
 def open_steps(initial_states, start_step, exit_probability, row_start, column, cumulative,
-               n_steps, seed, states_out):
+               row_offset, n_steps, seed, states_out):
     """Advance every particle from its start step to ``n_steps`` (Numba, parallel over
     particles): each lag it leaves through the outlet with probability r_s (then it is
     absent, -1, for good), else it takes the first entry of its row of P whose cumulative
@@ -66,6 +66,9 @@ def open_steps(initial_states, start_step, exit_probability, row_start, column, 
         r.
     row_start, column, cumulative : ndarray
         The arrays of a :class:`~cfbmarkov.markov.montecarlo.SparseChain` of P.
+    row_offset : ndarray of int64, shape (n_steps + 1,)
+        Step k draws from row ``row_offset[k] + s`` (zeros for one chain; a regime model's
+        common path times S).
     n_steps : int
         Lags to run.
     seed : numpy.uint64
@@ -83,8 +86,8 @@ def open_steps(initial_states, start_step, exit_probability, row_start, column, 
                 if uniform(seed, STREAM_EXIT, p, k) < exit_probability[s]:
                     s = -1
                 else:
-                    a = row_start[s]
-                    b = row_start[s + 1]
+                    a = row_start[row_offset[k] + s]
+                    b = row_start[row_offset[k] + s + 1]
                     if b > a:
                         s = column[first_above(cumulative, a, b - 1,
                                                uniform(seed, STREAM_STATE, p, k))]
@@ -92,8 +95,8 @@ def open_steps(initial_states, start_step, exit_probability, row_start, column, 
 
 
 def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.ndarray,
-                   inflow_per_lag: float, initial_states, n_steps: int, seed: int
-                   ) -> tuple[np.ndarray, np.ndarray]:
+                   inflow_per_lag: float, initial_states, n_steps: int, seed: int,
+                   row_offset=None, retag=None) -> tuple[np.ndarray, np.ndarray]:
     """States of an open riser's Monte Carlo run.
 
     Parameters
@@ -112,6 +115,12 @@ def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.n
         Lags to run.
     seed : int
         Seed of the counter-based generator.
+    row_offset : array_like of int, shape (n_steps + 1,), optional
+        Step k draws from row ``row_offset[k] + s`` of the chain (a regime model's common
+        path times S); None: zeros.
+    retag : callable, optional
+        ``retag(states, steps)`` gives the newcomers' states given their drawn states and
+        entry steps (a regime model sets the regime of the path at entry).
 
     Returns
     -------
@@ -128,11 +137,16 @@ def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.n
     cumulative = np.cumsum(entry)
     cumulative = cumulative / cumulative[-1]
     _entry_states(np.uint64(seed), cumulative, 0, newcomers)
+    entry_steps = np.repeat(np.arange(n_steps + 1), entries)
+    if retag is not None:
+        newcomers = retag(newcomers, entry_steps)
     states0 = np.concatenate([initial_states, newcomers]).astype(np.int32)
-    start = np.concatenate([np.zeros(initial_states.size, np.int64),
-                            np.repeat(np.arange(n_steps + 1), entries)])
+    start = np.concatenate([np.zeros(initial_states.size, np.int64), entry_steps])
+    offset = (np.zeros(n_steps + 1, np.int64) if row_offset is None
+              else np.ascontiguousarray(row_offset, dtype=np.int64))
     states = np.empty((n_steps + 1, states0.size), np.int32)
     open_steps(states0, start, np.ascontiguousarray(exit_probability, dtype=np.float64),
-               chain.row_start, chain.column, chain.cumulative, int(n_steps), np.uint64(seed),
+               chain.row_start, chain.column, chain.cumulative, offset, int(n_steps),
+               np.uint64(seed),
                states)
     return states, start

@@ -57,7 +57,8 @@ from cfbmarkov.markov.states import state_space_from_name
 from cfbmarkov.trajectories import opened
 
 #: state spaces tried by default (names of :func:`state_space_from_name`)
-DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-previous")
+DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-previous", "cells-regime",
+                  "cells-direction-regime")
 #: lags tried, in multiples of the given lag. Only the given lag by default: a model at
 #: twice the lag predicts residence times on a grid twice as coarse, every other bin of the
 #: RTD histogram empty, which the Minkowski distance on lag-wide bins punishes (MD 0.34

@@ -171,11 +171,50 @@ class StateSpace(ABC):
             attrs = json.loads(attrs)
         attrs = dict(attrs)
         import cfbmarkov.markov.memory_states  # noqa: F401  (registers the memory spaces)
+        import cfbmarkov.markov.regimes  # noqa: F401  (registers the regime space)
 
         kind = attrs.pop("kind", None)
         if kind not in _REGISTRY:
             raise InputError(f"unknown state space kind {kind!r}")
         return _REGISTRY[kind](**attrs)
+
+    def fit_to_frames(self, positions: np.ndarray, lag_frames: int,
+                      frame_interval: float | None) -> "StateSpace":
+        """This space with what it learns from the fitting window fitted; itself for the
+        spaces that learn nothing (all but the regime space,
+        :class:`~cfbmarkov.markov.regimes.RegimeCells`).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, D)
+            The window's positions (m) with ``memory_lags * lag_frames`` frames of history
+            first, NaN where a particle is absent.
+        lag_frames : int
+            The lag in frames.
+        frame_interval : float or None
+            Time between frames (s).
+
+        Returns
+        -------
+        StateSpace
+        """
+        return self
+
+    def accepts(self, other: "StateSpace") -> bool:
+        """Whether discrete trajectories in ``other`` can be fitted by an estimator
+        configured with this space: the same space, or (unfitted regime space) this space
+        fitted on the data.
+
+        Parameters
+        ----------
+        other : StateSpace
+            The discrete trajectories' state space.
+
+        Returns
+        -------
+        bool
+        """
+        return self == other
 
     def inlet_distribution(self) -> np.ndarray:
         """Eq. (8): a batch spread evenly over the bottom row of cells, as a state vector.
@@ -520,7 +559,8 @@ def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int,
 
 
 #: names accepted by :func:`state_space_from_name`
-STATE_SPACES = ("cells", "cells-direction", "cells-velocity", "cells-previous")
+STATE_SPACES = ("cells", "cells-direction", "cells-velocity", "cells-previous", "cells-regime",
+                "cells-direction-regime")
 
 
 def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.09,
@@ -530,10 +570,13 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
 
     Parameters
     ----------
-    name : {"cells", "cells-direction", "cells-velocity", "cells-previous"}
+    name : {"cells", "cells-direction", "cells-velocity", "cells-previous", "cells-regime", \
+            "cells-direction-regime"}
         ``cells`` (the paper's), ``cells-direction`` (direction from the displacement),
         ``cells-velocity`` (v_y bins from the displacement over the model's lag),
-        ``cells-previous`` (the second-order chain: previous cell within 3 rows).
+        ``cells-previous`` (the second-order chain: previous cell within 3 rows),
+        ``cells-regime`` (cells x 2 regimes of the solids flux, edges fitted on the fitting
+        window), ``cells-direction-regime`` (and the direction).
     columns, rows : int
         The cell grid m x n.
     width, height : float
@@ -577,4 +620,9 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
         return VelocityCells(columns, rows, width, height)
     if name == "cells-previous":
         return SecondOrderCells(columns, rows, width, height)
+    if name in ("cells-regime", "cells-direction-regime"):
+        from cfbmarkov.markov.regimes import DirectionRegimeCells, RegimeCells
+
+        return (DirectionRegimeCells if name == "cells-direction-regime" else RegimeCells)(
+            columns, rows, width, height)
     raise InputError(f"unknown state space '{name}' (choose from {', '.join(STATE_SPACES)})")
