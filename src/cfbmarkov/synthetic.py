@@ -339,7 +339,7 @@ def regime_generator(flows, switching) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 
 def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int,
-                     duration: float, seed: int = 0) -> Path:
+                     duration: float, seed: int = 0, boundary: str = "periodic") -> Path:
     """Write a periodic run whose particles share one hidden regime path (source
     ``'synthetic-regimes'``).
 
@@ -358,6 +358,9 @@ def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int
         Simulated time (s); frames every ``flows[0].lag``.
     seed : int, optional
         Random seed.
+    boundary : {"periodic", "open"}, optional
+        ``open``: each pass through the top or bottom is a visit outside, as in
+        :func:`write_open_run`.
 
     Returns
     -------
@@ -392,6 +395,11 @@ def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int
               "switching": g.tolist(), "seed": seed}
     with TrajectoryWriter(path, np.arange(n_particles), width=flow.width, height=flow.height,
                           source="synthetic-regimes", parameters=params,
-                          frame_interval=flow.lag) as w:
-        w.append_frames(times, positions, laps=laps)
+                          frame_interval=flow.lag, boundary=boundary) as w:
+        if boundary == "open":
+            present = np.ones(laps.shape, dtype=bool)
+            present[1:] = laps[1:] == laps[:-1]
+            w.append_frames(times, positions, present=present)
+        else:
+            w.append_frames(times, positions, laps=laps)
     return Path(path)

@@ -189,3 +189,21 @@ def test_cli_fits_and_predicts_with_regimes(regime_run, tmp_path, capsys):
                  "--duration", "5", "-q", "-o", str(pred)]) == 0
     with Trajectories(pred) as traj:
         assert traj.n_frames == 201
+
+
+def test_open_riser_regime_model_enters_newcomers_in_the_paths_regime(tmp_path):
+    path = synthetic.write_regime_run(tmp_path / "open.h5", FLOWS, SWITCH, 200, 20.0, seed=6,
+                                      boundary="open")
+    model = fit_model(path, state_space_from_name("cells-regime", 4, 16, 0.09, 0.95), LAG,
+                      (1.0, 20.0))
+    assert model.boundary == "open" and model.state_space.fitted
+    rtd = model.rtd()
+    assert np.isfinite(rtd.mean) and rtd.mean > 0
+    states0, _, _ = model.initial_states(path, 10.0)
+    present0 = states0[states0 >= 0]
+    states, _ = model.monte_carlo(present0, 200, seed=2)
+    assert states.shape[1] > present0.size                    # newcomers entered
+    space = model.state_space
+    for row in states[1:]:
+        here = row[row >= 0]
+        assert here.size and np.all(space.regime_of(here) == space.regime_of(here[0]))
