@@ -250,3 +250,28 @@ def _coverage_window(path, w: int, true, exact, left_cols, hits: dict) -> None:
     hits["E(RT)"] += iv.rt_mean[0] <= exact.mean <= iv.rt_mean[1]
     hits["SD(RT)"] += iv.rt_sd[0] <= exact.sd <= iv.rt_sd[1]
     hits["mixing"] += iv.mixing[0, middle] <= truth[middle] <= iv.mixing[1, middle]
+
+
+def test_compare_leaves_out_only_the_mixing_band_without_the_tracers_states(tmp_path):
+    """A state space with memory needs the frames before the window start: where neither
+    the reference nor the prediction has them, the mixing band is left out with a warning
+    and the other intervals are given."""
+    from cfbmarkov.markov import state_space_from_name
+    from cfbmarkov.report.compare import compare
+    from cfbmarkov.trajectories import Trajectories
+
+    flow = synthetic.RiserFlow()
+    run = synthetic.write_run(tmp_path / "run.h5", flow, 100, 3.0, seed=5)
+    model = fit_model(run, state_space_from_name("cells-direction", 6, 38), flow.lag,
+                      (0.5, 2.0), "mle")
+    pred = model.predict(run, 2.0, 1.0, seed=1, output=tmp_path / "pred.h5")
+    with Trajectories(run) as t:             # the reference from the window start on
+        frames = t.window(2.0, 3.0)
+        reference = write_trajectories(tmp_path / "ref.h5", t.times[frames],
+                                       t.positions(frames), width=flow.width,
+                                       height=flow.height, laps=t.laps(frames))
+    summary = compare(reference, pred, window=(2.0, 3.0), output=tmp_path / "cmp",
+                      figures=False, resamples=20)
+    assert "rt_mean_interval" in summary["model"] and "mixing_interval" not in summary["model"]
+    assert any(w.startswith("no mixing interval: the tracers' states at 2 s") for w in
+               summary["warnings"]), summary["warnings"]
