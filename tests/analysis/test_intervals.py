@@ -91,6 +91,14 @@ def test_model_mixing_curve_refuses_bad_input():
     odd = synthetic.cell_chain(synthetic.RiserFlow(columns=3, rows=8, persistence=False))
     with pytest.raises(InputError, match="odd column count"):
         model_mixing_curve(odd, states, np.ones(5, dtype=bool), 3)
+    # the band needs the curve and the tracers together, the curve on whole lags
+    samples, edges = np.array([0.5, 0.7, 0.9]), np.linspace(0.0, 2.0, 21)
+    times = 1.0 + model.lag * np.arange(4)
+    with pytest.raises(InputError, match="needs both"):
+        prediction_intervals(model, samples, edges, 2.0, mixing=(times, np.zeros(4)))
+    with pytest.raises(InputError, match="whole lags"):
+        prediction_intervals(model, samples, edges, 2.0, mixing=(times * 1.01, np.zeros(4)),
+                             tracers=(states, np.ones(5, dtype=bool)))
 
 
 # -- the block bootstrap against deeptime's Bayesian MSM ---------------------------------------

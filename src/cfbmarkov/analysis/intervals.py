@@ -228,8 +228,14 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     InputError
         For a level outside (0, 1), too few blocks or resamples, a model without a source
         file and window, a fitting window too short for the blocks, fewer than 2 samples,
-        fewer than 10 resamples with residences, only one of ``mixing`` and ``tracers``, or
-        tracers that do not fit the model (:func:`~cfbmarkov.analysis.mixing.model_mixing_curve`).
+        fewer than 10 resamples with residences, only one of ``mixing`` and ``tracers``, a
+        mixing curve not on whole lags from its first frame, or tracers that do not fit the
+        model (:func:`~cfbmarkov.analysis.mixing.model_mixing_curve`).
+
+    References
+    ----------
+    ``docs/definitions.md`` (Intervals); B. Efron and R. J. Tibshirani, An Introduction to
+    the Bootstrap, Chapman & Hall (1993), Ch. 8 and 13.
     """
     if not 0.0 < float(level) < 1.0:
         raise InputError(f"interval level {level!r} must lie between 0 and 1")
@@ -249,7 +255,11 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         m_values = np.asarray(mixing[1], dtype=np.float64)
         if m_times.ndim != 1 or m_times.shape != m_values.shape or m_times.size == 0:
             raise InputError("the prediction's mixing curve must be two arrays of shape (T,)")
-        lags = np.rint((m_times - m_times[0]) / model.lag).astype(np.int64)
+        steps = (m_times - m_times[0]) / model.lag
+        lags = np.rint(steps).astype(np.int64)
+        if np.abs(steps - lags).max() > 1e-3 or lags.min() < 0:
+            raise InputError("the prediction's mixing curve is not on whole lags of its model "
+                             f"({model.lag:g} s) from its first frame")
         states, left = tracers
         m_exact, m_se = model_mixing_curve(model, states, left, int(lags.max()))
         curve = (lags, states, left)
