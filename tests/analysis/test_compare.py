@@ -217,8 +217,9 @@ def test_figure_functions_write_pngs(tmp_path):
     fg.plot_snapshots(pos, pos[::-1], pos[0, :, 0] < 0.045, pos[2, :, 0] < 0.045,
                       [15.0, 15.1, 15.2], 0.09, 0.95, tmp_path / "snap.png")
     t = np.linspace(15, 20, 50)
-    fg.plot_mixing(t, 0.5 * np.exp(-(t - 15)) + 0.25, t, 0.5 * np.exp(-(t - 15) / 1.2) + 0.25,
-                   tmp_path / "mix.png", well_mixed=0.25)
+    curve = 0.5 * np.exp(-(t - 15) / 1.2) + 0.25
+    fg.plot_mixing(t, 0.5 * np.exp(-(t - 15)) + 0.25, t, curve, tmp_path / "mix.png",
+                   well_mixed=0.25, band=(t, np.vstack([curve - 0.02, curve + 0.02]), 0.9))
     for name in ("tm", "tb", "pm", "rtd", "snap", "mix"):
         assert_png(tmp_path / f"{name}.png")
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
@@ -303,12 +304,13 @@ def _frames(path):
 
 def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_path):
     """Block-bootstrap and Monte Carlo intervals: around the prediction's value, narrower at a
-    lower level, wider for a model fitted on less data; none when resamples = 0."""
+    lower level, wider for a model fitted on less data; none when resamples = 0. The mixing
+    curve's band too (on its frames, none at the window start, wider on less data)."""
     from cfbmarkov.markov import CellGrid, fit_model
     from cfbmarkov.synthetic import RiserFlow, write_run
 
     run = write_run(tmp_path / "run.h5", RiserFlow(), 200, 5.0, seed=3)
-    widths = {}
+    widths, mixing_widths = {}, {}
     for name, fit_window in (("long", (0.5, 3.0)), ("short", (2.5, 3.0))):
         model = fit_model(run, CellGrid(6, 38), 0.025, fit_window, "mle")
         pred = model.predict(run, 3.0, 2.0, seed=1, output=tmp_path / f"{name}.h5")
@@ -320,6 +322,15 @@ def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_pa
         assert s_lo < saved["model"]["rt_sd"] < s_hi
         band = np.asarray(saved["model"]["rtd_interval"])
         assert band.shape == (2, len(saved_bins(saved))) and (band[0] <= band[1]).all()
+        # the mixing band: on the prediction's frames, around its curve, none at the start
+        mixing = saved["model"]["mixing_interval"]
+        with Trajectories(pred) as t:
+            times, curve = mixing_curve_of(t, (3.0, 5.0))
+        lower, upper = np.asarray(mixing["lower"]), np.asarray(mixing["upper"])
+        assert np.allclose(mixing["times"], times) and lower.shape == upper.shape == curve.shape
+        assert (lower <= curve + 1e-12).all() and (curve <= upper + 1e-12).all()
+        assert upper[0] - lower[0] < 1e-9 < (upper[1:] - lower[1:]).min()
+        mixing_widths[name] = float(np.mean(upper - lower))
         widths[name] = hi - lo
         if name == "long":
             half = compare(run, pred, window=(3.0, 5.0), output=tmp_path / "half",
@@ -330,6 +341,7 @@ def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_pa
                            figures=False, resamples=0)
             assert "rt_mean_interval" not in none["model"] and "level" not in none
     assert widths["short"] > widths["long"]
+    assert mixing_widths["short"] > mixing_widths["long"]
 
 
 def saved_bins(saved):

@@ -6,7 +6,8 @@ reproduction report (:mod:`cfbmarkov.analysis.reproduction`).
 See docs/definitions.md, sections "residence time" and "mixing"."""
 
 from cfbmarkov.analysis.metrics import minkowski_distance, mixing_rms, percentage_difference
-from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve, mixing_curve_of
+from cfbmarkov.analysis.mixing import (left_tracer_group, mixing_curve, mixing_curve_of,
+                                       model_mixing_curve)
 from cfbmarkov.analysis.rtd import (
     ResidenceTimes,
     residence_times,
@@ -17,6 +18,7 @@ from cfbmarkov.analysis.rtd import (
 
 __all__ = [
     "ResidenceTimes", "left_tracer_group", "minkowski_distance", "mixing_curve",
-    "mixing_curve_of", "mixing_rms", "percentage_difference", "residence_times",
+    "mixing_curve_of", "mixing_rms", "model_mixing_curve", "percentage_difference",
+    "residence_times",
     "residence_times_from_events", "residence_times_from_laps", "rtd_histogram",
 ]

@@ -11,7 +11,9 @@ particles on the left).
 For a model whose positions are drawn inside cells, x < W/2 is the same as a cell column
 < m/2 when the number of columns m is even (with m odd the middle column straddles the axis
 and mixing by halves is undefined; :func:`cfbmarkov.analysis.compare.compare_runs` refuses
-it).
+it). :func:`model_mixing_curve` gives a model's expected mixing curve from given initial
+states, and the Monte Carlo standard deviation of a prediction's curve about it, without
+sampling (the mixing band of ``docs/definitions.md``, Intervals).
 
 References
 ----------
@@ -158,4 +160,118 @@ def _mixing_of_present(traj, frames: slice, half: float, block: int
     return np.concatenate(times).astype(np.float64), np.concatenate(parts)
 
 
-__all__ = ["left_tracer_group", "mixing_curve", "mixing_curve_of"]
+#: state counts up to which :func:`model_mixing_curve` propagates with the dense matrix
+DENSE_STATES = 256
+
+
+def _left_states(space) -> np.ndarray:
+    """Indicator (float64, shape (S,)) of the states whose cell column is < m/2."""
+    columns = int(space.columns)
+    if columns % 2:
+        raise InputError(f"the model's state space has an odd column count ({columns}): mixing "
+                         "by halves (x < W/2) is undefined")
+    column = np.asarray(space.cell_of_state, dtype=np.int64) % columns
+    return (column < columns // 2).astype(np.float64)
+
+
+def model_mixing_curve(model, states, left_group, steps: int) -> tuple[np.ndarray, np.ndarray]:
+    """A Markov model's expected mixing curve from given initial states, and the Monte Carlo
+    standard deviation of a prediction's curve about it.
+
+    Each particle moves independently by the model's transition matrix P, so a tracer that
+    starts in state s lies in the left half (a cell column < m/2) k lags later with
+    probability h_k[s], h_k = P^k 1_left (backward propagation: one sparse product per lag
+    whatever the number of particles; a dense one up to
+    :data:`DENSE_STATES` states). With n_s the left tracer group's members starting in
+    state s and N particles,
+
+        M(k) = sum_s n_s h_k[s] / N,   Var = sum_s n_s h_k[s] (1 - h_k[s]) / N^2,
+
+    the variance being that of a Monte Carlo run (Eq. 7) from these states. An open riser's
+    model propagates by its absorbing matrix Q = diag(1 - r) P: with g_k = Q^k 1 (still
+    present), the curve is the ratio of the expected left-group tracers present at x < W/2
+    to the expected tracers present (``docs/definitions.md``, Mixing in an open riser), its
+    variance that of the ratio to first order (delta method).
+
+    Parameters
+    ----------
+    model : cfbmarkov.markov.MarkovModel
+        The model (its transition matrix, state space and, for an open riser, exit
+        probabilities). Its state space needs an even number of columns m.
+    states : array_like of int, shape (N,)
+        The particles' states at the window start (-1: absent, an open riser's particle not
+        in the riser; it is no tracer).
+    left_group : array_like of bool, shape (N,)
+        The left tracer group (x < W/2 at the window start).
+    steps : int
+        Lags to propagate (>= 0).
+
+    Returns
+    -------
+    mean : numpy.ndarray of float64, shape (steps + 1,)
+        The expected mixing curve at k = 0 .. steps lags after the start (fraction of all
+        particles; of the tracers still present in an open riser, NaN once none is
+        expected to be left).
+    sd : numpy.ndarray of float64, shape (steps + 1,)
+        The standard deviation of a Monte Carlo run's curve about ``mean`` (same unit).
+
+    Raises
+    ------
+    InputError
+        For an odd column count, arrays of the wrong shape, states outside the state space,
+        no tracer, or negative ``steps``.
+
+    References
+    ----------
+    ``docs/definitions.md`` (Mixing; Intervals); J. G. Kemeny and J. L. Snell, Finite Markov
+    Chains, Van Nostrand (1960), Ch. II (the k-step probabilities P^k).
+    """
+    import scipy.sparse as sp
+
+    left_states = _left_states(model.state_space)
+    n_states = left_states.size
+    states = np.asarray(states)
+    left_group = np.asarray(left_group, dtype=bool)
+    if states.ndim != 1 or left_group.shape != states.shape:
+        raise InputError(f"initial states {states.shape} and left tracer group "
+                         f"{left_group.shape} must be two arrays of shape (N,)")
+    if int(steps) < 0:
+        raise InputError(f"steps {steps} must be >= 0")
+    states = states.astype(np.int64)
+    present = states >= 0
+    if states.size and states.max() >= n_states:
+        raise InputError("initial states outside the model's state space")
+    if not present.any():
+        raise InputError("mixing curve of no tracer (no particle present at the start)")
+    is_open = model.boundary == "open"
+    matrix = model.absorbing_matrix if is_open else model.transition_matrix
+    if n_states > DENSE_STATES:          # a sparse product per lag; below, a dense one is faster
+        matrix = sp.csr_matrix(matrix)
+    n_left = np.bincount(states[present & left_group], minlength=n_states).astype(np.float64)
+    n_all = np.bincount(states[present], minlength=n_states).astype(np.float64)
+    total = float(present.sum())
+    h = np.column_stack([left_states, np.ones(n_states)]) if is_open else left_states[:, None]
+    mean = np.empty(int(steps) + 1)
+    var = np.empty(int(steps) + 1)
+    for k in range(int(steps) + 1):
+        if k:
+            h = matrix @ h
+        hl = h[:, 0]
+        expected = n_left @ hl
+        spread = n_left @ (hl * (1.0 - hl))
+        if not is_open:
+            mean[k], var[k] = expected / total, spread / total ** 2
+            continue
+        g = h[:, 1]
+        present_k = n_all @ g
+        if present_k <= 1e-12 * total:
+            mean[k] = var[k] = np.nan
+            continue
+        f = expected / present_k
+        mean[k] = f
+        var[k] = max(spread - 2.0 * f * (n_left @ (hl * (1.0 - g)))
+                     + f * f * (n_all @ (g * (1.0 - g))), 0.0) / present_k ** 2
+    return mean, np.sqrt(np.maximum(var, 0.0))
+
+
+__all__ = ["left_tracer_group", "mixing_curve", "mixing_curve_of", "model_mixing_curve"]

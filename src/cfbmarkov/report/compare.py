@@ -59,10 +59,42 @@ def _jsonable(value):
     return value
 
 
+def _tracers(model, comparison: RunComparison, warnings: list[str]):
+    """The particles' states at the window start in the model's state space and the left
+    tracer group, for the mixing band: from the reference's frame (the frame a prediction
+    starts from, with the history a state space with memory needs), else the prediction's
+    first frame. None (with a warning) where neither can be discretised, the model's
+    columns are odd or the prediction's frames are not whole lags apart."""
+    from cfbmarkov.analysis.mixing import model_mixing_curve
+
+    times = comparison.model.mixing_times
+    lags = (times - times[0]) / model.lag
+    if times.size == 0 or np.abs(lags - np.rint(lags)).max(initial=0.0) > 1e-3:
+        warnings.append("no mixing interval: the prediction's frames are not whole lags of "
+                        f"its model ({model.lag:g} s) apart")
+        return None
+    reasons = []
+    for side in (comparison.reference, comparison.model):
+        try:
+            states, _, _ = model.initial_states(side.traj, float(side.traj.times[side.frames.start]))
+            if states.shape != side.left_group.shape:
+                raise InputError("the particle counts differ")
+            model_mixing_curve(model, states, side.left_group, 0)     # checks the tracers
+        except InputError as exc:
+            reasons.append(f"{side.traj.path}: {exc}")
+            continue
+        return states, side.left_group
+    warnings.append(f"no mixing interval: the tracers' states at {comparison.window[0]:g} s "
+                    f"cannot be formed ({'; '.join(reasons)})")
+    return None
+
+
 def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
                warnings: list[str]):
     """The prediction's intervals, or None (with a warning saying why) where they cannot be
-    formed: no model attached, its fitting data unreadable, too few residences."""
+    formed: no model attached, its fitting data unreadable, too few residences. The mixing
+    curve's band is left out (a warning says why) where the tracers' states cannot be
+    formed (:func:`_tracers`)."""
     if not resamples:
         return None
     from cfbmarkov.analysis.intervals import prediction_intervals
@@ -74,9 +106,13 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
             warnings.append("no intervals: the prediction carries no model")
             return None
         start, stop = comparison.window
+        tracers = _tracers(model, comparison, warnings)
+        mixing = None if tracers is None else (comparison.model.mixing_times,
+                                               comparison.model.mixing_fraction)
         return prediction_intervals(model, comparison.model.residence.samples, comparison.edges,
                                     stop - start, level=level, resamples=resamples,
-                                    direction=comparison.direction)
+                                    direction=comparison.direction, mixing=mixing,
+                                    tracers=tracers)
     except InputError as exc:
         warnings.append(f"no intervals: {exc}")
         return None
@@ -111,8 +147,11 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
     else:
         warnings.append("snapshots skipped: no frame at the window start + 0, 0.1, ... "
                         "0.7 s on both sides")
+    intervals = getattr(comparison, "intervals", None)
     fg.plot_mixing(ref.mixing_times, ref.mixing_fraction, mod.mixing_times, mod.mixing_fraction,
                    out / "mixing.png", labels=labels,
+                   band=None if intervals is None or intervals.mixing is None
+                   else (intervals.mixing_times, intervals.mixing, intervals.level),
                    well_mixed=ref.left_group_fraction ** 2,
                    title=f"Radial mixing from {start:g} s (RMS difference "
                          f"{comparison.mixing_rms:.3g})")
@@ -196,6 +235,10 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
             summary["model"]["rt_mean_interval"] = list(intervals.rt_mean)
             summary["model"]["rt_sd_interval"] = list(intervals.rt_sd)
             summary["model"]["rtd_interval"] = intervals.rtd.tolist()
+            if intervals.mixing is not None:
+                summary["model"]["mixing_interval"] = {
+                    "times": intervals.mixing_times.tolist(),
+                    "lower": intervals.mixing[0].tolist(), "upper": intervals.mixing[1].tolist()}
             summary["intervals"] = {"resamples": intervals.resamples,
                                     "blocks": intervals.blocks,
                                     "method": "block bootstrap of the fitting window and "

@@ -447,7 +447,7 @@ def plot_snapshots(positions_ref, positions_model, left_group_ref, left_group_mo
 # -- mixing curves (Fig. 11) -------------------------------------------------------------------
 def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
                 labels: tuple[str, str] = ("reference", "model"), title: str | None = None,
-                well_mixed: float | None = None) -> Path:
+                well_mixed: float | None = None, band=None) -> Path:
     """Mixing curves of both sides against time, written as a PNG.
 
     The fraction of all particles that are in the left tracer group (drawn purple) and in
@@ -467,6 +467,9 @@ def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
         Figure title.
     well_mixed : float, optional
         Level of a fully mixed bed (-), drawn as a dotted line when given and finite.
+    band : (array_like of shape (T_b,), array_like of shape (2, T_b), float), optional
+        The model's interval: frame times (s), lower and upper bounds (-) and its level,
+        drawn as a band (``docs/definitions.md``, Intervals).
 
     Returns
     -------
@@ -483,6 +486,11 @@ def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
     tm, fm = np.asarray(times_model, float), np.asarray(frac_model, float)
     ax.plot(tr, fr, color=REFERENCE_COLOUR, lw=1.2, label=labels[0])
     ax.plot(tm, fm, color=MODEL_COLOUR, lw=1.6, label=labels[1])
+    if band is not None:
+        tb, (lower, upper) = np.asarray(band[0], float), np.asarray(band[1], float)
+        if tb.shape == lower.shape == upper.shape:
+            ax.fill_between(tb, lower, upper, color=MODEL_COLOUR, alpha=0.2, lw=0,
+                            label=f"model, {100 * float(band[2]):g} % interval")
     if well_mixed is not None and np.isfinite(well_mixed):
         ax.axhline(well_mixed, color="0.4", ls=":", lw=1.0,
                    label=f"fully mixed: (purple fraction)² = {well_mixed:.3f}")
