@@ -224,15 +224,17 @@ def _cmd_fit(args) -> int:
             raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
         if args.states == "auto":
             model = select_model(run, window=args.window, columns=columns, rows=rows,
-                                 lag=args.lag, estimator=args.estimator)
+                                 lag=args.lag, estimator=args.estimator,
+                                 coherent=args.coherent)
             if args.connected:     # the chosen space, refitted on its largest connected set
                 model = fit_model(run, model.state_space, model.lag, args.window,
-                                  args.estimator, connected=True).with_selection(model.selection)
+                                  args.estimator, connected=True, coherent=args.coherent
+                                  ).with_selection(model.selection)
         else:
             space = state_space_from_name(args.states, columns, rows, run.width, run.height,
                                           depth_columns, run.depth)
             model = fit_model(run, space, args.lag, args.window, args.estimator,
-                              connected=args.connected)
+                              connected=args.connected, coherent=args.coherent)
     try:
         model.rtd()
     except TrappedResidences as exc:
@@ -512,6 +514,10 @@ def build_parser() -> argparse.ArgumentParser:
                    help="fit on the largest strongly connected set of the counts (transitions "
                         "out of it removed, as deeptime and PyEMMA do): states entered but "
                         "never left then trap no particle")
+    s.add_argument("--coherent", action="store_true",
+                   help="the cluster model: also fit how often particles that share a state "
+                        "move together (coherence), so that predictions keep clusters; the "
+                        "RTD and maps are unchanged (periodic risers)")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
     s.set_defaults(func=_cmd_fit)
 

@@ -184,6 +184,41 @@ class PredictionIntervals:
     mixing: np.ndarray | None = None
 
 
+#: replicate Monte Carlo runs that measure a coherent model's Monte Carlo noise
+REPLICATES = 20
+
+
+def _replicate_noise(model, states, left_group, n_steps: int, edges: np.ndarray,
+                     window_length: float, direction: str, lags, seed: int):
+    """Standard deviations over replicate Monte Carlo runs (from ``states``) of E(RT),
+    SD(RT), the RTD per bin and the mixing curve at ``lags`` (None without them): the
+    Monte Carlo noise of a model whose particles move coherently, which the formulas for
+    independent samples underestimate."""
+    from cfbmarkov.analysis.mixing import _left_states
+    from cfbmarkov.analysis.rtd import residence_times_from_laps
+
+    sign = 1 if direction == "up" else -1
+    times = model.lag * np.arange(n_steps + 1)
+    in_left = _left_states(model.state_space) > 0 if lags is not None else None
+    left = np.asarray(left_group, dtype=bool) if left_group is not None else None
+    figures, curves = [], []
+    for r in range(REPLICATES):
+        run_states, laps = model.monte_carlo(states, n_steps, seed=seed + 7919 * (r + 1))
+        samples = residence_times_from_laps(times, sign * laps.astype(np.int64))
+        if samples.size < 2:
+            continue
+        _, hist = rtd_histogram(samples, float(edges[1] - edges[0]), window_length=float(edges[-1]))
+        figures.append(np.concatenate([[samples.mean(), samples.std(ddof=1)], hist]))
+        if lags is not None:
+            curves.append((in_left[run_states[lags]] & left).sum(axis=1) / states.size)
+    if len(figures) < REPLICATES // 2:
+        raise InputError("intervals: too few replicate Monte Carlo runs of the coherent model "
+                         "had residences")
+    spread = np.std(np.asarray(figures), axis=0, ddof=1)
+    curve = np.std(np.asarray(curves), axis=0, ddof=1) if curves else None
+    return spread[0], spread[1], spread[2:], curve
+
+
 def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_length: float, *,
                          level: float = 0.9, blocks: int = 10, resamples: int = 100,
                          seed: int = 0, direction: str = "up", mixing=None,
@@ -285,6 +320,22 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     mean, sd = float(samples.mean()), float(samples.std(ddof=1))
     _, p_mc = rtd_histogram(samples, float(edges[1] - edges[0]),
                             window_length=float(edges[-1]))
+    se_mean, se_sd = sd / np.sqrt(n), sd / np.sqrt(2 * (n - 1))
+    se_bins = np.sqrt(p_mc * (1 - p_mc) / n)
+    if getattr(model, "coherence", 0.0) > 0.0:
+        # coherent moves: the particles' residences are correlated; the Monte Carlo noise
+        # comes from replicate runs instead of the formulas for independent samples
+        if tracers is None:
+            raise InputError("intervals of a model with coherent moves need the particles' "
+                             "states at the window start (its Monte Carlo noise is measured "
+                             "on replicate runs from them)")
+        states0 = np.asarray(tracers[0])
+        se_mean, se_sd, se_bins, se_curve = _replicate_noise(
+            model, states0, tracers[1], max(2, int(round(window_length / model.lag))), edges,
+            window_length, direction, None if curve is None else curve[0], seed)
+        if curve is not None:
+            m_se = np.zeros(int(curve[0].max()) + 1)
+            m_se[curve[0]] = se_curve
 
     def interval(value, boot, centre, se):
         lo, hi = np.quantile(boot, [lo_q, hi_q], axis=0)
@@ -292,9 +343,9 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         up = np.sqrt(np.maximum(hi - centre, 0.0) ** 2 + (z * se) ** 2)
         return value - down, value + up
 
-    m_lo, m_hi = interval(mean, np.asarray(means), exact.mean, sd / np.sqrt(n))
-    s_lo, s_hi = interval(sd, np.asarray(sds), exact.sd, sd / np.sqrt(2 * (n - 1)))
-    r_lo, r_hi = interval(p_mc, np.asarray(rtds), exact_hist, np.sqrt(p_mc * (1 - p_mc) / n))
+    m_lo, m_hi = interval(mean, np.asarray(means), exact.mean, se_mean)
+    s_lo, s_hi = interval(sd, np.asarray(sds), exact.sd, se_sd)
+    r_lo, r_hi = interval(p_mc, np.asarray(rtds), exact_hist, se_bins)
     band = None
     if curve is not None:
         with np.errstate(invalid="ignore"):     # an open riser's curve: NaN once no tracer is left

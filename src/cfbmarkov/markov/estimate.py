@@ -309,6 +309,10 @@ class TransitionEstimator:
         (and renormalise those rows), as deeptime and PyEMMA do by default: a state first
         entered in the window's last frame then traps no particle. Off by default (the
         paper's chain keeps every observed transition).
+    coherent : bool, optional
+        Also fit the coherence of the particles' moves (the cluster model,
+        :mod:`cfbmarkov.markov.coherence`), for a periodic riser; off by default
+        (independent particles, the paper's).
 
     Attributes
     ----------
@@ -328,7 +332,8 @@ class TransitionEstimator:
 
     name: str = ""
 
-    def __init__(self, state_space: StateSpace, lag: float = 0.025, connected: bool = False):
+    def __init__(self, state_space: StateSpace, lag: float = 0.025, connected: bool = False,
+                 coherent: bool = False):
         from cfbmarkov.limits import check_fit
 
         if not (np.isfinite(lag) and lag > 0):
@@ -337,9 +342,11 @@ class TransitionEstimator:
         self.state_space = state_space
         self.lag = float(lag)
         self.connected = bool(connected)
+        self.coherent = bool(coherent)
 
     def __repr__(self) -> str:
-        extra = ", connected=True" if self.connected else ""
+        extra = (", connected=True" if self.connected else "") + (
+            ", coherent=True" if self.coherent else "")
         return f"{type(self).__name__}({self.state_space!r}, lag={self.lag:g}{extra})"
 
     def transition_matrix(self, counts: TransitionCounts) -> np.ndarray:
@@ -385,7 +392,7 @@ class TransitionEstimator:
         fitted = windows[0].state_space
         if fitted != self.state_space and self.state_space.accepts(fitted):
             # an unfitted regime space: the discretisation fitted its edges on the window
-            return type(self)(fitted, self.lag, self.connected).fit(windows)
+            return type(self)(fitted, self.lag, self.connected, self.coherent).fit(windows)
         for window in windows:
             if window.state_space != self.state_space:
                 raise InputError(f"discrete trajectories are in {window.state_space.describe()}"
@@ -398,10 +405,18 @@ class TransitionEstimator:
         if self.name == "paper" and windows[0].boundary == "open":
             raise InputError("the paper's estimator (Eq. 2-4) averages per-frame matrices of a "
                              "closed (periodic) riser; fit an open riser with --estimator mle")
+        if self.coherent and windows[0].boundary == "open":
+            raise InputError("coherent moves (--coherent) are fitted for periodic risers only "
+                             "yet; fit an open riser without it")
         counts = count_transitions(windows, frame_average=self.name == "paper")
         sources = [w.source for w in windows]
-        return self.fit_counts(counts, window=windows[0].window,
-                               source=sources[0] if len(sources) == 1 else sources)
+        model = self.fit_counts(counts, window=windows[0].window,
+                                source=sources[0] if len(sources) == 1 else sources)
+        if self.coherent:
+            from cfbmarkov.markov.coherence import estimate_coherence
+
+            model = model.with_coherence(estimate_coherence(windows, model.transition_matrix))
+        return model
 
     def chain(self, counts: TransitionCounts
               ) -> tuple[np.ndarray, tuple[np.ndarray, np.ndarray] | None]:
@@ -585,7 +600,7 @@ ESTIMATORS: dict[str, type[TransitionEstimator]] = {
 
 
 def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025,
-                        connected: bool = False
+                        connected: bool = False, coherent: bool = False
                         ) -> TransitionEstimator:
     """An estimator by name.
 
@@ -599,6 +614,8 @@ def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025,
         The lag (s).
     connected : bool, optional
         Restrict to the largest strongly connected set (see :class:`TransitionEstimator`).
+    coherent : bool, optional
+        Also fit the coherence of the moves (see :class:`TransitionEstimator`).
 
     Returns
     -------
@@ -610,14 +627,14 @@ def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025,
         For an unknown name or a lag that is not positive.
     """
     try:
-        return ESTIMATORS[name](state_space, lag, connected)
+        return ESTIMATORS[name](state_space, lag, connected, coherent)
     except KeyError:
         raise InputError(f"unknown estimator '{name}' (choose from {', '.join(ESTIMATORS)})") from None
 
 
 def fit_model(source, state_space: StateSpace, lag: float,
               window: tuple[float, float] | None = None, estimator: str = "mle",
-              connected: bool = False) -> "MarkovModel":
+              connected: bool = False, coherent: bool = False) -> "MarkovModel":
     """Fit a model on a trajectory file: :func:`~cfbmarkov.markov.discretize`, then the
     estimator's ``fit`` (the one convenience wrapper that takes a file).
 
@@ -635,6 +652,8 @@ def fit_model(source, state_space: StateSpace, lag: float,
         Paper Eq. 2-4, or the pooled maximum-likelihood estimate.
     connected : bool, optional
         Restrict to the largest strongly connected set (see :class:`TransitionEstimator`).
+    coherent : bool, optional
+        Also fit the coherence of the moves (see :class:`TransitionEstimator`).
 
     Returns
     -------
@@ -652,5 +671,5 @@ def fit_model(source, state_space: StateSpace, lag: float,
     Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
     doi:10.3390/pr13030614 (Eq. 2-4, the paper estimator).
     """
-    fitter = estimator_from_name(estimator, state_space, lag, connected)
+    fitter = estimator_from_name(estimator, state_space, lag, connected, coherent)
     return fitter.fit(discretize(source, state_space, lag, window))

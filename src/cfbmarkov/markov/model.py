@@ -93,6 +93,10 @@ class MarkovModel:
     censored_tracks : tuple of int
         (vanished, appeared): tracks of an open riser that ended or began more than one cell
         from the outlet or inlet face, left out as censored.
+    coherence : float
+        rho in [0, 1]: in the Monte Carlo, the probability that a particle takes the draw
+        shared by the particles leaving its state at that step (coherent moves, the cluster
+        model; :mod:`cfbmarkov.markov.coherence`); 0: independent particles (the paper's).
 
     Raises
     ------
@@ -100,7 +104,7 @@ class MarkovModel:
         If an array does not have shape (S, S) for the state space, P holds negative or
         non-finite entries, its rows do not sum to 1, the pass fractions have the wrong
         shape, or an open riser's exit probabilities are not probabilities, its counts are
-        negative or it has no entry.
+        negative or it has no entry, or the coherence is not in [0, 1].
 
     Notes
     -----
@@ -134,6 +138,7 @@ class MarkovModel:
     entry_counts: np.ndarray | None = None
     inflow_per_lag: float = 0.0
     censored_tracks: tuple[int, int] = (0, 0)
+    coherence: float = 0.0
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
 
     def __post_init__(self):
@@ -179,6 +184,10 @@ class MarkovModel:
             for f in fractions:
                 f.setflags(write=False)
             object.__setattr__(self, "pass_fractions", fractions)
+        if not (isinstance(self.coherence, (int, float, np.number))
+                and 0.0 <= float(self.coherence) <= 1.0):
+            raise InputError(f"model coherence {self.coherence!r} must lie in [0, 1]")
+        object.__setattr__(self, "coherence", float(self.coherence))
         if not (isinstance(self.frame_pairs, (int, np.integer)) and self.frame_pairs >= 0):
             raise InputError(f"model frame_pairs {self.frame_pairs!r} must be a count >= 0")
         if self.window is not None and not (len(self.window) == 2 and all(
@@ -612,9 +621,11 @@ class MarkovModel:
 
             states, _ = run_open_chain(chain, self.exit_probability,
                                        self.entry_distribution, self.inflow_per_lag,
-                                       initial_states, n_steps, seed, offset, retag)
+                                       initial_states, n_steps, seed, offset, retag,
+                                       self.coherence)
             return states, np.zeros_like(states)
-        return run_chain(chain, initial_states, n_steps, seed, initial_laps, offset)
+        return run_chain(chain, initial_states, n_steps, seed, initial_laps, offset,
+                         self.coherence)
 
     def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """States, positions and laps of the particles in the frame at ``start``.
@@ -654,6 +665,25 @@ class MarkovModel:
 
         return predict(self, trajectories, start, duration, seed, output, progress)
 
+    def with_coherence(self, coherence: float) -> "MarkovModel":
+        """The same model with coherent moves of the given coherence.
+
+        Parameters
+        ----------
+        coherence : float
+            rho in [0, 1] (:mod:`cfbmarkov.markov.coherence`).
+
+        Returns
+        -------
+        MarkovModel
+
+        Raises
+        ------
+        InputError
+            If ``coherence`` is not in [0, 1].
+        """
+        return dataclasses.replace(self, coherence=coherence, _cache={})
+
     def with_selection(self, selection: dict) -> "MarkovModel":
         """The same model, recording how its state space and lag were chosen.
 
@@ -681,6 +711,8 @@ class MarkovModel:
         out = {"estimator": self.estimator, "lag": self.lag,
                "window": list(self.window) if self.window else None,
                "state_space": self.state_space.to_attrs(), "source": self.source}
+        if self.coherence:
+            out["coherence"] = self.coherence
         if self.selection:
             out["selection"] = self.selection
         return out
@@ -738,6 +770,9 @@ class MarkovModel:
                          f"({_short_list(self.entered_never_left)}): no state leads to them")
         if self.connected:
             lines.append("  fitted on the largest strongly connected set of the counts")
+        if self.coherence:
+            lines.append(f"  coherent moves (the cluster model): coherence {self.coherence:.3f} "
+                         "(share of a state's particles that move together each lag)")
         classes = self.closed_classes
         if len(classes) > 1:
             lines.append(f"  closed classes: {len(classes)} (sizes "

@@ -76,6 +76,8 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         attrs["selection"] = json.dumps(model.selection)
     if model.connected:
         attrs["connected"] = 1
+    if model.coherence:
+        attrs["coherence"] = float(model.coherence)
     if model.boundary == "open":
         attrs["boundary"] = "open"
         attrs["inflow_per_lag"] = float(model.inflow_per_lag)
@@ -178,6 +180,7 @@ def _read_model_group(group, MarkovModel) -> "MarkovModel":
         selection=json.loads(group.attrs["selection"])
         if "selection" in group.attrs else None,
         connected=bool(group.attrs.get("connected", 0)),
+        coherence=_attr_number(group.attrs.get("coherence", 0.0), "coherence"),
         **_open_fields(group))
 
 

@@ -18,6 +18,9 @@ from cfbmarkov._random import uniform
 
 #: random-number streams: next state, x and y placement (states.py), pass direction
 STREAM_STATE, STREAM_DIRECTION = 0, 3
+#: streams of coherent moves (:mod:`cfbmarkov.markov.coherence`): whether a particle takes its
+#: row's common draw, and the common draw of a row (the open riser uses 4-6, regimes 7)
+STREAM_SHARE, STREAM_COMMON = 8, 9
 
 
 @dataclass(frozen=True)
@@ -97,9 +100,21 @@ def first_above(cumulative, lo, hi, u):
     return lo
 
 
+@nb.njit(cache=True, inline="always")
+def state_draw(seed, particle, row, step, coherence):
+    """The uniform draw that picks a particle's next state (Eq. 7): its own, or, with
+    probability ``coherence``, the draw shared by every particle leaving the same row at
+    this step (:mod:`cfbmarkov.markov.coherence`). Without coherence exactly the draw of
+    an independent particle."""
+    if coherence > 0.0 and uniform(seed, STREAM_SHARE, particle, step) < coherence:
+        return uniform(seed, STREAM_COMMON, row, step)
+    return uniform(seed, STREAM_STATE, particle, step)
+
+
 @nb.njit(cache=True, parallel=True)
 def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulative, up_probability,
-                      down_probability, row_offset, n_steps, seed, states_out, laps_out):
+                      down_probability, row_offset, coherence, n_steps, seed, states_out,
+                      laps_out):
     """Advance every particle ``n_steps`` transitions (Numba kernel, parallel over particles).
 
     Each step draws u in [0, 1) and takes the first entry of the row whose cumulative
@@ -116,6 +131,9 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
     row_offset : ndarray of int64, shape (n_steps + 1,)
         Step k draws from row ``row_offset[k] + s`` of the chain (all zeros for one chain;
         a regime model's stacked conditional chains, :mod:`cfbmarkov.markov.regimes`).
+    coherence : float
+        Probability that a particle takes its row's common draw (0: independent particles;
+        :mod:`cfbmarkov.markov.coherence`).
     n_steps : int
         Number of lags to run.
     seed : numpy.uint64
@@ -136,10 +154,11 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
         states_out[0, p] = s
         laps_out[0, p] = lap
         for k in range(1, n_steps + 1):
-            a = row_start[row_offset[k] + s]
-            b = row_start[row_offset[k] + s + 1]
+            row = row_offset[k] + s
+            a = row_start[row]
+            b = row_start[row + 1]
             if b > a:
-                lo = first_above(cumulative, a, b - 1, uniform(seed, STREAM_STATE, p, k))
+                lo = first_above(cumulative, a, b - 1, state_draw(seed, p, row, k, coherence))
                 pu = up_probability[lo]
                 pd = down_probability[lo]
                 if pu > 0.0 or pd > 0.0:
@@ -154,7 +173,7 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
 
 
 def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initial_laps=None,
-              row_offset=None) -> tuple[np.ndarray, np.ndarray]:
+              row_offset=None, coherence: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """States and laps of a Monte Carlo run from ``initial_states``.
 
     Parameters
@@ -172,6 +191,8 @@ def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initi
     row_offset : array_like of int, shape (n_steps + 1,), optional
         Step k draws from row ``row_offset[k] + s`` (a regime model's common regime path
         times S, :mod:`cfbmarkov.markov.regimes`); None: zeros.
+    coherence : float, optional
+        Probability that a particle takes its row's common draw (:mod:`.coherence`).
 
     Returns
     -------
@@ -193,6 +214,7 @@ def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initi
     offset = (np.zeros(n_steps + 1, np.int64) if row_offset is None
               else np.ascontiguousarray(row_offset, dtype=np.int64))
     monte_carlo_steps(initial_states, laps0, chain.row_start, chain.column, chain.cumulative,
-                      chain.up_probability, chain.down_probability, offset, int(n_steps),
+                      chain.up_probability, chain.down_probability, offset, float(coherence),
+                      int(n_steps),
                       np.uint64(seed), states, laps)
     return states, laps

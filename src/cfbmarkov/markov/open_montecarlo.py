@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from cfbmarkov._random import uniform
-from cfbmarkov.markov.montecarlo import STREAM_STATE, SparseChain, first_above
+from cfbmarkov.markov.montecarlo import SparseChain, first_above, state_draw
 
 #: random-number streams of the open riser (the periodic ones use 0-3)
 STREAM_EXIT, STREAM_INFLOW, STREAM_ENTRY = 4, 5, 6
@@ -50,7 +50,7 @@ def _entry_states(seed, cumulative, first, out):
 
 @nb.njit(cache=True, parallel=True)
 def open_steps(initial_states, start_step, exit_probability, row_start, column, cumulative,
-               row_offset, n_steps, seed, states_out):
+               row_offset, coherence, n_steps, seed, states_out):
     """Advance every particle from its start step to ``n_steps`` (Numba, parallel over
     particles): each lag it leaves through the outlet with probability r_s (then it is
     absent, -1, for good), else it takes the first entry of its row of P whose cumulative
@@ -69,6 +69,9 @@ def open_steps(initial_states, start_step, exit_probability, row_start, column, 
     row_offset : ndarray of int64, shape (n_steps + 1,)
         Step k draws from row ``row_offset[k] + s`` (zeros for one chain; a regime model's
         common path times S).
+    coherence : float
+        Probability that a particle takes its row's common draw
+        (:func:`~cfbmarkov.markov.montecarlo.state_draw`).
     n_steps : int
         Lags to run.
     seed : numpy.uint64
@@ -86,17 +89,19 @@ def open_steps(initial_states, start_step, exit_probability, row_start, column, 
                 if uniform(seed, STREAM_EXIT, p, k) < exit_probability[s]:
                     s = -1
                 else:
-                    a = row_start[row_offset[k] + s]
-                    b = row_start[row_offset[k] + s + 1]
+                    row = row_offset[k] + s
+                    a = row_start[row]
+                    b = row_start[row + 1]
                     if b > a:
                         s = column[first_above(cumulative, a, b - 1,
-                                               uniform(seed, STREAM_STATE, p, k))]
+                                               state_draw(seed, p, row, k, coherence))]
             states_out[k, p] = s
 
 
 def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.ndarray,
                    inflow_per_lag: float, initial_states, n_steps: int, seed: int,
-                   row_offset=None, retag=None) -> tuple[np.ndarray, np.ndarray]:
+                   row_offset=None, retag=None, coherence: float = 0.0
+                   ) -> tuple[np.ndarray, np.ndarray]:
     """States of an open riser's Monte Carlo run.
 
     Parameters
@@ -121,6 +126,8 @@ def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.n
     retag : callable, optional
         ``retag(states, steps)`` gives the newcomers' states given their drawn states and
         entry steps (a regime model sets the regime of the path at entry).
+    coherence : float, optional
+        Probability that a particle takes its row's common draw.
 
     Returns
     -------
@@ -146,7 +153,8 @@ def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.n
               else np.ascontiguousarray(row_offset, dtype=np.int64))
     states = np.empty((n_steps + 1, states0.size), np.int32)
     open_steps(states0, start, np.ascontiguousarray(exit_probability, dtype=np.float64),
-               chain.row_start, chain.column, chain.cumulative, offset, int(n_steps),
+               chain.row_start, chain.column, chain.cumulative, offset, float(coherence),
+               int(n_steps),
                np.uint64(seed),
                states)
     return states, start

@@ -135,7 +135,8 @@ def _entry_distribution(counts) -> np.ndarray:
 def select_model(data, *, window: tuple[float, float], columns: int, rows: int, lag: float,
                  states: Sequence[str] = DEFAULT_STATES,
                  lag_multiples: Sequence[int] = DEFAULT_LAG_MULTIPLES,
-                 estimator: str = "mle", folds: int = 3, criterion: str = "auto"):
+                 estimator: str = "mle", folds: int = 3, criterion: str = "auto",
+                 coherent: bool = False):
     """Choose, fit on ``window`` and return the best model (see the module docstring).
 
     Parameters
@@ -159,6 +160,9 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
     criterion : {"auto", "rtd", "ck"}, optional
         Judge by the held-out RTD, by the held-out Chapman-Kolmogorov error, or ``auto``:
         the RTD where every block holds at least ``MIN_RESIDENCES`` residences.
+    coherent : bool, optional
+        Also fit the chosen model's coherence (:mod:`cfbmarkov.markov.coherence`); it does
+        not change the choice (the RTD and CK test are single-particle figures).
 
     Returns
     -------
@@ -275,7 +279,7 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         usable = [c for c in final if math.isfinite(c.score)]
         if not usable and criterion == "ck":
             space = state_space_from_name("cells", columns, rows, traj.width, traj.height)
-            model = fit_model(traj, space, lag, (a, b), estimator)
+            model = fit_model(traj, space, lag, (a, b), estimator, coherent=coherent)
             return model.with_selection({
                 "method": f"{folds}-fold blocked cross-validation",
                 "blocks": [list(x) for x in blocks], "estimator": estimator,
@@ -292,6 +296,13 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         chosen = discrete_of[(best.states, best.lag)]
         model = estimator_from_name(estimator, chosen.state_space, best.lag).fit_counts(
             count_transitions(chosen), window=chosen.window, source=traj.path)
+        if coherent:
+            from cfbmarkov.markov.coherence import estimate_coherence
+
+            if chosen.boundary == "open":
+                raise InputError("coherent moves (--coherent) are fitted for periodic risers "
+                                 "only yet; fit an open riser without it")
+            model = model.with_coherence(estimate_coherence(chosen, model.transition_matrix))
     cells = next((c for c in usable if c.states == "cells" and c.lag == lag), None)
     if criterion == "ck":
         why = (f"a block of the fitting window holds only {fewest} complete residences "
@@ -415,7 +426,7 @@ def parse_model_name(name: str) -> tuple[str, str]:
 
 
 def fit_by_name(name: str, data, *, window: tuple[float, float], columns: int, rows: int,
-                lag: float):
+                lag: float, coherent: bool = False):
     """Fit the model ``name`` (see :func:`parse_model_name`) on ``window`` of ``data``.
 
     Parameters
@@ -430,6 +441,8 @@ def fit_by_name(name: str, data, *, window: tuple[float, float], columns: int, r
         The cell grid m x n.
     lag : float
         The lag (s), a whole multiple of the frame interval.
+    coherent : bool, optional
+        Also fit the coherence of the moves (:mod:`cfbmarkov.markov.coherence`).
 
     Returns
     -------
@@ -444,10 +457,10 @@ def fit_by_name(name: str, data, *, window: tuple[float, float], columns: int, r
     states, estimator = parse_model_name(name)
     if states == "auto":
         return select_model(data, window=window, columns=columns, rows=rows, lag=lag,
-                            estimator=estimator)
+                            estimator=estimator, coherent=coherent)
     with opened(data) as traj:
         space = state_space_from_name(states, columns, rows, traj.width, traj.height)
-        return fit_model(traj, space, lag, window, estimator)
+        return fit_model(traj, space, lag, window, estimator, coherent=coherent)
 
 
 __all__ = ["DEFAULT_LAG_MULTIPLES", "DEFAULT_STATES", "CandidateScore", "fit_by_name",
