@@ -111,6 +111,8 @@ class MarkovConfig(_Model):
                                   description="coverage of the prediction's intervals, -")
     interval_resamples: int = Field(100, ge=0, description="bootstrap resamples of the fitting "
                                     "window for the intervals (0: none), -")
+    coherent_auto: bool = Field(True, description="fit the automatically chosen model with "
+                                "coherent moves (the cluster model), -")
 
 
 class CaseConfig(_Model):

@@ -210,7 +210,8 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
             else:
                 t0 = _time.perf_counter()
                 model = fit_by_name(name, ref, window=m.fit_window, columns=m.columns,
-                                    rows=m.rows, lag=m.lag)
+                                    rows=m.rows, lag=m.lag,
+                                    coherent=m.coherent_auto and name == "auto")
                 model.save(model_path)
                 _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0})
                 stages[f"fit-{name}"] = "done"
