@@ -9,9 +9,13 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
 - ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
-- ``mcm-fit-auto``: ``--states auto``, choosing among 4 state spaces by 3-fold
+- ``mcm-fit-auto``: ``--states auto``, choosing among 6 state spaces by 3-fold
   blocked cross-validation on the window and forming the chosen one; ``mcm-fit-chosen``: fitting
-  the chosen state space alone; ``mcm-predict-file-auto``: its prediction file.
+  the chosen state space alone; ``mcm-predict-file-auto``: its prediction file;
+  ``mcm-fit-auto-coherent``, ``mcm-predict-file-auto-coherent`` and their sum
+  ``mcm-fit-predict-auto-coherent``: the same with coherent moves (the reproductions' chosen
+  model; goal <= 2 s); ``mcm-fit-regime``, ``mcm-predict-file-regime``: the regime model
+  cells x 2 regimes x direction (912 states) and its prediction along one regime path.
 - ``mcm-fit-open``, ``mcm-predict-open``: the same fit (pooled counts, exits and entries)
   and prediction file for an open riser (:func:`cfbmarkov.synthetic.write_open_run`: the
   same flow and particle-frames, every pass through a face a visit outside), and their
@@ -97,6 +101,32 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         pred_auto = Path(tmp) / "bench-pred-auto.h5"
         yield "mcm-predict-file-auto", _median_time(
             lambda: chosen.predict(run, 10.0, 5.0, seed=7, output=pred_auto), repeat), "s"
+        # the reproductions' chosen model: with coherent moves (the cluster model)
+        fit_time = _median_time(lambda: select_model(run, window=(10.0, 15.0), columns=6,
+                                                     rows=38, lag=0.025, coherent=True),
+                                max(1, repeat // 2))
+        coherent = select_model(run, window=(10.0, 15.0), columns=6, rows=38, lag=0.025,
+                                coherent=True)
+        predict_time = _median_time(
+            lambda: coherent.predict(run, 10.0, 5.0, seed=7, output=pred_auto), repeat)
+        yield "mcm-fit-auto-coherent", fit_time, "s"
+        yield "mcm-predict-file-auto-coherent", predict_time, "s"
+        yield "mcm-fit-predict-auto-coherent", fit_time + predict_time, "s"
+        # the regime model (912 states) and its prediction along one common regime path
+        yield from _regime_benchmarks(run, Path(tmp), repeat)
+
+
+def _regime_benchmarks(run: Path, tmp: Path, repeat: int) -> Iterator[tuple[str, float, str]]:
+    """``mcm-fit-regime`` and ``mcm-predict-file-regime``: cells x regimes x direction."""
+    from cfbmarkov.markov import fit_model, state_space_from_name
+
+    space = state_space_from_name("cells-direction-regime", 6, 38, 0.09, 0.95)
+    yield "mcm-fit-regime", _median_time(
+        lambda: fit_model(run, space, 0.025, (10.0, 15.0)), repeat), "s"
+    model = fit_model(run, space, 0.025, (10.0, 15.0))
+    pred = tmp / "bench-pred-regime.h5"
+    yield "mcm-predict-file-regime", _median_time(
+        lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat), "s"
 
 
 def _open_benchmarks(tmp: Path, flow, grid, particles: int, repeat: int, run: Path,

@@ -115,7 +115,9 @@ def test_bench_prints_one_line_per_figure(capsys):
     assert names[4:8] == ["mcm-fit-open", "mcm-fit-open-ratio", "mcm-predict-open",
                           "mcm-predict-open-ratio"]
     assert names[8] == "mcm-fit-auto" and names[9].startswith("mcm-fit-chosen-cells")
-    assert names[10:] == ["mcm-predict-file-auto"]
+    assert names[10:] == ["mcm-predict-file-auto", "mcm-fit-auto-coherent",
+                          "mcm-predict-file-auto-coherent", "mcm-fit-predict-auto-coherent",
+                          "mcm-fit-regime", "mcm-predict-file-regime"]
     for line in out.strip().splitlines():
         name = line.split(":")[0]
         value, unit = line.split(": ")[1].split()
