@@ -770,6 +770,12 @@ class MarkovModel:
                          f"({_short_list(self.entered_never_left)}): no state leads to them")
         if self.connected:
             lines.append("  fitted on the largest strongly connected set of the counts")
+        if self.regime_chain is not None:
+            g = self.regime_chain
+            stay = ", ".join(f"{g[r, r]:.3f}" for r in range(g.shape[0]))
+            lines.append(f"  regime chain: stays per lag {stay} (mean durations "
+                         + ", ".join(f"{self.lag / max(1.0 - g[r, r], 1e-12):.3g}"
+                                     for r in range(g.shape[0])) + " s)")
         if self.coherence:
             lines.append(f"  coherent moves (the cluster model): coherence {self.coherence:.3f} "
                          "(share of a state's particles that move together each lag)")
