@@ -207,3 +207,16 @@ def test_open_riser_regime_model_enters_newcomers_in_the_paths_regime(tmp_path):
     for row in states[1:]:
         here = row[row >= 0]
         assert here.size and np.all(space.regime_of(here) == space.regime_of(here[0]))
+
+
+def test_height_feature_is_the_centre_of_mass_and_absent_particles_are_left_out():
+    space = RegimeCells(4, 16, 0.09, 0.95, feature="height")
+    rng = np.random.default_rng(2)
+    frames = rng.uniform([0, 0], [0.09, 0.95], size=(30, 50, 2))
+    frames[:15, :, 1] *= 0.3                       # a collapse: the bed low, then spread
+    frames[3, :5] = np.nan                         # five particles absent in frame 3
+    features = space.frame_features(frames, 1, 0.025)
+    np.testing.assert_allclose(features, np.nanmean(frames[..., 1], axis=1))
+    fitted = space.fit_to_frames(frames, 1, 0.025)
+    np.testing.assert_array_equal(fitted.frame_regimes(frames, 1, 0.025), [0] * 15 + [1] * 15)
+    assert "centre-of-mass height" in fitted.describe()
