@@ -138,7 +138,8 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     models : sequence of str, optional
         The models to fit, predict with and compare.
     progress : bool, optional
-        Show the CFD-DEM's progress.
+        Show the CFD-DEM's progress as whole lines on stderr, each starting with the case's
+        folder name (``u6: CFD-DEM ...``; :func:`cfbmarkov.simulate.run.simulate`).
     threads : int, optional
         Numba threads of this worker.
     checkpoint_every : float, optional
@@ -195,7 +196,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
         checkpoint = folder / "cfd-dem.h5.parts" / "checkpoint.h5"
         resume = checkpoint.exists()
         simulate(case, reference, checkpoint_every=checkpoint_every, resume=resume,
-                 progress=progress, label=label)
+                 progress="lines" if progress else False, label=label)
         stages["cfd-dem"] = "resumed" if resume else "done"
     _record(folder, "cfd_dem", cfd_dem_timing(reference, m.predict_window))
 
@@ -293,12 +294,16 @@ class InlineExecutor(cf.Executor):
 
 
 def _limit_threads(threads: int) -> None:
-    """Worker initializer: the thread count, and Ctrl-C left to the parent (which stops the
-    workers and says so in one line) instead of a traceback from every worker."""
+    """Worker initializer: the thread count, cfbmarkov's warnings as one line each (``note:
+    ...``, they cannot reach the caller's filters), and Ctrl-C left to the parent (which stops
+    the workers and says so in one line) instead of a traceback from every worker."""
     import signal
 
     import numba
 
+    from cfbmarkov._console import install_one_line_notes
+
+    install_one_line_notes()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
@@ -408,7 +413,9 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     jobs : int, optional
         Local workers.
     progress : bool, optional
-        Show the CFD-DEM's progress.
+        Show the CFD-DEM's progress: whole lines on stderr, each starting with its case
+        (``u6: CFD-DEM 1.50/5 s simulated, ...``), at the start, at every tenth of the
+        simulated time and at the end.
     report : bool, optional
         Write ``report.html`` when every case is done.
     log : callable, optional
