@@ -143,6 +143,12 @@ def test_rerun_skips_what_is_done(reference, capsys):
                  "8", "-o", str(out), "--jobs", "1", "-q"]) == 0
     log = capsys.readouterr().out
     assert "cfd-dem skipped" in log and "fit-paper skipped" in log and "compare-mle skipped" in log
+    # how finely the RTDs are resolved, per side: bins spanned and residences
+    summary = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
+    spanned = summary["rtd_bins_spanned"]
+    assert spanned["reference"] >= 1 and spanned["model"] >= 1
+    assert (f"u8 RTD (bins of 0.01 s spanned, residences): CFD-DEM {spanned['reference']}, "
+            f"{summary['reference']['rt_count']}; paper {spanned['model']}, ") in log
     after = {n: (out / "u8" / n).stat().st_mtime_ns for n in before}
     assert before == after
 
