@@ -333,15 +333,21 @@ class DEMSystem:
         out[ids] = values
         return out
 
+    def _pair_to_caller(self, column: int) -> np.ndarray:
+        st, ids, _ = self._cur()
+        out = np.empty((self._n, 2))
+        integrate.gather_pairs(st[:, column:column + 2], ids, out)
+        return out
+
     @property
     def positions(self) -> np.ndarray:
         """(N, 2) positions, caller's order (a copy)."""
-        return self._to_caller(self._cur()[0][:, 0:2])
+        return self._pair_to_caller(0)
 
     @property
     def velocities(self) -> np.ndarray:
         """(N, 2) half-step velocities v(t - dt/2), caller's order (a copy)."""
-        return self._to_caller(self._cur()[0][:, 2:4])
+        return self._pair_to_caller(2)
 
     @property
     def angular_velocities(self) -> np.ndarray:
