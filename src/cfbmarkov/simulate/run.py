@@ -340,17 +340,23 @@ class _Progress:
             self.t_wall = now
             self.bar.set_postfix_str(f"{rate:.3g} particle-steps/s", refresh=False)
             self.bar.update(simulated)
-        elif self.done >= self.next_line - 1e-9 and self.done < self.end - 1e-9:
-            # the rate since the last line (the first includes Numba's compilation)
-            rate = self.particles * (self.steps - self.steps_line) / max(now - self.t_line, 1e-9)
-            left = (self.end - self.done) / max(self.done - self.start, 1e-12) * (now - self.t_start)
-            if self.steps_line:        # the time left at the recent rate, once it is known
+            return
+        mark = first = self.steps == dem_steps      # rates count from the first frame
+        if self.done >= self.next_line - 1e-9 and self.done < self.end - 1e-9:
+            if first or self.done <= self.line_done:   # no frame since the last mark
+                rate = self.particles * self.steps / max(now - self.t_start, 1e-9)
+                left = (self.end - self.done) / (self.done - self.start) * (now - self.t_start)
+            else:       # since the last line (or the first frame: Numba compiles before it)
+                rate = self.particles * (self.steps - self.steps_line) / max(now - self.t_line,
+                                                                             1e-9)
                 left = (self.end - self.done) / (self.done - self.line_done) * (now - self.t_line)
             self._line(f"{self.done:.2f}/{self.end:g} s simulated, {_rate(rate)} particle-steps/s, "
                        f"{_clock(now - self.t_start)} so far, about {_clock(left)} left")
-            self.t_line, self.steps_line, self.line_done = now, self.steps, self.done
             while self.next_line <= self.done + 1e-9:
                 self.next_line += LINE_EVERY * (self.end - self.start)
+            mark = True
+        if mark:
+            self.t_line, self.steps_line, self.line_done = now, self.steps, self.done
 
     def close(self, finished: bool = False) -> None:
         if self.bar is not None:
