@@ -34,9 +34,11 @@ cfd_cells = [3, 12]
 dem_cells = [10, 40]
 [output]
 end_time = 0.8
+frame_interval = 0.01
 [markov]
 columns = 2
 rows = 6
+lag = 0.01
 fit_window = [0.2, 0.5]
 predict_window = [0.5, 0.8]
 """
@@ -118,8 +120,9 @@ def test_every_stage_is_a_file_and_the_report_has_every_section(reference, capsy
     # the wall time of the prediction window comes from the checkpoint history, not pro rata
     assert cfd["predict_window_estimated"] is False
     assert 0 < cfd["predict_window_wall_s"] < cfd["wall_s"]
-    for stage in ("fit-paper", "predict-paper", "fit-mle", "predict-mle"):
-        assert timings[stage]["wall_s"] > 0
+    for stage in ("fit-paper", "predict-paper", "fit-mle", "predict-mle", "compare-paper"):
+        assert timings[stage]["wall_s"] > 0 and timings[stage]["cpu_s"] > 0
+    assert cfd["cpu_s"] > 0      # the CPU time of the process that ran it
     summary = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
     assert summary["window"] == [0.5, 0.8] and summary["same_tracer_groups"]
     assert summary["basis"] == "frames" and summary["exact_reference"]["rt_count"] > 0
