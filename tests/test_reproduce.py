@@ -3,6 +3,8 @@ local and Dask executors, and the scales' claims (hold-up, contact resolution, w
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import math
 import os
@@ -32,9 +34,11 @@ cfd_cells = [3, 12]
 dem_cells = [10, 40]
 [output]
 end_time = 0.8
+frame_interval = 0.01
 [markov]
 columns = 2
 rows = 6
+lag = 0.01
 fit_window = [0.2, 0.5]
 predict_window = [0.5, 0.8]
 """
@@ -68,15 +72,41 @@ def assert_same_files(a: Path, b: Path, names=("cfd-dem.h5", "prediction-paper.h
             np.testing.assert_array_equal(x, y)
 
 
+#: what the reference reproduction printed on stderr
+STDERR: dict[str, str] = {}
+
+
 @pytest.fixture(scope="module")
 def reference(tmp_path_factory):
-    """An uninterrupted miniature reproduction at 8 m/s (inline executor)."""
+    """An uninterrupted miniature reproduction at 8 m/s (inline executor), with progress."""
     tmp = tmp_path_factory.mktemp("repro")
     overrides = tiny(tmp)
     out = tmp / "ref"
-    assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities",
-                 "8", "-o", str(out), "--jobs", "1", "-q"]) == 0
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err):
+        assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides),
+                     "--velocities", "8", "-o", str(out), "--jobs", "1"]) == 0
+    STDERR["reference"] = err.getvalue()
     return out, overrides
+
+
+def check_case_lines(err: str, cases) -> None:
+    """Every line on stderr is whole and names its case: one advisory per case (``note:``,
+    no Python warning format), progress lines from start to end."""
+    lines = err.splitlines()
+    assert lines and not any("Warning" in line or "warn(" in line for line in lines), lines
+    for case in cases:
+        notes = [x for x in lines if x.startswith(f"note: {case}: DEM time step 1e-05 s")]
+        assert len(notes) == 1, lines
+        progress = [x for x in lines if x.startswith(f"{case}: CFD-DEM ")]
+        assert progress[0].startswith(f"{case}: CFD-DEM starting at 0/")
+        assert " s simulated in " in progress[-1] and len(progress) >= 3
+    named = tuple(f"{c}: CFD-DEM " for c in cases) + tuple(f"note: {c}: " for c in cases)
+    assert all(line.startswith(named) and "\r" not in line for line in lines), lines
+
+
+def test_progress_and_advisory_are_whole_lines_naming_the_case(reference):
+    check_case_lines(STDERR["reference"], ["u8"])
 
 
 def test_every_stage_is_a_file_and_the_report_has_every_section(reference, capsys):
@@ -90,8 +120,9 @@ def test_every_stage_is_a_file_and_the_report_has_every_section(reference, capsy
     # the wall time of the prediction window comes from the checkpoint history, not pro rata
     assert cfd["predict_window_estimated"] is False
     assert 0 < cfd["predict_window_wall_s"] < cfd["wall_s"]
-    for stage in ("fit-paper", "predict-paper", "fit-mle", "predict-mle"):
-        assert timings[stage]["wall_s"] > 0
+    for stage in ("fit-paper", "predict-paper", "fit-mle", "predict-mle", "compare-paper"):
+        assert timings[stage]["wall_s"] > 0 and timings[stage]["cpu_s"] > 0
+    assert cfd["cpu_s"] > 0      # the CPU time of the process that ran it
     summary = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
     assert summary["window"] == [0.5, 0.8] and summary["same_tracer_groups"]
     assert summary["basis"] == "frames" and summary["exact_reference"]["rt_count"] > 0
@@ -115,6 +146,12 @@ def test_rerun_skips_what_is_done(reference, capsys):
                  "8", "-o", str(out), "--jobs", "1", "-q"]) == 0
     log = capsys.readouterr().out
     assert "cfd-dem skipped" in log and "fit-paper skipped" in log and "compare-mle skipped" in log
+    # how finely the RTDs are resolved, per side: bins spanned and residences
+    summary = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
+    spanned = summary["rtd_bins_spanned"]
+    assert spanned["reference"] >= 1 and spanned["model"] >= 1
+    assert (f"u8 RTD (bins of 0.01 s spanned, residences): CFD-DEM {spanned['reference']}, "
+            f"{summary['reference']['rt_count']}; paper {spanned['model']}, ") in log
     after = {n: (out / "u8" / n).stat().st_mtime_ns for n in before}
     assert before == after
 
@@ -172,7 +209,7 @@ def test_dask_cluster_gives_the_same_result(reference, tmp_path):
 
 
 @pytest.mark.slow
-def test_process_pool_runs_cases_in_parallel(tmp_path):
+def test_process_pool_runs_cases_in_parallel(tmp_path, capfd):
     overrides = tiny(tmp_path)
     text = overrides.read_text().replace("end_time = 0.8", "end_time = 0.3").replace(
         "fit_window = [0.2, 0.5]", "fit_window = [0.05, 0.2]").replace(
@@ -180,8 +217,11 @@ def test_process_pool_runs_cases_in_parallel(tmp_path):
     overrides.write_text(text)
     from cfbmarkov.reproduce import load_overrides
 
+    capfd.readouterr()
     out = reproduce(tmp_path / "pool", "quick", [4.0, 6.0], overrides=load_overrides(overrides),
-                    jobs=2, progress=False, report=False, log=lambda line: None)
+                    jobs=2, progress=True, report=False, log=lambda line: None)
+    # the workers' progress and advice: whole lines, each naming its case
+    check_case_lines(capfd.readouterr().err, ["u4", "u6"])
     for case in ("u4", "u6"):
         assert (out / case / "compare-mle" / "summary.json").exists()
         saved = json.loads((out / case / "case.json").read_text())

@@ -605,11 +605,11 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--scheduler", default=None,
                    help="address of a Dask distributed scheduler (tcp://host:8786) to run the "
                         "cases on; the workers must see the output directory")
-    s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=_cmd_reproduce)
 
     s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
-                       "(about 6 min on 2 cores), ending with the path of its report")
+                       "(about 6 min on 2 quiet cores), ending with the path of its report")
     s.add_argument("-o", "--output", default="cfbmarkov-demo", help="output directory")
     s.add_argument("--jobs", type=_count(1, MAX_JOBS), default=None,
                    help="local worker processes")
@@ -619,7 +619,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--particles", type=_count(1, MAX_PARTICLES), default=6000,
                    help="with --synthetic: particles")
     s.add_argument("--seed", type=_seed, default=1, help="with --synthetic: seed")
-    s.add_argument("-q", "--quiet", action="store_true", help="no progress bars")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=_cmd_demo)
 
     s = sub.add_parser("export-vtk", help="ParaView files: particle frames (with their tracer "
@@ -672,7 +672,10 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("cfbmarkov: interrupted", file=sys.stderr)
         return 130
-    code = _run(args)
+    from cfbmarkov._console import one_line_notes
+
+    with one_line_notes():             # cfbmarkov's warnings: one line, "note: ..."
+        code = _run(args)
     from cfbmarkov import _atomic
 
     if _atomic.HDF5_WRITE_FAILED:      # HDF5 may crash at exit after a failed write

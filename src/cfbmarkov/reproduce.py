@@ -12,7 +12,8 @@ what is done and resumes what was interrupted (the CFD-DEM from its last checkpo
     prediction-<name>.h5        Monte Carlo over the prediction window, started from the
                                 CFD-DEM state at its start
     compare-<name>/             RTD, mixing and figures against the CFD-DEM (summary.json)
-    timings.json                wall times of the stages (s)
+    timings.json                wall and CPU times of the stages (s; CPU time of the
+                                process that ran the stage, all its threads)
 
 ``DIR/reproduce.json`` names the scale and cases; ``DIR/report.html`` (with ``report.md``
 and ``figures/``) is written when every case is done.
@@ -138,7 +139,8 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     models : sequence of str, optional
         The models to fit, predict with and compare.
     progress : bool, optional
-        Show the CFD-DEM's progress.
+        Show the CFD-DEM's progress as whole lines on stderr, each starting with the case's
+        folder name (``u6: CFD-DEM ...``; :func:`cfbmarkov.simulate.run.simulate`).
     threads : int, optional
         Numba threads of this worker.
     checkpoint_every : float, optional
@@ -188,16 +190,23 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
 
     m = case.markov
     reference = folder / "cfd-dem.h5"
+    timing = {}
     if reference.exists():
         _check_reference(reference, case)
         stages["cfd-dem"] = "skipped"
+        previous = _read_json(folder / "timings.json").get("cfd_dem")
+        if isinstance(previous, dict) and "cpu_s" in previous:
+            timing["cpu_s"] = previous["cpu_s"]
     else:
         checkpoint = folder / "cfd-dem.h5.parts" / "checkpoint.h5"
         resume = checkpoint.exists()
+        cpu = _time.process_time()
         simulate(case, reference, checkpoint_every=checkpoint_every, resume=resume,
-                 progress=progress, label=label)
+                 progress="lines" if progress else False, label=label)
+        # this process's CPU time (Numba's compilation included where it compiled here)
+        timing["cpu_s"] = _time.process_time() - cpu
         stages["cfd-dem"] = "resumed" if resume else "done"
-    _record(folder, "cfd_dem", cfd_dem_timing(reference, m.predict_window))
+    _record(folder, "cfd_dem", {**cfd_dem_timing(reference, m.predict_window), **timing})
 
     summaries = {}
     with Trajectories(reference) as ref:
@@ -208,30 +217,35 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 model = MarkovModel.load(model_path)
                 stages[f"fit-{name}"] = "skipped"
             else:
-                t0 = _time.perf_counter()
+                t0, c0 = _time.perf_counter(), _time.process_time()
                 model = fit_by_name(name, ref, window=m.fit_window, columns=m.columns,
                                     rows=m.rows, lag=m.lag,
                                     coherent=m.coherent_auto and name == "auto")
                 model.save(model_path)
-                _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0})
+                _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0,
+                                                "cpu_s": _time.process_time() - c0})
                 stages[f"fit-{name}"] = "done"
             prediction = folder / f"prediction-{name}.h5"
             if prediction.exists():
                 stages[f"predict-{name}"] = "skipped"
             else:
-                t0 = _time.perf_counter()
+                t0, c0 = _time.perf_counter(), _time.process_time()
                 model.predict(ref, start=start, duration=stop - start, seed=case.seed,
                               output=prediction)
-                _record(folder, f"predict-{name}", {"wall_s": _time.perf_counter() - t0})
+                _record(folder, f"predict-{name}", {"wall_s": _time.perf_counter() - t0,
+                                                    "cpu_s": _time.process_time() - c0})
                 stages[f"predict-{name}"] = "done"
             out = folder / f"compare-{name}"
             if (out / SUMMARY).exists():
                 summaries[name] = _read_json(out / SUMMARY)
                 stages[f"compare-{name}"] = "skipped"
             else:
+                t0, c0 = _time.perf_counter(), _time.process_time()
                 summaries[name] = compare(ref, prediction, window=(start, stop), output=out,
                                           bin_width=m.lag, level=m.interval_level,
                                           resamples=m.interval_resamples)
+                _record(folder, f"compare-{name}", {"wall_s": _time.perf_counter() - t0,
+                                                    "cpu_s": _time.process_time() - c0})
                 stages[f"compare-{name}"] = "done"
     return {"case": label, "velocity": case.gas.superficial_velocity, "stages": stages,
             "summaries": summaries}
@@ -294,12 +308,16 @@ class InlineExecutor(cf.Executor):
 
 
 def _limit_threads(threads: int) -> None:
-    """Worker initializer: the thread count, and Ctrl-C left to the parent (which stops the
-    workers and says so in one line) instead of a traceback from every worker."""
+    """Worker initializer: the thread count, cfbmarkov's warnings as one line each (``note:
+    ...``, they cannot reach the caller's filters), and Ctrl-C left to the parent (which stops
+    the workers and says so in one line) instead of a traceback from every worker."""
     import signal
 
     import numba
 
+    from cfbmarkov._console import install_one_line_notes
+
+    install_one_line_notes()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
@@ -409,7 +427,9 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     jobs : int, optional
         Local workers.
     progress : bool, optional
-        Show the CFD-DEM's progress.
+        Show the CFD-DEM's progress: whole lines on stderr, each starting with its case
+        (``u6: CFD-DEM 1.50/5 s simulated, ...``), at the start, at every tenth of the
+        simulated time and at the end.
     report : bool, optional
         Write ``report.html`` when every case is done.
     log : callable, optional
@@ -487,6 +507,8 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                 log(f"{name} {est:>5}: PD E(RT) {_fmt(s.get('pd_rt_mean'), '+.1f')} %, PD SD(RT) "
                     f"{_fmt(s.get('pd_rt_sd'), '+.1f')} %, MD {_fmt(s.get('md_rtd'), '.3g')}, "
                     f"mixing RMS {_fmt(s.get('mixing_rms'), '.3g')}")
+            if result["summaries"]:
+                log(rtd_line(name, result["summaries"]))
     except KeyboardInterrupt:
         if own:
             _stop_workers(executor)
@@ -510,6 +532,36 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
     return write_report(out)
 
 
+def rtd_line(case: str, summaries: dict[str, dict]) -> str:
+    """One line on how finely a case's RTDs are resolved: bins spanned (the 1-99 % range of
+    the residences, :func:`cfbmarkov.report.compare.rtd_span`) and residences counted, for
+    the CFD-DEM and each model.
+
+    Parameters
+    ----------
+    case : str
+        The case's name (``u8``).
+    summaries : dict
+        Model name -> its compare summary (``summary.json``).
+
+    Returns
+    -------
+    str
+        ``u8 RTD (bins of 0.005 s spanned, residences): CFD-DEM 14, 5321; paper 16, 5100; ...``
+    """
+    def side(summary, which):
+        spanned = (summary.get("rtd_bins_spanned") or {}).get(which)
+        count = (summary.get(which) or {}).get("rt_count")
+        return f"{'n/a' if spanned is None else spanned}, {'n/a' if count is None else count}"
+
+    first = next(iter(summaries.values()))
+    width = first.get("bin_width")
+    parts = [f"CFD-DEM {side(first, 'reference')}"]
+    parts += [f"{est} {side(s, 'model')}" for est, s in summaries.items()]
+    return (f"{case} RTD (bins of {_fmt(width, 'g')} s spanned, residences): "
+            + "; ".join(parts))
+
+
 def _fmt(value, spec: str) -> str:
     if value is None or (isinstance(value, float) and not math.isfinite(value)):
         return "n/a"
@@ -518,4 +570,4 @@ def _fmt(value, spec: str) -> str:
 
 __all__ = ["MODELS", "InlineExecutor", "QUICK_REDUCTIONS", "SCALES", "Scale", "VELOCITIES",
            "case_name", "cfd_dem_timing", "dask_executor", "load_overrides", "local_executor",
-           "reproduce", "run_case", "scale_cases"]
+           "reproduce", "rtd_line", "run_case", "scale_cases"]

@@ -144,3 +144,24 @@ def test_configuration_errors(tmp_path, capsys):
     assert main(["simulate", str(unknown), "-o", str(tmp_path / "x.h5")]) == 2
     assert "gas.velocity" in capsys.readouterr().err
     assert CaseConfig().particles.number == 27000
+
+
+def test_time_step_advisory_is_one_line_and_progress_whole_lines(tmp_path, capsys):
+    """The CLI says the DEM step's advice once, as one line without Python's warning format;
+    off a terminal the progress is whole lines. From Python the advice is a warning."""
+    from cfbmarkov.errors import TimeStepAdvisory
+
+    case = small_case(tmp_path, n=100, end=0.05)     # the paper's step: 5.18 steps a contact
+    assert main(["simulate", str(case), "-o", str(tmp_path / "a.h5")]) == 0
+    err = capsys.readouterr().err.splitlines()
+    notes = [line for line in err if line.startswith("note: ")]
+    assert len(notes) == 1 and "DEM time step 5e-06 s resolves a contact in 5.18" in notes[0]
+    assert notes[0].endswith("10 or more are recommended")
+    assert not any("UserWarning" in line or "Warning:" in line for line in err)
+    progress = [line for line in err if not line.startswith("note: ")]
+    assert progress[0].startswith("CFD-DEM starting at 0/0.05 s simulated, 100 particles")
+    assert progress[-1].startswith("CFD-DEM 0.05/0.05 s simulated in ")
+    assert all(line.startswith("CFD-DEM ") for line in progress) and len(progress) >= 3
+    with pytest.warns(TimeStepAdvisory, match=r"^u6: DEM time step 5e-06 s") as caught:
+        simulate(load(case), tmp_path / "b.h5", until=0.025, progress=False, label="u6")
+    assert len([w for w in caught if w.category is TimeStepAdvisory]) == 1

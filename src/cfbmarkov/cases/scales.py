@@ -38,12 +38,35 @@ class Scale:
         Changes to every case, as nested tables of a case file.
     reductions : tuple of str
         What the scale reduces against the paper, and why.
+    by_velocity : tuple of (float, dict)
+        Further changes to the cases at and above a velocity (m/s), applied in order after
+        ``overrides``.
     """
 
     name: str
     description: str
     overrides: dict[str, Any] = field(default_factory=dict)
     reductions: tuple[str, ...] = ()
+    by_velocity: tuple[tuple[float, dict[str, Any]], ...] = ()
+
+    def overrides_at(self, velocity: float) -> dict[str, Any]:
+        """The changes to the paper's case at ``velocity`` (m/s).
+
+        Parameters
+        ----------
+        velocity : float
+            Superficial gas velocity U, m/s.
+
+        Returns
+        -------
+        dict
+            ``overrides``, then each entry of ``by_velocity`` whose velocity U reaches.
+        """
+        out = self.overrides
+        for threshold, changes in self.by_velocity:
+            if velocity >= threshold:
+                out = _merge(out, changes)
+        return out
 
 
 #: The quick scale's reductions and their reasons (shown in the docs and the report).
@@ -58,27 +81,35 @@ QUICK_REDUCTIONS = (
     "(1e-5 s): a contact still takes 5.2 DEM steps as in the paper, and restitution and "
     "friction are unchanged; overlaps at a given impact velocity are twice the paper's "
     "(1.7 % of d at 1 m/s instead of 0.8 %)",
-    "0-5 s of CFD-DEM, the model fitted on 1-3 s and compared on 3-5 s: in the shorter "
+    "0-3.5 s of CFD-DEM, the model fitted on 1-2.25 s and compared on 2.25-3.5 s: in the shorter "
     "riser the flow develops within half a second (the solids' mean velocity is steady "
-    "from 0.5 s at 6 and 8 m/s) and residence times are a third of the paper's",
-    "frames, lag and RTD bins of 0.01 s, and 4 x 12 cells of 10 mm x 25 mm, so that a mean "
-    "residence time still spans about ten lags, as 0.025 s does in the paper's riser",
+    "from 0.5 s at 6 and 8 m/s) and residence times are a third of the paper's or less",
+    "4 x 12 cells of 10 mm x 25 mm (the paper's row height); below 5 m/s frames, lag and "
+    "RTD bins of 0.01 s (a mean residence time of 0.2-0.5 s spans 20-50 lags, the paper's "
+    "56 at 3 m/s), from 5 m/s of 0.002 s: at 8 m/s the solids cross the 0.30 m in about "
+    "0.056 s, nearly as a plug, so the RTD must be binned this finely to span ten bins or "
+    "more (at 0.01 s it spanned four, at 0.0025 s eleven), and a mean residence time spans "
+    "about 28 lags instead of the paper's 9",
 )
+
+#: from this velocity (m/s) the quick scale's frames, lag and RTD bins are 0.002 s
+QUICK_FINE_FROM = 5.0
 
 SCALES: dict[str, Scale] = {
     "paper": Scale("paper", "the paper's riser: 27000 particles, 0.09 m x 0.95 m, 0-20 s, "
                    "fitted on 10-15 s, compared on 15-20 s, 6 x 38 cells, lag 0.025 s"),
     "quick": Scale(
-        "quick", "a reduced riser (3789 particles, 0.04 m x 0.30 m, 0-5 s) that runs the "
-        "whole pipeline in minutes on 2 cores",
+        "quick", "a reduced riser (3789 particles, 0.04 m x 0.30 m, 0-3.5 s; lag 0.01 s below "
+        "5 m/s, 0.002 s from 5 m/s) that runs the whole pipeline in minutes on 2 cores",
         {"riser": {"width": 0.04, "height": 0.30},
          "particles": {"number": 3789},
          "contact": {"normal_stiffness": 2500.0, "tangential_stiffness": 714.25},
          "numerics": {"cfd_cells": [4, 30], "dem_cells": [13, 100], "dem_time_step": 1e-5},
-         "output": {"end_time": 5.0, "frame_interval": 0.01},
-         "markov": {"columns": 4, "rows": 12, "lag": 0.01, "fit_window": [1.0, 3.0],
-                    "predict_window": [3.0, 5.0]}},
-        QUICK_REDUCTIONS),
+         "output": {"end_time": 3.5, "frame_interval": 0.01},
+         "markov": {"columns": 4, "rows": 12, "lag": 0.01, "fit_window": [1.0, 2.25],
+                    "predict_window": [2.25, 3.5]}},
+        QUICK_REDUCTIONS,
+        ((QUICK_FINE_FROM, {"output": {"frame_interval": 0.002}, "markov": {"lag": 0.002}}),)),
 }
 
 
@@ -169,7 +200,7 @@ def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELO
             base = load_case("paper-u6")
         data = _merge(json.loads(base.model_dump_json()), {
             "name": f"{scale.name}-{case_name(u)}", "gas": {"superficial_velocity": u}})
-        data = _merge(_merge(data, scale.overrides), overrides or {})
+        data = _merge(_merge(data, scale.overrides_at(u)), overrides or {})
         try:
             cases.append(CaseConfig.model_validate(data))
         except ValidationError as exc:   # one line

@@ -63,7 +63,7 @@ import h5py
 import numpy as np
 
 from cfbmarkov.analysis.mixing import left_tracer_group
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import CfbmarkovWarning, InputError
 from cfbmarkov.trajectories import Trajectories, opened
 
 #: relative tolerance (on max(|t|, 1 s)) for matching a gas frame to a particle frame
@@ -312,7 +312,7 @@ def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.P
     missing = int(np.count_nonzero(gas_index < 0)) if gas is not None else 0
     if missing:
         warnings.warn(f"{missing} of {frames.size} exported frames have no gas field at their "
-                      f"time; their gas files were skipped", stacklevel=2)
+                      f"time; their gas files were skipped", CfbmarkovWarning, stacklevel=2)
     return VtkExport(output=output, times=times, frames=frames, n_particle_files=int(frames.size),
                      n_gas_files=n_gas, n_gas_missing=missing)
 

@@ -30,12 +30,13 @@ import numpy as np
 from cfbmarkov._atomic import atomic_path, h5_file
 from cfbmarkov._outputs import claim_output
 from cfbmarkov.config import CaseConfig
-from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
 from cfbmarkov.simulate.cfd import (GasGrid, GasSolver, GasState, deposit_drag_jacobian,
                                     deposit_drag_reaction, void_fraction_field)
 from cfbmarkov.simulate.coupling import (drag_coefficients, drag_force_at_new_gas,
                                          place_without_overlap)
 from cfbmarkov.simulate.dem import ContactLaw, DEMSystem
+from cfbmarkov.simulate.dem.system import contact_resolution
 from cfbmarkov.segmented import SegmentedTrajectoryWriter
 
 CHECKPOINT_VERSION = 1
@@ -272,37 +273,114 @@ def read_checkpoint(path: Path, case: CaseConfig
     return (CoupledRiser.from_state(case, state), *meta, history)
 
 
-class _Progress:
-    """tqdm bar in simulated seconds with particle-steps/s; quiet when disabled."""
+def _clock(seconds: float) -> str:
+    """``H:MM:SS`` or ``M:SS``."""
+    if not math.isfinite(seconds):
+        return "?"
+    seconds = int(round(max(seconds, 0.0)))
+    h, rest = divmod(seconds, 3600)
+    m, s = divmod(rest, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
 
-    def __init__(self, enabled: bool, start: float, end: float, particles: int, label: str = ""):
+
+def _rate(value: float) -> str:
+    """``2.1e7``: two digits, the exponent without sign or zeros."""
+    if not (math.isfinite(value) and value > 0):
+        return "?"
+    mantissa, exponent = f"{value:.1e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+#: a line of progress (``progress="lines"``) at every this fraction of the simulated time
+LINE_EVERY = 0.1
+
+
+class _Progress:
+    """Progress in simulated seconds with particle-steps/s and the time left.
+
+    ``mode`` ``"bar"``: a tqdm bar on stderr; ``"lines"``: whole lines on stderr, one at the
+    start, one at every :data:`LINE_EVERY` of the simulated time and one at the end, each
+    starting with the label (lines of parallel cases never interleave); ``None``: quiet.
+    """
+
+    def __init__(self, mode: str | None, start: float, end: float, particles: int,
+                 label: str = ""):
+        self.mode, self.start, self.end, self.particles = mode, start, end, particles
+        self.prefix = f"{label}: CFD-DEM" if label else "CFD-DEM"
         self.bar = None
-        if enabled:
+        self.done = start
+        self.t_wall = self.t_start = self.t_line = _time.perf_counter()
+        self.steps = self.steps_line = 0
+        self.line_done = start
+        self.next_line = start + LINE_EVERY * (end - start)
+        if mode == "bar":
             from tqdm import tqdm
 
             self.bar = tqdm(total=round(end - start, 6), initial=0, unit="s", file=sys.stderr,
                             desc=f"{label} CFD-DEM (simulated s)".lstrip(),
                             mininterval=1.0 if sys.stderr.isatty() else 30.0,
                             bar_format="{desc}: {n:.3f}/{total:.3f} [{elapsed}<{remaining}{postfix}]")
-        self.particles = particles
-        self.t_wall = _time.perf_counter()
+        elif mode == "lines":
+            what = "resumed at" if start > 0 else "starting at"
+            self._line(f"{what} {start:g}/{end:g} s simulated, {particles} particles")
+
+    def _line(self, text: str) -> None:
+        from cfbmarkov._console import write_line
+
+        write_line(f"{self.prefix} {text}")
 
     def update(self, simulated: float, dem_steps: int) -> None:
-        if self.bar is None:
+        if self.mode is None:
             return
         now = _time.perf_counter()
-        rate = self.particles * dem_steps / max(now - self.t_wall, 1e-9)
-        self.t_wall = now
-        self.bar.set_postfix_str(f"{rate:.3g} particle-steps/s", refresh=False)
-        self.bar.update(simulated)
+        self.done += simulated
+        self.steps += dem_steps
+        if self.bar is not None:
+            rate = self.particles * dem_steps / max(now - self.t_wall, 1e-9)
+            self.t_wall = now
+            self.bar.set_postfix_str(f"{rate:.3g} particle-steps/s", refresh=False)
+            self.bar.update(simulated)
+            return
+        mark = first = self.steps == dem_steps      # rates count from the first frame
+        if self.done >= self.next_line - 1e-9 and self.done < self.end - 1e-9:
+            if first or self.done <= self.line_done:   # no frame since the last mark
+                rate = self.particles * self.steps / max(now - self.t_start, 1e-9)
+                left = (self.end - self.done) / (self.done - self.start) * (now - self.t_start)
+            else:       # since the last line (or the first frame: Numba compiles before it)
+                rate = self.particles * (self.steps - self.steps_line) / max(now - self.t_line,
+                                                                             1e-9)
+                left = (self.end - self.done) / (self.done - self.line_done) * (now - self.t_line)
+            self._line(f"{self.done:.2f}/{self.end:g} s simulated, {_rate(rate)} particle-steps/s, "
+                       f"{_clock(now - self.t_start)} so far, about {_clock(left)} left")
+            while self.next_line <= self.done + 1e-9:
+                self.next_line += LINE_EVERY * (self.end - self.start)
+            mark = True
+        if mark:
+            self.t_line, self.steps_line, self.line_done = now, self.steps, self.done
 
-    def close(self) -> None:
+    def close(self, finished: bool = False) -> None:
         if self.bar is not None:
             self.bar.close()
+        elif self.mode == "lines" and finished:
+            wall = _time.perf_counter() - self.t_start
+            rate = self.particles * self.steps / max(wall, 1e-9)
+            self._line(f"{self.end:g}/{self.end:g} s simulated in {_clock(wall)} "
+                       f"({_rate(rate)} particle-steps/s)")
+
+
+def _progress_mode(progress) -> str | None:
+    """``progress`` of :func:`simulate` as a mode of :class:`_Progress`."""
+    if progress in (False, None):
+        return None
+    if progress in ("bar", "lines"):
+        return progress
+    if progress is True:
+        return "bar" if sys.stderr.isatty() else "lines"
+    raise InputError(f"progress {progress!r}: choose True, False, 'bar' or 'lines'")
 
 
 def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None = None,
-             checkpoint_every: float = 1.0, resume: bool = False, progress: bool = True,
+             checkpoint_every: float = 1.0, resume: bool = False, progress: bool | str = True,
              stop_after_frames: int | None = None, fields: bool = True, label: str = ""
              ) -> Path:
     """Run a case from t = 0 (or the last checkpoint with ``resume``) to ``until`` (default:
@@ -323,8 +401,11 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
         Simulated time between checkpoints, s.
     resume : bool, optional
         Continue from the last checkpoint of an interrupted run.
-    progress : bool, optional
-        Show a progress bar on stderr.
+    progress : bool or {"bar", "lines"}, optional
+        Show progress on stderr: ``"bar"`` a tqdm bar; ``"lines"`` one whole line at the
+        start, at every tenth of the simulated time (particle-steps/s, time left) and at the
+        end, each starting with ``label`` (for cases run in parallel); True: the bar on a
+        terminal, else lines; False: none.
     stop_after_frames : int, optional
         End the process's work early, as a kill would, after that many frames (for tests of
         resume); the run is then left to be resumed.
@@ -332,7 +413,7 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
         Store the gas (void fraction, velocity, pressure at cell centres) with every frame
         under ``/fields``.
     label : str, optional
-        Prefix of the progress bar.
+        Prefix of the progress and of the time-step advisory (e.g. the case, ``u6``).
 
     Returns
     -------
@@ -347,10 +428,17 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
         without ``resume``).
     CfbmarkovError
         When the simulation fails (e.g. a blow-up); the last good checkpoint stays on disk.
+
+    Warns
+    -----
+    TimeStepAdvisory
+        Once per call, when the DEM step resolves a contact in fewer than 10 steps (the
+        command line prints it as one line, ``note: ...``).
     """
+    mode = _progress_mode(progress)
     output = Path(output)
     with claim_output(output, "simulate", "trajectory"):   # before any work: lock, folder
-        return _simulate(case, output, until, checkpoint_every, resume, progress,
+        return _simulate(case, output, until, checkpoint_every, resume, mode,
                          stop_after_frames, fields, label)
 
 
@@ -384,6 +472,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     if resume:
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist")
+        _advise_time_step(case, label)
         riser, n_segments, frames, wall_time, history = read_checkpoint(checkpoint, case)
         wall_history = [tuple(row) for row in history]
         writer = SegmentedTrajectoryWriter.resume(output, n_segments, **writer_options)
@@ -392,7 +481,10 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
             raise InputError(f"{parts} holds an interrupted run: add --resume to continue it, "
                              "or delete the folder to start again")
         _check_safety(case)
-        riser = CoupledRiser.initial(case)
+        _advise_time_step(case, label)
+        with warnings.catch_warnings():     # said once above, with the label
+            warnings.simplefilter("ignore", TimeStepAdvisory)
+            riser = CoupledRiser.initial(case)
         writer = SegmentedTrajectoryWriter(output, **writer_options)
         writer.append(0.0, riser.dem.positions, riser.dem.velocities, riser.dem.laps)
         if fields:
@@ -400,6 +492,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         frames, wall_time = 1, 0.0
         wall_history = [(0.0, 0.0)]
     bar = _Progress(progress, riser.time, end, case.particles.number, label)
+    finished = False
     started = _time.perf_counter() - wall_time
     try:
         while riser.cfd_steps < total_steps:
@@ -427,8 +520,10 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     except BaseException:
         writer.abort()
         raise
+    else:
+        finished = True
     finally:
-        bar.close()
+        bar.close(finished)
     wall = _time.perf_counter() - started
     run_info = {"wall_time_s": wall, "simulated_s": end, "particles": case.particles.number,
                 "particle_steps_per_s": case.particles.number * total_steps
@@ -459,6 +554,17 @@ def _remove_parts(parts: Path) -> None:
     shutil.rmtree(parts, ignore_errors=True)
 
 
+def _advise_time_step(case: CaseConfig, label: str = "") -> None:
+    """Warn (:class:`~cfbmarkov.errors.TimeStepAdvisory`) when the DEM step resolves a
+    contact in fewer than 10 steps; ``label`` (a case) starts the message."""
+    p = case.particles
+    law = ContactLaw.from_config(case.contact, p.diameter, p.density)
+    worst, message = contact_resolution(law, law.mass, case.numerics.dem_time_step)
+    if 5 <= worst < 10:     # below 5 the DEM refuses the run
+        warnings.warn((f"{label}: " if label else "") + message + "; 10 or more are recommended",
+                      TimeStepAdvisory, stacklevel=3)
+
+
 def _check_safety(case: CaseConfig) -> None:
     """Refuse a gas step beyond its stability limit at the expected velocities."""
     from cfbmarkov.simulate.cfd import gas_stability_limit
@@ -471,4 +577,4 @@ def _check_safety(case: CaseConfig) -> None:
                          f"limit {limit:.3g} s at velocities up to {expected:g} m/s "
                          f"(grid {grid.nx} x {grid.ny})")
     if not math.isfinite(limit):
-        warnings.warn("gas stability limit could not be evaluated", stacklevel=2)
+        warnings.warn("gas stability limit could not be evaluated", CfbmarkovWarning, stacklevel=2)

@@ -335,6 +335,17 @@ def scatter_external(ext, ids, aux):
         aux[k, 3] = ext[i, 1]
 
 
+@njit(cache=True)
+def gather_pairs(values, ids, out):
+    """``out[ids[k]] = values[k, 0:2]``: two columns (positions, velocities) from cell order
+    to the caller's order (one pass; numpy's fancy assignment on the strided view costs
+    several times more)."""
+    for k in range(ids.shape[0]):
+        i = ids[k]
+        out[i, 0] = values[k, 0]
+        out[i, 1] = values[k, 1]
+
+
 @njit(parallel=True, cache=True)
 def clear_external(aux):
     """Zero the external force columns of ``aux`` (N, 4)."""

@@ -37,7 +37,7 @@ from typing import NamedTuple
 import numba
 import numpy as np
 
-from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.errors import CfbmarkovError, InputError, TimeStepAdvisory
 from cfbmarkov.simulate.dem import integrate
 from cfbmarkov.simulate.dem import layout as L
 from cfbmarkov.simulate.dem.layout import DEMParams, empty_list
@@ -80,6 +80,32 @@ def _as_per_particle(value, n, name):
     if not np.all(np.isfinite(a)) or np.any(a <= 0):
         raise InputError(f"{name}: values must be positive and finite")
     return a
+
+
+def contact_resolution(law: ContactLaw, mass: float, time_step: float) -> tuple[float, str]:
+    """How many DEM steps a contact of the lightest particle lasts, and a sentence saying it.
+
+    Parameters
+    ----------
+    law : ContactLaw
+        The contact law.
+    mass : float
+        The lightest particle's mass, kg.
+    time_step : float
+        The DEM step, s.
+
+    Returns
+    -------
+    worst : float
+        The fewer steps of a particle-particle and a particle-wall contact.
+    message : str
+        ``DEM time step ... resolves a contact in ... steps (particle-particle, ...) and ...``.
+    """
+    pp, pw = law.contact_times(mass)
+    spp, spw = pp / time_step, pw / time_step
+    return min(spp, spw), (f"DEM time step {time_step:g} s resolves a contact in {spp:.2f} "
+                           f"steps (particle-particle, t_c = {pp:.4g} s) and {spw:.2f} steps "
+                           f"(particle-wall, t_c = {pw:.4g} s)")
 
 
 class DEMSystem:
@@ -237,16 +263,11 @@ class DEMSystem:
         self._wall_impulse = np.zeros(2)
 
     def _check_steps_per_contact(self):
-        spc = self.steps_per_contact()
-        worst = min(spc)
-        msg = (f"DEM time step {self._dt:g} s resolves a contact in {spc.particle_particle:.2f} "
-               f"steps (particle-particle, t_c = {self.contact_time().particle_particle:.4g} s) "
-               f"and {spc.particle_wall:.2f} steps (particle-wall, t_c = "
-               f"{self.contact_time().particle_wall:.4g} s)")
+        worst, msg = contact_resolution(self._law, self._min_mass, self._dt)
         if worst < 5:
             raise InputError(msg + "; at least 5 are needed (10 or more recommended)")
         if worst < 10:
-            warnings.warn(msg + "; 10 or more are recommended", stacklevel=3)
+            warnings.warn(msg + "; 10 or more are recommended", TimeStepAdvisory, stacklevel=3)
 
     # ------------------------------------------------------------------ information
     def contact_time(self) -> ContactTimes:
@@ -312,15 +333,21 @@ class DEMSystem:
         out[ids] = values
         return out
 
+    def _pair_to_caller(self, column: int) -> np.ndarray:
+        st, ids, _ = self._cur()
+        out = np.empty((self._n, 2))
+        integrate.gather_pairs(st[:, column:column + 2], ids, out)
+        return out
+
     @property
     def positions(self) -> np.ndarray:
         """(N, 2) positions, caller's order (a copy)."""
-        return self._to_caller(self._cur()[0][:, 0:2])
+        return self._pair_to_caller(0)
 
     @property
     def velocities(self) -> np.ndarray:
         """(N, 2) half-step velocities v(t - dt/2), caller's order (a copy)."""
-        return self._to_caller(self._cur()[0][:, 2:4])
+        return self._pair_to_caller(2)
 
     @property
     def angular_velocities(self) -> np.ndarray:
