@@ -35,7 +35,9 @@ extensions = [
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
 root_doc = "index"
-exclude_patterns = ["_build", "Thumbs.db", ".DS_Store"]
+# docs/results/<run>/ hold reproductions' outputs (reports with figures left out): data,
+# linked from docs/results/index.md, not pages of the guide
+exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "results/paper-*"]
 
 # markdown: anchors for headings (docs/definitions.md#residence-time), $...$ maths
 myst_heading_anchors = 3
