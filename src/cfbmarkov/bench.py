@@ -9,7 +9,7 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
 - ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
-- ``mcm-fit-auto``: ``--states auto``, choosing among 6 state spaces by 3-fold
+- ``mcm-fit-auto``: ``--states auto``, choosing among 5 state spaces by 3-fold
   blocked cross-validation on the window and forming the chosen one; ``mcm-fit-chosen``: fitting
   the chosen state space alone; ``mcm-predict-file-auto``: its prediction file;
   ``mcm-fit-auto-coherent``, ``mcm-predict-file-auto-coherent`` and their sum
