@@ -27,7 +27,7 @@ import numpy as np
 from cfbmarkov.analysis.baseline import WindowDifference, fitting_window, window_difference
 from cfbmarkov.analysis.clusters import cluster_index
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
-                                        percentage_difference)
+                                        percentage_difference, rtd_span)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.rtd import (DEFAULT_FACE_ROWS, ResidenceTimes, net_passes, residence_times,
                                     rtd_histogram)
@@ -313,6 +313,8 @@ class RunComparison:
             "basis": self.basis,
             "direction": self.direction,
             "cluster_index": self.cluster,
+            "rtd_bins_spanned": {"reference": rtd_span(self.reference.rtd),
+                                 "model": rtd_span(self.model.rtd)},
             "reference_frame_stride": int(self.stride),
             "exact_reference": None if self.exact_reference is None else {
                 "rt_mean": self.exact_reference.mean, "rt_sd": self.exact_reference.sd,

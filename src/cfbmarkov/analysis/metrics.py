@@ -176,5 +176,32 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
     return float(np.sqrt(np.mean((mf[ok] - ref_at_model) ** 2)))
 
 
+def rtd_span(probability, tail: float = 0.01) -> int:
+    """How many bins an RTD spans: from the bin holding its ``tail`` quantile to the bin
+    holding its 1 - ``tail`` quantile, both included (a stray residence in a far bin does
+    not widen it).
+
+    Parameters
+    ----------
+    probability : array_like, shape (B,)
+        Probability per bin (:func:`cfbmarkov.analysis.rtd.rtd_histogram`).
+    tail : float, optional
+        The share of residences left out at each end.
+
+    Returns
+    -------
+    int
+        Bins spanned; 0 when the RTD holds no residence.
+    """
+    p = np.asarray(probability, dtype=np.float64).reshape(-1)
+    total = p.sum()
+    if not total > 0:
+        return 0
+    cumulative = np.cumsum(p) / total
+    first = int(np.searchsorted(cumulative, tail - 1e-12, side="left"))
+    last = int(np.searchsorted(cumulative, 1.0 - tail - 1e-12, side="left"))
+    return max(1, min(last, p.size - 1) - first + 1)
+
+
 __all__ = ["ROUNDOFF", "minkowski_distance", "mixing_rms", "percentage_difference",
-           "percentage_text"]
+           "percentage_text", "rtd_span"]

@@ -170,33 +170,6 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
     return written
 
 
-def rtd_span(probability, tail: float = 0.01) -> int:
-    """How many bins an RTD spans: from the bin holding its ``tail`` quantile to the bin
-    holding its 1 - ``tail`` quantile, both included (a stray residence in a far bin does
-    not widen it).
-
-    Parameters
-    ----------
-    probability : array_like, shape (B,)
-        Probability per bin (:func:`cfbmarkov.analysis.rtd.rtd_histogram`).
-    tail : float, optional
-        The share of residences left out at each end.
-
-    Returns
-    -------
-    int
-        Bins spanned; 0 when the RTD holds no residence.
-    """
-    p = np.asarray(probability, dtype=np.float64).reshape(-1)
-    total = p.sum()
-    if not total > 0:
-        return 0
-    cumulative = np.cumsum(p) / total
-    first = int(np.searchsorted(cumulative, tail - 1e-12, side="left"))
-    last = int(np.searchsorted(cumulative, 1.0 - tail - 1e-12, side="left"))
-    return max(1, min(last, p.size - 1) - first + 1)
-
-
 def compare(reference, prediction, *, window, output, bin_width: float = 0.025, basis: str = "frames",
             level: float = 0.9, resamples: int = 100,
             md_order: float = 2.0, figures: bool = True) -> dict[str, Any]:
@@ -255,8 +228,6 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
         comparison = compare_runs(ref, pred, window, bin_width=bin_width, md_order=md_order,
                                   basis=basis)
         summary = comparison.summary()
-        summary["rtd_bins_spanned"] = {"reference": rtd_span(comparison.reference.rtd),
-                                       "model": rtd_span(comparison.model.rtd)}
         warnings = list(comparison.warnings)
         intervals = _intervals(pred, comparison, level, resamples, warnings)
         if intervals is not None:
@@ -283,4 +254,4 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
     return summary
 
 
-__all__ = ["SUMMARY", "compare", "model_columns", "rtd_span"]
+__all__ = ["SUMMARY", "compare", "model_columns"]
