@@ -132,14 +132,11 @@ def _positive_float(text: str) -> float:
 
 
 def _level(text: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+    """A coverage level strictly between 0 and 1 (NaN refused)."""
+    value = _number(text)
     if not 0.0 < value < 1.0:
         raise argparse.ArgumentTypeError(f"'{text}' must lie between 0 and 1")
     return value
-
 
 
 def _minkowski_order(text: str) -> float:
