@@ -136,3 +136,23 @@ def test_memory_candidates_work_when_the_window_starts_at_the_first_frame(tmp_pa
                          lag=FLOW.lag, lag_multiples=(1,))
     errors = {c["states"]: c["error"] for c in model.selection["candidates"]}
     assert errors == {name: "" for name in errors} and len(errors) == len(DEFAULT_STATES)
+
+
+def test_score_units_are_the_goals_on_a_steady_flow_and_the_flows_variability_otherwise():
+    """The PD terms' units: 2 % / 10 % where blocks agree, the blocks' own spread where not."""
+    from cfbmarkov.analysis.rtd import ResidenceTimes
+    from cfbmarkov.markov.select import GOAL_PD_MEAN, GOAL_PD_SD, _natural_tolerances
+
+    rng = np.random.default_rng(3)
+    steady = [ResidenceTimes(rng.exponential(0.3, 20000), False, (k, k + 1)) for k in range(3)]
+    assert _natural_tolerances(steady) == (GOAL_PD_MEAN, GOAL_PD_SD)
+    # the middle block's residences are half as long: each block differs from the others
+    scales = (0.36, 0.18, 0.36)
+    varying = [ResidenceTimes(rng.exponential(s, 20000), False, (k, k + 1))
+               for k, s in enumerate(scales)]
+    unit_mean, unit_sd = _natural_tolerances(varying)
+    # blocks 1 + 3 (0.36 s) as the prediction of block 2 (0.18 s): +100 % in E; blocks 2 + 3
+    # pooled (0.27 s) as that of block 1 or 3 (0.36 s): -25 %
+    expected = np.sqrt((2 * 25 ** 2 + 100 ** 2) / 3)
+    assert unit_mean == pytest.approx(expected, rel=0.02)
+    assert unit_sd > GOAL_PD_SD
