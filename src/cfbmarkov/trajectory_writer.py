@@ -25,6 +25,7 @@ from pathlib import Path
 from typing import Any
 
 import h5py
+import numba as nb
 import numpy as np
 
 from cfbmarkov import _interrupt
@@ -313,22 +314,19 @@ class TrajectoryWriter:
                 "DT --max-gap G")
 
     def _check_array(self, name: str, values: np.ndarray, times: np.ndarray,
-                     present: np.ndarray) -> None:
-        finite = np.isfinite(values).all(axis=-1) | ~present
-        if not finite.all():
-            t_idx, p_idx = np.argwhere(~finite)[0]
+                     present: np.ndarray, domain: bool = False) -> None:
+        """Refuse a present value that is not finite, or (``domain``) a present position
+        outside the domain by more than ``POSITION_TOLERANCE``; one pass
+        (:func:`_values_problem`), the first problem in frame, then particle order."""
+        limits = [self.width, self.height] + ([] if self.depth is None else [self.depth])
+        code, t_idx, p_idx = _values_problem(np.ascontiguousarray(values), present,
+                                             np.asarray(limits, dtype=np.float64),
+                                             POSITION_TOLERANCE, domain)
+        if code == 1:
             raise InputError(f"{self._label}: {name} of particle {self.ids[p_idx]} at t = "
                              f"{times[t_idx]:g} s is not a finite number")
-
-    def _check_domain(self, positions: np.ndarray, times: np.ndarray, present: np.ndarray) -> None:
-        tol = POSITION_TOLERANCE
-        limits = [self.width, self.height] + ([] if self.depth is None else [self.depth])
-        with np.errstate(invalid="ignore"):
-            outside = ((positions < -tol) | (positions > np.asarray(limits) + tol)).any(axis=-1)
-        outside &= present
-        if outside.any():
-            t_idx, p_idx = np.argwhere(outside)[0]
-            where = ", ".join(f"{v:g}" for v in positions[t_idx, p_idx])
+        if code == 2:
+            where = ", ".join(f"{v:g}" for v in values[t_idx, p_idx])
             size = " x ".join(f"0..{v:g}" for v in limits)
             raise InputError(
                 f"{self._label}: particle {self.ids[p_idx]} at t = {times[t_idx]:g} s lies outside "
@@ -466,8 +464,7 @@ class TrajectoryWriter:
             present, dtype=bool).reshape(t, n)
         absent = not present.all()
         self._check_times(times)
-        self._check_array("position", positions, times, present)
-        self._check_domain(positions, times, present)
+        self._check_array("position", positions, times, present, domain=True)
         if self.with_velocity:
             if velocities is None:
                 raise InputError(f"{self._label}: this file stores velocities; none were given")
@@ -765,3 +762,26 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
         if events is not None:
             w.add_events(events.time, events.particle, events.direction)
     return Path(path)
+
+
+@nb.njit(cache=True)
+def _values_problem(values, present, extent, tol, domain):
+    """The first problem of a block of per-particle values, in one pass without
+    temporaries: (code, frame, particle), code 0 none, 1 a present value not finite, 2
+    (``domain``) a present position outside [-tol, extent + tol] on some axis. A particle's
+    non-finite value is found before its being outside, as the checks are listed in
+    docs/definitions.md (What is checked when a file is written)."""
+    n_frames, n_particles, d = values.shape
+    for k in range(n_frames):
+        for p in range(n_particles):
+            if not present[k, p]:
+                continue
+            for c in range(d):
+                if not np.isfinite(values[k, p, c]):
+                    return 1, k, p
+            if domain:
+                for c in range(d):
+                    v = values[k, p, c]
+                    if v < -tol or v > extent[c] + tol:
+                        return 2, k, p
+    return 0, 0, 0

@@ -246,6 +246,8 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         blocks = [(float(edges[k]), float(edges[k + 1])) for k in range(folds)]
         # like for like: the held-out residence times from frames at the lag, the time
         # basis of the model's RTD (docs/definitions.md, Comparison basis)
+        for block in blocks:
+            traj.window(*block)         # a window outside the data is refused as such first
         stride = traj.lag_frames(lag)
         observed = [residence_times(traj, block, use_events=False, stride=stride)
                     for block in blocks]
