@@ -769,8 +769,7 @@ def _values_problem(values, present, extent, tol, domain):
     """The first problem of a block of per-particle values, in one pass without
     temporaries: (code, frame, particle), code 0 none, 1 a present value not finite, 2
     (``domain``) a present position outside [-tol, extent + tol] on some axis. A particle's
-    non-finite value is found before its being outside, as the checks are listed in
-    docs/definitions.md (What is checked when a file is written)."""
+    non-finite value is reported before its being outside."""
     n_frames, n_particles, d = values.shape
     for k in range(n_frames):
         for p in range(n_particles):
