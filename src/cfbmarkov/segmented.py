@@ -147,6 +147,20 @@ class SegmentedTrajectoryWriter:
         """
         self._writer().append_fields(time, spacing, **fields)
 
+    def append_frames(self, times, positions, velocities=None, laps=None) -> None:
+        """Append a block of frames to the current segment.
+
+        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.append_frames`.
+        """
+        self._writer().append_frames(times, positions, velocities, laps)
+
+    def append_field_frames(self, times, spacing, **fields) -> None:
+        """Append a block of gas-field frames to the current segment.
+
+        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.append_field_frames`.
+        """
+        self._writer().append_field_frames(times, spacing, **fields)
+
     def close_segment(self) -> int:
         """Close the current segment (if it holds frames; an empty one is discarded).
 
@@ -215,9 +229,12 @@ class SegmentedTrajectoryWriter:
                         merged.add_events(events.time, events.particle, events.direction)
                     if seg.has_fields:
                         spacing = seg.field_spacing
-                        for k, t in enumerate(seg.field_times):
-                            merged.append_fields(t, spacing, **{name: seg.field(name, k)
-                                                                for name in seg.field_names})
+                        field_times = seg.field_times
+                        for i in range(0, field_times.size, 256):
+                            block = slice(i, min(i + 256, field_times.size))
+                            merged.append_field_frames(
+                                field_times[block], spacing,
+                                **{name: seg.field(name, block) for name in seg.field_names})
             for name, (datasets, attrs) in (attach or {}).items():
                 merged.attach(name, datasets, attrs)
         # the output is in place: remove the checkpoint first (a kill from here on leaves

@@ -537,7 +537,6 @@ class TrajectoryWriter:
         self._last_y, self._last_lap, self._last_present = prev_y, prev_lap, prev_present
         return out
 
-    @_writes
     def append_fields(self, time: float, spacing, **fields) -> None:
         """Append one frame of gas fields on a cell-centred grid to ``/fields``.
 
@@ -557,11 +556,37 @@ class TrajectoryWriter:
             If the fields of the first frame are on different grids, or a later frame
             carries other fields.
         """
+        self.append_field_frames([time], spacing,
+                                 **{name: np.asarray(value)[None] for name, value in fields.items()})
+
+    @_writes
+    def append_field_frames(self, times, spacing, **fields) -> None:
+        """Append a block of gas-field frames to ``/fields`` (one write per field).
+
+        Parameters
+        ----------
+        times : array_like, shape (T,)
+            Times of the field frames (s).
+        spacing : tuple of float
+            (dx, dy) of the grid (m).
+        **fields : array_like, shape (T, ny, nx) or (T, ny, nx, 2)
+            As in :meth:`append_fields`, with a leading frame axis.
+
+        Raises
+        ------
+        InputError
+            If the fields are on different grids or do not hold T frames, or they are not
+            the fields of earlier frames.
+        """
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
         g = self._file.require_group("fields")
         first = "time" not in g
         arrays = {name: np.asarray(value, dtype=np.float32) for name, value in fields.items()}
+        if any(a.ndim < 3 or a.shape[0] != times.size for a in arrays.values()):
+            raise InputError(f"{self._label}: gas fields must hold {times.size} frame(s) of a "
+                             "2D grid each")
         if first:
-            shapes = {a.shape[:2] for a in arrays.values()}
+            shapes = {a.shape[1:3] for a in arrays.values()}
             if len(shapes) != 1:
                 raise InputError(f"{self._label}: gas fields of different grids {sorted(shapes)}")
             ny, nx = shapes.pop()
@@ -571,17 +596,17 @@ class TrajectoryWriter:
                                                  "pressure": "Pa"})})
             g.create_dataset("time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
             for name, a in arrays.items():
-                g.create_dataset(name, shape=(0, *a.shape), maxshape=(None, *a.shape),
-                                 dtype="f4", chunks=(1, *a.shape))
+                g.create_dataset(name, shape=(0, *a.shape[1:]), maxshape=(None, *a.shape[1:]),
+                                 dtype="f4", chunks=(1, *a.shape[1:]))
         elif set(arrays) != set(g) - {"time"}:
             raise InputError(f"{self._label}: gas fields {sorted(arrays)} differ from those of "
                              f"earlier frames {sorted(set(g) - {'time'})}")
         k = g["time"].shape[0]
-        g["time"].resize(k + 1, axis=0)
-        g["time"][k] = float(time)
+        g["time"].resize(k + times.size, axis=0)
+        g["time"][k:] = times
         for name, a in arrays.items():
-            g[name].resize(k + 1, axis=0)
-            g[name][k] = a
+            g[name].resize(k + times.size, axis=0)
+            g[name][k:] = a
 
     @_writes
     def add_events(self, times, particles, directions) -> None:
