@@ -1,9 +1,13 @@
-"""Time integration of the 2D DEM engine: the fused step and the advance loop (numba).
+"""Time integration of the 2D DEM engine: the step kernels and the advance loop (numba).
 
-Per step: 2 parallel loops, :func:`.contact.pair_forces` (every pair force once, into
-``pf``) and :func:`fused_step` (each particle sums its pairs' forces, adds its wall
-contacts, the external force and gravity, integrates and checks itself); a list rebuild
-(:func:`.neighbours.rebuild`) before a step whose particles may have left their lists.
+Per step: 3 parallel loops, :func:`.contact.pair_forces` (every pair force once, into
+``pf``), :func:`sum_pairs` (each particle sums its pairs' forces and its external force,
+into ``fsum``) and :func:`move` (each particle adds its wall contacts and gravity,
+integrates and checks itself); a list rebuild (:func:`.neighbours.rebuild`) before a step
+whose particles may have left their lists. :func:`fused_step` does the last two in one loop
+with the same bits; it is kept for single-particle tests, as the step uses the two loops:
+with the variable-length pair loops inside the long per-particle body, that one loop took
+about 1.6 times as long as the two together (dilute benchmark; docs/performance.md).
 
 Determinism: each particle sums its pairs in a fixed order (pairs where it is the second
 member, then those where it is the first), with no atomics and no shared accumulators, so
@@ -30,6 +34,137 @@ from cfbmarkov.simulate.dem.layout import (BAD_NAN, BAD_OVERLAP, BAD_RANGE, BAD_
 from cfbmarkov.simulate.dem.neighbours import rebuild
 
 
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
+    """The rest of particle i's step once its pair forces are summed into (fx, fy, tq): its
+    wall contacts, gravity, the leapfrog update (written to ``so``) and the checks.
+
+    Returns (moved beyond skin/2, boundary passes, bad, side walls' and floor's vertical
+    force on it). Inlined into :func:`fused_step` and :func:`one_pass_step`.
+    """
+    dt = prm.dt
+    W = prm.width
+    H = prm.height
+    skin = prm.skin
+    floor = prm.floor
+    periodic = prm.periodic
+    ovl = prm.max_overlap
+    xi = st[i, 0]
+    yi = st[i, 1]
+    vxi = st[i, 2]
+    vyi = st[i, 3]
+    ui = st[i, 4]
+    Ri = st[i, 5]
+    imi = st[i, 6]
+    rIi = st[i, 7]
+    isbad = 0
+    nev = 0
+    wall_fy = 0.0
+    floor_fy = 0.0
+    # near a wall (within the skin): contact, or a spring to clear (a particle cannot
+    # leave a contact by more than the skin in one step without tripping the checks)
+    if xi < Ri + skin or xi > W - Ri - skin or (floor and yi < Ri + skin):
+        kn = prm.kn
+        kt = prm.kt
+        inv_kt = prm.inv_kt
+        mu = prm.mu
+        if prm.mono:
+            etan = prm.etan_pw
+            etat = prm.etat_pw
+        else:
+            sm = 1.0 / math.sqrt(imi)
+            etan = prm.cn * sm
+            etat = prm.ct * sm
+        # a wall is a partner of infinite mass (m_ab = m) at rest without spin: the
+        # relative velocity of the contact point is (vx - u ny, vy + u nx), the approach
+        # speed its part along n, the tangential velocity (1D) its part along the wall
+        if xi < Ri:  # left wall, n = (-1, 0)
+            delta = Ri - xi
+            if delta > 2.0 * ovl * Ri:
+                isbad = BAD_OVERLAP
+            fn, ft, wh[i, 0] = contact_force(delta, -vxi, None, vyi - ui, wh[i, 0], kn, kt,
+                                             inv_kt, etan, etat, mu, dt)
+            fx += fn
+            fy += ft
+            tq -= Ri * ft
+            wall_fy += ft
+        elif wh[i, 0] != 0.0:
+            wh[i, 0] = 0.0
+        if xi > W - Ri:  # right wall, n = (1, 0)
+            delta = xi + Ri - W
+            if delta > 2.0 * ovl * Ri:
+                isbad = BAD_OVERLAP
+            fn, ft, wh[i, 1] = contact_force(delta, vxi, None, vyi + ui, wh[i, 1], kn, kt,
+                                             inv_kt, etan, etat, mu, dt)
+            fx -= fn
+            fy += ft
+            tq += Ri * ft
+            wall_fy += ft
+        elif wh[i, 1] != 0.0:
+            wh[i, 1] = 0.0
+        if floor and yi < Ri:  # floor, n = (0, -1)
+            delta = Ri - yi
+            if delta > 2.0 * ovl * Ri:
+                isbad = BAD_OVERLAP
+            fn, ft, wh[i, 2] = contact_force(delta, -vyi, None, vxi + ui, wh[i, 2], kn, kt,
+                                             inv_kt, etan, etat, mu, dt)
+            fy += fn
+            fx += ft
+            tq += Ri * ft
+            floor_fy += fn
+        elif wh[i, 2] != 0.0:
+            wh[i, 2] = 0.0
+    # integrate (leapfrog)
+    vxn = vxi + dt * (fx * imi)
+    vyn = vyi + dt * (fy * imi - prm.gravity)
+    wn = ui + dt * (tq * rIi)
+    xn = xi + dt * vxn
+    yn = yi + dt * vyn
+    if periodic:
+        if yn >= H:
+            yn -= H
+            laps[i] += 1
+            evf[i] = 1
+            nev = 1
+        elif yn < 0.0:
+            yn += H
+            if yn >= H:  # a step of -1e-17 rounds to H: that is the point 0
+                yn = 0.0
+            laps[i] -= 1
+            evf[i] = -1
+            nev = 1
+        if not (yn >= 0.0 and yn < H):
+            isbad = BAD_RANGE
+    elif yn < -Ri:
+        isbad = BAD_WALL
+    if xn < -Ri or xn > W + Ri:
+        isbad = BAD_WALL
+    if not (xn == xn and yn == yn and wn == wn and vxn == vxn and vyn == vyn):
+        isbad = BAD_NAN
+    nbad = 0
+    if isbad != 0:
+        bad[i] = isbad
+        nbad = 1
+    ddx = xn - aux[i, 0]
+    ddy = yn - aux[i, 1]
+    if periodic:
+        if ddy > 0.5 * H:
+            ddy -= H
+        elif ddy < -0.5 * H:
+            ddy += H
+    hs = 0.5 * skin
+    moved = 1 if ddx * ddx + ddy * ddy > hs * hs else 0
+    so[i, 0] = xn
+    so[i, 1] = yn
+    so[i, 2] = vxn
+    so[i, 3] = vyn
+    so[i, 4] = wn
+    so[i, 5] = Ri
+    so[i, 6] = imi
+    so[i, 7] = rIi
+    return moved, nev, nbad, wall_fy, floor_fy
+
+
 @njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
 def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, prm):
     """Sum the forces on each particle, add walls, external force and gravity, integrate.
@@ -37,6 +172,9 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
     The pair forces ``pf`` are summed in a fixed order (pairs where the particle comes
     second, then pairs where it comes first). The wall contacts use
     :func:`.contact.contact_force` with the wall as a mirror particle of infinite mass.
+
+    The step itself (:func:`advance`) runs this as :func:`sum_pairs` then :func:`move`
+    (the same bits, faster); this one loop is kept for tests of single contacts.
 
     Parameters
     ----------
@@ -73,44 +211,16 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
         (diagnostics, summed in any order).
     """
     N = st.shape[0]
-    dt = prm.dt
-    W = prm.width
-    H = prm.height
-    halfH = 0.5 * H
-    g = prm.gravity
-    kn = prm.kn
-    kt = prm.kt
-    inv_kt = prm.inv_kt
-    mu = prm.mu
-    etan_pw = prm.etan_pw
-    etat_pw = prm.etat_pw
-    cn = prm.cn
-    ct = prm.ct
-    skin = prm.skin
-    hs = 0.5 * skin
-    hs2 = hs * hs
-    ovl = prm.max_overlap
-    periodic = prm.periodic
-    floor = prm.floor
-    mono = prm.mono
     nmove = 0
     nev = 0
     nbad = 0
     wall_fy = 0.0
     floor_fy = 0.0
     for i in prange(N):
-        xi = st[i, 0]
-        yi = st[i, 1]
-        vxi = st[i, 2]
-        vyi = st[i, 3]
-        ui = st[i, 4]
         Ri = st[i, 5]
-        imi = st[i, 6]
-        rIi = st[i, 7]
         fx = aux[i, 2]
         fy = aux[i, 3]
         tq = 0.0
-        isbad = 0
         for q in range(lowstart[i], lowstart[i + 1]):
             p = lowpid[q]
             fx -= pf[p, 0]
@@ -120,102 +230,58 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
             fx += pf[p, 0]
             fy += pf[p, 1]
             tq += Ri * pf[p, 2]
-        # near a wall (within the skin): contact, or a spring to clear (a particle cannot
-        # leave a contact by more than the skin in one step without tripping the checks)
-        if xi < Ri + skin or xi > W - Ri - skin or (floor and yi < Ri + skin):
-            if mono:
-                etan = etan_pw
-                etat = etat_pw
-            else:
-                sm = 1.0 / math.sqrt(imi)
-                etan = cn * sm
-                etat = ct * sm
-            # a wall is a partner of infinite mass (m_ab = m) at rest without spin: the
-            # relative velocity of the contact point is (vx - u ny, vy + u nx), the approach
-            # speed its part along n, the tangential velocity (1D) its part along the wall
-            if xi < Ri:  # left wall, n = (-1, 0)
-                delta = Ri - xi
-                if delta > 2.0 * ovl * Ri:
-                    isbad = BAD_OVERLAP
-                fn, ft, wh[i, 0] = contact_force(delta, -vxi, None, vyi - ui, wh[i, 0], kn, kt,
-                                                 inv_kt, etan, etat, mu, dt)
-                fx += fn
-                fy += ft
-                tq -= Ri * ft
-                wall_fy += ft
-            elif wh[i, 0] != 0.0:
-                wh[i, 0] = 0.0
-            if xi > W - Ri:  # right wall, n = (1, 0)
-                delta = xi + Ri - W
-                if delta > 2.0 * ovl * Ri:
-                    isbad = BAD_OVERLAP
-                fn, ft, wh[i, 1] = contact_force(delta, vxi, None, vyi + ui, wh[i, 1], kn, kt,
-                                                 inv_kt, etan, etat, mu, dt)
-                fx -= fn
-                fy += ft
-                tq += Ri * ft
-                wall_fy += ft
-            elif wh[i, 1] != 0.0:
-                wh[i, 1] = 0.0
-            if floor and yi < Ri:  # floor, n = (0, -1)
-                delta = Ri - yi
-                if delta > 2.0 * ovl * Ri:
-                    isbad = BAD_OVERLAP
-                fn, ft, wh[i, 2] = contact_force(delta, -vyi, None, vxi + ui, wh[i, 2], kn, kt,
-                                                 inv_kt, etan, etat, mu, dt)
-                fy += fn
-                fx += ft
-                tq += Ri * ft
-                floor_fy += fn
-            elif wh[i, 2] != 0.0:
-                wh[i, 2] = 0.0
-        # integrate (leapfrog)
-        vxn = vxi + dt * (fx * imi)
-        vyn = vyi + dt * (fy * imi - g)
-        wn = ui + dt * (tq * rIi)
-        xn = xi + dt * vxn
-        yn = yi + dt * vyn
-        if periodic:
-            if yn >= H:
-                yn -= H
-                laps[i] += 1
-                evf[i] = 1
-                nev += 1
-            elif yn < 0.0:
-                yn += H
-                if yn >= H:  # a step of -1e-17 rounds to H: that is the point 0
-                    yn = 0.0
-                laps[i] -= 1
-                evf[i] = -1
-                nev += 1
-            if not (yn >= 0.0 and yn < H):
-                isbad = BAD_RANGE
-        elif yn < -Ri:
-            isbad = BAD_WALL
-        if xn < -Ri or xn > W + Ri:
-            isbad = BAD_WALL
-        if not (xn == xn and yn == yn and wn == wn and vxn == vxn and vyn == vyn):
-            isbad = BAD_NAN
-        if isbad != 0:
-            bad[i] = isbad
-            nbad += 1
-        ddx = xn - aux[i, 0]
-        ddy = yn - aux[i, 1]
-        if periodic:
-            if ddy > halfH:
-                ddy -= H
-            elif ddy < -halfH:
-                ddy += H
-        if ddx * ddx + ddy * ddy > hs2:
-            nmove += 1
-        so[i, 0] = xn
-        so[i, 1] = yn
-        so[i, 2] = vxn
-        so[i, 3] = vyn
-        so[i, 4] = wn
-        so[i, 5] = Ri
-        so[i, 6] = imi
-        so[i, 7] = rIi
+        m, e, nb, wf, ff = _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm)
+        nmove += m
+        nev += e
+        nbad += nb
+        wall_fy += wf
+        floor_fy += ff
+    return nmove, nev, nbad, wall_fy, floor_fy
+
+
+@njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
+def sum_pairs(st, aux, pstart, lowstart, lowpid, pf, fsum):
+    """Sum the pair forces on each particle in a fixed order (pairs where it comes second,
+    then pairs where it comes first), starting from its external force: ``fsum[i] = (fx, fy,
+    torque)``."""
+    N = st.shape[0]
+    for i in prange(N):
+        Ri = st[i, 5]
+        fx = aux[i, 2]
+        fy = aux[i, 3]
+        tq = 0.0
+        for q in range(lowstart[i], lowstart[i + 1]):
+            p = lowpid[q]
+            fx -= pf[p, 0]
+            fy -= pf[p, 1]
+            tq += Ri * pf[p, 2]
+        for p in range(pstart[i], pstart[i + 1]):
+            fx += pf[p, 0]
+            fy += pf[p, 1]
+            tq += Ri * pf[p, 2]
+        fsum[i, 0] = fx
+        fsum[i, 1] = fy
+        fsum[i, 2] = tq
+
+
+@njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
+def move(st, so, aux, wh, laps, fsum, evf, bad, prm):
+    """Walls, gravity, integration and checks of every particle (:func:`_finish`), from its
+    summed pair and external force ``fsum``; returns as :func:`fused_step`."""
+    N = st.shape[0]
+    nmove = 0
+    nev = 0
+    nbad = 0
+    wall_fy = 0.0
+    floor_fy = 0.0
+    for i in prange(N):
+        m, e, nb, wf, ff = _finish(i, st, so, aux, wh, laps, evf, bad, fsum[i, 0], fsum[i, 1],
+                                   fsum[i, 2], prm)
+        nmove += m
+        nev += e
+        nbad += nb
+        wall_fy += wf
+        floor_fy += ff
     return nmove, nev, nbad, wall_fy, floor_fy
 
 
@@ -250,7 +316,7 @@ def _record_events(st_old, st_new, ids, evf, step, prm, ev_t, ev_p, ev_d, ctl):
 
 
 @njit(cache=True)
-def advance(st, aux, wh, ids, laps, LA, LB, pf, ctl, evf, bad, key, cstart, cfill, perm,
+def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart, cfill, perm,
             invperm, prm, nsteps, ev_t, ev_p, ev_d, wall_impulse):
     """Advance up to ``nsteps`` steps (rebuilding the lists when needed).
 
@@ -262,6 +328,8 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, ctl, evf, bad, key, cstart, cfil
         The two list buffers.
     pf : float64 (>= npairs, 3)
         Pair-force scratch.
+    fsum : float64 (N, 3)
+        Scratch: each particle's summed force and torque (:func:`sum_pairs`).
     ctl : int64 (N_C,)
         Control slots.
     evf, bad : int8 (N,)
@@ -303,9 +371,9 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, ctl, evf, bad, key, cstart, cfil
         L = LA if ctl[C_LIST] == 0 else LB
         npairs = L.pstart[N]
         nbad_pairs = pair_forces(st[cs], npairs, L.pi, L.pj, L.springs, pf, prm)
-        nmove, nev, nbad, wall_fy, floor_fy = fused_step(
-            st[cs], st[1 - cs], aux[cp], wh[cp], laps[cp], L.pstart, L.lowstart, L.lowpid, pf,
-            evf, bad, prm)
+        sum_pairs(st[cs], aux[cp], L.pstart, L.lowstart, L.lowpid, pf, fsum)
+        nmove, nev, nbad, wall_fy, floor_fy = move(st[cs], st[1 - cs], aux[cp], wh[cp], laps[cp],
+                                                   fsum, evf, bad, prm)
         wall_impulse[0] += prm.dt * wall_fy
         wall_impulse[1] += prm.dt * floor_fy
         if nbad_pairs > 0:

@@ -231,6 +231,7 @@ class DEMSystem:
         self._arrays = dict(st=st, aux=aux, wh=np.zeros((2, n, 3)), ids=ids, laps=lp, ctl=ctl)
         self._lists = [empty_list(n, 4), empty_list(n, 4)]
         self._pf = np.zeros((self._lists[0].pi.shape[0], 3))
+        self._fsum = np.zeros((n, 3))
         self._t0 = float(time)
         self.serial_below = SERIAL_BELOW
         self._prm = self._parameters()
@@ -454,8 +455,8 @@ class DEMSystem:
         while left > 0:
             done, status, info = integrate.advance(
                 a["st"], a["aux"], a["wh"], a["ids"], a["laps"], self._lists[0], self._lists[1],
-                self._pf, ctl, sc["evf"], sc["bad"], sc["key"], sc["cstart"], sc["cfill"],
-                sc["perm"], sc["invperm"], self._prm, left, *self._ev,
+                self._pf, self._fsum, ctl, sc["evf"], sc["bad"], sc["key"], sc["cstart"],
+                sc["cfill"], sc["perm"], sc["invperm"], self._prm, left, *self._ev,
                 self._wall_impulse)
             left -= done
             if status == L.ST_OK:
@@ -612,6 +613,7 @@ class DEMSystem:
             lst.lowpid[:npairs] = state["internal_second_pairs"]
             self._lists = [lst, empty_list(n, stride)]
             self._pf = np.zeros((lst.pi.shape[0], 3))
+            self._fsum = np.zeros((n, 3))
             self._prm = self._parameters()
             ev_t = np.asarray(state["pending_event_time"], np.float64)
             self._alloc_scratch(capacity=max(4 * n, 4096, 2 * ev_t.shape[0]))
