@@ -227,3 +227,34 @@ def test_trust_paragraph_is_written_from_the_numbers():
     assert "beats simply" in text and "within the reference's own variability" in text
     assert "inside" in text
     assert "too few residences" in trust_text("3", "mle", {"md_rtd": None})
+
+
+def test_a_side_without_residences_is_said_so_not_n_a(reproduction):
+    """A model that predicts no residence in the net flow's direction: 'no residences' and a
+    note saying why, not a row of n/a (issue 14, net downflow)."""
+    from cfbmarkov.report.sections import NO_RESIDENCES
+
+    path = reproduction / "u3" / "compare-mle" / "summary.json"
+    s = json.loads(path.read_text())
+    s["model"].update(rt_mean=None, rt_sd=None, rt_count=0)
+    s.update(pd_rt_mean=None, pd_rt_sd=None, md_rtd=None)
+    s["baseline"] = dict(s.get("baseline") or {}, rt_count=0, pd_rt_mean=None, pd_rt_sd=None,
+                         md_rtd=None)
+    path.write_text(json.dumps(s))
+    write_report(reproduction)
+    md = (reproduction / "report.md").read_text(encoding="utf-8")
+    row = table_row(md, "3", "mle")
+    assert row[2] == f"{s['reference']['rt_mean']:.3f}"          # the CFD-DEM side stays
+    assert [row[k] for k in (3, 4, 6, 7, 8, 10)] == [NO_RESIDENCES] * 6
+    assert "n/a" not in row
+    assert f"{NO_RESIDENCES}: that side holds no complete residence" in md
+    assert NO_RESIDENCES not in table_row(md, "3", "paper")      # the others untouched
+
+
+def test_fig8_counts_residences_as_table3_does(report_of_template):
+    """Fig. 8's CFD-DEM E(RT) is Table 3's: one basis (frames at the lag) and direction."""
+    root, _ = report_of_template
+    md = (root / "report.md").read_text(encoding="utf-8")
+    for case, u in (("u3", "3"), ("u6", "6")):
+        s = json.loads((root / case / "compare-paper" / "summary.json").read_text())
+        assert f"{s['reference']['rt_mean']:.3f} s at U = {u} m/s" in md

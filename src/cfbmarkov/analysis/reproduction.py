@@ -120,7 +120,8 @@ class CaseMeasures:
     model: Any = None
 
 
-def measure_run(traj, window: tuple[float, float], bin_width: float) -> RunMeasures:
+def measure_run(traj, window: tuple[float, float], bin_width: float, *,
+                use_events: bool = True, stride: int = 1, direction: str = "up") -> RunMeasures:
     """Residence times, RTD and mixing curve of an open trajectory file.
 
     Parameters
@@ -130,6 +131,9 @@ def measure_run(traj, window: tuple[float, float], bin_width: float) -> RunMeasu
         (start, stop), s.
     bin_width : float
         RTD bin width, s.
+    use_events, stride, direction : optional
+        The residence times' basis and direction, as in
+        :func:`cfbmarkov.analysis.rtd.residence_times`.
 
     Returns
     -------
@@ -144,7 +148,8 @@ def measure_run(traj, window: tuple[float, float], bin_width: float) -> RunMeasu
     from cfbmarkov.analysis.mixing import mixing_curve_of
     from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
 
-    rt = residence_times(traj, window)
+    rt = residence_times(traj, window, use_events=use_events, stride=stride,
+                         direction=direction)
     _, prob = rtd_histogram(rt.samples, bin_width, window_length=window[1] - window[0])
     t, f = mixing_curve_of(traj, window)
     return RunMeasures(rt, prob, t, f)
@@ -238,18 +243,30 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
     ----------
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 3-9 and 11.
     """
-    from cfbmarkov.analysis.rtd import rtd_histogram
+    from cfbmarkov.analysis.rtd import net_passes, rtd_histogram
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.trajectories import Trajectories
 
+    # the basis and direction of the compare summaries (like for like, net downflow):
+    # frames at the models' lag on both sides, counted in the direction of the net flow
+    stride, lag, first = 1, math.nan, next(iter(predictions.values()), None)
+    if first is not None:
+        with reading_errors(first), Trajectories(first) as pred:
+            lag = pred.frame_interval
     with reading_errors(reference), Trajectories(reference) as ref:
-        measured = measure_run(ref, window, bin_width)
+        ratio = lag / ref.frame_interval
+        if math.isfinite(ratio) and round(ratio) >= 1 and abs(ratio - round(ratio)) <= 0.01 * ratio:
+            stride = int(round(ratio))
+        direction = ("down" if ref.boundary == "periodic" and net_passes(ref, window) < 0
+                     else "up")
+        measured = measure_run(ref, window, bin_width, use_events=False, stride=stride,
+                               direction=direction)
         across, solids, solids_velocity = solids_profile(ref, window, config)
     edges, _ = rtd_histogram(np.zeros(0), bin_width, window_length=window[1] - window[0])
     models = {}
     for name, path in predictions.items():
         with reading_errors(path), Trajectories(path) as pred:
-            models[name] = measure_run(pred, window, bin_width)
+            models[name] = measure_run(pred, window, bin_width, direction=direction)
     measures = CaseMeasures(window, bin_width, edges, measured, models, across, solids,
                             solids_velocity)
     measures.model_name = model[0]

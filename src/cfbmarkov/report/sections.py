@@ -169,6 +169,10 @@ def paper_row(u: float) -> tuple[str, str, str]:
     return values if values is not None else ("—", "—", "—")
 
 
+#: a table cell where one side holds no complete residence (instead of "n/a")
+NO_RESIDENCES = "no residences"
+
+
 def _difference_text(d) -> str:
     """'PD E / PD SD / MD' of a baseline or variability summary, or n/a."""
     if not d:
@@ -203,6 +207,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
               "Mixing RMS", "Baseline: PD E / PD SD / MD", "CFD-DEM halves: PD E / PD SD / MD",
               "Paper: PD of E(RT) (%)", "Paper: PD of SD(RT) (%)", "Paper: MD of RTD"]
     rows, pd_sd, pd_mean, orders, widths, exact = [], [], [], set(), set(), {}
+    exact_pd: list[str] = []
     downward: set[str] = set()
     for c in cases:
         paper = paper_row(c.velocity)
@@ -213,15 +218,23 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                 rows.append([u, e.name if e else "—"] + ["not finished"] * 10 + list(paper))
                 continue
             ref, mod = s["reference"], s["model"]
-            rows.append([u, e.name, number_text(ref.get("rt_mean"), ".3f"),
-                         number_text(mod.get("rt_mean"), ".3f"),
-                         percentage_text(s.get("pd_rt_mean"), ".2f"),
-                         number_text(ref.get("rt_sd"), ".3f"), number_text(mod.get("rt_sd"), ".3f"),
-                         percentage_text(s.get("pd_rt_sd"), ".2f"),
-                         number_text(s.get("md_rtd"), ".3g"), number_text(s.get("mixing_rms"), ".3g"),
-                         _difference_text(s.get("baseline")),
-                         _difference_text(s.get("natural_variability"))]
-                        + list(paper))
+            row = [u, e.name, number_text(ref.get("rt_mean"), ".3f"),
+                   number_text(mod.get("rt_mean"), ".3f"),
+                   percentage_text(s.get("pd_rt_mean"), ".2f"),
+                   number_text(ref.get("rt_sd"), ".3f"), number_text(mod.get("rt_sd"), ".3f"),
+                   percentage_text(s.get("pd_rt_sd"), ".2f"),
+                   number_text(s.get("md_rtd"), ".3g"), number_text(s.get("mixing_rms"), ".3g"),
+                   _difference_text(s.get("baseline")),
+                   _difference_text(s.get("natural_variability"))] + list(paper)
+            # a side without a complete residence in the net flow's direction: say so
+            for side, columns in ((ref, (2, 5)), (mod, (3, 6))):
+                if side.get("rt_count") == 0:
+                    for k in (*columns, 4, 7, 8):
+                        row[k] = NO_RESIDENCES
+            for k, summary in ((10, s.get("baseline")), (11, s.get("natural_variability"))):
+                if summary and summary.get("rt_count") == 0:
+                    row[k] = NO_RESIDENCES
+            rows.append(row)
             if (v := finite_or_none(s.get("pd_rt_sd"))) is not None:
                 pd_sd.append(v)
             if (v := finite_or_none(s.get("pd_rt_mean"))) is not None:
@@ -237,12 +250,12 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                 stride = s.get("reference_frame_stride") or 1
                 key = ("like for like: both sides from frames at the model's lag (CFD-DEM "
                        f"frames every {stride})")
-                er = s.get("exact_reference")
-                if er:
-                    key += (f"; from the CFD-DEM's exact pass events the PD of E(RT) would be "
-                            f"{percentage_text(er.get('pd_rt_mean'), '.2f')} % and of SD(RT) "
-                            f"{percentage_text(er.get('pd_rt_sd'), '.2f')} % at {u} m/s")
                 exact.setdefault(key, set()).add(c.name)
+                er = s.get("exact_reference")
+                if er and (finite_or_none(er.get("pd_rt_mean")) is not None
+                           or finite_or_none(er.get("pd_rt_sd")) is not None):
+                    exact_pd.append(f"{u} m/s {e.name} {percentage_text(er.get('pd_rt_mean'), '.1f')}"
+                                    f" / {percentage_text(er.get('pd_rt_sd'), '.1f')}")
             else:
                 exact.setdefault("CFD-DEM: exact pass events" if ex.get("reference")
                                  else "CFD-DEM: frame times", set()).add(c.name)
@@ -270,7 +283,15 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     if exact:
         notes.append("Residence-time basis: " + "; ".join(
             f"{k} ({', '.join(sorted(v))})" for k, v in exact.items())
-            + "; MCM predictions: frame times (docs/definitions.md, Comparison basis).")
+            + "; MCM predictions: frame times (docs/definitions.md, Comparison basis)."
+            + (" With the CFD-DEM's residence times from its exact pass events instead, the "
+               "PD of E(RT) / SD(RT) (%) would be: " + "; ".join(exact_pd) + "."
+               if exact_pd else ""))
+    if any(NO_RESIDENCES in row for row in rows):
+        notes.append(f"{NO_RESIDENCES}: that side holds no complete residence in the window, "
+                     "counted in the direction of the CFD-DEM's net solids flow (a model "
+                     "fitted where the solids rose predicts almost no residence when they "
+                     "fall); no mean, spread or distance can be formed.")
     if downward:
         notes.append(f"At U = {', '.join(sorted(downward))} m/s the solids' net flow over the "
                      "predict window is downward: residence times run from entries through the "
