@@ -34,6 +34,85 @@ from cfbmarkov.simulate.dem.layout import (BAD_NAN, BAD_OVERLAP, BAD_RANGE, BAD_
 from cfbmarkov.simulate.dem.neighbours import rebuild
 
 
+@njit(cache=True, fastmath=FASTMATH)
+def _walls(i, st, wh, fx, fy, tq, prm):
+    """Particle i's contacts with the side walls and the floor (or their springs cleared),
+    added to its force (fx, fy) and torque tq.
+
+    Called by :func:`_finish` only for a particle within the skin of a wall (a few percent
+    of them), and compiled as a function of its own rather than inlined: the three inlined
+    contact laws made the per-particle kernels' compilation slow (12 s of the DEM's 28 s),
+    while a call for so few particles costs nothing measurable.
+
+    Returns (fx, fy, tq, bad reason or 0, side walls' vertical force, floor's vertical force).
+    """
+    dt = prm.dt
+    W = prm.width
+    floor = prm.floor
+    ovl = prm.max_overlap
+    xi = st[i, 0]
+    yi = st[i, 1]
+    vxi = st[i, 2]
+    vyi = st[i, 3]
+    ui = st[i, 4]
+    Ri = st[i, 5]
+    imi = st[i, 6]
+    isbad = 0
+    wall_fy = 0.0
+    floor_fy = 0.0
+    kn = prm.kn
+    kt = prm.kt
+    inv_kt = prm.inv_kt
+    mu = prm.mu
+    if prm.mono:
+        etan = prm.etan_pw
+        etat = prm.etat_pw
+    else:
+        sm = 1.0 / math.sqrt(imi)
+        etan = prm.cn * sm
+        etat = prm.ct * sm
+    # a wall is a partner of infinite mass (m_ab = m) at rest without spin: the
+    # relative velocity of the contact point is (vx - u ny, vy + u nx), the approach
+    # speed its part along n, the tangential velocity (1D) its part along the wall
+    if xi < Ri:  # left wall, n = (-1, 0)
+        delta = Ri - xi
+        if delta > 2.0 * ovl * Ri:
+            isbad = BAD_OVERLAP
+        fn, ft, wh[i, 0] = contact_force(delta, -vxi, None, vyi - ui, wh[i, 0], kn, kt,
+                                         inv_kt, etan, etat, mu, dt)
+        fx += fn
+        fy += ft
+        tq -= Ri * ft
+        wall_fy += ft
+    elif wh[i, 0] != 0.0:
+        wh[i, 0] = 0.0
+    if xi > W - Ri:  # right wall, n = (1, 0)
+        delta = xi + Ri - W
+        if delta > 2.0 * ovl * Ri:
+            isbad = BAD_OVERLAP
+        fn, ft, wh[i, 1] = contact_force(delta, vxi, None, vyi + ui, wh[i, 1], kn, kt,
+                                         inv_kt, etan, etat, mu, dt)
+        fx -= fn
+        fy += ft
+        tq += Ri * ft
+        wall_fy += ft
+    elif wh[i, 1] != 0.0:
+        wh[i, 1] = 0.0
+    if floor and yi < Ri:  # floor, n = (0, -1)
+        delta = Ri - yi
+        if delta > 2.0 * ovl * Ri:
+            isbad = BAD_OVERLAP
+        fn, ft, wh[i, 2] = contact_force(delta, -vyi, None, vxi + ui, wh[i, 2], kn, kt,
+                                         inv_kt, etan, etat, mu, dt)
+        fy += fn
+        fx += ft
+        tq += Ri * ft
+        floor_fy += fn
+    elif wh[i, 2] != 0.0:
+        wh[i, 2] = 0.0
+    return fx, fy, tq, isbad, wall_fy, floor_fy
+
+
 @njit(cache=True, inline="always", fastmath=FASTMATH)
 def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
     """The rest of particle i's step once its pair forces are summed into (fx, fy, tq): its
@@ -49,7 +128,6 @@ def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
     skin = prm.skin
     floor = prm.floor
     periodic = prm.periodic
-    ovl = prm.max_overlap
     xi = st[i, 0]
     yi = st[i, 1]
     vxi = st[i, 2]
@@ -65,56 +143,7 @@ def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
     # near a wall (within the skin): contact, or a spring to clear (a particle cannot
     # leave a contact by more than the skin in one step without tripping the checks)
     if xi < Ri + skin or xi > W - Ri - skin or (floor and yi < Ri + skin):
-        kn = prm.kn
-        kt = prm.kt
-        inv_kt = prm.inv_kt
-        mu = prm.mu
-        if prm.mono:
-            etan = prm.etan_pw
-            etat = prm.etat_pw
-        else:
-            sm = 1.0 / math.sqrt(imi)
-            etan = prm.cn * sm
-            etat = prm.ct * sm
-        # a wall is a partner of infinite mass (m_ab = m) at rest without spin: the
-        # relative velocity of the contact point is (vx - u ny, vy + u nx), the approach
-        # speed its part along n, the tangential velocity (1D) its part along the wall
-        if xi < Ri:  # left wall, n = (-1, 0)
-            delta = Ri - xi
-            if delta > 2.0 * ovl * Ri:
-                isbad = BAD_OVERLAP
-            fn, ft, wh[i, 0] = contact_force(delta, -vxi, None, vyi - ui, wh[i, 0], kn, kt,
-                                             inv_kt, etan, etat, mu, dt)
-            fx += fn
-            fy += ft
-            tq -= Ri * ft
-            wall_fy += ft
-        elif wh[i, 0] != 0.0:
-            wh[i, 0] = 0.0
-        if xi > W - Ri:  # right wall, n = (1, 0)
-            delta = xi + Ri - W
-            if delta > 2.0 * ovl * Ri:
-                isbad = BAD_OVERLAP
-            fn, ft, wh[i, 1] = contact_force(delta, vxi, None, vyi + ui, wh[i, 1], kn, kt,
-                                             inv_kt, etan, etat, mu, dt)
-            fx -= fn
-            fy += ft
-            tq += Ri * ft
-            wall_fy += ft
-        elif wh[i, 1] != 0.0:
-            wh[i, 1] = 0.0
-        if floor and yi < Ri:  # floor, n = (0, -1)
-            delta = Ri - yi
-            if delta > 2.0 * ovl * Ri:
-                isbad = BAD_OVERLAP
-            fn, ft, wh[i, 2] = contact_force(delta, -vyi, None, vxi + ui, wh[i, 2], kn, kt,
-                                             inv_kt, etan, etat, mu, dt)
-            fy += fn
-            fx += ft
-            tq += Ri * ft
-            floor_fy += fn
-        elif wh[i, 2] != 0.0:
-            wh[i, 2] = 0.0
+        fx, fy, tq, isbad, wall_fy, floor_fy = _walls(i, st, wh, fx, fy, tq, prm)
     # integrate (leapfrog)
     vxn = vxi + dt * (fx * imi)
     vyn = vyi + dt * (fy * imi - prm.gravity)
