@@ -156,3 +156,34 @@ def test_score_units_are_the_goals_on_a_steady_flow_and_the_flows_variability_ot
     expected = np.sqrt((2 * 25 ** 2 + 100 ** 2) / 3)
     assert unit_mean == pytest.approx(expected, rel=0.02)
     assert unit_sd > GOAL_PD_SD
+
+
+def test_net_downflow_is_judged_downward(tmp_path):
+    """Where the fitting window's net flow runs down, the held-out residences and the
+    candidates' RTDs are counted downward: exactly the upward judgement of the same run
+    mirrored top to bottom (y -> H - y, laps -> -laps)."""
+    from cfbmarkov.trajectory_writer import TrajectoryWriter
+
+    flow = synthetic.RiserFlow(rise_velocity=0.8, fall_velocity=-2.0)
+    path, mirrored = tmp_path / "down.h5", tmp_path / "mirrored.h5"
+    with (threadpool_limits(1) if threadpool_limits else contextlib.nullcontext()):
+        synthetic.write_run(path, flow, 1500, FIT[1], seed=5)
+    with Trajectories(path) as traj:
+        positions, laps = traj.positions(slice(None)).copy(), traj.laps(slice(None))
+        times, height = traj.times[:], traj.height
+        with TrajectoryWriter(mirrored, traj.ids, width=traj.width, height=height,
+                              source="synthetic", frame_interval=traj.frame_interval) as out:
+            positions[..., 1] = np.where(positions[..., 1] > 0, height - positions[..., 1], 0.0)
+            out.append_frames(times, positions, None, -laps)
+    chosen = {}
+    for name in (path, mirrored):
+        chosen[name] = select_model(name, window=FIT, columns=6, rows=38, lag=0.025,
+                                    states=("cells", "cells-direction")).selection
+    down, up = chosen[path], chosen[mirrored]
+    assert down["direction"] == "down" and "counted downward" in down["reason"]
+    assert up["direction"] == "up" and "counted downward" not in up["reason"]
+    assert min(o["rt_count"] for o in down["observed"]) >= 30          # judged by the RTD
+    assert [o["rt_count"] for o in down["observed"]] == [o["rt_count"] for o in up["observed"]]
+    for a, b in zip(down["candidates"], up["candidates"]):
+        for key in ("pd_rt_mean", "pd_rt_sd", "md_rtd", "score"):
+            assert a[key] == pytest.approx(b[key], rel=1e-9, abs=1e-12), (a["states"], key)

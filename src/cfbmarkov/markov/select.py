@@ -54,7 +54,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
-from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
+from cfbmarkov.analysis.rtd import net_passes, residence_times, rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import DiscreteTrajectories, read_frames
 from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, fit_model
@@ -171,9 +171,11 @@ def _natural_tolerances(observed) -> tuple[float, float]:
     return max(GOAL_PD_MEAN, rms(pd_mean)), max(GOAL_PD_SD, rms(pd_sd))
 
 
-def _entry_distribution(counts) -> np.ndarray:
-    """Where particles entered in the counted data: the landing states of up passes."""
-    return counts.counts_up.sum(axis=0).astype(np.float64)
+def _entry_distribution(counts, direction: str = "up") -> np.ndarray:
+    """Where particles entered in the counted data: the landing states of up passes (of down
+    passes where residences run downward)."""
+    passes = counts.counts_up if direction == "up" else counts.counts_down
+    return passes.sum(axis=0).astype(np.float64)
 
 
 def select_model(data, *, window: tuple[float, float], columns: int, rows: int, lag: float,
@@ -249,8 +251,12 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         for block in blocks:
             traj.window(*block)         # a window outside the data is refused as such first
         stride = traj.lag_frames(lag)
-        observed = [residence_times(traj, block, use_events=False, stride=stride)
-                    for block in blocks]
+        # residences counted as the fitting window's net solids flow runs (docs/definitions.md,
+        # Net downflow), as the comparison of the prediction will count them
+        direction = ("down" if traj.boundary == "periodic" and net_passes(traj, (a, b)) < 0
+                     else "up")
+        observed = [residence_times(traj, block, use_events=False, stride=stride,
+                                    direction=direction) for block in blocks]
         fewest = min(o.count for o in observed)
         if criterion == "auto":
             criterion = "rtd" if fewest >= MIN_RESIDENCES else "ck"
@@ -288,9 +294,11 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                                                          ck_times),))
                         continue
                     up, down = fractions if fractions is not None else _pass_fractions(training)
+                    entry = _entry_distribution(training, direction)
+                    if direction == "down":     # the mirror image: in at the top, out below
+                        up, down = down, up
                     steps = max(2, int(round((block[1] - block[0]) / tau)))
-                    rtd = exact_rtd(matrix, up, down, tau, max_steps=steps,
-                                    entry=_entry_distribution(training)
+                    rtd = exact_rtd(matrix, up, down, tau, max_steps=steps, entry=entry
                                     ).in_window(block[1] - block[0])
                     rows_.append((percentage_difference(rtd.mean, observed[k].mean),
                                   percentage_difference(rtd.sd, observed[k].sd,
@@ -373,11 +381,15 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                   f"{best.md_rtd:.3g}")
         reason += (f"; cells: {cells.pd_rt_mean:+.1f} %, {cells.pd_rt_sd:+.1f} %, MD "
                    f"{cells.md_rtd:.3g}, score {cells.score:.3g})" if cells is not None else ")")
+        if direction == "down":
+            reason += ("; residences counted downward, as the solids' net flow over the "
+                       "fitting window runs")
         method = f"{folds}-fold blocked cross-validation of the RTD"
     selection = {"method": method,
                  "blocks": [list(x) for x in blocks],
                  "observed": [{"rt_mean": o.mean, "rt_sd": o.sd, "rt_count": o.count}
                               for o in observed],
+                 "direction": direction,
                  "estimator": estimator, "chosen": {"states": best.states, "lag": best.lag},
                  "units": {"pd_rt_mean": tolerance_mean, "pd_rt_sd": tolerance_sd},
                  "reason": reason, "candidates": [c.as_dict() for c in final]}
