@@ -112,6 +112,43 @@ def test_velocity_bins_from_displacement_and_from_velocity():
         space.discretize(pos, None, lag_frames=1)
 
 
+def test_velocity_bins_fitted_at_the_windows_quantiles(tmp_path):
+    """By name, cells-velocity fits its edges on the fitting window: the quantiles k/K of
+    the particles' vertical velocities (equal-frequency bins), whatever way the solids move
+    on net. A flow falling at 0.5 to 4 m/s gets its edges among the falling speeds, where
+    the fixed edges -1, 0, 1, 3 m/s put every particle in one or two bins."""
+    dt, n_frames, n = 0.025, 41, 400
+    speeds = -np.linspace(0.5, 4.0, n)                      # m/s, each particle's own
+    t = dt * np.arange(n_frames)
+    y = (0.9 + speeds[None, :] * t[:, None]) % 4.0
+    pos = np.stack([np.full_like(y, 0.05), y], axis=-1)
+    run = write_trajectories(tmp_path / "fall.h5", t, pos, width=0.1, height=4.0)
+    space = state_space_from_name("cells-velocity", 1, 4, 0.1, 4.0)
+    assert not space.fitted and space.per_cell == 8 and "quantiles" in space.describe()
+    with pytest.raises(InputError, match="not fitted"):
+        space.discretize(pos[:2], None, 1, dt)
+    model = fit_model(run, space, dt, (0.1, 0.9))
+    fitted = model.state_space
+    assert fitted.fitted and space.accepts(fitted) and not fitted.accepts(space)
+    # the edges split the speeds into 8 groups of 50 particles (within round-off)
+    expected = np.quantile(speeds, np.arange(1, 8) / 8)
+    np.testing.assert_allclose(fitted.edges, expected, atol=2e-4)
+    bins = fitted.velocity_bin(discretize(run, fitted, dt, (0.1, 0.9)).states[-1])
+    np.testing.assert_array_equal(np.bincount(bins, minlength=8), 50)
+    # the fitted edges are stored with the model, and a reloaded model uses them
+    back = MarkovModel.load(model.save(tmp_path / "model.h5"))
+    assert back.state_space == fitted and back.state_space.edges == fitted.edges
+    # a flow at rest: every quantile is 0, the bins merge into two (v < 0, v >= 0)
+    still = write_trajectories(tmp_path / "still.h5", t, np.repeat(pos[:1], n_frames, 0),
+                               width=0.1, height=4.0)
+    assert fit_model(still, space, dt, (0.1, 0.9)).state_space.edges == (0.0,)
+    for bad in (1, 33, 2.5):
+        with pytest.raises(InputError, match="velocity bins"):
+            VelocityCells(1, 4, edges=None, bins=bad)
+    with pytest.raises(InputError, match="source='displacement' only"):
+        VelocityCells(1, 4, 0.1, 4.0, edges=None, source="velocity").fit_to_frames(pos, 1, dt)
+
+
 def test_previous_cell_offsets_wrap_and_clip():
     space = SecondOrderCells(1, 10, width=1.0, height=10.0, reach=2)
     assert space.per_cell == 5 and space.n_states == 50 and space.memory_lags == 1
@@ -269,7 +306,7 @@ def test_every_space_through_the_pipeline(name, resolved_run, tmp_path):
     flow = RESOLVED
     space = state_space_from_name(name, flow.columns, flow.rows, flow.width, flow.height)
     model = PaperEstimator(space, flow.lag).fit(discretize(resolved_run, space, flow.lag, FIT))
-    if "regime" in name:     # the regime spaces come back with their edges fitted on FIT
+    if not getattr(space, "fitted", True):   # regime and velocity edges come back fitted on FIT
         assert space.accepts(model.state_space) and model.state_space.fitted
         space = model.state_space
     assert model.state_space is space and model.n_transitions == 2000 * 160

@@ -1,7 +1,7 @@
 """Intervals of a prediction's residence-time figures and mixing curve
 (``docs/definitions.md``, Intervals).
 
-Two sources of uncertainty are combined:
+Three sources of uncertainty are combined:
 
 - *the model's*: a block bootstrap over time blocks of the fitting window
   (:func:`block_bootstrap_models`). The window's transitions are counted in B contiguous
@@ -17,12 +17,21 @@ Two sources of uncertainty are combined:
   mean (SD / sqrt(n)), of its SD (SD / sqrt(2 (n - 1))), of a bin probability
   (sqrt(p (1 - p) / n)) and of the mixing curve (exact for the fitted model and the
   tracers' states, :func:`~cfbmarkov.analysis.mixing.model_mixing_curve`), normal
-  approximation.
+  approximation;
+- *the flow's* (:func:`flow_variability`), for E(RT) and SD(RT): how much the figures that
+  the reference shows in one window of the analysis window's length move by themselves,
+  from window to window, by sampling noise and by the surges and clusters of a
+  non-stationary flow, measured in the fitting window (its blocks against one another,
+  every side seeing residences through the same length of window). A model that is exactly
+  right still misses a window's observed E(RT) by this much: without it, the intervals are
+  those of the model's own value (confidence intervals), with it, of the value the
+  reference will show in the analysis window (prediction intervals).
 
 The interval at level L is centred on the prediction's value: its lower (upper) half-width is
 the distance from the fitted model's exact value to the bootstrap's (1 - L)/2 ((1 + L)/2)
-quantile and z_(1+L)/2 times the Monte Carlo standard error, added in quadrature (for the
-mixing curve, frame by frame).
+quantile, and z_(1+L)/2 times the Monte Carlo and the flow's standard errors, added in
+quadrature (for the RTD and the mixing curve, bin by bin and frame by frame, without a flow
+term: their bands are the model's own).
 
 References
 ----------
@@ -40,6 +49,12 @@ from scipy.stats import norm
 from cfbmarkov.analysis.mixing import model_mixing_curve
 from cfbmarkov.analysis.rtd import rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
+
+
+#: blocks of the fitting window that measure the flow's variability (:func:`flow_variability`)
+FLOW_BLOCKS = 4
+#: ... fewer where a block would be shorter than this many of the window's mean residences
+FLOW_BLOCK_RESIDENCES = 3.0
 
 
 def _resampled_rtd(model, window_length: float, direction: str, entry):
@@ -149,6 +164,92 @@ def block_bootstrap_models(model, *, blocks: int = 10, resamples: int = 100, see
     return draw()
 
 
+def flow_variability(model, window_length: float, *, direction: str = "up",
+                     blocks: int = FLOW_BLOCKS):
+    """How much the reference's E(RT) and SD(RT) in one window of ``window_length`` move by
+    themselves from window to window, relative to their values, measured in the model's
+    fitting window (the flow's own variability; module docstring).
+
+    The fitting window is cut into B equal blocks, ``blocks`` or fewer, so that a block is at
+    least ``FLOW_BLOCK_RESIDENCES`` (3) times the window's observed E(RT) long (a shorter
+    block cuts off so many of its residences that the comparison measures the cut, not the
+    flow); each block's residence times (from frames at the model's lag, counted in
+    ``direction``, wholly inside the block) are compared with the other blocks' pooled: the persistence baseline inside the
+    fitting window, every side seeing residences through the same length of window. The RMS
+    over the blocks of the relative differences estimates sqrt(B / (B - 1)) times the
+    relative SD of one block's figure (the block against the mean of B - 1 others), and
+    blocks as independent stretches of the flow give the window's: the RMS times
+    sqrt(B - 1) / B, times sqrt(fitting window / ``window_length``) for an analysis window of
+    another length.
+
+    Parameters
+    ----------
+    model : cfbmarkov.markov.MarkovModel
+        The fitted model; its ``source`` (one trajectory file) and ``window`` are re-read.
+    window_length : float
+        Length of the analysis window (s).
+    direction : {"up", "down"}, optional
+        The direction residences are counted in.
+    blocks : int, optional
+        The most blocks B of the fitting window (at least 2).
+
+    Returns
+    -------
+    (float, float) or None
+        The relative standard deviations of a window's E(RT) and SD(RT) (fractions); None
+        where the window is shorter than two such blocks, or fewer than two blocks hold two
+        residences each (no spread can be told).
+
+    Raises
+    ------
+    InputError
+        For a model without one source file and a window, or fewer than 2 blocks.
+
+    References
+    ----------
+    The relative SD of a mean over B independent blocks: e.g. H. Flyvbjerg and H. G.
+    Petersen, "Error estimates on averages of correlated data", J. Chem. Phys. 91, 461
+    (1989) (block averaging).
+    """
+    from cfbmarkov.analysis.rtd import residence_times
+    from cfbmarkov.trajectories import opened
+
+    if int(blocks) < 2:
+        raise InputError(f"the flow's variability needs at least 2 blocks ({blocks})")
+    if not isinstance(model.source, str) or model.window is None:
+        raise InputError("intervals need the model's fitting data (one source file and a window)")
+    a, b = (float(v) for v in model.window)
+    with opened(model.source) as traj:
+        stride = traj.lag_frames(model.lag)
+        whole = residence_times(traj, (a, b), use_events=False, stride=stride,
+                                direction=direction)
+        # blocks at least FLOW_BLOCK_RESIDENCES mean residences long, so that a block's own
+        # window cuts off few of its residences
+        if whole.count < 2:
+            return None
+        blocks = min(int(blocks), int((b - a) / (FLOW_BLOCK_RESIDENCES * whole.mean)))
+        if blocks < 2:
+            return None
+        cuts = a + (b - a) * np.arange(blocks + 1) / blocks
+        observed = [residence_times(traj, (float(cuts[k]), float(cuts[k + 1])), use_events=False,
+                                    stride=stride, direction=direction).samples
+                    for k in range(blocks)]
+    rel_mean, rel_sd = [], []
+    for k, block in enumerate(observed):
+        others = np.concatenate([o for j, o in enumerate(observed) if j != k])
+        if block.size < 2 or others.size < 2:
+            continue
+        rel_mean.append(block.mean() / others.mean() - 1.0)
+        spread = others.std(ddof=1)
+        if spread > 0:
+            rel_sd.append(block.std(ddof=1) / spread - 1.0)
+    if len(rel_mean) < 2:
+        return None
+    factor = np.sqrt(blocks - 1.0) / blocks * np.sqrt((b - a) / float(window_length))
+    rms = lambda values: float(np.sqrt(np.mean(np.square(values)))) if values else 0.0  # noqa: E731
+    return rms(rel_mean) * factor, rms(rel_sd) * factor
+
+
 @dataclass(frozen=True)
 class PredictionIntervals:
     """Intervals of E(RT), SD(RT), the RTD per bin and the mixing curve at ``level``.
@@ -172,6 +273,14 @@ class PredictionIntervals:
         Lower and upper bound of the mixing curve at each of those frames (fraction of all
         particles; of the tracers present in an open riser), NaN where the curve is
         undefined.
+    model_rt_mean, model_rt_sd : (float, float) or None
+        The intervals without the flow's variability (s): of the model's own value
+        (confidence intervals); the same as ``rt_mean`` and ``rt_sd`` where ``flow`` is
+        None.
+    flow : (float, float) or None
+        The flow's standard deviations of a window's E(RT) and SD(RT) (s; the relative ones
+        of :func:`flow_variability` times the prediction's values); None where not asked for
+        or not measurable.
     """
 
     level: float
@@ -182,6 +291,9 @@ class PredictionIntervals:
     blocks: int
     mixing_times: np.ndarray | None = None
     mixing: np.ndarray | None = None
+    model_rt_mean: tuple[float, float] | None = None
+    model_rt_sd: tuple[float, float] | None = None
+    flow: tuple[float, float] | None = None
 
 
 #: replicate Monte Carlo runs that measure a coherent model's Monte Carlo noise
@@ -222,7 +334,7 @@ def _replicate_noise(model, states, left_group, n_steps: int, edges: np.ndarray,
 def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_length: float, *,
                          level: float = 0.9, blocks: int = 10, resamples: int = 100,
                          seed: int = 0, direction: str = "up", mixing=None,
-                         tracers=None) -> PredictionIntervals:
+                         tracers=None, flow: bool = True) -> PredictionIntervals:
     """Intervals of a prediction's E(RT), SD(RT), RTD and mixing curve (module docstring).
 
     Parameters
@@ -252,11 +364,18 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     tracers : (ndarray of int, ndarray of bool), each of shape (N,), optional
         The particles' states at the window start in the model's state space (-1: absent)
         and the left tracer group; with ``mixing``, the mixing curve gets its band.
+    flow : bool, optional
+        Add the flow's own variability between windows (:func:`flow_variability`) to the
+        intervals of E(RT) and SD(RT): intervals for the value the reference shows in the
+        analysis window. False: intervals of the model's own value. (The RTD's and the
+        mixing curve's bands are the model's own either way.)
 
     Returns
     -------
     PredictionIntervals
-        ``mixing_times`` and ``mixing`` set where ``mixing`` and ``tracers`` are given.
+        ``mixing_times`` and ``mixing`` set where ``mixing`` and ``tracers`` are given;
+        ``flow`` where ``flow`` is true and the fitting window shows the flow's spread
+        (:func:`flow_variability`; where it does not, the intervals are the model's own).
 
     Raises
     ------
@@ -337,14 +456,19 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
             m_se = np.zeros(int(curve[0].max()) + 1)
             m_se[curve[0]] = se_curve
 
-    def interval(value, boot, centre, se):
+    def interval(value, boot, centre, se, se_flow=0.0):
         lo, hi = np.quantile(boot, [lo_q, hi_q], axis=0)
-        down = np.sqrt(np.maximum(centre - lo, 0.0) ** 2 + (z * se) ** 2)
-        up = np.sqrt(np.maximum(hi - centre, 0.0) ** 2 + (z * se) ** 2)
+        noise = (z * se) ** 2 + (z * se_flow) ** 2
+        down = np.sqrt(np.maximum(centre - lo, 0.0) ** 2 + noise)
+        up = np.sqrt(np.maximum(hi - centre, 0.0) ** 2 + noise)
         return value - down, value + up
 
-    m_lo, m_hi = interval(mean, np.asarray(means), exact.mean, se_mean)
-    s_lo, s_hi = interval(sd, np.asarray(sds), exact.sd, se_sd)
+    relative = flow_variability(model, window_length, direction=direction) if flow else None
+    model_mean = interval(mean, np.asarray(means), exact.mean, se_mean)
+    model_sd = interval(sd, np.asarray(sds), exact.sd, se_sd)
+    f_mean, f_sd = (0.0, 0.0) if relative is None else (relative[0] * mean, relative[1] * sd)
+    m_lo, m_hi = interval(mean, np.asarray(means), exact.mean, se_mean, f_mean)
+    s_lo, s_hi = interval(sd, np.asarray(sds), exact.sd, se_sd, f_sd)
     r_lo, r_hi = interval(p_mc, np.asarray(rtds), exact_hist, se_bins)
     band = None
     if curve is not None:
@@ -352,10 +476,14 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
             c_lo, c_hi = interval(m_values, np.asarray(curves), m_exact[curve[0]],
                                   m_se[curve[0]])
             band = np.vstack([np.clip(c_lo, 0.0, 1.0), np.clip(c_hi, 0.0, 1.0)])
-    return PredictionIntervals(float(level), (float(m_lo), float(m_hi)),
-                               (float(max(s_lo, 0.0)), float(s_hi)),
-                               np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means), int(blocks),
-                               None if curve is None else m_times, band)
+    return PredictionIntervals(
+        float(level), (float(m_lo), float(m_hi)), (float(max(s_lo, 0.0)), float(s_hi)),
+        np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means), int(blocks),
+        None if curve is None else m_times, band,
+        (float(model_mean[0]), float(model_mean[1])),
+        (float(max(model_sd[0], 0.0)), float(model_sd[1])),
+        None if relative is None else (float(f_mean), float(f_sd)))
 
 
-__all__ = ["PredictionIntervals", "block_bootstrap_models", "prediction_intervals"]
+__all__ = ["PredictionIntervals", "block_bootstrap_models", "flow_variability",
+           "prediction_intervals"]

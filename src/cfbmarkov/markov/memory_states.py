@@ -178,6 +178,10 @@ class _CellProductSpace(StateSpace):
 
 
 _SOURCES = ("displacement", "velocity")
+#: velocity bins K of ``cells-velocity`` by name (edges at the fitting window's quantiles)
+DEFAULT_VELOCITY_BINS = 8
+#: the most velocity bins of a fitted space
+MAX_VELOCITY_BINS = 32
 
 
 def _check_source(kind: str, source: str) -> str:
@@ -302,6 +306,15 @@ class VelocityCells(_CellProductSpace):
     disagree); ``memory_lags = 1``. ``source="velocity"``: v = v_y of the frame
     (``needs_velocity``). The first frames (no previous frame) get v = 0.
 
+    Made with ``edges=None`` (so by name, ``cells-velocity``), the space is *unfitted*: the
+    estimators fit the edges on the fitting window's frames (:meth:`fit_to_frames`) as the
+    quantiles k/K (k = 1 .. K - 1) of the window's vertical velocities, so that each of the
+    K = ``bins`` bins holds about as many particle-frames whatever the flow (equal-frequency
+    bins); the model keeps the fitted space. Fixed edges cannot fit every flow: at the
+    paper's 4 m/s the solids fall at up to 4 m/s, and the edges -1, 0, 1, 3 m/s put all
+    that falling motion into two bins, so the chain forgot how fast a particle was falling
+    (``docs/method.md``, Velocity bins).
+
     Model files written before the lag lived in one place stored it here as ``lag``; it is
     accepted on loading and ignored (the model's own lag is the one used).
 
@@ -311,26 +324,46 @@ class VelocityCells(_CellProductSpace):
         The cell grid m x n.
     width, height : float, optional
         The riser W x H (m).
-    edges : sequence of float, optional
-        The B interior bin edges of v_y (m/s), finite and strictly increasing.
+    edges : sequence of float or None, optional
+        The B interior bin edges of v_y (m/s), finite and strictly increasing; None:
+        unfitted, the edges are the quantiles of the fitting window's velocities.
     source : {"displacement", "velocity"}, optional
         Where v_y comes from.
     lag : float, optional
         Accepted from old model files and ignored.
+    bins : int, optional
+        Number of bins K of an unfitted space (2 to 32; default ``DEFAULT_VELOCITY_BINS``);
+        ignored where ``edges`` are given (K = B + 1).
 
     Raises
     ------
     InputError
         For a bad grid, edges that are not numbers or not finite and strictly increasing,
-        or an unknown ``source``.
+        a number of bins outside 2-32, or an unknown ``source``.
+
+    References
+    ----------
+    Equal-frequency (quantile) bins: J. Dougherty, R. Kohavi and M. Sahami, "Supervised and
+    unsupervised discretization of continuous features", Proc. ICML 1995, 194-202.
     """
 
     kind = "cells-velocity"
 
     def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
                  edges=(-1.0, 0.0, 1.0, 3.0), source: str = "displacement",
-                 lag: float | None = None):
+                 lag: float | None = None, bins: int | None = None):
         super().__init__(columns, rows, width, height)
+        del lag     # stored by older model files; the lag now comes with the frames
+        self.source = _check_source(self.kind, source)
+        self.memory_lags = 1 if self.source == "displacement" else 0
+        self.needs_velocity = self.source == "velocity"
+        if edges is None:
+            bins = DEFAULT_VELOCITY_BINS if bins is None else bins
+            if not (isinstance(bins, (int, np.integer)) and 2 <= int(bins) <= MAX_VELOCITY_BINS):
+                raise InputError(f"{self.kind}: {bins!r} velocity bins; choose 2 to "
+                                 f"{MAX_VELOCITY_BINS}")
+            self.edges, self.bins = None, int(bins)
+            return
         try:
             edges = np.asarray(edges, dtype=np.float64).ravel()
         except (TypeError, ValueError):
@@ -338,16 +371,78 @@ class VelocityCells(_CellProductSpace):
         if edges.size < 1 or not np.all(np.isfinite(edges)) or np.any(np.diff(edges) <= 0):
             raise InputError(f"{self.kind}: velocity bin edges must be one or more finite, "
                              f"strictly increasing values (m/s), got {edges.tolist()}")
-        del lag     # stored by older model files; the lag now comes with the frames
         self.edges = tuple(float(e) for e in edges)
-        self.source = _check_source(self.kind, source)
-        self.memory_lags = 1 if self.source == "displacement" else 0
-        self.needs_velocity = self.source == "velocity"
+        self.bins = len(self.edges) + 1
 
     @property
     def per_cell(self) -> int:
         """Sub-states per cell, K = B + 1 velocity bins."""
-        return len(self.edges) + 1
+        return self.bins
+
+    @property
+    def fitted(self) -> bool:
+        """Whether the bin edges are known (see :meth:`fit_to_frames`)."""
+        return self.edges is not None
+
+    def fit_to_frames(self, positions: np.ndarray, lag_frames: int,
+                      frame_interval: float | None) -> "VelocityCells":
+        """This space with its bin edges fitted on frames (itself when already fitted): the
+        quantiles k/K, k = 1 .. K - 1, of the vertical velocities of the particles present
+        (rounded to 1e-4 m/s; equal quantiles, as in a flow at rest, merge, so that fewer
+        bins remain).
+
+        Parameters
+        ----------
+        positions : ndarray, shape (T, N, D)
+            The fitting window's positions (m) with ``lag_frames`` frames of history first
+            (``source="displacement"``), NaN where a particle is absent.
+        lag_frames : int
+            The lag in frames.
+        frame_interval : float or None
+            Time between frames (s).
+
+        Returns
+        -------
+        VelocityCells
+
+        Raises
+        ------
+        InputError
+            If the frames hold no velocity (fewer frames than the lag plus one, or no
+            particle present in two frames one lag apart), or the frame interval is missing.
+        """
+        if self.fitted:
+            return self
+        if self.source == "velocity":
+            raise InputError(f"{self.kind}: bin edges from the velocities of frames are fitted "
+                             "for source='displacement' only; give the edges")
+        if frame_interval is None or not (np.isfinite(frame_interval) and frame_interval > 0):
+            raise InputError(f"{self.kind}: velocities from displacements need the frame "
+                             f"interval (s), got {frame_interval!r}")
+        positions = np.asarray(positions, dtype=np.float64)
+        lag_frames = int(lag_frames)
+        if positions.ndim != 3 or positions.shape[0] <= lag_frames:
+            raise InputError(f"{self.kind}: fitting the velocity bins needs at least "
+                             f"{lag_frames + 1} frames")
+        vertical = self._vertical(positions, None, lag_frames, "displacement")[lag_frames:]
+        velocity = vertical[np.isfinite(vertical)] / (lag_frames * float(frame_interval))
+        if velocity.size == 0:
+            raise InputError(f"{self.kind}: no particle is present one lag apart in the "
+                             "fitting window, so no velocity bins can be fitted")
+        quantiles = np.quantile(velocity, np.arange(1, self.bins) / self.bins)
+        edges = np.unique(np.round(quantiles, 4))
+        return type(self)(self.columns, self.rows, self.width, self.height,
+                          tuple(float(e) for e in edges), self.source)
+
+    def accepts(self, other) -> bool:
+        """Whether ``other`` is this space, or this unfitted space with edges fitted (see
+        :meth:`StateSpace.accepts <cfbmarkov.markov.states.StateSpace.accepts>`)."""
+        if self == other:
+            return True
+        if self.fitted or not isinstance(other, VelocityCells) or not other.fitted:
+            return False
+        mine, theirs = self.to_attrs(), other.to_attrs()
+        return all(mine[k] == theirs[k] for k in mine if k not in ("edges", "bins"))
 
     def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
         """States of frames (see :meth:`StateSpace.discretize`).
@@ -375,6 +470,9 @@ class VelocityCells(_CellProductSpace):
             positions' shape, or (``source="displacement"``) ``lag_frames < 1`` or the
             frame interval is missing or not positive.
         """
+        if not self.fitted:
+            raise InputError(f"{self.kind}: the velocity bin edges are not fitted yet (fit a "
+                             "model, whose state space has them, or give the edges)")
         cells = self._cells(positions)
         vertical = self._vertical(positions, velocities, lag_frames, self.source)
         scale = 1.0
@@ -404,17 +502,25 @@ class VelocityCells(_CellProductSpace):
 
     def to_attrs(self):
         """The grid, ``edges`` and ``source`` (see :meth:`StateSpace.to_attrs`)."""
+        if not self.fitted:
+            return {**self._base_attrs(), "edges": None, "source": self.source,
+                    "bins": self.bins}
         return {**self._base_attrs(), "edges": list(self.edges), "source": self.source}
 
     def describe(self) -> str:
         """A one-line description, with the bin edges (m/s) and their source."""
+        if not self.fitted:
+            return (f"{self.kind} {self.columns}x{self.rows}x{self.per_cell} ({self.n_states} "
+                    f"states, {self.bins} v_y bins at the fitting window's quantiles, from "
+                    f"{self.source})")
         return (f"{self.kind} {self.columns}x{self.rows}x{self.per_cell} ({self.n_states} "
                 f"states, v_y bins at {', '.join(f'{e:g}' for e in self.edges)} m/s from "
                 f"{self.source})")
 
     def __repr__(self) -> str:
+        edges = f"edges=None, bins={self.bins}" if not self.fitted else f"edges={self.edges}"
         return (f"VelocityCells({self.columns}, {self.rows}, width={self.width:g}, "
-                f"height={self.height:g}, edges={self.edges}, source={self.source!r})")
+                f"height={self.height:g}, {edges}, source={self.source!r})")
 
 
 class SecondOrderCells(_CellProductSpace):

@@ -573,7 +573,8 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
     name : {"cells", "cells-direction", "cells-velocity", "cells-previous", "cells-regime", \
             "cells-direction-regime"}
         ``cells`` (the paper's), ``cells-direction`` (direction from the displacement),
-        ``cells-velocity`` (v_y bins from the displacement over the model's lag),
+        ``cells-velocity`` (8 v_y bins from the displacement over the model's lag, edges at
+        the quantiles of the fitting window's velocities),
         ``cells-previous`` (the second-order chain: previous cell within 3 rows),
         ``cells-regime`` (cells x 2 regimes of the solids flux, edges fitted on the fitting
         window), ``cells-direction-regime`` (and the direction).
@@ -617,7 +618,7 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
     if name == "cells-direction":
         return DirectionCells(columns, rows, width, height)
     if name == "cells-velocity":
-        return VelocityCells(columns, rows, width, height)
+        return VelocityCells(columns, rows, width, height, edges=None)
     if name == "cells-previous":
         return SecondOrderCells(columns, rows, width, height)
     if name in ("cells-regime", "cells-direction-regime"):

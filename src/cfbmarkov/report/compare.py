@@ -239,10 +239,20 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
                 summary["model"]["mixing_interval"] = {
                     "times": intervals.mixing_times.tolist(),
                     "lower": intervals.mixing[0].tolist(), "upper": intervals.mixing[1].tolist()}
-            summary["intervals"] = {"resamples": intervals.resamples,
-                                    "blocks": intervals.blocks,
-                                    "method": "block bootstrap of the fitting window and "
-                                              "Monte Carlo noise, in quadrature"}
+            summary["model"]["model_rt_mean_interval"] = list(intervals.model_rt_mean)
+            summary["model"]["model_rt_sd_interval"] = list(intervals.model_rt_sd)
+            if intervals.flow is None:
+                warnings.append("the intervals leave out the flow's variability between "
+                                "windows: the fitting window is too short to show it (not "
+                                "two blocks of three mean residence times each, each with "
+                                "two residences); they are the model's own")
+            summary["intervals"] = {
+                "resamples": intervals.resamples, "blocks": intervals.blocks,
+                "method": ("block bootstrap of the fitting window, Monte Carlo noise"
+                           + (" and the flow's variability between windows"
+                              if intervals.flow is not None else "") + ", in quadrature"),
+                "flow_sd": None if intervals.flow is None else {
+                    "rt_mean": intervals.flow[0], "rt_sd": intervals.flow[1]}}
         comparison.intervals = intervals
         out.mkdir(parents=True, exist_ok=True)
         with contextlib.suppress(FileNotFoundError):   # never leave a stale summary beside
