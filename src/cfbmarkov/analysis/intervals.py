@@ -174,8 +174,9 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
     least ``FLOW_BLOCK_RESIDENCES`` (3) times the window's observed E(RT) long (a shorter
     block cuts off so many of its residences that the comparison measures the cut, not the
     flow); each block's residence times (from frames at the model's lag, counted in
-    ``direction``, wholly inside the block) are compared with the other blocks' pooled: the persistence baseline inside the
-    fitting window, every side seeing residences through the same length of window. The RMS
+    ``direction``, wholly inside the block) are compared with the other blocks' pooled:
+    the persistence baseline inside the fitting window, every side seeing residences
+    through the same length of window. The RMS
     over the blocks of the relative differences estimates sqrt(B / (B - 1)) times the
     relative SD of one block's figure (the block against the mean of B - 1 others), and
     blocks as independent stretches of the flow give the window's: the RMS times
