@@ -182,6 +182,8 @@ _SOURCES = ("displacement", "velocity")
 DEFAULT_VELOCITY_BINS = 8
 #: the most velocity bins of a fitted space
 MAX_VELOCITY_BINS = 32
+#: the most velocities the quantile edges are taken from (every k-th of the window's)
+QUANTILE_SAMPLES = 500_000
 
 
 def _check_source(kind: str, source: str) -> str:
@@ -388,8 +390,8 @@ class VelocityCells(_CellProductSpace):
                       frame_interval: float | None) -> "VelocityCells":
         """This space with its bin edges fitted on frames (itself when already fitted): the
         quantiles k/K, k = 1 .. K - 1, of the vertical velocities of the particles present
-        (rounded to 1e-4 m/s; equal quantiles, as in a flow at rest, merge, so that fewer
-        bins remain).
+        (of every k-th of them where there are more than ``QUANTILE_SAMPLES``; rounded to
+        1e-4 m/s; equal quantiles, as in a flow at rest, merge, so that fewer bins remain).
 
         Parameters
         ----------
@@ -429,7 +431,10 @@ class VelocityCells(_CellProductSpace):
         if velocity.size == 0:
             raise InputError(f"{self.kind}: no particle is present one lag apart in the "
                              "fitting window, so no velocity bins can be fitted")
-        quantiles = np.quantile(velocity, np.arange(1, self.bins) / self.bins)
+        # every k-th value, at most QUANTILE_SAMPLES of them: quantiles within about 0.1 % in
+        # probability, at a tenth of the cost of the window's 5.4 million at paper scale
+        step = max(1, -(-velocity.size // QUANTILE_SAMPLES))
+        quantiles = np.quantile(velocity[::step], np.arange(1, self.bins) / self.bins)
         edges = np.unique(np.round(quantiles, 4))
         return type(self)(self.columns, self.rows, self.width, self.height,
                           tuple(float(e) for e in edges), self.source)
