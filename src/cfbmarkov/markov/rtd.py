@@ -143,10 +143,12 @@ class ResidenceTimeDistribution:
         return edges, prob
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _first_passage(indptr, indices, data, exit_probability, start, tol, max_steps, out):
     """f(k) for k = 1.. by propagating ``start`` through Q (CSR of Q transposed). Returns
-    the number of steps taken."""
+    the number of steps taken. The rows of each product are shared among the threads, each
+    row summed in its own order, and the sums over the states run in one thread: the same
+    bits for any number of threads."""
     v = start.copy()
     w = np.empty_like(v)
     n = v.size
@@ -155,17 +157,37 @@ def _first_passage(indptr, indices, data, exit_probability, start, tol, max_step
         for i in range(n):
             absorbed += v[i] * exit_probability[i]
         out[k] = absorbed
-        remaining = 0.0
-        for j in range(n):
+        for j in nb.prange(n):
             acc = 0.0
             for q in range(indptr[j], indptr[j + 1]):
                 acc += data[q] * v[indices[q]]
             w[j] = acc
-            remaining += acc
+        remaining = 0.0
+        for j in range(n):
+            remaining += w[j]
         v, w = w, v
         if remaining < tol:
             return k + 1
     return max_steps
+
+
+def _reaching(q: sp.csr_matrix, targets: np.ndarray) -> np.ndarray:
+    """Which states reach one of ``targets`` (bool [n]) through the non-zeros of ``q``
+    (themselves included): a breadth-first search of the reversed graph from a virtual node
+    joined to every target."""
+    from scipy.sparse.csgraph import breadth_first_order
+
+    n = q.shape[0]
+    reverse = sp.csr_matrix(q.T)
+    hub = sp.csr_matrix((np.ones(int(targets.sum())), (np.full(int(targets.sum()), n),
+                                                        np.flatnonzero(targets))),
+                        shape=(n + 1, n + 1))
+    graph = sp.vstack([reverse, sp.csr_matrix((1, n))]).tocsr()
+    graph = sp.hstack([graph, sp.csr_matrix((n + 1, 1))]).tocsr() + hub
+    order = breadth_first_order(graph, n, directed=True, return_predecessors=False)
+    live = np.zeros(n, dtype=bool)
+    live[order[order < n]] = True
+    return live
 
 
 def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray, lag: float,
@@ -253,13 +275,9 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     if entries.size == 0:
         raise CfbmarkovError("the model has no transition up through the top: particles never "
                              "leave, so there is no residence time")
-    # keep the states from which an exit can be reached (others trap their mass)
-    live = exit_probability > 0
-    while True:
-        grown = live | (q @ live.astype(np.float64) > 0)
-        if grown.sum() == live.sum():
-            break
-        live = grown
+    # keep the states from which an exit can be reached (others trap their mass): one
+    # breadth-first search backwards from the exit states
+    live = _reaching(q, exit_probability > 0)
     idx = np.flatnonzero(live)
     position = -np.ones(s * levels, np.int64)
     position[idx] = np.arange(idx.size)
