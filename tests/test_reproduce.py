@@ -321,3 +321,27 @@ def test_a_dropped_in_cfd_dem_file_must_match_the_case(reference, tmp_path, caps
     assert main(["reproduce", "--scale", "quick", "--overrides", str(longer), "--velocities",
                  "8", "-o", str(tmp_path / "e"), "--jobs", "1", "-q"]) == 2
     assert "before the end of the prediction window" in capsys.readouterr().err
+
+
+def test_compile_kernels_warms_both_halves_and_leaves_the_step_alone(tmp_path, monkeypatch):
+    """The warm-up of a process pool (each worker compiles one half of a gas step's kernels):
+    both parts run on a tiny copy of the case and write nothing where they run; a gas step
+    split into its gas half and the DEM steps is the step, bit for bit."""
+    import numpy as np
+
+    from cfbmarkov.reproduce import compile_kernels
+    from cfbmarkov.simulate.run import CoupledRiser
+
+    monkeypatch.chdir(tmp_path)
+    case = scale_cases("quick", [8.0])[0]
+    for part in ("dem", "gas"):
+        assert compile_kernels(case.model_dump_json(), part) >= 0.0
+    assert list(tmp_path.iterdir()) == []
+    small = case.model_copy(update={"particles": case.particles.model_copy(update={"number": 80})})
+    whole, halves = CoupledRiser.initial(small), CoupledRiser.initial(small)
+    for _ in range(3):
+        whole.step()
+        halves._gas_step()
+        halves.dem.step(halves.dem_steps_per_cfd, external_force=halves._force)
+    np.testing.assert_array_equal(whole.dem.positions, halves.dem.positions)
+    np.testing.assert_array_equal(whole.gas.u, halves.gas.u)

@@ -148,6 +148,13 @@ class CoupledRiser:
                 numba.set_num_threads(threads)
 
     def _step(self) -> None:
+        self._gas_step()
+        self.dem.step(self.dem_steps_per_cfd, external_force=self._force)
+        self.cfd_steps += 1
+
+    def _gas_step(self) -> None:
+        """The gas step and the drag it leaves on the particles (``self._force``), before the
+        DEM steps inside it."""
         case, grid = self.case, self.grid
         d = case.particles.diameter
         positions, velocities = self.dem.positions, self.dem.velocities
@@ -162,8 +169,6 @@ class CoupledRiser:
         self.gas = self.solver.step(self.gas, eps, fu, fv, ku, kv)
         drag_force_at_new_gas(positions, velocities, self.gas.u, self.gas.v, grid.dx, grid.dy,
                               self._coefficient, self._force)
-        self.dem.step(self.dem_steps_per_cfd, external_force=self._force)
-        self.cfd_steps += 1
 
     def gas_fields(self) -> dict[str, np.ndarray]:
         """The gas at cell centres, arrays [ny, nx] (row 0 at the bottom): ``void_fraction``,
