@@ -275,8 +275,14 @@ def _cmd_compare(args) -> int:
     model = summary["model"]
     if "rt_mean_interval" in model:
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
-        print(f"  model {100 * summary['level']:g} % intervals: E(RT) {m0:.4g}-{m1:.4g} s, "
-              f"SD(RT) {s0:.4g}-{s1:.4g} s")
+        with_flow = (summary.get("intervals") or {}).get("flow_sd") is not None
+        own = ""
+        if with_flow and "model_rt_mean_interval" in model:
+            (o0, o1), (p0, p1) = model["model_rt_mean_interval"], model["model_rt_sd_interval"]
+            own = f" (the model's own: E(RT) {o0:.4g}-{o1:.4g} s, SD(RT) {p0:.4g}-{p1:.4g} s)"
+        kind = " with the flow's variability" if with_flow else ""
+        print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) {m0:.4g}-{m1:.4g} s, "
+              f"SD(RT) {s0:.4g}-{s1:.4g} s{own}")
     exact = summary.get("exact_reference")
     if exact:
         print(f"  (residence times from frames at the model's lag on both sides; the reference's "
