@@ -568,6 +568,14 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                     f"mixing RMS {_fmt(s.get('mixing_rms'), '.3g')}")
             if result["summaries"]:
                 log(rtd_line(name, result["summaries"]))
+        if not failures:
+            log(f"all cases done in {_time.perf_counter() - started:.0f} s")
+            if report:
+                from cfbmarkov.report.reproduction import write_report
+
+                # a process pool of its own, idle now, draws half the report's figures
+                pool = executor if own and isinstance(executor, cf.ProcessPoolExecutor) else None
+                html = write_report(out, executor=pool)
     except KeyboardInterrupt:
         if own:
             _stop_workers(executor)
@@ -583,12 +591,7 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                 client.close()
     if failures:
         raise InputError(f"{len(failures)} case(s) failed; rerun to resume: " + "; ".join(failures))
-    log(f"all cases done in {_time.perf_counter() - started:.0f} s")
-    if not report:
-        return out
-    from cfbmarkov.report.reproduction import write_report
-
-    return write_report(out)
+    return html if report else out
 
 
 def rtd_line(case: str, summaries: dict[str, dict]) -> str:

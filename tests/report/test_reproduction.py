@@ -187,6 +187,24 @@ def test_rerun_overwrites_cleanly(reproduction):
     assert len(re.findall("data:image/png;base64,", html)) == len(linked)
 
 
+def test_report_drawn_with_a_process_pool_is_the_same(reproduction, report_of_template):
+    """``cfbmarkov reproduce`` hands its idle process pool to the report, which draws two
+    groups of sections there: the same markdown, the same figures (names and PNGs), and no
+    stray figure left behind."""
+    import concurrent.futures as cf
+    import multiprocessing
+
+    serial_root, _ = report_of_template
+    with cf.ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as pool:
+        write_report(reproduction, executor=pool)
+    md = (reproduction / "report.md").read_text(encoding="utf-8")
+    assert md == (serial_root / "report.md").read_text(encoding="utf-8")
+    names = sorted(p.name for p in (reproduction / "figures").iterdir())
+    assert names == sorted(p.name for p in (serial_root / "figures").iterdir())
+    assert {"fig10-snapshots.png", "fig11-mixing.png", "plausibility.png"} <= set(names)
+    assert any(n.startswith("ck-") for n in names) and any(n.startswith("its-") for n in names)
+
+
 def test_estimators_discovered_in_order(tmp_path):
     a, b = tmp_path / "u3", tmp_path / "u4"
     a.mkdir()

@@ -70,7 +70,23 @@ def _measure(case: Case, notes: list[str]) -> CaseMeasures:
                         (chosen.name, chosen.model), window, bin_width, case.config)
 
 
-def write_report(directory: str | os.PathLike, *, title: str | None = None) -> Path:
+def _section(builder, *args) -> tuple[list, list[str]]:
+    """One section of the report, e.g. in a worker process: its blocks and the names of the
+    figures it wrote (``builder(*args, written)``)."""
+    written: list[str] = []
+    blocks = builder(*args, written)
+    return blocks, written
+
+
+def _later_sections(done, measures, estimators, figures_dir, written) -> list:
+    """The snapshot, mixing and plausibility sections, in the report's order."""
+    return (snapshot_blocks(done, measures, figures_dir, written)
+            + mixing_blocks(done, measures, estimators, figures_dir, written)
+            + plausibility_blocks(done, measures, estimators, figures_dir, written))
+
+
+def write_report(directory: str | os.PathLike, *, title: str | None = None,
+                 executor=None) -> Path:
     """Write the reproduction report of a run folder.
 
     Parameters
@@ -79,6 +95,10 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None) -> P
         The run folder of ``cfbmarkov reproduce``.
     title : str, optional
         Title of the report (default: names the scale).
+    executor : concurrent.futures.Executor, optional
+        Draws two groups of sections (the lag diagnostics; the snapshots, mixing and
+        plausibility) there while this process draws the rest: the same report, sooner
+        (``cfbmarkov reproduce`` passes its idle process pool).
 
     Returns
     -------
@@ -101,8 +121,15 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None) -> P
     folder = read_run_folder(directory)
     root, meta, cases, estimators = folder.root, folder.manifest, folder.cases, folder.estimators
     done = folder.finished
+    figures_dir = root / FIGURES
+    figures_dir.mkdir(parents=True, exist_ok=True)
+    if executor is not None:
+        diagnostics = executor.submit(_section, diagnostics_blocks, done, figures_dir)
     notes: list[str] = []
     measures = {c.name: _measure(c, notes) for c in done}
+    if executor is not None:
+        later = executor.submit(_section, _later_sections, done, measures, estimators,
+                                figures_dir)
     for c in done:
         if measures[c.name].model_name != "paper":
             notes.append(f"{c.name}: Fig. 3-7 use the {measures[c.name].model_name} estimator "
@@ -110,8 +137,6 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None) -> P
         if not c.timings:
             notes.append(f"{c.name}: no timings.json; computing times are n/a")
 
-    figures_dir = root / FIGURES
-    figures_dir.mkdir(parents=True, exist_ok=True)
     written: list[str] = []
     blocks: list = []
     blocks += header_blocks(meta, cases, estimators)
@@ -121,10 +146,12 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None) -> P
     blocks += fig3_blocks(done, measures, figures_dir, written)
     blocks += maps_blocks(cases, done, measures, figures_dir, written)
     blocks += rtd_blocks(done, measures, estimators, figures_dir, written)
-    blocks += snapshot_blocks(done, measures, figures_dir, written)
-    blocks += mixing_blocks(done, measures, estimators, figures_dir, written)
-    blocks += plausibility_blocks(done, measures, estimators, figures_dir, written)
-    blocks += diagnostics_blocks(done, figures_dir, written)
+    parts = ([later.result(), diagnostics.result()] if executor is not None else
+             [_section(_later_sections, done, measures, estimators, figures_dir),
+              _section(diagnostics_blocks, done, figures_dir)])
+    for part_blocks, part_written in parts:
+        blocks += part_blocks
+        written += part_written
     blocks += warning_blocks(cases, notes)
 
     # figures of an earlier run that this run did not draw (e.g. a case since removed)
