@@ -67,8 +67,8 @@ def test_switches_reported(record_property):
         ratios[s] = wenyu / ergun
         assert ergun == pytest.approx(hand_beta(0.8, s), rel=1e-13)
         assert wenyu == pytest.approx(hand_beta(0.8 + 1e-12, s), rel=1e-10)
-    record_property("cd_jump_at_re_1000", jump_re)
-    record_property("wenyu_over_ergun_at_eps_0.8", ratios)
+    record_property("cd_jump_at_re_1000", float(jump_re))
+    record_property("wenyu_over_ergun_at_eps_0.8", {k: float(v) for k, v in ratios.items()})
     print(f"C_D step at Re=1000: {100 * jump_re:+.2f} %; Wen&Yu/Ergun at eps=0.8: "
           + ", ".join(f"|s|={s:g}: {r:.3f}" for s, r in ratios.items()))
     # Wen & Yu lies below Ergun at the switch: by 1.5 % at 0.1 m/s slip, by a factor

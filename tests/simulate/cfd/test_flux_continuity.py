@@ -74,8 +74,8 @@ def test_flux_and_continuity_with_moving_blob(record_property, distributor):
         worst_res = max(worst_res, new.pressure_residual)
         state = new
     spread = np.ptp(cross_section_flux(state, grid))
-    record_property("worst_relative_flux_error", worst_flux)
-    record_property("worst_continuity_residual_per_s", worst_cont)
+    record_property("worst_relative_flux_error", float(worst_flux))
+    record_property("worst_continuity_residual_per_s", float(worst_cont))
     print(f"moving blob, 300 steps: max |<eps v> - U|/U = {worst_flux:.1e}, "
           f"max |div(eps u) + deps/dt| = {worst_cont:.1e} 1/s, max relative pressure residual "
           f"{worst_res:.1e}; cross-section fluxes spread {spread:.3e} m/s about U")

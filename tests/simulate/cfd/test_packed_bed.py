@@ -68,7 +68,7 @@ def run_bed(formulation, drag_factor, steps=200):
 def test_packed_bed_pressure_drop_is_ergun(formulation, factor, name, record_property):
     dp, dp_ergun, state = run_bed(formulation, factor)
     err = dp / dp_ergun - 1
-    record_property("ergun_relative_error", err)
+    record_property("ergun_relative_error", float(err))
     print(f"packed bed, {name}: dp = {dp:.2f} Pa, Ergun {dp_ergun:.2f} Pa, error {100 * err:+.2f} %")
     assert abs(err) < 0.05
     assert abs(state.mean_gas_flux() - U) < 1e-13

@@ -71,8 +71,8 @@ def test_poiseuille(nx, ny, tight, record_property):
     assert G == pytest.approx(12 * mu * U / (W**2 + 2 * dx**2), rel=1e-9)
     profile_err = np.max(np.abs(v[:, 0] - exact)) / U
     g_err = G / G_exact - 1
-    record_property("profile_error_over_U", profile_err)
-    record_property("G_relative_error", g_err)
+    record_property("profile_error_over_U", float(profile_err))
+    record_property("G_relative_error", float(g_err))
     print(f"Poiseuille {nx}x{ny}: {steps} steps, max |v - parabola| / U = {profile_err:.2e}, "
           f"G / (12 mu U / W^2) - 1 = {g_err:+.3e}")
     # second-order bounds derived in the module docstring
