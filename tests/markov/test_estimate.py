@@ -129,3 +129,57 @@ def test_estimators_take_discrete_trajectories_made_at_their_lag(markov_run, mar
     a, b = (discretize(markov_run, grid, 0.025, w) for w in ((0, 2), (3, 5)))
     both = est.fit([a, b])
     np.testing.assert_array_equal(both.counts, est.fit(a).counts + est.fit(b).counts)
+
+
+@pytest.mark.parametrize("name", ["cells", "cells-direction", "cells-velocity", "cells-previous"])
+def test_sparse_counts_and_split_chain_equal_the_dense_ones(tmp_path, markov_flow, name):
+    """Cross-validation's sparse path (counts as CSR, the chain split by pass direction
+    without an S x S array) gives the dense path's counts exactly and its chain and exact
+    RTD to rounding, for both estimators, with states never left filled from their cell
+    (40 particles leave some) and with the largest connected set."""
+    from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, pass_fractions
+    from cfbmarkov.markov.rtd import exact_rtd, rtd_of_split_chain, split_by_pass
+    from cfbmarkov.markov.states import state_space_from_name
+
+    space = state_space_from_name(name, markov_flow.columns, markov_flow.rows,
+                                  markov_flow.width, markov_flow.height)
+    run = tmp_path / "few.h5"       # 40 particles: states with memory go unvisited
+    synthetic.write_run(run, markov_flow, 40, 1.2, seed=3)
+    window = discretize(run, space, 0.05, (0.2, 1.2))
+    checked_fill = False
+    for frame_average in (False, True):
+        dense = count_transitions(window, frame_average=frame_average)
+        sparse = count_transitions([window, window], frame_average=frame_average, sparse=True)
+        doubled = count_transitions([window, window], frame_average=frame_average)
+        for field in ("counts", "counts_up", "counts_down", "frame_average_sum"):
+            if getattr(dense, field) is None:
+                assert getattr(sparse, field) is None
+                continue
+            # two windows: summed window by window (the float sums to rounding)
+            assert np.allclose(getattr(sparse, field).toarray(), getattr(doubled, field),
+                               rtol=1e-14, atol=0)
+        assert np.array_equal(sparse.occupied_frames, doubled.occupied_frames)
+        assert sparse.frame_pairs == doubled.frame_pairs == 2 * dense.frame_pairs
+        sparse = count_transitions(window, frame_average=frame_average, sparse=True)
+        for field in ("counts", "counts_up", "counts_down", "frame_average_sum"):
+            if getattr(dense, field) is not None:       # one window: the same bits
+                assert np.array_equal(getattr(sparse, field).toarray(), getattr(dense, field))
+        estimators = ["mle", "paper"] if frame_average else ["mle"]
+        for est_name in estimators:
+            for connected in (False, True):
+                est = estimator_from_name(est_name, window.state_space, 0.05, connected)
+                matrix, fractions = est.chain(dense)
+                up, down = fractions if fractions is not None else pass_fractions(dense)
+                expected = split_by_pass(matrix, up, down)
+                got = est.split_chain(sparse)
+                for a, b in zip(got, expected):
+                    assert np.abs(a.toarray() - b.toarray()).max() < 1e-14
+                total = (got[0] + got[1] + got[2]).toarray()
+                assert np.allclose(total.sum(axis=1), 1.0, atol=1e-13)
+                checked_fill |= fractions is not None
+                rtd = rtd_of_split_chain(*got, 0.05, entry=dense.counts_up.sum(axis=0) + 1e-3)
+                ref = exact_rtd(matrix, up, down, 0.05, entry=dense.counts_up.sum(axis=0) + 1e-3)
+                assert rtd.probability.size == ref.probability.size
+                assert np.abs(rtd.probability - ref.probability).max() < 1e-12
+    # 40 particles leave some states of a visited cell never left: the fill was checked
+    assert checked_fill == (name in ("cells-velocity", "cells-previous"))

@@ -198,3 +198,27 @@ def test_save_load_round_trip_and_bad_files(tmp_path, markov_flow, markov_run):
     truncated.write_bytes(path.read_bytes()[:1000])
     with pytest.raises(InputError, match="not a readable HDF5 file"):
         MarkovModel.load(truncated)
+
+
+def test_derived_models_share_the_validated_arrays_and_new_arrays_are_checked():
+    """with_selection / with_coherence keep the validated read-only arrays (no [S, S]
+    copies); any array not made by a model's validation is checked and copied as before."""
+    import dataclasses
+
+    model = ladder_model(6, 0.5, 0.1)
+    derived = model.with_selection({"reason": "test"}).with_coherence(0.2)
+    for name in ("transition_matrix", "counts", "counts_up", "counts_down"):
+        assert getattr(derived, name) is getattr(model, name)
+        assert not getattr(derived, name).flags.writeable
+    if model.pass_fractions is not None:
+        assert derived.pass_fractions[0] is model.pass_fractions[0]
+    doubled = np.array(model.transition_matrix) * 2.0
+    with pytest.raises(InputError, match="rows do not sum to 1"):
+        dataclasses.replace(model, transition_matrix=doubled)
+    negative = np.array(model.counts)
+    negative[0, 0] = -1
+    with pytest.raises(InputError, match="negative counts"):
+        dataclasses.replace(model, counts=negative)
+    given = np.array(model.transition_matrix)
+    copied = dataclasses.replace(model, transition_matrix=given)
+    assert copied.transition_matrix is not given and np.array_equal(copied.transition_matrix, given)

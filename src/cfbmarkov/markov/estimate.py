@@ -84,6 +84,89 @@ def _count_kernel(states, vertical, lag_frames, height, n_states, counts, counts
 
 
 @nb.njit(cache=True)
+def _sparse_count_kernel(states, vertical, lag_frames, height, n_states, with_frame_average,
+                         occupied_frames):
+    """The counts of :func:`_count_kernel` in compressed sparse rows (Numba kernel).
+
+    Each transition is first placed in the row of its start state (a counting sort by i,
+    frames in time order), then each row is gathered with a scratch marker over the
+    destinations, so the work and memory are O(transitions + S + non-zeros), never S x S;
+    the per-frame sums of the paper's Eq. 2 run in the same (time) order as the dense
+    kernel's. Returns ``indptr`` [S + 1], ``indices`` int32, the values of ``counts``,
+    ``counts_up``, ``counts_down`` (int64) and of the frame-average sum (float64; empty
+    unless ``with_frame_average``) on that one pattern (explicit zeros kept in up and down,
+    destinations of a row unsorted), and the number of frame pairs; ``occupied_frames`` [S]
+    is updated."""
+    n_frames, n_particles = states.shape
+    half = 0.5 * height
+    start = np.zeros(n_states + 1, np.int64)
+    pairs = 0
+    for t in range(n_frames - lag_frames):
+        for p in range(n_particles):
+            i = states[t, p]
+            if i >= 0 and states[t + lag_frames, p] >= 0:
+                start[i + 1] += 1
+        pairs += 1
+    for i in range(n_states):
+        start[i + 1] += start[i]
+    total = start[n_states]
+    destination = np.empty(total, np.int32)
+    kind = np.empty(total, np.int8)             # 0: stays, 1: up through the top, 2: down
+    weight = np.empty(total if with_frame_average else 0, np.float64)
+    slot = start[:n_states].copy()
+    occupancy = np.zeros(n_states, np.int64)
+    for t in range(n_frames - lag_frames):
+        occupancy[:] = 0
+        for p in range(n_particles):
+            i = states[t, p]
+            if i >= 0 and states[t + lag_frames, p] >= 0:
+                occupancy[i] += 1
+        for i in range(n_states):
+            if occupancy[i] > 0:
+                occupied_frames[i] += 1
+        for p in range(n_particles):
+            i = states[t, p]
+            j = states[t + lag_frames, p]
+            if i < 0 or j < 0:
+                continue
+            q = slot[i]
+            slot[i] += 1
+            destination[q] = j
+            dy = vertical[t + lag_frames, p] - vertical[t, p]
+            kind[q] = 1 if dy < -half else (2 if dy > half else 0)
+            if with_frame_average:
+                weight[q] = 1.0 / occupancy[i]
+    indptr = np.zeros(n_states + 1, np.int64)
+    indices = np.empty(total, np.int32)
+    counts = np.zeros(total, np.int64)
+    up = np.zeros(total, np.int64)
+    down = np.zeros(total, np.int64)
+    average = np.zeros(total if with_frame_average else 0, np.float64)
+    where = -np.ones(n_states, np.int64)        # position of destination j in this row
+    nnz = 0
+    for i in range(n_states):
+        row_start = nnz
+        for q in range(start[i], start[i + 1]):
+            j = destination[q]
+            k = where[j]
+            if k < row_start:
+                k = nnz
+                where[j] = k
+                indices[k] = j
+                nnz += 1
+            counts[k] += 1
+            if kind[q] == 1:
+                up[k] += 1
+            elif kind[q] == 2:
+                down[k] += 1
+            if with_frame_average:
+                average[k] += weight[q]
+        indptr[i + 1] = nnz
+    return (indptr, indices[:nnz], counts[:nnz], up[:nnz], down[:nnz],
+            average[:nnz] if with_frame_average else average, pairs)
+
+
+@nb.njit(cache=True)
 def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, vanished,
                  appeared):
     """Count what crosses the faces of an open riser (Numba kernel).
@@ -145,7 +228,8 @@ class TransitionCounts:
     Attributes
     ----------
     counts : ndarray of int64, shape (S, S)
-        Pooled transition counts C_ij.
+        Pooled transition counts C_ij. With ``count_transitions(..., sparse=True)`` this and
+        the other [S, S] fields are ``scipy.sparse.csr_array`` instead.
     counts_up, counts_down : ndarray of int64, shape (S, S)
         The transitions among them that passed up through the top / down through the
         bottom of the periodic riser.
@@ -185,7 +269,8 @@ class TransitionCounts:
                                 self.frame_pairs + other.frame_pairs, faces)
 
 
-def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
+def count_transitions(data, frame_average: bool = True, sparse: bool = False
+                      ) -> TransitionCounts:
     """Count the transitions of discrete trajectories.
 
     Parameters
@@ -195,6 +280,11 @@ def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
     frame_average : bool
         Also sum the per-frame matrices P'(t) that only the paper's estimator needs
         (``frame_average_sum`` is None otherwise).
+    sparse : bool, optional
+        Hold the [S, S] arrays as ``scipy.sparse.csr_array`` (memory and work grow with the
+        transitions and non-zeros, never with S x S; what cross-validation over large state
+        spaces uses, with :meth:`TransitionEstimator.split_chain`). Models are fitted from
+        dense counts.
 
     Returns
     -------
@@ -215,6 +305,8 @@ def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
     windows = as_discrete_list(data)
     space = windows[0].state_space
     s = space.n_states
+    if sparse:
+        return _count_sparse(windows, frame_average)
     counts = np.zeros((s, s), np.int64)
     up = np.zeros((s, s), np.int64)
     down = np.zeros((s, s), np.int64)
@@ -241,6 +333,48 @@ def count_transitions(data, frame_average: bool = True) -> TransitionCounts:
                                down, frame_sum, occupied, bool(frame_average))
     return TransitionCounts(counts, up, down, frame_sum if frame_average else None, occupied,
                             pairs, faces)
+
+
+def _count_sparse(windows, frame_average: bool) -> TransitionCounts:
+    """:func:`count_transitions` with scipy.sparse CSR arrays (one window at a time)."""
+    space = windows[0].state_space
+    s = space.n_states
+    open_riser = windows[0].boundary == "open"
+    total = None
+    for window in windows:
+        if window.state_space != space or not window.matches_lag(windows[0].lag):
+            raise InputError("discrete trajectories counted together must share the state "
+                             "space and the lag")
+        if (window.boundary == "open") != open_riser:
+            raise InputError("discrete trajectories counted together must share the boundary "
+                             "(periodic or open)")
+        states = np.ascontiguousarray(window.states, dtype=np.int32)
+        vertical = np.ascontiguousarray(window.vertical, dtype=np.float64)
+        faces = None
+        if open_riser:
+            faces = FaceCounts(*(np.zeros(s, np.int64) for _ in range(4)))
+            _open_kernel(states, vertical, int(window.lag_frames), face_band(space),
+                         float(window.height), faces.exits, faces.entries, faces.vanished,
+                         faces.appeared)
+        occupied = np.zeros(s, np.int64)
+        indptr, indices, counts, up, down, average, pairs = _sparse_count_kernel(
+            states, vertical, int(window.lag_frames), float(window.height), s,
+            bool(frame_average), occupied)
+
+        # sort each row's destinations once; the four value arrays follow the same order
+        order = sp.csr_array((np.arange(indices.size, dtype=np.int64), indices, indptr),
+                             shape=(s, s))
+        order.sort_indices()
+        permutation, sorted_indices, sorted_indptr = order.data, order.indices, order.indptr
+
+        matrices = [sp.csr_array((values[permutation], sorted_indices.copy(),
+                                  sorted_indptr.copy()), shape=(s, s))
+                    for values in ((counts, up, down, average) if frame_average
+                                   else (counts, up, down))]
+        part = TransitionCounts(*matrices[:3], matrices[3] if frame_average else None,
+                                occupied, int(pairs), faces)
+        total = part if total is None else total + part
+    return total
 
 
 def open_chain(counts: TransitionCounts) -> dict:
@@ -448,6 +582,78 @@ class TransitionEstimator:
             matrix = restrict_to_set(matrix, largest_connected_set(counts.counts))
         return matrix, fractions
 
+    def split_chain(self, counts: TransitionCounts) -> tuple[sp.csr_matrix, sp.csr_matrix,
+                                                              sp.csr_matrix]:
+        """The chain that :meth:`chain` forms, split by pass direction, without any dense
+        [S, S] array: P_up, P_down and P_stay with P = P_up + P_down + P_stay (what
+        :func:`cfbmarkov.markov.rtd.rtd_of_split_chain` takes).
+
+        A transition's share of P is split as its counts were (P_ij C^up_ij / C_ij, ...); a
+        state never left takes its cell's pooled counts, and stays in place where its whole
+        cell was never left, as in :meth:`chain`.
+
+        Parameters
+        ----------
+        counts : TransitionCounts
+            Counts gathered by :func:`count_transitions`, sparse (``sparse=True``) or dense.
+
+        Returns
+        -------
+        tuple of three scipy.sparse.csr_matrix, shape (S, S)
+            P_up, P_down, P_stay. Equal to :func:`cfbmarkov.markov.rtd.split_by_pass` of
+            :meth:`chain`'s matrix and fractions up to rounding (tested).
+        """
+        if self.connected:      # the largest connected set: through the dense chain
+            from cfbmarkov.markov.rtd import split_by_pass
+
+            dense = _densified(counts)
+            matrix, fractions = self.chain(dense)
+            up, down = fractions if fractions is not None else pass_fractions(dense)
+            return split_by_pass(matrix, up, down)
+        c = sp.csr_matrix(counts.counts, dtype=np.float64)
+        moves = {"up": sp.csr_matrix(counts.counts_up, dtype=np.float64),
+                 "down": sp.csr_matrix(counts.counts_down, dtype=np.float64)}
+        moves["stay"] = c - moves["up"] - moves["down"]
+        weights = self._sparse_weights(counts, c)
+        totals = np.asarray(weights.sum(axis=1)).ravel()
+        scale = np.divide(1.0, totals, out=np.zeros_like(totals), where=totals > 0)
+        matrix = sp.diags(scale) @ weights
+        inverse = c.copy()
+        inverse.data = 1.0 / inverse.data
+        share = matrix.multiply(inverse)                  # P_ij / C_ij on the counted pairs
+        parts = {name: sp.csr_matrix(share.multiply(values)) for name, values in moves.items()}
+        # states never left: their cell's pooled counts, or in place
+        space = self.state_space
+        n = space.n_states
+        unvisited = np.flatnonzero(np.asarray(c.sum(axis=1)).ravel() == 0)
+        cell = np.asarray(space.cell_of_state)
+        fill = np.zeros(0, np.int64)
+        if unvisited.size and np.unique(cell).size != cell.size:
+            needed = np.unique(cell[unvisited])
+            slot = -np.ones(space.n_cells, np.int64)
+            slot[needed] = np.arange(needed.size)
+            members = np.flatnonzero(slot[cell] >= 0)
+            indicator = sp.csr_matrix((np.ones(members.size), (slot[cell[members]], members)),
+                                      shape=(needed.size, n))
+            pooled_totals = np.asarray((indicator @ c).sum(axis=1)).ravel()
+            fill = unvisited[pooled_totals[slot[cell[unvisited]]] > 0]
+            chosen = sp.csr_matrix((1.0 / pooled_totals[slot[cell[fill]]],
+                                    (fill, slot[cell[fill]])), shape=(n, needed.size))
+            for name, values in moves.items():
+                parts[name] = (parts[name] + chosen @ (indicator @ values)).tocsr()
+        stuck = np.setdiff1d(unvisited, fill)
+        if stuck.size:
+            parts["stay"] = (parts["stay"] + sp.csr_matrix(
+                (np.ones(stuck.size), (stuck, stuck)), shape=(n, n))).tocsr()
+        for part in parts.values():
+            part.eliminate_zeros()
+        return parts["up"], parts["down"], parts["stay"]
+
+    def _sparse_weights(self, counts: TransitionCounts, pooled: sp.csr_matrix) -> sp.csr_matrix:
+        """The rows that :meth:`transition_matrix` normalises, as a sparse matrix (the pooled
+        counts; the paper's estimator overrides it)."""
+        return pooled
+
     def fit_counts(self, counts: TransitionCounts, window=None, source="") -> "MarkovModel":
         """Form the model from counts already gathered (e.g. by cross-validation).
 
@@ -593,6 +799,41 @@ class PaperEstimator(TransitionEstimator):
         plain_average = counts.frame_average_sum / counts.frame_pairs   # Eq. (4)
         rows = plain_average.sum(axis=1, keepdims=True)
         return np.divide(plain_average, rows, out=np.zeros_like(plain_average), where=rows > 0)
+
+
+    def _sparse_weights(self, counts, pooled):
+        if counts.frame_average_sum is None:
+            raise InputError("the paper's estimator needs the per-frame matrices; these counts "
+                             "were gathered without them")
+        return sp.csr_matrix(counts.frame_average_sum, dtype=np.float64)
+
+
+def pass_fractions(counts: TransitionCounts) -> tuple[np.ndarray, np.ndarray]:
+    """The fractions of each i -> j transition that passed up through the top and down
+    through the bottom, C^up_ij / C_ij and C^down_ij / C_ij (0 where C_ij = 0).
+
+    Parameters
+    ----------
+    counts : TransitionCounts
+        Dense counts.
+
+    Returns
+    -------
+    (ndarray, ndarray) of float64, shape (S, S)
+    """
+    c = counts.counts.astype(np.float64)
+    return (np.divide(counts.counts_up, c, out=np.zeros_like(c), where=c > 0),
+            np.divide(counts.counts_down, c, out=np.zeros_like(c), where=c > 0))
+
+
+def _densified(counts: TransitionCounts) -> TransitionCounts:
+    """Dense copies of sparse counts (dense counts as they are)."""
+    if not sp.issparse(counts.counts):
+        return counts
+    dense = lambda m: None if m is None else m.toarray()  # noqa: E731
+    return TransitionCounts(dense(counts.counts), dense(counts.counts_up),
+                            dense(counts.counts_down), dense(counts.frame_average_sum),
+                            counts.occupied_frames, counts.frame_pairs, counts.faces)
 
 
 ESTIMATORS: dict[str, type[TransitionEstimator]] = {

@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 
 import os
+import weakref
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -38,6 +39,20 @@ from cfbmarkov.markov.states import StateSpace
 #: the ``format`` attribute of a model file
 MODEL_FORMAT = "cfbmarkov.model"
 _DATASETS = ("transition_matrix", "counts", "counts_up", "counts_down")
+#: the read-only arrays that a model's validation made, by id: a model derived from another
+#: (``with_selection``, ``with_coherence``) takes them as they are instead of copying and
+#: checking [S, S] arrays again
+_VALIDATED: "weakref.WeakValueDictionary[int, np.ndarray]" = weakref.WeakValueDictionary()
+
+
+def _validated(value) -> bool:
+    return _VALIDATED.get(id(value)) is value
+
+
+def _mark_validated(value: np.ndarray) -> np.ndarray:
+    value.setflags(write=False)
+    _VALIDATED[id(value)] = value
+    return value
 #: share of an open riser's tracks ending (beginning) away from the outlet (inlet) above
 #: which :meth:`MarkovModel.warnings` says so
 CENSORED_SHARE = 0.05
@@ -143,7 +158,13 @@ class MarkovModel:
 
     def __post_init__(self):
         s = self.state_space.n_states
+        trusted = {name for name in _DATASETS if _validated(getattr(self, name))}
         for name in _DATASETS:
+            if name in trusted:
+                if getattr(self, name).shape != (s, s):
+                    raise InputError(f"model {name} has shape {getattr(self, name).shape}, "
+                                     f"expected ({s}, {s}) for {self.state_space.describe()}")
+                continue
             given = np.asarray(getattr(self, name))
             if name != "transition_matrix" and given.dtype.kind not in "iub" and not (
                     np.all(np.isfinite(given)) and np.all(given == np.round(given))):
@@ -153,23 +174,25 @@ class MarkovModel:
             if value.shape != (s, s):
                 raise InputError(f"model {name} has shape {value.shape}, expected ({s}, {s}) "
                                  f"for {self.state_space.describe()}")
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
+            object.__setattr__(self, name, _mark_validated(value))
         if not (isinstance(self.lag, (int, float, np.number)) and np.isfinite(self.lag)
                 and self.lag > 0):
             raise InputError(f"model lag {self.lag!r} s must be a positive finite number")
         p = self.transition_matrix
-        if not np.all(np.isfinite(p)) or (p.size and p.min() < 0):
+        if "transition_matrix" in trusted:
+            pass                            # checked when it was validated
+        elif not np.all(np.isfinite(p)) or (p.size and p.min() < 0):
             raise InputError("transition matrix holds negative or non-finite entries")
-        rows = p.sum(axis=1)
+        rows = p.sum(axis=1) if "transition_matrix" not in trusted else np.ones(s)
         if not np.allclose(rows, 1.0, atol=1e-9):
             k = int(np.argmax(np.abs(rows - 1.0)))
             raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to {rows[k]:.6g})")
         for name in ("counts", "counts_up", "counts_down"):
             value = getattr(self, name)
-            if value.size and value.min() < 0:
+            if name not in trusted and value.size and value.min() < 0:
                 raise InputError(f"model {name} holds negative counts")
-        if self.pass_fractions is not None:
+        if self.pass_fractions is not None and not all(
+                _validated(f) for f in self.pass_fractions):
             if len(self.pass_fractions) != 2:
                 raise InputError("pass fractions must be (up, down)")
             fractions = tuple(np.array(f, dtype=np.float64) for f in self.pass_fractions)
@@ -181,9 +204,8 @@ class MarkovModel:
                 worst = float(max(np.nanmax(np.abs(up)), np.nanmax(np.abs(down)))) if up.size else 0
                 raise InputError("pass fractions must lie in [0, 1] with up + down <= 1 for each "
                                  f"transition (largest {worst:.6g})")
-            for f in fractions:
-                f.setflags(write=False)
-            object.__setattr__(self, "pass_fractions", fractions)
+            object.__setattr__(self, "pass_fractions", tuple(_mark_validated(f)
+                                                             for f in fractions))
         if not (isinstance(self.coherence, (int, float, np.number))
                 and 0.0 <= float(self.coherence) <= 1.0):
             raise InputError(f"model coherence {self.coherence!r} must lie in [0, 1]")
@@ -208,8 +230,7 @@ class MarkovModel:
             value = np.array(value, dtype=dtype)
             if value.shape != (s,) or not np.all(np.isfinite(value)) or value.min() < 0:
                 raise InputError(f"model {name} must be {s} non-negative numbers")
-            value.setflags(write=False)
-            object.__setattr__(self, name, value)
+            object.__setattr__(self, name, _mark_validated(value))
         if self.exit_probability.max() > 1.0:
             raise InputError("model exit probabilities exceed 1")
         if self.entry_counts.sum() == 0:

@@ -247,13 +247,35 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
     (1960) (Ch. III, absorbing chains: absorption probabilities B = (I - Q)^-1 R).
     """
-    s = matrix.shape[0]
-    # split P by pass direction on its non-zeros only (one scan of the dense matrix)
     chain = sp.csr_matrix(matrix)
+    p_up, p_down, p_stay = split_by_pass(chain, up_fraction, down_fraction)
+    return rtd_of_split_chain(p_up, p_down, p_stay, lag, deficit_levels, tol, max_steps,
+                              entry, entry_flux, chain)
+
+
+def split_by_pass(matrix, up_fraction: np.ndarray, down_fraction: np.ndarray
+                  ) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
+    """P split by pass direction: P = P_up + P_down + P_stay, on P's non-zeros only.
+
+    Parameters
+    ----------
+    matrix : ndarray of float64 or scipy.sparse matrix, shape (S, S)
+        The transition matrix P.
+    up_fraction, down_fraction : ndarray of float64, shape (S, S)
+        Fraction of each i -> j transition that passes up through the top / down through
+        the bottom.
+
+    Returns
+    -------
+    tuple of three scipy.sparse.csr_matrix, shape (S, S)
+        P_up = P * up, P_down = P * down and the rest P_stay (element-wise), explicit zeros
+        removed.
+    """
+    s = matrix.shape[0]
+    chain = sp.csr_matrix(matrix)       # one scan of a dense matrix
     rows = np.repeat(np.arange(s), np.diff(chain.indptr))
     up_part = chain.data * up_fraction[rows, chain.indices]
     down_part = chain.data * down_fraction[rows, chain.indices]
-
     stay_part = chain.data - up_part - down_part
 
     def _part(values):      # own copies: eliminate_zeros compacts its arrays in place
@@ -262,7 +284,22 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
         part.eliminate_zeros()
         return part
 
-    p_up, p_down, p_stay = _part(up_part), _part(down_part), _part(stay_part)
+    return _part(up_part), _part(down_part), _part(stay_part)
+
+
+def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8,
+                       tol: float = 1e-10, max_steps: int = 200_000,
+                       entry: np.ndarray | None = None, entry_flux: np.ndarray | None = None,
+                       chain=None) -> ResidenceTimeDistribution:
+    """:func:`exact_rtd` of a chain given by its parts P_up, P_down, P_stay (scipy.sparse,
+    [S, S]; e.g. from :func:`split_by_pass` or, without a dense matrix,
+    :meth:`cfbmarkov.markov.estimate.TransitionEstimator.split_chain`). ``chain`` (P, CSR)
+    is their sum when omitted. Other parameters, return value and errors as
+    :func:`exact_rtd`."""
+    p_up, p_down, p_stay = (sp.csr_matrix(part) for part in (p_up, p_down, p_stay))
+    s = p_up.shape[0]
+    if chain is None:
+        chain = (p_up + p_down + p_stay).tocsr()
     levels = deficit_levels + 1
     # level index g = -l: a down pass moves g -> g+1, an up pass g -> g-1 (g = 0: exit)
     lower = sp.diags(np.ones(levels - 1), 1, shape=(levels, levels))

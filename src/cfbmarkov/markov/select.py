@@ -58,7 +58,7 @@ from cfbmarkov.analysis.rtd import net_passes, residence_times, rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import DiscreteTrajectories, read_frames
 from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, fit_model
-from cfbmarkov.markov.rtd import exact_rtd
+from cfbmarkov.markov.rtd import rtd_of_split_chain
 from cfbmarkov.markov.states import state_space_from_name
 from cfbmarkov.trajectories import opened
 
@@ -175,7 +175,7 @@ def _entry_distribution(counts, direction: str = "up") -> np.ndarray:
     """Where particles entered in the counted data: the landing states of up passes (of down
     passes where residences run downward)."""
     passes = counts.counts_up if direction == "up" else counts.counts_down
-    return passes.sum(axis=0).astype(np.float64)
+    return np.asarray(passes.sum(axis=0), dtype=np.float64).ravel()
 
 
 def select_model(data, *, window: tuple[float, float], columns: int, rows: int, lag: float,
@@ -281,25 +281,25 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
             try:
                 discrete = frames.discretize(space, traj.lag_frames(tau))
                 discrete_of[(name, tau)] = discrete
+                # sparse counts and chains: the work grows with the transitions, not S x S
                 parts = [count_transitions(discrete.block(*block),
-                                           frame_average=estimator == "paper")
+                                           frame_average=estimator == "paper", sparse=True)
                          for block in blocks]
                 rows_ = []
                 for k, block in enumerate(blocks):
                     # fitted on the other blocks; its RTD from where particles entered there
                     training = functools.reduce(operator.add, parts[:k] + parts[k + 1:])
-                    matrix, fractions = est.chain(training)
+                    up, down, stay = est.split_chain(training)
                     if criterion == "ck":
-                        rows_.append((_held_out_ck_error(discrete.block(*block), matrix,
-                                                         ck_times),))
+                        rows_.append((_held_out_ck_error(discrete.block(*block),
+                                                         up + down + stay, ck_times),))
                         continue
-                    up, down = fractions if fractions is not None else _pass_fractions(training)
                     entry = _entry_distribution(training, direction)
                     if direction == "down":     # the mirror image: in at the top, out below
                         up, down = down, up
                     steps = max(2, int(round((block[1] - block[0]) / tau)))
-                    rtd = exact_rtd(matrix, up, down, tau, max_steps=steps, entry=entry
-                                    ).in_window(block[1] - block[0])
+                    rtd = rtd_of_split_chain(up, down, stay, tau, max_steps=steps, entry=entry
+                                             ).in_window(block[1] - block[0])
                     rows_.append((percentage_difference(rtd.mean, observed[k].mean),
                                   percentage_difference(rtd.sd, observed[k].sd,
                                                         scale=observed[k].mean),
@@ -442,12 +442,6 @@ def _held_out_ck_error(block: DiscreteTrajectories, matrix: np.ndarray, times: n
         predicted = (member.T @ x).T                   # [G from, G to]
         errors.append(np.abs(predicted[ok] - pairs[ok] / n_a[ok, None]).mean())
     return float(np.mean(errors))
-
-
-def _pass_fractions(counts) -> tuple[np.ndarray, np.ndarray]:
-    c = counts.counts.astype(np.float64)
-    return (np.divide(counts.counts_up, c, out=np.zeros_like(c), where=c > 0),
-            np.divide(counts.counts_down, c, out=np.zeros_like(c), where=c > 0))
 
 
 def parse_model_name(name: str) -> tuple[str, str]:
