@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+import zlib
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import h5py
@@ -16,7 +19,8 @@ def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
 
     An array of two or more dimensions with at least :data:`COMPRESS_MIN_SIZE` elements
     (the [S, S] matrices of a model) is stored chunked in blocks of whole rows of about
-    1 MiB and compressed with gzip (deflate) at level 1; anything else is stored plain.
+    1 MiB and compressed with gzip (deflate) at level 1, the chunks deflated in parallel
+    threads and written as they are (``write_direct_chunk``); anything else is stored plain.
     Deflate is built into every HDF5 library, so any reader still reads the dataset as a
     plain dense array. Level 1 without the shuffle filter: on the sparse matrices of a
     model it gave the smallest file and the fastest load of the settings tried (shuffle
@@ -40,8 +44,27 @@ def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
         return group.create_dataset(name, data=value)
     row = int(np.prod(value.shape[1:])) * value.dtype.itemsize
     rows = int(min(value.shape[0], max(1, (1 << 20) // max(row, 1))))
-    return group.create_dataset(name, data=value, chunks=(rows, *value.shape[1:]),
-                                compression="gzip", compression_opts=1)
+    if not value.dtype.isnative:        # HDF5 converts the bytes itself
+        return group.create_dataset(name, data=value, chunks=(rows, *value.shape[1:]),
+                                    compression="gzip", compression_opts=1)
+    dataset = group.create_dataset(name, shape=value.shape, dtype=value.dtype,
+                                   chunks=(rows, *value.shape[1:]), compression="gzip",
+                                   compression_opts=1)
+    # the chunks deflated by zlib in threads (it releases the GIL), then written as they are:
+    # the same zlib stream HDF5's deflate filter writes, in a fraction of the time
+    starts = range(0, value.shape[0], rows)
+
+    def deflate(start: int) -> bytes:
+        chunk = value[start:start + rows]
+        if chunk.shape[0] < rows:                      # the last chunk, padded as HDF5 does
+            chunk = np.concatenate([chunk, np.zeros((rows - chunk.shape[0],
+                                                     *value.shape[1:]), value.dtype)])
+        return zlib.compress(np.ascontiguousarray(chunk).tobytes(), 1)
+
+    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+        for start, deflated in zip(starts, pool.map(deflate, starts)):
+            dataset.id.write_direct_chunk((start,) + (0,) * (value.ndim - 1), deflated)
+    return dataset
 
 
 

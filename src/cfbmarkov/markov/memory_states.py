@@ -39,24 +39,30 @@ from cfbmarkov.markov.states import CellGrid, StateSpace, cell_index
 # (-H/2, H/2] (a particle moves less than H/2 in one lag, docs/definitions.md, Pass direction).
 
 
+#: particles per work item of the [T, N] kernels (a division per item, not per element)
+_BLOCK = 1024
+
+
 @nb.njit(cache=True, parallel=True)
 def _wrapped_step(y, lag_frames, height, out):
     """out[t, p] = y[t, p] - y[t - lag_frames, p] wrapped into (-H/2, H/2]; 0 where
     t < lag_frames (no previous frame)."""
     n_frames, n = y.shape
     half = 0.5 * height
-    for k in nb.prange(n_frames * n):
-        t = k // n
-        p = k - t * n
-        if t < lag_frames:
-            out[t, p] = 0.0
-        else:
-            d = y[t, p] - y[t - lag_frames, p]
-            if d > half:
-                d -= height
-            elif d <= -half:
-                d += height
-            out[t, p] = d
+    blocks = (n + _BLOCK - 1) // _BLOCK      # frames x particle blocks: one division a block
+    for k in nb.prange(n_frames * blocks):
+        t = k // blocks
+        first = (k - t * blocks) * _BLOCK
+        for p in range(first, min(n, first + _BLOCK)):
+            if t < lag_frames:
+                out[t, p] = 0.0
+            else:
+                d = y[t, p] - y[t - lag_frames, p]
+                if d > half:
+                    d -= height
+                elif d <= -half:
+                    d += height
+                out[t, p] = d
 
 
 @nb.njit(cache=True, parallel=True)
@@ -93,23 +99,25 @@ def _previous_cell_states(cells, lag_frames, columns, rows, reach, column_reach,
     n_frames, n = cells.shape
     span = 2 * reach + 1
     per_cell = span * (2 * column_reach + 1)
-    for k in nb.prange(n_frames * n):
-        t = k // n
-        p = k - t * n
-        c = cells[t, p]
-        drow = 0
-        dcol = 0
-        if t >= lag_frames:
-            prev = cells[t - lag_frames, p]
-            row = c // columns
-            prow = prev // columns
-            drow = (prow - row) % rows          # 0..n-1 (Python-style modulo in numba)
-            if 2 * drow > rows:
-                drow -= rows                     # into (-n/2, n/2]
-            dcol = (prev - prow * columns) - (c - row * columns)
-            drow = min(max(drow, -reach), reach)
-            dcol = min(max(dcol, -column_reach), column_reach)
-        out[t, p] = c * per_cell + (dcol + column_reach) * span + (drow + reach)
+    blocks = (n + _BLOCK - 1) // _BLOCK
+    for k in nb.prange(n_frames * blocks):
+        t = k // blocks
+        first = (k - t * blocks) * _BLOCK
+        for p in range(first, min(n, first + _BLOCK)):
+            c = cells[t, p]
+            drow = 0
+            dcol = 0
+            if t >= lag_frames:
+                prev = cells[t - lag_frames, p]
+                row = c // columns
+                prow = prev // columns
+                drow = (prow - row) % rows          # 0..n-1 (Python-style modulo in numba)
+                if 2 * drow > rows:
+                    drow -= rows                     # into (-n/2, n/2]
+                dcol = (prev - prow * columns) - (c - row * columns)
+                drow = min(max(drow, -reach), reach)
+                dcol = min(max(dcol, -column_reach), column_reach)
+            out[t, p] = c * per_cell + (dcol + column_reach) * span + (drow + reach)
 
 
 class _CellProductSpace(StateSpace):

@@ -89,13 +89,16 @@ def _regime_states(cells, vertical, regime, per_cell, with_direction, out):
     """out[t, p] = cells[t, p] * K + regime[t] * D + (1 if falling else 0 with direction)."""
     n_frames, n = cells.shape
     d = 2 if with_direction else 1
-    for k in nb.prange(n_frames * n):
-        t = k // n
-        p = k - t * n
-        s = cells[t, p] * per_cell + regime[t] * d
-        if with_direction and vertical[t, p] < 0.0:
-            s += 1
-        out[t, p] = s
+    block = 1024                    # particles per work item: one division a block
+    blocks = (n + block - 1) // block
+    for k in nb.prange(n_frames * blocks):
+        t = k // blocks
+        first = (k - t * blocks) * block
+        for p in range(first, min(n, first + block)):
+            s = cells[t, p] * per_cell + regime[t] * d
+            if with_direction and vertical[t, p] < 0.0:
+                s += 1
+            out[t, p] = s
 
 
 def regime_edges(features: np.ndarray, regimes: int) -> tuple[float, ...]:
