@@ -418,3 +418,28 @@ def test_velocity_bins_use_the_models_lag_not_a_lag_of_their_own(tmp_path):
     # the same at a lag of one frame: the velocity does not depend on the lag
     np.testing.assert_array_equal(
         space.velocity_bin(discretize(run, space, 0.025, (0.1, 1.0)).states), 3)
+
+
+def test_spaces_discretised_on_shared_frames_equal_each_alone(default_run):
+    """The candidates of auto share the cells and displacements derived from one read of
+    the frames; every space's states equal those from frames read for it alone, in any
+    order, and the shared store holds one cell array for the grid."""
+    from cfbmarkov.markov.discrete import read_frames
+    from cfbmarkov.markov.select import DEFAULT_STATES
+
+    names = list(DEFAULT_STATES)
+    with Trajectories(default_run) as traj:
+        spaces = [state_space_from_name(n, 6, 38, traj.width, traj.height) for n in names]
+        shared = read_frames(traj, FIT, 1, short_history="skip")
+        together = [shared.discretize(sp_, 1) for sp_ in spaces + spaces[::-1]]
+        alone = [read_frames(traj, FIT, 1, short_history="skip").discretize(sp_, 1)
+                 for sp_ in spaces]
+    for k, name in enumerate(names):
+        for got in (together[k], together[2 * len(names) - 1 - k]):
+            assert got.state_space == alone[k].state_space, name
+            assert np.array_equal(got.states, alone[k].states), name
+            assert np.array_equal(got.vertical, alone[k].vertical), name
+    stores = [value[1] for key, value in shared._shared.items() if key[0] == "frames"]
+    cells = [sum(1 for key in store if key[0] == "cells") for store in stores]
+    assert max(cells) == 1 and min(cells) >= 0         # one grid: at most one cell array
+    assert any(key[0] == "displacement" for store in stores for key in store)

@@ -243,6 +243,10 @@ class WindowFrames:
     present: np.ndarray | None = None
     boundary: str = "periodic"
     depth: float | None = None
+    # per first row: the positions view given to the spaces and what they derive from it
+    # (cells, displacements; memory_states.frame_quantities_shared), and the windows'
+    # contiguous heights: shared by every state space discretised on these frames
+    _shared: dict = field(default_factory=dict, repr=False, compare=False)
 
     def discretize(self, state_space: StateSpace, lag_frames: int, *,
                    keep_positions: bool = False) -> DiscreteTrajectories:
@@ -286,21 +290,28 @@ class WindowFrames:
                 window = (max(window[0], float(self.times[start])), window[1])
         else:
             start = self.history
+        from cfbmarkov.markov.memory_states import frame_quantities_shared
+
         frames = slice(first, None)
-        positions = self.positions[frames]
+        positions, derived = self._shared.setdefault(("frames", first),
+                                                     (self.positions[frames], {}))
         velocities = None if self.velocities is None else self.velocities[frames]
-        # a space that learns from the fitting window (regime edges) learns it here
-        state_space = state_space.fit_to_frames(positions, lag_frames, self.frame_interval)
-        # absent particles (NaN) get some state, masked here with those whose history is
-        # incomplete
-        states = state_space.discretize(positions, velocities, lag_frames, self.frame_interval)
+        with frame_quantities_shared(positions, derived):
+            # a space that learns from the fitting window (regime edges) learns it here
+            state_space = state_space.fit_to_frames(positions, lag_frames, self.frame_interval)
+            # absent particles (NaN) get some state, masked here with those whose history is
+            # incomplete
+            states = state_space.discretize(positions, velocities, lag_frames,
+                                            self.frame_interval)
         if self.present is not None:
             states[~_known(self.present[frames], need, lag_frames)] = ABSENT
         offset = start - first
         rows = slice(start, None)
+        if ("vertical", start) not in self._shared:
+            self._shared[("vertical", start)] = np.ascontiguousarray(self.positions[rows, :, 1])
         return DiscreteTrajectories(
             states=np.ascontiguousarray(states[offset:]),
-            vertical=np.ascontiguousarray(self.positions[rows, :, 1]),
+            vertical=self._shared[("vertical", start)],
             times=self.times[rows], lag_frames=lag_frames, frame_interval=self.frame_interval,
             height=self.height, state_space=state_space, window=window, source=self.source,
             positions=self.positions[rows] if keep_positions else None,

@@ -115,20 +115,22 @@ def _sparse_count_kernel(states, vertical, lag_frames, height, n_states, with_fr
     weight = np.empty(total if with_frame_average else 0, np.float64)
     slot = start[:n_states].copy()
     occupancy = np.zeros(n_states, np.int64)
+    last_frame = -np.ones(n_states, np.int64)   # the last frame state i was occupied in
     for t in range(n_frames - lag_frames):
-        occupancy[:] = 0
-        for p in range(n_particles):
-            i = states[t, p]
-            if i >= 0 and states[t + lag_frames, p] >= 0:
-                occupancy[i] += 1
-        for i in range(n_states):
-            if occupancy[i] > 0:
-                occupied_frames[i] += 1
+        if with_frame_average:      # N_i(t) first: the weights 1 / N_i(t) of Eq. 2
+            occupancy[:] = 0
+            for p in range(n_particles):
+                i = states[t, p]
+                if i >= 0 and states[t + lag_frames, p] >= 0:
+                    occupancy[i] += 1
         for p in range(n_particles):
             i = states[t, p]
             j = states[t + lag_frames, p]
             if i < 0 or j < 0:
                 continue
+            if last_frame[i] != t:
+                last_frame[i] = t
+                occupied_frames[i] += 1
             q = slot[i]
             slot[i] += 1
             destination[q] = j

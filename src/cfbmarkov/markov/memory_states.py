@@ -9,6 +9,8 @@ saved models rebuild them by name.
 
 from __future__ import annotations
 
+import contextlib
+import contextvars
 from typing import Any
 
 import numba as nb
@@ -41,6 +43,46 @@ from cfbmarkov.markov.states import CellGrid, StateSpace, cell_index
 
 #: particles per work item of the [T, N] kernels (a division per item, not per element)
 _BLOCK = 1024
+
+#: the cells and vertical displacements of one array of frames, shared by the state spaces
+#: discretised on it (see :func:`frame_quantities_shared`)
+_SHARED: contextvars.ContextVar[dict | None] = contextvars.ContextVar("cfbmarkov_frames",
+                                                                      default=None)
+
+
+@contextlib.contextmanager
+def frame_quantities_shared(positions: np.ndarray, store: dict):
+    """Within the block, what the state spaces derive from ``positions`` (this very array:
+    its cells on a grid, its vertical displacement over a lag) is computed once, kept in
+    ``store`` and shared: the candidates of ``--states auto`` are discretised on the same
+    frames, and each [T, N] array costs its page faults once instead of once per space.
+
+    Parameters
+    ----------
+    positions : ndarray
+        The frames' positions, the object the spaces are given.
+    store : dict
+        Where the shared arrays are kept (the caller's, for as long as it keeps the frames;
+        a store made for other positions is cleared first). The arrays are never written.
+    """
+    if store.get("positions") is not positions:
+        store.clear()
+        store["positions"] = positions
+    token = _SHARED.set(store)
+    try:
+        yield
+    finally:
+        _SHARED.reset(token)
+
+
+def _shared(positions, key, compute):
+    """``compute()``, or its value already derived from ``positions`` in this block."""
+    store = _SHARED.get()
+    if store is None or store.get("positions") is not positions:
+        return compute()
+    if key not in store:
+        store[key] = compute()
+    return store[key]
 
 
 @nb.njit(cache=True, parallel=True)
@@ -155,7 +197,9 @@ class _CellProductSpace(StateSpace):
         return np.asarray(states) % self.per_cell
 
     def _cells(self, positions: np.ndarray) -> np.ndarray:
-        return cell_index(positions, self.width, self.height, self.columns, self.rows)
+        return _shared(positions, ("cells", self.columns, self.rows, self.width, self.height),
+                       lambda: cell_index(positions, self.width, self.height, self.columns,
+                                          self.rows))
 
     def _vertical(self, positions: np.ndarray, velocities, lag_frames: int, source: str
                   ) -> np.ndarray:
@@ -173,12 +217,16 @@ class _CellProductSpace(StateSpace):
         lag_frames = int(lag_frames)
         if lag_frames < 1:
             raise InputError(f"lag of {lag_frames} frames: must be at least 1")
-        y = np.ascontiguousarray(np.asarray(positions, dtype=np.float64)[..., 1])
-        if y.ndim == 1:      # a single frame has no previous frame
-            return np.zeros_like(y)
-        out = np.empty_like(y)
-        _wrapped_step(y, lag_frames, self.height, out)
-        return out
+
+        def displacement():
+            y = np.ascontiguousarray(np.asarray(positions, dtype=np.float64)[..., 1])
+            if y.ndim == 1:      # a single frame has no previous frame
+                return np.zeros_like(y)
+            out = np.empty_like(y)
+            _wrapped_step(y, lag_frames, self.height, out)
+            return out
+
+        return _shared(positions, ("displacement", lag_frames, self.height), displacement)
 
     def _base_attrs(self) -> dict[str, Any]:
         return {"kind": self.kind, "columns": self.columns, "rows": self.rows,
