@@ -222,3 +222,24 @@ def test_derived_models_share_the_validated_arrays_and_new_arrays_are_checked():
     given = np.array(model.transition_matrix)
     copied = dataclasses.replace(model, transition_matrix=given)
     assert copied.transition_matrix is not given and np.array_equal(copied.transition_matrix, given)
+
+
+def test_handed_over_arrays_are_kept_and_others_copied():
+    """An estimator's own fresh arrays are handed over (checked, kept, made read-only); a
+    caller's arrays are copied and stay the caller's."""
+    import dataclasses
+
+    from cfbmarkov.markov.model import hand_over
+
+    model = ladder_model(5, 0.5, 0.1)
+    mine = np.array(model.transition_matrix)
+    copied = dataclasses.replace(model, transition_matrix=mine)
+    assert copied.transition_matrix is not mine and mine.flags.writeable
+    given = np.array(model.transition_matrix)
+    hand_over(given)
+    adopted = dataclasses.replace(model, transition_matrix=given)
+    assert adopted.transition_matrix is given and not given.flags.writeable
+    bad = np.array(model.transition_matrix) * 3.0      # handed over, still checked
+    hand_over(bad)
+    with pytest.raises(InputError, match="rows do not sum to 1"):
+        dataclasses.replace(model, transition_matrix=bad)

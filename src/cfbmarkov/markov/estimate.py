@@ -545,6 +545,9 @@ class TransitionEstimator:
             raise InputError("coherent moves (--coherent) are fitted for periodic risers only "
                              "yet; fit an open riser without it")
         counts = count_transitions(windows, frame_average=self.name == "paper")
+        from cfbmarkov.markov.model import hand_over
+
+        hand_over(counts.counts, counts.counts_up, counts.counts_down)   # counted for it alone
         sources = [w.source for w in windows]
         model = self.fit_counts(counts, window=windows[0].window,
                                 source=sources[0] if len(sources) == 1 else sources)
@@ -678,9 +681,10 @@ class TransitionEstimator:
             If the counts do not fit the state space, or (paper estimator) were gathered
             without the per-frame matrices.
         """
-        from cfbmarkov.markov.model import MarkovModel
+        from cfbmarkov.markov.model import MarkovModel, hand_over
 
         matrix, fractions = self.chain(counts)
+        hand_over(matrix, *(fractions or ()))       # made here for this model alone
         open_flow = {}
         if counts.faces is not None:
             open_flow = open_chain(counts)

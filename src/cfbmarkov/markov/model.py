@@ -49,6 +49,35 @@ def _validated(value) -> bool:
     return _VALIDATED.get(id(value)) is value
 
 
+#: arrays an estimator made for the model it is forming and hands over (nobody else holds
+#: them): the model's validation checks them and keeps them instead of copying
+_HANDED_OVER: "weakref.WeakValueDictionary[int, np.ndarray]" = weakref.WeakValueDictionary()
+
+
+def hand_over(*arrays: np.ndarray) -> None:
+    """Give arrays to the next model made from them: it checks them and keeps them (made
+    read-only) instead of copying them. Only for arrays no one else holds or writes.
+
+    Parameters
+    ----------
+    *arrays : ndarray
+        The arrays (None is skipped).
+    """
+    for value in arrays:
+        if isinstance(value, np.ndarray):
+            _HANDED_OVER[id(value)] = value
+
+
+def _take(value, dtype) -> np.ndarray:
+    """The model's own read-only array of ``value``: the array itself where it was handed
+    over with this dtype (and is contiguous), else a copy."""
+    if (_HANDED_OVER.get(id(value)) is value and value.dtype == dtype
+            and value.flags.c_contiguous):
+        del _HANDED_OVER[id(value)]
+        return value
+    return np.array(value, dtype=dtype)
+
+
 def _mark_validated(value: np.ndarray) -> np.ndarray:
     value.setflags(write=False)
     _VALIDATED[id(value)] = value
@@ -169,8 +198,8 @@ class MarkovModel:
             if name != "transition_matrix" and given.dtype.kind not in "iub" and not (
                     np.all(np.isfinite(given)) and np.all(given == np.round(given))):
                 raise InputError(f"model {name} holds values that are not whole counts")
-            value = np.array(given, dtype=np.float64 if name == "transition_matrix"
-                             else np.int64)
+            value = _take(getattr(self, name), np.float64 if name == "transition_matrix"
+                          else np.int64)
             if value.shape != (s, s):
                 raise InputError(f"model {name} has shape {value.shape}, expected ({s}, {s}) "
                                  f"for {self.state_space.describe()}")
@@ -195,7 +224,7 @@ class MarkovModel:
                 _validated(f) for f in self.pass_fractions):
             if len(self.pass_fractions) != 2:
                 raise InputError("pass fractions must be (up, down)")
-            fractions = tuple(np.array(f, dtype=np.float64) for f in self.pass_fractions)
+            fractions = tuple(_take(f, np.float64) for f in self.pass_fractions)
             if any(f.shape != (s, s) for f in fractions):
                 raise InputError(f"pass fractions must have shape ({s}, {s})")
             up, down = fractions

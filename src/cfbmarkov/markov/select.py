@@ -58,6 +58,7 @@ from cfbmarkov.analysis.rtd import net_passes, residence_times, rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import DiscreteTrajectories, read_frames
 from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, fit_model
+from cfbmarkov.markov.model import hand_over
 from cfbmarkov.markov.rtd import rtd_of_split_chain
 from cfbmarkov.markov.states import state_space_from_name
 from cfbmarkov.trajectories import opened
@@ -354,8 +355,10 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                              + "; ".join(f"{c.states} lag {c.lag:g}: {c.error}" for c in final))
         best = min(usable, key=lambda c: c.score)
         chosen = discrete_of[(best.states, best.lag)]
+        counts = count_transitions(chosen)
+        hand_over(counts.counts, counts.counts_up, counts.counts_down)   # counted for it alone
         model = estimator_from_name(estimator, chosen.state_space, best.lag).fit_counts(
-            count_transitions(chosen), window=chosen.window, source=traj.path)
+            counts, window=chosen.window, source=traj.path)
         if coherent:
             from cfbmarkov.markov.coherence import estimate_coherence
 
