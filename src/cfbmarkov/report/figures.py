@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import numpy as np
-from matplotlib.colors import LogNorm, Normalize
+from matplotlib.colors import LogNorm, Normalize, to_rgba
 from matplotlib.figure import Figure
 
 from cfbmarkov._atomic import atomic_path
@@ -428,7 +428,8 @@ def plot_snapshots(positions_ref, positions_model, left_group_ref, left_group_mo
                                             (pmod, masks[1], labels[1]))):
         n = pos.shape[1]
         order = rng.permutation(n)
-        colours = np.where(mask, PURPLE, GREEN)[order]
+        # RGBA rows, not colour names: one conversion, not one per particle and panel
+        colours = np.where(mask[:, None], to_rgba(PURPLE), to_rgba(GREEN))[order]
         size = float(np.clip(0.4 * area / max(n, 1), 0.1, 8.0))   # ~40 % of the area inked
         for c in range(k):
             ax = axes[r, c]
