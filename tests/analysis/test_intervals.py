@@ -340,3 +340,48 @@ def test_flow_variability_sees_a_change_of_speed_and_no_steady_flow(tmp_path):
     assert with_flow.flow is not None and without.flow is None
     assert with_flow.model_rt_mean == without.rt_mean == without.model_rt_mean
     assert with_flow.rt_mean[1] - with_flow.rt_mean[0] > 2 * (without.rt_mean[1] - without.rt_mean[0])
+
+
+def test_model_mixing_curve_equals_the_matrix_powers(tmp_path):
+    """The kernel's curve and SD equal the formulas evaluated with dense matrix powers, for
+    a periodic and an open riser (to rounding)."""
+    def reference(matrix, left_states, states, left, steps, is_open):
+        present = states >= 0
+        n_left = np.bincount(states[present & left], minlength=left_states.size)
+        n_all = np.bincount(states[present], minlength=left_states.size)
+        total = present.sum()
+        mean, sd = [], []
+        for k in range(steps + 1):
+            power = np.linalg.matrix_power(matrix, k)
+            h, g = power @ left_states, power @ np.ones(left_states.size)
+            expected, spread = n_left @ h, n_left @ (h * (1 - h))
+            if not is_open:
+                mean.append(expected / total)
+                sd.append(np.sqrt(spread) / total)
+                continue
+            alive = n_all @ g
+            f = expected / alive
+            mean.append(f)
+            sd.append(np.sqrt(max(spread - 2 * f * (n_left @ (h * (1 - g)))
+                                  + f * f * (n_all @ (g * (1 - g))), 0)) / alive)
+        return np.array(mean), np.array(sd)
+
+    model = synthetic.cell_chain(FLOW)
+    rng = np.random.default_rng(3)
+    states = rng.choice(model.n_states, 150)
+    left = rng.random(150) < 0.5
+    left_states = _left_columns(model).astype(float)
+    mean, sd = model_mixing_curve(model, states, left, 25)
+    want = reference(model.transition_matrix, left_states, states, left, 25, False)
+    assert np.allclose(mean, want[0], rtol=1e-12, atol=1e-15)
+    assert np.allclose(sd, want[1], rtol=1e-10, atol=1e-15)
+    path = synthetic.write_open_run(tmp_path / "open.h5", FLOW, 200, 1.5, seed=5)
+    opened_model = fit_model(path, FLOW.grid, FLOW.lag, (0.0, 1.5), "mle")
+    states, positions, _ = opened_model.initial_states(path, 0.75)
+    present = states >= 0
+    left = present & (np.where(present, positions[:, 0], np.inf) < 0.5 * FLOW.width)
+    mean, sd = model_mixing_curve(opened_model, states, left, 20)
+    want = reference(np.asarray(opened_model.absorbing_matrix), left_states, states, left, 20,
+                     True)
+    assert np.allclose(mean, want[0], rtol=1e-12, atol=1e-15)
+    assert np.allclose(sd, want[1], rtol=1e-10, atol=1e-15)

@@ -22,6 +22,7 @@ docs/definitions.md, section "mixing".
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 from cfbmarkov.errors import InputError
@@ -160,10 +161,6 @@ def _mixing_of_present(traj, frames: slice, half: float, block: int
     return np.concatenate(times).astype(np.float64), np.concatenate(parts)
 
 
-#: state counts up to which :func:`model_mixing_curve` propagates with the dense matrix
-DENSE_STATES = 256
-
-
 def _left_states(space) -> np.ndarray:
     """Indicator (float64, shape (S,)) of the states whose cell column is < m/2."""
     columns = int(space.columns)
@@ -174,6 +171,56 @@ def _left_states(space) -> np.ndarray:
     return (column < columns // 2).astype(np.float64)
 
 
+@nb.njit(cache=True)
+def _propagated_mixing(indptr, indices, data, left_states, n_left, n_all, total, is_open,
+                       steps, mean, var):
+    """The loop of :func:`model_mixing_curve` (Numba kernel): h_k = P^k 1_left (and, open,
+    g_k = Q^k 1) by one sparse product per lag over the CSR rows of the matrix, with the
+    curve's mean and variance at each k written into ``mean`` and ``var`` [steps + 1]."""
+    n = left_states.size
+    h = left_states.copy()
+    g = np.ones(n)
+    h_next = np.empty(n)
+    g_next = np.empty(n)
+    for k in range(steps + 1):
+        if k:
+            for i in range(n):
+                acc_h = 0.0
+                acc_g = 0.0
+                for q in range(indptr[i], indptr[i + 1]):
+                    acc_h += data[q] * h[indices[q]]
+                    if is_open:
+                        acc_g += data[q] * g[indices[q]]
+                h_next[i] = acc_h
+                g_next[i] = acc_g
+            h, h_next = h_next, h
+            if is_open:
+                g, g_next = g_next, g
+        expected = 0.0
+        spread = 0.0
+        for i in range(n):
+            expected += n_left[i] * h[i]
+            spread += n_left[i] * h[i] * (1.0 - h[i])
+        if not is_open:
+            mean[k] = expected / total
+            var[k] = spread / (total * total)
+            continue
+        present_k = 0.0
+        cross = 0.0
+        scatter = 0.0
+        for i in range(n):
+            present_k += n_all[i] * g[i]
+            cross += n_left[i] * h[i] * (1.0 - g[i])
+            scatter += n_all[i] * g[i] * (1.0 - g[i])
+        if present_k <= 1e-12 * total:
+            mean[k] = np.nan
+            var[k] = np.nan
+            continue
+        f = expected / present_k
+        mean[k] = f
+        var[k] = max(spread - 2.0 * f * cross + f * f * scatter, 0.0) / (present_k * present_k)
+
+
 def model_mixing_curve(model, states, left_group, steps: int) -> tuple[np.ndarray, np.ndarray]:
     """A Markov model's expected mixing curve from given initial states, and the Monte Carlo
     standard deviation of a prediction's curve about it.
@@ -181,8 +228,7 @@ def model_mixing_curve(model, states, left_group, steps: int) -> tuple[np.ndarra
     Each particle moves independently by the model's transition matrix P, so a tracer that
     starts in state s lies in the left half (a cell column < m/2) k lags later with
     probability h_k[s], h_k = P^k 1_left (backward propagation: one sparse product per lag
-    whatever the number of particles; a dense one up to
-    :data:`DENSE_STATES` states). With n_s the left tracer group's members starting in
+    whatever the number of particles, in a Numba kernel). With n_s the left tracer group's members starting in
     state s and N particles,
 
         M(k) = sum_s n_s h_k[s] / N,   Var = sum_s n_s h_k[s] (1 - h_k[s]) / N^2,
@@ -244,33 +290,15 @@ def model_mixing_curve(model, states, left_group, steps: int) -> tuple[np.ndarra
     if not present.any():
         raise InputError("mixing curve of no tracer (no particle present at the start)")
     is_open = model.boundary == "open"
-    matrix = model.absorbing_matrix if is_open else model.transition_matrix
-    if n_states > DENSE_STATES:          # a sparse product per lag; below, a dense one is faster
-        matrix = sp.csr_matrix(matrix)
+    matrix = sp.csr_matrix(model.absorbing_matrix if is_open else model.transition_matrix)
     n_left = np.bincount(states[present & left_group], minlength=n_states).astype(np.float64)
     n_all = np.bincount(states[present], minlength=n_states).astype(np.float64)
     total = float(present.sum())
-    h = np.column_stack([left_states, np.ones(n_states)]) if is_open else left_states[:, None]
     mean = np.empty(int(steps) + 1)
     var = np.empty(int(steps) + 1)
-    for k in range(int(steps) + 1):
-        if k:
-            h = matrix @ h
-        hl = h[:, 0]
-        expected = n_left @ hl
-        spread = n_left @ (hl * (1.0 - hl))
-        if not is_open:
-            mean[k], var[k] = expected / total, spread / total ** 2
-            continue
-        g = h[:, 1]
-        present_k = n_all @ g
-        if present_k <= 1e-12 * total:
-            mean[k] = var[k] = np.nan
-            continue
-        f = expected / present_k
-        mean[k] = f
-        var[k] = max(spread - 2.0 * f * (n_left @ (hl * (1.0 - g)))
-                     + f * f * (n_all @ (g * (1.0 - g))), 0.0) / present_k ** 2
+    _propagated_mixing(matrix.indptr.astype(np.int64), matrix.indices.astype(np.int64),
+                       matrix.data.astype(np.float64), left_states.astype(np.float64), n_left,
+                       n_all, total, bool(is_open), int(steps), mean, var)
     return mean, np.sqrt(np.maximum(var, 0.0))
 
 
