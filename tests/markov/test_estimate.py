@@ -183,3 +183,19 @@ def test_sparse_counts_and_split_chain_equal_the_dense_ones(tmp_path, markov_flo
                 assert np.abs(rtd.probability - ref.probability).max() < 1e-12
     # 40 particles leave some states of a visited cell never left: the fill was checked
     assert checked_fill == (name in ("cells-velocity", "cells-previous"))
+
+
+def test_sparse_counts_of_an_open_riser_count_each_face_crossing_once(tmp_path, markov_flow):
+    """Open riser, two windows counted together: the sparse counts hold the dense ones'
+    exits, entries and censored tracks exactly once, and the same transitions."""
+    from cfbmarkov.markov.estimate import count_transitions
+
+    path = synthetic.write_open_run(tmp_path / "open.h5", markov_flow, 200, 1.5, seed=4)
+    windows = [discretize(path, markov_flow.grid, markov_flow.lag, w)
+               for w in ((0.0, 0.7), (0.7, 1.5))]
+    dense = count_transitions(windows, frame_average=False)
+    sparse = count_transitions(windows, frame_average=False, sparse=True)
+    assert dense.faces.exits.sum() > 0 and dense.faces.entries.sum() > 0
+    for field in ("exits", "entries", "vanished", "appeared"):
+        assert np.array_equal(getattr(sparse.faces, field), getattr(dense.faces, field))
+    assert np.array_equal(sparse.counts.toarray(), dense.counts)

@@ -23,6 +23,7 @@ model lists such states.
 
 from __future__ import annotations
 
+import dataclasses
 import os
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
@@ -38,6 +39,17 @@ from cfbmarkov.markov.states import StateSpace
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
+
+
+@nb.njit(cache=True)
+def _frame_occupancy(states, t, lag_frames, occupancy):
+    """occupancy[i] = N_i(t), the particles in state i at frame t whose frame t + lag is
+    present too (Numba; ``occupancy`` [S] is overwritten)."""
+    occupancy[:] = 0
+    for p in range(states.shape[1]):
+        i = states[t, p]
+        if i >= 0 and states[t + lag_frames, p] >= 0:
+            occupancy[i] += 1
 
 
 @nb.njit(cache=True)
@@ -58,11 +70,7 @@ def _count_kernel(states, vertical, lag_frames, height, n_states, counts, counts
     occupancy = np.zeros(n_states, dtype=np.int64)
     pairs = 0
     for t in range(n_frames - lag_frames):
-        occupancy[:] = 0
-        for p in range(n_particles):
-            i = states[t, p]
-            if i >= 0 and states[t + lag_frames, p] >= 0:
-                occupancy[i] += 1
+        _frame_occupancy(states, t, lag_frames, occupancy)
         for i in range(n_states):
             if occupancy[i] > 0:
                 occupied_frames[i] += 1
@@ -118,11 +126,7 @@ def _sparse_count_kernel(states, vertical, lag_frames, height, n_states, with_fr
     last_frame = -np.ones(n_states, np.int64)   # the last frame state i was occupied in
     for t in range(n_frames - lag_frames):
         if with_frame_average:      # N_i(t) first: the weights 1 / N_i(t) of Eq. 2
-            occupancy[:] = 0
-            for p in range(n_particles):
-                i = states[t, p]
-                if i >= 0 and states[t + lag_frames, p] >= 0:
-                    occupancy[i] += 1
+            _frame_occupancy(states, t, lag_frames, occupancy)
         for p in range(n_particles):
             i = states[t, p]
             j = states[t + lag_frames, p]
@@ -305,8 +309,7 @@ def count_transitions(data, frame_average: bool = True, sparse: bool = False
     minimal-image rule on y (``docs/definitions.md``, Pass direction).
     """
     windows = as_discrete_list(data)
-    space = windows[0].state_space
-    s = space.n_states
+    s = windows[0].state_space.n_states
     if sparse:
         return _count_sparse(windows, frame_average)
     counts = np.zeros((s, s), np.int64)
@@ -315,34 +318,27 @@ def count_transitions(data, frame_average: bool = True, sparse: bool = False
     frame_sum = np.zeros((s, s) if frame_average else (1, 1), np.float64)
     occupied = np.zeros(s, np.int64)
     pairs = 0
-    open_riser = windows[0].boundary == "open"
-    faces = FaceCounts(*(np.zeros(s, np.int64) for _ in range(4))) if open_riser else None
-    for window in windows:
-        if window.state_space != space or not window.matches_lag(windows[0].lag):
-            raise InputError("discrete trajectories counted together must share the state "
-                             "space and the lag")
-        if (window.boundary == "open") != open_riser:
-            raise InputError("discrete trajectories counted together must share the boundary "
-                             "(periodic or open)")
-        if open_riser:
-            _open_kernel(np.ascontiguousarray(window.states, dtype=np.int32),
-                         np.ascontiguousarray(window.vertical, dtype=np.float64),
-                         int(window.lag_frames), face_band(space), float(window.height),
-                         faces.exits, faces.entries, faces.vanished, faces.appeared)
-        pairs += _count_kernel(np.ascontiguousarray(window.states, dtype=np.int32),
-                               np.ascontiguousarray(window.vertical, dtype=np.float64),
-                               int(window.lag_frames), float(window.height), s, counts, up,
-                               down, frame_sum, occupied, bool(frame_average))
+    faces = _new_faces(windows)
+    for window, states, vertical in _window_arrays(windows, faces):
+        pairs += _count_kernel(states, vertical, int(window.lag_frames), float(window.height),
+                               s, counts, up, down, frame_sum, occupied, bool(frame_average))
     return TransitionCounts(counts, up, down, frame_sum if frame_average else None, occupied,
                             pairs, faces)
 
 
-def _count_sparse(windows, frame_average: bool) -> TransitionCounts:
-    """:func:`count_transitions` with scipy.sparse CSR arrays (one window at a time)."""
+def _new_faces(windows) -> FaceCounts | None:
+    """Empty face counts for windows of an open riser; None for a periodic one."""
+    s = windows[0].state_space.n_states
+    return (FaceCounts(*(np.zeros(s, np.int64) for _ in range(4)))
+            if windows[0].boundary == "open" else None)
+
+
+def _window_arrays(windows, faces: FaceCounts | None):
+    """Each window with its states (int32) and heights (float64) as contiguous arrays, after
+    checking that it shares the first one's state space, lag and boundary; an open riser's
+    face crossings are added to ``faces`` on the way."""
     space = windows[0].state_space
-    s = space.n_states
     open_riser = windows[0].boundary == "open"
-    total = None
     for window in windows:
         if window.state_space != space or not window.matches_lag(windows[0].lag):
             raise InputError("discrete trajectories counted together must share the state "
@@ -352,17 +348,23 @@ def _count_sparse(windows, frame_average: bool) -> TransitionCounts:
                              "(periodic or open)")
         states = np.ascontiguousarray(window.states, dtype=np.int32)
         vertical = np.ascontiguousarray(window.vertical, dtype=np.float64)
-        faces = None
         if open_riser:
-            faces = FaceCounts(*(np.zeros(s, np.int64) for _ in range(4)))
             _open_kernel(states, vertical, int(window.lag_frames), face_band(space),
                          float(window.height), faces.exits, faces.entries, faces.vanished,
                          faces.appeared)
+        yield window, states, vertical
+
+
+def _count_sparse(windows, frame_average: bool) -> TransitionCounts:
+    """:func:`count_transitions` with scipy.sparse CSR arrays (one window at a time)."""
+    s = windows[0].state_space.n_states
+    faces = _new_faces(windows)
+    total = None
+    for window, states, vertical in _window_arrays(windows, faces):
         occupied = np.zeros(s, np.int64)
         indptr, indices, counts, up, down, average, pairs = _sparse_count_kernel(
             states, vertical, int(window.lag_frames), float(window.height), s,
             bool(frame_average), occupied)
-
         # sort each row's destinations once; the four value arrays follow the same order
         order = sp.csr_array((np.arange(indices.size, dtype=np.int64), indices, indptr),
                              shape=(s, s))
@@ -374,9 +376,9 @@ def _count_sparse(windows, frame_average: bool) -> TransitionCounts:
                     for values in ((counts, up, down, average) if frame_average
                                    else (counts, up, down))]
         part = TransitionCounts(*matrices[:3], matrices[3] if frame_average else None,
-                                occupied, int(pairs), faces)
+                                occupied, int(pairs))
         total = part if total is None else total + part
-    return total
+    return dataclasses.replace(total, faces=faces)     # the faces of every window, once
 
 
 def open_chain(counts: TransitionCounts) -> dict:
