@@ -385,3 +385,33 @@ def test_model_mixing_curve_equals_the_matrix_powers(tmp_path):
                      True)
     assert np.allclose(mean, want[0], rtol=1e-12, atol=1e-15)
     assert np.allclose(sd, want[1], rtol=1e-10, atol=1e-15)
+
+
+@pytest.mark.parametrize("estimator", ["mle", "paper"])
+def test_sparse_bootstrap_chains_are_the_bootstrap_models(tmp_path, estimator):
+    """The periodic intervals' resamples as sparse split chains: the same draws as
+    block_bootstrap_models, with the same RTD in the window (both directions) and the same
+    mixing curve to rounding, for both estimators and a space with memory."""
+    from cfbmarkov.analysis.intervals import _bootstrap_chains, _resampled_rtd
+    from cfbmarkov.markov import DirectionCells
+
+    path = tmp_path / "run.h5"
+    synthetic.write_run(path, FLOW, 300, 3.0, seed=6)
+    space = DirectionCells(FLOW.columns, FLOW.rows, FLOW.width, FLOW.height)
+    model = fit_model(path, space, FLOW.lag, (0.5, 2.5), estimator)
+    entry = model.rtd(1.0).entry_distribution
+    states, positions, _ = model.initial_states(path, 2.5)
+    left = positions[:, 0] < 0.5 * FLOW.width
+    dense = list(block_bootstrap_models(model, blocks=6, resamples=8, seed=3))
+    sparse = list(_bootstrap_chains(model, 6, 8, 3))
+    assert len(dense) == len(sparse) == 8
+    for a, b in zip(dense, sparse):
+        assert np.abs(a.transition_matrix - b.transition_matrix.toarray()).max() < 1e-14
+        for direction in ("up", "down"):
+            ra = _resampled_rtd(a, 1.0, direction, entry)
+            rb = _resampled_rtd(b, 1.0, direction, entry)
+            assert ra.mean == pytest.approx(rb.mean, rel=1e-10)
+            assert ra.sd == pytest.approx(rb.sd, rel=1e-10)
+        ma = model_mixing_curve(a, states, left, 12)[0]
+        mb = model_mixing_curve(b, states, left, 12)[0]
+        assert np.allclose(ma, mb, rtol=1e-12, atol=1e-15)

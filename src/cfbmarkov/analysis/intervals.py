@@ -61,13 +61,19 @@ def _resampled_rtd(model, window_length: float, direction: str, entry):
     """A resampled model's RTD in the window, from the fitted model's entry distribution
     (one sparse LU per resample saved: the spread of the entry distribution is left out,
     that of the transitions kept)."""
+    steps = max(2, int(round(window_length / model.lag)))
+    if isinstance(model, _SplitChain):
+        from cfbmarkov.markov.rtd import rtd_of_split_chain
+
+        up, down = (model.up, model.down) if direction == "up" else (model.down, model.up)
+        return rtd_of_split_chain(up, down, model.stay, model.lag, max_steps=steps,
+                                  entry=entry).in_window(window_length)
     if model.boundary == "open" or entry is None:
         return model.rtd(window_length, direction)
     from cfbmarkov.markov.rtd import exact_rtd
 
     up, down = ((model.up_fraction, model.down_fraction) if direction == "up"
                 else (model.down_fraction, model.up_fraction))
-    steps = max(2, int(round(window_length / model.lag)))
     return exact_rtd(model.transition_matrix, up, down, model.lag, max_steps=steps,
                      entry=entry).in_window(window_length)
 
@@ -122,8 +128,29 @@ def block_bootstrap_models(model, *, blocks: int = 10, resamples: int = 100, see
     B. Efron and R. J. Tibshirani, An Introduction to the Bootstrap, Chapman & Hall (1993),
     Ch. 8.6 (the moving-block bootstrap; here non-overlapping blocks).
     """
+    from cfbmarkov.markov.estimate import estimator_from_name
+
+    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=False)
+    estimator = estimator_from_name(model.estimator, model.state_space, model.lag,
+                                    connected=model.connected)
+
+    def draw():
+        for total in totals:
+            try:
+                resampled = estimator.fit_counts(total)
+            except (CfbmarkovError, ValueError):
+                continue                 # counts that form no model: no figure
+            yield resampled
+
+    return draw()
+
+
+def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: bool):
+    """The summed counts of each block-bootstrap resample of the model's fitting window
+    (:func:`block_bootstrap_models`; dense, or scipy.sparse with ``sparse``). Checks and
+    counts on the call; the sums are formed as the iterator is consumed."""
     from cfbmarkov.markov.discrete import discretize
-    from cfbmarkov.markov.estimate import count_transitions, estimator_from_name
+    from cfbmarkov.markov.estimate import count_transitions
 
     if int(blocks) < 2 or int(resamples) < 1:
         raise InputError(f"a block bootstrap needs at least 2 blocks and 1 resample ({blocks}, "
@@ -143,10 +170,8 @@ def block_bootstrap_models(model, *, blocks: int = 10, resamples: int = 100, see
     times = discrete.times
     frame_average = model.estimator == "paper"
     counts = [count_transitions(discrete.block(float(times[a]), float(times[b - 1 + lag_frames])),
-                                frame_average=frame_average)
+                                frame_average=frame_average, sparse=sparse)
               for a, b in zip(cuts[:-1], cuts[1:])]
-    estimator = estimator_from_name(model.estimator, model.state_space, model.lag,
-                                    connected=model.connected)
     rng = np.random.default_rng(seed)
 
     def draw():
@@ -155,13 +180,40 @@ def block_bootstrap_models(model, *, blocks: int = 10, resamples: int = 100, see
             total = counts[picked[0]]
             for k in picked[1:]:
                 total = total + counts[k]
-            try:
-                resampled = estimator.fit_counts(total)
-            except (CfbmarkovError, ValueError):
-                continue                 # counts that form no model: no figure
-            yield resampled
+            yield total
 
     return draw()
+
+
+@dataclass(frozen=True)
+class _SplitChain:
+    """A bootstrap resample's chain without dense arrays: P split by pass direction (what
+    :func:`_resampled_rtd` and :func:`~cfbmarkov.analysis.mixing.model_mixing_curve` read
+    of a periodic model)."""
+
+    up: object
+    down: object
+    stay: object
+    state_space: object
+    lag: float
+    boundary: str = "periodic"
+
+    @property
+    def transition_matrix(self):
+        return (self.up + self.down + self.stay).tocsr()
+
+
+def _bootstrap_chains(model, blocks: int, resamples: int, seed: int):
+    """:func:`block_bootstrap_models`'s resamples (the same draws) as :class:`_SplitChain`,
+    from sparse counts: for a periodic riser's model without the largest-set restriction,
+    whose resamples are only asked for their RTD and mixing curve. The same chains to
+    rounding (tested), without the [S, S] arrays of a model per resample."""
+    from cfbmarkov.markov.estimate import estimator_from_name
+
+    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=True)
+    estimator = estimator_from_name(model.estimator, model.state_space, model.lag)
+    for total in totals:
+        yield _SplitChain(*estimator.split_chain(total), model.state_space, model.lag)
 
 
 def flow_variability(model, window_length: float, *, direction: str = "up",
@@ -419,8 +471,12 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         m_exact, m_se = model_mixing_curve(model, states, left, int(lags.max()))
         curve = (lags, states, left)
     means, sds, rtds, curves = [], [], [], []
-    for resampled in block_bootstrap_models(model, blocks=blocks, resamples=resamples,
-                                            seed=seed):
+    if model.boundary == "periodic" and not model.connected and entry is not None:
+        # the resamples' RTDs and mixing curves from sparse chains (no [S, S] model each)
+        drawn = _bootstrap_chains(model, blocks, resamples, seed)
+    else:
+        drawn = block_bootstrap_models(model, blocks=blocks, resamples=resamples, seed=seed)
+    for resampled in drawn:
         if curve is not None:      # the transitions' spread; defined with or without residences
             curves.append(model_mixing_curve(resampled, curve[1], curve[2],
                                              int(curve[0].max()))[0][curve[0]])
