@@ -355,7 +355,7 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                              + "; ".join(f"{c.states} lag {c.lag:g}: {c.error}" for c in final))
         best = min(usable, key=lambda c: c.score)
         chosen = discrete_of[(best.states, best.lag)]
-        counts = count_transitions(chosen)
+        counts = count_transitions(chosen, frame_average=estimator == "paper")
         hand_over(counts.counts, counts.counts_up, counts.counts_down)   # counted for it alone
         model = estimator_from_name(estimator, chosen.state_space, best.lag).fit_counts(
             counts, window=chosen.window, source=traj.path)
