@@ -171,6 +171,60 @@ def _first_passage(indptr, indices, data, exit_probability, start, tol, max_step
     return max_steps
 
 
+@nb.njit(cache=True, parallel=True)
+def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val,
+                          up_ptr, up_idx, up_val, exit_probability, live, start, tol,
+                          max_steps, out):
+    """:func:`_first_passage` on the lap-deficit levels without the [S L, S L] matrix
+    (Numba kernel). The mass is held as ``v[i, g]`` (state i, level g = 0 .. L-1, the
+    levels of a state side by side); one lag moves it by P_stay within a level, P_down one
+    level deeper and P_up one level up (from level 0: the exit). The three parts come as
+    CSR of their transposes (rows: destination j), so each non-zero is read once a lag and
+    gathers the L levels of its source at once. Mass on a state and level from which no
+    exit can be reached (``live`` false) is dropped, as :func:`exact_rtd` drops those
+    states. The terms of each destination and level are summed in the order of the full
+    matrix's transpose (down passes, stays, up passes), rows shared among the threads, the
+    sums over states in one thread: the same bits as the full matrix's propagation, for
+    any number of threads. Returns the number of steps taken."""
+    n, levels = start.shape
+    v = start.copy()
+    w = np.empty_like(v)
+    for k in range(max_steps):
+        absorbed = 0.0
+        for i in range(n):
+            absorbed += v[i, 0] * exit_probability[i]
+        out[k] = absorbed
+        for j in nb.prange(n):
+            for g in range(levels):
+                w[j, g] = 0.0
+            for q in range(down_ptr[j], down_ptr[j + 1]):      # from level g - 1
+                value = down_val[q]
+                i = down_idx[q]
+                for g in range(1, levels):
+                    w[j, g] += value * v[i, g - 1]
+            for q in range(stay_ptr[j], stay_ptr[j + 1]):
+                value = stay_val[q]
+                i = stay_idx[q]
+                for g in range(levels):
+                    w[j, g] += value * v[i, g]
+            for q in range(up_ptr[j], up_ptr[j + 1]):          # from level g + 1
+                value = up_val[q]
+                i = up_idx[q]
+                for g in range(levels - 1):
+                    w[j, g] += value * v[i, g + 1]
+            for g in range(levels):
+                if not live[j, g]:
+                    w[j, g] = 0.0
+        remaining = 0.0
+        for g in range(levels):
+            for j in range(n):
+                remaining += w[j, g]
+        v, w = w, v
+        if remaining < tol:
+            return k + 1
+    return max_steps
+
+
 def _reaching(q: sp.csr_matrix, targets: np.ndarray) -> np.ndarray:
     """Which states reach one of ``targets`` (bool [n]) through the non-zeros of ``q``
     (themselves included): a breadth-first search of the reversed graph from a virtual node
@@ -318,7 +372,6 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
     idx = np.flatnonzero(live)
     position = -np.ones(s * levels, np.int64)
     position[idx] = np.arange(idx.size)
-    q_live = q[idx][:, idx]
     if not live[entries].any():
         raise TrappedResidences(
             f"every residence is trapped: from none of the {entries.size} state(s) particles "
@@ -329,11 +382,13 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
         if entry.shape != (s,) or entry.min() < 0 or not entry[live[:s]].sum() > 0:
             raise CfbmarkovError("entry distribution must be [S], non-negative, and put mass "
                                  "on states from which the top can be reached")
-        start = np.zeros(idx.size)
-        start[position[np.flatnonzero(live[:s])]] = entry[live[:s]]
+        start = np.zeros((levels, s))
+        start[0, live[:s]] = entry[live[:s]]
         start /= start.sum()
-        return _finish(q_live, exit_probability[idx], start, tol, max_steps, lag,
-                       entry / entry.sum())
+        return _finish_levels((p_down, p_stay, p_up), live.reshape(levels, s),
+                              exit_probability[:s], start, tol, max_steps, lag,
+                              entry / entry.sum())
+    q_live = q[idx][:, idx]
     lu = splu(sp.csc_matrix(sp.identity(idx.size) - q_live))
     # absorption into entry e' starting from entry e at level 0: B = (I-Q)^-1 R; its
     # stationary distribution nu (the entry states of a steady riser) by power iteration,
@@ -372,7 +427,11 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
                              "stationary mass from which the top can be reached")
     entry = np.zeros(s)
     entry[entries] = nu
-    rtd = _finish(q_live, exit_probability[idx], start, tol, max_steps, lag, entry)
+    full_start = np.zeros(s * levels)
+    full_start[idx] = start
+    rtd = _finish_levels((p_down, p_stay, p_up), live.reshape(levels, s),
+                         exit_probability[:s], full_start.reshape(levels, s), tol, max_steps,
+                         lag, entry)
     return ResidenceTimeDistribution(rtd.lag, rtd.probability, rtd.unresolved,
                                      rtd.entry_distribution, None, max(1, len(classes)))
 
@@ -456,6 +515,25 @@ def _finish(q_live, exit_probability, start, tol, max_steps, lag, entry
     out = np.zeros(max_steps)
     steps = _first_passage(qt.indptr, qt.indices, qt.data, exit_probability, start, tol,
                            max_steps, out)
+    f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
+    return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
+
+
+def _finish_levels(parts, live, exit_probability, start, tol, max_steps, lag, entry
+                   ) -> ResidenceTimeDistribution:
+    """:func:`_finish` on the levels: ``parts`` (P_down, P_stay, P_up), ``live`` and
+    ``start`` [L, S] (passed to the kernel as [S, L]), ``exit_probability`` [S] (from
+    level 0)."""
+    arrays = []
+    for part in parts:
+        transposed = sp.csr_matrix(part.T)
+        transposed.sort_indices()
+        arrays += [transposed.indptr.astype(np.int64), transposed.indices.astype(np.int64),
+                   transposed.data.astype(np.float64)]
+    out = np.zeros(max_steps)
+    steps = _first_passage_levels(*arrays, np.ascontiguousarray(exit_probability, np.float64),
+                                  np.ascontiguousarray(live.T), np.ascontiguousarray(start.T),
+                                  tol, max_steps, out)
     f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
     return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
 
