@@ -41,6 +41,7 @@ rows = 6
 lag = 0.01
 fit_window = [0.2, 0.5]
 predict_window = [0.5, 0.8]
+interval_resamples = 20
 """
 STAGES = ["case.json", "cfd-dem.h5", "model-paper.h5", "model-mle.h5", "model-auto.h5",
           "prediction-paper.h5", "prediction-mle.h5", "prediction-auto.h5",
