@@ -254,16 +254,13 @@ def test_level_propagation_equals_the_full_deficit_matrix(markov_flow, markov_ru
     through the bottom."""
     import scipy.sparse as sp
 
-    from cfbmarkov.markov.rtd import _finish, _reaching, exact_rtd, split_by_pass
+    from cfbmarkov.markov.rtd import (_finish, _reaching, deficit_matrix, exact_rtd,
+                                      split_by_pass)
 
     def full(p_up, p_down, p_stay, start_level0, levels=9, steps=200_000):
         s = p_up.shape[0]
-        lower = sp.diags(np.ones(levels - 1), 1, shape=(levels, levels))
-        raise_ = sp.diags(np.ones(levels - 1), -1, shape=(levels, levels))
-        q = (sp.kron(sp.identity(levels), p_stay) + sp.kron(lower, p_down)
-             + sp.kron(raise_, p_up)).tocsr()
-        exits = np.zeros(s * levels)
-        exits[:s] = np.asarray(p_up.sum(axis=1)).ravel()
+        q, exits = deficit_matrix(sp.csr_matrix(p_up), sp.csr_matrix(p_down),
+                                  sp.csr_matrix(p_stay), levels)
         live = _reaching(q, exits > 0)
         idx = np.flatnonzero(live)
         start = np.zeros(s * levels)

@@ -341,6 +341,35 @@ def split_by_pass(matrix, up_fraction: np.ndarray, down_fraction: np.ndarray
     return _part(up_part), _part(down_part), _part(stay_part)
 
 
+def deficit_matrix(p_up, p_down, p_stay, levels: int) -> tuple[sp.csr_matrix, np.ndarray]:
+    """Q, the transient part of the chain on (lap-deficit level, state), and its exit
+    probabilities (module docstring): level index g = -l, a down pass moves g -> g + 1, an
+    up pass g -> g - 1, and an up pass from g = 0 leaves.
+
+    Parameters
+    ----------
+    p_up, p_down, p_stay : scipy.sparse matrix, shape (S, S)
+        P split by pass direction (:func:`split_by_pass`).
+    levels : int
+        L, the deficit levels kept (``deficit_levels + 1``).
+
+    Returns
+    -------
+    q : scipy.sparse.csr_matrix, shape (S L, S L)
+        Index g * S + i.
+    exit_probability : ndarray of float64, shape (S L,)
+        The row sums of P_up on level 0, zero elsewhere.
+    """
+    s = p_up.shape[0]
+    lower = sp.diags(np.ones(levels - 1), 1, shape=(levels, levels))
+    raise_ = sp.diags(np.ones(levels - 1), -1, shape=(levels, levels))
+    q = (sp.kron(sp.identity(levels), p_stay) + sp.kron(lower, p_down)
+         + sp.kron(raise_, p_up)).tocsr()
+    exit_probability = np.zeros(s * levels)
+    exit_probability[:s] = np.asarray(p_up.sum(axis=1)).ravel()
+    return q, exit_probability
+
+
 def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8,
                        tol: float = 1e-10, max_steps: int = 200_000,
                        entry: np.ndarray | None = None, entry_flux: np.ndarray | None = None,
@@ -355,13 +384,7 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
     if chain is None:
         chain = (p_up + p_down + p_stay).tocsr()
     levels = deficit_levels + 1
-    # level index g = -l: a down pass moves g -> g+1, an up pass g -> g-1 (g = 0: exit)
-    lower = sp.diags(np.ones(levels - 1), 1, shape=(levels, levels))
-    raise_ = sp.diags(np.ones(levels - 1), -1, shape=(levels, levels))
-    q = (sp.kron(sp.identity(levels), p_stay) + sp.kron(lower, p_down)
-         + sp.kron(raise_, p_up)).tocsr()
-    exit_probability = np.zeros(s * levels)
-    exit_probability[:s] = np.asarray(p_up.sum(axis=1)).ravel()
+    q, exit_probability = deficit_matrix(p_up, p_down, p_stay, levels)
     entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
     if entries.size == 0:
         raise CfbmarkovError("the model has no transition up through the top: particles never "
