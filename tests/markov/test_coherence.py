@@ -2,6 +2,8 @@
 with probability rho, so patches of particles move together; each particle alone still
 follows the chain."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -158,3 +160,39 @@ def test_intervals_of_a_coherent_model_measure_its_monte_carlo_noise(coherent):
         widths[rho] = iv.rt_mean[1] - iv.rt_mean[0]
     # correlated residences: the replicate runs spread more than independent samples would
     assert widths[model.coherence] > 1.2 * widths[0.0], widths
+
+
+def test_calibrated_coherence_matches_the_windows_cluster_index(coherent, tmp_path):
+    """The snapshots fit (what ``coherent=True`` fits): Monte Carlo snapshots with the
+    calibrated rho show the window's own cluster index (within the 5 % tolerance, the same
+    trial as the calibration's); the index from cells is that of the file's positions
+    (:func:`cluster_index`); too few steps and a window without a complete frame are refused."""
+    from cfbmarkov.analysis.clusters import cluster_index
+    from cfbmarkov.markov.coherence import (CALIBRATION_BURN_IN, CALIBRATION_STEPS,
+                                            calibrate_coherence, snapshot_cluster_index)
+    from cfbmarkov.trajectories import Trajectories
+
+    run, observed = coherent
+    n_cells = FLOW.columns * FLOW.rows
+    with Trajectories(run) as traj:
+        from_file = cluster_index(traj, slice(0, STEPS + 1), FLOW.columns, FLOW.rows)[0]
+    assert np.nanmean(snapshot_cluster_index(observed, n_cells)) == pytest.approx(from_file,
+                                                                                rel=1e-12)
+    window = discretize(run, FLOW.grid, FLOW.lag, (0.0, 100 * FLOW.lag))
+    plain = fit_model(run, FLOW.grid, FLOW.lag, (0.0, 100 * FLOW.lag), "mle")
+    rho = calibrate_coherence(plain, window)
+    assert 0.4 < rho < 0.8
+    target = np.nanmean(snapshot_cluster_index(window.states, n_cells))
+    trial, _ = plain.with_coherence(rho).monte_carlo(window.states[0], CALIBRATION_STEPS, seed=0)
+    index = np.nanmean(snapshot_cluster_index(trial[CALIBRATION_BURN_IN + 1:], n_cells))
+    assert abs(np.log(index / target)) <= 0.05
+    # rho = 0 where the window is no more clustered than the independent chain
+    calm = plain.with_coherence(0.0).monte_carlo(window.states[0], 100, seed=1)[0]
+    calm_window = dataclasses.replace(window, states=calm.astype(np.int32))
+    assert calibrate_coherence(plain, calm_window) < 0.25
+    with pytest.raises(InputError, match="more than"):
+        calibrate_coherence(plain, window, steps=CALIBRATION_BURN_IN)
+    holes = window.states.copy()
+    holes[:, 0] = -1
+    with pytest.raises(InputError, match="every particle has a state"):
+        calibrate_coherence(plain, dataclasses.replace(window, states=holes))

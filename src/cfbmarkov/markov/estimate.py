@@ -554,9 +554,9 @@ class TransitionEstimator:
         model = self.fit_counts(counts, window=windows[0].window,
                                 source=sources[0] if len(sources) == 1 else sources)
         if self.coherent:
-            from cfbmarkov.markov.coherence import estimate_coherence
+            from cfbmarkov.markov.coherence import calibrate_coherence
 
-            model = model.with_coherence(estimate_coherence(windows, model.transition_matrix))
+            model = model.with_coherence(calibrate_coherence(model, windows))
         return model
 
     def chain(self, counts: TransitionCounts

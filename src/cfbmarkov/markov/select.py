@@ -360,12 +360,12 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         model = estimator_from_name(estimator, chosen.state_space, best.lag).fit_counts(
             counts, window=chosen.window, source=traj.path)
         if coherent:
-            from cfbmarkov.markov.coherence import estimate_coherence
+            from cfbmarkov.markov.coherence import calibrate_coherence
 
             if chosen.boundary == "open":
                 raise InputError("coherent moves (--coherent) are fitted for periodic risers "
                                  "only yet; fit an open riser without it")
-            model = model.with_coherence(estimate_coherence(chosen, model.transition_matrix))
+            model = model.with_coherence(calibrate_coherence(model, chosen))
     cells = next((c for c in usable if c.states == "cells" and c.lag == lag), None)
     if criterion == "ck":
         why = (f"a block of the fitting window holds only {fewest} complete residences "
