@@ -26,9 +26,10 @@ instead of q_s. Two fits of the coherence on the fitting window (``docs/method.m
   the chain cannot track, so the snapshots of a model with this rho are less clustered
   than the flow (paper-scale runs: a cluster index 51-68 % below the CFD-DEM's at 8 m/s);
 - *snapshots* (:func:`calibrate_coherence`, what ``coherent=True`` fits): the rho whose
-  Monte Carlo snapshots, run from the window's first complete frame, show the window's
-  own mean cluster index (the index of dispersion of the cell counts,
-  :func:`snapshot_cluster_index`): the cluster measure itself is matched, as a model's
+  Monte Carlo snapshots, run for 120 lags (3 s at the paper's 0.025 s) from the window's
+  first complete frame, show the window's own mean cluster index (the index of dispersion
+  of the cell counts, :func:`snapshot_cluster_index`): the cluster measure itself is
+  matched, as a model's
   free parameter is matched to a moment of the data in indirect inference (C. Gourieroux,
   A. Monfort and E. Renault, "Indirect inference", J. Appl. Econometrics 8, S85 (1993)).
   The index grows monotonically with rho (more particles move together), so a bracketing
@@ -132,7 +133,7 @@ def estimate_coherence(data, transition_matrix: np.ndarray) -> float:
 
 
 #: Monte Carlo steps of one trial of :func:`calibrate_coherence` (lags)
-CALIBRATION_STEPS = 60
+CALIBRATION_STEPS = 120
 #: ... of which the first ones are left out of the index (the start frame is the data's)
 CALIBRATION_BURN_IN = 10
 #: the largest coherence tried (rho = 1 moves every particle of a state as one, for ever)
