@@ -519,8 +519,9 @@ def build_parser() -> argparse.ArgumentParser:
                         "never left then trap no particle")
     s.add_argument("--coherent", action="store_true",
                    help="the cluster model: also fit how often particles that share a state "
-                        "move together (coherence), so that predictions keep clusters; the "
-                        "RTD and maps are unchanged (periodic risers)")
+                        "move together (coherence, calibrated so that the model's snapshots "
+                        "show the window's cluster index), so that predictions keep clusters; "
+                        "the RTD and maps are unchanged (periodic risers)")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
     s.set_defaults(func=_cmd_fit)
 

@@ -449,7 +449,9 @@ class TransitionEstimator:
         paper's chain keeps every observed transition).
     coherent : bool, optional
         Also fit the coherence of the particles' moves (the cluster model,
-        :mod:`cfbmarkov.markov.coherence`), for a periodic riser; off by default
+        :mod:`cfbmarkov.markov.coherence`), for a periodic riser: calibrated so that the
+        model's Monte Carlo snapshots show the window's cluster index
+        (:func:`~cfbmarkov.markov.coherence.calibrate_coherence`); off by default
         (independent particles, the paper's).
 
     Attributes
