@@ -343,6 +343,12 @@ def test_flow_variability_sees_a_change_of_speed_and_no_steady_flow(tmp_path):
     assert with_flow.flow is not None and without.flow is None
     assert with_flow.model_rt_mean == without.rt_mean == without.model_rt_mean
     assert with_flow.rt_mean[1] - with_flow.rt_mean[0] > 2 * (without.rt_mean[1] - without.rt_mean[0])
+    # a flow term larger than the value itself: the lower bounds stop at 0 (the 3 m/s paper
+    # run's first window gave -0.89 s before they were cut)
+    short = prediction_intervals(m_change, samples, np.linspace(0.0, 1.25, 26), 1.25,
+                                 resamples=10)
+    assert short.flow[0] > 0.3 / 1.6449       # z * flow beyond the value: uncut, below 0
+    assert short.rt_mean[0] == 0.0 and short.rt_sd[0] >= 0.0 and short.rt_mean[1] > 0.3
 
 
 def test_model_mixing_curve_equals_the_matrix_powers(tmp_path):

@@ -542,11 +542,11 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
             c_lo, c_hi = interval(m_values, np.asarray(curves), m_exact[curve[0]],
                                   m_se[curve[0]])
             band = np.vstack([np.clip(c_lo, 0.0, 1.0), np.clip(c_hi, 0.0, 1.0)])
-    return PredictionIntervals(
-        float(level), (float(m_lo), float(m_hi)), (float(max(s_lo, 0.0)), float(s_hi)),
+    return PredictionIntervals(     # E(RT) and SD(RT) are not negative: bounds cut at 0
+        float(level), (float(max(m_lo, 0.0)), float(m_hi)), (float(max(s_lo, 0.0)), float(s_hi)),
         np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means), int(blocks),
         None if curve is None else m_times, band,
-        (float(model_mean[0]), float(model_mean[1])),
+        (float(max(model_mean[0], 0.0)), float(model_mean[1])),
         (float(max(model_sd[0], 0.0)), float(model_sd[1])),
         None if relative is None else (float(f_mean), float(f_sd)))
 
