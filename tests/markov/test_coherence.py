@@ -167,9 +167,9 @@ def test_calibrated_coherence_matches_the_windows_cluster_index(coherent, tmp_pa
     calibrated rho show the window's own cluster index (within the 5 % tolerance, the same
     trial as the calibration's); the index from cells is that of the file's positions
     (:func:`cluster_index`); too few steps and a window without a complete frame are refused."""
-    from cfbmarkov.analysis.clusters import cluster_index
+    from cfbmarkov.analysis.clusters import cluster_index, snapshot_cluster_index
     from cfbmarkov.markov.coherence import (CALIBRATION_BURN_IN, CALIBRATION_STEPS,
-                                            calibrate_coherence, snapshot_cluster_index)
+                                            calibrate_coherence)
     from cfbmarkov.trajectories import Trajectories
 
     run, observed = coherent

@@ -18,6 +18,33 @@ from __future__ import annotations
 import numpy as np
 
 
+def snapshot_cluster_index(cells: np.ndarray, n_cells: int) -> np.ndarray:
+    """The index of dispersion of the cell counts of each snapshot.
+
+    Parameters
+    ----------
+    cells : ndarray of int, shape (T, N)
+        Cell of particle p in frame t (negative: absent, not counted).
+    n_cells : int
+        Number of cells.
+
+    Returns
+    -------
+    ndarray of float64, shape (T,)
+        var(n_c) / mean(n_c) over the cells of each frame (-), NaN for an empty frame: the
+        measure of :func:`cluster_index`, from cells (e.g. a model's states mapped to
+        their cells).
+    """
+    cells = np.asarray(cells)
+    n_frames = cells.shape[0]
+    keep = cells >= 0
+    index = cells + n_cells * np.arange(n_frames)[:, None]
+    counts = np.bincount(index[keep], minlength=n_cells * n_frames).reshape(
+        n_frames, n_cells).astype(np.float64)
+    mean = counts.mean(axis=1)
+    return np.divide(counts.var(axis=1), mean, out=np.full(n_frames, np.nan), where=mean > 0)
+
+
 def cluster_index(traj, frames: slice, columns: int, rows: int, block: int = 64
                   ) -> tuple[float, float]:
     """Mean and SD over frames of the index of dispersion of the cell counts.
@@ -50,12 +77,8 @@ def cluster_index(traj, frames: slice, columns: int, rows: int, block: int = 64
                           columns - 1).astype(np.int64)
             row = np.clip(np.floor(np.nan_to_num(pos[..., 1]) / traj.height * rows), 0,
                           rows - 1).astype(np.int64)
-        cell = row * columns + col + n_cells * np.arange(pos.shape[0])[:, None]
-        counts = np.bincount(cell[present], minlength=n_cells * pos.shape[0]).reshape(
-            pos.shape[0], n_cells).astype(np.float64)
-        mean = counts.mean(axis=1)
-        values.append(np.divide(counts.var(axis=1), mean, out=np.full(mean.size, np.nan),
-                                where=mean > 0))
+        values.append(snapshot_cluster_index(np.where(present, row * columns + col, -1),
+                                             n_cells))
     v = np.concatenate(values) if values else np.zeros(0)
     v = v[np.isfinite(v)]
     if v.size == 0:

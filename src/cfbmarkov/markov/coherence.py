@@ -28,12 +28,12 @@ instead of q_s. Two fits of the coherence on the fitting window (``docs/method.m
 - *snapshots* (:func:`calibrate_coherence`, what ``coherent=True`` fits): the rho whose
   Monte Carlo snapshots, run for 120 lags (3 s at the paper's 0.025 s) from the window's
   first complete frame, show the window's own mean cluster index (the index of dispersion
-  of the cell counts, :func:`snapshot_cluster_index`): the cluster measure itself is
-  matched, as a model's
-  free parameter is matched to a moment of the data in indirect inference (C. Gourieroux,
-  A. Monfort and E. Renault, "Indirect inference", J. Appl. Econometrics 8, S85 (1993)).
-  The index grows monotonically with rho (more particles move together), so a bracketing
-  search (regula falsi) finds it in a few short runs.
+  of the cell counts, :func:`~cfbmarkov.analysis.clusters.snapshot_cluster_index`): the
+  cluster measure itself is matched, as a model's free parameter is matched to a moment of
+  the data in indirect inference (C. Gourieroux, A. Monfort and E. Renault, "Indirect
+  inference", J. Appl. Econometrics 8, S85 (1993)). The index grows monotonically with rho
+  (more particles move together), so a bracketing search (regula falsi) finds it in a few
+  short runs.
 
 References
 ----------
@@ -142,32 +142,6 @@ MAX_COHERENCE = 0.98
 FIRST_GUESS = 0.7
 
 
-def snapshot_cluster_index(cells: np.ndarray, n_cells: int) -> np.ndarray:
-    """The index of dispersion of the cell counts of each snapshot.
-
-    Parameters
-    ----------
-    cells : ndarray of int, shape (T, N)
-        Cell of particle p in frame t (negative: absent, not counted).
-    n_cells : int
-        Number of cells.
-
-    Returns
-    -------
-    ndarray of float64, shape (T,)
-        var(n_c) / mean(n_c) over the cells of each frame (-), NaN for an empty frame: the
-        measure of :func:`cfbmarkov.analysis.clusters.cluster_index`, from cells.
-    """
-    cells = np.asarray(cells)
-    n_frames = cells.shape[0]
-    keep = cells >= 0
-    index = cells + n_cells * np.arange(n_frames)[:, None]
-    counts = np.bincount(index[keep], minlength=n_cells * n_frames).reshape(
-        n_frames, n_cells).astype(np.float64)
-    mean = counts.mean(axis=1)
-    return np.divide(counts.var(axis=1), mean, out=np.full(n_frames, np.nan), where=mean > 0)
-
-
 def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: int = 0,
                         tolerance: float = 0.05) -> float:
     """The coherence whose Monte Carlo snapshots match the window's cluster index
@@ -210,6 +184,7 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
         For too few steps, or a window without a frame in which every particle present has
         a state, or without two particles.
     """
+    from cfbmarkov.analysis.clusters import snapshot_cluster_index
     from cfbmarkov.markov.discrete import as_discrete_list
 
     if int(steps) <= CALIBRATION_BURN_IN:
@@ -275,4 +250,4 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
     return float(rho)
 
 
-__all__ = ["calibrate_coherence", "estimate_coherence", "snapshot_cluster_index"]
+__all__ = ["calibrate_coherence", "estimate_coherence"]
