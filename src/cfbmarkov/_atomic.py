@@ -43,9 +43,14 @@ def temporary_path(target: str | os.PathLike, suffix: str = "") -> Path:
     except OSError as exc:
         raise write_error(exc, target) from None
     try:
-        os.fchmod(fd, file_mode())      # mkstemp makes 0600 files: give the umask's mode
-    except (OSError, AttributeError):   # pragma: no cover - no fchmod (Windows)
-        pass
+        try:
+            os.fchmod(fd, file_mode())      # mkstemp makes 0600 files: give the umask's mode
+        except (OSError, AttributeError):   # pragma: no cover - no fchmod (Windows)
+            pass
+    except BaseException:               # Ctrl-C here: the caller never learns the name
+        os.close(fd)
+        discard(tmp)
+        raise
     os.close(fd)
     return Path(tmp)
 

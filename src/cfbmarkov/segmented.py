@@ -186,10 +186,18 @@ class SegmentedTrajectoryWriter:
         return self.n_segments
 
     def abort(self) -> None:
-        """Discard the current, unfinished segment (complete segments stay)."""
-        if self._current is not None:
-            self._current.abort()
-            self._current = None
+        """Discard the current, unfinished segment (complete segments stay).
+
+        Temporary files of the next segment are removed too, even one whose writer never
+        finished opening (an interrupt can arrive at any point of its creation).
+        """
+        try:
+            if self._current is not None:
+                self._current.abort()
+                self._current = None
+        finally:
+            for path in self.parts.glob(f".segment-{self.n_segments:05d}.h5.*.tmp"):
+                path.unlink(missing_ok=True)
 
     def finish(self, attach: dict[str, tuple[dict, dict]] | None = None) -> Path:
         """Merge the segments into the output file and remove the parts folder.

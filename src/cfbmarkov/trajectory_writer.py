@@ -180,7 +180,15 @@ class TrajectoryWriter:
         except (OSError, RuntimeError) as exc:
             discard(self._tmp)
             raise write_error(exc, self.path) from None
-        self._create(n, d, source, parameters, origin, axes, boundary, frame_interval)
+        except BaseException:           # Ctrl-C while the file opens: leave nothing behind
+            discard(self._tmp)
+            raise
+        try:
+            self._create(n, d, source, parameters, origin, axes, boundary, frame_interval)
+        except BaseException:           # e.g. Ctrl-C while the datasets are created
+            if not self._closed:
+                self.abort()
+            raise
 
     @_writes
     def _create(self, n, d, source, parameters, origin, axes, boundary, frame_interval) -> None:

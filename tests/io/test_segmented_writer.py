@@ -66,3 +66,20 @@ def test_resume_discards_what_followed_the_checkpoint(tmp_path):
         assert t.laps()[-1].max() >= 1
     with pytest.raises(InputError, match="segment segment-00000.h5 is missing"):
         SegmentedTrajectoryWriter.resume(tmp_path / "other.h5", 1, **options())
+
+
+def test_abort_removes_a_segment_whose_writer_never_finished_opening(tmp_path):
+    # an interrupt between the temporary file's creation and the writer's return leaves a
+    # temporary segment the segmented writer does not hold: abort still removes it
+    times, pos = frames(4)
+    out = tmp_path / "run.h5"
+    w = SegmentedTrajectoryWriter(out, **options())
+    w.append(times[0], pos[0])
+    w.close_segment()
+    stray = w.parts / ".segment-00001.h5.abc123.tmp"
+    stray.write_bytes(b"half")
+    other = w.parts / ".segment-00007.h5.zzz.tmp.keep"
+    other.write_bytes(b"not ours")
+    w.abort()
+    assert not stray.exists() and other.exists()
+    assert (w.parts / "segment-00000.h5").exists()

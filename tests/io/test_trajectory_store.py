@@ -242,3 +242,22 @@ def test_parameters_are_json(tmp_path, run):
     with h5py.File(path) as f:
         stored = json.loads(f.attrs["parameters"])
     assert stored == {"array": [0, 1, 2], "value": 0.5, "path": str(tmp_path)}
+
+
+@pytest.mark.parametrize("stage", ["open", "create"])
+def test_writer_interrupted_while_it_opens_leaves_no_file(tmp_path, run, monkeypatch, stage):
+    # Ctrl-C can land while the constructor opens the file or creates its datasets, before
+    # the caller holds the writer to abort it: the constructor itself must clean up
+    import cfbmarkov.trajectory_writer as tw
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    if stage == "open":
+        monkeypatch.setattr(tw.h5py, "File", interrupted)
+    else:
+        monkeypatch.setattr(tw.TrajectoryWriter, "_create", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        TrajectoryWriter(tmp_path / "run.h5", run.ids, width=run.width, height=run.height,
+                         source="test")
+    assert list(tmp_path.iterdir()) == []
