@@ -41,6 +41,8 @@ def _env():
     env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
     env["PYTHONWARNINGS"] = "ignore"
     env["PYTHONDONTWRITEBYTECODE"] = "1"     # no .pyc cut short by a file size limit
+    if os.environ.get("PYTEST_XDIST_WORKER"):   # beside another worker (tests/conftest.py)
+        env["NUMBA_NUM_THREADS"] = "1"
     return env
 
 

@@ -1,0 +1,20 @@
+"""Suite-wide settings.
+
+The suite runs in two pytest-xdist workers (``-n auto --maxprocesses 2`` in pyproject.toml):
+Numba compiles kernels on one core, so two workers keep both cores busy while the other
+compiles. Each worker runs its Numba kernels on one thread, and the command lines that the
+tests of outputs and faults start get ``NUMBA_NUM_THREADS=1`` (their ``_env``), so that two
+workers do not oversubscribe the cores (OpenMP barriers wait for descheduled threads). The
+worker's own Numba still knows every core (``numba.config.NUMBA_NUM_THREADS``; it cannot
+change once its threads run), so tests of the thread count can set two.
+"""
+
+import os
+
+
+def pytest_configure(config):
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        import cfbmarkov  # noqa: F401  (selects the OpenMP threading layer first)
+        import numba
+
+        numba.set_num_threads(1)
