@@ -56,8 +56,12 @@ def _cell_value(field, dx, dy, x, y, periodic_y=True):
             fy = ny - 1.0
     j = np.floor(fy)
     wy = fy - j
-    j0 = int(j) % ny
-    j1 = (j0 + 1) % ny
+    j0 = int(j)
+    if j0 < 0 or j0 >= ny:  # rare: an integer modulo costs a tenth of the drag kernel
+        j0 = j0 % ny
+    j1 = j0 + 1
+    if j1 >= ny:
+        j1 = 0
     return ((1.0 - wy) * ((1.0 - wx) * field[i0, j0] + wx * field[i1, j0])
             + wy * ((1.0 - wx) * field[i0, j1] + wx * field[i1, j1]))
 

@@ -31,8 +31,8 @@ from cfbmarkov._atomic import atomic_path, h5_file
 from cfbmarkov._outputs import claim_output
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
-from cfbmarkov.simulate.cfd import (GasGrid, GasSolver, GasState, deposit_drag_jacobian,
-                                    deposit_drag_reaction, void_fraction_field)
+from cfbmarkov.simulate.cfd import (GasGrid, GasSolver, GasState, deposit_drag,
+                                    void_fraction_field)
 from cfbmarkov.simulate.coupling import (drag_coefficients, drag_force_at_new_gas,
                                          place_without_overlap)
 from cfbmarkov.simulate.dem import ContactLaw, DEMSystem
@@ -164,8 +164,8 @@ class CoupledRiser:
         drag_coefficients(positions, velocities, self.gas.u, self.gas.v, eps, grid.dx,
                           grid.dy, d, case.gas.density, case.gas.viscosity,
                           self._coefficient, self._force, periodic_y)
-        fu, fv = deposit_drag_reaction(grid, x, y, self._force[:, 0], self._force[:, 1], d)
-        ku, kv = deposit_drag_jacobian(grid, x, y, self._coefficient, d)
+        fu, fv, ku, kv = deposit_drag(grid, x, y, self._force[:, 0], self._force[:, 1],
+                                      self._coefficient, d)
         self.gas = self.solver.step(self.gas, eps, fu, fv, ku, kv)
         drag_force_at_new_gas(positions, velocities, self.gas.u, self.gas.v, grid.dx, grid.dy,
                               self._coefficient, self._force)

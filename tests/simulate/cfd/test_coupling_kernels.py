@@ -5,8 +5,10 @@ import math
 import numpy as np
 import pytest
 
+from cfbmarkov.errors import InputError
 from cfbmarkov.simulate.cfd import (
     GasGrid,
+    deposit_drag,
     deposit_drag_jacobian,
     deposit_drag_reaction,
     gas_velocity_at,
@@ -83,6 +85,18 @@ def test_reaction_conserves_momentum_and_is_the_transpose():
     lhs = (np.sum(fu * wu) + np.sum(fv * wv)) * vol
     rhs = np.sum(fx[inner] * ux) + np.sum(fy[inner] * uy)
     assert lhs == pytest.approx(rhs, rel=1e-11)
+    # the gas step deposits both in one pass: the same fields, bit for bit (particles with
+    # no force, or no coefficient, or neither, included)
+    fx[200:260] = 0.0
+    fy[200:230] = 0.0
+    coeff[230:290] = 0.0
+    fused = deposit_drag(g, x, y, fx, fy, coeff, thickness=D)
+    separate = (*deposit_drag_reaction(g, x, y, fx, fy, thickness=D),
+                *deposit_drag_jacobian(g, x, y, coeff, thickness=D))
+    for a, b in zip(fused, separate):
+        assert a.shape == b.shape and np.array_equal(a, b)
+    with pytest.raises(InputError, match="one value per particle"):
+        deposit_drag(g, x, y, fx, fy, coeff[:-1], thickness=D)
 
 
 def test_void_fraction_conserves_solid_volume():

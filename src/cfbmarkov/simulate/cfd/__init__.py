@@ -17,6 +17,7 @@ Typical use (the coupling calls ``step`` once per gas step)::
 import cfbmarkov  # noqa: F401  (sets the numba threading layer before anything compiles)
 from cfbmarkov.simulate.cfd.coupling import (
     VOID_FRACTION_FLOOR,
+    deposit_drag,
     deposit_drag_jacobian,
     deposit_drag_reaction,
     deposit_solid_volume,
@@ -46,6 +47,7 @@ __all__ = [
     "VOID_FRACTION_FLOOR",
     "continuity_residual",
     "cross_section_flux",
+    "deposit_drag",
     "deposit_drag_jacobian",
     "deposit_drag_reaction",
     "deposit_solid_volume",
