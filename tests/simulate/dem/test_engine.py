@@ -181,6 +181,32 @@ def test_checkpoint_continues_bit_for_bit():
     assert same(snapshot(a), snapshot(b))
 
 
+def test_wall_candidates_hold_every_particle_near_a_wall():
+    """The step adds wall contacts only for the candidates found after each list build (and
+    after a restart): every particle within the skin of a side wall or the floor at the
+    start of a step must be one of them, through rebuilds and a checkpoint."""
+    W, H = 0.012, 0.04
+    pos, vel, om = gas(150, W, H, seed=3, speed=3.0)
+    s = make(pos, vel, W, H, dt=2e-6, g=9.81, om=om, bottom_wall=True)
+    skin = 3e-4
+    seen_near = 0
+    for block in range(60):
+        if block == 30:
+            s = DEMSystem.from_state({k: v.copy() for k, v in s.state().items()})
+        s.step(5)
+        a, sc = s._arrays, s._scratch
+        st = a["st"][a["ctl"][0]]
+        x, y, r = st[:, 0], st[:, 1], st[:, 5]
+        near = np.flatnonzero((x < r + skin) | (x > W - r - skin) | (y < r + skin))
+        n_wall = int(sc["n_wall"][0])
+        assert n_wall >= 0
+        if a["ctl"][3]:  # C_REBUILD: the next step builds the lists and finds them anew
+            continue
+        assert set(near) <= set(sc["wall_ids"][:n_wall].tolist())
+        seen_near += len(near)
+    assert s.n_rebuilds > 5 and seen_near > 100
+
+
 def test_thread_count_does_not_change_results():
     n0 = numba.get_num_threads()
     try:

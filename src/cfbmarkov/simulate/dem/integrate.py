@@ -1,13 +1,16 @@
 """Time integration of the 2D DEM engine: the step kernels and the advance loop (numba).
 
-Per step: 3 parallel loops, :func:`.contact.pair_forces` (every pair force once, into
-``pf``), :func:`sum_pairs` (each particle sums its pairs' forces and its external force,
-into ``fsum``) and :func:`move` (each particle adds its wall contacts and gravity,
-integrates and checks itself); a list rebuild (:func:`.neighbours.rebuild`) before a step
-whose particles may have left their lists. :func:`fused_step` does the last two in one loop
-with the same bits; it is kept for single-particle tests, as the step uses the two loops:
-with the variable-length pair loops inside the long per-particle body, that one loop took
-about 1.6 times as long as the two together (dilute benchmark; docs/performance.md).
+Per step: :func:`.contact.pair_forces` (every pair force once, into ``pf``),
+:func:`sum_pairs` (each particle sums its pairs' forces and its external force, into
+``fsum``), :func:`wall_contacts` (the few particles within the skin of a wall add their wall
+contacts to ``fsum``; the candidates are found after each list build by
+:func:`wall_candidates`) and :func:`move` (each particle adds gravity, integrates and checks
+itself, with no branch but the loop-invariant periodic one); a list rebuild
+(:func:`.neighbours.rebuild`) before a step whose particles may have left their lists.
+:func:`fused_step` does the last three in one loop with the same bits; it is kept for
+single-particle tests, as the step uses the separate loops: with the variable-length pair
+loops inside the long per-particle body, that one loop took about 1.6 times as long as the
+two together (dilute benchmark; docs/performance.md).
 
 Determinism: each particle sums its pairs in a fixed order (pairs where it is the second
 member, then those where it is the first), with no atomics and no shared accumulators, so
@@ -114,20 +117,22 @@ def _walls(i, st, wh, fx, fy, tq, prm):
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
-def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
-    """The rest of particle i's step once its pair forces are summed into (fx, fy, tq): its
-    wall contacts, gravity, the leapfrog update (written to ``so``) and the checks.
+def _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm):
+    """Particle i's leapfrog update from its total force (fx, fy) and torque tq (pairs,
+    external force and walls; gravity added here), written to ``so``, and its checks.
 
-    Returns (moved beyond skin/2, boundary passes, bad, side walls' and floor's vertical
-    force on it). Inlined into :func:`fused_step` and :func:`move` (inlining it is worth 2x in
-    the dilute case: called, it halved the rate).
+    Branch-free apart from the loop-invariant ``periodic``: a pass through the top or bottom,
+    a bad particle and a move beyond skin/2 are selects and sums, so that the loop over all
+    particles (:func:`move`) is one straight body (no call, no rare path inside it). ``laps``
+    and ``evf`` are written for every particle (+-1 on a pass, 0 to ``evf`` otherwise: it is
+    all zeros between steps), ``bad`` only changes where a reason is found.
+
+    Returns (moved beyond skin/2, boundary passes, bad). Inlined into :func:`move` and
+    :func:`fused_step`.
     """
     dt = prm.dt
     W = prm.width
     H = prm.height
-    skin = prm.skin
-    floor = prm.floor
-    periodic = prm.periodic
     xi = st[i, 0]
     yi = st[i, 1]
     vxi = st[i, 2]
@@ -136,53 +141,36 @@ def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
     Ri = st[i, 5]
     imi = st[i, 6]
     rIi = st[i, 7]
-    isbad = 0
-    nev = 0
-    wall_fy = 0.0
-    floor_fy = 0.0
-    # near a wall (within the skin): contact, or a spring to clear (a particle cannot
-    # leave a contact by more than the skin in one step without tripping the checks)
-    if xi < Ri + skin or xi > W - Ri - skin or (floor and yi < Ri + skin):
-        fx, fy, tq, isbad, wall_fy, floor_fy = _walls(i, st, wh, fx, fy, tq, prm)
-    # integrate (leapfrog)
     vxn = vxi + dt * (fx * imi)
     vyn = vyi + dt * (fy * imi - prm.gravity)
     wn = ui + dt * (tq * rIi)
     xn = xi + dt * vxn
     yn = yi + dt * vyn
-    if periodic:
-        if yn >= H:
-            yn -= H
-            laps[i] += 1
-            evf[i] = 1
-            nev = 1
-        elif yn < 0.0:
-            yn += H
-            if yn >= H:  # a step of -1e-17 rounds to H: that is the point 0
-                yn = 0.0
-            laps[i] -= 1
-            evf[i] = -1
-            nev = 1
-        if not (yn >= 0.0 and yn < H):
-            isbad = BAD_RANGE
-    elif yn < -Ri:
-        isbad = BAD_WALL
-    if xn < -Ri or xn > W + Ri:
-        isbad = BAD_WALL
-    if not (xn == xn and yn == yn and wn == wn and vxn == vxn and vyn == vyn):
-        isbad = BAD_NAN
-    nbad = 0
-    if isbad != 0:
-        bad[i] = isbad
-        nbad = 1
+    ddy = 0.0
+    if prm.periodic:
+        up = yn >= H
+        down = yn < 0.0
+        yn = yn - H if up else yn
+        yn = yn + H if down else yn
+        yn = 0.0 if (down and yn >= H) else yn  # a step of -1e-17 rounds to H: that is 0
+        d = (1 if up else 0) - (1 if down else 0)
+        laps[i] += d
+        evf[i] = d
+        nev = 1 if d != 0 else 0
+        isbad = 0 if (yn >= 0.0 and yn < H) else BAD_RANGE
+        ddy = yn - aux[i, 1]
+        ddy = ddy - H if ddy > 0.5 * H else ddy
+        ddy = ddy + H if ddy < -0.5 * H else ddy
+    else:
+        nev = 0
+        isbad = BAD_WALL if yn < -Ri else 0
+        ddy = yn - aux[i, 1]
+    isbad = BAD_WALL if (xn < -Ri or xn > W + Ri) else isbad
+    finite = xn == xn and yn == yn and wn == wn and vxn == vxn and vyn == vyn
+    isbad = isbad if finite else BAD_NAN
+    bad[i] = isbad if isbad != 0 else bad[i]
     ddx = xn - aux[i, 0]
-    ddy = yn - aux[i, 1]
-    if periodic:
-        if ddy > 0.5 * H:
-            ddy -= H
-        elif ddy < -0.5 * H:
-            ddy += H
-    hs = 0.5 * skin
+    hs = 0.5 * prm.skin
     moved = 1 if ddx * ddx + ddy * ddy > hs * hs else 0
     so[i, 0] = xn
     so[i, 1] = yn
@@ -192,6 +180,37 @@ def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
     so[i, 5] = Ri
     so[i, 6] = imi
     so[i, 7] = rIi
+    return moved, nev, 1 if isbad != 0 else 0
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _near_wall(x, y, R, prm):
+    """Whether a particle at (x, y) of radius R is within the skin of a side wall or the
+    floor (it may touch it, or hold a spring to clear, during this step)."""
+    skin = prm.skin
+    return x < R + skin or x > prm.width - R - skin or (prm.floor and y < R + skin)
+
+
+@njit(cache=True, inline="always", fastmath=FASTMATH)
+def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
+    """The rest of particle i's step once its pair forces are summed into (fx, fy, tq): its
+    wall contacts (:func:`_walls`, near a wall only), then :func:`_integrate`.
+
+    Returns (moved beyond skin/2, boundary passes, bad, side walls' and floor's vertical
+    force on it). Inlined into :func:`fused_step`.
+    """
+    wall_fy = 0.0
+    floor_fy = 0.0
+    wbad = 0
+    # near a wall (within the skin): contact, or a spring to clear (a particle cannot
+    # leave a contact by more than the skin in one step without tripping the checks)
+    if _near_wall(st[i, 0], st[i, 1], st[i, 5], prm):
+        fx, fy, tq, wbad, wall_fy, floor_fy = _walls(i, st, wh, fx, fy, tq, prm)
+        if wbad != 0:
+            bad[i] = wbad
+    moved, nev, nbad = _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm)
+    if wbad != 0:
+        nbad = 1
     return moved, nev, nbad, wall_fy, floor_fy
 
 
@@ -294,25 +313,95 @@ def sum_pairs(st, aux, pstart, lowstart, lowpid, pf, fsum):
         fsum[i, 2] = tq
 
 
+@njit(cache=True)
+def wall_candidates(aux, wall_ids, prm):
+    """The particles that may come within the skin of a wall before the next list build.
+
+    Between two builds a particle stays within skin/2 of its reference position (the step
+    that takes it farther asks for a build), so one within the skin of a wall during a step
+    has its reference position within 1.5 skins of it; this takes 2 skins (and the largest
+    radius), a superset, and :func:`wall_contacts` checks each candidate exactly.
+
+    Parameters
+    ----------
+    aux : float64 (N, 4)
+        Reference positions (m) in columns 0-1.
+    wall_ids : int64 (N,)
+        Output: the candidates' indices (cell order), ascending.
+    prm : DEMParams
+
+    Returns
+    -------
+    int
+        Number of candidates (the first entries of ``wall_ids``).
+    """
+    lim = prm.rmax + 2.0 * prm.skin
+    right = prm.width - lim
+    floor = prm.floor
+    n = 0
+    for i in range(aux.shape[0]):
+        x = aux[i, 0]
+        if x < lim or x > right or (floor and aux[i, 1] < lim):
+            wall_ids[n] = i
+            n += 1
+    return n
+
+
 @njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
-def move(st, so, aux, wh, laps, fsum, evf, bad, prm):
-    """Walls, gravity, integration and checks of every particle (:func:`_finish`), from its
-    summed pair and external force ``fsum``; returns as :func:`fused_step`."""
+def wall_contacts(st, wh, fsum, bad, wall_ids, n_wall, prm):
+    """Wall contacts of the candidates near a wall (:func:`wall_candidates`), added to their
+    summed force ``fsum`` (N, 3) before :func:`move`; each adds to its own row only.
+
+    Returns
+    -------
+    nbad : int
+        Particles overlapping a wall beyond the blow-up limit (flagged in ``bad``).
+    wall_fy, floor_fy : float
+        Vertical force of the side walls and of the floor on the particles, N
+        (diagnostics, summed in any order).
+    """
+    nbad = 0
+    wall_fy = 0.0
+    floor_fy = 0.0
+    for q in prange(n_wall):
+        i = wall_ids[q]
+        if _near_wall(st[i, 0], st[i, 1], st[i, 5], prm):
+            fx, fy, tq, isbad, wf, ff = _walls(i, st, wh, fsum[i, 0], fsum[i, 1], fsum[i, 2],
+                                               prm)
+            fsum[i, 0] = fx
+            fsum[i, 1] = fy
+            fsum[i, 2] = tq
+            wall_fy += wf
+            floor_fy += ff
+            if isbad != 0:
+                bad[i] = isbad
+                nbad += 1
+    return nbad, wall_fy, floor_fy
+
+
+@njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
+def move(st, so, aux, laps, fsum, evf, bad, prm):
+    """Gravity, integration and checks of every particle (:func:`_integrate`) from its
+    summed force ``fsum`` (pairs, external force and walls: :func:`sum_pairs`, then
+    :func:`wall_contacts`).
+
+    Returns
+    -------
+    nmove, nev, nbad : int
+        Particles moved beyond skin/2 since the last list build, boundary passes, bad
+        particles.
+    """
     N = st.shape[0]
     nmove = 0
     nev = 0
     nbad = 0
-    wall_fy = 0.0
-    floor_fy = 0.0
     for i in prange(N):
-        m, e, nb, wf, ff = _finish(i, st, so, aux, wh, laps, evf, bad, fsum[i, 0], fsum[i, 1],
-                                   fsum[i, 2], prm)
+        m, e, nb = _integrate(i, st, so, aux, laps, evf, bad, fsum[i, 0], fsum[i, 1], fsum[i, 2],
+                              prm)
         nmove += m
         nev += e
         nbad += nb
-        wall_fy += wf
-        floor_fy += ff
-    return nmove, nev, nbad, wall_fy, floor_fy
+    return nmove, nev, nbad
 
 
 @njit(cache=True)
@@ -347,7 +436,7 @@ def _record_events(st_old, st_new, ids, evf, step, prm, ev_t, ev_p, ev_d, ctl):
 
 @njit(cache=True)
 def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart, cfill, perm,
-            invperm, prm, nsteps, ev_t, ev_p, ev_d, wall_impulse):
+            invperm, wall_ids, n_wall, prm, nsteps, ev_t, ev_p, ev_d, wall_impulse):
     """Advance up to ``nsteps`` steps (rebuilding the lists when needed).
 
     Parameters
@@ -366,6 +455,11 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
         Event flags and bad-particle reasons.
     key, cstart, cfill, perm, invperm : int64 arrays
         Rebuild scratch (see :func:`.neighbours.rebuild`).
+    wall_ids : int64 (N,)
+        The wall candidates (:func:`wall_candidates`) of the current list.
+    n_wall : int64 (1,)
+        Their number; -1 when not yet found for the current list (after a restart): they
+        are found then, and after every list build.
     prm : DEMParams
     nsteps : int
         Steps to do.
@@ -394,6 +488,9 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
                            invperm, prm)
             if need > 0:
                 return done, ST_STRIDE, need
+            n_wall[0] = wall_candidates(aux[ctl[C_PA]], wall_ids, prm)
+        elif n_wall[0] < 0:
+            n_wall[0] = wall_candidates(aux[ctl[C_PA]], wall_ids, prm)
         if ev_t.shape[0] - ctl[C_NEV] < N:
             return done, ST_EVENTS, 0
         cs = ctl[C_ST]
@@ -402,8 +499,10 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
         npairs = L.pstart[N]
         nbad_pairs = pair_forces(st[cs], npairs, L.pi, L.pj, L.springs, pf, prm)
         sum_pairs(st[cs], aux[cp], L.pstart, L.lowstart, L.lowpid, pf, fsum)
-        nmove, nev, nbad, wall_fy, floor_fy = move(st[cs], st[1 - cs], aux[cp], wh[cp], laps[cp],
-                                                   fsum, evf, bad, prm)
+        nbad, wall_fy, floor_fy = wall_contacts(st[cs], wh[cp], fsum, bad, wall_ids, n_wall[0],
+                                                prm)
+        nmove, nev, nbad_move = move(st[cs], st[1 - cs], aux[cp], laps[cp], fsum, evf, bad, prm)
+        nbad += nbad_move
         wall_impulse[0] += prm.dt * wall_fy
         wall_impulse[1] += prm.dt * floor_fy
         if nbad_pairs > 0:
