@@ -225,3 +225,65 @@ def test_oblique_wall_impacts():
     for row in rows:
         print("angle %2d: vt %.5f (ref %.5f)  R*w %.5f (ref %.5f)  err %.1e %.1e" % row)
     print(f"worst error {worst:.2e} of the impact speed")
+
+
+# ---------------------------------------------------------------- the two pair kernels
+@pytest.mark.parametrize("mono, periodic", [(True, True), (False, True), (True, False)])
+def test_simd_pair_kernel_writes_the_same_bits(mono, periodic):
+    """pair_forces_simd (the step's kernel where most listed pairs touch) and pair_forces
+    (the branching one) give the same forces, springs, contact and blow-up counts, bit for
+    bit (signs of zero included), over pairs in and out of contact, sticking and sliding,
+    across the periodic boundary, equal and unequal particles, with a list longer than one
+    SIMD block and not a multiple of it."""
+    from cfbmarkov.simulate.dem.contact import SIMD_BLOCK, pair_forces, pair_forces_simd
+    from cfbmarkov.simulate.dem.layout import DEMParams
+
+    rng = np.random.default_rng(11)
+    npairs = 2 * SIMD_BLOCK + 37
+    n = 2 * npairs
+    Hd = 0.05
+    st = np.zeros((n, 8))
+    rad = np.full(n, R) if mono else rng.uniform(0.8 * R, R, n)
+    st[0::2, 0] = rng.uniform(0.0, 0.01, npairs)
+    st[0::2, 1] = rng.uniform(0.0, Hd, npairs)
+    # partners at 0.9-1.1 times the contact distance: about half of the pairs in contact
+    ang = rng.uniform(0.0, 2 * math.pi, npairs)
+    dist = rng.uniform(0.9, 1.1, npairs) * (rad[0::2] + rad[1::2])
+    st[1::2, 0] = st[0::2, 0] + dist * np.cos(ang)
+    st[1::2, 1] = st[0::2, 1] + dist * np.sin(ang)
+    if periodic:
+        st[:40, 1] = rng.uniform(0.0, 2e-4, 40)  # pairs across the top/bottom
+        st[1:40:2, 1] = (st[0:40:2, 1] - 0.6e-3) % Hd
+    st[:, 2:4] = rng.normal(0.0, 0.5, (n, 2))
+    st[:, 4] = rng.normal(0.0, 0.05, n)
+    st[:, 5] = rad
+    mass = RHO * math.pi * (2 * rad) ** 3 / 6
+    st[:, 6] = 1.0 / mass
+    st[:, 7] = rad / (mass * (2 * rad) ** 2 / 10)
+    pi = np.arange(0, n, 2, dtype=np.int32)
+    pj = np.arange(1, n, 2, dtype=np.int32)
+    springs = rng.normal(0.0, 2e-5, (npairs, 2))  # large ones slide (Coulomb cap)
+    springs[::7] = 0.0
+    springs[3::11, 1] = -0.0
+    prm = DEMParams(
+        dt=5e-6, width=0.01, height=Hd, gravity=0.0, kn=LAW.kn, kt=LAW.kt, inv_kt=1.0 / LAW.kt,
+        mu=LAW.mu, etan_pp=LAW.normal_damping_factor * math.sqrt(M / 2),
+        etat_pp=LAW.tangential_damping_factor * math.sqrt(M / 2), etan_pw=0.0, etat_pw=0.0,
+        cn=LAW.normal_damping_factor, ct=LAW.tangential_damping_factor, skin=3e-4,
+        cell_w=1.0, cell_h=1.0, rmax=R, max_overlap=0.05, t0=0.0, ncx=1, ncy=1,
+        periodic=periodic, floor=not periodic, mono=mono)
+    out = []
+    for kernel in (pair_forces, pair_forces_simd):
+        sp = springs.copy()
+        pf = np.full((npairs, 3), np.nan)
+        counts = kernel(st, npairs, pi, pj, sp, pf, prm)
+        out.append((counts, pf.view(np.uint64), sp.view(np.uint64)))
+    (c_a, pf_a, sp_a), (c_b, pf_b, sp_b) = out
+    assert c_a == c_b
+    nbad, ncontacts = c_a
+    assert 0.3 * npairs < ncontacts < 0.7 * npairs and nbad > 0
+    capped = np.hypot(*springs.T) > 5e-6
+    assert np.count_nonzero(capped) > 50
+    assert np.array_equal(pf_a, pf_b)
+    assert np.array_equal(sp_a, sp_b)
+    assert not np.signbit(sp_a.view(np.float64)[np.all(pf_a.view(np.float64) == 0.0, axis=1)]).any()

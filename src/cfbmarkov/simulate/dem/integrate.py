@@ -30,7 +30,8 @@ import math
 
 from numba import njit, prange
 
-from cfbmarkov.simulate.dem.contact import FASTMATH, contact_force, flag_overlaps, pair_forces
+from cfbmarkov.simulate.dem.contact import (FASTMATH, contact_force, flag_overlaps, pair_forces,
+                                           pair_forces_simd)
 from cfbmarkov.simulate.dem.layout import (BAD_NAN, BAD_OVERLAP, BAD_RANGE, BAD_WALL, C_LIST,
                                            C_NEV, C_PA, C_REBUILD, C_ST, C_STEP, ST_BLOWUP,
                                            ST_EVENTS, ST_OK, ST_STRIDE)
@@ -404,6 +405,13 @@ def move(st, so, aux, laps, fsum, evf, bad, prm):
     return nmove, nev, nbad
 
 
+#: share of the listed pairs in contact from which the step uses
+#: :func:`.contact.pair_forces_simd`: measured on the DEM benchmark problems (2 threads), the
+#: branching kernel costs about 4.6 ns per listed pair plus 10 ns per contact, the SIMD one
+#: 5-6.5 ns per listed pair whatever the contacts (docs/performance.md)
+SIMD_CONTACT_SHARE = 0.15
+
+
 @njit(cache=True)
 def _record_events(st_old, st_new, ids, evf, step, prm, ev_t, ev_p, ev_d, ctl):
     """Log the boundary passes flagged in ``evf`` (and clear the flags): time interpolated
@@ -436,7 +444,7 @@ def _record_events(st_old, st_new, ids, evf, step, prm, ev_t, ev_p, ev_d, ctl):
 
 @njit(cache=True)
 def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart, cfill, perm,
-            invperm, wall_ids, n_wall, prm, nsteps, ev_t, ev_p, ev_d, wall_impulse):
+            invperm, wall_ids, n_wall, n_contacts, prm, nsteps, ev_t, ev_p, ev_d, wall_impulse):
     """Advance up to ``nsteps`` steps (rebuilding the lists when needed).
 
     Parameters
@@ -460,6 +468,11 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
     n_wall : int64 (1,)
         Their number; -1 when not yet found for the current list (after a restart): they
         are found then, and after every list build.
+    n_contacts : int64 (1,)
+        Pairs in contact at the last step (-1 before the first): where they were at least
+        :data:`SIMD_CONTACT_SHARE` of the listed pairs, the step computes the pair forces
+        with :func:`.contact.pair_forces_simd`, else with :func:`.contact.pair_forces` (the
+        same bits; only the speed differs).
     prm : DEMParams
     nsteps : int
         Steps to do.
@@ -497,7 +510,11 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
         cp = ctl[C_PA]
         L = LA if ctl[C_LIST] == 0 else LB
         npairs = L.pstart[N]
-        nbad_pairs = pair_forces(st[cs], npairs, L.pi, L.pj, L.springs, pf, prm)
+        if n_contacts[0] >= SIMD_CONTACT_SHARE * npairs and npairs > 0:
+            nbad_pairs, nc = pair_forces_simd(st[cs], npairs, L.pi, L.pj, L.springs, pf, prm)
+        else:
+            nbad_pairs, nc = pair_forces(st[cs], npairs, L.pi, L.pj, L.springs, pf, prm)
+        n_contacts[0] = nc
         sum_pairs(st[cs], aux[cp], L.pstart, L.lowstart, L.lowpid, pf, fsum)
         nbad, wall_fy, floor_fy = wall_contacts(st[cs], wh[cp], fsum, bad, wall_ids, n_wall[0],
                                                 prm)

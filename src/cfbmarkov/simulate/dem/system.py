@@ -259,7 +259,8 @@ class DEMSystem:
                              key=np.zeros(n, np.int64), cstart=np.zeros(ncell + 1, np.int64),
                              cfill=np.zeros(ncell, np.int64), perm=np.zeros(n, np.int64),
                              invperm=np.zeros(n, np.int64), wall_ids=np.zeros(n, np.int64),
-                             n_wall=np.full(1, -1, np.int64))
+                             n_wall=np.full(1, -1, np.int64),
+                             n_contacts=np.full(1, -1, np.int64))
         self._ev = (np.zeros(capacity), np.zeros(capacity, np.int64), np.zeros(capacity, np.int8))
         self._ext_set = False
         self._wall_impulse = np.zeros(2)
@@ -457,7 +458,8 @@ class DEMSystem:
             done, status, info = integrate.advance(
                 a["st"], a["aux"], a["wh"], a["ids"], a["laps"], self._lists[0], self._lists[1],
                 self._pf, self._fsum, ctl, sc["evf"], sc["bad"], sc["key"], sc["cstart"],
-                sc["cfill"], sc["perm"], sc["invperm"], sc["wall_ids"], sc["n_wall"], self._prm,
+                sc["cfill"], sc["perm"], sc["invperm"], sc["wall_ids"], sc["n_wall"],
+                sc["n_contacts"], self._prm,
                 left, *self._ev, self._wall_impulse)
             left -= done
             if status == L.ST_OK:
