@@ -2,7 +2,9 @@
 
 Every parameter of the paper's Table 1 (and the contact law of Table 2) has a named field;
 units are given in each field's description. Defaults are the paper's values
-(docs/definitions.md, Riser).
+(docs/definitions.md, Riser), except two numerical settings that change the speed only: the
+DEM's neighbour-list skin (not in the paper) and its search grid (``"auto"``; the paper's
+30 x 351 can be set).
 """
 
 from __future__ import annotations
@@ -11,7 +13,7 @@ import math
 import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
@@ -75,8 +77,10 @@ class ContactConfig(_Model):
 class NumericsConfig(_Model):
     cfd_cells: tuple[int, int] = Field(
         (9, 95), description="gas grid cells (across, up), - (Table 1: 9 x 95)")
-    dem_cells: tuple[int, int] = Field(
-        (30, 351), description="DEM neighbour-search cells (across, up), - (Table 1: 30 x 351)")
+    dem_cells: tuple[int, int] | Literal["auto"] = Field(
+        "auto", description="DEM neighbour-search cells (across, up), or \"auto\": the finest "
+        "grid whose cells are at least the search cutoff 2 R_max + skin (Table 1: 30 x 351; "
+        "the grid changes the speed and the round-off, not the physics)")
     dem_skin: Positive = Field(
         4e-4, description="Verlet neighbour-list skin, m (not in the paper; affects speed only)")
     cfd_time_step: Positive = Field(5e-5, description="gas time step, s (Table 1: 5e-5)")
@@ -183,3 +187,43 @@ def case_names() -> list[str]:
     """
     folder = resources.files("cfbmarkov.cases")
     return sorted(p.name[:-5] for p in folder.iterdir() if p.name.endswith(".toml"))
+
+
+#: settings that change a simulation's speed and round-off, not its physics: a CFD-DEM file
+#: made with other values still serves the same case (cfbmarkov.reproduce)
+SPEED_ONLY = ("numerics.dem_cells", "numerics.dem_skin")
+
+
+def flat_settings(case: CaseConfig) -> dict[str, object]:
+    """A case's settings as ``{"section.name": value}`` (JSON values: tuples as lists)."""
+    def flat(d, prefix=""):
+        out = {}
+        for key, value in d.items():
+            if isinstance(value, dict):
+                out.update(flat(value, f"{prefix}{key}."))
+            else:
+                out[f"{prefix}{key}"] = value
+        return out
+    return flat(case.model_dump(mode="json"))
+
+
+def case_difference(saved: CaseConfig, case: CaseConfig, limit: int = 3) -> str:
+    """The settings in which two cases differ, for a message.
+
+    Parameters
+    ----------
+    saved, case : CaseConfig
+        The case a file was made with and the case asked for now.
+    limit : int, optional
+        How many differences to name (the rest are counted).
+
+    Returns
+    -------
+    str
+        ``"section.name: saved X, now Y; ..."``, or ``"settings differ"`` when none is found.
+    """
+    a, b = flat_settings(saved), flat_settings(case)
+    diffs = [f"{k}: saved {a.get(k)!r}, now {b.get(k)!r}" for k in sorted(set(a) | set(b))
+             if a.get(k) != b.get(k)]
+    more = f", and {len(diffs) - limit} more" if len(diffs) > limit else ""
+    return "; ".join(diffs[:limit]) + more if diffs else "settings differ"

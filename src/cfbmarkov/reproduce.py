@@ -43,7 +43,7 @@ from typing import Any, Callable, Iterable, Sequence
 from pydantic import ValidationError
 
 from cfbmarkov._atomic import write_text_atomic
-from cfbmarkov.config import CaseConfig
+from cfbmarkov.config import SPEED_ONLY, CaseConfig, case_difference, flat_settings
 from cfbmarkov.errors import CfbmarkovError, InputError
 
 from cfbmarkov.cases.scales import (  # noqa: E402  (the scales and cases of a reproduction)
@@ -183,8 +183,9 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
             raise InputError(f"{saved}: unreadable case file; delete it to start this case "
                              "again") from None
         if previous != case:
-            raise InputError(f"{folder} holds a run of another configuration ({saved}); use "
-                             "another output directory or delete that folder")
+            raise InputError(f"{folder} holds a run of another configuration ({saved}: "
+                             f"{case_difference(previous, case)}); use another output directory "
+                             "or delete that folder")
     else:
         write_text_atomic(saved, case.model_dump_json(indent=2) + "\n")
 
@@ -257,19 +258,22 @@ PHYSICS = ("seed", "riser", "particles", "gas", "contact", "numerics")
 
 def _check_reference(path: Path, case: CaseConfig) -> None:
     """A CFD-DEM file found in place must come from this case's physics and cover its
-    prediction window (one made by ``cfbmarkov simulate`` may be dropped in)."""
+    prediction window (one made by ``cfbmarkov simulate`` may be dropped in; the settings
+    that change the speed only, :data:`cfbmarkov.config.SPEED_ONLY`, may differ)."""
     from cfbmarkov.trajectories import Trajectories
 
     with Trajectories(path) as traj:
         made_by, last = traj.parameters, float(traj.times[-1])
-    wanted = json.loads(case.model_dump_json())
     if made_by:
         try:
-            made = json.loads(CaseConfig.model_validate(made_by).model_dump_json())
+            made = CaseConfig.model_validate(made_by)
         except ValidationError:         # not a case: another source, e.g. imported data
             made = None
         if made is not None:
-            differs = [k for k in PHYSICS if made.get(k) != wanted.get(k)]
+            a, b = flat_settings(made), flat_settings(case)
+            differs = sorted({k.split(".")[0] for k in set(a) | set(b)
+                              if k.split(".")[0] in PHYSICS and k not in SPEED_ONLY
+                              and a.get(k) != b.get(k)}, key=PHYSICS.index)
             if differs:
                 raise InputError(f"{path} was simulated with other {', '.join(differs)} than "
                                  f"case {case.name}; move it away or use another directory")

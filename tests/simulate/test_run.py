@@ -111,6 +111,38 @@ def test_resume_equals_uninterrupted_run(tmp_path, reference):
         np.testing.assert_array_equal(a, b)
 
 
+def test_resume_with_another_search_grid_names_it(tmp_path, reference):
+    """A checkpoint is resumed only with the case it was made with; the refusal names the
+    setting that differs (here the DEM search grid, which changes the round-off only)."""
+    case, _ = reference
+    out = tmp_path / "c.h5"
+    simulate(case, out, checkpoint_every=0.025, progress=False, stop_after_frames=2)
+    auto = case.model_copy(update={"numerics": case.numerics.model_copy(
+        update={"dem_cells": "auto"})})
+    with pytest.raises(Exception, match=r"numerics\.dem_cells: saved \[30, 74\], now 'auto'"):
+        simulate(auto, out, progress=False, resume=True)
+
+
+def test_automatic_search_grid(tmp_path):
+    """dem_cells = "auto" (the default) gives the finest grid of cells no smaller than the
+    search cutoff; anything but two positive integers or "auto" is refused in one line."""
+    from cfbmarkov.simulate.run import CoupledRiser
+
+    assert CaseConfig().numerics.dem_cells == "auto"
+    case = load(small_case(tmp_path, n=300)).model_copy()
+    case = case.model_copy(update={"numerics": case.numerics.model_copy(
+        update={"dem_cells": "auto"})})
+    dem = CoupledRiser.initial(case).dem
+    ncx, ncy = dem.search_cells
+    cut = case.particles.diameter + case.numerics.dem_skin
+    assert case.riser.width / ncx >= cut and case.riser.height / ncy >= cut
+    assert case.riser.width / (ncx + 1) < cut and case.riser.height / (ncy + 1) < cut
+    bad = tmp_path / "bad.toml"
+    bad.write_text(SMALL.format(n=100, end=0.05).replace("dem_cells = [30, 74]",
+                                                         'dem_cells = "fine"'))
+    assert main(["simulate", str(bad), "-o", str(tmp_path / "x.h5"), "-q"]) == 2
+
+
 def test_resume_after_kill_9(tmp_path, reference):
     case, ref = reference
     toml = small_case(tmp_path)

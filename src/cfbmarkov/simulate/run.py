@@ -29,7 +29,7 @@ import numpy as np
 
 from cfbmarkov._atomic import atomic_path, h5_file
 from cfbmarkov._outputs import claim_output
-from cfbmarkov.config import CaseConfig
+from cfbmarkov.config import CaseConfig, case_difference
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
 from cfbmarkov.simulate.cfd import (GasGrid, GasSolver, GasState, deposit_drag,
                                     void_fraction_field)
@@ -117,7 +117,7 @@ class CoupledRiser:
         dem = DEMSystem(positions, velocities, 0.5 * p.diameter, p.density, law,
                         r.width, r.height, gravity=r.gravity,
                         time_step=case.numerics.dem_time_step,
-                        search_cells=tuple(case.numerics.dem_cells), skin=case.numerics.dem_skin,
+                        search_cells=_search_cells(case), skin=case.numerics.dem_skin,
                         angular_velocities=angular_velocities, bottom_wall=bottom_wall)
         grid = GasGrid.from_config(case)
         eps = void_fraction_field(grid, positions[:, 0], positions[:, 1], p.diameter,
@@ -266,8 +266,9 @@ def read_checkpoint(path: Path, case: CaseConfig
         with h5py.File(path, "r") as f:
             saved = CaseConfig.model_validate_json(f.attrs["case"])
             if saved != case:
-                raise InputError(f"{path}: the checkpoint was made with another configuration; "
-                                 "run without --resume to start again")
+                raise InputError(f"{path}: the checkpoint was made with another configuration "
+                                 f"({case_difference(saved, case)}); run without --resume to "
+                                 "start again, or with the saved value")
             state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
                      "cfd_steps": int(f.attrs["cfd_steps"])}
             meta = int(f.attrs["n_segments"]), int(f.attrs["frames"]), float(f.attrs["wall_time"])
@@ -276,6 +277,12 @@ def read_checkpoint(path: Path, case: CaseConfig
     except (OSError, KeyError) as exc:
         raise InputError(f"{path}: unreadable checkpoint ({exc})") from None
     return (CoupledRiser.from_state(case, state), *meta, history)
+
+
+def _search_cells(case: CaseConfig) -> tuple[int, int] | None:
+    """The DEM's ``search_cells`` for a case: None (the engine's automatic grid) for "auto"."""
+    cells = case.numerics.dem_cells
+    return None if cells == "auto" else tuple(int(c) for c in cells)
 
 
 def _clock(seconds: float) -> str:
