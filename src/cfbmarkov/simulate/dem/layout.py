@@ -115,17 +115,17 @@ class DEMParams(NamedTuple):
 class PairList(NamedTuple):
     """One neighbour/pair-list buffer (all arrays; N particles, stride S, capacity P pairs).
 
-    The full Verlet list of each particle and the *pair list* derived from it: pairs
-    (pi < pj) grouped by first member (``pstart``), the tangential spring of each pair (from
-    the first member's side), and for each particle the pairs in which it is the second
-    member (``lowstart``/``lowpid``).
+    The half Verlet list of each particle (its neighbours that come after it in cell
+    order) and the *pair list* derived from it: pairs (pi < pj) grouped by first member
+    (``pstart``), the tangential spring of each pair (from the first member's side), and for
+    each particle the pairs in which it is the second member (``lowstart``/``lowpid``).
 
     Attributes
     ----------
     nnb, nown : int32 (N,)
         Neighbours of each particle, and how many of them come after it.
     nbr : int32 (N*S,)
-        Neighbour indices, row k at ``k*S``.
+        Indices of the neighbours after each particle, row k at ``k*S``.
     pstart : int64 (N + 1,)
         First pair of each particle as first member; ``pstart[N]`` is the number of pairs.
     pi, pj : int32 (P,)
@@ -162,10 +162,10 @@ def empty_list(n: int, stride: int) -> PairList:
     Returns
     -------
     PairList
-        The pair arrays have room for ``n*stride//2 + n`` pairs (each pair appears once, in
-        its first member's strided row, so there are at most ``n*stride/2``).
+        The pair arrays have room for ``n*stride`` pairs (each pair appears once, in its
+        first member's strided row).
     """
-    cap = max(1, n * stride // 2 + n)
+    cap = max(1, n * stride)
     return PairList(np.zeros(n, np.int32), np.zeros(n, np.int32), np.zeros(n * stride, np.int32),
                     np.zeros(n + 1, np.int64), np.zeros(cap, np.int32), np.zeros(cap, np.int32),
                     np.zeros((cap, 2), np.float64), np.zeros(n + 1, np.int64),

@@ -2,15 +2,20 @@
 
 A rebuild (:func:`rebuild`; when a particle has moved more than skin/2 since the last one)
 computes cell keys, does a serial stable counting sort, gathers the particles into the new
-(cell) order, builds the full Verlet list (neighbour rows are contiguous ranges of the
-sorted particles), derives the pair list from it (see :class:`.layout.PairList`) and moves
-each contact's tangential spring to the new pair list (negated when the members swap order
-under the new numbering). The sort is stable and every loop writes only its own rows, so
-the lists do not depend on the thread count.
+(cell) order, builds the half Verlet list (each particle's neighbours after it in cell
+order; neighbour rows are contiguous ranges of the sorted particles), derives the pair list
+from it and, by one serial transposition, each particle's pairs as second member (see
+:class:`.layout.PairList`), and moves each contact's tangential spring to the new pair list
+(negated when the members swap order under the new numbering). The sort is stable and
+every parallel loop writes only its own rows, so the lists do not depend on the thread
+count. (Until session 13 the full list was built, each pair tested from both sides, and
+the second-member lists found by searching the first member's row: the same lists, twice
+the distance tests.)
 """
 
 from __future__ import annotations
 
+import numpy as np
 from numba import njit, prange
 
 from cfbmarkov.simulate.dem.layout import C_LIST, C_NREBUILD, C_PA, C_REBUILD, C_ST
@@ -93,12 +98,16 @@ def _gather_rest(st, aux, auxo, wh, who, ids, idso, laps, lapso, perm, prm):
 
 
 @njit(parallel=True, cache=True, error_model="numpy")
-def _build_list(so, cstart, nnb, nown, nbr, S, prm):
-    """Full Verlet list of the sorted particles ``so`` (cutoff R_i + R_j + skin).
+def _build_list(so, cstart, nown, nbr, S, prm):
+    """Half Verlet list of the sorted particles ``so``: for each particle the neighbours that
+    come after it in cell order (cutoff R_i + R_j + skin).
 
     Cells are numbered row by row, so the (up to) three cells of a neighbour row hold one
-    contiguous range of sorted particles; rows and columns that cannot hold a particle within
-    the cutoff (from the particle's place in its cell) are skipped.
+    contiguous range of sorted particles, of which only the part after the particle is
+    tested; rows and columns that cannot hold a particle within the cutoff (from the
+    particle's place in its cell) are skipped. The rows are visited from below to above
+    (a row reached across the periodic boundary in its place in that order), so a row of
+    the list holds its neighbours in the order of a full search.
 
     Parameters
     ----------
@@ -106,10 +115,10 @@ def _build_list(so, cstart, nnb, nown, nbr, S, prm):
         Particle records in cell order.
     cstart : int64 (ncells + 1,)
         First sorted particle of each cell.
-    nnb, nown : int32 (N,)
-        Output: neighbour count of each particle, and how many come after it.
+    nown : int32 (N,)
+        Output: how many neighbours come after each particle.
     nbr : int32 (N*S,)
-        Output: neighbours, row k at ``k*S`` (at most S written per row).
+        Output: those neighbours, row k at ``k*S`` (at most S written per row).
     S : int
         Stride of ``nbr``.
     prm : DEMParams
@@ -153,7 +162,6 @@ def _build_list(so, cstart, nnb, nown, nbr, S, prm):
         c1 = ix + 1 if (ix < ncx - 1 and (cw - fxc < cut or fxc < 0.0)) else ix
         r0 = iy - 1 if (fyc < cut or fyc > ch) else iy
         r1 = iy + 1 if (ch - fyc < cut or fyc < 0.0) else iy
-        cnt = 0
         own = 0
         base = k * S
         for rr in range(r0, r1 + 1):
@@ -171,6 +179,8 @@ def _build_list(so, cstart, nnb, nown, nbr, S, prm):
                 wrapped = True
             first = cstart[row * ncx + c0]
             last = cstart[row * ncx + c1 + 1]
+            if first <= k:
+                first = k + 1
             for jj in range(first, last):
                 dx = so[jj, 0] - x
                 dy = so[jj, 1] - y
@@ -185,62 +195,96 @@ def _build_list(so, cstart, nnb, nown, nbr, S, prm):
                 else:
                     rc = Rk + so[jj, 5] + skin
                     inside = d2 < rc * rc
-                if inside and jj != k:
-                    if cnt < S:
-                        nbr[base + cnt] = jj
-                    cnt += 1
-                    if jj > k:
-                        own += 1
-        nnb[k] = cnt
+                if inside:
+                    if own < S:
+                        nbr[base + own] = jj
+                    own += 1
         nown[k] = own
-        if cnt > S:
+        if own > S:
             nover += 1
     if nover == 0:
         return S
     m = 0
     for k in range(N):
-        if nnb[k] > m:
-            m = nnb[k]
+        if nown[k] > m:
+            m = nown[k]
     return m
 
 
 @njit(cache=True)
-def _prefix(nnb, nown, pstart, lowstart):
-    N = nnb.shape[0]
+def _prefix(nown, pstart):
+    N = nown.shape[0]
     pstart[0] = 0
-    lowstart[0] = 0
     for k in range(N):
         pstart[k + 1] = pstart[k] + nown[k]
-        lowstart[k + 1] = lowstart[k] + (nnb[k] - nown[k])
 
 
 @njit(parallel=True, cache=True)
-def _fill_pairs(nnb, nbr, S, pstart, pi, pj, springs, lowstart, lowpid):
-    """Pairs (k, j > k) in the order the search met them (springs zeroed), and for each
-    particle the pairs in which it is the second member: pair (j, k) with j < k is number
-    pstart[j] + (how many neighbours of j above j come before k in j's list)."""
-    N = nnb.shape[0]
+def _fill_pairs(nown, nbr, S, pstart, pi, pj, springs):
+    """Pairs (k, j > k) in the order the search met them, springs zeroed."""
+    N = nown.shape[0]
     for k in prange(N):
         p = pstart[k]
-        q = lowstart[k]
-        for s in range(k * S, k * S + nnb[k]):
-            jj = nbr[s]
-            if jj > k:
-                pi[p] = k
-                pj[p] = jj
-                springs[p, 0] = 0.0
-                springs[p, 1] = 0.0
-                p += 1
-            else:
-                c = pstart[jj]
-                for s2 in range(jj * S, jj * S + nnb[jj]):
-                    e = nbr[s2]
-                    if e == k:
-                        break
-                    if e > jj:
-                        c += 1
-                lowpid[q] = c
-                q += 1
+        for s in range(k * S, k * S + nown[k]):
+            pi[p] = k
+            pj[p] = nbr[s]
+            springs[p, 0] = 0.0
+            springs[p, 1] = 0.0
+            p += 1
+
+
+@njit(cache=True)
+def _second_members(so, npairs, pi, pj, nown, nnb, lowstart, lowpid, prm):
+    """For each particle the pairs in which it is the second member (``lowstart``,
+    ``lowpid``), in the order a full search from it would meet their first members, and its
+    total neighbour count ``nnb``.
+
+    That order is the ascending order of the first members, except that a search from the
+    top row of cells meets the bottom row (across the periodic boundary) last: those pairs
+    come after the others. One serial pass counts, one fills (pairs ascending), so the lists
+    do not depend on the thread count.
+    """
+    N = nown.shape[0]
+    periodic = prm.periodic
+    inv_ch = 1.0 / prm.cell_h
+    ncy = prm.ncy
+    nlow = nnb  # low counts first, totals at the end
+    nlow[:] = 0
+    nwrap = np.zeros(N, np.int32)
+    wrapped = np.zeros(npairs, np.bool_)
+    for p in range(npairs):
+        k = pj[p]
+        nlow[k] += 1
+        if periodic:
+            yi = so[pi[p], 1]
+            yk = so[k, 1]
+            ii = int(yi * inv_ch) if yi > 0.0 else 0
+            ik = int(yk * inv_ch) if yk > 0.0 else 0
+            if ii >= ncy:
+                ii = ncy - 1
+            if ik >= ncy:
+                ik = ncy - 1
+            if ik - ii > 1:
+                wrapped[p] = True
+                nwrap[k] += 1
+    lowstart[0] = 0
+    for k in range(N):
+        lowstart[k + 1] = lowstart[k] + nlow[k]
+    fill = np.empty(N, np.int64)
+    fillw = np.empty(N, np.int64)
+    for k in range(N):
+        fill[k] = lowstart[k]
+        fillw[k] = lowstart[k + 1] - nwrap[k]
+    for p in range(npairs):
+        k = pj[p]
+        if wrapped[p]:
+            lowpid[fillw[k]] = p
+            fillw[k] += 1
+        else:
+            lowpid[fill[k]] = p
+            fill[k] += 1
+    for k in range(N):
+        nnb[k] = nlow[k] + nown[k]
 
 
 @njit(parallel=True, cache=True)
@@ -310,12 +354,14 @@ def rebuild(st, aux, wh, ids, laps, LA, LB, ctl, key, cstart, cfill, perm, invpe
         old_l = LB
         new_l = LA
     S = new_l.nbr.shape[0] // N
-    need = _build_list(new, cstart, new_l.nnb, new_l.nown, new_l.nbr, S, prm)
+    need = _build_list(new, cstart, new_l.nown, new_l.nbr, S, prm)
     if need > S:
         return need
-    _prefix(new_l.nnb, new_l.nown, new_l.pstart, new_l.lowstart)
-    _fill_pairs(new_l.nnb, new_l.nbr, S, new_l.pstart, new_l.pi, new_l.pj, new_l.springs,
-                new_l.lowstart, new_l.lowpid)
+    _prefix(new_l.nown, new_l.pstart)
+    npairs = new_l.pstart[N]
+    _fill_pairs(new_l.nown, new_l.nbr, S, new_l.pstart, new_l.pi, new_l.pj, new_l.springs)
+    _second_members(new, npairs, new_l.pi, new_l.pj, new_l.nown, new_l.nnb, new_l.lowstart,
+                    new_l.lowpid, prm)
     _carry_springs(perm, invperm, old_l.pstart, old_l.pj, old_l.springs, new_l.pstart,
                    new_l.pj, new_l.springs)
     _gather_rest(cur, aux[cp], aux[1 - cp], wh[cp], wh[1 - cp], ids[cp], ids[1 - cp], laps[cp],
