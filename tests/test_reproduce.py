@@ -19,6 +19,7 @@ import pytest
 
 from cfbmarkov.cli import main
 from cfbmarkov.config import load_case
+from cfbmarkov.errors import InputError
 from cfbmarkov.reproduce import SCALES, reproduce, scale_cases
 from cfbmarkov.simulate.dem import ContactLaw
 from cfbmarkov.trajectories import Trajectories
@@ -322,6 +323,20 @@ def test_a_dropped_in_cfd_dem_file_must_match_the_case(reference, tmp_path, caps
     assert main(["reproduce", "--scale", "quick", "--overrides", str(longer), "--velocities",
                  "8", "-o", str(tmp_path / "e"), "--jobs", "1", "-q"]) == 2
     assert "before the end of the prediction window" in capsys.readouterr().err
+    # the search grid and the skin change the speed only: a file made with others serves
+    from cfbmarkov.cases.scales import load_overrides
+    from cfbmarkov.reproduce import _check_reference
+
+    changed = load_overrides(overrides)
+    changed["numerics"] = {**changed["numerics"], "dem_cells": "auto", "dem_skin": 6e-4}
+    case = scale_cases("quick", [8.0], overrides=changed)[0]
+    with Trajectories(ref / "u8" / "cfd-dem.h5") as t:
+        assert t.parameters["numerics"]["dem_cells"] != "auto"
+    _check_reference(ref / "u8" / "cfd-dem.h5", case)
+    changed["numerics"]["dem_time_step"] = 0.5 * case.numerics.dem_time_step
+    with pytest.raises(InputError, match="simulated with other numerics"):
+        _check_reference(ref / "u8" / "cfd-dem.h5", scale_cases("quick", [8.0],
+                                                               overrides=changed)[0])
 
 
 def test_compile_kernels_warms_both_halves_and_leaves_the_step_alone(tmp_path, monkeypatch):
