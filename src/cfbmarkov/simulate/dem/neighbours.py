@@ -22,14 +22,15 @@ from cfbmarkov.simulate.dem.layout import C_LIST, C_NREBUILD, C_PA, C_REBUILD, C
 
 
 @njit(cache=True, inline="always")
+def _index_of(x, inv_w, n):
+    """The search cell's column (row) of a coordinate x (y): clamped to 0 ... n - 1."""
+    i = int(x * inv_w) if x > 0.0 else 0
+    return n - 1 if i >= n else i
+
+
+@njit(cache=True, inline="always")
 def _cell_of(x, y, inv_cw, inv_ch, ncx, ncy):
-    ix = int(x * inv_cw) if x > 0.0 else 0
-    iy = int(y * inv_ch) if y > 0.0 else 0
-    if ix >= ncx:
-        ix = ncx - 1
-    if iy >= ncy:
-        iy = ncy - 1
-    return iy * ncx + ix
+    return _index_of(y, inv_ch, ncy) * ncx + _index_of(x, inv_cw, ncx)
 
 
 @njit(parallel=True, cache=True)
@@ -256,15 +257,7 @@ def _second_members(so, npairs, pi, pj, nown, nnb, lowstart, lowpid, prm):
         k = pj[p]
         nlow[k] += 1
         if periodic:
-            yi = so[pi[p], 1]
-            yk = so[k, 1]
-            ii = int(yi * inv_ch) if yi > 0.0 else 0
-            ik = int(yk * inv_ch) if yk > 0.0 else 0
-            if ii >= ncy:
-                ii = ncy - 1
-            if ik >= ncy:
-                ik = ncy - 1
-            if ik - ii > 1:
+            if _index_of(so[k, 1], inv_ch, ncy) - _index_of(so[pi[p], 1], inv_ch, ncy) > 1:
                 wrapped[p] = True
                 nwrap[k] += 1
     lowstart[0] = 0
