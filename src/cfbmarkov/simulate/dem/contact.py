@@ -11,7 +11,9 @@ The law is the linear spring-dashpot with tangential history of the paper's Tabl
 (:class:`cfbmarkov.simulate.dem.law.ContactLaw`; ``docs/definitions.md``, section riser),
 with the Coulomb cap of LAMMPS ``pair_style gran/hooke/history``.
 
-Pair forces: a step computes every pair force once (:func:`pair_forces`, into ``pf``);
+Pair forces: a step computes every pair force once (:func:`pair_forces`, or
+:func:`pair_forces_simd` eight pairs at a time where many listed pairs touch: the same
+bits; into ``pf``);
 each particle then sums its pairs' forces in a fixed order inside the fused integration, so
 the two members of a pair get exactly opposite forces (one spring per contact, so there are
 no two copies to keep consistent).
