@@ -152,6 +152,42 @@ def _interpolate_kernel(u, v, dx, dy, x, y, out_x, out_y):
         out_y[p] = b
 
 
+@nb.njit(cache=True, inline="always")
+def _face_weights(x, y, nx, ny, idx, idy):
+    """The faces a particle at (x, y) deposits on and their weights, the transpose of the
+    interpolation (:func:`_u_weights`, :func:`_v_weights`) except at the walls, whose share
+    goes to the neighbouring interior face (u) or node (v): (i0, j0, j1, w0, w1, wy) for u,
+    (ia, ib, wa, wb, k0, k1, vy) for v."""
+    i0, j0, j1, wx, wy = _u_weights(x, y, nx, ny, idx, idy)
+    w0 = 1.0 - wx
+    w1 = wx
+    if i0 == 0:
+        w1 = 1.0
+        w0 = 0.0
+    elif i0 + 1 == nx:
+        w0 = 1.0
+        w1 = 0.0
+    ia, ib, wa, wb, k0, k1, vy = _v_weights(x, y, nx, ny, idx, idy)
+    if ia == ib:
+        wa = 1.0
+        wb = 0.0
+    return i0, j0, j1, w0, w1, wy, ia, ib, wa, wb, k0, k1, vy
+
+
+@nb.njit(cache=True, inline="always")
+def _add_to_faces(fu, fv, gx, gy, w):
+    """Add (gx, gy) to the faces ``w`` of :func:`_face_weights` with their weights."""
+    i0, j0, j1, w0, w1, wy, ia, ib, wa, wb, k0, k1, vy = w
+    fu[i0, j0] += (1.0 - wy) * w0 * gx
+    fu[i0 + 1, j0] += (1.0 - wy) * w1 * gx
+    fu[i0, j1] += wy * w0 * gx
+    fu[i0 + 1, j1] += wy * w1 * gx
+    fv[ia, k0] += (1.0 - vy) * wa * gy
+    fv[ib, k0] += (1.0 - vy) * wb * gy
+    fv[ia, k1] += vy * wa * gy
+    fv[ib, k1] += vy * wb * gy
+
+
 @nb.njit(cache=True)
 def _deposit_forces_kernel(x, y, fx, fy, dx, dy, inv_volume, fu, fv):
     nx = fv.shape[0]
@@ -163,28 +199,8 @@ def _deposit_forces_kernel(x, y, fx, fy, dx, dy, inv_volume, fu, fv):
         gy = fy[p] * inv_volume
         if gx == 0.0 and gy == 0.0:
             continue
-        i0, j0, j1, wx, wy = _u_weights(x[p], y[p], nx, ny, idx, idy)
-        w0 = 1.0 - wx
-        w1 = wx
-        # a wall face's share goes to the interior face of the pair
-        if i0 == 0:
-            w1 = 1.0
-            w0 = 0.0
-        elif i0 + 1 == nx:
-            w0 = 1.0
-            w1 = 0.0
-        fu[i0, j0] += (1.0 - wy) * w0 * gx
-        fu[i0 + 1, j0] += (1.0 - wy) * w1 * gx
-        fu[i0, j1] += wy * w0 * gx
-        fu[i0 + 1, j1] += wy * w1 * gx
-        ia, ib, wa, wb, k0, k1, vy = _v_weights(x[p], y[p], nx, ny, idx, idy)
-        if ia == ib:  # next to a wall: the wall's share goes to the node
-            wa = 1.0
-            wb = 0.0
-        fv[ia, k0] += (1.0 - vy) * wa * gy
-        fv[ib, k0] += (1.0 - vy) * wb * gy
-        fv[ia, k1] += vy * wa * gy
-        fv[ib, k1] += vy * wb * gy
+        w = _face_weights(x[p], y[p], nx, ny, idx, idy)
+        _add_to_faces(fu, fv, gx, gy, w)
 
 
 @nb.njit(cache=True)
@@ -202,37 +218,11 @@ def _deposit_drag_kernel(x, y, fx, fy, k, dx, dy, inv_volume, fu, fv, ku, kv):
         gk = k[p] * inv_volume
         if gx == 0.0 and gy == 0.0 and gk == 0.0:
             continue
-        i0, j0, j1, wx, wy = _u_weights(x[p], y[p], nx, ny, idx, idy)
-        w0 = 1.0 - wx
-        w1 = wx
-        if i0 == 0:
-            w1 = 1.0
-            w0 = 0.0
-        elif i0 + 1 == nx:
-            w0 = 1.0
-            w1 = 0.0
-        ia, ib, wa, wb, k0, k1, vy = _v_weights(x[p], y[p], nx, ny, idx, idy)
-        if ia == ib:
-            wa = 1.0
-            wb = 0.0
+        w = _face_weights(x[p], y[p], nx, ny, idx, idy)
         if gx != 0.0 or gy != 0.0:
-            fu[i0, j0] += (1.0 - wy) * w0 * gx
-            fu[i0 + 1, j0] += (1.0 - wy) * w1 * gx
-            fu[i0, j1] += wy * w0 * gx
-            fu[i0 + 1, j1] += wy * w1 * gx
-            fv[ia, k0] += (1.0 - vy) * wa * gy
-            fv[ib, k0] += (1.0 - vy) * wb * gy
-            fv[ia, k1] += vy * wa * gy
-            fv[ib, k1] += vy * wb * gy
+            _add_to_faces(fu, fv, gx, gy, w)
         if gk != 0.0:
-            ku[i0, j0] += (1.0 - wy) * w0 * gk
-            ku[i0 + 1, j0] += (1.0 - wy) * w1 * gk
-            ku[i0, j1] += wy * w0 * gk
-            ku[i0 + 1, j1] += wy * w1 * gk
-            kv[ia, k0] += (1.0 - vy) * wa * gk
-            kv[ib, k0] += (1.0 - vy) * wb * gk
-            kv[ia, k1] += vy * wa * gk
-            kv[ib, k1] += vy * wb * gk
+            _add_to_faces(ku, kv, gk, gk, w)
 
 
 @nb.njit(cache=True)
