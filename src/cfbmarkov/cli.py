@@ -506,10 +506,12 @@ def build_parser() -> argparse.ArgumentParser:
                    help="paper (Eq. 2-4; the default for a periodic riser) or mle (pooled "
                         "counts; the default, and the only choice, for an open riser)")
     s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
-                                        "cells-previous", "cells-regime",
-                                        "cells-direction-regime", "auto"], default="cells",
+                                        "cells-velocity-fine", "cells-previous",
+                                        "cells-regime", "cells-direction-regime", "auto"],
+                   default="cells",
                    help="state space: the paper's cells, cells x direction of motion, cells x "
-                        "vertical-velocity bins, cells x previous-cell offset (second order), "
+                        "vertical-velocity bins, and with sub-rows fitted to the moves per lag "
+                        "(fine), cells x previous-cell offset (second order), "
                         "cells x 2 regimes of the solids flux (the regime model; with "
                         "direction: x direction too), or auto: chosen with the lag on held-out "
                         "frames of the window (default cells)")

@@ -149,6 +149,83 @@ def test_velocity_bins_fitted_at_the_windows_quantiles(tmp_path):
         VelocityCells(1, 4, 0.1, 4.0, edges=None, source="velocity").fit_to_frames(pos, 1, dt)
 
 
+def test_sub_rows_place_each_state_within_its_cell():
+    """With k sub-rows per row the state also says where in its row a particle is:
+    state = (cell*k + sub_row)*(B+1) + bin, sub_row = floor(k * (y / row height - row))."""
+    space = VelocityCells(1, 4, width=1.0, height=4.0, edges=(0.0,), sub_rows=4)
+    assert space.per_cell == 8 and space.n_states == 32 and space.fitted
+    # rows are 1 m: y 2.0 (sub-row 0), 2.3 (1), 2.5 (2), 2.99 (3), 0.74 (2), 3.999 (3);
+    # rising (bin 1) but for the third and fifth
+    y0 = np.array([1.9, 2.0, 2.9, 2.5, 0.5, 3.9])
+    y1 = np.array([2.0, 2.3, 2.5, 2.99, 0.74, 3.999])
+    pos = _frames(tuple(y0), tuple(y1))
+    states = space.discretize(pos, None, lag_frames=1, frame_interval=0.1)
+    cells = cell_index(pos, 1.0, 4.0, 1, 4)
+    subs = np.array([0, 1, 2, 3, 2, 3])
+    bins = np.array([1, 1, 0, 1, 1, 1])
+    np.testing.assert_array_equal(states[1], (4 * cells[1] + subs) * 2 + bins)
+    np.testing.assert_array_equal(space.sub_row(states[1]), subs)
+    np.testing.assert_array_equal(space.velocity_bin(states[1]), bins)
+    np.testing.assert_array_equal(space.cell_of_state[states], cells)
+    # one sub-row is the plain velocity space, state for state
+    plain = VelocityCells(1, 4, width=1.0, height=4.0, edges=(0.0,))
+    assert plain.sub_rows == 1 and "sub_rows" not in plain.to_attrs()
+    np.testing.assert_array_equal(
+        VelocityCells(1, 4, 1.0, 4.0, edges=(0.0,), sub_rows=1).discretize(pos, None, 1, 0.1),
+        plain.discretize(pos, None, 1, 0.1))
+    back = StateSpace.from_attrs(json.dumps(space.to_attrs()))
+    assert back == space and back.sub_rows == 4 and "4 sub-rows" in back.describe()
+    for bad in (0, 9, 2.5, "2"):
+        with pytest.raises(InputError, match="sub-rows"):
+            VelocityCells(1, 4, edges=(0.0,), sub_rows=bad)
+
+
+def _plug_flow(tmp_path, dt, speed=1.0, spread=0.1, n=300, duration=6.0, seed=3):
+    """Particles rising through a 1 m periodic riser at their own steady speeds (m/s):
+    every transit takes H / v, spread only by the speeds."""
+    rng = np.random.default_rng(seed)
+    speeds = speed * (1.0 + spread * rng.standard_normal(n))
+    t = dt * np.arange(int(round(duration / dt)) + 1)
+    y = (rng.uniform(0.0, 1.0, n)[None, :] + speeds[None, :] * t[:, None]) % 1.0
+    pos = np.stack([np.broadcast_to(rng.uniform(0.0, 0.1, n), y.shape), y], axis=-1)
+    return write_trajectories(tmp_path / "plug.h5", t, pos, width=0.1, height=1.0)
+
+
+def test_sub_rows_remove_the_chains_artificial_dispersion(tmp_path):
+    """A chain on whole cells forgets where in its cell a particle is: rising 0.3 of a row
+    per lag, a particle leaves its row after a geometric number of lags, and ten rows of
+    that spread the transit far beyond the flow's (tanks in series). The fitted sub-rows
+    (ceil(1 / 0.3) = 4 per row) make the transit nearly as steady as the flow's."""
+    dt = 0.03
+    run = _plug_flow(tmp_path, dt)
+    window = (0.5, 6.0)
+    with Trajectories(run) as traj:
+        observed = residence_times(traj, window, use_events=False, stride=1)
+    assert observed.count > 1000
+    fine = fit_model(run, state_space_from_name("cells-velocity-fine", 1, 10, 0.1, 1.0), dt,
+                     window)
+    coarse = fit_model(run, state_space_from_name("cells-velocity", 1, 10, 0.1, 1.0), dt,
+                       window)
+    assert fine.state_space.sub_rows == 4 and coarse.state_space.sub_rows == 1
+    assert "4 sub-rows" in fine.state_space.describe()
+    errors = {}
+    for name, model in (("fine", fine), ("coarse", coarse)):
+        rtd = model.rtd(window=window[1] - window[0])
+        errors[name] = (100 * (rtd.mean / observed.mean - 1), 100 * (rtd.sd / observed.sd - 1))
+    assert abs(errors["fine"][0]) < 3.0 and abs(errors["coarse"][0]) < 3.0, errors
+    assert errors["coarse"][1] > 100.0, errors           # the chain's own dispersion
+    assert abs(errors["fine"][1]) < 30.0, errors
+    # saved and loaded with its sub-rows
+    back = MarkovModel.load(fine.save(tmp_path / "fine.h5"))
+    assert back.state_space == fine.state_space
+    # a flow that moves a row or more per lag keeps whole rows: the plain velocity space
+    (tmp_path / "fast").mkdir()
+    fast = fit_model(_plug_flow(tmp_path / "fast", 0.12), state_space_from_name(
+        "cells-velocity-fine", 1, 10, 0.1, 1.0), 0.12, window)
+    assert fast.state_space.sub_rows == 1
+    assert fast.state_space == fast.state_space.fit_to_frames(None, 1, 0.12)
+
+
 def test_previous_cell_offsets_wrap_and_clip():
     space = SecondOrderCells(1, 10, width=1.0, height=10.0, reach=2)
     assert space.per_cell == 5 and space.n_states == 50 and space.memory_lags == 1

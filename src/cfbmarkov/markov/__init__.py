@@ -26,7 +26,8 @@ from cfbmarkov.markov.estimate import (
 )
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
-from cfbmarkov.markov.memory_states import DirectionCells, SecondOrderCells, VelocityCells
+from cfbmarkov.markov.memory_states import (DirectionCells, FineVelocityCells, SecondOrderCells,
+                                            VelocityCells)
 from cfbmarkov.markov.regimes import DirectionRegimeCells, RegimeCells
 from cfbmarkov.markov.states import (
     STATE_SPACES,
@@ -39,7 +40,7 @@ from cfbmarkov.markov.states import (
 
 __all__ = [
     "ABSENT", "CellGrid", "DirectionCells", "DirectionRegimeCells", "DiscreteTrajectories",
-    "ESTIMATORS", "MarkovModel",
+    "ESTIMATORS", "FineVelocityCells", "MarkovModel",
     "MaximumLikelihoodEstimator", "PaperEstimator", "RegimeCells", "ResidenceTimeDistribution",
     "STATE_SPACES", "SecondOrderCells", "StateSpace", "TransitionCounts", "TransitionEstimator",
     "VelocityCells", "WindowFrames", "cell_index", "count_transitions", "discretize",

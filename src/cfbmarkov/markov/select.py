@@ -64,7 +64,11 @@ from cfbmarkov.markov.states import state_space_from_name
 from cfbmarkov.trajectories import opened
 
 #: state spaces tried by default (names of :func:`state_space_from_name`)
-DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-previous", "cells-regime")
+DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-velocity-fine",
+                  "cells-previous", "cells-regime")
+#: (``cells-velocity-fine`` fits its sub-rows to the window; where that leaves one sub-row it
+#: has the states of ``cells-velocity``, and a candidate with an earlier one's states is
+#: not judged twice)
 #: (``cells-direction-regime``, 912 states, is left out of the default candidates: it cost 0.4 s
 #: of the 1.7 s choice at paper scale, and on the 6 m/s run it did worse than cells-direction,
 #: +11.7 % / +36.4 % against +3.2 % / +6.4 % in PD E / SD; ``states=`` can add it)
@@ -278,9 +282,17 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         raw = []
         discrete_of = {}
         for (name, tau), space in spaces.items():
-            est = estimator_from_name(estimator, space, tau)
             try:
                 discrete = frames.discretize(space, traj.lag_frames(tau))
+                space = discrete.state_space          # fitted to the window (bins, sub-rows)
+                est = estimator_from_name(estimator, space, tau)
+                same = next((other for (other, t), d in discrete_of.items()
+                             if t == tau and d.state_space.n_states == space.n_states
+                             and np.array_equal(d.states, discrete.states)), None)
+                if same is not None:       # fitted to the states of an earlier candidate
+                    raw.append((name, tau, discrete.state_space.n_states, None,
+                                f"the same states as {same} on this window"))
+                    continue
                 discrete_of[(name, tau)] = discrete
                 # sparse counts and chains: the work grows with the transitions, not S x S
                 parts = [count_transitions(discrete.block(*block),

@@ -559,8 +559,8 @@ def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int,
 
 
 #: names accepted by :func:`state_space_from_name`
-STATE_SPACES = ("cells", "cells-direction", "cells-velocity", "cells-previous", "cells-regime",
-                "cells-direction-regime")
+STATE_SPACES = ("cells", "cells-direction", "cells-velocity", "cells-velocity-fine",
+                "cells-previous", "cells-regime", "cells-direction-regime")
 
 
 def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.09,
@@ -570,11 +570,13 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
 
     Parameters
     ----------
-    name : {"cells", "cells-direction", "cells-velocity", "cells-previous", "cells-regime", \
-            "cells-direction-regime"}
+    name : {"cells", "cells-direction", "cells-velocity", "cells-velocity-fine", \
+            "cells-previous", "cells-regime", "cells-direction-regime"}
         ``cells`` (the paper's), ``cells-direction`` (direction from the displacement),
         ``cells-velocity`` (8 v_y bins from the displacement over the model's lag, edges at
-        the quantiles of the fitting window's velocities),
+        the quantiles of the fitting window's velocities), ``cells-velocity-fine`` (and each
+        row split into sub-rows no taller than the median move in a lag, fitted on the
+        fitting window),
         ``cells-previous`` (the second-order chain: previous cell within 3 rows),
         ``cells-regime`` (cells x 2 regimes of the solids flux, edges fitted on the fitting
         window), ``cells-direction-regime`` (and the direction).
@@ -602,7 +604,8 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
     -----
     See ``docs/definitions.md`` (States and transitions).
     """
-    from cfbmarkov.markov.memory_states import DirectionCells, SecondOrderCells, VelocityCells
+    from cfbmarkov.markov.memory_states import (DirectionCells, FineVelocityCells,
+                                                SecondOrderCells, VelocityCells)
 
     if depth_columns is not None:
         if name not in STATE_SPACES:
@@ -619,6 +622,8 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
         return DirectionCells(columns, rows, width, height)
     if name == "cells-velocity":
         return VelocityCells(columns, rows, width, height, edges=None)
+    if name == "cells-velocity-fine":
+        return FineVelocityCells(columns, rows, width, height)
     if name == "cells-previous":
         return SecondOrderCells(columns, rows, width, height)
     if name in ("cells-regime", "cells-direction-regime"):
