@@ -228,14 +228,11 @@ def test_oblique_wall_impacts():
 
 
 # ---------------------------------------------------------------- the two pair kernels
-@pytest.mark.parametrize("mono, periodic", [(True, True), (False, True), (True, False)])
-def test_simd_pair_kernel_writes_the_same_bits(mono, periodic):
-    """pair_forces_simd (the step's kernel where most listed pairs touch) and pair_forces
-    (the branching one) give the same forces, springs, contact and blow-up counts, bit for
-    bit (signs of zero included), over pairs in and out of contact, sticking and sliding,
-    across the periodic boundary, equal and unequal particles, with a list longer than one
-    SIMD block and not a multiple of it."""
-    from cfbmarkov.simulate.dem.contact import SIMD_BLOCK, pair_forces, pair_forces_simd
+def _pair_problem(mono, periodic):
+    """Pairs (2k, 2k + 1) at 0.9-1.1 times their contact distance, about half of them in
+    contact, some sliding, some across the periodic boundary; more than two blocks of
+    pairs, not a whole number of blocks."""
+    from cfbmarkov.simulate.dem.contact import SIMD_BLOCK
     from cfbmarkov.simulate.dem.layout import DEMParams
 
     rng = np.random.default_rng(11)
@@ -272,11 +269,28 @@ def test_simd_pair_kernel_writes_the_same_bits(mono, periodic):
         cn=LAW.normal_damping_factor, ct=LAW.tangential_damping_factor, skin=3e-4,
         cell_w=1.0, cell_h=1.0, rmax=R, max_overlap=0.05, t0=0.0, ncx=1, ncy=1,
         periodic=periodic, floor=not periodic, mono=mono)
+    return st, npairs, pi, pj, springs, prm
+
+
+@pytest.mark.parametrize("mono, periodic", [(True, True), (False, True), (True, False)])
+def test_simd_pair_kernel_writes_the_same_bits(mono, periodic):
+    """pair_forces_simd (the step's kernel where most listed pairs touch) and pair_forces
+    (the branching one) give the same forces, springs, contact and blow-up counts, bit for
+    bit (signs of zero included), over pairs in and out of contact, sticking and sliding,
+    across the periodic boundary, equal and unequal particles, with a list longer than one
+    SIMD block and not a multiple of it."""
+    from cfbmarkov.simulate.dem.contact import (CONTACT_BLOCK, pair_forces,
+                                                pair_forces_simd)
+
+    st, npairs, pi, pj, springs, prm = _pair_problem(mono, periodic)
+    contact_ids = np.full(npairs, -1, np.int64)
+    block_contacts = np.full(npairs // CONTACT_BLOCK + 1, -1, np.int64)
     out = []
     for kernel in (pair_forces, pair_forces_simd):
         sp = springs.copy()
         pf = np.full((npairs, 3), np.nan)
-        counts = kernel(st, npairs, pi, pj, sp, pf, prm)
+        lists = (contact_ids, block_contacts) if kernel is pair_forces else ()
+        counts = kernel(st, npairs, pi, pj, sp, pf, prm, *lists)
         out.append((counts, pf.view(np.uint64), sp.view(np.uint64)))
     (c_a, pf_a, sp_a), (c_b, pf_b, sp_b) = out
     assert c_a == c_b
@@ -287,3 +301,70 @@ def test_simd_pair_kernel_writes_the_same_bits(mono, periodic):
     assert np.array_equal(pf_a, pf_b)
     assert np.array_equal(sp_a, sp_b)
     assert not np.signbit(sp_a.view(np.float64)[np.all(pf_a.view(np.float64) == 0.0, axis=1)]).any()
+    # pair_forces listed exactly the pairs in contact, block by block in pair order
+    d = st[pj, :2] - st[pi, :2]
+    if periodic:
+        d[:, 1] -= prm.height * np.round(d[:, 1] / prm.height)
+    touching = np.flatnonzero(np.hypot(*d.T) < st[pi, 5] + st[pj, 5])
+    blocks = -(-npairs // CONTACT_BLOCK)
+    listed = np.concatenate([contact_ids[b * CONTACT_BLOCK:b * CONTACT_BLOCK + block_contacts[b]]
+                             for b in range(blocks)])
+    np.testing.assert_array_equal(listed, touching)
+    assert block_contacts[:blocks].sum() == ncontacts
+
+
+@pytest.mark.parametrize("mono, periodic", [(True, True), (False, True)])
+def test_summing_only_the_touched_particles_moves_them_by_the_same_bits(mono, periodic):
+    """A dilute step sums the pair forces of the particles in a contact only (the members
+    of the pairs that pair_forces listed) and moves every other particle by its external
+    force: every particle ends the step with the bits of the step that sums all pairs,
+    walls included."""
+    from cfbmarkov.simulate.dem.contact import CONTACT_BLOCK, pair_forces
+    from cfbmarkov.simulate.dem.integrate import (move, sum_pairs, sum_touched_pairs,
+                                                  touched_particles, wall_contacts)
+
+    st, npairs, pi, pj, springs, prm = _pair_problem(mono, periodic)
+    n = st.shape[0]
+    rng = np.random.default_rng(5)
+    st[::5, 0] = rng.uniform(0.0, 0.5 * R, st[::5, 0].size)      # some at the left wall
+    aux = np.zeros((n, 4))
+    aux[:, :2] = st[:, :2]
+    aux[:, 2:] = rng.normal(0.0, 1e-6, (n, 2))                    # external forces (N)
+    pf = np.zeros((npairs, 3))
+    contact_ids = np.zeros(npairs, np.int64)
+    block_contacts = np.zeros(npairs // CONTACT_BLOCK + 1, np.int64)
+    pair_forces(st, npairs, pi, pj, springs.copy(), pf, prm, contact_ids, block_contacts)
+    # particle 2k is the first member of pair k, 2k + 1 the second
+    pstart = np.zeros(n + 1, np.int64)
+    pstart[1::2] = np.arange(npairs)
+    pstart[2::2] = np.arange(1, npairs + 1)
+    lowstart = np.zeros(n + 1, np.int64)
+    lowstart[2::2] = np.arange(1, npairs + 1)
+    lowstart[1::2] = np.arange(npairs)
+    lowpid = np.arange(npairs, dtype=np.int64)
+    wall_ids = np.arange(n, dtype=np.int64)
+    results = []
+    for summed in (True, False):
+        fsum = np.full((n, 3), np.nan)
+        touched = np.full(n, -1, np.int64)
+        touched_ids = np.zeros(n, np.int64)
+        stamp = 7
+        if summed:
+            sum_pairs(st, aux, pstart, lowstart, lowpid, pf, fsum)
+        else:
+            k = touched_particles(npairs, pi, pj, contact_ids, block_contacts, touched, stamp,
+                                  touched_ids)
+            assert 0 < k < n
+            sum_touched_pairs(st, aux, pstart, lowstart, lowpid, pf, fsum, touched_ids, k)
+        wh = np.zeros((n, 3))
+        walls = wall_contacts(st, wh, aux, fsum, np.zeros(n, np.int8), wall_ids, n, touched,
+                              stamp, summed, prm)
+        so = np.zeros_like(st)
+        moved = move(st, so, aux, np.zeros(n, np.int64), fsum,
+                     touched, stamp, summed, np.zeros(n, np.int8), np.zeros(n, np.int8), prm)
+        results.append((so.view(np.uint64), wh.view(np.uint64), walls, moved))
+    (so_a, wh_a, walls_a, moved_a), (so_b, wh_b, walls_b, moved_b) = results
+    assert walls_a[1] != 0.0 or walls_a[2] != 0.0                 # a wall touched someone
+    np.testing.assert_array_equal(so_a, so_b)
+    np.testing.assert_array_equal(wh_a, wh_b)
+    assert walls_a == walls_b and moved_a == moved_b

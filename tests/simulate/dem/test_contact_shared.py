@@ -89,7 +89,8 @@ def _pair_path(wall, overlap, vel, spring, steps):
         st = np.array([_record(x, y, vx, vy, u, R, 1.0 / M, R * INV_I),
                        _record(x + GAP * nx, y + GAP * ny, 0.0, 0.0, 0.0, rj, 0.0, 0.0)])
         pf = np.zeros((1, 3))
-        assert pair_forces(st, 1, pi, pj, springs, pf, prm)[0] == 0
+        assert pair_forces(st, 1, pi, pj, springs, pf, prm, np.zeros(1, np.int64),
+                           np.zeros(1, np.int64))[0] == 0
         so = np.zeros_like(st)
         aux = np.array([[x, y, 0.0, 0.0], [x + GAP * nx, y + GAP * ny, 0.0, 0.0]])
         fused_step(st, so, aux, np.zeros((2, 3)), np.zeros(2, np.int64),

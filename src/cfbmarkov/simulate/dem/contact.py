@@ -172,12 +172,19 @@ def contact_force(delta, vn, n, vt, h, kn, kt, inv_kt, etan, etat, mu, dt):
     return fn, ft, h
 
 
-@njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
-def pair_forces(st, npairs, pi, pj, springs, pf, prm):
-    """Force of every listed pair (i < j), computed once.
+#: pairs per work item of :func:`pair_forces`, and per block of its lists of contacts
+CONTACT_BLOCK = 256
 
-    Branch-free apart from the contact test (contact or not, capped or not are selects),
-    so the loop can use SIMD.
+
+@njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
+def pair_forces(st, npairs, pi, pj, springs, pf, prm, contact_ids, block_contacts):
+    """Force of every listed pair (i < j), computed once, and the pairs in contact listed.
+
+    Branch-free apart from the contact test (contact or not, capped or not are selects).
+    The pairs go in blocks of :data:`CONTACT_BLOCK`, one block a work item; each block lists
+    its pairs in contact, in pair order, at its own place in ``contact_ids``, so the lists
+    do not depend on the thread count. Where few pairs touch (a dilute flow), the step
+    sums the forces of the particles in those pairs only (:mod:`.integrate`).
 
     Parameters
     ----------
@@ -194,6 +201,11 @@ def pair_forces(st, npairs, pi, pj, springs, pf, prm):
         opposite) and ``c = n x Ft`` (N), so that the torque on either particle is its
         radius times c.
     prm : DEMParams
+    contact_ids : int64 (>= npairs,)
+        Output: the pairs in contact of block b are
+        ``contact_ids[b*CONTACT_BLOCK : b*CONTACT_BLOCK + block_contacts[b]]``.
+    block_contacts : int64 (>= number of blocks,)
+        Output: pairs in contact per block of :data:`CONTACT_BLOCK` pairs.
 
     Returns
     -------
@@ -224,54 +236,61 @@ def pair_forces(st, npairs, pi, pj, springs, pf, prm):
     mono = prm.mono
     nbad = 0
     ncontacts = 0
-    for p in prange(npairs):
-        i = pi[p]
-        j = pj[p]
-        dx = st[j, 0] - st[i, 0]
-        dy = st[j, 1] - st[i, 1]
-        if periodic:
-            if dy > halfH:
-                dy -= H
-            elif dy < -halfH:
-                dy += H
-        rs = st[i, 5] + st[j, 5]
-        r2 = dx * dx + dy * dy
-        if r2 >= rs * rs:
-            springs[p, 0] = 0.0
-            springs[p, 1] = 0.0
-            pf[p, 0] = 0.0
-            pf[p, 1] = 0.0
-            pf[p, 2] = 0.0
-            continue
-        ncontacts += 1
-        r = math.sqrt(r2)
-        inv_r = 1.0 / r
-        nx = dx * inv_r
-        ny = dy * inv_r
-        delta = rs - r
-        if delta > ovl * rs:
-            nbad += 1
-        wsum = st[i, 4] + st[j, 4]
-        vrx = (st[i, 2] - st[j, 2]) - wsum * ny
-        vry = (st[i, 3] - st[j, 3]) + wsum * nx
-        vn = vrx * nx + vry * ny
-        vtx = vrx - vn * nx
-        vty = vry - vn * ny
-        if mono:
-            etan = etan_pp
-            etat = etat_pp
-        else:
-            sm = 1.0 / math.sqrt(st[i, 6] + st[j, 6])
-            etan = cn * sm
-            etat = ct * sm
-        fn, (ftx, fty), (hx, hy) = contact_force(delta, vn, (nx, ny), (vtx, vty),
-                                                 (springs[p, 0], springs[p, 1]), kn, kt, inv_kt,
-                                                 etan, etat, mu, dt)
-        springs[p, 0] = hx + 0.0
-        springs[p, 1] = hy + 0.0
-        pf[p, 0] = (ftx - fn * nx) + 0.0
-        pf[p, 1] = (fty - fn * ny) + 0.0
-        pf[p, 2] = (nx * fty - ny * ftx) + 0.0
+    B = CONTACT_BLOCK
+    for b in prange((npairs + B - 1) // B):
+        first = b * B
+        listed = 0
+        for p in range(first, min(npairs, first + B)):
+            i = pi[p]
+            j = pj[p]
+            dx = st[j, 0] - st[i, 0]
+            dy = st[j, 1] - st[i, 1]
+            if periodic:
+                if dy > halfH:
+                    dy -= H
+                elif dy < -halfH:
+                    dy += H
+            rs = st[i, 5] + st[j, 5]
+            r2 = dx * dx + dy * dy
+            if r2 >= rs * rs:
+                springs[p, 0] = 0.0
+                springs[p, 1] = 0.0
+                pf[p, 0] = 0.0
+                pf[p, 1] = 0.0
+                pf[p, 2] = 0.0
+                continue
+            ncontacts += 1
+            contact_ids[first + listed] = p
+            listed += 1
+            r = math.sqrt(r2)
+            inv_r = 1.0 / r
+            nx = dx * inv_r
+            ny = dy * inv_r
+            delta = rs - r
+            if delta > ovl * rs:
+                nbad += 1
+            wsum = st[i, 4] + st[j, 4]
+            vrx = (st[i, 2] - st[j, 2]) - wsum * ny
+            vry = (st[i, 3] - st[j, 3]) + wsum * nx
+            vn = vrx * nx + vry * ny
+            vtx = vrx - vn * nx
+            vty = vry - vn * ny
+            if mono:
+                etan = etan_pp
+                etat = etat_pp
+            else:
+                sm = 1.0 / math.sqrt(st[i, 6] + st[j, 6])
+                etan = cn * sm
+                etat = ct * sm
+            fn, (ftx, fty), (hx, hy) = contact_force(delta, vn, (nx, ny), (vtx, vty),
+                                                     (springs[p, 0], springs[p, 1]), kn, kt, inv_kt,
+                                                     etan, etat, mu, dt)
+            springs[p, 0] = hx + 0.0
+            springs[p, 1] = hy + 0.0
+            pf[p, 0] = (ftx - fn * nx) + 0.0
+            pf[p, 1] = (fty - fn * ny) + 0.0
+            pf[p, 2] = (nx * fty - ny * ftx) + 0.0
+        block_contacts[b] = listed
     return nbad, ncontacts
 
 

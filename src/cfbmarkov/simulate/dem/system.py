@@ -40,6 +40,7 @@ import numpy as np
 from cfbmarkov.errors import CfbmarkovError, InputError, TimeStepAdvisory
 from cfbmarkov.simulate.dem import integrate
 from cfbmarkov.simulate.dem import layout as L
+from cfbmarkov.simulate.dem.contact import CONTACT_BLOCK
 from cfbmarkov.simulate.dem.layout import DEMParams, empty_list
 from cfbmarkov.simulate.dem.law import ContactLaw
 
@@ -230,7 +231,7 @@ class DEMSystem:
         ctl[L.C_REBUILD] = 1
         self._arrays = dict(st=st, aux=aux, wh=np.zeros((2, n, 3)), ids=ids, laps=lp, ctl=ctl)
         self._lists = [empty_list(n, 4), empty_list(n, 4)]
-        self._pf = np.zeros((self._lists[0].pi.shape[0], 3))
+        self._pair_scratch(self._lists[0].pi.shape[0])
         self._fsum = np.zeros((n, 3))
         self._t0 = float(time)
         self.serial_below = SERIAL_BELOW
@@ -252,6 +253,13 @@ class DEMSystem:
             t0=self._t0, ncx=int(self._cells[0]), ncy=int(self._cells[1]),
             periodic=not self._bottom_wall, floor=self._bottom_wall, mono=self._mono)
 
+    def _pair_scratch(self, capacity):
+        """Per-pair scratch for lists of up to ``capacity`` pairs: forces, and the pairs in
+        contact by blocks (:func:`.contact.pair_forces`)."""
+        self._pf = np.zeros((capacity, 3))
+        self._contact_ids = np.zeros(capacity, np.int64)
+        self._block_contacts = np.zeros(capacity // CONTACT_BLOCK + 1, np.int64)
+
     def _alloc_scratch(self, capacity):
         n = self._n
         ncell = self._cells[0] * self._cells[1]
@@ -260,7 +268,9 @@ class DEMSystem:
                              cfill=np.zeros(ncell, np.int64), perm=np.zeros(n, np.int64),
                              invperm=np.zeros(n, np.int64), wall_ids=np.zeros(n, np.int64),
                              n_wall=np.full(1, -1, np.int64),
-                             n_contacts=np.full(1, -1, np.int64))
+                             n_contacts=np.full(1, -1, np.int64),
+                             touched=np.full(n, -1, np.int64), touched_ids=np.zeros(n, np.int64),
+                             stamp=np.zeros(1, np.int64))
         self._ev = (np.zeros(capacity), np.zeros(capacity, np.int64), np.zeros(capacity, np.int8))
         self._ext_set = False
         self._wall_impulse = np.zeros(2)
@@ -459,7 +469,8 @@ class DEMSystem:
                 a["st"], a["aux"], a["wh"], a["ids"], a["laps"], self._lists[0], self._lists[1],
                 self._pf, self._fsum, ctl, sc["evf"], sc["bad"], sc["key"], sc["cstart"],
                 sc["cfill"], sc["perm"], sc["invperm"], sc["wall_ids"], sc["n_wall"],
-                sc["n_contacts"], self._prm,
+                sc["n_contacts"], self._contact_ids, self._block_contacts, sc["touched"],
+                sc["touched_ids"], sc["stamp"], self._prm,
                 left, *self._ev, self._wall_impulse)
             left -= done
             if status == L.ST_OK:
@@ -469,7 +480,7 @@ class DEMSystem:
                 self._lists[new] = empty_list(self._n, int(info) + 2)
                 cap = max(lst.pi.shape[0] for lst in self._lists)
                 if self._pf.shape[0] < cap:
-                    self._pf = np.zeros((cap, 3))
+                    self._pair_scratch(cap)
             elif status == L.ST_EVENTS:
                 n_ev = int(ctl[L.C_NEV])
                 cap = max(2 * self._ev[0].shape[0], n_ev + 4 * self._n)
@@ -615,7 +626,7 @@ class DEMSystem:
             lst.lowstart[:] = state["internal_second_start"]
             lst.lowpid[:npairs] = state["internal_second_pairs"]
             self._lists = [lst, empty_list(n, stride)]
-            self._pf = np.zeros((lst.pi.shape[0], 3))
+            self._pair_scratch(lst.pi.shape[0])
             self._fsum = np.zeros((n, 3))
             self._prm = self._parameters()
             ev_t = np.asarray(state["pending_event_time"], np.float64)
