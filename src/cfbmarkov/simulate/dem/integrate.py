@@ -332,9 +332,25 @@ def touched_particles(npairs, pi, pj, contact_ids, block_contacts, touched, stam
     :func:`.contact.pair_forces` listed, marked ``touched[i] = stamp`` and listed in
     ``touched_ids`` (in the order met, each once). Serial: a dilute flow has few contacts.
 
+    Parameters
+    ----------
+    npairs : int
+        Number of listed pairs.
+    pi, pj : int32 (>= npairs,)
+        First and second member of each pair.
+    contact_ids, block_contacts : int64 arrays
+        The pairs in contact by blocks of ``CONTACT_BLOCK`` pairs, as
+        :func:`.contact.pair_forces` wrote them.
+    touched : int64 (N,)
+        Marks, updated: ``touched[i] = stamp`` for every particle listed.
+    stamp : int
+        This step's mark (never used before with this ``touched``).
+    touched_ids : int64 (N,)
+        Output: the particles in a contact, first ``n`` entries.
+
     Returns
     -------
-    int
+    n : int
         Number of particles listed.
     """
     n = 0
@@ -360,7 +376,23 @@ def sum_touched_pairs(st, aux, pstart, lowstart, lowpid, pf, fsum, touched_ids, 
     """:func:`sum_pairs` for the particles in ``touched_ids[:n_touched]`` only: every other
     particle is in no contact, its pair forces are all +0.0, and its sum is its external
     force, which :func:`wall_contacts` and :func:`move` take from ``aux`` instead (the same
-    value: adding +0.0 changes no bits but a -0.0, and a force of -0.0 moves nothing)."""
+    value: adding +0.0 changes no bits but a -0.0, and a force of -0.0 moves nothing).
+
+    Parameters
+    ----------
+    st, aux : float64 (N, 8), (N, 4)
+        Particle records and reference positions with external forces.
+    pstart, lowstart, lowpid : int64 arrays
+        Pair-list index arrays (see :class:`.layout.PairList`).
+    pf : float64 (>= npairs, 3)
+        Pair forces from :func:`.contact.pair_forces`.
+    fsum : float64 (N, 3)
+        Output: (fx, fy, torque) of the listed particles; other rows are left as they were.
+    touched_ids : int64 (N,)
+        The particles to sum (:func:`touched_particles`).
+    n_touched : int
+        Their number.
+    """
     for k in prange(n_touched):
         _sum_pairs_of(touched_ids[k], st, aux, pstart, lowstart, lowpid, pf, fsum)
 
