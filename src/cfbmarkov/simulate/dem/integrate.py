@@ -273,19 +273,7 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
     wall_fy = 0.0
     floor_fy = 0.0
     for i in prange(N):
-        Ri = st[i, 5]
-        fx = aux[i, 2]
-        fy = aux[i, 3]
-        tq = 0.0
-        for q in range(lowstart[i], lowstart[i + 1]):
-            p = lowpid[q]
-            fx -= pf[p, 0]
-            fy -= pf[p, 1]
-            tq += Ri * pf[p, 2]
-        for p in range(pstart[i], pstart[i + 1]):
-            fx += pf[p, 0]
-            fy += pf[p, 1]
-            tq += Ri * pf[p, 2]
+        fx, fy, tq = _pair_sum(i, st, aux, pstart, lowstart, lowpid, pf)
         m, e, nb, wf, ff = _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm)
         nmove += m
         nev += e
@@ -296,8 +284,9 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
 
 
 @njit(inline="always", error_model="numpy", fastmath=FASTMATH)
-def _sum_pairs_of(i, st, aux, pstart, lowstart, lowpid, pf, fsum):
-    """fsum[i] = particle i's external force plus its pairs' forces (see :func:`sum_pairs`)."""
+def _pair_sum(i, st, aux, pstart, lowstart, lowpid, pf):
+    """Particle i's external force plus its pairs' forces, and the pairs' torque: (fx, fy,
+    torque), in the order of :func:`sum_pairs`."""
     Ri = st[i, 5]
     fx = aux[i, 2]
     fy = aux[i, 3]
@@ -311,6 +300,13 @@ def _sum_pairs_of(i, st, aux, pstart, lowstart, lowpid, pf, fsum):
         fx += pf[p, 0]
         fy += pf[p, 1]
         tq += Ri * pf[p, 2]
+    return fx, fy, tq
+
+
+@njit(inline="always", error_model="numpy", fastmath=FASTMATH)
+def _sum_pairs_of(i, st, aux, pstart, lowstart, lowpid, pf, fsum):
+    """fsum[i] = :func:`_pair_sum` of particle i."""
+    fx, fy, tq = _pair_sum(i, st, aux, pstart, lowstart, lowpid, pf)
     fsum[i, 0] = fx
     fsum[i, 1] = fy
     fsum[i, 2] = tq
