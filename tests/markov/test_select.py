@@ -55,7 +55,7 @@ def test_auto_chooses_memory_and_predicts_the_later_spread(run, tmp_path):
     candidates = model.selection["candidates"]
     assert {c["states"] for c in candidates} == set(DEFAULT_STATES)
     assert "cells-regime" in DEFAULT_STATES
-    assert min(c["score"] for c in candidates if c["score"] is not None) == pytest.approx(
+    assert min(c["score"] for c in candidates) == pytest.approx(
         next(c["score"] for c in candidates if c["states"] == chosen["states"]
              and c["lag"] == chosen["lag"]))
     cells = fit_by_name("mle", run, window=FIT, columns=FLOW.columns, rows=FLOW.rows,
@@ -135,11 +135,21 @@ def test_memory_candidates_work_when_the_window_starts_at_the_first_frame(tmp_pa
     model = select_model(path, window=(0.0, 4.0), columns=FLOW.columns, rows=FLOW.rows,
                          lag=FLOW.lag, lag_multiples=(1,))
     errors = {c["states"]: c["error"] for c in model.selection["candidates"]}
-    assert len(errors) == len(DEFAULT_STATES)
-    # this flow moves a row or more per lag: the fine velocity space fits one sub-row, the
-    # states of cells-velocity, and is not judged twice
-    assert errors.pop("cells-velocity-fine") == "the same states as cells-velocity on this window"
-    assert errors == {name: "" for name in errors}
+    assert errors == {name: "" for name in errors} and len(errors) == len(DEFAULT_STATES)
+
+
+def test_a_candidate_with_an_earlier_ones_states_is_not_judged_twice(tmp_path):
+    """The fine velocity space fits one sub-row on a flow that moves a row or more per lag:
+    the states of cells-velocity, listed as such and not judged again."""
+    path = tmp_path / "fast.h5"
+    synthetic.write_run(path, FLOW, 1500, 4.0, seed=5)
+    model = select_model(path, window=(0.0, 4.0), columns=FLOW.columns, rows=FLOW.rows,
+                         lag=FLOW.lag, states=("cells", "cells-velocity", "cells-velocity-fine"))
+    scores = {c["states"]: c for c in model.selection["candidates"]}
+    assert scores["cells-velocity-fine"]["error"] == ("the same states as cells-velocity on "
+                                                     "this window")
+    assert scores["cells-velocity-fine"]["score"] is None
+    assert scores["cells-velocity"]["score"] is not None and scores["cells-velocity"]["error"] == ""
 
 
 def test_score_units_are_the_goals_on_a_steady_flow_and_the_flows_variability_otherwise():

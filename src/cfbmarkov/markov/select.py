@@ -64,11 +64,13 @@ from cfbmarkov.markov.states import state_space_from_name
 from cfbmarkov.trajectories import opened
 
 #: state spaces tried by default (names of :func:`state_space_from_name`)
-DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-velocity-fine",
-                  "cells-previous", "cells-regime")
-#: (``cells-velocity-fine`` fits its sub-rows to the window; where that leaves one sub-row it
-#: has the states of ``cells-velocity``, and a candidate with an earlier one's states is
-#: not judged twice)
+DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-previous", "cells-regime")
+#: (``cells-velocity-fine`` is not a default candidate either: at paper scale it fits one
+#: sub-row, the states of ``cells-velocity``, and at the quick scale's 6 and 8 m/s, where its
+#: sub-rows halve the later window's MD, the cross-validation on short blocks cannot tell it
+#: from ``cells-previous``; it chose it only at the quick 4 m/s, where it did worse on the
+#: later window and cost 13 s more of the demo (docs/method.md); ``states=`` can add it. A
+#: candidate whose fitted states equal an earlier one's is listed, not judged twice.)
 #: (``cells-direction-regime``, 912 states, is left out of the default candidates: it cost 0.4 s
 #: of the 1.7 s choice at paper scale, and on the 6 m/s run it did worse than cells-direction,
 #: +11.7 % / +36.4 % against +3.2 % / +6.4 % in PD E / SD; ``states=`` can add it)
