@@ -69,7 +69,7 @@ DEFAULT_STATES = ("cells", "cells-direction", "cells-velocity", "cells-previous"
 #: sub-row, the states of ``cells-velocity``, and at the quick scale's 6 and 8 m/s, where its
 #: sub-rows halve the later window's MD, the cross-validation on short blocks cannot tell it
 #: from ``cells-previous``; it chose it only at the quick 4 m/s, where it did worse on the
-#: later window and cost 13 s more of the demo (docs/method.md); ``states=`` can add it. A
+#: later window and cost 14 s more of the demo (docs/method.md); ``states=`` can add it. A
 #: candidate whose fitted states equal an earlier one's is listed, not judged twice.)
 #: (``cells-direction-regime``, 912 states, is left out of the default candidates: it cost 0.4 s
 #: of the 1.7 s choice at paper scale, and on the 6 m/s run it did worse than cells-direction,
