@@ -128,11 +128,13 @@ def _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm):
     """Particle i's leapfrog update from its total force (fx, fy) and torque tq (pairs,
     external force and walls; gravity added here), written to ``so``, and its checks.
 
-    Branch-free apart from the loop-invariant ``periodic``: a pass through the top or bottom,
-    a bad particle and a move beyond skin/2 are selects and sums, so that the loop over all
-    particles (:func:`move`) is one straight body (no call, no rare path inside it). ``laps``
-    and ``evf`` are written for every particle (+-1 on a pass, 0 to ``evf`` otherwise: it is
-    all zeros between steps), ``bad`` only changes where a reason is found.
+    Branch-free apart from the loop-invariant ``periodic`` and two rare writes: the new
+    record, a move beyond skin/2 and the checks are selects and sums (no call inside the
+    loop over all particles, :func:`move`); ``laps`` and ``evf`` are written only on a pass
+    through the top or bottom (+-1; ``evf`` is all zeros between steps) and ``bad`` only
+    where a reason is found. A branch that is almost never taken is predicted and costs
+    nothing, where writing every particle's ``laps`` and ``bad`` cost 12 % of :func:`move`
+    (docs/performance.md).
 
     Returns (moved beyond skin/2, boundary passes, bad). Inlined into :func:`move` and
     :func:`fused_step`.
@@ -161,8 +163,9 @@ def _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm):
         yn = yn + H if down else yn
         yn = 0.0 if (down and yn >= H) else yn  # a step of -1e-17 rounds to H: that is 0
         d = (1 if up else 0) - (1 if down else 0)
-        laps[i] += d
-        evf[i] = d
+        if d != 0:  # rare: only then written (evf is all zeros between steps)
+            laps[i] += d
+            evf[i] = d
         nev = 1 if d != 0 else 0
         isbad = 0 if (yn >= 0.0 and yn < H) else BAD_RANGE
         ddy = yn - aux[i, 1]
@@ -175,7 +178,8 @@ def _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm):
     isbad = BAD_WALL if (xn < -Ri or xn > W + Ri) else isbad
     finite = xn == xn and yn == yn and wn == wn and vxn == vxn and vyn == vyn
     isbad = isbad if finite else BAD_NAN
-    bad[i] = isbad if isbad != 0 else bad[i]
+    if isbad != 0:  # rare
+        bad[i] = isbad
     ddx = xn - aux[i, 0]
     hs = 0.5 * prm.skin
     moved = 1 if ddx * ddx + ddy * ddy > hs * hs else 0
