@@ -289,10 +289,24 @@ def test_persistence_baseline_and_natural_variability_stand_beside_the_model(tmp
     _, p_win = rtd_histogram(window_rt.samples, 0.025, window_length=2.0)
     assert base["md_rtd"] == pytest.approx(minkowski_distance(p_fit, p_win, 2.0), rel=1e-12)
     assert np.isfinite(halves["md_rtd"]) and halves["rt_count"] > 0
+    # the model on its own fitting window: its RTD against the fitting window's
+    own = saved["model_on_fitting_window"]
+    assert own["windows"] == [[2.0, 4.0], [0.5, 2.0]]
+    with Trajectories(pred) as p:
+        model_rt = residence_times(p, (2.0, 4.0), use_events=False)
+    _, p_model = rtd_histogram(model_rt.samples, 0.025, window_length=2.0)
+    assert own["rt_mean"] == pytest.approx(model_rt.mean, rel=1e-12)
+    assert own["pd_rt_mean"] == pytest.approx(100 * (model_rt.mean - fit_rt.mean) / fit_rt.mean,
+                                              rel=1e-9)
+    assert own["pd_rt_sd"] == pytest.approx(100 * (model_rt.sd - fit_rt.sd) / fit_rt.sd,
+                                            rel=1e-9)
+    assert own["md_rtd"] == pytest.approx(minkowski_distance(p_model, p_fit, 2.0), rel=1e-12)
+    assert own["md_rtd"] != pytest.approx(saved["md_rtd"])
     # a prediction without its model (plain arrays): no baseline, halves still given
     bare = write_trajectories(tmp_path / "bare.h5", *_frames(pred), width=0.09, height=0.95)
     plain = compare(run, bare, window=(2.0, 4.0), output=tmp_path / "b", figures=False)
     assert plain["baseline"] is None and plain["natural_variability"] is not None
+    assert plain["model_on_fitting_window"] is None
 
 
 def _frames(path):

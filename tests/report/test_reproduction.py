@@ -245,6 +245,14 @@ def test_trust_paragraph_is_written_from_the_numbers():
     assert "beats simply" in text and "within the reference's own variability" in text
     assert "inside" in text
     assert "too few residences" in trust_text("3", "mle", {"md_rtd": None})
+    # the model's own error on its fitting window, against the flow's change (the baseline)
+    summary["model_on_fitting_window"] = {"windows": [[15, 20], [10, 15]], "md_rtd": 0.02,
+                                          "pd_rt_mean": 1.25, "pd_rt_sd": -3.0}
+    text = trust_text("6", "auto", summary)
+    assert "On its own fitting window (10-15 s) the model is 0.02" in text
+    assert "+1.2 %" in text and "-3.0 %" in text and "smaller than the flow's change" in text
+    summary["model_on_fitting_window"]["md_rtd"] = 0.2
+    assert "the model's own error dominates" in trust_text("6", "auto", summary)
 
 
 def test_a_side_without_residences_is_said_so_not_n_a(reproduction):

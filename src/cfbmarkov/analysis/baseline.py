@@ -7,6 +7,10 @@
 - The *natural variability* is the reference's difference between the two halves of the
   analysis window: how much the "truth" itself moves at that scale (sampling noise and
   non-stationarity), the floor below which no model can be judged.
+- The model *on its fitting window*: the prediction's RTD against the reference's RTD in the
+  window the model was fitted on (the baseline's own RTD), the model's error where the flow
+  did not change. Beside the baseline it splits a model's error on the analysis window into
+  its own part and the flow's change between the windows.
 
 Both use the comparison's time basis (frames at the model's lag, or exact events) and its
 RTD bins, so their PD and MD stand beside the model's in Table 3.
@@ -87,6 +91,47 @@ def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, f
     return WindowDifference((tuple(stand_in), tuple(judged)), a, b,
                             percentage_difference(a.mean, b.mean),
                             percentage_difference(a.sd, b.sd, scale=b.mean), md)
+
+
+def model_on_fitting_window(model: ResidenceTimes, model_rtd: np.ndarray,
+                            baseline: WindowDifference, *, bin_width: float, md_order: float,
+                            window_length: float) -> WindowDifference:
+    """The prediction's residence times against the reference's in the model's fitting
+    window: the model's own (in-sample) error.
+
+    A model fitted on a window can at best reproduce that window's RTD, which the persistence
+    baseline uses as it is; its error on the analysis window is its own error here plus the
+    flow's change between the windows (the baseline's), so it beats the baseline only where
+    its own error is small against the flow's change and happens to lean towards it.
+
+    Parameters
+    ----------
+    model : ResidenceTimes
+        The prediction's residence times in the analysis window.
+    model_rtd : ndarray (bins,)
+        Their RTD on the comparison's bins.
+    baseline : WindowDifference
+        The persistence baseline (:func:`window_difference` of the fitting window against
+        the analysis window); its ``predicted`` are the fitting window's residence times.
+    bin_width, md_order : float
+        The comparison's RTD bins (s) and Minkowski order.
+    window_length : float
+        Length (s) whose bins both RTDs use (the analysis window's).
+
+    Returns
+    -------
+    WindowDifference
+        ``windows``: (analysis window, fitting window); ``predicted`` the model's,
+        ``observed`` the fitting window's residence times; PD (%) and MD of the first
+        against the second (Eq. 7-9 of the paper, as the comparison's).
+    """
+    fit = baseline.predicted
+    _, p_fit = rtd_histogram(fit.samples, bin_width, window_length=window_length)
+    md = (minkowski_distance(model_rtd, p_fit, md_order)
+          if model_rtd.sum() > 0 and p_fit.sum() > 0 else float("nan"))
+    return WindowDifference((tuple(baseline.windows[1]), tuple(baseline.windows[0])), model,
+                            fit, percentage_difference(model.mean, fit.mean),
+                            percentage_difference(model.sd, fit.sd, scale=fit.mean), md)
 
 
 def fitting_window(pred) -> tuple[float, float] | None:

@@ -24,7 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from cfbmarkov.analysis.baseline import WindowDifference, fitting_window, window_difference
+from cfbmarkov.analysis.baseline import (WindowDifference, fitting_window,
+                                         model_on_fitting_window, window_difference)
 from cfbmarkov.analysis.clusters import cluster_index
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
@@ -230,6 +231,10 @@ class RunComparison:
         reference).
     natural_variability : WindowDifference or None
         The reference's first half of the window against its second half.
+    on_fitting_window : WindowDifference or None
+        The prediction's RTD against the reference's in the model's fitting window, the
+        model's own error (:func:`cfbmarkov.analysis.baseline.model_on_fitting_window`);
+        None where there is no baseline.
     intervals : PredictionIntervals or None
         The prediction's intervals, set by the report where they can be formed
         (:mod:`cfbmarkov.analysis.intervals`).
@@ -257,6 +262,7 @@ class RunComparison:
     exact_reference: ResidenceTimes | None = None
     baseline: WindowDifference | None = None
     natural_variability: WindowDifference | None = None
+    on_fitting_window: WindowDifference | None = None
     intervals: Any = None
     direction: str = "up"
     cluster: dict | None = None
@@ -325,6 +331,8 @@ class RunComparison:
             "baseline": None if self.baseline is None else self.baseline.summary(),
             "natural_variability": (None if self.natural_variability is None
                                     else self.natural_variability.summary()),
+            "model_on_fitting_window": (None if self.on_fitting_window is None
+                                        else self.on_fitting_window.summary()),
             "units": {"time": "s", "pd": "%", "mixing_rms": "fraction of all particles"},
         }
 
@@ -460,6 +468,10 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         md = minkowski_distance(p_ref, p_mod, md_order)
     else:
         md = float("nan")
+    on_fit = None
+    if baseline is not None:
+        on_fit = model_on_fitting_window(rt_mod, p_mod, baseline, bin_width=bin_width,
+                                         md_order=md_order, window_length=length)
     for what, value in (("E(RT)", rt_ref.mean), ("SD(RT)", rt_ref.sd)):
         if rt_ref.count >= 2 and abs(value) <= ROUNDOFF * abs(rt_ref.mean):
             warnings.append(f"the reference {what} is zero to round-off ({value:.3g} s): its "
@@ -497,7 +509,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         model=ComparedRun(pred, pred_frames, rt_mod, p_mod, t_mod, f_mod, left_mod),
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
         warnings=warnings, basis=basis, stride=stride, exact_reference=exact_reference,
-        baseline=baseline, natural_variability=variability, direction=direction,
+        baseline=baseline, natural_variability=variability, on_fitting_window=on_fit,
+        direction=direction,
         cluster=_clusters(ref, pred, ref_frames, pred_frames, columns))
 
 

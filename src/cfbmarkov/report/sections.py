@@ -309,7 +309,8 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
 
 def trust_text(u: str, estimator: str, summary: dict) -> str:
     """One paragraph: how far to trust this prediction, written from its numbers (the model
-    against the persistence baseline and the CFD-DEM's own variability, and its interval).
+    against the persistence baseline, its own error on its fitting window, the CFD-DEM's own
+    variability, and its interval).
 
     Parameters
     ----------
@@ -339,6 +340,20 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
     else:
         parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD); no persistence baseline "
                      "(the fitting window is not in the reference file).")
+    own = summary.get("model_on_fitting_window") or {}
+    md_own = finite_or_none(own.get("md_rtd"))
+    if md_own is not None and md_base is not None:
+        windows = own.get("windows") or [[], []]
+        fit = "-".join(f"{t:g}" for t in windows[1]) if len(windows[1]) == 2 else "fitting"
+        pd_own = [finite_or_none(own.get(k)) for k in ("pd_rt_mean", "pd_rt_sd")]
+        pds = (f" (PD of E(RT) {pd_own[0]:+.1f} %, of SD(RT) {pd_own[1]:+.1f} %)"
+               if None not in pd_own else "")
+        share = ("smaller than" if md_own < md_base else "at least")
+        parts.append(f"On its own fitting window ({fit} s) the model is {md_own:.3g} from the "
+                     f"CFD-DEM's RTD{pds}, {share} the flow's change between the windows "
+                     f"({md_base:.3g})"
+                     + (": the flow's change, more than the model, limits this prediction."
+                        if md_own < md_base else ": the model's own error dominates."))
     if md_halves is not None:
         scale = ("within" if md <= md_halves else f"{md / md_halves:.1f} times")
         parts.append(f"The CFD-DEM's two halves of the window differ by {md_halves:.3g}: the "
