@@ -251,8 +251,12 @@ def test_trust_paragraph_is_written_from_the_numbers():
     text = trust_text("6", "auto", summary)
     assert "On its own fitting window (10-15 s) the model is 0.02" in text
     assert "+1.2 %" in text and "-3.0 %" in text and "smaller than the flow's change" in text
+    summary["md_rtd"] = 0.2      # beyond the halves: the flow's change since the fitting window
+    assert "the rest is the flow's change since the fitting window" in trust_text("6", "a",
+                                                                                  summary)
     summary["model_on_fitting_window"]["md_rtd"] = 0.2
-    assert "the model's own error dominates" in trust_text("6", "auto", summary)
+    text = trust_text("6", "auto", summary)
+    assert "the model's own error dominates" in text and "the difference is the model's" in text
 
 
 def test_a_side_without_residences_is_said_so_not_n_a(reproduction):

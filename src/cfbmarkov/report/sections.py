@@ -329,6 +329,8 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
     base = summary.get("baseline") or {}
     halves = summary.get("natural_variability") or {}
     md_base, md_halves = finite_or_none(base.get("md_rtd")), finite_or_none(halves.get("md_rtd"))
+    own = summary.get("model_on_fitting_window") or {}
+    md_own = finite_or_none(own.get("md_rtd"))
     parts = [f"U = {u} m/s, {estimator}:"]
     if md is None:
         return " ".join(parts + ["no RTD to judge (too few residences in the window)."])
@@ -340,8 +342,6 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
     else:
         parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD); no persistence baseline "
                      "(the fitting window is not in the reference file).")
-    own = summary.get("model_on_fitting_window") or {}
-    md_own = finite_or_none(own.get("md_rtd"))
     if md_own is not None and md_base is not None:
         windows = own.get("windows") or [[], []]
         fit = "-".join(f"{t:g}" for t in windows[1]) if len(windows[1]) == 2 else "fitting"
@@ -356,9 +356,12 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
                         if md_own < md_base else ": the model's own error dominates."))
     if md_halves is not None:
         scale = ("within" if md <= md_halves else f"{md / md_halves:.1f} times")
+        flow_limits = md_own is not None and md_base is not None and md_own < md_base
         parts.append(f"The CFD-DEM's two halves of the window differ by {md_halves:.3g}: the "
                      f"model's error is {scale} the reference's own variability"
-                     + ("." if md <= md_halves else "; the difference is the model's."))
+                     + ("." if md <= md_halves else
+                        "; the rest is the flow's change since the fitting window." if flow_limits
+                        else "; the difference is the model's."))
     cluster = summary.get("cluster_index") or {}
     c_ref = finite_or_none((cluster.get("reference") or {}).get("mean"))
     c_mod = finite_or_none((cluster.get("model") or {}).get("mean"))
