@@ -361,7 +361,8 @@ def test_summing_only_the_touched_particles_moves_them_by_the_same_bits(mono, pe
                               stamp, summed, prm)
         so = np.zeros_like(st)
         moved = move(st, so, aux, np.zeros(n, np.int64), fsum,
-                     touched, stamp, summed, np.zeros(n, np.int8), np.zeros(n, np.int8), prm)
+                     touched, stamp, summed, np.zeros(n, np.int8), np.zeros(n, np.int8), 0.0,
+                     prm)
         results.append((so.view(np.uint64), wh.view(np.uint64), walls, moved))
     (so_a, wh_a, walls_a, moved_a), (so_b, wh_b, walls_b, moved_b) = results
     assert walls_a[1] != 0.0 or walls_a[2] != 0.0                 # a wall touched someone

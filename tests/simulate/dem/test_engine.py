@@ -262,6 +262,38 @@ def test_pair_lists_are_consistent():
         assert s.n_rebuilds > 1
 
 
+def test_list_drifting_with_the_particles_misses_no_contact():
+    """A gas rising at 3 m/s as a whole: the list's frame drifts with it (builds are
+    needed only for the particles' motion relative to each other, not for the 3 m/s that the
+    usual rule would count), and every touching pair is listed at every step, across the
+    periodic boundary too."""
+    W, H = 0.02, 0.03
+    n = 300
+    pos, vel, om = gas(n, W, H, seed=11, speed=0.3)
+    vel[:, 1] += 3.0
+    dt = 2e-6
+    s = make(pos, vel, W, H, dt=dt, om=om)
+    skin = float(s.state()["skin"])
+    steps = 600
+    collisions = 0
+    for _ in range(steps):
+        s.step(1)
+        st = s.state()
+        x = st["internal_state"]
+        pairs = set(zip(st["internal_pair_first"].tolist(), st["internal_pair_second"].tolist()))
+        dx = x[:, None, 0] - x[None, :, 0]
+        dy = x[:, None, 1] - x[None, :, 1]
+        dy -= H * np.round(dy / H)
+        ii, jj = np.nonzero(np.triu(np.hypot(dx, dy) < x[:, None, 5] + x[None, :, 5], 1))
+        touching = set(zip(ii.tolist(), jj.tolist()))
+        assert touching <= pairs
+        collisions += len(touching)
+    assert collisions > 50  # the particles do meet
+    # the usual rule (each particle within skin/2 of where it was at the build) would have
+    # built the list at least every skin/2 / (2.5 m/s dt) steps
+    assert s.n_rebuilds < 0.5 * steps * 2.5 * dt / (0.5 * skin)
+
+
 # ---------------------------------------------------------------- independent reference
 def reference_run(pos, vel, om, rad, law, W, H, g, dt, nsteps):
     """Plain numpy/Python implementation of the same model (pair loop i < j, dict history)."""
@@ -349,8 +381,12 @@ def test_matches_independent_reference():
 # ---------------------------------------------------------------- external force
 def test_external_force_in_callers_order_through_rebuilds():
     W, H = 0.02, 0.02
-    pos, _, _ = gas(100, W, H, seed=4)
-    vel = np.tile([0.0, 4.0], (100, 1))  # all move together: no collisions
+    # ten columns 2 mm apart (D = 1 mm): the left five rise, the right five fall, and no two
+    # particles ever touch, while their relative motion makes the list be built again
+    cx, cy = np.meshgrid(0.001 + 0.002 * np.arange(10), 0.001 + 0.002 * np.arange(10))
+    pos = np.column_stack([cx.ravel(), cy.ravel()])
+    pos = pos[np.random.default_rng(4).permutation(100)]
+    vel = np.column_stack([np.zeros(100), np.where(pos[:, 0] < W / 2, 4.0, -4.0)])
     s = make(pos, vel, W, H, dt=2e-6, om=np.zeros(100))
     f = np.random.default_rng(1).uniform(-1, 1, (100, 2)) * 1e-6  # ~0.7 m/s^2
     s.step(500, external_force=f)

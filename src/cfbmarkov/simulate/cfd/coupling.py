@@ -20,8 +20,11 @@
   a floor (default 0.35) for robustness; the clipping is the only place solid volume is
   not conserved, and the gas solver reports the resulting continuity defect.
 
-These kernels are serial: one gas step's worth of 27000 particles costs ~1e-4 s each; the
-particle loop of the DEM may instead call :func:`gas_velocity_at` inline.
+The deposits run in parallel and give the same bits for any number of threads: the
+particles are cut by index into :data:`DEPOSIT_CHUNKS` fixed chunks, each chunk adds its
+particles, in order, to its own copy of the fields, and the copies are summed in chunk
+order (:func:`_sum_chunks`). The interpolation kernels are parallel over particles; the DEM's
+particle loop may instead call :func:`gas_velocity_at` inline.
 """
 
 from __future__ import annotations
@@ -36,6 +39,30 @@ from cfbmarkov.simulate.cfd.grid import GasGrid
 
 #: default lower clip of the void fraction
 VOID_FRACTION_FLOOR = 0.35
+
+#: the particles are deposited on the grid in this many fixed chunks of consecutive indices,
+#: each into its own copy of the fields, summed in chunk order: parallel over the chunks, and
+#: the same bits for any thread count (a constant, never the number of threads)
+DEPOSIT_CHUNKS = 8
+
+
+@nb.njit(cache=True, inline="always")
+def _chunk_range(c, n):
+    """Particles ``[lo, hi)`` of chunk ``c`` of :data:`DEPOSIT_CHUNKS` over ``n``."""
+    return c * n // DEPOSIT_CHUNKS, (c + 1) * n // DEPOSIT_CHUNKS
+
+
+@nb.njit(cache=True, parallel=True)
+def _sum_chunks(partial, out):
+    """``out += partial[0] + partial[1] + ...`` in chunk order (each element's sum in the
+    same order whatever the threads). ``partial`` (C, a, b), ``out`` (a, b)."""
+    C, a, b = partial.shape
+    for i in nb.prange(a):
+        for j in range(b):
+            acc = out[i, j]
+            for c in range(C):
+                acc += partial[c, i, j]
+            out[i, j] = acc
 
 
 @nb.njit(cache=True, inline="always")
@@ -188,22 +215,45 @@ def _add_to_faces(fu, fv, gx, gy, w):
     fv[ib, k1] += vy * wb * gy
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _deposit_forces_kernel(x, y, fx, fy, dx, dy, inv_volume, fu, fv):
+    """Add the particle forces (fx, fy) per unit volume to the faces (fu, fv), by chunks."""
     nx = fv.shape[0]
     ny = fv.shape[1]
     idx = 1.0 / dx
     idy = 1.0 / dy
-    for p in range(x.shape[0]):
-        gx = fx[p] * inv_volume
-        gy = fy[p] * inv_volume
-        if gx == 0.0 and gy == 0.0:
-            continue
-        w = _face_weights(x[p], y[p], nx, ny, idx, idy)
-        _add_to_faces(fu, fv, gx, gy, w)
+    n = x.shape[0]
+    pu = np.zeros((DEPOSIT_CHUNKS, nx + 1, ny))
+    pv = np.zeros((DEPOSIT_CHUNKS, nx, ny))
+    for c in nb.prange(DEPOSIT_CHUNKS):
+        lo, hi = _chunk_range(c, n)
+        cu = pu[c]
+        cv = pv[c]
+        for p in range(lo, hi):
+            gx = fx[p] * inv_volume
+            gy = fy[p] * inv_volume
+            if gx == 0.0 and gy == 0.0:
+                continue
+            w = _face_weights(x[p], y[p], nx, ny, idx, idy)
+            _add_to_faces(cu, cv, gx, gy, w)
+    _sum_chunks(pu, fu)
+    _sum_chunks(pv, fv)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
+def _deposit_particle(x, y, gx, gy, gk, nx, ny, idx, idy, cu, cv, cku, ckv):
+    """One particle's force (gx, gy) and coefficient gk (per unit volume) onto one chunk's
+    fields (as :func:`_deposit_forces_kernel` for each)."""
+    if gx == 0.0 and gy == 0.0 and gk == 0.0:
+        return
+    w = _face_weights(x, y, nx, ny, idx, idy)
+    if gx != 0.0 or gy != 0.0:
+        _add_to_faces(cu, cv, gx, gy, w)
+    if gk != 0.0:
+        _add_to_faces(cku, ckv, gk, gk, w)
+
+
+@nb.njit(cache=True, parallel=True)
 def _deposit_drag_kernel(x, y, fx, fy, k, dx, dy, inv_volume, fu, fv, ku, kv):
     """:func:`_deposit_forces_kernel` for the forces (fx, fy) into (fu, fv) and for the
     coefficients k into (ku, kv), in one pass: each particle's weights are computed once,
@@ -212,55 +262,75 @@ def _deposit_drag_kernel(x, y, fx, fy, k, dx, dy, inv_volume, fu, fv, ku, kv):
     ny = fv.shape[1]
     idx = 1.0 / dx
     idy = 1.0 / dy
-    for p in range(x.shape[0]):
-        gx = fx[p] * inv_volume
-        gy = fy[p] * inv_volume
-        gk = k[p] * inv_volume
-        if gx == 0.0 and gy == 0.0 and gk == 0.0:
-            continue
-        w = _face_weights(x[p], y[p], nx, ny, idx, idy)
-        if gx != 0.0 or gy != 0.0:
-            _add_to_faces(fu, fv, gx, gy, w)
-        if gk != 0.0:
-            _add_to_faces(ku, kv, gk, gk, w)
+    n = x.shape[0]
+    pu = np.zeros((DEPOSIT_CHUNKS, nx + 1, ny))
+    pv = np.zeros((DEPOSIT_CHUNKS, nx, ny))
+    pku = np.zeros((DEPOSIT_CHUNKS, nx + 1, ny))
+    pkv = np.zeros((DEPOSIT_CHUNKS, nx, ny))
+    for c in nb.prange(DEPOSIT_CHUNKS):
+        lo, hi = _chunk_range(c, n)
+        cu = pu[c]
+        cv = pv[c]
+        cku = pku[c]
+        ckv = pkv[c]
+        for p in range(lo, hi):
+            _deposit_particle(x[p], y[p], fx[p] * inv_volume, fy[p] * inv_volume,
+                              k[p] * inv_volume, nx, ny, idx, idy, cu, cv, cku, ckv)
+    _sum_chunks(pu, fu)
+    _sum_chunks(pv, fv)
+    _sum_chunks(pku, ku)
+    _sum_chunks(pkv, kv)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
+def _add_solid_volume(x, y, volume, nx, ny, idx, idy, solid, periodic_y):
+    """One particle's solid volume onto ``solid`` by cloud-in-cell."""
+    fi = x * idx - 0.5
+    ifl = math.floor(fi)
+    wx = fi - ifl
+    i0 = int(ifl)
+    i1 = i0 + 1
+    if i0 < 0:  # fold the share beyond the wall back into the wall cell
+        i0 = 0
+    if i1 > nx - 1:
+        i1 = nx - 1
+    if i0 > nx - 1:
+        i0 = nx - 1
+    if i1 < 0:
+        i1 = 0
+    fj = y * idy - 0.5
+    jfl = math.floor(fj)
+    wy = fj - jfl
+    if periodic_y:
+        j0 = _wrap_index(int(jfl), ny)
+        j1 = j0 + 1 if j0 + 1 < ny else 0
+    else:
+        j0 = min(max(int(jfl), 0), ny - 1)
+        j1 = min(max(int(jfl) + 1, 0), ny - 1)
+    solid[i0, j0] += (1.0 - wx) * (1.0 - wy) * volume
+    solid[i1, j0] += wx * (1.0 - wy) * volume
+    solid[i0, j1] += (1.0 - wx) * wy * volume
+    solid[i1, j1] += wx * wy * volume
+
+
+@nb.njit(cache=True, parallel=True)
 def deposit_solid_volume(x, y, volume, dx, dy, solid, periodic_y=True):
-    """Add each particle's solid volume (m^3, scalar) to ``solid`` (nx, ny) by cloud-in-cell.
+    """Add each particle's solid volume (m^3, scalar) to ``solid`` (nx, ny) by cloud-in-cell
+    (in :data:`DEPOSIT_CHUNKS` chunks, the same bits for any thread count).
     ``periodic_y=False`` (a bed on a floor): the share beyond the bottom (top) row is folded
     back into it, as at the side walls, instead of going across the periodic seam."""
     nx = solid.shape[0]
     ny = solid.shape[1]
     idx = 1.0 / dx
     idy = 1.0 / dy
-    for p in range(x.shape[0]):
-        fi = x[p] * idx - 0.5
-        ifl = math.floor(fi)
-        wx = fi - ifl
-        i0 = int(ifl)
-        i1 = i0 + 1
-        if i0 < 0:  # fold the share beyond the wall back into the wall cell
-            i0 = 0
-        if i1 > nx - 1:
-            i1 = nx - 1
-        if i0 > nx - 1:
-            i0 = nx - 1
-        if i1 < 0:
-            i1 = 0
-        fj = y[p] * idy - 0.5
-        jfl = math.floor(fj)
-        wy = fj - jfl
-        if periodic_y:
-            j0 = _wrap_index(int(jfl), ny)
-            j1 = j0 + 1 if j0 + 1 < ny else 0
-        else:
-            j0 = min(max(int(jfl), 0), ny - 1)
-            j1 = min(max(int(jfl) + 1, 0), ny - 1)
-        solid[i0, j0] += (1.0 - wx) * (1.0 - wy) * volume
-        solid[i1, j0] += wx * (1.0 - wy) * volume
-        solid[i0, j1] += (1.0 - wx) * wy * volume
-        solid[i1, j1] += wx * wy * volume
+    n = x.shape[0]
+    partial = np.zeros((DEPOSIT_CHUNKS, nx, ny))
+    for c in nb.prange(DEPOSIT_CHUNKS):
+        lo, hi = _chunk_range(c, n)
+        part = partial[c]
+        for p in range(lo, hi):
+            _add_solid_volume(x[p], y[p], volume, nx, ny, idx, idy, part, periodic_y)
+    _sum_chunks(partial, solid)
 
 
 def _positions(x, y):

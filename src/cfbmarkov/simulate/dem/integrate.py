@@ -38,9 +38,10 @@ from numba import njit, prange
 
 from cfbmarkov.simulate.dem.contact import (CONTACT_BLOCK, FASTMATH, contact_force,
                                            flag_overlaps, pair_forces, pair_forces_simd)
-from cfbmarkov.simulate.dem.layout import (BAD_NAN, BAD_OVERLAP, BAD_RANGE, BAD_WALL, C_LIST,
-                                           C_NEV, C_PA, C_REBUILD, C_ST, C_STEP, ST_BLOWUP,
-                                           ST_EVENTS, ST_OK, ST_STRIDE)
+from cfbmarkov.simulate.dem.layout import (BAD_NAN, BAD_OVERLAP, BAD_RANGE, BAD_WALL, C_BUILT,
+                                           C_DRIFT, C_LIST, C_NEV, C_PA, C_REBUILD, C_ST,
+                                           C_STEP, DRIFT_UNIT, ST_BLOWUP, ST_EVENTS, ST_OK,
+                                           ST_STRIDE)
 from cfbmarkov.simulate.dem.neighbours import rebuild
 
 
@@ -124,7 +125,7 @@ def _walls(i, st, wh, fx, fy, tq, prm):
 
 
 @njit(cache=True, inline="always", fastmath=FASTMATH)
-def _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm):
+def _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, shift, prm):
     """Particle i's leapfrog update from its total force (fx, fy) and torque tq (pairs,
     external force and walls; gravity added here), written to ``so``, and its checks.
 
@@ -135,6 +136,9 @@ def _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm):
     where a reason is found. A branch that is almost never taken is predicted and costs
     nothing, where writing every particle's ``laps`` and ``bad`` cost 12 % of :func:`move`
     (docs/performance.md).
+
+    ``shift`` (m) is the list's drift in y since its build (:func:`.neighbours.drift_velocity`):
+    "moved beyond skin/2" is measured from the reference position moved by it.
 
     Returns (moved beyond skin/2, boundary passes, bad). Inlined into :func:`move` and
     :func:`fused_step`.
@@ -180,6 +184,7 @@ def _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm):
     isbad = isbad if finite else BAD_NAN
     if isbad != 0:  # rare
         bad[i] = isbad
+    ddy = ddy - shift
     ddx = xn - aux[i, 0]
     hs = 0.5 * prm.skin
     moved = 1 if ddx * ddx + ddy * ddy > hs * hs else 0
@@ -219,7 +224,7 @@ def _finish(i, st, so, aux, wh, laps, evf, bad, fx, fy, tq, prm):
         fx, fy, tq, wbad, wall_fy, floor_fy = _walls(i, st, wh, fx, fy, tq, prm)
         if wbad != 0:
             bad[i] = wbad
-    moved, nev, nbad = _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm)
+    moved, nev, nbad = _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, 0.0, prm)
     if wbad != 0:
         nbad = 1
     return moved, nev, nbad, wall_fy, floor_fy
@@ -471,11 +476,12 @@ def wall_contacts(st, wh, aux, fsum, bad, wall_ids, n_wall, touched, stamp, summ
 
 
 @njit(parallel=True, cache=True, error_model="numpy", fastmath=FASTMATH)
-def move(st, so, aux, laps, fsum, touched, stamp, summed, evf, bad, prm):
+def move(st, so, aux, laps, fsum, touched, stamp, summed, evf, bad, shift, prm):
     """Gravity, integration and checks of every particle (:func:`_integrate`) from its
     summed force ``fsum`` (pairs, external force and walls: :func:`sum_pairs`, then
     :func:`wall_contacts`), or from its external force in ``aux`` where its pairs were not
     summed (``summed`` false and ``touched[i] != stamp``: a particle in no contact).
+    ``shift`` (m): the list's drift in y since its build (:func:`_integrate`).
 
     Returns
     -------
@@ -492,7 +498,7 @@ def move(st, so, aux, laps, fsum, touched, stamp, summed, evf, bad, prm):
         fx = fsum[i, 0] if use else aux[i, 2]
         fy = fsum[i, 1] if use else aux[i, 3]
         tq = fsum[i, 2] if use else 0.0
-        m, e, nb = _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, prm)
+        m, e, nb = _integrate(i, st, so, aux, laps, evf, bad, fx, fy, tq, shift, prm)
         nmove += m
         nev += e
         nbad += nb
@@ -631,8 +637,10 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
         n_contacts[0] = nc
         nbad, wall_fy, floor_fy = wall_contacts(st[cs], wh[cp], aux[cp], fsum, bad, wall_ids,
                                                 n_wall[0], touched, stamp[0], summed, prm)
+        # the list's frame drifts in y (neighbours.drift_velocity): its shift after this step
+        shift = (ctl[C_STEP] + 1 - ctl[C_BUILT]) * prm.dt * (ctl[C_DRIFT] * DRIFT_UNIT)
         nmove, nev, nbad_move = move(st[cs], st[1 - cs], aux[cp], laps[cp], fsum, touched,
-                                     stamp[0], summed, evf, bad, prm)
+                                     stamp[0], summed, evf, bad, shift, prm)
         nbad += nbad_move
         wall_impulse[0] += prm.dt * wall_fy
         wall_impulse[1] += prm.dt * floor_fy
@@ -663,12 +671,12 @@ def scatter_external(ext, ids, aux):
         aux[k, 3] = ext[i, 1]
 
 
-@njit(cache=True)
+@njit(parallel=True, cache=True)
 def gather_pairs(values, ids, out):
     """``out[ids[k]] = values[k, 0:2]``: two columns (positions, velocities) from cell order
     to the caller's order (one pass; numpy's fancy assignment on the strided view costs
-    several times more)."""
-    for k in range(ids.shape[0]):
+    several times more; ``ids`` is a permutation, so the writes never meet)."""
+    for k in prange(ids.shape[0]):
         i = ids[k]
         out[i, 0] = values[k, 0]
         out[i, 1] = values[k, 1]

@@ -19,7 +19,8 @@ Arrays (N particles)::
     lists two PairList buffers A/B (ctl[C_LIST] says which is current): the full
           Verlet list of each particle (fixed stride S, used while building) and the
           pair list derived from it (see PairList).
-    ctl   int64 (N_C,): the mutable control slots C_* (saved with a checkpoint).
+    ctl   int64 (N_C,): the mutable control slots C_* (saved with a checkpoint; a state
+          saved with fewer slots is read with zeros in the missing ones).
     prm   DEMParams: the constant parameters of a system (floats, ints, flags).
 """
 
@@ -31,7 +32,13 @@ import numpy as np
 
 # control slots of ``ctl``
 C_ST, C_PA, C_LIST, C_REBUILD, C_STEP, C_NREBUILD, C_NEV = 0, 1, 2, 3, 4, 5, 6
-N_C = 7
+#: the list's drift velocity in y (nm/s, an integer) and the step of its build: a list
+#: stays valid while every particle stays within skin/2 of its reference position moved by
+#: the drift since the build (:func:`.neighbours.drift_velocity`)
+C_DRIFT, C_BUILT = 7, 8
+N_C = 9
+#: units of ``ctl[C_DRIFT]``, m/s
+DRIFT_UNIT = 1e-9
 # statuses returned by advance()
 ST_OK, ST_STRIDE, ST_EVENTS, ST_BLOWUP = 0, 1, 2, 3
 # reasons in bad[]

@@ -1,6 +1,7 @@
 """Neighbour search of the 2D DEM engine: cell sort, Verlet list, pair list, springs (numba).
 
-A rebuild (:func:`rebuild`; when a particle has moved more than skin/2 since the last one)
+A rebuild (:func:`rebuild`; when a particle has moved more than skin/2 since the last one,
+relative to a frame drifting in y with the particles, :func:`drift_velocity`)
 computes cell keys, does a serial stable counting sort, gathers the particles into the new
 (cell) order, builds the half Verlet list (each particle's neighbours after it in cell
 order; neighbour rows are contiguous ranges of the sorted particles), derives the pair list
@@ -18,7 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
-from cfbmarkov.simulate.dem.layout import C_LIST, C_NREBUILD, C_PA, C_REBUILD, C_ST
+from cfbmarkov.simulate.dem.layout import (C_BUILT, C_DRIFT, C_LIST, C_NREBUILD, C_PA,
+                                           C_REBUILD, C_ST, C_STEP, DRIFT_UNIT)
 
 
 @njit(cache=True, inline="always")
@@ -67,11 +69,43 @@ def _counting_sort(key, cstart, cfill, perm, invperm):
 
 @njit(parallel=True, cache=True)
 def _gather_st(st, so, perm):
+    """``so[k] = st[perm[k]]``; returns the smallest and largest vy (exact whatever the
+    threads: a minimum and a maximum do not depend on the order)."""
     N = st.shape[0]
+    lo = np.inf
+    hi = -np.inf
     for k in prange(N):
         i = perm[k]
         for c in range(8):
             so[k, c] = st[i, c]
+        vy = st[i, 3]
+        lo = min(lo, vy)
+        hi = max(hi, vy)
+    return lo, hi
+
+
+@njit(cache=True)
+def drift_velocity(vy_min, vy_max, prm):
+    """The list's drift velocity in y, in units of :data:`.layout.DRIFT_UNIT` (an integer,
+    saved in ``ctl[C_DRIFT]``): the middle of the particles' vertical velocities at the
+    build, where the domain is periodic in y; 0 with a floor.
+
+    Between two builds the list stays valid while every particle stays within skin/2 of its
+    reference position moved by ``drift * (steps since the build) * dt`` in y: any two
+    particles then moved by at most a skin relative to each other, which is all a Verlet
+    list needs (the usual rule is the special case of no drift). Moving the frame with the
+    particles' middle velocity halves their largest displacement in a riser, where the core
+    rises at up to 6 m/s while the wall layers fall: at 6 m/s the list is built every 9-11
+    steps instead of every 7 (docs/performance.md, session 16). Any drift is valid; this
+    one only makes the builds rarer. x is not moved, so the side walls' candidates
+    (:func:`.integrate.wall_candidates`) keep their rule; with a floor nothing is moved.
+    """
+    if not prm.periodic or not (vy_min <= vy_max):
+        return 0
+    mid = 0.5 * (vy_min + vy_max)
+    if not (abs(mid) < 1e6):
+        return 0
+    return int(round(mid / DRIFT_UNIT))
 
 
 @njit(parallel=True, cache=True)
@@ -378,7 +412,7 @@ def rebuild(st, aux, wh, ids, laps, LA, LB, ctl, key, cstart, cfill, perm, invpe
     N = cur.shape[0]
     _cell_keys(cur, key, prm)
     _counting_sort(key, cstart, cfill, perm, invperm)
-    _gather_st(cur, new, perm)
+    vy_min, vy_max = _gather_st(cur, new, perm)
     if ctl[C_LIST] == 0:
         old_l = LA
         new_l = LB
@@ -403,4 +437,6 @@ def rebuild(st, aux, wh, ids, laps, LA, LB, ctl, key, cstart, cfill, perm, invpe
     ctl[C_LIST] = 1 - ctl[C_LIST]
     ctl[C_REBUILD] = 0
     ctl[C_NREBUILD] += 1
+    ctl[C_DRIFT] = drift_velocity(vy_min, vy_max, prm)
+    ctl[C_BUILT] = ctl[C_STEP]
     return 0

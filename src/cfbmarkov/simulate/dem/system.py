@@ -596,7 +596,9 @@ class DEMSystem:
             self._min_mass = float(np.min(1.0 / st[:, 6]))
             self._t0 = float(np.asarray(state["start_time"]))
             self.serial_below = SERIAL_BELOW
-            ctl = np.asarray(state["internal_control"], np.int64).copy()
+            saved = np.asarray(state["internal_control"], np.int64)
+            ctl = np.zeros(max(L.N_C, saved.shape[0]), np.int64)
+            ctl[:saved.shape[0]] = saved  # a state from before the drifting list: no drift
             ctl[L.C_ST] = 0
             ctl[L.C_PA] = 0
             ctl[L.C_LIST] = 0
