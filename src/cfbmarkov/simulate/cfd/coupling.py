@@ -23,8 +23,9 @@
 The deposits run in parallel and give the same bits for any number of threads: the
 particles are cut by index into :data:`DEPOSIT_CHUNKS` fixed chunks, each chunk adds its
 particles, in order, to its own copy of the fields, and the copies are summed in chunk
-order (:func:`_sum_chunks`). The interpolation kernels are parallel over particles; the DEM's
-particle loop may instead call :func:`gas_velocity_at` inline.
+order (:func:`_sum_chunks`). :func:`interpolate_gas_velocity` is serial; the coupled step's
+drag kernels (:mod:`cfbmarkov.simulate.coupling`) call :func:`gas_velocity_at` inline in
+their parallel particle loops.
 """
 
 from __future__ import annotations

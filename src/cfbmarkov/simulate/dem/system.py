@@ -123,7 +123,9 @@ class DEMSystem:
     search_cells : (nx, ny) cells of the neighbour-search grid, or None for the finest grid
         whose cells are no smaller than the list cutoff (2 R_max + skin).
     skin : Verlet skin, m; the list is rebuilt (and particles re-sorted into cell order)
-        when a particle has moved more than skin/2 since the last build.
+        when a particle has moved more than skin/2 since the last build, measured in a frame
+        drifting in y with the particles where the domain is periodic in y
+        (:func:`.neighbours.drift_velocity`).
     angular_velocities : (N,) rad/s, default 0.
     bottom_wall : contact wall at y = 0 instead of periodicity in y.
     time : starting time, s.
