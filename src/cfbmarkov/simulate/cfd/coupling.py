@@ -335,8 +335,10 @@ def deposit_solid_volume(x, y, volume, dx, dy, solid, periodic_y=True):
 
 
 def _positions(x, y):
-    x = np.ascontiguousarray(x, dtype=np.float64)
-    y = np.ascontiguousarray(y, dtype=np.float64)
+    # views such as positions[:, 0] are used as they are (no copy; the kernels read x and
+    # y of a particle from one cache line)
+    x = np.asarray(x, dtype=np.float64)
+    y = np.asarray(y, dtype=np.float64)
     if x.shape != y.shape or x.ndim != 1:
         raise InputError(f"particle x and y must be 1-D arrays of one length, got {x.shape}, {y.shape}")
     return x, y
@@ -345,8 +347,8 @@ def _positions(x, y):
 def interpolate_gas_velocity(grid: GasGrid, u, v, x, y) -> tuple[np.ndarray, np.ndarray]:
     """Gas velocity at particle positions (x, y): two arrays (m/s)."""
     x, y = _positions(x, y)
-    ox = np.empty_like(x)
-    oy = np.empty_like(y)
+    ox = np.empty(x.shape)
+    oy = np.empty(y.shape)
     _interpolate_kernel(np.ascontiguousarray(u, dtype=np.float64),
                         np.ascontiguousarray(v, dtype=np.float64), grid.dx, grid.dy, x, y, ox, oy)
     return ox, oy
@@ -421,9 +423,9 @@ def deposit_drag(grid: GasGrid, x, y, fx, fy, coefficient, thickness: float):
         If the arrays do not have one value per particle.
     """
     x, y = _positions(x, y)
-    fx = np.ascontiguousarray(fx, dtype=np.float64)
-    fy = np.ascontiguousarray(fy, dtype=np.float64)
-    k = np.ascontiguousarray(coefficient, dtype=np.float64)
+    fx = np.asarray(fx, dtype=np.float64)
+    fy = np.asarray(fy, dtype=np.float64)
+    k = np.asarray(coefficient, dtype=np.float64)
     if fx.shape != x.shape or fy.shape != x.shape or k.shape != x.shape:
         raise InputError("particle forces and drag coefficients must have one value per particle")
     fu = np.zeros(grid.u_shape)
