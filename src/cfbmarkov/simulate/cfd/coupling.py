@@ -216,6 +216,12 @@ def _add_to_faces(fu, fv, gx, gy, w):
     fv[ib, k1] += vy * wb * gy
 
 
+@nb.njit(cache=True)
+def _chunk_faces(nx, ny):
+    """Each chunk's own copy of the u- and v-face fields, zero: (C, nx + 1, ny), (C, nx, ny)."""
+    return np.zeros((DEPOSIT_CHUNKS, nx + 1, ny)), np.zeros((DEPOSIT_CHUNKS, nx, ny))
+
+
 @nb.njit(cache=True, parallel=True)
 def _deposit_forces_kernel(x, y, fx, fy, dx, dy, inv_volume, fu, fv):
     """Add the particle forces (fx, fy) per unit volume to the faces (fu, fv), by chunks."""
@@ -224,8 +230,7 @@ def _deposit_forces_kernel(x, y, fx, fy, dx, dy, inv_volume, fu, fv):
     idx = 1.0 / dx
     idy = 1.0 / dy
     n = x.shape[0]
-    pu = np.zeros((DEPOSIT_CHUNKS, nx + 1, ny))
-    pv = np.zeros((DEPOSIT_CHUNKS, nx, ny))
+    pu, pv = _chunk_faces(nx, ny)
     for c in nb.prange(DEPOSIT_CHUNKS):
         lo, hi = _chunk_range(c, n)
         cu = pu[c]
@@ -264,10 +269,8 @@ def _deposit_drag_kernel(x, y, fx, fy, k, dx, dy, inv_volume, fu, fv, ku, kv):
     idx = 1.0 / dx
     idy = 1.0 / dy
     n = x.shape[0]
-    pu = np.zeros((DEPOSIT_CHUNKS, nx + 1, ny))
-    pv = np.zeros((DEPOSIT_CHUNKS, nx, ny))
-    pku = np.zeros((DEPOSIT_CHUNKS, nx + 1, ny))
-    pkv = np.zeros((DEPOSIT_CHUNKS, nx, ny))
+    pu, pv = _chunk_faces(nx, ny)
+    pku, pkv = _chunk_faces(nx, ny)
     for c in nb.prange(DEPOSIT_CHUNKS):
         lo, hi = _chunk_range(c, n)
         cu = pu[c]
