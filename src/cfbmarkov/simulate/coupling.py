@@ -101,25 +101,17 @@ def drag_coefficients(positions, velocities, u, v, void_fraction, dx, dy, diamet
     Drag.
     """
     for p in nb.prange(positions.shape[0]):
-        _particle_drag(p, positions, velocities, u, v, void_fraction, dx, dy, diameter,
-                       gas_density, gas_viscosity, coefficient, force, periodic_y)
-
-
-@nb.njit(cache=True, inline="always")
-def _particle_drag(p, positions, velocities, u, v, void_fraction, dx, dy, diameter, gas_density,
-                   gas_viscosity, coefficient, force, periodic_y):
-    """K_p and the drag force of particle ``p`` (see :func:`drag_coefficients`)."""
-    x = positions[p, 0]
-    y = positions[p, 1]
-    ux, uy = gas_velocity_at(u, v, dx, dy, x, y)
-    eps = _cell_value(void_fraction, dx, dy, x, y, periodic_y)
-    sx = ux - velocities[p, 0]
-    sy = uy - velocities[p, 1]
-    k = particle_drag_jacobian(eps, np.sqrt(sx * sx + sy * sy), diameter, gas_density,
-                               gas_viscosity)
-    coefficient[p] = k
-    force[p, 0] = k * sx
-    force[p, 1] = k * sy
+        x = positions[p, 0]
+        y = positions[p, 1]
+        ux, uy = gas_velocity_at(u, v, dx, dy, x, y)
+        eps = _cell_value(void_fraction, dx, dy, x, y, periodic_y)
+        sx = ux - velocities[p, 0]
+        sy = uy - velocities[p, 1]
+        k = particle_drag_jacobian(eps, np.sqrt(sx * sx + sy * sy), diameter, gas_density,
+                                   gas_viscosity)
+        coefficient[p] = k
+        force[p, 0] = k * sx
+        force[p, 1] = k * sy
 
 
 @nb.njit(cache=True, parallel=True)
