@@ -84,31 +84,41 @@ QUICK_REDUCTIONS = (
     "from 5 m/s 0-3 s of CFD-DEM, the model fitted on 1-2 s and compared on 2-3 s: in the "
     "shorter riser the flow develops within a second (the solids' mean velocity is steady "
     "from 0.5 s at 6 m/s and from 0.75 s at 8 m/s) and residence times are a third of the "
-    "paper's or less; below 5 m/s 0-4.5 s, fitted on 2.5-3.5 s and compared on 3.5-4.5 s: from rest the "
-    "gas first lifts the solids for about 2.5 s, after which their net flow runs downward "
-    "(at 3 m/s they fall, at 4 m/s a dense wall layer falls faster than the core rises), so "
-    "both windows must lie in that developed flow",
+    "paper's or less; at 3 m/s 0-4.5 s, fitted on 2.5-3.5 s and compared on 3.5-4.5 s: from "
+    "rest the gas first lifts the solids for about 2.5 s, after which they fall, so both "
+    "windows must lie in that developed flow; at 4 m/s 0-7 s, fitted on 4-5.5 s and compared "
+    "on 5.5-7 s: there the net flow of the solids is small against their up and down passes "
+    "(a dense layer falls along one wall while the other side rises) and turns now and then "
+    "for up to 1.5 s (at 3-4.5 s and 2.5-3 s in two of four runs from different seeds), so "
+    "1 s windows at 2.5-4.5 s could see opposite flows, which no model fitted on the first "
+    "can predict; over both 1.5 s windows from 4 s on it rose in every run",
     "4 x 12 cells of 10 mm x 25 mm (the paper's row height); below 5 m/s frames, lag and "
     "RTD bins of 0.01 s (a mean residence time of 0.2-0.5 s spans 20-50 lags, the paper's "
-    "56 at 3 m/s), from 5 m/s of 0.002 s: at 8 m/s the solids cross the 0.30 m in about "
-    "0.056 s, nearly as a plug, so the RTD must be binned this finely to span ten bins or "
-    "more (at 0.01 s it spanned four, at 0.0025 s eleven), and a mean residence time spans "
-    "about 28 lags instead of the paper's 9",
+    "56 at 3 m/s), from 5 m/s of 0.002 s, from 7 m/s of 0.001 s: at 8 m/s the solids cross "
+    "the 0.30 m in about 0.056 s, nearly as a plug, so the RTD must be binned this finely to "
+    "span ten bins or more (at 0.01 s it spanned four, at 0.002 s 13 for the CFD-DEM and "
+    "10 for the automatic model in one run, at 0.001 s 27 and 46 in the same run), and a "
+    "mean residence time spans about 56 lags instead of the paper's 9",
     "from 5 m/s a neighbour-list skin of 0.8 mm instead of 0.4 mm: the fast solids cross the "
     "0.4 mm skin's half in a few DEM steps and the list was rebuilt that often (the skin "
     "changes which pairs are listed, never which touch: the speed only, and the round-off)",
 )
 
+#: from this velocity (m/s) the quick scale runs 0-7 s, fitted on 4-5.5 s, compared on 5.5-7 s
+#: (below :data:`QUICK_FINE_FROM`; see :data:`QUICK_REDUCTIONS`)
+QUICK_LONG_FROM = 4.0
 #: from this velocity (m/s) the quick scale's frames, lag and RTD bins are 0.002 s
 QUICK_FINE_FROM = 5.0
+#: from this velocity (m/s) the quick scale's frames, lag and RTD bins are 0.001 s
+QUICK_FINEST_FROM = 7.0
 
 SCALES: dict[str, Scale] = {
     "paper": Scale("paper", "the paper's riser: 27000 particles, 0.09 m x 0.95 m, 0-20 s, "
                    "fitted on 10-15 s, compared on 15-20 s, 6 x 38 cells, lag 0.025 s"),
     "quick": Scale(
-        "quick", "a reduced riser (3789 particles, 0.04 m x 0.30 m; below 5 m/s 0-4.5 s and lag "
-        "0.01 s, from 5 m/s 0-3 s and lag 0.002 s) that runs the whole pipeline in minutes "
-        "on 2 cores",
+        "quick", "a reduced riser (3789 particles, 0.04 m x 0.30 m; at 3 m/s 0-4.5 s, at 4 m/s "
+        "0-7 s, both with lag 0.01 s; from 5 m/s 0-3 s and lag 0.002 s, from 7 m/s 0.001 s) "
+        "that runs the whole pipeline in minutes on 2 cores",
         {"riser": {"width": 0.04, "height": 0.30},
          "particles": {"number": 3789},
          "contact": {"normal_stiffness": 2500.0, "tangential_stiffness": 714.25},
@@ -117,10 +127,13 @@ SCALES: dict[str, Scale] = {
          "markov": {"columns": 4, "rows": 12, "lag": 0.01, "fit_window": [2.5, 3.5],
                     "predict_window": [3.5, 4.5]}},
         QUICK_REDUCTIONS,
-        ((QUICK_FINE_FROM, {"output": {"end_time": 3.0, "frame_interval": 0.002},
+        ((QUICK_LONG_FROM, {"output": {"end_time": 7.0},
+                            "markov": {"fit_window": [4.0, 5.5], "predict_window": [5.5, 7.0]}}),
+         (QUICK_FINE_FROM, {"output": {"end_time": 3.0, "frame_interval": 0.002},
                             "numerics": {"dem_skin": 8e-4},
                             "markov": {"lag": 0.002, "fit_window": [1.0, 2.0],
-                                       "predict_window": [2.0, 3.0]}}),)),
+                                       "predict_window": [2.0, 3.0]}}),
+         (QUICK_FINEST_FROM, {"output": {"frame_interval": 0.001}, "markov": {"lag": 0.001}}))),
 }
 
 
