@@ -615,7 +615,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_reproduce)
 
     s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
-                       "(about 6 min on 2 quiet cores), ending with the path of its report")
+                       "(about 4 min on 2 quiet cores), ending with the path of its report")
     s.add_argument("-o", "--output", default="cfbmarkov-demo", help="output directory")
     s.add_argument("--jobs", type=_count(1, MAX_JOBS), default=None,
                    help="local worker processes")
