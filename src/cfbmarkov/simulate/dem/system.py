@@ -276,6 +276,10 @@ class DEMSystem:
         self._ev = (np.zeros(capacity), np.zeros(capacity, np.int64), np.zeros(capacity, np.int8))
         self._ext_set = False
         self._wall_impulse = np.zeros(2)
+        # the caller's particles' cell-order index (_internal_index), and the list build
+        # it belongs to
+        self._where = np.zeros(n, np.int64)
+        self._where_key = None
 
     def _check_steps_per_contact(self):
         worst, msg = contact_resolution(self._law, self._min_mass, self._dt)
@@ -348,10 +352,20 @@ class DEMSystem:
         out[ids] = values
         return out
 
+    def _internal_index(self) -> np.ndarray:
+        """Each caller's particle's index in cell order, remade after a list build (the
+        order changes only then)."""
+        ctl = self._arrays["ctl"]
+        key = (int(ctl[L.C_NREBUILD]), int(ctl[L.C_PA]))
+        if self._where_key != key:
+            integrate.internal_index(self._cur()[1], self._where)
+            self._where_key = key
+        return self._where
+
     def _pair_to_caller(self, column: int) -> np.ndarray:
-        st, ids, _ = self._cur()
+        st = self._cur()[0]
         out = np.empty((self._n, 2))
-        integrate.gather_pairs(st[:, column:column + 2], ids, out)
+        integrate.gather_pairs(st[:, column:column + 2], self._internal_index(), out)
         return out
 
     @property
