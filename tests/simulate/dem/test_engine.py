@@ -397,6 +397,29 @@ def test_external_force_in_callers_order_through_rebuilds():
     assert np.allclose(s.velocities - vel, f / M * 500 * 2e-6, rtol=1e-9, atol=1e-12)
 
 
+def test_positions_in_callers_order_after_every_list_build():
+    """The caller's order is kept by an index remade after each list build: read between
+    builds and right after them, positions and velocities are those of each caller's
+    particle (free flight: x unchanged, y wrapped)."""
+    W, H = 0.02, 0.02
+    cx, cy = np.meshgrid(0.001 + 0.002 * np.arange(10), 0.001 + 0.002 * np.arange(10))
+    pos = np.column_stack([cx.ravel(), cy.ravel()])
+    pos = pos[np.random.default_rng(5).permutation(100)]
+    vel = np.column_stack([np.zeros(100), np.where(pos[:, 0] < W / 2, 4.0, -4.0)])
+    s = make(pos, vel, W, H, dt=2e-6, om=np.zeros(100))
+    builds = set()
+    for k in range(1, 60):
+        s.step(7)
+        builds.add(s.n_rebuilds)
+        p = s.positions
+        assert np.array_equal(p[:, 0], pos[:, 0])
+        expected = np.mod(pos[:, 1] + vel[:, 1] * 7 * k * 2e-6, H)
+        gap = np.abs(p[:, 1] - expected)
+        assert np.all(np.minimum(gap, H - gap) < 1e-12)
+        assert np.array_equal(s.velocities, vel)
+    assert len(builds) > 10 and not np.array_equal(s.order, np.arange(100))
+
+
 def test_gravity_free_fall():
     s = make([[0.005, 0.015]], [[0.0, 0.0]], H=0.02, dt=2e-6, g=9.81)
     s.step(100)
