@@ -379,15 +379,19 @@ def test_matches_independent_reference():
 
 
 # ---------------------------------------------------------------- external force
-def test_external_force_in_callers_order_through_rebuilds():
-    W, H = 0.02, 0.02
-    # ten columns 2 mm apart (D = 1 mm): the left five rise, the right five fall, and no two
-    # particles ever touch, while their relative motion makes the list be built again
+def _rising_and_falling_columns(seed, W=0.02, H=0.02):
+    """Ten columns 2 mm apart (D = 1 mm) in a shuffled caller's order: the left five rise,
+    the right five fall, and no two particles ever touch, while their relative motion
+    makes the list be built again."""
     cx, cy = np.meshgrid(0.001 + 0.002 * np.arange(10), 0.001 + 0.002 * np.arange(10))
     pos = np.column_stack([cx.ravel(), cy.ravel()])
-    pos = pos[np.random.default_rng(4).permutation(100)]
+    pos = pos[np.random.default_rng(seed).permutation(100)]
     vel = np.column_stack([np.zeros(100), np.where(pos[:, 0] < W / 2, 4.0, -4.0)])
-    s = make(pos, vel, W, H, dt=2e-6, om=np.zeros(100))
+    return pos, vel, make(pos, vel, W, H, dt=2e-6, om=np.zeros(100))
+
+
+def test_external_force_in_callers_order_through_rebuilds():
+    pos, vel, s = _rising_and_falling_columns(4)
     f = np.random.default_rng(1).uniform(-1, 1, (100, 2)) * 1e-6  # ~0.7 m/s^2
     s.step(500, external_force=f)
     assert s.n_rebuilds > 5 and not np.array_equal(s.order, np.arange(100))
@@ -401,12 +405,8 @@ def test_positions_in_callers_order_after_every_list_build():
     """The caller's order is kept by an index remade after each list build: read between
     builds and right after them, positions and velocities are those of each caller's
     particle (free flight: x unchanged, y wrapped)."""
-    W, H = 0.02, 0.02
-    cx, cy = np.meshgrid(0.001 + 0.002 * np.arange(10), 0.001 + 0.002 * np.arange(10))
-    pos = np.column_stack([cx.ravel(), cy.ravel()])
-    pos = pos[np.random.default_rng(5).permutation(100)]
-    vel = np.column_stack([np.zeros(100), np.where(pos[:, 0] < W / 2, 4.0, -4.0)])
-    s = make(pos, vel, W, H, dt=2e-6, om=np.zeros(100))
+    H = 0.02
+    pos, vel, s = _rising_and_falling_columns(5, H=H)
     builds = set()
     for k in range(1, 60):
         s.step(7)
