@@ -9,8 +9,8 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
 - ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
-- ``mcm-fit-auto``: ``--states auto``, choosing among 5 state spaces by 3-fold
-  blocked cross-validation on the window and forming the chosen one; ``mcm-fit-chosen``: fitting
+- ``mcm-fit-auto``: ``--states auto``, choosing among 5 state spaces by their exact RTD
+  against the window's and forming the chosen one; ``mcm-fit-chosen``: fitting
   the chosen state space alone; ``mcm-predict-file-auto``: its prediction file;
   ``mcm-fit-auto-coherent``, ``mcm-predict-file-auto-coherent`` and their sum
   ``mcm-fit-predict-auto-coherent``: the same with coherent moves (the reproductions' chosen
@@ -87,8 +87,8 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
             lambda: exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
                               model.lag), repeat), "s"
         yield from _open_benchmarks(Path(tmp), flow, grid, particles, repeat, run, pred)
-        # beyond the paper: the automatic choice of state space (4 candidates, 3-fold
-        # blocked cross-validation on the window), then the chosen model's prediction
+        # beyond the paper: the automatic choice of state space (5 candidates judged by
+        # their exact RTD on the window), then the chosen model's prediction
         from cfbmarkov.markov.select import select_model
 
         def choose():

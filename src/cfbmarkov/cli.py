@@ -513,8 +513,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "vertical-velocity bins, and with sub-rows fitted to the moves per lag "
                         "(fine), cells x previous-cell offset (second order), "
                         "cells x 2 regimes of the solids flux (the regime model; with "
-                        "direction: x direction too), or auto: chosen with the lag on held-out "
-                        "frames of the window (default cells)")
+                        "direction: x direction too), or auto: the one whose RTD is closest to "
+                        "the window's own (default cells)")
     s.add_argument("--connected", action="store_true",
                    help="fit on the largest strongly connected set of the counts (transitions "
                         "out of it removed, as deeptime and PyEMMA do): states entered but "

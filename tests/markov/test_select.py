@@ -1,4 +1,4 @@
-"""``--states auto``: the state space and lag chosen on held-out frames of the fitting window.
+"""``--states auto``: the state space and lag chosen on the fitting window alone.
 
 On the synthetic core-annulus flow (hidden direction of motion) the paper's cells miss the
 spread of residence times by about 40 %; the automatic choice must find a space with
@@ -48,13 +48,15 @@ def test_auto_chooses_memory_and_predicts_the_later_spread(run, tmp_path):
     chosen = model.selection["chosen"]
     assert chosen["states"] != "cells" and model.state_space.kind == chosen["states"]
     assert model.lag == pytest.approx(chosen["lag"]) and model.window == FIT
-    # only the fitting window was used: its blocks tile it
-    blocks = model.selection["blocks"]
-    assert len(blocks) == 3 and blocks[0][0] == FIT[0] and blocks[-1][1] == FIT[1]
-    assert all(x[1] == y[0] for x, y in zip(blocks, blocks[1:]))
+    # only the fitting window was used, judged whole: score = MD / MD(cells)
+    assert model.selection["blocks"] == [list(FIT)]
+    assert model.selection["method"] == "the RTD over the fitting window"
     candidates = model.selection["candidates"]
     assert {c["states"] for c in candidates} == set(DEFAULT_STATES)
     assert "cells-regime" in DEFAULT_STATES
+    cells_md = next(c["md_rtd"] for c in candidates if c["states"] == "cells")
+    for c in candidates:
+        assert c["score"] == pytest.approx(c["md_rtd"] / cells_md)
     assert min(c["score"] for c in candidates) == pytest.approx(
         next(c["score"] for c in candidates if c["states"] == chosen["states"]
              and c["lag"] == chosen["lag"]))
@@ -68,13 +70,26 @@ def test_auto_chooses_memory_and_predicts_the_later_spread(run, tmp_path):
     model.save(tmp_path / "auto.h5")
     loaded = MarkovModel.load(tmp_path / "auto.h5")
     assert loaded.selection == json.loads(json.dumps(model.selection))
-    assert chosen["states"] in loaded.summary() and "cross-validation" in loaded.summary()
+    assert chosen["states"] in loaded.summary() and "fitting window" in loaded.summary()
     # the chosen model, formed from the counts of the cached frames, is the model that
     # fitting its state space on the window gives
     direct = fit_by_name(chosen["states"], run, window=FIT, columns=FLOW.columns,
                          rows=FLOW.rows, lag=chosen["lag"])
     np.testing.assert_array_equal(model.counts, direct.counts)
     np.testing.assert_allclose(model.transition_matrix, direct.transition_matrix, atol=0)
+
+
+def test_blocked_cross_validation_still_chooses_memory(run):
+    """The criterion of sessions 4-17 (held-out blocks, bias and shape) stays available."""
+    model = select_model(run, window=FIT, columns=FLOW.columns, rows=FLOW.rows,
+                         lag=FLOW.lag, criterion="rtd")
+    blocks = model.selection["blocks"]
+    assert len(blocks) == 3 and blocks[0][0] == FIT[0] and blocks[-1][1] == FIT[1]
+    assert all(x[1] == y[0] for x, y in zip(blocks, blocks[1:]))
+    assert "cross-validation" in model.selection["method"]
+    assert model.state_space.kind != "cells"
+    auto_mean, auto_sd = _later_errors(model, run)
+    assert abs(auto_mean) < 3.0 and abs(auto_sd) < 10.0, (auto_mean, auto_sd)
 
 
 def test_too_short_blocks_keep_the_papers_cells(run):
