@@ -422,9 +422,6 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                   f"E(RT) {best.pd_rt_mean:+.1f} %, SD(RT) {best.pd_rt_sd:+.1f} %")
         reason += (f"; cells: MD {cells.md_rtd:.3g}, {cells.pd_rt_mean:+.1f} %, "
                    f"{cells.pd_rt_sd:+.1f} %)" if cells is not None else ")")
-        if direction == "down":
-            reason += ("; residences counted downward, as the solids' net flow over the "
-                       "fitting window runs")
         method = "the RTD over the fitting window"
     else:
         reason = (f"{best.states} at lag {best.lag:g} s had the lowest score {best.score:.3g} "
@@ -433,10 +430,10 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                   f"{best.md_rtd:.3g}")
         reason += (f"; cells: {cells.pd_rt_mean:+.1f} %, {cells.pd_rt_sd:+.1f} %, MD "
                    f"{cells.md_rtd:.3g}, score {cells.score:.3g})" if cells is not None else ")")
-        if direction == "down":
-            reason += ("; residences counted downward, as the solids' net flow over the "
-                       "fitting window runs")
         method = f"{folds}-fold blocked cross-validation of the RTD"
+    if criterion != "ck" and direction == "down":
+        reason += ("; residences counted downward, as the solids' net flow over the fitting "
+                   "window runs")
     selection = {"method": method,
                  "blocks": [list(x) for x in judged],
                  "observed": [{"rt_mean": o.mean, "rt_sd": o.sd, "rt_count": o.count}
