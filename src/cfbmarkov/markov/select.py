@@ -26,12 +26,13 @@ the other blocks and judged on the held-out block's RTD by
     score = |mean PD E(RT)| / u_E + |mean PD SD(RT)| / u_SD + mean MD / mean MD(cells)
 
 with the units u the project's goals (2 %, 10 %) or the blocks' own variability where that
-is larger. On sliding 5 s windows of a 3 m/s paper-scale run and the quick scale's runs
-(``docs/method.md``, The automatic choice) the candidate with the lowest MD on the whole
-window had the lowest MD on the *next* window in 8 of 8 paper-scale windows, where the
-cross-validation's choice had it in 5: held-out blocks of 1.7 s see RTDs cut at 1.7 s, and
-the bias terms of one block against the others followed the flow's surges more than the
-models' errors.
+is larger. On sliding 5 s windows of the 3 and 4 m/s paper-scale runs (``docs/method.md``,
+Choosing the state space and lag) the choice by the whole window's RTD was the candidate
+with the lowest MD on the *next* window in 8 of 8 and 3 of 8 windows, the
+cross-validation's in 5 and 4, and lost less MD against the best candidate in total (0.24
+against 0.53 over the 16 windows): held-out blocks of 1.7 s see RTDs cut at 1.7 s, and the
+bias terms of one block against the others followed the flow's surges more than the
+models' errors. Neither is an oracle.
 
 When the window holds fewer than ``MIN_RESIDENCES`` (30) complete residences (at low gas
 velocity a residence can outlast the window), the RTD cannot judge, and the candidates are
