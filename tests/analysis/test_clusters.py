@@ -36,3 +36,27 @@ def test_independent_uniform_particles_give_about_one(tmp_path):
     with Trajectories(path) as t:
         mean, sd = cluster_index(t, slice(0, 40), 6, 38)
     assert mean == pytest.approx(1.0, abs=0.05) and 0 < sd < 0.3
+
+
+def test_snapshot_index_equals_numpy_and_maps_states_to_cells():
+    """The kernel's integer sums give numpy's var / mean of the counts, absent particles
+    and empty frames included, and ``cell_of_state`` equals mapping the states first."""
+    from cfbmarkov.analysis.clusters import snapshot_cluster_index
+
+    rng = np.random.default_rng(3)
+    n_cells, n_states = 12, 36
+    states = rng.integers(-1, n_states, size=(9, 500))
+    states[4] = -1                                              # an empty frame
+    cell_of_state = rng.integers(0, n_cells, size=n_states)
+    cells = np.where(states >= 0, cell_of_state[np.maximum(states, 0)], -1)
+    counts = np.stack([np.bincount(row[row >= 0], minlength=n_cells) for row in cells])
+    with np.errstate(invalid="ignore"):
+        expected = counts.var(axis=1) / counts.mean(axis=1)
+    got = snapshot_cluster_index(cells, n_cells)
+    assert np.isnan(got[4]) and np.isnan(expected[4])
+    keep = np.arange(9) != 4
+    assert np.allclose(got[keep], expected[keep], rtol=1e-12, atol=0)
+    assert np.array_equal(snapshot_cluster_index(states, n_cells, cell_of_state), got,
+                          equal_nan=True)
+    with pytest.raises(ValueError, match="outside the grid"):
+        snapshot_cluster_index(states, n_cells)                  # states are not cells

@@ -199,3 +199,26 @@ def test_sparse_counts_of_an_open_riser_count_each_face_crossing_once(tmp_path, 
     for field in ("exits", "entries", "vanished", "appeared"):
         assert np.array_equal(getattr(sparse.faces, field), getattr(dense.faces, field))
     assert np.array_equal(sparse.counts.toarray(), dense.counts)
+
+
+def test_sparse_count_kernel_is_the_same_for_any_number_of_chunks():
+    """The threads' frame and row chunks (1, 2, 3 or 7) give the same counts, frame-average
+    sums (bit for bit: every row is summed in time order) and occupied frames."""
+    from cfbmarkov.markov.estimate import _sparse_count_kernel
+
+    rng = np.random.default_rng(5)
+    n_states = 40
+    states = (np.cumsum(rng.integers(-1, 2, size=(31, 300)), axis=0) % n_states).astype(np.int32)
+    states[rng.random(states.shape) < 0.05] = -1
+    vertical = rng.uniform(0.0, 1.0, size=states.shape)
+    results = []
+    for chunks in (1, 2, 3, 7):
+        occupied = np.zeros(n_states, np.int64)
+        out = _sparse_count_kernel(states, vertical, 2, 1.0, n_states, True, occupied, chunks)
+        results.append((out, occupied))
+    (first, occupied_first) = results[0]
+    assert first[6] == 29 and first[2].sum() == ((states[:-2] >= 0) & (states[2:] >= 0)).sum()
+    for out, occupied in results[1:]:
+        for a, b in zip(first[:6], out[:6]):
+            assert np.array_equal(a, b)
+        assert out[6] == first[6] and np.array_equal(occupied, occupied_first)

@@ -15,34 +15,75 @@ D. R. Cox and V. Isham, Point Processes, Chapman & Hall (1980), §6.2 (index of 
 
 from __future__ import annotations
 
+import numba as nb
 import numpy as np
 
 
-def snapshot_cluster_index(cells: np.ndarray, n_cells: int) -> np.ndarray:
+@nb.njit(cache=True, parallel=True)
+def _dispersion_kernel(states, cell_of_state, n_cells, index):
+    """index[t] = var(n_c) / mean(n_c) of frame t's cell counts (Numba kernel, frames in
+    parallel). ``states`` [T, N] (negative: absent), ``cell_of_state`` [S] maps a state to
+    its cell. The sums of n_c and n_c^2 are integers, so
+    var / mean = (C sum n_c^2 - (sum n_c)^2) / (C sum n_c) is exact up to one rounding
+    (C: number of cells); NaN for an empty frame."""
+    n_frames, n_particles = states.shape
+    for t in nb.prange(n_frames):
+        counts = np.zeros(n_cells, np.int64)
+        for p in range(n_particles):
+            s = states[t, p]
+            if s >= 0:
+                counts[cell_of_state[s]] += 1
+        total = 0
+        squares = 0
+        for c in range(n_cells):
+            total += counts[c]
+            squares += counts[c] * counts[c]
+        if total == 0:
+            index[t] = np.nan
+        else:
+            index[t] = (n_cells * squares - total * total) / (n_cells * total)
+
+
+def snapshot_cluster_index(cells: np.ndarray, n_cells: int,
+                           cell_of_state: np.ndarray | None = None) -> np.ndarray:
     """The index of dispersion of the cell counts of each snapshot.
 
     Parameters
     ----------
     cells : ndarray of int, shape (T, N)
-        Cell of particle p in frame t (negative: absent, not counted).
+        Cell of particle p in frame t (negative: absent, not counted); with
+        ``cell_of_state``, its state instead.
     n_cells : int
         Number of cells.
+    cell_of_state : ndarray of int, shape (S,), optional
+        The cell of each state (a state space's ``cell_of_state``) where ``cells`` holds
+        states: the same as passing ``cell_of_state[cells]`` without forming it.
 
     Returns
     -------
     ndarray of float64, shape (T,)
-        var(n_c) / mean(n_c) over the cells of each frame (-), NaN for an empty frame: the
-        measure of :func:`cluster_index`, from cells (e.g. a model's states mapped to
-        their cells).
+        var(n_c) / mean(n_c) over the cells of each frame (-; var with divisor C, the
+        number of cells), NaN for an empty frame: the measure of :func:`cluster_index`,
+        from cells (e.g. a model's states mapped to their cells).
+
+    Raises
+    ------
+    ValueError
+        For a cell (or state) out of range.
     """
-    cells = np.asarray(cells)
-    n_frames = cells.shape[0]
-    keep = cells >= 0
-    index = cells + n_cells * np.arange(n_frames)[:, None]
-    counts = np.bincount(index[keep], minlength=n_cells * n_frames).reshape(
-        n_frames, n_cells).astype(np.float64)
-    mean = counts.mean(axis=1)
-    return np.divide(counts.var(axis=1), mean, out=np.full(n_frames, np.nan), where=mean > 0)
+    cells = np.ascontiguousarray(cells)
+    if cells.ndim != 2:
+        raise ValueError(f"cells must be (T, N), not of shape {cells.shape}")
+    if cell_of_state is None:
+        cell_of_state = np.arange(n_cells, dtype=np.int64)
+    cell_of_state = np.ascontiguousarray(cell_of_state, dtype=np.int64)
+    if cells.size and (cells.max() >= cell_of_state.size
+                       or (cell_of_state.size and (cell_of_state.min() < 0
+                                                   or cell_of_state.max() >= n_cells))):
+        raise ValueError("a cell or state lies outside the grid")
+    index = np.empty(cells.shape[0], np.float64)
+    _dispersion_kernel(cells, cell_of_state, int(n_cells), index)
+    return index
 
 
 def cluster_index(traj, frames: slice, columns: int, rows: int, block: int = 64

@@ -198,8 +198,7 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
         states = np.asarray(window.states)
         complete = (states >= 0).all(axis=1)
         if complete.any():
-            cells = cell_of_state[states[complete]]
-            observed.append(snapshot_cluster_index(cells, n_cells))
+            observed.append(snapshot_cluster_index(states[complete], n_cells, cell_of_state))
     first = np.asarray(windows[0].states)
     full = np.flatnonzero((first >= 0).all(axis=1))
     if full.size == 0 or not observed or first.shape[1] < 2:
@@ -211,8 +210,8 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
 
     def index(rho: float) -> float:
         run, _ = model.with_coherence(rho).monte_carlo(start, int(steps), seed=seed)
-        return float(np.nanmean(snapshot_cluster_index(cell_of_state[run[CALIBRATION_BURN_IN + 1:]],
-                                                       n_cells)))
+        return float(np.nanmean(snapshot_cluster_index(run[CALIBRATION_BURN_IN + 1:], n_cells,
+                                                       cell_of_state)))
 
     def miss(rho: float) -> float:          # log of the trial's index over the target's
         return float(np.log(max(index(rho), 1e-12) / target))

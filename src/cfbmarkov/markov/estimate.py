@@ -91,83 +91,117 @@ def _count_kernel(states, vertical, lag_frames, height, n_states, counts, counts
     return pairs
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, parallel=True)
 def _sparse_count_kernel(states, vertical, lag_frames, height, n_states, with_frame_average,
-                         occupied_frames):
-    """The counts of :func:`_count_kernel` in compressed sparse rows (Numba kernel).
+                         occupied_frames, chunks):
+    """The counts of :func:`_count_kernel` in compressed sparse rows (Numba kernel, parallel).
 
     Each transition is first placed in the row of its start state (a counting sort by i,
     frames in time order), then each row is gathered with a scratch marker over the
     destinations, so the work and memory are O(transitions + S + non-zeros), never S x S;
     the per-frame sums of the paper's Eq. 2 run in the same (time) order as the dense
-    kernel's. Returns ``indptr`` [S + 1], ``indices`` int32, the values of ``counts``,
-    ``counts_up``, ``counts_down`` (int64) and of the frame-average sum (float64; empty
-    unless ``with_frame_average``) on that one pattern (explicit zeros kept in up and down,
-    destinations of a row unsorted), and the number of frame pairs; ``occupied_frames`` [S]
-    is updated."""
+    kernel's. The threads share the frames in consecutive chunks (a row's slots for chunk c
+    follow those of chunks before it, so every row keeps the time order) and then the rows;
+    the result is the same for any thread count and any ``chunks`` (the number of frame and
+    row chunks, the caller's thread count: asking Numba for it here would make the kernel
+    uncacheable). Returns ``indptr`` [S + 1], ``indices``
+    int32, the values of ``counts``, ``counts_up``, ``counts_down`` (int64) and of the
+    frame-average sum (float64; empty unless ``with_frame_average``) on that one pattern
+    (explicit zeros kept in up and down, destinations of a row unsorted), and the number of
+    frame pairs; ``occupied_frames`` [S] is updated."""
     n_frames, n_particles = states.shape
     half = 0.5 * height
+    pairs = max(n_frames - lag_frames, 0)
+    chunks = max(1, min(chunks, pairs))
+    first_frame = np.empty(chunks + 1, np.int64)
+    for c in range(chunks + 1):
+        first_frame[c] = pairs * c // chunks
+    histogram = np.zeros((chunks, n_states), np.int64)     # transitions from i per chunk
+    for c in nb.prange(chunks):
+        for t in range(first_frame[c], first_frame[c + 1]):
+            for p in range(n_particles):
+                i = states[t, p]
+                if i >= 0 and states[t + lag_frames, p] >= 0:
+                    histogram[c, i] += 1
     start = np.zeros(n_states + 1, np.int64)
-    pairs = 0
-    for t in range(n_frames - lag_frames):
-        for p in range(n_particles):
-            i = states[t, p]
-            if i >= 0 and states[t + lag_frames, p] >= 0:
-                start[i + 1] += 1
-        pairs += 1
+    slot = np.empty((chunks, n_states), np.int64)   # next free slot of row i for chunk c
+    total = 0
     for i in range(n_states):
-        start[i + 1] += start[i]
-    total = start[n_states]
+        start[i] = total
+        for c in range(chunks):
+            slot[c, i] = total
+            total += histogram[c, i]
+    start[n_states] = total
     destination = np.empty(total, np.int32)
     kind = np.empty(total, np.int8)             # 0: stays, 1: up through the top, 2: down
     weight = np.empty(total if with_frame_average else 0, np.float64)
-    slot = start[:n_states].copy()
-    occupancy = np.zeros(n_states, np.int64)
-    last_frame = -np.ones(n_states, np.int64)   # the last frame state i was occupied in
-    for t in range(n_frames - lag_frames):
-        if with_frame_average:      # N_i(t) first: the weights 1 / N_i(t) of Eq. 2
-            _frame_occupancy(states, t, lag_frames, occupancy)
-        for p in range(n_particles):
-            i = states[t, p]
-            j = states[t + lag_frames, p]
-            if i < 0 or j < 0:
-                continue
-            if last_frame[i] != t:
-                last_frame[i] = t
-                occupied_frames[i] += 1
-            q = slot[i]
-            slot[i] += 1
-            destination[q] = j
-            dy = vertical[t + lag_frames, p] - vertical[t, p]
-            kind[q] = 1 if dy < -half else (2 if dy > half else 0)
-            if with_frame_average:
-                weight[q] = 1.0 / occupancy[i]
-    indptr = np.zeros(n_states + 1, np.int64)
+    occupied = np.zeros((chunks, n_states), np.int64)
+    for c in nb.prange(chunks):
+        occupancy = np.zeros(n_states, np.int64)
+        last_frame = -np.ones(n_states, np.int64)   # the last frame state i was occupied in
+        for t in range(first_frame[c], first_frame[c + 1]):
+            if with_frame_average:      # N_i(t) first: the weights 1 / N_i(t) of Eq. 2
+                _frame_occupancy(states, t, lag_frames, occupancy)
+            for p in range(n_particles):
+                i = states[t, p]
+                j = states[t + lag_frames, p]
+                if i < 0 or j < 0:
+                    continue
+                if last_frame[i] != t:
+                    last_frame[i] = t
+                    occupied[c, i] += 1
+                q = slot[c, i]
+                slot[c, i] += 1
+                destination[q] = j
+                dy = vertical[t + lag_frames, p] - vertical[t, p]
+                kind[q] = 1 if dy < -half else (2 if dy > half else 0)
+                if with_frame_average:
+                    weight[q] = 1.0 / occupancy[i]
+    for c in range(chunks):
+        for i in range(n_states):
+            occupied_frames[i] += occupied[c, i]
+    # gather each row in place at its own slots (a row has at most as many non-zeros as
+    # transitions), the rows shared in consecutive chunks, then compact
     indices = np.empty(total, np.int32)
     counts = np.zeros(total, np.int64)
     up = np.zeros(total, np.int64)
     down = np.zeros(total, np.int64)
     average = np.zeros(total if with_frame_average else 0, np.float64)
-    where = -np.ones(n_states, np.int64)        # position of destination j in this row
-    nnz = 0
+    row_nonzeros = np.zeros(n_states, np.int64)
+    for c in nb.prange(chunks):
+        where = -np.ones(n_states, np.int64)        # position of destination j in its row
+        for i in range(n_states * c // chunks, n_states * (c + 1) // chunks):
+            row_start = start[i]
+            nnz = row_start
+            for q in range(start[i], start[i + 1]):
+                j = destination[q]
+                k = where[j]
+                if k < row_start:
+                    k = nnz
+                    where[j] = k
+                    indices[k] = j
+                    nnz += 1
+                counts[k] += 1
+                if kind[q] == 1:
+                    up[k] += 1
+                elif kind[q] == 2:
+                    down[k] += 1
+                if with_frame_average:
+                    average[k] += weight[q]
+            row_nonzeros[i] = nnz - row_start
+    indptr = np.zeros(n_states + 1, np.int64)
     for i in range(n_states):
-        row_start = nnz
-        for q in range(start[i], start[i + 1]):
-            j = destination[q]
-            k = where[j]
-            if k < row_start:
-                k = nnz
-                where[j] = k
-                indices[k] = j
-                nnz += 1
-            counts[k] += 1
-            if kind[q] == 1:
-                up[k] += 1
-            elif kind[q] == 2:
-                down[k] += 1
+        k = indptr[i]
+        for q in range(start[i], start[i] + row_nonzeros[i]):   # k <= q: a forward move
+            indices[k] = indices[q]
+            counts[k] = counts[q]
+            up[k] = up[q]
+            down[k] = down[q]
             if with_frame_average:
-                average[k] += weight[q]
-        indptr[i + 1] = nnz
+                average[k] = average[q]
+            k += 1
+        indptr[i + 1] = k
+    nnz = indptr[n_states]
     return (indptr, indices[:nnz], counts[:nnz], up[:nnz], down[:nnz],
             average[:nnz] if with_frame_average else average, pairs)
 
@@ -364,7 +398,7 @@ def _count_sparse(windows, frame_average: bool) -> TransitionCounts:
         occupied = np.zeros(s, np.int64)
         indptr, indices, counts, up, down, average, pairs = _sparse_count_kernel(
             states, vertical, int(window.lag_frames), float(window.height), s,
-            bool(frame_average), occupied)
+            bool(frame_average), occupied, nb.get_num_threads())
         # sort each row's destinations once; the four value arrays follow the same order
         order = sp.csr_array((np.arange(indices.size, dtype=np.int64), indices, indptr),
                              shape=(s, s))
