@@ -196,3 +196,22 @@ def test_calibrated_coherence_matches_the_windows_cluster_index(coherent, tmp_pa
     holes[:, 0] = -1
     with pytest.raises(InputError, match="every particle has a state"):
         calibrate_coherence(plain, dataclasses.replace(window, states=holes))
+
+
+def test_a_model_with_another_coherence_keeps_what_its_chain_derived(coherent):
+    """with_coherence / with_selection carry the sampling chain and the exact RTD over
+    (the calibration's trials reuse them), and the Monte Carlo is the one of a model made
+    afresh with that coherence."""
+    run, states = coherent
+    model = fit_model(run, FLOW.grid, FLOW.lag, None, "mle")
+    model.monte_carlo(states[0], 3, seed=1)             # derives the sampling chain
+    rtd = model.rtd()
+    trial = model.with_coherence(0.4)
+    assert trial._chain is model._chain and trial.coherence == 0.4
+    assert trial.rtd().probability is rtd.probability
+    assert model.with_selection({"how": "test"})._chain is model._chain
+    fresh = dataclasses.replace(model, coherence=0.4, _cache={})
+    assert "_chain" not in fresh.__dict__
+    for a, b in zip(trial.monte_carlo(states[0], 20, seed=5),
+                    fresh.monte_carlo(states[0], 20, seed=5)):
+        np.testing.assert_array_equal(a, b)

@@ -209,7 +209,10 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
     start = first[full[0]]
 
     def index(rho: float) -> float:
-        run, _ = model.with_coherence(rho).monte_carlo(start, int(steps), seed=seed)
+        # the model itself where it already has this rho (the first trial, rho = 0): what
+        # it derives for its Monte Carlo is then kept and carried to the other trials
+        trial = model if rho == model.coherence else model.with_coherence(rho)
+        run, _ = trial.monte_carlo(start, int(steps), seed=seed)
         return float(np.nanmean(snapshot_cluster_index(run[CALIBRATION_BURN_IN + 1:], n_cells,
                                                        cell_of_state)))
 

@@ -715,6 +715,17 @@ class MarkovModel:
 
         return predict(self, trajectories, start, duration, seed, output, progress)
 
+    def _derived(self, **changes) -> "MarkovModel":
+        """This model with fields that change neither the chain nor anything derived from
+        it (the coherence, the selection record) replaced; what it has already derived
+        (sampling chain, pass fractions, exact RTDs, ...) is carried over, not recomputed:
+        calibrating the coherence runs the same chain with many values of it."""
+        model = dataclasses.replace(self, _cache=dict(self._cache), **changes)
+        for name, attribute in vars(type(self)).items():
+            if isinstance(attribute, cached_property) and name in self.__dict__:
+                model.__dict__[name] = self.__dict__[name]
+        return model
+
     def with_coherence(self, coherence: float) -> "MarkovModel":
         """The same model with coherent moves of the given coherence.
 
@@ -732,7 +743,7 @@ class MarkovModel:
         InputError
             If ``coherence`` is not in [0, 1].
         """
-        return dataclasses.replace(self, coherence=coherence, _cache={})
+        return self._derived(coherence=coherence)
 
     def with_selection(self, selection: dict) -> "MarkovModel":
         """The same model, recording how its state space and lag were chosen.
@@ -747,7 +758,7 @@ class MarkovModel:
         MarkovModel
             A copy with ``selection`` set.
         """
-        return dataclasses.replace(self, selection=dict(selection), _cache={})
+        return self._derived(selection=dict(selection))
 
     # -- description -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:
