@@ -26,11 +26,11 @@ the other blocks and judged on the held-out block's RTD by
     score = |mean PD E(RT)| / u_E + |mean PD SD(RT)| / u_SD + mean MD / mean MD(cells)
 
 with the units u the project's goals (2 %, 10 %) or the blocks' own variability where that
-is larger. On sliding 5 s windows of the 3, 4 and 6 m/s paper-scale runs (``docs/method.md``,
-Choosing the state space and lag) the choice by the whole window's RTD was the candidate
-with the lowest MD on the *next* window in 8, 3 and 6 of 8 windows each, the
-cross-validation's in 5, 4 and 4, and lost less MD against the best candidate in total
-(0.30 against 0.72 over the 24 windows): held-out blocks of 1.7 s see RTDs cut at 1.7 s, and the
+is larger. On sliding 5 s windows of the 3, 4, 6 and 8 m/s paper-scale runs
+(``docs/method.md``, Choosing the state space and lag) the choice by the whole window's RTD
+was the candidate with the lowest MD on the *next* window in 8, 3, 6 and 8 of 8 windows
+each, the cross-validation's in 5, 4, 4 and 5, and lost less MD against the best candidate
+in total (0.30 against 0.85 over the 32 windows): held-out blocks of 1.7 s see RTDs cut at 1.7 s, and the
 bias terms of one block against the others followed the flow's surges more than the
 models' errors. Neither is an oracle.
 
