@@ -245,6 +245,10 @@ def test_trust_paragraph_is_written_from_the_numbers():
     assert "beats simply" in text and "within the reference's own variability" in text
     assert "inside" in text
     assert "too few residences" in trust_text("3", "mle", {"md_rtd": None})
+    # the value and its interval at one precision, so that a miss reads as one
+    text = trust_text("6", "auto", dict(summary, reference={"rt_mean": 0.39952},
+                                        model={"rt_mean_interval": [0.2293, 0.3984]}))
+    assert "E(RT) 0.400 s lies outside the model's 90 % interval 0.229-0.398 s" in text
     # the model's own error on its fitting window, against the flow's change (the baseline)
     summary["model_on_fitting_window"] = {"windows": [[15, 20], [10, 15]], "md_rtd": 0.02,
                                           "pd_rt_mean": 1.25, "pd_rt_sd": -3.0}

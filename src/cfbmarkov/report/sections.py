@@ -375,11 +375,13 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
         inside = interval[0] <= ref["rt_mean"] <= interval[1]
         level = 100 * float(summary.get("level", 0.9))
         own = model.get("model_rt_mean_interval")
-        parts.append(f"The CFD-DEM's E(RT) {ref['rt_mean']:.3g} s lies "
+        # one precision for the value and its interval (ms): "0.400 s lies outside
+        # 0.229-0.398 s", not "0.4 s"
+        parts.append(f"The CFD-DEM's E(RT) {ref['rt_mean']:.3f} s lies "
                      f"{'inside' if inside else 'outside'} the model's {level:g} % interval "
-                     f"{interval[0]:.3g}-{interval[1]:.3g} s"
+                     f"{interval[0]:.3f}-{interval[1]:.3f} s"
                      + (f" (with the flow's variability between windows; the model's own "
-                        f"value: {own[0]:.3g}-{own[1]:.3g} s)." if own else "."))
+                        f"value: {own[0]:.3f}-{own[1]:.3f} s)." if own else "."))
     return " ".join(parts)
 
 
