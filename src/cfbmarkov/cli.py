@@ -292,6 +292,78 @@ def _cmd_compare(args) -> int:
     return 0
 
 
+def _cmd_stationarity(args) -> int:
+    import json
+
+    import numpy as np
+
+    from cfbmarkov.analysis.baseline import window_difference
+    from cfbmarkov.analysis.stationarity import long_run_baseline, window_statistics
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(args.file) as traj:
+        stride = traj.lag_frames(args.lag) if args.lag is not None else 1
+        bin_width = args.lag if args.lag is not None else traj.frame_interval
+        basis = {"use_events": args.exact_events, "stride": 1 if args.exact_events else stride}
+        stats = window_statistics(traj, window_length=args.window_length, step=args.step,
+                                  span=args.span, **basis)
+        summary = {"file": str(args.file), "span": list(args.span) if args.span else
+                   [float(traj.times[0]), float(traj.times[-1])], **stats.summary()}
+        judged = None
+        if args.judge is not None:
+            j0, j1 = args.judge
+            length = j1 - j0
+            span = args.span or (float(traj.times[0]), float(traj.times[-1]))
+            direction = "down" if _judged_down(traj, args.judge) else "up"
+            long_run = long_run_baseline(traj, args.judge, span=args.span, bin_width=bin_width,
+                                         direction=direction, **basis)
+            judged = {"window": [j0, j1], "direction": direction, "rt_mean": long_run.observed.mean,
+                      "rt_sd": long_run.observed.sd, "rt_count": long_run.observed.count,
+                      "long_run": long_run.summary(), "persistence": None}
+            if j0 - length >= span[0] - traj.time_tolerance:
+                persistence = window_difference(
+                    traj, (j0 - length, j0), (j0, j1), bin_width=bin_width, md_order=2.0,
+                    face_band=None, window_length=length, direction=direction, **basis)
+                judged["persistence"] = persistence.summary()
+            summary["judged"] = judged
+    if args.json:
+        print(json.dumps(summary, indent=1))
+        return 0
+    basis_text = ("exact pass events" if stats.exact else
+                  f"frames every {(args.lag if args.lag is not None else bin_width):g} s")
+    print(f"{args.file}: {stats.starts.size} windows of {stats.window_length:g} s, "
+          f"{stats.step:g} s apart, residence times from {basis_text}")
+    print(f"{'window (s)':>13}  {'direction':>9}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  "
+          f"{'residences':>10}")
+    for a, m, sd, n, d in zip(stats.starts, stats.rt_mean, stats.rt_sd, stats.rt_count,
+                              stats.direction):
+        print(f"{a:6g}-{a + stats.window_length:<6g}  {d:>9}  {m:9.4g}  {sd:10.4g}  {n:10d}")
+    print(f"E(RT) {np.nanmean(stats.rt_mean):.4g} s on average, relative SD "
+          f"{100 * stats.relative_sd_rt_mean:.1f} %; SD(RT) {np.nanmean(stats.rt_sd):.4g} s, "
+          f"relative SD {100 * stats.relative_sd_rt_sd:.1f} % (the scatter of one "
+          f"{stats.window_length:g} s window: a stationary model cannot be expected closer "
+          "to a given window)")
+    if judged is not None:
+        lr, pe = judged["long_run"], judged["persistence"]
+        print(f"judged window {j0:g}-{j1:g} s: E(RT) {judged['rt_mean']:.4g} s, SD(RT) "
+              f"{judged['rt_sd']:.4g} s, {judged['rt_count']} residences")
+        s0, s1 = lr["windows"][0]
+        print(f"  the run's long run ({s0:g}-{s1:g} s without it, pooled): PD E(RT) "
+              f"{lr['pd_rt_mean']:+.1f} %, PD SD(RT) {lr['pd_rt_sd']:+.1f} %, MD "
+              f"{lr['md_rtd']:.3f}")
+        if pe is not None:
+            print(f"  persistence (the {j0 - (j1 - j0):g}-{j0:g} s window): PD E(RT) "
+                  f"{pe['pd_rt_mean']:+.1f} %, PD SD(RT) {pe['pd_rt_sd']:+.1f} %, MD "
+                  f"{pe['md_rtd']:.3f}")
+    return 0
+
+
+def _judged_down(traj, window) -> bool:
+    from cfbmarkov.analysis.rtd import net_passes
+
+    return traj.boundary == "periodic" and net_passes(traj, window) < 0
+
+
 def _cmd_rtd(args) -> int:
     from cfbmarkov.markov import MarkovModel
 
@@ -563,6 +635,28 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--window-length", type=_positive_float, default=None,
                    help="observation window, s: the RTD as seen in such a window")
     s.set_defaults(func=_cmd_rtd)
+
+    s = sub.add_parser("stationarity",
+                       help="how much a run's RTD changes from window to window (sliding "
+                            "windows), and the best stationary prediction of one window")
+    s.add_argument("file", help="trajectory file")
+    s.add_argument("--window-length", type=_positive_float, default=5.0,
+                   help="window length, s (default 5)")
+    s.add_argument("--step", type=_positive_float, default=1.0,
+                   help="time between window starts, s (default 1)")
+    s.add_argument("--span", type=parse_window, default=None,
+                   help="START:STOP, s, the part of the file used (default all; leave out a "
+                        "start-up from rest)")
+    s.add_argument("--lag", type=_positive_float, default=None,
+                   help="residence times from frames at this lag, s (a model's; default every "
+                        "frame)")
+    s.add_argument("--exact-events", action="store_true",
+                   help="residence times from the file's exact pass events")
+    s.add_argument("--judge", type=parse_window, default=None,
+                   help="START:STOP, s: also compare this window with the run's long run "
+                        "(the span's other windows pooled) and with the window before it")
+    s.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    s.set_defaults(func=_cmd_stationarity)
 
     s = sub.add_parser("maps", help="batch-injection probability maps (Eq. 8, Fig. 4-7)")
     s.add_argument("model")

@@ -1,0 +1,265 @@
+"""How much a run's flow changes from window to window, and what the best stationary
+prediction of one window could achieve (``docs/definitions.md``, Stationarity).
+
+A Markov model fitted on one window is a stationary description of the flow: it predicts
+one RTD for every later window. Where the flow drifts or surges on the scale of the
+windows (a riser's clusters and inventory swings), the RTD of a 5 s window scatters about
+the flow's long-run RTD, and no stationary model can be expected to predict a given window
+closer than that scatter, whatever its states. Two figures measure it on the reference:
+
+- :func:`window_statistics`: E(RT), SD(RT) and residence counts of sliding windows, and
+  their relative standard deviations;
+- :func:`long_run_baseline`: the reference's RTD pooled over every window of a span that
+  does not overlap the judged window (whole windows of its length, aligned with it), taken
+  as the prediction of the judged window: the run's long-run RTD without the judged window,
+  what a perfect stationary model fitted on the rest of the run would predict. Beside the
+  persistence baseline (:func:`cfbmarkov.analysis.baseline.window_difference`) it shows how
+  much of a model's error on the judged window is the flow's scatter about its long run.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cfbmarkov.analysis.baseline import WindowDifference
+from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
+from cfbmarkov.analysis.rtd import ResidenceTimes, net_passes, residence_times, rtd_histogram
+from cfbmarkov.errors import InputError
+
+#: residence directions a caller may ask for; "auto" follows each window's net solids flow
+DIRECTIONS = ("auto", "up", "down")
+
+
+@dataclass(frozen=True)
+class WindowStatistics:
+    """E(RT), SD(RT) and residence counts of a run's sliding windows.
+
+    Attributes
+    ----------
+    window_length : float
+        Length of every window (s).
+    step : float
+        Time between the starts of consecutive windows (s).
+    starts : numpy.ndarray, shape (n,)
+        Window starts (s); window ``i`` is ``[starts[i], starts[i] + window_length]``.
+    rt_mean, rt_sd : numpy.ndarray, shape (n,)
+        E(RT) and SD(RT) of each window's residence-time samples (s; NaN with fewer than one
+        or two samples).
+    rt_count : numpy.ndarray of int, shape (n,)
+        Residences per window.
+    direction : tuple of str, length n
+        "up" or "down": the residences' direction in each window (docs/definitions.md, Net
+        downflow).
+    exact : bool
+        Whether the samples come from the file's exact pass events (else frames).
+    """
+
+    window_length: float
+    step: float
+    starts: np.ndarray
+    rt_mean: np.ndarray
+    rt_sd: np.ndarray
+    rt_count: np.ndarray
+    direction: tuple[str, ...]
+    exact: bool
+
+    @staticmethod
+    def _relative_sd(values: np.ndarray) -> float:
+        finite = values[np.isfinite(values)]
+        if finite.size < 2 or not finite.mean() > 0:
+            return float("nan")
+        return float(finite.std(ddof=1) / finite.mean())
+
+    @property
+    def relative_sd_rt_mean(self) -> float:
+        """Standard deviation of the windows' E(RT) over their mean (-; NaN with fewer than
+        two windows). Windows closer than their length overlap, so they are not independent
+        samples: the figure estimates the scatter of one window, not its uncertainty."""
+        return self._relative_sd(self.rt_mean)
+
+    @property
+    def relative_sd_rt_sd(self) -> float:
+        """Standard deviation of the windows' SD(RT) over their mean (-), as
+        :attr:`relative_sd_rt_mean`."""
+        return self._relative_sd(self.rt_sd)
+
+    def summary(self) -> dict[str, Any]:
+        """JSON-ready: the windows (s), their E(RT), SD(RT) (s), counts and directions, and
+        the relative standard deviations (-)."""
+        def finite(values):
+            return [float(v) if np.isfinite(v) else None for v in values]
+        return {"window_length": self.window_length, "step": self.step,
+                "exact_events": self.exact,
+                "windows": [[float(a), float(a + self.window_length)] for a in self.starts],
+                "rt_mean": finite(self.rt_mean), "rt_sd": finite(self.rt_sd),
+                "rt_count": [int(c) for c in self.rt_count], "direction": list(self.direction),
+                "relative_sd_rt_mean": finite([self.relative_sd_rt_mean])[0],
+                "relative_sd_rt_sd": finite([self.relative_sd_rt_sd])[0]}
+
+
+def _span(traj, span: tuple[float, float] | None) -> tuple[float, float]:
+    first, last = float(traj.times[0]), float(traj.times[-1])
+    if span is None:
+        return first, last
+    a, b = float(span[0]), float(span[1])
+    tol = traj.time_tolerance
+    if not (np.isfinite(a) and np.isfinite(b) and b > a):
+        raise InputError(f"span {a:g}:{b:g} s must be finite with its end after its start")
+    if a < first - tol or b > last + tol:
+        raise InputError(f"span {a:g}:{b:g} s lies outside the frames of {traj.path} "
+                         f"({first:g} to {last:g} s)")
+    return a, b
+
+
+def _direction_of(traj, window: tuple[float, float], direction: str) -> str:
+    if direction not in DIRECTIONS:
+        raise InputError(f"residence direction {direction!r}: auto, up or down")
+    if direction != "auto":
+        return direction
+    if traj.boundary == "periodic" and net_passes(traj, window) < 0:
+        return "down"
+    return "up"
+
+
+def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
+                      span: tuple[float, float] | None = None, use_events: bool = False,
+                      stride: int = 1, face_band: float | None = None,
+                      direction: str = "auto") -> WindowStatistics:
+    """E(RT), SD(RT) and residence counts of sliding windows of a trajectory file.
+
+    Windows of ``window_length`` start at the span's start and every ``step`` after it, as
+    long as they end within the span (a tolerance of the file's ``time_tolerance``).
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file (periodic or open riser).
+    window_length : float, optional
+        Length of each window (s), default 5 (the paper's fitting and analysis windows).
+    step : float, optional
+        Time between window starts (s), default 1.
+    span : (float, float), optional
+        The part of the file the windows cover (s); default all of it. Leave out a run's
+        start-up from rest.
+    use_events, stride, face_band
+        The residence times' basis (:func:`cfbmarkov.analysis.rtd.residence_times`): exact
+        events, or frames every ``stride``-th (a model's lag).
+    direction : {"auto", "up", "down"}, optional
+        "auto": each window's own net solids flow decides (docs/definitions.md, Net
+        downflow).
+
+    Returns
+    -------
+    WindowStatistics
+
+    Raises
+    ------
+    InputError
+        On a window length or step that is not finite and positive, a span outside the
+        file's frames, or a span that holds fewer than two windows.
+    """
+    length, step = float(window_length), float(step)
+    if not (np.isfinite(length) and length > 0):
+        raise InputError(f"window length {window_length} s must be finite and positive")
+    if not (np.isfinite(step) and step > 0):
+        raise InputError(f"window step {step} s must be finite and positive")
+    a, b = _span(traj, span)
+    tol = traj.time_tolerance
+    count = int(np.floor((b - a - length + tol) / step)) + 1 if b - a + tol >= length else 0
+    if count < 2:
+        raise InputError(f"{a:g}:{b:g} s of {traj.path} holds {max(count, 0)} window(s) of "
+                         f"{length:g} s {step:g} s apart: two at least are needed (a shorter "
+                         "--window-length or --step)")
+    starts = a + step * np.arange(count)
+    means, sds, counts, directions = [], [], [], []
+    exact = False
+    for start in starts:
+        window = (float(start), float(start + length))
+        d = _direction_of(traj, window, direction)
+        rt = residence_times(traj, window, use_events=use_events, stride=stride,
+                             face_band=face_band, direction=d)
+        means.append(rt.mean)
+        sds.append(rt.sd)
+        counts.append(rt.count)
+        directions.append(d)
+        exact = rt.exact
+    return WindowStatistics(length, step, starts, np.asarray(means, float),
+                            np.asarray(sds, float), np.asarray(counts, np.int64),
+                            tuple(directions), exact)
+
+
+def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, float] | None
+                      = None, bin_width: float, md_order: float = 2.0, use_events: bool = False,
+                      stride: int = 1, face_band: float | None = None,
+                      direction: str = "auto") -> WindowDifference:
+    """The reference's RTD pooled over the span's other windows, as the prediction of one.
+
+    The span is tiled with whole windows of the judged window's length, aligned with it
+    (``judged[0] + k L`` for whole k), and every tile that lies in the span and does not
+    overlap the judged window contributes its residence-time samples. The pooled samples
+    are the run's long-run RTD without the judged window: what a stationary model that
+    reproduced the rest of the run perfectly would predict. Their PD and MD against the
+    judged window measure the flow's scatter about its long run, the part of any
+    stationary model's error that no state space removes.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        The reference file.
+    judged : (float, float)
+        The window judged (s).
+    span : (float, float), optional
+        The part of the file whose other windows are pooled (s); default all of it.
+    bin_width : float
+        The RTD bins (s), keyword only.
+    md_order : float, optional
+        Minkowski order (Eq. 9), default 2.
+    use_events, stride, face_band
+        The residence times' basis (:func:`cfbmarkov.analysis.rtd.residence_times`).
+    direction : {"auto", "up", "down"}, optional
+        "auto": the judged window's net solids flow decides, and the pooled windows use the
+        same direction.
+
+    Returns
+    -------
+    WindowDifference
+        ``windows``: (the span, the judged window); ``predicted``: the pooled samples (their
+        ``window`` is the span); PD (%) of E(RT) and SD(RT) and MD against the judged window.
+
+    Raises
+    ------
+    InputError
+        On a judged window that is empty or outside the span, or a span without another
+        whole window of the judged window's length.
+    """
+    a, b = _span(traj, span)
+    j0, j1 = float(judged[0]), float(judged[1])
+    length = j1 - j0
+    tol = traj.time_tolerance
+    if not (np.isfinite(length) and length > 0):
+        raise InputError(f"judged window {j0:g}:{j1:g} s is empty")
+    if j0 < a - tol or j1 > b + tol:
+        raise InputError(f"judged window {j0:g}:{j1:g} s lies outside the span {a:g}:{b:g} s")
+    d = _direction_of(traj, (j0, j1), direction)
+    k_lo = int(np.ceil((a - j0 - tol) / length))
+    k_hi = int(np.floor((b - j1 + tol) / length))
+    tiles = [(j0 + k * length, j1 + k * length) for k in range(k_lo, k_hi + 1) if k != 0]
+    if not tiles:
+        raise InputError(f"span {a:g}:{b:g} s holds no other whole {length:g} s window beside "
+                         f"{j0:g}:{j1:g} s (a longer span)")
+    kwargs = {"use_events": use_events, "stride": stride, "face_band": face_band,
+              "direction": d}
+    pooled = [residence_times(traj, tile, **kwargs) for tile in tiles]
+    samples = np.concatenate([p.samples for p in pooled])
+    predicted = ResidenceTimes(samples, pooled[0].exact, (a, b))
+    observed = residence_times(traj, (j0, j1), **kwargs)
+    _, pa = rtd_histogram(predicted.samples, bin_width, window_length=length)
+    _, pb = rtd_histogram(observed.samples, bin_width, window_length=length)
+    md = minkowski_distance(pa, pb, md_order) if pa.sum() > 0 and pb.sum() > 0 else float("nan")
+    return WindowDifference(((a, b), (j0, j1)), predicted, observed,
+                            percentage_difference(predicted.mean, observed.mean),
+                            percentage_difference(predicted.sd, observed.sd, scale=observed.mean),
+                            md)

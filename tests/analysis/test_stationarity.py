@@ -1,0 +1,130 @@
+"""Sliding-window statistics of a run and the long-run baseline (analysis/stationarity.py,
+``cfbmarkov stationarity``)."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+from cfbmarkov.analysis.metrics import minkowski_distance
+from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
+from cfbmarkov.analysis.stationarity import long_run_baseline, window_statistics
+from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
+
+from .conftest import HEIGHT, WIDTH, generate_run
+
+
+def _stationary(tmp_path, seed=3):
+    run = generate_run(n_particles=200, t1=4.0, seed=seed)
+    return write_trajectories(tmp_path / "steady.h5", run.times, run.positions, width=WIDTH,
+                              height=HEIGHT)
+
+
+def _surging(tmp_path):
+    """The same particles rise at 1.6 m/s for 2 s, then at 0.8 m/s for 2 s."""
+    fast = generate_run(n_particles=200, t0=0.0, t1=2.0, seed=4, rise=1.6)
+    slow = generate_run(n_particles=200, t0=2.0, t1=4.0, seed=5, rise=0.8,
+                        initial=fast.positions[-1])
+    times = np.concatenate([fast.times, slow.times[1:]])
+    positions = np.concatenate([fast.positions, slow.positions[1:]])
+    return write_trajectories(tmp_path / "surging.h5", times, positions, width=WIDTH,
+                              height=HEIGHT)
+
+
+def test_window_statistics_are_each_windows_residence_times(tmp_path):
+    path = _stationary(tmp_path)
+    with Trajectories(path) as traj:
+        stats = window_statistics(traj, window_length=1.0, step=0.5, span=(0.5, 4.0))
+        assert np.allclose(stats.starts, [0.5, 1.0, 1.5, 2.0, 2.5, 3.0])
+        for start, mean, sd, count in zip(stats.starts, stats.rt_mean, stats.rt_sd,
+                                          stats.rt_count):
+            rt = residence_times(traj, (start, start + 1.0), use_events=False)
+            assert count == rt.count > 20
+            assert mean == pytest.approx(rt.mean, rel=1e-12)
+            assert sd == pytest.approx(rt.sd, rel=1e-12)
+        assert stats.direction == ("up",) * 6 and not stats.exact
+        assert stats.relative_sd_rt_mean == pytest.approx(
+            np.std(stats.rt_mean, ddof=1) / np.mean(stats.rt_mean), rel=1e-12)
+        summary = stats.summary()
+        assert summary["windows"][0] == [0.5, 1.5] and len(summary["rt_mean"]) == 6
+        json.dumps(summary)
+
+
+def test_a_surging_flow_scatters_more_than_a_steady_one(tmp_path):
+    with Trajectories(_stationary(tmp_path)) as steady, Trajectories(_surging(tmp_path)) as surge:
+        calm = window_statistics(steady, window_length=1.0, step=0.5)
+        moving = window_statistics(surge, window_length=1.0, step=0.5)
+    # particles at half the speed stay about twice as long: E(RT) moves by tens of per cent
+    assert moving.relative_sd_rt_mean > 0.2
+    assert moving.relative_sd_rt_mean > 3 * calm.relative_sd_rt_mean
+
+
+def test_long_run_baseline_pools_the_other_whole_windows(tmp_path):
+    path = _stationary(tmp_path)
+    with Trajectories(path) as traj:
+        judged = (2.0, 3.0)
+        result = long_run_baseline(traj, judged, span=(0.3, 4.0), bin_width=0.025)
+        # tiles aligned with 2-3 s inside 0.3-4 s: 1-2 and 3-4 (0-1 starts before the span)
+        pooled = np.concatenate([residence_times(traj, w, use_events=False).samples
+                                 for w in ((1.0, 2.0), (3.0, 4.0))])
+        observed = residence_times(traj, judged, use_events=False)
+        assert result.windows == ((0.3, 4.0), judged)
+        assert result.predicted.count == pooled.size
+        assert result.predicted.mean == pytest.approx(pooled.mean(), rel=1e-12)
+        assert result.pd_rt_mean == pytest.approx(100 * (pooled.mean() / observed.mean - 1),
+                                                  rel=1e-9)
+        _, a = rtd_histogram(pooled, 0.025, window_length=1.0)
+        _, b = rtd_histogram(observed.samples, 0.025, window_length=1.0)
+        assert result.md_rtd == pytest.approx(minkowski_distance(a, b), rel=1e-12)
+
+
+def test_the_long_run_of_a_surging_flow_misses_each_half(tmp_path):
+    """Pooled over both regimes, the long run sits between them: it understates E(RT) of the
+    slow half's windows by tens of per cent and overstates the fast half's."""
+    with Trajectories(_surging(tmp_path)) as traj:
+        slow = long_run_baseline(traj, (3.0, 4.0), bin_width=0.025)
+        fast = long_run_baseline(traj, (0.0, 1.0), bin_width=0.025)
+    assert slow.pd_rt_mean < -15 and fast.pd_rt_mean > 0
+
+
+def test_bad_windows_are_refused(tmp_path):
+    path = _stationary(tmp_path)
+    with Trajectories(path) as traj:
+        with pytest.raises(InputError, match="two at least"):
+            window_statistics(traj, window_length=3.0, step=2.0)
+        with pytest.raises(InputError, match="outside the frames"):
+            window_statistics(traj, span=(1.0, 9.0), window_length=1.0)
+        with pytest.raises(InputError, match="no other whole"):
+            long_run_baseline(traj, (1.0, 3.0), span=(0.5, 4.0), bin_width=0.025)
+        with pytest.raises(InputError, match="outside the span"):
+            long_run_baseline(traj, (3.0, 4.0), span=(0.0, 3.0), bin_width=0.025)
+
+
+def test_cli_prints_the_windows_and_the_judged_window(tmp_path, capsys):
+    path = _stationary(tmp_path)
+    assert main(["stationarity", str(path), "--window-length", "1", "--step", "0.5",
+                 "--judge", "3:4", "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    with Trajectories(path) as traj:
+        stats = window_statistics(traj, window_length=1.0, step=0.5)
+        persistence = residence_times(traj, (2.0, 3.0), use_events=False)
+        judged = residence_times(traj, (3.0, 4.0), use_events=False)
+    assert out["rt_mean"] == pytest.approx(list(stats.rt_mean), rel=1e-12)
+    assert out["judged"]["long_run"]["windows"] == [[0.0, 4.0], [3.0, 4.0]]
+    assert out["judged"]["persistence"]["pd_rt_mean"] == pytest.approx(
+        100 * (persistence.mean / judged.mean - 1), rel=1e-9)
+    assert main(["stationarity", str(path), "--window-length", "1", "--judge", "3:4"]) == 0
+    text = capsys.readouterr().out
+    assert "relative SD" in text and "long run" in text and "persistence" in text
+
+
+def test_cli_refuses_a_window_longer_than_the_file_in_one_line(tmp_path, capsys):
+    path = _stationary(tmp_path)
+    assert main(["stationarity", str(path), "--window-length", "5"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "two at least" in err[0]
