@@ -263,7 +263,8 @@ def _cmd_compare(args) -> int:
 
     summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
                       bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
-                      basis=args.basis, level=args.level, resamples=args.resamples)
+                      basis=args.basis, level=args.level, resamples=args.resamples,
+                      long_run_span=args.long_run_span)
     from cfbmarkov.analysis.metrics import percentage_text as pd_text
 
     for line in summary.get("warnings", []):
@@ -288,6 +289,12 @@ def _cmd_compare(args) -> int:
         print(f"  (residence times from frames at the model's lag on both sides; the reference's "
               f"exact pass events give E(RT) {exact['rt_mean']:.4g} s, PD "
               f"{pd_text(exact['pd_rt_mean'])} %, SD(RT) PD {pd_text(exact['pd_rt_sd'])} %)")
+    long_run = summary.get("long_run")
+    if long_run:
+        (a, b), _ = long_run["windows"]
+        print(f"  the reference's long run ({a:g}-{b:g} s, its other windows pooled): PD E(RT) "
+              f"{pd_text(long_run['pd_rt_mean'])} %, SD(RT) PD {pd_text(long_run['pd_rt_sd'])} "
+              f"%, MD {long_run['md_rtd']:.4g} (the best stationary prediction)")
     print(Path(args.output) / "summary.json")
     return 0
 
@@ -628,6 +635,9 @@ def build_parser() -> argparse.ArgumentParser:
                    help="residence times of both sides from frames at the model's lag (like "
                         "for like, the default; the reference's exact-event figures are shown "
                         "beside), or the reference's exact pass events")
+    s.add_argument("--long-run-span", type=parse_window, default=None,
+                   help="START:STOP, s: also give the reference's RTD pooled over this span's "
+                        "other whole windows (the best stationary prediction; e.g. 5:20)")
     s.set_defaults(func=_cmd_compare)
 
     s = sub.add_parser("rtd", help="exact residence-time distribution of a model")

@@ -212,6 +212,8 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     summaries = {}
     with Trajectories(reference) as ref:
         start, stop = m.predict_window
+        span = long_run_span(m.fit_window, m.predict_window, float(ref.times[0]),
+                             float(ref.times[-1]))
         for name in models:
             model_path = folder / f"model-{name}.h5"
             if model_path.exists():
@@ -244,12 +246,46 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 t0, c0 = _time.perf_counter(), _time.process_time()
                 summaries[name] = compare(ref, prediction, window=(start, stop), output=out,
                                           bin_width=m.lag, level=m.interval_level,
-                                          resamples=m.interval_resamples)
+                                          resamples=m.interval_resamples,
+                                          long_run_span=span)
                 _record(folder, f"compare-{name}", {"wall_s": _time.perf_counter() - t0,
                                                     "cpu_s": _time.process_time() - c0})
                 stages[f"compare-{name}"] = "done"
     return {"case": label, "velocity": case.gas.superficial_velocity, "stages": stages,
             "summaries": summaries}
+
+
+def long_run_span(fit_window, predict_window, first: float, last: float
+                  ) -> tuple[float, float] | None:
+    """The span of a reproduction's CFD-DEM whose other windows give the long-run baseline.
+
+    From one window length before the fitting window (never within the run's first window
+    length, its start-up from rest) to the file's last frame; None when that span holds no
+    whole window, aligned with the analysis window, besides it
+    (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`).
+
+    Parameters
+    ----------
+    fit_window, predict_window : (float, float)
+        The case's fitting and analysis windows (s).
+    first, last : float
+        The CFD-DEM file's first and last frame times (s).
+
+    Returns
+    -------
+    (float, float) or None
+        The span (s). The paper's protocol (fit 10-15 s, analysis 15-20 s of a 0-20 s
+        run): 5-20 s, whose other windows are 5-10 and 10-15 s.
+    """
+    a, b = (float(t) for t in predict_window)
+    length = b - a
+    tol = 1e-9 * max(1.0, abs(last))
+    start = max(first, float(fit_window[0]) - length, first + length)
+    if not (length > 0 and last > start):
+        return None
+    before = math.floor((a - start + tol) / length)
+    after = math.floor((last - b + tol) / length)
+    return (start, last) if before + after >= 1 else None
 
 
 #: the parts of a case that make the CFD-DEM (the Markov model and output times may differ)

@@ -302,6 +302,19 @@ def test_persistence_baseline_and_natural_variability_stand_beside_the_model(tmp
                                             rel=1e-9)
     assert own["md_rtd"] == pytest.approx(minkowski_distance(p_model, p_fit, 2.0), rel=1e-12)
     assert own["md_rtd"] != pytest.approx(saved["md_rtd"])
+    assert saved["long_run"] is None            # no span asked for
+    with_long = compare(run, pred, window=(3.0, 4.0), output=tmp_path / "l", figures=False,
+                        long_run_span=(0.5, 4.0))
+    long_run = with_long["long_run"]
+    assert long_run["windows"] == [[0.5, 4.0], [3.0, 4.0]]
+    with Trajectories(run) as t:    # the other whole 1 s windows aligned with 3-4 s: 1-2, 2-3
+        pooled = np.concatenate([residence_times(t, w, use_events=False).samples
+                                 for w in ((1.0, 2.0), (2.0, 3.0))])
+    assert long_run["rt_count"] == pooled.size
+    assert long_run["rt_mean"] == pytest.approx(pooled.mean(), rel=1e-12)
+    with pytest.raises(InputError, match="no other whole"):
+        compare(run, pred, window=(2.0, 4.0), output=tmp_path / "m", figures=False,
+                long_run_span=(2.0, 4.0))
     # a prediction without its model (plain arrays): no baseline, halves still given
     bare = write_trajectories(tmp_path / "bare.h5", *_frames(pred), width=0.09, height=0.95)
     plain = compare(run, bare, window=(2.0, 4.0), output=tmp_path / "b", figures=False)

@@ -261,6 +261,26 @@ def test_trust_paragraph_is_written_from_the_numbers():
     summary["model_on_fitting_window"]["md_rtd"] = 0.2
     text = trust_text("6", "auto", summary)
     assert "the model's own error dominates" in text and "the difference is the model's" in text
+    # the best stationary prediction (the run's long run), where the summary has it
+    assert "stationary" not in text
+    summary["long_run"] = {"windows": [[5, 20], [15, 20]], "md_rtd": 0.08, "pd_rt_mean": -19.84,
+                           "pd_rt_sd": -33.2}
+    text = trust_text("6", "auto", summary)
+    assert "other windows of 5-20 s pooled, is 0.08 from it (PD of E(RT) -19.8 %" in text
+    assert "the model is 2.5 times as far." in text
+    summary["md_rtd"] = 0.05
+    assert "the model is closer than that." in trust_text("6", "auto", summary)
+
+
+def test_the_long_run_span_of_a_reproduction():
+    """One window before the fitting window, never the run's first window (its start-up);
+    none where no other whole window fits."""
+    from cfbmarkov.reproduce import long_run_span
+
+    assert long_run_span((10, 15), (15, 20), 0.0, 20.0) == (5.0, 20.0)
+    assert long_run_span((5, 10), (10, 15), 0.0, 20.0) == (5.0, 20.0)
+    assert long_run_span((2.5, 3.5), (3.5, 4.5), 0.0, 4.5) == (1.5, 4.5)
+    assert long_run_span((0, 1), (1, 2), 0.0, 2.0) is None
 
 
 def test_a_side_without_residences_is_said_so_not_n_a(reproduction):

@@ -26,6 +26,7 @@ import numpy as np
 
 from cfbmarkov.analysis.baseline import (WindowDifference, fitting_window,
                                          model_on_fitting_window, window_difference)
+from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.analysis.clusters import cluster_index
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
@@ -235,6 +236,10 @@ class RunComparison:
         The prediction's RTD against the reference's in the model's fitting window, the
         model's own error (:func:`cfbmarkov.analysis.baseline.model_on_fitting_window`);
         None where there is no baseline.
+    long_run : WindowDifference or None
+        The reference's RTD pooled over the other whole windows of a span, as the prediction
+        of the window (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`): the best
+        a stationary model could do. None unless a span was given.
     intervals : PredictionIntervals or None
         The prediction's intervals, set by the report where they can be formed
         (:mod:`cfbmarkov.analysis.intervals`).
@@ -263,6 +268,7 @@ class RunComparison:
     baseline: WindowDifference | None = None
     natural_variability: WindowDifference | None = None
     on_fitting_window: WindowDifference | None = None
+    long_run: WindowDifference | None = None
     intervals: Any = None
     direction: str = "up"
     cluster: dict | None = None
@@ -333,6 +339,7 @@ class RunComparison:
                                     else self.natural_variability.summary()),
             "model_on_fitting_window": (None if self.on_fitting_window is None
                                         else self.on_fitting_window.summary()),
+            "long_run": None if self.long_run is None else self.long_run.summary(),
             "units": {"time": "s", "pd": "%", "mixing_rms": "fraction of all particles"},
         }
 
@@ -342,7 +349,8 @@ BASES = ("frames", "events")
 
 
 def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: float = 0.025,
-                 md_order: float = 2.0, basis: str = "frames") -> RunComparison:
+                 md_order: float = 2.0, basis: str = "frames",
+                 long_run_span: tuple[float, float] | None = None) -> RunComparison:
     """Compare a model's trajectories with a reference over a window.
 
     Parameters
@@ -360,6 +368,10 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         ``frames`` (default): like for like, both sides' residence times from frames at the
         model's lag (the prediction's frame interval), the reference's exact-event figures
         reported beside; ``events``: the reference's exact pass events where it has them.
+    long_run_span : (float, float), optional
+        A span of the reference (s) whose other whole windows of the analysis window's
+        length, pooled, stand beside the model as the best stationary prediction
+        (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`); default none.
 
     Returns
     -------
@@ -369,8 +381,9 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     ------
     InputError
         For unusable parameters, a model with an odd column count (mixing by halves is
-        undefined), different riser domains (size, 2D against 3D, or depth) or different
-        particle ids.
+        undefined), different riser domains (size, 2D against 3D, or depth), different
+        particle ids, or a long-run span outside the reference or without another whole
+        window.
 
     References
     ----------
@@ -449,6 +462,12 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
             fitted[1] <= ref.times[-1] + ref.time_tolerance):
         with contextlib.suppress(InputError):     # a window without frames: no baseline
             baseline = window_difference(ref, fitted, (start, stop), **basis_args)
+    long_run = None
+    if long_run_span is not None:
+        long_run = long_run_baseline(ref, (start, stop), span=long_run_span,
+                                     bin_width=bin_width, md_order=md_order,
+                                     use_events=events, stride=stride, face_band=band,
+                                     direction=direction)
     middle = 0.5 * (start + stop)
     variability = None
     with contextlib.suppress(InputError):
@@ -510,7 +529,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
         warnings=warnings, basis=basis, stride=stride, exact_reference=exact_reference,
         baseline=baseline, natural_variability=variability, on_fitting_window=on_fit,
-        direction=direction,
+        long_run=long_run, direction=direction,
         cluster=_clusters(ref, pred, ref_frames, pred_frames, columns))
 
 

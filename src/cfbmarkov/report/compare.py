@@ -172,7 +172,8 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
 
 def compare(reference, prediction, *, window, output, bin_width: float = 0.025, basis: str = "frames",
             level: float = 0.9, resamples: int = 100,
-            md_order: float = 2.0, figures: bool = True) -> dict[str, Any]:
+            md_order: float = 2.0, figures: bool = True,
+            long_run_span: tuple[float, float] | None = None) -> dict[str, Any]:
     """Compare ``prediction`` (the model) with ``reference`` on a window; write the results.
 
     Parameters
@@ -195,6 +196,10 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
         Coverage of the prediction's intervals (``docs/definitions.md``, Intervals).
     resamples : int, optional
         Bootstrap resamples of the model's fitting window for the intervals (0: none).
+    long_run_span : (float, float), optional
+        A span of the reference (s) whose other whole windows, pooled, give the summary's
+        ``long_run`` block (the best stationary prediction; docs/definitions.md,
+        Stationarity); default none (``long_run`` null).
     figures : bool, optional
         Draw ``rtd.png``, ``snapshots.png``, ``mixing.png`` and, when the prediction carries
         its model, ``transition_matrix.png``, ``transition_bars.png`` and
@@ -226,7 +231,7 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
         ref = _open(reference, stack)
         pred = _open(prediction, stack)
         comparison = compare_runs(ref, pred, window, bin_width=bin_width, md_order=md_order,
-                                  basis=basis)
+                                  basis=basis, long_run_span=long_run_span)
         summary = comparison.summary()
         warnings = list(comparison.warnings)
         intervals = _intervals(pred, comparison, level, resamples, warnings)

@@ -310,7 +310,8 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
 def trust_text(u: str, estimator: str, summary: dict) -> str:
     """One paragraph: how far to trust this prediction, written from its numbers (the model
     against the persistence baseline, its own error on its fitting window, the CFD-DEM's own
-    variability, and its interval).
+    variability, the best stationary prediction (the run's long run) where the summary has
+    it, and its interval).
 
     Parameters
     ----------
@@ -362,6 +363,19 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
                      + ("." if md <= md_halves else
                         "; the rest is the flow's change since the fitting window." if flow_limits
                         else "; the difference is the model's."))
+    long_run = summary.get("long_run") or {}
+    md_long = finite_or_none(long_run.get("md_rtd"))
+    if md_long is not None:
+        (a, b), _ = long_run["windows"]
+        pd_long = [finite_or_none(long_run.get(k)) for k in ("pd_rt_mean", "pd_rt_sd")]
+        pds = (f" (PD of E(RT) {pd_long[0]:+.1f} %, of SD(RT) {pd_long[1]:+.1f} %)"
+               if None not in pd_long else "")
+        parts.append(f"The best a stationary model could do, the CFD-DEM's own RTD over the "
+                     f"run's other windows of {a:g}-{b:g} s pooled, is {md_long:.3g} from it"
+                     f"{pds}: the flow's scatter about its long run, which no state space "
+                     "removes; the model is "
+                     + ("closer than that." if md < md_long else
+                        f"{md / md_long:.1f} times as far."))
     cluster = summary.get("cluster_index") or {}
     c_ref = finite_or_none((cluster.get("reference") or {}).get("mean"))
     c_mod = finite_or_none((cluster.get("model") or {}).get("mean"))
