@@ -370,7 +370,7 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
         pd_long = [finite_or_none(long_run.get(k)) for k in ("pd_rt_mean", "pd_rt_sd")]
         pds = (f" (PD of E(RT) {pd_long[0]:+.1f} %, of SD(RT) {pd_long[1]:+.1f} %)"
                if None not in pd_long else "")
-        parts.append(f"The best a stationary model could do, the CFD-DEM's own RTD over the "
+        parts.append(f"What a perfect stationary model would predict, the CFD-DEM's own RTD over the "
                      f"run's other windows of {a:g}-{b:g} s pooled, is {md_long:.3g} from it"
                      f"{pds}: the flow's scatter about its long run, which no state space "
                      "removes; the model is "
