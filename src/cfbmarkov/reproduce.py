@@ -260,9 +260,9 @@ def long_run_span(fit_window, predict_window, first: float, last: float
     """The span of a reproduction's CFD-DEM whose other windows give the long-run baseline.
 
     From one window length before the fitting window (never within the run's first window
-    length, its start-up from rest) to the file's last frame; None when that span holds no
-    whole window, aligned with the analysis window, besides it
-    (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`).
+    length, its start-up from rest) to the file's last frame; None when that span holds
+    fewer than two whole windows, aligned with the analysis window, besides it (one would
+    be the persistence baseline again; :func:`cfbmarkov.analysis.stationarity.long_run_baseline`).
 
     Parameters
     ----------
@@ -285,7 +285,7 @@ def long_run_span(fit_window, predict_window, first: float, last: float
         return None
     before = math.floor((a - start + tol) / length)
     after = math.floor((last - b + tol) / length)
-    return (start, last) if before + after >= 1 else None
+    return (start, last) if before + after >= 2 else None
 
 
 #: the parts of a case that make the CFD-DEM (the Markov model and output times may differ)

@@ -274,13 +274,16 @@ def test_trust_paragraph_is_written_from_the_numbers():
 
 def test_the_long_run_span_of_a_reproduction():
     """One window before the fitting window, never the run's first window (its start-up);
-    none where no other whole window fits."""
+    none where fewer than two other whole windows fit."""
     from cfbmarkov.reproduce import long_run_span
 
     assert long_run_span((10, 15), (15, 20), 0.0, 20.0) == (5.0, 20.0)
     assert long_run_span((5, 10), (10, 15), 0.0, 20.0) == (5.0, 20.0)
     assert long_run_span((2.5, 3.5), (3.5, 4.5), 0.0, 4.5) == (1.5, 4.5)
     assert long_run_span((0, 1), (1, 2), 0.0, 2.0) is None
+    # the fitting window alone besides the analysis window: the persistence baseline again
+    assert long_run_span((1, 2), (2, 3), 0.0, 3.0) is None
+    assert long_run_span((1, 2), (2, 3), 0.0, 4.0) == (1.0, 4.0)
 
 
 def test_a_side_without_residences_is_said_so_not_n_a(reproduction):
