@@ -344,7 +344,8 @@ def _cmd_stationarity(args) -> int:
           f"{'residences':>10}")
     for a, m, sd, n, d in zip(stats.starts, stats.rt_mean, stats.rt_sd, stats.rt_count,
                               stats.direction):
-        print(f"{a:6g}-{a + stats.window_length:<6g}  {d:>9}  {m:9.4g}  {sd:10.4g}  {n:10d}")
+        span_text = f"{a:g}-{a + stats.window_length:g}"
+        print(f"{span_text:>13}  {d:>9}  {m:9.4g}  {sd:10.4g}  {n:10d}")
     print(f"E(RT) {np.nanmean(stats.rt_mean):.4g} s on average, relative SD "
           f"{100 * stats.relative_sd_rt_mean:.1f} %; SD(RT) {np.nanmean(stats.rt_sd):.4g} s, "
           f"relative SD {100 * stats.relative_sd_rt_sd:.1f} % (the scatter of one "

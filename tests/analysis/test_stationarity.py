@@ -128,3 +128,18 @@ def test_cli_refuses_a_window_longer_than_the_file_in_one_line(tmp_path, capsys)
     assert main(["stationarity", str(path), "--window-length", "5"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "two at least" in err[0]
+
+
+def test_an_open_riser_counts_entries_to_exits_in_each_window(tmp_path):
+    from cfbmarkov.synthetic import RiserFlow, write_open_run
+
+    path = write_open_run(tmp_path / "open.h5", RiserFlow(), 600, 6.0, seed=4)
+    with Trajectories(path) as traj:
+        stats = window_statistics(traj, window_length=2.0, step=2.0)
+        assert stats.starts.size == 3 and stats.direction == ("up",) * 3
+        for start, count, mean in zip(stats.starts, stats.rt_count, stats.rt_mean):
+            rt = residence_times(traj, (start, start + 2.0), use_events=False)
+            assert count == rt.count > 10 and mean == pytest.approx(rt.mean, rel=1e-12)
+        long_run = long_run_baseline(traj, (4.0, 6.0), bin_width=0.025)
+        assert long_run.predicted.count == sum(
+            residence_times(traj, w, use_events=False).count for w in ((0.0, 2.0), (2.0, 4.0)))
