@@ -292,9 +292,9 @@ def _cmd_compare(args) -> int:
     long_run = summary.get("long_run")
     if long_run:
         (a, b), _ = long_run["windows"]
-        print(f"  the reference's long run ({a:g}-{b:g} s, its other windows pooled): PD E(RT) "
+        print(f"  the reference's long run (its windows of {a:g}-{b:g} s but this one, pooled): PD E(RT) "
               f"{pd_text(long_run['pd_rt_mean'])} %, SD(RT) PD {pd_text(long_run['pd_rt_sd'])} "
-              f"%, MD {long_run['md_rtd']:.4g} (the best stationary prediction)")
+              f"%, MD {long_run['md_rtd']:.4g} (what a perfect stationary model would predict)")
     print(Path(args.output) / "summary.json")
     return 0
 
@@ -305,65 +305,94 @@ def _cmd_stationarity(args) -> int:
     import numpy as np
 
     from cfbmarkov.analysis.baseline import window_difference
+    from cfbmarkov.analysis.metrics import percentage_text as pd_text
     from cfbmarkov.analysis.stationarity import long_run_baseline, window_statistics
+    from cfbmarkov.report.compare import _jsonable
     from cfbmarkov.trajectories import Trajectories
 
+    events = args.basis == "events"
     with Trajectories(args.file) as traj:
+        if events and not (traj.has_events and traj.boundary == "periodic"):
+            raise InputError(f"{args.file} holds no exact pass events: residence times from "
+                             "frames need no --basis events")
         stride = traj.lag_frames(args.lag) if args.lag is not None else 1
         bin_width = args.lag if args.lag is not None else traj.frame_interval
-        basis = {"use_events": args.exact_events, "stride": 1 if args.exact_events else stride}
+        basis = {"use_events": events, "stride": 1 if events else stride}
+        span = args.span or (float(traj.times[0]), float(traj.times[-1]))
         stats = window_statistics(traj, window_length=args.window_length, step=args.step,
                                   span=args.span, **basis)
-        summary = {"file": str(args.file), "span": list(args.span) if args.span else
-                   [float(traj.times[0]), float(traj.times[-1])], **stats.summary()}
+        summary = {"file": str(args.file), "span": list(span),
+                   "basis": "events" if events else "frames", "rtd_bin_width": bin_width,
+                   **stats.summary()}
         judged = None
         if args.judge is not None:
             j0, j1 = args.judge
             length = j1 - j0
-            span = args.span or (float(traj.times[0]), float(traj.times[-1]))
+            tol = traj.time_tolerance
+            if j0 < span[0] - tol or j1 > span[1] + tol:
+                raise InputError(f"--judge {j0:g}:{j1:g} s lies outside the span "
+                                 f"{span[0]:g}:{span[1]:g} s")
             direction = "down" if _judged_down(traj, args.judge) else "up"
             long_run = long_run_baseline(traj, args.judge, span=args.span, bin_width=bin_width,
                                          direction=direction, **basis)
-            judged = {"window": [j0, j1], "direction": direction, "rt_mean": long_run.observed.mean,
-                      "rt_sd": long_run.observed.sd, "rt_count": long_run.observed.count,
-                      "long_run": long_run.summary(), "persistence": None}
-            if j0 - length >= span[0] - traj.time_tolerance:
+            judged = {"window": [j0, j1], "direction": direction,
+                      "rt_mean": long_run.observed.mean, "rt_sd": long_run.observed.sd,
+                      "rt_count": long_run.observed.count, "long_run": long_run.summary(),
+                      "persistence": None}
+            if j0 - length >= span[0] - tol:
                 persistence = window_difference(
                     traj, (j0 - length, j0), (j0, j1), bin_width=bin_width, md_order=2.0,
                     face_band=None, window_length=length, direction=direction, **basis)
                 judged["persistence"] = persistence.summary()
             summary["judged"] = judged
     if args.json:
-        print(json.dumps(summary, indent=1))
+        print(json.dumps(_jsonable(summary), indent=1, allow_nan=False))
         return 0
-    basis_text = ("exact pass events" if stats.exact else
-                  f"frames every {(args.lag if args.lag is not None else bin_width):g} s")
-    print(f"{args.file}: {stats.starts.size} windows of {stats.window_length:g} s, "
-          f"{stats.step:g} s apart, residence times from {basis_text}")
+
+    def value(v, spec=".4g"):
+        return format(v, spec) if v is not None and np.isfinite(v) else "n/d"
+
+    length = stats.window_length
+    basis_text = ("exact pass events" if events else f"frames every {bin_width:g} s")
+    print(f"{args.file}: {stats.starts.size} windows of {length:g} s, {stats.step:g} s apart, "
+          f"residence times from {basis_text}")
     print(f"{'window (s)':>13}  {'direction':>9}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  "
           f"{'residences':>10}")
     for a, m, sd, n, d in zip(stats.starts, stats.rt_mean, stats.rt_sd, stats.rt_count,
                               stats.direction):
-        span_text = f"{a:g}-{a + stats.window_length:g}"
-        print(f"{span_text:>13}  {d:>9}  {m:9.4g}  {sd:10.4g}  {n:10d}")
-    print(f"E(RT) {np.nanmean(stats.rt_mean):.4g} s on average, relative SD "
-          f"{100 * stats.relative_sd_rt_mean:.1f} %; SD(RT) {np.nanmean(stats.rt_sd):.4g} s, "
-          f"relative SD {100 * stats.relative_sd_rt_sd:.1f} % (the scatter of one "
-          f"{stats.window_length:g} s window: a stationary model cannot be expected closer "
-          "to a given window)")
+        span_text = f"{a:g}-{a + length:g}"
+        print(f"{span_text:>13}  {d:>9}  {value(m):>9}  {value(sd):>10}  {n:10d}")
+    print(f"E(RT) {value(stats.average_rt_mean)} s on average, relative SD "
+          f"{value(100 * stats.relative_sd_rt_mean, '.1f')} %; SD(RT) "
+          f"{value(stats.average_rt_sd)} s, relative SD "
+          f"{value(100 * stats.relative_sd_rt_sd, '.1f')} % (the scatter of one {length:g} s "
+          "window about the run's average: a stationary prediction of a given window carries "
+          "about as much)")
+    few = int(np.sum(stats.rt_count < FEW_RESIDENCES))
+    if few:
+        print(f"note: {few} of {stats.starts.size} windows hold fewer than {FEW_RESIDENCES} "
+              "residences: their E(RT) and SD(RT), and the scatter, carry sampling noise (a "
+              "longer --window-length)")
     if judged is not None:
         lr, pe = judged["long_run"], judged["persistence"]
-        print(f"judged window {j0:g}-{j1:g} s: E(RT) {judged['rt_mean']:.4g} s, SD(RT) "
-              f"{judged['rt_sd']:.4g} s, {judged['rt_count']} residences")
+        print(f"judged window {j0:g}-{j1:g} s: E(RT) {value(judged['rt_mean'])} s, SD(RT) "
+              f"{value(judged['rt_sd'])} s, {judged['rt_count']} residences")
         s0, s1 = lr["windows"][0]
-        print(f"  the run's long run ({s0:g}-{s1:g} s without it, pooled): PD E(RT) "
-              f"{lr['pd_rt_mean']:+.1f} %, PD SD(RT) {lr['pd_rt_sd']:+.1f} %, MD "
-              f"{lr['md_rtd']:.3f}")
+        print(f"  the run's long run (its {j1 - j0:g} s windows of {s0:g}-{s1:g} s but this one, "
+              f"pooled; what a perfect stationary model would predict): PD E(RT) "
+              f"{pd_text(lr['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
+              f"{pd_text(lr['pd_rt_sd'], '+.1f')} %, MD {value(lr['md_rtd'], '.3f')}")
         if pe is not None:
             print(f"  persistence (the {j0 - (j1 - j0):g}-{j0:g} s window): PD E(RT) "
-                  f"{pe['pd_rt_mean']:+.1f} %, PD SD(RT) {pe['pd_rt_sd']:+.1f} %, MD "
-                  f"{pe['md_rtd']:.3f}")
+                  f"{pd_text(pe['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
+                  f"{pd_text(pe['pd_rt_sd'], '+.1f')} %, MD {value(pe['md_rtd'], '.3f')}")
+        else:
+            print(f"  persistence: no whole {j1 - j0:g} s window before {j0:g} s in the span")
     return 0
+
+
+#: windows with fewer residences than this get a note in ``cfbmarkov stationarity``
+FEW_RESIDENCES = 100
 
 
 def _judged_down(traj, window) -> bool:
@@ -638,7 +667,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "beside), or the reference's exact pass events")
     s.add_argument("--long-run-span", type=parse_window, default=None,
                    help="START:STOP, s: also give the reference's RTD pooled over this span's "
-                        "other whole windows (the best stationary prediction; e.g. 5:20)")
+                        "other whole windows (what a perfect stationary model would predict; "
+                        "e.g. 5:20)")
     s.set_defaults(func=_cmd_compare)
 
     s = sub.add_parser("rtd", help="exact residence-time distribution of a model")
@@ -649,7 +679,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("stationarity",
                        help="how much a run's RTD changes from window to window (sliding "
-                            "windows), and the best stationary prediction of one window")
+                            "windows), and the run's long run against one window")
     s.add_argument("file", help="trajectory file")
     s.add_argument("--window-length", type=_positive_float, default=5.0,
                    help="window length, s (default 5)")
@@ -659,13 +689,15 @@ def build_parser() -> argparse.ArgumentParser:
                    help="START:STOP, s, the part of the file used (default all; leave out a "
                         "start-up from rest)")
     s.add_argument("--lag", type=_positive_float, default=None,
-                   help="residence times from frames at this lag, s (a model's; default every "
-                        "frame)")
-    s.add_argument("--exact-events", action="store_true",
-                   help="residence times from the file's exact pass events")
+                   help="frames every LAG s (a model's lag; default every frame); also the "
+                        "RTD bins of the MD")
+    s.add_argument("--basis", choices=["frames", "events"], default="frames",
+                   help="residence times from frames (every --lag, the default) or from the "
+                        "file's exact pass events (as in compare)")
     s.add_argument("--judge", type=parse_window, default=None,
                    help="START:STOP, s: also compare this window with the run's long run "
-                        "(the span's other windows pooled) and with the window before it")
+                        "(the span's other whole windows of its length, pooled) and with the "
+                        "window before it (persistence)")
     s.add_argument("--json", action="store_true", help="print JSON instead of a table")
     s.set_defaults(func=_cmd_stationarity)
 

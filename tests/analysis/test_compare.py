@@ -306,7 +306,7 @@ def test_persistence_baseline_and_natural_variability_stand_beside_the_model(tmp
     with_long = compare(run, pred, window=(3.0, 4.0), output=tmp_path / "l", figures=False,
                         long_run_span=(0.5, 4.0))
     long_run = with_long["long_run"]
-    assert long_run["windows"] == [[0.5, 4.0], [3.0, 4.0]]
+    assert long_run["windows"] == [[1.0, 4.0], [3.0, 4.0]]
     with Trajectories(run) as t:    # the other whole 1 s windows aligned with 3-4 s: 1-2, 2-3
         pooled = np.concatenate([residence_times(t, w, use_events=False).samples
                                  for w in ((1.0, 2.0), (2.0, 3.0))])

@@ -73,7 +73,7 @@ def test_long_run_baseline_pools_the_other_whole_windows(tmp_path):
         pooled = np.concatenate([residence_times(traj, w, use_events=False).samples
                                  for w in ((1.0, 2.0), (3.0, 4.0))])
         observed = residence_times(traj, judged, use_events=False)
-        assert result.windows == ((0.3, 4.0), judged)
+        assert result.windows == ((1.0, 4.0), judged)     # the pooled windows and the judged
         assert result.predicted.count == pooled.size
         assert result.predicted.mean == pytest.approx(pooled.mean(), rel=1e-12)
         assert result.pd_rt_mean == pytest.approx(100 * (pooled.mean() / observed.mean - 1),
@@ -143,3 +143,29 @@ def test_an_open_riser_counts_entries_to_exits_in_each_window(tmp_path):
         long_run = long_run_baseline(traj, (4.0, 6.0), bin_width=0.025)
         assert long_run.predicted.count == sum(
             residence_times(traj, w, use_events=False).count for w in ((0.0, 2.0), (2.0, 4.0)))
+
+
+def test_cli_refusals_and_undefined_values(tmp_path, capsys):
+    """A lag as long as the window, exact events a file does not hold, a judged window outside
+    the span: one line, exit code 2. Windows without residences: n/d in the table, null in
+    the JSON (strict JSON, no NaN)."""
+    path = _stationary(tmp_path)
+    for args, message in ((["--lag", "1"], "no residence time inside"),
+                          (["--basis", "events"], "no exact pass events"),
+                          (["--judge", "3:5"], "--judge 3:5 s lies outside the span")):
+        assert main(["stationarity", str(path), "--window-length", "1", *args]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    tiny = ["stationarity", str(path), "--window-length", "0.05", "--step", "0.05", "--lag",
+            "0.025", "--judge", "0:0.05"]
+    assert main([*tiny, "--json"]) == 0
+
+    def no_nan(name):
+        raise AssertionError(f"{name} in the JSON")
+    out = json.loads(capsys.readouterr().out, parse_constant=no_nan)
+    assert out["windows"][5] == [0.25, 0.3]          # no round-off in the window times
+    assert None in out["rt_mean"] and out["judged"]["persistence"] is None
+    assert main(tiny) == 0
+    text = capsys.readouterr().out
+    assert "n/d" in text and "nan" not in text and "fewer than 100 residences" in text
+    assert "persistence: no whole 0.05 s window before 0 s in the span" in text

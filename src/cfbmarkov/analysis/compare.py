@@ -238,8 +238,8 @@ class RunComparison:
         None where there is no baseline.
     long_run : WindowDifference or None
         The reference's RTD pooled over the other whole windows of a span, as the prediction
-        of the window (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`): the best
-        a stationary model could do. None unless a span was given.
+        of the window (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`): what a
+        perfect stationary model would predict. None unless a span was given.
     intervals : PredictionIntervals or None
         The prediction's intervals, set by the report where they can be formed
         (:mod:`cfbmarkov.analysis.intervals`).
@@ -370,7 +370,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         reported beside; ``events``: the reference's exact pass events where it has them.
     long_run_span : (float, float), optional
         A span of the reference (s) whose other whole windows of the analysis window's
-        length, pooled, stand beside the model as the best stationary prediction
+        length, pooled, stand beside the model as what a perfect stationary model would
+        predict
         (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`); default none.
 
     Returns

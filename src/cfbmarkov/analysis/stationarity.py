@@ -1,11 +1,11 @@
-"""How much a run's flow changes from window to window, and what the best stationary
-prediction of one window could achieve (``docs/definitions.md``, Stationarity).
+"""How much a run's flow changes from window to window, and how far one window lies from
+the run's long run (``docs/definitions.md``, Stationarity).
 
 A Markov model fitted on one window is a stationary description of the flow: it predicts
 one RTD for every later window. Where the flow drifts or surges on the scale of the
 windows (a riser's clusters and inventory swings), the RTD of a 5 s window scatters about
-the flow's long-run RTD, and no stationary model can be expected to predict a given window
-closer than that scatter, whatever its states. Two figures measure it on the reference:
+the flow's long-run RTD, and a stationary model's prediction of a given window carries that
+scatter, whatever its states. Two figures measure it on the reference:
 
 - :func:`window_statistics`: E(RT), SD(RT) and residence counts of sliding windows, and
   their relative standard deviations;
@@ -73,6 +73,21 @@ class WindowStatistics:
             return float("nan")
         return float(finite.std(ddof=1) / finite.mean())
 
+    @staticmethod
+    def _average(values: np.ndarray) -> float:
+        finite = values[np.isfinite(values)]
+        return float(finite.mean()) if finite.size else float("nan")
+
+    @property
+    def average_rt_mean(self) -> float:
+        """Mean of the windows' E(RT) (s; NaN where none is defined)."""
+        return self._average(self.rt_mean)
+
+    @property
+    def average_rt_sd(self) -> float:
+        """Mean of the windows' SD(RT) (s; NaN where none is defined)."""
+        return self._average(self.rt_sd)
+
     @property
     def relative_sd_rt_mean(self) -> float:
         """Standard deviation of the windows' E(RT) over their mean (-; NaN with fewer than
@@ -87,13 +102,16 @@ class WindowStatistics:
         return self._relative_sd(self.rt_sd)
 
     def summary(self) -> dict[str, Any]:
-        """JSON-ready: the windows (s), their E(RT), SD(RT) (s), counts and directions, and
-        the relative standard deviations (-)."""
+        """JSON-ready: the windows (s), their E(RT), SD(RT) (s), counts and directions, the
+        averages (s) and the relative standard deviations (-); undefined values as None."""
         def finite(values):
             return [float(v) if np.isfinite(v) else None for v in values]
         return {"window_length": self.window_length, "step": self.step,
                 "exact_events": self.exact,
-                "windows": [[float(a), float(a + self.window_length)] for a in self.starts],
+                "average_rt_mean": finite([self.average_rt_mean])[0],
+                "average_rt_sd": finite([self.average_rt_sd])[0],
+                "windows": [[float(a), round(float(a + self.window_length), 9)]
+                            for a in self.starts],
                 "rt_mean": finite(self.rt_mean), "rt_sd": finite(self.rt_sd),
                 "rt_count": [int(c) for c in self.rt_count], "direction": list(self.direction),
                 "relative_sd_rt_mean": finite([self.relative_sd_rt_mean])[0],
@@ -170,10 +188,14 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
     tol = traj.time_tolerance
     count = int(np.floor((b - a - length + tol) / step)) + 1 if b - a + tol >= length else 0
     if count < 2:
+        fix = (f"a window length below the span's {b - a:g} s" if length > 0.5 * (b - a) + tol
+               else "a shorter --window-length or --step")
         raise InputError(f"{a:g}:{b:g} s of {traj.path} holds {max(count, 0)} window(s) of "
-                         f"{length:g} s {step:g} s apart: two at least are needed (a shorter "
-                         "--window-length or --step)")
-    starts = a + step * np.arange(count)
+                         f"{length:g} s {step:g} s apart: two at least are needed ({fix})")
+    if stride * traj.frame_interval >= length - tol:
+        raise InputError(f"frames every {stride * traj.frame_interval:g} s leave no residence "
+                         f"time inside a {length:g} s window: a lag shorter than the window")
+    starts = np.round(a + step * np.arange(count), 9)    # no 0.30000000000000004 s
     means, sds, counts, directions = [], [], [], []
     exact = False
     for start in starts:
@@ -202,8 +224,9 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
     overlap the judged window contributes its residence-time samples. The pooled samples
     are the run's long-run RTD without the judged window: what a stationary model that
     reproduced the rest of the run perfectly would predict. Their PD and MD against the
-    judged window measure the flow's scatter about its long run, the part of any
-    stationary model's error that no state space removes.
+    judged window measure the flow's scatter about its long run: a stationary model's
+    prediction carries that scatter whatever its states, though one may, by chance, lean
+    the judged window's way (the persistence baseline sometimes does).
 
     Parameters
     ----------
@@ -226,8 +249,9 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
     Returns
     -------
     WindowDifference
-        ``windows``: (the span, the judged window); ``predicted``: the pooled samples (their
-        ``window`` is the span); PD (%) of E(RT) and SD(RT) and MD against the judged window.
+        ``windows``: (the extent of the pooled windows and the judged one, the judged
+        window); ``predicted``: the pooled samples (their ``window`` is that extent); PD (%)
+        of E(RT) and SD(RT) and MD against the judged window.
 
     Raises
     ------
@@ -254,12 +278,13 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
               "direction": d}
     pooled = [residence_times(traj, tile, **kwargs) for tile in tiles]
     samples = np.concatenate([p.samples for p in pooled])
-    predicted = ResidenceTimes(samples, pooled[0].exact, (a, b))
+    extent = (min(tiles[0][0], j0), max(tiles[-1][1], j1))
+    predicted = ResidenceTimes(samples, pooled[0].exact, extent)
     observed = residence_times(traj, (j0, j1), **kwargs)
     _, pa = rtd_histogram(predicted.samples, bin_width, window_length=length)
     _, pb = rtd_histogram(observed.samples, bin_width, window_length=length)
     md = minkowski_distance(pa, pb, md_order) if pa.sum() > 0 and pb.sum() > 0 else float("nan")
-    return WindowDifference(((a, b), (j0, j1)), predicted, observed,
+    return WindowDifference((extent, (j0, j1)), predicted, observed,
                             percentage_difference(predicted.mean, observed.mean),
                             percentage_difference(predicted.sd, observed.sd, scale=observed.mean),
                             md)

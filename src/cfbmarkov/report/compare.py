@@ -198,7 +198,7 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
         Bootstrap resamples of the model's fitting window for the intervals (0: none).
     long_run_span : (float, float), optional
         A span of the reference (s) whose other whole windows, pooled, give the summary's
-        ``long_run`` block (the best stationary prediction; docs/definitions.md,
+        ``long_run`` block (what a perfect stationary model would predict; docs/definitions.md,
         Stationarity); default none (``long_run`` null).
     figures : bool, optional
         Draw ``rtd.png``, ``snapshots.png``, ``mixing.png`` and, when the prediction carries

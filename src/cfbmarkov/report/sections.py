@@ -310,8 +310,8 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
 def trust_text(u: str, estimator: str, summary: dict) -> str:
     """One paragraph: how far to trust this prediction, written from its numbers (the model
     against the persistence baseline, its own error on its fitting window, the CFD-DEM's own
-    variability, the best stationary prediction (the run's long run) where the summary has
-    it, and its interval).
+    variability, what a perfect stationary model would predict (the run's long run) where
+    the summary has it, and its interval).
 
     Parameters
     ----------
