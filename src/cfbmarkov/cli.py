@@ -306,6 +306,7 @@ def _cmd_stationarity(args) -> int:
 
     from cfbmarkov.analysis.baseline import window_difference
     from cfbmarkov.analysis.metrics import percentage_text as pd_text
+    from cfbmarkov.analysis.rtd import net_flow_direction
     from cfbmarkov.analysis.stationarity import long_run_baseline, window_statistics
     from cfbmarkov.report.compare import _jsonable
     from cfbmarkov.trajectories import Trajectories
@@ -332,7 +333,7 @@ def _cmd_stationarity(args) -> int:
             if j0 < span[0] - tol or j1 > span[1] + tol:
                 raise InputError(f"--judge {j0:g}:{j1:g} s lies outside the span "
                                  f"{span[0]:g}:{span[1]:g} s")
-            direction = "down" if _judged_down(traj, args.judge) else "up"
+            direction = net_flow_direction(traj, args.judge)
             long_run = long_run_baseline(traj, args.judge, span=args.span, bin_width=bin_width,
                                          direction=direction, **basis)
             judged = {"window": [j0, j1], "direction": direction,
@@ -393,12 +394,6 @@ def _cmd_stationarity(args) -> int:
 
 #: windows with fewer residences than this get a note in ``cfbmarkov stationarity``
 FEW_RESIDENCES = 100
-
-
-def _judged_down(traj, window) -> bool:
-    from cfbmarkov.analysis.rtd import net_passes
-
-    return traj.boundary == "periodic" and net_passes(traj, window) < 0
 
 
 def _cmd_rtd(args) -> int:

@@ -31,8 +31,8 @@ from cfbmarkov.analysis.clusters import cluster_index
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
-from cfbmarkov.analysis.rtd import (DEFAULT_FACE_ROWS, ResidenceTimes, net_passes, residence_times,
-                                    rtd_histogram)
+from cfbmarkov.analysis.rtd import (DEFAULT_FACE_ROWS, ResidenceTimes, net_flow_direction,
+                                    residence_times, rtd_histogram)
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 
@@ -441,9 +441,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
                             f"of the reference's frames ({ref.frame_interval:g} s): its "
                             "residence times use every frame")
     events = basis == "events"
-    direction = "up"
-    if ref.boundary == "periodic" and net_passes(ref, (start, stop)) < 0:
-        direction = "down"
+    direction = net_flow_direction(ref, (start, stop))
+    if direction == "down":
         warnings.append("the solids' net flow over the window is downward: residence times "
                         "run from entries through the top to exits through the bottom")
     rt_ref = residence_times(ref, (start, stop), use_events=events, face_band=band,

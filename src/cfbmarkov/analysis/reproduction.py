@@ -243,7 +243,7 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
     ----------
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 3-9 and 11.
     """
-    from cfbmarkov.analysis.rtd import net_passes, rtd_histogram
+    from cfbmarkov.analysis.rtd import net_flow_direction, rtd_histogram
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.trajectories import Trajectories
 
@@ -257,8 +257,7 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
         ratio = lag / ref.frame_interval
         if math.isfinite(ratio) and round(ratio) >= 1 and abs(ratio - round(ratio)) <= 0.01 * ratio:
             stride = int(round(ratio))
-        direction = ("down" if ref.boundary == "periodic" and net_passes(ref, window) < 0
-                     else "up")
+        direction = net_flow_direction(ref, window)
         measured = measure_run(ref, window, bin_width, use_events=False, stride=stride,
                                direction=direction)
         across, solids, solids_velocity = solids_profile(ref, window, config)

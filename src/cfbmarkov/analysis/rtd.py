@@ -330,6 +330,25 @@ def net_passes(traj, window: tuple[float, float]) -> int:
     return int((last - first).sum())
 
 
+def net_flow_direction(traj, window: tuple[float, float]) -> str:
+    """The direction residences are counted in over a window: "down" where a periodic
+    riser's net solids flow over it is downward (:func:`net_passes` < 0), else "up"
+    (docs/definitions.md, Net downflow).
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file (an open riser: always "up").
+    window : (float, float)
+        The window (s).
+
+    Returns
+    -------
+    {"up", "down"}
+    """
+    return "down" if traj.boundary == "periodic" and net_passes(traj, window) < 0 else "up"
+
+
 def residence_times(traj, window: tuple[float, float], use_events: bool = True,
                     face_band: float | None = None, stride: int = 1,
                     direction: str = "up") -> ResidenceTimes:

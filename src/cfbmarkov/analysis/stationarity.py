@@ -26,7 +26,8 @@ import numpy as np
 
 from cfbmarkov.analysis.baseline import WindowDifference
 from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
-from cfbmarkov.analysis.rtd import ResidenceTimes, net_passes, residence_times, rtd_histogram
+from cfbmarkov.analysis.rtd import (ResidenceTimes, net_flow_direction, residence_times,
+                                    rtd_histogram)
 from cfbmarkov.errors import InputError
 
 #: residence directions a caller may ask for; "auto" follows each window's net solids flow
@@ -135,11 +136,7 @@ def _span(traj, span: tuple[float, float] | None) -> tuple[float, float]:
 def _direction_of(traj, window: tuple[float, float], direction: str) -> str:
     if direction not in DIRECTIONS:
         raise InputError(f"residence direction {direction!r}: auto, up or down")
-    if direction != "auto":
-        return direction
-    if traj.boundary == "periodic" and net_passes(traj, window) < 0:
-        return "down"
-    return "up"
+    return net_flow_direction(traj, window) if direction == "auto" else direction
 
 
 def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,

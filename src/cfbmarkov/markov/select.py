@@ -60,7 +60,7 @@ from typing import Any, Sequence
 import numpy as np
 
 from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
-from cfbmarkov.analysis.rtd import net_passes, residence_times, rtd_histogram
+from cfbmarkov.analysis.rtd import net_flow_direction, residence_times, rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import DiscreteTrajectories, read_frames
 from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, fit_model
@@ -269,8 +269,7 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         stride = traj.lag_frames(lag)
         # residences counted as the fitting window's net solids flow runs (docs/definitions.md,
         # Net downflow), as the comparison of the prediction will count them
-        direction = ("down" if traj.boundary == "periodic" and net_passes(traj, (a, b)) < 0
-                     else "up")
+        direction = net_flow_direction(traj, (a, b))
         whole = residence_times(traj, (a, b), use_events=False, stride=stride,
                                 direction=direction)
         if criterion == "auto":
