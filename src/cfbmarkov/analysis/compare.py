@@ -26,13 +26,13 @@ import numpy as np
 
 from cfbmarkov.analysis.baseline import (WindowDifference, fitting_window,
                                          model_on_fitting_window, window_difference)
-from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.analysis.clusters import cluster_index
 from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.rtd import (DEFAULT_FACE_ROWS, ResidenceTimes, net_flow_direction,
                                     residence_times, rtd_histogram)
+from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 
@@ -371,8 +371,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     long_run_span : (float, float), optional
         A span of the reference (s) whose other whole windows of the analysis window's
         length, pooled, stand beside the model as what a perfect stationary model would
-        predict
-        (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`); default none.
+        predict (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`); default none.
 
     Returns
     -------
