@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cfbmarkov import synthetic
-from cfbmarkov.analysis.metrics import minkowski_distance
+from cfbmarkov.observed.metrics import minkowski_distance
 from cfbmarkov.cli import main
 from cfbmarkov.trajectories import Trajectories
 

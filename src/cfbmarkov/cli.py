@@ -207,7 +207,7 @@ def _cmd_fit(args) -> int:
     from cfbmarkov.markov.select import select_model
     from cfbmarkov.trajectories import Trajectories
 
-    from cfbmarkov.markov.rtd import TrappedResidences
+    from cfbmarkov.markov.first_passage import TrappedResidences
 
     columns, rows = args.cells[0], args.cells[-1]
     depth_columns = args.cells[1] if len(args.cells) == 3 else None
@@ -265,7 +265,7 @@ def _cmd_compare(args) -> int:
                       bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
                       basis=args.basis, level=args.level, resamples=args.resamples,
                       long_run_span=args.long_run_span)
-    from cfbmarkov.analysis.metrics import percentage_text as pd_text
+    from cfbmarkov.observed.metrics import percentage_text as pd_text
 
     for line in summary.get("warnings", []):
         print(f"warning: {line.strip()}", file=sys.stderr)
@@ -305,8 +305,8 @@ def _cmd_stationarity(args) -> int:
     import numpy as np
 
     from cfbmarkov.analysis.baseline import window_difference
-    from cfbmarkov.analysis.metrics import percentage_text as pd_text
-    from cfbmarkov.analysis.rtd import net_flow_direction
+    from cfbmarkov.observed.metrics import percentage_text as pd_text
+    from cfbmarkov.observed.residence import net_flow_direction
     from cfbmarkov.analysis.stationarity import long_run_baseline, window_statistics
     from cfbmarkov.report.compare import _jsonable
     from cfbmarkov.trajectories import Trajectories
@@ -316,9 +316,9 @@ def _cmd_stationarity(args) -> int:
         if events and not (traj.has_events and traj.boundary == "periodic"):
             raise InputError(f"{args.file} holds no exact pass events: residence times from "
                              "frames need no --basis events")
-        stride = traj.lag_frames(args.lag) if args.lag is not None else 1
+        lag_frames = traj.lag_frames(args.lag) if args.lag is not None else 1
         bin_width = args.lag if args.lag is not None else traj.frame_interval
-        basis = {"use_events": events, "stride": 1 if events else stride}
+        basis = {"use_events": events, "lag_frames": 1 if events else lag_frames}
         span = args.span or (float(traj.times[0]), float(traj.times[-1]))
         stats = window_statistics(traj, window_length=args.window_length, step=args.step,
                                   span=args.span, **basis)

@@ -13,7 +13,7 @@ import json
 from pathlib import Path
 
 from cfbmarkov import synthetic
-from cfbmarkov.analysis.metrics import percentage_text
+from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.markov import CellGrid, fit_model
 
 

@@ -636,7 +636,7 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
 
 def rtd_line(case: str, summaries: dict[str, dict]) -> str:
     """One line on how finely a case's RTDs are resolved: bins spanned (the 1-99 % range of
-    the residences, :func:`cfbmarkov.analysis.metrics.rtd_span`) and residences counted, for
+    the residences, :func:`cfbmarkov.observed.metrics.rtd_span`) and residences counted, for
     the CFD-DEM and each model.
 
     Parameters

@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from cfbmarkov.analysis.compare import RunComparison, compare_runs, map_times
-from cfbmarkov.analysis.metrics import minkowski_distance, mixing_rms, percentage_difference
+from cfbmarkov.observed.metrics import minkowski_distance, mixing_rms, percentage_difference
 from cfbmarkov.analysis.mixing import mixing_curve_of
-from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
+from cfbmarkov.observed.residence import residence_times, rtd_histogram
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.report import figures as fg
@@ -266,8 +266,8 @@ def test_persistence_baseline_and_natural_variability_stand_beside_the_model(tmp
     """A prediction carries its model's fitting window: the reference's RTD there, taken as
     the prediction of the analysis window, is the persistence baseline; the reference's two
     halves of the window are its natural variability. Both on the comparison's basis."""
-    from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
-    from cfbmarkov.analysis.metrics import minkowski_distance
+    from cfbmarkov.observed.residence import residence_times, rtd_histogram
+    from cfbmarkov.observed.metrics import minkowski_distance
     from cfbmarkov.markov import CellGrid, fit_model
     from cfbmarkov.synthetic import RiserFlow, write_run
     from cfbmarkov.trajectories import Trajectories

@@ -11,7 +11,7 @@ from scipy.stats import binom
 from cfbmarkov import synthetic
 from cfbmarkov.analysis.intervals import block_bootstrap_models, prediction_intervals
 from cfbmarkov.analysis.mixing import model_mixing_curve
-from cfbmarkov.analysis.rtd import residence_times, residence_times_from_laps, rtd_histogram
+from cfbmarkov.observed.residence import residence_times, residence_times_from_laps, rtd_histogram
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov import CellGrid, fit_model
 from cfbmarkov.trajectories import Trajectories

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from cfbmarkov.analysis import mixing as mixing_module
-from cfbmarkov.analysis.metrics import minkowski_distance, mixing_rms, percentage_difference
+from cfbmarkov.observed.metrics import minkowski_distance, mixing_rms, percentage_difference
 from cfbmarkov.analysis.mixing import mixing_curve, mixing_curve_of
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories

@@ -8,15 +8,15 @@ import json
 import numpy as np
 import pytest
 
-from cfbmarkov.analysis.metrics import minkowski_distance
-from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
+from cfbmarkov.observed.metrics import minkowski_distance
+from cfbmarkov.observed.residence import residence_times, rtd_histogram
 from cfbmarkov.analysis.stationarity import long_run_baseline, window_statistics
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 from cfbmarkov.trajectory_writer import write_trajectories
 
-from .conftest import HEIGHT, WIDTH, generate_run
+from ..observed.conftest import HEIGHT, WIDTH, generate_run
 
 
 def _stationary(tmp_path, seed=3):

@@ -66,7 +66,7 @@ def test_percentage_difference_of_round_off_is_undefined(tmp_path, capsys):
     in the CLI line, a warning that says why; the PD of E(RT) stays a number."""
     import json
 
-    from cfbmarkov.analysis.metrics import percentage_difference
+    from cfbmarkov.observed.metrics import percentage_difference
     from cfbmarkov.cli import main
     from cfbmarkov.report.compare import compare
 
@@ -165,7 +165,7 @@ def test_every_residence_trapped_is_one_line_and_exit_2(tmp_path, write_states, 
     frame: the only entry state is never left, so no residence can end."""
     from cfbmarkov.cli import main
     from cfbmarkov.markov import MarkovModel, fit_model
-    from cfbmarkov.markov.rtd import TrappedResidences
+    from cfbmarkov.markov.first_passage import TrappedResidences
 
     states = np.array([[0], [2], [4], [6], [1]])
     path = write_states(tmp_path / "trap.h5", states, columns=2, rows=4)
@@ -229,7 +229,7 @@ def test_exact_rtd_mean_equals_monte_carlo_for_random_chains(seed, reducible):
     model = MarkovModel(p, zeros, counts_up, counts_down, grid, lag,
                         pass_fractions=(up, down))
     assert model.rtd().closed_classes == (2 if reducible else 1)
-    from cfbmarkov.analysis.rtd import residence_times_from_laps
+    from cfbmarkov.observed.residence import residence_times_from_laps
 
     samples = residence_times_from_laps(lag * np.arange(n_steps + 1), laps)
     exact = model.rtd(window=n_steps * lag)

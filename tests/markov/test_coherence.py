@@ -142,7 +142,7 @@ def test_model_file_cli_and_refusals(coherent, tmp_path, capsys):
 
 def test_intervals_of_a_coherent_model_measure_its_monte_carlo_noise(coherent):
     from cfbmarkov.analysis.intervals import prediction_intervals
-    from cfbmarkov.analysis.rtd import residence_times_from_laps, rtd_histogram
+    from cfbmarkov.observed.residence import residence_times_from_laps, rtd_histogram
 
     run, _ = coherent
     model = fit_model(run, FLOW.grid, FLOW.lag, (0.0, 5.0), "mle", coherent=True)
@@ -167,7 +167,7 @@ def test_calibrated_coherence_matches_the_windows_cluster_index(coherent, tmp_pa
     calibrated rho show the window's own cluster index (within the 5 % tolerance, the same
     trial as the calibration's); the index from cells is that of the file's positions
     (:func:`cluster_index`); too few steps and a window without a complete frame are refused."""
-    from cfbmarkov.analysis.clusters import cluster_index, snapshot_cluster_index
+    from cfbmarkov.observed.clusters import cluster_index, snapshot_cluster_index
     from cfbmarkov.markov.coherence import (CALIBRATION_BURN_IN, CALIBRATION_STEPS,
                                             calibrate_coherence)
     from cfbmarkov.trajectories import Trajectories

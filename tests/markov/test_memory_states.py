@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cfbmarkov import synthetic
-from cfbmarkov.analysis.rtd import residence_times
+from cfbmarkov.observed.residence import residence_times
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov import (STATE_SPACES, CellGrid, DirectionCells, MarkovModel,
                               MaximumLikelihoodEstimator, PaperEstimator, SecondOrderCells,
@@ -200,7 +200,7 @@ def test_sub_rows_remove_the_chains_artificial_dispersion(tmp_path):
     run = _plug_flow(tmp_path, dt)
     window = (0.5, 6.0)
     with Trajectories(run) as traj:
-        observed = residence_times(traj, window, use_events=False, stride=1)
+        observed = residence_times(traj, window, use_events=False, lag_frames=1)
     assert observed.count > 1000
     fine = fit_model(run, state_space_from_name("cells-velocity-fine", 1, 10, 0.1, 1.0), dt,
                      window)

@@ -254,7 +254,7 @@ def test_level_propagation_equals_the_full_deficit_matrix(markov_flow, markov_ru
     through the bottom."""
     import scipy.sparse as sp
 
-    from cfbmarkov.markov.rtd import (_finish, _reaching, deficit_matrix, exact_rtd,
+    from cfbmarkov.markov.first_passage import (_finish, _reaching, deficit_matrix, exact_rtd,
                                       split_by_pass)
 
     def full(p_up, p_down, p_stay, start_level0, levels=9, steps=200_000):

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cfbmarkov.analysis.rtd import residence_times
+from cfbmarkov.observed.residence import residence_times
 from cfbmarkov.errors import InputError
 from cfbmarkov.io import import_file
 from cfbmarkov.markov import CellGrid, MarkovModel, fit_model

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cfbmarkov.analysis.rtd import residence_times
+from cfbmarkov.observed.residence import residence_times
 from cfbmarkov.io import import_file
 from cfbmarkov.markov import CellGrid, fit_model
 from cfbmarkov.synthetic import RiserFlow, sample_run

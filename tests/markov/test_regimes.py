@@ -16,7 +16,7 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.markov import MarkovModel, fit_model
 from cfbmarkov.markov.regimes import (DirectionRegimeCells, RegimeCells, regime_edges,
                                       regime_matrix)
-from cfbmarkov.markov.rtd import exact_rtd
+from cfbmarkov.markov.first_passage import exact_rtd
 from cfbmarkov.markov.select import select_model
 from cfbmarkov.markov.states import StateSpace, state_space_from_name
 from cfbmarkov.trajectories import Trajectories

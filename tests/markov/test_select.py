@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from cfbmarkov import synthetic
-from cfbmarkov.analysis.rtd import residence_times
+from cfbmarkov.observed.residence import residence_times
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov import MarkovModel
@@ -169,7 +169,7 @@ def test_a_candidate_with_an_earlier_ones_states_is_not_judged_twice(tmp_path):
 
 def test_score_units_are_the_goals_on_a_steady_flow_and_the_flows_variability_otherwise():
     """The PD terms' units: 2 % / 10 % where blocks agree, the blocks' own spread where not."""
-    from cfbmarkov.analysis.rtd import ResidenceTimes
+    from cfbmarkov.observed.residence import ResidenceTimes
     from cfbmarkov.markov.select import GOAL_PD_MEAN, GOAL_PD_SD, _natural_tolerances
 
     rng = np.random.default_rng(3)

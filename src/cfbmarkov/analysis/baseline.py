@@ -23,8 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
-from cfbmarkov.analysis.rtd import ResidenceTimes, residence_times, rtd_histogram
+from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
+from cfbmarkov.observed.residence import ResidenceTimes, residence_times, rtd_histogram
 
 
 @dataclass(frozen=True)
@@ -59,7 +59,7 @@ class WindowDifference:
 
 
 def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, float], *,
-                      bin_width: float, md_order: float, use_events: bool, stride: int,
+                      bin_width: float, md_order: float, use_events: bool, lag_frames: int,
                       face_band: float | None, window_length: float,
                       direction: str = "up") -> WindowDifference:
     """The reference's RTD in ``stand_in`` taken as the prediction of ``judged``.
@@ -72,8 +72,8 @@ def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, f
         The two windows (s).
     bin_width, md_order : float
         The comparison's RTD bins (s) and Minkowski order.
-    use_events, stride, face_band, direction
-        The comparison's basis and direction (:func:`cfbmarkov.analysis.rtd.residence_times`).
+    use_events, lag_frames, face_band, direction
+        The comparison's basis and direction (:func:`cfbmarkov.observed.residence.residence_times`).
     window_length : float
         Length (s) whose bins both RTDs use (the analysis window's).
 
@@ -81,7 +81,7 @@ def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, f
     -------
     WindowDifference
     """
-    kwargs = {"use_events": use_events, "stride": stride, "face_band": face_band,
+    kwargs = {"use_events": use_events, "lag_frames": lag_frames, "face_band": face_band,
               "direction": direction}
     a = residence_times(ref, stand_in, **kwargs)
     b = residence_times(ref, judged, **kwargs)

@@ -26,11 +26,11 @@ import numpy as np
 
 from cfbmarkov.analysis.baseline import (WindowDifference, fitting_window,
                                          model_on_fitting_window, window_difference)
-from cfbmarkov.analysis.clusters import cluster_index
-from cfbmarkov.analysis.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
+from cfbmarkov.observed.clusters import cluster_index
+from cfbmarkov.observed.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
-from cfbmarkov.analysis.rtd import (DEFAULT_FACE_ROWS, ResidenceTimes, net_flow_direction,
+from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, ResidenceTimes, net_flow_direction,
                                     residence_times, rtd_histogram)
 from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.errors import InputError
@@ -219,9 +219,9 @@ class RunComparison:
         Warnings of the computation (figures may add more).
     basis : str
         ``frames``: both sides' residence times from frames at the model's lag (the
-        reference's frames taken every ``stride``-th); ``events``: the reference's exact
+        reference's frames taken every ``lag_frames``-th); ``events``: the reference's exact
         pass events where it has them (``docs/definitions.md``, Comparison basis).
-    stride : int
+    lag_frames : int
         Reference frames per model lag used on the ``frames`` basis.
     exact_reference : ResidenceTimes or None
         The reference's residence times from its exact pass events, reported beside the
@@ -248,7 +248,7 @@ class RunComparison:
         flow over the window is downward.
     cluster : dict or None
         The cluster index of each side's snapshots (mean and SD over the window's frames,
-        :func:`cfbmarkov.analysis.clusters.cluster_index`) and the grid it was counted on.
+        :func:`cfbmarkov.observed.clusters.cluster_index`) and the grid it was counted on.
     """
 
     window: tuple[float, float]
@@ -263,7 +263,7 @@ class RunComparison:
     model_columns: int | None
     warnings: list[str] = field(default_factory=list)
     basis: str = "events"
-    stride: int = 1
+    lag_frames: int = 1
     exact_reference: ResidenceTimes | None = None
     baseline: WindowDifference | None = None
     natural_variability: WindowDifference | None = None
@@ -327,7 +327,7 @@ class RunComparison:
             "cluster_index": self.cluster,
             "rtd_bins_spanned": {"reference": rtd_span(self.reference.rtd),
                                  "model": rtd_span(self.model.rtd)},
-            "reference_frame_stride": int(self.stride),
+            "reference_frame_stride": int(self.lag_frames),
             "exact_reference": None if self.exact_reference is None else {
                 "rt_mean": self.exact_reference.mean, "rt_sd": self.exact_reference.sd,
                 "rt_count": self.exact_reference.count,
@@ -430,11 +430,11 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         raise InputError(f"comparison basis {basis!r}: choose frames or events")
     rows = pred.parameters.get("rows") or DEFAULT_FACE_ROWS
     band = ref.height / float(rows)
-    stride = 1
+    lag_frames = 1
     if basis == "frames":
         ratio = pred.frame_interval / ref.frame_interval
         if round(ratio) >= 1 and abs(ratio - round(ratio)) <= 0.01 * ratio:
-            stride = int(round(ratio))
+            lag_frames = int(round(ratio))
         else:
             warnings.append(f"the model's lag {pred.frame_interval:g} s is not a whole number "
                             f"of the reference's frames ({ref.frame_interval:g} s): its "
@@ -445,7 +445,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         warnings.append("the solids' net flow over the window is downward: residence times "
                         "run from entries through the top to exits through the bottom")
     rt_ref = residence_times(ref, (start, stop), use_events=events, face_band=band,
-                             stride=stride, direction=direction)
+                             lag_frames=lag_frames, direction=direction)
     rt_mod = residence_times(pred, (start, stop), use_events=events, face_band=band,
                              direction=direction)
     exact_reference = None
@@ -453,7 +453,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         exact_reference = residence_times(ref, (start, stop), use_events=True,
                                           direction=direction)
     basis_args = {"bin_width": bin_width, "md_order": md_order, "use_events": events,
-                  "stride": stride, "face_band": band, "window_length": stop - start,
+                  "lag_frames": lag_frames, "face_band": band, "window_length": stop - start,
                   "direction": direction}
     baseline = None
     fitted = fitting_window(pred)
@@ -465,7 +465,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     if long_run_span is not None:
         long_run = long_run_baseline(ref, (start, stop), span=long_run_span,
                                      bin_width=bin_width, md_order=md_order,
-                                     use_events=events, stride=stride, face_band=band,
+                                     use_events=events, lag_frames=lag_frames, face_band=band,
                                      direction=direction)
     middle = 0.5 * (start + stop)
     variability = None
@@ -526,7 +526,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         reference=ComparedRun(ref, ref_frames, rt_ref, p_ref, t_ref, f_ref, left_ref),
         model=ComparedRun(pred, pred_frames, rt_mod, p_mod, t_mod, f_mod, left_mod),
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
-        warnings=warnings, basis=basis, stride=stride, exact_reference=exact_reference,
+        warnings=warnings, basis=basis, lag_frames=lag_frames, exact_reference=exact_reference,
         baseline=baseline, natural_variability=variability, on_fitting_window=on_fit,
         long_run=long_run, direction=direction,
         cluster=_clusters(ref, pred, ref_frames, pred_frames, columns))

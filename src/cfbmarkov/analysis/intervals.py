@@ -47,7 +47,7 @@ import numpy as np
 from scipy.stats import norm
 
 from cfbmarkov.analysis.mixing import model_mixing_curve
-from cfbmarkov.analysis.rtd import rtd_histogram
+from cfbmarkov.observed.residence import rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
 
 
@@ -63,14 +63,14 @@ def _resampled_rtd(model, window_length: float, direction: str, entry):
     that of the transitions kept)."""
     steps = max(2, int(round(window_length / model.lag)))
     if isinstance(model, _SplitChain):
-        from cfbmarkov.markov.rtd import rtd_of_split_chain
+        from cfbmarkov.markov.first_passage import rtd_of_split_chain
 
         up, down = (model.up, model.down) if direction == "up" else (model.down, model.up)
         return rtd_of_split_chain(up, down, model.stay, model.lag, max_steps=steps,
                                   entry=entry).in_window(window_length)
     if model.boundary == "open" or entry is None:
         return model.rtd(window_length, direction)
-    from cfbmarkov.markov.rtd import exact_rtd
+    from cfbmarkov.markov.first_passage import exact_rtd
 
     up, down = ((model.up_fraction, model.down_fraction) if direction == "up"
                 else (model.down_fraction, model.up_fraction))
@@ -272,7 +272,7 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
     longest blocks is the honest estimate (here, one block's spread is kept for longer
     windows).
     """
-    from cfbmarkov.analysis.rtd import residence_times
+    from cfbmarkov.observed.residence import residence_times
     from cfbmarkov.trajectories import opened
 
     if int(blocks) < 2:
@@ -281,8 +281,8 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
         raise InputError("intervals need the model's fitting data (one source file and a window)")
     a, b = (float(v) for v in model.window)
     with opened(model.source) as traj:
-        stride = traj.lag_frames(model.lag)
-        whole = residence_times(traj, (a, b), use_events=False, stride=stride,
+        lag_frames = traj.lag_frames(model.lag)
+        whole = residence_times(traj, (a, b), use_events=False, lag_frames=lag_frames,
                                 direction=direction)
         # blocks at least FLOW_BLOCK_RESIDENCES mean residences long, so that a block's own
         # window cuts off few of its residences
@@ -293,7 +293,7 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
             return None
         cuts = a + (b - a) * np.arange(blocks + 1) / blocks
         observed = [residence_times(traj, (float(cuts[k]), float(cuts[k + 1])), use_events=False,
-                                    stride=stride, direction=direction).samples
+                                    lag_frames=lag_frames, direction=direction).samples
                     for k in range(blocks)]
     rel_mean, rel_sd = [], []
     for k, block in enumerate(observed):
@@ -369,7 +369,7 @@ def _replicate_noise(model, states, left_group, n_steps: int, edges: np.ndarray,
     Monte Carlo noise of a model whose particles move coherently, which the formulas for
     independent samples underestimate."""
     from cfbmarkov.analysis.mixing import _left_states
-    from cfbmarkov.analysis.rtd import residence_times_from_laps
+    from cfbmarkov.observed.residence import residence_times_from_laps
 
     sign = 1 if direction == "up" else -1
     times = model.lag * np.arange(n_steps + 1)

@@ -64,7 +64,7 @@ class RunMeasures:
 
     Attributes
     ----------
-    rt : cfbmarkov.analysis.rtd.ResidenceTimes
+    rt : cfbmarkov.observed.residence.ResidenceTimes
         Residence-time samples, s.
     prob : numpy.ndarray, shape (B,)
         RTD as probability per bin (bins of :attr:`CaseMeasures.edges`).
@@ -121,7 +121,7 @@ class CaseMeasures:
 
 
 def measure_run(traj, window: tuple[float, float], bin_width: float, *,
-                use_events: bool = True, stride: int = 1, direction: str = "up") -> RunMeasures:
+                use_events: bool = True, lag_frames: int = 1, direction: str = "up") -> RunMeasures:
     """Residence times, RTD and mixing curve of an open trajectory file.
 
     Parameters
@@ -131,9 +131,9 @@ def measure_run(traj, window: tuple[float, float], bin_width: float, *,
         (start, stop), s.
     bin_width : float
         RTD bin width, s.
-    use_events, stride, direction : optional
+    use_events, lag_frames, direction : optional
         The residence times' basis and direction, as in
-        :func:`cfbmarkov.analysis.rtd.residence_times`.
+        :func:`cfbmarkov.observed.residence.residence_times`.
 
     Returns
     -------
@@ -143,12 +143,12 @@ def measure_run(traj, window: tuple[float, float], bin_width: float, *,
     ------
     InputError
         When the window is empty or leaves the file's frames, or the file's pass events
-        are damaged (:func:`cfbmarkov.analysis.rtd.residence_times`).
+        are damaged (:func:`cfbmarkov.observed.residence.residence_times`).
     """
     from cfbmarkov.analysis.mixing import mixing_curve_of
-    from cfbmarkov.analysis.rtd import residence_times, rtd_histogram
+    from cfbmarkov.observed.residence import residence_times, rtd_histogram
 
-    rt = residence_times(traj, window, use_events=use_events, stride=stride,
+    rt = residence_times(traj, window, use_events=use_events, lag_frames=lag_frames,
                          direction=direction)
     _, prob = rtd_histogram(rt.samples, bin_width, window_length=window[1] - window[0])
     t, f = mixing_curve_of(traj, window)
@@ -243,22 +243,22 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
     ----------
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 3-9 and 11.
     """
-    from cfbmarkov.analysis.rtd import net_flow_direction, rtd_histogram
+    from cfbmarkov.observed.residence import net_flow_direction, rtd_histogram
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.trajectories import Trajectories
 
     # the basis and direction of the compare summaries (like for like, net downflow):
     # frames at the models' lag on both sides, counted in the direction of the net flow
-    stride, lag, first = 1, math.nan, next(iter(predictions.values()), None)
+    lag_frames, lag, first = 1, math.nan, next(iter(predictions.values()), None)
     if first is not None:
         with reading_errors(first), Trajectories(first) as pred:
             lag = pred.frame_interval
     with reading_errors(reference), Trajectories(reference) as ref:
         ratio = lag / ref.frame_interval
         if math.isfinite(ratio) and round(ratio) >= 1 and abs(ratio - round(ratio)) <= 0.01 * ratio:
-            stride = int(round(ratio))
+            lag_frames = int(round(ratio))
         direction = net_flow_direction(ref, window)
-        measured = measure_run(ref, window, bin_width, use_events=False, stride=stride,
+        measured = measure_run(ref, window, bin_width, use_events=False, lag_frames=lag_frames,
                                direction=direction)
         across, solids, solids_velocity = solids_profile(ref, window, config)
     edges, _ = rtd_histogram(np.zeros(0), bin_width, window_length=window[1] - window[0])

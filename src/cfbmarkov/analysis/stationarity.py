@@ -25,8 +25,8 @@ from typing import Any
 import numpy as np
 
 from cfbmarkov.analysis.baseline import WindowDifference
-from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
-from cfbmarkov.analysis.rtd import (ResidenceTimes, net_flow_direction, residence_times,
+from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
+from cfbmarkov.observed.residence import (ResidenceTimes, net_flow_direction, residence_times,
                                     rtd_histogram)
 from cfbmarkov.errors import InputError
 
@@ -141,7 +141,7 @@ def _direction_of(traj, window: tuple[float, float], direction: str) -> str:
 
 def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
                       span: tuple[float, float] | None = None, use_events: bool = False,
-                      stride: int = 1, face_band: float | None = None,
+                      lag_frames: int = 1, face_band: float | None = None,
                       direction: str = "auto") -> WindowStatistics:
     """E(RT), SD(RT) and residence counts of sliding windows of a trajectory file.
 
@@ -159,9 +159,9 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
     span : (float, float), optional
         The part of the file the windows cover (s); default all of it. Leave out a run's
         start-up from rest.
-    use_events, stride, face_band
-        The residence times' basis (:func:`cfbmarkov.analysis.rtd.residence_times`): exact
-        events, or frames every ``stride``-th (a model's lag).
+    use_events, lag_frames, face_band
+        The residence times' basis (:func:`cfbmarkov.observed.residence.residence_times`): exact
+        events, or frames every ``lag_frames``-th (a model's lag).
     direction : {"auto", "up", "down"}, optional
         "auto": each window's own net solids flow decides (docs/definitions.md, Net
         downflow).
@@ -189,8 +189,8 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
                else "a shorter --window-length or --step")
         raise InputError(f"{a:g}:{b:g} s of {traj.path} holds {max(count, 0)} window(s) of "
                          f"{length:g} s {step:g} s apart: two at least are needed ({fix})")
-    if stride * traj.frame_interval >= length - tol:
-        raise InputError(f"frames every {stride * traj.frame_interval:g} s leave no residence "
+    if lag_frames * traj.frame_interval >= length - tol:
+        raise InputError(f"frames every {lag_frames * traj.frame_interval:g} s leave no residence "
                          f"time inside a {length:g} s window: a lag shorter than the window")
     starts = np.round(a + step * np.arange(count), 9)    # no 0.30000000000000004 s
     means, sds, counts, directions = [], [], [], []
@@ -198,7 +198,7 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
     for start in starts:
         window = (float(start), float(start + length))
         d = _direction_of(traj, window, direction)
-        rt = residence_times(traj, window, use_events=use_events, stride=stride,
+        rt = residence_times(traj, window, use_events=use_events, lag_frames=lag_frames,
                              face_band=face_band, direction=d)
         means.append(rt.mean)
         sds.append(rt.sd)
@@ -212,7 +212,7 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
 
 def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, float] | None
                       = None, bin_width: float, md_order: float = 2.0, use_events: bool = False,
-                      stride: int = 1, face_band: float | None = None,
+                      lag_frames: int = 1, face_band: float | None = None,
                       direction: str = "auto") -> WindowDifference:
     """The reference's RTD pooled over the span's other windows, as the prediction of one.
 
@@ -237,8 +237,8 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
         The RTD bins (s), keyword only.
     md_order : float, optional
         Minkowski order (Eq. 9), default 2.
-    use_events, stride, face_band
-        The residence times' basis (:func:`cfbmarkov.analysis.rtd.residence_times`).
+    use_events, lag_frames, face_band
+        The residence times' basis (:func:`cfbmarkov.observed.residence.residence_times`).
     direction : {"auto", "up", "down"}, optional
         "auto": the judged window's net solids flow decides, and the pooled windows use the
         same direction.
@@ -271,7 +271,7 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
     if not tiles:
         raise InputError(f"span {a:g}:{b:g} s holds no other whole {length:g} s window beside "
                          f"{j0:g}:{j1:g} s (a longer span)")
-    kwargs = {"use_events": use_events, "stride": stride, "face_band": face_band,
+    kwargs = {"use_events": use_events, "lag_frames": lag_frames, "face_band": face_band,
               "direction": d}
     pooled = [residence_times(traj, tile, **kwargs) for tile in tiles]
     samples = np.concatenate([p.samples for p in pooled])

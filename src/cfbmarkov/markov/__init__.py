@@ -25,7 +25,7 @@ from cfbmarkov.markov.estimate import (
     fit_model,
 )
 from cfbmarkov.markov.model import MarkovModel
-from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
+from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, exact_rtd
 from cfbmarkov.markov.memory_states import (DirectionCells, FineVelocityCells, SecondOrderCells,
                                             VelocityCells)
 from cfbmarkov.markov.regimes import DirectionRegimeCells, RegimeCells

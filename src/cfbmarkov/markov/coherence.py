@@ -28,7 +28,7 @@ instead of q_s. Two fits of the coherence on the fitting window (``docs/method.m
 - *snapshots* (:func:`calibrate_coherence`, what ``coherent=True`` fits): the rho whose
   Monte Carlo snapshots, run for 120 lags (3 s at the paper's 0.025 s) from the window's
   first complete frame, show the window's own mean cluster index (the index of dispersion
-  of the cell counts, :func:`~cfbmarkov.analysis.clusters.snapshot_cluster_index`): the
+  of the cell counts, :func:`~cfbmarkov.observed.clusters.snapshot_cluster_index`): the
   cluster measure itself is matched, as a model's free parameter is matched to a moment of
   the data in indirect inference (C. Gourieroux, A. Monfort and E. Renault, "Indirect
   inference", J. Appl. Econometrics 8, S85 (1993)). The index grows monotonically with rho
@@ -184,7 +184,7 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
         For too few steps, or a window without a frame in which every particle present has
         a state, or without two particles.
     """
-    from cfbmarkov.analysis.clusters import snapshot_cluster_index
+    from cfbmarkov.observed.clusters import snapshot_cluster_index
     from cfbmarkov.markov.discrete import as_discrete_list
 
     if int(steps) <= CALIBRATION_BURN_IN:

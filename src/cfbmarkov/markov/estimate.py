@@ -629,7 +629,7 @@ class TransitionEstimator:
                                                               sp.csr_matrix]:
         """The chain that :meth:`chain` forms, split by pass direction, without any dense
         [S, S] array: P_up, P_down and P_stay with P = P_up + P_down + P_stay (what
-        :func:`cfbmarkov.markov.rtd.rtd_of_split_chain` takes).
+        :func:`cfbmarkov.markov.first_passage.rtd_of_split_chain` takes).
 
         A transition's share of P is split as its counts were (P_ij C^up_ij / C_ij, ...); a
         state never left takes its cell's pooled counts, and stays in place where its whole
@@ -643,11 +643,11 @@ class TransitionEstimator:
         Returns
         -------
         tuple of three scipy.sparse.csr_matrix, shape (S, S)
-            P_up, P_down, P_stay. Equal to :func:`cfbmarkov.markov.rtd.split_by_pass` of
+            P_up, P_down, P_stay. Equal to :func:`cfbmarkov.markov.first_passage.split_by_pass` of
             :meth:`chain`'s matrix and fractions up to rounding (tested).
         """
         if self.connected:      # the largest connected set: through the dense chain
-            from cfbmarkov.markov.rtd import split_by_pass
+            from cfbmarkov.markov.first_passage import split_by_pass
 
             dense = _densified(counts)
             matrix, fractions = self.chain(dense)

@@ -33,7 +33,7 @@ from cfbmarkov.markov.connectivity import (closed_classes, long_run_distribution
                                            states_reaching)
 from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
-from cfbmarkov.markov.rtd import ResidenceTimeDistribution, exact_rtd
+from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, exact_rtd
 from cfbmarkov.markov.states import StateSpace
 
 #: the ``format`` attribute of a model file
@@ -552,7 +552,7 @@ class MarkovModel:
 
         Notes
         -----
-        See :func:`~cfbmarkov.markov.rtd.exact_rtd` and ``docs/definitions.md`` (Residence
+        See :func:`~cfbmarkov.markov.first_passage.exact_rtd` and ``docs/definitions.md`` (Residence
         time).
 
         References
@@ -602,7 +602,7 @@ class MarkovModel:
     def _open_rtd(self, window: float | None) -> ResidenceTimeDistribution:
         """First passage to the outside from the entry distribution (fundamental matrix of
         the absorbing chain): f(k) = e Q^(k-1) r."""
-        from cfbmarkov.markov.rtd import open_rtd
+        from cfbmarkov.markov.first_passage import open_rtd
 
         if "open-rtd" not in self._cache:
             self._cache["open-rtd"] = open_rtd(self.absorbing_matrix, self.exit_probability,

@@ -23,7 +23,7 @@ their values separate. A particle's state is (cell, regime[, direction]),
 
 the layout of the other product spaces (``cell_of_state = state // K``), so everything that
 works on cells works unchanged, and the pooled maximum-likelihood chain on these states is a
-Markov chain on the product space whose exact RTD (:func:`~cfbmarkov.markov.rtd.exact_rtd`) is
+Markov chain on the product space whose exact RTD (:func:`~cfbmarkov.markov.first_passage.exact_rtd`) is
 the single-particle RTD over the regimes' own randomness.
 
 The Monte Carlo differs: all particles share one regime path. The regime chain G (R x R) is

@@ -2,7 +2,7 @@
 
 Every candidate (state space x lag) is fitted on the fitting window [A, B] and judged by
 what matters downstream, the residence-time distribution: its exact windowed RTD
-(:func:`~cfbmarkov.markov.rtd.exact_rtd`, no Monte Carlo noise), started from the entry
+(:func:`~cfbmarkov.markov.first_passage.exact_rtd`, no Monte Carlo noise), started from the entry
 states observed in the window (the landing states of its passes; this spares the chain's
 own stationary entry distribution, a sparse LU and an eigenvector per fit), against the
 residence times observed over the same window, from frames at the lag
@@ -59,13 +59,13 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from cfbmarkov.analysis.metrics import minkowski_distance, percentage_difference
-from cfbmarkov.analysis.rtd import net_flow_direction, residence_times, rtd_histogram
+from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
+from cfbmarkov.observed.residence import net_flow_direction, residence_times, rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import DiscreteTrajectories, read_frames
 from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, fit_model
 from cfbmarkov.markov.model import hand_over
-from cfbmarkov.markov.rtd import rtd_of_split_chain
+from cfbmarkov.markov.first_passage import rtd_of_split_chain
 from cfbmarkov.markov.states import state_space_from_name
 from cfbmarkov.trajectories import opened
 
@@ -266,11 +266,11 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         # basis of the model's RTD (docs/definitions.md, Comparison basis)
         for block in blocks:
             traj.window(*block)         # a window outside the data is refused as such first
-        stride = traj.lag_frames(lag)
+        lag_frames = traj.lag_frames(lag)
         # residences counted as the fitting window's net solids flow runs (docs/definitions.md,
         # Net downflow), as the comparison of the prediction will count them
         direction = net_flow_direction(traj, (a, b))
-        whole = residence_times(traj, (a, b), use_events=False, stride=stride,
+        whole = residence_times(traj, (a, b), use_events=False, lag_frames=lag_frames,
                                 direction=direction)
         if criterion == "auto":
             criterion = "window" if whole.count >= MIN_RESIDENCES else "ck"
@@ -281,7 +281,7 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
             judged, observed = [(a, b)], [whole]
         else:
             judged = blocks
-            observed = [residence_times(traj, block, use_events=False, stride=stride,
+            observed = [residence_times(traj, block, use_events=False, lag_frames=lag_frames,
                                         direction=direction) for block in blocks]
         fewest = min(o.count for o in observed)
         if criterion == "rtd" and fewest < MIN_RESIDENCES:

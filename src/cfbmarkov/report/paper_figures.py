@@ -127,7 +127,7 @@ def plot_rtd_grid(panels, path, title: str) -> Path:
     ----------
     panels : sequence of (str, numpy.ndarray, sequence)
         Per panel (label, edges, series): bin edges shape (B + 1,) in s, and series of
-        (name, probability per bin shape (B,), :class:`~cfbmarkov.analysis.rtd.ResidenceTimes`,
+        (name, probability per bin shape (B,), :class:`~cfbmarkov.observed.residence.ResidenceTimes`,
         colour, filled).
     path : str or os.PathLike
         Output PNG file.

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from cfbmarkov.analysis.metrics import percentage_text
+from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.report.document import (
     Bullets,
     Heading,
@@ -247,9 +247,9 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                 downward.add(u)
             ex = s.get("exact_events") or {}
             if s.get("basis") == "frames":
-                stride = s.get("reference_frame_stride") or 1
+                lag_frames = s.get("reference_frame_stride") or 1
                 key = ("like for like: both sides from frames at the model's lag (CFD-DEM "
-                       f"frames every {stride})")
+                       f"frames every {lag_frames})")
                 exact.setdefault(key, set()).add(c.name)
                 er = s.get("exact_reference")
                 if er and (finite_or_none(er.get("pd_rt_mean")) is not None

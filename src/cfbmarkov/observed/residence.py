@@ -350,7 +350,7 @@ def net_flow_direction(traj, window: tuple[float, float]) -> str:
 
 
 def residence_times(traj, window: tuple[float, float], use_events: bool = True,
-                    face_band: float | None = None, stride: int = 1,
+                    face_band: float | None = None, lag_frames: int = 1,
                     direction: str = "up") -> ResidenceTimes:
     """Residence-time samples of a trajectory file in a window.
 
@@ -369,8 +369,8 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     face_band : float, optional
         Open riser: how close to a face (m) a particle must appear or vanish to have
         crossed it (a model's cell height; default H / 38, the paper's rows).
-    stride : int, optional
-        From frames: use every ``stride``-th frame of the window from its first (a model's
+    lag_frames : int, optional
+        From frames: use every ``lag_frames``-th frame of the window from its first (a model's
         lag when the file's frames are finer), so that both sides of a comparison see
         passes on the same time basis (``docs/definitions.md``, Comparison basis).
     direction : {"up", "down"}, optional
@@ -402,19 +402,19 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     start, stop = float(window[0]), float(window[1])
     frames = traj.window(start, stop)
     i0, i1 = frames.start, frames.stop
-    stride = int(stride)
-    if stride < 1:
-        raise InputError(f"frame stride {stride} must be at least 1")
+    lag_frames = int(lag_frames)
+    if lag_frames < 1:
+        raise InputError(f"a lag of {lag_frames} frames: it must be at least 1")
     if direction not in ("up", "down"):
         raise InputError(f"residence direction {direction!r}: up or down")
     sign = 1 if direction == "up" else -1
-    span = _BLOCK_FRAMES * stride
+    span = _BLOCK_FRAMES * lag_frames
     if traj.boundary == "open":
         band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
         n = traj.n_particles
         was, last, entered, chunks = np.full(n, -1, np.int8), np.full(n, np.nan), np.full(n, np.nan), []
         for k in range(i0, i1, span):
-            block = slice(k, min(k + span, i1), stride)
+            block = slice(k, min(k + span, i1), lag_frames)
             present = np.ascontiguousarray(traj.present(block))
             out = np.empty(present.size)
             m = _scan_open(np.ascontiguousarray(traj.times[block], dtype=np.float64), present,
@@ -423,7 +423,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
             chunks.append(out[:m])
         return ResidenceTimes(np.concatenate(chunks) if chunks else np.zeros(0), False,
                               (start, stop))
-    if use_events and traj.has_events and stride == 1:
+    if use_events and traj.has_events and lag_frames == 1:
         events = traj.events()
         t_first = float(traj.times[i0])
         if not stop > t_first:                   # a window of a single frame
@@ -440,7 +440,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     last_record = np.full(traj.n_particles, np.nan)
     chunks = []
     for k in range(i0, i1, span):
-        block = slice(k, min(k + span, i1), stride)
+        block = slice(k, min(k + span, i1), lag_frames)
         laps = np.ascontiguousarray(traj.laps(block) if sign == 1 else -traj.laps(block))
         if running_max is None:
             running_max = laps[0].astype(np.int64)

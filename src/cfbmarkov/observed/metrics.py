@@ -184,7 +184,7 @@ def rtd_span(probability, tail: float = 0.01) -> int:
     Parameters
     ----------
     probability : array_like, shape (B,)
-        Probability per bin (:func:`cfbmarkov.analysis.rtd.rtd_histogram`).
+        Probability per bin (:func:`cfbmarkov.observed.residence.rtd_histogram`).
     tail : float, optional
         The share of residences left out at each end.
 

@@ -7,8 +7,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cfbmarkov.analysis import rtd as rtd_module
-from cfbmarkov.analysis.rtd import (
+from cfbmarkov.observed import residence as rtd_module
+from cfbmarkov.observed.residence import (
     ResidenceTimes,
     residence_times,
     residence_times_from_events,

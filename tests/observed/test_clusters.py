@@ -4,7 +4,7 @@ uniform particles, and reported by compare for both sides."""
 import numpy as np
 import pytest
 
-from cfbmarkov.analysis.clusters import cluster_index
+from cfbmarkov.observed.clusters import cluster_index
 from cfbmarkov.trajectories import Trajectories
 from cfbmarkov.trajectory_writer import write_trajectories
 
@@ -41,7 +41,7 @@ def test_independent_uniform_particles_give_about_one(tmp_path):
 def test_snapshot_index_equals_numpy_and_maps_states_to_cells():
     """The kernel's integer sums give numpy's var / mean of the counts, absent particles
     and empty frames included, and ``cell_of_state`` equals mapping the states first."""
-    from cfbmarkov.analysis.clusters import snapshot_cluster_index
+    from cfbmarkov.observed.clusters import snapshot_cluster_index
 
     rng = np.random.default_rng(3)
     n_cells, n_states = 12, 36
