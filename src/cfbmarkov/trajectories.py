@@ -51,6 +51,7 @@ import h5py
 import numba as nb
 import numpy as np
 
+from cfbmarkov.boundary import BOUNDARIES, Boundary
 from cfbmarkov.errors import InputError
 
 #: the ``format`` attribute of a trajectory file
@@ -58,7 +59,6 @@ FORMAT = "cfbmarkov.trajectories"
 #: the layout's version (the ``version`` attribute); version 1 files still read
 VERSION = 2
 #: the vertical boundaries a riser may have
-BOUNDARIES = ("periodic", "open")
 #: relative tolerance (on max(|t|, 1 s)) for matching a requested time to the frame of a
 #: file that holds one frame, and so has no frame interval to scale a tolerance
 TIME_TOLERANCE = 1e-6
@@ -239,8 +239,8 @@ class Trajectories:
         The riser's depth (m) of a 3D file; None in 2D.
     dimensions : int
         D, the coordinates per position: 2 (across, vertical) or 3 (across, vertical, depth).
-    boundary : {"periodic", "open"}
-        The vertical boundary.
+    boundary : Boundary
+        The vertical boundary (a str: ``"periodic"`` or ``"open"``).
     axes : dict of str to str
         The source's axis letter of each stored axis (keys ``across``, ``vertical``,
         ``depth``; ``depth`` is empty in 2D).
@@ -316,9 +316,10 @@ class Trajectories:
         self.height = self._length_attr("height")
         self.depth = self._length_attr("depth") if d == 3 else None
         boundary = f.attrs.get("boundary", "periodic")
-        self.boundary = boundary.decode() if isinstance(boundary, bytes) else str(boundary)
-        if self.boundary not in BOUNDARIES:
-            raise InputError(f"{self.path}: damaged trajectory file (boundary {self.boundary!r})")
+        boundary = boundary.decode() if isinstance(boundary, bytes) else str(boundary)
+        if boundary not in BOUNDARIES:
+            raise InputError(f"{self.path}: damaged trajectory file (boundary {boundary!r})")
+        self.boundary = Boundary(boundary)
         self.axes = {key: str(f.attrs.get(f"{key}_axis", default)) for key, default in
                      (("across", "x"), ("vertical", "y"), ("depth", "z" if d == 3 else ""))}
         self.region_origin = np.asarray(f.attrs.get("region_origin", np.zeros(d)), dtype=np.float64)
