@@ -11,7 +11,8 @@ from cfbmarkov import synthetic
 from cfbmarkov.cli import main, parse_cells
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov import CellGrid, MarkovModel, discretize, place_in_cells
-from cfbmarkov.markov.states import StateSpace, cell_index, state_space_from_name
+from cfbmarkov.markov.cells import cell_index
+from cfbmarkov.markov.spaces import state_space_from_attrs, state_space_from_name
 from cfbmarkov.trajectories import Trajectories
 from cfbmarkov.trajectory_writer import write_trajectories
 
@@ -145,7 +146,7 @@ def test_model_save_load_3d_grid(tmp_path, runs):
     assert back.state_space.depth == DEPTH
     np.testing.assert_array_equal(back.transition_matrix, model.transition_matrix)
     assert "cells 4x3x16 (192 states)" in back.summary()
-    assert StateSpace.from_attrs(grid.to_attrs()) == grid
+    assert state_space_from_attrs(grid.to_attrs()) == grid
     assert repr(grid) == "CellGrid(4, 16, width=0.09, height=0.95, depth_columns=3, depth=0.02)"
 
 

@@ -10,7 +10,8 @@ from cfbmarkov.markov import CellGrid, MarkovModel, discretize, fit_model
 from cfbmarkov.markov.diagnostics import (active_set, ck_test, core_annulus, group_labels,
                                           height_bands, implied_timescales, model_timescales,
                                           product_groups)
-from cfbmarkov.markov.states import StateSpace, cell_index
+from cfbmarkov.markov.cells import cell_index
+from cfbmarkov.markov.states import StateSpace
 from cfbmarkov.trajectory_writer import write_trajectories
 
 LAGS = (0.025, 0.05, 0.1, 0.2)
@@ -201,7 +202,8 @@ class _DirectionSpace(StateSpace):
     def cell_of_state(self):
         return np.arange(self.n_states, dtype=np.int64) // 2
 
-    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None, *,
+                   memo=None):
         cells = cell_index(positions, self.width, self.height, self.columns, self.rows)
         if self.needs_velocity:
             falling = velocities[..., 1] < 0

@@ -139,7 +139,7 @@ def test_sparse_counts_and_split_chain_equal_the_dense_ones(tmp_path, markov_flo
     (40 particles leave some) and with the largest connected set."""
     from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, pass_fractions
     from cfbmarkov.markov.first_passage import exact_rtd, rtd_of_split_chain, split_by_pass
-    from cfbmarkov.markov.states import state_space_from_name
+    from cfbmarkov.markov.spaces import state_space_from_name
 
     space = state_space_from_name(name, markov_flow.columns, markov_flow.rows,
                                   markov_flow.width, markov_flow.height)

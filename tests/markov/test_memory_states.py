@@ -18,8 +18,8 @@ from cfbmarkov.observed.residence import residence_times
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov import (STATE_SPACES, CellGrid, DirectionCells, MarkovModel,
                               MaximumLikelihoodEstimator, PaperEstimator, SecondOrderCells,
-                              StateSpace, VelocityCells, cell_index, discretize,
-                              estimator_from_name, fit_model, state_space_from_name)
+                              VelocityCells, cell_index, discretize, estimator_from_name,
+                              fit_model, state_space_from_attrs, state_space_from_name)
 from cfbmarkov.report.compare import compare
 from cfbmarkov.trajectories import Trajectories, lap_increments
 from cfbmarkov.trajectory_writer import write_trajectories
@@ -173,7 +173,7 @@ def test_sub_rows_place_each_state_within_its_cell():
     np.testing.assert_array_equal(
         VelocityCells(1, 4, 1.0, 4.0, edges=(0.0,), sub_rows=1).discretize(pos, None, 1, 0.1),
         plain.discretize(pos, None, 1, 0.1))
-    back = StateSpace.from_attrs(json.dumps(space.to_attrs()))
+    back = state_space_from_attrs(json.dumps(space.to_attrs()))
     assert back == space and back.sub_rows == 4 and "4 sub-rows" in back.describe()
     for bad in (0, 9, 2.5, "2"):
         with pytest.raises(InputError, match="sub-rows"):
@@ -270,9 +270,9 @@ def test_cell_of_state_matches_cell_index_and_attrs_round_trip(name):
     np.testing.assert_array_equal(space.cell_of_state[states], cell_index(pos, 0.09, 0.95, 6, 38))
     attrs = space.to_attrs()
     assert attrs["kind"] == name
-    back = StateSpace.from_attrs(json.dumps(attrs))
+    back = state_space_from_attrs(json.dumps(attrs))
     assert type(back) is type(space) and back == space and back.to_attrs() == attrs
-    assert StateSpace.from_attrs(attrs) == space and hash(back) == hash(space)
+    assert state_space_from_attrs(attrs) == space and hash(back) == hash(space)
     assert back.memory_lags == space.memory_lags and back.needs_velocity == space.needs_velocity
     inlet = space.inlet_distribution()
     assert inlet.sum() == pytest.approx(1.0)
@@ -291,7 +291,7 @@ def test_spaces_by_name_and_bad_names():
     with pytest.raises(InputError, match="source"):
         DirectionCells(6, 38, source="guess")
     with pytest.raises(InputError, match="unknown state space kind"):
-        StateSpace.from_attrs({"kind": "cells-bogus"})
+        state_space_from_attrs({"kind": "cells-bogus"})
 
 
 def test_velocity_source_fits_from_files_with_velocities(tmp_path):
@@ -516,7 +516,7 @@ def test_spaces_discretised_on_shared_frames_equal_each_alone(default_run):
             assert got.state_space == alone[k].state_space, name
             assert np.array_equal(got.states, alone[k].states), name
             assert np.array_equal(got.vertical, alone[k].vertical), name
-    stores = [value[1] for key, value in shared._shared.items() if key[0] == "frames"]
-    cells = [sum(1 for key in store if key[0] == "cells") for store in stores]
+    memos = list(shared._memos.values())
+    cells = [sum(1 for key in memo.derived if key[0] == "cells") for memo in memos]
     assert max(cells) == 1 and min(cells) >= 0         # one grid: at most one cell array
-    assert any(key[0] == "displacement" for store in stores for key in store)
+    assert any(key[0] == "displacement" for memo in memos for key in memo.derived)

@@ -18,7 +18,7 @@ from cfbmarkov.markov.regimes import (DirectionRegimeCells, RegimeCells, regime_
                                       regime_matrix)
 from cfbmarkov.markov.first_passage import exact_rtd
 from cfbmarkov.markov.select import select_model
-from cfbmarkov.markov.states import StateSpace, state_space_from_name
+from cfbmarkov.markov.spaces import state_space_from_attrs, state_space_from_name
 from cfbmarkov.trajectories import Trajectories
 
 _GRID = dict(columns=4, rows=16, persistence=False, vertical_spread=0.5)
@@ -72,7 +72,7 @@ def test_space_fits_its_edges_on_the_window_and_round_trips(regime_run):
     fitted = space.fit_to_frames(frames, 1, LAG)
     assert fitted.fitted and space.accepts(fitted) and not fitted.accepts(space)
     assert fitted.fit_to_frames(frames, 1, LAG) is fitted
-    back = StateSpace.from_attrs(fitted.to_attrs())
+    back = state_space_from_attrs(fitted.to_attrs())
     assert back == fitted and type(back) is RegimeCells
     # every particle of a frame carries the frame's regime, the cell is the cell
     states = fitted.discretize(frames, None, 1, LAG)[1:]

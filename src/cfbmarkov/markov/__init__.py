@@ -26,17 +26,12 @@ from cfbmarkov.markov.estimate import (
 )
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, exact_rtd
-from cfbmarkov.markov.memory_states import (DirectionCells, FineVelocityCells, SecondOrderCells,
-                                            VelocityCells)
+from cfbmarkov.markov.cells import cell_index
+from cfbmarkov.markov.memory_states import DirectionCells, SecondOrderCells
 from cfbmarkov.markov.regimes import DirectionRegimeCells, RegimeCells
-from cfbmarkov.markov.states import (
-    STATE_SPACES,
-    CellGrid,
-    StateSpace,
-    cell_index,
-    place_in_cells,
-    state_space_from_name,
-)
+from cfbmarkov.markov.spaces import STATE_SPACES, state_space_from_attrs, state_space_from_name
+from cfbmarkov.markov.states import CellGrid, StateSpace, place_in_cells
+from cfbmarkov.markov.velocity_states import FineVelocityCells, VelocityCells
 
 __all__ = [
     "ABSENT", "CellGrid", "DirectionCells", "DirectionRegimeCells", "DiscreteTrajectories",
@@ -45,5 +40,5 @@ __all__ = [
     "STATE_SPACES", "SecondOrderCells", "StateSpace", "TransitionCounts", "TransitionEstimator",
     "VelocityCells", "WindowFrames", "cell_index", "count_transitions", "discretize",
     "discretize_frame", "estimator_from_name", "exact_rtd", "fit_model", "place_in_cells",
-    "read_frames", "state_space_from_name",
+    "read_frames", "state_space_from_attrs", "state_space_from_name",
 ]

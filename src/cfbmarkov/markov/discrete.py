@@ -35,6 +35,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.frame_quantities import FrameQuantities
 from cfbmarkov.markov.states import StateSpace
 from cfbmarkov.trajectories import FRAME_SPACING_TOLERANCE, Trajectories, opened
 
@@ -198,7 +199,9 @@ class WindowFrames:
     """The frames of one window and the history before it, read from a file once.
 
     Several state spaces (the candidates of ``--states auto``) are then discretised on the
-    same frames without going back to the file. The arrays cover the frames
+    same frames without going back to the file, sharing what they derive from them: the
+    frames own one :class:`~cfbmarkov.markov.frame_quantities.FrameQuantities` memo per
+    array of positions they hand to the spaces. The arrays cover the frames
     ``first .. stop - 1`` of the file; the window's own frames start at row ``history``
     (``first + history`` in the file). Made by :func:`read_frames`.
 
@@ -243,10 +246,12 @@ class WindowFrames:
     present: np.ndarray | None = None
     boundary: str = "periodic"
     depth: float | None = None
-    # per first row: the positions view given to the spaces and what they derive from it
-    # (cells, displacements; memory_states.frame_quantities_shared), and the windows'
-    # contiguous heights: shared by every state space discretised on these frames
-    _shared: dict = field(default_factory=dict, repr=False, compare=False)
+    # per first row: the memo of the positions given to the spaces (the view and what they
+    # derive from it: cells, displacements); per window start: the window's contiguous
+    # heights. Shared by every state space discretised on these frames.
+    _memos: dict[int, FrameQuantities] = field(default_factory=dict, repr=False,
+                                               compare=False)
+    _heights: dict[int, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
 
     def discretize(self, state_space: StateSpace, lag_frames: int, *,
                    keep_positions: bool = False) -> DiscreteTrajectories:
@@ -290,28 +295,28 @@ class WindowFrames:
                 window = (max(window[0], float(self.times[start])), window[1])
         else:
             start = self.history
-        from cfbmarkov.markov.memory_states import frame_quantities_shared
-
         frames = slice(first, None)
-        positions, derived = self._shared.setdefault(("frames", first),
-                                                     (self.positions[frames], {}))
+        if first not in self._memos:
+            self._memos[first] = FrameQuantities(self.positions[frames])
+        memo = self._memos[first]
+        positions = memo.positions
         velocities = None if self.velocities is None else self.velocities[frames]
-        with frame_quantities_shared(positions, derived):
-            # a space that learns from the fitting window (regime edges) learns it here
-            state_space = state_space.fit_to_frames(positions, lag_frames, self.frame_interval)
-            # absent particles (NaN) get some state, masked here with those whose history is
-            # incomplete
-            states = state_space.discretize(positions, velocities, lag_frames,
-                                            self.frame_interval)
+        # a space that learns from the fitting window (regime edges) learns it here
+        state_space = state_space.fit_to_frames(positions, lag_frames, self.frame_interval,
+                                                memo=memo)
+        # absent particles (NaN) get some state, masked here with those whose history is
+        # incomplete
+        states = state_space.discretize(positions, velocities, lag_frames, self.frame_interval,
+                                        memo=memo)
         if self.present is not None:
             states[~_known(self.present[frames], need, lag_frames)] = ABSENT
         offset = start - first
         rows = slice(start, None)
-        if ("vertical", start) not in self._shared:
-            self._shared[("vertical", start)] = np.ascontiguousarray(self.positions[rows, :, 1])
+        if start not in self._heights:
+            self._heights[start] = np.ascontiguousarray(self.positions[rows, :, 1])
         return DiscreteTrajectories(
             states=np.ascontiguousarray(states[offset:]),
-            vertical=self._shared[("vertical", start)],
+            vertical=self._heights[start],
             times=self.times[rows], lag_frames=lag_frames, frame_interval=self.frame_interval,
             height=self.height, state_space=state_space, window=window, source=self.source,
             positions=self.positions[rows] if keep_positions else None,

@@ -37,7 +37,7 @@ import numpy as np
 from cfbmarkov._atomic import atomic_path, h5_file
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.model import _DATASETS, MODEL_FORMAT
-from cfbmarkov.markov.states import StateSpace
+from cfbmarkov.markov.spaces import state_space_from_attrs
 from cfbmarkov._hdf5 import create_array_dataset
 
 if TYPE_CHECKING:
@@ -170,7 +170,7 @@ def _read_model_group(group, MarkovModel) -> "MarkovModel":
         raise InputError(f"frame_pairs {frame_pairs:g} is not a count")
     return MarkovModel(
         **{name: group[name][()] for name in _DATASETS},
-        state_space=StateSpace.from_attrs(group.attrs["state_space"]),
+        state_space=state_space_from_attrs(group.attrs["state_space"]),
         lag=_attr_number(group.attrs["lag"], "lag"), estimator=str(group.attrs["estimator"]),
         window=None if np.isnan(window).any() else (float(window[0]), float(window[1])),
         source=json.loads(group.attrs.get("source", '""')),

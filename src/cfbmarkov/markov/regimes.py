@@ -58,6 +58,7 @@ import numpy as np
 
 from cfbmarkov._random import uniform
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.frame_quantities import PARTICLE_BLOCK, FrameQuantities
 from cfbmarkov.markov.memory_states import _CellProductSpace
 from cfbmarkov.markov.montecarlo import SparseChain, first_above
 
@@ -89,12 +90,11 @@ def _regime_states(cells, vertical, regime, per_cell, with_direction, out):
     """out[t, p] = cells[t, p] * K + regime[t] * D + (1 if falling else 0 with direction)."""
     n_frames, n = cells.shape
     d = 2 if with_direction else 1
-    block = 1024                    # particles per work item: one division a block
-    blocks = (n + block - 1) // block
+    blocks = (n + PARTICLE_BLOCK - 1) // PARTICLE_BLOCK
     for k in nb.prange(n_frames * blocks):
         t = k // blocks
-        first = (k - t * blocks) * block
-        for p in range(first, min(n, first + block)):
+        first = (k - t * blocks) * PARTICLE_BLOCK
+        for p in range(first, min(n, first + PARTICLE_BLOCK)):
             s = cells[t, p] * per_cell + regime[t] * d
             if with_direction and vertical[t, p] < 0.0:
                 s += 1
@@ -236,7 +236,8 @@ class RegimeCells(_CellProductSpace):
         return self.edges is not None
 
     def frame_features(self, positions: np.ndarray, lag_frames: int,
-                       frame_interval: float | None) -> np.ndarray:
+                       frame_interval: float | None, *,
+                       memo: FrameQuantities | None = None) -> np.ndarray:
         """The global feature of every frame.
 
         Parameters
@@ -248,6 +249,8 @@ class RegimeCells(_CellProductSpace):
             The lag in frames (>= 1).
         frame_interval : float or None
             Time between frames (s), needed for ``flux``.
+        memo : FrameQuantities, optional
+            What is derived from ``positions``, shared (:mod:`~cfbmarkov.markov.frame_quantities`).
 
         Returns
         -------
@@ -271,12 +274,13 @@ class RegimeCells(_CellProductSpace):
             raise InputError(f"{self.kind}: the solids flux needs the frame interval (s), got "
                              f"{frame_interval!r}")
         lag_frames = int(lag_frames)
-        vertical = self._vertical(positions, None, lag_frames, "displacement")
+        vertical = self._vertical(positions, None, lag_frames, "displacement", memo)
         _frame_means(vertical, lag_frames, out)
         return out / (lag_frames * float(frame_interval))
 
     def fit_to_frames(self, positions: np.ndarray, lag_frames: int,
-                      frame_interval: float | None) -> "RegimeCells":
+                      frame_interval: float | None, *,
+                      memo: FrameQuantities | None = None) -> "RegimeCells":
         """This space with its regime edges fitted on frames (itself when already fitted).
 
         Parameters
@@ -287,6 +291,8 @@ class RegimeCells(_CellProductSpace):
             The lag in frames.
         frame_interval : float or None
             Time between frames (s).
+        memo : FrameQuantities, optional
+            As in :meth:`frame_features`.
 
         Returns
         -------
@@ -299,7 +305,7 @@ class RegimeCells(_CellProductSpace):
         """
         if self.fitted:
             return self
-        features = self.frame_features(positions, lag_frames, frame_interval)
+        features = self.frame_features(positions, lag_frames, frame_interval, memo=memo)
         return type(self)(self.columns, self.rows, self.width, self.height, self.regimes,
                           regime_edges(features, self.regimes), self.feature)
 
@@ -313,12 +319,13 @@ class RegimeCells(_CellProductSpace):
             {k: v for k, v in mine.items() if k != "edges"} == theirs)
 
     def frame_regimes(self, positions: np.ndarray, lag_frames: int,
-                      frame_interval: float | None) -> np.ndarray:
+                      frame_interval: float | None, *,
+                      memo: FrameQuantities | None = None) -> np.ndarray:
         """The regime (0 .. R-1) of every frame.
 
         Parameters
         ----------
-        positions, lag_frames, frame_interval
+        positions, lag_frames, frame_interval, memo
             As :meth:`frame_features`.
 
         Returns
@@ -333,12 +340,13 @@ class RegimeCells(_CellProductSpace):
         if not self.fitted:
             raise InputError(f"{self.kind}: the regime edges are not fitted yet (fit a model, "
                              "which fits them on its window)")
-        features = self.frame_features(positions, lag_frames, frame_interval)
+        features = self.frame_features(positions, lag_frames, frame_interval, memo=memo)
         regime = np.searchsorted(np.asarray(self.edges), features, side="right")
         regime[~np.isfinite(features)] = 0
         return regime.astype(np.int32)
 
-    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None, *,
+                   memo=None):
         """States of frames (see :meth:`StateSpace.discretize
         <cfbmarkov.markov.states.StateSpace.discretize>`).
 
@@ -352,6 +360,8 @@ class RegimeCells(_CellProductSpace):
             The lag in frames (>= 1).
         frame_interval : float, optional
             Time between frames (s), needed for the flux.
+        memo : FrameQuantities, optional
+            As in :meth:`frame_features`.
 
         Returns
         -------
@@ -365,10 +375,10 @@ class RegimeCells(_CellProductSpace):
         """
         single = np.ndim(positions) == 2
         frames = np.asarray(positions)[None] if single else np.asarray(positions)
-        cells = self._cells(frames)
-        regime = self.frame_regimes(frames, lag_frames, frame_interval)
-        vertical = (self._vertical(frames, None, lag_frames, "displacement") if self.direction
-                    else np.zeros((1, 1)))
+        cells = self._cells(frames, memo)
+        regime = self.frame_regimes(frames, lag_frames, frame_interval, memo=memo)
+        vertical = (self._vertical(frames, None, lag_frames, "displacement", memo)
+                    if self.direction else np.zeros((1, 1)))
         out = np.empty_like(cells)
         _regime_states(cells, vertical, regime, self.per_cell, self.direction, out)
         return out[0] if single else out

@@ -66,7 +66,7 @@ from cfbmarkov.markov.discrete import DiscreteTrajectories, read_frames
 from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, fit_model
 from cfbmarkov.markov.model import hand_over
 from cfbmarkov.markov.first_passage import rtd_of_split_chain
-from cfbmarkov.markov.states import state_space_from_name
+from cfbmarkov.markov.spaces import state_space_from_name
 from cfbmarkov.trajectories import opened
 
 #: state spaces tried by default (names of :func:`state_space_from_name`)
@@ -101,7 +101,7 @@ class CandidateScore:
     Attributes
     ----------
     states : str
-        Name of the state space (:func:`~cfbmarkov.markov.states.state_space_from_name`).
+        Name of the state space (:func:`~cfbmarkov.markov.spaces.state_space_from_name`).
     lag : float
         The lag (s).
     n_states : int
@@ -508,7 +508,7 @@ def parse_model_name(name: str) -> tuple[str, str]:
     Returns
     -------
     states : str
-        A name of :data:`~cfbmarkov.markov.states.STATE_SPACES`, or ``auto``.
+        A name of :data:`~cfbmarkov.markov.spaces.STATE_SPACES`, or ``auto``.
     estimator : str
         ``paper`` or ``mle``.
 
@@ -518,7 +518,7 @@ def parse_model_name(name: str) -> tuple[str, str]:
         For an unknown state space or estimator.
     """
     from cfbmarkov.markov.estimate import ESTIMATORS
-    from cfbmarkov.markov.states import STATE_SPACES
+    from cfbmarkov.markov.spaces import STATE_SPACES
 
     if name in ESTIMATORS:
         return "cells", name

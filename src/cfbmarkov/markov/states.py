@@ -7,20 +7,26 @@ the paper's space: m columns x n rows of equal cells, state s = row*m + col
 (``docs/definitions.md``, States and transitions); with d > 1 depth columns (3D data) the
 cell is s = (row*d + k)*m + col, k the depth column.
 State spaces that carry more than the position subclass :class:`StateSpace` and register
-under their ``kind``: :class:`DirectionCells` (cell x {rising, falling}),
-:class:`VelocityCells` (cell x vertical-velocity bins) and :class:`SecondOrderCells` (cell x
-offset of the previous cell: the second-order chain on cells, kind ``cells-previous``);
-:func:`state_space_from_name` builds them by name.
+themselves under their ``kind`` (:meth:`StateSpace.registered_kinds`):
+:class:`~cfbmarkov.markov.memory_states.DirectionCells` (cell x {rising, falling}),
+:class:`~cfbmarkov.markov.velocity_states.VelocityCells` (cell x vertical-velocity bins),
+:class:`~cfbmarkov.markov.memory_states.SecondOrderCells` (cell x offset of the previous
+cell: the second-order chain on cells, kind ``cells-previous``) and the regime spaces of
+:mod:`cfbmarkov.markov.regimes`; :mod:`cfbmarkov.markov.spaces` builds them by name or from
+a saved description.
 
 Turning trajectory frames into states goes through :mod:`cfbmarkov.markov.discrete`, which
-gives :meth:`StateSpace.discretize` the frames, the lag in frames and the frame interval.
+gives :meth:`StateSpace.discretize` the frames, the lag in frames, the frame interval and
+the memo of what the spaces derive from those frames
+(:class:`~cfbmarkov.markov.frame_quantities.FrameQuantities`).
 """
 
 from __future__ import annotations
 
 import json
-import math
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
+from types import MappingProxyType
 from typing import Any, ClassVar
 
 import numba as nb
@@ -28,7 +34,11 @@ import numpy as np
 
 from cfbmarkov._random import uniform
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.cells import cell_index
+from cfbmarkov.markov.frame_quantities import FrameQuantities
 
+#: every subclass of :class:`StateSpace` that sets ``kind``, by kind (filled as they are
+#: defined)
 _REGISTRY: dict[str, type["StateSpace"]] = {}
 
 
@@ -37,9 +47,10 @@ class StateSpace(ABC):
 
     Every state lies in one cell of an underlying m x n cell grid, or m x d x n with d depth
     columns (``cell_of_state``), so maps, placement and mixing by halves work for any state
-    space. Subclasses that set a
-    class attribute ``kind`` are registered under it, so that :meth:`from_attrs` can
-    rebuild them from a saved model.
+    space. Subclasses that set a class attribute ``kind`` register themselves under it
+    (:meth:`registered_kinds`), so that
+    :func:`~cfbmarkov.markov.spaces.state_space_from_attrs` can rebuild them from a saved
+    model and :func:`~cfbmarkov.markov.spaces.state_space_from_name` can build them by name.
 
     Attributes
     ----------
@@ -75,11 +86,50 @@ class StateSpace(ABC):
     #: whether :meth:`discretize` needs velocities (otherwise positions suffice); a class
     #: default that a space may override per instance, like :attr:`memory_lags`.
     needs_velocity: bool = False
+    #: whether the constructor takes ``depth_columns`` and ``depth`` after the riser's
+    #: size (a 3D grid); only such spaces are built by name with depth columns
+    has_depth_columns: ClassVar[bool] = False
 
     def __init_subclass__(cls, **kwargs):
         super().__init_subclass__(**kwargs)
         if "kind" in cls.__dict__:
             _REGISTRY[cls.kind] = cls
+
+    @staticmethod
+    def registered_kinds() -> Mapping[str, type["StateSpace"]]:
+        """The state-space classes defined so far, by ``kind``.
+
+        Returns
+        -------
+        Mapping of str to type
+            A read-only view: every subclass that sets ``kind`` is in it once its module is
+            imported (:mod:`cfbmarkov.markov.spaces` imports them all).
+        """
+        return MappingProxyType(_REGISTRY)
+
+    @classmethod
+    def with_defaults(cls, columns: int, rows: int, width: float = 0.09,
+                      height: float = 0.95) -> "StateSpace":
+        """This kind of space on a grid with its other parameters at their defaults (what
+        :func:`~cfbmarkov.markov.spaces.state_space_from_name` builds).
+
+        Parameters
+        ----------
+        columns, rows : int
+            The cell grid m x n.
+        width, height : float, optional
+            The riser W x H (m).
+
+        Returns
+        -------
+        StateSpace
+
+        Raises
+        ------
+        InputError
+            For a bad grid.
+        """
+        return cls(columns, rows, width, height)
 
     columns: int
     rows: int
@@ -115,7 +165,8 @@ class StateSpace(ABC):
 
     @abstractmethod
     def discretize(self, positions: np.ndarray, velocities: np.ndarray | None = None,
-                   lag_frames: int = 1, frame_interval: float | None = None) -> np.ndarray:
+                   lag_frames: int = 1, frame_interval: float | None = None, *,
+                   memo: FrameQuantities | None = None) -> np.ndarray:
         """States of frames (a kernel on arrays; :func:`cfbmarkov.markov.discretize` is the
         way from a trajectory file).
 
@@ -132,6 +183,10 @@ class StateSpace(ABC):
             The lag in frames.
         frame_interval : float, optional
             Time between frames (s), for spaces that turn displacements into velocities.
+        memo : FrameQuantities, optional
+            What is derived from ``positions`` (this very array) and shared by the spaces
+            discretised on it (cells, vertical displacements); None, or a memo of other
+            positions: computed here.
 
         Returns
         -------
@@ -140,7 +195,8 @@ class StateSpace(ABC):
 
     @abstractmethod
     def to_attrs(self) -> dict[str, Any]:
-        """JSON-serialisable description; ``StateSpace.from_attrs`` rebuilds the space.
+        """JSON-serialisable description;
+        :func:`~cfbmarkov.markov.spaces.state_space_from_attrs` rebuilds the space.
 
         Returns
         -------
@@ -148,38 +204,9 @@ class StateSpace(ABC):
             ``kind`` and the constructor's arguments.
         """
 
-    @staticmethod
-    def from_attrs(attrs: dict[str, Any] | str) -> "StateSpace":
-        """Rebuild a state space from :meth:`to_attrs` (as a dict or as JSON text).
-
-        Parameters
-        ----------
-        attrs : dict or str
-            The description, e.g. a model file's ``state_space`` attribute.
-
-        Returns
-        -------
-        StateSpace
-
-        Raises
-        ------
-        InputError
-            If the kind is unknown, or the arguments make no valid state space (e.g. a bad
-            grid).
-        """
-        if isinstance(attrs, (str, bytes)):
-            attrs = json.loads(attrs)
-        attrs = dict(attrs)
-        import cfbmarkov.markov.memory_states  # noqa: F401  (registers the memory spaces)
-        import cfbmarkov.markov.regimes  # noqa: F401  (registers the regime space)
-
-        kind = attrs.pop("kind", None)
-        if kind not in _REGISTRY:
-            raise InputError(f"unknown state space kind {kind!r}")
-        return _REGISTRY[kind](**attrs)
-
     def fit_to_frames(self, positions: np.ndarray, lag_frames: int,
-                      frame_interval: float | None) -> "StateSpace":
+                      frame_interval: float | None, *,
+                      memo: FrameQuantities | None = None) -> "StateSpace":
         """This space with what it learns from the fitting window fitted; itself for the
         spaces that learn nothing (all but the regime space,
         :class:`~cfbmarkov.markov.regimes.RegimeCells`).
@@ -193,6 +220,8 @@ class StateSpace(ABC):
             The lag in frames.
         frame_interval : float or None
             Time between frames (s).
+        memo : FrameQuantities, optional
+            As in :meth:`discretize`.
 
         Returns
         -------
@@ -294,99 +323,6 @@ class StateSpace(ABC):
         return hash(json.dumps(self.to_attrs(), sort_keys=True))
 
 
-#: a position within this relative distance (in cells) below a cell edge counts as on the
-#: edge, so in the cell above it: 0.29 m on a grid of 0.01 m rows is 28.999999999999996
-#: rows by floating point, and lands in row 29 as written (about 1e-11 m on the paper's grid)
-EDGE_TOLERANCE = 1e-9
-
-
-@nb.njit(cache=True, inline="always")
-def _index_along(coordinate, scale, n):
-    """floor(coordinate * scale), a value a round-off below an edge taken as on it, clipped
-    to 0..n-1 (0 for NaN: an absent particle, whose state the caller masks)."""
-    v = coordinate * scale
-    if v != v:
-        return 0
-    k = int(math.floor(v + EDGE_TOLERANCE * max(1.0, abs(v))))
-    return min(max(k, 0), n - 1)
-
-
-@nb.njit(cache=True, parallel=True)
-def _cell_index_3d(positions, width, height, depth, columns, rows, depth_columns, out):
-    flat_pos = positions.reshape(-1, 3)
-    flat_out = out.reshape(-1)
-    sx = columns / width
-    sy = rows / height
-    sz = depth_columns / depth
-    for k in nb.prange(flat_out.size):
-        col = _index_along(flat_pos[k, 0], sx, columns)
-        row = _index_along(flat_pos[k, 1], sy, rows)
-        lay = _index_along(flat_pos[k, 2], sz, depth_columns)
-        flat_out[k] = (row * depth_columns + lay) * columns + col
-
-
-@nb.njit(cache=True, parallel=True)
-def _cell_index(positions, width, height, columns, rows, out):
-    flat_pos = positions.reshape(-1, 2)
-    flat_out = out.reshape(-1)
-    sx = columns / width
-    sy = rows / height
-    for k in nb.prange(flat_out.size):
-        col = _index_along(flat_pos[k, 0], sx, columns)
-        row = _index_along(flat_pos[k, 1], sy, rows)
-        flat_out[k] = row * columns + col
-
-
-def cell_index(positions: np.ndarray, width: float, height: float, columns: int, rows: int,
-               depth: float | None = None, depth_columns: int = 1) -> np.ndarray:
-    """Cell number row*m + col of positions (``(row*d + k)*m + col`` with a depth); points
-    on the far edges go inside.
-
-    A position on a cell edge belongs to the cell above (right of) it, also where floating
-    point puts it a round-off below the edge (0.29 m on 0.01 m rows is 28.999999999999996
-    rows): values within ``EDGE_TOLERANCE`` cells below an edge count as on it.
-
-    Parameters
-    ----------
-    positions : array_like, shape (..., 2) or (..., 3)
-        Positions (across, vertical[, depth]) in m; points outside the domain are clipped
-        into the nearest cell. Without ``depth``, 3D positions are projected on (across,
-        vertical).
-    width, height : float
-        The riser W x H (m).
-    columns, rows : int
-        The cell grid m x n.
-    depth : float, optional
-        The riser's depth (m): cells also along the depth (needs 3D positions).
-    depth_columns : int, optional
-        Cells along the depth, d.
-
-    Returns
-    -------
-    ndarray of int32, shape (...)
-        The cell of each position.
-
-    Raises
-    ------
-    InputError
-        If positions are not 2D or 3D, or a depth is given for 2D positions.
-    """
-    positions = np.asarray(positions, dtype=np.float64)
-    if positions.ndim < 1 or positions.shape[-1] not in (2, 3):
-        raise InputError(f"positions of shape {positions.shape} are neither 2D nor 3D")
-    out = np.empty(positions.shape[:-1], dtype=np.int32)
-    if depth is not None:
-        if positions.shape[-1] != 3:
-            raise InputError(f"a grid with {depth_columns} depth column(s) needs 3D positions, "
-                             "got 2D ones")
-        _cell_index_3d(np.ascontiguousarray(positions), float(width), float(height),
-                       float(depth), int(columns), int(rows), int(depth_columns), out)
-        return out
-    positions = np.ascontiguousarray(positions[..., :2])
-    _cell_index(positions, float(width), float(height), int(columns), int(rows), out)
-    return out
-
-
 @nb.njit(cache=True, parallel=True)
 def _place_in_cells(cells, columns, cell_width, cell_height, seed, step, out):
     for p in nb.prange(cells.size):
@@ -449,6 +385,7 @@ class CellGrid(StateSpace):
     """
 
     kind = "cells"
+    has_depth_columns = True
 
     def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
                  depth_columns: int = 1, depth: float | None = None):
@@ -475,7 +412,8 @@ class CellGrid(StateSpace):
         """Cell of every state, int64 [S]: the state itself."""
         return np.arange(self.n_states, dtype=np.int64)
 
-    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None):
+    def discretize(self, positions, velocities=None, lag_frames=1, frame_interval=None, *,
+                   memo=None):
         """The cell of each position (see :meth:`StateSpace.discretize`).
 
         Parameters
@@ -485,6 +423,8 @@ class CellGrid(StateSpace):
             vertical), a 3D grid needs D = 3.
         velocities, lag_frames, frame_interval
             Ignored (the cells need neither motion nor history).
+        memo : FrameQuantities, optional
+            Ignored (the grid computes its cells, with depth columns, itself).
 
         Returns
         -------
@@ -556,79 +496,3 @@ def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int,
     _place_in_cells(cells, space.columns, space.width / space.columns,
                     space.height / space.rows, np.uint64(seed), np.uint64(step), out)
     return out
-
-
-#: names accepted by :func:`state_space_from_name`
-STATE_SPACES = ("cells", "cells-direction", "cells-velocity", "cells-velocity-fine",
-                "cells-previous", "cells-regime", "cells-direction-regime")
-
-
-def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.09,
-                          height: float = 0.95, depth_columns: int | None = None,
-                          depth: float | None = None) -> StateSpace:
-    """A state space by name with its defaults.
-
-    Parameters
-    ----------
-    name : {"cells", "cells-direction", "cells-velocity", "cells-velocity-fine", \
-            "cells-previous", "cells-regime", "cells-direction-regime"}
-        ``cells`` (the paper's), ``cells-direction`` (direction from the displacement),
-        ``cells-velocity`` (8 v_y bins from the displacement over the model's lag, edges at
-        the quantiles of the fitting window's velocities), ``cells-velocity-fine`` (and each
-        row split into sub-rows no taller than the median move in a lag, fitted on the
-        fitting window),
-        ``cells-previous`` (the second-order chain: previous cell within 3 rows),
-        ``cells-regime`` (cells x 2 regimes of the solids flux, edges fitted on the fitting
-        window), ``cells-direction-regime`` (and the direction).
-    columns, rows : int
-        The cell grid m x n.
-    width, height : float
-        The riser W x H (m).
-    depth_columns : int, optional
-        Cells along the depth, d: a 3D grid (needs ``depth``; only ``cells`` has depth
-        columns yet). None: a 2D grid, which projects 3D positions.
-    depth : float, optional
-        The riser's depth (m), for a 3D grid.
-
-    Returns
-    -------
-    StateSpace
-
-    Raises
-    ------
-    InputError
-        For an unknown name, a bad grid, depth columns without a depth, or depth columns
-        for a state space with memory.
-
-    Notes
-    -----
-    See ``docs/definitions.md`` (States and transitions).
-    """
-    from cfbmarkov.markov.memory_states import (DirectionCells, FineVelocityCells,
-                                                SecondOrderCells, VelocityCells)
-
-    if depth_columns is not None:
-        if name not in STATE_SPACES:
-            raise InputError(f"unknown state space '{name}' (choose from {', '.join(STATE_SPACES)})")
-        if name != "cells":
-            raise InputError(f"state space {name} has no depth columns yet: use --states cells "
-                             "with COLUMNSxDEPTHxROWS, or COLUMNSxROWS (the projection)")
-        if depth is None:
-            raise InputError(f"{depth_columns} depth column(s) need 3D data (the riser's depth)")
-        return CellGrid(columns, rows, width, height, depth_columns, depth)
-    if name == "cells":
-        return CellGrid(columns, rows, width, height)
-    if name == "cells-direction":
-        return DirectionCells(columns, rows, width, height)
-    if name == "cells-velocity":
-        return VelocityCells(columns, rows, width, height, edges=None)
-    if name == "cells-velocity-fine":
-        return FineVelocityCells(columns, rows, width, height)
-    if name == "cells-previous":
-        return SecondOrderCells(columns, rows, width, height)
-    if name in ("cells-regime", "cells-direction-regime"):
-        from cfbmarkov.markov.regimes import DirectionRegimeCells, RegimeCells
-
-        return (DirectionRegimeCells if name == "cells-direction-regime" else RegimeCells)(
-            columns, rows, width, height)
-    raise InputError(f"unknown state space '{name}' (choose from {', '.join(STATE_SPACES)})")
