@@ -9,7 +9,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
-from cfbmarkov.trajectories import lap_increments
+from cfbmarkov.trajectory_format import lap_increments
 import pytest
 
 pytest.importorskip("pyevtk")

@@ -66,6 +66,7 @@ from typing import TextIO
 
 import numpy as np
 
+from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import (
     check_output,
@@ -91,7 +92,6 @@ from cfbmarkov.io.csv_layout import (
 )
 from cfbmarkov.io.resample import resample_tracks
 from cfbmarkov.io.riser import FrameColumns, RiserFrame
-from cfbmarkov.trajectories import BOUNDARIES
 from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 
@@ -161,14 +161,13 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
     check_units(length_unit, time_unit)
     if vertical_axis is not None and vertical_axis not in AXES:
         raise InputError(f"--vertical-axis {vertical_axis!r}: choose x, y or z")
-    if boundary is not None and boundary not in BOUNDARIES:
-        raise InputError(f"--boundary {boundary!r}: choose periodic or open")
+    boundary = Boundary.PERIODIC if boundary is None else Boundary.parse(boundary, "--boundary")
     if max_gap is not None and resample is None:
         raise InputError("--max-gap applies with --resample only")
     options = {"length_unit": length_unit, "time_unit": time_unit,
                "vertical_axis": vertical_axis, "keep_depth": not drop_depth}
     geometry = {"width": width, "height": height, "region": region,
-                "boundary": boundary or "periodic"}
+                "boundary": boundary}
     with removing_new_folders(output), reading(label):
         if resample is None:
             try:
@@ -218,7 +217,7 @@ def check_units(length_unit: str | None, time_unit: str | None) -> None:
 
 
 def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: float | None,
-              region, boundary: str) -> RiserFrame:
+              region, boundary: Boundary) -> RiserFrame:
     """The riser of a CSV file: axes from the layout; region from ``region`` (in the file's
     length unit, converted to m), else 0..W x 0..H (the paper's riser by default).
 
@@ -232,7 +231,7 @@ def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: flo
         The riser (m) when no region is given.
     region : sequence of (lo, hi) or None
         One range per axis x, y (, z), in the file's length unit.
-    boundary : {"periodic", "open"}
+    boundary : Boundary
         The vertical boundary.
 
     Returns
@@ -265,7 +264,7 @@ def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: flo
         bounds = np.array([(0.0, DEFAULT_WIDTH if width is None else float(width)),
                            (0.0, DEFAULT_HEIGHT if height is None else float(height))])
         given = width is not None or height is not None
-    periodic = (False, boundary == "periodic") + ((False,) if len(axes) == 3 else ())
+    periodic = (False, not boundary.is_open) + ((False,) if len(axes) == 3 else ())
     return RiserFrame(tuple(axes), bounds, not given, periodic, boundary)
 
 
@@ -297,7 +296,7 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
     reference = (np.unique(layout.ids(first[0])) if layout.has_id
                  else np.zeros(1, dtype=np.int64))
     parameters = _parameters(path, layout, riser, row_order)
-    periodic = riser.boundary == "periodic"
+    periodic = not riser.boundary.is_open
     parameters["laps_from"] = "minimal-image rule" if periodic else "none (open riser)"
     with create_writer(output, reference, source="import:csv", parameters=parameters,
                        with_velocity=layout.velocity is not None, label=label,
@@ -353,7 +352,7 @@ def _riser_positions(rows: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids
     tol = 1e-9
     within = (relative >= -tol) & (relative <= extent + tol)
     inside = within.all(axis=1)
-    strict = ~within[:, 1] if riser.boundary == "periodic" else np.zeros(len(rows), bool)
+    strict = ~within[:, 1] if not riser.boundary.is_open else np.zeros(len(rows), bool)
     if riser.from_box:
         strict = ~inside
     if strict.any():
@@ -403,7 +402,7 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     rows, ids = rows[order], ids[order]
     relative, inside = _riser_positions(rows, layout, riser, ids, label)
     extent = riser.region[:, 1] - riser.region[:, 0]
-    periodic = riser.boundary == "periodic"
+    periodic = not riser.boundary.is_open
     keep = inside
     if not keep.any():
         raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
