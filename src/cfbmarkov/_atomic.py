@@ -16,6 +16,7 @@ import sys
 import tempfile
 from pathlib import Path
 
+from cfbmarkov import _interrupt
 from cfbmarkov.errors import InputError
 
 
@@ -289,8 +290,6 @@ def publish(tmp: str | os.PathLike, target: str | os.PathLike) -> Path:
         If Ctrl-C was pressed while the output was written, even where the interrupt was
         swallowed (:mod:`cfbmarkov._interrupt`; the temporary file is removed).
     """
-    from cfbmarkov import _interrupt
-
     if _interrupt.requested:          # Ctrl-C swallowed on the way: never publish
         Path(tmp).unlink(missing_ok=True)
         raise KeyboardInterrupt

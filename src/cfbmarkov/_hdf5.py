@@ -12,6 +12,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from cfbmarkov._version import __version__
 from cfbmarkov.errors import InputError
 
 #: elements an [S, S]-like array must have before :func:`create_array_dataset` compresses it
@@ -85,8 +86,6 @@ def json_default(obj):
 
 def package_version() -> str:
     """The installed cfbmarkov version."""
-    from cfbmarkov import __version__
-
     return __version__
 
 

@@ -76,9 +76,10 @@ class TrajectoryWriter:
         The riser W x H (m), positive.
     depth : float, optional
         The riser's depth (m) for 3D positions (across, vertical, depth); 2D when None.
-    boundary : {"periodic", "open"}, optional
+    boundary : Boundary or {"periodic", "open"}, optional
         The vertical boundary: ``periodic`` (what leaves the top re-enters at the bottom;
-        laps counted) or ``open`` (inlet at the bottom, outlet at the top; laps are 0).
+        laps counted) or ``open`` (inlet at the bottom, outlet at the top; laps are 0);
+        stored as its name.
     axes : dict, optional
         The source's axis letter of each stored axis, keys ``across``, ``vertical`` and (3D)
         ``depth``; default x, y (, z).
@@ -117,7 +118,7 @@ class TrajectoryWriter:
                  source: str, parameters: dict[str, Any] | None = None,
                  with_velocity: bool = False, frame_interval: float | None = None,
                  label: str | None = None, max_step: float = 0.5, depth: float | None = None,
-                 boundary: str = "periodic", axes: dict[str, str] | None = None,
+                 boundary: str | Boundary = "periodic", axes: dict[str, str] | None = None,
                  region_origin=None):
         self.path = Path(path)
         self.max_step = float(max_step)
@@ -145,7 +146,6 @@ class TrajectoryWriter:
             raise InputError(f"region origin {origin.tolist()} needs {self.dimensions} coordinates")
         self._tmp = temporary_path(self.path)
         self._closed = False
-        n, d = self.ids.size, self.dimensions
         try:
             self._file = h5py.File(self._tmp, "w")
         except (OSError, RuntimeError) as exc:
@@ -155,15 +155,15 @@ class TrajectoryWriter:
             discard(self._tmp)
             raise
         try:
-            self._create(n, d, source, parameters, origin, axes, boundary, frame_interval)
+            self._create(source, parameters, origin, axes, boundary, frame_interval)
         except BaseException:           # e.g. Ctrl-C while the datasets are created
             if not self._closed:
                 self.abort()
             raise
 
     @write_method
-    def _create(self, n, d, source, parameters, origin, axes, boundary, frame_interval) -> None:
-        f = self._file
+    def _create(self, source, parameters, origin, axes, boundary, frame_interval) -> None:
+        f, d = self._file, self.dimensions
         f.attrs.update({
             "format": FORMAT, "version": VERSION, "width": self.width, "height": self.height,
             "dimensions": d, "boundary": boundary.value, "across_axis": axes["across"],
@@ -542,7 +542,7 @@ class TrajectoryWriter:
 def write_trajectories(path: str | os.PathLike, times, positions, *, width: float, height: float,
                        ids=None, velocities=None, laps=None, source: str = "arrays",
                        parameters: dict[str, Any] | None = None, events: PassEvents | None = None,
-                       present=None, depth: float | None = None, boundary: str = "periodic",
+                       present=None, depth: float | None = None, boundary: str | Boundary = "periodic",
                        axes: dict[str, str] | None = None, region_origin=None) -> Path:
     """Write whole arrays as a trajectory file.
 
