@@ -56,9 +56,9 @@ class FrameTimes:
     def time_tolerance(self) -> float:
         """How far (s) a frame may lie from a requested time and still be the frame at it.
 
-        Half of :data:`FRAME_SPACING_TOLERANCE` of the frame interval: frame times rounded
-        to q s lie within q/2 of the exact times, and the spacing check accepts q up to
-        the spacing tolerance of an interval. It does not depend on the time origin. A file
+        Half of :data:`~cfbmarkov.trajectory_format.FRAME_SPACING_TOLERANCE` of the frame
+        interval: frame times rounded to q s lie within q/2 of the exact times, and the
+        spacing check accepts q up to the spacing tolerance of an interval. It does not depend on the time origin. A file
         of one frame has no interval: then ``TIME_TOLERANCE * max(|t|, 1 s)`` (round-off).
         """
         if np.isfinite(self.frame_interval):

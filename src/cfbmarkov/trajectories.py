@@ -119,8 +119,9 @@ class Trajectories(FrameTimes):
         The file's layout version (1 or 2).
     frame_interval : float
         Time between frames (s): the file's ``frame_interval`` attribute or, for a file
-        without one, :func:`estimate_frame_interval` of its times; NaN for a file of one
-        frame without the attribute (then :meth:`lag_frames` raises).
+        without one, :func:`~cfbmarkov.trajectory_format.estimate_frame_interval` of its
+        times; NaN for a file of one frame without the attribute (then :meth:`lag_frames`
+        raises).
     source : str
         What produced the file.
     parameters : dict
