@@ -194,7 +194,8 @@ def test_resume_after_kill_mid_simulation_equals_uninterrupted(reference, tmp_pa
 
 @pytest.mark.slow
 def test_dask_cluster_gives_the_same_result(reference, tmp_path):
-    distributed = pytest.importorskip("dask.distributed")
+    from dask import distributed
+
     ref, overrides = reference
     from cfbmarkov.reproduce import load_overrides
 

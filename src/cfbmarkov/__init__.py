@@ -14,8 +14,7 @@ import os as _os
 # It must be chosen before numba compiles anything; a user's explicit choice wins.
 _os.environ.setdefault("NUMBA_THREADING_LAYER", "omp")
 
-__version__ = "0.1.0"
-
+from cfbmarkov._version import __version__  # noqa: E402
 from cfbmarkov.errors import CfbmarkovError, InputError  # noqa: E402
 from cfbmarkov.trajectories import Trajectories  # noqa: E402
 from cfbmarkov.trajectory_writer import TrajectoryWriter, write_trajectories  # noqa: E402

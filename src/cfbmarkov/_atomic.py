@@ -9,12 +9,14 @@ under the final name.
 from __future__ import annotations
 
 import contextlib
+import functools
 import os
 import re
 import sys
 import tempfile
 from pathlib import Path
 
+from cfbmarkov import _interrupt
 from cfbmarkov.errors import InputError
 
 
@@ -183,6 +185,38 @@ def h5_file(path: str | os.PathLike, target: str | os.PathLike):
 _UNCLOSED: list = []
 
 
+def write_method(method):
+    """Method decorator for a writer of one output: a failed write in the method (no space
+    left, file too large, ...), or one HDF5 reported late (:func:`late_write_failure`),
+    calls the writer's ``_fail()`` (which discards the partial output) and becomes one
+    :class:`~cfbmarkov.errors.InputError` naming the writer's ``path`` and the cause.
+
+    Parameters
+    ----------
+    method : callable
+        A method of an object with a ``path`` and a ``_fail()`` method.
+
+    Returns
+    -------
+    callable
+        The wrapped method.
+    """
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        try:
+            result = method(self, *args, **kwargs)
+            late = late_write_failure()
+        except (OSError, RuntimeError) as exc:
+            if not is_write_failure(exc):
+                raise
+            late = exc
+        if late is not None:
+            self._fail()
+            raise write_error(late, self.path) from None
+        return result
+    return wrapper
+
+
 def late_write_failure() -> BaseException | None:
     """The first write failure HDF5 reported while freeing an object (where Python could
     not raise it), once; None if there was none."""
@@ -256,8 +290,6 @@ def publish(tmp: str | os.PathLike, target: str | os.PathLike) -> Path:
         If Ctrl-C was pressed while the output was written, even where the interrupt was
         swallowed (:mod:`cfbmarkov._interrupt`; the temporary file is removed).
     """
-    from cfbmarkov import _interrupt
-
     if _interrupt.requested:          # Ctrl-C swallowed on the way: never publish
         Path(tmp).unlink(missing_ok=True)
         raise KeyboardInterrupt

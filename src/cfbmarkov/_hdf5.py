@@ -1,7 +1,9 @@
-"""HDF5 helpers shared by the file writers: compressed array datasets, JSON attributes."""
+"""HDF5 helpers shared by the file readers and writers: opening a file for reading with a
+one-line message on failure, compressed array datasets, JSON attributes."""
 
 from __future__ import annotations
 
+import errno
 import os
 import zlib
 from concurrent.futures import ThreadPoolExecutor
@@ -9,6 +11,9 @@ from pathlib import Path
 
 import h5py
 import numpy as np
+
+from cfbmarkov._version import __version__
+from cfbmarkov.errors import InputError
 
 #: elements an [S, S]-like array must have before :func:`create_array_dataset` compresses it
 COMPRESS_MIN_SIZE = 4096
@@ -81,6 +86,42 @@ def json_default(obj):
 
 def package_version() -> str:
     """The installed cfbmarkov version."""
-    from cfbmarkov import __version__
-
     return __version__
+
+
+def open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
+    """Open an HDF5 file, refusing in one line what cannot be opened.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file.
+    mode : str, optional
+        The h5py mode (default ``"r"``).
+
+    Returns
+    -------
+    h5py.File
+
+    Raises
+    ------
+    InputError
+        If the file is missing, empty, not readable (permission denied), locked by a
+        program writing it, or not HDF5 (truncated, or another format).
+    """
+    path = Path(path)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.stat().st_size == 0:
+        raise InputError(f"{path}: empty file")
+    try:
+        return h5py.File(path, mode)
+    except OSError as exc:
+        text = str(exc).lower()
+        if isinstance(exc, PermissionError) or "permission denied" in text or \
+                getattr(exc, "errno", None) in (errno.EACCES, errno.EPERM):
+            raise InputError(f"{path}: cannot read (permission denied)") from None
+        if "unable to lock file" in text:
+            raise InputError(f"{path}: locked by another program that is writing it (HDF5 "
+                             "file lock); wait for it to end") from None
+        raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format)") from None

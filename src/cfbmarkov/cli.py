@@ -439,9 +439,9 @@ def _parse_times(text: str) -> list[float]:
 def _cmd_info(args) -> int:
     import h5py
 
-    from cfbmarkov.trajectories import _open_h5
+    from cfbmarkov._hdf5 import open_h5
 
-    with _open_h5(args.file) as f:
+    with open_h5(args.file) as f:
         fmt = f.attrs.get("format")
     if isinstance(fmt, bytes):
         fmt = fmt.decode()

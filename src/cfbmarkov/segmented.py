@@ -127,7 +127,7 @@ class SegmentedTrajectoryWriter:
     def append(self, time: float, position, velocity=None, lap=None) -> None:
         """Append one frame to the current segment.
 
-        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.append` for the arguments and
+        See :meth:`cfbmarkov.trajectory_writer.TrajectoryWriter.append` for the arguments and
         the errors.
         """
         self._writer().append(time, position, velocity, lap)
@@ -135,7 +135,7 @@ class SegmentedTrajectoryWriter:
     def add_events(self, times, particles, directions) -> None:
         """Store exact pass events in the current segment (nothing if there are none).
 
-        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.add_events`.
+        See :meth:`cfbmarkov.trajectory_writer.TrajectoryWriter.add_events`.
         """
         if len(times):
             self._writer().add_events(times, particles, directions)
@@ -143,21 +143,21 @@ class SegmentedTrajectoryWriter:
     def append_fields(self, time: float, spacing, **fields) -> None:
         """Append one frame of gas fields to the current segment.
 
-        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.append_fields`.
+        See :meth:`cfbmarkov.trajectory_writer.TrajectoryWriter.append_fields`.
         """
         self._writer().append_fields(time, spacing, **fields)
 
     def append_frames(self, times, positions, velocities=None, laps=None) -> None:
         """Append a block of frames to the current segment.
 
-        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.append_frames`.
+        See :meth:`cfbmarkov.trajectory_writer.TrajectoryWriter.append_frames`.
         """
         self._writer().append_frames(times, positions, velocities, laps)
 
     def append_field_frames(self, times, spacing, **fields) -> None:
         """Append a block of gas-field frames to the current segment.
 
-        See :meth:`cfbmarkov.trajectories.TrajectoryWriter.append_field_frames`.
+        See :meth:`cfbmarkov.trajectory_writer.TrajectoryWriter.append_field_frames`.
         """
         self._writer().append_field_frames(times, spacing, **fields)
 

@@ -396,7 +396,7 @@ def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int
     with TrajectoryWriter(path, np.arange(n_particles), width=flow.width, height=flow.height,
                           source="synthetic-regimes", parameters=params,
                           frame_interval=flow.lag, boundary=boundary) as w:
-        if boundary == "open":
+        if w.boundary.is_open:
             present = np.ones(laps.shape, dtype=bool)
             present[1:] = laps[1:] == laps[:-1]
             w.append_frames(times, positions, present=present)

@@ -31,7 +31,8 @@ Files are written by :mod:`cfbmarkov.trajectory_writer`, under a temporary name 
 when complete, so a reader never sees a half-written file. Frames are read one at a time or
 by window without loading the whole file (:meth:`Trajectories.positions` with a slice).
 
-Frames are evenly spaced within :data:`FRAME_SPACING_TOLERANCE` (1 %) of the frame interval,
+Frames are evenly spaced within
+:data:`~cfbmarkov.trajectory_format.FRAME_SPACING_TOLERANCE` (1 %) of the frame interval,
 whatever the time origin, so times printed to a few decimals are accepted. A file of one
 frame has no ``frame_interval`` unless its producer gave one; then :meth:`Trajectories.lag_frames`
 refuses it (``docs/definitions.md``, File formats, Frame times).
@@ -40,151 +41,19 @@ refuses it (``docs/definitions.md``, File formats, Frame times).
 from __future__ import annotations
 
 import contextlib
-import errno
-import json
 import os
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Iterator
 
 import h5py
-import numba as nb
 import numpy as np
 
-from cfbmarkov.boundary import BOUNDARIES, Boundary
+from cfbmarkov._hdf5 import open_h5
 from cfbmarkov.errors import InputError
-
-#: the ``format`` attribute of a trajectory file
-FORMAT = "cfbmarkov.trajectories"
-#: the layout's version (the ``version`` attribute); version 1 files still read
-VERSION = 2
-#: the vertical boundaries a riser may have
-#: relative tolerance (on max(|t|, 1 s)) for matching a requested time to the frame of a
-#: file that holds one frame, and so has no frame interval to scale a tolerance
-TIME_TOLERANCE = 1e-6
-#: relative tolerance on frame spacing: every step between frames lies within this fraction
-#: of the file's frame interval (``docs/definitions.md``, File formats, Frame times); a
-#: requested time or lag matches a frame within half of it, in frame intervals
-FRAME_SPACING_TOLERANCE = 0.01
-#: positions may lie this far outside the domain (m) before they are refused (round-off)
-POSITION_TOLERANCE = 1e-9
-
-
-@dataclass(frozen=True)
-class PassEvents:
-    """Exact passes through the periodic boundary, sorted by time.
-
-    Attributes
-    ----------
-    time : ndarray of float64, shape (E,)
-        Times of the passes (s).
-    particle : ndarray of int32, shape (E,)
-        Index of the particle (into the file's ids).
-    direction : ndarray of int8, shape (E,)
-        +1 up through the top, -1 down through the bottom.
-    """
-
-    time: np.ndarray
-    particle: np.ndarray
-    direction: np.ndarray
-
-    def __len__(self) -> int:
-        return int(self.time.size)
-
-
-def lap_increments(previous_y: np.ndarray, y: np.ndarray, height: float) -> np.ndarray:
-    """Boundary passes between two frames by the minimal-image rule on y
-    (``docs/definitions.md``, Pass direction).
-
-    Parameters
-    ----------
-    previous_y, y : ndarray of float64, shape (N,) (or any matching shape)
-        Heights (m) in the earlier and the later frame.
-    height : float
-        Height H of the riser (m).
-
-    Returns
-    -------
-    ndarray of int32
-        +1 where a particle passed up through the top (y dropped by more than H/2), -1
-        where it passed down through the bottom, 0 elsewhere.
-    """
-    dy = y - previous_y
-    return (dy < -0.5 * height).astype(np.int32) - (dy > 0.5 * height).astype(np.int32)
-
-
-def estimate_frame_interval(times) -> float:
-    """The frame interval of evenly spaced frame times: the least-squares slope of t_k
-    against k.
-
-    With times rounded to q s (printed to a few decimals) the slope is off by about
-    q / T^1.5 s, far less than a single step (off by up to q) or the median step; it does
-    not depend on the time origin.
-
-    Parameters
-    ----------
-    times : array_like of float, shape (T,)
-        Frame times (s), increasing.
-
-    Returns
-    -------
-    float
-        The interval (s); NaN for fewer than two times.
-    """
-    times = np.asarray(times, dtype=np.float64).reshape(-1)
-    n = times.size
-    if n < 2:
-        return float("nan")
-    k = np.arange(n, dtype=np.float64) - 0.5 * (n - 1)
-    return float(np.dot(k, times - times[0]) / np.dot(k, k))
-
-
-def _open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
-    path = Path(path)
-    if not path.exists():
-        raise InputError(f"{path}: no such file")
-    if path.stat().st_size == 0:
-        raise InputError(f"{path}: empty file")
-    try:
-        return h5py.File(path, mode)
-    except OSError as exc:
-        text = str(exc).lower()
-        if isinstance(exc, PermissionError) or "permission denied" in text or \
-                getattr(exc, "errno", None) in (errno.EACCES, errno.EPERM):
-            raise InputError(f"{path}: cannot read (permission denied)") from None
-        if "unable to lock file" in text:
-            raise InputError(f"{path}: locked by another program that is writing it (HDF5 "
-                             "file lock); wait for it to end") from None
-        raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format)") from None
-
-
-@nb.njit(cache=True)
-def _frame_problem(pos, lap, present, extent, tol, height, open_riser):
-    """The first problem of a block of frames, in one pass without temporaries: (code,
-    frame, particle) with code 0 none, 1 a present position not finite, 2 outside the
-    domain (beyond ``tol``), 3 a non-zero lap on an open riser, 4 (periodic) between
-    consecutive present frames |dy + dL H| > H + 2 tol (laps inconsistent with positions).
-    Codes 1-2 are found before 3-4 for the same frame and particle (docs/definitions.md,
-    File formats, What is checked)."""
-    n_frames, n_particles, d = pos.shape
-    for k in range(n_frames):
-        for p in range(n_particles):
-            if not present[k, p]:
-                continue
-            for c in range(d):
-                v = pos[k, p, c]
-                if not np.isfinite(v):
-                    return 1, k, p
-                if v < -tol or v > extent[c] + tol:
-                    return 2, k, p
-            if open_riser:
-                if lap[k, p] != 0:
-                    return 3, k, p
-            elif k > 0 and present[k - 1, p]:
-                moved = pos[k, p, 1] - pos[k - 1, p, 1] + (lap[k, p] - lap[k - 1, p]) * height
-                if not abs(moved) <= height + 2 * tol:
-                    return 4, k - 1, p
-    return 0, 0, 0
+from cfbmarkov.trajectory_checks import check_pass_events, check_stored_frames
+from cfbmarkov.frame_times import FrameTimes
+from cfbmarkov.trajectory_format import PassEvents
+from cfbmarkov.trajectory_header import read_header
 
 
 @contextlib.contextmanager
@@ -215,7 +84,7 @@ def opened(source: "str | os.PathLike | Trajectories") -> Iterator["Trajectories
         yield traj
 
 
-class Trajectories:
+class Trajectories(FrameTimes):
     """Read access to a trajectory file. Open with ``Trajectories(path)`` or as a context manager.
 
     Small metadata (times, ids, domain) is loaded on open; frames are read on demand.
@@ -250,8 +119,9 @@ class Trajectories:
         The file's layout version (1 or 2).
     frame_interval : float
         Time between frames (s): the file's ``frame_interval`` attribute or, for a file
-        without one, :func:`estimate_frame_interval` of its times; NaN for a file of one
-        frame without the attribute (then :meth:`lag_frames` raises).
+        without one, :func:`~cfbmarkov.trajectory_format.estimate_frame_interval` of its
+        times; NaN for a file of one frame without the attribute (then :meth:`lag_frames`
+        raises).
     source : str
         What produced the file.
     parameters : dict
@@ -270,139 +140,34 @@ class Trajectories:
 
     def __init__(self, path: str | os.PathLike):
         self.path = Path(path)
-        self._file = _open_h5(self.path)
+        self._file = open_h5(self.path)
         try:
-            self._validate()
+            header = read_header(self._file, self.path)
         except InputError:
             self._file.close()
             raise
         except (KeyError, OSError, ValueError, TypeError) as exc:
             self._file.close()
             raise InputError(f"{self.path}: damaged trajectory file ({exc})") from None
-
-    # -- opening and validation -------------------------------------------------------
-    def _validate(self) -> None:
-        f = self._file
-        fmt = f.attrs.get("format")
-        if isinstance(fmt, bytes):
-            fmt = fmt.decode()
-        if fmt != FORMAT:
-            if fmt == "cfbmarkov.model":
-                raise InputError(f"{self.path}: a cfbmarkov model file, not a trajectory file")
-            raise InputError(f"{self.path}: not a cfbmarkov trajectory file "
-                             + (f"(format attribute is {fmt!r})" if fmt else "(no 'format' attribute)"))
-        version = _whole_attr(f.attrs.get("version", 1), "version", self.path)
-        if version > VERSION:
-            raise InputError(f"{self.path}: trajectory file of layout version {version}, written by a "
-                             f"newer cfbmarkov (this one reads up to {VERSION}); upgrade cfbmarkov")
-        self.version = version
-        for name in ("particles/id", "frames/time", "frames/position", "frames/lap"):
-            if name not in f:
-                raise InputError(f"{self.path}: damaged trajectory file (no '{name}' dataset)")
-        self.ids = f["particles/id"][()]
-        self.times = f["frames/time"][()]
-        self.dimensions = _whole_attr(f.attrs.get("dimensions", 2), "dimensions", self.path)
-        n, t, d = self.ids.size, self.times.size, self.dimensions
-        if d not in (2, 3):
-            raise InputError(f"{self.path}: damaged trajectory file (dimensions {d})")
-        if f["frames/position"].shape != (t, n, d) or f["frames/lap"].shape != (t, n) or (
-                "frames/present" in f and f["frames/present"].shape != (t, n)):
-            raise InputError(f"{self.path}: damaged trajectory file (frame arrays do not match "
-                             f"{t} times x {n} particles x {d} coordinates)")
-        if t == 0:
-            raise InputError(f"{self.path}: trajectory file holds no frames")
-        self._check_arrays()
-        self.width = self._length_attr("width")
-        self.height = self._length_attr("height")
-        self.depth = self._length_attr("depth") if d == 3 else None
-        boundary = f.attrs.get("boundary", "periodic")
-        boundary = boundary.decode() if isinstance(boundary, bytes) else str(boundary)
-        if boundary not in BOUNDARIES:
-            raise InputError(f"{self.path}: damaged trajectory file (boundary {boundary!r})")
-        self.boundary = Boundary(boundary)
-        self.axes = {key: str(f.attrs.get(f"{key}_axis", default)) for key, default in
-                     (("across", "x"), ("vertical", "y"), ("depth", "z" if d == 3 else ""))}
-        self.region_origin = np.asarray(f.attrs.get("region_origin", np.zeros(d)), dtype=np.float64)
-        if self.region_origin.shape != (d,) or not np.all(np.isfinite(self.region_origin)):
-            raise InputError(f"{self.path}: damaged trajectory file (region_origin "
-                             f"{self.region_origin.tolist()} is not {d} finite numbers)")
-        self.source = str(f.attrs.get("source", "unknown"))
-        try:
-            self.parameters: dict[str, Any] = json.loads(f.attrs.get("parameters", "{}"))
-        except (ValueError, TypeError):
-            raise InputError(f"{self.path}: damaged trajectory file (the 'parameters' attribute "
-                             "is not JSON)") from None
-        if "frame_interval" in f.attrs:
-            self.frame_interval = _float_attr(f.attrs["frame_interval"])
-            if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
-                raise InputError(f"{self.path}: damaged trajectory file (frame_interval "
-                                 f"{f.attrs['frame_interval']!r} is not a positive number of s)")
-        else:
-            self.frame_interval = estimate_frame_interval(self.times)
-        self._check_times()
+        self.version = header.version
+        self.ids = header.ids
+        self.dimensions = header.dimensions
+        self.width, self.height, self.depth = header.width, header.height, header.depth
+        self.boundary = header.boundary
+        self.axes = header.axes
+        self.region_origin = header.region_origin
+        self.source = header.source
+        self.parameters: dict[str, Any] = header.parameters
+        super().__init__(self.path, header.times, header.frame_interval)
         #: frames whose positions and laps have passed the per-frame checks
-        self._checked = np.zeros(t, dtype=bool)
+        self._checked = np.zeros(self.n_frames, dtype=bool)
 
-    def _length_attr(self, name: str) -> float:
-        if name not in self._file.attrs:
-            raise InputError(f"{self.path}: damaged trajectory file (no '{name}' attribute)")
-        value = _float_attr(self._file.attrs[name])
-        if not (np.isfinite(value) and value > 0):
-            raise InputError(f"{self.path}: damaged trajectory file ({name} "
-                             f"{self._file.attrs[name]!r} is not a positive length in m)")
-        return value
-
-    def _check_arrays(self) -> None:
-        """Types of the datasets and unique ids (cheap: no frame is read)."""
-        f = self._file
-        kinds = {"particles/id": "iu", "frames/time": "f", "frames/position": "f",
-                 "frames/lap": "iu", "frames/present": "b", "frames/velocity": "f"}
-        for name, kind in kinds.items():
-            if name in f and (not isinstance(f[name], h5py.Dataset) or f[name].dtype.kind not in kind):
-                wanted = ("whole numbers" if kind == "iu" else "booleans" if kind == "b"
-                          else "numbers")
-                raise InputError(f"{self.path}: damaged trajectory file ('{name}' holds "
-                                 f"{getattr(f[name], 'dtype', 'a group')}, not {wanted})")
-        if self.ids.ndim != 1 or self.times.ndim != 1:
-            raise InputError(f"{self.path}: damaged trajectory file (ids or times are not 1-D)")
-        if "frames/velocity" in f and f["frames/velocity"].shape != f["frames/position"].shape:
-            raise InputError(f"{self.path}: damaged trajectory file (velocities of shape "
-                             f"{f['frames/velocity'].shape}, positions {f['frames/position'].shape})")
-        if np.unique(self.ids).size != self.ids.size:
-            srt = np.sort(self.ids)
-            raise InputError(f"{self.path}: damaged trajectory file (particle id "
-                             f"{srt[1:][srt[1:] == srt[:-1]][0]} appears twice)")
-
-    def _check_times(self) -> None:
-        """Frame times finite, increasing and evenly spaced within twice
-        FRAME_SPACING_TOLERANCE of the frame interval (the writer holds them to once; the
-        margin covers a median interval when written against the slope when read)."""
-        t = self.times
-        bad = ~np.isfinite(t)
-        if bad.any():
-            k = int(np.argmax(bad))
-            raise InputError(f"{self.path}: damaged trajectory file (frame {k} has time {t[k]}; "
-                             "frame times must be finite)")
-        if t.size < 2:
-            return
-        steps = np.diff(t)
-        fi = self.frame_interval
-        off = ~(np.abs(steps - fi) <= 2 * FRAME_SPACING_TOLERANCE * fi)
-        if off.any() or not fi > 0:
-            k = int(np.argmax(off))
-            kind = ("do not increase" if not steps[k] > 0 else
-                    f"are not evenly spaced (step {_t(steps[k])} s, frame interval {_t(fi)} s)")
-            raise InputError(f"{self.path}: damaged trajectory file (frame times "
-                             f"{_t(t[k])} and {_t(t[k + 1])} s {kind})")
-
+    # -- per-frame checks -------------------------------------------------------------
     def _check_frames(self, i0: int, i1: int, positions: np.ndarray | None = None,
                       laps: np.ndarray | None = None) -> None:
-        """Per-frame checks of frames i0 .. i1 - 1, each frame once (docs/definitions.md,
-        File formats, What is checked): positions finite and inside the domain (within
-        POSITION_TOLERANCE) where present; on a periodic riser, between consecutive frames
-        where a particle is present, the unwrapped displacement y1 - y0 + (L1 - L0) H is at
-        most H (no lap jump of more than 1, none against the motion); on an open riser laps
-        are 0 where present. ``positions`` / ``laps`` are those frames when already read."""
+        """Per-frame checks of frames i0 .. i1 - 1, each frame once, with the frame before
+        (:func:`~cfbmarkov.trajectory_checks.check_stored_frames`). ``positions`` /
+        ``laps`` are those frames when already read."""
         if i1 <= i0 or self._checked[i0:i1].all():
             return
         f = self._file
@@ -414,27 +179,8 @@ class Trajectories:
             lap = np.concatenate([f["frames/lap"][lo:i0], lap])
         present = self.present(slice(lo, i1))
         extent = np.array([self.width, self.height] + ([self.depth] if self.dimensions == 3 else []))
-        tol = POSITION_TOLERANCE
-        code, k, n = _frame_problem(np.ascontiguousarray(pos, dtype=np.float64),
-                                    np.ascontiguousarray(lap, dtype=np.int64),
-                                    np.ascontiguousarray(present, dtype=np.bool_), extent, tol,
-                                    self.height, self.boundary == "open")
-        if code == 1 or code == 2:
-            what = ("is not a finite number" if code == 1 else "lies outside the domain 0.."
-                    + " x 0..".join(f"{v:g}" for v in extent) + " m")
-            raise InputError(f"{self.path}: damaged trajectory file (position "
-                             f"{pos[k, n].tolist()} of particle {self.ids[n]} at t = "
-                             f"{_t(self.times[lo + k])} s {what})")
-        if code == 3:
-            raise InputError(f"{self.path}: damaged trajectory file (an open riser, but particle "
-                             f"{self.ids[n]} has lap {lap[k, n]} at t = {_t(self.times[lo + k])} s)")
-        if code == 4:
-            raise InputError(
-                f"{self.path}: damaged trajectory file (lap counter of particle {self.ids[n]} "
-                f"goes from {lap[k, n]} to {lap[k + 1, n]} between t = {_t(self.times[lo + k])} "
-                f"and {_t(self.times[lo + k + 1])} s while its height goes from "
-                f"{pos[k, n, 1]:.6g} to {pos[k + 1, n, 1]:.6g} m: laps inconsistent with the "
-                "positions)")
+        check_stored_frames(self.path, self.ids, self.times[lo:i1], pos, lap, present, extent,
+                            self.height, self.boundary.is_open)
         self._checked[i0:i1] = True
 
     def _check_read(self, frames, data: np.ndarray, name: str) -> None:
@@ -474,11 +220,6 @@ class Trajectories:
 
     # -- metadata --------------------------------------------------------------------
     @property
-    def n_frames(self) -> int:
-        """Number of frames T."""
-        return int(self.times.size)
-
-    @property
     def n_particles(self) -> int:
         """Number of particles N."""
         return int(self.ids.size)
@@ -512,7 +253,7 @@ class Trajectories:
             reasons.append("3D positions")
         if self.has_absences and not absent:
             reasons.append("particles absent from some frames")
-        if self.boundary == "open" and not open_boundary:
+        if self.boundary.is_open and not open_boundary:
             reasons.append("an open riser (particles enter and leave)")
         return reasons
 
@@ -548,114 +289,6 @@ class Trajectories:
     def attrs(self) -> dict[str, Any]:
         """The root attributes of the file (bytes decoded to str)."""
         return {k: (v.decode() if isinstance(v, bytes) else v) for k, v in self._file.attrs.items()}
-
-    # -- locating frames -------------------------------------------------------------
-    @property
-    def time_tolerance(self) -> float:
-        """How far (s) a frame may lie from a requested time and still be the frame at it.
-
-        Half of :data:`FRAME_SPACING_TOLERANCE` of the frame interval: frame times rounded
-        to q s lie within q/2 of the exact times, and the spacing check accepts q up to
-        the spacing tolerance of an interval. It does not depend on the time origin. A file
-        of one frame has no interval: then ``TIME_TOLERANCE * max(|t|, 1 s)`` (round-off).
-        """
-        if np.isfinite(self.frame_interval):
-            return 0.5 * FRAME_SPACING_TOLERANCE * self.frame_interval
-        return TIME_TOLERANCE * max(abs(float(self.times[-1])), 1.0)
-
-    def _frames_text(self) -> str:
-        if self.n_frames == 1:
-            return f"{self.path} holds one frame, at t = {_t(self.times[0])} s"
-        return (f"frames span {_t(self.times[0])} to {_t(self.times[-1])} s every "
-                f"{_t(self.frame_interval)} s")
-
-    def frame_index(self, time: float) -> int:
-        """Index of the frame at ``time``.
-
-        Parameters
-        ----------
-        time : float
-            A frame time (s), matched within :attr:`time_tolerance`.
-
-        Returns
-        -------
-        int
-
-        Raises
-        ------
-        InputError
-            If no frame lies at ``time``.
-        """
-        if not np.isfinite(time):
-            raise InputError(f"time {time:g} s is not a finite number")
-        i = int(np.argmin(np.abs(self.times - time)))
-        if not abs(self.times[i] - time) <= self.time_tolerance:
-            raise InputError(f"{self.path}: no frame at t = {_t(time)} s ({self._frames_text()})")
-        return i
-
-    def window(self, start: float, stop: float) -> slice:
-        """Frames with start <= t <= stop, as a slice.
-
-        Parameters
-        ----------
-        start, stop : float
-            The window (s), matched to frames within :attr:`time_tolerance`.
-
-        Returns
-        -------
-        slice
-
-        Raises
-        ------
-        InputError
-            If the window is empty, leaves the data, or holds no frame.
-        """
-        if not (np.isfinite(start) and np.isfinite(stop)):
-            raise InputError(f"window {start:g}:{stop:g} s is not finite")
-        if not stop > start:
-            raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
-        tol = self.time_tolerance
-        if start < self.times[0] - tol or stop > self.times[-1] + tol:
-            raise InputError(
-                f"window {start:g}:{stop:g} s lies outside the data of {self.path} "
-                f"({_t(self.times[0])} to {_t(self.times[-1])} s)")
-        i0 = int(np.searchsorted(self.times, start - tol, side="left"))
-        i1 = int(np.searchsorted(self.times, stop + tol, side="right"))
-        if i1 - i0 < 1:
-            raise InputError(f"window {start:g}:{stop:g} s holds no frame of {self.path}")
-        return slice(i0, i1)
-
-    def lag_frames(self, lag: float) -> int:
-        """The lag as a whole number of frame intervals.
-
-        Parameters
-        ----------
-        lag : float
-            The lag (s), matched to a whole number of frame intervals within
-            :attr:`time_tolerance`.
-
-        Returns
-        -------
-        int
-            ``lag / frame_interval`` rounded (>= 1).
-
-        Raises
-        ------
-        InputError
-            If the lag is not positive, the file has no frame interval (one frame and no
-            ``frame_interval`` attribute), or the lag is not a whole multiple of the frame
-            interval.
-        """
-        if not (np.isfinite(lag) and lag > 0):
-            raise InputError(f"lag {lag:g} s must be a positive finite number")
-        if not np.isfinite(self.frame_interval):
-            raise InputError(f"{self.path} holds one frame: no frame interval, so no transition "
-                             f"can be counted (lag {lag:g} s)")
-        k = int(round(lag / self.frame_interval))
-        if k < 1 or not abs(lag - k * self.frame_interval) <= self.time_tolerance:
-            raise InputError(f"lag {lag:g} s is not a whole multiple of the frame interval "
-                             f"{_t(self.frame_interval)} s of {self.path}")
-        return k
 
     # -- reading frames --------------------------------------------------------------
     def positions(self, frames: int | slice = slice(None)) -> np.ndarray:
@@ -790,19 +423,17 @@ class Trajectories:
         Returns
         -------
         PassEvents or None
+
+        Raises
+        ------
+        InputError
+            If the events are damaged (:func:`~cfbmarkov.trajectory_checks.check_pass_events`).
         """
         if not self.has_events:
             return None
         g = self._file["events"]
         events = PassEvents(g["time"][()], g["particle"][()], g["direction"][()])
-        e = events.time.shape
-        if (events.particle.shape != e or events.direction.shape != e or len(e) != 1
-                or not np.all(np.isfinite(events.time))
-                or (e[0] and (events.particle.min() < 0 or events.particle.max() >= self.n_particles
-                              or not np.all(np.abs(events.direction) == 1)))):
-            raise InputError(f"{self.path}: damaged trajectory file (pass events: times, "
-                             "particles and directions must be equally long, times finite, "
-                             "particles indices of /particles/id and directions +1 or -1)")
+        check_pass_events(self.path, events, self.n_particles)
         return events
 
     # -- gas fields (CFD-DEM runs) ---------------------------------------------------------
@@ -868,23 +499,3 @@ class Trajectories:
         key = f"provenance/{name}"
         return self._file[key] if key in self._file else None
 
-
-def _float_attr(value) -> float:
-    """An attribute as a float (NaN where it is not one number)."""
-    try:
-        array = np.asarray(value, dtype=np.float64)
-    except (TypeError, ValueError):
-        return float("nan")
-    return float(array) if array.size == 1 else float("nan")
-
-
-def _whole_attr(value, name: str, path) -> int:
-    number = _float_attr(value)
-    if not (np.isfinite(number) and number == round(number)):
-        raise InputError(f"{path}: damaged trajectory file ({name} {value!r} is not a whole number)")
-    return int(number)
-
-
-def _t(value: float) -> str:
-    """A time for a message: up to 10 significant digits (10.00833, not 10.0083)."""
-    return f"{float(value):.10g}"

@@ -31,7 +31,7 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     d = t.dimensions
     size = f"{t.width:g} m across x {t.height:g} m high" + (
         f" x {t.depth:g} m deep (3D)" if d == 3 else " (2D)")
-    boundary = ("periodic (what leaves the top re-enters the bottom)" if t.boundary == "periodic"
+    boundary = ("periodic (what leaves the top re-enters the bottom)" if not t.boundary.is_open
                 else "open (inlet at the bottom, outlet at the top; particles enter and leave)")
     lines = [repr(t), f"  domain: {size}; vertical boundary {boundary}"]
     axes = f"vertical {t.axes['vertical']}, across {t.axes['across']}" + (
@@ -65,7 +65,7 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     every = " (every particle in every frame)" if not t.has_absences else ""
     lines.append(f"  particles present per frame: min {int(counts.min())}, max {int(counts.max())}"
                  f" of {t.n_particles}{every}")
-    if t.boundary == "periodic":
+    if not t.boundary.is_open:
         lines.append(f"  passes through the periodic boundary: {up} up, {down} down"
                      + (" (not counted across a particle's absence)" if t.has_absences else ""))
     lines.append(f"  entries {entries}, exits {exits} (after the first frame)")

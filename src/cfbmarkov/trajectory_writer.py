@@ -6,66 +6,40 @@ Every frame is validated as it is written (finite, inside the domain, evenly spa
 increasing times), and the file appears under its name only when complete: it is written
 under a temporary name beside it and renamed (:mod:`cfbmarkov._atomic`).
 
-Even spacing is judged relative to the frame interval, independent of the time origin:
-every step between frames must lie within :data:`~cfbmarkov.trajectories.FRAME_SPACING_TOLERANCE`
-(1 %) of the reference interval, the caller's ``frame_interval`` when given, else the
-median step (``docs/definitions.md``, File formats, Frame times). 1 % accepts times printed
-to 5 decimals at frame rates up to 1 kHz: rounding to q s moves a step by at most q
-(1e-5 s, 1 % of 1 ms) and still refuses a missing frame (100 %) or a step a few per cent
-off.
+Even spacing is judged relative to the frame interval, independent of the time origin
+(:class:`~cfbmarkov.trajectory_series.FrameSeries`; ``docs/definitions.md``, File formats,
+Frame times).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
-import functools
 import json
 import os
 from pathlib import Path
 from typing import Any
 
 import h5py
-import numba as nb
 import numpy as np
 
 from cfbmarkov import _interrupt
-from cfbmarkov._atomic import (discard, is_write_failure, late_write_failure, publish,
-                               temporary_path, write_error)
+from cfbmarkov._atomic import (discard, is_write_failure, publish, temporary_path, write_error,
+                               write_method)
 from cfbmarkov._hdf5 import create_array_dataset, json_default, package_version
+from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import (BOUNDARIES, FORMAT, FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE,
-                                    VERSION, PassEvents, _t, estimate_frame_interval, lap_increments)
+from cfbmarkov.trajectory_checks import check_written_values
+from cfbmarkov.trajectory_format import FORMAT, VERSION, PassEvents, estimate_frame_interval
+from cfbmarkov.trajectory_groups import append_events, append_field_frames, create_frames
+from cfbmarkov.trajectory_series import FrameSeries
 
-#: steps before a block that join its own in the median a block's steps are judged against
-RECENT_STEPS = 64
 #: laps from wrapped heights: the largest step between frames (fraction of H) that the
 #: importers accept; beyond a quarter a coarse output of a fast particle is likely
 IMPORT_MAX_STEP = 0.25
-#: fewest particles per chunk of a frame (a file whose particles grow by insertion)
-MIN_CHUNK_PARTICLES = 256
 
 
 #: files whose writes failed: kept referenced so that they are never closed or freed
 _FAILED_FILES: list = []
-
-
-def _writes(method):
-    """Method decorator: a failed write (no space left, file too large, ...) discards the
-    partial file and becomes one InputError naming the output and the cause."""
-    @functools.wraps(method)
-    def wrapper(self, *args, **kwargs):
-        try:
-            result = method(self, *args, **kwargs)
-            late = late_write_failure()
-        except (OSError, RuntimeError) as exc:
-            if not is_write_failure(exc):
-                raise
-            late = exc
-        if late is not None:
-            self._fail()
-            raise write_error(late, self.path) from None
-        return result
-    return wrapper
 
 
 class TrajectoryWriter:
@@ -77,13 +51,11 @@ class TrajectoryWriter:
     file is removed.
 
     Even spacing: every step between frames must lie within
-    :data:`~cfbmarkov.trajectories.FRAME_SPACING_TOLERANCE` (1 %) of the reference
-    interval, whatever the time origin. The reference is ``frame_interval`` when given;
-    otherwise the median of the steps: of each block with the steps just before it as it is
-    written (the first step while fewer than three are known), and of all steps when the
-    file is closed. The stored ``frame_interval`` is then the least-squares slope of the
-    times (:func:`~cfbmarkov.trajectories.estimate_frame_interval`), exact to far below one
-    rounding step for times printed to a few decimals.
+    :data:`~cfbmarkov.trajectory_format.FRAME_SPACING_TOLERANCE` (1 %) of the reference
+    interval, ``frame_interval`` when given, else the median of the steps
+    (:class:`~cfbmarkov.trajectory_series.FrameSeries`; of all steps when the file is
+    closed). The stored ``frame_interval`` is then the least-squares slope of the times
+    (:func:`~cfbmarkov.trajectory_format.estimate_frame_interval`).
 
     Particles may be absent from frames (inserted later, deleted at an outlet, out of a
     camera's view): give ``present`` to :meth:`append_frames`, and :meth:`add_particles` for
@@ -104,9 +76,10 @@ class TrajectoryWriter:
         The riser W x H (m), positive.
     depth : float, optional
         The riser's depth (m) for 3D positions (across, vertical, depth); 2D when None.
-    boundary : {"periodic", "open"}, optional
+    boundary : Boundary or {"periodic", "open"}, optional
         The vertical boundary: ``periodic`` (what leaves the top re-enters at the bottom;
-        laps counted) or ``open`` (inlet at the bottom, outlet at the top; laps are 0).
+        laps counted) or ``open`` (inlet at the bottom, outlet at the top; laps are 0);
+        stored as its name.
     axes : dict, optional
         The source's axis letter of each stored axis, keys ``across``, ``vertical`` and (3D)
         ``depth``; default x, y (, z).
@@ -145,7 +118,7 @@ class TrajectoryWriter:
                  source: str, parameters: dict[str, Any] | None = None,
                  with_velocity: bool = False, frame_interval: float | None = None,
                  label: str | None = None, max_step: float = 0.5, depth: float | None = None,
-                 boundary: str = "periodic", axes: dict[str, str] | None = None,
+                 boundary: str | Boundary = "periodic", axes: dict[str, str] | None = None,
                  region_origin=None):
         self.path = Path(path)
         self.max_step = float(max_step)
@@ -155,8 +128,7 @@ class TrajectoryWriter:
         if not (width > 0 and height > 0) or (depth is not None and not depth > 0):
             size = f"{width:g} x {height:g}" + ("" if depth is None else f" x {depth:g}")
             raise InputError(f"domain {size} m must have positive size")
-        if boundary not in BOUNDARIES:
-            raise InputError(f"boundary {boundary!r}: choose periodic or open")
+        boundary = Boundary.parse(boundary, "boundary")
         if frame_interval is not None and not (np.isfinite(frame_interval) and frame_interval > 0):
             raise InputError(f"frame interval {frame_interval!r} s must be a positive number")
         self.width, self.height = float(width), float(height)
@@ -174,7 +146,6 @@ class TrajectoryWriter:
             raise InputError(f"region origin {origin.tolist()} needs {self.dimensions} coordinates")
         self._tmp = temporary_path(self.path)
         self._closed = False
-        n, d = self.ids.size, self.dimensions
         try:
             self._file = h5py.File(self._tmp, "w")
         except (OSError, RuntimeError) as exc:
@@ -184,18 +155,18 @@ class TrajectoryWriter:
             discard(self._tmp)
             raise
         try:
-            self._create(n, d, source, parameters, origin, axes, boundary, frame_interval)
+            self._create(source, parameters, origin, axes, boundary, frame_interval)
         except BaseException:           # e.g. Ctrl-C while the datasets are created
             if not self._closed:
                 self.abort()
             raise
 
-    @_writes
-    def _create(self, n, d, source, parameters, origin, axes, boundary, frame_interval) -> None:
-        f = self._file
+    @write_method
+    def _create(self, source, parameters, origin, axes, boundary, frame_interval) -> None:
+        f, d = self._file, self.dimensions
         f.attrs.update({
             "format": FORMAT, "version": VERSION, "width": self.width, "height": self.height,
-            "dimensions": d, "boundary": boundary, "across_axis": axes["across"],
+            "dimensions": d, "boundary": boundary.value, "across_axis": axes["across"],
             "vertical_axis": axes["vertical"], "depth_axis": axes["depth"],
             "region_origin": origin,
             "length_unit": "m", "time_unit": "s", "source": source,
@@ -207,25 +178,10 @@ class TrajectoryWriter:
             f.attrs["depth"] = self.depth
         if frame_interval is not None:
             f.attrs["frame_interval"] = float(frame_interval)
-        chunk = max(n, MIN_CHUNK_PARTICLES)
-        f.create_dataset("particles/id", data=self.ids, maxshape=(None,), chunks=(max(n, 1024),))
-        f.create_dataset("frames/time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(4096,))
-        f.create_dataset("frames/position", shape=(0, n, d), maxshape=(None, None, d), dtype="f8",
-                         chunks=(1, chunk, d), fillvalue=np.nan)
-        f.create_dataset("frames/lap", shape=(0, n), maxshape=(None, None), dtype="i4",
-                         chunks=(1, chunk))
-        if self.with_velocity:
-            f.create_dataset("frames/velocity", shape=(0, n, d), maxshape=(None, None, d),
-                             dtype="f8", chunks=(1, chunk, d), fillvalue=np.nan)
-        self._chunk = chunk
+        self._chunk = create_frames(f, self.ids, d, self.with_velocity)
         self._n_frames = 0
-        self._last_time: float | None = None
-        self._continued_from: float | None = None   # last time of the series continued
-        self._interval = None if frame_interval is None else float(frame_interval)
-        self._recent_steps = np.zeros(0)
-        self._last_y: np.ndarray | None = None       # last height seen of each particle
-        self._last_lap: np.ndarray | None = None     # its lap counter then
-        self._last_present: np.ndarray | None = None  # present in the last frame written
+        self._series = FrameSeries(self._label, self.height, boundary.is_open, self.max_step,
+                                   frame_interval)
         self._any_present = False
 
     # -- context manager ---------------------------------------------------------------
@@ -251,9 +207,10 @@ class TrajectoryWriter:
     @property
     def last_frame(self) -> tuple[float, np.ndarray, np.ndarray] | None:
         """(time in s, heights y [N] in m, laps [N]) of the last frame written, or None."""
-        if self._last_time is None:
+        series = self._series
+        if series.last_time is None:
             return None
-        return self._last_time, self._last_y, self._last_lap
+        return series.last_time, series.last_y, series.last_lap
 
     def continue_after(self, time: float, heights: np.ndarray, laps: np.ndarray,
                        frame_interval: float | None = None) -> None:
@@ -279,86 +236,9 @@ class TrajectoryWriter:
         """
         if self._n_frames:
             raise InputError(f"{self._label}: cannot continue a series after writing frames")
-        self._last_time = self._continued_from = float(time)
-        self._last_y = np.asarray(heights, dtype=np.float64).copy()
-        self._last_lap = np.asarray(laps, dtype=np.int32).copy()
-        self._last_present = np.ones(self.ids.size, dtype=bool)
-        if frame_interval is not None:
-            self._interval = float(frame_interval)
+        self._series.continue_after(time, heights, laps, self.ids.size, frame_interval)
 
-    # -- validation --------------------------------------------------------------------
-    def _check_times(self, times: np.ndarray) -> None:
-        if not np.all(np.isfinite(times)):
-            raise InputError(f"{self._label}: frame time is not a finite number")
-        allt = times if self._last_time is None else np.concatenate([[self._last_time], times])
-        if allt.size < 2:
-            return
-        steps = np.diff(allt)
-        if np.any(steps <= 0):
-            k = int(np.argmax(steps <= 0))
-            raise InputError(f"{self._label}: time does not increase at t = {_t(allt[k + 1])} s "
-                             f"(after {_t(allt[k])} s)")
-        known = np.concatenate([self._recent_steps, steps])
-        self._check_spacing(allt, known, known.size - steps.size)
-        self._recent_steps = known[-RECENT_STEPS:]
-
-    def _check_spacing(self, times: np.ndarray, steps: np.ndarray, first: int = 0) -> None:
-        """Refuse the first of ``steps[first:]`` (between ``times[i - first]`` and the
-        next) more than FRAME_SPACING_TOLERANCE off the reference interval."""
-        if self._interval is not None:
-            reference, what = self._interval, "the frame interval"
-        elif steps.size >= 3:
-            reference, what = float(np.median(steps)), "the median step"
-        else:
-            reference, what = float(steps[0]), "the first step"
-        bad = np.abs(steps[first:] - reference) > FRAME_SPACING_TOLERANCE * reference
-        if np.any(bad):
-            k = int(np.argmax(bad))
-            raise InputError(
-                f"{self._label}: frames unevenly spaced: {_t(steps[first + k])} s between "
-                f"t = {_t(times[k])} and {_t(times[k + 1])} s, expected {_t(reference)} s "
-                f"({what}, within {FRAME_SPACING_TOLERANCE:.0%}); for irregular frame times "
-                "(tracking data such as PEPT, or missing frames) resample them with --resample "
-                "DT --max-gap G")
-
-    def _check_array(self, name: str, values: np.ndarray, times: np.ndarray,
-                     present: np.ndarray, domain: bool = False) -> None:
-        """Refuse a present value that is not finite, or (``domain``) a present position
-        outside the domain by more than ``POSITION_TOLERANCE``; one pass
-        (:func:`_values_problem`), the first problem in frame, then particle order."""
-        limits = [self.width, self.height] + ([] if self.depth is None else [self.depth])
-        code, t_idx, p_idx = _values_problem(np.ascontiguousarray(values), present,
-                                             np.asarray(limits, dtype=np.float64),
-                                             POSITION_TOLERANCE, domain)
-        if code == 1:
-            raise InputError(f"{self._label}: {name} of particle {self.ids[p_idx]} at t = "
-                             f"{times[t_idx]:g} s is not a finite number")
-        if code == 2:
-            where = ", ".join(f"{v:g}" for v in values[t_idx, p_idx])
-            size = " x ".join(f"0..{v:g}" for v in limits)
-            raise InputError(
-                f"{self._label}: particle {self.ids[p_idx]} at t = {times[t_idx]:g} s lies outside "
-                f"the domain {size} m at ({where})")
-
-    def _check_minimal_image(self, previous_y: np.ndarray, y: np.ndarray, t0, t1,
-                             both: np.ndarray) -> None:
-        """Laps from wrapped heights need small steps: refuse a particle that moved more
-        than ``max_step`` of the height between two frames (by the minimal image; beyond
-        half the height its pass through the periodic boundary, or not, cannot be told from
-        the positions at all)."""
-        step = np.where(both, np.abs(y - previous_y), 0.0)
-        step = np.minimum(step, self.height - step)          # the minimal image
-        worst = int(np.argmax(step)) if step.size else 0
-        if step.size and step[worst] > self.max_step * self.height:
-            raise InputError(
-                f"{self._label}: particle {int(self.ids[worst])} moved {step[worst]:.4g} m "
-                f"(more than {self.max_step:g} of the height {self.height:g} m) between t = {t0:g} "
-                f"and {t1:g} s: the lap counter cannot be inferred from wrapped positions; "
-                "write frames more often, or give unwrapped coordinates (xu yu) or image "
-                "flags (ix iy)")
-
-    # -- writing -----------------------------------------------------------------------
-    @_writes
+    @write_method
     def add_particles(self, ids) -> None:
         """Add particles that appear after the first frame (inserted, entering the view):
         new columns, absent from every frame written so far.
@@ -390,10 +270,7 @@ class TrajectoryWriter:
         self.ids = np.concatenate([self.ids, new])
         if self._n_frames:
             self._mark_absent()       # the new particles are absent from the frames so far
-        if self._last_y is not None:
-            self._last_y = np.concatenate([self._last_y, np.full(new.size, np.nan)])
-            self._last_lap = np.concatenate([self._last_lap, np.zeros(new.size, np.int32)])
-            self._last_present = np.concatenate([self._last_present, np.zeros(new.size, bool)])
+        self._series.add_particles(new.size)
 
     def _mark_absent(self) -> None:
         """Create the presence mask on the first absence: every earlier entry present, except
@@ -434,7 +311,7 @@ class TrajectoryWriter:
                            None if lap is None else np.asarray(lap)[None],
                            None if present is None else np.asarray(present)[None])
 
-    @_writes
+    @write_method
     def append_frames(self, times, positions, velocities=None, laps=None, present=None) -> None:
         """Append a block of frames.
 
@@ -471,20 +348,23 @@ class TrajectoryWriter:
         present = np.ones((t, n), dtype=bool) if present is None else np.asarray(
             present, dtype=bool).reshape(t, n)
         absent = not present.all()
-        self._check_times(times)
-        self._check_array("position", positions, times, present, domain=True)
+        self._series.check_times(times)
+        limits = [self.width, self.height] + ([] if self.depth is None else [self.depth])
+        check_written_values(self._label, "position", positions, times, present, self.ids,
+                             limits, domain=True)
         if self.with_velocity:
             if velocities is None:
                 raise InputError(f"{self._label}: this file stores velocities; none were given")
             velocities = np.asarray(velocities, dtype=np.float64)
             if velocities.shape != (t, n, d):
                 raise InputError(f"{self._label}: expected velocities of shape ({t}, {n}, {d})")
-            self._check_array("velocity", velocities, times, present)
+            check_written_values(self._label, "velocity", velocities, times, present,
+                                 self.ids, limits)
         if absent:
             positions = np.where(present[..., None], positions, np.nan)
             if self.with_velocity:
                 velocities = np.where(present[..., None], velocities, np.nan)
-        laps = self._laps(times, positions, present, laps)
+        laps = self._series.laps(self.ids, times, positions, present, laps)
         f = self._file
         if absent:
             self._mark_absent()
@@ -503,47 +383,8 @@ class TrajectoryWriter:
         if "frames/present" in f:
             f["frames/present"][i0:i1] = present
         self._n_frames = i1
-        self._last_time = float(times[-1])
+        self._series.last_time = float(times[-1])
         self._any_present = self._any_present or bool(present.any())
-
-    def _laps(self, times, positions, present, laps) -> np.ndarray:
-        """The lap counters of a block: given, 0 for an open riser, or by the minimal-image
-        rule between consecutive frames where a particle is present (carried over gaps);
-        updates the last height, lap and presence of every particle."""
-        t, n = present.shape
-        if laps is not None:
-            laps = np.where(present, np.asarray(laps, dtype=np.int32).reshape(t, n), 0)
-            if self._last_y is None:
-                self._last_y = np.full(n, np.nan)
-                self._last_lap = np.zeros(n, np.int32)
-            seen = present.any(axis=0)
-            last = t - 1 - np.argmax(present[::-1], axis=0)
-            cols = np.arange(n)
-            self._last_y = np.where(seen, positions[last, cols, 1], self._last_y)
-            self._last_lap = np.where(seen, laps[last, cols], self._last_lap).astype(np.int32)
-            self._last_present = present[-1].copy()
-            return laps
-        if self.boundary == "open":
-            return np.zeros((t, n), dtype=np.int32)
-        out = np.zeros((t, n), dtype=np.int32)
-        prev_y, prev_lap, prev_present = self._last_y, self._last_lap, self._last_present
-        prev_t = self._last_time
-        for k in range(t):
-            y = positions[k, :, 1]
-            if prev_y is None:
-                lap = np.zeros(n, dtype=np.int32)
-                prev_y = np.full(n, np.nan)
-            else:
-                both = present[k] & prev_present
-                self._check_minimal_image(prev_y, y, prev_t, times[k], both)
-                with np.errstate(invalid="ignore"):
-                    step = lap_increments(prev_y, y, self.height)
-                lap = prev_lap + np.where(both, step, 0).astype(np.int32)
-            out[k] = np.where(present[k], lap, 0)
-            prev_y = np.where(present[k], y, prev_y)
-            prev_lap, prev_present, prev_t = lap, present[k], times[k]
-        self._last_y, self._last_lap, self._last_present = prev_y, prev_lap, prev_present
-        return out
 
     def append_fields(self, time: float, spacing, **fields) -> None:
         """Append one frame of gas fields on a cell-centred grid to ``/fields``.
@@ -567,7 +408,7 @@ class TrajectoryWriter:
         self.append_field_frames([time], spacing,
                                  **{name: np.asarray(value)[None] for name, value in fields.items()})
 
-    @_writes
+    @write_method
     def append_field_frames(self, times, spacing, **fields) -> None:
         """Append a block of gas-field frames to ``/fields`` (one write per field).
 
@@ -586,37 +427,9 @@ class TrajectoryWriter:
             If the fields are on different grids or do not hold T frames, or they are not
             the fields of earlier frames.
         """
-        times = np.asarray(times, dtype=np.float64).reshape(-1)
-        g = self._file.require_group("fields")
-        first = "time" not in g
-        arrays = {name: np.asarray(value, dtype=np.float32) for name, value in fields.items()}
-        if any(a.ndim < 3 or a.shape[0] != times.size for a in arrays.values()):
-            raise InputError(f"{self._label}: gas fields must hold {times.size} frame(s) of a "
-                             "2D grid each")
-        if first:
-            shapes = {a.shape[1:3] for a in arrays.values()}
-            if len(shapes) != 1:
-                raise InputError(f"{self._label}: gas fields of different grids {sorted(shapes)}")
-            ny, nx = shapes.pop()
-            g.attrs.update({"spacing": np.asarray(spacing, dtype=np.float64),
-                            "origin": np.zeros(2), "shape": np.asarray([nx, ny]),
-                            "units": json.dumps({"void_fraction": "-", "gas_velocity": "m/s",
-                                                 "pressure": "Pa"})})
-            g.create_dataset("time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
-            for name, a in arrays.items():
-                g.create_dataset(name, shape=(0, *a.shape[1:]), maxshape=(None, *a.shape[1:]),
-                                 dtype="f4", chunks=(1, *a.shape[1:]))
-        elif set(arrays) != set(g) - {"time"}:
-            raise InputError(f"{self._label}: gas fields {sorted(arrays)} differ from those of "
-                             f"earlier frames {sorted(set(g) - {'time'})}")
-        k = g["time"].shape[0]
-        g["time"].resize(k + times.size, axis=0)
-        g["time"][k:] = times
-        for name, a in arrays.items():
-            g[name].resize(k + times.size, axis=0)
-            g[name][k:] = a
+        append_field_frames(self._file, self._label, times, spacing, fields)
 
-    @_writes
+    @write_method
     def add_events(self, times, particles, directions) -> None:
         """Store exact pass events, in any order.
 
@@ -629,21 +442,9 @@ class TrajectoryWriter:
         directions : array_like of int, shape (E,)
             +1 up through the top, -1 down through the bottom.
         """
-        times = np.asarray(times, dtype=np.float64)
-        order = np.argsort(times, kind="stable")
-        g = self._file.require_group("events")
-        g.attrs["exact"] = True
-        for name, values, dtype in (("time", times, "f8"), ("particle", particles, "i4"),
-                                    ("direction", directions, "i1")):
-            data = np.asarray(values)[order].astype(dtype)
-            if name in g:
-                old = g[name]
-                old.resize(old.shape[0] + data.size, axis=0)
-                old[-data.size:] = data
-            else:
-                g.create_dataset(name, data=data, maxshape=(None,), chunks=True)
+        append_events(self._file, times, particles, directions)
 
-    @_writes
+    @write_method
     def attach(self, name: str, datasets: dict[str, np.ndarray], attrs: dict[str, Any] | None = None
                ) -> None:
         """Attach a provenance group ``/provenance/<name>``.
@@ -664,7 +465,7 @@ class TrajectoryWriter:
         for key, value in (attrs or {}).items():
             g.attrs[key] = value
 
-    @_writes
+    @write_method
     def close(self) -> Path:
         """Finish the file and move it to its final name (nothing if already closed).
 
@@ -705,14 +506,14 @@ class TrajectoryWriter:
     def _finish_times(self) -> None:
         """Check the spacing of all frames against their median step and store the frame
         interval estimated from them (when the caller gave none)."""
-        if self._interval is not None:
+        if self._series.interval is not None:
             return      # every step was checked against it as it was written
         times = self._file["frames/time"][()]
-        if self._continued_from is not None:
-            times = np.concatenate([[self._continued_from], times])
+        if self._series.continued_from is not None:
+            times = np.concatenate([[self._series.continued_from], times])
         if times.size < 2:
             return      # one frame: no interval
-        self._check_spacing(times, np.diff(times))
+        self._series.check_spacing(times, np.diff(times))
         self._file.attrs["frame_interval"] = estimate_frame_interval(times)
 
     def abort(self) -> None:
@@ -741,7 +542,7 @@ class TrajectoryWriter:
 def write_trajectories(path: str | os.PathLike, times, positions, *, width: float, height: float,
                        ids=None, velocities=None, laps=None, source: str = "arrays",
                        parameters: dict[str, Any] | None = None, events: PassEvents | None = None,
-                       present=None, depth: float | None = None, boundary: str = "periodic",
+                       present=None, depth: float | None = None, boundary: str | Boundary = "periodic",
                        axes: dict[str, str] | None = None, region_origin=None) -> Path:
     """Write whole arrays as a trajectory file.
 
@@ -796,24 +597,3 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
             w.add_events(events.time, events.particle, events.direction)
     return Path(path)
 
-
-@nb.njit(cache=True)
-def _values_problem(values, present, extent, tol, domain):
-    """The first problem of a block of per-particle values, in one pass without
-    temporaries: (code, frame, particle), code 0 none, 1 a present value not finite, 2
-    (``domain``) a present position outside [-tol, extent + tol] on some axis. A particle's
-    non-finite value is reported before its being outside."""
-    n_frames, n_particles, d = values.shape
-    for k in range(n_frames):
-        for p in range(n_particles):
-            if not present[k, p]:
-                continue
-            for c in range(d):
-                if not np.isfinite(values[k, p, c]):
-                    return 1, k, p
-            if domain:
-                for c in range(d):
-                    v = values[k, p, c]
-                    if v < -tol or v > extent[c] + tol:
-                        return 2, k, p
-    return 0, 0, 0

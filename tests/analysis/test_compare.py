@@ -181,11 +181,12 @@ def test_cli_compare(pair, tmp_path, capsys):
 
 
 def test_model_figures_from_an_attached_model(tmp_path, make_run, write_run):
-    markov = pytest.importorskip("cfbmarkov.markov")
+    from cfbmarkov.markov import CellGrid, fit_model
+
     run = make_run(n_particles=300, t1=3.0, seed=11)
     ref = write_run(tmp_path / "ref.h5", run, source="cfd-dem")
-    grid = markov.CellGrid(6, 38, 0.09, 0.95)
-    model = markov.fit_model(ref, grid, 0.025, (0.0, 1.0))
+    grid = CellGrid(6, 38, 0.09, 0.95)
+    model = fit_model(ref, grid, 0.025, (0.0, 1.0))
     pred = model.predict(ref, start=1.0, duration=2.0, seed=3, output=tmp_path / "pred.h5")
     out = tmp_path / "report"
     saved = compare(ref, pred, window=(1.0, 3.0), output=out)

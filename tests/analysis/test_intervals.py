@@ -173,7 +173,6 @@ def test_block_bootstrap_spread_agrees_with_deeptime_bayesian_msm(tmp_path):
     each edge (the first version) count half the transitions with 50 blocks of 2 frames and
     fail this: median 1.42 over the transition probabilities, up to 1.78.
     """
-    pytest.importorskip("deeptime")
     path, states, _ = _chain_file(tmp_path / "chain0.h5", seed=0)
     ratios = _sd_ratios(path, states, blocks=50, seed=0)
     for name, ratio in ratios.items():

@@ -9,7 +9,8 @@ import pytest
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.io import import_csv
-from cfbmarkov.trajectories import FRAME_SPACING_TOLERANCE, Trajectories, estimate_frame_interval
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, estimate_frame_interval
 from cfbmarkov.trajectory_writer import TrajectoryWriter, write_trajectories
 
 WIDTH, HEIGHT = 0.09, 0.95

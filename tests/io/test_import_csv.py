@@ -92,9 +92,9 @@ def test_rows_in_any_order_are_sorted_by_time_then_id(tmp_path, make_run, make_c
                                                       monkeypatch, order):
     """Frames out of time order, or rows grouped by particle: read whole, sorted, stored right
     (also when the disorder first shows in a later read block)."""
-    import cfbmarkov.io.csv as csv_module
+    import cfbmarkov.io.csv_rows as csv_rows
 
-    monkeypatch.setattr(csv_module, "CHUNK_CHARS", 300)
+    monkeypatch.setattr(csv_rows, "CHUNK_CHARS", 300)
     run = make_run(n_particles=5, n_frames=12)
     header, *rows = make_csv(run).splitlines()
     if order == "by-particle":
@@ -114,9 +114,9 @@ def test_rows_in_any_order_are_sorted_by_time_then_id(tmp_path, make_run, make_c
 
 
 def test_frames_spanning_read_blocks(tmp_path, make_run, make_csv, save, monkeypatch):
-    import cfbmarkov.io.csv as csv_module
+    import cfbmarkov.io.csv_rows as csv_rows
 
-    monkeypatch.setattr(csv_module, "CHUNK_CHARS", 300)  # a few rows per block
+    monkeypatch.setattr(csv_rows, "CHUNK_CHARS", 300)  # a few rows per block
     run = make_run(n_particles=7, n_frames=9)
     out = import_csv(save(tmp_path / "run.csv", make_csv(run)), tmp_path / "run.h5")
     times, ids, pos, vel, laps, *_ = read_back(out)

@@ -6,13 +6,12 @@ from __future__ import annotations
 
 import h5py
 import numpy as np
-
-from cfbmarkov.trajectories import lap_increments
 import pytest
 
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import VERSION, Trajectories
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import VERSION, lap_increments
 from cfbmarkov.trajectory_info import describe
 from cfbmarkov.trajectory_writer import TrajectoryWriter, write_trajectories
 

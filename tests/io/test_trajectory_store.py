@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import FORMAT, PassEvents, Trajectories, lap_increments
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import FORMAT, PassEvents, lap_increments
 from cfbmarkov.trajectory_writer import TrajectoryWriter, write_trajectories
 
 

@@ -8,18 +8,14 @@ from pathlib import Path
 
 import h5py
 import numpy as np
-
-from cfbmarkov.trajectories import lap_increments
+import pyevtk.hl
 import pytest
 
-pytest.importorskip("pyevtk")
-
-import pyevtk.hl  # noqa: E402
-
-from cfbmarkov.errors import InputError  # noqa: E402
-from cfbmarkov.io.vtk import export_vtk, export_vtk_summary  # noqa: E402
-from cfbmarkov.trajectories import Trajectories  # noqa: E402
-from cfbmarkov.trajectory_writer import write_trajectories  # noqa: E402
+from cfbmarkov.errors import InputError
+from cfbmarkov.io.vtk import export_vtk, export_vtk_summary
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import lap_increments
+from cfbmarkov.trajectory_writer import write_trajectories
 
 W, H = 0.09, 0.95
 T, N = 10, 50

@@ -196,7 +196,6 @@ def test_fit_rtd_maps_predict_compare_vtk_on_3d_run(tmp_path, capsys, runs):
     assert code == 0, err
     assert (tmp_path / "cmp" / "summary.json").exists()
     assert (tmp_path / "cmp" / "probability_maps.png").exists()
-    pytest.importorskip("pyevtk")      # values read back: tests/io/test_vtk.py
     code, out, err = run_cli(capsys, "export-vtk", pred, "-o", tmp_path / "vtk", "--quiet",
                              "--every", "20")
     assert code == 0, err

@@ -85,7 +85,7 @@ def test_boundary_passes_are_counted_by_direction(tmp_path, write_states):
 
 
 def test_mle_equals_deeptime(markov_flow, markov_run):
-    deeptime = pytest.importorskip("deeptime")
+    import deeptime
     from deeptime.markov import TransitionCountEstimator
     from deeptime.markov.msm import MaximumLikelihoodMSM
 

@@ -21,7 +21,8 @@ from cfbmarkov.markov import (STATE_SPACES, CellGrid, DirectionCells, MarkovMode
                               VelocityCells, cell_index, discretize, estimator_from_name,
                               fit_model, state_space_from_attrs, state_space_from_name)
 from cfbmarkov.report.compare import compare
-from cfbmarkov.trajectories import Trajectories, lap_increments
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import lap_increments
 from cfbmarkov.trajectory_writer import write_trajectories
 
 try:

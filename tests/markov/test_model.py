@@ -8,7 +8,8 @@ from scipy import stats
 
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov import CellGrid, MarkovModel, fit_model
-from cfbmarkov.trajectories import Trajectories, lap_increments
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import lap_increments
 
 
 def ladder_model(rows, p_up, p_fall=0.0, lag=0.01):

@@ -7,10 +7,11 @@ import h5py
 import numpy as np
 import pytest
 
+from cfbmarkov._hdf5 import create_array_dataset
 from cfbmarkov.markov import CellGrid, MarkovModel, SecondOrderCells
 from cfbmarkov.markov.model_file import model_datasets_and_attrs, read_model, write_model
 from cfbmarkov.trajectories import Trajectories
-from cfbmarkov.trajectory_writer import TrajectoryWriter, create_array_dataset
+from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 SQUARE = ("transition_matrix", "counts", "counts_up", "counts_down", "pass_up_fraction",
           "pass_down_fraction")

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from cfbmarkov.trajectories import PassEvents
+from cfbmarkov.trajectory_format import PassEvents
 from cfbmarkov.trajectory_writer import write_trajectories
 
 WIDTH, HEIGHT = 0.09, 0.95

@@ -16,7 +16,8 @@ from cfbmarkov.observed.residence import (
     rtd_histogram,
 )
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import PassEvents, Trajectories
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import PassEvents
 from cfbmarkov.trajectory_writer import write_trajectories
 
 WIDTH, HEIGHT = 0.09, 0.95

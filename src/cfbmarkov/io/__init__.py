@@ -1,7 +1,7 @@
 """Importers: CSV files and LAMMPS/LIGGGHTS text dumps -> trajectory files (HDF5).
 
 Both read their input a frame at a time and write through
-:class:`~cfbmarkov.trajectories.TrajectoryWriter`, which validates every frame and derives the
+:class:`~cfbmarkov.trajectory_writer.TrajectoryWriter`, which validates every frame and derives the
 lap counter; bad input raises :class:`~cfbmarkov.errors.InputError` and leaves no output file.
 """
 

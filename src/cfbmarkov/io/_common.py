@@ -173,7 +173,7 @@ def create_writer(output: Path, ids: np.ndarray, **options: Any) -> TrajectoryWr
     ids : numpy.ndarray
         [N] particle ids.
     **options
-        Passed on to :class:`~cfbmarkov.trajectories.TrajectoryWriter`.
+        Passed on to :class:`~cfbmarkov.trajectory_writer.TrajectoryWriter`.
 
     Returns
     -------

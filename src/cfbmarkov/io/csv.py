@@ -43,7 +43,7 @@ Axes
 Rows
     Rows may come in any order. A file whose times never decrease (the rows of each frame
     together, frames in time order, the usual case) is read in blocks of rows and written
-    frame by frame through :class:`~cfbmarkov.trajectories.TrajectoryWriter`, so memory
+    frame by frame through :class:`~cfbmarkov.trajectory_writer.TrajectoryWriter`, so memory
     stays at a few frames whatever its length. Otherwise (rows grouped by particle, say) the
     file is read again whole into memory (8 bytes per value of the used columns), its rows
     sorted by time then id, and written; the provenance says which (``row_order``). Every
@@ -59,13 +59,12 @@ from __future__ import annotations
 
 import itertools
 import os
-import warnings
 from collections.abc import Iterator
 from pathlib import Path
-from typing import TextIO
 
 import numpy as np
 
+from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import (
     check_output,
@@ -75,28 +74,21 @@ from cfbmarkov.io._common import (
     progress,
     reading,
     removing_new_folders,
-    exact_ids,
 )
 from cfbmarkov.io.csv_layout import (
     AXES,
-    CHUNK_CHARS,
     DEFAULT_HEIGHT,
     DEFAULT_WIDTH,
     LENGTH_UNITS,
     TIME_UNITS,
     _DELIMITERS,
     CsvLayout,
-    _split,
     read_layout,
 )
+from cfbmarkov.io.csv_rows import UnsortedRows, frame_rows, row_blocks
 from cfbmarkov.io.resample import resample_tracks
 from cfbmarkov.io.riser import FrameColumns, RiserFrame
-from cfbmarkov.trajectories import BOUNDARIES
 from cfbmarkov.trajectory_writer import TrajectoryWriter
-
-
-class _Unsorted(Exception):
-    """The times of the rows decrease somewhere: read the file whole and sort it."""
 
 
 def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
@@ -161,29 +153,28 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
     check_units(length_unit, time_unit)
     if vertical_axis is not None and vertical_axis not in AXES:
         raise InputError(f"--vertical-axis {vertical_axis!r}: choose x, y or z")
-    if boundary is not None and boundary not in BOUNDARIES:
-        raise InputError(f"--boundary {boundary!r}: choose periodic or open")
+    boundary = Boundary.PERIODIC if boundary is None else Boundary.parse(boundary, "--boundary")
     if max_gap is not None and resample is None:
         raise InputError("--max-gap applies with --resample only")
     options = {"length_unit": length_unit, "time_unit": time_unit,
                "vertical_axis": vertical_axis, "keep_depth": not drop_depth}
     geometry = {"width": width, "height": height, "region": region,
-                "boundary": boundary or "periodic"}
+                "boundary": boundary}
     with removing_new_folders(output), reading(label):
         if resample is None:
             try:
                 with open_text(path) as fh:
                     layout = read_layout(fh, label, **options)
                     riser = csv_riser(layout, label, **geometry)
-                    blocks = _row_blocks(fh, layout, label, streaming=True)
+                    blocks = row_blocks(fh, layout, label, streaming=True)
                     _write(output, path, layout, riser, blocks, "as written")
                 return output
-            except _Unsorted:
+            except UnsortedRows:
                 pass
         with open_text(path) as fh:     # read whole: rows out of time order, or resampling
             layout = read_layout(fh, label, **options)
             riser = csv_riser(layout, label, **geometry)
-            rows = list(_row_blocks(fh, layout, label, streaming=False))
+            rows = list(row_blocks(fh, layout, label, streaming=False))
         rows = np.concatenate(rows) if rows else np.empty((0, len(layout.used)))
         if resample is not None:
             _write_resampled(output, path, layout, riser, rows, resample, max_gap)
@@ -218,7 +209,7 @@ def check_units(length_unit: str | None, time_unit: str | None) -> None:
 
 
 def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: float | None,
-              region, boundary: str) -> RiserFrame:
+              region, boundary: Boundary) -> RiserFrame:
     """The riser of a CSV file: axes from the layout; region from ``region`` (in the file's
     length unit, converted to m), else 0..W x 0..H (the paper's riser by default).
 
@@ -232,7 +223,7 @@ def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: flo
         The riser (m) when no region is given.
     region : sequence of (lo, hi) or None
         One range per axis x, y (, z), in the file's length unit.
-    boundary : {"periodic", "open"}
+    boundary : Boundary
         The vertical boundary.
 
     Returns
@@ -265,7 +256,7 @@ def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: flo
         bounds = np.array([(0.0, DEFAULT_WIDTH if width is None else float(width)),
                            (0.0, DEFAULT_HEIGHT if height is None else float(height))])
         given = width is not None or height is not None
-    periodic = (False, boundary == "periodic") + ((False,) if len(axes) == 3 else ())
+    periodic = (False, not boundary.is_open) + ((False,) if len(axes) == 3 else ())
     return RiserFrame(tuple(axes), bounds, not given, periodic, boundary)
 
 
@@ -290,14 +281,14 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
     """Split row blocks into frames and write them (the writer is discarded on an error)."""
     label = str(path)
     it = layout.index("t")
-    frames = _frames(blocks, it)
+    frames = frame_rows(blocks, it)
     first = next(frames, None)
     if first is None:
         raise InputError(f"{label}: no data rows after the header")
     reference = (np.unique(layout.ids(first[0])) if layout.has_id
                  else np.zeros(1, dtype=np.int64))
     parameters = _parameters(path, layout, riser, row_order)
-    periodic = riser.boundary == "periodic"
+    periodic = not riser.boundary.is_open
     parameters["laps_from"] = "minimal-image rule" if periodic else "none (open riser)"
     with create_writer(output, reference, source="import:csv", parameters=parameters,
                        with_velocity=layout.velocity is not None, label=label,
@@ -353,7 +344,7 @@ def _riser_positions(rows: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids
     tol = 1e-9
     within = (relative >= -tol) & (relative <= extent + tol)
     inside = within.all(axis=1)
-    strict = ~within[:, 1] if riser.boundary == "periodic" else np.zeros(len(rows), bool)
+    strict = ~within[:, 1] if not riser.boundary.is_open else np.zeros(len(rows), bool)
     if riser.from_box:
         strict = ~inside
     if strict.any():
@@ -403,7 +394,7 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     rows, ids = rows[order], ids[order]
     relative, inside = _riser_positions(rows, layout, riser, ids, label)
     extent = riser.region[:, 1] - riser.region[:, 0]
-    periodic = riser.boundary == "periodic"
+    periodic = not riser.boundary.is_open
     keep = inside
     if not keep.any():
         raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
@@ -422,192 +413,3 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
                        label=label, frame_interval=interval, **riser.writer_options()) as writer:
         writer.append_frames(tracks.times, positions, None, tracks.laps, tracks.present)
         _check_some_present(writer, riser, label)
-
-
-def _row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
-                ) -> Iterator[np.ndarray]:
-    """Parse the data rows in blocks of about CHUNK_CHARS characters: arrays [rows, used
-    columns] in SI units. ``streaming``: raise _Unsorted where the times decrease."""
-    it = layout.index("t")
-    iid = layout.index("id") if layout.has_id else None
-    line_no, last = layout.first_data_line, None
-    lines = layout.pending
-    shortest: dict = {}
-    while lines or (lines := fh.readlines(CHUNK_CHARS)):
-        if not lines[-1].endswith("\n"):          # the file's last line, unterminated
-            _check_last_line(lines, line_no, layout, label, shortest)
-        values = _parse_rows(lines, line_no, layout, label)
-        _check_keys(values, it, iid, lines, line_no, label)
-        if iid is not None:
-            values[:, iid] = layout.id_codes.encode(_exact_block_ids(values[:, iid], lines,
-                                                                     line_no, layout, label))
-        _note_last_field(lines, layout, shortest)
-        if streaming and values.shape[0]:
-            t = values[:, it]
-            if (last is not None and t[0] < last) or np.any(t[1:] < t[:-1]):
-                raise _Unsorted
-            last = t[-1]
-        line_no += len(lines)
-        lines = []
-        if values.shape[0]:
-            yield values
-
-
-def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -> np.ndarray:
-    """Rows of numbers from CSV lines (blank and '#' lines skipped); line_no numbers lines[0]."""
-    text = [line.replace(",", ".") for line in lines] if layout.decimal_comma else lines
-    n = len(layout.header)
-    try:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", UserWarning)  # a block of blank lines
-            values = np.loadtxt(text, delimiter=layout.delimiter, dtype=np.float64, ndmin=2,
-                                usecols=None if len(layout.usecols) == n else layout.usecols)
-    except ValueError as exc:
-        raise InputError(_locate_bad_row(lines, line_no, layout, label, exc)) from None
-    if values.size == 0:
-        return np.empty((0, len(layout.used)))
-    if values.shape[1] != len(layout.used):
-        line = _data_line_numbers(lines, line_no)[0]
-        raise InputError(f"{label}: line {line}: {values.shape[1]} values, the header names "
-                         f"{n} columns")
-    for k, divisor in enumerate(layout.divisors):
-        if divisor != 1.0:
-            values[:, k] /= divisor
-    return values
-
-
-def _locate_bad_row(lines: list[str], line_no: int, layout: CsvLayout, label: str,
-                    exc: Exception) -> str:
-    """Message naming the first line of a block that numpy could not parse."""
-    n = len(layout.header)
-    for k, line in enumerate(lines):
-        content = line.split("#", 1)[0].strip()
-        if not content:
-            continue
-        cut = "" if line.endswith("\n") else " (the file ends inside this row: truncated?)"
-        fields = _split(content, layout.delimiter)
-        if len(fields) != n and (len(fields) < n or len(layout.usecols) == n):
-            return (f"{label}: line {line_no + k}: {len(fields)} values, the header names "
-                    f"{n} columns{cut}")
-        for name, col in zip(layout.used, layout.usecols):
-            value = fields[col].strip()
-            number = value.replace(",", ".") if layout.decimal_comma else value
-            if not value:
-                return f"{label}: line {line_no + k}: column {name!r} is empty{cut}"
-            if not _is_plain_number(number):
-                mark = ("; the first rows use a decimal comma" if layout.decimal_comma else
-                        "; a decimal comma needs a semicolon, tab or space delimiter"
-                        if "," in value and layout.delimiter == "," else "")
-                return (f"{label}: line {line_no + k}: {value!r} in column {name!r} is "
-                        f"not a number{mark}{cut}")
-    return f"{label}: lines {line_no}-{line_no + len(lines) - 1}: {exc}"
-
-
-def _is_plain_number(text: str) -> bool:
-    try:
-        float(text)
-    except ValueError:
-        return False
-    return True
-
-
-def _data_line_numbers(lines: list[str], line_no: int) -> list[int]:
-    """Line numbers of the rows that np.loadtxt returned for a block (blank lines skipped)."""
-    return [line_no + k for k, line in enumerate(lines) if line.split("#", 1)[0].strip()]
-
-
-def _check_keys(values: np.ndarray, it: int, iid: int | None, lines: list[str], line_no: int,
-                label: str) -> None:
-    """Refuse a time that is not finite or an id that is not a whole number, by line."""
-    t = values[:, it]
-    bad_t = ~np.isfinite(t)
-    if iid is None:
-        bad_id = np.zeros(t.shape, dtype=bool)
-        ids = t
-    else:
-        ids = values[:, iid]
-        with np.errstate(invalid="ignore"):     # large ids are checked from their text
-            bad_id = (~np.isfinite(ids) | (ids != np.round(ids))) & ~(np.abs(ids) >= 2.0 ** 53)
-    if not (bad_t.any() or bad_id.any()):
-        return
-    rows = _data_line_numbers(lines, line_no)
-    if bad_t.any():
-        k = int(np.argmax(bad_t))
-        raise InputError(f"{label}: line {rows[k]}: time t = {t[k]:g} is not a finite number")
-    k = int(np.argmax(bad_id))
-    raise InputError(f"{label}: line {rows[k]}: particle id {ids[k]:g} is not a whole number")
-
-
-def _exact_block_ids(values: np.ndarray, lines: list[str], line_no: int, layout: CsvLayout,
-                     label: str) -> np.ndarray:
-    """The ids of a block of rows, exact (from the text where 2^53 or more)."""
-    def texts() -> list[str]:
-        col = layout.usecols[layout.index("id")]
-        rows = [line.split("#", 1)[0].strip() for line in lines]
-        return [_split(row, layout.delimiter)[col] for row in rows if row]
-
-    return exact_ids(values, texts, f"{label}: lines {line_no}-{line_no + len(lines) - 1}")
-
-
-def _note_last_field(lines: list[str], layout: CsvLayout, shortest: dict) -> None:
-    """Remember the shortest text of the last field over the last rows read (for
-    :func:`_check_last_line`)."""
-    n = len(layout.header)
-    lengths = []
-    for line in lines[-64:]:
-        content = line.split("#", 1)[0].strip()
-        if content:
-            fields = _split(content, layout.delimiter)
-            if len(fields) == n:
-                lengths.append(len(fields[-1].strip()))
-    if lengths:
-        shortest["last"] = min(lengths)
-
-
-def _check_last_line(lines: list[str], line_no: int, layout: CsvLayout, label: str,
-                     shortest: dict) -> None:
-    """Refuse a file cut inside its last row: the last line has no final newline and
-    fewer fields than the header, or a last value that cannot be complete (empty, ending in
-    '.', 'e', '+' or '-'), or one shorter than that column's value in every one of the
-    (up to 64) rows before it (``0.12345`` cut to ``0``)."""
-    _note_last_field(lines[:-1], layout, shortest)
-    content = lines[-1].split("#", 1)[0].strip()
-    if not content:
-        return
-    where = f"{label}: line {line_no + len(lines) - 1}"
-    fields = _split(content, layout.delimiter)
-    n = len(layout.header)
-    tail = ("(the file ends inside this row: truncated?; if the row is complete, end the "
-            "file with a newline)")
-    if len(fields) < n:
-        raise InputError(f"{where}: {len(fields)} values, the header names {n} columns "
-                         "(the file ends inside this row: truncated?)")
-    value = fields[n - 1].strip()
-    if not value or value[-1] in ".eE+-,":
-        raise InputError(f"{where}: last value {value!r} is incomplete {tail}")
-    if len(value) < shortest.get("last", 0):
-        raise InputError(f"{where}: last value {value!r} is shorter than in every row before "
-                         f"it {tail}")
-
-
-def _frames(blocks: Iterator[np.ndarray], it: int) -> Iterator[tuple[np.ndarray, bool]]:
-    """Split row blocks into frames (runs of equal t): yield (rows, is_last_frame)."""
-    pending: list[np.ndarray] = []
-    for values in blocks:
-        t = values[:, it]
-        cuts = np.flatnonzero(t[1:] != t[:-1]) + 1
-        if cuts.size == 0 and (not pending or pending[-1][0, it] == t[0]):
-            pending.append(values)
-            continue
-        if pending and pending[-1][0, it] != t[0]:
-            cuts = np.concatenate([[0], cuts])
-        start = 0
-        for cut in cuts:
-            pending.append(values[start:cut])
-            rows = np.concatenate(pending) if len(pending) > 1 else pending[0]
-            if rows.shape[0]:
-                yield rows, False
-            pending, start = [], cut
-        pending = [values[start:]]
-    if pending:
-        yield (np.concatenate(pending) if len(pending) > 1 else pending[0]), True

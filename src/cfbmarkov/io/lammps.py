@@ -162,7 +162,7 @@ def _depth_spread(first: DumpFrame, frames, layout: AtomColumns, n_axes: int):
 
 def _provenance(path: Path, first: DumpFrame, layout: AtomColumns, units: str | None,
                 time_step: float | None, riser: RiserFrame) -> dict:
-    periodic = riser.boundary == "periodic"
+    periodic = not riser.boundary.is_open
     has_image = layout.image is not None and layout.image[riser.vertical] is not None
     laps_from = ("unwrapped coordinates" if layout.unwrapped and periodic
                  else "image flags" if has_image and periodic

@@ -16,8 +16,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectories import BOUNDARIES, POSITION_TOLERANCE
+from cfbmarkov.trajectory_format import POSITION_TOLERANCE
 from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 AXES = "xyz"
@@ -39,7 +40,7 @@ class RiserFrame:
     periodic : tuple of bool
         Whether each stored axis is periodic in the source; the vertical one is the riser's
         boundary (``boundary``).
-    boundary : {"periodic", "open"}
+    boundary : Boundary
         The vertical boundary stored.
     dropped : int or None
         A source axis dropped by projection (``--drop-depth``), or None.
@@ -49,7 +50,7 @@ class RiserFrame:
     region: np.ndarray
     from_box: bool
     periodic: tuple[bool, ...]
-    boundary: str
+    boundary: Boundary
     dropped: int | None = None
 
     @property
@@ -94,7 +95,7 @@ class RiserFrame:
         return {"vertical_axis": AXES[self.vertical], "across_axis": AXES[self.across],
                 "depth_axis": None if self.depth is None else AXES[self.depth],
                 "depth_axis_dropped": None if self.dropped is None else AXES[self.dropped],
-                "region": self.region.tolist(), "boundary_stored": self.boundary}
+                "region": self.region.tolist(), "boundary_stored": self.boundary.value}
 
 
 def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: tuple[str, ...],
@@ -141,8 +142,8 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
         axis a guess would take), an unknown axis or boundary, a region that does not fit
         the source's axes, or a riser of no size.
     """
-    if boundary is not None and boundary not in BOUNDARIES:
-        raise InputError(f"--boundary {boundary!r}: choose periodic or open")
+    if boundary is not None:
+        boundary = Boundary.parse(boundary, "--boundary")
     if vertical_axis is not None and vertical_axis not in AXES:
         raise InputError(f"--vertical-axis {vertical_axis!r}: choose x, y or z")
     if vertical_axis is None:
@@ -165,8 +166,8 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
     dropped = others[1] if len(others) > 1 and drop_depth else None
     periodic = tuple(len(flags) > k and str(flags[k]).startswith("p") for k in axes)
     if boundary is None:
-        boundary = (("periodic" if periodic[1] else "open") if len(flags) > vertical
-                    else default_boundary)
+        boundary = Boundary.parse(("periodic" if periodic[1] else "open") if len(flags) > vertical
+                                  else default_boundary)
     if region is not None:
         ranges = [tuple(float(v) for v in r) for r in region]
         if max(axes) >= len(ranges):
@@ -225,7 +226,7 @@ def riser_positions(raw: np.ndarray, riser: RiserFrame, image: np.ndarray | None
     extent = riser.region[:, 1] - riser.region[:, 0]
     laps = None
     for k, periodic in enumerate(riser.periodic):
-        if k == 1 and riser.boundary != "periodic":
+        if k == 1 and riser.boundary.is_open:
             continue
         if not (periodic or k == 1):
             continue

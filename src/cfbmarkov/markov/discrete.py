@@ -37,7 +37,8 @@ import numpy as np
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.frame_quantities import FrameQuantities
 from cfbmarkov.markov.states import StateSpace
-from cfbmarkov.trajectories import FRAME_SPACING_TOLERANCE, Trajectories, opened
+from cfbmarkov.trajectories import Trajectories, opened
+from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE
 
 #: the state of a particle that is absent in a frame
 ABSENT = -1

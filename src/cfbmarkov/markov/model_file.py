@@ -226,9 +226,9 @@ def read_model(path: str | os.PathLike) -> "MarkovModel":
     InputError
         If the file is missing, empty, not HDF5, not a model file, or damaged.
     """
-    from cfbmarkov.trajectories import _open_h5
+    from cfbmarkov._hdf5 import open_h5
 
-    with _open_h5(path) as f:
+    with open_h5(path) as f:
         return read_model_group(f, str(path))
 
 

@@ -346,7 +346,7 @@ def net_flow_direction(traj, window: tuple[float, float]) -> str:
     -------
     {"up", "down"}
     """
-    return "down" if traj.boundary == "periodic" and net_passes(traj, window) < 0 else "up"
+    return "down" if not traj.boundary.is_open and net_passes(traj, window) < 0 else "up"
 
 
 def residence_times(traj, window: tuple[float, float], use_events: bool = True,
@@ -397,7 +397,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     ----------
     ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
-    traj.require_supported("residence times", three_d=True, absent=traj.boundary == "open",
+    traj.require_supported("residence times", three_d=True, absent=traj.boundary.is_open,
                            open_boundary=True)
     start, stop = float(window[0]), float(window[1])
     frames = traj.window(start, stop)
@@ -409,7 +409,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         raise InputError(f"residence direction {direction!r}: up or down")
     sign = 1 if direction == "up" else -1
     span = _BLOCK_FRAMES * lag_frames
-    if traj.boundary == "open":
+    if traj.boundary.is_open:
         band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
         n = traj.n_particles
         was, last, entered, chunks = np.full(n, -1, np.int8), np.full(n, np.nan), np.full(n, np.nan), []

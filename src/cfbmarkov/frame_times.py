@@ -1,0 +1,160 @@
+"""Frame times of a trajectory file, and the rules that match a requested time, window or
+lag to its frames (``docs/definitions.md``, File formats, Frame times).
+
+Frames are evenly spaced within
+:data:`~cfbmarkov.trajectory_format.FRAME_SPACING_TOLERANCE` of the frame interval; a
+time matches a frame within half of that, whatever the time origin. Nothing here reads a
+file.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, TIME_TOLERANCE, time_text
+
+
+class FrameTimes:
+    """The frame times of a file, located by time, window or lag.
+
+    :class:`~cfbmarkov.trajectories.Trajectories` is one.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file, for messages.
+    times : ndarray of float64, shape (T,)
+        Frame times (s), finite, increasing and evenly spaced.
+    frame_interval : float
+        Time between frames (s); NaN for a file of one frame without a known interval.
+
+    Attributes
+    ----------
+    path : pathlib.Path
+        The file.
+    times : ndarray of float64, shape (T,)
+        Frame times (s).
+    frame_interval : float
+        Time between frames (s), or NaN.
+    """
+
+    def __init__(self, path: str | os.PathLike, times: np.ndarray, frame_interval: float):
+        self.path = Path(path)
+        self.times = times
+        self.frame_interval = frame_interval
+
+    @property
+    def n_frames(self) -> int:
+        """Number of frames T."""
+        return int(self.times.size)
+
+    @property
+    def time_tolerance(self) -> float:
+        """How far (s) a frame may lie from a requested time and still be the frame at it.
+
+        Half of :data:`~cfbmarkov.trajectory_format.FRAME_SPACING_TOLERANCE` of the frame
+        interval: frame times rounded to q s lie within q/2 of the exact times, and the
+        spacing check accepts q up to the spacing tolerance of an interval. It does not depend on the time origin. A file
+        of one frame has no interval: then ``TIME_TOLERANCE * max(|t|, 1 s)`` (round-off).
+        """
+        if np.isfinite(self.frame_interval):
+            return 0.5 * FRAME_SPACING_TOLERANCE * self.frame_interval
+        return TIME_TOLERANCE * max(abs(float(self.times[-1])), 1.0)
+
+    def _frames_text(self) -> str:
+        if self.n_frames == 1:
+            return f"{self.path} holds one frame, at t = {time_text(self.times[0])} s"
+        return (f"frames span {time_text(self.times[0])} to {time_text(self.times[-1])} s every "
+                f"{time_text(self.frame_interval)} s")
+
+    def frame_index(self, time: float) -> int:
+        """Index of the frame at ``time``.
+
+        Parameters
+        ----------
+        time : float
+            A frame time (s), matched within :attr:`time_tolerance`.
+
+        Returns
+        -------
+        int
+
+        Raises
+        ------
+        InputError
+            If no frame lies at ``time``.
+        """
+        if not np.isfinite(time):
+            raise InputError(f"time {time:g} s is not a finite number")
+        i = int(np.argmin(np.abs(self.times - time)))
+        if not abs(self.times[i] - time) <= self.time_tolerance:
+            raise InputError(f"{self.path}: no frame at t = {time_text(time)} s ({self._frames_text()})")
+        return i
+
+    def window(self, start: float, stop: float) -> slice:
+        """Frames with start <= t <= stop, as a slice.
+
+        Parameters
+        ----------
+        start, stop : float
+            The window (s), matched to frames within :attr:`time_tolerance`.
+
+        Returns
+        -------
+        slice
+
+        Raises
+        ------
+        InputError
+            If the window is empty, leaves the data, or holds no frame.
+        """
+        if not (np.isfinite(start) and np.isfinite(stop)):
+            raise InputError(f"window {start:g}:{stop:g} s is not finite")
+        if not stop > start:
+            raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
+        tol = self.time_tolerance
+        if start < self.times[0] - tol or stop > self.times[-1] + tol:
+            raise InputError(
+                f"window {start:g}:{stop:g} s lies outside the data of {self.path} "
+                f"({time_text(self.times[0])} to {time_text(self.times[-1])} s)")
+        i0 = int(np.searchsorted(self.times, start - tol, side="left"))
+        i1 = int(np.searchsorted(self.times, stop + tol, side="right"))
+        if i1 - i0 < 1:
+            raise InputError(f"window {start:g}:{stop:g} s holds no frame of {self.path}")
+        return slice(i0, i1)
+
+    def lag_frames(self, lag: float) -> int:
+        """The lag as a whole number of frame intervals.
+
+        Parameters
+        ----------
+        lag : float
+            The lag (s), matched to a whole number of frame intervals within
+            :attr:`time_tolerance`.
+
+        Returns
+        -------
+        int
+            ``lag / frame_interval`` rounded (>= 1).
+
+        Raises
+        ------
+        InputError
+            If the lag is not positive, the file has no frame interval (one frame and no
+            ``frame_interval`` attribute), or the lag is not a whole multiple of the frame
+            interval.
+        """
+        if not (np.isfinite(lag) and lag > 0):
+            raise InputError(f"lag {lag:g} s must be a positive finite number")
+        if not np.isfinite(self.frame_interval):
+            raise InputError(f"{self.path} holds one frame: no frame interval, so no transition "
+                             f"can be counted (lag {lag:g} s)")
+        k = int(round(lag / self.frame_interval))
+        if k < 1 or not abs(lag - k * self.frame_interval) <= self.time_tolerance:
+            raise InputError(f"lag {lag:g} s is not a whole multiple of the frame interval "
+                             f"{time_text(self.frame_interval)} s of {self.path}")
+        return k

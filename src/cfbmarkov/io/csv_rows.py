@@ -1,0 +1,249 @@
+"""Reading the data rows of a CSV file (``docs/definitions.md``, CSV import): blocks of
+rows parsed into numbers in SI units, each refusal naming its line, and the blocks split into
+frames. The columns, units and delimiter come from the file's layout
+(:mod:`cfbmarkov.io.csv_layout`).
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Iterator
+from typing import TextIO
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.io._common import exact_ids
+from cfbmarkov.io.csv_layout import CHUNK_CHARS, CsvLayout, _split
+
+
+class UnsortedRows(Exception):
+    """The times of the rows decrease somewhere: read the file whole and sort it."""
+
+
+def row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
+                ) -> Iterator[np.ndarray]:
+    """Parse the data rows in blocks of about CHUNK_CHARS characters.
+
+    Parameters
+    ----------
+    fh : TextIO
+        The file, positioned after the rows the layout read ahead (``layout.pending``).
+    layout : CsvLayout
+        The file's columns, units and delimiter.
+    label : str
+        Names the file in messages.
+    streaming : bool
+        Raise :class:`UnsortedRows` where the times decrease.
+
+    Yields
+    ------
+    ndarray of float64, shape (R, C)
+        Rows of the used columns, in SI units (m, s, m/s); ids encoded by the layout.
+
+    Raises
+    ------
+    InputError
+        Naming the line of a row that is not numbers, has too few values, a time that is
+        not finite, an id that is not a whole number, or a last row cut short.
+    UnsortedRows
+        (``streaming``) where the times decrease.
+    """
+    it = layout.index("t")
+    iid = layout.index("id") if layout.has_id else None
+    line_no, last = layout.first_data_line, None
+    lines = layout.pending
+    shortest: dict = {}
+    while lines or (lines := fh.readlines(CHUNK_CHARS)):
+        if not lines[-1].endswith("\n"):          # the file's last line, unterminated
+            _check_last_line(lines, line_no, layout, label, shortest)
+        values = _parse_rows(lines, line_no, layout, label)
+        _check_keys(values, it, iid, lines, line_no, label)
+        if iid is not None:
+            values[:, iid] = layout.id_codes.encode(_exact_block_ids(values[:, iid], lines,
+                                                                     line_no, layout, label))
+        _note_last_field(lines, layout, shortest)
+        if streaming and values.shape[0]:
+            t = values[:, it]
+            if (last is not None and t[0] < last) or np.any(t[1:] < t[:-1]):
+                raise UnsortedRows
+            last = t[-1]
+        line_no += len(lines)
+        lines = []
+        if values.shape[0]:
+            yield values
+
+
+def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -> np.ndarray:
+    """Rows of numbers from CSV lines (blank and '#' lines skipped); line_no numbers lines[0]."""
+    text = [line.replace(",", ".") for line in lines] if layout.decimal_comma else lines
+    n = len(layout.header)
+    try:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # a block of blank lines
+            values = np.loadtxt(text, delimiter=layout.delimiter, dtype=np.float64, ndmin=2,
+                                usecols=None if len(layout.usecols) == n else layout.usecols)
+    except ValueError as exc:
+        raise InputError(_locate_bad_row(lines, line_no, layout, label, exc)) from None
+    if values.size == 0:
+        return np.empty((0, len(layout.used)))
+    if values.shape[1] != len(layout.used):
+        line = _data_line_numbers(lines, line_no)[0]
+        raise InputError(f"{label}: line {line}: {values.shape[1]} values, the header names "
+                         f"{n} columns")
+    for k, divisor in enumerate(layout.divisors):
+        if divisor != 1.0:
+            values[:, k] /= divisor
+    return values
+
+
+def _locate_bad_row(lines: list[str], line_no: int, layout: CsvLayout, label: str,
+                    exc: Exception) -> str:
+    """Message naming the first line of a block that numpy could not parse."""
+    n = len(layout.header)
+    for k, line in enumerate(lines):
+        content = line.split("#", 1)[0].strip()
+        if not content:
+            continue
+        cut = "" if line.endswith("\n") else " (the file ends inside this row: truncated?)"
+        fields = _split(content, layout.delimiter)
+        if len(fields) != n and (len(fields) < n or len(layout.usecols) == n):
+            return (f"{label}: line {line_no + k}: {len(fields)} values, the header names "
+                    f"{n} columns{cut}")
+        for name, col in zip(layout.used, layout.usecols):
+            value = fields[col].strip()
+            number = value.replace(",", ".") if layout.decimal_comma else value
+            if not value:
+                return f"{label}: line {line_no + k}: column {name!r} is empty{cut}"
+            if not _is_plain_number(number):
+                mark = ("; the first rows use a decimal comma" if layout.decimal_comma else
+                        "; a decimal comma needs a semicolon, tab or space delimiter"
+                        if "," in value and layout.delimiter == "," else "")
+                return (f"{label}: line {line_no + k}: {value!r} in column {name!r} is "
+                        f"not a number{mark}{cut}")
+    return f"{label}: lines {line_no}-{line_no + len(lines) - 1}: {exc}"
+
+
+def _is_plain_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+def _data_line_numbers(lines: list[str], line_no: int) -> list[int]:
+    """Line numbers of the rows that np.loadtxt returned for a block (blank lines skipped)."""
+    return [line_no + k for k, line in enumerate(lines) if line.split("#", 1)[0].strip()]
+
+
+def _check_keys(values: np.ndarray, it: int, iid: int | None, lines: list[str], line_no: int,
+                label: str) -> None:
+    """Refuse a time that is not finite or an id that is not a whole number, by line."""
+    t = values[:, it]
+    bad_t = ~np.isfinite(t)
+    if iid is None:
+        bad_id = np.zeros(t.shape, dtype=bool)
+        ids = t
+    else:
+        ids = values[:, iid]
+        with np.errstate(invalid="ignore"):     # large ids are checked from their text
+            bad_id = (~np.isfinite(ids) | (ids != np.round(ids))) & ~(np.abs(ids) >= 2.0 ** 53)
+    if not (bad_t.any() or bad_id.any()):
+        return
+    rows = _data_line_numbers(lines, line_no)
+    if bad_t.any():
+        k = int(np.argmax(bad_t))
+        raise InputError(f"{label}: line {rows[k]}: time t = {t[k]:g} is not a finite number")
+    k = int(np.argmax(bad_id))
+    raise InputError(f"{label}: line {rows[k]}: particle id {ids[k]:g} is not a whole number")
+
+
+def _exact_block_ids(values: np.ndarray, lines: list[str], line_no: int, layout: CsvLayout,
+                     label: str) -> np.ndarray:
+    """The ids of a block of rows, exact (from the text where 2^53 or more)."""
+    def texts() -> list[str]:
+        col = layout.usecols[layout.index("id")]
+        rows = [line.split("#", 1)[0].strip() for line in lines]
+        return [_split(row, layout.delimiter)[col] for row in rows if row]
+
+    return exact_ids(values, texts, f"{label}: lines {line_no}-{line_no + len(lines) - 1}")
+
+
+def _note_last_field(lines: list[str], layout: CsvLayout, shortest: dict) -> None:
+    """Remember the shortest text of the last field over the last rows read (for
+    :func:`_check_last_line`)."""
+    n = len(layout.header)
+    lengths = []
+    for line in lines[-64:]:
+        content = line.split("#", 1)[0].strip()
+        if content:
+            fields = _split(content, layout.delimiter)
+            if len(fields) == n:
+                lengths.append(len(fields[-1].strip()))
+    if lengths:
+        shortest["last"] = min(lengths)
+
+
+def _check_last_line(lines: list[str], line_no: int, layout: CsvLayout, label: str,
+                     shortest: dict) -> None:
+    """Refuse a file cut inside its last row: the last line has no final newline and
+    fewer fields than the header, or a last value that cannot be complete (empty, ending in
+    '.', 'e', '+' or '-'), or one shorter than that column's value in every one of the
+    (up to 64) rows before it (``0.12345`` cut to ``0``)."""
+    _note_last_field(lines[:-1], layout, shortest)
+    content = lines[-1].split("#", 1)[0].strip()
+    if not content:
+        return
+    where = f"{label}: line {line_no + len(lines) - 1}"
+    fields = _split(content, layout.delimiter)
+    n = len(layout.header)
+    tail = ("(the file ends inside this row: truncated?; if the row is complete, end the "
+            "file with a newline)")
+    if len(fields) < n:
+        raise InputError(f"{where}: {len(fields)} values, the header names {n} columns "
+                         "(the file ends inside this row: truncated?)")
+    value = fields[n - 1].strip()
+    if not value or value[-1] in ".eE+-,":
+        raise InputError(f"{where}: last value {value!r} is incomplete {tail}")
+    if len(value) < shortest.get("last", 0):
+        raise InputError(f"{where}: last value {value!r} is shorter than in every row before "
+                         f"it {tail}")
+
+
+def frame_rows(blocks: Iterator[np.ndarray], it: int) -> Iterator[tuple[np.ndarray, bool]]:
+    """Split row blocks, sorted by time, into frames (runs of equal t).
+
+    Parameters
+    ----------
+    blocks : iterator of ndarray, shape (R, C)
+        Row blocks (:func:`row_blocks`).
+    it : int
+        The time column.
+
+    Yields
+    ------
+    rows : ndarray, shape (R, C)
+        The rows of one frame.
+    is_last : bool
+        Whether it is the last frame.
+    """
+    pending: list[np.ndarray] = []
+    for values in blocks:
+        t = values[:, it]
+        cuts = np.flatnonzero(t[1:] != t[:-1]) + 1
+        if cuts.size == 0 and (not pending or pending[-1][0, it] == t[0]):
+            pending.append(values)
+            continue
+        if pending and pending[-1][0, it] != t[0]:
+            cuts = np.concatenate([[0], cuts])
+        start = 0
+        for cut in cuts:
+            pending.append(values[start:cut])
+            rows = np.concatenate(pending) if len(pending) > 1 else pending[0]
+            if rows.shape[0]:
+                yield rows, False
+            pending, start = [], cut
+        pending = [values[start:]]
+    if pending:
+        yield (np.concatenate(pending) if len(pending) > 1 else pending[0]), True

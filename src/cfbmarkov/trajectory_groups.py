@@ -1,0 +1,136 @@
+"""The groups of a trajectory file being written: the particles and frames, created empty
+and chunked one frame per chunk, and the optional gas fields of CFD-DEM runs (``/fields``)
+and exact pass events (``/events``), appended block by block (the layout is described in
+:mod:`cfbmarkov.trajectories`).
+"""
+
+from __future__ import annotations
+
+import json
+
+import h5py
+import numpy as np
+
+from cfbmarkov.errors import InputError
+
+#: fewest particles per chunk of a frame (a file whose particles grow by insertion)
+MIN_CHUNK_PARTICLES = 256
+
+
+def create_frames(f: h5py.File, ids: np.ndarray, d: int, with_velocity: bool) -> int:
+    """Create ``/particles/id`` and the empty, resizable frame datasets (time, position,
+    lap and, with velocities, velocity; positions and velocities filled with NaN).
+
+    Parameters
+    ----------
+    f : h5py.File
+        The file being written.
+    ids : ndarray of int64, shape (N,)
+        Particle ids.
+    d : int
+        D, the coordinates per position (2 or 3).
+    with_velocity : bool
+        Whether the file stores velocities.
+
+    Returns
+    -------
+    int
+        Particles per chunk of a frame.
+    """
+    n = ids.size
+    chunk = max(n, MIN_CHUNK_PARTICLES)
+    f.create_dataset("particles/id", data=ids, maxshape=(None,), chunks=(max(n, 1024),))
+    f.create_dataset("frames/time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(4096,))
+    f.create_dataset("frames/position", shape=(0, n, d), maxshape=(None, None, d), dtype="f8",
+                     chunks=(1, chunk, d), fillvalue=np.nan)
+    f.create_dataset("frames/lap", shape=(0, n), maxshape=(None, None), dtype="i4",
+                     chunks=(1, chunk))
+    if with_velocity:
+        f.create_dataset("frames/velocity", shape=(0, n, d), maxshape=(None, None, d),
+                         dtype="f8", chunks=(1, chunk, d), fillvalue=np.nan)
+    return chunk
+
+
+def append_field_frames(f: h5py.File, label: str, times, spacing, fields: dict) -> None:
+    """Append a block of gas-field frames on a cell-centred grid to ``/fields`` (one write
+    per field); the first block creates the group.
+
+    Parameters
+    ----------
+    f : h5py.File
+        The file being written.
+    label : str
+        Names the file in messages.
+    times : array_like, shape (T,)
+        Times of the field frames (s).
+    spacing : tuple of float
+        (dx, dy) of the grid (m).
+    fields : dict of str to array_like, shape (T, ny, nx) or (T, ny, nx, 2)
+        Stored as float32: ``void_fraction`` (-), ``gas_velocity`` (m/s), ``pressure``
+        (Pa). Every block must carry the same fields.
+
+    Raises
+    ------
+    InputError
+        If the fields are on different grids or do not hold T frames, or they are not the
+        fields of earlier frames.
+    """
+    times = np.asarray(times, dtype=np.float64).reshape(-1)
+    g = f.require_group("fields")
+    first = "time" not in g
+    arrays = {name: np.asarray(value, dtype=np.float32) for name, value in fields.items()}
+    if any(a.ndim < 3 or a.shape[0] != times.size for a in arrays.values()):
+        raise InputError(f"{label}: gas fields must hold {times.size} frame(s) of a "
+                         "2D grid each")
+    if first:
+        shapes = {a.shape[1:3] for a in arrays.values()}
+        if len(shapes) != 1:
+            raise InputError(f"{label}: gas fields of different grids {sorted(shapes)}")
+        ny, nx = shapes.pop()
+        g.attrs.update({"spacing": np.asarray(spacing, dtype=np.float64),
+                        "origin": np.zeros(2), "shape": np.asarray([nx, ny]),
+                        "units": json.dumps({"void_fraction": "-", "gas_velocity": "m/s",
+                                             "pressure": "Pa"})})
+        g.create_dataset("time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
+        for name, a in arrays.items():
+            g.create_dataset(name, shape=(0, *a.shape[1:]), maxshape=(None, *a.shape[1:]),
+                             dtype="f4", chunks=(1, *a.shape[1:]))
+    elif set(arrays) != set(g) - {"time"}:
+        raise InputError(f"{label}: gas fields {sorted(arrays)} differ from those of "
+                         f"earlier frames {sorted(set(g) - {'time'})}")
+    k = g["time"].shape[0]
+    g["time"].resize(k + times.size, axis=0)
+    g["time"][k:] = times
+    for name, a in arrays.items():
+        g[name].resize(k + times.size, axis=0)
+        g[name][k:] = a
+
+
+def append_events(f: h5py.File, times, particles, directions) -> None:
+    """Append exact pass events, given in any order, to ``/events`` (each block sorted by
+    time); the first block creates the group.
+
+    Parameters
+    ----------
+    f : h5py.File
+        The file being written.
+    times : array_like of float, shape (E,)
+        Times of the passes (s).
+    particles : array_like of int, shape (E,)
+        Particle indices (into ``/particles/id``).
+    directions : array_like of int, shape (E,)
+        +1 up through the top, -1 down through the bottom.
+    """
+    times = np.asarray(times, dtype=np.float64)
+    order = np.argsort(times, kind="stable")
+    g = f.require_group("events")
+    g.attrs["exact"] = True
+    for name, values, dtype in (("time", times, "f8"), ("particle", particles, "i4"),
+                                ("direction", directions, "i1")):
+        data = np.asarray(values)[order].astype(dtype)
+        if name in g:
+            old = g[name]
+            old.resize(old.shape[0] + data.size, axis=0)
+            old[-data.size:] = data
+        else:
+            g.create_dataset(name, data=data, maxshape=(None,), chunks=True)

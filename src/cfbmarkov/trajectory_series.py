@@ -1,0 +1,247 @@
+"""What the next block of frames written to a trajectory file must follow: the time of the
+last frame and the spacing of the frames so far, and each particle's last height, lap
+counter and presence, from which the laps of the next frames are counted
+(``docs/definitions.md``, File formats, Frame times; Lap counter; Presence).
+
+:class:`~cfbmarkov.trajectory_writer.TrajectoryWriter` keeps one :class:`FrameSeries` per
+file; nothing here reads or writes a file.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, lap_increments, time_text
+
+#: steps before a block that join its own in the median a block's steps are judged against
+RECENT_STEPS = 64
+
+
+class FrameSeries:
+    """The state of a series of frames between the blocks written.
+
+    Even spacing: every step between frames must lie within
+    :data:`~cfbmarkov.trajectory_format.FRAME_SPACING_TOLERANCE` of the reference interval,
+    the given ``frame_interval`` when known, else the median of each block's steps with the
+    :data:`RECENT_STEPS` steps before it (the first step while fewer than three are known).
+
+    Laps are 0 on an open riser; on a periodic one they are given or counted by the
+    minimal-image rule between consecutive frames where a particle is present, carried over
+    gaps.
+
+    Parameters
+    ----------
+    label : str
+        Names the file in messages.
+    height : float
+        Height H of the riser (m).
+    open_riser : bool
+        Whether the riser is open (laps are 0).
+    max_step : float
+        Where laps are counted from heights, the largest step a particle may make between
+        frames, as a fraction of H.
+    frame_interval : float, optional
+        The reference frame interval (s); None to judge steps by their median.
+
+    Attributes
+    ----------
+    interval : float or None
+        The reference frame interval (s), if known.
+    last_time : float or None
+        Time (s) of the last frame (written, or continued from); None before the first.
+    continued_from : float or None
+        Last time (s) of an earlier series this one continues, if any.
+    last_y, last_lap, last_present : ndarray, shape (N,), or None
+        Each particle's last height seen (m), its lap counter then, and whether it is
+        present in the last frame; None before the first frame.
+    """
+
+    def __init__(self, label: str, height: float, open_riser: bool, max_step: float,
+                 frame_interval: float | None = None):
+        self.label = label
+        self.height = height
+        self.open_riser = open_riser
+        self.max_step = max_step
+        self.interval = None if frame_interval is None else float(frame_interval)
+        self.last_time: float | None = None
+        self.continued_from: float | None = None
+        self.recent_steps = np.zeros(0)
+        self.last_y: np.ndarray | None = None
+        self.last_lap: np.ndarray | None = None
+        self.last_present: np.ndarray | None = None
+
+    def continue_after(self, time: float, heights, laps, n: int,
+                       frame_interval: float | None = None) -> None:
+        """Follow the last frame of an earlier series.
+
+        Parameters
+        ----------
+        time : float
+            Its time (s).
+        heights : array_like of float, shape (N,)
+            Its heights y (m).
+        laps : array_like of int, shape (N,)
+            Its lap counters.
+        n : int
+            N, the number of particles (all present).
+        frame_interval : float, optional
+            The series' frame interval (s), if known.
+        """
+        self.last_time = self.continued_from = float(time)
+        self.last_y = np.asarray(heights, dtype=np.float64).copy()
+        self.last_lap = np.asarray(laps, dtype=np.int32).copy()
+        self.last_present = np.ones(n, dtype=bool)
+        if frame_interval is not None:
+            self.interval = float(frame_interval)
+
+    def add_particles(self, count: int) -> None:
+        """Extend the per-particle state by ``count`` particles absent so far."""
+        if self.last_y is not None:
+            self.last_y = np.concatenate([self.last_y, np.full(count, np.nan)])
+            self.last_lap = np.concatenate([self.last_lap, np.zeros(count, np.int32)])
+            self.last_present = np.concatenate([self.last_present, np.zeros(count, bool)])
+
+    def check_times(self, times: np.ndarray) -> None:
+        """Refuse the times of a block that are not finite, do not increase after the last
+        frame, or are unevenly spaced (:meth:`check_spacing`); remembers the recent steps.
+
+        Parameters
+        ----------
+        times : ndarray of float64, shape (T,)
+            The block's frame times (s).
+
+        Raises
+        ------
+        InputError
+            Naming the first time that breaks the rules.
+        """
+        if not np.all(np.isfinite(times)):
+            raise InputError(f"{self.label}: frame time is not a finite number")
+        allt = times if self.last_time is None else np.concatenate([[self.last_time], times])
+        if allt.size < 2:
+            return
+        steps = np.diff(allt)
+        if np.any(steps <= 0):
+            k = int(np.argmax(steps <= 0))
+            raise InputError(f"{self.label}: time does not increase at t = "
+                             f"{time_text(allt[k + 1])} s (after {time_text(allt[k])} s)")
+        known = np.concatenate([self.recent_steps, steps])
+        self.check_spacing(allt, known, known.size - steps.size)
+        self.recent_steps = known[-RECENT_STEPS:]
+
+    def check_spacing(self, times: np.ndarray, steps: np.ndarray, first: int = 0) -> None:
+        """Refuse the first of ``steps[first:]`` (between ``times[i - first]`` and the
+        next) more than FRAME_SPACING_TOLERANCE off the reference interval.
+
+        Parameters
+        ----------
+        times : ndarray of float64, shape (K + 1,)
+            Frame times (s) of the steps judged.
+        steps : ndarray of float64, shape (S,)
+            Steps (s), the last K of them between ``times``.
+        first : int, optional
+            Steps before this one only join the median.
+
+        Raises
+        ------
+        InputError
+            Naming the step, its times and the reference.
+        """
+        if self.interval is not None:
+            reference, what = self.interval, "the frame interval"
+        elif steps.size >= 3:
+            reference, what = float(np.median(steps)), "the median step"
+        else:
+            reference, what = float(steps[0]), "the first step"
+        bad = np.abs(steps[first:] - reference) > FRAME_SPACING_TOLERANCE * reference
+        if np.any(bad):
+            k = int(np.argmax(bad))
+            raise InputError(
+                f"{self.label}: frames unevenly spaced: {time_text(steps[first + k])} s between "
+                f"t = {time_text(times[k])} and {time_text(times[k + 1])} s, expected "
+                f"{time_text(reference)} s ({what}, within {FRAME_SPACING_TOLERANCE:.0%}); for "
+                "irregular frame times (tracking data such as PEPT, or missing frames) resample "
+                "them with --resample DT --max-gap G")
+
+    def laps(self, ids: np.ndarray, times: np.ndarray, positions: np.ndarray,
+             present: np.ndarray, laps) -> np.ndarray:
+        """The lap counters of a block: given, 0 for an open riser, or by the minimal-image
+        rule between consecutive frames where a particle is present (carried over gaps);
+        updates the last height, lap and presence of every particle.
+
+        Parameters
+        ----------
+        ids : ndarray of int64, shape (N,)
+            Particle ids, for messages.
+        times : ndarray of float64, shape (T,)
+            Frame times (s).
+        positions : ndarray of float64, shape (T, N, D)
+            Positions (m); NaN where absent.
+        present : ndarray of bool, shape (T, N)
+            Which particles are in each frame.
+        laps : array_like of int, shape (T, N), or None
+            Given lap counters, or None to count them.
+
+        Returns
+        -------
+        ndarray of int32, shape (T, N)
+            0 where a particle is absent.
+
+        Raises
+        ------
+        InputError
+            If (laps counted) a particle moved more than ``max_step`` of the height between
+            frames.
+        """
+        t, n = present.shape
+        if laps is not None:
+            laps = np.where(present, np.asarray(laps, dtype=np.int32).reshape(t, n), 0)
+            if self.last_y is None:
+                self.last_y = np.full(n, np.nan)
+                self.last_lap = np.zeros(n, np.int32)
+            seen = present.any(axis=0)
+            last = t - 1 - np.argmax(present[::-1], axis=0)
+            cols = np.arange(n)
+            self.last_y = np.where(seen, positions[last, cols, 1], self.last_y)
+            self.last_lap = np.where(seen, laps[last, cols], self.last_lap).astype(np.int32)
+            self.last_present = present[-1].copy()
+            return laps
+        if self.open_riser:
+            return np.zeros((t, n), dtype=np.int32)
+        out = np.zeros((t, n), dtype=np.int32)
+        prev_y, prev_lap, prev_present = self.last_y, self.last_lap, self.last_present
+        prev_t = self.last_time
+        for k in range(t):
+            y = positions[k, :, 1]
+            if prev_y is None:
+                lap = np.zeros(n, dtype=np.int32)
+                prev_y = np.full(n, np.nan)
+            else:
+                both = present[k] & prev_present
+                self._check_minimal_image(ids, prev_y, y, prev_t, times[k], both)
+                with np.errstate(invalid="ignore"):
+                    step = lap_increments(prev_y, y, self.height)
+                lap = prev_lap + np.where(both, step, 0).astype(np.int32)
+            out[k] = np.where(present[k], lap, 0)
+            prev_y = np.where(present[k], y, prev_y)
+            prev_lap, prev_present, prev_t = lap, present[k], times[k]
+        self.last_y, self.last_lap, self.last_present = prev_y, prev_lap, prev_present
+        return out
+
+    def _check_minimal_image(self, ids: np.ndarray, previous_y: np.ndarray, y: np.ndarray,
+                             t0, t1, both: np.ndarray) -> None:
+        """Laps from wrapped heights need small steps: refuse a particle that moved more
+        than ``max_step`` of the height between two frames (by the minimal image; beyond
+        half the height its pass through the periodic boundary, or not, cannot be told from
+        the positions at all)."""
+        step = np.where(both, np.abs(y - previous_y), 0.0)
+        step = np.minimum(step, self.height - step)          # the minimal image
+        worst = int(np.argmax(step)) if step.size else 0
+        if step.size and step[worst] > self.max_step * self.height:
+            raise InputError(
+                f"{self.label}: particle {int(ids[worst])} moved {step[worst]:.4g} m "
+                f"(more than {self.max_step:g} of the height {self.height:g} m) between t = {t0:g} "
+                f"and {t1:g} s: the lap counter cannot be inferred from wrapped positions; "
+                "write frames more often, or give unwrapped coordinates (xu yu) or image "
+                "flags (ix iy)")
