@@ -26,11 +26,12 @@ import numpy as np
 
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
-from cfbmarkov.limits import MAX_STEPS, check_finite, check_memory, check_seed
+from cfbmarkov.limits import MAX_STEPS, check_finite, check_seed
 from cfbmarkov.markov import model_file, model_summary, prediction, propagation
 from cfbmarkov.markov.connectivity import (closed_classes, stationary_distribution,
                                            states_reaching)
 from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, exact_rtd
+from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS, checked_arrays, checked_coherence
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.regimes import (RegimeCells, conditional_chain, regime_matrix,
@@ -39,25 +40,6 @@ from cfbmarkov.markov.states import StateSpace
 
 if TYPE_CHECKING:
     import h5py
-
-
-def _own(value, dtype, adopt: bool) -> np.ndarray:
-    """The model's read-only array of ``value``: with ``adopt``, the array itself where it
-    has this dtype and is C-contiguous; else a copy."""
-    if (adopt and isinstance(value, np.ndarray) and value.dtype == dtype
-            and value.flags.c_contiguous):
-        owned = value
-    else:
-        owned = np.array(value, dtype=dtype)
-    owned.setflags(write=False)
-    return owned
-
-
-def _coherence(value) -> float:
-    """The coherence as a float; InputError where it is not a number in [0, 1]."""
-    if not (isinstance(value, (int, float, np.number)) and 0.0 <= float(value) <= 1.0):
-        raise InputError(f"model coherence {value!r} must lie in [0, 1]")
-    return float(value)
 
 
 @dataclass(frozen=True, eq=False)
@@ -149,45 +131,13 @@ class MarkovModel:
 
     def __post_init__(self, adopt: bool):
         s = self.state_space.n_states
-        for name in model_file.SQUARE_DATASETS:
-            given = np.asarray(getattr(self, name))
-            if name != "transition_matrix" and given.dtype.kind not in "iub" and not (
-                    np.all(np.isfinite(given)) and np.all(given == np.round(given))):
-                raise InputError(f"model {name} holds values that are not whole counts")
-            value = _own(getattr(self, name), np.float64 if name == "transition_matrix"
-                         else np.int64, adopt)
-            if value.shape != (s, s):
-                raise InputError(f"model {name} has shape {value.shape}, expected ({s}, {s}) "
-                                 f"for {self.state_space.describe()}")
+        arrays, fractions = checked_arrays({name: getattr(self, name) for name in SQUARE_ARRAYS},
+                                           self.pass_fractions, self.lag, self.state_space,
+                                           adopt)
+        for name, value in arrays.items():
             object.__setattr__(self, name, value)
-        if not (isinstance(self.lag, (int, float, np.number)) and np.isfinite(self.lag)
-                and self.lag > 0):
-            raise InputError(f"model lag {self.lag!r} s must be a positive finite number")
-        p = self.transition_matrix
-        if not np.all(np.isfinite(p)) or (p.size and p.min() < 0):
-            raise InputError("transition matrix holds negative or non-finite entries")
-        rows = p.sum(axis=1)
-        if not np.allclose(rows, 1.0, atol=1e-9):
-            k = int(np.argmax(np.abs(rows - 1.0)))
-            raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to {rows[k]:.6g})")
-        for name in ("counts", "counts_up", "counts_down"):
-            value = getattr(self, name)
-            if value.size and value.min() < 0:
-                raise InputError(f"model {name} holds negative counts")
-        if self.pass_fractions is not None:
-            if len(self.pass_fractions) != 2:
-                raise InputError("pass fractions must be (up, down)")
-            fractions = tuple(_own(f, np.float64, adopt) for f in self.pass_fractions)
-            if any(f.shape != (s, s) for f in fractions):
-                raise InputError(f"pass fractions must have shape ({s}, {s})")
-            up, down = fractions
-            if not (np.all(np.isfinite(up)) and np.all(np.isfinite(down))) or (up.size and (
-                    min(up.min(), down.min()) < 0 or (up + down).max() > 1.0 + 1e-9)):
-                worst = float(max(np.nanmax(np.abs(up)), np.nanmax(np.abs(down)))) if up.size else 0
-                raise InputError("pass fractions must lie in [0, 1] with up + down <= 1 for each "
-                                 f"transition (largest {worst:.6g})")
-            object.__setattr__(self, "pass_fractions", fractions)
-        object.__setattr__(self, "coherence", _coherence(self.coherence))
+        object.__setattr__(self, "pass_fractions", fractions)
+        object.__setattr__(self, "coherence", checked_coherence(self.coherence))
         if not (isinstance(self.frame_pairs, (int, np.integer)) and self.frame_pairs >= 0):
             raise InputError(f"model frame_pairs {self.frame_pairs!r} must be a count >= 0")
         if self.window is not None and not (len(self.window) == 2 and all(
@@ -541,7 +491,7 @@ class MarkovModel:
         InputError
             If ``coherence`` is not in [0, 1].
         """
-        return self._derived(coherence=_coherence(coherence))
+        return self._derived(coherence=checked_coherence(coherence))
 
     def with_selection(self, selection: dict) -> "MarkovModel":
         """The same model, recording how its state space and lag were chosen.

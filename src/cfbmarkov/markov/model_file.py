@@ -39,6 +39,7 @@ import numpy as np
 from cfbmarkov._atomic import atomic_path, h5_file
 from cfbmarkov.boundary import BOUNDARIES, Boundary
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS
 from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.states import StateSpace
 from cfbmarkov._hdf5 import create_array_dataset
@@ -48,8 +49,6 @@ if TYPE_CHECKING:
 
 #: the ``format`` attribute of a model file
 MODEL_FORMAT = "cfbmarkov.model"
-#: the model's [S, S] arrays, stored as datasets of the same names
-SQUARE_DATASETS = ("transition_matrix", "counts", "counts_up", "counts_down")
 
 
 def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -64,7 +63,7 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
     datasets : dict of str to ndarray
     attrs : dict of str to value
     """
-    datasets = {name: getattr(model, name) for name in SQUARE_DATASETS}
+    datasets = {name: getattr(model, name) for name in SQUARE_ARRAYS}
     datasets["unvisited_states"] = model.unvisited_states
     datasets["pass_up_fraction"] = model.up_fraction
     datasets["pass_down_fraction"] = model.down_fraction
@@ -177,7 +176,7 @@ def _read_model_group(group, model_class) -> "MarkovModel":
     if not (np.isfinite(frame_pairs) and frame_pairs >= 0 and frame_pairs == round(frame_pairs)):
         raise InputError(f"frame_pairs {frame_pairs:g} is not a count")
     return model_class(
-        **{name: group[name][()] for name in SQUARE_DATASETS},
+        **{name: group[name][()] for name in SQUARE_ARRAYS},
         state_space=StateSpace.from_attrs(group.attrs["state_space"]),
         lag=_attr_number(group.attrs["lag"], "lag"), estimator=str(group.attrs["estimator"]),
         window=None if np.isnan(window).any() else (float(window[0]), float(window[1])),
