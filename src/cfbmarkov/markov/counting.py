@@ -320,7 +320,7 @@ def count_transitions(data, frame_average: bool = True, sparse: bool = False
     sparse : bool, optional
         Hold the [S, S] arrays as ``scipy.sparse.csr_array`` (memory and work grow with the
         transitions and non-zeros, never with S x S; what cross-validation over large state
-        spaces uses, with :meth:`TransitionEstimator.split_chain`). Models are fitted from
+        spaces uses, with :meth:`~cfbmarkov.markov.estimate.TransitionEstimator.split_chain`). Models are fitted from
         dense counts.
 
     Returns

@@ -141,7 +141,7 @@ class TransitionEstimator:
         Parameters
         ----------
         counts : TransitionCounts
-            Counts gathered by :func:`count_transitions`.
+            Counts gathered by :func:`~cfbmarkov.markov.counting.count_transitions`.
 
         Returns
         -------
@@ -213,7 +213,7 @@ class TransitionEstimator:
         Parameters
         ----------
         counts : TransitionCounts
-            Counts gathered by :func:`count_transitions`.
+            Counts gathered by :func:`~cfbmarkov.markov.counting.count_transitions`.
 
         Returns
         -------
@@ -246,7 +246,7 @@ class TransitionEstimator:
         Parameters
         ----------
         counts : TransitionCounts
-            Counts gathered by :func:`count_transitions`, sparse (``sparse=True``) or dense.
+            Counts gathered by :func:`~cfbmarkov.markov.counting.count_transitions`, sparse (``sparse=True``) or dense.
 
         Returns
         -------
@@ -401,7 +401,7 @@ class MaximumLikelihoodEstimator(TransitionEstimator):
         Parameters
         ----------
         counts : TransitionCounts
-            Counts gathered by :func:`count_transitions`.
+            Counts gathered by :func:`~cfbmarkov.markov.counting.count_transitions`.
 
         Returns
         -------

@@ -42,6 +42,7 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS
 from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.states import StateSpace
+from cfbmarkov.trajectories import _open_h5
 from cfbmarkov._hdf5 import create_array_dataset
 
 if TYPE_CHECKING:
@@ -231,8 +232,6 @@ def read_model(path: str | os.PathLike, model_class: Callable[..., "MarkovModel"
     InputError
         If the file is missing, empty, not HDF5, not a model file, or damaged.
     """
-    from cfbmarkov.trajectories import _open_h5
-
     with _open_h5(path) as f:
         return read_model_group(f, model_class, str(path))
 

@@ -12,8 +12,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.limits import check_finite, check_memory, check_seed
 from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.model_file import model_datasets_and_attrs
+from cfbmarkov.markov.states import place_in_cells
+from cfbmarkov.trajectories import opened
+from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
@@ -58,11 +62,7 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
     Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
     doi:10.3390/pr13030614 (Eq. 7).
     """
-    from cfbmarkov.trajectories import opened
-
     with opened(trajectories) as traj:
-        from cfbmarkov.limits import check_finite, check_memory, check_seed
-
         seed = check_seed(seed)
         duration = check_finite(duration, "duration", "s", positive=True)
         check_finite(start, "start time", "s")
@@ -70,7 +70,7 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         if n_steps < 1:
             raise InputError(f"duration {duration:g} s is shorter than one lag ({model.lag:g} s)")
         particles = traj.n_particles + (model.open_flow.inflow_per_lag * n_steps
-                                        if model.boundary.is_open else 0)
+                                        if model.open_flow is not None else 0)
         # states and laps (int32 each) of every particle at every lag, and the positions
         check_memory((n_steps + 1.0) * particles * 8 + 8.0 * particles * traj.dimensions,
                      f"a prediction of {duration:g} s ({n_steps} lags of {model.lag:g} s x "
@@ -175,9 +175,6 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
     InputError
         If the file cannot be written.
     """
-    from cfbmarkov.markov.states import place_in_cells
-    from cfbmarkov.trajectory_writer import TrajectoryWriter
-
     traj = trajectories
     n_steps = times.size - 1
     duration = float(n_steps * model.lag if duration is None else duration)
