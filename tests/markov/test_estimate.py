@@ -137,7 +137,8 @@ def test_sparse_counts_and_split_chain_equal_the_dense_ones(tmp_path, markov_flo
     without an S x S array) gives the dense path's counts exactly and its chain and exact
     RTD to rounding, for both estimators, with states never left filled from their cell
     (40 particles leave some) and with the largest connected set."""
-    from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, pass_fractions
+    from cfbmarkov.markov.counting import count_transitions
+    from cfbmarkov.markov.estimate import estimator_from_name, pass_fractions
     from cfbmarkov.markov.first_passage import exact_rtd, rtd_of_split_chain, split_by_pass
     from cfbmarkov.markov.spaces import state_space_from_name
 
@@ -188,7 +189,7 @@ def test_sparse_counts_and_split_chain_equal_the_dense_ones(tmp_path, markov_flo
 def test_sparse_counts_of_an_open_riser_count_each_face_crossing_once(tmp_path, markov_flow):
     """Open riser, two windows counted together: the sparse counts hold the dense ones'
     exits, entries and censored tracks exactly once, and the same transitions."""
-    from cfbmarkov.markov.estimate import count_transitions
+    from cfbmarkov.markov.counting import count_transitions
 
     path = synthetic.write_open_run(tmp_path / "open.h5", markov_flow, 200, 1.5, seed=4)
     windows = [discretize(path, markov_flow.grid, markov_flow.lag, w)
@@ -204,7 +205,7 @@ def test_sparse_counts_of_an_open_riser_count_each_face_crossing_once(tmp_path, 
 def test_sparse_count_kernel_is_the_same_for_any_number_of_chunks():
     """The threads' frame and row chunks (1, 2, 3 or 7) give the same counts, frame-average
     sums (bit for bit: every row is summed in time order) and occupied frames."""
-    from cfbmarkov.markov.estimate import _sparse_count_kernel
+    from cfbmarkov.markov.counting import _sparse_count_kernel
 
     rng = np.random.default_rng(5)
     n_states = 40

@@ -451,7 +451,7 @@ def test_a_state_never_left_moves_as_its_cell_did():
     """A rare sub-state seen only at the end of the window has no outgoing transition: it
     takes its cell's pooled row and pass fractions instead of trapping its particles; a
     state whose whole cell was never left stays in place (P_ii = 1)."""
-    from cfbmarkov.markov.estimate import TransitionCounts
+    from cfbmarkov.markov.counting import TransitionCounts
 
     space = DirectionCells(1, 3, 1.0, 1.0)                  # states 2*cell + falling
     s = space.n_states

@@ -203,7 +203,7 @@ def test_save_load_round_trip_and_bad_files(tmp_path, markov_flow, markov_run):
 
 def test_derived_models_share_the_validated_arrays_and_new_arrays_are_checked():
     """with_selection / with_coherence keep the validated read-only arrays (no [S, S]
-    copies); any array not made by a model's validation is checked and copied as before."""
+    copies); a model made from arrays checks and copies them."""
     import dataclasses
 
     model = ladder_model(6, 0.5, 0.1)
@@ -213,6 +213,8 @@ def test_derived_models_share_the_validated_arrays_and_new_arrays_are_checked():
         assert not getattr(derived, name).flags.writeable
     if model.pass_fractions is not None:
         assert derived.pass_fractions[0] is model.pass_fractions[0]
+    with pytest.raises(InputError, match="must lie in"):
+        model.with_coherence(1.5)
     doubled = np.array(model.transition_matrix) * 2.0
     with pytest.raises(InputError, match="rows do not sum to 1"):
         dataclasses.replace(model, transition_matrix=doubled)
@@ -225,25 +227,21 @@ def test_derived_models_share_the_validated_arrays_and_new_arrays_are_checked():
     assert copied.transition_matrix is not given and np.array_equal(copied.transition_matrix, given)
 
 
-def test_handed_over_arrays_are_kept_and_others_copied():
-    """An estimator's own fresh arrays are handed over (checked, kept, made read-only); a
-    caller's arrays are copied and stay the caller's."""
+def test_adopted_arrays_are_kept_and_others_copied():
+    """A model made with adopt=True keeps the given arrays (checked, made read-only); without
+    it a caller's arrays are copied and stay the caller's."""
     import dataclasses
-
-    from cfbmarkov.markov.model import hand_over
 
     model = ladder_model(5, 0.5, 0.1)
     mine = np.array(model.transition_matrix)
     copied = dataclasses.replace(model, transition_matrix=mine)
     assert copied.transition_matrix is not mine and mine.flags.writeable
     given = np.array(model.transition_matrix)
-    hand_over(given)
-    adopted = dataclasses.replace(model, transition_matrix=given)
+    adopted = dataclasses.replace(model, transition_matrix=given, adopt=True)
     assert adopted.transition_matrix is given and not given.flags.writeable
-    bad = np.array(model.transition_matrix) * 3.0      # handed over, still checked
-    hand_over(bad)
+    bad = np.array(model.transition_matrix) * 3.0      # adopted, still checked
     with pytest.raises(InputError, match="rows do not sum to 1"):
-        dataclasses.replace(model, transition_matrix=bad)
+        dataclasses.replace(model, transition_matrix=bad, adopt=True)
 
 
 @pytest.mark.parametrize("falls", [0.0, 0.15])

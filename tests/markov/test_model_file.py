@@ -9,7 +9,7 @@ import pytest
 
 from cfbmarkov._hdf5 import create_array_dataset
 from cfbmarkov.markov import CellGrid, MarkovModel, SecondOrderCells
-from cfbmarkov.markov.model_file import model_datasets_and_attrs, read_model, write_model
+from cfbmarkov.markov.model_file import model_datasets_and_attrs, write_model
 from cfbmarkov.trajectories import Trajectories
 from cfbmarkov.trajectory_writer import TrajectoryWriter
 
@@ -47,7 +47,7 @@ def test_1596_state_model_is_small_and_round_trips_exactly(tmp_path, big_model):
     # 6 dense [1596, 1596] arrays of 8 bytes were 122 MB; 7 non-zeros per row compress to < 1 MB
     assert big_model.n_states == 1596
     assert path.stat().st_size < 3e6
-    back = read_model(path)
+    back = MarkovModel.load(path)
     for name in ("transition_matrix", "counts", "counts_up", "counts_down", "up_fraction",
                  "down_fraction", "unvisited_states"):
         a, b = getattr(big_model, name), getattr(back, name)
@@ -106,7 +106,7 @@ def test_files_written_without_compression_still_read(tmp_path, big_model):
         for name, value in datasets.items():
             f.create_dataset(name, data=value)
         f.attrs.update(attrs)
-    back = read_model(tmp_path / "plain.h5")
+    back = MarkovModel.load(tmp_path / "plain.h5")
     assert np.array_equal(back.transition_matrix, big_model.transition_matrix)
 
 

@@ -48,17 +48,17 @@ def test_fit_gives_back_the_open_chain_within_sampling_error(open_run):
     model = fit_model(open_run["run"], space, LAG, estimator="mle")
     assert model.boundary == "open"
     q_hat = model.absorbing_matrix
-    visits = model.counts.sum(axis=1) + model.exit_counts
+    visits = model.counts.sum(axis=1) + model.open_flow.exit_counts
     well = visits > 400
     assert well.sum() > 100
     sigma = np.sqrt(open_run["q"] * (1 - open_run["q"]) / np.maximum(visits, 1)[:, None])
     z = np.abs(q_hat - open_run["q"])[well] / np.maximum(sigma[well], 1e-12)
     assert z.max() < 5.0
     r_sigma = np.sqrt(open_run["r"] * (1 - open_run["r"]) / np.maximum(visits, 1))
-    assert (np.abs(model.exit_probability - open_run["r"])[well] <= 5 * r_sigma[well] + 1e-12).all()
+    assert (np.abs(model.open_flow.exit_probability - open_run["r"])[well] <= 5 * r_sigma[well] + 1e-12).all()
     # entries only into the bottom row, evenly
-    np.testing.assert_array_equal(np.flatnonzero(model.entry_counts), np.arange(6))
-    assert model.inflow_per_lag == pytest.approx(6.0, rel=0.1)
+    np.testing.assert_array_equal(np.flatnonzero(model.open_flow.entry_counts), np.arange(6))
+    assert model.open_flow.inflow_per_lag == pytest.approx(6.0, rel=0.1)
     # saved and loaded unchanged
     with pytest.raises(InputError, match="paper's estimator .* --estimator mle"):
         fit_model(open_run["run"], space, LAG, estimator="paper")
@@ -68,10 +68,10 @@ def test_exact_rtd_is_the_fundamental_matrix_result(open_run, tmp_path):
     model = fit_model(open_run["run"], CellGrid(6, 38, W, H), LAG, estimator="mle")
     path = model.save(tmp_path / "m.h5")
     loaded = MarkovModel.load(path)
-    np.testing.assert_array_equal(loaded.exit_probability, model.exit_probability)
-    np.testing.assert_array_equal(loaded.entry_counts, model.entry_counts)
-    assert loaded.inflow_per_lag == model.inflow_per_lag and loaded.boundary == "open"
-    q, r, e = model.absorbing_matrix, model.exit_probability, model.entry_distribution
+    np.testing.assert_array_equal(loaded.open_flow.exit_probability, model.open_flow.exit_probability)
+    np.testing.assert_array_equal(loaded.open_flow.entry_counts, model.open_flow.entry_counts)
+    assert loaded.open_flow.inflow_per_lag == model.open_flow.inflow_per_lag and loaded.boundary == "open"
+    q, r, e = model.absorbing_matrix, model.open_flow.exit_probability, model.open_flow.entry_distribution
     fundamental = np.linalg.inv(np.eye(q.shape[0]) - q)
     mean_lags = e @ fundamental @ np.ones(q.shape[0])
     second = e @ fundamental @ (2 * fundamental - np.eye(q.shape[0])) @ np.ones(q.shape[0])
@@ -119,7 +119,7 @@ def test_monte_carlo_of_the_open_riser_agrees_with_the_exact_rtd(open_run, tmp_p
             start_ids = ref.ids[ref.present(ref.frame_index(1.0))]
         np.testing.assert_array_equal(t.ids[present[0]], start_ids)
         entered = (present[1:] & ~present[:-1]).sum()
-        assert entered / (t.n_frames - 1) == pytest.approx(model.inflow_per_lag, rel=0.1)
+        assert entered / (t.n_frames - 1) == pytest.approx(model.open_flow.inflow_per_lag, rel=0.1)
     exact = model.rtd(window[1] - window[0])
     assert samples.size > 500
     se = samples.std(ddof=1) / np.sqrt(samples.size)

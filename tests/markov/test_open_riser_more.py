@@ -45,9 +45,9 @@ def test_tracks_leaving_the_view_at_a_side_are_censored_not_exits(tmp_path):
     path = write_trajectories(tmp_path / "cut.h5", times, pos, width=W, height=H, ids=ids,
                               present=truncated >= 0, boundary="open")
     model = fit_model(path, CellGrid(6, 38, W, H), LAG, estimator="mle")
-    assert model.censored_tracks[0] >= len(lost) > 20
+    assert model.open_flow.censored_tracks[0] >= len(lost) > 20
     assert any("left out as censored" in line for line in model.warnings())
-    visits = model.counts.sum(axis=1) + model.exit_counts
+    visits = model.counts.sum(axis=1) + model.open_flow.exit_counts
     well = visits > 400
     sigma = np.sqrt(q * (1 - q) / np.maximum(visits, 1)[:, None])
     assert (np.abs(model.absorbing_matrix - q)[well] / np.maximum(sigma[well], 1e-12)).max() < 5
@@ -76,13 +76,13 @@ def test_open_riser_in_3d_cells(tmp_path):
     projected = fit_model(deep, CellGrid(6, 38, W, H), LAG, estimator="mle")
     plain = fit_model(flat, CellGrid(6, 38, W, H), LAG, estimator="mle")
     np.testing.assert_array_equal(projected.counts, plain.counts)
-    np.testing.assert_array_equal(projected.exit_counts, plain.exit_counts)
+    np.testing.assert_array_equal(projected.open_flow.exit_counts, plain.open_flow.exit_counts)
     grid = CellGrid(6, 38, W, H, depth_columns=2, depth=0.01)
     model = fit_model(deep, grid, LAG, estimator="mle")
     assert model.n_states == 6 * 2 * 38
-    np.testing.assert_array_equal(np.flatnonzero(model.entry_counts), np.arange(12))
+    np.testing.assert_array_equal(np.flatnonzero(model.open_flow.entry_counts), np.arange(12))
     qm = model.absorbing_matrix
-    mean = model.entry_distribution @ np.linalg.solve(np.eye(qm.shape[0]) - qm, np.ones(qm.shape[0]))
+    mean = model.open_flow.entry_distribution @ np.linalg.solve(np.eye(qm.shape[0]) - qm, np.ones(qm.shape[0]))
     assert model.rtd().mean == pytest.approx(mean * LAG, rel=1e-8)
     out = model.predict(deep, start=1.0, duration=7.0, seed=3, output=tmp_path / "p.h5")
     with Trajectories(out) as t:

@@ -150,7 +150,7 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
     (:func:`block_bootstrap_models`; dense, or scipy.sparse with ``sparse``). Checks and
     counts on the call; the sums are formed as the iterator is consumed."""
     from cfbmarkov.markov.discrete import discretize
-    from cfbmarkov.markov.estimate import count_transitions
+    from cfbmarkov.markov.counting import count_transitions
 
     if int(blocks) < 2 or int(resamples) < 1:
         raise InputError(f"a block bootstrap needs at least 2 blocks and 1 resample ({blocks}, "

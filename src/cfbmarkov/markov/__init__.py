@@ -14,13 +14,12 @@ from cfbmarkov.markov.discrete import (
     discretize_frame,
     read_frames,
 )
+from cfbmarkov.markov.counting import TransitionCounts, count_transitions
 from cfbmarkov.markov.estimate import (
     ESTIMATORS,
     MaximumLikelihoodEstimator,
     PaperEstimator,
-    TransitionCounts,
     TransitionEstimator,
-    count_transitions,
     estimator_from_name,
     fit_model,
 )

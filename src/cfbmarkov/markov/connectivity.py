@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
+from threadpoolctl import threadpool_limits
 
 
 def _graph(matrix) -> sp.csr_matrix:
@@ -177,5 +178,41 @@ def long_run_distribution(matrix: np.ndarray, classes: list[np.ndarray],
     return out / out.sum()
 
 
+def stationary_distribution(matrix: np.ndarray, occupancy: np.ndarray) -> np.ndarray:
+    """The long-run distribution of P, pi P = pi.
+
+    One closed class: the left eigenvector of P for eigenvalue 1. A reducible chain (several
+    closed classes, traps P_ii = 1 included) has no unique one: ``occupancy`` is carried
+    into the closed classes by their absorption probabilities, and each class holds its own
+    stationary distribution with that mass (:func:`long_run_distribution`).
+
+    Parameters
+    ----------
+    matrix : ndarray of float64, shape (S, S)
+        P.
+    occupancy : ndarray of float64, shape (S,)
+        The mass of a reducible chain (e.g. particle-frames per state); uniform where it is
+        all zero.
+
+    Returns
+    -------
+    ndarray of float64, shape (S,)
+        Sums to 1.
+
+    References
+    ----------
+    J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
+    (1960) (Ch. III absorbing chains, IV-V regular and ergodic chains).
+    """
+    classes = closed_classes(matrix)
+    if len(classes) > 1:
+        return long_run_distribution(matrix, classes, occupancy)
+    with threadpool_limits(1):          # BLAS threads only contend on a dense eig here
+        values, vectors = np.linalg.eig(matrix.T)
+    lead = int(np.argmin(np.abs(values - 1.0)))
+    pi = np.abs(vectors[:, lead].real)
+    return pi / pi.sum()
+
+
 __all__ = ["closed_classes", "largest_connected_set", "long_run_distribution",
-           "restrict_to_set", "states_reaching"]
+           "restrict_to_set", "stationary_distribution", "states_reaching"]

@@ -30,9 +30,11 @@ import numba as nb
 import numpy as np
 from threadpoolctl import threadpool_limits
 import scipy.sparse as sp
+from scipy.sparse.csgraph import breadth_first_order
 from scipy.sparse.linalg import splu
 
 from cfbmarkov.errors import CfbmarkovError
+from cfbmarkov.markov.connectivity import closed_classes
 
 
 class TrappedResidences(CfbmarkovError):
@@ -229,8 +231,6 @@ def _reaching(q: sp.csr_matrix, targets: np.ndarray) -> np.ndarray:
     """Which states reach one of ``targets`` (bool [n]) through the non-zeros of ``q``
     (themselves included): a breadth-first search of the reversed graph from a virtual node
     joined to every target."""
-    from scipy.sparse.csgraph import breadth_first_order
-
     n = q.shape[0]
     reverse = sp.csr_matrix(q.T)
     hub = sp.csr_matrix((np.ones(int(targets.sum())), (np.full(int(targets.sum()), n),
@@ -430,7 +430,7 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
         flux = (np.zeros(s) if entry_flux is None
                 else np.asarray(entry_flux, dtype=np.float64).ravel())
         label = -np.ones(s, np.int64)
-        for k, members in enumerate(_classes_of_states(chain)):
+        for k, members in enumerate(closed_classes(chain)):
             label[members] = k
         weights = np.array([max(flux[label == label[entries[c[0]]]].sum(), 0.0)
                             for c in classes])
@@ -508,18 +508,10 @@ def open_rtd(absorbing: np.ndarray, exit_probability: np.ndarray, entry: np.ndar
     return result
 
 
-def _classes_of_states(chain: sp.csr_matrix) -> list[np.ndarray]:
-    from cfbmarkov.markov.connectivity import closed_classes
-
-    return closed_classes(chain)
-
-
 def _closed_entry_classes(chain: sp.csr_matrix, entries: np.ndarray) -> list[np.ndarray]:
     """The closed classes of the graph P_ij > 0 that hold entry states, each as positions
     into ``entries``; transient entry states belong to none (they carry no stationary
-    mass). One class: all entries (the irreducible case, computed as before)."""
-    from cfbmarkov.markov.connectivity import closed_classes
-
+    mass). One class: all entries (the irreducible case)."""
     classes = closed_classes(chain)
     if len(classes) <= 1:
         return [np.arange(entries.size)]

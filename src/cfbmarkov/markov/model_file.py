@@ -20,7 +20,9 @@ in about a tenth of a second. Deflate is built into every HDF5 library, so any H
 ``version`` are unchanged, and files written before compression read the same.
 
 A prediction carries the same group, stored the same way, as ``/provenance/model``. The model
-class itself never opens a file; this module does it for it.
+class itself never opens a file; this module does it for it, and builds the model it reads
+with the class it is given (:meth:`MarkovModel.load
+<cfbmarkov.markov.model.MarkovModel.load>` passes its own).
 """
 
 from __future__ import annotations
@@ -29,19 +31,24 @@ import datetime as _dt
 import json
 import os
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Callable
 
 import h5py
 import numpy as np
 
 from cfbmarkov._atomic import atomic_path, h5_file
+from cfbmarkov._hdf5 import create_array_dataset, open_h5
+from cfbmarkov.boundary import BOUNDARIES, Boundary
 from cfbmarkov.errors import InputError
-from cfbmarkov.markov.model import _DATASETS, MODEL_FORMAT
+from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS
+from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.spaces import state_space_from_attrs
-from cfbmarkov._hdf5 import create_array_dataset
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
+
+#: the ``format`` attribute of a model file
+MODEL_FORMAT = "cfbmarkov.model"
 
 
 def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray], dict[str, Any]]:
@@ -56,7 +63,7 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
     datasets : dict of str to ndarray
     attrs : dict of str to value
     """
-    datasets = {name: getattr(model, name) for name in _DATASETS}
+    datasets = {name: getattr(model, name) for name in SQUARE_ARRAYS}
     datasets["unvisited_states"] = model.unvisited_states
     datasets["pass_up_fraction"] = model.up_fraction
     datasets["pass_down_fraction"] = model.down_fraction
@@ -78,12 +85,10 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         attrs["connected"] = 1
     if model.coherence:
         attrs["coherence"] = float(model.coherence)
-    if model.boundary == "open":
-        attrs["boundary"] = "open"
-        attrs["inflow_per_lag"] = float(model.inflow_per_lag)
-        attrs["censored_tracks"] = np.asarray(model.censored_tracks, dtype=np.int64)
-        for name in _OPEN_DATASETS:
-            datasets[name] = getattr(model, name)
+    if model.open_flow is not None:
+        open_datasets, open_attrs = model.open_flow.file_fields()
+        attrs.update(open_attrs)
+        datasets.update(open_datasets)
     return datasets, attrs
 
 
@@ -115,13 +120,17 @@ def write_model(model: "MarkovModel", path: str | os.PathLike) -> Path:
     return Path(path)
 
 
-def read_model_group(group: h5py.Group | h5py.File, label: str = "") -> "MarkovModel":
+def read_model_group(group: h5py.Group | h5py.File, model_class: Callable[..., "MarkovModel"],
+                     label: str = "") -> "MarkovModel":
     """Rebuild a model from an HDF5 group written by :func:`write_model`.
 
     Parameters
     ----------
     group : h5py.Group or h5py.File
         The model file, or the group attached to a prediction as ``/provenance/model``.
+    model_class : callable
+        Makes the model from its fields as keywords
+        (:class:`~cfbmarkov.markov.model.MarkovModel`).
     label : str, optional
         Names the source in error messages (default: the file's name).
 
@@ -135,8 +144,6 @@ def read_model_group(group: h5py.Group | h5py.File, label: str = "") -> "MarkovM
         If the group is not a cfbmarkov model, misses a dataset or attribute, or holds an
         invalid model.
     """
-    from cfbmarkov.markov.model import MarkovModel
-
     label = label or getattr(group.file, "filename", "")
     fmt = group.attrs.get("format")
     if isinstance(fmt, bytes):
@@ -144,7 +151,7 @@ def read_model_group(group: h5py.Group | h5py.File, label: str = "") -> "MarkovM
     if fmt != MODEL_FORMAT:
         raise InputError(f"{label}: not a cfbmarkov model file (format attribute is {fmt!r})")
     try:
-        return _read_model_group(group, MarkovModel)
+        return _read_model_group(group, model_class)
     except KeyError as exc:
         raise InputError(f"{label}: damaged model file (missing {exc})") from None
     except InputError as exc:
@@ -156,7 +163,7 @@ def read_model_group(group: h5py.Group | h5py.File, label: str = "") -> "MarkovM
         raise InputError(f"{label}: damaged model file ({type(exc).__name__}: {exc})") from None
 
 
-def _read_model_group(group, MarkovModel) -> "MarkovModel":
+def _read_model_group(group, model_class) -> "MarkovModel":
     """The model of a group whose format has been checked (errors raised as they come)."""
     version = _attr_number(group.attrs.get("version", 1), "version")
     if version > 1:
@@ -168,8 +175,8 @@ def _read_model_group(group, MarkovModel) -> "MarkovModel":
     frame_pairs = _attr_number(group.attrs.get("frame_pairs", 0), "frame_pairs")
     if not (np.isfinite(frame_pairs) and frame_pairs >= 0 and frame_pairs == round(frame_pairs)):
         raise InputError(f"frame_pairs {frame_pairs:g} is not a count")
-    return MarkovModel(
-        **{name: group[name][()] for name in _DATASETS},
+    return model_class(
+        **{name: group[name][()] for name in SQUARE_ARRAYS},
         state_space=state_space_from_attrs(group.attrs["state_space"]),
         lag=_attr_number(group.attrs["lag"], "lag"), estimator=str(group.attrs["estimator"]),
         window=None if np.isnan(window).any() else (float(window[0]), float(window[1])),
@@ -181,7 +188,7 @@ def _read_model_group(group, MarkovModel) -> "MarkovModel":
         if "selection" in group.attrs else None,
         connected=bool(group.attrs.get("connected", 0)),
         coherence=_attr_number(group.attrs.get("coherence", 0.0), "coherence"),
-        **_open_fields(group))
+        open_flow=_open_flow(group))
 
 
 def _attr_number(value, name: str) -> float:
@@ -195,27 +202,25 @@ def _attr_number(value, name: str) -> float:
     return float(array.reshape(()))
 
 
-_OPEN_DATASETS = ("exit_probability", "exit_counts", "entry_counts")
-
-
-def _open_fields(group) -> dict:
-    """An open riser's fields from a model group (nothing for a periodic riser's)."""
-    boundary = group.attrs.get("boundary", "periodic")
+def _open_flow(group) -> OpenFlow | None:
+    """An open riser's flow from a model group (None for a periodic riser's)."""
+    boundary = group.attrs.get("boundary", Boundary.PERIODIC.value)
     boundary = boundary.decode() if isinstance(boundary, bytes) else str(boundary)
-    if boundary != "open":
-        return {"boundary": boundary}
-    censored = group.attrs.get("censored_tracks", (0, 0))
-    return {"boundary": boundary, "inflow_per_lag": float(group.attrs["inflow_per_lag"]),
-            "censored_tracks": (int(censored[0]), int(censored[1])),
-            **{name: group[name][()] for name in _OPEN_DATASETS}}
+    if boundary not in BOUNDARIES:
+        raise InputError(f"model boundary {boundary!r}: periodic or open")
+    return OpenFlow.from_group(group) if Boundary(boundary).is_open else None
 
 
-def read_model(path: str | os.PathLike) -> "MarkovModel":
+def read_model(path: str | os.PathLike, model_class: Callable[..., "MarkovModel"]
+               ) -> "MarkovModel":
     """Read a model file written by :func:`write_model`.
 
     Parameters
     ----------
     path : str or os.PathLike
+    model_class : callable
+        Makes the model from its fields as keywords
+        (:class:`~cfbmarkov.markov.model.MarkovModel`).
 
     Returns
     -------
@@ -226,10 +231,8 @@ def read_model(path: str | os.PathLike) -> "MarkovModel":
     InputError
         If the file is missing, empty, not HDF5, not a model file, or damaged.
     """
-    from cfbmarkov._hdf5 import open_h5
-
     with open_h5(path) as f:
-        return read_model_group(f, str(path))
+        return read_model_group(f, model_class, str(path))
 
 
 def _version() -> str:

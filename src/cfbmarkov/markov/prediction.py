@@ -12,7 +12,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.limits import check_finite, check_memory, check_seed
+from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.model_file import model_datasets_and_attrs
+from cfbmarkov.markov.states import place_in_cells
+from cfbmarkov.trajectories import opened
+from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
@@ -57,30 +62,26 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
     Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
     doi:10.3390/pr13030614 (Eq. 7).
     """
-    from cfbmarkov.trajectories import opened
-
     with opened(trajectories) as traj:
-        from cfbmarkov.limits import check_finite, check_memory, check_seed
-
         seed = check_seed(seed)
         duration = check_finite(duration, "duration", "s", positive=True)
         check_finite(start, "start time", "s")
         n_steps = model.steps_for(duration)
         if n_steps < 1:
             raise InputError(f"duration {duration:g} s is shorter than one lag ({model.lag:g} s)")
-        particles = traj.n_particles + (model.inflow_per_lag * n_steps
-                                        if model.boundary == "open" else 0)
+        particles = traj.n_particles + (model.open_flow.inflow_per_lag * n_steps
+                                        if model.open_flow is not None else 0)
         # states and laps (int32 each) of every particle at every lag, and the positions
         check_memory((n_steps + 1.0) * particles * 8 + 8.0 * particles * traj.dimensions,
                      f"a prediction of {duration:g} s ({n_steps} lags of {model.lag:g} s x "
                      f"{particles:.0f} particles)", "shorten --duration")
-        if model.boundary == "open" and traj.boundary != "open":
+        if model.boundary.is_open and not traj.boundary.is_open:
             raise InputError(f"{traj.path} is a periodic riser; the model is of an open one "
                              "(fit it on this file, or predict from an open riser's file)")
-        if model.boundary != "open" and traj.boundary == "open":
+        if not model.boundary.is_open and traj.boundary.is_open:
             raise InputError(f"{traj.path} is an open riser; the model is of a periodic one "
                              "(fit a model on open data)")
-        states0, positions0, laps0 = model.initial_states(traj, start)
+        states0, positions0, laps0 = initial_states(model, traj, start)
         ids = traj.ids
         present0 = states0 >= 0
         if not present0.all():          # only the particles present at the start move
@@ -95,6 +96,37 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
             return times, states, laps
         return write_prediction(model, traj, times, states, laps, positions0, seed, output,
                                 progress, duration=duration, ids=ids)
+
+
+def initial_states(model: "MarkovModel", trajectories, start: float
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """States, positions and laps of the particles in the frame at ``start``.
+
+    The frame is discretised with the history the state space needs.
+
+    Parameters
+    ----------
+    model : MarkovModel
+    trajectories : str, os.PathLike or Trajectories
+        A trajectory file, by path or open.
+    start : float
+        Time of the frame (s).
+
+    Returns
+    -------
+    states : ndarray of int32, shape (N,)
+    positions : ndarray of float64, shape (N, 2)
+        Positions (m).
+    laps : ndarray of int32, shape (N,)
+
+    Raises
+    ------
+    InputError
+        If the file does not fit the model's domain, has no frame at ``start``, lacks
+        the history before it, or the lag is not a whole number of its frames.
+    """
+    frame = discretize_frame(trajectories, model.state_space, model.lag, start)
+    return frame.states[-1], frame.positions[-1], frame.laps[-1]
 
 
 def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
@@ -143,9 +175,6 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
     InputError
         If the file cannot be written.
     """
-    from cfbmarkov.markov.states import place_in_cells
-    from cfbmarkov.trajectory_writer import TrajectoryWriter
-
     traj = trajectories
     n_steps = times.size - 1
     duration = float(n_steps * model.lag if duration is None else duration)
@@ -159,7 +188,7 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
     some_absent = bool((states < 0).any())
     with TrajectoryWriter(output, ids, width=traj.width, height=traj.height,
                           depth=traj.depth, source="markov-prediction", parameters=parameters,
-                          frame_interval=model.lag, boundary=model.boundary) as writer:
+                          frame_interval=model.lag, boundary=model.boundary.value) as writer:
         writer.attach("model", *model_datasets_and_attrs(model))
         bar = _progress(progress, duration)
         first = np.full((ids.size, first_positions.shape[1]), np.nan)

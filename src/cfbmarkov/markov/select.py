@@ -63,8 +63,8 @@ from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
 from cfbmarkov.observed.residence import net_flow_direction, residence_times, rtd_histogram
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import DiscreteTrajectories, read_frames
-from cfbmarkov.markov.estimate import count_transitions, estimator_from_name, fit_model
-from cfbmarkov.markov.model import hand_over
+from cfbmarkov.markov.counting import count_transitions
+from cfbmarkov.markov.estimate import estimator_from_name, fit_model
 from cfbmarkov.markov.first_passage import rtd_of_split_chain
 from cfbmarkov.markov.spaces import state_space_from_name
 from cfbmarkov.trajectories import opened
@@ -395,9 +395,8 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         best = min(usable, key=lambda c: c.score)
         chosen = discrete_of[(best.states, best.lag)]
         counts = count_transitions(chosen, frame_average=estimator == "paper")
-        hand_over(counts.counts, counts.counts_up, counts.counts_down)   # counted for it alone
         model = estimator_from_name(estimator, chosen.state_space, best.lag).fit_counts(
-            counts, window=chosen.window, source=traj.path)
+            counts, window=chosen.window, source=traj.path, adopt=True)   # counted for it alone
         if coherent:
             from cfbmarkov.markov.coherence import calibrate_coherence
 

@@ -1,0 +1,142 @@
+"""The checks of a Markov chain model's fields, and its own read-only arrays.
+
+:func:`checked_arrays` turns the arrays given to a
+:class:`~cfbmarkov.markov.model.MarkovModel` (P, the counts, the pass fractions) into the
+model's own: read-only copies, or the given arrays themselves where the model adopts them
+(made read-only, not copied). Each is checked as it is taken: shapes for the state space,
+whole non-negative counts, a row-stochastic P, pass fractions in [0, 1].
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov.states import StateSpace
+
+#: the model's [S, S] arrays (model files store them as datasets of the same names)
+SQUARE_ARRAYS = ("transition_matrix", "counts", "counts_up", "counts_down")
+
+
+def owned_array(value, dtype, adopt: bool) -> np.ndarray:
+    """A model's read-only array of ``value``.
+
+    Parameters
+    ----------
+    value : array_like
+    dtype : numpy dtype
+        The model's dtype for it.
+    adopt : bool
+        Take ``value`` itself where it is an ndarray of ``dtype`` and C-contiguous (it is
+        made read-only; the caller must not keep writing it); else (and without ``adopt``)
+        a copy.
+
+    Returns
+    -------
+    ndarray
+        Read-only.
+    """
+    if (adopt and isinstance(value, np.ndarray) and value.dtype == dtype
+            and value.flags.c_contiguous):
+        owned = value
+    else:
+        owned = np.array(value, dtype=dtype)
+    owned.setflags(write=False)
+    return owned
+
+
+def checked_coherence(value) -> float:
+    """The coherence rho as a float.
+
+    Parameters
+    ----------
+    value : float
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    InputError
+        If ``value`` is not a number in [0, 1].
+    """
+    if not (isinstance(value, (int, float, np.number)) and 0.0 <= float(value) <= 1.0):
+        raise InputError(f"model coherence {value!r} must lie in [0, 1]")
+    return float(value)
+
+
+def checked_arrays(square: dict[str, Any], pass_fractions, lag, state_space: StateSpace,
+                   adopt: bool) -> tuple[dict[str, np.ndarray], tuple | None]:
+    """A model's own P, counts and pass fractions, checked.
+
+    Parameters
+    ----------
+    square : dict of str to array_like
+        ``transition_matrix`` (float64 [S, S]) and ``counts``, ``counts_up``,
+        ``counts_down`` (whole numbers [S, S]).
+    pass_fractions : (array_like, array_like) or None
+        (up, down) fractions [S, S] of each transition passing the boundary.
+    lag : float
+        The lag (s).
+    state_space : StateSpace
+        The states (S).
+    adopt : bool
+        Take the given arrays themselves (see :func:`owned_array`).
+
+    Returns
+    -------
+    arrays : dict of str to ndarray
+        The four [S, S] arrays, float64 and int64, read-only.
+    pass_fractions : tuple of two ndarrays of float64, shape (S, S), or None
+
+    Raises
+    ------
+    InputError
+        If an array does not have shape (S, S), the counts are not whole or are negative,
+        the lag is not positive and finite, P holds negative or non-finite entries or its
+        rows do not sum to 1, or the pass fractions are not (up, down) of shape (S, S) in
+        [0, 1] with up + down <= 1.
+    """
+    s = state_space.n_states
+    arrays = {}
+    for name in SQUARE_ARRAYS:
+        given = np.asarray(square[name])
+        if name != "transition_matrix" and given.dtype.kind not in "iub" and not (
+                np.all(np.isfinite(given)) and np.all(given == np.round(given))):
+            raise InputError(f"model {name} holds values that are not whole counts")
+        value = owned_array(square[name], np.float64 if name == "transition_matrix"
+                            else np.int64, adopt)
+        if value.shape != (s, s):
+            raise InputError(f"model {name} has shape {value.shape}, expected ({s}, {s}) "
+                             f"for {state_space.describe()}")
+        arrays[name] = value
+    if not (isinstance(lag, (int, float, np.number)) and np.isfinite(lag) and lag > 0):
+        raise InputError(f"model lag {lag!r} s must be a positive finite number")
+    p = arrays["transition_matrix"]
+    if not np.all(np.isfinite(p)) or (p.size and p.min() < 0):
+        raise InputError("transition matrix holds negative or non-finite entries")
+    rows = p.sum(axis=1)
+    if not np.allclose(rows, 1.0, atol=1e-9):
+        k = int(np.argmax(np.abs(rows - 1.0)))
+        raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to {rows[k]:.6g})")
+    for name in ("counts", "counts_up", "counts_down"):
+        value = arrays[name]
+        if value.size and value.min() < 0:
+            raise InputError(f"model {name} holds negative counts")
+    if pass_fractions is None:
+        return arrays, None
+    if len(pass_fractions) != 2:
+        raise InputError("pass fractions must be (up, down)")
+    fractions = tuple(owned_array(f, np.float64, adopt) for f in pass_fractions)
+    if any(f.shape != (s, s) for f in fractions):
+        raise InputError(f"pass fractions must have shape ({s}, {s})")
+    up, down = fractions
+    if not (np.all(np.isfinite(up)) and np.all(np.isfinite(down))) or (up.size and (
+            min(up.min(), down.min()) < 0 or (up + down).max() > 1.0 + 1e-9)):
+        worst = float(max(np.nanmax(np.abs(up)), np.nanmax(np.abs(down)))) if up.size else 0
+        raise InputError("pass fractions must lie in [0, 1] with up + down <= 1 for each "
+                         f"transition (largest {worst:.6g})")
+    return arrays, fractions

@@ -1,0 +1,252 @@
+"""The open riser's flow through a Markov chain model: where particles enter, how likely they
+leave through the outlet from each state, and how many enter per lag
+(``docs/definitions.md``, Open risers).
+
+An open riser's chain is absorbing: each lag a particle in state i leaves through the
+outlet with probability r_i, else moves by the row-stochastic P, so the chain among the
+states is Q = diag(1 - r) P; particles enter through the inlet into state j with
+probability e_j, the observed entries normalised. An :class:`OpenFlow` holds these and
+answers what depends on them: the exact residence-time distribution, the Monte Carlo with
+inflow and outflow, the fields of a model file and the lines of a model's summary. A
+periodic riser's model has none.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from cfbmarkov.boundary import Boundary
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, open_rtd
+from cfbmarkov.markov.montecarlo import SparseChain
+from cfbmarkov.markov.open_montecarlo import run_open_chain
+
+#: share of an open riser's tracks ending (beginning) away from the outlet (inlet) above
+#: which :meth:`OpenFlow.warnings` says so
+CENSORED_SHARE = 0.05
+#: the [S] datasets of an open riser's model file
+OPEN_DATASETS = ("exit_probability", "exit_counts", "entry_counts")
+
+
+@dataclass(frozen=True, eq=False)
+class OpenFlow:
+    """The inlet and outlet of an open riser's model; immutable.
+
+    Made by the estimator from the counts of an open riser
+    (:func:`~cfbmarkov.markov.estimate.open_chain`) or read from a model file
+    (:meth:`from_group`). The arrays are stored as read-only copies.
+
+    Attributes
+    ----------
+    exit_probability : ndarray of float64, shape (S,)
+        r_i, the probability that a particle in state i leaves through the outlet within
+        one lag.
+    exit_counts, entry_counts : ndarray of int64, shape (S,)
+        Exits from / entries into each state observed in the fitting window.
+    inflow_per_lag : float
+        Mean number of particles entering through the inlet per lag.
+    censored_tracks : tuple of int
+        (vanished, appeared): tracks that ended or began more than one cell from the outlet
+        or inlet face, left out as censored.
+
+    Raises
+    ------
+    InputError
+        If an array is missing, is not S non-negative finite numbers (S the length of
+        ``exit_probability``), an exit probability exceeds 1, no particle entered, or the
+        inflow is negative or not finite.
+
+    References
+    ----------
+    J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton (1960),
+    Ch. III (absorbing chains).
+    """
+
+    exit_probability: np.ndarray
+    exit_counts: np.ndarray
+    entry_counts: np.ndarray
+    inflow_per_lag: float = 0.0
+    censored_tracks: tuple[int, int] = (0, 0)
+
+    def __post_init__(self):
+        s = int(np.size(self.exit_probability))
+        for name, dtype in (("exit_probability", np.float64), ("exit_counts", np.int64),
+                            ("entry_counts", np.int64)):
+            value = getattr(self, name)
+            if value is None:
+                raise InputError(f"an open riser's model needs {name}")
+            value = np.array(value, dtype=dtype)
+            if (value.shape != (s,) or not value.size or not np.all(np.isfinite(value))
+                    or value.min() < 0):
+                raise InputError(f"model {name} must be {s} non-negative numbers")
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        if self.exit_probability.max() > 1.0:
+            raise InputError("model exit probabilities exceed 1")
+        if self.entry_counts.sum() == 0:
+            raise InputError("an open riser's model without any entry through the inlet: the "
+                             "fitting window saw no particle enter (its entry distribution is "
+                             "empty)")
+        if not (np.isfinite(self.inflow_per_lag) and self.inflow_per_lag >= 0):
+            raise InputError(f"model inflow {self.inflow_per_lag!r} per lag must be >= 0")
+
+    @property
+    def n_states(self) -> int:
+        """Number of states S."""
+        return int(self.exit_probability.size)
+
+    @property
+    def entry_distribution(self) -> np.ndarray:
+        """Where particles enter: the observed entries per state, normalised, float64 [S]."""
+        return self.entry_counts / self.entry_counts.sum()
+
+    def absorbing_matrix(self, transition_matrix: np.ndarray) -> np.ndarray:
+        """Q = diag(1 - r) P, the sub-stochastic matrix among the states.
+
+        Parameters
+        ----------
+        transition_matrix : ndarray of float64, shape (S, S)
+            P, the row-stochastic transitions of the particles that stay.
+
+        Returns
+        -------
+        ndarray of float64, shape (S, S)
+        """
+        return (1.0 - self.exit_probability)[:, None] * transition_matrix
+
+    def rtd(self, absorbing: np.ndarray, lag: float) -> ResidenceTimeDistribution:
+        """Exact residence-time distribution: first passage to the outside from the entry
+        distribution, f(k) = e Q^(k-1) r (:func:`~cfbmarkov.markov.first_passage.open_rtd`).
+
+        Parameters
+        ----------
+        absorbing : ndarray of float64, shape (S, S)
+            Q, from :meth:`absorbing_matrix`.
+        lag : float
+            The lag (s).
+
+        Returns
+        -------
+        ResidenceTimeDistribution
+
+        Raises
+        ------
+        TrappedResidences
+            If no particle that enters can ever leave.
+        """
+        return open_rtd(absorbing, self.exit_probability, self.entry_distribution, lag)
+
+    def monte_carlo(self, chain: SparseChain, initial_states: np.ndarray, n_steps: int,
+                    seed: int, row_offset=None, retag=None, coherence: float = 0.0
+                    ) -> np.ndarray:
+        """States of a Monte Carlo run with outflow and inflow
+        (:func:`~cfbmarkov.markov.open_montecarlo.run_open_chain`).
+
+        Parameters
+        ----------
+        chain : SparseChain
+            P, the transitions of particles that stay.
+        initial_states : ndarray of int, shape (N0,)
+            States of the particles present at the start.
+        n_steps : int
+            Lags to run.
+        seed : int
+            Seed of the counter-based generator.
+        row_offset : array_like of int, shape (n_steps + 1,), optional
+            Row offset of each step in ``chain`` (a regime model's common path times S).
+        retag : callable, optional
+            ``retag(states, steps)``: the newcomers' states given their drawn states and
+            entry steps.
+        coherence : float, optional
+            Probability that a particle takes its row's common draw.
+
+        Returns
+        -------
+        ndarray of int32, shape (n_steps + 1, N0 + M)
+            -1 where absent; the M newcomers (Poisson, ``inflow_per_lag`` per lag, states
+            from the entry distribution) follow the N0 initial particles in order of entry.
+        """
+        states, _ = run_open_chain(chain, self.exit_probability, self.entry_distribution,
+                                   self.inflow_per_lag, initial_states, n_steps, seed,
+                                   row_offset, retag, coherence)
+        return states
+
+    # -- the model file ----------------------------------------------------------------
+    def file_fields(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+        """What a model file stores of the open riser: the datasets ``exit_probability``
+        [S] float64, ``exit_counts`` and ``entry_counts`` [S] int64, and the attributes
+        ``boundary = "open"``, ``inflow_per_lag`` and ``censored_tracks`` (vanished,
+        appeared; int64).
+
+        Returns
+        -------
+        datasets : dict of str to ndarray
+        attrs : dict of str to value
+        """
+        attrs = {"boundary": Boundary.OPEN.value, "inflow_per_lag": float(self.inflow_per_lag),
+                 "censored_tracks": np.asarray(self.censored_tracks, dtype=np.int64)}
+        return {name: getattr(self, name) for name in OPEN_DATASETS}, attrs
+
+    @classmethod
+    def from_group(cls, group) -> "OpenFlow":
+        """The open riser's fields of a model group written with :meth:`file_fields`.
+
+        Parameters
+        ----------
+        group : h5py.Group or h5py.File
+            A model group whose ``boundary`` attribute is ``open``.
+
+        Returns
+        -------
+        OpenFlow
+
+        Raises
+        ------
+        KeyError
+            If a dataset or the ``inflow_per_lag`` attribute is missing.
+        InputError
+            If the fields are invalid.
+        """
+        censored = group.attrs.get("censored_tracks", (0, 0))
+        return cls(inflow_per_lag=float(group.attrs["inflow_per_lag"]),
+                   censored_tracks=(int(censored[0]), int(censored[1])),
+                   **{name: group[name][()] for name in OPEN_DATASETS})
+
+    # -- description -------------------------------------------------------------------
+    def summary_line(self) -> str:
+        """The line of a model's summary on the open riser's exits, entries and censored
+        tracks.
+
+        Returns
+        -------
+        str
+        """
+        return (f"  open riser: {int(self.exit_counts.sum())} exits through the outlet, "
+                f"{int(self.entry_counts.sum())} entries through the inlet "
+                f"({self.inflow_per_lag:.4g} per lag) into "
+                f"{int(np.count_nonzero(self.entry_counts))} states; tracks censored (ended or "
+                f"began away from the faces): {self.censored_tracks[0]}, "
+                f"{self.censored_tracks[1]}")
+
+    def warnings(self) -> list[str]:
+        """Lines about many tracks that ended or began away from the faces (more than
+        :data:`CENSORED_SHARE` of those that ended or began).
+
+        Returns
+        -------
+        list of str
+        """
+        lines = []
+        for what, censored, counted, face in (
+                ("ended", self.censored_tracks[0], int(self.exit_counts.sum()), "outlet"),
+                ("began", self.censored_tracks[1], int(self.entry_counts.sum()), "inlet")):
+            if censored > CENSORED_SHARE * (censored + counted):
+                lines.append(
+                    f"  {censored} tracks {what} more than one cell from the {face} "
+                    f"({100 * censored / (censored + counted):.0f} % of those that {what} "
+                    f"near it or not) and were left out as censored; if particles cross the "
+                    "face farther than a cell per lag, use taller cells or a shorter lag")
+        return lines
