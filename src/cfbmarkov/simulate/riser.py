@@ -190,7 +190,6 @@ class CoupledRiser:
                    GasState.from_state_dict(state["gas"]), int(state["cfd_steps"]))
 
 
-
 def _search_cells(case: CaseConfig) -> tuple[int, int] | None:
     """The DEM's ``search_cells`` for a case: None (the engine's automatic grid) for "auto"."""
     cells = case.numerics.dem_cells

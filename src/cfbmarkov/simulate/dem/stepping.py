@@ -71,7 +71,7 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
     pf : float64 (>= npairs, 3)
         Pair-force scratch.
     fsum : float64 (N, 3)
-        Scratch: each particle's summed force and torque (:func:`sum_pairs`).
+        Scratch: each particle's summed force and torque (:func:`.integrate.sum_pairs`).
     ctl : int64 (N_C,)
         Control slots.
     evf, bad : int8 (N,)
@@ -79,7 +79,7 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
     key, cstart, cfill, perm, invperm : int64 arrays
         Rebuild scratch (see :func:`.neighbours.rebuild`).
     wall_ids : int64 (N,)
-        The wall candidates (:func:`wall_candidates`) of the current list.
+        The wall candidates (:func:`.integrate.wall_candidates`) of the current list.
     n_wall : int64 (1,)
         Their number; -1 when not yet found for the current list (after a restart): they
         are found then, and after every list build.
@@ -87,10 +87,11 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
         Pairs in contact at the last step (-1 before the first): where they were at least
         :data:`SIMD_CONTACT_SHARE` of the listed pairs, the step computes the pair forces
         with :func:`.contact.pair_forces_simd` and sums every particle's pairs
-        (:func:`sum_pairs`), else with :func:`.contact.pair_forces`, which lists the pairs
-        in contact, and sums the pairs of their members only (:func:`touched_particles`,
-        :func:`sum_touched_pairs`; the others move by their external force). The same bits
-        either way; only the speed differs.
+        (:func:`.integrate.sum_pairs`), else with :func:`.contact.pair_forces`, which lists
+        the pairs in contact, and sums the pairs of their members only
+        (:func:`.integrate.touched_particles`, :func:`.integrate.sum_touched_pairs`; the
+        others move by their external force). The same bits either way; only the speed
+        differs.
     contact_ids, block_contacts : int64 (>= pairs,), (>= pairs / CONTACT_BLOCK + 1,)
         Scratch: the pairs in contact (:func:`.contact.pair_forces`).
     touched, touched_ids : int64 (N,)
