@@ -24,7 +24,7 @@ import numpy as np
 
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.simulate.coupling import hexagonal_bed
-from cfbmarkov.simulate.run import CoupledRiser
+from cfbmarkov.simulate.riser import CoupledRiser
 
 
 def main(n: int = 8000, u: float = 1.6, duration: float = 1.6, height: float = 0.3,

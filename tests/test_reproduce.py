@@ -347,7 +347,7 @@ def test_compile_kernels_warms_both_halves_and_leaves_the_step_alone(tmp_path, m
     import numpy as np
 
     from cfbmarkov.reproduce import compile_kernels
-    from cfbmarkov.simulate.run import CoupledRiser
+    from cfbmarkov.simulate.riser import CoupledRiser
 
     monkeypatch.chdir(tmp_path)
     case = scale_cases("quick", [8.0])[0]

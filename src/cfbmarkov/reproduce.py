@@ -382,7 +382,7 @@ def compile_kernels(case_json: str, part: str) -> float:
 
     import numpy as np
 
-    from cfbmarkov.simulate.run import CoupledRiser
+    from cfbmarkov.simulate.riser import CoupledRiser
 
     started = _time.perf_counter()
     case = CaseConfig.model_validate_json(case_json)

@@ -170,7 +170,7 @@ def test_a_candidate_with_an_earlier_ones_states_is_not_judged_twice(tmp_path):
 def test_score_units_are_the_goals_on_a_steady_flow_and_the_flows_variability_otherwise():
     """The PD terms' units: 2 % / 10 % where blocks agree, the blocks' own spread where not."""
     from cfbmarkov.observed.residence import ResidenceTimes
-    from cfbmarkov.markov.select import GOAL_PD_MEAN, GOAL_PD_SD, _natural_tolerances
+    from cfbmarkov.markov.select.criteria import GOAL_PD_MEAN, GOAL_PD_SD, _natural_tolerances
 
     rng = np.random.default_rng(3)
     steady = [ResidenceTimes(rng.exponential(0.3, 20000), False, (k, k + 1)) for k in range(3)]

@@ -11,7 +11,7 @@ from scipy.optimize import brentq
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.simulate.cfd import cross_section_flux, particle_drag_force
 from cfbmarkov.simulate.coupling import _cell_value, hexagonal_bed
-from cfbmarkov.simulate.run import CoupledRiser
+from cfbmarkov.simulate.riser import CoupledRiser
 
 D, RHO_P, RHO_G, MU, G = 1e-3, 2600.0, 1.205, 1.8e-5, 9.81
 

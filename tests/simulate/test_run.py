@@ -126,7 +126,7 @@ def test_resume_with_another_search_grid_names_it(tmp_path, reference):
 def test_automatic_search_grid(tmp_path):
     """dem_cells = "auto" (the default) gives the finest grid of cells no smaller than the
     search cutoff; anything but two positive integers or "auto" is refused in one line."""
-    from cfbmarkov.simulate.run import CoupledRiser
+    from cfbmarkov.simulate.riser import CoupledRiser
 
     assert CaseConfig().numerics.dem_cells == "auto"
     case = load(small_case(tmp_path, n=300)).model_copy()

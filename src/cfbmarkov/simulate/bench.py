@@ -59,7 +59,8 @@ def fluidized_riser(particles: int = 27000, develop: float = 0.5):
         computed before.
     """
     from cfbmarkov.config import load_case
-    from cfbmarkov.simulate.run import CoupledRiser, read_checkpoint, write_checkpoint
+    from cfbmarkov.simulate.checkpoint import read_checkpoint, write_checkpoint
+    from cfbmarkov.simulate.riser import CoupledRiser
 
     case = load_case("paper-u6")
     if particles != case.particles.number:

@@ -73,6 +73,8 @@ import numpy as np
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.simulate.cfd._banded import cell_numbering
 from cfbmarkov.simulate.cfd.grid import GasGrid
+from cfbmarkov.simulate.cfd.layout import (GasParams, GasStepFields, GasStepOutput,
+                                          GasWorkspace)
 from cfbmarkov.simulate.cfd.momentum import (  # noqa: F401  (momentum_tendency re-exported)
     ADVECTIVE_COURANT,
     SCHEMES,
@@ -123,12 +125,28 @@ class PressureSolveError(CfbmarkovError):
 # --------------------------------------------------------------------------- step kernel
 
 @nb.njit(cache=True)
-def _step_kernel(nx, ny, dx, dy, dt, rho, nu, gravity, U, model_a, scheme, rtol, distributor,
-                 u, v, eps_old, eps_new, fu, fv, ku, kv, has_k,
-                 u_out, v_out, p_out,
-                 mu_s, mv_s, cu, cv, cu_fac, cv_fac, band, invdiag, ra, rb, numbering,
-                 tend_u, tend_v, ey_old, ey_new, factor_state, info):
-    """One gas step; see the module docstring. Returns a status code (0 = success)."""
+def _step_kernel(prm, fields, out, work):
+    """One gas step; see the module docstring. Returns a status code (0 = success).
+
+    Parameters
+    ----------
+    prm : GasParams
+    fields : GasStepFields
+    out : GasStepOutput
+        Written.
+    work : GasWorkspace
+        Scratch, the cached factorisation and ``info`` (updated).
+    """
+    nx, ny, dx, dy, dt = prm.nx, prm.ny, prm.dx, prm.dy, prm.dt
+    rho, nu, gravity, U, model_a = prm.rho, prm.nu, prm.gravity, prm.U, prm.model_a
+    scheme, rtol, distributor = prm.scheme, prm.rtol, prm.distributor
+    u, v, eps_old, eps_new = fields.u, fields.v, fields.eps_old, fields.eps_new
+    fu, fv, ku, kv, has_k = fields.fu, fields.fv, fields.ku, fields.kv, fields.has_k
+    u_out, v_out, p_out = out.u_out, out.v_out, out.p_out
+    mu_s, mv_s, cu, cv = work.mu_s, work.mv_s, work.cu, work.cv
+    cu_fac, cv_fac, band, invdiag = work.cu_fac, work.cv_fac, work.band, work.invdiag
+    ra, rb, numbering, tend_u, tend_v = work.ra, work.rb, work.numbering, work.tend_u, work.tend_v
+    ey_old, ey_new, factor_state, info = work.ey_old, work.ey_new, work.factor_state, work.info
     # ---- 1. stability of the explicit step, from the current velocities
     umax = 0.0
     vmax = 0.0
@@ -274,25 +292,17 @@ class GasSolver:
         self.distributor_pressure_drop = float(distributor_pressure_drop)
         nx, ny = grid.nx, grid.ny
         n = nx * ny
-        self._numbering = cell_numbering(nx, ny)
-        self._band = np.zeros((n, 2 * nx + 1))
-        self._invdiag = np.zeros(n)
-        self._ra = np.zeros(n)
-        self._rb = np.zeros(n)
-        self._mu_s = np.zeros(grid.u_shape)
-        self._mv_s = np.zeros(grid.v_shape)
-        self._cu = np.zeros(grid.u_shape)
-        self._cv = np.zeros(grid.v_shape)
-        self._cu_fac = np.zeros(grid.u_shape)
-        self._cv_fac = np.zeros(grid.v_shape)
-        self._tend_u = np.zeros(grid.u_shape)
-        self._tend_v = np.zeros(grid.v_shape)
-        self._ey_old = np.zeros(grid.v_shape)
-        self._ey_new = np.zeros(grid.v_shape)
-        self._factor_state = np.zeros(1, dtype=np.int64)
+        self._work = GasWorkspace(
+            mu_s=np.zeros(grid.u_shape), mv_s=np.zeros(grid.v_shape),
+            cu=np.zeros(grid.u_shape), cv=np.zeros(grid.v_shape),
+            cu_fac=np.zeros(grid.u_shape), cv_fac=np.zeros(grid.v_shape),
+            band=np.zeros((n, 2 * nx + 1)), invdiag=np.zeros(n), ra=np.zeros(n),
+            rb=np.zeros(n), numbering=cell_numbering(nx, ny),
+            tend_u=np.zeros(grid.u_shape), tend_v=np.zeros(grid.v_shape),
+            ey_old=np.zeros(grid.v_shape), ey_new=np.zeros(grid.v_shape),
+            factor_state=np.zeros(1, dtype=np.int64), info=np.zeros(_INFO_SIZE))
         self._zero_u = np.zeros(grid.u_shape)
         self._zero_v = np.zeros(grid.v_shape)
-        self._info = np.zeros(_INFO_SIZE)
         #: number of factorisations done (diagnostic)
         self.factorisations = 0
 
@@ -317,6 +327,14 @@ class GasSolver:
         return gas_stability_limit(self.grid, self, (np.max(np.abs(state.u)), np.max(np.abs(state.v))))
 
     # ----------------------------------------------------------------- helpers
+    def _parameters(self) -> GasParams:
+        g = self.grid
+        return GasParams(nx=g.nx, ny=g.ny, dx=g.dx, dy=g.dy, dt=self.time_step,
+                         rho=self.density, nu=self.kinematic_viscosity, gravity=self.gravity,
+                         U=self.superficial_velocity, model_a=self.formulation == "A",
+                         scheme=SCHEMES[self.scheme], rtol=self.residual_tolerance,
+                         distributor=g.distributor)
+
     def _field(self, arr, shape, name) -> np.ndarray:
         a = np.ascontiguousarray(arr, dtype=np.float64)
         if a.shape != shape:
@@ -399,16 +417,11 @@ class GasSolver:
         u_new = np.empty(g.u_shape)
         v_new = np.empty(g.v_shape)
         p_new = np.empty(g.cell_shape)
-        info = self._info
-        code = _step_kernel(
-            g.nx, g.ny, g.dx, g.dy, self.time_step, self.density, self.kinematic_viscosity,
-            self.gravity, self.superficial_velocity, self.formulation == "A",
-            SCHEMES[self.scheme], self.residual_tolerance, g.distributor,
-            state.u, state.v, state.void_fraction, eps_new, fu, fv, ku, kv, has_k,
-            u_new, v_new, p_new,
-            self._mu_s, self._mv_s, self._cu, self._cv, self._cu_fac, self._cv_fac,
-            self._band, self._invdiag, self._ra, self._rb, self._numbering,
-            self._tend_u, self._tend_v, self._ey_old, self._ey_new, self._factor_state, info)
+        info = self._work.info
+        code = _step_kernel(self._parameters(),
+                            GasStepFields(state.u, state.v, state.void_fraction, eps_new, fu, fv,
+                                          ku, kv, has_k),
+                            GasStepOutput(u_new, v_new, p_new), self._work)
         if code != _OK:
             self._raise(code, info, eps_new, fu, fv)
         if info[_I_REFACTORED]:

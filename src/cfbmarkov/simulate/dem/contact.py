@@ -312,7 +312,7 @@ def pair_forces_simd(st, npairs, pi, pj, springs, pf, prm):
     multiplied by 0), which pays where most listed pairs touch (a bed, a cluster; 2.2-2.5
     times faster than :func:`pair_forces` with 70 % of the pairs in contact) and not in a
     dilute flow (1.4 times slower with 3 %); the step picks one by the last step's share of
-    contacts (:func:`cfbmarkov.simulate.dem.integrate.advance`).
+    contacts (:func:`cfbmarkov.simulate.dem.stepping.advance`).
 
     Parameters and returns as :func:`pair_forces`.
     """

@@ -1,4 +1,5 @@
-"""Time integration of the 2D DEM engine: the step kernels and the advance loop (numba).
+"""Time integration of the 2D DEM engine: the kernels of one step (numba; the loop over
+steps is :func:`.stepping.advance`).
 
 Per step: :func:`.contact.pair_forces` (every pair force once, into ``pf``),
 :func:`sum_pairs` (each particle sums its pairs' forces and its external force, into
@@ -36,13 +37,8 @@ import math
 
 from numba import njit, prange
 
-from cfbmarkov.simulate.dem.contact import (CONTACT_BLOCK, FASTMATH, contact_force,
-                                           flag_overlaps, pair_forces, pair_forces_simd)
-from cfbmarkov.simulate.dem.layout import (BAD_NAN, BAD_OVERLAP, BAD_RANGE, BAD_WALL, C_BUILT,
-                                           C_DRIFT, C_LIST, C_NEV, C_PA, C_REBUILD, C_ST,
-                                           C_STEP, DRIFT_UNIT, ST_BLOWUP, ST_EVENTS, ST_OK,
-                                           ST_STRIDE)
-from cfbmarkov.simulate.dem.neighbours import rebuild
+from cfbmarkov.simulate.dem.contact import CONTACT_BLOCK, FASTMATH, contact_force
+from cfbmarkov.simulate.dem.layout import BAD_NAN, BAD_OVERLAP, BAD_RANGE, BAD_WALL
 
 
 @njit(cache=True, fastmath=FASTMATH)
@@ -238,7 +234,7 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
     second, then pairs where it comes first). The wall contacts use
     :func:`.contact.contact_force` with the wall as a mirror particle of infinite mass.
 
-    The step itself (:func:`advance`) runs this as :func:`sum_pairs` then :func:`move`
+    The step itself (:func:`.stepping.advance`) runs this as :func:`sum_pairs` then :func:`move`
     (the same bits, faster); this one loop is kept for tests of single contacts.
 
     Parameters
@@ -503,206 +499,3 @@ def move(st, so, aux, laps, fsum, touched, stamp, summed, evf, bad, shift, prm):
         nev += e
         nbad += nb
     return nmove, nev, nbad
-
-
-#: share of the listed pairs in contact from which the step uses
-#: :func:`.contact.pair_forces_simd`: measured on the DEM benchmark problems (2 threads), the
-#: branching kernel costs about 4.6 ns per listed pair plus 10 ns per contact, the SIMD one
-#: 5-6.5 ns per listed pair whatever the contacts (docs/performance.md)
-SIMD_CONTACT_SHARE = 0.15
-
-
-@njit(cache=True)
-def _record_events(st_old, st_new, ids, evf, step, prm, ev_t, ev_p, ev_d, ctl):
-    """Log the boundary passes flagged in ``evf`` (and clear the flags): time interpolated
-    inside the step (straight-line motion), caller's particle index, direction."""
-    N = st_old.shape[0]
-    dt = prm.dt
-    H = prm.height
-    t0 = prm.t0
-    n = ctl[C_NEV]
-    for i in range(N):
-        d = evf[i]
-        if d != 0:
-            evf[i] = 0
-            y0 = st_old[i, 1]
-            dy = dt * st_new[i, 3]
-            if d > 0:
-                frac = (H - y0) / dy if dy > 0.0 else 1.0
-            else:
-                frac = -y0 / dy if dy < 0.0 else 1.0
-            if not (frac >= 0.0):
-                frac = 0.0
-            elif frac > 1.0:
-                frac = 1.0
-            ev_t[n] = t0 + (step + frac) * dt
-            ev_p[n] = ids[i]
-            ev_d[n] = d
-            n += 1
-    ctl[C_NEV] = n
-
-
-@njit(cache=True)
-def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart, cfill, perm,
-            invperm, wall_ids, n_wall, n_contacts, contact_ids, block_contacts, touched,
-            touched_ids, stamp, prm, nsteps, ev_t, ev_p, ev_d, wall_impulse):
-    """Advance up to ``nsteps`` steps (rebuilding the lists when needed).
-
-    Parameters
-    ----------
-    st, aux, wh, ids, laps : arrays
-        The double-buffered particle arrays (see :mod:`.layout`).
-    LA, LB : PairList
-        The two list buffers.
-    pf : float64 (>= npairs, 3)
-        Pair-force scratch.
-    fsum : float64 (N, 3)
-        Scratch: each particle's summed force and torque (:func:`sum_pairs`).
-    ctl : int64 (N_C,)
-        Control slots.
-    evf, bad : int8 (N,)
-        Event flags and bad-particle reasons.
-    key, cstart, cfill, perm, invperm : int64 arrays
-        Rebuild scratch (see :func:`.neighbours.rebuild`).
-    wall_ids : int64 (N,)
-        The wall candidates (:func:`wall_candidates`) of the current list.
-    n_wall : int64 (1,)
-        Their number; -1 when not yet found for the current list (after a restart): they
-        are found then, and after every list build.
-    n_contacts : int64 (1,)
-        Pairs in contact at the last step (-1 before the first): where they were at least
-        :data:`SIMD_CONTACT_SHARE` of the listed pairs, the step computes the pair forces
-        with :func:`.contact.pair_forces_simd` and sums every particle's pairs
-        (:func:`sum_pairs`), else with :func:`.contact.pair_forces`, which lists the pairs
-        in contact, and sums the pairs of their members only (:func:`touched_particles`,
-        :func:`sum_touched_pairs`; the others move by their external force). The same bits
-        either way; only the speed differs.
-    contact_ids, block_contacts : int64 (>= pairs,), (>= pairs / CONTACT_BLOCK + 1,)
-        Scratch: the pairs in contact (:func:`.contact.pair_forces`).
-    touched, touched_ids : int64 (N,)
-        Scratch: ``touched[i] == stamp[0]`` marks a particle whose forces were summed in the
-        current step; ``touched_ids`` lists them. Values of earlier steps mean nothing.
-    stamp : int64 (1,)
-        The step's mark, incremented at every step (never reused with the same
-        ``touched``).
-    prm : DEMParams
-    nsteps : int
-        Steps to do.
-    ev_t, ev_p, ev_d : float64, int64, int8 (capacity,)
-        Event buffer (time s, particle, direction); ``ctl[C_NEV]`` entries are used.
-    wall_impulse : float64 (2,)
-        The walls' vertical impulse on the particles is added here ([side walls, floor],
-        N s).
-
-    Returns
-    -------
-    done : int
-        Steps done.
-    status : int
-        ``ST_OK``; ``ST_STRIDE`` (a list needs a larger stride, given as ``info``);
-        ``ST_EVENTS`` (the event buffer needs room); ``ST_BLOWUP`` (the step just done
-        produced a bad particle, flagged in ``bad``).
-    info : int
-        See ``status``.
-    """
-    N = st.shape[1]
-    done = 0
-    while done < nsteps:
-        if ctl[C_REBUILD] != 0:
-            need = rebuild(st, aux, wh, ids, laps, LA, LB, ctl, key, cstart, cfill, perm,
-                           invperm, prm)
-            if need > 0:
-                return done, ST_STRIDE, need
-            n_wall[0] = wall_candidates(aux[ctl[C_PA]], wall_ids, prm)
-        elif n_wall[0] < 0:
-            n_wall[0] = wall_candidates(aux[ctl[C_PA]], wall_ids, prm)
-        if ev_t.shape[0] - ctl[C_NEV] < N:
-            return done, ST_EVENTS, 0
-        cs = ctl[C_ST]
-        cp = ctl[C_PA]
-        L = LA if ctl[C_LIST] == 0 else LB
-        npairs = L.pstart[N]
-        stamp[0] += 1
-        summed = n_contacts[0] >= SIMD_CONTACT_SHARE * npairs and npairs > 0
-        if summed:
-            nbad_pairs, nc = pair_forces_simd(st[cs], npairs, L.pi, L.pj, L.springs, pf, prm)
-            sum_pairs(st[cs], aux[cp], L.pstart, L.lowstart, L.lowpid, pf, fsum)
-        else:
-            nbad_pairs, nc = pair_forces(st[cs], npairs, L.pi, L.pj, L.springs, pf, prm,
-                                         contact_ids, block_contacts)
-            n_touched = touched_particles(npairs, L.pi, L.pj, contact_ids, block_contacts,
-                                          touched, stamp[0], touched_ids)
-            sum_touched_pairs(st[cs], aux[cp], L.pstart, L.lowstart, L.lowpid, pf, fsum,
-                              touched_ids, n_touched)
-        n_contacts[0] = nc
-        nbad, wall_fy, floor_fy = wall_contacts(st[cs], wh[cp], aux[cp], fsum, bad, wall_ids,
-                                                n_wall[0], touched, stamp[0], summed, prm)
-        # the list's frame drifts in y (neighbours.drift_velocity): its shift after this step
-        shift = (ctl[C_STEP] + 1 - ctl[C_BUILT]) * prm.dt * (ctl[C_DRIFT] * DRIFT_UNIT)
-        nmove, nev, nbad_move = move(st[cs], st[1 - cs], aux[cp], laps[cp], fsum, touched,
-                                     stamp[0], summed, evf, bad, shift, prm)
-        nbad += nbad_move
-        wall_impulse[0] += prm.dt * wall_fy
-        wall_impulse[1] += prm.dt * floor_fy
-        if nbad_pairs > 0:
-            flag_overlaps(st[cs], npairs, L.pi, L.pj, bad, prm)
-            nbad += nbad_pairs
-        step = ctl[C_STEP]
-        ctl[C_ST] = 1 - cs
-        ctl[C_STEP] = step + 1
-        done += 1
-        if nev > 0:
-            _record_events(st[cs], st[1 - cs], ids[cp], evf, step, prm, ev_t, ev_p, ev_d, ctl)
-        if nbad > 0:
-            return done, ST_BLOWUP, 0
-        if nmove > 0:
-            ctl[C_REBUILD] = 1
-    return done, ST_OK, 0
-
-
-@njit(parallel=True, cache=True)
-def scatter_external(ext, ids, aux):
-    """``aux[k, 2:4] = ext[ids[k]]``: external force (N, (N, 2)) from the caller's order to
-    cell order."""
-    N = ids.shape[0]
-    for k in prange(N):
-        i = ids[k]
-        aux[k, 2] = ext[i, 0]
-        aux[k, 3] = ext[i, 1]
-
-
-@njit(cache=True)
-def internal_index(ids, where):
-    """``where[ids[k]] = k``: the cell-order index of each of the caller's particles (the
-    inverse of the permutation ``ids``).
-
-    Serial: threads scattering to random places of one array write to the same cache lines
-    (four int64 a line) and pass them back and forth; one thread is faster than two here.
-    """
-    for k in range(ids.shape[0]):
-        where[ids[k]] = k
-
-
-@njit(parallel=True, cache=True)
-def gather_pairs(values, where, out):
-    """``out[i] = values[where[i], 0:2]``: two columns (positions, velocities) from cell
-    order to the caller's order (``where``: :func:`internal_index`).
-
-    A gather: each thread writes its own contiguous rows of ``out`` and reads at random.
-    The scatter ``out[ids[k]] = values[k]`` it replaces had both threads write at random
-    into the same cache lines, and took 110 us on two threads for 27000 particles against
-    49 us on one (docs/performance.md, session 17).
-    """
-    for i in prange(where.shape[0]):
-        k = where[i]
-        out[i, 0] = values[k, 0]
-        out[i, 1] = values[k, 1]
-
-
-@njit(parallel=True, cache=True)
-def clear_external(aux):
-    """Zero the external force columns of ``aux`` (N, 4)."""
-    N = aux.shape[0]
-    for k in prange(N):
-        aux[k, 2] = 0.0
-        aux[k, 3] = 0.0

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import NamedTuple
 
 from cfbmarkov.errors import InputError
 
@@ -103,3 +104,44 @@ class ContactLaw:
         if m is None:
             raise InputError("contact law: no particle mass given")
         return self.contact_time(0.5 * m), self.contact_time(m)
+
+
+class ContactTimes(NamedTuple):
+    """Contact durations, or steps per contact, of the lightest particle.
+
+    Attributes
+    ----------
+    particle_particle : float
+        Of a particle-particle contact (s, or steps).
+    particle_wall : float
+        Of a particle-wall contact (s, or steps).
+    """
+
+    particle_particle: float
+    particle_wall: float
+
+
+def contact_resolution(law: ContactLaw, mass: float, time_step: float) -> tuple[float, str]:
+    """How many DEM steps a contact of the lightest particle lasts, and a sentence saying it.
+
+    Parameters
+    ----------
+    law : ContactLaw
+        The contact law.
+    mass : float
+        The lightest particle's mass, kg.
+    time_step : float
+        The DEM step, s.
+
+    Returns
+    -------
+    worst : float
+        The fewer steps of a particle-particle and a particle-wall contact.
+    message : str
+        ``DEM time step ... resolves a contact in ... steps (particle-particle, ...) and ...``.
+    """
+    pp, pw = law.contact_times(mass)
+    spp, spw = pp / time_step, pw / time_step
+    return min(spp, spw), (f"DEM time step {time_step:g} s resolves a contact in {spp:.2f} "
+                           f"steps (particle-particle, t_c = {pp:.4g} s) and {spw:.2f} steps "
+                           f"(particle-wall, t_c = {pw:.4g} s)")

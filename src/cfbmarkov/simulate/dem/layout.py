@@ -177,3 +177,42 @@ def empty_list(n: int, stride: int) -> PairList:
                     np.zeros(n + 1, np.int64), np.zeros(cap, np.int32), np.zeros(cap, np.int32),
                     np.zeros((cap, 2), np.float64), np.zeros(n + 1, np.int64),
                     np.zeros(cap, np.int64))
+
+
+def particle_arrays(positions, velocities, radius, spin, mass, inertia, laps) -> dict:
+    """The double-buffered particle arrays of a new system, in the caller's order (its
+    first list build sorts them into cell order).
+
+    Parameters
+    ----------
+    positions, velocities : ndarray of float64, shape (N, 2)
+        Centres (m) and half-step velocities (m/s).
+    radius, spin, mass, inertia : ndarray of float64, shape (N,)
+        R (m), omega (rad/s), m (kg) and I (kg m^2).
+    laps : ndarray of int64, shape (N,)
+        Passes through the periodic boundary so far.
+
+    Returns
+    -------
+    dict
+        ``st``, ``aux``, ``wh``, ``ids``, ``laps`` (buffer 0 filled, see the module
+        docstring) and ``ctl`` (a list build due).
+    """
+    n = positions.shape[0]
+    st = np.zeros((2, n, 8))
+    st[0, :, 0:2] = positions
+    st[0, :, 2:4] = velocities
+    st[0, :, 4] = radius * spin  # surface speed R*omega
+    st[0, :, 5] = radius
+    st[0, :, 6] = 1.0 / mass
+    st[0, :, 7] = radius / inertia
+    st[1] = st[0]
+    aux = np.zeros((2, n, 4))
+    aux[0, :, 0:2] = positions
+    ids = np.zeros((2, n), np.int64)
+    ids[0] = np.arange(n)
+    lp = np.zeros((2, n), np.int64)
+    lp[0] = laps
+    ctl = np.zeros(N_C, np.int64)
+    ctl[C_REBUILD] = 1
+    return dict(st=st, aux=aux, wh=np.zeros((2, n, 3)), ids=ids, laps=lp, ctl=ctl)

@@ -19,8 +19,58 @@ from __future__ import annotations
 import numpy as np
 from numba import njit, prange
 
+from cfbmarkov.errors import InputError
 from cfbmarkov.simulate.dem.layout import (C_BUILT, C_DRIFT, C_LIST, C_NREBUILD, C_PA,
                                            C_REBUILD, C_ST, C_STEP, DRIFT_UNIT)
+
+
+def search_grid(width: float, height: float, cut: float, search_cells, periodic: bool
+                ) -> tuple[int, int]:
+    """The cells of the neighbour-search grid, checked against the list cutoff.
+
+    Parameters
+    ----------
+    width, height : float
+        W and H of the domain, m.
+    cut : float
+        The list cutoff 2 R_max + skin, m.
+    search_cells : (int, int) or None
+        Cells across and up, or None for the finest grid whose cells are no smaller than
+        ``cut``.
+    periodic : bool
+        The domain is periodic in y (it then needs at least 3 rows).
+
+    Returns
+    -------
+    (int, int)
+        Cells across and up.
+
+    Raises
+    ------
+    InputError
+        For cells that are not two positive integers, smaller than the cutoff, or fewer
+        than 3 rows of a periodic height.
+    """
+    if search_cells is None:
+        ncx = max(1, int(width / cut))
+        ncy = max(1, int(height / cut))
+    else:
+        try:
+            ncx, ncy = (int(c) for c in search_cells)
+        except (TypeError, ValueError):
+            raise InputError(f"search_cells: expected two integers, got {search_cells!r}") from None
+        if ncx < 1 or ncy < 1:
+            raise InputError(f"search_cells must be positive, got {search_cells!r}")
+    cw, ch = width / ncx, height / ncy
+    if min(cw, ch) < cut * (1 - 1e-12):
+        raise InputError(
+            f"search cells {ncx} x {ncy} are {cw * 1e3:.4g} x {ch * 1e3:.4g} mm, smaller "
+            f"than the neighbour cutoff 2*R_max + skin = {cut * 1e3:.4g} mm; use fewer "
+            f"cells (at most {int(width / cut)} x {int(height / cut)}) or search_cells=None")
+    if periodic and ncy < 3:
+        raise InputError(f"a periodic height needs at least 3 search-cell rows (the period "
+                         f"H = {height:g} m must be at least 3 cutoffs of {cut:g} m)")
+    return ncx, ncy
 
 
 @njit(cache=True, inline="always")

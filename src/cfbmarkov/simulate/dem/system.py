@@ -1,6 +1,7 @@
 """DEMSystem: the orchestration object of the 2D DEM engine. Kernels: :mod:`.contact` (law,
-pair forces), :mod:`.neighbours` (cell sort, lists), :mod:`.integrate` (step, advance loop);
-their arrays: :mod:`.layout`.
+pair forces), :mod:`.neighbours` (cell sort, lists), :mod:`.integrate` (one step),
+:mod:`.stepping` (the advance loop), :mod:`.order` (caller's order and cell order); their
+arrays: :mod:`.layout`.
 
 Geometry: discs in the plane, x across between contact walls at x = 0 and x = W, y up and
 periodic with period H (positions kept in [0, H), minimal image for contacts). With
@@ -32,17 +33,16 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import NamedTuple
-
 import numba
 import numpy as np
 
 from cfbmarkov.errors import CfbmarkovError, InputError, TimeStepAdvisory
-from cfbmarkov.simulate.dem import integrate
+from cfbmarkov.simulate.dem import order, stepping
 from cfbmarkov.simulate.dem import layout as L
 from cfbmarkov.simulate.dem.contact import CONTACT_BLOCK
-from cfbmarkov.simulate.dem.layout import DEMParams, empty_list
-from cfbmarkov.simulate.dem.law import ContactLaw
+from cfbmarkov.simulate.dem.layout import DEMParams, empty_list, particle_arrays
+from cfbmarkov.simulate.dem.law import ContactLaw, ContactTimes, contact_resolution
+from cfbmarkov.simulate.dem.neighbours import search_grid
 
 STATE_VERSION = 1
 MAX_OVERLAP = 0.1  # blow-up: an overlap above this fraction of the (mean) diameter
@@ -61,11 +61,6 @@ class SimulationBlowUp(CfbmarkovError):
         self.reason = reason
 
 
-class ContactTimes(NamedTuple):
-    particle_particle: float
-    particle_wall: float
-
-
 _REASONS = {L.BAD_NAN: "has a non-finite position or velocity",
             L.BAD_WALL: "is outside a wall by more than its radius",
             L.BAD_OVERLAP: f"overlaps a neighbour or wall by more than {MAX_OVERLAP:.0%} of d",
@@ -81,32 +76,6 @@ def _as_per_particle(value, n, name):
     if not np.all(np.isfinite(a)) or np.any(a <= 0):
         raise InputError(f"{name}: values must be positive and finite")
     return a
-
-
-def contact_resolution(law: ContactLaw, mass: float, time_step: float) -> tuple[float, str]:
-    """How many DEM steps a contact of the lightest particle lasts, and a sentence saying it.
-
-    Parameters
-    ----------
-    law : ContactLaw
-        The contact law.
-    mass : float
-        The lightest particle's mass, kg.
-    time_step : float
-        The DEM step, s.
-
-    Returns
-    -------
-    worst : float
-        The fewer steps of a particle-particle and a particle-wall contact.
-    message : str
-        ``DEM time step ... resolves a contact in ... steps (particle-particle, ...) and ...``.
-    """
-    pp, pw = law.contact_times(mass)
-    spp, spw = pp / time_step, pw / time_step
-    return min(spp, spw), (f"DEM time step {time_step:g} s resolves a contact in {spp:.2f} "
-                           f"steps (particle-particle, t_c = {pp:.4g} s) and {spw:.2f} steps "
-                           f"(particle-wall, t_c = {pw:.4g} s)")
 
 
 class DEMSystem:
@@ -177,27 +146,8 @@ class DEMSystem:
         elif np.any(pos[:, 1] < -rad):
             i = int(np.flatnonzero(pos[:, 1] < -rad)[0])
             raise InputError(f"particle {i} at y = {pos[i, 1]:g} m is below the bottom wall")
-        rmax = float(rad.max())
-        cut = 2.0 * rmax + skin
-        if search_cells is None:
-            ncx = max(1, int(width / cut))
-            ncy = max(1, int(height / cut))
-        else:
-            try:
-                ncx, ncy = (int(c) for c in search_cells)
-            except (TypeError, ValueError):
-                raise InputError(f"search_cells: expected two integers, got {search_cells!r}") from None
-            if ncx < 1 or ncy < 1:
-                raise InputError(f"search_cells must be positive, got {search_cells!r}")
-        cw, ch = width / ncx, height / ncy
-        if min(cw, ch) < cut * (1 - 1e-12):
-            raise InputError(
-                f"search cells {ncx} x {ncy} are {cw * 1e3:.4g} x {ch * 1e3:.4g} mm, smaller "
-                f"than the neighbour cutoff 2*R_max + skin = {cut * 1e3:.4g} mm; use fewer "
-                f"cells (at most {int(width / cut)} x {int(height / cut)}) or search_cells=None")
-        if periodic and ncy < 3:
-            raise InputError(f"a periodic height needs at least 3 search-cell rows (the period "
-                             f"H = {height:g} m must be at least 3 cutoffs of {cut:g} m)")
+        ncx, ncy = search_grid(width, height, 2.0 * float(rad.max()) + skin, search_cells,
+                               periodic)
 
         mass = rho * math.pi * (2 * rad) ** 3 / 6.0
         inertia = 0.1 * mass * (2 * rad) ** 2
@@ -215,23 +165,7 @@ class DEMSystem:
         self._min_mass = mmin
         self._check_steps_per_contact()
 
-        st = np.zeros((2, n, 8))
-        st[0, :, 0:2] = pos
-        st[0, :, 2:4] = vel
-        st[0, :, 4] = rad * om  # surface speed R*omega (see .layout)
-        st[0, :, 5] = rad
-        st[0, :, 6] = 1.0 / mass
-        st[0, :, 7] = rad / inertia
-        st[1] = st[0]
-        aux = np.zeros((2, n, 4))
-        aux[0, :, 0:2] = pos
-        ids = np.zeros((2, n), np.int64)
-        ids[0] = np.arange(n)
-        lp = np.zeros((2, n), np.int64)
-        lp[0] = laps
-        ctl = np.zeros(L.N_C, np.int64)
-        ctl[L.C_REBUILD] = 1
-        self._arrays = dict(st=st, aux=aux, wh=np.zeros((2, n, 3)), ids=ids, laps=lp, ctl=ctl)
+        self._arrays = particle_arrays(pos, vel, rad, om, mass, inertia, laps)
         self._lists = [empty_list(n, 4), empty_list(n, 4)]
         self._pair_scratch(self._lists[0].pi.shape[0])
         self._fsum = np.zeros((n, 3))
@@ -358,14 +292,14 @@ class DEMSystem:
         ctl = self._arrays["ctl"]
         key = (int(ctl[L.C_NREBUILD]), int(ctl[L.C_PA]))
         if self._where_key != key:
-            integrate.internal_index(self._cur()[1], self._where)
+            order.internal_index(self._cur()[1], self._where)
             self._where_key = key
         return self._where
 
     def _pair_to_caller(self, column: int) -> np.ndarray:
         st = self._cur()[0]
         out = np.empty((self._n, 2))
-        integrate.gather_pairs(st[:, column:column + 2], self._internal_index(), out)
+        order.gather_pairs(st[:, column:column + 2], self._internal_index(), out)
         return out
 
     @property
@@ -461,10 +395,10 @@ class DEMSystem:
             ext = np.ascontiguousarray(external_force, dtype=np.float64)
             if ext.shape != (self._n, 2):
                 raise InputError(f"external_force: expected shape {(self._n, 2)}, got {ext.shape}")
-            integrate.scatter_external(ext, a["ids"][ctl[L.C_PA]], aux_cur)
+            order.scatter_external(ext, a["ids"][ctl[L.C_PA]], aux_cur)
             self._ext_set = True
         elif self._ext_set:
-            integrate.clear_external(aux_cur)
+            order.clear_external(aux_cur)
             self._ext_set = False
         threads = numba.get_num_threads()
         if self._n < self.serial_below and threads > 1:
@@ -481,7 +415,7 @@ class DEMSystem:
         left = n_steps
         sc = self._scratch
         while left > 0:
-            done, status, info = integrate.advance(
+            done, status, info = stepping.advance(
                 a["st"], a["aux"], a["wh"], a["ids"], a["laps"], self._lists[0], self._lists[1],
                 self._pf, self._fsum, ctl, sc["evf"], sc["bad"], sc["key"], sc["cstart"],
                 sc["cfill"], sc["perm"], sc["invperm"], sc["wall_ids"], sc["n_wall"],

@@ -1,0 +1,104 @@
+"""Checkpoints of a run: everything needed to continue a :class:`~.riser.CoupledRiser` bit
+for bit, written atomically to HDF5, with the run's progress (segments, frames, wall time).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import h5py
+import numpy as np
+
+from cfbmarkov._atomic import atomic_path, h5_file
+from cfbmarkov.config import CaseConfig, case_difference
+from cfbmarkov.errors import InputError
+from cfbmarkov.simulate.riser import CoupledRiser
+
+CHECKPOINT_VERSION = 1
+
+
+def _write_group(group: h5py.Group, values: dict) -> None:
+    for key, value in values.items():
+        if isinstance(value, dict):
+            _write_group(group.create_group(key), value)
+        else:
+            group.create_dataset(key, data=np.asarray(value))
+
+
+def _read_group(group: h5py.Group) -> dict:
+    return {k: (_read_group(v) if isinstance(v, h5py.Group) else v[()]) for k, v in group.items()}
+
+
+def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: int,
+                     wall_time: float, wall_history=None) -> None:
+    """Atomically write everything needed to continue the run bit for bit.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The checkpoint file (HDF5).
+    riser : CoupledRiser
+        The state to save, with its case.
+    n_segments, frames : int
+        Trajectory segments closed and frames written so far.
+    wall_time : float
+        Wall time spent so far, s.
+    wall_history : array_like, optional
+        Rows of (simulated time s, wall time s) at each checkpoint.
+    """
+    with atomic_path(path) as tmp:
+        with h5_file(tmp, path) as f:
+            f.attrs.update({"version": CHECKPOINT_VERSION, "n_segments": n_segments,
+                            "frames": frames, "wall_time": wall_time,
+                            "case": riser.case.model_dump_json()})
+            f.create_dataset("wall_history", data=np.asarray(
+                wall_history if wall_history is not None else np.empty((0, 2)),
+                dtype=np.float64).reshape(-1, 2))
+            state = riser.state()
+            _write_group(f.create_group("dem"), state["dem"])
+            _write_group(f.create_group("gas"), state["gas"])
+            f.attrs["cfd_steps"] = state["cfd_steps"]
+
+
+def read_checkpoint(path: Path, case: CaseConfig
+                    ) -> tuple[CoupledRiser, int, int, float, np.ndarray]:
+    """Read a checkpoint written by :func:`write_checkpoint`.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The checkpoint file.
+    case : CaseConfig
+        The case being run; it must equal the one saved.
+
+    Returns
+    -------
+    riser : CoupledRiser
+        The saved state.
+    n_segments, frames : int
+        Segments closed and frames written.
+    wall_time : float
+        Wall time spent, s.
+    wall_history : numpy.ndarray
+        [K, 2] (simulated time s, wall time s) at each checkpoint.
+
+    Raises
+    ------
+    InputError
+        When the file cannot be read or was made with another configuration.
+    """
+    try:
+        with h5py.File(path, "r") as f:
+            saved = CaseConfig.model_validate_json(f.attrs["case"])
+            if saved != case:
+                raise InputError(f"{path}: the checkpoint was made with another configuration "
+                                 f"({case_difference(saved, case)}); run without --resume to "
+                                 "start again, or with the saved value")
+            state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
+                     "cfd_steps": int(f.attrs["cfd_steps"])}
+            meta = int(f.attrs["n_segments"]), int(f.attrs["frames"]), float(f.attrs["wall_time"])
+            history = (f["wall_history"][()] if "wall_history" in f
+                       else np.empty((0, 2)))
+    except (OSError, KeyError) as exc:
+        raise InputError(f"{path}: unreadable checkpoint ({exc})") from None
+    return (CoupledRiser.from_state(case, state), *meta, history)
