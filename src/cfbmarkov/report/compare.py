@@ -26,14 +26,9 @@ import numpy as np
 
 from cfbmarkov._atomic import write_text_atomic
 from cfbmarkov._json import jsonable
-from cfbmarkov.analysis.compare import (
-    RunComparison,
-    check_parameters,
-    compare_runs,
-    model_columns,
-    model_maps,
-    snapshot_frames,
-)
+from cfbmarkov.analysis.compare import RunComparison, compare_runs
+from cfbmarkov.analysis.compare_inputs import check_parameters, model_columns
+from cfbmarkov.analysis.figure_inputs import model_maps, snapshot_frames
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories, opened
 
