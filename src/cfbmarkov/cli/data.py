@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+from cfbmarkov.boundary import BOUNDARIES
 from cfbmarkov.cli.options import count, finite_float, parse_region, positive_float
 
 
@@ -56,7 +57,7 @@ def add_import(sub) -> None:
     s.add_argument("--region", type=parse_region, default=None,
                    help="the riser in the source's coordinates and units: "
                         "XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX]; particles outside it are absent")
-    s.add_argument("--boundary", choices=["periodic", "open"], default=None,
+    s.add_argument("--boundary", choices=list(BOUNDARIES), default=None,
                    help="the vertical boundary (default: the dump's box flag on the vertical "
                         "axis; periodic for CSV)")
     s.add_argument("--resample", type=positive_float, default=None, metavar="DT",

@@ -8,6 +8,8 @@ from __future__ import annotations
 import argparse
 import math
 
+from cfbmarkov.limits import MAX_SEED
+
 def parse_window(text: str) -> tuple[float, float]:
     """Parse a time window: ``'10:15'`` -> (10.0, 15.0).
 
@@ -148,8 +150,6 @@ def whole(text: str) -> int:
 
 def seed(text: str) -> int:
     """A seed of the counter-based generator: a whole number in 0 .. 2^64 - 1."""
-    from cfbmarkov.limits import MAX_SEED
-
     value = whole(text)
     if not 0 <= value <= MAX_SEED:
         raise argparse.ArgumentTypeError(f"'{text}' must lie in 0 .. 2^64 - 1")
