@@ -11,7 +11,18 @@ from cfbmarkov.cli.options import (count, level, minkowski_order, parse_times, p
 
 
 def cmd_compare(args) -> int:
-    """``cfbmarkov compare``: compare, then print the summary's figures and its file."""
+    """``cfbmarkov compare``: compare, then print the summary's figures and its file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.observed.metrics import percentage_text as pd_text
     from cfbmarkov.report.compare import compare
 
@@ -57,7 +68,18 @@ FEW_RESIDENCES = 100
 
 def cmd_stationarity(args) -> int:
     """``cfbmarkov stationarity``: the sliding windows (and the judged window) as a table, or
-    as JSON with ``--json``."""
+    as JSON with ``--json``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     import json
 
     import numpy as np
@@ -120,7 +142,18 @@ def cmd_stationarity(args) -> int:
 
 
 def cmd_maps(args) -> int:
-    """``cfbmarkov maps``: draw the batch-injection maps; print the fractions and the file."""
+    """``cfbmarkov maps``: draw the batch-injection maps; print the fractions and the file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.report.figures import plot_probability_maps
 
@@ -138,7 +171,13 @@ def cmd_maps(args) -> int:
 
 
 def add_compare(sub) -> None:
-    """Add the ``compare`` verb (a prediction against a reference) to the subparsers ``sub``."""
+    """Add the ``compare`` verb (a prediction against a reference) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("compare", help="compare two trajectory files: RTD, mixing of the two "
                        "tracer groups, figures")
     s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
@@ -166,7 +205,13 @@ def add_compare(sub) -> None:
 
 
 def add_stationarity(sub) -> None:
-    """Add the ``stationarity`` verb (a run's window-to-window scatter) to the subparsers ``sub``."""
+    """Add the ``stationarity`` verb (a run's window-to-window scatter) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("stationarity",
                        help="how much a run's RTD changes from window to window (sliding "
                             "windows), and the run's long run against one window")
@@ -193,7 +238,13 @@ def add_stationarity(sub) -> None:
 
 
 def add_maps(sub) -> None:
-    """Add the ``maps`` verb (batch-injection maps) to the subparsers ``sub``."""
+    """Add the ``maps`` verb (batch-injection maps) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("maps", help="batch-injection probability maps (Eq. 8, Fig. 4-7)")
     s.add_argument("model")
     s.add_argument("--times", type=parse_times, default=[0.05, 0.1, 0.15],

@@ -8,7 +8,18 @@ from cfbmarkov.cli.options import count, finite_float, parse_region, positive_fl
 
 
 def cmd_import(args) -> int:
-    """``cfbmarkov import``: print the trajectory file written."""
+    """``cfbmarkov import``: print the trajectory file written.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.io import import_file
 
     path = import_file(args.source, args.format, args.output, width=args.width,
@@ -22,7 +33,18 @@ def cmd_import(args) -> int:
 
 
 def cmd_export_vtk(args) -> int:
-    """``cfbmarkov export-vtk``: print the frames written and the file to open."""
+    """``cfbmarkov export-vtk``: print the frames written and the file to open.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.io.vtk import export_vtk_summary
 
     done = export_vtk_summary(args.run, args.output, start=args.start, stop=args.stop,
@@ -36,7 +58,13 @@ def cmd_export_vtk(args) -> int:
 
 
 def add_import(sub) -> None:
-    """Add the ``import`` verb (a trajectory file from CSV or a dump) to the subparsers ``sub``."""
+    """Add the ``import`` verb (a trajectory file from CSV or a dump) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("import", help="import CSV or LAMMPS/LIGGGHTS dumps as a trajectory file")
     s.add_argument("source", help="input file (.csv, dump, optionally .gz)")
     s.add_argument("--format", required=True, choices=["csv", "lammps"])
@@ -74,7 +102,13 @@ def add_import(sub) -> None:
 
 
 def add_export_vtk(sub) -> None:
-    """Add the ``export-vtk`` verb (ParaView files of a trajectory file) to the subparsers ``sub``."""
+    """Add the ``export-vtk`` verb (ParaView files of a trajectory file) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("export-vtk", help="ParaView files: particle frames (with their tracer "
                        "group, colour_group) and gas fields with .pvd time series")
     s.add_argument("run", help="trajectory file")

@@ -10,7 +10,18 @@ from cfbmarkov.errors import CfbmarkovError, InputError
 
 
 def cmd_fit(args) -> int:
-    """``cfbmarkov fit``: fit, save and summarise a model; print its file."""
+    """``cfbmarkov fit``: fit, save and summarise a model; print its file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.markov import fit_model, state_space_from_name
     from cfbmarkov.markov.first_passage import TrappedResidences
     from cfbmarkov.markov.select import select_model
@@ -54,7 +65,18 @@ def cmd_fit(args) -> int:
 
 
 def cmd_predict(args) -> int:
-    """``cfbmarkov predict``: a Monte Carlo prediction; print its file."""
+    """``cfbmarkov predict``: a Monte Carlo prediction; print its file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.trajectories import Trajectories
 
@@ -67,7 +89,18 @@ def cmd_predict(args) -> int:
 
 
 def cmd_rtd(args) -> int:
-    """``cfbmarkov rtd``: print a model's E(RT) and SD(RT)."""
+    """``cfbmarkov rtd``: print a model's E(RT) and SD(RT).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.markov import MarkovModel
 
     model = MarkovModel.load(args.model)
@@ -79,7 +112,18 @@ def cmd_rtd(args) -> int:
 
 
 def cmd_info(args) -> int:
-    """``cfbmarkov info``: describe a model or trajectory file."""
+    """``cfbmarkov info``: describe a model or trajectory file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     import h5py
 
     from cfbmarkov.trajectories import _open_h5
@@ -103,7 +147,13 @@ def cmd_info(args) -> int:
 
 
 def add_fit(sub) -> None:
-    """Add the ``fit`` verb (fit a model) to the subparsers ``sub``."""
+    """Add the ``fit`` verb (fit a model) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("fit", help="fit a Markov chain model on a window of a trajectory file")
     s.add_argument("run", help="trajectory file")
     s.add_argument("--cells", type=parse_cells, default=(6, 38),
@@ -139,7 +189,13 @@ def add_fit(sub) -> None:
 
 
 def add_predict(sub) -> None:
-    """Add the ``predict`` verb (a Monte Carlo prediction) to the subparsers ``sub``."""
+    """Add the ``predict`` verb (a Monte Carlo prediction) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("predict", help="Monte Carlo prediction from a run's state at a start time")
     s.add_argument("model")
     s.add_argument("--init", required=True, help="trajectory file giving the initial state")
@@ -152,7 +208,13 @@ def add_predict(sub) -> None:
 
 
 def add_rtd(sub) -> None:
-    """Add the ``rtd`` verb (a model's RTD) to the subparsers ``sub``."""
+    """Add the ``rtd`` verb (a model's RTD) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("rtd", help="exact residence-time distribution of a model")
     s.add_argument("model")
     s.add_argument("--window-length", type=positive_float, default=None,
@@ -161,7 +223,13 @@ def add_rtd(sub) -> None:
 
 
 def add_info(sub) -> None:
-    """Add the ``info`` verb (describe a file) to the subparsers ``sub``."""
+    """Add the ``info`` verb (describe a file) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("info", help="describe a trajectory or model file")
     s.add_argument("file")
     s.set_defaults(func=cmd_info)

@@ -103,6 +103,7 @@ def parse_cells(text: str) -> tuple[int, int] | tuple[int, int, int]:
 
 
 def number(text: str) -> float:
+    """A number (NaN and infinities allowed), or an :class:`argparse.ArgumentTypeError`."""
     try:
         return float(text)
     except ValueError:
@@ -142,6 +143,7 @@ def minkowski_order(text: str) -> float:
 
 
 def whole(text: str) -> int:
+    """A whole number, or an :class:`argparse.ArgumentTypeError`."""
     try:
         return int(text)
     except ValueError:

@@ -7,7 +7,18 @@ from cfbmarkov.cli.options import (MAX_JOBS, MAX_PARTICLES, count, parse_names,
 
 
 def cmd_reproduce(args) -> int:
-    """``cfbmarkov reproduce``: the paper end to end; print the report's path."""
+    """``cfbmarkov reproduce``: the paper end to end; print the report's path.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.reproduce import load_overrides, reproduce
 
     overrides = load_overrides(args.overrides) if args.overrides else None
@@ -19,7 +30,18 @@ def cmd_reproduce(args) -> int:
 
 
 def cmd_demo(args) -> int:
-    """``cfbmarkov demo``: the quick reproduction (or the synthetic demo); print its output."""
+    """``cfbmarkov demo``: the quick reproduction (or the synthetic demo); print its output.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     if args.synthetic:
         from cfbmarkov.demo import run_demo
 
@@ -35,7 +57,18 @@ def cmd_demo(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    """``cfbmarkov bench``: one line per benchmark figure."""
+    """``cfbmarkov bench``: one line per benchmark figure.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.bench import run_benchmarks
 
     for name, value, unit in run_benchmarks(only=args.only, repeat=args.repeat,
@@ -45,7 +78,13 @@ def cmd_bench(args) -> int:
 
 
 def add_reproduce(sub) -> None:
-    """Add the ``reproduce`` verb (the paper end to end) to the subparsers ``sub``."""
+    """Add the ``reproduce`` verb (the paper end to end) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("reproduce", help="the paper end to end at U = 3, 4, 6, 8 m/s: CFD-DEM, "
                        "Markov models, predictions, comparison, report")
     s.add_argument("--scale", choices=["paper", "quick"], default="quick",
@@ -70,7 +109,13 @@ def add_reproduce(sub) -> None:
 
 
 def add_demo(sub) -> None:
-    """Add the ``demo`` verb (the demo) to the subparsers ``sub``."""
+    """Add the ``demo`` verb (the demo) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
                        "(about 4 min on 2 quiet cores), ending with the path of its report")
     s.add_argument("-o", "--output", default="cfbmarkov-demo", help="output directory")
@@ -87,7 +132,13 @@ def add_demo(sub) -> None:
 
 
 def add_bench(sub) -> None:
-    """Add the ``bench`` verb (benchmarks) to the subparsers ``sub``."""
+    """Add the ``bench`` verb (benchmarks) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
     s.add_argument("--only", action="append", default=None, help="run only this benchmark")
     s.add_argument("--repeat", type=count(1, 1000), default=5,

@@ -6,7 +6,18 @@ from cfbmarkov.cli.options import MAX_PARTICLES, count, positive_float
 
 
 def cmd_simulate(args) -> int:
-    """``cfbmarkov simulate``: run a case; print the trajectory file."""
+    """``cfbmarkov simulate``: run a case; print the trajectory file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.config import load_case
     from cfbmarkov.simulate.run import simulate
 
@@ -21,7 +32,18 @@ def cmd_simulate(args) -> int:
 
 
 def cmd_cases(args) -> int:
-    """``cfbmarkov cases``: one line per shipped case."""
+    """``cfbmarkov cases``: one line per shipped case.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
     from cfbmarkov.config import case_names, load_case
 
     for name in case_names():
@@ -32,7 +54,13 @@ def cmd_cases(args) -> int:
 
 
 def add_simulate(sub) -> None:
-    """Add the ``simulate`` verb (CFD-DEM of a case) to the subparsers ``sub``."""
+    """Add the ``simulate`` verb (CFD-DEM of a case) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("simulate", help="CFD-DEM of the periodic riser (a TOML case or a shipped name)")
     s.add_argument("case", help="case file (.toml) or shipped case name (see 'cfbmarkov cases')")
     s.add_argument("-o", "--output", required=True, help="trajectory file (.h5)")
@@ -47,6 +75,12 @@ def add_simulate(sub) -> None:
 
 
 def add_cases(sub) -> None:
-    """Add the ``cases`` verb (the shipped cases) to the subparsers ``sub``."""
+    """Add the ``cases`` verb (the shipped cases) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
     s = sub.add_parser("cases", help="list the shipped cases")
     s.set_defaults(func=cmd_cases)
