@@ -326,7 +326,7 @@ def test_a_dropped_in_cfd_dem_file_must_match_the_case(reference, tmp_path, caps
     assert "before the end of the prediction window" in capsys.readouterr().err
     # the search grid and the skin change the speed only: a file made with others serves
     from cfbmarkov.cases.scales import load_overrides
-    from cfbmarkov.reproduce import _check_reference
+    from cfbmarkov.reproduce_case import _check_reference
 
     changed = load_overrides(overrides)
     changed["numerics"] = {**changed["numerics"], "dem_cells": "auto", "dem_skin": 6e-4}
@@ -346,7 +346,7 @@ def test_compile_kernels_warms_both_halves_and_leaves_the_step_alone(tmp_path, m
     split into its gas half and the DEM steps is the step, bit for bit."""
     import numpy as np
 
-    from cfbmarkov.reproduce import compile_kernels
+    from cfbmarkov.reproduce_case import compile_kernels
     from cfbmarkov.simulate.riser import CoupledRiser
 
     monkeypatch.chdir(tmp_path)

@@ -8,7 +8,8 @@ import json
 import numpy as np
 import pytest
 
-from cfbmarkov.analysis.compare import RunComparison, compare_runs, map_times
+from cfbmarkov.analysis.compare import RunComparison, compare_runs
+from cfbmarkov.analysis.figure_inputs import map_times
 from cfbmarkov.observed.metrics import minkowski_distance, mixing_rms, percentage_difference
 from cfbmarkov.analysis.mixing import mixing_curve_of
 from cfbmarkov.observed.residence import residence_times, rtd_histogram

@@ -275,7 +275,7 @@ def test_trust_paragraph_is_written_from_the_numbers():
 def test_the_long_run_span_of_a_reproduction():
     """One window before the fitting window, never the run's first window (its start-up);
     none where fewer than two other whole windows fit."""
-    from cfbmarkov.reproduce import long_run_span
+    from cfbmarkov.reproduce_case import long_run_span
 
     assert long_run_span((10, 15), (15, 20), 0.0, 20.0) == (5.0, 20.0)
     assert long_run_span((5, 10), (10, 15), 0.0, 20.0) == (5.0, 20.0)

@@ -17,8 +17,6 @@ docs/definitions.md, sections "residence time", "mixing" and "file formats" (sum
 from __future__ import annotations
 
 import contextlib
-import json
-import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -26,109 +24,16 @@ import numpy as np
 
 from cfbmarkov.analysis.baseline import (WindowDifference, fitting_window,
                                          model_on_fitting_window, window_difference)
+from cfbmarkov.analysis.compare_inputs import check_parameters, check_runs
+from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
+from cfbmarkov.analysis.stationarity import long_run_baseline
+from cfbmarkov.errors import InputError
 from cfbmarkov.observed.clusters import cluster_index
 from cfbmarkov.observed.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
-from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
-from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, ResidenceTimes, net_flow_direction,
-                                    residence_times, rtd_histogram)
-from cfbmarkov.analysis.stationarity import long_run_baseline
-from cfbmarkov.errors import InputError
+from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, ResidenceTimes,
+                                          net_flow_direction, residence_times, rtd_histogram)
 from cfbmarkov.trajectories import Trajectories
-
-#: snapshot offsets from the window start (s), as in the paper's Fig. 10
-SNAPSHOT_OFFSETS = tuple(round(0.1 * k, 10) for k in range(8))
-
-
-def check_window(window) -> tuple[float, float]:
-    """An analysis window as two floats.
-
-    Parameters
-    ----------
-    window : sequence of two numbers
-        (start, stop), s.
-
-    Returns
-    -------
-    (float, float)
-        (start, stop), s.
-
-    Raises
-    ------
-    InputError
-        When the window is not two finite numbers with stop > start.
-    """
-    try:
-        start, stop = (float(v) for v in window)
-    except (TypeError, ValueError):
-        raise InputError(f"window {window!r} is not (start, stop) in seconds") from None
-    if not (math.isfinite(start) and math.isfinite(stop)):
-        raise InputError(f"window {start:g}:{stop:g} s is not finite")
-    if not stop > start:
-        raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
-    return start, stop
-
-
-def check_parameters(window, bin_width: float, md_order: float) -> tuple[float, float]:
-    """Check the parameters of a comparison.
-
-    Parameters
-    ----------
-    window : sequence of two numbers
-        Analysis window (start, stop), s.
-    bin_width : float
-        RTD bin width, s.
-    md_order : float
-        Order k of the Minkowski distance (Eq. 9).
-
-    Returns
-    -------
-    (float, float)
-        The window as (start, stop), s.
-
-    Raises
-    ------
-    InputError
-        For an unusable window (:func:`check_window`), a bin width (s) that is not finite
-        and positive, or a Minkowski order that is not positive.
-    """
-    start, stop = check_window(window)
-    if not (math.isfinite(bin_width) and bin_width > 0):
-        raise InputError(f"RTD bin width {bin_width:g} s must be positive")
-    from cfbmarkov.limits import MAX_BINS
-
-    if (stop - start) / bin_width > MAX_BINS:
-        raise InputError(f"RTD bin width {bin_width:g} s makes {(stop - start) / bin_width:.3g} "
-                         f"bins over the window, more than {MAX_BINS}; give a larger --bin-width")
-    if not md_order > 0:
-        raise InputError(f"Minkowski order {md_order:g} must be positive")
-    return start, stop
-
-
-def model_columns(traj: Trajectories) -> int | None:
-    """Number of cell columns of the model behind a prediction.
-
-    Parameters
-    ----------
-    traj : Trajectories
-        An open trajectory file.
-
-    Returns
-    -------
-    int or None
-        The ``columns`` attribute of ``/provenance/model`` (or of its ``state_space`` JSON),
-        else ``parameters["columns"]`` of the file; None when the file has neither.
-    """
-    group = traj.group("model")
-    if group is not None:
-        if "columns" in group.attrs:
-            return int(group.attrs["columns"])
-        space = group.attrs.get("state_space")
-        if space is not None:
-            with contextlib.suppress(ValueError, TypeError, KeyError):
-                return int(json.loads(space)["columns"])
-    columns = traj.parameters.get("columns") if isinstance(traj.parameters, dict) else None
-    return None if columns is None else int(columns)
 
 
 @dataclass
@@ -393,39 +298,44 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     The paper: Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614.
     """
     start, stop = check_parameters(window, bin_width, md_order)
-    for run in (ref, pred):
-        run.require_supported("comparing runs", three_d=True, absent=run.boundary == "open",
-                              open_boundary=True)
-    if ref.boundary != pred.boundary:
-        raise InputError(f"{ref.path} is a{'n open' if ref.boundary == 'open' else ' periodic'} "
-                         f"riser and {pred.path} a{'n open' if pred.boundary == 'open' else ' periodic'}"
-                         " one: compare runs of the same kind")
+    ref_frames, pred_frames, columns = check_runs(ref, pred, start, stop)
     warnings: list[str] = []
-    ref_frames = ref.window(start, stop)
-    pred_frames = pred.window(start, stop)
-    columns = model_columns(pred)
-    if columns is not None and columns % 2:
-        raise InputError(f"{pred.path}: the model's state space has an odd column count "
-                         f"({columns}): mixing by halves (x < W/2) is undefined")
-    if not (np.isclose(ref.width, pred.width) and np.isclose(ref.height, pred.height)):
-        raise InputError(f"domains differ: {ref.path} is {ref.width:g} x {ref.height:g} m, "
-                         f"{pred.path} is {pred.width:g} x {pred.height:g} m")
-    if ref.dimensions != pred.dimensions or (ref.depth is not None
-                                             and not np.isclose(ref.depth, pred.depth)):
-        raise InputError(f"domains differ: {ref.path} is {ref.dimensions}D"
-                         + (f" ({ref.depth:g} m deep)" if ref.depth is not None else "")
-                         + f", {pred.path} is {pred.dimensions}D"
-                         + (f" ({pred.depth:g} m deep)" if pred.depth is not None else ""))
-    if ref.boundary == "open":
-        _check_same_start(ref, pred, ref_frames.start, pred_frames.start)
-    elif ref.n_particles != pred.n_particles or not np.array_equal(np.sort(ref.ids),
-                                                                    np.sort(pred.ids)):
-        raise InputError(f"{ref.path} ({ref.n_particles} particles) and {pred.path} "
-                         f"({pred.n_particles}) do not hold the same particle ids; mixing "
-                         "needs the same particles on both sides")
-
+    on = _residence_basis(ref, pred, (start, stop), basis, warnings)
     # residence times (an open riser: entries and exits within one cell of the faces), on
     # one time basis: frames at the model's lag, or the reference's exact events
+    rt_ref = residence_times(ref, (start, stop), use_events=on.events, face_band=on.band,
+                             lag_frames=on.lag_frames, direction=on.direction)
+    rt_mod = residence_times(pred, (start, stop), use_events=on.events, face_band=on.band,
+                             direction=on.direction)
+    beside = _baselines(ref, pred, (start, stop), on, bin_width=bin_width, md_order=md_order,
+                        long_run_span=long_run_span)
+    if ref.boundary.is_open and rt_ref.count == 0:
+        raise InputError(f"window {start:g}:{stop:g} s of {ref.path} holds no complete residence "
+                         "(an entry through the inlet and the next exit through the outlet "
+                         "inside the window): compare over a longer window")
+    edges, reference = _compared_run(ref, ref_frames, rt_ref, (start, stop), bin_width)
+    _, model = _compared_run(pred, pred_frames, rt_mod, (start, stop), bin_width)
+    return _assemble(reference, model, edges, (start, stop), bin_width, md_order, columns,
+                     warnings, on, beside)
+
+
+@dataclass(frozen=True)
+class _Basis:
+    """The residence times' basis of a comparison: exact events or frames every
+    ``lag_frames``-th of the reference, the face band (m) and the direction."""
+
+    name: str
+    events: bool
+    lag_frames: int
+    band: float
+    direction: str
+
+
+def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float, float],
+                     basis: str, warnings: list[str]) -> _Basis:
+    """The residence times' basis of both sides: the reference's frames per model lag (a
+    warning where the lag is not a whole number of them), the face band of one cell row
+    and the direction of the reference's net solids flow over the window."""
     if basis not in BASES:
         raise InputError(f"comparison basis {basis!r}: choose frames or events")
     rows = pred.parameters.get("rows") or DEFAULT_FACE_ROWS
@@ -439,22 +349,38 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
             warnings.append(f"the model's lag {pred.frame_interval:g} s is not a whole number "
                             f"of the reference's frames ({ref.frame_interval:g} s): its "
                             "residence times use every frame")
-    events = basis == "events"
-    direction = net_flow_direction(ref, (start, stop))
+    direction = net_flow_direction(ref, window)
     if direction == "down":
         warnings.append("the solids' net flow over the window is downward: residence times "
                         "run from entries through the top to exits through the bottom")
-    rt_ref = residence_times(ref, (start, stop), use_events=events, face_band=band,
-                             lag_frames=lag_frames, direction=direction)
-    rt_mod = residence_times(pred, (start, stop), use_events=events, face_band=band,
-                             direction=direction)
+    return _Basis(basis, basis == "events", lag_frames, band, direction)
+
+
+@dataclass(frozen=True)
+class _Beside:
+    """What stands beside the model: the reference's exact-event residence times and the
+    persistence, long-run and natural-variability baselines (None where not formed)."""
+
+    exact_reference: ResidenceTimes | None
+    baseline: WindowDifference | None
+    long_run: WindowDifference | None
+    variability: WindowDifference | None
+
+
+def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float], on: _Basis,
+               *, bin_width: float, md_order: float,
+               long_run_span: tuple[float, float] | None) -> _Beside:
+    """The reference's side of the baselines: its exact pass events (on the frames basis),
+    its fitting window as the prediction (persistence), its long run over
+    ``long_run_span`` and its first half against its second half."""
+    start, stop = window
     exact_reference = None
-    if not events and ref.has_events and ref.boundary == "periodic":
+    if not on.events and ref.has_events and not ref.boundary.is_open:
         exact_reference = residence_times(ref, (start, stop), use_events=True,
-                                          direction=direction)
-    basis_args = {"bin_width": bin_width, "md_order": md_order, "use_events": events,
-                  "lag_frames": lag_frames, "face_band": band, "window_length": stop - start,
-                  "direction": direction}
+                                          direction=on.direction)
+    basis_args = {"bin_width": bin_width, "md_order": md_order, "use_events": on.events,
+                  "lag_frames": on.lag_frames, "face_band": on.band,
+                  "window_length": stop - start, "direction": on.direction}
     baseline = None
     fitted = fitting_window(pred)
     if fitted is not None and fitted[0] >= ref.times[0] - ref.time_tolerance and (
@@ -465,19 +391,37 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     if long_run_span is not None:
         long_run = long_run_baseline(ref, (start, stop), span=long_run_span,
                                      bin_width=bin_width, md_order=md_order,
-                                     use_events=events, lag_frames=lag_frames, face_band=band,
-                                     direction=direction)
+                                     use_events=on.events, lag_frames=on.lag_frames,
+                                     face_band=on.band, direction=on.direction)
     middle = 0.5 * (start + stop)
     variability = None
     with contextlib.suppress(InputError):
         variability = window_difference(ref, (start, middle), (middle, stop), **basis_args)
-    if ref.boundary == "open" and rt_ref.count == 0:
-        raise InputError(f"window {start:g}:{stop:g} s of {ref.path} holds no complete residence "
-                         "(an entry through the inlet and the next exit through the outlet "
-                         "inside the window): compare over a longer window")
-    length = stop - start
-    edges, p_ref = rtd_histogram(rt_ref.samples, bin_width, window_length=length)
-    _, p_mod = rtd_histogram(rt_mod.samples, bin_width, window_length=length)
+    return _Beside(exact_reference, baseline, long_run, variability)
+
+
+def _compared_run(traj: Trajectories, frames: slice, rt: ResidenceTimes,
+                  window: tuple[float, float], bin_width: float
+                  ) -> tuple[np.ndarray, ComparedRun]:
+    """One side over the window: its RTD on bins of ``bin_width`` (and their edges), its
+    mixing curve and its left tracer group (of an open riser: among the particles present
+    at the window start)."""
+    edges, rtd = rtd_histogram(rt.samples, bin_width, window_length=window[1] - window[0])
+    times, fraction = mixing_curve_of(traj, window)
+    left = left_tracer_group(traj.positions(frames.start)[:, 0], 0.5 * traj.width)
+    if traj.boundary.is_open:      # the tracers: the particles present at the window start
+        left = left & traj.present(frames.start)
+    return edges, ComparedRun(traj, frames, rt, rtd, times, fraction, left)
+
+
+def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
+              window: tuple[float, float], bin_width: float, md_order: float,
+              columns: int | None, warnings: list[str], on: _Basis, beside: _Beside
+              ) -> RunComparison:
+    """The comparison of the two sides: MD of the RTDs, the model on its fitting window,
+    mixing RMS, the tracer-group check, the cluster index and the warnings about them."""
+    rt_ref, rt_mod = reference.residence, model.residence
+    p_ref, p_mod = reference.rtd, model.rtd
     for name, rt in (("reference", rt_ref), ("model", rt_mod)):
         if rt.count < 2:
             warnings.append(f"{name}: {rt.count} residence-time sample(s) in the window; "
@@ -487,9 +431,9 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     else:
         md = float("nan")
     on_fit = None
-    if baseline is not None:
-        on_fit = model_on_fitting_window(rt_mod, p_mod, baseline, bin_width=bin_width,
-                                         md_order=md_order, window_length=length)
+    if beside.baseline is not None:
+        on_fit = model_on_fitting_window(rt_mod, p_mod, beside.baseline, bin_width=bin_width,
+                                         md_order=md_order, window_length=window[1] - window[0])
     for what, value in (("E(RT)", rt_ref.mean), ("SD(RT)", rt_ref.sd)):
         if rt_ref.count >= 2 and abs(value) <= ROUNDOFF * abs(rt_ref.mean):
             warnings.append(f"the reference {what} is zero to round-off ({value:.3g} s): its "
@@ -497,10 +441,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     if rt_ref.exact != rt_mod.exact:
         warnings.append("residence times use exact pass events on one side and frame times "
                         "on the other")
-
-    # mixing
-    t_ref, f_ref = mixing_curve_of(ref, (start, stop))
-    t_mod, f_mod = mixing_curve_of(pred, (start, stop))
+    t_ref, f_ref = reference.mixing_times, reference.mixing_fraction
+    t_mod, f_mod = model.mixing_times, model.mixing_fraction
     rms = mixing_rms(t_ref, f_ref, t_mod, f_mod)
     if not np.isfinite(rms):
         ends = [f"{name} at {times[~np.isfinite(curve)][0]:g} s"
@@ -509,11 +451,9 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         warnings.append("the mixing curve is undefined where no tracer (a particle present at "
                         f"the window start) is left ({', '.join(ends)}): the mixing RMS is "
                         "undefined (null); a window that ends before that gives one")
-    left_ref = left_tracer_group(ref.positions(ref_frames.start)[:, 0], 0.5 * ref.width)
-    left_mod = left_tracer_group(pred.positions(pred_frames.start)[:, 0], 0.5 * pred.width)
-    if ref.boundary == "open":      # the tracers: the particles present at the window start
-        left_ref = left_ref & ref.present(ref_frames.start)
-        left_mod = left_mod & pred.present(pred_frames.start)
+    ref, pred = reference.traj, model.traj
+    left_ref, left_mod = reference.left_group, model.left_group
+    if ref.boundary.is_open:
         same = bool(np.array_equal(np.sort(ref.ids[left_ref]), np.sort(pred.ids[left_mod])))
     else:
         same = bool(np.array_equal(left_ref[np.argsort(ref.ids)], left_mod[np.argsort(pred.ids)]))
@@ -522,14 +462,14 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
                         "particles are in the left tracer group (x < W/2): the prediction did "
                         "not start from the reference's state at the window start")
     return RunComparison(
-        window=(start, stop), bin_width=float(bin_width), md_order=float(md_order), edges=edges,
-        reference=ComparedRun(ref, ref_frames, rt_ref, p_ref, t_ref, f_ref, left_ref),
-        model=ComparedRun(pred, pred_frames, rt_mod, p_mod, t_mod, f_mod, left_mod),
+        window=window, bin_width=float(bin_width), md_order=float(md_order), edges=edges,
+        reference=reference, model=model,
         md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
-        warnings=warnings, basis=basis, lag_frames=lag_frames, exact_reference=exact_reference,
-        baseline=baseline, natural_variability=variability, on_fitting_window=on_fit,
-        long_run=long_run, direction=direction,
-        cluster=_clusters(ref, pred, ref_frames, pred_frames, columns))
+        warnings=warnings, basis=on.name, lag_frames=on.lag_frames,
+        exact_reference=beside.exact_reference, baseline=beside.baseline,
+        natural_variability=beside.variability, on_fitting_window=on_fit,
+        long_run=beside.long_run, direction=on.direction,
+        cluster=_clusters(ref, pred, reference.frames, model.frames, columns))
 
 
 def _clusters(ref, pred, ref_frames: slice, pred_frames: slice, columns: int | None) -> dict:
@@ -542,139 +482,4 @@ def _clusters(ref, pred, ref_frames: slice, pred_frames: slice, columns: int | N
             "model": {"mean": m_mean, "sd": m_sd}}
 
 
-def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:
-    """Open risers: the particles present at the window's first frame must be the same on
-    both sides (the prediction started from the reference's state); newcomers may differ."""
-    a = np.sort(ref.ids[ref.present(i_ref)])
-    b = np.sort(pred.ids[pred.present(i_pred)])
-    if not np.array_equal(a, b):
-        raise InputError(f"{ref.path} ({a.size} particles present at the window start) and "
-                         f"{pred.path} ({b.size}) do not start from the same particles; mixing "
-                         "needs the same tracers on both sides")
-
-
-def snapshot_frames(ref: Trajectories, pred: Trajectories, start: float, stop: float
-                    ) -> list[tuple[float, int, int]]:
-    """Frames of the snapshots (the paper's Fig. 10).
-
-    Parameters
-    ----------
-    ref, pred : Trajectories
-        The two open files.
-    start, stop : float
-        The analysis window, s.
-
-    Returns
-    -------
-    list of (float, int, int)
-        (time s, frame index in ``ref``, frame index in ``pred``) at start + 0, 0.1, ...
-        0.7 s inside the window, where both files have a frame.
-
-    References
-    ----------
-    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 10.
-    """
-    chosen = []
-    for offset in SNAPSHOT_OFFSETS:
-        t = start + offset
-        if t > stop + 1e-9 * max(1.0, abs(stop)):
-            break
-        try:
-            chosen.append((t, ref.frame_index(t), pred.frame_index(t)))
-        except InputError:
-            continue
-    return chosen
-
-
-def map_times(reference_mean: float, lag: float) -> list[float]:
-    """Times of the batch-injection maps of a comparison.
-
-    Parameters
-    ----------
-    reference_mean : float
-        E(RT) of the reference, s.
-    lag : float
-        The model's lag, s.
-
-    Returns
-    -------
-    list of float
-        About E(RT)/4, E(RT)/2 and 3 E(RT)/4 in whole lags (the paper's choice of 0.05-0.15 s
-        or 0.25-0.75 s), s; 2, 4 and 6 lags when these do not give three distinct times.
-    """
-    if math.isfinite(reference_mean) and reference_mean > 0:
-        steps = sorted({max(1, round(f * reference_mean / lag)) for f in (0.25, 0.5, 0.75)})
-        if len(steps) == 3:
-            return [k * lag for k in steps]
-    return [k * lag for k in (2, 4, 6)]
-
-
-@dataclass
-class ModelMaps:
-    """The model behind a prediction, as the figures of the paper's Fig. 3-7 need it.
-
-    Attributes
-    ----------
-    transition_matrix : numpy.ndarray, shape (S, S)
-        P_ij, the probability to go from state i to state j in one lag.
-    columns, rows : int
-        Cells across and along the riser.
-    lag : float
-        Lag, s.
-    times : list of float
-        Times of the batch-injection maps, s (:func:`map_times`).
-    maps : numpy.ndarray, shape (len(times), rows, columns)
-        Probability per cell of a batch fed evenly over the inlet at t = 0 (Eq. 8).
-    """
-
-    transition_matrix: np.ndarray
-    columns: int
-    rows: int
-    lag: float
-    times: list[float]
-    maps: np.ndarray
-
-
-def model_maps(pred: Trajectories, reference_mean: float, warnings: list[str]
-               ) -> ModelMaps | None:
-    """The transition matrix and batch-injection maps of the model carried by a prediction.
-
-    Parameters
-    ----------
-    pred : Trajectories
-        An open prediction file.
-    reference_mean : float
-        E(RT) of the reference, s (chooses the map times).
-    warnings : list of str
-        Receives a line when the model cannot be used.
-
-    Returns
-    -------
-    ModelMaps or None
-        None when the file carries no model (``/provenance/model``) or it cannot be used.
-    """
-    group = pred.group("model")
-    if group is None:
-        return None
-    try:
-        from cfbmarkov.markov import MarkovModel
-    except ImportError as exc:
-        warnings.append(f"model figures skipped: cfbmarkov.markov cannot be imported ({exc})")
-        return None
-    try:
-        model = MarkovModel.from_group(group)
-        P = np.asarray(model.transition_matrix, dtype=np.float64)
-        columns, rows = int(model.state_space.columns), int(model.state_space.rows)
-        lag = float(getattr(model, "lag", pred.frame_interval))
-        times = map_times(reference_mean, lag)
-        maps = np.asarray(model.batch_injection_maps(times), dtype=np.float64)
-    except (InputError, AttributeError, KeyError, TypeError, ValueError) as exc:
-        warnings.append(f"model figures skipped: the model of {pred.path} cannot be used "
-                        f"({type(exc).__name__}: {exc})")
-        return None
-    return ModelMaps(P, columns, rows, lag, times, maps)
-
-
-__all__ = ["ComparedRun", "ModelMaps", "RunComparison", "SNAPSHOT_OFFSETS", "check_parameters",
-           "check_window", "compare_runs", "map_times", "model_columns", "model_maps",
-           "snapshot_frames"]
+__all__ = ["BASES", "ComparedRun", "RunComparison", "compare_runs"]

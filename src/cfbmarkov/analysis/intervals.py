@@ -46,9 +46,12 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.stats import norm
 
-from cfbmarkov.analysis.mixing import model_mixing_curve
-from cfbmarkov.observed.residence import rtd_histogram
+from cfbmarkov.analysis.mixing import _left_states, model_mixing_curve
+from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.observed.residence import (residence_times, residence_times_from_laps,
+                                          rtd_histogram)
+from cfbmarkov.trajectories import opened
 
 
 #: blocks of the fitting window that measure the flow's variability (:func:`flow_variability`)
@@ -68,7 +71,7 @@ def _resampled_rtd(model, window_length: float, direction: str, entry):
         up, down = (model.up, model.down) if direction == "up" else (model.down, model.up)
         return rtd_of_split_chain(up, down, model.stay, model.lag, max_steps=steps,
                                   entry=entry).in_window(window_length)
-    if model.boundary == "open" or entry is None:
+    if Boundary(model.boundary).is_open or entry is None:
         return model.rtd(window_length, direction)
     from cfbmarkov.markov.first_passage import exact_rtd
 
@@ -196,7 +199,7 @@ class _SplitChain:
     stay: object
     state_space: object
     lag: float
-    boundary: str = "periodic"
+    boundary: Boundary = Boundary.PERIODIC
 
     @property
     def transition_matrix(self):
@@ -272,9 +275,6 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
     longest blocks is the honest estimate (here, one block's spread is kept for longer
     windows).
     """
-    from cfbmarkov.observed.residence import residence_times
-    from cfbmarkov.trajectories import opened
-
     if int(blocks) < 2:
         raise InputError(f"the flow's variability needs at least 2 blocks ({blocks})")
     if not isinstance(model.source, str) or model.window is None:
@@ -368,9 +368,6 @@ def _replicate_noise(model, states, left_group, n_steps: int, edges: np.ndarray,
     SD(RT), the RTD per bin and the mixing curve at ``lags`` (None without them): the
     Monte Carlo noise of a model whose particles move coherently, which the formulas for
     independent samples underestimate."""
-    from cfbmarkov.analysis.mixing import _left_states
-    from cfbmarkov.observed.residence import residence_times_from_laps
-
     sign = 1 if direction == "up" else -1
     times = model.lag * np.arange(n_steps + 1)
     in_left = _left_states(model.state_space) > 0 if lags is not None else None
@@ -480,7 +477,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         m_exact, m_se = model_mixing_curve(model, states, left, int(lags.max()))
         curve = (lags, states, left)
     means, sds, rtds, curves = [], [], [], []
-    if model.boundary == "periodic" and not model.connected and entry is not None:
+    if not Boundary(model.boundary).is_open and not model.connected and entry is not None:
         # the resamples' RTDs and mixing curves from sparse chains (no [S, S] model each)
         drawn = _bootstrap_chains(model, blocks, resamples, seed)
     else:

@@ -25,6 +25,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 
 
@@ -289,7 +290,7 @@ def model_mixing_curve(model, states, left_group, steps: int) -> tuple[np.ndarra
         raise InputError("initial states outside the model's state space")
     if not present.any():
         raise InputError("mixing curve of no tracer (no particle present at the start)")
-    is_open = model.boundary == "open"
+    is_open = Boundary(model.boundary).is_open
     matrix = sp.csr_matrix(model.absorbing_matrix if is_open else model.transition_matrix)
     n_left = np.bincount(states[present & left_group], minlength=n_states).astype(np.float64)
     n_all = np.bincount(states[present], minlength=n_states).astype(np.float64)

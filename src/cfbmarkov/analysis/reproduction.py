@@ -24,7 +24,10 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from cfbmarkov.analysis.mixing import mixing_curve_of
 from cfbmarkov.errors import InputError
+from cfbmarkov.observed.residence import (net_flow_direction, residence_times,
+                                          rtd_histogram)
 
 
 @contextlib.contextmanager
@@ -145,9 +148,6 @@ def measure_run(traj, window: tuple[float, float], bin_width: float, *,
         When the window is empty or leaves the file's frames, or the file's pass events
         are damaged (:func:`cfbmarkov.observed.residence.residence_times`).
     """
-    from cfbmarkov.analysis.mixing import mixing_curve_of
-    from cfbmarkov.observed.residence import residence_times, rtd_histogram
-
     rt = residence_times(traj, window, use_events=use_events, lag_frames=lag_frames,
                          direction=direction)
     _, prob = rtd_histogram(rt.samples, bin_width, window_length=window[1] - window[0])
@@ -243,7 +243,6 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
     ----------
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Figs. 3-9 and 11.
     """
-    from cfbmarkov.observed.residence import net_flow_direction, rtd_histogram
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.trajectories import Trajectories
 

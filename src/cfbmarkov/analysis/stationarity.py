@@ -15,6 +15,9 @@ scatter, whatever its states. Two figures measure it on the reference:
   what a perfect stationary model fitted on the rest of the run would predict. Beside the
   persistence baseline (:func:`cfbmarkov.analysis.baseline.window_difference`) it shows how
   much of a model's error on the judged window is the flow's scatter about its long run.
+
+:func:`check_stationarity` gives both for a trajectory file, the numbers of ``cfbmarkov
+stationarity``.
 """
 
 from __future__ import annotations
@@ -24,11 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from cfbmarkov.analysis.baseline import WindowDifference
+from cfbmarkov._json import jsonable
+from cfbmarkov.analysis.baseline import WindowDifference, window_difference
 from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
 from cfbmarkov.observed.residence import (ResidenceTimes, net_flow_direction, residence_times,
                                     rtd_histogram)
 from cfbmarkov.errors import InputError
+from cfbmarkov.trajectories import Trajectories
 
 #: residence directions a caller may ask for; "auto" follows each window's net solids flow
 DIRECTIONS = ("auto", "up", "down")
@@ -285,3 +290,164 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
                             percentage_difference(predicted.mean, observed.mean),
                             percentage_difference(predicted.sd, observed.sd, scale=observed.mean),
                             md)
+
+
+@dataclass(frozen=True)
+class JudgedWindow:
+    """One window of a run against the run's long run and against the window before it.
+
+    Attributes
+    ----------
+    window : (float, float)
+        The judged window (start, stop), s.
+    direction : {"up", "down"}
+        The residences' direction, from the judged window's net solids flow.
+    long_run : WindowDifference
+        The run's RTD pooled over the span's other whole windows as the prediction of the
+        judged window (:func:`long_run_baseline`); its ``observed`` samples are the judged
+        window's.
+    persistence : WindowDifference or None
+        The window of the same length just before it as the prediction
+        (:func:`cfbmarkov.analysis.baseline.window_difference`); None where that window
+        does not lie whole in the span.
+    """
+
+    window: tuple[float, float]
+    direction: str
+    long_run: WindowDifference
+    persistence: WindowDifference | None
+
+    def to_dict(self) -> dict[str, Any]:
+        """The ``judged`` part of :meth:`StationarityCheck.to_dict`.
+
+        Returns
+        -------
+        dict
+            ``window`` (s), ``direction``, the judged window's ``rt_mean`` and ``rt_sd``
+            (s) and ``rt_count``, and the ``long_run`` and ``persistence`` differences
+            (:meth:`~cfbmarkov.analysis.baseline.WindowDifference.summary`, or None).
+        """
+        observed = self.long_run.observed
+        return {"window": list(self.window), "direction": self.direction,
+                "rt_mean": observed.mean, "rt_sd": observed.sd, "rt_count": observed.count,
+                "long_run": self.long_run.summary(),
+                "persistence": None if self.persistence is None else self.persistence.summary()}
+
+
+@dataclass(frozen=True)
+class StationarityCheck:
+    """How much a run's RTD changes from window to window (``cfbmarkov stationarity``).
+
+    Attributes
+    ----------
+    file : str
+        The trajectory file, as named by the caller.
+    span : (float, float)
+        The part of the file the windows cover, s.
+    exact_events : bool
+        Whether residence times come from the file's exact pass events (else frames).
+    rtd_bin_width : float
+        The RTD bins of the Minkowski distances, s: the lag, else the frame interval.
+    statistics : WindowStatistics
+        The sliding windows (:func:`window_statistics`).
+    judged : JudgedWindow or None
+        The judged window, where one was asked for.
+    """
+
+    file: str
+    span: tuple[float, float]
+    exact_events: bool
+    rtd_bin_width: float
+    statistics: WindowStatistics
+    judged: JudgedWindow | None = None
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready, the output of ``cfbmarkov stationarity --json``.
+
+        Returns
+        -------
+        dict
+            ``file``, ``span`` (s), ``basis`` (``events`` or ``frames``), ``rtd_bin_width``
+            (s), the keys of :meth:`WindowStatistics.summary` and, where a window was judged,
+            ``judged`` (:meth:`JudgedWindow.to_dict`); undefined values as None.
+        """
+        summary = {"file": self.file, "span": list(self.span),
+                   "basis": "events" if self.exact_events else "frames",
+                   "rtd_bin_width": self.rtd_bin_width, **self.statistics.summary()}
+        if self.judged is not None:
+            summary["judged"] = self.judged.to_dict()
+        return jsonable(summary)
+
+
+def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
+                       span: tuple[float, float] | None = None, lag: float | None = None,
+                       basis: str = "frames", judge: tuple[float, float] | None = None
+                       ) -> StationarityCheck:
+    """Sliding-window statistics of a trajectory file and, optionally, one window judged
+    against the run's long run and against the window before it (persistence).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A trajectory file.
+    window_length, step : float, optional
+        Window length and the time between window starts, s (:func:`window_statistics`).
+    span : (float, float), optional
+        The part of the file used, s; default all of it.
+    lag : float, optional
+        Frames every ``lag`` s (a model's lag), also the RTD bins (s); default every frame
+        and bins of the frame interval.
+    basis : {"frames", "events"}, optional
+        Residence times from frames, or from the file's exact pass events.
+    judge : (float, float), optional
+        A window (s) to compare with the span's other whole windows of its length, pooled
+        (:func:`long_run_baseline`), and with the window of its length before it.
+
+    Returns
+    -------
+    StationarityCheck
+
+    Raises
+    ------
+    InputError
+        For ``basis="events"`` on a file without exact pass events (or an open riser), a
+        lag that is not a whole number of frames, a judged window outside the span, and
+        the errors of :func:`window_statistics` and :func:`long_run_baseline`.
+    """
+    events = basis == "events"
+    with Trajectories(path) as traj:
+        if events and not (traj.has_events and not traj.boundary.is_open):
+            raise InputError(f"{path} holds no exact pass events: residence times from "
+                             "frames need no --basis events")
+        lag_frames = traj.lag_frames(lag) if lag is not None else 1
+        bin_width = lag if lag is not None else traj.frame_interval
+        kwargs = {"use_events": events, "lag_frames": 1 if events else lag_frames}
+        extent = span or (float(traj.times[0]), float(traj.times[-1]))
+        stats = window_statistics(traj, window_length=window_length, step=step, span=span,
+                                  **kwargs)
+        judged = None
+        if judge is not None:
+            judged = _judged_window(traj, judge, span, extent, bin_width, kwargs)
+    return StationarityCheck(str(path), extent, events, bin_width, stats, judged)
+
+
+def _judged_window(traj, judge: tuple[float, float], span: tuple[float, float] | None,
+                   extent: tuple[float, float], bin_width: float, kwargs: dict
+                   ) -> JudgedWindow:
+    """The judged window of :func:`check_stationarity` against the long run and the window
+    before it; ``extent`` is the span in use, ``kwargs`` the residence times' basis."""
+    j0, j1 = judge
+    length = j1 - j0
+    tol = traj.time_tolerance
+    if j0 < extent[0] - tol or j1 > extent[1] + tol:
+        raise InputError(f"--judge {j0:g}:{j1:g} s lies outside the span "
+                         f"{extent[0]:g}:{extent[1]:g} s")
+    direction = net_flow_direction(traj, judge)
+    long_run = long_run_baseline(traj, judge, span=span, bin_width=bin_width,
+                                 direction=direction, **kwargs)
+    persistence = None
+    if j0 - length >= extent[0] - tol:
+        persistence = window_difference(
+            traj, (j0 - length, j0), (j0, j1), bin_width=bin_width, md_order=2.0,
+            face_band=None, window_length=length, direction=direction, **kwargs)
+    return JudgedWindow((j0, j1), direction, long_run, persistence)

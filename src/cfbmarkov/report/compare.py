@@ -19,21 +19,16 @@ from __future__ import annotations
 
 import contextlib
 import json
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from cfbmarkov._atomic import write_text_atomic
-from cfbmarkov.analysis.compare import (
-    RunComparison,
-    check_parameters,
-    compare_runs,
-    model_columns,
-    model_maps,
-    snapshot_frames,
-)
+from cfbmarkov._json import jsonable
+from cfbmarkov.analysis.compare import RunComparison, compare_runs
+from cfbmarkov.analysis.compare_inputs import check_parameters, model_columns
+from cfbmarkov.analysis.figure_inputs import model_maps, snapshot_frames
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories, opened
 
@@ -42,21 +37,6 @@ SUMMARY = "summary.json"
 
 def _open(source, stack: contextlib.ExitStack) -> Trajectories:
     return stack.enter_context(opened(source))
-
-
-def _jsonable(value):
-    """``value`` with numpy scalars as Python numbers and non-finite floats as None."""
-    if isinstance(value, dict):
-        return {k: _jsonable(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_jsonable(v) for v in value]
-    if isinstance(value, (np.bool_, bool)):
-        return bool(value)
-    if isinstance(value, (np.integer,)):
-        return int(value)
-    if isinstance(value, (float, np.floating)):
-        return float(value) if math.isfinite(value) else None
-    return value
 
 
 def _tracers(model, comparison: RunComparison, warnings: list[str]):
@@ -264,7 +244,7 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
             (out / SUMMARY).unlink()                     # figures of this run
         summary["figures"] = _draw(comparison, out, warnings) if figures else []
         summary["warnings"] = warnings
-    write_text_atomic(out / SUMMARY, json.dumps(_jsonable(summary), indent=2, allow_nan=False)
+    write_text_atomic(out / SUMMARY, json.dumps(jsonable(summary), indent=2, allow_nan=False)
                       + "\n")
     return summary
 

@@ -1,0 +1,178 @@
+"""The inputs of a comparison checked: the analysis window and parameters, the columns of
+the model behind a prediction, and whether a prediction and a reference can be compared
+(:func:`cfbmarkov.analysis.compare.compare_runs`).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import math
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.limits import MAX_BINS
+from cfbmarkov.trajectories import Trajectories
+
+
+def check_window(window) -> tuple[float, float]:
+    """An analysis window as two floats.
+
+    Parameters
+    ----------
+    window : sequence of two numbers
+        (start, stop), s.
+
+    Returns
+    -------
+    (float, float)
+        (start, stop), s.
+
+    Raises
+    ------
+    InputError
+        When the window is not two finite numbers with stop > start.
+    """
+    try:
+        start, stop = (float(v) for v in window)
+    except (TypeError, ValueError):
+        raise InputError(f"window {window!r} is not (start, stop) in seconds") from None
+    if not (math.isfinite(start) and math.isfinite(stop)):
+        raise InputError(f"window {start:g}:{stop:g} s is not finite")
+    if not stop > start:
+        raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
+    return start, stop
+
+
+def check_parameters(window, bin_width: float, md_order: float) -> tuple[float, float]:
+    """Check the parameters of a comparison.
+
+    Parameters
+    ----------
+    window : sequence of two numbers
+        Analysis window (start, stop), s.
+    bin_width : float
+        RTD bin width, s.
+    md_order : float
+        Order k of the Minkowski distance (Eq. 9).
+
+    Returns
+    -------
+    (float, float)
+        The window as (start, stop), s.
+
+    Raises
+    ------
+    InputError
+        For an unusable window (:func:`check_window`), a bin width (s) that is not finite
+        and positive, or a Minkowski order that is not positive.
+    """
+    start, stop = check_window(window)
+    if not (math.isfinite(bin_width) and bin_width > 0):
+        raise InputError(f"RTD bin width {bin_width:g} s must be positive")
+    if (stop - start) / bin_width > MAX_BINS:
+        raise InputError(f"RTD bin width {bin_width:g} s makes {(stop - start) / bin_width:.3g} "
+                         f"bins over the window, more than {MAX_BINS}; give a larger --bin-width")
+    if not md_order > 0:
+        raise InputError(f"Minkowski order {md_order:g} must be positive")
+    return start, stop
+
+
+def model_columns(traj: Trajectories) -> int | None:
+    """Number of cell columns of the model behind a prediction.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+
+    Returns
+    -------
+    int or None
+        The ``columns`` attribute of ``/provenance/model`` (or of its ``state_space`` JSON),
+        else ``parameters["columns"]`` of the file; None when the file has neither.
+    """
+    group = traj.group("model")
+    if group is not None:
+        if "columns" in group.attrs:
+            return int(group.attrs["columns"])
+        space = group.attrs.get("state_space")
+        if space is not None:
+            with contextlib.suppress(ValueError, TypeError, KeyError):
+                return int(json.loads(space)["columns"])
+    columns = traj.parameters.get("columns") if isinstance(traj.parameters, dict) else None
+    return None if columns is None else int(columns)
+
+
+def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
+               ) -> tuple[slice, slice, int | None]:
+    """Check that two files can be compared over a window.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and model files.
+    start, stop : float
+        The analysis window, s.
+
+    Returns
+    -------
+    ref_frames, pred_frames : slice
+        The window's frames in each file.
+    columns : int or None
+        The columns of the model behind the prediction (:func:`model_columns`).
+
+    Raises
+    ------
+    InputError
+        For a file whose content comparing does not support, an open riser against a
+        periodic one, a window without frames, a model with an odd column count (mixing by
+        halves is undefined), different domains (size, 2D against 3D, or depth), or
+        different particles (an open riser: different particles present at the window
+        start).
+    """
+    for run in (ref, pred):
+        run.require_supported("comparing runs", three_d=True, absent=run.boundary.is_open,
+                              open_boundary=True)
+    if ref.boundary != pred.boundary:
+        raise InputError(f"{ref.path} is a{'n open' if ref.boundary.is_open else ' periodic'} "
+                         f"riser and {pred.path} a{'n open' if pred.boundary.is_open else ' periodic'}"
+                         " one: compare runs of the same kind")
+    ref_frames = ref.window(start, stop)
+    pred_frames = pred.window(start, stop)
+    columns = model_columns(pred)
+    if columns is not None and columns % 2:
+        raise InputError(f"{pred.path}: the model's state space has an odd column count "
+                         f"({columns}): mixing by halves (x < W/2) is undefined")
+    if not (np.isclose(ref.width, pred.width) and np.isclose(ref.height, pred.height)):
+        raise InputError(f"domains differ: {ref.path} is {ref.width:g} x {ref.height:g} m, "
+                         f"{pred.path} is {pred.width:g} x {pred.height:g} m")
+    if ref.dimensions != pred.dimensions or (ref.depth is not None
+                                             and not np.isclose(ref.depth, pred.depth)):
+        raise InputError(f"domains differ: {ref.path} is {ref.dimensions}D"
+                         + (f" ({ref.depth:g} m deep)" if ref.depth is not None else "")
+                         + f", {pred.path} is {pred.dimensions}D"
+                         + (f" ({pred.depth:g} m deep)" if pred.depth is not None else ""))
+    if ref.boundary.is_open:
+        _check_same_start(ref, pred, ref_frames.start, pred_frames.start)
+    elif ref.n_particles != pred.n_particles or not np.array_equal(np.sort(ref.ids),
+                                                                    np.sort(pred.ids)):
+        raise InputError(f"{ref.path} ({ref.n_particles} particles) and {pred.path} "
+                         f"({pred.n_particles}) do not hold the same particle ids; mixing "
+                         "needs the same particles on both sides")
+    return ref_frames, pred_frames, columns
+
+
+def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:
+    """Open risers: the particles present at the window's first frame must be the same on
+    both sides (the prediction started from the reference's state); newcomers may differ."""
+    a = np.sort(ref.ids[ref.present(i_ref)])
+    b = np.sort(pred.ids[pred.present(i_pred)])
+    if not np.array_equal(a, b):
+        raise InputError(f"{ref.path} ({a.size} particles present at the window start) and "
+                         f"{pred.path} ({b.size}) do not start from the same particles; mixing "
+                         "needs the same tracers on both sides")
+
+
+__all__ = ["check_parameters", "check_runs", "check_window", "model_columns"]

@@ -1,0 +1,255 @@
+"""The verbs that analyse trajectory files and models: ``compare``, ``stationarity`` and
+``maps``."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+from cfbmarkov.cli.options import (count, level, minkowski_order, parse_times, parse_window,
+                                   positive_float)
+
+
+def cmd_compare(args) -> int:
+    """``cfbmarkov compare``: compare, then print the summary's figures and its file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.observed.metrics import percentage_text as pd_text
+    from cfbmarkov.report.compare import compare
+
+    summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
+                      bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
+                      basis=args.basis, level=args.level, resamples=args.resamples,
+                      long_run_span=args.long_run_span)
+    for line in summary.get("warnings", []):
+        print(f"warning: {line.strip()}", file=sys.stderr)
+    print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
+          f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
+          f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
+          f"mixing RMS {summary['mixing_rms']:.4g}")
+    model = summary["model"]
+    if "rt_mean_interval" in model:
+        (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
+        with_flow = (summary.get("intervals") or {}).get("flow_sd") is not None
+        own = ""
+        if with_flow and "model_rt_mean_interval" in model:
+            (o0, o1), (p0, p1) = model["model_rt_mean_interval"], model["model_rt_sd_interval"]
+            own = f" (the model's own: E(RT) {o0:.4g}-{o1:.4g} s, SD(RT) {p0:.4g}-{p1:.4g} s)"
+        kind = " with the flow's variability" if with_flow else ""
+        print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) {m0:.4g}-{m1:.4g} s, "
+              f"SD(RT) {s0:.4g}-{s1:.4g} s{own}")
+    exact = summary.get("exact_reference")
+    if exact:
+        print(f"  (residence times from frames at the model's lag on both sides; the reference's "
+              f"exact pass events give E(RT) {exact['rt_mean']:.4g} s, PD "
+              f"{pd_text(exact['pd_rt_mean'])} %, SD(RT) PD {pd_text(exact['pd_rt_sd'])} %)")
+    long_run = summary.get("long_run")
+    if long_run:
+        (a, b), _ = long_run["windows"]
+        print(f"  the reference's long run (its windows of {a:g}-{b:g} s but this one, pooled): PD E(RT) "
+              f"{pd_text(long_run['pd_rt_mean'])} %, SD(RT) PD {pd_text(long_run['pd_rt_sd'])} "
+              f"%, MD {long_run['md_rtd']:.4g} (what a perfect stationary model would predict)")
+    print(Path(args.output) / "summary.json")
+    return 0
+
+
+#: windows with fewer residences than this get a note in ``cfbmarkov stationarity``
+FEW_RESIDENCES = 100
+
+
+def cmd_stationarity(args) -> int:
+    """``cfbmarkov stationarity``: the sliding windows (and the judged window) as a table, or
+    as JSON with ``--json``.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    import json
+
+    import numpy as np
+
+    from cfbmarkov.analysis.stationarity import check_stationarity
+    from cfbmarkov.observed.metrics import percentage_text as pd_text
+
+    check = check_stationarity(args.file, window_length=args.window_length, step=args.step,
+                               span=args.span, lag=args.lag, basis=args.basis,
+                               judge=args.judge)
+    if args.json:
+        print(json.dumps(check.to_dict(), indent=1, allow_nan=False))
+        return 0
+
+    def value(v, spec=".4g"):
+        return format(v, spec) if v is not None and np.isfinite(v) else "n/d"
+
+    stats, bin_width = check.statistics, check.rtd_bin_width
+    length = stats.window_length
+    basis_text = ("exact pass events" if check.exact_events else f"frames every {bin_width:g} s")
+    print(f"{args.file}: {stats.starts.size} windows of {length:g} s, {stats.step:g} s apart, "
+          f"residence times from {basis_text}")
+    print(f"{'window (s)':>13}  {'direction':>9}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  "
+          f"{'residences':>10}")
+    for a, m, sd, n, d in zip(stats.starts, stats.rt_mean, stats.rt_sd, stats.rt_count,
+                              stats.direction):
+        span_text = f"{a:g}-{a + length:g}"
+        print(f"{span_text:>13}  {d:>9}  {value(m):>9}  {value(sd):>10}  {n:10d}")
+    print(f"E(RT) {value(stats.average_rt_mean)} s on average, relative SD "
+          f"{value(100 * stats.relative_sd_rt_mean, '.1f')} %; SD(RT) "
+          f"{value(stats.average_rt_sd)} s, relative SD "
+          f"{value(100 * stats.relative_sd_rt_sd, '.1f')} % (the scatter of one {length:g} s "
+          "window about the run's average: a stationary prediction of a given window carries "
+          "about as much)")
+    few = int(np.sum(stats.rt_count < FEW_RESIDENCES))
+    if few:
+        print(f"note: {few} of {stats.starts.size} windows hold fewer than {FEW_RESIDENCES} "
+              "residences: their E(RT) and SD(RT), and the scatter, carry sampling noise (a "
+              "longer --window-length)")
+    if check.judged is not None:
+        judged = check.judged
+        j0, j1 = judged.window
+        observed = judged.long_run.observed
+        lr = judged.long_run.summary()
+        pe = None if judged.persistence is None else judged.persistence.summary()
+        print(f"judged window {j0:g}-{j1:g} s: E(RT) {value(observed.mean)} s, SD(RT) "
+              f"{value(observed.sd)} s, {observed.count} residences")
+        s0, s1 = lr["windows"][0]
+        print(f"  the run's long run (its {j1 - j0:g} s windows of {s0:g}-{s1:g} s but this one, "
+              f"pooled; what a perfect stationary model would predict): PD E(RT) "
+              f"{pd_text(lr['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
+              f"{pd_text(lr['pd_rt_sd'], '+.1f')} %, MD {value(lr['md_rtd'], '.3f')}")
+        if pe is not None:
+            print(f"  persistence (the {j0 - (j1 - j0):g}-{j0:g} s window): PD E(RT) "
+                  f"{pd_text(pe['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
+                  f"{pd_text(pe['pd_rt_sd'], '+.1f')} %, MD {value(pe['md_rtd'], '.3f')}")
+        else:
+            print(f"  persistence: no whole {j1 - j0:g} s window before {j0:g} s in the span")
+    return 0
+
+
+def cmd_maps(args) -> int:
+    """``cfbmarkov maps``: draw the batch-injection maps; print the fractions and the file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.report.figures import plot_probability_maps
+
+    model = MarkovModel.load(args.model)
+    maps = model.batch_injection_maps(args.times, outflow=args.outflow)
+    space = model.state_space
+    title = (f"Batch fed over the inlet at t = 0 ({space.describe()}"
+             + (", summed over the depth" if space.depth_columns > 1 else "") + f", lag {model.lag:g} s"
+             + (", outflow through the top removed)" if args.outflow else ")"))
+    plot_probability_maps(maps, args.times, space.width, space.height, args.output, title=title)
+    for t, m in zip(args.times, maps):
+        print(f"t = {t:g} s: fraction in riser {m.sum():.4f}")
+    print(args.output)
+    return 0
+
+
+def add_compare(sub) -> None:
+    """Add the ``compare`` verb (a prediction against a reference) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("compare", help="compare two trajectory files: RTD, mixing of the two "
+                       "tracer groups, figures")
+    s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
+    s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
+    s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
+    s.add_argument("-o", "--output", required=True, help="output directory")
+    s.add_argument("--bin-width", type=positive_float, default=0.025, help="RTD bin width, s")
+    s.add_argument("--md-order", type=minkowski_order, default=2.0,
+                   help="Minkowski order k > 0 (inf: the largest difference)")
+    s.add_argument("--no-figures", action="store_true", help="write summary.json only")
+    s.add_argument("--level", type=level, default=0.9,
+                   help="coverage of the prediction's intervals (default 0.9)")
+    s.add_argument("--resamples", type=count(0, 100000), default=100,
+                   help="bootstrap resamples of the model's fitting window for the intervals "
+                        "(0: no intervals; default 100)")
+    s.add_argument("--basis", choices=["frames", "events"], default="frames",
+                   help="residence times of both sides from frames at the model's lag (like "
+                        "for like, the default; the reference's exact-event figures are shown "
+                        "beside), or the reference's exact pass events")
+    s.add_argument("--long-run-span", type=parse_window, default=None,
+                   help="START:STOP, s: also give the reference's RTD pooled over this span's "
+                        "other whole windows (what a perfect stationary model would predict; "
+                        "e.g. 5:20)")
+    s.set_defaults(func=cmd_compare)
+
+
+def add_stationarity(sub) -> None:
+    """Add the ``stationarity`` verb (a run's window-to-window scatter) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("stationarity",
+                       help="how much a run's RTD changes from window to window (sliding "
+                            "windows), and the run's long run against one window")
+    s.add_argument("file", help="trajectory file")
+    s.add_argument("--window-length", type=positive_float, default=5.0,
+                   help="window length, s (default 5)")
+    s.add_argument("--step", type=positive_float, default=1.0,
+                   help="time between window starts, s (default 1)")
+    s.add_argument("--span", type=parse_window, default=None,
+                   help="START:STOP, s, the part of the file used (default all; leave out a "
+                        "start-up from rest)")
+    s.add_argument("--lag", type=positive_float, default=None,
+                   help="frames every LAG s (a model's lag; default every frame); also the "
+                        "RTD bins of the MD")
+    s.add_argument("--basis", choices=["frames", "events"], default="frames",
+                   help="residence times from frames (every --lag, the default) or from the "
+                        "file's exact pass events (as in compare)")
+    s.add_argument("--judge", type=parse_window, default=None,
+                   help="START:STOP, s: also compare this window with the run's long run "
+                        "(the span's other whole windows of its length, pooled) and with the "
+                        "window before it (persistence)")
+    s.add_argument("--json", action="store_true", help="print JSON instead of a table")
+    s.set_defaults(func=cmd_stationarity)
+
+
+def add_maps(sub) -> None:
+    """Add the ``maps`` verb (batch-injection maps) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("maps", help="batch-injection probability maps (Eq. 8, Fig. 4-7)")
+    s.add_argument("model")
+    s.add_argument("--times", type=parse_times, default=[0.05, 0.1, 0.15],
+                   help="comma-separated times after injection, s (default 0.05,0.1,0.15)")
+    s.add_argument("--outflow", action="store_true",
+                   help="remove what passes up through the top (fraction still in the riser)")
+    s.add_argument("-o", "--output", required=True, help="PNG file")
+    s.set_defaults(func=cmd_maps)

@@ -1,0 +1,122 @@
+"""The verbs that bring data in and out: ``import`` (CSV, LAMMPS/LIGGGHTS dumps) and
+``export-vtk`` (ParaView files)."""
+
+from __future__ import annotations
+
+from cfbmarkov.boundary import BOUNDARIES
+from cfbmarkov.cli.options import count, finite_float, parse_region, positive_float
+
+
+def cmd_import(args) -> int:
+    """``cfbmarkov import``: print the trajectory file written.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.io import import_file
+
+    path = import_file(args.source, args.format, args.output, width=args.width,
+                       height=args.height, time_step=args.time_step,
+                       vertical_axis=args.vertical_axis, region=args.region,
+                       length_unit=args.length_unit, time_unit=args.time_unit,
+                       boundary=args.boundary, drop_depth=args.drop_depth,
+                       resample=args.resample, max_gap=args.max_gap)
+    print(path)
+    return 0
+
+
+def cmd_export_vtk(args) -> int:
+    """``cfbmarkov export-vtk``: print the frames written and the file to open.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.io.vtk import export_vtk_summary
+
+    done = export_vtk_summary(args.run, args.output, start=args.start, stop=args.stop,
+                              every=args.every, fields=not args.no_fields,
+                              progress=not args.quiet)
+    gas = f", {done.n_gas_files} gas field frames" if done.n_gas_files else ""
+    missing = f" ({done.n_gas_missing} frames without gas fields)" if done.n_gas_missing else ""
+    print(f"{done.n_particle_files} particle frames{gas}{missing}: open "
+          f"{done.output / 'particles.pvd'} in ParaView")
+    return 0
+
+
+def add_import(sub) -> None:
+    """Add the ``import`` verb (a trajectory file from CSV or a dump) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("import", help="import CSV or LAMMPS/LIGGGHTS dumps as a trajectory file")
+    s.add_argument("source", help="input file (.csv, dump, optionally .gz)")
+    s.add_argument("--format", required=True, choices=["csv", "lammps"])
+    s.add_argument("-o", "--output", required=True, help="output trajectory file (.h5)")
+    s.add_argument("--width", type=positive_float, default=None,
+                   help="riser width W, m: the riser is 0..W across in the source's own "
+                        "coordinates (default: the dump's box, else 0.09)")
+    s.add_argument("--height", type=positive_float, default=None,
+                   help="riser height H, m: 0..H vertically in the source's coordinates "
+                        "(default: the dump's box, else 0.95)")
+    s.add_argument("--time-step", type=positive_float, default=None,
+                   help="LAMMPS time step, s, for dumps without ITEM: TIME")
+    s.add_argument("--vertical-axis", choices=["x", "y", "z"], default=None,
+                   help="the source's vertical axis (gravity along minus it); required for a "
+                        "3D dump or a CSV file with a z column")
+    s.add_argument("--drop-depth", action="store_true",
+                   help="store 3D positions projected on (across, vertical)")
+    s.add_argument("--region", type=parse_region, default=None,
+                   help="the riser in the source's coordinates and units: "
+                        "XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX]; particles outside it are absent")
+    s.add_argument("--boundary", choices=list(BOUNDARIES), default=None,
+                   help="the vertical boundary (default: the dump's box flag on the vertical "
+                        "axis; periodic for CSV)")
+    s.add_argument("--resample", type=positive_float, default=None, metavar="DT",
+                   help="CSV: interpolate tracks at irregular times (PEPT) onto frames DT s apart")
+    s.add_argument("--max-gap", type=positive_float, default=None, metavar="G",
+                   help="with --resample: a particle is absent between samples more than G s "
+                        "apart (default DT)")
+    s.add_argument("--length-unit", choices=["m", "cm", "mm"], default=None,
+                   help="CSV: unit of positions (and, per --time-unit, velocities) in columns "
+                        "whose header names none (default m)")
+    s.add_argument("--time-unit", choices=["s", "ms"], default=None,
+                   help="CSV: unit of t where the header names none (default s)")
+    s.set_defaults(func=cmd_import)
+
+
+def add_export_vtk(sub) -> None:
+    """Add the ``export-vtk`` verb (ParaView files of a trajectory file) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("export-vtk", help="ParaView files: particle frames (with their tracer "
+                       "group, colour_group) and gas fields with .pvd time series")
+    s.add_argument("run", help="trajectory file")
+    s.add_argument("-o", "--output", required=True, help="output directory")
+    s.add_argument("--start", type=finite_float, default=None, help="first time, s")
+    s.add_argument("--stop", type=finite_float, default=None, help="last time, s")
+    s.add_argument("--every", type=count(1, 2 ** 31 - 1), default=1,
+                   help="export every k-th frame")
+    s.add_argument("--no-fields", action="store_true", help="particles only")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=cmd_export_vtk)

@@ -1,0 +1,235 @@
+"""The verbs of Markov models: ``fit``, ``predict``, ``rtd`` and ``info``."""
+
+from __future__ import annotations
+
+import sys
+
+from cfbmarkov.cli.options import (finite_float, parse_cells, parse_window, positive_float,
+                                   seed)
+from cfbmarkov.errors import CfbmarkovError, InputError
+
+
+def cmd_fit(args) -> int:
+    """``cfbmarkov fit``: fit, save and summarise a model; print its file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.markov import fit_model, state_space_from_name
+    from cfbmarkov.markov.first_passage import TrappedResidences
+    from cfbmarkov.markov.select import select_model
+    from cfbmarkov.trajectories import Trajectories
+
+    columns, rows = args.cells[0], args.cells[-1]
+    depth_columns = args.cells[1] if len(args.cells) == 3 else None
+    with Trajectories(args.run) as run:
+        if args.estimator is None:
+            args.estimator = "mle" if run.boundary.is_open else "paper"
+        if depth_columns is not None and run.dimensions != 3:
+            raise InputError(f"{args.run} is 2D: cells {'x'.join(map(str, args.cells))} with "
+                             "depth columns need 3D data (use COLUMNSxROWS)")
+        if args.states == "auto" and depth_columns is not None:
+            raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
+        if args.states == "auto":
+            model = select_model(run, window=args.window, columns=columns, rows=rows,
+                                 lag=args.lag, estimator=args.estimator,
+                                 coherent=args.coherent)
+            if args.connected:     # the chosen space, refitted on its largest connected set
+                model = fit_model(run, model.state_space, model.lag, args.window,
+                                  args.estimator, connected=True, coherent=args.coherent
+                                  ).with_selection(model.selection)
+        else:
+            space = state_space_from_name(args.states, columns, rows, run.width, run.height,
+                                          depth_columns, run.depth)
+            model = fit_model(run, space, args.lag, args.window, args.estimator,
+                              connected=args.connected, coherent=args.coherent)
+    try:
+        model.rtd()
+    except TrappedResidences as exc:
+        raise InputError(f"{args.run}: {exc}") from None
+    except CfbmarkovError:
+        pass                       # no circulation at all: a model without residence times
+    for line in model.warnings():
+        print(f"warning: {line.strip()}", file=sys.stderr)
+    model.save(args.output)
+    print(model.summary())
+    print(args.output)
+    return 0
+
+
+def cmd_predict(args) -> int:
+    """``cfbmarkov predict``: a Monte Carlo prediction; print its file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    model = MarkovModel.load(args.model)
+    with Trajectories(args.init) as run:
+        model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
+                      output=args.output, progress=not args.quiet)
+    print(args.output)
+    return 0
+
+
+def cmd_rtd(args) -> int:
+    """``cfbmarkov rtd``: print a model's E(RT) and SD(RT).
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.markov import MarkovModel
+
+    model = MarkovModel.load(args.model)
+    rtd = model.rtd(window=args.window_length)
+    print(f"E(RT) = {rtd.mean:.6g} s, SD(RT) = {rtd.sd:.6g} s "
+          f"({'window ' + format(args.window_length, 'g') + ' s' if args.window_length else 'intrinsic'}, "
+          f"unresolved mass {rtd.unresolved:.2g})")
+    return 0
+
+
+def cmd_info(args) -> int:
+    """``cfbmarkov info``: describe a model or trajectory file.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    import h5py
+
+    from cfbmarkov._hdf5 import open_h5
+
+    with open_h5(args.file) as f:
+        fmt = f.attrs.get("format")
+    if isinstance(fmt, bytes):
+        fmt = fmt.decode()
+    if fmt == "cfbmarkov.model":
+        from cfbmarkov.markov import MarkovModel
+
+        print(MarkovModel.load(args.file).summary())
+    else:
+        from cfbmarkov.trajectories import Trajectories
+        from cfbmarkov.trajectory_info import describe
+
+        with Trajectories(args.file) as t:
+            print("\n".join(describe(t)))
+    del h5py
+    return 0
+
+
+def add_fit(sub) -> None:
+    """Add the ``fit`` verb (fit a model) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("fit", help="fit a Markov chain model on a window of a trajectory file")
+    s.add_argument("run", help="trajectory file")
+    s.add_argument("--cells", type=parse_cells, default=(6, 38),
+                   help="COLUMNSxROWS, or COLUMNSxDEPTHxROWS for 3D data (depth columns; "
+                        "COLUMNSxROWS projects 3D data on across x vertical) (default 6x38)")
+    s.add_argument("--lag", type=positive_float, default=0.025, help="lag, s (default 0.025)")
+    s.add_argument("--window", type=parse_window, default=(10.0, 15.0),
+                   help="fitting window START:STOP, s (default 10:15)")
+    s.add_argument("--estimator", choices=["paper", "mle"], default=None,
+                   help="paper (Eq. 2-4; the default for a periodic riser) or mle (pooled "
+                        "counts; the default, and the only choice, for an open riser)")
+    s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
+                                        "cells-velocity-fine", "cells-previous",
+                                        "cells-regime", "cells-direction-regime", "auto"],
+                   default="cells",
+                   help="state space: the paper's cells, cells x direction of motion, cells x "
+                        "vertical-velocity bins, and with sub-rows fitted to the moves per lag "
+                        "(fine), cells x previous-cell offset (second order), "
+                        "cells x 2 regimes of the solids flux (the regime model; with "
+                        "direction: x direction too), or auto: the one whose RTD is closest to "
+                        "the window's own (default cells)")
+    s.add_argument("--connected", action="store_true",
+                   help="fit on the largest strongly connected set of the counts (transitions "
+                        "out of it removed, as deeptime and PyEMMA do): states entered but "
+                        "never left then trap no particle")
+    s.add_argument("--coherent", action="store_true",
+                   help="the cluster model: also fit how often particles that share a state "
+                        "move together (coherence, calibrated so that the model's snapshots "
+                        "show the window's cluster index), so that predictions keep clusters; "
+                        "the RTD and maps are unchanged (periodic risers)")
+    s.add_argument("-o", "--output", required=True, help="model file (.h5)")
+    s.set_defaults(func=cmd_fit)
+
+
+def add_predict(sub) -> None:
+    """Add the ``predict`` verb (a Monte Carlo prediction) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("predict", help="Monte Carlo prediction from a run's state at a start time")
+    s.add_argument("model")
+    s.add_argument("--init", required=True, help="trajectory file giving the initial state")
+    s.add_argument("--start", type=finite_float, required=True, help="initial frame time, s")
+    s.add_argument("--duration", type=positive_float, required=True, help="simulated time, s")
+    s.add_argument("--seed", type=seed, default=0, help="0 .. 2^64 - 1 (default 0)")
+    s.add_argument("-o", "--output", required=True, help="prediction trajectory file (.h5)")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=cmd_predict)
+
+
+def add_rtd(sub) -> None:
+    """Add the ``rtd`` verb (a model's RTD) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("rtd", help="exact residence-time distribution of a model")
+    s.add_argument("model")
+    s.add_argument("--window-length", type=positive_float, default=None,
+                   help="observation window, s: the RTD as seen in such a window")
+    s.set_defaults(func=cmd_rtd)
+
+
+def add_info(sub) -> None:
+    """Add the ``info`` verb (describe a file) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("info", help="describe a trajectory or model file")
+    s.add_argument("file")
+    s.set_defaults(func=cmd_info)

@@ -1,0 +1,207 @@
+"""The option types of ``cfbmarkov``: argparse ``type`` functions and the limits they check.
+
+Each parser returns the option's value or raises :class:`argparse.ArgumentTypeError`,
+whose message argparse prints as the one-line usage error (exit code 2)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+
+from cfbmarkov.limits import MAX_SEED
+
+def parse_window(text: str) -> tuple[float, float]:
+    """Parse a time window: ``'10:15'`` -> (10.0, 15.0).
+
+    Parameters
+    ----------
+    text : str
+        ``START:STOP`` in seconds.
+
+    Returns
+    -------
+    tuple of float
+        (start, stop), s.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        When ``text`` is not two finite numbers or the window is empty.
+    """
+    try:
+        a, b = text.split(":")
+        start, stop = float(a), float(b)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"window '{text}' is not START:STOP in seconds") from None
+    if not (math.isfinite(start) and math.isfinite(stop)):
+        raise argparse.ArgumentTypeError(f"window '{text}' is not two finite times")
+    if not stop > start:
+        raise argparse.ArgumentTypeError(f"window '{text}' is empty: STOP must exceed START")
+    return start, stop
+
+
+def parse_region(text: str) -> tuple[tuple[float, float], ...]:
+    """Parse a region: ``'-0.001:0.091,0:0.95'`` -> ((-0.001, 0.091), (0.0, 0.95)).
+
+    Parameters
+    ----------
+    text : str
+        Two or three ``LO:HI`` ranges (m), for x, y (, z), separated by commas.
+
+    Returns
+    -------
+    tuple of (float, float)
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        When a range is not two finite numbers with HI > LO, or there are not 2 or 3.
+    """
+    try:
+        ranges = tuple(tuple(float(v) for v in part.split(":")) for part in text.split(","))
+    except ValueError:
+        ranges = ()
+    if not 2 <= len(ranges) <= 3 or any(
+            len(r) != 2 or not all(map(math.isfinite, r)) or not r[1] > r[0] for r in ranges):
+        raise argparse.ArgumentTypeError(
+            f"region '{text}' is not XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX] in m (finite, MAX > MIN)")
+    return ranges
+
+
+def parse_cells(text: str) -> tuple[int, int] | tuple[int, int, int]:
+    """Parse a cell grid: ``'6x38'`` -> (6 columns, 38 rows); ``'6x3x38'`` -> (6 columns,
+    3 depth columns, 38 rows), a 3D grid for 3D data (``docs/definitions.md``, Cells and
+    state numbers).
+
+    Parameters
+    ----------
+    text : str
+        ``COLUMNSxROWS`` or ``COLUMNSxDEPTHxROWS``.
+
+    Returns
+    -------
+    tuple of int
+        (columns m, rows n), or (columns m, depth columns d, rows n).
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        When ``text`` is not two or three whole numbers of at least 1.
+    """
+    try:
+        values = tuple(int(v) for v in text.lower().split("x"))
+    except ValueError:
+        values = ()
+    if len(values) not in (2, 3):
+        raise argparse.ArgumentTypeError(
+            f"cells '{text}' is not COLUMNSxROWS or COLUMNSxDEPTHxROWS (for example 6x38 or "
+            "6x3x38)")
+    if min(values) < 1:
+        axes = "column and one row" if len(values) == 2 else "column, depth column and row"
+        raise argparse.ArgumentTypeError(f"cells '{text}' needs at least one {axes}")
+    return values
+
+
+def number(text: str) -> float:
+    """A number (NaN and infinities allowed), or an :class:`argparse.ArgumentTypeError`."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number") from None
+
+
+def finite_float(text: str) -> float:
+    """A finite number (a time, s)."""
+    value = number(text)
+    if not math.isfinite(value):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a finite number")
+    return value
+
+
+def positive_float(text: str) -> float:
+    """A finite number > 0."""
+    value = finite_float(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be positive")
+    return value
+
+
+def level(text: str) -> float:
+    """A coverage level strictly between 0 and 1 (NaN refused)."""
+    value = number(text)
+    if not 0.0 < value < 1.0:
+        raise argparse.ArgumentTypeError(f"'{text}' must lie between 0 and 1")
+    return value
+
+
+def minkowski_order(text: str) -> float:
+    """A Minkowski order k > 0; ``inf`` (the largest difference) is allowed, NaN is not."""
+    value = number(text)
+    if not value > 0:
+        raise argparse.ArgumentTypeError(f"'{text}' must be positive (or inf)")
+    return value
+
+
+def whole(text: str) -> int:
+    """A whole number, or an :class:`argparse.ArgumentTypeError`."""
+    try:
+        return int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"'{text}' is not a whole number") from None
+
+
+def seed(text: str) -> int:
+    """A seed of the counter-based generator: a whole number in 0 .. 2^64 - 1."""
+    value = whole(text)
+    if not 0 <= value <= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"'{text}' must lie in 0 .. 2^64 - 1")
+    return value
+
+
+def count(low: int, high: int):
+    """An argparse type: a whole number in low .. high."""
+    def parse(text: str) -> int:
+        value = whole(text)
+        if value < low:
+            raise argparse.ArgumentTypeError(f"'{text}' must be at least {low}")
+        if value > high:
+            raise argparse.ArgumentTypeError(f"'{text}' must be at most {high}")
+        return value
+    parse.__name__ = "count"
+    return parse
+
+
+#: the most particles a synthetic demo, a case or a benchmark may be given
+MAX_PARTICLES = 10_000_000
+#: the most worker processes
+MAX_JOBS = 1024
+
+
+def parse_times(text: str) -> list[float]:
+    try:
+        times = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"times '{text}' are not comma-separated seconds") from None
+    if not all(map(math.isfinite, times)):
+        raise argparse.ArgumentTypeError(f"times '{text}' must be finite numbers of seconds")
+    if not times or min(times) < 0:
+        raise argparse.ArgumentTypeError(f"times '{text}' must be one or more values >= 0 s")
+    return times
+
+
+def parse_velocities(text: str) -> list[float]:
+    try:
+        values = [float(v) for v in text.split(",") if v.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"velocities '{text}' are not comma-separated numbers "
+                                         "in m/s") from None
+    if not values or any(not (v > 0 and math.isfinite(v)) for v in values):
+        raise argparse.ArgumentTypeError(f"velocities '{text}' must be positive numbers in m/s")
+    return values
+
+
+def parse_names(text: str) -> list[str]:
+    names = [v.strip() for v in text.split(",") if v.strip()]
+    if not names:
+        raise argparse.ArgumentTypeError("no names given")
+    return names

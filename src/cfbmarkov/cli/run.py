@@ -1,0 +1,147 @@
+"""The verbs that run whole jobs: ``reproduce``, ``demo`` and ``bench``."""
+
+from __future__ import annotations
+
+from cfbmarkov.cli.options import (MAX_JOBS, MAX_PARTICLES, count, parse_names,
+                                   parse_velocities, seed)
+
+
+def cmd_reproduce(args) -> int:
+    """``cfbmarkov reproduce``: the paper end to end; print the report's path.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.reproduce import load_overrides, reproduce
+
+    overrides = load_overrides(args.overrides) if args.overrides else None
+    report = reproduce(args.output, args.scale, args.velocities, overrides=overrides,
+                       models=args.models, scheduler=args.scheduler, jobs=args.jobs,
+                       progress=not args.quiet, log=lambda line: print(line, flush=True))
+    print(report)
+    return 0
+
+
+def cmd_demo(args) -> int:
+    """``cfbmarkov demo``: the quick reproduction (or the synthetic demo); print its output.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    if args.synthetic:
+        from cfbmarkov.demo import run_demo
+
+        out = run_demo(args.output, particles=args.particles, seed=args.seed)
+        print(out)
+        return 0
+    from cfbmarkov.reproduce import reproduce
+
+    report = reproduce(args.output, "quick", jobs=args.jobs, progress=not args.quiet,
+                       log=lambda line: print(line, flush=True))
+    print(f"report: {report}")
+    return 0
+
+
+def cmd_bench(args) -> int:
+    """``cfbmarkov bench``: one line per benchmark figure.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    from cfbmarkov.bench import run_benchmarks
+
+    for name, value, unit in run_benchmarks(only=args.only, repeat=args.repeat,
+                                            particles=args.particles):
+        print(f"{name}: {value:.4g} {unit}", flush=True)
+    return 0
+
+
+def add_reproduce(sub) -> None:
+    """Add the ``reproduce`` verb (the paper end to end) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("reproduce", help="the paper end to end at U = 3, 4, 6, 8 m/s: CFD-DEM, "
+                       "Markov models, predictions, comparison, report")
+    s.add_argument("--scale", choices=["paper", "quick"], default="quick",
+                   help="paper: the paper's riser and 0-20 s (hours); quick: a reduced riser "
+                        "(minutes); default quick")
+    s.add_argument("-o", "--output", required=True, help="output directory (rerun to resume)")
+    s.add_argument("--velocities", type=parse_velocities, default=[3.0, 4.0, 6.0, 8.0],
+                   help="comma-separated superficial gas velocities U, m/s (default 3,4,6,8)")
+    s.add_argument("--models", type=parse_names, default=["paper", "mle", "auto"],
+                   help="comma-separated models: paper, mle (the paper's cells with that "
+                        "estimator), auto (state space and lag chosen on the fitting window), "
+                        "or STATES[:ESTIMATOR] (default paper,mle,auto)")
+    s.add_argument("--overrides", default=None,
+                   help="TOML file of changes applied to every case (same tables as a case file)")
+    s.add_argument("--jobs", type=count(1, MAX_JOBS), default=None,
+                   help="local worker processes (default: min(cases, cores))")
+    s.add_argument("--scheduler", default=None,
+                   help="address of a Dask distributed scheduler (tcp://host:8786) to run the "
+                        "cases on; the workers must see the output directory")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    s.set_defaults(func=cmd_reproduce)
+
+
+def add_demo(sub) -> None:
+    """Add the ``demo`` verb (the demo) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
+                       "(about 4 min on 2 quiet cores), ending with the path of its report")
+    s.add_argument("-o", "--output", default="cfbmarkov-demo", help="output directory")
+    s.add_argument("--jobs", type=count(1, MAX_JOBS), default=None,
+                   help="local worker processes")
+    s.add_argument("--synthetic", action="store_true",
+                   help="instead, the Markov part alone on synthetic core-annulus trajectories "
+                        "(30 s)")
+    s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=6000,
+                   help="with --synthetic: particles")
+    s.add_argument("--seed", type=seed, default=1, help="with --synthetic: seed")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
+    s.set_defaults(func=cmd_demo)
+
+
+def add_bench(sub) -> None:
+    """Add the ``bench`` verb (benchmarks) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
+    s.add_argument("--only", action="append", default=None, help="run only this benchmark")
+    s.add_argument("--repeat", type=count(1, 1000), default=5,
+                   help="repetitions (median reported)")
+    s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=27000)
+    s.set_defaults(func=cmd_bench)
