@@ -9,8 +9,8 @@ from it and, by one serial transposition, each particle's pairs as second member
 :class:`.layout.PairList`), and moves each contact's tangential spring to the new pair list
 (negated when the members swap order under the new numbering). The sort is stable and
 every parallel loop writes only its own rows, so the lists do not depend on the thread
-count. (Until session 13 the full list was built, each pair tested from both sides, and
-the second-member lists found by searching the first member's row: the same lists, twice
+count. (Building the full list instead, each pair tested from both sides, and finding the
+second-member lists by searching the first member's row, gives the same lists with twice
 the distance tests.)
 """
 
@@ -146,7 +146,7 @@ def drift_velocity(vy_min, vy_max, prm):
     list needs (the usual rule is the special case of no drift). Moving the frame with the
     particles' middle velocity halves their largest displacement in a riser, where the core
     rises at up to 6 m/s while the wall layers fall: at 6 m/s the list is built every 9-11
-    steps instead of every 7 (docs/performance.md, session 16). Any drift is valid; this
+    steps instead of every 7. Any drift is valid; this
     one only makes the builds rarer. x is not moved, so the side walls' candidates
     (:func:`.integrate.wall_candidates`) keep their rule; with a floor nothing is moved.
     """
