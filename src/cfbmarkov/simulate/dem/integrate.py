@@ -250,7 +250,7 @@ def fused_step(st, so, aux, wh, laps, pstart, lowstart, lowpid, pf, evf, bad, pr
     laps : int64 (N,)
         Passes through the top (+1) / bottom (-1); updated.
     pstart, lowstart, lowpid : int64 arrays
-        Pair-list index arrays (see :class:`.layout.PairList`).
+        Pair-list index arrays (see :class:`~cfbmarkov.simulate.dem.layout.PairList`).
     pf : float64 (npairs, 3)
         Pair forces from :func:`.contact.pair_forces`.
     evf : int8 (N,)
@@ -384,7 +384,7 @@ def sum_touched_pairs(st, aux, pstart, lowstart, lowpid, pf, fsum, touched_ids, 
     st, aux : float64 (N, 8), (N, 4)
         Particle records and reference positions with external forces.
     pstart, lowstart, lowpid : int64 arrays
-        Pair-list index arrays (see :class:`.layout.PairList`).
+        Pair-list index arrays (see :class:`~cfbmarkov.simulate.dem.layout.PairList`).
     pf : float64 (>= npairs, 3)
         Pair forces from :func:`.contact.pair_forces`.
     fsum : float64 (N, 3)

@@ -6,7 +6,7 @@ computes cell keys, does a serial stable counting sort, gathers the particles in
 (cell) order, builds the half Verlet list (each particle's neighbours after it in cell
 order; neighbour rows are contiguous ranges of the sorted particles), derives the pair list
 from it and, by one serial transposition, each particle's pairs as second member (see
-:class:`.layout.PairList`), and moves each contact's tangential spring to the new pair list
+:class:`~cfbmarkov.simulate.dem.layout.PairList`), and moves each contact's tangential spring to the new pair list
 (negated when the members swap order under the new numbering). The sort is stable and
 every parallel loop writes only its own rows, so the lists do not depend on the thread
 count. (Building the full list instead, each pair tested from both sides, and finding the
@@ -136,7 +136,7 @@ def _gather_st(st, so, perm):
 
 @njit(cache=True)
 def drift_velocity(vy_min, vy_max, prm):
-    """The list's drift velocity in y, in units of :data:`.layout.DRIFT_UNIT` (an integer,
+    """The list's drift velocity in y, in units of :data:`~cfbmarkov.simulate.dem.layout.DRIFT_UNIT` (an integer,
     saved in ``ctl[C_DRIFT]``): the middle of the particles' vertical velocities at the
     build, where the domain is periodic in y; 0 with a floor.
 
@@ -440,7 +440,7 @@ def rebuild(st, aux, wh, ids, laps, LA, LB, ctl, key, cstart, cfill, perm, invpe
     Parameters
     ----------
     st, aux, wh, ids, laps : arrays
-        The double-buffered particle arrays (see :mod:`.layout`).
+        The double-buffered particle arrays (see :mod:`~cfbmarkov.simulate.dem.layout`).
     LA, LB : PairList
         The two list buffers; the one not current (``ctl[C_LIST]``) receives the new list.
     ctl : int64 (N_C,)
