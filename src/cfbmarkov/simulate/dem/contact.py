@@ -189,7 +189,7 @@ def pair_forces(st, npairs, pi, pj, springs, pf, prm, contact_ids, block_contact
     Parameters
     ----------
     st : float64 (N, 8)
-        Particle records (see :mod:`.layout`).
+        Particle records (see :mod:`~cfbmarkov.simulate.dem.layout`).
     npairs : int
         Number of pairs in the list.
     pi, pj : int32 (>= npairs,)

@@ -440,7 +440,7 @@ def rebuild(st, aux, wh, ids, laps, LA, LB, ctl, key, cstart, cfill, perm, invpe
     Parameters
     ----------
     st, aux, wh, ids, laps : arrays
-        The double-buffered particle arrays (see :mod:`.layout`).
+        The double-buffered particle arrays (see :mod:`~cfbmarkov.simulate.dem.layout`).
     LA, LB : PairList
         The two list buffers; the one not current (``ctl[C_LIST]``) receives the new list.
     ctl : int64 (N_C,)

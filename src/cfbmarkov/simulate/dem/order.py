@@ -1,6 +1,6 @@
 """Between the caller's particle order and the engine's cell order (numba): the external
 force scattered into cell order, the inverse permutation, and positions or velocities
-gathered back into the caller's order (see :mod:`.layout`).
+gathered back into the caller's order (see :mod:`~cfbmarkov.simulate.dem.layout`).
 """
 
 from __future__ import annotations

@@ -65,7 +65,7 @@ def advance(st, aux, wh, ids, laps, LA, LB, pf, fsum, ctl, evf, bad, key, cstart
     Parameters
     ----------
     st, aux, wh, ids, laps : arrays
-        The double-buffered particle arrays (see :mod:`.layout`).
+        The double-buffered particle arrays (see :mod:`~cfbmarkov.simulate.dem.layout`).
     LA, LB : PairList
         The two list buffers.
     pf : float64 (>= npairs, 3)

@@ -1,7 +1,7 @@
 """DEMSystem: the orchestration object of the 2D DEM engine. Kernels: :mod:`.contact` (law,
 pair forces), :mod:`.neighbours` (cell sort, lists), :mod:`.integrate` (one step),
 :mod:`.stepping` (the advance loop), :mod:`.order` (caller's order and cell order); their
-arrays: :mod:`.layout`.
+arrays: :mod:`~cfbmarkov.simulate.dem.layout`.
 
 Geometry: discs in the plane, x across between contact walls at x = 0 and x = W, y up and
 periodic with period H (positions kept in [0, H), minimal image for contacts). With
