@@ -31,6 +31,7 @@ extensions = [
     "sphinx.ext.mathjax",
     "numpydoc",
     "myst_parser",
+    "sphinxarg.ext",  # the command-line reference (docs/cli.rst), from the argparse parser
 ]
 
 source_suffix = {".rst": "restructuredtext", ".md": "markdown"}
@@ -39,8 +40,10 @@ root_doc = "index"
 # linked from docs/results/index.md, not pages of the guide
 exclude_patterns = ["_build", "Thumbs.db", ".DS_Store", "results/paper-*"]
 
-# markdown: anchors for headings (docs/definitions.md#residence-time), $...$ maths
-myst_heading_anchors = 3
+# markdown: anchors for headings down to level 4 (docs/definitions.md#residence-time,
+# docs/definitions.md#intervals); a link to a missing page, file or anchor is a warning,
+# so an error under -W. $...$ maths
+myst_heading_anchors = 4
 myst_enable_extensions = ["dollarmath"]
 
 # autodoc: members in source order, signatures without the type-hint clutter
