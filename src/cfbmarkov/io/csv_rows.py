@@ -82,6 +82,9 @@ def row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
 def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -> np.ndarray:
     """Rows of numbers from CSV lines (blank and '#' lines skipped); line_no numbers lines[0]."""
     text = [line.replace(",", ".") for line in lines] if layout.decimal_comma else lines
+    if layout.delimiter is not None:      # a spreadsheet's ghost rows (only delimiters) are blank
+        ghost = layout.delimiter + " \t\r\n"
+        text = [line if line.strip(ghost) else "\n" for line in text]
     n = len(layout.header)
     try:
         with warnings.catch_warnings():
