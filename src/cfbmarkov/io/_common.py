@@ -147,6 +147,11 @@ def not_text_message(label: str) -> str:
                 fh = gzip.open(label, "rb")
             else:
                 fh.seek(0)
+            head = fh.read(8192)
+            fh.seek(0)
+            if b"\x00" in head:      # binary data (HDF5, NetCDF, ...), not text in any encoding
+                return (f"{label}: not a text file (it holds binary data, bytes that are not "
+                        "UTF-8 or UTF-16 text)")
             for number, raw in enumerate(fh, start=1):
                 try:
                     raw.decode("utf-8")

@@ -18,7 +18,13 @@ Header
     ========  =====================================================  ==============
 
     Other columns are ignored and listed in the provenance (``ignored_columns``). A file
-    without an id column is one tracer, stored as particle 0.
+    without an id column is one tracer, stored as particle 0. Where several columns may
+    hold the id, the most specific is used: ``TRACK_ID`` (TrackMate; its ``ID`` numbers
+    detections), then ``particle`` (trackpy), ``label`` (pept), then the plain id names;
+    rows of ``label`` -1 (noise) or with an empty ``TRACK_ID`` are dropped and counted
+    (``import_notes``). A title line above the header (one that names no time column)
+    and up to three rows without numbers below it (TrackMate's names, short names and
+    units, ``(mm)``, ``(sec)``) are skipped.
 
 Delimiter and decimal mark
     Comma, semicolon, tab or whitespace, told from the header line and checked against the
@@ -51,8 +57,9 @@ Rows
     enter or leave the view, and irregular frame times (PEPT), are refused with one line
     until the trajectory store has a presence mask and resampling exists.
 
-A gzip-compressed file is recognised by its magic bytes; blank lines and other lines
-starting with '#' are skipped; a UTF-8 byte-order mark and Windows line ends are accepted.
+A gzip-compressed file is recognised by its magic bytes; blank lines, rows of only
+delimiters and other lines starting with '#' are skipped; UTF-8 with or without a
+byte-order mark, UTF-16 with one, and Windows line ends are accepted.
 """
 
 from __future__ import annotations
