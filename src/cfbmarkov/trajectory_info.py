@@ -44,6 +44,7 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
                  + (f"; riser region {p['region']} m" if "region" in p else ""))
     if "laps_from" in p:
         lines.append(f"  laps from: {p['laps_from']}")
+    lines.extend(f"  import: {note}" for note in p.get("import_notes", []))
     counts = []
     up = down = entries = exits = 0
     previous = previous_present = None

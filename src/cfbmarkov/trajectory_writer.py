@@ -466,6 +466,20 @@ class TrajectoryWriter:
             g.attrs[key] = value
 
     @write_method
+    def update_parameters(self, values: dict[str, Any]) -> None:
+        """Add ``values`` to the producer's parameters (what is known only once every row
+        has been read: rows dropped, say).
+
+        Parameters
+        ----------
+        values : dict
+            Keys and JSON-serialisable values, replacing those of the same name.
+        """
+        parameters = json.loads(self._file.attrs["parameters"])
+        parameters.update(values)
+        self._file.attrs["parameters"] = json.dumps(parameters, default=json_default)
+
+    @write_method
     def close(self) -> Path:
         """Finish the file and move it to its final name (nothing if already closed).
 

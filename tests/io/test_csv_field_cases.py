@@ -214,7 +214,7 @@ def test_pept_style_file_at_even_times_reads_right(tmp_path):
     np.testing.assert_allclose(times, t / 1000, rtol=1e-6)
     np.testing.assert_allclose(pos[:, 0, 0], x / 1000, rtol=1e-6)
     np.testing.assert_allclose(pos[:, 0, 1], y / 1000, rtol=1e-6)
-    assert params["id_column"] is False and params["delimiter"] == "whitespace"
+    assert params["id_column"] is None and params["delimiter"] == "whitespace"
     assert params["ignored_columns"] == ["z (depth axis)", "error"]
     assert params["units"] == {"t": "ms", "x": "mm", "y": "mm"}
 

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 from cfbmarkov.cli import analysis, data, markov, run, simulate
-from cfbmarkov.cli.options import parse_cells, parse_window
+from cfbmarkov.cli.options import join_dash_values, parse_cells, parse_window
 from cfbmarkov.errors import CfbmarkovError, InputError
 
 
@@ -73,7 +73,8 @@ def main(argv: list[str] | None = None) -> int:
     try:
         parser = build_parser()
         try:
-            args = parser.parse_args(argv)
+            argv = list(sys.argv[1:] if argv is None else argv)
+            args = parser.parse_args(join_dash_values(parser, argv))
         except SystemExit as exc:      # usage errors (2), --help and --version (0)
             return int(exc.code or 0)
     except KeyboardInterrupt:

@@ -8,7 +8,8 @@ from cfbmarkov.cli.options import count, finite_float, parse_region, positive_fl
 
 
 def cmd_import(args) -> int:
-    """``cfbmarkov import``: print the trajectory file written.
+    """``cfbmarkov import``: print the trajectory file written, then what the import did
+    beyond reading rows (id column chosen, rows dropped or merged, title rows skipped).
 
     Parameters
     ----------
@@ -29,6 +30,11 @@ def cmd_import(args) -> int:
                        boundary=args.boundary, drop_depth=args.drop_depth,
                        resample=args.resample, max_gap=args.max_gap)
     print(path)
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(path) as written:     # what the import did beyond reading rows
+        for note in written.parameters.get("import_notes", []):
+            print(f"  {note}")
     return 0
 
 

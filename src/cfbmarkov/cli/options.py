@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import argparse
 import math
+import re
 
 from cfbmarkov.limits import MAX_SEED
 
@@ -205,3 +206,61 @@ def parse_names(text: str) -> list[str]:
     if not names:
         raise argparse.ArgumentTypeError("no names given")
     return names
+
+
+#: an option value that argparse would take for an option: a minus and then a digit or a
+#: point (``-0.045:0.045,0:0.95``, ``-1e-3``), which argparse reads as a value only when it
+#: is a plain negative number
+_DASH_VALUE = re.compile(r"^-\.?\d")
+
+
+def join_dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
+    """``argv`` with each option that takes one value and is followed by a value starting
+    with ``-`` and a digit joined to it (``--region -0.045:0.045,0:0.95`` ->
+    ``--region=-0.045:0.045,0:0.95``), so that argparse reads the value as written.
+
+    Parameters
+    ----------
+    parser : argparse.ArgumentParser
+        The parser, with its verbs as subparsers.
+    argv : list of str
+        The arguments after the program name.
+
+    Returns
+    -------
+    list of str
+        The arguments, unchanged but for the joins.
+    """
+    actions = _single_value_options(parser)
+    out: list[str] = []
+    k = 0
+    while k < len(argv):
+        word = argv[k]
+        if word == "--":
+            out.extend(argv[k:])
+            break
+        if word in actions and k + 1 < len(argv) and _DASH_VALUE.match(argv[k + 1]):
+            out.append(f"{word}={argv[k + 1]}")
+            k += 2
+            continue
+        if word in _verbs(parser):
+            actions = actions | _single_value_options(_verbs(parser)[word])
+        out.append(word)
+        k += 1
+    return out
+
+
+def _verbs(parser: argparse.ArgumentParser) -> dict:
+    """The parser's verbs (name -> subparser)."""
+    for action in parser._actions:  # noqa: SLF001 -- argparse keeps subparsers there only
+        if isinstance(action, argparse._SubParsersAction):  # noqa: SLF001
+            return action.choices
+    return {}
+
+
+def _single_value_options(parser: argparse.ArgumentParser) -> frozenset[str]:
+    """The option strings of ``parser`` that take exactly one value."""
+    return frozenset(name for action in parser._actions  # noqa: SLF001
+                     if action.option_strings and action.nargs in (None, "?")
+                     and not isinstance(action, argparse._SubParsersAction)  # noqa: SLF001
+                     for name in action.option_strings)

@@ -85,7 +85,8 @@ def open_text(path: Path) -> TextIO:
     Parameters
     ----------
     path : pathlib.Path
-        The file (UTF-8 text, plain or gzip-compressed).
+        The file: UTF-8 text with or without a byte-order mark, or UTF-16 with one (Excel's
+        "Unicode Text"); plain or gzip-compressed.
 
     Returns
     -------
@@ -99,12 +100,72 @@ def open_text(path: Path) -> TextIO:
     """
     try:
         with open(path, "rb") as fh:
-            magic = fh.read(2)
-        if magic == GZIP_MAGIC:
-            return gzip.open(path, "rt", encoding="utf-8")
-        return open(path, encoding="utf-8")
+            magic = fh.read(4)
+        if magic[:2] == GZIP_MAGIC:
+            return gzip.open(path, "rt", encoding="utf-8-sig")
+        return open(path, encoding=text_encoding(magic), newline=None)
     except OSError as exc:
         raise InputError(f"{path}: cannot open ({exc.strerror or exc})") from None
+
+
+def text_encoding(start: bytes) -> str:
+    """The encoding of a text file from its first bytes: UTF-16 where a UTF-16 byte-order
+    mark starts it, else UTF-8 (a UTF-8 byte-order mark skipped).
+
+    Parameters
+    ----------
+    start : bytes
+        The file's first (up to 4) bytes.
+
+    Returns
+    -------
+    str
+        A Python codec name: ``'utf-16'`` or ``'utf-8-sig'``.
+    """
+    if start[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return "utf-16"
+    return "utf-8-sig"
+
+
+def not_text_message(label: str) -> str:
+    """The message for a file that is not UTF-8 text: the first line holding a byte that
+    is not UTF-8, the byte, what it reads as in Windows cp1252, and the fix.
+
+    Parameters
+    ----------
+    label : str
+        The file's name (a path where the file can be read again to find the line).
+
+    Returns
+    -------
+    str
+        One line.
+    """
+    try:
+        with open(label, "rb") as fh:
+            if fh.read(2) == GZIP_MAGIC:
+                fh = gzip.open(label, "rb")
+            else:
+                fh.seek(0)
+            head = fh.read(8192)
+            fh.seek(0)
+            if b"\x00" in head:      # binary data (HDF5, NetCDF, ...), not text in any encoding
+                return (f"{label}: not a text file (it holds binary data, bytes that are not "
+                        "UTF-8 or UTF-16 text)")
+            for number, raw in enumerate(fh, start=1):
+                try:
+                    raw.decode("utf-8")
+                except UnicodeDecodeError as exc:
+                    byte = raw[exc.start]
+                    shown = bytes([byte]).decode("cp1252", errors="replace")
+                    return (f"{label}: line {number}: byte 0x{byte:02x} is not UTF-8 text (in "
+                            f"Windows cp1252 it is {shown!r}): the file is not UTF-8 or "
+                            "UTF-16; save it as UTF-8 (Excel: 'CSV UTF-8') or as 'Unicode "
+                            "Text'")
+    except (OSError, EOFError, gzip.BadGzipFile, zlib.error):
+        pass
+    return (f"{label}: not a text file (it holds bytes that are not UTF-8 or UTF-16 text); "
+            "save it as UTF-8")
 
 
 @contextlib.contextmanager
@@ -134,8 +195,7 @@ def reading(label: str):
     except (gzip.BadGzipFile, zlib.error) as exc:
         raise InputError(f"{label}: damaged gzip data ({exc})") from None
     except UnicodeDecodeError:
-        raise InputError(f"{label}: not a text file (it holds bytes that are not UTF-8 text)"
-                         ) from None
+        raise InputError(not_text_message(label)) from None
 
 
 @contextlib.contextmanager

@@ -18,7 +18,13 @@ Header
     ========  =====================================================  ==============
 
     Other columns are ignored and listed in the provenance (``ignored_columns``). A file
-    without an id column is one tracer, stored as particle 0.
+    without an id column is one tracer, stored as particle 0. Where several columns may
+    hold the id, the most specific is used: ``TRACK_ID`` (TrackMate; its ``ID`` numbers
+    detections), then ``particle`` (trackpy), ``label`` (pept), then the plain id names;
+    rows of ``label`` -1 (noise) or with an empty ``TRACK_ID`` are dropped and counted
+    (``import_notes``). A title line above the header (one that names no time column)
+    and up to three rows without numbers below it (TrackMate's names, short names and
+    units, ``(mm)``, ``(sec)``) are skipped.
 
 Delimiter and decimal mark
     Comma, semicolon, tab or whitespace, told from the header line and checked against the
@@ -51,8 +57,9 @@ Rows
     enter or leave the view, and irregular frame times (PEPT), are refused with one line
     until the trajectory store has a presence mask and resampling exists.
 
-A gzip-compressed file is recognised by its magic bytes; blank lines and other lines
-starting with '#' are skipped; a UTF-8 byte-order mark and Windows line ends are accepted.
+A gzip-compressed file is recognised by its magic bytes; blank lines, rows of only
+delimiters and other lines starting with '#' are skipped; UTF-8 with or without a
+byte-order mark, UTF-16 with one, and Windows line ends are accepted.
 """
 
 from __future__ import annotations
@@ -86,7 +93,7 @@ from cfbmarkov.io.csv_layout import (
     read_layout,
 )
 from cfbmarkov.io.csv_rows import UnsortedRows, frame_rows, row_blocks
-from cfbmarkov.io.resample import resample_tracks
+from cfbmarkov.io.resample import merge_same_times, resample_tracks
 from cfbmarkov.io.riser import FrameColumns, RiserFrame
 from cfbmarkov.trajectory_writer import TrajectoryWriter
 
@@ -271,7 +278,10 @@ def _parameters(path: Path, layout: CsvLayout, riser: RiserFrame, row_order: str
         "depth_axis_dropped": layout.dropped,
         "position_columns": list(layout.axes),
         "velocity_columns": list(velocity) if velocity else [],
-        "id_column": layout.has_id, "row_order": row_order,
+        "id_column": layout.id_column if layout.has_id else None,
+        "id_columns_not_used": layout.id_others, "row_order": row_order,
+        "title_lines_skipped": layout.title_lines,
+        "description_rows_skipped": layout.description_rows,
         "width": riser.width, "height": riser.height,
     }
 
@@ -297,6 +307,44 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
         for rows, _last in progress(itertools.chain([first], frames), label):
             _append_frame(writer, columns, rows, layout, riser, label)
         _check_some_present(writer, riser, label)
+        writer.update_parameters(read_notes(layout))
+
+
+def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
+    """What the import did beyond reading rows, for the provenance and the import's summary
+    (``import_notes``, shown by ``cfbmarkov import`` and ``cfbmarkov info``).
+
+    Parameters
+    ----------
+    layout : CsvLayout
+        The file's layout, after every row was read (its ``noise_rows`` counted).
+    merged : int, optional
+        Rows merged with another row of the same particle at the same time (resampling).
+
+    Returns
+    -------
+    dict
+        ``noise_rows_dropped``, ``rows_merged`` and ``import_notes`` (a list of str).
+    """
+    notes = []
+    if layout.title_lines:
+        notes.append(f"title line above the header skipped: {layout.title_lines[0]!r}")
+    if layout.description_rows:
+        notes.append(f"{layout.description_rows} description rows below the header skipped "
+                     "(names, units)")
+    if layout.has_id and layout.id_others:
+        notes.append(f"particle ids from column {layout.id_column!r}; not from "
+                     + ", ".join(repr(n) for n in layout.id_others))
+    elif layout.has_id and layout.noise_id is not None:
+        notes.append(f"particle ids from column {layout.id_column!r}")
+    if layout.noise_rows:
+        notes.append(f"{layout.noise_rows} rows with {layout.id_column} {layout.noise_id} or "
+                     "empty (noise, or no track) dropped")
+    if merged:
+        notes.append(f"{merged} rows at the same time as another row of their particle merged "
+                     "(positions averaged) before resampling")
+    return {"noise_rows_dropped": layout.noise_rows, "rows_merged": merged,
+            "import_notes": notes}
 
 
 def _check_some_present(writer: TrajectoryWriter, riser: RiserFrame, label: str) -> None:
@@ -399,7 +447,10 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     if not keep.any():
         raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
                          "particle in any row; check --region and --length-unit")
-    tracks = resample_tracks(rows[keep, layout.index("t")], ids[keep], relative[keep],
+    times, ids, relative, merged = merge_same_times(
+        rows[keep, layout.index("t")], ids[keep], relative[keep],
+        height=riser.height if periodic else None, vertical=1)
+    tracks = resample_tracks(times, ids, relative,
                              interval=interval, max_gap=max_gap,
                              height=riser.height if periodic else None, vertical=1,
                              label=label)
@@ -413,3 +464,4 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
                        label=label, frame_interval=interval, **riser.writer_options()) as writer:
         writer.append_frames(tracks.times, positions, None, tracks.laps, tracks.present)
         _check_some_present(writer, riser, label)
+        writer.update_parameters(read_notes(layout, merged))

@@ -25,8 +25,17 @@ CHUNK_CHARS = 1 << 22
 SNIFF_ROWS = 5
 _EXPECTED = ("expected t, x, y and optionally id, z, vx, vy, vz (or spreadsheet names such as "
              "'Time (s)', 'Particle ID', 'Position X (m)'); other columns are ignored")
-_ALIASES = {"t": "t", "time": "t", "id": "id", "particle id": "id", "particleid": "id",
-            "pid": "id"}
+_ALIASES = {"t": "t", "time": "t", "position t": "t"}
+#: the columns that may hold the particle id, most specific first: a track's id
+#: (TrackMate's TRACK_ID; its ID numbers detections), trackpy's ``particle``, pept's ``label``
+#: (a trajectory's index, -1 for noise), then the plain id names
+ID_COLUMNS = {"track id": 0, "particle": 1, "label": 2, "id": 3, "particle id": 3,
+              "particleid": 3, "pid": 3}
+#: ids that mark rows belonging to no particle, by the id column's kind: pept's noise label
+#: -1; a TrackMate spot without a track has an empty TRACK_ID, read as -1
+NOISE_IDS = {"label": -1, "track id": -1}
+#: units written as words in some exports (TrackMate's '(sec)')
+_UNIT_WORDS = {"sec": "s", "second": "s", "seconds": "s", "msec": "ms"}
 for _axis in AXES:
     _ALIASES.update({_axis: _axis, f"position {_axis}": _axis, f"pos {_axis}": _axis,
                      f"v{_axis}": f"v{_axis}", f"velocity {_axis}": f"v{_axis}",
@@ -59,6 +68,16 @@ class CsvLayout:
     unit_from: dict[str, str] = field(default_factory=dict)
     pending: list[str] = field(default_factory=list)
     dropped: str | None = None
+    #: the id column as written, the other id-like columns not used, and the id marking
+    #: rows of no particle (dropped and counted in ``noise_rows``)
+    id_column: str | None = None
+    id_others: list[str] = field(default_factory=list)
+    noise_id: int | None = None
+    noise_rows: int = 0
+    #: lines above the header skipped as a title, and rows below it skipped as
+    #: descriptions (TrackMate's names, short names and units rows)
+    title_lines: list[str] = field(default_factory=list)
+    description_rows: int = 0
     #: the exact ids behind the codes that the id column of parsed rows holds
     id_codes: IdCodes = field(default_factory=IdCodes, repr=False)
 
@@ -121,18 +140,29 @@ def read_layout(fh: TextIO, label: str, *, length_unit: str | None = None,
         For no header, a missing or repeated column, an unknown or contradicting unit, a z
         column without ``vertical_axis``, or a vertical axis the file does not have.
     """
-    header_text, header_line, pending, first_data_line = _find_header(fh, label)
+    header_text, header_line, pending, first_data_line, titles = _find_header(fh, label)
+    described, pending = _description_rows(pending)
+    first_data_line += len(described)
     data = [line for line in pending if line.split("#", 1)[0].strip()]
     delimiter = _delimiter(header_text, data[0] if data else None)
     decimal_comma = delimiter != "," and any("," in line.split("#", 1)[0] for line in data)
     header = [name.strip().strip('"').strip("'").strip() for name in _split(header_text,
                                                                                delimiter)]
     shown = (delimiter or " ").join(header)
+    row_units = _units_row(described, delimiter, len(header))
     canonical: dict[str, int] = {}
     units: dict[str, str | None] = {}
     ignored = []
+    id_kind, id_others = _id_column(header, shown, label)
     for k, name in enumerate(header):
         key, unit = _canonical(name)
+        if unit is None:
+            unit = row_units[k]
+        if _id_key(name) is not None:
+            key = "id" if id_kind is not None and k == id_kind[1] else None
+            if key is None:
+                ignored.append((k, f"{name} (not the particle id)"))
+                continue
         if key is None:
             ignored.append((k, name or f"column {k + 1} (no name)"))
             continue
@@ -169,16 +199,72 @@ def read_layout(fh: TextIO, label: str, *, length_unit: str | None = None,
                      ignored=[name for _, name in sorted(ignored)], vertical=vertical,
                      across=across, depth=depth, header_line=header_line,
                      first_data_line=first_data_line, unit_from=unit_from, pending=pending,
-                     dropped=dropped)
+                     dropped=dropped, id_column=None if id_kind is None else header[id_kind[1]],
+                     id_others=id_others,
+                     noise_id=None if id_kind is None else NOISE_IDS.get(id_kind[0]),
+                     title_lines=titles, description_rows=len(described))
 
 
-def _find_header(fh: TextIO, label: str) -> tuple[str, int, list[str], int]:
-    """The header text, its line number, the data lines read ahead and the first one's number.
+def _id_key(name: str) -> str | None:
+    """The kind of id column ``name`` is (a key of :data:`ID_COLUMNS`), or None."""
+    match = _UNIT.match(name)
+    if match:
+        name = match.group(1)
+    key = " ".join(name.strip().strip('"').strip("'").replace("_", " ").lower().split())
+    return key if key in ID_COLUMNS else None
+
+
+def _id_column(header: list[str], shown: str, label: str):
+    """((kind, index) of the particle id column, or None; the other id-like columns' names):
+    the most specific of :data:`ID_COLUMNS` present."""
+    found = [(ID_COLUMNS[key], k, key) for k, name in enumerate(header)
+             if (key := _id_key(name)) is not None]
+    if not found:
+        return None, []
+    found.sort()
+    if len(found) > 1 and found[0][0] == found[1][0]:
+        raise InputError(f"{label}: columns {header[found[0][1]]!r} and {header[found[1][1]]!r} "
+                         f"of the header {shown!r} both name the particle id; keep one")
+    rank, k, key = found[0]
+    return (key, k), [header[j] for _, j, _ in found[1:]]
+
+
+def _description_rows(pending: list[str]) -> tuple[list[str], list[str]]:
+    """(rows right below the header that hold no number, the rest): TrackMate writes three,
+    the columns' names, short names and units, before its first data row (whose text
+    fields, such as its LABEL ``ID0``, make it no row of numbers, but it holds numbers)."""
+    described = []
+    while len(described) < 3 and pending and pending[0].strip() and \
+            not pending[0].lstrip().startswith("#") and not any(
+                _is_number(f.strip().strip('"')) for f in re.split(r"[;,\s]", pending[0])
+                if f.strip()):
+        described.append(pending.pop(0))
+    return described, pending
+
+
+def _units_row(described: list[str], delimiter: str | None, n: int) -> list[str | None]:
+    """Units per column from a description row that holds only units in parentheses
+    (TrackMate's ``,,,(quality),(mm),(mm),(mm),(sec)``), else None for each."""
+    for row in described:
+        fields = [f.strip().strip('"') for f in _split(row, delimiter)]
+        if len(fields) == n and any(fields) and all(
+                not f or (f.startswith("(") and f.endswith(")")) for f in fields):
+            units = [f[1:-1].strip() or None if f else None for f in fields]
+            return [_UNIT_WORDS.get(u, u) if u else None for u in units]
+    return [None] * n
+
+
+def _find_header(fh: TextIO, label: str) -> tuple[str, int, list[str], int, list[str]]:
+    """The header text, its line number, the data lines read ahead, the first one's number
+    and the title lines skipped above the header.
 
     The header is the first non-blank line not starting with '#'; where that line is a row of
-    numbers, the last '#' line before it that names columns (without the '#').
+    numbers, the last '#' line before it that names columns (without the '#'). A first line
+    that names no time column, followed by one that does, is a title (a spreadsheet's
+    ``Riser PTV run 12, air at 25 °C``) and is skipped.
     """
     line_no, comment, comment_no = 0, None, 0
+    titles: list[str] = []
     while line := fh.readline():
         line_no += 1
         text = line.lstrip("\ufeff").strip()
@@ -189,9 +275,17 @@ def _find_header(fh: TextIO, label: str) -> tuple[str, int, list[str], int]:
                 comment, comment_no = text.lstrip("#").strip(), line_no
             continue
         if not _is_data(text):
-            return text, line_no, _read_ahead(fh, []), line_no + 1
+            if not titles and not _names_time(text):
+                following = fh.readline()
+                if following.strip() and not _is_data(following) and _names_time(following):
+                    titles.append(text.strip("\t ,;"))
+                    line_no += 1
+                    return following.strip(), line_no, _read_ahead(fh, []), line_no + 1, titles
+                return text, line_no, _read_ahead(fh, [following] if following else []), \
+                    line_no + 1, titles
+            return text, line_no, _read_ahead(fh, []), line_no + 1, titles
         if comment is not None:
-            return comment, comment_no, _read_ahead(fh, [line]), line_no
+            return comment, comment_no, _read_ahead(fh, [line]), line_no, titles
         raise InputError(f"{label}: line {line_no} is not a header ({text!r}); {_EXPECTED}")
     raise InputError(f"{label}: empty file (no header line)")
 
@@ -210,6 +304,11 @@ def _is_data(text: str) -> bool:
     """Whether a line is a row of numbers (any delimiter, either decimal mark)."""
     fields = [f for f in re.split(r"[;,\s]+", text) if f]
     return bool(fields) and all(_is_number(f) for f in fields)
+
+
+def _names_time(text: str) -> bool:
+    """Whether a line names a time column under any delimiter."""
+    return any(_canonical(name)[0] == "t" for name in re.split(r"[;,\t]|\s{2,}| ", text.strip()))
 
 
 def _names_columns(text: str) -> bool:

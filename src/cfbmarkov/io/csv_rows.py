@@ -60,8 +60,13 @@ def row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
         values = _parse_rows(lines, line_no, layout, label)
         _check_keys(values, it, iid, lines, line_no, label)
         if iid is not None:
-            values[:, iid] = layout.id_codes.encode(_exact_block_ids(values[:, iid], lines,
-                                                                     line_no, layout, label))
+            ids = _exact_block_ids(values[:, iid], lines, line_no, layout, label)
+            if layout.noise_id is not None:
+                noise = ids == layout.noise_id
+                if noise.any():             # rows of no particle: dropped and counted
+                    layout.noise_rows += int(noise.sum())
+                    values, ids = values[~noise], ids[~noise]
+            values[:, iid] = layout.id_codes.encode(ids)
         _note_last_field(lines, layout, shortest)
         if streaming and values.shape[0]:
             t = values[:, it]
@@ -77,12 +82,16 @@ def row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
 def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -> np.ndarray:
     """Rows of numbers from CSV lines (blank and '#' lines skipped); line_no numbers lines[0]."""
     text = [line.replace(",", ".") for line in lines] if layout.decimal_comma else lines
+    if layout.delimiter is not None:      # a spreadsheet's ghost rows (only delimiters) are blank
+        ghost = layout.delimiter + " \t\r\n"
+        text = [line if line.strip(ghost) else "\n" for line in text]
     n = len(layout.header)
     try:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)  # a block of blank lines
             values = np.loadtxt(text, delimiter=layout.delimiter, dtype=np.float64, ndmin=2,
-                                usecols=None if len(layout.usecols) == n else layout.usecols)
+                                usecols=None if len(layout.usecols) == n else layout.usecols,
+                                converters=_noise_converter(layout))
     except ValueError as exc:
         raise InputError(_locate_bad_row(lines, line_no, layout, label, exc)) from None
     if values.size == 0:
@@ -95,6 +104,16 @@ def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -
         if divisor != 1.0:
             values[:, k] /= divisor
     return values
+
+
+def _noise_converter(layout: CsvLayout) -> dict | None:
+    """An empty id field read as the noise id, where the id column has one (a TrackMate
+    spot that belongs to no track has an empty TRACK_ID)."""
+    if layout.noise_id is None or layout.delimiter is None:
+        return None
+    noise = float(layout.noise_id)
+    return {layout.usecols[layout.index("id")]: lambda text: float(text) if text.strip()
+            else noise}
 
 
 def _locate_bad_row(lines: list[str], line_no: int, layout: CsvLayout, label: str,

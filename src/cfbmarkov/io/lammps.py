@@ -126,7 +126,7 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
                            with_velocity=velocity is not None, label=label,
                            **riser.writer_options()) as writer:
             columns = FrameColumns(writer)
-            flat_z = (float(first.atoms[0, layout.position[2]])
+            flat_z = (float(positions_m(first, layout)[0, 2])
                       if n_axes == 3 and len(riser.axes) == 2 and riser.dropped is None else None)
             for frame_label, frame in progress(itertools.chain([(first_label, first)], frames),
                                                label):
@@ -225,10 +225,7 @@ def _append_frame(writer, columns: FrameColumns, frame: DumpFrame, first: DumpFr
     time = frame_time(frame, time_step, label)
     atoms = frame.atoms
     ids = _frame_ids(frame, layout, where)
-    raw = atoms[:, list(layout.position)]
-    if layout.scaled:
-        lo = frame.box[:raw.shape[1], 0]
-        raw = lo + raw * (frame.box[:raw.shape[1], 1] - lo)
+    raw = positions_m(frame, layout)
     bad = ~np.isfinite(raw).all(axis=1)
     if bad.any():
         k = int(np.argmax(bad))
@@ -249,6 +246,30 @@ def _append_frame(writer, columns: FrameColumns, frame: DumpFrame, first: DumpFr
     full, vel, lap, present = columns.frame(ids, positions, inside, velocity, laps,
                                             f"{where}, t = {time:g} s")
     writer.append(time, full, vel, lap, present)
+
+
+def positions_m(frame: DumpFrame, layout: AtomColumns) -> np.ndarray:
+    """Positions of a frame's atoms in the dump's coordinates, m.
+
+    Parameters
+    ----------
+    frame : DumpFrame
+        The frame.
+    layout : AtomColumns
+        Its column layout.
+
+    Returns
+    -------
+    numpy.ndarray
+        [N, D] positions; scaled columns (``xs``, ``xsu``) are mapped through the box,
+        x = lo + s (hi - lo) (LAMMPS ``dump`` doc), so a 2D dump's ``zs = 0.5`` is z = 0
+        in the default -0.5..0.5 z box.
+    """
+    raw = frame.atoms[:, list(layout.position)]
+    if layout.scaled:
+        lo = frame.box[:raw.shape[1], 0]
+        raw = lo + raw * (frame.box[:raw.shape[1], 1] - lo)
+    return raw
 
 
 def _check_same_box(frame: DumpFrame, first: DumpFrame, where: str) -> None:

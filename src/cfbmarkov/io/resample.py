@@ -231,3 +231,53 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
                          f"{max_gap:g} s (the samples are further apart than that); give a larger "
                          f"--max-gap")
     return ResampledTracks(times=grid, ids=ids, positions=out, present=present, laps=laps)
+
+
+def merge_same_times(times, particles, positions, *, height: float | None = None,
+                     vertical: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    """Merge the rows of a particle that share a time stamp into one, at their mean position.
+
+    PEPT locations are printed at a fixed precision, so two locations of one tracer may carry
+    the same time; they are one sample of the track.
+
+    Parameters
+    ----------
+    times : array_like
+        [R] float, s.
+    particles : array_like
+        [R] int, the particle id of each row.
+    positions : array_like
+        [R, D] float, m.
+    height : float, optional
+        m, the period H of a periodic vertical axis: heights are averaged by the minimal
+        image about the group's first row, then wrapped into 0..H. None: plain means.
+    vertical : int, optional
+        The column of ``positions`` that holds the height.
+
+    Returns
+    -------
+    times, particles, positions : numpy.ndarray
+        The rows with each (particle, time) once, sorted by particle then time.
+    merged : int
+        The number of rows merged away (R minus the rows returned).
+    """
+    t = np.asarray(times, dtype=np.float64)
+    pid = np.asarray(particles).astype(np.int64)
+    pos = np.array(positions, dtype=np.float64)
+    order = np.lexsort((t, pid))
+    t, pid, pos = t[order], pid[order], pos[order]
+    start = np.ones(t.size, dtype=bool)
+    start[1:] = (pid[1:] != pid[:-1]) | (t[1:] != t[:-1])
+    if start.all():
+        return t, pid, pos, 0
+    group = np.cumsum(start) - 1
+    first = np.flatnonzero(start)
+    if height is not None:
+        offset = pos[:, vertical] - pos[first[group], vertical]
+        pos[:, vertical] = pos[first[group], vertical] + offset - height * np.round(offset / height)
+    sums = np.zeros((first.size, pos.shape[1]))
+    np.add.at(sums, group, pos)
+    mean = sums / np.bincount(group)[:, None]
+    if height is not None:
+        mean[:, vertical] = np.mod(mean[:, vertical], height)
+    return t[first], pid[first], mean, int(t.size - first.size)

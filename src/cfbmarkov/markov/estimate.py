@@ -196,6 +196,7 @@ class TransitionEstimator:
             raise InputError("coherent moves (--coherent) are fitted for periodic risers only "
                              "yet; fit an open riser without it")
         counts = count_transitions(windows, frame_average=self.name == "paper")
+        check_some_transitions(counts, self.lag)
         sources = [w.source for w in windows]
         model = self.fit_counts(counts, window=windows[0].window,     # counted for it alone
                                 source=sources[0] if len(sources) == 1 else sources, adopt=True)
@@ -558,3 +559,31 @@ def fit_model(source, state_space: StateSpace, lag: float,
     """
     fitter = estimator_from_name(estimator, state_space, lag, connected, coherent)
     return fitter.fit(discretize(source, state_space, lag, window))
+
+
+def check_some_transitions(counts: TransitionCounts, lag: float) -> None:
+    """Refuse counts from which no row of the transition matrix can be estimated.
+
+    Parameters
+    ----------
+    counts : TransitionCounts
+        The counts of the data to fit.
+    lag : float
+        The lag, s (for the message).
+
+    Raises
+    ------
+    InputError
+        When no transition was counted: no particle is present at both ends of any frame
+        pair (one-frame tracks, a lag longer than every track, or too few frames).
+    """
+    if counts.n_transitions > 0:
+        return
+    if counts.frame_pairs == 0:
+        why = f"the data hold no pair of frames {lag:g} s apart"
+    else:
+        why = (f"no particle is present at both ends of any of the {counts.frame_pairs} frame "
+               f"pairs {lag:g} s apart")
+    raise InputError(f"no transitions to fit: {why}; check the import (particle ids: each "
+                     "track one id, 'cfbmarkov info' shows particles per frame), or give a "
+                     "shorter --lag or a longer --window")
