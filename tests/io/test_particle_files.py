@@ -322,3 +322,43 @@ def test_paraview_csv_export_names(tmp_path):
     np.testing.assert_allclose(p, ep[..., [0, 2]], rtol=0, atol=1e-12)
     np.testing.assert_allclose(v, ev[..., [0, 2]], rtol=0, atol=0)
     np.testing.assert_array_equal(lp - lp[0], el - el[0])
+
+
+# --- damaged files ------------------------------------------------------------------------
+
+@pytest.mark.parametrize("mode", ["legacy-ascii", "legacy-binary", "ascii", "binary-zlib",
+                                  "appended", "appended-zlib", "h5md"])
+def test_damaged_particle_files_are_refused_in_one_line(tmp_path, mode):
+    """Every cut and a run of flipped bytes: imported or refused with an InputError, never
+    another exception, and no output left by a refusal."""
+    pos, vel, laps = _motion()
+    source = tmp_path / ("d.h5" if mode == "h5md" else "d.vtk" if "legacy" in mode else "d.vtp")
+    if mode == "h5md":
+        _write_h5md(source, pos, vel, np.zeros(pos.shape, int), True)
+        options = {"vertical_axis": "z"}
+    elif "legacy" in mode:
+        _write_legacy(source, pos[0], vel[0], IDS, mode.endswith("binary"))
+        _write_box(tmp_path / "d_boundingBox.vtk")
+        options = {"vertical_axis": "z", "time_step": 1e-5}
+        source = tmp_path / "d0.vtk"
+        (tmp_path / "d.vtk").rename(source)
+        (tmp_path / "d_boundingBox.vtk").rename(tmp_path / "d0_boundingBox.vtk")
+    else:
+        _write_vtp(source, pos[0], vel[0], IDS, mode, time=0.0)
+        options = {"vertical_axis": "z", "region": ((0, W), (0, DEPTH), (0, H))}
+    data = source.read_bytes()
+    rng = np.random.default_rng(3)
+    cuts = sorted(set(np.linspace(1, len(data) - 1, 25).astype(int)))
+    variants = [data[:c] for c in cuts]
+    for start in rng.integers(0, len(data) - 8, 25):
+        flipped = bytearray(data)
+        flipped[start:start + 8] = rng.integers(0, 256, 8, dtype=np.uint8).tobytes()
+        variants.append(bytes(flipped))
+    for k, variant in enumerate(variants):
+        source.write_bytes(variant)
+        out = tmp_path / f"o{k}.h5"
+        try:
+            import_file(source, None, out, **options)
+        except InputError as exc:
+            assert "\n" not in str(exc)
+            assert not out.exists()

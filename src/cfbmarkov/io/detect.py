@@ -93,8 +93,9 @@ def detect_format(source) -> tuple[str, str]:
             with h5py.File(path, "r") as f:
                 h5md = "h5md" in f and "particles" in f
                 ours = "frames" in f
-        except OSError as exc:
-            raise InputError(f"{path}: cannot read as HDF5 ({exc})") from None
+        except (OSError, KeyError, RuntimeError, ValueError) as exc:
+            text = " ".join(str(exc).split())[:160]
+            raise InputError(f"{path}: cannot read as HDF5 ({text})") from None
         if not h5md:
             hint = ("; it is a cfbmarkov trajectory file already: use it as it is" if ours
                     else "")
@@ -119,17 +120,22 @@ def detect_format(source) -> tuple[str, str]:
 
 
 def check_given_format(source, fmt: str) -> None:
-    """Refuse a particle file (VTK, H5MD) given as ``csv`` or ``lammps``, naming its format.
+    """Refuse a source whose content is plainly of another format than ``fmt``: a particle
+    file (VTK, H5MD) given as ``csv`` or ``lammps``, or a text file given as a particle
+    format; the message names the content's format.
 
     Raises
     ------
     InputError
-        When the content is H5MD, VTK or VTK XML while ``fmt`` is a text format.
+        On such a mismatch.
     """
     try:
         found, shown = detect_format(source)
     except InputError:
         return                       # the reader of fmt reports what is wrong
-    if found in ("h5md", "vtk", "vtp", "pvd") and fmt in ("csv", "lammps"):
+    particle = ("h5md", "vtk", "vtp", "pvd")
+    same = found == fmt or {found, fmt} <= {"vtp", "pvd"} or (
+        found not in particle and fmt not in particle)
+    if not same:
         raise InputError(f"{first_file(source)}: the content is {shown}, not {fmt}; import it "
                          f"with --format {found} (or without --format)")

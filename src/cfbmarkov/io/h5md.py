@@ -14,6 +14,7 @@ advice to give the region. Laps come from the ``image`` flags where present.
 
 from __future__ import annotations
 
+import contextlib
 import os
 from collections.abc import Iterator
 from pathlib import Path
@@ -61,10 +62,21 @@ def h5md_series(source: str | os.PathLike, group: str | None = None) -> Particle
     except OSError as exc:
         raise InputError(f"{label}: cannot read as HDF5 ({exc})") from None
     try:
-        return _series(handle, label, path, group)
+        with _damaged(label):
+            return _series(handle, label, path, group)
     except BaseException:
         handle.close()
         raise
+
+
+@contextlib.contextmanager
+def _damaged(label: str):
+    """HDF5 read failures (a damaged or cut file) as one-line InputErrors."""
+    try:
+        yield
+    except (OSError, KeyError, RuntimeError, ValueError, TypeError, IndexError) as exc:
+        text = " ".join(str(exc).split())[:160]
+        raise InputError(f"{label}: damaged HDF5 data ({text})") from None
 
 
 def _series(f: h5py.File, label: str, path: Path, group: str | None) -> ParticleSeries:
@@ -108,18 +120,23 @@ def _series(f: h5py.File, label: str, path: Path, group: str | None) -> Particle
 
     def frames() -> Iterator[ParticleFrame]:
         for k in range(n_frames):
-            at = f"{where} frame {k} (step {int(position['step'][k])})"
-            pos = _three(np.asarray(position["value"][k], dtype=np.float64))
-            ids = (_frame_ids(others["id"], k, at) if "id" in others
-                   else np.arange(1, n_particles + 1, dtype=np.int64))
-            keep = ids >= 0 if "id" in others else slice(None)   # -1 fills unused slots
-            vel = (_three(np.asarray(others["velocity"][k], dtype=np.float64))[keep]
-                   if "velocity" in others else None)
-            img = (_three(np.asarray(others["image"][k], dtype=np.int64))[keep]
-                   if "image" in others else None)
-            yield ParticleFrame(time=float(times[k]), ids=ids[keep], positions=pos[keep],
-                                velocities=vel, image=img,
-                                box=None if box is None else box[k], where=at)
+            with _damaged(label):
+                frame = _frame(k)
+            yield frame
+
+    def _frame(k: int) -> ParticleFrame:
+        at = f"{where} frame {k} (step {int(position['step'][k])})"
+        pos = _three(np.asarray(position["value"][k], dtype=np.float64))
+        ids = (_frame_ids(others["id"], k, at) if "id" in others
+               else np.arange(1, n_particles + 1, dtype=np.int64))
+        keep = ids >= 0 if "id" in others else slice(None)   # -1 fills unused slots
+        vel = (_three(np.asarray(others["velocity"][k], dtype=np.float64))[keep]
+               if "velocity" in others else None)
+        img = (_three(np.asarray(others["image"][k], dtype=np.int64))[keep]
+               if "image" in others else None)
+        return ParticleFrame(time=float(times[k]), ids=ids[keep], positions=pos[keep],
+                            velocities=vel, image=img,
+                            box=None if box is None else box[k], where=at)
 
     return ParticleSeries(label=label, fmt="h5md", frames=frames(), flags=flags,
                           source_file=path.name, provenance=provenance,

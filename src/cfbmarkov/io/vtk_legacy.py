@@ -234,11 +234,11 @@ def _word(words: list[str], k: int, label: str) -> str:
 
 
 def _int(words: list[str], k: int, label: str) -> int:
+    word = _word(words, k, label)
     try:
-        value = int(_word(words, k, label))
+        value = int(word)
     except ValueError:
-        raise InputError(f"{label}: line {' '.join(words)!r}: {words[k]!r} is not a count"
-                         ) from None
+        raise InputError(f"{label}: line {' '.join(words)!r}: {word!r} is not a count") from None
     if value < 0:
         raise InputError(f"{label}: line {' '.join(words)!r}: negative count")
     return value

@@ -96,7 +96,7 @@ def read_vtp(path: Path) -> PolyData:
         raise InputError(f"{label}: no <Piece> in <PolyData>")
     points, arrays = [], []
     for piece in pieces:
-        n = int(piece.get("NumberOfPoints", "0"))
+        n = _count(piece, "NumberOfPoints", "0", label)
         array = piece.find("./Points/DataArray")
         if array is None:
             if n:
@@ -165,6 +165,18 @@ def read_pvd(path: Path) -> list[tuple[float, list[Path]]]:
     return sorted(times.items())
 
 
+def _count(node, attribute: str, default: str, label: str) -> int:
+    """A non-negative whole-number attribute."""
+    text = node.get(attribute, default)
+    try:
+        value = int(text)
+    except ValueError:
+        value = -1
+    if value < 0:
+        raise InputError(f"{label}: {attribute}={text!r} is not a count")
+    return value
+
+
 def _parse(data: bytes, label: str):
     try:
         return ElementTree.fromstring(data)
@@ -209,18 +221,32 @@ class _Decoder:
                 raise InputError(f"{self.label}: array {name!r} holds a value that is not a "
                                  "number") from None
         elif encoding == "binary":
-            values = np.frombuffer(self._inline(node.text or "", name), dtype=dtype)
+            values = self._values(self._inline(node.text or "", name), dtype, name)
         elif encoding == "appended":
-            values = np.frombuffer(self._appended(int(node.get("offset", "0")), name), dtype=dtype)
+            offset = _count(node, "offset", "0", self.label)
+            values = self._values(self._appended(offset, name), dtype, name)
         else:
             raise InputError(f"{self.label}: array {name!r}: format {encoding!r} is not read "
                              "(ascii, binary or appended)")
-        ncomp = int(node.get("NumberOfComponents", "1"))
+        ncomp = max(_count(node, "NumberOfComponents", "1", self.label), 1)
         if n_tuples is not None and values.size != ncomp * n_tuples:
             raise InputError(f"{self.label}: array {name!r} holds {values.size} values, expected "
                              f"{ncomp} x {n_tuples} (damaged or truncated file)")
         values = values.astype(np.int64 if values.dtype.kind in "iu" else np.float64)
         return values.reshape(-1, ncomp) if ncomp > 1 else values
+
+    def _first(self, raw: bytes, name: str) -> int:
+        """The first header word of ``raw``."""
+        if len(raw) < self.header.itemsize:
+            raise InputError(f"{self.label}: array {name!r}: its header is cut short (damaged "
+                             "file)")
+        return int(np.frombuffer(raw[:self.header.itemsize], self.header)[0])
+
+    def _values(self, raw: bytes, dtype: np.dtype, name: str) -> np.ndarray:
+        if len(raw) % dtype.itemsize:
+            raise InputError(f"{self.label}: array {name!r}: {len(raw)} bytes is no whole number "
+                             f"of {dtype.itemsize}-byte values (damaged file)")
+        return np.frombuffer(raw, dtype=dtype)
 
     def _b64(self, text: bytes | str, name: str) -> bytes:
         try:
@@ -236,13 +262,13 @@ class _Decoder:
         if not self.compressed:
             head_chars = 4 * -(-size // 3)
             if text[head_chars - 1:head_chars] == "=":        # encoded separately
-                nbytes = int(np.frombuffer(self._b64(text[:head_chars], name), self.header)[0])
+                nbytes = self._first(self._b64(text[:head_chars], name), name)
                 return self._exact(self._b64(text[head_chars:], name), nbytes, name)
             raw = self._b64(text, name)
-            nbytes = int(np.frombuffer(raw[:size], self.header)[0])
+            nbytes = self._first(raw, name)
             return self._exact(raw[size:], nbytes, name)
         first = self._b64(text[:4 * -(-3 * size // 3)], name)
-        nblocks = int(np.frombuffer(first[:size], self.header)[0])
+        nblocks = self._first(first, name)
         head_bytes = (3 + nblocks) * size
         head_chars = 4 * -(-head_bytes // 3)
         head = self._b64(text[:head_chars], name)
@@ -271,7 +297,8 @@ class _Decoder:
 
     def _inflate(self, head: bytes, body: bytes, name: str) -> bytes:
         """Decompress zlib blocks: header [nblocks, block size, last size, sizes...]."""
-        words = np.frombuffer(head, self.header)
+        usable = len(head) - len(head) % self.header.itemsize
+        words = np.frombuffer(head[:usable], self.header)
         if words.size < 3 or words.size < 3 + int(words[0]):
             raise InputError(f"{self.label}: array {name!r}: damaged compression header")
         sizes = words[3:3 + int(words[0])].astype(np.int64)
