@@ -62,7 +62,8 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                 length_unit: str | None = None, time_unit: str | None = None,
                 boundary: str | None = None, drop_depth: bool = False,
                 resample: float | None = None, max_gap: float | None = None) -> Path:
-    """Import ``source`` in format ``fmt`` ('csv' or 'lammps') as the trajectory file ``output``.
+    """Import ``source`` in format ``fmt`` (or the format its content shows) as the
+    trajectory file ``output``.
 
     Parameters
     ----------
