@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.io._common import check_output, create_writer, progress, removing_new_folders
+from cfbmarkov.io._common import create_writer, progress, removing_new_folders
 from cfbmarkov.io.riser import AXES, FrameColumns, riser_frame, riser_positions
 from cfbmarkov.trajectory_format import POSITION_TOLERANCE
 from cfbmarkov.trajectory_writer import IMPORT_MAX_STEP
