@@ -239,7 +239,9 @@ def test_options_that_do_not_apply(tmp_path, run, make_csv, save):
     source = save(tmp_path / "run.csv", make_csv(run))
     with pytest.raises(InputError, match=r"--time-step applies to LAMMPS dumps only"):
         import_file(source, "csv", tmp_path / "run.h5", time_step=1e-5)
-    with pytest.raises(InputError, match=r"unknown import format 'vtk'"):
+    with pytest.raises(InputError, match=r"unknown import format 'xyz'"):
+        import_file(source, "xyz", tmp_path / "run.h5")
+    with pytest.raises(InputError, match=r"the content is text .*not vtk; .*--format csv"):
         import_file(source, "vtk", tmp_path / "run.h5")
     with pytest.raises(InputError, match=r"width -1 must be a positive number"):
         import_file(source, "csv", tmp_path / "run.h5", width=-1)

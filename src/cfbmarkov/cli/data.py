@@ -1,5 +1,5 @@
-"""The verbs that bring data in and out: ``import`` (CSV, LAMMPS/LIGGGHTS dumps) and
-``export-vtk`` (ParaView files)."""
+"""The verbs that bring data in and out: ``import`` (CSV, LAMMPS/LIGGGHTS dumps, VTK and
+H5MD particle files) and ``export-vtk`` (ParaView files)."""
 
 from __future__ import annotations
 
@@ -21,8 +21,11 @@ def cmd_import(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
-    from cfbmarkov.io import import_file
+    import sys
 
+    from cfbmarkov.io import PARTICLE_FORMATS, import_file, resolve_format
+
+    fmt, detected = resolve_format(args.source, args.format)
     path = import_file(args.source, args.format, args.output, width=args.width,
                        height=args.height, time_step=args.time_step,
                        vertical_axis=args.vertical_axis, region=args.region,
@@ -35,6 +38,14 @@ def cmd_import(args) -> int:
     with Trajectories(path) as written:     # what the import did beyond reading rows
         for note in written.parameters.get("import_notes", []):
             print(f"  {note}")
+
+    if fmt in PARTICLE_FORMATS:
+        from cfbmarkov.io.particle_import import import_summary
+
+        print(f"cfbmarkov import: {import_summary(path)}", file=sys.stderr)
+    elif detected:
+        print(f"cfbmarkov import: format {fmt}, detected from the content: {detected}",
+              file=sys.stderr)
     return 0
 
 
@@ -71,9 +82,14 @@ def add_import(sub) -> None:
     sub : argparse._SubParsersAction
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
-    s = sub.add_parser("import", help="import CSV or LAMMPS/LIGGGHTS dumps as a trajectory file")
-    s.add_argument("source", help="input file (.csv, dump, optionally .gz)")
-    s.add_argument("--format", required=True, choices=["csv", "lammps"])
+    s = sub.add_parser("import", help="import CSV, LAMMPS/LIGGGHTS dumps, VTK (.vtk, .vtp, "
+                       ".pvd) or H5MD particle files as a trajectory file")
+    s.add_argument("source", help="input file (.csv, dump, optionally .gz; .vtk, .vtp, .pvd, "
+                                  ".h5), a folder or a quoted pattern such as 'post/dump*.vtk'")
+    s.add_argument("--format", default="auto",
+                   choices=["auto", "csv", "lammps", "vtk", "vtp", "pvd", "h5md"],
+                   help="the source's format (default auto: told from the content, and said "
+                        "so on stderr)")
     s.add_argument("-o", "--output", required=True, help="output trajectory file (.h5)")
     s.add_argument("--width", type=positive_float, default=None,
                    help="riser width W, m: the riser is 0..W across in the source's own "
@@ -82,7 +98,9 @@ def add_import(sub) -> None:
                    help="riser height H, m: 0..H vertically in the source's coordinates "
                         "(default: the dump's box, else 0.95)")
     s.add_argument("--time-step", type=positive_float, default=None,
-                   help="LAMMPS time step, s, for dumps without ITEM: TIME")
+                   help="simulation time step, s, for LAMMPS dumps without ITEM: TIME and "
+                        "legacy VTK files without a TIME array (dated by the step in their "
+                        "name)")
     s.add_argument("--vertical-axis", choices=["x", "y", "z"], default=None,
                    help="the source's vertical axis (gravity along minus it); required for a "
                         "3D dump or a CSV file with a z column")

@@ -1,6 +1,7 @@
-"""Importers: CSV files and LAMMPS/LIGGGHTS text dumps -> trajectory files (HDF5).
+"""Importers: CSV files, LAMMPS/LIGGGHTS text dumps, VTK particle files (legacy ``.vtk``,
+XML ``.vtp`` and ``.pvd``) and H5MD files -> trajectory files (HDF5).
 
-Both read their input a frame at a time and write through
+Each reads their input a frame at a time and write through
 :class:`~cfbmarkov.trajectory_writer.TrajectoryWriter`, which validates every frame and derives the
 lap counter; bad input raises :class:`~cfbmarkov.errors.InputError` and leaves no output file.
 """
@@ -16,7 +17,42 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.io.csv import import_csv
 from cfbmarkov.io.lammps import import_lammps
 
-FORMATS = ("csv", "lammps")
+FORMATS = ("csv", "lammps", "vtk", "vtp", "pvd", "h5md")
+#: the formats read by :mod:`cfbmarkov.io.particle_frames` (no CSV options apply)
+PARTICLE_FORMATS = ("vtk", "vtp", "pvd", "h5md")
+
+
+def resolve_format(source, fmt: str | None) -> tuple[str, str | None]:
+    """The format to read ``source`` with, and what showed it when it was detected.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or list
+        The source.
+    fmt : str or None
+        A format of :data:`FORMATS`, or None / ``'auto'`` to detect it from the content.
+
+    Returns
+    -------
+    (str, str or None)
+        The format, and the description of what the content showed (None when given).
+
+    Raises
+    ------
+    InputError
+        For an unknown format, a particle file (VTK, H5MD) given as CSV or LAMMPS, or a
+        source whose format cannot be told (see :func:`cfbmarkov.io.detect.detect_format`).
+    """
+    from cfbmarkov.io.detect import check_given_format, detect_format
+
+    if fmt is None or str(fmt).lower() == "auto":
+        return detect_format(source)
+    fmt = str(fmt).lower()
+    if fmt not in FORMATS:
+        raise InputError(f"unknown import format {fmt!r}; choose one of {', '.join(FORMATS)} "
+                         "or auto")
+    check_given_format(source, fmt)
+    return fmt, None
 
 
 def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, *,
@@ -26,21 +62,24 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                 length_unit: str | None = None, time_unit: str | None = None,
                 boundary: str | None = None, drop_depth: bool = False,
                 resample: float | None = None, max_gap: float | None = None) -> Path:
-    """Import ``source`` in format ``fmt`` ('csv' or 'lammps') as the trajectory file ``output``.
+    """Import ``source`` in format ``fmt`` (or the format its content shows) as the
+    trajectory file ``output``.
 
     Parameters
     ----------
     source : str or os.PathLike
         The file to import (optionally gzip-compressed).
-    fmt : {'csv', 'lammps'}
-        Its format (case-insensitive).
+    fmt : {'csv', 'lammps', 'vtk', 'vtp', 'pvd', 'h5md', 'auto'} or None
+        Its format (case-insensitive); None or 'auto': detected from the content
+        (:func:`resolve_format`), and recorded in the file's parameters.
     output : str or os.PathLike
         The trajectory file (HDF5) to write.
     width, height : float, optional
         The domain, m (CSV default: the paper's 0.09 x 0.95 m riser; LAMMPS default: the
         dump's box).
     time_step : float, optional
-        Simulation time step, s, that dates LAMMPS frames carrying no ``ITEM: TIME``; a CSV
+        Simulation time step, s, that dates LAMMPS frames carrying no ``ITEM: TIME`` and
+        legacy VTK files carrying no ``TIME`` array (by the step in their name); a CSV
         file carries its times in column t and takes no time step.
     vertical_axis : {"x", "y", "z"}, optional
         The source's vertical axis; required for a 3D dump and for a CSV file with a z
@@ -76,9 +115,7 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
         or bad input (see
         :func:`import_csv` and :func:`import_lammps`).
     """
-    fmt = str(fmt).lower()
-    if fmt not in FORMATS:
-        raise InputError(f"unknown import format {fmt!r}; choose one of {', '.join(FORMATS)}")
+    fmt, detected = resolve_format(source, fmt)
     for name, value in (("--width", width), ("--height", height), ("--time-step", time_step),
                         ("--resample", resample), ("--max-gap", max_gap)):
         if value is not None and not (np.isfinite(float(value)) and float(value) > 0):
@@ -91,6 +128,14 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                           time_unit=time_unit, vertical_axis=vertical_axis, region=region,
                           boundary=boundary, drop_depth=drop_depth, resample=resample,
                           max_gap=max_gap)
+    if fmt in PARTICLE_FORMATS:
+        from cfbmarkov.io.particle_import import import_particles
+
+        return import_particles(source, fmt, output, width=width, height=height,
+                                time_step=time_step, vertical_axis=vertical_axis, region=region,
+                                boundary=boundary, drop_depth=drop_depth,
+                                length_unit=length_unit, time_unit=time_unit,
+                                resample=resample, max_gap=max_gap, detected=detected)
     if length_unit is not None or time_unit is not None:
         raise InputError("--length-unit and --time-unit apply to CSV files only; a LAMMPS dump "
                          "must be in SI units (ITEM: UNITS si)")
@@ -102,4 +147,5 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                          drop_depth=drop_depth)
 
 
-__all__ = ["FORMATS", "import_csv", "import_file", "import_lammps"]
+__all__ = ["FORMATS", "PARTICLE_FORMATS", "import_csv", "import_file", "import_lammps",
+           "resolve_format"]

@@ -40,6 +40,10 @@ for _axis in AXES:
     _ALIASES.update({_axis: _axis, f"position {_axis}": _axis, f"pos {_axis}": _axis,
                      f"v{_axis}": f"v{_axis}", f"velocity {_axis}": f"v{_axis}",
                      f"vel {_axis}": f"v{_axis}", f"v {_axis}": f"v{_axis}"})
+#: ParaView's CSV export names array components 'name:k' and the point coordinates 'Points:k'
+for _k, _axis in enumerate(AXES):
+    _ALIASES.update({f"points:{_k}": _axis, **{f"{v}:{_k}": f"v{_axis}" for v in
+                                               ("v", "vel", "velocity")}})
 _UNIT = re.compile(r"^(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]$")
 _DELIMITERS = {";": "semicolon", "\t": "tab", ",": "comma", None: "whitespace"}
 

@@ -1,0 +1,141 @@
+"""Telling an import source's format from its content (``cfbmarkov import`` without
+``--format``, or ``--format auto``), and refusing a source given the wrong format.
+
+The first bytes decide: HDF5's signature with an ``/h5md`` group (H5MD), ``# vtk
+DataFile`` (legacy VTK), ``<VTKFile type="PolyData">`` (VTK XML PolyData) or
+``type="Collection"`` (a ParaView ``.pvd``), ``ITEM: TIMESTEP`` (a LAMMPS/LIGGGHTS dump);
+other text is read as CSV. A folder or a glob pattern is judged by its first file (a
+``.pvd`` first).
+"""
+
+from __future__ import annotations
+
+import glob
+import gzip
+import os
+import re
+from pathlib import Path
+
+from cfbmarkov.errors import InputError
+
+HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
+#: the formats read from particle files, and what the content shows for each
+DESCRIPTIONS = {"h5md": "H5MD (an HDF5 file with an /h5md group)",
+                "vtk": "legacy VTK ('# vtk DataFile' first line)",
+                "vtp": "VTK XML PolyData ('<VTKFile type=\"PolyData\">')",
+                "pvd": "a ParaView collection ('<VTKFile type=\"Collection\">')",
+                "lammps": "a LAMMPS/LIGGGHTS dump ('ITEM: TIMESTEP' first line)",
+                "csv": "text that is no dump or VTK file (read as CSV)"}
+_VTK_TYPE = re.compile(rb"<VTKFile[^>]*\btype\s*=\s*[\"'](\w+)[\"']")
+
+
+def first_file(source) -> Path:
+    """The file whose content stands for ``source`` (a file, folder, pattern or list)."""
+    if isinstance(source, (list, tuple)):
+        if not source:
+            raise InputError("no source file given")
+        return Path(source[0])
+    text = os.fspath(source)
+    path = Path(text)
+    if path.is_dir():
+        files = sorted(p for p in path.iterdir() if p.is_file())
+        for suffix in (".pvd", ".vtp", ".vtk", ".h5", ".hdf5"):
+            chosen = [p for p in files if p.suffix.lower() == suffix]
+            if chosen:
+                return chosen[0]
+        raise InputError(f"{path}: a folder without .pvd, .vtp, .vtk or .h5 files; give the "
+                         "file (or a pattern such as 'post/dump*.vtk')")
+    if not path.exists() and any(c in text for c in "*?["):
+        matches = sorted(glob.glob(text))
+        if not matches:
+            raise InputError(f"{text}: no file matches this pattern")
+        return Path(matches[0])
+    return path
+
+
+def detect_format(source) -> tuple[str, str]:
+    """The format of ``source`` from its content.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or list
+        A file, folder, glob pattern or list of files.
+
+    Returns
+    -------
+    (str, str)
+        The format (a key of :data:`DESCRIPTIONS`) and what showed it.
+
+    Raises
+    ------
+    InputError
+        If the file is missing or unreadable, or is HDF5 without the H5MD groups, or VTK XML
+        of a type that holds no particles.
+    """
+    path = first_file(source)
+    if not path.exists():
+        raise InputError(f"{path}: no such file")
+    if path.is_dir():
+        raise InputError(f"{path}: is a folder, not a file")
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+        if head[:2] == b"\x1f\x8b":
+            with gzip.open(path, "rb") as fh:
+                head = fh.read(4096)
+    except (OSError, EOFError) as exc:
+        raise InputError(f"{path}: cannot read ({getattr(exc, 'strerror', None) or exc})"
+                         ) from None
+    if head.startswith(HDF5_MAGIC):
+        import h5py
+
+        try:
+            with h5py.File(path, "r") as f:
+                h5md = "h5md" in f and "particles" in f
+                ours = "frames" in f
+        except (OSError, KeyError, RuntimeError, ValueError) as exc:
+            text = " ".join(str(exc).split())[:160]
+            raise InputError(f"{path}: cannot read as HDF5 ({text})") from None
+        if not h5md:
+            hint = ("; it is a cfbmarkov trajectory file already: use it as it is" if ours
+                    else "")
+            raise InputError(f"{path}: an HDF5 file without the H5MD groups /h5md and "
+                             f"/particles: no importer reads it{hint}")
+        return "h5md", DESCRIPTIONS["h5md"]
+    stripped = head.lstrip(b"\xef\xbb\xbf").lstrip()
+    if stripped.startswith(b"# vtk DataFile"):
+        return "vtk", DESCRIPTIONS["vtk"]
+    match = _VTK_TYPE.search(head)
+    if match:
+        kind = match.group(1).decode()
+        if kind == "PolyData":
+            return "vtp", DESCRIPTIONS["vtp"]
+        if kind == "Collection":
+            return "pvd", DESCRIPTIONS["pvd"]
+        raise InputError(f"{path}: VTK XML of type {kind}; particle files are PolyData (.vtp) "
+                         "or a .pvd collection of them")
+    if stripped.startswith(b"ITEM: TIMESTEP") or stripped.startswith(b"ITEM:"):
+        return "lammps", DESCRIPTIONS["lammps"]
+    return "csv", DESCRIPTIONS["csv"]
+
+
+def check_given_format(source, fmt: str) -> None:
+    """Refuse a source whose content is plainly of another format than ``fmt``: a particle
+    file (VTK, H5MD) given as ``csv`` or ``lammps``, or a text file given as a particle
+    format; the message names the content's format.
+
+    Raises
+    ------
+    InputError
+        On such a mismatch.
+    """
+    try:
+        found, shown = detect_format(source)
+    except InputError:
+        return                       # the reader of fmt reports what is wrong
+    particle = ("h5md", "vtk", "vtp", "pvd")
+    same = found == fmt or {found, fmt} <= {"vtp", "pvd"} or (
+        found not in particle and fmt not in particle)
+    if not same:
+        raise InputError(f"{first_file(source)}: the content is {shown}, not {fmt}; import it "
+                         f"with --format {found} (or without --format)")
