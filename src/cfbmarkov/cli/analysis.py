@@ -36,6 +36,9 @@ def cmd_compare(args) -> int:
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
           f"mixing RMS {summary['mixing_rms']:.4g}")
+    source = summary.get("bin_width_from", "given")
+    print(f"  RTD bins {summary['bin_width']:g} s wide"
+          + (" (--bin-width)" if source == "given" else f" ({source}; --bin-width to change)"))
     model = summary["model"]
     if "rt_mean_interval" in model:
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
@@ -184,7 +187,9 @@ def add_compare(sub) -> None:
     s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
     s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
     s.add_argument("-o", "--output", required=True, help="output directory")
-    s.add_argument("--bin-width", type=positive_float, default=0.025, help="RTD bin width, s")
+    s.add_argument("--bin-width", type=positive_float, default=None,
+                   help="RTD bin width, s (default: the lag of the model behind the prediction, "
+                        "else the reference's frame interval; printed)")
     s.add_argument("--md-order", type=minkowski_order, default=2.0,
                    help="Minkowski order k > 0 (inf: the largest difference)")
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
