@@ -71,10 +71,11 @@ def add_import(sub) -> None:
     s.add_argument("-o", "--output", required=True, help="output trajectory file (.h5)")
     s.add_argument("--width", type=positive_float, default=None,
                    help="riser width W, m: the riser is 0..W across in the source's own "
-                        "coordinates (default: the dump's box, else 0.09)")
+                        "coordinates (default: the dump's box; a CSV file needs it, or "
+                        "--region)")
     s.add_argument("--height", type=positive_float, default=None,
                    help="riser height H, m: 0..H vertically in the source's coordinates "
-                        "(default: the dump's box, else 0.95)")
+                        "(default: the dump's box; a CSV file needs it, or --region)")
     s.add_argument("--time-step", type=positive_float, default=None,
                    help="LAMMPS time step, s, for dumps without ITEM: TIME")
     s.add_argument("--vertical-axis", choices=["x", "y", "z"], default=None,
