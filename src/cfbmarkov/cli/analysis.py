@@ -191,7 +191,8 @@ def add_compare(sub) -> None:
                    help="RTD bin width, s (default: the lag of the model behind the prediction, "
                         "else the reference's frame interval; printed)")
     s.add_argument("--md-order", type=minkowski_order, default=2.0,
-                   help="Minkowski order k > 0 (inf: the largest difference)")
+                   help="Minkowski order k > 0 of the MD (Eq. 9; inf: the largest difference; "
+                        "default 2)")
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
     s.add_argument("--level", type=level, default=0.9,
                    help="coverage of the prediction's intervals (default 0.9)")
@@ -201,7 +202,7 @@ def add_compare(sub) -> None:
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
                    help="residence times of both sides from frames at the model's lag (like "
                         "for like, the default; the reference's exact-event figures are shown "
-                        "beside), or the reference's exact pass events")
+                        "beside), or the reference's exact pass events (default frames)")
     s.add_argument("--long-run-span", type=parse_window, default=None,
                    help="START:STOP, s: also give the reference's RTD pooled over this span's "
                         "other whole windows (what a perfect stationary model would predict; "
@@ -232,8 +233,8 @@ def add_stationarity(sub) -> None:
                    help="frames every LAG s (a model's lag; default every frame); also the "
                         "RTD bins of the MD")
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
-                   help="residence times from frames (every --lag, the default) or from the "
-                        "file's exact pass events (as in compare)")
+                   help="residence times from frames (every --lag) or from the file's exact "
+                        "pass events (as in compare); default frames")
     s.add_argument("--judge", type=parse_window, default=None,
                    help="START:STOP, s: also compare this window with the run's long run "
                         "(the span's other whole windows of its length, pooled) and with the "
@@ -251,7 +252,7 @@ def add_maps(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("maps", help="batch-injection probability maps (Eq. 8, Fig. 4-7)")
-    s.add_argument("model")
+    s.add_argument("model", help="model file (.h5, from cfbmarkov fit)")
     s.add_argument("--times", type=parse_times, default=[0.05, 0.1, 0.15],
                    help="comma-separated times after injection, s (default 0.05,0.1,0.15)")
     s.add_argument("--outflow", action="store_true",

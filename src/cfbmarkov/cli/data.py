@@ -67,7 +67,9 @@ def add_import(sub) -> None:
     """
     s = sub.add_parser("import", help="import CSV or LAMMPS/LIGGGHTS dumps as a trajectory file")
     s.add_argument("source", help="input file (.csv, dump, optionally .gz)")
-    s.add_argument("--format", required=True, choices=["csv", "lammps"])
+    s.add_argument("--format", required=True, choices=["csv", "lammps"],
+                   help="the source's format: csv (one row per particle and frame, "
+                        "docs/how-to/csv.md) or lammps (LAMMPS/LIGGGHTS text dumps)")
     s.add_argument("-o", "--output", required=True, help="output trajectory file (.h5)")
     s.add_argument("--width", type=positive_float, default=None,
                    help="riser width W, m: the riser is 0..W across in the source's own "
@@ -117,7 +119,7 @@ def add_export_vtk(sub) -> None:
     s.add_argument("--start", type=finite_float, default=None, help="first time, s")
     s.add_argument("--stop", type=finite_float, default=None, help="last time, s")
     s.add_argument("--every", type=count(1, 2 ** 31 - 1), default=1,
-                   help="export every k-th frame")
+                   help="export every k-th frame (default 1)")
     s.add_argument("--no-fields", action="store_true", help="particles only")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_export_vtk)

@@ -197,7 +197,7 @@ def add_predict(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("predict", help="Monte Carlo prediction from a run's state at a start time")
-    s.add_argument("model")
+    s.add_argument("model", help="model file (.h5, from cfbmarkov fit)")
     s.add_argument("--init", required=True, help="trajectory file giving the initial state")
     s.add_argument("--start", type=finite_float, required=True, help="initial frame time, s")
     s.add_argument("--duration", type=positive_float, required=True, help="simulated time, s")
@@ -216,9 +216,10 @@ def add_rtd(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("rtd", help="exact residence-time distribution of a model")
-    s.add_argument("model")
+    s.add_argument("model", help="model file (.h5, from cfbmarkov fit)")
     s.add_argument("--window-length", type=positive_float, default=None,
-                   help="observation window, s: the RTD as seen in such a window")
+                   help="observation window, s: the RTD as seen in such a window (default "
+                        "none: the chain's intrinsic RTD)")
     s.set_defaults(func=cmd_rtd)
 
 
@@ -231,5 +232,5 @@ def add_info(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("info", help="describe a trajectory or model file")
-    s.add_argument("file")
+    s.add_argument("file", help="trajectory file or model file (.h5)")
     s.set_defaults(func=cmd_info)

@@ -118,15 +118,16 @@ def add_demo(sub) -> None:
     """
     s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
                        "(about 4 min on 2 quiet cores), ending with the path of its report")
-    s.add_argument("-o", "--output", default="cfbmarkov-demo", help="output directory")
+    s.add_argument("-o", "--output", default="cfbmarkov-demo",
+                   help="output directory (default cfbmarkov-demo)")
     s.add_argument("--jobs", type=count(1, MAX_JOBS), default=None,
                    help="local worker processes")
     s.add_argument("--synthetic", action="store_true",
                    help="instead, the Markov part alone on synthetic core-annulus trajectories "
                         "(30 s)")
     s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=6000,
-                   help="with --synthetic: particles")
-    s.add_argument("--seed", type=seed, default=1, help="with --synthetic: seed")
+                   help="with --synthetic: particles (default 6000)")
+    s.add_argument("--seed", type=seed, default=1, help="with --synthetic: seed (default 1)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=cmd_demo)
 
@@ -142,6 +143,7 @@ def add_bench(sub) -> None:
     s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
     s.add_argument("--only", action="append", default=None, help="run only this benchmark")
     s.add_argument("--repeat", type=count(1, 1000), default=5,
-                   help="repetitions (median reported)")
-    s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=27000)
+                   help="repetitions (median reported; default 5)")
+    s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=27000,
+                   help="particles of the benchmarks' problems (default 27000, the paper's)")
     s.set_defaults(func=cmd_bench)
