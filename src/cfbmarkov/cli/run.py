@@ -69,11 +69,23 @@ def cmd_bench(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
-    from cfbmarkov.bench import run_benchmarks
+    import sys
+    import time
 
+    from cfbmarkov.bench import check_names, run_benchmarks
+
+    check_names(args.only)
+    started = time.perf_counter()
+    if not args.quiet:
+        print(f"bench: {', '.join(args.only) if args.only else 'all figures'}, "
+              f"{args.particles} particles, median of {args.repeat}; each figure is printed "
+              "when measured", file=sys.stderr, flush=True)
     for name, value, unit in run_benchmarks(only=args.only, repeat=args.repeat,
                                             particles=args.particles):
         print(f"{name}: {value:.4g} {unit}", flush=True)
+        if not args.quiet:
+            print(f"bench: {name} done, {time.perf_counter() - started:.0f} s so far",
+                  file=sys.stderr, flush=True)
     return 0
 
 
@@ -140,10 +152,18 @@ def add_bench(sub) -> None:
     sub : argparse._SubParsersAction
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
+    from cfbmarkov.bench import GROUPS, MCM_NAMES, SIMULATION_NAMES
+
     s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
-    s.add_argument("--only", action="append", default=None, help="run only this benchmark")
+    s.add_argument("--only", action="append", default=None, metavar="NAME",
+                   help="run only this group or figure (repeatable; default all): groups "
+                        f"{', '.join(GROUPS)}; figures {', '.join(MCM_NAMES)}, "
+                        f"{', '.join(SIMULATION_NAMES)} (a DEM figure brings its LAMMPS lines)"
+                        .replace("%", "%%"))
     s.add_argument("--repeat", type=count(1, 1000), default=5,
                    help="repetitions (median reported; default 5)")
     s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=27000,
                    help="particles of the benchmarks' problems (default 27000, the paper's)")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress lines on stderr (the figures still go to stdout)")
     s.set_defaults(func=cmd_bench)
