@@ -23,13 +23,31 @@ def cmd_compare(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
+    import time
+
     from cfbmarkov.observed.metrics import percentage_text as pd_text
     from cfbmarkov.report.compare import compare
 
+    started = time.perf_counter()
+    if not args.quiet:
+        from cfbmarkov.analysis.compare_inputs import check_runs
+        from cfbmarkov.trajectories import Trajectories
+
+        a, b = args.window
+        with Trajectories(args.reference) as ref, Trajectories(args.prediction) as pred:
+            check_runs(ref, pred, a, b)     # a refusal stays one line, before any progress
+        print(f"compare: {args.prediction} against {args.reference} over {a:g}-{b:g} s "
+              f"(residence times, baselines, mixing"
+              + (f", {args.resamples} bootstrap resamples for the intervals"
+                 if args.resamples else "") + (", figures" if not args.no_figures else "")
+              + ")", file=sys.stderr, flush=True)
     summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
                       bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
                       basis=args.basis, level=args.level, resamples=args.resamples,
                       long_run_span=args.long_run_span)
+    if not args.quiet:
+        print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
+              flush=True)
     for line in summary.get("warnings", []):
         print(f"warning: {line.strip()}", file=sys.stderr)
     print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
@@ -206,7 +224,9 @@ def add_compare(sub) -> None:
     s.add_argument("--long-run-span", type=parse_window, default=None,
                    help="START:STOP, s: also give the reference's RTD pooled over this span's "
                         "other whole windows (what a perfect stationary model would predict; "
-                        "e.g. 5:20)")
+                        "e.g. 5:20; default none)")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress lines on stderr")
     s.set_defaults(func=cmd_compare)
 
 

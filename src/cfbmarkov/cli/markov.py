@@ -38,6 +38,10 @@ def cmd_fit(args) -> int:
         if args.states == "auto" and depth_columns is not None:
             raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
         if args.states == "auto":
+            if not args.quiet:
+                print(f"fit: judging the candidate state spaces on {args.run}, "
+                      f"{args.window[0]:g}-{args.window[1]:g} s (each fitted and its RTD "
+                      "compared with the window's)", file=sys.stderr, flush=True)
             model = select_model(run, window=args.window, columns=columns, rows=rows,
                                  lag=args.lag, estimator=args.estimator,
                                  coherent=args.coherent)
@@ -185,6 +189,8 @@ def add_fit(sub) -> None:
                         "show the window's cluster index), so that predictions keep clusters; "
                         "the RTD and maps are unchanged (periodic risers)")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress lines on stderr")
     s.set_defaults(func=cmd_fit)
 
 
