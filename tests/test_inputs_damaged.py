@@ -183,7 +183,8 @@ def test_csv_ids_beyond_2_53_stay_distinct(tmp_path, capsys):
     big = 2 ** 53
     src = tmp_path / "ids.csv"
     src.write_text(_csv([big, big + 1, -big - 3]))
-    assert main(["import", str(src), "--format", "csv", "-o", str(tmp_path / "ids.h5")]) == 0
+    assert main(["import", str(src), "--format", "csv", "--width", "0.09", "--height", "0.95",
+                "-o", str(tmp_path / "ids.h5")]) == 0
     with Trajectories(tmp_path / "ids.h5") as t:
         assert sorted(t.ids.tolist()) == [-big - 3, big, big + 1]
 
@@ -209,7 +210,8 @@ def test_csv_cut_inside_its_last_row_refused(tmp_path, capsys, cut, message):
 def test_csv_without_final_newline_but_complete_is_read(tmp_path):
     src = tmp_path / "ok.csv"
     src.write_text(_csv([1, 2])[:-1])
-    assert main(["import", str(src), "--format", "csv", "-o", str(tmp_path / "o.h5")]) == 0
+    assert main(["import", str(src), "--format", "csv", "--width", "0.09", "--height", "0.95",
+                "-o", str(tmp_path / "o.h5")]) == 0
 
 
 def _dump(ids, frames=3, atoms_line=None, timestep=None):

@@ -16,8 +16,27 @@ _os.environ.setdefault("NUMBA_THREADING_LAYER", "omp")
 
 from cfbmarkov._version import __version__  # noqa: E402
 from cfbmarkov.errors import CfbmarkovError, InputError  # noqa: E402
-from cfbmarkov.trajectories import Trajectories  # noqa: E402
-from cfbmarkov.trajectory_writer import TrajectoryWriter, write_trajectories  # noqa: E402
+
+#: the names loaded on first use (h5py and Numba take seconds to import: ``cfbmarkov
+#: --help`` and the verbs that do not read files need neither)
+_LAZY = {"Trajectories": "cfbmarkov.trajectories",
+         "TrajectoryWriter": "cfbmarkov.trajectory_writer",
+         "write_trajectories": "cfbmarkov.trajectory_writer"}
+
+
+def __getattr__(name: str):
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
+    raise AttributeError(f"module 'cfbmarkov' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_LAZY])
+
 
 __all__ = [
     "CfbmarkovError",

@@ -44,8 +44,72 @@ def _median_time(fn: Callable[[], object], repeat: int) -> float:
     return statistics.median(samples)
 
 
-def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | None = None
-                      ) -> Iterator[tuple[str, float, str]]:
+#: the figures of the Markov layer, in the order they are measured (``mcm-fit-chosen`` is
+#: printed with the chosen space's kind, ``mcm-fit-chosen-KIND``)
+MCM_NAMES = ("mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd", "mcm-fit-open",
+             "mcm-fit-open-ratio", "mcm-predict-open", "mcm-predict-open-ratio", "mcm-fit-auto",
+             "mcm-fit-chosen", "mcm-predict-file-auto", "mcm-fit-auto-coherent",
+             "mcm-predict-file-auto-coherent", "mcm-fit-predict-auto-coherent",
+             "mcm-fit-regime", "mcm-predict-file-regime")
+#: the figures of the simulation (each DEM figure followed by its LAMMPS lines where LAMMPS
+#: is installed: ``NAME-lammps-NrankS`` and ``NAME-over-lammps``)
+SIMULATION_NAMES = ("dem-throughput", "dem-throughput-dense", "cfd-dem-throughput",
+                    "cfd-dem-throughput-over-lammps-dense")
+#: groups that ``--only`` takes for all their figures
+GROUPS = ("mcm", "dem", "cfd-dem")
+
+
+def check_names(only: list[str] | None) -> None:
+    """Refuse a name that is neither a figure nor a group.
+
+    Parameters
+    ----------
+    only : list of str or None
+        Names given to ``--only``.
+
+    Raises
+    ------
+    InputError
+        Naming the unknown names and listing the valid ones.
+    """
+    from cfbmarkov.errors import InputError
+
+    unknown = [o for o in only or () if o not in (*GROUPS, *MCM_NAMES, *SIMULATION_NAMES)]
+    if unknown:
+        raise InputError(f"unknown benchmark {', '.join(map(repr, unknown))}: choose a group "
+                         f"({', '.join(GROUPS)}) or a figure ({', '.join(MCM_NAMES)}, "
+                         f"{', '.join(SIMULATION_NAMES)})")
+
+
+def selects(only: list[str] | None, name: str) -> bool:
+    """Whether the figure ``name`` is run for ``--only`` names ``only``.
+
+    A group (``mcm``, ``dem``, ``cfd-dem``) selects all its figures; a figure's name selects
+    that figure, with its LAMMPS lines (``NAME-lammps-...``, ``NAME-over-lammps``) and, for
+    ``mcm-fit-chosen``, the chosen kind's suffix.
+
+    Parameters
+    ----------
+    only : list of str or None
+        The names given (None: everything).
+    name : str
+        A figure's name as printed.
+
+    Returns
+    -------
+    bool
+    """
+    if not only:
+        return True
+    group = "mcm" if name.startswith("mcm") else (
+        "cfd-dem" if name.startswith("cfd-dem") else "dem")
+    return any(o == group or o == name or (o == "mcm-fit-chosen" and name.startswith(o))
+               or name.startswith(f"{o}-lammps-") or name == f"{o}-over-lammps"
+               for o in only)
+
+
+def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | None = None,
+                      only: list[str] | None = None) -> Iterator[tuple[str, float, str]]:
     """The ``mcm-*`` figures (module docstring; docs/performance.md).
 
     Parameters
@@ -56,6 +120,8 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         Particles of the synthetic run.
     workdir : pathlib.Path, optional
         Folder for the temporary trajectory and prediction files (default: the system's).
+    only : list of str, optional
+        Measure only these figures (:func:`selects`); all when None.
 
     Yields
     ------
@@ -76,17 +142,29 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         def fit():      # read the window, discretise, count, estimate
             return estimator.fit(discretize(run, grid, 0.025, (10.0, 15.0)))
 
-        yield "mcm-fit", _median_time(fit, repeat), "s"
+        def want(*names: str) -> bool:
+            return any(selects(only, n) for n in names)
+
+        if want("mcm-fit"):
+            yield "mcm-fit", _median_time(fit, repeat), "s"
         model = fit()
-        states0, _, laps0 = model.initial_states(run, 10.0)
-        yield "mcm-predict", _median_time(lambda: model.monte_carlo(states0, 200, 7, laps0), repeat), "s"
+        if want("mcm-predict"):
+            states0, _, laps0 = model.initial_states(run, 10.0)
+            yield "mcm-predict", _median_time(
+                lambda: model.monte_carlo(states0, 200, 7, laps0), repeat), "s"
         pred = Path(tmp) / "bench-pred.h5"
-        yield "mcm-predict-file", _median_time(
-            lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat), "s"
-        yield "mcm-exact-rtd", _median_time(
-            lambda: exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
-                              model.lag), repeat), "s"
-        yield from _open_benchmarks(Path(tmp), flow, grid, particles, repeat, run, pred)
+        if want("mcm-predict-file"):
+            yield "mcm-predict-file", _median_time(
+                lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat), "s"
+        if want("mcm-exact-rtd"):
+            yield "mcm-exact-rtd", _median_time(
+                lambda: exact_rtd(model.transition_matrix, model.up_fraction,
+                                  model.down_fraction, model.lag), repeat), "s"
+        if want("mcm-fit-open", "mcm-fit-open-ratio", "mcm-predict-open",
+                "mcm-predict-open-ratio"):
+            for row in _open_benchmarks(Path(tmp), flow, grid, particles, repeat, run, pred):
+                if want(row[0]):
+                    yield row
         # beyond the paper: the automatic choice of state space (5 candidates judged by
         # their exact RTD on the window), then the chosen model's prediction
         from cfbmarkov.markov.select import select_model
@@ -94,26 +172,38 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         def choose():
             return select_model(run, window=(10.0, 15.0), columns=6, rows=38, lag=0.025)
 
-        yield "mcm-fit-auto", _median_time(choose, max(1, repeat // 2)), "s"
-        chosen = choose()
-        yield f"mcm-fit-chosen-{chosen.state_space.kind}", _median_time(
-            lambda: _refit(chosen, run), repeat), "s"
-        pred_auto = Path(tmp) / "bench-pred-auto.h5"
-        yield "mcm-predict-file-auto", _median_time(
-            lambda: chosen.predict(run, 10.0, 5.0, seed=7, output=pred_auto), repeat), "s"
+        if want("mcm-fit-auto"):
+            yield "mcm-fit-auto", _median_time(choose, max(1, repeat // 2)), "s"
+        if want("mcm-fit-chosen", "mcm-predict-file-auto"):
+            chosen = choose()
+            if want("mcm-fit-chosen"):
+                yield f"mcm-fit-chosen-{chosen.state_space.kind}", _median_time(
+                    lambda: _refit(chosen, run), repeat), "s"
+            pred_auto = Path(tmp) / "bench-pred-auto.h5"
+            if want("mcm-predict-file-auto"):
+                yield "mcm-predict-file-auto", _median_time(
+                    lambda: chosen.predict(run, 10.0, 5.0, seed=7, output=pred_auto),
+                    repeat), "s"
         # the reproductions' chosen model: with coherent moves (the cluster model)
-        fit_time = _median_time(lambda: select_model(run, window=(10.0, 15.0), columns=6,
-                                                     rows=38, lag=0.025, coherent=True),
-                                max(1, repeat // 2))
-        coherent = select_model(run, window=(10.0, 15.0), columns=6, rows=38, lag=0.025,
-                                coherent=True)
-        predict_time = _median_time(
-            lambda: coherent.predict(run, 10.0, 5.0, seed=7, output=pred_auto), repeat)
-        yield "mcm-fit-auto-coherent", fit_time, "s"
-        yield "mcm-predict-file-auto-coherent", predict_time, "s"
-        yield "mcm-fit-predict-auto-coherent", fit_time + predict_time, "s"
+        names = ("mcm-fit-auto-coherent", "mcm-predict-file-auto-coherent",
+                 "mcm-fit-predict-auto-coherent")
+        if want(*names):
+            fit_time = _median_time(lambda: select_model(run, window=(10.0, 15.0), columns=6,
+                                                         rows=38, lag=0.025, coherent=True),
+                                    max(1, repeat // 2))
+            coherent = select_model(run, window=(10.0, 15.0), columns=6, rows=38, lag=0.025,
+                                    coherent=True)
+            pred_coherent = Path(tmp) / "bench-pred-coherent.h5"
+            predict_time = _median_time(
+                lambda: coherent.predict(run, 10.0, 5.0, seed=7, output=pred_coherent), repeat)
+            for name, value in zip(names, (fit_time, predict_time, fit_time + predict_time)):
+                if want(name):
+                    yield name, value, "s"
         # the regime model (912 states) and its prediction along one common regime path
-        yield from _regime_benchmarks(run, Path(tmp), repeat)
+        if want("mcm-fit-regime", "mcm-predict-file-regime"):
+            for row in _regime_benchmarks(run, Path(tmp), repeat):
+                if want(row[0]):
+                    yield row
 
 
 def _regime_benchmarks(run: Path, tmp: Path, repeat: int) -> Iterator[tuple[str, float, str]]:
@@ -174,12 +264,13 @@ def _simulation_benchmarks(repeat: int, particles: int) -> Iterator[tuple[str, f
 
 def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: int = 27000
                    ) -> Iterator[tuple[str, float, str]]:
-    """All benchmarks, or those whose names start with one of ``only`` (``cfbmarkov bench``).
+    """All benchmarks, or those ``only`` names (``cfbmarkov bench``).
 
     Parameters
     ----------
     only : list of str, optional
-        Name prefixes to keep (e.g. ``['mcm']``, ``['dem', 'cfd-dem']``); all when None.
+        Groups (``mcm``, ``dem``, ``cfd-dem``) or figures (:data:`MCM_NAMES`,
+        :data:`SIMULATION_NAMES`) to run (:func:`selects`); all when None.
     repeat : int, optional
         Timed runs per figure (the median is reported).
     particles : int, optional
@@ -189,18 +280,16 @@ def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: in
     ------
     tuple of (str, float, str)
         (name, value, unit), one per figure; see docs/performance.md.
+
+    Raises
+    ------
+    InputError
+        For a name that is neither a group nor a figure (:func:`check_names`).
     """
-    def group_wanted(group: str) -> bool:
-        return not only or any(o.startswith(group) or group.startswith(o) for o in only)
-
-    def wanted(name: str) -> bool:
-        return not only or any(name.startswith(o) for o in only)
-
-    if group_wanted("mcm"):
-        for row in markov_benchmarks(repeat, particles):
-            if wanted(row[0]):
-                yield row
-    if group_wanted("dem") or group_wanted("cfd-dem"):
+    check_names(only)
+    if not only or any(o.startswith("mcm") for o in only):
+        yield from markov_benchmarks(repeat, particles, only=only)
+    if not only or any(not o.startswith("mcm") for o in only):
         for row in _simulation_benchmarks(repeat, particles):
-            if wanted(row[0]):
+            if selects(only, row[0]):
                 yield row

@@ -155,6 +155,9 @@ class FrameTimes:
                              f"can be counted (lag {lag:g} s)")
         k = int(round(lag / self.frame_interval))
         if k < 1 or not abs(lag - k * self.frame_interval) <= self.time_tolerance:
-            raise InputError(f"lag {lag:g} s is not a whole multiple of the frame interval "
-                             f"{time_text(self.frame_interval)} s of {self.path}")
+            interval = time_text(self.frame_interval)
+            nearest = time_text(max(k, 1) * self.frame_interval)
+            raise InputError(f"lag {lag:g} s is not a whole multiple of the frame interval of "
+                             f"{self.path}: its frames are {interval} s apart: use --lag "
+                             f"{interval} or a multiple (the nearest: {nearest})")
         return k

@@ -405,3 +405,28 @@ def test_net_downflow_counts_residences_downward(tmp_path):
     m_up = fit_model(up, grid, flow.lag, (0.0, 4.0), "mle")
     m_down = fit_model(down, grid, flow.lag, (0.0, 4.0), "mle")
     assert m_down.rtd(direction="down").mean == pytest.approx(m_up.rtd().mean, rel=1e-6)
+
+
+def test_cli_compare_bins_the_rtd_at_the_models_lag_by_default(tmp_path, make_run, write_run,
+                                                                capsys):
+    """Without --bin-width the RTD bins are the model's lag (as ``reproduce`` bins), printed
+    and stored; not a fixed 0.025 s."""
+    from cfbmarkov.markov import CellGrid, fit_model
+
+    run = make_run(n_particles=200, t1=3.0, dt=0.005, seed=5)
+    ref = write_run(tmp_path / "ref.h5", run, source="cfd-dem")
+    model = fit_model(ref, CellGrid(6, 38, 0.09, 0.95), 0.01, (0.0, 1.0))
+    pred = model.predict(ref, start=1.0, duration=2.0, seed=3, output=tmp_path / "pred.h5")
+    out = tmp_path / "cli"
+    assert main(["compare", str(ref), str(pred), "--window", "1:3", "-o", str(out),
+                 "--no-figures", "--resamples", "0"]) == 0
+    printed = capsys.readouterr().out
+    saved = json.loads((out / "summary.json").read_text())
+    assert saved["bin_width"] == pytest.approx(0.01)
+    assert saved["bin_width_from"] == "the model's lag"
+    assert "RTD bins 0.01 s wide (the model's lag" in printed
+    given = tmp_path / "given"
+    assert main(["compare", str(ref), str(pred), "--window", "1:3", "-o", str(given),
+                 "--no-figures", "--resamples", "0", "--bin-width", "0.05"]) == 0
+    assert json.loads((given / "summary.json").read_text())["bin_width"] == pytest.approx(0.05)
+    assert "RTD bins 0.05 s wide (--bin-width)" in capsys.readouterr().out

@@ -43,6 +43,7 @@ def _three_by_three(times, ids, pos):
 # -- semicolon and decimal comma -------------------------------------------------------------------
 def test_semicolon_and_decimal_comma(tmp_path, cli):
     code, out, err = cli("import", FIELD / "semicolon-decimal-comma.csv", "--format", "csv",
+                         "--width", "0.09", "--height", "0.95",
                          "-o", tmp_path / "s.h5")
     assert code == 0, err
     times, ids, pos, vel, params = _read(tmp_path / "s.h5")
@@ -62,7 +63,8 @@ def test_other_delimiters_with_either_decimal_mark(tmp_path, delimiter):
             text = text.replace(".", ",")
         source = tmp_path / f"d{comma}.csv"
         source.write_text(text)
-        times, ids, pos, _, params = _read(import_csv(source, tmp_path / f"d{comma}.h5"))
+        times, ids, pos, _, params = _read(import_csv(source, tmp_path / f"d{comma}.h5",
+                                                      width=0.09, height=0.95))
         _three_by_three(times, ids, pos)
         assert params["decimal_mark"] == ("comma" if comma else "point")
 
@@ -70,7 +72,8 @@ def test_other_delimiters_with_either_decimal_mark(tmp_path, delimiter):
 def test_decimal_comma_with_a_comma_delimiter_is_refused_by_line(tmp_path, assert_clean_failure):
     source = tmp_path / "bad.csv"
     source.write_text("t,id,x,y\n0,1,0.02,0.1\n0.025,1,0,02,0.1\n")
-    assert_clean_failure("import", source, "--format", "csv", "-o", tmp_path / "o" / "b.h5",
+    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                         "-o", tmp_path / "o" / "b.h5",
                          output=tmp_path / "o" / "b.h5", match=r"line 3: 5 values, the header "
                                                                r"names 4 columns")
 
@@ -79,7 +82,8 @@ def test_decimal_comma_with_a_comma_delimiter_is_refused_by_line(tmp_path, asser
 def test_spreadsheet_headers_need_the_vertical_axis_then_map(tmp_path, assert_clean_failure):
     source = FIELD / "spreadsheet-style-headers.csv"
     output = tmp_path / "o" / "e.h5"
-    line = assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+    line = assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                                "-o", output, output=output,
                                 match=r"has a z column \(3D positions\): say which axis is "
                                       r"vertical with --vertical-axis x\|y\|z")
     assert "nothing is guessed" in line
@@ -87,7 +91,8 @@ def test_spreadsheet_headers_need_the_vertical_axis_then_map(tmp_path, assert_cl
                          output=output, match=r"3D positions \(x across, y vertical, z depth\): "
                                               r"give the riser with --region .* or --drop-depth")
     times, ids, pos, vel, params = _read(import_file(source, "csv", tmp_path / "e.h5",
-                                                     vertical_axis="y", drop_depth=True))
+                                                     vertical_axis="y", drop_depth=True,
+                                                     width=0.09, height=0.95))
     _three_by_three(times, ids, pos)
     np.testing.assert_array_equal(vel, np.broadcast_to([0.0, 2.0], (3, 3, 2)))
     assert params["vertical_axis"] == "y" and params["across_axis"] == "x"
@@ -103,7 +108,7 @@ def test_header_units_are_honoured_and_not_contradicted(tmp_path, assert_clean_f
                       "Velocity Y (mm/s),Mass (kg)\n"
                       + "".join(f"{25 * k},{i},{20 * i},{100 + 50 * k},{1000 * i},-500,1e-6\n"
                                 for k in range(3) for i in (1, 2, 3)))
-    times, ids, pos, vel, params = _read(import_csv(source, tmp_path / "mm.h5"))
+    times, ids, pos, vel, params = _read(import_csv(source, tmp_path / "mm.h5", width=0.09, height=0.95))
     _three_by_three(times, ids, pos)
     np.testing.assert_allclose(vel[..., 0], np.tile([1.0, 2.0, 3.0], (3, 1)), rtol=0, atol=1e-15)
     np.testing.assert_allclose(vel[..., 1], -0.5, rtol=0, atol=1e-15)
@@ -111,11 +116,13 @@ def test_header_units_are_honoured_and_not_contradicted(tmp_path, assert_clean_f
     assert params["units"]["vx"] == "mm/s"
     assert params["ignored_columns"] == ["Mass (kg)"]
     output = tmp_path / "o" / "x.h5"
-    assert_clean_failure("import", source, "--format", "csv", "--length-unit", "cm", "-o", output,
+    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                         "--length-unit", "cm", "-o", output,
                          output=output, match=r"'Position X \(mm\)' is in mm but --length-unit "
                                               r"cm was given")
     source.write_text(source.read_text().replace("(mm)", "(in)", 1))
-    assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                         "-o", output, output=output,
                          match=r"'Position X \(in\)': unit 'in' is not known; --length-unit "
                                r"takes m, cm, mm")
 
@@ -124,7 +131,8 @@ def test_unknown_names_are_refused_naming_the_columns_expected(tmp_path, assert_
     source = tmp_path / "odd.csv"
     source.write_text("Zeit,Teilchen,PosX,PosY\n0,1,0.02,0.1\n")
     output = tmp_path / "o" / "x.h5"
-    assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                         "-o", output, output=output,
                          match=r"missing column 't' in the header 'Zeit,Teilchen,PosX,PosY'; "
                                r"expected t, x, y and optionally id.*'Time \(s\)'")
 
@@ -136,7 +144,8 @@ def test_vertical_axis_z_takes_heights_from_z(tmp_path):
         f"{0.025 * k},{i},{0.02 * i},0.004,{0.1 + 0.05 * k},0.5,9,-1.5\n"
         for k in range(3) for i in (1, 2, 3)))
     times, ids, pos, vel, params = _read(import_file(source, "csv", tmp_path / "z.h5",
-                                                     vertical_axis="z", drop_depth=True))
+                                                     vertical_axis="z", drop_depth=True,
+                                                     width=0.09, height=0.95))
     _three_by_three(times, ids, pos)
     np.testing.assert_array_equal(vel, np.broadcast_to([0.5, -1.5], (3, 3, 2)))
     assert (params["vertical_axis"], params["across_axis"]) == ("z", "x")
@@ -154,7 +163,7 @@ def test_vertical_axis_z_takes_heights_from_z(tmp_path):
         assert t.axes == {"across": "x", "vertical": "z", "depth": "y"}
     with pytest.raises(InputError, match=r"--vertical-axis z but the header 't;id;x;y' has no z"):
         import_file(FIELD / "semicolon-decimal-comma.csv", "csv", tmp_path / "n.h5",
-                    vertical_axis="z")
+                    vertical_axis="z", width=0.09, height=0.95)
 
 
 # -- PEPT and PTV: resampling and presence ----------------------------------------------------
@@ -169,9 +178,12 @@ def test_pept_point_data_needs_resampling_and_then_gives_the_right_track(tmp_pat
                                                      r"--vertical-axis")
     units = ("--vertical-axis", "y", "--drop-depth")
     assert_clean_failure(*base, *units, output=output,
+                         match=r"does not give the riser's size: give --width W and --height H "
+                               r".*the data span x 25..65 m, y 1.148..949.6 m")
+    assert_clean_failure(*base, *units, "--width", "0.09", "--height", "0.95", output=output,
                          match=r"particle 0 at t = 0.459185 s lies outside the domain .*'x' = "
                                r"45.1837 m.*give --length-unit cm\|mm")
-    units += ("--length-unit", "mm", "--time-unit", "ms")
+    units += ("--length-unit", "mm", "--time-unit", "ms", "--width", "0.09", "--height", "0.95")
     line = assert_clean_failure(*base, *units, output=output,
                                 match=r"frames unevenly spaced: 0.002244815 s between t = "
                                       r"0.001535799 and 0.003780614 s")
@@ -209,7 +221,7 @@ def test_pept_style_file_at_even_times_reads_right(tmp_path):
         f"{a:.6e} {b:.6e} {c:.6e} 5.000000e-01 1.2\n" for a, b, c in zip(t, x, y)))
     times, ids, pos, vel, params = _read(import_file(
         source, "csv", tmp_path / "p.h5", length_unit="mm", time_unit="ms", vertical_axis="y",
-        drop_depth=True))
+        drop_depth=True, width=0.09, height=0.95))
     np.testing.assert_array_equal(ids, [0])
     np.testing.assert_allclose(times, t / 1000, rtol=1e-6)
     np.testing.assert_allclose(pos[:, 0, 0], x / 1000, rtol=1e-6)
@@ -223,7 +235,8 @@ def test_two_rows_at_one_time_without_id(tmp_path, assert_clean_failure):
     source = tmp_path / "two.csv"
     source.write_text("t,x,y\n0,0.01,0.1\n0,0.02,0.2\n")
     output = tmp_path / "o" / "x.h5"
-    assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                         "-o", output, output=output,
                          match=r"2 rows at this time, but the file has no id column")
 
 
@@ -231,7 +244,7 @@ def test_ptv_particles_entering_and_leaving_are_present_as_in_the_file(tmp_path)
     """Particle 5 enters the view at the third frame, particle 2 leaves after the fourth."""
     source = FIELD / "ptv-enter-leave.csv"
     rows = np.loadtxt(source, delimiter=",", skiprows=1)
-    out = import_file(source, "csv", tmp_path / "v.h5")
+    out = import_file(source, "csv", tmp_path / "v.h5", width=0.09, height=0.95)
     with Trajectories(out) as t:
         ids, times, present, pos = t.ids, t.times, t.present(), t.positions()
         lines = describe(t)
@@ -261,6 +274,7 @@ def test_ptv_particles_entering_and_leaving_are_present_as_in_the_file(tmp_path)
 def test_wrong_option_values_give_one_line(tmp_path, assert_clean_failure, args, match):
     output = tmp_path / "o" / "x.h5"
     assert_clean_failure("import", FIELD / "semicolon-decimal-comma.csv", "--format", "csv",
+                         "--width", "0.09", "--height", "0.95",
                          *args, "-o", output, output=output, match=match)
 
 
@@ -270,7 +284,7 @@ def test_wrong_option_values_through_the_api(tmp_path):
                            ({"time_unit": "min"}, r"--time-unit 'min': choose s or ms"),
                            ({"vertical_axis": "w"}, r"--vertical-axis 'w': choose x, y or z")):
         with pytest.raises(InputError, match=match):
-            import_file(source, "csv", tmp_path / "x.h5", **options)
+            import_file(source, "csv", tmp_path / "x.h5", **options, width=0.09, height=0.95)
     with pytest.raises(InputError, match=r"--length-unit and --time-unit apply to CSV files only"):
         import_file(FIELD / "unwrapped-fine.dump", "lammps", tmp_path / "x.h5", length_unit="mm")
     assert not (tmp_path / "x.h5").exists()

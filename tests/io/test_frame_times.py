@@ -88,7 +88,7 @@ def test_one_frame_with_a_stored_interval_counts_lags(tmp_path):
 def test_one_frame_csv_imports_and_reads(tmp_path):
     source = tmp_path / "one.csv"
     source.write_text("t,id,x,y\n0.5,1,0.01,0.1\n0.5,2,0.02,0.2\n")
-    with Trajectories(import_csv(source, tmp_path / "one.h5")) as t:
+    with Trajectories(import_csv(source, tmp_path / "one.h5", width=0.09, height=0.95)) as t:
         assert t.n_frames == 1 and np.isnan(t.frame_interval) and t.frame_index(0.5) == 0
 
 
@@ -174,7 +174,9 @@ def test_csv_of_120_hz_printed_to_5_decimals_imports_and_fits(tmp_path, capsys, 
                             for k, t in enumerate(times) for i in range(3)]
     (tmp_path / "run.csv").write_text("\n".join(lines) + "\n")
     run = tmp_path / "run.h5"
-    code, _, err = run_cli(capsys, "import", tmp_path / "run.csv", "--format", "csv", "-o", run)
+    code, _, err = run_cli(capsys, "import", tmp_path / "run.csv", "--format", "csv",
+                           "--width", "0.09", "--height", "0.95",
+                           "-o", run)
     assert code == 0, err
     with Trajectories(run) as t:
         assert t.frame_interval == pytest.approx(1 / 120, rel=1e-7) and t.lag_frames(0.025) == 3
@@ -248,7 +250,9 @@ def test_uneven_csv_is_refused_naming_the_time(tmp_path, capsys, t0):
     lines = ["t,id,x,y"] + [f"{t:.5f},1,0.01,0.1" for t in times]
     (tmp_path / "run.csv").write_text("\n".join(lines) + "\n")
     out = tmp_path / "run.h5"
-    code, _, err = run_cli(capsys, "import", tmp_path / "run.csv", "--format", "csv", "-o", out)
+    code, _, err = run_cli(capsys, "import", tmp_path / "run.csv", "--format", "csv",
+                           "--width", "0.09", "--height", "0.95",
+                           "-o", out)
     a = f"{t0 + 49 / 120:.5f}".rstrip("0")
     assert f"frames unevenly spaced: 0.01667 s between t = {a} and" in err
     assert_one_line_exit_2(code, err, out)

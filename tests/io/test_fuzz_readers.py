@@ -59,7 +59,7 @@ def _import(tmp_path, text, fmt):
     out.unlink(missing_ok=True)
     src.write_text(text)
     try:
-        import_file(src, fmt, out)
+        import_file(src, fmt, out, **({"width": 0.09, "height": 0.95} if fmt == "csv" else {}))
     except InputError:
         assert not out.exists()
         return None

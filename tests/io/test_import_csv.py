@@ -24,7 +24,7 @@ def read_back(path):
                                      ("vy", "x", "id", "vx", "t", "y")])
 def test_round_trip_with_velocities(tmp_path, run, make_csv, save, columns):
     source = save(tmp_path / "run.csv", make_csv(run, columns))
-    out = import_file(source, "csv", tmp_path / "run.h5")
+    out = import_file(source, "csv", tmp_path / "run.h5", width=0.09, height=0.95)
     assert out == tmp_path / "run.h5"
     times, ids, pos, vel, laps, src, params, domain, interval = read_back(out)
     np.testing.assert_array_equal(ids, run.ids)
@@ -40,7 +40,7 @@ def test_round_trip_with_velocities(tmp_path, run, make_csv, save, columns):
 
 
 def test_laps_of_a_particle_crossing_top_and_bottom(tmp_path, run, make_csv, save):
-    out = import_csv(save(tmp_path / "run.csv", make_csv(run)), tmp_path / "run.h5")
+    out = import_csv(save(tmp_path / "run.csv", make_csv(run)), tmp_path / "run.h5", width=0.09, height=0.95)
     laps = read_back(out)[4][:, 0]
     steps = np.diff(laps)
     assert (steps == 1).sum() == 1 and (steps == -1).sum() == 2
@@ -51,7 +51,7 @@ def test_laps_of_a_particle_crossing_top_and_bottom(tmp_path, run, make_csv, sav
 
 def test_round_trip_without_velocities_and_sorted_rows(tmp_path, run, make_csv, save):
     text = make_csv(run, ("t", "id", "x", "y"), shuffle=False)
-    out = import_csv(save(tmp_path / "run.csv", text), tmp_path / "run.h5")
+    out = import_csv(save(tmp_path / "run.csv", text), tmp_path / "run.h5", width=0.09, height=0.95)
     times, ids, pos, vel, laps, *_ = read_back(out)
     np.testing.assert_array_equal(times, run.times)
     np.testing.assert_array_equal(ids, run.ids)
@@ -63,7 +63,7 @@ def test_round_trip_without_velocities_and_sorted_rows(tmp_path, run, make_csv, 
 @pytest.mark.parametrize("name", ["run.csv.gz", "run.csv"])
 def test_gzip_detected_by_magic_bytes(tmp_path, run, make_csv, save, name):
     source = save(tmp_path / name, make_csv(run), gz=True)
-    out = import_csv(source, tmp_path / "run.h5")
+    out = import_csv(source, tmp_path / "run.h5", width=0.09, height=0.95)
     np.testing.assert_array_equal(read_back(out)[2], run.positions)
 
 
@@ -81,7 +81,7 @@ def test_windows_line_ends_spaces_and_comments(tmp_path):
             "\r\n0.1, 1, 0.03, 0.7\r\n0.1, 2, 0.04, 0.7\r\n")
     source = tmp_path / "hand.csv"
     source.write_bytes(text.encode())
-    times, ids, pos, *_ = read_back(import_csv(source, tmp_path / "hand.h5"))
+    times, ids, pos, *_ = read_back(import_csv(source, tmp_path / "hand.h5", width=0.09, height=0.95))
     np.testing.assert_array_equal(ids, [1, 2])
     np.testing.assert_array_equal(times, [0.0, 0.1])
     np.testing.assert_array_equal(pos, [[[0.02, 0.6], [0.01, 0.5]], [[0.03, 0.7], [0.04, 0.7]]])
@@ -103,7 +103,7 @@ def test_rows_in_any_order_are_sorted_by_time_then_id(tmp_path, make_run, make_c
         frames = [rows[k:k + 5] for k in range(0, len(rows), 5)]
         rows = [r for k in (0, 1, 2, 3, 7, 4, 11, 5, 6, 8, 10, 9) for r in frames[k]]
     out = import_csv(save(tmp_path / "run.csv", "\n".join([header, *rows]) + "\n"),
-                     tmp_path / "run.h5")
+                     tmp_path / "run.h5", width=0.09, height=0.95)
     times, ids, pos, vel, laps, _, params, *_ = read_back(out)
     np.testing.assert_array_equal(times, run.times)
     np.testing.assert_array_equal(ids, run.ids)
@@ -118,7 +118,7 @@ def test_frames_spanning_read_blocks(tmp_path, make_run, make_csv, save, monkeyp
 
     monkeypatch.setattr(csv_rows, "CHUNK_CHARS", 300)  # a few rows per block
     run = make_run(n_particles=7, n_frames=9)
-    out = import_csv(save(tmp_path / "run.csv", make_csv(run)), tmp_path / "run.h5")
+    out = import_csv(save(tmp_path / "run.csv", make_csv(run)), tmp_path / "run.h5", width=0.09, height=0.95)
     times, ids, pos, vel, laps, *_ = read_back(out)
     np.testing.assert_array_equal(times, run.times)
     np.testing.assert_array_equal(pos, run.positions)
@@ -130,7 +130,8 @@ def test_frames_spanning_read_blocks(tmp_path, make_run, make_csv, save, monkeyp
 
 def test_cli_import_prints_the_output(tmp_path, run, make_csv, save, cli):
     source = save(tmp_path / "run.csv", make_csv(run))
-    code, out, err = cli("import", source, "--format", "csv", "-o", tmp_path / "o" / "run.h5")
+    code, out, err = cli("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                         "-o", tmp_path / "o" / "run.h5")
     assert code == 0, err
     assert out.strip() == str(tmp_path / "o" / "run.h5")
     assert err == ""
@@ -184,8 +185,6 @@ BAD_CSV = {
                       r"frames unevenly spaced: 0.035 s between t = 0.025 and 0.06 s"),
     "duplicate-id": (table(changed(1, 0, id=2)), r"particle id 2 appears more than once"),
     "duplicate-id-first-frame": (table(changed(0, 2, id=2)), r"id 2 appears more than once"),
-    "outside-width": (table(changed(1, 1, x=0.1)),
-                      r"particle 1 at t = 0.025 s lies outside the domain 0..0.09 x 0..0.95 m"),
     "outside-height": (table(changed(2, 2, y=-0.01)), r"particle 3 at t = 0.05 s lies outside"),
     "empty-file": ("", r"empty file"),
     "blank-file": ("\n \n", r"empty file \(no header line\)"),
@@ -213,7 +212,7 @@ def test_bad_csv_raises_input_error(tmp_path, case):
     source = write_case(tmp_path, content)
     output = tmp_path / "out" / "run.h5"
     with pytest.raises(InputError, match=match):
-        import_csv(source, output)
+        import_csv(source, output, width=0.09, height=0.95)
     assert not output.exists() and not output.parent.exists()
 
 
@@ -222,7 +221,8 @@ def test_bad_csv_through_cli(tmp_path, assert_clean_failure, case):
     content, match = BAD_CSV[case]
     source = write_case(tmp_path, content)
     output = tmp_path / "out" / "run.h5"
-    line = assert_clean_failure("import", source, "--format", "csv", "-o", output, output=output,
+    line = assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                                "-o", output, output=output,
                                 match=match)
     assert line.startswith("cfbmarkov import: error: ")
 
@@ -230,15 +230,17 @@ def test_bad_csv_through_cli(tmp_path, assert_clean_failure, case):
 def test_missing_input_file(tmp_path, assert_clean_failure):
     output = tmp_path / "out" / "run.h5"
     with pytest.raises(InputError, match=r"nowhere.csv: no such file"):
-        import_file(tmp_path / "nowhere.csv", "csv", output)
-    assert_clean_failure("import", tmp_path / "nowhere.csv", "--format", "csv", "-o", output,
+        import_file(tmp_path / "nowhere.csv", "csv", output, width=0.09, height=0.95)
+    assert_clean_failure("import", tmp_path / "nowhere.csv", "--format", "csv",
+                         "--width", "0.09", "--height", "0.95",
+                         "-o", output,
                          output=output, match=r"no such file")
 
 
 def test_options_that_do_not_apply(tmp_path, run, make_csv, save):
     source = save(tmp_path / "run.csv", make_csv(run))
     with pytest.raises(InputError, match=r"--time-step applies to LAMMPS dumps only"):
-        import_file(source, "csv", tmp_path / "run.h5", time_step=1e-5)
+        import_file(source, "csv", tmp_path / "run.h5", time_step=1e-5, width=0.09, height=0.95)
     with pytest.raises(InputError, match=r"unknown import format 'xyz'"):
         import_file(source, "xyz", tmp_path / "run.h5")
     with pytest.raises(InputError, match=r"the content is text .*not vtk; .*--format csv"):
@@ -246,27 +248,28 @@ def test_options_that_do_not_apply(tmp_path, run, make_csv, save):
     with pytest.raises(InputError, match=r"width -1 must be a positive number"):
         import_file(source, "csv", tmp_path / "run.h5", width=-1)
     with pytest.raises(InputError, match=r"is a folder"):
-        import_file(source, "csv", tmp_path)
+        import_file(source, "csv", tmp_path, width=0.09, height=0.95)
     with pytest.raises(InputError, match=r"would overwrite the input"):
-        import_file(source, "csv", source)
+        import_file(source, "csv", source, width=0.09, height=0.95)
     with pytest.raises(InputError, match=r"cannot write"):
-        import_file(source, "csv", source / "run.h5")
+        import_file(source, "csv", source / "run.h5", width=0.09, height=0.95)
     assert not (tmp_path / "run.h5").exists()
 
 
 def test_domain_too_small_for_the_data(tmp_path, run, make_csv, save, assert_clean_failure):
     source = save(tmp_path / "run.csv", make_csv(run))
     output = tmp_path / "out" / "run.h5"
-    assert_clean_failure("import", source, "--format", "csv", "-o", output, "--height", "0.5",
+    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                         "-o", output, "--height", "0.5",
                          output=output, match=r"lies outside the domain 0..0.09 x 0..0.5 m")
 
 
 def test_failed_import_keeps_an_existing_output(tmp_path, run, make_csv, save):
     output = tmp_path / "run.h5"
-    import_csv(save(tmp_path / "good.csv", make_csv(run)), output)
+    import_csv(save(tmp_path / "good.csv", make_csv(run)), output, width=0.09, height=0.95)
     before = output.read_bytes()
     with pytest.raises(InputError):
-        import_csv(write_case(tmp_path, BAD_CSV["duplicate-id"][0]), output)
+        import_csv(write_case(tmp_path, BAD_CSV["duplicate-id"][0]), output, width=0.09, height=0.95)
     assert output.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.csv", "good.csv", "run.h5"]
 
@@ -275,9 +278,36 @@ def test_progress_bar_only_on_a_terminal(tmp_path, run, make_csv, save, capsys, 
     import sys
 
     source = save(tmp_path / "run.csv", make_csv(run))
-    import_csv(source, tmp_path / "a.h5")
+    import_csv(source, tmp_path / "a.h5", width=0.09, height=0.95)
     assert capsys.readouterr().err == ""
     monkeypatch.setattr(sys.stderr, "isatty", lambda: True)
-    import_csv(source, tmp_path / "b.h5")  # short: the bar waits a second before it shows
+    import_csv(source, tmp_path / "b.h5", width=0.09, height=0.95)
+               # short: the bar waits a second before it shows
     assert capsys.readouterr().err == ""
     np.testing.assert_array_equal(read_back(tmp_path / "b.h5")[2], run.positions)
+
+
+# -- the riser's size ------------------------------------------------------------------------
+def test_a_csv_without_the_risers_size_is_refused_naming_the_datas_extent(tmp_path, make_run,
+                                                                          make_csv, save, cli):
+    """A CSV file does not give the riser's size: without --width/--height (or --region) the
+    import is refused (exit 2, one line naming the data's extent and the options), not read
+    as the paper's 0.09 x 0.95 m riser; with them it imports in the given riser."""
+    run = make_run(width=0.04, height=0.3)
+    source = save(tmp_path / "small.csv", make_csv(run))
+    output = tmp_path / "small.h5"
+    code, out, err = cli("import", source, "--format", "csv", "-o", output)
+    assert code == 2 and out == ""
+    assert err.count("\n") == 1 and "Traceback" not in err
+    assert "--width" in err and "--height" in err and "--region" in err
+    lo, hi = run.positions[..., 1].min(), run.positions[..., 1].max()
+    assert f"y {lo:.4g}..{hi:.4g} m" in err
+    assert not output.exists()
+    with pytest.raises(InputError, match="riser's size"):
+        import_csv(source, output, width=0.04)
+    code, out, err = cli("import", source, "--format", "csv", "-o", output, "--width", "0.04",
+                         "--height", "0.3")
+    assert code == 0, err
+    with Trajectories(output) as t:
+        assert (t.width, t.height) == (0.04, 0.3)
+        np.testing.assert_array_equal(t.laps(), run.laps)

@@ -28,7 +28,7 @@ def test_positions_on_decimal_edges_land_in_the_cell_above(columns, rows, width,
     edge = 29 * 0.01
     assert cell_index(np.array([[0.005, 0.29]]), 0.09, 0.95, 9, 95)[0] // 9 == 29
     assert cell_index(np.array([[0.005, edge - 1e-8]]), 0.09, 0.95, 9, 95)[0] // 9 == 28
-    assert CellGrid(9, 95).discretize(np.array([[0.005, 0.57], [0.005, 0.58]])).tolist() \
+    assert CellGrid(9, 95, 0.09, 0.95).discretize(np.array([[0.005, 0.57], [0.005, 0.58]])).tolist() \
         == [57 * 9, 58 * 9]
 
 

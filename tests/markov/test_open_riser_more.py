@@ -109,7 +109,8 @@ def test_one_long_pept_like_tracer_gives_the_model_of_many_particles(tmp_path):
     source = tmp_path / "pept.csv"
     source.write_text("# t x y z error\n" + rows)
     tracer = import_file(source, "csv", tmp_path / "tracer.h5", length_unit="mm", time_unit="ms",
-                         vertical_axis="y", drop_depth=True, resample=flow.lag, max_gap=0.06)
+                         vertical_axis="y", drop_depth=True, resample=flow.lag, max_gap=0.06,
+                         width=0.09, height=0.95)
     with Trajectories(tracer) as t:
         present = t.present()[:, 0]
         assert not present[(t.times > 100.05) & (t.times < 101.95)].any()

@@ -24,7 +24,7 @@ import numpy as np
 
 from cfbmarkov.analysis.baseline import (WindowDifference, fitting_window,
                                          model_on_fitting_window, window_difference)
-from cfbmarkov.analysis.compare_inputs import check_parameters, check_runs
+from cfbmarkov.analysis.compare_inputs import check_parameters, check_runs, default_bin_width
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.errors import InputError
@@ -107,6 +107,9 @@ class RunComparison:
         RTD bin width, s.
     md_order : float
         Order k of the Minkowski distance.
+    bin_width_from : str
+        Where the bin width comes from: ``given``, ``the model's lag``, or a file's frame
+        interval (:func:`~cfbmarkov.analysis.compare_inputs.default_bin_width`).
     edges : numpy.ndarray, shape (B + 1,)
         RTD bin edges, s, from 0 to the window length.
     reference, model : ComparedRun
@@ -177,6 +180,7 @@ class RunComparison:
     intervals: Any = None
     direction: str = "up"
     cluster: dict | None = None
+    bin_width_from: str = "given"
 
     @property
     def pd_rt_mean(self) -> float:
@@ -220,6 +224,7 @@ class RunComparison:
             "md_order": float(self.md_order),
             "mixing_rms": self.mixing_rms,
             "bin_width": float(self.bin_width),
+            "bin_width_from": self.bin_width_from,
             "rtd_bins": {"from": 0.0, "to": float(self.edges[-1]),
                          "count": int(self.edges.size - 1)},
             "exact_events": {"reference": ref.exact, "model": mod.exact},
@@ -253,7 +258,7 @@ class RunComparison:
 BASES = ("frames", "events")
 
 
-def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: float = 0.025,
+def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: float | None = None,
                  md_order: float = 2.0, basis: str = "frames",
                  long_run_span: tuple[float, float] | None = None) -> RunComparison:
     """Compare a model's trajectories with a reference over a window.
@@ -266,7 +271,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     window : (float, float)
         Analysis window (start, stop), s.
     bin_width : float, optional
-        RTD bin width, s (bins from 0 to the window length).
+        RTD bin width, s (bins from 0 to the window length); default the model's lag, as
+        ``reproduce`` bins (:func:`~cfbmarkov.analysis.compare_inputs.default_bin_width`).
     md_order : float, optional
         Order k > 0 of the Minkowski distance (``inf``: largest difference).
     basis : {"frames", "events"}, optional
@@ -298,6 +304,10 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     The paper: Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614.
     """
     start, stop = check_parameters(window, bin_width, md_order)
+    bin_width_from = "given"
+    if bin_width is None:
+        bin_width, bin_width_from = default_bin_width(ref, pred)
+        check_parameters((start, stop), bin_width, md_order)
     ref_frames, pred_frames, columns = check_runs(ref, pred, start, stop)
     warnings: list[str] = []
     on = _residence_basis(ref, pred, (start, stop), basis, warnings)
@@ -315,8 +325,10 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
                          "inside the window): compare over a longer window")
     edges, reference = _compared_run(ref, ref_frames, rt_ref, (start, stop), bin_width)
     _, model = _compared_run(pred, pred_frames, rt_mod, (start, stop), bin_width)
-    return _assemble(reference, model, edges, (start, stop), bin_width, md_order, columns,
-                     warnings, on, beside)
+    comparison = _assemble(reference, model, edges, (start, stop), bin_width, md_order,
+                           columns, warnings, on, beside)
+    comparison.bin_width_from = bin_width_from
+    return comparison
 
 
 @dataclass(frozen=True)

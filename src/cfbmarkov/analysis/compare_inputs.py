@@ -45,15 +45,15 @@ def check_window(window) -> tuple[float, float]:
     return start, stop
 
 
-def check_parameters(window, bin_width: float, md_order: float) -> tuple[float, float]:
+def check_parameters(window, bin_width: float | None, md_order: float) -> tuple[float, float]:
     """Check the parameters of a comparison.
 
     Parameters
     ----------
     window : sequence of two numbers
         Analysis window (start, stop), s.
-    bin_width : float
-        RTD bin width, s.
+    bin_width : float or None
+        RTD bin width, s; None (taken from the files, :func:`default_bin_width`) passes.
     md_order : float
         Order k of the Minkowski distance (Eq. 9).
 
@@ -69,14 +69,50 @@ def check_parameters(window, bin_width: float, md_order: float) -> tuple[float, 
         and positive, or a Minkowski order that is not positive.
     """
     start, stop = check_window(window)
+    if not md_order > 0:
+        raise InputError(f"Minkowski order {md_order:g} must be positive")
+    if bin_width is None:
+        return start, stop
     if not (math.isfinite(bin_width) and bin_width > 0):
         raise InputError(f"RTD bin width {bin_width:g} s must be positive")
     if (stop - start) / bin_width > MAX_BINS:
         raise InputError(f"RTD bin width {bin_width:g} s makes {(stop - start) / bin_width:.3g} "
                          f"bins over the window, more than {MAX_BINS}; give a larger --bin-width")
-    if not md_order > 0:
-        raise InputError(f"Minkowski order {md_order:g} must be positive")
     return start, stop
+
+
+def default_bin_width(ref: Trajectories, pred: Trajectories) -> tuple[float, str]:
+    """The RTD bin width of a comparison given none: the model's lag, as ``reproduce`` bins.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and model files.
+
+    Returns
+    -------
+    (float, str)
+        The bin width (s) and where it comes from: the ``lag`` of the model attached to the
+        prediction (``/provenance/model``), else the reference's frame interval, else the
+        prediction's.
+
+    Raises
+    ------
+    InputError
+        When neither file has a frame interval (single frames) nor the prediction a model.
+    """
+    group = pred.group("model")
+    if group is not None and "lag" in group.attrs:
+        lag = float(np.asarray(group.attrs["lag"]))
+        if math.isfinite(lag) and lag > 0:
+            return lag, "the model's lag"
+    for traj, what in ((ref, "the reference's frame interval"),
+                       (pred, "the prediction's frame interval")):
+        interval = float(traj.frame_interval)
+        if math.isfinite(interval) and interval > 0:
+            return interval, what
+    raise InputError(f"neither {ref.path} nor {pred.path} has frames at a known interval: give "
+                     "--bin-width (s)")
 
 
 def model_columns(traj: Trajectories) -> int | None:
@@ -175,4 +211,4 @@ def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred:
                          "needs the same tracers on both sides")
 
 
-__all__ = ["check_parameters", "check_runs", "check_window", "model_columns"]
+__all__ = ["check_parameters", "check_runs", "check_window", "default_bin_width", "model_columns"]

@@ -23,19 +23,40 @@ def cmd_compare(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
+    import time
+
     from cfbmarkov.observed.metrics import percentage_text as pd_text
     from cfbmarkov.report.compare import compare
 
+    started = time.perf_counter()
+    if not args.quiet:
+        from cfbmarkov.analysis.compare_inputs import check_runs
+        from cfbmarkov.trajectories import Trajectories
+
+        a, b = args.window
+        with Trajectories(args.reference) as ref, Trajectories(args.prediction) as pred:
+            check_runs(ref, pred, a, b)     # a refusal stays one line, before any progress
+        print(f"compare: {args.prediction} against {args.reference} over {a:g}-{b:g} s "
+              f"(residence times, baselines, mixing"
+              + (f", {args.resamples} bootstrap resamples for the intervals"
+                 if args.resamples else "") + (", figures" if not args.no_figures else "")
+              + ")", file=sys.stderr, flush=True)
     summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
                       bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
                       basis=args.basis, level=args.level, resamples=args.resamples,
                       long_run_span=args.long_run_span)
+    if not args.quiet:
+        print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
+              flush=True)
     for line in summary.get("warnings", []):
         print(f"warning: {line.strip()}", file=sys.stderr)
     print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
           f"mixing RMS {summary['mixing_rms']:.4g}")
+    source = summary.get("bin_width_from", "given")
+    print(f"  RTD bins {summary['bin_width']:g} s wide"
+          + (" (--bin-width)" if source == "given" else f" ({source}; --bin-width to change)"))
     model = summary["model"]
     if "rt_mean_interval" in model:
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
@@ -184,9 +205,12 @@ def add_compare(sub) -> None:
     s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
     s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
     s.add_argument("-o", "--output", required=True, help="output directory")
-    s.add_argument("--bin-width", type=positive_float, default=0.025, help="RTD bin width, s")
+    s.add_argument("--bin-width", type=positive_float, default=None,
+                   help="RTD bin width, s (default: the lag of the model behind the prediction, "
+                        "else the reference's frame interval; printed)")
     s.add_argument("--md-order", type=minkowski_order, default=2.0,
-                   help="Minkowski order k > 0 (inf: the largest difference)")
+                   help="Minkowski order k > 0 of the MD (Eq. 9; inf: the largest difference; "
+                        "default 2)")
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
     s.add_argument("--level", type=level, default=0.9,
                    help="coverage of the prediction's intervals (default 0.9)")
@@ -196,11 +220,13 @@ def add_compare(sub) -> None:
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
                    help="residence times of both sides from frames at the model's lag (like "
                         "for like, the default; the reference's exact-event figures are shown "
-                        "beside), or the reference's exact pass events")
+                        "beside), or the reference's exact pass events (default frames)")
     s.add_argument("--long-run-span", type=parse_window, default=None,
                    help="START:STOP, s: also give the reference's RTD pooled over this span's "
                         "other whole windows (what a perfect stationary model would predict; "
-                        "e.g. 5:20)")
+                        "e.g. 5:20; default none)")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress lines on stderr")
     s.set_defaults(func=cmd_compare)
 
 
@@ -227,8 +253,8 @@ def add_stationarity(sub) -> None:
                    help="frames every LAG s (a model's lag; default every frame); also the "
                         "RTD bins of the MD")
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
-                   help="residence times from frames (every --lag, the default) or from the "
-                        "file's exact pass events (as in compare)")
+                   help="residence times from frames (every --lag) or from the file's exact "
+                        "pass events (as in compare); default frames")
     s.add_argument("--judge", type=parse_window, default=None,
                    help="START:STOP, s: also compare this window with the run's long run "
                         "(the span's other whole windows of its length, pooled) and with the "
@@ -246,7 +272,7 @@ def add_maps(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("maps", help="batch-injection probability maps (Eq. 8, Fig. 4-7)")
-    s.add_argument("model")
+    s.add_argument("model", help="model file (.h5, from cfbmarkov fit)")
     s.add_argument("--times", type=parse_times, default=[0.05, 0.1, 0.15],
                    help="comma-separated times after injection, s (default 0.05,0.1,0.15)")
     s.add_argument("--outflow", action="store_true",

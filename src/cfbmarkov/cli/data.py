@@ -89,14 +89,16 @@ def add_import(sub) -> None:
     s.add_argument("--format", default="auto",
                    choices=["auto", "csv", "lammps", "vtk", "vtp", "pvd", "h5md"],
                    help="the source's format (default auto: told from the content, and said "
-                        "so on stderr)")
+                        "so on stderr); csv: docs/how-to/csv.md, lammps: LAMMPS/LIGGGHTS text "
+                        "dumps, vtk/vtp/pvd/h5md: docs/how-to/particle-files.md")
     s.add_argument("-o", "--output", required=True, help="output trajectory file (.h5)")
     s.add_argument("--width", type=positive_float, default=None,
                    help="riser width W, m: the riser is 0..W across in the source's own "
-                        "coordinates (default: the dump's box, else 0.09)")
+                        "coordinates (default: the dump's box; a CSV file needs it, or "
+                        "--region)")
     s.add_argument("--height", type=positive_float, default=None,
                    help="riser height H, m: 0..H vertically in the source's coordinates "
-                        "(default: the dump's box, else 0.95)")
+                        "(default: the dump's box; a CSV file needs it, or --region)")
     s.add_argument("--time-step", type=positive_float, default=None,
                    help="simulation time step, s, for LAMMPS dumps without ITEM: TIME and "
                         "legacy VTK files without a TIME array (dated by the step in their "
@@ -140,7 +142,7 @@ def add_export_vtk(sub) -> None:
     s.add_argument("--start", type=finite_float, default=None, help="first time, s")
     s.add_argument("--stop", type=finite_float, default=None, help="last time, s")
     s.add_argument("--every", type=count(1, 2 ** 31 - 1), default=1,
-                   help="export every k-th frame")
+                   help="export every k-th frame (default 1)")
     s.add_argument("--no-fields", action="store_true", help="particles only")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_export_vtk)

@@ -38,6 +38,10 @@ def cmd_fit(args) -> int:
         if args.states == "auto" and depth_columns is not None:
             raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
         if args.states == "auto":
+            if not args.quiet:
+                print(f"fit: judging the candidate state spaces on {args.run}, "
+                      f"{args.window[0]:g}-{args.window[1]:g} s (each fitted and its RTD "
+                      "compared with the window's)", file=sys.stderr, flush=True)
             model = select_model(run, window=args.window, columns=columns, rows=rows,
                                  lag=args.lag, estimator=args.estimator,
                                  coherent=args.coherent)
@@ -185,6 +189,8 @@ def add_fit(sub) -> None:
                         "show the window's cluster index), so that predictions keep clusters; "
                         "the RTD and maps are unchanged (periodic risers)")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress lines on stderr")
     s.set_defaults(func=cmd_fit)
 
 
@@ -197,7 +203,7 @@ def add_predict(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("predict", help="Monte Carlo prediction from a run's state at a start time")
-    s.add_argument("model")
+    s.add_argument("model", help="model file (.h5, from cfbmarkov fit)")
     s.add_argument("--init", required=True, help="trajectory file giving the initial state")
     s.add_argument("--start", type=finite_float, required=True, help="initial frame time, s")
     s.add_argument("--duration", type=positive_float, required=True, help="simulated time, s")
@@ -216,9 +222,10 @@ def add_rtd(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("rtd", help="exact residence-time distribution of a model")
-    s.add_argument("model")
+    s.add_argument("model", help="model file (.h5, from cfbmarkov fit)")
     s.add_argument("--window-length", type=positive_float, default=None,
-                   help="observation window, s: the RTD as seen in such a window")
+                   help="observation window, s: the RTD as seen in such a window (default "
+                        "none: the chain's intrinsic RTD)")
     s.set_defaults(func=cmd_rtd)
 
 
@@ -231,5 +238,5 @@ def add_info(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("info", help="describe a trajectory or model file")
-    s.add_argument("file")
+    s.add_argument("file", help="trajectory file or model file (.h5)")
     s.set_defaults(func=cmd_info)

@@ -69,11 +69,23 @@ def cmd_bench(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
-    from cfbmarkov.bench import run_benchmarks
+    import sys
+    import time
 
+    from cfbmarkov.bench import check_names, run_benchmarks
+
+    check_names(args.only)
+    started = time.perf_counter()
+    if not args.quiet:
+        print(f"bench: {', '.join(args.only) if args.only else 'all figures'}, "
+              f"{args.particles} particles, median of {args.repeat}; each figure is printed "
+              "when measured", file=sys.stderr, flush=True)
     for name, value, unit in run_benchmarks(only=args.only, repeat=args.repeat,
                                             particles=args.particles):
         print(f"{name}: {value:.4g} {unit}", flush=True)
+        if not args.quiet:
+            print(f"bench: {name} done, {time.perf_counter() - started:.0f} s so far",
+                  file=sys.stderr, flush=True)
     return 0
 
 
@@ -118,15 +130,16 @@ def add_demo(sub) -> None:
     """
     s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
                        "(about 4 min on 2 quiet cores), ending with the path of its report")
-    s.add_argument("-o", "--output", default="cfbmarkov-demo", help="output directory")
+    s.add_argument("-o", "--output", default="cfbmarkov-demo",
+                   help="output directory (default cfbmarkov-demo)")
     s.add_argument("--jobs", type=count(1, MAX_JOBS), default=None,
                    help="local worker processes")
     s.add_argument("--synthetic", action="store_true",
                    help="instead, the Markov part alone on synthetic core-annulus trajectories "
                         "(30 s)")
     s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=6000,
-                   help="with --synthetic: particles")
-    s.add_argument("--seed", type=seed, default=1, help="with --synthetic: seed")
+                   help="with --synthetic: particles (default 6000)")
+    s.add_argument("--seed", type=seed, default=1, help="with --synthetic: seed (default 1)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=cmd_demo)
 
@@ -139,9 +152,18 @@ def add_bench(sub) -> None:
     sub : argparse._SubParsersAction
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
+    from cfbmarkov.bench import GROUPS, MCM_NAMES, SIMULATION_NAMES
+
     s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
-    s.add_argument("--only", action="append", default=None, help="run only this benchmark")
+    s.add_argument("--only", action="append", default=None, metavar="NAME",
+                   help="run only this group or figure (repeatable; default all): groups "
+                        f"{', '.join(GROUPS)}; figures {', '.join(MCM_NAMES)}, "
+                        f"{', '.join(SIMULATION_NAMES)} (a DEM figure brings its LAMMPS lines)"
+                        .replace("%", "%%"))
     s.add_argument("--repeat", type=count(1, 1000), default=5,
-                   help="repetitions (median reported)")
-    s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=27000)
+                   help="repetitions (median reported; default 5)")
+    s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=27000,
+                   help="particles of the benchmarks' problems (default 27000, the paper's)")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress lines on stderr (the figures still go to stdout)")
     s.set_defaults(func=cmd_bench)

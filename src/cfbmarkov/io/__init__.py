@@ -75,8 +75,8 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
     output : str or os.PathLike
         The trajectory file (HDF5) to write.
     width, height : float, optional
-        The domain, m (CSV default: the paper's 0.09 x 0.95 m riser; LAMMPS default: the
-        dump's box).
+        The domain, m (LAMMPS default: the dump's box; a CSV file needs both, or ``region``,
+        and is refused without them, the message naming the data's extent).
     time_step : float, optional
         Simulation time step, s, that dates LAMMPS frames carrying no ``ITEM: TIME`` and
         legacy VTK files carrying no ``TIME`` array (by the step in their name); a CSV

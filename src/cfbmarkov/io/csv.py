@@ -84,8 +84,6 @@ from cfbmarkov.io._common import (
 )
 from cfbmarkov.io.csv_layout import (
     AXES,
-    DEFAULT_HEIGHT,
-    DEFAULT_WIDTH,
     LENGTH_UNITS,
     TIME_UNITS,
     _DELIMITERS,
@@ -120,7 +118,8 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
         The trajectory file (HDF5) to write; it appears only when complete.
     width, height : float, optional
         Riser width W and height H, m (whatever the file's unit); the riser is 0..W across
-        and 0..H vertically. By default the paper's 0.09 x 0.95 m riser.
+        and 0..H vertically. A CSV file does not give the riser's size: give both, or
+        ``region``; without them the import is refused with the data's extent.
     length_unit : {"m", "cm", "mm"}, optional
         Unit of positions (and, over ``time_unit``, velocities) in columns whose header
         gives none; default m.
@@ -151,8 +150,9 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
     ------
     InputError
         On bad input (a malformed header or row, an unknown unit, a z column without
-        ``vertical_axis``, unevenly spaced frames without ``resample``, a position outside
-        the default riser, a region that holds no particle, ...); no file is left behind.
+        ``vertical_axis``, unevenly spaced frames without ``resample``, neither the riser's
+        size nor a region (the message names the data's extent), a region that holds no
+        particle, ...); no file is left behind.
     """
     path = check_source(source)
     output = check_output(output, path)
@@ -172,6 +172,9 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
             try:
                 with open_text(path) as fh:
                     layout = read_layout(fh, label, **options)
+                    if _unsized(layout, geometry):
+                        _refuse_unsized(row_blocks(fh, layout, label, streaming=False),
+                                        layout, label)
                     riser = csv_riser(layout, label, **geometry)
                     blocks = row_blocks(fh, layout, label, streaming=True)
                     _write(output, path, layout, riser, blocks, "as written")
@@ -180,8 +183,10 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
                 pass
         with open_text(path) as fh:     # read whole: rows out of time order, or resampling
             layout = read_layout(fh, label, **options)
-            riser = csv_riser(layout, label, **geometry)
             rows = list(row_blocks(fh, layout, label, streaming=False))
+            if _unsized(layout, geometry):
+                _refuse_unsized(rows, layout, label)
+            riser = csv_riser(layout, label, **geometry)
         rows = np.concatenate(rows) if rows else np.empty((0, len(layout.used)))
         if resample is not None:
             _write_resampled(output, path, layout, riser, rows, resample, max_gap)
@@ -215,10 +220,32 @@ def check_units(length_unit: str | None, time_unit: str | None) -> None:
         raise InputError(f"--time-unit {time_unit!r}: choose s or ms")
 
 
+def _unsized(layout: CsvLayout, geometry: dict) -> bool:
+    """Whether a 2D CSV import has neither the riser's width and height nor a region."""
+    return (geometry["region"] is None and layout.depth is None
+            and (geometry["width"] is None or geometry["height"] is None))
+
+
+def _refuse_unsized(blocks, layout: CsvLayout, label: str) -> None:
+    """Refuse a CSV import without the riser's size, naming the data's extent (m)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    for rows in blocks:
+        raw = _source_positions(rows, layout)
+        lo = np.fmin(lo, np.where(np.isfinite(raw), raw, np.inf).min(axis=0, initial=np.inf))
+        hi = np.fmax(hi, np.where(np.isfinite(raw), raw, -np.inf).max(axis=0, initial=-np.inf))
+    spans = [f"{axis} {lo[AXES.index(axis)]:.4g}..{hi[AXES.index(axis)]:.4g} m"
+             for axis in (layout.across, layout.vertical)
+             if np.isfinite(lo[AXES.index(axis)])]
+    extent = f"; the data span {', '.join(spans)}" if spans else ""
+    raise InputError(f"{label}: a CSV file does not give the riser's size: give --width W and "
+                     f"--height H (m; the riser is 0..W across, {layout.across}, and 0..H "
+                     f"vertically, {layout.vertical}) or --region{extent}")
+
+
 def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: float | None,
               region, boundary: Boundary) -> RiserFrame:
     """The riser of a CSV file: axes from the layout; region from ``region`` (in the file's
-    length unit, converted to m), else 0..W x 0..H (the paper's riser by default).
+    length unit, converted to m), else 0..W x 0..H.
 
     Parameters
     ----------
@@ -236,13 +263,13 @@ def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: flo
     Returns
     -------
     RiserFrame
-        ``from_box`` is True where the region is the default riser (nothing given): a
-        position outside it is then refused instead of absent (a unit may be wrong).
+        ``from_box`` is False: a position outside the given riser is absent.
 
     Raises
     ------
     InputError
-        For 3D positions without a region, or a region without the riser's axes.
+        For 3D positions without a region, a region without the riser's axes, or 2D
+        positions with neither a region nor both ``width`` and ``height``.
     """
     axes = [AXES.index(layout.across), AXES.index(layout.vertical)]
     if layout.depth is not None:
@@ -259,10 +286,12 @@ def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: flo
         raise InputError(f"{label}: 3D positions ({layout.across} across, {layout.vertical} "
                          f"vertical, {layout.depth} depth): give the riser with --region "
                          "XMIN:XMAX,YMIN:YMAX,ZMIN:ZMAX in the file's units, or --drop-depth")
+    elif width is None or height is None:
+        raise InputError(f"{label}: a CSV file does not give the riser's size: give --width W "
+                         "and --height H (m) or --region")
     else:
-        bounds = np.array([(0.0, DEFAULT_WIDTH if width is None else float(width)),
-                           (0.0, DEFAULT_HEIGHT if height is None else float(height))])
-        given = width is not None or height is not None
+        bounds = np.array([(0.0, float(width)), (0.0, float(height))])
+        given = True
     periodic = (False, not boundary.is_open) + ((False,) if len(axes) == 3 else ())
     return RiserFrame(tuple(axes), bounds, not given, periodic, boundary)
 

@@ -12,9 +12,7 @@ import numpy as np
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import IdCodes
 
-#: the paper's riser (docs/definitions.md, Riser): width W and height H, m
-DEFAULT_WIDTH = 0.09
-DEFAULT_HEIGHT = 0.95
+#: the source's axes, in the order of a region's ranges
 AXES = ("x", "y", "z")
 #: length and time units: the number a value is divided by to give m or s
 LENGTH_UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0}

@@ -282,7 +282,8 @@ class WindowFrames:
             If the state space does not cover the frames' domain, needs velocities the
             frames lack, or the window holds fewer than two frames one lag apart.
         """
-        check_domain(state_space, self.width, self.height, self.source, self.depth)
+        state_space = check_domain(state_space, self.width, self.height, self.source,
+                                   self.depth)
         lag_frames = int(lag_frames)
         if state_space.needs_velocity and self.velocities is None:
             raise InputError(f"state space {state_space.kind} needs velocities; {self.source} "
@@ -340,9 +341,9 @@ def _describe(window) -> str:
 
 
 def check_domain(state_space: StateSpace, width: float, height: float, source: str = "",
-                 depth: float | None = None) -> None:
+                 depth: float | None = None) -> StateSpace:
     """Check that ``state_space`` covers a riser of W x H = ``width`` x ``height`` (m)
-    [x ``depth``].
+    [x ``depth``]; a space made without a size takes this one.
 
     A 2D state space fits 3D data (it uses the projection on across x vertical); a 3D one
     (with depth columns) needs 3D data of its depth.
@@ -358,6 +359,12 @@ def check_domain(state_space: StateSpace, width: float, height: float, source: s
     depth : float, optional
         The riser's depth (m) of 3D data; None for 2D data.
 
+    Returns
+    -------
+    StateSpace
+        ``state_space``, or, made without a size, a copy of it with this size
+        (:meth:`~cfbmarkov.markov.states.StateSpace.with_size`).
+
     Raises
     ------
     InputError
@@ -365,9 +372,12 @@ def check_domain(state_space: StateSpace, width: float, height: float, source: s
         (beyond :func:`numpy.isclose`), or it has a depth and the data have none or
         another one.
     """
+    if not state_space.sized:
+        state_space = state_space.with_size(width, height)
     if not (np.isclose(state_space.width, width) and np.isclose(state_space.height, height)):
         raise InputError(f"state space covers {state_space.width:g} x {state_space.height:g} m "
-                         f"but {source} is {width:g} x {height:g} m")
+                         f"but {source} is {width:g} x {height:g} m: make the space with that "
+                         "size, or without one (it then takes the file's)")
     if state_space.depth is not None:
         if depth is None:
             raise InputError(f"state space {state_space.describe()} has depth columns but "
@@ -375,6 +385,7 @@ def check_domain(state_space: StateSpace, width: float, height: float, source: s
         if not np.isclose(state_space.depth, depth):
             raise InputError(f"state space covers a depth of {state_space.depth:g} m but "
                              f"{source} is {depth:g} m deep")
+    return state_space
 
 
 def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,

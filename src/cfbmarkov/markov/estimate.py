@@ -176,6 +176,10 @@ class TransitionEstimator:
         """
         windows = as_discrete_list(data)
         fitted = windows[0].state_space
+        if not self.state_space.sized and fitted.sized:
+            # a space made without a size: the discretisation gave it the file's
+            sized = self.state_space.with_size(fitted.width, fitted.height)
+            return type(self)(sized, self.lag, self.connected, self.coherent).fit(windows)
         if fitted != self.state_space and self.state_space.accepts(fitted):
             # an unfitted regime space: the discretisation fitted its edges on the window
             return type(self)(fitted, self.lag, self.connected, self.coherent).fit(windows)

@@ -91,6 +91,10 @@ class _CellProductSpace(StateSpace):
         self.columns, self.rows = self._grid.columns, self._grid.rows
         self.width, self.height = self._grid.width, self._grid.height
 
+    def _set_size(self, width: float, height: float) -> None:
+        self._grid = self._grid.with_size(width, height)
+        self.width, self.height = width, height
+
     #: sub-states per cell, K
     per_cell: int
 
@@ -119,6 +123,7 @@ class _CellProductSpace(StateSpace):
 
     def _cells(self, positions: np.ndarray, memo: FrameQuantities | None) -> np.ndarray:
         """The cell of every position on the grid (from ``memo`` where it holds them)."""
+        self._require_size()
         return FrameQuantities.of(positions, memo).cells(self.columns, self.rows, self.width,
                                                          self.height)
 
@@ -170,7 +175,8 @@ class DirectionCells(_CellProductSpace):
     columns, rows : int
         The cell grid m x n.
     width, height : float, optional
-        The riser W x H (m).
+        The riser W x H (m); None (both, the default): the size of the file the space
+        is used on.
     source : {"displacement", "velocity"}, optional
         Where the direction comes from.
 
@@ -193,7 +199,8 @@ class DirectionCells(_CellProductSpace):
     per_cell = 2
     RISING, FALLING = 0, 1
 
-    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+    def __init__(self, columns: int, rows: int, width: float | None = None,
+                 height: float | None = None,
                  source: str = "displacement"):
         super().__init__(columns, rows, width, height)
         self.source = _check_source(self.kind, source)
@@ -260,8 +267,8 @@ class DirectionCells(_CellProductSpace):
                 f"from {self.source})")
 
     def __repr__(self) -> str:
-        return (f"DirectionCells({self.columns}, {self.rows}, width={self.width:g}, "
-                f"height={self.height:g}, source={self.source!r})")
+        return (f"DirectionCells({self.columns}, {self.rows}, width={self.width}, "
+                f"height={self.height}, source={self.source!r})")
 
 
 class SecondOrderCells(_CellProductSpace):
@@ -285,7 +292,8 @@ class SecondOrderCells(_CellProductSpace):
     columns, rows : int
         The cell grid m x n.
     width, height : float, optional
-        The riser W x H (m).
+        The riser W x H (m); None (both, the default): the size of the file the space
+        is used on.
     reach : int, optional
         R, the row offsets kept (whole number >= 0).
     column_reach : int, optional
@@ -299,7 +307,8 @@ class SecondOrderCells(_CellProductSpace):
 
     kind = "cells-previous"
 
-    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+    def __init__(self, columns: int, rows: int, width: float | None = None,
+                 height: float | None = None,
                  reach: int = 3, column_reach: int = 0):
         super().__init__(columns, rows, width, height)
         if int(reach) != reach or int(column_reach) != column_reach \
@@ -382,6 +391,6 @@ class SecondOrderCells(_CellProductSpace):
                 "column(s))")
 
     def __repr__(self) -> str:
-        return (f"SecondOrderCells({self.columns}, {self.rows}, width={self.width:g}, "
-                f"height={self.height:g}, reach={self.reach}, "
+        return (f"SecondOrderCells({self.columns}, {self.rows}, width={self.width}, "
+                f"height={self.height}, reach={self.reach}, "
                 f"column_reach={self.column_reach})")

@@ -176,7 +176,8 @@ class RegimeCells(_CellProductSpace):
     columns, rows : int
         The cell grid m x n.
     width, height : float, optional
-        The riser W x H (m).
+        The riser W x H (m); None (both, the default): the size of the file the space
+        is used on.
     regimes : int, optional
         Number of regimes R (2 to 8).
     edges : sequence of float, optional
@@ -203,7 +204,8 @@ class RegimeCells(_CellProductSpace):
     #: whether the states carry the direction (:class:`DirectionRegimeCells`)
     direction = False
 
-    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+    def __init__(self, columns: int, rows: int, width: float | None = None,
+                 height: float | None = None,
                  regimes: int = 2, edges=None, feature: str = "flux"):
         super().__init__(columns, rows, width, height)
         if not (isinstance(regimes, (int, np.integer)) and 2 <= int(regimes) <= 8):
@@ -416,8 +418,8 @@ class RegimeCells(_CellProductSpace):
                 f"{', with direction' if self.direction else ''})")
 
     def __repr__(self) -> str:
-        return (f"{type(self).__name__}({self.columns}, {self.rows}, width={self.width:g}, "
-                f"height={self.height:g}, regimes={self.regimes}, edges={self.edges}, "
+        return (f"{type(self).__name__}({self.columns}, {self.rows}, width={self.width}, "
+                f"height={self.height}, regimes={self.regimes}, edges={self.edges}, "
                 f"feature={self.feature!r})")
 
 

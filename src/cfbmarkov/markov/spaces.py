@@ -24,8 +24,8 @@ STATE_SPACES = ("cells", "cells-direction", "cells-velocity", "cells-velocity-fi
                 "cells-previous", "cells-regime", "cells-direction-regime")
 
 
-def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.09,
-                          height: float = 0.95, depth_columns: int | None = None,
+def state_space_from_name(name: str, columns: int, rows: int, width: float | None = None,
+                          height: float | None = None, depth_columns: int | None = None,
                           depth: float | None = None) -> StateSpace:
     """A state space by name with its defaults.
 
@@ -43,8 +43,8 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float = 0.0
         window), ``cells-direction-regime`` (and the direction).
     columns, rows : int
         The cell grid m x n.
-    width, height : float
-        The riser W x H (m).
+    width, height : float, optional
+        The riser W x H (m); None: the size of the file the space is used on.
     depth_columns : int, optional
         Cells along the depth, d: a 3D grid (needs ``depth``; only ``cells`` has depth
         columns yet). None: a 2D grid, which projects 3D positions.

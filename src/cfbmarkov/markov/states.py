@@ -23,6 +23,7 @@ the memo of what the spaces derive from those frames
 
 from __future__ import annotations
 
+import copy
 import json
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -59,8 +60,9 @@ class StateSpace(ABC):
         attribute.
     columns, rows : int
         The cell grid m x n.
-    width, height : float
-        The riser W x H (m) the grid covers.
+    width, height : float or None
+        The riser W x H (m) the grid covers; None for a space made without a size, which
+        takes the size of the trajectory file it is first discretised on (:meth:`with_size`).
     depth_columns : int
         Cells along the depth, d (1 for a 2D grid, a class default).
     depth : float or None
@@ -108,8 +110,8 @@ class StateSpace(ABC):
         return MappingProxyType(_REGISTRY)
 
     @classmethod
-    def with_defaults(cls, columns: int, rows: int, width: float = 0.09,
-                      height: float = 0.95) -> "StateSpace":
+    def with_defaults(cls, columns: int, rows: int, width: float | None = None,
+                      height: float | None = None) -> "StateSpace":
         """This kind of space on a grid with its other parameters at their defaults (what
         :func:`~cfbmarkov.markov.spaces.state_space_from_name` builds).
 
@@ -118,7 +120,7 @@ class StateSpace(ABC):
         columns, rows : int
             The cell grid m x n.
         width, height : float, optional
-            The riser W x H (m).
+            The riser W x H (m); None: the size of the file the space is used on.
 
         Returns
         -------
@@ -130,6 +132,46 @@ class StateSpace(ABC):
             For a bad grid.
         """
         return cls(columns, rows, width, height)
+
+    @property
+    def sized(self) -> bool:
+        """Whether the space has the riser's size (else it takes a file's, :meth:`with_size`)."""
+        return self.width is not None and self.height is not None
+
+    def with_size(self, width: float, height: float) -> "StateSpace":
+        """This space on a riser of ``width`` x ``height`` (m): how a space made without a
+        size takes the size of the trajectory file it is discretised on.
+
+        Parameters
+        ----------
+        width, height : float
+            The riser W x H (m).
+
+        Returns
+        -------
+        StateSpace
+            A copy with the size set (everything else shared).
+
+        Raises
+        ------
+        InputError
+            If the size is not positive.
+        """
+        if not (width > 0 and height > 0):
+            raise InputError(f"domain {width:g} x {height:g} m must have positive size")
+        new = copy.copy(self)
+        new._set_size(float(width), float(height))
+        return new
+
+    def _set_size(self, width: float, height: float) -> None:
+        self.width, self.height = width, height
+
+    def _require_size(self) -> None:
+        """Refuse to discretise arrays with a space made without a size."""
+        if not self.sized:
+            raise InputError(f"state space {self.kind} {self.grid_text()} has no riser size: "
+                             "give width and height, or discretise a trajectory file (whose "
+                             "size it takes)")
 
     columns: int
     rows: int
@@ -364,7 +406,8 @@ class CellGrid(StateSpace):
     columns, rows : int
         The cell grid m x n (at least 1 x 1).
     width, height : float, optional
-        The riser W x H (m); the paper's 0.09 x 0.95 m by default.
+        The riser W x H (m); None (the default, both): the size of the trajectory file the
+        grid is first discretised on (:meth:`StateSpace.with_size`). Give both or neither.
     depth_columns : int, optional
         Cells along the depth, d (at least 1; more than 1 needs ``depth``).
     depth : float, optional
@@ -387,18 +430,25 @@ class CellGrid(StateSpace):
     kind = "cells"
     has_depth_columns = True
 
-    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
-                 depth_columns: int = 1, depth: float | None = None):
+    def __init__(self, columns: int, rows: int, width: float | None = None,
+                 height: float | None = None, depth_columns: int = 1,
+                 depth: float | None = None):
         if int(columns) < 1 or int(rows) < 1 or int(depth_columns) < 1:
             grid = f"{columns}x{depth_columns}x{rows}" if depth is not None else f"{columns}x{rows}"
             raise InputError(f"a cell grid needs at least 1x1 cells, got {grid}")
         if int(depth_columns) > 1 and depth is None:
             raise InputError(f"{depth_columns} depth columns need the riser's depth")
-        if not (width > 0 and height > 0) or (depth is not None and not depth > 0):
-            size = f"{width:g} x {height:g}" + ("" if depth is None else f" x {depth:g}")
+        if (width is None) != (height is None):
+            raise InputError("give the riser's width and height, or neither (the size of the "
+                             "file the grid is used on)")
+        if width is not None and not (width > 0 and height > 0) or (
+                depth is not None and not depth > 0):
+            size = (f"{width:g} x {height:g}" if width is not None else "?") + (
+                "" if depth is None else f" x {depth:g}")
             raise InputError(f"domain {size} m must have positive size")
         self.columns, self.rows = int(columns), int(rows)
-        self.width, self.height = float(width), float(height)
+        self.width = None if width is None else float(width)
+        self.height = None if height is None else float(height)
         self.depth_columns = int(depth_columns)
         self.depth = None if depth is None else float(depth)
 
@@ -433,8 +483,9 @@ class CellGrid(StateSpace):
         Raises
         ------
         InputError
-            If a 3D grid is given 2D positions.
+            If a 3D grid is given 2D positions, or the grid has no size.
         """
+        self._require_size()
         return cell_index(positions, self.width, self.height, self.columns, self.rows,
                           self.depth, self.depth_columns)
 
@@ -448,11 +499,11 @@ class CellGrid(StateSpace):
         return attrs
 
     def __repr__(self) -> str:
+        size = (f", width={self.width:g}, height={self.height:g}" if self.sized else "")
         if self.is_3d:
-            return (f"CellGrid({self.columns}, {self.rows}, width={self.width:g}, "
-                    f"height={self.height:g}, depth_columns={self.depth_columns}, "
-                    f"depth={self.depth:g})")
-        return f"CellGrid({self.columns}, {self.rows}, width={self.width:g}, height={self.height:g})"
+            return (f"CellGrid({self.columns}, {self.rows}{size}, "
+                    f"depth_columns={self.depth_columns}, depth={self.depth:g})")
+        return f"CellGrid({self.columns}, {self.rows}{size})"
 
 
 def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int,

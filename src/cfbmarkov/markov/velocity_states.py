@@ -112,7 +112,8 @@ class VelocityCells(_CellProductSpace):
     columns, rows : int
         The cell grid m x n.
     width, height : float, optional
-        The riser W x H (m).
+        The riser W x H (m); None (both, the default): the size of the file the space
+        is used on.
     edges : sequence of float or None, optional
         The B interior bin edges of v_y (m/s), finite and strictly increasing; None:
         unfitted, the edges are the quantiles of the fitting window's velocities.
@@ -147,7 +148,8 @@ class VelocityCells(_CellProductSpace):
     #: sub-rows of a space made without ``sub_rows`` (left out of :meth:`to_attrs`)
     DEFAULT_SUB_ROWS: int | None = 1
 
-    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+    def __init__(self, columns: int, rows: int, width: float | None = None,
+                 height: float | None = None,
                  edges=(-1.0, 0.0, 1.0, 3.0), source: str = "displacement",
                  lag: float | None = None, bins: int | None = None,
                  sub_rows: int | None = 1):
@@ -179,8 +181,8 @@ class VelocityCells(_CellProductSpace):
         self.bins = len(self.edges) + 1
 
     @classmethod
-    def with_defaults(cls, columns: int, rows: int, width: float = 0.09,
-                      height: float = 0.95) -> "VelocityCells":
+    def with_defaults(cls, columns: int, rows: int, width: float | None = None,
+                      height: float | None = None) -> "VelocityCells":
         """This space unfitted (``edges=None``: the bin edges are fitted at the fitting
         window's quantiles; see :meth:`StateSpace.with_defaults
         <cfbmarkov.markov.states.StateSpace.with_defaults>`).
@@ -190,7 +192,8 @@ class VelocityCells(_CellProductSpace):
         columns, rows : int
             The cell grid m x n.
         width, height : float, optional
-            The riser W x H (m).
+            The riser W x H (m); None (both, the default): the size of the file the space
+            is used on.
 
         Returns
         -------
@@ -404,8 +407,8 @@ class VelocityCells(_CellProductSpace):
 
     def __repr__(self) -> str:
         edges = f"edges=None, bins={self.bins}" if self.edges is None else f"edges={self.edges}"
-        return (f"{type(self).__name__}({self.columns}, {self.rows}, width={self.width:g}, "
-                f"height={self.height:g}, {edges}, source={self.source!r}, "
+        return (f"{type(self).__name__}({self.columns}, {self.rows}, width={self.width}, "
+                f"height={self.height}, {edges}, source={self.source!r}, "
                 f"sub_rows={self.sub_rows})")
 
 
@@ -422,7 +425,8 @@ class FineVelocityCells(VelocityCells):
     columns, rows : int
         The cell grid m x n.
     width, height : float, optional
-        The riser W x H (m).
+        The riser W x H (m); None (both, the default): the size of the file the space
+        is used on.
     edges : sequence of float or None, optional
         As :class:`VelocityCells`; None (default): fitted.
     source : {"displacement", "velocity"}, optional
@@ -443,7 +447,8 @@ class FineVelocityCells(VelocityCells):
     kind = "cells-velocity-fine"
     DEFAULT_SUB_ROWS = None
 
-    def __init__(self, columns: int, rows: int, width: float = 0.09, height: float = 0.95,
+    def __init__(self, columns: int, rows: int, width: float | None = None,
+                 height: float | None = None,
                  edges=None, source: str = "displacement", lag: float | None = None,
                  bins: int | None = None, sub_rows: int | None = None):
         super().__init__(columns, rows, width, height, edges, source, lag, bins, sub_rows)

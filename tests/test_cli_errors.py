@@ -1,0 +1,42 @@
+"""Errors of the command line name the working value: the file's frame interval for a lag,
+its time span for a window, a span or an export range."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cfbmarkov.cli import main
+from cfbmarkov.trajectory_writer import write_trajectories
+
+
+@pytest.fixture
+def run(tmp_path):
+    """2 s of 50 particles, frames 0.002 s apart, in a 0.04 x 0.3 m riser."""
+    rng = np.random.default_rng(1)
+    t = 0.002 * np.arange(1001)
+    x = np.broadcast_to(rng.uniform(0.0, 0.04, 50), (t.size, 50))
+    y = np.mod(rng.uniform(0.0, 0.3, 50) + 1.0 * t[:, None], 0.3)
+    return write_trajectories(tmp_path / "r.h5", t, np.stack([x, y], axis=-1), width=0.04,
+                              height=0.3, source="cfd-dem")
+
+
+@pytest.mark.parametrize("args, expected", [
+    (("fit", "--lag", "0.025", "--window", "0.5:1.5", "-o", "m.h5"),
+     "its frames are 0.002 s apart: use --lag 0.002 or a multiple (the nearest: 0.024)"),
+    (("fit", "--lag", "0.002", "--window", "10:15", "-o", "m.h5"),
+     "window 10:15 s lies outside the data of {run} (0 to 2 s)"),
+    (("stationarity", "--span", "5:20"), "span 5:20 s lies outside the frames of {run} (0 to 2 s)"),
+    (("stationarity", "--window-length", "5"), "a window length below the span's 2 s"),
+    (("stationarity", "--window-length", "0.5", "--span", "0:1.5", "--judge", "3:4"),
+     "--judge 3:4 s lies outside the span 0:1.5 s"),
+    (("export-vtk", "--start", "15", "--stop", "16", "-o", "v"),
+     "window 15:16 s lies outside the data of {run} (0 to 2 s)"),
+])
+def test_errors_name_the_working_value(run, tmp_path, capsys, monkeypatch, args, expected):
+    monkeypatch.chdir(tmp_path)
+    verb, *rest = args
+    assert main([verb, str(run), *rest]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err, err
+    assert expected.format(run=run) in err, err
