@@ -133,6 +133,8 @@ def cmd_predict(args) -> int:
     from cfbmarkov.trajectories import Trajectories
 
     model = MarkovModel.load(args.model)
+    for line in model.adequacy.warnings if model.adequacy is not None else ():
+        print(f"warning: the model's fitting sample: {line}", file=sys.stderr)
     with Trajectories(args.init) as run:
         model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                       output=args.output, progress=not args.quiet)
