@@ -71,9 +71,9 @@ def _finish_fit(args, model, runs, windows) -> int:
 
         model = model.with_adequacy(assess_adequacy(model, runs, windows))
     # -- end of the sample's verdict ----------------------------------------------------
-    for line in model.warnings():
-        print(f"warning: {line.strip()}", file=sys.stderr)
     model.save(args.output)
+    for line in model.warnings():      # after the save: a failed fit prints one line
+        print(f"warning: {line.strip()}", file=sys.stderr)
     print(model.summary())
     print(args.output)
     return 0
@@ -133,11 +133,11 @@ def cmd_predict(args) -> int:
     from cfbmarkov.trajectories import Trajectories
 
     model = MarkovModel.load(args.model)
-    for line in model.adequacy.warnings if model.adequacy is not None else ():
-        print(f"warning: the model's fitting sample: {line}", file=sys.stderr)
     with Trajectories(args.init) as run:
         model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                       output=args.output, progress=not args.quiet)
+    for line in model.adequacy.warnings if model.adequacy is not None else ():
+        print(f"warning: the model's fitting sample: {line}", file=sys.stderr)
     print(args.output)
     return 0
 
