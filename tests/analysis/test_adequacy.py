@@ -199,3 +199,11 @@ def test_sample_length(runs, capsys):
     code, out, _ = run_cli(capsys, "stationarity", runs["switching"], "--sample-length",
                            "--cells", "4x16", "--tolerance", "0.5")
     assert code == 0 and "sample length:" in out and "within 50 %" in out
+
+
+def test_report_paragraph_repeats_the_verdict():
+    from cfbmarkov.report.sections import trust_text
+
+    summary = {"md_rtd": 0.2, "adequacy": {"warnings": ["the halves disagree: 67 %"]}}
+    assert "fitting sample was warned about" in trust_text("4", "paper", summary)
+    assert "warned" not in trust_text("4", "paper", {"md_rtd": 0.2})
