@@ -339,7 +339,8 @@ def regime_generator(flows, switching) -> tuple[np.ndarray, np.ndarray, np.ndarr
 
 
 def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int,
-                     duration: float, seed: int = 0, boundary: str = "periodic") -> Path:
+                     duration: float, seed: int = 0, boundary: str = "periodic",
+                     regimes=None) -> Path:
     """Write a periodic run whose particles share one hidden regime path (source
     ``'synthetic-regimes'``).
 
@@ -361,6 +362,9 @@ def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int
     boundary : {"periodic", "open"}, optional
         ``open``: each pass through the top or bottom is a visit outside, as in
         :func:`write_open_run`.
+    regimes : array_like of int, optional
+        The regime of each frame (``duration / lag + 1`` of them), given instead of drawn
+        from G (e.g. a switch at a known time).
 
     Returns
     -------
@@ -385,6 +389,10 @@ def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int
     path_[0] = rng.choice(len(flows), p=pi / pi.sum())
     for k in range(1, n_frames):         # one draw per frame (the regime path), not per particle
         path_[k] = rng.choice(len(flows), p=g[path_[k - 1]])
+    if regimes is not None:
+        path_ = np.asarray(regimes, dtype=np.int64)
+        if path_.shape != (n_frames,) or path_.min() < 0 or path_.max() >= len(flows):
+            raise ValueError(f"regimes must be {n_frames} regime numbers below {len(flows)}")
     initial = rng.integers(0, cells_n, n_particles)
     cells, laps = run_chain(stacked, initial, n_frames - 1, seed + 1, row_offset=path_ * cells_n)
     positions = np.empty((n_frames, n_particles, 2))

@@ -135,8 +135,9 @@ def _run_claimed(args) -> int:
             from cfbmarkov._outputs import claim_output
 
             kind, inputs = OUTPUTS[args.command]
-            with claim_output(args.output, args.command, kind,
-                              [getattr(args, name, None) for name in inputs],
+            named = [getattr(args, name, None) for name in inputs]   # a list: several runs
+            named = [v for n in named for v in (n if isinstance(n, list) else [n])]
+            with claim_output(args.output, args.command, kind, named,
                               force=getattr(args, "force", False)):
                 return int(args.func(args) or 0)
         return int(args.func(args) or 0)

@@ -6,8 +6,8 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
-from cfbmarkov.cli.options import (count, level, minkowski_order, parse_times, parse_window,
-                                   positive_float)
+from cfbmarkov.cli.options import (count, finite_float, level, minkowski_order, parse_cells,
+                                   parse_times, parse_window, positive_float)
 
 
 def cmd_compare(args) -> int:
@@ -108,6 +108,8 @@ def cmd_stationarity(args) -> int:
     from cfbmarkov.analysis.stationarity import check_stationarity
     from cfbmarkov.observed.metrics import percentage_text as pd_text
 
+    if args.sample_length:
+        return _sample_length(args)
     check = check_stationarity(args.file, window_length=args.window_length, step=args.step,
                                span=args.span, lag=args.lag, basis=args.basis,
                                judge=args.judge)
@@ -159,6 +161,47 @@ def cmd_stationarity(args) -> int:
                   f"{pd_text(pe['pd_rt_sd'], '+.1f')} %, MD {value(pe['md_rtd'], '.3f')}")
         else:
             print(f"  persistence: no whole {j1 - j0:g} s window before {j0:g} s in the span")
+    return 0
+
+
+def _sample_length(args) -> int:
+    """``stationarity --sample-length``: models on growing windows against the long run."""
+    import json
+
+    import numpy as np
+
+    from cfbmarkov.analysis.sample_length import sample_length
+    from cfbmarkov.markov import state_space_from_name
+    from cfbmarkov.trajectories import Trajectories
+
+    columns, rows = args.cells[0], args.cells[-1]
+    depth = args.cells[1] if len(args.cells) == 3 else None
+    with Trajectories(args.file) as run:
+        space = state_space_from_name(args.states, columns, rows, run.width, run.height,
+                                      depth, run.depth)
+    result = sample_length(args.file, space, lag=args.lag or 0.025, start=args.start,
+                           estimator=args.estimator, tolerance=args.tolerance)
+    if args.json:
+        print(json.dumps(result.to_dict(), indent=1, allow_nan=False))
+        return 0
+
+    def value(v):
+        return format(v, ".4g") if np.isfinite(v) else "n/d"
+
+    print(f"{args.file}: models ({result.description}) on windows from {result.start:g} s "
+          f"against the long run {result.start:g}-{result.span_end:g} s (E(RT) "
+          f"{value(result.long_run_mean)} s, SD(RT) {value(result.long_run_sd)} s, "
+          f"{result.long_run_count} residences)")
+    print(f"{'length (s)':>10}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  "
+          f"within {100 * result.tolerance:g} %")
+    for n, m, sd, ok in zip(result.lengths, result.rt_mean, result.rt_sd, result.within()):
+        print(f"{n:>10g}  {value(m):>9}  {value(sd):>10}  {'yes' if ok else 'no'}")
+    if np.isfinite(result.sample_length):
+        print(f"sample length: {result.sample_length:g} s (from it on, every window's E(RT) "
+              f"and SD(RT) lie within {100 * result.tolerance:g} % of the long run's)")
+    else:
+        print(f"sample length: not reached within {result.lengths[-1]:g} s (the longest "
+              "window still misses the long run: a longer run, or pool runs with fit A B ...)")
     return 0
 
 
@@ -259,6 +302,24 @@ def add_stationarity(sub) -> None:
                    help="START:STOP, s: also compare this window with the run's long run "
                         "(the span's other whole windows of its length, pooled) and with the "
                         "window before it (persistence)")
+    s.add_argument("--sample-length", action="store_true",
+                   help="how long a fitting window must be: fit models (--states, --cells, "
+                        "--lag, --estimator as in fit) on windows of 0.5, 1, 2, 5, 10, ... s "
+                        "from --start, and give the length from which their E(RT) and SD(RT) "
+                        "stay within --tolerance of the run's long run (its residences from "
+                        "--start on, pooled)")
+    s.add_argument("--start", type=finite_float, default=None,
+                   help="with --sample-length: where the windows start, s (default the first "
+                        "frame; leave out a start-up from rest)")
+    s.add_argument("--tolerance", type=positive_float, default=0.1,
+                   help="with --sample-length: relative tolerance (default 0.1)")
+    s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
+                                        "cells-velocity-fine", "cells-previous"],
+                   default="cells", help="with --sample-length: the models' states")
+    s.add_argument("--cells", type=parse_cells, default=(6, 38),
+                   help="with --sample-length: COLUMNSxROWS (default 6x38)")
+    s.add_argument("--estimator", choices=["paper", "mle"], default=None,
+                   help="with --sample-length: as in fit")
     s.add_argument("--json", action="store_true", help="print JSON instead of a table")
     s.set_defaults(func=cmd_stationarity)
 

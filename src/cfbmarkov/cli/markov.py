@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 
-from cfbmarkov.cli.options import (finite_float, parse_cells, parse_window, positive_float,
-                                   seed)
+from cfbmarkov.cli.options import (finite_float, parse_cells, parse_windows,
+                                   positive_float, seed)
 from cfbmarkov.errors import CfbmarkovError, InputError
 
 
@@ -23,12 +23,14 @@ def cmd_fit(args) -> int:
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
     from cfbmarkov.markov import fit_model, state_space_from_name
-    from cfbmarkov.markov.first_passage import TrappedResidences
     from cfbmarkov.markov.select import select_model
     from cfbmarkov.trajectories import Trajectories
 
     columns, rows = args.cells[0], args.cells[-1]
     depth_columns = args.cells[1] if len(args.cells) == 3 else None
+    if len(args.run) > 1:       # several runs of one case, pooled
+        return _fit_pooled(args, columns, rows, depth_columns)
+    args.run, args.window = args.run[0], _one_window(args.window)
     with Trajectories(args.run) as run:
         if args.estimator is None:
             args.estimator = "mle" if run.boundary.is_open else "paper"
@@ -54,18 +56,68 @@ def cmd_fit(args) -> int:
                                           depth_columns, run.depth)
             model = fit_model(run, space, args.lag, args.window, args.estimator,
                               connected=args.connected, coherent=args.coherent)
+    return _finish_fit(args, model, [args.run], [args.window])
+
+
+def _finish_fit(args, model, runs, windows) -> int:
+    """The end of ``fit``: the exact RTD, the sample's verdict, warnings, save, summary."""
+    from cfbmarkov.markov.first_passage import TrappedResidences
+
     try:
         model.rtd()
     except TrappedResidences as exc:
         raise InputError(f"{args.run}: {exc}") from None
     except CfbmarkovError:
         pass                       # no circulation at all: a model without residence times
-    for line in model.warnings():
-        print(f"warning: {line.strip()}", file=sys.stderr)
+    # -- the sample's verdict (docs/definitions.md, Sample adequacy) --------------------
+    if args.adequacy:
+        from cfbmarkov.analysis.adequacy import assess_adequacy
+
+        model = model.with_adequacy(assess_adequacy(model, runs, windows))
+    # -- end of the sample's verdict ----------------------------------------------------
     model.save(args.output)
+    for line in model.warnings():      # after the save: a failed fit prints one line
+        print(f"warning: {line.strip()}", file=sys.stderr)
     print(model.summary())
     print(args.output)
     return 0
+
+
+def _one_window(windows) -> tuple[float, float]:
+    """The one fitting window of a single run (several: refused in one line)."""
+    if len(windows) != 1:
+        raise InputError(f"{len(windows)} windows for one run: give one window (START:STOP)")
+    return windows[0]
+
+
+def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int:
+    """``fit`` on several runs of one case: their windows' counts pooled
+    (:mod:`cfbmarkov.markov.pooling`)."""
+    import contextlib
+
+    from cfbmarkov.markov import state_space_from_name
+    from cfbmarkov.markov.estimate import estimator_from_name
+    from cfbmarkov.markov.pooling import discretize_runs, run_windows
+    from cfbmarkov.trajectories import Trajectories
+
+    if args.states == "auto":
+        raise InputError("--states auto chooses states on one run: fit several runs with "
+                         "named states (e.g. --states cells), or choose on one run first")
+    windows = run_windows(args.window, len(args.run))
+    with contextlib.ExitStack() as stack:
+        runs = [stack.enter_context(Trajectories(path)) for path in args.run]
+        first = runs[0]
+        if args.estimator is None:
+            args.estimator = "mle" if first.boundary.is_open else "paper"
+        if depth_columns is not None and first.dimensions != 3:
+            raise InputError(f"{first.path} is 2D: cells {'x'.join(map(str, args.cells))} "
+                             "with depth columns need 3D data (use COLUMNSxROWS)")
+        space = state_space_from_name(args.states, columns, rows, first.width, first.height,
+                                      depth_columns, first.depth)
+        discrete = discretize_runs(runs, space, args.lag, windows)
+        model = estimator_from_name(args.estimator, space, args.lag, args.connected,
+                                    args.coherent).fit(discrete)
+    return _finish_fit(args, model, list(args.run), windows)
 
 
 def cmd_predict(args) -> int:
@@ -88,6 +140,8 @@ def cmd_predict(args) -> int:
     with Trajectories(args.init) as run:
         model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                       output=args.output, progress=not args.quiet)
+    for line in model.adequacy.warnings if model.adequacy is not None else ():
+        print(f"warning: the model's fitting sample: {line}", file=sys.stderr)
     print(args.output)
     return 0
 
@@ -159,13 +213,16 @@ def add_fit(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("fit", help="fit a Markov chain model on a window of a trajectory file")
-    s.add_argument("run", help="trajectory file")
+    s.add_argument("run", nargs="+",
+                   help="trajectory file; several runs of one case (same riser and frame "
+                        "interval) pool their transitions into one model")
     s.add_argument("--cells", type=parse_cells, default=(6, 38),
                    help="COLUMNSxROWS, or COLUMNSxDEPTHxROWS for 3D data (depth columns; "
                         "COLUMNSxROWS projects 3D data on across x vertical) (default 6x38)")
     s.add_argument("--lag", type=positive_float, default=0.025, help="lag, s (default 0.025)")
-    s.add_argument("--window", type=parse_window, default=(10.0, 15.0),
-                   help="fitting window START:STOP, s (default 10:15)")
+    s.add_argument("--window", type=parse_windows, default=[(10.0, 15.0)],
+                   help="fitting window START:STOP, s (default 10:15); with several runs one "
+                        "window for all or one per run, comma-separated (10:15,12:17)")
     s.add_argument("--estimator", choices=["paper", "mle"], default=None,
                    help="paper (Eq. 2-4; the default for a periodic riser) or mle (pooled "
                         "counts; the default, and the only choice, for an open riser)")
@@ -188,6 +245,10 @@ def add_fit(sub) -> None:
                         "move together (coherence, calibrated so that the model's snapshots "
                         "show the window's cluster index), so that predictions keep clusters; "
                         "the RTD and maps are unchanged (periodic risers)")
+    s.add_argument("--no-adequacy", dest="adequacy", action="store_false",
+                   help="leave out the verdict on the fitting sample (the window's halves and "
+                        "quarters refitted and compared, the net flow per part, the residences "
+                        "longer than the window)")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
     s.add_argument("-q", "--quiet", action="store_true",
                    help="no progress lines on stderr")

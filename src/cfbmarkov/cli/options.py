@@ -41,6 +41,27 @@ def parse_window(text: str) -> tuple[float, float]:
     return start, stop
 
 
+def parse_windows(text: str) -> list[tuple[float, float]]:
+    """Parse one time window or several, comma-separated: ``'10:15,12:17'`` ->
+    [(10.0, 15.0), (12.0, 17.0)] (one per run of a pooled fit).
+
+    Parameters
+    ----------
+    text : str
+        ``START:STOP[,START:STOP...]`` in seconds.
+
+    Returns
+    -------
+    list of (float, float)
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        When a window is not two finite numbers or is empty (:func:`parse_window`).
+    """
+    return [parse_window(part.strip()) for part in text.split(",")]
+
+
 def parse_region(text: str) -> tuple[tuple[float, float], ...]:
     """Parse a region: ``'-0.001:0.091,0:0.95'`` -> ((-0.001, 0.091), (0.0, 0.95)).
 

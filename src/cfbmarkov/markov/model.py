@@ -28,6 +28,7 @@ from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.limits import MAX_STEPS, check_finite, check_seed
 from cfbmarkov.markov import model_file, model_summary, prediction, propagation
+from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.connectivity import (closed_classes, stationary_distribution,
                                            states_reaching)
 from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, exact_rtd
@@ -90,6 +91,9 @@ class MarkovModel:
         rho in [0, 1]: in the Monte Carlo, the probability that a particle takes the draw
         shared by the particles leaving its state at that step (coherent moves, the cluster
         model; :mod:`cfbmarkov.markov.coherence`); 0: independent particles (the paper's).
+    adequacy : Adequacy or None
+        The verdict on the fitting sample (:mod:`cfbmarkov.markov.adequacy`); None where
+        none was formed.
 
     Raises
     ------
@@ -126,6 +130,7 @@ class MarkovModel:
     connected: bool = False
     open_flow: OpenFlow | None = None
     coherence: float = 0.0
+    adequacy: Adequacy | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     adopt: InitVar[bool] = field(default=False, kw_only=True)
 
@@ -508,6 +513,11 @@ class MarkovModel:
         """
         return self._derived(selection=dict(selection))
 
+    def with_adequacy(self, adequacy: Adequacy | None) -> "MarkovModel":
+        """The same model, holding the verdict on its fitting sample
+        (:func:`cfbmarkov.analysis.adequacy.assess_adequacy`; None: none)."""
+        return self._derived(adequacy=adequacy)
+
     # -- description -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:
         """Estimator, lag (s), window (s), state space, source and selection.
@@ -527,8 +537,9 @@ class MarkovModel:
         return out
 
     def warnings(self) -> list[str]:
-        """Lines about states entered but never left (traps) and, for an open riser, about
-        many tracks that ended or began away from the faces, for ``fit`` and ``info``
+        """Lines about states entered but never left (traps), for an open riser about many
+        tracks that ended or began away from the faces, and the fitting sample's verdict
+        (:attr:`adequacy`), for ``fit``, ``predict`` and ``info``
         (:func:`~cfbmarkov.markov.model_summary.model_warnings`).
 
         Returns

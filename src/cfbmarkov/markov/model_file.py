@@ -10,7 +10,9 @@ states:
   ``rows``, ``lag`` (s), ``window`` (s, NaN for none), ``estimator``, ``source`` (JSON),
   ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
   ``cfbmarkov_version``; for a model chosen by ``--states auto``, ``selection`` (JSON); for
-  a model fitted on the largest strongly connected set, ``connected = 1``.
+  a model fitted on the largest strongly connected set, ``connected = 1``; where the
+  fitting sample was judged, ``adequacy`` (JSON, :class:`~cfbmarkov.markov.adequacy.Adequacy`;
+  optional, files without it read as models without a verdict).
 
 The [S, S] datasets are stored chunked (blocks of whole rows, about 1 MiB) and compressed
 with gzip (deflate, level 1; :func:`~cfbmarkov._hdf5.create_array_dataset`): the
@@ -40,6 +42,7 @@ from cfbmarkov._atomic import atomic_path, h5_file
 from cfbmarkov._hdf5 import create_array_dataset, open_h5
 from cfbmarkov.boundary import BOUNDARIES, Boundary
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS
 from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.spaces import state_space_from_attrs
@@ -85,6 +88,8 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         attrs["connected"] = 1
     if model.coherence:
         attrs["coherence"] = float(model.coherence)
+    if model.adequacy is not None:
+        attrs["adequacy"] = model.adequacy.to_attr()
     if model.open_flow is not None:
         open_datasets, open_attrs = model.open_flow.file_fields()
         attrs.update(open_attrs)
@@ -188,7 +193,9 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         if "selection" in group.attrs else None,
         connected=bool(group.attrs.get("connected", 0)),
         coherence=_attr_number(group.attrs.get("coherence", 0.0), "coherence"),
-        open_flow=_open_flow(group))
+        open_flow=_open_flow(group),
+        adequacy=Adequacy.from_attr(group.attrs["adequacy"])
+        if "adequacy" in group.attrs else None)
 
 
 def _attr_number(value, name: str) -> float:

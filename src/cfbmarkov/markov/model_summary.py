@@ -13,8 +13,9 @@ if TYPE_CHECKING:
 
 
 def model_warnings(model: "MarkovModel") -> list[str]:
-    """Lines about states entered but never left (traps) and, for an open riser, about many
-    tracks that ended or began away from the faces.
+    """Lines about states entered but never left (traps), for an open riser about many
+    tracks that ended or began away from the faces, and the fitting sample's verdict
+    (``model.adequacy``).
 
     Parameters
     ----------
@@ -25,6 +26,8 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     list of str
     """
     lines = [] if model.open_flow is None else model.open_flow.warnings()
+    if model.adequacy is not None:
+        lines += [f"  {line}" for line in model.adequacy.warnings]
     trapped = model.entered_never_left
     if not trapped.size or model.trap_share == 0.0:
         return lines

@@ -98,6 +98,18 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
         return None
 
 
+def _adequacy(pred):
+    """The verdict on the fitting sample of the model a prediction carries (None where it
+    carries no model, or a model without one)."""
+    from cfbmarkov.markov import MarkovModel
+
+    try:
+        model = MarkovModel.from_trajectories(pred)
+    except InputError:
+        return None
+    return None if model is None else model.adequacy
+
+
 def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str]:
     """Draw the figures of a comparison into ``out``; returns the file names written."""
     from cfbmarkov.report import figures as fg
@@ -215,6 +227,10 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
         summary = comparison.summary()
         warnings = list(comparison.warnings)
         intervals = _intervals(pred, comparison, level, resamples, warnings)
+        adequacy = _adequacy(pred)
+        if adequacy is not None:        # the verdict on the model's fitting sample, repeated
+            summary["adequacy"] = adequacy.to_dict()
+            warnings += [f"the model's fitting sample: {line}" for line in adequacy.warnings]
         if intervals is not None:
             summary["level"] = intervals.level
             summary["model"]["rt_mean_interval"] = list(intervals.rt_mean)

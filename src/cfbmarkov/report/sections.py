@@ -396,6 +396,10 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
                      f"{interval[0]:.3f}-{interval[1]:.3f} s"
                      + (f" (with the flow's variability between windows; the model's own "
                         f"value: {own[0]:.3f}-{own[1]:.3f} s)." if own else "."))
+    verdict = (summary.get("adequacy") or {}).get("warnings") or []
+    if verdict:
+        parts.append("The model's fitting sample was warned about when it was fitted: "
+                     + "; ".join(line.rstrip(".") for line in verdict) + ".")
     return " ".join(parts)
 
 

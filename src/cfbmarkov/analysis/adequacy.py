@@ -1,0 +1,188 @@
+"""Whether a model's fitting sample can carry it: the verdict ``fit`` stores in the model
+(``docs/definitions.md``, Sample adequacy).
+
+A chain fitted on a window extrapolates the flow it saw to every later time. Three checks
+tell from the window alone when that flow may not be the run's:
+
+- **parts disagree**: the window's halves (and its quarters, where each holds at least
+  :data:`MIN_PART_RESIDENCES` residences) are fitted with the same estimator and states,
+  and their exact E(RT) compared: the spread (largest - smallest over the window model's
+  E(RT)) beyond the limit (the relative width of the model's E(RT) interval where one is
+  given, else :data:`DEFAULT_TOLERANCE`; quarters, twice as noisy in variance, get sqrt(2)
+  times the limit) says the flow changed within the window;
+- **the net flow turns**: the net solids flow direction
+  (:func:`~cfbmarkov.observed.residence.net_flow_direction`) differs between parts;
+- **long residences**: the model's exact RTD puts more than :data:`TAIL_LIMIT` of its mass
+  beyond the window's length, residences the window cannot contain;
+- and halves with fewer than :data:`MIN_PART_RESIDENCES` residences leave E(RT)
+  unjudged, itself a warning.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+import numpy as np
+
+from cfbmarkov.errors import CfbmarkovError
+from cfbmarkov.markov.adequacy import Adequacy
+from cfbmarkov.markov.discrete import DiscreteTrajectories, discretize
+from cfbmarkov.markov.estimate import estimator_from_name
+from cfbmarkov.observed.residence import net_flow_direction, residence_times
+from cfbmarkov.trajectories import opened
+
+#: relative spread of the halves' E(RT) beyond which they disagree, without an interval
+DEFAULT_TOLERANCE = 0.3
+#: residences a part must hold for its E(RT) to be compared
+MIN_PART_RESIDENCES = 30
+#: share of the model's RTD beyond the window length that is warned about
+TAIL_LIMIT = 0.1
+
+_ADVICE = ("fit on a longer window or pool several runs (fit A.h5 B.h5 ...); `cfbmarkov "
+           "stationarity RUN --sample-length` tells how long a window must be")
+
+
+def _rt_mean(model) -> float:
+    try:
+        return float(model.rtd().mean)
+    except (CfbmarkovError, ZeroDivisionError, FloatingPointError):
+        return math.nan
+
+
+def _split(window: tuple[float, float], n: int) -> list[tuple[float, float]]:
+    a, b = window
+    edges = np.round(np.linspace(a, b, n + 1), 9)
+    return [(float(edges[k]), float(edges[k + 1])) for k in range(n)]
+
+
+def _spread(values: Sequence[float], reference: float) -> float:
+    finite = [v for v in values if math.isfinite(v)]
+    if len(finite) < 2 or not reference > 0:
+        return math.nan
+    return (max(finite) - min(finite)) / reference
+
+
+def _parts_of(traj, discrete: DiscreteTrajectories, window, model, fitter):
+    """Parts of one run's window: halves, or quarters where each holds enough residences;
+    (parts as (start, stop, E(RT), direction), fewest residences of a half)."""
+    lag_frames = int(discrete.lag_frames)
+    counts, directions = {}, {}
+    for n in (2, 4):
+        for part in _split(window, n):
+            d = net_flow_direction(traj, part)
+            directions[part] = d
+            counts[part] = residence_times(traj, part, use_events=False,
+                                           lag_frames=lag_frames, direction=d).count
+    halves, quarters = _split(window, 2), _split(window, 4)
+    use = quarters if min(counts[q] for q in quarters) >= MIN_PART_RESIDENCES else halves
+    parts = []
+    for a, b in use:
+        try:
+            mean = _rt_mean(fitter.fit(discrete.block(a, b)))
+        except CfbmarkovError:
+            mean = math.nan
+        parts.append((a, b, mean, directions[(a, b)]))
+    return parts, min(counts[h] for h in halves)
+
+
+def _turn_line(path, parts) -> str | None:
+    directions = {d for _, _, _, d in parts}
+    if len(directions) < 2:
+        return None
+    text = ", ".join(f"{d} in {a:g}-{b:g} s" for a, b, _, d in parts)
+    return (f"the net solids flow turns inside the fitting window of {path} ({text}): a model "
+            "fitted across it mixes two flows; fit on a window of one direction or a longer "
+            "one (`cfbmarkov stationarity RUN` gives each window's direction)")
+
+
+def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]], *,
+                    discrete: Sequence[DiscreteTrajectories] | None = None,
+                    interval: tuple[float, float] | None = None,
+                    tolerance: float = DEFAULT_TOLERANCE) -> Adequacy:
+    """The verdict on a model's fitting sample (the checks of the module docstring).
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The model fitted on the windows (its state space, lag, estimator and
+        ``connected`` are used for the parts).
+    runs : sequence of str, os.PathLike or Trajectories
+        The trajectory file(s) it was fitted on.
+    windows : sequence of (float, float)
+        The fitting window (s) of each run, in the order of ``runs``.
+    discrete : sequence of DiscreteTrajectories, optional
+        The windows already discretised in the model's state space (one per run); read
+        from the files where not given.
+    interval : (float, float), optional
+        The model's E(RT) interval (s); its width over E(RT) is then the limit of the
+        parts' spread instead of ``tolerance``.
+    tolerance : float, optional
+        The relative spread of the halves' E(RT) beyond which they disagree, without an
+        interval (default :data:`DEFAULT_TOLERANCE`).
+
+    Returns
+    -------
+    Adequacy
+        The warnings (empty: none) and the numbers behind them.
+
+    Raises
+    ------
+    InputError
+        If a file cannot be read or a window lies outside it.
+    """
+    fitter = estimator_from_name(model.estimator, model.state_space, model.lag,
+                                 connected=model.connected)
+    rt_mean = _rt_mean(model)
+    limit = tolerance
+    if interval is not None and rt_mean > 0 and all(map(math.isfinite, interval)):
+        limit = (float(interval[1]) - float(interval[0])) / rt_mean
+    lines: list[str] = []
+    all_parts: list[tuple[float, float, float, str]] = []
+    spread = math.nan
+    for k, (run, window) in enumerate(zip(runs, windows)):
+        with opened(run) as traj:
+            d = discrete[k] if discrete is not None else discretize(
+                traj, model.state_space, model.lag, window)
+            parts, fewest = _parts_of(traj, d, window, model, fitter)
+            name = traj.path
+        all_parts += parts
+        turn = _turn_line(name, parts)
+        if turn:
+            lines.append(turn)
+        if fewest < MIN_PART_RESIDENCES:
+            lines.append(f"a half of the fitting window {window[0]:g}-{window[1]:g} s of {name} "
+                         f"holds {fewest} residences (fewer than {MIN_PART_RESIDENCES}): "
+                         f"the window is too short to judge its E(RT); {_ADVICE}")
+            continue
+        part_limit = limit * (math.sqrt(2.0) if len(parts) == 4 else 1.0)
+        part_spread = _spread([m for _, _, m, _ in parts], rt_mean)
+        spread = part_spread if not math.isfinite(spread) else max(spread, part_spread)
+        if math.isfinite(part_spread) and part_spread > part_limit:
+            text = ", ".join(f"{m:.3g} s in {a:g}-{b:g} s" for a, b, m, _ in parts)
+            kind = "quarters" if len(parts) == 4 else "halves"
+            lines.append(f"the {kind} of the fitting window of {name} disagree: E(RT) {text}, "
+                         f"a spread of {100 * part_spread:.0f} % of the model's {rt_mean:.3g} s "
+                         f"(limit {100 * part_limit:.0f} %): the flow changed within the "
+                         f"window, and the model may lie far from the flow's long run; {_ADVICE}")
+    length = min(b - a for a, b in windows)
+    tail = _tail_share(model, length)
+    if math.isfinite(tail) and tail > TAIL_LIMIT:
+        lines.append(f"{100 * tail:.0f} % of the model's residences last longer than the "
+                     f"{length:g} s fitting window (E(RT) {rt_mean:.3g} s): the window cannot "
+                     f"contain them, so the long residences rest on few observations; "
+                     f"{_ADVICE}")
+    return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail)
+
+
+def _tail_share(model, length: float) -> float:
+    """The model's exact RTD mass beyond ``length`` (s), of its resolved mass."""
+    try:
+        rtd = model.rtd()
+    except CfbmarkovError:
+        return math.nan
+    p = np.asarray(rtd.probability, dtype=float)
+    total = p.sum()
+    if not total > 0:
+        return math.nan
+    return float(p[rtd.times > length + 1e-9].sum() / total)

@@ -1,0 +1,178 @@
+"""How long a fitting sample must be: models fitted on growing windows of a run against the
+run's long run (``docs/definitions.md``, Sample length; ``cfbmarkov stationarity
+--sample-length``).
+
+From a start time, windows of growing length (0.5, 1, 2, 5, 10, 20, ... s, as far as the
+run reaches) are fitted with the same estimator and states, and each model's exact E(RT)
+and SD(RT) compared with the run's long-run values: the observed residence times of the
+whole span from the start, pooled. The sample length is the shortest window from which
+every longer window's E(RT) and SD(RT) lie within the tolerance of them.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Sequence
+
+import numpy as np
+
+from cfbmarkov._json import jsonable
+from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.markov.discrete import discretize
+from cfbmarkov.markov.estimate import estimator_from_name
+from cfbmarkov.observed.residence import net_flow_direction, residence_times
+from cfbmarkov.trajectories import Trajectories
+
+#: the window lengths tried, s (those the run's span holds)
+LENGTHS = (0.5, 1.0, 2.0, 5.0, 10.0, 20.0, 50.0, 100.0, 200.0, 500.0)
+
+
+@dataclass(frozen=True)
+class SampleLength:
+    """Models on growing windows of one run against its long run.
+
+    Attributes
+    ----------
+    file : str
+        The trajectory file.
+    start : float
+        Where every window starts (s).
+    span_end : float
+        The end of the long run (s): the run's last frame.
+    long_run_mean, long_run_sd : float
+        E(RT), SD(RT) (s) of the observed residence times of ``start``-``span_end`` pooled.
+    long_run_count : int
+        Their number.
+    lengths : ndarray, shape (n,)
+        Window lengths (s).
+    rt_mean, rt_sd : ndarray, shape (n,)
+        The exact E(RT), SD(RT) (s) of the model fitted on each window (NaN where none).
+    tolerance : float
+        Relative tolerance (-).
+    sample_length : float
+        The shortest length from which every longer window's E(RT) and SD(RT) lie within
+        ``tolerance`` of the long run's (s; NaN where none does, even the longest).
+    description : str
+        The states, lag and estimator of the models.
+    """
+
+    file: str
+    start: float
+    span_end: float
+    long_run_mean: float
+    long_run_sd: float
+    long_run_count: int
+    lengths: np.ndarray
+    rt_mean: np.ndarray
+    rt_sd: np.ndarray
+    tolerance: float
+    sample_length: float
+    description: str
+
+    def within(self) -> np.ndarray:
+        """Whether each window's E(RT) and SD(RT) lie within the tolerance, shape (n,)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            m = np.abs(self.rt_mean / self.long_run_mean - 1.0) <= self.tolerance
+            s = np.abs(self.rt_sd / self.long_run_sd - 1.0) <= self.tolerance
+        return m & s
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (NaN as None), the output of ``stationarity --sample-length --json``."""
+        return jsonable({
+            "file": self.file, "start": self.start, "span_end": self.span_end,
+            "models": self.description, "tolerance": self.tolerance,
+            "long_run": {"rt_mean": self.long_run_mean, "rt_sd": self.long_run_sd,
+                         "rt_count": self.long_run_count},
+            "windows": [{"length": float(n), "rt_mean": float(m), "rt_sd": float(s),
+                         "within": bool(w)}
+                        for n, m, s, w in zip(self.lengths, self.rt_mean, self.rt_sd,
+                                              self.within())],
+            "sample_length": self.sample_length})
+
+
+def _first_stable(within: np.ndarray, lengths: np.ndarray) -> float:
+    """The shortest length from which every longer one is within (NaN: none)."""
+    for k in range(within.size):
+        if within[k:].all():
+            return float(lengths[k])
+    return math.nan
+
+
+def sample_length(path, state_space, *, lag: float = 0.025, start: float | None = None,
+                  estimator: str | None = None, tolerance: float = 0.1,
+                  lengths: Sequence[float] = LENGTHS) -> SampleLength:
+    """Fit models on growing windows of a run from ``start`` and find the length from which
+    their E(RT) and SD(RT) stay within ``tolerance`` of the run's long run.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A trajectory file.
+    state_space : StateSpace
+        The states of the models (as ``fit --states``/``--cells``).
+    lag : float, optional
+        The lag (s).
+    start : float, optional
+        Where the windows start (s); default the run's first frame.
+    estimator : {"paper", "mle"}, optional
+        Default: ``mle`` for an open riser, else ``paper`` (as ``fit``).
+    tolerance : float, optional
+        Relative tolerance, default 0.1.
+    lengths : sequence of float, optional
+        The lengths tried (s); those that end beyond the run are left out.
+
+    Returns
+    -------
+    SampleLength
+
+    Raises
+    ------
+    InputError
+        On a tolerance that is not positive, a start outside the run, a run shorter than
+        the shortest length, a long run without two residences in its direction, or the
+        errors of :func:`~cfbmarkov.markov.discretize`.
+    """
+    if not (math.isfinite(tolerance) and tolerance > 0):
+        raise InputError(f"tolerance {tolerance!r} must be a positive number (e.g. 0.1)")
+    with Trajectories(path) as traj:
+        first, last = float(traj.times[0]), float(traj.times[-1])
+        a = first if start is None else float(start)
+        if not first - traj.time_tolerance <= a < last:
+            raise InputError(f"start {a:g} s lies outside the frames of {path} "
+                             f"({first:g} to {last:g} s)")
+        if estimator is None:
+            estimator = "mle" if traj.boundary.is_open else "paper"
+        usable = [float(n) for n in sorted(lengths) if a + n <= last + traj.time_tolerance]
+        if not usable:
+            raise InputError(f"{path} runs {last - a:g} s from {a:g} s: shorter than the "
+                             f"shortest window ({min(lengths):g} s); an earlier --start")
+        fitter = estimator_from_name(estimator, state_space, lag)
+        data = discretize(traj, state_space, lag, (a, a + usable[-1]))
+        means, sds = [], []
+        for n in usable:
+            try:
+                rtd = fitter.fit(data.block(a, a + n)).rtd()
+                means.append(rtd.mean)
+                sds.append(rtd.sd)
+            except CfbmarkovError:
+                means.append(math.nan)
+                sds.append(math.nan)
+        long_run = residence_times(traj, (a, last), use_events=False,
+                                   lag_frames=traj.lag_frames(lag),
+                                   direction=net_flow_direction(traj, (a, last)))
+    if long_run.count < 2:
+        raise InputError(f"{path} holds {long_run.count} residences from {a:g} s: no long run "
+                         "to judge the windows by (a longer run)")
+    lengths_ = np.asarray(usable)
+    result = SampleLength(str(path), a, last, long_run.mean, long_run.sd, long_run.count,
+                          lengths_, np.asarray(means, float), np.asarray(sds, float),
+                          float(tolerance), math.nan,
+                          f"{state_space.describe()}, lag {lag:g} s, estimator '{estimator}'")
+    return _with_length(result)
+
+
+def _with_length(result: SampleLength) -> SampleLength:
+    from dataclasses import replace
+
+    return replace(result, sample_length=_first_stable(result.within(), result.lengths))

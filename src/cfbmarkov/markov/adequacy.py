@@ -1,0 +1,128 @@
+"""The verdict on a model's fitting sample: whether the window (or the pooled windows) could
+carry the model (``docs/definitions.md``, Sample adequacy).
+
+The verdict is computed by :func:`cfbmarkov.analysis.adequacy.assess_adequacy` (it fits
+models on parts of the window and reads the trajectories); the model holds it as its
+``adequacy`` attribute, stores it in its file as the JSON attribute ``adequacy`` and
+repeats its lines among :meth:`~cfbmarkov.markov.model.MarkovModel.warnings`.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from typing import Any
+
+from cfbmarkov.errors import InputError
+
+
+@dataclass(frozen=True)
+class Adequacy:
+    """Whether a model's fitting sample can carry it, in numbers.
+
+    Attributes
+    ----------
+    warnings : tuple of str
+        One line per problem found (empty: none), each with its numbers and what to do.
+    parts : tuple of (float, float, float, str)
+        Per part of the fitting window (its halves, or its quarters where they hold enough
+        residences): start (s), stop (s), the E(RT) (s) of the model fitted on it with the
+        same estimator and states (NaN where none could be), and the net solids flow
+        direction over it ("up" or "down"). Several runs: the parts of each in turn.
+    rt_mean : float
+        The fitted model's exact E(RT) (s; NaN where it has none).
+    spread : float
+        (largest - smallest) E(RT) of the parts over ``rt_mean`` (-; NaN with fewer than two
+        parts that have one).
+    limit : float
+        The relative spread beyond which the parts disagree (-): the relative width of the
+        model's E(RT) interval where one was given, else the default tolerance.
+    window_length : float
+        Length of the fitting window (s; the shortest where several runs were pooled).
+    tail_share : float
+        The model's exact RTD mass beyond ``window_length``: the share of residences a
+        window of this length cannot contain (-; NaN without an RTD).
+    """
+
+    warnings: tuple[str, ...] = ()
+    parts: tuple[tuple[float, float, float, str], ...] = ()
+    rt_mean: float = math.nan
+    spread: float = math.nan
+    limit: float = math.nan
+    window_length: float = math.nan
+    tail_share: float = math.nan
+
+    @property
+    def adequate(self) -> bool:
+        """True where no warning was raised."""
+        return not self.warnings
+
+    def to_dict(self) -> dict[str, Any]:
+        """JSON-ready (NaN as None): the attributes, ``parts`` as a list of objects.
+
+        Returns
+        -------
+        dict
+        """
+        def number(v):
+            return float(v) if v is not None and math.isfinite(v) else None
+        return {"warnings": list(self.warnings),
+                "parts": [{"window": [float(a), float(b)], "rt_mean": number(m),
+                           "direction": d} for a, b, m, d in self.parts],
+                "rt_mean": number(self.rt_mean), "spread": number(self.spread),
+                "limit": number(self.limit), "window_length": number(self.window_length),
+                "tail_share": number(self.tail_share)}
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any]) -> "Adequacy":
+        """The verdict from :meth:`to_dict`'s form.
+
+        Parameters
+        ----------
+        data : dict
+
+        Returns
+        -------
+        Adequacy
+
+        Raises
+        ------
+        InputError
+            If ``data`` does not have that form.
+        """
+        def number(v):
+            return math.nan if v is None else float(v)
+        try:
+            return cls(tuple(str(w) for w in data.get("warnings", [])),
+                       tuple((float(p["window"][0]), float(p["window"][1]),
+                              number(p.get("rt_mean")), str(p.get("direction", "up")))
+                             for p in data.get("parts", [])),
+                       number(data.get("rt_mean")), number(data.get("spread")),
+                       number(data.get("limit")), number(data.get("window_length")),
+                       number(data.get("tail_share")))
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
+            raise InputError(f"adequacy attribute is not a verdict ({exc})") from None
+
+    def to_attr(self) -> str:
+        """The verdict as the model file's JSON attribute ``adequacy``."""
+        return json.dumps(self.to_dict(), allow_nan=False)
+
+    @classmethod
+    def from_attr(cls, text: str | bytes) -> "Adequacy":
+        """The verdict from the model file's attribute (:meth:`to_attr`).
+
+        Raises
+        ------
+        InputError
+            If the attribute is not such JSON.
+        """
+        if isinstance(text, bytes):
+            text = text.decode(errors="replace")
+        try:
+            data = json.loads(text)
+        except json.JSONDecodeError as exc:
+            raise InputError(f"adequacy attribute is not JSON ({exc.msg})") from None
+        if not isinstance(data, dict):
+            raise InputError("adequacy attribute is not a JSON object")
+        return cls.from_dict(data)

@@ -1,0 +1,120 @@
+"""Several runs of one case as one sample: their windows discretised alike and their
+transitions counted together (``docs/definitions.md``, Pooled fits).
+
+A model fitted on several runs pools their transition counts (:class:`TransitionCounts`
+add; :func:`~cfbmarkov.markov.counting.count_transitions` sums over a list of windows):
+its P is that of all their transitions, as if the windows were one longer sample of the
+same flow. Runs pool only where they describe one riser at one time basis:
+:func:`check_runs_match` refuses runs that differ in dimensions, width, height, depth,
+boundary or frame interval, naming the first difference.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Sequence
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.markov.discrete import DiscreteTrajectories, discretize
+from cfbmarkov.markov.states import StateSpace
+
+#: what two runs must share to be pooled, as (attribute, what the message calls it)
+_SHARED = (("dimensions", "dimensions"), ("width", "width (m)"), ("height", "height (m)"),
+           ("depth", "depth (m)"), ("boundary", "boundary"),
+           ("frame_interval", "frame interval (s)"))
+
+
+def _same(a, b, tolerance: float = 1e-9) -> bool:
+    if isinstance(a, float) and isinstance(b, float):
+        return math.isclose(a, b, rel_tol=tolerance, abs_tol=0.0)
+    return a == b
+
+
+def _text(value) -> str:
+    return format(value, "g") if isinstance(value, float) else str(getattr(value, "value", value))
+
+
+def check_runs_match(runs: Sequence) -> None:
+    """Refuse runs that do not describe one riser at one time basis.
+
+    Parameters
+    ----------
+    runs : sequence of Trajectories
+        Open trajectory files.
+
+    Raises
+    ------
+    InputError
+        At the first run that differs from the first in dimensions, width, height, depth,
+        boundary or frame interval (relative tolerance 1e-9), naming both values.
+    """
+    first = runs[0]
+    for run in runs[1:]:
+        for name, words in _SHARED:
+            a, b = getattr(first, name), getattr(run, name)
+            if not _same(a, b):
+                raise InputError(f"runs of different {words} cannot be pooled: {first.path} "
+                                 f"has {_text(a)}, {run.path} has {_text(b)} (fit runs of "
+                                 "one case, at one frame interval)")
+
+
+def run_windows(windows: Sequence[tuple[float, float]], n_runs: int
+                ) -> list[tuple[float, float]]:
+    """One fitting window per run: one window for all, or one each.
+
+    Parameters
+    ----------
+    windows : sequence of (float, float)
+        One window (s), or ``n_runs`` of them.
+    n_runs : int
+        Number of runs.
+
+    Returns
+    -------
+    list of (float, float)
+        ``n_runs`` windows.
+
+    Raises
+    ------
+    InputError
+        If neither one nor ``n_runs`` windows are given.
+    """
+    windows = [tuple(map(float, w)) for w in windows]
+    if len(windows) == 1:
+        return windows * n_runs
+    if len(windows) != n_runs:
+        raise InputError(f"{len(windows)} windows for {n_runs} runs: give one window for all "
+                         "runs or one per run (--window 10:15,12:17,...)")
+    return windows
+
+
+def discretize_runs(runs: Sequence, state_space: StateSpace, lag: float,
+                    windows: Sequence[tuple[float, float]]) -> list[DiscreteTrajectories]:
+    """The fitting windows of several runs, checked to match and discretised alike.
+
+    Parameters
+    ----------
+    runs : sequence of Trajectories
+        Open trajectory files of one case.
+    state_space : StateSpace
+        The states (the same for every run).
+    lag : float
+        The lag (s).
+    windows : sequence of (float, float)
+        One window for all runs, or one per run (s).
+
+    Returns
+    -------
+    list of DiscreteTrajectories
+        One per run, in order; an estimator's ``fit`` pools them.
+
+    Raises
+    ------
+    InputError
+        If the runs differ (:func:`check_runs_match`), the windows do not match the runs
+        (:func:`run_windows`), or a window cannot be discretised
+        (:func:`~cfbmarkov.markov.discretize`).
+    """
+    check_runs_match(runs)
+    return [discretize(run, state_space, lag, window)
+            for run, window in zip(runs, run_windows(windows, len(runs)))]

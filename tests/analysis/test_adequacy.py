@@ -1,0 +1,209 @@
+"""The verdict on a fitting sample (fit), pooled fits of several runs, and how long a sample
+must be (stationarity --sample-length), on generated risers."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from cfbmarkov import synthetic
+from cfbmarkov.analysis.adequacy import assess_adequacy
+from cfbmarkov.analysis.sample_length import sample_length
+from cfbmarkov.cli import main
+from cfbmarkov.markov import MarkovModel, fit_model
+from cfbmarkov.markov.adequacy import Adequacy
+from cfbmarkov.markov.estimate import estimator_from_name
+from cfbmarkov.markov.pooling import discretize_runs
+from cfbmarkov.markov.states import CellGrid
+from cfbmarkov.trajectories import Trajectories
+
+FAST = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=2.5, fall_velocity=-0.6,
+                           vertical_spread=0.5, persistence=False)
+SLOW = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.6, fall_velocity=-0.6,
+                           vertical_spread=0.5, persistence=False)
+SWITCH = 3.0        # s between switches of the two-chain riser
+DURATION = 24.0
+
+
+def _write(path, period, seed=3, n=3000):
+    """All particles follow the fast chain, then the slow one, switching every ``period``
+    s (0: the fast chain throughout, a stationary run)."""
+    k = int(round(DURATION / FAST.lag)) + 1
+    t = FAST.lag * np.arange(k)
+    regimes = ((t + 1e-9) // period).astype(int) % 2 if period else np.zeros(k, int)
+    return synthetic.write_regime_run(path, [FAST, SLOW], np.eye(2), n, DURATION, seed=seed,
+                                      regimes=regimes)
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("adequacy")
+    return {"switching": _write(folder / "switching.h5", SWITCH),
+            "stationary": _write(folder / "stationary.h5", 0),
+            "stationary2": _write(folder / "stationary2.h5", 0, seed=4)}
+
+
+def _space():
+    return CellGrid(4, 16, FAST.width, FAST.height)
+
+
+def _verdict(path, window):
+    model = fit_model(path, _space(), 0.025, window, "paper")
+    return assess_adequacy(model, [path], [window])
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_windows_holding_a_switch_warn(runs):
+    # windows of one switching time that straddle a switch: the halves see different chains
+    for start in (1.5, 4.5, 7.5):
+        verdict = _verdict(runs["switching"], (start, start + SWITCH))
+        assert any("disagree" in line for line in verdict.warnings), verdict
+        assert verdict.spread > verdict.limit
+        means = [m for _, _, m, _ in verdict.parts]
+        assert max(means) / min(means) > 1.4      # the slow and the fast chain's E(RT)
+
+
+def test_a_window_of_many_switches_and_a_stationary_chain_do_not_warn(runs):
+    long = _verdict(runs["switching"], (0.0, 8 * SWITCH))
+    assert not long.warnings, long.warnings
+    for start in (0.0, 1.5, 4.5, 7.5, 13.0):
+        verdict = _verdict(runs["stationary"], (start, start + SWITCH))
+        assert verdict.adequate, verdict.warnings
+        assert verdict.spread < 0.1
+        assert verdict.tail_share < 0.1
+
+
+def test_short_window_and_net_flow_turn_warn(runs, tmp_path):
+    few = _verdict(runs["stationary"], (2.0, 2.6))    # halves of 0.3 s hold no residence
+    assert any("residences" in line for line in few.warnings)
+    # a riser whose net flow is up, then down: the turn is named with both parts
+    up = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.5, fall_velocity=-0.3,
+                             vertical_spread=0.5, persistence=False)
+    down = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=0.3, fall_velocity=-1.5,
+                               vertical_spread=0.5, persistence=False)
+    k = int(round(4.0 / up.lag)) + 1
+    path = synthetic.write_regime_run(tmp_path / "turn.h5", [up, down], np.eye(2), 500, 4.0,
+                                      seed=1, regimes=(np.arange(k) >= k // 2).astype(int))
+    model = fit_model(path, _space(), 0.025, (0.0, 4.0), "mle")
+    turn = assess_adequacy(model, [path], [(0.0, 4.0)])
+    line = next(line for line in turn.warnings if "turns" in line)
+    assert "up in 0-2 s" in line and "down in 2-4 s" in line
+
+
+def test_verdict_in_the_model_file_and_the_verbs(runs, tmp_path, capsys):
+    out = tmp_path / "m.h5"
+    code, _, err = run_cli(capsys, "fit", runs["switching"], "--cells", "4x16", "--window",
+                           "1.5:4.5", "-o", out)
+    assert code == 0
+    warned = [line for line in err.splitlines() if line.startswith("warning:")]
+    assert any("disagree" in line and "cfbmarkov stationarity" in line for line in warned)
+    model = MarkovModel.load(out)
+    assert model.adequacy is not None and not model.adequacy.adequate
+    assert any("disagree" in line for line in model.warnings())
+    assert Adequacy.from_attr(model.adequacy.to_attr()) == model.adequacy
+    with h5py.File(out, "r+") as f:         # a file without the verdict still loads
+        del f.attrs["adequacy"]
+    assert MarkovModel.load(out).adequacy is None
+    code, _, err = run_cli(capsys, "fit", runs["switching"], "--cells", "4x16", "--window",
+                           "1.5:4.5", "-o", out, "--no-adequacy")
+    assert code == 0 and "disagree" not in err and MarkovModel.load(out).adequacy is None
+    # predict and compare repeat it
+    run_cli(capsys, "fit", runs["switching"], "--cells", "4x16", "--window", "1.5:4.5",
+            "-o", out)
+    pred = tmp_path / "p.h5"
+    code, _, err = run_cli(capsys, "predict", out, "--init", runs["switching"], "--start",
+                           "4.5", "--duration", "2", "-o", pred, "--quiet")
+    assert code == 0 and "warning: the model's fitting sample:" in err
+    code, _, err = run_cli(capsys, "compare", runs["switching"], pred, "--window", "4.5:6.5",
+                           "-o", tmp_path / "cmp", "--no-figures", "--resamples", "0")
+    assert code == 0 and "fitting sample" in err
+    summary = json.loads((tmp_path / "cmp" / "summary.json").read_text())
+    assert summary["adequacy"]["warnings"]
+    assert any("fitting sample" in w for w in summary["warnings"])
+
+
+def test_pooling_copies_gives_the_same_chain(runs):
+    path = runs["stationary"]
+    space = _space()
+    with Trajectories(path) as a, Trajectories(path) as b, Trajectories(path) as c:
+        pooled_data = discretize_runs([a, b, c], space, 0.025, [(2.0, 8.0)])
+    for name in ("paper", "mle"):
+        fitter = estimator_from_name(name, space, 0.025)
+        one = fit_model(path, space, 0.025, (2.0, 8.0), name)
+        pooled = fitter.fit(pooled_data)
+        np.testing.assert_array_equal(pooled.counts, 3 * one.counts)
+        np.testing.assert_allclose(pooled.transition_matrix, one.transition_matrix,
+                                   rtol=1e-12, atol=1e-15)
+        assert pooled.frame_pairs == 3 * one.frame_pairs
+
+
+def test_fit_several_runs(runs, tmp_path, capsys):
+    out = tmp_path / "pooled.h5"
+    code, _, err = run_cli(capsys, "fit", runs["stationary"], runs["stationary2"], "--cells",
+                           "4x16", "--window", "2:8,3:9", "-o", out)
+    assert code == 0, err
+    model = MarkovModel.load(out)
+    assert len(model.source) == 2 and model.adequacy.adequate
+    assert len(model.adequacy.parts) >= 4         # the parts of both runs
+    single = fit_model(runs["stationary"], _space(), 0.025, (2.0, 8.0), "paper")
+    other = fit_model(runs["stationary2"], _space(), 0.025, (3.0, 9.0), "paper")
+    np.testing.assert_array_equal(model.counts, single.counts + other.counts)
+    # refused in one line: --states auto, windows that do not match the runs
+    code, _, err = run_cli(capsys, "fit", runs["stationary"], runs["stationary2"], "--states",
+                           "auto", "-o", tmp_path / "x.h5")
+    assert code == 2 and "one run" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run_cli(capsys, "fit", runs["stationary"], runs["stationary2"], "--window",
+                           "1:2,2:3,3:4", "-o", tmp_path / "x.h5")
+    assert code == 2 and "3 windows for 2 runs" in err
+    assert not (tmp_path / "x.h5").exists()
+
+
+@pytest.mark.parametrize("change, named", [
+    (dict(height=2 * FAST.height), "height"),
+    (dict(width=2 * FAST.width), "width"),
+    (dict(lag=2 * FAST.lag), "frame interval"),
+])
+def test_runs_of_another_geometry_or_frame_interval_are_refused(runs, tmp_path, capsys,
+                                                                change, named):
+    from dataclasses import replace
+
+    other = synthetic.write_run(tmp_path / "other.h5", replace(FAST, **change), 200, 2.0,
+                                seed=1)
+    code, _, err = run_cli(capsys, "fit", runs["stationary"], other, "--cells", "4x16",
+                           "--window", "0.5:1.5", "--lag", "0.05", "-o", tmp_path / "x.h5")
+    assert code == 2 and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1
+    assert f"different {named}" in err
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_sample_length(runs, capsys):
+    stationary = sample_length(runs["stationary"], _space(), lag=0.025, start=0.0)
+    assert stationary.within().all()
+    assert stationary.sample_length == 0.5
+    switching = sample_length(runs["switching"], _space(), lag=0.025, start=0.0)
+    assert not switching.within()[:3].any()       # windows within the first (fast) chain
+    assert np.isnan(switching.sample_length) or switching.sample_length >= 2 * SWITCH
+    code, out, _ = run_cli(capsys, "stationarity", runs["stationary"], "--sample-length",
+                           "--cells", "4x16", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert data["sample_length"] == 0.5 and data["tolerance"] == 0.1
+    assert [w["length"] for w in data["windows"]] == [0.5, 1.0, 2.0, 5.0, 10.0, 20.0]
+    code, out, _ = run_cli(capsys, "stationarity", runs["switching"], "--sample-length",
+                           "--cells", "4x16", "--tolerance", "0.5")
+    assert code == 0 and "sample length:" in out and "within 50 %" in out
+
+
+def test_report_paragraph_repeats_the_verdict():
+    from cfbmarkov.report.sections import trust_text
+
+    summary = {"md_rtd": 0.2, "adequacy": {"warnings": ["the halves disagree: 67 %"]}}
+    assert "fitting sample was warned about" in trust_text("4", "paper", summary)
+    assert "warned" not in trust_text("4", "paper", {"md_rtd": 0.2})
