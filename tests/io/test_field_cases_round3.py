@@ -65,7 +65,7 @@ def test_liggghts_centred_box_with_the_documented_negative_region(tmp_path, caps
 
 
 def test_pept_tracers_are_told_apart_by_label_and_noise_is_dropped(tmp_path, capsys):
-    code = main(["import", str(FIELD / "pept-two-tracers-noise.csv"), "--format", "csv",
+    code = main(["import", str(FIELD / "pept-two-tracers-noise.csv"), "--format", "csv", "--width", "0.09", "--height", "0.95",
                  "-o", str(tmp_path / "p.h5"), "--vertical-axis", "y", "--drop-depth",
                  "--length-unit", "mm", "--time-unit", "ms", "--resample", "0.005",
                  "--max-gap", "0.01"])
@@ -89,7 +89,7 @@ def test_pept_tracers_are_told_apart_by_label_and_noise_is_dropped(tmp_path, cap
 
 
 def test_trackmate_spots_use_track_id(tmp_path, capsys):
-    code = main(["import", str(FIELD / "trackmate-spots.csv"), "--format", "csv", "-o",
+    code = main(["import", str(FIELD / "trackmate-spots.csv"), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o",
                  str(tmp_path / "s.h5"), "--vertical-axis", "y", "--drop-depth",
                  "--boundary", "open"])
     out = capsys.readouterr().out
@@ -121,7 +121,7 @@ def _spreadsheet_truth():
                                         ("excel-tab-utf8-title.txt", "title line"),
                                         ("excel-csv-bom-ghost-row.csv", None)])
 def test_spreadsheet_text_exports(tmp_path, capsys, name, note):
-    code = main(["import", str(FIELD / name), "--format", "csv", "-o", str(tmp_path / "e.h5")])
+    code = main(["import", str(FIELD / name), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o", str(tmp_path / "e.h5")])
     out = capsys.readouterr().out
     assert code == 0
     assert (note in out) if note else out.count("\n") == 1
@@ -133,7 +133,7 @@ def test_spreadsheet_text_exports(tmp_path, capsys, name, note):
 
 
 def test_cp1252_text_is_refused_naming_the_line_and_the_encoding(tmp_path, capsys):
-    code = main(["import", str(FIELD / "excel-tab-cp1252-title.txt"), "--format", "csv", "-o",
+    code = main(["import", str(FIELD / "excel-tab-cp1252-title.txt"), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o",
                  str(tmp_path / "e.h5")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1
@@ -146,7 +146,7 @@ def test_a_fit_without_transitions_is_an_error(tmp_path, capsys):
     rows = ["t,id,x,y"] + [f"{0.005 * f:.3f},{3 * f + i},{0.01 + 0.02 * i:.3f},{0.1 + 0.01 * f:.3f}"
                            for f in range(20) for i in range(3)]
     (tmp_path / "spots.csv").write_text("\n".join(rows) + "\n")
-    assert main(["import", str(tmp_path / "spots.csv"), "--format", "csv", "-o",
+    assert main(["import", str(tmp_path / "spots.csv"), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o",
                  str(tmp_path / "s.h5")]) == 0
     capsys.readouterr()
     code = main(["fit", str(tmp_path / "s.h5"), "--cells", "3x10", "--lag", "0.005",
@@ -162,7 +162,7 @@ def test_pept_rows_at_one_printed_time_are_merged(tmp_path, capsys):
     y = [100.0, 110.0, 120.0, 122.0, 131.0, 140.0, 150.0, 160.0, 170.0]
     (tmp_path / "p.csv").write_text("# t x y z error\n" + "".join(
         f"{a:.2f} 45.0 {b:.1f} 0.5 1.0\n" for a, b in zip(t, y)))
-    code = main(["import", str(tmp_path / "p.csv"), "--format", "csv", "-o",
+    code = main(["import", str(tmp_path / "p.csv"), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o",
                  str(tmp_path / "p.h5"), "--vertical-axis", "y", "--drop-depth",
                  "--length-unit", "mm", "--time-unit", "ms", "--resample", "0.001",
                  "--max-gap", "0.002"])

@@ -134,7 +134,7 @@ def test_lammps_h5md(tmp_path, capsys):
 def test_paraview_csv_export(tmp_path):
     truth = _truth("paraview-csv-export")
     out = import_file(FIELD / "paraview-csv-export" / "particles.csv", "csv", tmp_path / "p.h5",
-                      vertical_axis="z", drop_depth=True)
+                      vertical_axis="z", drop_depth=True, width=0.09, height=0.95)
     times, ids, pos, vel, laps, _ = _read(out)
     np.testing.assert_allclose(times, truth["times"], rtol=0, atol=1e-12)
     np.testing.assert_array_equal(ids, truth["ids"])
