@@ -25,7 +25,8 @@ def _command_lines(path: Path) -> list[str]:
         text = re.sub(r"\\\n\s*", " ", block)
         for line in text.splitlines():
             line = line.strip().removeprefix("$ ")
-            if line.startswith("cfbmarkov "):
+            # a command, not a line of its output ("cfbmarkov import: read ...")
+            if line.startswith("cfbmarkov ") and not line.split()[1].endswith(":"):
                 lines.append(line.split(" #")[0])
     return lines
 

@@ -177,7 +177,7 @@ def test_full_disk_markov_verbs(data, tmp_path, verb):
             "predict": ["predict", data / "model.h5", "--init", data / "run.h5", "--start",
                         "0.5", "--duration", "1", "-q", "-o", "out.h5"],
             "compare": ["compare", data / "run.h5", data / "run.h5", "--window", "0:1.5",
-                        "-o", "out"]}[verb]
+                        "-q", "-o", "out"]}[verb]
     rc, _, err = run_cli(*args, cwd=tmp_path, preexec_fn=_file_size_limit(2000))
     assert rc == 2, err
     lines = err.splitlines()

@@ -314,7 +314,7 @@ def test_paraview_csv_export_names(tmp_path):
                                   + [repr(float(a)) for a in (*vel[k, j], *pos[k, j])]))
     (tmp_path / "pv.csv").write_text("\n".join(lines) + "\n")
     out = import_file(tmp_path / "pv.csv", "csv", tmp_path / "c.h5", vertical_axis="z",
-                      drop_depth=True)
+                      drop_depth=True, width=W, height=H)
     times, ids, p, v, lp, *_ = _read(out)
     ep, ev, el = _expected_sorted(pos, vel, laps)
     np.testing.assert_allclose(times, TIMES, rtol=0, atol=0)

@@ -201,7 +201,7 @@ def test_no_entry_in_the_window_and_no_complete_residence_are_refused(open_run, 
     assert main(["predict", str(model), "--init", str(open_run["run"]), "--start", "4",
                  "--duration", "0.1", "-o", str(pred), "--quiet"]) == 0
     capsys.readouterr()
-    code = main(["compare", str(open_run["run"]), str(pred), "--window", "4:4.1", "-o",
+    code = main(["compare", str(open_run["run"]), str(pred), "--window", "4:4.1", "-q", "-o",
                  str(tmp_path / "cmp")])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "holds no complete residence" in err

@@ -315,11 +315,11 @@ def add_stationarity(sub) -> None:
                    help="with --sample-length: relative tolerance (default 0.1)")
     s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
                                         "cells-velocity-fine", "cells-previous"],
-                   default="cells", help="with --sample-length: the models' states")
+                   default="cells", help="with --sample-length: the models' states (default cells)")
     s.add_argument("--cells", type=parse_cells, default=(6, 38),
                    help="with --sample-length: COLUMNSxROWS (default 6x38)")
     s.add_argument("--estimator", choices=["paper", "mle"], default=None,
-                   help="with --sample-length: as in fit")
+                   help="with --sample-length: as in fit (default paper, mle on an open riser)")
     s.add_argument("--json", action="store_true", help="print JSON instead of a table")
     s.set_defaults(func=cmd_stationarity)
 

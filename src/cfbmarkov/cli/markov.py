@@ -40,6 +40,7 @@ def cmd_fit(args) -> int:
         if args.states == "auto" and depth_columns is not None:
             raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
         if args.states == "auto":
+            run.window(*args.window)        # a refusal stays one line, before any progress
             if not args.quiet:
                 print(f"fit: judging the candidate state spaces on {args.run}, "
                       f"{args.window[0]:g}-{args.window[1]:g} s (each fitted and its RTD "
