@@ -233,7 +233,7 @@ def test_map_times_and_numbers():
 
 
 def test_trust_paragraph_is_written_from_the_numbers():
-    from cfbmarkov.report.sections import trust_text
+    from cfbmarkov.report.table3 import trust_text
 
     summary = {"md_rtd": 0.33, "baseline": {"md_rtd": 0.076}, "natural_variability":
                {"md_rtd": 0.05}, "level": 0.9, "reference": {"rt_mean": 0.86},
@@ -289,7 +289,7 @@ def test_the_long_run_span_of_a_reproduction():
 def test_a_side_without_residences_is_said_so_not_n_a(reproduction):
     """A model that predicts no residence in the net flow's direction: 'no residences' and a
     note saying why, not a row of n/a (issue 14, net downflow)."""
-    from cfbmarkov.report.sections import NO_RESIDENCES
+    from cfbmarkov.report.table3 import NO_RESIDENCES
 
     path = reproduction / "u3" / "compare-mle" / "summary.json"
     s = json.loads(path.read_text())
