@@ -192,9 +192,10 @@ def test_model_figures_from_an_attached_model(tmp_path, make_run, write_run):
     out = tmp_path / "report"
     saved = compare(ref, pred, window=(1.0, 3.0), output=out)
     for name in ("rtd.png", "snapshots.png", "mixing.png", "transition_matrix.png",
-                 "transition_bars.png", "probability_maps.png"):
+                 "probability_maps.png"):
         assert_png(out / name)
         assert name in saved["figures"]
+    assert "transition_bars.png" not in saved["figures"]     # heat maps, not 3D stems
     assert saved["same_tracer_groups"] is True
     assert saved["model_columns"] == 6
 

@@ -16,6 +16,7 @@ from cfbmarkov.report.figure_sections import map_numbers
 from cfbmarkov.report.reproduction import write_report
 from cfbmarkov.report.run_folder import estimator_names
 from cfbmarkov.report.sections import PAPER_TABLE3
+from cfbmarkov.report.table3 import COMPACT_HEADER
 
 PNG = b"\x89PNG\r\n\x1a\n"
 EXPECTED_FIGURES = {"fig03-transition-matrices.png", "fig04-maps-u3.png", "fig05-maps-u6.png",
@@ -23,7 +24,8 @@ EXPECTED_FIGURES = {"fig03-transition-matrices.png", "fig04-maps-u3.png", "fig05
                     "fig11-mixing.png", "plausibility.png",
                     # beyond the paper: implied timescales and CK test per finished case
                     "its-u3.png", "its-u6.png", "ck-u3.png", "ck-u6.png"}
-HEADINGS = ("Table 3", "Computing time", "Fig. 3", "Fig. 4", "Fig. 8", "Fig. 9", "Fig. 10",
+HEADINGS = ("Summary", "Operating conditions and physics checks", "Table 3",
+            "Table 3 in detail", "Computing time", "Fig. 3", "Fig. 4", "Fig. 8", "Fig. 9", "Fig. 10",
             "Fig. 11", "Plausibility", "Beyond the paper", "Chapman-Kolmogorov errors",
             "Warnings", "Not finished")
 
@@ -32,8 +34,14 @@ def md_headings(md: str) -> list[str]:
     return [line.lstrip("#").strip() for line in md.splitlines() if line.startswith("#")]
 
 
-def table_row(md: str, u: str, estimator: str) -> list[str]:
-    rows = [line for line in md.splitlines() if line.startswith(f"| {u} | {estimator} |")]
+def section(md: str, heading: str) -> str:
+    """The text of a level-2 section of the report, from its heading to the next."""
+    return md.split(f"\n## {heading}", 1)[1].split("\n## ", 1)[0]
+
+
+def table_row(md: str, u: str, estimator: str, heading: str = "Table 3: RTD") -> list[str]:
+    rows = [line for line in section(md, heading).splitlines()
+            if line.startswith(f"| {u} | {estimator} |")]
     assert len(rows) == 1, f"expected one Table 3 row for U = {u}, {estimator}"
     return [cell.strip() for cell in rows[0].strip("|").split("|")]
 
@@ -45,7 +53,10 @@ def test_report_files_and_self_contained_html(report_of_template):
     assert html.startswith("<!DOCTYPE html>") and "<style>" in html
     assert 'src="figures/' not in html
     # every src/href is a data: URI: no file, http or protocol-relative resource
-    assert not re.findall(r"""(?:src|href)\s*=\s*["'](?!data:)""", html)
+    assert not re.findall(r"""(?:src|href)\s*=\s*["'](?!data:|#)""", html)
+    # a link to a heading goes to a heading of this page
+    ids = set(re.findall(r'<h[1-3] id="([^"]+)"', html))
+    assert set(re.findall(r'href="#([^"]+)"', html)) <= ids
     assert "<link" not in html and "<script" not in html and "url(" not in html
     uris = re.findall(r'src="data:image/png;base64,([A-Za-z0-9+/=]+)"', html)
     assert len(uris) == len(EXPECTED_FIGURES)
@@ -60,7 +71,7 @@ def test_sections_and_paper_numbers(report_of_template):
     md = (root / "report.md").read_text(encoding="utf-8")
     html = html_path.read_text(encoding="utf-8")
     headings = md_headings(md)
-    html_headings = re.findall(r"<h[1-3]>(.*?)</h[1-3]>", html)
+    html_headings = re.findall(r"<h[1-3][^>]*>(.*?)</h[1-3]>", html)
     for wanted in HEADINGS:
         assert any(h.startswith(wanted) for h in headings), wanted
         assert any(h.startswith(wanted) for h in html_headings), wanted
@@ -68,9 +79,15 @@ def test_sections_and_paper_numbers(report_of_template):
     for u in ("3", "6", "8"):
         for estimator in ("paper", "mle"):
             row = table_row(md, u, estimator)
-            assert row[-3:] == list(PAPER_TABLE3[float(u)]), (u, estimator, row)
+            assert row[-1] == " / ".join(PAPER_TABLE3[float(u)]), (u, estimator, row)
     assert "0.380" in md and "11.89" in html and "-45.16" in html
     assert not [line for line in md.splitlines() if line.startswith("| 4 |")]   # no U = 4
+    # the verdict first, its physics checks judged from the run's numbers (E(RT) 0.746 s at
+    # 3 m/s, 0.452 s at 6 m/s in the synthetic stand-in)
+    assert headings[1] == "Summary"
+    assert [h for h in headings if not h.startswith("What the")][2].startswith("Operating")
+    assert "E(RT) of the CFD-DEM falls as U rises: PASSED" in section(md, "Summary")
+    assert "doi:10.3390/pr13030614" in section(md, "Summary")
     # the paper's computing time (§3.1)
     assert "about 50 h" in md and "about 30 min" in md and "about 100" in md
     assert "(estimated)" in md     # u6's CFD-DEM time of the predict window is an estimate
@@ -88,13 +105,21 @@ def test_table3_quotes_the_summaries(report_of_template):
         for estimator in ("paper", "mle"):
             s = json.loads((root / case / f"compare-{estimator}" / "summary.json").read_text())
             row = table_row(md, u, estimator)
+            lo, hi = s["model"]["rt_mean_interval"]
+            # the interval in the cell, beside its value
+            assert row[3] == f"{s['model']['rt_mean']:.3f} [{lo:.3f}–{hi:.3f}]"
+            lo, hi = s["model"]["rt_sd_interval"]
+            assert row[6] == f"{s['model']['rt_sd']:.3f} [{lo:.3f}–{hi:.3f}]"
             assert row[2] == f"{s['reference']['rt_mean']:.3f}"
-            assert row[3] == f"{s['model']['rt_mean']:.3f}"
             assert row[4] == f"{s['pd_rt_mean']:.2f}"
             assert row[5] == f"{s['reference']['rt_sd']:.3f}"
             assert row[7] == f"{s['pd_rt_sd']:.2f}"
             assert row[8] == f"{s['md_rtd']:.3g}"
-            assert row[9] == f"{s['mixing_rms']:.3g}"
+            beats = "yes" if s["md_rtd"] < s["baseline"]["md_rtd"] else "no"
+            assert row[9] == f"{beats} ({s['baseline']['md_rtd']:.3g})"
+            detail = table_row(md, u, estimator, "Table 3 in detail")
+            assert detail[2] == f"{s['mixing_rms']:.3g}"
+    assert len(COMPACT_HEADER) == 11          # one row per velocity and model, compact
     # the MD footnote states the order and the bins
     assert "order k = 2" in md and "0.025 s bin" in md and "'%' heading" in md
 
@@ -233,7 +258,7 @@ def test_map_times_and_numbers():
 
 
 def test_trust_paragraph_is_written_from_the_numbers():
-    from cfbmarkov.report.sections import trust_text
+    from cfbmarkov.report.table3 import trust_text
 
     summary = {"md_rtd": 0.33, "baseline": {"md_rtd": 0.076}, "natural_variability":
                {"md_rtd": 0.05}, "level": 0.9, "reference": {"rt_mean": 0.86},
@@ -289,7 +314,7 @@ def test_the_long_run_span_of_a_reproduction():
 def test_a_side_without_residences_is_said_so_not_n_a(reproduction):
     """A model that predicts no residence in the net flow's direction: 'no residences' and a
     note saying why, not a row of n/a (issue 14, net downflow)."""
-    from cfbmarkov.report.sections import NO_RESIDENCES
+    from cfbmarkov.report.table3 import NO_RESIDENCES
 
     path = reproduction / "u3" / "compare-mle" / "summary.json"
     s = json.loads(path.read_text())
@@ -302,7 +327,7 @@ def test_a_side_without_residences_is_said_so_not_n_a(reproduction):
     md = (reproduction / "report.md").read_text(encoding="utf-8")
     row = table_row(md, "3", "mle")
     assert row[2] == f"{s['reference']['rt_mean']:.3f}"          # the CFD-DEM side stays
-    assert [row[k] for k in (3, 4, 6, 7, 8, 10)] == [NO_RESIDENCES] * 6
+    assert [row[k] for k in (3, 4, 6, 7, 8, 9)] == [NO_RESIDENCES] * 6
     assert "n/a" not in row
     assert f"{NO_RESIDENCES}: that side holds no complete residence" in md
     assert NO_RESIDENCES not in table_row(md, "3", "paper")      # the others untouched

@@ -89,6 +89,10 @@ class ModelMaps:
         Times of the batch-injection maps, s (:func:`map_times`).
     maps : numpy.ndarray, shape (len(times), rows, columns)
         Probability per cell of a batch fed evenly over the inlet at t = 0 (Eq. 8).
+    states : str
+        The state space's description, e.g. ``cells 6x38 (228 states)``.
+    row_of_state : numpy.ndarray of int, shape (S,)
+        The riser row (0 = bottom) of each state's cell.
     """
 
     transition_matrix: np.ndarray
@@ -97,6 +101,8 @@ class ModelMaps:
     lag: float
     times: list[float]
     maps: np.ndarray
+    states: str = ""
+    row_of_state: np.ndarray | None = None
 
 
 def model_maps(pred: Trajectories, reference_mean: float, warnings: list[str]
@@ -132,11 +138,14 @@ def model_maps(pred: Trajectories, reference_mean: float, warnings: list[str]
         lag = float(getattr(model, "lag", pred.frame_interval))
         times = map_times(reference_mean, lag)
         maps = np.asarray(model.batch_injection_maps(times), dtype=np.float64)
+        space = model.state_space
+        states = space.describe()
+        row_of_state = np.asarray(space.cell_of_state) // space.cells_per_row
     except (InputError, AttributeError, KeyError, TypeError, ValueError) as exc:
         warnings.append(f"model figures skipped: the model of {pred.path} cannot be used "
                         f"({type(exc).__name__}: {exc})")
         return None
-    return ModelMaps(P, columns, rows, lag, times, maps)
+    return ModelMaps(P, columns, rows, lag, times, maps, states, row_of_state)
 
 
 __all__ = ["ModelMaps", "SNAPSHOT_OFFSETS", "map_times", "model_maps", "snapshot_frames"]

@@ -419,6 +419,75 @@ def wall_core_contrast(fraction: np.ndarray, velocity: np.ndarray
     return wall, core, v_wall, v_core
 
 
-__all__ = ["BatchInjection", "CaseMeasures", "RunMeasures", "batch_injection",
+@dataclass
+class OperatingPoint:
+    """The operating conditions of a case, as set and as the CFD-DEM ran them.
+
+    Attributes
+    ----------
+    velocity : float
+        Superficial gas velocity U, m/s.
+    particles : int
+        Number of particles.
+    diameter, density : float
+        Particle diameter d (m) and density (kg/m^3).
+    hold_up : float
+        Solids volume fraction of the riser as set: N pi d^3 / 6 over W H d (pseudo-2D,
+        one particle diameter thick), -.
+    measured_hold_up : float
+        The CFD-DEM's solids volume fraction averaged over the window and across the riser, -.
+    solids_flux : float
+        Net vertical solids mass flux G_s of the CFD-DEM, averaged over the window and the
+        cross-section, kg/(m^2 s) (positive upward; NaN without velocities).
+    """
+
+    velocity: float
+    particles: int
+    diameter: float
+    density: float
+    hold_up: float
+    measured_hold_up: float
+    solids_flux: float
+
+
+def operating_point(config, measures: CaseMeasures) -> OperatingPoint:
+    """The operating conditions of a case from its configuration and its solids profiles.
+
+    Parameters
+    ----------
+    config : cfbmarkov.config.CaseConfig
+        The case.
+    measures : CaseMeasures
+        Its recomputed numbers (:func:`measure_case`; the profiles of :func:`solids_profile`).
+
+    Returns
+    -------
+    OperatingPoint
+
+    Notes
+    -----
+    Over bins of equal width the profile's fraction times velocity is the time-averaged
+    solids volume flux of the bin (the velocity is the mean over the particles that passed),
+    so G_s = rho_p mean_k(eps_k v_k).
+
+    References
+    ----------
+    docs/definitions.md, section "riser" (the pseudo-2D solids fraction).
+    """
+    p, r = config.particles, config.riser
+    volume = math.pi * p.diameter ** 3 / 6.0
+    hold_up = p.number * volume / (r.width * r.height * p.diameter)
+    fraction = np.asarray(measures.solids_fraction, dtype=np.float64)
+    velocity = np.asarray(measures.solids_velocity, dtype=np.float64)
+    measured = float(fraction.mean()) if fraction.size else math.nan
+    flux_per_bin = np.where(fraction > 0, fraction * velocity, 0.0)
+    flux = (float(p.density * flux_per_bin.mean())
+            if fraction.size and np.isfinite(flux_per_bin).all() else math.nan)
+    return OperatingPoint(float(config.gas.superficial_velocity), int(p.number),
+                          float(p.diameter), float(p.density), float(hold_up), measured, flux)
+
+
+__all__ = ["BatchInjection", "CaseMeasures", "OperatingPoint", "RunMeasures", "batch_injection",
            "implied_vertical_velocity", "measure_case", "measure_run", "nanmean",
+           "operating_point",
            "paper_map_times", "reading_errors", "solids_profile", "wall_core_contrast"]

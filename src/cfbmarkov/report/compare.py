@@ -151,14 +151,14 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
     maps = model_maps(mod.traj, rt_ref.mean, warnings)
     if maps is not None:
         fg.plot_transition_matrix(maps.transition_matrix, maps.columns, maps.rows,
-                                  out / "transition_matrix.png")
-        fg.plot_transition_bars(maps.transition_matrix, out / "transition_bars.png")
+                                  out / "transition_matrix.png", states=maps.states or None,
+                                  row_of_state=maps.row_of_state)
         fg.plot_probability_maps(maps.maps, maps.times, mod.traj.width, mod.traj.height,
                                  out / "probability_maps.png",
-                                 title=f"Batch fed over the inlet at t = 0 (model, "
-                                       f"{maps.columns} x {maps.rows} cells, lag "
-                                       f"{maps.lag:g} s)")
-        written += ["transition_matrix.png", "transition_bars.png", "probability_maps.png"]
+                                 title=f"Batch fed over the inlet at t = 0\nmodel: "
+                                       f"{maps.states or f'{maps.columns} x {maps.rows} cells'}"
+                                       f", lag {maps.lag:g} s")
+        written += ["transition_matrix.png", "probability_maps.png"]
     return written
 
 
@@ -194,8 +194,7 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
         Stationarity); default none (``long_run`` null).
     figures : bool, optional
         Draw ``rtd.png``, ``snapshots.png``, ``mixing.png`` and, when the prediction carries
-        its model, ``transition_matrix.png``, ``transition_bars.png`` and
-        ``probability_maps.png``.
+        its model, ``transition_matrix.png`` (a heat map) and ``probability_maps.png``.
 
     Returns
     -------

@@ -8,12 +8,51 @@ import base64
 import html
 import math
 import os
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
 from cfbmarkov._atomic import atomic_path
 
 FIGURES = "figures"
+#: a link to a heading of the report in a paragraph, table cell or list item: [text](#anchor)
+_LINK = re.compile(r"\[([^\]]+)\]\(#([a-z0-9-]+)\)")
+
+
+def anchor(text: str) -> str:
+    """The anchor of a heading, as Markdown renderers (GitHub, MyST) derive it.
+
+    Parameters
+    ----------
+    text : str
+        The heading's text.
+
+    Returns
+    -------
+    str
+        Lower case, punctuation dropped, spaces as hyphens, e.g. "Table 3 in detail" ->
+        "table-3-in-detail".
+    """
+    kept = re.sub(r"[^\w\- ]", "", text.strip().lower())
+    return kept.replace(" ", "-")
+
+
+def link(text: str, heading: str) -> str:
+    """A link to a heading of the report, written into a block's text.
+
+    Parameters
+    ----------
+    text : str
+        The link's text.
+    heading : str
+        The heading's text (:func:`anchor`).
+
+    Returns
+    -------
+    str
+        ``[text](#anchor)``: a Markdown link, and an ``<a href="#anchor">`` in the HTML.
+    """
+    return f"[{text}](#{anchor(heading)})"
 
 
 def finite_or_none(value) -> float | None:
@@ -241,13 +280,16 @@ def render_html(title: str, blocks, figures_dir: Path) -> str:
     str
         The HTML text.
     """
-    e = html.escape
+    def e(text) -> str:
+        """Escaped text with its links to headings as anchors."""
+        return _LINK.sub(r'<a href="#\2">\1</a>', html.escape(str(text)))
+
     out = ["<!DOCTYPE html>", '<html lang="en">', "<head>", '<meta charset="utf-8">',
-           f"<title>{e(title)}</title>", f"<style>{_CSS}</style>", "</head>", "<body>",
+           f"<title>{html.escape(title)}</title>", f"<style>{_CSS}</style>", "</head>", "<body>",
            f"<h1>{e(title)}</h1>"]
     for b in blocks:
         if isinstance(b, Heading):
-            out.append(f"<h{b.level}>{e(b.text)}</h{b.level}>")
+            out.append(f'<h{b.level} id="{anchor(b.text)}">{e(b.text)}</h{b.level}>')
         elif isinstance(b, Para):
             out.append(f'<p class="{b.css}">{e(b.text)}</p>' if b.css else f"<p>{e(b.text)}</p>")
         elif isinstance(b, Bullets):
@@ -262,7 +304,7 @@ def render_html(title: str, blocks, figures_dir: Path) -> str:
                            + "</ol>")
         elif isinstance(b, FigureBlock):
             encoded = base64.b64encode((figures_dir / b.file).read_bytes()).decode("ascii")
-            out.append(f'<figure><img src="data:image/png;base64,{encoded}" alt="{e(b.title)}">'
+            out.append(f'<figure><img src="data:image/png;base64,{encoded}" alt="{html.escape(b.title)}">'
                        f"<figcaption><b>{e(b.title)}.</b> {e(b.sentence)}</figcaption></figure>")
     out += ["</body>", "</html>", ""]
     return "\n".join(out)
@@ -296,6 +338,6 @@ def write_utf8(path: Path, text: str) -> None:
         os.chmod(tmp, readable_mode())
 
 
-__all__ = ["FIGURES", "Bullets", "FigureBlock", "Heading", "Para", "Table", "duration_text",
-           "finite_or_none", "number_text", "readable_mode", "render_html", "render_markdown",
+__all__ = ["FIGURES", "Bullets", "FigureBlock", "Heading", "Para", "Table", "anchor", "duration_text",
+           "finite_or_none", "link", "number_text", "readable_mode", "render_html", "render_markdown",
            "write_utf8"]

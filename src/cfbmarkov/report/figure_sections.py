@@ -39,7 +39,7 @@ from cfbmarkov.report.paper_figures import (
     plot_mixing_grid,
     plot_plausibility,
     plot_rtd_grid,
-    plot_transition_bars_grid,
+    plot_transition_heatmaps_grid,
 )
 from cfbmarkov.report.run_folder import Case, input_error
 from cfbmarkov.report.sections import shared_text, window_text
@@ -54,7 +54,7 @@ PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
 def fig3_blocks(done, measures, figures_dir: Path, written: list[str]) -> list:
-    """Fig. 3: the transition matrices of all finished cases as bar graphs.
+    """Fig. 3: the transition matrices of all finished cases as heat maps.
 
     Parameters
     ----------
@@ -80,19 +80,24 @@ def fig3_blocks(done, measures, figures_dir: Path, written: list[str]) -> list:
     panels, velocities = [], []
     for c in done:
         measured = measures[c.name]
+        model = measured.model
+        space = model.state_space
         suffix = "" if measured.model_name == "paper" else f", {measured.model_name} estimator"
-        panels.append((f"{c.label}{suffix}", np.asarray(measured.model.transition_matrix)))
-        velocities.append((c, implied_vertical_velocity(measured.model)))
-    plot_transition_bars_grid(panels, figures_dir / name,
-                               "Fig. 3: transition probability matrices as bar graphs")
+        rows = np.asarray(space.cell_of_state) // space.cells_per_row
+        panels.append((f"{c.label}{suffix}: {space.describe()}",
+                       np.asarray(model.transition_matrix), rows, int(space.rows)))
+        velocities.append((c, implied_vertical_velocity(model)))
+    plot_transition_heatmaps_grid(panels, figures_dir / name,
+                                  "Fig. 3: transition probability matrices")
     written.append(name)
     vel = ", ".join(f"{v:+.2f} m/s at {c.label}" for c, v in velocities)
-    sentence = (f"Each panel shows the nonzero P_ij of one velocity as a stem at (state i, "
-                f"state j); the stationary mean vertical particle velocity implied by P is {vel}"
+    sentence = (f"Each panel shows the transition matrix of one velocity as a heat map, from "
+                f"state i (down) to state j (across), zeros blank (the paper draws it as 3D "
+                f"bars); the stationary mean vertical particle velocity implied by P is {vel}"
                 + (", rising with U." if len(velocities) > 1 and all(
                     b[1] > a[1] for a, b in zip(velocities, velocities[1:])) else "."))
     return [Heading(2, "Fig. 3: Transition probability matrices"),
-            FigureBlock(name, "Fig. 3: transition probability matrices, paper estimator", sentence)]
+            FigureBlock(name, "Fig. 3: transition probability matrices", sentence)]
 
 
 def map_numbers(cases: list[Case]) -> dict[str, int]:
@@ -169,9 +174,8 @@ def maps_blocks(cases, done, measures, figures_dir: Path, written: list[str]) ->
         space = model.state_space
         plot_probability_maps(
             batch.maps, used, space.width, space.height, figures_dir / name,
-            title=f"Fig. {number}: batch fed over the inlet\nat t = 0, {c.label}\n"
-                  f"{measured.model_name} estimator, {space.columns} x {space.rows} cells,\n"
-                  f"lag {model.lag:g} s")
+            title=f"Fig. {number}: batch fed over the inlet at t = 0, {c.label}\n"
+                  f"{measured.model_name} estimator, {space.describe()}, lag {model.lag:g} s")
         written.append(name)
         sentence = (f"At t = {', '.join(f'{t:g}' for t in used)} s the mean height of the part of "
                     f"the batch that has not yet left through the top is "

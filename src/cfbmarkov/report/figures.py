@@ -50,13 +50,79 @@ def _riser_axes(ax, width: float, height: float, *, xlabel: bool = True, ylabel:
 
 
 # -- transition matrix (Fig. 3) --------------------------------------------------------------
+def row_ticks(row_of_state, rows: int) -> tuple[np.ndarray, list[str]] | None:
+    """Tick positions and labels of the riser rows along a matrix axis, where the states are
+    ordered by row.
+
+    Parameters
+    ----------
+    row_of_state : numpy.ndarray of int, shape (S,)
+        The riser row (0 = bottom) of each state's cell.
+    rows : int
+        Rows of the grid.
+
+    Returns
+    -------
+    (numpy.ndarray, list of str) or None
+        The first state of every k-th row (at most about ten ticks) and the row numbers;
+        None when the states are not ordered by row.
+    """
+    r = np.asarray(row_of_state)
+    if r.size == 0 or np.any(np.diff(r) < 0) or rows < 2:
+        return None
+    step = max(1, int(np.ceil(rows / 10)))
+    ticks = [int(np.searchsorted(r, k)) for k in range(0, rows, step) if np.any(r == k)]
+    return np.asarray(ticks, dtype=float) - 0.5, [str(int(r[t])) for t in ticks]
+
+
+def draw_heatmap(ax, P, norm, *, row_of_state=None, rows: int = 0, fontsize: float = 9):
+    """A transition matrix as a heat map on log colours, zeros blank, on given axes.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+    P : numpy.ndarray, shape (S, S)
+        Transition matrix, from state i (rows, top to bottom) to state j.
+    norm : matplotlib.colors.Normalize
+        Colour normalisation (e.g. shared by several panels).
+    row_of_state : numpy.ndarray of int, shape (S,), optional
+        The riser row of each state's cell: ticks on the top and right axes give it where
+        the states are ordered by row (:func:`row_ticks`).
+    rows : int, optional
+        Rows of the grid.
+    fontsize : float, optional
+        Size of the axis labels, points.
+
+    Returns
+    -------
+    matplotlib.image.AxesImage
+    """
+    s = P.shape[0]
+    image = ax.imshow(np.ma.masked_less_equal(P, 0.0), origin="upper", interpolation="nearest",
+                      norm=norm, cmap="viridis", extent=(-0.5, s - 0.5, s - 0.5, -0.5))
+    ax.set_facecolor("white")
+    ax.set_xlabel("to state j (0-based)", fontsize=fontsize)
+    ax.set_ylabel("from state i (0-based)", fontsize=fontsize)
+    ticks = row_ticks(row_of_state, rows) if row_of_state is not None else None
+    if ticks is not None:
+        top = ax.secondary_xaxis("top")
+        top.set_xticks(ticks[0])
+        top.set_xticklabels(ticks[1], fontsize=fontsize - 1)
+        top.set_xlabel("riser row of state j's cell (0 = bottom)", fontsize=fontsize)
+        right = ax.secondary_yaxis("right")
+        right.set_yticks(ticks[0])
+        right.set_yticklabels(ticks[1], fontsize=fontsize - 1)
+    return image
+
+
 def plot_transition_matrix(P, columns: int, rows: int, path, *, title: str | None = None,
-                           grid: bool = False) -> Path:
+                           grid: bool = False, states: str | None = None,
+                           row_of_state=None) -> Path:
     """Heatmap of the S x S transition matrix, written as a PNG.
 
     From state i (rows, top to bottom) to state j (columns), nonzero entries on a log colour
-    scale, zeros blank. When S = columns x rows the top axis gives the riser row of the
-    state (s = row*m + col).
+    scale, zeros blank. The top axis gives the riser row of the states' cells where the
+    states are ordered by row (for cells, s = row*m + col).
 
     Parameters
     ----------
@@ -67,9 +133,17 @@ def plot_transition_matrix(P, columns: int, rows: int, path, *, title: str | Non
     path : str or os.PathLike
         Output PNG file.
     title : str, optional
-        Figure title; by default one naming the states, cells and nonzero entries.
+        Figure title; by default one naming the state space, its states and the nonzero
+        entries.
     grid : bool, optional
         Draw a line between every row of cells.
+    states : str, optional
+        The state space's description (e.g. ``velocity 4x12 (336 states)``,
+        :meth:`cfbmarkov.markov.states.StateSpace.describe`); default: cells of
+        ``columns`` x ``rows``.
+    row_of_state : array_like of int, shape (S,), optional
+        The riser row of each state's cell; default: row*m + col order when S = columns x
+        rows.
 
     Returns
     -------
@@ -92,32 +166,23 @@ def plot_transition_matrix(P, columns: int, rows: int, path, *, title: str | Non
     positive = P[P > 0]
     vmin = max(float(positive.min()) if positive.size else 1e-3, 1e-6)
     vmax = max(float(positive.max()) if positive.size else 1.0, vmin * 10)
-    fig = Figure(figsize=(7.6, 6.6), layout="constrained")
+    if row_of_state is None and columns * rows == s:
+        row_of_state = np.arange(s) // columns
+    fig = Figure(figsize=(7.6, 6.8), layout="constrained")
     ax = fig.add_subplot()
-    image = ax.imshow(np.ma.masked_less_equal(P, 0.0), origin="upper", interpolation="nearest",
-                      norm=LogNorm(vmin=vmin, vmax=vmax), cmap="viridis",
-                      extent=(-0.5, s - 0.5, s - 0.5, -0.5))
-    ax.set_facecolor("white")
-    ax.set_xlabel("to state j (0-based, s = row·m + col)")
-    ax.set_ylabel("from state i (0-based)")
-    bar = fig.colorbar(image, ax=ax, shrink=0.85, pad=0.02)
+    image = draw_heatmap(ax, P, LogNorm(vmin=vmin, vmax=vmax), row_of_state=row_of_state,
+                         rows=rows, fontsize=10)
+    bar = fig.colorbar(image, ax=ax, shrink=0.85, pad=0.08)
     bar.set_label("transition probability $P_{ij}$ (log scale; blank = 0)")
-    cells = columns * rows == s
-    if cells and rows > 1:
-        step = max(1, int(np.ceil(rows / 10)))
-        row_ticks = np.arange(0, rows, step)
-        centre = row_ticks * columns + 0.5 * (columns - 1)
-        top = ax.secondary_xaxis("top")
-        top.set_xticks(centre)
-        top.set_xticklabels([str(r) for r in row_ticks])
-        top.set_xlabel(f"riser row of state j (0 = bottom, {columns} columns per row)")
-        if grid:
-            for r in range(1, rows):
-                ax.axhline(r * columns - 0.5, color="0.85", lw=0.3, zorder=0)
-                ax.axvline(r * columns - 0.5, color="0.85", lw=0.3, zorder=0)
+    if grid and row_of_state is not None:
+        r = np.asarray(row_of_state)
+        for t in (np.nonzero(np.diff(r))[0] + 0.5 if np.all(np.diff(r) >= 0) else []):
+            ax.axhline(t, color="0.85", lw=0.3, zorder=0)
+            ax.axvline(t, color="0.85", lw=0.3, zorder=0)
     nonzero = int(np.count_nonzero(P))
-    ax.set_title(title or f"Transition probability matrix ({s} states, {columns} x {rows} cells, "
-                 f"{nonzero} nonzero)", fontsize=11)
+    described = states or f"cells {columns}x{rows} ({s} states)"
+    ax.set_title(title or f"Transition probability matrix, {described}\n{nonzero} nonzero "
+                 f"of {s} x {s}", fontsize=11)
     return _save(fig, path)
 
 
@@ -259,7 +324,12 @@ def plot_probability_maps(maps, times: Sequence[float], width: float, height: fl
     vmax = float(maps.max()) if maps.size and maps.max() > 0 else 1.0
     panel_h = 6.2
     panel_w = panel_h * width / height
-    fig = Figure(figsize=(2.2 + k * (panel_w + 0.5), panel_h + 1.4), layout="constrained")
+    title = title or "Batch fed over the inlet at t = 0"
+    lines = title.splitlines() or [""]
+    # wide enough for the longest line of the title (about 0.085 in per character at 11 pt)
+    # and tall enough for all of its lines: a title is never cut
+    fig_w = max(2.2 + k * (panel_w + 0.5), 0.6 + 0.085 * max(len(t) for t in lines))
+    fig = Figure(figsize=(fig_w, panel_h + 1.0 + 0.22 * len(lines)), layout="constrained")
     axes = np.atleast_1d(fig.subplots(1, k, sharey=True, squeeze=False)[0])
     image = None
     for n, (ax, m, t) in enumerate(zip(axes, maps, times)):
@@ -271,7 +341,7 @@ def plot_probability_maps(maps, times: Sequence[float], width: float, height: fl
                                        else ""), fontsize=9)
     bar = fig.colorbar(image, ax=list(axes), shrink=0.8, pad=0.04)
     bar.set_label("probability per cell")
-    fig.suptitle(title or "Batch fed over the inlet at t = 0", fontsize=11)
+    fig.suptitle(title, fontsize=11)
     return _save(fig, path)
 
 
@@ -511,4 +581,4 @@ def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
 
 
 __all__ = ["plot_mixing", "plot_probability_maps", "plot_rtd", "plot_snapshots",
-           "plot_transition_bars", "plot_transition_matrix"]
+           "plot_transition_bars", "plot_transition_matrix", "draw_heatmap", "row_ticks"]

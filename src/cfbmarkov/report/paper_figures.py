@@ -64,17 +64,17 @@ def estimator_colour(name: str, names: Sequence[str]) -> str:
         else OTHER_COLOURS[0]
 
 
-def plot_transition_bars_grid(panels: Sequence[tuple[str, np.ndarray]], path, title: str
-                               ) -> Path:
-    """Fig. 3: one 3D bar (stem) panel per velocity, written as a PNG.
+def plot_transition_heatmaps_grid(panels, path, title: str) -> Path:
+    """Fig. 3: one heat map of the transition matrix per velocity, written as a PNG.
 
-    P_ij drawn as a stem at (state i, state j), on one colour scale shared by all panels
-    (the style of :func:`cfbmarkov.report.figures.plot_transition_bars`).
+    P_ij on one logarithmic colour scale shared by all panels, zeros blank; where the states
+    are ordered by riser row, the top and right axes give the row of each state's cell.
 
     Parameters
     ----------
-    panels : sequence of (str, numpy.ndarray)
-        Per panel its label and transition matrix, shape (S, S).
+    panels : sequence of (str, numpy.ndarray, numpy.ndarray or None, int)
+        Per panel its label (naming the state space), transition matrix (S, S), the riser
+        row of each state's cell (S,) or None, and the grid's rows.
     path : str or os.PathLike
         Output PNG file.
     title : str
@@ -87,35 +87,33 @@ def plot_transition_bars_grid(panels: Sequence[tuple[str, np.ndarray]], path, ti
 
     References
     ----------
-    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 3.
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Fig. 3 (drawn there
+    as 3D bars).
     """
-    from matplotlib.colors import Normalize
+    from matplotlib.colors import LogNorm
     from matplotlib.figure import Figure
 
-    from cfbmarkov.report.figures import _save, draw_stems
+    from cfbmarkov.report.figures import _save, draw_heatmap
 
     nrows, ncols = _grid(len(panels))
-    vmax = max((float(P.max()) for _, P in panels), default=1.0)
-    norm = Normalize(vmin=0.0, vmax=max(vmax, 1e-12))
-    fig = Figure(figsize=(0.6 + 5.4 * ncols, 0.9 + 4.8 * nrows), layout="constrained")
-    axes, stems = [], None
-    for k, (label, P) in enumerate(panels):
-        ax = fig.add_subplot(nrows, ncols, k + 1, projection="3d")
-        s = P.shape[0]
-        i, j = np.nonzero(P > 0)
-        p = P[i, j]
-        draw_stems(ax, i, j, p, s, norm, linewidth=0.7)
-        ax.set_xlabel("state number i, from (-)", fontsize=8)
-        ax.set_ylabel("transition number j, to (-)", fontsize=8)
-        ax.set_zlabel("$P_{ij}$ (-)", fontsize=8)
+    positive = [float(P[P > 0].min()) for _, P, _, _ in panels if np.any(P > 0)]
+    vmin = max(min(positive, default=1e-3), 1e-6)
+    vmax = max(max((float(P.max()) for _, P, _, _ in panels), default=1.0), vmin * 10)
+    norm = LogNorm(vmin=vmin, vmax=vmax)
+    fig = Figure(figsize=(0.8 + 5.0 * ncols, 1.0 + 5.0 * nrows), layout="constrained")
+    axes, image = [], None
+    for k, (label, P, row_of_state, rows) in enumerate(panels):
+        ax = fig.add_subplot(nrows, ncols, k + 1)
+        image = draw_heatmap(ax, np.asarray(P, dtype=np.float64), norm,
+                             row_of_state=row_of_state, rows=rows, fontsize=8)
         ax.tick_params(labelsize=7)
-        ax.view_init(elev=52, azim=-60)
-        ax.set_box_aspect(None, zoom=0.86)      # room for the axis labels
-        ax.set_title(f"{_letter(k)} {label}: {p.size} nonzero of {s} x {s}", fontsize=9)
+        s = P.shape[0]
+        ax.set_title(f"{_letter(k)} {label}\n{int(np.count_nonzero(P))} nonzero of {s} x {s}",
+                     fontsize=9)
         axes.append(ax)
-    if stems is not None:
-        bar = fig.colorbar(stems, ax=axes, shrink=0.6, pad=0.04)
-        bar.set_label("transition probability $P_{ij}$ (-)")
+    if image is not None:
+        bar = fig.colorbar(image, ax=axes, shrink=0.6, pad=0.04)
+        bar.set_label("transition probability $P_{ij}$ (log scale; blank = 0)")
     fig.suptitle(title, fontsize=11)
     return _save(fig, path)
 
@@ -289,4 +287,4 @@ def plot_plausibility(velocities, means, sds, model_means, profiles, path, title
 
 
 __all__ = ["CFD_DEM_COLOUR", "estimator_colour", "plot_mixing_grid", "plot_plausibility",
-           "plot_rtd_grid", "plot_transition_bars_grid"]
+           "plot_rtd_grid", "plot_transition_heatmaps_grid"]

@@ -5,8 +5,10 @@ reproduction run folder.
 (layout there), recomputes the RTDs (Fig. 8-9), mixing curves of the tracer groups
 (Fig. 11) and solids profiles from the trajectory files over each case's predict window with
 :func:`cfbmarkov.analysis.reproduction.measure_case` (bin width of the compare summaries;
-Table 3 quotes the summaries), builds the sections (:mod:`cfbmarkov.report.sections`,
-:mod:`cfbmarkov.report.figure_sections`, :mod:`cfbmarkov.report.diagnostic_sections`) and
+Table 3 quotes the summaries), builds the sections (the verdict and the physics checks first,
+:mod:`cfbmarkov.report.summary`; Table 3, :mod:`cfbmarkov.report.table3`;
+:mod:`cfbmarkov.report.sections`, :mod:`cfbmarkov.report.figure_sections`,
+:mod:`cfbmarkov.report.diagnostic_sections`) and
 writes ``DIR/report.html`` (self-contained: PNGs embedded as base64 ``data:`` URIs, inline
 CSS), ``DIR/report.md`` (the same content, images linked as ``figures/NAME.png``) and the
 PNGs in ``DIR/figures/``, each atomically; report.html is written last.
@@ -45,9 +47,10 @@ from cfbmarkov.report.sections import (
     computing_blocks,
     header_blocks,
     not_finished_blocks,
-    table3_blocks,
     warning_blocks,
 )
+from cfbmarkov.report.summary import conditions_blocks, physics_checks, summary_blocks
+from cfbmarkov.report.table3 import table3_blocks, table3_detail_blocks
 
 REPORT_HTML = "report.html"
 REPORT_MD = "report.md"
@@ -139,6 +142,9 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None,
 
     written: list[str] = []
     blocks: list = []
+    checks = physics_checks(done, measures)
+    blocks += summary_blocks(meta, cases, done, measures, estimators, checks)
+    blocks += conditions_blocks(done, measures, checks)
     blocks += header_blocks(meta, cases, estimators)
     blocks += not_finished_blocks(cases)
     blocks += table3_blocks(cases, estimators)
@@ -152,6 +158,7 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None,
     for part_blocks, part_written in parts:
         blocks += part_blocks
         written += part_written
+    blocks += table3_detail_blocks(cases)
     blocks += warning_blocks(cases, notes)
 
     # figures of an earlier run that this run did not draw (e.g. a case since removed)

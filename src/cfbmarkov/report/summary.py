@@ -1,0 +1,369 @@
+"""The report's opening: its verdict, the operating conditions and the physics checks.
+
+:func:`summary_blocks` writes, from the run's numbers, what was run and at what scale, the
+paper's citation, the comparison with the paper's Table 3, where the models beat the
+persistence baseline and where not (and why), and what the scale cannot show;
+:func:`conditions_blocks` the operating conditions of each case and the physics checks
+(:func:`physics_checks`) stated as passed or failed against what a riser should show.
+
+References
+----------
+Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Section 3 and Table 3;
+docs/definitions.md, sections "riser", "residence time" and "Baseline and natural
+variability".
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from cfbmarkov.analysis.reproduction import operating_point, wall_core_contrast
+from cfbmarkov.config import ParticleConfig, RiserConfig
+from cfbmarkov.report.document import Bullets, Heading, Para, Table, finite_or_none, link
+from cfbmarkov.report.run_folder import Case
+from cfbmarkov.report.sections import PAPER_TABLE3
+
+CITATION = ("Y. Zhuang, Markov Chain Based Statistic Model for Predicting Particle Movement "
+            "in Circulating Fluidized Bed (CFB) Risers, Processes 13(3), 614 (2025), "
+            "doi:10.3390/pr13030614")
+SUMMARY_HEADING = "Summary"
+CONDITIONS_HEADING = "Operating conditions and physics checks"
+#: the estimator the paper used
+PAPER_ESTIMATOR = "paper"
+
+
+@dataclass
+class PhysicsCheck:
+    """One expectation on the CFD-DEM's physics and whether the run meets it.
+
+    Attributes
+    ----------
+    name : str
+        What is checked, e.g. "E(RT) falls as U rises".
+    passed : bool or None
+        Whether the run meets it; None when it cannot be judged (e.g. one finished case).
+    evidence : str
+        The numbers it was judged on.
+    """
+
+    name: str
+    passed: bool | None
+    evidence: str
+
+    @property
+    def verdict(self) -> str:
+        """"passed", "failed" or "not judged"."""
+        return {True: "passed", False: "failed", None: "not judged"}[self.passed]
+
+
+def _u(case: Case) -> str:
+    return f"{case.velocity:g}" if math.isfinite(case.velocity) else case.name
+
+
+def physics_checks(done: list[Case], measures: dict) -> list[PhysicsCheck]:
+    """The physics checks of the CFD-DEM, judged from the run's numbers.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+
+    Returns
+    -------
+    list of PhysicsCheck
+        "E(RT) falls as U rises" (the CFD-DEM's mean residence time over the predict
+        windows, falling from each velocity to the next: the paper's Fig. 8) and
+        "core-annulus structure" (at every velocity the wall layers, the outer sixth of the
+        riser on each side, hold more solids than the core:
+        :func:`cfbmarkov.analysis.reproduction.wall_core_contrast`).
+    """
+    means = [(c, measures[c.name].reference.rt.mean) for c in done]
+    finite = [(c, m) for c, m in means if math.isfinite(m)]
+    trend = ", ".join(f"{m:.3f} s at {_u(c)} m/s" for c, m in finite)
+    if len(finite) < 2:
+        fall = PhysicsCheck("E(RT) of the CFD-DEM falls as U rises", None,
+                            f"fewer than two cases with a mean residence time ({trend or 'none'})")
+    else:
+        rises = [f"{_u(a)} -> {_u(b)} m/s ({ma:.3f} -> {mb:.3f} s)"
+                 for (a, ma), (b, mb) in zip(finite, finite[1:]) if mb >= ma]
+        fall = PhysicsCheck("E(RT) of the CFD-DEM falls as U rises", not rises,
+                            trend + ("" if not rises else "; it does not fall from "
+                                     + ", ".join(rises)))
+    parts, dense_core = [], []
+    for c in done:
+        m = measures[c.name]
+        wall, core, v_wall, v_core = wall_core_contrast(m.solids_fraction, m.solids_velocity)
+        velocity = (f", vertical velocity wall/core {v_wall:+.2f}/{v_core:+.2f} m/s"
+                    if math.isfinite(v_wall) and math.isfinite(v_core) else "")
+        parts.append(f"{_u(c)} m/s: solids fraction wall/core {wall:.3g}/{core:.3g}{velocity}")
+        if not (math.isfinite(wall) and math.isfinite(core) and wall > core):
+            dense_core.append(f"{_u(c)} m/s")
+    annulus = PhysicsCheck(
+        "core-annulus structure: wall layers denser than the core", not dense_core if done
+        else None, "; ".join(parts) + (f"; the core is as dense or denser at "
+                                       f"{', '.join(dense_core)}" if dense_core else ""))
+    return [fall, annulus]
+
+
+def _rows(cases: list[Case]):
+    """(case, estimator, summary) of every finished comparison."""
+    for c in cases:
+        for e in c.finished:
+            if e.summary is not None and not c.problems:
+                yield c, e.name, e.summary
+
+
+def _signed(values: list[tuple[str, float]], unit: str = " %") -> str:
+    return ", ".join(f"{v:+.0f}{unit} at {u} m/s" for u, v in values)
+
+
+def _paper_sentences(cases: list[Case]) -> list[str]:
+    """The headline comparison with the paper's Table 3, from the paper estimator's rows."""
+    rows = [(c, s) for c, name, s in _rows(cases) if name == PAPER_ESTIMATOR]
+    if not rows:
+        return ["No finished comparison of the paper's estimator: no comparison with the "
+                "paper's Table 3 can be made."]
+    pd_e = [(_u(c), v) for c, s in rows if (v := finite_or_none(s.get("pd_rt_mean"))) is not None]
+    pd_sd = [(_u(c), v) for c, s in rows if (v := finite_or_none(s.get("pd_rt_sd"))) is not None]
+    paper_e = [float(v[0]) for v in PAPER_TABLE3.values()]
+    paper_sd = [float(v[1]) for v in PAPER_TABLE3.values()]
+    worst_paper = max(abs(v) for v in paper_e)
+    out = []
+    if pd_e:
+        within = [u for u, v in pd_e if abs(v) <= worst_paper]
+        out.append(
+            f"The paper's estimator misses the CFD-DEM's mean residence time E(RT) by "
+            f"{_signed(pd_e)} (the paper: {min(paper_e):+.2f} to {max(paper_e):+.2f} %): "
+            + (f"within the paper's largest miss ({worst_paper:.2f} %) in {len(within)} of "
+               f"{len(pd_e)} cases" + (f" ({', '.join(within)} m/s)." if within else ".")))
+    if pd_sd:
+        narrower = [u for u, v in pd_sd if v < 0]
+        out.append(
+            f"Its spread SD(RT) differs by {_signed(pd_sd)}; it is narrower than the "
+            f"CFD-DEM's in {len(narrower)} of {len(pd_sd)} cases (the paper: narrower at all "
+            f"four velocities, by {-max(paper_sd):.0f} to {-min(paper_sd):.0f} %).")
+    return out
+
+
+def _baseline_sentences(cases: list[Case]) -> list[str]:
+    """Where the models beat the persistence baseline and where not, and why."""
+    beat, lost = [], 0
+    why: dict[tuple[str, str], list[str]] = {}
+    for c, name, s in _rows(cases):
+        md = finite_or_none(s.get("md_rtd"))
+        md_base = finite_or_none((s.get("baseline") or {}).get("md_rtd"))
+        if md is None or md_base is None:
+            continue
+        if md < md_base:
+            beat.append(f"{name} at {_u(c)} m/s")
+            continue
+        lost += 1
+        md_own = finite_or_none((s.get("model_on_fitting_window") or {}).get("md_rtd"))
+        md_halves = finite_or_none((s.get("natural_variability") or {}).get("md_rtd"))
+        if md_halves is not None and md_base <= md_halves:
+            reason = (f"the baseline's MD ({md_base:.3g}) is already within the CFD-DEM's own "
+                      f"variability between the predict window's halves ({md_halves:.3g}): "
+                      "no model can be told better than it")
+        elif md_own is not None and md_own < md_base:
+            reason = (f"the flow changed between the windows: on their fitting window the "
+                      f"models are closer to the CFD-DEM than the baseline's {md_base:.3g}")
+        else:
+            reason = (f"the models' own error: MD {md:.3g} against the baseline's "
+                      f"{md_base:.3g}" + (f", {md_own:.3g} already on the fitting window"
+                                         if md_own is not None else ""))
+        why.setdefault((_u(c), reason if "own error" not in reason else
+                        f"{name}'s own error: MD {md:.3g} against the baseline's "
+                        f"{md_base:.3g}"), []).append(name)
+    total = len(beat) + lost
+    if not total:
+        return ["No comparison has a persistence baseline (the fitting window is not in the "
+                "reference file): whether a model beats simply reusing the fitting window's "
+                "RTD cannot be said."]
+    out = [f"The models' RTDs beat the persistence baseline (the CFD-DEM's RTD of the fitting "
+           f"window reused as the prediction; distance MD) in {len(beat)} of {total} "
+           "velocity-model pairs" + (f": {', '.join(beat)}." if beat else ".")]
+    if lost:
+        out.append(f"They do not beat it in {lost}: " + "; ".join(
+            f"{', '.join(names)} at {u} m/s, {reason}" for (u, reason), names in why.items())
+            + ".")
+    return out
+
+
+def _interval_sentence(cases: list[Case]) -> str | None:
+    """How often the CFD-DEM's E(RT) lies inside the model's interval."""
+    inside, total, level = [], 0, None
+    for c, name, s in _rows(cases):
+        interval = (s.get("model") or {}).get("rt_mean_interval")
+        ref = finite_or_none((s.get("reference") or {}).get("rt_mean"))
+        if not interval or ref is None:
+            continue
+        total += 1
+        level = 100 * float(s.get("level", 0.9))
+        if interval[0] <= ref <= interval[1]:
+            inside.append(f"{name} at {_u(c)} m/s")
+    if not total:
+        return None
+    return (f"The CFD-DEM's E(RT) lies inside the model's {level:g} % interval in "
+            f"{len(inside)} of {total} velocity-model pairs"
+            + (f" ({', '.join(inside)})." if inside else ".")
+            + (" Intervals that miss it this often are too narrow to cover the models' "
+               "structural error (they hold the Monte Carlo noise and the fitting window's "
+               "sampling)."
+               if total and len(inside) < 0.5 * total else ""))
+
+
+def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> list[str]:
+    """What the scale of the run cannot show of what the paper shows, from its settings and
+    its checks."""
+    if meta.get("scale") == "paper" or not done:
+        return []
+    paper_riser, paper_particles = RiserConfig(), ParticleConfig()
+    out = []
+    risers = {(c.config.riser.width, c.config.riser.height, c.config.particles.number)
+              for c in done}
+    w, h, n = sorted(risers)[0]
+    if len(risers) == 1 and h < paper_riser.height:
+        out.append(f"The paper's residence times in seconds: the riser is {w:g} m x {h:g} m "
+                   f"with {n} particles (the paper's {paper_riser.width:g} m x "
+                   f"{paper_riser.height:g} m with {paper_particles.number}), so a particle "
+                   "crosses it sooner; compare the percentage differences, not the seconds.")
+    elif len(risers) == 1 and n != paper_particles.number:
+        out.append(f"The paper's flow in full: {n} particles instead of the paper's "
+                   f"{paper_particles.number} in a {w:g} m x {h:g} m riser; compare the "
+                   "percentage differences, not the flow itself.")
+    windows = {c.name: (tuple(c.config.markov.predict_window), c.config.markov.lag)
+               for c in done}
+    if len(set(windows.values())) > 1:
+        text = ", ".join(f"{_u(c)} m/s {windows[c.name][0][0]:g}-{windows[c.name][0][1]:g} s "
+                         f"(lag {windows[c.name][1]:g} s)" for c in done)
+        out.append(f"A trend with U alone: the cases differ in more than U (predict windows "
+                   f"and lags: {text}), so a trend across them mixes U with the time since "
+                   "the start and the lag.")
+    for check in checks:
+        if check.passed is False:
+            out.append(f"What the paper's riser shows, {check.name}: this run's CFD-DEM does "
+                       f"not ({check.evidence}).")
+    return out
+
+
+def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: dict,
+                   estimators: list[str], checks: list[PhysicsCheck]) -> list:
+    """The report's opening section: what was run, the verdict, what the scale cannot show.
+
+    Parameters
+    ----------
+    meta : dict
+        The run's ``reproduce.json``.
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+    estimators : list of str
+        The estimators of the run, in report order.
+    checks : list of PhysicsCheck
+        The physics checks (:func:`physics_checks`).
+
+    Returns
+    -------
+    list
+        Document blocks (:mod:`cfbmarkov.report.document`).
+    """
+    scale = meta.get("scale", "n/a")
+    description = meta.get("description")
+    velocities = ", ".join(_u(c) for c in cases)
+    ran = (f"This report reproduces {CITATION}, Section 3, at the {scale} scale"
+           + (f" ({description})" if description else "") + f". Cases at U = {velocities} "
+           f"m/s, {len(done)} of {len(cases)} finished; models: {', '.join(estimators) or 'none'}"
+           ", each fitted on the CFD-DEM's fitting window and compared with the CFD-DEM on "
+           "the predict window that follows.")
+    verdict = _paper_sentences(cases) + _baseline_sentences(cases)
+    interval = _interval_sentence(cases)
+    if interval:
+        verdict.append(interval)
+    checks_text = "; ".join(f"{c.name}: {c.verdict.upper()}" for c in checks)
+    verdict.append(f"Physics checks of the CFD-DEM ({link('evidence', CONDITIONS_HEADING)}): "
+                   f"{checks_text}.")
+    blocks = [Heading(2, SUMMARY_HEADING), Para(ran), Bullets(verdict)]
+    limits = _cannot_show(meta, done, checks)
+    if limits:
+        blocks += [Heading(3, f"What the {scale} scale cannot show"), Bullets(limits)]
+    return blocks
+
+
+def conditions_blocks(done: list[Case], measures: dict, checks: list[PhysicsCheck]) -> list:
+    """The operating conditions of each finished case and the physics checks.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        The recomputed numbers of each finished case, by case name.
+    checks : list of PhysicsCheck
+        The physics checks (:func:`physics_checks`).
+
+    Returns
+    -------
+    list
+        Document blocks (:mod:`cfbmarkov.report.document`).
+    """
+    header = ["U (m/s)", "Particles", "Riser W x H (m)", "Solids hold-up, set / CFD-DEM (%)",
+              "Solids flux G_s (kg/m²s)", "Fit / predict window (s)", "Lag (s)"]
+    rows = []
+    for c in done:
+        point = operating_point(c.config, measures[c.name])
+        m = c.config.markov
+        flux = "n/a" if not math.isfinite(point.solids_flux) else f"{point.solids_flux:+.3g}"
+        rows.append([_u(c), f"{point.particles} x {1000 * point.diameter:g} mm, "
+                            f"{point.density:g} kg/m³",
+                     f"{c.config.riser.width:g} x {c.config.riser.height:g}",
+                     f"{100 * point.hold_up:.3g} / {100 * point.measured_hold_up:.3g}", flux,
+                     f"{m.fit_window[0]:g}-{m.fit_window[1]:g} / "
+                     f"{m.predict_window[0]:g}-{m.predict_window[1]:g}", f"{m.lag:g}"])
+    notes = ["Hold-up: solids volume over the riser's, pseudo-2D (one particle diameter "
+             "thick); set from the particles, and as the CFD-DEM holds it over the predict "
+             "window. G_s: the CFD-DEM's net vertical solids mass flux over the predict window "
+             "and the cross-section, positive upward (rho_p times the mean of solids fraction "
+             "x vertical velocity across the riser)."]
+    advisory = _time_step_text(done)
+    if advisory:
+        notes.append(advisory)
+    items = [f"{c.name}: {c.verdict.upper()} ({c.evidence})." for c in checks]
+    return [Heading(2, CONDITIONS_HEADING), Table(header, rows, notes),
+            Heading(3, "Physics checks"), Bullets(items)]
+
+
+def _time_step_text(done: list[Case]) -> str | None:
+    """The DEM time step's resolution of a contact, once for the run, when it is below the
+    recommended 10 steps."""
+    from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
+
+    from cfbmarkov.config import ContactConfig, NumericsConfig
+
+    def steps(contact, particles, time_step) -> tuple[float, str]:
+        law = ContactLaw.from_config(contact, particles.diameter, particles.density)
+        return contact_resolution(law, law.mass, time_step)
+
+    texts: dict[str, list[str]] = {}
+    for c in done:
+        worst, message = steps(c.config.contact, c.config.particles,
+                               c.config.numerics.dem_time_step)
+        if worst < 10:
+            texts.setdefault(message, []).append(c.name)
+    if not texts:
+        return None
+    paper, _ = steps(ContactConfig(), ParticleConfig(), NumericsConfig().dem_time_step)
+    return ("; ".join(m + ("" if len(names) == len(done) else f" ({', '.join(names)})")
+                      for m, names in texts.items())
+            + (" in every case" if all(len(n) == len(done) for n in texts.values()) else "")
+            + f": fewer than the 10 steps recommended, as the paper's own settings give "
+            f"({paper:.2f} steps); a property of the run's scale, said once here.")
+
+
+__all__ = ["CITATION", "CONDITIONS_HEADING", "PhysicsCheck", "SUMMARY_HEADING",
+           "conditions_blocks", "physics_checks", "summary_blocks"]

@@ -1,0 +1,366 @@
+"""The paper's Table 3 in the report: a compact table (one row per velocity and model, the
+model's intervals in its cells, the paper's values beside them) and, linked from it, the
+rest in detail (mixing, the persistence baseline, the CFD-DEM's own variability, the
+model's own intervals) with a paragraph per prediction on how far to trust it, written from
+its numbers. Each builder returns document blocks (:mod:`cfbmarkov.report.document`).
+
+References
+----------
+Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3 and Eq. 9;
+docs/definitions.md, sections "residence time" (PD, Minkowski distance, Eq. 9), "Baseline and
+natural variability" and "Intervals".
+"""
+
+from __future__ import annotations
+
+import math
+
+from cfbmarkov.observed.metrics import percentage_text
+from cfbmarkov.report.document import (Heading, Para, Table, finite_or_none, link,
+                                       number_text)
+from cfbmarkov.report.run_folder import Case
+from cfbmarkov.report.sections import DEFAULT_BIN_WIDTH, PAPER_TABLE3, paper_row
+
+TABLE3_HEADING = "Table 3: RTD of the CFD-DEM and the MCM"
+DETAIL_HEADING = "Table 3 in detail"
+#: a table cell where one side holds no complete residence (instead of "n/a")
+NO_RESIDENCES = "no residences"
+#: the compact table's columns
+COMPACT_HEADER = ["U (m/s)", "Model", "E(RT) CFD-DEM (s)", "E(RT) MCM (s) [interval]",
+                  "PD of E(RT) (%)", "SD(RT) CFD-DEM (s)", "SD(RT) MCM (s) [interval]",
+                  "PD of SD(RT) (%)", "MD of RTD", "Beats baseline (its MD)",
+                  "Paper: PD E (%) / PD SD (%) / MD"]
+#: the detail table's columns
+DETAIL_HEADER = ["U (m/s)", "Model", "Mixing RMS", "Baseline: PD E / PD SD / MD",
+                 "CFD-DEM halves: PD E / PD SD / MD", "Model's own interval of E(RT) (s)",
+                 "Model's own interval of SD(RT) (s)", "Intervals"]
+
+
+def _difference_text(d) -> str:
+    """'PD E / PD SD / MD' of a baseline or variability summary, or n/a."""
+    if not d:
+        return "n/a"
+    return (f"{percentage_text(d.get('pd_rt_mean'), '.1f')} / "
+            f"{percentage_text(d.get('pd_rt_sd'), '.1f')} / {number_text(d.get('md_rtd'), '.3g')}")
+
+
+def _with_interval(value, interval) -> str:
+    """'0.312 [0.276–0.349]': a value (s) and its interval, or the value alone."""
+    text = number_text(value, ".3f")
+    lo, hi = (finite_or_none(v) for v in (interval or [None, None])[:2])
+    if lo is None or hi is None:
+        return text
+    return f"{text} [{lo:.3f}–{hi:.3f}]"
+
+
+def _interval_text(interval) -> str:
+    lo, hi = (finite_or_none(v) for v in (interval or [None, None])[:2])
+    return "n/a" if lo is None or hi is None else f"{lo:.3f}–{hi:.3f}"
+
+
+def _baseline_cell(summary: dict) -> str:
+    """'yes (0.12)' where the model's MD is below the persistence baseline's, else 'no (..)'."""
+    md = finite_or_none(summary.get("md_rtd"))
+    base = summary.get("baseline") or {}
+    md_base = finite_or_none(base.get("md_rtd"))
+    if base.get("rt_count") == 0:
+        return NO_RESIDENCES
+    if md is None or md_base is None:
+        return "n/a"
+    return f"{'yes' if md < md_base else 'no'} ({md_base:.3g})"
+
+
+def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
+    """The paper's Table 3, compact: one row per velocity and model, intervals in the cells.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+    estimators : list of str
+        The estimators of the run, in report order.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`); the rest of each
+        comparison is in :func:`table3_detail_blocks`, linked from here.
+
+    References
+    ----------
+    Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3 and Eq. 9;
+    ``docs/definitions.md`` (Metrics).
+    """
+    rows, pd_sd, pd_mean, orders, widths, levels = [], [], [], set(), set(), set()
+    downward: set[str] = set()
+    for c in cases:
+        values = paper_row(c.velocity)
+        paper = " / ".join(values) if values != ("—", "—", "—") else "—"
+        u = f"{c.velocity:g}" if math.isfinite(c.velocity) else c.name
+        for e in c.estimators if c.estimators else [None]:
+            s = e.summary if e is not None and not c.problems else None
+            if s is None:
+                rows.append([u, e.name if e else "—"] + ["not finished"] * 8 + [paper])
+                continue
+            ref, mod = s["reference"], s["model"]
+            row = [u, e.name, number_text(ref.get("rt_mean"), ".3f"),
+                   _with_interval(mod.get("rt_mean"), mod.get("rt_mean_interval")),
+                   percentage_text(s.get("pd_rt_mean"), ".2f"),
+                   number_text(ref.get("rt_sd"), ".3f"),
+                   _with_interval(mod.get("rt_sd"), mod.get("rt_sd_interval")),
+                   percentage_text(s.get("pd_rt_sd"), ".2f"),
+                   number_text(s.get("md_rtd"), ".3g"), _baseline_cell(s), paper]
+            # a side without a complete residence in the net flow's direction: say so
+            for side, columns in ((ref, (2, 5)), (mod, (3, 6))):
+                if side.get("rt_count") == 0:
+                    for k in (*columns, 4, 7, 8):
+                        row[k] = NO_RESIDENCES
+            rows.append(row)
+            if (v := finite_or_none(s.get("pd_rt_sd"))) is not None:
+                pd_sd.append(v)
+            if (v := finite_or_none(s.get("pd_rt_mean"))) is not None:
+                pd_mean.append(v)
+            if (v := finite_or_none(s.get("md_order"))) is not None:
+                orders.add(v)
+            if (v := finite_or_none(s.get("bin_width"))) is not None:
+                widths.add(v)
+            if mod.get("rt_mean_interval"):
+                levels.add(100 * float(s.get("level", 0.9)))
+            if s.get("direction") == "down":
+                downward.add(u)
+    order_text = ", ".join(f"{k:g}" for k in sorted(orders)) or "n/a"
+    width_text = ", ".join(f"{w:g}" for w in sorted(widths)) or f"{DEFAULT_BIN_WIDTH:g}"
+    level_text = ", ".join(f"{v:g}" for v in sorted(levels)) or "n/a"
+    notes = [
+        "PD = 100 (MCM − CFD-DEM) / CFD-DEM, in % (docs/definitions.md, residence time); "
+        "E(RT) and SD(RT) over the predict window, SD with ddof = 1. [interval]: the MCM's "
+        f"{level_text} % interval (docs/definitions.md, Intervals). The paper's column quotes "
+        "its Table 3; '—' where the paper has no case at this U.",
+        "The paper reports MD under a '%' heading. Our MD is Eq. 9 of order k = "
+        f"{order_text} (md_order of the compare summaries) on the RTD probabilities per "
+        f"{width_text} s bin (bins from 0 to the window length), a dimensionless distance; "
+        "compare its size with the paper's only loosely.",
+        "Beats baseline: whether the model's MD is below that of the persistence baseline "
+        "(the CFD-DEM's RTD of the fitting window reused as the prediction), whose MD is in "
+        "brackets. Mixing, the CFD-DEM's own variability, the model's own intervals and the "
+        f"residence-time basis: {link(DETAIL_HEADING, DETAIL_HEADING)}.",
+    ]
+    if any(row[4] == "n/d" or row[7] == "n/d" for row in rows):
+        notes.append("n/d: the percentage difference is undefined because the CFD-DEM value "
+                     "is zero to round-off (e.g. SD(RT) of residence times that are all "
+                     "equal), or missing.")
+    if any(NO_RESIDENCES in row for row in rows):
+        notes.append(f"{NO_RESIDENCES}: that side holds no complete residence in the window, "
+                     "counted in the direction of the CFD-DEM's net solids flow (a model "
+                     "fitted where the solids rose predicts almost no residence when they "
+                     "fall); no mean, spread or distance can be formed.")
+    if downward:
+        notes.append(f"At U = {', '.join(sorted(downward))} m/s the solids' net flow over the "
+                     "predict window is downward: residence times run from entries through the "
+                     "top to exits through the bottom (docs/definitions.md, Net downflow).")
+    blocks = [Heading(2, TABLE3_HEADING), Table(COMPACT_HEADER, rows, notes)]
+    if pd_mean:
+        paper_e = [float(v[0]) for v in PAPER_TABLE3.values()]
+        paper_sd = [float(v[1]) for v in PAPER_TABLE3.values()]
+        under = sum(v < 0 for v in pd_sd)
+        blocks.append(Para(
+            f"PD of E(RT) ranges from {min(pd_mean):.2f} to {max(pd_mean):.2f} % (paper: "
+            f"{min(paper_e):.2f} to {max(paper_e):.2f} %); the MCM's SD(RT) is smaller than "
+            f"the CFD-DEM's in {under} of {len(pd_sd)} comparisons (paper: all four, by "
+            f"{-max(paper_sd):.0f} to {-min(paper_sd):.0f} %)."))
+    return blocks
+
+
+def table3_detail_blocks(cases: list[Case]) -> list:
+    """The rest of each Table 3 comparison, and how far to trust each prediction.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run, sorted by U.
+
+    Returns
+    -------
+    list
+        Document blocks (empty without a finished comparison).
+    """
+    rows, exact, exact_pd = [], {}, []
+    for c in cases:
+        u = f"{c.velocity:g}" if math.isfinite(c.velocity) else c.name
+        for e in c.estimators or []:
+            s = e.summary if not c.problems else None
+            if s is None:
+                continue
+            mod = s.get("model") or {}
+            method = (s.get("intervals") or {}).get("method", "none")
+            rows.append([u, e.name, number_text(s.get("mixing_rms"), ".3g"),
+                         _difference_text(s.get("baseline")),
+                         _difference_text(s.get("natural_variability")),
+                         _interval_text(mod.get("model_rt_mean_interval")),
+                         _interval_text(mod.get("model_rt_sd_interval")), method])
+            for k, summary in ((3, s.get("baseline")), (4, s.get("natural_variability"))):
+                if summary and summary.get("rt_count") == 0:
+                    rows[-1][k] = NO_RESIDENCES
+            ex = s.get("exact_events") or {}
+            if s.get("basis") == "frames":
+                lag_frames = s.get("reference_frame_stride") or 1
+                key = ("like for like: both sides from frames at the model's lag (CFD-DEM "
+                       f"frames every {lag_frames})")
+                exact.setdefault(key, set()).add(c.name)
+                er = s.get("exact_reference")
+                if er and (finite_or_none(er.get("pd_rt_mean")) is not None
+                           or finite_or_none(er.get("pd_rt_sd")) is not None):
+                    exact_pd.append(f"{u} m/s {e.name} {percentage_text(er.get('pd_rt_mean'), '.1f')}"
+                                    f" / {percentage_text(er.get('pd_rt_sd'), '.1f')}")
+            else:
+                exact.setdefault("CFD-DEM: exact pass events" if ex.get("reference")
+                                 else "CFD-DEM: frame times", set()).add(c.name)
+    if not rows:
+        return []
+    notes = [
+        "Mixing RMS: root-mean-square difference of the MCM and CFD-DEM mixing curves on the "
+        "model's frames, as a fraction of all particles (no paper value).",
+        "Baseline: the CFD-DEM's own RTD in the fitting window taken as the prediction "
+        "(persistence); a model is only worth its name where it beats it. CFD-DEM halves: "
+        "the first half of the predict window against the second, the CFD-DEM's natural "
+        "variability at that scale (docs/definitions.md, Baseline and natural variability).",
+        "Model's own interval: from the model alone (block bootstrap of its fitting window and "
+        "Monte Carlo noise); the interval in Table 3 adds the flow's variability between "
+        "windows where the fitting window is long enough to show it (column Intervals).",
+    ]
+    if exact:
+        notes.append("Residence-time basis: " + "; ".join(
+            f"{k} ({', '.join(sorted(v))})" for k, v in exact.items())
+            + "; MCM predictions: frame times (docs/definitions.md, Comparison basis)."
+            + (" With the CFD-DEM's residence times from its exact pass events instead, the "
+               "PD of E(RT) / SD(RT) (%) would be: " + "; ".join(exact_pd) + "."
+               if exact_pd else ""))
+    return ([Heading(2, DETAIL_HEADING),
+             Para(f"The rest of each comparison of {link('Table 3', TABLE3_HEADING)}.")]
+            + [Table(DETAIL_HEADER, rows, notes)] + trust_blocks(cases))
+
+
+def trust_text(u: str, estimator: str, summary: dict) -> str:
+    """One paragraph: how far to trust this prediction, written from its numbers (the model
+    against the persistence baseline, its own error on its fitting window, the CFD-DEM's own
+    variability, what a perfect stationary model would predict (the run's long run) where
+    the summary has it, and its interval).
+
+    Parameters
+    ----------
+    u : str
+        The case's velocity as written in the table.
+    estimator : str
+        The model's name.
+    summary : dict
+        The compare summary.
+
+    Returns
+    -------
+    str
+    """
+    md = finite_or_none(summary.get("md_rtd"))
+    base = summary.get("baseline") or {}
+    halves = summary.get("natural_variability") or {}
+    md_base, md_halves = finite_or_none(base.get("md_rtd")), finite_or_none(halves.get("md_rtd"))
+    own = summary.get("model_on_fitting_window") or {}
+    md_own = finite_or_none(own.get("md_rtd"))
+    parts = [f"U = {u} m/s, {estimator}:"]
+    if md is None:
+        return " ".join(parts + ["no RTD to judge (too few residences in the window)."])
+    if md_base is not None:
+        verdict = ("beats" if md < md_base else "does not beat")
+        parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD), where the persistence "
+                     f"baseline is {md_base:.3g}: the model {verdict} simply reusing the "
+                     "fitting window's RTD.")
+    else:
+        parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD); no persistence baseline "
+                     "(the fitting window is not in the reference file).")
+    if md_own is not None and md_base is not None:
+        windows = own.get("windows") or [[], []]
+        fit = "-".join(f"{t:g}" for t in windows[1]) if len(windows[1]) == 2 else "fitting"
+        pd_own = [finite_or_none(own.get(k)) for k in ("pd_rt_mean", "pd_rt_sd")]
+        pds = (f" (PD of E(RT) {pd_own[0]:+.1f} %, of SD(RT) {pd_own[1]:+.1f} %)"
+               if None not in pd_own else "")
+        share = ("smaller than" if md_own < md_base else "at least")
+        parts.append(f"On its own fitting window ({fit} s) the model is {md_own:.3g} from the "
+                     f"CFD-DEM's RTD{pds}, {share} the flow's change between the windows "
+                     f"({md_base:.3g})"
+                     + (": the flow's change, more than the model, limits this prediction."
+                        if md_own < md_base else ": the model's own error dominates."))
+    if md_halves is not None:
+        scale = ("within" if md <= md_halves else f"{md / md_halves:.1f} times")
+        flow_limits = md_own is not None and md_base is not None and md_own < md_base
+        parts.append(f"The CFD-DEM's two halves of the window differ by {md_halves:.3g}: the "
+                     f"model's error is {scale} the reference's own variability"
+                     + ("." if md <= md_halves else
+                        "; the rest is the flow's change since the fitting window." if flow_limits
+                        else "; the difference is the model's."))
+    long_run = summary.get("long_run") or {}
+    md_long = finite_or_none(long_run.get("md_rtd"))
+    if md_long is not None:
+        (a, b), _ = long_run["windows"]
+        pd_long = [finite_or_none(long_run.get(k)) for k in ("pd_rt_mean", "pd_rt_sd")]
+        pds = (f" (PD of E(RT) {pd_long[0]:+.1f} %, of SD(RT) {pd_long[1]:+.1f} %)"
+               if None not in pd_long else "")
+        parts.append(f"What a perfect stationary model would predict, the CFD-DEM's own RTD over the "
+                     f"run's other windows of {a:g}-{b:g} s pooled, is {md_long:.3g} from it"
+                     f"{pds}: the flow's scatter about its long run, which no state space "
+                     "removes; the model is "
+                     + ("closer than that." if md < md_long else
+                        f"{md / md_long:.1f} times as far."))
+    cluster = summary.get("cluster_index") or {}
+    c_ref = finite_or_none((cluster.get("reference") or {}).get("mean"))
+    c_mod = finite_or_none((cluster.get("model") or {}).get("mean"))
+    if c_ref is not None and c_mod is not None:
+        parts.append(f"Cluster index of the snapshots (1: independent particles): CFD-DEM "
+                     f"{c_ref:.3g}, model {c_mod:.3g}.")
+    model = summary.get("model") or {}
+    ref = summary.get("reference") or {}
+    interval = model.get("rt_mean_interval")
+    if interval and finite_or_none(ref.get("rt_mean")) is not None:
+        inside = interval[0] <= ref["rt_mean"] <= interval[1]
+        level = 100 * float(summary.get("level", 0.9))
+        own = model.get("model_rt_mean_interval")
+        # one precision for the value and its interval (ms): "0.400 s lies outside
+        # 0.229-0.398 s", not "0.4 s"
+        same = own is not None and all(f"{a:.3f}" == f"{b:.3f}" for a, b in zip(own, interval))
+        parts.append(f"The CFD-DEM's E(RT) {ref['rt_mean']:.3f} s lies "
+                     f"{'inside' if inside else 'outside'} the model's {level:g} % interval "
+                     f"{interval[0]:.3f}-{interval[1]:.3f} s"
+                     + (f" (with the flow's variability between windows; the model's own "
+                        f"value: {own[0]:.3f}-{own[1]:.3f} s)." if own and not same else "."))
+    verdict = (summary.get("adequacy") or {}).get("warnings") or []
+    if verdict:
+        parts.append("The model's fitting sample was warned about when it was fitted: "
+                     + "; ".join(line.rstrip(".") for line in verdict) + ".")
+    return " ".join(parts)
+
+
+def trust_blocks(cases: list[Case]) -> list:
+    """"How far to trust this prediction": one paragraph per velocity and estimator.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run.
+
+    Returns
+    -------
+    list
+        Document blocks (empty without summaries).
+    """
+    texts = []
+    for c in cases:
+        u = f"{c.velocity:g}" if math.isfinite(c.velocity) else c.name
+        for e in c.estimators or []:
+            if e.summary is not None and not c.problems:
+                texts.append(trust_text(u, e.name, e.summary))
+    if not texts:
+        return []
+    return [Heading(3, "How far to trust these predictions")] + [Para(t) for t in texts]
+
+
+__all__ = ["COMPACT_HEADER", "DETAIL_HEADER", "DETAIL_HEADING", "NO_RESIDENCES",
+           "TABLE3_HEADING", "table3_blocks", "table3_detail_blocks", "trust_blocks",
+           "trust_text"]

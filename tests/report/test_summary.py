@@ -1,0 +1,175 @@
+"""The report's opening: the verdict and physics checks written from the numbers, each
+warning once, one interval stated once, matrices as heat maps labelled by their states."""
+
+from __future__ import annotations
+
+import math
+from types import SimpleNamespace
+
+import numpy as np
+
+from cfbmarkov.report.document import render_html, render_markdown
+from cfbmarkov.report.sections import warning_blocks
+from cfbmarkov.report.summary import conditions_blocks, physics_checks, summary_blocks
+
+from cfbmarkov.config import CaseConfig
+
+
+def case_config(u: float) -> CaseConfig:
+    return CaseConfig.model_validate({
+        "name": f"u{u:g}", "riser": {"width": 0.04, "height": 0.30},
+        "particles": {"number": 3789}, "gas": {"superficial_velocity": u},
+        "markov": {"columns": 4, "rows": 12, "lag": 0.01, "fit_window": [2.5, 3.5],
+                   "predict_window": [3.5, 4.5]}})
+
+#: solids fraction across the riser (12 bins): dense wall layers, a dilute core
+ANNULUS = np.r_[[0.3, 0.3], np.full(8, 0.1), [0.3, 0.3]]
+VELOCITY = np.r_[[-0.5, -0.5], np.full(8, 2.0), [-0.5, -0.5]]
+
+
+def fake_run(means: dict[float, float], fraction=ANNULUS, velocity=VELOCITY,
+             summary: dict | None = None):
+    """Finished cases at the velocities of ``means`` (CFD-DEM E(RT) in s) with one 'paper'
+    comparison each, and their measures."""
+    cases, measures = [], {}
+    for u, mean in means.items():
+        s = summary or {"pd_rt_mean": 50.0, "pd_rt_sd": -20.0, "md_rtd": 0.3,
+                        "baseline": {"md_rtd": 0.1}, "natural_variability": {"md_rtd": 0.05},
+                        "model_on_fitting_window": {"md_rtd": 0.25},
+                        "reference": {"rt_mean": mean},
+                        "model": {"rt_mean_interval": [mean * 1.3, mean * 1.6]}, "level": 0.9}
+        estimator = SimpleNamespace(name="paper", summary=s)
+        case = SimpleNamespace(name=f"u{u:g}", velocity=u, label=f"U = {u:g} m/s",
+                               config=case_config(u), finished=[estimator],
+                               estimators=[estimator], problems=[], complete=True)
+        cases.append(case)
+        measures[case.name] = SimpleNamespace(
+            reference=SimpleNamespace(rt=SimpleNamespace(mean=mean)),
+            solids_fraction=np.asarray(fraction, dtype=float),
+            solids_velocity=np.asarray(velocity, dtype=float))
+    return cases, measures
+
+
+def summary_text(cases, measures, meta=None) -> str:
+    checks = physics_checks(cases, measures)
+    blocks = (summary_blocks(meta or {"scale": "quick"}, cases, cases, measures, ["paper"],
+                             checks) + conditions_blocks(cases, measures, checks))
+    return render_markdown("report", blocks)
+
+
+def test_e_rt_falling_with_u_passes_and_rising_fails():
+    cases, measures = fake_run({3.0: 0.8, 4.0: 0.6, 6.0: 0.4, 8.0: 0.3})
+    fall, annulus = physics_checks(cases, measures)
+    assert fall.passed is True and annulus.passed is True
+    md = summary_text(cases, measures)
+    assert "E(RT) of the CFD-DEM falls as U rises: PASSED" in md
+    assert "wall layers denser than the core: PASSED" in md
+    # E(RT) rises from 4 to 6 m/s: the check fails, names where, and the summary says so
+    cases, measures = fake_run({3.0: 0.8, 4.0: 0.5, 6.0: 0.7, 8.0: 0.3})
+    fall, _ = physics_checks(cases, measures)
+    assert fall.passed is False and "4 -> 6 m/s (0.500 -> 0.700 s)" in fall.evidence
+    md = summary_text(cases, measures)
+    summary = md.split("## Operating conditions", 1)[0]
+    assert "E(RT) of the CFD-DEM falls as U rises: FAILED" in summary
+    assert "What the quick scale cannot show" in summary
+    assert "this run's CFD-DEM does not (0.800 s at 3 m/s" in summary
+    # one case: not judged
+    cases, measures = fake_run({6.0: 0.4})
+    assert physics_checks(cases, measures)[0].passed is None
+
+
+def test_a_dense_core_fails_the_core_annulus_check():
+    core = np.r_[[0.1, 0.1], np.full(8, 0.3), [0.1, 0.1]]
+    cases, measures = fake_run({3.0: 0.8, 6.0: 0.4}, fraction=core)
+    _, annulus = physics_checks(cases, measures)
+    assert annulus.passed is False
+    assert "the core is as dense or denser at 3 m/s, 6 m/s" in annulus.evidence
+    assert "wall/core 0.1/0.3" in annulus.evidence
+    md = summary_text(cases, measures)
+    assert "core-annulus structure: wall layers denser than the core: FAILED" in md
+
+
+def test_the_verdict_is_written_from_the_numbers():
+    cases, measures = fake_run({3.0: 0.8, 6.0: 0.4})
+    md = summary_text(cases, measures)
+    summary = md.split("## Operating conditions", 1)[0]
+    assert "doi:10.3390/pr13030614" in summary and "at the quick scale" in summary
+    assert "misses the CFD-DEM's mean residence time E(RT) by +50 % at 3 m/s, +50 % at 6 m/s" \
+        in summary
+    assert "(the paper: +0.54 to +11.89 %)" in summary
+    assert "in 0 of 2 velocity-model pairs" in summary       # MD 0.3 against a baseline of 0.1
+    assert "the models' own error" not in summary
+    assert "paper's own error: MD 0.3 against the baseline's 0.1" in summary
+    assert "inside the model's 90 % interval in 0 of 2" in summary
+    # a model that beats the baseline is named
+    good = {"pd_rt_mean": 2.0, "pd_rt_sd": -40.0, "md_rtd": 0.05, "baseline": {"md_rtd": 0.1},
+            "reference": {"rt_mean": 0.5}, "model": {"rt_mean_interval": [0.4, 0.6]}}
+    cases, measures = fake_run({3.0: 0.8}, summary=good)
+    summary = summary_text(cases, measures).split("## Operating conditions", 1)[0]
+    assert "in 1 of 1 velocity-model pairs: paper at 3 m/s." in summary
+    assert "within the paper's largest miss (11.89 %) in 1 of 1 cases (3 m/s)" in summary
+    # the link to the evidence goes to a heading of the page
+    checks = physics_checks(cases, measures)
+    html = render_html("r", summary_blocks({"scale": "quick"}, cases, cases, measures,
+                                           ["paper"], checks)
+                       + conditions_blocks(cases, measures, checks), None)
+    assert '<a href="#operating-conditions-and-physics-checks">' in html
+    assert 'id="operating-conditions-and-physics-checks"' in html
+
+
+def test_operating_conditions_from_the_profiles():
+    cases, measures = fake_run({6.0: 0.4})
+    md = summary_text(cases, measures)
+    section = md.split("## Operating conditions and physics checks", 1)[1]
+    row = [line for line in section.splitlines() if line.startswith("| 6 |")][0]
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    config = cases[0].config
+    p = config.particles
+    hold_up = p.number * math.pi * p.diameter ** 3 / 6 / (config.riser.width
+                                                          * config.riser.height * p.diameter)
+    assert cells[3] == f"{100 * hold_up:.3g} / {100 * ANNULUS.mean():.3g}"
+    flux = p.density * np.mean(ANNULUS * VELOCITY)
+    assert cells[4] == f"{flux:+.3g}"
+    # the DEM step's advisory: once, as a property of the run's settings
+    assert section.count("resolves a contact in") == 1
+
+
+def test_a_warning_given_by_several_comparisons_is_listed_once():
+    def case(name, warnings):
+        return SimpleNamespace(name=name, finished=[
+            SimpleNamespace(name=e, summary={"warnings": warnings}) for e in ("paper", "mle")])
+
+    same = "the intervals leave out the flow's variability between windows"
+    cases = [case("u3", [same, "only at u3"]), case("u6", [same])]
+    md = render_markdown("r", warning_blocks(cases, ["a note", "a note"]))
+    assert md.count(same) == 1
+    assert f"{same} (every comparison)" in md
+    assert "only at u3 (u3 / paper, u3 / mle)" in md
+    assert md.count("a note") == 1
+
+
+def test_one_interval_is_stated_once():
+    from cfbmarkov.report.table3 import trust_text
+
+    summary = {"md_rtd": 0.3, "level": 0.9, "reference": {"rt_mean": 0.4},
+               "model": {"rt_mean_interval": [0.276, 0.349],
+                         "model_rt_mean_interval": [0.2761, 0.3488]}}
+    text = trust_text("6", "paper", summary)
+    assert text.count("0.276-0.349") == 1 and "own value" not in text
+    summary["model"]["model_rt_mean_interval"] = [0.29, 0.33]
+    assert "the model's own value: 0.290-0.330 s" in trust_text("6", "paper", summary)
+
+
+def test_matrix_heat_map_labelled_by_its_state_space(tmp_path):
+    from cfbmarkov.report.figures import plot_transition_matrix, row_ticks
+
+    # 48 cells x 7 velocity bins, ordered by cell: 336 states, rows ticked where they start
+    rows_of_state = np.repeat(np.arange(12), 4 * 7)
+    ticks, labels = row_ticks(rows_of_state, 12)
+    assert labels[0] == "0" and ticks[1] == 2 * 28 - 0.5
+    assert row_ticks(rows_of_state[::-1], 12) is None          # not ordered by row: no ticks
+    P = np.eye(336)
+    path = plot_transition_matrix(P, 4, 12, tmp_path / "tm.png",
+                                  states="velocity 4x12x7 (336 states)",
+                                  row_of_state=rows_of_state)
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
