@@ -202,7 +202,7 @@ def test_sample_length(runs, capsys):
 
 
 def test_report_paragraph_repeats_the_verdict():
-    from cfbmarkov.report.sections import trust_text
+    from cfbmarkov.report.table3 import trust_text
 
     summary = {"md_rtd": 0.2, "adequacy": {"warnings": ["the halves disagree: 67 %"]}}
     assert "fitting sample was warned about" in trust_text("4", "paper", summary)
