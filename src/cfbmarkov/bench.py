@@ -8,7 +8,12 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict``: Monte Carlo of 27000 particles x 200 steps with lap counting;
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
+- ``mcm-fit-intervals``: ``mcm-fit`` plus the model's 90 % intervals (a block bootstrap of
+  the window's counts, 100 resamples; :func:`cfbmarkov.analysis.intervals.model_intervals`);
 - ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
+- ``mcm-exact-rtd-long-tail``: the same for a 228-state chain with slow wall states and laps
+  down through the bottom (:func:`cfbmarkov.synthetic.long_tail_chain`: E(RT) 108 lags, 1333
+  lags to resolve);
 - ``mcm-fit-auto``: ``--states auto``, choosing among 5 state spaces by their exact RTD
   against the window's and forming the chosen one; ``mcm-fit-chosen``: fitting
   the chosen state space alone; ``mcm-predict-file-auto``: its prediction file;
@@ -44,7 +49,8 @@ def _median_time(fn: Callable[[], object], repeat: int) -> float:
     return statistics.median(samples)
 
 
-def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | None = None
+def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | None = None,
+                      wanted: Callable[[str], bool] | None = None
                       ) -> Iterator[tuple[str, float, str]]:
     """The ``mcm-*`` figures (module docstring; docs/performance.md).
 
@@ -56,6 +62,9 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         Particles of the synthetic run.
     workdir : pathlib.Path, optional
         Folder for the temporary trajectory and prediction files (default: the system's).
+    wanted : callable, optional
+        Takes a figure's name, true for those to measure (default: all); the others are
+        not timed.
 
     Yields
     ------
@@ -65,6 +74,14 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
     from cfbmarkov import synthetic
     from cfbmarkov.markov import CellGrid, PaperEstimator, discretize, exact_rtd
 
+    wanted = wanted or (lambda name: True)
+    if wanted("mcm-exact-rtd-long-tail"):
+        chain = synthetic.long_tail_chain()
+        yield "mcm-exact-rtd-long-tail", _median_time(
+            lambda: exact_rtd(chain.transition_matrix, chain.up_fraction, chain.down_fraction,
+                              chain.lag), repeat), "s"
+    if not any(wanted(name) for name in MARKOV_FIGURES if name != "mcm-exact-rtd-long-tail"):
+        return
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         run = Path(tmp) / "bench-run.h5"
         flow = synthetic.RiserFlow()
@@ -76,8 +93,17 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         def fit():      # read the window, discretise, count, estimate
             return estimator.fit(discretize(run, grid, 0.025, (10.0, 15.0)))
 
-        yield "mcm-fit", _median_time(fit, repeat), "s"
+        if wanted("mcm-fit"):
+            yield "mcm-fit", _median_time(fit, repeat), "s"
         model = fit()
+        if wanted("mcm-fit-intervals"):
+            from cfbmarkov.analysis.intervals import model_intervals
+
+            yield "mcm-fit-intervals", _median_time(
+                lambda: model_intervals(fit(), level=0.9, resamples=100), repeat), "s"
+        if not any(wanted(name) for name in MARKOV_FIGURES
+                   if name not in ("mcm-fit", "mcm-fit-intervals", "mcm-exact-rtd-long-tail")):
+            return
         states0, _, laps0 = model.initial_states(run, 10.0)
         yield "mcm-predict", _median_time(lambda: model.monte_carlo(states0, 200, 7, laps0), repeat), "s"
         pred = Path(tmp) / "bench-pred.h5"
@@ -163,6 +189,14 @@ def _refit(model, run):
 
 BENCHMARKS = {"mcm": markov_benchmarks}
 
+#: the names of the Markov chain figures (``mcm-fit-chosen-<kind>`` names the chosen space)
+MARKOV_FIGURES = (
+    "mcm-exact-rtd-long-tail", "mcm-fit", "mcm-fit-intervals", "mcm-predict",
+    "mcm-predict-file", "mcm-exact-rtd", "mcm-fit-open", "mcm-fit-open-ratio",
+    "mcm-predict-open", "mcm-predict-open-ratio", "mcm-fit-auto", "mcm-fit-chosen-",
+    "mcm-predict-file-auto", "mcm-fit-auto-coherent", "mcm-predict-file-auto-coherent",
+    "mcm-fit-predict-auto-coherent", "mcm-fit-regime", "mcm-predict-file-regime")
+
 
 def _simulation_benchmarks(repeat: int, particles: int) -> Iterator[tuple[str, float, str]]:
     try:
@@ -174,12 +208,14 @@ def _simulation_benchmarks(repeat: int, particles: int) -> Iterator[tuple[str, f
 
 def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: int = 27000
                    ) -> Iterator[tuple[str, float, str]]:
-    """All benchmarks, or those whose names start with one of ``only`` (``cfbmarkov bench``).
+    """All benchmarks, or those named by ``only`` (``cfbmarkov bench``).
 
     Parameters
     ----------
     only : list of str, optional
-        Name prefixes to keep (e.g. ``['mcm']``, ``['dem', 'cfd-dem']``); all when None.
+        Names to keep: a figure's whole name keeps that figure alone (``mcm-fit``), any
+        other text the figures whose names start with it (``['mcm']``, ``['dem',
+        'cfd-dem']``); all when None. Figures not kept are not measured.
     repeat : int, optional
         Timed runs per figure (the median is reported).
     particles : int, optional
@@ -194,10 +230,11 @@ def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: in
         return not only or any(o.startswith(group) or group.startswith(o) for o in only)
 
     def wanted(name: str) -> bool:
-        return not only or any(name.startswith(o) for o in only)
+        return not only or any(name == o or (o not in MARKOV_FIGURES and name.startswith(o))
+                               for o in only)
 
     if group_wanted("mcm"):
-        for row in markov_benchmarks(repeat, particles):
+        for row in markov_benchmarks(repeat, particles, wanted=wanted):
             if wanted(row[0]):
                 yield row
     if group_wanted("dem") or group_wanted("cfd-dem"):

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import sys
 
-from cfbmarkov.cli.options import (finite_float, parse_cells, parse_window, positive_float,
-                                   seed)
+from cfbmarkov.cli.options import (count, finite_float, level, parse_cells, parse_window,
+                                   positive_float, seed)
 from cfbmarkov.errors import CfbmarkovError, InputError
 
 
@@ -27,6 +27,7 @@ def cmd_fit(args) -> int:
     from cfbmarkov.markov.select import select_model
     from cfbmarkov.trajectories import Trajectories
 
+    _check_resamples(args.resamples)
     columns, rows = args.cells[0], args.cells[-1]
     depth_columns = args.cells[1] if len(args.cells) == 3 else None
     with Trajectories(args.run) as run:
@@ -50,18 +51,43 @@ def cmd_fit(args) -> int:
                                           depth_columns, run.depth)
             model = fit_model(run, space, args.lag, args.window, args.estimator,
                               connected=args.connected, coherent=args.coherent)
+    has_rtd = True
     try:
         model.rtd()
     except TrappedResidences as exc:
         raise InputError(f"{args.run}: {exc}") from None
     except CfbmarkovError:
-        pass                       # no circulation at all: a model without residence times
+        has_rtd = False            # no circulation at all: a model without residence times
+    # -- the model's interval: a block bootstrap of the fitting window and the flow's
+    # variability between its blocks (analysis.intervals.model_intervals) ----------------
+    if args.resamples and has_rtd:
+        model = _with_interval(model, args.level, args.resamples)
+    # -- end of the model's interval ---------------------------------------------------
     for line in model.warnings():
         print(f"warning: {line.strip()}", file=sys.stderr)
     model.save(args.output)
     print(model.summary())
     print(args.output)
     return 0
+
+
+def _check_resamples(resamples: int) -> None:
+    """Refuse 1-9 resamples in one line (0: no interval)."""
+    if 0 < resamples < 10:
+        raise InputError(f"--resamples {resamples}: an interval needs at least 10 bootstrap "
+                         "resamples (0 leaves it out)")
+
+
+def _with_interval(model, level: float, resamples: int):
+    """``model`` carrying its interval at ``level`` from ``resamples`` bootstrap resamples,
+    or as it is with a ``warning:`` line on stderr saying why none could be formed."""
+    from cfbmarkov.analysis.intervals import model_intervals
+
+    try:
+        return model.with_uncertainty(model_intervals(model, level=level, resamples=resamples))
+    except CfbmarkovError as exc:
+        print(f"warning: no interval for the model's E(RT) and SD(RT): {exc}", file=sys.stderr)
+        return model
 
 
 def cmd_predict(args) -> int:
@@ -101,13 +127,48 @@ def cmd_rtd(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
+    import json
+
+    from cfbmarkov._json import jsonable
     from cfbmarkov.markov import MarkovModel
 
+    _check_resamples(args.resamples)
     model = MarkovModel.load(args.model)
+    if args.resamples:
+        model = model.with_uncertainty(None)
+        model = _with_interval(model, args.level if args.level is not None else 0.9,
+                               args.resamples)
+    elif (args.level is not None and model.uncertainty is not None
+          and abs(model.uncertainty.level - args.level) > 1e-12):
+        raise InputError(f"{args.model} holds a {model.uncertainty.percent} % interval, not "
+                         f"{100 * args.level:g} %: add --resamples N to form it from the "
+                         "model's fitting window")
     rtd = model.rtd(window=args.window_length)
-    print(f"E(RT) = {rtd.mean:.6g} s, SD(RT) = {rtd.sd:.6g} s "
-          f"({'window ' + format(args.window_length, 'g') + ' s' if args.window_length else 'intrinsic'}, "
-          f"unresolved mass {rtd.unresolved:.2g})")
+    band = rtd.uncertainty              # the intrinsic RTD's only
+    adequacy = getattr(model, "adequacy", None)
+    warnings = [str(line) for line in getattr(adequacy, "warnings", ()) or ()]
+    if args.json:
+        out = {"rt_mean": rtd.mean, "rt_sd": rtd.sd,
+               "window_length": args.window_length, "unresolved": rtd.unresolved,
+               "level": None if band is None else band.level,
+               "rt_mean_interval": None if band is None else list(band.rt_mean_interval),
+               "rt_sd_interval": None if band is None else list(band.rt_sd_interval),
+               "rtd_interval": None if band is None else {
+                   "edges": band.rtd_edges.tolist(), "lower": band.rtd_interval[0].tolist(),
+                   "upper": band.rtd_interval[1].tolist()},
+               "warnings": warnings}
+        print(json.dumps(jsonable(out), indent=1, allow_nan=False))
+        return 0
+    for line in warnings:
+        print(f"warning: {line.strip()}", file=sys.stderr)
+    kind = ('window ' + format(args.window_length, 'g') + ' s' if args.window_length
+            else 'intrinsic')
+    figures = (band.describe(rtd.mean, rtd.sd) if band is not None
+               else f"E(RT) = {rtd.mean:.6g} s, SD(RT) = {rtd.sd:.6g} s")
+    print(f"{figures} ({kind}, unresolved mass {rtd.unresolved:.2g})")
+    if band is None and model.uncertainty is not None:
+        print(f"  the model's {model.uncertainty.percent} % interval is of the intrinsic RTD: "
+              "leave out --window-length to see it")
     return 0
 
 
@@ -184,6 +245,12 @@ def add_fit(sub) -> None:
                         "move together (coherence, calibrated so that the model's snapshots "
                         "show the window's cluster index), so that predictions keep clusters; "
                         "the RTD and maps are unchanged (periodic risers)")
+    s.add_argument("--level", type=level, default=0.9,
+                   help="coverage of the interval of the model's E(RT), SD(RT) and RTD "
+                        "(default 0.9)")
+    s.add_argument("--resamples", type=count(0, 100000), default=100,
+                   help="bootstrap resamples of the fitting window for the model's interval "
+                        "(0: no interval; default 100)")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
     s.set_defaults(func=cmd_fit)
 
@@ -219,6 +286,15 @@ def add_rtd(sub) -> None:
     s.add_argument("model")
     s.add_argument("--window-length", type=positive_float, default=None,
                    help="observation window, s: the RTD as seen in such a window")
+    s.add_argument("--json", action="store_true",
+                   help="print rt_mean, rt_sd, level, rt_mean_interval, rt_sd_interval, "
+                        "rtd_interval, unresolved and warnings as JSON")
+    s.add_argument("--level", type=level, default=None,
+                   help="coverage of the interval (default: the model's, else 0.9; another "
+                        "than the model's needs --resamples)")
+    s.add_argument("--resamples", type=count(0, 100000), default=0,
+                   help="form the interval anew from this many bootstrap resamples of the "
+                        "model's fitting window (default 0: the one stored in the model)")
     s.set_defaults(func=cmd_rtd)
 
 

@@ -16,6 +16,7 @@ The file layout and its reading and writing are in :mod:`cfbmarkov.markov.model_
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 from dataclasses import InitVar, dataclass, field
 from functools import cached_property
@@ -37,6 +38,7 @@ from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.regimes import (RegimeCells, conditional_chain, regime_matrix,
                                       regime_path, start_regime, with_regime)
 from cfbmarkov.markov.states import StateSpace
+from cfbmarkov.markov.uncertainty import ModelUncertainty
 
 if TYPE_CHECKING:
     import h5py
@@ -90,6 +92,9 @@ class MarkovModel:
         rho in [0, 1]: in the Monte Carlo, the probability that a particle takes the draw
         shared by the particles leaving its state at that step (coherent moves, the cluster
         model; :mod:`cfbmarkov.markov.coherence`); 0: independent particles (the paper's).
+    uncertainty : ModelUncertainty or None
+        Intervals of the exact E(RT), SD(RT) and RTD per bin from the fitting window
+        (:func:`cfbmarkov.analysis.intervals.model_intervals`); None where not computed.
 
     Raises
     ------
@@ -126,6 +131,7 @@ class MarkovModel:
     connected: bool = False
     open_flow: OpenFlow | None = None
     coherence: float = 0.0
+    uncertainty: ModelUncertainty | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     adopt: InitVar[bool] = field(default=False, kw_only=True)
 
@@ -327,6 +333,8 @@ class MarkovModel:
         Returns
         -------
         ResidenceTimeDistribution
+            The intrinsic RTD in the model's direction carries the model's
+            :attr:`uncertainty` (its ``uncertainty``; None where the model has none).
 
         Raises
         ------
@@ -350,7 +358,7 @@ class MarkovModel:
                 raise InputError(f"--window-length {window:g} s is {window / self.lag:.3g} lags "
                                  f"of {self.lag:g} s, more than {MAX_STEPS}")
         if self.open_flow is not None:
-            return self._open_rtd(window)
+            return self._with_uncertainty(self._open_rtd(window), window)
         if direction not in ("up", "down"):
             raise InputError(f"residence direction {direction!r}: up or down")
         if direction == "down":
@@ -369,7 +377,14 @@ class MarkovModel:
                                            self.down_fraction, self.lag,
                                            entry_flux=self._entry_flux)
         intrinsic = self._cache["rtd"]
-        return intrinsic if window is None else intrinsic.in_window(window)
+        return self._with_uncertainty(intrinsic) if window is None else intrinsic.in_window(window)
+
+    def _with_uncertainty(self, rtd: ResidenceTimeDistribution, window: float | None = None
+                          ) -> ResidenceTimeDistribution:
+        """The intrinsic RTD with the model's uncertainty attached (a windowed one as it is)."""
+        if window is not None or self.uncertainty is None:
+            return rtd
+        return dataclasses.replace(rtd, uncertainty=self.uncertainty)
 
     def _down_rtd(self, window: float | None) -> ResidenceTimeDistribution:
         """Residences of a net downflow: entries through the top, exits through the bottom."""
@@ -507,6 +522,29 @@ class MarkovModel:
             A copy with ``selection`` set.
         """
         return self._derived(selection=dict(selection))
+
+    def with_uncertainty(self, uncertainty: ModelUncertainty | None) -> "MarkovModel":
+        """The same model carrying the intervals of its residence-time figures.
+
+        Parameters
+        ----------
+        uncertainty : ModelUncertainty or None
+            From :func:`cfbmarkov.analysis.intervals.model_intervals`; None removes them.
+
+        Returns
+        -------
+        MarkovModel
+            A copy with ``uncertainty`` set (the chain and its derived quantities shared).
+
+        Raises
+        ------
+        InputError
+            If ``uncertainty`` is neither a ModelUncertainty nor None.
+        """
+        if uncertainty is not None and not isinstance(uncertainty, ModelUncertainty):
+            raise InputError(f"model uncertainty must be a ModelUncertainty, not "
+                             f"{type(uncertainty).__name__}")
+        return self._derived(uncertainty=uncertainty)
 
     # -- description -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:

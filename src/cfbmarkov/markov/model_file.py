@@ -10,7 +10,12 @@ states:
   ``rows``, ``lag`` (s), ``window`` (s, NaN for none), ``estimator``, ``source`` (JSON),
   ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
   ``cfbmarkov_version``; for a model chosen by ``--states auto``, ``selection`` (JSON); for
-  a model fitted on the largest strongly connected set, ``connected = 1``.
+  a model fitted on the largest strongly connected set, ``connected = 1``;
+- optionally the group ``uncertainty`` (the intervals of the exact E(RT), SD(RT) and RTD
+  per bin, :class:`~cfbmarkov.markov.uncertainty.ModelUncertainty`): datasets ``level``,
+  ``rt_mean_interval`` [2], ``rt_sd_interval`` [2] (s), ``rtd_edges`` [B + 1] (s),
+  ``rtd_interval`` [2, B], ``resamples``, ``blocks``, ``block_length`` (s), ``flow_sd`` [2]
+  (NaN where not measured). A file without it loads as a model without intervals.
 
 The [S, S] datasets are stored chunked (blocks of whole rows, about 1 MiB) and compressed
 with gzip (deflate, level 1; :func:`~cfbmarkov._hdf5.create_array_dataset`): the
@@ -43,6 +48,7 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS
 from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.spaces import state_space_from_attrs
+from cfbmarkov.markov.uncertainty import ModelUncertainty
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
@@ -85,6 +91,8 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         attrs["connected"] = 1
     if model.coherence:
         attrs["coherence"] = float(model.coherence)
+    if model.uncertainty is not None:
+        datasets.update(model.uncertainty.file_fields())
     if model.open_flow is not None:
         open_datasets, open_attrs = model.open_flow.file_fields()
         attrs.update(open_attrs)
@@ -188,7 +196,7 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         if "selection" in group.attrs else None,
         connected=bool(group.attrs.get("connected", 0)),
         coherence=_attr_number(group.attrs.get("coherence", 0.0), "coherence"),
-        open_flow=_open_flow(group))
+        open_flow=_open_flow(group), uncertainty=ModelUncertainty.from_group(group))
 
 
 def _attr_number(value, name: str) -> float:
