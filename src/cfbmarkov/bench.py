@@ -75,12 +75,8 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
     from cfbmarkov.markov import CellGrid, PaperEstimator, discretize, exact_rtd
 
     wanted = wanted or (lambda name: True)
-    if wanted("mcm-exact-rtd-long-tail"):
-        chain = synthetic.long_tail_chain()
-        yield "mcm-exact-rtd-long-tail", _median_time(
-            lambda: exact_rtd(chain.transition_matrix, chain.up_fraction, chain.down_fraction,
-                              chain.lag), repeat), "s"
     if not any(wanted(name) for name in MARKOV_FIGURES if name != "mcm-exact-rtd-long-tail"):
+        yield from _long_tail_benchmark(wanted, repeat)     # no trajectory file needed
         return
     with tempfile.TemporaryDirectory(dir=workdir) as tmp:
         run = Path(tmp) / "bench-run.h5"
@@ -96,22 +92,26 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         if wanted("mcm-fit"):
             yield "mcm-fit", _median_time(fit, repeat), "s"
         model = fit()
+        states0, _, laps0 = model.initial_states(run, 10.0)
+        pred = Path(tmp) / "bench-pred.h5"
+        if wanted("mcm-predict"):
+            yield "mcm-predict", _median_time(
+                lambda: model.monte_carlo(states0, 200, 7, laps0), repeat), "s"
+        if wanted("mcm-predict-file"):
+            yield "mcm-predict-file", _median_time(
+                lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat), "s"
+        if wanted("mcm-exact-rtd"):
+            yield "mcm-exact-rtd", _median_time(
+                lambda: exact_rtd(model.transition_matrix, model.up_fraction,
+                                  model.down_fraction, model.lag), repeat), "s"
+        yield from _long_tail_benchmark(wanted, repeat)
         if wanted("mcm-fit-intervals"):
             from cfbmarkov.analysis.intervals import model_intervals
 
             yield "mcm-fit-intervals", _median_time(
                 lambda: model_intervals(fit(), level=0.9, resamples=100), repeat), "s"
-        if not any(wanted(name) for name in MARKOV_FIGURES
-                   if name not in ("mcm-fit", "mcm-fit-intervals", "mcm-exact-rtd-long-tail")):
+        if not any(wanted(name) for name in MARKOV_FIGURES[6:]):
             return
-        states0, _, laps0 = model.initial_states(run, 10.0)
-        yield "mcm-predict", _median_time(lambda: model.monte_carlo(states0, 200, 7, laps0), repeat), "s"
-        pred = Path(tmp) / "bench-pred.h5"
-        yield "mcm-predict-file", _median_time(
-            lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat), "s"
-        yield "mcm-exact-rtd", _median_time(
-            lambda: exact_rtd(model.transition_matrix, model.up_fraction, model.down_fraction,
-                              model.lag), repeat), "s"
         yield from _open_benchmarks(Path(tmp), flow, grid, particles, repeat, run, pred)
         # beyond the paper: the automatic choice of state space (5 candidates judged by
         # their exact RTD on the window), then the chosen model's prediction
@@ -140,6 +140,19 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         yield "mcm-fit-predict-auto-coherent", fit_time + predict_time, "s"
         # the regime model (912 states) and its prediction along one common regime path
         yield from _regime_benchmarks(run, Path(tmp), repeat)
+
+
+def _long_tail_benchmark(wanted, repeat: int) -> Iterator[tuple[str, float, str]]:
+    """``mcm-exact-rtd-long-tail``: the exact RTD of :func:`cfbmarkov.synthetic.long_tail_chain`."""
+    if not wanted("mcm-exact-rtd-long-tail"):
+        return
+    from cfbmarkov import synthetic
+    from cfbmarkov.markov import exact_rtd
+
+    chain = synthetic.long_tail_chain()
+    yield "mcm-exact-rtd-long-tail", _median_time(
+        lambda: exact_rtd(chain.transition_matrix, chain.up_fraction, chain.down_fraction,
+                          chain.lag), repeat), "s"
 
 
 def _regime_benchmarks(run: Path, tmp: Path, repeat: int) -> Iterator[tuple[str, float, str]]:
@@ -191,8 +204,8 @@ BENCHMARKS = {"mcm": markov_benchmarks}
 
 #: the names of the Markov chain figures (``mcm-fit-chosen-<kind>`` names the chosen space)
 MARKOV_FIGURES = (
-    "mcm-exact-rtd-long-tail", "mcm-fit", "mcm-fit-intervals", "mcm-predict",
-    "mcm-predict-file", "mcm-exact-rtd", "mcm-fit-open", "mcm-fit-open-ratio",
+    "mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd", "mcm-exact-rtd-long-tail",
+    "mcm-fit-intervals", "mcm-fit-open", "mcm-fit-open-ratio",
     "mcm-predict-open", "mcm-predict-open-ratio", "mcm-fit-auto", "mcm-fit-chosen-",
     "mcm-predict-file-auto", "mcm-fit-auto-coherent", "mcm-predict-file-auto-coherent",
     "mcm-fit-predict-auto-coherent", "mcm-fit-regime", "mcm-predict-file-regime")
