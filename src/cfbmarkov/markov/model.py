@@ -524,23 +524,10 @@ class MarkovModel:
         return self._derived(selection=dict(selection))
 
     def with_uncertainty(self, uncertainty: ModelUncertainty | None) -> "MarkovModel":
-        """The same model carrying the intervals of its residence-time figures.
-
-        Parameters
-        ----------
-        uncertainty : ModelUncertainty or None
-            From :func:`cfbmarkov.analysis.intervals.model_intervals`; None removes them.
-
-        Returns
-        -------
-        MarkovModel
-            A copy with ``uncertainty`` set (the chain and its derived quantities shared).
-
-        Raises
-        ------
-        InputError
-            If ``uncertainty`` is neither a ModelUncertainty nor None.
-        """
+        """The same model (chain and derived quantities shared) carrying the intervals of
+        its residence-time figures, a :class:`~cfbmarkov.markov.uncertainty.ModelUncertainty`
+        from :func:`cfbmarkov.analysis.intervals.model_intervals` (None: none); InputError
+        for anything else."""
         if uncertainty is not None and not isinstance(uncertainty, ModelUncertainty):
             raise InputError(f"model uncertainty must be a ModelUncertainty, not "
                              f"{type(uncertainty).__name__}")
