@@ -8,7 +8,12 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict``: Monte Carlo of 27000 particles x 200 steps with lap counting;
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
+- ``mcm-fit-intervals``: ``mcm-fit`` plus the model's 90 % intervals (a block bootstrap of
+  the window's counts, 100 resamples; :func:`cfbmarkov.analysis.intervals.model_intervals`);
 - ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
+- ``mcm-exact-rtd-long-tail``: the same for a 228-state chain with slow wall states and laps
+  down through the bottom (:func:`cfbmarkov.synthetic.long_tail_chain`: E(RT) 108 lags, 1333
+  lags to resolve);
 - ``mcm-fit-auto``: ``--states auto``, choosing among 5 state spaces by their exact RTD
   against the window's and forming the chosen one; ``mcm-fit-chosen``: fitting
   the chosen state space alone; ``mcm-predict-file-auto``: its prediction file;
@@ -46,7 +51,8 @@ def _median_time(fn: Callable[[], object], repeat: int) -> float:
 
 #: the figures of the Markov layer, in the order they are measured (``mcm-fit-chosen`` is
 #: printed with the chosen space's kind, ``mcm-fit-chosen-KIND``)
-MCM_NAMES = ("mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd", "mcm-fit-open",
+MCM_NAMES = ("mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd",
+             "mcm-exact-rtd-long-tail", "mcm-fit-intervals", "mcm-fit-open",
              "mcm-fit-open-ratio", "mcm-predict-open", "mcm-predict-open-ratio", "mcm-fit-auto",
              "mcm-fit-chosen", "mcm-predict-file-auto", "mcm-fit-auto-coherent",
              "mcm-predict-file-auto-coherent", "mcm-fit-predict-auto-coherent",
@@ -160,6 +166,12 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
             yield "mcm-exact-rtd", _median_time(
                 lambda: exact_rtd(model.transition_matrix, model.up_fraction,
                                   model.down_fraction, model.lag), repeat), "s"
+        yield from _long_tail_benchmark(want, repeat)
+        if want("mcm-fit-intervals"):
+            from cfbmarkov.analysis.intervals import model_intervals
+
+            yield "mcm-fit-intervals", _median_time(
+                lambda: model_intervals(fit(), level=0.9, resamples=100), repeat), "s"
         if want("mcm-fit-open", "mcm-fit-open-ratio", "mcm-predict-open",
                 "mcm-predict-open-ratio"):
             for row in _open_benchmarks(Path(tmp), flow, grid, particles, repeat, run, pred):
@@ -204,6 +216,19 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
             for row in _regime_benchmarks(run, Path(tmp), repeat):
                 if want(row[0]):
                     yield row
+
+
+def _long_tail_benchmark(wanted, repeat: int) -> Iterator[tuple[str, float, str]]:
+    """``mcm-exact-rtd-long-tail``: the exact RTD of :func:`cfbmarkov.synthetic.long_tail_chain`."""
+    if not wanted("mcm-exact-rtd-long-tail"):
+        return
+    from cfbmarkov import synthetic
+    from cfbmarkov.markov import exact_rtd
+
+    chain = synthetic.long_tail_chain()
+    yield "mcm-exact-rtd-long-tail", _median_time(
+        lambda: exact_rtd(chain.transition_matrix, chain.up_fraction, chain.down_fraction,
+                          chain.lag), repeat), "s"
 
 
 def _regime_benchmarks(run: Path, tmp: Path, repeat: int) -> Iterator[tuple[str, float, str]]:

@@ -107,11 +107,27 @@ def test_predict_bad_start(tmp_path, capsys, markov_run):
     assert_clean_failure(code, err, out)
 
 
+def test_bench_only_a_whole_name_measures_that_figure_alone(capsys):
+    """--only with a figure's whole name: that figure alone (mcm-exact-rtd-long-tail needs
+    no trajectory file); a prefix keeps every figure it starts."""
+    code, out, _ = run_cli(capsys, "bench", "--only", "mcm-exact-rtd-long-tail", "--repeat",
+                           "1")
+    assert code == 0
+    lines = out.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("mcm-exact-rtd-long-tail: ")
+    from cfbmarkov.bench import run_benchmarks
+
+    names = [row[0] for row in run_benchmarks(only=["mcm-exact-rtd"], repeat=1, particles=300)]
+    assert names == ["mcm-exact-rtd"]
+
+
 def test_bench_prints_one_line_per_figure(capsys):
     code, out, _ = run_cli(capsys, "bench", "--only", "mcm", "--repeat", "1", "--particles", "300")
     assert code == 0
     names = [line.split(":")[0] for line in out.strip().splitlines()]
-    assert names[:4] == ["mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd"]
+    assert names[:6] == ["mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd",
+                         "mcm-exact-rtd-long-tail", "mcm-fit-intervals"]
+    names = names[:4] + names[6:]
     assert names[4:8] == ["mcm-fit-open", "mcm-fit-open-ratio", "mcm-predict-open",
                           "mcm-predict-open-ratio"]
     assert names[8] == "mcm-fit-auto" and names[9].startswith("mcm-fit-chosen-cells")

@@ -277,3 +277,32 @@ def test_level_propagation_equals_the_full_deficit_matrix(markov_flow, markov_ru
             want = full(*parts, rtd.entry_distribution)
             assert rtd.probability.size == want.size
             assert np.abs(rtd.probability - want).max() < 1e-14
+
+
+@pytest.mark.parametrize("falls", [0.0, 0.2])
+def test_entry_chain_by_level_elimination_equals_the_full_fundamental_matrix(falls):
+    """B = (I - Q)^-1 R formed level by level (markov.entry_chain) equals B from one LU of
+    the full [S L, S L] matrix to 1e-13, for the long-tail chain (laps down through the
+    bottom) and a ladder, with and without falls; the exact RTD keeps its mean."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
+    from cfbmarkov.markov.entry_chain import entry_matrix
+    from cfbmarkov.markov.first_passage import _reaching, deficit_matrix, split_by_pass
+    from cfbmarkov.synthetic import long_tail_chain
+
+    for chain in (long_tail_chain(columns=3, rows=8), ladder_model(8, 0.6, falls)):
+        p_up, p_down, p_stay = split_by_pass(chain.transition_matrix, chain.up_fraction,
+                                             chain.down_fraction)
+        s, levels = chain.n_states, 9
+        q, exits = deficit_matrix(p_up, p_down, p_stay, levels)
+        live = _reaching(q, exits > 0)
+        idx = np.flatnonzero(live)
+        entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
+        lu = splu(sp.csc_matrix(sp.identity(idx.size) - q[idx][:, idx]))
+        r = np.zeros((idx.size, entries.size))
+        top = idx[idx < s]
+        r[np.searchsorted(idx, top)] = p_up[top][:, entries].toarray()
+        full = lu.solve(r)[np.searchsorted(idx, entries)]
+        got = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries)
+        assert np.abs(got - full).max() < 1e-13

@@ -44,272 +44,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import norm
 
+from cfbmarkov.analysis.bootstrap import (FLOW_BLOCK_RESIDENCES, FLOW_BLOCKS,  # noqa: F401
+                                          _binned, _bootstrap_chains, _resampled_rtd,
+                                          block_bootstrap_models, bootstrap_figures,
+                                          flow_variability, interval_bounds)
 from cfbmarkov.analysis.mixing import _left_states, model_mixing_curve
-from cfbmarkov.boundary import Boundary
-from cfbmarkov.errors import CfbmarkovError, InputError
-from cfbmarkov.observed.residence import (residence_times, residence_times_from_laps,
-                                          rtd_histogram)
-from cfbmarkov.trajectories import opened
-
-
-#: blocks of the fitting window that measure the flow's variability (:func:`flow_variability`)
-FLOW_BLOCKS = 4
-#: ... fewer where a block would be shorter than this many of the window's mean residences
-FLOW_BLOCK_RESIDENCES = 3.0
-
-
-def _resampled_rtd(model, window_length: float, direction: str, entry):
-    """A resampled model's RTD in the window, from the fitted model's entry distribution
-    (one sparse LU per resample saved: the spread of the entry distribution is left out,
-    that of the transitions kept)."""
-    steps = max(2, int(round(window_length / model.lag)))
-    if isinstance(model, _SplitChain):
-        from cfbmarkov.markov.first_passage import rtd_of_split_chain
-
-        up, down = (model.up, model.down) if direction == "up" else (model.down, model.up)
-        return rtd_of_split_chain(up, down, model.stay, model.lag, max_steps=steps,
-                                  entry=entry).in_window(window_length)
-    if Boundary(model.boundary).is_open or entry is None:
-        return model.rtd(window_length, direction)
-    from cfbmarkov.markov.first_passage import exact_rtd
-
-    up, down = ((model.up_fraction, model.down_fraction) if direction == "up"
-                else (model.down_fraction, model.up_fraction))
-    return exact_rtd(model.transition_matrix, up, down, model.lag, max_steps=steps,
-                     entry=entry).in_window(window_length)
-
-
-def _binned(rtd, edges: np.ndarray) -> np.ndarray:
-    """An exact RTD's probability per bin of ``edges``, with the sample histogram's rule
-    for times on an edge (whole lags on bins of one lag fall in the bin they start)."""
-    width = float(edges[1] - edges[0])
-    hist, _ = np.histogram(rtd.times + 1e-6 * width, bins=edges,
-                           weights=rtd.probability / rtd.probability.sum())
-    return hist
-
-
-def block_bootstrap_models(model, *, blocks: int = 10, resamples: int = 100, seed: int = 0):
-    """Models fitted on block-bootstrap resamples of a model's fitting window.
-
-    The fitting window (re-read from the model's source file) is cut into ``blocks``
-    contiguous time blocks and the transitions of each counted (with the model's
-    estimator's rule); the frame pairs (t, t + lag) are split by their first frame, so
-    that every pair of the window is counted in exactly one block. Each resample draws
-    ``blocks`` blocks with replacement, sums their counts and forms a model with the same
-    estimator, state space and lag. The data are read and counted once; each resample costs
-    one estimate.
-
-    Parameters
-    ----------
-    model : cfbmarkov.markov.MarkovModel
-        The fitted model; its ``source`` (one trajectory file) and ``window`` are re-read.
-    blocks : int, optional
-        Time blocks B of the fitting window (at least 2).
-    resamples : int, optional
-        Resamples drawn (at least 1).
-    seed : int, optional
-        Seed of the resampling.
-
-    Returns
-    -------
-    iterator of cfbmarkov.markov.MarkovModel
-        One model per resample whose counts form a model (a resample that does not, e.g. an
-        open riser's without any entry, is skipped), formed as the iterator is consumed, in
-        the order drawn; fewer than ``resamples`` where some were skipped.
-
-    Raises
-    ------
-    InputError
-        On the call (not on iteration): for too few blocks or resamples, a model without
-        one source file and a window, or a fitting window with fewer frame pairs one lag
-        apart than blocks.
-
-    References
-    ----------
-    B. Efron and R. J. Tibshirani, An Introduction to the Bootstrap, Chapman & Hall (1993),
-    Ch. 8.6 (the moving-block bootstrap; here non-overlapping blocks).
-    """
-    from cfbmarkov.markov.estimate import estimator_from_name
-
-    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=False)
-    estimator = estimator_from_name(model.estimator, model.state_space, model.lag,
-                                    connected=model.connected)
-
-    def draw():
-        for total in totals:
-            try:
-                resampled = estimator.fit_counts(total)
-            except (CfbmarkovError, ValueError):
-                continue                 # counts that form no model: no figure
-            yield resampled
-
-    return draw()
-
-
-def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: bool):
-    """The summed counts of each block-bootstrap resample of the model's fitting window
-    (:func:`block_bootstrap_models`; dense, or scipy.sparse with ``sparse``). Checks and
-    counts on the call; the sums are formed as the iterator is consumed."""
-    from cfbmarkov.markov.discrete import discretize
-    from cfbmarkov.markov.counting import count_transitions
-
-    if int(blocks) < 2 or int(resamples) < 1:
-        raise InputError(f"a block bootstrap needs at least 2 blocks and 1 resample ({blocks}, "
-                         f"{resamples})")
-    if not isinstance(model.source, str) or model.window is None:
-        raise InputError("intervals need the model's fitting data (one source file and a window)")
-    blocks = int(blocks)
-    discrete = discretize(model.source, model.state_space, model.lag, model.window)
-    # the frame pairs (t, t + lag) are split, by their first frame, into contiguous blocks:
-    # each pair is counted in exactly one block, none across a block's edge is lost
-    lag_frames = int(discrete.lag_frames)
-    pairs = discrete.times.size - lag_frames
-    if pairs < blocks:
-        raise InputError(f"the fitting window holds {max(pairs, 0)} frame pairs one lag apart, "
-                         f"fewer than the {blocks} bootstrap blocks")
-    cuts = np.rint(np.linspace(0, pairs, blocks + 1)).astype(np.int64)
-    times = discrete.times
-    frame_average = model.estimator == "paper"
-    counts = [count_transitions(discrete.block(float(times[a]), float(times[b - 1 + lag_frames])),
-                                frame_average=frame_average, sparse=sparse)
-              for a, b in zip(cuts[:-1], cuts[1:])]
-    rng = np.random.default_rng(seed)
-
-    def draw():
-        for _ in range(int(resamples)):
-            picked = rng.integers(0, blocks, blocks)
-            total = counts[picked[0]]
-            for k in picked[1:]:
-                total = total + counts[k]
-            yield total
-
-    return draw()
-
-
-@dataclass(frozen=True)
-class _SplitChain:
-    """A bootstrap resample's chain without dense arrays: P split by pass direction (what
-    :func:`_resampled_rtd` and :func:`~cfbmarkov.analysis.mixing.model_mixing_curve` read
-    of a periodic model)."""
-
-    up: object
-    down: object
-    stay: object
-    state_space: object
-    lag: float
-    boundary: Boundary = Boundary.PERIODIC
-
-    @property
-    def transition_matrix(self):
-        return (self.up + self.down + self.stay).tocsr()
-
-
-def _bootstrap_chains(model, blocks: int, resamples: int, seed: int):
-    """:func:`block_bootstrap_models`'s resamples (the same draws) as :class:`_SplitChain`,
-    from sparse counts: for a periodic riser's model without the largest-set restriction,
-    whose resamples are only asked for their RTD and mixing curve. The same chains to
-    rounding (tested), without the [S, S] arrays of a model per resample."""
-    from cfbmarkov.markov.estimate import estimator_from_name
-
-    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=True)
-    estimator = estimator_from_name(model.estimator, model.state_space, model.lag)
-    for total in totals:
-        yield _SplitChain(*estimator.split_chain(total), model.state_space, model.lag)
-
-
-def flow_variability(model, window_length: float, *, direction: str = "up",
-                     blocks: int = FLOW_BLOCKS):
-    """How much the reference's E(RT) and SD(RT) in one window of ``window_length`` move by
-    themselves from window to window, relative to their values, measured in the model's
-    fitting window (the flow's own variability; module docstring).
-
-    The fitting window is cut into B equal blocks, ``blocks`` or fewer, so that a block is at
-    least ``FLOW_BLOCK_RESIDENCES`` (3) times the window's observed E(RT) long (a shorter
-    block cuts off so many of its residences that the comparison measures the cut, not the
-    flow); each block's residence times (from frames at the model's lag, counted in
-    ``direction``, wholly inside the block) are compared with the other blocks' pooled:
-    the persistence baseline inside the fitting window, every side seeing residences
-    through the same length of window. The RMS
-    over the blocks of the relative differences estimates sqrt(B / (B - 1)) times the
-    relative SD of one block's figure (the block against the mean of B - 1 others), so one
-    block's relative SD is the RMS times sqrt((B - 1) / B). That is taken as the analysis
-    window's where the window is at least a block long, and scaled by sqrt(block /
-    ``window_length``) (sampling noise) where it is shorter. It is not reduced for a window
-    longer than a block, as independent blocks would have it (by sqrt(block / window)): a
-    longer window sees longer residences, whose share carries the flow's surges and
-    clusters. Measured on the paper-scale runs over 5-20 s, the relative SD of E(RT)
-    between windows of 1, 1.25, 2.5 and 5 s was 8.4, 9.3, 9.4 and 5.7 % at 8 m/s and 8.6,
-    11.8, 15.9 and 8.8 % at 6 m/s (5 s windows overlapping, 1 s apart), not falling as
-    1 / sqrt(length) (``docs/definitions.md``, Intervals).
-
-    Parameters
-    ----------
-    model : cfbmarkov.markov.MarkovModel
-        The fitted model; its ``source`` (one trajectory file) and ``window`` are re-read.
-    window_length : float
-        Length of the analysis window (s).
-    direction : {"up", "down"}, optional
-        The direction residences are counted in.
-    blocks : int, optional
-        The most blocks B of the fitting window (at least 2).
-
-    Returns
-    -------
-    (float, float) or None
-        The relative standard deviations of a window's E(RT) and SD(RT) (fractions); None
-        where the window is shorter than two such blocks, or fewer than two blocks hold two
-        residences each (no spread can be told).
-
-    Raises
-    ------
-    InputError
-        For a model without one source file and a window, or fewer than 2 blocks.
-
-    References
-    ----------
-    Block averaging: H. Flyvbjerg and H. G. Petersen, "Error estimates on averages of
-    correlated data", J. Chem. Phys. 91, 461 (1989): where the spread of block figures does
-    not fall with the block's length, the blocks are not independent, and the spread of the
-    longest blocks is the honest estimate (here, one block's spread is kept for longer
-    windows).
-    """
-    if int(blocks) < 2:
-        raise InputError(f"the flow's variability needs at least 2 blocks ({blocks})")
-    if not isinstance(model.source, str) or model.window is None:
-        raise InputError("intervals need the model's fitting data (one source file and a window)")
-    a, b = (float(v) for v in model.window)
-    with opened(model.source) as traj:
-        lag_frames = traj.lag_frames(model.lag)
-        whole = residence_times(traj, (a, b), use_events=False, lag_frames=lag_frames,
-                                direction=direction)
-        # blocks at least FLOW_BLOCK_RESIDENCES mean residences long, so that a block's own
-        # window cuts off few of its residences
-        if whole.count < 2:
-            return None
-        blocks = min(int(blocks), int((b - a) / (FLOW_BLOCK_RESIDENCES * whole.mean)))
-        if blocks < 2:
-            return None
-        cuts = a + (b - a) * np.arange(blocks + 1) / blocks
-        observed = [residence_times(traj, (float(cuts[k]), float(cuts[k + 1])), use_events=False,
-                                    lag_frames=lag_frames, direction=direction).samples
-                    for k in range(blocks)]
-    rel_mean, rel_sd = [], []
-    for k, block in enumerate(observed):
-        others = np.concatenate([o for j, o in enumerate(observed) if j != k])
-        if block.size < 2 or others.size < 2:
-            continue
-        rel_mean.append(block.mean() / others.mean() - 1.0)
-        spread = others.std(ddof=1)
-        if spread > 0:
-            rel_sd.append(block.std(ddof=1) / spread - 1.0)
-    if len(rel_mean) < 2:
-        return None
-    block = (b - a) / blocks
-    factor = np.sqrt((blocks - 1.0) / blocks) * max(1.0, np.sqrt(block / float(window_length)))
-    rms = lambda values: float(np.sqrt(np.mean(np.square(values)))) if values else 0.0  # noqa: E731
-    return rms(rel_mean) * factor, rms(rel_sd) * factor
+from cfbmarkov.errors import InputError
+from cfbmarkov.observed.residence import residence_times_from_laps, rtd_histogram
 
 
 @dataclass(frozen=True)
@@ -476,28 +218,11 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         states, left = tracers
         m_exact, m_se = model_mixing_curve(model, states, left, int(lags.max()))
         curve = (lags, states, left)
-    means, sds, rtds, curves = [], [], [], []
-    if not Boundary(model.boundary).is_open and not model.connected and entry is not None:
-        # the resamples' RTDs and mixing curves from sparse chains (no [S, S] model each)
-        drawn = _bootstrap_chains(model, blocks, resamples, seed)
-    else:
-        drawn = block_bootstrap_models(model, blocks=blocks, resamples=resamples, seed=seed)
-    for resampled in drawn:
-        if curve is not None:      # the transitions' spread; defined with or without residences
-            curves.append(model_mixing_curve(resampled, curve[1], curve[2],
-                                             int(curve[0].max()))[0][curve[0]])
-        try:
-            rtd = _resampled_rtd(resampled, window_length, direction, entry)
-        except (CfbmarkovError, ValueError):
-            continue                 # a resample without residences: no figure
-        means.append(rtd.mean)
-        sds.append(rtd.sd)
-        rtds.append(_binned(rtd, edges))
+    means, sds, rtds, curves = bootstrap_figures(model, window_length, direction, entry,
+                                                 edges, blocks, resamples, seed, curve)
     if len(means) < 10:
         raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
     exact_hist = _binned(exact, edges)
-    lo_q, hi_q = 0.5 * (1 - level), 0.5 * (1 + level)
-    z = float(norm.ppf(hi_q))
     n = samples.size
     mean, sd = float(samples.mean()), float(samples.std(ddof=1))
     _, p_mc = rtd_histogram(samples, float(edges[1] - edges[0]),
@@ -520,11 +245,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
             m_se[curve[0]] = se_curve
 
     def interval(value, boot, centre, se, se_flow=0.0):
-        lo, hi = np.quantile(boot, [lo_q, hi_q], axis=0)
-        noise = (z * se) ** 2 + (z * se_flow) ** 2
-        down = np.sqrt(np.maximum(centre - lo, 0.0) ** 2 + noise)
-        up = np.sqrt(np.maximum(hi - centre, 0.0) ** 2 + noise)
-        return value - down, value + up
+        return interval_bounds(value, boot, centre, level, se, se_flow)
 
     relative = flow_variability(model, window_length, direction=direction) if flow else None
     model_mean = interval(mean, np.asarray(means), exact.mean, se_mean)
@@ -548,5 +269,108 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         None if relative is None else (float(f_mean), float(f_sd)))
 
 
+#: most bins of a model's RTD interval (:func:`model_rtd_edges`)
+MODEL_RTD_BINS = 40
+
+
+def model_rtd_edges(rtd) -> np.ndarray:
+    """The bins of a model's RTD interval: whole lags wide, at most ``MODEL_RTD_BINS`` (40)
+    of them, from 0 to the exact RTD's 99th percentile rounded up to a bin.
+
+    Parameters
+    ----------
+    rtd : ResidenceTimeDistribution
+        The model's exact intrinsic RTD.
+
+    Returns
+    -------
+    ndarray of float64, shape (B + 1,)
+        Bin edges (s).
+    """
+    cumulative = np.cumsum(rtd.probability) / rtd.probability.sum()
+    upper = int(np.searchsorted(cumulative, 0.99)) + 1            # lags
+    width = max(1, -(-upper // MODEL_RTD_BINS))
+    bins = -(-upper // width)
+    return rtd.lag * width * np.arange(bins + 1, dtype=np.float64)
+
+
+def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: int = 100,
+                    seed: int = 0, direction: str = "up"):
+    """Intervals of a fitted model's exact E(RT), SD(RT) and RTD per bin, from its fitting
+    window alone (``docs/definitions.md``, The model's interval).
+
+    The same definitions as a prediction's intervals (:func:`prediction_intervals`), for
+    the model's intrinsic RTD and without a Monte Carlo term: the block bootstrap of the
+    fitting window (``blocks`` time blocks counted once, ``resamples`` draws of their
+    counts, each a chain whose exact RTD from the fitted model's entry distribution gives
+    E(RT), SD(RT) and the RTD per bin) and, for E(RT) and SD(RT), the flow's variability
+    between blocks of the window (:func:`flow_variability` for an analysis window as long
+    as the fitting window), added in quadrature. The interval is centred on the model's
+    exact value.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted model; its fitting window is re-read from its source file.
+    level : float, optional
+        Coverage, in (0, 1).
+    blocks : int, optional
+        Time blocks of the fitting window (at least 2).
+    resamples : int, optional
+        Bootstrap resamples (at least 10).
+    seed : int, optional
+        Seed of the resampling.
+    direction : {"up", "down"}, optional
+        The direction residences are counted in (:meth:`MarkovModel.rtd`).
+
+    Returns
+    -------
+    cfbmarkov.markov.uncertainty.ModelUncertainty
+        Bins from :func:`model_rtd_edges`; ``flow_sd`` None where the window is too short
+        for the flow's term (the intervals are then the bootstrap's alone).
+
+    Raises
+    ------
+    InputError
+        For a level outside (0, 1), fewer than 2 blocks or 10 resamples, a model without one
+        source file and a window, a fitting window too short for the blocks, or fewer than
+        10 resamples with residences.
+    CfbmarkovError
+        If the model has no residence time (:meth:`MarkovModel.rtd`).
+
+    References
+    ----------
+    B. Efron and R. J. Tibshirani, An Introduction to the Bootstrap, Chapman & Hall (1993),
+    Ch. 8 and 13; H. Flyvbjerg and H. G. Petersen, J. Chem. Phys. 91, 461 (1989).
+    """
+    from cfbmarkov.markov.uncertainty import ModelUncertainty
+
+    if not 0.0 < float(level) < 1.0:
+        raise InputError(f"interval level {level!r} must lie between 0 and 1")
+    if int(blocks) < 2 or int(resamples) < 10:
+        raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
+                         f"{resamples})")
+    if not isinstance(model.source, str) or model.window is None:
+        raise InputError("intervals need the model's fitting data (one source file and a window)")
+    exact = model.rtd(None, direction)
+    edges = model_rtd_edges(exact)
+    means, sds, rtds, _ = bootstrap_figures(model, None, direction, exact.entry_distribution,
+                                            edges, int(blocks), int(resamples), seed)
+    if len(means) < 10:
+        raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
+    length = float(model.window[1] - model.window[0])
+    relative = flow_variability(model, length, direction=direction)
+    f_mean, f_sd = (0.0, 0.0) if relative is None else (relative[0] * exact.mean,
+                                                        relative[1] * exact.sd)
+    m_lo, m_hi = interval_bounds(exact.mean, np.asarray(means), exact.mean, level, 0.0, f_mean)
+    s_lo, s_hi = interval_bounds(exact.sd, np.asarray(sds), exact.sd, level, 0.0, f_sd)
+    hist = _binned(exact, edges)
+    r_lo, r_hi = interval_bounds(hist, np.asarray(rtds), hist, level)
+    return ModelUncertainty(float(level), (max(float(m_lo), 0.0), float(m_hi)),
+                            (max(float(s_lo), 0.0), float(s_hi)), edges,
+                            np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means), int(blocks),
+                            length / int(blocks), relative)
+
+
 __all__ = ["PredictionIntervals", "block_bootstrap_models", "flow_variability",
-           "prediction_intervals"]
+           "model_intervals", "model_rtd_edges", "prediction_intervals"]

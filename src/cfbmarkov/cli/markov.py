@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import sys
 
-from cfbmarkov.cli.options import (finite_float, parse_cells, parse_windows,
+from cfbmarkov.cli.options import (count, finite_float, level, parse_cells, parse_windows,
                                    positive_float, seed)
 from cfbmarkov.errors import CfbmarkovError, InputError
 
@@ -26,6 +26,7 @@ def cmd_fit(args) -> int:
     from cfbmarkov.markov.select import select_model
     from cfbmarkov.trajectories import Trajectories
 
+    _check_resamples(args.resamples)
     columns, rows = args.cells[0], args.cells[-1]
     depth_columns = args.cells[1] if len(args.cells) == 3 else None
     if len(args.run) > 1:       # several runs of one case, pooled
@@ -64,17 +65,25 @@ def _finish_fit(args, model, runs, windows) -> int:
     """The end of ``fit``: the exact RTD, the sample's verdict, warnings, save, summary."""
     from cfbmarkov.markov.first_passage import TrappedResidences
 
+    has_rtd = True
     try:
         model.rtd()
     except TrappedResidences as exc:
         raise InputError(f"{args.run}: {exc}") from None
     except CfbmarkovError:
-        pass                       # no circulation at all: a model without residence times
+        has_rtd = False            # no circulation at all: a model without residence times
+    # -- the model's interval: a block bootstrap of the fitting window and the flow's
+    # variability between its blocks (analysis.intervals.model_intervals) ----------------
+    if args.resamples and has_rtd:
+        model = _with_interval(model, args.level, args.resamples)
+    # -- end of the model's interval ---------------------------------------------------
     # -- the sample's verdict (docs/definitions.md, Sample adequacy) --------------------
     if args.adequacy:
         from cfbmarkov.analysis.adequacy import assess_adequacy
 
-        model = model.with_adequacy(assess_adequacy(model, runs, windows))
+        interval = (model.uncertainty.rt_mean_interval if model.uncertainty is not None
+                    else None)
+        model = model.with_adequacy(assess_adequacy(model, runs, windows, interval=interval))
     # -- end of the sample's verdict ----------------------------------------------------
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line
@@ -121,6 +130,25 @@ def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int
     return _finish_fit(args, model, list(args.run), windows)
 
 
+def _check_resamples(resamples: int) -> None:
+    """Refuse 1-9 resamples in one line (0: no interval)."""
+    if 0 < resamples < 10:
+        raise InputError(f"--resamples {resamples}: an interval needs at least 10 bootstrap "
+                         "resamples (0 leaves it out)")
+
+
+def _with_interval(model, level: float, resamples: int):
+    """``model`` carrying its interval at ``level`` from ``resamples`` bootstrap resamples,
+    or as it is with a ``warning:`` line on stderr saying why none could be formed."""
+    from cfbmarkov.analysis.intervals import model_intervals
+
+    try:
+        return model.with_uncertainty(model_intervals(model, level=level, resamples=resamples))
+    except CfbmarkovError as exc:
+        print(f"warning: no interval for the model's E(RT) and SD(RT): {exc}", file=sys.stderr)
+        return model
+
+
 def cmd_predict(args) -> int:
     """``cfbmarkov predict``: a Monte Carlo prediction; print its file.
 
@@ -160,13 +188,48 @@ def cmd_rtd(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
+    import json
+
+    from cfbmarkov._json import jsonable
     from cfbmarkov.markov import MarkovModel
 
+    _check_resamples(args.resamples)
     model = MarkovModel.load(args.model)
+    if args.resamples:
+        model = model.with_uncertainty(None)
+        model = _with_interval(model, args.level if args.level is not None else 0.9,
+                               args.resamples)
+    elif (args.level is not None and model.uncertainty is not None
+          and abs(model.uncertainty.level - args.level) > 1e-12):
+        raise InputError(f"{args.model} holds a {model.uncertainty.percent} % interval, not "
+                         f"{100 * args.level:g} %: add --resamples N to form it from the "
+                         "model's fitting window")
     rtd = model.rtd(window=args.window_length)
-    print(f"E(RT) = {rtd.mean:.6g} s, SD(RT) = {rtd.sd:.6g} s "
-          f"({'window ' + format(args.window_length, 'g') + ' s' if args.window_length else 'intrinsic'}, "
-          f"unresolved mass {rtd.unresolved:.2g})")
+    band = rtd.uncertainty              # the intrinsic RTD's only
+    adequacy = getattr(model, "adequacy", None)
+    warnings = [str(line) for line in getattr(adequacy, "warnings", ()) or ()]
+    if args.json:
+        out = {"rt_mean": rtd.mean, "rt_sd": rtd.sd,
+               "window_length": args.window_length, "unresolved": rtd.unresolved,
+               "level": None if band is None else band.level,
+               "rt_mean_interval": None if band is None else list(band.rt_mean_interval),
+               "rt_sd_interval": None if band is None else list(band.rt_sd_interval),
+               "rtd_interval": None if band is None else {
+                   "edges": band.rtd_edges.tolist(), "lower": band.rtd_interval[0].tolist(),
+                   "upper": band.rtd_interval[1].tolist()},
+               "warnings": warnings}
+        print(json.dumps(jsonable(out), indent=1, allow_nan=False))
+        return 0
+    for line in warnings:
+        print(f"warning: {line.strip()}", file=sys.stderr)
+    kind = ('window ' + format(args.window_length, 'g') + ' s' if args.window_length
+            else 'intrinsic')
+    figures = (band.describe(rtd.mean, rtd.sd) if band is not None
+               else f"E(RT) = {rtd.mean:.6g} s, SD(RT) = {rtd.sd:.6g} s")
+    print(f"{figures} ({kind}, unresolved mass {rtd.unresolved:.2g})")
+    if band is None and model.uncertainty is not None:
+        print(f"  the model's {model.uncertainty.percent} % interval is of the intrinsic RTD: "
+              "leave out --window-length to see it")
     return 0
 
 
@@ -250,6 +313,12 @@ def add_fit(sub) -> None:
                    help="leave out the verdict on the fitting sample (the window's halves and "
                         "quarters refitted and compared, the net flow per part, the residences "
                         "longer than the window)")
+    s.add_argument("--level", type=level, default=0.9,
+                   help="coverage of the interval of the model's E(RT), SD(RT) and RTD "
+                        "(default 0.9)")
+    s.add_argument("--resamples", type=count(0, 100000), default=100,
+                   help="bootstrap resamples of the fitting window for the model's interval "
+                        "(0: no interval; default 100)")
     s.add_argument("-o", "--output", required=True, help="model file (.h5)")
     s.add_argument("-q", "--quiet", action="store_true",
                    help="no progress lines on stderr")
@@ -288,6 +357,15 @@ def add_rtd(sub) -> None:
     s.add_argument("--window-length", type=positive_float, default=None,
                    help="observation window, s: the RTD as seen in such a window (default "
                         "none: the chain's intrinsic RTD)")
+    s.add_argument("--json", action="store_true",
+                   help="print rt_mean, rt_sd, level, rt_mean_interval, rt_sd_interval, "
+                        "rtd_interval, unresolved and warnings as JSON")
+    s.add_argument("--level", type=level, default=None,
+                   help="coverage of the interval (default: the model's, else 0.9; another "
+                        "than the model's needs --resamples)")
+    s.add_argument("--resamples", type=count(0, 100000), default=0,
+                   help="form the interval anew from this many bootstrap resamples of the "
+                        "model's fitting window (default 0: the one stored in the model)")
     s.set_defaults(func=cmd_rtd)
 
 

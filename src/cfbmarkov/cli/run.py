@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 from cfbmarkov.cli.options import (MAX_JOBS, MAX_PARTICLES, count, parse_names,
                                    parse_velocities, seed)
 
@@ -144,6 +146,16 @@ def add_demo(sub) -> None:
     s.set_defaults(func=cmd_demo)
 
 
+class _NamesKeptWhole(argparse.HelpFormatter):
+    """Help lines wrapped at spaces only, so that figure names such as ``mcm-fit-regime``
+    are never split at their hyphens."""
+
+    def _split_lines(self, text, width):
+        import textwrap
+
+        return textwrap.wrap(" ".join(text.split()), width, break_on_hyphens=False)
+
+
 def add_bench(sub) -> None:
     """Add the ``bench`` verb (benchmarks) to the subparsers ``sub``.
 
@@ -154,7 +166,8 @@ def add_bench(sub) -> None:
     """
     from cfbmarkov.bench import GROUPS, MCM_NAMES, SIMULATION_NAMES
 
-    s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'")
+    s = sub.add_parser("bench", help="benchmarks; one line per figure as 'name: value unit'",
+                       formatter_class=_NamesKeptWhole)
     s.add_argument("--only", action="append", default=None, metavar="NAME",
                    help="run only this group or figure (repeatable; default all): groups "
                         f"{', '.join(GROUPS)}; figures {', '.join(MCM_NAMES)}, "

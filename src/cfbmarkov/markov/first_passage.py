@@ -11,7 +11,7 @@ l = L - L_entry in {0, -1, ..., -K}:
 
 Entry states are distributed as the stationary distribution nu of the embedded chain of
 landing states (entry -> next entry), found from the absorption probabilities B = (I-Q)^-1 R
-by a sparse LU solve. The residence-time probabilities f(k) = P(RT = k lag) follow by
+by block elimination over the lap-deficit levels (:mod:`cfbmarkov.markov.entry_chain`). The residence-time probabilities f(k) = P(RT = k lag) follow by
 propagating nu through Q. The result is exact up to the lap-deficit truncation K and the
 tail cut-off, both reported as ``unresolved`` mass.
 
@@ -28,13 +28,12 @@ from dataclasses import dataclass
 
 import numba as nb
 import numpy as np
-from threadpoolctl import threadpool_limits
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
-from scipy.sparse.linalg import splu
 
 from cfbmarkov.errors import CfbmarkovError
 from cfbmarkov.markov.connectivity import closed_classes
+from cfbmarkov.markov.entry_chain import embedded_stationary, entry_matrix
 
 
 class TrappedResidences(CfbmarkovError):
@@ -59,6 +58,12 @@ class ResidenceTimeDistribution:
         The distribution of the states residences start in.
     window : float or None
         Length of the observation window (s); None for the intrinsic RTD.
+    closed_classes : int
+        Closed classes of the chain that residences run in.
+    uncertainty : ModelUncertainty or None
+        The intervals of a fitted model's E(RT), SD(RT) and RTD per bin
+        (:class:`cfbmarkov.markov.uncertainty.ModelUncertainty`), on the intrinsic RTD of a
+        model that has them; None otherwise.
 
     Notes
     -----
@@ -72,6 +77,8 @@ class ResidenceTimeDistribution:
     entry_distribution: np.ndarray  # [S] stationary distribution of entry states
     window: float | None = None     # observation window length, s (None: intrinsic RTD)
     closed_classes: int = 1         # closed classes of the chain that residences run in
+    # the fitted model's intervals (markov.uncertainty.ModelUncertainty), or None
+    uncertainty: object = None
 
     @property
     def times(self) -> np.ndarray:
@@ -145,12 +152,13 @@ class ResidenceTimeDistribution:
         return edges, prob
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def _first_passage(indptr, indices, data, exit_probability, start, tol, max_steps, out):
     """f(k) for k = 1.. by propagating ``start`` through Q (CSR of Q transposed). Returns
-    the number of steps taken. The rows of each product are shared among the threads, each
-    row summed in its own order, and the sums over the states run in one thread: the same
-    bits for any number of threads."""
+    the number of steps taken. One thread: a lag's product is a few microseconds of work,
+    less than a parallel region costs to start and join (on a busy 2-core machine that
+    wait made the exact RTD 10-100 times slower), and the bits are the same on any
+    machine."""
     v = start.copy()
     w = np.empty_like(v)
     n = v.size
@@ -159,7 +167,7 @@ def _first_passage(indptr, indices, data, exit_probability, start, tol, max_step
         for i in range(n):
             absorbed += v[i] * exit_probability[i]
         out[k] = absorbed
-        for j in nb.prange(n):
+        for j in range(n):
             acc = 0.0
             for q in range(indptr[j], indptr[j + 1]):
                 acc += data[q] * v[indices[q]]
@@ -173,7 +181,7 @@ def _first_passage(indptr, indices, data, exit_probability, start, tol, max_step
     return max_steps
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val,
                           up_ptr, up_idx, up_val, exit_probability, live, start, tol,
                           max_steps, out):
@@ -185,9 +193,9 @@ def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay
     gathers the L levels of its source at once. Mass on a state and level from which no
     exit can be reached (``live`` false) is dropped, as :func:`exact_rtd` drops those
     states. The terms of each destination and level are summed in the order of the full
-    matrix's transpose (down passes, stays, up passes), rows shared among the threads, the
-    sums over states in one thread: the same bits as the full matrix's propagation, for
-    any number of threads. Returns the number of steps taken."""
+    matrix's transpose (down passes, stays, up passes): the same bits as the full matrix's
+    propagation. One thread, as :func:`_first_passage`. Returns the number of steps
+    taken."""
     n, levels = start.shape
     v = start.copy()
     w = np.empty_like(v)
@@ -196,7 +204,7 @@ def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay
         for i in range(n):
             absorbed += v[i, 0] * exit_probability[i]
         out[k] = absorbed
-        for j in nb.prange(n):
+        for j in range(n):
             for g in range(levels):
                 w[j, g] = 0.0
             for q in range(down_ptr[j], down_ptr[j + 1]):      # from level g - 1
@@ -244,6 +252,29 @@ def _reaching(q: sp.csr_matrix, targets: np.ndarray) -> np.ndarray:
     return live
 
 
+def _live_levels(p_up, p_down, p_stay, levels: int, targets: np.ndarray) -> np.ndarray:
+    """:func:`_reaching` on the Q of :func:`deficit_matrix` (bool [S L]), its graph built
+    from the non-zeros of the three parts by index arithmetic, without forming Q."""
+    s = p_up.shape[0]
+    n = s * levels
+    sources, dests = [], []
+    for part, shift, first, last in ((p_stay, 0, 0, levels), (p_down, 1, 0, levels - 1),
+                                     (p_up, -1, 1, levels)):
+        coo = part.tocoo()
+        g = np.arange(first, last, dtype=np.int64)[:, None]
+        sources.append((g * s + coo.row).ravel())
+        dests.append(((g + shift) * s + coo.col).ravel())
+    hub = np.flatnonzero(targets)
+    # the reversed graph (destination -> source) and a virtual node n joined to every target
+    rows = np.concatenate(dests + [np.full(hub.size, n)])
+    cols = np.concatenate(sources + [hub])
+    graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
+    order = breadth_first_order(graph, n, directed=True, return_predecessors=False)
+    live = np.zeros(n, dtype=bool)
+    live[order[order < n]] = True
+    return live
+
+
 def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray, lag: float,
               deficit_levels: int = 8, tol: float = 1e-10, max_steps: int = 200_000,
               entry: np.ndarray | None = None, entry_flux: np.ndarray | None = None
@@ -271,7 +302,7 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     entry : ndarray of float64, shape (S,), optional
         The distribution of the states particles enter in, e.g. the observed one (column
         sums of the up-pass counts); by default the chain's own stationary entry
-        distribution, which costs a sparse LU factorisation and an eigenvector.
+        distribution, which costs one sparse LU per lap-deficit level and an eigenvector.
     entry_flux : ndarray of float64, shape (S,), optional
         Observed net entries through the inlet per state (landings of up passes minus
         departures of down passes: a particle that falls out of the bottom and comes back
@@ -384,14 +415,15 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
     if chain is None:
         chain = (p_up + p_down + p_stay).tocsr()
     levels = deficit_levels + 1
-    q, exit_probability = deficit_matrix(p_up, p_down, p_stay, levels)
+    exit_probability = np.zeros(s * levels)
+    exit_probability[:s] = np.asarray(p_up.sum(axis=1)).ravel()
     entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
     if entries.size == 0:
         raise CfbmarkovError("the model has no transition up through the top: particles never "
                              "leave, so there is no residence time")
     # keep the states from which an exit can be reached (others trap their mass): one
     # breadth-first search backwards from the exit states
-    live = _reaching(q, exit_probability > 0)
+    live = _live_levels(p_up, p_down, p_stay, levels, exit_probability > 0)
     idx = np.flatnonzero(live)
     position = -np.ones(s * levels, np.int64)
     position[idx] = np.arange(idx.size)
@@ -411,17 +443,9 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
         return _finish_levels((p_down, p_stay, p_up), live.reshape(levels, s),
                               exit_probability[:s], start, tol, max_steps, lag,
                               entry / entry.sum())
-    q_live = q[idx][:, idx]
-    lu = splu(sp.csc_matrix(sp.identity(idx.size) - q_live))
-    # absorption into entry e' starting from entry e at level 0: B = (I-Q)^-1 R; its
-    # stationary distribution nu (the entry states of a steady riser) by power iteration,
-    # one transposed solve per step: nu B = ((I-Q)^-T nu)^T R
-    top_rows = idx[idx < s]
-    r = sp.csr_matrix((p_up[top_rows][:, entries].tocoo().data,
-                       (position[top_rows][p_up[top_rows][:, entries].tocoo().row],
-                        p_up[top_rows][:, entries].tocoo().col)),
-                      shape=(idx.size, entries.size))
-    rt = r.T.tocsr()
+    # B, the embedded chain of entry states, by block elimination over the levels
+    # (markov.entry_chain: no LU of the [S L, S L] matrix), and its stationary distribution
+    embedded = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries)
     live_entries = live[entries]
     classes = _closed_entry_classes(chain, entries)
     if len(classes) > 1:
@@ -438,10 +462,9 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
         weights /= weights.sum()
         nu = np.zeros(entries.size)
         for c, w in zip(classes, weights):
-            nu[c] = w * _embedded_stationary(lu, rt[c], position, entries[c],
-                                             live_entries[c], idx.size)
+            nu[c] = w * embedded_stationary(embedded[np.ix_(c, c)], live_entries[c])
     else:
-        nu = _embedded_stationary(lu, rt, position, entries, live_entries, idx.size)
+        nu = embedded_stationary(embedded, live_entries)
     start = np.zeros(idx.size)
     ok = live[entries]
     start[position[entries[ok]]] = nu[ok]
@@ -551,47 +574,3 @@ def _finish_levels(parts, live, exit_probability, start, tol, max_steps, lag, en
                                   tol, max_steps, out)
     f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
     return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
-
-
-def _embedded_stationary(lu, rt, position, entries, live_entries, n) -> np.ndarray:
-    """Stationary distribution of the embedded entry chain B = (I-Q)^-1 R: its dominant left
-    eigenvector by ARPACK, one transposed sparse solve per product (no dense B); a dense
-    eigenvector where ARPACK does not converge or the chain is tiny."""
-    from scipy.sparse.linalg import ArpackError, ArpackNoConvergence, LinearOperator, eigs
-
-    m = entries.size
-    rows = position[entries[live_entries]]
-    x = np.zeros(n)
-
-    def left_product(v):
-        x[:] = 0.0
-        x[rows] = np.real(v).ravel()[live_entries]
-        return rt @ lu.solve(x, trans="T")
-
-    if m > 8:
-        try:
-            with threadpool_limits(1):
-                values, vectors = eigs(LinearOperator((m, m), matvec=left_product,
-                                                      dtype=np.float64),
-                                       k=1, which="LM", tol=1e-12, maxiter=5000,
-                                       v0=live_entries.astype(np.float64) + 1e-3)
-            nu = np.abs(vectors[:, 0].real)
-            if abs(values[0] - 1.0) < 1e-6 and nu.sum() > 0:
-                return nu / nu.sum()
-        except (ArpackError, ArpackNoConvergence):
-            pass
-    dense = np.zeros((m, m))
-    solved = lu.solve(rt.T.toarray())
-    dense[live_entries] = solved[rows]
-    return _stationary(dense)
-
-
-def _stationary(embedded: np.ndarray) -> np.ndarray:
-    """Stationary distribution of a (sub)stochastic matrix's dominant left eigenvector."""
-    rows = embedded.sum(axis=1, keepdims=True)
-    k = np.divide(embedded, rows, out=np.zeros_like(embedded), where=rows > 0)
-    with threadpool_limits(1):    # a small dense eig: threads only contend (100x slower
-        values, vectors = np.linalg.eig(k.T)             # on a busy 2-core machine)
-    lead = int(np.argmax(values.real))
-    nu = np.abs(vectors[:, lead].real)
-    return nu / nu.sum()

@@ -16,6 +16,7 @@ The file layout and its reading and writing are in :mod:`cfbmarkov.markov.model_
 from __future__ import annotations
 
 import copy
+import dataclasses
 import os
 from dataclasses import InitVar, dataclass, field
 from functools import cached_property
@@ -38,6 +39,7 @@ from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.regimes import (RegimeCells, conditional_chain, regime_matrix,
                                       regime_path, start_regime, with_regime)
 from cfbmarkov.markov.states import StateSpace
+from cfbmarkov.markov.uncertainty import ModelUncertainty
 
 if TYPE_CHECKING:
     import h5py
@@ -94,6 +96,9 @@ class MarkovModel:
     adequacy : Adequacy or None
         The verdict on the fitting sample (:mod:`cfbmarkov.markov.adequacy`); None where
         none was formed.
+    uncertainty : ModelUncertainty or None
+        Intervals of the exact E(RT), SD(RT) and RTD per bin from the fitting window
+        (:func:`cfbmarkov.analysis.intervals.model_intervals`); None where not computed.
 
     Raises
     ------
@@ -131,6 +136,7 @@ class MarkovModel:
     open_flow: OpenFlow | None = None
     coherence: float = 0.0
     adequacy: Adequacy | None = None
+    uncertainty: ModelUncertainty | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     adopt: InitVar[bool] = field(default=False, kw_only=True)
 
@@ -332,6 +338,8 @@ class MarkovModel:
         Returns
         -------
         ResidenceTimeDistribution
+            The intrinsic RTD in the model's direction carries the model's
+            :attr:`uncertainty` (its ``uncertainty``; None where the model has none).
 
         Raises
         ------
@@ -355,7 +363,7 @@ class MarkovModel:
                 raise InputError(f"--window-length {window:g} s is {window / self.lag:.3g} lags "
                                  f"of {self.lag:g} s, more than {MAX_STEPS}")
         if self.open_flow is not None:
-            return self._open_rtd(window)
+            return self._with_uncertainty(self._open_rtd(window), window)
         if direction not in ("up", "down"):
             raise InputError(f"residence direction {direction!r}: up or down")
         if direction == "down":
@@ -374,7 +382,14 @@ class MarkovModel:
                                            self.down_fraction, self.lag,
                                            entry_flux=self._entry_flux)
         intrinsic = self._cache["rtd"]
-        return intrinsic if window is None else intrinsic.in_window(window)
+        return self._with_uncertainty(intrinsic) if window is None else intrinsic.in_window(window)
+
+    def _with_uncertainty(self, rtd: ResidenceTimeDistribution, window: float | None = None
+                          ) -> ResidenceTimeDistribution:
+        """The intrinsic RTD with the model's uncertainty attached (a windowed one as it is)."""
+        if window is not None or self.uncertainty is None:
+            return rtd
+        return dataclasses.replace(rtd, uncertainty=self.uncertainty)
 
     def _down_rtd(self, window: float | None) -> ResidenceTimeDistribution:
         """Residences of a net downflow: entries through the top, exits through the bottom."""
@@ -517,6 +532,15 @@ class MarkovModel:
         """The same model, holding the verdict on its fitting sample
         (:func:`cfbmarkov.analysis.adequacy.assess_adequacy`; None: none)."""
         return self._derived(adequacy=adequacy)
+    def with_uncertainty(self, uncertainty: ModelUncertainty | None) -> "MarkovModel":
+        """The same model (chain and derived quantities shared) carrying the intervals of
+        its residence-time figures, a :class:`~cfbmarkov.markov.uncertainty.ModelUncertainty`
+        from :func:`cfbmarkov.analysis.intervals.model_intervals` (None: none); InputError
+        for anything else."""
+        if uncertainty is not None and not isinstance(uncertainty, ModelUncertainty):
+            raise InputError(f"model uncertainty must be a ModelUncertainty, not "
+                             f"{type(uncertainty).__name__}")
+        return self._derived(uncertainty=uncertainty)
 
     # -- description -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:

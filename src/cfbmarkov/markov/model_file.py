@@ -12,7 +12,12 @@ states:
   ``cfbmarkov_version``; for a model chosen by ``--states auto``, ``selection`` (JSON); for
   a model fitted on the largest strongly connected set, ``connected = 1``; where the
   fitting sample was judged, ``adequacy`` (JSON, :class:`~cfbmarkov.markov.adequacy.Adequacy`;
-  optional, files without it read as models without a verdict).
+  optional, files without it read as models without a verdict);
+- optionally the group ``uncertainty`` (the intervals of the exact E(RT), SD(RT) and RTD
+  per bin, :class:`~cfbmarkov.markov.uncertainty.ModelUncertainty`): datasets ``level``,
+  ``rt_mean_interval`` [2], ``rt_sd_interval`` [2] (s), ``rtd_edges`` [B + 1] (s),
+  ``rtd_interval`` [2, B], ``resamples``, ``blocks``, ``block_length`` (s), ``flow_sd`` [2]
+  (NaN where not measured). A file without it loads as a model without intervals.
 
 The [S, S] datasets are stored chunked (blocks of whole rows, about 1 MiB) and compressed
 with gzip (deflate, level 1; :func:`~cfbmarkov._hdf5.create_array_dataset`): the
@@ -46,6 +51,7 @@ from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS
 from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.spaces import state_space_from_attrs
+from cfbmarkov.markov.uncertainty import ModelUncertainty
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
@@ -90,6 +96,8 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         attrs["coherence"] = float(model.coherence)
     if model.adequacy is not None:
         attrs["adequacy"] = model.adequacy.to_attr()
+    if model.uncertainty is not None:
+        datasets.update(model.uncertainty.file_fields())
     if model.open_flow is not None:
         open_datasets, open_attrs = model.open_flow.file_fields()
         attrs.update(open_attrs)
@@ -193,7 +201,7 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         if "selection" in group.attrs else None,
         connected=bool(group.attrs.get("connected", 0)),
         coherence=_attr_number(group.attrs.get("coherence", 0.0), "coherence"),
-        open_flow=_open_flow(group),
+        open_flow=_open_flow(group), uncertainty=ModelUncertainty.from_group(group),
         adequacy=Adequacy.from_attr(group.attrs["adequacy"])
         if "adequacy" in group.attrs else None)
 

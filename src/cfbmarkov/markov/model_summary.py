@@ -90,7 +90,18 @@ def model_summary(model: "MarkovModel") -> str:
         lines.append(f"  chosen automatically: {model.selection.get('reason', '')}")
     try:
         r = model.rtd()
-        lines.append(f"  exact residence time: E(RT) = {r.mean:.4g} s, SD(RT) = {r.sd:.4g} s")
+        if r.uncertainty is not None:
+            u = r.uncertainty
+            flow = ("; the flow's variability left out (the window is shorter than two "
+                    "blocks of three mean residence times)" if u.flow_sd is None else
+                    f" and the flow's variability between its blocks ({100 * u.flow_sd[0]:.3g} "
+                    "% of E(RT))")
+            lines.append(f"  exact residence time: {u.describe(r.mean, r.sd)}")
+            lines.append(f"    interval from the fitting window alone: {u.resamples} bootstrap "
+                         f"resamples of {u.blocks} blocks of {u.block_length:.3g} s{flow}")
+        else:
+            lines.append(f"  exact residence time: E(RT) = {r.mean:.4g} s, "
+                         f"SD(RT) = {r.sd:.4g} s")
     except Exception as exc:  # a model without exits still has a summary
         lines.append(f"  exact residence time: none ({exc})")
     return "\n".join(lines)

@@ -1,0 +1,424 @@
+"""The block bootstrap of a model's fitting window and the flow's variability between its
+blocks: the parts that :func:`cfbmarkov.analysis.intervals.prediction_intervals` (a
+prediction's intervals) and :func:`cfbmarkov.analysis.intervals.model_intervals` (the
+model's own) share (``docs/definitions.md``, Intervals).
+
+References
+----------
+B. Efron and R. J. Tibshirani, An Introduction to the Bootstrap, Chapman & Hall (1993),
+Ch. 8 (the moving-block bootstrap for dependent data) and Ch. 13 (percentile intervals).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.stats import norm
+
+from cfbmarkov.boundary import Boundary
+from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.observed.residence import residence_times
+from cfbmarkov.trajectories import opened
+
+
+#: blocks of the fitting window that measure the flow's variability (:func:`flow_variability`)
+FLOW_BLOCKS = 4
+#: ... fewer where a block would be shorter than this many of the window's mean residences
+FLOW_BLOCK_RESIDENCES = 3.0
+
+
+def _resampled_rtd(model, window_length: float, direction: str, entry):
+    """A resampled model's RTD in the window, from the fitted model's entry distribution
+    (one sparse LU per resample saved: the spread of the entry distribution is left out,
+    that of the transitions kept)."""
+    steps = (200_000 if window_length is None
+             else max(2, int(round(window_length / model.lag))))
+
+    def seen(rtd):
+        return rtd if window_length is None else rtd.in_window(window_length)
+
+    if isinstance(model, _SplitChain):
+        from cfbmarkov.markov.first_passage import rtd_of_split_chain
+
+        up, down = (model.up, model.down) if direction == "up" else (model.down, model.up)
+        return seen(rtd_of_split_chain(up, down, model.stay, model.lag, max_steps=steps,
+                                       entry=entry))
+    if Boundary(model.boundary).is_open or entry is None:
+        return model.rtd(window_length, direction)
+    from cfbmarkov.markov.first_passage import exact_rtd
+
+    up, down = ((model.up_fraction, model.down_fraction) if direction == "up"
+                else (model.down_fraction, model.up_fraction))
+    return seen(exact_rtd(model.transition_matrix, up, down, model.lag, max_steps=steps,
+                          entry=entry))
+
+
+def _binned(rtd, edges: np.ndarray) -> np.ndarray:
+    """An exact RTD's probability per bin of ``edges``, with the sample histogram's rule
+    for times on an edge (whole lags on bins of one lag fall in the bin they start)."""
+    width = float(edges[1] - edges[0])
+    hist, _ = np.histogram(rtd.times + 1e-6 * width, bins=edges,
+                           weights=rtd.probability / rtd.probability.sum())
+    return hist
+
+
+def block_bootstrap_models(model, *, blocks: int = 10, resamples: int = 100, seed: int = 0):
+    """Models fitted on block-bootstrap resamples of a model's fitting window.
+
+    The fitting window (re-read from the model's source file) is cut into ``blocks``
+    contiguous time blocks and the transitions of each counted (with the model's
+    estimator's rule); the frame pairs (t, t + lag) are split by their first frame, so
+    that every pair of the window is counted in exactly one block. Each resample draws
+    ``blocks`` blocks with replacement, sums their counts and forms a model with the same
+    estimator, state space and lag. The data are read and counted once; each resample costs
+    one estimate.
+
+    Parameters
+    ----------
+    model : cfbmarkov.markov.MarkovModel
+        The fitted model; its ``source`` (one trajectory file) and ``window`` are re-read.
+    blocks : int, optional
+        Time blocks B of the fitting window (at least 2).
+    resamples : int, optional
+        Resamples drawn (at least 1).
+    seed : int, optional
+        Seed of the resampling.
+
+    Returns
+    -------
+    iterator of cfbmarkov.markov.MarkovModel
+        One model per resample whose counts form a model (a resample that does not, e.g. an
+        open riser's without any entry, is skipped), formed as the iterator is consumed, in
+        the order drawn; fewer than ``resamples`` where some were skipped.
+
+    Raises
+    ------
+    InputError
+        On the call (not on iteration): for too few blocks or resamples, a model without
+        one source file and a window, or a fitting window with fewer frame pairs one lag
+        apart than blocks.
+
+    References
+    ----------
+    B. Efron and R. J. Tibshirani, An Introduction to the Bootstrap, Chapman & Hall (1993),
+    Ch. 8.6 (the moving-block bootstrap; here non-overlapping blocks).
+    """
+    from cfbmarkov.markov.estimate import estimator_from_name
+
+    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=False)
+    estimator = estimator_from_name(model.estimator, model.state_space, model.lag,
+                                    connected=model.connected)
+
+    def draw():
+        for total in totals:
+            try:
+                resampled = estimator.fit_counts(total)
+            except (CfbmarkovError, ValueError):
+                continue                 # counts that form no model: no figure
+            yield resampled
+
+    return draw()
+
+
+def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: bool):
+    """The summed counts of each block-bootstrap resample of the model's fitting window
+    (:func:`block_bootstrap_models`; dense, or scipy.sparse with ``sparse``). Checks and
+    counts on the call; the sums are formed as the iterator is consumed."""
+    from cfbmarkov.markov.discrete import discretize
+    from cfbmarkov.markov.counting import count_transitions
+
+    if int(blocks) < 2 or int(resamples) < 1:
+        raise InputError(f"a block bootstrap needs at least 2 blocks and 1 resample ({blocks}, "
+                         f"{resamples})")
+    if not isinstance(model.source, str) or model.window is None:
+        raise InputError("intervals need the model's fitting data (one source file and a window)")
+    blocks = int(blocks)
+    discrete = discretize(model.source, model.state_space, model.lag, model.window)
+    # the frame pairs (t, t + lag) are split, by their first frame, into contiguous blocks:
+    # each pair is counted in exactly one block, none across a block's edge is lost
+    lag_frames = int(discrete.lag_frames)
+    pairs = discrete.times.size - lag_frames
+    if pairs < blocks:
+        raise InputError(f"the fitting window holds {max(pairs, 0)} frame pairs one lag apart, "
+                         f"fewer than the {blocks} bootstrap blocks")
+    cuts = np.rint(np.linspace(0, pairs, blocks + 1)).astype(np.int64)
+    times = discrete.times
+    frame_average = model.estimator == "paper"
+    counts = [count_transitions(discrete.block(float(times[a]), float(times[b - 1 + lag_frames])),
+                                frame_average=frame_average, sparse=sparse)
+              for a, b in zip(cuts[:-1], cuts[1:])]
+    rng = np.random.default_rng(seed)
+    stacked = _StackedCounts(counts) if sparse and counts[0].faces is None else None
+
+    def draw():
+        for _ in range(int(resamples)):
+            picked = rng.integers(0, blocks, blocks)
+            if stacked is not None:
+                yield stacked.total(np.bincount(picked, minlength=blocks))
+                continue
+            total = counts[picked[0]]
+            for k in picked[1:]:
+                total = total + counts[k]
+            yield total
+
+    return draw()
+
+
+class _StackedCounts:
+    """The sparse counts of B blocks on the union of their non-zeros, stacked [B, nnz] per
+    field, so that a resample's total (each block times the number of times it was drawn)
+    is one product per field instead of B - 1 sparse sums."""
+
+    FIELDS = ("counts", "counts_up", "counts_down", "frame_average_sum")
+
+    def __init__(self, counts):
+        import scipy.sparse as sp
+
+        s = counts[0].counts.shape[0]
+        self.s = s
+        coos = {name: [None if getattr(c, name) is None else sp.coo_array(getattr(c, name))
+                       for c in counts] for name in self.FIELDS}
+        keys = np.unique(np.concatenate(
+            [np.asarray(m.row, np.int64) * s + m.col for ms in coos.values() for m in ms
+             if m is not None] + [np.zeros(0, np.int64)]))
+        self.indices = (keys % s).astype(np.int64)
+        self.indptr = np.searchsorted(keys // s, np.arange(s + 1)).astype(np.int64)
+        self.stacks = {}
+        for name, ms in coos.items():
+            if any(m is None for m in ms):
+                self.stacks[name] = None
+                continue
+            stack = np.zeros((len(ms), keys.size))
+            for b, m in enumerate(ms):
+                np.add.at(stack[b], np.searchsorted(keys, np.asarray(m.row, np.int64) * s + m.col),
+                          m.data)
+            self.stacks[name] = stack
+        self.occupied = np.stack([np.asarray(c.occupied_frames) for c in counts])
+        self.frame_pairs = np.array([int(c.frame_pairs) for c in counts], np.int64)
+        self.integer = {name: np.issubdtype(getattr(counts[0], name).dtype, np.integer)
+                        for name in self.FIELDS if self.stacks[name] is not None}
+
+    def total(self, times: np.ndarray):
+        """The summed counts with block b taken ``times[b]`` times."""
+        import scipy.sparse as sp
+
+        from cfbmarkov.markov.counting import TransitionCounts
+
+        weights = times.astype(np.float64)
+        fields = {}
+        for name, stack in self.stacks.items():
+            if stack is None:
+                fields[name] = None
+                continue
+            data = weights @ stack
+            if self.integer[name]:
+                data = np.rint(data).astype(np.int64)
+            matrix = sp.csr_array((data, self.indices.copy(), self.indptr.copy()),
+                                  shape=(self.s, self.s))
+            matrix.eliminate_zeros()
+            fields[name] = matrix
+        occupied = (times @ self.occupied).astype(self.occupied.dtype)
+        return TransitionCounts(fields["counts"], fields["counts_up"], fields["counts_down"],
+                                fields["frame_average_sum"], occupied,
+                                int(times @ self.frame_pairs))
+
+
+@dataclass(frozen=True)
+class _SplitChain:
+    """A bootstrap resample's chain without dense arrays: P split by pass direction (what
+    :func:`_resampled_rtd` and :func:`~cfbmarkov.analysis.mixing.model_mixing_curve` read
+    of a periodic model)."""
+
+    up: object
+    down: object
+    stay: object
+    state_space: object
+    lag: float
+    boundary: Boundary = Boundary.PERIODIC
+
+    @property
+    def transition_matrix(self):
+        return (self.up + self.down + self.stay).tocsr()
+
+
+def _bootstrap_chains(model, blocks: int, resamples: int, seed: int):
+    """:func:`block_bootstrap_models`'s resamples (the same draws) as :class:`_SplitChain`,
+    from sparse counts: for a periodic riser's model without the largest-set restriction,
+    whose resamples are only asked for their RTD and mixing curve. The same chains to
+    rounding (tested), without the [S, S] arrays of a model per resample."""
+    from cfbmarkov.markov.estimate import estimator_from_name
+
+    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=True)
+    estimator = estimator_from_name(model.estimator, model.state_space, model.lag)
+    for total in totals:
+        yield _SplitChain(*estimator.split_chain(total), model.state_space, model.lag)
+
+
+def flow_variability(model, window_length: float, *, direction: str = "up",
+                     blocks: int = FLOW_BLOCKS):
+    """How much the reference's E(RT) and SD(RT) in one window of ``window_length`` move by
+    themselves from window to window, relative to their values, measured in the model's
+    fitting window (the flow's own variability; module docstring).
+
+    The fitting window is cut into B equal blocks, ``blocks`` or fewer, so that a block is at
+    least ``FLOW_BLOCK_RESIDENCES`` (3) times the window's observed E(RT) long (a shorter
+    block cuts off so many of its residences that the comparison measures the cut, not the
+    flow); each block's residence times (from frames at the model's lag, counted in
+    ``direction``, wholly inside the block) are compared with the other blocks' pooled:
+    the persistence baseline inside the fitting window, every side seeing residences
+    through the same length of window. The RMS
+    over the blocks of the relative differences estimates sqrt(B / (B - 1)) times the
+    relative SD of one block's figure (the block against the mean of B - 1 others), so one
+    block's relative SD is the RMS times sqrt((B - 1) / B). That is taken as the analysis
+    window's where the window is at least a block long, and scaled by sqrt(block /
+    ``window_length``) (sampling noise) where it is shorter. It is not reduced for a window
+    longer than a block, as independent blocks would have it (by sqrt(block / window)): a
+    longer window sees longer residences, whose share carries the flow's surges and
+    clusters. Measured on the paper-scale runs over 5-20 s, the relative SD of E(RT)
+    between windows of 1, 1.25, 2.5 and 5 s was 8.4, 9.3, 9.4 and 5.7 % at 8 m/s and 8.6,
+    11.8, 15.9 and 8.8 % at 6 m/s (5 s windows overlapping, 1 s apart), not falling as
+    1 / sqrt(length) (``docs/definitions.md``, Intervals).
+
+    Parameters
+    ----------
+    model : cfbmarkov.markov.MarkovModel
+        The fitted model; its ``source`` (one trajectory file) and ``window`` are re-read.
+    window_length : float
+        Length of the analysis window (s).
+    direction : {"up", "down"}, optional
+        The direction residences are counted in.
+    blocks : int, optional
+        The most blocks B of the fitting window (at least 2).
+
+    Returns
+    -------
+    (float, float) or None
+        The relative standard deviations of a window's E(RT) and SD(RT) (fractions); None
+        where the window is shorter than two such blocks, or fewer than two blocks hold two
+        residences each (no spread can be told).
+
+    Raises
+    ------
+    InputError
+        For a model without one source file and a window, or fewer than 2 blocks.
+
+    References
+    ----------
+    Block averaging: H. Flyvbjerg and H. G. Petersen, "Error estimates on averages of
+    correlated data", J. Chem. Phys. 91, 461 (1989): where the spread of block figures does
+    not fall with the block's length, the blocks are not independent, and the spread of the
+    longest blocks is the honest estimate (here, one block's spread is kept for longer
+    windows).
+    """
+    if int(blocks) < 2:
+        raise InputError(f"the flow's variability needs at least 2 blocks ({blocks})")
+    if not isinstance(model.source, str) or model.window is None:
+        raise InputError("intervals need the model's fitting data (one source file and a window)")
+    a, b = (float(v) for v in model.window)
+    with opened(model.source) as traj:
+        lag_frames = traj.lag_frames(model.lag)
+        whole = residence_times(traj, (a, b), use_events=False, lag_frames=lag_frames,
+                                direction=direction)
+        # blocks at least FLOW_BLOCK_RESIDENCES mean residences long, so that a block's own
+        # window cuts off few of its residences
+        if whole.count < 2:
+            return None
+        blocks = min(int(blocks), int((b - a) / (FLOW_BLOCK_RESIDENCES * whole.mean)))
+        if blocks < 2:
+            return None
+        cuts = a + (b - a) * np.arange(blocks + 1) / blocks
+        observed = [residence_times(traj, (float(cuts[k]), float(cuts[k + 1])), use_events=False,
+                                    lag_frames=lag_frames, direction=direction).samples
+                    for k in range(blocks)]
+    rel_mean, rel_sd = [], []
+    for k, block in enumerate(observed):
+        others = np.concatenate([o for j, o in enumerate(observed) if j != k])
+        if block.size < 2 or others.size < 2:
+            continue
+        rel_mean.append(block.mean() / others.mean() - 1.0)
+        spread = others.std(ddof=1)
+        if spread > 0:
+            rel_sd.append(block.std(ddof=1) / spread - 1.0)
+    if len(rel_mean) < 2:
+        return None
+    block = (b - a) / blocks
+    factor = np.sqrt((blocks - 1.0) / blocks) * max(1.0, np.sqrt(block / float(window_length)))
+    rms = lambda values: float(np.sqrt(np.mean(np.square(values)))) if values else 0.0  # noqa: E731
+    return rms(rel_mean) * factor, rms(rel_sd) * factor
+
+
+def bootstrap_figures(model, window_length: float | None, direction: str, entry, edges,
+                      blocks: int, resamples: int, seed: int, curve=None):
+    """E(RT), SD(RT) and the RTD per bin of ``edges`` of each block-bootstrap resample of
+    the model's fitting window (and, with ``curve`` = (lags, states, left), its expected
+    mixing curve at those lags): the model's spread, shared by both kinds of interval.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted model (its fitting window is re-read and counted once per block).
+    window_length : float or None
+        The analysis window (s): each resample's RTD as seen in it; None: the intrinsic RTD.
+    direction : {"up", "down"}
+        The direction residences are counted in.
+    entry : ndarray of float64, shape (S,), or None
+        The fitted model's entry distribution, each resample's RTD started from it (None:
+        each resample's own).
+    edges : ndarray, shape (B + 1,)
+        RTD bin edges (s).
+    blocks, resamples, seed : int
+        Of the bootstrap (:func:`block_bootstrap_models`).
+    curve : (ndarray of int, ndarray of int, ndarray of bool), optional
+        Lags, tracers' states and left group of a mixing curve.
+
+    Returns
+    -------
+    means, sds : list of float
+        Of the resamples with residences (s).
+    rtds : list of ndarray, shape (B,)
+        Their probability per bin.
+    curves : list of ndarray
+        Their mixing curves at the lags (every resample; empty without ``curve``).
+    """
+    from cfbmarkov.analysis.mixing import model_mixing_curve
+
+    if (not Boundary(model.boundary).is_open and not model.connected and entry is not None
+            and direction in ("up", "down")):
+        # the resamples' RTDs and mixing curves from sparse chains (no [S, S] model each)
+        drawn = _bootstrap_chains(model, blocks, resamples, seed)
+    else:
+        drawn = block_bootstrap_models(model, blocks=blocks, resamples=resamples, seed=seed)
+    means, sds, rtds, curves = [], [], [], []
+    for resampled in drawn:
+        if curve is not None:      # the transitions' spread; defined with or without residences
+            curves.append(model_mixing_curve(resampled, curve[1], curve[2],
+                                             int(curve[0].max()))[0][curve[0]])
+        try:
+            rtd = _resampled_rtd(resampled, window_length, direction, entry)
+        except (CfbmarkovError, ValueError):
+            continue                 # a resample without residences: no figure
+        means.append(rtd.mean)
+        sds.append(rtd.sd)
+        rtds.append(_binned(rtd, edges))
+    return means, sds, rtds, curves
+
+
+def interval_bounds(value, boot, centre, level: float, se=0.0, se_flow=0.0):
+    """An interval at ``level`` centred on ``value``: each half-width is the distance from
+    ``centre`` (the fitted model's exact value) to the bootstrap's (1 - level)/2 or
+    (1 + level)/2 quantile of ``boot`` (along axis 0) and z times the standard errors ``se``
+    (Monte Carlo) and ``se_flow`` (the flow's), added in quadrature.
+
+    Returns
+    -------
+    (lower, upper)
+        Floats or arrays as ``value``.
+    """
+    lo_q, hi_q = 0.5 * (1 - level), 0.5 * (1 + level)
+    z = float(norm.ppf(hi_q))
+    lo, hi = np.quantile(boot, [lo_q, hi_q], axis=0)
+    noise = (z * se) ** 2 + (z * se_flow) ** 2
+    down = np.sqrt(np.maximum(centre - lo, 0.0) ** 2 + noise)
+    up = np.sqrt(np.maximum(hi - centre, 0.0) ** 2 + noise)
+    return value - down, value + up

@@ -1,0 +1,149 @@
+"""The embedded chain of a periodic riser's entry states and its stationary distribution.
+
+A residence starts in the state a particle lands in after the pass up through the top that
+ends the previous one (:mod:`cfbmarkov.markov.first_passage`). From entry state e, the next
+entry is e' with probability B[e, e'], B = N_00 R: N = (I - Q)^-1 is the fundamental
+matrix of the transient chain on (lap-deficit level, state), N_00 its block from level 0 to
+level 0, and R = P_up restricted to level 0's rows and the entry states' columns. The
+entry states of a steady riser are distributed as B's stationary distribution.
+
+Q is block tridiagonal in the levels g = 0 .. L-1 (P_stay within a level, P_down one level
+deeper, P_up one level up), so N_00 is the inverse of the Schur complement of the deeper
+levels onto level 0, formed from the deepest level up (block Gaussian elimination):
+
+    T_(L-1) = I - S_(L-1),   T_g = I - S_g - D_g T_(g+1)^-1 U_(g+1),   N_00 = T_0^-1,
+
+with S_g, D_g, U_g the blocks of P_stay, P_down and P_up between the levels' states that
+can still reach the top (the others trap their mass and are left out). Each step is one
+sparse LU of an [S, S] matrix and a solve with as many right-hand sides as the states that
+up passes land in (U's non-zero columns): the [S L, S L] matrix is never formed or factored
+(its LU fills in across the levels).
+
+References
+----------
+J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton (1960), Ch. III
+(absorbing chains, B = N R). G. H. Golub and C. F. Van Loan, Matrix Computations, 4th ed.,
+Johns Hopkins (2013), Sec. 4.5.1 (block tridiagonal systems).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+from threadpoolctl import threadpool_limits
+
+
+def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray) -> np.ndarray:
+    """B, the embedded chain of entry states (module docstring), dense.
+
+    Parameters
+    ----------
+    p_up, p_down, p_stay : scipy.sparse.csr_matrix, shape (S, S)
+        P split by pass direction.
+    live : ndarray of bool, shape (L, S)
+        The (level, state) pairs from which the top can be reached from level 0.
+    entries : ndarray of int, shape (M,)
+        The entry states (columns of P_up with a non-zero).
+
+    Returns
+    -------
+    ndarray of float64, shape (M, M)
+        B[e, e']: from entry state entries[e] (at level 0), the probability that the
+        residence ends landing in entries[e']; rows of entries that are not live are zero.
+        Rows sum to 1 less the mass lost beyond the deepest level.
+    """
+    levels, s = live.shape
+    kept = [np.flatnonzero(live[g]) for g in range(levels)]
+    block = _Blocks(s)
+    up_cols = up_block = None     # U_(g+1)'s non-zero columns, T_(g+1)^-1 U_(g+1) on them
+    t = None
+    for g in range(levels - 1, -1, -1):
+        rows = kept[g]
+        t = (sp.identity(rows.size, format="csr") - block(p_stay, rows, rows)).tocsr()
+        if up_block is not None and rows.size:
+            d = block(p_down, rows, kept[g + 1]).tocsr()       # D_g, level g -> g + 1
+            d_rows = np.flatnonzero(np.diff(d.indptr))
+            if d_rows.size:
+                product = d[d_rows] @ up_block                 # [rows with a down pass, C]
+                t = t - sp.csr_matrix(
+                    (product.ravel(), (np.repeat(d_rows, up_cols.size),
+                                       np.tile(up_cols, d_rows.size))),
+                    shape=t.shape)
+        if g == 0 or rows.size == 0:
+            up_cols = up_block = None
+            continue
+        u = block(p_up, rows, kept[g - 1]).tocsc()             # U_g, level g -> g - 1
+        up_cols = np.flatnonzero(np.diff(u.indptr))
+        up_block = (splu(sp.csc_matrix(t)).solve(u[:, up_cols].toarray()) if up_cols.size
+                    else None)
+    out = np.zeros((entries.size, entries.size))
+    rows = kept[0]
+    if rows.size == 0:
+        return out
+    position = -np.ones(s, np.int64)
+    position[rows] = np.arange(rows.size)
+    solved = splu(sp.csc_matrix(t)).solve(block(p_up, rows, entries).toarray())   # N_00 R
+    live_entries = position[entries] >= 0
+    out[live_entries] = solved[position[entries[live_entries]]]
+    return out
+
+
+class _Blocks:
+    """Sub-matrices part[rows][:, cols], the whole part where both are every state, and
+    each asked for once (the levels usually keep the same states)."""
+
+    def __init__(self, s: int):
+        self.s = s
+        self.memo = {}
+
+    def __call__(self, part, rows: np.ndarray, cols: np.ndarray):
+        if rows.size == self.s and cols.size == self.s:
+            return part
+        key = (id(part), rows.tobytes(), cols.tobytes())
+        if key not in self.memo:
+            self.memo[key] = part[rows][:, cols]
+        return self.memo[key]
+
+
+def embedded_stationary(embedded: np.ndarray, live_entries: np.ndarray) -> np.ndarray:
+    """Stationary distribution of the embedded entry chain B (dense [M, M]).
+
+    For more than 8 entry states, B's dominant left eigenvector where its eigenvalue is 1
+    within 1e-6 (B is then stochastic but for a negligible loss); else that of B with its
+    rows normalised (the chain conditioned on a next entry).
+
+    Parameters
+    ----------
+    embedded : ndarray of float64, shape (M, M)
+        B (:func:`entry_matrix`).
+    live_entries : ndarray of bool, shape (M,)
+        The entries whose rows are live.
+
+    Returns
+    -------
+    ndarray of float64, shape (M,)
+        Non-negative, summing to 1.
+    """
+    m = embedded.shape[0]
+    if m > 8:
+        b = np.where(live_entries[:, None], embedded, 0.0)
+        with threadpool_limits(1):
+            values, vectors = np.linalg.eig(b.T)
+        lead = int(np.argmax(np.abs(values)))
+        nu = np.abs(vectors[:, lead].real)
+        if abs(values[lead] - 1.0) < 1e-6 and nu.sum() > 0:
+            return nu / nu.sum()
+    return stationary(embedded)
+
+
+def stationary(embedded: np.ndarray) -> np.ndarray:
+    """Stationary distribution of a (sub)stochastic matrix with its rows normalised (the
+    dominant left eigenvector), non-negative and summing to 1."""
+    rows = embedded.sum(axis=1, keepdims=True)
+    k = np.divide(embedded, rows, out=np.zeros_like(embedded), where=rows > 0)
+    with threadpool_limits(1):    # a small dense eig: threads only contend (100x slower
+        values, vectors = np.linalg.eig(k.T)             # on a busy 2-core machine)
+    lead = int(np.argmax(values.real))
+    nu = np.abs(vectors[:, lead].real)
+    return nu / nu.sum()

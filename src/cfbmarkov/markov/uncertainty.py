@@ -1,0 +1,137 @@
+"""The uncertainty of a fitted model's residence-time figures, as the model carries it.
+
+A :class:`ModelUncertainty` holds the intervals at a stated level of the model's exact
+E(RT), SD(RT) and RTD per bin, from its fitting window alone: a block bootstrap over time
+blocks of the window plus the flow's variability between its blocks
+(``docs/definitions.md``, The model's interval). It is computed in the analysis layer
+(:func:`cfbmarkov.analysis.intervals.model_intervals`), held by the model
+(:meth:`MarkovModel.with_uncertainty <cfbmarkov.markov.model.MarkovModel.with_uncertainty>`),
+stored in the model file as the optional group ``uncertainty`` and shown beside the point
+values by ``fit``, ``rtd`` and ``info``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+
+#: the group of a model file that holds the uncertainty
+GROUP = "uncertainty"
+
+
+@dataclass(frozen=True)
+class ModelUncertainty:
+    """Intervals of a model's exact E(RT), SD(RT) and RTD per bin at ``level``.
+
+    Attributes
+    ----------
+    level : float
+        Coverage of the intervals, in (0, 1) (e.g. 0.9).
+    rt_mean_interval, rt_sd_interval : (float, float)
+        Lower and upper bound of E(RT) and SD(RT) (s).
+    rtd_edges : ndarray of float64, shape (B + 1,)
+        Edges of the RTD's bins (s).
+    rtd_interval : ndarray of float64, shape (2, B)
+        Lower and upper probability per bin.
+    resamples : int
+        Bootstrap resamples that gave a model with residences.
+    blocks : int
+        Time blocks of the fitting window in the bootstrap.
+    block_length : float
+        Length of one block (s).
+    flow_sd : (float, float) or None
+        The flow's relative standard deviations of E(RT) and SD(RT) between blocks of the
+        window (fractions) added to the bootstrap's spread; None where the window is too
+        short to measure them (the intervals are then the bootstrap's alone).
+
+    Raises
+    ------
+    InputError
+        If the level is not in (0, 1), a bound is not finite or lower above upper, or the
+        RTD's arrays do not fit together.
+    """
+
+    level: float
+    rt_mean_interval: tuple[float, float]
+    rt_sd_interval: tuple[float, float]
+    rtd_edges: np.ndarray
+    rtd_interval: np.ndarray
+    resamples: int
+    blocks: int
+    block_length: float
+    flow_sd: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        if not 0.0 < float(self.level) < 1.0:
+            raise InputError(f"interval level {self.level!r} must lie between 0 and 1")
+        for name in ("rt_mean_interval", "rt_sd_interval"):
+            lo, hi = (float(v) for v in getattr(self, name))
+            if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
+                raise InputError(f"{name} ({lo}, {hi}) is not two finite bounds, lower first")
+            object.__setattr__(self, name, (lo, hi))
+        edges = np.array(self.rtd_edges, dtype=np.float64)
+        band = np.array(self.rtd_interval, dtype=np.float64)
+        if edges.ndim != 1 or edges.size < 2 or band.shape != (2, edges.size - 1):
+            raise InputError(f"RTD interval of shape {band.shape} does not fit {edges.size} "
+                             "bin edges")
+        edges.setflags(write=False)
+        band.setflags(write=False)
+        object.__setattr__(self, "rtd_edges", edges)
+        object.__setattr__(self, "rtd_interval", band)
+        object.__setattr__(self, "level", float(self.level))
+        if self.flow_sd is not None:
+            object.__setattr__(self, "flow_sd", tuple(float(v) for v in self.flow_sd))
+
+    @property
+    def percent(self) -> str:
+        """The level as a percentage, e.g. ``'90'``."""
+        return f"{100 * self.level:g}"
+
+    def describe(self, mean: float, sd: float) -> str:
+        """``E(RT) = 0.591 s (90 % interval 0.41-0.83 s), SD(RT) = ...`` for the point values
+        ``mean`` and ``sd`` (s)."""
+        (a, b), (c, d) = self.rt_mean_interval, self.rt_sd_interval
+        return (f"E(RT) = {mean:.4g} s ({self.percent} % interval {a:.3g}-{b:.3g} s), "
+                f"SD(RT) = {sd:.4g} s ({self.percent} % interval {c:.3g}-{d:.3g} s)")
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable: level, the intervals, the RTD's edges and bounds, resamples,
+        blocks, block length and the flow's relative SDs (null where none)."""
+        return {"level": self.level, "rt_mean_interval": list(self.rt_mean_interval),
+                "rt_sd_interval": list(self.rt_sd_interval),
+                "rtd_edges": self.rtd_edges.tolist(),
+                "rtd_interval": self.rtd_interval.tolist(), "resamples": int(self.resamples),
+                "blocks": int(self.blocks), "block_length": float(self.block_length),
+                "flow_sd": None if self.flow_sd is None else list(self.flow_sd)}
+
+    def file_fields(self) -> dict[str, np.ndarray]:
+        """The datasets that store it, named ``uncertainty/<field>``."""
+        flow = (np.nan, np.nan) if self.flow_sd is None else self.flow_sd
+        fields = {"level": self.level, "rt_mean_interval": self.rt_mean_interval,
+                  "rt_sd_interval": self.rt_sd_interval, "rtd_edges": self.rtd_edges,
+                  "rtd_interval": self.rtd_interval, "resamples": int(self.resamples),
+                  "blocks": int(self.blocks), "block_length": float(self.block_length),
+                  "flow_sd": flow}
+        return {f"{GROUP}/{name}": np.asarray(value) for name, value in fields.items()}
+
+    @classmethod
+    def from_group(cls, group) -> "ModelUncertainty | None":
+        """The uncertainty stored in a model group (None where the group has none).
+
+        Raises
+        ------
+        KeyError, InputError
+            If the group is there but incomplete or invalid (the model file reader reports
+            it as a damaged file).
+        """
+        if GROUP not in group:
+            return None
+        g = group[GROUP]
+        flow = np.asarray(g["flow_sd"][()], dtype=np.float64)
+        return cls(float(g["level"][()]), tuple(g["rt_mean_interval"][()]),
+                   tuple(g["rt_sd_interval"][()]), g["rtd_edges"][()], g["rtd_interval"][()],
+                   int(g["resamples"][()]), int(g["blocks"][()]), float(g["block_length"][()]),
+                   None if np.isnan(flow).any() else (float(flow[0]), float(flow[1])))

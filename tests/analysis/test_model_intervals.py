@@ -1,0 +1,113 @@
+"""The interval a fitted model carries for its exact E(RT), SD(RT) and RTD
+(analysis.intervals.model_intervals, markov.uncertainty): coverage and width on a stationary
+generated chain, the model file round trip, and the command line (fit, rtd --json, info)."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from cfbmarkov import synthetic
+from cfbmarkov.analysis.intervals import model_intervals
+from cfbmarkov.cli import main
+from cfbmarkov.markov import MarkovModel, fit_model
+
+FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-0.6,
+                           vertical_spread=0.5, persistence=False)
+
+
+@pytest.fixture(scope="module")
+def stationary_run(tmp_path_factory):
+    """300 particles x 13 s of a chain on 3 x 8 cells, from its stationary distribution."""
+    path = tmp_path_factory.mktemp("model-intervals") / "run.h5"
+    synthetic.write_run(path, FLOW, 300, 13.0, seed=5)
+    return path
+
+
+def test_interval_holds_the_chains_e_rt_and_shrinks_as_the_window_grows(stationary_run):
+    """Twelve disjoint 1 s windows of a stationary chain: the 90 % interval of each fitted
+    model holds the generator's exact E(RT) in at least 9 of them (0.75; the bootstrap's
+    10 blocks make it a little narrow), and intervals from 4 s windows are narrower than
+    those from 1 s windows (median width, by more than a third: sqrt(4) = 2 expected)."""
+    truth = synthetic.cell_chain(FLOW).rtd().mean
+    widths, hits = {1.0: [], 4.0: []}, 0
+    for k in range(12):
+        model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (k + 0.5, k + 1.5), "mle")
+        u = model_intervals(model, resamples=30, seed=k)
+        lo, hi = u.rt_mean_interval
+        assert lo <= model.rtd().mean <= hi
+        hits += lo <= truth <= hi
+        widths[1.0].append(hi - lo)
+    for a in (0.5, 4.5, 8.5):
+        model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (a, a + 4.0), "mle")
+        lo, hi = model_intervals(model, resamples=30).rt_mean_interval
+        widths[4.0].append(hi - lo)
+    assert hits >= 9, hits
+    assert np.median(widths[4.0]) < 0.67 * np.median(widths[1.0]), widths
+
+
+def test_model_file_round_trip_keeps_the_interval(stationary_run, tmp_path):
+    """with_uncertainty, save, load: the same interval; the intrinsic RTD exposes it, a
+    windowed one does not; a file without the group loads as a model without one."""
+    model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (1.0, 3.0), "paper")
+    u = model_intervals(model, level=0.8, resamples=20, seed=3)
+    assert u.level == 0.8 and u.resamples == 20 and u.blocks == 10
+    assert u.rtd_interval.shape == (2, u.rtd_edges.size - 1)
+    assert np.all(u.rtd_interval[0] <= u.rtd_interval[1])
+    carried = model.with_uncertainty(u)
+    assert carried.rtd().uncertainty is u and model.rtd().uncertainty is None
+    assert carried.rtd(window=1.0).uncertainty is None
+    back = MarkovModel.load(carried.save(tmp_path / "with.h5"))
+    got = back.uncertainty
+    assert got.level == u.level and got.rt_mean_interval == u.rt_mean_interval
+    assert got.rt_sd_interval == u.rt_sd_interval and got.flow_sd == u.flow_sd
+    assert np.array_equal(got.rtd_edges, u.rtd_edges)
+    assert np.array_equal(got.rtd_interval, u.rtd_interval)
+    assert (got.resamples, got.blocks, got.block_length) == (u.resamples, u.blocks,
+                                                             u.block_length)
+    plain = MarkovModel.load(model.save(tmp_path / "without.h5"))
+    assert plain.uncertainty is None
+    with h5py.File(tmp_path / "with.h5", "a") as f:        # damaged: refused in one line
+        del f["uncertainty/rtd_edges"]
+    with pytest.raises(Exception, match="damaged model file"):
+        MarkovModel.load(tmp_path / "with.h5")
+
+
+def test_fit_rtd_info_print_the_interval_and_resamples_0_leaves_it_out(stationary_run,
+                                                                       tmp_path, capsys):
+    """fit prints 'E(RT) = ... (90 % interval a-b s)'; rtd --json has the keys scripts rely
+    on; info repeats the interval; --resamples 0 stores none (nulls in the JSON)."""
+    out = tmp_path / "m.h5"
+    args = ["fit", str(stationary_run), "--cells", "3x8", "--window", "1:4", "-o", str(out)]
+    assert main(args + ["--resamples", "20"]) == 0
+    printed = capsys.readouterr().out
+    assert "E(RT) = " in printed and "90 % interval" in printed
+    assert main(["rtd", str(out), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    for key in ("rt_mean", "rt_sd", "level", "rt_mean_interval", "rt_sd_interval",
+                "warnings"):
+        assert key in data
+    from cfbmarkov.markov import MarkovModel
+
+    verdict = MarkovModel.load(out).adequacy      # the fitting sample's lines, as fit gave them
+    assert data["level"] == 0.9 and data["warnings"] == list(verdict.warnings)
+    lo, hi = data["rt_mean_interval"]
+    assert lo <= data["rt_mean"] <= hi
+    assert len(data["rtd_interval"]["edges"]) == len(data["rtd_interval"]["lower"]) + 1
+    assert main(["rtd", str(out)]) == 0
+    assert "(90 % interval" in capsys.readouterr().out
+    assert main(["info", str(out)]) == 0
+    assert "90 % interval" in capsys.readouterr().out
+    assert main(["rtd", str(out), "--level", "0.8"]) == 2          # not the stored level
+    assert "--resamples" in capsys.readouterr().err
+    none = tmp_path / "none.h5"
+    assert main(["fit", str(stationary_run), "--cells", "3x8", "--window", "1:4",
+                 "--resamples", "0", "-o", str(none)]) == 0
+    assert "% interval" not in capsys.readouterr().out
+    assert MarkovModel.load(none).uncertainty is None
+    assert main(["rtd", str(none), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["level"] is None and data["rt_mean_interval"] is None
+    assert main(args + ["--resamples", "5"]) == 2
+    assert "at least 10" in capsys.readouterr().err
