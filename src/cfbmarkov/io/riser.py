@@ -7,7 +7,9 @@ are (across, vertical[, depth]) measured from the region's lower corner, so a bo
 than the riser shifts nothing. A particle outside the region is absent from that frame,
 not an error; ``cfbmarkov info`` shows how many are present per frame. On a periodic
 vertical axis the height is wrapped into the region and the lap counter counts the wraps
-(``docs/definitions.md``, Axes and region; Presence).
+(``docs/definitions.md``, Axes and region; Presence). A periodic source axis wraps by its
+box's period, never by the region's extent: a region narrower than a periodic box keeps
+the particles outside it absent, not folded in.
 """
 
 from __future__ import annotations
@@ -44,6 +46,11 @@ class RiserFrame:
         The vertical boundary stored.
     dropped : int or None
         A source axis dropped by projection (``--drop-depth``), or None.
+    wrap : numpy.ndarray, shape (D, 2), or None
+        [lo, period] (m, source coordinates) of each stored axis that wraps: a periodic box
+        axis wraps by the box, a periodic riser without a periodic box by the region; period
+        NaN where the axis does not wrap. None: every axis wraps by the region where
+        periodic (a source without a box).
     """
 
     axes: tuple[int, ...]
@@ -52,6 +59,7 @@ class RiserFrame:
     periodic: tuple[bool, ...]
     boundary: Boundary
     dropped: int | None = None
+    wrap: np.ndarray | None = None
 
     @property
     def across(self) -> int:
@@ -187,7 +195,33 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
     if not np.all(np.isfinite(bounds)) or np.any(bounds[:, 1] <= bounds[:, 0]):
         raise InputError(f"{where}: the riser region {bounds.tolist()} m has no size; give it "
                          "with --region")
-    return RiserFrame(axes, bounds, from_box, periodic, boundary, dropped)
+    wrap = _wrap(axes, bounds, periodic, boundary, box, where)
+    return RiserFrame(axes, bounds, from_box, periodic, boundary, dropped, wrap)
+
+
+def _wrap(axes, bounds: np.ndarray, periodic, boundary: Boundary, box, where: str) -> np.ndarray:
+    """[lo, period] of each stored axis that wraps (period NaN where none): a periodic box
+    axis by its box; the vertical axis of a periodic riser without a periodic box by the
+    region. A periodic riser whose height is not the box's period is refused (its laps and
+    heights would disagree)."""
+    wrap = np.full((len(axes), 2), np.nan)
+    for k, a in enumerate(axes):
+        if k == 1 and boundary.is_open:
+            continue
+        box_periodic = (periodic[k] and box is not None and a < len(box)
+                        and np.all(np.isfinite(box[a])) and box[a][1] > box[a][0])
+        if box_periodic:
+            wrap[k] = (box[a][0], box[a][1] - box[a][0])
+            if k == 1 and np.abs(bounds[1] - np.asarray(box[a])).max() > (
+                    POSITION_TOLERANCE + 1e-9 * float(np.abs(box[a]).max())):
+                raise InputError(
+                    f"{where}: the riser's vertical range {bounds[1, 0]:g}..{bounds[1, 1]:g} m "
+                    f"is not the periodic box's {box[a][0]:g}..{box[a][1]:g} m: a periodic "
+                    f"riser is the whole period; give {AXES[a]} as {box[a][0]:g}:{box[a][1]:g} "
+                    "(--region or --height), or --boundary open to import the section")
+        elif k == 1:
+            wrap[k] = (bounds[1, 0], bounds[1, 1] - bounds[1, 0])
+    return wrap
 
 
 def riser_positions(raw: np.ndarray, riser: RiserFrame, image: np.ndarray | None = None,
@@ -226,13 +260,19 @@ def riser_positions(raw: np.ndarray, riser: RiserFrame, image: np.ndarray | None
     extent = riser.region[:, 1] - riser.region[:, 0]
     laps = None
     for k, periodic in enumerate(riser.periodic):
-        if k == 1 and riser.boundary.is_open:
+        if riser.wrap is not None:
+            lo, period = riser.wrap[k]
+            if not np.isfinite(period):
+                continue
+        elif (k == 1 and riser.boundary.is_open) or not (periodic or k == 1):
             continue
-        if not (periodic or k == 1):
-            continue
-        wraps = np.floor(pos[:, k] / extent[k])
-        pos[:, k] -= wraps * extent[k]
-        pos[pos[:, k] >= extent[k], k] = 0.0         # round-off of a tiny negative value
+        else:
+            lo, period = riser.region[k, 0], extent[k]
+        offset = lo - riser.region[k, 0]               # the period's start, from the region's
+        wraps = np.floor((pos[:, k] - offset) / period)
+        pos[:, k] -= wraps * period
+        top = offset + period
+        pos[pos[:, k] >= top, k] = offset              # round-off of a tiny negative value
         if k == 1:
             if unwrapped:
                 laps = wraps.astype(np.int64)
