@@ -100,6 +100,42 @@ class PredictionIntervals:
     flow: tuple[float, float] | None = None
 
 
+class SourceChanged(InputError):
+    """The file a model names as its source no longer holds the data it was fitted on."""
+
+
+def check_source_identity(model) -> None:
+    """Refuse a model whose source file's fitting window is not the one it was fitted on.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        A model with one source file; one without a recorded ``source_identity`` passes.
+
+    Raises
+    ------
+    SourceChanged
+        Where the window's content identity
+        (:func:`cfbmarkov.trajectory_identity.window_identity`) differs from the one
+        recorded at fit time: another file of the same name, or the file replaced.
+    InputError
+        Where the source cannot be read or the window holds no frame of it.
+    """
+    from cfbmarkov.trajectories import Trajectories
+    from cfbmarkov.trajectory_identity import window_identity
+
+    if not model.source_identity or not isinstance(model.source, str):
+        return
+    with Trajectories(model.source) as traj:
+        if window_identity(traj, model.window) == model.source_identity:
+            return
+    raise SourceChanged(
+        f"{model.source} is not the data the model was fitted on (its fitting window's "
+        "content differs: another file of that name, or the file replaced since the fit); "
+        "run from the folder the model was fitted in with its own trajectory file, or fit "
+        "again (--resamples 0 compares without intervals)")
+
+
 #: replicate Monte Carlo runs that measure a coherent model's Monte Carlo noise
 REPLICATES = 20
 
@@ -197,6 +233,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")
+    check_source_identity(model)
     samples = np.asarray(samples, dtype=np.float64)
     if samples.size < 2:
         raise InputError("intervals need at least 2 residence-time samples in the window")
@@ -372,5 +409,6 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
                             length / int(blocks), relative)
 
 
-__all__ = ["PredictionIntervals", "block_bootstrap_models", "flow_variability",
+__all__ = ["PredictionIntervals", "SourceChanged", "block_bootstrap_models",
+           "check_source_identity", "flow_variability",
            "model_intervals", "model_rtd_edges", "prediction_intervals"]

@@ -65,6 +65,12 @@ def _finish_fit(args, model, runs, windows) -> int:
     """The end of ``fit``: the exact RTD, the sample's verdict, warnings, save, summary."""
     from cfbmarkov.markov.first_passage import TrappedResidences
 
+    if len(runs) == 1 and isinstance(model.source, str):
+        from cfbmarkov.trajectories import Trajectories
+        from cfbmarkov.trajectory_identity import window_identity
+
+        with Trajectories(model.source) as run:
+            model = model.with_source_identity(window_identity(run, model.window))
     has_rtd = True
     try:
         model.rtd()

@@ -99,6 +99,11 @@ class MarkovModel:
     uncertainty : ModelUncertainty or None
         Intervals of the exact E(RT), SD(RT) and RTD per bin from the fitting window
         (:func:`cfbmarkov.analysis.intervals.model_intervals`); None where not computed.
+    source_identity : str or None
+        The content identity of the fitting window of ``source``
+        (:func:`cfbmarkov.trajectory_identity.window_identity`), recorded by ``fit``; a
+        re-read of the window (a comparison's intervals) is refused where it differs. None:
+        not recorded (several sources, or a model made from counts).
 
     Raises
     ------
@@ -137,6 +142,7 @@ class MarkovModel:
     coherence: float = 0.0
     adequacy: Adequacy | None = None
     uncertainty: ModelUncertainty | None = None
+    source_identity: str | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     adopt: InitVar[bool] = field(default=False, kw_only=True)
 
@@ -527,6 +533,22 @@ class MarkovModel:
             A copy with ``selection`` set.
         """
         return self._derived(selection=dict(selection))
+
+    def with_source_identity(self, identity: str | None) -> "MarkovModel":
+        """The same model, recording the content identity of its fitting window.
+
+        Parameters
+        ----------
+        identity : str or None
+            :func:`cfbmarkov.trajectory_identity.window_identity` of ``source`` and
+            ``window``.
+
+        Returns
+        -------
+        MarkovModel
+            A copy with ``source_identity`` set.
+        """
+        return self._derived(source_identity=identity)
 
     def with_adequacy(self, adequacy: Adequacy | None) -> "MarkovModel":
         """The same model, holding the verdict on its fitting sample

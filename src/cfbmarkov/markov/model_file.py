@@ -88,6 +88,8 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "cfbmarkov_version": _version(),
     }
+    if model.source_identity:
+        attrs["source_identity"] = str(model.source_identity)
     if model.selection:
         attrs["selection"] = json.dumps(model.selection)
     if model.connected:
@@ -203,7 +205,14 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         coherence=_attr_number(group.attrs.get("coherence", 0.0), "coherence"),
         open_flow=_open_flow(group), uncertainty=ModelUncertainty.from_group(group),
         adequacy=Adequacy.from_attr(group.attrs["adequacy"])
-        if "adequacy" in group.attrs else None)
+        if "adequacy" in group.attrs else None,
+        source_identity=_text_attr(group.attrs["source_identity"])
+        if "source_identity" in group.attrs else None)
+
+
+def _text_attr(value) -> str:
+    """A text attribute as str (h5py may give bytes)."""
+    return value.decode() if isinstance(value, bytes) else str(value)
 
 
 def _attr_number(value, name: str) -> float:

@@ -77,7 +77,7 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
     formed (:func:`_tracers`)."""
     if not resamples:
         return None
-    from cfbmarkov.analysis.intervals import prediction_intervals
+    from cfbmarkov.analysis.intervals import SourceChanged, prediction_intervals
     from cfbmarkov.markov import MarkovModel
 
     try:
@@ -93,6 +93,8 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
                                     stop - start, level=level, resamples=resamples,
                                     direction=comparison.direction, mixing=mixing,
                                     tracers=tracers)
+    except SourceChanged:
+        raise
     except InputError as exc:
         warnings.append(f"no intervals: {exc}")
         return None
