@@ -144,6 +144,10 @@ def _direction_of(traj, window: tuple[float, float], direction: str) -> str:
     return net_flow_direction(traj, window) if direction == "auto" else direction
 
 
+#: most windows one stationarity check computes (each reads its window's residences)
+MAX_WINDOWS = 10_000
+
+
 def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
                       span: tuple[float, float] | None = None, use_events: bool = False,
                       lag_frames: int = 1, face_band: float | None = None,
@@ -179,7 +183,8 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
     ------
     InputError
         On a window length or step that is not finite and positive, a span outside the
-        file's frames, or a span that holds fewer than two windows.
+        file's frames, a span that holds fewer than two windows or more than
+        ``MAX_WINDOWS``, or (from frames) a step shorter than the frame interval.
     """
     length, step = float(window_length), float(step)
     if not (np.isfinite(length) and length > 0):
@@ -188,7 +193,16 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
         raise InputError(f"window step {step} s must be finite and positive")
     a, b = _span(traj, span)
     tol = traj.time_tolerance
+    interval = float(traj.frame_interval)
+    if not use_events and np.isfinite(interval) and step < interval - tol:
+        raise InputError(f"window step {step:g} s is shorter than the frame interval of "
+                         f"{traj.path} ({interval:g} s): windows starting between two frames "
+                         f"hold the same frames; give --step {interval:g} or more")
     count = int(np.floor((b - a - length + tol) / step)) + 1 if b - a + tol >= length else 0
+    if count > MAX_WINDOWS:
+        raise InputError(f"{a:g}:{b:g} s of {traj.path} holds {count} windows {step:g} s apart, "
+                         f"more than {MAX_WINDOWS}; give --step {(b - a - length) / MAX_WINDOWS:.3g}"
+                         " or more (or a shorter --span)")
     if count < 2:
         fix = (f"a window length below the span's {b - a:g} s" if length > 0.5 * (b - a) + tol
                else "a shorter --window-length or --step")

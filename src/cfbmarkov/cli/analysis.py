@@ -8,6 +8,7 @@ from pathlib import Path
 
 from cfbmarkov.cli.options import (count, finite_float, level, minkowski_order, parse_cells,
                                    parse_times, parse_window, positive_float)
+from cfbmarkov.errors import InputError
 
 
 def cmd_compare(args) -> int:
@@ -205,6 +206,10 @@ def _sample_length(args) -> int:
     return 0
 
 
+#: most maps one ``maps`` figure draws (one panel each)
+MAX_MAP_PANELS = 36
+
+
 def cmd_maps(args) -> int:
     """``cfbmarkov maps``: draw the batch-injection maps; print the fractions and the file.
 
@@ -221,6 +226,9 @@ def cmd_maps(args) -> int:
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.report.figures import plot_probability_maps
 
+    if len(args.times) > MAX_MAP_PANELS:
+        raise InputError(f"--times gives {len(args.times)} times: one figure draws at most "
+                         f"{MAX_MAP_PANELS} maps; give fewer times (or several figures)")
     model = MarkovModel.load(args.model)
     maps = model.batch_injection_maps(args.times, outflow=args.outflow)
     space = model.state_space

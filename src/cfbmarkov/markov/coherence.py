@@ -181,8 +181,8 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
     Raises
     ------
     InputError
-        For too few steps, or a window without a frame in which every particle present has
-        a state, or without two particles.
+        For too few steps, a state space of one cell, or a window without a frame in which
+        every particle present has a state, or without two particles.
     """
     from cfbmarkov.observed.clusters import snapshot_cluster_index
     from cfbmarkov.markov.discrete import as_discrete_list
@@ -193,6 +193,10 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
     windows = as_discrete_list(data)
     cell_of_state = np.asarray(model.state_space.cell_of_state, dtype=np.int64)
     n_cells = int(cell_of_state.max()) + 1
+    if n_cells < 2:
+        raise InputError("coherent moves (--coherent) need at least 2 cells: their coherence "
+                         "is calibrated on how unevenly the particles fill the cells; give "
+                         "more cells (--cells)")
     observed = []
     for window in windows:
         states = np.asarray(window.states)
@@ -206,6 +210,8 @@ def calibrate_coherence(model, data, *, steps: int = CALIBRATION_STEPS, seed: in
                          "which every particle has a state, and two particles")
     values = np.concatenate(observed)
     target = float(np.nanmean(values))
+    if not target > 0.0:            # particles spread evenly (or no index): no clustering
+        return 0.0
     start = first[full[0]]
 
     def index(rho: float) -> float:
