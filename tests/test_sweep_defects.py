@@ -72,3 +72,76 @@ def test_compare_refuses_intervals_from_a_replaced_source(good, tmp_path, capsys
                                   "--no-figures", "--resamples", "10", "-q", "-o", tmp_path / "c2"],
                          tmp_path / "c2")
     assert "not the data the model was fitted on" in err
+
+
+# -- tracebacks and unbounded work, each now one line ------------------------------------
+def test_fit_coherent_on_one_cell_is_refused(good, tmp_path, capsys):
+    run, _, _ = good
+    err = one_line_error(capsys, ["fit", run, "--cells", "1x1", "--coherent", "--window",
+                                  "0:2.5", "-o", tmp_path / "m.h5"], tmp_path / "m.h5")
+    assert "at least 2 cells" in err
+
+
+def test_fit_open_riser_with_states_auto(tmp_path, capsys):
+    run = synthetic.write_open_run(tmp_path / "open.h5", FLOW, 60, 6.0, seed=4)
+    out = tmp_path / "m.h5"
+    assert main(["fit", str(run), "--states", "auto", "--window", "0.5:6", "--resamples", "0",
+                 "-q", "-o", str(out)]) == 0
+    assert MarkovModel.load(out).boundary.is_open
+
+
+CASE_VALUES = {"riser.height": "[riser]\nheight = 1e300\n",
+               "particles.density": "[particles]\ndensity = 1e-300\n",
+               "gas.superficial_velocity": "[gas]\nsuperficial_velocity = inf\n",
+               "particles.number": "[particles]\nnumber = 10000000000\n",
+               "seed": "seed = 18446744073709551616\n",
+               "numerics.cfd_cells.0": "[numerics]\ncfd_cells = [0, 5]\n"}
+
+
+@pytest.mark.parametrize("field", CASE_VALUES)
+def test_case_values_out_of_range_are_refused(field, tmp_path, capsys):
+    case = tmp_path / "case.toml"
+    case.write_text(CASE_VALUES[field])
+    err = one_line_error(capsys, ["simulate", case, "-o", tmp_path / "s.h5"], tmp_path / "s.h5")
+    assert f"'{field}'" in err
+
+
+def test_simulate_more_particles_than_fit_is_refused(tmp_path, capsys):
+    err = one_line_error(capsys, ["simulate", "paper-u6", "--particles", "10000000", "--until",
+                                  "0.05", "-o", tmp_path / "s.h5"], tmp_path / "s.h5")
+    assert "do not fit" in err and "--particles" in err
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_demo_checks_memory_before_allocating(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("CFBMARKOV_MEMORY_LIMIT", "1000000000")
+    err = one_line_error(capsys, ["demo", "--synthetic", "--particles", "10000000", "-q",
+                                  "-o", tmp_path / "d"], tmp_path / "d")
+    assert "of memory" in err and "--particles" in err
+
+
+def test_synthetic_run_takes_the_largest_seed():
+    times, cells, positions, laps = synthetic.sample_run(FLOW, 5, 3, seed=2 ** 64 - 1)
+    assert positions.shape == (3, 5, 2)
+
+
+def test_numba_threads_that_are_not_a_number(good, tmp_path, capsys, monkeypatch):
+    run, _, _ = good
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "abc")
+    err = one_line_error(capsys, ["fit", run, "--cells", "4x8", "--window", "0:2.5",
+                                  "-o", tmp_path / "m.h5"], tmp_path / "m.h5")
+    assert "NUMBA_NUM_THREADS" in err
+
+
+def test_stationarity_steps_are_bounded(good, capsys):
+    run, _, _ = good
+    err = one_line_error(capsys, ["stationarity", run, "--window-length", "1", "--step", "1e-9"])
+    assert "shorter than the frame interval" in err
+
+
+def test_maps_times_are_bounded(good, tmp_path, capsys):
+    _, model, _ = good
+    times = ",".join(f"{0.025 * k:g}" for k in range(1, 401))
+    err = one_line_error(capsys, ["maps", model, "--times", times, "-o", tmp_path / "m.png"],
+                         tmp_path / "m.png")
+    assert "at most 36" in err

@@ -20,18 +20,25 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_valida
 from cfbmarkov.errors import InputError
 
 Positive = Annotated[float, Field(gt=0)]
+#: the physical range of a length of the riser (m), beyond which no simulation is meant
+Length = Annotated[float, Field(gt=0, le=100.0)]
+#: a count of cells along one axis
+Cells = Annotated[int, Field(gt=0, le=100_000)]
+#: most particles a case may hold (the simulation also checks its memory before allocating)
+MAX_PARTICLES = 10_000_000
 
 
 class _Model(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    # every number finite (no inf or nan): a case value out of range is refused in one line
+    model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
 
 
 class RiserConfig(_Model):
     """Geometry of the 2D riser: x across (walls at 0 and W), y up (periodic, 0 <= y < H)."""
 
-    width: Positive = Field(0.09, description="riser width W, m (Table 1: bed size 0.09 m)")
-    height: Positive = Field(0.95, description="riser height H, m (Table 1: bed size 0.95 m)")
-    gravity: float = Field(9.81, ge=0, description="gravitational acceleration, m/s^2, acting in -y")
+    width: Length = Field(0.09, description="riser width W, m (Table 1: bed size 0.09 m)")
+    height: Length = Field(0.95, description="riser height H, m (Table 1: bed size 0.95 m)")
+    gravity: float = Field(9.81, ge=0, le=1000.0, description="gravitational acceleration, m/s^2, acting in -y")
     distributor_pressure_drop: float = Field(
         0.0, ge=0, description="pressure drop of the gas distributor under a bed standing on a "
         "floor (verification beds only; the periodic riser has none), Pa at the superficial "
@@ -39,9 +46,9 @@ class RiserConfig(_Model):
 
 
 class ParticleConfig(_Model):
-    number: int = Field(27000, gt=0, description="number of particles (Table 1: 27000)")
-    diameter: Positive = Field(0.001, description="particle diameter d, m (Table 1: 0.001 m)")
-    density: Positive = Field(2600.0, description="particle density, kg/m^3 (Table 1: 2600)")
+    number: int = Field(27000, gt=0, le=MAX_PARTICLES, description="number of particles (Table 1: 27000)")
+    diameter: float = Field(0.001, gt=1e-7, le=0.1, description="particle diameter d, m (Table 1: 0.001 m)")
+    density: float = Field(2600.0, ge=1.0, le=1e5, description="particle density, kg/m^3 (Table 1: 2600)")
 
     @property
     def mass(self) -> float:
@@ -55,10 +62,10 @@ class ParticleConfig(_Model):
 
 
 class GasConfig(_Model):
-    density: Positive = Field(1.205, description="gas density, kg/m^3 (air)")
-    viscosity: Positive = Field(1.8e-5, description="gas dynamic viscosity, Pa s (air)")
-    superficial_velocity: Positive = Field(
-        6.0, description="inlet air velocity U: cross-section mean of void_fraction*v_gas, m/s "
+    density: float = Field(1.205, ge=1e-3, le=1e4, description="gas density, kg/m^3 (air)")
+    viscosity: float = Field(1.8e-5, ge=1e-7, le=10.0, description="gas dynamic viscosity, Pa s (air)")
+    superficial_velocity: float = Field(
+        6.0, gt=0, le=1000.0, description="inlet air velocity U: cross-section mean of void_fraction*v_gas, m/s "
         "(Table 1: 3, 4, 6 or 8 m/s)")
     minimum_fluidization_velocity: Positive = Field(
         0.44, description="minimum fluidization velocity, m/s (Table 1: 0.44; reported only)")
@@ -75,16 +82,16 @@ class ContactConfig(_Model):
 
 
 class NumericsConfig(_Model):
-    cfd_cells: tuple[int, int] = Field(
+    cfd_cells: tuple[Cells, Cells] = Field(
         (9, 95), description="gas grid cells (across, up), - (Table 1: 9 x 95)")
-    dem_cells: tuple[int, int] | Literal["auto"] = Field(
+    dem_cells: tuple[Cells, Cells] | Literal["auto"] = Field(
         "auto", description="DEM neighbour-search cells (across, up), or \"auto\": the finest "
         "grid whose cells are at least the search cutoff 2 R_max + skin (Table 1: 30 x 351; "
         "the grid changes the speed and the round-off, not the physics)")
     dem_skin: Positive = Field(
         4e-4, description="Verlet neighbour-list skin, m (not in the paper; affects speed only)")
-    cfd_time_step: Positive = Field(5e-5, description="gas time step, s (Table 1: 5e-5)")
-    dem_time_step: Positive = Field(5e-6, description="particle time step, s (Table 1: 5e-6)")
+    cfd_time_step: float = Field(5e-5, gt=0, le=1.0, description="gas time step, s (Table 1: 5e-5)")
+    dem_time_step: float = Field(5e-6, gt=0, le=1.0, description="particle time step, s (Table 1: 5e-6)")
 
     @model_validator(mode="after")
     def _steps_commensurate(self):
@@ -101,13 +108,13 @@ class NumericsConfig(_Model):
 
 
 class OutputConfig(_Model):
-    end_time: Positive = Field(20.0, description="simulated time to reach, s (paper: 20)")
+    end_time: float = Field(20.0, gt=0, le=1e6, description="simulated time to reach, s (paper: 20)")
     frame_interval: Positive = Field(0.025, description="time between stored frames, s")
 
 
 class MarkovConfig(_Model):
-    columns: int = Field(6, gt=0, description="cell columns m across the riser, - (paper: 6)")
-    rows: int = Field(38, gt=0, description="cell rows n up the riser, - (paper: 38)")
+    columns: int = Field(6, gt=0, le=100_000, description="cell columns m across the riser, - (paper: 6)")
+    rows: int = Field(38, gt=0, le=100_000, description="cell rows n up the riser, - (paper: 38)")
     lag: Positive = Field(0.025, description="transition time step, s (paper: 0.025)")
     fit_window: tuple[float, float] = Field((10.0, 15.0), description="fitting window A:B, s")
     predict_window: tuple[float, float] = Field((15.0, 20.0), description="prediction/comparison window, s")
@@ -121,7 +128,7 @@ class MarkovConfig(_Model):
 
 class CaseConfig(_Model):
     name: str = Field("custom", description="case name")
-    seed: int = Field(0, ge=0, description="random seed (initial placement, Monte Carlo)")
+    seed: int = Field(0, ge=0, le=2**64 - 1, description="random seed (initial placement, Monte Carlo)")
     riser: RiserConfig = RiserConfig()
     particles: ParticleConfig = ParticleConfig()
     gas: GasConfig = GasConfig()
@@ -134,7 +141,10 @@ class CaseConfig(_Model):
 def _format_validation_error(err: ValidationError, source: str) -> str:
     first = err.errors()[0]
     loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
-    return f"{source}: invalid configuration at '{loc}': {first['msg']}"
+    given = first.get("input")
+    value = (f" (given {given!r})" if isinstance(given, (int, float, str)) and
+             not isinstance(given, bool) else "")
+    return f"{source}: invalid configuration at '{loc}'{value}: {first['msg']}"
 
 
 def load_case(source: str | Path) -> CaseConfig:

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cfbmarkov.limits import check_memory
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.states import CellGrid, place_in_cells
 
@@ -199,6 +200,15 @@ def long_tail_chain(columns: int = 6, rows: int = 38, cutoff: float = 1e-4):
                        source="synthetic", pass_fractions=(up, down))
 
 
+def _seed(seed: int, offset: int) -> int:
+    """The seed ``offset`` streams on from ``seed``, within the generators' 0 .. 2^64 - 1."""
+    return (int(seed) + offset) % 2 ** 64
+
+
+#: bytes a synthetic run holds per particle and frame (states, cells, laps, positions)
+RUN_BYTES = 40
+
+
 def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
                start_time: float = 0.0) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """A synthetic run in memory, started from the generator's stationary distribution.
@@ -226,7 +236,15 @@ def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
         [T, N, 2] positions, m, uniform inside the cells.
     laps : numpy.ndarray
         [T, N] lap counters.
+
+    Raises
+    ------
+    InputError
+        Where the run would not fit in memory (:func:`cfbmarkov.limits.check_memory`).
     """
+    check_memory(RUN_BYTES * float(n_frames) * float(n_particles),
+                 f"a synthetic run of {n_particles} particles x {n_frames} frames",
+                 "give fewer particles (--particles) or a shorter run")
     p, up, down, cell_of_state = generator(flow)
     chain = SparseChain.from_matrix(p, up, down)
     # start from the stationary distribution of the generator
@@ -234,12 +252,12 @@ def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
     pi = np.abs(vectors[:, int(np.argmin(np.abs(values - 1)))].real)
     rng = np.random.default_rng(seed)
     initial = rng.choice(p.shape[0], size=n_particles, p=pi / pi.sum())
-    hidden, laps = run_chain(chain, initial, n_frames - 1, seed + 1)
+    hidden, laps = run_chain(chain, initial, n_frames - 1, _seed(seed, 1))
     cells = cell_of_state[hidden]
     grid = flow.grid
     positions = np.empty((n_frames, n_particles, 2))
     for k in range(n_frames):      # one vectorised placement per frame
-        positions[k] = place_in_cells(cells[k], grid, seed + 2, k)
+        positions[k] = place_in_cells(cells[k], grid, _seed(seed, 2), k)
     times = start_time + flow.lag * np.arange(n_frames)
     return times, cells, positions, laps
 
@@ -430,10 +448,10 @@ def write_regime_run(path: str | os.PathLike, flows, switching, n_particles: int
         if path_.shape != (n_frames,) or path_.min() < 0 or path_.max() >= len(flows):
             raise ValueError(f"regimes must be {n_frames} regime numbers below {len(flows)}")
     initial = rng.integers(0, cells_n, n_particles)
-    cells, laps = run_chain(stacked, initial, n_frames - 1, seed + 1, row_offset=path_ * cells_n)
+    cells, laps = run_chain(stacked, initial, n_frames - 1, _seed(seed, 1), row_offset=path_ * cells_n)
     positions = np.empty((n_frames, n_particles, 2))
     for k in range(n_frames):      # one vectorised placement per frame
-        positions[k] = place_in_cells(cells[k], flow.grid, seed + 2, k)
+        positions[k] = place_in_cells(cells[k], flow.grid, _seed(seed, 2), k)
     times = flow.lag * np.arange(n_frames)
     params = {"flows": [{k: getattr(f, k) for k in f.__dataclass_fields__} for f in flows],
               "switching": g.tolist(), "seed": seed}

@@ -126,11 +126,22 @@ def _run(args) -> int:
         return 2
 
 
+def _check_environment() -> None:
+    """Refuse, in one line, an environment setting the run cannot honour: a
+    ``NUMBA_NUM_THREADS`` that is not a positive whole number (Numba would warn over
+    several lines and take its default)."""
+    threads = os.environ.get("NUMBA_NUM_THREADS")
+    if threads is not None and not (threads.strip().isdigit() and int(threads) > 0):
+        raise InputError(f"NUMBA_NUM_THREADS={threads!r} is not a positive whole number of "
+                         "threads; set it to one (e.g. NUMBA_NUM_THREADS=4) or unset it")
+
+
 def _run_claimed(args) -> int:
     """The verb with its output claimed; a Ctrl-C swallowed on the way is raised at the end."""
     from cfbmarkov import _interrupt
 
     try:
+        _check_environment()
         if args.command in OUTPUTS:
             from cfbmarkov._outputs import claim_output
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from cfbmarkov.errors import InputError
 from cfbmarkov.simulate.cfd.coupling import gas_velocity_at
 from cfbmarkov.simulate.cfd.drag import particle_drag_jacobian
 
@@ -137,6 +138,42 @@ def drag_force_at_new_gas(positions, velocities, u, v, dx, dy, coefficient, forc
         force[p, 1] = coefficient[p] * (uy - velocities[p, 1])
 
 
+def check_placement(n: int, diameter: float, width: float, height: float,
+                    gap: float = 0.1) -> tuple[int, int]:
+    """The starting lattice of :func:`place_without_overlap`, refused where ``n`` discs do
+    not fit on it.
+
+    Parameters
+    ----------
+    n : int
+        Number of discs.
+    diameter : float
+        Disc diameter d, m.
+    width, height : float
+        The riser, m.
+    gap : float, optional
+        Lattice spacing beyond one diameter, as a fraction of d.
+
+    Returns
+    -------
+    (int, int)
+        Lattice sites across and up.
+
+    Raises
+    ------
+    InputError
+        When ``n`` discs do not fit on the lattice, naming how many do.
+    """
+    spacing = (1.0 + gap) * diameter
+    nx = int(np.floor((width - diameter) / spacing)) + 1
+    ny = int(np.floor(height / spacing))
+    if n > nx * ny:
+        raise InputError(f"{n} particles of {diameter:g} m do not fit in the {width:g} x "
+                         f"{height:g} m riser (at most {nx * ny} on the starting lattice of "
+                         f"{nx} x {ny} sites); give fewer particles (--particles)")
+    return nx, ny
+
+
 def place_without_overlap(n: int, diameter: float, width: float, height: float,
                           seed: int, gap: float = 0.1) -> np.ndarray:
     """Positions of discs that do not overlap: random sites of a square lattice of spacing
@@ -162,15 +199,11 @@ def place_without_overlap(n: int, diameter: float, width: float, height: float,
 
     Raises
     ------
-    ValueError
+    InputError
         When ``n`` discs do not fit on the lattice (a packing denser than it allows).
     """
     spacing = (1.0 + gap) * diameter
-    nx = int(np.floor((width - diameter) / spacing)) + 1
-    ny = int(np.floor(height / spacing))
-    if n > nx * ny:
-        raise ValueError(f"{n} particles of {diameter:g} m do not fit on a lattice of "
-                         f"{nx} x {ny} sites in {width:g} x {height:g} m")
+    nx, ny = check_placement(n, diameter, width, height, gap)
     rng = np.random.default_rng(seed)
     sites = np.sort(rng.choice(nx * ny, size=n, replace=False))
     ix, iy = sites % nx, sites // nx

@@ -31,6 +31,7 @@ from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeS
 from cfbmarkov.segmented import SegmentedTrajectoryWriter
 from cfbmarkov.simulate.cfd import GasGrid, gas_stability_limit
 from cfbmarkov.simulate.checkpoint import read_checkpoint, write_checkpoint
+from cfbmarkov.simulate.coupling import check_placement
 from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
 from cfbmarkov.simulate.progress import Progress, progress_mode
 from cfbmarkov.simulate.riser import CoupledRiser
@@ -269,7 +270,10 @@ def _advise_time_step(case: CaseConfig, label: str = "") -> None:
 
 
 def _check_safety(case: CaseConfig) -> None:
-    """Refuse a gas step beyond its stability limit at the expected velocities."""
+    """Refuse a gas step beyond its stability limit at the expected velocities, and more
+    particles than the riser holds at the start."""
+    p = case.particles
+    check_placement(p.number, p.diameter, case.riser.width, case.riser.height)
     grid = GasGrid.from_config(case)
     expected = 2.0 * case.gas.superficial_velocity / 0.5       # slip through dense clusters
     limit = gas_stability_limit(grid, case.gas, (expected, expected))

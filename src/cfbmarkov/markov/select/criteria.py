@@ -392,10 +392,15 @@ def _held_out_ck_error(block: DiscreteTrajectories, matrix: np.ndarray, times: n
                                                        core_annulus(space)))
     state_group = cell_label[space.cell_of_state]
     g, s = int(state_group.max()) + 1, space.n_states
-    labels = state_group[block_states]
+    # absent particles (an open riser's, ABSENT = -1) have no group; one present at a start
+    # frame and gone k lags on counts in its start group's total, not in any pair
+    labels = np.where(block_states >= 0, state_group[np.maximum(block_states, 0)], -1)
     member = np.zeros((s, g))
     member[np.arange(s), state_group] = 1.0
-    occupancy = np.bincount(block_states[:n_start].ravel(), minlength=s).astype(np.float64)
+    start_states = block_states[:n_start]
+    occupancy = np.bincount(start_states[start_states >= 0], minlength=s).astype(np.float64)
+    start_labels = labels[:n_start]
+    n_a = np.bincount(start_labels[start_labels >= 0], minlength=g).astype(np.float64)
     start_distribution = occupancy[:, None] * member                       # [S, G]
     mass = start_distribution.sum(axis=0, keepdims=True)
     x = np.divide(start_distribution, mass, out=np.zeros_like(start_distribution),
@@ -407,9 +412,10 @@ def _held_out_ck_error(block: DiscreteTrajectories, matrix: np.ndarray, times: n
             x = transposed @ x                         # each group's distribution, k lags on
         done = int(k)
         shift = int(k) * lag_frames
-        pairs = np.bincount((labels[:n_start] * g + labels[shift:shift + n_start]).ravel(),
+        later = labels[shift:shift + n_start]
+        both = (start_labels >= 0) & (later >= 0)
+        pairs = np.bincount(start_labels[both] * g + later[both],
                             minlength=g * g).reshape(g, g).astype(np.float64)
-        n_a = pairs.sum(axis=1)
         ok = n_a > 0
         predicted = (member.T @ x).T                   # [G from, G to]
         errors.append(np.abs(predicted[ok] - pairs[ok] / n_a[ok, None]).mean())
