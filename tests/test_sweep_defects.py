@@ -145,3 +145,20 @@ def test_maps_times_are_bounded(good, tmp_path, capsys):
     err = one_line_error(capsys, ["maps", model, "--times", times, "-o", tmp_path / "m.png"],
                          tmp_path / "m.png")
     assert "at most 36" in err
+
+
+# -- an option value that cannot be honoured is an error ------------------------------------
+def test_compare_events_basis_without_events_is_refused(good, tmp_path, capsys):
+    run, _, pred = good
+    err = one_line_error(capsys, ["compare", run, pred, "--window", "0.5:2.5", "--basis",
+                                  "events", "--resamples", "0", "--no-figures", "-q",
+                                  "-o", tmp_path / "c"], tmp_path / "c")
+    assert "no exact pass events" in err and "--basis frames" in err
+
+
+@pytest.mark.parametrize("order", ["1e-300", "0.5"])
+def test_compare_md_order_below_one_is_refused(good, tmp_path, capsys, order):
+    run, _, pred = good
+    err = one_line_error(capsys, ["compare", run, pred, "--window", "0.5:2.5", "--md-order",
+                                  order, "-o", tmp_path / "c"], tmp_path / "c")
+    assert "at least 1" in err

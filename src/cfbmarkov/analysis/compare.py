@@ -274,11 +274,12 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         RTD bin width, s (bins from 0 to the window length); default the model's lag, as
         ``reproduce`` bins (:func:`~cfbmarkov.analysis.compare_inputs.default_bin_width`).
     md_order : float, optional
-        Order k > 0 of the Minkowski distance (``inf``: largest difference).
+        Order k >= 1 of the Minkowski distance (``inf``: largest difference).
     basis : {"frames", "events"}, optional
         ``frames`` (default): like for like, both sides' residence times from frames at the
         model's lag (the prediction's frame interval), the reference's exact-event figures
-        reported beside; ``events``: the reference's exact pass events where it has them.
+        reported beside; ``events``: the reference's exact pass events (a reference
+        without them is refused).
     long_run_span : (float, float), optional
         A span of the reference (s) whose other whole windows of the analysis window's
         length, pooled, stand beside the model as what a perfect stationary model would
@@ -293,8 +294,8 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     InputError
         For unusable parameters, a model with an odd column count (mixing by halves is
         undefined), different riser domains (size, 2D against 3D, or depth), different
-        particle ids, or a long-run span outside the reference or without another whole
-        window.
+        particle ids, a long-run span outside the reference or without another whole
+        window, or the ``events`` basis on a reference without exact pass events.
 
     References
     ----------
@@ -350,6 +351,10 @@ def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float,
     and the direction of the reference's net solids flow over the window."""
     if basis not in BASES:
         raise InputError(f"comparison basis {basis!r}: choose frames or events")
+    if basis == "events" and not ref.has_events:
+        raise InputError(f"{ref.path} holds no exact pass events: --basis events needs a "
+                         "reference that logged them (cfbmarkov simulate writes them); "
+                         "compare on --basis frames")
     rows = pred.parameters.get("rows") or DEFAULT_FACE_ROWS
     band = ref.height / float(rows)
     lag_frames = 1

@@ -66,11 +66,12 @@ def check_parameters(window, bin_width: float | None, md_order: float) -> tuple[
     ------
     InputError
         For an unusable window (:func:`check_window`), a bin width (s) that is not finite
-        and positive, or a Minkowski order that is not positive.
+        and positive, or a Minkowski order below 1.
     """
     start, stop = check_window(window)
-    if not md_order > 0:
-        raise InputError(f"Minkowski order {md_order:g} must be positive")
+    if not md_order >= 1:
+        raise InputError(f"Minkowski order {md_order:g} must be at least 1 (or inf): below 1 "
+                         "the sum is not a distance")
     if bin_width is None:
         return start, stop
     if not (math.isfinite(bin_width) and bin_width > 0):

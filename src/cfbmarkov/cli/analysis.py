@@ -260,7 +260,7 @@ def add_compare(sub) -> None:
                    help="RTD bin width, s (default: the lag of the model behind the prediction, "
                         "else the reference's frame interval; printed)")
     s.add_argument("--md-order", type=minkowski_order, default=2.0,
-                   help="Minkowski order k > 0 of the MD (Eq. 9; inf: the largest difference; "
+                   help="Minkowski order k >= 1 of the MD (Eq. 9; inf: the largest difference; "
                         "default 2)")
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
     s.add_argument("--level", type=level, default=0.9,

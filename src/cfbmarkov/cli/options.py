@@ -157,10 +157,11 @@ def level(text: str) -> float:
 
 
 def minkowski_order(text: str) -> float:
-    """A Minkowski order k > 0; ``inf`` (the largest difference) is allowed, NaN is not."""
+    """A Minkowski order k >= 1; ``inf`` (the largest difference) is allowed, NaN is not."""
     value = number(text)
-    if not value > 0:
-        raise argparse.ArgumentTypeError(f"'{text}' must be positive (or inf)")
+    if not value >= 1:
+        raise argparse.ArgumentTypeError(f"'{text}' must be at least 1 (or inf): below 1 the "
+                                         "Minkowski sum is not a distance")
     return value
 
 

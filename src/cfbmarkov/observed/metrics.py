@@ -78,7 +78,8 @@ def minkowski_distance(e, f, order: float = 2.0) -> float:
         The two arrays, flattened; of equal size. For RTDs: probability per bin on shared
         bins, shape (B,).
     order : float, optional
-        The order k > 0; ``numpy.inf`` gives the largest absolute difference.
+        The order k >= 1 (below 1 the sum is not a distance); ``numpy.inf`` gives the
+        largest absolute difference.
 
     Returns
     -------
@@ -88,7 +89,7 @@ def minkowski_distance(e, f, order: float = 2.0) -> float:
     Raises
     ------
     InputError
-        When ``e`` and ``f`` differ in size, or ``order`` is not positive.
+        When ``e`` and ``f`` differ in size, or ``order`` is below 1 (or NaN).
 
     References
     ----------
@@ -99,8 +100,9 @@ def minkowski_distance(e, f, order: float = 2.0) -> float:
     f = np.asarray(f, dtype=np.float64).reshape(-1)
     if e.shape != f.shape:
         raise InputError(f"Minkowski distance of arrays of different lengths ({e.size} and {f.size})")
-    if not order > 0:   # NaN fails too; inf is the largest difference
-        raise InputError(f"Minkowski order {order:g} must be positive")
+    if not order >= 1:   # NaN fails too; inf is the largest difference
+        raise InputError(f"Minkowski order {order:g} must be at least 1 (or inf): below 1 "
+                         "the sum is not a distance")
     d = np.abs(e - f)
     if d.size == 0:
         return 0.0
