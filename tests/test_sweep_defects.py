@@ -162,3 +162,17 @@ def test_compare_md_order_below_one_is_refused(good, tmp_path, capsys, order):
     err = one_line_error(capsys, ["compare", run, pred, "--window", "0.5:2.5", "--md-order",
                                   order, "-o", tmp_path / "c"], tmp_path / "c")
     assert "at least 1" in err
+
+
+# -- output size estimated before writing --------------------------------------------------
+def test_predict_refuses_an_output_larger_than_the_free_disk(good, tmp_path, capsys,
+                                                             monkeypatch):
+    import cfbmarkov.limits
+
+    run, model, _ = good
+    monkeypatch.setattr(cfbmarkov.limits, "free_disk", lambda folder: 1e5)
+    err = one_line_error(capsys, ["predict", model, "--init", run, "--start", "0.5",
+                                  "--duration", "2", "-q", "-o", tmp_path / "p.h5"],
+                         tmp_path / "p.h5")
+    assert "on disk" in err and "--duration" in err
+    assert list(tmp_path.iterdir()) == []

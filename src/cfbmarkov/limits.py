@@ -5,7 +5,8 @@ estimated from the options and refused in one line (naming the estimate and the 
 when it exceeds :func:`memory_limit`: the memory available on the machine (``MemAvailable``
 of ``/proc/meminfo``, else the physical memory), or the value of the environment variable
 ``CFBMARKOV_MEMORY_LIMIT`` (bytes, e.g. ``4e9``) where it is set. See ``docs/definitions.md``
-(File formats, What is checked).
+(File formats, What is checked). The size of an output written uncompressed (a prediction)
+is estimated likewise and refused where it exceeds the free space beside it.
 """
 
 from __future__ import annotations
@@ -89,6 +90,48 @@ def check_memory(need: float, what: str, fix: str) -> None:
         source = MEMORY_ENV if os.environ.get(MEMORY_ENV) else "available memory"
         raise InputError(f"{what} would need about {size_text(need)} of memory, more than the "
                          f"{size_text(limit)} limit ({source}); {fix}")
+
+
+def free_disk(folder) -> float:
+    """Bytes free on the file system of ``folder`` (its nearest existing ancestor); inf
+    where that cannot be told."""
+    import shutil
+    from pathlib import Path
+
+    path = Path(folder).absolute()
+    while not path.exists() and path != path.parent:
+        path = path.parent
+    try:
+        return float(shutil.disk_usage(path).free)
+    except OSError:
+        return math.inf
+
+
+def check_disk(need: float, output, what: str, fix: str) -> None:
+    """Refuse an output whose estimated size exceeds the free space beside it.
+
+    Parameters
+    ----------
+    need : float
+        The estimate, bytes.
+    output : str or os.PathLike
+        The file to be written.
+    what : str
+        What it holds (``"a prediction of 2000 s ..."``).
+    fix : str
+        The option to change.
+
+    Raises
+    ------
+    InputError
+        Naming the estimate, the free space and the fix.
+    """
+    from pathlib import Path
+
+    free = free_disk(Path(output).absolute().parent)
+    if not need <= free:
+        raise InputError(f"{what} would take about {size_text(need)} on disk, more than the "
+                         f"{size_text(free)} free beside {output}; {fix}")
 
 
 def fit_memory(n_states: int) -> float:

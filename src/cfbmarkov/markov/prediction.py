@@ -12,7 +12,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.limits import check_finite, check_memory, check_seed
+from cfbmarkov.limits import check_disk, check_finite, check_memory, check_seed
 from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.model_file import model_datasets_and_attrs
 from cfbmarkov.markov.states import place_in_cells
@@ -54,7 +54,9 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
     InputError
         If the file cannot be read or does not fit the model, has no frame at
         ``start`` (or lacks the history before it), ``duration`` is not a whole number
-        of lags or is shorter than one, or the output cannot be written.
+        of lags or is shorter than one, the run would not fit in memory or its output on
+        the disk (estimated before either is allocated), or the output cannot be
+        written.
 
     References
     ----------
@@ -75,6 +77,11 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         check_memory((n_steps + 1.0) * particles * 8 + 8.0 * particles * traj.dimensions,
                      f"a prediction of {duration:g} s ({n_steps} lags of {model.lag:g} s x "
                      f"{particles:.0f} particles)", "shorten --duration")
+        if output is not None:          # every particle a column in every frame, uncompressed
+            check_disk((n_steps + 1.0) * particles * (8.0 * traj.dimensions + 5.0) + 1e6,
+                       output, f"a prediction of {duration:g} s ({n_steps + 1} frames x "
+                       f"{particles:.0f} particles, each a column in every frame)",
+                       "shorten --duration, or write to a disk with more space")
         if model.boundary.is_open and not traj.boundary.is_open:
             raise InputError(f"{traj.path} is a periodic riser; the model is of an open one "
                              "(fit it on this file, or predict from an open riser's file)")
