@@ -176,3 +176,36 @@ def test_predict_refuses_an_output_larger_than_the_free_disk(good, tmp_path, cap
                          tmp_path / "p.h5")
     assert "on disk" in err and "--duration" in err
     assert list(tmp_path.iterdir()) == []
+
+
+# -- folder outputs published whole ---------------------------------------------------------
+def test_compare_interrupted_while_drawing_leaves_no_folder(good, tmp_path, capsys,
+                                                            monkeypatch):
+    import importlib
+
+    report = importlib.import_module("cfbmarkov.report.compare")
+    run, _, pred = good
+
+    def draw(comparison, out, warnings):
+        (out / "rtd.png").write_bytes(b"half a figure")
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report, "_draw", draw)
+    out = tmp_path / "cmp"
+    assert main(["compare", str(run), str(pred), "--window", "0.5:2.5", "--resamples", "0",
+                 "-q", "-o", str(out)]) == 130
+    assert not out.exists() and [p.name for p in tmp_path.iterdir()] == []
+
+
+def test_compare_replaces_a_previous_comparison_whole(good, tmp_path):
+    run, _, pred = good
+    out = tmp_path / "cmp"
+    out.mkdir()
+    (out / "old.png").write_bytes(b"a figure of an earlier comparison")
+    assert main(["compare", str(run), str(pred), "--window", "0.5:2.5", "--resamples", "0",
+                 "--no-figures", "-q", "-o", str(out)]) == 0
+    assert sorted(p.name for p in out.iterdir()) == ["summary.json"]
+    (out / "notes.txt").write_text("mine")
+    assert main(["compare", str(run), str(pred), "--window", "0.5:2.5", "--resamples", "0",
+                 "--no-figures", "-q", "-o", str(out)]) == 2
+    assert (out / "notes.txt").read_text() == "mine"

@@ -12,9 +12,12 @@ import contextlib
 import functools
 import os
 import re
+import secrets
+import shutil
 import sys
 import tempfile
 from pathlib import Path
+from typing import Iterator
 
 from cfbmarkov import _interrupt
 from cfbmarkov.errors import InputError
@@ -364,3 +367,86 @@ def write_text_atomic(target: str | os.PathLike, text: str) -> None:
     """
     with atomic_path(target) as tmp:
         tmp.write_text(text)
+
+
+@contextlib.contextmanager
+def atomic_folder(output: Path) -> Iterator[Path]:
+    """Yield a new temporary sibling folder ``<output>.tmp-XXXX``; on success it replaces
+    ``output`` (a folder output published whole). On any error, an interrupt included, the
+    temporary folder and the parent folders created for it are removed, and a previous
+    ``output`` is left as it was.
+
+    Parameters
+    ----------
+    output : pathlib.Path
+        The folder to publish.
+
+    Yields
+    ------
+    pathlib.Path
+        The temporary folder to fill.
+
+    Raises
+    ------
+    InputError
+        If the temporary folder cannot be created, or filling or renaming it fails with an
+        OS error.
+    """
+    new_parents = [p for p in output.absolute().parents if not p.exists()]
+    try:
+        output.parent.mkdir(parents=True, exist_ok=True)
+        tmp = _new_folder(output.parent, f"{output.name}.tmp-")
+    except OSError as exc:
+        _remove_folders(new_parents)
+        raise InputError(f"{output}: cannot create ({exc.strerror or exc})") from None
+    try:
+        try:
+            yield tmp
+        except OSError as exc:
+            raise InputError(f"{output}: export failed ({exc.strerror or exc})") from None
+        _replace(tmp, output)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        _remove_folders(new_parents)
+        raise
+
+
+def _new_folder(parent: Path, prefix: str) -> Path:
+    """Create a folder ``prefix`` + random hex in ``parent`` (with the umask's permissions,
+    unlike tempfile.mkdtemp, so the renamed export is readable as usual)."""
+    for _ in range(100):
+        path = parent / f"{prefix}{secrets.token_hex(4)}"
+        try:
+            path.mkdir()
+        except FileExistsError:
+            continue
+        return path
+    raise FileExistsError(f"no free temporary name {prefix}XXXX in {parent}")
+
+
+def _replace(tmp: Path, output: Path) -> None:
+    """Move the complete folder ``tmp`` onto ``output``; a previous export there is moved
+    aside first and deleted only once the new one is in place (put back on failure)."""
+    old = None
+    try:
+        if output.is_dir():
+            old = _new_folder(output.parent, f"{output.name}.old-")
+            os.replace(output, old)   # rename onto the empty folder
+        os.replace(tmp, output)
+    except OSError as exc:
+        if old is not None and not output.exists():
+            with contextlib.suppress(OSError):
+                os.replace(old, output)
+                old = None
+        if old is not None and not any(old.iterdir()):
+            old.rmdir()
+            old = None
+        raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _remove_folders(folders: list[Path]) -> None:
+    for folder in folders:  # deepest first
+        with contextlib.suppress(OSError):
+            folder.rmdir()

@@ -48,20 +48,18 @@ remain.
 
 from __future__ import annotations
 
-import contextlib
 import os
 import re
-import secrets
-import shutil
 import sys
 import warnings
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterable, Iterator
+from typing import Iterable
 
 import h5py
 import numpy as np
 
+from cfbmarkov._atomic import atomic_folder
 from cfbmarkov.analysis.mixing import left_tracer_group
 from cfbmarkov.errors import CfbmarkovWarning, InputError
 from cfbmarkov.trajectories import Trajectories, opened
@@ -307,7 +305,7 @@ def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.P
         gas = read_gas_fields(traj) if fields else None
         times = traj.times[frames]
         gas_index = gas.match(times) if gas is not None else np.full(frames.size, -1)
-        with _atomic_folder(output) as tmp:
+        with atomic_folder(output) as tmp:
             n_gas = _write(hl, traj, gas, frames, gas_index, tmp, progress)
     missing = int(np.count_nonzero(gas_index < 0)) if gas is not None else 0
     if missing:
@@ -449,71 +447,6 @@ def _check_output(output: Path, source: Path) -> None:
         if foreign:
             raise InputError(f"{output}: folder holds {foreign[0]!r}, which is not part of a "
                              f"VTK export; refusing to replace it (give a new or empty folder)")
-
-
-@contextlib.contextmanager
-def _atomic_folder(output: Path) -> Iterator[Path]:
-    """Yield a new temporary sibling folder ``<output>.tmp-XXXX``; on success it replaces
-    ``output``. On any error the temporary folder, and the parent folders created for it,
-    are removed, and a previous ``output`` is left as it was."""
-    new_parents = [p for p in output.absolute().parents if not p.exists()]
-    try:
-        output.parent.mkdir(parents=True, exist_ok=True)
-        tmp = _new_folder(output.parent, f"{output.name}.tmp-")
-    except OSError as exc:
-        _remove_folders(new_parents)
-        raise InputError(f"{output}: cannot create ({exc.strerror or exc})") from None
-    try:
-        try:
-            yield tmp
-        except OSError as exc:
-            raise InputError(f"{output}: export failed ({exc.strerror or exc})") from None
-        _replace(tmp, output)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        _remove_folders(new_parents)
-        raise
-
-
-def _new_folder(parent: Path, prefix: str) -> Path:
-    """Create a folder ``prefix`` + random hex in ``parent`` (with the umask's permissions,
-    unlike tempfile.mkdtemp, so the renamed export is readable as usual)."""
-    for _ in range(100):
-        path = parent / f"{prefix}{secrets.token_hex(4)}"
-        try:
-            path.mkdir()
-        except FileExistsError:
-            continue
-        return path
-    raise FileExistsError(f"no free temporary name {prefix}XXXX in {parent}")
-
-
-def _replace(tmp: Path, output: Path) -> None:
-    """Move the complete folder ``tmp`` onto ``output``; a previous export there is moved
-    aside first and deleted only once the new one is in place (put back on failure)."""
-    old = None
-    try:
-        if output.is_dir():
-            old = _new_folder(output.parent, f"{output.name}.old-")
-            os.replace(output, old)   # rename onto the empty folder
-        os.replace(tmp, output)
-    except OSError as exc:
-        if old is not None and not output.exists():
-            with contextlib.suppress(OSError):
-                os.replace(old, output)
-                old = None
-        if old is not None and not any(old.iterdir()):
-            old.rmdir()
-            old = None
-        raise InputError(f"{output}: cannot write ({exc.strerror or exc})") from None
-    if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
-
-
-def _remove_folders(folders: list[Path]) -> None:
-    for folder in folders:  # deepest first
-        with contextlib.suppress(OSError):
-            folder.rmdir()
 
 
 def _progress(items: Iterable, total: int, enabled: bool) -> Iterable:

@@ -6,9 +6,9 @@ The numbers come from :func:`cfbmarkov.analysis.compare.compare_runs`: per side 
 residence-time samples, their RTD on shared bins and the Minkowski distance of the two RTDs
 (Eq. 9), the percentage differences of E(RT) and SD(RT) (Table 3), and the radial mixing
 curves of the two tracer groups (Fig. 11) with the RMS of their difference. This module
-writes ``output/summary.json`` (last and atomically) and, with ``figures``, the PNGs of
-Fig. 8-11 and, when the prediction carries its model (``/provenance/model``), those of
-Fig. 3-7 too.
+writes the folder ``output`` whole (filled as a temporary sibling folder, renamed onto it
+when complete): ``summary.json`` and, with ``figures``, the PNGs of Fig. 8-11 and, when the
+prediction carries its model (``/provenance/model``), those of Fig. 3-7 too.
 
 References
 ----------
@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from cfbmarkov._atomic import write_text_atomic
+from cfbmarkov._atomic import atomic_folder
 from cfbmarkov._json import jsonable
 from cfbmarkov.analysis.compare import RunComparison, compare_runs
 from cfbmarkov.analysis.compare_inputs import check_parameters, model_columns
@@ -256,14 +256,25 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
                 "flow_sd": None if intervals.flow is None else {
                     "rt_mean": intervals.flow[0], "rt_sd": intervals.flow[1]}}
         comparison.intervals = intervals
-        out.mkdir(parents=True, exist_ok=True)
-        with contextlib.suppress(FileNotFoundError):   # never leave a stale summary beside
-            (out / SUMMARY).unlink()                     # figures of this run
-        summary["figures"] = _draw(comparison, out, warnings) if figures else []
-        summary["warnings"] = warnings
-    write_text_atomic(out / SUMMARY, json.dumps(jsonable(summary), indent=2, allow_nan=False)
-                      + "\n")
+        _check_replaceable(out)
+        with atomic_folder(out) as folder:    # published whole: figures and summary, or none
+            summary["figures"] = _draw(comparison, folder, warnings) if figures else []
+            summary["warnings"] = warnings
+            (folder / SUMMARY).write_text(json.dumps(jsonable(summary), indent=2,
+                                                     allow_nan=False) + "\n")
     return summary
+
+
+def _check_replaceable(out: Path) -> None:
+    """Refuse to replace a folder holding anything but a comparison's files (its summary
+    and PNG figures): the new comparison replaces the folder whole."""
+    if not out.is_dir():
+        return
+    foreign = sorted(p.name for p in out.iterdir()
+                     if not (p.is_file() and (p.name == SUMMARY or p.suffix == ".png")))
+    if foreign:
+        raise InputError(f"{out}: folder holds {foreign[0]!r}, which is not part of a "
+                         "comparison; refusing to replace it (give a new or empty folder)")
 
 
 __all__ = ["SUMMARY", "compare", "model_columns"]
