@@ -12,6 +12,7 @@ import pytest
 
 from cfbmarkov.cli import main
 from cfbmarkov.config import CaseConfig
+from cfbmarkov.errors import InputError
 from cfbmarkov.simulate.run import simulate
 from cfbmarkov.trajectories import Trajectories
 
@@ -197,3 +198,12 @@ def test_time_step_advisory_is_one_line_and_progress_whole_lines(tmp_path, capsy
     with pytest.warns(TimeStepAdvisory, match=r"^u6: DEM time step 5e-06 s") as caught:
         simulate(load(case), tmp_path / "b.h5", until=0.025, progress=False, label="u6")
     assert len([w for w in caught if w.category is TimeStepAdvisory]) == 1
+
+
+def test_resume_to_an_end_before_the_checkpoint_is_refused(tmp_path, reference):
+    case, _ = reference
+    out = tmp_path / "c.h5"
+    simulate(case, out, checkpoint_every=0.025, progress=False, stop_after_frames=3)
+    with pytest.raises(InputError, match="past the end asked for"):
+        simulate(case, out, until=0.025, progress=False, resume=True)
+    assert not out.exists() and (tmp_path / "c.h5.parts" / "checkpoint.h5").exists()

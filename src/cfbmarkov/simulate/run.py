@@ -132,6 +132,10 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
             raise InputError(f"nothing to resume: {checkpoint} does not exist")
         _advise_time_step(case, label)
         riser, n_segments, frames, wall_time, history = read_checkpoint(checkpoint, case)
+        if riser.time > end + 0.5 * cfd_dt:
+            raise InputError(f"{checkpoint} holds the run at t = {riser.time:g} s, past the "
+                             f"end asked for ({end:g} s): resume to a later --until, or "
+                             "delete the folder to start again")
         wall_history = [tuple(row) for row in history]
         writer = SegmentedTrajectoryWriter.resume(output, n_segments, **writer_options)
     else:
