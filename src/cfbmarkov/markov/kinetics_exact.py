@@ -108,7 +108,7 @@ class ExitMoments:
         return m, (self.mean_2ab * m + self.mean_b2) / (1.0 - self.mean_a2)
 
 
-def exit_moments(q, r, e, a, b) -> ExitMoments:
+def exit_moments(q, r, e, a, b, lu_q=None) -> ExitMoments:
     """:class:`ExitMoments` of an absorbing chain (module docstring).
 
     Parameters
@@ -122,6 +122,8 @@ def exit_moments(q, r, e, a, b) -> ExitMoments:
         Entry distribution (sums to 1).
     a, b : ndarray of float64, shape (n,)
         The affine map of one lag per state, v' = a v + b.
+    lu_q : scipy.sparse.linalg.SuperLU, optional
+        The LU factors of I - Q (``splu``), shared by the properties of one chain.
 
     Returns
     -------
@@ -136,9 +138,10 @@ def exit_moments(q, r, e, a, b) -> ExitMoments:
     n = q.shape[0]
     r, e, a, b = (np.asarray(x, dtype=np.float64) for x in (r, e, a, b))
     eye = sp.identity(n, format="csc")
-    lu_q = splu(sp.csc_matrix(eye - q))
-    lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q))
-    lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q))
+    if lu_q is None:
+        lu_q = splu(sp.csc_matrix(eye - q), permc_spec="MMD_AT_PLUS_A")
+    lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q), permc_spec="MMD_AT_PLUS_A")
+    lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q), permc_spec="MMD_AT_PLUS_A")
     p = float(e @ lu_q.solve(r))
     if not p > 0:
         raise InputError("no particle that enters can leave in the model: every residence is "
@@ -275,13 +278,17 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
         if not linear:
             raise InputError(f"property {name}: law {law.key} has no exact answer; run the "
                              "Monte Carlo (react --init RUN --start T --duration D -o OUT)")
+    if model.open_flow is not None and "carried" in sk.starts:
+        raise InputError("a carried property needs a periodic riser: particles that leave an "
+                         "open riser do not come back (use start = entry)")
     q, r, e, state, _ = residence_chain(model)
     a_all, b_all = sk.over(model.lag)
     space = model.state_space
     cell = np.asarray(space.cell_of_state, dtype=np.int64)
     out = {}
+    lu_q = splu(sp.csc_matrix(sp.identity(q.shape[0], format="csc") - q), permc_spec="MMD_AT_PLUS_A")
     for i, name in enumerate(sk.names):
-        m = exit_moments(q, r, e, a_all[i][state], b_all[i][state])
+        m = exit_moments(q, r, e, a_all[i][state], b_all[i][state], lu_q)
         if sk.starts[i] == "carried":
             v0, second = m.carried()
             mean = v0
