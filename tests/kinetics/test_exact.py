@@ -103,9 +103,11 @@ def test_open_riser_heat_exchange():
     assert out.exit_sd == pytest.approx(np.sqrt(second - mean ** 2), rel=1e-10)
 
 
-def test_open_riser_refuses_nothing_but_carried_needs_relaxation():
+def test_carried_needs_a_periodic_riser_and_a_relaxation():
+    with pytest.raises(InputError, match="needs a periodic riser"):
+        exact_kinetics(open_model(), kinetics([1.0], start="carried"))
     with pytest.raises(InputError, match="no steady state"):
-        exact_kinetics(open_model(), kinetics([0.0], start="carried"))
+        exact_kinetics(periodic_model(), kinetics([0.0, 0.0], start="carried"))
 
 
 def _periodic_hand(u, w, k0, k1, t0, t1, v0):
@@ -216,3 +218,26 @@ def test_monte_carlo_values_depend_on_each_particle_alone():
     whole = run_properties(sk, LAG, states, laps, periodic=True)
     part = run_properties(sk, LAG, states[:, 7:9], laps[:, 7:9], periodic=True)
     np.testing.assert_array_equal(whole[:, :, 7:9], part)
+
+
+def test_custom_law_integrates_like_the_linear_one():
+    import numba as nb
+
+    from cfbmarkov.kinetics import Custom
+
+    @nb.njit
+    def first_order(v, row, others):
+        return row[0] * (1.0 - v)
+
+    model = periodic_model()
+    states, laps = model.monte_carlo(np.array([0, 1] * 20, np.int32), 60, seed=4)
+    linear = kinetics([1.5, 6.0]).per_state(model.state_space)
+    from cfbmarkov.kinetics import ByCell
+    table = np.array([[0, 0, 1.5], [0, 1, 6.0]])
+    custom = Kinetics((Property("v", Custom(first_order, ("rate",), substeps=8),
+                                {"rate": ByCell(table)}),)).per_state(model.state_space)
+    exact = run_properties(linear, LAG, states, laps, periodic=True)
+    rk4 = run_properties(custom, LAG, states, laps, periodic=True)
+    np.testing.assert_allclose(rk4, exact, atol=1e-8)
+    with pytest.raises(InputError, match="no exact answer"):
+        exact_kinetics(model, custom)

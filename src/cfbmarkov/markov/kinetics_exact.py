@@ -286,7 +286,8 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
     space = model.state_space
     cell = np.asarray(space.cell_of_state, dtype=np.int64)
     out = {}
-    lu_q = splu(sp.csc_matrix(sp.identity(q.shape[0], format="csc") - q), permc_spec="MMD_AT_PLUS_A")
+    lu_q = splu(sp.csc_matrix(sp.identity(q.shape[0], format="csc") - q),
+                permc_spec="MMD_AT_PLUS_A")
     for i, name in enumerate(sk.names):
         m = exit_moments(q, r, e, a_all[i][state], b_all[i][state], lu_q)
         if sk.starts[i] == "carried":
