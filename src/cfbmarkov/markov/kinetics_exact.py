@@ -31,11 +31,10 @@ References
 J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton (1960), Ch. III
 (absorbing chains, the fundamental matrix). H. Berthiaux, V. Mizonov and V. Zhukov,
 "Application of the theory of Markov chains to model different processes in particle
-technology", Powder Technology 157, 128-137 (2005). J. Harris, J. F. Davidson and R. B.
-Thorpe / A. T. Harris, J. F. Davidson and R. B. Thorpe, "A novel method for measuring the
-residence time distribution in short time scale particulate systems" and "The prediction of
-particle cluster properties in the near wall region of a vertical riser", Powder Technology
-(2003).
+technology", Powder Technology 157, 128-137 (2005). A. T. Harris, J. F. Davidson and
+R. B. Thorpe, Chemical Engineering Science (2003), on the particle residence-time
+distribution of CFB risers. O. Levenspiel, Chemical Reaction Engineering, 3rd ed., Wiley
+(1999), Ch. 15-16 (the segregated-flow model, for contrast).
 """
 
 from __future__ import annotations
