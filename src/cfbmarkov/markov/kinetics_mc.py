@@ -42,26 +42,33 @@ def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic,
     """
     n_props = a.shape[0]
     n_frames, n = states.shape
-    for p in nb.prange(n):
-        for q in range(n_props):
-            s = states[0, p]
-            v = initial[q, p] if s >= 0 else np.nan
-            out[q, 0, p] = v
-            top = laps[0, p]
-            for k in range(1, n_frames):
-                s_prev = s
+    block = 256                 # particles side by side: each frame's row is read in order
+    for c in nb.prange((n + block - 1) // block):
+        lo = c * block
+        hi = min(lo + block, n)
+        top = np.empty(hi - lo, np.int64)
+        for p in range(lo, hi):
+            top[p - lo] = laps[0, p]
+            for q in range(n_props):
+                out[q, 0, p] = initial[q, p] if states[0, p] >= 0 else np.nan
+        for k in range(1, n_frames):
+            for p in range(lo, hi):
+                s_prev = states[k - 1, p]
                 s = states[k, p]
-                if s < 0:
-                    v = np.nan
-                elif s_prev < 0:
-                    v = entry_value[q]
-                else:
-                    v = a[q, s_prev] * v + b[q, s_prev]
-                    if periodic and laps[k, p] > top:
-                        top = laps[k, p]
-                        if reset[q]:
-                            v = entry_value[q]
-                out[q, k, p] = v
+                passed = False
+                if periodic and laps[k, p] > top[p - lo]:
+                    top[p - lo] = laps[k, p]
+                    passed = True
+                for q in range(n_props):
+                    if s < 0:
+                        v = np.nan
+                    elif s_prev < 0:
+                        v = entry_value[q]
+                    elif passed and reset[q]:
+                        v = entry_value[q]
+                    else:
+                        v = a[q, s_prev] * out[q, k - 1, p] + b[q, s_prev]
+                    out[q, k, p] = v
 
 
 @nb.njit(cache=False, parallel=True)
@@ -163,12 +170,14 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
     linear = np.flatnonzero(sk.linear)
     if linear.size:
         a, b = sk.over(lag)
-        part = np.empty((linear.size,) + states.shape)
+        # all linear (the usual case): straight into the result, no copy
+        part = values if linear.size == n_props else np.empty((linear.size,) + states.shape)
         linear_properties(states, laps, np.ascontiguousarray(a[linear]),
                           np.ascontiguousarray(b[linear]), reset[linear],
                           np.ascontiguousarray(initial[linear]), sk.initial[linear],
                           bool(periodic), part)
-        values[linear] = part
+        if part is not values:
+            values[linear] = part
     for q in np.flatnonzero(~sk.linear):
         law = sk.laws[q]
         custom_property(law.function, states, laps,
