@@ -8,6 +8,9 @@ The Markov-chain figures are measured at the paper's scale on synthetic riser-li
 - ``mcm-predict``: Monte Carlo of 27000 particles x 200 steps with lap counting;
 - ``mcm-predict-file``: the same plus placing particles in their cells and writing the
   prediction file;
+- ``mcm-predict-file-kinetics``: ``mcm-predict-file`` with two particle properties (a
+  first-order reaction and heat exchange with a wall temperature) carried and stored per
+  frame (goal <= 1.5 x ``mcm-predict-file``);
 - ``mcm-fit-intervals``: ``mcm-fit`` plus the model's 90 % intervals (a block bootstrap of
   the window's counts, 100 resamples; :func:`cfbmarkov.analysis.intervals.model_intervals`);
 - ``mcm-exact-rtd``: the exact residence-time distribution of the 228-state model;
@@ -51,7 +54,8 @@ def _median_time(fn: Callable[[], object], repeat: int) -> float:
 
 #: the figures of the Markov layer, in the order they are measured (``mcm-fit-chosen`` is
 #: printed with the chosen space's kind, ``mcm-fit-chosen-KIND``)
-MCM_NAMES = ("mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd",
+MCM_NAMES = ("mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-predict-file-kinetics",
+             "mcm-exact-rtd",
              "mcm-exact-rtd-long-tail", "mcm-fit-intervals", "mcm-fit-open",
              "mcm-fit-open-ratio", "mcm-predict-open", "mcm-predict-open-ratio", "mcm-fit-auto",
              "mcm-fit-chosen", "mcm-predict-file-auto", "mcm-fit-auto-coherent",
@@ -162,6 +166,18 @@ def markov_benchmarks(repeat: int = 5, particles: int = 27000, workdir: Path | N
         if want("mcm-predict-file"):
             yield "mcm-predict-file", _median_time(
                 lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred), repeat), "s"
+        if want("mcm-predict-file-kinetics"):
+            from cfbmarkov.kinetics import (Constant, FirstOrder, HeatExchange, Kinetics,
+                                            Property)
+
+            kinetics = Kinetics((
+                Property("conversion", FirstOrder(), {"rate": Constant(1.0)}),
+                Property("temperature", HeatExchange(600.0),
+                         {"coefficient": Constant(2.0), "temperature": Constant(800.0)},
+                         initial=300.0))).per_state(model.state_space)
+            yield "mcm-predict-file-kinetics", _median_time(
+                lambda: model.predict(run, 10.0, 5.0, seed=7, output=pred, kinetics=kinetics),
+                repeat), "s"
         if want("mcm-exact-rtd"):
             yield "mcm-exact-rtd", _median_time(
                 lambda: exact_rtd(model.transition_matrix, model.up_fraction,

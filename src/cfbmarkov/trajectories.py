@@ -484,6 +484,25 @@ class Trajectories(FrameTimes):
                              f"{', '.join(self.field_names) or 'none'})")
         return self._file["fields"][name][frames]
 
+    @property
+    def property_names(self) -> list[str]:
+        """Names of the particle properties stored under ``/properties`` (a prediction
+        with kinetics; ``docs/definitions.md``, Properties along particle paths)."""
+        return sorted(self._file["properties"]) if "properties" in self._file else []
+
+    def property_values(self, name: str, frames: int | slice = slice(None)) -> np.ndarray:
+        """A particle property at frames, float64 [N] or [T, N] (NaN where absent).
+
+        Raises
+        ------
+        InputError
+            If the file has no property of that name.
+        """
+        if name not in self.property_names:
+            raise InputError(f"{self.path}: no particle property '{name}' (has: "
+                             f"{', '.join(self.property_names) or 'none'})")
+        return self._file["properties"][name][frames]
+
     def group(self, name: str) -> h5py.Group | None:
         """A provenance group attached by the producer, or None.
 

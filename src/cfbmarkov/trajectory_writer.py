@@ -466,6 +466,26 @@ class TrajectoryWriter:
             g.attrs[key] = value
 
     @write_method
+    def add_property(self, name: str, values: np.ndarray, attrs: dict[str, Any] | None = None
+                     ) -> None:
+        """Store a particle property ``/properties/<name>``, float64 [T, N] (NaN where a
+        particle is absent), with its attributes (e.g. the law and start rule).
+
+        Parameters
+        ----------
+        name : str
+            The property's name.
+        values : ndarray of float64, shape (T, N)
+            One row per frame, in the order the frames are written.
+        attrs : dict, optional
+            Attributes of the dataset.
+        """
+        ds = self._file.require_group("properties").create_dataset(
+            name, data=np.ascontiguousarray(values, dtype=np.float64))
+        for key, value in (attrs or {}).items():
+            ds.attrs[key] = value
+
+    @write_method
     def update_parameters(self, values: dict[str, Any]) -> None:
         """Add ``values`` to the producer's parameters (what is known only once every row
         has been read: rows dropped, say).

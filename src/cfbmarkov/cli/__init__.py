@@ -2,6 +2,7 @@
 
 This package builds the parser and runs a verb with its output claimed; the verbs live in
 modules by theme (:mod:`~cfbmarkov.cli.data`, :mod:`~cfbmarkov.cli.markov`,
+:mod:`~cfbmarkov.cli.kinetics`,
 :mod:`~cfbmarkov.cli.analysis`, :mod:`~cfbmarkov.cli.simulate`, :mod:`~cfbmarkov.cli.run`),
 their option types in :mod:`~cfbmarkov.cli.options`.
 
@@ -15,7 +16,7 @@ import os
 import sys
 from pathlib import Path
 
-from cfbmarkov.cli import analysis, data, markov, run, simulate
+from cfbmarkov.cli import analysis, data, kinetics, markov, run, simulate
 from cfbmarkov.cli.options import join_dash_values, parse_cells, parse_window
 from cfbmarkov.errors import CfbmarkovError, InputError
 
@@ -27,7 +28,8 @@ class _Parser(argparse.ArgumentParser):
 
 #: the verbs in the order of ``cfbmarkov --help``, each adding its subparser
 VERBS = (data.add_import, markov.add_fit, markov.add_predict, analysis.add_compare,
-         markov.add_rtd, analysis.add_stationarity, analysis.add_maps, markov.add_info,
+         markov.add_rtd, kinetics.add_react, analysis.add_stationarity, analysis.add_maps,
+         markov.add_info,
          simulate.add_simulate, simulate.add_cases, run.add_reproduce, run.add_demo,
          data.add_export_vtk, run.add_bench)
 

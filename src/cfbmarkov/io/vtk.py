@@ -339,6 +339,9 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
                 tracer_group[~keep] = -1
         point_data = {"colour_group": tracer_group, "id": ids,
                 "lap": np.ascontiguousarray(traj.laps(frame), dtype=np.int32)}
+        for prop in traj.property_names:      # particle properties (kinetics)
+            point_data[prop] = np.ascontiguousarray(traj.property_values(prop, frame),
+                                                    dtype=np.float64)
         velocity = traj.velocities(frame)
         if velocity is not None:
             vx = np.ascontiguousarray(velocity[:, 0], dtype=np.float64)

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
 
 def predict(model: "MarkovModel", trajectories, start: float, duration: float, seed: int = 0,
-            output: str | os.PathLike | None = None, progress: bool = False):
+            output: str | os.PathLike | None = None, progress: bool = False, kinetics=None):
     """Monte Carlo prediction of ``model`` from the particles' states in the frame at
     ``start``.
 
@@ -43,11 +43,18 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         cells, the model attached as ``/provenance/model``).
     progress : bool
         Show a progress bar while writing.
+    kinetics : StateKinetics, optional
+        Particle properties carried along the paths (:mod:`cfbmarkov.kinetics`, resolved on
+        the model's states): computed by :func:`cfbmarkov.markov.kinetics_mc.run_properties`
+        and stored as ``/properties/NAME`` [K+1, N] float64 with the attributes ``law``,
+        ``start`` and ``initial``. A ``reference`` start takes the file's own values of the
+        property at ``start`` for the particles present then.
 
     Returns
     -------
     pathlib.Path or tuple
-        The output path, or (times [K+1] s, states [K+1, N], laps [K+1, N]) without one.
+        The output path, or (times [K+1] s, states [K+1, N], laps [K+1, N]) without one
+        (and the properties [P, K+1, N] as a fourth item with ``kinetics``).
 
     Raises
     ------
@@ -99,10 +106,37 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         if states.shape[1] > ids.size:      # newcomers through the inlet: new ids
             first = int(traj.ids.max()) + 1 if traj.ids.size else 0
             ids = np.concatenate([ids, first + np.arange(states.shape[1] - ids.size)])
+        values = None
+        if kinetics is not None:
+            values = _properties(model, traj, kinetics, start, states, laps,
+                                 np.flatnonzero(present0))
         if output is None:
-            return times, states, laps
+            return (times, states, laps) if values is None else (times, states, laps, values)
         return write_prediction(model, traj, times, states, laps, positions0, seed, output,
-                                progress, duration=duration, ids=ids)
+                                progress, duration=duration, ids=ids,
+                                properties=None if values is None else (kinetics, values))
+
+
+def _properties(model, traj, kinetics, start, states, laps, present) -> np.ndarray:
+    """The properties [P, K+1, N] of a run (:func:`predict`), the reference's values at
+    ``start`` for a ``reference`` start."""
+    from cfbmarkov.markov.kinetics_mc import run_properties
+
+    if model.boundary.is_open and "carried" in kinetics.starts:
+        raise InputError("a carried property needs a periodic riser: particles that leave an "
+                         "open riser do not come back (use start = entry)")
+    initial = np.repeat(kinetics.initial[:, None], states.shape[1], axis=1)
+    frame = int(np.argmin(np.abs(traj.times - start)))
+    for q, (name, rule) in enumerate(zip(kinetics.names, kinetics.starts)):
+        if rule == "reference":
+            if name not in traj.property_names:
+                raise InputError(f"property {name} starts from the reference, but {traj.path} "
+                                 f"holds no values of it (properties: "
+                                 f"{', '.join(traj.property_names) or 'none'}); use start = "
+                                 "entry or carried")
+            initial[q, :present.size] = traj.property_values(name, frame)[present]
+    return run_properties(kinetics, model.lag, states, laps,
+                          periodic=not model.boundary.is_open, initial=initial)
 
 
 def initial_states(model: "MarkovModel", trajectories, start: float
@@ -139,7 +173,8 @@ def initial_states(model: "MarkovModel", trajectories, start: float
 def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                      states: np.ndarray, laps: np.ndarray, first_positions: np.ndarray,
                      seed: int, output: str | os.PathLike, progress: bool = False,
-                     duration: float | None = None, ids: np.ndarray | None = None) -> Path:
+                     duration: float | None = None, ids: np.ndarray | None = None,
+                     properties=None) -> Path:
     """Write a Monte Carlo run of ``model`` as a trajectory file (a prediction).
 
     The first frame keeps the actual positions it started from; later frames place each
@@ -171,6 +206,8 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
         The particles' ids (default: the file's). Where a state is -1 the particle is
         absent (an open riser's newcomers before they enter, particles after they leave);
         the first frame's positions are those of the first ``first_positions.shape[0]``.
+    properties : tuple (StateKinetics, ndarray of float64 [P, K+1, N]), optional
+        Particle properties to store as ``/properties/NAME`` (:func:`predict`).
 
     Returns
     -------
@@ -215,6 +252,12 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                 bar.update(model.lag * len(ks))
         if bar is not None:
             bar.close()
+        if properties is not None:
+            kin, values = properties
+            for q, name in enumerate(kin.names):
+                writer.add_property(name, values[q], {"law": kin.laws[q].key,
+                                                      "start": kin.starts[q],
+                                                      "initial": float(kin.initial[q])})
     return Path(output)
 
 

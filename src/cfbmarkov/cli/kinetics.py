@@ -1,0 +1,109 @@
+"""The ``react`` verb: particle properties along the chain's paths (reactions, heat
+exchange, deactivation; ``docs/how-to/kinetics.md``)."""
+
+from __future__ import annotations
+
+import sys
+import time
+
+from cfbmarkov.cli.options import finite_float, positive_float, seed
+from cfbmarkov.errors import InputError
+
+
+def cmd_react(args) -> int:
+    """``cfbmarkov react``: exact answers of a kinetics file on a model, and a Monte Carlo
+    with the properties where ``--init`` is given.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options.
+
+    Returns
+    -------
+    int
+        The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
+    """
+    import json
+
+    from cfbmarkov._json import jsonable
+    from cfbmarkov.kinetics import load_kinetics
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
+    mc = [args.init, args.start, args.duration, args.output]
+    if any(v is not None for v in mc) and any(v is None for v in mc):
+        raise InputError("the Monte Carlo needs all of --init RUN --start T --duration D "
+                         "-o OUT")
+    kinetics = load_kinetics(args.kinetics)
+    model = MarkovModel.load(args.model)
+    state_kinetics = kinetics.per_state(model.state_space)
+    answers, seconds = {}, None
+    if kinetics.linear:
+        t0 = time.perf_counter()
+        answers = exact_kinetics(model, state_kinetics)
+        seconds = time.perf_counter() - t0
+    elif args.init is None:
+        raise InputError(f"{args.kinetics}: a law without an exact answer; run the Monte "
+                         "Carlo with --init RUN --start T --duration D -o OUT")
+    if args.init is not None:
+        from cfbmarkov._outputs import claim_output
+        from cfbmarkov.trajectories import Trajectories
+
+        with claim_output(args.output, "react", "trajectory", [args.model, args.init],
+                          force=args.force):
+            with Trajectories(args.init) as run:
+                model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
+                              output=args.output, progress=not args.quiet,
+                              kinetics=state_kinetics)
+    if args.json:
+        out = {"properties": {name: {**a.to_dict(), "law": p.law.key}
+                              for (name, a), p in zip(answers.items(), kinetics.properties)},
+               "exact_seconds": seconds, "prediction": args.output}
+        print(json.dumps(jsonable(out)))
+        return 0
+    if answers:
+        print(f"{'property':<14} {'law':<14} {'start':<9} {'exit mean':>12} {'exit SD':>12} "
+              f"{'bed mean':>12} {'bed min..max per cell':>26}")
+        for p in kinetics.properties:
+            a = answers[p.name]
+            finite = a.bed_mean_by_cell[a.bed_mean_by_cell == a.bed_mean_by_cell]
+            span = f"{finite.min():.6g} .. {finite.max():.6g}" if finite.size else "-"
+            print(f"{p.name:<14} {p.law.key:<14} {p.start:<9} {a.exit_mean:>12.6g} "
+                  f"{a.exit_sd:>12.6g} {a.bed_mean:>12.6g} {span:>26}")
+        print(f"exact, per residence at the exit and over the bed in steady state "
+              f"({seconds:.3g} s)")
+    if args.output is not None:
+        print(args.output)
+    sys.stdout.flush()
+    return 0
+
+
+def add_react(sub) -> None:
+    """Add the ``react`` verb (kinetics along particle paths) to the subparsers ``sub``.
+
+    Parameters
+    ----------
+    sub : argparse._SubParsersAction
+        The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
+    """
+    s = sub.add_parser("react", help="properties along particle paths (reaction, heat, "
+                                     "deactivation): exact answers, and a Monte Carlo")
+    s.add_argument("model", help="model file (.h5, from cfbmarkov fit)")
+    s.add_argument("--kinetics", required=True,
+                   help="kinetics file (TOML, one [[property]] table per property)")
+    s.add_argument("--json", action="store_true",
+                   help="print {\"properties\": {NAME: {exit_mean, exit_sd, bed_mean, "
+                        "bed_mean_by_cell, ...}}} as JSON")
+    s.add_argument("--init", default=None,
+                   help="trajectory file giving the initial state of a Monte Carlo with the "
+                        "properties (with --start, --duration and -o)")
+    s.add_argument("--start", type=finite_float, default=None, help="initial frame time, s")
+    s.add_argument("--duration", type=positive_float, default=None, help="simulated time, s")
+    s.add_argument("--seed", type=seed, default=0, help="0 .. 2^64 - 1 (default 0)")
+    s.add_argument("-o", "--output", default=None,
+                   help="prediction trajectory file (.h5) with /properties/NAME per frame")
+    s.add_argument("--force", action="store_true",
+                   help="replace an existing output of another kind")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=cmd_react)

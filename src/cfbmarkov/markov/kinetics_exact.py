@@ -1,0 +1,307 @@
+"""Exact answers of linear kinetics along the chain's paths (no sampling noise).
+
+``docs/definitions.md`` (Properties along particle paths) derives them. A residence is a
+first passage through an absorbing chain: Q among the transient states, r the probability
+of leaving on the next lag, e where particles enter. Over a lag in state s the property
+maps exactly as v' = a_s v + b_s (:mod:`cfbmarkov.kinetics.laws`), so the value at the
+exit is v_exit = A v0 + B with A = prod a along the path and B an affine sum. With
+D = diag(a), conditioning on the exit (p = e (I - Q)^-1 r, 1 but for trapped mass):
+
+    E[A]    = e alpha / p,   alpha = (I - D Q)^-1 D r
+    E[B]    = e beta / p,    beta  = (I - Q)^-1 (b o (r + Q alpha))
+    E[A^2]  = e gamma / p,   gamma = (I - D^2 Q)^-1 D^2 r
+    E[2AB]  = e delta / p,   delta = (I - D Q)^-1 (2 a o b o (r + Q gamma))
+    E[B^2]  = e eps / p,     eps   = (I - Q)^-1 (b^2 o (r + Q gamma) + b o (Q delta))
+
+(o the element-wise product); E[v_exit] = E[A] v0 + E[B] and E[v_exit^2] =
+E[A^2] v0^2 + E[2AB] v0 + E[B^2]. A property carried across passes (v0 the previous exit
+value, independent of the next residence) has the steady mean m = E[B] / (1 - E[A]) and
+second moment (E[2AB] m + E[B^2]) / (1 - E[A^2]). The bed's steady state per state:
+occupancy nu = e (I - Q)^-1 and value mass mu = (v0 e + (nu o b) Q) (I - D Q)^-1, the mean
+mu / nu (the value at the frames, each lag's start).
+
+An open riser's chain is Q = diag(1 - r) P with the model's exit probabilities and entry
+distribution; a periodic riser's is the chain on (lap-deficit level, state) of
+:mod:`cfbmarkov.markov.first_passage` (the pass up through the top from level 0 ends a
+residence), entered at level 0 with the exact RTD's entry distribution. States from which
+no exit can be reached hold trapped mass and are left out, as the exact RTD leaves them.
+
+References
+----------
+J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton (1960), Ch. III
+(absorbing chains, the fundamental matrix). H. Berthiaux, V. Mizonov and V. Zhukov,
+"Application of the theory of Markov chains to model different processes in particle
+technology", Powder Technology 157, 128-137 (2005). A. T. Harris, J. F. Davidson and
+R. B. Thorpe, Chemical Engineering Science (2003), on the particle residence-time
+distribution of CFB risers. O. Levenspiel, Chemical Reaction Engineering, 3rd ed., Wiley
+(1999), Ch. 15-16 (the segregated-flow model, for contrast).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics import Kinetics, StateKinetics
+from cfbmarkov.markov.first_passage import (_live_levels, _reaching, deficit_matrix,
+                                            split_by_pass)
+
+
+@dataclass(frozen=True)
+class ExitMoments:
+    """Moments of the exit value v_exit = A v0 + B of one residence, and the bed's value
+    mass, for one linear law on one absorbing chain (module docstring).
+
+    Attributes
+    ----------
+    mean_a, mean_b, mean_a2, mean_2ab, mean_b2 : float
+        E[A], E[B], E[A^2], E[2AB], E[B^2], conditional on leaving.
+    occupancy : ndarray of float64, shape (n,)
+        nu = e (I - Q)^-1 per transient state (expected lags spent there per entry).
+    mass_per_start, mass_rest : ndarray of float64, shape (n,)
+        mu = v0 * mass_per_start + mass_rest, the expected sum of the value over the lags
+        spent in each state per entry.
+    exit_probability : float
+        p, the probability that an entering particle leaves (1 but for trapped mass).
+    """
+
+    mean_a: float
+    mean_b: float
+    mean_a2: float
+    mean_2ab: float
+    mean_b2: float
+    occupancy: np.ndarray
+    mass_per_start: np.ndarray
+    mass_rest: np.ndarray
+    exit_probability: float
+
+    def exit_mean(self, v0: float) -> float:
+        """E[v_exit] for the entry value ``v0``."""
+        return self.mean_a * v0 + self.mean_b
+
+    def exit_second(self, v0: float) -> float:
+        """E[v_exit^2] for the entry value ``v0``."""
+        return self.mean_a2 * v0 * v0 + self.mean_2ab * v0 + self.mean_b2
+
+    def carried(self) -> tuple[float, float]:
+        """The steady mean and second moment of a value carried across residences.
+
+        Returns
+        -------
+        mean, second : float
+
+        Raises
+        ------
+        InputError
+            If E[A] = 1 (no relaxation anywhere a particle goes: the value never forgets
+            its start, and there is no steady state).
+        """
+        if not self.mean_a < 1.0 - 1e-14:
+            raise InputError("a carried property with a zero rate wherever particles go has "
+                             "no steady state (it keeps its start value): use start = entry")
+        m = self.mean_b / (1.0 - self.mean_a)
+        return m, (self.mean_2ab * m + self.mean_b2) / (1.0 - self.mean_a2)
+
+
+def exit_moments(q, r, e, a, b, lu_q=None) -> ExitMoments:
+    """:class:`ExitMoments` of an absorbing chain (module docstring).
+
+    Parameters
+    ----------
+    q : ndarray or scipy.sparse matrix of float64, shape (n, n)
+        Q, sub-stochastic, among transient states from each of which an exit can be
+        reached (I - Q invertible).
+    r : ndarray of float64, shape (n,)
+        Probability of leaving on the next lag.
+    e : ndarray of float64, shape (n,)
+        Entry distribution (sums to 1).
+    a, b : ndarray of float64, shape (n,)
+        The affine map of one lag per state, v' = a v + b.
+    lu_q : scipy.sparse.linalg.SuperLU, optional
+        The LU factors of I - Q (``splu``), shared by the properties of one chain.
+
+    Returns
+    -------
+    ExitMoments
+
+    Raises
+    ------
+    InputError
+        If no entering particle can leave.
+    """
+    q = sp.csc_matrix(q, dtype=np.float64)
+    n = q.shape[0]
+    r, e, a, b = (np.asarray(x, dtype=np.float64) for x in (r, e, a, b))
+    eye = sp.identity(n, format="csc")
+    if lu_q is None:
+        lu_q = splu(sp.csc_matrix(eye - q), permc_spec="MMD_AT_PLUS_A")
+    lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q), permc_spec="MMD_AT_PLUS_A")
+    lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q), permc_spec="MMD_AT_PLUS_A")
+    p = float(e @ lu_q.solve(r))
+    if not p > 0:
+        raise InputError("no particle that enters can leave in the model: every residence is "
+                         "trapped")
+    alpha = lu_dq.solve(a * r)
+    beta = lu_q.solve(b * (r + q @ alpha))
+    gamma = lu_d2q.solve(a * a * r)
+    w = r + q @ gamma
+    delta = lu_dq.solve(2.0 * a * b * w)
+    eps = lu_q.solve(b * b * w + b * (q @ delta))
+    occupancy = lu_q.solve(e, trans="T")
+    per_start = lu_dq.solve(e, trans="T")
+    rest = lu_dq.solve(q.T @ (occupancy * b), trans="T")
+    return ExitMoments(float(e @ alpha) / p, float(e @ beta) / p, float(e @ gamma) / p,
+                       float(e @ delta) / p, float(e @ eps) / p, occupancy, per_start, rest, p)
+
+
+@dataclass(frozen=True)
+class PropertyAnswer:
+    """The exact answers for one property of a model.
+
+    Attributes
+    ----------
+    name : str
+        The property.
+    start : str
+        Its start rule.
+    entry_value : float
+        The value particles enter with (``initial``; for a carried property the steady
+        mean of the values they come back with).
+    exit_mean, exit_sd : float
+        Mean and standard deviation of the value at the exit, per residence.
+    bed_mean : float
+        The bed's steady-state mean over all particles (per particle, at the frames).
+    bed_mean_by_state : ndarray of float64, shape (S,)
+        The steady-state mean per state (NaN where no particle stays).
+    bed_mean_by_cell : ndarray of float64, shape (C,)
+        The steady-state mean per cell of the grid (NaN where no particle stays).
+    """
+
+    name: str
+    start: str
+    entry_value: float
+    exit_mean: float
+    exit_sd: float
+    bed_mean: float
+    bed_mean_by_state: np.ndarray
+    bed_mean_by_cell: np.ndarray
+
+    def to_dict(self) -> dict:
+        """JSON-serialisable (the per-cell means as a list, null where NaN)."""
+        return {"start": self.start, "entry_value": self.entry_value,
+                "exit_mean": self.exit_mean, "exit_sd": self.exit_sd,
+                "bed_mean": self.bed_mean,
+                "bed_mean_by_cell": [None if not np.isfinite(x) else float(x)
+                                     for x in self.bed_mean_by_cell]}
+
+
+def residence_chain(model) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray, int]:
+    """The absorbing chain of a model's residences, on the states from which an exit can be
+    reached (module docstring).
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    q : scipy.sparse.csr_matrix, shape (n, n)
+    r, e : ndarray of float64, shape (n,)
+    state : ndarray of int64, shape (n,)
+        The model's state of each transient state (a periodic riser's levels repeat them).
+    levels : int
+        Lap-deficit levels (1 for an open riser).
+
+    Raises
+    ------
+    CfbmarkovError
+        If the model has no residence (no exit, or every one trapped).
+    """
+    s = model.n_states
+    if model.open_flow is not None:
+        q = sp.csr_matrix(model.absorbing_matrix)
+        r = np.asarray(model.open_flow.exit_probability, dtype=np.float64)
+        e = model.open_flow.entry_distribution
+        live = _reaching(q, r > 0)
+        levels = 1
+    else:
+        entry = model.rtd().entry_distribution
+        p_up, p_down, p_stay = split_by_pass(sp.csr_matrix(model.transition_matrix),
+                                             model.up_fraction, model.down_fraction)
+        levels = 9
+        q, r = deficit_matrix(p_up, p_down, p_stay, levels)
+        live = _live_levels(p_up, p_down, p_stay, levels, r > 0)
+        e = np.zeros(s * levels)
+        e[:s] = entry
+    keep = np.flatnonzero(live)
+    e = e[keep]
+    if not e.sum() > 0:
+        raise InputError("no particle that enters can leave in the model: every residence is "
+                         "trapped")
+    state = np.tile(np.arange(s), levels)[keep]
+    return sp.csr_matrix(q)[keep][:, keep], r[keep], e / e.sum(), state, levels
+
+
+def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
+                   ) -> dict[str, PropertyAnswer]:
+    """Exact answers of every property of linear kinetics on a model.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted chain (open or periodic riser).
+    kinetics : Kinetics or StateKinetics
+        The properties (resolved on ``model.state_space`` where a :class:`Kinetics`).
+    cell_fields : CellFields, optional
+        For parameters given as functions of the fitting window's cell fields.
+
+    Returns
+    -------
+    dict of str to PropertyAnswer
+        By property name, in order. A ``reference`` start gives the answers of ``entry``
+        (in a steady state every residence starts at the inlet).
+
+    Raises
+    ------
+    InputError
+        For a non-linear (custom) law, a carried property with no relaxation, or a model
+        without residences.
+    """
+    sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
+        model.state_space, cell_fields)
+    for name, linear, law in zip(sk.names, sk.linear, sk.laws):
+        if not linear:
+            raise InputError(f"property {name}: law {law.key} has no exact answer; run the "
+                             "Monte Carlo (react --init RUN --start T --duration D -o OUT)")
+    if model.open_flow is not None and "carried" in sk.starts:
+        raise InputError("a carried property needs a periodic riser: particles that leave an "
+                         "open riser do not come back (use start = entry)")
+    q, r, e, state, _ = residence_chain(model)
+    a_all, b_all = sk.over(model.lag)
+    space = model.state_space
+    cell = np.asarray(space.cell_of_state, dtype=np.int64)
+    out = {}
+    lu_q = splu(sp.csc_matrix(sp.identity(q.shape[0], format="csc") - q),
+                permc_spec="MMD_AT_PLUS_A")
+    for i, name in enumerate(sk.names):
+        m = exit_moments(q, r, e, a_all[i][state], b_all[i][state], lu_q)
+        if sk.starts[i] == "carried":
+            v0, second = m.carried()
+            mean = v0
+        else:
+            v0 = float(sk.initial[i])
+            mean, second = m.exit_mean(v0), m.exit_second(v0)
+        sd = float(np.sqrt(max(second - mean * mean, 0.0)))
+        mass = np.bincount(state, v0 * m.mass_per_start + m.mass_rest, minlength=model.n_states)
+        count = np.bincount(state, m.occupancy, minlength=model.n_states)
+        by_state = np.divide(mass, count, out=np.full(mass.size, np.nan), where=count > 0)
+        cmass = np.bincount(cell, mass, minlength=space.n_cells)
+        ccount = np.bincount(cell, count, minlength=space.n_cells)
+        by_cell = np.divide(cmass, ccount, out=np.full(cmass.size, np.nan), where=ccount > 0)
+        out[name] = PropertyAnswer(name, sk.starts[i], float(v0), float(mean), sd,
+                                   float(mass.sum() / count.sum()), by_state, by_cell)
+    return out

@@ -1,0 +1,258 @@
+"""Particle properties along a Monte Carlo run (kernels; ``docs/definitions.md``,
+Properties along particle paths).
+
+The states of a run ([T, N], -1 where a particle is absent) and its lap counters fix every
+particle's path; the properties follow it lag by lag: over the lag from frame k-1 to k a
+particle in state s maps its value by v' = a_s v + b_s (a linear law, exact) or by
+``substeps`` RK4 steps of its custom rate function with the state held. Where a particle
+enters (an open riser's newcomer at its first frame; in a periodic riser, for
+``start = entry``, the frame after the pass up through the top that lifts its lap counter
+above every value it had) the value resets to the entry value. Each particle's values
+depend only on its own path, so the result is the same for any number of threads.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+
+@nb.njit(cache=True, parallel=True)
+def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic, out):
+    """The values of the linear properties of every particle at every frame (Numba,
+    parallel over particles).
+
+    Parameters
+    ----------
+    states, laps : ndarray of int32, shape (T, N)
+        The run (-1: absent).
+    a, b : ndarray of float64, shape (P, S)
+        The affine maps of one lag.
+    reset : ndarray of bool, shape (P,)
+        Whether each property resets on a periodic riser's pass up through the top.
+    initial : ndarray of float64, shape (P, N)
+        Values at frame 0.
+    entry_value : ndarray of float64, shape (P,)
+        The value a particle takes where it enters.
+    periodic : bool
+        A periodic riser (passes from the lap counters) or an open one (entries at the
+        first frame a newcomer is present).
+    out : ndarray of float64, shape (P, T, N)
+        Filled in place; NaN where a particle is absent.
+    """
+    n_props = a.shape[0]
+    n_frames, n = states.shape
+    block = 256                 # particles side by side: each frame's row is read in order
+    for c in nb.prange((n + block - 1) // block):
+        lo = c * block
+        hi = min(lo + block, n)
+        top = np.empty(hi - lo, np.int64)
+        for p in range(lo, hi):
+            top[p - lo] = laps[0, p]
+            for q in range(n_props):
+                out[q, 0, p] = initial[q, p] if states[0, p] >= 0 else np.nan
+        for k in range(1, n_frames):
+            for p in range(lo, hi):
+                s_prev = states[k - 1, p]
+                s = states[k, p]
+                passed = False
+                if periodic and laps[k, p] > top[p - lo]:
+                    top[p - lo] = laps[k, p]
+                    passed = True
+                for q in range(n_props):
+                    if s < 0:
+                        v = np.nan
+                    elif s_prev < 0:
+                        v = entry_value[q]
+                    elif passed and reset[q]:
+                        v = entry_value[q]
+                    else:
+                        v = a[q, s_prev] * out[q, k - 1, p] + b[q, s_prev]
+                    out[q, k, p] = v
+
+
+@nb.njit(cache=False, parallel=True)
+def custom_property(function, states, laps, parameters, lag, substeps, reset, initial,
+                    entry_value, periodic, index, values):
+    """The values of a custom-law property (Numba, parallel over particles): each lag
+    ``substeps`` classical RK4 steps of dv/dt = function(v, parameters[s], values at the
+    lag's start), the state s held.
+
+    Parameters
+    ----------
+    function : numba dispatcher
+        ``function(v, row, others) -> dv/dt``.
+    states, laps : ndarray of int32, shape (T, N)
+    parameters : ndarray of float64, shape (S, q)
+        The law's parameters per state.
+    lag : float
+        The lag (s).
+    substeps : int
+        RK4 steps per lag.
+    reset : bool
+        Reset on a periodic riser's pass up through the top.
+    initial : ndarray of float64, shape (N,)
+        Values at frame 0.
+    entry_value : float
+        The value where a particle enters.
+    periodic : bool
+    index : int
+        The property's position q in ``values``.
+    values : ndarray of float64, shape (P, T, N)
+        All properties; row ``index`` is filled in place (the earlier rows are read).
+    """
+    n_props = values.shape[0]
+    n_frames, n = states.shape
+    h = lag / substeps
+    for p in nb.prange(n):
+        others = np.empty(n_props)
+        s = states[0, p]
+        v = initial[p] if s >= 0 else np.nan
+        values[index, 0, p] = v
+        top = laps[0, p]
+        for k in range(1, n_frames):
+            s_prev = s
+            s = states[k, p]
+            if s < 0:
+                v = np.nan
+            elif s_prev < 0:
+                v = entry_value
+            else:
+                for q in range(n_props):
+                    others[q] = values[q, k - 1, p]
+                row = parameters[s_prev]
+                for _ in range(substeps):
+                    k1 = function(v, row, others)
+                    k2 = function(v + 0.5 * h * k1, row, others)
+                    k3 = function(v + 0.5 * h * k2, row, others)
+                    k4 = function(v + h * k3, row, others)
+                    v = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+                if periodic and laps[k, p] > top:
+                    top = laps[k, p]
+                    if reset:
+                        v = entry_value
+            values[index, k, p] = v
+
+
+def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndarray,
+                   periodic: bool, initial: np.ndarray | None = None) -> np.ndarray:
+    """Every property of every particle at every frame of a Monte Carlo run.
+
+    Parameters
+    ----------
+    state_kinetics : StateKinetics
+        The kinetics on the model's states.
+    lag : float
+        The lag (s).
+    states, laps : ndarray of int32, shape (T, N)
+        The run (-1 where absent).
+    periodic : bool
+        A periodic riser (resets at passes up through the top for ``start = entry``) or
+        an open one (resets where a newcomer enters).
+    initial : ndarray of float64, shape (P, N), optional
+        Values at frame 0 (default: every property's entry value).
+
+    Returns
+    -------
+    ndarray of float64, shape (P, T, N)
+        NaN where a particle is absent.
+    """
+    sk = state_kinetics
+    n_props = sk.n_properties
+    states = np.ascontiguousarray(states, dtype=np.int32)
+    laps = np.ascontiguousarray(laps, dtype=np.int32)
+    n = states.shape[1]
+    if initial is None:
+        initial = np.repeat(sk.initial[:, None], n, axis=1)
+    initial = np.ascontiguousarray(initial, dtype=np.float64)
+    reset = np.array([st != "carried" for st in sk.starts])
+    values = np.empty((n_props,) + states.shape)
+    linear = np.flatnonzero(sk.linear)
+    if linear.size:
+        a, b = sk.over(lag)
+        # all linear (the usual case): straight into the result, no copy
+        part = values if linear.size == n_props else np.empty((linear.size,) + states.shape)
+        linear_properties(states, laps, np.ascontiguousarray(a[linear]),
+                          np.ascontiguousarray(b[linear]), reset[linear],
+                          np.ascontiguousarray(initial[linear]), sk.initial[linear],
+                          bool(periodic), part)
+        if part is not values:
+            values[linear] = part
+    for q in np.flatnonzero(~sk.linear):
+        law = sk.laws[q]
+        custom_property(law.function, states, laps,
+                        np.ascontiguousarray(sk.parameters[q], dtype=np.float64), float(lag),
+                        int(law.substeps), bool(reset[q]), initial[q], float(sk.initial[q]),
+                        bool(periodic), int(q), values)
+    return values
+
+
+@nb.njit(cache=True)
+def _exit_values(states, laps, values, a, b, periodic, fresh_only, out, out_time, out_entry):
+    n_frames, n = states.shape
+    count = 0
+    for p in range(n):
+        top = laps[0, p]
+        fresh = False
+        entered = 0
+        for k in range(1, n_frames):
+            s_prev = states[k - 1, p]
+            s = states[k, p]
+            if s_prev < 0:
+                fresh = s >= 0
+                entered = k
+                continue
+            left = (s < 0) if not periodic else (laps[k, p] > top)
+            if periodic and laps[k, p] > top:
+                top = laps[k, p]
+            if left:
+                if fresh or not fresh_only:
+                    out[count] = a[s_prev] * values[k - 1, p] + b[s_prev]
+                    out_time[count] = k
+                    out_entry[count] = entered
+                    count += 1
+                fresh = True
+                entered = k
+    return count
+
+
+def exit_values(states: np.ndarray, laps: np.ndarray, values: np.ndarray, a: np.ndarray,
+                b: np.ndarray, periodic: bool, fresh_only: bool = True
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The value of a linear property at every exit of a run (the lag's map applied to the
+    value at the last frame before it).
+
+    Parameters
+    ----------
+    states, laps : ndarray of int32, shape (T, N)
+    values : ndarray of float64, shape (T, N)
+        The property (:func:`run_properties`, one row of it).
+    a, b : ndarray of float64, shape (S,)
+        Its affine maps of one lag.
+    periodic : bool
+        Exits are passes up through the top to a new lap maximum (else leaving an open
+        riser).
+    fresh_only : bool, optional
+        Only residences that began in the run (an entry seen), the ones whose start value
+        is the entry value.
+
+    Returns
+    -------
+    values : ndarray of float64, shape (E,)
+    frames : ndarray of int64, shape (E,)
+        The frame of each exit (the first after it).
+    entries : ndarray of int64, shape (E,)
+        The frame its residence began (0 for one under way at the start). A run of K lags
+        sees only residences that end in it: to average over residences without favouring
+        the short ones, keep those that began early enough to have ended.
+    """
+    states = np.ascontiguousarray(states, dtype=np.int32)
+    out = np.empty(states.size)
+    frames = np.empty(states.size, np.int64)
+    entries = np.empty(states.size, np.int64)
+    count = _exit_values(states, np.ascontiguousarray(laps, dtype=np.int32),
+                         np.ascontiguousarray(values, dtype=np.float64),
+                         np.ascontiguousarray(a, dtype=np.float64),
+                         np.ascontiguousarray(b, dtype=np.float64), bool(periodic),
+                         bool(fresh_only), out, frames, entries)
+    return out[:count].copy(), frames[:count].copy(), entries[:count].copy()

@@ -1,0 +1,243 @@
+"""Exact answers of linear kinetics on small chains against hand-computed values, and the
+Monte Carlo against them."""
+
+import numpy as np
+import pytest
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics import Constant, Deactivation, FirstOrder, HeatExchange, Kinetics, Property
+from cfbmarkov.markov.kinetics_exact import exact_kinetics, exit_moments
+from cfbmarkov.markov.kinetics_mc import exit_values, run_properties
+from cfbmarkov.markov.model import MarkovModel
+from cfbmarkov.markov.open_flow import OpenFlow
+from cfbmarkov.markov.states import CellGrid
+
+LAG = 0.1
+
+
+def periodic_model(u=0.3, w=0.4):
+    """Two states up a periodic riser: 0 (bottom) -> 1 with probability u a lag; 1 leaves
+    through the top back to 0 with probability w (a pass up)."""
+    p = np.array([[1 - u, u], [w, 1 - w]])
+    up = np.array([[0.0, 0.0], [1.0, 0.0]])
+    zeros = np.zeros((2, 2), np.int64)
+    return MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 2, 0.1, 1.0), LAG,
+                       estimator="given", pass_fractions=(up, np.zeros((2, 2))))
+
+
+def open_model(r=0.25, inflow=2.0):
+    """One state that particles leave with probability r a lag."""
+    p = np.array([[1.0]])
+    zeros = np.zeros((1, 1), np.int64)
+    flow = OpenFlow(np.array([r]), np.array([1]), np.array([1]), inflow)
+    return MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 1, 0.1, 1.0), LAG,
+                       estimator="given", open_flow=flow)
+
+
+def kinetics(rates, start="entry", law="first-order", temps=(0.0, 0.0), initial=None,
+             wall=None):
+    table = np.array([[0, i, k] for i, k in enumerate(rates)], dtype=float)
+    from cfbmarkov.kinetics import ByCell
+    if law == "heat-exchange":
+        params = {"coefficient": ByCell(table),
+                  "temperature": ByCell(np.array([[0, i, t] for i, t in enumerate(temps)],
+                                                 dtype=float))}
+        law_obj = HeatExchange(wall)
+    else:
+        params = {"rate": ByCell(table)}
+        law_obj = FirstOrder() if law == "first-order" else Deactivation()
+    return Kinetics((Property("v", law_obj, params, start, initial),))
+
+
+def geometric(a, u):
+    """E[a^n] (and helpers) for n >= 1 geometric with success probability u."""
+    return a * u / (1 - a * (1 - u))
+
+
+def test_affine_general_case_against_path_sums():
+    # an independent summation over path lengths of the moments on a 2-state chain
+    q = np.array([[0.2, 0.3], [0.1, 0.4]])
+    r = 1 - q.sum(1)
+    e = np.array([0.7, 0.3])
+    a, b = np.array([0.9, 0.5]), np.array([0.1, 0.3])
+    m = exit_moments(q, r, e, a, b)
+    v0 = 0.2
+    m0, m1, m2 = e.copy(), e * v0, e * v0 * v0
+    ex = np.zeros(3)
+    mass = np.zeros(2)
+    for _ in range(200):
+        mass += m1
+        n1, n2 = a * m1 + b * m0, a * a * m2 + 2 * a * b * m1 + b * b * m0
+        ex += [r @ m0, r @ n1, r @ n2]
+        m0, m1, m2 = m0 @ q, n1 @ q, n2 @ q
+    assert ex[0] == pytest.approx(1.0, abs=1e-14)
+    assert m.exit_mean(v0) == pytest.approx(ex[1], abs=1e-12)
+    assert m.exit_second(v0) == pytest.approx(ex[2], abs=1e-12)
+    np.testing.assert_allclose(v0 * m.mass_per_start + m.mass_rest, mass, atol=1e-12)
+
+
+@pytest.mark.parametrize("law", ["first-order", "deactivation"])
+def test_open_riser_one_state(law):
+    r, k = 0.25, 2.0
+    a = np.exp(-k * LAG)
+    ea = geometric(a, r)                    # E[a^n], n = lags to the exit
+    ea2 = geometric(a * a, r)
+    out = exact_kinetics(open_model(r), kinetics([k], law=law))["v"]
+    mean, second = (1 - ea, 1 - 2 * ea + ea2) if law == "first-order" else (ea, ea2)
+    assert out.exit_mean == pytest.approx(mean, abs=1e-12)
+    assert out.exit_sd == pytest.approx(np.sqrt(second - mean ** 2), abs=1e-12)
+    # the bed: a particle j lags after its entry (weight (1-r)^j) holds 1 - a^j (or a^j)
+    bed = r / (1 - a * (1 - r))             # sum_j (1-r)^j r a^j
+    assert out.bed_mean == pytest.approx(1 - bed if law == "first-order" else bed, abs=1e-12)
+
+
+def test_open_riser_heat_exchange():
+    r, h, t_gas, t0 = 0.25, 3.0, 800.0, 300.0
+    a = np.exp(-h * LAG)
+    out = exact_kinetics(open_model(r), kinetics([h], law="heat-exchange", temps=[t_gas],
+                                                 initial=t0))["v"]
+    ea, ea2 = geometric(a, r), geometric(a * a, r)
+    mean = t_gas + (t0 - t_gas) * ea
+    second = t_gas ** 2 + 2 * t_gas * (t0 - t_gas) * ea + (t0 - t_gas) ** 2 * ea2
+    assert out.exit_mean == pytest.approx(mean, abs=1e-9)
+    assert out.exit_sd == pytest.approx(np.sqrt(second - mean ** 2), rel=1e-10)
+
+
+def test_carried_needs_a_periodic_riser_and_a_relaxation():
+    with pytest.raises(InputError, match="needs a periodic riser"):
+        exact_kinetics(open_model(), kinetics([1.0], start="carried"))
+    with pytest.raises(InputError, match="no steady state"):
+        exact_kinetics(periodic_model(), kinetics([0.0, 0.0], start="carried"))
+
+
+def _periodic_hand(u, w, k0, k1, t0, t1, v0):
+    """Closed forms for the 2-state periodic ladder: n0 lags in 0, then n1 in 1."""
+    a0, a1 = np.exp(-k0 * LAG), np.exp(-k1 * LAG)
+    e0, e1 = geometric(a0, u), geometric(a1, w)
+    f0, f1 = geometric(a0 * a0, u), geometric(a1 * a1, w)
+    # v1 = t0 + (v0 - t0) A0, v = t1 + (v1 - t1) A1 (A0, A1 independent)
+    mean = t1 + (t0 + (v0 - t0) * e0 - t1) * e1
+    x1 = t0 - t1                              # v1 - t1 = x1 + (v0 - t0) A0
+    y = v0 - t0
+    second = (t1 ** 2 + 2 * t1 * (x1 + y * e0) * e1
+              + (x1 ** 2 + 2 * x1 * y * e0 + y * y * f0) * f1)
+    return mean, second, (e0, e1)
+
+
+@pytest.mark.parametrize("law", ["first-order", "deactivation", "heat-exchange"])
+def test_periodic_two_states(law):
+    u, w, k0, k1 = 0.3, 0.4, 1.5, 6.0
+    if law == "first-order":
+        t, v0, temps, initial = (1.0, 1.0), 0.0, (0, 0), None
+    elif law == "deactivation":
+        t, v0, temps, initial = (0.0, 0.0), 1.0, (0, 0), None
+    else:
+        t, v0, temps, initial = (700.0, 900.0), 300.0, (700.0, 900.0), 300.0
+    mean, second, (e0, e1) = _periodic_hand(u, w, k0, k1, *t, v0)
+    out = exact_kinetics(periodic_model(u, w), kinetics([k0, k1], law=law, temps=temps,
+                                                        initial=initial))["v"]
+    assert out.exit_mean == pytest.approx(mean, abs=1e-12 * max(1, abs(mean)))
+    assert out.exit_sd == pytest.approx(np.sqrt(second - mean ** 2), abs=1e-10)
+    # the bed per state: in 0, j lags after entry; in 1, j lags after arriving there
+    a0, a1 = np.exp(-k0 * LAG), np.exp(-k1 * LAG)
+    g0 = u / (1 - a0 * (1 - u))              # E[a0^j] over the lags j spent in 0
+    g1 = w / (1 - a1 * (1 - w))
+    bed0 = t[0] + (v0 - t[0]) * g0
+    bed1 = t[1] + (t[0] + (v0 - t[0]) * e0 - t[1]) * g1
+    np.testing.assert_allclose(out.bed_mean_by_state, [bed0, bed1], rtol=1e-12)
+    pi = np.array([w, u]) / (u + w)
+    assert out.bed_mean == pytest.approx(pi @ [bed0, bed1], rel=1e-12)
+
+
+def test_periodic_carried_is_the_fixed_point():
+    u, w, k0, k1 = 0.3, 0.4, 1.5, 6.0
+    t = (700.0, 900.0)
+    m1 = _periodic_hand(u, w, k0, k1, *t, 1.0)[0]
+    m0 = _periodic_hand(u, w, k0, k1, *t, 0.0)[0]
+    fixed = m0 / (1 - (m1 - m0))
+    out = exact_kinetics(periodic_model(u, w), kinetics([k0, k1], law="heat-exchange",
+                                                        temps=t, initial=300.0,
+                                                        start="carried"))["v"]
+    assert out.exit_mean == pytest.approx(fixed, rel=1e-12)
+    assert out.entry_value == pytest.approx(fixed, rel=1e-12)
+
+
+def test_wall_temperature_replaces_the_wall_cells():
+    space = CellGrid(3, 1, 0.09, 1.0)
+    k = Kinetics((Property("T", HeatExchange(500.0), {"coefficient": Constant(1.0),
+                                                       "temperature": Constant(800.0)},
+                           initial=300.0),))
+    np.testing.assert_array_equal(k.per_state(space).target[0], [500.0, 800.0, 500.0])
+
+
+def _draw(p, n, seed):
+    rng = np.random.default_rng(seed)
+    return rng.choice(p.size, size=n, p=p / p.sum()).astype(np.int32)
+
+
+@pytest.mark.parametrize("law", ["first-order", "heat-exchange"])
+def test_monte_carlo_agrees_periodic(law):
+    model = periodic_model()
+    temps, initial = ((700.0, 900.0), 300.0) if law == "heat-exchange" else ((0, 0), None)
+    kin = kinetics([1.5, 6.0], law=law, temps=temps, initial=initial)
+    exact = exact_kinetics(model, kin)["v"]
+    states, laps = model.monte_carlo(_draw(model.stationary_distribution, 4000, 1), 400,
+                                     seed=3)
+    sk = kin.per_state(model.state_space)
+    values = run_properties(sk, LAG, states, laps, periodic=True)
+    a, b = sk.over(LAG)
+    exits, _, entered = exit_values(states, laps, values[0], a[0], b[0], periodic=True)
+    exits = exits[entered < 300]        # residences that have ended (P(RT > 100 lags) ~ 1e-12)
+    se = exits.std(ddof=1) / np.sqrt(exits.size)
+    assert exits.size > 10000
+    assert abs(exits.mean() - exact.exit_mean) < 3 * se
+    assert exits.std(ddof=1) == pytest.approx(exact.exit_sd, rel=0.03)
+
+
+def test_monte_carlo_agrees_open():
+    model = open_model(0.25, inflow=50.0)
+    kin = kinetics([2.0])
+    exact = exact_kinetics(model, kin)["v"]
+    states, laps = model.monte_carlo(np.zeros(100, np.int32), 600, seed=5)
+    sk = kin.per_state(model.state_space)
+    values = run_properties(sk, LAG, states, laps, periodic=False)
+    a, b = sk.over(LAG)
+    exits, _, entered = exit_values(states, laps, values[0], a[0], b[0], periodic=False)
+    exits = exits[(entered > 0) & (entered < 500)]
+    se = exits.std(ddof=1) / np.sqrt(exits.size)
+    assert exits.size > 20000
+    assert abs(exits.mean() - exact.exit_mean) < 3 * se
+    # present particles: NaN exactly where absent
+    assert np.array_equal(np.isnan(values[0]), states < 0)
+
+
+def test_monte_carlo_values_depend_on_each_particle_alone():
+    model = periodic_model()
+    sk = kinetics([1.5, 6.0]).per_state(model.state_space)
+    states, laps = model.monte_carlo(np.array([0, 1, 0, 1] * 50, np.int32), 50, seed=2)
+    whole = run_properties(sk, LAG, states, laps, periodic=True)
+    part = run_properties(sk, LAG, states[:, 7:9], laps[:, 7:9], periodic=True)
+    np.testing.assert_array_equal(whole[:, :, 7:9], part)
+
+
+def test_custom_law_integrates_like_the_linear_one():
+    import numba as nb
+
+    from cfbmarkov.kinetics import Custom
+
+    @nb.njit
+    def first_order(v, row, others):
+        return row[0] * (1.0 - v)
+
+    model = periodic_model()
+    states, laps = model.monte_carlo(np.array([0, 1] * 20, np.int32), 60, seed=4)
+    linear = kinetics([1.5, 6.0]).per_state(model.state_space)
+    from cfbmarkov.kinetics import ByCell
+    table = np.array([[0, 0, 1.5], [0, 1, 6.0]])
+    custom = Kinetics((Property("v", Custom(first_order, ("rate",), substeps=8),
+                                {"rate": ByCell(table)}),)).per_state(model.state_space)
+    exact = run_properties(linear, LAG, states, laps, periodic=True)
+    rk4 = run_properties(custom, LAG, states, laps, periodic=True)
+    np.testing.assert_allclose(rk4, exact, atol=1e-6)   # RK4: error ~ (k lag / 8)^4
+    with pytest.raises(InputError, match="no exact answer"):
+        exact_kinetics(model, custom)

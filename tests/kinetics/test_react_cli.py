@@ -1,0 +1,114 @@
+"""``cfbmarkov react`` on a small generated run, and bad kinetics files."""
+
+import json
+
+import h5py
+import numpy as np
+import pytest
+
+from cfbmarkov.cli import main
+from cfbmarkov.kinetics import load_kinetics
+from cfbmarkov.markov.states import CellGrid
+from cfbmarkov.synthetic import RiserFlow, write_run
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    folder = tmp_path_factory.mktemp("react")
+    run = write_run(folder / "run.h5", RiserFlow(columns=3, rows=6), 60, 2.0, seed=1)
+    model = folder / "model.h5"
+    assert main(["fit", str(run), "--cells", "3x6", "--window", "0:2", "-o", str(model)]) == 0
+    return folder, run, model
+
+
+def _write(folder, text, rates=None):
+    path = folder / "kin.toml"
+    path.write_text(text)
+    if rates is not None:
+        (folder / "rates.csv").write_text(rates)
+    return path
+
+
+GOOD = """
+[[property]]
+name = "X"
+law = "first-order"
+rate_by_cell = "rates.csv"
+
+[[property]]
+name = "T"
+law = "heat-exchange"
+coefficient = 2.0
+temperature = 800.0
+wall_temperature = 600.0
+initial = 300.0
+"""
+RATES = "col,row,rate\n" + "".join(f"{c},{r},{0.2 if c != 1 else 2.0}\n"
+                                     for r in range(6) for c in range(3))
+
+
+def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
+    folder, run, model = fitted
+    kin = _write(tmp_path, GOOD, RATES)
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    x = out["properties"]["X"]["exit_mean"]
+    assert 0 < x < 1
+    assert 300 < out["properties"]["T"]["exit_mean"] < 800
+    pred = tmp_path / "pred.h5"
+    assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "1", "-o", str(pred), "-q"]) == 0
+    with h5py.File(pred) as f:
+        values = f["properties/X"][()]
+        assert f["properties/X"].attrs["start"] == "entry"
+        assert values.shape == f["frames/lap"].shape
+        assert np.all((values >= 0) & (values <= 1))
+        assert np.all(np.diff(values, axis=0)[np.diff(f["frames/lap"][()], axis=0) == 0]
+                      >= -1e-15)      # conversion only grows between passes
+
+
+@pytest.mark.parametrize("text, rates, message", [
+    ('[[property]]\nname = "X"\nlaw = "second-order"\nrate = 1.0\n', None, "unknown law"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = -1.0\n', None, "rate = -1.0"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = nan\n', None, "finite"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\nspeed = 2\n', None,
+     "unknown key 'speed'"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n0,0,1.0\n", "misses 17 cell"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n" + "".join(f"{c},{r},1\n" for r in range(6) for c in range(3))
+     + "7,0,1\n", "outside the grid"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,rate\n0,1\n", "columns col,rate"),
+    ('[[property]]\nname = "X"\nlaw = "heat-exchange"\ncoefficient = 1.0\n'
+     'temperature = 800\n', None, "initial"),
+    ('[[property]\nname = "X"\n', None, "not valid TOML"),
+])
+def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rates, message):
+    _, _, model = fitted
+    kin = _write(tmp_path, text, rates)
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and message in err and str(kin) in err
+
+
+def test_rate_from_a_cell_field():
+    from cfbmarkov.kinetics import CellFields
+
+    space = CellGrid(3, 2, 0.09, 1.0)
+    path = _tmp_toml('[[property]]\nname = "X"\nlaw = "first-order"\n'
+                     'rate_from = "solids_fraction"\nrate_dense = 0.1\nrate_dilute = 1.0\n'
+                     'threshold = 0.05\n')
+    kin = load_kinetics(path)
+    fields = CellFields(np.array([0.2, 0.01, 0.2, 0.1, 0.02, 0.1]), np.zeros(6), np.zeros(6))
+    np.testing.assert_array_equal(kin.per_state(space, fields).rate[0],
+                                  [0.1, 1.0, 0.1, 0.1, 1.0, 0.1])
+
+
+def _tmp_toml(text):
+    import tempfile
+    from pathlib import Path
+
+    path = Path(tempfile.mkdtemp()) / "kin.toml"
+    path.write_text(text)
+    return path
