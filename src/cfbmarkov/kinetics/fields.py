@@ -1,0 +1,204 @@
+"""Per-cell parameters of particle properties and the cell fields they may depend on.
+
+A parameter of a rate law is given per cell of the model's grid in one of three ways
+(``docs/definitions.md``, Properties along particle paths):
+
+- :class:`Constant`: one value everywhere (``rate = 0.4``);
+- :class:`ByCell`: a table with one row per cell, columns ``col,row[,depth],VALUE``
+  (``rate_by_cell = "rates.csv"``);
+- :class:`FromField`: a two-level function of one of the fitting window's time-averaged
+  cell fields (:class:`CellFields`): the ``dense`` value where the cell is on the dense
+  side of ``threshold``, else the ``dilute`` value (``rate_from = "solids_fraction"``).
+  The dense side is a solids fraction >= threshold, a distance to the wall <= threshold
+  (m), or a mean vertical velocity <= threshold (m/s: the falling wall layers).
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+
+#: the cell fields a parameter may be a function of, and the side that counts as dense
+FIELDS = {"solids_fraction": "above", "wall_distance": "below", "vertical_velocity": "below"}
+
+
+@dataclass(frozen=True)
+class CellFields:
+    """Time-averaged fields of the fitting window per cell of a grid.
+
+    Attributes
+    ----------
+    solids_fraction : ndarray of float64, shape (C,)
+        Mean solids volume fraction per cell (C = m x d x n cells, in the grid's cell order
+        (row*d + k)*m + col).
+    wall_distance : ndarray of float64, shape (C,)
+        Distance (m) from the cell's centre to the nearest side wall.
+    vertical_velocity : ndarray of float64, shape (C,)
+        Mean vertical particle velocity (m/s) in the cell; NaN where no particle was seen.
+
+    Raises
+    ------
+    InputError
+        If the arrays are not all 1D of the same length.
+    """
+
+    solids_fraction: np.ndarray
+    wall_distance: np.ndarray
+    vertical_velocity: np.ndarray
+
+    def __post_init__(self):
+        n = None
+        for name in FIELDS:
+            value = np.array(getattr(self, name), dtype=np.float64)
+            if value.ndim != 1 or (n is not None and value.size != n):
+                raise InputError(f"cell field {name} must be one number per cell, like the "
+                                 "others")
+            n = value.size
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+
+    @property
+    def n_cells(self) -> int:
+        """Number of cells C."""
+        return int(self.solids_fraction.size)
+
+    def field(self, name: str) -> np.ndarray:
+        """The field ``name`` (one of :data:`FIELDS`), float64 [C]."""
+        return getattr(self, name)
+
+
+class CellParameter(ABC):
+    """A law parameter per cell of a grid."""
+
+    @abstractmethod
+    def per_cell(self, space, fields: CellFields | None) -> np.ndarray:
+        """The parameter per cell of ``space``'s grid, float64 [C].
+
+        Parameters
+        ----------
+        space : StateSpace
+            The state space whose cell grid (columns, depth columns, rows) the values fit.
+        fields : CellFields or None
+            The fitting window's cell fields (needed by :class:`FromField` only).
+
+        Raises
+        ------
+        InputError
+            If a table does not fit the grid, or fields are needed but not given.
+        """
+
+    @abstractmethod
+    def describe(self):
+        """The source as JSON-serialisable text."""
+
+
+@dataclass(frozen=True)
+class Constant(CellParameter):
+    """The same value in every cell."""
+
+    value: float
+
+    def per_cell(self, space, fields=None):
+        return np.full(space.n_cells, float(self.value))
+
+    def describe(self):
+        return float(self.value)
+
+
+@dataclass(frozen=True)
+class ByCell(CellParameter):
+    """A value per cell from a table.
+
+    Attributes
+    ----------
+    table : ndarray of float64, shape (R, 3) or (R, 4)
+        Rows col, row[, depth], value; every cell of the grid exactly once.
+    source : str
+        Where the table came from (a file name), for messages.
+    key : str
+        The key that named it (``rate_by_cell``), for messages.
+    """
+
+    table: np.ndarray
+    source: str = "table"
+    key: str = "value_by_cell"
+
+    def per_cell(self, space, fields=None):
+        t = np.asarray(self.table, dtype=np.float64)
+        cols = t[:, 0].astype(np.int64)
+        rows = t[:, 1].astype(np.int64)
+        depth = t[:, 2].astype(np.int64) if t.shape[1] == 4 else np.zeros(len(t), np.int64)
+        m, d, n = space.columns, space.depth_columns, space.rows
+        where = f"{self.source} ({self.key})"
+        if t.shape[1] == 4 and d == 1 and np.any(depth != 0):
+            raise InputError(f"{where}: a depth column for a 2D grid of {space.grid_text()}; "
+                             "give col,row,VALUE")
+        if t.shape[1] == 3 and d > 1:
+            raise InputError(f"{where}: the grid {space.grid_text()} has {d} depth columns; "
+                             "give col,row,depth,VALUE")
+        bad = (cols < 0) | (cols >= m) | (rows < 0) | (rows >= n) | (depth < 0) | (depth >= d)
+        if bad.any():
+            i = int(np.flatnonzero(bad)[0])
+            raise InputError(f"{where}: cell col {cols[i]}, row {rows[i]} is outside the "
+                             f"grid {space.grid_text()} (col 0..{m - 1}, row 0..{n - 1}); "
+                             "give one row per cell of the model's grid")
+        cell = (rows * d + depth) * m + cols
+        seen = np.bincount(cell, minlength=space.n_cells)
+        if seen.max() > 1 or seen.min() < 1:
+            what = ("repeats a cell" if seen.max() > 1
+                    else f"misses {int(np.sum(seen == 0))} cell(s)")
+            raise InputError(f"{where}: the table {what} of the grid {space.grid_text()}; "
+                             f"give each of its {space.n_cells} cells exactly once")
+        out = np.empty(space.n_cells)
+        out[cell] = t[:, -1]
+        return out
+
+    def describe(self):
+        return {"by_cell": self.source}
+
+
+@dataclass(frozen=True)
+class FromField(CellParameter):
+    """``dense`` on the dense side of ``threshold`` of a cell field, else ``dilute``
+    (module docstring; a cell where the field is NaN, never visited, takes ``dilute``).
+    """
+
+    field: str
+    dense: float
+    dilute: float
+    threshold: float
+    key: str = "value_from"
+
+    def per_cell(self, space, fields=None):
+        if fields is None:
+            raise InputError(f"{self.key} = {self.field!r} needs the fitting window's cell "
+                             "fields: give the trajectory file (CellFields)")
+        value = fields.field(self.field)
+        if value.size != space.n_cells:
+            raise InputError(f"cell fields of {value.size} cells for a grid of "
+                             f"{space.n_cells} ({space.grid_text()})")
+        with np.errstate(invalid="ignore"):
+            dense = (value >= self.threshold if FIELDS[self.field] == "above"
+                     else value <= self.threshold)
+        return np.where(dense, float(self.dense), float(self.dilute))
+
+    def describe(self):
+        return {"from": self.field, "dense": self.dense, "dilute": self.dilute,
+                "threshold": self.threshold}
+
+
+def wall_cells(space) -> np.ndarray:
+    """Whether each cell of ``space``'s grid touches a side wall (its column is the first or
+    the last across, or in the depth of a 3D grid), bool [C]."""
+    c = np.arange(space.n_cells)
+    m, d = space.columns, space.depth_columns
+    col = c % m
+    depth = (c // m) % d
+    wall = (col == 0) | (col == m - 1)
+    if d > 1:
+        wall |= (depth == 0) | (depth == d - 1)
+    return wall

@@ -1,0 +1,439 @@
+"""Kinetics of particle properties: what each particle carries and how it changes
+(``docs/definitions.md``, Properties along particle paths; ``docs/how-to/kinetics.md``).
+
+A :class:`Kinetics` is a tuple of :class:`Property` (a name, a rate law, its parameters per
+cell, where the property starts and its start value). :meth:`Kinetics.per_state` resolves
+the parameters on a model's state space into a :class:`StateKinetics`: per state the rate
+k and limit v_inf of every linear law and, over a lag, the exact affine maps.
+:func:`load_kinetics` reads a kinetics file (TOML).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics.fields import (FIELDS, ByCell, CellFields, CellParameter, Constant,
+                                       FromField, wall_cells)
+from cfbmarkov.kinetics.laws import LAWS, Custom, HeatExchange, Law, affine_map
+
+#: where a property starts: reset at each entry through the inlet (a fresh feed), carried
+#: across passes (a circulating inventory), or the reference's values at the start
+STARTS = ("entry", "carried", "reference")
+
+
+@dataclass(frozen=True)
+class Property:
+    """One scalar carried by every particle.
+
+    Attributes
+    ----------
+    name : str
+        Its name (a dataset name in prediction files: letters, digits, ``_``, ``-``).
+    law : Law
+        Its rate law.
+    parameters : Mapping of str to CellParameter
+        Each of ``law.parameter_names``, per cell.
+    start : {"entry", "carried", "reference"}
+        ``entry``: the value resets to ``initial`` at each entry through the inlet (open
+        riser) or pass up through the top that starts a residence (periodic riser);
+        ``carried``: a particle keeps its value across passes (a circulating inventory);
+        ``reference``: the particles present at the start take the reference's values, the
+        entering ones ``initial``.
+    initial : float
+        The value at entry (and of every particle at the start of a Monte Carlo run without
+        reference values).
+
+    Raises
+    ------
+    InputError
+        For a bad name, start, a parameter missing or unknown, or a non-finite start value.
+    """
+
+    name: str
+    law: Law
+    parameters: Mapping[str, CellParameter]
+    start: str = "entry"
+    initial: float | None = None
+
+    def __post_init__(self):
+        if not (isinstance(self.name, str) and self.name
+                and all(c.isalnum() or c in "_-" for c in self.name)):
+            raise InputError(f"property name {self.name!r}: use letters, digits, _ and -")
+        if self.start not in STARTS:
+            raise InputError(f"property {self.name}: start {self.start!r} is not one of "
+                             f"{', '.join(STARTS)}")
+        names = set(self.law.parameter_names)
+        given = set(self.parameters)
+        if names - given:
+            raise InputError(f"property {self.name}: law {self.law.key} needs "
+                             f"{', '.join(sorted(names - given))}")
+        if given - names:
+            raise InputError(f"property {self.name}: law {self.law.key} takes no "
+                             f"{', '.join(sorted(given - names))}")
+        initial = self.initial
+        if initial is None:
+            initial = (self.law.initial if isinstance(self.law, Custom)
+                       else self.law.default_initial)
+        if initial is None or not math.isfinite(float(initial)):
+            raise InputError(f"property {self.name}: give its finite start value, initial = "
+                             "... (the feed's value)")
+        object.__setattr__(self, "initial", float(initial))
+        object.__setattr__(self, "parameters", dict(self.parameters))
+
+    def per_cell(self, space, fields: CellFields | None = None) -> dict[str, np.ndarray]:
+        """Each parameter per cell of ``space``'s grid, checked (float64 [C] each).
+
+        Raises
+        ------
+        InputError
+            If a value is not finite, or negative where the law needs it >= 0.
+        """
+        out = {}
+        signed = self.law.signed_parameters()
+        for name in self.law.parameter_names:
+            value = self.parameters[name].per_cell(space, fields)
+            if not np.all(np.isfinite(value)):
+                raise InputError(f"property {self.name}: {name} is not finite in some cell")
+            if name not in signed and value.min() < 0:
+                raise InputError(f"property {self.name}: {name} {value.min():g} < 0; rates "
+                                 "and coefficients must be >= 0")
+            out[name] = value
+        return out
+
+    def describe(self) -> dict:
+        """The property as JSON-serialisable text."""
+        return {"name": self.name, **self.law.describe(), "start": self.start,
+                "initial": self.initial,
+                "parameters": {k: v.describe() for k, v in self.parameters.items()}}
+
+
+@dataclass(frozen=True)
+class StateKinetics:
+    """The kinetics resolved on a state space: per property and state.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The properties' names (P).
+    starts : tuple of str
+        Their start rules.
+    initial : ndarray of float64, shape (P,)
+        Their values at entry.
+    linear : ndarray of bool, shape (P,)
+        Whether each law is a linear relaxation.
+    rate, target : ndarray of float64, shape (P, S)
+        k_s (1/s) and v_inf,s of the linear laws (NaN rows for a custom law).
+    parameters : tuple of ndarray of float64, shape (S, q)
+        Each property's parameters per state (columns in the law's order).
+    laws : tuple of Law
+        The laws.
+    """
+
+    names: tuple
+    starts: tuple
+    initial: np.ndarray
+    linear: np.ndarray
+    rate: np.ndarray
+    target: np.ndarray
+    parameters: tuple
+    laws: tuple
+
+    @property
+    def n_properties(self) -> int:
+        """Number of properties P."""
+        return len(self.names)
+
+    def over(self, lag: float) -> tuple[np.ndarray, np.ndarray]:
+        """The exact affine maps of one lag, v' = a_s v + b_s, of every linear law.
+
+        Parameters
+        ----------
+        lag : float
+            The lag (s).
+
+        Returns
+        -------
+        a, b : ndarray of float64, shape (P, S)
+            a = exp(-k_s lag), b = v_inf,s (1 - a) (NaN rows for a custom law).
+        """
+        return affine_map(self.rate, self.target, lag)
+
+    def index(self, name: str) -> int:
+        """Position of the property ``name``.
+
+        Raises
+        ------
+        InputError
+            If there is none of that name.
+        """
+        if name not in self.names:
+            raise InputError(f"no property {name!r} (the kinetics has "
+                             f"{', '.join(self.names)})")
+        return self.names.index(name)
+
+
+@dataclass(frozen=True)
+class Kinetics:
+    """The properties every particle carries, in order.
+
+    Attributes
+    ----------
+    properties : tuple of Property
+        At least one, with distinct names.
+    source : str
+        Where it came from (a file name), for messages.
+
+    Raises
+    ------
+    InputError
+        If there is no property or two share a name.
+    """
+
+    properties: tuple
+    source: str = ""
+
+    def __post_init__(self):
+        props = tuple(self.properties)
+        if not props:
+            raise InputError(f"{self.source or 'kinetics'}: no property; add a [[property]] "
+                             "table")
+        names = [p.name for p in props]
+        if len(set(names)) != len(names):
+            raise InputError(f"{self.source or 'kinetics'}: two properties are named "
+                             f"{next(n for n in names if names.count(n) > 1)!r}")
+        object.__setattr__(self, "properties", props)
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        """The properties' names."""
+        return tuple(p.name for p in self.properties)
+
+    @property
+    def linear(self) -> bool:
+        """Whether every law is a linear relaxation (exact answers exist)."""
+        return all(p.law.linear for p in self.properties)
+
+    def per_state(self, state_space, cell_fields: CellFields | None = None) -> StateKinetics:
+        """Resolve the parameters on a state space (cells to states through
+        ``state_space.cell_of_state``).
+
+        Parameters
+        ----------
+        state_space : StateSpace
+            The model's states.
+        cell_fields : CellFields, optional
+            The fitting window's time-averaged cell fields, for parameters given as a
+            function of them.
+
+        Returns
+        -------
+        StateKinetics
+
+        Raises
+        ------
+        InputError
+            If a table does not fit the grid, a parameter is negative or not finite, or
+            cell fields are needed but not given.
+        """
+        cell = np.asarray(state_space.cell_of_state, dtype=np.int64)
+        wall = wall_cells(state_space)
+        s = cell.size
+        p = len(self.properties)
+        rate = np.full((p, s), np.nan)
+        target = np.full((p, s), np.nan)
+        params = []
+        for i, prop in enumerate(self.properties):
+            try:
+                values = prop.per_cell(state_space, cell_fields)
+            except InputError as exc:
+                raise InputError(f"{self.source}: {exc}" if self.source else str(exc)) from None
+            params.append(np.stack([values[n][cell] for n in prop.law.parameter_names], axis=1)
+                          if values else np.zeros((s, 0)))
+            if prop.law.linear:
+                k, v_inf = prop.law.relaxation(values, wall)
+                rate[i], target[i] = k[cell], v_inf[cell]
+        for arr in (rate, target):
+            arr.setflags(write=False)
+        return StateKinetics(self.names, tuple(pr.start for pr in self.properties),
+                             np.array([pr.initial for pr in self.properties]),
+                             np.array([pr.law.linear for pr in self.properties]),
+                             rate, target, tuple(params),
+                             tuple(pr.law for pr in self.properties))
+
+    def describe(self) -> list[dict]:
+        """The properties as JSON-serialisable text."""
+        return [p.describe() for p in self.properties]
+
+
+_PROPERTY_KEYS = {"name", "law", "start", "initial", "threshold", "wall_temperature"}
+
+
+def load_kinetics(path: str | os.PathLike) -> Kinetics:
+    """Read a kinetics file (TOML; ``docs/how-to/kinetics.md``).
+
+    One ``[[property]]`` table per scalar: ``name``, ``law`` (``first-order``,
+    ``deactivation``, ``heat-exchange``), each parameter of the law (``rate``; for heat
+    exchange ``coefficient`` and ``temperature``, and optionally ``wall_temperature``) as a
+    constant (``rate = 0.4``), a per-cell table (``rate_by_cell = "rates.csv"``, columns
+    ``col,row[,depth],rate`` -- or ``value`` -- relative to the kinetics file) or a
+    function of a cell field (``rate_from = "solids_fraction"``, ``rate_dense``,
+    ``rate_dilute`` and ``threshold``), ``start`` (``entry``, ``carried``, ``reference``;
+    default ``entry``) and ``initial`` (the value at entry).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The kinetics file.
+
+    Returns
+    -------
+    Kinetics
+
+    Raises
+    ------
+    InputError
+        One line naming the file, the key and the fix: a file that cannot be read or
+        parsed, an unknown law or key, a missing parameter, a negative or non-finite value,
+        a bad table.
+    """
+    path = Path(path)
+    name = str(path)
+    try:
+        data = tomllib.loads(path.read_text())
+    except OSError as exc:
+        raise InputError(f"cannot read kinetics file {name}: {exc.strerror or exc}") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise InputError(f"kinetics file {name} is not valid TOML: {exc}") from None
+    unknown = set(data) - {"property"}
+    if unknown:
+        raise InputError(f"{name}: unknown key {sorted(unknown)[0]!r}; a kinetics file holds "
+                         "[[property]] tables only")
+    tables = data.get("property")
+    if not isinstance(tables, list) or not tables:
+        raise InputError(f"{name}: no [[property]] table; add one per property")
+    props = [_property(t, i, path) for i, t in enumerate(tables)]
+    return Kinetics(tuple(props), name)
+
+
+def _property(table, index: int, path: Path) -> Property:
+    where = f"{path} [[property]] {index + 1}"
+    if not isinstance(table, dict):
+        raise InputError(f"{where}: not a table")
+    if "name" in table:
+        where = f"{path} property {table['name']!r}"
+    for key in ("name", "law"):
+        if not isinstance(table.get(key), str):
+            raise InputError(f"{where}: give {key} = \"...\"")
+    law_key = table["law"]
+    if law_key not in LAWS:
+        raise InputError(f"{where}: unknown law {law_key!r}; use one of {', '.join(LAWS)}")
+    law_cls = LAWS[law_key]
+    if law_cls is HeatExchange:
+        wall = table.get("wall_temperature")
+        if wall is not None and not _finite(wall):
+            raise InputError(f"{where}: wall_temperature must be a finite number")
+        law = HeatExchange(None if wall is None else float(wall))
+    else:
+        if "wall_temperature" in table:
+            raise InputError(f"{where}: wall_temperature is for law heat-exchange only")
+        law = law_cls()
+    allowed = set(_PROPERTY_KEYS)
+    params = {}
+    for p in law.parameter_names:
+        keys = (p, f"{p}_by_cell", f"{p}_from", f"{p}_dense", f"{p}_dilute")
+        allowed.update(keys)
+        params[p] = _parameter(table, p, where, path, law)
+    unknown = sorted(set(table) - allowed)
+    if unknown:
+        raise InputError(f"{where}: unknown key {unknown[0]!r} for law {law_key}; it takes "
+                         f"{', '.join(sorted(allowed))}")
+    initial = table.get("initial")
+    if initial is not None and not _finite(initial):
+        raise InputError(f"{where}: initial must be a finite number")
+    start = table.get("start", "entry")
+    try:
+        return Property(table["name"], law, params, start, initial)
+    except InputError as exc:
+        raise InputError(f"{path}: {exc}") from None
+
+
+def _finite(value) -> bool:
+    return (isinstance(value, (int, float)) and not isinstance(value, bool)
+            and math.isfinite(value))
+
+
+def _parameter(table, p: str, where: str, path: Path, law: Law) -> CellParameter:
+    forms = [k for k in (p, f"{p}_by_cell", f"{p}_from") if k in table]
+    if len(forms) != 1:
+        raise InputError(f"{where}: give {p} exactly once, as {p} = NUMBER, {p}_by_cell = "
+                         f"\"FILE.csv\" or {p}_from = \"FIELD\""
+                         + (f" (found {', '.join(forms)})" if forms else ""))
+    key = forms[0]
+    signed = p in law.signed_parameters()
+    value = table[key]
+    if key == p:
+        if not _finite(value) or (not signed and value < 0):
+            raise InputError(f"{where}: {p} = {value!r} must be a finite number"
+                             + ("" if signed else " >= 0"))
+        return Constant(float(value))
+    if key.endswith("_by_cell"):
+        if not isinstance(value, str):
+            raise InputError(f"{where}: {key} must be a file name (CSV, relative to "
+                             f"{path.name})")
+        return ByCell(_read_table(path.parent / value, p, f"{where}: {key}", signed),
+                      str(path.parent / value), key)
+    if value not in FIELDS:
+        raise InputError(f"{where}: {key} = {value!r} is not a cell field; use one of "
+                         f"{', '.join(FIELDS)}")
+    numbers = {}
+    for k in (f"{p}_dense", f"{p}_dilute", "threshold"):
+        v = table.get(k)
+        if not _finite(v) or (k != "threshold" and not signed and v < 0):
+            raise InputError(f"{where}: {key} needs {k} = NUMBER (finite"
+                             + (")" if k == "threshold" or signed else ", >= 0)"))
+        numbers[k] = float(v)
+    return FromField(value, numbers[f"{p}_dense"], numbers[f"{p}_dilute"], numbers["threshold"],
+                     key)
+
+
+def _read_table(file: Path, p: str, where: str, signed: bool) -> np.ndarray:
+    try:
+        lines = [ln.strip() for ln in file.read_text().splitlines() if ln.strip()]
+    except OSError as exc:
+        raise InputError(f"{where}: cannot read {file}: {exc.strerror or exc}") from None
+    if not lines:
+        raise InputError(f"{where}: {file} is empty; give a header col,row[,depth],{p}")
+    header = [h.strip() for h in lines[0].split(",")]
+    if header not in (["col", "row", p], ["col", "row", "depth", p], ["col", "row", "value"],
+                      ["col", "row", "depth", "value"]):
+        raise InputError(f"{where}: {file} has columns {','.join(header)}; give "
+                         f"col,row[,depth],{p}")
+    width = len(header)
+    rows = []
+    for n, line in enumerate(lines[1:], start=2):
+        parts = line.split(",")
+        try:
+            values = [float(x) for x in parts]
+        except ValueError:
+            values = None
+        if values is None or len(values) != width:
+            raise InputError(f"{where}: {file} line {n} is not {width} numbers")
+        if any(v != int(v) or v < 0 for v in values[:-1] if math.isfinite(v)) or not all(
+                math.isfinite(v) for v in values):
+            raise InputError(f"{where}: {file} line {n}: cells are integers >= 0 and the "
+                             f"{p} finite")
+        if not signed and values[-1] < 0:
+            raise InputError(f"{where}: {file} line {n}: {p} {values[-1]:g} < 0; rates and "
+                             "coefficients must be >= 0")
+        rows.append(values)
+    if not rows:
+        raise InputError(f"{where}: {file} has no rows; give one per cell")
+    return np.array(rows, dtype=np.float64)
