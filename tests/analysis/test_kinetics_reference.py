@@ -32,10 +32,11 @@ def _plain_periodic(states, laps, times, a, b, v0, reset):
     exits = []
     n_frames, n = states.shape
     bed = np.zeros(n_frames)
-    values = np.full(n, v0)
+    values = np.full((n_frames, n), v0)
     for p in range(n):
         v, top, last = v0, laps[0, p], math.nan
         bed[0] += v / n
+        values[0, p] = v
         for k in range(1, n_frames):
             v = a[states[k - 1, p]] * v + b[states[k - 1, p]]
             while laps[k, p] > top:
@@ -46,9 +47,9 @@ def _plain_periodic(states, laps, times, a, b, v0, reset):
                 if reset:
                     v = v0
             bed[k] += v / n
-        values[p] = v
+            values[k, p] = v
     exits.sort(key=lambda e: (e[0], e[1]))
-    return exits, bed
+    return exits, bed, values
 
 
 @pytest.mark.parametrize("reset", [True, False])
@@ -60,7 +61,7 @@ def test_periodic_paths_equal_a_plain_integration(tmp_path, reset):
     a, b = _maps(space, lag)
     got = integrate_along_paths(discrete, a, b, 0.0, reset=reset, name="X")
     states, laps, times = discrete.states[::2], discrete.laps[::2], discrete.times[::2]
-    exits, bed = _plain_periodic(states, laps, times, a, b, 0.0, reset)
+    exits, bed, values = _plain_periodic(states, laps, times, a, b, 0.0, reset)
     assert got.count == len(exits) > 10
     np.testing.assert_allclose(got.exit_values, [e[2] for e in exits], rtol=0, atol=1e-13)
     np.testing.assert_allclose(got.exit_times, [e[0] for e in exits])
@@ -68,6 +69,13 @@ def test_periodic_paths_equal_a_plain_integration(tmp_path, reset):
         np.testing.assert_allclose(got.residence_times, [e[3] for e in exits])
     np.testing.assert_allclose(got.bed_mean, bed, atol=1e-13)
     assert got.times.size == times.size
+    # a Monte Carlo run's stored values stand in for the integrated ones: the same exits
+    full = np.zeros(discrete.states.shape)
+    full[::2] = values
+    full[1::2] = np.nan                            # frames between lags are never read
+    stored = integrate_along_paths(discrete, a, b, 0.0, reset=reset, stored=full)
+    np.testing.assert_allclose(stored.exit_values, got.exit_values, atol=1e-13)
+    np.testing.assert_allclose(stored.bed_mean, got.bed_mean, atol=1e-13)
 
 
 def test_open_paths_equal_a_plain_integration(tmp_path):

@@ -45,8 +45,9 @@ def _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count):
 
 
 @nb.njit(cache=True)
-def integrate_periodic(times, states, laps, a, b, v0, reset, value, cell_of_state,
-                       exit_value, exit_time, exit_residence, bed_mean, cell_sum, cell_count):
+def integrate_periodic(times, states, laps, a, b, v0, reset, value, stored, use_stored,
+                       cell_of_state, exit_value, exit_time, exit_residence, bed_mean,
+                       cell_sum, cell_count):
     """Integrate a property along the paths of a periodic riser; return the exits written.
 
     ``value`` [N] holds the values in the first frame and is advanced in place. Every frame
@@ -54,9 +55,15 @@ def integrate_periodic(times, states, laps, a, b, v0, reset, value, cell_of_stat
     records an exit (once per new level), with the time since its previous record as the
     residence time (NaN before its first record: its entry is unknown), then, with
     ``reset``, an entry at ``v0``. ``exit_*`` must hold the number of records;
-    ``bed_mean`` [T], ``cell_sum`` and ``cell_count`` [C] are filled.
+    ``bed_mean`` [T], ``cell_sum`` and ``cell_count`` [C] are filled. With
+    ``use_stored``, the values of ``stored`` [T, N] (a Monte Carlo run's) stand in each
+    frame instead of the integrated ones; an exit's value is then the lag's map of the
+    stored value in the frame before it.
     """
     n_frames, n_particles = states.shape
+    if use_stored and n_frames > 0:
+        for p in range(n_particles):
+            value[p] = stored[0, p]
     running_max = np.empty(n_particles, np.int64)
     last_record = np.full(n_particles, np.nan)
     for p in range(n_particles):
@@ -80,14 +87,16 @@ def integrate_periodic(times, states, laps, a, b, v0, reset, value, cell_of_stat
                 last_record[p] = t
                 if reset:
                     value[p] = v0
+            if use_stored:
+                value[p] = stored[k, p]
         _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
     return n_out
 
 
 @nb.njit(cache=True)
 def integrate_open(times, states, present, vertical, band, height, a, b, v0, reset, value,
-                   cell_of_state, exit_value, exit_time, exit_residence, bed_mean, cell_sum,
-                   cell_count):
+                   stored, use_stored, cell_of_state, exit_value, exit_time, exit_residence,
+                   bed_mean, cell_sum, cell_count):
     """Integrate a property along the paths of an open riser; return the exits written.
 
     A particle present in frame k - 1 in a state advances over the lag to frame k. An entry
@@ -96,9 +105,12 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
     was present before within ``band`` of the outlet, recorded with the time since its
     entry (NaN where the entry was not seen). A particle absent in the first frame is
     not an entry there. ``exit_*`` must hold one slot per particle-frame that can be an
-    exit.
+    exit. ``stored`` and ``use_stored`` as for :func:`integrate_periodic`.
     """
     n_frames, n_particles = states.shape
+    if use_stored and n_frames > 0:
+        for p in range(n_particles):
+            value[p] = stored[0, p]
     entered = np.full(n_particles, np.nan)
     last_height = np.full(n_particles, np.nan)
     for p in range(n_particles):
@@ -128,6 +140,8 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
                 entered[p] = np.nan
             if now:
                 last_height[p] = vertical[k, p]
+                if use_stored:
+                    value[p] = stored[k, p]
         _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
     return n_out
 
