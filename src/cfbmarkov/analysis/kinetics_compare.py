@@ -18,7 +18,7 @@ Per property of a kinetics file (linear laws):
 Each side gives the mean at exit and its distribution, the bed's mean over time and per
 cell; between sides the PD of the exit mean and the Minkowski distance (MD) of the exit
 distributions on shared bins: the range of the values of the three sides cut into as many
-equal bins as the RTD has.
+equal bins as the RTD has, at most :data:`EXIT_BINS`.
 """
 
 from __future__ import annotations
@@ -36,6 +36,8 @@ from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
 
 #: the group of a prediction file that holds its properties, one [T, N] dataset each
 PROPERTIES_GROUP = "properties"
+#: at most this many bins of the exit distributions (a few hundred exits per window)
+EXIT_BINS = 50
 
 
 def needs_cell_fields(kinetics) -> bool:
@@ -295,7 +297,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     exact = _exact(model, sk, warnings)
     boot = _bootstrap_exit_means(model, kinetics, fields, resamples, warnings) if exact else None
     rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings)
-    n_bins = int(comparison.edges.size - 1)
+    n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)
     summary, figures = {}, {}
     for m in maps:
         name = m["name"]
@@ -361,5 +363,5 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     return {"summary": summary, "figures": figures}
 
 
-__all__ = ["PROPERTIES_GROUP", "compare_kinetics", "exit_bins", "exit_distribution",
+__all__ = ["EXIT_BINS", "PROPERTIES_GROUP", "compare_kinetics", "exit_bins", "exit_distribution",
            "needs_cell_fields", "stored_property"]
