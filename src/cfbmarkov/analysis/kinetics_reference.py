@@ -183,8 +183,8 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
         exit_value, exit_time, exit_rt = np.empty(size), np.empty(size), np.empty(size)
         n = integrate_open(times, states, present, np.nan_to_num(vertical), band,
                            float(discrete.height), a, b, float(entry_value), bool(reset), value,
-                           stored, use_stored, cell_of_state, exit_value, exit_time, exit_rt, bed_mean, cell_sum,
-                           cell_count)
+                           stored, use_stored, cell_of_state, exit_value, exit_time, exit_rt,
+                           bed_mean, cell_sum, cell_count)
     else:
         if discrete.laps is None:
             raise InputError("the discrete trajectories carry no lap counters: discretise "
@@ -194,8 +194,8 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
         size = records_bound(laps)
         exit_value, exit_time, exit_rt = np.empty(size), np.empty(size), np.empty(size)
         n = integrate_periodic(times, states, laps, a, b, float(entry_value), bool(reset), value,
-                               stored, use_stored, cell_of_state, exit_value, exit_time, exit_rt, bed_mean,
-                               cell_sum, cell_count)
+                               stored, use_stored, cell_of_state, exit_value, exit_time,
+                               exit_rt, bed_mean, cell_sum, cell_count)
     keep = np.isfinite(exit_rt[:n]) if reset else np.ones(n, bool)
     with np.errstate(invalid="ignore", divide="ignore"):
         cell_mean = np.where(cell_count > 0, cell_sum / np.maximum(cell_count, 1), np.nan)
