@@ -181,7 +181,8 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
               velocities: Iterable[float] = VELOCITIES, *, overrides: dict | None = None,
               models: Sequence[str] = MODELS, executor: cf.Executor | None = None,
               scheduler: str | None = None, jobs: int | None = None, progress: bool = True,
-              report: bool = True, log: Callable[[str], None] = print) -> Path:
+              report: bool = True, log: Callable[[str], None] = print,
+              kinetics: str | os.PathLike | None = None) -> Path:
     """Run every case of a scale into a folder (resuming what is there) and write the report.
 
     Cases go to ``executor`` if given, else to the Dask cluster at ``scheduler``, else to
@@ -213,6 +214,9 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
         Write ``report.html`` when every case is done.
     log : callable, optional
         Receives one line per event.
+    kinetics : str or os.PathLike, optional
+        A kinetics file: every comparison also integrates its properties
+        (``compare --kinetics``; summary.json's ``kinetics`` block).
 
     Returns
     -------
@@ -234,6 +238,11 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
 
     for name in models:
         parse_model_name(name)
+    if kinetics is not None:
+        from cfbmarkov.kinetics import load_kinetics
+
+        load_kinetics(kinetics)                   # a bad file: one line, before any work
+        kinetics = str(Path(kinetics).resolve())
     scale = as_scale(scale)
     cases = scale_cases(scale, velocities, overrides)
     names = [case_name(c.gas.superficial_velocity) for c in cases]
@@ -246,11 +255,11 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
 
     with claim_output(out, "reproduce", "folder"):    # lock and folder before any work
         return _reproduce(out, scale, cases, names, overrides, models, executor, scheduler,
-                          jobs, progress, report, log)
+                          jobs, progress, report, log, kinetics)
 
 
 def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executor, scheduler,
-               jobs, progress, report, log) -> Path:
+               jobs, progress, report, log, kinetics=None) -> Path:
     client = None
     threads = None
     own = executor is None
@@ -278,7 +287,8 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                 with contextlib.suppress(Exception):    # the case itself will say what fails
                     future.result()
         futures = {executor.submit(run_case, case.model_dump_json(), str(out / name),
-                                   tuple(models), progress, threads): name
+                                   tuple(models), progress, threads,
+                                   kinetics=kinetics): name
                    for case, name in zip(cases, names)}
         for future in cf.as_completed(futures):
             name = futures[future]

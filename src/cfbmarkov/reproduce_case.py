@@ -87,7 +87,7 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
 
 def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
              progress: bool = True, threads: int | None = None,
-             checkpoint_every: float = 0.5) -> dict[str, Any]:
+             checkpoint_every: float = 0.5, kinetics: str | None = None) -> dict[str, Any]:
     """Run (or finish) every stage of one case in a folder.
 
     A module-level function, so that any executor (process pool, Dask) can run it.
@@ -107,6 +107,9 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
         Numba threads of this worker.
     checkpoint_every : float, optional
         Simulated time between CFD-DEM checkpoints, s.
+    kinetics : str, optional
+        A kinetics file passed to each comparison (``compare --kinetics``); a comparison
+        in place without its ``kinetics`` block is redone.
 
     Returns
     -------
@@ -201,15 +204,16 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                                                     "cpu_s": _time.process_time() - c0})
                 stages[f"predict-{name}"] = "done"
             out = folder / f"compare-{name}"
-            if (out / SUMMARY).exists():
-                summaries[name] = _read_json(out / SUMMARY)
+            done = _read_json(out / SUMMARY) if (out / SUMMARY).exists() else None
+            if done is not None and (kinetics is None or done.get("kinetics")):
+                summaries[name] = done
                 stages[f"compare-{name}"] = "skipped"
             else:
                 t0, c0 = _time.perf_counter(), _time.process_time()
                 summaries[name] = compare(ref, prediction, window=(start, stop), output=out,
                                           bin_width=m.lag, level=m.interval_level,
                                           resamples=m.interval_resamples,
-                                          long_run_span=span)
+                                          long_run_span=span, kinetics=kinetics)
                 _record(folder, f"compare-{name}", {"wall_s": _time.perf_counter() - t0,
                                                     "cpu_s": _time.process_time() - c0})
                 stages[f"compare-{name}"] = "done"

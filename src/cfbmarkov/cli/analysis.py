@@ -45,7 +45,7 @@ def cmd_compare(args) -> int:
     summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
                       bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
                       basis=args.basis, level=args.level, resamples=args.resamples,
-                      long_run_span=args.long_run_span)
+                      long_run_span=args.long_run_span, kinetics=args.kinetics)
     if not args.quiet:
         print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
               flush=True)
@@ -80,8 +80,36 @@ def cmd_compare(args) -> int:
         print(f"  the reference's long run (its windows of {a:g}-{b:g} s but this one, pooled): PD E(RT) "
               f"{pd_text(long_run['pd_rt_mean'])} %, SD(RT) PD {pd_text(long_run['pd_rt_sd'])} "
               f"%, MD {long_run['md_rtd']:.4g} (what a perfect stationary model would predict)")
+    _print_kinetics(summary.get("kinetics") or {})
     print(Path(args.output) / "summary.json")
     return 0
+
+
+def _print_kinetics(block: dict) -> None:
+    """One line per property of ``compare --kinetics``: the exit means of the three sides."""
+    from cfbmarkov.observed.metrics import percentage_text as pd_text
+
+    def value(v):
+        return "n/d" if v is None or not v == v else f"{v:.4g}"
+
+    for name, entry in block.items():
+        ref, mod, seg = entry["reference"], entry["model"], entry.get("segregated_flow")
+        exact = mod.get("exact")
+        line = (f"{name} at the exit: reference {value(ref['exit_mean'])} "
+                f"({ref['exit_count']} exits), model {value(mod['exit_mean'])} (PD "
+                f"{pd_text(mod['pd_exit_mean'])} %, MD {value(mod['md_exit'])}")
+        if exact:
+            line += f"; exact {value(exact['exit_mean'])}, PD {pd_text(exact['pd_exit_mean'])} %"
+        line += ")"
+        if seg:
+            line += (f", segregated flow {value(seg['exit_mean'])} (PD "
+                     f"{pd_text(seg['pd_exit_mean'])} %, MD {value(seg['md_exit'])})")
+        else:
+            line += ", segregated flow n/d"
+        print(line)
+        print(f"  {name} in the bed (mean over the window): reference "
+              f"{value(ref['bed_mean'])}, model {value(mod['bed_mean'])}"
+              + (f", segregated flow {value(seg['bed_mean'])}" if seg else ""))
 
 
 #: windows with fewer residences than this get a note in ``cfbmarkov stationarity``
@@ -276,6 +304,11 @@ def add_compare(sub) -> None:
                    help="START:STOP, s: also give the reference's RTD pooled over this span's "
                         "other whole windows (what a perfect stationary model would predict; "
                         "e.g. 5:20; default none)")
+    s.add_argument("--kinetics", default=None, metavar="FILE",
+                   help="a kinetics file (TOML, linear laws): also each property at the exit "
+                        "and in the bed for the reference (integrated along its paths), the "
+                        "model and the segregated-flow baseline (summary.json 'kinetics', "
+                        "figures kinetics-NAME.png)")
     s.add_argument("-q", "--quiet", action="store_true",
                    help="no progress lines on stderr")
     s.set_defaults(func=cmd_compare)

@@ -26,7 +26,8 @@ def cmd_reproduce(args) -> int:
     overrides = load_overrides(args.overrides) if args.overrides else None
     report = reproduce(args.output, args.scale, args.velocities, overrides=overrides,
                        models=args.models, scheduler=args.scheduler, jobs=args.jobs,
-                       progress=not args.quiet, log=lambda line: print(line, flush=True))
+                       progress=not args.quiet, log=lambda line: print(line, flush=True),
+                       kinetics=args.kinetics)
     print(report)
     return 0
 
@@ -118,6 +119,10 @@ def add_reproduce(sub) -> None:
     s.add_argument("--scheduler", default=None,
                    help="address of a Dask distributed scheduler (tcp://host:8786) to run the "
                         "cases on; the workers must see the output directory")
+    s.add_argument("--kinetics", default=None, metavar="FILE",
+                   help="a kinetics file (TOML): every comparison also gives its properties "
+                        "for the CFD-DEM, the model and the segregated-flow baseline "
+                        "(compare --kinetics)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=cmd_reproduce)
 

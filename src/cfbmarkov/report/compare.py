@@ -167,7 +167,7 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
 def compare(reference, prediction, *, window, output, bin_width: float = 0.025, basis: str = "frames",
             level: float = 0.9, resamples: int = 100,
             md_order: float = 2.0, figures: bool = True,
-            long_run_span: tuple[float, float] | None = None) -> dict[str, Any]:
+            long_run_span: tuple[float, float] | None = None, kinetics=None) -> dict[str, Any]:
     """Compare ``prediction`` (the model) with ``reference`` on a window; write the results.
 
     Parameters
@@ -194,6 +194,11 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
         A span of the reference (s) whose other whole windows, pooled, give the summary's
         ``long_run`` block (what a perfect stationary model would predict; docs/definitions.md,
         Stationarity); default none (``long_run`` null).
+    kinetics : str, os.PathLike or Kinetics, optional
+        A kinetics file (or loaded kinetics): the summary's ``kinetics`` block, each
+        property at the exit and in the bed for the reference, the model and the
+        segregated-flow baseline (:func:`cfbmarkov.analysis.kinetics_compare.compare_kinetics`),
+        and with ``figures`` the ``kinetics-NAME.png`` of each.
     figures : bool, optional
         Draw ``rtd.png``, ``snapshots.png``, ``mixing.png`` and, when the prediction carries
         its model, ``transition_matrix.png`` (a heat map) and ``probability_maps.png``.
@@ -220,6 +225,10 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
     out = Path(output)
     if out.exists() and not out.is_dir():
         raise InputError(f"output {out} exists and is not a directory")
+    if kinetics is not None and not hasattr(kinetics, "properties"):
+        from cfbmarkov.kinetics import load_kinetics
+
+        kinetics = load_kinetics(kinetics)      # a bad file: one line, before any work
     with contextlib.ExitStack() as stack:
         ref = _open(reference, stack)
         pred = _open(prediction, stack)
@@ -256,9 +265,23 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
                 "flow_sd": None if intervals.flow is None else {
                     "rt_mean": intervals.flow[0], "rt_sd": intervals.flow[1]}}
         comparison.intervals = intervals
+        kinetic = None
+        if kinetics is not None:
+            from cfbmarkov.analysis.kinetics_compare import compare_kinetics
+
+            kinetic = compare_kinetics(ref, pred, comparison, kinetics, level=level,
+                                       resamples=resamples, warnings=warnings)
+            summary["kinetics"] = kinetic["summary"]
         _check_replaceable(out)
         with atomic_folder(out) as folder:    # published whole: figures and summary, or none
             summary["figures"] = _draw(comparison, folder, warnings) if figures else []
+            if figures and kinetic is not None:
+                from cfbmarkov.report.kinetics import plot_kinetics
+
+                for name, drawn in kinetic["figures"].items():
+                    file = f"kinetics-{name}.png"
+                    plot_kinetics(drawn, name, folder / file, window=comparison.window)
+                    summary["figures"].append(file)
             summary["warnings"] = warnings
             (folder / SUMMARY).write_text(json.dumps(jsonable(summary), indent=2,
                                                      allow_nan=False) + "\n")

@@ -1,0 +1,366 @@
+"""Properties along particle paths in ``cfbmarkov compare --kinetics``: the reference, the
+model and the segregated-flow baseline side by side (``docs/definitions.md``, Properties
+along observed paths).
+
+Per property of a kinetics file (linear laws):
+
+- *reference*: the property integrated along the reference's paths over the window, on the
+  model's states at its lag (:mod:`cfbmarkov.analysis.kinetics_reference`);
+- *model*: the prediction's values over the same window, the ones its Monte Carlo stored
+  (``/properties/NAME``) or, where it stored none, the same integration along the
+  prediction's own paths (on a space of cells these are the chain's states, so the values
+  are those a Monte Carlo with properties gives); beside them the chain's exact answers
+  (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`) and an interval from the block
+  bootstrap of the fitting window, as for the RTD;
+- *segregated flow*: the bed-averaged law over the fitting window's observed RTD
+  (:mod:`cfbmarkov.analysis.segregated_flow`).
+
+Each side gives the mean at exit and its distribution, the bed's mean over time and per
+cell; between sides the PD of the exit mean and the Minkowski distance (MD) of the exit
+distributions on shared bins: the range of the values of the three sides cut into as many
+equal bins as the RTD has, at most :data:`EXIT_BINS`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cfbmarkov.analysis.kinetics_reference import (PathKinetics, integrate_along_paths,
+                                                   linear_maps, reference_kinetics)
+from cfbmarkov.analysis.segregated_flow import SegregatedFlow, segregated_flow
+from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
+
+#: the group of a prediction file that holds its properties, one [T, N] dataset each
+PROPERTIES_GROUP = "properties"
+#: at most this many bins of the exit distributions (a few hundred exits per window)
+EXIT_BINS = 50
+
+
+def needs_cell_fields(kinetics) -> bool:
+    """Whether a parameter of ``kinetics`` is a function of the cell fields."""
+    from cfbmarkov.kinetics import FromField
+
+    return any(isinstance(v, FromField) for p in kinetics.properties
+               for v in p.parameters.values())
+
+
+def stored_property(traj, name: str, frames: slice) -> np.ndarray | None:
+    """The values of property ``name`` a prediction file stored for ``frames``, or None.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open prediction file.
+    name : str
+        The property.
+    frames : slice
+        The frames.
+
+    Returns
+    -------
+    ndarray of float64, shape (T, N), or None
+        None where the file holds no ``/properties/NAME`` of the file's shape.
+    """
+    if name not in traj.property_names:
+        return None
+    data = traj.property_values(name, frames)
+    if data.shape[-1] != traj.n_particles:
+        raise InputError(f"{traj.path}: /{PROPERTIES_GROUP}/{name} holds {data.shape[-1]} "
+                         f"particles for the file's {traj.n_particles}")
+    return np.asarray(data, dtype=np.float64)
+
+
+def _fitting_source(model, ref):
+    """The file and window the model was fitted on: its own source where that is one
+    readable file, else the reference where the window lies inside it (None, None else)."""
+    window = model.window
+    if window is None:
+        return None, None
+    source = model.source
+    if isinstance(source, (str, Path)) and str(source) and Path(source).is_file():
+        return source, tuple(window)
+    tol = ref.time_tolerance
+    if window[0] >= ref.times[0] - tol and window[1] <= ref.times[-1] + tol:
+        return ref, tuple(window)
+    return None, None
+
+
+def _cell_fields(model, ref, warnings):
+    from cfbmarkov.analysis.cell_fields import window_cell_fields
+    from cfbmarkov.kinetics import CellFields
+    from cfbmarkov.trajectories import opened
+
+    source, window = _fitting_source(model, ref)
+    if source is None:
+        raise InputError("the kinetics' rates depend on the fitting window's cell fields, but "
+                         "the model's fitting file is not readable: give rates per cell "
+                         "(rate_by_cell) or keep the fitting file where the model says")
+    with opened(source) as traj:
+        fields = window_cell_fields(traj, model.state_space, window)
+    if fields["relative"]:
+        warnings.append("kinetics: the fitting file gives no particle diameter; its solids "
+                        "fraction is each cell's count relative to the mean (1: the bed's "
+                        "mean)")
+    return CellFields(fields["solids_fraction"], fields["wall_distance"],
+                      fields["vertical_velocity"])
+
+
+def _fitting_rtd_and_occupancy(model, ref, on, warnings):
+    """The fitting window's residence-time samples (on the comparison's basis) and state
+    occupancy at the model's lag; (None, None) with a warning where unreadable."""
+    from cfbmarkov.markov.discrete import discretize
+    from cfbmarkov.observed.residence import residence_times
+    from cfbmarkov.trajectories import opened
+
+    source, window = _fitting_source(model, ref)
+    if source is None:
+        warnings.append("kinetics: no segregated-flow baseline: the model's fitting window "
+                        "is not readable")
+        return None, None
+    try:
+        with opened(source) as traj:
+            lag_frames = traj.lag_frames(model.lag)
+            rt = residence_times(traj, window, use_events=on.events, face_band=on.band,
+                                 lag_frames=1 if on.events else lag_frames,
+                                 direction=on.direction)
+            discrete = discretize(traj, model.state_space, model.lag, window)
+    except InputError as exc:
+        warnings.append(f"kinetics: no segregated-flow baseline ({exc})")
+        return None, None
+    states = discrete.states[::discrete.lag_frames]
+    occupancy = np.bincount(states[states >= 0], minlength=model.n_states).astype(float)
+    return rt.samples, occupancy
+
+
+def _exact(model, sk, warnings):
+    try:
+        from cfbmarkov.markov.kinetics_exact import exact_kinetics
+    except ImportError:          # pragma: no cover - the exact module is part of the package
+        return None
+    try:
+        return exact_kinetics(model, sk)
+    except CfbmarkovError as exc:
+        warnings.append(f"kinetics: no exact answers ({exc})")
+        return None
+
+
+def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings):
+    """Exact exit means of each property on block-bootstrap resamples of the fitting
+    window ({name: list}), or None."""
+    if not resamples:
+        return None
+    from cfbmarkov.analysis.bootstrap import block_bootstrap_models
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
+    try:
+        drawn = block_bootstrap_models(model, blocks=10, resamples=resamples, seed=0)
+        means: dict[str, list[float]] = {name: [] for name in kinetics.names}
+        for resampled in drawn:
+            try:
+                answers = exact_kinetics(resampled, kinetics.per_state(resampled.state_space,
+                                                                       fields))
+            except (CfbmarkovError, ValueError):
+                continue
+            for name, answer in answers.items():
+                means[name].append(answer.exit_mean)
+    except InputError as exc:
+        warnings.append(f"kinetics: no model intervals ({exc})")
+        return None
+    return means
+
+
+def _interval(value, se, level):
+    from scipy.stats import norm
+
+    if not (np.isfinite(value) and np.isfinite(se)):
+        return None
+    z = float(norm.ppf(0.5 * (1 + level)))
+    return [float(value - z * se), float(value + z * se)]
+
+
+def _side(values: np.ndarray, mean: float, sd: float, se: float, level: float) -> dict:
+    return {"exit_mean": mean, "exit_sd": sd, "exit_count": int(values.size),
+            "exit_mean_interval": _interval(mean, se, level)}
+
+
+def _paths(p: PathKinetics) -> dict:
+    return {"bed_mean": p.time_mean,
+            "bed_mean_over_time": {"times": p.times.tolist(),
+                                   "mean": [None if not np.isfinite(x) else float(x)
+                                            for x in p.bed_mean]},
+            "bed_mean_by_cell": [None if not np.isfinite(x) else float(x) for x in p.cell_mean]}
+
+
+def exit_bins(samples, count: int) -> np.ndarray:
+    """Shared bins of the exit distributions: the values' range cut into ``count`` bins.
+
+    Parameters
+    ----------
+    samples : sequence of array_like
+        The sides' exit values.
+    count : int
+        Number of bins (the comparison's RTD bins).
+
+    Returns
+    -------
+    ndarray of float64, shape (count + 1,)
+        Edges (a range of zero width is widened by 1e-9 either side).
+    """
+    finite = [np.asarray(s, float)[np.isfinite(s)] for s in samples]
+    finite = [s for s in finite if s.size]
+    if not finite:
+        return np.linspace(0.0, 1.0, count + 1)
+    lo = min(float(s.min()) for s in finite)
+    hi = max(float(s.max()) for s in finite)
+    if not hi > lo:
+        lo, hi = lo - 1e-9, hi + 1e-9
+    return np.linspace(lo, hi, count + 1)
+
+
+def exit_distribution(values, edges: np.ndarray) -> np.ndarray:
+    """Probability per bin of exit values (all zero without values)."""
+    counts, _ = np.histogram(np.asarray(values, float), bins=edges)
+    total = counts.sum()
+    return counts / total if total else counts.astype(float)
+
+
+def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
+                     resamples: int = 100, warnings: list[str]) -> dict[str, Any]:
+    """The ``kinetics`` block of ``summary.json`` and the figures' inputs.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and prediction files of ``comparison``.
+    comparison : RunComparison
+        The comparison (its window, basis, direction and RTD bins are used).
+    kinetics : Kinetics
+        The properties (linear laws only).
+    level : float, optional
+        Coverage of the intervals.
+    resamples : int, optional
+        Bootstrap resamples of the fitting window for the model's interval (0: none).
+    warnings : list of str
+        Appended to.
+
+    Returns
+    -------
+    dict
+        ``{"summary": {NAME: {...}}, "figures": {NAME: {...}}}``: the summary block
+        (module docstring) and, per property, what the report draws.
+
+    Raises
+    ------
+    InputError
+        When the prediction carries no model, a law is not linear, a rate table does not
+        fit the model's grid, or the reference cannot be discretised on its states.
+    """
+    from cfbmarkov.analysis.compare import _Basis
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.discrete import discretize
+
+    model = MarkovModel.from_trajectories(pred)
+    if model is None:
+        raise InputError(f"{pred.path} carries no model (/provenance/model): --kinetics needs "
+                         "the model's states and lag; predict with cfbmarkov predict")
+    if not kinetics.linear:
+        raise InputError(f"{kinetics.source or 'kinetics'}: a custom law has no reference "
+                         "side here; compare needs linear laws")
+    fields = _cell_fields(model, ref, warnings) if needs_cell_fields(kinetics) else None
+    sk = kinetics.per_state(model.state_space, fields)
+    maps = linear_maps(sk, model.lag)
+    start, stop = comparison.window
+    on = _Basis(comparison.basis, comparison.basis == "events", comparison.lag_frames,
+                ref.height / float(pred.parameters.get("rows") or model.state_space.rows),
+                comparison.direction)
+    reference = reference_kinetics(ref, model, sk, (start, stop), direction=on.direction)
+    frames = pred.window(start, stop)
+    pred_discrete = discretize(pred, model.state_space, model.lag, (start, stop),
+                               keep_positions=True)
+    model_paths, sources = {}, {}
+    for m in maps:
+        stored = stored_property(pred, m["name"], slice(frames.start, frames.stop))
+        if stored is not None and stored.shape[0] != pred_discrete.n_frames:
+            stored = None
+        sources[m["name"]] = "stored" if stored is not None else "paths"
+        model_paths[m["name"]] = integrate_along_paths(
+            pred_discrete, m["a"], m["b"], m["initial"], reset=m["reset"], name=m["name"],
+            direction=on.direction, stored=stored)
+    if any(v == "paths" for v in sources.values()):
+        warnings.append("kinetics: the prediction stored no properties; the model side "
+                        "integrates them along the prediction's paths")
+    exact = _exact(model, sk, warnings)
+    boot = _bootstrap_exit_means(model, kinetics, fields, resamples, warnings) if exact else None
+    rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings)
+    n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)
+    summary, figures = {}, {}
+    for m in maps:
+        name = m["name"]
+        r, p = reference[name], model_paths[name]
+        seg: SegregatedFlow | None = None
+        if rt_fit is not None:
+            seg = segregated_flow(rt_fit, m["rate"], m["target"], occupancy, m["initial"],
+                                  name=name)
+        edges = exit_bins([r.exit_values, p.exit_values]
+                          + ([seg.exit_values] if seg is not None else []), n_bins)
+        dist_ref = exit_distribution(r.exit_values, edges)
+        dist_mod = exit_distribution(p.exit_values, edges)
+
+        def md(dist):
+            return (minkowski_distance(dist_ref, dist, comparison.md_order)
+                    if dist_ref.sum() > 0 and dist.sum() > 0 else float("nan"))
+
+        ref_block = {**_side(r.exit_values, r.exit_mean, r.exit_sd, r.exit_se, level),
+                     **_paths(r)}
+        mod_block = {**_side(p.exit_values, p.exit_mean, p.exit_sd, p.exit_se, level),
+                     **_paths(p), "values_from": sources[name],
+                     "pd_exit_mean": percentage_difference(p.exit_mean, r.exit_mean),
+                     "md_exit": md(dist_mod)}
+        answer = None if exact is None else exact.get(name)
+        if answer is not None:
+            mod_block["exact"] = {"exit_mean": answer.exit_mean, "exit_sd": answer.exit_sd,
+                                  "bed_mean": answer.bed_mean,
+                                  "pd_exit_mean": percentage_difference(answer.exit_mean,
+                                                                        r.exit_mean)}
+            values = None if boot is None else np.asarray(boot.get(name, []), float)
+            if values is not None and values.size >= 2:
+                from cfbmarkov.analysis.bootstrap import interval_bounds
+
+                lo, hi = interval_bounds(p.exit_mean, values, answer.exit_mean, level,
+                                         se=p.exit_se if np.isfinite(p.exit_se) else 0.0)
+                mod_block["exit_mean_interval"] = [float(lo), float(hi)]
+                mod_block["interval_method"] = ("block bootstrap of the fitting window (exact "
+                                                "exit means) and Monte Carlo noise, in "
+                                                "quadrature")
+        seg_block = None
+        dist_seg = None
+        if seg is not None:
+            dist_seg = exit_distribution(seg.exit_values, edges)
+            seg_block = {**_side(seg.exit_values, seg.exit_mean, seg.exit_sd, seg.exit_se,
+                                 level),
+                         "bed_mean": seg.bed_mean, "rate": seg.rate, "target": seg.target,
+                         "fitting_window": list(model.window),
+                         "pd_exit_mean": percentage_difference(seg.exit_mean, r.exit_mean),
+                         "md_exit": md(dist_seg)}
+        summary[name] = {"law": kinetics.properties[kinetics.names.index(name)].law.key,
+                         "start": m["start"], "initial": m["initial"],
+                         "reference": ref_block, "model": mod_block,
+                         "segregated_flow": seg_block,
+                         "exit_bins": {"from": float(edges[0]), "to": float(edges[-1]),
+                                       "count": n_bins}}
+        figures[name] = {"edges": edges, "reference": dist_ref, "model": dist_mod,
+                         "segregated_flow": dist_seg, "cell_reference": r.cell_mean,
+                         "cell_model": p.cell_mean,
+                         "cell_exact": None if answer is None else answer.bed_mean_by_cell,
+                         "space": model.state_space,
+                         "means": (r.exit_mean, p.exit_mean,
+                                   None if seg is None else seg.exit_mean)}
+    return {"summary": summary, "figures": figures}
+
+
+__all__ = ["EXIT_BINS", "PROPERTIES_GROUP", "compare_kinetics", "exit_bins", "exit_distribution",
+           "needs_cell_fields", "stored_property"]

@@ -1,0 +1,167 @@
+"""Kernels of the reference side of the kinetics: a property integrated along observed
+particle paths (``docs/definitions.md``, Properties along observed paths).
+
+Every particle carries a value v. Over each lag, with the state s of the lag's first frame
+held, the linear relaxation dv/dt = k_s (v_inf,s - v) is integrated exactly: the update is
+affine, v' = a_s v + b_s with a_s = exp(-k_s lag) and b_s = v_inf,s (1 - a_s) (the maps
+:meth:`cfbmarkov.kinetics.StateKinetics.over` gives). A residence ends at an exit (a
+periodic riser: a record pass up through the top as :mod:`cfbmarkov.observed.residence`
+defines it; an open riser: a vanishing within ``band`` of the outlet), whose value is the
+one after the lag that crosses it; with ``reset`` the value restarts at ``v0`` at each
+entry (the same record pass, or an appearance within ``band`` of the inlet).
+
+The kernels are pure functions on arrays (numba), no I/O; per frame they also accumulate
+the bed's mean value and its sums per cell.
+
+Layout (T frames one lag apart, N particles, S states, C cells)::
+
+    states   int32   [T, N]   state (-1: absent or undefined: the value is held)
+    laps     int64   [T, N]   lap counter (periodic riser; sign-flipped for net downflow)
+    present  bool    [T, N]   open riser: the particle is in the frame
+    vertical float64 [T, N]   open riser: its height (m)
+    a, b     float64 [S]      the lag's affine map per state
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+
+@nb.njit(cache=True)
+def _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count):
+    """Frame ``k``'s mean value over the particles in a state and its sums per cell."""
+    total = 0.0
+    n = 0
+    for p in range(states.shape[1]):
+        s = states[k, p]
+        if s >= 0:
+            total += value[p]
+            n += 1
+            c = cell_of_state[s]
+            cell_sum[c] += value[p]
+            cell_count[c] += 1
+    bed_mean[k] = total / n if n > 0 else np.nan
+
+
+@nb.njit(cache=True)
+def integrate_periodic(times, states, laps, a, b, v0, reset, value, stored, use_stored,
+                       cell_of_state, exit_value, exit_time, exit_residence, bed_mean,
+                       cell_sum, cell_count):
+    """Integrate a property along the paths of a periodic riser; return the exits written.
+
+    ``value`` [N] holds the values in the first frame and is advanced in place. Every frame
+    in which a particle's lap counter exceeds its running maximum since the first frame
+    records an exit (once per new level), with the time since its previous record as the
+    residence time (NaN before its first record: its entry is unknown), then, with
+    ``reset``, an entry at ``v0``. ``exit_*`` must hold the number of records;
+    ``bed_mean`` [T], ``cell_sum`` and ``cell_count`` [C] are filled. With
+    ``use_stored``, the values of ``stored`` [T, N] (a Monte Carlo run's) stand in each
+    frame instead of the integrated ones; an exit's value is then the lag's map of the
+    stored value in the frame before it.
+    """
+    n_frames, n_particles = states.shape
+    if use_stored and n_frames > 0:
+        for p in range(n_particles):
+            value[p] = stored[0, p]
+    running_max = np.empty(n_particles, np.int64)
+    last_record = np.full(n_particles, np.nan)
+    for p in range(n_particles):
+        running_max[p] = laps[0, p]
+    n_out = 0
+    if n_frames > 0:
+        _bed(0, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
+    for k in range(1, n_frames):
+        t = times[k]
+        for p in range(n_particles):
+            s = states[k - 1, p]
+            if s >= 0:
+                value[p] = a[s] * value[p] + b[s]
+            level = laps[k, p]
+            while level > running_max[p]:
+                running_max[p] += 1
+                exit_value[n_out] = value[p]
+                exit_time[n_out] = t
+                exit_residence[n_out] = t - last_record[p]
+                n_out += 1
+                last_record[p] = t
+                if reset:
+                    value[p] = v0
+            if use_stored:
+                value[p] = stored[k, p]
+        _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
+    return n_out
+
+
+@nb.njit(cache=True)
+def integrate_open(times, states, present, vertical, band, height, a, b, v0, reset, value,
+                   stored, use_stored, cell_of_state, exit_value, exit_time, exit_residence,
+                   bed_mean, cell_sum, cell_count):
+    """Integrate a property along the paths of an open riser; return the exits written.
+
+    A particle present in frame k - 1 in a state advances over the lag to frame k. An entry
+    is a frame where it is present, was absent before and lies within ``band`` of the inlet
+    (then, with ``reset``, its value restarts at ``v0``); an exit a frame where it is absent,
+    was present before within ``band`` of the outlet, recorded with the time since its
+    entry (NaN where the entry was not seen). A particle absent in the first frame is
+    not an entry there. ``exit_*`` must hold one slot per particle-frame that can be an
+    exit. ``stored`` and ``use_stored`` as for :func:`integrate_periodic`.
+    """
+    n_frames, n_particles = states.shape
+    if use_stored and n_frames > 0:
+        for p in range(n_particles):
+            value[p] = stored[0, p]
+    entered = np.full(n_particles, np.nan)
+    last_height = np.full(n_particles, np.nan)
+    for p in range(n_particles):
+        if present[0, p]:
+            last_height[p] = vertical[0, p]
+    n_out = 0
+    if n_frames > 0:
+        _bed(0, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
+    for k in range(1, n_frames):
+        t = times[k]
+        for p in range(n_particles):
+            now = present[k, p]
+            before = present[k - 1, p]
+            if before:
+                s = states[k - 1, p]
+                if s >= 0:
+                    value[p] = a[s] * value[p] + b[s]
+            if now and not before and vertical[k, p] <= band:
+                entered[p] = t
+                if reset:
+                    value[p] = v0
+            elif before and not now and last_height[p] >= height - band:
+                exit_value[n_out] = value[p]
+                exit_time[n_out] = t
+                exit_residence[n_out] = t - entered[p]
+                n_out += 1
+                entered[p] = np.nan
+            if now:
+                last_height[p] = vertical[k, p]
+                if use_stored:
+                    value[p] = stored[k, p]
+        _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
+    return n_out
+
+
+def records_bound(laps: np.ndarray) -> int:
+    """Upper bound on the exits of :func:`integrate_periodic`: new lap levels reached.
+
+    Parameters
+    ----------
+    laps : ndarray of int, shape (T, N)
+        Lap counters.
+
+    Returns
+    -------
+    int
+    """
+    if laps.shape[0] == 0:
+        return 0
+    return int(np.maximum(laps.max(axis=0).astype(np.int64) - laps[0].astype(np.int64),
+                          0).sum())
+
+
+__all__ = ["integrate_open", "integrate_periodic", "records_bound"]

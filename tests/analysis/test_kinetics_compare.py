@@ -1,0 +1,121 @@
+"""compare --kinetics: the reference along its paths, the chain and the segregated-flow
+baseline; the segregated-flow model by hand."""
+
+from __future__ import annotations
+
+import json
+import math
+
+import numpy as np
+import pytest
+
+from cfbmarkov.analysis.segregated_flow import bed_averaged, segregated_flow
+from cfbmarkov.errors import InputError
+from cfbmarkov.synthetic import RiserFlow, write_run
+
+# a chain on cells whose wall columns fall slowly: particles that stay long stay at the walls
+FLOW = RiserFlow(columns=6, rows=10, lag=0.02, persistence=False, rise_velocity=2.0,
+                 fall_velocity=-2.0)
+
+
+def test_bed_averaged_law_by_hand():
+    k, v = bed_averaged([1.0, 3.0], [0.0, 1.0], [3, 1])
+    assert k == pytest.approx(0.75 * 1 + 0.25 * 3)
+    assert v == pytest.approx(0.25 * 3 * 1.0 / 1.5)
+    assert bed_averaged([0.0, 0.0], [2.0, 4.0], [1, 1]) == (0.0, 3.0)
+    with pytest.raises(InputError):
+        bed_averaged([1.0], [1.0], [0.0])
+
+
+def test_segregated_flow_by_hand():
+    tau = np.array([0.5, 1.0, 2.0])
+    seg = segregated_flow(tau, np.full(2, 2.0), np.ones(2), [1, 1], 0.0, name="X")
+    np.testing.assert_allclose(seg.exit_values, 1 - np.exp(-2 * tau), rtol=1e-14)
+    assert seg.exit_mean == pytest.approx(np.mean(1 - np.exp(-2 * tau)), rel=1e-14)
+    # mean over the bed's age distribution: sum_i int_0^tau_i (1 - e^-2a) da / sum_i tau_i
+    integral = tau - (1 - np.exp(-2 * tau)) / 2
+    assert seg.bed_mean == pytest.approx(integral.sum() / tau.sum(), rel=1e-14)
+
+
+def _kinetics(tmp_path, name, rate_lines):
+    path = tmp_path / f"{name}.toml"
+    path.write_text(f'[[property]]\nname = "X"\nlaw = "first-order"\n{rate_lines}\n')
+    return path
+
+
+@pytest.fixture(scope="module")
+def prediction(tmp_path_factory):
+    from cfbmarkov.markov import CellGrid, fit_model
+
+    tmp = tmp_path_factory.mktemp("kin")
+    run = write_run(tmp / "run.h5", FLOW, 400, 12.0, seed=2)
+    model = fit_model(run, CellGrid(FLOW.columns, FLOW.rows), FLOW.lag, (0.0, 6.0), "mle")
+    pred = model.predict(run, start=6.0, duration=6.0, seed=4, output=tmp / "pred.h5")
+    return run, pred, tmp
+
+
+def _compare(run, pred, kinetics, out):
+    from cfbmarkov.report.compare import compare
+
+    return compare(run, pred, window=(6.0, 12.0), output=out, figures=False, resamples=0,
+                   kinetics=kinetics)["kinetics"]["X"]
+
+
+def test_zone_dependent_rate_the_chain_beats_the_segregated_flow(prediction, tmp_path):
+    run, pred, _ = prediction
+    # tenfold faster in the wall columns (within one column of the walls)
+    kin = _kinetics(tmp_path, "zones", 'rate_from = "wall_distance"\nrate_dense = 4.0\n'
+                    'rate_dilute = 0.4\nthreshold = 0.01')
+    got = _compare(run, pred, kin, tmp_path / "zones")
+    ref, mod, seg = got["reference"], got["model"], got["segregated_flow"]
+    assert ref["exit_count"] > 300 and mod["values_from"] == "paths"
+    chain_error = abs(mod["exit_mean"] - ref["exit_mean"])
+    seg_error = abs(seg["exit_mean"] - ref["exit_mean"])
+    assert seg_error > 2 * chain_error
+    assert seg_error > 3 * math.hypot(ref["exit_mean_interval"][1] - ref["exit_mean"],
+                                      seg["exit_mean_interval"][1] - seg["exit_mean"]) / 1.645
+    assert len(ref["bed_mean_by_cell"]) == FLOW.columns * FLOW.rows
+    assert np.isfinite(mod["md_exit"]) and np.isfinite(seg["md_exit"])
+
+
+def test_uniform_rate_the_chain_and_the_segregated_flow_agree(prediction, tmp_path):
+    run, pred, _ = prediction
+    got = _compare(run, pred, _kinetics(tmp_path, "uniform", "rate = 1.0"), tmp_path / "u")
+    ref, mod, seg = got["reference"], got["model"], got["segregated_flow"]
+    for side in (mod, seg):
+        half = side["exit_mean_interval"][1] - side["exit_mean"]
+        ref_half = ref["exit_mean_interval"][1] - ref["exit_mean"]
+        assert abs(side["exit_mean"] - ref["exit_mean"]) < 3 * math.hypot(half, ref_half) / 1.645
+    assert seg["rate"] == pytest.approx(1.0)
+
+
+def test_cli_compare_kinetics_prints_and_writes_the_block(prediction, tmp_path, capsys):
+    from cfbmarkov.cli import main
+
+    run, pred, _ = prediction
+    kin = _kinetics(tmp_path, "uniform", "rate = 1.0")
+    code = main(["compare", str(run), str(pred), "--window", "6:12", "-o", str(tmp_path / "c"),
+                 "--resamples", "0", "--kinetics", str(kin), "-q"])
+    assert code == 0
+    printed = capsys.readouterr().out
+    assert "X at the exit: reference" in printed and "segregated flow" in printed
+    summary = json.loads((tmp_path / "c" / "summary.json").read_text())
+    block = summary["kinetics"]["X"]
+    assert set(block) >= {"reference", "model", "segregated_flow"}
+    assert block["reference"]["exit_mean"] > 0
+    assert "kinetics-X.png" in summary["figures"]
+    assert (tmp_path / "c" / "kinetics-X.png").stat().st_size > 1000
+
+
+def test_cli_compare_bad_kinetics_file_is_one_line(prediction, tmp_path, capsys):
+    from cfbmarkov.cli import main
+
+    run, pred, _ = prediction
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[property]]\nname = "X"\nlaw = "zeroth-order"\nrate = 1.0\n')
+    code = main(["compare", str(run), str(pred), "--window", "6:12", "-o", str(tmp_path / "b"),
+                 "--kinetics", str(bad), "-q"])
+    assert code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "unknown law" in err[0]
+    assert not (tmp_path / "b" / "summary.json").exists()

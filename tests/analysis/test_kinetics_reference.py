@@ -1,0 +1,136 @@
+"""The reference side of the kinetics: a property integrated along generated paths equals a
+direct per-particle integration written plainly here."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from cfbmarkov.analysis.cell_fields import wall_distance, window_cell_fields
+from cfbmarkov.analysis.kinetics_reference import integrate_along_paths
+from cfbmarkov.markov import discretize
+from cfbmarkov.markov.states import CellGrid
+from cfbmarkov.synthetic import RiserFlow, write_open_run, write_run
+from cfbmarkov.trajectories import Trajectories
+
+FLOW = RiserFlow(columns=6, rows=10, lag=0.02, persistence=False, rise_velocity=2.0,
+                 fall_velocity=-2.0)
+
+
+def _maps(space, lag):
+    """A zone-dependent first-order rate: wall columns 10x slower than the core."""
+    col = space.cell_of_state % space.columns
+    k = np.where((col == 0) | (col == space.columns - 1), 0.5, 5.0)
+    a = np.exp(-k * lag)
+    return a, 1.0 - a
+
+
+def _plain_periodic(states, laps, times, a, b, v0, reset):
+    """Per particle, frame by frame: advance, then at each new lap level record and reset."""
+    exits = []
+    n_frames, n = states.shape
+    bed = np.zeros(n_frames)
+    values = np.full((n_frames, n), v0)
+    for p in range(n):
+        v, top, last = v0, laps[0, p], math.nan
+        bed[0] += v / n
+        values[0, p] = v
+        for k in range(1, n_frames):
+            v = a[states[k - 1, p]] * v + b[states[k - 1, p]]
+            while laps[k, p] > top:
+                top += 1
+                if not reset or not math.isnan(last):
+                    exits.append((times[k], p, v, times[k] - last))
+                last = times[k]
+                if reset:
+                    v = v0
+            bed[k] += v / n
+            values[k, p] = v
+    exits.sort(key=lambda e: (e[0], e[1]))
+    return exits, bed, values
+
+
+@pytest.mark.parametrize("reset", [True, False])
+def test_periodic_paths_equal_a_plain_integration(tmp_path, reset):
+    path = write_run(tmp_path / "run.h5", FLOW, 200, 2.0, seed=3)
+    space = CellGrid(FLOW.columns, FLOW.rows, FLOW.width, FLOW.height)
+    lag = 2 * FLOW.lag                          # every second frame
+    discrete = discretize(path, space, lag, (0.2, 1.8), keep_positions=True)
+    a, b = _maps(space, lag)
+    got = integrate_along_paths(discrete, a, b, 0.0, reset=reset, name="X")
+    states, laps, times = discrete.states[::2], discrete.laps[::2], discrete.times[::2]
+    exits, bed, values = _plain_periodic(states, laps, times, a, b, 0.0, reset)
+    assert got.count == len(exits) > 10
+    np.testing.assert_allclose(got.exit_values, [e[2] for e in exits], rtol=0, atol=1e-13)
+    np.testing.assert_allclose(got.exit_times, [e[0] for e in exits])
+    if reset:
+        np.testing.assert_allclose(got.residence_times, [e[3] for e in exits])
+    np.testing.assert_allclose(got.bed_mean, bed, atol=1e-13)
+    assert got.times.size == times.size
+    # a Monte Carlo run's stored values stand in for the integrated ones: the same exits
+    full = np.zeros(discrete.states.shape)
+    full[::2] = values
+    full[1::2] = np.nan                            # frames between lags are never read
+    stored = integrate_along_paths(discrete, a, b, 0.0, reset=reset, stored=full)
+    np.testing.assert_allclose(stored.exit_values, got.exit_values, atol=1e-13)
+    np.testing.assert_allclose(stored.bed_mean, got.bed_mean, atol=1e-13)
+
+
+def test_open_paths_equal_a_plain_integration(tmp_path):
+    path = write_open_run(tmp_path / "open.h5", FLOW, 50, 2.0, seed=4)
+    space = CellGrid(FLOW.columns, FLOW.rows, FLOW.width, FLOW.height)
+    discrete = discretize(path, space, FLOW.lag, (0.0, 2.0), keep_positions=True)
+    a, b = _maps(space, FLOW.lag)
+    got = integrate_along_paths(discrete, a, b, 0.0, reset=True, name="X")
+    y = discrete.vertical
+    present = np.isfinite(y)
+    band, height = FLOW.height / FLOW.rows, FLOW.height
+    exits = []
+    for p in range(y.shape[1]):
+        v, entered, last_y = 0.0, math.nan, y[0, p]
+        for k in range(1, y.shape[0]):
+            if present[k - 1, p]:
+                v = a[discrete.states[k - 1, p]] * v + b[discrete.states[k - 1, p]]
+            if present[k, p] and not present[k - 1, p] and y[k, p] <= band:
+                entered, v = discrete.times[k], 0.0
+            elif present[k - 1, p] and not present[k, p] and last_y >= height - band:
+                if not math.isnan(entered):
+                    exits.append((discrete.times[k], p, v))
+                entered = math.nan
+            if present[k, p]:
+                last_y = y[k, p]
+    exits.sort(key=lambda e: (e[0], e[1]))
+    assert got.count == len(exits) > 10
+    np.testing.assert_allclose(got.exit_values, [e[2] for e in exits], atol=1e-13)
+
+
+def test_uniform_rate_exit_values_follow_the_residence_time(tmp_path):
+    path = write_run(tmp_path / "run.h5", FLOW, 40, 2.0, seed=5)
+    space = CellGrid(FLOW.columns, FLOW.rows, FLOW.width, FLOW.height)
+    discrete = discretize(path, space, FLOW.lag, (0.0, 2.0), keep_positions=True)
+    k = 2.0
+    a = np.full(space.n_states, math.exp(-k * FLOW.lag))
+    got = integrate_along_paths(discrete, a, 1.0 - a, 0.0, reset=True)
+    np.testing.assert_allclose(got.exit_values, 1.0 - np.exp(-k * got.residence_times),
+                               atol=1e-12)
+
+
+def test_cell_fields_of_a_window(tmp_path):
+    path = write_run(tmp_path / "run.h5", FLOW, 80, 1.0, seed=6)
+    space = CellGrid(FLOW.columns, FLOW.rows, FLOW.width, FLOW.height)
+    with Trajectories(path) as traj:
+        fields = window_cell_fields(traj, space, (0.0, 1.0))
+        cells = np.concatenate([
+            np.bincount(np.minimum((traj.positions(i)[:, 1] / FLOW.height * FLOW.rows)
+                                   .astype(int), FLOW.rows - 1) * FLOW.columns
+                        + np.minimum((traj.positions(i)[:, 0] / FLOW.width * FLOW.columns)
+                                     .astype(int), FLOW.columns - 1), minlength=60)[None]
+            for i in range(traj.n_frames)])
+    assert fields["relative"]                     # no particle diameter in the file
+    np.testing.assert_allclose(fields["solids_fraction"], cells.mean(0) / cells.mean(), rtol=1e-12)
+    np.testing.assert_allclose(wall_distance(space)[:4], [0.0075, 0.0225, 0.0375, 0.0375])
+    # core rises, wall falls
+    v = fields["vertical_velocity"].reshape(FLOW.rows, FLOW.columns)
+    assert np.nanmean(v[:, 2:4]) > 0 > np.nanmean(v[:, [0, 5]])
