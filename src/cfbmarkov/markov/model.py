@@ -426,7 +426,7 @@ class MarkovModel:
         return prediction.initial_states(self, trajectories, start)
 
     def predict(self, trajectories, start: float, duration: float, seed: int = 0,
-                output: str | os.PathLike | None = None, progress: bool = False):
+                output: str | os.PathLike | None = None, progress: bool | str = False):
         """Monte Carlo prediction (Eq. 7) from the particles' states in the frame at
         ``start`` (s) for ``duration`` (s), written as a trajectory file when ``output`` is
         given; see :func:`cfbmarkov.markov.prediction.predict` for the parameters, the

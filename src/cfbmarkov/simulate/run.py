@@ -25,6 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from cfbmarkov._console import progress_mode
 from cfbmarkov._outputs import claim_output
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
@@ -32,7 +33,7 @@ from cfbmarkov.segmented import SegmentedTrajectoryWriter
 from cfbmarkov.simulate.cfd import GasGrid, gas_stability_limit
 from cfbmarkov.simulate.checkpoint import read_checkpoint, write_checkpoint
 from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
-from cfbmarkov.simulate.progress import Progress, progress_mode
+from cfbmarkov.simulate.progress import Progress
 from cfbmarkov.simulate.riser import CoupledRiser
 
 
