@@ -32,8 +32,9 @@ from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS, checked_arrays, checked_coherence
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.open_flow import OpenFlow
-from cfbmarkov.markov.regimes import (RegimeCells, conditional_chain, regime_matrix,
-                                      regime_path, start_regime, with_regime)
+from cfbmarkov.markov.regime_chain import (conditional_chain, regime_matrix, regime_path,
+                                           start_regime, with_regime)
+from cfbmarkov.markov.regimes import RegimeCells
 from cfbmarkov.markov.states import StateSpace
 from cfbmarkov.markov.uncertainty import ModelUncertainty
 
@@ -255,7 +256,7 @@ class MarkovModel:
     @cached_property
     def regime_chain(self) -> np.ndarray | None:
         """The regime chain G (R x R) of a regime model, read off its counts
-        (:func:`~cfbmarkov.markov.regimes.regime_matrix`; from P itself for a model without
+        (:func:`~cfbmarkov.markov.regime_chain.regime_matrix`; from P itself for a model without
         counts); None for other state spaces."""
         if not isinstance(self.state_space, RegimeCells):
             return None
