@@ -338,8 +338,9 @@ def _advise_time_step(scale: Scale, cases, names) -> None:
         if message is not None:
             said.setdefault(message, []).append(name)
     for message, which in said.items():
-        where = "the same in every case" if len(which) == len(names) else "in " + ", ".join(which)
-        warnings.warn(f"{message} (the {scale.name} scale's step, {where})", TimeStepAdvisory,
+        where = ("" if len(names) == 1 else ", the same in every case"
+                 if len(which) == len(names) else ", in " + ", ".join(which))
+        warnings.warn(f"{message} (the {scale.name} scale's step{where})", TimeStepAdvisory,
                       stacklevel=4)
 
 
