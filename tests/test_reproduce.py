@@ -101,8 +101,9 @@ def check_case_lines(err: str, cases) -> None:
     notes = [x for x in lines if x.startswith("note: ")]
     assert len(notes) == 1 and notes == lines[:1], lines
     assert notes[0].startswith("note: DEM time step 1e-05 s resolves a contact in 5.18 steps")
-    assert notes[0].endswith("(the quick scale's step)" if len(cases) == 1
-                             else "(the quick scale's step, the same in every case)")
+    assert notes[0].endswith("(the quick scale's step; the paper's settings give 5.18 steps)"
+                             if len(cases) == 1 else "(the quick scale's step, the same in "
+                             "every case; the paper's settings give 5.18 steps)")
     for case in cases:
         progress = [x for x in lines if x.startswith(f"{case}: CFD-DEM ")]
         assert progress[0].startswith(f"{case}: CFD-DEM starting at 0/")

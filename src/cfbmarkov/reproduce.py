@@ -329,9 +329,15 @@ def _advise_time_step(scale: Scale, cases, names) -> None:
     step is the scale's, the same in each case."""
     import warnings
 
+    from cfbmarkov.config import CaseConfig
     from cfbmarkov.errors import TimeStepAdvisory
+    from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
     from cfbmarkov.simulate.run import time_step_advisory
 
+    paper = CaseConfig.model_validate({})       # the paper's particles, contact and step
+    law = ContactLaw.from_config(paper.contact, paper.particles.diameter,
+                                 paper.particles.density)
+    paper_steps, _ = contact_resolution(law, law.mass, paper.numerics.dem_time_step)
     said: dict[str, list[str]] = {}
     for case, name in zip(cases, names):
         message = time_step_advisory(case)
@@ -340,8 +346,8 @@ def _advise_time_step(scale: Scale, cases, names) -> None:
     for message, which in said.items():
         where = ("" if len(names) == 1 else ", the same in every case"
                  if len(which) == len(names) else ", in " + ", ".join(which))
-        warnings.warn(f"{message} (the {scale.name} scale's step{where})", TimeStepAdvisory,
-                      stacklevel=4)
+        warnings.warn(f"{message} (the {scale.name} scale's step{where}; the paper's settings "
+                      f"give {paper_steps:.2f} steps)", TimeStepAdvisory, stacklevel=4)
 
 
 def rtd_line(case: str, summaries: dict[str, dict]) -> str:
