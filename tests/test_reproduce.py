@@ -93,18 +93,23 @@ def reference(tmp_path_factory):
 
 
 def check_case_lines(err: str, cases) -> None:
-    """Every line on stderr is whole and names its case: one advisory per case (``note:``,
-    no Python warning format), progress lines from start to end."""
+    """Every line on stderr is whole: one advisory for the run, the quick scale's step
+    (``note:``, no Python warning format), then progress lines naming their case, from
+    start to end."""
     lines = err.splitlines()
     assert lines and not any("Warning" in line or "warn(" in line for line in lines), lines
+    notes = [x for x in lines if x.startswith("note: ")]
+    assert len(notes) == 1 and notes == lines[:1], lines
+    assert notes[0].startswith("note: DEM time step 1e-05 s resolves a contact in 5.18 steps")
+    assert notes[0].endswith("(the quick scale's step; the paper's settings give 5.18 steps)"
+                             if len(cases) == 1 else "(the quick scale's step, the same in "
+                             "every case; the paper's settings give 5.18 steps)")
     for case in cases:
-        notes = [x for x in lines if x.startswith(f"note: {case}: DEM time step 1e-05 s")]
-        assert len(notes) == 1, lines
         progress = [x for x in lines if x.startswith(f"{case}: CFD-DEM ")]
         assert progress[0].startswith(f"{case}: CFD-DEM starting at 0/")
         assert " s simulated in " in progress[-1] and len(progress) >= 3
-    named = tuple(f"{c}: CFD-DEM " for c in cases) + tuple(f"note: {c}: " for c in cases)
-    assert all(line.startswith(named) and "\r" not in line for line in lines), lines
+    named = tuple(f"{c}: CFD-DEM " for c in cases)
+    assert all(line.startswith(named) and "\r" not in line for line in lines[1:]), lines
 
 
 def test_progress_and_advisory_are_whole_lines_naming_the_case(reference):
@@ -220,9 +225,13 @@ def test_process_pool_runs_cases_in_parallel(tmp_path, capfd):
     overrides.write_text(text)
     from cfbmarkov.reproduce import load_overrides
 
+    from cfbmarkov._console import one_line_notes
+
     capfd.readouterr()
-    out = reproduce(tmp_path / "pool", "quick", [4.0, 6.0], overrides=load_overrides(overrides),
-                    jobs=2, progress=True, report=False, log=lambda line: None)
+    with one_line_notes():          # as the command line prints the run's advisory
+        out = reproduce(tmp_path / "pool", "quick", [4.0, 6.0],
+                        overrides=load_overrides(overrides), jobs=2, progress=True,
+                        report=False, log=lambda line: None)
     # the workers' progress and advice: whole lines, each naming its case
     check_case_lines(capfd.readouterr().err, ["u4", "u6"])
     for case in ("u4", "u6"):

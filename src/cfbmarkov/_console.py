@@ -9,11 +9,12 @@ within a line.
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 import warnings
 from typing import Iterator
 
-from cfbmarkov.errors import CfbmarkovWarning
+from cfbmarkov.errors import CfbmarkovWarning, InputError
 
 #: what starts the line of a :class:`~cfbmarkov.errors.CfbmarkovWarning` on the command line
 NOTE = "note: "
@@ -66,4 +67,56 @@ def one_line_notes() -> Iterator[None]:
         yield
 
 
-__all__ = ["NOTE", "install_one_line_notes", "one_line_notes", "write_line"]
+def clock_text(seconds: float) -> str:
+    """A duration as ``H:MM:SS`` or ``M:SS`` (``?`` where it is not finite).
+
+    Parameters
+    ----------
+    seconds : float
+        The duration (s); negative counts as 0.
+
+    Returns
+    -------
+    str
+    """
+    if not math.isfinite(seconds):
+        return "?"
+    seconds = int(round(max(seconds, 0.0)))
+    h, rest = divmod(seconds, 3600)
+    m, s = divmod(rest, 60)
+    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
+
+
+def progress_mode(progress) -> str | None:
+    """How to show progress on stderr: ``"bar"`` (a bar redrawn in place, for a terminal),
+    ``"lines"`` (whole lines, readable in a log file) or None (quiet).
+
+    Parameters
+    ----------
+    progress : bool, None or {"bar", "lines"}
+        True: a bar where stderr is a terminal, lines where it is not (a file, a pipe);
+        False or None: quiet; ``"bar"`` or ``"lines"``: that.
+
+    Returns
+    -------
+    str or None
+
+    Raises
+    ------
+    InputError
+        For any other value.
+    """
+    if progress is None or progress is False:
+        return None
+    if progress in ("bar", "lines"):
+        return progress
+    if progress is True:
+        try:
+            return "bar" if sys.stderr.isatty() else "lines"
+        except (AttributeError, ValueError):        # no stderr, or a closed one
+            return "lines"
+    raise InputError(f"progress {progress!r}: choose True, False, 'bar' or 'lines'")
+
+
+__all__ = ["NOTE", "clock_text", "install_one_line_notes", "one_line_notes", "progress_mode",
+           "write_line"]

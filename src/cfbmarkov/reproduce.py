@@ -275,6 +275,7 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                 "cases": names, "models": list(models), "version": __version__}
     write_text_atomic(out / "reproduce.json", json.dumps(manifest, indent=2) + "\n")
     log(f"reproduce ({scale.name} scale): {len(cases)} case(s) {', '.join(names)} in {out}")
+    _advise_time_step(scale, cases, names)
     started = _time.perf_counter()
     failures: list[str] = []
     try:
@@ -288,7 +289,7 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                     future.result()
         futures = {executor.submit(run_case, case.model_dump_json(), str(out / name),
                                    tuple(models), progress, threads,
-                                   kinetics=kinetics): name
+                                   kinetics=kinetics, time_step_note=False): name
                    for case, name in zip(cases, names)}
         for future in cf.as_completed(futures):
             name = futures[future]
@@ -330,6 +331,33 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
     if failures:
         raise InputError(f"{len(failures)} case(s) failed; rerun to resume: " + "; ".join(failures))
     return html if report else out
+
+
+def _advise_time_step(scale: Scale, cases, names) -> None:
+    """Say once for the run (:class:`~cfbmarkov.errors.TimeStepAdvisory`), not once per
+    case, where the scale's DEM time step resolves a contact in fewer than 10 steps: the
+    step is the scale's, the same in each case."""
+    import warnings
+
+    from cfbmarkov.config import CaseConfig
+    from cfbmarkov.errors import TimeStepAdvisory
+    from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
+    from cfbmarkov.simulate.run import time_step_advisory
+
+    paper = CaseConfig.model_validate({})       # the paper's particles, contact and step
+    law = ContactLaw.from_config(paper.contact, paper.particles.diameter,
+                                 paper.particles.density)
+    paper_steps, _ = contact_resolution(law, law.mass, paper.numerics.dem_time_step)
+    said: dict[str, list[str]] = {}
+    for case, name in zip(cases, names):
+        message = time_step_advisory(case)
+        if message is not None:
+            said.setdefault(message, []).append(name)
+    for message, which in said.items():
+        where = ("" if len(names) == 1 else ", the same in every case"
+                 if len(which) == len(names) else ", in " + ", ".join(which))
+        warnings.warn(f"{message} (the {scale.name} scale's step{where}; the paper's settings "
+                      f"give {paper_steps:.2f} steps)", TimeStepAdvisory, stacklevel=4)
 
 
 def rtd_line(case: str, summaries: dict[str, dict]) -> str:

@@ -14,6 +14,7 @@ import json
 import math
 import os
 import time as _time
+import warnings
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -22,7 +23,7 @@ from pydantic import ValidationError
 from cfbmarkov._atomic import write_text_atomic
 from cfbmarkov.cases.scales import MODELS
 from cfbmarkov.config import SPEED_ONLY, CaseConfig, case_difference, flat_settings
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import InputError, TimeStepAdvisory
 
 
 def _read_json(path: Path) -> dict:
@@ -87,7 +88,8 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
 
 def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
              progress: bool = True, threads: int | None = None,
-             checkpoint_every: float = 0.5, kinetics: str | None = None) -> dict[str, Any]:
+             checkpoint_every: float = 0.5, kinetics: str | None = None,
+             time_step_note: bool = True) -> dict[str, Any]:
     """Run (or finish) every stage of one case in a folder.
 
     A module-level function, so that any executor (process pool, Dask) can run it.
@@ -110,6 +112,10 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     kinetics : str, optional
         A kinetics file passed to each comparison (``compare --kinetics``); a comparison
         in place without its ``kinetics`` block is redone.
+    time_step_note : bool, optional
+        Let the CFD-DEM say when its DEM time step resolves a contact in fewer than 10
+        steps (:class:`~cfbmarkov.errors.TimeStepAdvisory`); False where the caller says it
+        once for every case of its scale (:func:`cfbmarkov.reproduce.reproduce`).
 
     Returns
     -------
@@ -167,8 +173,11 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
         checkpoint = folder / "cfd-dem.h5.parts" / "checkpoint.h5"
         resume = checkpoint.exists()
         cpu = _time.process_time()
-        simulate(case, reference, checkpoint_every=checkpoint_every, resume=resume,
-                 progress="lines" if progress else False, label=label)
+        with warnings.catch_warnings():
+            if not time_step_note:
+                warnings.simplefilter("ignore", TimeStepAdvisory)
+            simulate(case, reference, checkpoint_every=checkpoint_every, resume=resume,
+                     progress="lines" if progress else False, label=label)
         # this process's CPU time (Numba's compilation included where it compiled here)
         timing["cpu_s"] = _time.process_time() - cpu
         stages["cfd-dem"] = "resumed" if resume else "done"

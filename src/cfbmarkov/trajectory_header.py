@@ -1,12 +1,14 @@
-"""What a trajectory file holds besides its frames, read and checked when it is opened: the
-format and version, particle ids and frame times, the domain, the boundary, the axes, the
-producer and the frame interval (``docs/definitions.md``, File formats, What is checked).
+"""What a trajectory file holds besides its frames: the format and version, particle ids
+and frame times, the domain, the boundary, the axes, the producer and the frame interval;
+checked when a file is written (:func:`header_attrs`) and read and checked when it is
+opened (:func:`read_header`; ``docs/definitions.md``, File formats, What is checked).
 
 No frame is read here; frames are checked as they are read (:mod:`cfbmarkov.trajectories`).
 """
 
 from __future__ import annotations
 
+import datetime as _dt
 import json
 from dataclasses import dataclass
 from pathlib import Path
@@ -15,6 +17,7 @@ from typing import Any
 import h5py
 import numpy as np
 
+from cfbmarkov._hdf5 import json_default, package_version
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectory_format import (FORMAT, FRAME_SPACING_TOLERANCE, VERSION,
@@ -67,6 +70,71 @@ class TrajectoryHeader:
     source: str
     parameters: dict[str, Any]
     frame_interval: float
+
+
+def header_attrs(*, width: float, height: float, depth: float | None,
+                 boundary: str | Boundary, axes: dict[str, str] | None, region_origin,
+                 source: str, parameters: dict[str, Any] | None,
+                 frame_interval: float | None) -> dict[str, Any]:
+    """The root attributes of a trajectory file about to be written, checked.
+
+    Parameters
+    ----------
+    width, height : float
+        The riser W x H (m), positive.
+    depth : float or None
+        The depth (m) of a 3D file; None in 2D.
+    boundary : Boundary or {"periodic", "open"}
+        The vertical boundary.
+    axes : dict or None
+        The source's axis letter of each stored axis (default x, y (, z)).
+    region_origin : array_like of float, shape (D,), or None
+        Source coordinates (m) of the stored origin (default zeros).
+    source : str
+        What produces the file.
+    parameters : dict or None
+        The producer's parameters (stored as JSON).
+    frame_interval : float or None
+        Time between frames (s); None: estimated when the file is closed (not stored here).
+
+    Returns
+    -------
+    dict
+        Attribute name -> value, with the creation time and the package's version.
+
+    Raises
+    ------
+    InputError
+        If the domain is not of positive size, the boundary is unknown, ``frame_interval``
+        is not a positive number, or the origin has not D coordinates.
+    """
+    if not (width > 0 and height > 0) or (depth is not None and not depth > 0):
+        size = f"{width:g} x {height:g}" + ("" if depth is None else f" x {depth:g}")
+        raise InputError(f"domain {size} m must have positive size")
+    boundary = Boundary.parse(boundary, "boundary")
+    if frame_interval is not None and not (np.isfinite(frame_interval) and frame_interval > 0):
+        raise InputError(f"frame interval {frame_interval!r} s must be a positive number")
+    d = 2 if depth is None else 3
+    axes = dict(axes or {})
+    origin = np.zeros(d) if region_origin is None else np.asarray(
+        region_origin, dtype=np.float64).reshape(-1)
+    if origin.size != d:
+        raise InputError(f"region origin {origin.tolist()} needs {d} coordinates")
+    attrs = {
+        "format": FORMAT, "version": VERSION, "width": float(width), "height": float(height),
+        "dimensions": d, "boundary": boundary.value, "across_axis": axes.get("across", "x"),
+        "vertical_axis": axes.get("vertical", "y"),
+        "depth_axis": axes.get("depth", "z") if d == 3 else "", "region_origin": origin,
+        "length_unit": "m", "time_unit": "s", "source": source,
+        "parameters": json.dumps(parameters or {}, default=json_default),
+        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        "cfbmarkov_version": package_version(),
+    }
+    if depth is not None:
+        attrs["depth"] = float(depth)
+    if frame_interval is not None:
+        attrs["frame_interval"] = float(frame_interval)
+    return attrs
 
 
 def read_header(f: h5py.File, path: Path) -> TrajectoryHeader:

@@ -13,7 +13,6 @@ Frame times).
 
 from __future__ import annotations
 
-import datetime as _dt
 import json
 import os
 from pathlib import Path
@@ -25,12 +24,13 @@ import numpy as np
 from cfbmarkov import _interrupt
 from cfbmarkov._atomic import (discard, is_write_failure, publish, temporary_path, write_error,
                                write_method)
-from cfbmarkov._hdf5 import create_array_dataset, json_default, package_version
+from cfbmarkov._hdf5 import create_array_dataset, json_default
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectory_checks import check_written_values
-from cfbmarkov.trajectory_format import FORMAT, VERSION, PassEvents, estimate_frame_interval
+from cfbmarkov.trajectory_format import PassEvents, estimate_frame_interval
 from cfbmarkov.trajectory_groups import append_events, append_field_frames, create_frames
+from cfbmarkov.trajectory_header import header_attrs
 from cfbmarkov.trajectory_series import FrameSeries
 
 #: laps from wrapped heights: the largest step between frames (fraction of H) that the
@@ -125,25 +125,15 @@ class TrajectoryWriter:
         self.ids = np.asarray(ids, dtype=np.int64).reshape(-1)
         if np.unique(self.ids).size != self.ids.size:
             raise InputError("particle ids are not unique")
-        if not (width > 0 and height > 0) or (depth is not None and not depth > 0):
-            size = f"{width:g} x {height:g}" + ("" if depth is None else f" x {depth:g}")
-            raise InputError(f"domain {size} m must have positive size")
-        boundary = Boundary.parse(boundary, "boundary")
-        if frame_interval is not None and not (np.isfinite(frame_interval) and frame_interval > 0):
-            raise InputError(f"frame interval {frame_interval!r} s must be a positive number")
+        attrs = header_attrs(width=width, height=height, depth=depth, boundary=boundary,
+                             axes=axes, region_origin=region_origin, source=source,
+                             parameters=parameters, frame_interval=frame_interval)
         self.width, self.height = float(width), float(height)
         self.depth = None if depth is None else float(depth)
         self.dimensions = 2 if depth is None else 3
-        self.boundary = boundary
+        self.boundary = boundary = Boundary.parse(boundary, "boundary")
         self.with_velocity = with_velocity
         self._label = label or str(self.path)
-        axes = dict(axes or {})
-        axes = {"across": axes.get("across", "x"), "vertical": axes.get("vertical", "y"),
-                "depth": axes.get("depth", "z") if self.dimensions == 3 else ""}
-        origin = np.zeros(self.dimensions) if region_origin is None else np.asarray(
-            region_origin, dtype=np.float64).reshape(-1)
-        if origin.size != self.dimensions:
-            raise InputError(f"region origin {origin.tolist()} needs {self.dimensions} coordinates")
         self._tmp = temporary_path(self.path)
         self._closed = False
         try:
@@ -155,29 +145,16 @@ class TrajectoryWriter:
             discard(self._tmp)
             raise
         try:
-            self._create(source, parameters, origin, axes, boundary, frame_interval)
+            self._create(attrs, boundary, frame_interval)
         except BaseException:           # e.g. Ctrl-C while the datasets are created
             if not self._closed:
                 self.abort()
             raise
 
     @write_method
-    def _create(self, source, parameters, origin, axes, boundary, frame_interval) -> None:
+    def _create(self, attrs: dict[str, Any], boundary: Boundary, frame_interval) -> None:
         f, d = self._file, self.dimensions
-        f.attrs.update({
-            "format": FORMAT, "version": VERSION, "width": self.width, "height": self.height,
-            "dimensions": d, "boundary": boundary.value, "across_axis": axes["across"],
-            "vertical_axis": axes["vertical"], "depth_axis": axes["depth"],
-            "region_origin": origin,
-            "length_unit": "m", "time_unit": "s", "source": source,
-            "parameters": json.dumps(parameters or {}, default=json_default),
-            "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
-            "cfbmarkov_version": package_version(),
-        })
-        if self.depth is not None:
-            f.attrs["depth"] = self.depth
-        if frame_interval is not None:
-            f.attrs["frame_interval"] = float(frame_interval)
+        f.attrs.update(attrs)
         self._chunk = create_frames(f, self.ids, d, self.with_velocity)
         self._n_frames = 0
         self._series = FrameSeries(self._label, self.height, boundary.is_open, self.max_step,

@@ -431,3 +431,24 @@ def test_cli_compare_bins_the_rtd_at_the_models_lag_by_default(tmp_path, make_ru
                  "--no-figures", "--resamples", "0", "--bin-width", "0.05"]) == 0
     assert json.loads((given / "summary.json").read_text())["bin_width"] == pytest.approx(0.05)
     assert "RTD bins 0.05 s wide (--bin-width)" in capsys.readouterr().out
+
+
+def test_python_compare_bins_the_rtd_at_the_models_lag_by_default(tmp_path, make_run,
+                                                                   write_run):
+    """``report.compare.compare`` called from Python without ``bin_width`` bins as the
+    command line does: at the lag of the model attached to the prediction (0.01 s here, not
+    0.025 s), else at the reference's frame interval; the summary says which."""
+    from cfbmarkov.markov import CellGrid, fit_model
+
+    run = make_run(n_particles=200, t1=3.0, dt=0.005, seed=5)
+    ref = write_run(tmp_path / "ref.h5", run, source="cfd-dem")
+    model = fit_model(ref, CellGrid(6, 38, 0.09, 0.95), 0.01, (0.0, 1.0))
+    pred = model.predict(ref, start=1.0, duration=2.0, seed=3, output=tmp_path / "pred.h5")
+    summary = compare(ref, pred, window=(1.0, 3.0), output=tmp_path / "lag", figures=False,
+                      resamples=0)
+    assert summary["bin_width"] == pytest.approx(0.01)
+    assert summary["bin_width_from"] == "the model's lag"
+    plain = compare(ref, ref, window=(1.0, 3.0), output=tmp_path / "frames", figures=False,
+                    resamples=0)        # no model attached: the reference's frames
+    assert plain["bin_width"] == pytest.approx(0.005)
+    assert plain["bin_width_from"] == "the reference's frame interval"

@@ -107,6 +107,58 @@ def test_predict_bad_start(tmp_path, capsys, markov_run):
     assert_clean_failure(code, err, out)
 
 
+def test_predict_progress_is_whole_lines_off_a_terminal(tmp_path, capsys, markov_run,
+                                                      monkeypatch):
+    """stderr captured (not a terminal, as in a log file): whole lines starting with
+    ``predict:``, no carriage return; -q: nothing."""
+    from cfbmarkov.markov import prediction
+
+    model_path = tmp_path / "model.h5"
+    run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--lag", "0.05", "--window", "1:5",
+            "-o", model_path)
+    monkeypatch.setattr(prediction, "LINE_INTERVAL", 0.0)      # a line at every block
+    out = tmp_path / "p.h5"
+    code, stdout, err = run_cli(capsys, "predict", model_path, "--init", markov_run,
+                                "--start", 5, "--duration", 3, "-o", out)
+    assert code == 0 and stdout.strip() == str(out)
+    assert "\r" not in err and err.endswith("\n")
+    lines = err.splitlines()
+    assert all(line.startswith("predict: ") for line in lines), err
+    assert lines[0] == ("predict: 3 s from t = 5 s (60 lags of 0.05 s), 2000 particles: "
+                        "Monte Carlo, then the frames written")
+    assert lines[1].startswith("predict: Monte Carlo done in 0:")
+    assert "writing 61 frames" in lines[1]
+    assert lines[2].startswith("predict: 1.6/3 s written, ")      # 32 lags of 0.05 s
+    assert "about" in lines[2] and lines[2].endswith(" left")
+    assert lines[-1].startswith(f"predict: 3 s written to {out} in 0:")
+    code, _, err = run_cli(capsys, "predict", model_path, "--init", markov_run, "--start", 5,
+                           "--duration", 1, "-o", tmp_path / "q.h5", "-q")
+    assert code == 0 and err == ""
+
+
+def test_prediction_progress_bar_and_modes(capsys):
+    """On a terminal a bar redrawn in place, counted in whole lags (never past the end);
+    a mode that is none of True, False, 'bar' or 'lines' is refused."""
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.markov.prediction import PredictionProgress
+
+    shown = PredictionProgress("bar", 0.0, 40, 0.025, 10)
+    shown.chain_done()
+    for k in (32, 40):
+        shown.written(k)
+    shown.close("x.h5")
+    err = capsys.readouterr().err
+    assert "\r" in err and "40/40 lags written" in err and "predict 1 s" in err
+    assert "s/s" not in err and "-00:00" not in err
+    quiet = PredictionProgress(False, 0.0, 40, 0.025, 10)
+    quiet.chain_done()
+    quiet.written(40)
+    quiet.close("x.h5")
+    assert capsys.readouterr().err == ""
+    with pytest.raises(InputError, match="progress 'yes'"):
+        PredictionProgress("yes", 0.0, 40, 0.025, 10)
+
+
 def test_bench_only_a_whole_name_measures_that_figure_alone(capsys):
     """--only with a figure's whole name: that figure alone (mcm-exact-rtd-long-tail needs
     no trajectory file); a prefix keeps every figure it starts."""

@@ -14,8 +14,8 @@ from cfbmarkov import synthetic
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov import MarkovModel, fit_model
-from cfbmarkov.markov.regimes import (DirectionRegimeCells, RegimeCells, regime_edges,
-                                      regime_matrix)
+from cfbmarkov.markov.regime_chain import regime_matrix
+from cfbmarkov.markov.regimes import DirectionRegimeCells, RegimeCells, regime_edges
 from cfbmarkov.markov.first_passage import exact_rtd
 from cfbmarkov.markov.select import select_model
 from cfbmarkov.markov.spaces import state_space_from_attrs, state_space_from_name

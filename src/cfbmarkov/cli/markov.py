@@ -346,7 +346,8 @@ def add_predict(sub) -> None:
     s.add_argument("--duration", type=positive_float, required=True, help="simulated time, s")
     s.add_argument("--seed", type=seed, default=0, help="0 .. 2^64 - 1 (default 0)")
     s.add_argument("-o", "--output", required=True, help="prediction trajectory file (.h5)")
-    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress on stderr (a bar on a terminal, whole lines in a log file)")
     s.set_defaults(func=cmd_predict)
 
 

@@ -16,7 +16,6 @@ The file layout and its reading and writing are in :mod:`cfbmarkov.markov.model_
 from __future__ import annotations
 
 import copy
-import dataclasses
 import os
 from dataclasses import InitVar, dataclass, field
 from functools import cached_property
@@ -27,22 +26,22 @@ import numpy as np
 
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
-from cfbmarkov.limits import MAX_STEPS, check_finite, check_seed
-from cfbmarkov.markov import model_file, model_summary, prediction, propagation
+from cfbmarkov.limits import check_seed
+from cfbmarkov.markov import model_file, model_summary, propagation
 from cfbmarkov.markov.adequacy import Adequacy
-from cfbmarkov.markov.connectivity import (closed_classes, stationary_distribution,
-                                           states_reaching)
-from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, exact_rtd
 from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS, checked_arrays, checked_coherence
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.open_flow import OpenFlow
-from cfbmarkov.markov.regimes import (RegimeCells, conditional_chain, regime_matrix,
-                                      regime_path, start_regime, with_regime)
+from cfbmarkov.markov.regime_chain import (conditional_chain, regime_matrix, regime_path,
+                                           start_regime, with_regime)
+from cfbmarkov.markov.regimes import RegimeCells
 from cfbmarkov.markov.states import StateSpace
 from cfbmarkov.markov.uncertainty import ModelUncertainty
 
 if TYPE_CHECKING:
     import h5py
+
+    from cfbmarkov.markov.first_passage import ResidenceTimeDistribution
 
 
 @dataclass(frozen=True, eq=False)
@@ -222,6 +221,8 @@ class MarkovModel:
     def trap_share(self) -> float:
         """Share of the fitting window's particle-frames in states from which the chain can
         reach a state entered but never left that keeps its particles (P_ii = 1)."""
+        from cfbmarkov.markov.connectivity import states_reaching
+
         traps = [i for i in self.entered_never_left if self.transition_matrix[i, i] == 1.0]
         occupancy = self.counts.sum(axis=1).astype(np.float64)
         if not traps or occupancy.sum() == 0:
@@ -233,14 +234,9 @@ class MarkovModel:
     def closed_classes(self) -> list[np.ndarray]:
         """Closed classes of P with two or more states, largest first: more than one means a
         reducible chain (particles in one never reach the other's states)."""
-        return closed_classes(self.transition_matrix, min_size=2)
+        from cfbmarkov.markov.connectivity import closed_classes
 
-    @property
-    def _entry_flux(self) -> np.ndarray | None:
-        # net entries through the inlet per state: landings of up passes minus departures of
-        # down passes (a particle that falls out and comes back starts no new residence)
-        flux = (self.counts_up.sum(axis=0) - self.counts_down.sum(axis=1)).astype(np.float64)
-        return flux if flux.sum() > 0 else None
+        return closed_classes(self.transition_matrix, min_size=2)
 
     @cached_property
     def up_fraction(self) -> np.ndarray:
@@ -266,7 +262,7 @@ class MarkovModel:
     @cached_property
     def regime_chain(self) -> np.ndarray | None:
         """The regime chain G (R x R) of a regime model, read off its counts
-        (:func:`~cfbmarkov.markov.regimes.regime_matrix`; from P itself for a model without
+        (:func:`~cfbmarkov.markov.regime_chain.regime_matrix`; from P itself for a model without
         counts); None for other state spaces."""
         if not isinstance(self.state_space, RegimeCells):
             return None
@@ -284,6 +280,8 @@ class MarkovModel:
         for a reducible chain, the particle-frames observed in the fitting window (uniform
         for a model given by its matrix) carried into the closed classes
         (:func:`~cfbmarkov.markov.connectivity.stationary_distribution`)."""
+        from cfbmarkov.markov.connectivity import stationary_distribution
+
         return stationary_distribution(self.transition_matrix,
                                        self.counts.sum(axis=1).astype(np.float64))
 
@@ -327,8 +325,8 @@ class MarkovModel:
         returned values and the errors raised."""
         return propagation.batch_injection_maps(self, times, outflow)
 
-    # -- residence times ---------------------------------------------------------------
-    def rtd(self, window: float | None = None, direction: str = "up") -> ResidenceTimeDistribution:
+    # -- residence times (cfbmarkov.markov.model_rtd) ---------------------------------
+    def rtd(self, window: float | None = None, direction: str = "up") -> "ResidenceTimeDistribution":
         """Exact residence-time distribution (no sampling noise), cached.
 
         Parameters
@@ -363,57 +361,9 @@ class MarkovModel:
         J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton
         (1960) (Ch. III, absorbing chains).
         """
-        if window is not None:
-            window = check_finite(window, "--window-length", "s", positive=True)
-            if window / self.lag > MAX_STEPS:
-                raise InputError(f"--window-length {window:g} s is {window / self.lag:.3g} lags "
-                                 f"of {self.lag:g} s, more than {MAX_STEPS}")
-        if self.open_flow is not None:
-            return self._with_uncertainty(self._open_rtd(window), window)
-        if direction not in ("up", "down"):
-            raise InputError(f"residence direction {direction!r}: up or down")
-        if direction == "down":
-            return self._down_rtd(window)
-        if window is not None and "rtd" not in self._cache:
-            # a window of n lags sees residence times below n lags only: propagate no further
-            steps = max(2, int(round(window / self.lag)))
-            key = ("rtd-steps", steps)
-            if key not in self._cache:
-                self._cache[key] = exact_rtd(self.transition_matrix, self.up_fraction,
-                                             self.down_fraction, self.lag, max_steps=steps,
-                                             entry_flux=self._entry_flux)
-            return self._cache[key].in_window(window)
-        if "rtd" not in self._cache:
-            self._cache["rtd"] = exact_rtd(self.transition_matrix, self.up_fraction,
-                                           self.down_fraction, self.lag,
-                                           entry_flux=self._entry_flux)
-        intrinsic = self._cache["rtd"]
-        return self._with_uncertainty(intrinsic) if window is None else intrinsic.in_window(window)
+        from cfbmarkov.markov.model_rtd import model_rtd
 
-    def _with_uncertainty(self, rtd: ResidenceTimeDistribution, window: float | None = None
-                          ) -> ResidenceTimeDistribution:
-        """The intrinsic RTD with the model's uncertainty attached (a windowed one as it is)."""
-        if window is not None or self.uncertainty is None:
-            return rtd
-        return dataclasses.replace(rtd, uncertainty=self.uncertainty)
-
-    def _down_rtd(self, window: float | None) -> ResidenceTimeDistribution:
-        """Residences of a net downflow: entries through the top, exits through the bottom."""
-        if "rtd-down" not in self._cache:
-            flux = (self.counts_down.sum(axis=0) - self.counts_up.sum(axis=1)).astype(np.float64)
-            self._cache["rtd-down"] = exact_rtd(self.transition_matrix, self.down_fraction,
-                                                self.up_fraction, self.lag,
-                                                entry_flux=flux if flux.sum() > 0 else None)
-        intrinsic = self._cache["rtd-down"]
-        return intrinsic if window is None else intrinsic.in_window(window)
-
-    def _open_rtd(self, window: float | None) -> ResidenceTimeDistribution:
-        """First passage to the outside from the entry distribution (fundamental matrix of
-        the absorbing chain): f(k) = e Q^(k-1) r."""
-        if "open-rtd" not in self._cache:
-            self._cache["open-rtd"] = self.open_flow.rtd(self.absorbing_matrix, self.lag)
-        intrinsic = self._cache["open-rtd"]
-        return intrinsic if window is None else intrinsic.in_window(window)
+        return model_rtd(self, window, direction)
 
     # -- Monte Carlo -------------------------------------------------------------------
     def monte_carlo(self, initial_states, n_steps: int, seed: int = 0, initial_laps=None
@@ -478,15 +428,19 @@ class MarkovModel:
         """States [N], positions [N, 2] (m) and laps [N] of the particles in the frame at
         ``start`` (s); see :func:`cfbmarkov.markov.prediction.initial_states` for the
         parameters, the returned values and the errors raised."""
+        from cfbmarkov.markov import prediction
+
         return prediction.initial_states(self, trajectories, start)
 
     def predict(self, trajectories, start: float, duration: float, seed: int = 0,
-                output: str | os.PathLike | None = None, progress: bool = False,
+                output: str | os.PathLike | None = None, progress: bool | str = False,
                 kinetics=None):
         """Monte Carlo prediction (Eq. 7) from the particles' states in the frame at
         ``start`` (s) for ``duration`` (s), written as a trajectory file when ``output`` is
         given; see :func:`cfbmarkov.markov.prediction.predict` for the parameters, the
         returned values and the errors raised."""
+        from cfbmarkov.markov import prediction
+
         return prediction.predict(self, trajectories, start, duration, seed, output, progress,
                                   kinetics)
 

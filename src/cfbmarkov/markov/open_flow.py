@@ -14,15 +14,17 @@ periodic riser's model has none.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
-from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, open_rtd
 from cfbmarkov.markov.montecarlo import SparseChain
 from cfbmarkov.markov.open_montecarlo import run_open_chain
+
+if TYPE_CHECKING:
+    from cfbmarkov.markov.first_passage import ResidenceTimeDistribution
 
 #: share of an open riser's tracks ending (beginning) away from the outlet (inlet) above
 #: which :meth:`OpenFlow.warnings` says so
@@ -117,7 +119,7 @@ class OpenFlow:
         """
         return (1.0 - self.exit_probability)[:, None] * transition_matrix
 
-    def rtd(self, absorbing: np.ndarray, lag: float) -> ResidenceTimeDistribution:
+    def rtd(self, absorbing: np.ndarray, lag: float) -> "ResidenceTimeDistribution":
         """Exact residence-time distribution: first passage to the outside from the entry
         distribution, f(k) = e Q^(k-1) r (:func:`~cfbmarkov.markov.first_passage.open_rtd`).
 
@@ -137,6 +139,8 @@ class OpenFlow:
         TrappedResidences
             If no particle that enters can ever leave.
         """
+        from cfbmarkov.markov.first_passage import open_rtd
+
         return open_rtd(absorbing, self.exit_probability, self.entry_distribution, lag)
 
     def monte_carlo(self, chain: SparseChain, initial_states: np.ndarray, n_steps: int,

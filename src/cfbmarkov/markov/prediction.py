@@ -6,11 +6,14 @@ model attached as ``/provenance/model``).
 from __future__ import annotations
 
 import os
+import sys
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cfbmarkov._console import clock_text, progress_mode, write_line
 from cfbmarkov.errors import InputError
 from cfbmarkov.limits import check_disk, check_finite, check_memory, check_seed
 from cfbmarkov.markov.discrete import discretize_frame
@@ -24,7 +27,8 @@ if TYPE_CHECKING:
 
 
 def predict(model: "MarkovModel", trajectories, start: float, duration: float, seed: int = 0,
-            output: str | os.PathLike | None = None, progress: bool = False, kinetics=None):
+            output: str | os.PathLike | None = None, progress: bool | str = False,
+            kinetics=None):
     """Monte Carlo prediction of ``model`` from the particles' states in the frame at
     ``start``.
 
@@ -41,8 +45,10 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
     output : str or os.PathLike, optional
         Write the prediction as a trajectory file (positions drawn uniformly inside the
         cells, the model attached as ``/provenance/model``).
-    progress : bool
-        Show a progress bar while writing.
+    progress : bool or {"bar", "lines"}
+        Show progress on stderr while a prediction is run and written to ``output``
+        (:class:`PredictionProgress`): True a bar on a terminal and whole lines elsewhere (a
+        log file, a pipe); ``"bar"`` or ``"lines"`` that; False quiet.
     kinetics : StateKinetics, optional
         Particle properties carried along the paths (:mod:`cfbmarkov.kinetics`, resolved on
         the model's states): computed by :func:`cfbmarkov.markov.kinetics_mc.run_properties`
@@ -101,7 +107,11 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         if not present0.all():          # only the particles present at the start move
             states0, positions0, laps0, ids = (states0[present0], positions0[present0],
                                                laps0[present0], ids[present0])
+        shown = (PredictionProgress(progress, start, n_steps, model.lag, states0.size)
+                 if output is not None else None)
         states, laps = model.monte_carlo(states0, n_steps, seed, laps0)
+        if shown is not None:
+            shown.chain_done()
         times = start + model.lag * np.arange(n_steps + 1)
         if states.shape[1] > ids.size:      # newcomers through the inlet: new ids
             first = int(traj.ids.max()) + 1 if traj.ids.size else 0
@@ -113,7 +123,7 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         if output is None:
             return (times, states, laps) if values is None else (times, states, laps, values)
         return write_prediction(model, traj, times, states, laps, positions0, seed, output,
-                                progress, duration=duration, ids=ids,
+                                shown, duration=duration, ids=ids,
                                 properties=None if values is None else (kinetics, values))
 
 
@@ -172,7 +182,8 @@ def initial_states(model: "MarkovModel", trajectories, start: float
 
 def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                      states: np.ndarray, laps: np.ndarray, first_positions: np.ndarray,
-                     seed: int, output: str | os.PathLike, progress: bool = False,
+                     seed: int, output: str | os.PathLike,
+                     progress: "bool | str | PredictionProgress" = False,
                      duration: float | None = None, ids: np.ndarray | None = None,
                      properties=None) -> Path:
     """Write a Monte Carlo run of ``model`` as a trajectory file (a prediction).
@@ -197,8 +208,9 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
         The seed of the run (also seeds the placement inside cells).
     output : str or os.PathLike
         The trajectory file to write (atomically).
-    progress : bool
-        Show a progress bar in simulated seconds.
+    progress : bool, {"bar", "lines"} or PredictionProgress
+        Show the frames written on stderr (as ``progress`` of :func:`predict`; a
+        :class:`PredictionProgress` already started goes on).
     duration : float, optional
         The prediction's length as asked for (s), recorded in the file's parameters
         (default: K lags).
@@ -234,7 +246,8 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                           depth=traj.depth, source="markov-prediction", parameters=parameters,
                           frame_interval=model.lag, boundary=model.boundary.value) as writer:
         writer.attach("model", *model_datasets_and_attrs(model))
-        bar = _progress(progress, duration)
+        bar = (progress if isinstance(progress, PredictionProgress)
+               else PredictionProgress(progress, start, n_steps, model.lag, ids.size))
         first = np.full((ids.size, first_positions.shape[1]), np.nan)
         first[:first_positions.shape[0]] = first_positions
         writer.append(times[0], first, lap=laps[0],
@@ -248,23 +261,97 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                                   for k in ks])
             writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop],
                                  present=(states[ks.start:ks.stop] >= 0) if some_absent else None)
-            if bar is not None:
-                bar.update(model.lag * len(ks))
-        if bar is not None:
-            bar.close()
+            bar.written(ks.stop - 1)
         if properties is not None:
             kin, values = properties
             for q, name in enumerate(kin.names):
                 writer.add_property(name, values[q], {"law": kin.laws[q].key,
                                                       "start": kin.starts[q],
                                                       "initial": float(kin.initial[q])})
+    bar.close(output)
     return Path(output)
 
 
-def _progress(enabled: bool, duration: float):
-    if not enabled:
-        return None
-    from tqdm import tqdm
+#: wall seconds between two lines of progress (``progress="lines"``) while frames are written
+LINE_INTERVAL = 10.0
 
-    return tqdm(total=duration, unit="s", unit_scale=False, desc="Monte Carlo (simulated s)",
-                bar_format="{desc}: {n:.3f}/{total:.3f} s [{elapsed}<{remaining}, {rate_fmt}]")
+
+class PredictionProgress:
+    """Progress of a prediction on stderr: the Monte Carlo run, then its frames written.
+
+    As a bar of the lags written, redrawn in place (for a terminal), or as whole lines
+    starting with ``predict:`` (readable in a log file): one at the start, one when the
+    Monte Carlo is done, one every :data:`LINE_INTERVAL` s of wall time while frames are
+    written and one at the end.
+
+    Parameters
+    ----------
+    progress : bool, None or {"bar", "lines"}
+        As ``progress`` of :func:`predict`: True a bar where stderr is a terminal and lines
+        where it is not; False or None quiet.
+    start : float
+        Time of the first frame (s).
+    n_steps : int
+        Number of lags predicted.
+    lag : float
+        The model's lag (s).
+    particles : int
+        Particles at the start.
+
+    Raises
+    ------
+    InputError
+        If ``progress`` is none of these.
+    """
+
+    def __init__(self, progress, start: float, n_steps: int, lag: float, particles: int):
+        self.mode = progress_mode(progress)
+        self.start, self.n_steps, self.lag = start, n_steps, lag
+        self.t0 = self.t_line = time.perf_counter()
+        self.t_chain = None
+        self.done = 0
+        self.bar = None
+        span = f"{n_steps * lag:g} s from t = {start:g} s ({n_steps} lags of {lag:g} s)"
+        if self.mode == "bar":
+            from tqdm import tqdm
+
+            self.bar = tqdm(total=n_steps, unit="lag", file=sys.stderr, leave=True,
+                            desc=f"predict {n_steps * lag:g} s", dynamic_ncols=True,
+                            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
+                                       "lags written [{elapsed} so far, {remaining} left]")
+        elif self.mode == "lines":
+            self._line(f"{span}, {particles} particles: Monte Carlo, then the frames written")
+
+    def _line(self, text: str) -> None:
+        write_line(f"predict: {text}")
+
+    def chain_done(self) -> None:
+        """The Monte Carlo run is done; the frames are written next."""
+        self.t_chain = time.perf_counter()
+        if self.mode == "lines":
+            self._line(f"Monte Carlo done in {clock_text(self.t_chain - self.t0)}; writing "
+                       f"{self.n_steps + 1} frames")
+
+    def written(self, steps: int) -> None:
+        """Frames up to lag ``steps`` (0 .. n_steps) are written."""
+        if self.mode is None or steps <= self.done:
+            return
+        if self.bar is not None:
+            self.bar.update(steps - self.done)
+        elif steps < self.n_steps:
+            now = time.perf_counter()
+            if now - self.t_line >= LINE_INTERVAL:
+                begun = self.t_chain if self.t_chain is not None else self.t0
+                left = (now - begun) * (self.n_steps - steps) / steps
+                self._line(f"{steps * self.lag:g}/{self.n_steps * self.lag:g} s written, "
+                           f"{clock_text(now - self.t0)} so far, about {clock_text(left)} left")
+                self.t_line = now
+        self.done = steps
+
+    def close(self, output) -> None:
+        """The prediction is written to ``output``."""
+        if self.bar is not None:
+            self.bar.close()
+        elif self.mode == "lines":
+            self._line(f"{self.n_steps * self.lag:g} s written to {output} in "
+                       f"{clock_text(time.perf_counter() - self.t0)}")

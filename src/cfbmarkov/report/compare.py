@@ -164,7 +164,8 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
     return written
 
 
-def compare(reference, prediction, *, window, output, bin_width: float = 0.025, basis: str = "frames",
+def compare(reference, prediction, *, window, output, bin_width: float | None = None,
+            basis: str = "frames",
             level: float = 0.9, resamples: int = 100,
             md_order: float = 2.0, figures: bool = True,
             long_run_span: tuple[float, float] | None = None, kinetics=None) -> dict[str, Any]:
@@ -180,7 +181,10 @@ def compare(reference, prediction, *, window, output, bin_width: float = 0.025, 
     output : str or os.PathLike
         Output directory (created).
     bin_width : float, optional
-        RTD bin width, s.
+        RTD bin width, s; default: the lag of the model attached to the prediction, else the
+        reference's frame interval, else the prediction's
+        (:func:`~cfbmarkov.analysis.compare_inputs.default_bin_width`); the summary's
+        ``bin_width`` and ``bin_width_from`` say which.
     md_order : float, optional
         Order k of the Minkowski distance (Eq. 9).
     basis : {"frames", "events"}, optional

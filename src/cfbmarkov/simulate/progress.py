@@ -8,17 +8,7 @@ import math
 import sys
 import time as _time
 
-from cfbmarkov.errors import InputError
-
-
-def _clock(seconds: float) -> str:
-    """``H:MM:SS`` or ``M:SS``."""
-    if not math.isfinite(seconds):
-        return "?"
-    seconds = int(round(max(seconds, 0.0)))
-    h, rest = divmod(seconds, 3600)
-    m, s = divmod(rest, 60)
-    return f"{h}:{m:02d}:{s:02d}" if h else f"{m}:{s:02d}"
+from cfbmarkov._console import clock_text as _clock
 
 
 def _rate(value: float) -> str:
@@ -104,14 +94,3 @@ class Progress:
             rate = self.particles * self.steps / max(wall, 1e-9)
             self._line(f"{self.end:g}/{self.end:g} s simulated in {_clock(wall)} "
                        f"({_rate(rate)} particle-steps/s)")
-
-
-def progress_mode(progress) -> str | None:
-    """``progress`` of :func:`~cfbmarkov.simulate.run.simulate` as a mode of :class:`Progress`."""
-    if progress in (False, None):
-        return None
-    if progress in ("bar", "lines"):
-        return progress
-    if progress is True:
-        return "bar" if sys.stderr.isatty() else "lines"
-    raise InputError(f"progress {progress!r}: choose True, False, 'bar' or 'lines'")

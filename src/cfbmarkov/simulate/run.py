@@ -25,6 +25,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from cfbmarkov._console import progress_mode
 from cfbmarkov._outputs import claim_output
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
@@ -33,7 +34,7 @@ from cfbmarkov.simulate.cfd import GasGrid, gas_stability_limit
 from cfbmarkov.simulate.checkpoint import read_checkpoint, write_checkpoint
 from cfbmarkov.simulate.coupling import check_placement
 from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
-from cfbmarkov.simulate.progress import Progress, progress_mode
+from cfbmarkov.simulate.progress import Progress
 from cfbmarkov.simulate.riser import CoupledRiser
 
 
@@ -262,15 +263,34 @@ def _remove_parts(parts: Path) -> None:
     shutil.rmtree(parts, ignore_errors=True)
 
 
-def _advise_time_step(case: CaseConfig, label: str = "") -> None:
-    """Warn (:class:`~cfbmarkov.errors.TimeStepAdvisory`) when the DEM step resolves a
-    contact in fewer than 10 steps; ``label`` (a case) starts the message."""
+def time_step_advisory(case: CaseConfig) -> str | None:
+    """What :func:`simulate` says (:class:`~cfbmarkov.errors.TimeStepAdvisory`) of a case
+    whose DEM time step resolves a contact in fewer than the recommended 10 steps.
+
+    Parameters
+    ----------
+    case : CaseConfig
+        The case.
+
+    Returns
+    -------
+    str or None
+        ``DEM time step ... s resolves a contact in ... steps (...); 10 or more are
+        recommended``, or None where the step resolves a contact in 10 or more steps (below
+        5 the DEM refuses the run).
+    """
     p = case.particles
     law = ContactLaw.from_config(case.contact, p.diameter, p.density)
     worst, message = contact_resolution(law, law.mass, case.numerics.dem_time_step)
-    if 5 <= worst < 10:     # below 5 the DEM refuses the run
-        warnings.warn((f"{label}: " if label else "") + message + "; 10 or more are recommended",
-                      TimeStepAdvisory, stacklevel=3)
+    return message + "; 10 or more are recommended" if 5 <= worst < 10 else None
+
+
+def _advise_time_step(case: CaseConfig, label: str = "") -> None:
+    """Warn (:class:`~cfbmarkov.errors.TimeStepAdvisory`) when the DEM step resolves a
+    contact in fewer than 10 steps; ``label`` (a case) starts the message."""
+    message = time_step_advisory(case)
+    if message is not None:
+        warnings.warn((f"{label}: " if label else "") + message, TimeStepAdvisory, stacklevel=3)
 
 
 def _check_safety(case: CaseConfig) -> None:

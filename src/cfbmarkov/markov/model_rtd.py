@@ -1,0 +1,119 @@
+"""The exact residence-time distributions of a fitted :class:`~cfbmarkov.markov.model.MarkovModel`
+(:meth:`MarkovModel.rtd <cfbmarkov.markov.model.MarkovModel.rtd>`): a periodic riser's from
+passes up through the top (or down through the bottom, for a net downflow), an open
+riser's from the inlet to the outlet, each computed once and kept in the model's cache.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.limits import MAX_STEPS, check_finite
+from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, exact_rtd
+
+if TYPE_CHECKING:
+    from cfbmarkov.markov.model import MarkovModel
+
+
+def model_rtd(model: "MarkovModel", window: float | None = None,
+              direction: str = "up") -> ResidenceTimeDistribution:
+    """Exact residence-time distribution of ``model`` (no sampling noise), cached in it.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted model.
+    window : float, optional
+        Length (s) of an analysis window: the RTD as seen in it (None: the intrinsic RTD).
+    direction : {"up", "down"}, optional
+        A periodic riser's residences from passes up through the top (default) or down
+        through the bottom (the pass fractions swapped).
+
+    Returns
+    -------
+    ResidenceTimeDistribution
+        The intrinsic RTD in the model's direction carries the model's ``uncertainty``.
+
+    Raises
+    ------
+    InputError
+        If ``window`` is not a positive finite time of at most
+        :data:`~cfbmarkov.limits.MAX_STEPS` lags, or ``direction`` is neither up nor down.
+    CfbmarkovError
+        If the model has no transition up through the top (no residence ends), or no
+        residence fits in ``window``.
+
+    Notes
+    -----
+    See :func:`~cfbmarkov.markov.first_passage.exact_rtd` and ``docs/definitions.md``
+    (Residence time).
+    """
+    if window is not None:
+        window = check_finite(window, "--window-length", "s", positive=True)
+        if window / model.lag > MAX_STEPS:
+            raise InputError(f"--window-length {window:g} s is {window / model.lag:.3g} lags "
+                             f"of {model.lag:g} s, more than {MAX_STEPS}")
+    cache = model._cache
+    if model.open_flow is not None:
+        return _with_uncertainty(model, _open_rtd(model, window), window)
+    if direction not in ("up", "down"):
+        raise InputError(f"residence direction {direction!r}: up or down")
+    if direction == "down":
+        return _down_rtd(model, window)
+    if window is not None and "rtd" not in cache:
+        # a window of n lags sees residence times below n lags only: propagate no further
+        steps = max(2, int(round(window / model.lag)))
+        key = ("rtd-steps", steps)
+        if key not in cache:
+            cache[key] = exact_rtd(model.transition_matrix, model.up_fraction,
+                                   model.down_fraction, model.lag, max_steps=steps,
+                                   entry_flux=_entry_flux(model))
+        return cache[key].in_window(window)
+    if "rtd" not in cache:
+        cache["rtd"] = exact_rtd(model.transition_matrix, model.up_fraction,
+                                 model.down_fraction, model.lag,
+                                 entry_flux=_entry_flux(model))
+    intrinsic = cache["rtd"]
+    return _with_uncertainty(model, intrinsic) if window is None else intrinsic.in_window(window)
+
+
+def _entry_flux(model: "MarkovModel") -> np.ndarray | None:
+    # net entries through the inlet per state: landings of up passes minus departures of
+    # down passes (a particle that falls out and comes back starts no new residence)
+    flux = (model.counts_up.sum(axis=0) - model.counts_down.sum(axis=1)).astype(np.float64)
+    return flux if flux.sum() > 0 else None
+
+
+def _with_uncertainty(model: "MarkovModel", rtd: ResidenceTimeDistribution,
+                      window: float | None = None) -> ResidenceTimeDistribution:
+    """The intrinsic RTD with the model's uncertainty attached (a windowed one as it is)."""
+    if window is not None or model.uncertainty is None:
+        return rtd
+    return dataclasses.replace(rtd, uncertainty=model.uncertainty)
+
+
+def _down_rtd(model: "MarkovModel", window: float | None) -> ResidenceTimeDistribution:
+    """Residences of a net downflow: entries through the top, exits through the bottom."""
+    if "rtd-down" not in model._cache:
+        flux = (model.counts_down.sum(axis=0) - model.counts_up.sum(axis=1)).astype(np.float64)
+        model._cache["rtd-down"] = exact_rtd(model.transition_matrix, model.down_fraction,
+                                             model.up_fraction, model.lag,
+                                             entry_flux=flux if flux.sum() > 0 else None)
+    intrinsic = model._cache["rtd-down"]
+    return intrinsic if window is None else intrinsic.in_window(window)
+
+
+def _open_rtd(model: "MarkovModel", window: float | None) -> ResidenceTimeDistribution:
+    """First passage to the outside from the entry distribution (fundamental matrix of the
+    absorbing chain): f(k) = e Q^(k-1) r."""
+    if "open-rtd" not in model._cache:
+        model._cache["open-rtd"] = model.open_flow.rtd(model.absorbing_matrix, model.lag)
+    intrinsic = model._cache["open-rtd"]
+    return intrinsic if window is None else intrinsic.in_window(window)
+
+
+__all__ = ["model_rtd"]
