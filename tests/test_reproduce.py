@@ -93,13 +93,13 @@ def reference(tmp_path_factory):
 
 
 def check_case_lines(err: str, cases) -> None:
-    """Every line on stderr is whole: one advisory for the run, the quick scale's step
-    (``note:``, no Python warning format), then progress lines naming their case, from
-    start to end."""
+    """Every line on stderr is whole: progress lines naming their case, from start to end,
+    then one advisory for the run that finished, the quick scale's step (``note:``, no
+    Python warning format)."""
     lines = err.splitlines()
     assert lines and not any("Warning" in line or "warn(" in line for line in lines), lines
     notes = [x for x in lines if x.startswith("note: ")]
-    assert len(notes) == 1 and notes == lines[:1], lines
+    assert len(notes) == 1 and notes == lines[-1:], lines
     assert notes[0].startswith("note: DEM time step 1e-05 s resolves a contact in 5.18 steps")
     assert notes[0].endswith("(the quick scale's step; the paper's settings give 5.18 steps)"
                              if len(cases) == 1 else "(the quick scale's step, the same in "
@@ -109,7 +109,7 @@ def check_case_lines(err: str, cases) -> None:
         assert progress[0].startswith(f"{case}: CFD-DEM starting at 0/")
         assert " s simulated in " in progress[-1] and len(progress) >= 3
     named = tuple(f"{c}: CFD-DEM " for c in cases)
-    assert all(line.startswith(named) and "\r" not in line for line in lines[1:]), lines
+    assert all(line.startswith(named) and "\r" not in line for line in lines[:-1]), lines
 
 
 def test_progress_and_advisory_are_whole_lines_naming_the_case(reference):

@@ -275,7 +275,6 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                 "cases": names, "models": list(models), "version": __version__}
     write_text_atomic(out / "reproduce.json", json.dumps(manifest, indent=2) + "\n")
     log(f"reproduce ({scale.name} scale): {len(cases)} case(s) {', '.join(names)} in {out}")
-    _advise_time_step(scale, cases, names)
     started = _time.perf_counter()
     failures: list[str] = []
     try:
@@ -309,6 +308,8 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                 log(rtd_line(name, result["summaries"]))
         if not failures:
             log(f"all cases done in {_time.perf_counter() - started:.0f} s")
+            # said once for the run, and only for a run that finished: a refusal stays one line
+            _advise_time_step(scale, cases, names)
             if report:
                 from cfbmarkov.report.reproduction import write_report
 

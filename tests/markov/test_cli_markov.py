@@ -177,9 +177,10 @@ def test_bench_prints_one_line_per_figure(capsys):
     code, out, _ = run_cli(capsys, "bench", "--only", "mcm", "--repeat", "1", "--particles", "300")
     assert code == 0
     names = [line.split(":")[0] for line in out.strip().splitlines()]
-    assert names[:6] == ["mcm-fit", "mcm-predict", "mcm-predict-file", "mcm-exact-rtd",
+    assert names[:7] == ["mcm-fit", "mcm-predict", "mcm-predict-file",
+                         "mcm-predict-file-kinetics", "mcm-exact-rtd",
                          "mcm-exact-rtd-long-tail", "mcm-fit-intervals"]
-    names = names[:4] + names[6:]
+    names = names[:3] + names[4:5] + names[7:]
     assert names[4:8] == ["mcm-fit-open", "mcm-fit-open-ratio", "mcm-predict-open",
                           "mcm-predict-open-ratio"]
     assert names[8] == "mcm-fit-auto" and names[9].startswith("mcm-fit-chosen-cells")

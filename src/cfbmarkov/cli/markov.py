@@ -231,7 +231,7 @@ def cmd_rtd(args) -> int:
     kind = ('window ' + format(args.window_length, 'g') + ' s' if args.window_length
             else 'intrinsic')
     figures = (band.describe(rtd.mean, rtd.sd) if band is not None
-               else f"E(RT) = {rtd.mean:.6g} s, SD(RT) = {rtd.sd:.6g} s")
+               else f"E(RT) = {rtd.mean:.4f} s, SD(RT) = {rtd.sd:.4f} s")
     print(f"{figures} ({kind}, unresolved mass {rtd.unresolved:.2g})")
     if band is None and model.uncertainty is not None:
         print(f"  the model's {model.uncertainty.percent} % interval is of the intrinsic RTD: "
