@@ -25,12 +25,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from cfbmarkov.analysis.kinetics_paths import integrate_open, integrate_periodic, records_bound
+from cfbmarkov.analysis.exit_statistics import ExitStatistics
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.residence import DEFAULT_FACE_ROWS
 
 
 @dataclass(frozen=True)
-class PathKinetics:
+class PathKinetics(ExitStatistics):
     """One property integrated along the paths of one window.
 
     Attributes
@@ -68,25 +69,6 @@ class PathKinetics:
     cell_occupancy: np.ndarray
     final_values: np.ndarray | None = None
 
-    @property
-    def count(self) -> int:
-        """Number of exits counted."""
-        return int(self.exit_values.size)
-
-    @property
-    def exit_mean(self) -> float:
-        """The mean value at exit (NaN without exits)."""
-        return float(self.exit_values.mean()) if self.count else float("nan")
-
-    @property
-    def exit_sd(self) -> float:
-        """The SD of the values at exit, ddof = 1 (NaN with fewer than two)."""
-        return float(self.exit_values.std(ddof=1)) if self.count > 1 else float("nan")
-
-    @property
-    def exit_se(self) -> float:
-        """Standard error of :attr:`exit_mean` (exits taken as independent)."""
-        return self.exit_sd / np.sqrt(self.count) if self.count > 1 else float("nan")
 
     @property
     def time_mean(self) -> float:

@@ -28,11 +28,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cfbmarkov.analysis.exit_statistics import ExitStatistics
 from cfbmarkov.errors import InputError
 
 
 @dataclass(frozen=True)
-class SegregatedFlow:
+class SegregatedFlow(ExitStatistics):
     """One property by the segregated-flow model.
 
     Attributes
@@ -60,26 +61,6 @@ class SegregatedFlow:
     residence_times: np.ndarray
     exit_values: np.ndarray
     bed_mean: float
-
-    @property
-    def count(self) -> int:
-        """Number of residence-time samples."""
-        return int(self.exit_values.size)
-
-    @property
-    def exit_mean(self) -> float:
-        """E[v_exit] (NaN without samples)."""
-        return float(self.exit_values.mean()) if self.count else float("nan")
-
-    @property
-    def exit_sd(self) -> float:
-        """SD of v at exit, ddof = 1 (NaN with fewer than two samples)."""
-        return float(self.exit_values.std(ddof=1)) if self.count > 1 else float("nan")
-
-    @property
-    def exit_se(self) -> float:
-        """Standard error of :attr:`exit_mean` over the RTD's samples."""
-        return self.exit_sd / np.sqrt(self.count) if self.count > 1 else float("nan")
 
 
 def bed_averaged(rate, target, occupancy) -> tuple[float, float]:
