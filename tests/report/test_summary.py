@@ -99,7 +99,7 @@ def test_the_verdict_is_written_from_the_numbers():
     assert "(the paper: +0.54 to +11.89 %)" in summary
     assert "in 0 of 2 velocity-model pairs" in summary       # MD 0.3 against a baseline of 0.1
     assert "the models' own error" not in summary
-    assert "paper's own error: MD 0.3 against the baseline's 0.1" in summary
+    assert "paper at 3 m/s: the model's own error (MD 0.3 against the baseline's 0.1" in summary
     assert "inside the model's 90 % interval in 0 of 2" in summary
     # a model that beats the baseline is named
     good = {"pd_rt_mean": 2.0, "pd_rt_sd": -40.0, "md_rtd": 0.05, "baseline": {"md_rtd": 0.1},

@@ -163,20 +163,23 @@ def _baseline_sentences(cases: list[Case]) -> list[str]:
         lost += 1
         md_own = finite_or_none((s.get("model_on_fitting_window") or {}).get("md_rtd"))
         md_halves = finite_or_none((s.get("natural_variability") or {}).get("md_rtd"))
+        tie = abs(md - md_base) <= 0.01 * md_base
         if md_halves is not None and md_base <= md_halves:
             reason = (f"the baseline's MD ({md_base:.3g}) is already within the CFD-DEM's own "
-                      f"variability between the predict window's halves ({md_halves:.3g}): "
-                      "no model can be told better than it")
+                      f"variability between the predict window's halves ({md_halves:.3g}), "
+                      "so no model can be told better than it")
         elif md_own is not None and md_own < md_base:
-            reason = (f"the flow changed between the windows: on their fitting window the "
-                      f"models are closer to the CFD-DEM than the baseline's {md_base:.3g}")
+            reason = (f"the flow changed between the windows (on its fitting window the model "
+                      f"is {md_own:.3g} from the CFD-DEM, nearer than the baseline's "
+                      f"{md_base:.3g} on the predict window)")
         else:
-            reason = (f"the models' own error: MD {md:.3g} against the baseline's "
-                      f"{md_base:.3g}" + (f", {md_own:.3g} already on the fitting window"
-                                         if md_own is not None else ""))
-        why.setdefault((_u(c), reason if "own error" not in reason else
-                        f"{name}'s own error: MD {md:.3g} against the baseline's "
-                        f"{md_base:.3g}"), []).append(name)
+            reason = (f"the model's own error (MD {md:.3g} against the baseline's "
+                      f"{md_base:.3g}" + (f", {md_own:.3g} already on its fitting window"
+                                          if md_own is not None else "") + ")")
+        if tie:
+            reason = (f"a tie within 1 % (MD {md:.3g} against the baseline's {md_base:.3g}); "
+                      + reason)
+        why.setdefault((_u(c), reason), []).append(name)
     total = len(beat) + lost
     if not total:
         return ["No comparison has a persistence baseline (the fitting window is not in the "
@@ -186,9 +189,8 @@ def _baseline_sentences(cases: list[Case]) -> list[str]:
            f"window reused as the prediction; distance MD) in {len(beat)} of {total} "
            "velocity-model pairs" + (f": {', '.join(beat)}." if beat else ".")]
     if lost:
-        out.append(f"They do not beat it in {lost}: " + "; ".join(
-            f"{', '.join(names)} at {u} m/s, {reason}" for (u, reason), names in why.items())
-            + ".")
+        out.append(f"They do not beat it in {lost}. " + " ".join(
+            f"{' and '.join(names)} at {u} m/s: {reason}." for (u, reason), names in why.items()))
     return out
 
 
@@ -244,8 +246,8 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
                    "the start and the lag.")
     for check in checks:
         if check.passed is False:
-            out.append(f"What the paper's riser shows, {check.name}: this run's CFD-DEM does "
-                       f"not ({check.evidence}).")
+            out.append(f"The paper's riser shows {check.name}; this run's CFD-DEM does not "
+                       f"({check.evidence}).")
     return out
 
 
