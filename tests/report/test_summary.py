@@ -173,3 +173,32 @@ def test_matrix_heat_map_labelled_by_its_state_space(tmp_path):
                                   states="velocity 4x12x7 (336 states)",
                                   row_of_state=rows_of_state)
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_a_long_state_space_description_leaves_the_matrix_title_whole(tmp_path, monkeypatch):
+    """The title of a transition-matrix figure lies inside the figure, however long the state
+    space's description (a cells-previous space's was cut at the left edge)."""
+    import numpy as np
+
+    from cfbmarkov.report import figures
+
+    drawn = {}
+
+    def keep(fig, path):
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+
+        canvas = FigureCanvasAgg(fig)
+        canvas.draw()
+        drawn["fig"], drawn["renderer"] = fig, canvas.get_renderer()
+        return path
+
+    monkeypatch.setattr(figures, "_save", keep)
+    p = np.full((60, 60), 1 / 60)
+    figures.plot_transition_matrix(p, 6, 10, tmp_path / "m.png",
+                                   states="cells-previous 6x38x7 (1596 states; the previous "
+                                          "cell up to 3 rows and 1 column away, kept apart)")
+    fig = drawn["fig"]
+    renderer = drawn["renderer"]
+    title = fig.axes[0].title.get_window_extent(renderer)
+    width = fig.bbox.width
+    assert title.x0 >= 0 and title.x1 <= width, (title.x0, title.x1, width)

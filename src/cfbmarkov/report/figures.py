@@ -9,6 +9,7 @@ pyplot's global state is never used (safe in scripts, servers and tests).
 from __future__ import annotations
 
 import os
+import textwrap
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 
@@ -181,8 +182,10 @@ def plot_transition_matrix(P, columns: int, rows: int, path, *, title: str | Non
             ax.axvline(t, color="0.85", lw=0.3, zorder=0)
     nonzero = int(np.count_nonzero(P))
     described = states or f"cells {columns}x{rows} ({s} states)"
-    ax.set_title(title or f"Transition probability matrix, {described}\n{nonzero} nonzero "
-                 f"of {s} x {s}", fontsize=11)
+    # a long state-space description on lines of its own, so that no title is cut
+    lines = ["Transition probability matrix", *textwrap.wrap(described, 60),
+             f"{nonzero} nonzero of {s} x {s}"]
+    ax.set_title(title or "\n".join(lines), fontsize=11)
     return _save(fig, path)
 
 
