@@ -10,11 +10,19 @@ whether a CUDA device (or the CUDA simulator, ``NUMBA_ENABLE_CUDASIM=1``) is usa
 
 from __future__ import annotations
 
+import os
+
 from cfbmarkov.errors import CfbmarkovError
 
 
 class GpuUnavailable(CfbmarkovError):
     """No usable CUDA device (and the CUDA simulator is not switched on)."""
+
+
+def simulator() -> bool:
+    """Whether ``numba.cuda`` runs (or will run) the CUDA simulator: ``NUMBA_ENABLE_CUDASIM``
+    set to a non-zero value in the environment, read when ``numba.cuda`` is first imported."""
+    return os.environ.get("NUMBA_ENABLE_CUDASIM", "0").strip() not in ("", "0")
 
 
 def gpu_available() -> tuple[bool, str]:
@@ -48,4 +56,4 @@ def require_gpu() -> None:
                              f"with an NVIDIA GPU and numba-cuda")
 
 
-__all__ = ["GpuUnavailable", "gpu_available", "require_gpu"]
+__all__ = ["GpuUnavailable", "gpu_available", "require_gpu", "simulator"]

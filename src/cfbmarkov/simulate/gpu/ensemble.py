@@ -20,7 +20,7 @@ from cfbmarkov.errors import CfbmarkovError, InputError, TimeStepAdvisory
 from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
 from cfbmarkov.simulate.dem.neighbours import search_grid
 from cfbmarkov.simulate.dem.system import _REASONS, MAX_OVERLAP, SimulationBlowUp
-from cfbmarkov.simulate.gpu import require_gpu
+from cfbmarkov.simulate.gpu import require_gpu, simulator
 
 STATE_VERSION = 1
 #: neighbours a particle's list holds (a list build that finds more stops the run with an
@@ -42,8 +42,7 @@ def _per_particle(value, m, n, name):
 def default_threads() -> int:
     """Threads per block (per member): 256 on a GPU, 16 under the CUDA simulator (where each
     thread is a Python thread)."""
-    from numba import config
-    return 16 if config.ENABLE_CUDASIM else 256
+    return 16 if simulator() else 256
 
 
 class GpuEnsembleDEM:
@@ -447,7 +446,8 @@ class GpuEnsembleDEM:
                         float(np.min(1.0 / im)), float(rad.max()), threads,
                         int(np.asarray(state["max_neighbours"])),
                         float(np.asarray(state["start_time"])))
-            self._check_density(rec)
+            if not np.all(np.isfinite(rec)):
+                raise InputError("GPU DEM state: non-finite particle record")
             ctl = np.zeros((m, K.N_CTL), np.int64)
             ctl[:, K.C_STEP] = np.asarray(state["step"])
             ctl[:, K.C_REBUILD] = np.asarray(state["rebuild"])
@@ -467,8 +467,3 @@ class GpuEnsembleDEM:
         except KeyError as exc:
             raise InputError(f"GPU DEM state: missing entry {exc.args[0]!r}") from None
         return self
-
-    def _check_density(self, rec):
-        """Nothing to check beyond the record itself (masses are stored in it)."""
-        if not np.all(np.isfinite(rec)):
-            raise InputError("GPU DEM state: non-finite particle record")
