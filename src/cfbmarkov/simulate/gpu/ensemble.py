@@ -74,6 +74,11 @@ class GpuEnsembleDEM:
         Passes so far (positions outside [0, H) are wrapped and counted as by DEMSystem).
     threads : int, optional
         Threads per block (:func:`default_threads`); results do not depend on it.
+    blocks_per_member : int, optional
+        1 (default): one thread block per member. More: the grid-synchronised kernel
+        (:func:`.kernels.grid_advance`, a cooperative launch: every block must be resident
+        on the GPU at once), for members too large for one block; not available under the
+        CUDA simulator. The same results, bit for bit.
     max_neighbours : int, optional
         Capacity of each particle's neighbour list.
 
@@ -88,7 +93,7 @@ class GpuEnsembleDEM:
     def __init__(self, positions, velocities, radius, density, law: ContactLaw, width, height,
                  *, gravity=9.81, time_step=5e-6, skin=3e-4, search_cells=None,
                  angular_velocities=None, bottom_wall=False, laps=None, threads=None,
-                 max_neighbours=MAX_NEIGHBOURS, time=0.0):
+                 blocks_per_member=1, max_neighbours=MAX_NEIGHBOURS, time=0.0):
         require_gpu()
         pos = np.array(positions, dtype=np.float64)
         if pos.ndim != 3 or pos.shape[2] != 2 or pos.shape[0] < 1 or pos.shape[1] < 1:
@@ -141,7 +146,8 @@ class GpuEnsembleDEM:
         rec[6] = (1.0 / mass).reshape(-1)
         rec[7] = (rad / inertia).reshape(-1)
         self._setup(m, n, law, width, height, float(gravity), dt, skin, cells, bool(bottom_wall),
-                    mono, mmin, rmax, threads, int(max_neighbours), float(time))
+                    mono, mmin, rmax, threads, int(max_neighbours), float(time),
+                    blocks_per_member)
         from cfbmarkov.simulate.gpu import kernels as K
         ctl = np.zeros((m, K.N_CTL), np.int64)
         ctl[:, K.C_REBUILD] = 1
@@ -150,8 +156,15 @@ class GpuEnsembleDEM:
 
     # ------------------------------------------------------------------ set-up
     def _setup(self, m, n, law, width, height, gravity, dt, skin, cells, bottom_wall, mono,
-               mmin, rmax, threads, max_neighbours, t0):
+               mmin, rmax, threads, max_neighbours, t0, blocks_per_member=1):
         from cfbmarkov.simulate.gpu import kernels as K
+        self._bpm = int(blocks_per_member)
+        if self._bpm < 1:
+            raise InputError(f"blocks_per_member must be >= 1, got {blocks_per_member!r}")
+        if self._bpm > 1 and simulator():
+            raise InputError("blocks_per_member > 1 needs grid synchronisation, which the "
+                             "CUDA simulator does not have; use 1")
+        self._kernel = K.advance if self._bpm == 1 else K.grid_advance()
         self._m, self._n = m, n
         self._law = law
         self._width, self._height, self._gravity, self._dt = width, height, gravity, dt
@@ -201,6 +214,7 @@ class GpuEnsembleDEM:
             laps=cuda.to_device(np.ascontiguousarray(laps, np.int64)), nbr=cuda.to_device(nb),
             nnb=cuda.to_device(nn), spr=cuda.to_device(sp),
             cstart=cuda.to_device(np.zeros((m, ncell + 1), np.int32)),
+            part=cuda.to_device(np.zeros((m, self._threads * self._bpm), np.int64)),
             cfill=cuda.to_device(np.zeros((m, ncell), np.int32)),
             cidx=cuda.to_device(np.zeros(mn, np.int32)), key=cuda.to_device(np.zeros(mn, np.int32)),
             ctl=cuda.to_device(ctl),
@@ -317,10 +331,10 @@ class GpuEnsembleDEM:
             self._ext_set = False
         target = self.steps_done + n_steps
         while True:
-            K.advance[self._m, self._threads](
+            self._kernel[self._m * self._bpm, self._threads](
                 d["s"], d["aux"], d["ext"], d["wh"], d["laps"], d["nbr"], d["nnb"], d["spr"],
-                d["cstart"], d["cfill"], d["cidx"], d["key"], d["ctl"], d["ev_s"], d["ev_f"],
-                d["ev_p"], d["ev_d"], d["bad"], d["fp"], d["ip"], target)
+                d["cstart"], d["cfill"], d["part"], d["cidx"], d["key"], d["ctl"], d["ev_s"],
+                d["ev_f"], d["ev_p"], d["ev_d"], d["bad"], d["fp"], d["ip"], self._bpm, target)
             ctl = d["ctl"].copy_to_host()
             self._ctl = ctl
             if np.any(ctl[:, K.C_NEV] > 0):
@@ -423,7 +437,7 @@ class GpuEnsembleDEM:
         }
 
     @classmethod
-    def from_state(cls, state: dict, *, threads=None) -> "GpuEnsembleDEM":
+    def from_state(cls, state: dict, *, threads=None, blocks_per_member=1) -> "GpuEnsembleDEM":
         """The ensemble saved by :meth:`state`; it continues exactly as the original would."""
         from cfbmarkov.simulate.gpu import kernels as K
         require_gpu()
@@ -445,7 +459,7 @@ class GpuEnsembleDEM:
                         cells, bool(np.asarray(state["bottom_wall"])), mono,
                         float(np.min(1.0 / im)), float(rad.max()), threads,
                         int(np.asarray(state["max_neighbours"])),
-                        float(np.asarray(state["start_time"])))
+                        float(np.asarray(state["start_time"])), blocks_per_member)
             if not np.all(np.isfinite(rec)):
                 raise InputError("GPU DEM state: non-finite particle record")
             ctl = np.zeros((m, K.N_CTL), np.int64)

@@ -69,15 +69,86 @@ def _cell_index(x, inv_w, n):
 
 
 @cuda.jit(device=True)
-def _build(m, t, nt, s, cur, aux, nbr, nnb, spr, lst, cstart, cfill, cidx, key, ctl, fp, ip):
-    """Thread t of nt's part of member m's list build into list buffer 1 - lst (the block
-    synchronises between the phases)."""
+def _count(m, t, nt, s, cur, cfill, key, ip, fp):
+    """List build, phase 1: each particle's cell (``key``) and the cells' counts."""
+    N = ip[I_N]
+    ncx = ip[I_NCX]
+    inv_cw = 1.0 / fp[F_CELL_W]
+    inv_ch = 1.0 / fp[F_CELL_H]
+    for i in range(t, N, nt):
+        g = m * N + i
+        c = (_cell_index(s[cur, 1, g], inv_ch, ip[I_NCY]) * ncx
+             + _cell_index(s[cur, 0, g], inv_cw, ncx))
+        key[g] = c
+        cuda.atomic.add(cfill, (m, c), 1)
+
+
+@cuda.jit(device=True)
+def _chunk(t, nt, ncell):
+    """Thread t's contiguous range of cells in the prefix sum."""
+    size = (ncell + nt - 1) // nt
+    lo = t * size
+    hi = lo + size
+    return (ncell if lo > ncell else lo), (ncell if hi > ncell else hi)
+
+
+@cuda.jit(device=True)
+def _scan_partial(m, t, nt, cfill, part, ip):
+    """Prefix sum, phase 1: each thread's total over its chunk of cells."""
+    lo, hi = _chunk(t, nt, ip[I_NCX] * ip[I_NCY])
+    acc = 0
+    for c in range(lo, hi):
+        acc += cfill[m, c]
+    part[m, t] = acc
+
+
+@cuda.jit(device=True)
+def _scan_totals(m, nt, part):
+    """Prefix sum, phase 2 (one thread): the chunks' totals to their exclusive offsets."""
+    acc = 0
+    for q in range(nt):
+        v = part[m, q]
+        part[m, q] = acc
+        acc += v
+
+
+@cuda.jit(device=True)
+def _scan_cells(m, t, nt, cfill, cstart, part, ip):
+    """Prefix sum, phase 3: each chunk's cell starts from its offset; counts cleared."""
+    ncell = ip[I_NCX] * ip[I_NCY]
+    lo, hi = _chunk(t, nt, ncell)
+    acc = part[m, t]
+    for c in range(lo, hi):
+        cstart[m, c] = acc
+        acc += cfill[m, c]
+        cfill[m, c] = 0
+    if t == nt - 1:
+        cstart[m, ncell] = ip[I_N]
+
+
+@cuda.jit(device=True)
+def _fill(m, t, nt, cstart, cfill, cidx, key, ip):
+    """List build, phase 3: the particles' rows by cell (order within a cell arbitrary:
+    each list is sorted afterwards)."""
+    N = ip[I_N]
+    base = m * N
+    for i in range(t, N, nt):
+        g = base + i
+        c = key[g]
+        slot = cstart[m, c] + cuda.atomic.add(cfill, (m, c), 1)
+        cidx[base + slot] = g
+
+
+@cuda.jit(device=True)
+def _lists(m, t, nt, s, cur, aux, nbr, nnb, spr, lst, cstart, cidx, ctl, fp, ip):
+    """List build, phase 4: each particle's neighbours within the cutoff from the 3 x 3
+    cells around it, ascending, into list buffer 1 - lst, with the springs of the contacts
+    it already had; its reference position."""
     N = ip[I_N]
     ncx = ip[I_NCX]
     ncy = ip[I_NCY]
     K = ip[I_K]
     periodic = ip[I_PERIODIC] != 0
-    ncell = ncx * ncy
     inv_cw = 1.0 / fp[F_CELL_W]
     inv_ch = 1.0 / fp[F_CELL_H]
     H = fp[F_H]
@@ -85,30 +156,6 @@ def _build(m, t, nt, s, cur, aux, nbr, nnb, spr, lst, cstart, cfill, cidx, key, 
     cut2 = fp[F_CUT] * fp[F_CUT]
     base = m * N
     new = 1 - lst
-    for c in range(t, ncell, nt):
-        cfill[m, c] = 0
-    cuda.syncthreads()
-    for i in range(t, N, nt):
-        g = base + i
-        c = (_cell_index(s[cur, 1, g], inv_ch, ncy) * ncx
-             + _cell_index(s[cur, 0, g], inv_cw, ncx))
-        key[g] = c
-        cuda.atomic.add(cfill, (m, c), 1)
-    cuda.syncthreads()
-    if t == 0:
-        acc = 0
-        for c in range(ncell):
-            cstart[m, c] = acc
-            acc += cfill[m, c]
-            cfill[m, c] = 0
-        cstart[m, ncell] = acc
-    cuda.syncthreads()
-    for i in range(t, N, nt):
-        g = base + i
-        c = key[g]
-        slot = cstart[m, c] + cuda.atomic.add(cfill, (m, c), 1)
-        cidx[base + slot] = g
-    cuda.syncthreads()
     for i in range(t, N, nt):
         g = base + i
         xi = s[cur, 0, g]
@@ -373,50 +420,118 @@ def _step_particle(m, g, s, cur, aux, ext, wh, laps, nbr, nnb, spr, lst, ctl, ev
     return ddx * ddx + ddy * ddy > hs * hs
 
 
-@cuda.jit
-def advance(s, aux, ext, wh, laps, nbr, nnb, spr, cstart, cfill, cidx, key, ctl, ev_s, ev_f, ev_p,
-            ev_d, bad, fp, ip, target):
-    """Advance every member (block m = member m) to step ``target``: list builds when due,
-    then the steps, until ``target``, an event buffer that could overflow in the next step,
-    a bad particle or a list overflow (see the module doc)."""
-    m = cuda.blockIdx.x
-    t = cuda.threadIdx.x
-    nt = cuda.blockDim.x
-    N = ip[I_N]
-    base = m * N
-    cap = ip[I_EVCAP]
-    while True:
-        cuda.syncthreads()
-        # every thread reads the member's control slots after the barrier: the branches
-        # below are uniform over the block
-        step = ctl[m, C_STEP]
-        stop = (step >= target or ctl[m, C_BAD] != 0 or ctl[m, C_OVERFLOW] != 0
-                or ctl[m, C_NEV] + N > cap)
-        rebuild = ctl[m, C_REBUILD] != 0
-        cur = ctl[m, C_CUR]
-        lst = ctl[m, C_LIST]
-        cuda.syncthreads()
-        if stop:
-            return
-        if rebuild:
-            _build(m, t, nt, s, cur, aux, nbr, nnb, spr, lst, cstart, cfill, cidx, key, ctl,
-                   fp, ip)
+def _make_advance(grid):
+    """The advance kernel; ``grid``: several blocks per member, synchronised grid-wide
+    (a cooperative launch; not available under the CUDA simulator), else one block per
+    member synchronised with ``cuda.syncthreads()``. One source for both."""
+    if grid:
+        @cuda.jit(device=True)
+        def sync():
+            cuda.cg.this_grid().sync()
+    else:
+        @cuda.jit(device=True)
+        def sync():
             cuda.syncthreads()
-            if t == 0:
-                ctl[m, C_LIST] = 1 - lst
-                ctl[m, C_REBUILD] = 0
-            lst = 1 - lst
-            cuda.syncthreads()
-            if ctl[m, C_OVERFLOW] != 0:
+
+    @cuda.jit(device=True)
+    def halted(ctl, m, target, N, cap):
+        """Whether member m (every member, on a grid) must stop before its next step."""
+        lo = 0 if grid else m
+        hi = ctl.shape[0] if grid else m + 1
+        stop = False
+        for q in range(lo, hi):
+            if (ctl[q, C_STEP] >= target or ctl[q, C_BAD] != 0 or ctl[q, C_OVERFLOW] != 0
+                    or ctl[q, C_NEV] + N > cap):
+                stop = True
+        return stop
+
+    @cuda.jit(device=True)
+    def overflowed(ctl, m):
+        lo = 0 if grid else m
+        hi = ctl.shape[0] if grid else m + 1
+        stop = False
+        for q in range(lo, hi):
+            if ctl[q, C_OVERFLOW] != 0:
+                stop = True
+        return stop
+
+    @cuda.jit
+    def advance(s, aux, ext, wh, laps, nbr, nnb, spr, cstart, cfill, part, cidx, key, ctl,
+                ev_s, ev_f, ev_p, ev_d, bad, fp, ip, blocks_per_member, target):
+        """Advance every member to step ``target``: list builds when due, then the steps,
+        until ``target``, an event buffer that could overflow in the next step, a bad
+        particle or a list overflow (see the module doc)."""
+        b = cuda.blockIdx.x
+        m = b // blocks_per_member
+        t = (b - m * blocks_per_member) * cuda.blockDim.x + cuda.threadIdx.x
+        nt = blocks_per_member * cuda.blockDim.x
+        N = ip[I_N]
+        base = m * N
+        cap = ip[I_EVCAP]
+        while True:
+            sync()
+            # every thread reads the control slots after the barrier: the branches below
+            # are uniform over the member (the grid)
+            step = ctl[m, C_STEP]
+            stop = halted(ctl, m, target, N, cap)
+            rebuild = ctl[m, C_REBUILD] != 0
+            cur = ctl[m, C_CUR]
+            lst = ctl[m, C_LIST]
+            sync()
+            if stop:
                 return
-        moved = False
-        for i in range(t, N, nt):
-            if _step_particle(m, base + i, s, cur, aux, ext, wh, laps, nbr, nnb, spr, lst, ctl,
-                              ev_s, ev_f, ev_p, ev_d, bad, step, fp, ip):
-                moved = True
-        if moved:
-            ctl[m, C_REBUILD] = 1
-        cuda.syncthreads()
-        if t == 0:
-            ctl[m, C_CUR] = 1 - cur
-            ctl[m, C_STEP] = step + 1
+            if grid:  # members in step: any member's rebuild is every member's
+                for q in range(ctl.shape[0]):
+                    if ctl[q, C_REBUILD] != 0:
+                        rebuild = True
+                sync()
+            if rebuild:
+                for c in range(t, ip[I_NCX] * ip[I_NCY], nt):
+                    cfill[m, c] = 0
+                sync()
+                _count(m, t, nt, s, cur, cfill, key, ip, fp)
+                sync()
+                _scan_partial(m, t, nt, cfill, part, ip)
+                sync()
+                if t == 0:
+                    _scan_totals(m, nt, part)
+                sync()
+                _scan_cells(m, t, nt, cfill, cstart, part, ip)
+                sync()
+                _fill(m, t, nt, cstart, cfill, cidx, key, ip)
+                sync()
+                _lists(m, t, nt, s, cur, aux, nbr, nnb, spr, lst, cstart, cidx, ctl, fp, ip)
+                sync()
+                if t == 0:
+                    ctl[m, C_LIST] = 1 - lst
+                    ctl[m, C_REBUILD] = 0
+                lst = 1 - lst
+                sync()
+                if overflowed(ctl, m):
+                    return
+            moved = False
+            for i in range(t, N, nt):
+                if _step_particle(m, base + i, s, cur, aux, ext, wh, laps, nbr, nnb, spr, lst,
+                                  ctl, ev_s, ev_f, ev_p, ev_d, bad, step, fp, ip):
+                    moved = True
+            if moved:
+                ctl[m, C_REBUILD] = 1
+            sync()
+            if t == 0:
+                ctl[m, C_CUR] = 1 - cur
+                ctl[m, C_STEP] = step + 1
+
+    return advance
+
+
+#: one block per member (tested under the CUDA simulator)
+advance = _make_advance(False)
+_grid_advance = []
+
+
+def grid_advance():
+    """The grid-synchronised variant of :data:`advance` (several blocks per member; made on
+    first use: it needs a GPU, as the CUDA simulator has no grid synchronisation)."""
+    if not _grid_advance:
+        _grid_advance.append(_make_advance(True))
+    return _grid_advance[0]
