@@ -57,8 +57,9 @@ def _law():
     return ContactLaw.from_config(CaseConfig().contact, DIAMETER, DENSITY)
 
 
-def dem_rate_gpu(members, n, steps, per_call, threads):
-    """GPU particle-steps/s: ``steps`` steps in calls of ``per_call`` steps."""
+def dem_rate_gpu(members, n, steps, per_call, threads, blocks=1):
+    """GPU particle-steps/s: ``steps`` steps in calls of ``per_call`` steps, ``blocks`` thread
+    blocks per member."""
     from cfbmarkov.simulate.gpu.ensemble import GpuEnsembleDEM
     states = [_state(n, seed) for seed in range(members)]
     height = states[0][2]
@@ -66,7 +67,8 @@ def dem_rate_gpu(members, n, steps, per_call, threads):
         warnings.simplefilter("ignore")
         dem = GpuEnsembleDEM(np.stack([s[0] for s in states]), np.stack([s[1] for s in states]),
                              0.5 * DIAMETER, DENSITY, _law(), WIDTH, height, gravity=0.0,
-                             time_step=DT, skin=3e-4, threads=threads)
+                             time_step=DT, skin=3e-4, threads=threads,
+                             blocks_per_member=blocks)
     dem.step(per_call)  # compilation, first list build
     t = time.perf_counter()
     done = 0
@@ -96,7 +98,7 @@ def _case(quick):
     return CaseConfig()
 
 
-def coupled_rate(members, gas_steps, quick, threads, device):
+def coupled_rate(members, gas_steps, quick, threads, device, blocks=1):
     """Coupled particle-steps/s (DEM steps x particles) over ``gas_steps`` gas steps."""
     case = _case(quick)
     with warnings.catch_warnings():
@@ -104,7 +106,7 @@ def coupled_rate(members, gas_steps, quick, threads, device):
         if device == "gpu":
             from cfbmarkov.simulate.gpu.riser import GpuEnsembleRiser
             riser = GpuEnsembleRiser.initial(case, range(case.seed, case.seed + members),
-                                             threads=threads)
+                                             threads=threads, blocks_per_member=blocks)
         else:
             riser = CoupledRiser.initial(case)
     riser.step()
@@ -140,17 +142,22 @@ def main(argv=None) -> int:
     report = {"device": str(device), "numba_threads": numba.get_num_threads(), "quick": quick,
               "dem": [], "coupled": [], "checks": {}}
     rows = []
+    # the grid-synchronised kernel: one block of `threads` per SM in all (always resident)
+    sms = 1 if quick else cuda.get_current_device().MULTIPROCESSOR_COUNT
     for members, n in sizes:
-        for per_call in (steps, 10):
+        grid = max(1, sms // members)
+        for per_call, blocks in dict.fromkeys(((steps, 1), (10, 1), (steps, grid), (10, grid))):
             try:
-                rate = dem_rate_gpu(members, n, steps, per_call, args.threads)
+                rate = dem_rate_gpu(members, n, steps, per_call, args.threads, blocks)
             except Exception as exc:  # e.g. out of device memory at 2.7 million
                 rate = None
-                print(f"  {members} x {n}, {per_call} steps a call: {type(exc).__name__}: {exc}",
-                      file=sys.stderr)
+                print(f"  {members} x {n}, {per_call} steps a call, {blocks} blocks a member: "
+                      f"{type(exc).__name__}: {exc}", file=sys.stderr)
             report["dem"].append({"device": "gpu", "members": members, "particles": n,
-                                  "steps_per_call": per_call, "particle_steps_per_s": rate})
-            rows.append((f"DEM gpu {members} x {n}", f"{per_call} steps/call", rate))
+                                  "steps_per_call": per_call, "blocks_per_member": blocks,
+                                  "particle_steps_per_s": rate})
+            rows.append((f"DEM gpu {members} x {n}", f"{per_call} st/call {blocks} bl/memb",
+                         rate))
     cpu_n = 40 if quick else PAPER
     rate = dem_rate_cpu(cpu_n, steps if quick else 300)
     report["dem"].append({"device": "cpu", "members": 1, "particles": cpu_n,
@@ -158,11 +165,17 @@ def main(argv=None) -> int:
     rows.append((f"DEM cpu 1 x {cpu_n}", f"{numba.get_num_threads()} threads", rate))
     gas_steps = 2 if quick else 50
     for members in ((1, 2) if quick else (1, 10)):
-        rate, extra = coupled_rate(members, gas_steps, quick, args.threads, "gpu")
-        report["coupled"].append({"device": "gpu", "members": members, **extra,
-                                  "particle_steps_per_s": rate})
-        rows.append((f"coupled gpu {members} member(s)", f"{extra['bytes_per_gas_step']} B/gas step",
-                     rate))
+        for blocks in dict.fromkeys((1, max(1, sms // members))):
+            try:
+                rate, extra = coupled_rate(members, gas_steps, quick, args.threads, "gpu", blocks)
+            except Exception as exc:
+                rate, extra = None, {}
+                print(f"  coupled, {members} members, {blocks} blocks a member: "
+                      f"{type(exc).__name__}: {exc}", file=sys.stderr)
+            report["coupled"].append({"device": "gpu", "members": members, **extra,
+                                      "blocks_per_member": blocks, "particle_steps_per_s": rate})
+            rows.append((f"coupled gpu {members} member(s)", f"{blocks} bl/memb, "
+                         f"{extra.get('bytes_per_gas_step', '?')} B/gas st", rate))
     rate, _ = coupled_rate(1, gas_steps, quick, None, "cpu")
     report["coupled"].append({"device": "cpu", "members": 1, "particle_steps_per_s": rate})
     rows.append(("coupled cpu 1 member", f"{numba.get_num_threads()} threads", rate))

@@ -56,17 +56,21 @@ class GpuEnsembleRiser:
 
     # -- construction ----------------------------------------------------------------
     @classmethod
-    def initial(cls, case: CaseConfig, seeds, *, threads=None) -> "GpuEnsembleRiser":
+    def initial(cls, case: CaseConfig, seeds, *, threads=None, blocks_per_member=1
+                ) -> "GpuEnsembleRiser":
         """Member m's particles on random lattice sites placed with ``seeds[m]`` (as
-        :meth:`CoupledRiser.initial` with that seed), at rest; gas at U."""
+        :meth:`CoupledRiser.initial` with that seed), at rest; gas at U. ``threads`` and
+        ``blocks_per_member``: see :class:`~.ensemble.GpuEnsembleDEM`."""
         p, r = case.particles, case.riser
         pos = np.stack([place_without_overlap(p.number, p.diameter, r.width, r.height, int(s))
                         for s in seeds])
-        return cls.from_particles(case, pos, np.zeros_like(pos), threads=threads)
+        return cls.from_particles(case, pos, np.zeros_like(pos), threads=threads,
+                                  blocks_per_member=blocks_per_member)
 
     @classmethod
     def from_particles(cls, case: CaseConfig, positions, velocities, *, bottom_wall=False,
-                       angular_velocities=None, threads=None) -> "GpuEnsembleRiser":
+                       angular_velocities=None, threads=None, blocks_per_member=1
+                       ) -> "GpuEnsembleRiser":
         """Given particles (M, N, 2) positions (m) and velocities (m/s); gas at U."""
         p, r = case.particles, case.riser
         positions = np.asarray(positions, dtype=np.float64)
@@ -76,7 +80,7 @@ class GpuEnsembleRiser:
                              time_step=case.numerics.dem_time_step,
                              search_cells=_search_cells(case), skin=case.numerics.dem_skin,
                              angular_velocities=angular_velocities, bottom_wall=bottom_wall,
-                             threads=threads)
+                             threads=threads, blocks_per_member=blocks_per_member)
         grid = GasGrid.from_config(case)
         solver = gas_solver(case, bottom_wall)
         gases = [solver.initial_state(void_fraction_field(grid, x[:, 0], x[:, 1], p.diameter,
@@ -153,8 +157,10 @@ class GpuEnsembleRiser:
                 "cfd_steps": self.cfd_steps}
 
     @classmethod
-    def from_state(cls, case: CaseConfig, state: dict, *, threads=None) -> "GpuEnsembleRiser":
+    def from_state(cls, case: CaseConfig, state: dict, *, threads=None, blocks_per_member=1
+                   ) -> "GpuEnsembleRiser":
         """The ensemble saved by :meth:`state` (with the same ``case``)."""
-        dem = GpuEnsembleDEM.from_state(state["dem"], threads=threads)
+        dem = GpuEnsembleDEM.from_state(state["dem"], threads=threads,
+                                        blocks_per_member=blocks_per_member)
         gases = [GasState.from_state_dict(state["gas"][f"m{k}"]) for k in range(dem.n_members)]
         return cls(case, dem, gases, int(np.asarray(state["cfd_steps"])))
