@@ -83,8 +83,8 @@ def add_simulate(sub) -> None:
                         "RUN-m<N-1>.h5 for -o RUN.h5; member m's seed is word 0 of child m "
                         "of numpy SeedSequence(case seed).spawn(N)")
     s.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
-                   help="where the DEM runs: cpu (members one after another) or gpu "
-                        "(numba-cuda; members side by side; needs an NVIDIA GPU)")
+                   help="where the DEM runs (default cpu): cpu, members one after another, or "
+                        "gpu (numba-cuda), members side by side; needs an NVIDIA GPU")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_simulate)
 

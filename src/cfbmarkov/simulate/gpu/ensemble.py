@@ -258,13 +258,20 @@ class GpuEnsembleDEM:
         return self._t0 + self.steps_done * self._dt
 
     def _current(self, name, fields):
-        """Member-wise current buffer of a double-buffered device array: (M, fields, N)."""
+        """Member-wise current buffer of a double-buffered device array: (M, fields, N),
+        for ``fields`` a contiguous range ``[f0, f0 + 1, ...]``. Members step together, so
+        they share the current buffer and only those rows are copied."""
         from cfbmarkov.simulate.gpu.kernels import C_CUR
-        a = self._d[name].copy_to_host()
         m, n = self._m, self._n
-        out = np.empty((m, len(fields), n))
+        f0, f1 = fields[0], fields[-1] + 1
+        curs = self._ctl[:, C_CUR]
+        if np.all(curs == curs[0]):
+            a = self._d[name][int(curs[0])][f0:f1].copy_to_host()
+            return a.reshape(f1 - f0, m, n).transpose(1, 0, 2)
+        a = self._d[name].copy_to_host()
+        out = np.empty((m, f1 - f0, n))
         for k in range(m):
-            out[k] = a[self._ctl[k, C_CUR]][fields, k * n:(k + 1) * n]
+            out[k] = a[curs[k]][f0:f1, k * n:(k + 1) * n]
         return out
 
     @property
@@ -355,13 +362,13 @@ class GpuEnsembleDEM:
     def _drain_device_events(self, ctl):
         from cfbmarkov.simulate.gpu.kernels import C_NEV
         d = self._d
-        es, ef = d["ev_s"].copy_to_host(), d["ev_f"].copy_to_host()
-        ep, ed = d["ev_p"].copy_to_host(), d["ev_d"].copy_to_host()
         for k in range(self._m):
             c = int(ctl[k, C_NEV])
-            if c:
-                t = self._t0 + (es[k, :c] + ef[k, :c]) * self._dt
-                self._events[k].append((t, ep[k, :c].copy(), ed[k, :c].copy()))
+            if c:  # only the events written: 25 bytes each
+                es, ef, ep, ed = (d[x][k][:c].copy_to_host()
+                                  for x in ("ev_s", "ev_f", "ev_p", "ev_d"))
+                t = self._t0 + (es + ef) * self._dt
+                self._events[k].append((t, ep, ed))
             ctl[k, C_NEV] = 0
 
     def _raise_blowup(self, ctl):

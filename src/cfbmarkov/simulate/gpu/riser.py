@@ -7,7 +7,8 @@ member after another) and the drag at the new gas are computed **on the host** w
 kernels, then every member's ``dem_steps_per_cfd_step`` DEM steps run on the device in one
 launch with the drag held (no host round trip inside them). Bytes moved per gas step
 (:attr:`GpuEnsembleRiser.bytes_per_gas_step`): positions and velocities out (32 bytes a
-particle), drag forces in (16 bytes a particle), and the control slots (56 bytes a member).
+particle), drag forces in (16 bytes a particle), the control slots (56 bytes a member), and
+25 bytes per pass event through the top or bottom when there are any.
 """
 
 from __future__ import annotations
@@ -100,7 +101,8 @@ class GpuEnsembleRiser:
 
     @property
     def bytes_per_gas_step(self) -> int:
-        """Bytes moved between host and device per gas step (no pass events)."""
+        """Bytes moved between host and device per gas step, pass events (25 bytes each)
+        not counted."""
         from cfbmarkov.simulate.gpu.kernels import N_CTL
         m, n = self.dem.n_members, self.dem.n_particles
         return m * n * (32 + 16) + m * N_CTL * 8
