@@ -71,8 +71,8 @@ def member_paths(output: str | Path, n: int) -> list[Path]:
     return [output.with_name(f"{output.stem}-m{m}{output.suffix}") for m in range(n)]
 
 
-def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None, *, device: str = "cpu",
-                      until: float | None = None, checkpoint_every: float = 1.0,
+def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None, *,
+                      device: str = "cpu", until: float | None = None, checkpoint_every: float = 1.0,
                       resume: bool = False, progress: bool | str = True, threads=None,
                       stop_after_frames: int | None = None) -> list[Path]:
     """Run ``members`` independent runs of ``case`` (seeds :func:`member_seeds`) to ``until``.

@@ -416,7 +416,8 @@ class GpuEnsembleDEM:
         for q in range(m):
             sl = slice(q * n, (q + 1) * n)
             b = self._ctl[q, K.C_LIST]
-            nbr[:, sl], nnb[sl], spr[:, :, sl] = nbr_all[b][:, sl], nnb_all[b][sl], spr_all[b][..., sl]
+            nbr[:, sl], nnb[sl] = nbr_all[b][:, sl], nnb_all[b][sl]
+            spr[:, :, sl] = spr_all[b][..., sl]
         law = self._law
         events = [self.drain_pass_events(q) for q in range(m)]
         for q, ev in enumerate(events):

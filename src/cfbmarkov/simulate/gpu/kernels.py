@@ -1,5 +1,5 @@
-"""CUDA kernels of the GPU DEM (numba-cuda): an ensemble of independent members, one
-thread block per member, several DEM steps per launch. No I/O.
+"""CUDA kernels of the GPU DEM (numba-cuda): an ensemble of independent members, several
+DEM steps per launch. No I/O.
 
 Layout (structure of arrays; M members of N particles, member m at rows m*N ... m*N+N-1;
 contacts only within a member)::
@@ -16,7 +16,8 @@ contacts only within a member)::
     spr   float64 (2, 2, K, M*N): the tangential spring of each listed contact, from the
           particle's own side (a pair's two copies are opposite, up to round-off)
     cells int32 (M, ncell + 1) starts, (M, ncell) fill counts, (M*N) particle rows by cell;
-          key int32 (M*N) each particle's cell at the build
+          key int32 (M*N) each particle's cell at the build; part int64 (M, threads) the
+          prefix sum's chunk offsets
     ctl   int64 (M, N_CTL): per member C_CUR, C_LIST, C_STEP, C_REBUILD, C_NEV, C_BAD,
           C_OVERFLOW
     ev_*  (M, cap): pass events (step, fraction of the step, particle, direction)
@@ -27,13 +28,16 @@ the same wall contacts, the same leapfrog update in the same order; only the ord
 a particle sums its pair forces differs (ascending partner index here), so float64 results
 agree with the CPU to round-off. Each particle evaluates its own side of each contact (a
 full list), so no atomics touch the forces and the results do not depend on the launch
-shape.
+shape, the other members, or when the lists are built (a touching pair is in every valid
+list, and a pair's spring is zero whenever it does not touch).
 
-Launch: :func:`advance` runs, in each block, the member's steps up to ``target`` with
-``cuda.syncthreads()`` between the phases: a list build when a particle has moved more than
-skin/2 since the last one (cell count, a serial prefix sum by thread 0, cell fill, each
-particle's neighbours from the 3 x 3 cells around it, sorted by index, springs carried over),
-then the step (forces, walls, integration, checks, events). A block stops early when its
+Launch: :data:`advance` (one thread block per member) runs the members' steps up to
+``target`` with ``cuda.syncthreads()`` between the phases: a list build when a particle of
+the member has moved more than skin/2 since the last one (cell counts, a prefix sum over
+the cells in chunks, cell fill, each particle's neighbours from the 3 x 3 cells around it,
+sorted by index, springs carried over), then the step (forces, walls, integration, checks,
+events). :func:`grid_advance` is the same source with several blocks per member and a
+grid-wide synchronisation (a cooperative launch; GPU only). A member stops early when its
 event buffer could overflow, a particle went bad or a list overflowed; the host
 (:class:`~.ensemble.GpuEnsembleDEM`) then handles that and launches again.
 """
