@@ -61,6 +61,7 @@ def test_members_are_independent(checks):
 
 def test_state_continues_bit_for_bit(checks):
     r = checks["state_roundtrip"]
+    assert r["events"] > 0  # a pass event is pending in the saved state
     assert r["identical"] and r["events_identical"]
 
 

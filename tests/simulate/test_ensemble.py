@@ -103,6 +103,14 @@ simulate_ensemble(case, sys.argv[2], 2, device="gpu", **kw)
 simulate_ensemble(case, sys.argv[3], 2, device="gpu", stop_after_frames=2, **kw)
 assert (Path(sys.argv[3] + ".parts") / "gpu-checkpoint.h5").exists()
 simulate_ensemble(case, sys.argv[3], 2, device="gpu", resume=True, **kw)
+from cfbmarkov.errors import InputError
+from cfbmarkov.simulate.gpu.riser import GpuEnsembleRiser
+try:  # the grid-synchronised kernel needs a GPU
+    GpuEnsembleRiser.initial(case, [1], blocks_per_member=2)
+except InputError as exc:
+    assert "simulator" in str(exc)
+else:
+    raise AssertionError("blocks_per_member=2 accepted under the simulator")
 """
 
 

@@ -35,7 +35,7 @@ def _flow(n, width, height, seed):
     pos = place_without_overlap(n, D, width, height, seed)
     # all moved up (modulo H: no distance changes) so that the highest is 0.02 d below
     # the top, which it passes moving up
-    pos[:, 1] = np.mod(pos[:, 1] + (height - 0.52 * D - pos[:, 1].max()), height)
+    pos[:, 1] = np.mod(pos[:, 1] + (height - 0.02 * D - pos[:, 1].max()), height)
     vel = rng.normal(0.0, 1.0, (n, 2))
     vel[np.argmax(pos[:, 1]), 1] = 2.0
     vel[np.argmin(pos[:, 1]), 1] = -2.0

@@ -203,16 +203,20 @@ class GpuEnsembleDEM:
         s = np.zeros((2, 8, mn))
         s[0] = rec
         s[1] = rec
-        nb = np.zeros((2, k, mn), np.int32)
         nn = np.zeros((2, mn), np.int32)
-        sp = np.zeros((2, 2, k, mn))
+        # list buffers: only the first nnb entries of a particle are ever read, so they are
+        # left uninitialised (no host copy of their size)
+        nb = cuda.device_array((2, k, mn), np.int32)
+        sp = cuda.device_array((2, 2, k, mn), np.float64)
         if nbr is not None:
-            nb[0], nn[0], sp[0] = nbr, nnb, spr
+            nn[0] = nnb
+            nb[0].copy_to_device(np.ascontiguousarray(nbr, np.int32))
+            sp[0].copy_to_device(np.ascontiguousarray(spr, np.float64))
         self._d = dict(
             s=cuda.to_device(s), aux=cuda.to_device(np.ascontiguousarray(ref)),
             ext=cuda.to_device(np.zeros((2, mn))), wh=cuda.to_device(np.ascontiguousarray(wh)),
-            laps=cuda.to_device(np.ascontiguousarray(laps, np.int64)), nbr=cuda.to_device(nb),
-            nnb=cuda.to_device(nn), spr=cuda.to_device(sp),
+            laps=cuda.to_device(np.ascontiguousarray(laps, np.int64)), nbr=nb,
+            nnb=cuda.to_device(nn), spr=sp,
             cstart=cuda.to_device(np.zeros((m, ncell + 1), np.int32)),
             part=cuda.to_device(np.zeros((m, self._threads * self._bpm), np.int64)),
             cfill=cuda.to_device(np.zeros((m, ncell), np.int32)),
