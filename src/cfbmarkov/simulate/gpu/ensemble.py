@@ -15,6 +15,7 @@ import math
 import warnings
 
 import numpy as np
+from numba.core.errors import NumbaPerformanceWarning
 
 from cfbmarkov.errors import CfbmarkovError, InputError, TimeStepAdvisory
 from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
@@ -342,10 +343,15 @@ class GpuEnsembleDEM:
             self._ext_set = False
         target = self.steps_done + n_steps
         while True:
-            self._kernel[self._m * self._bpm, self._threads](
-                d["s"], d["aux"], d["ext"], d["wh"], d["laps"], d["nbr"], d["nnb"], d["spr"],
-                d["cstart"], d["cfill"], d["part"], d["cidx"], d["key"], d["ctl"], d["ev_s"],
-                d["ev_f"], d["ev_p"], d["ev_d"], d["bad"], d["fp"], d["ip"], self._bpm, target)
+            with warnings.catch_warnings():
+                # numba-cuda's "grid size will likely under-utilise the GPU" for a few members:
+                # one block per member is the design (docs/simulation.md)
+                warnings.simplefilter("ignore", NumbaPerformanceWarning)
+                self._kernel[self._m * self._bpm, self._threads](
+                    d["s"], d["aux"], d["ext"], d["wh"], d["laps"], d["nbr"], d["nnb"],
+                    d["spr"], d["cstart"], d["cfill"], d["part"], d["cidx"], d["key"], d["ctl"],
+                    d["ev_s"], d["ev_f"], d["ev_p"], d["ev_d"], d["bad"], d["fp"], d["ip"],
+                    self._bpm, target)
             ctl = d["ctl"].copy_to_host()
             self._ctl = ctl
             if np.any(ctl[:, K.C_NEV] > 0):
