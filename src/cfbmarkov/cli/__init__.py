@@ -161,8 +161,12 @@ def _run_claimed(args) -> int:
 def _resumable(args) -> str:
     """What an interrupted verb can be resumed with."""
     if args.command == "simulate":
-        checkpoint = Path(str(args.output) + ".parts") / "checkpoint.h5"
-        if checkpoint.exists():
+        out = Path(str(args.output))
+        parts = [Path(str(out) + ".parts")]
+        if getattr(args, "ensemble", None):   # CPU members' own checkpoints
+            parts += [p.with_name(p.name + ".parts") for p in
+                      (out.with_name(f"{out.stem}-m{m}{out.suffix}") for m in range(args.ensemble))]
+        if any((p / name).exists() for p in parts for name in ("checkpoint.h5", "gpu-checkpoint.h5")):
             return "; the run can be resumed with --resume (from its last checkpoint)"
     if args.command in ("reproduce", "demo") and not getattr(args, "synthetic", False):
         return "; rerun the same command to resume"
