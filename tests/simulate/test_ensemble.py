@@ -111,6 +111,28 @@ except InputError as exc:
     assert "simulator" in str(exc)
 else:
     raise AssertionError("blocks_per_member=2 accepted under the simulator")
+import numpy as np
+from cfbmarkov.errors import CfbmarkovError
+from cfbmarkov.simulate.dem import ContactLaw, SimulationBlowUp
+from cfbmarkov.simulate.gpu.ensemble import GpuEnsembleDEM
+law = ContactLaw(kn=1000.0, kt=285.7, en=0.9, et=0.5, mu=0.3)
+pos = np.array([[[2e-3, 4e-3], [3.05e-3, 4e-3]], [[2e-3, 4e-3], [3.05e-3, 4e-3]]])
+vel = np.zeros((2, 2, 2))
+vel[1, :, 0] = [30.0, -30.0]   # member 1 collides far too fast for the step
+kw = dict(gravity=0.0, time_step=5e-6, skin=1e-4, threads=2)
+try:
+    GpuEnsembleDEM(pos, vel, 5e-4, 2500.0, law, 8e-3, 8e-3, **kw).step(20)
+except SimulationBlowUp as exc:
+    assert "member 1" in str(exc) and "overlaps" in str(exc), str(exc)
+else:
+    raise AssertionError("no blow-up")
+try:
+    GpuEnsembleDEM(pos, np.zeros((2, 2, 2)), 5e-4, 2500.0, law, 8e-3, 8e-3,
+                   max_neighbours=0, **kw).step(1)
+except CfbmarkovError as exc:
+    assert "neighbours" in str(exc) and "smaller skin" in str(exc), str(exc)
+else:
+    raise AssertionError("no list overflow")
 """
 
 
