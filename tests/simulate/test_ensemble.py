@@ -133,6 +133,23 @@ except CfbmarkovError as exc:
     assert "neighbours" in str(exc) and "smaller skin" in str(exc), str(exc)
 else:
     raise AssertionError("no list overflow")
+# bytes moved per gas step, counted on the simulator's copies: as bytes_per_gas_step says
+from numba.cuda.simulator.cudadrv import devicearray as da
+moved = [0]
+to_dev, to_host = da.FakeCUDAArray.copy_to_device, da.FakeCUDAArray.copy_to_host
+def counted_to_dev(self, ary, *a, **k):
+    moved[0] += np.asarray(ary).nbytes
+    return to_dev(self, ary, *a, **k)
+def counted_to_host(self, *a, **k):
+    out = to_host(self, *a, **k)
+    moved[0] += out.nbytes
+    return out
+da.FakeCUDAArray.copy_to_device, da.FakeCUDAArray.copy_to_host = counted_to_dev, counted_to_host
+riser = GpuEnsembleRiser.initial(case, [1, 2], threads=2)
+riser.step()
+moved[0] = 0
+riser.step()
+assert moved[0] == riser.bytes_per_gas_step == 2 * 10 * 48 + 2 * 7 * 8, moved[0]
 """
 
 
