@@ -182,7 +182,7 @@ def main(argv=None) -> int:
     kw = {"threads": args.threads}
     report["checks"]["dem_vs_cpu"] = (checks.dem_vs_cpu(**kw) if quick else
                                       checks.dem_vs_cpu(n=2000, steps=1000, width=0.03,
-                                                        height=0.2, **kw))
+                                                        height=0.2, speed=0.5, **kw))
     for name in ("restitution", "bed_weight", "members_independent", "state_roundtrip",
                  "coupled_vs_cpu"):
         report["checks"][name] = checks.CHECKS[name](**kw)
