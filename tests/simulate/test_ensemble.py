@@ -170,3 +170,26 @@ def test_gpu_ensemble_under_the_simulator(tmp_path):
         for a, b in zip(g, r):
             assert np.array_equal(a, b)
     assert not (tmp_path / "r.h5.parts").exists()
+
+
+def test_cpu_ensemble_resumes_the_unfinished_members(tmp_path):
+    """Member 0 finished, member 1 stopped after its first checkpoint: ``resume`` keeps
+    member 0 as it is and continues member 1 to the file an uninterrupted run writes."""
+    from cfbmarkov.simulate.ensemble import simulate_ensemble
+
+    case = load_case(_case(tmp_path))
+    full = simulate_ensemble(case, tmp_path / "full.h5", 2, checkpoint_every=0.0005,
+                             progress=False)
+    seeds = member_seeds(case.seed, 2)
+    part = member_paths(tmp_path / "part.h5", 2)
+    simulate(member_case(case, seeds[0]), part[0], checkpoint_every=0.0005, progress=False)
+    stamp = part[0].stat().st_mtime_ns
+    simulate(member_case(case, seeds[1]), part[1], checkpoint_every=0.0005, progress=False,
+             stop_after_frames=2)
+    assert (part[1].with_name(part[1].name + ".parts") / "checkpoint.h5").exists()
+    simulate_ensemble(case, tmp_path / "part.h5", 2, checkpoint_every=0.0005, resume=True,
+                      progress=False)
+    assert part[0].stat().st_mtime_ns == stamp
+    for a, b in zip(full, part):
+        for x, y in zip(_arrays(a), _arrays(b)):
+            assert np.array_equal(x, y)
