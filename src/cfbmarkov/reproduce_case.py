@@ -132,6 +132,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     """
     import numba
 
+    from cfbmarkov.analysis.cell_fields import fitting_cell_fields
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.markov.select import fit_by_name
     from cfbmarkov.report.compare import SUMMARY, compare
@@ -198,6 +199,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 model = fit_by_name(name, ref, window=m.fit_window, columns=m.columns,
                                     rows=m.rows, lag=m.lag,
                                     coherent=m.coherent_auto and name == "auto")
+                model = model.with_cell_fields(fitting_cell_fields(ref, model))
                 model.save(model_path)
                 _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0,
                                                 "cpu_s": _time.process_time() - c0})

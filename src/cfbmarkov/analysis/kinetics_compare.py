@@ -90,23 +90,26 @@ def _fitting_source(model, ref):
 
 
 def _cell_fields(model, ref, warnings):
-    from cfbmarkov.analysis.cell_fields import window_cell_fields
-    from cfbmarkov.kinetics import CellFields
+    """The fitting window's cell fields: the model's own, else computed on its fitting
+    window (its source file, or the reference where the window lies inside it)."""
+    from cfbmarkov.analysis.cell_fields import cell_fields_of
     from cfbmarkov.trajectories import opened
 
-    source, window = _fitting_source(model, ref)
-    if source is None:
-        raise InputError("the kinetics' rates depend on the fitting window's cell fields, but "
-                         "the model's fitting file is not readable: give rates per cell "
-                         "(rate_by_cell) or keep the fitting file where the model says")
-    with opened(source) as traj:
-        fields = window_cell_fields(traj, model.state_space, window)
-    if fields["relative"]:
+    fields = model.cell_fields
+    if fields is None:
+        source, window = _fitting_source(model, ref)
+        if source is None:
+            raise InputError("the kinetics' rates depend on the fitting window's cell fields, "
+                             "but the model stores none and its fitting file is not readable: "
+                             "give rates per cell (rate_by_cell) or keep the fitting file "
+                             "where the model says")
+        with opened(source) as traj:
+            fields = cell_fields_of(traj, model.state_space, window)
+    if fields.relative:
         warnings.append("kinetics: the fitting file gives no particle diameter; its solids "
                         "fraction is each cell's count relative to the mean (1: the bed's "
                         "mean)")
-    return CellFields(fields["solids_fraction"], fields["wall_distance"],
-                      fields["vertical_velocity"])
+    return fields
 
 
 def _fitting_rtd_and_occupancy(model, ref, on, warnings):

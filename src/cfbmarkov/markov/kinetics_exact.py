@@ -257,7 +257,8 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
     kinetics : Kinetics or StateKinetics
         The properties (resolved on ``model.state_space`` where a :class:`Kinetics`).
     cell_fields : CellFields, optional
-        For parameters given as functions of the fitting window's cell fields.
+        For parameters given as functions of the fitting window's cell fields (default: the
+        ones the model stores, :attr:`MarkovModel.cell_fields`).
 
     Returns
     -------
@@ -272,7 +273,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
         without residences.
     """
     sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
-        model.state_space, cell_fields)
+        model.state_space, model.cell_fields if cell_fields is None else cell_fields)
     for name, linear, law in zip(sk.names, sk.linear, sk.laws):
         if not linear:
             raise InputError(f"property {name}: law {law.key} has no exact answer; run the "
