@@ -306,3 +306,75 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
         out[name] = PropertyAnswer(name, sk.starts[i], float(v0), float(mean), sd,
                                    float(mass.sum() / count.sum()), by_state, by_cell)
     return out
+
+
+def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float,
+                        cell_fields=None) -> dict[str, float]:
+    """The mean exit value per residence as a window of ``length`` seconds observes it:
+    each residence of n lags weighted by the number of places it fits in the window.
+
+    A window of M = length / lag lags sees a residence of n lags that starts at one of its
+    lag boundaries 1 .. M - n and ends inside it, M - n ways; in a steady state the exits
+    of a window are therefore the chain's exits weighted by w_n = max(M - n, 0), which
+    favours short residences. With the first-passage masses p_n = e Q^(n-1) r and value
+    masses m_n = E[v_exit 1{exit at n}], propagated lag by lag (u <- a o u + b o p, exit
+    through r, move by Q; the affine maps of :meth:`StateKinetics.over
+    <cfbmarkov.kinetics.StateKinetics.over>`),
+
+        windowed mean = sum_n w_n m_n / sum_n w_n p_n.
+
+    This is the answer to compare with exit values observed over a finite window (the
+    reference's paths, an observed RTD); as ``length`` grows it tends to
+    :func:`exact_kinetics`' exit mean.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted chain (open or periodic riser).
+    kinetics : Kinetics or StateKinetics
+        The properties (linear laws; ``entry`` or ``reference`` starts, the value at entry).
+    length : float
+        The window's length (s), at least one lag.
+    cell_fields : CellFields, optional
+        As :func:`exact_kinetics`.
+
+    Returns
+    -------
+    dict of str to float
+        The windowed exit mean of each property, by name.
+
+    Raises
+    ------
+    InputError
+        For a non-linear law, a carried property, a window shorter than a lag, or a model
+        without residences.
+    """
+    sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
+        model.state_space, model.cell_fields if cell_fields is None else cell_fields)
+    for name, linear, law, start in zip(sk.names, sk.linear, sk.laws, sk.starts):
+        if not linear:
+            raise InputError(f"property {name}: law {law.key} has no exact answer")
+        if start == "carried":
+            raise InputError(f"property {name}: a carried property has no windowed answer "
+                             "(its value at entry is that of the previous pass)")
+    steps = int(round(float(length) / model.lag))
+    if steps < 1:
+        raise InputError(f"window of {length:g} s is shorter than the lag {model.lag:g} s")
+    q, r, e, state, _ = residence_chain(model)
+    qt = q.T.tocsr()
+    a_all, b_all = sk.over(model.lag)
+    a, b = a_all[:, state], b_all[:, state]                      # [P, n]
+    p = e.copy()
+    u = np.asarray(sk.initial, dtype=np.float64)[:, None] * e[None, :]
+    weighted_value = np.zeros(sk.n_properties)
+    weighted_prob = 0.0
+    for n in range(1, steps):
+        u = a * u + b * p[None, :]
+        w = steps - n
+        weighted_value += w * (u @ r)
+        weighted_prob += w * float(p @ r)
+        p = qt @ p
+        u = (qt @ u.T).T
+    if not weighted_prob > 0:
+        raise InputError(f"no residence of the model fits a window of {length:g} s")
+    return {name: float(weighted_value[i] / weighted_prob) for i, name in enumerate(sk.names)}
