@@ -66,9 +66,9 @@ def test_the_section_quotes_summary_json(reported):
         ref, mod, seg = entry["reference"], entry["model"], entry["segregated_flow"]
         assert f"{ref['exit_mean']:.4g} [" in row
         assert f"{mod['exit_mean']:.4g} [" in row
-        assert f"| {mod['exact']['exit_mean']:.4g} |" in row
+        assert f"| {mod['exact']['windowed_exit_mean']:.4g} | {mod['exact']['exit_mean']:.4g} |" in row
         assert f"{seg['exit_mean']:.4g} [" in row
-        assert f"| {mod['exact']['pd_exit_mean']:+.2f} |" in row
+        assert f"| {mod['exact']['pd_windowed_exit_mean']:+.2f} |" in row
         assert f"| {seg['pd_exit_mean']:+.2f} |" in row
         assert f"| {ref['exit_count']} |" in row
         # the figure of the case is copied and linked

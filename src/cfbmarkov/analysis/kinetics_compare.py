@@ -10,8 +10,10 @@ Per property of a kinetics file (linear laws):
   (``/properties/NAME``) or, where it stored none, the same integration along the
   prediction's own paths (on a space of cells these are the chain's states, so the values
   are those a Monte Carlo with properties gives); beside them the chain's exact answers
-  (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`) and an interval from the block
-  bootstrap of the fitting window, as for the RTD;
+  (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`), its exact exit mean as a window
+  of the comparison's length sees it (short residences more often than long ones, as the
+  reference's exits; :func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`) and an
+  interval from the block bootstrap of the fitting window, as for the RTD;
 - *segregated flow*: the bed-averaged law over the fitting window's observed RTD
   (:mod:`cfbmarkov.analysis.segregated_flow`).
 
@@ -149,6 +151,19 @@ def _exact(model, sk, warnings):
     except CfbmarkovError as exc:
         warnings.append(f"kinetics: no exact answers ({exc})")
         return None
+
+
+def _windowed(model, sk, length: float, warnings) -> dict:
+    """The chain's exact exit means as a window of ``length`` s sees them
+    (:func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`); {} with a warning where
+    they cannot be had."""
+    from cfbmarkov.markov.kinetics_exact import windowed_exit_means
+
+    try:
+        return windowed_exit_means(model, sk, length)
+    except CfbmarkovError as exc:
+        warnings.append(f"kinetics: no windowed exact answers ({exc})")
+        return {}
 
 
 def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings):
@@ -297,6 +312,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
         warnings.append("kinetics: the prediction stored no properties; the model side "
                         "integrates them along the prediction's paths")
     exact = _exact(model, sk, warnings)
+    windowed = _windowed(model, sk, stop - start, warnings) if exact else {}
     boot = _bootstrap_exit_means(model, kinetics, fields, resamples, warnings) if exact else None
     rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings)
     n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)
@@ -329,6 +345,10 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                                   "bed_mean": answer.bed_mean,
                                   "pd_exit_mean": percentage_difference(answer.exit_mean,
                                                                         r.exit_mean)}
+            if name in windowed:
+                mod_block["exact"]["windowed_exit_mean"] = windowed[name]
+                mod_block["exact"]["pd_windowed_exit_mean"] = percentage_difference(
+                    windowed[name], r.exit_mean)
             values = None if boot is None else np.asarray(boot.get(name, []), float)
             if values is not None and values.size >= 2:
                 from cfbmarkov.analysis.bootstrap import interval_bounds

@@ -332,7 +332,9 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
     model : MarkovModel
         The fitted chain (open or periodic riser).
     kinetics : Kinetics or StateKinetics
-        The properties (linear laws; ``entry`` or ``reference`` starts, the value at entry).
+        The properties (linear laws). A ``carried`` property (its value at entry that of
+        the previous pass) is left out of the result; the others start at their entry
+        value.
     length : float
         The window's length (s), at least one lag.
     cell_fields : CellFields, optional
@@ -341,22 +343,19 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
     Returns
     -------
     dict of str to float
-        The windowed exit mean of each property, by name.
+        The windowed exit mean of each property but the carried ones, by name.
 
     Raises
     ------
     InputError
-        For a non-linear law, a carried property, a window shorter than a lag, or a model
+        For a non-linear law, a window shorter than a lag, or a model
         without residences.
     """
     sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
         model.state_space, model.cell_fields if cell_fields is None else cell_fields)
-    for name, linear, law, start in zip(sk.names, sk.linear, sk.laws, sk.starts):
+    for name, linear, law in zip(sk.names, sk.linear, sk.laws):
         if not linear:
             raise InputError(f"property {name}: law {law.key} has no exact answer")
-        if start == "carried":
-            raise InputError(f"property {name}: a carried property has no windowed answer "
-                             "(its value at entry is that of the previous pass)")
     steps = int(round(float(length) / model.lag))
     if steps < 1:
         raise InputError(f"window of {length:g} s is shorter than the lag {model.lag:g} s")
@@ -377,4 +376,5 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
         u = (qt @ u.T).T
     if not weighted_prob > 0:
         raise InputError(f"no residence of the model fits a window of {length:g} s")
-    return {name: float(weighted_value[i] / weighted_prob) for i, name in enumerate(sk.names)}
+    return {name: float(weighted_value[i] / weighted_prob) for i, name in enumerate(sk.names)
+            if sk.starts[i] != "carried"}
