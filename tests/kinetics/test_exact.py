@@ -241,3 +241,24 @@ def test_custom_law_integrates_like_the_linear_one():
     np.testing.assert_allclose(rk4, exact, atol=1e-6)   # RK4: error ~ (k lag / 8)^4
     with pytest.raises(InputError, match="no exact answer"):
         exact_kinetics(model, custom)
+
+
+def test_windowed_exit_mean_by_hand_open_riser():
+    from cfbmarkov.markov.kinetics_exact import windowed_exit_means
+
+    r, k, length = 0.25, 1.7, 1.5          # one state; a window of 15 lags
+    steps = int(round(length / LAG))
+    n = np.arange(1, steps)
+    p = r * (1 - r) ** (n - 1)
+    w = steps - n
+    by_hand = np.sum(w * p * (1 - np.exp(-k * n * LAG))) / np.sum(w * p)
+    got = windowed_exit_means(open_model(r), kinetics([k]), length)["v"]
+    assert got == pytest.approx(by_hand, abs=1e-12)
+    # a long window sees every residence nearly alike (bias of order E(n) / M)
+    assert windowed_exit_means(open_model(r), kinetics([k]), 400.0)["v"] == pytest.approx(
+        exact_kinetics(open_model(r), kinetics([k]))["v"].exit_mean, rel=2e-3)
+    # carried properties are left out; a window shorter than a lag is refused
+    assert windowed_exit_means(periodic_model(), kinetics([1.0, 1.0], start="carried"),
+                               1.0) == {}
+    with pytest.raises(InputError, match="shorter than the lag"):
+        windowed_exit_means(open_model(r), kinetics([k]), 0.01)
