@@ -316,7 +316,7 @@ def tables(result: dict) -> str:
     """The in-sample and out-of-sample tables and the counts as text."""
     lines = []
     head = (f"{'run':<12} {'fit':>9} {'judged':>9} {'rate':<8} {'Da':>4} {'exits':>6} "
-            f"{'reference':>10} {'ref SE %':>8} {'chain':>8} {'seg.flow':>8} "
+            f"{'reference':>10} {'ref SE %':>8} {'chain':>8} {'(exact)':>8} {'seg.flow':>8} "
             f"{'chain %':>8} {'seg %':>8} {'ok':>3}")
     for key, title in (("in_sample", "In sample (fitted and judged on the same window; goal: "
                                      f"chain within {IN_SAMPLE_GOAL:g} %)"),
@@ -332,10 +332,13 @@ def tables(result: dict) -> str:
                 f"{r['label']:<12} {r['fit'][0]:>4g}-{r['fit'][1]:<4g} "
                 f"{r['judged'][0]:>4g}-{r['judged'][1]:<4g} {r['kind']:<8} "
                 f"{r['damkoehler']:>4g} {r['exits']:>6d} {_fmt(r['reference']):>10} "
-                f"{_fmt(se, '.2f'):>8} {_fmt(r['chain']):>8} {_fmt(r['segregated_flow']):>8} "
+                f"{_fmt(se, '.2f'):>8} {_fmt(r['chain']):>8} {_fmt(r['chain_unwindowed']):>8} "
+                f"{_fmt(r['segregated_flow']):>8} "
                 f"{_fmt(r['chain_error'], '+.2f'):>8} {_fmt(r['segregated_flow_error'], '+.2f'):>8}"
                 f" {'yes' if ok else 'no':>3}")
         lines.append("")
+    lines.append("chain: the exact exit mean as the judged window sees it; (exact): per residence "
+                 "of the chain, unwindowed; errors against the reference, %")
     counts = result["counts"]
     for kind, c in counts["in_sample_within"].items():
         lines.append(f"in sample, {kind}: chain within {IN_SAMPLE_GOAL:g} % in {c['within']} of "
