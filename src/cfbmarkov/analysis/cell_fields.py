@@ -264,5 +264,5 @@ def model_cell_fields(model, run=None, *, what: str = "the kinetics"):
         return cell_fields_of(traj, model.state_space, window)
 
 
-__all__ = ["cell_fields_of", "fitting_cell_fields", "model_cell_fields", "particle_diameter", "wall_distance",
-           "window_cell_fields"]
+__all__ = ["cell_fields_of", "fitting_cell_fields", "model_cell_fields", "particle_diameter",
+           "wall_distance", "window_cell_fields"]
