@@ -16,13 +16,15 @@ ways at each Damkoehler number Da:
   :func:`cfbmarkov.kinetics.wall_cells`) than in the core, as in the docs' worked example.
 
 Da = k_bar tau_bar, with tau_bar the mean of the fitting window's observed residence times
-(passes up through the top, on the model's lag) and k_bar the fitting window's
+(in the same direction, on the model's lag) and k_bar the fitting window's
 bed-averaged rate (the state occupancy's mean of k_s, the rate the segregated-flow baseline
 uses): the uniform rate is k = Da / tau_bar, and the zone rates are scaled so that their
 bed average is the same. The two kinds of rate therefore give the same segregated-flow
 answer; the chain tells them apart.
 
-Three exit means of X per residence (passes up through the top):
+Three exit means of X per residence, the residences counted in the direction of the
+judged window's net solids flow (passes up through the top; down through the bottom where
+the solids fall on average, as at low gas velocities):
 
 - *reference*: X integrated along the run's own paths over the judged window, on the
   model's states at its lag (:func:`cfbmarkov.analysis.kinetics_reference.reference_kinetics`);
@@ -72,9 +74,9 @@ KINDS = ("uniform", "zones")
 IN_SAMPLE_GOAL = 2.0          # %
 
 
-def fitting_window_facts(traj, model) -> dict:
-    """The fitting window's observed residence times (passes up, on the model's lag) and its
-    state occupancy at the lag.
+def fitting_window_facts(traj, model, direction: str = "up") -> dict:
+    """The fitting window's observed residence times (on the model's lag, in ``direction``)
+    and its state occupancy at the lag.
 
     Parameters
     ----------
@@ -82,12 +84,15 @@ def fitting_window_facts(traj, model) -> dict:
         The fitting file.
     model : MarkovModel
         The model fitted on it (its state space, lag and window).
+    direction : {"up", "down"}, optional
+        Residences from passes up through the top, or down through the bottom (a net
+        downflow).
 
     Returns
     -------
     dict
         ``residence_times`` (s, float64 [K]), ``tau`` (their mean, s), ``occupancy``
-        (float64 [S], visits per state), ``direction`` (the window's net solids flow).
+        (float64 [S], visits per state), ``direction``.
 
     Raises
     ------
@@ -97,15 +102,15 @@ def fitting_window_facts(traj, model) -> dict:
     window = tuple(model.window)
     lag_frames = traj.lag_frames(model.lag)
     rt = residence_times(traj, window, use_events=False, lag_frames=lag_frames,
-                         direction="up").samples
-    if rt.size == 0:
-        raise InputError(f"{traj.path}: no residence (pass up through the top) in the fitting "
-                         f"window {window[0]:g}-{window[1]:g} s")
+                         direction=direction).samples
+    if rt.size < 2:
+        raise InputError(f"{traj.path}: {rt.size} residences ({direction} passes) in the "
+                         f"fitting window {window[0]:g}-{window[1]:g} s")
     discrete = discretize(traj, model.state_space, model.lag, window)
     states = discrete.states[::discrete.lag_frames]
     occupancy = np.bincount(states[states >= 0], minlength=model.n_states).astype(float)
     return {"residence_times": rt, "tau": float(rt.mean()), "occupancy": occupancy,
-            "direction": net_flow_direction(traj, window)}
+            "direction": direction}
 
 
 def goal_kinetics(model, facts: dict, damkoehler) -> Kinetics:
@@ -176,9 +181,11 @@ def judge(traj, model, facts: dict, judge_window, damkoehler) -> list[dict]:
     """
     kinetics = goal_kinetics(model, facts, damkoehler)
     sk = kinetics.per_state(model.state_space)
-    exact = exact_kinetics(model, sk)
-    windowed = windowed_exit_means(model, sk, judge_window[1] - judge_window[0])
-    ref = reference_kinetics(traj, model, sk, tuple(judge_window), direction="up")
+    direction = facts["direction"]
+    exact = exact_kinetics(model, sk, direction=direction)
+    windowed = windowed_exit_means(model, sk, judge_window[1] - judge_window[0],
+                                   direction=direction)
+    ref = reference_kinetics(traj, model, sk, tuple(judge_window), direction=direction)
     wall = wall_cells(model.state_space)[np.asarray(model.state_space.cell_of_state)]
     out = []
     for i, name in enumerate(kinetics.names):
@@ -253,7 +260,7 @@ def run_goals(runs, *, in_sample=IN_SAMPLE, out_of_sample=OUT_OF_SAMPLE,
     """
     pairs = [("in", tuple(w), tuple(w)) for w in in_sample]
     pairs += [("out", tuple(f), tuple(j)) for f, j in out_of_sample]
-    result = {"in_sample": [], "out_of_sample": [],
+    result = {"in_sample": [], "out_of_sample": [], "skipped": [],
               "settings": {"damkoehler": list(map(float, damkoehler)),
                            "wall_factor": WALL_FACTOR, "in_goal_percent": IN_SAMPLE_GOAL}}
     for path in runs:
@@ -261,14 +268,24 @@ def run_goals(runs, *, in_sample=IN_SAMPLE, out_of_sample=OUT_OF_SAMPLE,
             (columns, rows), model_lag = _grid(traj, cells, lag)
             est = estimator or ("mle" if traj.boundary.is_open else "paper")
             space = state_space_from_name("cells", columns, rows, traj.width, traj.height)
-            fitted = {}
+            fitted, facts_of = {}, {}
             for which, fit, judged in pairs:
                 t0 = time.perf_counter()
-                if fit not in fitted:
-                    model = fit_model(traj, space, model_lag, fit, est)
-                    fitted[fit] = (model, fitting_window_facts(traj, model))
-                model, facts = fitted[fit]
-                rows_out = judge(traj, model, facts, judged, damkoehler)
+                try:
+                    if fit not in fitted:
+                        fitted[fit] = fit_model(traj, space, model_lag, fit, est)
+                    model = fitted[fit]
+                    direction = net_flow_direction(traj, judged)
+                    if (fit, direction) not in facts_of:
+                        facts_of[fit, direction] = fitting_window_facts(traj, model, direction)
+                    rows_out = judge(traj, model, facts_of[fit, direction], judged, damkoehler)
+                except CfbmarkovError as exc:
+                    result["skipped"].append({"run": str(path), "label": _label(traj),
+                                              "fit": list(fit), "judged": list(judged),
+                                              "in_sample": which == "in",
+                                              "reason": " ".join(str(exc).split())})
+                    continue
+                facts = facts_of[fit, direction]
                 for row in rows_out:
                     row.update({"run": str(path), "label": _label(traj), "fit": list(fit),
                                 "judged": list(judged), "tau": facts["tau"],
@@ -315,7 +332,7 @@ def _fmt(v, spec=".4f"):
 def tables(result: dict) -> str:
     """The in-sample and out-of-sample tables and the counts as text."""
     lines = []
-    head = (f"{'run':<12} {'fit':>9} {'judged':>9} {'rate':<8} {'Da':>4} {'exits':>6} "
+    head = (f"{'run':<12} {'fit':>9} {'judged':>9} {'dir':<4} {'rate':<8} {'Da':>4} {'exits':>6} "
             f"{'reference':>10} {'ref SE %':>8} {'chain':>8} {'(exact)':>8} {'seg.flow':>8} "
             f"{'chain %':>8} {'seg %':>8} {'ok':>3}")
     for key, title in (("in_sample", "In sample (fitted and judged on the same window; goal: "
@@ -330,15 +347,19 @@ def tables(result: dict) -> str:
                   if r["reference"] and math.isfinite(r["reference_se"]) else float("nan"))
             lines.append(
                 f"{r['label']:<12} {r['fit'][0]:>4g}-{r['fit'][1]:<4g} "
-                f"{r['judged'][0]:>4g}-{r['judged'][1]:<4g} {r['kind']:<8} "
+                f"{r['judged'][0]:>4g}-{r['judged'][1]:<4g} {r['direction']:<4} {r['kind']:<8} "
                 f"{r['damkoehler']:>4g} {r['exits']:>6d} {_fmt(r['reference']):>10} "
                 f"{_fmt(se, '.2f'):>8} {_fmt(r['chain']):>8} {_fmt(r['chain_unwindowed']):>8} "
                 f"{_fmt(r['segregated_flow']):>8} "
                 f"{_fmt(r['chain_error'], '+.2f'):>8} {_fmt(r['segregated_flow_error'], '+.2f'):>8}"
                 f" {'yes' if ok else 'no':>3}")
         lines.append("")
+    for r in result.get("skipped", []):
+        lines.append(f"skipped: {r['label']}, fit {r['fit'][0]:g}-{r['fit'][1]:g} s, judged "
+                     f"{r['judged'][0]:g}-{r['judged'][1]:g} s: {r['reason']}")
     lines.append("chain: the exact exit mean as the judged window sees it; (exact): per residence "
-                 "of the chain, unwindowed; errors against the reference, %")
+                 "of the chain, unwindowed; errors against the reference, %; dir: the judged "
+                 "window's net solids flow, residences counted that way")
     counts = result["counts"]
     for kind, c in counts["in_sample_within"].items():
         lines.append(f"in sample, {kind}: chain within {IN_SAMPLE_GOAL:g} % in {c['within']} of "
@@ -412,6 +433,11 @@ def main(argv=None) -> int:
                            progress=lambda line: print(line, file=sys.stderr, flush=True))
     except CfbmarkovError as exc:
         print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)
+        return 2
+    if not result["in_sample"] and not result["out_of_sample"]:
+        first = result["skipped"][0]
+        print(f"error: no window could be judged ({first['label']}, fit {first['fit'][0]:g}-"
+              f"{first['fit'][1]:g} s: {first['reason']})", file=sys.stderr)
         return 2
     print(tables(result))
     if args.json:

@@ -262,3 +262,24 @@ def test_windowed_exit_mean_by_hand_open_riser():
                                1.0) == {}
     with pytest.raises(InputError, match="shorter than the lag"):
         windowed_exit_means(open_model(r), kinetics([k]), 0.01)
+
+
+def test_down_residences_mirror_up_ones():
+    from cfbmarkov.markov.kinetics_exact import windowed_exit_means
+
+    up_model = periodic_model()
+    p = up_model.transition_matrix
+    passes = np.array([[0.0, 0.0], [1.0, 0.0]])
+    zeros = np.zeros((2, 2), np.int64)
+    # the same chain whose 1 -> 0 move passes down through the bottom: a net downflow
+    down_model = MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 2, 0.1, 1.0), LAG,
+                             estimator="given", pass_fractions=(np.zeros((2, 2)), passes))
+    kin = kinetics([0.7, 2.0])
+    up = exact_kinetics(up_model, kin)["v"]
+    down = exact_kinetics(down_model, kin, direction="down")["v"]
+    assert down.exit_mean == pytest.approx(up.exit_mean, rel=1e-12)
+    assert down.exit_sd == pytest.approx(up.exit_sd, rel=1e-10)
+    assert windowed_exit_means(down_model, kin, 2.0, direction="down")["v"] == pytest.approx(
+        windowed_exit_means(up_model, kin, 2.0)["v"], rel=1e-12)
+    with pytest.raises(InputError, match="up or down"):
+        exact_kinetics(up_model, kin, direction="sideways")

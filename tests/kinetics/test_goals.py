@@ -87,9 +87,15 @@ def test_goals_on_a_tiny_run(run, tmp_path, capsys):
     assert len(data["in_sample"]) == 2 and data["settings"]["damkoehler"] == [1.0]
 
 
-def test_goals_refuse_a_window_outside_the_run(run, capsys):
+def test_goals_skip_a_window_outside_the_run(run, capsys):
     goals = _script()
     assert goals.main([str(run), "--cells", "4x10", "--lag", "0.025", "--in-sample",
-                       "10:15"]) == 2
+                       "10:15", "--out-of-sample", "10:15,15:20"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("error: ") and err.count("\n") == 1
+    assert err.startswith("error: no window could be judged") and err.count("\n") == 1
+    # one window outside, one inside: the one judged, the other listed as skipped
+    assert goals.main([str(run), "--cells", "4x10", "--lag", "0.025", "--in-sample", "0.5:2.5",
+                       "--in-sample", "10:15", "--out-of-sample", "0.5:2.5,2:4",
+                       "--damkoehler", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "skipped: run, fit 10-15 s, judged 10-15 s:" in out

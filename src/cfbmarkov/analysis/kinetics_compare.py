@@ -141,32 +141,33 @@ def _fitting_rtd_and_occupancy(model, ref, on, warnings):
     return rt.samples, occupancy
 
 
-def _exact(model, sk, warnings):
+def _exact(model, sk, warnings, direction="up"):
     try:
         from cfbmarkov.markov.kinetics_exact import exact_kinetics
     except ImportError:          # pragma: no cover - the exact module is part of the package
         return None
     try:
-        return exact_kinetics(model, sk)
+        return exact_kinetics(model, sk, direction=direction)
     except CfbmarkovError as exc:
         warnings.append(f"kinetics: no exact answers ({exc})")
         return None
 
 
-def _windowed(model, sk, length: float, warnings) -> dict:
+def _windowed(model, sk, length: float, warnings, direction: str = "up") -> dict:
     """The chain's exact exit means as a window of ``length`` s sees them
     (:func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`); {} with a warning where
     they cannot be had."""
     from cfbmarkov.markov.kinetics_exact import windowed_exit_means
 
     try:
-        return windowed_exit_means(model, sk, length)
+        return windowed_exit_means(model, sk, length, direction=direction)
     except CfbmarkovError as exc:
         warnings.append(f"kinetics: no windowed exact answers ({exc})")
         return {}
 
 
-def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings):
+def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
+                          direction: str = "up"):
     """Exact exit means of each property on block-bootstrap resamples of the fitting
     window ({name: list}), or None."""
     if not resamples:
@@ -180,7 +181,8 @@ def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings):
         for resampled in drawn:
             try:
                 answers = exact_kinetics(resampled, kinetics.per_state(resampled.state_space,
-                                                                       fields))
+                                                                       fields),
+                                         direction=direction)
             except (CfbmarkovError, ValueError):
                 continue
             for name, answer in answers.items():
@@ -311,9 +313,10 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     if any(v == "paths" for v in sources.values()):
         warnings.append("kinetics: the prediction stored no properties; the model side "
                         "integrates them along the prediction's paths")
-    exact = _exact(model, sk, warnings)
-    windowed = _windowed(model, sk, stop - start, warnings) if exact else {}
-    boot = _bootstrap_exit_means(model, kinetics, fields, resamples, warnings) if exact else None
+    exact = _exact(model, sk, warnings, on.direction)
+    windowed = _windowed(model, sk, stop - start, warnings, on.direction) if exact else {}
+    boot = (_bootstrap_exit_means(model, kinetics, fields, resamples, warnings, on.direction)
+            if exact else None)
     rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings)
     n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)
     summary, figures = {}, {}
