@@ -100,6 +100,9 @@ def _print_kinetics(block: dict) -> None:
                 f"{pd_text(mod['pd_exit_mean'])} %, MD {value(mod['md_exit'])}")
         if exact:
             line += f"; exact {value(exact['exit_mean'])}, PD {pd_text(exact['pd_exit_mean'])} %"
+            if exact.get("windowed_exit_mean") is not None:
+                line += (f"; exact as the window sees it {value(exact['windowed_exit_mean'])}, "
+                         f"PD {pd_text(exact['pd_windowed_exit_mean'])} %")
         line += ")"
         if seg:
             line += (f", segregated flow {value(seg['exit_mean'])} (PD "

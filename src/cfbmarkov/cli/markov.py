@@ -66,11 +66,13 @@ def _finish_fit(args, model, runs, windows) -> int:
     from cfbmarkov.markov.first_passage import TrappedResidences
 
     if len(runs) == 1 and isinstance(model.source, str):
+        from cfbmarkov.analysis.cell_fields import fitting_cell_fields
         from cfbmarkov.trajectories import Trajectories
         from cfbmarkov.trajectory_identity import window_identity
 
         with Trajectories(model.source) as run:
             model = model.with_source_identity(window_identity(run, model.window))
+            model = model.with_cell_fields(fitting_cell_fields(run, model))
     has_rtd = True
     try:
         model.rtd()
