@@ -177,6 +177,33 @@ def number_text(value, spec: str, unit: str = "") -> str:
     return "n/a" if v is None else f"{v:{spec}}{unit}"
 
 
+def interval_text(lo, hi, decimals: int = 3, sep: str = "–") -> str:
+    """An interval's ends as text, with as many decimals as keep them apart.
+
+    Parameters
+    ----------
+    lo, hi : object
+        The ends (see :func:`finite_or_none`).
+    decimals : int, optional
+        The fewest decimals; more are taken (up to 12) while the two ends would print the
+        same but differ, so that an interval never collapses to "0.014-0.014".
+    sep : str, optional
+        Between the ends.
+
+    Returns
+    -------
+    str
+        "0.0138–0.0144", or "n/a" where an end is not finite.
+    """
+    a, b = finite_or_none(lo), finite_or_none(hi)
+    if a is None or b is None:
+        return "n/a"
+    d = decimals
+    while d < 12 and a != b and f"{a:.{d}f}" == f"{b:.{d}f}":
+        d += 1
+    return f"{a:.{d}f}{sep}{b:.{d}f}"
+
+
 def duration_text(seconds) -> str:
     """A wall time in s, min or h (3 significant digits), or "n/a".
 
@@ -338,6 +365,6 @@ def write_utf8(path: Path, text: str) -> None:
         os.chmod(tmp, readable_mode())
 
 
-__all__ = ["FIGURES", "Bullets", "FigureBlock", "Heading", "Para", "Table", "anchor", "duration_text",
+__all__ = ["FIGURES", "Bullets", "FigureBlock", "Heading", "Para", "Table", "anchor", "duration_text", "interval_text",
            "finite_or_none", "link", "number_text", "readable_mode", "render_html", "render_markdown",
            "write_utf8"]

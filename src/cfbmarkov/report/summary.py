@@ -23,6 +23,7 @@ from cfbmarkov.config import ParticleConfig, RiserConfig
 from cfbmarkov.report.document import Bullets, Heading, Para, Table, finite_or_none, link
 from cfbmarkov.report.run_folder import Case
 from cfbmarkov.report.sections import PAPER_TABLE3
+from cfbmarkov.report.table3 import BASELINE_RULE_SHORT, baseline_judgement
 
 CITATION = ("Y. Zhuang, Markov Chain Based Statistic Model for Predicting Particle Movement "
             "in Circulating Fluidized Bed (CFB) Risers, Processes 13(3), 614 (2025), "
@@ -149,49 +150,73 @@ def _paper_sentences(cases: list[Case]) -> list[str]:
 
 
 def _baseline_sentences(cases: list[Case]) -> list[str]:
-    """Where the models beat the persistence baseline and where not, and why."""
-    beat, lost = [], 0
+    """Where the models beat the persistence baseline and where not, and why, by the one rule
+    of Table 3 (:func:`cfbmarkov.report.table3.baseline_judgement`)."""
+    groups: dict[str, list[str]] = {k: [] for k in ("beats", "loses", "tie", "not told apart")}
     why: dict[tuple[str, str], list[str]] = {}
     for c, name, s in _rows(cases):
-        md = finite_or_none(s.get("md_rtd"))
-        md_base = finite_or_none((s.get("baseline") or {}).get("md_rtd"))
-        if md is None or md_base is None:
+        j = baseline_judgement(s)
+        if j is None:
             continue
-        if md < md_base:
-            beat.append(f"{name} at {_u(c)} m/s")
+        groups[j.outcome].append(f"{name} at {_u(c)} m/s")
+        if j.outcome == "beats":
             continue
-        lost += 1
         md_own = finite_or_none((s.get("model_on_fitting_window") or {}).get("md_rtd"))
-        md_halves = finite_or_none((s.get("natural_variability") or {}).get("md_rtd"))
-        tie = abs(md - md_base) <= 0.01 * md_base
-        if md_halves is not None and md_base <= md_halves:
-            reason = (f"the baseline's MD ({md_base:.3g}) is already within the CFD-DEM's own "
-                      f"variability between the predict window's halves ({md_halves:.3g}), "
-                      "so no model can be told better than it")
-        elif md_own is not None and md_own < md_base:
-            reason = (f"the flow changed between the windows (on its fitting window the model "
-                      f"is {md_own:.3g} from the CFD-DEM, nearer than the baseline's "
-                      f"{md_base:.3g} on the predict window)")
+        if j.outcome == "tie":
+            reason = f"within {100 * j.tie:g} % of the baseline's MD {j.md_base:.4g}: a tie"
+        elif j.outcome == "not told apart":
+            reason = (f"against the baseline's {j.md_base:.4g}, gaps within the CFD-DEM's own "
+                      f"variability (its halves differ by {j.md_halves:.3g}): not told apart")
+        elif md_own is not None and md_own < j.md_base:
+            reason = (f"against the baseline's {j.md_base:.4g}: the flow changed between the "
+                      f"windows (on its fitting window the model is {md_own:.3g} from the "
+                      "CFD-DEM, nearer than the baseline on the predict window)")
         else:
-            reason = (f"the model's own error (MD {md:.3g} against the baseline's "
-                      f"{md_base:.3g}" + (f", {md_own:.3g} already on its fitting window"
-                                          if md_own is not None else "") + ")")
-        if tie:
-            reason = (f"a tie within 1 % (MD {md:.3g} against the baseline's {md_base:.3g}); "
-                      + reason)
-        why.setdefault((_u(c), reason), []).append(name)
-    total = len(beat) + lost
+            reason = (f"against the baseline's {j.md_base:.4g}: the model's own error"
+                      + (f" ({md_own:.3g} already on its fitting window)"
+                         if md_own is not None else ""))
+        why.setdefault((_u(c), reason), []).append(f"{name} {j.md:.4g}")
+    total = sum(len(v) for v in groups.values())
     if not total:
         return ["No comparison has a persistence baseline (the fitting window is not in the "
                 "reference file): whether a model beats simply reusing the fitting window's "
                 "RTD cannot be said."]
+    beat = groups["beats"]
     out = [f"The models' RTDs beat the persistence baseline (the CFD-DEM's RTD of the fitting "
            f"window reused as the prediction; distance MD) in {len(beat)} of {total} "
-           "velocity-model pairs" + (f": {', '.join(beat)}." if beat else ".")]
-    if lost:
-        out.append(f"They do not beat it in {lost}. " + " ".join(
-            f"{' and '.join(names)} at {u} m/s: {reason}." for (u, reason), names in why.items()))
+           "velocity-model pairs" + (f": {', '.join(beat)}." if beat else ".")
+           + f" The rule, as in Table 3 and below: {BASELINE_RULE_SHORT}."]
+    counts = [f"{len(groups[k])} {word}" for k, word in
+              (("loses", "where the baseline is better"), ("not told apart",
+               "that the CFD-DEM's own variability cannot tell apart"), ("tie", "tied"))
+              if groups[k]]
+    if why:
+        out.append(f"Not beating it: {', '.join(counts)}. MD " + "; ".join(
+            f"at {u} m/s {', '.join(names)} {reason}" for (u, reason), names in why.items())
+            + ".")
     return out
+
+
+def baseline_counts(cases: list[Case]) -> dict[str, int]:
+    """How many velocity-model pairs have each outcome of the baseline rule.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run.
+
+    Returns
+    -------
+    dict of str to int
+        Keys "beats", "loses", "tie", "not told apart"
+        (:func:`cfbmarkov.analysis.baseline.judge_baseline`).
+    """
+    counts = {k: 0 for k in ("beats", "loses", "tie", "not told apart")}
+    for _, _, s in _rows(cases):
+        j = baseline_judgement(s)
+        if j is not None:
+            counts[j.outcome] += 1
+    return counts
 
 
 def _interval_sentence(cases: list[Case]) -> str | None:
