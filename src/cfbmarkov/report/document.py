@@ -274,6 +274,7 @@ h1 { font-size: 1.7em; border-bottom: 2px solid #1f4e79; padding-bottom: .2em; }
 h2 { font-size: 1.3em; margin-top: 2em; color: #1f4e79; border-bottom: 1px solid #ccd; }
 h3 { font-size: 1.08em; margin-top: 1.4em; }
 div.wide { overflow-x: auto; }
+p.verdict { font-weight: bold; border-left: 4px solid #1f4e79; padding-left: .6em; }
 table { border-collapse: collapse; margin: .8em 0; font-size: .88em; }
 th, td { border: 1px solid #bbc; padding: .25em .55em; text-align: right; }
 th { background: #eef2f7; text-align: center; }

@@ -30,6 +30,9 @@ CITATION = ("Y. Zhuang, Markov Chain Based Statistic Model for Predicting Partic
             "doi:10.3390/pr13030614")
 SUMMARY_HEADING = "Summary"
 CONDITIONS_HEADING = "Operating conditions and physics checks"
+#: the largest relative difference of the solids' mean vertical velocity between the fitting
+#: and the predict window for which the flow counts as developed at the fitting window
+DEVELOPED = 0.10
 #: the estimator the paper used
 PAPER_ESTIMATOR = "paper"
 
@@ -276,6 +279,148 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
     return out
 
 
+def _run_text(done: list[Case]) -> str:
+    """' (a riser of 0.04 m x 0.3 m with 3789 particles; the CFD-DEM run 0-4.5 s at 3 m/s,
+    ...)': what the finished cases ran, from their settings."""
+    if not done:
+        return ""
+    risers = sorted({(c.config.riser.width, c.config.riser.height, c.config.particles.number)
+                     for c in done})
+    riser = "; ".join(f"{w:g} m x {h:g} m with {n} particles" for w, h, n in risers)
+    runs: dict[str, list[str]] = {}
+    for c in done:
+        end = float(c.config.output.end_time)
+        runs.setdefault(f"0-{end:g} s", []).append(_u(c))
+    text = ", ".join(f"{span} at {', '.join(us)} m/s" for span, us in runs.items())
+    return f" (a riser of {riser}; the CFD-DEM run from rest {text})"
+
+
+def windows_text(done: list[Case], measures: dict) -> str | None:
+    """Why the cases' windows and lags differ, and how developed the flow is at the fitting
+    window, from the case data.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        Their recomputed numbers (``reference.rt.mean``, ``development``).
+
+    Returns
+    -------
+    str or None
+        None without a finished case.
+    """
+    if not done:
+        return None
+    settings = {(tuple(c.config.markov.fit_window), tuple(c.config.markov.predict_window),
+                 c.config.markov.lag) for c in done}
+    out = []
+    if len(settings) > 1:
+        spans = []
+        for c in done:
+            m = c.config.markov
+            mean = finite_or_none(measures[c.name].reference.rt.mean)
+            spans.append(f"{_u(c)} m/s fit {m.fit_window[0]:g}-{m.fit_window[1]:g} s, predict "
+                         f"{m.predict_window[0]:g}-{m.predict_window[1]:g} s, lag {m.lag:g} s"
+                         + (f" (E(RT) {mean / m.lag:.0f} lags)" if mean is not None else ""))
+        out.append("The windows and lags differ per case: "
+                   + "; ".join(spans) + ". A riser started from rest takes a time that "
+                   "depends on U to develop its flow, and the windows lie after it; the "
+                   "faster the solids, the shorter their residence times, so the lag and the "
+                   "RTD bins shrink with U to keep a mean residence time many lags long.")
+    flows, changing = [], []
+    for c in done:
+        d = getattr(measures[c.name], "development", None) or {}
+        before, fit, predict = (finite_or_none(d.get(k)) for k in ("before", "fit", "predict"))
+        if fit is None or predict is None:
+            continue
+        values = " / ".join("n/a" if v is None else f"{v:+.2f}" for v in (before, fit, predict))
+        off = abs(fit - predict) / abs(predict) if abs(predict) > 1e-9 else math.nan
+        flows.append(f"{_u(c)} m/s {values} m/s"
+                     + (f" ({100 * off:.0f} %)" if math.isfinite(off) else ""))
+        if not off <= DEVELOPED:
+            changing.append(f"{_u(c)} m/s")
+    if flows:
+        out.append("How developed the flow is at the fitting window: the CFD-DEM's mean "
+                   "vertical solids velocity before the fitting window / over it / over the "
+                   "predict window (the fitting window's difference from the predict "
+                   "window's): " + "; ".join(flows) + ". "
+                   + (f"The flow was still changing when the model was fitted (more than "
+                      f"{100 * DEVELOPED:.0f} %) at {', '.join(changing)}." if changing else
+                      f"At every velocity the fitting window's lies within "
+                      f"{100 * DEVELOPED:.0f} % of the predict window's."))
+    return " ".join(out) or None
+
+
+def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
+    """The report's verdict in one line, with the next step, written from the numbers.
+
+    Parameters
+    ----------
+    meta : dict
+        The run's ``reproduce.json`` (its ``scale``).
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run.
+    checks : list of PhysicsCheck
+        The physics checks (:func:`physics_checks`).
+
+    Returns
+    -------
+    str
+        "Verdict: ..." naming how many velocity-model pairs beat the persistence baseline by
+        the report's one rule (:func:`cfbmarkov.analysis.baseline.judge_baseline`), how
+        often the paper's estimator misses E(RT) by no more than the paper's largest miss,
+        the physics checks failed, and the next step.
+    """
+    scale = meta.get("scale", "n/a")
+    counts = baseline_counts(cases)
+    total = sum(counts.values())
+    hidden = counts["not told apart"] + counts["tie"]
+    parts = []
+    if total:
+        if counts["beats"] == total:
+            parts.append(f"the models beat the persistence baseline in all {total} "
+                         "velocity-model pairs")
+        elif counts["beats"] == 0:
+            parts.append(f"no model is shown to predict the RTD better than reusing the fitting "
+                         f"window's (0 of {total} velocity-model pairs beat the persistence "
+                         f"baseline; {hidden} are tied with it or within the CFD-DEM's own "
+                         "variability)")
+        else:
+            parts.append(f"the models beat the persistence baseline in {counts['beats']} of "
+                         f"{total} velocity-model pairs")
+    rows = [s for _, name, s in _rows(cases) if name == PAPER_ESTIMATOR]
+    pd_e = [v for s in rows if (v := finite_or_none(s.get("pd_rt_mean"))) is not None]
+    if pd_e:
+        worst = max(abs(float(v[0])) for v in PAPER_TABLE3.values())
+        parts.append(f"the paper's estimator misses E(RT) by no more than the paper's largest "
+                     f"miss ({worst:.2f} %) in {sum(abs(v) <= worst for v in pd_e)} of "
+                     f"{len(pd_e)} cases")
+    failed = [c.name for c in checks if c.passed is False]
+    if failed:
+        parts.append(f"the CFD-DEM fails {len(failed)} of {len(checks)} physics checks "
+                     f"({'; '.join(failed)})")
+    text = "Verdict at the " + scale + " scale: " + ("; ".join(parts) or "nothing finished to "
+                                                     "judge") + "."
+    if failed and scale != "paper":
+        step = ("the numbers test the pipeline, not the method: judge the method on the "
+                "paper's scale (cfbmarkov reproduce --scale paper, hours), whose flow passes "
+                "these checks in the paper")
+    elif failed:
+        step = ("check the CFD-DEM's settings against the paper's before reading the models' "
+                "errors as the method's")
+    elif total and 2 * hidden > total:
+        step = ("longer predict windows (more residences), so that the CFD-DEM's own "
+                "variability no longer hides the difference from the baseline")
+    elif total and 2 * counts["loses"] > total:
+        step = ("a state space with memory (fit --states auto) or a longer fitting window, "
+                "since reusing the fitting window's RTD predicts better")
+    else:
+        step = "use the models over windows like these, with their intervals"
+    return text + " Next step: " + step + "."
+
+
 def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: dict,
                    estimators: list[str], checks: list[PhysicsCheck]) -> list:
     """The report's opening section: what was run, the verdict, what the scale cannot show.
@@ -301,10 +446,9 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
         Document blocks (:mod:`cfbmarkov.report.document`).
     """
     scale = meta.get("scale", "n/a")
-    description = meta.get("description")
     velocities = ", ".join(_u(c) for c in cases)
     ran = (f"This report reproduces {CITATION}, Section 3, at the {scale} scale"
-           + (f" ({description})" if description else "") + f". Cases at U = {velocities} "
+           + _run_text(done) + f". Cases at U = {velocities} "
            f"m/s, {len(done)} of {len(cases)} finished; models: {', '.join(estimators) or 'none'}"
            ", each fitted on the CFD-DEM's fitting window and compared with the CFD-DEM on "
            "the predict window that follows.")
@@ -315,7 +459,12 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
     checks_text = "; ".join(f"{c.name}: {c.verdict.upper()}" for c in checks)
     verdict.append(f"Physics checks of the CFD-DEM ({link('evidence', CONDITIONS_HEADING)}): "
                    f"{checks_text}.")
-    blocks = [Heading(2, SUMMARY_HEADING), Para(ran), Bullets(verdict)]
+    blocks = [Heading(2, SUMMARY_HEADING), Para(headline(meta, cases, checks), css="verdict"),
+              Para(ran)]
+    windows = windows_text(done, measures)
+    if windows:
+        blocks.append(Para(windows))
+    blocks.append(Bullets(verdict))
     limits = _cannot_show(meta, done, checks)
     if limits:
         blocks += [Heading(3, f"What the {scale} scale cannot show"), Bullets(limits)]
@@ -393,4 +542,5 @@ def _time_step_text(done: list[Case]) -> str | None:
 
 
 __all__ = ["CITATION", "CONDITIONS_HEADING", "PhysicsCheck", "SUMMARY_HEADING",
-           "conditions_blocks", "physics_checks", "summary_blocks"]
+           "baseline_counts", "conditions_blocks", "headline",
+           "windows_text", "physics_checks", "summary_blocks"]
