@@ -382,11 +382,14 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
         if counts["beats"] == total:
             parts.append(f"the models beat the persistence baseline in all {total} "
                          "velocity-model pairs")
+        elif counts["loses"] == total:
+            parts.append("reusing the fitting window's RTD (the persistence baseline) predicts "
+                         f"better than the models in all {total} velocity-model pairs")
         elif counts["beats"] == 0:
             parts.append(f"no model is shown to predict the RTD better than reusing the fitting "
                          f"window's (0 of {total} velocity-model pairs beat the persistence "
                          f"baseline; {hidden} are tied with it or within the CFD-DEM's own "
-                         "variability)")
+                         f"variability, {counts['loses']} worse)")
         else:
             parts.append(f"the models beat the persistence baseline in {counts['beats']} of "
                          f"{total} velocity-model pairs")
@@ -400,7 +403,7 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
     failed = [c.name for c in checks if c.passed is False]
     if failed:
         parts.append(f"the CFD-DEM fails {len(failed)} of {len(checks)} physics checks "
-                     f"({'; '.join(failed)})")
+                     f"(expected: {'; '.join(failed)})")
     text = "Verdict at the " + scale + " scale: " + ("; ".join(parts) or "nothing finished to "
                                                      "judge") + "."
     if failed and scale != "paper":
