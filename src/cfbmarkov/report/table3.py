@@ -112,6 +112,25 @@ def _baseline_cell(summary: dict) -> str:
     return f"{OUTCOME_WORDS[j.outcome]} ({j.md_base:.4g} / {halves})"
 
 
+def _count(value) -> str:
+    return "n/a" if value is None else f"{int(value)}"
+
+
+def _sizes_text(sizes: dict[str, dict]) -> str:
+    """Per case: the RTD bin width, the residences counted on each side and the bins their
+    RTD spans, e.g. '3 m/s 0.01 s: CFD-DEM 7740 (43), paper 6280 (64), mle 6111 (62)'."""
+    def one(n, b) -> str:
+        return _count(n) + ("" if b is None else f" ({_count(b)})")
+
+    parts = []
+    for u, size in sizes.items():
+        width = "n/a" if size["width"] is None else f"{size['width']:g} s"
+        models = ", ".join(f"{name} {one(n, b)}" for name, n, b in size["models"])
+        parts.append(f"{u} m/s {width}: CFD-DEM {one(size['reference'], size['spanned'])}, "
+                     f"{models}")
+    return "; ".join(parts)
+
+
 def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     """The paper's Table 3, compact: one row per velocity and model, intervals in the cells.
 
@@ -135,6 +154,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     """
     rows, pd_sd, pd_mean, orders, widths, levels = [], [], [], set(), set(), set()
     downward: set[str] = set()
+    sizes: dict[str, dict] = {}
     for c in cases:
         values = paper_row(c.velocity)
         paper = " / ".join(values) if values != ("—", "—", "—") else "—"
@@ -170,6 +190,12 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                 levels.add(100 * float(s.get("level", 0.9)))
             if s.get("direction") == "down":
                 downward.add(u)
+            size = sizes.setdefault(u, {"width": finite_or_none(s.get("bin_width")),
+                                        "spanned": (s.get("rtd_bins_spanned") or {}).get(
+                                            "reference"),
+                                        "reference": ref.get("rt_count"), "models": []})
+            size["models"].append((e.name, mod.get("rt_count"),
+                                   (s.get("rtd_bins_spanned") or {}).get("model")))
     order_text = ", ".join(f"{k:g}" for k in sorted(orders)) or "n/a"
     width_text = ", ".join(f"{w:g}" for w in sorted(widths)) or f"{DEFAULT_BIN_WIDTH:g}"
     level_text = ", ".join(f"{v:g}" for v in sorted(levels)) or "n/a"
@@ -180,13 +206,20 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
         "its Table 3; '—' where the paper has no case at this U.",
         "The paper reports MD under a '%' heading. Our MD is Eq. 9 of order k = "
         f"{order_text} (md_order of the compare summaries) on the RTD probabilities per "
-        f"{width_text} s bin (bins from 0 to the window length), a dimensionless distance; "
+        + (f"{width_text} s bin (" if len(widths) <= 1 else "bin of the case's width (next "
+           "note; ")
+        + "bins from 0 to the window length), a dimensionless distance; "
         "compare its size with the paper's only loosely.",
         "Against the baseline: the persistence baseline is the CFD-DEM's RTD of the fitting "
         f"window reused as the prediction; {BASELINE_RULE}. In brackets: the baseline's MD "
         "and the halves' MD. Mixing, the CFD-DEM's own variability, the model's own intervals and the "
         f"residence-time basis: {link(DETAIL_HEADING, DETAIL_HEADING)}.",
     ]
+    sizes_text = _sizes_text(sizes)
+    if sizes_text:
+        notes.insert(2, "RTD bins and residences per case (the bin width; the residences "
+                        "counted in the predict window, with the number of bins their RTD "
+                        f"spans in brackets): {sizes_text}.")
     if any(row[4] == "n/d" or row[7] == "n/d" for row in rows):
         notes.append("n/d: the percentage difference is undefined because the CFD-DEM value "
                      "is zero to round-off (e.g. SD(RT) of residence times that are all "
