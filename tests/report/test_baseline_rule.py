@@ -114,7 +114,7 @@ def test_the_summary_opens_with_a_verdict_and_a_next_step():
     first = text.split("## Summary\n\n", 1)[1].split("\n", 1)[0]
     assert first.startswith("Verdict at the quick scale: no model is shown to predict the "
                             "RTD better than reusing the fitting window's (0 of 2")
-    assert "2 are tied with it or within the CFD-DEM's own variability, 0 worse" in first
+    assert "2 are tied with it or within the CFD-DEM's own variability)" in first
     assert "Next step: longer predict windows" in first
     cases, measures = fake_run({3.0: 0.5, 6.0: 0.4}, summary=_summary(0.05, 0.1, 0.01))
     first = render_markdown("r", summary_blocks(
@@ -151,3 +151,39 @@ def test_development_from_the_case_data(tmp_path):
     measures["u6"].development = {"before": 1.0, "fit": 2.9, "predict": 3.0}
     assert "At every velocity the fitting window's lies within 10 %" in windows_text(cases,
                                                                                       measures)
+
+
+def test_computing_time_gives_cpu_time_and_the_load():
+    from cfbmarkov.report.sections import computing_blocks
+
+    cases, _ = fake_run({8.0: 0.05})
+    case = cases[0]
+    case.timings = {"cfd_dem": {"wall_s": 400.0, "cpu_s": 75.0, "simulated_s": 3.0,
+                                "particles": 3789, "predict_window_wall_s": 60.0},
+                    "fit-paper": {"wall_s": 1.0, "cpu_s": 0.4},
+                    "predict-paper": {"wall_s": 0.6, "cpu_s": 0.1}}
+    md = render_markdown("r", computing_blocks(cases))
+    # the predict window's CPU time: the run's pro rata, 75 s x 1 / 3
+    assert "| 3 s / 6.67 min / 75 s | 60 s / 25 s |" in md
+    assert "| 1 s / 0.4 s | 0.6 s / 0.1 s | 1.6 s / 0.5 s | 50 (37.5) |" in md
+    assert "0.19 at 8 m/s; below 1 the process waited for the processor" in md
+    assert "takes 50 to 50 times less CPU time than the CFD-DEM" in md
+    assert "on wall time 37.5 to 37.5 times" in md
+    # without CPU times: the wall times, said to carry the load
+    case.timings = {"cfd_dem": {"wall_s": 400.0, "simulated_s": 3.0, "particles": 3789,
+                                "predict_window_wall_s": 60.0},
+                    "fit-paper": {"wall_s": 1.0}, "predict-paper": {"wall_s": 0.6}}
+    md = render_markdown("r", computing_blocks(cases))
+    assert "37.5 to 37.5 times faster than the CFD-DEM on wall time (no CPU times" in md
+
+
+def test_one_sided_profiles_are_said_as_the_windows_flow():
+    from cfbmarkov.report.figure_sections import _one_sided_text
+
+    one_sided = np.r_[[0.13, 0.14], np.full(8, 0.17), [0.23, 0.23]]
+    cases, measures = fake_run({3.0: 0.2}, fraction=one_sided)
+    text = _one_sided_text(cases, measures)
+    assert "solids fraction U = 3 m/s 0.135 at the left wall, 0.23 at the right" in text
+    assert "over this window the flow keeps a dense layer along one wall" in text
+    cases, measures = fake_run({3.0: 0.2})          # symmetric: nothing to say
+    assert _one_sided_text(cases, measures) == ""

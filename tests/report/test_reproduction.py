@@ -91,7 +91,7 @@ def test_sections_and_paper_numbers(report_of_template):
     assert "doi:10.3390/pr13030614" in section(md, "Summary")
     # the paper's computing time (§3.1)
     assert "about 50 h" in md and "about 30 min" in md and "about 100" in md
-    assert "(estimated)" in md     # u6's CFD-DEM time of the predict window is an estimate
+    assert "(wall estimated)" in md  # u6's CFD-DEM time of the predict window is an estimate
     # header
     for text in ("Scale: quick", "fit 2–4 s, predict 4–6 s", "Lag: 0.025 s",
                  "6 columns x 12 rows", "Particles: 400", "0.09 m wide x 0.95 m high",

@@ -267,11 +267,9 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
     windows = {c.name: (tuple(c.config.markov.predict_window), c.config.markov.lag)
                for c in done}
     if len(set(windows.values())) > 1:
-        text = ", ".join(f"{_u(c)} m/s {windows[c.name][0][0]:g}-{windows[c.name][0][1]:g} s "
-                         f"(lag {windows[c.name][1]:g} s)" for c in done)
-        out.append(f"A trend with U alone: the cases differ in more than U (predict windows "
-                   f"and lags: {text}), so a trend across them mixes U with the time since "
-                   "the start and the lag.")
+        out.append("A trend with U alone: the cases differ in their windows and lags as "
+                   "well (above), so a trend across them mixes U with the time since the "
+                   "start and the lag.")
     for check in checks:
         if check.passed is False:
             out.append(f"The paper's riser shows {check.name}; this run's CFD-DEM does not "
@@ -389,7 +387,8 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
             parts.append(f"no model is shown to predict the RTD better than reusing the fitting "
                          f"window's (0 of {total} velocity-model pairs beat the persistence "
                          f"baseline; {hidden} are tied with it or within the CFD-DEM's own "
-                         f"variability, {counts['loses']} worse)")
+                         "variability" + (f", {counts['loses']} worse)" if counts["loses"]
+                                          else ")"))
         else:
             parts.append(f"the models beat the persistence baseline in {counts['beats']} of "
                          f"{total} velocity-model pairs")
@@ -408,8 +407,8 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
                                                      "judge") + "."
     if failed and scale != "paper":
         step = ("the numbers test the pipeline, not the method: judge the method on the "
-                "paper's scale (cfbmarkov reproduce --scale paper, hours), whose flow passes "
-                "these checks in the paper")
+                "paper's scale (cfbmarkov reproduce --scale paper, hours), where the paper's "
+                "flow shows what these checks expect")
     elif failed:
         step = ("check the CFD-DEM's settings against the paper's before reading the models' "
                 "errors as the method's")
