@@ -187,3 +187,8 @@ def test_one_sided_profiles_are_said_as_the_windows_flow():
     assert "over this window the flow keeps a dense layer along one wall" in text
     cases, measures = fake_run({3.0: 0.2})          # symmetric: nothing to say
     assert _one_sided_text(cases, measures) == ""
+
+
+def test_narrow_intervals_keep_three_steps_between_their_ends():
+    assert interval_text(0.01331, 0.01412) == "0.0133–0.0141"
+    assert interval_text(0.051, 0.054) == "0.051–0.054"

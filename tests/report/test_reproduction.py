@@ -12,6 +12,7 @@ import pytest
 
 from cfbmarkov.errors import InputError
 from cfbmarkov.analysis.reproduction import paper_map_times
+from cfbmarkov.report.document import interval_text
 from cfbmarkov.report.figure_sections import map_numbers
 from cfbmarkov.report.reproduction import write_report
 from cfbmarkov.report.run_folder import estimator_names
@@ -108,9 +109,9 @@ def test_table3_quotes_the_summaries(report_of_template):
             row = table_row(md, u, estimator)
             lo, hi = s["model"]["rt_mean_interval"]
             # the interval in the cell, beside its value
-            assert row[3] == f"{s['model']['rt_mean']:.3f} [{lo:.3f}–{hi:.3f}]"
+            assert row[3] == f"{s['model']['rt_mean']:.3f} [{interval_text(lo, hi)}]"
             lo, hi = s["model"]["rt_sd_interval"]
-            assert row[6] == f"{s['model']['rt_sd']:.3f} [{lo:.3f}–{hi:.3f}]"
+            assert row[6] == f"{s['model']['rt_sd']:.3f} [{interval_text(lo, hi)}]"
             assert row[2] == f"{s['reference']['rt_mean']:.3f}"
             assert row[4] == f"{s['pd_rt_mean']:.2f}"
             assert row[5] == f"{s['reference']['rt_sd']:.3f}"

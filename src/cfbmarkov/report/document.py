@@ -185,8 +185,9 @@ def interval_text(lo, hi, decimals: int = 3, sep: str = "–") -> str:
     lo, hi : object
         The ends (see :func:`finite_or_none`).
     decimals : int, optional
-        The fewest decimals; more are taken (up to 12) while the two ends would print the
-        same but differ, so that an interval never collapses to "0.014-0.014".
+        The fewest decimals; more are taken (up to 12) while the two ends, where they
+        differ, would print fewer than three steps of the last digit apart, so that an
+        interval never collapses to "0.014-0.014" nor reads as "0.013-0.014".
     sep : str, optional
         Between the ends.
 
@@ -199,7 +200,8 @@ def interval_text(lo, hi, decimals: int = 3, sep: str = "–") -> str:
     if a is None or b is None:
         return "n/a"
     d = decimals
-    while d < 12 and a != b and f"{a:.{d}f}" == f"{b:.{d}f}":
+    # ends at least three steps of the last digit apart: "0.0133–0.0141", not "0.013–0.014"
+    while d < 12 and a != b and abs(round(b * 10 ** d) - round(a * 10 ** d)) < 3:
         d += 1
     return f"{a:.{d}f}{sep}{b:.{d}f}"
 
