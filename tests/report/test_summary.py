@@ -99,7 +99,11 @@ def test_the_verdict_is_written_from_the_numbers():
     assert "(the paper: +0.54 to +11.89 %)" in summary
     assert "in 0 of 2 velocity-model pairs" in summary       # MD 0.3 against a baseline of 0.1
     assert "the models' own error" not in summary
-    assert "paper at 3 m/s: the model's own error (MD 0.3 against the baseline's 0.1" in summary
+    assert ("at 3 m/s paper 0.3 against the baseline's 0.1: the model's own error (0.25 "
+            "already on its fitting window)") in summary
+    assert "2 where the baseline is better" in summary
+    assert summary.count("Verdict at the quick scale: reusing the fitting window's RTD (the "
+                         "persistence baseline) predicts better than the models in all 2") == 1
     assert "inside the model's 90 % interval in 0 of 2" in summary
     # a model that beats the baseline is named
     good = {"pd_rt_mean": 2.0, "pd_rt_sd": -40.0, "md_rtd": 0.05, "baseline": {"md_rtd": 0.1},

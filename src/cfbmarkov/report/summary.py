@@ -23,12 +23,16 @@ from cfbmarkov.config import ParticleConfig, RiserConfig
 from cfbmarkov.report.document import Bullets, Heading, Para, Table, finite_or_none, link
 from cfbmarkov.report.run_folder import Case
 from cfbmarkov.report.sections import PAPER_TABLE3
+from cfbmarkov.report.table3 import BASELINE_RULE_SHORT, baseline_judgement
 
 CITATION = ("Y. Zhuang, Markov Chain Based Statistic Model for Predicting Particle Movement "
             "in Circulating Fluidized Bed (CFB) Risers, Processes 13(3), 614 (2025), "
             "doi:10.3390/pr13030614")
 SUMMARY_HEADING = "Summary"
 CONDITIONS_HEADING = "Operating conditions and physics checks"
+#: the largest relative difference of the solids' mean vertical velocity between the fitting
+#: and the predict window for which the flow counts as developed at the fitting window
+DEVELOPED = 0.10
 #: the estimator the paper used
 PAPER_ESTIMATOR = "paper"
 
@@ -149,49 +153,73 @@ def _paper_sentences(cases: list[Case]) -> list[str]:
 
 
 def _baseline_sentences(cases: list[Case]) -> list[str]:
-    """Where the models beat the persistence baseline and where not, and why."""
-    beat, lost = [], 0
+    """Where the models beat the persistence baseline and where not, and why, by the one rule
+    of Table 3 (:func:`cfbmarkov.report.table3.baseline_judgement`)."""
+    groups: dict[str, list[str]] = {k: [] for k in ("beats", "loses", "tie", "not told apart")}
     why: dict[tuple[str, str], list[str]] = {}
     for c, name, s in _rows(cases):
-        md = finite_or_none(s.get("md_rtd"))
-        md_base = finite_or_none((s.get("baseline") or {}).get("md_rtd"))
-        if md is None or md_base is None:
+        j = baseline_judgement(s)
+        if j is None:
             continue
-        if md < md_base:
-            beat.append(f"{name} at {_u(c)} m/s")
+        groups[j.outcome].append(f"{name} at {_u(c)} m/s")
+        if j.outcome == "beats":
             continue
-        lost += 1
         md_own = finite_or_none((s.get("model_on_fitting_window") or {}).get("md_rtd"))
-        md_halves = finite_or_none((s.get("natural_variability") or {}).get("md_rtd"))
-        tie = abs(md - md_base) <= 0.01 * md_base
-        if md_halves is not None and md_base <= md_halves:
-            reason = (f"the baseline's MD ({md_base:.3g}) is already within the CFD-DEM's own "
-                      f"variability between the predict window's halves ({md_halves:.3g}), "
-                      "so no model can be told better than it")
-        elif md_own is not None and md_own < md_base:
-            reason = (f"the flow changed between the windows (on its fitting window the model "
-                      f"is {md_own:.3g} from the CFD-DEM, nearer than the baseline's "
-                      f"{md_base:.3g} on the predict window)")
+        if j.outcome == "tie":
+            reason = f"within {100 * j.tie:g} % of the baseline's MD {j.md_base:.4g}: a tie"
+        elif j.outcome == "not told apart":
+            reason = (f"against the baseline's {j.md_base:.4g}, gaps within the CFD-DEM's own "
+                      f"variability (its halves differ by {j.md_halves:.3g}): not told apart")
+        elif md_own is not None and md_own < j.md_base:
+            reason = (f"against the baseline's {j.md_base:.4g}: the flow changed between the "
+                      f"windows (on its fitting window the model is {md_own:.3g} from the "
+                      "CFD-DEM, nearer than the baseline on the predict window)")
         else:
-            reason = (f"the model's own error (MD {md:.3g} against the baseline's "
-                      f"{md_base:.3g}" + (f", {md_own:.3g} already on its fitting window"
-                                          if md_own is not None else "") + ")")
-        if tie:
-            reason = (f"a tie within 1 % (MD {md:.3g} against the baseline's {md_base:.3g}); "
-                      + reason)
-        why.setdefault((_u(c), reason), []).append(name)
-    total = len(beat) + lost
+            reason = (f"against the baseline's {j.md_base:.4g}: the model's own error"
+                      + (f" ({md_own:.3g} already on its fitting window)"
+                         if md_own is not None else ""))
+        why.setdefault((_u(c), reason), []).append(f"{name} {j.md:.4g}")
+    total = sum(len(v) for v in groups.values())
     if not total:
         return ["No comparison has a persistence baseline (the fitting window is not in the "
                 "reference file): whether a model beats simply reusing the fitting window's "
                 "RTD cannot be said."]
+    beat = groups["beats"]
     out = [f"The models' RTDs beat the persistence baseline (the CFD-DEM's RTD of the fitting "
            f"window reused as the prediction; distance MD) in {len(beat)} of {total} "
-           "velocity-model pairs" + (f": {', '.join(beat)}." if beat else ".")]
-    if lost:
-        out.append(f"They do not beat it in {lost}. " + " ".join(
-            f"{' and '.join(names)} at {u} m/s: {reason}." for (u, reason), names in why.items()))
+           "velocity-model pairs" + (f": {', '.join(beat)}." if beat else ".")
+           + f" The rule, as in Table 3 and below: {BASELINE_RULE_SHORT}."]
+    counts = [f"{len(groups[k])} {word}" for k, word in
+              (("loses", "where the baseline is better"), ("not told apart",
+               "that the CFD-DEM's own variability cannot tell apart"), ("tie", "tied"))
+              if groups[k]]
+    if why:
+        out.append(f"Not beating it: {', '.join(counts)}. MD " + "; ".join(
+            f"at {u} m/s {', '.join(names)} {reason}" for (u, reason), names in why.items())
+            + ".")
     return out
+
+
+def baseline_counts(cases: list[Case]) -> dict[str, int]:
+    """How many velocity-model pairs have each outcome of the baseline rule.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run.
+
+    Returns
+    -------
+    dict of str to int
+        Keys "beats", "loses", "tie", "not told apart"
+        (:func:`cfbmarkov.analysis.baseline.judge_baseline`).
+    """
+    counts = {k: 0 for k in ("beats", "loses", "tie", "not told apart")}
+    for _, _, s in _rows(cases):
+        j = baseline_judgement(s)
+        if j is not None:
+            counts[j.outcome] += 1
+    return counts
 
 
 def _interval_sentence(cases: list[Case]) -> str | None:
@@ -239,16 +267,160 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
     windows = {c.name: (tuple(c.config.markov.predict_window), c.config.markov.lag)
                for c in done}
     if len(set(windows.values())) > 1:
-        text = ", ".join(f"{_u(c)} m/s {windows[c.name][0][0]:g}-{windows[c.name][0][1]:g} s "
-                         f"(lag {windows[c.name][1]:g} s)" for c in done)
-        out.append(f"A trend with U alone: the cases differ in more than U (predict windows "
-                   f"and lags: {text}), so a trend across them mixes U with the time since "
-                   "the start and the lag.")
+        out.append("A trend with U alone: the cases differ in their windows and lags as "
+                   "well (above), so a trend across them mixes U with the time since the "
+                   "start and the lag.")
     for check in checks:
         if check.passed is False:
             out.append(f"The paper's riser shows {check.name}; this run's CFD-DEM does not "
                        f"({check.evidence}).")
     return out
+
+
+def _run_text(done: list[Case]) -> str:
+    """' (a riser of 0.04 m x 0.3 m with 3789 particles; the CFD-DEM run 0-4.5 s at 3 m/s,
+    ...)': what the finished cases ran, from their settings."""
+    if not done:
+        return ""
+    risers = sorted({(c.config.riser.width, c.config.riser.height, c.config.particles.number)
+                     for c in done})
+    riser = "; ".join(f"{w:g} m x {h:g} m with {n} particles" for w, h, n in risers)
+    runs: dict[str, list[str]] = {}
+    for c in done:
+        end = float(c.config.output.end_time)
+        runs.setdefault(f"0-{end:g} s", []).append(_u(c))
+    text = ", ".join(f"{span} at {', '.join(us)} m/s" for span, us in runs.items())
+    return f" (a riser of {riser}; the CFD-DEM run from rest {text})"
+
+
+def windows_text(done: list[Case], measures: dict) -> str | None:
+    """Why the cases' windows and lags differ, and how developed the flow is at the fitting
+    window, from the case data.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        Their recomputed numbers (``reference.rt.mean``, ``development``).
+
+    Returns
+    -------
+    str or None
+        None without a finished case.
+    """
+    if not done:
+        return None
+    settings = {(tuple(c.config.markov.fit_window), tuple(c.config.markov.predict_window),
+                 c.config.markov.lag) for c in done}
+    out = []
+    if len(settings) > 1:
+        spans = []
+        for c in done:
+            m = c.config.markov
+            mean = finite_or_none(measures[c.name].reference.rt.mean)
+            spans.append(f"{_u(c)} m/s fit {m.fit_window[0]:g}-{m.fit_window[1]:g} s, predict "
+                         f"{m.predict_window[0]:g}-{m.predict_window[1]:g} s, lag {m.lag:g} s"
+                         + (f" (E(RT) {mean / m.lag:.0f} lags)" if mean is not None else ""))
+        out.append("The windows and lags differ per case: "
+                   + "; ".join(spans) + ". A riser started from rest takes a time that "
+                   "depends on U to develop its flow, and the windows lie after it; the "
+                   "faster the solids, the shorter their residence times, so the lag and the "
+                   "RTD bins shrink with U to keep a mean residence time many lags long.")
+    flows, changing = [], []
+    for c in done:
+        d = getattr(measures[c.name], "development", None) or {}
+        before, fit, predict = (finite_or_none(d.get(k)) for k in ("before", "fit", "predict"))
+        if fit is None or predict is None:
+            continue
+        values = " / ".join("n/a" if v is None else f"{v:+.2f}" for v in (before, fit, predict))
+        off = abs(fit - predict) / abs(predict) if abs(predict) > 1e-9 else math.nan
+        flows.append(f"{_u(c)} m/s {values} m/s"
+                     + (f" ({100 * off:.0f} %)" if math.isfinite(off) else ""))
+        if not off <= DEVELOPED:
+            changing.append(f"{_u(c)} m/s")
+    if flows:
+        out.append("How developed the flow is at the fitting window: the CFD-DEM's mean "
+                   "vertical solids velocity before the fitting window / over it / over the "
+                   "predict window (the fitting window's difference from the predict "
+                   "window's): " + "; ".join(flows) + ". "
+                   + (f"The flow was still changing when the model was fitted (more than "
+                      f"{100 * DEVELOPED:.0f} %) at {', '.join(changing)}." if changing else
+                      f"At every velocity the fitting window's lies within "
+                      f"{100 * DEVELOPED:.0f} % of the predict window's."))
+    return " ".join(out) or None
+
+
+def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
+    """The report's verdict in one line, with the next step, written from the numbers.
+
+    Parameters
+    ----------
+    meta : dict
+        The run's ``reproduce.json`` (its ``scale``).
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run.
+    checks : list of PhysicsCheck
+        The physics checks (:func:`physics_checks`).
+
+    Returns
+    -------
+    str
+        "Verdict: ..." naming how many velocity-model pairs beat the persistence baseline by
+        the report's one rule (:func:`cfbmarkov.analysis.baseline.judge_baseline`), how
+        often the paper's estimator misses E(RT) by no more than the paper's largest miss,
+        the physics checks failed, and the next step.
+    """
+    scale = meta.get("scale", "n/a")
+    counts = baseline_counts(cases)
+    total = sum(counts.values())
+    hidden = counts["not told apart"] + counts["tie"]
+    parts = []
+    if total:
+        if counts["beats"] == total:
+            parts.append(f"the models beat the persistence baseline in all {total} "
+                         "velocity-model pairs")
+        elif counts["loses"] == total:
+            parts.append("reusing the fitting window's RTD (the persistence baseline) predicts "
+                         f"better than the models in all {total} velocity-model pairs")
+        elif counts["beats"] == 0:
+            parts.append(f"no model is shown to predict the RTD better than reusing the fitting "
+                         f"window's (0 of {total} velocity-model pairs beat the persistence "
+                         f"baseline; {hidden} are tied with it or within the CFD-DEM's own "
+                         "variability" + (f", {counts['loses']} worse)" if counts["loses"]
+                                          else ")"))
+        else:
+            parts.append(f"the models beat the persistence baseline in {counts['beats']} of "
+                         f"{total} velocity-model pairs")
+    rows = [s for _, name, s in _rows(cases) if name == PAPER_ESTIMATOR]
+    pd_e = [v for s in rows if (v := finite_or_none(s.get("pd_rt_mean"))) is not None]
+    if pd_e:
+        worst = max(abs(float(v[0])) for v in PAPER_TABLE3.values())
+        parts.append(f"the paper's estimator misses E(RT) by no more than the paper's largest "
+                     f"miss ({worst:.2f} %) in {sum(abs(v) <= worst for v in pd_e)} of "
+                     f"{len(pd_e)} cases")
+    failed = [c.name for c in checks if c.passed is False]
+    if failed:
+        parts.append(f"the CFD-DEM fails {len(failed)} of {len(checks)} physics checks "
+                     f"(expected: {'; '.join(failed)})")
+    text = "Verdict at the " + scale + " scale: " + ("; ".join(parts) or "nothing finished to "
+                                                     "judge") + "."
+    if failed and scale != "paper":
+        step = ("the numbers test the pipeline, not the method: judge the method on the "
+                "paper's scale (cfbmarkov reproduce --scale paper, hours), where the paper's "
+                "flow shows what these checks expect")
+    elif failed:
+        step = ("check the CFD-DEM's settings against the paper's before reading the models' "
+                "errors as the method's")
+    elif total and 2 * hidden > total:
+        step = ("longer predict windows (more residences), so that the CFD-DEM's own "
+                "variability no longer hides the difference from the baseline")
+    elif total and 2 * counts["loses"] > total:
+        step = ("a state space with memory (fit --states auto) or a longer fitting window, "
+                "since reusing the fitting window's RTD predicts better")
+    else:
+        step = "use the models over windows like these, with their intervals"
+    return text + " Next step: " + step + "."
 
 
 def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: dict,
@@ -276,10 +448,9 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
         Document blocks (:mod:`cfbmarkov.report.document`).
     """
     scale = meta.get("scale", "n/a")
-    description = meta.get("description")
     velocities = ", ".join(_u(c) for c in cases)
     ran = (f"This report reproduces {CITATION}, Section 3, at the {scale} scale"
-           + (f" ({description})" if description else "") + f". Cases at U = {velocities} "
+           + _run_text(done) + f". Cases at U = {velocities} "
            f"m/s, {len(done)} of {len(cases)} finished; models: {', '.join(estimators) or 'none'}"
            ", each fitted on the CFD-DEM's fitting window and compared with the CFD-DEM on "
            "the predict window that follows.")
@@ -290,7 +461,12 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
     checks_text = "; ".join(f"{c.name}: {c.verdict.upper()}" for c in checks)
     verdict.append(f"Physics checks of the CFD-DEM ({link('evidence', CONDITIONS_HEADING)}): "
                    f"{checks_text}.")
-    blocks = [Heading(2, SUMMARY_HEADING), Para(ran), Bullets(verdict)]
+    blocks = [Heading(2, SUMMARY_HEADING), Para(headline(meta, cases, checks), css="verdict"),
+              Para(ran)]
+    windows = windows_text(done, measures)
+    if windows:
+        blocks.append(Para(windows))
+    blocks.append(Bullets(verdict))
     limits = _cannot_show(meta, done, checks)
     if limits:
         blocks += [Heading(3, f"What the {scale} scale cannot show"), Bullets(limits)]
@@ -368,4 +544,5 @@ def _time_step_text(done: list[Case]) -> str | None:
 
 
 __all__ = ["CITATION", "CONDITIONS_HEADING", "PhysicsCheck", "SUMMARY_HEADING",
-           "conditions_blocks", "physics_checks", "summary_blocks"]
+           "baseline_counts", "conditions_blocks", "headline",
+           "windows_text", "physics_checks", "summary_blocks"]
