@@ -14,6 +14,7 @@ import sys
 import warnings
 from typing import Iterator
 
+from cfbmarkov._names import one_line
 from cfbmarkov.errors import CfbmarkovWarning, InputError
 
 #: what starts the line of a :class:`~cfbmarkov.errors.CfbmarkovWarning` on the command line
@@ -40,7 +41,7 @@ def write_line(text: str, stream=None) -> None:
 def _show(previous):
     def show(message, category, filename, lineno, file=None, line=None):
         if isinstance(category, type) and issubclass(category, CfbmarkovWarning):
-            write_line(NOTE + " ".join(str(message).split()), file)
+            write_line(NOTE + " ".join(one_line(str(message)).split()), file)
         else:
             previous(message, category, filename, lineno, file, line)
     show.cfbmarkov_notes = True

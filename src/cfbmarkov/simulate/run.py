@@ -17,6 +17,7 @@ import contextlib
 import json
 import math
 import os
+import secrets
 import shutil
 import time as _time
 import warnings
@@ -26,6 +27,7 @@ import h5py
 import numpy as np
 
 from cfbmarkov._console import progress_mode
+from cfbmarkov._names import parts_folder
 from cfbmarkov._outputs import claim_output
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
@@ -97,8 +99,14 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
     mode = progress_mode(progress)
     output = Path(output)
     with claim_output(output, "simulate", "trajectory"):   # before any work: lock, folder
-        return _simulate(case, output, until, checkpoint_every, resume, mode,
-                         stop_after_frames, fields, label)
+        parts = parts_folder(output)
+        try:
+            return _simulate(case, output, until, checkpoint_every, resume, mode,
+                             stop_after_frames, fields, label)
+        except BaseException:
+            if not (parts / "checkpoint.h5").exists():
+                _remove_parts(parts)        # nothing to resume from: leave no folder
+            raise
 
 
 def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, progress,
@@ -115,7 +123,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     total_steps = int(round(end / cfd_dt))
     if total_steps < steps_per_frame:
         raise InputError(f"run length {end:g} s is shorter than one frame ({frame_dt:g} s)")
-    parts = output.with_name(output.name + ".parts")
+    parts = parts_folder(output)
     checkpoint = parts / "checkpoint.h5"
     grid = GasGrid.from_config(case)
     spacing = (grid.dx, grid.dy)
@@ -132,13 +140,15 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist")
         _advise_time_step(case, label)
-        riser, n_segments, frames, wall_time, history = read_checkpoint(checkpoint, case)
+        riser, n_segments, frames, wall_time, history, run_id = read_checkpoint(checkpoint,
+                                                                                case)
         if riser.time > end + 0.5 * cfd_dt:
             raise InputError(f"{checkpoint} holds the run at t = {riser.time:g} s, past the "
                              f"end asked for ({end:g} s): resume to a later --until, or "
                              "delete the folder to start again")
         wall_history = [tuple(row) for row in history]
-        writer = SegmentedTrajectoryWriter.resume(output, n_segments, **writer_options)
+        writer = SegmentedTrajectoryWriter.resume(output, n_segments, run_id=run_id,
+                                                  **writer_options)
     else:
         if parts.exists() and checkpoint.exists():
             raise InputError(f"{parts} holds an interrupted run: add --resume to continue it, "
@@ -148,7 +158,8 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         with warnings.catch_warnings():     # said once above, with the label
             warnings.simplefilter("ignore", TimeStepAdvisory)
             riser = CoupledRiser.initial(case)
-        writer = SegmentedTrajectoryWriter(output, **writer_options)
+        run_id = secrets.token_hex(16)      # carried by the checkpoint and every segment
+        writer = SegmentedTrajectoryWriter(output, run_id=run_id, **writer_options)
         writer.append(0.0, riser.dem.positions, riser.dem.velocities, riser.dem.laps)
         if fields:
             writer.append_fields(0.0, spacing, **riser.gas_fields())
@@ -173,7 +184,8 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
                 n_segments = writer.close_segment()
                 elapsed = _time.perf_counter() - started
                 wall_history.append((riser.time, elapsed))
-                write_checkpoint(checkpoint, riser, n_segments, frames, elapsed, wall_history)
+                write_checkpoint(checkpoint, riser, n_segments, frames, elapsed, wall_history,
+                                 run_id)
             if stop_after_frames is not None and frames >= stop_after_frames:
                 writer.abort()
                 return output
