@@ -232,3 +232,26 @@ def test_a_failed_start_of_simulate_leaves_no_parts_folder(tmp_path, monkeypatch
     with pytest.raises(InputError, match="No space left"):
         simulate(load_case(case), tmp_path / "s.h5", progress=False)
     assert stray(tmp_path, ["small.toml"]) == []
+
+
+# -- simulate's memory and disk, estimated before anything is allocated --------------------------
+def test_simulate_refuses_a_run_that_does_not_fit_in_memory(tmp_path, capsys, monkeypatch):
+    case = tmp_path / "small.toml"
+    case.write_text(SMALL_CASE)
+    monkeypatch.setenv("CFBMARKOV_MEMORY_LIMIT", "20000000")
+    err = one_line_error(capsys, ["simulate", case, "-o", tmp_path / "s.h5", "-q"],
+                         tmp_path / "s.h5")
+    assert "CFD-DEM run of 200 particles" in err and "of memory" in err
+    assert stray(tmp_path, ["small.toml"]) == []
+
+
+def test_simulate_refuses_an_output_larger_than_the_free_disk(tmp_path, capsys, monkeypatch):
+    from cfbmarkov import limits
+
+    case = tmp_path / "small.toml"
+    case.write_text(SMALL_CASE.replace("end_time = 0.05", "end_time = 2000"))
+    monkeypatch.setattr(limits, "free_disk", lambda folder: 50e6)
+    err = one_line_error(capsys, ["simulate", case, "-o", tmp_path / "s.h5", "-q"],
+                         tmp_path / "s.h5")
+    assert "on disk" in err and "200 particles" in err and "--until" in err
+    assert stray(tmp_path, ["small.toml"]) == []

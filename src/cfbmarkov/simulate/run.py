@@ -136,6 +136,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         return output
     if not checkpoint.exists() and parts.is_dir():
         _remove_parts(parts)     # segments of a run whose checkpoint is gone: useless
+    check_resources(case, output, end, fields, resume and checkpoint.exists())
     if resume:
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist")
@@ -303,6 +304,49 @@ def _advise_time_step(case: CaseConfig, label: str = "") -> None:
     message = time_step_advisory(case)
     if message is not None:
         warnings.warn((f"{label}: " if label else "") + message, TimeStepAdvisory, stacklevel=3)
+
+
+#: bytes of memory per particle: the DEM state and scratch (positions, velocities, forces,
+#: spins, neighbour and contact lists of about 4 pairs per particle, pass events), and the
+#: FRAMES_PER_WRITE frames held before a write (positions, velocities, laps)
+PARTICLE_BYTES = 1200 + FRAMES_PER_WRITE * 40
+#: bytes of memory per gas cell: the gas solver's fields and work arrays, and the held frames
+#: of the stored fields (void fraction, velocity, pressure as float32)
+CELL_BYTES = 60 * 8 + FRAMES_PER_WRITE * 16
+
+
+def check_resources(case: CaseConfig, output: Path, end: float, fields: bool,
+                    resuming: bool) -> None:
+    """Refuse, before anything is allocated, a run whose memory or output would not fit.
+
+    The memory is estimated as particles x :data:`PARTICLE_BYTES` + gas cells x
+    (:data:`CELL_BYTES` + the pressure solver's band, 8 bytes x columns), against
+    :func:`cfbmarkov.limits.memory_limit`; the disk as the frames x (36 bytes a particle:
+    position, velocity, lap; 16 bytes a gas cell with ``fields``), twice (the segments and
+    the merged file exist together before the segments are removed; once for a resumed run,
+    whose segments so far are on disk already), against the free space beside ``output``.
+
+    Raises
+    ------
+    InputError
+        Naming the estimate, what is available and the fix.
+    """
+    from cfbmarkov.limits import check_disk, check_memory
+
+    n = case.particles.number
+    nx, ny = case.numerics.cfd_cells
+    cells = nx * ny
+    check_memory(n * PARTICLE_BYTES + cells * (CELL_BYTES + 8.0 * nx) + 50e6,
+                 f"a CFD-DEM run of {n} particles on {nx} x {ny} gas cells",
+                 "run fewer particles or a coarser gas grid")
+    frames = math.floor(end / case.output.frame_interval + 1e-9) + 1
+    per_frame = 36.0 * n + (16.0 * cells if fields else 0.0)
+    copies = 1.0 if resuming else 2.0
+    stored = f"{n} particles and the gas fields" if fields else f"{n} particles"
+    check_disk(copies * frames * per_frame + 1e6, output,
+               f"the run's output ({frames} frames x {stored}, with its segments until they "
+               "are merged)", "shorten the run (--until), store fewer frames (a longer "
+               "output.frame_interval), or write to a disk with more space")
 
 
 def _check_safety(case: CaseConfig) -> None:
