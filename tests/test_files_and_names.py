@@ -255,3 +255,28 @@ def test_simulate_refuses_an_output_larger_than_the_free_disk(tmp_path, capsys, 
                          tmp_path / "s.h5")
     assert "on disk" in err and "200 particles" in err and "--until" in err
     assert stray(tmp_path, ["small.toml"]) == []
+
+
+def test_a_read_error_inside_h5py_names_the_damaged_file(tmp_path):
+    from cfbmarkov.cli.command import _damaged_input
+
+    path = tmp_path / "d.h5"
+    with h5py.File(path, "w") as f:
+        f.create_dataset("x", data=np.arange(4096.0).reshape(64, 64), chunks=(64, 64),
+                         compression="gzip")
+    with h5py.File(path, "r") as f:
+        offset = f["x"].id.get_chunk_info(0).byte_offset
+    data = bytearray(path.read_bytes())
+    data[offset:offset + 64] = bytes(64)
+    path.write_bytes(bytes(data))
+
+    def read(handle):
+        return handle["x"][()]
+
+    with h5py.File(path, "r") as f:
+        with pytest.raises(OSError) as caught:
+            read(f)
+        message = _damaged_input(caught.value)
+    assert message.startswith(f"{path}: damaged file, cannot be read (")
+    assert "\n" not in message
+    assert _damaged_input(KeyError("not from h5py")) is None

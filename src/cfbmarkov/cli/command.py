@@ -139,14 +139,17 @@ def _damaged_input(exc: BaseException) -> str | None:
     None where ``exc`` did not come from reading an HDF5 file opened for reading."""
     tb = exc.__traceback__
     name = None
+    in_h5py = False
     while tb is not None:
+        where = tb.tb_frame.f_code.co_filename.replace(os.sep, "/")
+        in_h5py = in_h5py or "/h5py/" in where or where.startswith("h5py/")
         for value in tb.tb_frame.f_locals.values():
             file = getattr(value, "file", None) if "h5py" in type(value).__module__ else None
             with contextlib.suppress(Exception):
                 if file is not None and file.mode == "r":
                     name = file.filename
         tb = tb.tb_next
-    if name is None:
+    if name is None or not in_h5py:
         return None
     from cfbmarkov._names import first_line
 
