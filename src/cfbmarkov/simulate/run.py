@@ -136,10 +136,10 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         return output
     if not checkpoint.exists() and parts.is_dir():
         _remove_parts(parts)     # segments of a run whose checkpoint is gone: useless
-    check_resources(case, output, end, fields, resume and checkpoint.exists())
     if resume:
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist")
+        check_resources(case, output, end, fields, resuming=True)
         _advise_time_step(case, label)
         riser, n_segments, frames, wall_time, history, run_id = read_checkpoint(checkpoint,
                                                                                 case)
@@ -155,6 +155,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
             raise InputError(f"{parts} holds an interrupted run: add --resume to continue it, "
                              "or delete the folder to start again")
         _check_safety(case)
+        check_resources(case, output, end, fields, resuming=False)
         _advise_time_step(case, label)
         with warnings.catch_warnings():     # said once above, with the label
             warnings.simplefilter("ignore", TimeStepAdvisory)
@@ -338,7 +339,7 @@ def check_resources(case: CaseConfig, output: Path, end: float, fields: bool,
     cells = nx * ny
     check_memory(n * PARTICLE_BYTES + cells * (CELL_BYTES + 8.0 * nx) + 50e6,
                  f"a CFD-DEM run of {n} particles on {nx} x {ny} gas cells",
-                 "run fewer particles or a coarser gas grid")
+                 "run fewer particles (--particles) or a coarser gas grid")
     frames = math.floor(end / case.output.frame_interval + 1e-9) + 1
     per_frame = 36.0 * n + (16.0 * cells if fields else 0.0)
     copies = 1.0 if resuming else 2.0
