@@ -44,8 +44,8 @@ def temporary_path(target: str | os.PathLike, suffix: str = "") -> Path:
     catch_late_write_failures()
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{helper_stem(target.name)}.", suffix=".tmp" + suffix,
-                                   dir=target.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{helper_stem(target.name)}.",
+                                   suffix=".tmp" + suffix, dir=target.parent)
     except OSError as exc:
         raise write_error(exc, target) from None
     try:

@@ -299,11 +299,12 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
     """Claim ``target`` for writing for the duration of the block.
 
     In order: a name longer than the file system allows is refused (the helper names built
-    from a long one are shortened, :func:`~cfbmarkov._names.helper_stem`); the folder is created if missing (and removed again, if still empty, when the
-    block fails); ``target`` must not be one of ``inputs`` (same file, also through links);
-    the lock is taken (refused naming the holder: pid, host, verb, since when); an existing
-    ``target`` of another kind is refused unless ``force``; the temporaries of dead writers
-    of ``target`` are removed. Re-entrant within a process.
+    from a long one are shortened, :func:`~cfbmarkov._names.helper_stem`); the folder is
+    created if missing (and removed again, if still empty, when the block fails); ``target``
+    must not be one of ``inputs`` (same file, also through links); the lock is taken
+    (refused naming the holder: pid, host, verb, since when); an existing ``target`` of
+    another kind is refused unless ``force``; the temporaries of dead writers of ``target``
+    are removed. Re-entrant within a process.
 
     Parameters
     ----------

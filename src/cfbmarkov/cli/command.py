@@ -15,7 +15,7 @@ import sys
 
 from cfbmarkov._names import one_line
 from cfbmarkov.cli import analysis, data, kinetics, markov, run, simulate
-from cfbmarkov.cli.options import join_dash_values, parse_cells, parse_window
+from cfbmarkov.cli.options import join_dash_values
 from cfbmarkov.errors import CfbmarkovError, InputError
 
 
