@@ -28,20 +28,21 @@ def write_line(text: str, stream=None) -> None:
     Parameters
     ----------
     text : str
-        One line (without its newline).
+        One line (without its newline); a line break inside it (a file name's) is written
+        as an escape.
     stream : file-like, optional
         Where to write.
     """
     stream = sys.stderr if stream is None else stream
     with contextlib.suppress(OSError, ValueError):     # a closed or broken stderr
-        stream.write(text + "\n")
+        stream.write(one_line(text) + "\n")
         stream.flush()
 
 
 def _show(previous):
     def show(message, category, filename, lineno, file=None, line=None):
         if isinstance(category, type) and issubclass(category, CfbmarkovWarning):
-            write_line(NOTE + " ".join(one_line(str(message)).split()), file)
+            write_line(NOTE + " ".join(str(message).split()), file)
         else:
             previous(message, category, filename, lineno, file, line)
     show.cfbmarkov_notes = True

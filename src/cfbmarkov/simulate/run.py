@@ -104,7 +104,8 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
             return _simulate(case, output, until, checkpoint_every, resume, mode,
                              stop_after_frames, fields, label)
         except BaseException:
-            if not (parts / "checkpoint.h5").exists():
+            if not (parts / "checkpoint.h5").exists() and not _complete(
+                    output, case, case.output.end_time if until is None else until):
                 _remove_parts(parts)        # nothing to resume from: leave no folder
             raise
 
@@ -257,15 +258,16 @@ class _PendingFrames:
         self._frames, self._events, self._fields = [], [], []
 
 
-def _complete(output: Path, case: CaseConfig, end: float) -> bool:
-    """Whether ``output`` is the finished run of ``case`` up to ``end``."""
+def _complete(output: Path, case: CaseConfig, end) -> bool:
+    """Whether ``output`` is the finished run of ``case`` up to ``end`` (s)."""
     if not output.is_file():
         return False
     try:
+        end = float(end)
         with h5py.File(output, "r") as f:
             same = json.loads(f.attrs["parameters"]) == json.loads(case.model_dump_json())
             last = float(f["frames/time"][-1])
-    except (OSError, KeyError, ValueError, IndexError):
+    except (OSError, KeyError, ValueError, IndexError, TypeError):
         return False
     return same and abs(last - end) <= 0.5 * case.output.frame_interval
 
