@@ -21,6 +21,7 @@ from typing import Any, Sequence
 from pydantic import ValidationError
 
 from cfbmarkov._atomic import write_text_atomic
+from cfbmarkov._names import parts_folder
 from cfbmarkov.cases.scales import MODELS
 from cfbmarkov.config import SPEED_ONLY, CaseConfig, case_difference, flat_settings
 from cfbmarkov.errors import InputError, TimeStepAdvisory
@@ -171,7 +172,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
         if isinstance(previous, dict) and "cpu_s" in previous:
             timing["cpu_s"] = previous["cpu_s"]
     else:
-        checkpoint = folder / "cfd-dem.h5.parts" / "checkpoint.h5"
+        checkpoint = parts_folder(folder / "cfd-dem.h5") / "checkpoint.h5"
         resume = checkpoint.exists()
         cpu = _time.process_time()
         with warnings.catch_warnings():

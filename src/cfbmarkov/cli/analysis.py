@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import (count, finite_float, level, minkowski_order, parse_cells,
                                    parse_times, parse_window, positive_float)
 from cfbmarkov.errors import InputError
@@ -50,7 +51,7 @@ def cmd_compare(args) -> int:
         print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
               flush=True)
     for line in summary.get("warnings", []):
-        print(f"warning: {line.strip()}", file=sys.stderr)
+        print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 
+from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import (count, finite_float, level, parse_cells, parse_windows,
                                    positive_float, seed)
 from cfbmarkov.errors import CfbmarkovError, InputError
@@ -95,7 +96,7 @@ def _finish_fit(args, model, runs, windows) -> int:
     # -- end of the sample's verdict ----------------------------------------------------
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line
-        print(f"warning: {line.strip()}", file=sys.stderr)
+        print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     print(model.summary())
     print(args.output)
     return 0
@@ -178,7 +179,7 @@ def cmd_predict(args) -> int:
         model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                       output=args.output, progress=not args.quiet)
     for line in model.adequacy.warnings if model.adequacy is not None else ():
-        print(f"warning: the model's fitting sample: {line}", file=sys.stderr)
+        print(f"warning: the model's fitting sample: {one_line(line)}", file=sys.stderr)
     print(args.output)
     return 0
 
@@ -229,7 +230,7 @@ def cmd_rtd(args) -> int:
         print(json.dumps(jsonable(out), indent=1, allow_nan=False))
         return 0
     for line in warnings:
-        print(f"warning: {line.strip()}", file=sys.stderr)
+        print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     kind = ('window ' + format(args.window_length, 'g') + ' s' if args.window_length
             else 'intrinsic')
     figures = (band.describe(rtd.mean, rtd.sd) if band is not None
