@@ -278,6 +278,8 @@ def _write(path: Path, case, riser, n_segments, frames, wall_time, wall_history)
             _write_group(f.create_group("dem"), state["dem"])
             _write_group(f.create_group("gas"), state["gas"])
             f.attrs["cfd_steps"] = state["cfd_steps"]
+            f.attrs["coupling"] = state["coupling"]
+            f.attrs["deposit_chunks"] = state["deposit_chunks"]
 
 
 def _read(path: Path, case: CaseConfig, n: int, threads):
@@ -296,6 +298,9 @@ def _read(path: Path, case: CaseConfig, n: int, threads):
                                  f"{int(f.attrs['members'])}")
             state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
                      "cfd_steps": int(f.attrs["cfd_steps"])}
+            if "coupling" in f.attrs:
+                state["coupling"] = str(f.attrs["coupling"])
+                state["deposit_chunks"] = int(f.attrs["deposit_chunks"])
             segs = [int(k) for k in f["n_segments"][()]]
             frames, wall = int(f.attrs["frames"]), float(f.attrs["wall_time"])
             history = f["wall_history"][()]
