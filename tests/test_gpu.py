@@ -68,7 +68,7 @@ def test_state_continues_bit_for_bit(checks):
 def test_coupled_riser_agrees_with_cpu(checks):
     r = checks["coupled_vs_cpu"]
     assert r["members_differ"]
-    # the device coupling (64 chunks): the CPU's to round-off
+    # the device coupling (256 chunks): the CPU's to round-off
     assert r["position"] < 1e-12 and r["gas_velocity"] < 1e-9
     # with the CPU's 8 chunks the simulator adds the same terms in the same order
     assert r["position_cpu_chunks"] == 0.0 and r["gas_velocity_cpu_chunks"] == 0.0

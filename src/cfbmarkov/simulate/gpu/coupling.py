@@ -12,7 +12,7 @@ Deterministic deposits, no float atomics: member m's particles are cut by index 
 fixed chunks (``[c N / C, (c + 1) N / C)``, as :data:`~cfbmarkov.simulate.cfd.coupling.
 DEPOSIT_CHUNKS` on the CPU); thread (m, c) adds its chunk's particles, in index order, to
 its own copy of the fields, and one thread per grid node then sums the copies in chunk
-order. The results depend on C only (not on the launch shape or the other members); with
+order and zeroes them for the next gas step (so no thread clears a whole grid). The results depend on C only (not on the launch shape or the other members); with
 C = DEPOSIT_CHUNKS the sums are the CPU's, term for term.
 
 Layout (member-major, as :mod:`.kernels`): particle fields from ``s[ctl[m, C_CUR]]``;
@@ -56,16 +56,14 @@ def _gas_velocity(u, v, m, nx, ny, idx, idy, x, y):
 @cuda.jit
 def solid_chunks(s, ctl, part, cp, cq):
     """Thread (m, c): member m's chunk c of particles, their solid volume onto
-    ``part[m, c]`` (zeroed first) by cloud-in-cell (the CPU's ``_add_solid_volume``)."""
+    ``part[m, c]`` (zero on entry: :func:`void_fraction` zeroes it after reading) by
+    cloud-in-cell (the CPU's ``_add_solid_volume``)."""
     t = cuda.grid(1)
     n, nm, nc, nx, ny = cq[Q_N], cq[Q_M], cq[Q_C], cq[Q_NX], cq[Q_NY]
     if t >= nm * nc:
         return
     m = t // nc
     c = t - m * nc
-    for i in range(nx):
-        for j in range(ny):
-            part[m, c, i, j] = 0.0
     cur = ctl[m, C_CUR]
     idx, idy, volume = cp[P_IDX], cp[P_IDY], cp[P_VOLUME]
     periodic = cq[Q_PERIODIC] != 0
@@ -82,7 +80,8 @@ def solid_chunks(s, ctl, part, cp, cq):
 @cuda.jit
 def void_fraction(part, eps, cp, cq):
     """Thread (m, cell): the chunks' solid volume summed in chunk order, eps = 1 - solid /
-    (dx dy d), clipped below at the floor (the CPU's ``void_fraction_field``)."""
+    (dx dy d), clipped below at the floor (the CPU's ``void_fraction_field``); the copies
+    are left zero for the next gas step."""
     t = cuda.grid(1)
     nm, nc, nx, ny = cq[Q_M], cq[Q_C], cq[Q_NX], cq[Q_NY]
     if t >= nm * nx * ny:
@@ -94,6 +93,7 @@ def void_fraction(part, eps, cp, cq):
     acc = 0.0
     for c in range(nc):
         acc += part[m, c, i, j]
+        part[m, c, i, j] = 0.0
     e = 1.0 - acc / cp[P_CELL]
     eps[m, i, j] = e if e >= cp[P_FLOOR] else cp[P_FLOOR]
 
@@ -139,20 +139,14 @@ def _add_to_faces(fu, fv, m, c, gx, gy, i0, j0, j1, w0, w1, wy, ia, ib, wa, wb, 
 @cuda.jit
 def drag_chunks(s, ctl, coef, frc, pu, pv, pku, pkv, cp, cq):
     """Thread (m, c): chunk c's drag forces and coefficients per unit volume onto its
-    copies of the u and v faces (zeroed first), the CPU's ``_deposit_particle``."""
+    copies of the u and v faces (zero on entry: :func:`face_sums` zeroes them after
+    reading), the CPU's ``_deposit_particle``."""
     t = cuda.grid(1)
     n, nm, nc, nx, ny = cq[Q_N], cq[Q_M], cq[Q_C], cq[Q_NX], cq[Q_NY]
     if t >= nm * nc:
         return
     m = t // nc
     c = t - m * nc
-    for i in range(nx + 1):
-        for j in range(ny):
-            pu[m, c, i, j] = 0.0
-            pku[m, c, i, j] = 0.0
-            if i < nx:
-                pv[m, c, i, j] = 0.0
-                pkv[m, c, i, j] = 0.0
     cur = ctl[m, C_CUR]
     idx, idy, inv = cp[P_IDX], cp[P_IDY], cp[P_INV_CELL]
     for p in range(c * n // nc, (c + 1) * n // nc):
@@ -175,7 +169,8 @@ def drag_chunks(s, ctl, coef, frc, pu, pv, pku, pkv, cp, cq):
 @cuda.jit
 def face_sums(pu, pv, pku, pkv, fu, fv, ku, kv, cq):
     """Thread (m, u face): the chunk copies summed in chunk order into fu, ku (and fv, kv
-    where the face index is also a v node), the CPU's ``_sum_chunks``."""
+    where the face index is also a v node), the CPU's ``_sum_chunks``; the copies are left
+    zero for the next gas step."""
     t = cuda.grid(1)
     nm, nc, nx, ny = cq[Q_M], cq[Q_C], cq[Q_NX], cq[Q_NY]
     if t >= nm * (nx + 1) * ny:
@@ -189,6 +184,8 @@ def face_sums(pu, pv, pku, pkv, fu, fv, ku, kv, cq):
     for c in range(nc):
         a += pu[m, c, i, j]
         b += pku[m, c, i, j]
+        pu[m, c, i, j] = 0.0
+        pku[m, c, i, j] = 0.0
     fu[m, i, j] = a
     ku[m, i, j] = b
     if i < nx:
@@ -197,6 +194,8 @@ def face_sums(pu, pv, pku, pkv, fu, fv, ku, kv, cq):
         for c in range(nc):
             a += pv[m, c, i, j]
             b += pkv[m, c, i, j]
+            pv[m, c, i, j] = 0.0
+            pkv[m, c, i, j] = 0.0
         fv[m, i, j] = a
         kv[m, i, j] = b
 

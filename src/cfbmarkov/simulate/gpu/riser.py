@@ -40,9 +40,10 @@ from cfbmarkov.simulate.gpu.ensemble import GpuEnsembleDEM
 from cfbmarkov.simulate.riser import _search_cells, gas_solver
 
 
-#: chunks per member of the device deposits on a GPU (threads per member of the deposit
-#: kernels; each chunk's copy of the fields is four grid-sized arrays)
-GPU_DEPOSIT_CHUNKS = 64
+#: chunks per member of the device deposits (threads per member of the deposit kernels, each
+#: adding N / C particles in order; each chunk's copies of the fields are five grid-sized
+#: arrays, 10 MB a member at paper scale)
+GPU_DEPOSIT_CHUNKS = 256
 
 
 class GpuEnsembleRiser:
@@ -201,12 +202,14 @@ class GpuEnsembleRiser:
         cq[K.Q_N], cq[K.Q_M], cq[K.Q_C], cq[K.Q_NX], cq[K.Q_NY] = n, m, c, nx, ny
         cq[K.Q_PERIODIC] = int(not self.dem.bottom_wall)
         u_shape, v_shape = (m, nx + 1, ny), (m, nx, ny)
+        # the chunk copies start zero and the summing kernels leave them zero
+        pu, pv = np.zeros((m, c, nx + 1, ny)), np.zeros((m, c, nx, ny))
         self._dev = dict(
             cp=cuda.to_device(cp), cq=cuda.to_device(cq),
-            ps=cuda.device_array((m, c, nx, ny)), eps=cuda.device_array(v_shape),
+            ps=cuda.to_device(pv), eps=cuda.device_array(v_shape),
             coef=cuda.device_array(m * n), frc=cuda.device_array((2, m * n)),
-            pu=cuda.device_array((m, c, nx + 1, ny)), pv=cuda.device_array((m, c, nx, ny)),
-            pku=cuda.device_array((m, c, nx + 1, ny)), pkv=cuda.device_array((m, c, nx, ny)),
+            pu=cuda.to_device(pu), pv=cuda.to_device(pv),
+            pku=cuda.to_device(pu), pkv=cuda.to_device(pv),
             fu=cuda.device_array(u_shape), fv=cuda.device_array(v_shape),
             ku=cuda.device_array(u_shape), kv=cuda.device_array(v_shape),
             u=cuda.device_array(u_shape), v=cuda.device_array(v_shape))
