@@ -84,3 +84,19 @@ def test_package_imports_without_numba_cuda():
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                           env=_env(), timeout=300)
     assert proc.returncode == 0, proc.stderr[-2000:]
+
+
+def test_coupling_kernels_compile_for_a_gpu_where_libnvvm_is_present():
+    """numba-cuda types and lowers the coupling kernels, the CPU's scalar functions called
+    as device functions included, to PTX for sm_90 (libNVVM only, no GPU needed)."""
+    code = ("import json; from cfbmarkov.simulate.gpu.coupling import compile_ptx; "
+            "print(json.dumps(compile_ptx((9, 0))))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          env=_env(), timeout=600)
+    if proc.returncode != 0 and ("NVVM" in proc.stderr or "nvvm" in proc.stderr):
+        pytest.skip("no libNVVM here: " + proc.stderr.strip().splitlines()[-1][:200])
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    sizes = json.loads(proc.stdout.strip().splitlines()[-1])
+    assert set(sizes) == {"solid_chunks", "void_fraction", "drag_at_old_gas", "drag_chunks",
+                          "face_sums", "drag_at_new_gas"}
+    assert all(v > 1000 for v in sizes.values())

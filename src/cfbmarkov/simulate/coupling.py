@@ -52,9 +52,17 @@ def cell_weights(nx, ny, dx, dy, x, y, periodic_y=True):
         fx = 0.0
     elif fx > nx - 1:
         fx = nx - 1.0
-    i0 = min(int(fx), nx - 2) if nx > 1 else 0
-    wx = fx - i0 if nx > 1 else 0.0
-    i1 = i0 + 1 if nx > 1 else 0
+    # the cases written out: numba-cuda does not type min() of these integers
+    if nx > 1:
+        i0 = int(fx)
+        if i0 > nx - 2:
+            i0 = nx - 2
+        wx = fx - i0
+        i1 = i0 + 1
+    else:
+        i0 = 0
+        wx = 0.0
+        i1 = 0
     if not periodic_y:
         if fy < 0.0:
             fy = 0.0

@@ -314,9 +314,17 @@ def solid_weights(x, y, nx, ny, idx, idy, periodic_y):
     if periodic_y:
         j0 = _wrap_index(int(jfl), ny)
         j1 = j0 + 1 if j0 + 1 < ny else 0
-    else:
-        j0 = min(max(int(jfl), 0), ny - 1)
-        j1 = min(max(int(jfl) + 1, 0), ny - 1)
+    else:  # clamped by comparisons: numba-cuda does not type min/max of these integers
+        j0 = int(jfl)
+        j1 = j0 + 1
+        if j0 < 0:
+            j0 = 0
+        elif j0 > ny - 1:
+            j0 = ny - 1
+        if j1 < 0:
+            j1 = 0
+        elif j1 > ny - 1:
+            j1 = ny - 1
     return i0, i1, j0, j1, wx, wy
 
 

@@ -9,11 +9,17 @@ The formulas are the CPU's (:mod:`cfbmarkov.simulate.cfd.coupling`,
 device where a kernel calls them, and write the same sums in the same order.
 
 Deterministic deposits, no float atomics: member m's particles are cut by index into C
-fixed chunks (``[c N / C, (c + 1) N / C)``, as :data:`~cfbmarkov.simulate.cfd.coupling.
-DEPOSIT_CHUNKS` on the CPU); thread (m, c) adds its chunk's particles, in index order, to
-its own copy of the fields, and one thread per grid node then sums the copies in chunk
-order and zeroes them for the next gas step (so no thread clears a whole grid). The results depend on C only (not on the launch shape or the other members); with
+fixed chunks (``[c N / C, (c + 1) N / C)``, as the CPU's ``DEPOSIT_CHUNKS`` of
+:mod:`cfbmarkov.simulate.cfd.coupling`); thread (m, c) adds its chunk's particles, in index
+order, to its own copy of the fields, and one thread per grid node then sums the copies in
+chunk order and zeroes them for the next gas step (so no thread clears a whole grid). The
+results depend on C only (not on the launch shape or the other members); with
 C = DEPOSIT_CHUNKS the sums are the CPU's, term for term.
+
+On a GPU numba compiles each of those CPU functions once more for the device where a
+kernel calls it (a numba ``njit`` function called from a CUDA kernel); the kernels compile
+to PTX for sm_90 (checked with libNVVM, without a GPU: :func:`compile_ptx`), and under the
+CUDA simulator the CPU functions run as they are.
 
 Layout (member-major, as :mod:`.kernels`): particle fields from ``s[ctl[m, C_CUR]]``;
 grid fields ``(M, nx, ny)`` (cells, v faces) and ``(M, nx + 1, ny)`` (u faces); chunk copies
@@ -213,3 +219,49 @@ def drag_at_new_gas(s, ctl, u, v, coef, ext, cp, cq):
     ux, uy = _gas_velocity(u, v, m, nx, ny, cp[P_IDX], cp[P_IDY], s[cur, 0, r], s[cur, 1, r])
     ext[0, r] = coef[r] * (ux - s[cur, 2, r])
     ext[1, r] = coef[r] * (uy - s[cur, 3, r])
+
+
+#: the kernels of this module by name, with their argument kinds for :func:`compile_ptx`:
+#: "p" particle fields (3-D), "c" control slots (2-D int64), "g" a grid field per member
+#: (3-D), "k" chunk copies (4-D), "v" per-particle (1-D), "f" per-particle pairs (2-D),
+#: "P"/"Q" the float/int parameters
+KERNEL_ARGS = {"solid_chunks": "pckPQ", "void_fraction": "kgPQ",
+               "drag_at_old_gas": "pcgggvfPQ", "drag_chunks": "pcvfkkkkPQ",
+               "face_sums": "kkkkggggQ", "drag_at_new_gas": "pcggvfPQ"}
+
+
+def compile_ptx(cc=(9, 0)) -> dict[str, int]:
+    """Compile every kernel of this module to PTX for compute capability ``cc``, without a
+    GPU (libNVVM only): a check that numba-cuda types and lowers them, CPU functions
+    called as device functions included.
+
+    Returns
+    -------
+    dict
+        Kernel name -> PTX length (characters).
+
+    Raises
+    ------
+    Exception
+        What numba-cuda raises: a typing or lowering error, or no libNVVM.
+    """
+    import types as _types
+    from unittest import mock
+
+    from numba import types as T
+
+    import numba.cuda.dispatcher as dispatcher
+
+    kinds = {"p": T.Array(T.float64, 3, "C"), "c": T.Array(T.int64, 2, "C"),
+             "g": T.Array(T.float64, 3, "C"), "k": T.Array(T.float64, 4, "C"),
+             "v": T.Array(T.float64, 1, "C"), "f": T.Array(T.float64, 2, "C"),
+             "P": T.Array(T.float64, 1, "C"), "Q": T.Array(T.int64, 1, "C")}
+    out = {}
+    # device functions are compiled for the current device's compute capability: give it
+    device = _types.SimpleNamespace(compute_capability=tuple(cc))
+    with mock.patch.object(dispatcher, "get_current_device", lambda: device):
+        for name, args in KERNEL_ARGS.items():
+            ptx, _ = cuda.compile_ptx(globals()[name].py_func, tuple(kinds[a] for a in args),
+                                      cc=tuple(cc))
+            out[name] = len(ptx)
+    return out

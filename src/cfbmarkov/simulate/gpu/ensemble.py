@@ -309,8 +309,8 @@ class GpuEnsembleDEM:
     @property
     def device_arrays(self) -> dict:
         """The device arrays by name (the layout of :mod:`.kernels`), for kernels that work
-        on the members' particles in place (:mod:`.coupling`): ``s`` the particle fields,
-        ``ctl`` the control slots, ``ext`` the external force."""
+        on the members' particles in place (:mod:`cfbmarkov.simulate.gpu.coupling`): ``s``
+        the particle fields, ``ctl`` the control slots, ``ext`` the external force."""
         return self._d
 
     def step(self, n_steps: int = 1, external_force=None, *, external_on_device=False

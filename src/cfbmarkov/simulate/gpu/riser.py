@@ -3,10 +3,11 @@
 Per gas step (:meth:`GpuEnsembleRiser.step`), as :class:`cfbmarkov.simulate.riser.CoupledRiser`
 does for one riser. With ``coupling="device"`` (the default) the void fraction, the drag
 coefficients and forces and their deposit onto the gas grid are computed on the device
-(:mod:`.coupling`: deterministic chunked deposits, no float atomics); only grid-sized
-fields cross: the void fraction and the four drag fields come to the host, each member's
-gas step runs there (the existing :class:`~cfbmarkov.simulate.cfd.GasSolver`, one member
-after another), the new gas velocities go back, and the drag at the new gas is computed on
+(:mod:`cfbmarkov.simulate.gpu.coupling`: deterministic chunked deposits, no float
+atomics); only grid-sized fields cross: the void fraction and the four drag fields come to
+the host, each member's gas step runs there (the existing
+:class:`~cfbmarkov.simulate.cfd.GasSolver`, one member after another), the new gas
+velocities go back, and the drag at the new gas is computed on
 the device straight into the DEM's external force. Then every member's
 ``dem_steps_per_cfd_step`` DEM steps run on the device in one launch with the drag held.
 Bytes moved per gas step (:attr:`GpuEnsembleRiser.bytes_per_gas_step`), per member with a
@@ -183,7 +184,8 @@ class GpuEnsembleRiser:
 
     # -- the device coupling -------------------------------------------------------------
     def _setup_device(self) -> None:
-        """Device arrays and parameters of :mod:`.coupling`; the gas velocities uploaded."""
+        """Device arrays and parameters of :mod:`cfbmarkov.simulate.gpu.coupling`; the gas
+        velocities uploaded."""
         from cfbmarkov.simulate.gpu import coupling as K
         from cfbmarkov.simulate.gpu._cuda import cuda
         case, grid = self.case, self.grid
