@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -104,3 +105,58 @@ def test_device_gpu_without_cuda_is_one_line(tmp_path):
     assert main(["reproduce", "--scale", "quick", "-o", str(tmp_path / "g"), "--ensemble", "2",
                  "--device", "gpu", "-q"]) == 2
     assert not (tmp_path / "g").exists()
+
+
+GPU_STAGE = """
+import sys
+from pathlib import Path
+from cfbmarkov.config import load_case
+from cfbmarkov.reproduce_case import _check_reference
+from cfbmarkov.reproduce_ensemble import run_ensemble_cfd_dem
+case, folder = load_case(sys.argv[1]), Path(sys.argv[2])
+stage, paths = run_ensemble_cfd_dem(case, folder, 2, device="gpu", checkpoint_every=0.0005,
+                                    progress=False, check=_check_reference)
+assert stage == "done" and [p.name for p in paths] == ["cfd-dem-m0.h5", "cfd-dem-m1.h5"]
+assert all(p.is_file() for p in paths)
+stage, _ = run_ensemble_cfd_dem(case, folder, 2, device="gpu", progress=False,
+                                check=_check_reference)
+assert stage == "skipped", stage
+print("ok")
+"""
+
+SIM_CASE = """
+name = "tiny"
+seed = 7
+[riser]
+width = 0.02
+height = 0.04
+[particles]
+number = 10
+[gas]
+superficial_velocity = 4.0
+[numerics]
+cfd_cells = [2, 4]
+[output]
+end_time = 0.001
+frame_interval = 0.0005
+[markov]
+lag = 0.0005
+fit_window = [0.0, 0.0005]
+predict_window = [0.0005, 0.001]
+"""
+
+
+def test_gpu_cfd_dem_stage_under_the_simulator(tmp_path):
+    """The reproduction's CFD-DEM stage with ``device="gpu"`` (the CUDA simulator): the
+    members written, then skipped on a rerun after their files are checked."""
+    import os
+
+    case = tmp_path / "tiny.toml"
+    case.write_text(SIM_CASE)
+    env = dict(os.environ, NUMBA_ENABLE_CUDASIM="1")
+    env.setdefault("NUMBA_NUM_THREADS", "1")
+    src = str(Path(__file__).resolve().parents[1] / "src")
+    env["PYTHONPATH"] = src + os.pathsep + env.get("PYTHONPATH", "")
+    proc = subprocess.run([sys.executable, "-c", GPU_STAGE, str(case), str(tmp_path / "u4")],
+                          capture_output=True, text=True, env=env, timeout=900)
+    assert proc.returncode == 0 and "ok" in proc.stdout, proc.stderr[-3000:]
