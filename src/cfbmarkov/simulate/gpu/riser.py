@@ -23,6 +23,7 @@ the control slots (56 bytes a member).
 from __future__ import annotations
 
 import math
+import time
 import warnings
 
 import numba
@@ -94,6 +95,8 @@ class GpuEnsembleRiser:
         if coupling not in ("device", "host"):
             raise InputError(f"coupling: expected 'device' or 'host', got {coupling!r}")
         self.coupling = coupling
+        #: wall time spent in the members' gas solves on the host (device coupling), s
+        self.host_gas_seconds = 0.0
         if deposit_chunks is None:
             deposit_chunks = GPU_DEPOSIT_CHUNKS
         if int(deposit_chunks) < 1:
@@ -243,8 +246,10 @@ class GpuEnsembleRiser:
         self._launch(K.face_sums, m * (nx + 1) * ny, g["pu"], g["pv"], g["pku"], g["pkv"],
                      g["fu"], g["fv"], g["ku"], g["kv"], cq)
         eps, fu, fv, ku, kv = (g[x].copy_to_host() for x in ("eps", "fu", "fv", "ku", "kv"))
+        started = time.perf_counter()
         for k in range(m):
             self.gases[k] = self.solver.step(self.gases[k], eps[k], fu[k], fv[k], ku[k], kv[k])
+        self.host_gas_seconds += time.perf_counter() - started
         self._upload_gas()
         self._launch(K.drag_at_new_gas, m * n, e["s"], e["ctl"], g["u"], g["v"], g["coef"],
                      e["ext"], cp, cq)
