@@ -6,7 +6,8 @@ coefficients and forces and their deposit onto the gas grid are computed on the 
 (:mod:`cfbmarkov.simulate.gpu.coupling`: deterministic chunked deposits, no float
 atomics); only grid-sized fields cross: the void fraction and the four drag fields come to
 the host, each member's gas step runs there (the existing
-:class:`~cfbmarkov.simulate.cfd.GasSolver`, one member after another), the new gas
+:class:`~cfbmarkov.simulate.cfd.GasSolver`, each member its own, on host threads at once
+up to the cores: its kernel releases the GIL), the new gas
 velocities go back, and the drag at the new gas is computed on
 the device straight into the DEM's external force. Then every member's
 ``dem_steps_per_cfd_step`` DEM steps run on the device in one launch with the drag held.
@@ -23,8 +24,10 @@ the control slots (56 bytes a member).
 from __future__ import annotations
 
 import math
+import os
 import time
 import warnings
+from concurrent.futures import ThreadPoolExecutor
 
 import numba
 import numpy as np
@@ -90,6 +93,10 @@ class GpuEnsembleRiser:
         self.cfd_steps = int(cfd_steps)
         self.solver = gas_solver(case, dem.bottom_wall)
         self.grid = self.solver.grid
+        # each member its own solver (workspace), so that their gas steps can run at once
+        self._solvers = [self.solver] + [gas_solver(case, dem.bottom_wall)
+                                         for _ in range(dem.n_members - 1)]
+        self._pool = None
         self.dem_steps_per_cfd = case.numerics.dem_steps_per_cfd_step
         m, n = dem.n_members, dem.n_particles
         if coupling not in ("device", "host"):
@@ -247,8 +254,17 @@ class GpuEnsembleRiser:
                      g["fu"], g["fv"], g["ku"], g["kv"], cq)
         eps, fu, fv, ku, kv = (g[x].copy_to_host() for x in ("eps", "fu", "fv", "ku", "kv"))
         started = time.perf_counter()
-        for k in range(m):
-            self.gases[k] = self.solver.step(self.gases[k], eps[k], fu[k], fv[k], ku[k], kv[k])
+
+        def solve(k):
+            return self._solvers[k].step(self.gases[k], eps[k], fu[k], fv[k], ku[k], kv[k])
+
+        workers = min(m, os.cpu_count() or 1)
+        if workers > 1:  # the solver's kernel releases the GIL: members on host threads
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(max_workers=workers)
+            self.gases = list(self._pool.map(solve, range(m)))
+        else:
+            self.gases = [solve(k) for k in range(m)]
         self.host_gas_seconds += time.perf_counter() - started
         self._upload_gas()
         self._launch(K.drag_at_new_gas, m * n, e["s"], e["ctl"], g["u"], g["v"], g["coef"],
