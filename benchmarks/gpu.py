@@ -7,7 +7,8 @@ Full run (a CUDA GPU; about 10 minutes on one): particle-steps/s of the DEM alon
 paper riser (27 000 particles, dilute benchmark state of ``cfbmarkov bench``), an ensemble
 of 10 of them, one riser of 270 000 and one of 2.7 million particles (the riser made taller
 at the same area fraction), each also as the launches of a coupled run go (10 DEM steps a
-call); the coupled riser (paper case) for 1 and 10 members; the CPU engine on the same
+call); the coupled riser (paper case) for 1 and 10 members, with the coupling on the device
+and on the host; the CPU engine on the same
 27 000-particle state and the CPU coupled riser, with numba's threads; then the checks of
 :mod:`cfbmarkov.simulate.gpu.checks` (round-off agreement with the CPU over the first 1000
 steps of 2000 particles, restitution, bed weight, independent members, checkpoint round
@@ -98,24 +99,31 @@ def _case(quick):
     return CaseConfig()
 
 
-def coupled_rate(members, gas_steps, quick, threads, device, blocks=1):
-    """Coupled particle-steps/s (DEM steps x particles) over ``gas_steps`` gas steps."""
+def coupled_rate(members, gas_steps, quick, threads, device, blocks=1, coupling="device"):
+    """Coupled particle-steps/s (DEM steps x particles) over ``gas_steps`` gas steps
+    (``coupling``: the GPU riser's, device or host)."""
     case = _case(quick)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         if device == "gpu":
             from cfbmarkov.simulate.gpu.riser import GpuEnsembleRiser
             riser = GpuEnsembleRiser.initial(case, range(case.seed, case.seed + members),
-                                             threads=threads, blocks_per_member=blocks)
+                                             threads=threads, blocks_per_member=blocks,
+                                             coupling=coupling)
         else:
             riser = CoupledRiser.initial(case)
     riser.step()
+    riser.host_gas_seconds = 0.0
     t = time.perf_counter()
     for _ in range(gas_steps):
         riser.step()
     wall = time.perf_counter() - t
     rate = members * case.particles.number * gas_steps * riser.dem_steps_per_cfd / wall
-    extra = {"bytes_per_gas_step": riser.bytes_per_gas_step} if device == "gpu" else {}
+    extra = {}
+    if device == "gpu":
+        extra["bytes_per_gas_step"] = riser.bytes_per_gas_step
+        if coupling == "device":  # the share of the wall time in the host's gas solves
+            extra["host_gas_fraction"] = riser.host_gas_seconds / wall
     return rate, extra
 
 
@@ -165,17 +173,22 @@ def main(argv=None) -> int:
     rows.append((f"DEM cpu 1 x {cpu_n}", f"{numba.get_num_threads()} threads", rate))
     gas_steps = 2 if quick else 50
     for members in ((1, 2) if quick else (1, 10)):
-        for blocks in dict.fromkeys((1, max(1, sms // members))):
+        runs = [(b, "device") for b in dict.fromkeys((1, max(1, sms // members)))]
+        for blocks, coupling in runs + [(1, "host")]:
             try:
-                rate, extra = coupled_rate(members, gas_steps, quick, args.threads, "gpu", blocks)
+                rate, extra = coupled_rate(members, gas_steps, quick, args.threads, "gpu", blocks,
+                                           coupling)
             except Exception as exc:
                 rate, extra = None, {}
-                print(f"  coupled, {members} members, {blocks} blocks a member: "
-                      f"{type(exc).__name__}: {exc}", file=sys.stderr)
+                print(f"  coupled, {members} members, {blocks} blocks a member, {coupling} "
+                      f"coupling: {type(exc).__name__}: {exc}", file=sys.stderr)
             report["coupled"].append({"device": "gpu", "members": members, **extra,
-                                      "blocks_per_member": blocks, "particle_steps_per_s": rate})
-            rows.append((f"coupled gpu {members} member(s)", f"{blocks} bl/memb, "
-                         f"{extra.get('bytes_per_gas_step', '?')} B/gas st", rate))
+                                      "blocks_per_member": blocks, "coupling": coupling,
+                                      "particle_steps_per_s": rate})
+            gas = extra.get("host_gas_fraction")
+            rows.append((f"coupled gpu {members} member(s)", f"{blocks} bl/memb, {coupling} "
+                         f"coupling, {extra.get('bytes_per_gas_step', '?')} B/gas st"
+                         + ("" if gas is None else f", host gas {100 * gas:.0f} %"), rate))
     rate, _ = coupled_rate(1, gas_steps, quick, None, "cpu")
     report["coupled"].append({"device": "cpu", "members": 1, "particle_steps_per_s": rate})
     rows.append(("coupled cpu 1 member", f"{numba.get_num_threads()} threads", rate))
@@ -188,9 +201,9 @@ def main(argv=None) -> int:
         report["checks"][name] = checks.CHECKS[name](**kw)
     print(f"GPU check on {report['device']} ({'quick' if quick else 'full'}; "
           f"CPU with {report['numba_threads']} threads)")
-    print(f"{'run':34s} {'':22s} {'particle-steps/s':>16s}")
+    print(f"{'run':34s} {'':58s} {'particle-steps/s':>16s}")
     for name, how, rate in rows:
-        print(f"{name:34s} {how:22s} {('%.3g' % rate) if rate else 'failed':>16s}")
+        print(f"{name:34s} {how:58s} {('%.3g' % rate) if rate else 'failed':>16s}")
     for name, r in report["checks"].items():
         print(f"check {name}: {'ok' if r['ok'] else 'FAILED'} "
               + json.dumps({k: v for k, v in r.items() if k != 'ok'}))

@@ -145,7 +145,14 @@ def counted_to_host(self, *a, **k):
     moved[0] += out.nbytes
     return out
 da.FakeCUDAArray.copy_to_device, da.FakeCUDAArray.copy_to_host = counted_to_dev, counted_to_host
+# device coupling: grid-sized fields only (2 x 4 cells: eps, fv, kv, v 8 values each, fu,
+# ku, u 12 each), whatever the particles; host coupling: 48 bytes a particle
 riser = GpuEnsembleRiser.initial(case, [1, 2], threads=2)
+riser.step()
+moved[0] = 0
+riser.step()
+assert moved[0] == riser.bytes_per_gas_step == 2 * 8 * (4 * 8 + 3 * 12) + 2 * 7 * 8, moved[0]
+riser = GpuEnsembleRiser.initial(case, [1, 2], threads=2, coupling="host")
 riser.step()
 moved[0] = 0
 riser.step()

@@ -72,6 +72,28 @@ def window_text(window) -> str:
     return f"{float(window[0]):g}–{float(window[1]):g} s"
 
 
+def ensemble_text(meta: dict) -> str:
+    """The header's line on the CFD-DEM runs per case (``reproduce --ensemble N``).
+
+    Parameters
+    ----------
+    meta : dict
+        The run's ``reproduce.json``.
+
+    Returns
+    -------
+    str
+        One line naming N (1 where the manifest does not say).
+    """
+    n = meta.get("ensemble", 1)
+    n = n if isinstance(n, int) and n >= 1 else 1
+    if n == 1:
+        return "CFD-DEM runs per case: 1"
+    return (f"CFD-DEM runs per case: {n} (an ensemble, on the {meta.get('device', 'cpu')}; "
+            f"each model fitted on the {n} runs' fitting windows pooled and compared on "
+            "member 0's prediction window, cfd-dem-m0.h5)")
+
+
 def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
     """The run: scale, cases, riser, windows, lag, cells, estimators, version.
 
@@ -98,6 +120,7 @@ def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
     cfg = {c.name: c.config for c in configured}
     items = [
         f"Scale: {meta.get('scale', 'n/a')}",
+        ensemble_text(meta),
         "Cases: " + ", ".join(f"{c.name} ({c.label})" for c in cases)
         + f" — {len(done)} finished" + (f", {len(pending)} not finished ("
                                          + ", ".join(c.name for c in pending) + ")"

@@ -74,7 +74,7 @@ def member_paths(output: str | Path, n: int) -> list[Path]:
 def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None, *,
                       device: str = "cpu", until: float | None = None, checkpoint_every: float = 1.0,
                       resume: bool = False, progress: bool | str = True, threads=None,
-                      stop_after_frames: int | None = None) -> list[Path]:
+                      stop_after_frames: int | None = None, label: str = "") -> list[Path]:
     """Run ``members`` independent runs of ``case`` (seeds :func:`member_seeds`) to ``until``.
 
     Parameters
@@ -95,6 +95,8 @@ def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None,
         GPU threads per member (default :func:`~cfbmarkov.simulate.gpu.ensemble.default_threads`).
     stop_after_frames : int, optional
         GPU only: stop (as if killed) once this many frames are written (tests of resume).
+    label : str, optional
+        Starts each progress line (``LABEL member 3``, ``LABEL ensemble``).
 
     Returns
     -------
@@ -126,7 +128,7 @@ def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None,
             for p in paths:
                 stack.enter_context(claim_output(p, "simulate", "trajectory"))
             return _simulate_gpu(case, output, paths, seeds, until, checkpoint_every, resume,
-                                 mode, threads, stop_after_frames)
+                                 mode, threads, stop_after_frames, label)
     end = case.output.end_time if until is None else float(until)
     for m, (path, seed) in enumerate(zip(paths, seeds)):
         mcase = member_case(case, seed)
@@ -135,7 +137,8 @@ def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None,
         if resume and not started and _complete(path, mcase, end):
             continue
         simulate(mcase, path, until=until, checkpoint_every=checkpoint_every,
-                 resume=resume and started, progress=progress, label=f"member {m}")
+                 resume=resume and started, progress=progress,
+                 label=f"{label} member {m}".strip())
     return paths
 
 
@@ -158,7 +161,7 @@ class _Member:
 
 
 def _simulate_gpu(case, output, paths, seeds, until, checkpoint_every, resume, progress,
-                  threads, stop_after_frames) -> list[Path]:
+                  threads, stop_after_frames, label="") -> list[Path]:
     from cfbmarkov.simulate.gpu.riser import GpuEnsembleRiser
     n = len(paths)
     end = case.output.end_time if until is None else float(until)
@@ -209,7 +212,8 @@ def _simulate_gpu(case, output, paths, seeds, until, checkpoint_every, resume, p
             w.append_fields(0.0, spacing, **riser.gas_fields(k))
         frames, wall_time, wall_history = 1, 0.0, [(0.0, 0.0)]
         parts.mkdir(parents=True, exist_ok=True)
-    bar = Progress(progress, riser.time, end, n * case.particles.number, "ensemble")
+    bar = Progress(progress, riser.time, end, n * case.particles.number,
+                   f"{label} ensemble".strip())
     finished = False
     started = _time.perf_counter() - wall_time
     pending = [_PendingFrames(w, spacing) for w in writers]
@@ -278,6 +282,8 @@ def _write(path: Path, case, riser, n_segments, frames, wall_time, wall_history)
             _write_group(f.create_group("dem"), state["dem"])
             _write_group(f.create_group("gas"), state["gas"])
             f.attrs["cfd_steps"] = state["cfd_steps"]
+            f.attrs["coupling"] = state["coupling"]
+            f.attrs["deposit_chunks"] = state["deposit_chunks"]
 
 
 def _read(path: Path, case: CaseConfig, n: int, threads):
@@ -296,6 +302,9 @@ def _read(path: Path, case: CaseConfig, n: int, threads):
                                  f"{int(f.attrs['members'])}")
             state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
                      "cfd_steps": int(f.attrs["cfd_steps"])}
+            if "coupling" in f.attrs:
+                state["coupling"] = str(f.attrs["coupling"])
+                state["deposit_chunks"] = int(f.attrs["deposit_chunks"])
             segs = [int(k) for k in f["n_segments"][()]]
             frames, wall = int(f.attrs["frames"]), float(f.attrs["wall_time"])
             history = f["wall_history"][()]

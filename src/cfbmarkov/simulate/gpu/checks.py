@@ -173,27 +173,41 @@ def state_roundtrip(n=12, steps=20, threads=None):
 
 
 def coupled_vs_cpu(gas_steps=5, threads=None, tol=1e-12):
-    """A small coupled riser (30 particles, 2 x 4 gas cells): GPU ensemble of one member
-    against :class:`~cfbmarkov.simulate.riser.CoupledRiser` after ``gas_steps`` gas steps
-    (positions and gas velocities; ``ok`` below ``tol``)."""
+    """Two small coupled risers (30 particles, 2 x 4 gas cells, seeds 5 and 6) as one GPU
+    ensemble against :class:`~cfbmarkov.simulate.riser.CoupledRiser` of each seed after
+    ``gas_steps`` gas steps (positions and gas velocities, the largest difference over both
+    members; ``ok`` below ``tol`` and 1e-9 m/s), for the device coupling with its default
+    chunks (``position``, ``gas_velocity``), with the CPU's 8 chunks (``*_cpu_chunks``: the
+    CPU's sums term for term) and for the host coupling (``*_host``)."""
     from cfbmarkov.config import CaseConfig
+    from cfbmarkov.simulate.cfd.coupling import DEPOSIT_CHUNKS
     from cfbmarkov.simulate.gpu.riser import GpuEnsembleRiser
     from cfbmarkov.simulate.riser import CoupledRiser
     case = CaseConfig.model_validate({
         "seed": 5, "riser": {"width": 0.02, "height": 0.04}, "particles": {"number": 30},
         "gas": {"superficial_velocity": 4.0}, "numerics": {"cfd_cells": [2, 4]}})
+    seeds = [5, 6]
+    variants = {"": {}, "_cpu_chunks": {"deposit_chunks": DEPOSIT_CHUNKS},
+                "_host": {"coupling": "host"}}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        cpu = CoupledRiser.initial(case)
-        gpu = GpuEnsembleRiser.initial(case, [case.seed], threads=threads)
+        cpus = [CoupledRiser.initial(case.model_copy(update={"seed": s})) for s in seeds]
+        gpus = {k: GpuEnsembleRiser.initial(case, seeds, threads=threads, **kw)
+                for k, kw in variants.items()}
     for _ in range(gas_steps):
-        cpu.step()
-        gpu.step()
-    out = {"gas_steps": gas_steps, "position": _pair(cpu.dem.positions, gpu.dem.positions[0]),
-           "gas_velocity": max(_pair(cpu.gas.u, gpu.gases[0].u),
-                               _pair(cpu.gas.v, gpu.gases[0].v)),
-           "bytes_per_gas_step": gpu.bytes_per_gas_step}
-    out["ok"] = out["position"] < tol and out["gas_velocity"] < 1e-9
+        for r in cpus + list(gpus.values()):
+            r.step()
+    out = {"gas_steps": gas_steps}
+    for k, gpu in gpus.items():
+        out["position" + k] = max(_pair(c.dem.positions, gpu.dem.positions[m])
+                                  for m, c in enumerate(cpus))
+        out["gas_velocity" + k] = max(max(_pair(c.gas.u, gpu.gases[m].u),
+                                          _pair(c.gas.v, gpu.gases[m].v))
+                                      for m, c in enumerate(cpus))
+        out["bytes_per_gas_step" + k] = gpu.bytes_per_gas_step
+    out["members_differ"] = _pair(gpus[""].dem.positions[0], gpus[""].dem.positions[1]) > 0
+    out["ok"] = (all(out["position" + k] < tol and out["gas_velocity" + k] < 1e-9
+                     for k in variants) and out["members_differ"])
     return out
 
 

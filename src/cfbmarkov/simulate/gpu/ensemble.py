@@ -306,7 +306,15 @@ class GpuEnsembleDEM:
         return self._d["laps"].copy_to_host().reshape(self._m, self._n)
 
     # ------------------------------------------------------------------ running
-    def step(self, n_steps: int = 1, external_force=None) -> None:
+    @property
+    def device_arrays(self) -> dict:
+        """The device arrays by name (the layout of :mod:`.kernels`), for kernels that work
+        on the members' particles in place (:mod:`cfbmarkov.simulate.gpu.coupling`): ``s``
+        the particle fields, ``ctl`` the control slots, ``ext`` the external force."""
+        return self._d
+
+    def step(self, n_steps: int = 1, external_force=None, *, external_on_device=False
+             ) -> None:
         """Advance every member ``n_steps`` DEM steps.
 
         Parameters
@@ -315,6 +323,9 @@ class GpuEnsembleDEM:
             Steps (>= 0).
         external_force : array_like (M, N, 2), optional
             Force on each particle, N, held during these steps (e.g. drag).
+        external_on_device : bool, optional
+            The external force was written on the device (``device_arrays['ext']``, by a
+            kernel) and is held as it is; ``external_force`` must then be None.
 
         Raises
         ------
@@ -331,7 +342,11 @@ class GpuEnsembleDEM:
         if n_steps < 0:
             raise InputError(f"n_steps must be >= 0, got {n_steps}")
         d = self._d
-        if external_force is not None:
+        if external_on_device:
+            if external_force is not None:
+                raise InputError("external_force and external_on_device: give one of them")
+            self._ext_set = True
+        elif external_force is not None:
             ext = np.asarray(external_force, dtype=np.float64)
             if ext.shape != (self._m, self._n, 2):
                 raise InputError(f"external_force: expected shape {(self._m, self._n, 2)}, "
