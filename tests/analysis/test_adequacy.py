@@ -12,7 +12,9 @@ from cfbmarkov.analysis.adequacy import assess_adequacy
 from cfbmarkov.analysis.sample_length import sample_length
 from cfbmarkov.cli import main
 from cfbmarkov.markov import MarkovModel, fit_model
+from cfbmarkov.errors import InputError
 from cfbmarkov.markov.adequacy import Adequacy
+from cfbmarkov.markov.discrete import discretize
 from cfbmarkov.markov.estimate import estimator_from_name
 from cfbmarkov.markov.pooling import discretize_runs
 from cfbmarkov.markov.states import CellGrid
@@ -129,10 +131,14 @@ def test_verdict_in_the_model_file_and_the_verbs(runs, tmp_path, capsys):
 
 
 def test_pooling_copies_gives_the_same_chain(runs):
+    """The counts of three windows add (one window counted three times here; fit refuses
+    a run pooled with itself, test_pooled_intervals)."""
     path = runs["stationary"]
     space = _space()
-    with Trajectories(path) as a, Trajectories(path) as b, Trajectories(path) as c:
-        pooled_data = discretize_runs([a, b, c], space, 0.025, [(2.0, 8.0)])
+    pooled_data = [discretize(path, space, 0.025, (2.0, 8.0))] * 3
+    with Trajectories(path) as a, Trajectories(path) as b:
+        with pytest.raises(InputError, match="same data"):
+            discretize_runs([a, b], space, 0.025, [(2.0, 8.0)])
     for name in ("paper", "mle"):
         fitter = estimator_from_name(name, space, 0.025)
         one = fit_model(path, space, 0.025, (2.0, 8.0), name)
