@@ -1,6 +1,7 @@
 """The verdict on a fitting sample (fit), pooled fits of several runs, and how long a sample
 must be (stationarity --sample-length), on generated risers."""
 
+import contextlib
 import json
 
 import h5py
@@ -28,12 +29,12 @@ SWITCH = 3.0        # s between switches of the two-chain riser
 DURATION = 24.0
 
 
-def _write(path, period, seed=3, n=3000):
+def _write(path, period, seed=3, n=3000, slow=False):
     """All particles follow the fast chain, then the slow one, switching every ``period``
-    s (0: the fast chain throughout, a stationary run)."""
+    s (0: the fast chain throughout, a stationary run; with ``slow``, the slow one)."""
     k = int(round(DURATION / FAST.lag)) + 1
     t = FAST.lag * np.arange(k)
-    regimes = ((t + 1e-9) // period).astype(int) % 2 if period else np.zeros(k, int)
+    regimes = ((t + 1e-9) // period).astype(int) % 2 if period else np.full(k, int(slow))
     return synthetic.write_regime_run(path, [FAST, SLOW], np.eye(2), n, DURATION, seed=seed,
                                       regimes=regimes)
 
@@ -213,3 +214,34 @@ def test_report_paragraph_repeats_the_verdict():
     summary = {"md_rtd": 0.2, "adequacy": {"warnings": ["the halves disagree: 67 %"]}}
     assert "fitting sample was warned about" in trust_text("4", "paper", summary)
     assert "warned" not in trust_text("4", "paper", {"md_rtd": 0.2})
+
+
+def test_pooled_verdict_names_the_run_that_disagrees_and_pooled_halves(runs, tmp_path):
+    """Two fast runs and a slow one pooled: 'the runs disagree', the slow run named first;
+    two stationary runs pooled: no warning, each run's E(RT) recorded; two switching runs
+    in step: the pooled windows' halves disagree."""
+    slow = _write(tmp_path / "slow.h5", 0, seed=5, n=1000, slow=True)
+    paths = [runs["stationary"], runs["stationary2"], slow]
+    window = (2.0, 8.0)
+    with contextlib.ExitStack() as stack:
+        opened = [stack.enter_context(Trajectories(p)) for p in paths]
+        data = discretize_runs(opened, _space(), 0.025, [window])
+    model = estimator_from_name("paper", _space(), 0.025).fit(data)
+    verdict = assess_adequacy(model, paths, [window] * 3, discrete=data)
+    line = next(line for line in verdict.warnings if "runs disagree" in line)
+    assert line.index(str(slow)) < min(line.find(str(p)) % len(line) for p in paths[:2])
+    assert [r for r, _ in verdict.runs] == [str(p) for p in paths]
+    assert Adequacy.from_dict(verdict.to_dict()) == verdict
+    calm = estimator_from_name("paper", _space(), 0.025).fit(data[:2])
+    quiet = assess_adequacy(calm, paths[:2], [window] * 2, discrete=data[:2])
+    assert quiet.adequate, quiet.warnings
+    assert len(quiet.runs) == 2 and all(m > 0 for _, m in quiet.runs)
+    other = _write(tmp_path / "switching2.h5", SWITCH, seed=6, n=1000)
+    pair = [runs["switching"], other]
+    step = (1.5, 4.5)
+    model = fit_model(pair[0], _space(), 0.025, step, "paper")
+    with Trajectories(pair[0]) as a, Trajectories(pair[1]) as b:
+        both = discretize_runs([a, b], _space(), 0.025, [step])
+    model = estimator_from_name("paper", _space(), 0.025).fit(both)
+    verdict = assess_adequacy(model, pair, [step] * 2, discrete=both)
+    assert any("halves of the pooled windows disagree" in line for line in verdict.warnings)
