@@ -245,3 +245,23 @@ def test_pooled_verdict_names_the_run_that_disagrees_and_pooled_halves(runs, tmp
     model = estimator_from_name("paper", _space(), 0.025).fit(both)
     verdict = assess_adequacy(model, pair, [step] * 2, discrete=both)
     assert any("halves of the pooled windows disagree" in line for line in verdict.warnings)
+
+
+def test_sample_length_of_several_runs_pools_windows_and_long_runs(runs, capsys):
+    """Two stationary runs: the windows' models fitted on both runs' counts, the long run
+    over both runs' residences; the table names both; the sliding windows refuse two runs,
+    and a run pooled with itself is refused."""
+    one = sample_length(runs["stationary"], _space(), lag=0.025, start=0.0)
+    two = sample_length([runs["stationary"], runs["stationary2"]], _space(), lag=0.025,
+                        start=0.0)
+    assert two.long_run_count > 1.8 * one.long_run_count
+    assert two.within().all() and two.sample_length == 0.5
+    assert "2 runs pooled" in two.description
+    code, out, _ = run_cli(capsys, "stationarity", runs["stationary"], runs["stationary2"],
+                           "--sample-length", "--cells", "4x16")
+    assert code == 0 and str(runs["stationary2"]) in out and "2 runs pooled" in out
+    code, _, err = run_cli(capsys, "stationarity", runs["stationary"], runs["stationary2"])
+    assert code == 2 and "--sample-length" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run_cli(capsys, "stationarity", runs["stationary"], runs["stationary"],
+                           "--sample-length", "--cells", "4x16")
+    assert code == 2 and "same data" in err
