@@ -87,3 +87,17 @@ def test_fit_pooled_stores_and_prints_the_interval_and_refuses_a_run_with_itself
         err = capsys.readouterr().err
         assert said in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
         assert not bad.exists()
+
+
+def test_pooled_fit_of_a_space_fitted_to_its_window(runs, tmp_path, capsys):
+    """cells-velocity and cells-regime fit their bins on the window: pooled, the first run's
+    bins are used for every run (the same states), and the interval is formed."""
+    for states in ("cells-velocity", "cells-regime"):
+        out = tmp_path / f"{states}.h5"
+        assert main(["fit", str(runs[0]), str(runs[1]), "--cells", "3x8", "--states", states,
+                     "--window", "0.5:2.5", "--resamples", "10", "-o", str(out)]) == 0, \
+            capsys.readouterr().err
+        model = MarkovModel.load(out)
+        one = fit_model(runs[0], model.state_space, FLOW.lag, WINDOW, "paper")
+        assert one.state_space == model.state_space
+        assert model.uncertainty is not None

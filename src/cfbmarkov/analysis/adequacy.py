@@ -147,7 +147,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     all_parts: list[tuple[float, float, float, str]] = []
     spread = math.nan
     pooled = len(runs) > 1
-    data, names = [], []
+    data, names, pooled_fewest = [], [], 0
     for k, (run, window) in enumerate(zip(runs, windows)):
         with opened(run) as traj:
             d = discrete[k] if discrete is not None else discretize(
@@ -156,6 +156,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
             name = traj.path
         data.append(d)
         names.append(str(name))
+        pooled_fewest += fewest
         all_parts += parts
         turn = _turn_line(name, parts)
         if turn:
@@ -179,7 +180,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     run_means: tuple[tuple[str, float], ...] = ()
     if pooled:
         run_means, pooled_lines, pooled_spread = _pooled_checks(
-            fitter, data, names, windows, rt_mean, limit)
+            fitter, data, names, windows, rt_mean, limit,
+            halves=pooled_fewest >= MIN_PART_RESIDENCES)
         lines += pooled_lines
         if math.isfinite(pooled_spread):
             spread = pooled_spread if not math.isfinite(spread) else max(spread, pooled_spread)
@@ -194,12 +196,15 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                     run_means)
 
 
-def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float):
+def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
+                   halves: bool = True):
     """A pooled fit's checks across its runs: the first halves of all the windows pooled
     against the second halves pooled (limit ``limit``), and each run's own model against
     the pooled one (limit ``limit`` sqrt(N - 1): a run holds 1/N of the data, so its E(RT)
     scatters sqrt(N) times the pooled interval's, and sqrt(1 - 1/N) of that about the
-    pooled value). Returns ((run, E(RT)) per run, warning lines, the halves' spread)."""
+    pooled value). The halves are compared only with ``halves`` (where the pooled halves
+    hold at least MIN_PART_RESIDENCES residences each). Returns ((run, E(RT)) per run,
+    warning lines, the halves' spread)."""
     lines = []
     runs = len(data)
     means = []
@@ -220,20 +225,21 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float):
                      + ", ".join(f"{m:.3g}" for m in means) + " s): the runs may not be "
                      "samples of one flow (check their cases, or `cfbmarkov stationarity` "
                      "each); pool runs of one case and state")
-    halves = []
-    for side in (0, 1):
+    means_of_halves = []
+    for side in ((0, 1) if halves else ()):
         blocks = []
         for d, (a, b) in zip(data, windows):
             cut = _split((a, b), 2)[side]
             blocks.append(d.block(*cut))
         try:
-            halves.append(_rt_mean(fitter.fit(blocks)))
+            means_of_halves.append(_rt_mean(fitter.fit(blocks)))
         except CfbmarkovError:
-            halves.append(math.nan)
-    spread = _spread(halves, rt_mean)
+            means_of_halves.append(math.nan)
+    spread = _spread(means_of_halves, rt_mean)
     if math.isfinite(spread) and spread > limit:
-        lines.append(f"the halves of the pooled windows disagree: E(RT) {halves[0]:.3g} s "
-                     f"from the first halves of all {runs} runs, {halves[1]:.3g} s from the "
+        first, second = means_of_halves
+        lines.append(f"the halves of the pooled windows disagree: E(RT) {first:.3g} s "
+                     f"from the first halves of all {runs} runs, {second:.3g} s from the "
                      f"second, a spread of {100 * spread:.0f} % of the pooled model's "
                      f"{rt_mean:.3g} s (limit {100 * limit:.0f} %): the flow changed within "
                      f"the windows; {_ADVICE}")

@@ -144,7 +144,9 @@ def discretize_runs(runs: Sequence, state_space: StateSpace, lag: float,
     Returns
     -------
     list of DiscreteTrajectories
-        One per run, in order; an estimator's ``fit`` pools them.
+        One per run, in order, all in one state space (a space that fits itself to its
+        window, e.g. ``cells-velocity`` or ``cells-regime``, fitted on the first run's);
+        an estimator's ``fit`` pools them.
 
     Raises
     ------
@@ -157,4 +159,9 @@ def discretize_runs(runs: Sequence, state_space: StateSpace, lag: float,
     check_runs_match(runs)
     windows = run_windows(windows, len(runs))
     check_runs_distinct(runs, windows)
-    return [discretize(run, state_space, lag, window) for run, window in zip(runs, windows)]
+    first = discretize(runs[0], state_space, lag, windows[0])
+    # a space that fits itself to its window (velocity bins, regime edges) is fitted on the
+    # first run's and applied as it is to the others, so that their states are the same
+    fitted = first.state_space
+    return [first] + [discretize(run, fitted, lag, window)
+                      for run, window in zip(runs[1:], windows[1:])]
