@@ -161,10 +161,7 @@ def test_fit_several_runs(runs, tmp_path, capsys):
     single = fit_model(runs["stationary"], _space(), 0.025, (2.0, 8.0), "paper")
     other = fit_model(runs["stationary2"], _space(), 0.025, (3.0, 9.0), "paper")
     np.testing.assert_array_equal(model.counts, single.counts + other.counts)
-    # refused in one line: --states auto, windows that do not match the runs
-    code, _, err = run_cli(capsys, "fit", runs["stationary"], runs["stationary2"], "--states",
-                           "auto", "-o", tmp_path / "x.h5")
-    assert code == 2 and "one run" in err and len(err.strip().splitlines()) == 1
+    # refused in one line: windows that do not match the runs
     code, _, err = run_cli(capsys, "fit", runs["stationary"], runs["stationary2"], "--window",
                            "1:2,2:3,3:4", "-o", tmp_path / "x.h5")
     assert code == 2 and "3 windows for 2 runs" in err

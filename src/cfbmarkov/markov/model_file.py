@@ -10,8 +10,8 @@ states:
   ``rows``, ``lag`` (s), ``window`` (s, NaN for none), ``estimator``, ``source`` (JSON),
   ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
   ``cfbmarkov_version``; for a model fitted on several runs, ``run_windows`` (JSON, the
-  window of each run of ``source``); for a model chosen by ``--states auto``, ``selection`` (JSON); for
-  a model fitted on the largest strongly connected set, ``connected = 1``; where the
+  window of each run of ``source``); for a model chosen by ``--states auto``,
+  ``selection`` (JSON); for a model fitted on the largest strongly connected set, ``connected = 1``; where the
   fitting sample was judged, ``adequacy`` (JSON, :class:`~cfbmarkov.markov.adequacy.Adequacy`;
   optional, files without it read as models without a verdict);
 - optionally the group ``uncertainty`` (the intervals of the exact E(RT), SD(RT) and RTD
