@@ -101,3 +101,32 @@ def test_pooled_fit_of_a_space_fitted_to_its_window(runs, tmp_path, capsys):
         one = fit_model(runs[0], model.state_space, FLOW.lag, WINDOW, "paper")
         assert one.state_space == model.state_space
         assert model.uncertainty is not None
+
+
+def test_compare_baseline_of_a_pooled_model_pools_its_runs_windows(tmp_path, capsys):
+    """compare's persistence baseline for a pooled model: the residences of both runs'
+    fitting windows pooled (as many as the two windows hold together)."""
+    from dataclasses import replace
+
+    from cfbmarkov.observed.residence import residence_times
+
+    flow = replace(FLOW, columns=4)             # mixing by halves needs an even count
+    runs = [synthetic.write_run(tmp_path / f"r{k}.h5", flow, 200, 3.0, seed=30 + k)
+            for k in range(2)]
+    model = tmp_path / "pooled.h5"
+    assert main(["fit", str(runs[0]), str(runs[1]), "--cells", "4x8", "--window", "0.5:2",
+                 "--resamples", "0", "--no-adequacy", "-o", str(model)]) == 0
+    pred = tmp_path / "pred.h5"
+    assert main(["predict", str(model), "--init", str(runs[0]), "--start", "2", "--duration",
+                 "1", "-o", str(pred), "-q"]) == 0
+    out = tmp_path / "cmp"
+    assert main(["compare", str(runs[0]), str(pred), "--window", "2:3", "-o", str(out),
+                 "--no-figures", "--resamples", "0"]) == 0
+    capsys.readouterr()
+    baseline = json.loads((out / "summary.json").read_text())["baseline"]
+    counts = []
+    for path in runs[:2]:
+        with Trajectories(path) as traj:
+            counts.append(residence_times(traj, (0.5, 2.0), use_events=False,
+                                          lag_frames=traj.lag_frames(FLOW.lag)).count)
+    assert baseline["rt_count"] == sum(counts) and min(counts) > 0
