@@ -143,7 +143,8 @@ def table(fits: list[dict]) -> list[dict]:
                   for f in with_interval]
         errors = [abs(f["rt_mean"] / f["long_run"] - 1.0) for f in group]
         off = [f for f in group if abs(f["rt_mean"] / f["long_run"] - 1.0) > OFF]
-        rows.append({"model": key[0], "length": key[1], "fits": len(group),
+        failed = sum("error" in f for f in fits if (f["model"], f["length"]) == key)
+        rows.append({"model": key[0], "length": key[1], "fits": len(group), "failed": failed,
                      "intervals": len(with_interval),
                      "coverage": float(np.mean(held)) if held else math.nan,
                      "median_relative_width": float(np.median(widths)) if widths else math.nan,
@@ -174,9 +175,12 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
                     reference = long_run_outside(residences, window)
                     for model in (("cells", "auto") if auto else ("cells",)):
                         t0 = time.perf_counter()
-                        fit = fit_one(path, traj, window, columns=columns, rows=rows,
-                                      lag=run_lag, auto=model == "auto", level=level,
-                                      resamples=resamples)
+                        try:
+                            fit = fit_one(path, traj, window, columns=columns, rows=rows,
+                                          lag=run_lag, auto=model == "auto", level=level,
+                                          resamples=resamples)
+                        except CfbmarkovError as exc:     # kept, and left out of the table
+                            fit = {"window": list(window), "error": str(exc)}
                         fit.update(run=str(path), model=model, length=float(length),
                                    long_run=float(reference.mean()) if reference.size
                                    else None,
@@ -192,14 +196,16 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
 def _print_table(result: dict) -> None:
     pct = f"{100 * result['level']:g}"
     print(f"{'model':<6} {'L (s)':>6} {'fits':>5} {'coverage':>9} {'width':>7} "
-          f"{'error':>7} {'>50% off':>9} {'warned':>7}")
+          f"{'error':>7} {'>50% off':>9} {'warned':>7} {'any warning':>12}")
     for r in result["table"]:
         print(f"{r['model']:<6} {r['length']:>6g} {r['fits']:>5d} {r['coverage']:>9.2f} "
               f"{r['median_relative_width']:>7.2f} {r['median_relative_error']:>7.2f} "
-              f"{r['off']:>9d} {r['off_warned']:>7d}")
+              f"{r['off']:>9d} {r['off_warned']:>7d} {r['warned']:>12d}"
+              + (f" ({r['failed']} failed)" if r["failed"] else ""))
     print(f"coverage: share of {pct} % intervals holding the long-run E(RT) outside the "
           "window; width: median (upper - lower) / fitted E(RT); error: median |fit / long "
-          "run - 1|; warned: of the fits > 50 % off, those with a verdict warning")
+          "run - 1|; warned: of the fits > 50 % off, those with a verdict warning; any "
+          "warning: fits with a verdict warning")
 
 
 def main(argv=None) -> int:
@@ -231,6 +237,10 @@ def main(argv=None) -> int:
 
     def progress(fit):
         if not args.quiet:
+            if "error" in fit:
+                print(f"{Path(fit['run']).name} {fit['model']} {fit['window'][0]:g}-"
+                      f"{fit['window'][1]:g} s: no fit ({fit['error']})", file=sys.stderr)
+                return
             lo, hi = fit.get("rt_mean_interval", (math.nan, math.nan))
             ref = math.nan if fit["long_run"] is None else fit["long_run"]
             print(f"{Path(fit['run']).parent.name}/{Path(fit['run']).name} {fit['model']} "
