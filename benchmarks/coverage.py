@@ -12,6 +12,12 @@ takes by default), with its interval (:func:`cfbmarkov.analysis.intervals.model_
 and the verdict on its sample (:func:`cfbmarkov.analysis.adequacy.assess_adequacy`);
 ``--auto`` also fits ``--states auto`` (:func:`cfbmarkov.markov.select.select_model`).
 
+The model's E(RT) and interval are those of residences counted in the direction of the
+span's net solids flow (``model.rtd(None, direction)``, ``model_intervals(direction=...)``;
+``docs/definitions.md``, Net downflow), the direction the long run is counted in; ``fit``
+prints the upward one, which differs from it where the net flow runs down (the verdict's
+E(RT) limit then comes from the default tolerance instead of the interval).
+
 The reference is the run's **long-run E(RT) outside the window**: every residence of the
 run after the settling time (from the lap counters at the model's lag, counted in the net
 solids flow direction of the whole span, from one record of a new lap level to the next,
@@ -100,8 +106,9 @@ def _case_markov(path: Path) -> dict:
 
 
 def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, auto: bool,
-            level: float, resamples: int) -> dict:
-    """One fit as ``cfbmarkov fit`` makes it: E(RT), its interval and the verdict's lines."""
+            level: float, resamples: int, direction: str = "up") -> dict:
+    """One fit as ``cfbmarkov fit`` makes it: E(RT) and its interval in ``direction`` (the
+    residences' direction of the long run it is compared with) and the verdict's lines."""
     estimator = "mle" if traj.boundary.is_open else "paper"
     if auto:
         from cfbmarkov.markov.select import select_model
@@ -113,18 +120,20 @@ def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, au
         model = fit_model(traj, space, lag, window, estimator)
     out = {"window": list(window), "states": model.state_space.describe()}
     try:
-        rtd = model.rtd()
+        rtd = model.rtd(None, direction)
     except CfbmarkovError as exc:
         return out | {"error": str(exc)}
     out["rt_mean"] = float(rtd.mean)
+    out["direction"] = direction
     interval = None
     try:
-        u = model_intervals(model, level=level, resamples=resamples)
+        u = model_intervals(model, level=level, resamples=resamples, direction=direction)
         interval = u.rt_mean_interval
         out["rt_mean_interval"] = list(interval)
     except CfbmarkovError as exc:
         out["interval_error"] = str(exc)
-    verdict = assess_adequacy(model, [path], [window], interval=interval)
+    verdict = assess_adequacy(model, [path], [window],
+                              interval=interval if direction == "up" else None)
     out["warnings"] = list(verdict.warnings)
     return out
 
@@ -167,6 +176,7 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
             first, last = float(traj.times[0]), float(traj.times[-1])
             a0 = max(first, settle)
             residences = residence_intervals(traj, (a0, last), run_lag)
+            direction = net_flow_direction(traj, (a0, last))
             for length in lengths:
                 if a0 + length > last + 1e-9:
                     continue
@@ -178,7 +188,7 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
                         try:
                             fit = fit_one(path, traj, window, columns=columns, rows=rows,
                                           lag=run_lag, auto=model == "auto", level=level,
-                                          resamples=resamples)
+                                          resamples=resamples, direction=direction)
                         except CfbmarkovError as exc:     # kept, and left out of the table
                             fit = {"window": list(window), "error": str(exc)}
                         fit.update(run=str(path), model=model, length=float(length),
