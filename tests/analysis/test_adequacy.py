@@ -1,6 +1,7 @@
 """The verdict on a fitting sample (fit), pooled fits of several runs, and how long a sample
 must be (stationarity --sample-length), on generated risers."""
 
+import contextlib
 import json
 
 import h5py
@@ -12,7 +13,9 @@ from cfbmarkov.analysis.adequacy import assess_adequacy
 from cfbmarkov.analysis.sample_length import sample_length
 from cfbmarkov.cli import main
 from cfbmarkov.markov import MarkovModel, fit_model
+from cfbmarkov.errors import InputError
 from cfbmarkov.markov.adequacy import Adequacy
+from cfbmarkov.markov.discrete import discretize
 from cfbmarkov.markov.estimate import estimator_from_name
 from cfbmarkov.markov.pooling import discretize_runs
 from cfbmarkov.markov.states import CellGrid
@@ -26,12 +29,12 @@ SWITCH = 3.0        # s between switches of the two-chain riser
 DURATION = 24.0
 
 
-def _write(path, period, seed=3, n=3000):
+def _write(path, period, seed=3, n=3000, slow=False):
     """All particles follow the fast chain, then the slow one, switching every ``period``
-    s (0: the fast chain throughout, a stationary run)."""
+    s (0: the fast chain throughout, a stationary run; with ``slow``, the slow one)."""
     k = int(round(DURATION / FAST.lag)) + 1
     t = FAST.lag * np.arange(k)
-    regimes = ((t + 1e-9) // period).astype(int) % 2 if period else np.zeros(k, int)
+    regimes = ((t + 1e-9) // period).astype(int) % 2 if period else np.full(k, int(slow))
     return synthetic.write_regime_run(path, [FAST, SLOW], np.eye(2), n, DURATION, seed=seed,
                                       regimes=regimes)
 
@@ -129,10 +132,14 @@ def test_verdict_in_the_model_file_and_the_verbs(runs, tmp_path, capsys):
 
 
 def test_pooling_copies_gives_the_same_chain(runs):
+    """The counts of three windows add (one window counted three times here; fit refuses
+    a run pooled with itself, test_pooled_intervals)."""
     path = runs["stationary"]
     space = _space()
-    with Trajectories(path) as a, Trajectories(path) as b, Trajectories(path) as c:
-        pooled_data = discretize_runs([a, b, c], space, 0.025, [(2.0, 8.0)])
+    pooled_data = [discretize(path, space, 0.025, (2.0, 8.0))] * 3
+    with Trajectories(path) as a, Trajectories(path) as b:
+        with pytest.raises(InputError, match="same data"):
+            discretize_runs([a, b], space, 0.025, [(2.0, 8.0)])
     for name in ("paper", "mle"):
         fitter = estimator_from_name(name, space, 0.025)
         one = fit_model(path, space, 0.025, (2.0, 8.0), name)
@@ -154,10 +161,7 @@ def test_fit_several_runs(runs, tmp_path, capsys):
     single = fit_model(runs["stationary"], _space(), 0.025, (2.0, 8.0), "paper")
     other = fit_model(runs["stationary2"], _space(), 0.025, (3.0, 9.0), "paper")
     np.testing.assert_array_equal(model.counts, single.counts + other.counts)
-    # refused in one line: --states auto, windows that do not match the runs
-    code, _, err = run_cli(capsys, "fit", runs["stationary"], runs["stationary2"], "--states",
-                           "auto", "-o", tmp_path / "x.h5")
-    assert code == 2 and "one run" in err and len(err.strip().splitlines()) == 1
+    # refused in one line: windows that do not match the runs
     code, _, err = run_cli(capsys, "fit", runs["stationary"], runs["stationary2"], "--window",
                            "1:2,2:3,3:4", "-o", tmp_path / "x.h5")
     assert code == 2 and "3 windows for 2 runs" in err
@@ -207,3 +211,54 @@ def test_report_paragraph_repeats_the_verdict():
     summary = {"md_rtd": 0.2, "adequacy": {"warnings": ["the halves disagree: 67 %"]}}
     assert "fitting sample was warned about" in trust_text("4", "paper", summary)
     assert "warned" not in trust_text("4", "paper", {"md_rtd": 0.2})
+
+
+def test_pooled_verdict_names_the_run_that_disagrees_and_pooled_halves(runs, tmp_path):
+    """Two fast runs and a slow one pooled: 'the runs disagree', the slow run named first;
+    two stationary runs pooled: no warning, each run's E(RT) recorded; two switching runs
+    in step: the pooled windows' halves disagree."""
+    slow = _write(tmp_path / "slow.h5", 0, seed=5, n=1000, slow=True)
+    paths = [runs["stationary"], runs["stationary2"], slow]
+    window = (2.0, 8.0)
+    with contextlib.ExitStack() as stack:
+        opened = [stack.enter_context(Trajectories(p)) for p in paths]
+        data = discretize_runs(opened, _space(), 0.025, [window])
+    model = estimator_from_name("paper", _space(), 0.025).fit(data)
+    verdict = assess_adequacy(model, paths, [window] * 3, discrete=data)
+    line = next(line for line in verdict.warnings if "runs disagree" in line)
+    assert line.index(str(slow)) < min(line.find(str(p)) % len(line) for p in paths[:2])
+    assert [r for r, _ in verdict.runs] == [str(p) for p in paths]
+    assert Adequacy.from_dict(verdict.to_dict()) == verdict
+    calm = estimator_from_name("paper", _space(), 0.025).fit(data[:2])
+    quiet = assess_adequacy(calm, paths[:2], [window] * 2, discrete=data[:2])
+    assert quiet.adequate, quiet.warnings
+    assert len(quiet.runs) == 2 and all(m > 0 for _, m in quiet.runs)
+    other = _write(tmp_path / "switching2.h5", SWITCH, seed=6, n=1000)
+    pair = [runs["switching"], other]
+    step = (1.5, 4.5)
+    model = fit_model(pair[0], _space(), 0.025, step, "paper")
+    with Trajectories(pair[0]) as a, Trajectories(pair[1]) as b:
+        both = discretize_runs([a, b], _space(), 0.025, [step])
+    model = estimator_from_name("paper", _space(), 0.025).fit(both)
+    verdict = assess_adequacy(model, pair, [step] * 2, discrete=both)
+    assert any("halves of the pooled windows disagree" in line for line in verdict.warnings)
+
+
+def test_sample_length_of_several_runs_pools_windows_and_long_runs(runs, capsys):
+    """Two stationary runs: the windows' models fitted on both runs' counts, the long run
+    over both runs' residences; the table names both; the sliding windows refuse two runs,
+    and a run pooled with itself is refused."""
+    one = sample_length(runs["stationary"], _space(), lag=0.025, start=0.0)
+    two = sample_length([runs["stationary"], runs["stationary2"]], _space(), lag=0.025,
+                        start=0.0)
+    assert two.long_run_count > 1.8 * one.long_run_count
+    assert two.within().all() and two.sample_length == 0.5
+    assert "2 runs pooled" in two.description
+    code, out, _ = run_cli(capsys, "stationarity", runs["stationary"], runs["stationary2"],
+                           "--sample-length", "--cells", "4x16")
+    assert code == 0 and str(runs["stationary2"]) in out and "2 runs pooled" in out
+    code, _, err = run_cli(capsys, "stationarity", runs["stationary"], runs["stationary2"])
+    assert code == 2 and "--sample-length" in err and len(err.strip().splitlines()) == 1
+    code, _, err = run_cli(capsys, "stationarity", runs["stationary"], runs["stationary"],
+                           "--sample-length", "--cells", "4x16")
+    assert code == 2 and "same data" in err

@@ -16,6 +16,12 @@ tell from the window alone when that flow may not be the run's:
   beyond the window's length, residences the window cannot contain;
 - and halves with fewer than :data:`MIN_PART_RESIDENCES` residences leave E(RT)
   unjudged, itself a warning.
+
+A model fitted on several runs (a pooled fit) has these checks per run, each run's limit
+sqrt(N) times the pooled interval's (a run holds 1/N of the data), and two across the runs:
+the first halves of all the windows pooled against the second halves pooled (the flow
+changing in step in every run), and each run's own model against the pooled one, the runs
+further than the limit times sqrt(N - 1) named (:func:`_pooled_checks`).
 """
 
 from __future__ import annotations
@@ -140,12 +146,17 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     lines: list[str] = []
     all_parts: list[tuple[float, float, float, str]] = []
     spread = math.nan
+    pooled = len(runs) > 1
+    data, names, pooled_fewest = [], [], 0
     for k, (run, window) in enumerate(zip(runs, windows)):
         with opened(run) as traj:
             d = discrete[k] if discrete is not None else discretize(
                 traj, model.state_space, model.lag, window)
             parts, fewest = _parts_of(traj, d, window, model, fitter)
             name = traj.path
+        data.append(d)
+        names.append(str(name))
+        pooled_fewest += fewest
         all_parts += parts
         turn = _turn_line(name, parts)
         if turn:
@@ -155,7 +166,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                          f"holds {fewest} residences (fewer than {MIN_PART_RESIDENCES}): "
                          f"the window is too short to judge its E(RT); {_ADVICE}")
             continue
-        part_limit = limit * (math.sqrt(2.0) if len(parts) == 4 else 1.0)
+        # one run of a pooled fit is N times less data than the interval's: sqrt(N) wider
+        part_limit = limit * math.sqrt(len(runs)) * (math.sqrt(2.0) if len(parts) == 4 else 1.0)
         part_spread = _spread([m for _, _, m, _ in parts], rt_mean)
         spread = part_spread if not math.isfinite(spread) else max(spread, part_spread)
         if math.isfinite(part_spread) and part_spread > part_limit:
@@ -165,6 +177,14 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                          f"a spread of {100 * part_spread:.0f} % of the model's {rt_mean:.3g} s "
                          f"(limit {100 * part_limit:.0f} %): the flow changed within the "
                          f"window, and the model may lie far from the flow's long run; {_ADVICE}")
+    run_means: tuple[tuple[str, float], ...] = ()
+    if pooled:
+        run_means, pooled_lines, pooled_spread = _pooled_checks(
+            fitter, data, names, windows, rt_mean, limit,
+            halves=pooled_fewest >= MIN_PART_RESIDENCES)
+        lines += pooled_lines
+        if math.isfinite(pooled_spread):
+            spread = pooled_spread if not math.isfinite(spread) else max(spread, pooled_spread)
     length = min(b - a for a, b in windows)
     tail = _tail_share(model, length)
     if math.isfinite(tail) and tail > TAIL_LIMIT:
@@ -172,7 +192,58 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                      f"{length:g} s fitting window (E(RT) {rt_mean:.3g} s): the window cannot "
                      f"contain them, so the long residences rest on few observations; "
                      f"{_ADVICE}")
-    return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail)
+    return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
+                    run_means)
+
+
+def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
+                   halves: bool = True):
+    """A pooled fit's checks across its runs: the first halves of all the windows pooled
+    against the second halves pooled (limit ``limit``), and each run's own model against
+    the pooled one (limit ``limit`` sqrt(N - 1): a run holds 1/N of the data, so its E(RT)
+    scatters sqrt(N) times the pooled interval's, and sqrt(1 - 1/N) of that about the
+    pooled value). The halves are compared only with ``halves`` (where the pooled halves
+    hold at least MIN_PART_RESIDENCES residences each). Returns ((run, E(RT)) per run,
+    warning lines, the halves' spread)."""
+    lines = []
+    runs = len(data)
+    means = []
+    for d in data:
+        try:
+            means.append(_rt_mean(fitter.fit(d)))
+        except CfbmarkovError:
+            means.append(math.nan)
+    run_limit = limit * math.sqrt(runs - 1)
+    off = sorted(((name, m) for name, m in zip(names, means)
+                  if math.isfinite(m) and rt_mean > 0 and abs(m / rt_mean - 1.0) > run_limit),
+                 key=lambda item: -abs(item[1] / rt_mean - 1.0))     # the furthest first
+    if off:
+        text = ", ".join(f"{name} {m:.3g} s" for name, m in off)
+        lines.append(f"the runs disagree: E(RT) of the model fitted on each run alone, {text}, "
+                     f"lies more than {100 * run_limit:.0f} % from the pooled model's "
+                     f"{rt_mean:.3g} s (all runs: "
+                     + ", ".join(f"{m:.3g}" for m in means) + " s): the runs may not be "
+                     "samples of one flow (check their cases, or `cfbmarkov stationarity` "
+                     "each); pool runs of one case and state")
+    means_of_halves = []
+    for side in ((0, 1) if halves else ()):
+        blocks = []
+        for d, (a, b) in zip(data, windows):
+            cut = _split((a, b), 2)[side]
+            blocks.append(d.block(*cut))
+        try:
+            means_of_halves.append(_rt_mean(fitter.fit(blocks)))
+        except CfbmarkovError:
+            means_of_halves.append(math.nan)
+    spread = _spread(means_of_halves, rt_mean)
+    if math.isfinite(spread) and spread > limit:
+        first, second = means_of_halves
+        lines.append(f"the halves of the pooled windows disagree: E(RT) {first:.3g} s "
+                     f"from the first halves of all {runs} runs, {second:.3g} s from the "
+                     f"second, a spread of {100 * spread:.0f} % of the pooled model's "
+                     f"{rt_mean:.3g} s (limit {100 * limit:.0f} %): the flow changed within "
+                     f"the windows; {_ADVICE}")
+    return tuple(zip(names, means)), lines, spread
 
 
 def _tail_share(model, length: float) -> float:

@@ -3,7 +3,8 @@
 
 - The *persistence baseline* uses the reference's own RTD observed in the model's fitting
   window as the prediction of the analysis window: a model is only worth its name where it
-  beats it.
+  beats it. For a model fitted on several runs, the RTD of all its runs' fitting windows
+  pooled (:func:`pooled_window_difference`), read from the runs.
 - The *natural variability* is the reference's difference between the two halves of the
   analysis window: how much the "truth" itself moves at that scale (sampling noise and
   non-stationarity), the floor below which no model can be judged.
@@ -25,6 +26,7 @@ import numpy as np
 
 from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
 from cfbmarkov.observed.residence import ResidenceTimes, residence_times, rtd_histogram
+from cfbmarkov.trajectories import opened
 
 
 @dataclass(frozen=True)
@@ -183,6 +185,52 @@ def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, f
                             percentage_difference(a.sd, b.sd, scale=b.mean), md)
 
 
+def pooled_window_difference(runs, ref, judged: tuple[float, float], *, bin_width: float,
+                             md_order: float, use_events: bool, lag_frames: int,
+                             face_band: float | None, window_length: float,
+                             direction: str = "up") -> WindowDifference:
+    """The RTD of several runs' windows pooled taken as the prediction of ``judged`` in the
+    reference: the persistence baseline of a pooled fit.
+
+    Parameters
+    ----------
+    runs : sequence of (str, (float, float))
+        Each run's trajectory file and window (s), as a pooled model records them.
+    ref : Trajectories
+        The reference file.
+    judged : (float, float)
+        The window judged (s).
+    bin_width, md_order, use_events, lag_frames, face_band, window_length, direction
+        As :func:`window_difference`.
+
+    Returns
+    -------
+    WindowDifference
+        ``windows``: (the first run's window, ``judged``); ``predicted``: the pooled samples.
+
+    Raises
+    ------
+    InputError
+        If a run cannot be read or a window holds no frame of it.
+    """
+    kwargs = {"use_events": use_events, "lag_frames": lag_frames, "face_band": face_band,
+              "direction": direction}
+    samples, exact = [], True
+    for path, window in runs:
+        with opened(path) as run:
+            got = residence_times(run, window, **kwargs)
+        samples.append(got.samples)
+        exact = exact and got.exact
+    a = ResidenceTimes(np.concatenate(samples), exact, tuple(runs[0][1]))
+    b = residence_times(ref, judged, **kwargs)
+    _, pa = rtd_histogram(a.samples, bin_width, window_length=window_length)
+    _, pb = rtd_histogram(b.samples, bin_width, window_length=window_length)
+    md = minkowski_distance(pa, pb, md_order) if pa.sum() > 0 and pb.sum() > 0 else float("nan")
+    return WindowDifference((tuple(runs[0][1]), tuple(judged)), a, b,
+                            percentage_difference(a.mean, b.mean),
+                            percentage_difference(a.sd, b.sd, scale=b.mean), md)
+
+
 def model_on_fitting_window(model: ResidenceTimes, model_rtd: np.ndarray,
                             baseline: WindowDifference, *, bin_width: float, md_order: float,
                             window_length: float) -> WindowDifference:
@@ -243,3 +291,31 @@ def fitting_window(pred) -> tuple[float, float] | None:
     if window.shape != (2,) or not np.all(np.isfinite(window)) or not window[1] > window[0]:
         return None
     return float(window[0]), float(window[1])
+
+
+def fitting_runs_of(pred) -> list[tuple[str, tuple[float, float]]] | None:
+    """The runs and windows of the pooled model behind a prediction (its
+    ``/provenance/model`` group's ``source`` and ``run_windows``), or None for a model of
+    one run or where they cannot be read.
+
+    Parameters
+    ----------
+    pred : Trajectories
+        A prediction.
+
+    Returns
+    -------
+    list of (str, (float, float)) or None
+    """
+    import json
+
+    group = pred.group("model")
+    if group is None or "run_windows" not in group.attrs or "source" not in group.attrs:
+        return None
+    try:
+        text = [group.attrs[k] for k in ("source", "run_windows")]
+        source, windows = (json.loads(t.decode() if isinstance(t, bytes) else t) for t in text)
+        runs = [(str(p), (float(w[0]), float(w[1]))) for p, w in zip(source, windows)]
+    except (ValueError, TypeError, IndexError):
+        return None
+    return runs if len(runs) == len(source) and len(runs) > 1 else None

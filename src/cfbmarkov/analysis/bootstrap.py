@@ -28,6 +28,34 @@ FLOW_BLOCKS = 4
 FLOW_BLOCK_RESIDENCES = 3.0
 
 
+def fitting_runs(model) -> list[tuple[str, tuple[float, float]]]:
+    """The runs a model was fitted on and the window of each: one (source, window) pair,
+    or a pooled fit's pairs in its order.
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    list of (str, (float, float))
+
+    Raises
+    ------
+    InputError
+        For a model without its fitting data: no window, or several sources without a
+        window per run.
+    """
+    if isinstance(model.source, str) and model.window is not None:
+        return [(model.source, tuple(model.window))]
+    runs = getattr(model, "run_windows", None)
+    if (isinstance(model.source, (list, tuple)) and runs is not None
+            and len(runs) == len(model.source)):
+        return [(str(path), tuple(w)) for path, w in zip(model.source, runs)]
+    raise InputError("intervals need the model's fitting data (its source file(s) and the "
+                     "window of each)")
+
+
 def _resampled_rtd(model, window_length: float, direction: str, entry):
     """A resampled model's RTD in the window, from the fitted model's entry distribution
     (one sparse LU per resample saved: the spread of the entry distribution is left out,
@@ -72,7 +100,9 @@ def block_bootstrap_models(model, *, blocks: int = 10, resamples: int = 100, see
     that every pair of the window is counted in exactly one block. Each resample draws
     ``blocks`` blocks with replacement, sums their counts and forms a model with the same
     estimator, state space and lag. The data are read and counted once; each resample costs
-    one estimate.
+    one estimate. A model fitted on several runs (:func:`fitting_runs`) has ``blocks``
+    blocks in each run's window, and a resample draws ``blocks`` of each run's own blocks
+    (a stratified block bootstrap: every run keeps its weight in every resample).
 
     Parameters
     ----------
@@ -131,31 +161,36 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
     if int(blocks) < 2 or int(resamples) < 1:
         raise InputError(f"a block bootstrap needs at least 2 blocks and 1 resample ({blocks}, "
                          f"{resamples})")
-    if not isinstance(model.source, str) or model.window is None:
-        raise InputError("intervals need the model's fitting data (one source file and a window)")
     blocks = int(blocks)
-    discrete = discretize(model.source, model.state_space, model.lag, model.window)
-    # the frame pairs (t, t + lag) are split, by their first frame, into contiguous blocks:
-    # each pair is counted in exactly one block, none across a block's edge is lost
-    lag_frames = int(discrete.lag_frames)
-    pairs = discrete.times.size - lag_frames
-    if pairs < blocks:
-        raise InputError(f"the fitting window holds {max(pairs, 0)} frame pairs one lag apart, "
-                         f"fewer than the {blocks} bootstrap blocks")
-    cuts = np.rint(np.linspace(0, pairs, blocks + 1)).astype(np.int64)
-    times = discrete.times
     frame_average = model.estimator == "paper"
-    counts = [count_transitions(discrete.block(float(times[a]), float(times[b - 1 + lag_frames])),
-                                frame_average=frame_average, sparse=sparse)
-              for a, b in zip(cuts[:-1], cuts[1:])]
+    counts = []           # blocks of run r at counts[r * blocks: (r + 1) * blocks]
+    for source, window in fitting_runs(model):
+        discrete = discretize(source, model.state_space, model.lag, window)
+        # the frame pairs (t, t + lag) are split, by their first frame, into contiguous
+        # blocks: each pair is counted in exactly one block, none across a block's edge lost
+        lag_frames = int(discrete.lag_frames)
+        pairs = discrete.times.size - lag_frames
+        if pairs < blocks:
+            raise InputError(f"the fitting window {window[0]:g}-{window[1]:g} s of {source} "
+                             f"holds {max(pairs, 0)} frame pairs one lag apart, fewer than the "
+                             f"{blocks} bootstrap blocks")
+        cuts = np.rint(np.linspace(0, pairs, blocks + 1)).astype(np.int64)
+        times = discrete.times
+        counts += [count_transitions(discrete.block(float(times[a]),
+                                                    float(times[b - 1 + lag_frames])),
+                                     frame_average=frame_average, sparse=sparse)
+                   for a, b in zip(cuts[:-1], cuts[1:])]
+    runs = len(counts) // blocks
     rng = np.random.default_rng(seed)
     stacked = _StackedCounts(counts) if sparse and counts[0].faces is None else None
 
     def draw():
         for _ in range(int(resamples)):
-            picked = rng.integers(0, blocks, blocks)
+            # blocks of each run drawn from that run's own (one run: as before)
+            picked = np.concatenate([r * blocks + rng.integers(0, blocks, blocks)
+                                     for r in range(runs)])
             if stacked is not None:
-                yield stacked.total(np.bincount(picked, minlength=blocks))
+                yield stacked.total(np.bincount(picked, minlength=len(counts)))
                 continue
             total = counts[picked[0]]
             for k in picked[1:]:
@@ -280,10 +315,15 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
     11.8, 15.9 and 8.8 % at 6 m/s (5 s windows overlapping, 1 s apart), not falling as
     1 / sqrt(length) (``docs/definitions.md``, Intervals).
 
+    A model fitted on several runs (:func:`fitting_runs`) has the blocks of every run's
+    window (as many as fit in each, by the same rule, from the E(RT) of all the runs'
+    residences), each compared with all the others pooled: the spread then holds the
+    differences between the runs too.
+
     Parameters
     ----------
     model : cfbmarkov.markov.MarkovModel
-        The fitted model; its ``source`` (one trajectory file) and ``window`` are re-read.
+        The fitted model; its fitting windows are re-read from its source file(s).
     window_length : float
         Length of the analysis window (s).
     direction : {"up", "down"}, optional
@@ -301,7 +341,7 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
     Raises
     ------
     InputError
-        For a model without one source file and a window, or fewer than 2 blocks.
+        For a model without its fitting data (:func:`fitting_runs`), or fewer than 2 blocks.
 
     References
     ----------
@@ -313,24 +353,32 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
     """
     if int(blocks) < 2:
         raise InputError(f"the flow's variability needs at least 2 blocks ({blocks})")
-    if not isinstance(model.source, str) or model.window is None:
-        raise InputError("intervals need the model's fitting data (one source file and a window)")
-    a, b = (float(v) for v in model.window)
-    with opened(model.source) as traj:
-        lag_frames = traj.lag_frames(model.lag)
-        whole = residence_times(traj, (a, b), use_events=False, lag_frames=lag_frames,
-                                direction=direction)
+    runs = fitting_runs(model)
+    whole = []
+    for source, window in runs:
+        with opened(source) as traj:
+            whole.append(residence_times(traj, window, use_events=False,
+                                         lag_frames=traj.lag_frames(model.lag),
+                                         direction=direction).samples)
+    pooled = np.concatenate(whole)
+    if pooled.size < 2:
+        return None
+    observed, lengths = [], []
+    for source, (a, b) in runs:
         # blocks at least FLOW_BLOCK_RESIDENCES mean residences long, so that a block's own
         # window cuts off few of its residences
-        if whole.count < 2:
-            return None
-        blocks = min(int(blocks), int((b - a) / (FLOW_BLOCK_RESIDENCES * whole.mean)))
-        if blocks < 2:
-            return None
-        cuts = a + (b - a) * np.arange(blocks + 1) / blocks
-        observed = [residence_times(traj, (float(cuts[k]), float(cuts[k + 1])), use_events=False,
-                                    lag_frames=lag_frames, direction=direction).samples
-                    for k in range(blocks)]
+        n = min(int(blocks), int((b - a) / (FLOW_BLOCK_RESIDENCES * pooled.mean())))
+        if n < 1 or (n < 2 and len(runs) == 1):
+            continue
+        cuts = a + (b - a) * np.arange(n + 1) / n
+        with opened(source) as traj:
+            lag_frames = traj.lag_frames(model.lag)
+            observed += [residence_times(traj, (float(cuts[k]), float(cuts[k + 1])),
+                                         use_events=False, lag_frames=lag_frames,
+                                         direction=direction).samples for k in range(n)]
+        lengths += [(b - a) / n] * n
+    if len(observed) < 2:
+        return None
     rel_mean, rel_sd = [], []
     for k, block in enumerate(observed):
         others = np.concatenate([o for j, o in enumerate(observed) if j != k])
@@ -342,8 +390,8 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
             rel_sd.append(block.std(ddof=1) / spread - 1.0)
     if len(rel_mean) < 2:
         return None
-    block = (b - a) / blocks
-    factor = np.sqrt((blocks - 1.0) / blocks) * max(1.0, np.sqrt(block / float(window_length)))
+    count, block = len(observed), float(np.mean(lengths))
+    factor = np.sqrt((count - 1.0) / count) * max(1.0, np.sqrt(block / float(window_length)))
     rms = lambda values: float(np.sqrt(np.mean(np.square(values)))) if values else 0.0  # noqa: E731
     return rms(rel_mean) * factor, rms(rel_sd) * factor
 

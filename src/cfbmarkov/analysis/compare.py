@@ -22,8 +22,9 @@ from typing import Any
 
 import numpy as np
 
-from cfbmarkov.analysis.baseline import (WindowDifference, fitting_window,
-                                         model_on_fitting_window, window_difference)
+from cfbmarkov.analysis.baseline import (WindowDifference, fitting_runs_of, fitting_window,
+                                         model_on_fitting_window, pooled_window_difference,
+                                         window_difference)
 from cfbmarkov.analysis.compare_inputs import check_parameters, check_runs, default_bin_width
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.stationarity import long_run_baseline
@@ -136,7 +137,8 @@ class RunComparison:
         ``frames`` basis (None where it has none, or on the ``events`` basis).
     baseline : WindowDifference or None
         The persistence baseline: the reference's RTD in the model's fitting window taken
-        as the prediction (None where the fitting window is unknown or outside the
+        as the prediction (a pooled model's: the RTD of its runs' windows pooled, where
+        they can be read; None where the fitting window is unknown or outside the
         reference).
     natural_variability : WindowDifference or None
         The reference's first half of the window against its second half.
@@ -400,7 +402,11 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
                   "window_length": stop - start, "direction": on.direction}
     baseline = None
     fitted = fitting_window(pred)
-    if fitted is not None and fitted[0] >= ref.times[0] - ref.time_tolerance and (
+    pooled = fitting_runs_of(pred)
+    if pooled is not None:          # a pooled fit: its runs' windows pooled, as fitted
+        with contextlib.suppress(InputError):
+            baseline = pooled_window_difference(pooled, ref, (start, stop), **basis_args)
+    if baseline is None and fitted is not None and fitted[0] >= ref.times[0] - ref.time_tolerance and (
             fitted[1] <= ref.times[-1] + ref.time_tolerance):
         with contextlib.suppress(InputError):     # a window without frames: no baseline
             baseline = window_difference(ref, fitted, (start, stop), **basis_args)

@@ -48,7 +48,7 @@ import numpy as np
 from cfbmarkov.analysis.bootstrap import (FLOW_BLOCK_RESIDENCES, FLOW_BLOCKS,  # noqa: F401
                                           _binned, _bootstrap_chains, _resampled_rtd,
                                           block_bootstrap_models, bootstrap_figures,
-                                          flow_variability, interval_bounds)
+                                          fitting_runs, flow_variability, interval_bounds)
 from cfbmarkov.analysis.mixing import _left_states, model_mixing_curve
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.residence import residence_times_from_laps, rtd_histogram
@@ -345,6 +345,12 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     as the fitting window), added in quadrature. The interval is centred on the model's
     exact value.
 
+    A model fitted on several runs (a pooled fit) resamples ``blocks`` blocks of each run's
+    window within that run (:func:`block_bootstrap_models`), and its flow term is the
+    variability between the blocks of all the runs' windows (:func:`flow_variability`)
+    divided by sqrt(runs): the runs are independent samples of one flow, and the pooled
+    model sees their mean.
+
     Parameters
     ----------
     model : MarkovModel
@@ -369,9 +375,9 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     Raises
     ------
     InputError
-        For a level outside (0, 1), fewer than 2 blocks or 10 resamples, a model without one
-        source file and a window, a fitting window too short for the blocks, or fewer than
-        10 resamples with residences.
+        For a level outside (0, 1), fewer than 2 blocks or 10 resamples, a model without its
+        fitting data (:func:`fitting_runs`), a fitting window too short for the blocks, or
+        fewer than 10 resamples with residences.
     CfbmarkovError
         If the model has no residence time (:meth:`MarkovModel.rtd`).
 
@@ -387,16 +393,17 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")
-    if not isinstance(model.source, str) or model.window is None:
-        raise InputError("intervals need the model's fitting data (one source file and a window)")
+    runs = fitting_runs(model)
     exact = model.rtd(None, direction)
     edges = model_rtd_edges(exact)
     means, sds, rtds, _ = bootstrap_figures(model, None, direction, exact.entry_distribution,
                                             edges, int(blocks), int(resamples), seed)
     if len(means) < 10:
         raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
-    length = float(model.window[1] - model.window[0])
+    length = float(np.mean([b - a for _, (a, b) in runs]))
     relative = flow_variability(model, length, direction=direction)
+    if relative is not None:       # several independent runs: their mean's variability
+        relative = tuple(v / np.sqrt(len(runs)) for v in relative)
     f_mean, f_sd = (0.0, 0.0) if relative is None else (relative[0] * exact.mean,
                                                         relative[1] * exact.sd)
     m_lo, m_hi = interval_bounds(exact.mean, np.asarray(means), exact.mean, level, 0.0, f_mean)
@@ -405,8 +412,8 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     r_lo, r_hi = interval_bounds(hist, np.asarray(rtds), hist, level)
     return ModelUncertainty(float(level), (max(float(m_lo), 0.0), float(m_hi)),
                             (max(float(s_lo), 0.0), float(s_hi)), edges,
-                            np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means), int(blocks),
-                            length / int(blocks), relative)
+                            np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means),
+                            int(blocks) * len(runs), length / int(blocks), relative)
 
 
 __all__ = ["PredictionIntervals", "SourceChanged", "block_bootstrap_models",

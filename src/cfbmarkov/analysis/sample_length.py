@@ -105,70 +105,96 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
     """Fit models on growing windows of a run from ``start`` and find the length from which
     their E(RT) and SD(RT) stay within ``tolerance`` of the run's long run.
 
+    Several runs of one case (a sequence of paths) are pooled: each window length is taken
+    from ``start`` in every run and the model fitted on their counts pooled
+    (:mod:`cfbmarkov.markov.pooling`), and the long run is every run's residences from
+    ``start`` to its last frame, pooled; the lengths are per run.
+
     Parameters
     ----------
-    path : str or os.PathLike
-        A trajectory file.
+    path : str, os.PathLike or sequence of them
+        A trajectory file, or several runs of one case.
     state_space : StateSpace
         The states of the models (as ``fit --states``/``--cells``).
     lag : float, optional
         The lag (s).
     start : float, optional
-        Where the windows start (s); default the run's first frame.
+        Where the windows start (s); default the run's first frame (the latest first frame
+        of several runs).
     estimator : {"paper", "mle"}, optional
         Default: ``mle`` for an open riser, else ``paper`` (as ``fit``).
     tolerance : float, optional
         Relative tolerance, default 0.1.
     lengths : sequence of float, optional
-        The lengths tried (s); those that end beyond the run are left out.
+        The lengths tried (s); those that end beyond the (shortest) run are left out.
 
     Returns
     -------
     SampleLength
+        ``file``: the path, or the runs' paths joined by ", ".
 
     Raises
     ------
     InputError
         On a tolerance that is not positive, a start outside the run, a run shorter than
-        the shortest length, a long run without two residences in its direction, or the
-        errors of :func:`~cfbmarkov.markov.discretize`.
+        the shortest length, a long run without two residences in its direction, runs that
+        cannot be pooled (:func:`~cfbmarkov.markov.pooling.check_runs_match`,
+        :func:`~cfbmarkov.markov.pooling.check_runs_distinct`), or the errors of
+        :func:`~cfbmarkov.markov.discretize`.
     """
+    import contextlib
+    import os
+
+    from cfbmarkov.markov.pooling import check_runs_distinct, check_runs_match
+
     if not (math.isfinite(tolerance) and tolerance > 0):
         raise InputError(f"tolerance {tolerance!r} must be a positive number (e.g. 0.1)")
-    with Trajectories(path) as traj:
-        first, last = float(traj.times[0]), float(traj.times[-1])
+    paths = [path] if isinstance(path, (str, os.PathLike)) else list(path)
+    name = ", ".join(str(p) for p in paths)
+    with contextlib.ExitStack() as stack:
+        runs = [stack.enter_context(Trajectories(p)) for p in paths]
+        check_runs_match(runs)
+        first = max(float(t.times[0]) for t in runs)
+        lasts = [float(t.times[-1]) for t in runs]
+        last = min(lasts)
+        tol = runs[0].time_tolerance
         a = first if start is None else float(start)
-        if not first - traj.time_tolerance <= a < last:
-            raise InputError(f"start {a:g} s lies outside the frames of {path} "
+        if not first - tol <= a < last:
+            raise InputError(f"start {a:g} s lies outside the frames of {name} "
                              f"({first:g} to {last:g} s)")
         if estimator is None:
-            estimator = "mle" if traj.boundary.is_open else "paper"
-        usable = [float(n) for n in sorted(lengths) if a + n <= last + traj.time_tolerance]
+            estimator = "mle" if runs[0].boundary.is_open else "paper"
+        usable = [float(n) for n in sorted(lengths) if a + n <= last + tol]
         if not usable:
-            raise InputError(f"{path} runs {last - a:g} s from {a:g} s: shorter than the "
+            raise InputError(f"{name} runs {last - a:g} s from {a:g} s: shorter than the "
                              f"shortest window ({min(lengths):g} s); an earlier --start")
+        if len(runs) > 1:
+            check_runs_distinct(runs, [(a, t_last) for t_last in lasts])
         fitter = estimator_from_name(estimator, state_space, lag)
-        data = discretize(traj, state_space, lag, (a, a + usable[-1]))
+        data = [discretize(t, state_space, lag, (a, a + usable[-1])) for t in runs]
         means, sds = [], []
         for n in usable:
             try:
-                rtd = fitter.fit(data.block(a, a + n)).rtd()
+                rtd = fitter.fit([d.block(a, a + n) for d in data]).rtd()
                 means.append(rtd.mean)
                 sds.append(rtd.sd)
             except CfbmarkovError:
                 means.append(math.nan)
                 sds.append(math.nan)
-        long_run = residence_times(traj, (a, last), use_events=False,
-                                   lag_frames=traj.lag_frames(lag),
-                                   direction=net_flow_direction(traj, (a, last)))
-    if long_run.count < 2:
-        raise InputError(f"{path} holds {long_run.count} residences from {a:g} s: no long run "
+        long_run = np.concatenate([
+            residence_times(t, (a, t_last), use_events=False, lag_frames=t.lag_frames(lag),
+                            direction=net_flow_direction(t, (a, t_last))).samples
+            for t, t_last in zip(runs, lasts)])
+    if long_run.size < 2:
+        raise InputError(f"{name} holds {long_run.size} residences from {a:g} s: no long run "
                          "to judge the windows by (a longer run)")
     lengths_ = np.asarray(usable)
-    result = SampleLength(str(path), a, last, long_run.mean, long_run.sd, long_run.count,
-                          lengths_, np.asarray(means, float), np.asarray(sds, float),
-                          float(tolerance), math.nan,
-                          f"{state_space.describe()}, lag {lag:g} s, estimator '{estimator}'")
+    runs_text = f", {len(paths)} runs pooled" if len(paths) > 1 else ""
+    result = SampleLength(name, a, max(lasts), float(long_run.mean()),
+                          float(long_run.std(ddof=1)), int(long_run.size), lengths_,
+                          np.asarray(means, float), np.asarray(sds, float), float(tolerance),
+                          math.nan, f"{state_space.describe()}, lag {lag:g} s, estimator "
+                                    f"'{estimator}'{runs_text}")
     return _with_length(result)
 
 

@@ -143,6 +143,10 @@ def cmd_stationarity(args) -> int:
 
     if args.sample_length:
         return _sample_length(args)
+    if len(args.file) > 1:
+        raise InputError(f"{len(args.file)} runs: the sliding windows are of one run (several "
+                         "runs pool only with --sample-length)")
+    args.file = args.file[0]
     check = check_stationarity(args.file, window_length=args.window_length, step=args.step,
                                span=args.span, lag=args.lag, basis=args.basis,
                                judge=args.judge)
@@ -209,10 +213,11 @@ def _sample_length(args) -> int:
 
     columns, rows = args.cells[0], args.cells[-1]
     depth = args.cells[1] if len(args.cells) == 3 else None
-    with Trajectories(args.file) as run:
+    with Trajectories(args.file[0]) as run:
         space = state_space_from_name(args.states, columns, rows, run.width, run.height,
                                       depth, run.depth)
-    result = sample_length(args.file, space, lag=args.lag or 0.025, start=args.start,
+    result = sample_length(args.file if len(args.file) > 1 else args.file[0], space,
+                           lag=args.lag or 0.025, start=args.start,
                            estimator=args.estimator, tolerance=args.tolerance)
     if args.json:
         print(json.dumps(result.to_dict(), indent=1, allow_nan=False))
@@ -221,7 +226,7 @@ def _sample_length(args) -> int:
     def value(v):
         return format(v, ".4g") if np.isfinite(v) else "n/d"
 
-    print(f"{args.file}: models ({result.description}) on windows from {result.start:g} s "
+    print(f"{result.file}: models ({result.description}) on windows from {result.start:g} s "
           f"against the long run {result.start:g}-{result.span_end:g} s (E(RT) "
           f"{value(result.long_run_mean)} s, SD(RT) {value(result.long_run_sd)} s, "
           f"{result.long_run_count} residences)")
@@ -329,7 +334,9 @@ def add_stationarity(sub) -> None:
     s = sub.add_parser("stationarity",
                        help="how much a run's RTD changes from window to window (sliding "
                             "windows), and the run's long run against one window")
-    s.add_argument("file", help="trajectory file")
+    s.add_argument("file", nargs="+",
+                   help="trajectory file; with --sample-length, several runs of one case "
+                        "(their windows' counts pooled, their long runs pooled)")
     s.add_argument("--window-length", type=positive_float, default=5.0,
                    help="window length, s (default 5)")
     s.add_argument("--step", type=positive_float, default=1.0,

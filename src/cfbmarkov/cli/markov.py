@@ -119,9 +119,8 @@ def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int
     from cfbmarkov.markov.pooling import discretize_runs, run_windows
     from cfbmarkov.trajectories import Trajectories
 
-    if args.states == "auto":
-        raise InputError("--states auto chooses states on one run: fit several runs with "
-                         "named states (e.g. --states cells), or choose on one run first")
+    if args.states == "auto" and depth_columns is not None:
+        raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
     windows = run_windows(args.window, len(args.run))
     with contextlib.ExitStack() as stack:
         runs = [stack.enter_context(Trajectories(path)) for path in args.run]
@@ -131,11 +130,30 @@ def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int
         if depth_columns is not None and first.dimensions != 3:
             raise InputError(f"{first.path} is 2D: cells {'x'.join(map(str, args.cells))} "
                              "with depth columns need 3D data (use COLUMNSxROWS)")
-        space = state_space_from_name(args.states, columns, rows, first.width, first.height,
-                                      depth_columns, first.depth)
-        discrete = discretize_runs(runs, space, args.lag, windows)
-        model = estimator_from_name(args.estimator, space, args.lag, args.connected,
+        if args.states == "auto":       # chosen on the pooled windows
+            from cfbmarkov.markov.select import DEFAULT_LAG_MULTIPLES, DEFAULT_STATES
+            from cfbmarkov.markov.select import select_pooled
+
+            if not args.quiet:
+                print(f"fit: judging the candidate state spaces on {len(runs)} runs' windows "
+                      "pooled (each fitted and its RTD compared with the windows')",
+                      file=sys.stderr, flush=True)
+            model = select_pooled(runs, windows=windows, columns=columns, rows=rows,
+                                  lag=args.lag, states=DEFAULT_STATES,
+                                  lag_multiples=DEFAULT_LAG_MULTIPLES,
+                                  estimator=args.estimator, coherent=args.coherent)
+            if not args.connected:
+                return _finish_fit(args, model, list(args.run), windows)
+            space, selection, lag = model.state_space, model.selection, model.lag
+        else:
+            space = state_space_from_name(args.states, columns, rows, first.width,
+                                          first.height, depth_columns, first.depth)
+            selection, lag = None, args.lag
+        discrete = discretize_runs(runs, space, lag, windows)
+        model = estimator_from_name(args.estimator, space, lag, args.connected,
                                     args.coherent).fit(discrete)
+        if selection is not None:      # the chosen space, refitted on its connected set
+            model = model.with_selection(selection)
     return _finish_fit(args, model, list(args.run), windows)
 
 

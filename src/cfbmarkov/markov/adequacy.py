@@ -43,6 +43,9 @@ class Adequacy:
     tail_share : float
         The model's exact RTD mass beyond ``window_length``: the share of residences a
         window of this length cannot contain (-; NaN without an RTD).
+    runs : tuple of (str, float)
+        A pooled fit's runs and the E(RT) (s; NaN where none) of the model fitted on each
+        alone; empty for one run.
     """
 
     warnings: tuple[str, ...] = ()
@@ -52,6 +55,7 @@ class Adequacy:
     limit: float = math.nan
     window_length: float = math.nan
     tail_share: float = math.nan
+    runs: tuple[tuple[str, float], ...] = ()
 
     @property
     def adequate(self) -> bool:
@@ -72,7 +76,8 @@ class Adequacy:
                            "direction": d} for a, b, m, d in self.parts],
                 "rt_mean": number(self.rt_mean), "spread": number(self.spread),
                 "limit": number(self.limit), "window_length": number(self.window_length),
-                "tail_share": number(self.tail_share)}
+                "tail_share": number(self.tail_share),
+                "runs": [{"run": r, "rt_mean": number(m)} for r, m in self.runs]}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Adequacy":
@@ -100,7 +105,9 @@ class Adequacy:
                              for p in data.get("parts", [])),
                        number(data.get("rt_mean")), number(data.get("spread")),
                        number(data.get("limit")), number(data.get("window_length")),
-                       number(data.get("tail_share")))
+                       number(data.get("tail_share")),
+                       tuple((str(r["run"]), number(r.get("rt_mean")))
+                             for r in data.get("runs", [])))
         except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
             raise InputError(f"adequacy attribute is not a verdict ({exc})") from None
 

@@ -202,8 +202,10 @@ class TransitionEstimator:
         counts = count_transitions(windows, frame_average=self.name == "paper")
         check_some_transitions(counts, self.lag)
         sources = [w.source for w in windows]
+        pooled = len(windows) > 1 and all(w.window is not None for w in windows)
         model = self.fit_counts(counts, window=windows[0].window,     # counted for it alone
-                                source=sources[0] if len(sources) == 1 else sources, adopt=True)
+                                source=sources[0] if len(sources) == 1 else sources, adopt=True,
+                                run_windows=[w.window for w in windows] if pooled else None)
         if self.coherent:
             model = model.with_coherence(calibrate_coherence(model, windows))
         return model
@@ -309,7 +311,7 @@ class TransitionEstimator:
         return pooled
 
     def fit_counts(self, counts: TransitionCounts, window=None, source="", *,
-                   adopt: bool = False) -> MarkovModel:
+                   adopt: bool = False, run_windows=None) -> MarkovModel:
         """Form the model from counts already gathered (e.g. by cross-validation).
 
         Parameters
@@ -324,6 +326,9 @@ class TransitionEstimator:
             The model takes the counts' [S, S] arrays as its own: made read-only, not
             copied; the caller must not keep writing them (nor count into them again).
             Without it the model holds copies.
+        run_windows : sequence of (float, float), optional
+            A pooled fit's window (s) of each run of ``source`` (a list), recorded in the
+            model.
 
         Returns
         -------
@@ -346,7 +351,7 @@ class TransitionEstimator:
             estimator=self.name, window=tuple(window) if window is not None else None,
             source=os.fspath(source) if isinstance(source, (str, os.PathLike)) else list(source),
             frame_pairs=counts.frame_pairs, pass_fractions=fractions, connected=self.connected,
-            open_flow=open_flow, adopt=True)
+            open_flow=open_flow, run_windows=run_windows, adopt=True)
 
 
 def _fill_from_cells(matrix: np.ndarray, counts: TransitionCounts, space: StateSpace,

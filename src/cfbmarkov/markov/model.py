@@ -30,7 +30,8 @@ from cfbmarkov.kinetics.fields import CellFields
 from cfbmarkov.limits import check_seed
 from cfbmarkov.markov import model_file, model_summary, propagation
 from cfbmarkov.markov.adequacy import Adequacy
-from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS, checked_arrays, checked_coherence
+from cfbmarkov.markov.model_arrays import (SQUARE_ARRAYS, checked_arrays, checked_coherence,
+                                          checked_run_windows)
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.regime_chain import (conditional_chain, regime_matrix, regime_path,
@@ -108,6 +109,9 @@ class MarkovModel:
         The fitting window's time-averaged cell fields (solids fraction, distance to the
         wall, mean vertical velocity; :class:`~cfbmarkov.kinetics.CellFields`), recorded by
         ``fit`` for kinetics whose rates depend on them; None: not recorded.
+    run_windows : tuple of (float, float) or None
+        A pooled fit's fitting window of each run of ``source``, in its order (``window``
+        is the first); None for one run.
 
     Raises
     ------
@@ -148,6 +152,7 @@ class MarkovModel:
     uncertainty: ModelUncertainty | None = None
     source_identity: str | None = None
     cell_fields: CellFields | None = None
+    run_windows: tuple[tuple[float, float], ...] | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     adopt: InitVar[bool] = field(default=False, kw_only=True)
 
@@ -165,6 +170,9 @@ class MarkovModel:
         if self.window is not None and not (len(self.window) == 2 and all(
                 np.isfinite(self.window)) and self.window[1] > self.window[0]):
             raise InputError(f"model window {self.window!r} is not two finite times (A < B)")
+        if self.run_windows is not None:
+            object.__setattr__(self, "run_windows", checked_run_windows(self.run_windows,
+                                                                        self.source))
         if self.open_flow is not None and self.open_flow.n_states != s:
             raise InputError(f"model exit_probability must be {s} non-negative numbers")
         if self.cell_fields is not None and self.cell_fields.n_cells != self.state_space.n_cells:

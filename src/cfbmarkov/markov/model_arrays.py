@@ -68,6 +68,38 @@ def checked_coherence(value) -> float:
     return float(value)
 
 
+def checked_run_windows(windows, source) -> tuple[tuple[float, float], ...]:
+    """A pooled fit's windows, one per run of ``source``, as a tuple of float pairs.
+
+    Parameters
+    ----------
+    windows : sequence of (float, float)
+        The fitting window (s) of each run.
+    source : list of str
+        The runs.
+
+    Returns
+    -------
+    tuple of (float, float)
+
+    Raises
+    ------
+    InputError
+        If ``source`` is not a list of as many runs, or a window is not two finite times
+        A < B.
+    """
+    try:
+        pairs = tuple((float(a), float(b)) for a, b in windows)
+    except (TypeError, ValueError):
+        raise InputError(f"model run_windows {windows!r} are not pairs of times") from None
+    if not isinstance(source, (list, tuple)) or len(source) != len(pairs):
+        raise InputError(f"model run_windows: {len(pairs)} windows for source {source!r} "
+                         "(one per run of a pooled fit)")
+    if not all(np.isfinite(w).all() and w[1] > w[0] for w in pairs):
+        raise InputError(f"model run_windows {windows!r} are not finite times (A < B)")
+    return pairs
+
+
 def checked_arrays(square: dict[str, Any], pass_fractions, lag, state_space: StateSpace,
                    adopt: bool) -> tuple[dict[str, np.ndarray], tuple | None]:
     """A model's own P, counts and pass fractions, checked.

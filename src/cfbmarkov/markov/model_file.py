@@ -9,8 +9,9 @@ states:
 - attributes ``format = "cfbmarkov.model"``, ``version``, ``state_space`` (JSON), ``columns``,
   ``rows``, ``lag`` (s), ``window`` (s, NaN for none), ``estimator``, ``source`` (JSON),
   ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
-  ``cfbmarkov_version``; for a model chosen by ``--states auto``, ``selection`` (JSON); for
-  a model fitted on the largest strongly connected set, ``connected = 1``; where the
+  ``cfbmarkov_version``; for a model fitted on several runs, ``run_windows`` (JSON, the
+  window of each run of ``source``); for a model chosen by ``--states auto``,
+  ``selection`` (JSON); for a model fitted on the largest strongly connected set, ``connected = 1``; where the
   fitting sample was judged, ``adequacy`` (JSON, :class:`~cfbmarkov.markov.adequacy.Adequacy`;
   optional, files without it read as models without a verdict);
 - optionally the group ``uncertainty`` (the intervals of the exact E(RT), SD(RT) and RTD
@@ -96,6 +97,8 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "cfbmarkov_version": _version(),
     }
+    if model.run_windows is not None:
+        attrs["run_windows"] = json.dumps([list(w) for w in model.run_windows])
     if model.source_identity:
         attrs["source_identity"] = str(model.source_identity)
     if model.selection:
@@ -220,7 +223,9 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         if "adequacy" in group.attrs else None,
         source_identity=_text_attr(group.attrs["source_identity"])
         if "source_identity" in group.attrs else None,
-        cell_fields=_cell_fields(group))
+        cell_fields=_cell_fields(group),
+        run_windows=json.loads(_text_attr(group.attrs["run_windows"]))
+        if "run_windows" in group.attrs else None)
 
 
 def _cell_fields(group) -> CellFields | None:

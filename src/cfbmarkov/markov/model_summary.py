@@ -37,6 +37,15 @@ def model_warnings(model: "MarkovModel") -> list[str]:
             "can reach a trap (fit --connected leaves them out)"]
 
 
+def _windows_text(model: "MarkovModel") -> str:
+    """``window 10:15 s``, ``windows 10:15, 12:17 s`` (a pooled fit's, one per run) or
+    ``window all``."""
+    if model.run_windows is not None and len({tuple(w) for w in model.run_windows}) > 1:
+        return "windows " + ", ".join(f"{a:g}:{b:g}" for a, b in model.run_windows) + " s"
+    return 'window ' + ('all' if model.window is None
+                        else f'{model.window[0]:g}:{model.window[1]:g} s')
+
+
 def model_summary(model: "MarkovModel") -> str:
     """A few lines of text: state space, lag, fitting data, passes (or an open riser's exits
     and entries), unvisited states, warnings, regimes, coherence, closed classes, the
@@ -55,8 +64,7 @@ def model_summary(model: "MarkovModel") -> str:
     lines = [
         f"Markov chain model: {model.state_space.describe()}, lag {model.lag:g} s, "
         f"estimator '{model.estimator}'",
-        f"  fitted on {model.source} window "
-        f"{'all' if model.window is None else f'{model.window[0]:g}:{model.window[1]:g} s'}: "
+        f"  fitted on {model.source} {_windows_text(model)}: "
         f"{model.n_transitions} transitions over {model.frame_pairs} frame pairs",
         f"  passes through the periodic boundary: {int(model.counts_up.sum())} up, "
         f"{int(model.counts_down.sum())} down" if model.open_flow is None else
@@ -95,10 +103,15 @@ def model_summary(model: "MarkovModel") -> str:
             flow = ("; the flow's variability left out (the window is shorter than two "
                     "blocks of three mean residence times)" if u.flow_sd is None else
                     f" and the flow's variability between its blocks ({100 * u.flow_sd[0]:.3g} "
-                    "% of E(RT))")
+                    "% of E(RT)" + (", over sqrt(runs)" if model.run_windows else "") + ")")
             lines.append(f"  exact residence time: {u.describe(r.mean, r.sd)}")
-            lines.append(f"    interval from the fitting window alone: {u.resamples} bootstrap "
-                         f"resamples of {u.blocks} blocks of {u.block_length:.3g} s{flow}")
+            runs = len(model.run_windows) if model.run_windows is not None else 1
+            where = (f"the fitting windows of {runs} runs: {u.resamples} bootstrap "
+                     f"resamples of {u.blocks // runs} blocks of each run, about "
+                     f"{u.block_length:.3g} s long" if runs > 1 else
+                     f"the fitting window alone: {u.resamples} bootstrap resamples of "
+                     f"{u.blocks} blocks of {u.block_length:.3g} s")
+            lines.append(f"    interval from {where}{flow}")
         else:
             lines.append(f"  exact residence time: E(RT) = {r.mean:.4g} s, "
                          f"SD(RT) = {r.sd:.4g} s")

@@ -6,17 +6,20 @@ add; :func:`~cfbmarkov.markov.counting.count_transitions` sums over a list of wi
 its P is that of all their transitions, as if the windows were one longer sample of the
 same flow. Runs pool only where they describe one riser at one time basis:
 :func:`check_runs_match` refuses runs that differ in dimensions, width, height, depth,
-boundary or frame interval, naming the first difference.
+boundary or frame interval, naming the first difference; :func:`check_runs_distinct` refuses
+a run pooled with itself.
 """
 
 from __future__ import annotations
 
 import math
+import os
 from typing import Sequence
 
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.discrete import DiscreteTrajectories, discretize
 from cfbmarkov.markov.states import StateSpace
+from cfbmarkov.trajectory_identity import window_identity
 
 #: what two runs must share to be pooled, as (attribute, what the message calls it)
 _SHARED = (("dimensions", "dimensions"), ("width", "width (m)"), ("height", "height (m)"),
@@ -56,6 +59,41 @@ def check_runs_match(runs: Sequence) -> None:
                 raise InputError(f"runs of different {words} cannot be pooled: {first.path} "
                                  f"has {_text(a)}, {run.path} has {_text(b)} (fit runs of "
                                  "one case, at one frame interval)")
+
+
+def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) -> None:
+    """Refuse to pool a run with itself: a window pooled twice counts its transitions
+    twice and narrows the interval as if it were independent flow.
+
+    Parameters
+    ----------
+    runs : sequence of Trajectories
+        Open trajectory files, one per window.
+    windows : sequence of (float, float)
+        The fitting window (s) of each run.
+
+    Raises
+    ------
+    InputError
+        Where two windows have the same content
+        (:func:`~cfbmarkov.trajectory_identity.window_identity`: a run given twice, or a
+        copy of it), or two overlapping windows are of one file.
+    """
+    seen: dict[str, str] = {}
+    for k, (run, window) in enumerate(zip(runs, windows)):
+        identity = window_identity(run, window)
+        where = f"{run.path} {window[0]:g}-{window[1]:g} s"
+        if identity in seen:
+            raise InputError(f"{seen[identity]} and {where} hold the same data: pooling a run "
+                             "with itself counts its transitions twice and narrows the "
+                             "interval falsely (pool independent runs of one case)")
+        seen[identity] = where
+        for other, w in zip(runs[:k], windows[:k]):
+            if (os.path.realpath(other.path) == os.path.realpath(run.path)
+                    and w[0] < window[1] and window[0] < w[1]):
+                raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
+                                 f"{window[1]:g} s of {run.path} overlap: their common frames "
+                                 "would be counted twice (give windows that do not overlap)")
 
 
 def run_windows(windows: Sequence[tuple[float, float]], n_runs: int
@@ -106,15 +144,24 @@ def discretize_runs(runs: Sequence, state_space: StateSpace, lag: float,
     Returns
     -------
     list of DiscreteTrajectories
-        One per run, in order; an estimator's ``fit`` pools them.
+        One per run, in order, all in one state space (a space that fits itself to its
+        window, e.g. ``cells-velocity`` or ``cells-regime``, fitted on the first run's);
+        an estimator's ``fit`` pools them.
 
     Raises
     ------
     InputError
         If the runs differ (:func:`check_runs_match`), the windows do not match the runs
-        (:func:`run_windows`), or a window cannot be discretised
+        (:func:`run_windows`), a run is pooled with itself (:func:`check_runs_distinct`),
+        or a window cannot be discretised
         (:func:`~cfbmarkov.markov.discretize`).
     """
     check_runs_match(runs)
-    return [discretize(run, state_space, lag, window)
-            for run, window in zip(runs, run_windows(windows, len(runs)))]
+    windows = run_windows(windows, len(runs))
+    check_runs_distinct(runs, windows)
+    first = discretize(runs[0], state_space, lag, windows[0])
+    # a space that fits itself to its window (velocity bins, regime edges) is fitted on the
+    # first run's and applied as it is to the others, so that their states are the same
+    fitted = first.state_space
+    return [first] + [discretize(run, fitted, lag, window)
+                      for run, window in zip(runs[1:], windows[1:])]

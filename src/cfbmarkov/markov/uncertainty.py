@@ -39,13 +39,15 @@ class ModelUncertainty:
     resamples : int
         Bootstrap resamples that gave a model with residences.
     blocks : int
-        Time blocks of the fitting window in the bootstrap.
+        Time blocks of the fitting window in the bootstrap (a pooled fit's: of all its
+        runs' windows, the same number in each).
     block_length : float
-        Length of one block (s).
+        Length of one block (s; a pooled fit's: mean over its runs).
     flow_sd : (float, float) or None
         The flow's relative standard deviations of E(RT) and SD(RT) between blocks of the
-        window (fractions) added to the bootstrap's spread; None where the window is too
-        short to measure them (the intervals are then the bootstrap's alone).
+        window (fractions) added to the bootstrap's spread (a pooled fit's: between the
+        blocks of all its runs, over sqrt(runs)); None where the window is too short to
+        measure them (the intervals are then the bootstrap's alone).
 
     Raises
     ------

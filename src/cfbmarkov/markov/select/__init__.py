@@ -52,12 +52,14 @@ The steps, one module each: :mod:`.blocks` (the judged blocks of the fitting win
 their observed residence times), :mod:`.criteria` (the three criteria behind one
 interface), :mod:`.candidates` (every candidate fitted, judged and scored), :mod:`.record`
 (the selection record stored in the model) and :mod:`.choice` (:func:`select_model`, which
-runs them, and the models named in a reproduction).
+runs them, and the models named in a reproduction); :mod:`.pooled` (:func:`select_pooled`)
+runs them on several runs of one case, their windows pooled.
 """
 
 from cfbmarkov.markov.select.choice import (DEFAULT_LAG_MULTIPLES, DEFAULT_STATES, fit_by_name,
                                             parse_model_name, select_model)
+from cfbmarkov.markov.select.pooled import select_pooled
 from cfbmarkov.markov.select.record import CandidateScore
 
 __all__ = ["DEFAULT_LAG_MULTIPLES", "DEFAULT_STATES", "CandidateScore", "fit_by_name",
-           "parse_model_name", "select_model"]
+           "parse_model_name", "select_model", "select_pooled"]

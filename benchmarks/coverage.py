@@ -1,0 +1,276 @@
+"""The coverage study: do the intervals `fit` prints hold the flow's long-run E(RT)?
+
+    python benchmarks/coverage.py RUN.h5 [RUN.h5 ...] [--lengths 0.5,1,2,5] [--starts 6]
+                                  [--settle 10] [--cells 4x12] [--lag 0.01] [--auto]
+                                  [--resamples 100] [--level 0.9] [-o coverage.json]
+
+For each run and each window length L, six fitting windows (``--starts``) start at times
+spread evenly from the settling time (``--settle``) to the run's last frame minus L. On
+each window a model is fitted as ``cfbmarkov fit`` does (the cells and lag given, or those
+of the ``case.json`` beside the run, written by ``reproduce``; the estimator ``fit``
+takes by default), with its interval (:func:`cfbmarkov.analysis.intervals.model_intervals`)
+and the verdict on its sample (:func:`cfbmarkov.analysis.adequacy.assess_adequacy`);
+``--auto`` also fits ``--states auto`` (:func:`cfbmarkov.markov.select.select_model`).
+
+The model's E(RT) and interval are those of residences counted in the direction of the
+span's net solids flow (``model.rtd(None, direction)``, ``model_intervals(direction=...)``;
+``docs/definitions.md``, Net downflow), the direction the long run is counted in; ``fit``
+prints the upward one, which differs from it where the net flow runs down (the verdict's
+E(RT) limit then comes from the default tolerance instead of the interval).
+
+The reference is the run's **long-run E(RT) outside the window**: every residence of the
+run after the settling time (from the lap counters at the model's lag, counted in the net
+solids flow direction of the whole span, from one record of a new lap level to the next,
+as :func:`cfbmarkov.observed.residence.residence_times` counts them over the span) whose
+interval [entry, exit] does not overlap the fitting window, pooled: the rest of the run's
+residences, none cut by the window's edges.
+
+Printed per window length (and model): fits; coverage, the share of intervals holding
+the long-run value; the median relative width of the interval, (upper - lower) / the
+fitted E(RT); the median relative error |E(RT) - long run| / long run; the fits more than
+50 % off the long run and how many of them printed a verdict warning (any line of the
+sample's verdict; ``warned`` counts them). The JSON (``-o``) holds every fit.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+# run as a script, this folder comes first on sys.path, and this file would stand in for
+# the `coverage` package that Numba imports: take the folder off before importing it
+if sys.path and Path(sys.path[0] or ".").resolve() == Path(__file__).resolve().parent:
+    sys.path.pop(0)
+
+import numpy as np  # noqa: E402
+
+from cfbmarkov._json import jsonable  # noqa: E402
+from cfbmarkov.analysis.adequacy import assess_adequacy  # noqa: E402
+from cfbmarkov.analysis.intervals import model_intervals  # noqa: E402
+from cfbmarkov.errors import CfbmarkovError, InputError  # noqa: E402
+from cfbmarkov.markov import fit_model  # noqa: E402
+from cfbmarkov.markov.states import CellGrid  # noqa: E402
+from cfbmarkov.observed.residence import net_flow_direction  # noqa: E402
+from cfbmarkov.trajectories import Trajectories  # noqa: E402
+
+#: a fit this far from the long run (relative) must warn
+OFF = 0.5
+
+
+def residence_intervals(traj, span: tuple[float, float], lag: float) -> np.ndarray:
+    """Every residence of a periodic run in ``span``: (entry, exit) times, float [K, 2].
+
+    From the lap counters of every ``lag_frames``-th frame of the span from its first, in
+    the span's net solids flow direction: a record is a frame at which a particle's lap
+    counter first exceeds its running maximum (twice, at the same time, if it jumped by
+    two), and a residence runs from one record of a particle to its next; the samples are
+    those of :func:`cfbmarkov.observed.residence.residence_times` over the span, with
+    their times.
+    """
+    if traj.boundary.is_open:
+        raise InputError(f"{traj.path}: the coverage study reads a periodic riser's lap "
+                         "counters (an open riser has none)")
+    frames = traj.window(*span)
+    step = traj.lag_frames(lag)
+    picked = slice(frames.start, frames.stop, step)
+    times = np.asarray(traj.times[picked], dtype=np.float64)
+    sign = 1 if net_flow_direction(traj, span) == "up" else -1
+    laps = sign * np.asarray(traj.laps(picked), dtype=np.int64)
+    top = np.maximum.accumulate(laps, axis=0)
+    new = np.diff(top, axis=0)                            # new levels per frame, [T - 1, N]
+    particle, frame = np.nonzero(new.T)                   # by particle, then by frame
+    repeat = new.T[particle, frame]
+    particle = np.repeat(particle, repeat)
+    t = np.repeat(times[frame + 1], repeat)
+    same = particle[1:] == particle[:-1]
+    return np.column_stack([t[:-1][same], t[1:][same]])
+
+
+def long_run_outside(residences: np.ndarray, window: tuple[float, float]) -> np.ndarray:
+    """The residence times (s) of ``residences`` ([K, 2] entry and exit) whose interval
+    does not overlap ``window``."""
+    a, b = window
+    keep = (residences[:, 1] <= a + 1e-9) | (residences[:, 0] >= b - 1e-9)
+    return residences[keep, 1] - residences[keep, 0]
+
+
+def _case_markov(path: Path) -> dict:
+    case = path.parent / "case.json"
+    if case.is_file():
+        return json.loads(case.read_text()).get("markov", {})
+    return {}
+
+
+def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, auto: bool,
+            level: float, resamples: int, direction: str = "up") -> dict:
+    """One fit as ``cfbmarkov fit`` makes it: E(RT) and its interval in ``direction`` (the
+    residences' direction of the long run it is compared with) and the verdict's lines."""
+    estimator = "mle" if traj.boundary.is_open else "paper"
+    if auto:
+        from cfbmarkov.markov.select import select_model
+
+        model = select_model(traj, window=window, columns=columns, rows=rows, lag=lag,
+                             estimator=estimator)
+    else:
+        space = CellGrid(columns, rows, traj.width, traj.height)
+        model = fit_model(traj, space, lag, window, estimator)
+    out = {"window": list(window), "states": model.state_space.describe()}
+    try:
+        rtd = model.rtd(None, direction)
+    except CfbmarkovError as exc:
+        return out | {"error": str(exc)}
+    out["rt_mean"] = float(rtd.mean)
+    out["direction"] = direction
+    interval = None
+    try:
+        u = model_intervals(model, level=level, resamples=resamples, direction=direction)
+        interval = u.rt_mean_interval
+        out["rt_mean_interval"] = list(interval)
+    except CfbmarkovError as exc:
+        out["interval_error"] = str(exc)
+    verdict = assess_adequacy(model, [path], [window],
+                              interval=interval if direction == "up" else None)
+    out["warnings"] = list(verdict.warnings)
+    return out
+
+
+def table(fits: list[dict]) -> list[dict]:
+    """Per (model, window length): fits, coverage, median relative width and error, the
+    fits more than ``OFF`` off and how many of them warned."""
+    rows = []
+    for key in sorted({(f["model"], f["length"]) for f in fits}):
+        group = [f for f in fits if (f["model"], f["length"]) == key and "rt_mean" in f
+                 and f["long_run"] is not None]
+        with_interval = [f for f in group if "rt_mean_interval" in f]
+        held = [f["rt_mean_interval"][0] <= f["long_run"] <= f["rt_mean_interval"][1]
+                for f in with_interval]
+        widths = [(f["rt_mean_interval"][1] - f["rt_mean_interval"][0]) / f["rt_mean"]
+                  for f in with_interval]
+        errors = [abs(f["rt_mean"] / f["long_run"] - 1.0) for f in group]
+        off = [f for f in group if abs(f["rt_mean"] / f["long_run"] - 1.0) > OFF]
+        failed = sum("error" in f for f in fits if (f["model"], f["length"]) == key)
+        rows.append({"model": key[0], "length": key[1], "fits": len(group), "failed": failed,
+                     "intervals": len(with_interval),
+                     "coverage": float(np.mean(held)) if held else math.nan,
+                     "median_relative_width": float(np.median(widths)) if widths else math.nan,
+                     "median_relative_error": float(np.median(errors)) if errors else math.nan,
+                     "off": len(off), "off_warned": sum(bool(f["warnings"]) for f in off),
+                     "warned": sum(bool(f["warnings"]) for f in group)})
+    return rows
+
+
+def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, level: float,
+          resamples: int, progress=None) -> dict:
+    """Every fit of the study and its table (the module docstring)."""
+    fits = []
+    for name in runs:
+        path = Path(name)
+        case = _case_markov(path)
+        columns, rows = cells or (case.get("columns", 6), case.get("rows", 38))
+        run_lag = lag or case.get("lag", 0.025)
+        with Trajectories(path) as traj:
+            first, last = float(traj.times[0]), float(traj.times[-1])
+            a0 = max(first, settle)
+            residences = residence_intervals(traj, (a0, last), run_lag)
+            direction = net_flow_direction(traj, (a0, last))
+            for length in lengths:
+                if a0 + length > last + 1e-9:
+                    continue
+                for start in np.linspace(a0, last - length, starts):
+                    window = (round(float(start), 6), round(float(start) + length, 6))
+                    reference = long_run_outside(residences, window)
+                    for model in (("cells", "auto") if auto else ("cells",)):
+                        t0 = time.perf_counter()
+                        try:
+                            fit = fit_one(path, traj, window, columns=columns, rows=rows,
+                                          lag=run_lag, auto=model == "auto", level=level,
+                                          resamples=resamples, direction=direction)
+                        except CfbmarkovError as exc:     # kept, and left out of the table
+                            fit = {"window": list(window), "error": str(exc)}
+                        fit.update(run=str(path), model=model, length=float(length),
+                                   long_run=float(reference.mean()) if reference.size
+                                   else None,
+                                   long_run_count=int(reference.size),
+                                   seconds=time.perf_counter() - t0)
+                        fits.append(fit)
+                        if progress:
+                            progress(fit)
+    return {"level": level, "resamples": resamples, "settle": settle, "lengths": list(lengths),
+            "starts": starts, "off": OFF, "table": table(fits), "fits": fits}
+
+
+def _print_table(result: dict) -> None:
+    pct = f"{100 * result['level']:g}"
+    print(f"{'model':<6} {'L (s)':>6} {'fits':>5} {'coverage':>9} {'width':>7} "
+          f"{'error':>7} {'>50% off':>9} {'warned':>7} {'any warning':>12}")
+    for r in result["table"]:
+        print(f"{r['model']:<6} {r['length']:>6g} {r['fits']:>5d} {r['coverage']:>9.2f} "
+              f"{r['median_relative_width']:>7.2f} {r['median_relative_error']:>7.2f} "
+              f"{r['off']:>9d} {r['off_warned']:>7d} {r['warned']:>12d}"
+              + (f" ({r['failed']} failed)" if r["failed"] else ""))
+    print(f"coverage: share of {pct} % intervals holding the long-run E(RT) outside the "
+          "window; width: median (upper - lower) / fitted E(RT); error: median |fit / long "
+          "run - 1|; warned: of the fits > 50 % off, those with a verdict warning; any "
+          "warning: fits with a verdict warning")
+
+
+def main(argv=None) -> int:
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("runs", nargs="+", help="trajectory files (long runs)")
+    p.add_argument("--lengths", default="0.5,1,2,5", help="window lengths, s (0.5,1,2,5)")
+    p.add_argument("--starts", type=int, default=6, help="start times per length (6)")
+    p.add_argument("--settle", type=float, default=10.0,
+                   help="settling time, s: windows and long run start after it (10)")
+    p.add_argument("--cells", default=None,
+                   help="COLUMNSxROWS (default: case.json beside the run, else 6x38)")
+    p.add_argument("--lag", type=float, default=None,
+                   help="lag, s (default: case.json beside the run, else 0.025)")
+    p.add_argument("--auto", action="store_true", help="also fit --states auto")
+    p.add_argument("--level", type=float, default=0.9, help="interval level (0.9)")
+    p.add_argument("--resamples", type=int, default=100, help="bootstrap resamples (100)")
+    p.add_argument("-o", "--output", default="coverage.json", help="JSON of every fit")
+    p.add_argument("-q", "--quiet", action="store_true", help="no line per fit on stderr")
+    args = p.parse_args(argv)
+    try:
+        lengths = [float(v) for v in args.lengths.split(",")]
+        cells = tuple(int(v) for v in args.cells.lower().split("x")) if args.cells else None
+        if any(not v > 0 for v in lengths) or args.starts < 1 or (cells and len(cells) != 2):
+            raise ValueError
+    except ValueError:
+        print("coverage: --lengths must be positive numbers (0.5,1,2,5), --starts at least 1 "
+              "and --cells COLUMNSxROWS", file=sys.stderr)
+        return 2
+
+    def progress(fit):
+        if not args.quiet:
+            if "error" in fit:
+                print(f"{Path(fit['run']).name} {fit['model']} {fit['window'][0]:g}-"
+                      f"{fit['window'][1]:g} s: no fit ({fit['error']})", file=sys.stderr)
+                return
+            lo, hi = fit.get("rt_mean_interval", (math.nan, math.nan))
+            ref = math.nan if fit["long_run"] is None else fit["long_run"]
+            print(f"{Path(fit['run']).parent.name}/{Path(fit['run']).name} {fit['model']} "
+                  f"{fit['window'][0]:g}-{fit['window'][1]:g} s: E(RT) "
+                  f"{fit.get('rt_mean', math.nan):.3g} s [{lo:.3g}, {hi:.3g}], long run "
+                  f"{ref:.3g} s, {len(fit.get('warnings', []))} warning(s), "
+                  f"{fit['seconds']:.1f} s", file=sys.stderr, flush=True)
+
+    try:
+        result = study(args.runs, lengths=lengths, starts=args.starts, settle=args.settle,
+                       cells=cells, lag=args.lag, auto=args.auto, level=args.level,
+                       resamples=args.resamples, progress=progress)
+    except CfbmarkovError as exc:
+        print(f"coverage: {exc}", file=sys.stderr)
+        return 2
+    Path(args.output).write_text(json.dumps(jsonable(result), indent=1, allow_nan=False))
+    _print_table(result)
+    print(args.output)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

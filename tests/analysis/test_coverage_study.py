@@ -1,0 +1,67 @@
+"""benchmarks/coverage.py, the coverage study, on a small generated riser: its long-run
+residences are residence_times' over the span, with their times; the study's table and
+JSON."""
+
+import importlib.util
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cfbmarkov import synthetic
+from cfbmarkov.observed.residence import net_flow_direction, residence_times
+from cfbmarkov.trajectories import Trajectories
+
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "coverage.py"
+FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-0.6,
+                           vertical_spread=0.5, persistence=False)
+
+
+@pytest.fixture(scope="module")
+def coverage():
+    spec = importlib.util.spec_from_file_location("coverage_study", SCRIPT)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    return synthetic.write_run(tmp_path_factory.mktemp("coverage") / "run.h5", FLOW, 200, 6.0,
+                               seed=2)
+
+
+def test_residence_intervals_are_residence_times_with_their_times(coverage, run):
+    with Trajectories(run) as traj:
+        span = (0.5, 6.0)
+        got = coverage.residence_intervals(traj, span, 0.05)
+        want = residence_times(traj, span, use_events=False, lag_frames=traj.lag_frames(0.05),
+                               direction=net_flow_direction(traj, span)).samples
+    assert got.shape[0] == want.size > 50
+    np.testing.assert_allclose(np.sort(got[:, 1] - got[:, 0]), np.sort(want), atol=1e-9)
+    assert np.all(got[:, 0] >= span[0] - 1e-9) and np.all(got[:, 1] <= span[1] + 1e-9)
+    outside = coverage.long_run_outside(got, (2.0, 3.0))
+    inside = (got[:, 1] > 2.0) & (got[:, 0] < 3.0)
+    assert outside.size == got.shape[0] - inside.sum() and inside.any()
+
+
+def test_study_table_and_json(coverage, run, tmp_path, capsys):
+    out = tmp_path / "cov.json"
+    assert coverage.main([str(run), "--settle", "0.5", "--cells", "3x8", "--lag", "0.05",
+                          "--lengths", "1,2", "--starts", "2", "--resamples", "10", "-q",
+                          "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "coverage" in printed and str(out) in printed
+    data = json.loads(out.read_text())
+    assert [r["length"] for r in data["table"]] == [1.0, 2.0]
+    assert len(data["fits"]) == 4
+    for fit in data["fits"]:
+        assert fit["long_run"] > 0 and fit["rt_mean"] > 0 and "warnings" in fit
+        lo, hi = fit["rt_mean_interval"]
+        assert lo <= fit["rt_mean"] <= hi
+    for row in data["table"]:
+        assert row["fits"] == 2 and 0.0 <= row["coverage"] <= 1.0
+        assert row["off_warned"] <= row["off"]
+    assert coverage.main([str(run), "--lengths", "0,1", "-o", str(out)]) == 2
+    assert "--lengths" in capsys.readouterr().err

@@ -1,0 +1,132 @@
+"""Intervals of a model fitted on several runs (a pooled fit): each run's blocks resampled
+within that run, the flow's term over all runs' blocks; a run pooled with itself refused."""
+
+import contextlib
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from cfbmarkov import synthetic
+from cfbmarkov.analysis.intervals import model_intervals
+from cfbmarkov.cli import main
+from cfbmarkov.markov import MarkovModel, fit_model
+from cfbmarkov.markov.estimate import estimator_from_name
+from cfbmarkov.markov.pooling import discretize_runs
+from cfbmarkov.trajectories import Trajectories
+
+FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-0.6,
+                           vertical_spread=0.5, persistence=False)
+WINDOW = (0.5, 2.5)
+RUNS = 4
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    """Four independent 3 s runs (seeds 10-13) of one stationary chain, 300 particles."""
+    folder = tmp_path_factory.mktemp("pooled-intervals")
+    return [synthetic.write_run(folder / f"run{k}.h5", FLOW, 300, 3.0, seed=10 + k)
+            for k in range(RUNS)]
+
+
+def _width(interval):
+    return interval[1] - interval[0]
+
+
+def test_pooling_n_independent_runs_narrows_the_interval_as_one_over_sqrt_n(runs):
+    """The pooled model's E(RT) interval is 1/sqrt(4) = 0.5 times the median of the single
+    runs' widths, within 0.3-0.75 (40 resamples: each width scatters by about 15 %); it
+    holds the generating chain's E(RT), and each run keeps its weight: every resample has
+    10 blocks of each run."""
+    single = []
+    for path in runs:
+        model = fit_model(path, FLOW.grid, FLOW.lag, WINDOW, "mle")
+        single.append(_width(model_intervals(model, resamples=40).rt_mean_interval))
+    with contextlib.ExitStack() as stack:
+        opened = [stack.enter_context(Trajectories(p)) for p in runs]
+        data = discretize_runs(opened, FLOW.grid, FLOW.lag, [WINDOW])
+    pooled = estimator_from_name("mle", FLOW.grid, FLOW.lag).fit(data)
+    assert pooled.run_windows == (WINDOW,) * RUNS
+    u = model_intervals(pooled, resamples=40)
+    assert u.blocks == 10 * RUNS
+    ratio = _width(u.rt_mean_interval) / np.median(single)
+    assert 0.3 < ratio < 0.75, (ratio, single, u.rt_mean_interval)
+    truth = synthetic.cell_chain(FLOW).rtd().mean
+    lo, hi = u.rt_mean_interval
+    assert lo <= pooled.rtd().mean <= hi
+    assert lo - 0.5 * (hi - lo) <= truth <= hi + 0.5 * (hi - lo)
+
+
+def test_fit_pooled_stores_and_prints_the_interval_and_refuses_a_run_with_itself(
+        runs, tmp_path, capsys):
+    out = tmp_path / "pooled.h5"
+    assert main(["fit", str(runs[0]), str(runs[1]), "--cells", "3x8", "--estimator", "mle",
+                 "--window", "0.5:2.5,0.4:2.4", "--resamples", "20", "-o", str(out)]) == 0
+    printed = capsys.readouterr().out
+    assert "90 % interval" in printed and "fitting windows of 2 runs" in printed
+    assert "windows 0.5:2.5, 0.4:2.4 s" in printed
+    model = MarkovModel.load(out)
+    assert model.run_windows == ((0.5, 2.5), (0.4, 2.4))
+    assert model.uncertainty is not None and model.uncertainty.blocks == 20
+    assert main(["rtd", str(out), "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    lo, hi = data["rt_mean_interval"]
+    assert lo <= data["rt_mean"] <= hi
+    assert main(["info", str(out)]) == 0
+    assert "fitting windows of 2 runs" in capsys.readouterr().out
+    # the same run twice, a copy of it, or overlapping windows of one file: one line, exit 2
+    copy = tmp_path / "copy.h5"
+    shutil.copy(runs[0], copy)
+    for argv, said in ([str(runs[0]), str(runs[0])], "same data"), \
+                      ([str(runs[0]), str(copy)], "same data"), \
+                      ([str(runs[0]), str(runs[0]), "--window", "0.5:2.5,1:2.8"], "overlap"):
+        bad = tmp_path / "bad.h5"
+        assert main(["fit", *argv, "--cells", "3x8", "-o", str(bad)]
+                    + ([] if "--window" in argv else ["--window", "0.5:2.5"])) == 2
+        err = capsys.readouterr().err
+        assert said in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+        assert not bad.exists()
+
+
+def test_pooled_fit_of_a_space_fitted_to_its_window(runs, tmp_path, capsys):
+    """cells-velocity and cells-regime fit their bins on the window: pooled, the first run's
+    bins are used for every run (the same states), and the interval is formed."""
+    for states in ("cells-velocity", "cells-regime"):
+        out = tmp_path / f"{states}.h5"
+        assert main(["fit", str(runs[0]), str(runs[1]), "--cells", "3x8", "--states", states,
+                     "--window", "0.5:2.5", "--resamples", "10", "-o", str(out)]) == 0, \
+            capsys.readouterr().err
+        model = MarkovModel.load(out)
+        one = fit_model(runs[0], model.state_space, FLOW.lag, WINDOW, "paper")
+        assert one.state_space == model.state_space
+        assert model.uncertainty is not None
+
+
+def test_compare_baseline_of_a_pooled_model_pools_its_runs_windows(tmp_path, capsys):
+    """compare's persistence baseline for a pooled model: the residences of both runs'
+    fitting windows pooled (as many as the two windows hold together)."""
+    from dataclasses import replace
+
+    from cfbmarkov.observed.residence import residence_times
+
+    flow = replace(FLOW, columns=4)             # mixing by halves needs an even count
+    runs = [synthetic.write_run(tmp_path / f"r{k}.h5", flow, 200, 3.0, seed=30 + k)
+            for k in range(2)]
+    model = tmp_path / "pooled.h5"
+    assert main(["fit", str(runs[0]), str(runs[1]), "--cells", "4x8", "--window", "0.5:2",
+                 "--resamples", "0", "--no-adequacy", "-o", str(model)]) == 0
+    pred = tmp_path / "pred.h5"
+    assert main(["predict", str(model), "--init", str(runs[0]), "--start", "2", "--duration",
+                 "1", "-o", str(pred), "-q"]) == 0
+    out = tmp_path / "cmp"
+    assert main(["compare", str(runs[0]), str(pred), "--window", "2:3", "-o", str(out),
+                 "--no-figures", "--resamples", "0"]) == 0
+    capsys.readouterr()
+    baseline = json.loads((out / "summary.json").read_text())["baseline"]
+    counts = []
+    for path in runs[:2]:
+        with Trajectories(path) as traj:
+            counts.append(residence_times(traj, (0.5, 2.0), use_events=False,
+                                          lag_frames=traj.lag_frames(FLOW.lag)).count)
+    assert baseline["rt_count"] == sum(counts) and min(counts) > 0
