@@ -56,8 +56,14 @@ def cmd_compare(args) -> int:
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
           f"mixing RMS {summary['mixing_rms']:.4g}")
     source = summary.get("bin_width_from", "given")
+    counts = [summary[side].get("rt_count") for side in ("reference", "model")]
     print(f"  RTD bins {summary['bin_width']:g} s wide"
-          + (" (--bin-width)" if source == "given" else f" ({source}; --bin-width to change)"))
+          + (" (--bin-width)" if source == "given" else f" ({source}; --bin-width to change)")
+          + ("" if None in counts else
+             f"; residences counted: reference {counts[0]}, model {counts[1]}"))
+    baseline = summary.get("baseline")
+    if baseline and baseline.get("md_rtd") is not None:
+        print("  " + baseline_line(baseline, summary["md_rtd"]))
     model = summary["model"]
     if "rt_mean_interval" in model:
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
@@ -69,6 +75,9 @@ def cmd_compare(args) -> int:
         kind = " with the flow's variability" if with_flow else ""
         print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) {m0:.4g}-{m1:.4g} s, "
               f"SD(RT) {s0:.4g}-{s1:.4g} s{own}")
+        reference = summary["reference"]
+        print("  " + interval_verdict(reference["rt_mean"], reference["rt_sd"],
+                                      (m0, m1), (s0, s1)))
     exact = summary.get("exact_reference")
     if exact:
         print(f"  (residence times from frames at the model's lag on both sides; the reference's "
@@ -83,6 +92,63 @@ def cmd_compare(args) -> int:
     _print_kinetics(summary.get("kinetics") or {})
     print(Path(args.output) / "summary.json")
     return 0
+
+
+def _place(value: float, interval) -> str:
+    """Where ``value`` lies against ``interval``: inside, below or above it."""
+    lo, hi = interval
+    return "inside" if lo <= value <= hi else "below" if value < lo else "above"
+
+
+def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -> str:
+    """One line saying whether the reference's E(RT) and SD(RT) lie inside the model's
+    intervals, and what that means.
+
+    Parameters
+    ----------
+    rt_mean, rt_sd : float
+        The reference's E(RT) and SD(RT), s.
+    mean_interval, sd_interval : (float, float)
+        The model's intervals of E(RT) and SD(RT), s.
+
+    Returns
+    -------
+    str
+        ``the reference's E(RT) 0.7446 s lies below the model's interval, SD(RT) ...``.
+    """
+    places = [_place(rt_mean, mean_interval), _place(rt_sd, sd_interval)]
+    text = (f"the reference's E(RT) {rt_mean:.4g} s lies {places[0]} the model's interval, "
+            f"its SD(RT) {rt_sd:.4g} s {places[1]}")
+    if places == ["inside", "inside"]:
+        return text + ": the model is consistent with the reference within its uncertainty"
+    missed = " and ".join(n for n, p in zip(("E(RT)", "SD(RT)"), places) if p != "inside")
+    return text + f": the model misses the reference's {missed} beyond its uncertainty"
+
+
+def baseline_line(baseline: dict, md_model: float) -> str:
+    """One line setting the persistence baseline's MD beside the model's.
+
+    Parameters
+    ----------
+    baseline : dict
+        The summary's ``baseline`` block (``windows``: the window whose observed RTD is the
+        baseline's prediction, then the judged one; ``md_rtd``; ``pd_rt_mean``).
+    md_model : float
+        The model's MD of the RTD.
+
+    Returns
+    -------
+    str
+    """
+    from cfbmarkov.observed.metrics import percentage_text as pd_text
+
+    (a, b), _ = baseline["windows"]
+    md = baseline["md_rtd"]
+    verdict = ("the model is closer" if md_model < md else
+               "the baseline is closer" if md < md_model else "a tie")
+    return (f"persistence baseline (the observed RTD of {a:g}-{b:g} s taken as the "
+            f"prediction): MD {md:.4g} against the model's {md_model:.4g}, PD E(RT) "
+            f"{pd_text(baseline.get('pd_rt_mean'))} %: {verdict}")
 
 
 def _print_kinetics(block: dict) -> None:
