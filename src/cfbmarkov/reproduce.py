@@ -42,6 +42,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from cfbmarkov._atomic import write_text_atomic
+from cfbmarkov._console import heartbeat
 from cfbmarkov.cases.scales import (
     MODELS,
     QUICK_REDUCTIONS,
@@ -315,7 +316,12 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
 
                 # a process pool of its own, idle now, draws half the report's figures
                 pool = executor if own and isinstance(executor, cf.ProcessPoolExecutor) else None
-                html = write_report(out, executor=pool)
+                if progress:
+                    log("report: drawing the figures and writing report.html")
+                with heartbeat("report" if progress else "", write=log):
+                    html = write_report(out, executor=pool)
+                if progress:
+                    log(f"report: done, {_time.perf_counter() - started:.0f} s in all")
     except KeyboardInterrupt:
         if own:
             _stop_workers(executor)

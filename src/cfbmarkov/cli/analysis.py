@@ -30,6 +30,8 @@ def cmd_compare(args) -> int:
     from cfbmarkov.report.compare import compare
 
     started = time.perf_counter()
+    if args.window is None:
+        _refuse_missing_window(args.prediction)
     if not args.quiet:
         from cfbmarkov.analysis.compare_inputs import check_runs
         from cfbmarkov.trajectories import Trajectories
@@ -42,10 +44,14 @@ def cmd_compare(args) -> int:
               + (f", {args.resamples} bootstrap resamples for the intervals"
                  if args.resamples else "") + (", figures" if not args.no_figures else "")
               + ")", file=sys.stderr, flush=True)
-    summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
-                      bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
-                      basis=args.basis, level=args.level, resamples=args.resamples,
-                      long_run_span=args.long_run_span, kinetics=args.kinetics)
+    from cfbmarkov._console import heartbeat
+
+    with heartbeat("" if args.quiet else "compare"):     # a line every 5 s of work
+        summary = compare(args.reference, args.prediction, window=args.window,
+                          output=args.output, bin_width=args.bin_width, md_order=args.md_order,
+                          figures=not args.no_figures, basis=args.basis, level=args.level,
+                          resamples=args.resamples, long_run_span=args.long_run_span,
+                          kinetics=args.kinetics)
     if not args.quiet:
         print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
               flush=True)
@@ -92,6 +98,20 @@ def cmd_compare(args) -> int:
     _print_kinetics(summary.get("kinetics") or {})
     print(Path(args.output) / "summary.json")
     return 0
+
+
+def _refuse_missing_window(prediction: str) -> None:
+    """Refuse ``compare`` without ``--window`` in one line naming the prediction's span."""
+    from cfbmarkov.trajectories import Trajectories
+
+    hint = ""
+    try:
+        with Trajectories(prediction) as pred:
+            a, b = float(pred.times[0]), float(pred.times[-1])
+        hint = f": the prediction {prediction} covers {a:g}-{b:g} s (--window {a:g}:{b:g})"
+    except Exception:       # an unreadable prediction is reported as such by compare itself
+        pass
+    raise InputError(f"give the window to compare over, --window START:STOP{hint}")
 
 
 def _place(value: float, interval) -> str:
@@ -348,7 +368,9 @@ def add_compare(sub) -> None:
                        "tracer groups, figures")
     s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
     s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
-    s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
+    s.add_argument("--window", type=parse_window, default=None,
+                   help="analysis window START:STOP, s (required; without it the prediction's "
+                        "span is named, e.g. 15:20)")
     s.add_argument("-o", "--output", required=True, help="output directory")
     s.add_argument("--bin-width", type=positive_float, default=None,
                    help="RTD bin width, s (default: the lag of the model behind the prediction, "
@@ -363,9 +385,9 @@ def add_compare(sub) -> None:
                    help="bootstrap resamples of the model's fitting window for the intervals "
                         "(0: no intervals; default 100)")
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
-                   help="residence times of both sides from frames at the model's lag (like "
-                        "for like, the default; the reference's exact-event figures are shown "
-                        "beside), or the reference's exact pass events (default frames)")
+                   help="frames: residence times of both sides from frames at the model's "
+                        "lag, like for like (the reference's exact-event figures are shown "
+                        "beside); events: the reference's exact pass events (default frames)")
     s.add_argument("--long-run-span", type=parse_window, default=None,
                    help="START:STOP, s: also give the reference's RTD pooled over this span's "
                         "other whole windows (what a perfect stationary model would predict; "
