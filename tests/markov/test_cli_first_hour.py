@@ -183,3 +183,18 @@ def test_demo_help_gives_jobs_default_and_synthetic_span():
     compare = build_parser()._subparsers._group_actions[0].choices["compare"]
     basis = next(a.help for a in compare._actions if "--basis" in a.option_strings)
     assert basis.count("default") == 1
+
+
+# -- fit --states auto: what its percentages are against ----------------------------------
+
+def test_auto_choice_says_what_its_percentages_are_against(markov_run):
+    from cfbmarkov.markov.select import select_model
+
+    model = select_model(markov_run, window=(2.0, 6.0), columns=4, rows=16, lag=0.05,
+                         states=("cells", "cells-direction"))
+    reason = model.selection["reason"]
+    found = re.search(r"PD E\(RT\) ([+-][\d.]+) %.*as seen in a 4 s window \(E\(RT\) ([\d.]+) s\)"
+                      r" against the window's observed E\(RT\) ([\d.]+) s", reason)
+    assert found, reason
+    pd, seen, observed = map(float, found.groups())
+    assert pd == pytest.approx(100 * (seen / observed - 1), abs=0.6)   # 3-digit rounding
