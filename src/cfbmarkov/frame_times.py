@@ -79,7 +79,7 @@ class FrameTimes:
         if stop <= first or start >= last:
             where = f"lies outside the data of {self.path} ({data})"
         else:
-            where = (f"reaches past the data of {self.path} ({data}); only "
+            where = (f"lies partly outside the data of {self.path} ({data}); only "
                      f"{time_text(max(start, first))}:{time_text(min(stop, last))} s lies "
                      "inside")
         length = stop - start

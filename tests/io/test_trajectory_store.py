@@ -71,7 +71,7 @@ def test_frames_located_by_time(tmp_path, run):
         with pytest.raises(InputError, match=r"no frame at t = 0.61 s"):
             t.frame_index(0.61)
         # partly inside: the part inside and a window of the same length that fits
-        with pytest.raises(InputError, match=r"reaches past the data .*\(0.5 to 0.875 s\); "
+        with pytest.raises(InputError, match=r"lies partly outside the data .*\(0.5 to 0.875 s\); "
                                              r"only 0.5:0.6 s lies inside: choose one within "
                                              r"it, e.g. 0.5:0.7 \(the same length\)"):
             t.window(0.4, 0.6)
