@@ -58,3 +58,15 @@ def test_read_case_from_its_files(tmp_path):
          "predict-paper": {"wall_s": 2.0}, "compare-paper": {"wall_s": 3.5}}))
     done = read_case(folder, 2.0, 10, True)
     assert done.stage == "done" and done.models_wall == pytest.approx(6.5)
+
+
+def test_a_finished_cfd_dem_paces_the_cases_to_come(tmp_path):
+    """Between two cases (the first finished, the next not started) the estimate holds."""
+    folder = tmp_path / "u3"
+    folder.mkdir()
+    (folder / "timings.json").write_text(json.dumps(
+        {"cfd_dem": {"wall_s": 40.0, "simulated_s": 2.0}, "fit-paper": {"wall_s": 4.0}}))
+    cases = [read_case(folder, 2.0, 100, True), read_case(tmp_path / "u4", 1.0, 200, False)]
+    assert cases[0].stage == "done" and cases[1].stage == "waiting"
+    left, with_models = time_left(cases, 2)
+    assert with_models and left == pytest.approx(1.0 * 200 * (40.0 / 200.0) + 4.0)

@@ -38,9 +38,10 @@ class CaseState:
     particles : int
         Its particles.
     reached : float
-        Simulated time reached by its CFD-DEM at its last checkpoint, s (0 if none).
+        Simulated time reached by its CFD-DEM at its last checkpoint, or at its end once
+        finished, s (0 if none).
     wall : float
-        Wall time its CFD-DEM had spent at that checkpoint, s.
+        Wall time its CFD-DEM had spent then, s.
     since : float
         Wall time since that checkpoint was written, s.
     models_wall : float or None
@@ -83,6 +84,12 @@ def read_case(folder: str | os.PathLike, simulated: float, particles: int,
                    and all(isinstance(w, (int, float)) for w in post) else None)
     state = CaseState("done" if finished else "waiting", simulated, particles,
                       models_wall=models_wall)
+    cfd = timings.get("cfd_dem")
+    if isinstance(cfd, dict):           # a finished CFD-DEM: its pace, for the cases to come
+        wall, reached = cfd.get("wall_s"), cfd.get("simulated_s")
+        if (isinstance(wall, (int, float)) and isinstance(reached, (int, float))
+                and math.isfinite(wall) and math.isfinite(reached) and reached > 0):
+            state.reached, state.wall = float(reached), float(wall)
     if finished:
         return state
     if (folder / "cfd-dem.h5").exists():
@@ -131,7 +138,7 @@ def time_left(cases: list[CaseState], jobs: int) -> tuple[float, bool] | None:
         before any case has finished them: the CFD-DEM's alone); None before any CFD-DEM
         has reached its first checkpoint.
     """
-    measured = [c for c in cases if c.stage == "cfd-dem" and c.reached > 0 and c.wall > 0]
+    measured = [c for c in cases if c.stage != "waiting" and c.reached > 0 and c.wall > 0]
     if not measured and any(c.stage in ("waiting", "cfd-dem") for c in cases):
         return None
     # wall time per simulated second and particle, from the CFD-DEMs measured
