@@ -157,7 +157,13 @@ def test_demos_have_distinct_default_folders():
     assert "cfbmarkov-demo-synthetic" in demo.help
 
 
-def test_synthetic_demo_refuses_the_cfd_dem_demo_folder(tmp_path, capsys):
+def test_synthetic_demo_refuses_the_cfd_dem_demo_folder(tmp_path, capsys, monkeypatch):
+    import cfbmarkov.demo
+
+    def no_run(*args, **kwargs):            # were it not refused: fail at once, not run
+        raise AssertionError("the synthetic demo started in the CFD-DEM demo's folder")
+
+    monkeypatch.setattr(cfbmarkov.demo, "run_demo", no_run)
     folder = tmp_path / "cfbmarkov-demo"
     folder.mkdir()
     (folder / "reproduce.json").write_text("{}")
@@ -166,7 +172,13 @@ def test_synthetic_demo_refuses_the_cfd_dem_demo_folder(tmp_path, capsys):
     assert sorted(p.name for p in folder.iterdir()) == ["reproduce.json"]
 
 
-def test_cfd_dem_demo_refuses_the_synthetic_demo_folder(tmp_path, capsys):
+def test_cfd_dem_demo_refuses_the_synthetic_demo_folder(tmp_path, capsys, monkeypatch):
+    import cfbmarkov.reproduce
+
+    def no_run(*args, **kwargs):            # were it not refused: fail at once, not run
+        raise AssertionError("the CFD-DEM demo started in the synthetic demo's folder")
+
+    monkeypatch.setattr(cfbmarkov.reproduce, "reproduce", no_run)
     folder = tmp_path / "synth"
     folder.mkdir()
     (folder / "demo.json").write_text("{}")
