@@ -67,3 +67,30 @@ def test_a_missing_value_is_still_an_error(capsys):
     assert "expected one argument" in capsys.readouterr().err
     # a value that is an option stays an option
     assert main(["import", "d", "--format", "lammps", "--region", "-o", "r.h5"]) == 2
+
+
+def _outputs(line: str) -> list[str]:
+    """The output paths a command line names (``-o``/``--output``)."""
+    words = shlex.split(line)
+    return [words[i + 1] for i, w in enumerate(words[:-1]) if w in ("-o", "--output")]
+
+
+@pytest.mark.parametrize("doc", ["README.md", "docs/tutorial/index.md"])
+def test_example_outputs_are_ignored_by_git(doc):
+    """Run from the repository's root, the examples' outputs (a folder or a file each) leave
+    no untracked file for git to show: .gitignore lists each (or its ``*.h5``)."""
+    import shutil
+    import subprocess
+
+    if shutil.which("git") is None or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout")
+    outputs = {o.rstrip("/") for line in _command_lines(ROOT / doc) for o in _outputs(line)
+               if not o.startswith("/")}
+    outputs.add("cfbmarkov-demo")                 # `cfbmarkov demo`'s default folders
+    outputs.add("cfbmarkov-demo-synthetic")
+    assert "synth" in outputs
+    probes = [f"{o}/x.png" if not o.endswith(".h5") else o for o in sorted(outputs)]
+    done = subprocess.run(["git", "check-ignore", "--no-index", *probes], cwd=ROOT,
+                          capture_output=True, text=True)
+    ignored = {line.strip() for line in done.stdout.splitlines()}
+    assert not set(probes) - ignored, f"not in .gitignore: {sorted(set(probes) - ignored)}"

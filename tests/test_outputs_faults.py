@@ -73,7 +73,7 @@ def data(tmp_path_factory):
 
 
 def _fit(data, out, *more):
-    return main(["fit", str(data / "run.h5"), "--window", "0:1", "-o", str(out), *more])
+    return main(["fit", str(data / "run.h5"), "--window", "0:1", "-q", "-o", str(out), *more])
 
 
 # -- 1. locks -------------------------------------------------------------------------------
@@ -173,7 +173,7 @@ def test_full_disk_import_one_line_no_temporary(tmp_path):
 
 @pytest.mark.parametrize("verb", ["fit", "predict", "compare"])
 def test_full_disk_markov_verbs(data, tmp_path, verb):
-    args = {"fit": ["fit", data / "run.h5", "--window", "0:1", "-o", "out.h5"],
+    args = {"fit": ["fit", data / "run.h5", "--window", "0:1", "-q", "-o", "out.h5"],
             "predict": ["predict", data / "model.h5", "--init", data / "run.h5", "--start",
                         "0.5", "--duration", "1", "-q", "-o", "out.h5"],
             "compare": ["compare", data / "run.h5", data / "run.h5", "--window", "0:1.5",

@@ -69,6 +69,50 @@ def one_line_notes() -> Iterator[None]:
         yield
 
 
+#: seconds between the lines of :func:`heartbeat`
+HEARTBEAT_EVERY = 5.0
+
+
+@contextlib.contextmanager
+def heartbeat(text: str, write=None, every: float | None = None) -> Iterator[None]:
+    """Within the block, one line ``TEXT: still working, M:SS so far`` every ``every``
+    seconds of work, from a background thread, so that a long step without progress of its
+    own still shows it is alive in a log file.
+
+    Parameters
+    ----------
+    text : str
+        What the block does (``compare: pred.h5 against ref.h5``).
+    write : callable, optional
+        Called with each line (default :func:`write_line` to the current ``sys.stderr``);
+        None as ``write`` and a falsy ``text`` alike mean no lines.
+    every : float, optional
+        Seconds between lines (default :data:`HEARTBEAT_EVERY`).
+    """
+    import threading
+    import time
+
+    if not text:
+        yield
+        return
+    write = write_line if write is None else write
+    every = HEARTBEAT_EVERY if every is None else every
+    stop = threading.Event()
+    started = time.perf_counter()
+
+    def beat() -> None:
+        while not stop.wait(every):
+            write(f"{text}: still working, {clock_text(time.perf_counter() - started)} so far")
+
+    thread = threading.Thread(target=beat, name="cfbmarkov-heartbeat", daemon=True)
+    thread.start()
+    try:
+        yield
+    finally:
+        stop.set()
+        thread.join()
+
+
 def clock_text(seconds: float) -> str:
     """A duration as ``H:MM:SS`` or ``M:SS`` (``?`` where it is not finite).
 
@@ -120,5 +164,6 @@ def progress_mode(progress) -> str | None:
     raise InputError(f"progress {progress!r}: choose True, False, 'bar' or 'lines'")
 
 
-__all__ = ["NOTE", "clock_text", "install_one_line_notes", "one_line_notes", "progress_mode",
+__all__ = ["HEARTBEAT_EVERY", "NOTE", "clock_text", "heartbeat", "install_one_line_notes",
+           "one_line_notes", "progress_mode",
            "write_line"]

@@ -71,6 +71,26 @@ class FrameTimes:
         return (f"frames span {time_text(self.times[0])} to {time_text(self.times[-1])} s every "
                 f"{time_text(self.frame_interval)} s")
 
+    def _outside_text(self, start: float, stop: float) -> str:
+        """Why the window ``start:stop`` is refused where it leaves the data, with the part
+        inside and a window of its length that fits."""
+        first, last = float(self.times[0]), float(self.times[-1])
+        data = f"{time_text(first)} to {time_text(last)} s"
+        if stop <= first or start >= last:
+            where = f"lies outside the data of {self.path} ({data})"
+        else:
+            where = (f"lies partly outside the data of {self.path} ({data}); only "
+                     f"{time_text(max(start, first))}:{time_text(min(stop, last))} s lies "
+                     "inside")
+        length = stop - start
+        if length >= last - first:
+            fits = f"{time_text(first)}:{time_text(last)} (all of it)"
+        elif stop > last:
+            fits = f"{time_text(last - length)}:{time_text(last)} (the same length)"
+        else:
+            fits = f"{time_text(first)}:{time_text(first + length)} (the same length)"
+        return f"window {start:g}:{stop:g} s {where}: choose one within it, e.g. {fits}"
+
     def frame_index(self, time: float) -> int:
         """Index of the frame at ``time``.
 
@@ -92,7 +112,10 @@ class FrameTimes:
             raise InputError(f"time {time:g} s is not a finite number")
         i = int(np.argmin(np.abs(self.times - time)))
         if not abs(self.times[i] - time) <= self.time_tolerance:
-            raise InputError(f"{self.path}: no frame at t = {time_text(time)} s ({self._frames_text()})")
+            nearest = ("" if self.n_frames == 1
+                       else f"; the nearest is at {time_text(self.times[i])} s")
+            raise InputError(f"{self.path}: no frame at t = {time_text(time)} s "
+                             f"({self._frames_text()}{nearest})")
         return i
 
     def window(self, start: float, stop: float) -> slice:
@@ -118,9 +141,7 @@ class FrameTimes:
             raise InputError(f"window {start:g}:{stop:g} s is empty (the end must follow the start)")
         tol = self.time_tolerance
         if start < self.times[0] - tol or stop > self.times[-1] + tol:
-            raise InputError(
-                f"window {start:g}:{stop:g} s lies outside the data of {self.path} "
-                f"({time_text(self.times[0])} to {time_text(self.times[-1])} s)")
+            raise InputError(self._outside_text(start, stop))
         i0 = int(np.searchsorted(self.times, start - tol, side="left"))
         i1 = int(np.searchsorted(self.times, stop + tol, side="right"))
         if i1 - i0 < 1:

@@ -44,6 +44,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from cfbmarkov._atomic import write_text_atomic
+from cfbmarkov._console import heartbeat
 from cfbmarkov.cases.scales import (
     MODELS,
     QUICK_REDUCTIONS,
@@ -57,6 +58,8 @@ from cfbmarkov.cases.scales import (
 )
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.reproduce_case import compile_kernels, run_case
+from cfbmarkov.run_progress import EVERY as PROGRESS_EVERY
+from cfbmarkov.run_progress import read_case, time_left_line
 
 
 # -- executors ---------------------------------------------------------------------------------
@@ -320,22 +323,34 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                                    kinetics=kinetics, time_step_note=False,
                                    ensemble=ensemble, device=device): name
                    for case, name in zip(cases, names)}
-        for future in cf.as_completed(futures):
-            name = futures[future]
-            try:
-                result = future.result()
-            except CfbmarkovError as exc:
-                failures.append(f"{name}: {exc}")
-                log(f"{name}: failed: {exc}")
-                continue
-            done = ", ".join(f"{k} {v}" for k, v in result["stages"].items())
-            log(f"{name}: {done}")
-            for est, s in result["summaries"].items():
-                log(f"{name} {est:>5}: PD E(RT) {_fmt(s.get('pd_rt_mean'), '+.1f')} %, PD SD(RT) "
-                    f"{_fmt(s.get('pd_rt_sd'), '+.1f')} %, MD {_fmt(s.get('md_rtd'), '.3g')}, "
-                    f"mixing RMS {_fmt(s.get('mixing_rms'), '.3g')}")
-            if result["summaries"]:
-                log(rtd_line(name, result["summaries"]))
+        workers = getattr(executor, "_max_workers", None) or len(cases)
+        finished: set[str] = set()
+
+        def whole_run() -> None:        # the whole run's time left (cfbmarkov.run_progress)
+            states = [read_case(out / n, c.output.end_time, c.particles.number, n in finished)
+                      for c, n in zip(cases, names)]
+            line = time_left_line(states, workers, _time.perf_counter() - started)
+            if line is not None:
+                log(line)
+
+        pending, last = set(futures), _time.perf_counter()
+        while pending:
+            done_now, pending = cf.wait(pending, timeout=PROGRESS_EVERY,
+                                        return_when=cf.FIRST_COMPLETED)
+            for future in done_now:
+                name = futures[future]
+                finished.add(name)
+                try:
+                    result = future.result()
+                except CfbmarkovError as exc:
+                    failures.append(f"{name}: {exc}")
+                    log(f"{name}: failed: {exc}")
+                    continue
+                _log_case(log, name, result)
+            if progress and pending and (done_now or _time.perf_counter() - last
+                                         >= PROGRESS_EVERY - 0.5):
+                whole_run()
+                last = _time.perf_counter()
         if not failures:
             log(f"all cases done in {_time.perf_counter() - started:.0f} s")
             # said once for the run, and only for a run that finished: a refusal stays one line
@@ -345,7 +360,12 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
 
                 # a process pool of its own, idle now, draws half the report's figures
                 pool = executor if own and isinstance(executor, cf.ProcessPoolExecutor) else None
-                html = write_report(out, executor=pool)
+                if progress:
+                    log("report: drawing the figures and writing report.html")
+                with heartbeat("report" if progress else "", write=log):
+                    html = write_report(out, executor=pool)
+                if progress:
+                    log(f"report: done, {_time.perf_counter() - started:.0f} s in all")
     except KeyboardInterrupt:
         if own:
             _stop_workers(executor)
@@ -362,6 +382,18 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
     if failures:
         raise InputError(f"{len(failures)} case(s) failed; rerun to resume: " + "; ".join(failures))
     return html if report else out
+
+
+def _log_case(log, name: str, result: dict) -> None:
+    """The lines of a finished case: its stages, each model's figures, its RTDs' sizes."""
+    done = ", ".join(f"{k} {v}" for k, v in result["stages"].items())
+    log(f"{name}: {done}")
+    for est, s in result["summaries"].items():
+        log(f"{name} {est:>5}: PD E(RT) {_fmt(s.get('pd_rt_mean'), '+.1f')} %, PD SD(RT) "
+            f"{_fmt(s.get('pd_rt_sd'), '+.1f')} %, MD {_fmt(s.get('md_rtd'), '.3g')}, "
+            f"mixing RMS {_fmt(s.get('mixing_rms'), '.3g')}")
+    if result["summaries"]:
+        log(rtd_line(name, result["summaries"]))
 
 
 def _advise_time_step(scale: Scale, cases, names) -> None:

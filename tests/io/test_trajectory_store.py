@@ -70,8 +70,15 @@ def test_frames_located_by_time(tmp_path, run):
         assert t.lag_frames(0.05) == 2
         with pytest.raises(InputError, match=r"no frame at t = 0.61 s"):
             t.frame_index(0.61)
-        with pytest.raises(InputError, match=r"lies outside the data"):
+        # partly inside: the part inside and a window of the same length that fits
+        with pytest.raises(InputError, match=r"lies partly outside the data .*\(0.5 to 0.875 s\); "
+                                             r"only 0.5:0.6 s lies inside: choose one within "
+                                             r"it, e.g. 0.5:0.7 \(the same length\)"):
             t.window(0.4, 0.6)
+        with pytest.raises(InputError, match=r"lies outside the data .*e.g. 0.675:0.875"):
+            t.window(1.0, 1.2)
+        with pytest.raises(InputError, match=r"e.g. 0.5:0.875 \(all of it\)"):
+            t.window(0.0, 2.0)
         with pytest.raises(InputError, match=r"not a whole multiple"):
             t.lag_frames(0.03)
 

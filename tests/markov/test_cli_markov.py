@@ -65,7 +65,8 @@ def test_fit_predict_rtd_info(tmp_path, capsys, markov_run):
     (["--cells", "0x38"], "at least one column"),
     (["--lag", "0.03"], "not a whole multiple of the frame interval"),
     (["--lag", "-1"], "must be positive"),
-    (["--window", "7:12"], "outside the data"),
+    (["--window", "7:12"], "lies partly outside the data"),
+    (["--window", "7:12"], "only 7:8 s lies inside: choose one within it, e.g. 3:8"),
     (["--window", "5:2"], "STOP must exceed START"),
     (["--window", "a:b"], "is not START:STOP"),
 ])

@@ -31,6 +31,8 @@ def cmd_compare(args) -> int:
     from cfbmarkov.report.compare import compare
 
     started = time.perf_counter()
+    if args.window is None:
+        _refuse_missing_window(args.prediction)
     if not args.quiet:
         from cfbmarkov.analysis.compare_inputs import check_runs
         from cfbmarkov.trajectories import Trajectories
@@ -43,10 +45,14 @@ def cmd_compare(args) -> int:
               + (f", {args.resamples} bootstrap resamples for the intervals"
                  if args.resamples else "") + (", figures" if not args.no_figures else "")
               + ")", file=sys.stderr, flush=True)
-    summary = compare(args.reference, args.prediction, window=args.window, output=args.output,
-                      bin_width=args.bin_width, md_order=args.md_order, figures=not args.no_figures,
-                      basis=args.basis, level=args.level, resamples=args.resamples,
-                      long_run_span=args.long_run_span, kinetics=args.kinetics)
+    from cfbmarkov._console import heartbeat
+
+    with heartbeat("" if args.quiet else "compare"):     # a line every 5 s of work
+        summary = compare(args.reference, args.prediction, window=args.window,
+                          output=args.output, bin_width=args.bin_width, md_order=args.md_order,
+                          figures=not args.no_figures, basis=args.basis, level=args.level,
+                          resamples=args.resamples, long_run_span=args.long_run_span,
+                          kinetics=args.kinetics)
     if not args.quiet:
         print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
               flush=True)
@@ -57,8 +63,14 @@ def cmd_compare(args) -> int:
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
           f"mixing RMS {summary['mixing_rms']:.4g}")
     source = summary.get("bin_width_from", "given")
+    counts = [summary[side].get("rt_count") for side in ("reference", "model")]
     print(f"  RTD bins {summary['bin_width']:g} s wide"
-          + (" (--bin-width)" if source == "given" else f" ({source}; --bin-width to change)"))
+          + (" (--bin-width)" if source == "given" else f" ({source}; --bin-width to change)")
+          + ("" if None in counts else
+             f"; residences counted: reference {counts[0]}, model {counts[1]}"))
+    baseline = summary.get("baseline")
+    if baseline and baseline.get("md_rtd") is not None:
+        print("  " + baseline_line(baseline, summary["md_rtd"]))
     model = summary["model"]
     if "rt_mean_interval" in model:
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
@@ -70,6 +82,9 @@ def cmd_compare(args) -> int:
         kind = " with the flow's variability" if with_flow else ""
         print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) {m0:.4g}-{m1:.4g} s, "
               f"SD(RT) {s0:.4g}-{s1:.4g} s{own}")
+        reference = summary["reference"]
+        print("  " + interval_verdict(reference["rt_mean"], reference["rt_sd"],
+                                      (m0, m1), (s0, s1)))
     exact = summary.get("exact_reference")
     if exact:
         print(f"  (residence times from frames at the model's lag on both sides; the reference's "
@@ -84,6 +99,77 @@ def cmd_compare(args) -> int:
     _print_kinetics(summary.get("kinetics") or {})
     print(Path(args.output) / "summary.json")
     return 0
+
+
+def _refuse_missing_window(prediction: str) -> None:
+    """Refuse ``compare`` without ``--window`` in one line naming the prediction's span."""
+    from cfbmarkov.trajectories import Trajectories
+
+    hint = ""
+    try:
+        with Trajectories(prediction) as pred:
+            a, b = float(pred.times[0]), float(pred.times[-1])
+        hint = f": the prediction {prediction} covers {a:g}-{b:g} s (--window {a:g}:{b:g})"
+    except Exception:       # an unreadable prediction is reported as such by compare itself
+        pass
+    raise InputError(f"give the window to compare over, --window START:STOP{hint}")
+
+
+def _place(value: float, interval) -> str:
+    """Where ``value`` lies against ``interval``: inside, below or above it."""
+    lo, hi = interval
+    return "inside" if lo <= value <= hi else "below" if value < lo else "above"
+
+
+def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -> str:
+    """One line saying whether the reference's E(RT) and SD(RT) lie inside the model's
+    intervals, and what that means.
+
+    Parameters
+    ----------
+    rt_mean, rt_sd : float
+        The reference's E(RT) and SD(RT), s.
+    mean_interval, sd_interval : (float, float)
+        The model's intervals of E(RT) and SD(RT), s.
+
+    Returns
+    -------
+    str
+        ``the reference's E(RT) 0.7446 s lies below the model's interval, SD(RT) ...``.
+    """
+    places = [_place(rt_mean, mean_interval), _place(rt_sd, sd_interval)]
+    text = (f"the reference's E(RT) {rt_mean:.4g} s lies {places[0]} the model's interval, "
+            f"its SD(RT) {rt_sd:.4g} s {places[1]}")
+    if places == ["inside", "inside"]:
+        return text + ": the model is consistent with the reference within its uncertainty"
+    missed = " and ".join(n for n, p in zip(("E(RT)", "SD(RT)"), places) if p != "inside")
+    return text + f": the model misses the reference's {missed} beyond its uncertainty"
+
+
+def baseline_line(baseline: dict, md_model: float) -> str:
+    """One line setting the persistence baseline's MD beside the model's.
+
+    Parameters
+    ----------
+    baseline : dict
+        The summary's ``baseline`` block (``windows``: the window whose observed RTD is the
+        baseline's prediction, then the judged one; ``md_rtd``; ``pd_rt_mean``).
+    md_model : float
+        The model's MD of the RTD.
+
+    Returns
+    -------
+    str
+    """
+    from cfbmarkov.observed.metrics import percentage_text as pd_text
+
+    (a, b), _ = baseline["windows"]
+    md = baseline["md_rtd"]
+    verdict = ("the model is closer" if md_model < md else
+               "the baseline is closer" if md < md_model else "a tie")
+    return (f"persistence baseline (the observed RTD of {a:g}-{b:g} s taken as the "
+            f"prediction): MD {md:.4g} against the model's {md_model:.4g}, PD E(RT) "
+            f"{pd_text(baseline.get('pd_rt_mean'))} %: {verdict}")
 
 
 def _print_kinetics(block: dict) -> None:
@@ -291,7 +377,9 @@ def add_compare(sub) -> None:
                        "tracer groups, figures")
     s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
     s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
-    s.add_argument("--window", type=parse_window, required=True, help="analysis window START:STOP, s")
+    s.add_argument("--window", type=parse_window, default=None,
+                   help="analysis window START:STOP, s (required; without it the prediction's "
+                        "span is named, e.g. 15:20)")
     s.add_argument("-o", "--output", required=True, help="output directory")
     s.add_argument("--bin-width", type=positive_float, default=None,
                    help="RTD bin width, s (default: the lag of the model behind the prediction, "
@@ -306,9 +394,9 @@ def add_compare(sub) -> None:
                    help="bootstrap resamples of the model's fitting window for the intervals "
                         "(0: no intervals; default 100)")
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
-                   help="residence times of both sides from frames at the model's lag (like "
-                        "for like, the default; the reference's exact-event figures are shown "
-                        "beside), or the reference's exact pass events (default frames)")
+                   help="frames: residence times of both sides from frames at the model's "
+                        "lag, like for like (the reference's exact-event figures are shown "
+                        "beside); events: the reference's exact pass events (default frames)")
     s.add_argument("--long-run-span", type=parse_window, default=None,
                    help="START:STOP, s: also give the reference's RTD pooled over this span's "
                         "other whole windows (what a perfect stationary model would predict; "

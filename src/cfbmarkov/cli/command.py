@@ -76,6 +76,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             argv = list(sys.argv[1:] if argv is None else argv)
             args = parser.parse_args(join_dash_values(parser, argv))
+            if args.command == "demo":     # each kind of demo its own default folder
+                args.output = run.demo_output(args.output, args.synthetic)
         except SystemExit as exc:      # usage errors (2), --help and --version (0)
             return int(exc.code or 0)
     except KeyboardInterrupt:

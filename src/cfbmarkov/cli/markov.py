@@ -2,12 +2,29 @@
 
 from __future__ import annotations
 
+import contextlib
 import sys
 
 from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import (count, finite_float, level, parse_cells, parse_windows,
                                    positive_float, seed)
 from cfbmarkov.errors import CfbmarkovError, InputError
+
+
+@contextlib.contextmanager
+def _stage(args, short: str, text: str | None):
+    """A stage of a verb: a line ``VERB: TEXT`` on stderr at its start (none where ``text``
+    is None: a stage that may still refuse its input, in one line) and a line every 5 s of
+    work after it (:func:`cfbmarkov._console.heartbeat`); nothing with ``-q``."""
+    from cfbmarkov._console import heartbeat, write_line
+
+    if getattr(args, "quiet", False):
+        yield
+        return
+    if text is not None:
+        write_line(f"{args.command}: {text}")
+    with heartbeat(f"{args.command} ({short})"):
+        yield
 
 
 def cmd_fit(args) -> int:
@@ -43,13 +60,13 @@ def cmd_fit(args) -> int:
             raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
         if args.states == "auto":
             run.window(*args.window)        # a refusal stays one line, before any progress
-            if not args.quiet:
-                print(f"fit: judging the candidate state spaces on {args.run}, "
-                      f"{args.window[0]:g}-{args.window[1]:g} s (each fitted and its RTD "
-                      "compared with the window's)", file=sys.stderr, flush=True)
-            model = select_model(run, window=args.window, columns=columns, rows=rows,
-                                 lag=args.lag, estimator=args.estimator,
-                                 coherent=args.coherent)
+            with _stage(args, "choosing the state space",
+                        f"judging the candidate state spaces on {args.run}, "
+                        f"{args.window[0]:g}-{args.window[1]:g} s (each fitted and its RTD "
+                        "compared with the window's)"):
+                model = select_model(run, window=args.window, columns=columns, rows=rows,
+                                     lag=args.lag, estimator=args.estimator,
+                                     coherent=args.coherent)
             if args.connected:     # the chosen space, refitted on its largest connected set
                 model = fit_model(run, model.state_space, model.lag, args.window,
                                   args.estimator, connected=True, coherent=args.coherent
@@ -57,8 +74,9 @@ def cmd_fit(args) -> int:
         else:
             space = state_space_from_name(args.states, columns, rows, run.width, run.height,
                                           depth_columns, run.depth)
-            model = fit_model(run, space, args.lag, args.window, args.estimator,
-                              connected=args.connected, coherent=args.coherent)
+            with _stage(args, "counting", None):    # a refusal stays one line: no start line
+                model = fit_model(run, space, args.lag, args.window, args.estimator,
+                                  connected=args.connected, coherent=args.coherent)
     return _finish_fit(args, model, [args.run], [args.window])
 
 
@@ -84,7 +102,9 @@ def _finish_fit(args, model, runs, windows) -> int:
     # -- the model's interval: a block bootstrap of the fitting window and the flow's
     # variability between its blocks (analysis.intervals.model_intervals) ----------------
     if args.resamples and has_rtd:
-        model = _with_interval(model, args.level, args.resamples)
+        with _stage(args, "interval", f"the model's {100 * args.level:g} % interval: "
+                    f"{args.resamples} bootstrap resamples of the fitting window"):
+            model = _with_interval(model, args.level, args.resamples)
     # -- end of the model's interval ---------------------------------------------------
     # -- the sample's verdict (docs/definitions.md, Sample adequacy) --------------------
     if args.adequacy:
@@ -92,7 +112,10 @@ def _finish_fit(args, model, runs, windows) -> int:
 
         interval = (model.uncertainty.rt_mean_interval if model.uncertainty is not None
                     else None)
-        model = model.with_adequacy(assess_adequacy(model, runs, windows, interval=interval))
+        with _stage(args, "sample verdict", "the fitting sample's verdict: the window's "
+                    "halves and quarters refitted and compared"):
+            model = model.with_adequacy(assess_adequacy(model, runs, windows,
+                                                        interval=interval))
     # -- end of the sample's verdict ----------------------------------------------------
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line
@@ -149,9 +172,10 @@ def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int
             space = state_space_from_name(args.states, columns, rows, first.width,
                                           first.height, depth_columns, first.depth)
             selection, lag = None, args.lag
-        discrete = discretize_runs(runs, space, lag, windows)
-        model = estimator_from_name(args.estimator, space, lag, args.connected,
-                                    args.coherent).fit(discrete)
+        with _stage(args, "counting", None):    # a refusal stays one line: no start line
+            discrete = discretize_runs(runs, space, lag, windows)
+            model = estimator_from_name(args.estimator, space, lag, args.connected,
+                                        args.coherent).fit(discrete)
         if selection is not None:      # the chosen space, refitted on its connected set
             model = model.with_selection(selection)
     return _finish_fit(args, model, list(args.run), windows)
@@ -229,8 +253,8 @@ def cmd_rtd(args) -> int:
     elif (args.level is not None and model.uncertainty is not None
           and abs(model.uncertainty.level - args.level) > 1e-12):
         raise InputError(f"{args.model} holds a {model.uncertainty.percent} % interval, not "
-                         f"{100 * args.level:g} %: add --resamples N to form it from the "
-                         "model's fitting window")
+                         f"{100 * args.level:g} %: add --resamples 100 to form it from 100 "
+                         "bootstrap resamples of the model's fitting window")
     rtd = model.rtd(window=args.window_length)
     band = rtd.uncertainty              # the intrinsic RTD's only
     adequacy = getattr(model, "adequacy", None)

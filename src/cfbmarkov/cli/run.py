@@ -45,10 +45,12 @@ def cmd_demo(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
+    _check_demo_folder(args.output, args.synthetic)
     if args.synthetic:
         from cfbmarkov.demo import run_demo
 
-        out = run_demo(args.output, particles=args.particles, seed=args.seed)
+        out = run_demo(args.output, particles=args.particles, seed=args.seed,
+                       progress=None if args.quiet else _stderr_line)
         print(out)
         return 0
     from cfbmarkov.reproduce import reproduce
@@ -57,6 +59,47 @@ def cmd_demo(args) -> int:
                        log=lambda line: print(line, flush=True))
     print(f"report: {report}")
     return 0
+
+
+def _stderr_line(text: str) -> None:
+    from cfbmarkov._console import write_line
+
+    write_line(text)
+
+
+#: the default output folders of ``cfbmarkov demo`` and ``cfbmarkov demo --synthetic``
+DEMO_FOLDER, SYNTHETIC_FOLDER = "cfbmarkov-demo", "cfbmarkov-demo-synthetic"
+
+
+def demo_output(output: str | None, synthetic: bool) -> str:
+    """The demo's output folder: ``output``, or the default of its kind (the CFD-DEM demo
+    and the synthetic demo never share a default folder)."""
+    if output is not None:
+        return output
+    return SYNTHETIC_FOLDER if synthetic else DEMO_FOLDER
+
+
+def _check_demo_folder(output: str, synthetic: bool) -> None:
+    """Refuse, in one line, a demo into a folder that holds the demo of the other kind
+    (the CFD-DEM demo leaves ``reproduce.json``, the synthetic one ``demo.json`` or
+    ``reference.h5``): their files would mix."""
+    from pathlib import Path
+
+    from cfbmarkov.errors import InputError
+
+    folder = Path(output)
+    if not folder.is_dir():
+        return
+    cfd_dem = (folder / "reproduce.json").exists()
+    synthetic_files = [n for n in ("demo.json", "reference.h5") if (folder / n).exists()]
+    if synthetic and cfd_dem:
+        raise InputError(f"{output} holds the CFD-DEM demo (reproduce.json): the synthetic "
+                         f"demo's files would mix with it; give it its own folder (-o "
+                         f"{SYNTHETIC_FOLDER}, its default) or remove {output}")
+    if not synthetic and synthetic_files and not cfd_dem:
+        raise InputError(f"{output} holds the synthetic demo ({synthetic_files[0]}): the "
+                         f"CFD-DEM demo's files would mix with it; give it its own folder "
+                         f"(-o {DEMO_FOLDER}, its default) or remove {output}")
 
 
 def cmd_bench(args) -> int:
@@ -145,13 +188,16 @@ def add_demo(sub) -> None:
     """
     s = sub.add_parser("demo", help="the main job on a fresh machine: 'reproduce --scale quick' "
                        "(about 4 min on 2 quiet cores), ending with the path of its report")
-    s.add_argument("-o", "--output", default="cfbmarkov-demo",
-                   help="output directory (default cfbmarkov-demo)")
+    s.add_argument("-o", "--output", default=None,
+                   help=f"output directory (default {DEMO_FOLDER}; with --synthetic "
+                        f"{SYNTHETIC_FOLDER}); a folder holding the demo of the other kind "
+                        "is refused")
     s.add_argument("--jobs", type=count(1, MAX_JOBS), default=None,
-                   help="local worker processes")
+                   help="local worker processes running the cases side by side (default: "
+                        "min(4 cases, cores))")
     s.add_argument("--synthetic", action="store_true",
                    help="instead, the Markov part alone on synthetic core-annulus trajectories "
-                        "(30 s)")
+                        "of 0-20 s (under a minute on 2 quiet cores)")
     s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=6000,
                    help="with --synthetic: particles (default 6000)")
     s.add_argument("--seed", type=seed, default=1, help="with --synthetic: seed (default 1)")

@@ -178,6 +178,10 @@ def read_model_group(group: h5py.Group | h5py.File, model_class: Callable[..., "
     fmt = group.attrs.get("format")
     if isinstance(fmt, bytes):
         fmt = fmt.decode(errors="replace")
+    if fmt == "cfbmarkov.trajectories":
+        raise InputError(f"{label} is a trajectory file, not a cfbmarkov model file: fit a "
+                         f"model on it first (cfbmarkov fit {label} -o model.h5) and give "
+                         "that model")
     if fmt != MODEL_FORMAT:
         raise InputError(f"{label}: not a cfbmarkov model file (format attribute is {fmt!r})")
     try:

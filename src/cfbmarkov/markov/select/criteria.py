@@ -221,11 +221,17 @@ class WindowRTD(_RTDCriterion):
 
     def _reason(self, best, cells):
         a, b = self.fitting.window
+        observed = self.fitting.whole
         reason = (f"{best.states} at lag {best.lag:g} s had the exact RTD closest to the one "
                   f"observed over the fitting window {a:g}-{b:g} s (MD {best.md_rtd:.3g}, PD "
                   f"E(RT) {best.pd_rt_mean:+.1f} %, SD(RT) {best.pd_rt_sd:+.1f} %")
         reason += (f"; cells: MD {cells.md_rtd:.3g}, {cells.pd_rt_mean:+.1f} %, "
                    f"{cells.pd_rt_sd:+.1f} %)" if cells is not None else ")")
+        # what the percentages are against: the chain's RTD as a window of that length
+        # sees it, against the window's observed one (not the intrinsic E(RT) printed below)
+        reason += (f"; the percentages set the chain's RTD as seen in a {b - a:g} s window "
+                   f"(E(RT) {best.rt_mean:.3g} s) against the window's observed E(RT) "
+                   f"{observed.mean:.3g} s, SD(RT) {observed.sd:.3g} s")
         return reason
 
 

@@ -1,0 +1,212 @@
+"""What a new user meets on the command line: errors that name a working value, progress
+lines every few seconds of work, compare's lines that judge, demos that never mix."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import pytest
+
+from cfbmarkov import _console
+from cfbmarkov.cli import build_parser, main
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def one_line_error(code, err):
+    assert code == 2
+    lines = err.strip().splitlines()
+    assert len(lines) == 1 and "Traceback" not in err, err
+    return lines[0]
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory, markov_run):
+    """A model on 1-5 s of ``markov_run`` (0-8 s, frames every 0.025 s) and its prediction
+    of 5-7 s."""
+    folder = tmp_path_factory.mktemp("first-hour")
+    model, pred = folder / "model.h5", folder / "pred.h5"
+    assert main(["fit", str(markov_run), "--cells", "4x16", "--window", "1:5", "-q",
+                 "--resamples", "20", "-o", str(model)]) == 0
+    assert main(["predict", str(model), "--init", str(markov_run), "--start", "5",
+                 "--duration", "2", "-q", "-o", str(pred)]) == 0
+    return model, pred
+
+
+# -- errors that name a working value ------------------------------------------------------
+
+def test_predict_off_a_frame_names_the_nearest(tmp_path, capsys, markov_run, fitted):
+    model, _ = fitted
+    line = one_line_error(*run_cli(capsys, "predict", model, "--init", markov_run, "--start",
+                                   "5.01", "--duration", "1", "-o", tmp_path / "p.h5")[::2])
+    assert "no frame at t = 5.01 s" in line and "the nearest is at 5 s" in line
+
+
+def test_rtd_of_a_trajectory_file_says_fit_first(capsys, markov_run):
+    line = one_line_error(*run_cli(capsys, "rtd", markov_run)[::2])
+    assert "is a trajectory file" in line and f"cfbmarkov fit {markov_run}" in line
+
+
+def test_rtd_at_another_level_names_a_number_of_resamples(capsys, fitted):
+    model, _ = fitted
+    line = one_line_error(*run_cli(capsys, "rtd", model, "--level", "0.95")[::2])
+    assert "--resamples 100" in line and "--resamples N" not in line
+
+
+def test_compare_without_window_names_the_prediction_span(tmp_path, capsys, markov_run,
+                                                         fitted):
+    _, pred = fitted
+    line = one_line_error(*run_cli(capsys, "compare", markov_run, pred, "-o",
+                                   tmp_path / "c")[::2])
+    assert "--window 5:7" in line and "covers 5-7 s" in line
+    assert not (tmp_path / "c").exists()
+
+
+def test_window_partly_outside_names_the_part_inside(tmp_path, capsys, markov_run):
+    line = one_line_error(*run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--window",
+                                   "6:10", "-o", tmp_path / "m.h5")[::2])
+    assert "only 6:8 s lies inside" in line and "e.g. 4:8" in line
+
+
+# -- progress: a line at the start of each stage and every few seconds of work -------------
+
+def test_heartbeat_writes_lines_while_the_block_works():
+    import time
+
+    lines = []
+    with _console.heartbeat("compare", write=lines.append, every=0.05):
+        time.sleep(0.3)
+    assert len(lines) >= 2
+    assert all(re.fullmatch(r"compare: still working, 0:0\d so far", line) for line in lines)
+    quiet = []
+    with _console.heartbeat("", write=quiet.append, every=0.01):
+        time.sleep(0.05)
+    assert quiet == []
+
+
+def test_fit_names_its_stages_and_is_silent_with_q(tmp_path, capsys, markov_run):
+    code, _, err = run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--window", "1:5",
+                           "--resamples", "20", "-o", tmp_path / "m.h5")
+    assert code == 0
+    assert "fit: the model's 90 % interval: 20 bootstrap resamples" in err
+    assert "fit: the fitting sample's verdict" in err
+    code, _, err = run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--window", "1:5",
+                           "--resamples", "20", "-q", "-o", tmp_path / "q.h5")
+    assert code == 0 and not [l for l in err.splitlines() if l.startswith("fit")]
+
+
+def test_compare_says_it_is_alive_every_few_seconds(tmp_path, capsys, markov_run, fitted,
+                                                   monkeypatch):
+    _, pred = fitted
+    monkeypatch.setattr(_console, "HEARTBEAT_EVERY", 0.05)
+    code, out, err = run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
+                             "--no-figures", "--resamples", "0", "-o", tmp_path / "c")
+    assert code == 0
+    assert "compare: still working" in err
+    code, out, err = run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
+                             "--no-figures", "--resamples", "0", "-q", "-o", tmp_path / "d")
+    assert code == 0 and "still working" not in err
+
+
+# -- compare's printed lines judge --------------------------------------------------------
+
+def test_compare_prints_counts_baseline_and_whether_inside(tmp_path, capsys, markov_run,
+                                                           fitted):
+    _, pred = fitted
+    code, out, _ = run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
+                           "--no-figures", "--resamples", "20", "-q", "-o", tmp_path / "c")
+    assert code == 0
+    summary = json.loads((tmp_path / "c" / "summary.json").read_text())
+    ref, model = summary["reference"], summary["model"]
+    assert (f"residences counted: reference {ref['rt_count']}, model {model['rt_count']}"
+            in out)
+    baseline = summary["baseline"]
+    assert f"MD {baseline['md_rtd']:.4g} against the model's {summary['md_rtd']:.4g}" in out
+    lo, hi = model["rt_mean_interval"]
+    place = "inside" if lo <= ref["rt_mean"] <= hi else "below" if ref["rt_mean"] < lo else "above"
+    assert f"the reference's E(RT) {ref['rt_mean']:.4g} s lies {place} the model's interval" in out
+
+
+def test_interval_verdict_says_outside_means_a_miss():
+    from cfbmarkov.cli.analysis import baseline_line, interval_verdict
+
+    assert interval_verdict(0.74, 0.53, (0.81, 0.86), (0.28, 0.30)).endswith(
+        "the model misses the reference's E(RT) and SD(RT) beyond its uncertainty")
+    assert "lies inside" in interval_verdict(0.83, 0.29, (0.81, 0.86), (0.28, 0.30))
+    assert "SD(RT) 0.35 s above" in interval_verdict(0.83, 0.35, (0.81, 0.86), (0.28, 0.30))
+    line = baseline_line({"windows": [[10, 15], [15, 20]], "md_rtd": 0.0122,
+                          "pd_rt_mean": -0.5}, 0.2021)
+    assert "10-15 s" in line and "MD 0.0122 against the model's 0.2021" in line
+    assert line.endswith("the baseline is closer")
+
+
+# -- the two demos never share a folder ----------------------------------------------------
+
+def test_demos_have_distinct_default_folders():
+    from cfbmarkov.cli.run import demo_output
+
+    assert demo_output(None, False) != demo_output(None, True)
+    assert demo_output("x", True) == "x"
+    demo = next(a for a in build_parser()._subparsers._group_actions[0].choices["demo"]._actions
+                if "--output" in a.option_strings)
+    assert "cfbmarkov-demo-synthetic" in demo.help
+
+
+def test_synthetic_demo_refuses_the_cfd_dem_demo_folder(tmp_path, capsys, monkeypatch):
+    import cfbmarkov.demo
+
+    def no_run(*args, **kwargs):            # were it not refused: fail at once, not run
+        raise AssertionError("the synthetic demo started in the CFD-DEM demo's folder")
+
+    monkeypatch.setattr(cfbmarkov.demo, "run_demo", no_run)
+    folder = tmp_path / "cfbmarkov-demo"
+    folder.mkdir()
+    (folder / "reproduce.json").write_text("{}")
+    line = one_line_error(*run_cli(capsys, "demo", "--synthetic", "-o", folder)[::2])
+    assert "holds the CFD-DEM demo" in line and "-o cfbmarkov-demo-synthetic" in line
+    assert sorted(p.name for p in folder.iterdir()) == ["reproduce.json"]
+
+
+def test_cfd_dem_demo_refuses_the_synthetic_demo_folder(tmp_path, capsys, monkeypatch):
+    import cfbmarkov.reproduce
+
+    def no_run(*args, **kwargs):            # were it not refused: fail at once, not run
+        raise AssertionError("the CFD-DEM demo started in the synthetic demo's folder")
+
+    monkeypatch.setattr(cfbmarkov.reproduce, "reproduce", no_run)
+    folder = tmp_path / "synth"
+    folder.mkdir()
+    (folder / "demo.json").write_text("{}")
+    line = one_line_error(*run_cli(capsys, "demo", "-o", folder)[::2])
+    assert "holds the synthetic demo" in line and "-o cfbmarkov-demo" in line
+    assert sorted(p.name for p in folder.iterdir()) == ["demo.json"]
+
+
+def test_demo_help_gives_jobs_default_and_synthetic_span():
+    demo = build_parser()._subparsers._group_actions[0].choices["demo"]
+    helps = {a.option_strings[0]: a.help for a in demo._actions if a.option_strings}
+    assert "default" in helps["--jobs"]
+    assert "0-20 s" in helps["--synthetic"] and "(30 s)" not in helps["--synthetic"]
+    compare = build_parser()._subparsers._group_actions[0].choices["compare"]
+    basis = next(a.help for a in compare._actions if "--basis" in a.option_strings)
+    assert basis.count("default") == 1
+
+
+# -- fit --states auto: what its percentages are against ----------------------------------
+
+def test_auto_choice_says_what_its_percentages_are_against(markov_run):
+    from cfbmarkov.markov.select import select_model
+
+    model = select_model(markov_run, window=(2.0, 6.0), columns=4, rows=16, lag=0.05,
+                         states=("cells", "cells-direction"))
+    reason = model.selection["reason"]
+    found = re.search(r"PD E\(RT\) ([+-][\d.]+) %.*as seen in a 4 s window \(E\(RT\) ([\d.]+) s\)"
+                      r" against the window's observed E\(RT\) ([\d.]+) s", reason)
+    assert found, reason
+    pd, seen, observed = map(float, found.groups())
+    assert pd == pytest.approx(100 * (seen / observed - 1), abs=0.6)   # 3-digit rounding
