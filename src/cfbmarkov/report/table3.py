@@ -19,7 +19,7 @@ from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.report.document import (Heading, Para, Table, finite_or_none, link,
                                        number_text)
 from cfbmarkov.report.run_folder import Case
-from cfbmarkov.report.sections import DEFAULT_BIN_WIDTH, PAPER_TABLE3, paper_row
+from cfbmarkov.report.sections import DEFAULT_BIN_WIDTH, paper_row
 
 TABLE3_HEADING = "Table 3: RTD of the CFD-DEM and the MCM"
 DETAIL_HEADING = "Table 3 in detail"
@@ -91,7 +91,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3 and Eq. 9;
     ``docs/definitions.md`` (Metrics).
     """
-    rows, pd_sd, pd_mean, orders, widths, levels = [], [], [], set(), set(), set()
+    rows, orders, widths, levels = [], set(), set(), set()
     downward: set[str] = set()
     for c in cases:
         values = paper_row(c.velocity)
@@ -116,10 +116,6 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                     for k in (*columns, 4, 7, 8):
                         row[k] = NO_RESIDENCES
             rows.append(row)
-            if (v := finite_or_none(s.get("pd_rt_sd"))) is not None:
-                pd_sd.append(v)
-            if (v := finite_or_none(s.get("pd_rt_mean"))) is not None:
-                pd_mean.append(v)
             if (v := finite_or_none(s.get("md_order"))) is not None:
                 orders.add(v)
             if (v := finite_or_none(s.get("bin_width"))) is not None:
@@ -159,15 +155,6 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                      "predict window is downward: residence times run from entries through the "
                      "top to exits through the bottom (docs/definitions.md, Net downflow).")
     blocks = [Heading(2, TABLE3_HEADING), Table(COMPACT_HEADER, rows, notes)]
-    if pd_mean:
-        paper_e = [float(v[0]) for v in PAPER_TABLE3.values()]
-        paper_sd = [float(v[1]) for v in PAPER_TABLE3.values()]
-        under = sum(v < 0 for v in pd_sd)
-        blocks.append(Para(
-            f"PD of E(RT) ranges from {min(pd_mean):.2f} to {max(pd_mean):.2f} % (paper: "
-            f"{min(paper_e):.2f} to {max(paper_e):.2f} %); the MCM's SD(RT) is smaller than "
-            f"the CFD-DEM's in {under} of {len(pd_sd)} comparisons (paper: all four, by "
-            f"{-max(paper_sd):.0f} to {-min(paper_sd):.0f} %)."))
     return blocks
 
 
@@ -270,9 +257,9 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
         return " ".join(parts + ["no RTD to judge (too few residences in the window)."])
     if md_base is not None:
         verdict = ("beats" if md < md_base else "does not beat")
-        parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD), where the persistence "
-                     f"baseline is {md_base:.3g}: the model {verdict} simply reusing the "
-                     "fitting window's RTD.")
+        # the two distances are in Table 3's row (MD, and the baseline's beside it)
+        parts.append(f"the model {verdict} simply reusing the fitting window's RTD (the "
+                     "persistence baseline, Table 3).")
     else:
         parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD); no persistence baseline "
                      "(the fitting window is not in the reference file).")
@@ -285,14 +272,14 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
         share = ("smaller than" if md_own < md_base else "at least")
         parts.append(f"On its own fitting window ({fit} s) the model is {md_own:.3g} from the "
                      f"CFD-DEM's RTD{pds}, {share} the flow's change between the windows "
-                     f"({md_base:.3g})"
+                     "(the baseline's MD)"
                      + (": the flow's change, more than the model, limits this prediction."
                         if md_own < md_base else ": the model's own error dominates."))
     if md_halves is not None:
         scale = ("within" if md <= md_halves else f"{md / md_halves:.1f} times")
         flow_limits = md_own is not None and md_base is not None and md_own < md_base
-        parts.append(f"The CFD-DEM's two halves of the window differ by {md_halves:.3g}: the "
-                     f"model's error is {scale} the reference's own variability"
+        parts.append(f"The model's error is {scale} the reference's own variability (the "
+                     "MD between the CFD-DEM's two halves of the window, Table 3 in detail)"
                      + ("." if md <= md_halves else
                         "; the rest is the flow's change since the fitting window." if flow_limits
                         else "; the difference is the model's."))
@@ -321,15 +308,10 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
     if interval and finite_or_none(ref.get("rt_mean")) is not None:
         inside = interval[0] <= ref["rt_mean"] <= interval[1]
         level = 100 * float(summary.get("level", 0.9))
-        own = model.get("model_rt_mean_interval")
-        # one precision for the value and its interval (ms): "0.400 s lies outside
-        # 0.229-0.398 s", not "0.4 s"
-        same = own is not None and all(f"{a:.3f}" == f"{b:.3f}" for a, b in zip(own, interval))
-        parts.append(f"The CFD-DEM's E(RT) {ref['rt_mean']:.3f} s lies "
-                     f"{'inside' if inside else 'outside'} the model's {level:g} % interval "
-                     f"{interval[0]:.3f}-{interval[1]:.3f} s"
-                     + (f" (with the flow's variability between windows; the model's own "
-                        f"value: {own[0]:.3f}-{own[1]:.3f} s)." if own and not same else "."))
+        # the value and the interval are in Table 3's row, the model's own interval in the
+        # detail table: said in words here, not repeated
+        parts.append(f"The CFD-DEM's E(RT) lies {'inside' if inside else 'outside'} the "
+                     f"model's {level:g} % interval (Table 3).")
     verdict = (summary.get("adequacy") or {}).get("warnings") or []
     if verdict:
         parts.append("The model's fitting sample was warned about when it was fitted: "

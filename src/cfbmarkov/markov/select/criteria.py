@@ -146,7 +146,9 @@ class Criterion(ABC):
 
     @abstractmethod
     def reason(self, best: CandidateScore, cells: CandidateScore | None) -> str:
-        """Why ``best`` was chosen, with the paper's cells (``cells``, None if not judged)."""
+        """Why ``best`` was chosen, in words (``cells``: the paper's cells, None if not judged);
+        the numbers of every candidate are in the record's table
+        (:func:`~cfbmarkov.markov.select.table.candidate_columns`)."""
 
 
 class _RTDCriterion(Criterion):
@@ -221,12 +223,8 @@ class WindowRTD(_RTDCriterion):
 
     def _reason(self, best, cells):
         a, b = self.fitting.window
-        reason = (f"{best.states} at lag {best.lag:g} s had the exact RTD closest to the one "
-                  f"observed over the fitting window {a:g}-{b:g} s (MD {best.md_rtd:.3g}, PD "
-                  f"E(RT) {best.pd_rt_mean:+.1f} %, SD(RT) {best.pd_rt_sd:+.1f} %")
-        reason += (f"; cells: MD {cells.md_rtd:.3g}, {cells.pd_rt_mean:+.1f} %, "
-                   f"{cells.pd_rt_sd:+.1f} %)" if cells is not None else ")")
-        return reason
+        return (f"{best.states} at lag {best.lag:g} s had the exact RTD closest to the one "
+                f"observed over the fitting window {a:g}-{b:g} s")
 
 
 class CrossValidatedRTD(_RTDCriterion):
@@ -252,13 +250,8 @@ class CrossValidatedRTD(_RTDCriterion):
 
     def _reason(self, best, cells):
         a, b = self.fitting.window
-        reason = (f"{best.states} at lag {best.lag:g} s had the lowest score {best.score:.3g} "
-                  f"in {self.fitting.folds}-fold blocked cross-validation over {a:g}-{b:g} s "
-                  f"(mean PD E(RT) {best.pd_rt_mean:+.1f} %, SD(RT) {best.pd_rt_sd:+.1f} %, MD "
-                  f"{best.md_rtd:.3g}")
-        reason += (f"; cells: {cells.pd_rt_mean:+.1f} %, {cells.pd_rt_sd:+.1f} %, MD "
-                   f"{cells.md_rtd:.3g}, score {cells.score:.3g})" if cells is not None else ")")
-        return reason
+        return (f"{best.states} at lag {best.lag:g} s had the lowest score in "
+                f"{self.fitting.folds}-fold blocked cross-validation over {a:g}-{b:g} s")
 
 
 class HeldOutCK(Criterion):
@@ -293,12 +286,9 @@ class HeldOutCK(Criterion):
         why = (f"the fitting window holds only {count} complete residences (fewer "
                f"than {MIN_RESIDENCES}), so the RTD could not judge; "
                if count < MIN_RESIDENCES else "")
-        reason = (f"{why}{best.states} "
-                  f"at lag {best.lag:g} s had the lowest held-out Chapman-Kolmogorov error "
-                  f"{best.ck_error:.4f} in {self.fitting.folds}-fold blocked cross-validation "
-                  f"over {a:g}-{b:g} s")
-        reason += (f" (cells: {cells.ck_error:.4f})" if cells is not None else "")
-        return reason
+        return (f"{why}{best.states} at lag {best.lag:g} s had the lowest held-out "
+                f"Chapman-Kolmogorov error in {self.fitting.folds}-fold blocked "
+                f"cross-validation over {a:g}-{b:g} s")
 
 
 #: the criteria by name
