@@ -72,7 +72,7 @@ def test_e_rt_falling_with_u_passes_and_rising_fails():
     summary = md.split("## Operating conditions", 1)[0]
     assert "E(RT) of the CFD-DEM falls as U rises: FAILED" in summary
     assert "What the quick scale cannot show" in summary
-    assert ("this run's CFD-DEM does not (the numbers: [physics checks]"
+    assert ("which the paper's riser passes; this run's CFD-DEM fails it ([the numbers]"
             "(#operating-conditions-and-physics-checks))") in summary
     # the evidence once, in the physics checks, not in the summary
     assert "0.800 s at 3 m/s" not in summary and md.count("0.800 s at 3 m/s") == 1

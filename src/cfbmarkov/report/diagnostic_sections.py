@@ -62,6 +62,7 @@ def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
                           "change with the lag, and Chapman-Kolmogorov errors, show the memory "
                           "a chain on cells misses.")]
     ck_rows = []
+    formulas: set[str] = set()
     for c in done:
         m = c.config.markov
         window = tuple(float(v) for v in m.fit_window)
@@ -82,9 +83,14 @@ def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
                           "the RTD over the fitting window" else
                           f"{sel.get('method', 'cross-validation')} over the blocks {parts}")
                 headers[0] = "chosen"
+                # the score's definition once, under the first table that uses it
+                said = notes[0] in formulas
+                formulas.add(notes[0])
                 blocks.append(Table(headers, rows,
-                                    [f"{fitted}; S: states; visited: states occupied in "
-                                     f"the fitting window; {notes[0]}.", *notes[1:]]))
+                                    [f"{fitted}; " + ("the columns and score as above." if said
+                                                      else f"S: states; visited: states "
+                                                      f"occupied in the fitting window; "
+                                                      f"{notes[0]}."), *notes[1:]]))
         with reading_errors(c.reference), Trajectories(c.reference) as ref:
             lags = [m.lag * k for k in (1, 2, 4)]
             grid = CellGrid(m.columns, m.rows, ref.width, ref.height)

@@ -116,8 +116,15 @@ def _rows(cases: list[Case]):
                 yield c, e.name, e.summary
 
 
+def _and(names: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
 def _signed(values: list[tuple[str, float]], unit: str = " %") -> str:
-    return ", ".join(f"{v:+.0f}{unit} at {u} m/s" for u, v in values)
+    # whole percent, one decimal below 10 % (so that +0.46 % does not read "+0 %")
+    return ", ".join(f"{v:+.0f}{unit} at {u} m/s" if abs(v) >= 10 else
+                     f"{v:+.1f}{unit} at {u} m/s" for u, v in values)
 
 
 def _paper_sentences(cases: list[Case]) -> list[str]:
@@ -205,7 +212,7 @@ def _baseline_sentences(cases: list[Case]) -> list[str]:
                                                        "the models") + "."]
     if lost:
         out.append("The models that do not beat it, and why: " + " ".join(
-            f"{' and '.join(names)} at {u} m/s, {reason}." for (u, reason), names in why.items()))
+            f"{_and(names)} at {u} m/s, {reason}." for (u, reason), names in why.items()))
     return out
 
 
@@ -275,8 +282,8 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
                    "the start and the lag.")
     for check in checks:
         if check.passed is False:
-            out.append(f"The paper's riser shows {check.name}; this run's CFD-DEM does not "
-                       f"(the numbers: {link('physics checks', CONDITIONS_HEADING)}).")
+            out.append(f"The check \"{check.name}\", which the paper's riser passes; this "
+                       f"run's CFD-DEM fails it ({link('the numbers', CONDITIONS_HEADING)}).")
     return out
 
 
