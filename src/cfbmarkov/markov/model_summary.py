@@ -37,7 +37,7 @@ def model_warnings(model: "MarkovModel") -> list[str]:
             "can reach a trap (fit --connected leaves them out)"]
 
 
-def model_summary(model: "MarkovModel") -> str:
+def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     """A few lines of text: state space, lag, fitting data, passes (or an open riser's exits
     and entries), unvisited states, warnings, regimes, coherence, closed classes, the
     selection and the exact E(RT) and SD(RT).
@@ -45,6 +45,9 @@ def model_summary(model: "MarkovModel") -> str:
     Parameters
     ----------
     model : MarkovModel
+    warnings : bool, optional
+        Include the model's warnings (:func:`model_warnings`); ``fit`` leaves them out, having
+        printed them as ``warning:`` lines on stderr.
 
     Returns
     -------
@@ -64,7 +67,8 @@ def model_summary(model: "MarkovModel") -> str:
     ]
     never = np.setdiff1d(model.unvisited_states, model.entered_never_left)
     lines.append(f"  states never visited: {state_set_text(model.state_space, never)}")
-    lines.extend(model.warnings())
+    if warnings:
+        lines.extend(model.warnings())
     if model.entered_never_left.size and model.trap_share == 0.0:
         lines.append("  states entered but never left: "
                      f"{state_set_text(model.state_space, model.entered_never_left)}: "
