@@ -122,6 +122,7 @@ def test_the_verdict_is_written_from_the_numbers():
                                            ["paper"], checks)
                        + conditions_blocks(cases, measures, checks), None)
     assert '<a href="#operating-conditions-and-physics-checks">' in html
+    assert '<p class="verdict">Verdict at the quick scale:' in html
     assert 'id="operating-conditions-and-physics-checks"' in html
 
 

@@ -328,7 +328,8 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
     interval = _interval_sentence(cases)
     if interval:
         verdict.append(interval)
-    blocks = [Heading(2, SUMMARY_HEADING), Para(headline), Bullets(verdict), Para(ran)]
+    blocks = [Heading(2, SUMMARY_HEADING), Para(headline, css="verdict"), Bullets(verdict),
+              Para(ran)]
     limits = _cannot_show(meta, done, checks)
     if limits:
         blocks += [Heading(3, f"What the {scale} scale cannot show"), Bullets(limits)]
