@@ -1,8 +1,10 @@
 """The report's opening: its verdict, the operating conditions and the physics checks.
 
-:func:`summary_blocks` writes, from the run's numbers, what was run and at what scale, the
-paper's citation, the comparison with the paper's Table 3, where the models beat the
-persistence baseline and where not (and why), and what the scale cannot show;
+:func:`summary_blocks` writes, from the run's numbers, the verdict in one sentence (the
+paper's estimator against the paper's largest E(RT) miss, the models against the
+persistence baseline, the physics checks), then the comparison with the paper's Table 3,
+where the models beat the persistence baseline and where not (and why), what was run and
+at what scale with the paper's citation, and what the scale cannot show;
 :func:`conditions_blocks` the operating conditions of each case and the physics checks
 (:func:`physics_checks`) stated as passed or failed against what a riser should show.
 
@@ -289,7 +291,9 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
 
 def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: dict,
                    estimators: list[str], checks: list[PhysicsCheck]) -> list:
-    """The report's opening section: what was run, the verdict, what the scale cannot show.
+    """The report's opening section: the verdict, its details, what was run, what the scale
+    cannot show. Each number is said once: the physics checks' evidence is left to
+    :func:`conditions_blocks`, linked.
 
     Parameters
     ----------
