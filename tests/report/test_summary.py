@@ -76,6 +76,15 @@ def test_e_rt_falling_with_u_passes_and_rising_fails():
             "(#operating-conditions-and-physics-checks))") in summary
     # the evidence once, in the physics checks, not in the summary
     assert "0.800 s at 3 m/s" not in summary and md.count("0.800 s at 3 m/s") == 1
+    # cases with other windows and lags: said, the windows themselves left to the table
+    cases, measures = fake_run({3.0: 0.8, 6.0: 0.4})
+    config = cases[1].config
+    cases[1].config = config.model_copy(update={"markov": config.markov.model_copy(
+        update={"predict_window": (2.0, 3.0), "lag": 0.002})})
+    summary = summary_text(cases, measures).split("## Operating conditions", 1)[0]
+    assert ("the cases differ in more than U (their predict windows and lags, [operating "
+            "conditions](#operating-conditions-and-physics-checks))") in summary
+    assert "2-3" not in summary
     # one case: not judged
     cases, measures = fake_run({6.0: 0.4})
     assert physics_checks(cases, measures)[0].passed is None

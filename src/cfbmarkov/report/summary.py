@@ -277,11 +277,14 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
     windows = {c.name: (tuple(c.config.markov.predict_window), c.config.markov.lag)
                for c in done}
     if len(set(windows.values())) > 1:
-        text = ", ".join(f"{_u(c)} m/s {windows[c.name][0][0]:g}-{windows[c.name][0][1]:g} s "
-                         f"(lag {windows[c.name][1]:g} s)" for c in done)
-        out.append(f"A trend with U alone: the cases differ in more than U (predict windows "
-                   f"and lags: {text}), so a trend across them mixes U with the time since "
-                   "the start and the lag.")
+        # which windows and lags: the operating conditions' table, linked
+        differ = " and ".join(k for k, n in (("predict windows", {w for w, _ in
+                                                                   windows.values()}),
+                                              ("lags", {t for _, t in windows.values()}))
+                              if len(n) > 1)
+        out.append(f"A trend with U alone: the cases differ in more than U (their {differ}, "
+                   f"{link('operating conditions', CONDITIONS_HEADING)}), so a trend across "
+                   "them mixes U with the time since the start and the lag.")
     for check in checks:
         if check.passed is False:
             out.append(f"The check \"{check.name}\", which the paper's riser passes; this "
