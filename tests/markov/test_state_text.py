@@ -86,6 +86,14 @@ def test_candidate_table_of_the_other_criteria():
         c["ck_error"] = 0.01
     headers, rows, notes = candidate_columns(record)
     assert headers[5:] == ["CK error", "score"] and rows[0][5] == "0.0100"
+    # none judged (the blocks too short): one note per reason, no score formula
+    for c in record["candidates"]:
+        c.update(score=None, error="no held-out comparison")
+    headers, rows, notes = candidate_columns(record)
+    assert len(rows) == 5 and notes == [
+        "cells at lag 0.025 s, cells-direction at lag 0.025 s, cells-velocity at lag 0.025 s, "
+        "cells-previous at lag 0.025 s, cells-regime at lag 0.025 s not judged: no held-out "
+        "comparison"]
     # a record without the visited count: "-" in its place
     for c in record["candidates"]:
         del c["visited"]

@@ -84,13 +84,15 @@ def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
                           f"{sel.get('method', 'cross-validation')} over the blocks {parts}")
                 headers[0] = "chosen"
                 # the score's definition once, under the first table that uses it
-                said = notes[0] in formulas
-                formulas.add(notes[0])
+                formula = notes[0] if notes and notes[0].startswith("score =") else ""
+                said = formula in formulas
+                formulas.add(formula)
                 blocks.append(Table(headers, rows,
                                     [f"{fitted}; " + ("the columns and score as above." if said
-                                                      else f"S: states; visited: states "
-                                                      f"occupied in the fitting window; "
-                                                      f"{notes[0]}."), *notes[1:]]))
+                                                      else "S: states; visited: states "
+                                                      "occupied in the fitting window"
+                                                      + (f"; {formula}." if formula else ".")),
+                                     *notes[1 if formula else 0:]]))
         with reading_errors(c.reference), Trajectories(c.reference) as ref:
             lags = [m.lag * k for k in (1, 2, 4)]
             grid = CellGrid(m.columns, m.rows, ref.width, ref.height)

@@ -50,7 +50,8 @@ def candidate_columns(selection: Mapping[str, Any]
         One per candidate, lowest score first, those not judged last; "-" where a number
         is missing.
     notes : list of str
-        What the score is, and why each candidate not judged was not.
+        What the score is (where a candidate was scored), and why the candidates not judged
+        were not, once per reason.
     """
     kind = _kind(selection)
     chosen = selection.get("chosen", {})
@@ -75,7 +76,8 @@ def candidate_columns(selection: Mapping[str, Any]
                    f"|PD SD(RT)| / {_number(units.get('pd_rt_sd'), '.3g')} + MD / MD(cells), "
                    "the lowest chosen; each the mean over the held-out blocks")
     headers = ["", "states", "lag (s)", "S", "visited", *parts, "score"]
-    rows, notes = [], [formula]
+    rows, notes = [], [formula] if scored else []
+    unjudged: dict[str, list[str]] = {}           # why -> the candidates, said once each
     for c in scored + rest:
         mark = "*" if (c.get("states"), c.get("lag")) == (chosen.get("states"),
                                                           chosen.get("lag")) else ""
@@ -91,8 +93,9 @@ def candidate_columns(selection: Mapping[str, Any]
                      _number(c.get("n_states"), "d"), _number(c.get("visited"), "d"),
                      *values, _number(c.get("score"), ".3g")])
         if c in rest:
-            notes.append(f"{c.get('states')} at lag {_number(c.get('lag'), 'g')} s not "
-                         f"judged: {c.get('error') or 'no held-out comparison'}")
+            unjudged.setdefault(c.get("error") or "no held-out comparison", []).append(
+                f"{c.get('states')} at lag {_number(c.get('lag'), 'g')} s")
+    notes += [f"{', '.join(names)} not judged: {why}" for why, names in unjudged.items()]
     return headers, rows, notes
 
 
