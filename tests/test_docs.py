@@ -147,13 +147,15 @@ def _same_files(a: str, b: str) -> bool:
 
 
 def common_start(a: list[str], b: list[str]) -> list[str]:
-    """The writing commands that ``a`` and ``b`` both start with, in the words of ``a``;
-    commands that write nothing (:func:`reads_only`) are stepped over in either."""
+    """The writing commands that ``a`` and ``b`` both start with; commands that write
+    nothing (:func:`reads_only`) are stepped over in either. Of two that differ by ``-q``
+    alone, the one without it (its progress lines run too)."""
     wa, wb = [c for c in a if not reads_only(c)], [c for c in b if not reads_only(c)]
     n = 0
     while n < min(len(wa), len(wb)) and _same_files(wa[n], wb[n]):
         n += 1
-    return wa[:n]
+    quiet = lambda c: bool(set(shlex.split(c)) & set(QUIET))  # noqa: E731
+    return [y if quiet(x) and not quiet(y) else x for x, y in zip(wa[:n], wb[:n])]
 
 
 def commands_left(commands: list[str], start: list[str]) -> list[str]:
@@ -211,7 +213,7 @@ def test_common_start():
               "cfbmarkov predict m.h5 -o p.h5", "cfbmarkov compare s/r.h5 p.h5 -o c"]
     start = common_start(tutorial, readme)
     assert start == ["cfbmarkov demo -o s", "cfbmarkov fit s/r.h5 -o m.h5",
-                     "cfbmarkov predict m.h5 -q -o p.h5"]
+                     "cfbmarkov predict m.h5 -o p.h5"]
     assert commands_left(tutorial, start) == [
         "cfbmarkov info s/r.h5", "cfbmarkov rtd m.h5", "cfbmarkov stationarity s/r.h5",
         "cfbmarkov fit s/r.h5 --states auto -o a.h5"]
