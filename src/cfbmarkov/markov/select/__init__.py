@@ -51,8 +51,9 @@ every candidate's numbers and why it was chosen (``model.selection``, saved with
 The steps, one module each: :mod:`.blocks` (the judged blocks of the fitting window and
 their observed residence times), :mod:`.criteria` (the three criteria behind one
 interface), :mod:`.candidates` (every candidate fitted, judged and scored), :mod:`.record`
-(the selection record stored in the model) and :mod:`.choice` (:func:`select_model`, which
-runs them, and the models named in a reproduction).
+(the selection record stored in the model), :mod:`.choice` (:func:`select_model`, which
+runs them, and the models named in a reproduction) and :mod:`.table` (the record's
+candidates as the table ``fit`` and the report print).
 """
 
 from cfbmarkov.markov.select.choice import (DEFAULT_LAG_MULTIPLES, DEFAULT_STATES, fit_by_name,
