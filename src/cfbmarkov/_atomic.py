@@ -20,6 +20,7 @@ from pathlib import Path
 from typing import Iterator
 
 from cfbmarkov import _interrupt
+from cfbmarkov._names import helper_stem
 from cfbmarkov.errors import InputError
 
 
@@ -43,8 +44,8 @@ def temporary_path(target: str | os.PathLike, suffix: str = "") -> Path:
     catch_late_write_failures()
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp" + suffix,
-                                   dir=target.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{helper_stem(target.name)}.",
+                                   suffix=".tmp" + suffix, dir=target.parent)
     except OSError as exc:
         raise write_error(exc, target) from None
     try:
@@ -95,11 +96,19 @@ def error_number(exc: BaseException) -> int | None:
     return int(match.group(1)) if match else None
 
 
+#: the words of an HDF5 error raised while reading (h5py's "Unable to synchronously read
+#: data (...)", "Can't read data", "Unable to synchronously open object (...)")
+_HDF5_READ = re.compile(r"(?i)\b(read|open object|get|iterate|determine|decompress|"
+                        r"inflate|filter)\b")
+
+
 def is_write_failure(exc: BaseException) -> bool:
     """Whether ``exc`` is a failed write: an OSError, or an h5py error whose text names an
-    errno or a failed write."""
+    errno or a failed write; not an HDF5 error of reading an input (a damaged file), which
+    names no errno and says it was reading."""
     if isinstance(exc, OSError):
-        return True
+        return not (exc.errno is None and error_number(exc) is None
+                    and _HDF5_READ.search(str(exc)) and "write" not in str(exc).lower())
     return isinstance(exc, RuntimeError) and (
         error_number(exc) is not None or "write failed" in str(exc))
 
@@ -395,7 +404,7 @@ def atomic_folder(output: Path) -> Iterator[Path]:
     new_parents = [p for p in output.absolute().parents if not p.exists()]
     try:
         output.parent.mkdir(parents=True, exist_ok=True)
-        tmp = _new_folder(output.parent, f"{output.name}.tmp-")
+        tmp = _new_folder(output.parent, f"{helper_stem(output.name)}.tmp-")
     except OSError as exc:
         _remove_folders(new_parents)
         raise InputError(f"{output}: cannot create ({exc.strerror or exc})") from None
@@ -430,7 +439,7 @@ def _replace(tmp: Path, output: Path) -> None:
     old = None
     try:
         if output.is_dir():
-            old = _new_folder(output.parent, f"{output.name}.old-")
+            old = _new_folder(output.parent, f"{helper_stem(output.name)}.old-")
             os.replace(output, old)   # rename onto the empty folder
         os.replace(tmp, output)
     except OSError as exc:

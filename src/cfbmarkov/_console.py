@@ -14,6 +14,7 @@ import sys
 import warnings
 from typing import Iterator
 
+from cfbmarkov._names import one_line
 from cfbmarkov.errors import CfbmarkovWarning, InputError
 
 #: what starts the line of a :class:`~cfbmarkov.errors.CfbmarkovWarning` on the command line
@@ -27,13 +28,14 @@ def write_line(text: str, stream=None) -> None:
     Parameters
     ----------
     text : str
-        One line (without its newline).
+        One line (without its newline); a line break inside it (a file name's) is written
+        as an escape.
     stream : file-like, optional
         Where to write.
     """
     stream = sys.stderr if stream is None else stream
     with contextlib.suppress(OSError, ValueError):     # a closed or broken stderr
-        stream.write(text + "\n")
+        stream.write(one_line(text) + "\n")
         stream.flush()
 
 

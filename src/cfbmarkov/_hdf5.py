@@ -12,6 +12,7 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+from cfbmarkov._names import check_not_pipe, first_line
 from cfbmarkov._version import __version__
 from cfbmarkov.errors import InputError
 
@@ -107,15 +108,17 @@ def open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
     ------
     InputError
         If the file is missing, empty, not readable (permission denied), locked by a
-        program writing it, or not HDF5 (truncated, or another format).
+        program writing it, not HDF5 (truncated, or another format), or damaged (its root
+        group cannot be read).
     """
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file")
+    check_not_pipe(path)
     if path.stat().st_size == 0:
         raise InputError(f"{path}: empty file")
     try:
-        return h5py.File(path, mode)
+        handle = h5py.File(path, mode)
     except OSError as exc:
         text = str(exc).lower()
         if isinstance(exc, PermissionError) or "permission denied" in text or \
@@ -125,3 +128,11 @@ def open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
             raise InputError(f"{path}: locked by another program that is writing it (HDF5 "
                              "file lock); wait for it to end") from None
         raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format)") from None
+    try:                                # a damaged root group fails only when it is read
+        handle.attrs.get("format")
+        list(handle.keys())
+    except Exception as exc:            # noqa: BLE001 - whatever a damaged file raises
+        handle.close()
+        raise InputError(f"{path}: damaged HDF5 file, cannot be read ({first_line(exc)})"
+                         ) from None
+    return handle

@@ -13,6 +13,7 @@ again.
 
 from __future__ import annotations
 
+import contextlib
 import signal
 import sys
 import threading
@@ -36,6 +37,38 @@ def check() -> None:
     KeyboardInterrupt
     """
     if requested:
+        raise KeyboardInterrupt
+
+
+@contextlib.contextmanager
+def deferred():
+    """Context manager: a Ctrl-C during the block is held until the block ends, then raised
+    (KeyboardInterrupt). For the calls of Numba kernels: the interrupt is then never raised
+    inside Numba's dispatch or compilation, or while its threading layer starts, and the
+    arrays a kernel works on stay referenced and unchanged until it has returned. Outside
+    the main thread, or nested, the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = signal.getsignal(signal.SIGINT)
+    if getattr(previous, "cfbmarkov_deferred", False) or not callable(previous):
+        yield                           # nested, or SIGINT ignored (worker processes)
+        return
+    held = []
+
+    def hold(signum, frame):
+        held.append(signum)
+
+    hold.cfbmarkov_deferred = True
+    signal.signal(signal.SIGINT, hold)
+    try:
+        yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    if held:
+        global requested
+        if previous is handler:
+            requested = True
         raise KeyboardInterrupt
 
 

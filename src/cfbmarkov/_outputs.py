@@ -22,6 +22,7 @@ import shutil
 import socket
 from pathlib import Path
 
+from cfbmarkov._names import check_output_name, helper_stem, parts_folder
 from cfbmarkov.errors import InputError
 
 try:
@@ -40,9 +41,10 @@ _HELD: dict[str, list] = {}
 
 
 def lock_path(target: str | os.PathLike) -> Path:
-    """The lock file of an output: ``.NAME.lock`` beside it."""
+    """The lock file of an output: ``.NAME.lock`` beside it (``NAME`` is
+    :func:`~cfbmarkov._names.helper_stem` of the output's name)."""
     target = Path(target)
-    return target.parent / f".{target.name}.lock"
+    return target.parent / f".{helper_stem(target.name)}.lock"
 
 
 def _holder_text(lock: Path) -> str:
@@ -248,7 +250,7 @@ _RANDOM = r"[a-z0-9_]{8}"
 def temporary_patterns(target: Path) -> list[re.Pattern]:
     """Name patterns of the temporaries of ``target`` in its folder: files of
     :func:`~cfbmarkov._atomic.temporary_path` and the VTK export's folders."""
-    name = re.escape(target.name)
+    name = re.escape(helper_stem(target.name))
     return [re.compile(rf"^\.{name}\.{_RANDOM}\.tmp(\.\w+)?$"),
             re.compile(rf"^{name}\.(tmp|old)-[0-9a-f]{{8}}$")]
 
@@ -278,7 +280,7 @@ def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
                 else:
                     with contextlib.suppress(OSError):
                         entry.unlink()
-    for folder in (target, target.with_name(target.name + ".parts")):
+    for folder in (target, parts_folder(target)):
         if not folder.is_dir() or folder.is_symlink():
             continue
         for root, _dirs, files in os.walk(folder):
@@ -296,11 +298,13 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
                  force: bool = False):
     """Claim ``target`` for writing for the duration of the block.
 
-    In order: the folder is created if missing (and removed again, if still empty, when the
-    block fails); ``target`` must not be one of ``inputs`` (same file, also through links);
-    the lock is taken (refused naming the holder: pid, host, verb, since when); an existing
-    ``target`` of another kind is refused unless ``force``; the temporaries of dead writers
-    of ``target`` are removed. Re-entrant within a process.
+    In order: a name longer than the file system allows is refused (the helper names built
+    from a long one are shortened, :func:`~cfbmarkov._names.helper_stem`); the folder is
+    created if missing (and removed again, if still empty, when the block fails); ``target``
+    must not be one of ``inputs`` (same file, also through links); the lock is taken
+    (refused naming the holder: pid, host, verb, since when); an existing ``target`` of
+    another kind is refused unless ``force``; the temporaries of dead writers of ``target``
+    are removed. Re-entrant within a process.
 
     Parameters
     ----------
@@ -321,6 +325,7 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
         When the output cannot be claimed.
     """
     target = Path(target)
+    check_output_name(target)
     key = str(lock_path(target).absolute())
     if key in _HELD:        # claimed by this process already (the command line, then the API)
         _HELD[key][1] += 1

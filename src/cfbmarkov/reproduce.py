@@ -8,6 +8,8 @@ what is done and resumes what was interrupted (the CFD-DEM from its last checkpo
                                 is refused; a rerun of a folder without it writes it): the
                                 report reads U from here, not from the folder name
     cfd-dem.h5                  CFD-DEM 0..end (frames, exact pass events, gas fields)
+    cfd-dem-m<m>.h5             with ``ensemble`` N > 1 instead: the N members, the models
+    ensemble.json               fitted on them pooled, N (:mod:`cfbmarkov.reproduce_ensemble`)
     model-<name>.h5             Markov model fitted on the fitting window (paper, mle, auto)
     prediction-<name>.h5        Monte Carlo over the prediction window, started from the
                                 CFD-DEM state at its start
@@ -182,7 +184,8 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
               models: Sequence[str] = MODELS, executor: cf.Executor | None = None,
               scheduler: str | None = None, jobs: int | None = None, progress: bool = True,
               report: bool = True, log: Callable[[str], None] = print,
-              kinetics: str | os.PathLike | None = None) -> Path:
+              kinetics: str | os.PathLike | None = None, ensemble: int = 1,
+              device: str = "cpu") -> Path:
     """Run every case of a scale into a folder (resuming what is there) and write the report.
 
     Cases go to ``executor`` if given, else to the Dask cluster at ``scheduler``, else to
@@ -217,6 +220,12 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     kinetics : str or os.PathLike, optional
         A kinetics file: every comparison also integrates its properties
         (``compare --kinetics``; summary.json's ``kinetics`` block).
+    ensemble : int, optional
+        CFD-DEM runs per case, N (:mod:`cfbmarkov.reproduce_ensemble`): with N > 1 each
+        model is fitted on the N runs' fitting windows pooled and compared on member 0's
+        prediction window; ``reproduce.json`` and the report say N.
+    device : {"cpu", "gpu"}, optional
+        Where the CFD-DEM's DEM runs (``simulate --device``).
 
     Returns
     -------
@@ -228,7 +237,10 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     InputError
         For an unknown model name or scale, unusable velocities or overrides, repeated
         velocities, an output that exists and is not a directory, an unusable executor
-        setting, a failed case, or a report that cannot be written.
+        setting, an ensemble size out of range or another than the folder's, a failed case,
+        or a report that cannot be written.
+    GpuUnavailable
+        ``device="gpu"`` where no CUDA device is usable (before any work).
 
     References
     ----------
@@ -243,6 +255,17 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
 
         load_kinetics(kinetics)                   # a bad file: one line, before any work
         kinetics = str(Path(kinetics).resolve())
+    from cfbmarkov.simulate.ensemble import MAX_MEMBERS
+
+    ensemble = int(ensemble)
+    if not 1 <= ensemble <= MAX_MEMBERS:
+        raise InputError(f"--ensemble: expected 1 to {MAX_MEMBERS} runs per case, got {ensemble}")
+    if device not in ("cpu", "gpu"):
+        raise InputError(f"--device: expected cpu or gpu, got {device!r}")
+    if device == "gpu":
+        from cfbmarkov.simulate.gpu import require_gpu
+
+        require_gpu()
     scale = as_scale(scale)
     cases = scale_cases(scale, velocities, overrides)
     names = [case_name(c.gas.superficial_velocity) for c in cases]
@@ -255,11 +278,15 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
 
     with claim_output(out, "reproduce", "folder"):    # lock and folder before any work
         return _reproduce(out, scale, cases, names, overrides, models, executor, scheduler,
-                          jobs, progress, report, log, kinetics)
+                          jobs, progress, report, log, kinetics, ensemble, device)
 
 
 def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executor, scheduler,
-               jobs, progress, report, log, kinetics=None) -> Path:
+               jobs, progress, report, log, kinetics=None, ensemble=1, device="cpu") -> Path:
+    from cfbmarkov.reproduce_ensemble import check_ensemble_folder
+
+    for name in names:                       # another N in a case folder: refused up front
+        check_ensemble_folder(out / name, ensemble, record=False)
     client = None
     threads = None
     own = executor is None
@@ -272,9 +299,11 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
 
     manifest = {"scale": scale.name, "description": scale.description,
                 "reductions": list(scale.reductions), "overrides": overrides or {},
-                "cases": names, "models": list(models), "version": __version__}
+                "cases": names, "models": list(models), "version": __version__,
+                "ensemble": ensemble, "device": device}
     write_text_atomic(out / "reproduce.json", json.dumps(manifest, indent=2) + "\n")
-    log(f"reproduce ({scale.name} scale): {len(cases)} case(s) {', '.join(names)} in {out}")
+    runs = "" if ensemble == 1 else f", {ensemble} CFD-DEM runs each ({device})"
+    log(f"reproduce ({scale.name} scale): {len(cases)} case(s) {', '.join(names)}{runs} in {out}")
     started = _time.perf_counter()
     failures: list[str] = []
     try:
@@ -288,7 +317,8 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                     future.result()
         futures = {executor.submit(run_case, case.model_dump_json(), str(out / name),
                                    tuple(models), progress, threads,
-                                   kinetics=kinetics, time_step_note=False): name
+                                   kinetics=kinetics, time_step_note=False,
+                                   ensemble=ensemble, device=device): name
                    for case, name in zip(cases, names)}
         for future in cf.as_completed(futures):
             name = futures[future]

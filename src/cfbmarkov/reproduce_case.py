@@ -21,9 +21,11 @@ from typing import Any, Sequence
 from pydantic import ValidationError
 
 from cfbmarkov._atomic import write_text_atomic
+from cfbmarkov._names import parts_folder
 from cfbmarkov.cases.scales import MODELS
 from cfbmarkov.config import SPEED_ONLY, CaseConfig, case_difference, flat_settings
 from cfbmarkov.errors import InputError, TimeStepAdvisory
+from cfbmarkov.reproduce_ensemble import check_ensemble_folder, run_ensemble_cfd_dem
 
 
 def _read_json(path: Path) -> dict:
@@ -89,7 +91,8 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
 def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
              progress: bool = True, threads: int | None = None,
              checkpoint_every: float = 0.5, kinetics: str | None = None,
-             time_step_note: bool = True) -> dict[str, Any]:
+             time_step_note: bool = True, ensemble: int = 1,
+             device: str = "cpu") -> dict[str, Any]:
     """Run (or finish) every stage of one case in a folder.
 
     A module-level function, so that any executor (process pool, Dask) can run it.
@@ -116,6 +119,12 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
         Let the CFD-DEM say when its DEM time step resolves a contact in fewer than 10
         steps (:class:`~cfbmarkov.errors.TimeStepAdvisory`); False where the caller says it
         once for every case of its scale (:func:`cfbmarkov.reproduce.reproduce`).
+    ensemble : int, optional
+        CFD-DEM runs of the case (N > 1: an ensemble, :mod:`cfbmarkov.reproduce_ensemble`:
+        members ``cfd-dem-m<m>.h5``, the models fitted on their fitting windows pooled and
+        compared on member 0's prediction window).
+    device : {"cpu", "gpu"}, optional
+        Where the DEM runs (``simulate --device``).
 
     Returns
     -------
@@ -126,14 +135,16 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     Raises
     ------
     InputError
-        When the folder's ``case.json`` is unreadable or holds another configuration, a
-        ``cfd-dem.h5`` in place comes from other physics or ends before the prediction
-        window, or a stage refuses its input.
+        When the folder's ``case.json`` is unreadable or holds another configuration or
+        another ensemble size, a ``cfd-dem.h5`` in place comes from other physics or ends
+        before the prediction window, or a stage refuses its input.
+    GpuUnavailable
+        ``device="gpu"`` where no CUDA device is usable.
     """
     import numba
 
+    from cfbmarkov.analysis.cell_fields import fitting_cell_fields
     from cfbmarkov.markov import MarkovModel
-    from cfbmarkov.markov.select import fit_by_name
     from cfbmarkov.report.compare import SUMMARY, compare
     from cfbmarkov.simulate.run import simulate
     from cfbmarkov.trajectories import Trajectories
@@ -161,23 +172,46 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
         write_text_atomic(saved, case.model_dump_json(indent=2) + "\n")
 
     m = case.markov
+    check_ensemble_folder(folder, ensemble)
     reference = folder / "cfd-dem.h5"
+    members = [reference]
     timing = {}
-    if reference.exists():
+    if ensemble > 1:
+        cpu = _time.process_time()
+        with warnings.catch_warnings():
+            if not time_step_note:
+                warnings.simplefilter("ignore", TimeStepAdvisory)
+            stages["cfd-dem"], members = run_ensemble_cfd_dem(
+                case, folder, ensemble, device=device, checkpoint_every=checkpoint_every,
+                progress=progress, label=label, check=_check_reference)
+        reference = members[0]
+        if stages["cfd-dem"] != "skipped":
+            timing["cpu_s"] = _time.process_time() - cpu
+        timing["ensemble_members"] = ensemble
+        timing["ensemble_device"] = device
+    elif reference.exists():
         _check_reference(reference, case)
         stages["cfd-dem"] = "skipped"
         previous = _read_json(folder / "timings.json").get("cfd_dem")
         if isinstance(previous, dict) and "cpu_s" in previous:
             timing["cpu_s"] = previous["cpu_s"]
     else:
-        checkpoint = folder / "cfd-dem.h5.parts" / "checkpoint.h5"
+        checkpoint = parts_folder(folder / "cfd-dem.h5") / "checkpoint.h5"
         resume = checkpoint.exists()
         cpu = _time.process_time()
         with warnings.catch_warnings():
             if not time_step_note:
                 warnings.simplefilter("ignore", TimeStepAdvisory)
-            simulate(case, reference, checkpoint_every=checkpoint_every, resume=resume,
-                     progress="lines" if progress else False, label=label)
+            if device == "gpu":       # the case itself, one member on the GPU
+                from cfbmarkov.simulate.ensemble import simulate_ensemble
+
+                resume = (folder / "cfd-dem.h5.parts" / "gpu-checkpoint.h5").exists()
+                simulate_ensemble(case, reference, None, device="gpu",
+                                  checkpoint_every=checkpoint_every, resume=resume,
+                                  progress="lines" if progress else False, label=label)
+            else:
+                simulate(case, reference, checkpoint_every=checkpoint_every, resume=resume,
+                         progress="lines" if progress else False, label=label)
         # this process's CPU time (Numba's compilation included where it compiled here)
         timing["cpu_s"] = _time.process_time() - cpu
         stages["cfd-dem"] = "resumed" if resume else "done"
@@ -195,9 +229,13 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 stages[f"fit-{name}"] = "skipped"
             else:
                 t0, c0 = _time.perf_counter(), _time.process_time()
-                model = fit_by_name(name, ref, window=m.fit_window, columns=m.columns,
-                                    rows=m.rows, lag=m.lag,
-                                    coherent=m.coherent_auto and name == "auto")
+                model = _fit(name, ref, members, m)
+                if len(members) == 1:
+                    # the cell fields serve kinetics (react), not the paper's fit: not timed
+                    t1, c1 = _time.perf_counter(), _time.process_time()
+                    model = model.with_cell_fields(fitting_cell_fields(ref, model))
+                    t0 += _time.perf_counter() - t1
+                    c0 += _time.process_time() - c1
                 model.save(model_path)
                 _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0,
                                                 "cpu_s": _time.process_time() - c0})
@@ -228,6 +266,25 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 stages[f"compare-{name}"] = "done"
     return {"case": label, "velocity": case.gas.superficial_velocity, "stages": stages,
             "summaries": summaries}
+
+
+def _fit(name: str, ref, members: Sequence[Path], m) -> Any:
+    """Model ``name`` on the fitting window of ``ref`` (one run), or of every member
+    pooled (an ensemble, ``members`` its files with ``ref`` open on the first)."""
+    from cfbmarkov.markov.select import fit_by_name
+    from cfbmarkov.markov.select.choice import fit_pooled_by_name
+    from cfbmarkov.trajectories import Trajectories
+
+    coherent = m.coherent_auto and name == "auto"
+    if len(members) == 1:
+        return fit_by_name(name, ref, window=m.fit_window, columns=m.columns, rows=m.rows,
+                           lag=m.lag, coherent=coherent)
+    import contextlib
+
+    with contextlib.ExitStack() as stack:
+        runs = [ref] + [stack.enter_context(Trajectories(p)) for p in members[1:]]
+        return fit_pooled_by_name(name, runs, window=m.fit_window, columns=m.columns,
+                                  rows=m.rows, lag=m.lag, coherent=coherent)
 
 
 def long_run_span(fit_window, predict_window, first: float, last: float

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from cfbmarkov._names import parts_folder
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 from cfbmarkov.trajectory_writer import TrajectoryWriter
@@ -46,6 +47,9 @@ class SegmentedTrajectoryWriter:
         Time between frames (s).
     n_segments : int, optional
         Complete segments already written (see :meth:`resume`).
+    run_id : str, optional
+        The run's identity, stored in every segment (``/provenance/segment`` attribute
+        ``run_id``) and checked by :meth:`resume`: a segment of another run is refused.
 
     Attributes
     ----------
@@ -60,9 +64,10 @@ class SegmentedTrajectoryWriter:
     def __init__(self, output: str | os.PathLike, ids, *, width: float, height: float,
                  source: str, parameters: dict[str, Any] | None = None,
                  with_velocity: bool = False, frame_interval: float | None = None,
-                 n_segments: int = 0):
+                 n_segments: int = 0, run_id: str | None = None):
         self.output = Path(output)
-        self.parts = self.output.with_name(self.output.name + ".parts")
+        self.run_id = run_id
+        self.parts = parts_folder(self.output)
         self.parts.mkdir(parents=True, exist_ok=True)
         self._options = dict(ids=np.asarray(ids, dtype=np.int64), width=width, height=height,
                              source=source, parameters=parameters,
@@ -92,7 +97,8 @@ class SegmentedTrajectoryWriter:
         Raises
         ------
         InputError
-            If one of the kept segments is missing or cannot be read.
+            If one of the kept segments is missing or cannot be read, or (where ``run_id``
+            is given) belongs to another run.
         """
         writer = cls(output, n_segments=n_segments, **options)
         for path in writer.parts.glob("segment-*.h5"):
@@ -103,6 +109,15 @@ class SegmentedTrajectoryWriter:
         missing = [p for p in writer.segment_paths() if not p.exists()]
         if missing:
             raise InputError(f"cannot resume {output}: segment {missing[0].name} is missing")
+        if writer.run_id is not None:
+            for path in writer.segment_paths():
+                found = segment_run_id(path)
+                if found != writer.run_id:
+                    raise InputError(
+                        f"cannot resume {output}: {path} is not a segment of this run (its "
+                        f"run identity is {found or 'missing'}, the checkpoint's "
+                        f"{writer.run_id}); put the run's own segment back, or delete "
+                        f"{writer.parts} to start again")
         if n_segments:
             with Trajectories(writer.segment_paths()[-1]) as last:
                 writer._last = (float(last.times[-1]), last.positions(-1)[:, 1].copy(), last.laps(-1))
@@ -120,6 +135,9 @@ class SegmentedTrajectoryWriter:
                 height=o["height"], source=o["source"], parameters=o["parameters"],
                 with_velocity=o["with_velocity"], frame_interval=o["frame_interval"],
                 label=str(self.output))
+            if self.run_id is not None:
+                self._current.attach("segment", {}, {"run_id": self.run_id,
+                                                     "index": self.n_segments})
             if self._last is not None:     # continue validation and laps across segments
                 self._current.continue_after(*self._last, frame_interval=o["frame_interval"])
         return self._current
@@ -254,3 +272,27 @@ class SegmentedTrajectoryWriter:
             path.unlink(missing_ok=True)
         self.parts.rmdir()
         return self.output
+
+
+def segment_run_id(path: Path) -> str | None:
+    """The run identity stored in a segment (None where it holds none).
+
+    Raises
+    ------
+    InputError
+        If the segment cannot be read.
+    """
+    import h5py
+
+    from cfbmarkov._names import first_line
+
+    try:
+        with h5py.File(path, "r") as f:
+            group = f.get("provenance/segment")
+            value = None if group is None else group.attrs.get("run_id")
+    except (OSError, KeyError, RuntimeError, ValueError) as exc:
+        raise InputError(f"{path}: unreadable segment ({first_line(exc)}); delete the "
+                         "folder to start again") from None
+    if isinstance(value, bytes):
+        value = value.decode(errors="replace")
+    return None if value is None else str(value)

@@ -1,5 +1,6 @@
 """The groups of a trajectory file being written: the particles and frames, created empty
-and chunked one frame per chunk, and the optional gas fields of CFD-DEM runs (``/fields``)
+and chunked one frame per chunk (an open riser's compactly, see :func:`create_frames`), and
+the optional gas fields of CFD-DEM runs (``/fields``)
 and exact pass events (``/events``), appended block by block (the layout is described in
 :mod:`cfbmarkov.trajectories`).
 """
@@ -15,11 +16,50 @@ from cfbmarkov.errors import InputError
 
 #: fewest particles per chunk of a frame (a file whose particles grow by insertion)
 MIN_CHUNK_PARTICLES = 256
+#: frames per chunk of a compact file (an open riser's)
+COMPACT_FRAMES = 16
 
 
-def create_frames(f: h5py.File, ids: np.ndarray, d: int, with_velocity: bool) -> int:
+def frame_chunks(n: int, compact: bool, *tail: int) -> dict:
+    """The h5py options of a frame dataset (``/frames/position``, ``lap``, ``velocity``,
+    ``present``) of ``n`` particles: one frame of every particle per chunk, or (``compact``)
+    :data:`COMPACT_FRAMES` frames of :data:`MIN_CHUNK_PARTICLES` particles per chunk,
+    deflated, so that the particles absent from a block of frames take no space."""
+    if not compact:
+        return {"chunks": (1, max(n, MIN_CHUNK_PARTICLES), *tail)}
+    return {"chunks": (COMPACT_FRAMES, MIN_CHUNK_PARTICLES, *tail), "compression": "gzip",
+            "compression_opts": 1, "shuffle": True}
+
+
+def write_frame_rows(ds: h5py.Dataset, i0: int, values: np.ndarray, compact: bool) -> None:
+    """Write ``values`` (T frames) to the frame dataset ``ds`` from frame ``i0``.
+
+    In a compact file, a block of :data:`MIN_CHUNK_PARTICLES` particles that holds only the
+    dataset's fill value in these frames (NaN positions, lap 0, absent) is not written: its
+    chunks stay unallocated and read back as that fill value, so an open riser's prediction,
+    whose particles are present a short while each, stores only the particles present.
+    """
+    i1 = i0 + values.shape[0]
+    if not compact:
+        ds[i0:i1] = values
+        return
+    fill = ds.fillvalue
+    for j0 in range(0, values.shape[1], MIN_CHUNK_PARTICLES):
+        block = values[:, j0:j0 + MIN_CHUNK_PARTICLES]
+        empty = (np.isnan(block).all() if isinstance(fill, float) and np.isnan(fill)
+                 else not (block != fill).any())
+        if not empty:
+            ds[i0:i1, j0:j0 + block.shape[1]] = block
+
+
+def create_frames(f: h5py.File, ids: np.ndarray, d: int, with_velocity: bool,
+                  compact: bool = False) -> int:
     """Create ``/particles/id`` and the empty, resizable frame datasets (time, position,
     lap and, with velocities, velocity; positions and velocities filled with NaN).
+
+    A ``compact`` file (an open riser's: particles present a short while each) is chunked
+    by blocks of frames and particles and deflated (:func:`frame_chunks`), and written by
+    :func:`write_frame_rows`; the values read back are the same.
 
     Parameters
     ----------
@@ -31,6 +71,8 @@ def create_frames(f: h5py.File, ids: np.ndarray, d: int, with_velocity: bool) ->
         D, the coordinates per position (2 or 3).
     with_velocity : bool
         Whether the file stores velocities.
+    compact : bool, optional
+        Chunk and deflate for particles that are absent from most frames.
 
     Returns
     -------
@@ -42,12 +84,12 @@ def create_frames(f: h5py.File, ids: np.ndarray, d: int, with_velocity: bool) ->
     f.create_dataset("particles/id", data=ids, maxshape=(None,), chunks=(max(n, 1024),))
     f.create_dataset("frames/time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(4096,))
     f.create_dataset("frames/position", shape=(0, n, d), maxshape=(None, None, d), dtype="f8",
-                     chunks=(1, chunk, d), fillvalue=np.nan)
+                     fillvalue=np.nan, **frame_chunks(n, compact, d))
     f.create_dataset("frames/lap", shape=(0, n), maxshape=(None, None), dtype="i4",
-                     chunks=(1, chunk))
+                     **frame_chunks(n, compact))
     if with_velocity:
         f.create_dataset("frames/velocity", shape=(0, n, d), maxshape=(None, None, d),
-                         dtype="f8", chunks=(1, chunk, d), fillvalue=np.nan)
+                         dtype="f8", fillvalue=np.nan, **frame_chunks(n, compact, d))
     return chunk
 
 

@@ -29,7 +29,8 @@ from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectory_checks import check_written_values
 from cfbmarkov.trajectory_format import PassEvents, estimate_frame_interval
-from cfbmarkov.trajectory_groups import append_events, append_field_frames, create_frames
+from cfbmarkov.trajectory_groups import (append_events, append_field_frames, create_frames,
+                                         frame_chunks, write_frame_rows)
 from cfbmarkov.trajectory_header import header_attrs
 from cfbmarkov.trajectory_series import FrameSeries
 
@@ -63,7 +64,8 @@ class TrajectoryWriter:
     and absent laps as 0; the presence mask ``/frames/present`` is written only when some
     particle is absent from some frame. Laps are counted between consecutive frames in which
     a particle is present: no pass is seen across a gap, and the counter carries on from its
-    last value when the particle reappears (``docs/definitions.md``, Presence).
+    last value when the particle reappears (``docs/definitions.md``, Presence). An open
+    riser's frames are stored compactly (:func:`~cfbmarkov.trajectory_groups.create_frames`).
 
     Parameters
     ----------
@@ -155,7 +157,8 @@ class TrajectoryWriter:
     def _create(self, attrs: dict[str, Any], boundary: Boundary, frame_interval) -> None:
         f, d = self._file, self.dimensions
         f.attrs.update(attrs)
-        self._chunk = create_frames(f, self.ids, d, self.with_velocity)
+        self._compact = boundary.is_open   # particles present a short while each
+        self._chunk = create_frames(f, self.ids, d, self.with_velocity, self._compact)
         self._n_frames = 0
         self._series = FrameSeries(self._label, self.height, boundary.is_open, self.max_step,
                                    frame_interval)
@@ -257,10 +260,10 @@ class TrajectoryWriter:
             return
         n = self.ids.size
         ds = f.create_dataset("frames/present", shape=(self._n_frames, n), maxshape=(None, None),
-                              dtype="?", chunks=(1, self._chunk), fillvalue=False)
+                              dtype="?", fillvalue=False, **frame_chunks(n, self._compact))
         for i in range(0, self._n_frames, 1024):
             j = min(i + 1024, self._n_frames)
-            ds[i:j] = np.isfinite(f["frames/position"][i:j, :, 0])
+            write_frame_rows(ds, i, np.isfinite(f["frames/position"][i:j, :, 0]), self._compact)
 
     def append(self, time: float, position, velocity=None, lap=None, present=None) -> None:
         """Append one frame.
@@ -353,12 +356,9 @@ class TrajectoryWriter:
         for name in names:
             f[name].resize(i1, axis=0)
         f["frames/time"][i0:i1] = times
-        f["frames/position"][i0:i1] = positions
-        f["frames/lap"][i0:i1] = laps
-        if self.with_velocity:
-            f["frames/velocity"][i0:i1] = velocities
-        if "frames/present" in f:
-            f["frames/present"][i0:i1] = present
+        rows = {"position": positions, "lap": laps, "velocity": velocities, "present": present}
+        for name in names[1:]:
+            write_frame_rows(f[name], i0, np.asarray(rows[name.split("/")[1]]), self._compact)
         self._n_frames = i1
         self._series.last_time = float(times[-1])
         self._any_present = self._any_present or bool(present.any())

@@ -241,3 +241,45 @@ def test_custom_law_integrates_like_the_linear_one():
     np.testing.assert_allclose(rk4, exact, atol=1e-6)   # RK4: error ~ (k lag / 8)^4
     with pytest.raises(InputError, match="no exact answer"):
         exact_kinetics(model, custom)
+
+
+def test_windowed_exit_mean_by_hand_open_riser():
+    from cfbmarkov.markov.kinetics_exact import windowed_exit_means
+
+    r, k, length = 0.25, 1.7, 1.5          # one state; a window of 15 lags
+    steps = int(round(length / LAG))
+    n = np.arange(1, steps)
+    p = r * (1 - r) ** (n - 1)
+    w = steps - n
+    by_hand = np.sum(w * p * (1 - np.exp(-k * n * LAG))) / np.sum(w * p)
+    got = windowed_exit_means(open_model(r), kinetics([k]), length)["v"]
+    assert got == pytest.approx(by_hand, abs=1e-12)
+    # a long window sees every residence nearly alike (bias of order E(n) / M)
+    assert windowed_exit_means(open_model(r), kinetics([k]), 400.0)["v"] == pytest.approx(
+        exact_kinetics(open_model(r), kinetics([k]))["v"].exit_mean, rel=2e-3)
+    # carried properties are left out; a window shorter than a lag is refused
+    assert windowed_exit_means(periodic_model(), kinetics([1.0, 1.0], start="carried"),
+                               1.0) == {}
+    with pytest.raises(InputError, match="shorter than the lag"):
+        windowed_exit_means(open_model(r), kinetics([k]), 0.01)
+
+
+def test_down_residences_mirror_up_ones():
+    from cfbmarkov.markov.kinetics_exact import windowed_exit_means
+
+    up_model = periodic_model()
+    p = up_model.transition_matrix
+    passes = np.array([[0.0, 0.0], [1.0, 0.0]])
+    zeros = np.zeros((2, 2), np.int64)
+    # the same chain whose 1 -> 0 move passes down through the bottom: a net downflow
+    down_model = MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 2, 0.1, 1.0), LAG,
+                             estimator="given", pass_fractions=(np.zeros((2, 2)), passes))
+    kin = kinetics([0.7, 2.0])
+    up = exact_kinetics(up_model, kin)["v"]
+    down = exact_kinetics(down_model, kin, direction="down")["v"]
+    assert down.exit_mean == pytest.approx(up.exit_mean, rel=1e-12)
+    assert down.exit_sd == pytest.approx(up.exit_sd, rel=1e-10)
+    assert windowed_exit_means(down_model, kin, 2.0, direction="down")["v"] == pytest.approx(
+        windowed_exit_means(up_model, kin, 2.0)["v"], rel=1e-12)
+    with pytest.raises(InputError, match="up or down"):
+        exact_kinetics(up_model, kin, direction="sideways")

@@ -112,3 +112,63 @@ def _tmp_toml(text):
     path = Path(tempfile.mkdtemp()) / "kin.toml"
     path.write_text(text)
     return path
+
+
+ZONES = ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_from = "wall_distance"\n'
+         'rate_dense = 0.2\nrate_dilute = 2.0\nthreshold = 0.02\n')
+
+
+def _exit_mean(capsys, argv):
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    return out["properties"]["X"]["exit_mean"], out["cell_fields_from"]
+
+
+def test_react_rate_from_uses_the_fields_fit_stored(fitted, tmp_path, capsys):
+    from cfbmarkov.markov import MarkovModel
+
+    folder, run, model = fitted
+    stored = MarkovModel.load(model).cell_fields
+    assert stored is not None and stored.n_cells == 18
+    assert np.all(stored.solids_fraction > 0)
+    dense = stored.wall_distance <= 0.02       # the wall columns, not the core
+    assert dense.any() and not dense.all()
+    kin = _write(tmp_path, ZONES)
+    x_fields, source = _exit_mean(capsys, ["react", str(model), "--kinetics", str(kin),
+                                           "--json"])
+    assert source == "model"
+    # the same answer as a rate table of the same values per cell
+    table = "col,row,rate\n" + "".join(f"{c},{r},{0.2 if dense[r * 3 + c] else 2.0}\n"
+                                       for r in range(6) for c in range(3))
+    (tmp_path / "t").mkdir()
+    by_cell = _write(tmp_path / "t", '[[property]]\nname = "X"\nlaw = "first-order"\n'
+                     'rate_by_cell = "rates.csv"\n', table)
+    x_table, source = _exit_mean(capsys, ["react", str(model), "--kinetics", str(by_cell),
+                                          "--json"])
+    assert source is None
+    assert x_fields == pytest.approx(x_table, rel=1e-12)
+    assert 0 < x_fields < 1
+
+
+def test_react_rate_from_with_run_and_the_refusal(fitted, tmp_path, capsys):
+    from cfbmarkov.markov import MarkovModel
+
+    folder, run, model = fitted
+    bare = tmp_path / "bare.h5"
+    MarkovModel.load(model).with_cell_fields(None).save(bare)
+    kin = _write(tmp_path, ZONES)
+    # no fields in the model and no run: one line naming the fix, exit 2
+    assert main(["react", str(bare), "--kinetics", str(kin)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--run" in err and "stores none" in err
+    # with the fitting file: the fields computed there, the same answer as the stored ones
+    x_run, source = _exit_mean(capsys, ["react", str(bare), "--kinetics", str(kin), "--run",
+                                        str(run), "--json"])
+    assert source == str(run)
+    x_model, _ = _exit_mean(capsys, ["react", str(model), "--kinetics", str(kin), "--json"])
+    assert x_run == pytest.approx(x_model, rel=1e-12)
+    # another file than the one fitted on: refused
+    other = write_run(tmp_path / "other.h5", RiserFlow(columns=3, rows=6), 60, 2.0, seed=2)
+    assert main(["react", str(bare), "--kinetics", str(kin), "--run", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not the model's fitting file" in err

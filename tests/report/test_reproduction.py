@@ -13,11 +13,13 @@ import pytest
 
 from cfbmarkov.errors import InputError
 from cfbmarkov.analysis.reproduction import paper_map_times
+from cfbmarkov.report.document import interval_text
 from cfbmarkov.report.figure_sections import map_numbers
 from cfbmarkov.report.reproduction import write_report
 from cfbmarkov.report.run_folder import estimator_names
 from cfbmarkov.report.sections import PAPER_TABLE3
-from cfbmarkov.report.table3 import COMPACT_HEADER
+from cfbmarkov.analysis.baseline import judge_baseline
+from cfbmarkov.report.table3 import COMPACT_HEADER, OUTCOME_WORDS
 
 PNG = b"\x89PNG\r\n\x1a\n"
 EXPECTED_FIGURES = {"fig03-transition-matrices.png", "fig04-maps-u3.png", "fig05-maps-u6.png",
@@ -91,7 +93,7 @@ def test_sections_and_paper_numbers(report_of_template):
     assert "doi:10.3390/pr13030614" in section(md, "Summary")
     # the paper's computing time (§3.1)
     assert "about 50 h" in md and "about 30 min" in md and "about 100" in md
-    assert "(estimated)" in md     # u6's CFD-DEM time of the predict window is an estimate
+    assert "(wall estimated)" in md  # u6's CFD-DEM time of the predict window is an estimate
     # header
     for text in ("Scale: quick", "6 columns x 12 rows", "cfbmarkov version: "):
         assert text in md, text
@@ -112,16 +114,18 @@ def test_table3_quotes_the_summaries(report_of_template):
             row = table_row(md, u, estimator)
             lo, hi = s["model"]["rt_mean_interval"]
             # the interval in the cell, beside its value
-            assert row[3] == f"{s['model']['rt_mean']:.3f} [{lo:.3f}–{hi:.3f}]"
+            assert row[3] == f"{s['model']['rt_mean']:.3f} [{interval_text(lo, hi)}]"
             lo, hi = s["model"]["rt_sd_interval"]
-            assert row[6] == f"{s['model']['rt_sd']:.3f} [{lo:.3f}–{hi:.3f}]"
+            assert row[6] == f"{s['model']['rt_sd']:.3f} [{interval_text(lo, hi)}]"
             assert row[2] == f"{s['reference']['rt_mean']:.3f}"
             assert row[4] == f"{s['pd_rt_mean']:.2f}"
             assert row[5] == f"{s['reference']['rt_sd']:.3f}"
             assert row[7] == f"{s['pd_rt_sd']:.2f}"
-            assert row[8] == f"{s['md_rtd']:.3g}"
-            beats = "yes" if s["md_rtd"] < s["baseline"]["md_rtd"] else "no"
-            assert row[9] == f"{beats} ({s['baseline']['md_rtd']:.3g})"
+            assert row[8] == f"{s['md_rtd']:.4g}"
+            j = judge_baseline(s["md_rtd"], s["baseline"]["md_rtd"],
+                               s["natural_variability"]["md_rtd"])
+            assert row[9] == (f"{OUTCOME_WORDS[j.outcome]} ({s['baseline']['md_rtd']:.4g} / "
+                              f"{s['natural_variability']['md_rtd']:.4g})")
             detail = table_row(md, u, estimator, "Table 3 in detail")
             assert detail[2] == f"{s['mixing_rms']:.3g}"
     assert len(COMPACT_HEADER) == 11          # one row per velocity and model, compact
@@ -269,10 +273,14 @@ def test_trust_paragraph_is_written_from_the_numbers():
                {"md_rtd": 0.05}, "level": 0.9, "reference": {"rt_mean": 0.86},
                "model": {"rt_mean_interval": [0.9, 1.1]}}
     text = trust_text("6", "paper", summary)
-    assert "does not beat" in text and "6.6 times" in text and "outside the model's 90 %" in text
+    # MD 0.33 against 0.076: higher by more than the halves' 0.05
+    assert "simply reusing the fitting window's RTD beats the model" in text
+    assert "6.6 times" in text and "outside the model's 90 %" in text
     summary.update(md_rtd=0.04, model={"rt_mean_interval": [0.8, 0.9]})
     text = trust_text("6", "auto", summary)
-    assert "beats simply" in text and "within the reference's own variability" in text
+    # lower by 0.036, within the halves' 0.05: not told apart, never "beats"
+    assert "cannot tell the model from simply reusing" in text and "beats" not in text
+    assert "within the reference's own variability" in text
     assert "inside" in text
     assert "too few residences" in trust_text("3", "mle", {"md_rtd": None})
     # the value and its interval at one precision, so that a miss reads as one
@@ -280,20 +288,28 @@ def test_trust_paragraph_is_written_from_the_numbers():
                                         model={"rt_mean_interval": [0.2293, 0.3984]}))
     assert "E(RT) lies outside the model's 90 % interval (Table 3)" in text
     assert "0.398" not in text             # the interval is Table 3's, not repeated
-    # the model's own error on its fitting window, against the flow's change (the baseline)
+    # the MDs are Table 3's too: the rule's outcome and the gap in words
+    assert "0.33" not in text and "0.076" not in text
+    # the model's own error on its fitting window, against the flow's change (the baseline):
+    # not split where the model's MD is within the reference's own variability
     summary["model_on_fitting_window"] = {"windows": [[15, 20], [10, 15]], "md_rtd": 0.02,
                                           "pd_rt_mean": 1.25, "pd_rt_sd": -3.0}
     text = trust_text("6", "auto", summary)
     assert "On its own fitting window (10-15 s) the model is 0.02" in text
-    assert "+1.2 %" in text and "-3.0 %" in text and "smaller than the flow's change" in text
+    assert "+1.2 %" in text and "-3.0 %" in text
+    assert "cannot tell how much of it is the model's own error" in text
+    assert "limits this prediction" not in text and "dominates" not in text
     summary["md_rtd"] = 0.2      # beyond the halves: the flow's change since the fitting window
-    assert "the rest is the flow's change since the fitting window" in trust_text("6", "a",
-                                                                                  summary)
+    text = trust_text("6", "a", summary)
+    assert "smaller than the flow's change" in text
+    assert "the rest is the flow's change since the fitting window" in text
     summary["model_on_fitting_window"]["md_rtd"] = 0.2
     text = trust_text("6", "auto", summary)
     assert "the model's own error dominates" in text and "the difference is the model's" in text
+    # without the run's long run, the paragraph says why
+    assert "perfect stationary model would predict (the CFD-DEM's RTD pooled" in text
+    assert "is not given" in text
     # the best stationary prediction (the run's long run), where the summary has it
-    assert "stationary" not in text
     summary["long_run"] = {"windows": [[5, 20], [15, 20]], "md_rtd": 0.08, "pd_rt_mean": -19.84,
                            "pd_rt_sd": -33.2}
     text = trust_text("6", "auto", summary)

@@ -109,22 +109,31 @@ def test_the_verdict_is_written_from_the_numbers():
     assert "misses the CFD-DEM's mean residence time E(RT) by +50 % at 3 m/s, +50 % at 6 m/s" \
         in summary
     assert "(the paper: +0.54 to +11.89 %)" in summary
-    assert "in 0 of 2 velocity-model pairs" in summary       # MD 0.3 against a baseline of 0.1
     assert "the models' own error" not in summary
-    assert "paper at 3 m/s, the model's own error (MD 0.3 against the baseline's 0.1" in summary
+    assert ("at 3 m/s paper 0.3 against the baseline's 0.1: the model's own error (0.25 "
+            "already on its fitting window)") in summary
+    # the count once, in the verdict line; the details name the pairs
+    assert summary.count("Verdict at the quick scale: reusing the fitting window's RTD (the "
+                         "persistence baseline) predicts better than the models in all 2") == 1
+    assert summary.count("velocity-model pairs") == 2        # the verdict line and the interval
+    assert "is beaten, by the rule of Table 3" in summary and "by none of the models" in summary
     assert "inside the model's 90 % interval in 0 of 2" in summary
     # a model that beats the baseline is named
     good = {"pd_rt_mean": 2.0, "pd_rt_sd": -40.0, "md_rtd": 0.05, "baseline": {"md_rtd": 0.1},
             "reference": {"rt_mean": 0.5}, "model": {"rt_mean_interval": [0.4, 0.6]}}
     cases, measures = fake_run({3.0: 0.8}, summary=good)
     summary = summary_text(cases, measures).split("## Operating conditions", 1)[0]
-    assert "the models beat the persistence baseline in 1 of 1 velocity-model pairs" in summary
-    assert "is beaten by paper at 3 m/s." in summary
+    assert "the models beat the persistence baseline in the one velocity-model pair" in summary
+    assert "by paper at 3 m/s." in summary and "Not beating it" not in summary
     assert "(within its largest miss, 11.89 %) in its one case" in summary
     # the verdict leads: the first paragraph after the heading
     first = summary.split("## Summary", 1)[1].strip().splitlines()[0]
-    assert first.startswith("Verdict at the quick scale: the paper's estimator")
-    assert "physics checks of the CFD-DEM" in first
+    assert first.startswith("Verdict at the quick scale: the models beat the persistence")
+    assert "the paper's estimator is as close" in first
+    assert ("physics checks of the CFD-DEM ([evidence](#operating-conditions-and-physics-"
+            "checks)): E(RT) of the CFD-DEM falls as U rises: NOT JUDGED") in first
+    assert first.endswith("Next step: use the models over windows like these, with their "
+                          "intervals.")
     # the link to the evidence goes to a heading of the page
     checks = physics_checks(cases, measures)
     html = render_html("r", summary_blocks({"scale": "quick"}, cases, cases, measures,

@@ -58,6 +58,96 @@ class WindowDifference:
                 "pd_rt_sd": self.pd_rt_sd, "md_rtd": self.md_rtd}
 
 
+#: MDs within this fraction of the baseline's MD are a tie
+BASELINE_TIE = 0.01
+#: the outcomes of :func:`judge_baseline`
+OUTCOMES = ("beats", "loses", "tie", "not told apart")
+
+
+@dataclass(frozen=True)
+class BaselineJudgement:
+    """A model's MD against the persistence baseline's, judged by one rule.
+
+    Attributes
+    ----------
+    outcome : {"beats", "loses", "tie", "not told apart"}
+        "beats": the model's MD is lower than the baseline's by more than the tie margin
+        and by more than the reference's own variability; "loses": higher by as much;
+        "tie": within the tie margin; "not told apart": outside the tie margin but within
+        the reference's own variability.
+    md, md_base : float
+        The model's and the baseline's MD against the reference.
+    md_halves : float or None
+        The reference's own variability (MD of its predict window's halves); None where it
+        is not known, and then only the tie margin judges.
+    tie : float
+        The tie margin as a fraction of ``md_base``.
+    """
+
+    outcome: str
+    md: float
+    md_base: float
+    md_halves: float | None
+    tie: float
+
+    @property
+    def beats(self) -> bool:
+        """Whether the model beats the baseline."""
+        return self.outcome == "beats"
+
+    @property
+    def gap(self) -> float:
+        """The baseline's MD minus the model's (positive where the model is closer)."""
+        return self.md_base - self.md
+
+
+def judge_baseline(md: float, md_base: float, md_halves: float | None = None, *,
+                   tie: float = BASELINE_TIE) -> BaselineJudgement:
+    """Whether a model beats the persistence baseline: the one rule of the report.
+
+    The model beats the baseline only where its MD is lower than the baseline's by more
+    than ``tie`` times the baseline's MD and by more than ``md_halves``, the distance
+    between the reference's two halves of the window. The second condition comes from the
+    triangle inequality of the Minkowski distance: against the true RTD T instead of the
+    reference's sampled R, each MD moves by at most MD(R, T), so their gap by at most
+    2 MD(R, T); each half of the window carries about sqrt(2) times the sampling noise of
+    the whole, so the halves' distance is about 2 MD(R, T) (more where the flow also
+    changes within the window). A gap larger than it holds against the true RTD too.
+
+    Parameters
+    ----------
+    md, md_base : float
+        The model's and the baseline's MD against the reference (finite, >= 0).
+    md_halves : float, optional
+        The MD of the reference's halves; None (or NaN) where unknown: the tie margin
+        alone then judges.
+    tie : float, optional
+        The tie margin as a fraction of ``md_base``; default :data:`BASELINE_TIE` (1 %).
+
+    Returns
+    -------
+    BaselineJudgement
+
+    Raises
+    ------
+    ValueError
+        On an MD that is not finite, or negative.
+    """
+    for name, value in (("md", md), ("md_base", md_base)):
+        if not (np.isfinite(value) and value >= 0):
+            raise ValueError(f"{name} must be a finite distance >= 0, got {value!r}")
+    halves = (None if md_halves is None or not np.isfinite(md_halves)
+              else float(md_halves))
+    gap = md_base - md
+    if abs(gap) <= tie * md_base:
+        outcome = "tie"
+    elif halves is not None and abs(gap) <= halves:
+        outcome = "not told apart"
+    else:
+        outcome = "beats" if gap > 0 else "loses"
+    return BaselineJudgement(outcome, float(md), float(md_base), halves, float(tie))
+
+
 def window_difference(ref, stand_in: tuple[float, float], judged: tuple[float, float], *,
                       bin_width: float, md_order: float, use_events: bool, lag_frames: int,
                       face_band: float | None, window_length: float,

@@ -169,4 +169,100 @@ def window_cell_fields(traj, space, window: tuple[float, float]) -> dict:
             "vertical_velocity": velocity, "relative": relative, "frames": int(n_frames)}
 
 
-__all__ = ["particle_diameter", "wall_distance", "window_cell_fields"]
+def cell_fields_of(traj, space, window: tuple[float, float]):
+    """:func:`window_cell_fields` as a :class:`~cfbmarkov.kinetics.CellFields`.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+    space : StateSpace
+        The model's state space.
+    window : (float, float)
+        The window (s).
+
+    Returns
+    -------
+    CellFields
+
+    Raises
+    ------
+    InputError
+        As :func:`window_cell_fields`.
+    """
+    from cfbmarkov.kinetics import CellFields
+
+    f = window_cell_fields(traj, space, window)
+    return CellFields(f["solids_fraction"], f["wall_distance"], f["vertical_velocity"],
+                      relative=f["relative"])
+
+
+def fitting_cell_fields(traj, model):
+    """The cell fields of ``model``'s fitting window of ``traj`` (its fitting file), for
+    ``fit`` to store in the model; None where they cannot be computed there (the grid does
+    not fit the file).
+
+    Parameters
+    ----------
+    traj : Trajectories
+        The open fitting file.
+    model : MarkovModel
+        The fitted model (its state space and window; None: every frame).
+
+    Returns
+    -------
+    CellFields or None
+    """
+    window = model.window or (float(traj.times[0]), float(traj.times[-1]))
+    try:
+        return cell_fields_of(traj, model.state_space, window)
+    except InputError:
+        return None
+
+
+def model_cell_fields(model, run=None, *, what: str = "the kinetics"):
+    """The fitting window's cell fields of ``model``: the ones it stores (``fit`` records
+    them), else computed on its fitting window of ``run``.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted model.
+    run : str, os.PathLike or Trajectories, optional
+        Its fitting file, used where the model stores no fields. Its window must hold the
+        model's fitting window, and where the model recorded the window's content identity
+        the file must match it.
+    what : str, optional
+        Names what needs the fields, for the message.
+
+    Returns
+    -------
+    CellFields
+
+    Raises
+    ------
+    InputError
+        One line: the model stores no fields and no run is given (give ``--run`` or refit),
+        or the run is not the model's fitting file or does not hold its window.
+    """
+    from cfbmarkov.trajectories import opened
+    from cfbmarkov.trajectory_identity import window_identity
+
+    if model.cell_fields is not None:
+        return model.cell_fields
+    if run is None:
+        raise InputError(f"{what}: rates given as a function of a cell field (*_from) need the "
+                         "fitting window's cell fields, and the model stores none: give its "
+                         "fitting file with --run RUN.h5, or refit it with cfbmarkov fit "
+                         "(which stores them)")
+    with opened(run) as traj:
+        window = model.window or (float(traj.times[0]), float(traj.times[-1]))
+        if model.source_identity and window_identity(traj, window) != model.source_identity:
+            raise InputError(f"{traj.path}: not the model's fitting file (its window "
+                             f"{window[0]:g}-{window[1]:g} s differs from the one the model "
+                             "was fitted on); give the file it was fitted on")
+        return cell_fields_of(traj, model.state_space, window)
+
+
+__all__ = ["cell_fields_of", "fitting_cell_fields", "model_cell_fields", "particle_diameter",
+           "wall_distance", "window_cell_fields"]

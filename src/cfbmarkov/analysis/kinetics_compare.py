@@ -10,8 +10,10 @@ Per property of a kinetics file (linear laws):
   (``/properties/NAME``) or, where it stored none, the same integration along the
   prediction's own paths (on a space of cells these are the chain's states, so the values
   are those a Monte Carlo with properties gives); beside them the chain's exact answers
-  (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`) and an interval from the block
-  bootstrap of the fitting window, as for the RTD;
+  (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`), its exact exit mean as a window
+  of the comparison's length sees it (short residences more often than long ones, as the
+  reference's exits; :func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`) and an
+  interval from the block bootstrap of the fitting window, as for the RTD;
 - *segregated flow*: the bed-averaged law over the fitting window's observed RTD
   (:mod:`cfbmarkov.analysis.segregated_flow`).
 
@@ -90,23 +92,26 @@ def _fitting_source(model, ref):
 
 
 def _cell_fields(model, ref, warnings):
-    from cfbmarkov.analysis.cell_fields import window_cell_fields
-    from cfbmarkov.kinetics import CellFields
+    """The fitting window's cell fields: the model's own, else computed on its fitting
+    window (its source file, or the reference where the window lies inside it)."""
+    from cfbmarkov.analysis.cell_fields import cell_fields_of
     from cfbmarkov.trajectories import opened
 
-    source, window = _fitting_source(model, ref)
-    if source is None:
-        raise InputError("the kinetics' rates depend on the fitting window's cell fields, but "
-                         "the model's fitting file is not readable: give rates per cell "
-                         "(rate_by_cell) or keep the fitting file where the model says")
-    with opened(source) as traj:
-        fields = window_cell_fields(traj, model.state_space, window)
-    if fields["relative"]:
+    fields = model.cell_fields
+    if fields is None:
+        source, window = _fitting_source(model, ref)
+        if source is None:
+            raise InputError("the kinetics' rates depend on the fitting window's cell fields, "
+                             "but the model stores none and its fitting file is not readable: "
+                             "give rates per cell (rate_by_cell) or keep the fitting file "
+                             "where the model says")
+        with opened(source) as traj:
+            fields = cell_fields_of(traj, model.state_space, window)
+    if fields.relative:
         warnings.append("kinetics: the fitting file gives no particle diameter; its solids "
                         "fraction is each cell's count relative to the mean (1: the bed's "
                         "mean)")
-    return CellFields(fields["solids_fraction"], fields["wall_distance"],
-                      fields["vertical_velocity"])
+    return fields
 
 
 def _fitting_rtd_and_occupancy(model, ref, on, warnings):
@@ -136,19 +141,33 @@ def _fitting_rtd_and_occupancy(model, ref, on, warnings):
     return rt.samples, occupancy
 
 
-def _exact(model, sk, warnings):
+def _exact(model, sk, warnings, direction="up"):
     try:
         from cfbmarkov.markov.kinetics_exact import exact_kinetics
     except ImportError:          # pragma: no cover - the exact module is part of the package
         return None
     try:
-        return exact_kinetics(model, sk)
+        return exact_kinetics(model, sk, direction=direction)
     except CfbmarkovError as exc:
         warnings.append(f"kinetics: no exact answers ({exc})")
         return None
 
 
-def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings):
+def _windowed(model, sk, length: float, warnings, direction: str = "up") -> dict:
+    """The chain's exact exit means as a window of ``length`` s sees them
+    (:func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`); {} with a warning where
+    they cannot be had."""
+    from cfbmarkov.markov.kinetics_exact import windowed_exit_means
+
+    try:
+        return windowed_exit_means(model, sk, length, direction=direction)
+    except CfbmarkovError as exc:
+        warnings.append(f"kinetics: no windowed exact answers ({exc})")
+        return {}
+
+
+def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
+                          direction: str = "up"):
     """Exact exit means of each property on block-bootstrap resamples of the fitting
     window ({name: list}), or None."""
     if not resamples:
@@ -162,7 +181,8 @@ def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings):
         for resampled in drawn:
             try:
                 answers = exact_kinetics(resampled, kinetics.per_state(resampled.state_space,
-                                                                       fields))
+                                                                       fields),
+                                         direction=direction)
             except (CfbmarkovError, ValueError):
                 continue
             for name, answer in answers.items():
@@ -293,8 +313,10 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     if any(v == "paths" for v in sources.values()):
         warnings.append("kinetics: the prediction stored no properties; the model side "
                         "integrates them along the prediction's paths")
-    exact = _exact(model, sk, warnings)
-    boot = _bootstrap_exit_means(model, kinetics, fields, resamples, warnings) if exact else None
+    exact = _exact(model, sk, warnings, on.direction)
+    windowed = _windowed(model, sk, stop - start, warnings, on.direction) if exact else {}
+    boot = (_bootstrap_exit_means(model, kinetics, fields, resamples, warnings, on.direction)
+            if exact else None)
     rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings)
     n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)
     summary, figures = {}, {}
@@ -326,6 +348,10 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                                   "bed_mean": answer.bed_mean,
                                   "pd_exit_mean": percentage_difference(answer.exit_mean,
                                                                         r.exit_mean)}
+            if name in windowed:
+                mod_block["exact"]["windowed_exit_mean"] = windowed[name]
+                mod_block["exact"]["pd_windowed_exit_mean"] = percentage_difference(
+                    windowed[name], r.exit_mean)
             values = None if boot is None else np.asarray(boot.get(name, []), float)
             if values is not None and values.size >= 2:
                 from cfbmarkov.analysis.bootstrap import interval_bounds

@@ -24,6 +24,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from cfbmarkov.analysis.development import development
 from cfbmarkov.analysis.mixing import mixing_curve_of
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.residence import (net_flow_direction, residence_times,
@@ -109,6 +110,9 @@ class CaseMeasures:
         Estimator of the model used for Fig. 3-7.
     model : MarkovModel or None
         That model.
+    development : dict or None
+        The solids' mean vertical velocity before the fitting window, over it and over the
+        predict window (:func:`cfbmarkov.analysis.development.development`).
     """
 
     window: tuple[float, float]
@@ -121,6 +125,7 @@ class CaseMeasures:
     solids_velocity: np.ndarray
     model_name: str | None = None
     model: Any = None
+    development: dict | None = None
 
 
 def measure_run(traj, window: tuple[float, float], bin_width: float, *,
@@ -260,6 +265,7 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
         measured = measure_run(ref, window, bin_width, use_events=False, lag_frames=lag_frames,
                                direction=direction)
         across, solids, solids_velocity = solids_profile(ref, window, config)
+        flow = development(ref, tuple(config.markov.fit_window), window)
     edges, _ = rtd_histogram(np.zeros(0), bin_width, window_length=window[1] - window[0])
     models = {}
     for name, path in predictions.items():
@@ -268,6 +274,7 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
     measures = CaseMeasures(window, bin_width, edges, measured, models, across, solids,
                             solids_velocity)
     measures.model_name = model[0]
+    measures.development = flow
     with reading_errors(model[1]):
         measures.model = MarkovModel.load(model[1])
     return measures

@@ -6,6 +6,7 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import (count, finite_float, level, minkowski_order, parse_cells,
                                    parse_times, parse_window, positive_float)
 from cfbmarkov.errors import InputError
@@ -50,7 +51,7 @@ def cmd_compare(args) -> int:
         print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
               flush=True)
     for line in summary.get("warnings", []):
-        print(f"warning: {line.strip()}", file=sys.stderr)
+        print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
@@ -100,6 +101,9 @@ def _print_kinetics(block: dict) -> None:
                 f"{pd_text(mod['pd_exit_mean'])} %, MD {value(mod['md_exit'])}")
         if exact:
             line += f"; exact {value(exact['exit_mean'])}, PD {pd_text(exact['pd_exit_mean'])} %"
+            if exact.get("windowed_exit_mean") is not None:
+                line += (f"; exact as the window sees it {value(exact['windowed_exit_mean'])}, "
+                         f"PD {pd_text(exact['pd_windowed_exit_mean'])} %")
         line += ")"
         if seg:
             line += (f", segregated flow {value(seg['exit_mean'])} (PD "

@@ -27,6 +27,8 @@ def cmd_react(args) -> int:
     import json
 
     from cfbmarkov._json import jsonable
+    from cfbmarkov.analysis.cell_fields import model_cell_fields
+    from cfbmarkov.analysis.kinetics_compare import needs_cell_fields
     from cfbmarkov.kinetics import load_kinetics
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.markov.kinetics_exact import exact_kinetics
@@ -37,7 +39,11 @@ def cmd_react(args) -> int:
                          "-o OUT")
     kinetics = load_kinetics(args.kinetics)
     model = MarkovModel.load(args.model)
-    state_kinetics = kinetics.per_state(model.state_space)
+    fields, fields_from = None, None
+    if needs_cell_fields(kinetics):
+        fields = model_cell_fields(model, args.run, what=str(args.kinetics))
+        fields_from = "model" if model.cell_fields is not None else str(args.run)
+    state_kinetics = kinetics.per_state(model.state_space, fields)
     answers, seconds = {}, None
     if kinetics.linear:
         t0 = time.perf_counter()
@@ -59,7 +65,8 @@ def cmd_react(args) -> int:
     if args.json:
         out = {"properties": {name: {**a.to_dict(), "law": p.law.key}
                               for (name, a), p in zip(answers.items(), kinetics.properties)},
-               "exact_seconds": seconds, "prediction": args.output}
+               "exact_seconds": seconds, "prediction": args.output,
+               "cell_fields_from": fields_from}
         print(json.dumps(jsonable(out)))
         return 0
     if answers:
@@ -92,6 +99,10 @@ def add_react(sub) -> None:
     s.add_argument("model", help="model file (.h5, from cfbmarkov fit)")
     s.add_argument("--kinetics", required=True,
                    help="kinetics file (TOML, one [[property]] table per property)")
+    s.add_argument("--run", default=None, metavar="RUN.h5",
+                   help="the model's fitting file, for rates given as a function of a cell "
+                        "field (rate_from = ...) where the model stores no cell fields "
+                        "(cfbmarkov fit stores them)")
     s.add_argument("--json", action="store_true",
                    help="print {\"properties\": {NAME: {exit_mean, exit_sd, bed_mean, "
                         "bed_mean_by_cell, ...}}} as JSON")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import sys
 
+from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import (count, finite_float, level, parse_cells, parse_windows,
                                    positive_float, seed)
 from cfbmarkov.errors import CfbmarkovError, InputError
@@ -66,11 +67,13 @@ def _finish_fit(args, model, runs, windows) -> int:
     from cfbmarkov.markov.first_passage import TrappedResidences
 
     if len(runs) == 1 and isinstance(model.source, str):
+        from cfbmarkov.analysis.cell_fields import fitting_cell_fields
         from cfbmarkov.trajectories import Trajectories
         from cfbmarkov.trajectory_identity import window_identity
 
         with Trajectories(model.source) as run:
             model = model.with_source_identity(window_identity(run, model.window))
+            model = model.with_cell_fields(fitting_cell_fields(run, model))
     has_rtd = True
     try:
         model.rtd()
@@ -93,7 +96,7 @@ def _finish_fit(args, model, runs, windows) -> int:
     # -- end of the sample's verdict ----------------------------------------------------
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line
-        print(f"warning: {line.strip()}", file=sys.stderr)
+        print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     print(model.summary(warnings=False))   # each warning once, on stderr
     print(args.output)
     return 0
@@ -176,7 +179,7 @@ def cmd_predict(args) -> int:
         model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                       output=args.output, progress=not args.quiet)
     for line in model.adequacy.warnings if model.adequacy is not None else ():
-        print(f"warning: the model's fitting sample: {line}", file=sys.stderr)
+        print(f"warning: the model's fitting sample: {one_line(line)}", file=sys.stderr)
     print(args.output)
     return 0
 
@@ -227,7 +230,7 @@ def cmd_rtd(args) -> int:
         print(json.dumps(jsonable(out), indent=1, allow_nan=False))
         return 0
     for line in warnings:
-        print(f"warning: {line.strip()}", file=sys.stderr)
+        print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     kind = ('window ' + format(args.window_length, 'g') + ' s' if args.window_length
             else 'intrinsic')
     figures = (band.describe(rtd.mean, rtd.sd) if band is not None

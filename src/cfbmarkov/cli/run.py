@@ -27,7 +27,7 @@ def cmd_reproduce(args) -> int:
     report = reproduce(args.output, args.scale, args.velocities, overrides=overrides,
                        models=args.models, scheduler=args.scheduler, jobs=args.jobs,
                        progress=not args.quiet, log=lambda line: print(line, flush=True),
-                       kinetics=args.kinetics)
+                       kinetics=args.kinetics, ensemble=args.ensemble, device=args.device)
     print(report)
     return 0
 
@@ -123,6 +123,14 @@ def add_reproduce(sub) -> None:
                    help="a kinetics file (TOML): every comparison also gives its properties "
                         "for the CFD-DEM, the model and the segregated-flow baseline "
                         "(compare --kinetics)")
+    s.add_argument("--ensemble", type=count(1, 1000), default=1, metavar="N",
+                   help="N independent CFD-DEM runs per case (seeds as simulate --ensemble), "
+                        "written to cfd-dem-m0.h5 ...: each model is fitted on their fitting "
+                        "windows pooled and compared on member 0's prediction window "
+                        "(default 1)")
+    s.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
+                   help="where the CFD-DEM's DEM runs (default cpu; gpu needs an NVIDIA GPU "
+                        "and numba-cuda)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=cmd_reproduce)
 

@@ -25,9 +25,17 @@ def cmd_simulate(args) -> int:
     if args.particles is not None:
         case = case.model_copy(update={"particles": case.particles.model_copy(
             update={"number": args.particles})})
-    out = simulate(case, args.output, until=args.until, checkpoint_every=args.checkpoint_every,
-                   resume=args.resume, progress=not args.quiet)
-    print(out)
+    if args.ensemble is None and args.device == "cpu":
+        out = simulate(case, args.output, until=args.until,
+                       checkpoint_every=args.checkpoint_every, resume=args.resume,
+                       progress=not args.quiet)
+        print(out)
+        return 0
+    from cfbmarkov.simulate.ensemble import simulate_ensemble
+    for out in simulate_ensemble(case, args.output, args.ensemble, device=args.device,
+                                 until=args.until, checkpoint_every=args.checkpoint_every,
+                                 resume=args.resume, progress=not args.quiet):
+        print(out)
     return 0
 
 
@@ -70,6 +78,13 @@ def add_simulate(sub) -> None:
     s.add_argument("--resume", action="store_true", help="continue an interrupted run")
     s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=None,
                    help="override the number of particles")
+    s.add_argument("--ensemble", type=count(1, 1000), default=None, metavar="N",
+                   help="N independent runs of the case, written to RUN-m0.h5 ... "
+                        "RUN-m<N-1>.h5 for -o RUN.h5; member m's seed is word 0 of child m "
+                        "of numpy SeedSequence(case seed).spawn(N)")
+    s.add_argument("--device", choices=("cpu", "gpu"), default="cpu",
+                   help="where the DEM runs (default cpu): cpu, members one after another, or "
+                        "gpu (numba-cuda), members side by side; needs an NVIDIA GPU")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_simulate)
 

@@ -17,6 +17,7 @@ from typing import Any, TextIO
 
 import numpy as np
 
+from cfbmarkov._names import check_not_pipe
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectory_writer import TrajectoryWriter
 
@@ -39,13 +40,14 @@ def check_source(source: str | os.PathLike) -> Path:
     Raises
     ------
     InputError
-        If it is missing, a folder or empty.
+        If it is missing, a folder, a pipe or device, or empty.
     """
     path = Path(source)
     if not path.exists():
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not a file")
+    check_not_pipe(path)
     if path.stat().st_size == 0:
         raise InputError(f"{path}: empty file")
     return path
@@ -96,8 +98,9 @@ def open_text(path: Path) -> TextIO:
     Raises
     ------
     InputError
-        If the file cannot be opened.
+        If the file cannot be opened, or is a pipe.
     """
+    check_not_pipe(path)
     try:
         with open(path, "rb") as fh:
             magic = fh.read(4)

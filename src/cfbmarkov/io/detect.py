@@ -16,6 +16,7 @@ import os
 import re
 from pathlib import Path
 
+from cfbmarkov._names import check_not_pipe
 from cfbmarkov.errors import InputError
 
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
@@ -69,7 +70,7 @@ def detect_format(source) -> tuple[str, str]:
     Raises
     ------
     InputError
-        If the file is missing or unreadable, or is HDF5 without the H5MD groups, or VTK XML
+        If the file is missing, unreadable or a pipe, or is HDF5 without the H5MD groups, or VTK XML
         of a type that holds no particles.
     """
     path = first_file(source)
@@ -77,6 +78,7 @@ def detect_format(source) -> tuple[str, str]:
         raise InputError(f"{path}: no such file")
     if path.is_dir():
         raise InputError(f"{path}: is a folder, not a file")
+    check_not_pipe(path)
     try:
         with open(path, "rb") as fh:
             head = fh.read(4096)

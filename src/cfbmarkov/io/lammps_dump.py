@@ -30,6 +30,7 @@ from typing import TextIO
 
 import numpy as np
 
+from cfbmarkov._names import check_not_pipe
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import check_source, exact_ids, open_text
 
@@ -416,6 +417,7 @@ def dump_files(source) -> list[Path]:
     for path in paths:
         if not path.exists() or path.is_dir():
             check_source(path)
+        check_not_pipe(path)
     kept = [p for p in paths if p.stat().st_size > 0]      # empty files are skipped
     if not kept:
         raise InputError(f"{paths[0].parent}: all {len(paths)} dump files are empty")

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cfbmarkov._names import check_not_pipe
 from cfbmarkov.errors import InputError
 
 MAGIC = b"# vtk DataFile"
@@ -128,6 +129,7 @@ def read_legacy(path: Path) -> LegacyData:
         uses a data type or dataset feature that is not read (named in the message).
     """
     try:
+        check_not_pipe(path)
         data = path.read_bytes()
         if data[:2] == b"\x1f\x8b":
             data = gzip.decompress(data)

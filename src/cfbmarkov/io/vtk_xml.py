@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cfbmarkov._names import check_not_pipe
 from cfbmarkov.errors import InputError
 
 _TYPES = {"Int8": "i1", "UInt8": "u1", "Int16": "i2", "UInt16": "u2", "Int32": "i4",
@@ -72,6 +73,7 @@ def read_vtp(path: Path) -> PolyData:
     """
     label = str(path)
     try:
+        check_not_pipe(path)
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"{label}: cannot read ({exc.strerror or exc})") from None
@@ -140,6 +142,7 @@ def read_pvd(path: Path) -> list[tuple[float, list[Path]]]:
     """
     label = str(path)
     try:
+        check_not_pipe(path)
         data = path.read_bytes()
     except OSError as exc:
         raise InputError(f"{label}: cannot read ({exc.strerror or exc})") from None

@@ -39,6 +39,9 @@ class CellFields:
         Distance (m) from the cell's centre to the nearest side wall.
     vertical_velocity : ndarray of float64, shape (C,)
         Mean vertical particle velocity (m/s) in the cell; NaN where no particle was seen.
+    relative : bool, optional
+        The solids fraction is each cell's mean count relative to the mean over the cells
+        (1: the bed's mean), the file giving no particle diameter (default False).
 
     Raises
     ------
@@ -49,6 +52,7 @@ class CellFields:
     solids_fraction: np.ndarray
     wall_distance: np.ndarray
     vertical_velocity: np.ndarray
+    relative: bool = False
 
     def __post_init__(self):
         n = None
@@ -60,6 +64,7 @@ class CellFields:
             n = value.size
             value.setflags(write=False)
             object.__setattr__(self, name, value)
+        object.__setattr__(self, "relative", bool(self.relative))
 
     @property
     def n_cells(self) -> int:

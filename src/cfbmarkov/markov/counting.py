@@ -18,6 +18,7 @@ import numba as nb
 import numpy as np
 import scipy.sparse as sp
 
+from cfbmarkov import _interrupt
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.discrete import as_discrete_list
@@ -342,7 +343,8 @@ def count_transitions(data, frame_average: bool = True, sparse: bool = False
     windows = as_discrete_list(data)
     s = windows[0].state_space.n_states
     if sparse:
-        return _count_sparse(windows, frame_average)
+        with _interrupt.deferred():     # Ctrl-C held until the kernels return
+            return _count_sparse(windows, frame_average)
     counts = np.zeros((s, s), np.int64)
     up = np.zeros((s, s), np.int64)
     down = np.zeros((s, s), np.int64)
@@ -350,9 +352,11 @@ def count_transitions(data, frame_average: bool = True, sparse: bool = False
     occupied = np.zeros(s, np.int64)
     pairs = 0
     faces = _new_faces(windows)
-    for window, states, vertical in _window_arrays(windows, faces):
-        pairs += _count_kernel(states, vertical, int(window.lag_frames), float(window.height),
-                               s, counts, up, down, frame_sum, occupied, bool(frame_average))
+    with _interrupt.deferred():         # Ctrl-C held until the kernels return
+        for window, states, vertical in _window_arrays(windows, faces):
+            pairs += _count_kernel(states, vertical, int(window.lag_frames),
+                                   float(window.height), s, counts, up, down, frame_sum,
+                                   occupied, bool(frame_average))
     return TransitionCounts(counts, up, down, frame_sum if frame_average else None, occupied,
                             pairs, faces)
 

@@ -199,13 +199,18 @@ class PropertyAnswer:
                                      for x in self.bed_mean_by_cell]}
 
 
-def residence_chain(model) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray, int]:
+def residence_chain(model, direction: str = "up"
+                    ) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray, int]:
     """The absorbing chain of a model's residences, on the states from which an exit can be
     reached (module docstring).
 
     Parameters
     ----------
     model : MarkovModel
+    direction : {"up", "down"}, optional
+        A periodic riser's residences: from passes up through the top (default) or, for a
+        net downflow, down through the bottom (the roles of the two passes swapped, entered
+        with the downward exact RTD's entry distribution). Ignored for an open riser.
 
     Returns
     -------
@@ -229,9 +234,13 @@ def residence_chain(model) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.nd
         live = _reaching(q, r > 0)
         levels = 1
     else:
-        entry = model.rtd().entry_distribution
+        if direction not in ("up", "down"):
+            raise InputError(f"residence direction {direction!r}: up or down")
+        entry = model.rtd(direction=direction).entry_distribution
         p_up, p_down, p_stay = split_by_pass(sp.csr_matrix(model.transition_matrix),
                                              model.up_fraction, model.down_fraction)
+        if direction == "down":      # the pass down through the bottom ends a residence
+            p_up, p_down = p_down, p_up
         levels = 9
         q, r = deficit_matrix(p_up, p_down, p_stay, levels)
         live = _live_levels(p_up, p_down, p_stay, levels, r > 0)
@@ -246,8 +255,8 @@ def residence_chain(model) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.nd
     return sp.csr_matrix(q)[keep][:, keep], r[keep], e / e.sum(), state, levels
 
 
-def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
-                   ) -> dict[str, PropertyAnswer]:
+def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
+                   direction: str = "up") -> dict[str, PropertyAnswer]:
     """Exact answers of every property of linear kinetics on a model.
 
     Parameters
@@ -257,7 +266,11 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
     kinetics : Kinetics or StateKinetics
         The properties (resolved on ``model.state_space`` where a :class:`Kinetics`).
     cell_fields : CellFields, optional
-        For parameters given as functions of the fitting window's cell fields.
+        For parameters given as functions of the fitting window's cell fields (default: the
+        ones the model stores, :attr:`MarkovModel.cell_fields`).
+    direction : {"up", "down"}, optional
+        A periodic riser's residences (:func:`residence_chain`): from passes up through the
+        top (default) or down through the bottom (a net downflow).
 
     Returns
     -------
@@ -272,7 +285,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
         without residences.
     """
     sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
-        model.state_space, cell_fields)
+        model.state_space, model.cell_fields if cell_fields is None else cell_fields)
     for name, linear, law in zip(sk.names, sk.linear, sk.laws):
         if not linear:
             raise InputError(f"property {name}: law {law.key} has no exact answer; run the "
@@ -280,7 +293,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
     if model.open_flow is not None and "carried" in sk.starts:
         raise InputError("a carried property needs a periodic riser: particles that leave an "
                          "open riser do not come back (use start = entry)")
-    q, r, e, state, _ = residence_chain(model)
+    q, r, e, state, _ = residence_chain(model, direction)
     a_all, b_all = sk.over(model.lag)
     space = model.state_space
     cell = np.asarray(space.cell_of_state, dtype=np.int64)
@@ -305,3 +318,79 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None
         out[name] = PropertyAnswer(name, sk.starts[i], float(v0), float(mean), sd,
                                    float(mass.sum() / count.sum()), by_state, by_cell)
     return out
+
+
+def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float,
+                        cell_fields=None, direction: str = "up") -> dict[str, float]:
+    """The mean exit value per residence as a window of ``length`` seconds observes it:
+    each residence of n lags weighted by the number of places it fits in the window.
+
+    A window of M = length / lag lags sees a residence of n lags that starts at one of its
+    lag boundaries 1 .. M - n and ends inside it, M - n ways; in a steady state the exits
+    of a window are therefore the chain's exits weighted by w_n = max(M - n, 0), which
+    favours short residences. With the first-passage masses p_n = e Q^(n-1) r and value
+    masses m_n = E[v_exit 1{exit at n}], propagated lag by lag (u <- a o u + b o p, exit
+    through r, move by Q; the affine maps of :meth:`StateKinetics.over
+    <cfbmarkov.kinetics.StateKinetics.over>`),
+
+        windowed mean = sum_n w_n m_n / sum_n w_n p_n.
+
+    This is the answer to compare with exit values observed over a finite window (the
+    reference's paths, an observed RTD), with the weights of the RTD as a window observes
+    it (:meth:`ResidenceTimeDistribution.in_window
+    <cfbmarkov.markov.first_passage.ResidenceTimeDistribution.in_window>`); as ``length``
+    grows it tends to :func:`exact_kinetics`' exit mean.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted chain (open or periodic riser).
+    kinetics : Kinetics or StateKinetics
+        The properties (linear laws). A ``carried`` property (its value at entry that of
+        the previous pass) is left out of the result; the others start at their entry
+        value.
+    length : float
+        The window's length (s), at least one lag.
+    cell_fields : CellFields, optional
+        As :func:`exact_kinetics`.
+    direction : {"up", "down"}, optional
+        As :func:`exact_kinetics`.
+
+    Returns
+    -------
+    dict of str to float
+        The windowed exit mean of each property but the carried ones, by name.
+
+    Raises
+    ------
+    InputError
+        For a non-linear law, a window shorter than a lag, or a model
+        without residences.
+    """
+    sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
+        model.state_space, model.cell_fields if cell_fields is None else cell_fields)
+    for name, linear, law in zip(sk.names, sk.linear, sk.laws):
+        if not linear:
+            raise InputError(f"property {name}: law {law.key} has no exact answer")
+    steps = int(round(float(length) / model.lag))
+    if steps < 1:
+        raise InputError(f"window of {length:g} s is shorter than the lag {model.lag:g} s")
+    q, r, e, state, _ = residence_chain(model, direction)
+    qt = q.T.tocsr()
+    a_all, b_all = sk.over(model.lag)
+    a, b = a_all[:, state], b_all[:, state]                      # [P, n]
+    p = e.copy()
+    u = np.asarray(sk.initial, dtype=np.float64)[:, None] * e[None, :]
+    weighted_value = np.zeros(sk.n_properties)
+    weighted_prob = 0.0
+    for n in range(1, steps):
+        u = a * u + b * p[None, :]
+        w = steps - n
+        weighted_value += w * (u @ r)
+        weighted_prob += w * float(p @ r)
+        p = qt @ p
+        u = (qt @ u.T).T
+    if not weighted_prob > 0:
+        raise InputError(f"no residence of the model fits a window of {length:g} s")
+    return {name: float(weighted_value[i] / weighted_prob) for i, name in enumerate(sk.names)
+            if sk.starts[i] != "carried"}

@@ -26,6 +26,7 @@ import numpy as np
 
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics.fields import CellFields
 from cfbmarkov.limits import check_seed
 from cfbmarkov.markov import model_file, model_summary, propagation
 from cfbmarkov.markov.adequacy import Adequacy
@@ -103,6 +104,10 @@ class MarkovModel:
         (:func:`cfbmarkov.trajectory_identity.window_identity`), recorded by ``fit``; a
         re-read of the window (a comparison's intervals) is refused where it differs. None:
         not recorded (several sources, or a model made from counts).
+    cell_fields : CellFields or None
+        The fitting window's time-averaged cell fields (solids fraction, distance to the
+        wall, mean vertical velocity; :class:`~cfbmarkov.kinetics.CellFields`), recorded by
+        ``fit`` for kinetics whose rates depend on them; None: not recorded.
 
     Raises
     ------
@@ -142,6 +147,7 @@ class MarkovModel:
     adequacy: Adequacy | None = None
     uncertainty: ModelUncertainty | None = None
     source_identity: str | None = None
+    cell_fields: CellFields | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     adopt: InitVar[bool] = field(default=False, kw_only=True)
 
@@ -161,6 +167,9 @@ class MarkovModel:
             raise InputError(f"model window {self.window!r} is not two finite times (A < B)")
         if self.open_flow is not None and self.open_flow.n_states != s:
             raise InputError(f"model exit_probability must be {s} non-negative numbers")
+        if self.cell_fields is not None and self.cell_fields.n_cells != self.state_space.n_cells:
+            raise InputError(f"model cell fields of {self.cell_fields.n_cells} cells for a grid "
+                             f"of {self.state_space.n_cells}")
 
     @property
     def boundary(self) -> Boundary:
@@ -476,40 +485,20 @@ class MarkovModel:
         return self._derived(coherence=checked_coherence(coherence))
 
     def with_selection(self, selection: dict) -> "MarkovModel":
-        """The same model, recording how its state space and lag were chosen.
-
-        Parameters
-        ----------
-        selection : dict
-            JSON-serialisable record (candidates, scores, reason).
-
-        Returns
-        -------
-        MarkovModel
-            A copy with ``selection`` set.
-        """
+        """The same model recording how its state space and lag were chosen (``selection``:
+        a JSON-serialisable record of candidates, scores and reason)."""
         return self._derived(selection=dict(selection))
 
     def with_source_identity(self, identity: str | None) -> "MarkovModel":
-        """The same model, recording the content identity of its fitting window.
-
-        Parameters
-        ----------
-        identity : str or None
-            :func:`cfbmarkov.trajectory_identity.window_identity` of ``source`` and
-            ``window``.
-
-        Returns
-        -------
-        MarkovModel
-            A copy with ``source_identity`` set.
-        """
+        """The same model recording the content identity of its fitting window
+        (:func:`cfbmarkov.trajectory_identity.window_identity` of ``source`` and ``window``)."""
         return self._derived(source_identity=identity)
 
     def with_adequacy(self, adequacy: Adequacy | None) -> "MarkovModel":
         """The same model, holding the verdict on its fitting sample
         (:func:`cfbmarkov.analysis.adequacy.assess_adequacy`; None: none)."""
         return self._derived(adequacy=adequacy)
+
     def with_uncertainty(self, uncertainty: ModelUncertainty | None) -> "MarkovModel":
         """The same model (chain and derived quantities shared) carrying the intervals of
         its residence-time figures, a :class:`~cfbmarkov.markov.uncertainty.ModelUncertainty`
@@ -519,6 +508,14 @@ class MarkovModel:
             raise InputError(f"model uncertainty must be a ModelUncertainty, not "
                              f"{type(uncertainty).__name__}")
         return self._derived(uncertainty=uncertainty)
+
+    def with_cell_fields(self, fields: CellFields | None) -> "MarkovModel":
+        """The same model holding its fitting window's cell fields (None: none); InputError
+        where they are not one value per cell of its grid."""
+        if fields is not None and fields.n_cells != self.state_space.n_cells:
+            raise InputError(f"cell fields of {fields.n_cells} cells for a model grid of "
+                             f"{self.state_space.n_cells}")
+        return self._derived(cell_fields=fields)
 
     # -- description -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:

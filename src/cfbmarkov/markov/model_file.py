@@ -17,7 +17,13 @@ states:
   per bin, :class:`~cfbmarkov.markov.uncertainty.ModelUncertainty`): datasets ``level``,
   ``rt_mean_interval`` [2], ``rt_sd_interval`` [2] (s), ``rtd_edges`` [B + 1] (s),
   ``rtd_interval`` [2, B], ``resamples``, ``blocks``, ``block_length`` (s), ``flow_sd`` [2]
-  (NaN where not measured). A file without it loads as a model without intervals.
+  (NaN where not measured). A file without it loads as a model without intervals;
+- optionally the fitting window's time-averaged cell fields
+  (:class:`~cfbmarkov.kinetics.CellFields`, for kinetics whose rates depend on them):
+  datasets ``cell_solids_fraction``, ``cell_wall_distance`` (m) and
+  ``cell_vertical_velocity`` (m/s, NaN in a cell never visited), [C] float64 each (C cells
+  of the grid), and the attribute ``cell_fields_relative`` (1: the solids fraction is a
+  count relative to the bed's mean). A file without them loads as a model without fields.
 
 The [S, S] datasets are stored chunked (blocks of whole rows, about 1 MiB) and compressed
 with gzip (deflate, level 1; :func:`~cfbmarkov._hdf5.create_array_dataset`): the
@@ -47,6 +53,8 @@ from cfbmarkov._atomic import atomic_path, h5_file
 from cfbmarkov._hdf5 import create_array_dataset, open_h5
 from cfbmarkov.boundary import BOUNDARIES, Boundary
 from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics.fields import FIELDS as CELL_FIELDS
+from cfbmarkov.kinetics.fields import CellFields
 from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.model_arrays import SQUARE_ARRAYS
 from cfbmarkov.markov.open_flow import OpenFlow
@@ -100,6 +108,10 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         attrs["adequacy"] = model.adequacy.to_attr()
     if model.uncertainty is not None:
         datasets.update(model.uncertainty.file_fields())
+    if model.cell_fields is not None:
+        for name in CELL_FIELDS:
+            datasets[f"cell_{name}"] = model.cell_fields.field(name)
+        attrs["cell_fields_relative"] = int(model.cell_fields.relative)
     if model.open_flow is not None:
         open_datasets, open_attrs = model.open_flow.file_fields()
         attrs.update(open_attrs)
@@ -207,7 +219,17 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         adequacy=Adequacy.from_attr(group.attrs["adequacy"])
         if "adequacy" in group.attrs else None,
         source_identity=_text_attr(group.attrs["source_identity"])
-        if "source_identity" in group.attrs else None)
+        if "source_identity" in group.attrs else None,
+        cell_fields=_cell_fields(group))
+
+
+def _cell_fields(group) -> CellFields | None:
+    """The fitting window's cell fields stored in a model group, or None."""
+    names = [f"cell_{name}" for name in CELL_FIELDS]
+    if not all(name in group for name in names):
+        return None
+    return CellFields(*(np.asarray(group[name][()], dtype=np.float64) for name in names),
+                      relative=bool(group.attrs.get("cell_fields_relative", 0)))
 
 
 def _text_attr(value) -> str:

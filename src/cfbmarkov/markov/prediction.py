@@ -20,6 +20,7 @@ from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.model_file import model_datasets_and_attrs
 from cfbmarkov.markov.states import place_in_cells
 from cfbmarkov.trajectories import opened
+from cfbmarkov.trajectory_groups import MIN_CHUNK_PARTICLES
 from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 if TYPE_CHECKING:
@@ -90,10 +91,13 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         check_memory((n_steps + 1.0) * particles * 8 + 8.0 * particles * traj.dimensions,
                      f"a prediction of {duration:g} s ({n_steps} lags of {model.lag:g} s x "
                      f"{particles:.0f} particles)", "shorten --duration")
-        if output is not None:          # every particle a column in every frame, uncompressed
-            check_disk((n_steps + 1.0) * particles * (8.0 * traj.dimensions + 5.0) + 1e6,
+        if output is not None:          # uncompressed: every particle a column in every frame;
+            stored = particles          # an open riser's file stores the blocks of 256
+            if model.open_flow is not None:     # particles present (trajectory_groups)
+                stored = min(particles, traj.n_particles + 2.0 * MIN_CHUNK_PARTICLES)
+            check_disk((n_steps + 1.0) * stored * (8.0 * traj.dimensions + 5.0) + 1e6,
                        output, f"a prediction of {duration:g} s ({n_steps + 1} frames x "
-                       f"{particles:.0f} particles, each a column in every frame)",
+                       f"{stored:.0f} particles stored per frame)",
                        "shorten --duration, or write to a disk with more space")
         if model.boundary.is_open and not traj.boundary.is_open:
             raise InputError(f"{traj.path} is a periodic riser; the model is of an open one "

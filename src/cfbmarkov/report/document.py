@@ -177,6 +177,35 @@ def number_text(value, spec: str, unit: str = "") -> str:
     return "n/a" if v is None else f"{v:{spec}}{unit}"
 
 
+def interval_text(lo, hi, decimals: int = 3, sep: str = "–") -> str:
+    """An interval's ends as text, with as many decimals as keep them apart.
+
+    Parameters
+    ----------
+    lo, hi : object
+        The ends (see :func:`finite_or_none`).
+    decimals : int, optional
+        The fewest decimals; more are taken (up to 12) while the two ends, where they
+        differ, would print fewer than three steps of the last digit apart, so that an
+        interval never collapses to "0.014-0.014" nor reads as "0.013-0.014".
+    sep : str, optional
+        Between the ends.
+
+    Returns
+    -------
+    str
+        "0.0138–0.0144", or "n/a" where an end is not finite.
+    """
+    a, b = finite_or_none(lo), finite_or_none(hi)
+    if a is None or b is None:
+        return "n/a"
+    d = decimals
+    # ends at least three steps of the last digit apart: "0.0133–0.0141", not "0.013–0.014"
+    while d < 12 and a != b and abs(round(b * 10 ** d) - round(a * 10 ** d)) < 3:
+        d += 1
+    return f"{a:.{d}f}{sep}{b:.{d}f}"
+
+
 def duration_text(seconds) -> str:
     """A wall time in s, min or h (3 significant digits), or "n/a".
 
@@ -247,6 +276,7 @@ h1 { font-size: 1.7em; border-bottom: 2px solid #1f4e79; padding-bottom: .2em; }
 h2 { font-size: 1.3em; margin-top: 2em; color: #1f4e79; border-bottom: 1px solid #ccd; }
 h3 { font-size: 1.08em; margin-top: 1.4em; }
 div.wide { overflow-x: auto; }
+p.verdict { font-weight: bold; border-left: 4px solid #1f4e79; padding-left: .6em; }
 table { border-collapse: collapse; margin: .8em 0; font-size: .88em; }
 th, td { border: 1px solid #bbc; padding: .25em .55em; text-align: right; }
 th { background: #eef2f7; text-align: center; }
@@ -339,6 +369,6 @@ def write_utf8(path: Path, text: str) -> None:
         os.chmod(tmp, readable_mode())
 
 
-__all__ = ["FIGURES", "Bullets", "FigureBlock", "Heading", "Para", "Table", "anchor", "duration_text",
+__all__ = ["FIGURES", "Bullets", "FigureBlock", "Heading", "Para", "Table", "anchor", "duration_text", "interval_text",
            "finite_or_none", "link", "number_text", "readable_mode", "render_html", "render_markdown",
            "write_utf8"]

@@ -8,7 +8,8 @@ reproduction run folder.
 Table 3 quotes the summaries), builds the sections (the verdict and the physics checks first,
 :mod:`cfbmarkov.report.summary`; Table 3, :mod:`cfbmarkov.report.table3`;
 :mod:`cfbmarkov.report.sections`, :mod:`cfbmarkov.report.figure_sections`,
-:mod:`cfbmarkov.report.diagnostic_sections`) and
+:mod:`cfbmarkov.report.diagnostic_sections`; where the comparisons integrated a kinetics
+file, the properties along particle paths, :mod:`cfbmarkov.report.kinetics_section`) and
 writes ``DIR/report.html`` (self-contained: PNGs embedded as base64 ``data:`` URIs, inline
 CSS), ``DIR/report.md`` (the same content, images linked as ``figures/NAME.png``) and the
 PNGs in ``DIR/figures/``, each atomically; report.html is written last.
@@ -41,6 +42,7 @@ from cfbmarkov.report.figure_sections import (
     rtd_blocks,
     snapshot_blocks,
 )
+from cfbmarkov.report.kinetics_section import kinetics_blocks
 from cfbmarkov.report.run_folder import Case, read_run_folder
 from cfbmarkov.report.sections import (
     DEFAULT_BIN_WIDTH,
@@ -54,7 +56,7 @@ from cfbmarkov.report.table3 import table3_blocks, table3_detail_blocks
 
 REPORT_HTML = "report.html"
 REPORT_MD = "report.md"
-_STALE_FIGURE = re.compile(r"^(fig\d\d-.*|plausibility|its-.*|ck-.*)\.png$")
+_STALE_FIGURE = re.compile(r"^(fig\d\d-.*|plausibility|its-.*|ck-.*|kinetics-.*)\.png$")
 
 
 def _measure(case: Case, notes: list[str]) -> CaseMeasures:
@@ -152,6 +154,7 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None,
     blocks += fig3_blocks(done, measures, figures_dir, written)
     blocks += maps_blocks(cases, done, measures, figures_dir, written)
     blocks += rtd_blocks(done, measures, estimators, figures_dir, written)
+    blocks += kinetics_blocks(done, figures_dir, written)
     parts = ([later.result(), diagnostics.result()] if executor is not None else
              [_section(_later_sections, done, measures, estimators, figures_dir),
               _section(diagnostics_blocks, done, figures_dir)])

@@ -50,6 +50,8 @@ ESTIMATOR_ORDER = ("paper", "mle")
 CASE_FILE = "case.json"
 MANIFEST = "reproduce.json"
 REFERENCE = "cfd-dem.h5"
+#: an ensemble's member 0 (``reproduce --ensemble``), the reference where REFERENCE is absent
+MEMBER_REFERENCE = "cfd-dem-m0.h5"
 
 
 def input_error(path: Path, what: str) -> InputError:
@@ -274,8 +276,11 @@ class Case:
 
     @property
     def reference(self) -> Path:
-        """The CFD-DEM trajectory file ``cfd-dem.h5`` of the case."""
-        return self.path / REFERENCE
+        """The CFD-DEM trajectory file ``cfd-dem.h5`` of the case (of an ensemble
+        (``reproduce --ensemble``), member 0's ``cfd-dem-m0.h5``)."""
+        single = self.path / REFERENCE
+        member = self.path / MEMBER_REFERENCE
+        return member if not single.exists() and member.exists() else single
 
     @property
     def finished(self) -> list[EstimatorRun]:

@@ -1,10 +1,12 @@
 """The report's opening: its verdict, the operating conditions and the physics checks.
 
 :func:`summary_blocks` writes, from the run's numbers, the verdict in one sentence (the
-paper's estimator against the paper's largest E(RT) miss, the models against the
-persistence baseline, the physics checks), then the comparison with the paper's Table 3,
-where the models beat the persistence baseline and where not (and why), what was run and
-at what scale with the paper's citation, and what the scale cannot show;
+models against the persistence baseline by the one rule of Table 3, the paper's estimator
+against the paper's largest E(RT) miss, the physics checks passed or failed, the next step),
+then the comparison with the paper's Table 3, where the models beat the persistence baseline
+and where not (and why), what was run and at what scale with the paper's citation, why the
+windows and lags differ per case and how developed the flow is at the fitting window, and
+what the scale cannot show;
 :func:`conditions_blocks` the operating conditions of each case and the physics checks
 (:func:`physics_checks`) stated as passed or failed against what a riser should show.
 
@@ -25,12 +27,16 @@ from cfbmarkov.config import ParticleConfig, RiserConfig
 from cfbmarkov.report.document import Bullets, Heading, Para, Table, finite_or_none, link
 from cfbmarkov.report.run_folder import Case
 from cfbmarkov.report.sections import PAPER_TABLE3
+from cfbmarkov.report.table3 import BASELINE_RULE_SHORT, baseline_judgement
 
 CITATION = ("Y. Zhuang, Markov Chain Based Statistic Model for Predicting Particle Movement "
             "in Circulating Fluidized Bed (CFB) Risers, Processes 13(3), 614 (2025), "
             "doi:10.3390/pr13030614")
 SUMMARY_HEADING = "Summary"
 CONDITIONS_HEADING = "Operating conditions and physics checks"
+#: the largest relative difference of the solids' mean vertical velocity between the fitting
+#: and the predict window for which the flow counts as developed at the fitting window
+DEVELOPED = 0.10
 #: the estimator the paper used
 PAPER_ESTIMATOR = "paper"
 
@@ -173,63 +179,71 @@ def _paper_clause(cases: list[Case]) -> str | None:
 
 
 def _baseline_sentences(cases: list[Case]) -> list[str]:
-    """Where the models beat the persistence baseline and where not, and why."""
-    beat, lost = [], 0
+    """Where the models beat the persistence baseline and where not, and why, by the one rule
+    of Table 3 (:func:`cfbmarkov.report.table3.baseline_judgement`)."""
+    groups: dict[str, list[str]] = {k: [] for k in ("beats", "loses", "tie", "not told apart")}
     why: dict[tuple[str, str], list[str]] = {}
     for c, name, s in _rows(cases):
-        md = finite_or_none(s.get("md_rtd"))
-        md_base = finite_or_none((s.get("baseline") or {}).get("md_rtd"))
-        if md is None or md_base is None:
+        j = baseline_judgement(s)
+        if j is None:
             continue
-        if md < md_base:
-            beat.append(f"{name} at {_u(c)} m/s")
+        groups[j.outcome].append(f"{name} at {_u(c)} m/s")
+        if j.outcome == "beats":
             continue
-        lost += 1
         md_own = finite_or_none((s.get("model_on_fitting_window") or {}).get("md_rtd"))
-        md_halves = finite_or_none((s.get("natural_variability") or {}).get("md_rtd"))
-        tie = abs(md - md_base) <= 0.01 * md_base
-        if md_halves is not None and md_base <= md_halves:
-            reason = (f"the baseline's MD ({md_base:.3g}) is already within the CFD-DEM's own "
-                      f"variability between the predict window's halves ({md_halves:.3g}), "
-                      "so no model can be told better than it")
-        elif md_own is not None and md_own < md_base:
-            reason = (f"the flow changed between the windows (on its fitting window the model "
-                      f"is {md_own:.3g} from the CFD-DEM, nearer than the baseline's "
-                      f"{md_base:.3g} on the predict window)")
+        if j.outcome == "tie":
+            reason = f"within {100 * j.tie:g} % of the baseline's MD {j.md_base:.4g}: a tie"
+        elif j.outcome == "not told apart":
+            reason = (f"against the baseline's {j.md_base:.4g}, gaps within the CFD-DEM's own "
+                      f"variability (its halves differ by {j.md_halves:.3g}): not told apart")
+        elif md_own is not None and md_own < j.md_base:
+            reason = (f"against the baseline's {j.md_base:.4g}: the flow changed between the "
+                      f"windows (on its fitting window the model is {md_own:.3g} from the "
+                      "CFD-DEM, nearer than the baseline on the predict window)")
         else:
-            reason = (f"the model's own error (MD {md:.3g} against the baseline's "
-                      f"{md_base:.3g}" + (f", {md_own:.3g} already on its fitting window"
-                                          if md_own is not None else "") + ")")
-        if tie:
-            reason = (f"a tie within 1 % (MD {md:.3g} against the baseline's {md_base:.3g}); "
-                      + reason)
-        why.setdefault((_u(c), reason), []).append(name)
-    total = len(beat) + lost
+            reason = (f"against the baseline's {j.md_base:.4g}: the model's own error"
+                      + (f" ({md_own:.3g} already on its fitting window)"
+                         if md_own is not None else ""))
+        why.setdefault((_u(c), reason), []).append(f"{name} {j.md:.4g}")
+    total = sum(len(v) for v in groups.values())
     if not total:
         return ["No comparison has a persistence baseline (the fitting window is not in the "
                 "reference file): whether a model beats simply reusing the fitting window's "
                 "RTD cannot be said."]
+    beat = groups["beats"]
+    # the count of each outcome is the headline's (:func:`headline`): here the pairs by name,
+    # with the rule and the reasons
     out = ["The persistence baseline (the CFD-DEM's RTD of the fitting window reused as the "
-           "prediction; distance MD) is beaten by " + (", ".join(beat) if beat else "none of "
-                                                       "the models") + "."]
-    if lost:
-        out.append("The models that do not beat it, and why: " + " ".join(
-            f"{_and(names)} at {u} m/s, {reason}." for (u, reason), names in why.items()))
+           "prediction; distance MD) is beaten, by the rule of Table 3 "
+           f"({BASELINE_RULE_SHORT}), by " + (_and(beat) if beat else "none of the models")
+           + "."]
+    if why:
+        out.append("Not beating it, and why: MD " + "; ".join(
+            f"at {u} m/s {', '.join(names)} {reason}" for (u, reason), names in why.items())
+            + ".")
     return out
 
 
-def _baseline_clause(cases: list[Case]) -> str | None:
-    """The headline's count of the velocity-model pairs that beat the persistence baseline."""
-    beat = total = 0
+def baseline_counts(cases: list[Case]) -> dict[str, int]:
+    """How many velocity-model pairs have each outcome of the baseline rule.
+
+    Parameters
+    ----------
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run.
+
+    Returns
+    -------
+    dict of str to int
+        Keys "beats", "loses", "tie", "not told apart"
+        (:func:`cfbmarkov.analysis.baseline.judge_baseline`).
+    """
+    counts = {k: 0 for k in ("beats", "loses", "tie", "not told apart")}
     for _, _, s in _rows(cases):
-        md = finite_or_none(s.get("md_rtd"))
-        md_base = finite_or_none((s.get("baseline") or {}).get("md_rtd"))
-        if md is not None and md_base is not None:
-            total += 1
-            beat += md < md_base
-    if not total:
-        return None
-    return f"the models beat the persistence baseline in {beat} of {total} velocity-model pairs"
+        j = baseline_judgement(s)
+        if j is not None:
+            counts[j.outcome] += 1
+    return counts
 
 
 def _interval_sentence(cases: list[Case]) -> str | None:
@@ -292,11 +306,155 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
     return out
 
 
+def _run_text(done: list[Case]) -> str:
+    """' (the CFD-DEM run from rest 0-4.5 s at 3, 4 m/s, 0-3 s at 6, 8 m/s)': how long the
+    finished cases ran, from their settings (their riser, particles, windows and lag are in
+    the operating conditions)."""
+    if not done:
+        return ""
+    runs: dict[str, list[str]] = {}
+    for c in done:
+        end = float(c.config.output.end_time)
+        runs.setdefault(f"0-{end:g} s", []).append(_u(c))
+    text = ", ".join(f"{span} at {', '.join(us)} m/s" for span, us in runs.items())
+    return f"the CFD-DEM run from rest {text}"
+
+
+def windows_text(done: list[Case], measures: dict) -> str | None:
+    """Why the cases' windows and lags differ, and how developed the flow is at the fitting
+    window, from the case data.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    measures : dict of str to cfbmarkov.analysis.reproduction.CaseMeasures
+        Their recomputed numbers (``reference.rt.mean``, ``development``).
+
+    Returns
+    -------
+    str or None
+        None without a finished case.
+    """
+    if not done:
+        return None
+    settings = {(tuple(c.config.markov.fit_window), tuple(c.config.markov.predict_window),
+                 c.config.markov.lag) for c in done}
+    out = []
+    if len(settings) > 1:
+        spans = []
+        for c in done:
+            mean = finite_or_none(measures[c.name].reference.rt.mean)
+            if mean is not None:
+                spans.append(f"{mean / c.config.markov.lag:.0f} lags at {_u(c)} m/s")
+        out.append("The windows and lags differ per case ("
+                   + link("operating conditions", CONDITIONS_HEADING) + "): a riser started "
+                   "from rest takes a time that depends on U to develop its flow, and the "
+                   "windows lie after it; the faster the solids, the shorter their residence "
+                   "times, so the lag and the RTD bins shrink with U to keep a mean residence "
+                   "time many lags long"
+                   + (f" (the CFD-DEM's E(RT) is {', '.join(spans)})." if spans else "."))
+    flows, changing = [], []
+    for c in done:
+        d = getattr(measures[c.name], "development", None) or {}
+        before, fit, predict = (finite_or_none(d.get(k)) for k in ("before", "fit", "predict"))
+        if fit is None or predict is None:
+            continue
+        values = " / ".join("n/a" if v is None else f"{v:+.2f}" for v in (before, fit, predict))
+        off = abs(fit - predict) / abs(predict) if abs(predict) > 1e-9 else math.nan
+        flows.append(f"{_u(c)} m/s {values} m/s"
+                     + (f" ({100 * off:.0f} %)" if math.isfinite(off) else ""))
+        if not off <= DEVELOPED:
+            changing.append(f"{_u(c)} m/s")
+    if flows:
+        out.append("How developed the flow is at the fitting window: the CFD-DEM's mean "
+                   "vertical solids velocity before the fitting window / over it / over the "
+                   "predict window (the fitting window's difference from the predict "
+                   "window's): " + "; ".join(flows) + ". "
+                   + (f"The flow was still changing when the model was fitted (more than "
+                      f"{100 * DEVELOPED:.0f} %) at {', '.join(changing)}." if changing else
+                      f"At every velocity the fitting window's lies within "
+                      f"{100 * DEVELOPED:.0f} % of the predict window's."))
+    return " ".join(out) or None
+
+
+def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
+    """The report's verdict in one line, with the next step, written from the numbers.
+
+    Parameters
+    ----------
+    meta : dict
+        The run's ``reproduce.json`` (its ``scale``).
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run.
+    checks : list of PhysicsCheck
+        The physics checks (:func:`physics_checks`).
+
+    Returns
+    -------
+    str
+        "Verdict at the ... scale: ..." naming how many velocity-model pairs beat the
+        persistence baseline by the report's one rule
+        (:func:`cfbmarkov.analysis.baseline.judge_baseline`), in how many cases the paper's
+        estimator misses E(RT) by no more than the paper's largest miss, each physics check
+        passed or failed (its numbers linked, not repeated), and the next step.
+    """
+    scale = meta.get("scale", "n/a")
+    counts = baseline_counts(cases)
+    total = sum(counts.values())
+    hidden = counts["not told apart"] + counts["tie"]
+    parts = []
+    if total:
+        every = (f"all {total} velocity-model pairs" if total > 1 else
+                 "the one velocity-model pair")
+        if counts["beats"] == total:
+            parts.append(f"the models beat the persistence baseline in {every}")
+        elif counts["loses"] == total:
+            parts.append("reusing the fitting window's RTD (the persistence baseline) predicts "
+                         f"better than the models in {every}")
+        elif counts["beats"] == 0:
+            parts.append(f"no model is shown to predict the RTD better than reusing the fitting "
+                         f"window's (0 of {total} velocity-model pairs beat the persistence "
+                         f"baseline; {hidden} are tied with it or within the CFD-DEM's own "
+                         "variability" + (f", {counts['loses']} worse)" if counts["loses"]
+                                          else ")"))
+        else:
+            parts.append(f"the models beat the persistence baseline in {counts['beats']} of "
+                         f"{total} velocity-model pairs")
+    paper = _paper_clause(cases)
+    if paper:
+        parts.append(paper)
+    failed = [c.name for c in checks if c.passed is False]
+    if checks:
+        # passed or failed, each; their numbers once, in the physics checks, linked
+        parts.append(f"physics checks of the CFD-DEM ({link('evidence', CONDITIONS_HEADING)}): "
+                     + "; ".join(f"{c.name}: {c.verdict.upper()}" for c in checks))
+    text = "Verdict at the " + scale + " scale: " + ("; ".join(parts) or "nothing finished to "
+                                                     "judge") + "."
+    if failed and scale != "paper":
+        step = ("the numbers test the pipeline, not the method: judge the method on the "
+                "paper's scale (cfbmarkov reproduce --scale paper, hours), where the paper's "
+                "flow shows what these checks expect")
+    elif failed:
+        step = ("check the CFD-DEM's settings against the paper's before reading the models' "
+                "errors as the method's")
+    elif total and 2 * hidden > total:
+        step = ("longer predict windows (more residences), so that the CFD-DEM's own "
+                "variability no longer hides the difference from the baseline")
+    elif total and 2 * counts["loses"] > total:
+        step = ("a state space with memory (fit --states auto) or a longer fitting window, "
+                "since reusing the fitting window's RTD predicts better")
+    else:
+        step = "use the models over windows like these, with their intervals"
+    return text + " Next step: " + step + "."
+
+
 def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: dict,
                    estimators: list[str], checks: list[PhysicsCheck]) -> list:
-    """The report's opening section: the verdict, its details, what was run, what the scale
-    cannot show. Each number is said once: the physics checks' evidence is left to
-    :func:`conditions_blocks`, linked.
+    """The report's opening section: the verdict (:func:`headline`), its details, what was
+    run, why the windows differ (:func:`windows_text`), what the scale cannot show. Each
+    number is said once: the physics checks' evidence and each case's windows and lag are
+    left to :func:`conditions_blocks`, linked.
 
     Parameters
     ----------
@@ -320,23 +478,22 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
     """
     scale = meta.get("scale", "n/a")
     velocities = ", ".join(_u(c) for c in cases)
-    checks_text = "; ".join(f"{c.name}: {c.verdict.upper()}" for c in checks)
-    clauses = [c for c in (_paper_clause(cases), _baseline_clause(cases)) if c]
-    headline = (f"Verdict at the {scale} scale: " + "; ".join(clauses)
-                + ("; " if clauses else "")
-                + f"physics checks of the CFD-DEM ({link('evidence', CONDITIONS_HEADING)}): "
-                + f"{checks_text}.")
-    ran = (f"What was run: {CITATION}, Section 3, at the {scale} scale (its riser, particles, "
-           f"windows and lag: {link('operating conditions', CONDITIONS_HEADING)}). Cases at "
-           f"U = {velocities} m/s, {len(done)} of {len(cases)} finished; models: "
-           f"{', '.join(estimators) or 'none'}, each fitted on the CFD-DEM's fitting window and "
-           "compared with the CFD-DEM on the predict window that follows.")
+    run = _run_text(done)
+    ran = (f"What was run: {CITATION}, Section 3, at the {scale} scale"
+           + (f", {run}" if run else "") + f" (each case's riser, particles, windows and lag: "
+           f"{link('operating conditions', CONDITIONS_HEADING)}). Cases at U = {velocities} "
+           f"m/s, {len(done)} of {len(cases)} finished; models: {', '.join(estimators) or 'none'}"
+           ", each fitted on the CFD-DEM's fitting window and compared with the CFD-DEM on "
+           "the predict window that follows.")
     verdict = _paper_sentences(cases) + _baseline_sentences(cases)
     interval = _interval_sentence(cases)
     if interval:
         verdict.append(interval)
-    blocks = [Heading(2, SUMMARY_HEADING), Para(headline, css="verdict"), Bullets(verdict),
-              Para(ran)]
+    blocks = [Heading(2, SUMMARY_HEADING), Para(headline(meta, cases, checks), css="verdict"),
+              Bullets(verdict), Para(ran)]
+    windows = windows_text(done, measures)
+    if windows:
+        blocks.append(Para(windows))
     limits = _cannot_show(meta, done, checks)
     if limits:
         blocks += [Heading(3, f"What the {scale} scale cannot show"), Bullets(limits)]
@@ -414,4 +571,5 @@ def _time_step_text(done: list[Case]) -> str | None:
 
 
 __all__ = ["CITATION", "CONDITIONS_HEADING", "PhysicsCheck", "SUMMARY_HEADING",
-           "conditions_blocks", "physics_checks", "summary_blocks"]
+           "baseline_counts", "conditions_blocks", "headline",
+           "windows_text", "physics_checks", "summary_blocks"]

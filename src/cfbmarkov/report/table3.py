@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import math
 
+from cfbmarkov.analysis.baseline import BASELINE_TIE, BaselineJudgement, judge_baseline
 from cfbmarkov.observed.metrics import percentage_text
-from cfbmarkov.report.document import (Heading, Para, Table, finite_or_none, link,
-                                       number_text)
+from cfbmarkov.report.document import (Heading, Para, Table, finite_or_none, interval_text,
+                                       link, number_text)
 from cfbmarkov.report.run_folder import Case
 from cfbmarkov.report.sections import DEFAULT_BIN_WIDTH, paper_row
 
@@ -28,7 +29,7 @@ NO_RESIDENCES = "no residences"
 #: the compact table's columns
 COMPACT_HEADER = ["U (m/s)", "Model", "E(RT) CFD-DEM (s)", "E(RT) MCM (s) [interval]",
                   "PD of E(RT) (%)", "SD(RT) CFD-DEM (s)", "SD(RT) MCM (s) [interval]",
-                  "PD of SD(RT) (%)", "MD of RTD", "Beats baseline (its MD)",
+                  "PD of SD(RT) (%)", "MD of RTD", "Against the baseline (its MD / halves' MD)",
                   "Paper: PD E (%) / PD SD (%) / MD"]
 #: the detail table's columns
 DETAIL_HEADER = ["U (m/s)", "Model", "Mixing RMS", "Baseline: PD E / PD SD / MD",
@@ -45,29 +46,89 @@ def _difference_text(d) -> str:
 
 
 def _with_interval(value, interval) -> str:
-    """'0.312 [0.276–0.349]': a value (s) and its interval, or the value alone."""
+    """'0.312 [0.276–0.349]': a value (s) and its interval, or the value alone; the interval
+    with as many decimals as keep its ends apart."""
     text = number_text(value, ".3f")
     lo, hi = (finite_or_none(v) for v in (interval or [None, None])[:2])
     if lo is None or hi is None:
         return text
-    return f"{text} [{lo:.3f}–{hi:.3f}]"
+    return f"{text} [{interval_text(lo, hi)}]"
 
 
 def _interval_text(interval) -> str:
-    lo, hi = (finite_or_none(v) for v in (interval or [None, None])[:2])
-    return "n/a" if lo is None or hi is None else f"{lo:.3f}–{hi:.3f}"
+    return interval_text(*(interval or [None, None])[:2])
+
+
+#: the report's words for each outcome of :func:`cfbmarkov.analysis.baseline.judge_baseline`
+OUTCOME_WORDS = {"beats": "model better", "loses": "baseline better",
+                 "tie": f"tie (within {100 * BASELINE_TIE:g} %)", "not told apart": "not told apart"}
+#: the rule, as the report states it once in Table 3's note and in the summary
+BASELINE_RULE = (f"a model beats the persistence baseline only where its MD is lower than the "
+                 f"baseline's by more than {100 * BASELINE_TIE:g} % (the tie margin) and by "
+                 "more than the CFD-DEM's own variability, the MD between the two halves of "
+                 "its predict window (a smaller gap could be the reference's sampling noise: "
+                 "docs/definitions.md, Baseline and natural variability); the baseline is "
+                 "better where the model's MD is higher by as much; otherwise the two are a "
+                 "tie or cannot be told apart")
+
+
+#: the rule in a clause, where Table 3's note has it in full
+BASELINE_RULE_SHORT = (f"an MD lower than the baseline's by more than {100 * BASELINE_TIE:g} % "
+                       "and by more than the MD between the CFD-DEM's two halves of the "
+                       "predict window")
+
+
+def baseline_judgement(summary: dict) -> BaselineJudgement | None:
+    """The model of a compare summary against its persistence baseline, by the one rule
+    (:func:`cfbmarkov.analysis.baseline.judge_baseline`); None without both MDs.
+
+    Parameters
+    ----------
+    summary : dict
+        A compare summary (``md_rtd``, ``baseline``, ``natural_variability``).
+
+    Returns
+    -------
+    BaselineJudgement or None
+    """
+    md = finite_or_none(summary.get("md_rtd"))
+    md_base = finite_or_none((summary.get("baseline") or {}).get("md_rtd"))
+    if md is None or md_base is None:
+        return None
+    halves = finite_or_none((summary.get("natural_variability") or {}).get("md_rtd"))
+    return judge_baseline(md, md_base, halves)
 
 
 def _baseline_cell(summary: dict) -> str:
-    """'yes (0.12)' where the model's MD is below the persistence baseline's, else 'no (..)'."""
-    md = finite_or_none(summary.get("md_rtd"))
+    """'model better (0.1240 / 0.0300)': the outcome of the rule, the baseline's and the halves'
+    MD, at the precision of the model's MD column."""
     base = summary.get("baseline") or {}
-    md_base = finite_or_none(base.get("md_rtd"))
     if base.get("rt_count") == 0:
         return NO_RESIDENCES
-    if md is None or md_base is None:
+    j = baseline_judgement(summary)
+    if j is None:
         return "n/a"
-    return f"{'yes' if md < md_base else 'no'} ({md_base:.3g})"
+    halves = "n/a" if j.md_halves is None else f"{j.md_halves:.4g}"
+    return f"{OUTCOME_WORDS[j.outcome]} ({j.md_base:.4g} / {halves})"
+
+
+def _count(value) -> str:
+    return "n/a" if value is None else f"{int(value)}"
+
+
+def _sizes_text(sizes: dict[str, dict]) -> str:
+    """Per case: the RTD bin width, the residences counted on each side and the bins their
+    RTD spans, e.g. '3 m/s 0.01 s: CFD-DEM 7740 (43), paper 6280 (64), mle 6111 (62)'."""
+    def one(n, b) -> str:
+        return _count(n) + ("" if b is None else f" ({_count(b)})")
+
+    parts = []
+    for u, size in sizes.items():
+        width = "n/a" if size["width"] is None else f"{size['width']:g} s"
+        models = ", ".join(f"{name} {one(n, b)}" for name, n, b in size["models"])
+        parts.append(f"{u} m/s {width}: CFD-DEM {one(size['reference'], size['spanned'])}, "
+                     f"{models}")
+    return "; ".join(parts)
 
 
 def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
@@ -93,6 +154,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     """
     rows, orders, widths, levels = [], set(), set(), set()
     downward: set[str] = set()
+    sizes: dict[str, dict] = {}
     for c in cases:
         values = paper_row(c.velocity)
         paper = " / ".join(values) if values != ("—", "—", "—") else "—"
@@ -109,7 +171,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                    number_text(ref.get("rt_sd"), ".3f"),
                    _with_interval(mod.get("rt_sd"), mod.get("rt_sd_interval")),
                    percentage_text(s.get("pd_rt_sd"), ".2f"),
-                   number_text(s.get("md_rtd"), ".3g"), _baseline_cell(s), paper]
+                   number_text(s.get("md_rtd"), ".4g"), _baseline_cell(s), paper]
             # a side without a complete residence in the net flow's direction: say so
             for side, columns in ((ref, (2, 5)), (mod, (3, 6))):
                 if side.get("rt_count") == 0:
@@ -124,6 +186,12 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                 levels.add(100 * float(s.get("level", 0.9)))
             if s.get("direction") == "down":
                 downward.add(u)
+            size = sizes.setdefault(u, {"width": finite_or_none(s.get("bin_width")),
+                                        "spanned": (s.get("rtd_bins_spanned") or {}).get(
+                                            "reference"),
+                                        "reference": ref.get("rt_count"), "models": []})
+            size["models"].append((e.name, mod.get("rt_count"),
+                                   (s.get("rtd_bins_spanned") or {}).get("model")))
     order_text = ", ".join(f"{k:g}" for k in sorted(orders)) or "n/a"
     width_text = ", ".join(f"{w:g}" for w in sorted(widths)) or f"{DEFAULT_BIN_WIDTH:g}"
     level_text = ", ".join(f"{v:g}" for v in sorted(levels)) or "n/a"
@@ -134,13 +202,20 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
         "its Table 3; '—' where the paper has no case at this U.",
         "The paper reports MD under a '%' heading. Our MD is Eq. 9 of order k = "
         f"{order_text} (md_order of the compare summaries) on the RTD probabilities per "
-        f"{width_text} s bin (bins from 0 to the window length), a dimensionless distance; "
+        + (f"{width_text} s bin (" if len(widths) <= 1 else "bin of the case's width (next "
+           "note; ")
+        + "bins from 0 to the window length), a dimensionless distance; "
         "compare its size with the paper's only loosely.",
-        "Beats baseline: whether the model's MD is below that of the persistence baseline "
-        "(the CFD-DEM's RTD of the fitting window reused as the prediction), whose MD is in "
-        "brackets. Mixing, the CFD-DEM's own variability, the model's own intervals and the "
+        "Against the baseline: the persistence baseline is the CFD-DEM's RTD of the fitting "
+        f"window reused as the prediction; {BASELINE_RULE}. In brackets: the baseline's MD "
+        "and the halves' MD. Mixing, the CFD-DEM's own variability, the model's own intervals and the "
         f"residence-time basis: {link(DETAIL_HEADING, DETAIL_HEADING)}.",
     ]
+    sizes_text = _sizes_text(sizes)
+    if sizes_text:
+        notes.insert(2, "RTD bins and residences per case (the bin width; the residences "
+                        "counted in the predict window, with the number of bins their RTD "
+                        f"spans in brackets): {sizes_text}.")
     if any(row[4] == "n/d" or row[7] == "n/d" for row in rows):
         notes.append("n/d: the percentage difference is undefined because the CFD-DEM value "
                      "is zero to round-off (e.g. SD(RT) of residence times that are all "
@@ -227,6 +302,43 @@ def table3_detail_blocks(cases: list[Case]) -> list:
             + [Table(DETAIL_HEADER, rows, notes)] + trust_blocks(cases))
 
 
+def _baseline_sentence(j: BaselineJudgement) -> str:
+    """The model against the persistence baseline, by the one rule, in a sentence; the MDs
+    themselves are in Table 3's row (the model's, the baseline's and the halves'), not
+    repeated."""
+    gap = abs(j.gap)
+    halves = ", more than the halves differ" if j.md_halves is not None else ""
+    if j.outcome == "beats":
+        body = ("the model beats simply reusing the fitting window's RTD (the persistence "
+                f"baseline): its MD is lower by {gap:.2g}{halves}.")
+    elif j.outcome == "loses":
+        body = ("simply reusing the fitting window's RTD beats the model (the persistence "
+                f"baseline's MD is lower by {gap:.2g}{halves}).")
+    elif j.outcome == "tie":
+        body = ("the model and simply reusing the fitting window's RTD (the persistence "
+                f"baseline) are a tie: their MDs differ by less than {100 * j.tie:g} %.")
+    else:
+        body = ("the model's MD and the persistence baseline's differ by "
+                f"{gap:.2g}, within the CFD-DEM's own variability: the window cannot tell the "
+                "model from simply reusing the fitting window's RTD.")
+    if j.md_halves is None:
+        body += " (No halves' variability is known: the tie margin alone judges.)"
+    return "by the baseline rule (Table 3), " + body
+
+
+def _cluster_clause(c_ref: float, c_mod: float) -> str:
+    """What the cluster indices say: the share of the CFD-DEM's clustering the model keeps."""
+    if not c_ref > 1.0:
+        return ""
+    share = (c_mod - 1.0) / (c_ref - 1.0)
+    if share < 0.5:
+        return (f": the model keeps {100 * max(share, 0.0):.0f} % of the CFD-DEM's clustering "
+                "above 1 (its particles move independently)")
+    if share <= 1.25:
+        return f": the model keeps {100 * share:.0f} % of the CFD-DEM's clustering above 1"
+    return f": the model clusters more than the CFD-DEM ({100 * share:.0f} % of its clustering above 1)"
+
+
 def trust_text(u: str, estimator: str, summary: dict) -> str:
     """One paragraph: how far to trust this prediction, written from its numbers (the model
     against the persistence baseline, its own error on its fitting window, the CFD-DEM's own
@@ -255,34 +367,46 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
     parts = [f"U = {u} m/s, {estimator}:"]
     if md is None:
         return " ".join(parts + ["no RTD to judge (too few residences in the window)."])
-    if md_base is not None:
-        verdict = ("beats" if md < md_base else "does not beat")
-        # the two distances are in Table 3's row (MD, and the baseline's beside it)
-        parts.append(f"the model {verdict} simply reusing the fitting window's RTD (the "
-                     "persistence baseline, Table 3).")
+    j = baseline_judgement(summary)
+    if j is not None:
+        parts.append(_baseline_sentence(j))
     else:
-        parts.append(f"its RTD is {md:.3g} from the CFD-DEM's (MD); no persistence baseline "
+        parts.append(f"its RTD is {md:.4g} from the CFD-DEM's (MD); no persistence baseline "
                      "(the fitting window is not in the reference file).")
+    # the model's error within the reference's own variability: its split into the model's
+    # own part and the flow's change cannot be told, so none is claimed
+    within = md_halves is not None and md <= md_halves
     if md_own is not None and md_base is not None:
         windows = own.get("windows") or [[], []]
         fit = "-".join(f"{t:g}" for t in windows[1]) if len(windows[1]) == 2 else "fitting"
         pd_own = [finite_or_none(own.get(k)) for k in ("pd_rt_mean", "pd_rt_sd")]
         pds = (f" (PD of E(RT) {pd_own[0]:+.1f} %, of SD(RT) {pd_own[1]:+.1f} %)"
                if None not in pd_own else "")
-        share = ("smaller than" if md_own < md_base else "at least")
-        parts.append(f"On its own fitting window ({fit} s) the model is {md_own:.3g} from the "
-                     f"CFD-DEM's RTD{pds}, {share} the flow's change between the windows "
-                     "(the baseline's MD)"
+        # the MDs (the model's, the baseline's, the halves') are in Table 3's row: said in
+        # words here, not repeated
+        text = (f"On its own fitting window ({fit} s) the model is {md_own:.3g} from the "
+                f"CFD-DEM's RTD{pds}")
+        if within:
+            text += (". Its MD on the predict window is within the CFD-DEM's own variability "
+                     "(the MD between the two halves of the window, Table 3): the window "
+                     "cannot tell how much of it is the model's own error and how much the "
+                     "flow's change.")
+        else:
+            text += (f", {'smaller than' if md_own < md_base else 'at least'} the flow's "
+                     "change between the windows (the baseline's MD)"
                      + (": the flow's change, more than the model, limits this prediction."
                         if md_own < md_base else ": the model's own error dominates."))
-    if md_halves is not None:
-        scale = ("within" if md <= md_halves else f"{md / md_halves:.1f} times")
+        parts.append(text)
+    if md_halves is not None and not within:
         flow_limits = md_own is not None and md_base is not None and md_own < md_base
-        parts.append(f"The model's error is {scale} the reference's own variability (the "
-                     "MD between the CFD-DEM's two halves of the window, Table 3 in detail)"
-                     + ("." if md <= md_halves else
-                        "; the rest is the flow's change since the fitting window." if flow_limits
+        parts.append(f"The model's error is {md / md_halves:.1f} times the reference's own "
+                     "variability (the MD between the CFD-DEM's two halves of the window, "
+                     "Table 3)"
+                     + ("; the rest is the flow's change since the fitting window." if flow_limits
                         else "; the difference is the model's."))
+    elif md_halves is not None and (md_own is None or md_base is None):
+        parts.append("The model's error is within the reference's own variability (the MD "
+                     "between the CFD-DEM's two halves of the window, Table 3).")
     long_run = summary.get("long_run") or {}
     md_long = finite_or_none(long_run.get("md_rtd"))
     if md_long is not None:
@@ -296,12 +420,20 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
                      "removes; the model is "
                      + ("closer than that." if md < md_long else
                         f"{md / md_long:.1f} times as far."))
+    else:
+        parts.append("What a perfect stationary model would predict (the CFD-DEM's RTD pooled "
+                     "over the run's other windows) is not given: besides the fitting window "
+                     "the run holds no other whole window of the predict window's length "
+                     "after its first window length (the start-up from rest), and one window "
+                     "alone would be the persistence baseline again.")
     cluster = summary.get("cluster_index") or {}
     c_ref = finite_or_none((cluster.get("reference") or {}).get("mean"))
     c_mod = finite_or_none((cluster.get("model") or {}).get("mean"))
     if c_ref is not None and c_mod is not None:
-        parts.append(f"Cluster index of the snapshots (1: independent particles): CFD-DEM "
-                     f"{c_ref:.3g}, model {c_mod:.3g}.")
+        parts.append(f"Cluster index of the snapshots (1: particles placed independently, "
+                     f"higher: clusters and voids; the nearer the CFD-DEM's, the better): "
+                     f"CFD-DEM {c_ref:.3g}, model {c_mod:.3g}"
+                     + _cluster_clause(c_ref, c_mod) + ".")
     model = summary.get("model") or {}
     ref = summary.get("reference") or {}
     interval = model.get("rt_mean_interval")

@@ -10,6 +10,7 @@ import h5py
 import numpy as np
 
 from cfbmarkov._atomic import atomic_path, h5_file
+from cfbmarkov._names import first_line
 from cfbmarkov.config import CaseConfig, case_difference
 from cfbmarkov.errors import InputError
 from cfbmarkov.simulate.riser import CoupledRiser
@@ -30,7 +31,7 @@ def _read_group(group: h5py.Group) -> dict:
 
 
 def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: int,
-                     wall_time: float, wall_history=None) -> None:
+                     wall_time: float, wall_history=None, run_id: str | None = None) -> None:
     """Atomically write everything needed to continue the run bit for bit.
 
     Parameters
@@ -45,12 +46,16 @@ def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: i
         Wall time spent so far, s.
     wall_history : array_like, optional
         Rows of (simulated time s, wall time s) at each checkpoint.
+    run_id : str, optional
+        The run's identity, which its segments carry too.
     """
     with atomic_path(path) as tmp:
         with h5_file(tmp, path) as f:
             f.attrs.update({"version": CHECKPOINT_VERSION, "n_segments": n_segments,
                             "frames": frames, "wall_time": wall_time,
                             "case": riser.case.model_dump_json()})
+            if run_id is not None:
+                f.attrs["run_id"] = run_id
             f.create_dataset("wall_history", data=np.asarray(
                 wall_history if wall_history is not None else np.empty((0, 2)),
                 dtype=np.float64).reshape(-1, 2))
@@ -61,7 +66,7 @@ def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: i
 
 
 def read_checkpoint(path: Path, case: CaseConfig
-                    ) -> tuple[CoupledRiser, int, int, float, np.ndarray]:
+                    ) -> tuple[CoupledRiser, int, int, float, np.ndarray, str | None]:
     """Read a checkpoint written by :func:`write_checkpoint`.
 
     Parameters
@@ -81,24 +86,38 @@ def read_checkpoint(path: Path, case: CaseConfig
         Wall time spent, s.
     wall_history : numpy.ndarray
         [K, 2] (simulated time s, wall time s) at each checkpoint.
+    run_id : str or None
+        The run's identity (None in a checkpoint that records none).
 
     Raises
     ------
     InputError
-        When the file cannot be read or was made with another configuration.
+        When the file cannot be read (damaged: truncated, zeroed, overwritten; named in one
+        line) or was made with another configuration.
     """
     try:
-        with h5py.File(path, "r") as f:
-            saved = CaseConfig.model_validate_json(f.attrs["case"])
-            if saved != case:
-                raise InputError(f"{path}: the checkpoint was made with another configuration "
-                                 f"({case_difference(saved, case)}); run without --resume to "
-                                 "start again, or with the saved value")
-            state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
-                     "cfd_steps": int(f.attrs["cfd_steps"])}
-            meta = int(f.attrs["n_segments"]), int(f.attrs["frames"]), float(f.attrs["wall_time"])
-            history = (f["wall_history"][()] if "wall_history" in f
-                       else np.empty((0, 2)))
-    except (OSError, KeyError) as exc:
-        raise InputError(f"{path}: unreadable checkpoint ({exc})") from None
-    return (CoupledRiser.from_state(case, state), *meta, history)
+        return _read_checkpoint(path, case)
+    except InputError:
+        raise
+    except Exception as exc:        # noqa: BLE001 - whatever a damaged file raises
+        raise InputError(f"{path}: damaged checkpoint, cannot resume ({first_line(exc)}); "
+                         f"delete {path.parent} to start the run again") from None
+
+
+def _read_checkpoint(path: Path, case: CaseConfig):
+    with h5py.File(path, "r") as f:
+        saved = CaseConfig.model_validate_json(f.attrs["case"])
+        if saved != case:
+            raise InputError(f"{path}: the checkpoint was made with another configuration "
+                             f"({case_difference(saved, case)}); run without --resume to "
+                             "start again, or with the saved value")
+        state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
+                 "cfd_steps": int(f.attrs["cfd_steps"])}
+        meta = int(f.attrs["n_segments"]), int(f.attrs["frames"]), float(f.attrs["wall_time"])
+        history = (f["wall_history"][()] if "wall_history" in f
+                   else np.empty((0, 2)))
+        run_id = f.attrs.get("run_id")
+    if isinstance(run_id, bytes):
+        run_id = run_id.decode(errors="replace")
+    return (CoupledRiser.from_state(case, state), *meta, history,
+            None if run_id is None else str(run_id))

@@ -27,6 +27,8 @@ References
 
 from __future__ import annotations
 
+import math
+
 import numba as nb
 import numpy as np
 
@@ -36,26 +38,37 @@ from cfbmarkov.simulate.cfd.drag import particle_drag_jacobian
 
 
 @nb.njit(cache=True, inline="always")
-def _cell_value(field, dx, dy, x, y, periodic_y=True):
-    """Bilinear interpolation of a cell-centred field (nx, ny), periodic in y (or, with
-    ``periodic_y=False``, constant extrapolation to the floor and top too), constant
-    extrapolation to the walls."""
-    nx, ny = field.shape
+def cell_weights(nx, ny, dx, dy, x, y, periodic_y=True):
+    """Cells and weights of the bilinear interpolation of a cell-centred field (nx, ny) at
+    (x, y): ``(i0, i1, j0, j1, wx, wy)``, periodic in y (or, with ``periodic_y=False``,
+    constant extrapolation to the floor and top too), constant extrapolation to the walls.
+
+    A function of scalars, compiled for the CPU here and called by the GPU coupling kernels
+    (:mod:`cfbmarkov.simulate.gpu.coupling`) as a device function.
+    """
     fx = x / dx - 0.5
     fy = y / dy - 0.5
     if fx < 0.0:
         fx = 0.0
     elif fx > nx - 1:
         fx = nx - 1.0
-    i0 = min(int(fx), nx - 2) if nx > 1 else 0
-    wx = fx - i0 if nx > 1 else 0.0
-    i1 = i0 + 1 if nx > 1 else 0
+    # the cases written out: numba-cuda does not type min() of these integers
+    if nx > 1:
+        i0 = int(fx)
+        if i0 > nx - 2:
+            i0 = nx - 2
+        wx = fx - i0
+        i1 = i0 + 1
+    else:
+        i0 = 0
+        wx = 0.0
+        i1 = 0
     if not periodic_y:
         if fy < 0.0:
             fy = 0.0
         elif fy > ny - 1:
             fy = ny - 1.0
-    j = np.floor(fy)
+    j = math.floor(fy)
     wy = fy - j
     j0 = int(j)
     if j0 < 0 or j0 >= ny:  # rare: an integer modulo costs a tenth of the drag kernel
@@ -63,6 +76,14 @@ def _cell_value(field, dx, dy, x, y, periodic_y=True):
     j1 = j0 + 1
     if j1 >= ny:
         j1 = 0
+    return i0, i1, j0, j1, wx, wy
+
+
+@nb.njit(cache=True, inline="always")
+def _cell_value(field, dx, dy, x, y, periodic_y=True):
+    """Bilinear interpolation of a cell-centred field (nx, ny) with :func:`cell_weights`."""
+    i0, i1, j0, j1, wx, wy = cell_weights(field.shape[0], field.shape[1], dx, dy, x, y,
+                                          periodic_y)
     return ((1.0 - wy) * ((1.0 - wx) * field[i0, j0] + wx * field[i1, j0])
             + wy * ((1.0 - wx) * field[i0, j1] + wx * field[i1, j1]))
 

@@ -17,6 +17,7 @@ import contextlib
 import json
 import math
 import os
+import secrets
 import shutil
 import time as _time
 import warnings
@@ -26,6 +27,7 @@ import h5py
 import numpy as np
 
 from cfbmarkov._console import progress_mode
+from cfbmarkov._names import parts_folder
 from cfbmarkov._outputs import claim_output
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
@@ -97,8 +99,15 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
     mode = progress_mode(progress)
     output = Path(output)
     with claim_output(output, "simulate", "trajectory"):   # before any work: lock, folder
-        return _simulate(case, output, until, checkpoint_every, resume, mode,
-                         stop_after_frames, fields, label)
+        parts = parts_folder(output)
+        try:
+            return _simulate(case, output, until, checkpoint_every, resume, mode,
+                             stop_after_frames, fields, label)
+        except BaseException:
+            if not (parts / "checkpoint.h5").exists() and not _complete(
+                    output, case, case.output.end_time if until is None else until):
+                _remove_parts(parts)        # nothing to resume from: leave no folder
+            raise
 
 
 def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, progress,
@@ -115,7 +124,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     total_steps = int(round(end / cfd_dt))
     if total_steps < steps_per_frame:
         raise InputError(f"run length {end:g} s is shorter than one frame ({frame_dt:g} s)")
-    parts = output.with_name(output.name + ".parts")
+    parts = parts_folder(output)
     checkpoint = parts / "checkpoint.h5"
     grid = GasGrid.from_config(case)
     spacing = (grid.dx, grid.dy)
@@ -131,24 +140,29 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     if resume:
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist")
+        check_resources(case, output, end, fields, resuming=True)
         _advise_time_step(case, label)
-        riser, n_segments, frames, wall_time, history = read_checkpoint(checkpoint, case)
+        riser, n_segments, frames, wall_time, history, run_id = read_checkpoint(checkpoint,
+                                                                                case)
         if riser.time > end + 0.5 * cfd_dt:
             raise InputError(f"{checkpoint} holds the run at t = {riser.time:g} s, past the "
                              f"end asked for ({end:g} s): resume to a later --until, or "
                              "delete the folder to start again")
         wall_history = [tuple(row) for row in history]
-        writer = SegmentedTrajectoryWriter.resume(output, n_segments, **writer_options)
+        writer = SegmentedTrajectoryWriter.resume(output, n_segments, run_id=run_id,
+                                                  **writer_options)
     else:
         if parts.exists() and checkpoint.exists():
             raise InputError(f"{parts} holds an interrupted run: add --resume to continue it, "
                              "or delete the folder to start again")
         _check_safety(case)
+        check_resources(case, output, end, fields, resuming=False)
         _advise_time_step(case, label)
         with warnings.catch_warnings():     # said once above, with the label
             warnings.simplefilter("ignore", TimeStepAdvisory)
             riser = CoupledRiser.initial(case)
-        writer = SegmentedTrajectoryWriter(output, **writer_options)
+        run_id = secrets.token_hex(16)      # carried by the checkpoint and every segment
+        writer = SegmentedTrajectoryWriter(output, run_id=run_id, **writer_options)
         writer.append(0.0, riser.dem.positions, riser.dem.velocities, riser.dem.laps)
         if fields:
             writer.append_fields(0.0, spacing, **riser.gas_fields())
@@ -173,7 +187,8 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
                 n_segments = writer.close_segment()
                 elapsed = _time.perf_counter() - started
                 wall_history.append((riser.time, elapsed))
-                write_checkpoint(checkpoint, riser, n_segments, frames, elapsed, wall_history)
+                write_checkpoint(checkpoint, riser, n_segments, frames, elapsed, wall_history,
+                                 run_id)
             if stop_after_frames is not None and frames >= stop_after_frames:
                 writer.abort()
                 return output
@@ -243,15 +258,16 @@ class _PendingFrames:
         self._frames, self._events, self._fields = [], [], []
 
 
-def _complete(output: Path, case: CaseConfig, end: float) -> bool:
-    """Whether ``output`` is the finished run of ``case`` up to ``end``."""
+def _complete(output: Path, case: CaseConfig, end) -> bool:
+    """Whether ``output`` is the finished run of ``case`` up to ``end`` (s)."""
     if not output.is_file():
         return False
     try:
+        end = float(end)
         with h5py.File(output, "r") as f:
             same = json.loads(f.attrs["parameters"]) == json.loads(case.model_dump_json())
             last = float(f["frames/time"][-1])
-    except (OSError, KeyError, ValueError, IndexError):
+    except (OSError, KeyError, ValueError, IndexError, TypeError):
         return False
     return same and abs(last - end) <= 0.5 * case.output.frame_interval
 
@@ -291,6 +307,49 @@ def _advise_time_step(case: CaseConfig, label: str = "") -> None:
     message = time_step_advisory(case)
     if message is not None:
         warnings.warn((f"{label}: " if label else "") + message, TimeStepAdvisory, stacklevel=3)
+
+
+#: bytes of memory per particle: the DEM state and scratch (positions, velocities, forces,
+#: spins, neighbour and contact lists of about 4 pairs per particle, pass events), and the
+#: FRAMES_PER_WRITE frames held before a write (positions, velocities, laps)
+PARTICLE_BYTES = 1200 + FRAMES_PER_WRITE * 40
+#: bytes of memory per gas cell: the gas solver's fields and work arrays, and the held frames
+#: of the stored fields (void fraction, velocity, pressure as float32)
+CELL_BYTES = 60 * 8 + FRAMES_PER_WRITE * 16
+
+
+def check_resources(case: CaseConfig, output: Path, end: float, fields: bool,
+                    resuming: bool) -> None:
+    """Refuse, before anything is allocated, a run whose memory or output would not fit.
+
+    The memory is estimated as particles x :data:`PARTICLE_BYTES` + gas cells x
+    (:data:`CELL_BYTES` + the pressure solver's band, 8 bytes x columns), against
+    :func:`cfbmarkov.limits.memory_limit`; the disk as the frames x (36 bytes a particle:
+    position, velocity, lap; 16 bytes a gas cell with ``fields``), twice (the segments and
+    the merged file exist together before the segments are removed; once for a resumed run,
+    whose segments so far are on disk already), against the free space beside ``output``.
+
+    Raises
+    ------
+    InputError
+        Naming the estimate, what is available and the fix.
+    """
+    from cfbmarkov.limits import check_disk, check_memory
+
+    n = case.particles.number
+    nx, ny = case.numerics.cfd_cells
+    cells = nx * ny
+    check_memory(n * PARTICLE_BYTES + cells * (CELL_BYTES + 8.0 * nx) + 50e6,
+                 f"a CFD-DEM run of {n} particles on {nx} x {ny} gas cells",
+                 "run fewer particles (--particles) or a coarser gas grid")
+    frames = math.floor(end / case.output.frame_interval + 1e-9) + 1
+    per_frame = 36.0 * n + (16.0 * cells if fields else 0.0)
+    copies = 1.0 if resuming else 2.0
+    stored = f"{n} particles and the gas fields" if fields else f"{n} particles"
+    check_disk(copies * frames * per_frame + 1e6, output,
+               f"the run's output ({frames} frames x {stored}, with its segments until they "
+               "are merged)", "shorten the run (--until), store fewer frames (a longer "
+               "output.frame_interval), or write to a disk with more space")
 
 
 def _check_safety(case: CaseConfig) -> None:

@@ -220,5 +220,57 @@ def fit_by_name(name: str, data, *, window: tuple[float, float], columns: int, r
         return fit_model(traj, space, lag, window, estimator, coherent=coherent)
 
 
-__all__ = ["DEFAULT_LAG_MULTIPLES", "DEFAULT_STATES", "fit_by_name", "parse_model_name",
-           "select_model"]
+def fit_pooled_by_name(name: str, runs: Sequence, *, window: tuple[float, float], columns: int,
+                       rows: int, lag: float, coherent: bool = False):
+    """Fit the model ``name`` on ``window`` of several runs of one case, their transitions
+    pooled (:mod:`cfbmarkov.markov.pooling`), as :func:`fit_by_name` does on one run.
+
+    ``auto`` chooses the state space and lag on the first run (:func:`select_model`, which
+    judges candidates on one run's blocks), then fits the chosen space on all runs pooled
+    and keeps the selection record.
+
+    Parameters
+    ----------
+    name : str
+        The model's name (``paper``, ``mle``, ``auto``, ``STATES[:ESTIMATOR]``).
+    runs : sequence of Trajectories
+        Open trajectory files of one case (e.g. an ensemble's members).
+    window : tuple of float
+        The fitting window (A, B) in s, the same in every run.
+    columns, rows : int
+        The cell grid m x n.
+    lag : float
+        The lag (s), a whole multiple of the frame interval.
+    coherent : bool, optional
+        Also fit the coherence of the moves (:mod:`cfbmarkov.markov.coherence`).
+
+    Returns
+    -------
+    MarkovModel
+
+    Raises
+    ------
+    InputError
+        As :func:`fit_by_name`, and for runs that cannot be pooled
+        (:func:`~cfbmarkov.markov.pooling.check_runs_match`).
+    """
+    from cfbmarkov.markov.pooling import discretize_runs
+
+    if not runs:
+        raise InputError("no runs to fit")
+    states, estimator = parse_model_name(name)
+    first = runs[0]
+    chosen = None
+    if states == "auto":
+        chosen = select_model(first, window=window, columns=columns, rows=rows, lag=lag,
+                              estimator=estimator, coherent=coherent)
+        space, lag = chosen.state_space, chosen.lag
+    else:
+        space = state_space_from_name(states, columns, rows, first.width, first.height)
+    discrete = discretize_runs(runs, space, lag, [tuple(window)])
+    model = estimator_from_name(estimator, space, lag, False, coherent).fit(discrete)
+    return model if chosen is None else model.with_selection(chosen.selection)
+
+
+__all__ = ["DEFAULT_LAG_MULTIPLES", "DEFAULT_STATES", "fit_by_name", "fit_pooled_by_name",
+           "parse_model_name", "select_model"]

@@ -287,8 +287,14 @@ def _deposit_drag_kernel(x, y, fx, fy, k, dx, dy, inv_volume, fu, fv, ku, kv):
 
 
 @nb.njit(cache=True, inline="always")
-def _add_solid_volume(x, y, volume, nx, ny, idx, idy, solid, periodic_y):
-    """One particle's solid volume onto ``solid`` by cloud-in-cell."""
+def solid_weights(x, y, nx, ny, idx, idy, periodic_y):
+    """Cells and cloud-in-cell weights of a particle at (x, y): ``(i0, i1, j0, j1, wx, wy)``
+    (cell (i0, j0) receives ``(1 - wx) (1 - wy)`` of its volume, and so on), the share
+    beyond a wall folded back into the wall cell. ``idx``, ``idy`` are 1/dx, 1/dy.
+
+    A function of scalars, compiled for the CPU here and called by the GPU coupling kernels
+    (:mod:`cfbmarkov.simulate.gpu.coupling`) as a device function.
+    """
     fi = x * idx - 0.5
     ifl = math.floor(fi)
     wx = fi - ifl
@@ -308,9 +314,24 @@ def _add_solid_volume(x, y, volume, nx, ny, idx, idy, solid, periodic_y):
     if periodic_y:
         j0 = _wrap_index(int(jfl), ny)
         j1 = j0 + 1 if j0 + 1 < ny else 0
-    else:
-        j0 = min(max(int(jfl), 0), ny - 1)
-        j1 = min(max(int(jfl) + 1, 0), ny - 1)
+    else:  # clamped by comparisons: numba-cuda does not type min/max of these integers
+        j0 = int(jfl)
+        j1 = j0 + 1
+        if j0 < 0:
+            j0 = 0
+        elif j0 > ny - 1:
+            j0 = ny - 1
+        if j1 < 0:
+            j1 = 0
+        elif j1 > ny - 1:
+            j1 = ny - 1
+    return i0, i1, j0, j1, wx, wy
+
+
+@nb.njit(cache=True, inline="always")
+def _add_solid_volume(x, y, volume, nx, ny, idx, idy, solid, periodic_y):
+    """One particle's solid volume onto ``solid`` by cloud-in-cell."""
+    i0, i1, j0, j1, wx, wy = solid_weights(x, y, nx, ny, idx, idy, periodic_y)
     solid[i0, j0] += (1.0 - wx) * (1.0 - wy) * volume
     solid[i1, j0] += wx * (1.0 - wy) * volume
     solid[i0, j1] += (1.0 - wx) * wy * volume

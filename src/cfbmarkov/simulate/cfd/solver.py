@@ -124,7 +124,7 @@ class PressureSolveError(CfbmarkovError):
 
 # --------------------------------------------------------------------------- step kernel
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _step_kernel(prm, fields, out, work):
     """One gas step; see the module docstring. Returns a status code (0 = success).
 

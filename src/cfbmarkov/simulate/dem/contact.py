@@ -1,6 +1,8 @@
 """The contact law of the 2D DEM engine and the pair-force kernel (numba).
 
-One function, :func:`contact_force`, holds the law; it is inlined (``inline="always"``)
+One plain Python function of scalars, :func:`contact_law`, holds the law; it is compiled
+for the CPU as :func:`contact_force` and for the GPU as a device function
+(:mod:`cfbmarkov.simulate.gpu.kernels`). On the CPU it is inlined (``inline="always"``)
 into both the pair loop (:func:`pair_forces`) and the wall loop
 (:func:`cfbmarkov.simulate.dem.integrate.fused_step`). A wall contact is the contact with a
 mirror particle of infinite mass at rest, without spin: the normal points from the particle
@@ -25,8 +27,6 @@ import math
 
 import numpy as np
 from numba import njit, prange
-from numba.core import types
-from numba.extending import overload
 
 from cfbmarkov.simulate.dem.layout import BAD_OVERLAP
 
@@ -35,89 +35,25 @@ from cfbmarkov.simulate.dem.layout import BAD_OVERLAP
 FASTMATH = {"contract", "arcp", "afn"}
 
 
-# -- the tangential algebra, for a 1D tangent (floats: a wall, whose tangent is a fixed
-# coordinate axis) and a 2D one (2-tuples (x, y): a pair, whose tangent turns). Numba picks
-# the form from the argument types when it compiles the law; both are inlined.
-
-def _advance_spring(h, vt, n, dt):
-    """The spring after the step, ``h + vt*dt``, on the current tangent (normal ``n``)."""
-
-
-@overload(_advance_spring, inline="always")
-def _advance_spring_impl(h, vt, n, dt):
-    if isinstance(h, types.Float):
-        return lambda h, vt, n, dt: h + vt * dt
-
-    def impl(h, vt, n, dt):
-        hx = h[0] + vt[0] * dt
-        hy = h[1] + vt[1] * dt
-        hn = hx * n[0] + hy * n[1]
-        return hx - hn * n[0], hy - hn * n[1]
-    return impl
-
-
-def _spring_dashpot(h, vt, kt, etat):
-    """Tangential force ``-kt*h - etat*vt``."""
-
-
-@overload(_spring_dashpot, inline="always")
-def _spring_dashpot_impl(h, vt, kt, etat):
-    if isinstance(h, types.Float):
-        return lambda h, vt, kt, etat: -kt * h - etat * vt
-    return lambda h, vt, kt, etat: (-kt * h[0] - etat * vt[0], -kt * h[1] - etat * vt[1])
-
-
-def _square(f):
-    """``|f|^2``."""
-
-
-@overload(_square, inline="always")
-def _square_impl(f):
-    if isinstance(f, types.Float):
-        return lambda f: f * f
-    return lambda f: f[0] * f[0] + f[1] * f[1]
-
-
-def _cap(f, f2, fc):
-    """``f`` scaled to magnitude ``fc`` (``f2 = |f|^2 > fc^2``)."""
-
-
-@overload(_cap, inline="always")
-def _cap_impl(f, f2, fc):
-    if isinstance(f, types.Float):  # exactly +-fc (f != 0 here)
-        return lambda f, f2, fc: math.copysign(fc, f)
-
-    def impl(f, f2, fc):
-        sc = fc / math.sqrt(f2)
-        return f[0] * sc, f[1] * sc
-    return impl
-
-
-def _spring_of(ft, vt, etat, inv_kt):
-    """The spring that gives the force ``ft``: ``-(ft + etat*vt)/kt``."""
-
-
-@overload(_spring_of, inline="always")
-def _spring_of_impl(ft, vt, etat, inv_kt):
-    if isinstance(ft, types.Float):
-        return lambda ft, vt, etat, inv_kt: -(ft + etat * vt) * inv_kt
-    return lambda ft, vt, etat, inv_kt: (-(ft[0] + etat * vt[0]) * inv_kt,
-                                         -(ft[1] + etat * vt[1]) * inv_kt)
-
-
-@njit(cache=True, inline="always", fastmath=FASTMATH)
-def contact_force(delta, vn, n, vt, h, kn, kt, inv_kt, etan, etat, mu, dt):
+def contact_law(delta, vn, nx, ny, vtx, vty, hx, hy, kn, kt, inv_kt, etan, etat, mu, dt,
+                wall):
     """Force of one contact: linear spring-dashpot, tangential spring, Coulomb cap.
+
+    A plain Python function of scalars, compiled for the CPU (:func:`contact_force`,
+    ``numba.njit``, inlined into the pair and wall loops) and for the GPU
+    (``cuda.jit(device=True)`` in :mod:`cfbmarkov.simulate.gpu.kernels`): the one source of
+    the law for both targets.
 
     Normal force ``Fn = max(kn*delta + eta_n*v_n, 0)`` (repulsive, no tension). Tangential
     spring ``h <- h + v_t*dt``, projected on the current tangent (a pair's contact turns);
     trial force ``Ft = -kt*h - eta_t*v_t``; if ``|Ft| > mu*Fn`` it is scaled to ``mu*Fn``
     and the spring reset to ``-(Ft + eta_t*v_t)/kt``, the spring that gives the capped force.
 
-    The tangential quantities ``vt``, ``h`` (and the returned ``ft``, ``h``) are 2-tuples
-    (x, y) for a pair, or floats for a wall (the component along the wall, whose tangent
-    does not turn: no projection, and the cap sets exactly ``+-mu*Fn``, which the scaling
-    ``Ft*mu*Fn/|Ft|`` equals only up to round-off).
+    A wall (``wall`` true) has a tangent along a fixed coordinate axis: its tangential
+    quantities are the single components ``vty``, ``hy`` (``nx``, ``ny``, ``vtx``, ``hx``
+    are not used, and the returned ``ftx``, ``hx`` are 0), there is no projection, and the
+    cap sets exactly ``+-mu*Fn``, which the scaling ``Ft*mu*Fn/|Ft|`` equals only up to
+    round-off.
 
     Parameters
     ----------
@@ -125,11 +61,11 @@ def contact_force(delta, vn, n, vt, h, kn, kt, inv_kt, etan, etat, mu, dt):
         Overlap, m (> 0 in contact).
     vn : float
         Approach speed: the relative velocity of the contact point along the normal, m/s.
-    n : (float, float) or None
-        Unit normal from the particle to its partner, -; unused (None) for a wall.
-    vt : (float, float) or float
+    nx, ny : float
+        Unit normal from the particle to its partner, - (pairs).
+    vtx, vty : float
         Tangential relative velocity of the contact point (normal part removed), m/s.
-    h : (float, float) or float
+    hx, hy : float
         Tangential spring before the step, m.
     kn, kt : float
         Normal and tangential stiffness, N/m.
@@ -141,14 +77,16 @@ def contact_force(delta, vn, n, vt, h, kn, kt, inv_kt, etan, etat, mu, dt):
         Friction coefficient, -.
     dt : float
         Time step, s.
+    wall : bool
+        The partner is a wall (one tangential component, ``vty``/``hy``).
 
     Returns
     -------
     fn : float
         Normal force magnitude, N (>= 0); the force on the particle is ``-fn*n``.
-    ft : (float, float) or float
+    ftx, fty : float
         Tangential force on the particle, N.
-    h : (float, float) or float
+    hx, hy : float
         Tangential spring after the step, m.
 
     References
@@ -162,14 +100,34 @@ def contact_force(delta, vn, n, vt, h, kn, kt, inv_kt, etan, etat, mu, dt):
     fn = kn * delta + etan * vn
     if fn < 0.0:
         fn = 0.0
-    h = _advance_spring(h, vt, n, dt)
-    ft = _spring_dashpot(h, vt, kt, etat)
-    ft2 = _square(ft)
     fc = mu * fn
+    if wall:
+        h = hy + vty * dt
+        ft = -kt * h - etat * vty
+        if ft * ft > fc * fc:  # exactly +-fc (ft != 0 here)
+            ft = math.copysign(fc, ft)
+            h = -(ft + etat * vty) * inv_kt
+        return fn, 0.0, ft, 0.0, h
+    hx = hx + vtx * dt
+    hy = hy + vty * dt
+    hn = hx * nx + hy * ny
+    hx = hx - hn * nx
+    hy = hy - hn * ny
+    ftx = -kt * hx - etat * vtx
+    fty = -kt * hy - etat * vty
+    ft2 = ftx * ftx + fty * fty
     if ft2 > fc * fc:
-        ft = _cap(ft, ft2, fc)
-        h = _spring_of(ft, vt, etat, inv_kt)
-    return fn, ft, h
+        sc = fc / math.sqrt(ft2)
+        ftx = ftx * sc
+        fty = fty * sc
+        hx = -(ftx + etat * vtx) * inv_kt
+        hy = -(fty + etat * vty) * inv_kt
+    return fn, ftx, fty, hx, hy
+
+
+#: the law compiled for the CPU, inlined into the pair loop (:func:`pair_forces`) and the
+#: wall loop (:func:`cfbmarkov.simulate.dem.integrate.fused_step`)
+contact_force = njit(cache=True, inline="always", fastmath=FASTMATH)(contact_law)
 
 
 #: pairs per work item of :func:`pair_forces`, and per block of its lists of contacts
@@ -282,9 +240,9 @@ def pair_forces(st, npairs, pi, pj, springs, pf, prm, contact_ids, block_contact
                 sm = 1.0 / math.sqrt(st[i, 6] + st[j, 6])
                 etan = cn * sm
                 etat = ct * sm
-            fn, (ftx, fty), (hx, hy) = contact_force(delta, vn, (nx, ny), (vtx, vty),
-                                                     (springs[p, 0], springs[p, 1]), kn, kt, inv_kt,
-                                                     etan, etat, mu, dt)
+            fn, ftx, fty, hx, hy = contact_force(delta, vn, nx, ny, vtx, vty, springs[p, 0],
+                                                 springs[p, 1], kn, kt, inv_kt, etan, etat,
+                                                 mu, dt, False)
             springs[p, 0] = hx + 0.0
             springs[p, 1] = hy + 0.0
             pf[p, 0] = (ftx - fn * nx) + 0.0

@@ -85,8 +85,9 @@ def _walls(i, st, wh, fx, fy, tq, prm):
         delta = Ri - xi
         if delta > 2.0 * ovl * Ri:
             isbad = BAD_OVERLAP
-        fn, ft, wh[i, 0] = contact_force(delta, -vxi, None, vyi - ui, wh[i, 0], kn, kt,
-                                         inv_kt, etan, etat, mu, dt)
+        fn, _, ft, _, wh[i, 0] = contact_force(delta, -vxi, 0.0, 0.0, 0.0, vyi - ui, 0.0,
+                                               wh[i, 0], kn, kt, inv_kt, etan, etat, mu,
+                                               dt, True)
         fx += fn
         fy += ft
         tq -= Ri * ft
@@ -97,8 +98,9 @@ def _walls(i, st, wh, fx, fy, tq, prm):
         delta = xi + Ri - W
         if delta > 2.0 * ovl * Ri:
             isbad = BAD_OVERLAP
-        fn, ft, wh[i, 1] = contact_force(delta, vxi, None, vyi + ui, wh[i, 1], kn, kt,
-                                         inv_kt, etan, etat, mu, dt)
+        fn, _, ft, _, wh[i, 1] = contact_force(delta, vxi, 0.0, 0.0, 0.0, vyi + ui, 0.0,
+                                               wh[i, 1], kn, kt, inv_kt, etan, etat, mu,
+                                               dt, True)
         fx -= fn
         fy += ft
         tq += Ri * ft
@@ -109,8 +111,9 @@ def _walls(i, st, wh, fx, fy, tq, prm):
         delta = Ri - yi
         if delta > 2.0 * ovl * Ri:
             isbad = BAD_OVERLAP
-        fn, ft, wh[i, 2] = contact_force(delta, -vyi, None, vxi + ui, wh[i, 2], kn, kt,
-                                         inv_kt, etan, etat, mu, dt)
+        fn, _, ft, _, wh[i, 2] = contact_force(delta, -vyi, 0.0, 0.0, 0.0, vxi + ui, 0.0,
+                                               wh[i, 2], kn, kt, inv_kt, etan, etat, mu,
+                                               dt, True)
         fy += fn
         fx += ft
         tq += Ri * ft

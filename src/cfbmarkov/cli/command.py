@@ -1,0 +1,208 @@
+"""The parser and the run of a verb with its output claimed (what :func:`cfbmarkov.cli.main`
+loads): the verbs live in modules by theme (:mod:`~cfbmarkov.cli.data`,
+:mod:`~cfbmarkov.cli.markov`, :mod:`~cfbmarkov.cli.kinetics`, :mod:`~cfbmarkov.cli.analysis`,
+:mod:`~cfbmarkov.cli.simulate`, :mod:`~cfbmarkov.cli.run`), their option types in
+:mod:`~cfbmarkov.cli.options`.
+
+Errors in the input (files, options) are reported as one line on stderr with exit code 2."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import os
+import sys
+from pathlib import Path
+
+from cfbmarkov._names import one_line
+from cfbmarkov.cli import analysis, data, kinetics, markov, run, simulate
+from cfbmarkov.cli.options import join_dash_values
+from cfbmarkov.errors import CfbmarkovError, InputError
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message: str):  # one line, exit code 2
+        self.exit(2, f"{self.prog}: error: {message}\n")
+
+
+#: the verbs in the order of ``cfbmarkov --help``, each adding its subparser
+VERBS = (data.add_import, markov.add_fit, markov.add_predict, analysis.add_compare,
+         markov.add_rtd, kinetics.add_react, analysis.add_stationarity, analysis.add_maps,
+         markov.add_info,
+         simulate.add_simulate, simulate.add_cases, run.add_reproduce, run.add_demo,
+         data.add_export_vtk, run.add_bench)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The argument parser of ``cfbmarkov`` with all its verbs.
+
+    Returns
+    -------
+    argparse.ArgumentParser
+        A parser whose usage errors exit with code 2; each verb sets ``func``.
+    """
+    from cfbmarkov import __version__
+
+    p = _Parser(prog="cfbmarkov", description="Markov chain models of particle motion in CFB risers.")
+    p.add_argument("--version", action="version", version=f"cfbmarkov {__version__}")
+    sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
+    for add in VERBS:
+        add(sub)
+    for name, verb in sub.choices.items():
+        if name in OUTPUTS:
+            verb.add_argument("--force", action="store_true",
+                              help="replace an existing output of another kind (a file of "
+                                   "another format, a FIFO, an empty folder, ...)")
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Run ``cfbmarkov`` with ``argv`` (default: the process's arguments).
+
+    Parameters
+    ----------
+    argv : list of str, optional
+        The arguments after the program name.
+
+    Returns
+    -------
+    int
+        The exit code: 0 on success, 2 on a usage error or a
+        :class:`~cfbmarkov.errors.CfbmarkovError` (reported as one line on stderr), 130 when
+        interrupted.
+    """
+    try:
+        parser = build_parser()
+        try:
+            argv = list(sys.argv[1:] if argv is None else argv)
+            args = parser.parse_args(join_dash_values(parser, argv))
+        except SystemExit as exc:      # usage errors (2), --help and --version (0)
+            return int(exc.code or 0)
+    except KeyboardInterrupt:
+        print("cfbmarkov: interrupted", file=sys.stderr)
+        return 130
+    from cfbmarkov._console import one_line_notes
+
+    with one_line_notes():             # cfbmarkov's warnings: one line, "note: ..."
+        code = _run(args)
+    from cfbmarkov import _atomic
+
+    if _atomic.HDF5_WRITE_FAILED:      # HDF5 may crash at exit after a failed write
+        from cfbmarkov._outputs import release_all
+
+        release_all()
+        with contextlib.suppress(Exception):
+            sys.stdout.flush()
+            sys.stderr.flush()
+        os._exit(code)
+    return code
+
+
+#: the output each writing verb claims: kind, and the arguments naming its inputs
+OUTPUTS = {"import": ("trajectory", ("source",)), "fit": ("model", ("run",)),
+           "predict": ("trajectory", ("model", "init")),
+           "compare": ("folder", ("reference", "prediction")), "maps": ("png", ("model",)),
+           "simulate": ("trajectory", ("case",)), "reproduce": ("folder", ("overrides",)),
+           "demo": ("folder", ()), "export-vtk": ("folder", ("run",))}
+
+
+def _run(args) -> int:
+    """Run the verb of ``args`` with its output claimed; errors become one line."""
+    from cfbmarkov import _interrupt
+
+    try:
+        with _interrupt.installed():
+            return _run_claimed(args)
+    except CfbmarkovError as exc:
+        print(f"cfbmarkov {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"cfbmarkov {args.command}: interrupted{_resumable(args)}", file=sys.stderr)
+        return 130
+    except (OSError, KeyError, RuntimeError) as exc:
+        damaged = _damaged_input(exc)   # an HDF5 input that fails only where it is read
+        if damaged is not None:
+            print(f"cfbmarkov {args.command}: error: {one_line(damaged)}", file=sys.stderr)
+            return 2
+        if not isinstance(exc, OSError):
+            raise
+        from cfbmarkov._atomic import write_error     # a write failed outside the writers
+
+        name = exc.filename or getattr(args, "output", "")
+        print(f"cfbmarkov {args.command}: error: {one_line(str(write_error(exc, name)))}",
+              file=sys.stderr)
+        return 2
+
+
+def _damaged_input(exc: BaseException) -> str | None:
+    """The one-line error for an h5py failure while an input file was being read (a
+    damaged model or trajectory file whose damage shows only in a dataset), naming the file;
+    None where ``exc`` did not come from reading an HDF5 file opened for reading."""
+    tb = exc.__traceback__
+    name = None
+    in_h5py = False
+    while tb is not None:
+        where = tb.tb_frame.f_code.co_filename.replace(os.sep, "/")
+        in_h5py = in_h5py or "/h5py/" in where or where.startswith("h5py/")
+        for value in tb.tb_frame.f_locals.values():
+            file = getattr(value, "file", None) if "h5py" in type(value).__module__ else None
+            with contextlib.suppress(Exception):
+                if file is not None and file.mode == "r":
+                    name = file.filename
+        tb = tb.tb_next
+    if name is None or not in_h5py:
+        return None
+    from cfbmarkov._names import first_line
+
+    return f"{name}: damaged file, cannot be read ({first_line(exc)})"
+
+
+def _check_environment() -> None:
+    """Refuse, in one line, an environment setting the run cannot honour: a
+    ``NUMBA_NUM_THREADS`` that is not a positive whole number (Numba would warn over
+    several lines and take its default)."""
+    threads = os.environ.get("NUMBA_NUM_THREADS")
+    if threads is not None and not (threads.strip().isdigit() and int(threads) > 0):
+        raise InputError(f"NUMBA_NUM_THREADS={threads!r} is not a positive whole number of "
+                         "threads; set it to one (e.g. NUMBA_NUM_THREADS=4) or unset it")
+
+
+def _run_claimed(args) -> int:
+    """The verb with its output claimed; a Ctrl-C swallowed on the way is raised at the end."""
+    from cfbmarkov import _interrupt
+
+    try:
+        _check_environment()
+        if args.command in OUTPUTS:
+            from cfbmarkov._outputs import claim_output
+
+            kind, inputs = OUTPUTS[args.command]
+            named = [getattr(args, name, None) for name in inputs]   # a list: several runs
+            named = [v for n in named for v in (n if isinstance(n, list) else [n])]
+            with claim_output(args.output, args.command, kind, named,
+                              force=getattr(args, "force", False)):
+                return int(args.func(args) or 0)
+        return int(args.func(args) or 0)
+    finally:
+        _interrupt.check()
+
+
+def _resumable(args) -> str:
+    """What an interrupted verb can be resumed with."""
+    if args.command == "simulate":
+        from cfbmarkov._names import parts_folder
+
+        out = Path(str(args.output))
+        parts = [parts_folder(out)]
+        if getattr(args, "ensemble", None):   # CPU members' own checkpoints
+            parts += [parts_folder(out.with_name(f"{out.stem}-m{m}{out.suffix}"))
+                      for m in range(args.ensemble)]
+        if any((p / name).exists() for p in parts
+               for name in ("checkpoint.h5", "gpu-checkpoint.h5")):
+            return "; the run can be resumed with --resume (from its last checkpoint)"
+    if args.command in ("reproduce", "demo") and not getattr(args, "synthetic", False):
+        return "; rerun the same command to resume"
+    return ""
+
+
+__all__ = ["OUTPUTS", "VERBS", "build_parser", "main"]

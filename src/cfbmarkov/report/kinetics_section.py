@@ -1,0 +1,306 @@
+"""The report's section on properties along particle paths (reactions, heat exchange,
+deactivation), from the ``kinetics`` blocks of the compare summaries
+(``cfbmarkov reproduce --kinetics``; :func:`cfbmarkov.analysis.kinetics_compare.compare_kinetics`).
+
+Per property: a table with one row per case and estimator (the exit mean of the reference,
+the chain's Monte Carlo and exact answer, and the segregated-flow baseline, with their
+intervals; the relative errors of the chain and of the baseline against the reference; the
+Minkowski distances of the exit distributions), a paragraph written from those numbers
+(where the chain is closer to the reference than the segregated-flow baseline and where
+not) and, per case, the figure of the comparison (``kinetics-NAME.png``: per-cell maps of
+the bed's mean and the exit distribution), copied into the report's figures as
+``kinetics-CASE-ESTIMATOR-NAME.png``.
+
+Choices:
+
+- The chain's error is that of its exact exit mean as a window of the comparison's length
+  sees it where the summary holds it (no sampling noise, and the same window bias as the
+  reference's exits: :func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`), else
+  that of its exact exit mean, else that of its Monte Carlo; the table's note says so.
+- The chain *beats* the baseline in a row where the magnitude of its relative error is at
+  most the baseline's; the paragraph names every row where it does not, with both errors.
+- The figure of each case is that of its first finished estimator with one (paper, mle,
+  then the others).
+
+References
+----------
+``docs/definitions.md``, Properties along observed paths; O. Levenspiel, Chemical Reaction
+Engineering, 3rd ed., Wiley (1999), ch. 15 (segregated flow).
+"""
+
+from __future__ import annotations
+
+import re
+import shutil
+from dataclasses import dataclass
+from pathlib import Path
+
+from cfbmarkov._atomic import atomic_path
+from cfbmarkov.report.document import Bullets, FigureBlock, Heading, Para, Table, finite_or_none
+from cfbmarkov.report.run_folder import input_error
+
+#: the heading of the section
+HEADING = "Properties along particle paths"
+PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
+
+
+@dataclass
+class KineticsRow:
+    """One property in one case and estimator, as the summary gives it.
+
+    Attributes
+    ----------
+    case, estimator : str
+        The case's label (U) and the estimator.
+    entry : dict
+        The property's block of the summary's ``kinetics``.
+    """
+
+    case: str
+    estimator: str
+    entry: dict
+
+    def side(self, key: str) -> dict:
+        """The block of one side (``reference``, ``model``, ``segregated_flow``), or {}."""
+        value = self.entry.get(key)
+        return value if isinstance(value, dict) else {}
+
+    def _chain(self, key: str) -> float | None:
+        """The chain's exact figure ``key`` as the window sees it, else its exact one, else
+        its Monte Carlo's (``key``: ``exit_mean`` or ``pd_exit_mean``)."""
+        exact = self.side("model").get("exact")
+        if isinstance(exact, dict):
+            for k in (key.replace("exit_mean", "windowed_exit_mean"), key):
+                if finite_or_none(exact.get(k)) is not None:
+                    return finite_or_none(exact.get(k))
+        return finite_or_none(self.side("model").get(key))
+
+    @property
+    def chain_mean(self) -> float | None:
+        """The chain's exit mean the errors are judged on (module docstring), or None."""
+        return self._chain("exit_mean")
+
+    @property
+    def chain_error(self) -> float | None:
+        """The chain's relative error in the exit mean (%), on :attr:`chain_mean`; None
+        where undefined."""
+        return self._chain("pd_exit_mean")
+
+    @property
+    def baseline_error(self) -> float | None:
+        """The segregated-flow baseline's relative error in the exit mean (%), or None."""
+        return finite_or_none(self.side("segregated_flow").get("pd_exit_mean"))
+
+
+def safe_name(name: str) -> str:
+    """A property name as a file-name part (letters, digits, ``-`` and ``_``)."""
+    return re.sub(r"[^A-Za-z0-9_-]", "_", str(name)) or "property"
+
+
+def _value(v) -> str:
+    x = finite_or_none(v)
+    return "n/a" if x is None else f"{x:.4g}"
+
+
+def _with_interval(block: dict) -> str:
+    text = _value(block.get("exit_mean"))
+    interval = block.get("exit_mean_interval")
+    if (text != "n/a" and isinstance(interval, list) and len(interval) == 2
+            and all(finite_or_none(v) is not None for v in interval)):
+        text += f" [{interval[0]:.4g}, {interval[1]:.4g}]"
+    return text
+
+
+def _pd(v) -> str:
+    x = finite_or_none(v)
+    return "n/d" if x is None else f"{x:+.2f}"
+
+
+def collect_rows(done) -> dict[str, list[KineticsRow]]:
+    """The kinetics blocks of the finished comparisons, by property name.
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+
+    Returns
+    -------
+    dict of str to list of KineticsRow
+        In the order the properties first appear; rows in case, then estimator order.
+    """
+    rows: dict[str, list[KineticsRow]] = {}
+    for c in done:
+        for e in c.finished:
+            block = e.summary.get("kinetics")
+            if not isinstance(block, dict):
+                continue
+            for name, entry in block.items():
+                if isinstance(entry, dict):
+                    rows.setdefault(name, []).append(KineticsRow(c.label, e.name, entry))
+    return rows
+
+
+def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
+    """The paragraph on one property, written from the numbers: in how many rows the chain's
+    exit mean is at least as close to the reference as the segregated-flow baseline's, the
+    rows where it is not (both errors), and how often the chain's exit mean lies inside the
+    reference's interval.
+
+    Parameters
+    ----------
+    name : str
+        The property.
+    rows : list of KineticsRow
+        Its rows.
+
+    Returns
+    -------
+    str
+    """
+    judged = [r for r in rows if r.chain_error is not None and r.baseline_error is not None]
+    parts = []
+    if not judged:
+        parts.append(f"No comparison of {name} has both the chain's and the segregated-flow "
+                     "baseline's error, so the two are not ranked here.")
+    else:
+        beats = [r for r in judged if abs(r.chain_error) <= abs(r.baseline_error)]
+        worse = [r for r in judged if r not in beats]
+        parts.append(f"For {name} at the exit the chain is at least as close to the reference "
+                     f"as the segregated-flow baseline in {len(beats)} of {len(judged)} "
+                     "comparisons"
+                     + (f" (largest chain error {max(abs(r.chain_error) for r in beats):.2f} %)"
+                        if beats else "") + ".")
+        if worse:
+            parts.append("It is not in " + "; ".join(
+                f"{r.case} ({r.estimator}): chain {r.chain_error:+.2f} %, segregated flow "
+                f"{r.baseline_error:+.2f} %" for r in worse) + ".")
+        else:
+            parts.append("In none is the baseline closer.")
+    inside, known = 0, 0
+    for r in rows:
+        interval = r.side("reference").get("exit_mean_interval")
+        value = r.chain_mean
+        if value is None or not (isinstance(interval, list) and len(interval) == 2):
+            continue
+        lo, hi = finite_or_none(interval[0]), finite_or_none(interval[1])
+        if lo is None or hi is None:
+            continue
+        known += 1
+        inside += lo <= value <= hi
+    if known:
+        parts.append(f"The chain's exit mean lies inside the reference's interval in {inside} "
+                     f"of {known}.")
+    return " ".join(parts)
+
+
+def _table(rows: list[KineticsRow]) -> Table:
+    header = ["case", "model", "exits", "reference", "chain (Monte Carlo)",
+              "chain (exact, window)", "chain (exact)", "segregated flow", "chain error, %",
+              "segregated flow error, %", "MD chain", "MD segregated flow"]
+    body = []
+    for r in rows:
+        ref, mod, seg = r.side("reference"), r.side("model"), r.side("segregated_flow")
+        exact = mod.get("exact") if isinstance(mod.get("exact"), dict) else {}
+        body.append([r.case, r.estimator, str(ref.get("exit_count", "n/a")), _with_interval(ref),
+                     _with_interval(mod), _value(exact.get("windowed_exit_mean")),
+                     _value(exact.get("exit_mean")),
+                     _with_interval(seg) if seg else "n/a", _pd(r.chain_error),
+                     _pd(r.baseline_error), _value(mod.get("md_exit")),
+                     _value(seg.get("md_exit")) if seg else "n/a"])
+    notes = ["Exit means per residence with their intervals in brackets (the reference's and "
+             "the baseline's from their standard errors, the chain's from the block bootstrap "
+             "of its fitting window and the Monte Carlo noise). The chain's exact answer "
+             "'window' is its exit mean as a window of the comparison's length sees it (short "
+             "residences more often than long ones, as the reference's exits); the plain one "
+             "is per residence of the chain. Errors are 100 (side - reference) / reference, "
+             "the chain's from its exact answer as the window sees it where there is one, "
+             "else from its exact answer, else from its Monte Carlo; MD: Minkowski distance "
+             "of the exit distributions to the reference's on shared bins."]
+    return Table(header, body, notes)
+
+
+def _copy_figure(c, name: str, figures_dir: Path, written: list[str]) -> tuple[str, str] | None:
+    """Copy the case's kinetics figure of ``name`` into the figures; (file, estimator)."""
+    want = f"kinetics-{name}.png"
+    for e in c.finished:
+        figures = e.summary.get("figures") or []
+        block = e.summary.get("kinetics")
+        png = e.compare_dir / want
+        if not (isinstance(block, dict) and name in block and want in figures
+                and png.is_file()):
+            continue
+        if png.read_bytes()[:8] != PNG_SIGNATURE:
+            raise input_error(png, "not a PNG image")
+        file = f"kinetics-{c.name}-{e.name}-{safe_name(name)}.png"
+        with atomic_path(figures_dir / file, suffix=".png") as tmp:
+            shutil.copyfile(png, tmp)
+        written.append(file)
+        return file, e.name
+    return None
+
+
+def kinetics_blocks(done, figures_dir: Path, written: list[str]) -> list:
+    """The section on properties along particle paths (empty where no comparison has a
+    ``kinetics`` block).
+
+    Parameters
+    ----------
+    done : list of cfbmarkov.report.run_folder.Case
+        The finished cases, sorted by U.
+    figures_dir : pathlib.Path
+        Folder the figures are copied into.
+    written : list of str
+        Receives the file names of the PNGs copied.
+
+    Returns
+    -------
+    list
+        The section's document blocks (:mod:`cfbmarkov.report.document`).
+
+    Raises
+    ------
+    InputError
+        Where a comparison's kinetics figure is not a PNG image.
+    """
+    by_name = collect_rows(done)
+    if not by_name:
+        return []
+    blocks: list = [Heading(2, HEADING), Para(
+        "Each property of the kinetics file integrated along three sets of paths over the "
+        "comparison window: the reference's (the CFD-DEM trajectories on the model's states "
+        "at its lag), the chain's (its prediction, and its exact answer by the "
+        "absorbing-chain algebra), and the segregated-flow baseline (the bed-averaged law "
+        "over the fitting window's observed residence times). The chain is worth its name "
+        "where it is closer to the reference than the baseline.")]
+    warnings = []
+    for c in done:
+        for e in c.finished:
+            for w in e.summary.get("warnings") or []:
+                if isinstance(w, str) and w.startswith("kinetics:"):
+                    line = f"{c.label} ({e.name}): {w[len('kinetics:'):].strip()}"
+                    if line not in warnings:
+                        warnings.append(line)
+    if warnings:
+        blocks.append(Bullets(warnings))
+    for name, rows in by_name.items():
+        law = rows[0].entry.get("law", "")
+        blocks.append(Heading(3, f"{name} ({law})" if law else name))
+        blocks.append(_table(rows))
+        blocks.append(Para(verdict_sentence(name, rows)))
+        for c in done:
+            copied = _copy_figure(c, name, figures_dir, written)
+            if copied is None:
+                continue
+            file, est = copied
+            blocks.append(FigureBlock(
+                file, f"{name} along particle paths, {c.label} ({est})",
+                "Left: the bed's mean of the property per cell over the comparison window "
+                "(reference, the chain's prediction and, where known, its exact steady "
+                "state), on one colour scale. Right: the distribution of the value at the "
+                "exit (reference, chain, segregated flow) with each side's mean."))
+    return blocks
+
+
+__all__ = ["HEADING", "KineticsRow", "collect_rows", "kinetics_blocks", "safe_name",
+           "verdict_sentence"]

@@ -1,0 +1,101 @@
+"""The report's section on properties along particle paths: a small generated reproduction
+whose comparisons integrated a kinetics file (zone-dependent first-order rate)."""
+
+from __future__ import annotations
+
+import json
+import re
+
+import numba
+import pytest
+
+from cfbmarkov.report.compare import compare
+from cfbmarkov.report.kinetics_section import HEADING, KineticsRow, verdict_sentence
+
+KINETICS = """
+[[property]]
+name = "X"
+law = "first-order"
+rate_by_cell = "rates.csv"
+"""
+
+
+def _rates(columns: int, rows: int) -> str:
+    """Tenfold slower in the wall columns than in the core."""
+    return "col,row,rate\n" + "".join(
+        f"{c},{r},{0.3 if c in (0, columns - 1) else 3.0}\n"
+        for r in range(rows) for c in range(columns))
+
+
+@pytest.fixture(scope="module")
+def reported(reproduction_template, tmp_path_factory):
+    import shutil
+
+    from cfbmarkov.report.reproduction import write_report
+    from tests.report.conftest import COLUMNS, PREDICT, ROWS
+
+    root = tmp_path_factory.mktemp("kinetic") / "reproduction"
+    shutil.copytree(reproduction_template, root)
+    kin = root / "kinetics.toml"
+    kin.write_text(KINETICS)
+    (root / "rates.csv").write_text(_rates(COLUMNS, ROWS))
+    threads = numba.get_num_threads()
+    numba.set_num_threads(1)
+    try:
+        for case in ("u3", "u6"):
+            folder = root / case
+            shutil.rmtree(folder / "compare-paper")
+            compare(folder / "cfd-dem.h5", folder / "prediction-paper.h5", window=PREDICT,
+                    output=folder / "compare-paper", kinetics=kin, resamples=10)
+    finally:
+        numba.set_num_threads(threads)
+    return root, write_report(root)
+
+
+def test_the_section_quotes_summary_json(reported):
+    root, html_path = reported
+    md = (root / "report.md").read_text()
+    assert f"## {HEADING}" in md and "### X (first-order)" in md
+    section = md[md.index(f"## {HEADING}"):]
+    section = section[:section.index("\n## ", 3)] if "\n## " in section[3:] else section
+    for case, label in (("u3", "U = 3 m/s"), ("u6", "U = 6 m/s")):
+        entry = json.loads((root / case / "compare-paper" / "summary.json").read_text()
+                           )["kinetics"]["X"]
+        row = next(line for line in section.splitlines()
+                   if line.startswith(f"| {label} | paper |"))
+        ref, mod, seg = entry["reference"], entry["model"], entry["segregated_flow"]
+        assert f"{ref['exit_mean']:.4g} [" in row
+        assert f"{mod['exit_mean']:.4g} [" in row
+        assert f"| {mod['exact']['windowed_exit_mean']:.4g} | {mod['exact']['exit_mean']:.4g} |" in row
+        assert f"{seg['exit_mean']:.4g} [" in row
+        assert f"| {mod['exact']['pd_windowed_exit_mean']:+.2f} |" in row
+        assert f"| {seg['pd_exit_mean']:+.2f} |" in row
+        assert f"| {ref['exit_count']} |" in row
+        # the figure of the case is copied and linked
+        file = f"kinetics-{case}-paper-X.png"
+        assert (root / "figures" / file).is_file() and f"figures/{file}" in section
+    # the mle comparisons have no kinetics: no row for them
+    assert "| mle |" not in section
+    # one sentence written from the numbers
+    assert re.search(r"in \d of 2 comparisons", section)
+    html = html_path.read_text()
+    assert f'id="{HEADING.lower().replace(" ", "-")}"' in html
+
+
+def test_a_report_without_kinetics_has_no_section(report_of_template):
+    root, _ = report_of_template
+    assert HEADING not in (root / "report.md").read_text()
+
+
+def test_the_sentence_names_where_the_chain_loses():
+    def row(case, chain, seg):
+        return KineticsRow(case, "paper", {
+            "reference": {"exit_mean": 0.5, "exit_mean_interval": [0.49, 0.51]},
+            "model": {"exit_mean": 0.5 * (1 + chain / 100), "pd_exit_mean": chain,
+                      "exact": {"exit_mean": 0.5 * (1 + chain / 100), "pd_exit_mean": chain}},
+            "segregated_flow": {"exit_mean": 0.5 * (1 + seg / 100), "pd_exit_mean": seg}})
+
+    text = verdict_sentence("X", [row("U = 3 m/s", 0.5, -4.0), row("U = 6 m/s", 3.0, 1.0)])
+    assert "in 1 of 2 comparisons" in text
+    assert "U = 6 m/s (paper): chain +3.00 %, segregated flow +1.00 %" in text
+    assert "inside the reference's interval in 1 of 2" in text
