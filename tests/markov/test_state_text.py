@@ -8,7 +8,7 @@ import numpy as np
 from cfbmarkov.markov import CellGrid, DirectionCells
 from cfbmarkov.markov.model_summary import cells_text, state_set_text
 from cfbmarkov.markov.select.record import CandidateScore
-from cfbmarkov.markov.select.table import candidate_columns, candidate_table
+from cfbmarkov.markov.selection_table import candidate_columns, candidate_table
 
 
 def test_cells_by_whole_rows_and_single_cells():

@@ -91,7 +91,7 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
                      f"{', ...' if len(classes) > 6 else ''}): a reducible chain; the "
                      "exact RTD weights each class by its observed entry flux")
     if model.selection:
-        from cfbmarkov.markov.select.table import candidate_table
+        from cfbmarkov.markov.selection_table import candidate_table
 
         lines.append(f"  chosen automatically: {model.selection.get('reason', '')}")
         lines.extend(f"    {line}" for line in candidate_table(model.selection))

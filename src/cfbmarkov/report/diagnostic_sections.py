@@ -47,7 +47,7 @@ def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
     from cfbmarkov.markov.diagnostics import (core_annulus, ck_test, height_bands,
                                               implied_timescales)
     from cfbmarkov.markov.states import CellGrid
-    from cfbmarkov.markov.select.table import candidate_columns
+    from cfbmarkov.markov.selection_table import candidate_columns
     from cfbmarkov.report.diagnostics import plot_ck_test, plot_implied_timescales
     from cfbmarkov.trajectories import Trajectories
 

@@ -148,7 +148,7 @@ class Criterion(ABC):
     def reason(self, best: CandidateScore, cells: CandidateScore | None) -> str:
         """Why ``best`` was chosen, in words (``cells``: the paper's cells, None if not judged);
         the numbers of every candidate are in the record's table
-        (:func:`~cfbmarkov.markov.select.table.candidate_columns`)."""
+        (:func:`~cfbmarkov.markov.selection_table.candidate_columns`)."""
 
 
 class _RTDCriterion(Criterion):
