@@ -110,8 +110,9 @@ def test_the_verdict_is_written_from_the_numbers():
         in summary
     assert "(the paper: +0.54 to +11.89 %)" in summary
     assert "the models' own error" not in summary
-    assert ("at 3 m/s paper 0.3 against the baseline's 0.1: the model's own error (0.25 "
-            "already on its fitting window)") in summary
+    assert ("At 3 m/s, against the baseline's 0.1: paper 0.3 worse: the model's own error "
+            "(0.25 already on its fitting window).") in summary
+    assert summary.count("against the baseline's 0.1") == 2      # once per velocity
     # the count once, in the verdict line; the details name the pairs
     assert summary.count("Verdict at the quick scale: reusing the fitting window's RTD (the "
                          "persistence baseline) predicts better than the models in all 2") == 1

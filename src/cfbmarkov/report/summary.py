@@ -180,47 +180,50 @@ def _paper_clause(cases: list[Case]) -> str | None:
 
 def _baseline_sentences(cases: list[Case]) -> list[str]:
     """Where the models beat the persistence baseline and where not, and why, by the one rule
-    of Table 3 (:func:`cfbmarkov.report.table3.baseline_judgement`)."""
-    groups: dict[str, list[str]] = {k: [] for k in ("beats", "loses", "tie", "not told apart")}
-    why: dict[tuple[str, str], list[str]] = {}
+    of Table 3 (:func:`cfbmarkov.report.table3.baseline_judgement`); each velocity's
+    baseline MD and halves' MD once."""
+    beat, total = [], 0
+    # per velocity: the baseline's MD, and the models not beating it grouped by reason
+    why: dict[str, tuple[float, dict[str, list[str]]]] = {}
     for c, name, s in _rows(cases):
         j = baseline_judgement(s)
         if j is None:
             continue
-        groups[j.outcome].append(f"{name} at {_u(c)} m/s")
+        total += 1
         if j.outcome == "beats":
+            beat.append(f"{name} at {_u(c)} m/s")
             continue
         md_own = finite_or_none((s.get("model_on_fitting_window") or {}).get("md_rtd"))
         if j.outcome == "tie":
-            reason = f"within {100 * j.tie:g} % of the baseline's MD {j.md_base:.4g}: a tie"
+            reason = f"a tie (within {100 * j.tie:g} %)"
         elif j.outcome == "not told apart":
-            reason = (f"against the baseline's {j.md_base:.4g}, gaps within the CFD-DEM's own "
-                      f"variability (its halves differ by {j.md_halves:.3g}): not told apart")
+            reason = (f"not told apart (gaps within the CFD-DEM's own variability, its halves "
+                      f"differ by {j.md_halves:.3g})")
         elif md_own is not None and md_own < j.md_base:
-            reason = (f"against the baseline's {j.md_base:.4g}: the flow changed between the "
-                      f"windows (on its fitting window the model is {md_own:.3g} from the "
-                      "CFD-DEM, nearer than the baseline on the predict window)")
+            reason = ("worse: the flow changed between the windows (on its fitting window the "
+                      f"model is {md_own:.3g} from the CFD-DEM, nearer than the baseline on "
+                      "the predict window)")
         else:
-            reason = (f"against the baseline's {j.md_base:.4g}: the model's own error"
-                      + (f" ({md_own:.3g} already on its fitting window)"
-                         if md_own is not None else ""))
-        why.setdefault((_u(c), reason), []).append(f"{name} {j.md:.4g}")
-    total = sum(len(v) for v in groups.values())
+            reason = ("worse: the model's own error" + (f" ({md_own:.3g} already on its "
+                                                         "fitting window)"
+                                                         if md_own is not None else ""))
+        reasons = why.setdefault(_u(c), (j.md_base, {}))[1]
+        reasons.setdefault(reason, []).append(f"{name} {j.md:.4g}")
     if not total:
         return ["No comparison has a persistence baseline (the fitting window is not in the "
                 "reference file): whether a model beats simply reusing the fitting window's "
                 "RTD cannot be said."]
-    beat = groups["beats"]
-    # the count of each outcome is the headline's (:func:`headline`): here the pairs by name,
-    # with the rule and the reasons
+    # the count of each outcome is the verdict line's (:func:`headline`): here the pairs by
+    # name, with the rule and the reasons
     out = ["The persistence baseline (the CFD-DEM's RTD of the fitting window reused as the "
            "prediction; distance MD) is beaten, by the rule of Table 3 "
            f"({BASELINE_RULE_SHORT}), by " + (_and(beat) if beat else "none of the models")
            + "."]
     if why:
-        out.append("Not beating it, and why: MD " + "; ".join(
-            f"at {u} m/s {', '.join(names)} {reason}" for (u, reason), names in why.items())
-            + ".")
+        out.append("Not beating it, and why (each model's MD): " + " ".join(
+            f"At {u} m/s, against the baseline's {base:.4g}: " + "; ".join(
+                f"{_and(names)} {reason}" for reason, names in reasons.items()) + "."
+            for u, (base, reasons) in why.items()))
     return out
 
 
