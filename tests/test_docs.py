@@ -5,8 +5,11 @@
 - The README: its ```bash blocks of example commands the same way in a folder of its own
   (the set-up lines, which install the package or build the documentation, are skipped:
   ``SKIPPED_README``), then its ```python snippet in that folder.
-- The commands both start with (the synthetic data) run once per test run, shared by the
-  xdist workers; each document's folder starts as a copy of their result.
+- The writing commands both start with (the synthetic data, the paper's model, its
+  prediction and comparison) run once per test run, shared by the xdist workers; each
+  document's folder starts as a copy of their result, and runs the rest of its commands,
+  with those that write nothing (``info``, ``rtd``, ``stationarity``) among the shared ones
+  (``commands_left``).
 - Relative links of README.md, CHANGELOG.md and the Markdown pages under docs/ point to an
   existing file, and to an existing heading where they name an anchor of a Markdown page
   (the slug rule of myst-parser and GitHub). The Sphinx build checks the pages' links
@@ -123,18 +126,57 @@ def run_commands(commands: list[str], folder: Path, env: dict[str, str], source:
                         f"stderr:\n{done.stderr[-4000:]}", pytrace=False)
 
 
+#: verbs that write nothing: a document's command of one of them sees the same files when
+#: it runs after the writing commands that follow it in the document
+READ_ONLY_VERBS = ("info", "rtd", "stationarity")
+#: options that change what a command prints, not what it writes
+QUIET = ("-q", "--quiet")
+
+
+def reads_only(command: str) -> bool:
+    """Whether ``command`` is a ``cfbmarkov`` verb that writes no file."""
+    words = shlex.split(command)
+    return (len(words) > 1 and words[0] == "cfbmarkov" and words[1] in READ_ONLY_VERBS
+            and not {"-o", "--output"} & set(words))
+
+
+def _same_files(a: str, b: str) -> bool:
+    """Whether two commands write the same files (the same words, ``-q`` aside)."""
+    key = lambda c: [w for w in shlex.split(c) if w not in QUIET]  # noqa: E731
+    return key(a) == key(b)
+
+
 def common_start(a: list[str], b: list[str]) -> list[str]:
-    """The commands that ``a`` and ``b`` both start with."""
+    """The writing commands that ``a`` and ``b`` both start with; commands that write
+    nothing (:func:`reads_only`) are stepped over in either. Of two that differ by ``-q``
+    alone, the one without it (its progress lines run too)."""
+    wa, wb = [c for c in a if not reads_only(c)], [c for c in b if not reads_only(c)]
     n = 0
-    while n < min(len(a), len(b)) and a[n] == b[n]:
+    while n < min(len(wa), len(wb)) and _same_files(wa[n], wb[n]):
         n += 1
-    return a[:n]
+    quiet = lambda c: bool(set(shlex.split(c)) & set(QUIET))  # noqa: E731
+    return [y if quiet(x) and not quiet(y) else x for x, y in zip(wa[:n], wb[:n])]
+
+
+def commands_left(commands: list[str], start: list[str]) -> list[str]:
+    """The commands of a document left to run in a folder where ``start`` (its first
+    writing commands, :func:`common_start`) has run: the read-only ones among those first
+    commands, and every command after them, in order."""
+    left, done = [], 0
+    for command in commands:
+        if done < len(start) and not reads_only(command):
+            assert _same_files(command, start[done]), (command, start[done])
+            done += 1
+        else:
+            left.append(command)
+    assert done == len(start), "the document does not start with the shared commands"
+    return left
 
 
 @pytest.fixture(scope="session")
 def shared_start(tmp_path_factory):
-    """(commands, folder): the tutorial's and the README's common first commands and the
-    folder they were run in, made once per test run (under xdist, by the first worker that
+    """(commands, folder): the tutorial's and the README's common first writing commands
+    (:func:`common_start`) and the folder they were run in, made once per test run (under xdist, by the first worker that
     asks; the others wait for it)."""
     start = common_start(doc_commands(TUTORIAL), doc_commands(README, SKIPPED_README))
     base = tmp_path_factory.getbasetemp()
@@ -155,15 +197,28 @@ def shared_start(tmp_path_factory):
 def _start_from(shared_start, commands: list[str], work: Path) -> list[str]:
     """Copy the shared folder to ``work``; the commands left to run."""
     start, seed = shared_start
-    assert commands[:len(start)] == start
     shutil.copytree(seed, work)
-    return commands[len(start):]
+    return commands_left(commands, start)
 
 
 def test_common_start():
     assert common_start(["a", "b", "c"], ["a", "b", "d"]) == ["a", "b"]
     assert common_start(["a"], ["b"]) == []
     assert common_start([], ["b"]) == []
+    # commands that write nothing are stepped over; -q does not change what is written
+    tutorial = ["cfbmarkov demo -o s", "cfbmarkov info s/r.h5", "cfbmarkov fit s/r.h5 -o m.h5",
+                "cfbmarkov rtd m.h5", "cfbmarkov predict m.h5 -q -o p.h5",
+                "cfbmarkov stationarity s/r.h5", "cfbmarkov fit s/r.h5 --states auto -o a.h5"]
+    readme = ["cfbmarkov demo -o s", "cfbmarkov fit s/r.h5 -o m.h5",
+              "cfbmarkov predict m.h5 -o p.h5", "cfbmarkov compare s/r.h5 p.h5 -o c"]
+    start = common_start(tutorial, readme)
+    assert start == ["cfbmarkov demo -o s", "cfbmarkov fit s/r.h5 -o m.h5",
+                     "cfbmarkov predict m.h5 -o p.h5"]
+    assert commands_left(tutorial, start) == [
+        "cfbmarkov info s/r.h5", "cfbmarkov rtd m.h5", "cfbmarkov stationarity s/r.h5",
+        "cfbmarkov fit s/r.h5 --states auto -o a.h5"]
+    assert commands_left(readme, start) == ["cfbmarkov compare s/r.h5 p.h5 -o c"]
+    assert not reads_only("cfbmarkov rtd m.h5 -o x") and reads_only("cfbmarkov info x.h5")
 
 
 def test_shell_blocks_are_read_as_typed():

@@ -139,8 +139,8 @@ def test_state_entered_in_the_last_frame_is_reported_and_connected_set_frees_it(
     pi = model.stationary_distribution
     assert pi[5] == pytest.approx(1.0)                 # the trap takes all the mass
     text = model.summary()
-    assert "states entered but never left: 1 (5)" in text
-    assert "states never visited: 3 (1, 3, 7)" in text
+    assert "states entered but never left: 1 of 8 (cell (1,2) as column,row)" in text
+    assert "states never visited: 3 of 8 (cells (1,0), (1,1), (1,3) as column,row)" in text
     connected = fit_model(path, grid, 1.0, connected=True)
     assert connected.connected and connected.trap_share == 0.0
     assert connected.transition_matrix[:, 5].sum() == 1.0      # only its own row, P_55
@@ -149,8 +149,10 @@ def test_state_entered_in_the_last_frame_is_reported_and_connected_set_frees_it(
     out = tmp_path / "m.h5"
     assert main(["fit", str(path), "--cells", "2x4", "--lag", "1", "--window", "0:40",
                  "-o", str(out)]) == 0
-    err = capsys.readouterr().err
-    assert "warning: states entered but never left: 1 (5)" in err and "100.0 %" in err
+    printed, err = capsys.readouterr()
+    assert "warning: states entered but never left: 1 of 8 (cell (1,2) as column,row)" in err
+    assert "100.0 %" in err
+    assert "never left" not in printed          # each warning once: on stderr, not repeated
     assert main(["info", str(out)]) == 0
     assert "entered but never left" in capsys.readouterr().out
     assert main(["fit", str(path), "--cells", "2x4", "--lag", "1", "--window", "0:40",

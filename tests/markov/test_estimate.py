@@ -71,7 +71,7 @@ def test_unvisited_states_stay_in_place_and_are_reported(tmp_path, write_states)
     model = fit_model(path, CellGrid(2, 2, 1.0, 2.0), 1.0)
     np.testing.assert_array_equal(model.unvisited_states, [2, 3])
     assert model.transition_matrix[2, 2] == 1 and model.transition_matrix[3, 3] == 1
-    assert "states never visited: 2 (2, 3)" in model.summary()
+    assert "states never visited: 2 of 4 (row 1)" in model.summary()
 
 
 def test_boundary_passes_are_counted_by_direction(tmp_path, write_states):

@@ -122,8 +122,18 @@ def test_cli_fit_with_auto_and_named_states(run, tmp_path, capsys):
     # (a short window: the CLI path, not the choice, is under test here)
     assert main(["fit", str(run), "--cells", "6x38", "--window", "0.5:1.5", "--states", "auto",
                  "--estimator", "mle", "-o", str(out)]) == 0
-    assert "chosen automatically" in capsys.readouterr().out
-    assert MarkovModel.load(out).selection is not None
+    text = capsys.readouterr().out
+    assert "chosen automatically" in text
+    selection = MarkovModel.load(out).selection
+    assert selection is not None
+    # every candidate scored in one table, the winner marked, visited states counted
+    assert "visited" in text and "score" in text
+    marked = [line.split() for line in text.splitlines() if line.strip().startswith("* ")]
+    assert len(marked) == 1 and marked[0][1] == selection["chosen"]["states"]
+    for c in selection["candidates"]:
+        assert any(line.split()[:1] == [c["states"]] or line.split()[1:2] == [c["states"]]
+                   for line in text.splitlines() if line.strip())
+        assert 0 < c["visited"] <= c["n_states"]
     assert main(["fit", str(run), "--window", "0.5:4.5", "--states", "cells-direction",
                  "-o", str(out)]) == 0
     model = MarkovModel.load(out)

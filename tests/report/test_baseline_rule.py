@@ -72,7 +72,14 @@ def test_one_rule_in_the_table_the_summary_and_the_trust_paragraph(md, base, hal
     cases, measures = fake_run({6.0: 0.5}, summary=s)
     text = render_markdown("r", summary_blocks({"scale": "quick"}, cases, cases, measures,
                                                ["paper"], physics_checks(cases, measures)))
-    assert (f"in {int(j.beats)} of 1 velocity-model pairs" in text)
+    # the count in the verdict line, by the same rule, and only there
+    first = text.split("## Summary\n\n", 1)[1].split("\n", 1)[0]
+    expected = {"beats": "the models beat the persistence baseline in the one velocity-model",
+                "loses": "predicts better than the models in the one velocity-model pair",
+                "tie": "(0 of 1 velocity-model pairs beat", "not told apart": "(0 of 1 "
+                "velocity-model pairs beat"}[j.outcome]
+    assert expected in first
+    assert text.count("velocity-model pair") == 2    # the verdict line and the interval's
     # never both: the model's own error dominates, and within the reference's variability
     assert not ("own error dominates" in trust
                 and "within the reference's own variability" in trust)
@@ -104,7 +111,10 @@ def test_intervals_never_collapse():
     cases, _ = fake_run({8.0: 0.054}, summary=s)
     table = render_markdown("r", table3_blocks(cases, ["paper"]))
     assert "0.014 [0.0140–0.0145]" in table
-    assert "interval 0.0540-0.0545 s" in trust_text("8", "paper", s)
+    assert "[0.0540–0.0545]" in table
+    # the trust paragraph refers to Table 3's interval, not repeating it
+    trust = trust_text("8", "paper", s)
+    assert "0.054" not in trust and "interval (Table 3)" in trust
 
 
 def test_the_summary_opens_with_a_verdict_and_a_next_step():
@@ -121,6 +131,7 @@ def test_the_summary_opens_with_a_verdict_and_a_next_step():
         {"scale": "quick"}, cases, cases, measures, ["paper"],
         physics_checks(cases, measures))).split("## Summary\n\n", 1)[1].split("\n", 1)[0]
     assert "the models beat the persistence baseline in all 2 velocity-model pairs" in first
+    assert "Next step: use the models over windows like these" in first
 
 
 def _run_file(path, velocity):

@@ -4,6 +4,7 @@ compare summaries, unfinished cases, errors and re-runs."""
 from __future__ import annotations
 
 import base64
+import collections
 import json
 import re
 import shutil
@@ -94,10 +95,14 @@ def test_sections_and_paper_numbers(report_of_template):
     assert "about 50 h" in md and "about 30 min" in md and "about 100" in md
     assert "(wall estimated)" in md  # u6's CFD-DEM time of the predict window is an estimate
     # header
-    for text in ("Scale: quick", "fit 2–4 s, predict 4–6 s", "Lag: 0.025 s",
-                 "6 columns x 12 rows", "Particles: 400", "0.09 m wide x 0.95 m high",
-                 "cfbmarkov version: "):
+    for text in ("Scale: quick", "6 columns x 12 rows", "cfbmarkov version: "):
         assert text in md, text
+    # the riser, particles, windows and lag once, in the operating conditions
+    conditions = section(md, "Operating conditions and physics checks")
+    row = [line for line in conditions.splitlines() if line.startswith("| 3 |")][0]
+    for text in ("400 x ", "| 0.09 x 0.95 |", "| 2-4 / 4-6 |", "| 0.025 |"):
+        assert text in row, text
+    assert "Particles: " not in md and "Lag: " not in md
 
 
 def test_table3_quotes_the_summaries(report_of_template):
@@ -281,7 +286,10 @@ def test_trust_paragraph_is_written_from_the_numbers():
     # the value and its interval at one precision, so that a miss reads as one
     text = trust_text("6", "auto", dict(summary, reference={"rt_mean": 0.39952},
                                         model={"rt_mean_interval": [0.2293, 0.3984]}))
-    assert "E(RT) 0.400 s lies outside the model's 90 % interval 0.229-0.398 s" in text
+    assert "E(RT) lies outside the model's 90 % interval (Table 3)" in text
+    assert "0.398" not in text             # the interval is Table 3's, not repeated
+    # the MDs are Table 3's too: the rule's outcome and the gap in words
+    assert "0.33" not in text and "0.076" not in text
     # the model's own error on its fitting window, against the flow's change (the baseline):
     # not split where the model's MD is within the reference's own variability
     summary["model_on_fitting_window"] = {"windows": [[15, 20], [10, 15]], "md_rtd": 0.02,
@@ -354,3 +362,51 @@ def test_fig8_counts_residences_as_table3_does(report_of_template):
     for case, u in (("u3", "3"), ("u6", "6")):
         s = json.loads((root / case / "compare-paper" / "summary.json").read_text())
         assert f"{s['reference']['rt_mean']:.3f} s at U = {u} m/s" in md
+
+
+def numbered_clauses(md: str) -> list[str]:
+    """The report's prose cut into clauses (at ``. ``, ``;``, ``:``, brackets and line
+    ends) that hold a decimal number: tables, headings and figure links left out. A
+    paragraph about one case and model ("U = 6 m/s, paper: ...") or one figure ("**Fig. 4:
+    ...**") keys its clauses by that subject: the same ratio of two models, or the riser's
+    height beside two figures' heights, is not a repeat."""
+    out = []
+    for line in md.splitlines():
+        if not line or line.startswith(("|", "#", "![")):
+            continue
+        subject = re.match(r"(U = [^,:]+, [^:]+:|\*\*[^*]+\*\*)", line)
+        prefix = subject.group(1) + " " if subject else ""
+        for clause in re.split(r"[;:()]|\. ", line):
+            clause = clause.strip().rstrip(".")
+            if len(clause) >= 15 and re.search(r"\d\.\d", clause):
+                out.append(prefix + clause)
+    return out
+
+
+def test_each_number_is_said_once(report_of_template):
+    """The physics checks' evidence, and every clause of the prose that holds a number,
+    once in the report: the summary states the verdict and links to the evidence."""
+    root, _ = report_of_template
+    md = (root / "report.md").read_text(encoding="utf-8")
+    repeated = [c for c, n in collections.Counter(numbered_clauses(md)).items() if n > 1]
+    assert repeated == []
+    evidence = section(md, "Operating conditions and physics checks")
+    profiles = re.findall(r"solids fraction wall/core [\d.]+/[\d.]+", evidence)
+    assert profiles, "the physics checks give the wall and core solids fractions"
+    for text in profiles:
+        assert md.count(text) == 1, text
+    assert "wall/core" not in section(md, "Summary") + section(md, "Plausibility")
+    # the headline comparison with the paper's Table 3 once, in the summary
+    assert md.count("the paper: narrower at all four") == 1
+    assert "PD of E(RT) ranges" not in md and "narrower than the CFD-DEM's in" not in \
+        section(md, "Fig. 9: RTD of the MCM")
+
+
+def test_the_dedup_check_finds_a_repeat():
+    md = ("## A\n\nE(RT) 0.746 s at 3 m/s; the core is dense.\n\n| 1 | 0.746 |\n\n"
+          "## B\n\nAgain: E(RT) 0.746 s at 3 m/s.\n\n"
+          "U = 6 m/s, paper: the error is 2.9 times the halves'.\n\n"
+          "U = 6 m/s, mle: the error is 2.9 times the halves'.\n")
+    counts = collections.Counter(numbered_clauses(md))
+    assert counts["0.746 s at 3 m/s"] == 2
+    assert [n for n in counts.values() if n > 1] == [2]

@@ -63,7 +63,7 @@ def test_e_rt_falling_with_u_passes_and_rising_fails():
     assert fall.passed is True and annulus.passed is True
     md = summary_text(cases, measures)
     assert "E(RT) of the CFD-DEM falls as U rises: PASSED" in md
-    assert "wall layers denser than the core: PASSED" in md
+    assert "core-annulus structure (wall layers denser than the core): PASSED" in md
     # E(RT) rises from 4 to 6 m/s: the check fails, names where, and the summary says so
     cases, measures = fake_run({3.0: 0.8, 4.0: 0.5, 6.0: 0.7, 8.0: 0.3})
     fall, _ = physics_checks(cases, measures)
@@ -72,7 +72,19 @@ def test_e_rt_falling_with_u_passes_and_rising_fails():
     summary = md.split("## Operating conditions", 1)[0]
     assert "E(RT) of the CFD-DEM falls as U rises: FAILED" in summary
     assert "What the quick scale cannot show" in summary
-    assert "this run's CFD-DEM does not (0.800 s at 3 m/s" in summary
+    assert ("which the paper's riser passes; this run's CFD-DEM fails it ([the numbers]"
+            "(#operating-conditions-and-physics-checks))") in summary
+    # the evidence once, in the physics checks, not in the summary
+    assert "0.800 s at 3 m/s" not in summary and md.count("0.800 s at 3 m/s") == 1
+    # cases with other windows and lags: said, the windows themselves left to the table
+    cases, measures = fake_run({3.0: 0.8, 6.0: 0.4})
+    config = cases[1].config
+    cases[1].config = config.model_copy(update={"markov": config.markov.model_copy(
+        update={"predict_window": (2.0, 3.0), "lag": 0.002})})
+    summary = summary_text(cases, measures).split("## Operating conditions", 1)[0]
+    assert ("the cases differ in more than U (their predict windows and lags, [operating "
+            "conditions](#operating-conditions-and-physics-checks))") in summary
+    assert "2-3" not in summary
     # one case: not judged
     cases, measures = fake_run({6.0: 0.4})
     assert physics_checks(cases, measures)[0].passed is None
@@ -86,7 +98,7 @@ def test_a_dense_core_fails_the_core_annulus_check():
     assert "the core is as dense or denser at 3 m/s, 6 m/s" in annulus.evidence
     assert "wall/core 0.1/0.3" in annulus.evidence
     md = summary_text(cases, measures)
-    assert "core-annulus structure: wall layers denser than the core: FAILED" in md
+    assert "core-annulus structure (wall layers denser than the core): FAILED" in md
 
 
 def test_the_verdict_is_written_from_the_numbers():
@@ -97,27 +109,39 @@ def test_the_verdict_is_written_from_the_numbers():
     assert "misses the CFD-DEM's mean residence time E(RT) by +50 % at 3 m/s, +50 % at 6 m/s" \
         in summary
     assert "(the paper: +0.54 to +11.89 %)" in summary
-    assert "in 0 of 2 velocity-model pairs" in summary       # MD 0.3 against a baseline of 0.1
     assert "the models' own error" not in summary
-    assert ("at 3 m/s paper 0.3 against the baseline's 0.1: the model's own error (0.25 "
-            "already on its fitting window)") in summary
-    assert "2 where the baseline is better" in summary
+    assert ("At 3 m/s, against the baseline's 0.1: paper 0.3 worse: the model's own error "
+            "(0.25 already on its fitting window).") in summary
+    assert summary.count("against the baseline's 0.1") == 2      # once per velocity
+    # the count once, in the verdict line; the details name the pairs
     assert summary.count("Verdict at the quick scale: reusing the fitting window's RTD (the "
                          "persistence baseline) predicts better than the models in all 2") == 1
+    assert summary.count("velocity-model pairs") == 2        # the verdict line and the interval
+    assert "is beaten, by the rule of Table 3" in summary and "by none of the models" in summary
     assert "inside the model's 90 % interval in 0 of 2" in summary
     # a model that beats the baseline is named
     good = {"pd_rt_mean": 2.0, "pd_rt_sd": -40.0, "md_rtd": 0.05, "baseline": {"md_rtd": 0.1},
             "reference": {"rt_mean": 0.5}, "model": {"rt_mean_interval": [0.4, 0.6]}}
     cases, measures = fake_run({3.0: 0.8}, summary=good)
     summary = summary_text(cases, measures).split("## Operating conditions", 1)[0]
-    assert "in 1 of 1 velocity-model pairs: paper at 3 m/s." in summary
-    assert "within the paper's largest miss (11.89 %) in 1 of 1 cases (3 m/s)" in summary
+    assert "the models beat the persistence baseline in the one velocity-model pair" in summary
+    assert "by paper at 3 m/s." in summary and "Not beating it" not in summary
+    assert "(within its largest miss, 11.89 %) in its one case" in summary
+    # the verdict leads: the first paragraph after the heading
+    first = summary.split("## Summary", 1)[1].strip().splitlines()[0]
+    assert first.startswith("Verdict at the quick scale: the models beat the persistence")
+    assert "the paper's estimator is as close" in first
+    assert ("physics checks of the CFD-DEM ([evidence](#operating-conditions-and-physics-"
+            "checks)): E(RT) of the CFD-DEM falls as U rises: NOT JUDGED") in first
+    assert first.endswith("Next step: use the models over windows like these, with their "
+                          "intervals.")
     # the link to the evidence goes to a heading of the page
     checks = physics_checks(cases, measures)
     html = render_html("r", summary_blocks({"scale": "quick"}, cases, cases, measures,
                                            ["paper"], checks)
                        + conditions_blocks(cases, measures, checks), None)
     assert '<a href="#operating-conditions-and-physics-checks">' in html
+    assert '<p class="verdict">Verdict at the quick scale:' in html
     assert 'id="operating-conditions-and-physics-checks"' in html
 
 
@@ -159,9 +183,9 @@ def test_one_interval_is_stated_once():
                "model": {"rt_mean_interval": [0.276, 0.349],
                          "model_rt_mean_interval": [0.2761, 0.3488]}}
     text = trust_text("6", "paper", summary)
-    assert text.count("0.276-0.349") == 1 and "own value" not in text
-    summary["model"]["model_rt_mean_interval"] = [0.29, 0.33]
-    assert "the model's own value: 0.290-0.330 s" in trust_text("6", "paper", summary)
+    # Table 3 holds the value and its interval, its detail the model's own interval
+    assert "0.276" not in text and "0.349" not in text and "own value" not in text
+    assert "lies outside the model's 90 % interval (Table 3)" in text
 
 
 def test_matrix_heat_map_labelled_by_its_state_space(tmp_path):

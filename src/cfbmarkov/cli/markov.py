@@ -120,7 +120,7 @@ def _finish_fit(args, model, runs, windows) -> int:
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line
         print(f"warning: {one_line(line.strip())}", file=sys.stderr)
-    print(model.summary())
+    print(model.summary(warnings=False))   # each warning once, on stderr
     print(args.output)
     return 0
 

@@ -555,15 +555,20 @@ class MarkovModel:
         """
         return model_summary.model_warnings(self)
 
-    def summary(self) -> str:
+    def summary(self, warnings: bool = True) -> str:
         """A few lines of text: state space, lag, fitting data, passes, unvisited states
         and the exact E(RT) and SD(RT) (:func:`~cfbmarkov.markov.model_summary.model_summary`).
+
+        Parameters
+        ----------
+        warnings : bool, optional
+            Include the model's warnings (:meth:`warnings`).
 
         Returns
         -------
         str
         """
-        return model_summary.model_summary(self)
+        return model_summary.model_summary(self, warnings)
 
     def __repr__(self) -> str:
         return (f"MarkovModel({self.state_space.describe()}, lag={self.lag:g} s, "

@@ -31,7 +31,7 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     trapped = model.entered_never_left
     if not trapped.size or model.trap_share == 0.0:
         return lines
-    return lines + [f"  states entered but never left: {trapped.size} ({_short_list(trapped)}): "
+    return lines + [f"  states entered but never left: {state_set_text(model.state_space, trapped)}: "
             f"they keep their particles (P_ii = 1) or move as their cell; "
             f"{100 * model.trap_share:.1f} % of the particle-frames are in states that "
             "can reach a trap (fit --connected leaves them out)"]
@@ -46,7 +46,7 @@ def _windows_text(model: "MarkovModel") -> str:
                         else f'{model.window[0]:g}:{model.window[1]:g} s')
 
 
-def model_summary(model: "MarkovModel") -> str:
+def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     """A few lines of text: state space, lag, fitting data, passes (or an open riser's exits
     and entries), unvisited states, warnings, regimes, coherence, closed classes, the
     selection and the exact E(RT) and SD(RT).
@@ -54,6 +54,9 @@ def model_summary(model: "MarkovModel") -> str:
     Parameters
     ----------
     model : MarkovModel
+    warnings : bool, optional
+        Include the model's warnings (:func:`model_warnings`); ``fit`` leaves them out, having
+        printed them as ``warning:`` lines on stderr.
 
     Returns
     -------
@@ -71,12 +74,13 @@ def model_summary(model: "MarkovModel") -> str:
         model.open_flow.summary_line(),
     ]
     never = np.setdiff1d(model.unvisited_states, model.entered_never_left)
-    lines.append(f"  states never visited: {never.size}"
-                 + (f" ({_short_list(never)})" if never.size else ""))
-    lines.extend(model.warnings())
+    lines.append(f"  states never visited: {state_set_text(model.state_space, never)}")
+    if warnings:
+        lines.extend(model.warnings())
     if model.entered_never_left.size and model.trap_share == 0.0:
-        lines.append(f"  states entered but never left: {model.entered_never_left.size} "
-                     f"({_short_list(model.entered_never_left)}): no state leads to them")
+        lines.append("  states entered but never left: "
+                     f"{state_set_text(model.state_space, model.entered_never_left)}: "
+                     "no state leads to them")
     if model.connected:
         lines.append("  fitted on the largest strongly connected set of the counts")
     if model.regime_chain is not None:
@@ -95,7 +99,10 @@ def model_summary(model: "MarkovModel") -> str:
                      f"{', ...' if len(classes) > 6 else ''}): a reducible chain; the "
                      "exact RTD weights each class by its observed entry flux")
     if model.selection:
+        from cfbmarkov.markov.selection_table import candidate_table
+
         lines.append(f"  chosen automatically: {model.selection.get('reason', '')}")
+        lines.extend(f"    {line}" for line in candidate_table(model.selection))
     try:
         r = model.rtd()
         if r.uncertainty is not None:
@@ -120,6 +127,87 @@ def model_summary(model: "MarkovModel") -> str:
     return "\n".join(lines)
 
 
-def _short_list(values: np.ndarray, limit: int = 12) -> str:
-    text = ", ".join(str(v) for v in values[:limit])
-    return text + (", ..." if values.size > limit else "")
+def state_set_text(space, states: np.ndarray, limit: int = 8) -> str:
+    """A set of states as a count and where they lie, never a long list of numbers.
+
+    ``"0"``; ``"12 of 336 (rows 36-37; cells (0,3), (1,3) as column,row)"`` for a space
+    whose states are its cells; ``"134 of 1596 (in 57 of 228 cells; all the states of 2 of
+    them: cells (0,3), (1,3) as column,row)"`` for a space with memory, whose states split
+    each cell.
+
+    Parameters
+    ----------
+    space : StateSpace
+        The state space the states belong to.
+    states : ndarray of int
+        State numbers, [K].
+    limit : int, optional
+        At most this many single cells are named (whole rows are named as row ranges).
+
+    Returns
+    -------
+    str
+        Cells as (column,row), or (column,depth column,row) in 3D, counted from the bottom
+        left (``docs/definitions.md``, Cells and state numbers).
+    """
+    states = np.unique(np.asarray(states, dtype=np.int64))
+    if not states.size:
+        return "0"
+    head = f"{states.size} of {space.n_states}"
+    cell_of = np.asarray(space.cell_of_state)
+    if space.n_states == space.n_cells and np.array_equal(cell_of,
+                                                          np.arange(space.n_cells)):
+        return f"{head} ({cells_text(space, states, limit)})"
+    touched = np.unique(cell_of[states])
+    per_cell = np.bincount(cell_of, minlength=space.n_cells)
+    inside = np.bincount(cell_of[states], minlength=space.n_cells)
+    whole = np.flatnonzero((inside == per_cell) & (per_cell > 0))
+    text = f"{head} (in {touched.size} of {space.n_cells} cells"
+    if whole.size:
+        return text + (f"; all the states of {whole.size} of them: "
+                       f"{cells_text(space, whole, limit)})")
+    return text + ", each with other states visited)"
+
+
+def cells_text(space, cells: np.ndarray, limit: int = 8) -> str:
+    """Cells by their rows and positions: whole rows as ranges (``rows 36-37``), the other
+    cells as (column,row) counted from the bottom left, at most ``limit`` of them named
+    (``"rows 36-37; cells (0,3), (1,3) as column,row"``).
+
+    Parameters
+    ----------
+    space : StateSpace
+        The state space whose grid numbers the cells (``(row*d + k)*m + col``).
+    cells : ndarray of int
+        Cell numbers, [K].
+    limit : int, optional
+        At most this many single cells are named; the rest are counted.
+
+    Returns
+    -------
+    str
+    """
+    cells = np.unique(np.asarray(cells, dtype=np.int64))
+    per_row = space.cells_per_row
+    rows, within = np.divmod(cells, per_row)
+    counts = np.bincount(rows, minlength=space.rows)
+    full = np.flatnonzero(counts == per_row)
+    parts = []
+    start = None
+    for k, r in enumerate(full):           # consecutive whole rows as one range
+        if start is None:
+            start = r
+        if k + 1 == full.size or full[k + 1] != r + 1:
+            parts.append(f"row {r}" if start == r else f"rows {start}-{r}")
+            start = None
+    single = ~np.isin(rows, full)
+    named = []
+    for r, w in zip(rows[single], within[single]):
+        k, col = divmod(int(w), space.columns)
+        named.append(f"({col},{k},{r})" if space.depth_columns > 1 else f"({col},{r})")
+    if named:
+        shown = ", ".join(named[:limit]) + (f", ... ({len(named) - limit} more)"
+                                            if len(named) > limit else "")
+        axes = "column,depth column,row" if space.depth_columns > 1 else "column,row"
+        parts.append(f"cell{'s' if len(named) > 1 else ''} {shown} as {axes}")
+    return "; ".join(parts)

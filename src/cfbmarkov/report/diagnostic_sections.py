@@ -47,6 +47,7 @@ def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
     from cfbmarkov.markov.diagnostics import (core_annulus, ck_test, height_bands,
                                               implied_timescales)
     from cfbmarkov.markov.states import CellGrid
+    from cfbmarkov.markov.selection_table import candidate_columns
     from cfbmarkov.report.diagnostics import plot_ck_test, plot_implied_timescales
     from cfbmarkov.trajectories import Trajectories
 
@@ -61,6 +62,7 @@ def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
                           "change with the lag, and Chapman-Kolmogorov errors, show the memory "
                           "a chain on cells misses.")]
     ck_rows = []
+    formulas: set[str] = set()
     for c in done:
         m = c.config.markov
         window = tuple(float(v) for v in m.fit_window)
@@ -73,39 +75,24 @@ def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
             sel = models["auto"].selection
             blocks.append(Heading(3, f"{c.label}: the automatic choice"))
             blocks.append(Para(f"Chosen: {sel.get('reason', 'n/a')}."))
-            by_ck = "Chapman-Kolmogorov" in sel.get("method", "")
-            rows = [[cand["states"], f"{cand['lag']:g}", str(cand["n_states"]),
-                     number_text(cand.get("ck_error"), ".4f"), number_text(cand.get("score"), ".3g")]
-                    if by_ck else
-                    [cand["states"], f"{cand['lag']:g}", str(cand["n_states"]),
-                     number_text(cand.get("pd_rt_mean"), "+.1f"), number_text(cand.get("pd_rt_sd"), "+.1f"),
-                     number_text(cand.get("md_rtd"), ".3g"), number_text(cand.get("score"), ".3g")]
-                    for cand in sel.get("candidates", [])]
-            if rows and by_ck:
+            headers, rows, notes = candidate_columns(sel)
+            if rows:
                 parts = ", ".join(f"{x:g}-{y:g} s" for x, y in sel.get("blocks", []))
-                blocks.append(Table(
-                    ["states", "lag (s)", "states S", "mean CK error", "score"], rows,
-                    [f"{sel.get('method')} over the blocks {parts}: each block predicted by "
-                     "the model fitted on the others; CK error = mean |P_model(A -> B, t) - "
-                     "P_observed| over height thirds x core/annulus at t = 2 to 20 lags; "
-                     "score = CK error / CK error(cells)."]))
-            elif rows and sel.get("method") == "the RTD over the fitting window":
-                blocks.append(Table(
-                    ["states", "lag (s)", "states S", "PD E(RT) (%)", "PD SD(RT) (%)", "MD",
-                     "score"], rows,
-                    [f"Each candidate fitted on the fitting window {window[0]:g}-"
-                     f"{window[1]:g} s; its exact RTD in a window of that length, from the "
-                     "window's observed entries, against the residences observed in it; "
-                     "score = MD / MD(cells), the lowest wins (PD E and PD SD are shown, "
-                     "not judged)."]))
-            elif rows:
-                parts = ", ".join(f"{x:g}-{y:g} s" for x, y in sel.get("blocks", []))
-                blocks.append(Table(
-                    ["states", "lag (s)", "states S", "mean PD E(RT) (%)",
-                     "mean PD SD(RT) (%)", "mean MD", "score"], rows,
-                    [f"{sel.get('method', 'cross-validation')} over the blocks {parts}: each "
-                     "block predicted by the model fitted on the others; score = |mean PD E|/2 "
-                     "+ |mean PD SD|/10 + mean MD / mean MD(cells)."]))
+                fitted = (f"Each candidate fitted on the fitting window {window[0]:g}-"
+                          f"{window[1]:g} s" if sel.get("method") ==
+                          "the RTD over the fitting window" else
+                          f"{sel.get('method', 'cross-validation')} over the blocks {parts}")
+                headers[0] = "chosen"
+                # the score's definition once, under the first table that uses it
+                formula = notes[0] if notes and notes[0].startswith("score =") else ""
+                said = formula in formulas
+                formulas.add(formula)
+                blocks.append(Table(headers, rows,
+                                    [f"{fitted}; " + ("the columns and score as above." if said
+                                                      else "S: states; visited: states "
+                                                      "occupied in the fitting window"
+                                                      + (f"; {formula}." if formula else ".")),
+                                     *notes[1 if formula else 0:]]))
         with reading_errors(c.reference), Trajectories(c.reference) as ref:
             lags = [m.lag * k for k in (1, 2, 4)]
             grid = CellGrid(m.columns, m.rows, ref.width, ref.height)

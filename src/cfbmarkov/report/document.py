@@ -287,6 +287,7 @@ figure { margin: 1em 0 1.6em 0; }
 figure img { max-width: 100%; height: auto; border: 1px solid #e3e3e3; }
 figcaption { font-size: .92em; margin-top: .3em; }
 p.warn { color: #8a4b00; }
+p.verdict { font-weight: 600; border-left: 4px solid #1f4e79; padding-left: .7em; }
 """
 
 

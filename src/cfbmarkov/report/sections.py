@@ -95,7 +95,9 @@ def ensemble_text(meta: dict) -> str:
 
 
 def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
-    """The run: scale, cases, riser, windows, lag, cells, estimators, version.
+    """The run: scale, cases, cells, estimators, version (the riser, particles, windows and
+    lag of each case are in the operating conditions,
+    :func:`cfbmarkov.report.summary.conditions_blocks`).
 
     Parameters
     ----------
@@ -118,20 +120,14 @@ def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
     done = [c for c in cases if c.complete]
     pending = [c for c in cases if not c.complete]
     cfg = {c.name: c.config for c in configured}
+    description = _without_brackets(meta.get("description") or "")
     items = [
-        f"Scale: {meta.get('scale', 'n/a')}",
+        f"Scale: {meta.get('scale', 'n/a')}" + (f", {description}" if description else ""),
         ensemble_text(meta),
         "Cases: " + ", ".join(f"{c.name} ({c.label})" for c in cases)
         + f" — {len(done)} finished" + (f", {len(pending)} not finished ("
                                          + ", ".join(c.name for c in pending) + ")"
                                          if pending else ""),
-        "Riser: " + shared_text({n: f"{c.riser.width:g} m wide x {c.riser.height:g} m high"
-                             for n, c in cfg.items()}),
-        "Particles: " + shared_text({n: f"{c.particles.number}" for n, c in cfg.items()}),
-        "Windows: " + shared_text({n: f"fit {window_text(c.markov.fit_window)}, predict "
-                                  f"{window_text(c.markov.predict_window)}"
-                               for n, c in cfg.items()}),
-        "Lag: " + shared_text({n: f"{c.markov.lag:g} s" for n, c in cfg.items()}),
         "Cells: " + shared_text({n: f"{c.markov.columns} columns x {c.markov.rows} rows"
                              for n, c in cfg.items()}),
         "Estimators: " + (", ".join(estimators) or "none"),
@@ -140,6 +136,18 @@ def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
            else ""),
     ]
     return [Heading(2, "Reproduction"), Bullets(items)]
+
+
+def _without_brackets(text: str) -> str:
+    """``text`` less its bracketed asides (a scale's settings, which the operating
+    conditions give case by case)."""
+    depth, out = 0, []
+    for ch in text:
+        depth += ch == "("
+        if not depth:
+            out.append(ch)
+        depth -= ch == ")" and depth > 0
+    return " ".join("".join(out).split())
 
 
 def not_finished_blocks(cases: list[Case]) -> list:

@@ -1,8 +1,12 @@
 """The report's opening: its verdict, the operating conditions and the physics checks.
 
-:func:`summary_blocks` writes, from the run's numbers, what was run and at what scale, the
-paper's citation, the comparison with the paper's Table 3, where the models beat the
-persistence baseline and where not (and why), and what the scale cannot show;
+:func:`summary_blocks` writes, from the run's numbers, the verdict in one sentence (the
+models against the persistence baseline by the one rule of Table 3, the paper's estimator
+against the paper's largest E(RT) miss, the physics checks passed or failed, the next step),
+then the comparison with the paper's Table 3, where the models beat the persistence baseline
+and where not (and why), what was run and at what scale with the paper's citation, why the
+windows and lags differ per case and how developed the flow is at the fitting window, and
+what the scale cannot show;
 :func:`conditions_blocks` the operating conditions of each case and the physics checks
 (:func:`physics_checks`) stated as passed or failed against what a riser should show.
 
@@ -106,7 +110,7 @@ def physics_checks(done: list[Case], measures: dict) -> list[PhysicsCheck]:
         if not (math.isfinite(wall) and math.isfinite(core) and wall > core):
             dense_core.append(f"{_u(c)} m/s")
     annulus = PhysicsCheck(
-        "core-annulus structure: wall layers denser than the core", not dense_core if done
+        "core-annulus structure (wall layers denser than the core)", not dense_core if done
         else None, "; ".join(parts) + (f"; the core is as dense or denser at "
                                        f"{', '.join(dense_core)}" if dense_core else ""))
     return [fall, annulus]
@@ -120,8 +124,15 @@ def _rows(cases: list[Case]):
                 yield c, e.name, e.summary
 
 
+def _and(names: list[str]) -> str:
+    """``a``, ``a and b``, ``a, b and c``."""
+    return names[0] if len(names) == 1 else f"{', '.join(names[:-1])} and {names[-1]}"
+
+
 def _signed(values: list[tuple[str, float]], unit: str = " %") -> str:
-    return ", ".join(f"{v:+.0f}{unit} at {u} m/s" for u, v in values)
+    # whole percent, one decimal below 10 % (so that +0.46 % does not read "+0 %")
+    return ", ".join(f"{v:+.0f}{unit} at {u} m/s" if abs(v) >= 10 else
+                     f"{v:+.1f}{unit} at {u} m/s" for u, v in values)
 
 
 def _paper_sentences(cases: list[Case]) -> list[str]:
@@ -137,12 +148,9 @@ def _paper_sentences(cases: list[Case]) -> list[str]:
     worst_paper = max(abs(v) for v in paper_e)
     out = []
     if pd_e:
-        within = [u for u, v in pd_e if abs(v) <= worst_paper]
         out.append(
             f"The paper's estimator misses the CFD-DEM's mean residence time E(RT) by "
-            f"{_signed(pd_e)} (the paper: {min(paper_e):+.2f} to {max(paper_e):+.2f} %): "
-            + (f"within the paper's largest miss ({worst_paper:.2f} %) in {len(within)} of "
-               f"{len(pd_e)} cases" + (f" ({', '.join(within)} m/s)." if within else ".")))
+            f"{_signed(pd_e)} (the paper: {min(paper_e):+.2f} to {max(paper_e):+.2f} %).")
     if pd_sd:
         narrower = [u for u, v in pd_sd if v < 0]
         out.append(
@@ -152,51 +160,70 @@ def _paper_sentences(cases: list[Case]) -> list[str]:
     return out
 
 
+def _paper_clause(cases: list[Case]) -> str | None:
+    """The headline's comparison with the paper: in how many cases the paper's estimator
+    misses E(RT) by no more than the paper's largest miss."""
+    rows = [(c, v) for c, name, s in _rows(cases) if name == PAPER_ESTIMATOR
+            and (v := finite_or_none(s.get("pd_rt_mean"))) is not None]
+    if not rows:
+        return None
+    worst_paper = max(abs(float(v[0])) for v in PAPER_TABLE3.values())
+    within = [_u(c) for c, v in rows if abs(v) <= worst_paper]
+    if len(within) == len(rows):
+        return (f"the paper's estimator is as close to the CFD-DEM's E(RT) as the paper's "
+                f"(within its largest miss, {worst_paper:.2f} %) in "
+                + ("its one case" if len(rows) == 1 else f"all {len(rows)} cases"))
+    return (f"the paper's estimator is within the paper's largest E(RT) miss "
+            f"({worst_paper:.2f} %) in {len(within)} of {len(rows)} cases"
+            + (f" ({', '.join(within)} m/s)" if within else ""))
+
+
 def _baseline_sentences(cases: list[Case]) -> list[str]:
     """Where the models beat the persistence baseline and where not, and why, by the one rule
-    of Table 3 (:func:`cfbmarkov.report.table3.baseline_judgement`)."""
-    groups: dict[str, list[str]] = {k: [] for k in ("beats", "loses", "tie", "not told apart")}
-    why: dict[tuple[str, str], list[str]] = {}
+    of Table 3 (:func:`cfbmarkov.report.table3.baseline_judgement`); each velocity's
+    baseline MD and halves' MD once."""
+    beat, total = [], 0
+    # per velocity: the baseline's MD, and the models not beating it grouped by reason
+    why: dict[str, tuple[float, dict[str, list[str]]]] = {}
     for c, name, s in _rows(cases):
         j = baseline_judgement(s)
         if j is None:
             continue
-        groups[j.outcome].append(f"{name} at {_u(c)} m/s")
+        total += 1
         if j.outcome == "beats":
+            beat.append(f"{name} at {_u(c)} m/s")
             continue
         md_own = finite_or_none((s.get("model_on_fitting_window") or {}).get("md_rtd"))
         if j.outcome == "tie":
-            reason = f"within {100 * j.tie:g} % of the baseline's MD {j.md_base:.4g}: a tie"
+            reason = f"a tie (within {100 * j.tie:g} %)"
         elif j.outcome == "not told apart":
-            reason = (f"against the baseline's {j.md_base:.4g}, gaps within the CFD-DEM's own "
-                      f"variability (its halves differ by {j.md_halves:.3g}): not told apart")
+            reason = (f"not told apart (gaps within the CFD-DEM's own variability, its halves "
+                      f"differ by {j.md_halves:.3g})")
         elif md_own is not None and md_own < j.md_base:
-            reason = (f"against the baseline's {j.md_base:.4g}: the flow changed between the "
-                      f"windows (on its fitting window the model is {md_own:.3g} from the "
-                      "CFD-DEM, nearer than the baseline on the predict window)")
+            reason = ("worse: the flow changed between the windows (on its fitting window the "
+                      f"model is {md_own:.3g} from the CFD-DEM, nearer than the baseline on "
+                      "the predict window)")
         else:
-            reason = (f"against the baseline's {j.md_base:.4g}: the model's own error"
-                      + (f" ({md_own:.3g} already on its fitting window)"
-                         if md_own is not None else ""))
-        why.setdefault((_u(c), reason), []).append(f"{name} {j.md:.4g}")
-    total = sum(len(v) for v in groups.values())
+            reason = ("worse: the model's own error" + (f" ({md_own:.3g} already on its "
+                                                         "fitting window)"
+                                                         if md_own is not None else ""))
+        reasons = why.setdefault(_u(c), (j.md_base, {}))[1]
+        reasons.setdefault(reason, []).append(f"{name} {j.md:.4g}")
     if not total:
         return ["No comparison has a persistence baseline (the fitting window is not in the "
                 "reference file): whether a model beats simply reusing the fitting window's "
                 "RTD cannot be said."]
-    beat = groups["beats"]
-    out = [f"The models' RTDs beat the persistence baseline (the CFD-DEM's RTD of the fitting "
-           f"window reused as the prediction; distance MD) in {len(beat)} of {total} "
-           "velocity-model pairs" + (f": {', '.join(beat)}." if beat else ".")
-           + f" The rule, as in Table 3 and below: {BASELINE_RULE_SHORT}."]
-    counts = [f"{len(groups[k])} {word}" for k, word in
-              (("loses", "where the baseline is better"), ("not told apart",
-               "that the CFD-DEM's own variability cannot tell apart"), ("tie", "tied"))
-              if groups[k]]
+    # the count of each outcome is the verdict line's (:func:`headline`): here the pairs by
+    # name, with the rule and the reasons
+    out = ["The persistence baseline (the CFD-DEM's RTD of the fitting window reused as the "
+           "prediction; distance MD) is beaten, by the rule of Table 3 "
+           f"({BASELINE_RULE_SHORT}), by " + (_and(beat) if beat else "none of the models")
+           + "."]
     if why:
-        out.append(f"Not beating it: {', '.join(counts)}. MD " + "; ".join(
-            f"at {u} m/s {', '.join(names)} {reason}" for (u, reason), names in why.items())
-            + ".")
+        out.append("Not beating it, and why (each model's MD): " + " ".join(
+            f"At {u} m/s, against the baseline's {base:.4g}: " + "; ".join(
+                f"{_and(names)} {reason}" for reason, names in reasons.items()) + "."
+            for u, (base, reasons) in why.items()))
     return out
 
 
@@ -267,30 +294,33 @@ def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> li
     windows = {c.name: (tuple(c.config.markov.predict_window), c.config.markov.lag)
                for c in done}
     if len(set(windows.values())) > 1:
-        out.append("A trend with U alone: the cases differ in their windows and lags as "
-                   "well (above), so a trend across them mixes U with the time since the "
-                   "start and the lag.")
+        # which windows and lags: the operating conditions' table, linked
+        differ = " and ".join(k for k, n in (("predict windows", {w for w, _ in
+                                                                   windows.values()}),
+                                              ("lags", {t for _, t in windows.values()}))
+                              if len(n) > 1)
+        out.append(f"A trend with U alone: the cases differ in more than U (their {differ}, "
+                   f"{link('operating conditions', CONDITIONS_HEADING)}), so a trend across "
+                   "them mixes U with the time since the start and the lag.")
     for check in checks:
         if check.passed is False:
-            out.append(f"The paper's riser shows {check.name}; this run's CFD-DEM does not "
-                       f"({check.evidence}).")
+            out.append(f"The check \"{check.name}\", which the paper's riser passes; this "
+                       f"run's CFD-DEM fails it ({link('the numbers', CONDITIONS_HEADING)}).")
     return out
 
 
 def _run_text(done: list[Case]) -> str:
-    """' (a riser of 0.04 m x 0.3 m with 3789 particles; the CFD-DEM run 0-4.5 s at 3 m/s,
-    ...)': what the finished cases ran, from their settings."""
+    """' (the CFD-DEM run from rest 0-4.5 s at 3, 4 m/s, 0-3 s at 6, 8 m/s)': how long the
+    finished cases ran, from their settings (their riser, particles, windows and lag are in
+    the operating conditions)."""
     if not done:
         return ""
-    risers = sorted({(c.config.riser.width, c.config.riser.height, c.config.particles.number)
-                     for c in done})
-    riser = "; ".join(f"{w:g} m x {h:g} m with {n} particles" for w, h, n in risers)
     runs: dict[str, list[str]] = {}
     for c in done:
         end = float(c.config.output.end_time)
         runs.setdefault(f"0-{end:g} s", []).append(_u(c))
     text = ", ".join(f"{span} at {', '.join(us)} m/s" for span, us in runs.items())
-    return f" (a riser of {riser}; the CFD-DEM run from rest {text})"
+    return f"the CFD-DEM run from rest {text}"
 
 
 def windows_text(done: list[Case], measures: dict) -> str | None:
@@ -317,16 +347,16 @@ def windows_text(done: list[Case], measures: dict) -> str | None:
     if len(settings) > 1:
         spans = []
         for c in done:
-            m = c.config.markov
             mean = finite_or_none(measures[c.name].reference.rt.mean)
-            spans.append(f"{_u(c)} m/s fit {m.fit_window[0]:g}-{m.fit_window[1]:g} s, predict "
-                         f"{m.predict_window[0]:g}-{m.predict_window[1]:g} s, lag {m.lag:g} s"
-                         + (f" (E(RT) {mean / m.lag:.0f} lags)" if mean is not None else ""))
-        out.append("The windows and lags differ per case: "
-                   + "; ".join(spans) + ". A riser started from rest takes a time that "
-                   "depends on U to develop its flow, and the windows lie after it; the "
-                   "faster the solids, the shorter their residence times, so the lag and the "
-                   "RTD bins shrink with U to keep a mean residence time many lags long.")
+            if mean is not None:
+                spans.append(f"{mean / c.config.markov.lag:.0f} lags at {_u(c)} m/s")
+        out.append("The windows and lags differ per case ("
+                   + link("operating conditions", CONDITIONS_HEADING) + "): a riser started "
+                   "from rest takes a time that depends on U to develop its flow, and the "
+                   "windows lie after it; the faster the solids, the shorter their residence "
+                   "times, so the lag and the RTD bins shrink with U to keep a mean residence "
+                   "time many lags long"
+                   + (f" (the CFD-DEM's E(RT) is {', '.join(spans)})." if spans else "."))
     flows, changing = [], []
     for c in done:
         d = getattr(measures[c.name], "development", None) or {}
@@ -366,10 +396,11 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
     Returns
     -------
     str
-        "Verdict: ..." naming how many velocity-model pairs beat the persistence baseline by
-        the report's one rule (:func:`cfbmarkov.analysis.baseline.judge_baseline`), how
-        often the paper's estimator misses E(RT) by no more than the paper's largest miss,
-        the physics checks failed, and the next step.
+        "Verdict at the ... scale: ..." naming how many velocity-model pairs beat the
+        persistence baseline by the report's one rule
+        (:func:`cfbmarkov.analysis.baseline.judge_baseline`), in how many cases the paper's
+        estimator misses E(RT) by no more than the paper's largest miss, each physics check
+        passed or failed (its numbers linked, not repeated), and the next step.
     """
     scale = meta.get("scale", "n/a")
     counts = baseline_counts(cases)
@@ -377,12 +408,13 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
     hidden = counts["not told apart"] + counts["tie"]
     parts = []
     if total:
+        every = (f"all {total} velocity-model pairs" if total > 1 else
+                 "the one velocity-model pair")
         if counts["beats"] == total:
-            parts.append(f"the models beat the persistence baseline in all {total} "
-                         "velocity-model pairs")
+            parts.append(f"the models beat the persistence baseline in {every}")
         elif counts["loses"] == total:
             parts.append("reusing the fitting window's RTD (the persistence baseline) predicts "
-                         f"better than the models in all {total} velocity-model pairs")
+                         f"better than the models in {every}")
         elif counts["beats"] == 0:
             parts.append(f"no model is shown to predict the RTD better than reusing the fitting "
                          f"window's (0 of {total} velocity-model pairs beat the persistence "
@@ -392,17 +424,14 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
         else:
             parts.append(f"the models beat the persistence baseline in {counts['beats']} of "
                          f"{total} velocity-model pairs")
-    rows = [s for _, name, s in _rows(cases) if name == PAPER_ESTIMATOR]
-    pd_e = [v for s in rows if (v := finite_or_none(s.get("pd_rt_mean"))) is not None]
-    if pd_e:
-        worst = max(abs(float(v[0])) for v in PAPER_TABLE3.values())
-        parts.append(f"the paper's estimator misses E(RT) by no more than the paper's largest "
-                     f"miss ({worst:.2f} %) in {sum(abs(v) <= worst for v in pd_e)} of "
-                     f"{len(pd_e)} cases")
+    paper = _paper_clause(cases)
+    if paper:
+        parts.append(paper)
     failed = [c.name for c in checks if c.passed is False]
-    if failed:
-        parts.append(f"the CFD-DEM fails {len(failed)} of {len(checks)} physics checks "
-                     f"(expected: {'; '.join(failed)})")
+    if checks:
+        # passed or failed, each; their numbers once, in the physics checks, linked
+        parts.append(f"physics checks of the CFD-DEM ({link('evidence', CONDITIONS_HEADING)}): "
+                     + "; ".join(f"{c.name}: {c.verdict.upper()}" for c in checks))
     text = "Verdict at the " + scale + " scale: " + ("; ".join(parts) or "nothing finished to "
                                                      "judge") + "."
     if failed and scale != "paper":
@@ -425,7 +454,10 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
 
 def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: dict,
                    estimators: list[str], checks: list[PhysicsCheck]) -> list:
-    """The report's opening section: what was run, the verdict, what the scale cannot show.
+    """The report's opening section: the verdict (:func:`headline`), its details, what was
+    run, why the windows differ (:func:`windows_text`), what the scale cannot show. Each
+    number is said once: the physics checks' evidence and each case's windows and lag are
+    left to :func:`conditions_blocks`, linked.
 
     Parameters
     ----------
@@ -449,8 +481,10 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
     """
     scale = meta.get("scale", "n/a")
     velocities = ", ".join(_u(c) for c in cases)
-    ran = (f"This report reproduces {CITATION}, Section 3, at the {scale} scale"
-           + _run_text(done) + f". Cases at U = {velocities} "
+    run = _run_text(done)
+    ran = (f"What was run: {CITATION}, Section 3, at the {scale} scale"
+           + (f", {run}" if run else "") + f" (each case's riser, particles, windows and lag: "
+           f"{link('operating conditions', CONDITIONS_HEADING)}). Cases at U = {velocities} "
            f"m/s, {len(done)} of {len(cases)} finished; models: {', '.join(estimators) or 'none'}"
            ", each fitted on the CFD-DEM's fitting window and compared with the CFD-DEM on "
            "the predict window that follows.")
@@ -458,15 +492,11 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
     interval = _interval_sentence(cases)
     if interval:
         verdict.append(interval)
-    checks_text = "; ".join(f"{c.name}: {c.verdict.upper()}" for c in checks)
-    verdict.append(f"Physics checks of the CFD-DEM ({link('evidence', CONDITIONS_HEADING)}): "
-                   f"{checks_text}.")
     blocks = [Heading(2, SUMMARY_HEADING), Para(headline(meta, cases, checks), css="verdict"),
-              Para(ran)]
+              Bullets(verdict), Para(ran)]
     windows = windows_text(done, measures)
     if windows:
         blocks.append(Para(windows))
-    blocks.append(Bullets(verdict))
     limits = _cannot_show(meta, done, checks)
     if limits:
         blocks += [Heading(3, f"What the {scale} scale cannot show"), Bullets(limits)]

@@ -20,7 +20,7 @@ from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.report.document import (Heading, Para, Table, finite_or_none, interval_text,
                                        link, number_text)
 from cfbmarkov.report.run_folder import Case
-from cfbmarkov.report.sections import DEFAULT_BIN_WIDTH, PAPER_TABLE3, paper_row
+from cfbmarkov.report.sections import DEFAULT_BIN_WIDTH, paper_row
 
 TABLE3_HEADING = "Table 3: RTD of the CFD-DEM and the MCM"
 DETAIL_HEADING = "Table 3 in detail"
@@ -152,7 +152,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3 and Eq. 9;
     ``docs/definitions.md`` (Metrics).
     """
-    rows, pd_sd, pd_mean, orders, widths, levels = [], [], [], set(), set(), set()
+    rows, orders, widths, levels = [], set(), set(), set()
     downward: set[str] = set()
     sizes: dict[str, dict] = {}
     for c in cases:
@@ -178,10 +178,6 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                     for k in (*columns, 4, 7, 8):
                         row[k] = NO_RESIDENCES
             rows.append(row)
-            if (v := finite_or_none(s.get("pd_rt_sd"))) is not None:
-                pd_sd.append(v)
-            if (v := finite_or_none(s.get("pd_rt_mean"))) is not None:
-                pd_mean.append(v)
             if (v := finite_or_none(s.get("md_order"))) is not None:
                 orders.add(v)
             if (v := finite_or_none(s.get("bin_width"))) is not None:
@@ -234,15 +230,6 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                      "predict window is downward: residence times run from entries through the "
                      "top to exits through the bottom (docs/definitions.md, Net downflow).")
     blocks = [Heading(2, TABLE3_HEADING), Table(COMPACT_HEADER, rows, notes)]
-    if pd_mean:
-        paper_e = [float(v[0]) for v in PAPER_TABLE3.values()]
-        paper_sd = [float(v[1]) for v in PAPER_TABLE3.values()]
-        under = sum(v < 0 for v in pd_sd)
-        blocks.append(Para(
-            f"PD of E(RT) ranges from {min(pd_mean):.2f} to {max(pd_mean):.2f} % (paper: "
-            f"{min(paper_e):.2f} to {max(paper_e):.2f} %); the MCM's SD(RT) is smaller than "
-            f"the CFD-DEM's in {under} of {len(pd_sd)} comparisons (paper: all four, by "
-            f"{-max(paper_sd):.0f} to {-min(paper_sd):.0f} %)."))
     return blocks
 
 
@@ -316,28 +303,27 @@ def table3_detail_blocks(cases: list[Case]) -> list:
 
 
 def _baseline_sentence(j: BaselineJudgement) -> str:
-    """The model against the persistence baseline, by the one rule, in a sentence."""
-    halves = ("" if j.md_halves is None else
-              f", the CFD-DEM's halves' {j.md_halves:.4g}")
-    head = (f"its RTD is {j.md:.4g} from the CFD-DEM's (MD), the persistence baseline's "
-            f"{j.md_base:.4g}{halves}: ")
+    """The model against the persistence baseline, by the one rule, in a sentence; the MDs
+    themselves are in Table 3's row (the model's, the baseline's and the halves'), not
+    repeated."""
     gap = abs(j.gap)
+    halves = ", more than the halves differ" if j.md_halves is not None else ""
     if j.outcome == "beats":
-        body = ("the model beats simply reusing the fitting window's RTD (its MD is lower by "
-                f"{gap:.2g}" + (", more than the halves differ)." if j.md_halves is not None
-                                else ")."))
+        body = ("the model beats simply reusing the fitting window's RTD (the persistence "
+                f"baseline): its MD is lower by {gap:.2g}{halves}.")
     elif j.outcome == "loses":
-        body = ("simply reusing the fitting window's RTD beats the model (its MD is higher "
-                f"by {gap:.2g}" + (", more than the halves differ)." if j.md_halves is not None
-                                   else ")."))
+        body = ("simply reusing the fitting window's RTD beats the model (the persistence "
+                f"baseline's MD is lower by {gap:.2g}{halves}).")
     elif j.outcome == "tie":
-        body = f"a tie (the two differ by less than {100 * j.tie:g} %)."
+        body = ("the model and simply reusing the fitting window's RTD (the persistence "
+                f"baseline) are a tie: their MDs differ by less than {100 * j.tie:g} %.")
     else:
-        body = (f"the two differ by {gap:.2g}, within the CFD-DEM's own variability: the "
-                "window cannot tell the model from simply reusing the fitting window's RTD.")
+        body = ("the model's MD and the persistence baseline's differ by "
+                f"{gap:.2g}, within the CFD-DEM's own variability: the window cannot tell the "
+                "model from simply reusing the fitting window's RTD.")
     if j.md_halves is None:
         body += " (No halves' variability is known: the tie margin alone judges.)"
-    return head + body
+    return "by the baseline rule (Table 3), " + body
 
 
 def _cluster_clause(c_ref: float, c_mod: float) -> str:
@@ -396,29 +382,31 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
         pd_own = [finite_or_none(own.get(k)) for k in ("pd_rt_mean", "pd_rt_sd")]
         pds = (f" (PD of E(RT) {pd_own[0]:+.1f} %, of SD(RT) {pd_own[1]:+.1f} %)"
                if None not in pd_own else "")
+        # the MDs (the model's, the baseline's, the halves') are in Table 3's row: said in
+        # words here, not repeated
         text = (f"On its own fitting window ({fit} s) the model is {md_own:.3g} from the "
                 f"CFD-DEM's RTD{pds}")
         if within:
-            text += (f". Its MD on the predict window ({md:.3g}) is within the CFD-DEM's own "
-                     f"variability (the halves of the window differ by {md_halves:.3g}): the "
-                     "window cannot tell how much of it is the model's own error and how much "
-                     "the flow's change.")
+            text += (". Its MD on the predict window is within the CFD-DEM's own variability "
+                     "(the MD between the two halves of the window, Table 3): the window "
+                     "cannot tell how much of it is the model's own error and how much the "
+                     "flow's change.")
         else:
             text += (f", {'smaller than' if md_own < md_base else 'at least'} the flow's "
-                     f"change between the windows ({md_base:.3g})"
+                     "change between the windows (the baseline's MD)"
                      + (": the flow's change, more than the model, limits this prediction."
                         if md_own < md_base else ": the model's own error dominates."))
         parts.append(text)
     if md_halves is not None and not within:
         flow_limits = md_own is not None and md_base is not None and md_own < md_base
-        parts.append(f"The CFD-DEM's two halves of the window differ by {md_halves:.3g}: the "
-                     f"model's error is {md / md_halves:.1f} times the reference's own "
-                     "variability"
+        parts.append(f"The model's error is {md / md_halves:.1f} times the reference's own "
+                     "variability (the MD between the CFD-DEM's two halves of the window, "
+                     "Table 3)"
                      + ("; the rest is the flow's change since the fitting window." if flow_limits
                         else "; the difference is the model's."))
     elif md_halves is not None and (md_own is None or md_base is None):
-        parts.append(f"The CFD-DEM's two halves of the window differ by {md_halves:.3g}: the "
-                     "model's error is within the reference's own variability.")
+        parts.append("The model's error is within the reference's own variability (the MD "
+                     "between the CFD-DEM's two halves of the window, Table 3).")
     long_run = summary.get("long_run") or {}
     md_long = finite_or_none(long_run.get("md_rtd"))
     if md_long is not None:
@@ -452,16 +440,10 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
     if interval and finite_or_none(ref.get("rt_mean")) is not None:
         inside = interval[0] <= ref["rt_mean"] <= interval[1]
         level = 100 * float(summary.get("level", 0.9))
-        own = model.get("model_rt_mean_interval")
-        # one precision for the value and its interval (ms): "0.400 s lies outside
-        # 0.229-0.398 s", not "0.4 s"
-        text = interval_text(interval[0], interval[1], sep="-")
-        own_text = None if not own else interval_text(own[0], own[1], sep="-")
-        parts.append(f"The CFD-DEM's E(RT) {ref['rt_mean']:.3f} s lies "
-                     f"{'inside' if inside else 'outside'} the model's {level:g} % interval "
-                     f"{text} s"
-                     + (f" (with the flow's variability between windows; the model's own "
-                        f"value: {own_text} s)." if own_text and own_text != text else "."))
+        # the value and the interval are in Table 3's row, the model's own interval in the
+        # detail table: said in words here, not repeated
+        parts.append(f"The CFD-DEM's E(RT) lies {'inside' if inside else 'outside'} the "
+                     f"model's {level:g} % interval (Table 3).")
     verdict = (summary.get("adequacy") or {}).get("warnings") or []
     if verdict:
         parts.append("The model's fitting sample was warned about when it was fitted: "

@@ -53,7 +53,8 @@ their observed residence times), :mod:`.criteria` (the three criteria behind one
 interface), :mod:`.candidates` (every candidate fitted, judged and scored), :mod:`.record`
 (the selection record stored in the model) and :mod:`.choice` (:func:`select_model`, which
 runs them, and the models named in a reproduction); :mod:`.pooled` (:func:`select_pooled`)
-runs them on several runs of one case, their windows pooled.
+runs them on several runs of one case, their windows pooled. The record's candidates as the
+table ``fit`` and the report print: :mod:`cfbmarkov.markov.selection_table`.
 """
 
 from cfbmarkov.markov.select.choice import (DEFAULT_LAG_MULTIPLES, DEFAULT_STATES, fit_by_name,

@@ -8,6 +8,7 @@ rows into its score, relative to the paper's cells.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import NamedTuple, Sequence
 
@@ -39,6 +40,8 @@ class JudgedCandidate(NamedTuple):
         not judged.
     error : str
         Why it was not judged ("" if it was).
+    visited : int or None
+        States occupied in some frame of the window; None where it was not discretised.
     """
 
     states: str
@@ -46,6 +49,7 @@ class JudgedCandidate(NamedTuple):
     n_states: int
     table: np.ndarray | None
     error: str
+    visited: int | None = None
 
 
 def candidate_spaces(traj, states: Sequence[str], lag_multiples: Sequence[int], lag: float,
@@ -135,16 +139,19 @@ def judge_candidates(traj, frames: WindowFrames, spaces: dict[tuple[str, float],
     fitting = criterion.fitting
     judged, discrete_of = [], {}
     for (name, lag), space in spaces.items():
+        visited = None
         try:
             discrete = frames.discretize(space, traj.lag_frames(lag))
             space = discrete.state_space          # fitted to the window (bins, sub-rows)
+            visited = _visited(discrete)
             est = estimator_from_name(estimator, space, lag)
             same = next((other for (other, t), d in discrete_of.items()
                          if t == lag and d.state_space.n_states == space.n_states
                          and np.array_equal(d.states, discrete.states)), None)
             if same is not None:       # fitted to the states of an earlier candidate
                 judged.append(JudgedCandidate(name, lag, discrete.state_space.n_states, None,
-                                              f"the same states as {same} on this window"))
+                                              f"the same states as {same} on this window",
+                                              visited))
                 continue
             discrete_of[(name, lag)] = discrete
             # sparse counts and chains: the work grows with the transitions, not S x S
@@ -156,10 +163,17 @@ def judge_candidates(traj, frames: WindowFrames, spaces: dict[tuple[str, float],
             rows = [criterion.judge(discrete, k, est, criterion.training(parts, k), lag)
                     for k in range(len(fitting.judged))]
         except (InputError, CfbmarkovError) as exc:
-            judged.append(JudgedCandidate(name, lag, space.n_states, None, str(exc)))
+            judged.append(JudgedCandidate(name, lag, space.n_states, None, str(exc), visited))
             continue
-        judged.append(JudgedCandidate(name, lag, space.n_states, np.asarray(rows), ""))
+        judged.append(JudgedCandidate(name, lag, space.n_states, np.asarray(rows), "", visited))
     return judged, discrete_of
+
+
+def _visited(discrete: DiscreteTrajectories) -> int:
+    """How many states are occupied in some frame of ``discrete`` (absent particles aside)."""
+    states = discrete.states.ravel()
+    return int(np.count_nonzero(np.bincount(states[states >= 0],
+                                            minlength=discrete.state_space.n_states)))
 
 
 def score_candidates(judged: list[JudgedCandidate], criterion: Criterion, lag: float
@@ -190,7 +204,10 @@ def score_candidates(judged: list[JudgedCandidate], criterion: Criterion, lag: f
         if c.table is None or not np.all(np.isfinite(c.table[:, column])):
             scores.append(CandidateScore(c.states, c.lag, c.n_states, math.nan, math.nan,
                                          math.nan, math.nan, math.nan, math.inf,
-                                         c.error or "no held-out comparison"))
+                                         c.error or "no held-out comparison",
+                                         visited=c.visited))
             continue
-        scores.append(criterion.score(c.states, c.lag, c.n_states, c.table, reference))
+        scores.append(dataclasses.replace(
+            criterion.score(c.states, c.lag, c.n_states, c.table, reference),
+            visited=c.visited))
     return scores

@@ -146,7 +146,9 @@ class Criterion(ABC):
 
     @abstractmethod
     def reason(self, best: CandidateScore, cells: CandidateScore | None) -> str:
-        """Why ``best`` was chosen, with the paper's cells (``cells``, None if not judged)."""
+        """Why ``best`` was chosen, in words (``cells``: the paper's cells, None if not judged);
+        the numbers of every candidate are in the record's table
+        (:func:`~cfbmarkov.markov.selection_table.candidate_columns`)."""
 
 
 class _RTDCriterion(Criterion):
@@ -222,17 +224,13 @@ class WindowRTD(_RTDCriterion):
     def _reason(self, best, cells):
         a, b = self.fitting.window
         observed = self.fitting.whole
-        reason = (f"{best.states} at lag {best.lag:g} s had the exact RTD closest to the one "
-                  f"observed over the fitting window {a:g}-{b:g} s (MD {best.md_rtd:.3g}, PD "
-                  f"E(RT) {best.pd_rt_mean:+.1f} %, SD(RT) {best.pd_rt_sd:+.1f} %")
-        reason += (f"; cells: MD {cells.md_rtd:.3g}, {cells.pd_rt_mean:+.1f} %, "
-                   f"{cells.pd_rt_sd:+.1f} %)" if cells is not None else ")")
-        # what the percentages are against: the chain's RTD as a window of that length
-        # sees it, against the window's observed one (not the intrinsic E(RT) printed below)
-        reason += (f"; the percentages set the chain's RTD as seen in a {b - a:g} s window "
-                   f"(E(RT) {best.rt_mean:.3g} s) against the window's observed E(RT) "
-                   f"{observed.mean:.3g} s, SD(RT) {observed.sd:.3g} s")
-        return reason
+        # what the table's percentages are against: the chain's RTD as a window of that
+        # length sees it, against the window's observed one (not the intrinsic E(RT))
+        return (f"{best.states} at lag {best.lag:g} s had the exact RTD closest to the one "
+                f"observed over the fitting window {a:g}-{b:g} s; the percentages set the "
+                f"chain's RTD as seen in a {b - a:g} s window (E(RT) {best.rt_mean:.3g} s) "
+                f"against the window's observed E(RT) {observed.mean:.3g} s, SD(RT) "
+                f"{observed.sd:.3g} s")
 
 
 class CrossValidatedRTD(_RTDCriterion):
@@ -258,13 +256,8 @@ class CrossValidatedRTD(_RTDCriterion):
 
     def _reason(self, best, cells):
         a, b = self.fitting.window
-        reason = (f"{best.states} at lag {best.lag:g} s had the lowest score {best.score:.3g} "
-                  f"in {self.fitting.folds}-fold blocked cross-validation over {a:g}-{b:g} s "
-                  f"(mean PD E(RT) {best.pd_rt_mean:+.1f} %, SD(RT) {best.pd_rt_sd:+.1f} %, MD "
-                  f"{best.md_rtd:.3g}")
-        reason += (f"; cells: {cells.pd_rt_mean:+.1f} %, {cells.pd_rt_sd:+.1f} %, MD "
-                   f"{cells.md_rtd:.3g}, score {cells.score:.3g})" if cells is not None else ")")
-        return reason
+        return (f"{best.states} at lag {best.lag:g} s had the lowest score in "
+                f"{self.fitting.folds}-fold blocked cross-validation over {a:g}-{b:g} s")
 
 
 class HeldOutCK(Criterion):
@@ -299,12 +292,9 @@ class HeldOutCK(Criterion):
         why = (f"the fitting window holds only {count} complete residences (fewer "
                f"than {MIN_RESIDENCES}), so the RTD could not judge; "
                if count < MIN_RESIDENCES else "")
-        reason = (f"{why}{best.states} "
-                  f"at lag {best.lag:g} s had the lowest held-out Chapman-Kolmogorov error "
-                  f"{best.ck_error:.4f} in {self.fitting.folds}-fold blocked cross-validation "
-                  f"over {a:g}-{b:g} s")
-        reason += (f" (cells: {cells.ck_error:.4f})" if cells is not None else "")
-        return reason
+        return (f"{why}{best.states} at lag {best.lag:g} s had the lowest held-out "
+                f"Chapman-Kolmogorov error in {self.fitting.folds}-fold blocked "
+                f"cross-validation over {a:g}-{b:g} s")
 
 
 #: the criteria by name

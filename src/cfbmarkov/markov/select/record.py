@@ -44,6 +44,9 @@ class CandidateScore:
         Why the candidate could not be judged ("" if it could).
     ck_error : float
         Held-out Chapman-Kolmogorov error (the criterion when residences are too few).
+    visited : int or None
+        States occupied in some frame of the fitting window (at the candidate's lag); None
+        where the candidate could not be discretised.
     """
 
     states: str
@@ -58,6 +61,7 @@ class CandidateScore:
     error: str = ""
     # held-out Chapman-Kolmogorov error (the criterion when residences are too few)
     ck_error: float = math.nan
+    visited: int | None = None
 
     def as_dict(self) -> dict[str, Any]:
         """The fields as a JSON-serialisable dict (non-finite numbers as None)."""
