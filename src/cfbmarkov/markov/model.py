@@ -113,12 +113,10 @@ class MarkovModel:
         A pooled fit's fitting window of each run of ``source``, in its order (``window``
         is the first); None for one run.
     flow_direction : {"up", "down"}
-        The direction of the fitting window's net solids flow, the direction
-        :meth:`rtd`, the intervals and the verdict count residences in: "down" where the
-        window's transitions passed down through the bottom more often than up through the
-        top (recorded at fit time; None given: read off the pass counts); "up" for an open
-        riser and for model files that do not record it (``docs/definitions.md``, Net
-        downflow).
+        The fitting window's net solids flow, the direction residences are counted in
+        (None given: read off the pass counts by
+        :func:`~cfbmarkov.markov.model_arrays.checked_flow_direction`;
+        ``docs/definitions.md``, Flow direction of a model).
 
     Raises
     ------
