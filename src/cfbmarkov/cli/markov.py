@@ -390,8 +390,8 @@ def add_rtd(sub) -> None:
                    help="observation window, s: the RTD as seen in such a window (default "
                         "none: the chain's intrinsic RTD)")
     s.add_argument("--json", action="store_true",
-                   help="print rt_mean, rt_sd, direction, level, rt_mean_interval, rt_sd_interval, "
-                        "rtd_interval, unresolved and warnings as JSON")
+                   help="print rt_mean, rt_sd, direction, level, rt_mean_interval, "
+                        "rt_sd_interval, rtd_interval, unresolved and warnings as JSON")
     s.add_argument("--level", type=level, default=None,
                    help="coverage of the interval (default: the model's, else 0.9; another "
                         "than the model's needs --resamples)")

@@ -11,7 +11,8 @@ states:
   ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
   ``cfbmarkov_version``; for a model fitted on several runs, ``run_windows`` (JSON, the
   window of each run of ``source``); ``flow_direction`` ("up" or "down", the direction
-  residences are counted in; a file without it reads as "up"); for a model chosen by ``--states auto``,
+  residences are counted in; a file without it reads as "up"); for a model chosen by
+  ``--states auto``,
   ``selection`` (JSON); for a model fitted on the largest strongly connected set, ``connected = 1``; where the
   fitting sample was judged, ``adequacy`` (JSON, :class:`~cfbmarkov.markov.adequacy.Adequacy`;
   optional, files without it read as models without a verdict);
