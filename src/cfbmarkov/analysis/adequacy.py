@@ -17,6 +17,9 @@ tell from the window alone when that flow may not be the run's:
 - and halves with fewer than :data:`MIN_PART_RESIDENCES` residences leave E(RT)
   unjudged, itself a warning.
 
+Every E(RT) is counted in the judged model's direction (its ``flow_direction``, the
+direction of its fitting window's net solids flow; ``docs/definitions.md``, Net downflow).
+
 A model fitted on several runs (a pooled fit) has these checks per run, each run's limit
 sqrt(N) times the pooled interval's (a run holds 1/N of the data), and two across the runs:
 the first halves of all the windows pooled against the second halves pooled (the flow
@@ -49,9 +52,11 @@ _ADVICE = ("fit on a longer window or pool several runs (fit A.h5 B.h5 ...); `cf
            "stationarity RUN --sample-length` tells how long a window must be")
 
 
-def _rt_mean(model) -> float:
+def _rt_mean(model, direction: str | None = None) -> float:
+    """E(RT) of ``model``'s exact RTD counted in ``direction`` (default its own flow
+    direction; the parts of a window are counted in the judged model's), NaN where none."""
     try:
-        return float(model.rtd().mean)
+        return float(model.rtd(direction=direction).mean)
     except (CfbmarkovError, ZeroDivisionError, FloatingPointError):
         return math.nan
 
@@ -85,7 +90,7 @@ def _parts_of(traj, discrete: DiscreteTrajectories, window, model, fitter):
     parts = []
     for a, b in use:
         try:
-            mean = _rt_mean(fitter.fit(discrete.block(a, b)))
+            mean = _rt_mean(fitter.fit(discrete.block(a, b)), model.flow_direction)
         except CfbmarkovError:
             mean = math.nan
         parts.append((a, b, mean, directions[(a, b)]))
@@ -181,7 +186,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     if pooled:
         run_means, pooled_lines, pooled_spread = _pooled_checks(
             fitter, data, names, windows, rt_mean, limit,
-            halves=pooled_fewest >= MIN_PART_RESIDENCES)
+            halves=pooled_fewest >= MIN_PART_RESIDENCES, direction=model.flow_direction)
         lines += pooled_lines
         if math.isfinite(pooled_spread):
             spread = pooled_spread if not math.isfinite(spread) else max(spread, pooled_spread)
@@ -197,20 +202,21 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
 
 
 def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
-                   halves: bool = True):
+                   halves: bool = True, direction: str = "up"):
     """A pooled fit's checks across its runs: the first halves of all the windows pooled
     against the second halves pooled (limit ``limit``), and each run's own model against
     the pooled one (limit ``limit`` sqrt(N - 1): a run holds 1/N of the data, so its E(RT)
     scatters sqrt(N) times the pooled interval's, and sqrt(1 - 1/N) of that about the
     pooled value). The halves are compared only with ``halves`` (where the pooled halves
-    hold at least MIN_PART_RESIDENCES residences each). Returns ((run, E(RT)) per run,
+    hold at least MIN_PART_RESIDENCES residences each). E(RT) counted in ``direction``
+    (the pooled model's). Returns ((run, E(RT)) per run,
     warning lines, the halves' spread)."""
     lines = []
     runs = len(data)
     means = []
     for d in data:
         try:
-            means.append(_rt_mean(fitter.fit(d)))
+            means.append(_rt_mean(fitter.fit(d), direction))
         except CfbmarkovError:
             means.append(math.nan)
     run_limit = limit * math.sqrt(runs - 1)
@@ -232,7 +238,7 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
             cut = _split((a, b), 2)[side]
             blocks.append(d.block(*cut))
         try:
-            means_of_halves.append(_rt_mean(fitter.fit(blocks)))
+            means_of_halves.append(_rt_mean(fitter.fit(blocks), direction))
         except CfbmarkovError:
             means_of_halves.append(math.nan)
     spread = _spread(means_of_halves, rt_mean)

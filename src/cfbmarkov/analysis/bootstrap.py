@@ -290,7 +290,7 @@ def _bootstrap_chains(model, blocks: int, resamples: int, seed: int):
         yield _SplitChain(*estimator.split_chain(total), model.state_space, model.lag)
 
 
-def flow_variability(model, window_length: float, *, direction: str = "up",
+def flow_variability(model, window_length: float, *, direction: str | None = None,
                      blocks: int = FLOW_BLOCKS):
     """How much the reference's E(RT) and SD(RT) in one window of ``window_length`` move by
     themselves from window to window, relative to their values, measured in the model's
@@ -327,7 +327,7 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
     window_length : float
         Length of the analysis window (s).
     direction : {"up", "down"}, optional
-        The direction residences are counted in.
+        The direction residences are counted in; default the model's ``flow_direction``.
     blocks : int, optional
         The most blocks B of the fitting window (at least 2).
 
@@ -353,6 +353,7 @@ def flow_variability(model, window_length: float, *, direction: str = "up",
     """
     if int(blocks) < 2:
         raise InputError(f"the flow's variability needs at least 2 blocks ({blocks})")
+    direction = model.flow_direction if direction is None else direction
     runs = fitting_runs(model)
     whole = []
     for source, window in runs:

@@ -25,7 +25,8 @@ import numpy as np
 from cfbmarkov.analysis.baseline import (WindowDifference, fitting_runs_of, fitting_window,
                                          model_on_fitting_window, pooled_window_difference,
                                          window_difference)
-from cfbmarkov.analysis.compare_inputs import check_parameters, check_runs, default_bin_width
+from cfbmarkov.analysis.compare_inputs import (check_parameters, check_runs, default_bin_width,
+                                               model_flow_direction)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.errors import InputError
@@ -154,8 +155,10 @@ class RunComparison:
         The prediction's intervals, set by the report where they can be formed
         (:mod:`cfbmarkov.analysis.intervals`).
     direction : {"up", "down"}
-        The direction residences are counted in: down where the reference's net solids
-        flow over the window is downward.
+        The direction residences are counted in: the model's (its fitting window's net
+        solids flow, :attr:`MarkovModel.flow_direction
+        <cfbmarkov.markov.model.MarkovModel.flow_direction>`) where the prediction records
+        it, else down where the reference's net solids flow over the window is downward.
     cluster : dict or None
         The cluster index of each side's snapshots (mean and SD over the window's frames,
         :func:`cfbmarkov.observed.clusters.cluster_index`) and the grid it was counted on.
@@ -350,7 +353,9 @@ def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float,
                      basis: str, warnings: list[str]) -> _Basis:
     """The residence times' basis of both sides: the reference's frames per model lag (a
     warning where the lag is not a whole number of them), the face band of one cell row
-    and the direction of the reference's net solids flow over the window."""
+    and the direction residences are counted in: the model's (its fitting window's net
+    solids flow, recorded in the prediction's ``/provenance/model``; a warning where the
+    reference's net flow over the window runs the other way), else the reference's."""
     if basis not in BASES:
         raise InputError(f"comparison basis {basis!r}: choose frames or events")
     if basis == "events" and not ref.has_events:
@@ -369,7 +374,14 @@ def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float,
                             f"of the reference's frames ({ref.frame_interval:g} s): its "
                             "residence times use every frame")
     direction = net_flow_direction(ref, window)
-    if direction == "down":
+    model_direction = model_flow_direction(pred)
+    if model_direction is not None and model_direction != direction:
+        warnings.append(f"the model counts residences {model_direction}ward (its fitting "
+                        f"window's net solids flow runs {model_direction}) but the "
+                        f"reference's net flow over the window runs {direction}: both sides "
+                        f"are counted {model_direction}ward, as the model")
+        direction = model_direction
+    elif direction == "down":
         warnings.append("the solids' net flow over the window is downward: residence times "
                         "run from entries through the top to exits through the bottom")
     return _Basis(basis, basis == "events", lag_frames, band, direction)

@@ -142,6 +142,28 @@ def model_columns(traj: Trajectories) -> int | None:
     return None if columns is None else int(columns)
 
 
+def model_flow_direction(traj: Trajectories) -> str | None:
+    """The direction the model behind a prediction counts residences in.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+
+    Returns
+    -------
+    {"up", "down"} or None
+        The ``flow_direction`` attribute of ``/provenance/model``; None where the file
+        carries no model, or one whose file does not record it (or records something else).
+    """
+    group = traj.group("model")
+    if group is None or "flow_direction" not in group.attrs:
+        return None
+    value = group.attrs["flow_direction"]
+    value = value.decode(errors="replace") if isinstance(value, bytes) else str(value)
+    return value if value in ("up", "down") else None
+
+
 def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
                ) -> tuple[slice, slice, int | None]:
     """Check that two files can be compared over a window.

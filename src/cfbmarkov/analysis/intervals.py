@@ -170,7 +170,7 @@ def _replicate_noise(model, states, left_group, n_steps: int, edges: np.ndarray,
 
 def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_length: float, *,
                          level: float = 0.9, blocks: int = 10, resamples: int = 100,
-                         seed: int = 0, direction: str = "up", mixing=None,
+                         seed: int = 0, direction: str | None = None, mixing=None,
                          tracers=None, flow: bool = True) -> PredictionIntervals:
     """Intervals of a prediction's E(RT), SD(RT), RTD and mixing curve (module docstring).
 
@@ -194,7 +194,8 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     seed : int, optional
         Seed of the resampling.
     direction : {"up", "down"}, optional
-        The direction residences are counted in (:meth:`MarkovModel.rtd`).
+        The direction residences are counted in (:meth:`MarkovModel.rtd`); default the
+        model's ``flow_direction``, the direction of its fitting window's net solids flow.
     mixing : (ndarray, ndarray), each of shape (T,), optional
         The prediction's mixing curve: its frame times (s), one lag apart from the window
         start, and its values (:func:`cfbmarkov.analysis.mixing.mixing_curve_of`).
@@ -239,6 +240,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         raise InputError("intervals need at least 2 residence-time samples in the window")
     if (mixing is None) != (tracers is None):
         raise InputError("the mixing band needs both the prediction's curve and the tracers")
+    direction = model.flow_direction if direction is None else direction
     exact = model.rtd(window_length, direction)
     entry = exact.entry_distribution
     curve = None
@@ -332,7 +334,7 @@ def model_rtd_edges(rtd) -> np.ndarray:
 
 
 def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: int = 100,
-                    seed: int = 0, direction: str = "up"):
+                    seed: int = 0, direction: str | None = None):
     """Intervals of a fitted model's exact E(RT), SD(RT) and RTD per bin, from its fitting
     window alone (``docs/definitions.md``, The model's interval).
 
@@ -364,7 +366,8 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     seed : int, optional
         Seed of the resampling.
     direction : {"up", "down"}, optional
-        The direction residences are counted in (:meth:`MarkovModel.rtd`).
+        The direction residences are counted in (:meth:`MarkovModel.rtd`); default the
+        model's ``flow_direction``, the direction of its fitting window's net solids flow.
 
     Returns
     -------
@@ -394,6 +397,7 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")
     runs = fitting_runs(model)
+    direction = model.flow_direction if direction is None else direction
     exact = model.rtd(None, direction)
     edges = model_rtd_edges(exact)
     means, sds, rtds, _ = bootstrap_figures(model, None, direction, exact.entry_distribution,

@@ -260,7 +260,7 @@ def cmd_rtd(args) -> int:
     adequacy = getattr(model, "adequacy", None)
     warnings = [str(line) for line in getattr(adequacy, "warnings", ()) or ()]
     if args.json:
-        out = {"rt_mean": rtd.mean, "rt_sd": rtd.sd,
+        out = {"rt_mean": rtd.mean, "rt_sd": rtd.sd, "direction": model.flow_direction,
                "window_length": args.window_length, "unresolved": rtd.unresolved,
                "level": None if band is None else band.level,
                "rt_mean_interval": None if band is None else list(band.rt_mean_interval),
@@ -278,6 +278,10 @@ def cmd_rtd(args) -> int:
     figures = (band.describe(rtd.mean, rtd.sd) if band is not None
                else f"E(RT) = {rtd.mean:.4f} s, SD(RT) = {rtd.sd:.4f} s")
     print(f"{figures} ({kind}, unresolved mass {rtd.unresolved:.2g})")
+    if model.flow_direction == "down":
+        from cfbmarkov.markov.model_summary import DOWNWARD_LINE
+
+        print(f"  {DOWNWARD_LINE}")
     if band is None and model.uncertainty is not None:
         print(f"  the model's {model.uncertainty.percent} % interval is of the intrinsic RTD: "
               "leave out --window-length to see it")
@@ -410,8 +414,8 @@ def add_rtd(sub) -> None:
                    help="observation window, s: the RTD as seen in such a window (default "
                         "none: the chain's intrinsic RTD)")
     s.add_argument("--json", action="store_true",
-                   help="print rt_mean, rt_sd, level, rt_mean_interval, rt_sd_interval, "
-                        "rtd_interval, unresolved and warnings as JSON")
+                   help="print rt_mean, rt_sd, direction, level, rt_mean_interval, "
+                        "rt_sd_interval, rtd_interval, unresolved and warnings as JSON")
     s.add_argument("--level", type=level, default=None,
                    help="coverage of the interval (default: the model's, else 0.9; another "
                         "than the model's needs --resamples)")

@@ -199,7 +199,7 @@ class PropertyAnswer:
                                      for x in self.bed_mean_by_cell]}
 
 
-def residence_chain(model, direction: str = "up"
+def residence_chain(model, direction: str | None = None
                     ) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray, int]:
     """The absorbing chain of a model's residences, on the states from which an exit can be
     reached (module docstring).
@@ -208,9 +208,10 @@ def residence_chain(model, direction: str = "up"
     ----------
     model : MarkovModel
     direction : {"up", "down"}, optional
-        A periodic riser's residences: from passes up through the top (default) or, for a
-        net downflow, down through the bottom (the roles of the two passes swapped, entered
-        with the downward exact RTD's entry distribution). Ignored for an open riser.
+        A periodic riser's residences: from passes up through the top or, for a net
+        downflow, down through the bottom (the roles of the two passes swapped, entered
+        with the downward exact RTD's entry distribution); default the model's
+        ``flow_direction``. Ignored for an open riser.
 
     Returns
     -------
@@ -234,6 +235,7 @@ def residence_chain(model, direction: str = "up"
         live = _reaching(q, r > 0)
         levels = 1
     else:
+        direction = model.flow_direction if direction is None else direction
         if direction not in ("up", "down"):
             raise InputError(f"residence direction {direction!r}: up or down")
         entry = model.rtd(direction=direction).entry_distribution
@@ -256,7 +258,7 @@ def residence_chain(model, direction: str = "up"
 
 
 def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
-                   direction: str = "up") -> dict[str, PropertyAnswer]:
+                   direction: str | None = None) -> dict[str, PropertyAnswer]:
     """Exact answers of every property of linear kinetics on a model.
 
     Parameters
@@ -270,7 +272,8 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         ones the model stores, :attr:`MarkovModel.cell_fields`).
     direction : {"up", "down"}, optional
         A periodic riser's residences (:func:`residence_chain`): from passes up through the
-        top (default) or down through the bottom (a net downflow).
+        top or down through the bottom (a net downflow); default the model's
+        ``flow_direction``.
 
     Returns
     -------
@@ -321,7 +324,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
 
 
 def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float,
-                        cell_fields=None, direction: str = "up") -> dict[str, float]:
+                        cell_fields=None, direction: str | None = None) -> dict[str, float]:
     """The mean exit value per residence as a window of ``length`` seconds observes it:
     each residence of n lags weighted by the number of places it fits in the window.
 

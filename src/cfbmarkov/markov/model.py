@@ -31,7 +31,7 @@ from cfbmarkov.limits import check_seed
 from cfbmarkov.markov import model_file, model_summary, propagation
 from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.model_arrays import (SQUARE_ARRAYS, checked_arrays, checked_coherence,
-                                          checked_run_windows)
+                                          checked_flow_direction, checked_run_windows)
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.regime_chain import (conditional_chain, regime_matrix, regime_path,
@@ -112,6 +112,11 @@ class MarkovModel:
     run_windows : tuple of (float, float) or None
         A pooled fit's fitting window of each run of ``source``, in its order (``window``
         is the first); None for one run.
+    flow_direction : {"up", "down"}
+        The fitting window's net solids flow, the direction residences are counted in
+        (None given: read off the pass counts by
+        :func:`~cfbmarkov.markov.model_arrays.checked_flow_direction`;
+        ``docs/definitions.md``, Flow direction of a model).
 
     Raises
     ------
@@ -153,6 +158,7 @@ class MarkovModel:
     source_identity: str | None = None
     cell_fields: CellFields | None = None
     run_windows: tuple[tuple[float, float], ...] | None = None
+    flow_direction: str | None = None
     _cache: dict = field(default_factory=dict, repr=False, compare=False)
     adopt: InitVar[bool] = field(default=False, kw_only=True)
 
@@ -165,6 +171,8 @@ class MarkovModel:
             object.__setattr__(self, name, value)
         object.__setattr__(self, "pass_fractions", fractions)
         object.__setattr__(self, "coherence", checked_coherence(self.coherence))
+        object.__setattr__(self, "flow_direction", checked_flow_direction(
+            self.flow_direction, self.counts_up, self.counts_down, self.open_flow is not None))
         if not (isinstance(self.frame_pairs, (int, np.integer)) and self.frame_pairs >= 0):
             raise InputError(f"model frame_pairs {self.frame_pairs!r} must be a count >= 0")
         if self.window is not None and not (len(self.window) == 2 and all(
@@ -343,7 +351,8 @@ class MarkovModel:
         return propagation.batch_injection_maps(self, times, outflow)
 
     # -- residence times (cfbmarkov.markov.model_rtd) ---------------------------------
-    def rtd(self, window: float | None = None, direction: str = "up") -> "ResidenceTimeDistribution":
+    def rtd(self, window: float | None = None, direction: str | None = None
+            ) -> "ResidenceTimeDistribution":
         """Exact residence-time distribution (no sampling noise), cached.
 
         Parameters
@@ -352,9 +361,9 @@ class MarkovModel:
             Length (s) of an analysis window: the RTD as seen in it, the quantity a
             sample-based RTD estimates (None: the intrinsic RTD).
         direction : {"up", "down"}, optional
-            A periodic riser's residences from passes up through the top (default) or, for
-            a net downflow, down through the bottom (the pass fractions swapped;
-            ``docs/definitions.md``, Net downflow).
+            A periodic riser's residences from passes up through the top or, for a net
+            downflow, down through the bottom (the pass fractions swapped;
+            ``docs/definitions.md``, Net downflow); default :attr:`flow_direction`.
 
         Returns
         -------
@@ -365,8 +374,9 @@ class MarkovModel:
         Raises
         ------
         CfbmarkovError
-            If the model has no transition up through the top (no residence ends), or no
-            residence fits in ``window``.
+            If the model has no transition through the boundary in ``direction`` (no
+            residence ends), or no residence fits in ``window``; InputError for a
+            ``direction`` that is neither up nor down.
 
         Notes
         -----
@@ -527,7 +537,8 @@ class MarkovModel:
 
     # -- description -------------------------------------------------------------------
     def describe(self) -> dict[str, Any]:
-        """Estimator, lag (s), window (s), state space, source and selection.
+        """Estimator, lag (s), window (s), state space, source and selection (and the flow
+        direction where it is down).
 
         Returns
         -------
@@ -539,6 +550,8 @@ class MarkovModel:
                "state_space": self.state_space.to_attrs(), "source": self.source}
         if self.coherence:
             out["coherence"] = self.coherence
+        if self.flow_direction == "down":
+            out["flow_direction"] = "down"
         if self.selection:
             out["selection"] = self.selection
         return out

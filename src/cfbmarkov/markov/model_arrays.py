@@ -68,6 +68,42 @@ def checked_coherence(value) -> float:
     return float(value)
 
 
+def checked_flow_direction(value, counts_up: np.ndarray, counts_down: np.ndarray,
+                           open_riser: bool) -> str:
+    """The direction a model counts residences in: ``value`` checked, or where it is None
+    the fitting window's net solids flow read off its pass counts ("down" where a periodic
+    riser's transitions passed down through the bottom more often than up through the top;
+    "up" otherwise and for an open riser).
+
+    Parameters
+    ----------
+    value : {"up", "down"} or None
+        The recorded direction (None: from the counts).
+    counts_up, counts_down : ndarray of int64, shape (S, S)
+        The transitions that passed up through the top / down through the bottom.
+    open_riser : bool
+        An open riser's model (always "up": from the inlet to the outlet).
+
+    Returns
+    -------
+    {"up", "down"}
+
+    Raises
+    ------
+    InputError
+        If ``value`` is neither None, "up" nor "down", or "down" for an open riser.
+    """
+    if value is None:
+        if open_riser:
+            return "up"
+        return "down" if int(counts_down.sum()) > int(counts_up.sum()) else "up"
+    if isinstance(value, bytes):
+        value = value.decode(errors="replace")
+    if value not in ("up", "down") or (open_riser and value == "down"):
+        raise InputError(f"model flow direction {value!r}: up or down (an open riser: up)")
+    return str(value)
+
+
 def checked_run_windows(windows, source) -> tuple[tuple[float, float], ...]:
     """A pooled fit's windows, one per run of ``source``, as a tuple of float pairs.
 

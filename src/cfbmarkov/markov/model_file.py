@@ -10,7 +10,9 @@ states:
   ``rows``, ``lag`` (s), ``window`` (s, NaN for none), ``estimator``, ``source`` (JSON),
   ``frame_pairs``, ``n_transitions``, ``n_unvisited_states``, ``created``,
   ``cfbmarkov_version``; for a model fitted on several runs, ``run_windows`` (JSON, the
-  window of each run of ``source``); for a model chosen by ``--states auto``,
+  window of each run of ``source``); ``flow_direction`` ("up" or "down", the direction
+  residences are counted in; a file without it reads as "up"); for a model chosen by
+  ``--states auto``,
   ``selection`` (JSON); for a model fitted on the largest strongly connected set, ``connected = 1``; where the
   fitting sample was judged, ``adequacy`` (JSON, :class:`~cfbmarkov.markov.adequacy.Adequacy`;
   optional, files without it read as models without a verdict);
@@ -96,6 +98,7 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         "n_unvisited_states": int(model.unvisited_states.size),
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "cfbmarkov_version": _version(),
+        "flow_direction": model.flow_direction,
     }
     if model.run_windows is not None:
         attrs["run_windows"] = json.dumps([list(w) for w in model.run_windows])
@@ -229,7 +232,8 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         if "source_identity" in group.attrs else None,
         cell_fields=_cell_fields(group),
         run_windows=json.loads(_text_attr(group.attrs["run_windows"]))
-        if "run_windows" in group.attrs else None)
+        if "run_windows" in group.attrs else None,
+        flow_direction=_text_attr(group.attrs.get("flow_direction", "up")))
 
 
 def _cell_fields(group) -> CellFields | None:

@@ -20,7 +20,7 @@ if TYPE_CHECKING:
 
 
 def model_rtd(model: "MarkovModel", window: float | None = None,
-              direction: str = "up") -> ResidenceTimeDistribution:
+              direction: str | None = None) -> ResidenceTimeDistribution:
     """Exact residence-time distribution of ``model`` (no sampling noise), cached in it.
 
     Parameters
@@ -30,8 +30,8 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
     window : float, optional
         Length (s) of an analysis window: the RTD as seen in it (None: the intrinsic RTD).
     direction : {"up", "down"}, optional
-        A periodic riser's residences from passes up through the top (default) or down
-        through the bottom (the pass fractions swapped).
+        A periodic riser's residences from passes up through the top or down through the
+        bottom (the pass fractions swapped); default the model's ``flow_direction``.
 
     Returns
     -------
@@ -44,8 +44,8 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
         If ``window`` is not a positive finite time of at most
         :data:`~cfbmarkov.limits.MAX_STEPS` lags, or ``direction`` is neither up nor down.
     CfbmarkovError
-        If the model has no transition up through the top (no residence ends), or no
-        residence fits in ``window``.
+        If the model has no transition through the boundary in ``direction`` (no residence
+        ends), or no residence fits in ``window``.
 
     Notes
     -----
@@ -60,10 +60,14 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
     cache = model._cache
     if model.open_flow is not None:
         return _with_uncertainty(model, _open_rtd(model, window), window)
+    if direction is None:
+        direction = model.flow_direction
     if direction not in ("up", "down"):
         raise InputError(f"residence direction {direction!r}: up or down")
+    own = direction == model.flow_direction     # the direction the uncertainty is of
     if direction == "down":
-        return _down_rtd(model, window)
+        rtd = _down_rtd(model, window)
+        return _with_uncertainty(model, rtd, window) if own else rtd
     if window is not None and "rtd" not in cache:
         # a window of n lags sees residence times below n lags only: propagate no further
         steps = max(2, int(round(window / model.lag)))
@@ -78,7 +82,9 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
                                  model.down_fraction, model.lag,
                                  entry_flux=_entry_flux(model))
     intrinsic = cache["rtd"]
-    return _with_uncertainty(model, intrinsic) if window is None else intrinsic.in_window(window)
+    if window is not None:
+        return intrinsic.in_window(window)
+    return _with_uncertainty(model, intrinsic) if own else intrinsic
 
 
 def _entry_flux(model: "MarkovModel") -> np.ndarray | None:

@@ -12,6 +12,11 @@ if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
 
 
+#: the line ``fit``, ``rtd`` and ``info`` print for a model of a net downflow
+DOWNWARD_LINE = ("residences counted downward: the fitting window's net solids flow runs "
+                 "down")
+
+
 def model_warnings(model: "MarkovModel") -> list[str]:
     """Lines about states entered but never left (traps), for an open riser about many
     tracks that ended or began away from the faces, and the fitting sample's verdict
@@ -49,7 +54,8 @@ def _windows_text(model: "MarkovModel") -> str:
 def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     """A few lines of text: state space, lag, fitting data, passes (or an open riser's exits
     and entries), unvisited states, warnings, regimes, coherence, closed classes, the
-    selection and the exact E(RT) and SD(RT).
+    selection, the direction residences are counted in where it is down
+    (:data:`DOWNWARD_LINE`) and the exact E(RT) and SD(RT).
 
     Parameters
     ----------
@@ -103,6 +109,8 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
 
         lines.append(f"  chosen automatically: {model.selection.get('reason', '')}")
         lines.extend(f"    {line}" for line in candidate_table(model.selection))
+    if model.flow_direction == "down":
+        lines.append(f"  {DOWNWARD_LINE}")
     try:
         r = model.rtd()
         if r.uncertainty is not None:
