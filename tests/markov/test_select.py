@@ -226,3 +226,20 @@ def test_net_downflow_is_judged_downward(tmp_path):
     for a, b in zip(down["candidates"], up["candidates"]):
         for key in ("pd_rt_mean", "pd_rt_sd", "md_rtd", "score"):
             assert a[key] == pytest.approx(b[key], rel=1e-9, abs=1e-12), (a["states"], key)
+
+
+def test_auto_fit_at_the_file_start_keeps_its_verdict_and_interval(tmp_path, capsys):
+    """A window starting at the file's first frame: the choice judges memory spaces with
+    the window's first frames as their history, and the verdict's halves and the interval's
+    bootstrap re-read the window the same way (they refused "needs 1 frame(s) of history"
+    whenever a space with memory won)."""
+    run = tmp_path / "run.h5"
+    synthetic.write_run(run, synthetic.RiserFlow(), 80, 3.0, seed=3)
+    out = tmp_path / "m.h5"
+    code = main(["fit", str(run), "--states", "auto", "--window", "0:2.5", "--resamples", "20",
+                 "-q", "-o", str(out)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    model = MarkovModel.load(out)
+    assert model.state_space.memory_lags >= 1        # a space with memory won here
+    assert model.uncertainty is not None and model.adequacy is not None

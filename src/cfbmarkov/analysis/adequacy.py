@@ -155,8 +155,10 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     data, names, pooled_fewest = [], [], 0
     for k, (run, window) in enumerate(zip(runs, windows)):
         with opened(run) as traj:
+            # as the model was fitted: an automatic choice of a space with memory on a
+            # window at the file's start takes its first frames as history ("skip")
             d = discrete[k] if discrete is not None else discretize(
-                traj, model.state_space, model.lag, window)
+                traj, model.state_space, model.lag, window, short_history="skip")
             parts, fewest = _parts_of(traj, d, window, model, fitter)
             name = traj.path
         data.append(d)

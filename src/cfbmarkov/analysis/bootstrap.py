@@ -165,7 +165,9 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
     frame_average = model.estimator == "paper"
     counts = []           # blocks of run r at counts[r * blocks: (r + 1) * blocks]
     for source, window in fitting_runs(model):
-        discrete = discretize(source, model.state_space, model.lag, window)
+        # as the model was fitted (an automatic choice at the file's start: "skip")
+        discrete = discretize(source, model.state_space, model.lag, window,
+                              short_history="skip")
         # the frame pairs (t, t + lag) are split, by their first frame, into contiguous
         # blocks: each pair is counted in exactly one block, none across a block's edge lost
         lag_frames = int(discrete.lag_frames)
