@@ -57,3 +57,21 @@ def test_fit_states_auto_on_several_runs(runs, tmp_path, capsys):
     assert main(["fit", str(runs["a"]), str(runs["a"]), "--states", "auto", "--cells", "3x8",
                  "--window", "0.5:4", "-o", str(tmp_path / "x.h5")]) == 2
     assert "same data" in capsys.readouterr().err
+
+
+def test_reproduction_ensemble_auto_is_chosen_on_all_members(runs):
+    """A reproduction's ensemble (markov.select.fit_pooled_by_name) chooses ``auto`` on all
+    the members' windows pooled, as ``fit a b --states auto`` does: the same record and
+    transition matrix."""
+    from cfbmarkov.markov.select.choice import fit_pooled_by_name
+
+    with contextlib.ExitStack() as stack:
+        opened = [stack.enter_context(Trajectories(runs[k])) for k in ("a", "b")]
+        by_name = fit_pooled_by_name("auto", opened, window=WINDOW, columns=3, rows=8,
+                                     lag=FLOW.lag)
+        direct = select_pooled(opened, windows=[WINDOW, WINDOW], columns=3, rows=8,
+                               lag=FLOW.lag, states=DEFAULT_STATES, lag_multiples=(1,),
+                               estimator="mle")
+    assert by_name.selection["chosen"] == direct.selection["chosen"]
+    assert by_name.run_windows == (WINDOW, WINDOW)
+    assert (by_name.transition_matrix == direct.transition_matrix).all()

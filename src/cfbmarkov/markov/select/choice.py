@@ -225,9 +225,9 @@ def fit_pooled_by_name(name: str, runs: Sequence, *, window: tuple[float, float]
     """Fit the model ``name`` on ``window`` of several runs of one case, their transitions
     pooled (:mod:`cfbmarkov.markov.pooling`), as :func:`fit_by_name` does on one run.
 
-    ``auto`` chooses the state space and lag on the first run (:func:`select_model`, which
-    judges candidates on one run's blocks), then fits the chosen space on all runs pooled
-    and keeps the selection record.
+    ``auto`` chooses the state space and lag on all the runs' windows pooled and fits the
+    chosen one on all of them (:func:`~cfbmarkov.markov.select.pooled.select_pooled`, as
+    ``fit a.h5 b.h5 --states auto``).
 
     Parameters
     ----------
@@ -260,16 +260,16 @@ def fit_pooled_by_name(name: str, runs: Sequence, *, window: tuple[float, float]
         raise InputError("no runs to fit")
     states, estimator = parse_model_name(name)
     first = runs[0]
-    chosen = None
     if states == "auto":
-        chosen = select_model(first, window=window, columns=columns, rows=rows, lag=lag,
-                              estimator=estimator, coherent=coherent)
-        space, lag = chosen.state_space, chosen.lag
-    else:
-        space = state_space_from_name(states, columns, rows, first.width, first.height)
+        from cfbmarkov.markov.select.pooled import select_pooled
+
+        return select_pooled(runs, windows=[tuple(window)] * len(runs), columns=columns,
+                             rows=rows, lag=lag, states=DEFAULT_STATES,
+                             lag_multiples=DEFAULT_LAG_MULTIPLES, estimator=estimator,
+                             coherent=coherent)
+    space = state_space_from_name(states, columns, rows, first.width, first.height)
     discrete = discretize_runs(runs, space, lag, [tuple(window)])
-    model = estimator_from_name(estimator, space, lag, False, coherent).fit(discrete)
-    return model if chosen is None else model.with_selection(chosen.selection)
+    return estimator_from_name(estimator, space, lag, False, coherent).fit(discrete)
 
 
 __all__ = ["DEFAULT_LAG_MULTIPLES", "DEFAULT_STATES", "fit_by_name", "fit_pooled_by_name",
