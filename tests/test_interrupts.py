@@ -19,7 +19,16 @@ from cfbmarkov.cli import main
 SRC = str(Path(__file__).resolve().parents[1] / "src")
 
 
-def test_deferred_holds_ctrl_c_until_the_block_ends():
+@pytest.fixture
+def default_sigint():
+    """SIGINT as in a program started from a shell (the default handler): a test worker
+    process may have it ignored, and then no Ctrl-C arrives at all."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
+def test_deferred_holds_ctrl_c_until_the_block_ends(default_sigint):
     reached = False
     with pytest.raises(KeyboardInterrupt):
         with _interrupt.deferred():
@@ -30,7 +39,7 @@ def test_deferred_holds_ctrl_c_until_the_block_ends():
     assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
 
 
-def test_counting_holds_ctrl_c_until_its_kernels_return(monkeypatch):
+def test_counting_holds_ctrl_c_until_its_kernels_return(monkeypatch, default_sigint):
     from cfbmarkov.markov import counting
 
     seen = []
@@ -63,7 +72,7 @@ def test_ctrl_c_while_the_modules_load_is_one_line(monkeypatch, capsys):
             raise KeyboardInterrupt              # as a Ctrl-C in the middle of the import
         return real(name, *args, **kwargs)
 
-    monkeypatch.delitem(sys.modules, "cfbmarkov.cli.command")
+    monkeypatch.delitem(sys.modules, "cfbmarkov.cli.command", raising=False)
     monkeypatch.setattr(builtins, "__import__", slow_import)
     assert main(["info", "x.h5"]) == 130
     assert capsys.readouterr().err == "cfbmarkov: interrupted\n"

@@ -102,8 +102,20 @@ def test_fit_names_its_stages_and_is_silent_with_q(tmp_path, capsys, markov_run)
 
 def test_compare_says_it_is_alive_every_few_seconds(tmp_path, capsys, markov_run, fitted,
                                                    monkeypatch):
+    import importlib
+    import time
+
+    report_compare = importlib.import_module("cfbmarkov.report.compare")
+
     _, pred = fitted
     monkeypatch.setattr(_console, "HEARTBEAT_EVERY", 0.05)
+    real = report_compare.compare
+
+    def slow_compare(*args, **kwargs):      # at least a few beats long on any machine
+        time.sleep(0.3)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(report_compare, "compare", slow_compare)
     code, out, err = run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
                              "--no-figures", "--resamples", "0", "-o", tmp_path / "c")
     assert code == 0
