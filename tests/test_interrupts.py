@@ -101,8 +101,9 @@ def test_ctrl_c_during_fit_states_auto_is_clean(tmp_path, delay):
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=300)
     assert "Traceback" not in err and "Fatal Python error" not in err, err
-    assert p.returncode in (0, 130), (p.returncode, err)
-    if p.returncode == 130:
+    # 130 from the handler, or ended by the signal itself (-2: the shell shows 130 too)
+    assert p.returncode in (0, 130, -signal.SIGINT), (p.returncode, err)
+    if p.returncode != 0:
         assert err.splitlines()[-1].endswith("interrupted"), err
         assert not (tmp_path / "m.h5").exists()
         assert sorted(x.name for x in tmp_path.iterdir()) == ["run.h5"]
