@@ -11,12 +11,12 @@ bed weight per unit cross-section (block mean and running mean from 0.3 s), and 
 of the weight the floor and the side walls carried in the block (their impulse on the
 particles over the block's weight impulse). A fluidized bed should carry its weight (ratio
 1); without a distributor plate the gas channels through one loose column and the floor
-carries 5-20 % (docs/simulation.md has the measured table). Session 4, with the plate at 0.3:
+carries 5-20 % (``docs/simulation.md`` has the measured table). With the plate at 0.3:
 8000 particles, 1.6 m/s, 4 s, 0.3 m: dp / weight 0.985, floor 2.0 %; 4000 particles, 1.3 m/s,
 2 s, 0.25 m, 1 cm cells, 6 cm wide (the pytest case): 0.985, floor 2.4 %.
 """
 
-import sys
+import argparse
 import time
 import warnings
 
@@ -65,5 +65,18 @@ def main(n: int = 8000, u: float = 1.6, duration: float = 1.6, height: float = 0
                   f"wall time {time.perf_counter() - start:.0f} s", flush=True)
 
 
+def _arguments(argv=None):
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    for name, kind, default, text in (
+            ("particles", int, 8000, "particles"), ("u", float, 1.6, "gas velocity, m/s"),
+            ("seconds", float, 1.6, "simulated time, s"), ("height", float, 0.3, "bed box, m"),
+            ("cell", float, 0.01, "gas cell, m"), ("width", float, 0.09, "bed width, m"),
+            ("distributor", float, 0.3, "distributor drop / bed weight")):
+        p.add_argument(name, type=kind, nargs="?", default=default,
+                       help=f"{text} (default {default:g})")
+    return p.parse_args(argv)
+
+
 if __name__ == "__main__":
-    main(*(t(a) for t, a in zip((int, float, float, float, float, float, float), sys.argv[1:])))
+    a = _arguments()
+    main(a.particles, a.u, a.seconds, a.height, a.cell, a.width, a.distributor)

@@ -4,7 +4,8 @@ The accuracy goals).
 
     python benchmarks/kinetics_goals.py RUN.h5 [RUN.h5 ...] [--in-sample 10:15]
         [--out-of-sample 10:15,15:20] [--out-of-sample 5:10,10:15] [--damkoehler 0.3,1,3]
-        [--cells 6x38] [--lag 0.025] [--estimator paper] [--json goals.json]
+        [--cells 6x38] [--lag 0.025] [--estimator paper] [--states cells] [--history S]
+        [--json goals.json]
 
 For each run (one per gas velocity) and each pair of windows (fit, judge) -- in sample the
 judged window is the fitting window -- a model is fitted on the fitting window, and a
@@ -16,7 +17,7 @@ ways at each Damkoehler number Da:
   :func:`cfbmarkov.kinetics.wall_cells`) than in the core, as in the docs' worked example.
 
 Da = k_bar tau_bar, with tau_bar the mean of the fitting window's observed residence times
-(in the same direction, on the model's lag) and k_bar the fitting window's
+(in the same direction, on the model's lag, counted by their exits as below) and k_bar the fitting window's
 bed-averaged rate (the state occupancy's mean of k_s, the rate the segregated-flow baseline
 uses): the uniform rate is k = Da / tau_bar, and the zone rates are scaled so that their
 bed average is the same. The two kinds of rate therefore give the same segregated-flow
@@ -24,17 +25,23 @@ answer; the chain tells them apart.
 
 Three exit means of X per residence, the residences counted in the direction of the
 judged window's net solids flow (passes up through the top; down through the bottom where
-the solids fall on average, as at low gas velocities):
+the solids fall on average, as at low gas velocities), by their exits: every residence
+that ends inside the window, its path followed back before the window (``--history``,
+default the window's length): residences counted by their exits are a fair sample of the
+flow's, where those wholly inside a window favour short ones:
 
-- *reference*: X integrated along the run's own paths over the judged window, on the
-  model's states at its lag (:func:`cfbmarkov.analysis.kinetics_reference.reference_kinetics`);
-- *chain*: the exact answer of the fitted chain as a window of the judged window's length
-  observes it (:func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`: a window sees
-  short residences more often than long ones, the reference's exits and the observed RTD
-  alike; the chain's unwindowed exact answer,
-  :func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`, is in the JSON beside it);
-- *segregated flow*: the bed-averaged law over the fitting window's observed RTD
+- *reference*: X integrated along the run's own paths, on the model's states at its lag
+  (:func:`cfbmarkov.analysis.kinetics_reference.reference_kinetics` with ``history``);
+- *chain*: the fitted chain's exact exit mean per residence
+  (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`); the exit mean as a window of the
+  judged window's length observes it
+  (:func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`) is in the JSON beside it;
+- *segregated flow*: the bed-averaged law over the fitting window's observed RTD, the
+  residence times of the exits inside the fitting window followed back the same way
   (:func:`cfbmarkov.analysis.segregated_flow.segregated_flow`).
+
+``--history 0`` gives the comparison of residences wholly inside the windows instead: the
+reference and the baseline from those, the chain windowed.
 
 Errors are relative to the reference, 100 (side - reference) / reference in %. Prints the
 in-sample table (the goal: the chain within 2 %), the out-of-sample table (the goal: the
@@ -72,11 +79,40 @@ IN_SAMPLE = ((10.0, 15.0),)
 OUT_OF_SAMPLE = (((10.0, 15.0), (15.0, 20.0)), ((5.0, 10.0), (10.0, 15.0)))
 KINDS = ("uniform", "zones")
 IN_SAMPLE_GOAL = 2.0          # %
+#: above this share of a judged window's exits left out (begun before the history), the
+#: tables warn
+CENSORED_SHARE = 0.01
 
 
-def fitting_window_facts(traj, model, direction: str = "up") -> dict:
-    """The fitting window's observed residence times (on the model's lag, in ``direction``)
-    and its state occupancy at the lag.
+def exit_residence_times(traj, window, lag: float, direction: str, history: float):
+    """Residence times (s) of the residences of a periodic run that end inside ``window``,
+    each followed back at most ``history`` s before the window's start (cut at the file's
+    first frame), on lap-counter records one lag apart in ``direction``; with ``history``
+    0, those wholly inside the window (:func:`cfbmarkov.observed.residence.residence_times`).
+    """
+    if not history:
+        return residence_times(traj, window, use_events=False,
+                               lag_frames=traj.lag_frames(lag), direction=direction).samples
+    first = max(float(traj.times[0]), window[0] - history)
+    frames = traj.window(first, window[1])
+    picked = slice(frames.start, frames.stop, traj.lag_frames(lag))
+    times = np.asarray(traj.times[picked], dtype=np.float64)
+    sign = 1 if direction == "up" else -1
+    laps = sign * np.asarray(traj.laps(picked), dtype=np.int64)
+    new = np.diff(np.maximum.accumulate(laps, axis=0), axis=0)        # [T - 1, N]
+    particle, frame = np.nonzero(new.T)                                # by particle, frame
+    repeat = new.T[particle, frame]
+    particle, t = np.repeat(particle, repeat), np.repeat(times[frame + 1], repeat)
+    same = particle[1:] == particle[:-1]
+    entry, exit_ = t[:-1][same], t[1:][same]
+    inside = exit_ > window[0] + 1e-9 * max(1.0, abs(window[0]))
+    return exit_[inside] - entry[inside]
+
+
+def fitting_window_facts(traj, model, direction: str = "up", history: float = 0.0) -> dict:
+    """The fitting window's observed residence times (on the model's lag, in ``direction``,
+    by their exits followed back ``history`` s: :func:`exit_residence_times`) and its state
+    occupancy at the lag.
 
     Parameters
     ----------
@@ -87,6 +123,9 @@ def fitting_window_facts(traj, model, direction: str = "up") -> dict:
     direction : {"up", "down"}, optional
         Residences from passes up through the top, or down through the bottom (a net
         downflow).
+    history : float, optional
+        Seconds an exit's residence is followed back before the window (0: residences
+        wholly inside the window).
 
     Returns
     -------
@@ -100,9 +139,7 @@ def fitting_window_facts(traj, model, direction: str = "up") -> dict:
         Where the window holds no residence.
     """
     window = tuple(model.window)
-    lag_frames = traj.lag_frames(model.lag)
-    rt = residence_times(traj, window, use_events=False, lag_frames=lag_frames,
-                         direction=direction).samples
+    rt = exit_residence_times(traj, window, model.lag, direction, history)
     if rt.size < 2:
         raise InputError(f"{traj.path}: {rt.size} residences ({direction} passes) in the "
                          f"fitting window {window[0]:g}-{window[1]:g} s")
@@ -110,7 +147,7 @@ def fitting_window_facts(traj, model, direction: str = "up") -> dict:
     states = discrete.states[::discrete.lag_frames]
     occupancy = np.bincount(states[states >= 0], minlength=model.n_states).astype(float)
     return {"residence_times": rt, "tau": float(rt.mean()), "occupancy": occupancy,
-            "direction": direction}
+            "direction": direction, "history": float(history)}
 
 
 def goal_kinetics(model, facts: dict, damkoehler) -> Kinetics:
@@ -175,8 +212,9 @@ def judge(traj, model, facts: dict, judge_window, damkoehler) -> list[dict]:
     -------
     list of dict
         One per kind and Da: ``kind``, ``damkoehler``, ``rate_core`` and ``rate_wall``
-        (1/s), ``reference`` (exit mean), ``reference_se``, ``exits``, ``chain`` (windowed),
-        ``chain_unwindowed``, ``segregated_flow``, ``chain_error`` and ``segregated_flow_error`` (%),
+        (1/s), ``reference`` (exit mean), ``reference_se``, ``exits``, ``chain`` (exact, or
+        windowed with no history),
+        ``chain_unwindowed``, ``chain_windowed``, ``exits_censored``, ``segregated_flow``, ``chain_error`` and ``segregated_flow_error`` (%),
         ``chain_no_worse`` (bool).
     """
     kinetics = goal_kinetics(model, facts, damkoehler)
@@ -185,7 +223,9 @@ def judge(traj, model, facts: dict, judge_window, damkoehler) -> list[dict]:
     exact = exact_kinetics(model, sk, direction=direction)
     windowed = windowed_exit_means(model, sk, judge_window[1] - judge_window[0],
                                    direction=direction)
-    ref = reference_kinetics(traj, model, sk, tuple(judge_window), direction=direction)
+    history = facts["history"]
+    ref = reference_kinetics(traj, model, sk, tuple(judge_window), direction=direction,
+                             history=history)
     wall = wall_cells(model.state_space)[np.asarray(model.state_space.cell_of_state)]
     out = []
     for i, name in enumerate(kinetics.names):
@@ -193,7 +233,8 @@ def judge(traj, model, facts: dict, judge_window, damkoehler) -> list[dict]:
         da = damkoehler[int(position)]
         seg = segregated_flow(facts["residence_times"], sk.rate[i], sk.target[i],
                               facts["occupancy"], float(sk.initial[i]), name=name)
-        r, chain = ref[name], windowed[name]
+        r = ref[name]
+        chain = exact[name].exit_mean if history else windowed[name]
         ce, se = _error(chain, r.exit_mean), _error(seg.exit_mean, r.exit_mean)
         out.append({
             "kind": kind, "damkoehler": float(da),
@@ -201,6 +242,7 @@ def judge(traj, model, facts: dict, judge_window, damkoehler) -> list[dict]:
             "rate_wall": float(sk.rate[i][wall].max()) if wall.any() else float("nan"),
             "reference": r.exit_mean, "reference_se": r.exit_se, "exits": int(r.exit_values.size),
             "chain": chain, "chain_unwindowed": exact[name].exit_mean,
+            "chain_windowed": windowed[name], "exits_censored": r.exits_censored,
             "segregated_flow": seg.exit_mean,
             "chain_error": ce, "segregated_flow_error": se,
             "chain_no_worse": bool(abs(ce) <= abs(se)) if math.isfinite(ce + se) else None})
@@ -230,7 +272,7 @@ def _grid(traj, cells, lag):
 
 def run_goals(runs, *, in_sample=IN_SAMPLE, out_of_sample=OUT_OF_SAMPLE,
               damkoehler=DAMKOEHLER, cells=None, lag=None, estimator=None,
-              progress=None) -> dict:
+              states="cells", history=None, progress=None) -> dict:
     """The goals' numbers on every run.
 
     Parameters
@@ -248,6 +290,12 @@ def run_goals(runs, *, in_sample=IN_SAMPLE, out_of_sample=OUT_OF_SAMPLE,
         The lag (s; default: the run's ``markov`` parameters).
     estimator : str, optional
         ``paper`` or ``mle`` (default: paper for a periodic riser, mle for an open one).
+    history : float, optional
+        Seconds an exit's residence is followed back before its window (default: the
+        window's length; 0: residences wholly inside the windows, the chain windowed).
+    states : str, optional
+        The state space's name (:func:`cfbmarkov.markov.state_space_from_name`) on the
+        cell grid; default ``cells``, the paper's.
     progress : callable, optional
         Called with a line of text per fitted model.
 
@@ -267,7 +315,7 @@ def run_goals(runs, *, in_sample=IN_SAMPLE, out_of_sample=OUT_OF_SAMPLE,
         with Trajectories(path) as traj:
             (columns, rows), model_lag = _grid(traj, cells, lag)
             est = estimator or ("mle" if traj.boundary.is_open else "paper")
-            space = state_space_from_name("cells", columns, rows, traj.width, traj.height)
+            space = state_space_from_name(states, columns, rows, traj.width, traj.height)
             fitted, facts_of = {}, {}
             for which, fit, judged in pairs:
                 t0 = time.perf_counter()
@@ -276,8 +324,10 @@ def run_goals(runs, *, in_sample=IN_SAMPLE, out_of_sample=OUT_OF_SAMPLE,
                         fitted[fit] = fit_model(traj, space, model_lag, fit, est)
                     model = fitted[fit]
                     direction = net_flow_direction(traj, judged)
+                    back = (fit[1] - fit[0]) if history is None else float(history)
                     if (fit, direction) not in facts_of:
-                        facts_of[fit, direction] = fitting_window_facts(traj, model, direction)
+                        facts_of[fit, direction] = fitting_window_facts(traj, model, direction,
+                                                                        back)
                     rows_out = judge(traj, model, facts_of[fit, direction], judged, damkoehler)
                 except CfbmarkovError as exc:
                     result["skipped"].append({"run": str(path), "label": _label(traj),
@@ -290,7 +340,8 @@ def run_goals(runs, *, in_sample=IN_SAMPLE, out_of_sample=OUT_OF_SAMPLE,
                     row.update({"run": str(path), "label": _label(traj), "fit": list(fit),
                                 "judged": list(judged), "tau": facts["tau"],
                                 "direction": facts["direction"], "lag": model_lag,
-                                "cells": [columns, rows], "estimator": est})
+                                "cells": [columns, rows], "estimator": est,
+                                "states": states})
                 result["in_sample" if which == "in" else "out_of_sample"] += rows_out
                 if progress is not None:
                     progress(f"{_label(traj)}: fit {fit[0]:g}-{fit[1]:g} s, judged "
@@ -354,12 +405,25 @@ def tables(result: dict) -> str:
                 f"{_fmt(r['chain_error'], '+.2f'):>8} {_fmt(r['segregated_flow_error'], '+.2f'):>8}"
                 f" {'yes' if ok else 'no':>3}")
         lines.append("")
+    seen = set()
+    for r in result["in_sample"] + result["out_of_sample"]:
+        key = (r["label"], tuple(r["judged"]))
+        total = r["exits"] + r.get("exits_censored", 0)
+        if key in seen or not total or r.get("exits_censored", 0) <= CENSORED_SHARE * total:
+            continue
+        seen.add(key)
+        lines.append(f"warning: {r['label']}, judged {r['judged'][0]:g}-{r['judged'][1]:g} s: "
+                     f"{r['exits_censored']} of {total} exits began before the history "
+                     "(or the file's start) and are left out, so the reference favours short "
+                     "residences; judge a later window or give a longer --history")
     for r in result.get("skipped", []):
         lines.append(f"skipped: {r['label']}, fit {r['fit'][0]:g}-{r['fit'][1]:g} s, judged "
                      f"{r['judged'][0]:g}-{r['judged'][1]:g} s: {r['reason']}")
-    lines.append("chain: the exact exit mean as the judged window sees it; (exact): per residence "
-                 "of the chain, unwindowed; errors against the reference, %; dir: the judged "
-                 "window's net solids flow, residences counted that way")
+    lines.append("residences counted by their exits in the judged window, followed back before "
+                 "it (with history 0: wholly inside it, the chain as the window sees it); "
+                 "chain: the exact exit mean; (exact): per residence of the chain, unwindowed; "
+                 "errors against the reference, %; dir: the judged window's net solids flow, "
+                 "residences counted that way")
     counts = result["counts"]
     for kind, c in counts["in_sample_within"].items():
         lines.append(f"in sample, {kind}: chain within {IN_SAMPLE_GOAL:g} % in {c['within']} of "
@@ -423,13 +487,19 @@ def main(argv=None) -> int:
                                                               "run's markov parameters)")
     p.add_argument("--lag", type=float, default=None, help="lag, s (default: the run's)")
     p.add_argument("--estimator", choices=("paper", "mle"), default=None)
+    p.add_argument("--states", default="cells", help="state space on the grid (default cells, "
+                                                     "the paper's; e.g. cells-velocity)")
+    p.add_argument("--history", type=float, default=None,
+                   help="seconds an exit's residence is followed back before its window "
+                        "(default: the window's length; 0: residences wholly inside)")
     p.add_argument("--json", default=None, help="write the numbers here")
     args = p.parse_args(argv)
     try:
         result = run_goals(args.runs, in_sample=args.in_sample or IN_SAMPLE,
                            out_of_sample=args.out_of_sample or OUT_OF_SAMPLE,
                            damkoehler=args.damkoehler, cells=args.cells, lag=args.lag,
-                           estimator=args.estimator,
+                           estimator=args.estimator, states=args.states,
+                           history=args.history,
                            progress=lambda line: print(line, file=sys.stderr, flush=True))
     except CfbmarkovError as exc:
         print(f"error: {' '.join(str(exc).split())}", file=sys.stderr)

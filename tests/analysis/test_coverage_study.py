@@ -1,4 +1,4 @@
-"""benchmarks/coverage.py, the coverage study, on a small generated riser: its long-run
+"""benchmarks/interval_coverage.py, the coverage study, on a small generated riser: its long-run
 residences are residence_times' over the span, with their times; the study's table and
 JSON."""
 
@@ -13,7 +13,7 @@ from cfbmarkov import synthetic
 from cfbmarkov.observed.residence import net_flow_direction, residence_times
 from cfbmarkov.trajectories import Trajectories
 
-SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "coverage.py"
+SCRIPT = Path(__file__).resolve().parents[2] / "benchmarks" / "interval_coverage.py"
 FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-0.6,
                            vertical_spread=0.5, persistence=False)
 

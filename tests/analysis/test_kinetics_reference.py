@@ -134,3 +134,59 @@ def test_cell_fields_of_a_window(tmp_path):
     # core rises, wall falls
     v = fields["vertical_velocity"].reshape(FLOW.rows, FLOW.columns)
     assert np.nanmean(v[:, 2:4]) > 0 > np.nanmean(v[:, [0, 5]])
+
+
+def test_history_counts_every_exit_in_the_window_with_its_whole_path(tmp_path):
+    """With a history the exits are every exit inside the window, each followed back to its
+    entry before the window where need be: they include residences longer than the window
+    lets a residence wholly inside it be, equal the plain integration over the longer span
+    restricted to the window's exits, and sample the residences fairly (their mean lies
+    above the wholly-inside one and near the fitted chain's exact exit mean)."""
+    from cfbmarkov.analysis.kinetics_reference import reference_kinetics
+    from cfbmarkov.kinetics import ByCell, FirstOrder, Kinetics, Property
+    from cfbmarkov.markov import fit_model
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
+    path = write_run(tmp_path / "run.h5", FLOW, 150, 6.0, seed=11)
+    space = CellGrid(FLOW.columns, FLOW.rows, FLOW.width, FLOW.height)
+    window = (3.0, 4.0)
+    model = fit_model(path, space, FLOW.lag, window, "mle")
+    col = np.arange(space.n_cells) % space.columns
+    k = np.where((col == 0) | (col == space.columns - 1), 0.5, 5.0)
+    table = np.column_stack([col, np.arange(space.n_cells) // space.columns,
+                             np.zeros(space.n_cells), k])
+    kin = Kinetics((Property("X", FirstOrder(), {"rate": ByCell(table, "t", "t")}),))
+    sk = kin.per_state(space)
+    inside = reference_kinetics(path, model, sk, window)["X"]
+    assert reference_kinetics(path, model, sk, window, history=0.0)["X"].count == inside.count
+    back = reference_kinetics(path, model, sk, window, history=3.0)["X"]
+    assert back.count > inside.count
+    assert np.all((back.exit_times > window[0]) & (back.exit_times <= window[1] + 1e-9))
+    assert np.isfinite(back.residence_times).all()
+    # some residences began before the window: longer than a wholly-inside one could be
+    assert np.any(back.residence_times > back.exit_times - window[0] + 1e-9)
+    # the plain integration over the whole 0-4 s span, its exits inside the window
+    discrete = discretize(path, space, FLOW.lag, (0.0, 4.0), keep_positions=True)
+    a, b = sk.over(FLOW.lag)
+    rows = slice(None, None, discrete.lag_frames)
+    exits, _, _ = _plain_periodic(discrete.states[rows], discrete.laps[rows],
+                                  discrete.times[rows], a[0], b[0], 0.0, True)
+    plain = [e for e in exits if e[0] > window[0] + 1e-9]
+    np.testing.assert_allclose(back.exit_values, [e[2] for e in plain], atol=1e-13)
+    # a short history: the exits whose residence began before it are left out and counted
+    short = reference_kinetics(path, model, sk, window, history=0.2)["X"]
+    part = discretize(path, space, FLOW.lag, (2.8, 4.0), keep_positions=True)
+    laps = part.laps[slice(None, None, part.lag_frames)]
+    times = part.times[slice(None, None, part.lag_frames)]
+    first_record = [times[np.argmax(laps[:, p] > laps[0, p])] for p in range(laps.shape[1])
+                    if (laps[:, p] > laps[0, p]).any()]
+    censored = sum(t > window[0] + 1e-9 for t in first_record)
+    assert short.exits_censored == censored > 0
+    assert short.count < back.count
+    # the wholly-inside exits favour short residences; the exits followed back do not
+    assert back.residence_times.mean() > inside.residence_times.mean()
+    exact = exact_kinetics(model, sk)["X"].exit_mean
+    assert abs(back.exit_mean - exact) < abs(inside.exit_mean - exact)
+    assert abs(back.exit_mean - exact) < 4 * back.exit_se + 0.01 * exact
+    with pytest.raises(Exception, match="history"):
+        reference_kinetics(path, model, sk, window, history=-1.0)

@@ -52,9 +52,10 @@ def test_windowed_exit_mean_is_the_rtd_weighted_by_the_window(run):
 
 def test_goals_on_a_tiny_run(run, tmp_path, capsys):
     goals = _script()
+    # residences wholly inside the windows, the chain as such a window sees it
     result = goals.run_goals([run], in_sample=[(0.5, 2.5)],
                              out_of_sample=[((0.5, 2.5), (2.0, 4.0))], damkoehler=(0.3, 1.0),
-                             cells=(4, 10), lag=0.025)
+                             cells=(4, 10), lag=0.025, history=0.0)
     assert len(result["in_sample"]) == 4 and len(result["out_of_sample"]) == 4
     for row in result["in_sample"]:
         tau = row["tau"]
@@ -73,6 +74,17 @@ def test_goals_on_a_tiny_run(run, tmp_path, capsys):
                        and r["damkoehler"] == 1.0) for kind in ("uniform", "zones"))
     assert uni["segregated_flow"] == pytest.approx(zones["segregated_flow"], rel=1e-12)
     assert uni["reference"] != zones["reference"]
+    # by default every exit in the judged window, followed back a window's length: more
+    # exits, judged against the chain's exact exit mean per residence
+    back = goals.run_goals([run], in_sample=[], out_of_sample=[((0.5, 2.5), (2.0, 4.0))],
+                           damkoehler=(0.3, 1.0), cells=(4, 10), lag=0.025)
+    inside = {(r["kind"], r["damkoehler"]): r for r in result["out_of_sample"]}
+    for row in back["out_of_sample"]:
+        assert row["exits"] > inside[row["kind"], row["damkoehler"]]["exits"]
+        assert row["chain"] == pytest.approx(row["chain_unwindowed"], rel=1e-12)
+        assert 0 <= row["exits_censored"] < 0.05 * row["exits"]
+        # the generated flow is this chain: the difference is the reference's noise
+        assert abs(row["chain"] - row["reference"]) < 3 * row["reference_se"]
     counts = result["counts"]
     assert counts["in_sample_within"]["zones"]["rows"] == 2
     assert counts["out_of_sample_no_worse"]["zones"]["1"]["cases"] == 1

@@ -16,6 +16,16 @@ the file's paths from its first frame (:func:`values_at`). Where the value resta
 entry (``entry`` and ``reference``) only the exits of residences that began inside the
 window count (those whose start value is known: the residence-time samples of the RTD);
 with ``carried`` every exit counts.
+
+With a ``history`` (:func:`reference_kinetics`), the exits are instead every exit inside the
+window whose residence began after the window's start minus the history: the paths are
+followed back before the window, so that a residence that began before the window counts
+with its whole path. Counted by their exits, residences are a fair sample of the flow's
+(each residence ends once, whatever its length), which the exits of residences wholly
+inside a window are not: a window of W s sees a residence of t s only where it begins in
+the first W - t s, so long residences are under-counted. Exits whose residence began
+before the history's start are left out and counted (``exits_censored``). The bed's means
+stay those of the window.
 """
 
 from __future__ import annotations
@@ -57,6 +67,9 @@ class PathKinetics(ExitStatistics):
         The particle-frames counted per cell.
     final_values : ndarray of float64, shape (N,)
         Each particle's value in the last frame.
+    exits_censored : int
+        With a history (:func:`reference_kinetics`): the exits inside the window whose
+        residence began before the history's start, left out; 0 otherwise.
     """
 
     name: str
@@ -68,7 +81,7 @@ class PathKinetics(ExitStatistics):
     cell_mean: np.ndarray
     cell_occupancy: np.ndarray
     final_values: np.ndarray | None = None
-
+    exits_censored: int = 0
 
     @property
     def time_mean(self) -> float:
@@ -186,13 +199,23 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
 
 
 def reference_kinetics(source, model, state_kinetics, window: tuple[float, float], *,
-                       direction: str = "up", face_band: float | None = None
-                       ) -> dict[str, PathKinetics]:
+                       direction: str = "up", face_band: float | None = None,
+                       history: float = 0.0) -> dict[str, PathKinetics]:
     """Every property of ``state_kinetics`` integrated along the paths of a file's window.
 
     Every particle starts the window at the property's entry value; a property whose start
     rule is ``reference`` starts at the values :func:`values_at` gives (integrated from the
     file's first frame), as a prediction that takes the reference's values does.
+
+    With ``history`` > 0 the exits of a property that restarts at entry are every exit
+    inside the window whose residence began at most ``history`` s before the window's start
+    (cut at the file's first frame), its value integrated along the whole path; the exits
+    of residences that began earlier are left out and counted (module docstring). These
+    exits sample the residences fairly, and their mean is comparable with the chain's exact
+    exit mean per residence (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`);
+    without a history the exits are those of residences wholly inside the window, which
+    favour short residences (compare with
+    :func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`).
 
     Parameters
     ----------
@@ -209,6 +232,9 @@ def reference_kinetics(source, model, state_kinetics, window: tuple[float, float
         As :func:`integrate_along_paths`.
     face_band : float, optional
         As :func:`integrate_along_paths`.
+    history : float, optional
+        Seconds before the window from which exits' paths are followed (>= 0; 0: only
+        residences wholly inside the window). Needs a periodic riser.
 
     Returns
     -------
@@ -219,7 +245,8 @@ def reference_kinetics(source, model, state_kinetics, window: tuple[float, float
     ------
     InputError
         When the file cannot be discretised on the model's states at its lag over the
-        window (:func:`cfbmarkov.markov.discretize`), or a property's law is not linear.
+        window (:func:`cfbmarkov.markov.discretize`), a property's law is not linear, or the
+        history is negative, not finite, or given for an open riser.
     """
     from cfbmarkov.markov.discrete import discretize
     from cfbmarkov.trajectories import opened
@@ -239,6 +266,50 @@ def reference_kinetics(source, model, state_kinetics, window: tuple[float, float
                                                entry_value=m["initial"], reset=m["reset"],
                                                name=m["name"], direction=direction,
                                                face_band=face_band)
+    if history:
+        out = _with_history(source, model, maps, tuple(window), out, history, direction)
+    return out
+
+
+def _with_history(source, model, maps, window, out, history, direction):
+    """``out`` with each restarting property's exits replaced by every exit inside the
+    window whose path is followed back at most ``history`` s (:func:`reference_kinetics`)."""
+    from dataclasses import replace
+
+    from cfbmarkov.markov.discrete import discretize
+    from cfbmarkov.trajectories import opened
+
+    history = float(history)
+    if not (np.isfinite(history) and history >= 0):
+        raise InputError(f"history {history!r} s: a finite number of seconds >= 0")
+    with opened(source) as traj:
+        if traj.boundary.is_open:
+            raise InputError(f"{traj.path}: the history of exits is read from a periodic "
+                             "riser's lap counters (an open riser's residences are its "
+                             "passes from the inlet to the outlet)")
+        first = max(float(traj.times[0]), window[0] - history)
+        discrete = discretize(traj, model.state_space, model.lag, (first, window[1]),
+                              keep_positions=True, short_history="skip")
+    start = window[0] + 1e-9 * max(1.0, abs(window[0]))
+    # a particle's first record in the read span ends a residence of unknown entry: censored
+    # where it lies inside the window
+    rows = slice(None, None, int(discrete.lag_frames))
+    sign = 1 if direction == "up" else -1
+    laps = sign * discrete.laps[rows].astype(np.int64)
+    raised = np.maximum.accumulate(laps, axis=0) > laps[0]
+    first = np.where(raised.any(axis=0), raised.argmax(axis=0), -1)
+    times = discrete.times[rows]
+    censored = int(np.count_nonzero((first > 0) & (times[np.maximum(first, 0)] > start)))
+    for m in maps:
+        if not m["reset"]:
+            continue
+        whole = integrate_along_paths(discrete, m["a"], m["b"], m["initial"], reset=True,
+                                      name=m["name"], direction=direction)
+        inside = whole.exit_times > start
+        out[m["name"]] = replace(out[m["name"]], exit_values=whole.exit_values[inside].copy(),
+                                 exit_times=whole.exit_times[inside].copy(),
+                                 residence_times=whole.residence_times[inside].copy(),
+                                 exits_censored=censored)
     return out
 
 

@@ -1,6 +1,6 @@
 """The coverage study: do the intervals `fit` prints hold the flow's long-run E(RT)?
 
-    python benchmarks/coverage.py RUN.h5 [RUN.h5 ...] [--lengths 0.5,1,2,5] [--starts 6]
+    python benchmarks/interval_coverage.py RUN.h5 [RUN.h5 ...] [--lengths 0.5,1,2,5] [--starts 6]
                                   [--settle 10] [--cells 4x12] [--lag 0.01] [--auto]
                                   [--resamples 100] [--level 0.9] [-o coverage.json]
 
@@ -41,21 +41,16 @@ import sys
 import time
 from pathlib import Path
 
-# run as a script, this folder comes first on sys.path, and this file would stand in for
-# the `coverage` package that Numba imports: take the folder off before importing it
-if sys.path and Path(sys.path[0] or ".").resolve() == Path(__file__).resolve().parent:
-    sys.path.pop(0)
+import numpy as np
 
-import numpy as np  # noqa: E402
-
-from cfbmarkov._json import jsonable  # noqa: E402
-from cfbmarkov.analysis.adequacy import assess_adequacy  # noqa: E402
-from cfbmarkov.analysis.intervals import model_intervals  # noqa: E402
-from cfbmarkov.errors import CfbmarkovError, InputError  # noqa: E402
-from cfbmarkov.markov import fit_model  # noqa: E402
-from cfbmarkov.markov.states import CellGrid  # noqa: E402
-from cfbmarkov.observed.residence import net_flow_direction  # noqa: E402
-from cfbmarkov.trajectories import Trajectories  # noqa: E402
+from cfbmarkov._json import jsonable
+from cfbmarkov.analysis.adequacy import assess_adequacy
+from cfbmarkov.analysis.intervals import model_intervals
+from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.markov import fit_model
+from cfbmarkov.markov.states import CellGrid
+from cfbmarkov.observed.residence import net_flow_direction
+from cfbmarkov.trajectories import Trajectories
 
 #: a fit this far from the long run (relative) must warn
 OFF = 0.5
