@@ -137,12 +137,12 @@ superficial_velocity = 4.0
 [numerics]
 cfd_cells = [2, 4]
 [output]
-end_time = 0.001
-frame_interval = 0.0005
+end_time = 0.0005
+frame_interval = 0.00025
 [markov]
-lag = 0.0005
-fit_window = [0.0, 0.0005]
-predict_window = [0.0005, 0.001]
+lag = 0.00025
+fit_window = [0.0, 0.00025]
+predict_window = [0.00025, 0.0005]
 """
 
 

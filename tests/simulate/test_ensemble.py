@@ -31,8 +31,8 @@ superficial_velocity = 4.0
 [numerics]
 cfd_cells = [2, 4]
 [output]
-end_time = 0.001
-frame_interval = 0.0005
+end_time = 0.0005
+frame_interval = 0.00025
 """
 
 
@@ -98,7 +98,7 @@ from pathlib import Path
 from cfbmarkov.config import load_case
 from cfbmarkov.simulate.ensemble import simulate_ensemble
 case = load_case(sys.argv[1])
-kw = dict(checkpoint_every=0.0005, progress=False, threads=4)
+kw = dict(checkpoint_every=0.00025, progress=False, threads=4)
 simulate_ensemble(case, sys.argv[2], 2, device="gpu", **kw)
 simulate_ensemble(case, sys.argv[3], 2, device="gpu", stop_after_frames=2, **kw)
 assert (Path(sys.argv[3] + ".parts") / "gpu-checkpoint.h5").exists()
@@ -185,16 +185,16 @@ def test_cpu_ensemble_resumes_the_unfinished_members(tmp_path):
     from cfbmarkov.simulate.ensemble import simulate_ensemble
 
     case = load_case(_case(tmp_path))
-    full = simulate_ensemble(case, tmp_path / "full.h5", 2, checkpoint_every=0.0005,
+    full = simulate_ensemble(case, tmp_path / "full.h5", 2, checkpoint_every=0.00025,
                              progress=False)
     seeds = member_seeds(case.seed, 2)
     part = member_paths(tmp_path / "part.h5", 2)
-    simulate(member_case(case, seeds[0]), part[0], checkpoint_every=0.0005, progress=False)
+    simulate(member_case(case, seeds[0]), part[0], checkpoint_every=0.00025, progress=False)
     stamp = part[0].stat().st_mtime_ns
-    simulate(member_case(case, seeds[1]), part[1], checkpoint_every=0.0005, progress=False,
+    simulate(member_case(case, seeds[1]), part[1], checkpoint_every=0.00025, progress=False,
              stop_after_frames=2)
     assert (part[1].with_name(part[1].name + ".parts") / "checkpoint.h5").exists()
-    simulate_ensemble(case, tmp_path / "part.h5", 2, checkpoint_every=0.0005, resume=True,
+    simulate_ensemble(case, tmp_path / "part.h5", 2, checkpoint_every=0.00025, resume=True,
                       progress=False)
     assert part[0].stat().st_mtime_ns == stamp
     for a, b in zip(full, part):
