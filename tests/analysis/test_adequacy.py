@@ -203,6 +203,20 @@ def test_sample_length(runs, capsys):
     code, out, _ = run_cli(capsys, "stationarity", runs["switching"], "--sample-length",
                            "--cells", "4x16", "--tolerance", "0.5")
     assert code == 0 and "sample length:" in out and "within 50 %" in out
+    # --span bounds the windows and the long run: inside the first (fast) 3 s of the
+    # switching run it is as stationary as the fast chain alone
+    code, out, _ = run_cli(capsys, "stationarity", runs["switching"], "--sample-length",
+                           "--cells", "4x16", "--span", "0:3", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert data["start"] == 0.0 and data["span_end"] == pytest.approx(3.0)
+    assert [w["length"] for w in data["windows"]] == [0.5, 1.0, 2.0]
+    inside = sample_length(runs["switching"], _space(), lag=0.025, start=0.0, stop=3.0)
+    assert inside.long_run_mean == pytest.approx(data["long_run"]["rt_mean"])
+    assert inside.long_run_mean < switching.long_run_mean
+    code, _, err = run_cli(capsys, "stationarity", runs["switching"], "--sample-length",
+                           "--cells", "4x16", "--span", "0:3", "--start", "5")
+    assert code == 2 and "outside --span" in err and err.count("\n") == 1
 
 
 def test_report_paragraph_repeats_the_verdict():

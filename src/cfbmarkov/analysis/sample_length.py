@@ -101,7 +101,8 @@ def _first_stable(within: np.ndarray, lengths: np.ndarray) -> float:
 
 def sample_length(path, state_space, *, lag: float = 0.025, start: float | None = None,
                   estimator: str | None = None, tolerance: float = 0.1,
-                  lengths: Sequence[float] = LENGTHS) -> SampleLength:
+                  lengths: Sequence[float] = LENGTHS, stop: float | None = None
+                  ) -> SampleLength:
     """Fit models on growing windows of a run from ``start`` and find the length from which
     their E(RT) and SD(RT) stay within ``tolerance`` of the run's long run.
 
@@ -126,7 +127,10 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
     tolerance : float, optional
         Relative tolerance, default 0.1.
     lengths : sequence of float, optional
-        The lengths tried (s); those that end beyond the (shortest) run are left out.
+        The lengths tried (s); those that end beyond the (shortest) run or ``stop`` are left
+        out.
+    stop : float, optional
+        Where the long run ends (s); default each run's last frame. Windows end by it.
 
     Returns
     -------
@@ -136,7 +140,8 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
     Raises
     ------
     InputError
-        On a tolerance that is not positive, a start outside the run, a run shorter than
+        On a tolerance that is not positive, a start outside the run, a stop beyond it, a run
+        shorter than
         the shortest length, a long run without two residences in its direction, runs that
         cannot be pooled (:func:`~cfbmarkov.markov.pooling.check_runs_match`,
         :func:`~cfbmarkov.markov.pooling.check_runs_distinct`), or the errors of
@@ -156,8 +161,13 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
         check_runs_match(runs)
         first = max(float(t.times[0]) for t in runs)
         lasts = [float(t.times[-1]) for t in runs]
-        last = min(lasts)
         tol = runs[0].time_tolerance
+        if stop is not None:
+            if not (math.isfinite(stop) and stop <= min(lasts) + tol):
+                raise InputError(f"the span's end {stop:g} s lies beyond the last frame of "
+                                 f"{name} ({min(lasts):g} s)")
+            lasts = [min(t_last, float(stop)) for t_last in lasts]
+        last = min(lasts)
         a = first if start is None else float(start)
         if not first - tol <= a < last:
             raise InputError(f"start {a:g} s lies outside the frames of {name} "

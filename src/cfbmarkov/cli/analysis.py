@@ -302,9 +302,16 @@ def _sample_length(args) -> int:
     with Trajectories(args.file[0]) as run:
         space = state_space_from_name(args.states, columns, rows, run.width, run.height,
                                       depth, run.depth)
+    start = args.start
+    if args.span is not None and start is None:
+        start = args.span[0]
+    elif args.span is not None and not args.span[0] <= start < args.span[1]:
+        raise InputError(f"--start {start:g} s lies outside --span {args.span[0]:g}:"
+                         f"{args.span[1]:g} s: give a start inside the span, or one of them")
     result = sample_length(args.file if len(args.file) > 1 else args.file[0], space,
-                           lag=args.lag or 0.025, start=args.start,
-                           estimator=args.estimator, tolerance=args.tolerance)
+                           lag=args.lag or 0.025, start=start,
+                           estimator=args.estimator, tolerance=args.tolerance,
+                           stop=None if args.span is None else args.span[1])
     if args.json:
         print(json.dumps(result.to_dict(), indent=1, allow_nan=False))
         return 0
@@ -449,8 +456,9 @@ def add_stationarity(sub) -> None:
                         "stay within --tolerance of the run's long run (its residences from "
                         "--start on, pooled)")
     s.add_argument("--start", type=finite_float, default=None,
-                   help="with --sample-length: where the windows start, s (default the first "
-                        "frame; leave out a start-up from rest)")
+                   help="with --sample-length: where the windows start, s (default the "
+                        "start of --span, else the first frame; leave out a start-up from "
+                        "rest); --span's end also ends the long run")
     s.add_argument("--tolerance", type=positive_float, default=0.1,
                    help="with --sample-length: relative tolerance (default 0.1)")
     s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
