@@ -110,12 +110,10 @@ def _finish_fit(args, model, runs, windows) -> int:
     if args.adequacy:
         from cfbmarkov.analysis.adequacy import assess_adequacy
 
-        interval = (model.uncertainty.rt_mean_interval if model.uncertainty is not None
-                    else None)
         with _stage(args, "sample verdict", "the fitting sample's verdict: the window's "
                     "halves and quarters refitted and compared"):
             model = model.with_adequacy(assess_adequacy(model, runs, windows,
-                                                        interval=interval))
+                                                        uncertainty=model.uncertainty))
     # -- end of the sample's verdict ----------------------------------------------------
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line
