@@ -172,3 +172,65 @@ def test_react_rate_from_with_run_and_the_refusal(fitted, tmp_path, capsys):
     assert main(["react", str(bare), "--kinetics", str(kin), "--run", str(other)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not the model's fitting file" in err
+
+
+def test_react_run_must_be_the_fitting_file(fitted, tmp_path, capsys):
+    """--run is checked against the model's recorded identity even where the model stores
+    its fields: another file is refused in one line naming both files and the fix."""
+    folder, run, model = fitted
+    kin = _write(tmp_path, ZONES)
+    other = write_run(tmp_path / "other.h5", RiserFlow(columns=3, rows=6), 60, 2.0, seed=2)
+    for text in (ZONES, GOOD):
+        kin = _write(tmp_path, text, RATES)
+        assert main(["react", str(model), "--kinetics", str(kin), "--run", str(other)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err
+        assert str(other) in err and str(run) in err and "--run" in err
+    kin = _write(tmp_path, ZONES)
+    x, source = _exit_mean(capsys, ["react", str(model), "--kinetics", str(kin), "--run",
+                                    str(run), "--json"])
+    assert 0 < x < 1 and source == "model"
+
+
+def test_pooled_model_stores_pooled_cell_fields(tmp_path, capsys):
+    """A pooled fit stores the cell fields of all its runs' windows together (particle-frames
+    summed, the velocity weighted by particle-frames per cell); react uses them, accepts
+    --run of any one of the pooled runs and refuses another file."""
+    from cfbmarkov.analysis.cell_fields import window_cell_fields
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    flow = RiserFlow(columns=3, rows=6)
+    a = write_run(tmp_path / "a.h5", flow, 60, 2.0, seed=1)
+    b = write_run(tmp_path / "b.h5", flow, 90, 2.0, seed=2)
+    other = write_run(tmp_path / "c.h5", flow, 60, 2.0, seed=3)
+    pooled = tmp_path / "pooled.h5"
+    assert main(["fit", str(a), str(b), "--cells", "3x6", "--window", "0:2,0.5:1.5",
+                 "--resamples", "0", "-q", "-o", str(pooled)]) == 0
+    capsys.readouterr()
+    model = MarkovModel.load(pooled)
+    assert model.cell_fields is not None
+    with Trajectories(a) as ta, Trajectories(b) as tb:
+        fa = window_cell_fields(ta, model.state_space, (0.0, 2.0))
+        fb = window_cell_fields(tb, model.state_space, (0.5, 1.5))
+        ca = fa["solids_fraction"] * fa["frames"]          # relative: no diameter in files
+        # counts per cell: relative fraction times the mean count over cells
+        na = ca / ca.mean() * 60 * fa["frames"] / 18
+        nb = fb["solids_fraction"] * fb["frames"] / fb["solids_fraction"].mean() * 90 / 18
+    expected = (na + nb) / (fa["frames"] + fb["frames"])
+    np.testing.assert_allclose(model.cell_fields.solids_fraction, expected / expected.mean(),
+                               rtol=1e-9)
+    kin = _write(tmp_path, ZONES)
+    x, source = _exit_mean(capsys, ["react", str(pooled), "--kinetics", str(kin), "--json"])
+    assert 0 < x < 1 and source == "model"
+    assert _exit_mean(capsys, ["react", str(pooled), "--kinetics", str(kin), "--run", str(b),
+                               "--json"])[0] == x
+    assert main(["react", str(pooled), "--kinetics", str(kin), "--run", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(other) in err and str(a) in err
+    # a pooled model without fields: the message says to refit on the runs, not --run
+    bare = tmp_path / "bare.h5"
+    model.with_cell_fields(None).save(bare)
+    assert main(["react", str(bare), "--kinetics", str(kin), "--run", str(a)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pooled" in err and "cfbmarkov fit RUN1.h5" in err

@@ -41,8 +41,13 @@ def cmd_react(args) -> int:
     model = MarkovModel.load(args.model)
     fields, fields_from = None, None
     if needs_cell_fields(kinetics):
-        fields = model_cell_fields(model, args.run, what=str(args.kinetics))
+        fields = model_cell_fields(model, args.run, what=str(args.kinetics),
+                                   model_name=str(args.model))
         fields_from = "model" if model.cell_fields is not None else str(args.run)
+    elif args.run is not None:      # a file that is not the model's is refused all the same
+        from cfbmarkov.analysis.cell_fields import check_fitting_file
+
+        check_fitting_file(model, args.run, model_name=str(args.model))
     state_kinetics = kinetics.per_state(model.state_space, fields)
     answers, seconds = {}, None
     if kinetics.linear:

@@ -92,6 +92,22 @@ def _finish_fit(args, model, runs, windows) -> int:
         with Trajectories(model.source) as run:
             model = model.with_source_identity(window_identity(run, model.window))
             model = model.with_cell_fields(fitting_cell_fields(run, model))
+    elif len(runs) > 1:     # a pooled fit: each run's identity, the pooled cell fields
+        import contextlib
+
+        from cfbmarkov.analysis.cell_fields import pooled_cell_fields
+        from cfbmarkov.trajectories import Trajectories
+        from cfbmarkov.trajectory_identity import window_identity
+
+        with contextlib.ExitStack() as stack:
+            opened = [stack.enter_context(Trajectories(path)) for path in runs]
+            model = model.with_source_identity(";".join(
+                window_identity(run, w) for run, w in zip(opened, windows)))
+            try:
+                model = model.with_cell_fields(pooled_cell_fields(opened, model.state_space,
+                                                                  windows))
+            except InputError:         # the grid does not fit the files: no fields
+                pass
     has_rtd = True
     try:
         model.rtd()
