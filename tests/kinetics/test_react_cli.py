@@ -83,6 +83,17 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     ('[[property]]\nname = "X"\nlaw = "heat-exchange"\ncoefficient = 1.0\n'
      'temperature = 800\n', None, "initial"),
     ('[[property]\nname = "X"\n', None, "not valid TOML"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\ninitial = 1.5\n', None,
+     "initial = 1.5 is outside [0, 1]"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\ninitial = -0.1\n', None,
+     "outside [0, 1]"),
+    ('[[property]]\nname = "X"\nlaw = "deactivation"\nrate = 1.0\ninitial = -0.5\n', None,
+     "initial = -0.5 is outside [0, inf)"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n" + "".join(f"{c},{r},1\n" for r in range(6) for c in range(3))
+     + "2,4,1\n", "cell col 2, row 4 more than once"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.0\nstart = "carried"\n', None,
+     "no steady state"),
 ])
 def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rates, message):
     _, _, model = fitted
@@ -234,3 +245,19 @@ def test_pooled_model_stores_pooled_cell_fields(tmp_path, capsys):
     assert main(["react", str(bare), "--kinetics", str(kin), "--run", str(a)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "pooled" in err and "cfbmarkov fit RUN1.h5" in err
+
+
+def test_unknown_key_lists_only_the_laws_keys(fitted, tmp_path, capsys):
+    """The keys the message offers for first-order exclude wall_temperature (heat-exchange
+    only); heat-exchange's include it."""
+    _, _, model = fitted
+    kin = _write(tmp_path, '[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\n'
+                 'speed = 2\n')
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown key 'speed'" in err and "wall_temperature" not in err
+    assert "rate_by_cell" in err
+    kin = _write(tmp_path, '[[property]]\nname = "T"\nlaw = "heat-exchange"\n'
+                 'coefficient = 1.0\ntemperature = 800\ninitial = 300\nspeed = 2\n')
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 2
+    assert "wall_temperature" in capsys.readouterr().err
