@@ -261,3 +261,36 @@ def test_unknown_key_lists_only_the_laws_keys(fitted, tmp_path, capsys):
                  'coefficient = 1.0\ntemperature = 800\ninitial = 300\nspeed = 2\n')
     assert main(["react", str(model), "--kinetics", str(kin)]) == 2
     assert "wall_temperature" in capsys.readouterr().err
+
+
+def test_react_says_exits_are_counted_downward_and_repeats_the_verdict(tmp_path, capsys):
+    """A model of a net downflow (a run mirrored top to bottom): the table and --json say
+    the exits are counted downward; --init repeats the model's fitting-sample warnings as
+    predict does."""
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.adequacy import Adequacy
+    from cfbmarkov.markov.model_summary import DOWNWARD_LINE
+    from cfbmarkov.synthetic import sample_run
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    flow = RiserFlow(columns=3, rows=6, persistence=False)
+    times, _, pos, laps = sample_run(flow, 60, 81, seed=4)
+    pos[..., 1] = np.nextafter(flow.height, 0) - pos[..., 1]
+    down = write_trajectories(tmp_path / "down.h5", times, pos, width=flow.width,
+                              height=flow.height, laps=-laps)
+    model = tmp_path / "down-model.h5"
+    assert main(["fit", str(down), "--cells", "3x6", "--window", "0:2", "--resamples", "0",
+                 "-q", "-o", str(model)]) == 0
+    capsys.readouterr()
+    kin = _write(tmp_path, GOOD, RATES)
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["direction"] == "down"
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 0
+    out = capsys.readouterr().out
+    assert "downward" in out and DOWNWARD_LINE in out
+    warned = tmp_path / "warned.h5"
+    MarkovModel.load(model).with_adequacy(Adequacy(("the halves disagree: test",))).save(warned)
+    assert main(["react", str(warned), "--kinetics", str(kin), "--init", str(down), "--start",
+                 "0.5", "--duration", "0.5", "-o", str(tmp_path / "p.h5"), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the model's fitting sample: the halves disagree: test" in err
