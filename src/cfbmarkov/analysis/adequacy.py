@@ -261,7 +261,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     if pooled:
         run_means, pooled_lines, pooled_spread = _pooled_checks(
             fitter, data, names, windows, rt_mean, limit,
-            within_run_limit(model, uncertainty, rt_mean, tolerance), halves=pooled_fewest >= MIN_PART_RESIDENCES, direction=model.flow_direction)
+            within_run_limit(model, uncertainty, rt_mean, tolerance),
+            halves=pooled_fewest >= MIN_PART_RESIDENCES, direction=model.flow_direction)
         lines += pooled_lines
         if math.isfinite(pooled_spread):
             spread = pooled_spread if not math.isfinite(spread) else max(spread, pooled_spread)
