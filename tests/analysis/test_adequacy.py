@@ -276,3 +276,70 @@ def test_sample_length_of_several_runs_pools_windows_and_long_runs(runs, capsys)
     code, _, err = run_cli(capsys, "stationarity", runs["stationary"], runs["stationary"],
                            "--sample-length", "--cells", "4x16")
     assert code == 2 and "same data" in err
+
+
+def _pair_runs(folder):
+    """Two runs of one flow (seeds 1, 2) and one of a slower flow, as write_run stores them
+    (their parameters hold no case settings, so pooling them is not refused)."""
+    from dataclasses import replace
+
+    flow = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=2.5, fall_velocity=-0.6,
+                               vertical_spread=0.5, persistence=False)
+    return (synthetic.write_run(folder / "fast.h5", flow, 400, 6.0, seed=1),
+            synthetic.write_run(folder / "fast2.h5", flow, 400, 6.0, seed=2),
+            synthetic.write_run(folder / "slow.h5", replace(flow, rise_velocity=1.4), 400,
+                                6.0, seed=3))
+
+
+@pytest.mark.parametrize("resamples", ["30", "0"])
+def test_runs_of_different_flows_warn_with_and_without_an_interval(tmp_path, capsys,
+                                                                   resamples):
+    """The cross-run limit does not grow with the runs' disagreement: two flows pooled warn
+    with an interval (whose flow term the disagreement widens) as without; two seeds of
+    one flow do not."""
+    fast, fast2, slow = _pair_runs(tmp_path)
+    code, _, err = run_cli(capsys, "fit", fast, slow, "--cells", "4x16", "--window", "1:6",
+                           "--resamples", resamples, "-q", "-o", tmp_path / "p.h5")
+    assert code == 0, err
+    assert any(line.startswith("warning: the runs disagree") and str(slow) in line
+               for line in err.splitlines()), err
+    code, _, err = run_cli(capsys, "fit", fast, fast2, "--cells", "4x16", "--window", "1:6",
+                           "--resamples", resamples, "-q", "-o", tmp_path / "q.h5")
+    assert code == 0, err
+    assert "disagree" not in err, err
+
+
+def _case_run(path, velocity, seed):
+    """A generated run whose parameters record a simulated case's settings."""
+    from cfbmarkov.config import CaseConfig
+    from cfbmarkov.trajectory_writer import TrajectoryWriter
+
+    case = json.loads(CaseConfig().model_dump_json())
+    case["gas"]["superficial_velocity"] = velocity
+    case["seed"] = seed
+    times, positions, laps, _ = synthetic._sampled(FAST, 100, 2.0, seed, 0.0)
+    with TrajectoryWriter(path, np.arange(100), width=FAST.width, height=FAST.height,
+                          source="cfd-dem", parameters=case, frame_interval=FAST.lag) as w:
+        w.append_frames(times, positions, laps=laps)
+    return path
+
+
+def test_runs_of_different_cases_are_refused(tmp_path, capsys):
+    """Files recording different case settings are refused by fit and stationarity
+    --sample-length in one line naming the setting and both values; the same case from
+    two seeds pools."""
+    u3 = _case_run(tmp_path / "u3.h5", 3.0, 1)
+    u4 = _case_run(tmp_path / "u4.h5", 4.0, 2)
+    u3b = _case_run(tmp_path / "u3b.h5", 3.0, 3)
+    for argv in (["fit", u3, u4, "--cells", "4x16", "--window", "0.5:1.5", "-o",
+                  tmp_path / "x.h5"],
+                 ["stationarity", u3, u4, "--sample-length", "--cells", "4x16"]):
+        code, out, err = run_cli(capsys, *argv)
+        assert code == 2 and "Traceback" not in err, err
+        assert len(err.strip().splitlines()) == 1
+        assert "gas.superficial_velocity = 3" in err and "= 4" in err, err
+        assert str(u3) in err and str(u4) in err
+    assert not (tmp_path / "x.h5").exists()
+    code, _, err = run_cli(capsys, "fit", u3, u3b, "--cells", "4x16", "--window", "0.5:1.5",
+                           "--resamples", "0", "-q", "-o", tmp_path / "y.h5")
+    assert code == 0, err

@@ -83,6 +83,17 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     ('[[property]]\nname = "X"\nlaw = "heat-exchange"\ncoefficient = 1.0\n'
      'temperature = 800\n', None, "initial"),
     ('[[property]\nname = "X"\n', None, "not valid TOML"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\ninitial = 1.5\n', None,
+     "initial = 1.5 is outside [0, 1]"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\ninitial = -0.1\n', None,
+     "outside [0, 1]"),
+    ('[[property]]\nname = "X"\nlaw = "deactivation"\nrate = 1.0\ninitial = -0.5\n', None,
+     "initial = -0.5 is outside [0, inf)"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n" + "".join(f"{c},{r},1\n" for r in range(6) for c in range(3))
+     + "2,4,1\n", "cell col 2, row 4 more than once"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.0\nstart = "carried"\n', None,
+     "no steady state"),
 ])
 def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rates, message):
     _, _, model = fitted
@@ -172,3 +183,114 @@ def test_react_rate_from_with_run_and_the_refusal(fitted, tmp_path, capsys):
     assert main(["react", str(bare), "--kinetics", str(kin), "--run", str(other)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "not the model's fitting file" in err
+
+
+def test_react_run_must_be_the_fitting_file(fitted, tmp_path, capsys):
+    """--run is checked against the model's recorded identity even where the model stores
+    its fields: another file is refused in one line naming both files and the fix."""
+    folder, run, model = fitted
+    kin = _write(tmp_path, ZONES)
+    other = write_run(tmp_path / "other.h5", RiserFlow(columns=3, rows=6), 60, 2.0, seed=2)
+    for text in (ZONES, GOOD):
+        kin = _write(tmp_path, text, RATES)
+        assert main(["react", str(model), "--kinetics", str(kin), "--run", str(other)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err
+        assert str(other) in err and str(run) in err and "--run" in err
+    kin = _write(tmp_path, ZONES)
+    x, source = _exit_mean(capsys, ["react", str(model), "--kinetics", str(kin), "--run",
+                                    str(run), "--json"])
+    assert 0 < x < 1 and source == "model"
+
+
+def test_pooled_model_stores_pooled_cell_fields(tmp_path, capsys):
+    """A pooled fit stores the cell fields of all its runs' windows together (particle-frames
+    summed, the velocity weighted by particle-frames per cell); react uses them, accepts
+    --run of any one of the pooled runs and refuses another file."""
+    from cfbmarkov.analysis.cell_fields import window_cell_fields
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    flow = RiserFlow(columns=3, rows=6)
+    a = write_run(tmp_path / "a.h5", flow, 60, 2.0, seed=1)
+    b = write_run(tmp_path / "b.h5", flow, 90, 2.0, seed=2)
+    other = write_run(tmp_path / "c.h5", flow, 60, 2.0, seed=3)
+    pooled = tmp_path / "pooled.h5"
+    assert main(["fit", str(a), str(b), "--cells", "3x6", "--window", "0:2,0.5:1.5",
+                 "--resamples", "0", "-q", "-o", str(pooled)]) == 0
+    capsys.readouterr()
+    model = MarkovModel.load(pooled)
+    assert model.cell_fields is not None
+    with Trajectories(a) as ta, Trajectories(b) as tb:
+        fa = window_cell_fields(ta, model.state_space, (0.0, 2.0))
+        fb = window_cell_fields(tb, model.state_space, (0.5, 1.5))
+        ca = fa["solids_fraction"] * fa["frames"]          # relative: no diameter in files
+        # counts per cell: relative fraction times the mean count over cells
+        na = ca / ca.mean() * 60 * fa["frames"] / 18
+        nb = fb["solids_fraction"] * fb["frames"] / fb["solids_fraction"].mean() * 90 / 18
+    expected = (na + nb) / (fa["frames"] + fb["frames"])
+    np.testing.assert_allclose(model.cell_fields.solids_fraction, expected / expected.mean(),
+                               rtol=1e-9)
+    kin = _write(tmp_path, ZONES)
+    x, source = _exit_mean(capsys, ["react", str(pooled), "--kinetics", str(kin), "--json"])
+    assert 0 < x < 1 and source == "model"
+    assert _exit_mean(capsys, ["react", str(pooled), "--kinetics", str(kin), "--run", str(b),
+                               "--json"])[0] == x
+    assert main(["react", str(pooled), "--kinetics", str(kin), "--run", str(other)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and str(other) in err and str(a) in err
+    # a pooled model without fields: the message says to refit on the runs, not --run
+    bare = tmp_path / "bare.h5"
+    model.with_cell_fields(None).save(bare)
+    assert main(["react", str(bare), "--kinetics", str(kin), "--run", str(a)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "pooled" in err and "cfbmarkov fit RUN1.h5" in err
+
+
+def test_unknown_key_lists_only_the_laws_keys(fitted, tmp_path, capsys):
+    """The keys the message offers for first-order exclude wall_temperature (heat-exchange
+    only); heat-exchange's include it."""
+    _, _, model = fitted
+    kin = _write(tmp_path, '[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\n'
+                 'speed = 2\n')
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 2
+    err = capsys.readouterr().err
+    assert "unknown key 'speed'" in err and "wall_temperature" not in err
+    assert "rate_by_cell" in err
+    kin = _write(tmp_path, '[[property]]\nname = "T"\nlaw = "heat-exchange"\n'
+                 'coefficient = 1.0\ntemperature = 800\ninitial = 300\nspeed = 2\n')
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 2
+    assert "wall_temperature" in capsys.readouterr().err
+
+
+def test_react_says_exits_are_counted_downward_and_repeats_the_verdict(tmp_path, capsys):
+    """A model of a net downflow (a run mirrored top to bottom): the table and --json say
+    the exits are counted downward; --init repeats the model's fitting-sample warnings as
+    predict does."""
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.adequacy import Adequacy
+    from cfbmarkov.markov.model_summary import DOWNWARD_LINE
+    from cfbmarkov.synthetic import sample_run
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    flow = RiserFlow(columns=3, rows=6, persistence=False)
+    times, _, pos, laps = sample_run(flow, 60, 81, seed=4)
+    pos[..., 1] = np.nextafter(flow.height, 0) - pos[..., 1]
+    down = write_trajectories(tmp_path / "down.h5", times, pos, width=flow.width,
+                              height=flow.height, laps=-laps)
+    model = tmp_path / "down-model.h5"
+    assert main(["fit", str(down), "--cells", "3x6", "--window", "0:2", "--resamples", "0",
+                 "-q", "-o", str(model)]) == 0
+    capsys.readouterr()
+    kin = _write(tmp_path, GOOD, RATES)
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["direction"] == "down"
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 0
+    out = capsys.readouterr().out
+    assert "downward" in out and DOWNWARD_LINE in out
+    warned = tmp_path / "warned.h5"
+    MarkovModel.load(model).with_adequacy(Adequacy(("the halves disagree: test",))).save(warned)
+    assert main(["react", str(warned), "--kinetics", str(kin), "--init", str(down), "--start",
+                 "0.5", "--duration", "0.5", "-o", str(tmp_path / "p.h5"), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the model's fitting sample: the halves disagree: test" in err

@@ -24,7 +24,16 @@ A model fitted on several runs (a pooled fit) has these checks per run, each run
 sqrt(N) times the pooled interval's (a run holds 1/N of the data), and two across the runs:
 the first halves of all the windows pooled against the second halves pooled (the flow
 changing in step in every run), and each run's own model against the pooled one, the runs
-further than the limit times sqrt(N - 1) named (:func:`_pooled_checks`).
+further than the cross-run limit times sqrt(N - 1) named (:func:`_pooled_checks`).
+
+The cross-run limit does not grow with the spread it tests. The pooled interval's flow
+term is measured between the blocks of all the runs, so runs that disagree widen it; the
+cross-run check takes instead the within-run part of the interval, the stratified block
+bootstrap's (each resample draws every run's blocks from that run) with the flow's
+variability measured within each run (:func:`within_run_limit`), at least
+:data:`MIN_RUNS_LIMIT` and never more than :data:`DEFAULT_TOLERANCE` (the limit without an
+interval). Two runs whose models differ by far more than each run's own uncertainty warn,
+with or without an interval.
 """
 
 from __future__ import annotations
@@ -43,6 +52,10 @@ from cfbmarkov.trajectories import opened
 
 #: relative spread of the halves' E(RT) beyond which they disagree, without an interval
 DEFAULT_TOLERANCE = 0.3
+#: the least cross-run limit: runs whose E(RT) lie within this fraction of the pooled one
+#: are not named (runs of one flow from different seeds scatter by about 1 % on generated
+#: risers, slightly more than the blocks within one run show)
+MIN_RUNS_LIMIT = 0.05
 #: residences a part must hold for its E(RT) to be compared
 MIN_PART_RESIDENCES = 30
 #: share of the model's RTD beyond the window length that is warned about
@@ -107,10 +120,64 @@ def _turn_line(path, parts) -> str | None:
             "one (`cfbmarkov stationarity RUN` gives each window's direction)")
 
 
+def within_run_limit(model, uncertainty, rt_mean: float,
+                     tolerance: float = DEFAULT_TOLERANCE) -> float:
+    """The relative width of a pooled model's E(RT) interval with its flow term measured
+    within the runs, at most ``tolerance``: the limit of a pooled fit's cross-run check
+    (the module docstring).
+
+    The interval's half-widths are the stratified block bootstrap's and z times the flow's
+    standard error added in quadrature
+    (:func:`~cfbmarkov.analysis.bootstrap.interval_bounds`, z the normal quantile at
+    (1 + level) / 2). The stored flow term (``flow_sd``, measured between the blocks of all
+    the runs, so widened by their disagreement) is taken out of each half-width in
+    quadrature, and the flow's variability within the runs
+    (:func:`~cfbmarkov.analysis.bootstrap.flow_variability` with ``within_runs``, over
+    sqrt(runs) as the interval's) put in its place.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The pooled model (its fitting windows are re-read for the within-run term).
+    uncertainty : ModelUncertainty or None
+        The model's interval (None: ``tolerance``).
+    rt_mean : float
+        The model's exact E(RT) (s).
+    tolerance : float, optional
+        The most the limit may be (default :data:`DEFAULT_TOLERANCE`).
+
+    Returns
+    -------
+    float
+        The limit, a fraction of E(RT), between :data:`MIN_RUNS_LIMIT` and ``tolerance``.
+    """
+    if uncertainty is None or not rt_mean > 0:
+        return tolerance
+    from scipy.stats import norm
+
+    from cfbmarkov.analysis.bootstrap import fitting_runs, flow_variability
+
+    lo, hi = (float(v) for v in uncertainty.rt_mean_interval)
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        return tolerance
+    z = float(norm.ppf(0.5 * (1.0 + float(uncertainty.level))))
+    pooled = 0.0 if uncertainty.flow_sd is None else z * float(uncertainty.flow_sd[0]) * rt_mean
+    try:
+        runs = fitting_runs(model)
+        length = float(np.mean([b - a for _, (a, b) in runs]))
+        relative = flow_variability(model, length, within_runs=True)
+    except CfbmarkovError:
+        relative, runs = None, [None]
+    within = 0.0 if relative is None else z * relative[0] / math.sqrt(len(runs)) * rt_mean
+    down = math.sqrt(max((rt_mean - lo) ** 2 - pooled ** 2, 0.0) + within ** 2)
+    up = math.sqrt(max((hi - rt_mean) ** 2 - pooled ** 2, 0.0) + within ** 2)
+    return min(max((down + up) / rt_mean, MIN_RUNS_LIMIT), tolerance)
+
+
 def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]], *,
                     discrete: Sequence[DiscreteTrajectories] | None = None,
                     interval: tuple[float, float] | None = None,
-                    tolerance: float = DEFAULT_TOLERANCE) -> Adequacy:
+                    tolerance: float = DEFAULT_TOLERANCE, uncertainty=None) -> Adequacy:
     """The verdict on a model's fitting sample (the checks of the module docstring).
 
     Parameters
@@ -131,6 +198,10 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     tolerance : float, optional
         The relative spread of the halves' E(RT) beyond which they disagree, without an
         interval (default :data:`DEFAULT_TOLERANCE`).
+    uncertainty : ModelUncertainty, optional
+        The model's interval; a pooled fit's cross-run check takes its within-run part
+        (:func:`within_run_limit`), else ``tolerance``. ``interval`` defaults to its
+        E(RT) interval.
 
     Returns
     -------
@@ -145,6 +216,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     fitter = estimator_from_name(model.estimator, model.state_space, model.lag,
                                  connected=model.connected)
     rt_mean = _rt_mean(model)
+    if interval is None and uncertainty is not None:
+        interval = uncertainty.rt_mean_interval
     limit = tolerance
     if interval is not None and rt_mean > 0 and all(map(math.isfinite, interval)):
         limit = (float(interval[1]) - float(interval[0])) / rt_mean
@@ -188,6 +261,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     if pooled:
         run_means, pooled_lines, pooled_spread = _pooled_checks(
             fitter, data, names, windows, rt_mean, limit,
+            within_run_limit(model, uncertainty, rt_mean, tolerance),
             halves=pooled_fewest >= MIN_PART_RESIDENCES, direction=model.flow_direction)
         lines += pooled_lines
         if math.isfinite(pooled_spread):
@@ -204,10 +278,11 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
 
 
 def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
-                   halves: bool = True, direction: str = "up"):
+                   cross_limit: float, halves: bool = True, direction: str = "up"):
     """A pooled fit's checks across its runs: the first halves of all the windows pooled
     against the second halves pooled (limit ``limit``), and each run's own model against
-    the pooled one (limit ``limit`` sqrt(N - 1): a run holds 1/N of the data, so its E(RT)
+    the pooled one (limit ``cross_limit`` sqrt(N - 1), ``cross_limit`` the within-run
+    limit of :func:`within_run_limit`: a run holds 1/N of the data, so its E(RT)
     scatters sqrt(N) times the pooled interval's, and sqrt(1 - 1/N) of that about the
     pooled value). The halves are compared only with ``halves`` (where the pooled halves
     hold at least MIN_PART_RESIDENCES residences each). E(RT) counted in ``direction``
@@ -221,7 +296,7 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
             means.append(_rt_mean(fitter.fit(d), direction))
         except CfbmarkovError:
             means.append(math.nan)
-    run_limit = limit * math.sqrt(runs - 1)
+    run_limit = cross_limit * math.sqrt(runs - 1)
     off = sorted(((name, m) for name, m in zip(names, means)
                   if math.isfinite(m) and rt_mean > 0 and abs(m / rt_mean - 1.0) > run_limit),
                  key=lambda item: -abs(item[1] / rt_mean - 1.0))     # the furthest first

@@ -293,7 +293,7 @@ def _bootstrap_chains(model, blocks: int, resamples: int, seed: int):
 
 
 def flow_variability(model, window_length: float, *, direction: str | None = None,
-                     blocks: int = FLOW_BLOCKS):
+                     blocks: int = FLOW_BLOCKS, within_runs: bool = False):
     """How much the reference's E(RT) and SD(RT) in one window of ``window_length`` move by
     themselves from window to window, relative to their values, measured in the model's
     fitting window (the flow's own variability; module docstring).
@@ -320,7 +320,9 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
     A model fitted on several runs (:func:`fitting_runs`) has the blocks of every run's
     window (as many as fit in each, by the same rule, from the E(RT) of all the runs'
     residences), each compared with all the others pooled: the spread then holds the
-    differences between the runs too.
+    differences between the runs too. With ``within_runs`` each block is compared with the
+    other blocks of its own run only (runs with fewer than two blocks left out): the flow's
+    variability within the runs, without their differences.
 
     Parameters
     ----------
@@ -332,6 +334,9 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
         The direction residences are counted in; default the model's ``flow_direction``.
     blocks : int, optional
         The most blocks B of the fitting window (at least 2).
+    within_runs : bool, optional
+        Compare each block with the other blocks of its own run only (a pooled fit's
+        within-run variability; default False: with all the other blocks).
 
     Returns
     -------
@@ -366,12 +371,12 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
     pooled = np.concatenate(whole)
     if pooled.size < 2:
         return None
-    observed, lengths = [], []
-    for source, (a, b) in runs:
+    observed, lengths, group = [], [], []
+    for r, (source, (a, b)) in enumerate(runs):
         # blocks at least FLOW_BLOCK_RESIDENCES mean residences long, so that a block's own
         # window cuts off few of its residences
         n = min(int(blocks), int((b - a) / (FLOW_BLOCK_RESIDENCES * pooled.mean())))
-        if n < 1 or (n < 2 and len(runs) == 1):
+        if n < 1 or (n < 2 and (len(runs) == 1 or within_runs)):
             continue
         cuts = a + (b - a) * np.arange(n + 1) / n
         with opened(source) as traj:
@@ -380,11 +385,13 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
                                          use_events=False, lag_frames=lag_frames,
                                          direction=direction).samples for k in range(n)]
         lengths += [(b - a) / n] * n
+        group += [r if within_runs else 0] * n
     if len(observed) < 2:
         return None
     rel_mean, rel_sd = [], []
     for k, block in enumerate(observed):
-        others = np.concatenate([o for j, o in enumerate(observed) if j != k])
+        others = np.concatenate([o for j, o in enumerate(observed)
+                                 if j != k and group[j] == group[k]])
         if block.size < 2 or others.size < 2:
             continue
         rel_mean.append(block.mean() / others.mean() - 1.0)
@@ -393,7 +400,9 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
             rel_sd.append(block.std(ddof=1) / spread - 1.0)
     if len(rel_mean) < 2:
         return None
-    count, block = len(observed), float(np.mean(lengths))
+    # blocks in each comparison (their mean over the blocks, within_runs: per run)
+    count = float(np.mean([group.count(g) for g in group]))
+    block = float(np.mean(lengths))
     factor = np.sqrt((count - 1.0) / count) * max(1.0, np.sqrt(block / float(window_length)))
     rms = lambda values: float(np.sqrt(np.mean(np.square(values)))) if values else 0.0  # noqa: E731
     return rms(rel_mean) * factor, rms(rel_sd) * factor

@@ -41,8 +41,13 @@ def cmd_react(args) -> int:
     model = MarkovModel.load(args.model)
     fields, fields_from = None, None
     if needs_cell_fields(kinetics):
-        fields = model_cell_fields(model, args.run, what=str(args.kinetics))
+        fields = model_cell_fields(model, args.run, what=str(args.kinetics),
+                                   model_name=str(args.model))
         fields_from = "model" if model.cell_fields is not None else str(args.run)
+    elif args.run is not None:      # a file that is not the model's is refused all the same
+        from cfbmarkov.analysis.cell_fields import check_fitting_file
+
+        check_fitting_file(model, args.run, model_name=str(args.model))
     state_kinetics = kinetics.per_state(model.state_space, fields)
     answers, seconds = {}, None
     if kinetics.linear:
@@ -62,11 +67,18 @@ def cmd_react(args) -> int:
                 model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                               output=args.output, progress=not args.quiet,
                               kinetics=state_kinetics)
+        from cfbmarkov._names import one_line
+
+        for line in model.adequacy.warnings if model.adequacy is not None else ():
+            print(f"warning: the model's fitting sample: {one_line(line)}", file=sys.stderr)
+    # exits are counted in the model's direction: down through the bottom for a periodic
+    # model of a net downflow (docs/definitions.md, Net downflow), as fit and rtd say
+    direction = model.flow_direction
     if args.json:
         out = {"properties": {name: {**a.to_dict(), "law": p.law.key}
                               for (name, a), p in zip(answers.items(), kinetics.properties)},
                "exact_seconds": seconds, "prediction": args.output,
-               "cell_fields_from": fields_from}
+               "cell_fields_from": fields_from, "direction": direction}
         print(json.dumps(jsonable(out)))
         return 0
     if answers:
@@ -80,6 +92,11 @@ def cmd_react(args) -> int:
                   f"{a.exit_sd:>12.6g} {a.bed_mean:>12.6g} {span:>26}")
         print(f"exact, per residence at the exit and over the bed in steady state "
               f"({seconds:.3g} s)")
+        if direction == "down":
+            from cfbmarkov.markov.model_summary import DOWNWARD_LINE
+
+            print("  exits counted downward, at the pass down through the bottom "
+                  f"({DOWNWARD_LINE})")
     if args.output is not None:
         print(args.output)
     sys.stdout.flush()
@@ -105,7 +122,8 @@ def add_react(sub) -> None:
                         "(cfbmarkov fit stores them)")
     s.add_argument("--json", action="store_true",
                    help="print {\"properties\": {NAME: {exit_mean, exit_sd, bed_mean, "
-                        "bed_mean_by_cell, ...}}} as JSON")
+                        "bed_mean_by_cell, ...}}, \"direction\": up or down (exits counted "
+                        "downward through the bottom: a net downflow), ...} as JSON")
     s.add_argument("--init", default=None,
                    help="trajectory file giving the initial state of a Monte Carlo with the "
                         "properties (with --start, --duration and -o)")

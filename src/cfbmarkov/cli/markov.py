@@ -92,6 +92,22 @@ def _finish_fit(args, model, runs, windows) -> int:
         with Trajectories(model.source) as run:
             model = model.with_source_identity(window_identity(run, model.window))
             model = model.with_cell_fields(fitting_cell_fields(run, model))
+    elif len(runs) > 1:     # a pooled fit: each run's identity, the pooled cell fields
+        import contextlib
+
+        from cfbmarkov.analysis.cell_fields import pooled_cell_fields
+        from cfbmarkov.trajectories import Trajectories
+        from cfbmarkov.trajectory_identity import window_identity
+
+        with contextlib.ExitStack() as stack:
+            opened = [stack.enter_context(Trajectories(path)) for path in runs]
+            model = model.with_source_identity(";".join(
+                window_identity(run, w) for run, w in zip(opened, windows)))
+            try:
+                model = model.with_cell_fields(pooled_cell_fields(opened, model.state_space,
+                                                                  windows))
+            except InputError:         # the grid does not fit the files: no fields
+                pass
     has_rtd = True
     try:
         model.rtd()
@@ -110,12 +126,10 @@ def _finish_fit(args, model, runs, windows) -> int:
     if args.adequacy:
         from cfbmarkov.analysis.adequacy import assess_adequacy
 
-        interval = (model.uncertainty.rt_mean_interval if model.uncertainty is not None
-                    else None)
         with _stage(args, "sample verdict", "the fitting sample's verdict: the window's "
                     "halves and quarters refitted and compared"):
             model = model.with_adequacy(assess_adequacy(model, runs, windows,
-                                                        interval=interval))
+                                                        uncertainty=model.uncertainty))
     # -- end of the sample's verdict ----------------------------------------------------
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line

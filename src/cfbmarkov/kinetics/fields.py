@@ -153,9 +153,16 @@ class ByCell(CellParameter):
                              "give one row per cell of the model's grid")
         cell = (rows * d + depth) * m + cols
         seen = np.bincount(cell, minlength=space.n_cells)
-        if seen.max() > 1 or seen.min() < 1:
-            what = ("repeats a cell" if seen.max() > 1
-                    else f"misses {int(np.sum(seen == 0))} cell(s)")
+        if seen.max() > 1:
+            i = int(np.flatnonzero(seen[cell] > 1)[0])        # the first repeated cell
+            at = f"col {cols[i]}, row {rows[i]}" + (f", depth {depth[i]}" if d > 1 else "")
+            rows_of = np.flatnonzero(cell == cell[i]) + 1        # data rows, from 1
+            raise InputError(f"{where}: the table gives the cell {at} more than once (data rows "
+                             f"{', '.join(map(str, rows_of))}); give each of the "
+                             f"{space.n_cells} cells of the grid {space.grid_text()} exactly "
+                             "once")
+        if seen.min() < 1:
+            what = f"misses {int(np.sum(seen == 0))} cell(s)"
             raise InputError(f"{where}: the table {what} of the grid {space.grid_text()}; "
                              f"give each of its {space.n_cells} cells exactly once")
         out = np.empty(space.n_cells)

@@ -47,6 +47,9 @@ class Law(ABC):
     linear: ClassVar[bool] = True
     #: the value a property of this law takes at entry unless the file gives ``initial``
     default_initial: ClassVar[float | None] = None
+    #: the range (lowest, highest; None: unbounded) of a start value, and what it is
+    initial_range: ClassVar[tuple[float | None, float | None]] = (None, None)
+    quantity: ClassVar[str] = "value"
 
     @property
     @abstractmethod
@@ -95,6 +98,8 @@ class FirstOrder(Law):
 
     key: ClassVar[str] = "first-order"
     default_initial: ClassVar[float | None] = 0.0
+    initial_range: ClassVar[tuple[float | None, float | None]] = (0.0, 1.0)
+    quantity: ClassVar[str] = "a conversion"
 
     @property
     def parameter_names(self) -> tuple[str, ...]:
@@ -112,6 +117,8 @@ class Deactivation(Law):
 
     key: ClassVar[str] = "deactivation"
     default_initial: ClassVar[float | None] = 1.0
+    initial_range: ClassVar[tuple[float | None, float | None]] = (0.0, None)
+    quantity: ClassVar[str] = "an activity"
 
     @property
     def parameter_names(self) -> tuple[str, ...]:

@@ -54,7 +54,8 @@ class Property:
     Raises
     ------
     InputError
-        For a bad name, start, a parameter missing or unknown, or a non-finite start value.
+        For a bad name, start, a parameter missing or unknown, or a start value that is not
+        finite or lies outside the law's range (a conversion in [0, 1], an activity >= 0).
     """
 
     name: str
@@ -85,6 +86,13 @@ class Property:
         if initial is None or not math.isfinite(float(initial)):
             raise InputError(f"property {self.name}: give its finite start value, initial = "
                              "... (the feed's value)")
+        low, high = getattr(self.law, "initial_range", (None, None))
+        if (low is not None and float(initial) < low) or (high is not None
+                                                          and float(initial) > high):
+            span = f"[{low:g}, {high:g}]" if high is not None else f"[{low:g}, inf)"
+            raise InputError(f"property {self.name}: initial = {float(initial):g} is outside "
+                             f"{span}, the range of {self.law.quantity} (law {self.law.key}); "
+                             f"give a start value in {span}")
         object.__setattr__(self, "initial", float(initial))
         object.__setattr__(self, "parameters", dict(self.parameters))
 
@@ -135,6 +143,8 @@ class StateKinetics:
         Each property's parameters per state (columns in the law's order).
     laws : tuple of Law
         The laws.
+    source : str, optional
+        The kinetics file they came from, for messages.
     """
 
     names: tuple
@@ -145,6 +155,7 @@ class StateKinetics:
     target: np.ndarray
     parameters: tuple
     laws: tuple
+    source: str = ""
 
     @property
     def n_properties(self) -> int:
@@ -266,14 +277,14 @@ class Kinetics:
                              np.array([pr.initial for pr in self.properties]),
                              np.array([pr.law.linear for pr in self.properties]),
                              rate, target, tuple(params),
-                             tuple(pr.law for pr in self.properties))
+                             tuple(pr.law for pr in self.properties), self.source)
 
     def describe(self) -> list[dict]:
         """The properties as JSON-serialisable text."""
         return [p.describe() for p in self.properties]
 
 
-_PROPERTY_KEYS = {"name", "law", "start", "initial", "threshold", "wall_temperature"}
+_PROPERTY_KEYS = {"name", "law", "start", "initial", "threshold"}
 
 
 def load_kinetics(path: str | os.PathLike) -> Kinetics:
@@ -345,7 +356,7 @@ def _property(table, index: int, path: Path) -> Property:
         if "wall_temperature" in table:
             raise InputError(f"{where}: wall_temperature is for law heat-exchange only")
         law = law_cls()
-    allowed = set(_PROPERTY_KEYS)
+    allowed = set(_PROPERTY_KEYS) | ({"wall_temperature"} if law_cls is HeatExchange else set())
     params = {}
     for p in law.parameter_names:
         keys = (p, f"{p}_by_cell", f"{p}_from", f"{p}_dense", f"{p}_dilute")

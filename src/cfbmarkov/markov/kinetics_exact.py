@@ -293,9 +293,12 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         if not linear:
             raise InputError(f"property {name}: law {law.key} has no exact answer; run the "
                              "Monte Carlo (react --init RUN --start T --duration D -o OUT)")
+    where = f"{sk.source}: " if getattr(sk, "source", "") else ""
     if model.open_flow is not None and "carried" in sk.starts:
-        raise InputError("a carried property needs a periodic riser: particles that leave an "
-                         "open riser do not come back (use start = entry)")
+        name = sk.names[list(sk.starts).index("carried")]
+        raise InputError(f"{where}property {name}: a carried property needs a periodic riser: "
+                         "particles that leave an open riser do not come back (use start = "
+                         "entry)")
     q, r, e, state, _ = residence_chain(model, direction)
     a_all, b_all = sk.over(model.lag)
     space = model.state_space
@@ -306,7 +309,10 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     for i, name in enumerate(sk.names):
         m = exit_moments(q, r, e, a_all[i][state], b_all[i][state], lu_q)
         if sk.starts[i] == "carried":
-            v0, second = m.carried()
+            try:
+                v0, second = m.carried()
+            except InputError as exc:
+                raise InputError(f"{where}property {name}: {exc}") from None
             mean = v0
         else:
             v0 = float(sk.initial[i])

@@ -103,8 +103,9 @@ class MarkovModel:
     source_identity : str or None
         The content identity of the fitting window of ``source``
         (:func:`cfbmarkov.trajectory_identity.window_identity`), recorded by ``fit``; a
-        re-read of the window (a comparison's intervals) is refused where it differs. None:
-        not recorded (several sources, or a model made from counts).
+        re-read of the window (a comparison's intervals) is refused where it differs; a
+        pooled fit's: one identity per run, in ``source`` order, joined by ``;``. None: not
+        recorded (a model made from counts).
     cell_fields : CellFields or None
         The fitting window's time-averaged cell fields (solids fraction, distance to the
         wall, mean vertical velocity; :class:`~cfbmarkov.kinetics.CellFields`), recorded by

@@ -6,8 +6,10 @@ add; :func:`~cfbmarkov.markov.counting.count_transitions` sums over a list of wi
 its P is that of all their transitions, as if the windows were one longer sample of the
 same flow. Runs pool only where they describe one riser at one time basis:
 :func:`check_runs_match` refuses runs that differ in dimensions, width, height, depth,
-boundary or frame interval, naming the first difference; :func:`check_runs_distinct` refuses
-a run pooled with itself.
+boundary or frame interval, and runs whose files record different case parameters (the
+physical settings of a simulated case, :data:`CASE_SECTIONS`, e.g.
+``gas.superficial_velocity``), naming the first difference; :func:`check_runs_distinct`
+refuses a run pooled with itself.
 """
 
 from __future__ import annotations
@@ -25,6 +27,43 @@ from cfbmarkov.trajectory_identity import window_identity
 _SHARED = (("dimensions", "dimensions"), ("width", "width (m)"), ("height", "height (m)"),
            ("depth", "depth (m)"), ("boundary", "boundary"),
            ("frame_interval", "frame interval (s)"))
+
+
+#: the sections of a file's ``parameters`` (a simulated case's settings) that define its flow:
+#: runs whose files both record a setting of these and differ in it are of different cases.
+#: Files that record none (imports, synthetic flows) are not compared on them.
+CASE_SECTIONS = ("riser", "particles", "gas", "contact")
+
+
+def case_parameters(parameters) -> dict[str, object]:
+    """The case-defining settings recorded in a trajectory file's ``parameters``.
+
+    Parameters
+    ----------
+    parameters : dict
+        The file's ``parameters`` (a case's settings as nested sections, or a producer's
+        own keys).
+
+    Returns
+    -------
+    dict
+        ``{"section.name": value}`` for every setting under :data:`CASE_SECTIONS` (empty
+        for a file that records none).
+    """
+    out: dict[str, object] = {}
+
+    def flat(d, prefix):
+        for key, value in d.items():
+            if isinstance(value, dict):
+                flat(value, f"{prefix}{key}.")
+            else:
+                out[f"{prefix}{key}"] = value
+
+    for section in CASE_SECTIONS:
+        value = (parameters or {}).get(section) if isinstance(parameters, dict) else None
+        if isinstance(value, dict):
+            flat(value, f"{section}.")
+    return out
 
 
 def _same(a, b, tolerance: float = 1e-9) -> bool:
@@ -49,9 +88,11 @@ def check_runs_match(runs: Sequence) -> None:
     ------
     InputError
         At the first run that differs from the first in dimensions, width, height, depth,
-        boundary or frame interval (relative tolerance 1e-9), naming both values.
+        boundary or frame interval (relative tolerance 1e-9), or in a case parameter both
+        files record (:func:`case_parameters`), naming the setting and both values.
     """
     first = runs[0]
+    first_case = case_parameters(getattr(first, "parameters", None))
     for run in runs[1:]:
         for name, words in _SHARED:
             a, b = getattr(first, name), getattr(run, name)
@@ -59,6 +100,14 @@ def check_runs_match(runs: Sequence) -> None:
                 raise InputError(f"runs of different {words} cannot be pooled: {first.path} "
                                  f"has {_text(a)}, {run.path} has {_text(b)} (fit runs of "
                                  "one case, at one frame interval)")
+        case = case_parameters(getattr(run, "parameters", None))
+        for key in sorted(set(first_case) & set(case)):
+            a, b = first_case[key], case[key]
+            if not _same(float(a) if isinstance(a, int) and not isinstance(a, bool) else a,
+                         float(b) if isinstance(b, int) and not isinstance(b, bool) else b):
+                raise InputError(f"runs of different cases cannot be pooled: {first.path} has "
+                                 f"{key} = {_text(a)}, {run.path} has {key} = {_text(b)} "
+                                 "(pool runs of one case; fit each case on its own)")
 
 
 def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) -> None:
