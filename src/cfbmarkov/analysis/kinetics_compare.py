@@ -7,15 +7,23 @@ Per property of a kinetics file (linear laws):
 - *reference*: the property integrated along the reference's paths over the window, on the
   model's states at its lag (:mod:`cfbmarkov.analysis.kinetics_reference`);
 - *model*: the prediction's values over the same window, the ones its Monte Carlo stored
-  (``/properties/NAME``) or, where it stored none, the same integration along the
-  prediction's own paths (on a space of cells these are the chain's states, so the values
-  are those a Monte Carlo with properties gives); beside them the chain's exact answers
+  (``/properties/NAME``) where their fingerprint is that of this kinetics on the model's
+  states (:func:`stored_definition_differs`), else (none stored, another definition, no
+  fingerprint; with a warning) the same integration along the prediction's own paths (on
+  a space of cells these are the chain's states, so the values are those a Monte Carlo
+  with properties gives); beside them the chain's exact answers
   (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`), its exact exit mean as a window
   of the comparison's length sees it (short residences more often than long ones, as the
   reference's exits; :func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`) and an
   interval from the block bootstrap of the fitting window, as for the RTD;
 - *segregated flow*: the bed-averaged law over the fitting window's observed RTD
   (:mod:`cfbmarkov.analysis.segregated_flow`).
+
+A carried property's exact exit mean is the long-run steady state of the circulating
+inventory, which a window's exits do not show: it has no PD (null, with a note) and no
+segregated-flow baseline (null, with a note). A state space with memory takes its history
+from the prediction's first frame(s) where the window starts there; both sides then start
+that many lags later (``window``, ``window_note``).
 
 Each side gives the mean at exit and its distribution, the bed's mean over time and per
 cell; between sides the PD of the exit mean and the Minkowski distance (MD) of the exit
