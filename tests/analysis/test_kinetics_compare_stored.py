@@ -234,3 +234,20 @@ def test_console_prints_the_models_interval_and_verdict(runs, tmp_path, capsys):
     assert f"{lo:.4g}-{hi:.4g}" in verdict and "the flow's variability left out" in verdict
     inside = lo <= block["reference"]["exit_mean"] <= hi
     assert ("consistent with the reference" in verdict) == inside
+
+
+def test_a_carried_property_stored_from_before_a_later_start_is_not_used(runs, tmp_path):
+    from cfbmarkov.kinetics import load_kinetics
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    kin = _toml(tmp_path, "carried", 'law = "deactivation"\nrate = 0.5\nstart = "carried"')
+    with Trajectories(runs["pred_v"]) as traj:
+        model = MarkovModel.from_trajectories(traj)
+    pred = model.predict(runs["run"], start=4.0, duration=4.0, seed=5,
+                         output=tmp_path / "pvc.h5",
+                         kinetics=load_kinetics(kin).per_state(model.state_space))
+    block = _compare(runs, pred, kin, tmp_path / "pvc")["kinetics"]["X"]
+    assert block["window"] == pytest.approx([4.02, 8.0])
+    assert block["model"]["values_from"] == "paths"
+    assert "has run 1 lag(s)" in block["model"]["values_note"]

@@ -407,6 +407,10 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                 notes[name] = (f"{pred.path} stores {name} in {stored.shape[0]} frames of "
                                f"{start:g}-{stop:g} s, not the {pred_discrete.n_frames} the "
                                "comparison reads")
+            if notes[name] is None and late and not m["reset"]:
+                notes[name] = (f"the carried {name} stored in {pred.path} has run {late} "
+                               f"lag(s) from {float(pred.times[0]):g} s, while the reference "
+                               f"starts at {start:g} s")
             if notes[name] is not None:
                 warnings.append(f"kinetics: {notes[name]}; the model side integrates {name} "
                                 "along the prediction's paths instead")
