@@ -503,6 +503,22 @@ class Trajectories(FrameTimes):
                              f"{', '.join(self.property_names) or 'none'})")
         return self._file["properties"][name][frames]
 
+    def property_attrs(self, name: str) -> dict:
+        """The attributes stored with ``/properties/NAME`` (a prediction's: ``law``,
+        ``start``, ``initial``, ``fingerprint``, ``fingerprint_method``; a file written
+        before fingerprints holds none of the last two).
+
+        Raises
+        ------
+        InputError
+            If the file has no property of that name.
+        """
+        if name not in self.property_names:
+            raise InputError(f"{self.path}: no particle property '{name}' (has: "
+                             f"{', '.join(self.property_names) or 'none'})")
+        return {k: (v.decode() if isinstance(v, bytes) else v)
+                for k, v in self._file["properties"][name].attrs.items()}
+
     def group(self, name: str) -> h5py.Group | None:
         """A provenance group attached by the producer, or None.
 

@@ -99,3 +99,15 @@ def test_the_sentence_names_where_the_chain_loses():
     assert "in 1 of 2 comparisons" in text
     assert "U = 6 m/s (paper): chain +3.00 %, segregated flow +1.00 %" in text
     assert "inside the reference's interval in 1 of 2" in text
+
+
+def test_a_carried_propertys_chain_is_its_monte_carlo_not_the_steady_state():
+    row = KineticsRow("U = 3 m/s", "mle", {
+        "start": "carried",
+        "reference": {"exit_mean": 0.6, "exit_mean_interval": [0.58, 0.62]},
+        "model": {"exit_mean": 0.62, "pd_exit_mean": 3.33,
+                  "exact": {"exit_mean": 0.0, "pd_exit_mean": None,
+                            "note": "the circulating inventory's long-run steady state"}},
+        "segregated_flow": None, "segregated_flow_note": "not defined for a carried property"})
+    assert row.chain_mean == pytest.approx(0.62) and row.chain_error == pytest.approx(3.33)
+    assert row.baseline_error is None

@@ -7,15 +7,23 @@ Per property of a kinetics file (linear laws):
 - *reference*: the property integrated along the reference's paths over the window, on the
   model's states at its lag (:mod:`cfbmarkov.analysis.kinetics_reference`);
 - *model*: the prediction's values over the same window, the ones its Monte Carlo stored
-  (``/properties/NAME``) or, where it stored none, the same integration along the
-  prediction's own paths (on a space of cells these are the chain's states, so the values
-  are those a Monte Carlo with properties gives); beside them the chain's exact answers
+  (``/properties/NAME``) where their fingerprint is that of this kinetics on the model's
+  states (:func:`stored_definition_differs`), else (none stored, another definition, no
+  fingerprint; with a warning) the same integration along the prediction's own paths (on
+  a space of cells these are the chain's states, so the values are those a Monte Carlo
+  with properties gives); beside them the chain's exact answers
   (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`), its exact exit mean as a window
   of the comparison's length sees it (short residences more often than long ones, as the
   reference's exits; :func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`) and an
   interval from the block bootstrap of the fitting window, as for the RTD;
 - *segregated flow*: the bed-averaged law over the fitting window's observed RTD
   (:mod:`cfbmarkov.analysis.segregated_flow`).
+
+A carried property's exact exit mean is the long-run steady state of the circulating
+inventory, which a window's exits do not show: it has no PD (null, with a note) and no
+segregated-flow baseline (null, with a note). A state space with memory takes its history
+from the prediction's first frame(s) where the window starts there; both sides then start
+that many lags later (``window``, ``window_note``).
 
 Each side gives the mean at exit and its distribution, the bed's mean over time and per
 cell; between sides the PD of the exit mean and the Minkowski distance (MD) of the exit
@@ -40,6 +48,19 @@ from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
 PROPERTIES_GROUP = "properties"
 #: at most this many bins of the exit distributions (a few hundred exits per window)
 EXIT_BINS = 50
+
+
+#: why a carried property has no segregated-flow baseline (``summary.json``'s note)
+CARRIED_SEGREGATED_NOTE = ("not defined for a carried property (the segregated flow restarts "
+                           "every residence at the entry value)")
+
+
+def carried_exact_note(length: float) -> str:
+    """What the chain's exact exit mean of a carried property is, against a window of
+    ``length`` s: its long-run steady state, which no PD against the window's exits
+    judges (``summary.json``'s ``exact.note``)."""
+    return (f"the circulating inventory's long-run steady state; not comparable with a "
+            f"{length:g} s window")
 
 
 def needs_cell_fields(kinetics) -> bool:
@@ -74,6 +95,82 @@ def stored_property(traj, name: str, frames: slice) -> np.ndarray | None:
         raise InputError(f"{traj.path}: /{PROPERTIES_GROUP}/{name} holds {data.shape[-1]} "
                          f"particles for the file's {traj.n_particles}")
     return np.asarray(data, dtype=np.float64)
+
+
+def stored_definition_differs(traj, name: str, state_kinetics, lag: float) -> str | None:
+    """Why the values a prediction stored for ``name`` cannot stand for the property as
+    ``state_kinetics`` defines it, or None where they can.
+
+    The stored values stand for it only where the fingerprint stored with them
+    (:func:`cfbmarkov.kinetics.fingerprint.property_fingerprint`: law, start rule, entry
+    value, lag and the per-state rates and targets) is that of ``state_kinetics`` at
+    ``lag``.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open prediction file holding ``/properties/NAME``.
+    name : str
+        The property.
+    state_kinetics : StateKinetics
+        The comparison's kinetics on the model's states.
+    lag : float
+        The model's lag (s).
+
+    Returns
+    -------
+    str or None
+        The reason in words (what differs), or None where the fingerprints match.
+    """
+    from cfbmarkov.kinetics.fingerprint import property_fingerprint
+
+    attrs = traj.property_attrs(name)
+    q = state_kinetics.index(name)
+    stored = attrs.get("fingerprint")
+    if not stored:
+        return (f"{traj.path} stores {name} without the fingerprint of its definition (a file "
+                "written by an older cfbmarkov): its values may be those of another kinetics")
+    if str(stored) == property_fingerprint(state_kinetics, q, lag):
+        return None
+    differ = []
+    law = state_kinetics.laws[q].key
+    if str(attrs.get("law", law)) != law:
+        differ.append(f"law {attrs.get('law')} stored, {law} here")
+    if str(attrs.get("start", state_kinetics.starts[q])) != state_kinetics.starts[q]:
+        differ.append(f"start {attrs.get('start')} stored, {state_kinetics.starts[q]} here")
+    initial = float(state_kinetics.initial[q])
+    if not np.isclose(float(attrs.get("initial", initial)), initial, rtol=1e-12, atol=0.0):
+        differ.append(f"initial {float(attrs.get('initial')):g} stored, {initial:g} here")
+    what = "; ".join(differ) if differ else "the rates or targets per state (or the lag) differ"
+    return f"stored values of another definition of {name} in {traj.path}: {what}"
+
+
+def _prediction_states(pred, model, window, warnings):
+    """The prediction's states over ``window`` (positions kept) and the lags by which they
+    start after the window's start: where the file starts less than the history the
+    state space needs before the window, its first frames serve as that history (as
+    ``fit`` does at a file's start) and the comparison starts later, with a warning."""
+    from cfbmarkov.markov.discrete import discretize
+
+    start, stop = window
+    try:
+        discrete = discretize(pred, model.state_space, model.lag, (start, stop),
+                              keep_positions=True, short_history="skip")
+    except InputError as exc:
+        memory = int(model.state_space.memory_lags)
+        hint = (f"; the model's states ({model.state_space.kind}) take their {memory} lag(s) "
+                "of history from the file's first frames: give a window ending at "
+                f"{start + (memory + 1) * model.lag:g} s or later" if memory else "")
+        raise InputError(f"{exc}{hint}") from None
+    first = float(discrete.times[0])
+    late = int(round((first - start) / model.lag)) if first > start + pred.time_tolerance else 0
+    if late:
+        warnings.append(f"kinetics: the model's states ({model.state_space.kind}) need "
+                        f"{model.state_space.memory_lags} lag(s) of history and {pred.path} "
+                        f"starts at {float(pred.times[0]):g} s: its first frame(s) serve as "
+                        f"that history, so the kinetics comparison starts {late} lag(s) "
+                        f"later, over {first:g}-{stop:g} s on both sides")
+    return discrete, late
 
 
 def _fitting_source(model, ref):
@@ -281,7 +378,6 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     """
     from cfbmarkov.analysis.compare import _Basis
     from cfbmarkov.markov import MarkovModel
-    from cfbmarkov.markov.discrete import discretize
 
     model = MarkovModel.from_trajectories(pred)
     if model is None:
@@ -297,22 +393,36 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     on = _Basis(comparison.basis, comparison.basis == "events", comparison.lag_frames,
                 ref.height / float(pred.parameters.get("rows") or model.state_space.rows),
                 comparison.direction)
+    pred_discrete, late = _prediction_states(pred, model, (start, stop), warnings)
+    start = float(pred_discrete.times[0]) if late else start
     reference = reference_kinetics(ref, model, sk, (start, stop), direction=on.direction)
     frames = pred.window(start, stop)
-    pred_discrete = discretize(pred, model.state_space, model.lag, (start, stop),
-                               keep_positions=True)
-    model_paths, sources = {}, {}
+    model_paths, sources, notes = {}, {}, {}
     for m in maps:
-        stored = stored_property(pred, m["name"], slice(frames.start, frames.stop))
-        if stored is not None and stored.shape[0] != pred_discrete.n_frames:
-            stored = None
-        sources[m["name"]] = "stored" if stored is not None else "paths"
-        model_paths[m["name"]] = integrate_along_paths(
-            pred_discrete, m["a"], m["b"], m["initial"], reset=m["reset"], name=m["name"],
+        name = m["name"]
+        stored = stored_property(pred, name, slice(frames.start, frames.stop))
+        if stored is not None:
+            notes[name] = stored_definition_differs(pred, name, sk, model.lag)
+            if notes[name] is None and stored.shape[0] != pred_discrete.n_frames:
+                notes[name] = (f"{pred.path} stores {name} in {stored.shape[0]} frames of "
+                               f"{start:g}-{stop:g} s, not the {pred_discrete.n_frames} the "
+                               "comparison reads")
+            if notes[name] is None and late and not m["reset"]:
+                notes[name] = (f"the carried {name} stored in {pred.path} has run {late} "
+                               f"lag(s) from {float(pred.times[0]):g} s, while the reference "
+                               f"starts at {start:g} s")
+            if notes[name] is not None:
+                warnings.append(f"kinetics: {notes[name]}; the model side integrates {name} "
+                                "along the prediction's paths instead")
+                stored = None
+        sources[name] = "stored" if stored is not None else "paths"
+        model_paths[name] = integrate_along_paths(
+            pred_discrete, m["a"], m["b"], m["initial"], reset=m["reset"], name=name,
             direction=on.direction, stored=stored)
-    if any(v == "paths" for v in sources.values()):
-        warnings.append("kinetics: the prediction stored no properties; the model side "
-                        "integrates them along the prediction's paths")
+    unstored = [m["name"] for m in maps if m["name"] not in notes]
+    if unstored:
+        warnings.append(f"kinetics: the prediction stored no values of {', '.join(unstored)}; "
+                        "the model side integrates them along the prediction's paths")
     exact = _exact(model, sk, warnings, on.direction)
     windowed = _windowed(model, sk, stop - start, warnings, on.direction) if exact else {}
     boot = (_bootstrap_exit_means(model, kinetics, fields, resamples, warnings, on.direction)
@@ -323,8 +433,9 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     for m in maps:
         name = m["name"]
         r, p = reference[name], model_paths[name]
+        carried = not m["reset"]
         seg: SegregatedFlow | None = None
-        if rt_fit is not None:
+        if rt_fit is not None and not carried:
             seg = segregated_flow(rt_fit, m["rate"], m["target"], occupancy, m["initial"],
                                   name=name)
         edges = exit_bins([r.exit_values, p.exit_values]
@@ -340,6 +451,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                      **_paths(r)}
         mod_block = {**_side(p.exit_values, p.exit_mean, p.exit_sd, p.exit_se, level),
                      **_paths(p), "values_from": sources[name],
+                     **({"values_note": notes[name]} if notes.get(name) else {}),
                      "pd_exit_mean": percentage_difference(p.exit_mean, r.exit_mean),
                      "md_exit": md(dist_mod)}
         answer = None if exact is None else exact.get(name)
@@ -348,12 +460,19 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                                   "bed_mean": answer.bed_mean,
                                   "pd_exit_mean": percentage_difference(answer.exit_mean,
                                                                         r.exit_mean)}
+            if carried:
+                mod_block["exact"]["pd_exit_mean"] = None
+                mod_block["exact"]["note"] = carried_exact_note(stop - start)
             if name in windowed:
                 mod_block["exact"]["windowed_exit_mean"] = windowed[name]
                 mod_block["exact"]["pd_windowed_exit_mean"] = percentage_difference(
                     windowed[name], r.exit_mean)
             values = None if boot is None else np.asarray(boot.get(name, []), float)
-            if values is not None and values.size >= 2:
+            if carried:
+                mod_block["interval_method"] = (
+                    "Monte Carlo noise only (the fitting window's bootstrap spreads the "
+                    "long-run steady state of a carried property, not a window's values)")
+            elif values is not None and values.size >= 2:
                 from cfbmarkov.analysis.bootstrap import interval_bounds
 
                 lo, hi = interval_bounds(p.exit_mean, values, answer.exit_mean, level,
@@ -376,6 +495,12 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                          "start": m["start"], "initial": m["initial"],
                          "reference": ref_block, "model": mod_block,
                          "segregated_flow": seg_block,
+                         **({"segregated_flow_note": CARRIED_SEGREGATED_NOTE}
+                            if carried else {}),
+                         "window": [float(start), float(stop)],
+                         **({"window_note": f"starts {late} lag(s) after the window's start "
+                                            "(the prediction's first frames serve as the "
+                                            "model's states' history)"} if late else {}),
                          "exit_bins": {"from": float(edges[0]), "to": float(edges[-1]),
                                        "count": n_bins}}
         figures[name] = {"edges": edges, "reference": dist_ref, "model": dist_mod,
@@ -388,5 +513,6 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     return {"summary": summary, "figures": figures}
 
 
-__all__ = ["EXIT_BINS", "PROPERTIES_GROUP", "compare_kinetics", "exit_bins", "exit_distribution",
-           "needs_cell_fields", "stored_property"]
+__all__ = ["CARRIED_SEGREGATED_NOTE", "EXIT_BINS", "PROPERTIES_GROUP", "carried_exact_note",
+           "compare_kinetics", "exit_bins", "exit_distribution", "needs_cell_fields",
+           "stored_definition_differs", "stored_property"]

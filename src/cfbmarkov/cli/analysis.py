@@ -96,7 +96,7 @@ def cmd_compare(args) -> int:
         print(f"  the reference's long run (its windows of {a:g}-{b:g} s but this one, pooled): PD E(RT) "
               f"{pd_text(long_run['pd_rt_mean'])} %, SD(RT) PD {pd_text(long_run['pd_rt_sd'])} "
               f"%, MD {long_run['md_rtd']:.4g} (what a perfect stationary model would predict)")
-    _print_kinetics(summary.get("kinetics") or {})
+    _print_kinetics(summary.get("kinetics") or {}, summary.get("level", args.level))
     print(Path(args.output) / "summary.json")
     return 0
 
@@ -172,8 +172,9 @@ def baseline_line(baseline: dict, md_model: float) -> str:
             f"{pd_text(baseline.get('pd_rt_mean'))} %: {verdict}")
 
 
-def _print_kinetics(block: dict) -> None:
-    """One line per property of ``compare --kinetics``: the exit means of the three sides."""
+def _print_kinetics(block: dict, level: float = 0.9) -> None:
+    """Lines per property of ``compare --kinetics``: the exit means of the three sides, the
+    model's interval and whether the reference lies inside it, the bed's means."""
     from cfbmarkov.observed.metrics import percentage_text as pd_text
 
     def value(v):
@@ -182,10 +183,15 @@ def _print_kinetics(block: dict) -> None:
     for name, entry in block.items():
         ref, mod, seg = entry["reference"], entry["model"], entry.get("segregated_flow")
         exact = mod.get("exact")
+        if entry.get("window_note"):
+            a, b = entry["window"]
+            print(f"{name} over {a:g}-{b:g} s: {entry['window_note']}")
         line = (f"{name} at the exit: reference {value(ref['exit_mean'])} "
                 f"({ref['exit_count']} exits), model {value(mod['exit_mean'])} (PD "
                 f"{pd_text(mod['pd_exit_mean'])} %, MD {value(mod['md_exit'])}")
-        if exact:
+        if exact and exact.get("pd_exit_mean") is None and exact.get("note"):
+            line += f"; exact steady state {value(exact['exit_mean'])} ({exact['note']})"
+        elif exact:
             line += f"; exact {value(exact['exit_mean'])}, PD {pd_text(exact['pd_exit_mean'])} %"
             if exact.get("windowed_exit_mean") is not None:
                 line += (f"; exact as the window sees it {value(exact['windowed_exit_mean'])}, "
@@ -194,12 +200,55 @@ def _print_kinetics(block: dict) -> None:
         if seg:
             line += (f", segregated flow {value(seg['exit_mean'])} (PD "
                      f"{pd_text(seg['pd_exit_mean'])} %, MD {value(seg['md_exit'])})")
+        elif entry.get("segregated_flow_note"):
+            line += f", segregated flow: {entry['segregated_flow_note']}"
         else:
             line += ", segregated flow n/d"
         print(line)
+        verdict = kinetics_verdict(name, ref["exit_mean"], mod, level)
+        if verdict:
+            print("  " + verdict)
         print(f"  {name} in the bed (mean over the window): reference "
               f"{value(ref['bed_mean'])}, model {value(mod['bed_mean'])}"
               + (f", segregated flow {value(seg['bed_mean'])}" if seg else ""))
+
+
+def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float) -> str:
+    """One line: the model's interval of a property's exit mean and whether the
+    reference's exit mean lies inside it.
+
+    Parameters
+    ----------
+    name : str
+        The property.
+    reference_mean : float
+        The reference's exit mean.
+    model : dict
+        The property's ``model`` block of ``summary.json`` (``exit_mean_interval``,
+        ``interval_method``).
+    level : float
+        The intervals' coverage.
+
+    Returns
+    -------
+    str
+        Empty where the model has no interval or the reference no exit mean.
+    """
+    interval = model.get("exit_mean_interval")
+    if not interval or None in interval or reference_mean is None \
+            or not reference_mean == reference_mean:
+        return ""
+    lo, hi = interval
+    method = model.get("interval_method") or "Monte Carlo noise only"
+    kind = ("the fitting window's bootstrap and Monte Carlo noise"
+            if method.startswith("block bootstrap") else "Monte Carlo noise only")
+    place = _place(reference_mean, (lo, hi))
+    text = (f"{100 * level:g} % interval of the model's exit mean {lo:.4g}-{hi:.4g} ({kind}; "
+            f"the flow's variability left out): the reference's {reference_mean:.4g} lies "
+            f"{place} it")
+    if place == "inside":
+        return text + ": the model is consistent with the reference within its uncertainty"
+    return text + f": the model misses the reference's {name} beyond its uncertainty"
 
 
 #: windows with fewer residences than this get a note in ``cfbmarkov stationarity``

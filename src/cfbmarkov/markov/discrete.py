@@ -397,8 +397,14 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
         if short_history != "skip":
             where = (f"the window start {_describe(window)}" if window is not None
                      else f"t = {trajectories.times[start]:g} s")
+            fix = ""
+            if int(history) < trajectories.n_frames:
+                earliest = float(trajectories.times[int(history)])
+                fix = (f": start the window at {earliest:g} s or later"
+                       + (f" (--window {earliest:g}:{window[1]:g})" if window is not None
+                          else ""))
             raise InputError(f"the state space needs {history} frame(s) of history before "
-                             f"{where}; {trajectories.path} has {start}")
+                             f"{where}; {trajectories.path} has {start}{fix}")
         first = 0
     rows = slice(first, stop)
     return WindowFrames(

@@ -15,6 +15,7 @@ import numpy as np
 
 from cfbmarkov._console import clock_text, progress_mode, write_line
 from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics.fingerprint import FINGERPRINT_METHOD, property_fingerprint
 from cfbmarkov.limits import check_disk, check_finite, check_memory, check_seed
 from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.model_file import model_datasets_and_attrs
@@ -54,7 +55,9 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         Particle properties carried along the paths (:mod:`cfbmarkov.kinetics`, resolved on
         the model's states): computed by :func:`cfbmarkov.markov.kinetics_mc.run_properties`
         and stored as ``/properties/NAME`` [K+1, N] float64 with the attributes ``law``,
-        ``start`` and ``initial``. A ``reference`` start takes the file's own values of the
+        ``start``, ``initial`` and ``fingerprint`` (the definition on the model's states at
+        its lag, :func:`cfbmarkov.kinetics.fingerprint.property_fingerprint`; with
+        ``fingerprint_method``). A ``reference`` start takes the file's own values of the
         property at ``start`` for the particles present then.
 
     Returns
@@ -269,9 +272,11 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
         if properties is not None:
             kin, values = properties
             for q, name in enumerate(kin.names):
-                writer.add_property(name, values[q], {"law": kin.laws[q].key,
-                                                      "start": kin.starts[q],
-                                                      "initial": float(kin.initial[q])})
+                writer.add_property(name, values[q], {
+                    "law": kin.laws[q].key, "start": kin.starts[q],
+                    "initial": float(kin.initial[q]),
+                    "fingerprint": property_fingerprint(kin, q, model.lag),
+                    "fingerprint_method": FINGERPRINT_METHOD})
     bar.close(output)
     return Path(output)
 

@@ -67,9 +67,11 @@ class KineticsRow:
 
     def _chain(self, key: str) -> float | None:
         """The chain's exact figure ``key`` as the window sees it, else its exact one, else
-        its Monte Carlo's (``key``: ``exit_mean`` or ``pd_exit_mean``)."""
+        its Monte Carlo's (``key``: ``exit_mean`` or ``pd_exit_mean``). A carried
+        property's exact answer is the long-run steady state, not a window's: its Monte
+        Carlo's then."""
         exact = self.side("model").get("exact")
-        if isinstance(exact, dict):
+        if isinstance(exact, dict) and self.entry.get("start") != "carried":
             for k in (key.replace("exit_mean", "windowed_exit_mean"), key):
                 if finite_or_none(exact.get(k)) is not None:
                     return finite_or_none(exact.get(k))
