@@ -107,3 +107,42 @@ def test_ctrl_c_during_fit_states_auto_is_clean(tmp_path, delay):
         assert err.splitlines()[-1].endswith("interrupted"), err
         assert not (tmp_path / "m.h5").exists()
         assert sorted(x.name for x in tmp_path.iterdir()) == ["run.h5"]
+
+
+
+HALF_BUILT = """
+import sys
+from cfbmarkov.cli import main
+from cfbmarkov.cli import markov as verbs
+
+
+class HalfBuilt:  # construction cut short by Ctrl-C; its finalizer then fails
+    def __init__(self):
+        raise KeyboardInterrupt
+
+    def __del__(self):
+        self.handle
+
+
+verbs.cmd_info = lambda args: HalfBuilt()
+hook = sys.unraisablehook
+code = main(["info", sys.argv[1]])
+assert sys.unraisablehook is hook, "the unraisable hook is not restored"
+sys.exit(code)
+"""
+
+
+def test_failing_finalizers_of_what_the_interrupt_cut_short_stay_quiet(tmp_path):
+    """An object the interrupt left half built, whose finalizer fails as it is freed (as
+    llvmlite's ``ObjectRef`` does when Numba is interrupted while it loads its cache): the
+    one line and exit code 130, no "Exception ignored" traceback after it, and the
+    unraisable hook restored."""
+
+    script = tmp_path / "half_built.py"
+    script.write_text(HALF_BUILT)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
+    done = subprocess.run([sys.executable, str(script), str(script)], capture_output=True,
+                          text=True, env=env, timeout=120)
+    assert done.returncode == 130, done.stderr
+    assert done.stderr == "cfbmarkov info: interrupted\n", done.stderr

@@ -14,6 +14,7 @@ again.
 from __future__ import annotations
 
 import contextlib
+import gc
 import signal
 import sys
 import threading
@@ -70,6 +71,28 @@ def deferred():
         if previous is handler:
             requested = True
         raise KeyboardInterrupt
+
+
+def ignore_unraisable(unraisable) -> None:
+    """An ``sys.unraisablehook`` that drops everything: set while an interrupted verb winds
+    down, where the finalizers of objects whose construction the interrupt cut short fail as
+    they are freed (e.g. llvmlite's ``ObjectRef.__del__``: "Exception ignored ...
+    AttributeError"), which would print a traceback after the one line."""
+
+
+@contextlib.contextmanager
+def finalizers_quiet():
+    """Context manager: :func:`ignore_unraisable` from here until the block ends; at the end
+    the cycles are collected (their finalizers run quietly) and the previous hook restored.
+    Enter it where an interrupt is caught, so that the exception and the frames it holds are
+    freed inside."""
+    previous = sys.unraisablehook
+    sys.unraisablehook = ignore_unraisable
+    try:
+        yield
+    finally:
+        gc.collect()
+        sys.unraisablehook = previous
 
 
 class installed:

@@ -26,16 +26,30 @@ def main(argv: list[str] | None = None) -> int:
         :class:`~cfbmarkov.errors.CfbmarkovError` (reported as one line on stderr), 130 when
         interrupted (also while the modules load).
     """
+    previous = sys.unraisablehook
     try:
         from cfbmarkov.cli.command import main as run
 
         return run(argv)
     except KeyboardInterrupt:
+        # what the interrupt cut short (a module half imported) is freed after this block:
+        # its failing finalizers print nothing ("Exception ignored ...") until the end
+        sys.unraisablehook = _ignore
         try:
             print("cfbmarkov: interrupted", file=sys.stderr)
         except KeyboardInterrupt:       # a second Ctrl-C while the line is printed
             pass
         return 130
+    finally:
+        if sys.unraisablehook is _ignore:
+            import gc
+
+            gc.collect()
+            sys.unraisablehook = previous
+
+
+def _ignore(unraisable) -> None:
+    """``sys.unraisablehook`` while an interrupted start winds down: drops everything."""
 
 
 def build_parser():

@@ -112,28 +112,34 @@ def _run(args) -> int:
     """Run the verb of ``args`` with its output claimed; errors become one line."""
     from cfbmarkov import _interrupt
 
-    try:
-        with _interrupt.installed():
-            return _run_claimed(args)
-    except CfbmarkovError as exc:
-        print(f"cfbmarkov {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
-        return 2
-    except KeyboardInterrupt:
-        print(f"cfbmarkov {args.command}: interrupted{_resumable(args)}", file=sys.stderr)
-        return 130
-    except (OSError, KeyError, RuntimeError) as exc:
-        damaged = _damaged_input(exc)   # an HDF5 input that fails only where it is read
-        if damaged is not None:
-            print(f"cfbmarkov {args.command}: error: {one_line(damaged)}", file=sys.stderr)
+    with contextlib.ExitStack() as winding_down:
+        try:
+            with _interrupt.installed():
+                return _run_claimed(args)
+        except CfbmarkovError as exc:
+            print(f"cfbmarkov {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
             return 2
-        if not isinstance(exc, OSError):
-            raise
-        from cfbmarkov._atomic import write_error     # a write failed outside the writers
+        except KeyboardInterrupt:
+            # what the interrupt cut short is freed with it, after this block: its failing
+            # finalizers stay quiet until the stack closes
+            winding_down.enter_context(_interrupt.finalizers_quiet())
+            print(f"cfbmarkov {args.command}: interrupted{_resumable(args)}",
+                  file=sys.stderr)
+            return 130
+        except (OSError, KeyError, RuntimeError) as exc:
+            damaged = _damaged_input(exc)   # an HDF5 input that fails only where it is read
+            if damaged is not None:
+                print(f"cfbmarkov {args.command}: error: {one_line(damaged)}",
+                      file=sys.stderr)
+                return 2
+            if not isinstance(exc, OSError):
+                raise
+            from cfbmarkov._atomic import write_error     # a write failed outside the writers
 
-        name = exc.filename or getattr(args, "output", "")
-        print(f"cfbmarkov {args.command}: error: {one_line(str(write_error(exc, name)))}",
-              file=sys.stderr)
-        return 2
+            name = exc.filename or getattr(args, "output", "")
+            print(f"cfbmarkov {args.command}: error: {one_line(str(write_error(exc, name)))}",
+                  file=sys.stderr)
+            return 2
 
 
 def _damaged_input(exc: BaseException) -> str | None:
