@@ -119,3 +119,34 @@ def test_cli_compare_bad_kinetics_file_is_one_line(prediction, tmp_path, capsys)
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown law" in err[0]
     assert not (tmp_path / "b" / "summary.json").exists()
+
+
+def test_kinetics_resamples_fall_with_the_square_of_the_states():
+    from cfbmarkov.analysis.kinetics_compare import kinetics_resamples
+
+    assert kinetics_resamples(228, 100) == 100 and kinetics_resamples(500, 100) == 100
+    assert kinetics_resamples(1000, 100) == 25          # (500 / 1000)^2 of them
+    assert kinetics_resamples(1824, 100) == 20          # never fewer than 20
+    assert kinetics_resamples(1824, 10) == 10 and kinetics_resamples(1824, 0) == 0
+
+
+def test_the_kinetics_interval_says_how_many_resamples_it_took(prediction, tmp_path,
+                                                               monkeypatch):
+    """All the resamples asked for on a small space; fewer, said in a warning and in the
+    summary, where the rule takes fewer (here forced by a lowered state threshold)."""
+    from cfbmarkov.analysis import kinetics_compare
+    from cfbmarkov.report.compare import compare
+
+    run, pred, _ = prediction
+    kin = _kinetics(tmp_path, "u", "rate = 1.0")
+    got = compare(run, pred, window=(6.0, 12.0), output=tmp_path / "a", figures=False,
+                  resamples=10, kinetics=kin)
+    block = got["kinetics"]["X"]["model"]
+    assert block["interval_resamples"] == 10 and len(block["exit_mean_interval"]) == 2
+    monkeypatch.setattr(kinetics_compare, "KINETICS_FULL_STATES", 1)
+    monkeypatch.setattr(kinetics_compare, "KINETICS_MIN_RESAMPLES", 4)
+    got = compare(run, pred, window=(6.0, 12.0), output=tmp_path / "b", figures=False,
+                  resamples=10, kinetics=kin)
+    assert got["kinetics"]["X"]["model"]["interval_resamples"] == 4
+    assert any("interval from 4 of 10 bootstrap resamples" in w
+               for w in got.get("warnings", [])), got.get("warnings")
