@@ -1,14 +1,14 @@
 """The coverage study: do the intervals `fit` prints hold the flow's long-run E(RT)?
 
     python benchmarks/interval_coverage.py RUN.h5 [RUN.h5 ...] [--lengths 0.5,1,2,5] [--starts 6]
-                                  [--settle 10] [--cells 4x12] [--lag 0.01] [--auto]
+                                  [--settle 10] [--cells 4x12] [--lag 0.01] [--auto] [--estimator mle]
                                   [--resamples 100] [--level 0.9] [-o coverage.json]
 
 For each run and each window length L, six fitting windows (``--starts``) start at times
 spread evenly from the settling time (``--settle``) to the run's last frame minus L. On
 each window a model is fitted as ``cfbmarkov fit`` does (the cells and lag given, or those
 of the ``case.json`` beside the run, written by ``reproduce``; the estimator ``fit``
-takes by default), with its interval (:func:`cfbmarkov.analysis.intervals.model_intervals`)
+takes by default, or ``--estimator``), with its interval (:func:`cfbmarkov.analysis.intervals.model_intervals`)
 and the verdict on its sample (:func:`cfbmarkov.analysis.adequacy.assess_adequacy`);
 ``--auto`` also fits ``--states auto`` (:func:`cfbmarkov.markov.select.select_model`).
 
@@ -101,10 +101,13 @@ def _case_markov(path: Path) -> dict:
 
 
 def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, auto: bool,
-            level: float, resamples: int, direction: str = "up") -> dict:
+            level: float, resamples: int, direction: str = "up",
+            estimator: str | None = None) -> dict:
     """One fit as ``cfbmarkov fit`` makes it: E(RT) and its interval in ``direction`` (the
-    residences' direction of the long run it is compared with) and the verdict's lines."""
-    estimator = "mle" if traj.boundary.is_open else "paper"
+    residences' direction of the long run it is compared with) and the verdict's lines;
+    ``estimator`` None: ``fit``'s default (``paper`` for a periodic riser, ``mle`` open)."""
+    if estimator is None:
+        estimator = "mle" if traj.boundary.is_open else "paper"
     if auto:
         from cfbmarkov.markov.select import select_model
 
@@ -159,7 +162,7 @@ def table(fits: list[dict]) -> list[dict]:
 
 
 def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, level: float,
-          resamples: int, progress=None) -> dict:
+          resamples: int, estimator: str | None = None, progress=None) -> dict:
     """Every fit of the study and its table (the module docstring)."""
     fits = []
     for name in runs:
@@ -183,7 +186,8 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
                         try:
                             fit = fit_one(path, traj, window, columns=columns, rows=rows,
                                           lag=run_lag, auto=model == "auto", level=level,
-                                          resamples=resamples, direction=direction)
+                                          resamples=resamples, direction=direction,
+                                          estimator=estimator)
                         except CfbmarkovError as exc:     # kept, and left out of the table
                             fit = {"window": list(window), "error": str(exc)}
                         fit.update(run=str(path), model=model, length=float(length),
@@ -194,7 +198,8 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
                         fits.append(fit)
                         if progress:
                             progress(fit)
-    return {"level": level, "resamples": resamples, "settle": settle, "lengths": list(lengths),
+    return {"level": level, "resamples": resamples, "settle": settle, "estimator": estimator,
+            "lengths": list(lengths),
             "starts": starts, "off": OFF, "table": table(fits), "fits": fits}
 
 
@@ -225,6 +230,8 @@ def main(argv=None) -> int:
     p.add_argument("--lag", type=float, default=None,
                    help="lag, s (default: case.json beside the run, else 0.025)")
     p.add_argument("--auto", action="store_true", help="also fit --states auto")
+    p.add_argument("--estimator", choices=("paper", "mle"), default=None,
+                   help="estimator (default: fit's, paper for a periodic riser)")
     p.add_argument("--level", type=float, default=0.9, help="interval level (0.9)")
     p.add_argument("--resamples", type=int, default=100, help="bootstrap resamples (100)")
     p.add_argument("-o", "--output", default="coverage.json", help="JSON of every fit")
@@ -257,7 +264,8 @@ def main(argv=None) -> int:
     try:
         result = study(args.runs, lengths=lengths, starts=args.starts, settle=args.settle,
                        cells=cells, lag=args.lag, auto=args.auto, level=args.level,
-                       resamples=args.resamples, progress=progress)
+                       resamples=args.resamples, estimator=args.estimator,
+                       progress=progress)
     except CfbmarkovError as exc:
         print(f"coverage: {exc}", file=sys.stderr)
         return 2
