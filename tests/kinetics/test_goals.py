@@ -50,6 +50,25 @@ def test_windowed_exit_mean_is_the_rtd_weighted_by_the_window(run):
         exact_kinetics(model, kin)["X"].exit_mean, rel=2e-3)
 
 
+def test_windowed_exit_mean_with_a_history_counts_what_the_reference_counts(run):
+    model = fit_model(run, CellGrid(4, 10, 0.09, 0.95), 0.025, (0.0, 4.0), "paper")
+    k = 1.3
+    kin = Kinetics((Property("X", FirstOrder(), {"rate": Constant(k)}),))
+    rtd = model.rtd()
+    for length, history in ((1.0, 0.5), (1.0, 1.0), (0.5, 2.0)):
+        steps, back = int(round(length / model.lag)), int(round(history / model.lag))
+        n = np.arange(1, steps + back)
+        w = np.minimum(steps, steps + back - n)          # full rate up to the history
+        p = rtd.probability[: n.size]
+        by_hand = np.sum(w * p * (1 - np.exp(-k * n * model.lag))) / np.sum(w * p)
+        got = windowed_exit_means(model, kin, length, history=history)["X"]
+        assert got == pytest.approx(by_hand, rel=1e-10)
+        # longer residences count more than without the history: a higher conversion
+        assert got > windowed_exit_means(model, kin, length)["X"]
+    with pytest.raises(Exception, match="history"):
+        windowed_exit_means(model, kin, 1.0, history=-1.0)
+
+
 def test_goals_on_a_tiny_run(run, tmp_path, capsys):
     goals = _script()
     # residences wholly inside the windows, the chain as such a window sees it
@@ -81,7 +100,11 @@ def test_goals_on_a_tiny_run(run, tmp_path, capsys):
     inside = {(r["kind"], r["damkoehler"]): r for r in result["out_of_sample"]}
     for row in back["out_of_sample"]:
         assert row["exits"] > inside[row["kind"], row["damkoehler"]]["exits"]
-        assert row["chain"] == pytest.approx(row["chain_unwindowed"], rel=1e-12)
+        assert row["chain"] == pytest.approx(row["chain_windowed"], rel=1e-12)
+        assert inside[row["kind"], row["damkoehler"]]["chain"] < row["chain"]
+        assert row["chain"] < row["chain_unwindowed"]
+        assert row["chain_exact_error"] == pytest.approx(
+            100 * (row["chain_unwindowed"] / row["reference"] - 1), rel=1e-9)
         assert 0 <= row["exits_censored"] < 0.05 * row["exits"]
         # the generated flow is this chain: the difference is the reference's noise
         assert abs(row["chain"] - row["reference"]) < 3 * row["reference_se"]

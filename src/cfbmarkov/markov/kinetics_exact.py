@@ -330,14 +330,24 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
 
 
 def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float,
-                        cell_fields=None, direction: str | None = None) -> dict[str, float]:
+                        cell_fields=None, direction: str | None = None,
+                        history: float = 0.0) -> dict[str, float]:
     """The mean exit value per residence as a window of ``length`` seconds observes it:
     each residence of n lags weighted by the number of places it fits in the window.
 
     A window of M = length / lag lags sees a residence of n lags that starts at one of its
     lag boundaries 1 .. M - n and ends inside it, M - n ways; in a steady state the exits
     of a window are therefore the chain's exits weighted by w_n = max(M - n, 0), which
-    favours short residences. With the first-passage masses p_n = e Q^(n-1) r and value
+    favours short residences. With a ``history`` of H = history / lag lags (the exits
+    inside the window whose residence began at most H lags before it, as
+    :func:`cfbmarkov.analysis.kinetics_reference.reference_kinetics` counts them with a
+    history), a residence of n lags ends at one of the window's M lag boundaries from
+    n + 1 - H on, so
+
+        w_n = min(M, M + H - n), clipped at 0,
+
+    every residence up to H lags counted at its full rate M and none longer than M + H.
+    With the first-passage masses p_n = e Q^(n-1) r and value
     masses m_n = E[v_exit 1{exit at n}], propagated lag by lag (u <- a o u + b o p, exit
     through r, move by Q; the affine maps of :meth:`StateKinetics.over
     <cfbmarkov.kinetics.StateKinetics.over>`),
@@ -347,8 +357,9 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
     This is the answer to compare with exit values observed over a finite window (the
     reference's paths, an observed RTD), with the weights of the RTD as a window observes
     it (:meth:`ResidenceTimeDistribution.in_window
-    <cfbmarkov.markov.first_passage.ResidenceTimeDistribution.in_window>`); as ``length``
-    grows it tends to :func:`exact_kinetics`' exit mean.
+    <cfbmarkov.markov.first_passage.ResidenceTimeDistribution.in_window>` without a
+    history); as ``length`` or ``history`` grows it tends to :func:`exact_kinetics`' exit
+    mean.
 
     Parameters
     ----------
@@ -364,6 +375,9 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
         As :func:`exact_kinetics`.
     direction : {"up", "down"}, optional
         As :func:`exact_kinetics`.
+    history : float, optional
+        Seconds before the window that an exit's residence may have begun in (>= 0; 0:
+        residences wholly inside the window).
 
     Returns
     -------
@@ -373,8 +387,8 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
     Raises
     ------
     InputError
-        For a non-linear law, a window shorter than a lag, or a model
-        without residences.
+        For a non-linear law, a window shorter than a lag, a negative or non-finite
+        history, or a model without residences.
     """
     sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
         model.state_space, model.cell_fields if cell_fields is None else cell_fields)
@@ -384,6 +398,9 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
     steps = int(round(float(length) / model.lag))
     if steps < 1:
         raise InputError(f"window of {length:g} s is shorter than the lag {model.lag:g} s")
+    if not (np.isfinite(history) and history >= 0):
+        raise InputError(f"history {history!r} s: a finite number of seconds >= 0")
+    back = int(round(float(history) / model.lag))
     q, r, e, state, _ = residence_chain(model, direction)
     qt = q.T.tocsr()
     a_all, b_all = sk.over(model.lag)
@@ -392,9 +409,9 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
     u = np.asarray(sk.initial, dtype=np.float64)[:, None] * e[None, :]
     weighted_value = np.zeros(sk.n_properties)
     weighted_prob = 0.0
-    for n in range(1, steps):
+    for n in range(1, steps + back):
         u = a * u + b * p[None, :]
-        w = steps - n
+        w = min(steps, steps + back - n)
         weighted_value += w * (u @ r)
         weighted_prob += w * float(p @ r)
         p = qt @ p
