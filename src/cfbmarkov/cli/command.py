@@ -14,6 +14,7 @@ import os
 import sys
 from pathlib import Path
 
+from cfbmarkov._console import stdout_closed
 from cfbmarkov._names import one_line
 from cfbmarkov.cli import analysis, data, kinetics, markov, run, simulate
 from cfbmarkov.cli.options import join_dash_values
@@ -127,6 +128,8 @@ def _run(args) -> int:
                   file=sys.stderr)
             return 130
         except (OSError, KeyError, RuntimeError) as exc:
+            if isinstance(exc, BrokenPipeError) and stdout_closed():
+                raise                       # cfbmarkov.cli.main stops quietly
             damaged = _damaged_input(exc)   # an HDF5 input that fails only where it is read
             if damaged is not None:
                 print(f"cfbmarkov {args.command}: error: {one_line(damaged)}",
@@ -153,8 +156,8 @@ def _damaged_input(exc: BaseException) -> str | None:
         where = tb.tb_frame.f_code.co_filename.replace(os.sep, "/")
         in_h5py = in_h5py or "/h5py/" in where or where.startswith("h5py/")
         for value in tb.tb_frame.f_locals.values():
-            file = getattr(value, "file", None) if "h5py" in type(value).__module__ else None
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(Exception):   # a closed h5py object has no file
+                file = getattr(value, "file", None) if "h5py" in type(value).__module__ else None
                 if file is not None and file.mode == "r":
                     name = file.filename
         tb = tb.tb_next

@@ -1,0 +1,64 @@
+"""What the command line prints and where: a reader that closes standard output early stops
+the verb quietly; ``import`` prints only the output path on stdout; the advice in errors
+names options the verb has; lists of files are printed as names."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from cfbmarkov import synthetic
+from cfbmarkov._console import CLOSED_PIPE
+from cfbmarkov.cli import main
+
+SRC = str(Path(__file__).resolve().parents[1] / "src")
+
+
+def _env():
+    return {**os.environ, "PYTHONPATH": SRC, "NUMBA_NUM_THREADS": "1"}
+
+
+@pytest.fixture(scope="module")
+def model(tmp_path_factory):
+    """A 4x8-cell model fitted on 300 synthetic particles x 3 s, and its run."""
+    folder = tmp_path_factory.mktemp("pipe")
+    flow = synthetic.RiserFlow(columns=4, rows=8, rise_velocity=1.2, fall_velocity=-0.6,
+                               vertical_spread=0.5, persistence=False)
+    run = synthetic.write_run(folder / "run.h5", flow, 300, 3.0, seed=3)
+    path = folder / "model.h5"
+    assert main(["fit", str(run), "--cells", "4x8", "--lag", "0.05", "--window", "0:3",
+                 "--no-adequacy", "-o", str(path)]) == 0
+    return path
+
+
+@pytest.mark.parametrize("verb", [["info"], ["rtd", "--json"], ["rtd"]])
+def test_closed_stdout_stops_quietly(model, verb):
+    """Standard output a pipe whose reader has already gone: every write fails (EPIPE)."""
+    read, write = os.pipe()
+    os.close(read)
+    try:
+        done = subprocess.run([sys.executable, "-m", "cfbmarkov", verb[0], str(model), *verb[1:]],
+                              stdout=write, stderr=subprocess.PIPE, text=True, env=_env(),
+                              timeout=300)
+    finally:
+        os.close(write)
+    assert done.stderr == "" and done.returncode == CLOSED_PIPE == 141, done.stderr
+
+
+@pytest.mark.parametrize("repeat", range(3))
+def test_reader_closing_after_one_line(model, repeat):
+    """``cfbmarkov info model.h5 | head -1``: the reader takes one line and closes."""
+    for verb in (["info"], ["rtd", "--json"]):
+        proc = subprocess.Popen([sys.executable, "-m", "cfbmarkov", verb[0], str(model),
+                                 *verb[1:]], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                                env=_env())
+        first = proc.stdout.readline()
+        proc.stdout.close()
+        err = proc.stderr.read().decode()
+        code = proc.wait(timeout=300)
+        assert first.strip()
+        assert err == "" and code in (0, CLOSED_PIPE), err
