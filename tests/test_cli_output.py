@@ -62,3 +62,23 @@ def test_reader_closing_after_one_line(model, repeat):
         code = proc.wait(timeout=300)
         assert first.strip()
         assert err == "" and code in (0, CLOSED_PIPE), err
+
+
+def test_import_prints_only_the_path_on_stdout(tmp_path, capsys):
+    """``run=$(cfbmarkov import ...)`` holds the path; the summary and notes go to stderr."""
+    source = tmp_path / "spots.csv"
+    source.write_text("ID,TRACK_ID,POSITION_X,POSITION_Y,POSITION_T\n1,0,0.01,0.2,0\n"
+                      "2,1,0.03,0.4,0\n3,0,0.012,0.25,0.1\n4,1,0.031,0.45,0.1\n"
+                      "5,-1,0.02,0.3,0.1\n")
+    for fmt in (["--format", "csv"], []):
+        output = tmp_path / f"run{len(fmt)}.h5"
+        code = main(["import", str(source), *fmt, "--width", "0.09", "--height", "0.95", "-o",
+                     str(output)])
+        out, err = capsys.readouterr()
+        assert code == 0 and out == f"{output}\n"
+        lines = err.splitlines()
+        told = "--format" if fmt else "detected from the content"
+        assert lines[0].startswith(f"cfbmarkov import: read 2 frames of 2 particles as CSV "
+                                   f"({told}") and "ids from column 'TRACK_ID'" in lines[0]
+        assert lines[1:] == ["  particle ids from column 'TRACK_ID'; not from 'ID'",
+                             "  1 rows with TRACK_ID -1 or empty (noise, or no track) dropped"]
