@@ -82,3 +82,46 @@ def test_import_prints_only_the_path_on_stdout(tmp_path, capsys):
                                    f"({told}") and "ids from column 'TRACK_ID'" in lines[0]
         assert lines[1:] == ["  particle ids from column 'TRACK_ID'; not from 'ID'",
                              "  1 rows with TRACK_ID -1 or empty (noise, or no track) dropped"]
+
+
+def _options(verb: str) -> set[str]:
+    import argparse
+
+    from cfbmarkov.cli import build_parser
+
+    sub = next(a for a in build_parser()._actions if isinstance(a, argparse._SubParsersAction))
+    return set(sub.choices[verb]._option_string_actions)
+
+
+def _advised(message: str, verb: str) -> list[tuple[str, str]]:
+    """(verb, option) for each option an error line advises: inside a quoted command line
+    `cfbmarkov VERB ...` the options of VERB, elsewhere the failing verb's."""
+    import re
+
+    advised = []
+    for quoted in re.findall(r"`cfbmarkov ([a-z-]+) ([^`]*)`", message):
+        advised += [(quoted[0], o) for o in re.findall(r"(?<![\w-])--[a-z][a-z-]*", quoted[1])]
+    rest = re.sub(r"`cfbmarkov [^`]*`", "", message)
+    return advised + [(verb, o) for o in re.findall(r"(?<![\w-])--[a-z][a-z-]*", rest)]
+
+
+def test_errors_advise_only_options_the_verb_has(model, tmp_path, capsys):
+    """The lag of a model that does not fit a file's frames is refitted with ``fit --lag``;
+    ``predict`` has no ``--lag``."""
+    coarse = synthetic.write_run(tmp_path / "coarse.h5", synthetic.RiserFlow(
+        columns=4, rows=8, lag=0.1, persistence=False), 20, 1.0, seed=1)
+    run = model.parent / "run.h5"
+    cases = [("predict", [str(model), "--init", str(coarse), "--start", "0", "--duration",
+                          "0.2", "-o", str(tmp_path / "p.h5")], "refit the model"),
+             ("fit", [str(run), "--cells", "4x8", "--lag", "0.03", "--window", "0:3", "-o",
+                      str(tmp_path / "m.h5")], "use --lag 0.025 or a multiple"),
+             ("stationarity", [str(run), "--cells", "4x8", "--lag", "0.03",
+                               "--window-length", "1"], "use --lag 0.025")]
+    for verb, argv, expected in cases:
+        assert main([verb, *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and expected in err, err
+        advised = _advised(err, verb)
+        assert advised, err
+        for where, option in advised:
+            assert option in _options(where), f"{verb}: advises {where} {option}: {err}"

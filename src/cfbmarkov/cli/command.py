@@ -18,7 +18,7 @@ from cfbmarkov._console import stdout_closed
 from cfbmarkov._names import one_line
 from cfbmarkov.cli import analysis, data, kinetics, markov, run, simulate
 from cfbmarkov.cli.options import join_dash_values
-from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.errors import CfbmarkovError, InputError, LagError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -118,7 +118,8 @@ def _run(args) -> int:
             with _interrupt.installed():
                 return _run_claimed(args)
         except CfbmarkovError as exc:
-            print(f"cfbmarkov {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+            print(f"cfbmarkov {args.command}: error: {one_line(_for_verb(exc, args))}",
+                  file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             # what the interrupt cut short is freed with it, after this block: its failing
@@ -143,6 +144,15 @@ def _run(args) -> int:
             print(f"cfbmarkov {args.command}: error: {one_line(str(write_error(exc, name)))}",
                   file=sys.stderr)
             return 2
+
+
+def _for_verb(exc: CfbmarkovError, args) -> str:
+    """The message of ``exc`` as advice the verb of ``args`` can follow: a lag that does
+    not fit a file's frames, on a verb without ``--lag``, is a fitted model's, which only a
+    refit changes."""
+    if isinstance(exc, LagError) and not hasattr(args, "lag"):
+        return exc.for_model()
+    return str(exc)
 
 
 def _damaged_input(exc: BaseException) -> str | None:
