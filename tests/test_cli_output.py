@@ -125,3 +125,19 @@ def test_errors_advise_only_options_the_verb_has(model, tmp_path, capsys):
         assert advised, err
         for where, option in advised:
             assert option in _options(where), f"{verb}: advises {where} {option}: {err}"
+
+
+def test_pooled_fit_names_its_runs(model, tmp_path, capsys):
+    """``fit A B`` says ``fitted on A, B``, not a Python list."""
+    first = model.parent / "run.h5"
+    second = synthetic.write_run(tmp_path / "second.h5", synthetic.RiserFlow(
+        columns=4, rows=8, persistence=False), 300, 3.0, seed=4)
+    pooled = tmp_path / "pooled.h5"
+    assert main(["fit", str(first), str(second), "--cells", "4x8", "--lag", "0.05", "--window",
+                 "0:3", "--no-adequacy", "-o", str(pooled)]) == 0
+    fit_out = capsys.readouterr().out
+    assert main(["info", str(pooled)]) == 0
+    info_out = capsys.readouterr().out
+    for out in (fit_out, info_out):
+        assert f"fitted on {first}, {second} window 0:3 s" in out, out
+        assert "['" not in out
