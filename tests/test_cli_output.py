@@ -141,3 +141,21 @@ def test_pooled_fit_names_its_runs(model, tmp_path, capsys):
     for out in (fit_out, info_out):
         assert f"fitted on {first}, {second} window 0:3 s" in out, out
         assert "['" not in out
+
+
+def test_trackpy_file_without_times_is_told_what_to_add(tmp_path, capsys):
+    """trackpy writes ``frame`` and ``particle`` (x, y in pixels) and no time."""
+    source = tmp_path / "trackpy.csv"
+    source.write_text("y,x,mass,size,ecc,signal,raw_mass,ep,frame,particle\n"
+                      "10.0,5.0,100,1.5,0.1,5,200,0.1,0,0\n20.0,6.0,100,1.5,0.1,5,200,0.1,0,1\n"
+                      "11.0,5.2,100,1.5,0.1,5,200,0.1,1,0\n21.0,6.1,100,1.5,0.1,5,200,0.1,1,1\n")
+    output = tmp_path / "t.h5"
+    assert main(["import", str(source), "--width", "0.09", "--height", "0.95", "-o",
+                 str(output)]) == 2
+    out, err = capsys.readouterr()
+    assert out == "" and err.count("\n") == 1 and not output.exists()
+    assert "missing column 't'" in err
+    assert "frame numbers in 'frame' and particle ids in 'particle'" in err
+    assert "add a column t = frame / frame rate (s)" in err and "pixels" in err
+    for option in _advised(err, "import"):
+        assert option[1] in _options("import"), err
