@@ -159,3 +159,20 @@ def test_trackpy_file_without_times_is_told_what_to_add(tmp_path, capsys):
     assert "add a column t = frame / frame rate (s)" in err and "pixels" in err
     for option in _advised(err, "import"):
         assert option[1] in _options("import"), err
+
+
+def test_history_advice_names_the_verbs_own_option(model, capsys):
+    """A window short of a memory state space's history: ``fit`` moves it with ``--window``,
+    ``stationarity --sample-length`` (no ``--window``) with ``--start``."""
+    run = str(model.parent / "run.h5")
+    cases = [("fit", [run, "--states", "cells-direction", "--cells", "4x8", "--lag", "0.05",
+                      "--window", "0:3", "-o", str(model.parent / "d.h5")], "(--window 0.05:3)"),
+             ("stationarity", [run, "--sample-length", "--start", "0", "--states",
+                               "cells-direction", "--cells", "4x8", "--lag", "0.05"],
+              "(--start 0.05)")]
+    for verb, argv, expected in cases:
+        assert main([verb, *argv]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and err.rstrip().endswith(expected), err
+        for where, option in _advised(err, verb):
+            assert option in _options(where), f"{verb}: advises {where} {option}: {err}"

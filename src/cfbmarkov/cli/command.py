@@ -18,7 +18,7 @@ from cfbmarkov._console import stdout_closed
 from cfbmarkov._names import one_line
 from cfbmarkov.cli import analysis, data, kinetics, markov, run, simulate
 from cfbmarkov.cli.options import join_dash_values
-from cfbmarkov.errors import CfbmarkovError, InputError, LagError
+from cfbmarkov.errors import CfbmarkovError, HistoryError, InputError, LagError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -149,9 +149,13 @@ def _run(args) -> int:
 def _for_verb(exc: CfbmarkovError, args) -> str:
     """The message of ``exc`` as advice the verb of ``args`` can follow: a lag that does
     not fit a file's frames, on a verb without ``--lag``, is a fitted model's, which only a
-    refit changes."""
+    refit changes; a window short of history is moved with the verb's ``--window`` or
+    ``--start``, or with neither named."""
     if isinstance(exc, LagError) and not hasattr(args, "lag"):
         return exc.for_model()
+    if isinstance(exc, HistoryError):
+        return exc.advice(next((option for option in ("--window", "--start")
+                                if hasattr(args, option[2:])), None))
     return str(exc)
 
 
