@@ -39,6 +39,55 @@ def write_line(text: str, stream=None) -> None:
         stream.flush()
 
 
+#: the exit code of a verb whose standard output was closed by its reader (``cfbmarkov
+#: info model.h5 | head -1``): 128 + SIGPIPE, what a shell reports for a program that a
+#: closed pipe stopped
+CLOSED_PIPE = 141
+
+
+def stdout_closed() -> bool:
+    """Whether the reader of standard output has gone: a pipe or socket whose other end is
+    closed (``| head -1`` after its line). False where standard output is a file, a
+    terminal or an object without a file descriptor (a test's capture).
+
+    Returns
+    -------
+    bool
+    """
+    try:
+        fd = sys.stdout.fileno()
+    except (AttributeError, OSError, ValueError):
+        return False
+    try:
+        import select
+
+        poller = select.poll()
+        poller.register(fd, select.POLLOUT)
+        events = poller.poll(0)
+    except (AttributeError, OSError, ValueError):   # no poll (Windows): assume a pipe
+        return True
+    return any(mask & (select.POLLERR | select.POLLHUP) for _, mask in events)
+
+
+def quit_closed_stdout() -> int:
+    """Stop quietly after the reader of standard output has gone: what is still buffered
+    for it goes to the null device (Python's advice on SIGPIPE, so that the flush at exit
+    raises nothing), and the exit code is :data:`CLOSED_PIPE`.
+
+    Returns
+    -------
+    int
+        :data:`CLOSED_PIPE`.
+    """
+    import os
+
+    with contextlib.suppress(AttributeError, OSError, ValueError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+    return CLOSED_PIPE
+
+
 def _show(previous):
     def show(message, category, filename, lineno, file=None, line=None):
         if isinstance(category, type) and issubclass(category, CfbmarkovWarning):

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import InputError, LagError
 from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, TIME_TOLERANCE, time_text
 
 
@@ -165,9 +165,11 @@ class FrameTimes:
         Raises
         ------
         InputError
-            If the lag is not positive, the file has no frame interval (one frame and no
-            ``frame_interval`` attribute), or the lag is not a whole multiple of the frame
-            interval.
+            If the lag is not positive, or the file has no frame interval (one frame and no
+            ``frame_interval`` attribute).
+        LagError
+            If the lag is not a whole multiple of the frame interval (an
+            :class:`~cfbmarkov.errors.InputError`).
         """
         if not (np.isfinite(lag) and lag > 0):
             raise InputError(f"lag {lag:g} s must be a positive finite number")
@@ -178,7 +180,5 @@ class FrameTimes:
         if k < 1 or not abs(lag - k * self.frame_interval) <= self.time_tolerance:
             interval = time_text(self.frame_interval)
             nearest = time_text(max(k, 1) * self.frame_interval)
-            raise InputError(f"lag {lag:g} s is not a whole multiple of the frame interval of "
-                             f"{self.path}: its frames are {interval} s apart: use --lag "
-                             f"{interval} or a multiple (the nearest: {nearest})")
+            raise LagError(lag, interval, nearest, str(self.path))
         return k

@@ -69,7 +69,7 @@ def test_pept_tracers_are_told_apart_by_label_and_noise_is_dropped(tmp_path, cap
                  "-o", str(tmp_path / "p.h5"), "--vertical-axis", "y", "--drop-depth",
                  "--length-unit", "mm", "--time-unit", "ms", "--resample", "0.005",
                  "--max-gap", "0.01"])
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err                 # the notes go to stderr, after the summary
     assert code == 0
     assert "particle ids from column 'label'" in out and "1 rows with label -1" in out
     with Trajectories(tmp_path / "p.h5") as t:
@@ -92,7 +92,7 @@ def test_trackmate_spots_use_track_id(tmp_path, capsys):
     code = main(["import", str(FIELD / "trackmate-spots.csv"), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o",
                  str(tmp_path / "s.h5"), "--vertical-axis", "y", "--drop-depth",
                  "--boundary", "open"])
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err
     assert code == 0
     assert "particle ids from column 'TRACK_ID'; not from 'LABEL', 'ID'" in out
     assert "1 rows with TRACK_ID -1 or empty" in out
@@ -122,9 +122,9 @@ def _spreadsheet_truth():
                                         ("excel-csv-bom-ghost-row.csv", None)])
 def test_spreadsheet_text_exports(tmp_path, capsys, name, note):
     code = main(["import", str(FIELD / name), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o", str(tmp_path / "e.h5")])
-    out = capsys.readouterr().out
-    assert code == 0
-    assert (note in out) if note else out.count("\n") == 1
+    out, err = capsys.readouterr()
+    assert code == 0 and out == f"{tmp_path / 'e.h5'}\n"
+    assert (note in err) if note else err.count("\n") == 1
     times, positions = _spreadsheet_truth()
     with Trajectories(tmp_path / "e.h5") as t:
         assert t.ids.tolist() == [1, 2, 3]
@@ -166,7 +166,7 @@ def test_pept_rows_at_one_printed_time_are_merged(tmp_path, capsys):
                  str(tmp_path / "p.h5"), "--vertical-axis", "y", "--drop-depth",
                  "--length-unit", "mm", "--time-unit", "ms", "--resample", "0.001",
                  "--max-gap", "0.002"])
-    out = capsys.readouterr().out
+    out = capsys.readouterr().err
     assert code == 0 and "1 rows at the same time" in out
     with Trajectories(tmp_path / "p.h5") as p:
         k = int(np.argmin(np.abs(p.times - 0.00377)))

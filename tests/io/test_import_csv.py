@@ -133,8 +133,10 @@ def test_cli_import_prints_the_output(tmp_path, run, make_csv, save, cli):
     code, out, err = cli("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
                          "-o", tmp_path / "o" / "run.h5")
     assert code == 0, err
-    assert out.strip() == str(tmp_path / "o" / "run.h5")
-    assert err == ""
+    assert out == f"{tmp_path / 'o' / 'run.h5'}\n"          # the path alone on stdout
+    assert err == ("cfbmarkov import: read 16 frames of 6 particles as CSV (--format); "
+                   "positions from x, y (m); ids from column 'id'; times in s; velocities "
+                   "from vx, vy; periodic boundary; laps from minimal-image rule\n")
     assert sorted(p.name for p in (tmp_path / "o").iterdir()) == ["run.h5"]
 
 

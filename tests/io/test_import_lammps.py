@@ -115,7 +115,9 @@ def test_cli_import_of_a_dump(tmp_path, run, make_dump, save, cli):
     code, out, err = cli("import", source, "--format", "lammps", "-o", output,
                          "--time-step", "5e-6")
     assert code == 0, err
-    assert out.strip() == str(output) and err == ""
+    assert out == f"{output}\n"
+    assert err.startswith("cfbmarkov import: read 16 frames of 6 particles as LAMMPS/LIGGGHTS "
+                          "text dump (--format)") and err.count("\n") == 1, err
     code, out, err = cli("info", output)
     assert code == 0 and "6 particles x 16 frames" in out and "import:lammps" in out
 

@@ -47,6 +47,20 @@ RATES = "col,row,rate\n" + "".join(f"{c},{r},{0.2 if c != 1 else 2.0}\n"
                                      for r in range(6) for c in range(3))
 
 
+def test_react_table_says_the_computing_time_is_one(fitted, tmp_path, capsys):
+    """The time under the table is the computation's, not a physical time; the values are
+    in the kinetics file's units."""
+    import re
+
+    folder, run, model = fitted
+    kin = _write(tmp_path, GOOD, RATES)
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 0
+    last = capsys.readouterr().out.splitlines()[-1]
+    assert re.fullmatch(r"exact, per residence at the exit and over the bed in steady state, "
+                        r"in the units of the kinetics file's values; computed in "
+                        r"[0-9.e-]+ s", last), last
+
+
 def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     folder, run, model = fitted
     kin = _write(tmp_path, GOOD, RATES)

@@ -4,7 +4,10 @@ This module is what the ``cfbmarkov`` program imports first, and imports nothing
 Ctrl-C while the command line's modules load (:mod:`cfbmarkov.cli.command`, the parser and
 the verbs by theme) is one line and exit code 130, as it is while a verb runs.
 
-Errors in the input (files, options) are reported as one line on stderr with exit code 2."""
+Errors in the input (files, options) are reported as one line on stderr with exit code 2.
+A verb whose standard output is closed by its reader (``cfbmarkov info model.h5 | head -1``)
+stops quietly with exit code 141 (128 + SIGPIPE, as a shell reports for a program a closed
+pipe stopped)."""
 
 from __future__ import annotations
 
@@ -24,13 +27,20 @@ def main(argv: list[str] | None = None) -> int:
     int
         The exit code: 0 on success, 2 on a usage error or a
         :class:`~cfbmarkov.errors.CfbmarkovError` (reported as one line on stderr), 130 when
-        interrupted (also while the modules load).
+        interrupted (also while the modules load), 141 when the reader of standard output
+        has gone (nothing printed on stderr).
     """
     previous = sys.unraisablehook
     try:
         from cfbmarkov.cli.command import main as run
 
-        return run(argv)
+        code = run(argv)
+        sys.stdout.flush()            # what is still buffered meets a closed pipe here
+        return code
+    except BrokenPipeError:           # the reader of standard output has gone
+        from cfbmarkov._console import quit_closed_stdout
+
+        return quit_closed_stdout()
     except KeyboardInterrupt:
         # what the interrupt cut short (a module half imported) is freed after this block:
         # its failing finalizers print nothing ("Exception ignored ...") until the end

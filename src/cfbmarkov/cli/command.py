@@ -14,10 +14,11 @@ import os
 import sys
 from pathlib import Path
 
+from cfbmarkov._console import stdout_closed
 from cfbmarkov._names import one_line
 from cfbmarkov.cli import analysis, data, kinetics, markov, run, simulate
 from cfbmarkov.cli.options import join_dash_values
-from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.errors import CfbmarkovError, HistoryError, InputError, LagError
 
 
 class _Parser(argparse.ArgumentParser):
@@ -117,7 +118,8 @@ def _run(args) -> int:
             with _interrupt.installed():
                 return _run_claimed(args)
         except CfbmarkovError as exc:
-            print(f"cfbmarkov {args.command}: error: {one_line(str(exc))}", file=sys.stderr)
+            print(f"cfbmarkov {args.command}: error: {one_line(_for_verb(exc, args))}",
+                  file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             # what the interrupt cut short is freed with it, after this block: its failing
@@ -127,6 +129,8 @@ def _run(args) -> int:
                   file=sys.stderr)
             return 130
         except (OSError, KeyError, RuntimeError) as exc:
+            if isinstance(exc, BrokenPipeError) and stdout_closed():
+                raise                       # cfbmarkov.cli.main stops quietly
             damaged = _damaged_input(exc)   # an HDF5 input that fails only where it is read
             if damaged is not None:
                 print(f"cfbmarkov {args.command}: error: {one_line(damaged)}",
@@ -142,6 +146,19 @@ def _run(args) -> int:
             return 2
 
 
+def _for_verb(exc: CfbmarkovError, args) -> str:
+    """The message of ``exc`` as advice the verb of ``args`` can follow: a lag that does
+    not fit a file's frames, on a verb without ``--lag``, is a fitted model's, which only a
+    refit changes; a window short of history is moved with the verb's ``--window`` or
+    ``--start``, or with neither named."""
+    if isinstance(exc, LagError) and not hasattr(args, "lag"):
+        return exc.for_model()
+    if isinstance(exc, HistoryError):
+        return exc.advice(next((option for option in ("--window", "--start")
+                                if hasattr(args, option[2:])), None))
+    return str(exc)
+
+
 def _damaged_input(exc: BaseException) -> str | None:
     """The one-line error for an h5py failure while an input file was being read (a
     damaged model or trajectory file whose damage shows only in a dataset), naming the file;
@@ -153,8 +170,8 @@ def _damaged_input(exc: BaseException) -> str | None:
         where = tb.tb_frame.f_code.co_filename.replace(os.sep, "/")
         in_h5py = in_h5py or "/h5py/" in where or where.startswith("h5py/")
         for value in tb.tb_frame.f_locals.values():
-            file = getattr(value, "file", None) if "h5py" in type(value).__module__ else None
-            with contextlib.suppress(Exception):
+            with contextlib.suppress(Exception):   # a closed h5py object has no file
+                file = getattr(value, "file", None) if "h5py" in type(value).__module__ else None
                 if file is not None and file.mode == "r":
                     name = file.filename
         tb = tb.tb_next

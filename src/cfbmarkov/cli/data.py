@@ -8,8 +8,9 @@ from cfbmarkov.cli.options import count, finite_float, parse_region, positive_fl
 
 
 def cmd_import(args) -> int:
-    """``cfbmarkov import``: print the trajectory file written, then what the import did
-    beyond reading rows (id column chosen, rows dropped or merged, title rows skipped).
+    """``cfbmarkov import``: print the trajectory file written, alone, on stdout; on stderr
+    one line on what was read and how the format was told, then what the import did beyond
+    reading rows (id column chosen, rows dropped or merged, title rows skipped).
 
     Parameters
     ----------
@@ -23,29 +24,23 @@ def cmd_import(args) -> int:
     """
     import sys
 
-    from cfbmarkov.io import PARTICLE_FORMATS, import_file, resolve_format
+    from cfbmarkov.io import import_file, import_summary, resolve_format
 
-    fmt, detected = resolve_format(args.source, args.format)
+    _, detected = resolve_format(args.source, args.format)
     path = import_file(args.source, args.format, args.output, width=args.width,
                        height=args.height, time_step=args.time_step,
                        vertical_axis=args.vertical_axis, region=args.region,
                        length_unit=args.length_unit, time_unit=args.time_unit,
                        boundary=args.boundary, drop_depth=args.drop_depth,
                        resample=args.resample, max_gap=args.max_gap)
-    print(path)
     from cfbmarkov.trajectories import Trajectories
 
     with Trajectories(path) as written:     # what the import did beyond reading rows
-        for note in written.parameters.get("import_notes", []):
-            print(f"  {note}")
-
-    if fmt in PARTICLE_FORMATS:
-        from cfbmarkov.io.particle_import import import_summary
-
-        print(f"cfbmarkov import: {import_summary(path)}", file=sys.stderr)
-    elif detected:
-        print(f"cfbmarkov import: format {fmt}, detected from the content: {detected}",
-              file=sys.stderr)
+        notes = list(written.parameters.get("import_notes", []))
+    print(path)
+    print(f"cfbmarkov import: {import_summary(path, detected)}", file=sys.stderr)
+    for note in notes:
+        print(f"  {note}", file=sys.stderr)
     return 0
 
 

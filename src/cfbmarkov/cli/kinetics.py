@@ -90,8 +90,8 @@ def cmd_react(args) -> int:
             span = f"{finite.min():.6g} .. {finite.max():.6g}" if finite.size else "-"
             print(f"{p.name:<14} {p.law.key:<14} {p.start:<9} {a.exit_mean:>12.6g} "
                   f"{a.exit_sd:>12.6g} {a.bed_mean:>12.6g} {span:>26}")
-        print(f"exact, per residence at the exit and over the bed in steady state "
-              f"({seconds:.3g} s)")
+        print("exact, per residence at the exit and over the bed in steady state, in the "
+              f"units of the kinetics file's values; computed in {seconds:.3g} s")
         if direction == "down":
             from cfbmarkov.markov.model_summary import DOWNWARD_LINE
 

@@ -112,7 +112,7 @@ def _finish_fit(args, model, runs, windows) -> int:
     try:
         model.rtd()
     except TrappedResidences as exc:
-        raise InputError(f"{args.run}: {exc}") from None
+        raise InputError(f"{', '.join(map(str, runs))}: {exc}") from None
     except CfbmarkovError:
         has_rtd = False            # no circulation at all: a model without residence times
     # -- the model's interval: a block bootstrap of the fitting window and the flow's

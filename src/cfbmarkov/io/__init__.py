@@ -147,5 +147,60 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                          drop_depth=drop_depth)
 
 
+_FORMAT_NAMES = {"csv": "CSV", "lammps": "LAMMPS/LIGGGHTS text dump"}
+
+
+def import_summary(path: str | os.PathLike, detected: str | None = None) -> str:
+    """One line on what an import read: the format and how it was told, frames, particles,
+    and where positions, ids, times, velocities, the boundary and laps came from.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A trajectory file written by :func:`import_file`.
+    detected : str, optional
+        What the content showed where the format was detected (the second item of
+        :func:`resolve_format`); None where it was given. Files of the particle formats
+        record it themselves.
+
+    Returns
+    -------
+    str
+        For example ``read 20 frames of 3 particles as CSV (--format); positions from x, y
+        (mm); ids from column 'TRACK_ID'; times in s; velocities from none; periodic
+        boundary; laps from minimal-image rule``.
+    """
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(path) as t:
+        p = dict(t.parameters)
+        n_frames, n_particles = t.times.size, t.ids.size
+    fmt = p.get("format")
+    if fmt in PARTICLE_FORMATS:
+        from cfbmarkov.io.particle_import import import_summary as particle_summary
+
+        return particle_summary(path)
+    told = f"detected from the content: {detected}" if detected else "--format"
+    units = p.get("units") if isinstance(p.get("units"), dict) else {}   # CSV: per column
+    positions = ", ".join(p.get("position_columns") or [])
+    length = {units.get(a) for a in ("x", "y", "z") if units.get(a)}
+    if length:
+        positions += f" ({', '.join(sorted(length))})"
+    parts = [f"read {n_frames} frames of {n_particles} particles as "
+             f"{_FORMAT_NAMES.get(fmt, fmt)} ({told})", f"positions from {positions}"]
+    if fmt == "csv":
+        column = p.get("id_column")
+        parts.append(f"ids from column {column!r}" if column else "one tracer (no id column)")
+        parts.append(f"times in {units.get('t', 's')}")
+    else:
+        parts.append(f"times from {p.get('time_from')}")
+    parts.append(f"velocities from {', '.join(p.get('velocity_columns') or []) or 'none'}")
+    if p.get("resample"):
+        parts.append(f"resampled every {p['resample']:g} s from {p.get('samples')} samples")
+    parts.append(f"{p.get('boundary_stored')} boundary")
+    parts.append(f"laps from {p.get('laps_from')}")
+    return "; ".join(parts)
+
+
 __all__ = ["FORMATS", "PARTICLE_FORMATS", "import_csv", "import_file", "import_lammps",
-           "resolve_format"]
+           "import_summary", "resolve_format"]

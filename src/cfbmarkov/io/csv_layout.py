@@ -174,7 +174,8 @@ def read_layout(fh: TextIO, label: str, *, length_unit: str | None = None,
         canonical[key] = k
         units[key] = unit
     if "t" not in canonical:
-        raise InputError(f"{label}: missing column 't' in the header {shown!r}; {_EXPECTED}")
+        raise InputError(f"{label}: missing column 't' in the header {shown!r}"
+                         f"{_no_time_advice(header, id_kind) or '; ' + _EXPECTED}")
     vertical, across, depth = _axes(canonical, vertical_axis, shown, label)
     for v in (f"v{across}", f"v{vertical}"):
         other = f"v{across}" if v == f"v{vertical}" else f"v{vertical}"
@@ -214,6 +215,23 @@ def _id_key(name: str) -> str | None:
         name = match.group(1)
     key = " ".join(name.strip().strip('"').strip("'").replace("_", " ").lower().split())
     return key if key in ID_COLUMNS else None
+
+
+def _no_time_advice(header: list[str], id_kind) -> str:
+    """What to give a file that numbers its frames instead of timing them (trackpy's
+    ``frame`` and ``particle``): a t column from the frame rate; empty for other files."""
+    frame = next((name for name in header if name.strip().lower() in ("frame", "frame_no",
+                                                                       "frame number")), None)
+    if frame is None:
+        return ""
+    found = f"frame numbers in {frame!r}"
+    if id_kind is not None:
+        found += f" and particle ids in {header[id_kind[1]]!r}"
+    pixels = (" (trackpy's x and y are in pixels: convert them to m, or to mm or cm with "
+              "--length-unit)" if id_kind is not None and id_kind[0] == "particle" else "")
+    return (f": it holds {found} but no times, and import takes no frame rate: add a column "
+            f"t = {frame} / frame rate (s), e.g. in pandas df['t'] = df[{frame!r}] / fps, "
+            f"and import that file{pixels}")
 
 
 def _id_column(header: list[str], shown: str, label: str):

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import HistoryError, InputError
 from cfbmarkov.markov.frame_quantities import FrameQuantities
 from cfbmarkov.markov.states import StateSpace
 from cfbmarkov.trajectories import Trajectories, opened
@@ -397,14 +397,13 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
         if short_history != "skip":
             where = (f"the window start {_describe(window)}" if window is not None
                      else f"t = {trajectories.times[start]:g} s")
-            fix = ""
+            fix, earliest = "", None
             if int(history) < trajectories.n_frames:
                 earliest = float(trajectories.times[int(history)])
-                fix = (f": start the window at {earliest:g} s or later"
-                       + (f" (--window {earliest:g}:{window[1]:g})" if window is not None
-                          else ""))
-            raise InputError(f"the state space needs {history} frame(s) of history before "
-                             f"{where}; {trajectories.path} has {start}{fix}")
+                fix = f": start the window at {earliest:g} s or later"
+            raise HistoryError(f"the state space needs {history} frame(s) of history before "
+                               f"{where}; {trajectories.path} has {start}{fix}", earliest,
+                               None if window is None else float(window[1]))
         first = 0
     rows = slice(first, stop)
     return WindowFrames(

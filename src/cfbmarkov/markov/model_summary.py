@@ -42,6 +42,13 @@ def model_warnings(model: "MarkovModel") -> list[str]:
             "can reach a trap (fit --connected leaves them out)"]
 
 
+def _sources_text(source) -> str:
+    """The file or files a model was fitted on, names joined by ``, `` (a pooled fit's)."""
+    if isinstance(source, (list, tuple)):
+        return ", ".join(str(s) for s in source)
+    return str(source)
+
+
 def _windows_text(model: "MarkovModel") -> str:
     """``window 10:15 s``, ``windows 10:15, 12:17 s`` (a pooled fit's, one per run) or
     ``window all``."""
@@ -73,7 +80,7 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     lines = [
         f"Markov chain model: {model.state_space.describe()}, lag {model.lag:g} s, "
         f"estimator '{model.estimator}'",
-        f"  fitted on {model.source} {_windows_text(model)}: "
+        f"  fitted on {_sources_text(model.source)} {_windows_text(model)}: "
         f"{model.n_transitions} transitions over {model.frame_pairs} frame pairs",
         f"  passes through the periodic boundary: {int(model.counts_up.sum())} up, "
         f"{int(model.counts_down.sum())} down" if model.open_flow is None else
