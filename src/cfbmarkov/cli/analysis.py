@@ -32,7 +32,7 @@ def cmd_compare(args) -> int:
 
     started = time.perf_counter()
     if args.window is None:
-        _refuse_missing_window(args.prediction)
+        args.window = _default_window(args.reference, args.prediction)
     if not args.quiet:
         from cfbmarkov.analysis.compare_inputs import check_runs
         from cfbmarkov.trajectories import Trajectories
@@ -101,18 +101,24 @@ def cmd_compare(args) -> int:
     return 0
 
 
-def _refuse_missing_window(prediction: str) -> None:
-    """Refuse ``compare`` without ``--window`` in one line naming the prediction's span."""
+def _default_window(reference: str, prediction: str) -> tuple[float, float]:
+    """``compare`` without ``--window``: the span both files cover, said on stderr; refused
+    in one line naming both spans where they do not overlap."""
+    from cfbmarkov.analysis.compare_inputs import common_span, spans_text
     from cfbmarkov.trajectories import Trajectories
+    from cfbmarkov.trajectory_format import time_text
 
-    hint = ""
-    try:
-        with Trajectories(prediction) as pred:
-            a, b = float(pred.times[0]), float(pred.times[-1])
-        hint = f": the prediction {prediction} covers {a:g}-{b:g} s (--window {a:g}:{b:g})"
-    except Exception:       # an unreadable prediction is reported as such by compare itself
-        pass
-    raise InputError(f"give the window to compare over, --window START:STOP{hint}")
+    with Trajectories(reference) as ref, Trajectories(prediction) as pred:
+        both = common_span(ref, pred)
+        spans = spans_text(ref, pred)
+    if both is None:
+        raise InputError(f"{spans}: they do not overlap, so there is no window to compare "
+                         "over; compare a prediction of the reference's span")
+    a, b = both
+    print(f"compare: no --window given: comparing over {time_text(a)}:{time_text(b)} s, the "
+          f"span both files "
+          f"cover ({spans})", file=sys.stderr, flush=True)
+    return a, b
 
 
 def _place(value: float, interval) -> str:
@@ -434,8 +440,8 @@ def add_compare(sub) -> None:
     s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
     s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
     s.add_argument("--window", type=parse_window, default=None,
-                   help="analysis window START:STOP, s (required; without it the prediction's "
-                        "span is named, e.g. 15:20)")
+                   help="analysis window START:STOP, s (default: the span both files cover, "
+                        "said on stderr; a window outside it is refused naming both spans)")
     s.add_argument("-o", "--output", required=True, help="output directory")
     s.add_argument("--bin-width", type=positive_float, default=None,
                    help="RTD bin width, s (default: the lag of the model behind the prediction, "
