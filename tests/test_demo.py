@@ -18,7 +18,18 @@ def test_demo_end_to_end(tmp_path, capsys):
         assert summary["pd_rt_sd"] < -20          # the hidden direction is lost
         for png in ("rtd", "snapshots", "mixing", "transition_matrix", "probability_maps"):
             assert (out / f"compare-{name}" / f"{png}.png").stat().st_size > 10_000
-    assert str(out) in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert str(out) in printed
+    # the exact E(RT) is labelled as the window sees it, not as fit's intrinsic one
+    assert "exact, as a 5 s window sees it:" in printed
+    # a closing verdict in the report's words, against the persistence baseline
+    from cfbmarkov.report.table3 import baseline_clause, baseline_outcomes
+
+    verdict = [line for line in printed.splitlines() if line.startswith("verdict: ")]
+    assert len(verdict) == 1
+    clause = baseline_clause(baseline_outcomes(rows.values()), unit="estimator",
+                             reference="the reference")
+    assert verdict[0].startswith(f"verdict: {clause} (") and "Next step: " in verdict[0]
 
 
 # --- what the demo does with a folder that holds files (small references, no full run) ---
@@ -117,3 +128,19 @@ def test_demo_force_makes_the_reference_again(tmp_path, capsys, monkeypatch):
     with Trajectories(out / "reference.h5") as run:
         assert run.n_particles == 10 and run.parameters["seed"] == 1
     assert (out / "notes.txt").read_text() == "mine"
+
+
+def _summary(md, md_base, md_halves=0.01):
+    return {"md_rtd": md, "baseline": {"md_rtd": md_base, "windows": [[10, 15], [15, 20]]},
+            "natural_variability": {"md_rtd": md_halves}}
+
+
+def test_demo_verdict_follows_the_baseline_rule():
+    loses = demo_module.demo_verdict({"paper": _summary(0.2, 0.03), "mle": _summary(0.2, 0.03)})
+    assert loses.startswith("verdict: reusing the fitting window's RTD (the persistence "
+                            "baseline) predicts better than the models in all 2 estimators")
+    assert "paper MD 0.2 against the baseline's 0.03" in loses
+    assert "10-15 s as the prediction of 15-20 s" in loses
+    assert "Next step: a state space with memory (fit --states auto)" in loses
+    beats = demo_module.demo_verdict({"paper": _summary(0.02, 0.2), "mle": _summary(0.3, 0.2)})
+    assert "the models beat the persistence baseline in 1 of 2 estimators" in beats

@@ -185,6 +185,42 @@ def check_demo_folder(output: str | Path, particles: int, seed: int,
     return reuse
 
 
+def demo_verdict(summaries: dict[str, dict]) -> str:
+    """The demo's closing line: the models against the persistence baseline by the report's
+    rule, in the words of the report's verdict
+    (:func:`cfbmarkov.report.table3.baseline_clause`), and the next step.
+
+    Parameters
+    ----------
+    summaries : dict of str to dict
+        Estimator -> its compare summary.
+
+    Returns
+    -------
+    str
+        "verdict: ...; Next step: ...".
+    """
+    from cfbmarkov.report.table3 import baseline_clause, baseline_outcomes, baseline_step
+
+    counts = baseline_outcomes(summaries.values())
+    reference = "the reference"
+    clause = baseline_clause(counts, unit="estimator", reference=reference)
+    if clause is None:
+        return "verdict: no comparison could be judged against the persistence baseline"
+    judged = {name: s for name, s in summaries.items()
+              if (s.get("baseline") or {}).get("md_rtd") is not None}
+    base = ", ".join(f"{name} MD {s['md_rtd']:.3g} against the baseline's "
+                     f"{s['baseline']['md_rtd']:.3g}" for name, s in judged.items())
+    stand_in, target = next(iter(judged.values()))["baseline"]["windows"]
+    return (f"verdict: {clause} ({base}; the persistence baseline takes the reference's RTD "
+            f"of {_span(stand_in)} s as the prediction of {_span(target)} s). Next step: "
+            f"{baseline_step(counts, reference=reference)}.")
+
+
+def _span(window) -> str:
+    return f"{window[0]:g}-{window[1]:g}"
+
+
 def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print,
              progress=None, force: bool = False, note=None) -> Path:
     """Run the Markov-chain pipeline on a synthetic reference (``cfbmarkov demo --synthetic``).
@@ -268,28 +304,31 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
         with stage(step, f"synthetic reference: {particles} particles, 0-20 s"):
             synthetic.write_run(reference, flow, particles, DURATION, seed=seed)
         step += 1
-    grid = CellGrid(6, 38, flow.width, flow.height)
+    grid = CellGrid(*CELLS, flow.width, flow.height)
     rows = {}
-    for name in ("paper", "mle"):
+    for name in ESTIMATORS:
         with stage(step, f"{name}: fitting 6x38 cells at lag 0.025 s on 10-15 s"):
-            model = fit_model(reference, grid, 0.025, (10.0, 15.0), name)
+            model = fit_model(reference, grid, LAG, FIT_WINDOW, name)
             model.save(out / f"model-{name}.h5")
         with stage(step + 1, f"{name}: predicting 15-20 s from the reference's state at 15 s"):
-            prediction = model.predict(reference, start=15.0, duration=5.0, seed=seed,
+            prediction = model.predict(reference, start=PREDICT_WINDOW[0],
+                                       duration=PREDICT_WINDOW[1] - PREDICT_WINDOW[0], seed=seed,
                                        output=out / f"prediction-{name}.h5")
         with stage(step + 2, f"{name}: comparing the prediction with the reference on 15-20 s "
                              "(residence times, baselines, mixing, figures)"):
-            summary = compare(reference, prediction, window=(15.0, 20.0),
+            summary = compare(reference, prediction, window=PREDICT_WINDOW,
                               output=out / f"compare-{name}")
         step += 3
-        exact = model.rtd(window=5.0)
+        seen = PREDICT_WINDOW[1] - PREDICT_WINDOW[0]
+        exact = model.rtd(window=seen)
         rows[name] = {**summary, "exact_model_rt_mean": exact.mean, "exact_model_rt_sd": exact.sd}
         log(f"{name:>5}: E(RT) reference {summary['reference']['rt_mean']:.3f} s, model "
-            f"{summary['model']['rt_mean']:.3f} s (its Monte Carlo sample; exact, from the "
-            f"chain without sampling: {exact.mean:.3f} s), PD E(RT) "
+            f"{summary['model']['rt_mean']:.3f} s (its Monte Carlo sample; exact, as a "
+            f"{seen:g} s window sees it: {exact.mean:.3f} s), PD E(RT) "
             f"{percentage_text(summary['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
             f"{percentage_text(summary['pd_rt_sd'], '+.1f')} %, "
             f"MD {summary['md_rtd']:.3g}, mixing RMS {summary['mixing_rms']:.3g}")
+    log(demo_verdict(rows))
     (out / "demo.json").write_text(json.dumps(rows, indent=2))
     if progress is not None:
         progress(f"demo: done in {clock_text(time.perf_counter() - started)}")
