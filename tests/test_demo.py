@@ -30,6 +30,22 @@ def test_demo_end_to_end(tmp_path, capsys):
     clause = baseline_clause(baseline_outcomes(rows.values()), unit="estimator",
                              reference="the reference")
     assert verdict[0].startswith(f"verdict: {clause} (") and "Next step: " in verdict[0]
+    # the tutorial quotes these lines as printed (numbers and the folder aside)
+    assert _masked(printed.splitlines()[:-1]) == _masked(_tutorial_quote()[:-1])
+
+
+def _masked(lines):
+    import re
+
+    return [re.sub(r"[-+]?\d+(\.\d+)?(e-?\d+)?", "#", line) for line in lines]
+
+
+def _tutorial_quote():
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "docs" / "tutorial" / "index.md").read_text()
+    after = text.split("cfbmarkov demo --synthetic --particles 2000 -o synth\n```", 1)[1]
+    return after.split("```text\n", 1)[1].split("```", 1)[0].splitlines()
 
 
 # --- what the demo does with a folder that holds files (small references, no full run) ---
@@ -138,7 +154,7 @@ def _summary(md, md_base, md_halves=0.01):
 def test_demo_verdict_follows_the_baseline_rule():
     loses = demo_module.demo_verdict({"paper": _summary(0.2, 0.03), "mle": _summary(0.2, 0.03)})
     assert loses.startswith("verdict: reusing the fitting window's RTD (the persistence "
-                            "baseline) predicts better than the models in all 2 estimators")
+                            "baseline) predicts better than the models in both estimators")
     assert "paper MD 0.2 against the baseline's 0.03" in loses
     assert "10-15 s as the prediction of 15-20 s" in loses
     assert "Next step: a state space with memory (fit --states auto)" in loses

@@ -143,7 +143,8 @@ def baseline_clause(counts: dict[str, int], unit: str = "velocity-model pair",
     if not total:
         return None
     hidden = counts["not told apart"] + counts["tie"]
-    every = f"all {total} {unit}s" if total > 1 else f"the one {unit}"
+    every = (f"all {total} {unit}s" if total > 2 else f"both {unit}s" if total == 2
+             else f"the one {unit}")
     if counts["beats"] == total:
         return f"the models beat the persistence baseline in {every}"
     if counts["loses"] == total:
