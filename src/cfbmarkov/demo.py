@@ -46,9 +46,12 @@ def _reference_text(path: Path, flow, particles: int, seed: int) -> str | None:
     kind = describe(path)
     if kind != "trajectory":
         return f"{_KIND_WORDS.get(kind, kind)}, which the demo did not write"
-    with Trajectories(path) as run:
-        source, params, n = run.source, run.parameters, run.n_particles
-        span = (float(run.times[0]), float(run.times[-1]))
+    try:
+        with Trajectories(path) as run:
+            source, params, n = run.source, run.parameters, run.n_particles
+            span = (float(run.times[0]), float(run.times[-1]))
+    except (InputError, OSError, KeyError, ValueError) as exc:
+        return f"a trajectory file that cannot be read ({exc}), which the demo did not write"
     if source != "synthetic" or not isinstance(params, dict) or "seed" not in params:
         return f"a trajectory file of source {source!r}, which the demo did not write"
     expected = {k: getattr(flow, k) for k in flow.__dataclass_fields__}
@@ -114,8 +117,9 @@ def check_demo_folder(output: str | Path, particles: int, seed: int,
     The demo reuses its reference only where it is its own, of the same parameters; it
     replaces its other files, where they are its own. Anything else is refused unless
     ``force``: files the demo does not write, a reference it did not write or wrote with
-    other parameters, and a model, prediction, comparison or ``demo.json`` that is not the
-    demo's.
+    other parameters, and a model, prediction or ``demo.json`` that is not the demo's. A
+    comparison folder holding other files than a comparison's is refused even with
+    ``force`` (``compare`` replaces it whole).
 
     Parameters
     ----------
@@ -157,6 +161,13 @@ def check_demo_folder(output: str | Path, particles: int, seed: int,
             reuse = True
         elif not force:
             raise InputError(f"{reference}: {why}; {fix}")
+    for name in ESTIMATORS:      # a comparison's folder is replaced whole: never forced
+        folder = out / _files(name)["compare"]
+        if folder.exists() and not folder.is_dir():
+            raise InputError(f"{folder}: not a comparison's folder; give the demo another "
+                             "folder with -o")
+        refuse_foreign(folder, is_comparison_file, "a comparison",
+                       "replace it (give the demo another folder with -o)")
     if force:
         return reuse
     for name in ESTIMATORS:
@@ -168,11 +179,6 @@ def check_demo_folder(output: str | Path, particles: int, seed: int,
             path = out / files[kind]
             if path.exists() and not own(path, name):
                 raise InputError(f"{path}: {words}; {fix}")
-        folder = out / files["compare"]
-        if folder.exists() and not folder.is_dir():
-            raise InputError(f"{folder}: not a comparison's folder; {fix}")
-        refuse_foreign(folder, is_comparison_file, "a comparison",
-                       "replace it (give the demo another folder with -o)")
     summary = out / "demo.json"
     if summary.exists():
         try:
