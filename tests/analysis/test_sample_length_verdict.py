@@ -8,9 +8,8 @@ import numpy as np
 import pytest
 
 from cfbmarkov import synthetic
-from cfbmarkov.analysis.sample_length import SampleLength, _with_length
+from cfbmarkov.analysis.sample_length import SampleLength, _with_length, verdict_text
 from cfbmarkov.cli import main
-from cfbmarkov.cli.analysis import _sample_length_verdict
 
 
 def _result(means, sds, long_mean=1.0, long_sd=1.0):
@@ -31,7 +30,7 @@ def test_each_window_names_the_figure_it_misses():
 def test_a_figure_off_at_every_length_calls_for_memory_not_a_longer_run():
     r = _result([1.05, 1.02, 0.98, 1.01, 1.0], [0.44, 0.45, 0.43, 0.44, 0.44])
     assert set(r.steady_misses()) == {"SD(RT)"}
-    line = _sample_length_verdict(r, "cells")
+    line = verdict_text(r, "cells")
     assert "E(RT) settles (within 10 % from 0.5 s)" in line
     assert "SD(RT) stays -56 % off at every length" in line
     assert "state space with memory" in line and "--states auto" in line
@@ -41,10 +40,10 @@ def test_a_figure_off_at_every_length_calls_for_memory_not_a_longer_run():
 def test_a_drifting_figure_calls_for_a_longer_run():
     r = _result([1.6, 1.4, 1.3, 1.2, 1.15], [1.0, 1.0, 1.0, 1.0, 1.0])
     assert r.steady_misses() == {}
-    line = _sample_length_verdict(r, "cells")
+    line = verdict_text(r, "cells")
     assert "the longest window's E(RT) +15 % off" in line
     assert "a longer run, or pool runs" in line and "memory" not in line
-    both = _sample_length_verdict(_result([1.6, 1.4, 1.3, 1.2, 1.15],
+    both = verdict_text(_result([1.6, 1.4, 1.3, 1.2, 1.15],
                                           [0.44, 0.45, 0.43, 0.44, 0.44]), "cells")
     assert "for E(RT) a longer run" in both and "for SD(RT) a state space with memory" in both
 

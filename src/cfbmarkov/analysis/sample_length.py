@@ -139,6 +139,78 @@ class SampleLength:
             "sample_length": self.sample_length})
 
 
+def missed_text(miss: str, pd_mean: float, pd_sd: float) -> str:
+    """A window's "within" cell of ``stationarity --sample-length``: "yes", or which figure
+    misses and by how much.
+
+    Parameters
+    ----------
+    miss : str
+        :meth:`SampleLength.missed` of the window.
+    pd_mean, pd_sd : float
+        :meth:`SampleLength.deviations` of the window (relative, -).
+
+    Returns
+    -------
+    str
+        E.g. "no: SD(RT) -56 %" or "no: both (E(RT) +12 %, SD(RT) -56 %)".
+    """
+    if not miss:
+        return "yes"
+    if miss == "no model":
+        return "no: no model (the window's fit failed)"
+    mean, sd = f"E(RT) {100 * pd_mean:+.0f} %", f"SD(RT) {100 * pd_sd:+.0f} %"
+    return f"no: {mean if miss == 'E(RT)' else sd if miss == 'SD(RT)' else f'both ({mean}, {sd})'}"
+
+
+def verdict_text(result: SampleLength, states: str) -> str:
+    """The closing line of ``stationarity --sample-length``: the length, or which figure
+    misses and the cure (a longer run where a figure still drifts with the length, a state
+    space with memory where it stays off by a similar amount at every length).
+
+    Parameters
+    ----------
+    result : SampleLength
+        The windows against the long run.
+    states : str
+        The models' state space, as ``--states`` names it.
+
+    Returns
+    -------
+    str
+        The text after "sample length: ".
+    """
+    tol = 100 * result.tolerance
+    if np.isfinite(result.sample_length):
+        return (f"{result.sample_length:g} s (from it on, every window's E(RT) and SD(RT) lie "
+                f"within {tol:g} % of the long run's)")
+    longest = result.lengths[-1]
+    steady = result.steady_misses()
+    settles = [f"{figure} settles (within {tol:g} % from {result.settled_from(figure):g} s)"
+               for figure in ("E(RT)", "SD(RT)") if np.isfinite(result.settled_from(figure))]
+    stays = [f"the {states} model's {figure} stays {50 * (lo + hi):+.0f} % off at every "
+             f"length ({100 * lo:+.0f} to {100 * hi:+.0f} %)"
+             for figure, (lo, hi) in steady.items()]
+    drifting = [f for f in ("E(RT)", "SD(RT)")
+                if f not in steady and not np.isfinite(result.settled_from(f))]
+    said = " but ".join(p for p in (", ".join(settles), " and ".join(stays)) if p)
+    said = f": {said}" if said else ""
+    memory = ("with memory (fit --states auto; here --states cells-direction)"
+              if states == "cells" else "with more memory (fit --states auto)")
+    if steady and not drifting:
+        return (f"not reached within {longest:g} s{said}: a longer run does not cure that; a "
+                f"state space {memory} does")
+    pd_mean, pd_sd = result.deviations()
+    last = {"E(RT)": pd_mean[-1], "SD(RT)": pd_sd[-1]}
+    off = " and ".join(f"{f} {100 * last[f]:+.0f} %" for f in drifting if np.isfinite(last[f]))
+    off = f"; the longest window's {off} off" if off else ""
+    cure = "a longer run, or pool runs with fit A B ..."
+    if steady:
+        cure = (f"for {' and '.join(drifting)} {cure}; for {' and '.join(steady)} a state "
+                f"space {memory}")
+    return f"not reached within {longest:g} s{said}{off}: {cure}"
+
+
 def _first_stable(within: np.ndarray, lengths: np.ndarray) -> float:
     """The shortest length from which every longer one is within (NaN: none)."""
     for k in range(within.size):

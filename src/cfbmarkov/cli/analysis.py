@@ -348,7 +348,7 @@ def _sample_length(args) -> int:
 
     import numpy as np
 
-    from cfbmarkov.analysis.sample_length import sample_length
+    from cfbmarkov.analysis.sample_length import missed_text, sample_length, verdict_text
     from cfbmarkov.markov import state_space_from_name
     from cfbmarkov.trajectories import Trajectories
 
@@ -387,56 +387,9 @@ def _sample_length(args) -> int:
     pd_mean, pd_sd = result.deviations()
     for n, m, sd, miss, a, b in zip(result.lengths, result.rt_mean, result.rt_sd,
                                     result.missed(), pd_mean, pd_sd):
-        print(f"{n:>10g}  {value(m):>9}  {value(sd):>10}  {_missed_text(miss, a, b)}")
-    print("sample length: " + _sample_length_verdict(result, args.states))
+        print(f"{n:>10g}  {value(m):>9}  {value(sd):>10}  {missed_text(miss, a, b)}")
+    print("sample length: " + verdict_text(result, args.states))
     return 0
-
-
-def _missed_text(miss: str, pd_mean: float, pd_sd: float) -> str:
-    """A window's "within" cell: yes, or which figure misses and by how much."""
-    if not miss:
-        return "yes"
-    if miss == "no model":
-        return "no: no model (the window's fit failed)"
-    mean, sd = f"E(RT) {100 * pd_mean:+.0f} %", f"SD(RT) {100 * pd_sd:+.0f} %"
-    return f"no: {mean if miss == 'E(RT)' else sd if miss == 'SD(RT)' else f'both ({mean}, {sd})'}"
-
-
-def _sample_length_verdict(result, states: str) -> str:
-    """The closing line of ``stationarity --sample-length``: the length, or which figure
-    misses and the cure (a longer run where a figure still drifts with the length, a state
-    space with memory where it stays off by a similar amount at every length)."""
-    import numpy as np
-
-    tol = 100 * result.tolerance
-    if np.isfinite(result.sample_length):
-        return (f"{result.sample_length:g} s (from it on, every window's E(RT) and SD(RT) lie "
-                f"within {tol:g} % of the long run's)")
-    longest = result.lengths[-1]
-    steady = result.steady_misses()
-    settles = [f"{figure} settles (within {tol:g} % from {result.settled_from(figure):g} s)"
-               for figure in ("E(RT)", "SD(RT)") if np.isfinite(result.settled_from(figure))]
-    stays = [f"the {states} model's {figure} stays {50 * (lo + hi):+.0f} % off at every "
-             f"length ({100 * lo:+.0f} to {100 * hi:+.0f} %)"
-             for figure, (lo, hi) in steady.items()]
-    drifting = [f for f in ("E(RT)", "SD(RT)")
-                if f not in steady and not np.isfinite(result.settled_from(f))]
-    said = " but ".join(p for p in (", ".join(settles), " and ".join(stays)) if p)
-    said = f": {said}" if said else ""
-    memory = ("with memory (fit --states auto; here --states cells-direction)"
-              if states == "cells" else "with more memory (fit --states auto)")
-    if steady and not drifting:
-        return (f"not reached within {longest:g} s{said}: a longer run does not cure that; a "
-                f"state space {memory} does")
-    pd_mean, pd_sd = result.deviations()
-    last = {"E(RT)": pd_mean[-1], "SD(RT)": pd_sd[-1]}
-    off = " and ".join(f"{f} {100 * last[f]:+.0f} %" for f in drifting if np.isfinite(last[f]))
-    off = f"; the longest window's {off} off" if off else ""
-    cure = "a longer run, or pool runs with fit A B ..."
-    if steady:
-        cure = (f"for {' and '.join(drifting)} {cure}; for {' and '.join(steady)} a state "
-                f"space {memory}")
-    return f"not reached within {longest:g} s{said}{off}: {cure}"
 
 
 #: most maps one ``maps`` figure draws (one panel each)
