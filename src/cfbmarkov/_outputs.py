@@ -293,6 +293,73 @@ def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
     return removed
 
 
+def foreign_entries(folder: str | os.PathLike, belongs) -> list[str]:
+    """The names in ``folder`` that are not part of an output written there.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        An existing folder (a missing one holds nothing).
+    belongs : callable
+        Called with each entry's :class:`pathlib.Path`; true where the entry is part of the
+        output (one of its files, or a lock or temporary of one).
+
+    Returns
+    -------
+    list of str
+        The other entries' names, sorted.
+    """
+    folder = Path(folder)
+    if not folder.is_dir():
+        return []
+    return sorted(p.name for p in folder.iterdir() if not belongs(p))
+
+
+def refuse_foreign(folder: str | os.PathLike, belongs, what: str, action: str) -> None:
+    """Refuse, in one line, to write into a folder holding what another writer put there.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The output folder.
+    belongs : callable
+        As for :func:`foreign_entries`.
+    what : str
+        The output, in words (e.g. "a comparison").
+    action : str
+        What is refused and the fix (e.g. "replace it (give a new or empty folder)").
+
+    Raises
+    ------
+    InputError
+        "FOLDER: folder holds 'NAME', which is not part of WHAT; refusing to ACTION", naming
+        the first foreign entry.
+    """
+    foreign = foreign_entries(folder, belongs)
+    if foreign:
+        more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
+        raise InputError(f"{folder}: folder holds {foreign[0]!r}{more}, which is not part of "
+                         f"{what}; refusing to {action}")
+
+
+def output_helper(entry: str | os.PathLike, names) -> bool:
+    """Whether ``entry`` is the lock or a temporary of one of the outputs ``names`` beside
+    it (:func:`lock_path`, :func:`temporary_patterns`)."""
+    entry = Path(entry)
+    for name in names:
+        target = entry.parent / name
+        if entry.name == lock_path(target).name or any(
+                p.match(entry.name) for p in temporary_patterns(target)):
+            return True
+    return False
+
+
+def describe(path: str | os.PathLike) -> str:
+    """What an existing path holds: one of :data:`KINDS` but ``"folder"`` for a cfbmarkov
+    file or a PNG, ``"a folder"``, ``"empty"``, or words for anything else."""
+    return _describe(Path(path))
+
+
 @contextlib.contextmanager
 def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
                  force: bool = False):
@@ -363,5 +430,6 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
         raise
 
 
-__all__ = ["KINDS", "claim_output", "lock_path", "release_all", "remove_stale_temporaries",
+__all__ = ["KINDS", "claim_output", "describe", "foreign_entries", "lock_path",
+           "output_helper", "refuse_foreign", "release_all", "remove_stale_temporaries",
            "temporary_patterns"]

@@ -58,13 +58,16 @@ def test_rtd_at_another_level_names_a_number_of_resamples(capsys, fitted):
     assert "--resamples 100" in line and "--resamples N" not in line
 
 
-def test_compare_without_window_names_the_prediction_span(tmp_path, capsys, markov_run,
-                                                         fitted):
+def test_compare_without_window_compares_over_the_span_both_cover(tmp_path, capsys,
+                                                                  markov_run, fitted):
     _, pred = fitted
-    line = one_line_error(*run_cli(capsys, "compare", markov_run, pred, "-o",
-                                   tmp_path / "c")[::2])
-    assert "--window 5:7" in line and "covers 5-7 s" in line
-    assert not (tmp_path / "c").exists()
+    code, _, err = run_cli(capsys, "compare", markov_run, pred, "-o", tmp_path / "c",
+                           "--no-figures", "--resamples", "0")
+    assert code == 0, err
+    assert "no --window given: comparing over 5:7 s, the span both files cover" in err
+    assert "covers 0 to 8 s" in err and "5 to 7 s" in err
+    summary = json.loads((tmp_path / "c" / "summary.json").read_text())
+    assert summary["window"] == [5.0, 7.0]
 
 
 def test_window_partly_outside_names_the_part_inside(tmp_path, capsys, markov_run):

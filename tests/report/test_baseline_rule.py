@@ -130,7 +130,7 @@ def test_the_summary_opens_with_a_verdict_and_a_next_step():
     first = render_markdown("r", summary_blocks(
         {"scale": "quick"}, cases, cases, measures, ["paper"],
         physics_checks(cases, measures))).split("## Summary\n\n", 1)[1].split("\n", 1)[0]
-    assert "the models beat the persistence baseline in all 2 velocity-model pairs" in first
+    assert "the models beat the persistence baseline in both velocity-model pairs" in first
     assert "Next step: use the models over windows like these" in first
 
 

@@ -115,7 +115,7 @@ def test_the_verdict_is_written_from_the_numbers():
     assert summary.count("against the baseline's 0.1") == 2      # once per velocity
     # the count once, in the verdict line; the details name the pairs
     assert summary.count("Verdict at the quick scale: reusing the fitting window's RTD (the "
-                         "persistence baseline) predicts better than the models in all 2") == 1
+                         "persistence baseline) predicts better than the models in both") == 1
     assert summary.count("velocity-model pairs") == 2        # the verdict line and the interval
     assert "is beaten, by the rule of Table 3" in summary and "by none of the models" in summary
     assert "inside the model's 90 % interval in 0 of 2" in summary

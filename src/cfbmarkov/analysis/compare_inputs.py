@@ -14,6 +14,7 @@ import numpy as np
 from cfbmarkov.errors import InputError
 from cfbmarkov.limits import MAX_BINS
 from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import time_text
 
 
 def check_window(window) -> tuple[float, float]:
@@ -164,6 +165,76 @@ def model_flow_direction(traj: Trajectories) -> str | None:
     return value if value in ("up", "down") else None
 
 
+def common_span(ref: Trajectories, pred: Trajectories) -> tuple[float, float] | None:
+    """The span of time both files cover.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and model files.
+
+    Returns
+    -------
+    (float, float) or None
+        (first, last), s: from the later first frame to the earlier last one; None where
+        the files share less than two frames' span (no window to compare over).
+    """
+    first = max(float(ref.times[0]), float(pred.times[0]))
+    last = min(float(ref.times[-1]), float(pred.times[-1]))
+    tol = max(ref.time_tolerance, pred.time_tolerance)
+    return (first, last) if last - first > tol else None
+
+
+def spans_text(ref: Trajectories, pred: Trajectories) -> str:
+    """'the reference R covers 0 to 20 s, the prediction P 15 to 25 s'."""
+    def span(run):
+        return f"{time_text(run.times[0])} to {time_text(run.times[-1])} s"
+
+    return f"the reference {ref.path} covers {span(ref)}, the prediction {pred.path} {span(pred)}"
+
+
+def check_common_window(ref: Trajectories, pred: Trajectories, start: float,
+                        stop: float) -> None:
+    """Refuse a window that leaves the span both files cover, naming both spans and a
+    window inside their overlap (or saying that they do not overlap).
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and model files.
+    start, stop : float
+        The analysis window, s.
+
+    Raises
+    ------
+    InputError
+        Where the window leaves the overlap of the two files' spans, or they do not overlap.
+    """
+    both = common_span(ref, pred)
+    spans = spans_text(ref, pred)
+    if both is None:
+        raise InputError(f"window {start:g}:{stop:g} s: {spans}; they do not overlap, so no "
+                         "window holds both: compare a prediction of the reference's span")
+    first, last = both
+    tol = max(ref.time_tolerance, pred.time_tolerance)
+    if start >= first - tol and stop <= last + tol:
+        return
+    if stop <= first or start >= last:
+        where = "lies outside the span both files cover"
+    else:
+        where = (f"lies partly outside the span both files cover; only "
+                 f"{time_text(max(start, first))}:{time_text(min(stop, last))} s lies inside")
+    length = stop - start
+    if length >= last - first - tol:
+        fits = f"{time_text(first)}:{time_text(last)} (all of it)"
+    elif stop > last:
+        fits = f"{time_text(last - length)}:{time_text(last)} (the same length)"
+    else:
+        fits = f"{time_text(first)}:{time_text(first + length)} (the same length)"
+    raise InputError(f"window {start:g}:{stop:g} s {where} ({spans}: both {time_text(first)} "
+                     f"to {time_text(last)} s); choose one within it, e.g. {fits}")
+
+
 def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
                ) -> tuple[slice, slice, int | None]:
     """Check that two files can be compared over a window.
@@ -186,7 +257,8 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
     ------
     InputError
         For a file whose content comparing does not support, an open riser against a
-        periodic one, a window without frames, a model with an odd column count (mixing by
+        periodic one, a window outside the span both files cover (:func:`check_common_window`)
+        or without frames, a model with an odd column count (mixing by
         halves is undefined), different domains (size, 2D against 3D, or depth), or
         different particles (an open riser: different particles present at the window
         start).
@@ -198,6 +270,7 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
         raise InputError(f"{ref.path} is a{'n open' if ref.boundary.is_open else ' periodic'} "
                          f"riser and {pred.path} a{'n open' if pred.boundary.is_open else ' periodic'}"
                          " one: compare runs of the same kind")
+    check_common_window(ref, pred, start, stop)
     ref_frames = ref.window(start, stop)
     pred_frames = pred.window(start, stop)
     columns = model_columns(pred)
@@ -234,4 +307,5 @@ def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred:
                          "needs the same tracers on both sides")
 
 
-__all__ = ["check_parameters", "check_runs", "check_window", "default_bin_width", "model_columns"]
+__all__ = ["check_common_window", "check_parameters", "check_runs", "check_window",
+           "common_span", "default_bin_width", "model_columns", "spans_text"]

@@ -70,25 +70,145 @@ class SampleLength:
     sample_length: float
     description: str
 
+    def deviations(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each window's E(RT) and SD(RT) relative to the long run's, minus 1 (NaN where
+        the window has no model), two arrays of shape (n,)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return (self.rt_mean / self.long_run_mean - 1.0,
+                    self.rt_sd / self.long_run_sd - 1.0)
+
     def within(self) -> np.ndarray:
         """Whether each window's E(RT) and SD(RT) lie within the tolerance, shape (n,)."""
-        with np.errstate(invalid="ignore", divide="ignore"):
-            m = np.abs(self.rt_mean / self.long_run_mean - 1.0) <= self.tolerance
-            s = np.abs(self.rt_sd / self.long_run_sd - 1.0) <= self.tolerance
-        return m & s
+        m, s = self.deviations()
+        return (np.abs(m) <= self.tolerance) & (np.abs(s) <= self.tolerance)
+
+    def missed(self) -> list[str]:
+        """Which figure each window misses the tolerance by: "", "E(RT)", "SD(RT)",
+        "both", or "no model"."""
+        out = []
+        for m, s in zip(*self.deviations()):
+            if not (np.isfinite(m) and np.isfinite(s)):
+                out.append("no model")
+                continue
+            names = [n for n, d in (("E(RT)", m), ("SD(RT)", s)) if abs(d) > self.tolerance]
+            out.append("both" if len(names) == 2 else (names[0] if names else ""))
+        return out
+
+    def steady_misses(self) -> dict[str, tuple[float, float]]:
+        """The figures off by a similar amount at every length: those no longer window
+        cures (the states cannot show them).
+
+        Returns
+        -------
+        dict of str to (float, float)
+            "E(RT)" and/or "SD(RT)" -> the smallest and largest deviation (relative, -),
+            where every window's deviation of that figure lies beyond the tolerance, on one
+            side, and the deviations spread over no more than the tolerance.
+        """
+        out = {}
+        for name, dev in zip(("E(RT)", "SD(RT)"), self.deviations()):
+            dev = dev[np.isfinite(dev)]
+            if dev.size < 2 or not (np.abs(dev) > self.tolerance).all():
+                continue
+            if (np.sign(dev) == np.sign(dev[0])).all() and dev.max() - dev.min() <= self.tolerance:
+                out[name] = (float(dev.min()), float(dev.max()))
+        return out
+
+    def settled_from(self, figure: str) -> float:
+        """The shortest length from which every longer window has ``figure`` ("E(RT)" or
+        "SD(RT)") within the tolerance (s; NaN: none)."""
+        dev = self.deviations()[0 if figure == "E(RT)" else 1]
+        return _first_stable(np.abs(dev) <= self.tolerance, self.lengths)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (NaN as None), the output of ``stationarity --sample-length --json``."""
+        pd_mean, pd_sd = self.deviations()
         return jsonable({
             "file": self.file, "start": self.start, "span_end": self.span_end,
             "models": self.description, "tolerance": self.tolerance,
             "long_run": {"rt_mean": self.long_run_mean, "rt_sd": self.long_run_sd,
                          "rt_count": self.long_run_count},
             "windows": [{"length": float(n), "rt_mean": float(m), "rt_sd": float(s),
-                         "within": bool(w)}
-                        for n, m, s, w in zip(self.lengths, self.rt_mean, self.rt_sd,
-                                              self.within())],
+                         "within": bool(w), "pd_rt_mean": 100 * float(a),
+                         "pd_rt_sd": 100 * float(b), "missed": miss or None}
+                        for n, m, s, w, a, b, miss in zip(
+                            self.lengths, self.rt_mean, self.rt_sd, self.within(), pd_mean,
+                            pd_sd, self.missed())],
+            "steady_misses": {k: [100 * lo, 100 * hi]
+                              for k, (lo, hi) in self.steady_misses().items()},
             "sample_length": self.sample_length})
+
+
+def missed_text(miss: str, pd_mean: float, pd_sd: float) -> str:
+    """A window's "within" cell of ``stationarity --sample-length``: "yes", or which figure
+    misses and by how much.
+
+    Parameters
+    ----------
+    miss : str
+        :meth:`SampleLength.missed` of the window.
+    pd_mean, pd_sd : float
+        :meth:`SampleLength.deviations` of the window (relative, -).
+
+    Returns
+    -------
+    str
+        E.g. "no: SD(RT) -56 %" or "no: both (E(RT) +12 %, SD(RT) -56 %)".
+    """
+    if not miss:
+        return "yes"
+    if miss == "no model":
+        return "no: no model (the window's fit failed)"
+    mean, sd = f"E(RT) {100 * pd_mean:+.0f} %", f"SD(RT) {100 * pd_sd:+.0f} %"
+    return f"no: {mean if miss == 'E(RT)' else sd if miss == 'SD(RT)' else f'both ({mean}, {sd})'}"
+
+
+def verdict_text(result: SampleLength, states: str) -> str:
+    """The closing line of ``stationarity --sample-length``: the length, or which figure
+    misses and the cure (a longer run where a figure still drifts with the length, a state
+    space with memory where it stays off by a similar amount at every length).
+
+    Parameters
+    ----------
+    result : SampleLength
+        The windows against the long run.
+    states : str
+        The models' state space, as ``--states`` names it.
+
+    Returns
+    -------
+    str
+        The text after "sample length: ".
+    """
+    tol = 100 * result.tolerance
+    if np.isfinite(result.sample_length):
+        return (f"{result.sample_length:g} s (from it on, every window's E(RT) and SD(RT) lie "
+                f"within {tol:g} % of the long run's)")
+    longest = result.lengths[-1]
+    steady = result.steady_misses()
+    settles = [f"{figure} settles (within {tol:g} % from {result.settled_from(figure):g} s)"
+               for figure in ("E(RT)", "SD(RT)") if np.isfinite(result.settled_from(figure))]
+    stays = [f"the {states} model's {figure} stays {50 * (lo + hi):+.0f} % off at every "
+             f"length ({100 * lo:+.0f} to {100 * hi:+.0f} %)"
+             for figure, (lo, hi) in steady.items()]
+    drifting = [f for f in ("E(RT)", "SD(RT)")
+                if f not in steady and not np.isfinite(result.settled_from(f))]
+    said = " but ".join(p for p in (", ".join(settles), " and ".join(stays)) if p)
+    said = f": {said}" if said else ""
+    memory = ("with memory (fit --states auto; here --states cells-direction)"
+              if states == "cells" else "with more memory (fit --states auto)")
+    if steady and not drifting:
+        return (f"not reached within {longest:g} s{said}: a longer run does not cure that; a "
+                f"state space {memory} does")
+    pd_mean, pd_sd = result.deviations()
+    last = {"E(RT)": pd_mean[-1], "SD(RT)": pd_sd[-1]}
+    off = " and ".join(f"{f} {100 * last[f]:+.0f} %" for f in drifting if np.isfinite(last[f]))
+    off = f"; the longest window's {off} off" if off else ""
+    cure = "a longer run, or pool runs with fit A B ..."
+    if steady:
+        cure = (f"for {' and '.join(drifting)} {cure}; for {' and '.join(steady)} a state "
+                f"space {memory}")
+    return f"not reached within {longest:g} s{said}{off}: {cure}"
 
 
 def _first_stable(within: np.ndarray, lengths: np.ndarray) -> float:

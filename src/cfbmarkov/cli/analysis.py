@@ -32,7 +32,7 @@ def cmd_compare(args) -> int:
 
     started = time.perf_counter()
     if args.window is None:
-        _refuse_missing_window(args.prediction)
+        args.window = _default_window(args.reference, args.prediction)
     if not args.quiet:
         from cfbmarkov.analysis.compare_inputs import check_runs
         from cfbmarkov.trajectories import Trajectories
@@ -101,18 +101,24 @@ def cmd_compare(args) -> int:
     return 0
 
 
-def _refuse_missing_window(prediction: str) -> None:
-    """Refuse ``compare`` without ``--window`` in one line naming the prediction's span."""
+def _default_window(reference: str, prediction: str) -> tuple[float, float]:
+    """``compare`` without ``--window``: the span both files cover, said on stderr; refused
+    in one line naming both spans where they do not overlap."""
+    from cfbmarkov.analysis.compare_inputs import common_span, spans_text
     from cfbmarkov.trajectories import Trajectories
+    from cfbmarkov.trajectory_format import time_text
 
-    hint = ""
-    try:
-        with Trajectories(prediction) as pred:
-            a, b = float(pred.times[0]), float(pred.times[-1])
-        hint = f": the prediction {prediction} covers {a:g}-{b:g} s (--window {a:g}:{b:g})"
-    except Exception:       # an unreadable prediction is reported as such by compare itself
-        pass
-    raise InputError(f"give the window to compare over, --window START:STOP{hint}")
+    with Trajectories(reference) as ref, Trajectories(prediction) as pred:
+        both = common_span(ref, pred)
+        spans = spans_text(ref, pred)
+    if both is None:
+        raise InputError(f"{spans}: they do not overlap, so there is no window to compare "
+                         "over; compare a prediction of the reference's span")
+    a, b = both
+    print(f"compare: no --window given: comparing over {time_text(a)}:{time_text(b)} s, the "
+          f"span both files "
+          f"cover ({spans})", file=sys.stderr, flush=True)
+    return a, b
 
 
 def _place(value: float, interval) -> str:
@@ -342,7 +348,7 @@ def _sample_length(args) -> int:
 
     import numpy as np
 
-    from cfbmarkov.analysis.sample_length import sample_length
+    from cfbmarkov.analysis.sample_length import missed_text, sample_length, verdict_text
     from cfbmarkov.markov import state_space_from_name
     from cfbmarkov.trajectories import Trajectories
 
@@ -372,16 +378,17 @@ def _sample_length(args) -> int:
           f"against the long run {result.start:g}-{result.span_end:g} s (E(RT) "
           f"{value(result.long_run_mean)} s, SD(RT) {value(result.long_run_sd)} s, "
           f"{result.long_run_count} residences)")
-    print(f"{'length (s)':>10}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  "
-          f"within {100 * result.tolerance:g} %")
-    for n, m, sd, ok in zip(result.lengths, result.rt_mean, result.rt_sd, result.within()):
-        print(f"{n:>10g}  {value(m):>9}  {value(sd):>10}  {'yes' if ok else 'no'}")
-    if np.isfinite(result.sample_length):
-        print(f"sample length: {result.sample_length:g} s (from it on, every window's E(RT) "
-              f"and SD(RT) lie within {100 * result.tolerance:g} % of the long run's)")
-    else:
-        print(f"sample length: not reached within {result.lengths[-1]:g} s (the longest "
-              "window still misses the long run: a longer run, or pool runs with fit A B ...)")
+    print(f"  (the long run counts every residence of {result.start:g}-{result.span_end:g} s; "
+          "the sliding-window table (stationarity without --sample-length) counts only those "
+          "inside one short window, leaving out the longest: its average E(RT) lies lower; "
+          "docs/definitions.md, Sample length)")
+    tol = 100 * result.tolerance
+    print(f"{'length (s)':>10}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  within {tol:g} %")
+    pd_mean, pd_sd = result.deviations()
+    for n, m, sd, miss, a, b in zip(result.lengths, result.rt_mean, result.rt_sd,
+                                    result.missed(), pd_mean, pd_sd):
+        print(f"{n:>10g}  {value(m):>9}  {value(sd):>10}  {missed_text(miss, a, b)}")
+    print("sample length: " + verdict_text(result, args.states))
     return 0
 
 
@@ -434,8 +441,8 @@ def add_compare(sub) -> None:
     s.add_argument("reference", help="reference trajectory file (e.g. CFD-DEM)")
     s.add_argument("prediction", help="model trajectory file (e.g. a prediction)")
     s.add_argument("--window", type=parse_window, default=None,
-                   help="analysis window START:STOP, s (required; without it the prediction's "
-                        "span is named, e.g. 15:20)")
+                   help="analysis window START:STOP, s (default: the span both files cover, "
+                        "said on stderr; a window outside it is refused naming both spans)")
     s.add_argument("-o", "--output", required=True, help="output directory")
     s.add_argument("--bin-width", type=positive_float, default=None,
                    help="RTD bin width, s (default: the lag of the model behind the prediction, "

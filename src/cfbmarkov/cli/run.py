@@ -50,7 +50,8 @@ def cmd_demo(args) -> int:
         from cfbmarkov.demo import run_demo
 
         out = run_demo(args.output, particles=args.particles, seed=args.seed,
-                       progress=None if args.quiet else _stderr_line)
+                       progress=None if args.quiet else _stderr_line, force=args.force,
+                       note=_stderr_line)
         print(out)
         return 0
     from cfbmarkov.reproduce import reproduce
@@ -191,7 +192,9 @@ def add_demo(sub) -> None:
     s.add_argument("-o", "--output", default=None,
                    help=f"output directory (default {DEMO_FOLDER}; with --synthetic "
                         f"{SYNTHETIC_FOLDER}); a folder holding the demo of the other kind "
-                        "is refused")
+                        "is refused, and with --synthetic one holding files the demo did not "
+                        "write or wrote with other --particles or --seed (--force to write "
+                        "anyway); the synthetic reference of the same parameters is reused")
     s.add_argument("--jobs", type=count(1, MAX_JOBS), default=None,
                    help="local worker processes running the cases side by side (default: "
                         "min(4 cases, cores))")

@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from cfbmarkov._atomic import atomic_folder
+from cfbmarkov._outputs import refuse_foreign
 from cfbmarkov._json import jsonable
 from cfbmarkov.analysis.compare import RunComparison, compare_runs
 from cfbmarkov.analysis.compare_inputs import check_parameters, model_columns
@@ -292,16 +293,17 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     return summary
 
 
+def is_comparison_file(entry: Path) -> bool:
+    """Whether ``entry`` of a comparison's folder is one of its files (its summary or a
+    PNG figure)."""
+    return entry.is_file() and (entry.name == SUMMARY or entry.suffix == ".png")
+
+
 def _check_replaceable(out: Path) -> None:
     """Refuse to replace a folder holding anything but a comparison's files (its summary
     and PNG figures): the new comparison replaces the folder whole."""
-    if not out.is_dir():
-        return
-    foreign = sorted(p.name for p in out.iterdir()
-                     if not (p.is_file() and (p.name == SUMMARY or p.suffix == ".png")))
-    if foreign:
-        raise InputError(f"{out}: folder holds {foreign[0]!r}, which is not part of a "
-                         "comparison; refusing to replace it (give a new or empty folder)")
+    refuse_foreign(out, is_comparison_file, "a comparison",
+                   "replace it (give a new or empty folder)")
 
 
-__all__ = ["SUMMARY", "compare", "model_columns"]
+__all__ = ["SUMMARY", "compare", "is_comparison_file", "model_columns"]

@@ -27,7 +27,8 @@ from cfbmarkov.config import ParticleConfig, RiserConfig
 from cfbmarkov.report.document import Bullets, Heading, Para, Table, finite_or_none, link
 from cfbmarkov.report.run_folder import Case
 from cfbmarkov.report.sections import PAPER_TABLE3
-from cfbmarkov.report.table3 import BASELINE_RULE_SHORT, baseline_judgement
+from cfbmarkov.report.table3 import (BASELINE_RULE_SHORT, baseline_clause, baseline_judgement,
+                                     baseline_outcomes, baseline_step)
 
 CITATION = ("Y. Zhuang, Markov Chain Based Statistic Model for Predicting Particle Movement "
             "in Circulating Fluidized Bed (CFB) Risers, Processes 13(3), 614 (2025), "
@@ -241,12 +242,7 @@ def baseline_counts(cases: list[Case]) -> dict[str, int]:
         Keys "beats", "loses", "tie", "not told apart"
         (:func:`cfbmarkov.analysis.baseline.judge_baseline`).
     """
-    counts = {k: 0 for k in ("beats", "loses", "tie", "not told apart")}
-    for _, _, s in _rows(cases):
-        j = baseline_judgement(s)
-        if j is not None:
-            counts[j.outcome] += 1
-    return counts
+    return baseline_outcomes(s for _, _, s in _rows(cases))
 
 
 def _interval_sentence(cases: list[Case]) -> str | None:
@@ -404,26 +400,10 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
     """
     scale = meta.get("scale", "n/a")
     counts = baseline_counts(cases)
-    total = sum(counts.values())
-    hidden = counts["not told apart"] + counts["tie"]
     parts = []
-    if total:
-        every = (f"all {total} velocity-model pairs" if total > 1 else
-                 "the one velocity-model pair")
-        if counts["beats"] == total:
-            parts.append(f"the models beat the persistence baseline in {every}")
-        elif counts["loses"] == total:
-            parts.append("reusing the fitting window's RTD (the persistence baseline) predicts "
-                         f"better than the models in {every}")
-        elif counts["beats"] == 0:
-            parts.append(f"no model is shown to predict the RTD better than reusing the fitting "
-                         f"window's (0 of {total} velocity-model pairs beat the persistence "
-                         f"baseline; {hidden} are tied with it or within the CFD-DEM's own "
-                         "variability" + (f", {counts['loses']} worse)" if counts["loses"]
-                                          else ")"))
-        else:
-            parts.append(f"the models beat the persistence baseline in {counts['beats']} of "
-                         f"{total} velocity-model pairs")
+    clause = baseline_clause(counts)
+    if clause:
+        parts.append(clause)
     paper = _paper_clause(cases)
     if paper:
         parts.append(paper)
@@ -441,14 +421,8 @@ def headline(meta: dict, cases: list[Case], checks: list[PhysicsCheck]) -> str:
     elif failed:
         step = ("check the CFD-DEM's settings against the paper's before reading the models' "
                 "errors as the method's")
-    elif total and 2 * hidden > total:
-        step = ("longer predict windows (more residences), so that the CFD-DEM's own "
-                "variability no longer hides the difference from the baseline")
-    elif total and 2 * counts["loses"] > total:
-        step = ("a state space with memory (fit --states auto) or a longer fitting window, "
-                "since reusing the fitting window's RTD predicts better")
     else:
-        step = "use the models over windows like these, with their intervals"
+        step = baseline_step(counts)
     return text + " Next step: " + step + "."
 
 

@@ -99,6 +99,78 @@ def baseline_judgement(summary: dict) -> BaselineJudgement | None:
     return judge_baseline(md, md_base, halves)
 
 
+def baseline_outcomes(summaries) -> dict[str, int]:
+    """How many comparisons have each outcome of the baseline rule.
+
+    Parameters
+    ----------
+    summaries : iterable of dict
+        Compare summaries (:func:`baseline_judgement`; those without both MDs are left out).
+
+    Returns
+    -------
+    dict of str to int
+        Keys "beats", "loses", "tie", "not told apart"
+        (:func:`cfbmarkov.analysis.baseline.judge_baseline`).
+    """
+    counts = {k: 0 for k in ("beats", "loses", "tie", "not told apart")}
+    for summary in summaries:
+        j = baseline_judgement(summary)
+        if j is not None:
+            counts[j.outcome] += 1
+    return counts
+
+
+def baseline_clause(counts: dict[str, int], unit: str = "velocity-model pair",
+                    reference: str = "the CFD-DEM") -> str | None:
+    """What the baseline rule says of the models, in words: the verdict's first clause.
+
+    Parameters
+    ----------
+    counts : dict of str to int
+        :func:`baseline_outcomes`.
+    unit : str, optional
+        What one comparison is, singular (the report: a velocity-model pair).
+    reference : str, optional
+        The reference, for its own variability.
+
+    Returns
+    -------
+    str or None
+        The clause; None where no comparison was judged.
+    """
+    total = sum(counts.values())
+    if not total:
+        return None
+    hidden = counts["not told apart"] + counts["tie"]
+    every = (f"all {total} {unit}s" if total > 2 else f"both {unit}s" if total == 2
+             else f"the one {unit}")
+    if counts["beats"] == total:
+        return f"the models beat the persistence baseline in {every}"
+    if counts["loses"] == total:
+        return ("reusing the fitting window's RTD (the persistence baseline) predicts "
+                f"better than the models in {every}")
+    if counts["beats"] == 0:
+        return (f"no model is shown to predict the RTD better than reusing the fitting "
+                f"window's (0 of {total} {unit}s beat the persistence baseline; {hidden} are "
+                f"tied with it or within {reference}'s own variability"
+                + (f", {counts['loses']} worse)" if counts["loses"] else ")"))
+    return f"the models beat the persistence baseline in {counts['beats']} of {total} {unit}s"
+
+
+def baseline_step(counts: dict[str, int], reference: str = "the CFD-DEM") -> str:
+    """The next step the baseline rule's outcomes call for (:func:`baseline_outcomes`)."""
+    total = sum(counts.values())
+    hidden = counts["not told apart"] + counts["tie"]
+    if total and 2 * hidden > total:
+        return (f"longer predict windows (more residences), so that {reference}'s own "
+                "variability no longer hides the difference from the baseline")
+    if total and 2 * counts["loses"] > total:
+        return ("a state space with memory (fit --states auto) or a longer fitting window, "
+                "since reusing the fitting window's RTD predicts better")
+    return "use the models over windows like these, with their intervals"
+
+
 def _baseline_cell(summary: dict) -> str:
     """'model better (0.1240 / 0.0300)': the outcome of the rule, the baseline's and the halves'
     MD, at the precision of the model's MD column."""
@@ -476,5 +548,6 @@ def trust_blocks(cases: list[Case]) -> list:
 
 
 __all__ = ["COMPACT_HEADER", "DETAIL_HEADER", "DETAIL_HEADING", "NO_RESIDENCES",
-           "TABLE3_HEADING", "table3_blocks", "table3_detail_blocks", "trust_blocks",
+           "TABLE3_HEADING", "baseline_clause", "baseline_judgement", "baseline_outcomes",
+           "baseline_step", "table3_blocks", "table3_detail_blocks", "trust_blocks",
            "trust_text"]

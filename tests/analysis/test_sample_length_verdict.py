@@ -1,0 +1,63 @@
+"""stationarity --sample-length says which figure misses, by how much, and the cure that
+fits: a state space with memory where a figure stays off at every length, a longer run
+where it still drifts with the length."""
+
+import json
+
+import numpy as np
+import pytest
+
+from cfbmarkov import synthetic
+from cfbmarkov.analysis.sample_length import SampleLength, _with_length, verdict_text
+from cfbmarkov.cli import main
+
+
+def _result(means, sds, long_mean=1.0, long_sd=1.0):
+    lengths = np.array([0.5, 1.0, 2.0, 5.0, 10.0][:len(means)])
+    return _with_length(SampleLength("run.h5", 5.0, 20.0, long_mean, long_sd, 1000, lengths,
+                                     np.array(means, float), np.array(sds, float), 0.1,
+                                     np.nan, "cells"))
+
+
+def test_each_window_names_the_figure_it_misses():
+    r = _result([1.0, 1.2, 1.0, 1.3], [1.0, 1.0, 0.5, 0.5])
+    assert r.missed() == ["", "E(RT)", "SD(RT)", "both"]
+    data = r.to_dict()
+    assert [w["missed"] for w in data["windows"]] == [None, "E(RT)", "SD(RT)", "both"]
+    assert data["windows"][2]["pd_rt_sd"] == pytest.approx(-50.0)
+
+
+def test_a_figure_off_at_every_length_calls_for_memory_not_a_longer_run():
+    r = _result([1.05, 1.02, 0.98, 1.01, 1.0], [0.44, 0.45, 0.43, 0.44, 0.44])
+    assert set(r.steady_misses()) == {"SD(RT)"}
+    line = verdict_text(r, "cells")
+    assert "E(RT) settles (within 10 % from 0.5 s)" in line
+    assert "SD(RT) stays -56 % off at every length" in line
+    assert "state space with memory" in line and "--states auto" in line
+    assert "longer run, or pool" not in line
+
+
+def test_a_drifting_figure_calls_for_a_longer_run():
+    r = _result([1.6, 1.4, 1.3, 1.2, 1.15], [1.0, 1.0, 1.0, 1.0, 1.0])
+    assert r.steady_misses() == {}
+    line = verdict_text(r, "cells")
+    assert "the longest window's E(RT) +15 % off" in line
+    assert "a longer run, or pool runs" in line and "memory" not in line
+    both = verdict_text(_result([1.6, 1.4, 1.3, 1.2, 1.15],
+                                          [0.44, 0.45, 0.43, 0.44, 0.44]), "cells")
+    assert "for E(RT) a longer run" in both and "for SD(RT) a state space with memory" in both
+
+
+def test_cli_on_a_flow_with_hidden_direction(tmp_path, capsys):
+    run = tmp_path / "run.h5"
+    synthetic.write_run(run, synthetic.RiserFlow(), 300, 12.0, seed=1)
+    assert main(["stationarity", str(run), "--sample-length", "--start", "1"]) == 0
+    out = capsys.readouterr().out
+    rows = [line for line in out.splitlines() if line.strip().startswith(("0.5 ", "10 "))]
+    assert rows and all("no: SD(RT) -" in line for line in rows), out
+    assert "docs/definitions.md, Sample length" in out
+    last = out.strip().splitlines()[-1]
+    assert "SD(RT) stays" in last and "state space with memory" in last, last
+    assert main(["stationarity", str(run), "--sample-length", "--start", "1", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert "SD(RT)" in data["steady_misses"]
