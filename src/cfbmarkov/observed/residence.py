@@ -437,6 +437,13 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
     split = bool(split_at_absences) and traj.has_absences and not traj.boundary.is_open
+    if traj.has_absences and not (traj.boundary.is_open or split):
+        raise InputError(f"{traj.path}: residences on a periodic riser cannot be observed "
+                         "across particles' absences (a pass while absent is not seen): "
+                         "`fit` with the states given (--states cells) fits the model, its "
+                         "verdict and interval counting residences within each particle's "
+                         "stretches of presence; import with --boundary open where "
+                         "particles enter and leave through the riser's faces")
     traj.require_supported("residence times", three_d=True,
                            absent=traj.boundary.is_open or split, open_boundary=True)
     start, stop = float(window[0]), float(window[1])
