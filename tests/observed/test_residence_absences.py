@@ -80,3 +80,21 @@ def test_without_the_split_a_periodic_file_with_absences_is_refused_naming_the_w
         with pytest.raises(InputError, match=r"across particles' absences.*--states cells.*"
                                              r"--boundary open"):
             residence_times(t, (0, 9))
+
+
+def test_net_passes_count_each_particle_between_its_frames_present(tmp_path):
+    """Particle 0 passes up twice; particle 1 sits at lap 3 and leaves the view for the last
+    frames (stored lap 0 there): the net flow is 2 passes up, not 2 - 3."""
+    from cfbmarkov.observed.residence import net_flow_direction, net_passes
+
+    laps = np.zeros((10, 2), np.int32)
+    laps[:, 0] = [0, 0, 1, 1, 1, 1, 2, 2, 2, 2]
+    laps[:6, 1] = 3
+    present = np.ones((10, 2), bool)
+    present[6:, 1] = False
+    pos = np.tile([0.045, 0.4], (10, 2, 1))
+    path = write_trajectories(tmp_path / "n.h5", np.arange(10.0), pos, width=W, height=H,
+                              laps=laps, present=present)
+    with Trajectories(path) as t:
+        assert net_passes(t, (0, 9)) == 2 and net_flow_direction(t, (0, 9)) == "up"
+        assert net_passes(t, (2, 9)) == 1

@@ -342,7 +342,9 @@ DEFAULT_FACE_ROWS = 38
 
 def net_passes(traj, window: tuple[float, float]) -> int:
     """Net passes through the periodic boundary in a window: the lap counters' change from
-    its first to its last frame, summed over the particles (negative: net downflow).
+    its first to its last frame, summed over the particles (negative: net downflow). A
+    particle absent from some frames counts from its first to its last frame present in
+    the window (passes while absent are not seen).
 
     Parameters
     ----------
@@ -356,9 +358,23 @@ def net_passes(traj, window: tuple[float, float]) -> int:
     int
     """
     frames = traj.window(float(window[0]), float(window[1]))
-    first = traj.laps(frames.start).astype(np.int64)
-    last = traj.laps(frames.stop - 1).astype(np.int64)
-    return int((last - first).sum())
+    if not traj.has_absences:
+        first = traj.laps(frames.start).astype(np.int64)
+        last = traj.laps(frames.stop - 1).astype(np.int64)
+        return int((last - first).sum())
+    # with absences: from each particle's first to its last frame present in the window
+    # (a counter carries on across an absence; an absent frame's stored lap means nothing)
+    n = traj.n_particles
+    first, last, seen = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, bool)
+    for k in range(frames.start, frames.stop, _BLOCK_FRAMES):
+        block = slice(k, min(k + _BLOCK_FRAMES, frames.stop))
+        laps, here = traj.laps(block).astype(np.int64), np.asarray(traj.present(block))
+        some = np.flatnonzero(here.any(axis=0))
+        new = some[~seen[some]]
+        first[new] = laps[here[:, new].argmax(axis=0), new]
+        last[some] = laps[here.shape[0] - 1 - here[::-1, some].argmax(axis=0), some]
+        seen[some] = True
+    return int((last - first)[seen].sum())
 
 
 def net_flow_direction(traj, window: tuple[float, float]) -> str:
