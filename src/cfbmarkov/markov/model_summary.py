@@ -73,10 +73,14 @@ def model_warnings(model: "MarkovModel") -> list[str]:
         lines += [f"  {line}" for line in model.adequacy.warnings]
     never = np.setdiff1d(model.unvisited_states, model.entered_never_left).size
     if never > UNVISITED_LIMIT * model.n_states:
+        split = model.n_states > model.state_space.n_cells     # states that split cells
         lines.append(f"  {never} of {model.n_states} states never visited (more than "
-                     f"{100 * UNVISITED_LIMIT:g} %): the grid is too fine for the data, and "
-                     "the chain rests on the few states seen; fit with a coarser --cells "
-                     "(fewer columns or rows) or on more data")
+                     f"{100 * UNVISITED_LIMIT:g} %): the "
+                     + ("state space is" if split else "grid is")
+                     + " too fine for the data, and the chain rests on the few states seen; "
+                     "fit with a coarser --cells (fewer columns or rows)"
+                     + (" or a state space with fewer states per cell" if split else "")
+                     + " or on more data")
     try:
         unresolved = unresolved_warning(model.rtd())
     except Exception:  # a model without residence times says so in its summary
