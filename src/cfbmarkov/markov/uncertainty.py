@@ -96,10 +96,11 @@ class ModelUncertainty:
         """``E(RT) = 0.591 s (90 % interval 0.41-0.83 s), SD(RT) = ...`` for the point values
         ``mean`` and ``sd`` (s)."""
         (a, b), (c, d) = self.rt_mean_interval, self.rt_sd_interval
-        return (f"E(RT) = {mean:.4g} s ({self.percent} % interval {self._bounds(a, b, 0)}), "
-                f"SD(RT) = {sd:.4g} s ({self.percent} % interval {self._bounds(c, d, 1)})")
+        return (f"E(RT) = {mean:.4g} s ({self.percent} % interval {self._bounds(a, b)}), "
+                f"SD(RT) = {sd:.4g} s ({self.percent} % interval {self._bounds(c, d)})")
 
-    def _bounds(self, lower: float, upper: float, which: int) -> str:
+    @staticmethod
+    def _bounds(lower: float, upper: float) -> str:
         """``0.41-0.83 s``, or for a lower bound cut at 0 (:meth:`cut_at_zero`) ``up to
         0.83 s, its lower end cut at 0``."""
         if lower > 0.0:
