@@ -80,7 +80,8 @@ class FrameTimes:
             where = f"lies outside the data of {self.path} ({data})"
         else:
             where = (f"lies partly outside the data of {self.path} ({data}); only "
-                     f"{time_text(max(start, first))}:{time_text(min(stop, last))} s lies "
+                     f"{self._short_time(max(start, first))}:"
+                     f"{self._short_time(min(stop, last))} s lies "
                      "inside")
         length = stop - start
         short = self._short_time
