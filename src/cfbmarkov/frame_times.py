@@ -80,16 +80,29 @@ class FrameTimes:
             where = f"lies outside the data of {self.path} ({data})"
         else:
             where = (f"lies partly outside the data of {self.path} ({data}); only "
-                     f"{time_text(max(start, first))}:{time_text(min(stop, last))} s lies "
+                     f"{self._short_time(max(start, first))}:"
+                     f"{self._short_time(min(stop, last))} s lies "
                      "inside")
         length = stop - start
+        short = self._short_time
         if length >= last - first:
-            fits = f"{time_text(first)}:{time_text(last)} (all of it)"
+            fits = f"{short(first)}:{short(last)} (all of it)"
         elif stop > last:
-            fits = f"{time_text(last - length)}:{time_text(last)} (the same length)"
+            fits = f"{short(last - length)}:{short(last)} (the same length)"
         else:
-            fits = f"{time_text(first)}:{time_text(first + length)} (the same length)"
+            fits = f"{short(first)}:{short(first + length)} (the same length)"
         return f"window {start:g}:{stop:g} s {where}: choose one within it, e.g. {fits}"
+
+    def _short_time(self, value: float) -> str:
+        """``value`` with the fewest decimals that keep it within half the
+        :attr:`time_tolerance` of itself, so that a window suggested with it selects the
+        same frames and is accepted (0.00046 for 0.000459185 with frames 5 ms apart)."""
+        tol = 0.5 * self.time_tolerance
+        for decimals in range(16):
+            rounded = round(float(value), decimals)
+            if abs(rounded - value) <= tol:
+                return time_text(rounded)
+        return time_text(value)
 
     def frame_index(self, time: float) -> int:
         """Index of the frame at ``time``.

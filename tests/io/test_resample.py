@@ -24,7 +24,8 @@ def _rows(*tracks):
 
 def test_pept_field_file_resamples_onto_the_truth_with_the_gap_absent():
     """tests/io/field/pept-pointdata.csv: t in ms, x y z in mm, y = 2.5 t mod 950 mm,
-    x = 45 + 20 sin(t / 50) mm; samples 0.459..297.155 ms and 420.451..784.662 ms."""
+    x = 45 + 20 sin(t / 50) mm; samples 0.459..297.155 ms and 420.451..784.662 ms: frames on
+    the multiples of 5 ms within them, 5..780 ms."""
     data = np.loadtxt(FIELD / "pept-pointdata.csv", comments="#")
     t, xyz = data[:, 0] / 1000, data[:, 1:4] / 1000
     out = resample_tracks(t, np.zeros(len(t), dtype=np.int64), xyz, interval=0.005, max_gap=0.1,
@@ -32,27 +33,29 @@ def test_pept_field_file_resamples_onto_the_truth_with_the_gap_absent():
     assert isinstance(out, ResampledTracks)
     np.testing.assert_array_equal(out.ids, [0])
     g = out.times * 1000                                  # ms
-    assert g[0] == pytest.approx(0.4591849, abs=1e-9) and len(g) == 157
-    np.testing.assert_allclose(np.diff(g), 5.0, rtol=0, atol=1e-9)
+    np.testing.assert_array_equal(out.times, np.round(np.arange(1, 157) * 0.005, 12))
+    assert g[0] == 5.0 and g[-1] == 780.0 and len(g) == 156
     expected = (g <= 297.1547) | (g >= 420.4513)
-    assert expected.sum() == 60 + 73 and (~expected).sum() == 24
+    assert expected.sum() == 59 + 72 and (~expected).sum() == 25
     np.testing.assert_array_equal(out.present[:, 0], expected)
     assert np.isnan(out.positions[~expected, 0]).all() and (out.laps[~expected, 0] == 0).all()
     here = out.positions[expected, 0] * 1000              # mm
     gp = g[expected]
     np.testing.assert_allclose(here[:, 0], 45 + 20 * np.sin(gp / 50), rtol=0, atol=0.5)
-    np.testing.assert_allclose(here[:, 1], np.mod(2.5 * gp, 950), rtol=0, atol=0.5)
+    dy = np.abs(here[:, 1] - np.mod(2.5 * gp, 950))       # 760 ms lies on the top: 0 or 950
+    assert np.minimum(dy, 950 - dy).max() < 0.5
     np.testing.assert_allclose(here[:, 2], 0.5, rtol=0, atol=1e-12)
     assert (here[:, 1] >= 0).all() and (here[:, 1] < 950).all()
     # the pass at 380 ms lies inside the gap, unseen: the laps carry on from 0 after it;
-    # the pass at 760 ms is seen: one more lap from then on
+    # the pass at 760 ms is seen: one more lap from then on (the frame at 760 ms lies on the
+    # top within the samples' round-off, just below it)
     laps = out.laps[expected, 0]
-    np.testing.assert_array_equal(laps, np.where(gp < 760, 0, 1))
+    np.testing.assert_array_equal(laps, np.where(gp < 762, 0, 1))
     adjacent = np.diff(np.flatnonzero(expected)) == 1     # not across the gap
     wrapped = np.flatnonzero((np.diff(here[:, 1]) < 0) & adjacent)
-    assert not adjacent.all() and here[60, 1] < here[59, 1]  # y fell across the gap: no lap
+    assert not adjacent.all() and here[59, 1] < here[58, 1]  # y fell across the gap: no lap
     np.testing.assert_array_equal(np.flatnonzero(np.diff(laps)), wrapped)
-    assert np.diff(laps)[wrapped].tolist() == [1] and gp[wrapped + 1][0] == pytest.approx(760.459185)
+    assert np.diff(laps)[wrapped].tolist() == [1] and gp[wrapped + 1][0] == pytest.approx(765.0)
 
 
 def test_samples_on_grid_times_are_reproduced_exactly_and_between_is_linear():
@@ -65,7 +68,7 @@ def test_samples_on_grid_times_are_reproduced_exactly_and_between_is_linear():
     out = resample_tracks(t, np.full(len(t), 4), pos, interval=interval, max_gap=0.05, height=H,
                           max_step=0.5)
     k = np.arange(0, 30, 3)
-    np.testing.assert_array_equal(out.times[k], on)
+    np.testing.assert_allclose(out.times[k], on, rtol=0, atol=1e-12)
     np.testing.assert_array_equal(out.positions[k, 0], pos[:len(on)])
     assert out.present.all()
     # grid time 1 lies a third of the way from the sample at 0 to the one at 1.5 intervals
@@ -74,6 +77,19 @@ def test_samples_on_grid_times_are_reproduced_exactly_and_between_is_linear():
     dy = b[1] - a[1] - H * np.round((b[1] - a[1]) / H)
     assert out.positions[1, 0, 0] == pytest.approx(a[0] + w * (b[0] - a[0]), abs=1e-15)
     assert out.positions[1, 0, 1] == pytest.approx(np.mod(a[1] + w * dy, H), abs=1e-15)
+
+
+def test_frames_lie_on_multiples_of_the_step_and_interpolate_the_samples_around_them():
+    """Samples from 0.0123 s, 7 ms apart: frames at the multiples of 5 ms within their span
+    (0.015 ... 0.08 s, round numbers), each the linear interpolation of its two samples."""
+    t = 0.0123 + 0.007 * np.arange(11)                  # 0.0123 .. 0.0823 s
+    pos = np.column_stack([0.01 + 0.5 * t, 0.1 + 2.0 * t])   # linear: exact interpolation
+    out = resample_tracks(t, np.zeros(11, dtype=np.int64), pos, interval=0.005, max_gap=0.008)
+    assert out.times[0] == 0.015 and out.times[-1] == 0.08 and len(out.times) == 14
+    assert [float(v) for v in out.times] == [round(0.005 * k, 12) for k in range(3, 17)]
+    assert out.present.all()
+    np.testing.assert_allclose(out.positions[:, 0, 0], 0.01 + 0.5 * out.times, atol=1e-15)
+    np.testing.assert_allclose(out.positions[:, 0, 1], 0.1 + 2.0 * out.times, atol=1e-15)
 
 
 def test_late_particle_is_absent_before_its_first_sample_and_after_its_last():

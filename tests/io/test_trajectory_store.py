@@ -83,6 +83,24 @@ def test_frames_located_by_time(tmp_path, run):
             t.lag_frames(0.03)
 
 
+def test_window_suggestions_have_few_digits_and_are_accepted(tmp_path):
+    """Frames off the round numbers (0.000459185 + k * 0.005 s): the suggested window is
+    written with the fewest digits that select the same frames, and it is accepted."""
+    times = 0.000459185 + 0.005 * np.arange(157)
+    pos = np.tile([0.045, 0.4], (157, 1, 1))
+    path = write_trajectories(tmp_path / "p.h5", times, pos, width=0.09, height=0.95)
+    with Trajectories(path) as t:
+        with pytest.raises(InputError, match=r"only 0\.00046:0\.29 s lies inside: .*"
+                                             r"e\.g\. 0\.00046:0\.29046 \(the same length\)$"):
+            t.window(0.0, 0.29)
+        assert t.window(0.00046, 0.29046) == t.window(times[0], times[0] + 0.29) == slice(0, 59)
+        with pytest.raises(InputError, match=r"e\.g\. 0\.00046:0\.78046 \(all of it\)$"):
+            t.window(0.0, 2.0)
+        assert t.window(0.00046, 0.78046) == slice(0, 157)
+        with pytest.raises(InputError, match=r"e\.g\. 0\.38046:0\.78046 \(the same length\)$"):
+            t.window(0.5, 0.9)
+
+
 def test_lap_increments_minimal_image():
     np.testing.assert_array_equal(
         lap_increments(np.array([0.9, 0.05, 0.5, 0.2]), np.array([0.05, 0.9, 0.6, 0.1]), 0.95),

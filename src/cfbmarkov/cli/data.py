@@ -110,7 +110,8 @@ def add_import(sub) -> None:
                    help="the vertical boundary (default: the dump's box flag on the vertical "
                         "axis; periodic for CSV)")
     s.add_argument("--resample", type=positive_float, default=None, metavar="DT",
-                   help="CSV: interpolate tracks at irregular times (PEPT) onto frames DT s apart")
+                   help="CSV: interpolate tracks at irregular times (PEPT) onto frames at the "
+                        "multiples of DT s")
     s.add_argument("--max-gap", type=positive_float, default=None, metavar="G",
                    help="with --resample: a particle is absent between samples more than G s "
                         "apart (default DT)")

@@ -273,6 +273,13 @@ def cmd_rtd(args) -> int:
     band = rtd.uncertainty              # the intrinsic RTD's only
     adequacy = getattr(model, "adequacy", None)
     warnings = [str(line) for line in getattr(adequacy, "warnings", ()) or ()]
+    from cfbmarkov.markov.model_summary import unresolved_warning
+
+    unresolved = unresolved_warning(rtd)
+    if unresolved is not None:
+        warnings.append(unresolved)
+    if band is not None:
+        warnings += band.cut_at_zero()
     if args.json:
         out = {"rt_mean": rtd.mean, "rt_sd": rtd.sd, "direction": model.flow_direction,
                "window_length": args.window_length, "unresolved": rtd.unresolved,

@@ -2,8 +2,9 @@
 
 Positron emission particle tracking (PEPT) and similar methods give one location of a tracer
 every few milliseconds at irregular times, with gaps where the tracer left the field of view.
-:func:`resample_tracks` puts such rows onto the grid ``start + k * interval`` (``start`` the
-earliest time of any row) with the *presence rule*: a grid time ``t`` is present for a
+:func:`resample_tracks` puts such rows onto the grid ``k * interval`` (the multiples of the
+interval from the first at or after the earliest row to the last at or before the latest,
+so that frame times are round numbers) with the *presence rule*: a grid time ``t`` is present for a
 particle if and only if
 
 - the particle has a sample at ``t`` (within ``1e-9 * interval``), or
@@ -37,7 +38,8 @@ class ResampledTracks:
     Attributes
     ----------
     times : numpy.ndarray
-        [T] float64, s: ``start + k * interval``.
+        [T] float64, s: ``k * interval`` for the whole numbers k with ``k * interval`` within
+        the span of the rows (rounded to 1e-9 of the interval).
     ids : numpy.ndarray
         [N] int64, the sorted unique particle ids.
     positions : numpy.ndarray
@@ -69,7 +71,8 @@ def _positive(value, what: str) -> float:
 
 def resample_tracks(times, particles, positions, *, interval, max_gap=None, height=None,
                     vertical=1, max_step=0.25, label="tracks") -> ResampledTracks:
-    """Resample rows ``(time, particle, position)`` onto the grid ``start + k * interval``.
+    """Resample rows ``(time, particle, position)`` onto the grid ``k * interval`` (the
+    multiples of ``interval`` within the span of the rows).
 
     Present grid times (module docstring) get positions by linear interpolation between the
     two samples around them, ``x = xa + (t - ta) / (tb - ta) * (xb - xa)``; a sample on a grid
@@ -167,8 +170,10 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
     frames = span / interval + 1
     check_memory(frames * ids.size * (8.0 * pos.shape[1] + 5), f"{label}: resampling "
                  f"{ids.size} particles onto {frames:.3g} frames", "use a larger --resample step")
-    n_times = int(math.floor(span / interval + _TOL)) + 1
-    grid = start + np.arange(n_times) * interval
+    first_k = int(math.ceil(start / interval - _TOL))       # the grid: multiples of interval
+    n_times = int(math.floor(float(t.max()) / interval + _TOL)) - first_k + 1
+    decimals = 9 - int(math.floor(math.log10(interval)))   # below 1e-9 intervals: no round-off
+    grid = np.round((first_k + np.arange(n_times)) * interval, decimals)
     out = np.full((n_times, len(ids), pos.shape[1]), np.nan)
     present = np.zeros((n_times, len(ids)), dtype=bool)
     laps = np.zeros((n_times, len(ids)), dtype=np.int32)
@@ -192,8 +197,8 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
                     f"{period:g} m, so its passes through the top cannot be counted; sample more "
                     f"often or give unwrapped coordinates")
             lap[1:] = np.cumsum(np.where(joined, wrap, 0).astype(np.int64))
-        k0 = max(int(math.ceil((ts[0] - start) / interval - _TOL)), 0)
-        k1 = min(int(math.floor((ts[-1] - start) / interval + _TOL)), n_times - 1)
+        k0 = max(int(math.ceil(ts[0] / interval - _TOL)) - first_k, 0)
+        k1 = min(int(math.floor(ts[-1] / interval + _TOL)) - first_k, n_times - 1)
         if k1 < k0:
             continue
         g = grid[k0:k1 + 1]
@@ -226,7 +231,7 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
         out[k0:k1 + 1, j][here] = values[here]
         present[k0:k1 + 1, j] = here
         laps[k0:k1 + 1, j] = np.where(here, glap, 0)
-    if not present.any():  # a guard: the earliest row lies on grid time 0, so this cannot happen now
+    if not present.any():   # every sample off the grid and no two within --max-gap around one
         raise InputError(f"{label}: no grid time is present for any particle with --max-gap "
                          f"{max_gap:g} s (the samples are further apart than that); give a larger "
                          f"--max-gap")

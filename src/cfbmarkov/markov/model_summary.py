@@ -17,10 +17,48 @@ DOWNWARD_LINE = ("residences counted downward: the fitting window's net solids f
                  "down")
 
 
+#: unresolved mass of an exact RTD above which its E(RT) and SD(RT) are warned about
+#: (``docs/definitions.md``, Exact RTD of a model)
+UNRESOLVED_LIMIT = 0.01
+#: share of a model's states never visited above which the grid is warned about as too fine
+UNVISITED_LIMIT = 0.5
+
+
+def unresolved_warning(rtd) -> str | None:
+    """The line that says an exact RTD's E(RT) and SD(RT) describe only its resolved
+    residences, where its unresolved mass exceeds :data:`UNRESOLVED_LIMIT`; else None.
+
+    Parameters
+    ----------
+    rtd : ResidenceTimeDistribution
+        An exact RTD (:meth:`MarkovModel.rtd <cfbmarkov.markov.model.MarkovModel.rtd>`).
+
+    Returns
+    -------
+    str or None
+    """
+    u = float(rtd.unresolved)
+    if not u > UNRESOLVED_LIMIT:
+        return None
+    window = ("; the window is short beside the residences: a longer --window-length"
+              if rtd.window is not None else "")
+    return (f"unresolved mass {u:.2g} (above {100 * UNRESOLVED_LIMIT:g} %): E(RT) and SD(RT) "
+            f"describe only the resolved {100 * (1.0 - u):.3g} % of the residences; the rest "
+            "never reach the top in the chain (they stay in states where the fitting data "
+            "saw particles only stay, as where a track ends or vanishes), fall deeper than "
+            "the lap deficits computed or last longer than the lags computed "
+            "(docs/definitions.md, Exact RTD of a model); fit on a coarser grid (--cells) "
+            "or a longer window, so that the chain reaches the top from every state it "
+            f"enters, and see its states never visited{window}")
+
+
 def model_warnings(model: "MarkovModel") -> list[str]:
     """Lines about states entered but never left (traps), for an open riser about many
-    tracks that ended or began away from the faces, and the fitting sample's verdict
-    (``model.adequacy``).
+    tracks that ended or began away from the faces, the fitting sample's verdict
+    (``model.adequacy``), more than :data:`UNVISITED_LIMIT` of the states never visited, an
+    exact RTD whose unresolved mass exceeds :data:`UNRESOLVED_LIMIT`
+    (:func:`unresolved_warning`) and an interval whose lower end is cut at 0
+    (:meth:`~cfbmarkov.markov.uncertainty.ModelUncertainty.cut_at_zero`).
 
     Parameters
     ----------
@@ -33,6 +71,24 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     lines = [] if model.open_flow is None else model.open_flow.warnings()
     if model.adequacy is not None:
         lines += [f"  {line}" for line in model.adequacy.warnings]
+    never = np.setdiff1d(model.unvisited_states, model.entered_never_left).size
+    if never > UNVISITED_LIMIT * model.n_states:
+        split = model.n_states > model.state_space.n_cells     # states that split cells
+        lines.append(f"  {never} of {model.n_states} states never visited (more than "
+                     f"{100 * UNVISITED_LIMIT:g} %): the "
+                     + ("state space is" if split else "grid is")
+                     + " too fine for the data, and the chain rests on the few states seen; "
+                     "fit with a coarser --cells (fewer columns or rows)"
+                     + (" or a state space with fewer states per cell" if split else "")
+                     + " or on more data")
+    try:
+        unresolved = unresolved_warning(model.rtd())
+    except Exception:  # a model without residence times says so in its summary
+        unresolved = None
+    if unresolved is not None:
+        lines.append(f"  {unresolved}")
+    if model.uncertainty is not None:
+        lines += [f"  {line}" for line in model.uncertainty.cut_at_zero()]
     trapped = model.entered_never_left
     if not trapped.size or model.trap_share == 0.0:
         return lines

@@ -96,8 +96,44 @@ class ModelUncertainty:
         """``E(RT) = 0.591 s (90 % interval 0.41-0.83 s), SD(RT) = ...`` for the point values
         ``mean`` and ``sd`` (s)."""
         (a, b), (c, d) = self.rt_mean_interval, self.rt_sd_interval
-        return (f"E(RT) = {mean:.4g} s ({self.percent} % interval {a:.3g}-{b:.3g} s), "
-                f"SD(RT) = {sd:.4g} s ({self.percent} % interval {c:.3g}-{d:.3g} s)")
+        return (f"E(RT) = {mean:.4g} s ({self.percent} % interval {self._bounds(a, b)}), "
+                f"SD(RT) = {sd:.4g} s ({self.percent} % interval {self._bounds(c, d)})")
+
+    @staticmethod
+    def _bounds(lower: float, upper: float) -> str:
+        """``0.41-0.83 s``, or for a lower bound cut at 0 (:meth:`cut_at_zero`) ``up to
+        0.83 s, its lower end cut at 0``."""
+        if lower > 0.0:
+            return f"{lower:.3g}-{upper:.3g} s"
+        return f"up to {upper:.3g} s, its lower end cut at 0"
+
+    def cut_at_zero(self) -> list[str]:
+        """Lines saying which interval's lower end fell to zero or below and was cut at 0,
+        and why: the flow's variability between the fitting window's blocks, z times it
+        more than the figure itself (``flow_sd``), or bootstrap resamples whose figure is 0
+        (``docs/definitions.md``, The model's interval).
+
+        Returns
+        -------
+        list of str
+            Empty where both lower bounds are above 0.
+        """
+        lines = []
+        for k, (name, (lower, _)) in enumerate((("E(RT)", self.rt_mean_interval),
+                                                ("SD(RT)", self.rt_sd_interval))):
+            if lower > 0.0:
+                continue
+            why = (f"the flow's variability between the fitting window's blocks is "
+                   f"{100 * self.flow_sd[k]:.3g} % of {name}, so the interval's lower "
+                   "half-width exceeds the figure itself"
+                   if self.flow_sd is not None and self.flow_sd[k] > 0 else
+                   f"at least {100 * (1 - self.level) / 2:g} % of the bootstrap resamples "
+                   f"give {name} 0 (their chains have residences of one length only)")
+            lines.append(f"the {self.percent} % interval of {name} reaches 0 and is cut "
+                         f"there ({name} cannot be negative): {why}; the interval says only "
+                         "that the figure lies below its upper end, and a longer fitting "
+                         "window (more residences per block) narrows it")
+        return lines
 
     def to_dict(self) -> dict:
         """JSON-serialisable: level, the intervals, the RTD's edges and bounds, resamples,

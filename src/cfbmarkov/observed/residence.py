@@ -55,6 +55,37 @@ def _scan_laps(times, laps, running_max, last_record, out):
 
 
 @nb.njit(cache=True)
+def _scan_laps_present(times, laps, seen, running_max, last_record, started, out):
+    """:func:`_scan_laps` over frames where particles may be absent: a frame where
+    ``seen[k, p]`` is false (the particle absent there or in a frame since the previous one)
+    ends the particle's record chain, and the next frame where it is seen starts a new one
+    from its counter there, as a window's first frame does. ``started`` [N] (bool) says
+    whether a chain is running; it, ``running_max`` and ``last_record`` carry over between
+    blocks. Returns the number of samples written."""
+    n_frames, n_particles = laps.shape
+    n_out = 0
+    for k in range(n_frames):
+        t = times[k]
+        for p in range(n_particles):
+            if not seen[k, p]:
+                started[p] = False
+                last_record[p] = np.nan
+                continue
+            level = np.int64(laps[k, p])
+            if not started[p]:
+                started[p] = True
+                running_max[p] = level
+                continue
+            while level > running_max[p]:        # one record per new level reached
+                running_max[p] += 1
+                if not np.isnan(last_record[p]):
+                    out[n_out] = t - last_record[p]
+                    n_out += 1
+                last_record[p] = t
+    return n_out
+
+
+@nb.njit(cache=True)
 def _scan_open(times, present, vertical, band, height, was_present, last_height, entered,
                out):
     """Advance the residences of an open riser over a block of frames; write samples into
@@ -311,7 +342,9 @@ DEFAULT_FACE_ROWS = 38
 
 def net_passes(traj, window: tuple[float, float]) -> int:
     """Net passes through the periodic boundary in a window: the lap counters' change from
-    its first to its last frame, summed over the particles (negative: net downflow).
+    its first to its last frame, summed over the particles (negative: net downflow). A
+    particle absent from some frames counts from its first to its last frame present in
+    the window (passes while absent are not seen).
 
     Parameters
     ----------
@@ -325,9 +358,23 @@ def net_passes(traj, window: tuple[float, float]) -> int:
     int
     """
     frames = traj.window(float(window[0]), float(window[1]))
-    first = traj.laps(frames.start).astype(np.int64)
-    last = traj.laps(frames.stop - 1).astype(np.int64)
-    return int((last - first).sum())
+    if not traj.has_absences:
+        first = traj.laps(frames.start).astype(np.int64)
+        last = traj.laps(frames.stop - 1).astype(np.int64)
+        return int((last - first).sum())
+    # with absences: from each particle's first to its last frame present in the window
+    # (a counter carries on across an absence; an absent frame's stored lap means nothing)
+    n = traj.n_particles
+    first, last, seen = np.zeros(n, np.int64), np.zeros(n, np.int64), np.zeros(n, bool)
+    for k in range(frames.start, frames.stop, _BLOCK_FRAMES):
+        block = slice(k, min(k + _BLOCK_FRAMES, frames.stop))
+        laps, here = traj.laps(block).astype(np.int64), np.asarray(traj.present(block))
+        some = np.flatnonzero(here.any(axis=0))
+        new = some[~seen[some]]
+        first[new] = laps[here[:, new].argmax(axis=0), new]
+        last[some] = laps[here.shape[0] - 1 - here[::-1, some].argmax(axis=0), some]
+        seen[some] = True
+    return int((last - first)[seen].sum())
 
 
 def net_flow_direction(traj, window: tuple[float, float]) -> str:
@@ -351,7 +398,7 @@ def net_flow_direction(traj, window: tuple[float, float]) -> str:
 
 def residence_times(traj, window: tuple[float, float], use_events: bool = True,
                     face_band: float | None = None, lag_frames: int = 1,
-                    direction: str = "up") -> ResidenceTimes:
+                    direction: str = "up", split_at_absences: bool = False) -> ResidenceTimes:
     """Residence-time samples of a trajectory file in a window.
 
     Uses the file's exact pass events when it has them and ``use_events`` is true (counted
@@ -378,6 +425,13 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         upward, the default) or, where the net flow is downward, down through the bottom
         (entries through the top, exits through the bottom; ``docs/definitions.md``, Net
         downflow).
+    split_at_absences : bool, optional
+        Periodic riser with particles absent from some frames: count each particle's
+        residences within each stretch of frames where it is present, a stretch standing
+        for a window of its own (a pass while absent is not seen, so a residence across an
+        absence is not a sample; ``docs/definitions.md``, Residence times across
+        absences). Default False: such a file is refused. Without absences it changes
+        nothing.
 
     Returns
     -------
@@ -390,15 +444,24 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     ------
     InputError
         When the window is empty, lies outside the file's frames or holds no frame
-        (:meth:`~cfbmarkov.trajectories.Trajectories.window`), or the file's pass events are
-        damaged (unsorted, unequal lengths, bad particle index or direction).
+        (:meth:`~cfbmarkov.trajectories.Trajectories.window`), the file's pass events are
+        damaged (unsorted, unequal lengths, bad particle index or direction), or a periodic
+        riser has particles absent from some frames and ``split_at_absences`` is false.
 
     References
     ----------
     ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
-    traj.require_supported("residence times", three_d=True, absent=traj.boundary.is_open,
-                           open_boundary=True)
+    split = bool(split_at_absences) and traj.has_absences and not traj.boundary.is_open
+    if traj.has_absences and not (traj.boundary.is_open or split):
+        raise InputError(f"{traj.path}: residences on a periodic riser cannot be observed "
+                         "across particles' absences (a pass while absent is not seen): "
+                         "`fit` with the states given (--states cells) fits the model, its "
+                         "verdict and interval counting residences within each particle's "
+                         "stretches of presence; import with --boundary open where "
+                         "particles enter and leave through the riser's faces")
+    traj.require_supported("residence times", three_d=True,
+                           absent=traj.boundary.is_open or split, open_boundary=True)
     start, stop = float(window[0]), float(window[1])
     frames = traj.window(start, stop)
     i0, i1 = frames.start, frames.stop
@@ -422,6 +485,9 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
                            was, last, entered, out)
             chunks.append(out[:m])
         return ResidenceTimes(np.concatenate(chunks) if chunks else np.zeros(0), False,
+                              (start, stop))
+    if split:
+        return ResidenceTimes(_split_residences(traj, i0, i1, lag_frames, sign), False,
                               (start, stop))
     if use_events and traj.has_events and lag_frames == 1:
         events = traj.events()
@@ -450,6 +516,34 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         chunks.append(out[:n])
     samples = np.concatenate(chunks) if chunks else np.zeros(0)
     return ResidenceTimes(samples, False, (start, stop))
+
+
+def _split_residences(traj, i0: int, i1: int, lag_frames: int, sign: int) -> np.ndarray:
+    """Residence-time samples of frames ``i0:i1:lag_frames`` of a periodic riser with
+    absences, each particle's record chain cut where it is absent in a used frame or in a
+    frame between two used ones (:func:`_scan_laps_present`)."""
+    n = traj.n_particles
+    running_max, last_record = np.zeros(n, np.int64), np.full(n, np.nan)
+    started, chunks = np.zeros(n, np.bool_), []
+    span = _BLOCK_FRAMES * lag_frames
+    for k in range(i0, i1, span):
+        end = min(k + span, i1)
+        used = np.arange(k, end, lag_frames)
+        lo = max(i0, k - lag_frames + 1)          # the frames since the previous used one
+        absent = np.zeros((end - lo + 1, n), np.int64)
+        np.cumsum(~traj.present(slice(lo, end)), axis=0, out=absent[1:])
+        first = np.maximum(used - lag_frames + 1, i0) - lo
+        seen = np.ascontiguousarray(absent[used - lo + 1] - absent[first] == 0)
+        laps = sign * traj.laps(slice(k, end, lag_frames)).astype(np.int64)
+        previous = np.where(started, running_max, laps[0])
+        bound = int(np.maximum(np.diff(laps, axis=0, prepend=previous[None]), 0).sum())
+        out = np.empty(bound)
+        m = _scan_laps_present(np.ascontiguousarray(traj.times[k:end:lag_frames],
+                                                    dtype=np.float64),
+                               np.ascontiguousarray(laps), seen, running_max, last_record,
+                               started, out)
+        chunks.append(out[:m])
+    return np.concatenate(chunks) if chunks else np.zeros(0)
 
 
 def rtd_histogram(samples, bin_width: float = 0.025, *, window_length: float

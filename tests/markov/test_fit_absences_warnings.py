@@ -1,0 +1,125 @@
+"""``fit`` on a periodic file with particles absent from some frames (PEPT, PTV imports),
+and the warnings of a fit whose exact RTD leaves mass unresolved, whose grid is mostly never
+visited or whose interval reaches 0."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+
+from cfbmarkov import synthetic
+from cfbmarkov.cli import main
+from cfbmarkov.markov import MarkovModel
+from cfbmarkov.markov.uncertainty import ModelUncertainty
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
+
+
+def run_cli(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_fit_of_a_periodic_file_with_absences_writes_the_model_with_verdict_and_interval(
+        tmp_path, capsys):
+    """Particles drop out of view for stretches of frames: the model, its sample verdict
+    (residences counted within each stretch of presence) and its interval are all formed."""
+    flow = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                               vertical_spread=0.5, persistence=False)
+    full = synthetic.write_run(tmp_path / "full.h5", flow, 300, 6.0, seed=4)
+    with Trajectories(full) as t:
+        times, pos, laps = t.times, t.positions(), t.laps()
+    rng = np.random.default_rng(2)
+    present = np.ones(laps.shape, bool)
+    for p in rng.choice(laps.shape[1], 120, replace=False):     # 40 % leave view once
+        a = rng.integers(0, laps.shape[0] - 40)
+        present[a:a + rng.integers(5, 40), p] = False
+    path = write_trajectories(tmp_path / "gaps.h5", times, np.where(present[..., None], pos,
+                                                                    np.nan),
+                              width=flow.width, height=flow.height, laps=laps, present=present)
+    model = tmp_path / "m.h5"
+    code, out, err = run_cli(capsys, "fit", path, "--cells", "4x16", "--lag", "0.05",
+                             "--window", "0:6", "-o", model, "--resamples", "20")
+    assert code == 0, err
+    assert "Traceback" not in err and "cannot" not in err, err
+    assert out.strip().splitlines()[-1] == str(model)
+    loaded = MarkovModel.load(model)
+    assert loaded.adequacy is not None and loaded.uncertainty is not None
+    assert loaded.adequacy.parts           # the halves (or quarters) were fitted and judged
+    lo, hi = loaded.uncertainty.rt_mean_interval
+    assert 0 < lo < loaded.rtd().mean < hi
+
+
+def _trap_run(tmp_path):
+    """4 x 10 cells of a 1 x 2 riser, frames 1 s apart: particle 0 climbs column 1 a row
+    a frame and passes the top every 10 frames; particle 1 starts in the same cell, moves
+    to column 2 of row 1 and stays there. The chain enters that cell from the entry state
+    with probability 1/11 and never leaves it: unresolved mass about 0.09, and 29 of the
+    40 states never visited."""
+    frames = 101
+    rows = np.arange(frames) % 10
+    states = np.empty((frames, 2), np.int64)
+    states[:, 0] = rows * 4 + 1
+    states[:, 1] = 1 * 4 + 2
+    states[0, 1] = 1
+    col, row = states % 4, states // 4
+    pos = np.stack([(col + 0.5) / 4, (row + 0.5) * 2.0 / 10], axis=-1)
+    return write_trajectories(tmp_path / "trap.h5", np.arange(frames, dtype=float), pos,
+                              width=1.0, height=2.0)
+
+
+def test_unresolved_mass_and_a_grid_mostly_never_visited_are_warned_about(tmp_path, capsys):
+    path, model = _trap_run(tmp_path), tmp_path / "m.h5"
+    code, out, err = run_cli(capsys, "fit", path, "--cells", "4x10", "--lag", "1",
+                             "--window", "0:100", "-o", model, "--resamples", "0",
+                             "--no-adequacy")
+    assert code == 0, err
+    unresolved = MarkovModel.load(model).rtd().unresolved
+    assert 0.05 < unresolved < 0.15
+    warnings = [line for line in err.splitlines() if line.startswith("warning: ")]
+    assert any("29 of 40 states never visited" in w and "coarser --cells" in w
+               for w in warnings), err
+    text = [w for w in warnings if "unresolved mass" in w]
+    assert len(text) == 1 and f"describe only the resolved {100 * (1 - unresolved):.3g} %" \
+        in text[0] and "coarser grid (--cells)" in text[0] and "longer window" in text[0]
+    # the numbers themselves are unchanged: the summary still prints E(RT) and SD(RT)
+    assert "exact residence time: E(RT) = " in out
+    code, out, err = run_cli(capsys, "rtd", model)
+    assert code == 0 and "unresolved mass" in err and err.startswith("warning: ")
+    code, out, err = run_cli(capsys, "rtd", model, "--json")
+    data = json.loads(out)
+    assert code == 0 and any("describe only the resolved" in w for w in data["warnings"])
+    assert data["unresolved"] == unresolved
+    code, out, err = run_cli(capsys, "info", model)
+    assert code == 0 and "describe only the resolved" in out and "29 of 40 states never" in out
+
+
+def test_a_well_resolved_fit_has_none_of_these_warnings(tmp_path, capsys, markov_run):
+    model = tmp_path / "m.h5"
+    code, out, err = run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--lag", "0.05",
+                             "--window", "1:5", "-o", model, "--resamples", "0",
+                             "--no-adequacy")
+    assert code == 0, err
+    assert "unresolved mass" not in err and "never visited (more than" not in err
+    code, out, err = run_cli(capsys, "rtd", model, "--json")
+    assert json.loads(out)["warnings"] == []
+
+
+def test_an_interval_cut_at_zero_says_so_instead_of_printing_a_bare_zero():
+    edges = np.array([0.0, 0.1, 0.2])
+    band = np.array([[0.0, 0.0], [0.6, 0.6]])
+    cut = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1,
+                           (0.13, 0.842))
+    text = cut.describe(0.1811, 0.06647)
+    assert "0-0.159" not in text and "up to 0.159 s, its lower end cut at 0" in text
+    assert "(90 % interval 0.129-0.22 s)" in text
+    lines = cut.cut_at_zero()
+    assert len(lines) == 1 and lines[0].startswith("the 90 % interval of SD(RT) reaches 0")
+    assert "84.2 % of SD(RT)" in lines[0]
+    whole = ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10, 0.1,
+                             (0.13, 0.2))
+    assert whole.cut_at_zero() == [] and "0.03-0.159 s" in whole.describe(0.18, 0.066)
+    boot = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1)
+    assert "resamples give SD(RT) 0" in boot.cut_at_zero()[0]
