@@ -224,8 +224,8 @@ def commands_left(commands: list[str], start: list[str]) -> list[str]:
 @pytest.fixture(scope="session")
 def shared_start(tmp_path_factory):
     """(commands, folder): the tutorial's and the README's common first writing commands
-    (:func:`common_start`) and the folder they were run in, made once per test run (under xdist, by the first worker that
-    asks; the others wait for it)."""
+    (:func:`common_start`) and the folder they were run in, made once per test run (under
+    xdist, by the first worker that asks; any other waits for it)."""
     start = common_start(doc_commands(TUTORIAL), doc_commands(README, SKIPPED_README))
     base = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):
