@@ -17,7 +17,9 @@
   build does not read, and runs without Sphinx.
 
 ``cfbmarkov`` in a command is ``python -m cfbmarkov`` of this checkout (its src/ first on
-PYTHONPATH), with ``NUMBA_NUM_THREADS=1``.
+PYTHONPATH), with ``NUMBA_NUM_THREADS=1``; after the first command of a list, a plain
+``cfbmarkov`` command line calls the same ``cfbmarkov.cli.main`` in the test's process
+(:func:`run_commands`).
 """
 
 from __future__ import annotations
@@ -116,14 +118,60 @@ def _environment(bin_dir: Path) -> dict[str, str]:
     return env
 
 
+#: characters that make a command line more than a program and its words
+_SHELL_SYNTAX = set("|&;<>()$`\\\"'*?[]{}~#=")
+
+
+def in_process_argv(command: str) -> list[str] | None:
+    """The arguments of ``cfbmarkov.cli.main`` for a plain ``cfbmarkov`` command line (the
+    program and its words, nothing else the shell would interpret); None for any other."""
+    words = command.split()
+    if len(words) < 2 or words[0] != "cfbmarkov" or _SHELL_SYNTAX & set(command):
+        return None
+    return words[1:]
+
+
+def _run_in_process(argv: list[str], folder: Path) -> tuple[int, str]:
+    """``cfbmarkov.cli.main(argv)`` in ``folder`` on one Numba thread (as the command line
+    with ``NUMBA_NUM_THREADS=1``): its exit code and what it wrote on stderr."""
+    import contextlib
+    import io
+
+    import numba
+
+    from cfbmarkov.cli import main
+
+    err, cwd, threads = io.StringIO(), os.getcwd(), numba.get_num_threads()
+    os.chdir(folder)
+    numba.set_num_threads(1)
+    try:
+        with contextlib.redirect_stdout(io.StringIO()), contextlib.redirect_stderr(err):
+            code = main(argv)
+    finally:
+        numba.set_num_threads(threads)
+        os.chdir(cwd)
+    return code, err.getvalue()
+
+
 def run_commands(commands: list[str], folder: Path, env: dict[str, str], source: str) -> None:
-    """Run ``commands`` in order in ``folder``; fail on the first that exits non-zero."""
-    for command in commands:
-        done = subprocess.run(["bash", "-c", command], cwd=folder, env=env,
-                              capture_output=True, text=True, timeout=600)
-        if done.returncode != 0:
-            pytest.fail(f"{source}: `{command}` exited with {done.returncode}\n"
-                        f"stderr:\n{done.stderr[-4000:]}", pytrace=False)
+    """Run ``commands`` in order in ``folder``; fail on the first that exits non-zero.
+
+    The first command runs as typed (``bash -c``, the ``cfbmarkov`` program of
+    :func:`_environment`), and so does any that is not a plain ``cfbmarkov`` command line;
+    the other ``cfbmarkov`` commands call ``cfbmarkov.cli.main`` in this process, which is
+    what the program runs (``python -m cfbmarkov``), without a Python start and the imports
+    for each."""
+    for k, command in enumerate(commands):
+        argv = in_process_argv(command) if k else None
+        if argv is None:
+            done = subprocess.run(["bash", "-c", command], cwd=folder, env=env,
+                                  capture_output=True, text=True, timeout=600)
+            code, stderr = done.returncode, done.stderr
+        else:
+            code, stderr = _run_in_process(argv, folder)
+        if code != 0:
+            pytest.fail(f"{source}: `{command}` exited with {code}\n"
+                        f"stderr:\n{stderr[-4000:]}", pytrace=False)
 
 
 #: verbs that write nothing: a document's command of one of them sees the same files when
@@ -176,8 +224,8 @@ def commands_left(commands: list[str], start: list[str]) -> list[str]:
 @pytest.fixture(scope="session")
 def shared_start(tmp_path_factory):
     """(commands, folder): the tutorial's and the README's common first writing commands
-    (:func:`common_start`) and the folder they were run in, made once per test run (under xdist, by the first worker that
-    asks; the others wait for it)."""
+    (:func:`common_start`) and the folder they were run in, made once per test run (under
+    xdist, by the first worker that asks; any other waits for it)."""
     start = common_start(doc_commands(TUTORIAL), doc_commands(README, SKIPPED_README))
     base = tmp_path_factory.getbasetemp()
     if os.environ.get("PYTEST_XDIST_WORKER"):
@@ -219,6 +267,15 @@ def test_common_start():
         "cfbmarkov fit s/r.h5 --states auto -o a.h5"]
     assert commands_left(readme, start) == ["cfbmarkov compare s/r.h5 p.h5 -o c"]
     assert not reads_only("cfbmarkov rtd m.h5 -o x") and reads_only("cfbmarkov info x.h5")
+
+
+def test_only_plain_command_lines_run_in_process():
+    assert in_process_argv("cfbmarkov fit a.h5 --lag 0.025 -o m.h5") == [
+        "fit", "a.h5", "--lag", "0.025", "-o", "m.h5"]
+    for command in ("cfbmarkov info a.h5 > out.txt", "cfbmarkov info a.h5 | head",
+                    "cfbmarkov fit 'a b.h5'", "cfbmarkov info *.h5", "X=1 cfbmarkov info a.h5",
+                    "python -m cfbmarkov info a.h5", "cfbmarkov", "cfbmarkov info $HOME/a.h5"):
+        assert in_process_argv(command) is None, command
 
 
 def test_shell_blocks_are_read_as_typed():

@@ -113,8 +113,10 @@ from pathlib import Path
 from cfbmarkov.config import load_case
 from cfbmarkov.reproduce_case import _check_reference
 from cfbmarkov.reproduce_ensemble import run_ensemble_cfd_dem
+import cfbmarkov.simulate.gpu.riser as gpu_riser
+gpu_riser.GPU_DEPOSIT_CHUNKS = 3  # not 256 mostly empty chunks, each a simulated thread
 case, folder = load_case(sys.argv[1]), Path(sys.argv[2])
-stage, paths = run_ensemble_cfd_dem(case, folder, 2, device="gpu", checkpoint_every=0.0005,
+stage, paths = run_ensemble_cfd_dem(case, folder, 2, device="gpu", checkpoint_every=0.0002,
                                     progress=False, check=_check_reference)
 assert stage == "done" and [p.name for p in paths] == ["cfd-dem-m0.h5", "cfd-dem-m1.h5"]
 assert all(p.is_file() for p in paths)
@@ -137,12 +139,12 @@ superficial_velocity = 4.0
 [numerics]
 cfd_cells = [2, 4]
 [output]
-end_time = 0.0005
-frame_interval = 0.00025
+end_time = 0.0002
+frame_interval = 0.0001
 [markov]
-lag = 0.00025
-fit_window = [0.0, 0.00025]
-predict_window = [0.00025, 0.0005]
+lag = 0.0001
+fit_window = [0.0, 0.0001]
+predict_window = [0.0001, 0.0002]
 """
 
 
