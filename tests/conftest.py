@@ -40,12 +40,7 @@ def pytest_xdist_make_scheduler(config, log):
     ``xdist_group`` mark that reaches the scheduler), every other test on its own."""
     if config.getvalue("dist") != "loadgroup":
         return None
-    try:
-        from xdist.scheduler import LoadGroupScheduling
-    except ImportError:            # another pytest-xdist: its own loadgroup, ungrouped
-        return None
-    if not callable(getattr(LoadGroupScheduling, "_split_scope", None)):
-        return None
+    from xdist.scheduler import LoadGroupScheduling
 
     class ModuleGroups(LoadGroupScheduling):
         def _split_scope(self, nodeid: str) -> str:
