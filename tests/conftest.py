@@ -30,8 +30,6 @@ GROUPS = {
     "tests/report/test_reproduction.py": "report-template",
     "tests/report/test_kinetics_section.py": "report-template",
     "tests/report/test_run_folder.py": "report-template",
-    # shared_start: made by the first worker that asks, while any other waits for it
-    "tests/test_docs.py": "docs",
 }
 
 
