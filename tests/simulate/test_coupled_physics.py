@@ -147,9 +147,9 @@ def test_fluidized_bed_pressure_drop_carries_its_weight():
     0.3 of the bed weight per area, as real beds are built; without one, the gas channels
     through one loose column and the floor carries 5-10 %. The bed slugs (block means
     swing by +-25 % with a period near 0.3 s), so the mean is taken over 0.3-1.0 s (about
-    2.3 periods). Measured over 0.3-1.0 s: 0.999, floor 2.5 %, walls -0.0 %; without the
-    plate the same window gives 0.945 with the floor at 7.8 %, so the test still fails
-    without it (0.3-1.4 s: 0.998 and 0.934; 0.3-2.0 s: 0.985 and 0.924; docs/simulation.md)."""
+    2.3 periods). Measured over 0.3-1.0 s: 1.014, floor 2.4 %, walls -0.2 %; without the
+    plate the same window gives 0.946 with the floor at 8.3 %, so the test still fails
+    without it (docs/simulation.md)."""
     n, u, width, height = 4000, 1.3, 0.06, 0.25
     mass = RHO_P * math.pi * D**3 / 6
     weight = n * mass * G / (width * D)
