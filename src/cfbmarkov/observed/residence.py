@@ -32,6 +32,20 @@ _BLOCK_FRAMES = 256
 
 
 # -- kernels -------------------------------------------------------------------------------
+@nb.njit(cache=True, inline="always")
+def _records(p, level, t, running_max, last_record, out, n_out):
+    """Particle ``p`` at lap ``level`` at time ``t``: one record per new level reached, a
+    sample (the time since its previous record) for each but its first; returns the new
+    number of samples in ``out``."""
+    while level > running_max[p]:
+        running_max[p] += 1
+        if not np.isnan(last_record[p]):
+            out[n_out] = t - last_record[p]
+            n_out += 1
+        last_record[p] = t
+    return n_out
+
+
 @nb.njit(cache=True)
 def _scan_laps(times, laps, running_max, last_record, out):
     """Advance the record state over a block of frames; write samples into ``out``.
@@ -45,12 +59,7 @@ def _scan_laps(times, laps, running_max, last_record, out):
         t = times[k]
         for p in range(n_particles):
             level = np.int64(laps[k, p])
-            while level > running_max[p]:        # one record per new level reached
-                running_max[p] += 1
-                if not np.isnan(last_record[p]):
-                    out[n_out] = t - last_record[p]
-                    n_out += 1
-                last_record[p] = t
+            n_out = _records(p, level, t, running_max, last_record, out, n_out)
     return n_out
 
 
@@ -76,12 +85,7 @@ def _scan_laps_present(times, laps, seen, running_max, last_record, started, out
                 started[p] = True
                 running_max[p] = level
                 continue
-            while level > running_max[p]:        # one record per new level reached
-                running_max[p] += 1
-                if not np.isnan(last_record[p]):
-                    out[n_out] = t - last_record[p]
-                    n_out += 1
-                last_record[p] = t
+            n_out = _records(p, level, t, running_max, last_record, out, n_out)
     return n_out
 
 
