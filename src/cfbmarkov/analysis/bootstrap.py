@@ -56,10 +56,12 @@ def fitting_runs(model) -> list[tuple[str, tuple[float, float]]]:
                      "window of each)")
 
 
-def _resampled_rtd(model, window_length: float, direction: str, entry):
+def _resampled_rtd(model, window_length: float, direction: str, entry,
+                   deficit_levels: int | None = None):
     """A resampled model's RTD in the window, from the fitted model's entry distribution
     (one sparse LU per resample saved: the spread of the entry distribution is left out,
-    that of the transitions kept)."""
+    that of the transitions kept), on ``deficit_levels`` lap deficits (None: as deep as
+    its residences fall)."""
     steps = (200_000 if window_length is None
              else max(2, int(round(window_length / model.lag))))
 
@@ -70,16 +72,16 @@ def _resampled_rtd(model, window_length: float, direction: str, entry):
         from cfbmarkov.markov.first_passage import rtd_of_split_chain
 
         up, down = (model.up, model.down) if direction == "up" else (model.down, model.up)
-        return seen(rtd_of_split_chain(up, down, model.stay, model.lag, max_steps=steps,
-                                       entry=entry))
+        return seen(rtd_of_split_chain(up, down, model.stay, model.lag, deficit_levels,
+                                       max_steps=steps, entry=entry))
     if Boundary(model.boundary).is_open or entry is None:
         return model.rtd(window_length, direction)
     from cfbmarkov.markov.first_passage import exact_rtd
 
     up, down = ((model.up_fraction, model.down_fraction) if direction == "up"
                 else (model.down_fraction, model.up_fraction))
-    return seen(exact_rtd(model.transition_matrix, up, down, model.lag, max_steps=steps,
-                          entry=entry))
+    return seen(exact_rtd(model.transition_matrix, up, down, model.lag, deficit_levels,
+                          max_steps=steps, entry=entry))
 
 
 def _binned(rtd, edges: np.ndarray) -> np.ndarray:
@@ -412,7 +414,8 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
 
 
 def bootstrap_figures(model, window_length: float | None, direction: str, entry, edges,
-                      blocks: int, resamples: int, seed: int, curve=None):
+                      blocks: int, resamples: int, seed: int, curve=None,
+                      deficit_levels: int | None = None):
     """E(RT), SD(RT) and the RTD per bin of ``edges`` of each block-bootstrap resample of
     the model's fitting window (and, with ``curve`` = (lags, states, left), its expected
     mixing curve at those lags): the model's spread, shared by both kinds of interval.
@@ -434,6 +437,9 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
         Of the bootstrap (:func:`block_bootstrap_models`).
     curve : (ndarray of int, ndarray of int, ndarray of bool), optional
         Lags, tracers' states and left group of a mixing curve.
+    deficit_levels : int, optional
+        The lap deficits each resample's exact RTD keeps (a periodic riser's; None: as
+        deep as its residences fall, :func:`~cfbmarkov.markov.first_passage.exact_rtd`).
 
     Returns
     -------
@@ -458,7 +464,7 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
             curves.append(model_mixing_curve(resampled, curve[1], curve[2],
                                              int(curve[0].max()))[0][curve[0]])
         try:
-            rtd = _resampled_rtd(resampled, window_length, direction, entry)
+            rtd = _resampled_rtd(resampled, window_length, direction, entry, deficit_levels)
         except (CfbmarkovError, ValueError):
             continue                 # a resample without residences: no figure
         means.append(rtd.mean)

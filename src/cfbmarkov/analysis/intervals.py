@@ -258,7 +258,8 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         m_exact, m_se = model_mixing_curve(model, states, left, int(lags.max()))
         curve = (lags, states, left)
     means, sds, rtds, curves = bootstrap_figures(model, window_length, direction, entry,
-                                                 edges, blocks, resamples, seed, curve)
+                                                 edges, blocks, resamples, seed, curve,
+                                                 exact.deficit_levels)
     if len(means) < 10:
         raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
     exact_hist = _binned(exact, edges)
@@ -333,6 +334,26 @@ def model_rtd_edges(rtd) -> np.ndarray:
     return rtd.lag * width * np.arange(bins + 1, dtype=np.float64)
 
 
+#: the deepest lap deficit a model interval's resamples keep; a model whose exact RTD keeps
+#: more has its resamples computed on MIN_DEFICIT_LEVELS and scaled (:func:`model_intervals`)
+BOOTSTRAP_DEFICIT_LEVELS = 32
+
+
+def _shallow_rtd(model, exact, direction: str):
+    """The fitted model's intrinsic RTD on :data:`~cfbmarkov.markov.first_passage.MIN_DEFICIT_LEVELS`
+    lap deficits from its exact entry distribution, where its exact RTD keeps more than
+    :data:`BOOTSTRAP_DEFICIT_LEVELS` (None otherwise): the depth the bootstrap resamples
+    are then computed at (``docs/definitions.md``, The model's interval)."""
+    from cfbmarkov.analysis.bootstrap import _resampled_rtd
+    from cfbmarkov.markov.first_passage import MIN_DEFICIT_LEVELS
+
+    if exact.deficit_levels is None or exact.deficit_levels <= BOOTSTRAP_DEFICIT_LEVELS:
+        return None
+    shallow = _resampled_rtd(model, None, direction, exact.entry_distribution,
+                             MIN_DEFICIT_LEVELS)
+    return shallow if shallow.mean > 0 and shallow.sd > 0 else None
+
+
 def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: int = 100,
                     seed: int = 0, direction: str | None = None):
     """Intervals of a fitted model's exact E(RT), SD(RT) and RTD per bin, from its fitting
@@ -352,6 +373,12 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     variability between the blocks of all the runs' windows (:func:`flow_variability`)
     divided by sqrt(runs): the runs are independent samples of one flow, and the pooled
     model sees their mean.
+
+    Each resample's exact RTD keeps the lap deficits of the model's exact RTD; where that
+    is more than :data:`BOOTSTRAP_DEFICIT_LEVELS` (residences that fall many laps, as in a
+    velocity memory's falling states) the resamples keep 8 instead, and their E(RT), SD(RT)
+    and RTD per bin are scaled by the fitted model's ratio of its full-depth value to its
+    8-deficit one (a resample's deep tail taken to change with it as the model's does).
 
     Parameters
     ----------
@@ -400,10 +427,18 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     direction = model.flow_direction if direction is None else direction
     exact = model.rtd(None, direction)
     edges = model_rtd_edges(exact)
-    means, sds, rtds, _ = bootstrap_figures(model, None, direction, exact.entry_distribution,
-                                            edges, int(blocks), int(resamples), seed)
+    shallow = _shallow_rtd(model, exact, direction)
+    means, sds, rtds, _ = bootstrap_figures(
+        model, None, direction, exact.entry_distribution, edges, int(blocks), int(resamples),
+        seed, deficit_levels=(exact if shallow is None else shallow).deficit_levels)
     if len(means) < 10:
         raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
+    if shallow is not None:     # each resample's spread, scaled to the full depth
+        means = [value * exact.mean / shallow.mean for value in means]
+        sds = [value * exact.sd / shallow.sd for value in sds]
+        full, part = _binned(exact, edges), _binned(shallow, edges)
+        scale = np.divide(full, part, out=np.ones_like(full), where=part > 0)
+        rtds = [values * scale for values in rtds]
     length = float(np.mean([b - a for _, (a, b) in runs]))
     relative = flow_variability(model, length, direction=direction)
     if relative is not None:       # several independent runs: their mean's variability

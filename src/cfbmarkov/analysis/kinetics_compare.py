@@ -314,6 +314,21 @@ def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
                         f"resamples ({model.n_states} states: each resample is an exact solve "
                         "that grows as the square of the states)")
     resamples = taken
+    from cfbmarkov.analysis.intervals import BOOTSTRAP_DEFICIT_LEVELS
+    from cfbmarkov.markov.first_passage import MIN_DEFICIT_LEVELS
+
+    # the resamples keep the model's lap deficits, or where it keeps many, 8 and are scaled
+    # by the model's full-depth / 8-deficit exit means (as model_intervals does the RTD)
+    depth = model.rtd(direction=direction).deficit_levels if model.open_flow is None else None
+    scale = {}
+    if depth is not None and depth > BOOTSTRAP_DEFICIT_LEVELS:
+        per_state = kinetics.per_state(model.state_space, fields)
+        full = exact_kinetics(model, per_state, direction=direction)
+        part = exact_kinetics(model, per_state, direction=direction,
+                              deficit_levels=MIN_DEFICIT_LEVELS)
+        scale = {name: full[name].exit_mean / part[name].exit_mean for name in full
+                 if part[name].exit_mean != 0}
+        depth = MIN_DEFICIT_LEVELS
     try:
         drawn = block_bootstrap_models(model, blocks=10, resamples=resamples, seed=0)
         means: dict[str, list[float]] = {name: [] for name in kinetics.names}
@@ -321,11 +336,11 @@ def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
             try:
                 answers = exact_kinetics(resampled, kinetics.per_state(resampled.state_space,
                                                                        fields),
-                                         direction=direction)
+                                         direction=direction, deficit_levels=depth)
             except (CfbmarkovError, ValueError):
                 continue
             for name, answer in answers.items():
-                means[name].append(answer.exit_mean)
+                means[name].append(answer.exit_mean * scale.get(name, 1.0))
     except InputError as exc:
         warnings.append(f"kinetics: no model intervals ({exc})")
         return None

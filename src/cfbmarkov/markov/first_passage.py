@@ -64,6 +64,9 @@ class ResidenceTimeDistribution:
         The intervals of a fitted model's E(RT), SD(RT) and RTD per bin
         (:class:`cfbmarkov.markov.uncertainty.ModelUncertainty`), on the intrinsic RTD of a
         model that has them; None otherwise.
+    deficit_levels : int or None
+        K, the deepest lap deficit the computation kept (a periodic riser's; None for an
+        open riser's).
 
     Notes
     -----
@@ -79,6 +82,7 @@ class ResidenceTimeDistribution:
     closed_classes: int = 1         # closed classes of the chain that residences run in
     # the fitted model's intervals (markov.uncertainty.ModelUncertainty), or None
     uncertainty: object = None
+    deficit_levels: int | None = None   # K, the lap deficits kept (None: an open riser's)
 
     @property
     def times(self) -> np.ndarray:
@@ -128,7 +132,7 @@ class ResidenceTimeDistribution:
         observed = observed[: max(n_window - 1, 1)]
         return ResidenceTimeDistribution(self.lag, observed / observed.sum(), self.unresolved,
                                          self.entry_distribution, float(window),
-                                         self.closed_classes)
+                                         self.closed_classes, deficit_levels=self.deficit_levels)
 
     def histogram(self, bin_width: float, upper: float) -> tuple[np.ndarray, np.ndarray]:
         """Probability per bin on edges 0, bin_width, ..., upper (s).
@@ -181,10 +185,55 @@ def _first_passage(indptr, indices, data, exit_probability, start, tol, max_step
     return max_steps
 
 
+@nb.njit(cache=True, inline="always")
+def _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr, up_idx,
+               up_val, live, v, w):
+    """One lag of :func:`_first_passage_levels` into destination state ``j``, every level."""
+    levels = v.shape[1]
+    for g in range(levels):
+        w[j, g] = 0.0
+    for q in range(down_ptr[j], down_ptr[j + 1]):      # from level g - 1
+        value = down_val[q]
+        i = down_idx[q]
+        for g in range(1, levels):
+            w[j, g] += value * v[i, g - 1]
+    for q in range(stay_ptr[j], stay_ptr[j + 1]):
+        value = stay_val[q]
+        i = stay_idx[q]
+        for g in range(levels):
+            w[j, g] += value * v[i, g]
+    for q in range(up_ptr[j], up_ptr[j + 1]):          # from level g + 1
+        value = up_val[q]
+        i = up_idx[q]
+        for g in range(levels - 1):
+            w[j, g] += value * v[i, g + 1]
+    for g in range(levels):
+        if not live[j, g]:
+            w[j, g] = 0.0
+
+
+@nb.njit(cache=True)
+def _level_sums(v, exit_probability, down_probability, falls):
+    """The mass absorbed this lag (level 0's exits) and the mass left; ``falls[g]`` gathers
+    the mass passing down from level g. In one fixed order: the same bits on any thread
+    count."""
+    n, levels = v.shape
+    absorbed = 0.0
+    remaining = 0.0
+    for i in range(n):
+        absorbed += v[i, 0] * exit_probability[i]
+        for g in range(levels):
+            falls[g] += v[i, g] * down_probability[i]
+    for g in range(levels):
+        for j in range(n):
+            remaining += v[j, g]
+    return absorbed, remaining
+
+
 @nb.njit(cache=True)
 def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val,
                           up_ptr, up_idx, up_val, exit_probability, live, start, tol,
-                          max_steps, out):
+                          max_steps, out, down_probability, falls):
     """:func:`_first_passage` on the lap-deficit levels without the [S L, S L] matrix
     (Numba kernel). The mass is held as ``v[i, g]`` (state i, level g = 0 .. L-1, the
     levels of a state side by side); one lag moves it by P_stay within a level, P_down one
@@ -194,45 +243,58 @@ def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay
     exit can be reached (``live`` false) is dropped, as :func:`exact_rtd` drops those
     states. The terms of each destination and level are summed in the order of the full
     matrix's transpose (down passes, stays, up passes): the same bits as the full matrix's
-    propagation. One thread, as :func:`_first_passage`. Returns the number of steps
-    taken."""
+    propagation. One thread, as :func:`_first_passage` (:func:`_first_passage_levels_parallel`
+    for large chains: the same bits). ``falls[g]`` (float64 [L]) gathers the mass that
+    passes down from level g (``down_probability``: each state's probability of a pass
+    down, P_down's row sums); ``falls[L - 1]`` is the mass lost below the deepest level.
+    Returns the number of steps taken."""
     n, levels = start.shape
     v = start.copy()
     w = np.empty_like(v)
     for k in range(max_steps):
-        absorbed = 0.0
-        for i in range(n):
-            absorbed += v[i, 0] * exit_probability[i]
+        absorbed, _ = _level_sums(v, exit_probability, down_probability, falls)
         out[k] = absorbed
         for j in range(n):
-            for g in range(levels):
-                w[j, g] = 0.0
-            for q in range(down_ptr[j], down_ptr[j + 1]):      # from level g - 1
-                value = down_val[q]
-                i = down_idx[q]
-                for g in range(1, levels):
-                    w[j, g] += value * v[i, g - 1]
-            for q in range(stay_ptr[j], stay_ptr[j + 1]):
-                value = stay_val[q]
-                i = stay_idx[q]
-                for g in range(levels):
-                    w[j, g] += value * v[i, g]
-            for q in range(up_ptr[j], up_ptr[j + 1]):          # from level g + 1
-                value = up_val[q]
-                i = up_idx[q]
-                for g in range(levels - 1):
-                    w[j, g] += value * v[i, g + 1]
-            for g in range(levels):
-                if not live[j, g]:
-                    w[j, g] = 0.0
+            _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
+                       up_idx, up_val, live, v, w)
+        v, w = w, v
         remaining = 0.0
         for g in range(levels):
             for j in range(n):
-                remaining += w[j, g]
-        v, w = w, v
+                remaining += v[j, g]
         if remaining < tol:
             return k + 1
     return max_steps
+
+
+@nb.njit(cache=True, parallel=True)
+def _first_passage_levels_parallel(down_ptr, down_idx, down_val, stay_ptr, stay_idx,
+                                   stay_val, up_ptr, up_idx, up_val, exit_probability, live,
+                                   start, tol, max_steps, out, down_probability, falls):
+    """:func:`_first_passage_levels` with the destinations of each lag shared among the
+    threads (each destination's levels summed by one thread in the same order, the sums in
+    one thread: the same bits on any thread count)."""
+    n, levels = start.shape
+    v = start.copy()
+    w = np.empty_like(v)
+    for k in range(max_steps):
+        absorbed, _ = _level_sums(v, exit_probability, down_probability, falls)
+        out[k] = absorbed
+        for j in nb.prange(n):
+            _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
+                       up_idx, up_val, live, v, w)
+        v, w = w, v
+        remaining = 0.0
+        for g in range(levels):
+            for j in range(n):
+                remaining += v[j, g]
+        if remaining < tol:
+            return k + 1
+    return max_steps
+
+
+#: non-zeros times levels above which a lag's product is shared among threads
+PARALLEL_LEVEL_WORK = 1_000_000
 
 
 def _reaching(q: sp.csr_matrix, targets: np.ndarray) -> np.ndarray:
@@ -276,7 +338,7 @@ def _live_levels(p_up, p_down, p_stay, levels: int, targets: np.ndarray) -> np.n
 
 
 def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray, lag: float,
-              deficit_levels: int = 8, tol: float = 1e-10, max_steps: int = 200_000,
+              deficit_levels: int | None = None, tol: float = 1e-10, max_steps: int = 200_000,
               entry: np.ndarray | None = None, entry_flux: np.ndarray | None = None
               ) -> ResidenceTimeDistribution:
     """Exact intrinsic RTD of a chain with transition matrix P and pass fractions.
@@ -294,7 +356,11 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     lag : float
         The lag (s).
     deficit_levels : int, optional
-        K, the deepest lap deficit kept (mass beyond it counts as unresolved).
+        K, the deepest lap deficit kept (mass beyond it counts as unresolved). By default
+        as deep as the chain's residences fall: from :data:`MIN_DEFICIT_LEVELS`, deepened
+        until at most :data:`DEFICIT_TOL` of the residences pass below the deepest level
+        kept, or :data:`MAX_DEFICIT_LEVELS` is reached (:func:`deeper_levels`); the mass
+        below stays ``unresolved``.
     tol : float, optional
         Stop when the mass not yet absorbed falls below this.
     max_steps : int, optional
@@ -315,7 +381,7 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     Returns
     -------
     ResidenceTimeDistribution
-        The intrinsic RTD (``window`` None).
+        The intrinsic RTD (``window`` None); its ``deficit_levels`` is the K used.
 
     Raises
     ------
@@ -401,7 +467,52 @@ def deficit_matrix(p_up, p_down, p_stay, levels: int) -> tuple[sp.csr_matrix, np
     return q, exit_probability
 
 
-def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8,
+#: the lap deficits an exact RTD keeps at least (:func:`exact_rtd`)
+MIN_DEFICIT_LEVELS = 8
+#: the most lap deficits an exact RTD keeps; mass below stays unresolved (and is warned of)
+MAX_DEFICIT_LEVELS = 512
+#: the share of the residences that may pass below the deepest lap deficit kept
+DEFICIT_TOL = 1e-7
+
+
+def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> int:
+    """The lap deficits to keep next, from the tries so far: (K, the mass lost below level
+    K) pairs, in order.
+
+    The mass a chain's residences lose below level K falls about geometrically with K once
+    its deepest excursions dominate, lost(K) ~ c rho^K: after the first try (K =
+    :data:`MIN_DEFICIT_LEVELS`) the next doubles K; from two tries rho is estimated, and the
+    next K is where the loss would be ``tol``, two levels deeper for safety, at least 8
+    deeper than the last, at most :data:`MAX_DEFICIT_LEVELS`.
+
+    Parameters
+    ----------
+    tried : list of (int, float)
+        The deficits kept and the mass lost below them, at least one try.
+    tol : float, optional
+        The loss accepted.
+
+    Returns
+    -------
+    int
+        The next K; the last one tried where its loss is at most ``tol`` or it is already
+        :data:`MAX_DEFICIT_LEVELS`.
+    """
+    levels, lost = tried[-1]
+    if lost <= tol or levels >= MAX_DEFICIT_LEVELS:
+        return levels
+    deeper = 2 * levels
+    if len(tried) >= 2:
+        before, lost_before = tried[-2]
+        if 0.0 < lost < lost_before:
+            rho = (lost / lost_before) ** (1.0 / (levels - before))
+            deeper = levels + max(8, int(np.ceil(np.log(tol / lost) / np.log(rho))) + 2)
+        else:
+            deeper = 4 * levels
+    return min(deeper, MAX_DEFICIT_LEVELS)
+
+
+def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int | None = None,
                        tol: float = 1e-10, max_steps: int = 200_000,
                        entry: np.ndarray | None = None, entry_flux: np.ndarray | None = None,
                        chain=None) -> ResidenceTimeDistribution:
@@ -411,9 +522,28 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
     is their sum when omitted. Other parameters, return value and errors as
     :func:`exact_rtd`."""
     p_up, p_down, p_stay = (sp.csr_matrix(part) for part in (p_up, p_down, p_stay))
-    s = p_up.shape[0]
     if chain is None:
         chain = (p_up + p_down + p_stay).tocsr()
+    if deficit_levels is not None:
+        return _rtd_on_levels(p_up, p_down, p_stay, lag, int(deficit_levels), tol, max_steps,
+                              entry, entry_flux, chain)[0]
+    levels, tried = MIN_DEFICIT_LEVELS, []
+    while True:
+        rtd, falls = _rtd_on_levels(p_up, p_down, p_stay, lag, levels, tol, max_steps, entry,
+                                    entry_flux, chain)
+        tried.append((levels, float(falls[-1])))
+        deeper = deeper_levels(tried)
+        if deeper == levels:
+            return rtd
+        levels = deeper
+
+
+def _rtd_on_levels(p_up, p_down, p_stay, lag: float, deficit_levels: int, tol: float,
+                   max_steps: int, entry, entry_flux, chain
+                   ) -> tuple[ResidenceTimeDistribution, np.ndarray]:
+    """:func:`rtd_of_split_chain` with K = ``deficit_levels`` lap deficits kept; also the
+    mass that passed down from each level (float64 [K + 1], the last lost below)."""
+    s = p_up.shape[0]
     levels = deficit_levels + 1
     exit_probability = np.zeros(s * levels)
     exit_probability[:s] = np.asarray(p_up.sum(axis=1)).ravel()
@@ -442,7 +572,7 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
         start /= start.sum()
         return _finish_levels((p_down, p_stay, p_up), live.reshape(levels, s),
                               exit_probability[:s], start, tol, max_steps, lag,
-                              entry / entry.sum())
+                              entry / entry.sum(), 1)
     # B, the embedded chain of entry states, by block elimination over the levels
     # (markov.entry_chain: no LU of the [S L, S L] matrix), and its stationary distribution
     embedded = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries)
@@ -475,11 +605,9 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int = 8
     entry[entries] = nu
     full_start = np.zeros(s * levels)
     full_start[idx] = start
-    rtd = _finish_levels((p_down, p_stay, p_up), live.reshape(levels, s),
-                         exit_probability[:s], full_start.reshape(levels, s), tol, max_steps,
-                         lag, entry)
-    return ResidenceTimeDistribution(rtd.lag, rtd.probability, rtd.unresolved,
-                                     rtd.entry_distribution, None, max(1, len(classes)))
+    return _finish_levels((p_down, p_stay, p_up), live.reshape(levels, s),
+                          exit_probability[:s], full_start.reshape(levels, s), tol, max_steps,
+                          lag, entry, max(1, len(classes)))
 
 
 def open_rtd(absorbing: np.ndarray, exit_probability: np.ndarray, entry: np.ndarray, lag: float,
@@ -557,11 +685,11 @@ def _finish(q_live, exit_probability, start, tol, max_steps, lag, entry
     return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
 
 
-def _finish_levels(parts, live, exit_probability, start, tol, max_steps, lag, entry
-                   ) -> ResidenceTimeDistribution:
+def _finish_levels(parts, live, exit_probability, start, tol, max_steps, lag, entry,
+                   classes: int) -> tuple[ResidenceTimeDistribution, np.ndarray]:
     """:func:`_finish` on the levels: ``parts`` (P_down, P_stay, P_up), ``live`` and
     ``start`` [L, S] (passed to the kernel as [S, L]), ``exit_probability`` [S] (from
-    level 0)."""
+    level 0). Also returns the mass that passed down from each level (float64 [L])."""
     arrays = []
     for part in parts:
         transposed = sp.csr_matrix(part.T)
@@ -569,8 +697,15 @@ def _finish_levels(parts, live, exit_probability, start, tol, max_steps, lag, en
         arrays += [transposed.indptr.astype(np.int64), transposed.indices.astype(np.int64),
                    transposed.data.astype(np.float64)]
     out = np.zeros(max_steps)
-    steps = _first_passage_levels(*arrays, np.ascontiguousarray(exit_probability, np.float64),
+    levels = live.shape[0]
+    falls = np.zeros(levels)
+    down_probability = np.asarray(parts[0].sum(axis=1), dtype=np.float64).ravel()
+    work = sum(part.nnz for part in parts) * levels
+    kernel = (_first_passage_levels_parallel if work > PARALLEL_LEVEL_WORK
+              and nb.get_num_threads() > 1 else _first_passage_levels)
+    steps = kernel(*arrays, np.ascontiguousarray(exit_probability, np.float64),
                                   np.ascontiguousarray(live.T), np.ascontiguousarray(start.T),
-                                  tol, max_steps, out)
+                                  tol, max_steps, out, down_probability, falls)
     f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
-    return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
+    return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry, None,
+                                     classes, deficit_levels=levels - 1), falls

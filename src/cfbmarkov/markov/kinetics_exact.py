@@ -48,7 +48,7 @@ from scipy.sparse.linalg import splu
 from cfbmarkov.errors import InputError
 from cfbmarkov.kinetics import Kinetics, StateKinetics
 from cfbmarkov.markov.first_passage import (_live_levels, _reaching, deficit_matrix,
-                                            split_by_pass)
+                                            rtd_of_split_chain, split_by_pass)
 
 
 @dataclass(frozen=True)
@@ -199,7 +199,7 @@ class PropertyAnswer:
                                      for x in self.bed_mean_by_cell]}
 
 
-def residence_chain(model, direction: str | None = None
+def residence_chain(model, direction: str | None = None, deficit_levels: int | None = None
                     ) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray, int]:
     """The absorbing chain of a model's residences, on the states from which an exit can be
     reached (module docstring).
@@ -212,6 +212,11 @@ def residence_chain(model, direction: str | None = None
         downflow, down through the bottom (the roles of the two passes swapped, entered
         with the downward exact RTD's entry distribution); default the model's
         ``flow_direction``. Ignored for an open riser.
+    deficit_levels : int, optional
+        K, the lap deficits kept: by default those of the model's exact RTD (as deep as
+        its residences fall, :func:`~cfbmarkov.markov.first_passage.exact_rtd`); given, the
+        entry distribution is that of the exact RTD on K deficits, computed here and not
+        cached (a bootstrap resample's). Ignored for an open riser.
 
     Returns
     -------
@@ -238,12 +243,21 @@ def residence_chain(model, direction: str | None = None
         direction = model.flow_direction if direction is None else direction
         if direction not in ("up", "down"):
             raise InputError(f"residence direction {direction!r}: up or down")
-        entry = model.rtd(direction=direction).entry_distribution
         p_up, p_down, p_stay = split_by_pass(sp.csr_matrix(model.transition_matrix),
                                              model.up_fraction, model.down_fraction)
         if direction == "down":      # the pass down through the bottom ends a residence
             p_up, p_down = p_down, p_up
-        levels = 9
+        if deficit_levels is None:   # as deep as the exact RTD's residences fall
+            exact = model.rtd(direction=direction)
+        else:
+            flux = (model.counts_up.sum(axis=0) - model.counts_down.sum(axis=1)
+                    if direction == "up" else
+                    model.counts_down.sum(axis=0) - model.counts_up.sum(axis=1))
+            flux = flux.astype(np.float64)
+            exact = rtd_of_split_chain(p_up, p_down, p_stay, model.lag, int(deficit_levels),
+                                       entry_flux=flux if flux.sum() > 0 else None)
+        entry = exact.entry_distribution
+        levels = exact.deficit_levels + 1
         q, r = deficit_matrix(p_up, p_down, p_stay, levels)
         live = _live_levels(p_up, p_down, p_stay, levels, r > 0)
         e = np.zeros(s * levels)
@@ -258,7 +272,8 @@ def residence_chain(model, direction: str | None = None
 
 
 def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
-                   direction: str | None = None) -> dict[str, PropertyAnswer]:
+                   direction: str | None = None, deficit_levels: int | None = None
+                   ) -> dict[str, PropertyAnswer]:
     """Exact answers of every property of linear kinetics on a model.
 
     Parameters
@@ -274,6 +289,9 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         A periodic riser's residences (:func:`residence_chain`): from passes up through the
         top or down through the bottom (a net downflow); default the model's
         ``flow_direction``.
+    deficit_levels : int, optional
+        The lap deficits kept (:func:`residence_chain`); default those of the model's
+        exact RTD.
 
     Returns
     -------
@@ -299,7 +317,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         raise InputError(f"{where}property {name}: a carried property needs a periodic riser: "
                          "particles that leave an open riser do not come back (use start = "
                          "entry)")
-    q, r, e, state, _ = residence_chain(model, direction)
+    q, r, e, state, _ = residence_chain(model, direction, deficit_levels)
     a_all, b_all = sk.over(model.lag)
     space = model.state_space
     cell = np.asarray(space.cell_of_state, dtype=np.int64)

@@ -1,0 +1,90 @@
+"""Residences that fall many laps before they end: the exact RTD and the exact kinetics keep
+as many lap deficits as the chain's residences need (first_passage.deeper_levels), so that
+E(RT), SD(RT) and exit means are those of the whole chain, not of its first 8 deficits."""
+
+import numpy as np
+import pytest
+
+from cfbmarkov.kinetics import Constant, FirstOrder, Kinetics, Property
+from cfbmarkov.markov.first_passage import (DEFICIT_TOL, MIN_DEFICIT_LEVELS, deeper_levels,
+                                            exact_rtd)
+from cfbmarkov.markov.kinetics_exact import exact_kinetics
+from cfbmarkov.markov.model import MarkovModel
+from cfbmarkov.markov.states import CellGrid
+
+LAG = 0.1
+
+
+def walk(up=0.3, down=0.25):
+    """One state of a periodic riser whose lap counter is a lazy random walk: a pass up
+    with probability ``up`` a lag, a pass down with ``down``. A residence is the first
+    passage of the walk to +1: mean 1 / mu lags and variance sigma^2 / mu^3 lags^2 (Wald's
+    identities for a walk that cannot skip a level up; mu = up - down, sigma^2 the variance
+    of a step); a residence reaches deficit -K with probability (down / up)^K (gambler's
+    ruin), 0.83^8 = 0.23 here."""
+    p = np.array([[1.0]])
+    fractions = (np.array([[up]]), np.array([[down]]))
+    zeros = np.zeros((1, 1), np.int64)
+    return MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 1, 0.1, 1.0), LAG,
+                       estimator="given", pass_fractions=fractions)
+
+
+def test_exact_rtd_of_a_walk_that_falls_deep_has_wald_moments():
+    up, down = 0.3, 0.25
+    mu, step_variance = up - down, up + down - (up - down) ** 2
+    rtd = walk(up, down).rtd()
+    assert rtd.mean == pytest.approx(LAG / mu, rel=2e-5)                 # 2 s
+    assert rtd.sd == pytest.approx(LAG * np.sqrt(step_variance / mu ** 3), rel=1e-4)
+    assert rtd.deficit_levels > 4 * MIN_DEFICIT_LEVELS
+    assert rtd.unresolved < 10 * DEFICIT_TOL
+    shallow = exact_rtd(np.array([[1.0]]), np.array([[up]]), np.array([[down]]), LAG,
+                        deficit_levels=MIN_DEFICIT_LEVELS)
+    assert shallow.mean < 0.8 * rtd.mean          # what 8 deficits alone gave
+
+
+def test_a_chain_that_stays_shallow_keeps_the_first_depth():
+    rtd = walk(0.4, 0.05).rtd()                   # (1/8)^9: nothing below 8 deficits
+    assert rtd.deficit_levels == MIN_DEFICIT_LEVELS
+    assert rtd.mean == pytest.approx(LAG / 0.35, rel=1e-6)
+
+
+def test_first_order_exit_mean_of_a_deep_walk_is_its_generating_function():
+    """X at the exit of dX/dt = k (1 - X), X = 0 at entry: 1 - E[z^T] with z = exp(-k lag),
+    E[z^T] = G the root in (0, 1) of d z G^2 + (s z - 1) G + u z = 0 (first step of the
+    walk: up and done, stay, or down and two first passages)."""
+    up, down, k = 0.3, 0.25, 0.2
+    stay = 1 - up - down
+    z = np.exp(-k * LAG)
+    g = ((1 - stay * z) - np.sqrt((1 - stay * z) ** 2 - 4 * up * down * z * z)) / (2 * down * z)
+    kinetics = Kinetics((Property("x", FirstOrder(), {"rate": Constant(k)}),))
+    answer = exact_kinetics(walk(up, down), kinetics)["x"]
+    assert answer.exit_mean == pytest.approx(1 - g, rel=1e-6)
+    shallow = exact_kinetics(walk(up, down), kinetics, deficit_levels=MIN_DEFICIT_LEVELS)
+    assert abs(shallow["x"].exit_mean / (1 - g) - 1) > 1e-3   # what 8 deficits alone gave
+
+
+def test_deeper_levels_from_the_losses_of_two_tries():
+    assert deeper_levels([(8, 1e-9)]) == 8                       # lost little: done
+    assert deeper_levels([(8, 1e-2)]) == 16                      # one try: double
+    # lost 1e-2 at 8 and 1e-3 at 16: rho^8 = 0.1, 1e-7 needs 32 more levels, and two
+    nxt = deeper_levels([(8, 1e-2), (16, 1e-3)])
+    assert nxt in (16 + 32 + 2, 16 + 33 + 2)                      # ceil of 32 in floats
+    assert deeper_levels([(8, 1e-2), (16, 2e-2)]) == 64          # no decay seen: x4
+    assert deeper_levels([(512, 0.5)]) == 512                    # the cap
+
+
+def test_the_threaded_propagation_gives_the_same_bits(monkeypatch):
+    import cfbmarkov.markov.first_passage as fp
+
+    rng = np.random.default_rng(3)
+    p = rng.random((12, 12)) * (rng.random((12, 12)) < 0.4) + np.eye(12)
+    p /= p.sum(axis=1, keepdims=True)
+    up = np.zeros((12, 12))
+    down = np.zeros((12, 12))
+    up[9:, :3] = 1.0                    # the top rows pass up onto the bottom ones
+    down[:3, 9:] = 0.7                  # and the bottom ones fall back often
+    serial = fp.exact_rtd(p, up, down, LAG)
+    monkeypatch.setattr(fp, "PARALLEL_LEVEL_WORK", 0)
+    threaded = fp.exact_rtd(p, up, down, LAG)
+    assert serial.deficit_levels == threaded.deficit_levels
+    assert np.array_equal(serial.probability, threaded.probability)
