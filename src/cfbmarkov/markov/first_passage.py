@@ -24,7 +24,7 @@ frame positions, so the RTD seen in the window is f(k)(n_W - k)+ renormalised
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba as nb
 import numpy as np
@@ -67,6 +67,12 @@ class ResidenceTimeDistribution:
     deficit_levels : int or None
         K, the deepest lap deficit the computation kept (a periodic riser's; None for an
         open riser's).
+    deficit_unresolved : float
+        The part of ``unresolved`` that fell below deficit -K.
+    drift_mean : float or None
+        Where more than :data:`DEFICIT_TOL` fell below the deepest deficit kept
+        (:data:`MAX_DEFICIT_LEVELS`), the chain's E(RT) from its lap drift
+        (:func:`drift_residence_time`, s), which counts those residences too; else None.
 
     Notes
     -----
@@ -83,6 +89,8 @@ class ResidenceTimeDistribution:
     # the fitted model's intervals (markov.uncertainty.ModelUncertainty), or None
     uncertainty: object = None
     deficit_levels: int | None = None   # K, the lap deficits kept (None: an open riser's)
+    deficit_unresolved: float = 0.0     # of ``unresolved``: fallen below deficit -K
+    drift_mean: float | None = None     # E(RT) from the lap drift, where deficits were lost
 
     @property
     def times(self) -> np.ndarray:
@@ -132,7 +140,8 @@ class ResidenceTimeDistribution:
         observed = observed[: max(n_window - 1, 1)]
         return ResidenceTimeDistribution(self.lag, observed / observed.sum(), self.unresolved,
                                          self.entry_distribution, float(window),
-                                         self.closed_classes, deficit_levels=self.deficit_levels)
+                                         self.closed_classes, deficit_levels=self.deficit_levels,
+                                         deficit_unresolved=self.deficit_unresolved)
 
     def histogram(self, bin_width: float, upper: float) -> tuple[np.ndarray, np.ndarray]:
         """Probability per bin on edges 0, bin_width, ..., upper (s).
@@ -469,8 +478,9 @@ def deficit_matrix(p_up, p_down, p_stay, levels: int) -> tuple[sp.csr_matrix, np
 
 #: the lap deficits an exact RTD keeps at least (:func:`exact_rtd`)
 MIN_DEFICIT_LEVELS = 8
-#: the most lap deficits an exact RTD keeps; mass below stays unresolved (and is warned of)
-MAX_DEFICIT_LEVELS = 512
+#: the most lap deficits an exact RTD keeps; mass below stays unresolved (and is warned of,
+#: with the chain's E(RT) from its lap drift: :func:`drift_residence_time`)
+MAX_DEFICIT_LEVELS = 64
 #: the share of the residences that may pass below the deepest lap deficit kept
 DEFICIT_TOL = 1e-7
 
@@ -482,8 +492,9 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> i
     The mass a chain's residences lose below level K falls about geometrically with K once
     its deepest excursions dominate, lost(K) ~ c rho^K: after the first try (K =
     :data:`MIN_DEFICIT_LEVELS`) the next doubles K; from two tries rho is estimated, and the
-    next K is where the loss would be ``tol``, two levels deeper for safety, at least 8
-    deeper than the last, at most :data:`MAX_DEFICIT_LEVELS`.
+    next K is where the loss would be a tenth of ``tol`` (the loss of the shallower tries
+    falls a little faster than the deeper ones'), at least 8 deeper than the last, at most
+    :data:`MAX_DEFICIT_LEVELS`.
 
     Parameters
     ----------
@@ -506,7 +517,7 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> i
         before, lost_before = tried[-2]
         if 0.0 < lost < lost_before:
             rho = (lost / lost_before) ** (1.0 / (levels - before))
-            deeper = levels + max(8, int(np.ceil(np.log(tol / lost) / np.log(rho))) + 2)
+            deeper = levels + max(8, int(np.ceil(np.log(0.1 * tol / lost) / np.log(rho))))
         else:
             deeper = 4 * levels
     return min(deeper, MAX_DEFICIT_LEVELS)
@@ -534,8 +545,59 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int | N
         tried.append((levels, float(falls[-1])))
         deeper = deeper_levels(tried)
         if deeper == levels:
-            return rtd
+            break
         levels = deeper
+    if rtd.deficit_unresolved > DEFICIT_TOL and entry is None:
+        rtd = replace(rtd, drift_mean=drift_residence_time(p_up, p_down, chain, lag))
+    return rtd
+
+
+def drift_residence_time(p_up, p_down, chain, lag: float) -> float | None:
+    """A periodic chain's mean residence time from its net lap drift: lag / (pi (P_up -
+    P_down) 1), pi the chain's stationary distribution.
+
+    Each residence ends with the lap counter one above its last record, so over a long run
+    the records rise as fast as the laps: the mean time between records is the inverse of
+    the mean lap gain per lag (Wald's identity for the lap counter of an irreducible chain,
+    whose entry states are distributed as :func:`exact_rtd`'s). Exact whatever the depth
+    the residences fall to, and cheap (one sparse LU): the check of an exact RTD whose
+    residences fall below its deepest lap deficit.
+
+    Parameters
+    ----------
+    p_up, p_down : scipy.sparse matrix, shape (S, S)
+        The chain's parts through the top and the bottom.
+    chain : scipy.sparse matrix, shape (S, S)
+        P.
+    lag : float
+        The lag (s).
+
+    Returns
+    -------
+    float or None
+        E(RT) in s; None where the chain has several closed classes (no single stationary
+        distribution) or does not rise on average.
+
+    References
+    ----------
+    A. Wald, "On cumulative sums of random variables", Ann. Math. Statist. 15, 283 (1944);
+    S. Asmussen, Applied Probability and Queues, 2nd ed., Springer (2003), Ch. XI (Markov
+    additive processes).
+    """
+    from scipy.sparse.linalg import splu
+
+    chain = sp.csr_matrix(chain)
+    if len(closed_classes(chain)) != 1:
+        return None
+    n = chain.shape[0]
+    system = (chain.T - sp.identity(n, format="csr")).tolil()
+    system[n - 1, :] = np.ones(n)                       # sum pi = 1 instead of one balance
+    rhs = np.zeros(n)
+    rhs[-1] = 1.0
+    pi = splu(sp.csc_matrix(system)).solve(rhs)
+    gain = float(pi @ (np.asarray(sp.csr_matrix(p_up).sum(axis=1)).ravel()
+                       - np.asarray(sp.csr_matrix(p_down).sum(axis=1)).ravel()))
+    return lag / gain if gain > 0 else None
 
 
 def _rtd_on_levels(p_up, p_down, p_stay, lag: float, deficit_levels: int, tol: float,
@@ -708,4 +770,5 @@ def _finish_levels(parts, live, exit_probability, start, tol, max_steps, lag, en
                                   tol, max_steps, out, down_probability, falls)
     f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
     return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry, None,
-                                     classes, deficit_levels=levels - 1), falls
+                                     classes, deficit_levels=levels - 1,
+                                     deficit_unresolved=float(falls[-1])), falls

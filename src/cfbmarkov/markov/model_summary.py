@@ -38,6 +38,16 @@ def unresolved_warning(rtd) -> str | None:
     str or None
     """
     u = float(rtd.unresolved)
+    drift = getattr(rtd, "drift_mean", None)
+    fallen = float(getattr(rtd, "deficit_unresolved", 0.0))
+    if drift is not None and abs(rtd.mean - drift) > UNRESOLVED_LIMIT * drift:
+        return (f"{fallen:.2g} of the residences fall more than {rtd.deficit_levels} laps "
+                "below their entry, deeper than the exact RTD follows them: E(RT) and SD(RT) "
+                "describe the others and are too short; the chain's E(RT) from its net lap "
+                f"drift, which counts them, is {drift:.3g} s (docs/definitions.md, Exact RTD "
+                "of a model); such a chain spends long stretches falling (a state space "
+                "with memory on a window of a sluggish flow): fit on a longer window or "
+                "another --states")
     if not u > UNRESOLVED_LIMIT:
         return None
     window = ("; the window is short beside the residences: a longer --window-length"
