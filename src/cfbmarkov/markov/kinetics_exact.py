@@ -250,12 +250,10 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
         if deficit_levels is None:   # as deep as the exact RTD's residences fall
             exact = model.rtd(direction=direction)
         else:
-            flux = (model.counts_up.sum(axis=0) - model.counts_down.sum(axis=1)
-                    if direction == "up" else
-                    model.counts_down.sum(axis=0) - model.counts_up.sum(axis=1))
-            flux = flux.astype(np.float64)
+            from cfbmarkov.markov.model_rtd import net_entry_flux
+
             exact = rtd_of_split_chain(p_up, p_down, p_stay, model.lag, int(deficit_levels),
-                                       entry_flux=flux if flux.sum() > 0 else None)
+                                       entry_flux=net_entry_flux(model, direction))
         entry = exact.entry_distribution
         levels = exact.deficit_levels + 1
         q, r = deficit_matrix(p_up, p_down, p_stay, levels)

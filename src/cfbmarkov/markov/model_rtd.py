@@ -75,22 +75,39 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
         if key not in cache:
             cache[key] = exact_rtd(model.transition_matrix, model.up_fraction,
                                    model.down_fraction, model.lag, max_steps=steps,
-                                   entry_flux=_entry_flux(model))
+                                   entry_flux=net_entry_flux(model))
         return cache[key].in_window(window)
     if "rtd" not in cache:
         cache["rtd"] = exact_rtd(model.transition_matrix, model.up_fraction,
                                  model.down_fraction, model.lag,
-                                 entry_flux=_entry_flux(model))
+                                 entry_flux=net_entry_flux(model))
     intrinsic = cache["rtd"]
     if window is not None:
         return intrinsic.in_window(window)
     return _with_uncertainty(model, intrinsic) if own else intrinsic
 
 
-def _entry_flux(model: "MarkovModel") -> np.ndarray | None:
-    # net entries through the inlet per state: landings of up passes minus departures of
-    # down passes (a particle that falls out and comes back starts no new residence)
-    flux = (model.counts_up.sum(axis=0) - model.counts_down.sum(axis=1)).astype(np.float64)
+def net_entry_flux(model: "MarkovModel", direction: str = "up") -> np.ndarray | None:
+    """Observed net entries per state of residences in ``direction``: landings of the
+    passes that end them minus departures of the passes the other way (a particle that
+    falls out and comes back starts no new residence); what the exact RTD weights a
+    reducible chain's closed classes by (:func:`~cfbmarkov.markov.first_passage.exact_rtd`).
+
+    Parameters
+    ----------
+    model : MarkovModel
+        A periodic riser's model (its pass counts).
+    direction : {"up", "down"}, optional
+        Residences ended by passes up through the top, or down through the bottom.
+
+    Returns
+    -------
+    ndarray of float64, shape (S,), or None
+        None where the entries do not add up to an inflow.
+    """
+    ends, back = ((model.counts_up, model.counts_down) if direction == "up"
+                  else (model.counts_down, model.counts_up))
+    flux = (ends.sum(axis=0) - back.sum(axis=1)).astype(np.float64)
     return flux if flux.sum() > 0 else None
 
 
@@ -105,10 +122,9 @@ def _with_uncertainty(model: "MarkovModel", rtd: ResidenceTimeDistribution,
 def _down_rtd(model: "MarkovModel", window: float | None) -> ResidenceTimeDistribution:
     """Residences of a net downflow: entries through the top, exits through the bottom."""
     if "rtd-down" not in model._cache:
-        flux = (model.counts_down.sum(axis=0) - model.counts_up.sum(axis=1)).astype(np.float64)
         model._cache["rtd-down"] = exact_rtd(model.transition_matrix, model.down_fraction,
                                              model.up_fraction, model.lag,
-                                             entry_flux=flux if flux.sum() > 0 else None)
+                                             entry_flux=net_entry_flux(model, "down"))
     intrinsic = model._cache["rtd-down"]
     return intrinsic if window is None else intrinsic.in_window(window)
 
