@@ -222,21 +222,27 @@ def _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up
 
 
 @nb.njit(cache=True)
-def _level_sums(v, exit_probability, down_probability, falls):
-    """The mass absorbed this lag (level 0's exits) and the mass left; ``falls[g]`` gathers
-    the mass passing down from level g. In one fixed order: the same bits on any thread
-    count."""
+def _level_exits(v, exit_probability, down_probability, falls):
+    """The mass absorbed this lag (level 0's exits); ``falls[g]`` gathers the mass passing
+    down from level g. In one fixed order: the same bits on any thread count."""
     n, levels = v.shape
     absorbed = 0.0
-    remaining = 0.0
     for i in range(n):
         absorbed += v[i, 0] * exit_probability[i]
         for g in range(levels):
             falls[g] += v[i, g] * down_probability[i]
+    return absorbed
+
+
+@nb.njit(cache=True)
+def _level_mass(v):
+    """The mass left on every state and level, summed level by level."""
+    n, levels = v.shape
+    remaining = 0.0
     for g in range(levels):
         for j in range(n):
             remaining += v[j, g]
-    return absorbed, remaining
+    return remaining
 
 
 @nb.njit(cache=True)
@@ -257,21 +263,16 @@ def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay
     passes down from level g (``down_probability``: each state's probability of a pass
     down, P_down's row sums); ``falls[L - 1]`` is the mass lost below the deepest level.
     Returns the number of steps taken."""
-    n, levels = start.shape
+    n = start.shape[0]
     v = start.copy()
     w = np.empty_like(v)
     for k in range(max_steps):
-        absorbed, _ = _level_sums(v, exit_probability, down_probability, falls)
-        out[k] = absorbed
+        out[k] = _level_exits(v, exit_probability, down_probability, falls)
         for j in range(n):
             _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
                        up_idx, up_val, live, v, w)
         v, w = w, v
-        remaining = 0.0
-        for g in range(levels):
-            for j in range(n):
-                remaining += v[j, g]
-        if remaining < tol:
+        if _level_mass(v) < tol:
             return k + 1
     return max_steps
 
@@ -283,21 +284,16 @@ def _first_passage_levels_parallel(down_ptr, down_idx, down_val, stay_ptr, stay_
     """:func:`_first_passage_levels` with the destinations of each lag shared among the
     threads (each destination's levels summed by one thread in the same order, the sums in
     one thread: the same bits on any thread count)."""
-    n, levels = start.shape
+    n = start.shape[0]
     v = start.copy()
     w = np.empty_like(v)
     for k in range(max_steps):
-        absorbed, _ = _level_sums(v, exit_probability, down_probability, falls)
-        out[k] = absorbed
+        out[k] = _level_exits(v, exit_probability, down_probability, falls)
         for j in nb.prange(n):
             _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
                        up_idx, up_val, live, v, w)
         v, w = w, v
-        remaining = 0.0
-        for g in range(levels):
-            for j in range(n):
-                remaining += v[j, g]
-        if remaining < tol:
+        if _level_mass(v) < tol:
             return k + 1
     return max_steps
 
