@@ -138,9 +138,9 @@ def exit_moments(q, r, e, a, b, lu_q=None) -> ExitMoments:
     r, e, a, b = (np.asarray(x, dtype=np.float64) for x in (r, e, a, b))
     eye = sp.identity(n, format="csc")
     if lu_q is None:
-        lu_q = splu(sp.csc_matrix(eye - q), permc_spec="MMD_AT_PLUS_A")
-    lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q), permc_spec="MMD_AT_PLUS_A")
-    lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q), permc_spec="MMD_AT_PLUS_A")
+        lu_q = splu(sp.csc_matrix(eye - q))
+    lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q))
+    lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q))
     p = float(e @ lu_q.solve(r))
     if not p > 0:
         raise InputError("no particle that enters can leave in the model: every residence is "
@@ -320,8 +320,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     space = model.state_space
     cell = np.asarray(space.cell_of_state, dtype=np.int64)
     out = {}
-    lu_q = splu(sp.csc_matrix(sp.identity(q.shape[0], format="csc") - q),
-                permc_spec="MMD_AT_PLUS_A")
+    lu_q = splu(sp.csc_matrix(sp.identity(q.shape[0], format="csc") - q))
     for i, name in enumerate(sk.names):
         m = exit_moments(q, r, e, a_all[i][state], b_all[i][state], lu_q)
         if sk.starts[i] == "carried":
