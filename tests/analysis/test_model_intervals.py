@@ -111,3 +111,32 @@ def test_fit_rtd_info_print_the_interval_and_resamples_0_leaves_it_out(stationar
     assert data["level"] is None and data["rt_mean_interval"] is None
     assert main(args + ["--resamples", "5"]) == 2
     assert "at least 10" in capsys.readouterr().err
+
+
+def test_resamples_of_a_chain_that_falls_deep_are_scaled_to_its_full_depth(tmp_path,
+                                                                          monkeypatch):
+    """A flow whose walls fall as fast as its core rises: the fitted chain's residences
+    fall more than 8 laps (28 deficits kept; E(RT) 5.00 s, 4.83 s with 8, SD 8.8 and
+    7.9 s). The resamples keep 8 lap deficits and are scaled by the model's full-depth /
+    8-deficit ratio: the interval's bounds are then within 3 % of those of resamples that
+    keep the full depth (at most 2.3 % here), where unscaled 8-deficit resamples put the
+    SD(RT) interval's bounds 5-6 % low."""
+    import cfbmarkov.analysis.intervals as intervals
+
+    flow = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.5, fall_velocity=-1.5,
+                               vertical_spread=1.0, lateral_probability=0.05,
+                               persistence=False)
+    path = tmp_path / "falls.h5"
+    synthetic.write_run(path, flow, 300, 20.0, seed=2)
+    model = fit_model(path, flow.grid, flow.lag, (2.0, 20.0), "mle")
+    exact = model.rtd()
+    assert exact.deficit_levels > intervals.BOOTSTRAP_DEFICIT_LEVELS
+    shallow = intervals._shallow_rtd(model, exact, model.flow_direction)
+    assert shallow.mean < 0.99 * exact.mean
+    scaled = model_intervals(model, resamples=30, seed=1)
+    monkeypatch.setattr(intervals, "BOOTSTRAP_DEFICIT_LEVELS", 512)
+    deep = model_intervals(model, resamples=30, seed=1)
+    for a, b in zip(scaled.rt_mean_interval + scaled.rt_sd_interval,
+                    deep.rt_mean_interval + deep.rt_sd_interval):
+        assert a == pytest.approx(b, rel=0.03)
+    assert scaled.rt_mean_interval[0] <= exact.mean <= scaled.rt_mean_interval[1]

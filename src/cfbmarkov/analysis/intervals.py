@@ -334,23 +334,24 @@ def model_rtd_edges(rtd) -> np.ndarray:
     return rtd.lag * width * np.arange(bins + 1, dtype=np.float64)
 
 
-#: the deepest lap deficit a model interval's resamples keep; a model whose exact RTD keeps
-#: more has its resamples computed on MIN_DEFICIT_LEVELS and scaled (:func:`model_intervals`)
-BOOTSTRAP_DEFICIT_LEVELS = 32
+#: the deepest lap deficit a model interval's resamples keep (the fewest an exact RTD keeps,
+#: MIN_DEFICIT_LEVELS); a model whose exact RTD keeps more has its resamples' figures scaled
+#: by its own full-depth / shallow ratio (:func:`model_intervals`): the bootstrap costs what
+#: it costs on a shallow chain
+BOOTSTRAP_DEFICIT_LEVELS = 8
 
 
 def _shallow_rtd(model, exact, direction: str):
-    """The fitted model's intrinsic RTD on :data:`~cfbmarkov.markov.first_passage.MIN_DEFICIT_LEVELS`
-    lap deficits from its exact entry distribution, where its exact RTD keeps more than
-    :data:`BOOTSTRAP_DEFICIT_LEVELS` (None otherwise): the depth the bootstrap resamples
-    are then computed at (``docs/definitions.md``, The model's interval)."""
+    """The fitted model's intrinsic RTD on :data:`BOOTSTRAP_DEFICIT_LEVELS` lap deficits
+    from its exact entry distribution, where its exact RTD keeps more (None otherwise): the
+    depth of the bootstrap resamples, whose figures are scaled by the model's ratio of the
+    two (``docs/definitions.md``, The model's interval)."""
     from cfbmarkov.analysis.bootstrap import _resampled_rtd
-    from cfbmarkov.markov.first_passage import MIN_DEFICIT_LEVELS
 
     if exact.deficit_levels is None or exact.deficit_levels <= BOOTSTRAP_DEFICIT_LEVELS:
         return None
     shallow = _resampled_rtd(model, None, direction, exact.entry_distribution,
-                             MIN_DEFICIT_LEVELS)
+                             BOOTSTRAP_DEFICIT_LEVELS)
     return shallow if shallow.mean > 0 and shallow.sd > 0 else None
 
 
@@ -374,11 +375,11 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     divided by sqrt(runs): the runs are independent samples of one flow, and the pooled
     model sees their mean.
 
-    Each resample's exact RTD keeps the lap deficits of the model's exact RTD; where that
-    is more than :data:`BOOTSTRAP_DEFICIT_LEVELS` (residences that fall many laps, as in a
-    velocity memory's falling states) the resamples keep 8 instead, and their E(RT), SD(RT)
-    and RTD per bin are scaled by the fitted model's ratio of its full-depth value to its
-    8-deficit one (a resample's deep tail taken to change with it as the model's does).
+    Each resample's exact RTD keeps :data:`BOOTSTRAP_DEFICIT_LEVELS` lap deficits; where the
+    model's exact RTD keeps more (residences that fall many laps, as in a velocity memory's
+    falling states), the resamples' E(RT), SD(RT) and RTD per bin are scaled by the fitted
+    model's ratio of its full-depth value to its 8-deficit one (a resample's deep tail taken
+    to change with it as the model's does).
 
     Parameters
     ----------

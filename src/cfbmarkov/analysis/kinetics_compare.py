@@ -315,20 +315,19 @@ def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
                         "that grows as the square of the states)")
     resamples = taken
     from cfbmarkov.analysis.intervals import BOOTSTRAP_DEFICIT_LEVELS
-    from cfbmarkov.markov.first_passage import MIN_DEFICIT_LEVELS
 
-    # the resamples keep the model's lap deficits, or where it keeps many, 8 and are scaled
-    # by the model's full-depth / 8-deficit exit means (as model_intervals does the RTD)
+    # the resamples keep 8 lap deficits; where the model keeps more, their exit means are
+    # scaled by the model's full-depth / 8-deficit ones (as model_intervals does the RTD)
     depth = model.rtd(direction=direction).deficit_levels if model.open_flow is None else None
     scale = {}
     if depth is not None and depth > BOOTSTRAP_DEFICIT_LEVELS:
         per_state = kinetics.per_state(model.state_space, fields)
         full = exact_kinetics(model, per_state, direction=direction)
         part = exact_kinetics(model, per_state, direction=direction,
-                              deficit_levels=MIN_DEFICIT_LEVELS)
+                              deficit_levels=BOOTSTRAP_DEFICIT_LEVELS)
         scale = {name: full[name].exit_mean / part[name].exit_mean for name in full
                  if part[name].exit_mean != 0}
-        depth = MIN_DEFICIT_LEVELS
+    depth = None if depth is None else min(depth, BOOTSTRAP_DEFICIT_LEVELS)
     try:
         drawn = block_bootstrap_models(model, blocks=10, resamples=resamples, seed=0)
         means: dict[str, list[float]] = {name: [] for name in kinetics.names}
