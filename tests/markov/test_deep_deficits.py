@@ -106,3 +106,37 @@ def test_a_walk_deeper_than_the_deficits_kept_says_so_with_its_drift_mean():
     assert rtd.mean < 0.8 * rtd.drift_mean
     line = unresolved_warning(rtd)
     assert "64 laps" in line and "10 s" in line
+
+
+def test_the_drift_mean_is_the_exact_rtds_mean():
+    """drift_rt_mean (one sparse LU) equals the exact RTD's E(RT): on the walk, and on a
+    generated riser's chain in both directions (its net downflow counted too)."""
+    from cfbmarkov import synthetic
+    from cfbmarkov.markov.model_rtd import drift_rt_mean
+
+    assert drift_rt_mean(walk(0.3, 0.2)) == pytest.approx(LAG / 0.1, rel=1e-12)
+    assert walk(0.3, 0.2).rtd().mean == pytest.approx(LAG / 0.1, rel=2e-5)
+    flow = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.5, fall_velocity=-1.5,
+                               vertical_spread=1.0, lateral_probability=0.05,
+                               persistence=False)
+    chain = synthetic.cell_chain(flow)
+    assert drift_rt_mean(chain) == pytest.approx(chain.rtd().mean, rel=1e-6)
+    falling = walk(0.2, 0.3)                      # laps go down: residences end at the bottom
+    assert drift_rt_mean(falling, "down") == pytest.approx(falling.rtd(direction="down").mean,
+                                                           rel=2e-5)
+    assert drift_rt_mean(falling, "up") is None
+
+
+def test_the_drift_mean_ignores_a_state_that_no_residence_reaches():
+    """A walk beside a state never left and never entered (an unvisited state kept in place):
+    two closed classes, the residences in one; the drift mean is still the RTD's."""
+    from cfbmarkov.markov.model_rtd import drift_rt_mean
+
+    p = np.eye(2)
+    up = np.array([[0.3, 0.0], [0.0, 0.0]])
+    down = np.array([[0.2, 0.0], [0.0, 0.0]])
+    zeros = np.zeros((2, 2), np.int64)
+    model = MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 2, 0.1, 1.0), LAG,
+                        estimator="given", pass_fractions=(up, down))
+    assert drift_rt_mean(model) == pytest.approx(LAG / 0.1, rel=1e-12)
+    assert model.rtd().mean == pytest.approx(LAG / 0.1, rel=2e-5)

@@ -74,6 +74,29 @@ def _rt_mean(model, direction: str | None = None) -> float:
         return math.nan
 
 
+def _part_rt_mean(model, direction: str | None = None) -> float:
+    """E(RT) of the model of a part of the window: from its chain's lap drift where that is
+    exact (residences in one closed class whose laps advance in ``direction``;
+    :func:`~cfbmarkov.markov.model_rtd.drift_rt_mean`, one sparse LU), the exact RTD's
+    E(RT) without its propagation. Otherwise from its exact RTD on the fewest lap deficits
+    (:data:`~cfbmarkov.markov.first_passage.MIN_DEFICIT_LEVELS`): a part whose net flow
+    runs the other way has residences that rarely end, and following them deeper would
+    cost minutes for a figure that only says the part differs; NaN where none ends."""
+    from cfbmarkov.markov.first_passage import MIN_DEFICIT_LEVELS
+    from cfbmarkov.markov.model_rtd import drift_rt_mean, rtd_at_depth
+
+    try:
+        value = drift_rt_mean(model, direction)
+    except (CfbmarkovError, ValueError, RuntimeError):
+        value = None
+    if value is not None:
+        return float(value)
+    try:
+        return float(rtd_at_depth(model, direction, MIN_DEFICIT_LEVELS).mean)
+    except (CfbmarkovError, ZeroDivisionError, FloatingPointError):
+        return math.nan
+
+
 def _split(window: tuple[float, float], n: int) -> list[tuple[float, float]]:
     a, b = window
     edges = np.round(np.linspace(a, b, n + 1), 9)
@@ -104,7 +127,7 @@ def _parts_of(traj, discrete: DiscreteTrajectories, window, model, fitter):
     parts = []
     for a, b in use:
         try:
-            mean = _rt_mean(fitter.fit(discrete.block(a, b)), model.flow_direction)
+            mean = _part_rt_mean(fitter.fit(discrete.block(a, b)), model.flow_direction)
         except CfbmarkovError:
             mean = math.nan
         parts.append((a, b, mean, directions[(a, b)]))
@@ -294,7 +317,7 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
     means = []
     for d in data:
         try:
-            means.append(_rt_mean(fitter.fit(d), direction))
+            means.append(_part_rt_mean(fitter.fit(d), direction))
         except CfbmarkovError:
             means.append(math.nan)
     run_limit = cross_limit * math.sqrt(runs - 1)
@@ -316,7 +339,7 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
             cut = _split((a, b), 2)[side]
             blocks.append(d.block(*cut))
         try:
-            means_of_halves.append(_rt_mean(fitter.fit(blocks), direction))
+            means_of_halves.append(_part_rt_mean(fitter.fit(blocks), direction))
         except CfbmarkovError:
             means_of_halves.append(math.nan)
     spread = _spread(means_of_halves, rt_mean)

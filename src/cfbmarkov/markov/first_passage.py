@@ -571,8 +571,11 @@ def drift_residence_time(p_up, p_down, chain, lag: float) -> float | None:
     Returns
     -------
     float or None
-        E(RT) in s; None where the chain has several closed classes (no single stationary
-        distribution) or does not rise on average.
+        E(RT) in s, of the closed class that the up passes land in; None where they land
+        in several closed classes or in transient states (no single stationary
+        distribution of the residences' states), or where the class does not rise on
+        average. States outside that class (a state never left that nothing enters, say)
+        do not count: no residence reaches them.
 
     References
     ----------
@@ -583,16 +586,23 @@ def drift_residence_time(p_up, p_down, chain, lag: float) -> float | None:
     from scipy.sparse.linalg import splu
 
     chain = sp.csr_matrix(chain)
-    if len(closed_classes(chain)) != 1:
+    p_up, p_down = sp.csr_matrix(p_up), sp.csr_matrix(p_down)
+    classes = closed_classes(chain)
+    label = -np.ones(chain.shape[0], np.int64)
+    for k, members in enumerate(classes):
+        label[members] = k
+    owners = np.unique(label[np.asarray(p_up.sum(axis=0)).ravel() > 0])
+    if owners.size != 1 or owners[0] < 0:     # entries in several classes, or transient
         return None
-    n = chain.shape[0]
-    system = (chain.T - sp.identity(n, format="csr")).tolil()
+    members = np.asarray(classes[owners[0]])
+    n = members.size
+    system = (chain[members][:, members].T - sp.identity(n, format="csr")).tolil()
     system[n - 1, :] = np.ones(n)                       # sum pi = 1 instead of one balance
     rhs = np.zeros(n)
     rhs[-1] = 1.0
     pi = splu(sp.csc_matrix(system)).solve(rhs)
-    gain = float(pi @ (np.asarray(sp.csr_matrix(p_up).sum(axis=1)).ravel()
-                       - np.asarray(sp.csr_matrix(p_down).sum(axis=1)).ravel()))
+    gain = float(pi @ (np.asarray(p_up[members].sum(axis=1)).ravel()
+                       - np.asarray(p_down[members].sum(axis=1)).ravel()))
     return lag / gain if gain > 0 else None
 
 
