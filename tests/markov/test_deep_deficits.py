@@ -70,7 +70,9 @@ def test_deeper_levels_from_the_losses_of_two_tries():
     # lost 1e-2 at 8 and 1e-3 at 16: rho^8 = 0.1, a tenth of 1e-7 needs 40 more levels
     nxt = deeper_levels([(8, 1e-2), (16, 1e-3)])
     assert nxt in (16 + 40, 16 + 41)                              # ceil of 40 in floats
-    assert deeper_levels([(8, 1e-2), (16, 2e-2)]) == 64          # no decay seen: x4
+    assert deeper_levels([(8, 1e-2), (16, 2e-2)]) == 16          # no decay: laps run away
+    assert deeper_levels([(8, 0.81153), (16, 0.81152)]) == 16      # nor a tenth of one
+    assert deeper_levels([(8, 0.005), (16, 0.0049)]) > 16         # unwarned: go deeper
     assert deeper_levels([(4, 1e-2), (8, 1e-3)]) == 8 + 20        # rho^4 = 0.1
     assert deeper_levels([(64, 0.5)]) == 64                      # the cap
 
@@ -140,3 +142,10 @@ def test_the_drift_mean_ignores_a_state_that_no_residence_reaches():
                         estimator="given", pass_fractions=(up, down))
     assert drift_rt_mean(model) == pytest.approx(LAG / 0.1, rel=1e-12)
     assert model.rtd().mean == pytest.approx(LAG / 0.1, rel=2e-5)
+
+
+def test_the_loss_left_unfollowed_is_one_the_summaries_warn_of():
+    from cfbmarkov.markov.first_passage import UNRESOLVED_WARNED
+    from cfbmarkov.markov.model_summary import UNRESOLVED_LIMIT
+
+    assert UNRESOLVED_WARNED == UNRESOLVED_LIMIT

@@ -479,6 +479,11 @@ MIN_DEFICIT_LEVELS = 8
 MAX_DEFICIT_LEVELS = 64
 #: the share of the residences that may pass below the deepest lap deficit kept
 DEFICIT_TOL = 1e-7
+#: the unresolved mass that `fit`, `rtd` and `info` warn of (equal to
+#: :data:`cfbmarkov.markov.model_summary.UNRESOLVED_LIMIT`, tested; that module stays free of
+#: scipy): a loss above it that deeper deficits do not reduce is left there, said, rather
+#: than followed to the deepest level
+UNRESOLVED_WARNED = 0.01
 
 
 def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> int:
@@ -490,7 +495,10 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> i
     :data:`MIN_DEFICIT_LEVELS`) the next doubles K; from two tries rho is estimated, and the
     next K is where the loss would be a tenth of ``tol`` (the loss of the shallower tries
     falls a little faster than the deeper ones'), at least 8 deeper than the last, at most
-    :data:`MAX_DEFICIT_LEVELS`.
+    :data:`MAX_DEFICIT_LEVELS`. Where the loss is above :data:`UNRESOLVED_WARNED` and fell
+    by less than a tenth between the two tries, K stays:
+    residences counted against the chain's net drift (up passes of a net downflow) keep
+    falling at any depth, and their loss stays unresolved mass, warned of above 1 %.
 
     Parameters
     ----------
@@ -502,7 +510,8 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> i
     Returns
     -------
     int
-        The next K; the last one tried where its loss is at most ``tol`` or it is already
+        The next K; the last one tried where its loss is at most ``tol``, is warned of and
+        fell by less than a tenth from the try before, or K is already
         :data:`MAX_DEFICIT_LEVELS`.
     """
     levels, lost = tried[-1]
@@ -511,11 +520,10 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> i
     deeper = 2 * levels
     if len(tried) >= 2:
         before, lost_before = tried[-2]
-        if 0.0 < lost < lost_before:
-            rho = (lost / lost_before) ** (1.0 / (levels - before))
-            deeper = levels + max(8, int(np.ceil(np.log(0.1 * tol / lost) / np.log(rho))))
-        else:
-            deeper = 4 * levels
+        if lost > UNRESOLVED_WARNED and not lost < 0.9 * lost_before:
+            return levels       # deeper keeps losing as much: the laps run the other way
+        rho = (lost / lost_before) ** (1.0 / (levels - before))
+        deeper = levels + max(8, int(np.ceil(np.log(0.1 * tol / lost) / np.log(rho))))
     return min(deeper, MAX_DEFICIT_LEVELS)
 
 
