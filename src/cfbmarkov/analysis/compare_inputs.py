@@ -193,6 +193,35 @@ def spans_text(ref: Trajectories, pred: Trajectories) -> str:
     return f"the reference {ref.path} covers {span(ref)}, the prediction {pred.path} {span(pred)}"
 
 
+def overlap_of(ref: Trajectories, pred: Trajectories, lead: str = ""
+               ) -> tuple[tuple[float, float], str]:
+    """The span both files cover (:func:`common_span`) and the text naming both spans
+    (:func:`spans_text`); refused where they do not overlap.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and model files.
+    lead : str, optional
+        What the refusal begins with (the window asked for, say).
+
+    Returns
+    -------
+    ((float, float), str)
+
+    Raises
+    ------
+    InputError
+        Where the files do not overlap: one line naming both spans.
+    """
+    both = common_span(ref, pred)
+    spans = spans_text(ref, pred)
+    if both is None:
+        raise InputError(f"{lead}{spans}; they do not overlap, so no window holds both: "
+                         "compare a prediction of the reference's span")
+    return both, spans
+
+
 def check_common_window(ref: Trajectories, pred: Trajectories, start: float,
                         stop: float) -> None:
     """Refuse a window that leaves the span both files cover, naming both spans and a
@@ -210,12 +239,7 @@ def check_common_window(ref: Trajectories, pred: Trajectories, start: float,
     InputError
         Where the window leaves the overlap of the two files' spans, or they do not overlap.
     """
-    both = common_span(ref, pred)
-    spans = spans_text(ref, pred)
-    if both is None:
-        raise InputError(f"window {start:g}:{stop:g} s: {spans}; they do not overlap, so no "
-                         "window holds both: compare a prediction of the reference's span")
-    first, last = both
+    (first, last), spans = overlap_of(ref, pred, f"window {start:g}:{stop:g} s: ")
     tol = max(ref.time_tolerance, pred.time_tolerance)
     if start >= first - tol and stop <= last + tol:
         return

@@ -104,17 +104,12 @@ def cmd_compare(args) -> int:
 def _default_window(reference: str, prediction: str) -> tuple[float, float]:
     """``compare`` without ``--window``: the span both files cover, said on stderr; refused
     in one line naming both spans where they do not overlap."""
-    from cfbmarkov.analysis.compare_inputs import common_span, spans_text
+    from cfbmarkov.analysis.compare_inputs import overlap_of
     from cfbmarkov.trajectories import Trajectories
     from cfbmarkov.trajectory_format import time_text
 
     with Trajectories(reference) as ref, Trajectories(prediction) as pred:
-        both = common_span(ref, pred)
-        spans = spans_text(ref, pred)
-    if both is None:
-        raise InputError(f"{spans}: they do not overlap, so there is no window to compare "
-                         "over; compare a prediction of the reference's span")
-    a, b = both
+        (a, b), spans = overlap_of(ref, pred)
     print(f"compare: no --window given: comparing over {time_text(a)}:{time_text(b)} s, the "
           f"span both files "
           f"cover ({spans})", file=sys.stderr, flush=True)
