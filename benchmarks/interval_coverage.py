@@ -18,18 +18,27 @@ span's net solids flow (``model.rtd(None, direction)``, ``model_intervals(direct
 prints the upward one, which differs from it where the net flow runs down (the verdict's
 E(RT) limit then comes from the default tolerance instead of the interval).
 
-The reference is the run's **long-run E(RT) outside the window**: every residence of the
-run after the settling time (from the lap counters at the model's lag, counted in the net
-solids flow direction of the whole span, from one record of a new lap level to the next,
-as :func:`cfbmarkov.observed.residence.residence_times` counts them over the span) whose
-interval [entry, exit] does not overlap the fitting window, pooled: the rest of the run's
-residences, none cut by the window's edges.
+The reference is the run's **long-run E(RT) outside the window**, in two forms:
 
-Printed per window length (and model): fits; coverage, the share of intervals holding
-the long-run value; the median relative width of the interval, (upper - lower) / the
-fitted E(RT); the median relative error |E(RT) - long run| / long run; the fits more than
-50 % off the long run and how many of them printed a verdict warning (any line of the
-sample's verdict; ``warned`` counts them). The JSON (``-o``) holds every fit.
+- *residences*: every residence of the run after the settling time (from the lap counters
+  at the model's lag, counted in the net solids flow direction of the whole span, from one
+  record of a new lap level to the next, as :func:`cfbmarkov.observed.residence.residence_times`
+  counts them over the span) whose interval [entry, exit] does not overlap the fitting
+  window, pooled: the rest of the run's residences, none cut by the window's edges. The
+  span censors them: residences longer than the rest of the run are missing and those
+  close to its length under-counted, so where the residences are long against the run this
+  mean lies below the flow's E(RT);
+- *flux*: the particle-time of the rest of the run (settling time to the window, window to
+  the last frame) over its net passes in that direction (Little's law,
+  :func:`cfbmarkov.observed.residence.flux_residence_time`), which no length censors.
+
+Printed per window length (and model), against each reference: fits; coverage, the share
+of intervals holding the long-run value; the median relative width of the interval, (upper
+- lower) / the fitted E(RT); the median relative error |E(RT) - long run| / long run; the
+fits more than 50 % off the long run and how many of them printed a verdict warning (any
+line of the sample's verdict; ``warned`` counts them). The JSON (``-o``) holds every fit.
+``--rescore STUDY.json`` forms the references again for the fits of an earlier study's JSON
+(the runs given as in that study) and prints its table without fitting again.
 """
 
 from __future__ import annotations
@@ -49,7 +58,7 @@ from cfbmarkov.analysis.intervals import model_intervals
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov import fit_model
 from cfbmarkov.markov.states import CellGrid
-from cfbmarkov.observed.residence import net_flow_direction
+from cfbmarkov.observed.residence import net_flow_direction, residence_flux
 from cfbmarkov.trajectories import Trajectories
 
 #: a fit this far from the long run (relative) must warn
@@ -91,6 +100,21 @@ def long_run_outside(residences: np.ndarray, window: tuple[float, float]) -> np.
     a, b = window
     keep = (residences[:, 1] <= a + 1e-9) | (residences[:, 0] >= b - 1e-9)
     return residences[keep, 1] - residences[keep, 0]
+
+
+def flux_outside(traj, window: tuple[float, float], span: tuple[float, float],
+                 direction: str) -> float | None:
+    """The flux long run outside ``window``: the particle-time of the parts of ``span``
+    before and after it over their net passes in ``direction`` (s; None where they have
+    none)."""
+    particle_time, passes = 0.0, 0
+    step = float(traj.frame_interval)
+    for lo, hi in ((span[0], window[0]), (window[1], span[1])):
+        if hi - lo >= step - 1e-9:
+            part = residence_flux(traj, (lo, hi), direction)
+            particle_time += part[0]
+            passes += part[1]
+    return particle_time / passes if passes > 0 else None
 
 
 def _case_markov(path: Path) -> dict:
@@ -136,29 +160,67 @@ def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, au
     return out
 
 
+#: the references: the fits' key of each and its suffix in the table's keys
+REFERENCES = (("long_run", ""), ("long_run_flux", "_flux"))
+
+
 def table(fits: list[dict]) -> list[dict]:
-    """Per (model, window length): fits, coverage, median relative width and error, the
-    fits more than ``OFF`` off and how many of them warned."""
+    """Per (model, window length) and per reference (``REFERENCES``; keys with its
+    suffix): fits, coverage, median relative width and error, the fits more than ``OFF``
+    off and how many of them warned."""
     rows = []
     for key in sorted({(f["model"], f["length"]) for f in fits}):
-        group = [f for f in fits if (f["model"], f["length"]) == key and "rt_mean" in f
-                 and f["long_run"] is not None]
-        with_interval = [f for f in group if "rt_mean_interval" in f]
-        held = [f["rt_mean_interval"][0] <= f["long_run"] <= f["rt_mean_interval"][1]
-                for f in with_interval]
-        widths = [(f["rt_mean_interval"][1] - f["rt_mean_interval"][0]) / f["rt_mean"]
-                  for f in with_interval]
-        errors = [abs(f["rt_mean"] / f["long_run"] - 1.0) for f in group]
-        off = [f for f in group if abs(f["rt_mean"] / f["long_run"] - 1.0) > OFF]
         failed = sum("error" in f for f in fits if (f["model"], f["length"]) == key)
-        rows.append({"model": key[0], "length": key[1], "fits": len(group), "failed": failed,
-                     "intervals": len(with_interval),
-                     "coverage": float(np.mean(held)) if held else math.nan,
-                     "median_relative_width": float(np.median(widths)) if widths else math.nan,
-                     "median_relative_error": float(np.median(errors)) if errors else math.nan,
-                     "off": len(off), "off_warned": sum(bool(f["warnings"]) for f in off),
-                     "warned": sum(bool(f["warnings"]) for f in group)})
+        row = {"model": key[0], "length": key[1], "failed": failed}
+        for reference, suffix in REFERENCES:
+            group = [f for f in fits if (f["model"], f["length"]) == key and "rt_mean" in f
+                     and f.get(reference) is not None]
+            with_interval = [f for f in group if "rt_mean_interval" in f]
+            held = [f["rt_mean_interval"][0] <= f[reference] <= f["rt_mean_interval"][1]
+                    for f in with_interval]
+            widths = [(f["rt_mean_interval"][1] - f["rt_mean_interval"][0]) / f["rt_mean"]
+                      for f in with_interval]
+            errors = [abs(f["rt_mean"] / f[reference] - 1.0) for f in group]
+            off = [f for f in group if abs(f["rt_mean"] / f[reference] - 1.0) > OFF]
+            row |= {f"fits{suffix}": len(group), f"intervals{suffix}": len(with_interval),
+                    f"coverage{suffix}": float(np.mean(held)) if held else math.nan,
+                    f"median_relative_width{suffix}":
+                        float(np.median(widths)) if widths else math.nan,
+                    f"median_relative_error{suffix}":
+                        float(np.median(errors)) if errors else math.nan,
+                    f"off{suffix}": len(off),
+                    f"off_warned{suffix}": sum(bool(f["warnings"]) for f in off),
+                    f"warned{suffix}": sum(bool(f["warnings"]) for f in group)}
+        rows.append(row)
     return rows
+
+
+def rescore(study_json: dict, runs, lag: float | None = None) -> dict:
+    """An earlier study's fits with both references formed again from ``runs`` (matched to
+    the fits by file name; the lag ``lag``, else the study's, else the run's case.json's,
+    else 0.025 s), and its table."""
+    paths = {Path(name).name: Path(name) for name in runs}
+    fits = study_json["fits"]
+    for name in sorted({Path(f["run"]).name for f in fits}):
+        if name not in paths:
+            raise InputError(f"the study's fits name {name}: give it among the runs")
+        path = paths[name]
+        case = _case_markov(path)
+        with Trajectories(path) as traj:
+            first, last = float(traj.times[0]), float(traj.times[-1])
+            a0 = max(first, float(study_json["settle"]))
+            run_lag = float(lag or study_json.get("lag") or case.get("lag", 0.025))
+            direction = net_flow_direction(traj, (a0, last))
+            residences = residence_intervals(traj, (a0, last), run_lag)
+            for f in fits:
+                if Path(f["run"]).name != name:
+                    continue
+                window = tuple(f["window"])
+                reference = long_run_outside(residences, window)
+                f["long_run"] = float(reference.mean()) if reference.size else None
+                f["long_run_count"] = int(reference.size)
+                f["long_run_flux"] = flux_outside(traj, window, (a0, last), direction)
+    return study_json | {"table": table(fits), "fits": fits}
 
 
 def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, level: float,
@@ -181,6 +243,7 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
                 for start in np.linspace(a0, last - length, starts):
                     window = (round(float(start), 6), round(float(start) + length, 6))
                     reference = long_run_outside(residences, window)
+                    flux = flux_outside(traj, window, (a0, last), direction)
                     for model in (("cells", "auto") if auto else ("cells",)):
                         t0 = time.perf_counter()
                         try:
@@ -194,24 +257,30 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
                                    long_run=float(reference.mean()) if reference.size
                                    else None,
                                    long_run_count=int(reference.size),
+                                   long_run_flux=flux,
                                    seconds=time.perf_counter() - t0)
                         fits.append(fit)
                         if progress:
                             progress(fit)
     return {"level": level, "resamples": resamples, "settle": settle, "estimator": estimator,
-            "lengths": list(lengths),
+            "lag": lag, "lengths": list(lengths),
             "starts": starts, "off": OFF, "table": table(fits), "fits": fits}
 
 
 def _print_table(result: dict) -> None:
     pct = f"{100 * result['level']:g}"
-    print(f"{'model':<6} {'L (s)':>6} {'fits':>5} {'coverage':>9} {'width':>7} "
-          f"{'error':>7} {'>50% off':>9} {'warned':>7} {'any warning':>12}")
-    for r in result["table"]:
-        print(f"{r['model']:<6} {r['length']:>6g} {r['fits']:>5d} {r['coverage']:>9.2f} "
-              f"{r['median_relative_width']:>7.2f} {r['median_relative_error']:>7.2f} "
-              f"{r['off']:>9d} {r['off_warned']:>7d} {r['warned']:>12d}"
-              + (f" ({r['failed']} failed)" if r["failed"] else ""))
+    for reference, suffix in REFERENCES:
+        print(f"long run from the {'net flux' if suffix else 'residences'} outside the window:")
+        print(f"{'model':<6} {'L (s)':>6} {'fits':>5} {'coverage':>9} {'width':>7} "
+              f"{'error':>7} {'>50% off':>9} {'warned':>7} {'any warning':>12}")
+        for r in result["table"]:
+            if f"fits{suffix}" not in r:       # a study before the flux reference
+                continue
+            print(f"{r['model']:<6} {r['length']:>6g} {r[f'fits{suffix}']:>5d} "
+                  f"{r[f'coverage{suffix}']:>9.2f} {r[f'median_relative_width{suffix}']:>7.2f} "
+                  f"{r[f'median_relative_error{suffix}']:>7.2f} {r[f'off{suffix}']:>9d} "
+                  f"{r[f'off_warned{suffix}']:>7d} {r[f'warned{suffix}']:>12d}"
+                  + (f" ({r['failed']} failed)" if r["failed"] else ""))
     print(f"coverage: share of {pct} % intervals holding the long-run E(RT) outside the "
           "window; width: median (upper - lower) / fitted E(RT); error: median |fit / long "
           "run - 1|; warned: of the fits > 50 % off, those with a verdict warning; any "
@@ -236,7 +305,23 @@ def main(argv=None) -> int:
     p.add_argument("--resamples", type=int, default=100, help="bootstrap resamples (100)")
     p.add_argument("-o", "--output", default="coverage.json", help="JSON of every fit")
     p.add_argument("-q", "--quiet", action="store_true", help="no line per fit on stderr")
+    p.add_argument("--rescore", default=None, metavar="STUDY.json",
+                   help="form the references again for an earlier study's fits (its runs "
+                        "given) and print its table, without fitting; -o writes it")
     args = p.parse_args(argv)
+    if args.rescore:
+        try:
+            result = rescore(json.loads(Path(args.rescore).read_text()), args.runs, args.lag)
+        except (OSError, ValueError, KeyError) as exc:
+            print(f"coverage: {args.rescore} is not a study's JSON ({exc})", file=sys.stderr)
+            return 2
+        except CfbmarkovError as exc:
+            print(f"coverage: {exc}", file=sys.stderr)
+            return 2
+        Path(args.output).write_text(json.dumps(jsonable(result), indent=1, allow_nan=False))
+        _print_table(result)
+        print(args.output)
+        return 0
     try:
         lengths = [float(v) for v in args.lengths.split(",")]
         cells = tuple(int(v) for v in args.cells.lower().split("x")) if args.cells else None
@@ -255,10 +340,11 @@ def main(argv=None) -> int:
                 return
             lo, hi = fit.get("rt_mean_interval", (math.nan, math.nan))
             ref = math.nan if fit["long_run"] is None else fit["long_run"]
+            flux = math.nan if fit["long_run_flux"] is None else fit["long_run_flux"]
             print(f"{Path(fit['run']).parent.name}/{Path(fit['run']).name} {fit['model']} "
                   f"{fit['window'][0]:g}-{fit['window'][1]:g} s: E(RT) "
                   f"{fit.get('rt_mean', math.nan):.3g} s [{lo:.3g}, {hi:.3g}], long run "
-                  f"{ref:.3g} s, {len(fit.get('warnings', []))} warning(s), "
+                  f"{ref:.3g} s (flux {flux:.3g} s), {len(fit.get('warnings', []))} warning(s), "
                   f"{fit['seconds']:.1f} s", file=sys.stderr, flush=True)
 
     try:

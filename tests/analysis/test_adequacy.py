@@ -343,3 +343,34 @@ def test_runs_of_different_cases_are_refused(tmp_path, capsys):
     code, _, err = run_cli(capsys, "fit", u3, u3b, "--cells", "4x16", "--window", "0.5:1.5",
                            "--resamples", "0", "-q", "-o", tmp_path / "y.h5")
     assert code == 0, err
+
+
+def test_sample_length_long_run_from_the_flux_where_the_span_cuts_residences(tmp_path, capsys):
+    # a long-tailed flow (E(RT) 2.69 s) over a span of 6 s: its complete residences average
+    # a fifth less than the flow's E(RT) and cover too little of the particle-time for
+    # their SD(RT) to be judged; the long run's E(RT) comes from the net flux
+    flow = synthetic.RiserFlow(persistence=False, rise_velocity=1.4, fall_velocity=-1.0,
+                               lateral_probability=0.08)
+    exact = synthetic.cell_chain(flow).rtd()
+    path = synthetic.write_run(tmp_path / "tail.h5", flow, 2000, 6.0, seed=1)
+    result = sample_length(path, flow.grid, lag=0.025, start=0.0, estimator="mle")
+    assert result.long_run_mean == pytest.approx(exact.mean, rel=0.04)
+    assert result.long_run_observed_mean < 0.9 * exact.mean
+    assert result.censored_share > 0.3 and not result.sd_judged
+    assert np.isnan(result.deviations()[1]).all()
+    within = np.abs(result.rt_mean / result.long_run_mean - 1) <= result.tolerance
+    assert (result.within() == within).all() and within[-1]
+    code, out, _ = run_cli(capsys, "stationarity", path, "--sample-length", "--cells", "6x38",
+                           "--estimator", "mle", "--json")
+    assert code == 0
+    long_run = json.loads(out)["long_run"]
+    assert long_run["rt_sd_judged"] is False
+    assert long_run["rt_mean"] == pytest.approx(result.long_run_mean)
+    assert long_run["rt_mean_observed"] < long_run["rt_mean"]
+    code, out, _ = run_cli(capsys, "stationarity", path, "--sample-length", "--cells", "6x38",
+                           "--estimator", "mle")
+    assert code == 0 and "SD(RT) not judged" in out and "from its net solids flux" in out
+    # a short-tailed flow's span covers its residences: both figures judged
+    stationary = sample_length(_write(tmp_path / "fast.h5", 0), _space(), lag=0.025, start=0.0)
+    assert stationary.sd_judged and 0.0 < stationary.censored_share < 0.3
+    assert stationary.long_run_mean == pytest.approx(stationary.long_run_observed_mean, rel=0.05)

@@ -63,5 +63,25 @@ def test_study_table_and_json(coverage, run, tmp_path, capsys):
     for row in data["table"]:
         assert row["fits"] == 2 and 0.0 <= row["coverage"] <= 1.0
         assert row["off_warned"] <= row["off"]
+        assert row["fits_flux"] == 2 and 0.0 <= row["coverage_flux"] <= 1.0
+    with Trajectories(run) as traj:
+        for fit in data["fits"]:
+            # the flux long run: the particle-time of the span outside the window over its
+            # net passes, by hand from the lap counters of the window's edges and the span's
+            a, b = fit["window"]
+            end = float(traj.times[-1])
+            frames = [int(np.argmin(np.abs(np.asarray(traj.times) - t))) for t in (0.5, a, b, end)]
+            laps = [traj.laps(k).astype(np.int64) for k in frames]
+            passes = (laps[1] - laps[0]).sum() + (laps[3] - laps[2]).sum()
+            time = (a - 0.5) + (end - b)
+            assert fit["long_run_flux"] == pytest.approx(traj.n_particles * time / passes)
+    # the references formed again for the study's fits, without fitting
+    again = tmp_path / "again.json"
+    assert coverage.main([str(run), "--rescore", str(out), "-o", str(again)]) == 0
+    assert "net flux" in capsys.readouterr().out
+    rescored = json.loads(again.read_text())
+    assert rescored["table"] == data["table"]
+    assert coverage.main([str(run), "--rescore", str(run), "-o", str(again)]) == 2
+    assert "not a study's JSON" in capsys.readouterr().err
     assert coverage.main([str(run), "--lengths", "0,1", "-o", str(out)]) == 2
     assert "--lengths" in capsys.readouterr().err

@@ -4,9 +4,14 @@ run's long run (``docs/definitions.md``, Sample length; ``cfbmarkov stationarity
 
 From a start time, windows of growing length (0.5, 1, 2, 5, 10, 20, ... s, as far as the
 run reaches) are fitted with the same estimator and states, and each model's exact E(RT)
-and SD(RT) compared with the run's long-run values: the observed residence times of the
-whole span from the start, pooled. The sample length is the shortest window from which
-every longer window's E(RT) and SD(RT) lie within the tolerance of them.
+and SD(RT) compared with the run's long-run values. The long run's E(RT) of a periodic
+riser comes from its net solids flux over the span (Little's law,
+:func:`~cfbmarkov.observed.residence.flux_residence_time`), which the span's length does not
+censor; its SD(RT) from the observed residence times of the span, pooled, and it is judged
+only where their mean lies within the tolerance of that E(RT): a span that cuts off the
+long residences lowers their mean, and their SD more. An open riser's long run is its
+pooled residences. The sample length is the shortest window from
+which every longer window's judged figures lie within the tolerance of them.
 """
 
 from __future__ import annotations
@@ -21,7 +26,7 @@ from cfbmarkov._json import jsonable
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import discretize
 from cfbmarkov.markov.estimate import estimator_from_name
-from cfbmarkov.observed.residence import net_flow_direction, residence_times
+from cfbmarkov.observed.residence import net_flow_direction, residence_flux, residence_times
 from cfbmarkov.trajectories import Trajectories
 
 #: the window lengths tried, s (those the run's span holds)
@@ -40,8 +45,12 @@ class SampleLength:
         Where every window starts (s).
     span_end : float
         The end of the long run (s): the run's last frame.
-    long_run_mean, long_run_sd : float
-        E(RT), SD(RT) (s) of the observed residence times of ``start``-``span_end`` pooled.
+    long_run_mean : float
+        The long run's E(RT) (s): of a periodic riser from its net flux over
+        ``start``-``span_end`` (:func:`~cfbmarkov.observed.residence.flux_residence_time`,
+        several runs' particle-time over their passes), of an open riser its residences'.
+    long_run_sd : float
+        SD(RT) (s) of the observed residence times of ``start``-``span_end`` pooled.
     long_run_count : int
         Their number.
     lengths : ndarray, shape (n,)
@@ -55,6 +64,13 @@ class SampleLength:
         ``tolerance`` of the long run's (s; NaN where none does, even the longest).
     description : str
         The states, lag and estimator of the models.
+    long_run_observed_mean : float
+        The mean of those observed residence times (s): lower than ``long_run_mean`` where
+        the span cuts long residences off (SD(RT) is then judged only where it lies within
+        ``tolerance`` of ``long_run_mean``, :attr:`sd_judged`).
+    censored_share : float
+        The share of the span's particle-time outside its complete residences, 1 - (their
+        sum) / (N x span), in [0, 1]; NaN for an open riser (not measured).
     """
 
     file: str
@@ -69,25 +85,38 @@ class SampleLength:
     tolerance: float
     sample_length: float
     description: str
+    long_run_observed_mean: float = math.nan
+    censored_share: float = math.nan
+
+    @property
+    def sd_judged(self) -> bool:
+        """Whether SD(RT) is judged: the mean of the long run's complete residences lies
+        within the tolerance of its E(RT) (always for an open riser, whose long run is its
+        residences)."""
+        shortfall = 1.0 - self.long_run_observed_mean / self.long_run_mean
+        return not shortfall > self.tolerance
 
     def deviations(self) -> tuple[np.ndarray, np.ndarray]:
         """Each window's E(RT) and SD(RT) relative to the long run's, minus 1 (NaN where
-        the window has no model), two arrays of shape (n,)."""
+        the window has no model, and SD(RT)'s everywhere where it is not judged,
+        :attr:`sd_judged`), two arrays of shape (n,)."""
         with np.errstate(invalid="ignore", divide="ignore"):
-            return (self.rt_mean / self.long_run_mean - 1.0,
-                    self.rt_sd / self.long_run_sd - 1.0)
+            sd = (self.rt_sd / self.long_run_sd - 1.0 if self.sd_judged
+                  else np.full(self.rt_sd.shape, np.nan))
+            return self.rt_mean / self.long_run_mean - 1.0, sd
 
     def within(self) -> np.ndarray:
-        """Whether each window's E(RT) and SD(RT) lie within the tolerance, shape (n,)."""
+        """Whether each window's judged figures lie within the tolerance, shape (n,)."""
         m, s = self.deviations()
-        return (np.abs(m) <= self.tolerance) & (np.abs(s) <= self.tolerance)
+        return (np.abs(m) <= self.tolerance) & ((np.abs(s) <= self.tolerance)
+                                                | (not self.sd_judged))
 
     def missed(self) -> list[str]:
         """Which figure each window misses the tolerance by: "", "E(RT)", "SD(RT)",
         "both", or "no model"."""
         out = []
         for m, s in zip(*self.deviations()):
-            if not (np.isfinite(m) and np.isfinite(s)):
+            if not (np.isfinite(m) and (np.isfinite(s) or not self.sd_judged)):
                 out.append("no model")
                 continue
             names = [n for n, d in (("E(RT)", m), ("SD(RT)", s)) if abs(d) > self.tolerance]
@@ -127,7 +156,10 @@ class SampleLength:
             "file": self.file, "start": self.start, "span_end": self.span_end,
             "models": self.description, "tolerance": self.tolerance,
             "long_run": {"rt_mean": self.long_run_mean, "rt_sd": self.long_run_sd,
-                         "rt_count": self.long_run_count},
+                         "rt_count": self.long_run_count,
+                         "rt_mean_observed": self.long_run_observed_mean,
+                         "censored_share": self.censored_share,
+                         "rt_sd_judged": self.sd_judged},
             "windows": [{"length": float(n), "rt_mean": float(m), "rt_sd": float(s),
                          "within": bool(w), "pd_rt_mean": 100 * float(a),
                          "pd_rt_sd": 100 * float(b), "missed": miss or None}
@@ -182,7 +214,8 @@ def verdict_text(result: SampleLength, states: str) -> str:
     """
     tol = 100 * result.tolerance
     if np.isfinite(result.sample_length):
-        return (f"{result.sample_length:g} s (from it on, every window's E(RT) and SD(RT) lie "
+        figures = "E(RT) and SD(RT) lie" if result.sd_judged else "E(RT) lies"
+        return (f"{result.sample_length:g} s (from it on, every window's {figures} "
                 f"within {tol:g} % of the long run's)")
     longest = result.lengths[-1]
     steady = result.steady_misses()
@@ -191,7 +224,8 @@ def verdict_text(result: SampleLength, states: str) -> str:
     stays = [f"the {states} model's {figure} stays {50 * (lo + hi):+.0f} % off at every "
              f"length ({100 * lo:+.0f} to {100 * hi:+.0f} %)"
              for figure, (lo, hi) in steady.items()]
-    drifting = [f for f in ("E(RT)", "SD(RT)")
+    judged = ("E(RT)", "SD(RT)") if result.sd_judged else ("E(RT)",)
+    drifting = [f for f in judged
                 if f not in steady and not np.isfinite(result.settled_from(f))]
     said = " but ".join(p for p in (", ".join(settles), " and ".join(stays)) if p)
     said = f": {said}" if said else ""
@@ -228,8 +262,9 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
 
     Several runs of one case (a sequence of paths) are pooled: each window length is taken
     from ``start`` in every run and the model fitted on their counts pooled
-    (:mod:`cfbmarkov.markov.pooling`), and the long run is every run's residences from
-    ``start`` to its last frame, pooled; the lengths are per run.
+    (:mod:`cfbmarkov.markov.pooling`), and the long run is every run's span from ``start``
+    to its last frame (its E(RT) from their particle-time over their net passes, its SD(RT)
+    from their residences pooled; module docstring); the lengths are per run.
 
     Parameters
     ----------
@@ -262,7 +297,8 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
     InputError
         On a tolerance that is not positive, a start outside the run, a stop beyond it, a run
         shorter than
-        the shortest length, a long run without two residences in its direction, runs that
+        the shortest length, a long run without two residences in its direction or (a
+        periodic riser) without a net flux in it, runs that
         cannot be pooled (:func:`~cfbmarkov.markov.pooling.check_runs_match`,
         :func:`~cfbmarkov.markov.pooling.check_runs_distinct`), or the errors of
         :func:`~cfbmarkov.markov.discretize`.
@@ -311,20 +347,35 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
             except CfbmarkovError:
                 means.append(math.nan)
                 sds.append(math.nan)
+        directions = [net_flow_direction(t, (a, t_last)) for t, t_last in zip(runs, lasts)]
         long_run = np.concatenate([
             residence_times(t, (a, t_last), use_events=False, lag_frames=t.lag_frames(lag),
-                            direction=net_flow_direction(t, (a, t_last))).samples
-            for t, t_last in zip(runs, lasts)])
-    if long_run.size < 2:
-        raise InputError(f"{name} holds {long_run.size} residences from {a:g} s: no long run "
-                         "to judge the windows by (a longer run)")
+                            direction=d).samples
+            for t, t_last, d in zip(runs, lasts, directions)])
+        if long_run.size < 2:
+            raise InputError(f"{name} holds {long_run.size} residences from {a:g} s: no long "
+                             "run to judge the windows by (a longer run)")
+        long_mean, censored = float(long_run.mean()), math.nan
+        if not runs[0].boundary.is_open:
+            # Little's law over the span: particle-time over the passes that end residences
+            flux = [residence_flux(t, (a, t_last), d)
+                    for t, t_last, d in zip(runs, lasts, directions)]
+            particle_time = sum(f[0] for f in flux)
+            passes = sum(f[1] for f in flux)
+            if passes <= 0:
+                raise InputError(f"{name} has no net solids flux from {a:g} s (its runs' net "
+                                 "flows run opposite ways): no long-run E(RT) to judge the "
+                                 "windows by (runs of one case, a longer span)")
+            long_mean = particle_time / passes
+            censored = min(1.0, max(0.0, 1.0 - float(long_run.sum()) / particle_time))
     lengths_ = np.asarray(usable)
     runs_text = f", {len(paths)} runs pooled" if len(paths) > 1 else ""
-    result = SampleLength(name, a, max(lasts), float(long_run.mean()),
+    result = SampleLength(name, a, max(lasts), long_mean,
                           float(long_run.std(ddof=1)), int(long_run.size), lengths_,
                           np.asarray(means, float), np.asarray(sds, float), float(tolerance),
                           math.nan, f"{state_space.describe()}, lag {lag:g} s, estimator "
-                                    f"'{estimator}'{runs_text}")
+                                    f"'{estimator}'{runs_text}",
+                          float(long_run.mean()), censored)
     return _with_length(result)
 
 

@@ -369,14 +369,26 @@ def _sample_length(args) -> int:
     def value(v):
         return format(v, ".4g") if np.isfinite(v) else "n/d"
 
-    print(f"{result.file}: models ({result.description}) on windows from {result.start:g} s "
-          f"against the long run {result.start:g}-{result.span_end:g} s (E(RT) "
-          f"{value(result.long_run_mean)} s, SD(RT) {value(result.long_run_sd)} s, "
-          f"{result.long_run_count} residences)")
-    print(f"  (the long run counts every residence of {result.start:g}-{result.span_end:g} s; "
-          "the sliding-window table (stationarity without --sample-length) counts only those "
-          "inside one short window, leaving out the longest: its average E(RT) lies lower; "
-          "docs/definitions.md, Sample length)")
+    span = f"{result.start:g}-{result.span_end:g} s"
+    if np.isfinite(result.censored_share):
+        print(f"{result.file}: models ({result.description}) on windows from {result.start:g} s "
+              f"against the long run {span}: E(RT) {value(result.long_run_mean)} s from its "
+              f"net solids flux; its {result.long_run_count} complete residences: mean "
+              f"{value(result.long_run_observed_mean)} s, SD(RT) {value(result.long_run_sd)} s")
+        cut = (f"{100 * result.censored_share:.0f} % of the span's particle-time lies "
+               "outside them")
+        shortfall = 100 * (1 - result.long_run_observed_mean / result.long_run_mean)
+        if result.sd_judged:
+            print(f"  ({cut}; docs/definitions.md, Sample length)")
+        else:
+            print(f"  (SD(RT) not judged: their mean lies {shortfall:.0f} % below the flux's "
+                  f"E(RT), more than the tolerance, and {cut}: the span cuts the long "
+                  "residences off and their SD(RT) is too low; a longer run judges it; "
+                  "docs/definitions.md, Sample length)")
+    else:
+        print(f"{result.file}: models ({result.description}) on windows from {result.start:g} s "
+              f"against the long run {span} (E(RT) {value(result.long_run_mean)} s, SD(RT) "
+              f"{value(result.long_run_sd)} s, {result.long_run_count} residences)")
     tol = 100 * result.tolerance
     print(f"{'length (s)':>10}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  within {tol:g} %")
     pd_mean, pd_sd = result.deviations()
@@ -504,8 +516,9 @@ def add_stationarity(sub) -> None:
                    help="how long a fitting window must be: fit models (--states, --cells, "
                         "--lag, --estimator as in fit) on windows of 0.5, 1, 2, 5, 10, ... s "
                         "from --start, and give the length from which their E(RT) and SD(RT) "
-                        "stay within --tolerance of the run's long run (its residences from "
-                        "--start on, pooled)")
+                        "stay within --tolerance of the run's long run from --start on (its "
+                        "E(RT) from its net solids flux, its SD(RT) from its residences, "
+                        "pooled, judged where the run is long enough for them)")
     s.add_argument("--start", type=finite_float, default=None,
                    help="with --sample-length: where the windows start, s (default the "
                         "start of --span, else the first frame; leave out a start-up from "

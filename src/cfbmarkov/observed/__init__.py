@@ -11,6 +11,7 @@ Cluster index).
 from cfbmarkov.observed.metrics import minkowski_distance, mixing_rms, percentage_difference
 from cfbmarkov.observed.residence import (
     ResidenceTimes,
+    flux_residence_time,
     residence_times,
     residence_times_from_events,
     residence_times_from_laps,
@@ -18,7 +19,7 @@ from cfbmarkov.observed.residence import (
 )
 
 __all__ = [
-    "ResidenceTimes", "minkowski_distance", "mixing_rms", "percentage_difference",
+    "ResidenceTimes", "flux_residence_time", "minkowski_distance", "mixing_rms", "percentage_difference",
     "residence_times", "residence_times_from_events", "residence_times_from_laps",
     "rtd_histogram",
 ]
