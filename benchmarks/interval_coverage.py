@@ -157,6 +157,7 @@ def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, au
     verdict = assess_adequacy(model, [path], [window],
                               interval=interval if direction == "up" else None)
     out["warnings"] = list(verdict.warnings)
+    out["window_rt_mean"] = verdict.window_rt_mean
     return out
 
 

@@ -374,3 +374,35 @@ def test_sample_length_long_run_from_the_flux_where_the_span_cuts_residences(tmp
     stationary = sample_length(_write(tmp_path / "fast.h5", 0), _space(), lag=0.025, start=0.0)
     assert stationary.sd_judged and 0.0 < stationary.censored_share < 0.3
     assert stationary.long_run_mean == pytest.approx(stationary.long_run_observed_mean, rel=0.05)
+
+
+def test_a_model_that_does_not_carry_its_windows_throughput_warns(runs, tmp_path):
+    from cfbmarkov.analysis.adequacy import THROUGHPUT_LIMIT, window_rt_mean
+
+    # on a stationary chain both estimators keep the window's throughput: the model's E(RT)
+    # equals the window's particle-time over its net passes within a few per cent
+    window = (2.0, 5.0)
+    fast = window_rt_mean([runs["stationary"]], [window], "up")
+    for estimator in ("paper", "mle"):
+        model = fit_model(runs["stationary"], _space(), 0.025, window, estimator)
+        verdict = assess_adequacy(model, [runs["stationary"]], [window])
+        assert verdict.window_rt_mean == pytest.approx(fast)
+        assert abs(verdict.rt_mean / fast - 1) < THROUGHPUT_LIMIT / 3
+        assert not any("net solids flux" in line for line in verdict.warnings)
+    # the fast chain's model judged on the slow chain's window: its E(RT) lies far from the
+    # throughput of the flow it is said to carry, and the line names the numbers and the cure
+    slow_run = _write(tmp_path / "slow.h5", 0, slow=True)
+    slow = window_rt_mean([slow_run], [window], "up")
+    assert slow > 1.3 * fast
+    model = fit_model(runs["stationary"], _space(), 0.025, window, "paper")
+    verdict = assess_adequacy(model, [slow_run], [window])
+    line = next(line for line in verdict.warnings if "net solids flux" in line)
+    assert f"{slow:.3g} s" in line and "--estimator mle" in line
+    assert Adequacy.from_dict(verdict.to_dict()).window_rt_mean == pytest.approx(slow)
+    mle = fit_model(runs["stationary"], _space(), 0.025, window, "mle")
+    line = next(line for line in assess_adequacy(mle, [slow_run], [window]).warnings
+                if "net solids flux" in line)
+    assert "--estimator mle" not in line and "longer window" in line
+    # an open riser has no net flux to compare with
+    open_run = synthetic.write_open_run(tmp_path / "open.h5", SLOW, 200, 2.0)
+    assert np.isnan(window_rt_mean([open_run], [(0.0, 2.0)], "up"))

@@ -46,6 +46,10 @@ class Adequacy:
     runs : tuple of (str, float)
         A pooled fit's runs and the E(RT) (s; NaN where none) of the model fitted on each
         alone; empty for one run.
+    window_rt_mean : float
+        The fitting window's own E(RT) from its net solids flux (particle-time over net
+        passes, several runs' summed; s): NaN for an open riser, a file with absent
+        particles, or a verdict stored without it.
     """
 
     warnings: tuple[str, ...] = ()
@@ -56,6 +60,7 @@ class Adequacy:
     window_length: float = math.nan
     tail_share: float = math.nan
     runs: tuple[tuple[str, float], ...] = ()
+    window_rt_mean: float = math.nan
 
     @property
     def adequate(self) -> bool:
@@ -77,7 +82,8 @@ class Adequacy:
                 "rt_mean": number(self.rt_mean), "spread": number(self.spread),
                 "limit": number(self.limit), "window_length": number(self.window_length),
                 "tail_share": number(self.tail_share),
-                "runs": [{"run": r, "rt_mean": number(m)} for r, m in self.runs]}
+                "runs": [{"run": r, "rt_mean": number(m)} for r, m in self.runs],
+                "window_rt_mean": number(self.window_rt_mean)}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Adequacy":
@@ -107,7 +113,8 @@ class Adequacy:
                        number(data.get("limit")), number(data.get("window_length")),
                        number(data.get("tail_share")),
                        tuple((str(r["run"]), number(r.get("rt_mean")))
-                             for r in data.get("runs", [])))
+                             for r in data.get("runs", [])),
+                       number(data.get("window_rt_mean")))
         except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
             raise InputError(f"adequacy attribute is not a verdict ({exc})") from None
 
