@@ -367,9 +367,12 @@ def test_sample_length_long_run_from_the_flux_where_the_span_cuts_residences(tmp
     assert long_run["rt_sd_judged"] is False
     assert long_run["rt_mean"] == pytest.approx(result.long_run_mean)
     assert long_run["rt_mean_observed"] < long_run["rt_mean"]
+    assert json.loads(out)["verdict"].startswith("0.5 s")
     code, out, _ = run_cli(capsys, "stationarity", path, "--sample-length", "--cells", "6x38",
                            "--estimator", "mle")
     assert code == 0 and "SD(RT) not judged" in out and "from its net solids flux" in out
+    code, _, err = run_cli(capsys, "stationarity", path, "--sample-length", "--judge", "1:2")
+    assert code == 2 and "--judge" in err and err.count("\n") == 1
     # a short-tailed flow's span covers its residences: both figures judged
     stationary = sample_length(_write(tmp_path / "fast.h5", 0), _space(), lag=0.025, start=0.0)
     assert stationary.sd_judged and 0.0 < stationary.censored_share < 0.3
@@ -388,7 +391,7 @@ def test_a_model_that_does_not_carry_its_windows_throughput_warns(runs, tmp_path
         verdict = assess_adequacy(model, [runs["stationary"]], [window])
         assert verdict.window_rt_mean == pytest.approx(fast)
         assert abs(verdict.rt_mean / fast - 1) < THROUGHPUT_LIMIT / 3
-        assert not any("net solids flux" in line for line in verdict.warnings)
+        assert not any("throughput E(RT)" in line for line in verdict.warnings)
     # the fast chain's model judged on the slow chain's window: its E(RT) lies far from the
     # throughput of the flow it is said to carry, and the line names the numbers and the cure
     slow_run = _write(tmp_path / "slow.h5", 0, slow=True)
@@ -396,12 +399,12 @@ def test_a_model_that_does_not_carry_its_windows_throughput_warns(runs, tmp_path
     assert slow > 1.3 * fast
     model = fit_model(runs["stationary"], _space(), 0.025, window, "paper")
     verdict = assess_adequacy(model, [slow_run], [window])
-    line = next(line for line in verdict.warnings if "net solids flux" in line)
-    assert f"{slow:.3g} s" in line and "--estimator mle" in line
+    line = next(line for line in verdict.warnings if "throughput E(RT)" in line)
+    assert f"{slow:.3g} s" in line and "--estimator mle" in line and "% below its" in line
     assert Adequacy.from_dict(verdict.to_dict()).window_rt_mean == pytest.approx(slow)
     mle = fit_model(runs["stationary"], _space(), 0.025, window, "mle")
     line = next(line for line in assess_adequacy(mle, [slow_run], [window]).warnings
-                if "net solids flux" in line)
+                if "throughput E(RT)" in line)
     assert "--estimator mle" not in line and "longer window" in line
     # an open riser has no net flux to compare with
     open_run = synthetic.write_open_run(tmp_path / "open.h5", SLOW, 200, 2.0)

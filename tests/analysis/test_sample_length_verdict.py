@@ -61,3 +61,12 @@ def test_cli_on_a_flow_with_hidden_direction(tmp_path, capsys):
     assert main(["stationarity", str(run), "--sample-length", "--start", "1", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert "SD(RT)" in data["steady_misses"]
+
+
+def test_a_length_only_the_longest_window_meets_is_not_confirmed():
+    r = _result([1.6, 1.4, 1.3, 1.2, 1.05], [1.0, 1.0, 1.0, 1.0, 1.0])
+    assert r.sample_length == 10.0
+    line = verdict_text(r, "cells")
+    assert line.startswith("10 s at most") and "no longer window confirms it" in line
+    assert verdict_text(_result([1.6, 1.4, 1.3, 1.05, 1.0], [1.0] * 5), "cells").startswith(
+        "5 s (from it on")

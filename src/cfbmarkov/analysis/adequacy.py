@@ -136,15 +136,17 @@ def _throughput_line(model, rt_mean: float, window_mean: float,
     gap = rt_mean / window_mean - 1.0
     if abs(gap) <= limit:
         return None
-    cure = ("the paper's estimator averages every frame's matrix alike whatever the cells' "
-            "occupancy: --estimator mle keeps the window's transitions and its throughput"
-            if model.estimator == "paper" else
-            "the window's occupancy is not the chain's stationary one (a flow still changing "
-            f"in the window); {_ADVICE}")
-    return (f"the model's E(RT) {rt_mean:.3g} s lies {100 * gap:+.0f} % from its fitting "
-            f"window's own, {window_mean:.3g} s from the window's net solids flux "
-            f"(particle-time over net passes; limit {100 * limit:.0f} %): the chain does not "
-            f"carry the flow it was fitted on; {cure}")
+    why = ("the paper's estimator averages every frame's matrix alike whatever the cells' "
+           "occupancy (--estimator mle keeps the window's transitions and its throughput)"
+           if model.estimator == "paper" else
+           "the window's occupancy is not the chain's stationary one (a flow still changing "
+           "in the window)")
+    side = "above" if gap > 0 else "below"
+    return (f"the model's E(RT) {rt_mean:.3g} s lies {100 * abs(gap):.0f} % {side} its "
+            f"fitting window's own throughput E(RT), {window_mean:.3g} s (the window's "
+            f"particle-time over its net passes; limit {100 * limit:.0f} %): the chain does "
+            f"not carry the flow it was fitted on; {why}. The window's own flow may itself "
+            f"lie far from the run's long run: {_ADVICE}")
 
 
 def _split(window: tuple[float, float], n: int) -> list[tuple[float, float]]:
@@ -292,9 +294,10 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     rt_mean = _rt_mean(model)
     if interval is None and uncertainty is not None:
         interval = uncertainty.rt_mean_interval
-    limit = tolerance
+    limit, limit_source = tolerance, ", the default tolerance"
     if interval is not None and rt_mean > 0 and all(map(math.isfinite, interval)):
         limit = (float(interval[1]) - float(interval[0])) / rt_mean
+        limit_source = ", the relative width of the model's E(RT) interval"
     lines: list[str] = []
     all_parts: list[tuple[float, float, float, str]] = []
     spread = math.nan
@@ -329,8 +332,11 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
             kind = "quarters" if len(parts) == 4 else "halves"
             lines.append(f"the {kind} of the fitting window of {name} disagree: E(RT) {text}, "
                          f"a spread of {100 * part_spread:.0f} % of the model's {rt_mean:.3g} s "
-                         f"(limit {100 * part_limit:.0f} %): the flow changed within the "
-                         f"window, and the model may lie far from the flow's long run; {_ADVICE}")
+                         f"(limit {100 * part_limit:.0f} %{limit_source}"
+                         f"{' times sqrt(2) for quarters' if len(parts) == 4 else ''}"
+                         f"{f' times sqrt({len(runs)}) for one of {len(runs)} runs' if pooled else ''}"
+                         f"): the flow changed within the window, and the model may lie far "
+                         f"from the flow's long run; {_ADVICE}")
     run_means: tuple[tuple[str, float], ...] = ()
     if pooled:
         run_means, pooled_lines, pooled_spread = _pooled_checks(

@@ -215,6 +215,10 @@ def verdict_text(result: SampleLength, states: str) -> str:
     tol = 100 * result.tolerance
     if np.isfinite(result.sample_length):
         figures = "E(RT) and SD(RT) lie" if result.sd_judged else "E(RT) lies"
+        if result.sample_length == result.lengths[-1] and result.lengths.size > 1:
+            return (f"{result.sample_length:g} s at most: only the longest window's {figures} "
+                    f"within {tol:g} % of the long run's, and no longer window confirms it "
+                    "(a longer run, or pool runs with fit A B ...)")
         return (f"{result.sample_length:g} s (from it on, every window's {figures} "
                 f"within {tol:g} % of the long run's)")
     longest = result.lengths[-1]
@@ -229,8 +233,9 @@ def verdict_text(result: SampleLength, states: str) -> str:
                 if f not in steady and not np.isfinite(result.settled_from(f))]
     said = " but ".join(p for p in (", ".join(settles), " and ".join(stays)) if p)
     said = f": {said}" if said else ""
-    memory = ("with memory (fit --states auto; here --states cells-direction)"
-              if states == "cells" else "with more memory (fit --states auto)")
+    memory = ("with memory (fit --states auto chooses one, e.g. --states cells-direction or "
+              "cells-previous; try it here with --states)"
+              if states == "cells" else "with more memory (fit --states auto chooses one)")
     if steady and not drifting:
         return (f"not reached within {longest:g} s{said}: a longer run does not cure that; a "
                 f"state space {memory} does")

@@ -347,6 +347,10 @@ def _sample_length(args) -> int:
     from cfbmarkov.markov import state_space_from_name
     from cfbmarkov.trajectories import Trajectories
 
+    if args.judge is not None:
+        raise InputError("--judge compares one window with the run's long run in the sliding "
+                         "windows' table; --sample-length fits models on growing windows "
+                         "instead: give one of them")
     columns, rows = args.cells[0], args.cells[-1]
     depth = args.cells[1] if len(args.cells) == 3 else None
     with Trajectories(args.file[0]) as run:
@@ -363,7 +367,8 @@ def _sample_length(args) -> int:
                            estimator=args.estimator, tolerance=args.tolerance,
                            stop=None if args.span is None else args.span[1])
     if args.json:
-        print(json.dumps(result.to_dict(), indent=1, allow_nan=False))
+        print(json.dumps(result.to_dict() | {"verdict": verdict_text(result, args.states)},
+                         indent=1, allow_nan=False))
         return 0
 
     def value(v):
@@ -376,10 +381,12 @@ def _sample_length(args) -> int:
               f"net solids flux; its {result.long_run_count} complete residences: mean "
               f"{value(result.long_run_observed_mean)} s, SD(RT) {value(result.long_run_sd)} s")
         cut = (f"{100 * result.censored_share:.0f} % of the span's particle-time lies "
-               "outside them")
+               "outside its complete residences")
         shortfall = 100 * (1 - result.long_run_observed_mean / result.long_run_mean)
         if result.sd_judged:
-            print(f"  ({cut}; docs/definitions.md, Sample length)")
+            print(f"  (SD(RT) judged: the complete residences' mean lies {shortfall:.0f} % "
+                  f"below the flux's E(RT), within the tolerance; {cut}; "
+                  "docs/definitions.md, Sample length)")
         else:
             print(f"  (SD(RT) not judged: their mean lies {shortfall:.0f} % below the flux's "
                   f"E(RT), more than the tolerance, and {cut}: the span cuts the long "
