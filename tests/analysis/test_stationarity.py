@@ -53,6 +53,13 @@ def test_window_statistics_are_each_windows_residence_times(tmp_path):
         summary = stats.summary()
         assert summary["windows"][0] == [0.5, 1.5] and len(summary["rt_mean"]) == 6
         json.dumps(summary)
+        # each window's flux E(RT): its particle-time over its net passes, by hand
+        times = np.asarray(traj.times)
+        for start, flux in zip(stats.starts, stats.flux_rt_mean):
+            i, j = (int(np.argmin(np.abs(times - t))) for t in (start, start + 1.0))
+            passes = (traj.laps(j).astype(np.int64) - traj.laps(i).astype(np.int64)).sum()
+            assert flux == pytest.approx(traj.n_particles * (times[j] - times[i]) / passes)
+        assert summary["flux_rt_mean"] == pytest.approx(list(stats.flux_rt_mean))
 
 
 def test_a_surging_flow_scatters_more_than_a_steady_one(tmp_path):
@@ -121,6 +128,7 @@ def test_cli_prints_the_windows_and_the_judged_window(tmp_path, capsys):
     assert main(["stationarity", str(path), "--window-length", "1", "--judge", "3:4"]) == 0
     text = capsys.readouterr().out
     assert "relative SD" in text and "long run" in text and "persistence" in text
+    assert "flux E(RT) (s)" in text and "net passes" in text
 
 
 def test_cli_refuses_a_window_longer_than_the_file_in_one_line(tmp_path, capsys):
@@ -137,6 +145,7 @@ def test_an_open_riser_counts_entries_to_exits_in_each_window(tmp_path):
     with Trajectories(path) as traj:
         stats = window_statistics(traj, window_length=2.0, step=2.0)
         assert stats.starts.size == 3 and stats.direction == ("up",) * 3
+        assert stats.flux_rt_mean is None and stats.summary()["flux_rt_mean"] is None
         for start, count, mean in zip(stats.starts, stats.rt_count, stats.rt_mean):
             rt = residence_times(traj, (start, start + 2.0), use_events=False)
             assert count == rt.count > 10 and mean == pytest.approx(rt.mean, rel=1e-12)

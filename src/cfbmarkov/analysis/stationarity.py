@@ -30,8 +30,9 @@ import numpy as np
 from cfbmarkov._json import jsonable
 from cfbmarkov.analysis.baseline import WindowDifference, window_difference
 from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
-from cfbmarkov.observed.residence import (ResidenceTimes, net_flow_direction, residence_times,
-                                    rtd_histogram)
+from cfbmarkov.observed.residence import (ResidenceTimes, flux_residence_time,
+                                          net_flow_direction, residence_times,
+                                          rtd_histogram)
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 
@@ -61,6 +62,12 @@ class WindowStatistics:
         downflow).
     exact : bool
         Whether the samples come from the file's exact pass events (else frames).
+    flux_rt_mean : numpy.ndarray, shape (n,), or None
+        Each window's E(RT) from its net solids flux, particle-time over net passes in its
+        direction (s; docs/definitions.md, Long-run E(RT)): the flow's mean residence time
+        over the window, which the window's length does not censor as it does ``rt_mean``;
+        ``inf`` where no net pass runs that way; None for an open riser or a file with
+        absent particles.
     """
 
     window_length: float
@@ -71,6 +78,7 @@ class WindowStatistics:
     rt_count: np.ndarray
     direction: tuple[str, ...]
     exact: bool
+    flux_rt_mean: np.ndarray | None = None
 
     @staticmethod
     def _relative_sd(values: np.ndarray) -> float:
@@ -121,7 +129,9 @@ class WindowStatistics:
                 "rt_mean": finite(self.rt_mean), "rt_sd": finite(self.rt_sd),
                 "rt_count": [int(c) for c in self.rt_count], "direction": list(self.direction),
                 "relative_sd_rt_mean": finite([self.relative_sd_rt_mean])[0],
-                "relative_sd_rt_sd": finite([self.relative_sd_rt_sd])[0]}
+                "relative_sd_rt_sd": finite([self.relative_sd_rt_sd])[0],
+                "flux_rt_mean": (None if self.flux_rt_mean is None
+                                 else finite(self.flux_rt_mean))}
 
 
 def _span(traj, span: tuple[float, float] | None) -> tuple[float, float]:
@@ -212,7 +222,8 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
         raise InputError(f"frames every {lag_frames * traj.frame_interval:g} s leave no residence "
                          f"time inside a {length:g} s window: a lag shorter than the window")
     starts = np.round(a + step * np.arange(count), 9)    # no 0.30000000000000004 s
-    means, sds, counts, directions = [], [], [], []
+    means, sds, counts, directions, fluxes = [], [], [], [], []
+    with_flux = not (traj.boundary.is_open or traj.has_absences)
     exact = False
     for start in starts:
         window = (float(start), float(start + length))
@@ -223,10 +234,13 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
         sds.append(rt.sd)
         counts.append(rt.count)
         directions.append(d)
+        if with_flux:
+            fluxes.append(flux_residence_time(traj, window, d))
         exact = rt.exact
     return WindowStatistics(length, step, starts, np.asarray(means, float),
                             np.asarray(sds, float), np.asarray(counts, np.int64),
-                            tuple(directions), exact)
+                            tuple(directions), exact,
+                            np.asarray(fluxes, float) if with_flux else None)
 
 
 def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, float] | None

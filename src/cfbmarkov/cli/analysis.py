@@ -298,18 +298,25 @@ def cmd_stationarity(args) -> int:
     basis_text = ("exact pass events" if check.exact_events else f"frames every {bin_width:g} s")
     print(f"{args.file}: {stats.starts.size} windows of {length:g} s, {stats.step:g} s apart, "
           f"residence times from {basis_text}")
+    flux = stats.flux_rt_mean
     print(f"{'window (s)':>13}  {'direction':>9}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  "
-          f"{'residences':>10}")
-    for a, m, sd, n, d in zip(stats.starts, stats.rt_mean, stats.rt_sd, stats.rt_count,
-                              stats.direction):
+          f"{'residences':>10}" + ("" if flux is None else f"  {'flux E(RT) (s)':>14}"))
+    for k, (a, m, sd, n, d) in enumerate(zip(stats.starts, stats.rt_mean, stats.rt_sd,
+                                             stats.rt_count, stats.direction)):
         span_text = f"{a:g}-{a + length:g}"
-        print(f"{span_text:>13}  {d:>9}  {value(m):>9}  {value(sd):>10}  {n:10d}")
+        print(f"{span_text:>13}  {d:>9}  {value(m):>9}  {value(sd):>10}  {n:10d}"
+              + ("" if flux is None else f"  {value(flux[k]):>14}"))
     print(f"E(RT) {value(stats.average_rt_mean)} s on average, relative SD "
           f"{value(100 * stats.relative_sd_rt_mean, '.1f')} %; SD(RT) "
           f"{value(stats.average_rt_sd)} s, relative SD "
           f"{value(100 * stats.relative_sd_rt_sd, '.1f')} % (the scatter of one {length:g} s "
           "window about the run's average: a stationary prediction of a given window carries "
           "about as much)")
+    if flux is not None:
+        print(f"(E(RT), SD(RT): of the residences wholly inside each window, which leaves out "
+              f"those longer than {length:g} s; flux E(RT): the window's particle-time over its "
+              "net passes, the flow's mean residence time without that cut; "
+              "docs/definitions.md, Long-run E(RT))")
     few = int(np.sum(stats.rt_count < FEW_RESIDENCES))
     if few:
         print(f"note: {few} of {stats.starts.size} windows hold fewer than {FEW_RESIDENCES} "
