@@ -319,10 +319,7 @@ def main(argv=None) -> int:
         except CfbmarkovError as exc:
             print(f"coverage: {exc}", file=sys.stderr)
             return 2
-        Path(args.output).write_text(json.dumps(jsonable(result), indent=1, allow_nan=False))
-        _print_table(result)
-        print(args.output)
-        return 0
+        return _write(result, args.output)
     try:
         lengths = [float(v) for v in args.lengths.split(",")]
         cells = tuple(int(v) for v in args.cells.lower().split("x")) if args.cells else None
@@ -356,9 +353,14 @@ def main(argv=None) -> int:
     except CfbmarkovError as exc:
         print(f"coverage: {exc}", file=sys.stderr)
         return 2
-    Path(args.output).write_text(json.dumps(jsonable(result), indent=1, allow_nan=False))
+    return _write(result, args.output)
+
+
+def _write(result: dict, output: str) -> int:
+    """Write the study's JSON, print its table and the file's name; 0."""
+    Path(output).write_text(json.dumps(jsonable(result), indent=1, allow_nan=False))
     _print_table(result)
-    print(args.output)
+    print(output)
     return 0
 
 
