@@ -392,6 +392,8 @@ def test_a_model_that_does_not_carry_its_windows_throughput_warns(runs, tmp_path
         assert verdict.window_rt_mean == pytest.approx(fast)
         assert abs(verdict.rt_mean / fast - 1) < THROUGHPUT_LIMIT / 3
         assert not any("throughput E(RT)" in line for line in verdict.warnings)
+        assert f"fitting window's own E(RT): {fast:.4g} s" in model.with_adequacy(
+            verdict).summary()
     # the fast chain's model judged on the slow chain's window: its E(RT) lies far from the
     # throughput of the flow it is said to carry, and the line names the numbers and the cure
     slow_run = _write(tmp_path / "slow.h5", 0, slow=True)

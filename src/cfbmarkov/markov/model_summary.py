@@ -205,6 +205,11 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
                          f"SD(RT) = {r.sd:.4g} s")
     except Exception as exc:  # a model without exits still has a summary
         lines.append(f"  exact residence time: none ({exc})")
+    own = None if model.adequacy is None else model.adequacy.window_rt_mean
+    if own is not None and np.isfinite(own):
+        lines.append(f"    the fitting window's own E(RT): {own:.4g} s (its particle-time over "
+                     "its net passes, the throughput the chain should carry; the verdict "
+                     "warns beyond 10 %)")
     return "\n".join(lines)
 
 
