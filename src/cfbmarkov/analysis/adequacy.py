@@ -69,8 +69,8 @@ TAIL_LIMIT = 0.1
 #: relative distance of the model's E(RT) from its window's own (from the net flux) beyond
 #: which the chain does not carry the window's flow. Both are read from the same data: on
 #: stationary generated risers both estimators agree within 2 %; on paper-scale CFD-DEM
-#: windows of 2 and 5 s the maximum-likelihood chain was within 10 % in 37 of 48, the
-#: paper's estimator in 6 of 24 at 3-4 m/s (docs/definitions.md, Sample adequacy)
+#: windows of 2 and 5 s the maximum-likelihood chain was within 10 % in 36 of 48, the
+#: paper's estimator in 5 of 24 at 3-4 m/s (docs/definitions.md, Sample adequacy)
 THROUGHPUT_LIMIT = 0.1
 
 _ADVICE = ("fit on a longer window or pool several runs (fit A.h5 B.h5 ...); `cfbmarkov "
