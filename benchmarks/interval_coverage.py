@@ -2,7 +2,7 @@
 
     python benchmarks/interval_coverage.py RUN.h5 [RUN.h5 ...] [--lengths 0.5,1,2,5] [--starts 6]
                                   [--settle 10] [--cells 4x12] [--lag 0.01] [--auto] [--estimator mle]
-                                  [--resamples 100] [--level 0.9] [-o coverage.json]
+                                  [--resamples 100] [--level 0.9] [--pool] [-o coverage.json]
 
 For each run and each window length L, six fitting windows (``--starts``) start at times
 spread evenly from the settling time (``--settle``) to the run's last frame minus L. On
@@ -38,7 +38,10 @@ of intervals holding the long-run value; the median relative width of the interv
 fits more than 50 % off the long run and how many of them printed a verdict warning (any
 line of the sample's verdict; ``warned`` counts them). The JSON (``-o``) holds every fit.
 ``--rescore STUDY.json`` forms the references again for the fits of an earlier study's JSON
-(the runs given as in that study) and prints its table without fitting again.
+(the runs given as in that study) and prints its table without fitting again. ``--pool``
+takes the runs as independent runs of one case: each window, the same in every run, is
+fitted on all of them pooled (``fit A.h5 B.h5 ... --window A:B``), and the long run is all
+their rests pooled (:func:`pooled_study`).
 """
 
 from __future__ import annotations
@@ -58,18 +61,19 @@ from cfbmarkov.analysis.intervals import model_intervals
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov import fit_model
 from cfbmarkov.markov.states import CellGrid
-from cfbmarkov.observed.residence import net_flow_direction, residence_flux
+from cfbmarkov.observed.residence import net_flow_direction, net_passes, residence_flux
 from cfbmarkov.trajectories import Trajectories
 
 #: a fit this far from the long run (relative) must warn
 OFF = 0.5
 
 
-def residence_intervals(traj, span: tuple[float, float], lag: float) -> np.ndarray:
+def residence_intervals(traj, span: tuple[float, float], lag: float,
+                        direction: str | None = None) -> np.ndarray:
     """Every residence of a periodic run in ``span``: (entry, exit) times, float [K, 2].
 
     From the lap counters of every ``lag_frames``-th frame of the span from its first, in
-    the span's net solids flow direction: a record is a frame at which a particle's lap
+    ``direction`` (default the span's net solids flow direction): a record is a frame at which a particle's lap
     counter first exceeds its running maximum (twice, at the same time, if it jumped by
     two), and a residence runs from one record of a particle to its next; the samples are
     those of :func:`cfbmarkov.observed.residence.residence_times` over the span, with
@@ -82,7 +86,8 @@ def residence_intervals(traj, span: tuple[float, float], lag: float) -> np.ndarr
     step = traj.lag_frames(lag)
     picked = slice(frames.start, frames.stop, step)
     times = np.asarray(traj.times[picked], dtype=np.float64)
-    sign = 1 if net_flow_direction(traj, span) == "up" else -1
+    direction = net_flow_direction(traj, span) if direction is None else direction
+    sign = 1 if direction == "up" else -1
     laps = sign * np.asarray(traj.laps(picked), dtype=np.int64)
     top = np.maximum.accumulate(laps, axis=0)
     new = np.diff(top, axis=0)                            # new levels per frame, [T - 1, N]
@@ -159,6 +164,85 @@ def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, au
     out["warnings"] = list(verdict.warnings)
     out["window_rt_mean"] = verdict.window_rt_mean
     return out
+
+
+def pooled_study(runs, *, lengths, starts: int, settle: float, cells, lag, level: float,
+                 resamples: int, estimator: str | None = None, progress=None) -> dict:
+    """``--pool``: the runs are of one case, and each window (the same in every run, from
+    the settling time to the shortest run's end) is fitted on all of them pooled, as
+    ``fit A.h5 B.h5 ... --window A:B`` does, with its interval and verdict; the long run
+    is every run's rest pooled (their residences outside the window, and their
+    particle-time over their net passes there), counted in the pooled span's net flow
+    direction."""
+    import contextlib
+
+    from cfbmarkov.markov.estimate import estimator_from_name
+    from cfbmarkov.markov.pooling import discretize_runs
+
+    paths = [Path(name) for name in runs]
+    case = _case_markov(paths[0])
+    columns, rows = cells or (case.get("columns", 6), case.get("rows", 38))
+    run_lag = lag or case.get("lag", 0.025)
+    fits = []
+    with contextlib.ExitStack() as stack:
+        trajs = [stack.enter_context(Trajectories(p)) for p in paths]
+        if any(t.boundary.is_open for t in trajs):
+            raise InputError("--pool reads periodic risers' lap counters (an open riser has "
+                             "none)")
+        a0 = max(max(float(t.times[0]) for t in trajs), settle)
+        last = min(float(t.times[-1]) for t in trajs)
+        direction = "up" if sum(net_passes(t, (a0, last)) for t in trajs) >= 0 else "down"
+        residences = [residence_intervals(t, (a0, last), run_lag, direction) for t in trajs]
+        space = CellGrid(columns, rows, trajs[0].width, trajs[0].height)
+        if estimator is None:
+            estimator = "paper"
+        fitter = estimator_from_name(estimator, space, run_lag)
+        for length in lengths:
+            if a0 + length > last + 1e-9:
+                continue
+            for start in np.linspace(a0, last - length, starts):
+                window = (round(float(start), 6), round(float(start) + length, 6))
+                reference = np.concatenate([long_run_outside(r, window) for r in residences])
+                particle_time, passes = 0.0, 0
+                for t in trajs:
+                    for lo, hi in ((a0, window[0]), (window[1], last)):
+                        if hi - lo >= float(t.frame_interval) - 1e-9:
+                            part = residence_flux(t, (lo, hi), direction)
+                            particle_time += part[0]
+                            passes += part[1]
+                t0 = time.perf_counter()
+                fit = {"window": list(window)}
+                try:
+                    model = fitter.fit(discretize_runs(trajs, space, run_lag, [window]))
+                    fit["states"] = model.state_space.describe()
+                    fit["rt_mean"] = float(model.rtd(None, direction).mean)
+                    fit["direction"] = direction
+                    interval = None
+                    try:
+                        u = model_intervals(model, level=level, resamples=resamples,
+                                            direction=direction)
+                        interval = u.rt_mean_interval
+                        fit["rt_mean_interval"] = list(interval)
+                    except CfbmarkovError as exc:
+                        fit["interval_error"] = str(exc)
+                    verdict = assess_adequacy(model, trajs, [window] * len(trajs),
+                                              interval=interval if direction == "up" else None)
+                    fit["warnings"] = list(verdict.warnings)
+                    fit["window_rt_mean"] = verdict.window_rt_mean
+                except CfbmarkovError as exc:     # kept, and left out of the table
+                    fit["error"] = str(exc)
+                fit.update(run=", ".join(str(p) for p in paths), model=f"pool{len(paths)}",
+                           length=float(length),
+                           long_run=float(reference.mean()) if reference.size else None,
+                           long_run_count=int(reference.size),
+                           long_run_flux=particle_time / passes if passes > 0 else None,
+                           seconds=time.perf_counter() - t0)
+                fits.append(fit)
+                if progress:
+                    progress(fit)
+    return {"level": level, "resamples": resamples, "settle": settle, "estimator": estimator,
+            "lag": lag, "lengths": list(lengths), "starts": starts, "off": OFF,
+            "pooled": [str(p) for p in paths], "table": table(fits), "fits": fits}
 
 
 #: the references: the fits' key of each and its suffix in the table's keys
@@ -306,6 +390,9 @@ def main(argv=None) -> int:
     p.add_argument("--resamples", type=int, default=100, help="bootstrap resamples (100)")
     p.add_argument("-o", "--output", default="coverage.json", help="JSON of every fit")
     p.add_argument("-q", "--quiet", action="store_true", help="no line per fit on stderr")
+    p.add_argument("--pool", action="store_true",
+                   help="the runs are of one case: fit every window on all of them pooled "
+                        "(fit A.h5 B.h5 ...), the long run their rests pooled")
     p.add_argument("--rescore", default=None, metavar="STUDY.json",
                    help="form the references again for an earlier study's fits (its runs "
                         "given) and print its table, without fitting; -o writes it")
@@ -320,6 +407,10 @@ def main(argv=None) -> int:
             print(f"coverage: {exc}", file=sys.stderr)
             return 2
         return _write(result, args.output)
+    if args.pool and args.auto:
+        print("coverage: --pool fits the paper's cells (--cells) on the runs pooled; --auto "
+              "is of single runs", file=sys.stderr)
+        return 2
     try:
         lengths = [float(v) for v in args.lengths.split(",")]
         cells = tuple(int(v) for v in args.cells.lower().split("x")) if args.cells else None
@@ -346,10 +437,16 @@ def main(argv=None) -> int:
                   f"{fit['seconds']:.1f} s", file=sys.stderr, flush=True)
 
     try:
-        result = study(args.runs, lengths=lengths, starts=args.starts, settle=args.settle,
-                       cells=cells, lag=args.lag, auto=args.auto, level=args.level,
-                       resamples=args.resamples, estimator=args.estimator,
-                       progress=progress)
+        if args.pool:
+            result = pooled_study(args.runs, lengths=lengths, starts=args.starts,
+                                  settle=args.settle, cells=cells, lag=args.lag,
+                                  level=args.level, resamples=args.resamples,
+                                  estimator=args.estimator, progress=progress)
+        else:
+            result = study(args.runs, lengths=lengths, starts=args.starts, settle=args.settle,
+                           cells=cells, lag=args.lag, auto=args.auto, level=args.level,
+                           resamples=args.resamples, estimator=args.estimator,
+                           progress=progress)
     except CfbmarkovError as exc:
         print(f"coverage: {exc}", file=sys.stderr)
         return 2

@@ -85,3 +85,39 @@ def test_study_table_and_json(coverage, run, tmp_path, capsys):
     assert "not a study's JSON" in capsys.readouterr().err
     assert coverage.main([str(run), "--lengths", "0,1", "-o", str(out)]) == 2
     assert "--lengths" in capsys.readouterr().err
+
+
+def test_pooled_study_fits_every_window_on_all_runs(coverage, run, tmp_path, capsys):
+    second = synthetic.write_run(tmp_path / "second.h5", FLOW, 200, 6.0, seed=5)
+    out = tmp_path / "pool.json"
+    assert coverage.main([str(run), str(second), "--pool", "--settle", "0.5", "--cells",
+                          "3x8", "--lag", "0.05", "--lengths", "2", "--starts", "2",
+                          "--resamples", "10", "-q", "-o", str(out)]) == 0
+    data = json.loads(out.read_text())
+    assert [r["model"] for r in data["table"]] == ["pool2"] and len(data["fits"]) == 2
+    from cfbmarkov.markov.estimate import estimator_from_name
+    from cfbmarkov.markov.pooling import discretize_runs
+
+    space = synthetic.RiserFlow(columns=3, rows=8).grid
+    fitter = estimator_from_name("paper", space, 0.05)
+    with Trajectories(run) as a, Trajectories(second) as b:
+        for fit in data["fits"]:
+            window = tuple(fit["window"])
+            # the model fit A B --window makes, on both runs' counts
+            pooled = fitter.fit(discretize_runs([a, b], space, 0.05, [window]))
+            assert fit["rt_mean"] == pytest.approx(pooled.rtd().mean, rel=1e-12)
+            single = fitter.fit(discretize_runs([a], space, 0.05, [window]))
+            assert fit["rt_mean"] != pytest.approx(single.rtd().mean, rel=1e-6)
+            lo, hi = fit["rt_mean_interval"]
+            assert lo <= fit["rt_mean"] <= hi
+            # the flux long run: both runs' particle-time outside the window over their
+            # net passes there
+            times = np.asarray(a.times)
+            frames = [int(np.argmin(np.abs(times - t))) for t in (0.5, *window, times[-1])]
+            passes = sum((t.laps(frames[1]).astype(np.int64) - t.laps(frames[0])).sum()
+                         + (t.laps(frames[3]).astype(np.int64) - t.laps(frames[2])).sum()
+                         for t in (a, b))
+            span = (window[0] - 0.5) + (times[-1] - window[1])
+            assert fit["long_run_flux"] == pytest.approx(2 * 200 * span / passes)
+    assert coverage.main([str(run), str(second), "--pool", "--auto", "-o", str(out)]) == 2
+    assert "--pool" in capsys.readouterr().err
