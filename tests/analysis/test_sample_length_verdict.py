@@ -70,3 +70,10 @@ def test_a_length_only_the_longest_window_meets_is_not_confirmed():
     assert line.startswith("10 s at most") and "no longer window confirms it" in line
     assert verdict_text(_result([1.6, 1.4, 1.3, 1.05, 1.0], [1.0] * 5), "cells").startswith(
         "5 s (from it on")
+
+
+def test_a_figure_within_only_at_the_longest_window_is_said_so():
+    r = _result([1.6, 1.4, 1.3, 1.2, 1.05], [0.44, 0.45, 0.43, 0.44, 0.44])
+    line = verdict_text(r, "cells")
+    assert "E(RT) lies within 10 % at the longest window (10 s) only" in line
+    assert "settles" not in line
