@@ -107,18 +107,18 @@ def long_run_outside(residences: np.ndarray, window: tuple[float, float]) -> np.
     return residences[keep, 1] - residences[keep, 0]
 
 
-def flux_outside(traj, window: tuple[float, float], span: tuple[float, float],
+def flux_outside(trajs, window: tuple[float, float], span: tuple[float, float],
                  direction: str) -> float | None:
     """The flux long run outside ``window``: the particle-time of the parts of ``span``
-    before and after it over their net passes in ``direction`` (s; None where they have
-    none)."""
+    before and after it over their net passes in ``direction``, summed over ``trajs`` (one
+    open run, or several of one case; s; None where they have none)."""
     particle_time, passes = 0.0, 0
-    step = float(traj.frame_interval)
-    for lo, hi in ((span[0], window[0]), (window[1], span[1])):
-        if hi - lo >= step - 1e-9:
-            part = residence_flux(traj, (lo, hi), direction)
-            particle_time += part[0]
-            passes += part[1]
+    for traj in (trajs if isinstance(trajs, (list, tuple)) else [trajs]):
+        for lo, hi in ((span[0], window[0]), (window[1], span[1])):
+            if hi - lo >= float(traj.frame_interval) - 1e-9:
+                part = residence_flux(traj, (lo, hi), direction)
+                particle_time += part[0]
+                passes += part[1]
     return particle_time / passes if passes > 0 else None
 
 
@@ -203,13 +203,7 @@ def pooled_study(runs, *, lengths, starts: int, settle: float, cells, lag, level
             for start in np.linspace(a0, last - length, starts):
                 window = (round(float(start), 6), round(float(start) + length, 6))
                 reference = np.concatenate([long_run_outside(r, window) for r in residences])
-                particle_time, passes = 0.0, 0
-                for t in trajs:
-                    for lo, hi in ((a0, window[0]), (window[1], last)):
-                        if hi - lo >= float(t.frame_interval) - 1e-9:
-                            part = residence_flux(t, (lo, hi), direction)
-                            particle_time += part[0]
-                            passes += part[1]
+                flux = flux_outside(trajs, window, (a0, last), direction)
                 t0 = time.perf_counter()
                 fit = {"window": list(window)}
                 try:
@@ -235,7 +229,7 @@ def pooled_study(runs, *, lengths, starts: int, settle: float, cells, lag, level
                            length=float(length),
                            long_run=float(reference.mean()) if reference.size else None,
                            long_run_count=int(reference.size),
-                           long_run_flux=particle_time / passes if passes > 0 else None,
+                           long_run_flux=flux,
                            seconds=time.perf_counter() - t0)
                 fits.append(fit)
                 if progress:
@@ -284,6 +278,9 @@ def rescore(study_json: dict, runs, lag: float | None = None) -> dict:
     """An earlier study's fits with both references formed again from ``runs`` (matched to
     the fits by file name; the lag ``lag``, else the study's, else the run's case.json's,
     else 0.025 s), and its table."""
+    if study_json.get("pooled"):
+        raise InputError("--rescore forms the references of a study of single runs; a --pool "
+                         "study's are formed as it runs: run it again with --pool")
     paths = {Path(name).name: Path(name) for name in runs}
     fits = study_json["fits"]
     for name in sorted({Path(f["run"]).name for f in fits}):
@@ -400,11 +397,11 @@ def main(argv=None) -> int:
     if args.rescore:
         try:
             result = rescore(json.loads(Path(args.rescore).read_text()), args.runs, args.lag)
-        except (OSError, ValueError, KeyError) as exc:
-            print(f"coverage: {args.rescore} is not a study's JSON ({exc})", file=sys.stderr)
-            return 2
         except CfbmarkovError as exc:
             print(f"coverage: {exc}", file=sys.stderr)
+            return 2
+        except (OSError, ValueError, KeyError) as exc:
+            print(f"coverage: {args.rescore} is not a study's JSON ({exc})", file=sys.stderr)
             return 2
         return _write(result, args.output)
     if args.pool and args.auto:

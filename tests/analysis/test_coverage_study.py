@@ -121,3 +121,6 @@ def test_pooled_study_fits_every_window_on_all_runs(coverage, run, tmp_path, cap
             assert fit["long_run_flux"] == pytest.approx(2 * 200 * span / passes)
     assert coverage.main([str(run), str(second), "--pool", "--auto", "-o", str(out)]) == 2
     assert "--pool" in capsys.readouterr().err
+    assert coverage.main([str(run), str(second), "--rescore", str(out), "-o",
+                          str(tmp_path / "again.json")]) == 2
+    assert "run it again with --pool" in capsys.readouterr().err

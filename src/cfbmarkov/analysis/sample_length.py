@@ -89,12 +89,18 @@ class SampleLength:
     censored_share: float = math.nan
 
     @property
+    def observed_shortfall(self) -> float:
+        """How far the mean of the long run's complete residences lies below its E(RT),
+        1 - ``long_run_observed_mean`` / ``long_run_mean`` (-; 0 for an open riser, NaN
+        where not measured)."""
+        return 1.0 - self.long_run_observed_mean / self.long_run_mean
+
+    @property
     def sd_judged(self) -> bool:
         """Whether SD(RT) is judged: the mean of the long run's complete residences lies
-        within the tolerance of its E(RT) (always for an open riser, whose long run is its
-        residences)."""
-        shortfall = 1.0 - self.long_run_observed_mean / self.long_run_mean
-        return not shortfall > self.tolerance
+        within the tolerance of its E(RT) (:attr:`observed_shortfall`; always for an open
+        riser, whose long run is its residences)."""
+        return not self.observed_shortfall > self.tolerance
 
     def deviations(self) -> tuple[np.ndarray, np.ndarray]:
         """Each window's E(RT) and SD(RT) relative to the long run's, minus 1 (NaN where

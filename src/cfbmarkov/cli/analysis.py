@@ -389,7 +389,7 @@ def _sample_length(args) -> int:
               f"{value(result.long_run_observed_mean)} s, SD(RT) {value(result.long_run_sd)} s")
         cut = (f"{100 * result.censored_share:.0f} % of the span's particle-time lies "
                "outside its complete residences")
-        shortfall = 100 * (1 - result.long_run_observed_mean / result.long_run_mean)
+        shortfall = 100 * result.observed_shortfall
         if result.sd_judged:
             print(f"  (SD(RT) judged: the complete residences' mean lies {shortfall:.0f} % "
                   f"below the flux's E(RT), within the tolerance; {cut}; "
