@@ -4,6 +4,7 @@ names options the verb has; lists of files are printed as names."""
 
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -176,3 +177,26 @@ def test_history_advice_names_the_verbs_own_option(model, capsys):
         assert err.count("\n") == 1 and err.rstrip().endswith(expected), err
         for where, option in _advised(err, verb):
             assert option in _options(where), f"{verb}: advises {where} {option}: {err}"
+
+
+def test_sample_length_without_a_start_begins_where_the_history_is(model, capsys):
+    """``stationarity --sample-length`` names no start by default: a memory state space then
+    starts the windows at the first frame with its history, says so on stderr, and gives
+    the table that ``--start`` there gives."""
+    run = str(model.parent / "run.h5")
+    argv = [run, "--sample-length", "--states", "cells-direction", "--cells", "4x8", "--lag",
+            "0.05", "--json"]
+    assert main(["stationarity", *argv]) == 0
+    out, err = capsys.readouterr()
+    assert err == ("note: the windows start at 0.05 s, the first frame with the history that "
+                   "cells-direction needs (--start sets another)\n")
+    assert main(["stationarity", *argv, "--start", "0.05"]) == 0
+    again, err = capsys.readouterr()
+    assert json.loads(out) == json.loads(again) and err == ""
+
+
+def test_a_model_file_for_a_trajectory_names_the_fix(model, capsys):
+    assert main(["stationarity", str(model)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "a cfbmarkov model file, not a trajectory file; give a " \
+        "trajectory file" in err and "cfbmarkov info MODEL" in err

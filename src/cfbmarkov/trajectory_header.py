@@ -165,7 +165,9 @@ def read_header(f: h5py.File, path: Path) -> TrajectoryHeader:
         fmt = fmt.decode()
     if fmt != FORMAT:
         if fmt == "cfbmarkov.model":
-            raise InputError(f"{path}: a cfbmarkov model file, not a trajectory file")
+            raise InputError(f"{path}: a cfbmarkov model file, not a trajectory file; give "
+                             "a trajectory file (a run, an imported file or a prediction), "
+                             "such as the one `cfbmarkov info MODEL` names as the source")
         raise InputError(f"{path}: not a cfbmarkov trajectory file "
                          + (f"(format attribute is {fmt!r})" if fmt else "(no 'format' attribute)"))
     version = _whole_attr(f.attrs.get("version", 1), "version", path)

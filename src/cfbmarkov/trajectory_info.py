@@ -13,7 +13,8 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     domain, axes and region, boundary, particles present per frame, passes through the
     periodic boundary (from the lap counters between consecutive frames where a particle is
     present), entries and exits (a particle absent in one frame and present in the next, or
-    the reverse) and where the laps came from. Frames are read block by block.
+    the reverse), where the laps came from and the particle properties a prediction
+    stored (``/properties``). Frames are read block by block.
 
     Parameters
     ----------
@@ -70,4 +71,9 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
         lines.append(f"  passes through the periodic boundary: {up} up, {down} down"
                      + (" (not counted across a particle's absence)" if t.has_absences else ""))
     lines.append(f"  entries {entries}, exits {exits} (after the first frame)")
+    for name in t.property_names:
+        attrs = t.property_attrs(name)
+        how = ", ".join(f"{key} {attrs[key]}" for key in ("law", "start") if key in attrs)
+        lines.append(f"  particle property {name}" + (f" ({how})" if how else "")
+                     + " per frame (cfbmarkov react --init; compare --kinetics reads it)")
     return lines

@@ -411,3 +411,13 @@ def test_a_model_that_does_not_carry_its_windows_throughput_warns(runs, tmp_path
     # an open riser has no net flux to compare with
     open_run = synthetic.write_open_run(tmp_path / "open.h5", SLOW, 200, 2.0)
     assert np.isnan(window_rt_mean([open_run], [(0.0, 2.0)], "up"))
+
+
+def test_a_figure_beyond_its_limit_is_printed_beyond_it():
+    """A spread of 6.72 % against a limit of 6.58 % reads "6.7" and "6.6", not "7" twice;
+    whole percents where they differ."""
+    from cfbmarkov.analysis.adequacy import _percents
+
+    assert _percents(0.0672, 0.0658) == ("6.7", "6.6")
+    assert _percents(0.066051, 0.066049) == ("6.61", "6.60")
+    assert _percents(0.25, 0.10) == ("25", "10")

@@ -108,6 +108,17 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
      + "2,4,1\n", "cell col 2, row 4 more than once"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.0\nstart = "carried"\n', None,
      "no steady state"),
+    # a misspelt parameter is named as an unknown key, not as a missing one
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrat = 1.0\n', None,
+     "unknown key 'rat'"),
+    # file lines as an editor numbers them, blank lines counted: the cell (col 2, row 4) on
+    # line 16 (header on 1, cell k = 3 row + col on line k + 2) and again on line 21, after
+    # a blank line 20
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n" + "".join(f"{c},{r},1\n" for r in range(6) for c in range(3))
+     + "\n2,4,1\n", "(lines 16, 21)"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n\n0,0,x\n", "line 3 ('0,0,x') is not 3 numbers; give col,row,rate"),
 ])
 def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rates, message):
     _, _, model = fitted
@@ -308,3 +319,75 @@ def test_react_says_exits_are_counted_downward_and_repeats_the_verdict(tmp_path,
                  "0.5", "--duration", "0.5", "-o", str(tmp_path / "p.h5"), "-q"]) == 0
     err = capsys.readouterr().err
     assert "warning: the model's fitting sample: the halves disagree: test" in err
+
+
+def test_react_warns_where_a_cell_field_cannot_tell_the_zones(fitted, tmp_path, capsys):
+    """A solids fraction read as a relative count (the generated file stores no particle
+    diameter) and a threshold that puts every cell on one side are said on stderr as
+    `warning:` lines naming the property, the range and the fix; the answer is that of the
+    one rate it then is everywhere."""
+    from cfbmarkov.markov import MarkovModel
+
+    folder, run, model = fitted
+    fraction = MarkovModel.load(model).cell_fields.solids_fraction
+    assert MarkovModel.load(model).cell_fields.relative
+    kin = _write(tmp_path, '[[property]]\nname = "X"\nlaw = "first-order"\n'
+                 'rate_from = "solids_fraction"\nrate_dense = 0.2\nrate_dilute = 2.0\n'
+                 'threshold = 0.1\n')
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    captured = capsys.readouterr()
+    x = json.loads(captured.out)["properties"]["X"]["exit_mean"]
+    lines = captured.err.splitlines()
+    assert len(lines) == 2 and all(line.startswith("warning: property X: rate_from = "
+                                                   "'solids_fraction'") for line in lines)
+    assert "relative to the bed's mean" in lines[0]
+    assert f"{fraction.min():.3g}-{fraction.max():.3g}" in lines[0]
+    assert "every cell on the dense side" in lines[1] and "rate is 0.2 everywhere" in lines[1]
+    (tmp_path / "uniform").mkdir()
+    uniform = _write(tmp_path / "uniform",
+                     '[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.2\n')
+    assert _exit_mean(capsys, ["react", str(model), "--kinetics", str(uniform), "--json"])[0] \
+        == pytest.approx(x, rel=1e-12)
+    # a threshold inside the range: only the relative-count line
+    middle = float(np.median(fraction))
+    kin.write_text(kin.read_text().replace("threshold = 0.1", f"threshold = {middle!r}"))
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 0
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 1 and "relative to the bed's mean" in err[0]
+
+
+def test_react_carried_and_reference_starts_are_said(fitted, tmp_path, capsys):
+    """A carried value relaxing to one temperature everywhere leaves the exit at exactly that
+    value: its SD is printed 0, not the round-off of E[v^2] - E[v]^2; the table says that a
+    carried row is the inventory's steady state and that a reference start without --init
+    is answered as a fresh feed."""
+    folder, run, model = fitted
+    kin = _write(tmp_path, '[[property]]\nname = "T"\nlaw = "heat-exchange"\n'
+                 'coefficient = 2.0\ntemperature = 650.0\ninitial = 300.0\n'
+                 'start = "carried"\n\n[[property]]\nname = "X"\nlaw = "first-order"\n'
+                 'rate = 1.0\nstart = "reference"\n')
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)["properties"]
+    assert out["T"]["exit_mean"] == pytest.approx(650.0, rel=1e-12)
+    assert out["T"]["exit_sd"] == 0.0
+    assert out["X"]["exit_sd"] > 0.01
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 0
+    text = capsys.readouterr().out
+    assert "T (carried): the circulating inventory's steady state" in text
+    assert "X (start = reference): the exact answers are those of a fresh feed entering at 0" \
+        in text
+
+
+def test_info_lists_a_predictions_properties(fitted, tmp_path, capsys):
+    folder, run, model = fitted
+    kin = _write(tmp_path, GOOD, RATES)
+    pred = tmp_path / "pred.h5"
+    assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "0.5", "-o", str(pred), "-q"]) == 0
+    capsys.readouterr()
+    assert main(["info", str(pred)]) == 0
+    out = capsys.readouterr().out
+    assert "particle property T (law heat-exchange, start entry) per frame" in out
+    assert "particle property X (law first-order, start entry) per frame" in out
+    assert main(["info", str(run)]) == 0
+    assert "particle property" not in capsys.readouterr().out

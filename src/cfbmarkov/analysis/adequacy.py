@@ -127,6 +127,16 @@ def window_rt_mean(runs, windows, direction: str) -> float:
     return particle_time / passes if passes > 0 else math.nan
 
 
+def _percents(value: float, limit: float) -> tuple[str, str]:
+    """``value`` and ``limit`` (fractions, ``value`` beyond ``limit``) as percents with the
+    fewest decimals (0 to 2) that print them apart: "6.7" and "6.6", never "7" and "7"."""
+    for decimals in (0, 1, 2):
+        shown = f"{100 * value:.{decimals}f}", f"{100 * limit:.{decimals}f}"
+        if shown[0] != shown[1]:
+            break
+    return shown
+
+
 def _throughput_line(model, rt_mean: float, window_mean: float,
                      limit: float = THROUGHPUT_LIMIT) -> str | None:
     """The warning where the model's E(RT) lies further than ``limit`` from the window's
@@ -142,9 +152,10 @@ def _throughput_line(model, rt_mean: float, window_mean: float,
            "the window's occupancy is not the chain's stationary one (a flow still changing "
            "in the window)")
     side = "above" if gap > 0 else "below"
-    return (f"the model's E(RT) {rt_mean:.3g} s lies {100 * abs(gap):.0f} % {side} its "
+    gap_text, limit_text = _percents(abs(gap), limit)
+    return (f"the model's E(RT) {rt_mean:.3g} s lies {gap_text} % {side} its "
             f"fitting window's own throughput E(RT), {window_mean:.3g} s (the window's "
-            f"particle-time over its net passes; limit {100 * limit:.0f} %): the chain does "
+            f"particle-time over its net passes; limit {limit_text} %): the chain does "
             f"not carry the flow it was fitted on; {why}. The window's own flow may itself "
             f"lie far from the run's long run: {_ADVICE}")
 
@@ -330,9 +341,10 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
         if math.isfinite(part_spread) and part_spread > part_limit:
             text = ", ".join(f"{m:.3g} s in {a:g}-{b:g} s" for a, b, m, _ in parts)
             kind = "quarters" if len(parts) == 4 else "halves"
+            spread_text, limit_text = _percents(part_spread, part_limit)
             lines.append(f"the {kind} of the fitting window of {name} disagree: E(RT) {text}, "
-                         f"a spread of {100 * part_spread:.0f} % of the model's {rt_mean:.3g} s "
-                         f"(limit {100 * part_limit:.0f} %{limit_source}"
+                         f"a spread of {spread_text} % of the model's {rt_mean:.3g} s "
+                         f"(limit {limit_text} %{limit_source}"
                          f"{' times sqrt(2) for quarters' if len(parts) == 4 else ''}"
                          f"{f' times sqrt({len(runs)}) for one of {len(runs)} runs' if pooled else ''}"
                          f"): the flow changed within the window, and the model may lie far "
@@ -405,10 +417,11 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
     spread = _spread(means_of_halves, rt_mean)
     if math.isfinite(spread) and spread > limit:
         first, second = means_of_halves
+        spread_text, limit_text = _percents(spread, limit)
         lines.append(f"the halves of the pooled windows disagree: E(RT) {first:.3g} s "
                      f"from the first halves of all {runs} runs, {second:.3g} s from the "
-                     f"second, a spread of {100 * spread:.0f} % of the pooled model's "
-                     f"{rt_mean:.3g} s (limit {100 * limit:.0f} %): the flow changed within "
+                     f"second, a spread of {spread_text} % of the pooled model's "
+                     f"{rt_mean:.3g} s (limit {limit_text} %): the flow changed within "
                      f"the windows; {_ADVICE}")
     return tuple(zip(names, means)), lines, spread
 

@@ -204,10 +204,6 @@ def _cell_fields(model, ref, warnings):
                              "where the model says")
         with opened(source) as traj:
             fields = cell_fields_of(traj, model.state_space, window)
-    if fields.relative:
-        warnings.append("kinetics: the fitting file gives no particle diameter; its solids "
-                        "fraction is each cell's count relative to the mean (1: the bed's "
-                        "mean)")
     return fields
 
 
@@ -443,6 +439,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
         raise InputError(f"{kinetics.source or 'kinetics'}: a custom law has no reference "
                          "side here; compare needs linear laws")
     fields = _cell_fields(model, ref, warnings) if needs_cell_fields(kinetics) else None
+    warnings.extend(f"kinetics: {note}" for note in kinetics.field_notes(fields))
     sk = kinetics.per_state(model.state_space, fields)
     maps = linear_maps(sk, model.lag)
     start, stop = comparison.window

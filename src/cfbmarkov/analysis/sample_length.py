@@ -345,7 +345,7 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
         a = first if start is None else float(start)
         if not first - tol <= a < last:
             raise InputError(f"start {a:g} s lies outside the frames of {name} "
-                             f"({first:g} to {last:g} s)")
+                             f"({first:g} to {last:g} s): give a start inside them")
         if estimator is None:
             estimator = "mle" if runs[0].boundary.is_open else "paper"
         usable = [float(n) for n in sorted(lengths) if a + n <= last + tol]

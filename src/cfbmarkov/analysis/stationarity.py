@@ -144,7 +144,8 @@ def _span(traj, span: tuple[float, float] | None) -> tuple[float, float]:
         raise InputError(f"span {a:g}:{b:g} s must be finite with its end after its start")
     if a < first - tol or b > last + tol:
         raise InputError(f"span {a:g}:{b:g} s lies outside the frames of {traj.path} "
-                         f"({first:g} to {last:g} s)")
+                         f"({first:g} to {last:g} s): give a span inside them, or leave "
+                         "--span out for all of them")
     return a, b
 
 
@@ -296,7 +297,8 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
     if not (np.isfinite(length) and length > 0):
         raise InputError(f"judged window {j0:g}:{j1:g} s is empty")
     if j0 < a - tol or j1 > b + tol:
-        raise InputError(f"judged window {j0:g}:{j1:g} s lies outside the span {a:g}:{b:g} s")
+        raise InputError(f"judged window {j0:g}:{j1:g} s lies outside the span {a:g}:{b:g} "
+                         "s: judge a window inside it, or widen the span")
     d = _direction_of(traj, (j0, j1), direction)
     k_lo = int(np.ceil((a - j0 - tol) / length))
     k_hi = int(np.floor((b - j1 + tol) / length))
@@ -469,7 +471,8 @@ def _judged_window(traj, judge: tuple[float, float], span: tuple[float, float] |
     tol = traj.time_tolerance
     if j0 < extent[0] - tol or j1 > extent[1] + tol:
         raise InputError(f"--judge {j0:g}:{j1:g} s lies outside the span "
-                         f"{extent[0]:g}:{extent[1]:g} s")
+                         f"{extent[0]:g}:{extent[1]:g} s: judge a window inside it, or widen "
+                         "--span")
     direction = net_flow_direction(traj, judge)
     long_run = long_run_baseline(traj, judge, span=span, bin_width=bin_width,
                                  direction=direction, **kwargs)

@@ -9,7 +9,7 @@ from pathlib import Path
 from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import (count, finite_float, level, minkowski_order, parse_cells,
                                    parse_times, parse_window, positive_float)
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import HistoryError, InputError
 
 
 def cmd_compare(args) -> int:
@@ -369,10 +369,21 @@ def _sample_length(args) -> int:
     elif args.span is not None and not args.span[0] <= start < args.span[1]:
         raise InputError(f"--start {start:g} s lies outside --span {args.span[0]:g}:"
                          f"{args.span[1]:g} s: give a start inside the span, or one of them")
-    result = sample_length(args.file if len(args.file) > 1 else args.file[0], space,
-                           lag=args.lag or 0.025, start=start,
-                           estimator=args.estimator, tolerance=args.tolerance,
-                           stop=None if args.span is None else args.span[1])
+    def measure(start):
+        return sample_length(args.file if len(args.file) > 1 else args.file[0], space,
+                             lag=args.lag or 0.025, start=start,
+                             estimator=args.estimator, tolerance=args.tolerance,
+                             stop=None if args.span is None else args.span[1])
+
+    try:
+        result = measure(start)
+    except HistoryError as exc:
+        if start is not None or exc.earliest is None:
+            raise
+        # no start named: the windows start where the state space has its history
+        print(f"note: the windows start at {exc.earliest:g} s, the first frame with the "
+              f"history that {args.states} needs (--start sets another)", file=sys.stderr)
+        result = measure(exc.earliest)
     if args.json:
         print(json.dumps(result.to_dict() | {"verdict": verdict_text(result, args.states)},
                          indent=1, allow_nan=False))

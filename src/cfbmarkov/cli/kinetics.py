@@ -49,6 +49,8 @@ def cmd_react(args) -> int:
 
         check_fitting_file(model, args.run, model_name=str(args.model))
     state_kinetics = kinetics.per_state(model.state_space, fields)
+    for note in kinetics.field_notes(fields):
+        print(f"warning: {note}", file=sys.stderr)
     answers, seconds = {}, None
     if kinetics.linear:
         t0 = time.perf_counter()
@@ -92,6 +94,14 @@ def cmd_react(args) -> int:
                   f"{a.exit_sd:>12.6g} {a.bed_mean:>12.6g} {span:>26}")
         print("exact, per residence at the exit and over the bed in steady state, in the "
               f"units of the kinetics file's values; computed in {seconds:.3g} s")
+        for p in kinetics.properties:
+            if p.start == "carried":
+                print(f"  {p.name} (carried): the circulating inventory's steady state, every "
+                      "particle entering with its previous exit value")
+            elif p.start == "reference" and args.init is None:
+                print(f"  {p.name} (start = reference): the exact answers are those of a fresh "
+                      f"feed entering at {p.initial:g} (start = entry); the reference's values "
+                      "are taken by the Monte Carlo, with --init RUN --start T")
         if direction == "down":
             from cfbmarkov.markov.model_summary import DOWNWARD_LINE
 

@@ -126,11 +126,14 @@ class ByCell(CellParameter):
         Where the table came from (a file name), for messages.
     key : str
         The key that named it (``rate_by_cell``), for messages.
+    lines : ndarray of int64, shape (R,), optional
+        The file line (from 1) of each row, for messages; None: the rows are numbered from 1.
     """
 
     table: np.ndarray
     source: str = "table"
     key: str = "value_by_cell"
+    lines: np.ndarray | None = None
 
     def per_cell(self, space, fields=None):
         t = np.asarray(self.table, dtype=np.float64)
@@ -156,9 +159,12 @@ class ByCell(CellParameter):
         if seen.max() > 1:
             i = int(np.flatnonzero(seen[cell] > 1)[0])        # the first repeated cell
             at = f"col {cols[i]}, row {rows[i]}" + (f", depth {depth[i]}" if d > 1 else "")
-            rows_of = np.flatnonzero(cell == cell[i]) + 1        # data rows, from 1
-            raise InputError(f"{where}: the table gives the cell {at} more than once (data rows "
-                             f"{', '.join(map(str, rows_of))}); give each of the "
+            repeated = np.flatnonzero(cell == cell[i])
+            named = (f"lines {', '.join(str(int(self.lines[k])) for k in repeated)}"
+                     if self.lines is not None else
+                     f"data rows {', '.join(str(k + 1) for k in repeated)}")
+            raise InputError(f"{where}: the table gives the cell {at} more than once ({named}); "
+                             f"give each of the "
                              f"{space.n_cells} cells of the grid {space.grid_text()} exactly "
                              "once")
         if seen.min() < 1:

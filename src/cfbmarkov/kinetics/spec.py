@@ -279,6 +279,51 @@ class Kinetics:
                              rate, target, tuple(params),
                              tuple(pr.law for pr in self.properties), self.source)
 
+    def field_notes(self, cell_fields: CellFields | None) -> tuple[str, ...]:
+        """Warnings on the parameters given as a function of a cell field: where the solids
+        fraction is a relative count (a fitting file without the particle diameter), and
+        where the threshold puts every cell seen on one side (the parameter is then one
+        value everywhere).
+
+        Parameters
+        ----------
+        cell_fields : CellFields or None
+            The fitting window's cell fields (None: no notes).
+
+        Returns
+        -------
+        tuple of str
+            One line each, naming the property, the key and what to do.
+        """
+        if cell_fields is None:
+            return ()
+        notes = []
+        for prop in self.properties:
+            for name, parameter in prop.parameters.items():
+                if not isinstance(parameter, FromField):
+                    continue
+                value = cell_fields.field(parameter.field)
+                seen = value[np.isfinite(value)]
+                if not seen.size:
+                    continue
+                span = f"{seen.min():.3g}-{seen.max():.3g}"
+                what = f"property {prop.name}: {parameter.key} = {parameter.field!r}"
+                if parameter.field == "solids_fraction" and cell_fields.relative:
+                    notes.append(f"{what} reads each cell's particle count relative to the "
+                                 f"bed's mean (here {span}; 1 the mean), the fitting file "
+                                 "giving no particle diameter: give the threshold on that "
+                                 "scale, or fit on a file that stores the particle diameter")
+                above = FIELDS[parameter.field] == "above"
+                dense = seen >= parameter.threshold if above else seen <= parameter.threshold
+                if dense.all() or not dense.any():
+                    side, used = (("dense", parameter.dense) if dense.all()
+                                  else ("dilute", parameter.dilute))
+                    notes.append(f"{what}: threshold {parameter.threshold:g} puts every cell "
+                                 f"on the {side} side ({parameter.field} {span} over the cells "
+                                 f"seen), so {name} is {used:g} everywhere; give a threshold "
+                                 "inside that range to tell the zones apart")
+        return tuple(notes)
+
     def describe(self) -> list[dict]:
         """The properties as JSON-serialisable text."""
         return [p.describe() for p in self.properties]
@@ -357,15 +402,14 @@ def _property(table, index: int, path: Path) -> Property:
             raise InputError(f"{where}: wall_temperature is for law heat-exchange only")
         law = law_cls()
     allowed = set(_PROPERTY_KEYS) | ({"wall_temperature"} if law_cls is HeatExchange else set())
-    params = {}
     for p in law.parameter_names:
-        keys = (p, f"{p}_by_cell", f"{p}_from", f"{p}_dense", f"{p}_dilute")
-        allowed.update(keys)
-        params[p] = _parameter(table, p, where, path, law)
+        allowed.update((p, f"{p}_by_cell", f"{p}_from", f"{p}_dense", f"{p}_dilute"))
+    # an unknown key first: a misspelt parameter is named as such, not as a missing one
     unknown = sorted(set(table) - allowed)
     if unknown:
         raise InputError(f"{where}: unknown key {unknown[0]!r} for law {law_key}; it takes "
                          f"{', '.join(sorted(allowed))}")
+    params = {p: _parameter(table, p, where, path, law) for p in law.parameter_names}
     initial = table.get("initial")
     if initial is not None and not _finite(initial):
         raise InputError(f"{where}: initial must be a finite number")
@@ -399,8 +443,8 @@ def _parameter(table, p: str, where: str, path: Path, law: Law) -> CellParameter
         if not isinstance(value, str):
             raise InputError(f"{where}: {key} must be a file name (CSV, relative to "
                              f"{path.name})")
-        return ByCell(_read_table(path.parent / value, p, f"{where}: {key}", signed),
-                      str(path.parent / value), key)
+        rows, lines = _read_table(path.parent / value, p, f"{where}: {key}", signed)
+        return ByCell(rows, str(path.parent / value), key, lines)
     if value not in FIELDS:
         raise InputError(f"{where}: {key} = {value!r} is not a cell field; use one of "
                          f"{', '.join(FIELDS)}")
@@ -415,36 +459,42 @@ def _parameter(table, p: str, where: str, path: Path, law: Law) -> CellParameter
                      key)
 
 
-def _read_table(file: Path, p: str, where: str, signed: bool) -> np.ndarray:
+def _read_table(file: Path, p: str, where: str, signed: bool) -> tuple[np.ndarray, np.ndarray]:
+    """The rows of a per-cell CSV table and the file line (from 1) of each; blank lines are
+    skipped but counted, so that every message names the line an editor shows."""
     try:
-        lines = [ln.strip() for ln in file.read_text().splitlines() if ln.strip()]
+        text = file.read_text().splitlines()
     except OSError as exc:
         raise InputError(f"{where}: cannot read {file}: {exc.strerror or exc}") from None
-    if not lines:
+    numbered = [(n, ln.strip()) for n, ln in enumerate(text, start=1) if ln.strip()]
+    if not numbered:
         raise InputError(f"{where}: {file} is empty; give a header col,row[,depth],{p}")
-    header = [h.strip() for h in lines[0].split(",")]
+    header = [h.strip() for h in numbered[0][1].split(",")]
     if header not in (["col", "row", p], ["col", "row", "depth", p], ["col", "row", "value"],
                       ["col", "row", "depth", "value"]):
         raise InputError(f"{where}: {file} has columns {','.join(header)}; give "
                          f"col,row[,depth],{p}")
     width = len(header)
-    rows = []
-    for n, line in enumerate(lines[1:], start=2):
+    example = "0,5,0.4" if width == 3 else "0,5,1,0.4"
+    rows, lines = [], []
+    for n, line in numbered[1:]:
         parts = line.split(",")
         try:
             values = [float(x) for x in parts]
         except ValueError:
             values = None
         if values is None or len(values) != width:
-            raise InputError(f"{where}: {file} line {n} is not {width} numbers")
+            raise InputError(f"{where}: {file} line {n} ({line!r}) is not {width} numbers; "
+                             f"give {','.join(header)} on each line, such as {example}")
         if any(v != int(v) or v < 0 for v in values[:-1] if math.isfinite(v)) or not all(
                 math.isfinite(v) for v in values):
             raise InputError(f"{where}: {file} line {n}: cells are integers >= 0 and the "
-                             f"{p} finite")
+                             f"{p} finite; give {','.join(header)}, such as {example}")
         if not signed and values[-1] < 0:
             raise InputError(f"{where}: {file} line {n}: {p} {values[-1]:g} < 0; rates and "
                              "coefficients must be >= 0")
         rows.append(values)
+        lines.append(n)
     if not rows:
         raise InputError(f"{where}: {file} has no rows; give one per cell")
-    return np.array(rows, dtype=np.float64)
+    return np.array(rows, dtype=np.float64), np.array(lines, dtype=np.int64)

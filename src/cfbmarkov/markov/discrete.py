@@ -395,7 +395,7 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
     first = start - int(history)
     if first < 0:
         if short_history != "skip":
-            where = (f"the window start {_describe(window)}" if window is not None
+            where = (f"the start of the window {_describe(window)}" if window is not None
                      else f"t = {trajectories.times[start]:g} s")
             fix, earliest = "", None
             if int(history) < trajectories.n_frames:

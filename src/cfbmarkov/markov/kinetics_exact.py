@@ -172,7 +172,8 @@ class PropertyAnswer:
         The value particles enter with (``initial``; for a carried property the steady
         mean of the values they come back with).
     exit_mean, exit_sd : float
-        Mean and standard deviation of the value at the exit, per residence.
+        Mean and standard deviation of the value at the exit, per residence (the SD is
+        sqrt(E[v^2] - E[v]^2), 0 where that lies within :data:`ROUND_OFF` of E[v^2]).
     bed_mean : float
         The bed's steady-state mean over all particles (per particle, at the frames).
     bed_mean_by_state : ndarray of float64, shape (S,)
@@ -197,6 +198,11 @@ class PropertyAnswer:
                 "bed_mean": self.bed_mean,
                 "bed_mean_by_cell": [None if not np.isfinite(x) else float(x)
                                      for x in self.bed_mean_by_cell]}
+
+
+#: the relative size of E[v^2] below which the exit variance E[v^2] - E[v]^2 is round-off
+#: (an exit SD below 1e-6 of the value's scale is printed as 0)
+ROUND_OFF = 1e-12
 
 
 def residence_chain(model, direction: str | None = None, deficit_levels: int | None = None
@@ -332,7 +338,10 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         else:
             v0 = float(sk.initial[i])
             mean, second = m.exit_mean(v0), m.exit_second(v0)
-        sd = float(np.sqrt(max(second - mean * mean, 0.0)))
+        # E[v^2] - E[v]^2 cancels to round-off where every exit value is alike (a carried
+        # value at a uniform target): below ROUND_OFF of E[v^2] the variance is zero
+        variance = second - mean * mean
+        sd = float(np.sqrt(variance)) if variance > ROUND_OFF * abs(second) else 0.0
         mass = np.bincount(state, v0 * m.mass_per_start + m.mass_rest, minlength=model.n_states)
         count = np.bincount(state, m.occupancy, minlength=model.n_states)
         by_state = np.divide(mass, count, out=np.full(mass.size, np.nan), where=count > 0)
