@@ -18,3 +18,15 @@ def pytest_configure(config):
         import numba
 
         numba.set_num_threads(1)
+
+
+#: the two longest tests (about 35 s each on 2 cores), run first, one per worker, so that
+#: neither is left running alone at the end while the other worker idles
+FIRST = ("tests/simulate/test_coupled_physics.py::"
+         "test_fluidized_bed_pressure_drop_carries_its_weight",
+         "tests/test_docs.py::test_tutorial_commands_run")
+
+
+def pytest_collection_modifyitems(config, items):
+    first = [item for item in items if item.nodeid in FIRST]
+    items[:] = first + [item for item in items if item.nodeid not in FIRST]
