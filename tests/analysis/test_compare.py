@@ -452,3 +452,39 @@ def test_python_compare_bins_the_rtd_at_the_models_lag_by_default(tmp_path, make
                     resamples=0)        # no model attached: the reference's frames
     assert plain["bin_width"] == pytest.approx(0.005)
     assert plain["bin_width_from"] == "the reference's frame interval"
+
+
+def test_the_models_exact_e_rt_as_the_window_sees_it_stands_beside_the_prediction(
+        tmp_path, capsys):
+    """A prediction that carries its model: summary.json gives the chain's exact E(RT) as a
+    window of the comparison's length sees it (MarkovModel.rtd(window=W)), and the
+    prediction's residences estimate it within their standard error; compare prints it.
+    Files without a model: no such block."""
+    from cfbmarkov.markov import CellGrid, fit_model
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    flow = RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                     vertical_spread=0.5, persistence=False)
+    run = write_run(tmp_path / "run.h5", flow, 1500, 6.0, seed=5)
+    model = fit_model(run, CellGrid(4, 16), 0.025, (0.0, 6.0), "mle")
+    pred = model.predict(run, 1.0, 5.0, seed=2, output=tmp_path / "p.h5")
+    saved = compare(run, pred, window=(1.0, 6.0), output=tmp_path / "o", figures=False,
+                    resamples=0)
+    exact = saved["model"]["exact"]
+    seen = model.rtd(window=5.0)
+    assert exact["window_length"] == 5.0
+    assert exact["windowed_rt_mean"] == pytest.approx(seen.mean, rel=1e-12)
+    assert exact["rt_mean"] == pytest.approx(model.rtd().mean, rel=1e-12)
+    assert exact["windowed_rt_mean"] < exact["rt_mean"]          # the window cuts the tail
+    predicted = saved["model"]
+    standard_error = predicted["rt_sd"] / np.sqrt(predicted["rt_count"])
+    assert abs(predicted["rt_mean"] - exact["windowed_rt_mean"]) < 3 * standard_error
+    assert exact["pd_windowed_rt_mean"] == pytest.approx(
+        100 * (seen.mean / saved["reference"]["rt_mean"] - 1), rel=1e-9)
+    assert main(["compare", str(run), str(pred), "--window", "1:6", "-o", str(tmp_path / "c"),
+                 "--no-figures", "--resamples", "0", "-q"]) == 0
+    assert (f"  the model's exact E(RT) as a 5 s window sees it: {seen.mean:.4g} s"
+            in capsys.readouterr().out)
+    bare = compare(run, run, window=(1.0, 6.0), output=tmp_path / "b", figures=False,
+                   resamples=0)
+    assert "exact" not in bare["model"]

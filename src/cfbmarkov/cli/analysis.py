@@ -62,6 +62,13 @@ def cmd_compare(args) -> int:
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
           f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
           f"mixing RMS {summary['mixing_rms']:.4g}")
+    exact_model = summary["model"].get("exact")
+    if exact_model:
+        print(f"  the model's exact E(RT) as a {exact_model['window_length']:g} s window sees "
+              f"it: {exact_model['windowed_rt_mean']:.4g} s (PD "
+              f"{pd_text(exact_model['pd_windowed_rt_mean'])} %; over all its residences "
+              f"{exact_model['rt_mean']:.4g} s): what the prediction's residences estimate, "
+              "up to its Monte Carlo noise")
     source = summary.get("bin_width_from", "given")
     counts = [summary[side].get("rt_count") for side in ("reference", "model")]
     print(f"  RTD bins {summary['bin_width']:g} s wide"

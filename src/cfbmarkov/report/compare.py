@@ -113,6 +113,37 @@ def _adequacy(pred):
     return None if model is None else model.adequacy
 
 
+def _model_exact(pred, comparison: RunComparison) -> dict | None:
+    """The exact E(RT) and SD(RT) of the chain a prediction carries, over all its
+    residences and as a window of the comparison's length sees them (the quantity the
+    prediction's residences estimate, up to Monte Carlo noise); None where the prediction
+    carries no model or its RTD cannot be formed.
+
+    References
+    ----------
+    ``docs/definitions.md`` (RTD as a window sees it): the windowed RTD weights the chain's
+    first-passage mass at n lags by max(M - n, 0) for a window of M lags.
+    """
+    from cfbmarkov.errors import CfbmarkovError
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.observed.metrics import percentage_difference
+
+    try:
+        model = MarkovModel.from_trajectories(pred)
+        if model is None:
+            return None
+        length = float(comparison.window[1] - comparison.window[0])
+        full = model.rtd(direction=comparison.direction)
+        seen = model.rtd(window=length, direction=comparison.direction)
+    except CfbmarkovError:
+        return None
+    reference = comparison.reference.residence
+    return {"rt_mean": full.mean, "rt_sd": full.sd, "window_length": length,
+            "windowed_rt_mean": seen.mean, "windowed_rt_sd": seen.sd,
+            "pd_windowed_rt_mean": float(percentage_difference(seen.mean, reference.mean)),
+            "pd_windowed_rt_sd": float(percentage_difference(seen.sd, reference.sd))}
+
+
 def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str]:
     """Draw the figures of a comparison into ``out``; returns the file names written."""
     from cfbmarkov.report import figures as fg
@@ -243,6 +274,9 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
         warnings = list(comparison.warnings)
         intervals = _intervals(pred, comparison, level, resamples, warnings)
         adequacy = _adequacy(pred)
+        exact_model = _model_exact(pred, comparison)
+        if exact_model is not None:
+            summary["model"]["exact"] = exact_model
         if adequacy is not None:        # the verdict on the model's fitting sample, repeated
             summary["adequacy"] = adequacy.to_dict()
             warnings += [f"the model's fitting sample: {line}" for line in adequacy.warnings]
