@@ -59,7 +59,7 @@ def test_region_values_starting_with_a_minus(value):
     for argv in (["import", "d", "--format", "lammps", "-o", "r.h5", "--region", value],
                  ["import", "--region", value, "d", "--format", "lammps", "-o", "r.h5"]):
         args = parser.parse_args(join_dash_values(parser, argv))
-        assert args.region[0][0] == pytest.approx(-0.045) and args.source == "d"
+        assert args.region[0][0] == pytest.approx(-0.045) and args.source == ["d"]
 
 
 def test_a_missing_value_is_still_an_error(capsys):

@@ -17,10 +17,13 @@ WIDTH, HEIGHT = 0.09, 0.95
 
 
 def positions(n_frames: int, n_particles: int = 4, seed: int = 3) -> np.ndarray:
-    """Random positions [T, N, 2] inside the riser."""
+    """Random walks [T, N, 2] inside the riser, steps of about 1 cm a frame (no particle
+    passes the top or the bottom: laps 0 fit them)."""
     rng = np.random.default_rng(seed)
-    return np.stack([rng.uniform(0.001, WIDTH - 0.001, (n_frames, n_particles)),
-                     rng.uniform(0.001, HEIGHT - 0.001, (n_frames, n_particles))], axis=-1)
+    start = np.stack([rng.uniform(0.001, WIDTH - 0.001, n_particles),
+                      rng.uniform(0.1, HEIGHT - 0.1, n_particles)], axis=-1)
+    walk = start + np.cumsum(rng.normal(0.0, 0.01, (n_frames, n_particles, 2)), axis=0)
+    return np.clip(walk, 0.001, [WIDTH - 0.001, HEIGHT - 0.001])
 
 
 def printed(t0: float, rate: float, n_frames: int, decimals: int = 5) -> np.ndarray:
@@ -29,7 +32,7 @@ def printed(t0: float, rate: float, n_frames: int, decimals: int = 5) -> np.ndar
 
 
 def write(path, times, **options):
-    # random positions jump about: give the laps (0), they cannot come from the positions
+    # laps 0: the walks never reach the top or the bottom
     options.setdefault("laps", np.zeros((len(times), 4), np.int32))
     return write_trajectories(path, times, positions(len(times)), width=WIDTH, height=HEIGHT,
                               **options)

@@ -313,3 +313,53 @@ def test_a_csv_without_the_risers_size_is_refused_naming_the_datas_extent(tmp_pa
     with Trajectories(output) as t:
         assert (t.width, t.height) == (0.04, 0.3)
         np.testing.assert_array_equal(t.laps(), run.laps)
+
+
+def test_a_dump_given_as_csv_and_an_expanded_pattern_name_the_fix(tmp_path, capsys):
+    """A LAMMPS dump given --format csv is named as a dump (not a CSV file missing column
+    t); several sources, the shell's expansion of an unquoted pattern, are refused with the
+    pattern quoted."""
+    from cfbmarkov.cli import main
+
+    dump = tmp_path / "run.dump"
+    dump.write_text("ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS pp pp pp\n"
+                    "0 0.09\n0 0.95\n0 0.001\nITEM: ATOMS id x y z\n1 0.01 0.2 0.0005\n")
+    with pytest.raises(InputError, match=r"the content is a LAMMPS/LIGGGHTS dump .*not csv; "
+                                         r"import it with --format lammps"):
+        import_file(dump, "csv", tmp_path / "a.h5", width=0.09, height=0.95)
+    steps = [tmp_path / f"dump{k}.liggghts" for k in (0, 2000, 4000)]
+    for path in steps:
+        path.write_text(dump.read_text())
+    assert main(["import", *map(str, steps), "-o", str(tmp_path / "b.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "3 sources given" in err
+    assert f"'{tmp_path / 'dump*.liggghts'}'" in err
+    assert not (tmp_path / "a.h5").exists() and not (tmp_path / "b.h5").exists()
+
+
+def test_sizes_that_suggest_a_unit_mistake_warn(tmp_path, capsys):
+    """Metre positions read as mm (a sliver of the riser), a riser given in mm (950 m high)
+    and times in s read as ms (frames 2 microseconds apart) each import with a `warning:`
+    line naming the option (the 950 m riser a second, on its particles' sliver of it); the
+    same file in its right units warns of nothing."""
+    from cfbmarkov.cli import main
+
+    rows = ["t,id,x,y"] + [f"{0.002 * k:.3f},{i},{0.01 + 0.02 * i:.4f},{0.2 + 0.05 * k + 0.1 * i:.4f}"
+                           for k in range(10) for i in range(3)]
+    source = tmp_path / "run.csv"
+    source.write_text("\n".join(rows) + "\n")
+    cases = {(): None,
+             ("--length-unit", "mm"): "the particles' heights span 0.00065 m of the riser's "
+                                      "0.95 m",
+             ("--width", "90", "--height", "950"): "the riser is 950 m high and 90 m wide",
+             ("--time-unit", "ms"): "frames 2e-06 s apart"}
+    for k, (options, expected) in enumerate(cases.items()):
+        size = [] if "--width" in options else ["--width", "0.09", "--height", "0.95"]
+        assert main(["import", str(source), *size, *options, "-o",
+                     str(tmp_path / f"{k}.h5")]) == 0
+        warnings = [line for line in capsys.readouterr().err.splitlines()
+                    if line.startswith("warning:")]
+        if expected is None:
+            assert warnings == []
+        else:       # the 950 m riser: its particles' span is a sliver of it too
+            assert expected in warnings[0] and len(warnings) == 1 + ("--width" in options)

@@ -62,7 +62,9 @@ def test_an_absence_between_used_frames_ends_the_chain_too(tmp_path):
 
 def test_split_residences_of_a_complete_file_are_the_usual_ones(tmp_path):
     rng = np.random.default_rng(5)
-    laps = np.cumsum(rng.integers(0, 2, size=(200, 6)), axis=0).astype(np.int32)
+    steps = rng.integers(0, 2, size=(200, 6))
+    steps[np.arange(200) % 3 != 0] = 0     # at most one pass within any 3 frames (the lag)
+    laps = np.cumsum(steps, axis=0).astype(np.int32)
     pos = np.tile([0.045, 0.4], (200, 6, 1))
     path = write_trajectories(tmp_path / "c.h5", 0.01 * np.arange(200), pos, width=W,
                               height=H, laps=laps)

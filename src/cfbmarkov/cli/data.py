@@ -26,6 +26,7 @@ def cmd_import(args) -> int:
 
     from cfbmarkov.io import import_file, import_summary, resolve_format
 
+    args.source = _one_source(args.source)
     _, detected = resolve_format(args.source, args.format)
     path = import_file(args.source, args.format, args.output, width=args.width,
                        height=args.height, time_step=args.time_step,
@@ -35,12 +36,17 @@ def cmd_import(args) -> int:
                        resample=args.resample, max_gap=args.max_gap)
     from cfbmarkov.trajectories import Trajectories
 
+    from cfbmarkov.io.plausibility import unit_warnings
+
     with Trajectories(path) as written:     # what the import did beyond reading rows
         notes = list(written.parameters.get("import_notes", []))
+        warnings = unit_warnings(written)
     print(path)
     print(f"cfbmarkov import: {import_summary(path, detected)}", file=sys.stderr)
     for note in notes:
         print(f"  {note}", file=sys.stderr)
+    for line in warnings:
+        print(f"warning: {line}", file=sys.stderr)
     return 0
 
 
@@ -69,6 +75,25 @@ def cmd_export_vtk(args) -> int:
     return 0
 
 
+def _one_source(sources: list[str]) -> str:
+    """The one source of ``import``; several (a pattern the shell expanded) refused in one
+    line giving the pattern quoted, so that cfbmarkov orders the files by their time."""
+    import os
+
+    from cfbmarkov.errors import InputError
+
+    if len(sources) == 1:
+        return sources[0]
+    names = [os.path.basename(s) for s in sources]
+    head = os.path.commonprefix(names).rstrip("0123456789")     # the step's digits vary
+    tail = os.path.commonprefix([n[len(head):][::-1] for n in names])[::-1].lstrip("0123456789")
+    folder = os.path.dirname(sources[0])
+    pattern = os.path.join(folder, f"{head}*{tail}")
+    raise InputError(f"{len(sources)} sources given ({sources[0]}, ...): import reads one "
+                     "file, folder or pattern; quote a pattern so that the shell leaves it "
+                     f"to cfbmarkov, which orders the files by their time: '{pattern}'")
+
+
 def add_import(sub) -> None:
     """Add the ``import`` verb (a trajectory file from CSV or a dump) to the subparsers ``sub``.
 
@@ -79,8 +104,9 @@ def add_import(sub) -> None:
     """
     s = sub.add_parser("import", help="import CSV, LAMMPS/LIGGGHTS dumps, VTK (.vtk, .vtp, "
                        ".pvd) or H5MD particle files as a trajectory file")
-    s.add_argument("source", help="input file (.csv, dump, optionally .gz; .vtk, .vtp, .pvd, "
-                                  ".h5), a folder or a quoted pattern such as 'post/dump*.vtk'")
+    s.add_argument("source", nargs="+",
+                   help="input file (.csv, dump, optionally .gz; .vtk, .vtp, .pvd, .h5), a "
+                        "folder or a quoted pattern such as 'post/dump*.vtk'")
     s.add_argument("--format", default="auto",
                    choices=["auto", "csv", "lammps", "vtk", "vtp", "pvd", "h5md"],
                    help="the source's format (default auto: told from the content, and said "

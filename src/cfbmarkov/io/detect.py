@@ -123,8 +123,8 @@ def detect_format(source) -> tuple[str, str]:
 
 def check_given_format(source, fmt: str) -> None:
     """Refuse a source whose content is plainly of another format than ``fmt``: a particle
-    file (VTK, H5MD) given as ``csv`` or ``lammps``, or a text file given as a particle
-    format; the message names the content's format.
+    file (VTK, H5MD) given as ``csv`` or ``lammps``, a LAMMPS dump given as ``csv``, or a
+    text file given as a particle format; the message names the content's format.
 
     Raises
     ------
@@ -136,8 +136,9 @@ def check_given_format(source, fmt: str) -> None:
     except InputError:
         return                       # the reader of fmt reports what is wrong
     particle = ("h5md", "vtk", "vtp", "pvd")
+    # a dump's 'ITEM:' first line is never a CSV file's; other text is told by its reader
     same = found == fmt or {found, fmt} <= {"vtp", "pvd"} or (
-        found not in particle and fmt not in particle)
+        found not in particle and fmt not in particle and not (found, fmt) == ("lammps", "csv"))
     if not same:
         raise InputError(f"{first_file(source)}: the content is {shown}, not {fmt}; import it "
                          f"with --format {found} (or without --format)")

@@ -37,6 +37,7 @@ import numpy as np
 from cfbmarkov.errors import HistoryError, InputError
 from cfbmarkov.markov.frame_quantities import FrameQuantities
 from cfbmarkov.markov.states import StateSpace
+from cfbmarkov.observed.lag_resolution import PassReading
 from cfbmarkov.trajectories import Trajectories, opened
 from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE
 
@@ -78,6 +79,10 @@ class DiscreteTrajectories:
         The riser's vertical boundary: on an open one, a particle that vanishes within one
         cell of the outlet face has left, one that appears within one cell of the inlet
         face has entered (``docs/definitions.md``, Open risers).
+    pass_reading : PassReading, optional
+        How the heights one lag apart read the periodic boundary's passes against the file's
+        laps (:func:`cfbmarkov.observed.lag_resolution.read_passes`); the estimators refuse
+        a lag that misreads them. None: not read (an open riser, or arrays made by hand).
 
     Raises
     ------
@@ -107,6 +112,7 @@ class DiscreteTrajectories:
     positions: np.ndarray | None = field(default=None, repr=False)
     laps: np.ndarray | None = field(default=None, repr=False)
     boundary: str = "periodic"
+    pass_reading: PassReading | None = field(default=None, repr=False, compare=False)
 
     def __post_init__(self):
         if self.boundary not in ("periodic", "open"):
@@ -253,6 +259,22 @@ class WindowFrames:
     _memos: dict[int, FrameQuantities] = field(default_factory=dict, repr=False,
                                                compare=False)
     _heights: dict[int, np.ndarray] = field(default_factory=dict, repr=False, compare=False)
+    # per lag (in frames): how the heights one lag apart read the periodic boundary's passes
+    _pass_readings: dict = field(default_factory=dict, repr=False, compare=False)
+
+    def _pass_reading(self, lag_frames: int):
+        """How the heights one lag apart read a periodic riser's passes against the file's
+        laps (:func:`cfbmarkov.observed.lag_resolution.read_passes`), once per lag; None on
+        an open riser or where no laps were read."""
+        if self.laps is None or self.boundary == "open":
+            return None
+        if lag_frames not in self._pass_readings:
+            from cfbmarkov.observed.lag_resolution import read_passes
+
+            self._pass_readings[lag_frames] = read_passes(
+                self.positions[:, :, 1], self.laps, lag_frames, self.height,
+                self.frame_interval, self.source)
+        return self._pass_readings[lag_frames]
 
     def discretize(self, state_space: StateSpace, lag_frames: int, *,
                    keep_positions: bool = False) -> DiscreteTrajectories:
@@ -285,6 +307,7 @@ class WindowFrames:
         state_space = check_domain(state_space, self.width, self.height, self.source,
                                    self.depth)
         lag_frames = int(lag_frames)
+        reading = self._pass_reading(lag_frames)
         if state_space.needs_velocity and self.velocities is None:
             raise InputError(f"state space {state_space.kind} needs velocities; {self.source} "
                              "has none")
@@ -323,7 +346,7 @@ class WindowFrames:
             height=self.height, state_space=state_space, window=window, source=self.source,
             positions=self.positions[rows] if keep_positions else None,
             laps=None if (self.laps is None or not keep_positions) else self.laps[rows],
-            boundary=self.boundary)
+            boundary=self.boundary, pass_reading=reading)
 
 
 def _known(present: np.ndarray, history: int, lag_frames: int) -> np.ndarray:
@@ -409,7 +432,10 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
     return WindowFrames(
         positions=trajectories.positions(rows),
         velocities=trajectories.velocities(rows) if velocities else None,
-        times=trajectories.times[rows], laps=trajectories.laps(rows) if laps else None,
+        # a periodic riser's laps always: they check that the lag resolves its passes
+        times=trajectories.times[rows],
+        laps=(trajectories.laps(rows) if laps or not trajectories.boundary.is_open
+              else None),
         history=start - first, frame_interval=trajectories.frame_interval,
         width=trajectories.width, height=trajectories.height,
         window=None if window is None else (float(window[0]), float(window[1])),

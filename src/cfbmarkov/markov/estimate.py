@@ -155,7 +155,7 @@ class TransitionEstimator:
         """
         raise NotImplementedError
 
-    def fit(self, data) -> MarkovModel:
+    def fit(self, data, *, check_passes: bool = True) -> MarkovModel:
         """Fit on discrete trajectories (arrays in, model out, as deeptime's estimators).
 
         Parameters
@@ -163,6 +163,10 @@ class TransitionEstimator:
         data : DiscreteTrajectories or sequence of them
             Made by :func:`cfbmarkov.markov.discretize` with this estimator's state space
             and lag (or use :func:`cfbmarkov.markov.fit_model` to fit from a file).
+        check_passes : bool, optional
+            Refuse a lag at which the heights one lag apart misread the periodic boundary's
+            passes (``DiscreteTrajectories.pass_reading``; default). False for a transition
+            matrix whose passes are not used (implied timescales).
 
         Returns
         -------
@@ -172,17 +176,24 @@ class TransitionEstimator:
         ------
         InputError
             If ``data`` is not discrete trajectories, or was made with another state space
-            or lag, or holds no transition.
+            or lag, or holds no transition, or (``check_passes``) its lag misreads the
+            passes (:meth:`cfbmarkov.observed.lag_resolution.PassReading.check`).
         """
         windows = as_discrete_list(data)
+        if check_passes:
+            for window in windows:
+                if window.pass_reading is not None:
+                    window.pass_reading.check()
         fitted = windows[0].state_space
         if not self.state_space.sized and fitted.sized:
             # a space made without a size: the discretisation gave it the file's
             sized = self.state_space.with_size(fitted.width, fitted.height)
-            return type(self)(sized, self.lag, self.connected, self.coherent).fit(windows)
+            return type(self)(sized, self.lag, self.connected, self.coherent).fit(
+                windows, check_passes=check_passes)
         if fitted != self.state_space and self.state_space.accepts(fitted):
             # an unfitted regime space: the discretisation fitted its edges on the window
-            return type(self)(fitted, self.lag, self.connected, self.coherent).fit(windows)
+            return type(self)(fitted, self.lag, self.connected, self.coherent).fit(
+                windows, check_passes=check_passes)
         for window in windows:
             if window.state_space != self.state_space:
                 raise InputError(f"discrete trajectories are in {window.state_space.describe()}"

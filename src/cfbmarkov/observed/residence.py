@@ -579,8 +579,9 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         return ResidenceTimes(np.concatenate(chunks) if chunks else np.zeros(0), False,
                               (start, stop))
     if split:
-        return ResidenceTimes(_split_residences(traj, i0, i1, lag_frames, sign), False,
-                              (start, stop))
+        samples = _split_residences(traj, i0, i1, lag_frames, sign)
+        _check_resolved(traj, samples, lag_frames)
+        return ResidenceTimes(samples, False, (start, stop))
     if use_events and traj.has_events and lag_frames == 1:
         events = traj.events()
         t_first = float(traj.times[i0])
@@ -607,7 +608,24 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
                        running_max, last_record, out)
         chunks.append(out[:n])
     samples = np.concatenate(chunks) if chunks else np.zeros(0)
+    _check_resolved(traj, samples, lag_frames)
     return ResidenceTimes(samples, False, (start, stop))
+
+
+def _check_resolved(traj, samples: np.ndarray, lag_frames: int) -> None:
+    """Refuse residences from frames one lag apart where a lap counter stepped by two or
+    more within a lag (a residence shorter than the lag, recorded as zero) for more than
+    :data:`~cfbmarkov.observed.lag_resolution.TOLERANCE` of them."""
+    from cfbmarkov.observed.lag_resolution import TOLERANCE, short_residences
+
+    short = short_residences(samples)
+    if short > TOLERANCE * samples.size:
+        raise InputError(f"{traj.path}: at a lag of {lag_frames * traj.frame_interval:g} s, "
+                         f"{short} of {samples.size} residences are shorter than the lag (a "
+                         "particle passed the periodic boundary twice or more between frames "
+                         "one lag apart), so the residence times cannot be told; give a "
+                         f"shorter lag (--lag; the file's frames are {traj.frame_interval:g} s "
+                         "apart)")
 
 
 def _split_residences(traj, i0: int, i1: int, lag_frames: int, sign: int) -> np.ndarray:
