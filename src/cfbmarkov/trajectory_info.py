@@ -38,11 +38,17 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     axes = f"vertical {t.axes['vertical']}, across {t.axes['across']}" + (
         f", depth {t.axes['depth']}" if d == 3 else "")
     dropped = p.get("depth_axis_dropped")
-    origin = ", ".join(f"{v:g}" for v in t.region_origin)
+    stored = ("across", "vertical", "depth")[:len(t.region_origin)]
+    letters = [t.axes.get(name) or name for name in stored]
+    # the source's coordinates named by the source's axis letters, in x, y, z order
+    origin = ", ".join(f"{a} = {v:g}" for a, v in sorted(zip(letters, t.region_origin)))
+    region = ""
+    if "region" in p and len(p["region"]) == len(letters):
+        region = "; riser region " + ", ".join(
+            f"{a} {lo:g}:{hi:g}" for a, (lo, hi) in sorted(zip(letters, p["region"]))) + " m"
     lines.append(f"  axes from the source: {axes}"
                  + (f", depth axis {dropped} dropped (projection)" if dropped else "")
-                 + f"; origin at ({origin}) m in the source's coordinates"
-                 + (f"; riser region {p['region']} m" if "region" in p else ""))
+                 + f"; origin at {origin} m in the source's coordinates" + region)
     if "laps_from" in p:
         lines.append(f"  laps from: {p['laps_from']}")
     lines.extend(f"  import: {note}" for note in p.get("import_notes", []))

@@ -363,3 +363,47 @@ def test_sizes_that_suggest_a_unit_mistake_warn(tmp_path, capsys):
             assert warnings == []
         else:       # the 950 m riser: its particles' span is a sliver of it too
             assert expected in warnings[0] and len(warnings) == 1 + ("--width" in options)
+
+
+def test_info_names_origin_and_region_by_the_sources_axes(tmp_path, capsys):
+    """A 3D CSV file with z vertical: info gives the origin and the region in the source's
+    x, y, z (not the stored across, vertical, depth order), so that the region it prints
+    imports the file again."""
+    from cfbmarkov.cli import main
+
+    rows = ["t,id,x,y,z"] + [f"{0.01 * k:.2f},{i},{-0.03 + 0.02 * i:.3f},0.001,{0.2 + 0.01 * k:.3f}"
+                             for k in range(5) for i in range(3)]
+    source = tmp_path / "run.csv"
+    source.write_text("\n".join(rows) + "\n")
+    region = "-0.045:0.045,0:0.003,0.1:1.05"
+    out = tmp_path / "a.h5"
+    assert main(["import", str(source), "--vertical-axis", "z", "--region", region, "-o",
+                 str(out)]) == 0
+    capsys.readouterr()
+    assert main(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert ("origin at x = -0.045, y = 0, z = 0.1 m in the source's coordinates; riser region "
+            "x -0.045:0.045, y 0:0.003, z 0.1:1.05 m") in text
+    printed = text.split("riser region ")[1].split(" m\n")[0]
+    again = ",".join(part.split(" ")[1] for part in printed.split(", "))
+    assert again == region
+
+
+def test_a_missing_option_and_a_folder_of_dumps_name_the_fix(tmp_path):
+    """--width alone: the message asks for --height and says --width is given; a folder of
+    dumps given as the source: the quoted pattern of its dumps, whatever --format."""
+    source = tmp_path / "run.csv"
+    source.write_text("t,id,x,y\n0,1,0.01,0.2\n0.01,1,0.01,0.21\n")
+    with pytest.raises(InputError, match=r"give --height H \(--width is given\)"):
+        import_file(source, "csv", tmp_path / "a.h5", width=0.09)
+    folder = tmp_path / "post"
+    folder.mkdir()
+    for step in (0, 500, 1000):
+        (folder / f"dump{step}.liggghts").write_text(
+            "ITEM: TIMESTEP\n0\nITEM: NUMBER OF ATOMS\n1\nITEM: BOX BOUNDS pp pp pp\n"
+            "0 0.09\n0 0.95\n0 0.001\nITEM: ATOMS id x y z\n1 0.01 0.2 0.0005\n")
+    for fmt in ("auto", "lammps", "csv"):
+        with pytest.raises(InputError, match=r"it holds 3 LAMMPS/LIGGGHTS dump\(s\): import them "
+                                             rf"with the quoted pattern '{folder}/dump\*\.liggghts'"):
+            import_file(folder, fmt, tmp_path / "b.h5", time_step=1e-5 if fmt != "csv" else None)
+    assert not (tmp_path / "a.h5").exists() and not (tmp_path / "b.h5").exists()

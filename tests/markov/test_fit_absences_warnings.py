@@ -123,3 +123,32 @@ def test_an_interval_cut_at_zero_says_so_instead_of_printing_a_bare_zero():
     assert whole.cut_at_zero() == [] and "0.03-0.159 s" in whole.describe(0.18, 0.066)
     boot = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1)
     assert "resamples give SD(RT) 0" in boot.cut_at_zero()[0]
+
+
+def test_an_interval_on_fewer_resamples_than_drawn_says_so(tmp_path):
+    """38 of 100 resamples with residences: a line says the interval rests on them; all of
+    them, or no count drawn recorded (an older file): none. The count drawn survives the
+    model file."""
+    import h5py
+
+    from cfbmarkov.markov.uncertainty import GROUP
+
+    edges = np.array([0.0, 0.1, 0.2])
+    band = np.array([[0.0, 0.0], [0.6, 0.6]])
+    short = ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 38, 10, 0.1,
+                             None, 100)
+    lines = short.warnings()
+    assert len(lines) == 1 and lines[0].startswith(
+        "the 90 % interval rests on 38 of the 100 bootstrap resamples drawn")
+    assert short.to_dict()["requested"] == 100
+    for whole in (ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10,
+                                   0.1, None, 100),
+                  ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 38, 10,
+                                   0.1)):
+        assert whole.warnings() == []
+    with h5py.File(tmp_path / "u.h5", "w") as f:
+        for name, value in short.file_fields().items():
+            f[name] = value
+        assert ModelUncertainty.from_group(f).requested == 100
+        del f[f"{GROUP}/requested"]
+        assert ModelUncertainty.from_group(f).requested is None

@@ -453,7 +453,8 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     return ModelUncertainty(float(level), (max(float(m_lo), 0.0), float(m_hi)),
                             (max(float(s_lo), 0.0), float(s_hi)), edges,
                             np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means),
-                            int(blocks) * len(runs), length / int(blocks), relative)
+                            int(blocks) * len(runs), length / int(blocks), relative,
+                            int(resamples))
 
 
 __all__ = ["PredictionIntervals", "SourceChanged", "block_bootstrap_models",

@@ -78,17 +78,12 @@ def cmd_export_vtk(args) -> int:
 def _one_source(sources: list[str]) -> str:
     """The one source of ``import``; several (a pattern the shell expanded) refused in one
     line giving the pattern quoted, so that cfbmarkov orders the files by their time."""
-    import os
-
     from cfbmarkov.errors import InputError
+    from cfbmarkov.io.detect import pattern_of
 
     if len(sources) == 1:
         return sources[0]
-    names = [os.path.basename(s) for s in sources]
-    head = os.path.commonprefix(names).rstrip("0123456789")     # the step's digits vary
-    tail = os.path.commonprefix([n[len(head):][::-1] for n in names])[::-1].lstrip("0123456789")
-    folder = os.path.dirname(sources[0])
-    pattern = os.path.join(folder, f"{head}*{tail}")
+    pattern = pattern_of(sources)
     raise InputError(f"{len(sources)} sources given ({sources[0]}, ...): import reads one "
                      "file, folder or pattern; quote a pattern so that the shell leaves it "
                      f"to cfbmarkov, which orders the files by their time: '{pattern}'")

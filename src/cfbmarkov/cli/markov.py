@@ -279,7 +279,7 @@ def cmd_rtd(args) -> int:
     if unresolved is not None:
         warnings.append(unresolved)
     if band is not None:
-        warnings += band.cut_at_zero()
+        warnings += band.warnings()
     if args.json:
         out = {"rt_mean": rtd.mean, "rt_sd": rtd.sd, "direction": model.flow_direction,
                "window_length": args.window_length, "unresolved": rtd.unresolved,

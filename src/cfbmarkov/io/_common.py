@@ -46,7 +46,9 @@ def check_source(source: str | os.PathLike) -> Path:
     if not path.exists():
         raise InputError(f"{path}: no such file")
     if path.is_dir():
-        raise InputError(f"{path}: is a folder, not a file")
+        from cfbmarkov.io.detect import folder_advice
+
+        raise InputError(f"{path}: is a folder, not a file; {folder_advice(path)}")
     check_not_pipe(path)
     if path.stat().st_size == 0:
         raise InputError(f"{path}: empty file")

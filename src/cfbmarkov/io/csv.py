@@ -174,7 +174,7 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
                     layout = read_layout(fh, label, **options)
                     if _unsized(layout, geometry):
                         _refuse_unsized(row_blocks(fh, layout, label, streaming=False),
-                                        layout, label)
+                                        layout, label, geometry)
                     riser = csv_riser(layout, label, **geometry)
                     blocks = row_blocks(fh, layout, label, streaming=True)
                     _write(output, path, layout, riser, blocks, "as written")
@@ -185,7 +185,7 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
             layout = read_layout(fh, label, **options)
             rows = list(row_blocks(fh, layout, label, streaming=False))
             if _unsized(layout, geometry):
-                _refuse_unsized(rows, layout, label)
+                _refuse_unsized(rows, layout, label, geometry)
             riser = csv_riser(layout, label, **geometry)
         rows = np.concatenate(rows) if rows else np.empty((0, len(layout.used)))
         if resample is not None:
@@ -226,8 +226,9 @@ def _unsized(layout: CsvLayout, geometry: dict) -> bool:
             and (geometry["width"] is None or geometry["height"] is None))
 
 
-def _refuse_unsized(blocks, layout: CsvLayout, label: str) -> None:
-    """Refuse a CSV import without the riser's size, naming the data's extent (m)."""
+def _refuse_unsized(blocks, layout: CsvLayout, label: str, geometry: dict) -> None:
+    """Refuse a CSV import without the riser's size, naming the data's extent (m) and the
+    option missing where one of --width and --height was given."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     for rows in blocks:
         raw = _source_positions(rows, layout)
@@ -237,8 +238,12 @@ def _refuse_unsized(blocks, layout: CsvLayout, label: str) -> None:
              for axis in (layout.across, layout.vertical)
              if np.isfinite(lo[AXES.index(axis)])]
     extent = f"; the data span {', '.join(spans)}" if spans else ""
-    raise InputError(f"{label}: a CSV file does not give the riser's size: give --width W and "
-                     f"--height H (m; the riser is 0..W across, {layout.across}, and 0..H "
+    given = [name for name in ("width", "height") if geometry.get(name) is not None]
+    missing = ("--height H" if given == ["width"] else "--width W" if given == ["height"]
+               else "--width W and --height H")
+    told = f" (--{given[0]} is given)" if len(given) == 1 else ""
+    raise InputError(f"{label}: a CSV file does not give the riser's size: give {missing}"
+                     f"{told} (m; the riser is 0..W across, {layout.across}, and 0..H "
                      f"vertically, {layout.vertical}) or --region{extent}")
 
 

@@ -30,6 +30,33 @@ DESCRIPTIONS = {"h5md": "H5MD (an HDF5 file with an /h5md group)",
 _VTK_TYPE = re.compile(rb"<VTKFile[^>]*\btype\s*=\s*[\"'](\w+)[\"']")
 
 
+def pattern_of(paths) -> str:
+    """A glob pattern that matches the files ``paths`` of one folder: their names' common
+    start and end around a ``*`` (the digits of a step number left to the ``*``), e.g.
+    ``post/dump*.liggghts`` for ``post/dump0.liggghts``, ``post/dump2000.liggghts``."""
+    names = [os.path.basename(os.fspath(p)) for p in paths]
+    head = os.path.commonprefix(names).rstrip("0123456789")
+    tail = os.path.commonprefix([n[len(head):][::-1] for n in names])[::-1]
+    return os.path.join(os.path.dirname(os.fspath(paths[0])), f"{head}*{tail.lstrip('0123456789')}")
+
+
+def folder_advice(path: Path) -> str:
+    """What to give instead of a folder: a quoted pattern of the LAMMPS/LIGGGHTS dumps it
+    holds (files whose first line starts ``ITEM:``), else a file or a pattern."""
+    dumps = []
+    for file in sorted(p for p in path.iterdir() if p.is_file()):
+        try:
+            with open(file, "rb") as fh:
+                if fh.read(5) == b"ITEM:":
+                    dumps.append(file)
+        except OSError:
+            continue
+    if dumps:
+        return (f"it holds {len(dumps)} LAMMPS/LIGGGHTS dump(s): import them with the quoted "
+                f"pattern '{pattern_of(dumps)}'")
+    return "give the file, or a quoted pattern such as 'post/dump*.vtk'"
+
+
 def first_file(source) -> Path:
     """The file whose content stands for ``source`` (a file, folder, pattern or list)."""
     if isinstance(source, (list, tuple)):
@@ -44,8 +71,8 @@ def first_file(source) -> Path:
             chosen = [p for p in files if p.suffix.lower() == suffix]
             if chosen:
                 return chosen[0]
-        raise InputError(f"{path}: a folder without .pvd, .vtp, .vtk or .h5 files; give the "
-                         "file (or a pattern such as 'post/dump*.vtk')")
+        raise InputError(f"{path}: a folder without .pvd, .vtp, .vtk or .h5 files; "
+                         f"{folder_advice(path)}")
     if not path.exists() and any(c in text for c in "*?["):
         matches = sorted(glob.glob(text))
         if not matches:
@@ -77,7 +104,7 @@ def detect_format(source) -> tuple[str, str]:
     if not path.exists():
         raise InputError(f"{path}: no such file")
     if path.is_dir():
-        raise InputError(f"{path}: is a folder, not a file")
+        raise InputError(f"{path}: is a folder, not a file; {folder_advice(path)}")
     check_not_pipe(path)
     try:
         with open(path, "rb") as fh:

@@ -68,7 +68,7 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     (``model.adequacy``), more than :data:`UNVISITED_LIMIT` of the states never visited, an
     exact RTD whose unresolved mass exceeds :data:`UNRESOLVED_LIMIT`
     (:func:`unresolved_warning`) and an interval whose lower end is cut at 0
-    (:meth:`~cfbmarkov.markov.uncertainty.ModelUncertainty.cut_at_zero`).
+    (:meth:`~cfbmarkov.markov.uncertainty.ModelUncertainty.warnings`).
 
     Parameters
     ----------
@@ -98,7 +98,7 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     if unresolved is not None:
         lines.append(f"  {unresolved}")
     if model.uncertainty is not None:
-        lines += [f"  {line}" for line in model.uncertainty.cut_at_zero()]
+        lines += [f"  {line}" for line in model.uncertainty.warnings()]
     trapped = model.entered_never_left
     if not trapped.size or model.trap_share == 0.0:
         return lines

@@ -48,6 +48,9 @@ class ModelUncertainty:
         window (fractions) added to the bootstrap's spread (a pooled fit's: between the
         blocks of all its runs, over sqrt(runs)); None where the window is too short to
         measure them (the intervals are then the bootstrap's alone).
+    requested : int or None, optional
+        Bootstrap resamples drawn (``resamples`` of them gave a model with residences);
+        None where not recorded.
 
     Raises
     ------
@@ -65,6 +68,7 @@ class ModelUncertainty:
     blocks: int
     block_length: float
     flow_sd: tuple[float, float] | None = None
+    requested: int | None = None
 
     def __post_init__(self):
         if not 0.0 < float(self.level) < 1.0:
@@ -135,6 +139,22 @@ class ModelUncertainty:
                          "window (more residences per block) narrows it")
         return lines
 
+    def short_of_resamples(self) -> list[str]:
+        """A line where fewer resamples than drawn gave a model with residences: the
+        interval rests on those (the others' chains never pass the boundary), empty where
+        all did or the count drawn was not recorded."""
+        if self.requested is None or self.resamples >= self.requested:
+            return []
+        return [f"the {self.percent} % interval rests on {self.resamples} of the "
+                f"{self.requested} bootstrap resamples drawn: the others' chains have no "
+                "residence (their blocks hold too few passes through the boundary), so it "
+                "describes the resamples that circulate and may be too narrow; a longer "
+                "fitting window or pooled runs give more"]
+
+    def warnings(self) -> list[str]:
+        """Every line on the interval: :meth:`cut_at_zero` and :meth:`short_of_resamples`."""
+        return self.cut_at_zero() + self.short_of_resamples()
+
     def to_dict(self) -> dict:
         """JSON-serialisable: level, the intervals, the RTD's edges and bounds, resamples,
         blocks, block length and the flow's relative SDs (null where none)."""
@@ -143,7 +163,8 @@ class ModelUncertainty:
                 "rtd_edges": self.rtd_edges.tolist(),
                 "rtd_interval": self.rtd_interval.tolist(), "resamples": int(self.resamples),
                 "blocks": int(self.blocks), "block_length": float(self.block_length),
-                "flow_sd": None if self.flow_sd is None else list(self.flow_sd)}
+                "flow_sd": None if self.flow_sd is None else list(self.flow_sd),
+                "requested": self.requested}
 
     def file_fields(self) -> dict[str, np.ndarray]:
         """The datasets that store it, named ``uncertainty/<field>``."""
@@ -153,6 +174,8 @@ class ModelUncertainty:
                   "rtd_interval": self.rtd_interval, "resamples": int(self.resamples),
                   "blocks": int(self.blocks), "block_length": float(self.block_length),
                   "flow_sd": flow}
+        if self.requested is not None:
+            fields["requested"] = int(self.requested)
         return {f"{GROUP}/{name}": np.asarray(value) for name, value in fields.items()}
 
     @classmethod
@@ -172,4 +195,5 @@ class ModelUncertainty:
         return cls(float(g["level"][()]), tuple(g["rt_mean_interval"][()]),
                    tuple(g["rt_sd_interval"][()]), g["rtd_edges"][()], g["rtd_interval"][()],
                    int(g["resamples"][()]), int(g["blocks"][()]), float(g["block_length"][()]),
-                   None if np.isnan(flow).any() else (float(flow[0]), float(flow[1])))
+                   None if np.isnan(flow).any() else (float(flow[0]), float(flow[1])),
+                   int(g["requested"][()]) if "requested" in g else None)
