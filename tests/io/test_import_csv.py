@@ -407,3 +407,24 @@ def test_a_missing_option_and_a_folder_of_dumps_name_the_fix(tmp_path):
                                              rf"with the quoted pattern '{folder}/dump\*\.liggghts'"):
             import_file(folder, fmt, tmp_path / "b.h5", time_step=1e-5 if fmt != "csv" else None)
     assert not (tmp_path / "a.h5").exists() and not (tmp_path / "b.h5").exists()
+
+
+def test_rows_outside_the_riser_are_counted_in_the_import_notes(tmp_path, capsys):
+    """Positions measured from the riser's centre (x from -0.03) with --width 0.09: the rows
+    left of x = 0 are absent, and the import says how many of how many."""
+    from cfbmarkov.cli import main
+
+    rows = ["t,id,x,y"] + [f"{0.01 * k:.2f},{i},{-0.03 + 0.02 * i:.3f},0.3"
+                           for k in range(4) for i in range(4)]
+    source = tmp_path / "centred.csv"
+    source.write_text("\n".join(rows) + "\n")
+    assert main(["import", str(source), "--width", "0.09", "--height", "0.95", "-o",
+                 str(tmp_path / "a.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "  8 of 16 rows (50 %) lie outside the riser's region and are absent there" in err
+    inside = ["t,id,x,y"] + [f"{0.01 * k:.2f},{i},{0.01 + 0.02 * i:.3f},0.3"
+                             for k in range(4) for i in range(4)]
+    source.write_text("\n".join(inside) + "\n")
+    assert main(["import", str(source), "--width", "0.09", "--height", "0.95", "-o",
+                 str(tmp_path / "b.h5")]) == 0
+    assert "outside the riser's region" not in capsys.readouterr().err

@@ -377,6 +377,12 @@ def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
     if merged:
         notes.append(f"{merged} rows at the same time as another row of their particle merged "
                      "(positions averaged) before resampling")
+    if layout.outside_rows:
+        share = 100 * layout.outside_rows / max(layout.placed_rows, 1)
+        notes.append(f"{layout.outside_rows} of {layout.placed_rows} rows ({share:.3g} %) lie "
+                     "outside the riser's region and are absent there; if that is not the "
+                     "particles leaving the view, check --width, --region and where the "
+                     "positions' origin lies")
     return {"noise_rows_dropped": layout.noise_rows, "rows_merged": merged,
             "import_notes": notes}
 
@@ -432,6 +438,8 @@ def _riser_positions(rows: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids
     if strict.any():
         k = int(np.argmax(strict))
         _refuse_outside(rows[k:k + 1], layout, riser, ids[k:k + 1], float(t[k]), label)
+    layout.placed_rows += int(inside.size)
+    layout.outside_rows += int(inside.size - np.count_nonzero(inside))
     return np.clip(relative, 0.0, extent), inside
 
 

@@ -76,6 +76,9 @@ class CsvLayout:
     id_others: list[str] = field(default_factory=list)
     noise_id: int | None = None
     noise_rows: int = 0
+    #: rows placed on the riser, and those of them outside its region (absent there)
+    placed_rows: int = 0
+    outside_rows: int = 0
     #: lines above the header skipped as a title, and rows below it skipped as
     #: descriptions (TrackMate's names, short names and units rows)
     title_lines: list[str] = field(default_factory=list)
