@@ -421,3 +421,18 @@ def test_a_figure_beyond_its_limit_is_printed_beyond_it():
     assert _percents(0.0672, 0.0658) == ("6.7", "6.6")
     assert _percents(0.066051, 0.066049) == ("6.61", "6.60")
     assert _percents(0.25, 0.10) == ("25", "10")
+
+
+def test_the_throughput_line_names_a_reducible_chain():
+    """A chain of several closed classes weights them by their entry flux: the throughput
+    line says so beside its estimator's reason; a chain of one class does not."""
+    from types import SimpleNamespace
+
+    from cfbmarkov.analysis.adequacy import _throughput_line
+
+    two = SimpleNamespace(estimator="mle", closed_classes=[np.arange(3), np.arange(3, 5)])
+    line = _throughput_line(two, 1.5, 1.0)
+    assert "in the window); the chain is reducible (2 closed classes" in line
+    one = SimpleNamespace(estimator="mle", closed_classes=[np.arange(5)])
+    assert "reducible" not in _throughput_line(one, 1.5, 1.0)
+    assert _throughput_line(two, 1.05, 1.0) is None

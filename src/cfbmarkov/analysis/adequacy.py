@@ -151,6 +151,11 @@ def _throughput_line(model, rt_mean: float, window_mean: float,
            if model.estimator == "paper" else
            "the window's occupancy is not the chain's stationary one (a flow still changing "
            "in the window)")
+    classes = len(model.closed_classes)
+    if classes > 1:     # a reducible chain: its classes weighted by their entry flux
+        why += (f"; the chain is reducible ({classes} closed classes: particles in some "
+                "cells never reach others), and its E(RT) weights the classes by their entry "
+                "flux, not by the window's occupancy")
     side = "above" if gap > 0 else "below"
     gap_text, limit_text = _percents(abs(gap), limit)
     return (f"the model's E(RT) {rt_mean:.3g} s lies {gap_text} % {side} its "
