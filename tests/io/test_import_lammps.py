@@ -317,3 +317,27 @@ def test_missing_dump(tmp_path, assert_clean_failure):
         import_lammps(tmp_path / "none.dump", output)
     assert_clean_failure("import", tmp_path / "none.dump", "--format", "lammps", "-o", output,
                          output=output, match=r"no such file")
+
+
+def test_a_dump_cut_inside_a_frame_names_the_lines_to_keep(tmp_path):
+    """A dump cut inside its third frame's atoms (a run still writing it): the refusal gives
+    the head command that keeps the two whole frames, and that file imports them."""
+    import subprocess
+
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.io import import_file
+
+    frame = ("ITEM: TIMESTEP\n{step}\nITEM: NUMBER OF ATOMS\n2\nITEM: BOX BOUNDS pp pp pp\n"
+             "0 0.09\n0 0.95\n0 0.001\nITEM: ATOMS id x y z\n1 0.01 {y} 0.0005\n"
+             "2 0.05 0.4 0.0005\n")
+    text = "".join(frame.format(step=1000 * k, y=0.2 + 0.01 * k) for k in range(3))
+    cut = tmp_path / "run.dump"
+    cut.write_text(text[:text.rindex("2 0.05")])           # the third frame's last atom missing
+    with pytest.raises(InputError, match=r"2 atom lines \(truncated\?\); the frames before "
+                                         r"line 23 are whole: keep them with head -n 22 ") as err:
+        import_file(cut, "lammps", tmp_path / "a.h5", time_step=1e-5)
+    command = str(err.value).split("keep them with ")[1]
+    subprocess.run(command, shell=True, cwd=tmp_path, check=True)
+    import_file(tmp_path / "whole.dump", "lammps", tmp_path / "b.h5", time_step=1e-5)
+    with Trajectories(tmp_path / "b.h5") as t:
+        assert t.n_frames == 2

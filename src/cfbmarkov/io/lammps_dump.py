@@ -176,6 +176,18 @@ class DumpReader:
         self.line = 0
         self.units: str | None = None
         self._pushed: str | None = None
+        self._frame_line = 1        # the line where the frame being read begins
+
+    def _keep_whole(self) -> str:
+        """Advice for a file cut inside a frame (a run still writing it, a copy cut
+        short): the command that keeps the whole frames before it; empty where none is."""
+        if self._frame_line <= 1:
+            return ""
+        keep = self._frame_line - 1
+        name = self.label
+        command = (f"zcat {name} | head -n {keep} > whole.dump" if name.endswith(".gz") else
+                   f"head -n {keep} {name} > whole.dump")
+        return f"; the frames before line {self._frame_line} are whole: keep them with {command}"
 
     # -- lines -------------------------------------------------------------------------
     def _readline(self) -> str | None:
@@ -229,6 +241,8 @@ class DumpReader:
                 raise InputError(f"{self.label}: line {self.line}: expected an 'ITEM:' line, "
                                  f"found {text[:40]!r} ({hint})")
             item = text[5:].strip()
+            if not header:
+                self._frame_line = self.line
             after_atoms = item.startswith("ATOMS")
             if after_atoms:
                 yield self._atoms(item, header)
@@ -237,7 +251,7 @@ class DumpReader:
                 self._header_item(item, header)
         if header:
             raise InputError(f"{self.label}: file ends inside the header of a frame at line "
-                             f"{self.line} (truncated?)")
+                             f"{self.line} (truncated?){self._keep_whole()}")
 
     def _header_item(self, item: str, header: dict) -> None:
         if item == "TIMESTEP":
@@ -329,7 +343,8 @@ class DumpReader:
         self.line += len(lines)
         if len(lines) < count:
             raise InputError(f"{self.label}: file ends inside the atoms of timestep {timestep}: "
-                             f"{len(lines)} of {count} atom lines (truncated?)")
+                             f"{len(lines)} of {count} atom lines (truncated?)"
+                             f"{self._keep_whole()}")
         if count == 0:
             return np.empty((0, len(columns))), (np.empty(0, np.int64) if "id" in columns else None)
         try:
@@ -346,7 +361,7 @@ class DumpReader:
         if not last.endswith("\n") and last.split() and last.split()[-1][-1] in ".eE+-":
             raise InputError(f"{self.label}: line {first + count - 1}: last value "
                              f"{last.split()[-1]!r} is incomplete: the file ends inside this "
-                             "line (truncated?)")
+                             f"line (truncated?){self._keep_whole()}")
         return atoms, self._exact_ids(atoms, lines, columns, first)
 
     def _exact_ids(self, atoms: np.ndarray, lines: list[str], columns: tuple[str, ...],
