@@ -206,3 +206,46 @@ def test_no_entry_in_the_window_and_no_complete_residence_are_refused(open_run, 
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "holds no complete residence" in err
     assert not (tmp_path / "cmp").exists()
+
+
+def _fast_open_riser(path, rise=0.05, n=150, frames=200, dt=0.01):
+    """Particles entering one per frame at the inlet and rising ``rise`` of the height a
+    frame: each is last seen up to ``rise`` H below the outlet (below a face band of H/38
+    about half of them), then vanishes."""
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    height = 0.95
+    k = np.arange(frames)[:, None] - np.arange(n)[None, :]      # frames since entry
+    y = (0.005 + rise * k + 0.013 * (np.arange(n) % 4)) * height
+    present = (k >= 0) & (y < height)
+    x = np.broadcast_to(0.01 + 0.02 * (np.arange(n) % 4), y.shape)
+    positions = np.stack([x, np.where(present, y, np.nan)], axis=-1)
+    return write_trajectories(path, dt * np.arange(frames), positions, width=0.09,
+                              height=height, present=present, boundary="open")
+
+
+def test_an_open_riser_counts_exits_within_one_cell_row_of_the_outlet(tmp_path, capsys):
+    """The fit's verdict and --states auto count an open riser's residences as compare does,
+    a particle vanishing within one cell row of the outlet having left: on 4 x 10 cells the
+    halves of the window hold their residences (no 'holds 0 residences' warning), where the
+    paper's face band of H/38 would miss about half of the exits; auto judges by the
+    Chapman-Kolmogorov test, and an RTD criterion is refused on an open riser."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.markov.select import select_model
+
+    run = _fast_open_riser(tmp_path / "fast.h5")
+    with Trajectories(run) as t:
+        band = residence_times(t, (0.3, 1.5), face_band=t.height / 10).count
+        thin = residence_times(t, (0.3, 1.5)).count
+    assert band >= 100 and thin < 0.75 * band
+    assert main(["fit", str(run), "--cells", "4x10", "--lag", "0.01", "--window", "0.3:1.5",
+                 "-o", str(tmp_path / "m.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "residences (fewer than" not in err
+    longer = _fast_open_riser(tmp_path / "longer.h5", n=350, frames=400)
+    model = select_model(longer, window=(0.3, 3.5), columns=4, rows=10, lag=0.01,
+                         states=("cells", "cells-direction"))
+    assert "Chapman-Kolmogorov" in model.selection["reason"]
+    with pytest.raises(InputError, match="the window criterion judges a periodic riser's RTD"):
+        select_model(run, window=(0.3, 1.5), columns=4, rows=10, lag=0.01,
+                     states=("cells", "cells-direction"), criterion="window")

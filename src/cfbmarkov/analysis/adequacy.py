@@ -189,7 +189,9 @@ def _parts_of(traj, discrete: DiscreteTrajectories, window, model, fitter):
             directions[part] = d
             counts[part] = residence_times(traj, part, use_events=False,
                                            lag_frames=lag_frames, direction=d,
-                                           split_at_absences=True).count
+                                           split_at_absences=True,
+                                           face_band=traj.height / discrete.state_space.rows
+                                           ).count
     halves, quarters = _split(window, 2), _split(window, 4)
     use = quarters if min(counts[q] for q in quarters) >= MIN_PART_RESIDENCES else halves
     parts = []

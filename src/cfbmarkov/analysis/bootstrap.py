@@ -369,8 +369,9 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
         with opened(source) as traj:
             whole.append(residence_times(traj, window, use_events=False,
                                          lag_frames=traj.lag_frames(model.lag),
-                                         direction=direction,
-                                         split_at_absences=True).samples)
+                                         direction=direction, split_at_absences=True,
+                                         face_band=traj.height / model.state_space.rows
+                                         ).samples)
     pooled = np.concatenate(whole)
     if pooled.size < 2:
         return None
@@ -386,8 +387,9 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
             lag_frames = traj.lag_frames(model.lag)
             observed += [residence_times(traj, (float(cuts[k]), float(cuts[k + 1])),
                                          use_events=False, lag_frames=lag_frames,
-                                         direction=direction,
-                                         split_at_absences=True).samples
+                                         direction=direction, split_at_absences=True,
+                                         face_band=traj.height / model.state_space.rows
+                                         ).samples
                          for k in range(n)]
         lengths += [(b - a) / n] * n
         group += [r if within_runs else 0] * n

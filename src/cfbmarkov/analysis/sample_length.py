@@ -368,7 +368,7 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
         directions = [net_flow_direction(t, (a, t_last)) for t, t_last in zip(runs, lasts)]
         long_run = np.concatenate([
             residence_times(t, (a, t_last), use_events=False, lag_frames=t.lag_frames(lag),
-                            direction=d).samples
+                            direction=d, face_band=t.height / state_space.rows).samples
             for t, t_last, d in zip(runs, lasts, directions)])
         if long_run.size < 2:
             raise InputError(f"{name} holds {long_run.size} residences from {a:g} s: no long "

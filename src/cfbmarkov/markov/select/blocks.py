@@ -65,8 +65,21 @@ class JudgedBlocks:
         return min(o.count for o in self.observed)
 
 
+def _open_riser_criterion(is_open: bool, criterion: str) -> str:
+    """An open riser's criterion: the Chapman-Kolmogorov test (``auto``), the RTD criteria
+    refused in one line: their chain's RTD is the periodic riser's (passes up through the
+    top), not the absorbing chain of an open one."""
+    if not is_open:
+        return criterion
+    if criterion in ("window", "rtd"):
+        raise InputError(f"auto: the {criterion} criterion judges a periodic riser's RTD; an "
+                         "open riser's candidates are judged by the Chapman-Kolmogorov test "
+                         "(criterion ck, or auto)")
+    return "ck"
+
+
 def judged_blocks(traj, window: tuple[float, float], lag: float, lag_multiples: Sequence[int],
-                  folds: int, criterion: str) -> JudgedBlocks:
+                  folds: int, criterion: str, face_band: float | None = None) -> JudgedBlocks:
     """Cut the fitting window into blocks and observe the residence times to judge by.
 
     Parameters
@@ -84,7 +97,10 @@ def judged_blocks(traj, window: tuple[float, float], lag: float, lag_multiples: 
         Number of blocks (>= 2).
     criterion : {"auto", "window", "rtd", "ck"}
         The criterion asked for; ``auto`` becomes ``window`` where the window holds at least
-        :data:`MIN_RESIDENCES` residences, else ``ck``.
+        :data:`MIN_RESIDENCES` residences, else ``ck``; on an open riser always ``ck``.
+    face_band : float, optional
+        An open riser's face band (m): one cell row of the candidates' grid, where a
+        vanishing particle has left (:func:`cfbmarkov.observed.residence.residence_times`).
 
     Returns
     -------
@@ -114,7 +130,8 @@ def judged_blocks(traj, window: tuple[float, float], lag: float, lag_multiples: 
     # Net downflow), as the comparison of the prediction will count them
     direction = net_flow_direction(traj, (a, b))
     whole = residence_times(traj, (a, b), use_events=False, lag_frames=lag_frames,
-                            direction=direction)
+                            direction=direction, face_band=face_band)
+    criterion = _open_riser_criterion(traj.boundary.is_open, criterion)
     if criterion == "auto":
         criterion = "window" if whole.count >= MIN_RESIDENCES else "ck"
     if criterion == "window":          # one "block": the whole window, in sample
@@ -125,7 +142,8 @@ def judged_blocks(traj, window: tuple[float, float], lag: float, lag_multiples: 
     else:
         judged = blocks
         observed = [residence_times(traj, block, use_events=False, lag_frames=lag_frames,
-                                    direction=direction) for block in blocks]
+                                    direction=direction, face_band=face_band)
+                    for block in blocks]
     fitting = JudgedBlocks((a, b), criterion, blocks, judged, observed, whole, direction,
                            lag_frames)
     if criterion == "rtd" and fitting.fewest < MIN_RESIDENCES:

@@ -110,7 +110,8 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
     folds = int(folds)
     a, b = (float(v) for v in window)
     with opened(data) as traj:
-        fitting = judged_blocks(traj, (a, b), lag, lag_multiples, folds, criterion)
+        fitting = judged_blocks(traj, (a, b), lag, lag_multiples, folds, criterion,
+                                face_band=traj.height / rows)
         judge = criterion_for(fitting, lag)
         spaces = candidate_spaces(traj, states, lag_multiples, lag, columns, rows)
         # the window's frames are read once; every candidate is discretised on them

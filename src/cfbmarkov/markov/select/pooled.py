@@ -30,7 +30,7 @@ from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.counting import count_transitions
 from cfbmarkov.markov.estimate import estimator_from_name
 from cfbmarkov.markov.pooling import check_runs_distinct, check_runs_match, run_windows
-from cfbmarkov.markov.select.blocks import MIN_RESIDENCES, JudgedBlocks
+from cfbmarkov.markov.select.blocks import MIN_RESIDENCES, JudgedBlocks, _open_riser_criterion
 from cfbmarkov.markov.select.candidates import (JudgedCandidate, candidate_spaces,
                                                 read_window_frames, score_candidates)
 from cfbmarkov.markov.select.criteria import criterion_for
@@ -40,7 +40,8 @@ from cfbmarkov.observed.residence import ResidenceTimes, net_passes, residence_t
 
 
 def pooled_blocks(runs, windows, lag: float, lag_multiples: Sequence[int], folds: int,
-                  criterion: str) -> tuple[JudgedBlocks, list[int]]:
+                  criterion: str, face_band: float | None = None
+                  ) -> tuple[JudgedBlocks, list[int]]:
     """The judged blocks of several runs' windows as one sample.
 
     Parameters
@@ -49,7 +50,7 @@ def pooled_blocks(runs, windows, lag: float, lag_multiples: Sequence[int], folds
         Open runs of one case.
     windows : sequence of (float, float)
         One window per run (s).
-    lag, lag_multiples, folds, criterion
+    lag, lag_multiples, folds, criterion, face_band
         As :func:`~cfbmarkov.markov.select.blocks.judged_blocks`.
 
     Returns
@@ -80,10 +81,12 @@ def pooled_blocks(runs, windows, lag: float, lag_multiples: Sequence[int], folds
     lag_frames = runs[0].lag_frames(lag)
     direction = "up" if sum(net_passes(run, w) for run, w in zip(runs, windows)) >= 0 \
         else "down"
-    kwargs = {"use_events": False, "lag_frames": lag_frames, "direction": direction}
+    kwargs = {"use_events": False, "lag_frames": lag_frames, "direction": direction,
+              "face_band": face_band}
     wholes = [residence_times(run, w, **kwargs) for run, w in zip(runs, windows)]
     whole = ResidenceTimes(np.concatenate([w.samples for w in wholes]), False,
                            tuple(windows[0]))
+    criterion = _open_riser_criterion(runs[0].boundary.is_open, criterion)
     if criterion == "auto":
         criterion = "window" if whole.count >= MIN_RESIDENCES else "ck"
     if criterion == "window":
@@ -132,7 +135,8 @@ def select_pooled(runs, *, windows, columns: int, rows: int, lag: float,
     check_runs_match(runs)
     windows = run_windows(windows, len(runs))
     check_runs_distinct(runs, windows)
-    fitting, judged_run = pooled_blocks(runs, windows, lag, lag_multiples, folds, criterion)
+    fitting, judged_run = pooled_blocks(runs, windows, lag, lag_multiples, folds, criterion,
+                                        face_band=runs[0].height / rows)
     judge = criterion_for(fitting, lag)
     spaces = candidate_spaces(runs[0], states, lag_multiples, lag, columns, rows)
     frames = [read_window_frames(run, w, spaces) for run, w in zip(runs, windows)]
