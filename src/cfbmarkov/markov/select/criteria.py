@@ -229,7 +229,7 @@ class WindowRTD(_RTDCriterion):
         return (f"{best.states} at lag {best.lag:g} s had the exact RTD closest to the one "
                 f"observed over the fitting window {a:g}-{b:g} s; the percentages set the "
                 f"chain's RTD as seen in a {b - a:g} s window (E(RT) {best.rt_mean:.3g} s) "
-                f"against the window's observed E(RT) {observed.mean:.3g} s, SD(RT) "
+                f"against the residences the window holds whole, E(RT) {observed.mean:.3g} s, SD(RT) "
                 f"{observed.sd:.3g} s")
 
 
