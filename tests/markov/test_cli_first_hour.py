@@ -221,7 +221,8 @@ def test_auto_choice_says_what_its_percentages_are_against(markov_run):
                          states=("cells", "cells-direction"))
     reason = model.selection["reason"]
     found = re.search(r"as seen in a 4 s window \(E\(RT\) ([\d.]+) s\)"
-                      r" against the window's observed E\(RT\) ([\d.]+) s", reason)
+                      r" against the residences the window holds whole, E\(RT\) ([\d.]+) s",
+                      reason)
     assert found, reason
     seen, observed = map(float, found.groups())
     chosen = model.selection["chosen"]       # the winner's PD, as its row of the table shows

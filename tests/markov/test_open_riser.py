@@ -249,3 +249,24 @@ def test_an_open_riser_counts_exits_within_one_cell_row_of_the_outlet(tmp_path, 
     with pytest.raises(InputError, match="the window criterion judges a periodic riser's RTD"):
         select_model(run, window=(0.3, 1.5), columns=4, rows=10, lag=0.01,
                      states=("cells", "cells-direction"), criterion="window")
+
+
+def test_a_memory_model_says_which_particles_it_cannot_start(tmp_path):
+    """On an open riser a particle that entered within the memory of the state space has no
+    state at the start frame: the prediction leaves it out and says so; a model on cells
+    starts every particle present."""
+    import warnings
+
+    from cfbmarkov.errors import CfbmarkovWarning
+    from cfbmarkov.markov import state_space_from_name
+
+    run = _fast_open_riser(tmp_path / "fast.h5", n=350, frames=400)
+    memory = state_space_from_name("cells-direction", 4, 10, 0.09, 0.95)
+    model = fit_model(run, memory, 0.01, (0.3, 2.5), estimator="mle")
+    with pytest.warns(CfbmarkovWarning, match=r"1 of \d+ particles present at 2\.5 s have no "
+                                              r"state in cells-direction"):
+        model.predict(run, 2.5, 0.2, seed=1)
+    cells = fit_model(run, CellGrid(4, 10, 0.09, 0.95), 0.01, (0.3, 2.5), estimator="mle")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CfbmarkovWarning)
+        cells.predict(run, 2.5, 0.2, seed=1)

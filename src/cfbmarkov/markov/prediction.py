@@ -111,6 +111,7 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         states0, positions0, laps0 = initial_states(model, traj, start)
         ids = traj.ids
         present0 = states0 >= 0
+        _warn_stateless(states0, positions0, model, start)
         if not present0.all():          # only the particles present at the start move
             states0, positions0, laps0, ids = (states0[present0], positions0[present0],
                                                laps0[present0], ids[present0])
@@ -154,6 +155,26 @@ def _properties(model, traj, kinetics, start, states, laps, present) -> np.ndarr
             initial[q, :present.size] = traj.property_values(name, frame)[present]
     return run_properties(kinetics, model.lag, states, laps,
                           periodic=not model.boundary.is_open, initial=initial)
+
+
+def _warn_stateless(states0: np.ndarray, positions0: np.ndarray, model: "MarkovModel",
+                    start: float) -> None:
+    """Warn where particles present in the start frame have no state: on an open riser,
+    those that entered within the state space's memory before it (their history is
+    incomplete); they are left out of the prediction."""
+    import warnings
+
+    from cfbmarkov.errors import CfbmarkovWarning
+
+    seen = np.isfinite(positions0).all(axis=1)
+    missing = int(np.count_nonzero(seen & (states0 < 0)))
+    if missing:
+        warnings.warn(f"{missing} of {int(seen.sum())} particles present at {start:g} s have no "
+                      f"state in {model.state_space.kind} (they entered less than its memory, "
+                      f"{model.state_space.memory_lags} lag(s), before that frame) and are left "
+                      "out of the prediction, which `compare` then refuses to set against the "
+                      "reference; a model on cells keeps them all", CfbmarkovWarning,
+                      stacklevel=3)
 
 
 def initial_states(model: "MarkovModel", trajectories, start: float
