@@ -240,6 +240,9 @@ def test_pooled_verdict_names_the_run_that_disagrees_and_pooled_halves(runs, tmp
     model = estimator_from_name("paper", _space(), 0.025).fit(data)
     verdict = assess_adequacy(model, paths, [window] * 3, discrete=data)
     line = next(line for line in verdict.warnings if "runs disagree" in line)
+    # a pooled fit is not told to pool runs, but to pool more
+    assert all("pool several runs" not in w for w in verdict.warnings)
+    assert any("or pool more runs" in w for w in verdict.warnings)
     assert line.index(str(slow)) < min(line.find(str(p)) % len(line) for p in paths[:2])
     assert [r for r, _ in verdict.runs] == [str(p) for p in paths]
     assert Adequacy.from_dict(verdict.to_dict()) == verdict

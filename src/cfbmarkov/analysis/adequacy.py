@@ -75,6 +75,9 @@ THROUGHPUT_LIMIT = 0.1
 
 _ADVICE = ("fit on a longer window or pool several runs (fit A.h5 B.h5 ...); `cfbmarkov "
            "stationarity RUN --sample-length` tells how long a window must be")
+#: the advice of a pooled fit's lines: it pools runs already
+_POOLED_ADVICE = ("fit on longer windows or pool more runs; `cfbmarkov stationarity RUN "
+                  "--sample-length` tells how long a window must be")
 
 
 def _rt_mean(model, direction: str | None = None) -> float:
@@ -376,6 +379,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                      f"{length:g} s fitting window (E(RT) {rt_mean:.3g} s): the window cannot "
                      f"contain them, so the long residences rest on few observations; "
                      f"{_ADVICE}")
+    if pooled:
+        lines = [line.replace(_ADVICE, _POOLED_ADVICE) for line in lines]
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
                     run_means, window_mean)
 
