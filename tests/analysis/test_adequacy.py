@@ -439,3 +439,24 @@ def test_the_throughput_line_names_a_reducible_chain():
     one = SimpleNamespace(estimator="mle", closed_classes=[np.arange(5)])
     assert "reducible" not in _throughput_line(one, 1.5, 1.0)
     assert _throughput_line(two, 1.05, 1.0) is None
+
+
+def test_a_passed_verdict_says_so_with_its_numbers():
+    """No warning: one line with the parts' spread and limit (times sqrt(2) for quarters, as
+    they are judged; left out for pooled runs, judged run by run), the throughput gap and
+    the share of residences beyond the window; a warning: no such line."""
+    from cfbmarkov.markov.adequacy import Adequacy
+
+    parts = tuple((a, a + 1.0, 1.0, "up") for a in (0.0, 1.0, 2.0, 3.0))
+    calm = Adequacy((), parts, 1.02, 0.031, 0.057, 4.0, 0.002, (), 1.0)
+    assert calm.passed_line() == (
+        "the fitting sample's verdict: no warning: the window's quarters agree (E(RT) spread "
+        "3.1 %, limit 8.1 %); the chain carries the window's throughput (within 2 %); 0.2 % "
+        "of its residences outlast the window")
+    assert "under 0.1 % of its" in Adequacy((), parts[:2], 1.0, 0.01, 0.05, 2.0, 1e-9, (),
+                                            1.0).passed_line()
+    halves = Adequacy((), parts[:2], 1.0, 0.01, 0.05, 2.0, 1e-9).passed_line()
+    assert "halves agree (E(RT) spread 1 %, limit 5 %)" in halves
+    pooled = Adequacy((), parts, 1.0, 0.01, 0.05, 2.0, 0.01, (("a.h5", 1.0), ("b.h5", 1.0)))
+    assert "agree" not in pooled.passed_line()
+    assert Adequacy(("a warning",), parts, 1.0, 0.1, 0.05).passed_line() is None

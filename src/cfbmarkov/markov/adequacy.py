@@ -67,6 +67,35 @@ class Adequacy:
         """True where no warning was raised."""
         return not self.warnings
 
+    def passed_line(self) -> str | None:
+        """Where the verdict raised no warning, one line with the numbers it judged (one
+        run's parts' spread against its limit, times sqrt(2) for quarters; the chain's E(RT)
+        against the window's throughput; the residences longer than the window), so that a
+        passed verdict reads as such and not as one that was not run; None where it warned.
+
+        Returns
+        -------
+        str or None
+        """
+        if self.warnings:
+            return None
+        said = []
+        if math.isfinite(self.spread) and math.isfinite(self.limit) and not self.runs:
+            # one run: quarters are judged against the limit times sqrt(2), as they warn
+            quarters = len(self.parts) == 4
+            limit = self.limit * (math.sqrt(2.0) if quarters else 1.0)
+            said.append(f"the window's {'quarters' if quarters else 'halves'} agree (E(RT) "
+                        f"spread {100 * self.spread:.2g} %, limit {100 * limit:.2g} %)")
+        if math.isfinite(self.window_rt_mean) and math.isfinite(self.rt_mean):
+            gap = abs(self.rt_mean / self.window_rt_mean - 1.0)
+            said.append(f"the chain carries the window's throughput (within {100 * gap:.2g} %)")
+        if math.isfinite(self.tail_share):
+            share = 100 * self.tail_share
+            said.append(f"{f'{share:.2g} %' if share >= 0.1 else 'under 0.1 %'} of its "
+                        "residences outlast the window")
+        return ("the fitting sample's verdict: no warning" +
+                (f": {'; '.join(said)}" if said else ""))
+
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (NaN as None): the attributes, ``parts`` as a list of objects.
 

@@ -210,6 +210,9 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         lines.append(f"    the fitting window's own E(RT): {own:.4g} s (its particle-time over "
                      "its net passes, the throughput the chain should carry; the verdict "
                      "warns beyond 10 %)")
+    passed = None if model.adequacy is None else model.adequacy.passed_line()
+    if passed:
+        lines.append(f"  {passed}")
     return "\n".join(lines)
 
 
