@@ -166,6 +166,18 @@ def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, au
     return out
 
 
+def _record(fit: dict, fits: list, progress, reference: np.ndarray, flux, t0: float,
+            **keys) -> None:
+    """Complete a fit's record (its ``keys``, both long runs, the seconds since ``t0``),
+    keep it in ``fits`` and show it."""
+    fit.update(**keys, long_run=float(reference.mean()) if reference.size else None,
+               long_run_count=int(reference.size), long_run_flux=flux,
+               seconds=time.perf_counter() - t0)
+    fits.append(fit)
+    if progress:
+        progress(fit)
+
+
 def pooled_study(runs, *, lengths, starts: int, settle: float, cells, lag, level: float,
                  resamples: int, estimator: str | None = None, progress=None) -> dict:
     """``--pool``: the runs are of one case, and each window (the same in every run, from
@@ -225,15 +237,9 @@ def pooled_study(runs, *, lengths, starts: int, settle: float, cells, lag, level
                     fit["window_rt_mean"] = verdict.window_rt_mean
                 except CfbmarkovError as exc:     # kept, and left out of the table
                     fit["error"] = str(exc)
-                fit.update(run=", ".join(str(p) for p in paths), model=f"pool{len(paths)}",
-                           length=float(length),
-                           long_run=float(reference.mean()) if reference.size else None,
-                           long_run_count=int(reference.size),
-                           long_run_flux=flux,
-                           seconds=time.perf_counter() - t0)
-                fits.append(fit)
-                if progress:
-                    progress(fit)
+                _record(fit, fits, progress, reference, flux, t0,
+                        run=", ".join(str(p) for p in paths), model=f"pool{len(paths)}",
+                        length=float(length))
     return {"level": level, "resamples": resamples, "settle": settle, "estimator": estimator,
             "lag": lag, "lengths": list(lengths), "starts": starts, "off": OFF,
             "pooled": [str(p) for p in paths], "table": table(fits), "fits": fits}
@@ -335,15 +341,8 @@ def study(runs, *, lengths, starts: int, settle: float, cells, lag, auto: bool, 
                                           estimator=estimator)
                         except CfbmarkovError as exc:     # kept, and left out of the table
                             fit = {"window": list(window), "error": str(exc)}
-                        fit.update(run=str(path), model=model, length=float(length),
-                                   long_run=float(reference.mean()) if reference.size
-                                   else None,
-                                   long_run_count=int(reference.size),
-                                   long_run_flux=flux,
-                                   seconds=time.perf_counter() - t0)
-                        fits.append(fit)
-                        if progress:
-                            progress(fit)
+                        _record(fit, fits, progress, reference, flux, t0, run=str(path),
+                                model=model, length=float(length))
     return {"level": level, "resamples": resamples, "settle": settle, "estimator": estimator,
             "lag": lag, "lengths": list(lengths),
             "starts": starts, "off": OFF, "table": table(fits), "fits": fits}
