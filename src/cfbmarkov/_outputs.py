@@ -35,6 +35,9 @@ KINDS = ("trajectory", "model", "png", "folder")
 _HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 _PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 _FORMATS = {"trajectory": "cfbmarkov.trajectories", "model": "cfbmarkov.model"}
+#: the ``source`` of a trajectory file that a Monte Carlo prediction wrote: a prediction
+#: may replace a prediction, but a simulated or imported run only with ``force``
+PREDICTION_SOURCE = "markov-prediction"
 
 #: locks held by this process: lock file -> [fd, count]
 _HELD: dict[str, list] = {}
@@ -188,9 +191,13 @@ def _describe(path: Path) -> str:
 
         with h5py.File(path, "r") as f:
             fmt = f.attrs.get("format")
+            source = f.attrs.get("source")
     except (OSError, RuntimeError):
         return "a damaged or locked HDF5 file"
     fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
+    source = source.decode() if isinstance(source, bytes) else source
+    if fmt == _FORMATS["trajectory"] and source == PREDICTION_SOURCE:
+        return "prediction"
     for kind, name in _FORMATS.items():
         if fmt == name:
             return kind
@@ -198,7 +205,7 @@ def _describe(path: Path) -> str:
 
 
 _KIND_TEXT = {"trajectory": "a trajectory file", "model": "a model file", "png": "a PNG image",
-              "folder": "a folder"}
+              "folder": "a folder", "prediction": "a prediction (a trajectory file)"}
 
 
 def _check_kind(target: Path, kind: str, force: bool) -> None:
@@ -208,12 +215,14 @@ def _check_kind(target: Path, kind: str, force: bool) -> None:
         return
     what = _describe(target)
     if what == kind or what == "empty" and kind != "folder" or (
-            kind == "folder" and what == "a folder"):
+            kind == "folder" and what == "a folder") or (
+            kind == "trajectory" and what == "prediction"):
         return
     if what == "a folder":
         if not force:
             raise InputError(f"{target}: is a folder, not {_KIND_TEXT[kind]}; give another "
-                             "output name (or add --force to replace an empty folder)")
+                             "output name (or add --force, in Python force=True, to replace "
+                             "an empty folder)")
         try:
             target.rmdir()
         except OSError:
@@ -221,9 +230,11 @@ def _check_kind(target: Path, kind: str, force: bool) -> None:
                              "only an empty folder") from None
         return
     shown = _KIND_TEXT.get(what, what)
+    if kind == "prediction" and what == "trajectory":
+        shown = "a simulated or imported trajectory file"
     if not force:
         raise InputError(f"{target}: exists and is {shown}, not {_KIND_TEXT[kind]}; add --force "
-                         "to replace it, or give another output name")
+                         "(in Python force=True) to replace it, or give another output name")
     if kind == "folder":
         try:
             target.unlink()
@@ -379,8 +390,9 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
         The output file or folder.
     verb : str
         The writing verb, recorded in the lock.
-    kind : {"trajectory", "model", "png", "folder"}
-        What is written.
+    kind : {"trajectory", "prediction", "model", "png", "folder"}
+        What is written: a prediction may replace a prediction; a trajectory file (a run)
+        a run or a prediction.
     inputs : iterable of str or os.PathLike, optional
         The verb's input files (glob patterns are expanded).
     force : bool, optional

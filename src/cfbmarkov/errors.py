@@ -105,3 +105,9 @@ class CfbmarkovWarning(UserWarning):
 class TimeStepAdvisory(CfbmarkovWarning):
     """The DEM time step resolves a contact in fewer than the recommended 10 steps (but in
     5 or more, below which the run is refused)."""
+
+
+class SampleWarning(CfbmarkovWarning):
+    """A model used for a prediction carries a warning of its fitting sample's verdict
+    (:attr:`cfbmarkov.markov.MarkovModel.adequacy`): the message repeats it, as the command
+    line's ``warning: the model's fitting sample: ...`` line does."""

@@ -75,3 +75,25 @@ def test_open_section_of_a_periodic_box(tmp_path):
     _, present, _ = _read(import_lammps(source, tmp_path / "o.h5", boundary="open",
                                         region=((0.0, 0.09), (0.0, 0.4))))
     np.testing.assert_array_equal(present, [[True, False], [True, False]])
+
+
+def _notes(path):
+    with Trajectories(path) as t:
+        return t.parameters.get("import_notes", [])
+
+
+def test_rows_outside_the_region_and_a_region_beyond_the_box_are_noted(tmp_path):
+    """A dump's particles left out by the region are counted in the import's notes, as a
+    CSV file's rows are, and a region reaching past a fixed box is named; a region inside
+    the box that holds every particle, and a shrink-wrapped box, give no note."""
+    source = _dump(tmp_path / "wide.dump", FRAMES_2D, BOX_2D)
+    notes = _notes(import_lammps(source, tmp_path / "w.h5",
+                                 region=((-0.045, 0.045), (0.0, 0.95))))
+    assert len(notes) == 2
+    assert notes[0].startswith("2 of 4 particle rows (50 %) lie outside the riser's region")
+    assert "the region's x -0.045..0.045 reaches beyond the source's box 0..0.09" in notes[1]
+    assert _notes(import_lammps(source, tmp_path / "all.h5")) == []
+    shrunk = _dump(tmp_path / "m.dump", FRAMES_2D, ((0.01, 0.08), (0.3, 0.52), (-0.0005, 0.0005)),
+                   flags="mm mm mm")
+    assert _notes(import_lammps(shrunk, tmp_path / "m.h5", region=((0.0, 0.09), (0.0, 0.95)),
+                                boundary="open")) == []

@@ -103,7 +103,7 @@ def main(argv: list[str] | None = None) -> int:
 
 #: the output each writing verb claims: kind, and the arguments naming its inputs
 OUTPUTS = {"import": ("trajectory", ("source",)), "fit": ("model", ("run",)),
-           "predict": ("trajectory", ("model", "init")),
+           "predict": ("prediction", ("model", "init")),
            "compare": ("folder", ("reference", "prediction")), "maps": ("png", ("model",)),
            "simulate": ("trajectory", ("case",)), "reproduce": ("folder", ("overrides",)),
            "demo": ("folder", ()), "export-vtk": ("folder", ("run",))}

@@ -60,12 +60,16 @@ def cmd_react(args) -> int:
         raise InputError(f"{args.kinetics}: a law without an exact answer; run the Monte "
                          "Carlo with --init RUN --start T --duration D -o OUT")
     if args.init is not None:
+        import warnings
+
         from cfbmarkov._outputs import claim_output
+        from cfbmarkov.errors import SampleWarning
         from cfbmarkov.trajectories import Trajectories
 
-        with claim_output(args.output, "react", "trajectory", [args.model, args.init],
+        with claim_output(args.output, "react", "prediction", [args.model, args.init],
                           force=args.force):
-            with Trajectories(args.init) as run:
+            with Trajectories(args.init) as run, warnings.catch_warnings():
+                warnings.simplefilter("ignore", SampleWarning)  # printed below
                 model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                               output=args.output, progress=not args.quiet,
                               kinetics=state_kinetics)

@@ -82,55 +82,21 @@ def cmd_fit(args) -> int:
 
 def _finish_fit(args, model, runs, windows) -> int:
     """The end of ``fit``: the exact RTD, the sample's verdict, warnings, save, summary."""
-    from cfbmarkov.markov.first_passage import TrappedResidences
+    import warnings
 
-    if len(runs) == 1 and isinstance(model.source, str):
-        from cfbmarkov.analysis.cell_fields import fitting_cell_fields
-        from cfbmarkov.trajectories import Trajectories
-        from cfbmarkov.trajectory_identity import window_identity
+    from cfbmarkov.analysis.fit_checks import IntervalWarning, assess_fit
 
-        with Trajectories(model.source) as run:
-            model = model.with_source_identity(window_identity(run, model.window))
-            model = model.with_cell_fields(fitting_cell_fields(run, model))
-    elif len(runs) > 1:     # a pooled fit: each run's identity, the pooled cell fields
-        import contextlib
-
-        from cfbmarkov.analysis.cell_fields import pooled_cell_fields
-        from cfbmarkov.trajectories import Trajectories
-        from cfbmarkov.trajectory_identity import window_identity
-
-        with contextlib.ExitStack() as stack:
-            opened = [stack.enter_context(Trajectories(path)) for path in runs]
-            model = model.with_source_identity(";".join(
-                window_identity(run, w) for run, w in zip(opened, windows)))
-            try:
-                model = model.with_cell_fields(pooled_cell_fields(opened, model.state_space,
-                                                                  windows))
-            except InputError:         # the grid does not fit the files: no fields
-                pass
-    has_rtd = True
-    try:
-        model.rtd()
-    except TrappedResidences as exc:
-        raise InputError(f"{', '.join(map(str, runs))}: {exc}") from None
-    except CfbmarkovError:
-        has_rtd = False            # no circulation at all: a model without residence times
-    # -- the model's interval: a block bootstrap of the fitting window and the flow's
-    # variability between its blocks (analysis.intervals.model_intervals) ----------------
-    if args.resamples and has_rtd:
-        with _stage(args, "interval", f"the model's {100 * args.level:g} % interval: "
-                    f"{args.resamples} bootstrap resamples of the fitting window"):
-            model = _with_interval(model, args.level, args.resamples)
-    # -- end of the model's interval ---------------------------------------------------
-    # -- the sample's verdict (docs/definitions.md, Sample adequacy) --------------------
-    if args.adequacy:
-        from cfbmarkov.analysis.adequacy import assess_adequacy
-
-        with _stage(args, "sample verdict", "the fitting sample's verdict: the window's "
-                    "halves and quarters refitted and compared"):
-            model = model.with_adequacy(assess_adequacy(model, runs, windows,
-                                                        uncertainty=model.uncertainty))
-    # -- end of the sample's verdict ----------------------------------------------------
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", IntervalWarning)
+        model = assess_fit(model, runs, windows, level=args.level, resamples=args.resamples,
+                           verdict=args.adequacy,
+                           stage=lambda short, text: _stage(args, short, text))
+    for caught_warning in caught:
+        if issubclass(caught_warning.category, IntervalWarning):
+            print(f"warning: {one_line(str(caught_warning.message))}", file=sys.stderr)
+        else:
+            warnings.warn_explicit(caught_warning.message, caught_warning.category,
+                                   caught_warning.filename, caught_warning.lineno)
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line
         print(f"warning: {one_line(line.strip())}", file=sys.stderr)
@@ -230,8 +196,13 @@ def cmd_predict(args) -> int:
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.trajectories import Trajectories
 
+    import warnings
+
+    from cfbmarkov.errors import SampleWarning
+
     model = MarkovModel.load(args.model)
-    with Trajectories(args.init) as run:
+    with Trajectories(args.init) as run, warnings.catch_warnings():
+        warnings.simplefilter("ignore", SampleWarning)     # printed below, after the file
         model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                       output=args.output, progress=not args.quiet)
     for line in model.adequacy.warnings if model.adequacy is not None else ():

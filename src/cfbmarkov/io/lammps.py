@@ -42,7 +42,8 @@ from cfbmarkov.io._common import (
     whole_ids,
 )
 from cfbmarkov.io.lammps_dump import AXES, AtomColumns, DumpFrame, _frames_of, dump_files
-from cfbmarkov.io.riser import FrameColumns, RiserFrame, riser_frame, riser_positions
+from cfbmarkov.io.riser import (FrameColumns, RiserFrame, region_notes, riser_frame,
+                                riser_positions)
 from cfbmarkov.trajectory_writer import IMPORT_MAX_STEP
 
 #: relative change of the box bounds between frames that is taken as round-off
@@ -136,6 +137,10 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
                 raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
                                  "particle in any frame; check --region (or --width/--height) "
                                  "against the box")
+            notes = region_notes(riser, first.box[:n_axes], columns.rows, columns.outside,
+                                 tuple(first.boundary))
+            if notes:
+                writer.update_parameters({"import_notes": notes})
     return output
 
 

@@ -23,7 +23,8 @@ import numpy as np
 
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import create_writer, progress, removing_new_folders
-from cfbmarkov.io.riser import AXES, FrameColumns, riser_frame, riser_positions
+from cfbmarkov.io.riser import (AXES, FrameColumns, region_notes, riser_frame,
+                                riser_positions)
 from cfbmarkov.trajectory_format import POSITION_TOLERANCE
 from cfbmarkov.trajectory_writer import IMPORT_MAX_STEP
 
@@ -185,6 +186,10 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
             if not writer.any_present:
                 raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
                                  "particle in any frame; check --region (or --width/--height)")
+            notes = region_notes(riser, box, columns.rows, columns.outside,
+                                 tuple(series.flags))
+            if notes:
+                writer.update_parameters({"import_notes": notes})
     return output
 
 

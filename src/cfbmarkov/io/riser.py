@@ -284,6 +284,48 @@ def riser_positions(raw: np.ndarray, riser: RiserFrame, image: np.ndarray | None
     return pos, inside, laps
 
 
+def region_notes(riser, box, rows: int, outside: int, flags: tuple[str, ...] = ()
+                 ) -> list[str]:
+    """The import's notes on its region: the particle rows outside it (absent in the file)
+    and the sides where it reaches beyond the source's box.
+
+    Parameters
+    ----------
+    riser : RiserFrame
+        The riser's region (source coordinates, m).
+    box : ndarray of float64, shape (3, 2), or None
+        The source's box (source coordinates), where it has one.
+    rows, outside : int
+        Particle rows read, and of them those outside the region.
+    flags : tuple of str, optional
+        The box's boundary flags per source axis (LAMMPS: ``pp``, ``ff``, ``ss``, ``mm``):
+        a shrink-wrapped side (``s``, ``m``) follows the particles and is not compared.
+
+    Returns
+    -------
+    list of str
+    """
+    notes = []
+    if outside:
+        notes.append(f"{outside} of {rows} particle rows ({100 * outside / max(rows, 1):.3g} %) "
+                     "lie outside the riser's region and are absent there; if that is not "
+                     "the particles leaving the riser, check --width/--height (from 0 in the "
+                     "source's coordinates) or --region")
+    if box is not None and not riser.from_box:
+        letters = "xyz"
+        for k, axis in enumerate(riser.axes):
+            if len(flags) > axis and any(c in "sm" for c in str(flags[axis])):
+                continue
+            lo, hi = riser.region[k]
+            b_lo, b_hi = box[axis]
+            tol = 1e-9 * max(abs(b_hi - b_lo), 1.0)
+            if lo < b_lo - tol or hi > b_hi + tol:
+                notes.append(f"the region's {letters[axis]} {lo:g}..{hi:g} reaches beyond the "
+                             f"source's box {b_lo:g}..{b_hi:g}: no particle can lie in the part "
+                             "outside it")
+    return notes
+
+
 class FrameColumns:
     """Puts each frame's particles into the writer's columns, adding particles that appear
     for the first time (inserted, entering the view) as new columns.
@@ -292,10 +334,17 @@ class FrameColumns:
     ----------
     writer : TrajectoryWriter
         The open writer (its ids are the columns so far).
+
+    Attributes
+    ----------
+    rows, outside : int
+        Particle rows placed so far, and of them those outside the region.
     """
 
     def __init__(self, writer: TrajectoryWriter):
         self.writer = writer
+        self.rows = 0
+        self.outside = 0
         self._refresh()
 
     def _refresh(self) -> None:
@@ -363,6 +412,8 @@ class FrameColumns:
             :meth:`TrajectoryWriter.append`.
         """
         cols = self.columns(ids, where)
+        self.rows += int(inside.size)
+        self.outside += int(inside.size - np.count_nonzero(inside))
         n, d = self.writer.ids.size, positions.shape[1]
         full = np.full((n, d), np.nan)
         full[cols] = positions

@@ -619,5 +619,43 @@ def as_discrete_list(data) -> list[DiscreteTrajectories]:
     return items
 
 
+def check_distinct_windows(windows: list[DiscreteTrajectories]) -> None:
+    """Refuse to pool discrete trajectories with themselves: the same object twice, two
+    windows of one file whose times overlap, or two with equal times and states (a copy).
+    Pooled twice, a window counts its transitions twice and its interval narrows as if it
+    were independent flow (``cfbmarkov fit a.h5 a.h5`` is refused alike,
+    :func:`cfbmarkov.markov.pooling.check_runs_distinct`).
+
+    Parameters
+    ----------
+    windows : list of DiscreteTrajectories
+
+    Raises
+    ------
+    InputError
+        Where two of them hold the same data.
+    """
+    import os
+
+    for k, window in enumerate(windows):
+        for j, other in enumerate(windows[:k]):
+            same_file = (bool(window.source) and bool(other.source)
+                         and os.path.realpath(window.source) == os.path.realpath(other.source)
+                         and window.times[0] < other.times[-1]
+                         and other.times[0] < window.times[-1])
+            if other is window or same_file or (
+                    other.states.shape == window.states.shape
+                    and np.array_equal(other.times, window.times)
+                    and np.array_equal(other.states, window.states)):
+                name = window.source or "discrete trajectories"
+                raise InputError(
+                    f"windows {j} and {k} ({name}, {other.times[0]:g}-{other.times[-1]:g} s "
+                    f"and {window.times[0]:g}-{window.times[-1]:g} s) hold the same data: "
+                    "pooling a window with itself counts its transitions twice and narrows "
+                    "the interval falsely (pool windows of independent runs, or windows of "
+                    "one run that do not overlap)")
+
+
 __all__ = ["ABSENT", "DiscreteTrajectories", "WindowFrames", "as_discrete_list",
+           "check_distinct_windows",
            "check_domain", "discretize", "discretize_frame", "read_frames"]

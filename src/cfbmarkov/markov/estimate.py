@@ -34,7 +34,7 @@ from cfbmarkov.limits import check_fit
 from cfbmarkov.markov.coherence import calibrate_coherence
 from cfbmarkov.markov.connectivity import largest_connected_set, restrict_to_set
 from cfbmarkov.markov.counting import TransitionCounts, count_transitions
-from cfbmarkov.markov.discrete import as_discrete_list, discretize
+from cfbmarkov.markov.discrete import check_distinct_windows, as_discrete_list, discretize
 from cfbmarkov.markov.first_passage import split_by_pass
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.open_flow import OpenFlow
@@ -180,6 +180,7 @@ class TransitionEstimator:
             passes (:meth:`cfbmarkov.observed.lag_resolution.PassReading.check`).
         """
         windows = as_discrete_list(data)
+        check_distinct_windows(windows)
         if check_passes:
             for window in windows:
                 if window.pass_reading is not None:

@@ -462,7 +462,7 @@ class MarkovModel:
 
     def predict(self, trajectories, start: float, duration: float, seed: int = 0,
                 output: str | os.PathLike | None = None, progress: bool | str = False,
-                kinetics=None):
+                kinetics=None, force: bool = False):
         """Monte Carlo prediction (Eq. 7) from the particles' states in the frame at
         ``start`` (s) for ``duration`` (s), written as a trajectory file when ``output`` is
         given; see :func:`cfbmarkov.markov.prediction.predict` for the parameters, the
@@ -470,7 +470,7 @@ class MarkovModel:
         from cfbmarkov.markov import prediction
 
         return prediction.predict(self, trajectories, start, duration, seed, output, progress,
-                                  kinetics)
+                                  kinetics, force)
 
     def _derived(self, **changes) -> "MarkovModel":
         """This model with fields that change neither the chain nor anything derived from
@@ -589,11 +589,24 @@ class MarkovModel:
                 f"estimator={self.estimator!r}, transitions={self.n_transitions})")
 
     # -- persistence (the file layout lives in cfbmarkov.markov.model_file) --------------
-    def save(self, path: str | os.PathLike) -> Path:
+    def save(self, path: str | os.PathLike, force: bool = False) -> Path:
         """Write the model as an HDF5 file at ``path``, atomically, and return the path
-        (:func:`~cfbmarkov.markov.model_file.write_model`; InputError if it cannot be put
-        in place)."""
-        return model_file.write_model(self, path)
+        (:func:`~cfbmarkov.markov.model_file.write_model`).
+
+        An existing model file at ``path`` is replaced; a file of another kind (a
+        trajectory file, an image) only with ``force=True``, as ``cfbmarkov fit -o``
+        with ``--force``.
+
+        Raises
+        ------
+        InputError
+            If ``path`` holds a file of another kind and ``force`` is False, or the file
+            cannot be put in place.
+        """
+        from cfbmarkov._outputs import claim_output
+
+        with claim_output(path, "save", "model", force=force):
+            return model_file.write_model(self, path)
 
     @classmethod
     def from_group(cls, group: h5py.Group | h5py.File, label: str = "") -> "MarkovModel":

@@ -15,6 +15,7 @@ import numpy as np
 
 from cfbmarkov._console import clock_text, progress_mode, write_line
 from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics import Kinetics
 from cfbmarkov.kinetics.fingerprint import FINGERPRINT_METHOD, property_fingerprint
 from cfbmarkov.limits import check_disk, check_finite, check_memory, check_seed
 from cfbmarkov.markov.discrete import discretize_frame
@@ -30,7 +31,7 @@ if TYPE_CHECKING:
 
 def predict(model: "MarkovModel", trajectories, start: float, duration: float, seed: int = 0,
             output: str | os.PathLike | None = None, progress: bool | str = False,
-            kinetics=None):
+            kinetics=None, force: bool = False):
     """Monte Carlo prediction of ``model`` from the particles' states in the frame at
     ``start``.
 
@@ -51,14 +52,20 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         Show progress on stderr while a prediction is run and written to ``output``
         (:class:`PredictionProgress`): True a bar on a terminal and whole lines elsewhere (a
         log file, a pipe); ``"bar"`` or ``"lines"`` that; False quiet.
-    kinetics : StateKinetics, optional
-        Particle properties carried along the paths (:mod:`cfbmarkov.kinetics`, resolved on
-        the model's states): computed by :func:`cfbmarkov.markov.kinetics_mc.run_properties`
+    kinetics : Kinetics or StateKinetics, optional
+        Particle properties carried along the paths (:mod:`cfbmarkov.kinetics`; a
+        :class:`~cfbmarkov.kinetics.Kinetics` is resolved on the model's states with the
+        model's cell fields, :meth:`~cfbmarkov.kinetics.Kinetics.per_state`): computed by :func:`cfbmarkov.markov.kinetics_mc.run_properties`
         and stored as ``/properties/NAME`` [K+1, N] float64 with the attributes ``law``,
         ``start``, ``initial`` and ``fingerprint`` (the definition on the model's states at
         its lag, :func:`cfbmarkov.kinetics.fingerprint.property_fingerprint`; with
         ``fingerprint_method``). A ``reference`` start takes the file's own values of the
         property at ``start`` for the particles present then.
+
+    force : bool, optional
+        Replace an existing ``output`` that is a simulated or imported run or a model
+        file; without it those are refused (a prediction replaces a prediction), and
+        ``output`` may never be ``trajectories`` itself.
 
     Returns
     -------
@@ -73,7 +80,7 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
         ``start`` (or lacks the history before it), ``duration`` is not a whole number
         of lags or is shorter than one, the run would not fit in memory or its output on
         the disk (estimated before either is allocated), or the output cannot be
-        written.
+        written (it is the input, or a run or model file without ``force``).
 
     References
     ----------
@@ -81,6 +88,30 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
     Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
     doi:10.3390/pr13030614 (Eq. 7).
     """
+    _warn_sample(model)
+    if output is None:
+        return _predict(model, trajectories, start, duration, seed, None, progress, kinetics)
+    from cfbmarkov._outputs import claim_output
+
+    source = getattr(trajectories, "path", trajectories)
+    with claim_output(output, "predict", "prediction", [source], force=force):
+        return _predict(model, trajectories, start, duration, seed, output, progress, kinetics)
+
+
+def _warn_sample(model: "MarkovModel") -> None:
+    """Repeat the warnings of the model's fitting-sample verdict (:class:`SampleWarning`)."""
+    import warnings
+
+    from cfbmarkov.errors import SampleWarning
+
+    for line in model.adequacy.warnings if model.adequacy is not None else ():
+        warnings.warn(f"the model's fitting sample: {line}", SampleWarning, stacklevel=4)
+
+
+def _predict(model, trajectories, start, duration, seed, output, progress, kinetics):
+    """:func:`predict`, its output claimed."""
+    if isinstance(kinetics, Kinetics):
+        kinetics = kinetics.per_state(model.state_space, model.cell_fields)
     with opened(trajectories) as traj:
         seed = check_seed(seed)
         duration = check_finite(duration, "duration", "s", positive=True)

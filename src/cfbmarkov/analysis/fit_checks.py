@@ -1,0 +1,144 @@
+"""What ``cfbmarkov fit`` adds to a fitted model before it saves it: the fitting window's
+identity and time-averaged cell fields, the exact RTD's check, the model's interval and the
+verdict on its fitting sample. :func:`assess_fit` gives a model fitted in Python the same
+figures and warnings as one fitted on the command line.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import warnings
+from collections.abc import Callable, Sequence
+
+from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError
+
+__all__ = ["IntervalWarning", "assess_fit"]
+
+
+class IntervalWarning(CfbmarkovWarning):
+    """No interval could be formed for a model's E(RT) and SD(RT) (the message says why);
+    the model is returned without one."""
+
+
+def _no_stage(short: str, text: str | None):
+    return contextlib.nullcontext()
+
+
+def assess_fit(model, runs: Sequence | None = None,
+               windows: Sequence[tuple[float, float]] | None = None, *, level: float = 0.9,
+               resamples: int = 100, verdict: bool = True,
+               stage: Callable[[str, str | None], contextlib.AbstractContextManager] = _no_stage):
+    """The model as ``cfbmarkov fit`` saves it: with its fitting window's identity and cell
+    fields, its interval and the verdict on its fitting sample.
+
+    A model fitted in Python (``PaperEstimator(...).fit(window)``) carries none of these;
+    after this call ``model.uncertainty`` holds the interval of E(RT), SD(RT) and the RTD
+    per bin (:func:`cfbmarkov.analysis.intervals.model_intervals`), ``model.adequacy`` the
+    verdict (:func:`cfbmarkov.analysis.adequacy.assess_adequacy`), ``model.warnings()`` its
+    warning lines and ``model.summary()`` prints the interval beside E(RT)
+    (docs/definitions.md, The model's interval and Sample adequacy).
+
+    Parameters
+    ----------
+    model : MarkovModel
+        A model fitted on trajectory files (``model.source`` names them).
+    runs : sequence of str, os.PathLike or Trajectories, optional
+        The run(s) it was fitted on; default ``[model.source]`` (a fit on one file).
+    windows : sequence of (float, float), optional
+        The fitting window (s) of each run; default ``[model.window]``.
+    level : float, optional
+        Coverage of the interval (default 0.9).
+    resamples : int, optional
+        Bootstrap resamples of the fitting window (default 100; 0 leaves the interval out,
+        1-9 are refused).
+    verdict : bool, optional
+        Judge the fitting sample (its halves and quarters refitted; default True).
+    stage : callable, optional
+        ``stage(short, text)`` returns a context manager around each stage (the command
+        line shows progress with it); default none.
+
+    Returns
+    -------
+    MarkovModel
+        The same chain with the figures attached (a new immutable model).
+
+    Raises
+    ------
+    InputError
+        If the model was not fitted on files (no ``source``), ``runs`` and ``windows``
+        differ in number, ``resamples`` is 1-9, or the chain traps residences.
+
+    Warns
+    -----
+    IntervalWarning
+        Where no interval can be formed (the model is returned without one).
+    """
+    from cfbmarkov.markov.first_passage import TrappedResidences
+
+    if runs is None:
+        if not model.source or not isinstance(model.source, str):
+            raise InputError("the model names no trajectory file it was fitted on: give "
+                             "runs= and windows= (the files and fitting windows)")
+        runs = [model.source]
+    runs = list(runs)
+    if windows is None:
+        windows = [model.window] * len(runs)
+    windows = list(windows)
+    if len(windows) != len(runs):
+        raise InputError(f"{len(runs)} runs and {len(windows)} windows: give one fitting "
+                         "window per run")
+    if 0 < resamples < 10:
+        raise InputError(f"resamples {resamples}: an interval needs at least 10 bootstrap "
+                         "resamples (0 leaves it out)")
+    model = _with_window_fields(model, runs, windows)
+    has_rtd = True
+    try:
+        model.rtd()
+    except TrappedResidences as exc:
+        raise InputError(f"{', '.join(map(str, runs))}: {exc}") from None
+    except CfbmarkovError:
+        has_rtd = False            # no circulation at all: a model without residence times
+    if resamples and has_rtd:
+        from cfbmarkov.analysis.intervals import model_intervals
+
+        with stage("interval", f"the model's {100 * level:g} % interval: {resamples} "
+                   "bootstrap resamples of the fitting window"):
+            try:
+                model = model.with_uncertainty(model_intervals(model, level=level,
+                                                               resamples=resamples))
+            except CfbmarkovError as exc:
+                warnings.warn(f"no interval for the model's E(RT) and SD(RT): {exc}",
+                              IntervalWarning, stacklevel=2)
+    if verdict:
+        from cfbmarkov.analysis.adequacy import assess_adequacy
+
+        with stage("sample verdict", "the fitting sample's verdict: the window's halves "
+                   "and quarters refitted and compared"):
+            model = model.with_adequacy(assess_adequacy(model, runs, windows,
+                                                        uncertainty=model.uncertainty))
+    return model
+
+
+def _with_window_fields(model, runs, windows):
+    """``model`` with its fitting window's identity and time-averaged cell fields."""
+    from cfbmarkov.trajectories import Trajectories, opened
+    from cfbmarkov.trajectory_identity import window_identity
+
+    if len(runs) == 1:
+        from cfbmarkov.analysis.cell_fields import fitting_cell_fields
+
+        with opened(runs[0]) as run:
+            model = model.with_source_identity(window_identity(run, windows[0]))
+            return model.with_cell_fields(fitting_cell_fields(run, model))
+    from cfbmarkov.analysis.cell_fields import pooled_cell_fields
+
+    with contextlib.ExitStack() as stack:
+        files = [stack.enter_context(Trajectories(p)) if not isinstance(p, Trajectories)
+                 else p for p in runs]
+        model = model.with_source_identity(";".join(
+            window_identity(run, w) for run, w in zip(files, windows)))
+        try:
+            return model.with_cell_fields(pooled_cell_fields(files, model.state_space,
+                                                             windows))
+        except InputError:         # the grid does not fit the files: no fields
+            return model

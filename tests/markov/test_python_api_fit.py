@@ -1,0 +1,121 @@
+"""The Python API does what the command line does: a fit gets its interval and verdict
+(assess_fit), a prediction repeats the verdict's warnings and accepts a Kinetics, and
+neither save nor predict overwrites a run or its own input without being told."""
+
+import shutil
+import warnings
+
+import numpy as np
+import pytest
+
+from cfbmarkov.analysis.fit_checks import assess_fit
+from cfbmarkov.errors import CfbmarkovWarning, InputError, SampleWarning
+from cfbmarkov.kinetics import FirstOrder, Kinetics, Property
+from cfbmarkov.kinetics.fields import Constant
+from cfbmarkov.markov import CellGrid, MarkovModel, PaperEstimator, discretize
+from cfbmarkov.trajectories import Trajectories
+
+GRID = CellGrid(4, 16, 0.09, 0.95)
+
+
+@pytest.fixture(scope="module")
+def fitted(markov_run):
+    window = discretize(markov_run, GRID, lag=0.1, window=(2.0, 6.0))
+    return PaperEstimator(GRID, lag=0.1).fit(window)
+
+
+def test_assess_fit_gives_a_python_fit_the_command_lines_interval_and_verdict(
+        fitted, markov_run, tmp_path):
+    from cfbmarkov.cli import main
+
+    assert fitted.uncertainty is None and fitted.adequacy is None
+    judged = assess_fit(fitted, resamples=20)
+    assert judged.uncertainty is not None and judged.adequacy is not None
+    low, high = judged.uncertainty.rt_mean_interval
+    assert low < judged.rtd().mean < high
+    assert "interval" in judged.summary()
+    # the command line's fit of the same window stores the same figures
+    out = tmp_path / "m.h5"
+    assert main(["fit", str(markov_run), "--cells", "4x16", "--lag", "0.1", "--window", "2:6",
+                 "--resamples", "20", "-q", "-o", str(out)]) == 0
+    cli = MarkovModel.load(out)
+    assert cli.uncertainty.rt_mean_interval == pytest.approx((low, high), rel=1e-12)
+    assert cli.adequacy.warnings == judged.adequacy.warnings
+    assert np.array_equal(cli.cell_fields.solids_fraction, judged.cell_fields.solids_fraction)
+
+
+def test_assess_fit_refuses_what_it_cannot_use(fitted, markov_run):
+    with pytest.raises(InputError, match="one fitting window per run"):
+        assess_fit(fitted, [markov_run, markov_run], [(2.0, 6.0)])
+    with pytest.raises(InputError, match="at least 10 bootstrap"):
+        assess_fit(fitted, resamples=5)
+    with pytest.raises(InputError, match="give runs= and windows="):
+        assess_fit(fitted._derived(source=""))
+
+
+def test_a_python_prediction_repeats_the_verdicts_warnings(fitted, markov_run):
+    from cfbmarkov.markov.adequacy import Adequacy
+
+    warned = fitted.with_adequacy(Adequacy(warnings=("the halves disagree",)))
+    with pytest.warns(SampleWarning, match="the model's fitting sample: the halves disagree"):
+        warned.predict(markov_run, start=6.0, duration=0.5, seed=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CfbmarkovWarning)
+        fitted.predict(markov_run, start=6.0, duration=0.5, seed=1)   # no verdict: quiet
+
+
+def test_predict_takes_a_kinetics_as_exact_kinetics_does(fitted, markov_run):
+    kinetics = Kinetics((Property("X", FirstOrder(), {"rate": Constant(0.5)}),))
+    *_, values = fitted.predict(markov_run, start=6.0, duration=0.5, seed=1,
+                                kinetics=kinetics)
+    *_, resolved = fitted.predict(markov_run, start=6.0, duration=0.5, seed=1,
+                                  kinetics=kinetics.per_state(fitted.state_space))
+    assert np.array_equal(values, resolved, equal_nan=True)
+    assert np.nanmax(values) > 0
+
+
+def test_save_and_predict_never_replace_a_run_or_their_input_unasked(fitted, markov_run,
+                                                                     tmp_path):
+    run = tmp_path / "run.h5"
+    shutil.copy(markov_run, run)
+    with pytest.raises(InputError, match="is a trajectory file, not a model file; add --force"):
+        fitted.save(run)
+    with pytest.raises(InputError, match="is one of the inputs"):
+        fitted.predict(run, start=6.0, duration=0.5, output=run)
+    other = tmp_path / "other.h5"
+    shutil.copy(markov_run, other)
+    with pytest.raises(InputError, match="simulated or imported trajectory file, not a "
+                                         "prediction"):
+        fitted.predict(run, start=6.0, duration=0.5, output=other)
+    with Trajectories(other) as p:
+        assert p.source != "markov-prediction"     # untouched
+    # a prediction replaces a prediction; force replaces a run
+    pred = fitted.predict(run, start=6.0, duration=0.5, output=tmp_path / "p.h5")
+    fitted.predict(run, start=6.0, duration=1.0, seed=2, output=pred)
+    with Trajectories(pred) as p:
+        assert p.times[-1] == pytest.approx(7.0)
+    fitted.predict(run, start=6.0, duration=0.5, output=other, force=True)
+    with Trajectories(other) as p:
+        assert p.source == "markov-prediction"
+    model = tmp_path / "m.h5"
+    fitted.save(model)
+    fitted.save(model)                      # a model replaces a model
+    with pytest.raises(InputError, match="is a model file, not a prediction"):
+        fitted.predict(run, start=6.0, duration=0.5, output=model)
+    fitted.save(run, force=True)
+    assert MarkovModel.load(run).n_states == fitted.n_states
+
+
+def test_a_window_pooled_with_itself_is_refused_as_on_the_command_line(markov_run):
+    from cfbmarkov.markov import MaximumLikelihoodEstimator
+
+    window = discretize(markov_run, GRID, lag=0.1, window=(2.0, 6.0))
+    overlapping = discretize(markov_run, GRID, lag=0.1, window=(4.0, 7.0))
+    later = discretize(markov_run, GRID, lag=0.1, window=(6.0, 8.0))
+    for estimator in (PaperEstimator(GRID, lag=0.1), MaximumLikelihoodEstimator(GRID, lag=0.1)):
+        with pytest.raises(InputError, match="hold the same data"):
+            estimator.fit([window, window])
+        with pytest.raises(InputError, match="2-6 s and 4-7 s\\) hold the same data"):
+            estimator.fit([window, overlapping])
+        pooled = estimator.fit([window, later])       # windows that do not overlap: pooled
+        assert pooled.counts.sum() > estimator.fit(window).counts.sum()
