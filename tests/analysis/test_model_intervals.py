@@ -95,6 +95,10 @@ def test_fit_rtd_info_print_the_interval_and_resamples_0_leaves_it_out(stationar
     lo, hi = data["rt_mean_interval"]
     assert lo <= data["rt_mean"] <= hi
     assert len(data["rtd_interval"]["edges"]) == len(data["rtd_interval"]["lower"]) + 1
+    # the exact RTD itself: its mean is the printed E(RT)
+    times, probability = np.array(data["rtd"]["times"]), np.array(data["rtd"]["probability"])
+    assert times[0] == pytest.approx(data["rtd"]["lag"])
+    assert times @ probability / probability.sum() == pytest.approx(data["rt_mean"], rel=1e-9)
     assert main(["rtd", str(out)]) == 0
     assert "(90 % interval" in capsys.readouterr().out
     assert main(["info", str(out)]) == 0

@@ -162,6 +162,50 @@ def test_periodic_carried_is_the_fixed_point():
     assert out.entry_value == pytest.approx(fixed, rel=1e-12)
 
 
+def test_after_passes_by_hand_and_towards_the_carried_steady_state():
+    """A carried deactivation's steady state is 0 (nothing regenerates it); after N passes
+    its mean is E[A]^N (hand: the residence's E[A] from the closed form), with the SD of
+    a product of N independent residences' A, and heat exchange after many passes reaches
+    the carried fixed point."""
+    u, w, k0, k1 = 0.3, 0.4, 1.5, 6.0
+    model = periodic_model(u, w)
+    out = exact_kinetics(model, kinetics([k0, k1], law="deactivation", start="carried",
+                                         initial=1.0))["v"]
+    assert out.exit_mean == 0 and out.initial == 1.0
+    mean1, second1, _ = _periodic_hand(u, w, k0, k1, 0.0, 0.0, 1.0)
+    for n in (1, 3, 10):
+        mean, sd = out.after_passes(n)
+        assert mean == pytest.approx(mean1 ** n, rel=1e-12)
+        assert sd == pytest.approx(np.sqrt(second1 ** n - mean1 ** (2 * n)), rel=1e-10)
+    with pytest.raises(InputError, match="at least 1"):
+        out.after_passes(0)
+    heat = exact_kinetics(model, kinetics([k0, k1], law="heat-exchange", temps=(700.0, 900.0),
+                                          initial=300.0, start="carried"))["v"]
+    assert heat.after_passes(1)[0] == pytest.approx(
+        _periodic_hand(u, w, k0, k1, 700.0, 900.0, 300.0)[0], rel=1e-12)
+    assert heat.after_passes(2000)[0] == pytest.approx(heat.exit_mean, rel=1e-12)
+    assert heat.to_dict(passes=(1, 5))["after_passes"]["5"]["mean"] == heat.after_passes(5)[0]
+
+
+@pytest.mark.parametrize("rate", [1e-10, 1e-12, 3e-13, 1e-14, 1e-200])
+def test_a_carried_property_at_tiny_rates_keeps_every_digit(rate):
+    """1 - E[A] is computed from 1 - a = -expm1(-k lag), not by subtraction: a carried
+    conversion at a tiny rate is its fixed point 1 exactly enough (never above 1), a carried
+    temperature the time-weighted mean of the targets, with no spurious SD; a rate of 0 has
+    no steady state."""
+    model = periodic_model(0.3, 0.4)
+    x = exact_kinetics(model, kinetics([rate, 2 * rate], start="carried"))["v"]
+    assert x.exit_mean == pytest.approx(1.0, abs=1e-12) and x.exit_mean <= 1.0 + 1e-15
+    assert x.exit_sd == 0.0
+    heat = exact_kinetics(model, kinetics([rate, rate], law="heat-exchange",
+                                          temps=(700.0, 900.0), initial=300.0,
+                                          start="carried"))["v"]
+    # a uniform vanishing rate: each state's target weighted by the lags spent there
+    time_weighted = (700.0 / 0.3 + 900.0 / 0.4) / (1 / 0.3 + 1 / 0.4)
+    assert heat.exit_mean == pytest.approx(time_weighted, rel=1e-9)
+    assert heat.exit_sd < 1e-3
+
+
 def test_wall_temperature_replaces_the_wall_cells():
     space = CellGrid(3, 1, 0.09, 1.0)
     k = Kinetics((Property("T", HeatExchange(500.0), {"coefficient": Constant(1.0),

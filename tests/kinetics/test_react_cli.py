@@ -119,6 +119,13 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
      + "\n2,4,1\n", "(lines 16, 21)"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
      "col,row,rate\n\n0,0,x\n", "line 3 ('0,0,x') is not 3 numbers; give col,row,rate"),
+    # keys of a field-dependent rate left beside a constant rate are refused, not ignored
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.4\nrate_dense = 5.0\n', None,
+     "rate_dense applies only with rate_from"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.4\nthreshold = 0.1\n', None,
+     "threshold applies only to a parameter given as a function of a cell field"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.4\nunits = "1/min"\n', None,
+     "rates and heat-exchange coefficients are read in 1/s"),
 ])
 def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rates, message):
     _, _, model = fitted
@@ -139,6 +146,25 @@ def test_rate_from_a_cell_field():
     fields = CellFields(np.array([0.2, 0.01, 0.2, 0.1, 0.02, 0.1]), np.zeros(6), np.zeros(6))
     np.testing.assert_array_equal(kin.per_state(space, fields).rate[0],
                                   [0.1, 1.0, 0.1, 0.1, 1.0, 0.1])
+
+
+def test_two_fields_of_one_property_take_a_threshold_each():
+    """coefficient from the wall distance (m) and temperature from the solids fraction (-)
+    need thresholds of different scales: coefficient_threshold and temperature_threshold,
+    each before the shared threshold."""
+    from cfbmarkov.kinetics import CellFields
+
+    space = CellGrid(3, 2, 0.09, 1.0)
+    path = _tmp_toml('[[property]]\nname = "T"\nlaw = "heat-exchange"\ninitial = 300\n'
+                     'coefficient_from = "wall_distance"\ncoefficient_dense = 5.0\n'
+                     'coefficient_dilute = 1.0\ncoefficient_threshold = 0.02\n'
+                     'temperature_from = "solids_fraction"\ntemperature_dense = 600\n'
+                     'temperature_dilute = 800\nthreshold = 0.05\n')
+    fields = CellFields(np.array([0.2, 0.01, 0.2, 0.1, 0.02, 0.1]),
+                        np.array([0.015, 0.045, 0.015, 0.015, 0.045, 0.015]), np.zeros(6))
+    resolved = load_kinetics(path).per_state(space, fields)
+    np.testing.assert_array_equal(resolved.rate[0], [5.0, 1.0, 5.0, 5.0, 1.0, 5.0])
+    np.testing.assert_array_equal(resolved.target[0], [600, 800, 600, 600, 800, 600])
 
 
 def _tmp_toml(text):
@@ -391,3 +417,39 @@ def test_info_lists_a_predictions_properties(fitted, tmp_path, capsys):
     assert "particle property X (law first-order, start entry) per frame" in out
     assert main(["info", str(run)]) == 0
     assert "particle property" not in capsys.readouterr().out
+
+
+def test_react_follows_a_carried_activity_pass_by_pass(fitted, tmp_path, capsys):
+    """A carried deactivation's steady state is 0, and react says so and gives the
+    activity after 1, 10, 100 passes (or --passes): the entry start's exit mean to the
+    power N; --json carries them with the grid's cell order and the warnings."""
+    folder, run, model = fitted
+    kin = _write(tmp_path, '[[property]]\nname = "a"\nlaw = "deactivation"\nrate = 0.5\n'
+                 'start = "carried"\ninitial = 1.0\n\n[[property]]\nname = "fresh"\n'
+                 'law = "deactivation"\nrate = 0.5\ninitial = 1.0\n')
+    assert main(["react", str(model), "--kinetics", str(kin), "--json", "--passes", "3"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    one = out["properties"]["fresh"]["exit_mean"]
+    carried = out["properties"]["a"]
+    assert carried["exit_mean"] == 0 and carried["initial"] == 1.0
+    assert carried["after_passes"]["3"]["mean"] == pytest.approx(one ** 3, rel=1e-12)
+    assert "after_passes" not in out["properties"]["fresh"]
+    assert out["grid"]["columns"] == 3 and out["grid"]["rows"] == 6
+    assert out["warnings"] == []
+    assert main(["react", str(model), "--kinetics", str(kin)]) == 0
+    text = capsys.readouterr().out
+    assert "(nothing brings it back: it tends to 0)" in text
+    assert (f"a after 1 / 10 / 100 passes from 1: exit mean {one:.6g} / {one ** 10:.6g} / "
+            f"{one ** 100:.6g}") in text
+
+
+def test_react_refuses_a_reference_start_before_the_monte_carlo(fitted, tmp_path, capsys):
+    folder, run, model = fitted
+    kin = _write(tmp_path, '[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\n'
+                 'start = "reference"\n')
+    out = tmp_path / "p.h5"
+    assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "0.5", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "starts from the reference" in err and "Monte Carlo done" not in err
+    assert not out.exists()

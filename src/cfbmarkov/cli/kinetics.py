@@ -6,7 +6,8 @@ from __future__ import annotations
 import sys
 import time
 
-from cfbmarkov.cli.options import finite_float, positive_float, seed
+from cfbmarkov._names import one_line
+from cfbmarkov.cli.options import count, finite_float, positive_float, seed
 from cfbmarkov.errors import InputError
 
 
@@ -49,8 +50,20 @@ def cmd_react(args) -> int:
 
         check_fitting_file(model, args.run, model_name=str(args.model))
     state_kinetics = kinetics.per_state(model.state_space, fields)
-    for note in kinetics.field_notes(fields):
+    notes = list(kinetics.field_notes(fields))
+    for note in notes:
         print(f"warning: {note}", file=sys.stderr)
+    passes = tuple(args.passes) if args.passes else PASSES
+    if args.init is not None:       # a start from the reference, checked before the run
+        from cfbmarkov.trajectories import Trajectories
+
+        with Trajectories(args.init) as run:
+            for p in kinetics.properties:
+                if p.start == "reference" and p.name not in run.property_names:
+                    raise InputError(f"property {p.name} starts from the reference, but "
+                                     f"{args.init} holds no values of it (properties: "
+                                     f"{', '.join(run.property_names) or 'none'}); use start "
+                                     "= entry or carried")
     answers, seconds = {}, None
     if kinetics.linear:
         t0 = time.perf_counter()
@@ -73,18 +86,23 @@ def cmd_react(args) -> int:
                 model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                               output=args.output, progress=not args.quiet,
                               kinetics=state_kinetics)
-        from cfbmarkov._names import one_line
-
         for line in model.adequacy.warnings if model.adequacy is not None else ():
             print(f"warning: the model's fitting sample: {one_line(line)}", file=sys.stderr)
     # exits are counted in the model's direction: down through the bottom for a periodic
     # model of a net downflow (docs/definitions.md, Net downflow), as fit and rtd say
     direction = model.flow_direction
     if args.json:
-        out = {"properties": {name: {**a.to_dict(), "law": p.law.key}
+        space = model.state_space
+        out = {"properties": {name: {**a.to_dict(passes if p.start == "carried" else ()),
+                                     "law": p.law.key}
                               for (name, a), p in zip(answers.items(), kinetics.properties)},
                "exact_seconds": seconds, "prediction": args.output,
-               "cell_fields_from": fields_from, "direction": direction}
+               "cell_fields_from": fields_from, "direction": direction,
+               "grid": {"columns": space.columns, "rows": space.rows,
+                        "depth_columns": space.depth_columns,
+                        "bed_mean_by_cell": "cell = (row * depth_columns + depth column) * "
+                                            "columns + column, from the bottom left"},
+               "warnings": [one_line(n) for n in notes]}
         print(json.dumps(jsonable(out)))
         return 0
     if answers:
@@ -100,8 +118,16 @@ def cmd_react(args) -> int:
               f"units of the kinetics file's values; computed in {seconds:.3g} s")
         for p in kinetics.properties:
             if p.start == "carried":
+                a = answers[p.name]
+                after = [a.after_passes(n) for n in passes]
                 print(f"  {p.name} (carried): the circulating inventory's steady state, every "
-                      "particle entering with its previous exit value")
+                      "particle entering with its previous exit value"
+                      + (" (nothing brings it back: it tends to 0)" if a.exit_mean == 0
+                         and a.initial != 0 else ""))
+                print(f"  {p.name} after {' / '.join(map(str, passes))} passes from "
+                      f"{a.initial:g}: exit mean {' / '.join(f'{m:.6g}' for m, _ in after)}"
+                      f" (SD {' / '.join(f'{sd:.3g}' for _, sd in after)}; --passes N for "
+                      "others)")
             elif p.start == "reference" and args.init is None:
                 print(f"  {p.name} (start = reference): the exact answers are those of a fresh "
                       f"feed entering at {p.initial:g} (start = entry); the reference's values "
@@ -115,6 +141,10 @@ def cmd_react(args) -> int:
         print(args.output)
     sys.stdout.flush()
     return 0
+
+
+#: the passes after which ``react`` gives a carried property's exit value by default
+PASSES = (1, 10, 100)
 
 
 def add_react(sub) -> None:
@@ -138,6 +168,10 @@ def add_react(sub) -> None:
                    help="print {\"properties\": {NAME: {exit_mean, exit_sd, bed_mean, "
                         "bed_mean_by_cell, ...}}, \"direction\": up or down (exits counted "
                         "downward through the bottom: a net downflow), ...} as JSON")
+    s.add_argument("--passes", type=count(1, 10 ** 6), nargs="+", default=None, metavar="N",
+                   help="for a carried property, the exit mean and SD after N passes "
+                        "through the riser from its initial value (default "
+                        f"{' '.join(map(str, PASSES))})")
     s.add_argument("--init", default=None,
                    help="trajectory file giving the initial state of a Monte Carlo with the "
                         "properties (with --start, --duration and -o)")

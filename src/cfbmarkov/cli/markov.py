@@ -260,6 +260,8 @@ def cmd_rtd(args) -> int:
                "rtd_interval": None if band is None else {
                    "edges": band.rtd_edges.tolist(), "lower": band.rtd_interval[0].tolist(),
                    "upper": band.rtd_interval[1].tolist()},
+               "rtd": {"lag": rtd.lag, "times": rtd.times.tolist(),
+                       "probability": rtd.probability.tolist()},
                "warnings": warnings}
         print(json.dumps(jsonable(out), indent=1, allow_nan=False))
         return 0
@@ -407,7 +409,9 @@ def add_rtd(sub) -> None:
                         "none: the chain's intrinsic RTD)")
     s.add_argument("--json", action="store_true",
                    help="print rt_mean, rt_sd, direction, level, rt_mean_interval, "
-                        "rt_sd_interval, rtd_interval, unresolved and warnings as JSON")
+                        "rt_sd_interval, rtd_interval, unresolved, warnings and the exact "
+                        "RTD itself (rtd: lag, times, probability of each residence time "
+                        "k lags) as JSON")
     s.add_argument("--level", type=level, default=None,
                    help="coverage of the interval (default: the model's, else 0.9; another "
                         "than the model's needs --resamples)")

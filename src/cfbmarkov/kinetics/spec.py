@@ -321,7 +321,8 @@ class Kinetics:
                     notes.append(f"{what}: threshold {parameter.threshold:g} puts every cell "
                                  f"on the {side} side ({parameter.field} {span} over the cells "
                                  f"seen), so {name} is {used:g} everywhere; give a threshold "
-                                 "inside that range to tell the zones apart")
+                                 f"({name}_threshold for this parameter alone) inside that "
+                                 "range to tell the zones apart")
         return tuple(notes)
 
     def describe(self) -> list[dict]:
@@ -341,7 +342,8 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
     constant (``rate = 0.4``), a per-cell table (``rate_by_cell = "rates.csv"``, columns
     ``col,row[,depth],rate`` -- or ``value`` -- relative to the kinetics file) or a
     function of a cell field (``rate_from = "solids_fraction"``, ``rate_dense``,
-    ``rate_dilute`` and ``threshold``), ``start`` (``entry``, ``carried``, ``reference``;
+    ``rate_dilute`` and ``threshold``, or ``rate_threshold`` where two parameters of one
+    property need different thresholds), ``start`` (``entry``, ``carried``, ``reference``;
     default ``entry``) and ``initial`` (the value at entry).
 
     Parameters
@@ -403,13 +405,23 @@ def _property(table, index: int, path: Path) -> Property:
         law = law_cls()
     allowed = set(_PROPERTY_KEYS) | ({"wall_temperature"} if law_cls is HeatExchange else set())
     for p in law.parameter_names:
-        allowed.update((p, f"{p}_by_cell", f"{p}_from", f"{p}_dense", f"{p}_dilute"))
+        allowed.update((p, f"{p}_by_cell", f"{p}_from", f"{p}_dense", f"{p}_dilute",
+                        f"{p}_threshold"))
     # an unknown key first: a misspelt parameter is named as such, not as a missing one
     unknown = sorted(set(table) - allowed)
     if unknown:
+        if "unit" in unknown[0].lower():
+            raise InputError(f"{where}: unknown key {unknown[0]!r}: a kinetics file has no "
+                             "units to set; rates and heat-exchange coefficients are read in "
+                             "1/s (convert: a rate in 1/min divided by 60), values in the "
+                             "units you give initial and temperature in")
         raise InputError(f"{where}: unknown key {unknown[0]!r} for law {law_key}; it takes "
-                         f"{', '.join(sorted(allowed))}")
+                         f"{', '.join(sorted(allowed))} (rates in 1/s)")
     params = {p: _parameter(table, p, where, path, law) for p in law.parameter_names}
+    if "threshold" in table and not any(isinstance(v, FromField) for v in params.values()):
+        raise InputError(f"{where}: threshold applies only to a parameter given as a function "
+                         f"of a cell field ({law.parameter_names[0]}_from = \"FIELD\"); "
+                         "remove it")
     initial = table.get("initial")
     if initial is not None and not _finite(initial):
         raise InputError(f"{where}: initial must be a finite number")
@@ -434,6 +446,11 @@ def _parameter(table, p: str, where: str, path: Path, law: Law) -> CellParameter
     key = forms[0]
     signed = p in law.signed_parameters()
     value = table[key]
+    stray = [k for k in (f"{p}_dense", f"{p}_dilute", f"{p}_threshold") if k in table]
+    if stray and key != f"{p}_from":
+        raise InputError(f"{where}: {stray[0]} applies only with {p}_from = \"FIELD\", and "
+                         f"{p} is given as {key}; remove {', '.join(stray)} (or give "
+                         f"{p}_from instead of {key})")
     if key == p:
         if not _finite(value) or (not signed and value < 0):
             raise InputError(f"{where}: {p} = {value!r} must be a finite number"
@@ -449,13 +466,17 @@ def _parameter(table, p: str, where: str, path: Path, law: Law) -> CellParameter
         raise InputError(f"{where}: {key} = {value!r} is not a cell field; use one of "
                          f"{', '.join(FIELDS)}")
     numbers = {}
-    for k in (f"{p}_dense", f"{p}_dilute", "threshold"):
+    # a threshold of this parameter's own (p_threshold) before the property's shared one:
+    # two parameters of different fields need two thresholds
+    threshold = f"{p}_threshold" if f"{p}_threshold" in table else "threshold"
+    for k in (f"{p}_dense", f"{p}_dilute", threshold):
         v = table.get(k)
-        if not _finite(v) or (k != "threshold" and not signed and v < 0):
+        if not _finite(v) or (k != threshold and not signed and v < 0):
             raise InputError(f"{where}: {key} needs {k} = NUMBER (finite"
-                             + (")" if k == "threshold" or signed else ", >= 0)"))
+                             + (")" if k == threshold or signed else ", >= 0)")
+                             + (f" (or {p}_threshold)" if k == "threshold" else ""))
         numbers[k] = float(v)
-    return FromField(value, numbers[f"{p}_dense"], numbers[f"{p}_dilute"], numbers["threshold"],
+    return FromField(value, numbers[f"{p}_dense"], numbers[f"{p}_dilute"], numbers[threshold],
                      key)
 
 

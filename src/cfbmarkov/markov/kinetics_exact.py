@@ -39,7 +39,7 @@ distribution of CFB risers. O. Levenspiel, Chemical Reaction Engineering, 3rd ed
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 import scipy.sparse as sp
@@ -67,6 +67,10 @@ class ExitMoments:
         spent in each state per entry.
     exit_probability : float
         p, the probability that an entering particle leaves (1 but for trapped mass).
+    mean_1ma, mean_1ma2 : float
+        E[1 - A] and E[1 - A^2], computed from 1 - a (not as 1 - E[A], which loses every
+        digit where rates are small): e (I - D Q)^-1 ((1 - a) o x) / p with x = (I - Q)^-1 r,
+        and likewise with D^2, since (I - D Q)(x - alpha) = (1 - a) o x.
     """
 
     mean_a: float
@@ -78,6 +82,8 @@ class ExitMoments:
     mass_per_start: np.ndarray
     mass_rest: np.ndarray
     exit_probability: float
+    mean_1ma: float = float("nan")
+    mean_1ma2: float = float("nan")
 
     def exit_mean(self, v0: float) -> float:
         """E[v_exit] for the entry value ``v0``."""
@@ -100,14 +106,39 @@ class ExitMoments:
             If E[A] = 1 (no relaxation anywhere a particle goes: the value never forgets
             its start, and there is no steady state).
         """
-        if not self.mean_a < 1.0 - 1e-14:
+        forget = self.mean_1ma if np.isfinite(self.mean_1ma) else 1.0 - self.mean_a
+        forget2 = self.mean_1ma2 if np.isfinite(self.mean_1ma2) else 1.0 - self.mean_a2
+        if not forget > 0.0:
             raise InputError("a carried property with a zero rate wherever particles go has "
                              "no steady state (it keeps its start value): use start = entry")
-        m = self.mean_b / (1.0 - self.mean_a)
-        return m, (self.mean_2ab * m + self.mean_b2) / (1.0 - self.mean_a2)
+        m = self.mean_b / forget
+        return m, (self.mean_2ab * m + self.mean_b2) / forget2
+
+    def after_passes(self, v0: float, passes: int) -> tuple[float, float]:
+        """Mean and second moment of the exit value after ``passes`` residences of a value
+        carried from ``v0``, each residence independent of the last (as :meth:`carried`,
+        its limit): m_k = E[A] m_(k-1) + E[B], s_k = E[A^2] s_(k-1) + E[2AB] m_(k-1) +
+        E[B^2], with m_0 = v0 and s_0 = v0^2.
+
+        Parameters
+        ----------
+        v0 : float
+            The value at the first entry.
+        passes : int
+            Residences, at least 1.
+
+        Returns
+        -------
+        mean, second : float
+        """
+        m, s = float(v0), float(v0) * float(v0)
+        for _ in range(int(passes)):
+            m, s = (self.mean_a * m + self.mean_b,
+                    self.mean_a2 * s + self.mean_2ab * m + self.mean_b2)
+        return m, s
 
 
-def exit_moments(q, r, e, a, b, lu_q=None) -> ExitMoments:
+def exit_moments(q, r, e, a, b, lu_q=None, c=None) -> ExitMoments:
     """:class:`ExitMoments` of an absorbing chain (module docstring).
 
     Parameters
@@ -123,6 +154,8 @@ def exit_moments(q, r, e, a, b, lu_q=None) -> ExitMoments:
         The affine map of one lag per state, v' = a v + b.
     lu_q : scipy.sparse.linalg.SuperLU, optional
         The LU factors of I - Q (``splu``), shared by the properties of one chain.
+    c : ndarray of float64, shape (n,), optional
+        1 - a computed without cancellation (``-expm1(-k lag)``); default 1 - a.
 
     Returns
     -------
@@ -136,12 +169,14 @@ def exit_moments(q, r, e, a, b, lu_q=None) -> ExitMoments:
     q = sp.csc_matrix(q, dtype=np.float64)
     n = q.shape[0]
     r, e, a, b = (np.asarray(x, dtype=np.float64) for x in (r, e, a, b))
+    c = 1.0 - a if c is None else np.asarray(c, dtype=np.float64)
     eye = sp.identity(n, format="csc")
     if lu_q is None:
         lu_q = splu(sp.csc_matrix(eye - q))
     lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q))
     lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q))
-    p = float(e @ lu_q.solve(r))
+    leaves = lu_q.solve(r)
+    p = float(e @ leaves)
     if not p > 0:
         raise InputError("no particle that enters can leave in the model: every residence is "
                          "trapped")
@@ -154,8 +189,11 @@ def exit_moments(q, r, e, a, b, lu_q=None) -> ExitMoments:
     occupancy = lu_q.solve(e, trans="T")
     per_start = lu_dq.solve(e, trans="T")
     rest = lu_dq.solve(q.T @ (occupancy * b), trans="T")
+    forget = float(e @ lu_dq.solve(c * leaves)) / p
+    forget2 = float(e @ lu_d2q.solve(c * (2.0 - c) * leaves)) / p
     return ExitMoments(float(e @ alpha) / p, float(e @ beta) / p, float(e @ gamma) / p,
-                       float(e @ delta) / p, float(e @ eps) / p, occupancy, per_start, rest, p)
+                       float(e @ delta) / p, float(e @ eps) / p, occupancy, per_start, rest, p,
+                       forget, forget2)
 
 
 @dataclass(frozen=True)
@@ -180,6 +218,10 @@ class PropertyAnswer:
         The steady-state mean per state (NaN where no particle stays).
     bed_mean_by_cell : ndarray of float64, shape (C,)
         The steady-state mean per cell of the grid (NaN where no particle stays).
+    initial : float
+        The value at the first entry (the kinetics file's ``initial``).
+    moments : ExitMoments, optional
+        The residence's exit moments, for :meth:`after_passes`.
     """
 
     name: str
@@ -190,10 +232,42 @@ class PropertyAnswer:
     bed_mean: float
     bed_mean_by_state: np.ndarray
     bed_mean_by_cell: np.ndarray
+    initial: float = float("nan")
+    moments: ExitMoments | None = field(default=None, repr=False, compare=False)
 
-    def to_dict(self) -> dict:
-        """JSON-serialisable (the per-cell means as a list, null where NaN)."""
-        return {"start": self.start, "entry_value": self.entry_value,
+    def after_passes(self, passes: int) -> tuple[float, float]:
+        """Mean and SD of the exit value after ``passes`` residences of a value carried
+        from :attr:`initial` (:meth:`ExitMoments.after_passes`): the activity left after
+        N passes through the riser, where the steady state of a carried deactivation is 0.
+
+        Parameters
+        ----------
+        passes : int
+            At least 1.
+
+        Returns
+        -------
+        mean, sd : float
+
+        Raises
+        ------
+        InputError
+            If ``passes`` is below 1, or the answer holds no exit moments.
+        """
+        if self.moments is None:
+            raise InputError(f"property {self.name}: no exit moments to follow passes with")
+        if int(passes) != passes or passes < 1:
+            raise InputError(f"passes {passes}: give a whole number of residences, at least 1")
+        mean, second = self.moments.after_passes(self.initial, int(passes))
+        variance = second - mean * mean
+        return mean, float(np.sqrt(variance)) if variance > ROUND_OFF * abs(second) else 0.0
+
+    def to_dict(self, passes=()) -> dict:
+        """JSON-serialisable (the per-cell means as a list, null where NaN; with
+        ``passes``, the mean and SD after each number of passes, :meth:`after_passes`)."""
+        after = {str(n): dict(zip(("mean", "sd"), self.after_passes(n))) for n in passes}
+        return {"start": self.start, "entry_value": self.entry_value, "initial": self.initial,
+                **({"after_passes": after} if after else {}),
                 "exit_mean": self.exit_mean, "exit_sd": self.exit_sd,
                 "bed_mean": self.bed_mean,
                 "bed_mean_by_cell": [None if not np.isfinite(x) else float(x)
@@ -323,12 +397,13 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
                          "entry)")
     q, r, e, state, _ = residence_chain(model, direction, deficit_levels)
     a_all, b_all = sk.over(model.lag)
+    c_all = -np.expm1(-np.asarray(sk.rate, dtype=np.float64) * model.lag)    # 1 - a, exact
     space = model.state_space
     cell = np.asarray(space.cell_of_state, dtype=np.int64)
     out = {}
     lu_q = splu(sp.csc_matrix(sp.identity(q.shape[0], format="csc") - q))
     for i, name in enumerate(sk.names):
-        m = exit_moments(q, r, e, a_all[i][state], b_all[i][state], lu_q)
+        m = exit_moments(q, r, e, a_all[i][state], b_all[i][state], lu_q, c_all[i][state])
         if sk.starts[i] == "carried":
             try:
                 v0, second = m.carried()
@@ -349,7 +424,8 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         ccount = np.bincount(cell, count, minlength=space.n_cells)
         by_cell = np.divide(cmass, ccount, out=np.full(cmass.size, np.nan), where=ccount > 0)
         out[name] = PropertyAnswer(name, sk.starts[i], float(v0), float(mean), sd,
-                                   float(mass.sum() / count.sum()), by_state, by_cell)
+                                   float(mass.sum() / count.sum()), by_state, by_cell,
+                                   float(sk.initial[i]), m)
     return out
 
 
