@@ -22,10 +22,15 @@ COMPACT_FRAMES = 16
 
 def frame_chunks(n: int, compact: bool, *tail: int) -> dict:
     """The h5py options of a frame dataset (``/frames/position``, ``lap``, ``velocity``,
-    ``present``) of ``n`` particles: one frame of every particle per chunk, or (``compact``)
+    ``present``) of ``n`` particles: one frame of every particle per chunk, or, with fewer
+    than :data:`MIN_CHUNK_PARTICLES` particles (a PEPT tracer), as many frames of them as
+    make about that many values, so that a chunk holds no padding (a one-tracer file of
+    150 000 frames takes megabytes, not the 256-fold); or (``compact``)
     :data:`COMPACT_FRAMES` frames of :data:`MIN_CHUNK_PARTICLES` particles per chunk,
     deflated, so that the particles absent from a block of frames take no space."""
     if not compact:
+        if 0 < n < MIN_CHUNK_PARTICLES:
+            return {"chunks": (MIN_CHUNK_PARTICLES // n, n, *tail)}
         return {"chunks": (1, max(n, MIN_CHUNK_PARTICLES), *tail)}
     return {"chunks": (COMPACT_FRAMES, MIN_CHUNK_PARTICLES, *tail), "compression": "gzip",
             "compression_opts": 1, "shuffle": True}

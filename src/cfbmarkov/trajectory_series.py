@@ -161,8 +161,9 @@ class FrameSeries:
                 f"{self.label}: frames unevenly spaced: {time_text(steps[first + k])} s between "
                 f"t = {time_text(times[k])} and {time_text(times[k + 1])} s, expected "
                 f"{time_text(reference)} s ({what}, within {FRAME_SPACING_TOLERANCE:.0%}); for "
-                "irregular frame times (tracking data such as PEPT, or missing frames) resample "
-                "them with --resample DT --max-gap G")
+                "irregular frame times (CSV tracking data such as PEPT) resample them with "
+                "--resample DT --max-gap G; a dump or VTK series that misses frames: import "
+                "the frames before and after the gap as two files (fit A.h5 B.h5 pools them)")
 
     def laps(self, ids: np.ndarray, times: np.ndarray, positions: np.ndarray,
              present: np.ndarray, laps) -> np.ndarray:

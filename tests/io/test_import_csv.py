@@ -338,31 +338,55 @@ def test_a_dump_given_as_csv_and_an_expanded_pattern_name_the_fix(tmp_path, caps
 
 
 def test_sizes_that_suggest_a_unit_mistake_warn(tmp_path, capsys):
-    """Metre positions read as mm (a sliver of the riser), a riser given in mm (950 m high)
-    and times in s read as ms (frames 2 microseconds apart) each import with a `warning:`
-    line naming the option (the 950 m riser a second, on its particles' sliver of it); the
-    same file in its right units warns of nothing."""
+    """Metre positions read as mm (a sliver of the riser), a riser given in mm (950 m high),
+    times in s read as ms (frames 2 microseconds apart, particles at 25 km/s) and times in
+    ms read as s (a 0.5 m/s flow moving at 5 mm/s) each import with `warning:` lines naming
+    the option (the 950 m riser a second, on its particles' sliver of it); the same file in
+    its right units, and a flow of 2.5 cm/s (above the 2 cm/s limit), warn of nothing."""
     from cfbmarkov.cli import main
 
     rows = ["t,id,x,y"] + [f"{0.002 * k:.3f},{i},{0.01 + 0.02 * i:.4f},{0.2 + 0.05 * k + 0.1 * i:.4f}"
                            for k in range(10) for i in range(3)]
     source = tmp_path / "run.csv"
     source.write_text("\n".join(rows) + "\n")
-    cases = {(): None,
-             ("--length-unit", "mm"): "the particles' heights span 0.00065 m of the riser's "
-                                      "0.95 m",
-             ("--width", "90", "--height", "950"): "the riser is 950 m high and 90 m wide",
-             ("--time-unit", "ms"): "frames 2e-06 s apart"}
-    for k, (options, expected) in enumerate(cases.items()):
+    slow = tmp_path / "ms.csv"          # the same flow with its times written in ms
+    slow.write_text("\n".join(["t,id,x,y"] + [
+        f"{2 * k},{i},{0.01 + 0.02 * i:.4f},{0.2 + 0.05 * k + 0.1 * i:.4f}"
+        for k in range(10) for i in range(3)]) + "\n")
+    cases = {(): (None, 0),
+             ("--length-unit", "mm"): ("the particles' heights span 0.00065 m of the riser's "
+                                       "0.95 m", 1),
+             # the 950 m riser: its particles' span is a sliver of it too
+             ("--width", "90", "--height", "950"): ("the riser is 950 m high and 90 m wide", 2),
+             ("--time-unit", "ms"): ("frames 2e-06 s apart", 2),
+             ("slow",): ("the particles move at a median 0.025 m/s", 0)}
+    for k, (options, (expected, count)) in enumerate(cases.items()):
         size = [] if "--width" in options else ["--width", "0.09", "--height", "0.95"]
-        assert main(["import", str(source), *size, *options, "-o",
-                     str(tmp_path / f"{k}.h5")]) == 0
+        given = [str(slow)] if options == ("slow",) else [str(source), *options]
+        assert main(["import", *given, *size, "-o", str(tmp_path / f"{k}.h5")]) == 0
         warnings = [line for line in capsys.readouterr().err.splitlines()
                     if line.startswith("warning:")]
         if expected is None:
             assert warnings == []
-        else:       # the 950 m riser: its particles' span is a sliver of it too
-            assert expected in warnings[0] and len(warnings) == 1 + ("--width" in options)
+        elif options == ("slow",):      # 2.5 cm/s: above the limit of 2 cm/s, no warning
+            assert warnings == []
+        else:
+            assert expected in "\n".join(warnings) and len(warnings) == count, warnings
+    assert "the particles move at a median 2.5e+04 m/s" in "\n".join(
+        [line for line in _import_err(main, capsys, source, tmp_path, "--time-unit", "ms")])
+    slower = tmp_path / "slower.csv"    # a 0.5 m/s flow written in ms: 5 mm/s read as s
+    slower.write_text("\n".join(["t,id,x,y"] + [
+        f"{2 * k},{i},{0.01 + 0.02 * i:.4f},{0.2 + 0.001 * k + 0.1 * i:.4f}"
+        for k in range(10) for i in range(3)]) + "\n")
+    assert any("the particles move at a median 0.0005 m/s between frames: times in "
+               "milliseconds read as seconds?" in line
+               for line in _import_err(main, capsys, slower, tmp_path))
+
+
+def _import_err(main, capsys, source, tmp_path, *options):
+    assert main(["import", str(source), "--width", "0.09", "--height", "0.95", *options,
+                 "-o", str(tmp_path / "again.h5"), "--force"]) == 0
+    return capsys.readouterr().err.splitlines()
 
 
 def test_info_names_origin_and_region_by_the_sources_axes(tmp_path, capsys):

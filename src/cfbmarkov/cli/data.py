@@ -26,7 +26,7 @@ def cmd_import(args) -> int:
 
     from cfbmarkov.io import import_file, import_summary, resolve_format
 
-    args.source = _one_source(args.source)
+    args.source = _one_source(args.source, args.format)
     _, detected = resolve_format(args.source, args.format)
     path = import_file(args.source, args.format, args.output, width=args.width,
                        height=args.height, time_step=args.time_step,
@@ -75,14 +75,42 @@ def cmd_export_vtk(args) -> int:
     return 0
 
 
-def _one_source(sources: list[str]) -> str:
-    """The one source of ``import``; several (a pattern the shell expanded) refused in one
-    line giving the pattern quoted, so that cfbmarkov orders the files by their time."""
+def _one_source(sources: list[str], fmt: str | None = None) -> str | list[str]:
+    """The source of ``import``: one file, folder or pattern, or several dump files (read
+    in the order of their first timestep, whatever order the shell gave them); several
+    files of another format are refused in one line giving the pattern quoted."""
     from cfbmarkov.errors import InputError
+    from cfbmarkov.io import resolve_format
     from cfbmarkov.io.detect import pattern_of
 
+    import glob
+    from pathlib import Path
+
+    files = sources
     if len(sources) == 1:
+        if Path(sources[0]).exists() or not glob.has_magic(sources[0]):
+            return sources[0]
+        files = sorted(glob.glob(sources[0]))     # a quoted pattern: its files' format
+        if not files:
+            return sources[0]                     # the reader names the empty pattern
+    one_format = None
+    if all(Path(p).is_file() for p in files):
+        try:
+            one_format = {resolve_format(p, fmt)[0] for p in files}
+        except InputError:
+            pass
+    if len(sources) == 1:
+        if one_format == {"csv"}:
+            raise InputError(f"{sources[0]}: matches {len(files)} CSV files; import reads one "
+                             "CSV file at a time (patterns are for dumps and VTK series): "
+                             "import each on its own, and fit A.h5 B.h5 ... pools them")
         return sources[0]
+    if one_format == {"lammps"}:
+        return list(sources)
+    if one_format == {"csv"}:
+        raise InputError(f"{len(sources)} CSV files given ({sources[0]}, ...): import reads "
+                         "one CSV file at a time: import each on its own, and fit A.h5 B.h5 "
+                         "... pools them")
     pattern = pattern_of(sources)
     raise InputError(f"{len(sources)} sources given ({sources[0]}, ...): import reads one "
                      "file, folder or pattern; quote a pattern so that the shell leaves it "

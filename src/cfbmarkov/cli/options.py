@@ -86,7 +86,8 @@ def parse_region(text: str) -> tuple[tuple[float, float], ...]:
     if not 2 <= len(ranges) <= 3 or any(
             len(r) != 2 or not all(map(math.isfinite, r)) or not r[1] > r[0] for r in ranges):
         raise argparse.ArgumentTypeError(
-            f"region '{text}' is not XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX] in m (finite, MAX > MIN)")
+            f"region '{text}' is not XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX] in the source's units "
+            "(finite, MAX > MIN)")
     return ranges
 
 

@@ -463,7 +463,8 @@ def _refuse_outside(row: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids: 
     unit = layout.units[axis]
     written = raw[riser.axes[k]] * LENGTH_UNITS[unit]
     hint = ("; if the file is not in m, give --length-unit cm|mm" if layout.unit_from[axis] ==
-            "default" else "")
+            "default" else "" if unit == "m" else
+            f"; --region is read in the file's unit ({unit}), --width and --height in m")
     raise InputError(
         f"{label}: particle {int(ids[p])} at t = {time:g} s lies outside the domain "
         f"0..{riser.width:g} x 0..{riser.height:g} m: {layout.column(axis)!r} = {written:g} "

@@ -14,6 +14,16 @@ SPAN_SHARE = 0.01
 SHORTEST_FRAME_INTERVAL = 1e-5
 #: frames read to measure the particles' span (the first, the last and some between)
 SAMPLED_FRAMES = 5
+#: the particles' median speed (m/s) between frames outside which the times' or lengths'
+#: unit is likely wrong (riser solids move at cm/s to tens of m/s)
+SPEED_RANGE = (0.02, 100.0)
+#: pairs of consecutive frames read to measure the particles' speed
+SAMPLED_PAIRS = 10
+#: the factors by which the moves' median speed may exceed the stored velocities' (moves
+#: faster than the particles' own velocities cannot be), and fall short of it (frames far
+#: apart in a flow that turns back show shorter moves), before the frames' times are taken
+#: to be wrong
+VELOCITY_MISMATCH = (5.0, 30.0)
 
 
 def unit_warnings(traj) -> list[str]:
@@ -29,7 +39,8 @@ def unit_warnings(traj) -> list[str]:
     list of str
         One line each: a riser height outside :data:`HEIGHT_RANGE`, particles whose heights
         over a few frames (:data:`SAMPLED_FRAMES`, first to last) span less than
-        :data:`SPAN_SHARE` of the riser's height, or frames less than
+        :data:`SPAN_SHARE` of the riser's height, a median speed between frames outside
+        :data:`SPEED_RANGE` (:func:`median_speed`), or frames less than
         :data:`SHORTEST_FRAME_INTERVAL` apart.
     """
     lines = []
@@ -37,9 +48,9 @@ def unit_warnings(traj) -> list[str]:
     low, high = HEIGHT_RANGE
     if not low <= height <= high:
         lines.append(f"the riser is {height:g} m high and {width:g} m wide: lengths are in "
-                     "metres (CSV: --length-unit for the positions' unit; --width, --height and "
-                     "--region in the source's own units); check the units if that is not "
-                     "the riser")
+                     "metres (CSV: --length-unit for the positions' unit; --width and --height "
+                     "in m, --region in the source's own units); check the units if that is "
+                     "not the riser")
     frames = np.unique(np.linspace(0, traj.n_frames - 1, SAMPLED_FRAMES).round().astype(int))
     heights = np.concatenate([traj.positions(int(k))[:, 1] for k in frames])
     heights = heights[np.isfinite(heights)]
@@ -48,8 +59,27 @@ def unit_warnings(traj) -> list[str]:
         if span < SPAN_SHARE * height:
             lines.append(f"the particles' heights span {span:.3g} m of the riser's {height:g} m "
                          f"(in {frames.size} frames from the first to the last): the positions' "
-                         "unit and the riser's may differ (CSV: --length-unit; --width, --height "
-                         "and --region are in the source's own units)")
+                         "unit and the riser's may differ (CSV: --length-unit; --width and "
+                         "--height are in m, --region in the source's own units)")
+    speed = median_speed(traj)
+    stored = median_stored_speed(traj)
+    if np.isfinite(speed) and np.isfinite(stored) and speed > 0 and stored > 0 and (
+            speed / stored > VELOCITY_MISMATCH[0] or stored / speed > VELOCITY_MISMATCH[1]):
+        lines.append(f"the file's velocities (median {stored:.3g} m/s) disagree with the "
+                     f"particles' moves between frames (median {speed:.3g} m/s) by a factor "
+                     f"{max(speed, stored) / min(speed, stored):.3g}: the frames' times are "
+                     "likely wrong (dumps: --time-step in s, the simulation's time step; "
+                     "CSV: --time-unit)")
+    slow, fast = SPEED_RANGE
+    if np.isfinite(speed) and 0 < speed < slow:
+        lines.append(f"the particles move at a median {speed:.3g} m/s between frames: times "
+                     "in milliseconds read as seconds? (CSV: --time-unit ms; dumps: "
+                     "--time-step in s); check the times and lengths if the flow is not "
+                     "this slow")
+    elif speed > fast:
+        lines.append(f"the particles move at a median {speed:.3g} m/s between frames: times "
+                     "in seconds read as milliseconds, or lengths in mm read as m? (CSV: "
+                     "--time-unit, --length-unit); check the units if the flow is that fast")
     interval = traj.frame_interval
     if np.isfinite(interval) and 0 < interval < SHORTEST_FRAME_INTERVAL:
         lines.append(f"frames {interval:g} s apart: times are in seconds (CSV: --time-unit ms "
@@ -58,4 +88,77 @@ def unit_warnings(traj) -> list[str]:
     return lines
 
 
-__all__ = ["unit_warnings"]
+def median_speed(traj) -> float:
+    """The particles' median speed (m/s) between consecutive frames, over
+    :data:`SAMPLED_PAIRS` pairs spread through the file: |displacement| / frame interval
+    of the particles present in both frames of a pair, leaving out moves of half the
+    riser's height or more (a pass through a periodic boundary, or a particle leaving an
+    open riser and a new one entering).
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+
+    Returns
+    -------
+    float
+        NaN where no particle is present in both frames of any pair.
+    """
+    if traj.n_frames < 2:
+        return float("nan")
+    starts = np.unique(np.linspace(0, traj.n_frames - 2, SAMPLED_PAIRS).round().astype(int))
+    speeds = []
+    for k in starts:
+        a, b = traj.positions(int(k)), traj.positions(int(k) + 1)
+        dt = float(traj.times[k + 1] - traj.times[k])
+        step = np.linalg.norm(b - a, axis=1)
+        keep = np.isfinite(step) & (np.abs(b[:, 1] - a[:, 1]) < 0.5 * traj.height)
+        if dt > 0 and keep.any():
+            speeds.append(step[keep] / dt)
+    if not speeds and traj.n_particles * traj.n_frames <= SPARSE_VALUES:
+        speeds = _sparse_speeds(traj)
+    return float(np.median(np.concatenate(speeds))) if speeds else float("nan")
+
+
+def median_stored_speed(traj) -> float:
+    """The median speed (m/s) of the non-zero velocities stored in the file, at the frames
+    that :func:`median_speed` samples; NaN where the file stores none."""
+    if not traj.has_velocity or traj.n_frames < 2:
+        return float("nan")
+    starts = np.unique(np.linspace(0, traj.n_frames - 2, SAMPLED_PAIRS).round().astype(int))
+    speeds = [np.linalg.norm(traj.velocities(int(k)), axis=1) for k in starts]
+    speeds = np.concatenate(speeds)
+    speeds = speeds[np.isfinite(speeds) & (speeds > 0)]    # zeros: velocities not written
+    return float(np.median(speeds)) if speeds.size else float("nan")
+
+
+#: the most particle-frames read whole where no particle is present in two consecutive
+#: frames (a tracer resampled with gaps longer than its samples' spacing)
+SPARSE_VALUES = 5_000_000
+
+
+def _sparse_speeds(traj) -> list[np.ndarray]:
+    """Speeds between each particle's consecutive observations, however far apart, with
+    heights unwrapped by the laps on a periodic riser (an open riser's moves of half its
+    height or more left out)."""
+    positions, present = traj.positions(), traj.present()
+    laps = None if traj.boundary.is_open else traj.laps()
+    speeds = []
+    for j in range(traj.n_particles):
+        seen = np.flatnonzero(present[:, j] & np.isfinite(positions[:, j, 1]))
+        if seen.size < 2:
+            continue
+        track = positions[seen, j].copy()
+        if laps is not None:
+            track[:, 1] += traj.height * laps[seen, j]
+        step = np.linalg.norm(np.diff(track, axis=0), axis=1)
+        dt = np.diff(traj.times[seen])
+        keep = dt > 0
+        if laps is None:
+            keep &= np.abs(np.diff(track[:, 1])) < 0.5 * traj.height
+        speeds.append(step[keep] / dt[keep])
+    return speeds
+
+
+__all__ = ["median_speed", "median_stored_speed", "unit_warnings"]

@@ -251,6 +251,12 @@ class OpenFlow:
                 lines.append(
                     f"  {censored} tracks {what} more than one cell from the {face} "
                     f"({100 * censored / (censored + counted):.0f} % of those that {what} "
-                    f"near it or not) and were left out as censored; if particles cross the "
-                    "face farther than a cell per lag, use taller cells or a shorter lag")
+                    f"near it or not) and were left out as censored: they "
+                    f"{'left' if what == 'ended' else 'came into'} the view elsewhere, through "
+                    f"the {'inlet' if face == 'outlet' else 'outlet'} face ("
+                    + ("solids falling back out through a section's bottom" if what == "ended"
+                       else "solids falling into a section through its top")
+                    + ", which the open model does not count: import the riser from its "
+                    "inlet to its outlet), a side or a gap in the tracking; if they crossed "
+                    f"the {face} farther than a cell per lag, use taller cells or a shorter lag")
         return lines
