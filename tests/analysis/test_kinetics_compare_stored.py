@@ -93,6 +93,31 @@ def test_fingerprint_tells_definitions_apart_and_ignores_the_last_bits(tmp_path)
     assert property_fingerprint(replace(base, rate=rate), 0, 0.02) == same
 
 
+def test_custom_laws_of_one_name_and_other_bodies_have_other_fingerprints():
+    """The fingerprint hashes a custom rate function's definition, not only its name."""
+    import importlib.util
+    from pathlib import Path
+
+    from cfbmarkov.kinetics import Constant, Custom, Kinetics, Property
+    from cfbmarkov.kinetics.fingerprint import property_fingerprint
+    from cfbmarkov.markov import CellGrid
+
+    spec = importlib.util.spec_from_file_location(
+        "rate_functions", Path(__file__).parents[1] / "kinetics" / "rate_functions.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.FIRST.__name__ == module.SECOND.__name__ == "rate"
+    space = CellGrid(FLOW.columns, FLOW.rows).with_size(0.1, 1.0)
+
+    def fingerprint(function):
+        law = Custom(function, parameters=("k",))
+        kinetics = Kinetics((Property("X", law, {"k": Constant(1.0)}),))
+        return property_fingerprint(kinetics.per_state(space), 0, 0.02)
+
+    assert fingerprint(module.FIRST) == fingerprint(module.FIRST)
+    assert fingerprint(module.FIRST) != fingerprint(module.SECOND)
+
+
 def test_prediction_stores_the_fingerprint(runs):
     with h5py.File(runs["pred"], "r") as f:
         attrs = dict(f["properties/X"].attrs)

@@ -317,8 +317,8 @@ def test_a_csv_without_the_risers_size_is_refused_naming_the_datas_extent(tmp_pa
 
 def test_a_dump_given_as_csv_and_an_expanded_pattern_name_the_fix(tmp_path, capsys):
     """A LAMMPS dump given --format csv is named as a dump (not a CSV file missing column
-    t); several sources, the shell's expansion of an unquoted pattern, are refused with the
-    pattern quoted."""
+    t); several dump files, the shell's expansion of an unquoted pattern in name order, are
+    read in the order of their timesteps; several CSV files are refused naming why."""
     from cfbmarkov.cli import main
 
     dump = tmp_path / "run.dump"
@@ -328,13 +328,24 @@ def test_a_dump_given_as_csv_and_an_expanded_pattern_name_the_fix(tmp_path, caps
                                          r"import it with --format lammps"):
         import_file(dump, "csv", tmp_path / "a.h5", width=0.09, height=0.95)
     steps = [tmp_path / f"dump{k}.liggghts" for k in (0, 2000, 4000)]
-    for path in steps:
-        path.write_text(dump.read_text())
-    assert main(["import", *map(str, steps), "-o", str(tmp_path / "b.h5")]) == 2
+    for k, path in zip((0, 2000, 4000), steps):
+        path.write_text(dump.read_text().replace("TIMESTEP\n0\n", f"TIMESTEP\n{k}\n")
+                        .replace("0.2 0.0005", f"{0.2 + k * 1e-5} 0.0005"))
+    by_name = sorted(map(str, steps))              # dump0, dump2000, dump4000 as the shell
+    assert main(["import", *by_name[::-1], "--time-step", "1e-5", "-o",
+                 str(tmp_path / "b.h5")]) == 0
+    with Trajectories(tmp_path / "b.h5") as run:
+        np.testing.assert_allclose(run.times, [0.0, 0.02, 0.04])
+        np.testing.assert_allclose(run.positions()[:, 0, 1], [0.2, 0.22, 0.24])
+    capsys.readouterr()
+    tables = [tmp_path / f"t{k}.csv" for k in range(2)]
+    for path in tables:
+        path.write_text("t,x,y\n0,0.01,0.2\n0.01,0.01,0.21\n")
+    assert main(["import", *map(str, tables), "--width", "0.09", "--height", "0.95", "-o",
+                 str(tmp_path / "c.h5")]) == 2
     err = capsys.readouterr().err
-    assert err.count("\n") == 1 and "3 sources given" in err
-    assert f"'{tmp_path / 'dump*.liggghts'}'" in err
-    assert not (tmp_path / "a.h5").exists() and not (tmp_path / "b.h5").exists()
+    assert err.count("\n") == 1 and "2 CSV files given" in err and "one CSV file at a time" in err
+    assert not (tmp_path / "a.h5").exists() and not (tmp_path / "c.h5").exists()
 
 
 def test_sizes_that_suggest_a_unit_mistake_warn(tmp_path, capsys):

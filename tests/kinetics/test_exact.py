@@ -287,6 +287,48 @@ def test_custom_law_integrates_like_the_linear_one():
         exact_kinetics(model, custom)
 
 
+def test_a_coupled_custom_law_declared_too_early_is_refused_and_divergence_warned():
+    """An Arrhenius-like rate of a custom temperature declared after it reads NaN: refused
+    before the run, naming the property and what it can read (not a bare SystemError from
+    the compiled run); declared after it, it runs. A rate growing with its value that blows
+    up is stored with a warning."""
+    import numba as nb
+
+    from cfbmarkov.errors import CfbmarkovWarning
+    from cfbmarkov.kinetics import Custom
+
+    @nb.njit
+    def heating(v, row, others):
+        return row[0] * (900.0 - v)
+
+    @nb.njit
+    def arrhenius(v, row, others):
+        return row[0] * np.exp(-1000.0 / others[1]) * (1.0 - v)   # others[1]: temperature
+
+    @nb.njit
+    def runaway(v, row, others):
+        return row[0] * v * v
+
+    model = periodic_model()
+    states, laps = model.monte_carlo(np.array([0, 1] * 20, np.int32), 60, seed=4)
+    one = {"k": Constant(2.0)}
+    temperature = Property("T", Custom(heating, ("k",), initial=300.0), one)
+    conversion = Property("X", Custom(arrhenius, ("k",)), one)
+    early = Kinetics((conversion, temperature)).per_state(model.state_space)
+    with pytest.raises(InputError, match="property X: its rate function gives nan at its start "
+                                         "value 0 in state 0, with the properties it can read "
+                                         "filled \(none; the others NaN\)"):
+        run_properties(early, LAG, states, laps, periodic=True)
+    ordered = Kinetics((Property("X0", FirstOrder(), {"rate": Constant(1.0)}), temperature,
+                        conversion)).per_state(model.state_space)
+    values = run_properties(ordered, LAG, states, laps, periodic=True)
+    assert np.isfinite(values[2]).all() and values[2].max() > 0
+    blowing = Kinetics((Property("Y", Custom(runaway, ("k",), initial=1.0),
+                                 {"k": Constant(50.0)}),)).per_state(model.state_space)
+    with pytest.warns(CfbmarkovWarning, match="property Y is not finite for"):
+        run_properties(blowing, LAG, states, laps, periodic=True)
+
+
 def test_windowed_exit_mean_by_hand_open_riser():
     from cfbmarkov.markov.kinetics_exact import windowed_exit_means
 

@@ -119,3 +119,35 @@ def test_a_window_pooled_with_itself_is_refused_as_on_the_command_line(markov_ru
             estimator.fit([window, overlapping])
         pooled = estimator.fit([window, later])       # windows that do not overlap: pooled
         assert pooled.counts.sum() > estimator.fit(window).counts.sum()
+
+
+def test_arguments_of_the_wrong_kind_are_named_in_one_line(markov_run):
+    """Text for a number, a tuple for a state space, '10:15' for a window: one InputError
+    naming the form expected, not a numpy TypeError; a plain number is a constant rate."""
+    for call, message in [
+            (lambda: discretize(markov_run, GRID, lag="0.1", window=(2.0, 6.0)),
+             "lag '0.1' is a str, not a number of seconds"),
+            (lambda: discretize(markov_run, GRID, lag=0.1, window="2:6"),
+             "window '2:6' is not \\(start, stop\\) in s"),
+            (lambda: discretize(markov_run, (4, 16), lag=0.1, window=(2.0, 6.0)),
+             "state space \\(4, 16\\) is a tuple, not a state space"),
+            (lambda: PaperEstimator(GRID, lag="0.1"), "is a str, not a number"),
+            (lambda: Property("X", FirstOrder(), {"rate": "fast"}),
+             "parameter rate = 'fast' is a str; give a number")]:
+        with pytest.raises(InputError, match=message):
+            call()
+    assert Property("X", FirstOrder(), {"rate": 0.5}).parameters["rate"] == Constant(0.5)
+
+
+def test_result_objects_echo_in_a_line_or_two(fitted):
+    """A notebook cell's echo of an RTD, an interval or a kinetics answer shows arrays by
+    shape, not thousands of numbers."""
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
+    rtd = fitted.rtd()
+    text = repr(rtd)
+    assert text.startswith("ResidenceTimeDistribution(lag=0.1, probability=<array ")
+    assert len(text) < 400 and str(rtd.probability.size) in text
+    answer = exact_kinetics(fitted, Kinetics((Property("X", FirstOrder(), {"rate": 0.5}),)))
+    assert "bed_mean_by_cell=<array 64 float64>" in repr(answer["X"])
+    assert len(repr(answer["X"])) < 400

@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from cfbmarkov._repr import compact_repr
 from cfbmarkov.analysis.baseline import (WindowDifference, fitting_runs_of, fitting_window,
                                          model_on_fitting_window, pooled_window_difference,
                                          window_difference)
@@ -163,6 +164,8 @@ class RunComparison:
         The cluster index of each side's snapshots (mean and SD over the window's frames,
         :func:`cfbmarkov.observed.clusters.cluster_index`) and the grid it was counted on.
     """
+
+    __repr__ = compact_repr
 
     window: tuple[float, float]
     bin_width: float

@@ -129,7 +129,8 @@ def add_import(sub) -> None:
                        ".pvd) or H5MD particle files as a trajectory file")
     s.add_argument("source", nargs="+",
                    help="input file (.csv, dump, optionally .gz; .vtk, .vtp, .pvd, .h5), a "
-                        "folder or a quoted pattern such as 'post/dump*.vtk'")
+                        "folder of VTK files, a quoted pattern such as 'post/dump*.vtk', or "
+                        "several dump files (read in timestep order)")
     s.add_argument("--format", default="auto",
                    choices=["auto", "csv", "lammps", "vtk", "vtp", "pvd", "h5md"],
                    help="the source's format (default auto: told from the content, and said "

@@ -145,7 +145,26 @@ def detect_format(source) -> tuple[str, str]:
                          "or a .pvd collection of them")
     if stripped.startswith(b"ITEM: TIMESTEP") or stripped.startswith(b"ITEM:"):
         return "lammps", DESCRIPTIONS["lammps"]
+    _refuse_unread_text(path, stripped)
     return "csv", DESCRIPTIONS["csv"]
+
+
+def _refuse_unread_text(path, head: bytes) -> None:
+    """Refuse, naming the format and what to export instead, text formats no importer
+    reads (their first line would otherwise be read as a CSV header): XML other than VTK
+    (TrackMate's XML tracks) and Tecplot ASCII (MFiX, Fluent)."""
+    lower = head[:4096].lower()
+    if lower.startswith(b"<"):
+        what = ("TrackMate XML tracks" if b"<trackmate" in lower or b"<tracks" in lower
+                else "XML that is no VTK file")
+        raise InputError(f"{path}: {what}: not read; export the tracks as CSV (TrackMate: "
+                         "the spots table, with TRACK_ID, POSITION_T, POSITION_X, POSITION_Y; "
+                         "docs/how-to/pept-ptv.md) or as VTK PolyData (.vtp)")
+    first = lower.split(b"\n", 1)[0].strip()
+    if first.startswith((b"title", b"variables", b"zone")) or b"\nvariables" in lower[:1024]:
+        raise InputError(f"{path}: Tecplot ASCII (TITLE/VARIABLES/ZONE lines): not read; "
+                         "export the particles as CSV with columns t, id, x, y (or VTK "
+                         "PolyData, .vtp; MFiX writes those with its VTK output)")
 
 
 def check_given_format(source, fmt: str) -> None:

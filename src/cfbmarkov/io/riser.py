@@ -192,9 +192,26 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
         if height is not None:
             bounds[1] = (0.0, float(height))
         from_box = width is None and height is None
+    unknown = [k for k in range(len(axes)) if not np.all(np.isfinite(bounds[k]))]
+    if unknown == [2] and region is None:
+        raise InputError(f"{where}: the riser's depth along {AXES[axes[2]]} is unknown (the "
+                         "files carry no box, and --width and --height set the other two): "
+                         "give all three ranges with --region XMIN:XMAX,YMIN:YMAX,ZMIN:ZMAX, "
+                         "or --drop-depth for a 2D projection")
     if not np.all(np.isfinite(bounds)) or np.any(bounds[:, 1] <= bounds[:, 0]):
         raise InputError(f"{where}: the riser region {bounds.tolist()} m has no size; give it "
                          "with --region")
+    if boundary.is_open and periodic[1] and box is not None and vertical < len(box) and (
+            np.all(np.isfinite(box[vertical]))):
+        lo, hi = (float(v) for v in box[vertical])
+        tol = POSITION_TOLERANCE + 1e-9 * max(abs(lo), abs(hi))
+        if bounds[1, 0] <= lo + tol and bounds[1, 1] >= hi - tol:
+            raise InputError(
+                f"{where}: --boundary open, but the box is periodic along {vertical_axis} and "
+                f"the riser spans all of it ({lo:g}..{hi:g} m): its particles leave through "
+                "the top and come back at the bottom, which an open riser would read as "
+                "jumps inside it; leave out --boundary (a periodic riser), or give --region "
+                "a section of the height to import it open")
     wrap = _wrap(axes, bounds, periodic, boundary, box, where)
     return RiserFrame(axes, bounds, from_box, periodic, boundary, dropped, wrap)
 

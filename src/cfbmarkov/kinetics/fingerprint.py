@@ -9,7 +9,9 @@ The fingerprint is ``sha256:`` and the SHA-256 (hex) of, in order:
    the law's key, the start rule, the entry value, the lag (s) and the number of states
    (floats written as ``repr`` of the value quantised as below);
 2. for a linear law, the per-state rate k_s (1/s) and target v_inf,s; for a custom law its
-   function's name, its RK4 sub-steps and its per-state parameters: each number quantised
+   function's name and definition (the SHA-256 of its source text, or of its code object
+   where Python has no source for it, :func:`function_digest`), its RK4 sub-steps and its
+   per-state parameters: each number quantised
    to 40 significant bits of mantissa (:func:`quantised`; about 12 decimal digits) and
    written as little-endian int64 mantissas then int32 exponents.
 
@@ -94,6 +96,7 @@ def property_fingerprint(state_kinetics, index: int, lag: float) -> str:
               "states": int(np.shape(sk.rate)[1])}
     if not linear:
         header["function"] = str(getattr(law.function, "__name__", "?"))
+        header["definition"] = function_digest(law.function)
         header["substeps"] = int(law.substeps)
     digest = hashlib.sha256(json.dumps(header, sort_keys=True).encode())
     arrays = ((sk.rate[index], sk.target[index]) if linear
@@ -105,4 +108,31 @@ def property_fingerprint(state_kinetics, index: int, lag: float) -> str:
     return "sha256:" + digest.hexdigest()
 
 
-__all__ = ["FINGERPRINT_METHOD", "MANTISSA_BITS", "property_fingerprint", "quantised"]
+def function_digest(function) -> str:
+    """The SHA-256 (hex) of a rate function's definition: its source text where Python can
+    find it (a module, a notebook cell), else its code object's bytecode, constants and
+    names; two functions of one name but different bodies differ.
+
+    Parameters
+    ----------
+    function : numba dispatcher or function
+        The rate function (its ``py_func`` where compiled).
+
+    Returns
+    -------
+    str
+    """
+    import inspect
+
+    func = getattr(function, "py_func", function)
+    try:
+        text = inspect.getsource(func).encode()
+    except (OSError, TypeError):
+        code = getattr(func, "__code__", None)
+        text = b"" if code is None else (code.co_code + repr(code.co_consts).encode()
+                                         + repr(code.co_names).encode())
+    return hashlib.sha256(text).hexdigest()
+
+
+__all__ = ["FINGERPRINT_METHOD", "MANTISSA_BITS", "function_digest", "property_fingerprint",
+           "quantised"]

@@ -170,9 +170,10 @@ class Custom(Law):
     ``function(v, parameters, values) -> dv/dt`` (all float64): ``v`` the property's value,
     ``parameters`` the state's row of this law's parameters (float64 [q], in the order of
     ``parameters``), ``values`` the particle's properties at the lag's start (float64 [P],
-    in the order of the kinetics; only the properties declared before this one are filled,
-    so a coupled law, e.g. an Arrhenius rate of a temperature, comes after the property it
-    reads). Each lag is integrated with ``substeps`` classical RK4 steps with the state and
+    in the order of the kinetics; the linear properties and the custom ones declared before
+    this one are filled, the others NaN, so a coupled custom law, e.g. an Arrhenius rate of
+    a custom temperature, comes after the property it reads; a function that raises or
+    gives no finite rate at its start value is refused before the run). Each lag is integrated with ``substeps`` classical RK4 steps with the state and
     the other properties held at the lag's start.
 
     Attributes

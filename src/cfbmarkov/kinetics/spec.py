@@ -11,6 +11,7 @@ k and limit v_inf of every linear law and, over a lag, the exact affine maps.
 from __future__ import annotations
 
 import math
+import numbers
 import os
 import tomllib
 from dataclasses import dataclass
@@ -19,6 +20,7 @@ from typing import Mapping
 
 import numpy as np
 
+from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
 from cfbmarkov.kinetics.fields import (FIELDS, ByCell, CellFields, CellParameter, Constant,
                                        FromField, wall_cells)
@@ -94,7 +96,16 @@ class Property:
                              f"{span}, the range of {self.law.quantity} (law {self.law.key}); "
                              f"give a start value in {span}")
         object.__setattr__(self, "initial", float(initial))
-        object.__setattr__(self, "parameters", dict(self.parameters))
+        parameters = {}
+        for key, value in self.parameters.items():     # a plain number: a constant
+            if isinstance(value, numbers.Real) and not isinstance(value, bool):
+                value = Constant(float(value))
+            if not isinstance(value, CellParameter):
+                raise InputError(f"property {self.name}: parameter {key} = {value!r} is a "
+                                 f"{type(value).__name__}; give a number, Constant(...), "
+                                 "ByCell(...) or FromField(...) (cfbmarkov.kinetics)")
+            parameters[key] = value
+        object.__setattr__(self, "parameters", parameters)
 
     def per_cell(self, space, fields: CellFields | None = None) -> dict[str, np.ndarray]:
         """Each parameter per cell of ``space``'s grid, checked (float64 [C] each).
@@ -146,6 +157,8 @@ class StateKinetics:
     source : str, optional
         The kinetics file they came from, for messages.
     """
+
+    __repr__ = compact_repr
 
     names: tuple
     starts: tuple

@@ -53,6 +53,7 @@ import numpy as np
 from scipy.sparse import csr_matrix
 from scipy.sparse.csgraph import connected_components
 
+from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.discrete import as_discrete_list, discretize
 from cfbmarkov.markov.estimate import estimator_from_name
@@ -88,6 +89,8 @@ class ImpliedTimescales:
     J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
     validation", J. Chem. Phys. 134, 174105 (2011) (implied timescales).
     """
+
+    __repr__ = compact_repr
 
     lags: np.ndarray            # [L] s
     timescales: np.ndarray      # [L, k] s (inf for |lambda| = 1, nan where S - 1 < k)
@@ -312,6 +315,8 @@ class CKTest:
     J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
     validation", J. Chem. Phys. 134, 174105 (2011) (the Chapman-Kolmogorov test).
     """
+
+    __repr__ = compact_repr
 
     lag: float                  # s
     steps: np.ndarray           # [K] multiples of the lag

@@ -483,6 +483,41 @@ def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
                       short_history)
 
 
+def check_arguments(state_space, lag, window=None) -> None:
+    """Refuse, in one line naming the expected form, arguments of the wrong kind (a state
+    space given as a tuple, a lag or window as text) before they reach numpy.
+
+    Parameters
+    ----------
+    state_space : StateSpace
+    lag : float
+        The lag (s).
+    window : (float, float) or None, optional
+        A fitting window (s).
+
+    Raises
+    ------
+    InputError
+        Naming the argument, what was given and an example of the right form.
+    """
+    import numbers
+
+    if not isinstance(state_space, StateSpace):
+        raise InputError(f"state space {state_space!r} is a {type(state_space).__name__}, not "
+                         "a state space: give e.g. CellGrid(6, 38) (cfbmarkov.markov), or "
+                         "state_space_from_name('cells-previous', 6, 38)")
+    if isinstance(lag, bool) or not isinstance(lag, numbers.Real):
+        raise InputError(f"lag {lag!r} is a {type(lag).__name__}, not a number of seconds: "
+                         "give e.g. lag=0.025")
+    if window is None:
+        return
+    ok = (isinstance(window, (tuple, list, np.ndarray)) and len(window) == 2 and all(
+        isinstance(v, numbers.Real) and not isinstance(v, bool) for v in window))
+    if not ok or not float(window[0]) < float(window[1]):
+        raise InputError(f"window {window!r} is not (start, stop) in s with start < stop: "
+                         "give e.g. window=(10.0, 15.0)")
+
+
 def _prepare(traj: Trajectories, state_space: StateSpace, lag: float) -> int:
     """Check that ``state_space`` fits the file and return the lag in frames (NaN as the
     lag: check the fit only, return 0)."""
@@ -533,6 +568,7 @@ def discretize(source, state_space: StateSpace, lag: float,
     -----
     See ``docs/definitions.md`` (Discrete trajectories; Lag and fitting window).
     """
+    check_arguments(state_space, lag, window)
     with opened(source) as traj:
         lag_frames = _prepare(traj, state_space, lag)
         frames = read_frames(traj, window, state_space.memory_lags * lag_frames,
@@ -657,5 +693,5 @@ def check_distinct_windows(windows: list[DiscreteTrajectories]) -> None:
 
 
 __all__ = ["ABSENT", "DiscreteTrajectories", "WindowFrames", "as_discrete_list",
-           "check_distinct_windows",
+           "check_arguments", "check_distinct_windows",
            "check_domain", "discretize", "discretize_frame", "read_frames"]

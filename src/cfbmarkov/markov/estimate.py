@@ -34,7 +34,8 @@ from cfbmarkov.limits import check_fit
 from cfbmarkov.markov.coherence import calibrate_coherence
 from cfbmarkov.markov.connectivity import largest_connected_set, restrict_to_set
 from cfbmarkov.markov.counting import TransitionCounts, count_transitions
-from cfbmarkov.markov.discrete import check_distinct_windows, as_discrete_list, discretize
+from cfbmarkov.markov.discrete import (as_discrete_list, check_arguments,
+                                       check_distinct_windows, discretize)
 from cfbmarkov.markov.first_passage import split_by_pass
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.open_flow import OpenFlow
@@ -122,6 +123,7 @@ class TransitionEstimator:
 
     def __init__(self, state_space: StateSpace, lag: float = 0.025, connected: bool = False,
                  coherent: bool = False):
+        check_arguments(state_space, lag)
         if not (np.isfinite(lag) and lag > 0):
             raise InputError(f"lag {lag:g} s must be a positive finite number")
         check_fit(state_space)          # refuse before counting: the dense [S, S] arrays

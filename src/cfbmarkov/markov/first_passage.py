@@ -31,6 +31,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order
 
+from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import CfbmarkovError
 from cfbmarkov.markov.connectivity import closed_classes
 from cfbmarkov.markov.entry_chain import embedded_stationary, entry_matrix
@@ -78,6 +79,8 @@ class ResidenceTimeDistribution:
     -----
     See ``docs/definitions.md`` (Residence time; Exact RTD of a model).
     """
+
+    __repr__ = compact_repr
 
     lag: float
     probability: np.ndarray   # [K]: index 0 is k = 1

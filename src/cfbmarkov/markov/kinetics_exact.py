@@ -45,6 +45,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
 from cfbmarkov.kinetics import Kinetics, StateKinetics
 from cfbmarkov.markov.first_passage import (_live_levels, _reaching, deficit_matrix,
@@ -223,6 +224,8 @@ class PropertyAnswer:
     moments : ExitMoments, optional
         The residence's exit moments, for :meth:`after_passes`.
     """
+
+    __repr__ = compact_repr
 
     name: str
     start: str

@@ -178,13 +178,68 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
                           bool(periodic), part)
         if part is not values:
             values[linear] = part
-    for q in np.flatnonzero(~sk.linear):
+    custom = np.flatnonzero(~sk.linear)
+    values[custom] = np.nan        # a custom law that reads one not yet computed reads NaN
+    for q in custom:
         law = sk.laws[q]
+        _check_custom_start(sk, int(q), states)
         custom_property(law.function, states, laps,
                         np.ascontiguousarray(sk.parameters[q], dtype=np.float64), float(lag),
                         int(law.substeps), bool(reset[q]), initial[q], float(sk.initial[q]),
                         bool(periodic), int(q), values)
+        _warn_not_finite(sk.names[q], values[q], states >= 0)
     return values
+
+
+def _check_custom_start(sk, q: int, states: np.ndarray) -> None:
+    """Evaluate a custom law's rate function once, in Python, at its start value in the
+    first occupied state, with the properties computed before it at their start values and
+    the others NaN (as the Monte Carlo fills them): a function that raises there, or gives
+    no finite rate, is refused naming the property before the run (inside the compiled run
+    the error would be a bare SystemError)."""
+    from cfbmarkov.errors import InputError
+
+    law = sk.laws[q]
+    occupied = states[states >= 0]
+    if not occupied.size:
+        return
+    s = int(occupied[0])
+    others = np.full(sk.n_properties, np.nan)
+    filled = [i for i in range(sk.n_properties) if sk.linear[i] or i < q]
+    others[filled] = sk.initial[filled]
+    row = np.asarray(sk.parameters[q], dtype=np.float64)[s]
+    function = getattr(law.function, "py_func", law.function)
+    readable = ", ".join(sk.names[i] for i in filled if i != q) or "none"
+    try:
+        rate = float(function(float(sk.initial[q]), row, others))
+    except Exception as exc:     # the user's code: any error it raises is named
+        raise InputError(f"property {sk.names[q]}: its rate function raised "
+                         f"{type(exc).__name__} ({exc}) at its start value "
+                         f"{sk.initial[q]:g} in state {s}, with the properties it can read "
+                         f"filled ({readable}; the others NaN): a coupled law reads only the "
+                         "linear properties and those declared before it, so declare the "
+                         "properties it reads first") from None
+    if not np.isfinite(rate):
+        raise InputError(f"property {sk.names[q]}: its rate function gives {rate} at its "
+                         f"start value {sk.initial[q]:g} in state {s}, with the properties "
+                         f"it can read filled ({readable}; the others NaN): declare the "
+                         "properties it reads before it, and give it a finite rate there")
+
+
+def _warn_not_finite(name: str, values: np.ndarray, present: np.ndarray) -> None:
+    """Warn where a custom law's values are not finite for particles present (a rate
+    function that diverges): they are stored, and every figure from them is NaN."""
+    import warnings
+
+    from cfbmarkov.errors import CfbmarkovWarning
+
+    bad = int(np.count_nonzero(present & ~np.isfinite(values)))
+    if bad:
+        warnings.warn(f"property {name} is not finite for {bad} of "
+                      f"{int(np.count_nonzero(present))} particle-frames present: its rate "
+                      "function diverges (a rate growing with the value) or the RK4 "
+                      "sub-steps are too few for it (Custom(..., substeps=...))",
+                      CfbmarkovWarning, stacklevel=3)
 
 
 @nb.njit(cache=True)

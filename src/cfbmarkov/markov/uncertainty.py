@@ -16,6 +16,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
 
 #: the group of a model file that holds the uncertainty
@@ -58,6 +59,8 @@ class ModelUncertainty:
         If the level is not in (0, 1), a bound is not finite or lower above upper, or the
         RTD's arrays do not fit together.
     """
+
+    __repr__ = compact_repr
 
     level: float
     rt_mean_interval: tuple[float, float]
