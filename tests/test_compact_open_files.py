@@ -49,11 +49,17 @@ def test_open_file_is_compact_and_reads_back_exactly(tmp_path):
 
 
 def test_periodic_file_layout_is_unchanged(tmp_path):
-    path = synthetic.write_run(tmp_path / "run.h5", FLOW, 30, 0.5, seed=1)
+    """A periodic file: one frame of its particles per chunk, uncompressed; with fewer than
+    256 particles, as many frames of them as make about 256 values (no padding)."""
+    path = synthetic.write_run(tmp_path / "run.h5", FLOW, 300, 0.5, seed=1)
     with h5py.File(path) as f:
-        assert f["frames/position"].chunks == (1, 256, 2)
+        assert f["frames/position"].chunks == (1, 300, 2)
         assert f["frames/position"].compression is None
-        assert f["frames/lap"].chunks == (1, 256)
+        assert f["frames/lap"].chunks == (1, 300)
+    few = synthetic.write_run(tmp_path / "few.h5", FLOW, 30, 0.5, seed=1)
+    with h5py.File(few) as f:
+        assert f["frames/position"].chunks == (8, 30, 2)
+        assert f["frames/lap"].chunks == (8, 30)
 
 
 def test_open_riser_prediction_is_small_and_reads_the_same(tmp_path, capsys):

@@ -294,7 +294,7 @@ def test_simulate_killed_at_random_points_resumes_or_reruns_clean(tmp_path):
 
 @pytest.mark.slow
 def test_simulate_full_disk_keeps_last_checkpoint_and_ctrl_c(tmp_path):
-    case = _case(tmp_path, end=0.1)
+    case = _case(tmp_path, end=0.2)     # an output of about 290 kB against a 150 kB limit
     args = ["simulate", case, "-o", "s.h5", "-q", "--checkpoint-every", "0.01"]
     rc, _, err = run_cli(*args, cwd=tmp_path, preexec_fn=_file_size_limit(150_000),
                          timeout=300)
