@@ -126,6 +126,8 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
      "threshold applies only to a parameter given as a function of a cell field"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.4\nunits = "1/min"\n', None,
      "rates and heat-exchange coefficients are read in 1/s"),
+    ('[property]\nname = "X"\nlaw = "first-order"\nrate = 0.4\n', None,
+     "a single [property] table; write it [[property]]"),
 ])
 def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rates, message):
     _, _, model = fitted
@@ -453,3 +455,14 @@ def test_react_refuses_a_reference_start_before_the_monte_carlo(fitted, tmp_path
     err = capsys.readouterr().err
     assert "starts from the reference" in err and "Monte Carlo done" not in err
     assert not out.exists()
+
+
+def test_a_value_beyond_an_interval_prints_apart_from_its_end():
+    """The reference just above the interval's upper end is printed with the digits that
+    tell them apart, never "0.8855 lies above 0.8835-0.8855"."""
+    from cfbmarkov.cli.analysis import interval_verdict
+
+    line = interval_verdict(0.885512, 0.3, (0.88351, 0.885504), (0.2, 0.4))
+    assert "E(RT) 0.88551 s lies above" in line          # 0.8855 at 4 digits, as the end
+    assert "E(RT) 0.85 s lies below" in interval_verdict(0.85, 0.3, (0.88351, 0.885504),
+                                                         (0.2, 0.4))

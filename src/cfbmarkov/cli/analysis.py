@@ -129,6 +129,18 @@ def _place(value: float, interval) -> str:
     return "inside" if lo <= value <= hi else "below" if value < lo else "above"
 
 
+def _digits(value: float, interval) -> int:
+    """Significant digits (4 or more) at which a value outside ``interval`` prints apart
+    from the end it lies beyond, so that "0.8855 lies above 0.8835-0.8855" cannot be
+    printed."""
+    lo, hi = interval
+    end = hi if value > hi else lo if value < lo else None
+    digits = 4
+    while end is not None and digits < 12 and f"{value:.{digits}g}" == f"{end:.{digits}g}":
+        digits += 1
+    return digits
+
+
 def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -> str:
     """One line saying whether the reference's E(RT) and SD(RT) lie inside the model's
     intervals, and what that means.
@@ -146,8 +158,9 @@ def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -
         ``the reference's E(RT) 0.7446 s lies below the model's interval, SD(RT) ...``.
     """
     places = [_place(rt_mean, mean_interval), _place(rt_sd, sd_interval)]
-    text = (f"the reference's E(RT) {rt_mean:.4g} s lies {places[0]} the model's interval, "
-            f"its SD(RT) {rt_sd:.4g} s {places[1]}")
+    dm, ds = _digits(rt_mean, mean_interval), _digits(rt_sd, sd_interval)
+    text = (f"the reference's E(RT) {rt_mean:.{dm}g} s lies {places[0]} the model's interval, "
+            f"its SD(RT) {rt_sd:.{ds}g} s {places[1]}")
     if places == ["inside", "inside"]:
         return text + ": the model is consistent with the reference within its uncertainty"
     missed = " and ".join(n for n, p in zip(("E(RT)", "SD(RT)"), places) if p != "inside")
@@ -251,8 +264,9 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
     kind = ("the fitting window's bootstrap and Monte Carlo noise"
             if method.startswith("block bootstrap") else "Monte Carlo noise only")
     place = _place(reference_mean, (lo, hi))
-    text = (f"{100 * level:g} % interval of the model's exit mean {lo:.4g}-{hi:.4g} ({kind}; "
-            f"the flow's variability left out): the reference's {reference_mean:.4g} lies "
+    d = _digits(reference_mean, (lo, hi))
+    text = (f"{100 * level:g} % interval of the model's exit mean {lo:.{d}g}-{hi:.{d}g} ({kind}; "
+            f"the flow's variability left out): the reference's {reference_mean:.{d}g} lies "
             f"{place} it")
     if place == "inside":
         return text + ": the model is consistent with the reference within its uncertainty"

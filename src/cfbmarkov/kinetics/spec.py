@@ -388,6 +388,9 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
         raise InputError(f"{name}: unknown key {sorted(unknown)[0]!r}; a kinetics file holds "
                          "[[property]] tables only")
     tables = data.get("property")
+    if isinstance(tables, dict):
+        raise InputError(f"{name}: a single [property] table; write it [[property]] (double "
+                         "brackets: an array of tables, one per property)")
     if not isinstance(tables, list) or not tables:
         raise InputError(f"{name}: no [[property]] table; add one per property")
     props = [_property(t, i, path) for i, t in enumerate(tables)]
