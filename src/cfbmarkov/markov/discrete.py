@@ -190,14 +190,26 @@ class DiscreteTrajectories:
         Returns
         -------
         list of ndarray of int32, shape (T,)
-            One array per particle (N in all).
+            One array per particle (N in all), one entry per frame of the file (not per
+            lag).
+
+        Notes
+        -----
+        Three things differ from this package's own estimators: deeptime's ``lagtime`` is
+        in frames, so give it :attr:`lag_frames` (a lag of 0.05 s on frames 0.025 s apart
+        is 2); the entries are ``-1`` (:data:`ABSENT`) where a particle is absent (an open
+        riser, a tracked particle out of view), which deeptime's counting does not take,
+        so split the sequences there first; and the passes through a periodic riser's top
+        and bottom are not in the states, so a chain counted by deeptime has no RTD (the
+        passes come from :attr:`vertical` and :attr:`laps`).
         """
         return list(np.ascontiguousarray(self.states.T))
 
     def __repr__(self) -> str:
         span = (f"{self.times[0]:g}..{self.times[-1]:g} s" if self.n_frames else "no frames")
+        frames = "frame" if self.lag_frames == 1 else "frames"
         return (f"DiscreteTrajectories({self.state_space.describe()}, {self.n_particles} "
-                f"particles x {self.n_frames} frames, {span}, lag {self.lag_frames} frames = "
+                f"particles x {self.n_frames} frames, {span}, lag {self.lag_frames} {frames} = "
                 f"{self.lag:g} s)")
 
 
