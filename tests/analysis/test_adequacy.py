@@ -82,6 +82,42 @@ def test_a_window_of_many_switches_and_a_stationary_chain_do_not_warn(runs):
         assert verdict.tail_share < 0.1
 
 
+def test_the_parts_limit_from_the_interval_is_the_range_of_k_parts():
+    """Halves (quarters) of a window hold 1/2 (1/4) of its data: the limit is the 95 %
+    range of 2 (4) normal values with sqrt(2) (2) times the window's standard error, at
+    least 10 %; the same whatever the interval's level, a tolerance as before."""
+    from scipy.stats import norm, studentized_range
+
+    from cfbmarkov.analysis.adequacy import MIN_PARTS_LIMIT, parts_limit
+
+    width = 0.2                                     # a 90 % interval 20 % of E(RT) wide
+    sigma = width / (2 * norm.ppf(0.95))
+    for k in (2, 4):
+        q95 = studentized_range.ppf(0.95, k, 1e5)
+        assert parts_limit(width, k) == pytest.approx(q95 * np.sqrt(k) * sigma, rel=1e-4)
+        wider = 2 * norm.ppf(0.975) * sigma            # the same error at a 95 % level
+        assert parts_limit(wider, k, level=0.95) == pytest.approx(parts_limit(width, k))
+    assert parts_limit(0.01, 4) == MIN_PARTS_LIMIT
+    assert parts_limit(0.3, 4, from_interval=False) == pytest.approx(0.3 * np.sqrt(2))
+
+
+def test_a_stationary_flow_with_memory_does_not_warn_that_it_changed(tmp_path):
+    """The synthetic demo's flow (a hidden direction: the cells chain misses memory, its
+    quarters scatter beyond their bootstrap interval) fitted as `fit` does on 2 and 5 s
+    windows: no "disagree" warning, where the limit was the interval's width (times
+    sqrt(2) for quarters) and half of such windows warned "the flow changed"."""
+    from cfbmarkov.analysis.fit_checks import assess_fit
+
+    run = synthetic.write_run(tmp_path / "memory.h5", synthetic.RiserFlow(), 1000, 10.0,
+                              seed=5)
+    for window in [(2.0, 4.0), (5.0, 7.0), (4.0, 9.0)]:
+        model = assess_fit(fit_model(run, CellGrid(6, 38), 0.025, window, "paper"),
+                           resamples=30)
+        verdict = model.adequacy
+        assert not any("disagree" in line for line in verdict.warnings), verdict.warnings
+        assert verdict.spread < verdict.part_limit
+
+
 def test_short_window_and_net_flow_turn_warn(runs, tmp_path):
     few = _verdict(runs["stationary"], (2.0, 2.6))    # halves of 0.3 s hold no residence
     assert any("residences" in line for line in few.warnings)

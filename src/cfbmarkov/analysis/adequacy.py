@@ -320,10 +320,16 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     if interval is None and uncertainty is not None:
         interval = uncertainty.rt_mean_interval
     limit, limit_source = tolerance, ", the default tolerance"
+    level = float(uncertainty.level) if uncertainty is not None else 0.9
+    from_interval = False
     if interval is not None and rt_mean > 0 and all(map(math.isfinite, interval)):
         limit = (float(interval[1]) - float(interval[0])) / rt_mean
-        limit_source = ", the relative width of the model's E(RT) interval"
+        from_interval = True
+        limit_source = (f": the larger of {100 * MIN_PARTS_LIMIT:g} % and the range 95 % of "
+                        "{k} parts stay within where they scatter as the model's interval "
+                        "says")
     lines: list[str] = []
+    applied = math.nan
     if limit > WIDE_INTERVAL and interval is not None:
         lines.append(f"the model's E(RT) interval {float(interval[0]):.3g}-"
                      f"{float(interval[1]):.3g} s is {100 * limit:.0f} % of its E(RT) "
@@ -354,7 +360,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                          f"the window is too short to judge its E(RT); {_ADVICE}")
             continue
         # one run of a pooled fit is N times less data than the interval's: sqrt(N) wider
-        part_limit = limit * math.sqrt(len(runs)) * (math.sqrt(2.0) if len(parts) == 4 else 1.0)
+        part_limit = parts_limit(limit, len(parts), level, from_interval) * math.sqrt(len(runs))
+        applied = part_limit if not math.isfinite(applied) else max(applied, part_limit)
         part_spread = _spread([m for _, _, m, _ in parts], rt_mean)
         spread = part_spread if not math.isfinite(spread) else max(spread, part_spread)
         if math.isfinite(part_spread) and part_spread > part_limit:
@@ -363,15 +370,14 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
             spread_text, limit_text = _percents(part_spread, part_limit)
             lines.append(f"the {kind} of the fitting window of {name} disagree: E(RT) {text}, "
                          f"a spread of {spread_text} % of the model's {rt_mean:.3g} s "
-                         f"(limit {limit_text} %{limit_source}"
-                         f"{' times sqrt(2) for quarters' if len(parts) == 4 else ''}"
-                         f"{f' times sqrt({len(runs)}) for one of {len(runs)} runs' if pooled else ''}"
+                         f"(limit {limit_text} %{limit_source.format(k=len(parts))}"
+                         f"{f', times sqrt({len(runs)}) for one of {len(runs)} runs' if pooled else ''}"
                          f"): the flow changed within the window, and the model may lie far "
                          f"from the flow's long run; {_ADVICE}")
     run_means: tuple[tuple[str, float], ...] = ()
     if pooled:
         run_means, pooled_lines, pooled_spread = _pooled_checks(
-            fitter, data, names, windows, rt_mean, limit,
+            fitter, data, names, windows, rt_mean, parts_limit(limit, 2, level, from_interval),
             within_run_limit(model, uncertainty, rt_mean, tolerance),
             halves=pooled_fewest >= MIN_PART_RESIDENCES, direction=model.flow_direction)
         lines += pooled_lines
@@ -391,7 +397,59 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     if pooled:
         lines = [line.replace(_ADVICE, _POOLED_ADVICE) for line in lines]
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
-                    run_means, window_mean)
+                    run_means, window_mean, applied if not pooled else math.nan)
+
+
+#: the least limit of the parts' spread (-). A short window's interval is narrower than
+#: its parts' scatter on stationary flows (its bootstrap blocks, a tenth of the window,
+#: are shorter than a residence): on the synthetic demo's flow (`RiserFlow()`, 2000
+#: particles) the quarters of 2 s windows spread 1-5 % of E(RT), up to three times their
+#: interval's width, and those of 5 s windows 4-7 %; the flow's own changes that matter
+#: (the paper's riser: E(RT) 10-28 % apart between 5 s windows) are larger
+MIN_PARTS_LIMIT = 0.1
+
+#: the 95th percentile of the range of k independent standard normal values (Tukey's
+#: studentized range with infinite degrees of freedom, q(0.95; k, inf); H. L. Harter,
+#: "Tables of range and studentized range", Ann. Math. Statist. 31, 1122 (1960);
+#: scipy.stats.studentized_range.ppf(0.95, k, df) for large df)
+RANGE_95 = {2: 2.7718, 4: 3.6332}
+
+
+def parts_limit(width: float, parts: int, level: float = 0.9, from_interval: bool = True
+                ) -> float:
+    """The largest spread (max - min, relative to E(RT)) of the E(RT) of a window's
+    ``parts`` equal parts that a stationary flow gives in 95 % of windows.
+
+    Each part holds 1/k of the window's data, so its E(RT) scatters sqrt(k) times as much
+    as the whole window's, whose standard error is the interval's relative width over
+    2 z (z the normal quantile at (1 + level) / 2): the limit is
+    q95(k) sqrt(k) width / (2 z), with q95(k) the 95th percentile of the range of k
+    normal values (:data:`RANGE_95`). For a 90 % interval that is 1.19 times its width
+    for halves and 2.21 times for quarters, and at least :data:`MIN_PARTS_LIMIT`. Without
+    an interval ``width`` is a tolerance, taken as it is for halves and sqrt(2) times for
+    quarters.
+
+    Parameters
+    ----------
+    width : float
+        The model's E(RT) interval's width over E(RT) (-), or the tolerance.
+    parts : {2, 4}
+        Halves or quarters.
+    level : float, optional
+        The interval's level.
+    from_interval : bool, optional
+        Whether ``width`` is an interval's (else a tolerance).
+
+    Returns
+    -------
+    float
+    """
+    if not from_interval:
+        return width * (math.sqrt(2.0) if parts == 4 else 1.0)
+    from scipy.stats import norm
+
+    z = float(norm.ppf(0.5 * (1.0 + level)))
+    return max(RANGE_95[parts] * math.sqrt(parts) * width / (2.0 * z), MIN_PARTS_LIMIT)
 
 
 def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,

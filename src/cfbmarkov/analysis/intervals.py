@@ -230,7 +230,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     the Bootstrap, Chapman & Hall (1993), Ch. 8 and 13.
     """
     if not 0.0 < float(level) < 1.0:
-        raise InputError(f"interval level {level!r} must lie between 0 and 1")
+        raise InputError(f"interval level {level!r} must lie strictly between 0 and 1")
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")
@@ -420,7 +420,7 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     from cfbmarkov.markov.uncertainty import ModelUncertainty
 
     if not 0.0 < float(level) < 1.0:
-        raise InputError(f"interval level {level!r} must lie between 0 and 1")
+        raise InputError(f"interval level {level!r} must lie strictly between 0 and 1")
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")

@@ -572,7 +572,8 @@ def add_stationarity(sub) -> None:
     s.add_argument("--tolerance", type=positive_float, default=0.1,
                    help="with --sample-length: relative tolerance (default 0.1)")
     s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
-                                        "cells-velocity-fine", "cells-previous"],
+                                        "cells-velocity-fine", "cells-previous",
+                                        "cells-regime", "cells-direction-regime"],
                    default="cells", help="with --sample-length: the models' states (default cells)")
     s.add_argument("--cells", type=parse_cells, default=(6, 38),
                    help="with --sample-length: COLUMNSxROWS (default 6x38)")

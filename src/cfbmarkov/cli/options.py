@@ -153,7 +153,7 @@ def level(text: str) -> float:
     """A coverage level strictly between 0 and 1 (NaN refused)."""
     value = number(text)
     if not 0.0 < value < 1.0:
-        raise argparse.ArgumentTypeError(f"'{text}' must lie between 0 and 1")
+        raise argparse.ArgumentTypeError(f"'{text}' must lie strictly between 0 and 1 (e.g. 0.9)")
     return value
 
 

@@ -50,6 +50,11 @@ class Adequacy:
         The fitting window's own E(RT) from its net solids flux (particle-time over net
         passes, several runs' summed; s): NaN for an open riser, a file with absent
         particles, or a verdict stored without it.
+    part_limit : float
+        The spread (-) beyond which one run's parts (as judged: halves or quarters) disagree,
+        the limit the warning compares with
+        (:func:`cfbmarkov.analysis.adequacy.parts_limit`); NaN for a pooled fit or a
+        verdict stored without it.
     """
 
     warnings: tuple[str, ...] = ()
@@ -61,6 +66,7 @@ class Adequacy:
     tail_share: float = math.nan
     runs: tuple[tuple[str, float], ...] = ()
     window_rt_mean: float = math.nan
+    part_limit: float = math.nan
 
     @property
     def adequate(self) -> bool:
@@ -81,9 +87,11 @@ class Adequacy:
             return None
         said = []
         if math.isfinite(self.spread) and math.isfinite(self.limit) and not self.runs:
-            # one run: quarters are judged against the limit times sqrt(2), as they warn
+            # one run: the limit its parts were judged against (a verdict stored without
+            # it: quarters against the limit times sqrt(2), as they were judged then)
             quarters = len(self.parts) == 4
-            limit = self.limit * (math.sqrt(2.0) if quarters else 1.0)
+            limit = (self.part_limit if math.isfinite(self.part_limit)
+                     else self.limit * (math.sqrt(2.0) if quarters else 1.0))
             said.append(f"the window's {'quarters' if quarters else 'halves'} agree (E(RT) "
                         f"spread {100 * self.spread:.2g} %, limit {100 * limit:.2g} %)")
         if math.isfinite(self.window_rt_mean) and math.isfinite(self.rt_mean):
@@ -112,7 +120,8 @@ class Adequacy:
                 "limit": number(self.limit), "window_length": number(self.window_length),
                 "tail_share": number(self.tail_share),
                 "runs": [{"run": r, "rt_mean": number(m)} for r, m in self.runs],
-                "window_rt_mean": number(self.window_rt_mean)}
+                "window_rt_mean": number(self.window_rt_mean),
+                "part_limit": number(self.part_limit)}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Adequacy":
@@ -143,7 +152,7 @@ class Adequacy:
                        number(data.get("tail_share")),
                        tuple((str(r["run"]), number(r.get("rt_mean")))
                              for r in data.get("runs", [])),
-                       number(data.get("window_rt_mean")))
+                       number(data.get("window_rt_mean")), number(data.get("part_limit")))
         except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
             raise InputError(f"adequacy attribute is not a verdict ({exc})") from None
 

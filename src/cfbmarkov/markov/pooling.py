@@ -126,7 +126,8 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
     InputError
         Where two windows have the same content
         (:func:`~cfbmarkov.trajectory_identity.window_identity`: a run given twice, or a
-        copy of it), or two overlapping windows are of one file.
+        copy of it), or two windows are of one file (overlapping: counted twice; apart:
+        not independent runs).
     """
     seen: dict[str, str] = {}
     for k, (run, window) in enumerate(zip(runs, windows)):
@@ -138,11 +139,18 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
                              "interval falsely (pool independent runs of one case)")
         seen[identity] = where
         for other, w in zip(runs[:k], windows[:k]):
-            if (os.path.realpath(other.path) == os.path.realpath(run.path)
-                    and w[0] < window[1] and window[0] < w[1]):
+            if os.path.realpath(other.path) != os.path.realpath(run.path):
+                continue
+            if w[0] < window[1] and window[0] < w[1]:
                 raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
                                  f"{window[1]:g} s of {run.path} overlap: their common frames "
                                  "would be counted twice (give windows that do not overlap)")
+            raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
+                             f"{window[1]:g} s are both of {run.path}: pooled as runs they "
+                             "would be taken as independent flow and narrow the interval by "
+                             "sqrt(2), while windows of one run share its slow changes; fit "
+                             f"one window of it ({min(w[0], window[0]):g}:"
+                             f"{max(w[1], window[1]):g}), or pool independent runs of the case")
 
 
 def run_windows(windows: Sequence[tuple[float, float]], n_runs: int

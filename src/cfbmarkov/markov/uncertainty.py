@@ -75,7 +75,7 @@ class ModelUncertainty:
 
     def __post_init__(self):
         if not 0.0 < float(self.level) < 1.0:
-            raise InputError(f"interval level {self.level!r} must lie between 0 and 1")
+            raise InputError(f"interval level {self.level!r} must lie strictly between 0 and 1")
         for name in ("rt_mean_interval", "rt_sd_interval"):
             lo, hi = (float(v) for v in getattr(self, name))
             if not (np.isfinite(lo) and np.isfinite(hi) and lo <= hi):
