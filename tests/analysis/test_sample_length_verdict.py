@@ -42,7 +42,11 @@ def test_a_drifting_figure_calls_for_a_longer_run():
     assert r.steady_misses() == {}
     line = verdict_text(r, "cells")
     assert "the longest window's E(RT) +15 % off" in line
-    assert "a longer run, or pool runs" in line and "memory" not in line
+    assert "a longer run, or pool runs" in line
+    assert line.endswith("; if it stays off as the windows grow, a state space with memory "
+                         "(fit --states auto chooses one, e.g. --states cells-direction, "
+                         "cells-previous or, for a flow that alternates between regimes, "
+                         "cells-regime; try it here with --states)")
     both = verdict_text(_result([1.6, 1.4, 1.3, 1.2, 1.15],
                                           [0.44, 0.45, 0.43, 0.44, 0.44]), "cells")
     assert "for E(RT) a longer run" in both and "for SD(RT) a state space with memory" in both

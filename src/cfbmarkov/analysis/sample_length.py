@@ -246,8 +246,9 @@ def verdict_text(result: SampleLength, states: str) -> str:
                 if f not in steady and not np.isfinite(result.settled_from(f))]
     said = " but ".join(p for p in (", ".join(settles), " and ".join(stays)) if p)
     said = f": {said}" if said else ""
-    memory = ("with memory (fit --states auto chooses one, e.g. --states cells-direction or "
-              "cells-previous; try it here with --states)"
+    memory = ("with memory (fit --states auto chooses one, e.g. --states cells-direction, "
+              "cells-previous or, for a flow that alternates between regimes, cells-regime; "
+              "try it here with --states)"
               if states == "cells" else "with more memory (fit --states auto chooses one)")
     if steady and not drifting:
         return (f"not reached within {longest:g} s{said}: a longer run does not cure that; a "
@@ -260,6 +261,8 @@ def verdict_text(result: SampleLength, states: str) -> str:
     if steady:
         cure = (f"for {' and '.join(drifting)} {cure}; for {' and '.join(steady)} a state "
                 f"space {memory}")
+    else:       # too few lengths may hide a miss that no length cures
+        cure += f"; if it stays off as the windows grow, a state space {memory}"
     return f"not reached within {longest:g} s{said}{off}: {cure}"
 
 
