@@ -104,6 +104,84 @@ class SourceChanged(InputError):
     """The file a model names as its source no longer holds the data it was fitted on."""
 
 
+def resolve_source(model, candidates=()):
+    """The model with its fitting file(s) found: its ``source`` is a path as given at fit
+    time, relative to the folder it was fitted in, which need not be the current one.
+
+    Tried in turn, each kept only where its fitting window's content identity
+    (:func:`cfbmarkov.trajectory_identity.window_identity`) is the one recorded at fit
+    time: the path as recorded (from the current folder), the same path beside the model
+    file (a model loaded from a file, saved where it was fitted), and ``candidates`` (the
+    files a verb was given, e.g. `compare`'s reference when it is the fitting file).
+
+    Parameters
+    ----------
+    model : MarkovModel
+    candidates : iterable of str or os.PathLike, optional
+        Further files that may be the fitting file.
+
+    Returns
+    -------
+    MarkovModel
+        ``model``, or a copy whose ``source`` names the files found. A model without a
+        recorded identity is returned as it is (its source taken on trust).
+
+    Raises
+    ------
+    SourceChanged
+        Where a file of that name exists but none tried holds the fitting window's data.
+    InputError
+        Where no file tried exists.
+    """
+    import os
+    from pathlib import Path
+
+    from cfbmarkov.trajectories import Trajectories
+    from cfbmarkov.trajectory_identity import window_identity
+
+    if not model.source_identity:
+        return model
+    pooled = not isinstance(model.source, str)
+    sources = [str(p) for p in model.source] if pooled else [model.source]
+    identities = model.source_identity.split(";")
+    windows = ([tuple(w) for w in model.run_windows] if pooled and model.run_windows
+               else [model.window] * len(sources))
+    if len(identities) != len(sources) or len(windows) != len(sources):
+        return model
+    home = model._cache.get("file")
+    found = []
+    for source, identity, window in zip(sources, identities, windows):
+        tried = [Path(source)]
+        if home is not None and not Path(source).is_absolute():
+            tried.append(Path(home).parent / source)
+        tried += [Path(c) for c in candidates]
+        existing, match = [], None
+        for path in dict.fromkeys(os.path.abspath(p) for p in tried):
+            if not Path(path).is_file():
+                continue
+            existing.append(path)
+            try:
+                with Trajectories(path) as traj:
+                    if window_identity(traj, window) == identity:
+                        match = path
+                        break
+            except InputError:
+                continue
+        if match is None:
+            where = (f"the files of that name tried ({', '.join(existing)}) do not hold its "
+                     "fitting window's data (another file of that name, or the file replaced "
+                     "since the fit)" if existing else "no file of that name was found from "
+                     "this folder or beside the model file")
+            error = SourceChanged if existing else InputError
+            raise error(f"{source} (the model's fitting file, named from the folder it was "
+                        f"fitted in): {where}; run from that folder, or fit again (--resamples "
+                        "0 leaves the intervals out)")
+        found.append(source if os.path.abspath(source) == match else match)
+    if found == sources:
+        return model
+    return model._derived(source=found if pooled else found[0])
+
+
 def check_source_identity(model) -> None:
     """Refuse a model whose source file's fitting window is not the one it was fitted on.
 
@@ -171,7 +249,8 @@ def _replicate_noise(model, states, left_group, n_steps: int, edges: np.ndarray,
 def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_length: float, *,
                          level: float = 0.9, blocks: int = 10, resamples: int = 100,
                          seed: int = 0, direction: str | None = None, mixing=None,
-                         tracers=None, flow: bool = True) -> PredictionIntervals:
+                         tracers=None, flow: bool = True,
+                         candidates=()) -> PredictionIntervals:
     """Intervals of a prediction's E(RT), SD(RT), RTD and mixing curve (module docstring).
 
     Parameters
@@ -207,6 +286,9 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         intervals of E(RT) and SD(RT): intervals for the value the reference shows in the
         analysis window. False: intervals of the model's own value. (The RTD's and the
         mixing curve's bands are the model's own either way.)
+    candidates : iterable of str or os.PathLike, optional
+        Files that may be the model's fitting file where its recorded path does not lead
+        to it (:func:`resolve_source`; e.g. `compare`'s reference).
 
     Returns
     -------
@@ -234,7 +316,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")
-    check_source_identity(model)
+    model = resolve_source(model, candidates)
     samples = np.asarray(samples, dtype=np.float64)
     if samples.size < 2:
         raise InputError("intervals need at least 2 residence-time samples in the window")
@@ -424,6 +506,7 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")
+    model = resolve_source(model)
     runs = fitting_runs(model)
     direction = model.flow_direction if direction is None else direction
     exact = model.rtd(None, direction)
@@ -458,5 +541,5 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
 
 
 __all__ = ["PredictionIntervals", "SourceChanged", "block_bootstrap_models",
-           "check_source_identity", "flow_variability",
+           "check_source_identity", "flow_variability", "resolve_source",
            "model_intervals", "model_rtd_edges", "prediction_intervals"]

@@ -291,7 +291,12 @@ def read_model(path: str | os.PathLike, model_class: Callable[..., "MarkovModel"
         If the file is missing, empty, not HDF5, not a model file, or damaged.
     """
     with open_h5(path) as f:
-        return read_model_group(f, model_class, str(path))
+        model = read_model_group(f, model_class, str(path))
+    # where it was read from: a fitting file named relative to the folder the model was
+    # fitted (and usually saved) in is looked for beside it too
+    # (cfbmarkov.analysis.intervals.resolve_source)
+    model._cache["file"] = os.path.abspath(path)
+    return model
 
 
 def _version() -> str:

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 from pathlib import Path
 from typing import Any
 
@@ -90,10 +91,13 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
         tracers = _tracers(model, comparison, warnings)
         mixing = None if tracers is None else (comparison.model.mixing_times,
                                                comparison.model.mixing_fraction)
+        # the fitting file: as recorded, beside the prediction, or the reference itself
+        model._cache.setdefault("file", os.path.abspath(pred.path))
         return prediction_intervals(model, comparison.model.residence.samples, comparison.edges,
                                     stop - start, level=level, resamples=resamples,
                                     direction=comparison.direction, mixing=mixing,
-                                    tracers=tracers)
+                                    tracers=tracers,
+                                    candidates=[comparison.reference.traj.path])
     except SourceChanged:
         raise
     except InputError as exc:
