@@ -158,6 +158,13 @@ def test_interval_verdict_says_outside_means_a_miss():
                           "pd_rt_mean": -0.5}, 0.2021)
     assert "10-15 s" in line and "MD 0.0122 against the model's 0.2021" in line
     assert line.endswith("the baseline is closer")
+    # the report's rule: a gap within the reference halves' MD cannot be told apart
+    close = baseline_line({"windows": [[10, 15], [15, 20]], "md_rtd": 0.01225,
+                           "pd_rt_mean": -0.5}, 0.01343, 0.02154)
+    assert close.endswith("not told apart (the gap is within the reference's own "
+                          "variability, its halves' MD 0.02154)")
+    assert baseline_line({"windows": [[10, 15], [15, 20]], "md_rtd": 0.1,
+                          "pd_rt_mean": -0.5}, 0.1005, 0.0).endswith("a tie (within 1 %)")
 
 
 # -- the two demos never share a folder ----------------------------------------------------

@@ -77,7 +77,8 @@ def cmd_compare(args) -> int:
              f"; residences counted: reference {counts[0]}, model {counts[1]}"))
     baseline = summary.get("baseline")
     if baseline and baseline.get("md_rtd") is not None:
-        print("  " + baseline_line(baseline, summary["md_rtd"]))
+        halves = (summary.get("natural_variability") or {}).get("md_rtd")
+        print("  " + baseline_line(baseline, summary["md_rtd"], halves))
     model = summary["model"]
     if "rt_mean_interval" in model:
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
@@ -167,8 +168,11 @@ def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -
     return text + f": the model misses the reference's {missed} beyond its uncertainty"
 
 
-def baseline_line(baseline: dict, md_model: float) -> str:
-    """One line setting the persistence baseline's MD beside the model's.
+def baseline_line(baseline: dict, md_model: float, md_halves: float | None = None) -> str:
+    """One line setting the persistence baseline's MD beside the model's, judged by the
+    report's rule (:func:`cfbmarkov.analysis.baseline.judge_baseline`: a gap within 1 % of
+    the baseline's MD is a tie, one within the reference's own variability, the MD of its
+    window's halves, cannot be told apart).
 
     Parameters
     ----------
@@ -177,17 +181,24 @@ def baseline_line(baseline: dict, md_model: float) -> str:
         baseline's prediction, then the judged one; ``md_rtd``; ``pd_rt_mean``).
     md_model : float
         The model's MD of the RTD.
+    md_halves : float, optional
+        The MD of the reference window's halves (``natural_variability.md_rtd``).
 
     Returns
     -------
     str
     """
+    from cfbmarkov.analysis.baseline import judge_baseline
     from cfbmarkov.observed.metrics import percentage_text as pd_text
 
     (a, b), _ = baseline["windows"]
     md = baseline["md_rtd"]
-    verdict = ("the model is closer" if md_model < md else
-               "the baseline is closer" if md < md_model else "a tie")
+    judged = judge_baseline(md_model, md, md_halves)
+    verdict = {"beats": "the model is closer", "loses": "the baseline is closer",
+               "tie": "a tie (within 1 %)"}.get(judged.outcome)
+    if verdict is None:
+        verdict = (f"not told apart (the gap is within the reference's own variability, "
+                   f"its halves' MD {judged.md_halves:.4g})")
     return (f"persistence baseline (the observed RTD of {a:g}-{b:g} s taken as the "
             f"prediction): MD {md:.4g} against the model's {md_model:.4g}, PD E(RT) "
             f"{pd_text(baseline.get('pd_rt_mean'))} %: {verdict}")
