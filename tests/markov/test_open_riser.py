@@ -168,6 +168,7 @@ def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys):
     summary = json.loads((tmp_path / "cmp" / "summary.json").read_text())
     assert summary["reference"]["rt_count"] > 50 and summary["model"]["rt_count"] > 50
     assert abs(summary["model"]["rt_mean"] / summary["reference"]["rt_mean"] - 1) < 0.15
+    assert summary["units"]["mixing_rms"] == "fraction of the tracers still present"
     assert main(["maps", model, "--times", "0.1,0.2", "-o", str(tmp_path / "maps.png")]) == 0
     capsys.readouterr()
     assert main(["info", pred]) == 0

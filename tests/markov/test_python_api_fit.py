@@ -151,3 +151,20 @@ def test_result_objects_echo_in_a_line_or_two(fitted):
     answer = exact_kinetics(fitted, Kinetics((Property("X", FirstOrder(), {"rate": 0.5}),)))
     assert "bed_mean_by_cell=<array 64 float64>" in repr(answer["X"])
     assert len(repr(answer["X"])) < 400
+
+
+def test_a_prediction_keeps_the_source_frame_of_its_initial_file(markov_run, tmp_path):
+    """A run imported with z vertical and its origin moved: the prediction from it records
+    the same axis letters and origin (info and export-vtk read them), not x, y at 0."""
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    with Trajectories(markov_run) as run:
+        times, positions, laps = run.times, run.positions(), run.laps()
+    moved = write_trajectories(tmp_path / "z.h5", times, positions, laps=laps, width=0.09,
+                               height=0.95, axes={"across": "x", "vertical": "z"},
+                               region_origin=[-0.045, 0.1])
+    model = PaperEstimator(GRID, lag=0.1).fit(discretize(moved, GRID, 0.1, (2.0, 6.0)))
+    pred = model.predict(moved, start=6.0, duration=0.5, output=tmp_path / "p.h5")
+    with Trajectories(pred) as p, Trajectories(moved) as r:
+        assert p.axes == r.axes and p.axes["vertical"] == "z"
+        np.testing.assert_array_equal(p.region_origin, r.region_origin)

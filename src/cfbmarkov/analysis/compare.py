@@ -258,7 +258,10 @@ class RunComparison:
             "model_on_fitting_window": (None if self.on_fitting_window is None
                                         else self.on_fitting_window.summary()),
             "long_run": None if self.long_run is None else self.long_run.summary(),
-            "units": {"time": "s", "pd": "%", "mixing_rms": "fraction of all particles"},
+            "units": {"time": "s", "pd": "%",
+                      "mixing_rms": ("fraction of the tracers still present"
+                                     if self.reference.traj.boundary.is_open
+                                     else "fraction of all particles")},
         }
 
 

@@ -303,7 +303,9 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
     some_absent = bool((states < 0).any())
     with TrajectoryWriter(output, ids, width=traj.width, height=traj.height,
                           depth=traj.depth, source="markov-prediction", parameters=parameters,
-                          frame_interval=model.lag, boundary=model.boundary.value) as writer:
+                          frame_interval=model.lag, boundary=model.boundary.value,
+                          axes=dict(traj.axes), region_origin=traj.region_origin
+                          ) as writer:        # the source's frame, as the initial file's
         writer.attach("model", *model_datasets_and_attrs(model))
         bar = (progress if isinstance(progress, PredictionProgress)
                else PredictionProgress(progress, start, n_steps, model.lag, ids.size))

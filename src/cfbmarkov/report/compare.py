@@ -183,6 +183,7 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
                    band=None if intervals is None or intervals.mixing is None
                    else (intervals.mixing_times, intervals.mixing, intervals.level),
                    well_mixed=ref.left_group_fraction ** 2,
+                   open_riser=ref.traj.boundary.is_open,
                    title=f"Radial mixing from {start:g} s (RMS difference "
                          f"{comparison.mixing_rms:.3g})")
     written.append("mixing.png")

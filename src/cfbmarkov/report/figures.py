@@ -521,11 +521,13 @@ def plot_snapshots(positions_ref, positions_model, left_group_ref, left_group_mo
 # -- mixing curves (Fig. 11) -------------------------------------------------------------------
 def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
                 labels: tuple[str, str] = ("reference", "model"), title: str | None = None,
-                well_mixed: float | None = None, band=None) -> Path:
+                well_mixed: float | None = None, band=None, open_riser: bool = False
+                ) -> Path:
     """Mixing curves of both sides against time, written as a PNG.
 
     The fraction of all particles that are in the left tracer group (drawn purple) and in
-    the left half (x < W/2).
+    the left half (x < W/2); of an open riser, the fraction of the tracers still present
+    (``docs/definitions.md``, Mixing in an open riser).
 
     Parameters
     ----------
@@ -544,6 +546,8 @@ def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
     band : (array_like of shape (T_b,), array_like of shape (2, T_b), float), optional
         The model's interval: frame times (s), lower and upper bounds (-) and its level,
         drawn as a band (``docs/definitions.md``, Intervals).
+    open_riser : bool, optional
+        The curves are an open riser's (their denominator the tracers still present).
 
     Returns
     -------
@@ -575,7 +579,8 @@ def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
     if np.isfinite(lo) and hi > lo:
         ax.set_xlim(lo, hi)
     ax.set_xlabel("time (s)")
-    ax.set_ylabel("purple particles in left half / all particles")
+    ax.set_ylabel("purple tracers in left half / tracers still present" if open_riser
+                  else "purple particles in left half / all particles")
     ax.grid(alpha=0.3)
     ax.legend(loc="upper right", fontsize=9, frameon=False)
     ax.set_title(title or "Radial mixing: purple = left half (x < W/2) at the window start",
