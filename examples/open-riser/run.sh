@@ -5,6 +5,11 @@
 set -euo pipefail
 here="$(cd "$(dirname "$0")" && pwd)"
 python="${PYTHON:-python}"
+if [ -z "${LMP:-}" ] && ! "$python" -c 'import cfbmarkov.simulate.dem.lammps' 2>/dev/null; then
+    echo "$python cannot import cfbmarkov: set PYTHON to the interpreter it is installed in" \
+         "(e.g. PYTHON=.venv/bin/python), or LMP to the LAMMPS executable" >&2
+    exit 1
+fi
 lmp="${LMP:-$("$python" -c 'from cfbmarkov.simulate.dem.lammps import find_lammps; print(find_lammps() or "")')}"
 if [ -z "$lmp" ]; then
     echo "no LAMMPS executable found (set LMP or CFBMARKOV_LAMMPS)" >&2

@@ -380,7 +380,10 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
             with contextlib.suppress(Exception):
                 client.close()
     if failures:
-        raise InputError(f"{len(failures)} case(s) failed; rerun to resume: " + "; ".join(failures))
+        # a rerun resumes a case stopped on its way, not one refused for its input or folder
+        resumable = "; rerun to resume" if not all(
+            "another configuration" in f or "delete that folder" in f for f in failures) else ""
+        raise InputError(f"{len(failures)} case(s) failed{resumable}: " + "; ".join(failures))
     return html if report else out
 
 

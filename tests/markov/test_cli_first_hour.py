@@ -236,3 +236,15 @@ def test_auto_choice_says_what_its_percentages_are_against(markov_run):
     pd = next(c["pd_rt_mean"] for c in model.selection["candidates"]
               if c["states"] == chosen["states"] and c["lag"] == chosen["lag"])
     assert pd == pytest.approx(100 * (seen / observed - 1), abs=0.6)   # 3-digit rounding
+
+
+def test_fit_without_a_window_says_10_15_is_the_default(markov_run, tmp_path, capsys):
+    """A run shorter than 15 s fitted without --window: the refusal says that 10:15 s is
+    the default, not a window the user gave."""
+    from cfbmarkov.cli import main
+
+    assert main(["fit", str(markov_run), "--cells", "4x16", "--lag", "0.1", "-o",
+                 str(tmp_path / "m.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "window 10:15 s lies outside" in err and "no --window was given: 10:15 s is its " \
+        "default" in err

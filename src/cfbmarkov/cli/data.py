@@ -68,10 +68,14 @@ def cmd_export_vtk(args) -> int:
     done = export_vtk_summary(args.run, args.output, start=args.start, stop=args.stop,
                               every=args.every, fields=not args.no_fields,
                               progress=not args.quiet)
-    gas = f", {done.n_gas_files} gas field frames" if done.n_gas_files else ""
+    def frames(n: int, what: str) -> str:
+        return f"{n} {what} frame{'' if n == 1 else 's'}"
+
+    gas = f", {frames(done.n_gas_files, 'gas field')}" if done.n_gas_files else ""
     missing = f" ({done.n_gas_missing} frames without gas fields)" if done.n_gas_missing else ""
-    print(f"{done.n_particle_files} particle frames{gas}{missing}: open "
-          f"{done.output / 'particles.pvd'} in ParaView")
+    also = f" (and {done.output / 'gas.pvd'})" if done.n_gas_files else ""
+    print(f"{frames(done.n_particle_files, 'particle')}{gas}{missing}: open "
+          f"{done.output / 'particles.pvd'}{also} in ParaView")
     return 0
 
 

@@ -40,11 +40,29 @@ def cmd_fit(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
+    _check_resamples(args.resamples)
+    if args.window is None:       # the paper's window; a refusal of it says it is the default
+        args.window = [DEFAULT_WINDOW]
+        try:
+            return _fit(args)
+        except InputError as exc:
+            if "window 10:15 s" not in str(exc):
+                raise
+            raise InputError(f"{exc} (no --window was given: 10:15 s is its default, the "
+                             "paper's fitting window)") from None
+    return _fit(args)
+
+
+#: ``fit``'s window where none is given: the paper's fitting window (s)
+DEFAULT_WINDOW = (10.0, 15.0)
+
+
+def _fit(args) -> int:
+    """``fit`` with its window given."""
     from cfbmarkov.markov import fit_model, state_space_from_name
     from cfbmarkov.markov.select import select_model
     from cfbmarkov.trajectories import Trajectories
 
-    _check_resamples(args.resamples)
     columns, rows = args.cells[0], args.cells[-1]
     depth_columns = args.cells[1] if len(args.cells) == 3 else None
     if len(args.run) > 1:       # several runs of one case, pooled
@@ -335,7 +353,7 @@ def add_fit(sub) -> None:
                    help="COLUMNSxROWS, or COLUMNSxDEPTHxROWS for 3D data (depth columns; "
                         "COLUMNSxROWS projects 3D data on across x vertical) (default 6x38)")
     s.add_argument("--lag", type=positive_float, default=0.025, help="lag, s (default 0.025)")
-    s.add_argument("--window", type=parse_windows, default=[(10.0, 15.0)],
+    s.add_argument("--window", type=parse_windows, default=None,
                    help="fitting window START:STOP, s (default 10:15); with several runs one "
                         "window for all or one per run, comma-separated (10:15,12:17)")
     s.add_argument("--estimator", choices=["paper", "mle"], default=None,

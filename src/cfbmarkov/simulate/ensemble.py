@@ -185,7 +185,9 @@ def _simulate_gpu(case, output, paths, seeds, until, checkpoint_every, resume, p
         if not checkpoint.exists():
             if all(_complete(p, member_case(case, s), end) for p, s in zip(paths, seeds)):
                 return paths
-            raise InputError(f"nothing to resume: {checkpoint} does not exist")
+            raise InputError(f"nothing to resume: {checkpoint} does not exist (the run "
+                             "stopped before its first checkpoint); start it again without "
+                             "--resume")
         _advise_time_step(case, "ensemble")
         riser, n_segments, frames, wall_time, history = _read(checkpoint, case, n, threads)
         if riser.time > end + 0.5 * cfd_dt:

@@ -139,7 +139,9 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         _remove_parts(parts)     # segments of a run whose checkpoint is gone: useless
     if resume:
         if not checkpoint.exists():
-            raise InputError(f"nothing to resume: {checkpoint} does not exist")
+            raise InputError(f"nothing to resume: {checkpoint} does not exist (the run "
+                             "stopped before its first checkpoint); start it again without "
+                             "--resume")
         check_resources(case, output, end, fields, resuming=True)
         _advise_time_step(case, label)
         riser, n_segments, frames, wall_time, history, run_id = read_checkpoint(checkpoint,
