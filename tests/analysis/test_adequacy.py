@@ -84,11 +84,11 @@ def test_a_window_of_many_switches_and_a_stationary_chain_do_not_warn(runs):
 
 def test_the_parts_limit_from_the_interval_is_the_range_of_k_parts():
     """Halves (quarters) of a window hold 1/2 (1/4) of its data: the limit is the 95 %
-    range of 2 (4) normal values with sqrt(2) (2) times the window's standard error, at
-    least 10 %; the same whatever the interval's level, a tolerance as before."""
+    range of 2 (4) normal values with sqrt(2) (2) times the window's standard error, kept
+    within 10-50 %; the same whatever the interval's level, a tolerance as before."""
     from scipy.stats import norm, studentized_range
 
-    from cfbmarkov.analysis.adequacy import MIN_PARTS_LIMIT, parts_limit
+    from cfbmarkov.analysis.adequacy import MAX_PARTS_LIMIT, MIN_PARTS_LIMIT, parts_limit
 
     width = 0.2                                     # a 90 % interval 20 % of E(RT) wide
     sigma = width / (2 * norm.ppf(0.95))
@@ -98,6 +98,7 @@ def test_the_parts_limit_from_the_interval_is_the_range_of_k_parts():
         wider = 2 * norm.ppf(0.975) * sigma            # the same error at a 95 % level
         assert parts_limit(wider, k, level=0.95) == pytest.approx(parts_limit(width, k))
     assert parts_limit(0.01, 4) == MIN_PARTS_LIMIT
+    assert parts_limit(0.6, 2) == MAX_PARTS_LIMIT         # halves a factor 1.5 apart warn
     assert parts_limit(0.3, 4, from_interval=False) == pytest.approx(0.3 * np.sqrt(2))
 
 
