@@ -40,3 +40,13 @@ def test_errors_name_the_working_value(run, tmp_path, capsys, monkeypatch, args,
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert expected.format(run=run) in err, err
+
+
+def test_a_mistyped_option_names_the_verb_and_the_option_it_may_mean(capsys):
+    assert main(["fit", "run.h5", "--cels", "6x38", "-o", "m.h5"]) == 2
+    err = capsys.readouterr().err
+    assert err == ("cfbmarkov fit: error: unrecognized arguments: --cels 6x38 (--cels: did "
+                   "you mean --cells?); see cfbmarkov fit --help\n")
+    assert main(["rtd", "m.h5", "surplus"]) == 2
+    assert capsys.readouterr().err.startswith("cfbmarkov rtd: error: unrecognized arguments: "
+                                              "surplus; see")

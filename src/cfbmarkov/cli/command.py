@@ -57,6 +57,25 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def _refuse_unknown(parser: argparse.ArgumentParser, verb: str, extra: list[str]) -> None:
+    """Exit 2 with one line naming the verb, its unknown arguments, the options they may
+    have meant (by spelling) and ``--help``."""
+    import difflib
+
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    options = [o for action in sub.choices[verb]._actions for o in action.option_strings]
+    hints = []
+    for word in extra:
+        if word.startswith("-"):
+            close = difflib.get_close_matches(word.split("=")[0], options, n=1, cutoff=0.6)
+            if close:
+                hints.append(f"{word.split('=')[0]}: did you mean {close[0]}?")
+    said = f" ({'; '.join(hints)})" if hints else ""
+    print(f"cfbmarkov {verb}: error: unrecognized arguments: {' '.join(extra)}{said}; see "
+          f"cfbmarkov {verb} --help", file=sys.stderr)
+    raise SystemExit(2)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``cfbmarkov`` with ``argv`` (default: the process's arguments).
 
@@ -76,7 +95,9 @@ def main(argv: list[str] | None = None) -> int:
         parser = build_parser()
         try:
             argv = list(sys.argv[1:] if argv is None else argv)
-            args = parser.parse_args(join_dash_values(parser, argv))
+            args, extra = parser.parse_known_args(join_dash_values(parser, argv))
+            if extra:
+                _refuse_unknown(parser, args.command, extra)
             if args.command == "demo":     # each kind of demo its own default folder
                 args.output = run.demo_output(args.output, args.synthetic)
         except SystemExit as exc:      # usage errors (2), --help and --version (0)
