@@ -59,7 +59,7 @@ def test_another_file_of_that_name_is_never_taken(fitted, tmp_path, monkeypatch)
     moved.mkdir()
     shutil.copy(fitted / "model.h5", moved / "model.h5")
     alone = MarkovModel.load(moved / "model.h5")
-    with pytest.raises(SourceChanged, match="do not hold its fitting window's data"):
+    with pytest.raises(SourceChanged, match="are not the data the model was fitted on"):
         resolve_source(alone)
     assert main(["rtd", str(moved / "model.h5"), "--resamples", "20"]) == 2
     # the right file given as a candidate (compare's reference) is taken

@@ -127,8 +127,10 @@ def _with_window_fields(model, runs, windows):
     if len(runs) == 1:
         from cfbmarkov.analysis.cell_fields import fitting_cell_fields
 
-        with opened(runs[0]) as run:
-            model = model.with_source_identity(window_identity(run, windows[0]))
+        with opened(runs[0]) as run:    # the window the model holds (a choice with memory
+            # at the file's start begins it after the first frames, its history)
+            window = model.window if model.window is not None else windows[0]
+            model = model.with_source_identity(window_identity(run, window))
             return model.with_cell_fields(fitting_cell_fields(run, model))
     from cfbmarkov.analysis.cell_fields import pooled_cell_fields
 

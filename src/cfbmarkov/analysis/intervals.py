@@ -168,10 +168,11 @@ def resolve_source(model, candidates=()):
             except InputError:
                 continue
         if match is None:
-            where = (f"the files of that name tried ({', '.join(existing)}) do not hold its "
-                     "fitting window's data (another file of that name, or the file replaced "
-                     "since the fit)" if existing else "no file of that name was found from "
-                     "this folder or beside the model file")
+            where = (f"the files of that name tried ({', '.join(existing)}) are not the data "
+                     "the model was fitted on (its fitting window's content differs: another "
+                     "file of that name, or the file replaced since the fit)" if existing
+                     else "no file of that name was found from this folder or beside the "
+                     "model file")
             error = SourceChanged if existing else InputError
             raise error(f"{source} (the model's fitting file, named from the folder it was "
                         f"fitted in): {where}; run from that folder, or fit again (--resamples "
