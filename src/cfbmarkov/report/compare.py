@@ -298,9 +298,10 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
             summary["model"]["model_rt_sd_interval"] = list(intervals.model_rt_sd)
             if intervals.flow is None:
                 warnings.append("the intervals leave out the flow's variability between "
-                                "windows: the fitting window is too short to show it (not "
-                                "two blocks of three mean residence times each, each with "
-                                "two residences); they are the model's own")
+                                "windows: the fitting window is too short to show it (it "
+                                "must hold two blocks, each three mean residence times long "
+                                "and holding two residences or more); they are the model's "
+                                "own")
             summary["intervals"] = {
                 "resamples": intervals.resamples, "blocks": intervals.blocks,
                 "method": ("block bootstrap of the fitting window, Monte Carlo noise"

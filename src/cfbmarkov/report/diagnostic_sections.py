@@ -136,7 +136,7 @@ def diagnostics_blocks(done, figures_dir: Path, written: list[str]) -> list:
                                        f"Probability to be in each third of the riser k lags "
                                        f"after being in it: data of the fitting window "
                                        f"(points) against P^k of the {name_m} model (lines); "
-                                       f"largest difference {b['max_abs_error']:.3f}."))
+                                       f"largest difference {b['max_abs_error']:.2g}."))
     if ck_rows:
         blocks.append(Heading(3, "Chapman-Kolmogorov errors"))
         blocks.append(Table(["case", "model", "states", "lag (s)",
