@@ -271,3 +271,13 @@ def test_a_memory_model_says_which_particles_it_cannot_start(tmp_path):
     with warnings.catch_warnings():
         warnings.simplefilter("error", CfbmarkovWarning)
         cells.predict(run, 2.5, 0.2, seed=1)
+    # compare takes the particles the prediction started as the tracers on both sides
+    from cfbmarkov.report.compare import compare
+
+    with pytest.warns(CfbmarkovWarning):
+        pred = model.predict(run, 2.5, 1.4, seed=1, output=tmp_path / "p.h5")
+    summary = compare(run, pred, window=(2.5, 3.9), output=tmp_path / "cmp", figures=False,
+                      resamples=0)
+    said = [w for w in summary["warnings"] if "the prediction started" in w]
+    assert said and "the mixing curves follow those it started, on both sides" in said[0]
+    assert summary["mixing_rms"] == summary["mixing_rms"]        # a number, not NaN

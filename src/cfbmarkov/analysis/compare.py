@@ -27,7 +27,7 @@ from cfbmarkov.analysis.baseline import (WindowDifference, fitting_runs_of, fitt
                                          model_on_fitting_window, pooled_window_difference,
                                          window_difference)
 from cfbmarkov.analysis.compare_inputs import (check_parameters, check_runs, default_bin_width,
-                                               model_flow_direction)
+                                               model_flow_direction, starting_tracers)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.errors import InputError
@@ -335,8 +335,19 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         raise InputError(f"window {start:g}:{stop:g} s of {ref.path} holds no complete residence "
                          "(an entry through the inlet and the next exit through the outlet "
                          "inside the window): compare over a longer window")
-    edges, reference = _compared_run(ref, ref_frames, rt_ref, (start, stop), bin_width)
-    _, model = _compared_run(pred, pred_frames, rt_mod, (start, stop), bin_width)
+    tracers = None
+    if ref.boundary.is_open:
+        tracers = starting_tracers(ref, pred, ref_frames.start, pred_frames.start)
+        if tracers is not None:
+            held = int(ref.present(ref_frames.start).sum())
+            warnings.append(f"the prediction started {tracers.size} of the {held} particles "
+                            f"present at {start:g} s in {ref.path} (the others entered within "
+                            "its state space's memory and have no state yet; its newcomers "
+                            "stand for them): the mixing curves follow those it started, on "
+                            "both sides")
+    edges, reference = _compared_run(ref, ref_frames, rt_ref, (start, stop), bin_width,
+                                     tracers)
+    _, model = _compared_run(pred, pred_frames, rt_mod, (start, stop), bin_width, tracers)
     comparison = _assemble(reference, model, edges, (start, stop), bin_width, md_order,
                            columns, warnings, on, beside)
     comparison.bin_width_from = bin_width_from
@@ -442,16 +453,18 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
 
 
 def _compared_run(traj: Trajectories, frames: slice, rt: ResidenceTimes,
-                  window: tuple[float, float], bin_width: float
+                  window: tuple[float, float], bin_width: float, tracers=None
                   ) -> tuple[np.ndarray, ComparedRun]:
     """One side over the window: its RTD on bins of ``bin_width`` (and their edges), its
     mixing curve and its left tracer group (of an open riser: among the particles present
-    at the window start)."""
+    at the window start, or the ids ``tracers`` among them)."""
     edges, rtd = rtd_histogram(rt.samples, bin_width, window_length=window[1] - window[0])
-    times, fraction = mixing_curve_of(traj, window)
+    times, fraction = mixing_curve_of(traj, window, tracers=tracers)
     left = left_tracer_group(traj.positions(frames.start)[:, 0], 0.5 * traj.width)
     if traj.boundary.is_open:      # the tracers: the particles present at the window start
         left = left & traj.present(frames.start)
+        if tracers is not None:
+            left &= np.isin(traj.ids, tracers)
     return edges, ComparedRun(traj, frames, rt, rtd, times, fraction, left)
 
 

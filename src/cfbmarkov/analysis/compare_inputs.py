@@ -322,14 +322,50 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
 
 def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:
     """Open risers: the particles present at the window's first frame must be the same on
-    both sides (the prediction started from the reference's state); newcomers may differ."""
+    both sides (the prediction started from the reference's state); newcomers may differ
+    (:func:`starting_tracers`)."""
+    starting_tracers(ref, pred, i_ref, i_pred)
+
+
+def starting_tracers(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int
+                     ) -> np.ndarray | None:
+    """Open risers: the tracers of the mixing curves, the particles present at the window's
+    first frame on both sides.
+
+    A prediction starts from the reference's frame, so both sides hold the same particles
+    there; a model with memory leaves out those that entered within its memory before that
+    frame (they have no state yet; its newcomers of the next lags stand for them), and the
+    tracers are then the particles the prediction started.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        Open files of an open riser.
+    i_ref, i_pred : int
+        The window's first frame in each.
+
+    Returns
+    -------
+    ndarray of int64 or None
+        The tracers' ids where the prediction started fewer particles than the reference
+        holds; None where both hold the same.
+
+    Raises
+    ------
+    InputError
+        Where the prediction's particles at its start are not all the reference's.
+    """
     a = np.sort(ref.ids[ref.present(i_ref)])
     b = np.sort(pred.ids[pred.present(i_pred)])
-    if not np.array_equal(a, b):
-        raise InputError(f"{ref.path} ({a.size} particles present at the window start) and "
-                         f"{pred.path} ({b.size}) do not start from the same particles; mixing "
-                         "needs the same tracers on both sides")
+    if np.array_equal(a, b):
+        return None
+    if b.size and b.size < a.size and np.isin(b, a).all():
+        return b
+    raise InputError(f"{ref.path} ({a.size} particles present at the window start) and "
+                     f"{pred.path} ({b.size}) do not start from the same particles; mixing "
+                     "needs the same tracers on both sides")
 
 
 __all__ = ["check_common_window", "check_parameters", "check_runs", "check_window",
-           "common_span", "default_bin_width", "model_columns", "spans_text"]
+           "common_span", "default_bin_width", "model_columns", "spans_text",
+           "starting_tracers"]

@@ -90,7 +90,7 @@ def mixing_curve(x, half_width: float, left_group: np.ndarray | None = None) -> 
     return np.count_nonzero(x[:, left_group] < half_width, axis=1) / n
 
 
-def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
+def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=None
                     ) -> tuple[np.ndarray, np.ndarray]:
     """Mixing curve of a trajectory file over a window.
 
@@ -103,6 +103,9 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
         first frame.
     block : int, optional
         Frames read per block.
+    tracers : ndarray of int64, optional
+        A file with absences (an open riser): the ids of the tracers among the particles
+        present at the window's first frame (default all of them).
 
     Returns
     -------
@@ -126,7 +129,8 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
     frames = traj.window(float(window[0]), float(window[1]))
     half = 0.5 * traj.width
     if traj.has_absences:
-        return _mixing_of_present(traj, frames, half, block)
+        return _mixing_of_present(traj, frames, half, block,
+                                  None if tracers is None else np.isin(traj.ids, tracers))
     left_group = None
     times, parts = [], []
     for t, positions, _ in traj.iter_frames(frames, block=block):
@@ -138,12 +142,12 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64
     return np.concatenate(times).astype(np.float64), np.concatenate(parts)
 
 
-def _mixing_of_present(traj, frames: slice, half: float, block: int
+def _mixing_of_present(traj, frames: slice, half: float, block: int, chosen=None
                        ) -> tuple[np.ndarray, np.ndarray]:
     """The mixing curve where particles come and go (``docs/definitions.md``, Mixing in an
-    open riser): the particles present at the window's first frame are the tracers; at each
-    frame the fraction of those still present that belong to the left group and lie at
-    x < W/2 (NaN once none is left)."""
+    open riser): the particles present at the window's first frame (those of them marked in
+    ``chosen``, where given) are the tracers; at each frame the fraction of those still
+    present that belong to the left group and lie at x < W/2 (NaN once none is left)."""
     cohort = left = None
     times, parts = [], []
     for i in range(frames.start, frames.stop, block):
@@ -151,7 +155,7 @@ def _mixing_of_present(traj, frames: slice, half: float, block: int
         x = traj.positions(rows)[..., 0]
         present = traj.present(rows)
         if cohort is None:
-            cohort = present[0].copy()
+            cohort = present[0].copy() if chosen is None else present[0] & chosen
             left = cohort & (np.where(cohort, x[0], np.inf) < half)
         still = present & cohort
         inside = still & left & (np.where(still, x, np.inf) < half)

@@ -203,8 +203,9 @@ def _warn_stateless(states0: np.ndarray, positions0: np.ndarray, model: "MarkovM
         warnings.warn(f"{missing} of {int(seen.sum())} particles present at {start:g} s have no "
                       f"state in {model.state_space.kind} (they entered less than its memory, "
                       f"{model.state_space.memory_lags} lag(s), before that frame) and are left "
-                      "out of the prediction, which `compare` then refuses to set against the "
-                      "reference; a model on cells keeps them all", CfbmarkovWarning,
+                      "out of the prediction (its newcomers of the next lags stand for them; "
+                      "`compare` follows the particles it started on both sides); a model on "
+                      "cells keeps them all", CfbmarkovWarning,
                       stacklevel=3)
 
 
