@@ -277,7 +277,11 @@ class Trajectories(FrameTimes):
         reasons = self.unsupported(three_d=three_d, absent=absent, open_boundary=open_boundary)
         if reasons:
             hint = (" (a 3D dump imported with --drop-depth gives 2D positions)"
-                    if self.dimensions == 3 and not three_d else "")
+                    if self.dimensions == 3 and not three_d else
+                    ": a periodic riser's passes cannot be followed across a particle's gap; "
+                    "import the tracks again with --boundary open (an open view: each gap an "
+                    "exit and an entry)"
+                    if self.has_absences and not absent and not self.boundary.is_open else "")
             raise InputError(f"{self.path}: {purpose} cannot use {' and '.join(reasons)} yet{hint}")
 
     @property

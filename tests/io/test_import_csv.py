@@ -390,7 +390,7 @@ def test_sizes_that_suggest_a_unit_mistake_warn(tmp_path, capsys):
         f"{2 * k},{i},{0.01 + 0.02 * i:.4f},{0.2 + 0.001 * k + 0.1 * i:.4f}"
         for k in range(10) for i in range(3)]) + "\n")
     assert any("the particles move at a median 0.0005 m/s between frames: times in "
-               "milliseconds read as seconds?" in line
+               "milliseconds read as seconds" in line
                for line in _import_err(main, capsys, slower, tmp_path))
 
 

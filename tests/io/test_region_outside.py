@@ -97,3 +97,17 @@ def test_rows_outside_the_region_and_a_region_beyond_the_box_are_noted(tmp_path)
                    flags="mm mm mm")
     assert _notes(import_lammps(shrunk, tmp_path / "m.h5", region=((0.0, 0.09), (0.0, 0.95)),
                                 boundary="open")) == []
+
+
+def test_particles_outside_the_region_in_every_frame_warn_on_import(tmp_path, capsys):
+    """A region that cuts the riser leaves particles out of every frame: `import` warns
+    (a particle leaving an open view is present in some frames and is not counted)."""
+    from cfbmarkov.cli import main
+
+    source = _dump(tmp_path / "wide.dump", FRAMES_2D, BOX_2D)
+    assert main(["import", str(source), "--region", "0:0.045,0:0.95", "-o",
+                 str(tmp_path / "cut.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "warning: 1 of the 2 particles lie outside the riser's region in every frame" in err
+    assert main(["import", str(source), "-o", str(tmp_path / "whole.h5")]) == 0
+    assert "warning" not in capsys.readouterr().err

@@ -204,3 +204,24 @@ def test_shuffled_rows_give_the_identical_result():
     assert a.present.any(axis=0).all() and a.laps.max() >= 1
     for name in ("times", "ids", "positions", "present", "laps"):
         np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_an_open_riser_does_not_interpolate_across_a_return_through_the_faces():
+    """A tracer leaving an open view at the top and coming back at the bottom 9 ms later:
+    no height is interpolated across the riser between the two samples; it is absent
+    there, its two stretches an exit and an entry. The periodic riser joins them by the
+    minimal-image rule instead."""
+    t = np.array([0.750, 0.7598, 0.7690, 0.780])
+    y = np.array([0.925, 0.9496, 0.0225, 0.050])
+    xy = np.stack([np.full(4, 0.045), y], axis=1)
+    ids = np.zeros(4, dtype=np.int64)
+    open_riser = resample_tracks(t, ids, xy, interval=0.005, max_gap=0.02, open_height=0.95)
+    at = {round(float(g), 3): k for k, g in enumerate(open_riser.times)}
+    assert not open_riser.present[at[0.765], 0]
+    assert open_riser.present[at[0.755], 0] and open_riser.present[at[0.775], 0]
+    periodic = resample_tracks(t, ids, xy, interval=0.005, max_gap=0.02, height=0.95)
+    assert periodic.present[at[0.765], 0]
+    # through the top: 0.9496 + (0.0225 + 0.95 - 0.9496) * 5.2 / 9.2, wrapped
+    assert periodic.positions[at[0.765], 0, 1] == pytest.approx(
+        (0.9496 + (0.0225 + 0.95 - 0.9496) * (0.765 - 0.7598) / (0.7690 - 0.7598)) - 0.95)
+    assert periodic.laps[at[0.765], 0] == 1

@@ -168,3 +168,22 @@ def test_a_prediction_keeps_the_source_frame_of_its_initial_file(markov_run, tmp
     with Trajectories(pred) as p, Trajectories(moved) as r:
         assert p.axes == r.axes and p.axes["vertical"] == "z"
         np.testing.assert_array_equal(p.region_origin, r.region_origin)
+
+
+def test_a_prediction_from_a_frame_with_no_particle_is_refused_first(markov_run, tmp_path):
+    """A tracked file (particles absent from frames) whose start frame holds no particle:
+    refused before any Monte Carlo, naming when particles are present."""
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    with Trajectories(markov_run) as run:
+        times, positions, laps = run.times, run.positions()[:, :5], run.laps()[:, :5]
+    present = np.ones(positions.shape[:2], dtype=bool)
+    present[(times > 5.95) & (times < 7.0)] = False        # 6-7 s: nobody seen
+    positions = np.where(present[..., None], positions, np.nan)
+    gappy = write_trajectories(tmp_path / "gap.h5", times, positions, laps=laps, width=0.09,
+                               height=0.95, present=present)
+    model = PaperEstimator(GRID, lag=0.1).fit(discretize(gappy, GRID, 0.1, (1.0, 5.0)))
+    with pytest.raises(InputError, match="no particle is present \\(with a state\\) at 6.5 s.*"
+                                         "present from 0 s to 8 s"):
+        model.predict(gappy, start=6.5, duration=0.5, output=tmp_path / "p.h5")
+    assert not (tmp_path / "p.h5").exists()

@@ -153,11 +153,13 @@ def _throughput_line(model, rt_mean: float, window_mean: float,
     gap = rt_mean / window_mean - 1.0
     if abs(gap) <= limit:
         return None
+    occupancy = ("the window's occupancy is not the chain's stationary one: a flow still "
+                 "changing in the window, or loops slower than the window (particles held "
+                 "in a downflowing wall layer longer than the window shows)")
     why = ("the paper's estimator averages every frame's matrix alike whatever the cells' "
-           "occupancy (--estimator mle keeps the window's transitions and its throughput)"
-           if model.estimator == "paper" else
-           "the window's occupancy is not the chain's stationary one (a flow still changing "
-           "in the window)")
+           "occupancy (--estimator mle keeps the window's transitions and its throughput; "
+           f"where it shows the same gap, {occupancy})"
+           if model.estimator == "paper" else occupancy)
     classes = len(model.closed_classes)
     if classes > 1:     # a reducible chain: its classes weighted by their entry flux
         why += (f"; the chain is reducible ({classes} closed classes: particles in some "

@@ -175,8 +175,9 @@ def resolve_source(model, candidates=()):
                      "model file")
             error = SourceChanged if existing else InputError
             raise error(f"{source} (the model's fitting file, named from the folder it was "
-                        f"fitted in): {where}; run from that folder, or fit again (--resamples "
-                        "0 leaves the intervals out)")
+                        f"fitted in): {where}; run from that folder (in it, the file was "
+                        "replaced since the fit: fit again), or --resamples 0 to leave the "
+                        "intervals out")
         found.append(source if os.path.abspath(source) == match else match)
     if found == sources:
         return model

@@ -496,7 +496,7 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     tracks = resample_tracks(times, ids, relative,
                              interval=interval, max_gap=max_gap,
                              height=riser.height if periodic else None, vertical=1,
-                             label=label)
+                             label=label, open_height=None if periodic else riser.height)
     positions = np.clip(tracks.positions, 0.0, extent)
     parameters = _parameters(path, layout, riser, "resampled")
     parameters.update({"resample": interval, "max_gap": interval if max_gap is None else max_gap,

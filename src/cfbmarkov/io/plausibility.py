@@ -73,18 +73,19 @@ def unit_warnings(traj) -> list[str]:
     slow, fast = SPEED_RANGE
     if np.isfinite(speed) and 0 < speed < slow:
         lines.append(f"the particles move at a median {speed:.3g} m/s between frames: times "
-                     "in milliseconds read as seconds? (CSV: --time-unit ms; dumps: "
-                     "--time-step in s); check the times and lengths if the flow is not "
-                     "this slow")
+                     "in milliseconds read as seconds (CSV: --time-unit ms; dumps: "
+                     "--time-step in s), or lengths in metres read as millimetres (a "
+                     "--length-unit mm too many)? check the times and lengths if the flow is "
+                     "not this slow")
     elif speed > fast:
         lines.append(f"the particles move at a median {speed:.3g} m/s between frames: times "
                      "in seconds read as milliseconds, or lengths in mm read as m? (CSV: "
                      "--time-unit, --length-unit); check the units if the flow is that fast")
     interval = traj.frame_interval
     if np.isfinite(interval) and 0 < interval < SHORTEST_FRAME_INTERVAL:
-        lines.append(f"frames {interval:g} s apart: times are in seconds (CSV: --time-unit ms "
-                     "for milliseconds; dumps: --time-step in s); check the times if that is "
-                     "not the sampling")
+        lines.append(f"frames {interval:g} s apart: the times are read too small (CSV: a "
+                     "file in seconds given --time-unit ms, drop it; dumps: --time-step in "
+                     "s); check the times if that is not the sampling")
     return lines
 
 
@@ -119,6 +120,34 @@ def median_speed(traj) -> float:
     if not speeds and traj.n_particles * traj.n_frames <= SPARSE_VALUES:
         speeds = _sparse_speeds(traj)
     return float(np.median(np.concatenate(speeds))) if speeds else float("nan")
+
+
+def presence_warnings(traj) -> list[str]:
+    """A warning where some particles of an imported file lie in no frame inside the
+    riser: the region (``--region``, ``--width``, ``--height``) leaves out part of the
+    riser, or the source's origin is not the riser's corner.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+
+    Returns
+    -------
+    list of str
+    """
+    if not traj.has_absences or traj.n_particles == 0:
+        return []
+    seen = np.zeros(traj.n_particles, dtype=bool)
+    for start in range(0, traj.n_frames, 256):       # blocks of frames: bounded memory
+        seen |= traj.present(slice(start, start + 256)).any(axis=0)
+    never = int(np.count_nonzero(~seen))
+    if not never:
+        return []
+    return [f"{never} of the {traj.n_particles} particles lie outside the riser's region in "
+            "every frame: the region leaves out part of the riser, or its origin is not the "
+            "riser's corner; check --region (or --width/--height, from 0 in the source's "
+            "coordinates) against the riser's walls"]
 
 
 def median_stored_speed(traj) -> float:
@@ -161,4 +190,4 @@ def _sparse_speeds(traj) -> list[np.ndarray]:
     return speeds
 
 
-__all__ = ["median_speed", "median_stored_speed", "unit_warnings"]
+__all__ = ["median_speed", "median_stored_speed", "presence_warnings", "unit_warnings"]

@@ -70,7 +70,8 @@ def _positive(value, what: str) -> float:
 
 
 def resample_tracks(times, particles, positions, *, interval, max_gap=None, height=None,
-                    vertical=1, max_step=0.25, label="tracks") -> ResampledTracks:
+                    vertical=1, max_step=0.25, label="tracks", open_height=None
+                    ) -> ResampledTracks:
     """Resample rows ``(time, particle, position)`` onto the grid ``k * interval`` (the
     multiples of ``interval`` within the span of the rows).
 
@@ -113,6 +114,11 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
         of H, that is trusted; default 0.25.
     label : str, optional
         The name of the data in error messages.
+    open_height : float, optional
+        m, an open riser's height: consecutive samples that lie half of it or more apart
+        vertically are not joined (a particle that left through one face and came back
+        through the other, e.g. a tracer in a circulating loop seen in an open view), so no
+        height is interpolated across the riser between them.
 
     Returns
     -------
@@ -181,6 +187,8 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
     for j, (a, b) in enumerate(zip(bounds[:-1], bounds[1:])):
         ts, xs = t[a:b], pos[a:b].copy()
         joined = np.diff(ts) <= max_gap + tol        # consecutive samples in one stretch
+        if period is None and open_height is not None:  # left and came back: two stretches
+            joined &= np.abs(np.diff(xs[:, vertical])) < 0.5 * float(open_height)
         lap = np.zeros(len(ts), dtype=np.int64)
         if period is not None:
             y = np.mod(xs[:, vertical], period)

@@ -566,8 +566,9 @@ class MarkovModel:
         Returns
         -------
         list of str
+            One line each, as ``fit`` prints them after ``warning:`` (no indentation).
         """
-        return model_summary.model_warnings(self)
+        return [line.strip() for line in model_summary.model_warnings(self)]
 
     def summary(self, warnings: bool = True) -> str:
         """A few lines of text: state space, lag, fitting data, passes, unvisited states

@@ -149,13 +149,15 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         f"  fitted on {_sources_text(model.source)} {_windows_text(model)}: "
         f"{model.n_transitions} transitions over {model.frame_pairs} frame pairs",
         f"  passes through the periodic boundary: {int(model.counts_up.sum())} up, "
-        f"{int(model.counts_down.sum())} down" if model.open_flow is None else
+        f"{int(model.counts_down.sum())} down (in the transitions counted: a pass lies in "
+        "every pair of frames one lag apart that spans it, so with frames closer than the lag "
+        "it counts several times)" if model.open_flow is None else
         model.open_flow.summary_line(),
     ]
     never = np.setdiff1d(model.unvisited_states, model.entered_never_left)
     lines.append(f"  states never visited: {state_set_text(model.state_space, never)}")
     if warnings:
-        lines.extend(model.warnings())
+        lines.extend(f"  {line}" for line in model.warnings())
     if model.entered_never_left.size and model.trap_share == 0.0:
         lines.append("  states entered but never left: "
                      f"{state_set_text(model.state_space, model.entered_never_left)}: "

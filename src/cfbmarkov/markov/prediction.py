@@ -142,6 +142,16 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
         states0, positions0, laps0 = initial_states(model, traj, start)
         ids = traj.ids
         present0 = states0 >= 0
+        if not present0.any() and model.open_flow is None:   # nothing to move, no newcomers
+            seen = traj.present(slice(None)).any(axis=1) if traj.has_absences else None
+            where = ""
+            if seen is not None and seen.any():
+                where = (f"; particles are present from {traj.times[np.argmax(seen)]:g} s "
+                         f"to {traj.times[len(seen) - 1 - np.argmax(seen[::-1])]:g} s (some "
+                         "frames between may hold none)")
+            raise InputError(f"{traj.path}: no particle is present (with a state) at "
+                             f"{start:g} s, so the prediction has nothing to move; give "
+                             f"--start at a frame where particles are present{where}")
         _warn_stateless(states0, positions0, model, start)
         if not present0.all():          # only the particles present at the start move
             states0, positions0, laps0, ids = (states0[present0], positions0[present0],
