@@ -237,7 +237,8 @@ def _print_kinetics(block: dict, level: float = 0.9) -> None:
         else:
             line += ", segregated flow n/d"
         print(line)
-        verdict = kinetics_verdict(name, ref["exit_mean"], mod, level)
+        verdict = kinetics_verdict(name, ref["exit_mean"], mod, level,
+                                   ref.get("exit_mean_interval"))
         if verdict:
             print("  " + verdict)
         print(f"  {name} in the bed (mean over the window): reference "
@@ -245,7 +246,8 @@ def _print_kinetics(block: dict, level: float = 0.9) -> None:
               + (f", segregated flow {value(seg['bed_mean'])}" if seg else ""))
 
 
-def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float) -> str:
+def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float,
+                     reference_interval=None) -> str:
     """One line: the model's interval of a property's exit mean and whether the
     reference's exit mean lies inside it.
 
@@ -260,6 +262,9 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
         ``interval_method``).
     level : float
         The intervals' coverage.
+    reference_interval : (float, float), optional
+        The reference's own interval of its exit mean (its exits' sampling); a model
+        interval that misses the reference's value but overlaps this one is not told apart.
 
     Returns
     -------
@@ -281,6 +286,12 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
             f"{place} it")
     if place == "inside":
         return text + ": the model is consistent with the reference within its uncertainty"
+    if reference_interval and None not in reference_interval and (
+            reference_interval[0] <= hi and lo <= reference_interval[1]):
+        r0, r1 = reference_interval
+        return text + (f", but the reference's own {100 * level:g} % interval "
+                       f"{r0:.{d}g}-{r1:.{d}g} (its exits' sampling) overlaps it: the two are "
+                       "not told apart")
     return text + f": the model misses the reference's {name} beyond its uncertainty"
 
 

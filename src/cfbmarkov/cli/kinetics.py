@@ -52,7 +52,14 @@ def cmd_react(args) -> int:
     state_kinetics = kinetics.per_state(model.state_space, fields)
     notes = list(kinetics.field_notes(fields))
     for note in notes:
-        print(f"warning: {note}", file=sys.stderr)
+        print(f"warning: {one_line(note)}", file=sys.stderr)
+    # the model's own verdict, printed once the answers stand (a refusal stays one line):
+    # exact answers rest on the chain as much as a Monte Carlo does
+    verdict = [f"the model's fitting sample: {line}"
+               for line in (model.adequacy.warnings if model.adequacy is not None else ())]
+    if args.passes and "carried" not in [p.start for p in kinetics.properties]:
+        print("note: --passes follows carried properties (start = \"carried\"); this "
+              "kinetics file has none, so it is left out", file=sys.stderr)
     passes = tuple(args.passes) if args.passes else PASSES
     if args.init is not None:       # a start from the reference, checked before the run
         from cfbmarkov.trajectories import Trajectories
@@ -86,11 +93,11 @@ def cmd_react(args) -> int:
                 model.predict(run, start=args.start, duration=args.duration, seed=args.seed,
                               output=args.output, progress=not args.quiet,
                               kinetics=state_kinetics)
-        for line in model.adequacy.warnings if model.adequacy is not None else ():
-            print(f"warning: the model's fitting sample: {one_line(line)}", file=sys.stderr)
     # exits are counted in the model's direction: down through the bottom for a periodic
     # model of a net downflow (docs/definitions.md, Net downflow), as fit and rtd say
     direction = model.flow_direction
+    for line in verdict:
+        print(f"warning: {one_line(line)}", file=sys.stderr)
     if args.json:
         space = model.state_space
         out = {"properties": {name: {**a.to_dict(passes if p.start == "carried" else ()),
@@ -102,7 +109,7 @@ def cmd_react(args) -> int:
                         "depth_columns": space.depth_columns,
                         "bed_mean_by_cell": "cell = (row * depth_columns + depth column) * "
                                             "columns + column, from the bottom left"},
-               "warnings": [one_line(n) for n in notes]}
+               "warnings": [one_line(n) for n in notes + verdict]}
         print(json.dumps(jsonable(out)))
         return 0
     if answers:

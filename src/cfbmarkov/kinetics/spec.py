@@ -434,10 +434,13 @@ def _property(table, index: int, path: Path) -> Property:
         raise InputError(f"{where}: unknown key {unknown[0]!r} for law {law_key}; it takes "
                          f"{', '.join(sorted(allowed))} (rates in 1/s)")
     params = {p: _parameter(table, p, where, path, law) for p in law.parameter_names}
-    if "threshold" in table and not any(isinstance(v, FromField) for v in params.values()):
+    if "threshold" in table and not any(
+            isinstance(v, FromField) and f"{p}_threshold" not in table
+            for p, v in params.items()):
         raise InputError(f"{where}: threshold applies only to a parameter given as a function "
-                         f"of a cell field ({law.parameter_names[0]}_from = \"FIELD\"); "
-                         "remove it")
+                         f"of a cell field ({law.parameter_names[0]}_from = \"FIELD\") "
+                         "without a threshold of its own (PARAMETER_threshold); no parameter "
+                         "uses it here: remove it")
     initial = table.get("initial")
     if initial is not None and not _finite(initial):
         raise InputError(f"{where}: initial must be a finite number")

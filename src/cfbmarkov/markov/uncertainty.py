@@ -138,8 +138,9 @@ class ModelUncertainty:
                    f"give {name} 0 (their chains have residences of one length only)")
             lines.append(f"the {self.percent} % interval of {name} reaches 0 and is cut "
                          f"there ({name} cannot be negative): {why}; the interval says only "
-                         "that the figure lies below its upper end, and a longer fitting "
-                         "window (more residences per block) narrows it")
+                         "that the figure lies below its upper end; a longer fitting "
+                         "window narrows it where the flow is steady (more residences per "
+                         "block), not where its blocks see different flows")
         return lines
 
     def short_of_resamples(self) -> list[str]:
