@@ -191,13 +191,14 @@ def missed_text(miss: str, pd_mean: float, pd_sd: float) -> str:
     Returns
     -------
     str
-        E.g. "no: SD(RT) -56 %" or "no: both (E(RT) +12 %, SD(RT) -56 %)".
+        E.g. "no: SD(RT) -56.2 %" or "no: both (E(RT) +12.1 %, SD(RT) -56.2 %)".
     """
     if not miss:
         return "yes"
     if miss == "no model":
         return "no: no model (the window's fit failed)"
-    mean, sd = f"E(RT) {100 * pd_mean:+.0f} %", f"SD(RT) {100 * pd_sd:+.0f} %"
+    # three digits: a figure 10.14 % off is not printed "10 %" beside a 10 % tolerance
+    mean, sd = f"E(RT) {100 * pd_mean:+.3g} %", f"SD(RT) {100 * pd_sd:+.3g} %"
     return f"no: {mean if miss == 'E(RT)' else sd if miss == 'SD(RT)' else f'both ({mean}, {sd})'}"
 
 
