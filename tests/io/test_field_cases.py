@@ -279,6 +279,23 @@ def test_outlet_deletion_and_reinsertion_under_a_new_id(tmp_path):
         assert t.boundary == "periodic" and t.laps()[2:, 4].tolist() == [1, 1]
 
 
+def test_an_open_riser_warns_of_a_particle_back_at_the_inlet_with_its_id(tmp_path, capsys):
+    """Particle 5 goes from 0.9 m to 0 m between two frames of the open riser while present
+    in both: an open riser reads it as a move inside, not an exit and an entry, so import
+    warns and names the periodic boundary; declared periodic, no warning (a lap)."""
+    dump = str(FIELD / "outlet-delete-reinsert.dump")
+    code = main(["import", dump, "--time-step", "1e-5", "-o", str(tmp_path / "o.h5")])
+    err = capsys.readouterr().err
+    assert code == 0
+    line = [w for w in err.splitlines() if w.startswith("warning:")]
+    assert len(line) == 1 and "1 move(s) of half the riser's height" in line[0]
+    assert "particle 5: 0.9 -> 0 m between 0.05 and 0.1 s" in line[0]
+    assert "--boundary periodic" in line[0]
+    code = main(["import", dump, "--time-step", "1e-5", "--boundary", "periodic", "-o",
+                 str(tmp_path / "p.h5")])
+    assert code == 0 and "warning:" not in capsys.readouterr().err
+
+
 def test_insert_stream_growing_atom_count_with_image_flags(tmp_path):
     """LIGGGHTS insert/stream: the atom count grows; a duplicated `type` column; image flags.
     Every id is present from the frame where it first appears."""

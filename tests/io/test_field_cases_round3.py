@@ -20,6 +20,7 @@ its right result:
 """
 
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -108,6 +109,41 @@ def test_trackmate_spots_use_track_id(tmp_path, capsys):
             frame, track = int(r[8]), int(r[2])
             np.testing.assert_allclose(pos[frame, track], [float(r[4]) / 1000,
                                                            float(r[5]) / 1000], atol=1e-12)
+
+
+def test_spots_without_tracks_are_refused_naming_the_columns(tmp_path, capsys):
+    """A TrackMate export whose spots are in no track (TRACK_ID empty everywhere) and one
+    without a TRACK_ID column (its text LABEL would be the id): each refused in one line
+    naming the file's own column, nothing written."""
+    lines = (FIELD / "trackmate-spots.csv").read_text().splitlines()
+    rows = [line.split(",") for line in lines]
+    untracked = [r if k < 4 else r[:2] + [""] + r[3:] for k, r in enumerate(rows)]
+    no_track = [r[:2] + r[3:] for r in rows]
+    for name, table, match in (
+            ("untracked.csv", untracked, r"all 61 data rows have an empty 'TRACK_ID'"),
+            ("no-track.csv", no_track, r"'ID0' in column 'LABEL' \(read as 'id'\) is not a "
+                                       r"number; the particle id must be a whole number")):
+        source = tmp_path / name
+        source.write_text("\n".join(",".join(r) for r in table) + "\n")
+        code = main(["import", str(source), "--width", "0.09", "--height", "0.95", "-o",
+                     str(tmp_path / "s.h5"), "--vertical-axis", "y", "--drop-depth"])
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1, err
+        assert re.search(match, err), err
+        assert not (tmp_path / "s.h5").exists()
+
+
+def test_pept_points_all_noise_are_refused_as_such(tmp_path, capsys):
+    rows = np.loadtxt(FIELD / "pept-two-tracers-noise.csv")
+    rows[:, 5] = -1
+    source = tmp_path / "noise.csv"
+    np.savetxt(source, rows, header="t x y z error label")
+    code = main(["import", str(source), "--width", "0.09", "--height", "0.95", "-o",
+                 str(tmp_path / "p.h5"), "--vertical-axis", "y", "--drop-depth",
+                 "--length-unit", "mm", "--time-unit", "ms", "--resample", "0.005"])
+    err = capsys.readouterr().err
+    assert code == 2 and f"all {rows.shape[0]} data rows have -1 (noise) in 'label'" in err
+    assert not (tmp_path / "p.h5").exists()
 
 
 def _spreadsheet_truth():

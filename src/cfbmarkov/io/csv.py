@@ -320,6 +320,19 @@ def _parameters(path: Path, layout: CsvLayout, riser: RiserFrame, row_order: str
     }
 
 
+def _no_rows(label: str, layout: CsvLayout) -> str:
+    """The message of a file with no particle's row: none after the header, or every one
+    marked as belonging to no particle (pept's label -1, an empty TrackMate TRACK_ID)."""
+    if layout.noise_rows:
+        if "track" in str(layout.id_column).lower():
+            what, fix = "an empty", "track the spots first (TrackMate: export the spots of tracks)"
+        else:
+            what, fix = f"{layout.noise_id} (noise) in", "label the tracers' points first"
+        return (f"{label}: all {layout.noise_rows} data rows have {what} "
+                f"{layout.id_column!r}: they belong to no particle, nothing to import; {fix}")
+    return f"{label}: no data rows after the header"
+
+
 def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
            blocks: Iterator[np.ndarray], row_order: str) -> None:
     """Split row blocks into frames and write them (the writer is discarded on an error)."""
@@ -328,7 +341,7 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
     frames = frame_rows(blocks, it)
     first = next(frames, None)
     if first is None:
-        raise InputError(f"{label}: no data rows after the header")
+        raise InputError(_no_rows(label, layout))
     reference = (np.unique(layout.ids(first[0])) if layout.has_id
                  else np.zeros(1, dtype=np.int64))
     parameters = _parameters(path, layout, riser, row_order)
@@ -478,7 +491,7 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     """Resample every track onto frames ``interval`` apart and write them."""
     label = str(path)
     if rows.shape[0] == 0:
-        raise InputError(f"{label}: no data rows after the header")
+        raise InputError(_no_rows(label, layout))
     ids = (layout.ids(rows) if layout.has_id
            else np.zeros(rows.shape[0], dtype=np.int64))
     order = np.argsort(rows[:, layout.index("t")], kind="stable")

@@ -138,7 +138,12 @@ def _locate_bad_row(lines: list[str], line_no: int, layout: CsvLayout, label: st
                 mark = ("; the first rows use a decimal comma" if layout.decimal_comma else
                         "; a decimal comma needs a semicolon, tab or space delimiter"
                         if "," in value and layout.delimiter == "," else "")
-                return (f"{label}: line {line_no + k}: {value!r} in column {name!r} is "
+                shown = layout.header[col].strip()
+                column = repr(shown) if shown == name else f"{shown!r} (read as {name!r})"
+                if name == "id":
+                    mark += ("; the particle id must be a whole number (TrackMate: the spots "
+                             "of tracks, with their TRACK_ID column)")
+                return (f"{label}: line {line_no + k}: {value!r} in column {column} is "
                         f"not a number{mark}{cut}")
     return f"{label}: lines {line_no}-{line_no + len(lines) - 1}: {exc}"
 

@@ -190,4 +190,56 @@ def _sparse_speeds(traj) -> list[np.ndarray]:
     return speeds
 
 
-__all__ = ["median_speed", "median_stored_speed", "presence_warnings", "unit_warnings"]
+#: frames read at once where every frame is scanned (bounded memory)
+FRAME_BLOCK = 256
+
+
+def return_warnings(traj) -> list[str]:
+    """A warning where particles of an open riser move half its height or more between
+    consecutive frames in which they are present: particles taken from the outlet back to
+    the inlet (or the other way) keeping their ids, which an open riser reads as one move
+    inside it, not as an exit and an entry.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file; a periodic riser gets no warning (its laps count such
+        moves as passes through the boundary).
+
+    Returns
+    -------
+    list of str
+        At most one line: how many such moves, the first one (particle id, heights, times),
+        and the fixes (``--boundary periodic`` for a riser that recycles its particles, or
+        the frames' times).
+    """
+    if not traj.boundary.is_open or traj.n_frames < 2 or traj.n_particles == 0:
+        return []
+    count, first = 0, None
+    half = 0.5 * traj.height
+    for start in range(0, traj.n_frames - 1, FRAME_BLOCK):
+        stop = min(start + FRAME_BLOCK + 1, traj.n_frames)
+        heights = traj.positions(slice(start, stop))[:, :, 1]
+        present = traj.present(slice(start, stop))
+        both = present[1:] & present[:-1]
+        with np.errstate(invalid="ignore"):
+            jump = both & (np.abs(np.diff(heights, axis=0)) >= half)
+        if not jump.any():
+            continue
+        count += int(np.count_nonzero(jump))
+        if first is None:
+            k, j = (int(v[0]) for v in np.nonzero(jump))
+            first = (int(traj.ids[j]), float(heights[k, j]), float(heights[k + 1, j]),
+                     float(traj.times[start + k]), float(traj.times[start + k + 1]))
+    if not count:
+        return []
+    pid, y0, y1, t0, t1 = first
+    return [f"{count} move(s) of half the riser's height or more between consecutive frames "
+            f"(particle {pid}: {y0:.3g} -> {y1:.3g} m between {t0:g} and {t1:g} s): particles "
+            "taken from the outlet back to the inlet with their ids? this open riser reads "
+            "each as a move inside it, not as an exit and an entry; import with --boundary "
+            "periodic if the riser recycles its particles, or give them new ids on re-entry"]
+
+
+__all__ = ["median_speed", "median_stored_speed", "presence_warnings", "return_warnings",
+           "unit_warnings"]
