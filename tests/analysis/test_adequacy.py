@@ -522,3 +522,24 @@ def test_a_passed_verdict_says_so_with_its_numbers():
     pooled = Adequacy((), parts, 1.0, 0.01, 0.05, 2.0, 0.01, (("a.h5", 1.0), ("b.h5", 1.0)))
     assert "agree" not in pooled.passed_line()
     assert Adequacy(("a warning",), parts, 1.0, 0.1, 0.05).passed_line() is None
+
+
+def test_a_pooled_fit_judges_short_halves_across_its_runs(tmp_path, capsys):
+    """Three runs whose 4 s windows' halves hold 24-30 residences each: fitted alone, a run
+    whose half holds fewer than 30 warns that the window is too short to judge; pooled, the
+    halves hold three times as many, so no run is named (adding runs must not add that
+    warning); pooled windows of 1 s still hold too few and warn once, for the pool."""
+    flow = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                               vertical_spread=0.5, persistence=False)
+    paths = [synthetic.write_run(tmp_path / f"run{s}.h5", flow, 500, 8.0, seed=s)
+             for s in (11, 12, 13)]
+    code, _, err = run_cli(capsys, "fit", paths[1], "--cells", "4x16", "--window", "1:5",
+                           "--estimator", "mle", "--resamples", "0", "-o", tmp_path / "one.h5")
+    assert code == 0 and "holds 24 residences (fewer than 30)" in err
+    code, _, err = run_cli(capsys, "fit", *paths, "--cells", "4x16", "--window", "1:5",
+                           "--estimator", "mle", "--resamples", "0", "-o", tmp_path / "p.h5")
+    assert code == 0 and "residences (fewer than 30)" not in err, err
+    code, _, err = run_cli(capsys, "fit", *paths, "--cells", "4x16", "--window", "1:2",
+                           "--estimator", "mle", "--resamples", "0", "-o", tmp_path / "q.h5")
+    short = [line for line in err.splitlines() if "(fewer than 30)" in line]
+    assert code == 0 and len(short) == 1 and "of the pooled fitting windows (3 runs)" in short[0]

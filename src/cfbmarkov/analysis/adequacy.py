@@ -21,7 +21,8 @@ tell from the window alone when that flow may not be the run's:
   estimator weighting every frame's matrix alike whatever the cells' occupancy, or a flow
   still changing in the window);
 - and halves with fewer than :data:`MIN_PART_RESIDENCES` residences leave E(RT)
-  unjudged, itself a warning.
+  unjudged, itself a warning (in a pooled fit, where the halves pooled over the runs hold
+  that few: a run whose own halves are too short is judged across the runs).
 
 Every E(RT) is counted in the judged model's direction (its ``flow_direction``, the
 direction of its fitting window's net solids flow; ``docs/definitions.md``, Net downflow).
@@ -360,14 +361,18 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
         if turn:
             lines.append(turn)
         if fewest < MIN_PART_RESIDENCES:
-            means = [m for _, _, m, _ in parts if math.isfinite(m)]
-            seen = ("" if len(means) < 2 else
-                    f" (its parts' chains give E(RT) "
-                    f"{', '.join(f'{m:.3g}' for m in means)} s, too few residences to judge "
-                    "the difference)")
-            lines.append(f"a half of the fitting window {window[0]:g}-{window[1]:g} s of {name} "
-                         f"holds {fewest} residences (fewer than {MIN_PART_RESIDENCES}): "
-                         f"the window is too short to judge its E(RT){seen}; {_ADVICE}")
+            # a pooled fit is judged across its runs where one run's halves are too short
+            # (the pooled halves' line below, where those too hold too few)
+            if not pooled:
+                means = [m for _, _, m, _ in parts if math.isfinite(m)]
+                seen = ("" if len(means) < 2 else
+                        f" (its parts' chains give E(RT) "
+                        f"{', '.join(f'{m:.3g}' for m in means)} s, too few residences to "
+                        "judge the difference)")
+                lines.append(f"a half of the fitting window {window[0]:g}-{window[1]:g} s of "
+                             f"{name} holds {fewest} residences (fewer than "
+                             f"{MIN_PART_RESIDENCES}): the window is too short to judge its "
+                             f"E(RT){seen}; {_ADVICE}")
             continue
         # one run of a pooled fit is N times less data than the interval's: sqrt(N) wider
         part_limit = parts_limit(sampling if from_interval else limit, len(parts), level,
@@ -393,6 +398,10 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
             within_run_limit(model, uncertainty, rt_mean, tolerance),
             halves=pooled_fewest >= MIN_PART_RESIDENCES, direction=model.flow_direction)
         lines += pooled_lines
+        if pooled_fewest < MIN_PART_RESIDENCES:
+            lines.append(f"a half of the pooled fitting windows ({len(runs)} runs) holds "
+                         f"{pooled_fewest} residences (fewer than {MIN_PART_RESIDENCES}): "
+                         f"the windows are too short to judge their E(RT); {_ADVICE}")
         if math.isfinite(pooled_spread):
             spread = pooled_spread if not math.isfinite(spread) else max(spread, pooled_spread)
     window_mean = window_rt_mean(runs, windows, model.flow_direction)
