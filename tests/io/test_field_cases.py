@@ -294,6 +294,12 @@ def test_an_open_riser_warns_of_a_particle_back_at_the_inlet_with_its_id(tmp_pat
     code = main(["import", dump, "--time-step", "1e-5", "--boundary", "periodic", "-o",
                  str(tmp_path / "p.h5")])
     assert code == 0 and "warning:" not in capsys.readouterr().err
+    # four frames hold no path from the inlet to the outlet: refused with the fix
+    code = main(["fit", str(tmp_path / "o.h5"), "--cells", "1x4", "--lag", "0.05", "--window",
+                 "0:0.15", "-o", str(tmp_path / "m.h5")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "every residence is trapped" in err
+    assert "fit on a longer window" in err and not (tmp_path / "m.h5").exists()
 
 
 def test_insert_stream_growing_atom_count_with_image_flags(tmp_path):

@@ -734,7 +734,9 @@ def open_rtd(absorbing: np.ndarray, exit_probability: np.ndarray, entry: np.ndar
                      entry)
     if result.probability.sum() <= 0:
         raise TrappedResidences("no particle that enters the open riser can reach the outlet "
-                                "in the model: every residence is trapped")
+                                "in the model: every residence is trapped (the fitting "
+                                "window holds no path from an entry to an exit); fit on a "
+                                "longer window, or with fewer cells")
     return result
 
 
