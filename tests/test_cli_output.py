@@ -116,8 +116,8 @@ def test_errors_advise_only_options_the_verb_has(model, tmp_path, capsys):
                           "0.2", "-o", str(tmp_path / "p.h5")], "refit the model"),
              ("fit", [str(run), "--cells", "4x8", "--lag", "0.03", "--window", "0:3", "-o",
                       str(tmp_path / "m.h5")], "use --lag 0.025 or a multiple"),
-             ("stationarity", [str(run), "--cells", "4x8", "--lag", "0.03",
-                               "--window-length", "1"], "use --lag 0.025")]
+             ("stationarity", [str(run), "--lag", "0.03", "--window-length", "1"],
+              "use --lag 0.025")]
     for verb, argv, expected in cases:
         assert main([verb, *argv]) == 2
         err = capsys.readouterr().err

@@ -178,3 +178,22 @@ def test_cli_refusals_and_undefined_values(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "n/d" in text and "nan" not in text and "fewer than 100 residences" in text
     assert "persistence: no whole 0.05 s window before 0 s in the span" in text
+
+
+def test_options_of_the_other_mode_and_a_percentage_tolerance_are_refused(tmp_path, capsys):
+    """Each option belongs to the sliding windows or to --sample-length; given to the other
+    it would be ignored without a word, so it is refused in one line naming it. A tolerance
+    of 10 (meaning 10 %) would judge within 1000 %: refused naming 0.1."""
+    path = str(_stationary(tmp_path))
+    for args, message in (
+            (["--start", "1"], "--start: of --sample-length only"),
+            (["--cells", "4x10", "--tolerance", "0.2"],
+             "--tolerance, --cells: of --sample-length only"),
+            (["--sample-length", "--step", "2"], "--step: of the sliding windows"),
+            (["--sample-length", "--basis", "events"], "--basis: of the sliding windows"),
+            (["--sample-length", "--tolerance", "10"], "(0.1 for 10 %)")):
+        assert main(["stationarity", path, *args]) == 2, args
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and message in err[0], err
+    assert main(["stationarity", path, "--window-length", "1", "--step", "1"]) == 0
+    capsys.readouterr()

@@ -8,7 +8,8 @@ from pathlib import Path
 
 from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import (count, finite_float, level, minkowski_order, parse_cells,
-                                   parse_times, parse_window, positive_float)
+                                   parse_times, parse_window, positive_float,
+                                   relative_tolerance)
 from cfbmarkov.errors import HistoryError, InputError
 
 
@@ -320,6 +321,7 @@ def cmd_stationarity(args) -> int:
     from cfbmarkov.analysis.stationarity import check_stationarity
     from cfbmarkov.observed.metrics import percentage_text as pd_text
 
+    _check_stationarity_options(args)
     if args.sample_length:
         return _sample_length(args)
     if len(args.file) > 1:
@@ -385,6 +387,42 @@ def cmd_stationarity(args) -> int:
         else:
             print(f"  persistence: no whole {j1 - j0:g} s window before {j0:g} s in the span")
     return 0
+
+
+#: stationarity's options of each mode: the sliding windows' and --sample-length's
+_SLIDING_ONLY = ("window_length", "step")
+_SAMPLE_LENGTH_ONLY = ("start", "tolerance", "states", "cells", "estimator")
+_STATIONARITY_DEFAULTS = {"window_length": 5.0, "step": 1.0, "tolerance": 0.1,
+                          "states": "cells", "cells": (6, 38)}
+
+
+def _option_names(names: list[str]) -> tuple[str, str]:
+    """The options' command-line names joined, and the pronoun for them."""
+    return (", ".join("--" + name.replace("_", "-") for name in names),
+            "it" if len(names) == 1 else "them")
+
+
+def _check_stationarity_options(args) -> None:
+    """Refuse an option of the other mode (it would be ignored without a word), then fill
+    in the defaults."""
+    if args.sample_length:
+        given = [name for name in _SLIDING_ONLY if getattr(args, name) is not None]
+        if args.basis != "frames":
+            given.append("basis")
+        if given:
+            names, it = _option_names(given)
+            raise InputError(f"{names}: of the sliding windows, not of --sample-length (whose "
+                             f"windows grow from --start); leave {it} out, or run without "
+                             "--sample-length")
+    else:
+        given = [name for name in _SAMPLE_LENGTH_ONLY if getattr(args, name) is not None]
+        if given:
+            names, it = _option_names(given)
+            raise InputError(f"{names}: of --sample-length only (the sliding windows fit no "
+                             f"model); add --sample-length, or leave {it} out")
+    for name, value in _STATIONARITY_DEFAULTS.items():
+        if getattr(args, name) is None:
+            setattr(args, name, value)
 
 
 def _sample_length(args) -> int:
@@ -563,9 +601,9 @@ def add_stationarity(sub) -> None:
     s.add_argument("file", nargs="+",
                    help="trajectory file; with --sample-length, several runs of one case "
                         "(their windows' counts pooled, their long runs pooled)")
-    s.add_argument("--window-length", type=positive_float, default=5.0,
+    s.add_argument("--window-length", type=positive_float, default=None,
                    help="window length, s (default 5)")
-    s.add_argument("--step", type=positive_float, default=1.0,
+    s.add_argument("--step", type=positive_float, default=None,
                    help="time between window starts, s (default 1)")
     s.add_argument("--span", type=parse_window, default=None,
                    help="START:STOP, s, the part of the file used (default all; leave out a "
@@ -591,13 +629,14 @@ def add_stationarity(sub) -> None:
                    help="with --sample-length: where the windows start, s (default the "
                         "start of --span, else the first frame; leave out a start-up from "
                         "rest); --span's end also ends the long run")
-    s.add_argument("--tolerance", type=positive_float, default=0.1,
-                   help="with --sample-length: relative tolerance (default 0.1)")
+    s.add_argument("--tolerance", type=relative_tolerance, default=None,
+                   help="with --sample-length: relative tolerance, a fraction (default 0.1, "
+                        "10 %%)")
     s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
                                         "cells-velocity-fine", "cells-previous",
                                         "cells-regime", "cells-direction-regime"],
-                   default="cells", help="with --sample-length: the models' states (default cells)")
-    s.add_argument("--cells", type=parse_cells, default=(6, 38),
+                   default=None, help="with --sample-length: the models' states (default cells)")
+    s.add_argument("--cells", type=parse_cells, default=None,
                    help="with --sample-length: COLUMNSxROWS (default 6x38)")
     s.add_argument("--estimator", choices=["paper", "mle"], default=None,
                    help="with --sample-length: as in fit (default paper, mle on an open riser)")

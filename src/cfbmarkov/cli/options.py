@@ -287,3 +287,15 @@ def _single_value_options(parser: argparse.ArgumentParser) -> frozenset[str]:
                      if action.option_strings and action.nargs in (None, "?")
                      and not isinstance(action, argparse._SubParsersAction)  # noqa: SLF001
                      for name in action.option_strings)
+
+
+def relative_tolerance(text: str) -> float:
+    """A relative tolerance, a fraction strictly between 0 and 1 (``0.1`` for 10 %); a
+    percentage such as ``10`` is refused naming the fraction meant."""
+    value = number(text)
+    if not 0.0 < value < 1.0:
+        hint = (f"{value / 100:g} for {value:g} %" if 1.0 <= value < 100.0
+                else "e.g. 0.1 for 10 %")
+        raise argparse.ArgumentTypeError(f"'{text}' must be a fraction strictly between 0 and "
+                                         f"1 ({hint})")
+    return value
