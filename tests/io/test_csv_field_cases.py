@@ -270,12 +270,16 @@ def test_ptv_particles_entering_and_leaving_are_present_as_in_the_file(tmp_path)
     (("--region", "0:0.09"), r"argument --region"),
     (("--boundary", "closed"), r"argument --boundary: invalid choice: 'closed'"),
     (("--region", "0.5:0.9,0:0.95"), r"holds no particle in any frame"),
+    (("--region", "0:0.09,0:0.95", "--width", "0.05"),
+     r"--region sets the riser's size and place, so --width would be ignored"),
+    (("--drop-depth", "--width", "0.09", "--height", "0.95"),
+     r"--drop-depth drops a z column, but the file's positions are 2D"),
 ])
 def test_wrong_option_values_give_one_line(tmp_path, assert_clean_failure, args, match):
     output = tmp_path / "o" / "x.h5"
+    size = () if {"--region", "--width"} & set(args) else ("--width", "0.09", "--height", "0.95")
     assert_clean_failure("import", FIELD / "semicolon-decimal-comma.csv", "--format", "csv",
-                         "--width", "0.09", "--height", "0.95",
-                         *args, "-o", output, output=output, match=match)
+                         *size, *args, "-o", output, output=output, match=match)
 
 
 def test_wrong_option_values_through_the_api(tmp_path):

@@ -110,8 +110,9 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
     Raises
     ------
     InputError
-        For an unknown format, a non-positive size, time step, resample step or gap, a time
-        step given with a CSV file, a length or time unit or resampling given with a dump,
+        For an unknown format, a non-positive size, time step, resample step or gap, a
+        region given with a width or height, ``drop_depth`` on 2D positions, a time step
+        given with a CSV file, a length or time unit or resampling given with a dump,
         or bad input (see
         :func:`import_csv` and :func:`import_lammps`).
     """
@@ -120,6 +121,11 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                         ("--resample", resample), ("--max-gap", max_gap)):
         if value is not None and not (np.isfinite(float(value)) and float(value) > 0):
             raise InputError(f"{name} {value} must be a positive number")
+    if region is not None and (width is not None or height is not None):
+        given = " and ".join(name for name, value in (("--width", width), ("--height", height))
+                             if value is not None)
+        raise InputError(f"--region sets the riser's size and place, so {given} would be "
+                         f"ignored; give --region alone, or {given} without it")
     if fmt == "csv":
         if time_step is not None:
             raise InputError("--time-step applies to LAMMPS dumps only; a CSV file gives its "

@@ -172,6 +172,7 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
             try:
                 with open_text(path) as fh:
                     layout = read_layout(fh, label, **options)
+                    _check_depth_option(layout, label, drop_depth)
                     if _unsized(layout, geometry):
                         _refuse_unsized(row_blocks(fh, layout, label, streaming=False),
                                         layout, label, geometry)
@@ -183,6 +184,7 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
                 pass
         with open_text(path) as fh:     # read whole: rows out of time order, or resampling
             layout = read_layout(fh, label, **options)
+            _check_depth_option(layout, label, drop_depth)
             rows = list(row_blocks(fh, layout, label, streaming=False))
             if _unsized(layout, geometry):
                 _refuse_unsized(rows, layout, label, geometry)
@@ -318,6 +320,14 @@ def _parameters(path: Path, layout: CsvLayout, riser: RiserFrame, row_order: str
         "description_rows_skipped": layout.description_rows,
         "width": riser.width, "height": riser.height,
     }
+
+
+def _check_depth_option(layout: CsvLayout, label: str, drop_depth: bool) -> None:
+    """Refuse ``--drop-depth`` on a file of 2D positions (it would be ignored)."""
+    if drop_depth and layout.dropped is None:
+        raise InputError(f"{label}: --drop-depth drops a z column, but the file's positions "
+                         f"are 2D ({layout.across} across, {layout.vertical} vertical): leave "
+                         "--drop-depth out")
 
 
 def _no_rows(label: str, layout: CsvLayout) -> str:

@@ -147,8 +147,8 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
     ------
     InputError
         For a 3D source without ``vertical_axis`` (the message lists the extents and the
-        axis a guess would take), an unknown axis or boundary, a region that does not fit
-        the source's axes, or a riser of no size.
+        axis a guess would take), an unknown axis or boundary, ``drop_depth`` on a 2D source, a region that does not fit the source's
+        axes, or a riser of no size.
     """
     if boundary is not None:
         boundary = Boundary.parse(boundary, "--boundary")
@@ -176,6 +176,9 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
     if boundary is None:
         boundary = Boundary.parse(("periodic" if periodic[1] else "open") if len(flags) > vertical
                                   else default_boundary)
+    if drop_depth and not spread and n_axes == 2:
+        raise InputError(f"{where}: --drop-depth drops a third axis, but the source has two "
+                         "(x and y): leave --drop-depth out")
     if region is not None:
         ranges = [tuple(float(v) for v in r) for r in region]
         if max(axes) >= len(ranges):
