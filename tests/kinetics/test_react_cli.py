@@ -482,3 +482,34 @@ def test_a_kinetics_miss_within_the_references_own_sampling_is_not_told_apart():
     assert line.endswith("overlaps it: the two are not told apart")
     assert kinetics_verdict("activity", 0.8648, model, 0.9, [0.8646, 0.8663]).endswith(
         "the model misses the reference's activity beyond its uncertainty")
+
+
+def test_react_options_that_would_be_ignored_are_refused(fitted, tmp_path, capsys):
+    """A Monte Carlo option given alone names the missing ones; --seed without a Monte
+    Carlo, and a model file given as the kinetics file, are refused in one line."""
+    folder, run, model = fitted
+    kin = _write(tmp_path, "[[property]]\nname = \"X\"\nlaw = \"first-order\"\nrate = 0.4\n")
+    for argv, message in (
+            (["--init", str(run)], "add --start T --duration D -o OUT"),
+            (["--init", str(run), "--start", "0", "-o", str(tmp_path / "p.h5")],
+             "add --duration D"),
+            (["--seed", "3"], "--seed seeds the Monte Carlo"),
+            (["--kinetics", str(model)], "is not text (an HDF5 file: a model or trajectory")):
+        kinetics = [] if "--kinetics" in argv else ["--kinetics", str(kin)]
+        assert main(["react", str(model), *kinetics, *argv]) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err, err
+    assert not (tmp_path / "p.h5").exists()
+
+
+def test_rtd_at_another_level_of_a_model_without_an_interval_is_refused(fitted, tmp_path,
+                                                                         capsys):
+    _, run, _ = fitted
+    bare = tmp_path / "bare.h5"
+    assert main(["fit", str(run), "--cells", "3x6", "--window", "0:2", "--resamples", "0",
+                 "-o", str(bare)]) == 0
+    capsys.readouterr()
+    assert main(["rtd", str(bare), "--level", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds no interval" in err and "--resamples 100" in err
+    assert main(["rtd", str(bare)]) == 0

@@ -34,10 +34,15 @@ def cmd_react(args) -> int:
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.markov.kinetics_exact import exact_kinetics
 
-    mc = [args.init, args.start, args.duration, args.output]
-    if any(v is not None for v in mc) and any(v is None for v in mc):
-        raise InputError("the Monte Carlo needs all of --init RUN --start T --duration D "
-                         "-o OUT")
+    mc = {"--init RUN": args.init, "--start T": args.start, "--duration D": args.duration,
+          "-o OUT": args.output}
+    missing = [name for name, value in mc.items() if value is None]
+    if len(missing) < len(mc) and missing:
+        raise InputError(f"the Monte Carlo needs all of --init RUN --start T --duration D "
+                         f"-o OUT: add {' '.join(missing)}")
+    if not len(missing) < len(mc) and args.seed != 0:
+        raise InputError("--seed seeds the Monte Carlo (--init RUN --start T --duration D "
+                         "-o OUT); the exact answers use none: leave it out, or add those")
     kinetics = load_kinetics(args.kinetics)
     model = MarkovModel.load(args.model)
     fields, fields_from = None, None

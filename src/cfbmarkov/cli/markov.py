@@ -260,6 +260,10 @@ def cmd_rtd(args) -> int:
         raise InputError(f"{args.model} holds a {model.uncertainty.percent} % interval, not "
                          f"{100 * args.level:g} %: add --resamples 100 to form it from 100 "
                          "bootstrap resamples of the model's fitting window")
+    elif args.level is not None and model.uncertainty is None:
+        raise InputError(f"{args.model} holds no interval (fitted with --resamples 0, or in "
+                         f"Python): add --resamples 100 to form a {100 * args.level:g} % one "
+                         "from 100 bootstrap resamples of the model's fitting window")
     rtd = model.rtd(window=args.window_length)
     band = rtd.uncertainty              # the intrinsic RTD's only
     adequacy = getattr(model, "adequacy", None)

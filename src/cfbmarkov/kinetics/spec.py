@@ -346,6 +346,18 @@ class Kinetics:
 _PROPERTY_KEYS = {"name", "law", "start", "initial", "threshold"}
 
 
+def _binary_kind(path: Path) -> str:
+    """What a file that is not text seems to be, in words."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(8)
+    except OSError:
+        return "unreadable"
+    if head == b"\x89HDF\r\n\x1a\n":
+        return "an HDF5 file: a model or trajectory file?"
+    return "a binary file"
+
+
 def load_kinetics(path: str | os.PathLike) -> Kinetics:
     """Read a kinetics file (TOML; ``docs/how-to/kinetics.md``).
 
@@ -381,7 +393,11 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
         data = tomllib.loads(path.read_text())
     except OSError as exc:
         raise InputError(f"cannot read kinetics file {name}: {exc.strerror or exc}") from None
-    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+    except UnicodeDecodeError:
+        what = _binary_kind(path)
+        raise InputError(f"kinetics file {name} is not text ({what}): give the TOML file of "
+                         "[[property]] tables (--kinetics kin.toml)") from None
+    except tomllib.TOMLDecodeError as exc:
         raise InputError(f"kinetics file {name} is not valid TOML: {exc}") from None
     unknown = set(data) - {"property"}
     if unknown:
