@@ -32,6 +32,10 @@ def run(tmp_path):
      "--judge 3:4 s lies outside the span 0:1.5 s"),
     (("export-vtk", "--start", "15", "--stop", "16", "-o", "v"),
      "window 15:16 s lies outside the data of {run} (0 to 2 s)"),
+    (("export-vtk", "--start", "15", "-o", "v"),
+     "--start 15 s lies after the data's end: the data of {run} span 0 to 2 s"),
+    (("export-vtk", "--stop", "-1", "-o", "v"),
+     "--stop -1 s lies before the data's start: the data of {run} span 0 to 2 s"),
 ])
 def test_errors_name_the_working_value(run, tmp_path, capsys, monkeypatch, args, expected):
     monkeypatch.chdir(tmp_path)
@@ -50,3 +54,17 @@ def test_a_mistyped_option_names_the_verb_and_the_option_it_may_mean(capsys):
     assert main(["rtd", "m.h5", "surplus"]) == 2
     assert capsys.readouterr().err.startswith("cfbmarkov rtd: error: unrecognized arguments: "
                                               "surplus; see")
+
+
+def test_a_model_given_to_import_and_a_folder_given_as_a_file(run, tmp_path, capsys):
+    model = tmp_path / "m.h5"
+    assert main(["fit", str(run), "--lag", "0.002", "--window", "0.5:1.5", "--cells", "2x4",
+                 "--resamples", "0", "-o", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["import", str(model), "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "it is a cfbmarkov model file (from fit)" in err
+    for verb in ("info", "rtd"):
+        assert main([verb, str(tmp_path)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "is a folder, not a file" in err, err

@@ -127,6 +127,9 @@ def open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
         if "unable to lock file" in text:
             raise InputError(f"{path}: locked by another program that is writing it (HDF5 "
                              "file lock); wait for it to end") from None
+        if Path(path).is_dir():
+            raise InputError(f"{path}: is a folder, not a file; give a cfbmarkov trajectory "
+                             "or model file (.h5) in it") from None
         raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format); "
                          "give a cfbmarkov trajectory or model file (.h5), or import the "
                          "data first (cfbmarkov import)") from None

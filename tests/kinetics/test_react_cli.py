@@ -513,3 +513,8 @@ def test_rtd_at_another_level_of_a_model_without_an_interval_is_refused(fitted, 
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "holds no interval" in err and "--resamples 100" in err
     assert main(["rtd", str(bare)]) == 0
+    capsys.readouterr()
+    assert main(["predict", str(bare), "--init", str(run), "--start", "0", "--duration",
+                 "0.11", "-q", "-o", str(tmp_path / "p.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "not a whole multiple of the model's lag 0.025 s (e.g. 0.1 or 0.125 s)" in err

@@ -38,7 +38,8 @@ def test_the_kernel_counts_the_passes_the_heights_misread():
     check_lag_resolves_passes(heights, laps, 3, H, DT)
     passes = int(np.count_nonzero(laps[4:] != laps[:-4]))
     with pytest.raises(InputError, match=rf"run\.h5: at a lag of 0\.1 s the heights one lag "
-                                         rf"apart misread 32 of the {passes} passes .* in 32 "
+                                         rf"apart read 32 passes .* wrong .* against the {passes} "
+                                         r"that the file's laps count, in 32 "
                                          r"particle moves: .*up to 0\.6 m; give a lag of at "
                                          r"most 0\.075 s \(--lag\)"):
         check_lag_resolves_passes(heights, laps, 4, H, DT, "run.h5")
@@ -59,7 +60,7 @@ def test_a_few_misread_passes_below_the_tolerance_pass():
     heights[1, 0], laps[1, 0] = 0.6, 1            # a rise of 0.65 m through the top
     check_lag_resolves_passes(heights, laps, 1, H, DT)
     heights[1, 1], laps[1, 1] = 0.6, 1
-    with pytest.raises(InputError, match=f"misread 2 of the {n} passes"):
+    with pytest.raises(InputError, match=f"read 2 passes .* wrong .* against the {n} "):
         check_lag_resolves_passes(heights, laps, 1, H, DT)
 
 

@@ -122,12 +122,15 @@ def detect_format(source) -> tuple[str, str]:
             with h5py.File(path, "r") as f:
                 h5md = "h5md" in f and "particles" in f
                 ours = "frames" in f
+                fmt = f.attrs.get("format")
+                fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
         except (OSError, KeyError, RuntimeError, ValueError) as exc:
             text = " ".join(str(exc).split())[:160]
             raise InputError(f"{path}: cannot read as HDF5 ({text})") from None
         if not h5md:
             hint = ("; it is a cfbmarkov trajectory file already: use it as it is" if ours
-                    else "")
+                    else "; it is a cfbmarkov model file (from fit): import reads particle "
+                    "data (dumps, CSV, VTK, H5MD)" if fmt == "cfbmarkov.model" else "")
             raise InputError(f"{path}: an HDF5 file without the H5MD groups /h5md and "
                              f"/particles: no importer reads it{hint}")
         return "h5md", DESCRIPTIONS["h5md"]

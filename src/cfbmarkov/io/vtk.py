@@ -420,8 +420,10 @@ def _select_frames(traj: Trajectories, start: float | None, stop: float | None,
     t0 = float(traj.times[0]) if start is None else float(start)
     t1 = float(traj.times[-1]) if stop is None else float(stop)
     if t0 > t1 and (start is None or stop is None):   # one bound given, beyond the data
-        raise InputError(f"window {t0:g}:{t1:g} s lies outside the data of {traj.path} "
-                         f"({traj.times[0]:g} to {traj.times[-1]:g} s)")
+        given = f"--start {t0:g} s" if start is not None else f"--stop {t1:g} s"
+        side = "after the data's end" if start is not None else "before the data's start"
+        raise InputError(f"{given} lies {side}: the data of {traj.path} span "
+                         f"{traj.times[0]:g} to {traj.times[-1]:g} s")
     if t0 == t1:
         window = slice(traj.frame_index(t0), traj.frame_index(t0) + 1)
     else:

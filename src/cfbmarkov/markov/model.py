@@ -341,7 +341,11 @@ class MarkovModel:
             raise InputError(f"time {time:g} s is not a finite number")
         k = int(round(time / self.lag))
         if k < 0 or abs(k * self.lag - time) > 1e-6 * max(self.lag, abs(time)):
-            raise InputError(f"time {time:g} s is not a whole multiple of the lag {self.lag:g} s")
+            below = max(int(np.floor(time / self.lag + 1e-9)), 0) * self.lag
+            nearest = f"{below:g} or {below + self.lag:g} s" if below > 0 else \
+                f"{self.lag:g} s"
+            raise InputError(f"time {time:g} s is not a whole multiple of the model's lag "
+                             f"{self.lag:g} s (e.g. {nearest})")
         return k
 
     def batch_injection_maps(self, times: Sequence[float], outflow: bool = False) -> np.ndarray:

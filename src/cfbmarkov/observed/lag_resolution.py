@@ -126,8 +126,9 @@ class PassReading:
                f"frames at most {dt * half / self.largest:.2g} s apart")
         where = f"{self.source}: " if self.source else ""
         raise InputError(f"{where}at a lag of {self.lag_frames * dt:g} s the heights one lag "
-                         f"apart misread {self.misread} of the {self.passes} passes through "
-                         "the periodic boundary that the file's laps count, in "
+                         f"apart read {self.misread} passes through the periodic boundary "
+                         f"wrong (missed, or seen where there is none) against the "
+                         f"{self.passes} that the file's laps count, in "
                          f"{self.moves} particle moves: particles move half the riser's "
                          f"height ({half:g} m) or more within the lag, up to "
                          f"{self.largest:.3g} m; {fix}")
