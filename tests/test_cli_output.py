@@ -200,3 +200,20 @@ def test_a_model_file_for_a_trajectory_names_the_fix(model, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "a cfbmarkov model file, not a trajectory file; give a " \
         "trajectory file" in err and "cfbmarkov info MODEL" in err
+
+
+def test_an_output_named_as_another_format_is_refused(model, tmp_path, capsys):
+    """A model named .txt, a prediction .csv, a map .h5: refused naming the suffix to use,
+    nothing written; a name without a suffix is taken as given."""
+    run = str(model.parent / "run.h5")
+    for argv, message in (
+            (["fit", run, "--cells", "4x8", "-o", str(tmp_path / "m.txt")],
+             "the output is an HDF5 file, not a .txt file; name it m.h5"),
+            (["predict", str(model), "--init", run, "--start", "0", "--duration", "0.1",
+              "-q", "-o", str(tmp_path / "p.csv")], "not a .csv file; name it p.h5"),
+            (["maps", str(model), "-o", str(tmp_path / "maps.h5")],
+             "the output is a PNG image, not a .h5 file; name it maps.png")):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and message in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == []

@@ -371,6 +371,35 @@ def describe(path: str | os.PathLike) -> str:
     return _describe(Path(path))
 
 
+#: file name suffixes that say a file is of another format than the HDF5 file or PNG
+#: image a verb writes (a name without a suffix, or another one, is taken as given)
+_FOREIGN_SUFFIXES = {
+    "hdf5": {".csv", ".txt", ".tsv", ".json", ".png", ".jpg", ".jpeg", ".pdf", ".svg",
+             ".vtk", ".vtp", ".pvd", ".dump", ".toml", ".xlsx", ".dat"},
+    "png": {".h5", ".hdf5", ".csv", ".txt", ".json", ".jpg", ".jpeg", ".pdf", ".svg",
+            ".vtk"},
+}
+_WRITES = {"trajectory": "hdf5", "prediction": "hdf5", "model": "hdf5", "png": "png"}
+
+
+def check_suffix(target: str | os.PathLike, kind: str) -> None:
+    """Refuse an output name whose suffix says another format than the one written (a
+    model written as ``model.txt``, a map as ``maps.h5``).
+
+    Raises
+    ------
+    InputError
+        Naming the suffix and the one to use.
+    """
+    written = _WRITES.get(kind)
+    suffix = Path(target).suffix.lower()
+    if written is None or suffix not in _FOREIGN_SUFFIXES[written]:
+        return
+    what, right = (("an HDF5 file", ".h5") if written == "hdf5" else ("a PNG image", ".png"))
+    raise InputError(f"{target}: the output is {what}, not a {suffix} file; name it "
+                     f"{Path(target).with_suffix(right).name}")
+
+
 @contextlib.contextmanager
 def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
                  force: bool = False):
@@ -405,6 +434,7 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
     """
     target = Path(target)
     check_output_name(target)
+    check_suffix(target, kind)
     key = str(lock_path(target).absolute())
     if key in _HELD:        # claimed by this process already (the command line, then the API)
         _HELD[key][1] += 1
