@@ -33,9 +33,9 @@ def run(tmp_path):
     (("export-vtk", "--start", "15", "--stop", "16", "-o", "v"),
      "window 15:16 s lies outside the data of {run} (0 to 2 s)"),
     (("export-vtk", "--start", "15", "-o", "v"),
-     "--start 15 s lies after the data's end: the data of {run} span 0 to 2 s"),
+     "--start 15 s lies outside the data of {run}, after its end (0 to 2 s)"),
     (("export-vtk", "--stop", "-1", "-o", "v"),
-     "--stop -1 s lies before the data's start: the data of {run} span 0 to 2 s"),
+     "--stop -1 s lies outside the data of {run}, before its start (0 to 2 s)"),
 ])
 def test_errors_name_the_working_value(run, tmp_path, capsys, monkeypatch, args, expected):
     monkeypatch.chdir(tmp_path)

@@ -421,9 +421,9 @@ def _select_frames(traj: Trajectories, start: float | None, stop: float | None,
     t1 = float(traj.times[-1]) if stop is None else float(stop)
     if t0 > t1 and (start is None or stop is None):   # one bound given, beyond the data
         given = f"--start {t0:g} s" if start is not None else f"--stop {t1:g} s"
-        side = "after the data's end" if start is not None else "before the data's start"
-        raise InputError(f"{given} lies {side}: the data of {traj.path} span "
-                         f"{traj.times[0]:g} to {traj.times[-1]:g} s")
+        side = "after its end" if start is not None else "before its start"
+        raise InputError(f"{given} lies outside the data of {traj.path}, {side} "
+                         f"({traj.times[0]:g} to {traj.times[-1]:g} s)")
     if t0 == t1:
         window = slice(traj.frame_index(t0), traj.frame_index(t0) + 1)
     else:
