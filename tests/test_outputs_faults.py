@@ -127,7 +127,7 @@ def test_output_of_another_kind_needs_force(data, tmp_path, capsys):
     assert "is a trajectory file, not a model file; add --force" in capsys.readouterr().err
     assert _fit(data, traj, "--force") == 0            # asked for: replaced
     assert _fit(data, traj) == 0                       # same kind: replaced as before
-    text = tmp_path / "notes.txt"
+    text = tmp_path / "notes"                          # a text file without a suffix
     text.write_text("keep me")
     assert _fit(data, text) == 2 and text.read_text() == "keep me"
     os.mkfifo(tmp_path / "fifo")

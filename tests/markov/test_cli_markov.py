@@ -52,7 +52,7 @@ def test_fit_predict_rtd_info(tmp_path, capsys, markov_run):
     assert code == 0 and fractions[0] == 1.0 and fractions[2] < fractions[1] <= 1.0
     assert (tmp_path / "maps.png").stat().st_size > 5000
     code, _, err = run_cli(capsys, "maps", model_path, "--times", "0.07", "-o", tmp_path / "x.png")
-    assert "not a whole multiple of the lag" in err
+    assert "not a whole multiple of the model's lag" in err
     assert_clean_failure(code, err, tmp_path / "x.png")
     code, out, _ = run_cli(capsys, "info", model_path)
     assert code == 0 and "Markov chain model" in out

@@ -129,7 +129,7 @@ def test_batch_injection_maps(markov_flow, markov_run):
     np.testing.assert_allclose(maps.sum(axis=(1, 2)), 1.0)
     rows_mean = [(m.sum(axis=1) * np.arange(markov_flow.rows)).sum() for m in maps]
     assert rows_mean[0] < rows_mean[1] < rows_mean[2]       # the batch rises
-    with pytest.raises(InputError, match="whole multiple of the lag"):
+    with pytest.raises(InputError, match="whole multiple of the model's lag"):
         model.batch_injection_maps([0.01])
 
 
