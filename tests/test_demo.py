@@ -160,3 +160,23 @@ def test_demo_verdict_follows_the_baseline_rule():
     assert "Next step: a state space with memory (fit --states auto)" in loses
     beats = demo_module.demo_verdict({"paper": _summary(0.02, 0.2), "mle": _summary(0.3, 0.2)})
     assert "the models beat the persistence baseline in 1 of 2 estimators" in beats
+
+
+def test_demo_refuses_synthetic_options_without_synthetic(tmp_path, capsys, monkeypatch):
+    """--particles and --seed belong to the synthetic demo: without --synthetic they are
+    refused in one line before anything starts, not dropped."""
+    import cfbmarkov.reproduce
+
+    def no_run(*args, **kwargs):            # were it not refused: fail at once, not run
+        raise AssertionError("the CFD-DEM demo started")
+
+    monkeypatch.setattr(cfbmarkov.reproduce, "reproduce", no_run)
+    for argv, named in ((["--particles", "100"], "--particles applies only with --synthetic"),
+                        (["--particles", "100", "--seed", "2"],
+                         "--particles and --seed apply only with --synthetic")):
+        assert main(["demo", "-o", str(tmp_path / "d"), *argv]) == 2
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert len(err) == 1 and captured.out == "" and named in err[0]
+        assert "add --synthetic" in err[0]
+        assert not (tmp_path / "d").exists()
