@@ -457,3 +457,19 @@ def test_a_reproductions_own_entries_are_not_foreign(tmp_path):
     with pytest.raises(InputError, match="'u7.txt' and 'uu', which are not part of"):
         check_run_folder(out, scale_cases("quick", [6.0]), ["u6"])
 
+
+def test_the_models_record_their_fitting_data(reference, tmp_path):
+    """As fit does: each model records its fitting window's identity (and cell fields), by
+    which a copy of its fitting file is recognised wherever it lies."""
+    import shutil
+
+    from cfbmarkov.analysis.cell_fields import check_fitting_file
+    from cfbmarkov.markov import MarkovModel
+
+    out, _ = reference
+    copy = tmp_path / "copy.h5"
+    shutil.copy(out / "u8" / "cfd-dem.h5", copy)
+    for name in ("paper", "mle", "auto"):
+        model = MarkovModel.load(out / "u8" / f"model-{name}.h5")
+        assert model.source_identity and model.cell_fields is not None, name
+        assert check_fitting_file(model, copy) == tuple(model.window)

@@ -180,7 +180,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     """
     import numba
 
-    from cfbmarkov.analysis.cell_fields import fitting_cell_fields
+    from cfbmarkov.analysis.fit_checks import record_fitting_data
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.report.compare import SUMMARY, compare
     from cfbmarkov.simulate.run import simulate
@@ -257,12 +257,14 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
             else:
                 t0, c0 = _time.perf_counter(), _time.process_time()
                 model = _fit(name, ref, members, m)
-                if len(members) == 1:
-                    # the cell fields serve kinetics (react), not the paper's fit: not timed
-                    t1, c1 = _time.perf_counter(), _time.process_time()
-                    model = model.with_cell_fields(fitting_cell_fields(ref, model))
-                    t0 += _time.perf_counter() - t1
-                    c0 += _time.process_time() - c1
+                # what fit records (the fitting window's identity, by which the fitting
+                # file is found wherever the folder goes, and the cell fields for react),
+                # not the paper's fit: not timed
+                t1, c1 = _time.perf_counter(), _time.process_time()
+                model = record_fitting_data(model, [ref, *members[1:]],
+                                            [m.fit_window] * len(members))
+                t0 += _time.perf_counter() - t1
+                c0 += _time.process_time() - c1
                 model.save(model_path)
                 _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0,
                                                 "cpu_s": _time.process_time() - c0})
