@@ -89,8 +89,14 @@ def cmd_compare(args) -> int:
              f"; residences counted: reference {counts[0]}, model {counts[1]}"))
     baseline = summary.get("baseline")
     if baseline and baseline.get("md_rtd") is not None:
+        import math
+
         halves = (summary.get("natural_variability") or {}).get("md_rtd")
-        print("  " + baseline_line(baseline, summary["md_rtd"], halves))
+        if summary["md_rtd"] is not None and math.isfinite(summary["md_rtd"]):
+            print("  " + baseline_line(baseline, summary["md_rtd"], halves))
+        else:       # no MD of the model's RTD (too few residences): nothing to judge
+            print("  persistence baseline not judged: the model's MD is undefined in this "
+                  "window")
     model = summary["model"]
     if "rt_mean_interval" in model:
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
