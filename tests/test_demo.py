@@ -160,3 +160,55 @@ def test_demo_verdict_follows_the_baseline_rule():
     assert "Next step: a state space with memory (fit --states auto)" in loses
     beats = demo_module.demo_verdict({"paper": _summary(0.02, 0.2), "mle": _summary(0.3, 0.2)})
     assert "the models beat the persistence baseline in 1 of 2 estimators" in beats
+
+
+def test_demo_models_find_their_reference_from_inside_the_folder(tmp_path, capsys,
+                                                                 monkeypatch):
+    """The demo's models record their fitting data as fit does (its identity): run from
+    inside the demo's folder, rtd's interval and react --run find or accept reference.h5
+    (and a byte-identical copy), though the models name it from the folder above."""
+    import importlib
+    import shutil
+
+    def stop(*args, **kwargs):
+        raise InputError("stopped at the comparison (test)")
+
+    monkeypatch.setattr(importlib.import_module("cfbmarkov.report.compare"), "compare", stop)
+    monkeypatch.chdir(tmp_path)
+    assert main(["demo", "--synthetic", "-o", "synth", "--particles", "300", "-q"]) == 2
+    monkeypatch.chdir(tmp_path / "synth")
+    from cfbmarkov.markov import MarkovModel
+
+    model = MarkovModel.load("model-paper.h5")
+    assert model.source == "synth/reference.h5" and model.source_identity
+    capsys.readouterr()
+    assert main(["rtd", "model-paper.h5", "--resamples", "20"]) == 0
+    captured = capsys.readouterr()
+    assert "90 % interval" in captured.out and "warning" not in captured.err
+    (tmp_path / "kin.toml").write_text('[[property]]\nname = "T"\nlaw = "heat-exchange"\n'
+                                       "coefficient = 2.0\ntemperature = 800.0\n"
+                                       "wall_temperature = 600.0\ninitial = 300.0\n")
+    shutil.copy("reference.h5", tmp_path / "copy.h5")
+    for run in ("reference.h5", str(tmp_path / "copy.h5")):
+        assert main(["react", "model-paper.h5", "--kinetics", str(tmp_path / "kin.toml"),
+                     "--run", run]) == 0, capsys.readouterr().err
+
+
+def test_demo_refuses_synthetic_options_without_synthetic(tmp_path, capsys, monkeypatch):
+    """--particles and --seed belong to the synthetic demo: without --synthetic they are
+    refused in one line before anything starts, not dropped."""
+    import cfbmarkov.reproduce
+
+    def no_run(*args, **kwargs):            # were it not refused: fail at once, not run
+        raise AssertionError("the CFD-DEM demo started")
+
+    monkeypatch.setattr(cfbmarkov.reproduce, "reproduce", no_run)
+    for argv, named in ((["--particles", "100"], "--particles applies only with --synthetic"),
+                        (["--particles", "100", "--seed", "2"],
+                         "--particles and --seed apply only with --synthetic")):
+        assert main(["demo", "-o", str(tmp_path / "d"), *argv]) == 2
+        captured = capsys.readouterr()
+        err = captured.err.strip().splitlines()
+        assert len(err) == 1 and captured.out == "" and named in err[0]
+        assert "add --synthetic" in err[0]
+        assert not (tmp_path / "d").exists()

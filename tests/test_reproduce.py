@@ -375,3 +375,101 @@ def test_compile_kernels_warms_both_halves_and_leaves_the_step_alone(tmp_path, m
         halves.dem.step(halves.dem_steps_per_cfd, external_force=halves._force)
     np.testing.assert_array_equal(whole.dem.positions, halves.dem.positions)
     np.testing.assert_array_equal(whole.gas.u, halves.gas.u)
+
+
+# -- what reproduce refuses before it writes anything ----------------------------------------
+def _quick_case_folder(out: Path) -> dict:
+    """A folder as a quick-scale reproduce at 3 m/s leaves it once its case has started:
+    reproduce.json and u3/case.json; returns each file's bytes."""
+    (out / "u3").mkdir(parents=True)
+    case = scale_cases("quick", [3.0])[0]
+    (out / "u3" / "case.json").write_text(case.model_dump_json(indent=2) + "\n")
+    (out / "reproduce.json").write_text(json.dumps({"scale": "quick", "cases": ["u3"]}) + "\n")
+    return {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+
+def test_another_scale_in_the_folder_is_refused_before_the_manifest_is_written(
+        tmp_path, capsys):
+    out = tmp_path / "rp"
+    before = _quick_case_folder(out)
+    capsys.readouterr()
+    assert main(["reproduce", "-o", str(out), "--velocities", "3", "--scale", "paper"]) == 2
+    captured = capsys.readouterr()
+    err = captured.err.strip().splitlines()
+    assert captured.out == "" and len(err) == 1, captured
+    assert f"{out / 'u3'} holds a run of another configuration" in err[0]
+    assert "failed" not in err[0] and "use another output directory" in err[0]
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before          # the quick scale's manifest intact, nothing added
+
+
+@pytest.mark.parametrize("foreign, named", [
+    (["notes.txt"], "'notes.txt', which is not part"),
+    (["a.txt", "b.dat", "c.csv", "d.h5"], "'a.txt', 'b.dat' and 'c.csv' (and 1 more), which "
+                                          "are not part"),
+])
+def test_a_folder_of_other_files_is_refused_naming_them(tmp_path, capsys, foreign, named):
+    out = tmp_path / "k3"
+    out.mkdir()
+    for name in foreign:
+        (out / name).write_text("mine")
+    assert main(["reproduce", "-o", str(out), "--velocities", "3", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "Traceback" not in err[0]
+    assert f"{out}: folder holds {named} of a reproduction" in err[0]
+    assert "give a new or empty folder with -o" in err[0]
+    assert sorted(p.name for p in out.iterdir()) == sorted(foreign)
+
+
+def test_the_synthetic_demo_folder_is_refused_and_stays_the_demos(tmp_path, capsys,
+                                                                   monkeypatch):
+    import cfbmarkov.demo
+
+    out = tmp_path / "synth"
+    out.mkdir()
+    for name in ("reference.h5", "demo.json", "model-paper.h5"):
+        (out / name).write_text("{}")
+    assert main(["reproduce", "-o", str(out), "--velocities", "3", "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "which are not part of a reproduction" in err and "'demo.json'" in err
+    assert sorted(p.name for p in out.iterdir()) == ["demo.json", "model-paper.h5",
+                                                     "reference.h5"]
+    # still the synthetic demo's folder: the CFD-DEM demo refuses it as such
+    monkeypatch.setattr(cfbmarkov.demo, "run_demo", lambda *a, **k: None)
+    assert main(["demo", "-o", str(out)]) == 2
+    assert "holds the synthetic demo" in capsys.readouterr().err
+
+
+def test_a_reproductions_own_entries_are_not_foreign(tmp_path):
+    from cfbmarkov.reproduce import check_run_folder, is_reproduce_entry
+
+    out = tmp_path / "run"
+    for folder in ("u3", "u4.5", "figures"):
+        (out / folder).mkdir(parents=True)
+    for name in ("reproduce.json", "report.html", "report.md", ".reproduce.json.abcd_123.tmp",
+                 "u4.5.tmp-0123abcd"):
+        (out / name).write_text("")
+    assert all(is_reproduce_entry(p) for p in out.iterdir())
+    check_run_folder(out, scale_cases("quick", [6.0]), ["u6"])
+    (out / "u7.txt").write_text("")
+    (out / "uu").mkdir()
+    assert not is_reproduce_entry(out / "u7.txt") and not is_reproduce_entry(out / "uu")
+    with pytest.raises(InputError, match="'u7.txt' and 'uu', which are not part of"):
+        check_run_folder(out, scale_cases("quick", [6.0]), ["u6"])
+
+
+def test_the_models_record_their_fitting_data(reference, tmp_path):
+    """As fit does: each model records its fitting window's identity (and cell fields), by
+    which a copy of its fitting file is recognised wherever it lies."""
+    import shutil
+
+    from cfbmarkov.analysis.cell_fields import check_fitting_file
+    from cfbmarkov.markov import MarkovModel
+
+    out, _ = reference
+    copy = tmp_path / "copy.h5"
+    shutil.copy(out / "u8" / "cfd-dem.h5", copy)
+    for name in ("paper", "mle", "auto"):
+        model = MarkovModel.load(out / "u8" / f"model-{name}.h5")
+        assert model.source_identity and model.cell_fields is not None, name
+        assert check_fitting_file(model, copy) == tuple(model.window)

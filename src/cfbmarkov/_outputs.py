@@ -344,12 +344,15 @@ def refuse_foreign(folder: str | os.PathLike, belongs, what: str, action: str) -
     ------
     InputError
         "FOLDER: folder holds 'NAME', which is not part of WHAT; refusing to ACTION", naming
-        the first foreign entry.
+        the first three foreign entries ("'A', 'B' and 'C' (and 2 more), which are not ...").
     """
     foreign = foreign_entries(folder, belongs)
     if foreign:
-        more = f" (and {len(foreign) - 1} more)" if len(foreign) > 1 else ""
-        raise InputError(f"{folder}: folder holds {foreign[0]!r}{more}, which is not part of "
+        shown = [repr(name) for name in foreign[:3]]
+        names = shown[0] if len(shown) == 1 else f"{', '.join(shown[:-1])} and {shown[-1]}"
+        more = f" (and {len(foreign) - 3} more)" if len(foreign) > 3 else ""
+        verb = "is" if len(foreign) == 1 else "are"
+        raise InputError(f"{folder}: folder holds {names}{more}, which {verb} not part of "
                          f"{what}; refusing to {action}")
 
 

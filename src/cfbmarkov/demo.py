@@ -14,6 +14,7 @@ from pathlib import Path
 
 from cfbmarkov import synthetic
 from cfbmarkov._outputs import describe, output_helper, refuse_foreign
+from cfbmarkov.analysis.fit_checks import record_fitting_data
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.markov import CellGrid, fit_model
@@ -314,7 +315,9 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
     rows = {}
     for name in ESTIMATORS:
         with stage(step, f"{name}: fitting 6x38 cells at lag 0.025 s on 10-15 s"):
-            model = fit_model(reference, grid, LAG, FIT_WINDOW, name)
+            # as fit records it: the fitting file is found by its window's content
+            # wherever the folder goes (cfbmarkov.analysis.intervals.resolve_source)
+            model = record_fitting_data(fit_model(reference, grid, LAG, FIT_WINDOW, name))
             model.save(out / f"model-{name}.h5")
         with stage(step + 1, f"{name}: predicting 15-20 s from the reference's state at 15 s"):
             prediction = model.predict(reference, start=PREDICT_WINDOW[0],

@@ -239,7 +239,9 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     ------
     InputError
         For an unknown model name or scale, unusable velocities or overrides, repeated
-        velocities, an output that exists and is not a directory, an unusable executor
+        velocities, an output that exists and is not a directory, a folder holding what a
+        reproduction did not write or a case folder of another configuration
+        (:func:`check_run_folder`, before anything is written), an unusable executor
         setting, an ensemble size out of range or another than the folder's, a failed case,
         or a report that cannot be written.
     GpuUnavailable
@@ -284,12 +286,81 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
                           jobs, progress, report, log, kinetics, ensemble, device)
 
 
-def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executor, scheduler,
-               jobs, progress, report, log, kinetics=None, ensemble=1, device="cpu") -> Path:
+#: what a reproduction writes at the top of its folder, beside its case folders
+TOP_LEVEL = ("reproduce.json", "report.html", "report.md", "figures")
+
+
+def _is_case_folder(entry: Path) -> bool:
+    """Whether ``entry`` is named and made as a case folder (``u<U>``, a folder)."""
+    name = entry.name
+    try:
+        velocity = float(name[1:]) if name.startswith("u") else math.nan
+    except ValueError:
+        return False
+    return math.isfinite(velocity) and case_name(velocity) == name and entry.is_dir()
+
+
+def is_reproduce_entry(entry: str | os.PathLike) -> bool:
+    """Whether ``entry`` of a folder is part of a reproduction written there: its manifest
+    ``reproduce.json``, its report (``report.html``, ``report.md``, ``figures/``), a case
+    folder (``u<U>``), or a lock or temporary of one of them.
+
+    Parameters
+    ----------
+    entry : str or os.PathLike
+        A path inside the folder.
+
+    Returns
+    -------
+    bool
+    """
+    from cfbmarkov._outputs import output_helper
+
+    entry = Path(entry)
+    if entry.name in TOP_LEVEL or _is_case_folder(entry):
+        return True
+    cases = [p.name for p in entry.parent.iterdir() if _is_case_folder(p)]
+    return output_helper(entry, [*TOP_LEVEL, *cases])
+
+
+def check_run_folder(out: str | os.PathLike, cases, names, ensemble: int = 1) -> None:
+    """Refuse, before anything is written, a folder that a reproduction must not write into:
+    one holding entries that are not a reproduction's (:func:`is_reproduce_entry`), a case
+    folder of another configuration (:func:`~cfbmarkov.reproduce_case.check_case_folder`)
+    or of another ensemble size (:func:`~cfbmarkov.reproduce_ensemble.check_ensemble_folder`).
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The run folder (missing: nothing to check).
+    cases : sequence of CaseConfig
+        The cases about to run.
+    names : sequence of str
+        Their folder names.
+    ensemble : int, optional
+        CFD-DEM runs per case.
+
+    Raises
+    ------
+    InputError
+        One line naming the folder, what it holds and the fix.
+    """
+    from cfbmarkov._outputs import refuse_foreign
+    from cfbmarkov.reproduce_case import check_case_folder
     from cfbmarkov.reproduce_ensemble import check_ensemble_folder
 
-    for name in names:                       # another N in a case folder: refused up front
+    out = Path(out)
+    refuse_foreign(out, is_reproduce_entry, "a reproduction",
+                   "write into it (give a new or empty folder with -o, or that of an earlier "
+                   "reproduction to resume it)")
+    for case, name in zip(cases, names):
+        check_case_folder(out / name, case)
         check_ensemble_folder(out / name, ensemble, record=False)
+
+
+def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executor, scheduler,
+               jobs, progress, report, log, kinetics=None, ensemble=1, device="cpu") -> Path:
+    check_run_folder(out, cases, names, ensemble)    # refused: nothing written
     client = None
     threads = None
     own = executor is None
@@ -463,5 +534,5 @@ def _fmt(value, spec: str) -> str:
 
 
 __all__ = ["MODELS", "InlineExecutor", "QUICK_REDUCTIONS", "SCALES", "Scale", "VELOCITIES",
-           "case_name", "dask_executor", "load_overrides", "local_executor", "reproduce",
-           "rtd_line", "scale_cases"]
+           "case_name", "check_run_folder", "dask_executor", "is_reproduce_entry",
+           "load_overrides", "local_executor", "reproduce", "rtd_line", "scale_cases"]

@@ -88,6 +88,43 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
     return out
 
 
+def check_case_folder(folder: str | os.PathLike, case: CaseConfig) -> bool:
+    """Refuse a case folder whose ``case.json`` holds another configuration than ``case``.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+        The case folder (``DIR/u<U>``; missing: nothing to check).
+    case : CaseConfig
+        The case about to run there.
+
+    Returns
+    -------
+    bool
+        Whether the folder holds ``case.json`` (of this very configuration).
+
+    Raises
+    ------
+    InputError
+        One line: ``case.json`` is unreadable (delete it), or holds another configuration
+        (naming the first differences; use another output directory or delete the folder).
+    """
+    folder = Path(folder)
+    saved = folder / "case.json"
+    if not saved.exists():
+        return False
+    try:
+        previous = CaseConfig.model_validate_json(saved.read_text())
+    except (OSError, ValueError):
+        raise InputError(f"{saved}: unreadable case file; delete it to start this case "
+                         "again") from None
+    if previous != case:
+        raise InputError(f"{folder} holds a run of another configuration ({saved}: "
+                         f"{case_difference(previous, case)}); use another output directory "
+                         "or delete that folder")
+    return True
+
+
 def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
              progress: bool = True, threads: int | None = None,
              checkpoint_every: float = 0.5, kinetics: str | None = None,
@@ -143,7 +180,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     """
     import numba
 
-    from cfbmarkov.analysis.cell_fields import fitting_cell_fields
+    from cfbmarkov.analysis.fit_checks import record_fitting_data
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.report.compare import SUMMARY, compare
     from cfbmarkov.simulate.run import simulate
@@ -158,17 +195,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     stages: dict[str, str] = {}
 
     saved = folder / "case.json"
-    if saved.exists():
-        try:
-            previous = CaseConfig.model_validate_json(saved.read_text())
-        except (OSError, ValueError):
-            raise InputError(f"{saved}: unreadable case file; delete it to start this case "
-                             "again") from None
-        if previous != case:
-            raise InputError(f"{folder} holds a run of another configuration ({saved}: "
-                             f"{case_difference(previous, case)}); use another output directory "
-                             "or delete that folder")
-    else:
+    if not check_case_folder(folder, case):
         write_text_atomic(saved, case.model_dump_json(indent=2) + "\n")
 
     m = case.markov
@@ -230,12 +257,14 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
             else:
                 t0, c0 = _time.perf_counter(), _time.process_time()
                 model = _fit(name, ref, members, m)
-                if len(members) == 1:
-                    # the cell fields serve kinetics (react), not the paper's fit: not timed
-                    t1, c1 = _time.perf_counter(), _time.process_time()
-                    model = model.with_cell_fields(fitting_cell_fields(ref, model))
-                    t0 += _time.perf_counter() - t1
-                    c0 += _time.process_time() - c1
+                # what fit records (the fitting window's identity, by which the fitting
+                # file is found wherever the folder goes, and the cell fields for react),
+                # not the paper's fit: not timed
+                t1, c1 = _time.perf_counter(), _time.process_time()
+                model = record_fitting_data(model, [ref, *members[1:]],
+                                            [m.fit_window] * len(members))
+                t0 += _time.perf_counter() - t1
+                c0 += _time.process_time() - c1
                 model.save(model_path)
                 _record(folder, f"fit-{name}", {"wall_s": _time.perf_counter() - t0,
                                                 "cpu_s": _time.process_time() - c0})
@@ -401,5 +430,5 @@ def compile_kernels(case_json: str, part: str) -> float:
     return _time.perf_counter() - started
 
 
-__all__ = ["PHYSICS", "WARM_UP_PARTICLES", "cfd_dem_timing", "compile_kernels", "long_run_span",
-           "run_case"]
+__all__ = ["PHYSICS", "WARM_UP_PARTICLES", "cfd_dem_timing", "check_case_folder",
+           "compile_kernels", "long_run_span", "run_case"]

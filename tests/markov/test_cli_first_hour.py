@@ -167,6 +167,29 @@ def test_interval_verdict_says_outside_means_a_miss():
                           "pd_rt_mean": -0.5}, 0.1005, 0.0).endswith("a tie (within 1 %)")
 
 
+def test_compare_with_an_undefined_model_md_prints_no_baseline_verdict(
+        tmp_path, capsys, monkeypatch, markov_run, fitted):
+    """A window where the prediction has no residence (its MD undefined) while the
+    baseline's is defined: the baseline line says it is not judged, no traceback."""
+    import importlib
+
+    from cfbmarkov.report.compare import compare as real_compare
+
+    def undefined_md(*args, **kwargs):
+        summary = real_compare(*args, **kwargs)
+        summary["md_rtd"] = float("nan")
+        summary["baseline"] = {"windows": [[3, 5], [5, 7]], "md_rtd": 0.05, "pd_rt_mean": 1.0}
+        return summary
+
+    monkeypatch.setattr(importlib.import_module("cfbmarkov.report.compare"), "compare",
+                        undefined_md)
+    _, pred = fitted
+    code, out, err = run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
+                             "--resamples", "0", "--no-figures", "-q", "-o", tmp_path / "c")
+    assert code == 0 and "Traceback" not in err
+    assert "persistence baseline not judged: the model's MD is undefined" in out
+
+
 # -- the two demos never share a folder ----------------------------------------------------
 
 def test_demos_have_distinct_default_folders():

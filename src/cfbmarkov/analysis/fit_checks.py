@@ -12,7 +12,7 @@ from collections.abc import Callable, Sequence
 
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError
 
-__all__ = ["IntervalWarning", "assess_fit"]
+__all__ = ["IntervalWarning", "assess_fit", "record_fitting_data"]
 
 
 class IntervalWarning(CfbmarkovWarning):
@@ -117,6 +117,44 @@ def assess_fit(model, runs: Sequence | None = None,
             model = model.with_adequacy(assess_adequacy(model, runs, windows,
                                                         uncertainty=model.uncertainty))
     return model
+
+
+def record_fitting_data(model, runs: Sequence | None = None,
+                        windows: Sequence[tuple[float, float]] | None = None):
+    """The model with what ``cfbmarkov fit`` records of its fitting data: the fitting
+    window's content identity (``source_identity``, by which its fitting file is found
+    again wherever it lies: :func:`cfbmarkov.analysis.intervals.resolve_source`) and its
+    time-averaged cell fields; no interval, no verdict (:func:`assess_fit` adds those).
+
+    Parameters
+    ----------
+    model : MarkovModel
+        A model fitted on trajectory files.
+    runs : sequence of str, os.PathLike or Trajectories, optional
+        The run(s) it was fitted on; default ``[model.source]``.
+    windows : sequence of (float, float), optional
+        The fitting window (s) of each run; default ``[model.window]``.
+
+    Returns
+    -------
+    MarkovModel
+        The same chain with its identity and cell fields (a pooled fit's fields where the
+        grid fits the files).
+
+    Raises
+    ------
+    InputError
+        If the model names no trajectory file and ``runs`` is not given, or the fitting
+        window lies outside the file.
+    """
+    if runs is None:
+        if not model.source or not isinstance(model.source, str):
+            raise InputError("the model names no trajectory file it was fitted on: give "
+                             "runs= and windows= (the files and fitting windows)")
+        runs = [model.source]
+    runs = list(runs)
+    windows = [model.window] * len(runs) if windows is None else list(windows)
+    return _with_window_fields(model, runs, windows)
 
 
 def _with_window_fields(model, runs, windows):

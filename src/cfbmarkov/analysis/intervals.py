@@ -104,6 +104,30 @@ class SourceChanged(InputError):
     """The file a model names as its source no longer holds the data it was fitted on."""
 
 
+class SourceMissing(InputError):
+    """The file a model names as its source cannot be found (from the current folder, beside
+    the model file or among the files a verb was given)."""
+
+
+def _check_sources_exist(model) -> None:
+    """Refuse a model without a recorded identity whose fitting file is not where its
+    ``source`` says (no other file can be checked to be it)."""
+    import os
+
+    sources = model.source if isinstance(model.source, (list, tuple)) else [model.source]
+    if not sources or not all(sources):
+        raise SourceMissing("the model names no trajectory file it was fitted on: intervals "
+                            "need its fitting data (fit it with cfbmarkov fit), or "
+                            "--resamples 0 to leave them out")
+    for source in sources:
+        if not os.path.isfile(str(source)):
+            raise SourceMissing(
+                f"{source} (the model's fitting file, named from the folder it was fitted "
+                "in): no such file from this folder, and the model records no identity of "
+                "its fitting data by which another copy could be taken; run from that "
+                "folder, or --resamples 0 to leave the intervals out")
+
+
 def resolve_source(model, candidates=()):
     """The model with its fitting file(s) found: its ``source`` is a path as given at fit
     time, relative to the folder it was fitted in, which need not be the current one.
@@ -111,8 +135,11 @@ def resolve_source(model, candidates=()):
     Tried in turn, each kept only where its fitting window's content identity
     (:func:`cfbmarkov.trajectory_identity.window_identity`) is the one recorded at fit
     time: the path as recorded (from the current folder), the same path beside the model
-    file (a model loaded from a file, saved where it was fitted), and ``candidates`` (the
-    files a verb was given, e.g. `compare`'s reference when it is the fitting file).
+    file and the file's name alone beside it (a model loaded from a file, saved where it
+    was fitted, or in the folder of its fitting file: ``synth/model.h5`` fitted on
+    ``synth/reference.h5`` finds ``reference.h5`` beside it from any folder), and
+    ``candidates`` (the files a verb was given, e.g. `compare`'s reference when it is the
+    fitting file).
 
     Parameters
     ----------
@@ -124,14 +151,16 @@ def resolve_source(model, candidates=()):
     -------
     MarkovModel
         ``model``, or a copy whose ``source`` names the files found. A model without a
-        recorded identity is returned as it is (its source taken on trust).
+        recorded identity is returned as it is (its source taken on trust), where its
+        source files exist.
 
     Raises
     ------
     SourceChanged
         Where a file of that name exists but none tried holds the fitting window's data.
-    InputError
-        Where no file tried exists.
+    SourceMissing
+        Where no file tried exists (for a model without a recorded identity: where its
+        source names no file, or a file missing from the current folder).
     """
     import os
     from pathlib import Path
@@ -140,6 +169,7 @@ def resolve_source(model, candidates=()):
     from cfbmarkov.trajectory_identity import window_identity
 
     if not model.source_identity:
+        _check_sources_exist(model)
         return model
     pooled = not isinstance(model.source, str)
     sources = [str(p) for p in model.source] if pooled else [model.source]
@@ -152,14 +182,18 @@ def resolve_source(model, candidates=()):
     found = []
     for source, identity, window in zip(sources, identities, windows):
         tried = [Path(source)]
-        if home is not None and not Path(source).is_absolute():
-            tried.append(Path(home).parent / source)
+        if home is not None:
+            if not Path(source).is_absolute():
+                tried.append(Path(home).parent / source)
+            tried.append(Path(home).parent / Path(source).name)
+        named = {os.path.abspath(p) for p in tried}     # files found by the source's name
         tried += [Path(c) for c in candidates]
         existing, match = [], None
         for path in dict.fromkeys(os.path.abspath(p) for p in tried):
             if not Path(path).is_file():
                 continue
-            existing.append(path)
+            if path in named:   # (a candidate that is not the fitting file says nothing
+                existing.append(path)     # of whether the fitting file was replaced)
             try:
                 with Trajectories(path) as traj:
                     if window_identity(traj, window) == identity:
@@ -173,10 +207,12 @@ def resolve_source(model, candidates=()):
                      "file of that name, or the file replaced since the fit)" if existing
                      else "no file of that name was found from this folder or beside the "
                      "model file")
-            error = SourceChanged if existing else InputError
+            fix = ("run from that folder (in it, the file was replaced since the fit: fit "
+                   "again)" if existing else "run from that folder, or put the file beside "
+                   "the model file")
+            error = SourceChanged if existing else SourceMissing
             raise error(f"{source} (the model's fitting file, named from the folder it was "
-                        f"fitted in): {where}; run from that folder (in it, the file was "
-                        "replaced since the fit: fit again), or --resamples 0 to leave the "
+                        f"fitted in): {where}; {fix}, or --resamples 0 to leave the "
                         "intervals out")
         found.append(source if os.path.abspath(source) == match else match)
     if found == sources:
@@ -318,7 +354,6 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")
-    model = resolve_source(model, candidates)
     samples = np.asarray(samples, dtype=np.float64)
     if samples.size < 2:
         raise InputError("intervals need at least 2 residence-time samples in the window")
@@ -341,6 +376,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         states, left = tracers
         m_exact, m_se = model_mixing_curve(model, states, left, int(lags.max()))
         curve = (lags, states, left)
+    model = resolve_source(model, candidates)       # the fitting data, for the bootstrap
     means, sds, rtds, curves = bootstrap_figures(model, window_length, direction, entry,
                                                  edges, blocks, resamples, seed, curve,
                                                  exact.deficit_levels)
@@ -542,6 +578,6 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
                             int(resamples))
 
 
-__all__ = ["PredictionIntervals", "SourceChanged", "block_bootstrap_models",
+__all__ = ["PredictionIntervals", "SourceChanged", "SourceMissing", "block_bootstrap_models",
            "check_source_identity", "flow_variability", "resolve_source",
            "model_intervals", "model_rtd_edges", "prediction_intervals"]

@@ -13,6 +13,10 @@ from cfbmarkov.cli.options import (count, finite_float, level, minkowski_order, 
 from cfbmarkov.errors import HistoryError, InputError
 
 
+#: compare's bootstrap resamples where --resamples is not given
+DEFAULT_RESAMPLES = 100
+
+
 def cmd_compare(args) -> int:
     """``cfbmarkov compare``: compare, then print the summary's figures and its file.
 
@@ -32,6 +36,14 @@ def cmd_compare(args) -> int:
     from cfbmarkov.report.compare import compare
 
     started = time.perf_counter()
+    # --resamples given: the intervals were asked for, and a fitting file not found refuses
+    required = args.resamples is not None
+    if args.resamples is None:
+        args.resamples = DEFAULT_RESAMPLES
+    if args.resamples:      # a refusal stays one line, before any other line
+        from cfbmarkov.report.compare import check_fitting_file
+
+        check_fitting_file(args.reference, args.prediction, required)
     if args.window is None:
         args.window = _default_window(args.reference, args.prediction)
     if not args.quiet:
@@ -53,7 +65,7 @@ def cmd_compare(args) -> int:
                           output=args.output, bin_width=args.bin_width, md_order=args.md_order,
                           figures=not args.no_figures, basis=args.basis, level=args.level,
                           resamples=args.resamples, long_run_span=args.long_run_span,
-                          kinetics=args.kinetics)
+                          kinetics=args.kinetics, intervals_required=required)
     if not args.quiet:
         print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
               flush=True)
@@ -78,8 +90,14 @@ def cmd_compare(args) -> int:
              f"; residences counted: reference {counts[0]}, model {counts[1]}"))
     baseline = summary.get("baseline")
     if baseline and baseline.get("md_rtd") is not None:
+        import math
+
         halves = (summary.get("natural_variability") or {}).get("md_rtd")
-        print("  " + baseline_line(baseline, summary["md_rtd"], halves))
+        if summary["md_rtd"] is not None and math.isfinite(summary["md_rtd"]):
+            print("  " + baseline_line(baseline, summary["md_rtd"], halves))
+        else:       # no MD of the model's RTD (too few residences): nothing to judge
+            print("  persistence baseline not judged: the model's MD is undefined in this "
+                  "window")
     model = summary["model"]
     if "rt_mean_interval" in model:
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
@@ -566,9 +584,11 @@ def add_compare(sub) -> None:
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
     s.add_argument("--level", type=level, default=0.9,
                    help="coverage of the prediction's intervals (default 0.9)")
-    s.add_argument("--resamples", type=count(0, 100000), default=100,
+    s.add_argument("--resamples", type=count(0, 100000), default=None,
                    help="bootstrap resamples of the model's fitting window for the intervals "
-                        "(0: no intervals; default 100)")
+                        f"(0: no intervals; default {DEFAULT_RESAMPLES}, left out with a "
+                        "warning where the model's fitting file is not found; given, such a "
+                        "comparison is refused)")
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
                    help="frames: residence times of both sides from frames at the model's "
                         "lag, like for like (the reference's exact-event figures are shown "

@@ -99,6 +99,10 @@ def main(argv: list[str] | None = None) -> int:
             if extra:
                 _refuse_unknown(parser, args.command, extra)
             if args.command == "demo":     # each kind of demo its own default folder
+                refused = run.demo_option_error(args)
+                if refused is not None:     # before anything starts: one line
+                    print(f"cfbmarkov demo: error: {refused}", file=sys.stderr)
+                    return 2
                 args.output = run.demo_output(args.output, args.synthetic)
         except SystemExit as exc:      # usage errors (2), --help and --version (0)
             return int(exc.code or 0)

@@ -188,13 +188,14 @@ def _check_resamples(resamples: int) -> None:
 
 def _with_interval(model, level: float, resamples: int):
     """``model`` carrying its interval at ``level`` from ``resamples`` bootstrap resamples,
-    or as it is with a ``warning:`` line on stderr saying why none could be formed."""
-    from cfbmarkov.analysis.intervals import SourceChanged, model_intervals
+    or as it is with a ``warning:`` line on stderr saying why none could be formed from its
+    fitting data; refused where that data cannot be found (the interval was asked for)."""
+    from cfbmarkov.analysis.intervals import SourceChanged, SourceMissing, model_intervals
 
     try:
         return model.with_uncertainty(model_intervals(model, level=level, resamples=resamples))
-    except SourceChanged:
-        raise           # another file of the fitting file's name: refused, as compare does
+    except (SourceChanged, SourceMissing):
+        raise           # another file of the fitting file's name, or none: refused
     except CfbmarkovError as exc:
         print(f"warning: no interval for the model's E(RT) and SD(RT): {exc}", file=sys.stderr)
         return model

@@ -49,7 +49,9 @@ def cmd_demo(args) -> int:
     if args.synthetic:
         from cfbmarkov.demo import run_demo
 
-        out = run_demo(args.output, particles=args.particles, seed=args.seed,
+        particles = SYNTHETIC_PARTICLES if args.particles is None else args.particles
+        seed_ = SYNTHETIC_SEED if args.seed is None else args.seed
+        out = run_demo(args.output, particles=particles, seed=seed_,
                        progress=None if args.quiet else _stderr_line, force=args.force,
                        note=_stderr_line)
         print(out)
@@ -70,6 +72,37 @@ def _stderr_line(text: str) -> None:
 
 #: the default output folders of ``cfbmarkov demo`` and ``cfbmarkov demo --synthetic``
 DEMO_FOLDER, SYNTHETIC_FOLDER = "cfbmarkov-demo", "cfbmarkov-demo-synthetic"
+
+
+#: the synthetic demo's default particles and seed
+SYNTHETIC_PARTICLES, SYNTHETIC_SEED = 6000, 1
+#: the options of ``cfbmarkov demo`` that apply only with --synthetic
+SYNTHETIC_ONLY = ("particles", "seed")
+
+
+def demo_option_error(args) -> str | None:
+    """Why the options of ``cfbmarkov demo`` cannot run together, in one line (None where
+    they can): the synthetic demo's options given without ``--synthetic``, which the
+    CFD-DEM demo would otherwise drop.
+
+    Parameters
+    ----------
+    args : argparse.Namespace
+        The verb's parsed options (``particles`` and ``seed`` None where not given).
+
+    Returns
+    -------
+    str or None
+    """
+    if args.synthetic:
+        return None
+    given = [f"--{name}" for name in SYNTHETIC_ONLY if getattr(args, name) is not None]
+    if not given:
+        return None
+    named = " and ".join(given)
+    return (f"{named} {'applies' if len(given) == 1 else 'apply'} only with --synthetic (the "
+            "synthetic demo); the CFD-DEM demo (reproduce --scale quick) has no such option: "
+            f"add --synthetic, or leave out {named}")
 
 
 def demo_output(output: str | None, synthetic: bool) -> str:
@@ -201,9 +234,12 @@ def add_demo(sub) -> None:
     s.add_argument("--synthetic", action="store_true",
                    help="instead, the Markov part alone on synthetic core-annulus trajectories "
                         "of 0-20 s (under a minute on 2 quiet cores)")
-    s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=6000,
-                   help="with --synthetic: particles (default 6000)")
-    s.add_argument("--seed", type=seed, default=1, help="with --synthetic: seed (default 1)")
+    s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=None,
+                   help=f"with --synthetic only (refused without it): particles (default "
+                        f"{SYNTHETIC_PARTICLES})")
+    s.add_argument("--seed", type=seed, default=None,
+                   help=f"with --synthetic only (refused without it): seed (default "
+                        f"{SYNTHETIC_SEED})")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress lines")
     s.set_defaults(func=cmd_demo)
 

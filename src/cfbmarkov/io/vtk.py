@@ -447,11 +447,10 @@ def _check_output(output: Path, source: Path) -> None:
             raise InputError(f"{output}: the output would overwrite the input file")
         raise InputError(f"{output}: exists and is a file; give a folder for the VTK export")
     if output.is_dir():
-        foreign = sorted(p.name for p in output.iterdir() if not _EXPORT_NAME.match(p.name)
-                         or not p.is_file())
-        if foreign:
-            raise InputError(f"{output}: folder holds {foreign[0]!r}, which is not part of a "
-                             f"VTK export; refusing to replace it (give a new or empty folder)")
+        from cfbmarkov._outputs import refuse_foreign
+
+        refuse_foreign(output, lambda p: bool(_EXPORT_NAME.match(p.name)) and p.is_file(),
+                       "a VTK export", "replace it (give a new or empty folder)")
 
 
 def _progress(items: Iterable, total: int, enabled: bool) -> Iterable:

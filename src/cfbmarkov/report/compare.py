@@ -72,14 +72,14 @@ def _tracers(model, comparison: RunComparison, warnings: list[str]):
 
 
 def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
-               warnings: list[str]):
+               warnings: list[str], required: bool = False):
     """The prediction's intervals, or None (with a warning saying why) where they cannot be
-    formed: no model attached, its fitting data unreadable, too few residences. The mixing
-    curve's band is left out (a warning says why) where the tracers' states cannot be
-    formed (:func:`_tracers`)."""
+    formed: no model attached, its fitting data unreadable or (unless ``required``) not
+    found, too few residences. The mixing curve's band is left out (a warning says why)
+    where the tracers' states cannot be formed (:func:`_tracers`)."""
     if not resamples:
         return None
-    from cfbmarkov.analysis.intervals import SourceChanged, prediction_intervals
+    from cfbmarkov.analysis.intervals import SourceChanged, SourceMissing, prediction_intervals
     from cfbmarkov.markov import MarkovModel
 
     try:
@@ -101,8 +101,44 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
     except SourceChanged:
         raise
     except InputError as exc:
+        if required and isinstance(exc, SourceMissing):
+            raise           # the intervals were asked for: refused, not left out
         warnings.append(f"no intervals: {exc}")
         return None
+
+
+def check_fitting_file(reference, prediction, required: bool = False) -> None:
+    """Refuse, before any work, a comparison whose intervals cannot use the model the
+    prediction carries: its fitting file replaced since the fit or, where ``required``, not
+    found (:func:`cfbmarkov.analysis.intervals.resolve_source`, with ``reference`` as a
+    candidate). A prediction without a model passes.
+
+    Parameters
+    ----------
+    reference, prediction : str or os.PathLike
+        The comparison's trajectory files.
+    required : bool, optional
+        The intervals were asked for: a fitting file not found is refused too.
+
+    Raises
+    ------
+    InputError
+        :class:`~cfbmarkov.analysis.intervals.SourceChanged`, or
+        :class:`~cfbmarkov.analysis.intervals.SourceMissing` where ``required``.
+    """
+    from cfbmarkov.analysis.intervals import SourceMissing, resolve_source
+    from cfbmarkov.markov import MarkovModel
+
+    with opened(prediction) as pred:
+        model = MarkovModel.from_trajectories(pred)
+        if model is None:
+            return
+        model._cache.setdefault("file", os.path.abspath(pred.path))
+    try:
+        resolve_source(model, [reference])
+    except SourceMissing:
+        if required:
+            raise
 
 
 def _adequacy(pred):
@@ -205,7 +241,8 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
             basis: str = "frames",
             level: float = 0.9, resamples: int = 100,
             md_order: float = 2.0, figures: bool = True,
-            long_run_span: tuple[float, float] | None = None, kinetics=None) -> dict[str, Any]:
+            long_run_span: tuple[float, float] | None = None, kinetics=None,
+            intervals_required: bool = False) -> dict[str, Any]:
     """Compare ``prediction`` (the model) with ``reference`` on a window; write the results.
 
     Parameters
@@ -231,6 +268,11 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
         Coverage of the prediction's intervals (``docs/definitions.md``, Intervals).
     resamples : int, optional
         Bootstrap resamples of the model's fitting window for the intervals (0: none).
+    intervals_required : bool, optional
+        Refuse the comparison where the model's fitting file cannot be found
+        (:class:`~cfbmarkov.analysis.intervals.SourceMissing`; nothing is written) instead
+        of leaving the intervals out with a warning (default). The command line sets it
+        where ``--resamples`` is given.
     long_run_span : (float, float), optional
         A span of the reference (s) whose other whole windows, pooled, give the summary's
         ``long_run`` block (what a perfect stationary model would predict; docs/definitions.md,
@@ -255,7 +297,9 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     ------
     InputError
         For unusable parameters or files (:func:`cfbmarkov.analysis.compare.compare_runs`),
-        or an ``output`` that exists and is not a directory.
+        an ``output`` that exists and is not a directory, a model's fitting file replaced
+        since the fit (:class:`~cfbmarkov.analysis.intervals.SourceChanged`) or, with
+        ``intervals_required``, not found.
 
     References
     ----------
@@ -277,7 +321,8 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
                                   basis=basis, long_run_span=long_run_span)
         summary = comparison.summary()
         warnings = list(comparison.warnings)
-        intervals = _intervals(pred, comparison, level, resamples, warnings)
+        intervals = _intervals(pred, comparison, level, resamples, warnings,
+                               required=intervals_required)
         adequacy = _adequacy(pred)
         exact_model = _model_exact(pred, comparison)
         if exact_model is not None:
@@ -346,4 +391,4 @@ def _check_replaceable(out: Path) -> None:
                    "replace it (give a new or empty folder)")
 
 
-__all__ = ["SUMMARY", "compare", "is_comparison_file", "model_columns"]
+__all__ = ["SUMMARY", "check_fitting_file", "compare", "is_comparison_file", "model_columns"]
