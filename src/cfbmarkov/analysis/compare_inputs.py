@@ -71,8 +71,8 @@ def check_parameters(window, bin_width: float | None, md_order: float) -> tuple[
     """
     start, stop = check_window(window)
     if not md_order >= 1:
-        raise InputError(f"Minkowski order {md_order:g} must be at least 1 (or inf): below 1 "
-                         "the sum is not a distance")
+        raise InputError(f"Minkowski order {md_order:g} must be a finite number >= 1 (or inf, "
+                         "the largest difference): below 1 the sum is not a distance")
     if bin_width is None:
         return start, stop
     if not (math.isfinite(bin_width) and bin_width > 0):
