@@ -1,10 +1,18 @@
-"""``compare``'s refusals: one line, before any output, naming its own options."""
+"""``compare``'s refusals: one line, before any output, naming its own options; a
+prediction given as the reference of a run is refused as the two swapped."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
+from cfbmarkov.report.compare import compare
+from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_writer import write_trajectories
+
+from ..observed.conftest import HEIGHT, WIDTH, generate_run
 
 
 def refused(capsys, argv, out):
@@ -17,6 +25,39 @@ def refused(capsys, argv, out):
     assert code == 2 and len(lines) == 1 and captured.out == "", captured
     assert "Traceback" not in captured.err
     return lines[0]
+
+
+def prediction(path, run):
+    return write_trajectories(path, run.times, run.positions, width=WIDTH, height=HEIGHT,
+                              source="markov-prediction", parameters={"columns": 6, "rows": 38})
+
+
+# -- 3. a prediction given as the reference --------------------------------------------------
+
+def test_a_prediction_given_as_the_reference_of_a_run_is_refused(pair, tmp_path, capsys):
+    ref, pred = pair
+    for window in (["--window", "0.5:3"], []):       # also before the default window's line
+        err = refused(capsys, [pred, ref, *window], tmp_path / "c")
+        assert f"the reference {pred} is a Markov prediction and the prediction {ref} is not" \
+               in err
+        assert "look swapped; give the run first" in err
+    assert not (tmp_path / "c").exists()
+    with pytest.raises(InputError, match="look swapped"):
+        compare(pred, ref, window=(0.5, 3.0), output=tmp_path / "c", figures=False)
+
+
+def test_two_predictions_are_compared_as_given(pair, tmp_path):
+    ref, pred = pair
+    with Trajectories(ref) as r:
+        start = r.positions(20)
+    other = prediction(tmp_path / "other.h5", generate_run(seed=5, rise=1.5, t0=0.5,
+                                                           initial=start))
+    one = compare(pred, other, window=(0.5, 3.0), output=tmp_path / "a", figures=False,
+                  resamples=0)
+    two = compare(other, pred, window=(0.5, 3.0), output=tmp_path / "b", figures=False,
+                  resamples=0)
+    assert np.isfinite(one["pd_rt_mean"]) and one["pd_rt_mean"] != 0
+    assert np.sign(one["pd_rt_mean"]) == -np.sign(two["pd_rt_mean"])
 
 
 # -- 4. messages naming compare's own options -------------------------------------------------

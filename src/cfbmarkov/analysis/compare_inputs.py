@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from cfbmarkov._outputs import PREDICTION_SOURCE
 from cfbmarkov.errors import InputError
 from cfbmarkov.limits import MAX_BINS
 from cfbmarkov.trajectories import Trajectories
@@ -280,16 +281,18 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
     Raises
     ------
     InputError
-        For a file whose content comparing does not support, an open riser against a
-        periodic one, a window outside the span both files cover (:func:`check_common_window`)
-        or without frames, a model with an odd column count (mixing by
-        halves is undefined), different domains (size, 2D against 3D, or depth), or
-        different particles (an open riser: different particles present at the window
-        start).
+        For a file whose content comparing does not support, a reference that is a Markov
+        prediction against a prediction that is not (the two look swapped,
+        :func:`check_order`), an open riser against a periodic one, a window outside the
+        span both files cover (:func:`check_common_window`) or without frames, a model
+        with an odd column count (mixing by halves is undefined), different domains (size,
+        2D against 3D, or depth), or different particles (an open riser: different
+        particles present at the window start).
     """
     for run in (ref, pred):
         run.require_supported("comparing runs", three_d=True, absent=run.boundary.is_open,
                               open_boundary=True)
+    check_order(ref, pred)
     if ref.boundary != pred.boundary:
         raise InputError(f"{ref.path} is a{'n open' if ref.boundary.is_open else ' periodic'} "
                          f"riser and {pred.path} a{'n open' if pred.boundary.is_open else ' periodic'}"
@@ -318,6 +321,28 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
                          f"({pred.n_particles}) do not hold the same particle ids; mixing "
                          "needs the same particles on both sides")
     return ref_frames, pred_frames, columns
+
+
+def check_order(ref: Trajectories, pred: Trajectories) -> None:
+    """Refuse a Markov prediction given as the reference beside a prediction that is not
+    one (a run): the two look swapped, and every percentage difference would change sign.
+    Two predictions (one model against another) pass.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and model files, as given.
+
+    Raises
+    ------
+    InputError
+        One line naming both files and the order to give them in.
+    """
+    if ref.source == PREDICTION_SOURCE and pred.source != PREDICTION_SOURCE:
+        raise InputError(f"the reference {ref.path} is a Markov prediction and the prediction "
+                         f"{pred.path} is not (its source is {pred.source!r}): the two look "
+                         f"swapped; give the run first, then the prediction (cfbmarkov compare "
+                         f"{pred.path} {ref.path} ...)")
 
 
 def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:
@@ -366,6 +391,7 @@ def starting_tracers(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: 
                      "needs the same tracers on both sides")
 
 
-__all__ = ["check_common_window", "check_parameters", "check_runs", "check_window",
+__all__ = ["check_common_window", "check_order", "check_parameters", "check_runs",
+           "check_window",
            "common_span", "default_bin_width", "model_columns", "spans_text",
            "starting_tracers"]

@@ -111,12 +111,14 @@ def cmd_compare(args) -> int:
 
 def _default_window(reference: str, prediction: str) -> tuple[float, float]:
     """``compare`` without ``--window``: the span both files cover, said on stderr; refused
-    in one line naming both spans where they do not overlap."""
-    from cfbmarkov.analysis.compare_inputs import overlap_of
+    in one line naming both spans where they do not overlap, and before it where the files
+    look swapped (:func:`~cfbmarkov.analysis.compare_inputs.check_order`)."""
+    from cfbmarkov.analysis.compare_inputs import check_order, overlap_of
     from cfbmarkov.trajectories import Trajectories
     from cfbmarkov.trajectory_format import time_text
 
     with Trajectories(reference) as ref, Trajectories(prediction) as pred:
+        check_order(ref, pred)
         (a, b), spans = overlap_of(ref, pred)
     print(f"compare: no --window given: comparing over {time_text(a)}:{time_text(b)} s, the "
           f"span both files "
