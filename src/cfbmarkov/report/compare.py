@@ -205,7 +205,8 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
             basis: str = "frames",
             level: float = 0.9, resamples: int = 100,
             md_order: float = 2.0, figures: bool = True,
-            long_run_span: tuple[float, float] | None = None, kinetics=None) -> dict[str, Any]:
+            long_run_span: tuple[float, float] | None = None, kinetics=None,
+            allow_empty: bool = False, checked=None) -> dict[str, Any]:
     """Compare ``prediction`` (the model) with ``reference`` on a window; write the results.
 
     Parameters
@@ -243,6 +244,14 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     figures : bool, optional
         Draw ``rtd.png``, ``snapshots.png``, ``mixing.png`` and, when the prediction carries
         its model, ``transition_matrix.png`` (a heat map) and ``probability_maps.png``.
+    allow_empty : bool, optional
+        Write a side without a complete residence in the window (its E(RT), SD(RT), PD and
+        MD null, with a warning) instead of refusing it (default False: refused before
+        anything is written; :func:`cfbmarkov.analysis.compare.compare_runs`).
+    checked : callable, optional
+        Called without arguments once both files and the parameters are checked and the
+        residences counted, before the intervals, kinetics and figures (the command line's
+        progress line: a refusal comes before it).
 
     Returns
     -------
@@ -254,8 +263,10 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     Raises
     ------
     InputError
-        For unusable parameters or files (:func:`cfbmarkov.analysis.compare.compare_runs`),
-        or an ``output`` that exists and is not a directory.
+        For unusable parameters or files (:func:`cfbmarkov.analysis.compare.compare_runs`:
+        among them a side without a complete residence in the window, bins too wide to tell
+        RTDs apart, a prediction given as the reference of a run), or an ``output`` that
+        exists and is not a directory; raised before ``output`` is written or replaced.
 
     References
     ----------
@@ -274,7 +285,10 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
         ref = _open(reference, stack)
         pred = _open(prediction, stack)
         comparison = compare_runs(ref, pred, window, bin_width=bin_width, md_order=md_order,
-                                  basis=basis, long_run_span=long_run_span)
+                                  basis=basis, long_run_span=long_run_span,
+                                  allow_empty=allow_empty)
+        if checked is not None:
+            checked()
         summary = comparison.summary()
         warnings = list(comparison.warnings)
         intervals = _intervals(pred, comparison, level, resamples, warnings)
