@@ -161,7 +161,7 @@ def test_compare_md_order_below_one_is_refused(good, tmp_path, capsys, order):
     run, _, pred = good
     err = one_line_error(capsys, ["compare", run, pred, "--window", "0.5:2.5", "--md-order",
                                   order, "-o", tmp_path / "c"], tmp_path / "c")
-    assert "at least 1" in err
+    assert "must be a finite number >= 1" in err
 
 
 # -- output size estimated before writing --------------------------------------------------

@@ -289,7 +289,8 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 summaries[name] = compare(ref, prediction, window=(start, stop), output=out,
                                           bin_width=m.lag, level=m.interval_level,
                                           resamples=m.interval_resamples,
-                                          long_run_span=span, kinetics=kinetics)
+                                          long_run_span=span, kinetics=kinetics,
+                                          allow_empty=True)   # Table 3: "no residences"
                 _record(folder, f"compare-{name}", {"wall_s": _time.perf_counter() - t0,
                                                     "cpu_s": _time.process_time() - c0})
                 stages[f"compare-{name}"] = "done"

@@ -155,10 +155,16 @@ def test_different_particles_are_refused(tmp_path, make_run):
         compare(ref, pred, window=WINDOW, output=tmp_path / "o")
 
 
-def test_too_short_a_window_gives_nulls_and_warnings(pair, tmp_path):
+def test_too_short_a_window_is_refused_or_kept_with_nulls_and_warnings(pair, tmp_path):
+    """A window without a complete residence is refused before anything is written; with
+    ``allow_empty`` (as ``reproduce`` compares) its figures are null, with warnings."""
     ref_path, pred_path = pair
+    with pytest.raises(InputError, match="no residence begins and ends in 0.5-0.55 s on the "
+                                         "reference side"):
+        compare(ref_path, pred_path, window=(0.5, 0.55), output=tmp_path / "o", figures=False)
+    assert not (tmp_path / "o").exists()
     summary = compare(ref_path, pred_path, window=(0.5, 0.55), output=tmp_path / "o",
-                      figures=False)
+                      figures=False, allow_empty=True)
     saved = json.loads((tmp_path / "o" / "summary.json").read_text())
     assert saved["reference"]["rt_count"] == 0 and saved["reference"]["rt_mean"] is None
     assert saved["md_rtd"] is None and saved["pd_rt_mean"] is None

@@ -228,7 +228,8 @@ def test_velocity_states_window_too_short_names_the_fix(runs, tmp_path, capsys):
                  "--kinetics", str(kin), "-q"])
     err = capsys.readouterr().err.strip().splitlines()
     assert code == 2 and len(err) == 1
-    assert "give a window ending at 4.04 s or later" in err[0]
+    # one lag of 0.02 s: one RTD bin, refused before the kinetics' own check of the window
+    assert "compare over a window of 0.04 s or more" in err[0]
     assert not (tmp_path / "short").exists()
 
 

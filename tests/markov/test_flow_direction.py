@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
 from cfbmarkov.markov import CellGrid, MarkovModel, fit_model
 from cfbmarkov.markov.model_summary import DOWNWARD_LINE
 from cfbmarkov.observed.residence import residence_times
@@ -139,8 +140,13 @@ def test_compare_counts_as_the_model_and_says_where_the_reference_differs(runs, 
                    resamples=0)
     assert same["direction"] == "down"
     assert not any("the model counts residences" in w for w in same["warnings"])
+    with pytest.raises(InputError, match="counted downward as the model counts, while the "
+                                         "reference's net flow over the window runs up"):
+        compare(up, pred, window=(5.0, 10.0), output=tmp_path / "other", figures=False,
+                resamples=0)     # the up run holds no downward residence
+    assert not (tmp_path / "other").exists()
     other = compare(up, pred, window=(5.0, 10.0), output=tmp_path / "other", figures=False,
-                    resamples=0)
+                    resamples=0, allow_empty=True)
     assert other["direction"] == "down"
     lines = [w for w in other["warnings"] if "the model counts residences downward" in w]
     assert len(lines) == 1 and "runs up" in lines[0]

@@ -205,7 +205,7 @@ def test_no_entry_in_the_window_and_no_complete_residence_are_refused(open_run, 
     code = main(["compare", str(open_run["run"]), str(pred), "--window", "4:4.1", "-q", "-o",
                  str(tmp_path / "cmp")])
     err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1 and "holds no complete residence" in err
+    assert code == 2 and err.count("\n") == 1 and "no residence begins and ends" in err
     assert not (tmp_path / "cmp").exists()
 
 

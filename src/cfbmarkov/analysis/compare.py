@@ -22,11 +22,13 @@ from typing import Any
 
 import numpy as np
 
+from cfbmarkov._outputs import PREDICTION_SOURCE
 from cfbmarkov._repr import compact_repr
 from cfbmarkov.analysis.baseline import (WindowDifference, fitting_runs_of, fitting_window,
                                          model_on_fitting_window, pooled_window_difference,
                                          window_difference)
-from cfbmarkov.analysis.compare_inputs import (check_parameters, check_runs, default_bin_width,
+from cfbmarkov.analysis.compare_inputs import (check_bins, check_parameters, check_runs,
+                                               common_span, default_bin_width,
                                                model_flow_direction, starting_tracers)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.stationarity import long_run_baseline
@@ -37,6 +39,7 @@ from cfbmarkov.observed.metrics import (ROUNDOFF, minkowski_distance, mixing_rms
 from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, ResidenceTimes,
                                           net_flow_direction, residence_times, rtd_histogram)
 from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import time_text
 
 
 @dataclass
@@ -271,7 +274,8 @@ BASES = ("frames", "events")
 
 def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: float | None = None,
                  md_order: float = 2.0, basis: str = "frames",
-                 long_run_span: tuple[float, float] | None = None) -> RunComparison:
+                 long_run_span: tuple[float, float] | None = None,
+                 allow_empty: bool = False) -> RunComparison:
     """Compare a model's trajectories with a reference over a window.
 
     Parameters
@@ -295,6 +299,11 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
         A span of the reference (s) whose other whole windows of the analysis window's
         length, pooled, stand beside the model as what a perfect stationary model would
         predict (:func:`cfbmarkov.analysis.stationarity.long_run_baseline`); default none.
+    allow_empty : bool, optional
+        Keep a side without a complete residence in the window (its E(RT), SD(RT), PD and
+        MD NaN, with a warning) instead of refusing it; an open riser's reference without
+        one is refused all the same. Default False: refused (what ``cfbmarkov compare``
+        does; ``reproduce`` keeps them, its Table 3 says "no residences").
 
     Returns
     -------
@@ -303,10 +312,13 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     Raises
     ------
     InputError
-        For unusable parameters, a model with an odd column count (mixing by halves is
-        undefined), different riser domains (size, 2D against 3D, or depth), different
-        particle ids, a long-run span outside the reference or without another whole
-        window, or the ``events`` basis on a reference without exact pass events.
+        For unusable parameters, a reference that is a Markov prediction against a run (the
+        two swapped), a model with an odd column count (mixing by halves is undefined),
+        different riser domains (size, 2D against 3D, or depth), different particle ids, a
+        side without a complete residence in the window (unless ``allow_empty``), bins
+        that put all the reference's residences in one bin (their MD could not tell RTDs
+        apart), a long-run span outside the reference or without another whole window, or
+        the ``events`` basis on a reference without exact pass events.
 
     References
     ----------
@@ -319,7 +331,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     bin_width_from = "given"
     if bin_width is None:
         bin_width, bin_width_from = default_bin_width(ref, pred)
-        check_parameters((start, stop), bin_width, md_order)
+        check_bins((start, stop), bin_width, bin_width_from)
     ref_frames, pred_frames, columns = check_runs(ref, pred, start, stop)
     warnings: list[str] = []
     on = _residence_basis(ref, pred, (start, stop), basis, warnings)
@@ -329,12 +341,12 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
                              lag_frames=on.lag_frames, direction=on.direction)
     rt_mod = residence_times(pred, (start, stop), use_events=on.events, face_band=on.band,
                              direction=on.direction)
+    for side, traj, rt in (("reference", ref, rt_ref), ("model", pred, rt_mod)):
+        if rt.count == 0 and (not allow_empty or (side == "reference" and ref.boundary.is_open)):
+            _refuse_empty(ref, pred, side, traj, (start, stop), on)
+    _check_bins_resolve(rt_ref, bin_width, bin_width_from, (start, stop))
     beside = _baselines(ref, pred, (start, stop), on, bin_width=bin_width, md_order=md_order,
                         long_run_span=long_run_span)
-    if ref.boundary.is_open and rt_ref.count == 0:
-        raise InputError(f"window {start:g}:{stop:g} s of {ref.path} holds no complete residence "
-                         "(an entry through the inlet and the next exit through the outlet "
-                         "inside the window): compare over a longer window")
     tracers = None
     if ref.boundary.is_open:
         tracers = starting_tracers(ref, pred, ref_frames.start, pred_frames.start)
@@ -354,16 +366,67 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     return comparison
 
 
+def _refuse_empty(ref: Trajectories, pred: Trajectories, side: str, traj: Trajectories,
+                  window: tuple[float, float], on: _Basis) -> None:
+    """Refuse a side (``reference`` or ``model``, the file ``traj``) that holds no complete
+    residence in the window, in one line saying what would give one: a model fitted where
+    the flow runs as the reference's does (where the model's direction overrode it), else a
+    longer window inside the span both files cover, or, where they overlap no longer than
+    the window, a longer prediction."""
+    start, stop = window
+    first, last = common_span(ref, pred) or window
+    tol = max(ref.time_tolerance, pred.time_tolerance)
+    counted = f", counted {on.direction}ward" if on.direction == "down" else ""
+    if on.direction != on.reference_flow:
+        raise InputError(f"no residence begins and ends in {start:g}-{stop:g} s on the {side} "
+                         f"side ({traj.path}), counted {on.direction}ward as the model counts, "
+                         f"while the reference's net flow over the window runs "
+                         f"{on.reference_flow}: compare with a model fitted where the flow runs "
+                         f"{on.reference_flow}")
+    if last - first > stop - start + tol:
+        hint = (f"both files cover {time_text(first)} to {time_text(last)} s, e.g. --window "
+                f"{time_text(first)}:{time_text(last)}")
+    else:
+        longer = ("predict a longer --duration" if pred.source == PREDICTION_SOURCE
+                  else "give files that overlap longer")
+        hint = f"both files cover only {time_text(first)} to {time_text(last)} s: {longer}"
+    what = ("; in an open riser an entry through the inlet and the next exit through the "
+            "outlet" if traj.boundary.is_open else "")
+    raise InputError(f"no residence begins and ends in {start:g}-{stop:g} s on the {side} "
+                     f"side ({traj.path}{what}{counted}): compare over a longer window ({hint})")
+
+
+def _check_bins_resolve(rt_ref: ResidenceTimes, bin_width: float, source: str,
+                        window: tuple[float, float]) -> None:
+    """Refuse bins so wide that all the reference's residences (two or more, of different
+    lengths beyond round-off) fall in one: every RTD held in that bin would then be at an
+    MD of 0 from the reference's, the model's and the baselines' alike."""
+    if rt_ref.count < 2:
+        return
+    samples = np.asarray(rt_ref.samples, dtype=np.float64)
+    spread = float(samples.max() - samples.min())
+    _, p = rtd_histogram(samples, bin_width, window_length=window[1] - window[0])
+    if spread <= 1e-6 * float(samples.max()) or np.count_nonzero(p) >= 2:
+        return          # residences of one length (to round-off), or in two bins or more
+    leave = ", or leave it out for the default width" if source == "given" else ""
+    raise InputError(f"all {rt_ref.count} residences of the reference in {window[0]:g}-"
+                     f"{window[1]:g} s ({samples.min():.3g} to {samples.max():.3g} s long) "
+                     f"fall in one RTD bin of {bin_width:g} s, where an MD cannot tell RTDs "
+                     f"apart: give --bin-width {spread / 2:.2g} s or less{leave}")
+
+
 @dataclass(frozen=True)
 class _Basis:
     """The residence times' basis of a comparison: exact events or frames every
-    ``lag_frames``-th of the reference, the face band (m) and the direction."""
+    ``lag_frames``-th of the reference, the face band (m), the direction residences are
+    counted in and the reference's own net flow over the window."""
 
     name: str
     events: bool
     lag_frames: int
     band: float
     direction: str
+    reference_flow: str = "up"
 
 
 def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float, float],
@@ -390,7 +453,7 @@ def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float,
             warnings.append(f"the model's lag {pred.frame_interval:g} s is not a whole number "
                             f"of the reference's frames ({ref.frame_interval:g} s): its "
                             "residence times use every frame")
-    direction = net_flow_direction(ref, window)
+    direction = reference_flow = net_flow_direction(ref, window)
     model_direction = model_flow_direction(pred)
     if model_direction is not None and model_direction != direction:
         warnings.append(f"the model counts residences {model_direction}ward (its fitting "
@@ -401,7 +464,7 @@ def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float,
     elif direction == "down":
         warnings.append("the solids' net flow over the window is downward: residence times "
                         "run from entries through the top to exits through the bottom")
-    return _Basis(basis, basis == "events", lag_frames, band, direction)
+    return _Basis(basis, basis == "events", lag_frames, band, direction, reference_flow)
 
 
 @dataclass(frozen=True)
@@ -442,6 +505,7 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
     long_run = None
     if long_run_span is not None:
         long_run = long_run_baseline(ref, (start, stop), span=long_run_span,
+                                     option="--long-run-span",
                                      bin_width=bin_width, md_order=md_order,
                                      use_events=on.events, lag_frames=on.lag_frames,
                                      face_band=on.band, direction=on.direction)

@@ -11,6 +11,7 @@ import math
 
 import numpy as np
 
+from cfbmarkov._outputs import PREDICTION_SOURCE
 from cfbmarkov.errors import InputError
 from cfbmarkov.limits import MAX_BINS
 from cfbmarkov.trajectories import Trajectories
@@ -66,21 +67,64 @@ def check_parameters(window, bin_width: float | None, md_order: float) -> tuple[
     Raises
     ------
     InputError
-        For an unusable window (:func:`check_window`), a bin width (s) that is not finite
-        and positive, or a Minkowski order below 1.
+        For an unusable window (:func:`check_window`), a Minkowski order that is not a
+        number >= 1, or a bin width (s) that is not finite and positive or leaves fewer
+        than two bins, or more than ``MAX_BINS``, over the window (:func:`check_bins`).
     """
     start, stop = check_window(window)
     if not md_order >= 1:
-        raise InputError(f"Minkowski order {md_order:g} must be at least 1 (or inf): below 1 "
-                         "the sum is not a distance")
+        raise InputError(f"Minkowski order {md_order:g} must be a finite number >= 1 (or inf, "
+                         "the largest difference): below 1 the sum is not a distance")
     if bin_width is None:
         return start, stop
+    check_bins((start, stop), bin_width)
+    return start, stop
+
+
+def rtd_bin_count(window_length: float, bin_width: float) -> int:
+    """Number of RTD bins over a window, as :func:`cfbmarkov.observed.residence.rtd_histogram`
+    lays them (from 0 to the first multiple of the bin width at or above the length)."""
+    return max(1, math.ceil(window_length / bin_width - 1e-6))
+
+
+def check_bins(window: tuple[float, float], bin_width: float, source: str = "given") -> None:
+    """Refuse an RTD bin width that leaves fewer than two bins over the window (the RTDs
+    of both sides then fill the one bin, and their MD is 0 whatever the model), or more
+    than ``MAX_BINS``.
+
+    Parameters
+    ----------
+    window : (float, float)
+        The analysis window (start, stop), s.
+    bin_width : float
+        RTD bin width, s.
+    source : str, optional
+        Where the width comes from: ``given`` (``--bin-width``) or a default
+        (:func:`default_bin_width`); the refusal's advice follows it.
+
+    Raises
+    ------
+    InputError
+        One line naming the window and a workable width (or, for a default width, a
+        window long enough for it).
+    """
+    start, stop = window
+    length = stop - start
     if not (math.isfinite(bin_width) and bin_width > 0):
         raise InputError(f"RTD bin width {bin_width:g} s must be positive")
-    if (stop - start) / bin_width > MAX_BINS:
-        raise InputError(f"RTD bin width {bin_width:g} s makes {(stop - start) / bin_width:.3g} "
+    if length / bin_width > MAX_BINS:
+        raise InputError(f"RTD bin width {bin_width:g} s makes {length / bin_width:.3g} "
                          f"bins over the window, more than {MAX_BINS}; give a larger --bin-width")
-    return start, stop
+    if rtd_bin_count(length, bin_width) >= 2:
+        return
+    if source == "given":
+        raise InputError(f"--bin-width {bin_width:g} s leaves one RTD bin over the window "
+                         f"{start:g}:{stop:g} s ({length:g} s long), and one bin gives an MD "
+                         f"of 0 whatever the model: give --bin-width {length / 2:.3g} s or "
+                         "less, or leave it out for the default width")
+    raise InputError(f"window {start:g}:{stop:g} s ({length:g} s long) holds fewer than two "
+                     f"RTD bins of {bin_width:g} s ({source}): compare over a window of "
+                     f"{2 * bin_width:g} s or more")
 
 
 def default_bin_width(ref: Trajectories, pred: Trajectories) -> tuple[float, str]:
@@ -280,16 +324,18 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
     Raises
     ------
     InputError
-        For a file whose content comparing does not support, an open riser against a
-        periodic one, a window outside the span both files cover (:func:`check_common_window`)
-        or without frames, a model with an odd column count (mixing by
-        halves is undefined), different domains (size, 2D against 3D, or depth), or
-        different particles (an open riser: different particles present at the window
-        start).
+        For a file whose content comparing does not support, a reference that is a Markov
+        prediction against a prediction that is not (the two look swapped,
+        :func:`check_order`), an open riser against a periodic one, a window outside the
+        span both files cover (:func:`check_common_window`) or without frames, a model
+        with an odd column count (mixing by halves is undefined), different domains (size,
+        2D against 3D, or depth), or different particles (an open riser: different
+        particles present at the window start).
     """
     for run in (ref, pred):
         run.require_supported("comparing runs", three_d=True, absent=run.boundary.is_open,
                               open_boundary=True)
+    check_order(ref, pred)
     if ref.boundary != pred.boundary:
         raise InputError(f"{ref.path} is a{'n open' if ref.boundary.is_open else ' periodic'} "
                          f"riser and {pred.path} a{'n open' if pred.boundary.is_open else ' periodic'}"
@@ -318,6 +364,28 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
                          f"({pred.n_particles}) do not hold the same particle ids; mixing "
                          "needs the same particles on both sides")
     return ref_frames, pred_frames, columns
+
+
+def check_order(ref: Trajectories, pred: Trajectories) -> None:
+    """Refuse a Markov prediction given as the reference beside a prediction that is not
+    one (a run): the two look swapped, and every percentage difference would change sign.
+    Two predictions (one model against another) pass.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and model files, as given.
+
+    Raises
+    ------
+    InputError
+        One line naming both files and the order to give them in.
+    """
+    if ref.source == PREDICTION_SOURCE and pred.source != PREDICTION_SOURCE:
+        raise InputError(f"the reference {ref.path} is a Markov prediction and the prediction "
+                         f"{pred.path} is not (its source is {pred.source!r}): the two look "
+                         f"swapped; give the run first, then the prediction (cfbmarkov compare "
+                         f"{pred.path} {ref.path} ...)")
 
 
 def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:
@@ -366,6 +434,6 @@ def starting_tracers(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: 
                      "needs the same tracers on both sides")
 
 
-__all__ = ["check_common_window", "check_parameters", "check_runs", "check_window",
-           "common_span", "default_bin_width", "model_columns", "spans_text",
-           "starting_tracers"]
+__all__ = ["check_bins", "check_common_window", "check_order", "check_parameters",
+           "check_runs", "check_window", "common_span", "default_bin_width", "model_columns",
+           "rtd_bin_count", "spans_text", "starting_tracers"]

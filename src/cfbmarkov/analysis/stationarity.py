@@ -134,7 +134,10 @@ class WindowStatistics:
                                  else finite(self.flux_rt_mean))}
 
 
-def _span(traj, span: tuple[float, float] | None) -> tuple[float, float]:
+def _span(traj, span: tuple[float, float] | None, option: str = "--span"
+          ) -> tuple[float, float]:
+    """The span of ``traj`` asked for (s), all of it for None; a refusal names the
+    ``option`` that gave it."""
     first, last = float(traj.times[0]), float(traj.times[-1])
     if span is None:
         return first, last
@@ -144,8 +147,10 @@ def _span(traj, span: tuple[float, float] | None) -> tuple[float, float]:
         raise InputError(f"span {a:g}:{b:g} s must be finite with its end after its start")
     if a < first - tol or b > last + tol:
         raise InputError(f"span {a:g}:{b:g} s lies outside the frames of {traj.path} "
-                         f"({first:g} to {last:g} s): give a span inside them, or leave "
-                         "--span out for all of them")
+                         f"({first:g} to {last:g} s): give {option} inside them, e.g. "
+                         f"{option} {first:g}:{last:g}"
+                         + (", or leave --span out for all of them" if option == "--span"
+                            else ""))
     return a, b
 
 
@@ -247,7 +252,7 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
 def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, float] | None
                       = None, bin_width: float, md_order: float = 2.0, use_events: bool = False,
                       lag_frames: int = 1, face_band: float | None = None,
-                      direction: str = "auto") -> WindowDifference:
+                      direction: str = "auto", option: str = "--span") -> WindowDifference:
     """The reference's RTD pooled over the span's other windows, as the prediction of one.
 
     The span is tiled with whole windows of the judged window's length, aligned with it
@@ -276,6 +281,9 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
     direction : {"auto", "up", "down"}, optional
         "auto": the judged window's net solids flow decides, and the pooled windows use the
         same direction.
+    option : str, optional
+        The command-line option that gave ``span``, named in the refusals (``--span`` of
+        ``stationarity``, ``--long-run-span`` of ``compare``).
 
     Returns
     -------
@@ -290,7 +298,7 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
         On a judged window that is empty or outside the span, or a span without another
         whole window of the judged window's length.
     """
-    a, b = _span(traj, span)
+    a, b = _span(traj, span, option)
     j0, j1 = float(judged[0]), float(judged[1])
     length = j1 - j0
     tol = traj.time_tolerance
@@ -298,14 +306,14 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
         raise InputError(f"judged window {j0:g}:{j1:g} s is empty")
     if j0 < a - tol or j1 > b + tol:
         raise InputError(f"judged window {j0:g}:{j1:g} s lies outside the span {a:g}:{b:g} "
-                         "s: judge a window inside it, or widen the span")
+                         f"s: judge a window inside it, or widen the span ({option})")
     d = _direction_of(traj, (j0, j1), direction)
     k_lo = int(np.ceil((a - j0 - tol) / length))
     k_hi = int(np.floor((b - j1 + tol) / length))
     tiles = [(j0 + k * length, j1 + k * length) for k in range(k_lo, k_hi + 1) if k != 0]
     if not tiles:
         raise InputError(f"span {a:g}:{b:g} s holds no other whole {length:g} s window beside "
-                         f"{j0:g}:{j1:g} s (a longer span)")
+                         f"{j0:g}:{j1:g} s (give a longer {option})")
     kwargs = {"use_events": use_events, "lag_frames": lag_frames, "face_band": face_band,
               "direction": d}
     pooled = [residence_times(traj, tile, **kwargs) for tile in tiles]

@@ -3,6 +3,7 @@
 
 from __future__ import annotations
 
+import math
 import sys
 from pathlib import Path
 
@@ -46,13 +47,12 @@ def cmd_compare(args) -> int:
         check_fitting_file(args.reference, args.prediction, required)
     if args.window is None:
         args.window = _default_window(args.reference, args.prediction)
-    if not args.quiet:
-        from cfbmarkov.analysis.compare_inputs import check_runs
-        from cfbmarkov.trajectories import Trajectories
 
+    def checked() -> None:
+        """The progress line, once the inputs are checked: a refusal stays one line."""
+        if args.quiet:
+            return
         a, b = args.window
-        with Trajectories(args.reference) as ref, Trajectories(args.prediction) as pred:
-            check_runs(ref, pred, a, b)     # a refusal stays one line, before any progress
         print(f"compare: {args.prediction} against {args.reference} over {a:g}-{b:g} s "
               f"(residence times, baselines, mixing"
               + (f", {args.resamples} bootstrap resamples for the intervals"
@@ -65,7 +65,8 @@ def cmd_compare(args) -> int:
                           output=args.output, bin_width=args.bin_width, md_order=args.md_order,
                           figures=not args.no_figures, basis=args.basis, level=args.level,
                           resamples=args.resamples, long_run_span=args.long_run_span,
-                          kinetics=args.kinetics, intervals_required=required)
+                          kinetics=args.kinetics, intervals_required=required,
+                          checked=checked)
     if not args.quiet:
         print(f"compare: done in {time.perf_counter() - started:.0f} s", file=sys.stderr,
               flush=True)
@@ -73,8 +74,8 @@ def cmd_compare(args) -> int:
         print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
-          f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {summary['md_rtd']:.4g}; "
-          f"mixing RMS {summary['mixing_rms']:.4g}")
+          f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {_number(summary['md_rtd'])}; "
+          f"mixing RMS {_number(summary['mixing_rms'])}")
     exact_model = summary["model"].get("exact")
     if exact_model:
         print(f"  the model's exact E(RT) as a {exact_model['window_length']:g} s window sees "
@@ -122,20 +123,28 @@ def cmd_compare(args) -> int:
         (a, b), _ = long_run["windows"]
         print(f"  the reference's long run (its windows of {a:g}-{b:g} s but this one, pooled): PD E(RT) "
               f"{pd_text(long_run['pd_rt_mean'])} %, SD(RT) PD {pd_text(long_run['pd_rt_sd'])} "
-              f"%, MD {long_run['md_rtd']:.4g} (what a perfect stationary model would predict)")
+              f"%, MD {_number(long_run['md_rtd'])} (what a perfect stationary model would "
+              "predict)")
     _print_kinetics(summary.get("kinetics") or {}, summary.get("level", args.level))
     print(Path(args.output) / "summary.json")
     return 0
 
 
+def _number(value) -> str:
+    """A figure at 4 significant digits; "n/d" where it is undefined (None or NaN)."""
+    return "n/d" if value is None or not value == value else f"{value:.4g}"
+
+
 def _default_window(reference: str, prediction: str) -> tuple[float, float]:
     """``compare`` without ``--window``: the span both files cover, said on stderr; refused
-    in one line naming both spans where they do not overlap."""
-    from cfbmarkov.analysis.compare_inputs import overlap_of
+    in one line naming both spans where they do not overlap, and before it where the files
+    look swapped (:func:`~cfbmarkov.analysis.compare_inputs.check_order`)."""
+    from cfbmarkov.analysis.compare_inputs import check_order, overlap_of
     from cfbmarkov.trajectories import Trajectories
     from cfbmarkov.trajectory_format import time_text
 
     with Trajectories(reference) as ref, Trajectories(prediction) as pred:
+        check_order(ref, pred)
         (a, b), spans = overlap_of(ref, pred)
     print(f"compare: no --window given: comparing over {time_text(a)}:{time_text(b)} s, the "
           f"span both files "
@@ -206,12 +215,17 @@ def baseline_line(baseline: dict, md_model: float, md_halves: float | None = Non
     Returns
     -------
     str
+        The line; where either MD is undefined (None or NaN: a side without residences),
+        one saying the baseline is not judged.
     """
     from cfbmarkov.analysis.baseline import judge_baseline
     from cfbmarkov.observed.metrics import percentage_text as pd_text
 
     (a, b), _ = baseline["windows"]
     md = baseline["md_rtd"]
+    if not all(v is not None and math.isfinite(v) for v in (md, md_model)):
+        return (f"persistence baseline (the observed RTD of {a:g}-{b:g} s taken as the "
+                "prediction): not judged, an MD is undefined (a side without residences)")
     judged = judge_baseline(md_model, md, md_halves)
     verdict = {"beats": "the model is closer", "loses": "the baseline is closer",
                "tie": "a tie (within 1 %)"}.get(judged.outcome)
@@ -577,7 +591,9 @@ def add_compare(sub) -> None:
     s.add_argument("-o", "--output", required=True, help="output directory")
     s.add_argument("--bin-width", type=positive_float, default=None,
                    help="RTD bin width, s (default: the lag of the model behind the prediction, "
-                        "else the reference's frame interval; printed)")
+                        "else the reference's frame interval; printed); refused where it "
+                        "leaves fewer than two bins over the window or over the reference's "
+                        "residences")
     s.add_argument("--md-order", type=minkowski_order, default=2.0,
                    help="Minkowski order k >= 1 of the MD (Eq. 9; inf: the largest difference; "
                         "default 2)")

@@ -160,9 +160,13 @@ def level(text: str) -> float:
 def minkowski_order(text: str) -> float:
     """A Minkowski order k >= 1; ``inf`` (the largest difference) is allowed, NaN is not."""
     value = number(text)
+    if math.isnan(value):
+        raise argparse.ArgumentTypeError(f"'{text}' is not a number: give a finite number "
+                                         ">= 1 (or inf, the largest difference)")
     if not value >= 1:
-        raise argparse.ArgumentTypeError(f"'{text}' must be at least 1 (or inf): below 1 the "
-                                         "Minkowski sum is not a distance")
+        raise argparse.ArgumentTypeError(f"'{text}' must be a finite number >= 1 (or inf, the "
+                                         "largest difference): below 1 the Minkowski sum is "
+                                         "not a distance")
     return value
 
 

@@ -101,8 +101,8 @@ def minkowski_distance(e, f, order: float = 2.0) -> float:
     if e.shape != f.shape:
         raise InputError(f"Minkowski distance of arrays of different lengths ({e.size} and {f.size})")
     if not order >= 1:   # NaN fails too; inf is the largest difference
-        raise InputError(f"Minkowski order {order:g} must be at least 1 (or inf): below 1 "
-                         "the sum is not a distance")
+        raise InputError(f"Minkowski order {order:g} must be a finite number >= 1 (or inf, "
+                         "the largest difference): below 1 the sum is not a distance")
     d = np.abs(e - f)
     if d.size == 0:
         return 0.0

@@ -242,7 +242,8 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
             level: float = 0.9, resamples: int = 100,
             md_order: float = 2.0, figures: bool = True,
             long_run_span: tuple[float, float] | None = None, kinetics=None,
-            intervals_required: bool = False) -> dict[str, Any]:
+            intervals_required: bool = False, allow_empty: bool = False,
+            checked=None) -> dict[str, Any]:
     """Compare ``prediction`` (the model) with ``reference`` on a window; write the results.
 
     Parameters
@@ -285,6 +286,14 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     figures : bool, optional
         Draw ``rtd.png``, ``snapshots.png``, ``mixing.png`` and, when the prediction carries
         its model, ``transition_matrix.png`` (a heat map) and ``probability_maps.png``.
+    allow_empty : bool, optional
+        Write a side without a complete residence in the window (its E(RT), SD(RT), PD and
+        MD null, with a warning) instead of refusing it (default False: refused before
+        anything is written; :func:`cfbmarkov.analysis.compare.compare_runs`).
+    checked : callable, optional
+        Called without arguments once both files and the parameters are checked and the
+        residences counted, before the intervals, kinetics and figures (the command line's
+        progress line: a refusal comes before it).
 
     Returns
     -------
@@ -296,10 +305,12 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     Raises
     ------
     InputError
-        For unusable parameters or files (:func:`cfbmarkov.analysis.compare.compare_runs`),
-        an ``output`` that exists and is not a directory, a model's fitting file replaced
-        since the fit (:class:`~cfbmarkov.analysis.intervals.SourceChanged`) or, with
-        ``intervals_required``, not found.
+        For unusable parameters or files (:func:`cfbmarkov.analysis.compare.compare_runs`:
+        among them a side without a complete residence in the window, bins too wide to tell
+        RTDs apart, a prediction given as the reference of a run), an ``output`` that
+        exists and is not a directory, a model's fitting file replaced since the fit
+        (:class:`~cfbmarkov.analysis.intervals.SourceChanged`) or, with
+        ``intervals_required``, not found; raised before ``output`` is written or replaced.
 
     References
     ----------
@@ -318,7 +329,10 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
         ref = _open(reference, stack)
         pred = _open(prediction, stack)
         comparison = compare_runs(ref, pred, window, bin_width=bin_width, md_order=md_order,
-                                  basis=basis, long_run_span=long_run_span)
+                                  basis=basis, long_run_span=long_run_span,
+                                  allow_empty=allow_empty)
+        if checked is not None:
+            checked()
         summary = comparison.summary()
         warnings = list(comparison.warnings)
         intervals = _intervals(pred, comparison, level, resamples, warnings,
