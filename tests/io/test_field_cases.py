@@ -302,6 +302,20 @@ def test_an_open_riser_warns_of_a_particle_back_at_the_inlet_with_its_id(tmp_pat
     assert "fit on a longer window" in err and not (tmp_path / "m.h5").exists()
 
 
+def test_an_open_riser_without_entries_is_refused_with_the_fix(tmp_path, capsys):
+    """LIGGGHTS files of one timestep each, an open box whose 6 particles never leave nor
+    enter: a fit has no entry distribution, refused in one line naming what to do."""
+    source = str(FIELD / "liggghts-per-timestep" / "post" / "dump*.newModels")
+    assert main(["import", source, "--vertical-axis", "z", "--time-step", "1e-5", "-o",
+                 str(tmp_path / "lig.h5")]) == 0
+    capsys.readouterr()
+    assert main(["fit", str(tmp_path / "lig.h5"), "--cells", "2x3", "--lag", "0.008",
+                 "--window", "0.008:0.096", "-o", str(tmp_path / "m.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "without any entry through the inlet" in err
+    assert "fit on a window in which particles enter" in err and "--boundary periodic" in err
+
+
 def test_insert_stream_growing_atom_count_with_image_flags(tmp_path):
     """LIGGGHTS insert/stream: the atom count grows; a duplicated `type` column; image flags.
     Every id is present from the frame where it first appears."""

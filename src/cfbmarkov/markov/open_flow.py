@@ -91,7 +91,9 @@ class OpenFlow:
         if self.entry_counts.sum() == 0:
             raise InputError("an open riser's model without any entry through the inlet: the "
                              "fitting window saw no particle enter (its entry distribution is "
-                             "empty)")
+                             "empty); fit on a window in which particles enter through the "
+                             "bottom (cfbmarkov info shows the entries), or import a riser "
+                             "that recycles its particles with --boundary periodic")
         if not (np.isfinite(self.inflow_per_lag) and self.inflow_per_lag >= 0):
             raise InputError(f"model inflow {self.inflow_per_lag!r} per lag must be >= 0")
 
