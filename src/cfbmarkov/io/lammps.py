@@ -280,9 +280,15 @@ def positions_m(frame: DumpFrame, layout: AtomColumns) -> np.ndarray:
 def _check_same_box(frame: DumpFrame, first: DumpFrame, where: str) -> None:
     scale = float(np.abs(first.box).max()) or 1.0
     if frame.box.shape != first.box.shape or np.abs(frame.box - first.box).max() > BOX_TOLERANCE * scale:
-        raise InputError(f"{where}: the box changes ({frame.box.tolist()} instead of "
-                         f"{first.box.tolist()}); a deforming or shrink-wrapped box can be "
-                         "imported with the riser's region given (--region)")
+        changed = [k for k in range(min(len(frame.box), len(first.box)))
+                   if np.abs(frame.box[k] - first.box[k]).max() > BOX_TOLERANCE * scale]
+        axis = "xyz"[changed[0]] if changed else "x"
+        k = changed[0] if changed else 0
+        raise InputError(f"{where}: the box changes along {axis} ({first.box[k][0]:.4g}.."
+                         f"{first.box[k][1]:.4g} m in the first frame, {frame.box[k][0]:.4g}.."
+                         f"{frame.box[k][1]:.4g} m here); a deforming or shrink-wrapped box "
+                         "can be imported with the riser's region given (--region "
+                         "XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX])")
 
 
 def _same_layout(frame: DumpFrame, layout: AtomColumns, where: str) -> AtomColumns:

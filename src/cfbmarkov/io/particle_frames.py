@@ -217,8 +217,11 @@ def _append(writer, columns: FrameColumns, frame: ParticleFrame, first: Particle
     if riser.from_box and frame.box is not None and first.box is not None:
         scale = float(np.abs(first.box).max()) or 1.0
         if np.abs(frame.box - first.box).max() > BOX_TOLERANCE * scale:
-            raise InputError(f"{where}: the box changes ({frame.box.tolist()} instead of "
-                             f"{first.box.tolist()}); give the riser's region with --region")
+            k = int(np.argmax(np.abs(frame.box - first.box).max(axis=1)))
+            raise InputError(f"{where}: the box changes along {'xyz'[k]} ({first.box[k][0]:.4g}"
+                             f"..{first.box[k][1]:.4g} m in the first frame, "
+                             f"{frame.box[k][0]:.4g}..{frame.box[k][1]:.4g} m here); give the "
+                             "riser's region with --region XMIN:XMAX,YMIN:YMAX[,ZMIN:ZMAX]")
     raw = frame.positions
     bad = ~np.isfinite(raw).all(axis=1)
     if bad.any():
