@@ -236,3 +236,18 @@ def test_compare_refuses_2d_against_3d(tmp_path, capsys, runs):
     code, _, err = run_cli(capsys, "compare", runs[0], runs[1], "--window", "1:3", "-o",
                            tmp_path / "cmp", "--no-figures")
     assert code == 2 and len(err.strip().splitlines()) == 1 and "3D" in err
+
+
+def test_a_rate_table_cell_outside_a_3d_grid_names_its_depth():
+    """col 0, row 0 is a cell of the grid; its depth 4 is not: the refusal names the depth
+    and its range, not a cell that looks valid."""
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.kinetics.fields import ByCell
+
+    grid = CellGrid(2, 3, 1.0, 1.0, depth_columns=2, depth=1.0)
+    rows = [(c, r, k, 1.0) for r in range(3) for k in range(2) for c in range(2)]
+    ByCell(np.array(rows, dtype=float)).per_cell(grid)            # the whole grid: accepted
+    rows[0] = (0, 0, 4, 1.0)
+    with pytest.raises(InputError, match=r"cell col 0, row 0, depth 4 is outside the grid "
+                                         r".*\(col 0\.\.1, row 0\.\.2, depth 0\.\.1\)"):
+        ByCell(np.array(rows, dtype=float)).per_cell(grid)

@@ -151,9 +151,11 @@ class ByCell(CellParameter):
         bad = (cols < 0) | (cols >= m) | (rows < 0) | (rows >= n) | (depth < 0) | (depth >= d)
         if bad.any():
             i = int(np.flatnonzero(bad)[0])
-            raise InputError(f"{where}: cell col {cols[i]}, row {rows[i]} is outside the "
-                             f"grid {space.grid_text()} (col 0..{m - 1}, row 0..{n - 1}); "
-                             "give one row per cell of the model's grid")
+            at = f"col {cols[i]}, row {rows[i]}" + (f", depth {depth[i]}" if d > 1 else "")
+            ranges = f"col 0..{m - 1}, row 0..{n - 1}" + (f", depth 0..{d - 1}" if d > 1
+                                                          else "")
+            raise InputError(f"{where}: cell {at} is outside the grid {space.grid_text()} "
+                             f"({ranges}); give one row per cell of the model's grid")
         cell = (rows * d + depth) * m + cols
         seen = np.bincount(cell, minlength=space.n_cells)
         if seen.max() > 1:
