@@ -369,7 +369,8 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
         if files:
             group = VtkGroup(str(folder / stem))
             for name, t in files:
-                group.addFile(filepath=str(folder / name), sim_time=t)
+                # the frame's time to 12 digits: 10.075, not 10.075000000000001
+                group.addFile(filepath=str(folder / name), sim_time=float(f"{t:.12g}"))
             group.save()
     return len(gas_files)
 
