@@ -148,10 +148,15 @@ def test_every_stage_is_a_file_and_the_report_has_every_section(reference, capsy
 def test_rerun_skips_what_is_done(reference, capsys):
     out, overrides = reference
     before = {n: (out / "u8" / n).stat().st_mtime_ns for n in STAGES if n != "timings.json"}
+    # what a worker stopped mid-comparison leaves: removed, and no estimator of the report
+    stale = out / "u8" / "compare-mle.tmp-1a2b3c4d"
+    stale.mkdir()
+    (stale / ".snapshots.png.abcd1234.tmp.png").write_bytes(b"half")
     capsys.readouterr()
     assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities",
                  "8", "-o", str(out), "--jobs", "1", "-q"]) == 0
     log = capsys.readouterr().out
+    assert not stale.exists() and "tmp-1a2b3c4d" not in (out / "report.md").read_text()
     assert "cfd-dem skipped" in log and "fit-paper skipped" in log and "compare-mle skipped" in log
     # how finely the RTDs are resolved, per side: bins spanned and residences
     summary = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
@@ -196,6 +201,10 @@ def test_resume_after_kill_mid_simulation_equals_uninterrupted(reference, tmp_pa
     a = json.loads((ref / "u8" / "compare-paper" / "summary.json").read_text())
     b = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
     assert a["pd_rt_mean"] == b["pd_rt_mean"] and a["mixing_rms"] == b["mixing_rms"]
+    # the resumed run's CPU time is the run's own record, the killed process's included
+    timing = json.loads((out / "u8" / "timings.json").read_text())["cfd_dem"]
+    with Trajectories(out / "u8" / "cfd-dem.h5") as t:
+        assert timing["cpu_s"] == t.group("run").attrs["cpu_time_s"]
 
 
 @pytest.mark.slow

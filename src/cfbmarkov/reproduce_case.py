@@ -22,6 +22,7 @@ from pydantic import ValidationError
 
 from cfbmarkov._atomic import write_text_atomic
 from cfbmarkov._names import parts_folder
+from cfbmarkov._outputs import remove_stale_temporaries
 from cfbmarkov.cases.scales import MODELS
 from cfbmarkov.config import SPEED_ONLY, CaseConfig, case_difference, flat_settings
 from cfbmarkov.errors import InputError, TimeStepAdvisory
@@ -58,8 +59,9 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
     -------
     dict
         ``wall_s`` and ``simulated_s`` (s), ``particles``, ``particle_steps_per_s``,
-        ``predict_window_wall_s`` (s) and ``predict_window_estimated``; empty when the file
-        has no ``/provenance/run`` group.
+        ``predict_window_wall_s`` (s) and ``predict_window_estimated``, and ``cpu_s`` where
+        the run recorded its CPU time over all its resumes; empty when the file has no
+        ``/provenance/run`` group.
     """
     import numpy as np
 
@@ -76,6 +78,9 @@ def cfd_dem_timing(path: str | os.PathLike, window: tuple[float, float]) -> dict
     out = {"wall_s": wall, "simulated_s": simulated,
            "particles": int(attrs.get("particles", 0)),
            "particle_steps_per_s": float(attrs.get("particle_steps_per_s", float("nan")))}
+    cpu = float(attrs.get("cpu_time_s", float("nan")))
+    if np.isfinite(cpu):            # the run's own, across its resumes
+        out["cpu_s"] = cpu
     a, b = window
     times = history[:, 0] if history.size else np.empty(0)
     if times.size >= 2 and times[0] <= a + 1e-9 and times[-1] >= b - 1e-9:
@@ -239,10 +244,16 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
             else:
                 simulate(case, reference, checkpoint_every=checkpoint_every, resume=resume,
                          progress="lines" if progress else False, label=label)
-        # this process's CPU time (Numba's compilation included where it compiled here)
+        # this process's CPU time (Numba's compilation included where it compiled here);
+        # a resumed run's own record, which holds the earlier processes' too, replaces it
         timing["cpu_s"] = _time.process_time() - cpu
         stages["cfd-dem"] = "resumed" if resume else "done"
-    _record(folder, "cfd_dem", {**cfd_dem_timing(reference, m.predict_window), **timing})
+    run_timing = cfd_dem_timing(reference, m.predict_window)
+    if "cpu_s" in run_timing and stages["cfd-dem"] == "resumed":
+        timing["cpu_s"] = run_timing["cpu_s"]
+    elif stages["cfd-dem"] == "resumed":
+        timing.pop("cpu_s")                 # the earlier processes' time is unknown
+    _record(folder, "cfd_dem", {**run_timing, **timing})
 
     summaries = {}
     with Trajectories(reference) as ref:
@@ -251,6 +262,11 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                              float(ref.times[-1]))
         for name in models:
             model_path = folder / f"model-{name}.h5"
+            # what a worker stopped by the parent (terminate) or killed left half-written:
+            # the reproduction holds its folder's lock, so no live writer owns them
+            for target in (model_path, folder / f"prediction-{name}.h5",
+                           folder / f"compare-{name}"):
+                remove_stale_temporaries(target)
             if model_path.exists():
                 model = MarkovModel.load(model_path)
                 stages[f"fit-{name}"] = "skipped"

@@ -247,7 +247,10 @@ def test_estimators_discovered_in_order(tmp_path):
                  b / "notes-x.h5"):
         path.write_bytes(b"")
     (b / "compare-zeta").mkdir()
+    (b / "compare-mle.tmp-9ba5c0d3").mkdir()          # a stopped writer's: no estimator
     assert estimator_names([a, b, tmp_path / "absent"]) == ["paper", "mle", "auto", "zeta"]
+    (b / "compare-omega.tmp-9ba5c0d3").mkdir()
+    assert "omega" not in estimator_names([b])
 
 
 def test_map_times_and_numbers():

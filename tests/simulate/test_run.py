@@ -107,9 +107,17 @@ def test_resume_equals_uninterrupted_run(tmp_path, reference):
     assert not out.exists() and (tmp_path / "b.h5.parts" / "checkpoint.h5").exists()
     with pytest.raises(Exception, match="add --resume"):
         simulate(case, out, progress=False)
+    from cfbmarkov.simulate.checkpoint import checkpoint_cpu_time
+    from cfbmarkov.trajectories import Trajectories
+
+    before = checkpoint_cpu_time(tmp_path / "b.h5.parts" / "checkpoint.h5")
+    assert before > 0
     simulate(case, out, checkpoint_every=0.025, progress=False, resume=True)
     for a, b in zip(arrays(ref), arrays(out)):
         np.testing.assert_array_equal(a, b)
+    # the run's CPU time counts the interrupted process's as well as the resumed one's
+    with Trajectories(out) as t:
+        assert t.group("run").attrs["cpu_time_s"] > before
 
 
 def test_resume_with_another_search_grid_names_it(tmp_path, reference):

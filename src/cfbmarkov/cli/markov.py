@@ -253,9 +253,14 @@ def cmd_rtd(args) -> int:
     _check_resamples(args.resamples)
     model = MarkovModel.load(args.model)
     if args.resamples:
-        model = model.with_uncertainty(None)
-        model = _with_interval(model, args.level if args.level is not None else 0.9,
-                               args.resamples)
+        from cfbmarkov.analysis.intervals import resolve_source
+
+        # its fitting file found (or the refusal, one line) before the progress line
+        model = resolve_source(model.with_uncertainty(None))
+        level_ = args.level if args.level is not None else 0.9
+        with _stage(args, "interval", f"the model's {100 * level_:g} % interval: "
+                    f"{args.resamples} bootstrap resamples of the fitting window"):
+            model = _with_interval(model, level_, args.resamples)
     elif (args.level is not None and model.uncertainty is not None
           and abs(model.uncertainty.level - args.level) > 1e-12):
         raise InputError(f"{args.model} holds a {model.uncertainty.percent} % interval, not "
@@ -443,6 +448,8 @@ def add_rtd(sub) -> None:
     s.add_argument("--resamples", type=count(0, 100000), default=0,
                    help="form the interval anew from this many bootstrap resamples of the "
                         "model's fitting window (default 0: the one stored in the model)")
+    s.add_argument("-q", "--quiet", action="store_true",
+                   help="no progress on stderr while --resamples forms the interval")
     s.set_defaults(func=cmd_rtd)
 
 

@@ -176,6 +176,10 @@ def config_of_reference(path: Path):
         return None
 
 
+#: the name ending of a folder a writer had not finished (``compare-mle.tmp-1a2b3c4d``)
+_TEMPORARY = re.compile(r"\.(?:tmp|old)-[0-9a-f]{8}$")
+
+
 def estimator_names(case_dirs: Sequence[Path]) -> list[str]:
     """Estimators with any file in any of the case folders.
 
@@ -197,7 +201,7 @@ def estimator_names(case_dirs: Sequence[Path]) -> list[str]:
         for p in d.iterdir():
             match = (re.fullmatch(r"(?:model|prediction)-(.+)\.h5", p.name) if p.is_file()
                      else re.fullmatch(r"compare-(.+)", p.name) if p.is_dir() else None)
-            if match:
+            if match and not _TEMPORARY.search(p.name):     # a dead writer's leftover
                 names.add(match.group(1))
     return ([n for n in ESTIMATOR_ORDER if n in names]
             + sorted(n for n in names if n not in ESTIMATOR_ORDER))

@@ -31,7 +31,8 @@ def _read_group(group: h5py.Group) -> dict:
 
 
 def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: int,
-                     wall_time: float, wall_history=None, run_id: str | None = None) -> None:
+                     wall_time: float, wall_history=None, run_id: str | None = None,
+                     cpu_time: float | None = None) -> None:
     """Atomically write everything needed to continue the run bit for bit.
 
     Parameters
@@ -48,6 +49,9 @@ def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: i
         Rows of (simulated time s, wall time s) at each checkpoint.
     run_id : str, optional
         The run's identity, which its segments carry too.
+    cpu_time : float, optional
+        CPU time spent so far, s (of the processes that ran it; NaN where a part is
+        unknown).
     """
     with atomic_path(path) as tmp:
         with h5_file(tmp, path) as f:
@@ -56,6 +60,8 @@ def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: i
                             "case": riser.case.model_dump_json()})
             if run_id is not None:
                 f.attrs["run_id"] = run_id
+            if cpu_time is not None:
+                f.attrs["cpu_time"] = float(cpu_time)
             f.create_dataset("wall_history", data=np.asarray(
                 wall_history if wall_history is not None else np.empty((0, 2)),
                 dtype=np.float64).reshape(-1, 2))
@@ -63,6 +69,25 @@ def write_checkpoint(path: Path, riser: CoupledRiser, n_segments: int, frames: i
             _write_group(f.create_group("dem"), state["dem"])
             _write_group(f.create_group("gas"), state["gas"])
             f.attrs["cfd_steps"] = state["cfd_steps"]
+
+
+def checkpoint_cpu_time(path: Path) -> float:
+    """The CPU time (s) a checkpoint records as spent so far; NaN where it records none.
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        A checkpoint written by :func:`write_checkpoint`.
+
+    Returns
+    -------
+    float
+    """
+    try:
+        with h5py.File(path, "r") as f:
+            return float(f.attrs.get("cpu_time", float("nan")))
+    except (OSError, ValueError, TypeError):
+        return float("nan")
 
 
 def read_checkpoint(path: Path, case: CaseConfig

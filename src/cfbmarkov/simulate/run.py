@@ -33,7 +33,7 @@ from cfbmarkov.config import CaseConfig
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
 from cfbmarkov.segmented import SegmentedTrajectoryWriter
 from cfbmarkov.simulate.cfd import GasGrid, gas_stability_limit
-from cfbmarkov.simulate.checkpoint import read_checkpoint, write_checkpoint
+from cfbmarkov.simulate.checkpoint import checkpoint_cpu_time, read_checkpoint, write_checkpoint
 from cfbmarkov.simulate.coupling import check_placement
 from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
 from cfbmarkov.simulate.progress import Progress
@@ -146,6 +146,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         _advise_time_step(case, label)
         riser, n_segments, frames, wall_time, history, run_id = read_checkpoint(checkpoint,
                                                                                 case)
+        cpu_time = checkpoint_cpu_time(checkpoint)
         if riser.time > end + 0.5 * cfd_dt:
             raise InputError(f"{checkpoint} holds the run at t = {riser.time:g} s, past the "
                              f"end asked for ({end:g} s): resume to a later --until, or "
@@ -168,11 +169,12 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         writer.append(0.0, riser.dem.positions, riser.dem.velocities, riser.dem.laps)
         if fields:
             writer.append_fields(0.0, spacing, **riser.gas_fields())
-        frames, wall_time = 1, 0.0
+        frames, wall_time, cpu_time = 1, 0.0, 0.0
         wall_history = [(0.0, 0.0)]
     bar = Progress(progress, riser.time, end, case.particles.number, label)
     finished = False
     started = _time.perf_counter() - wall_time
+    cpu_started = _time.process_time() - cpu_time     # NaN where a resumed part is unknown
     pending = _PendingFrames(writer, spacing)
     try:
         while riser.cfd_steps < total_steps:
@@ -190,7 +192,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
                 elapsed = _time.perf_counter() - started
                 wall_history.append((riser.time, elapsed))
                 write_checkpoint(checkpoint, riser, n_segments, frames, elapsed, wall_history,
-                                 run_id)
+                                 run_id, cpu_time=_time.process_time() - cpu_started)
             if stop_after_frames is not None and frames >= stop_after_frames:
                 writer.abort()
                 return output
@@ -209,7 +211,10 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     run_info = {"wall_time_s": wall, "simulated_s": end, "particles": case.particles.number,
                 "particle_steps_per_s": case.particles.number * total_steps
                 * riser.dem_steps_per_cfd / max(wall, 1e-9),
-                "exact_pass_events": True}
+                "exact_pass_events": True,
+                # this process's CPU time and, across resumes, the earlier ones' (NaN where a
+                # checkpoint recorded none): Numba's threads count, other processes not
+                "cpu_time_s": _time.process_time() - cpu_started}
     writer.finish(attach={"run": ({"wall_history": np.asarray(wall_history, dtype=np.float64)},
                                   run_info)})
     return output
