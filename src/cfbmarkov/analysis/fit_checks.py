@@ -75,18 +75,7 @@ def assess_fit(model, runs: Sequence | None = None,
     """
     from cfbmarkov.markov.first_passage import TrappedResidences
 
-    if runs is None:
-        if not model.source or not isinstance(model.source, str):
-            raise InputError("the model names no trajectory file it was fitted on: give "
-                             "runs= and windows= (the files and fitting windows)")
-        runs = [model.source]
-    runs = list(runs)
-    if windows is None:
-        windows = [model.window] * len(runs)
-    windows = list(windows)
-    if len(windows) != len(runs):
-        raise InputError(f"{len(runs)} runs and {len(windows)} windows: give one fitting "
-                         "window per run")
+    runs, windows = _runs_and_windows(model, runs, windows)
     if 0 < resamples < 10:
         raise InputError(f"resamples {resamples}: an interval needs at least 10 bootstrap "
                          "resamples (0 leaves it out)")
@@ -144,9 +133,15 @@ def record_fitting_data(model, runs: Sequence | None = None,
     Raises
     ------
     InputError
-        If the model names no trajectory file and ``runs`` is not given, or the fitting
-        window lies outside the file.
+        If the model names no trajectory file and ``runs`` is not given, ``runs`` and
+        ``windows`` differ in number, or the fitting window lies outside the file.
     """
+    return _with_window_fields(model, *_runs_and_windows(model, runs, windows))
+
+
+def _runs_and_windows(model, runs, windows) -> tuple[list, list]:
+    """The runs and their fitting windows: as given, else the model's source and window;
+    one window per run."""
     if runs is None:
         if not model.source or not isinstance(model.source, str):
             raise InputError("the model names no trajectory file it was fitted on: give "
@@ -154,7 +149,10 @@ def record_fitting_data(model, runs: Sequence | None = None,
         runs = [model.source]
     runs = list(runs)
     windows = [model.window] * len(runs) if windows is None else list(windows)
-    return _with_window_fields(model, runs, windows)
+    if len(windows) != len(runs):
+        raise InputError(f"{len(runs)} runs and {len(windows)} windows: give one fitting "
+                         "window per run")
+    return runs, windows
 
 
 def _with_window_fields(model, runs, windows):
