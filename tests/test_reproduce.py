@@ -10,6 +10,7 @@ import math
 import os
 import signal
 import subprocess
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -205,6 +206,32 @@ def test_resume_after_kill_mid_simulation_equals_uninterrupted(reference, tmp_pa
     timing = json.loads((out / "u8" / "timings.json").read_text())["cfd_dem"]
     with Trajectories(out / "u8" / "cfd-dem.h5") as t:
         assert timing["cpu_s"] == t.group("run").attrs["cpu_time_s"]
+
+
+def test_cases_added_to_a_reproduction_join_its_report_and_another_scale_is_refused(
+        reference, tmp_path, capsys):
+    """A folder's earlier cases stay listed when a rerun adds others (its report covers
+    them all); a reproduction of another scale or overrides into it is refused in one line
+    before anything is written."""
+    from cfbmarkov.reproduce import load_overrides
+
+    ref, overrides = reference
+    out = tmp_path / "grown"
+    shutil.copytree(ref, out)
+    earlier = json.loads((out / "reproduce.json").read_text())
+    (out / "u3").mkdir()                           # a case of the earlier reproduction
+    (out / "reproduce.json").write_text(json.dumps({**earlier, "cases": ["u3"]}))
+    reproduce(out, "quick", [8.0], overrides=load_overrides(overrides), models=("paper", "mle"),
+              jobs=1, progress=False, report=False, log=lambda line: None)
+    assert json.loads((out / "reproduce.json").read_text())["cases"] == ["u3", "u8"]
+    before = (out / "reproduce.json").read_bytes()
+    capsys.readouterr()
+    for argv, what in ((["--scale", "paper", "--velocities", "6"], "another scale"),
+                       (["--scale", "quick", "--velocities", "6"], "another --overrides")):
+        assert main(["reproduce", *argv, "-o", str(out), "-q"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and what in err[0], err
+    assert (out / "reproduce.json").read_bytes() == before and not (out / "u6").exists()
 
 
 @pytest.mark.slow

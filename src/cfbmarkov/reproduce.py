@@ -358,9 +358,42 @@ def check_run_folder(out: str | os.PathLike, cases, names, ensemble: int = 1) ->
         check_ensemble_folder(out / name, ensemble, record=False)
 
 
+def earlier_manifest(out: Path, scale: Scale, overrides, ensemble: int) -> dict:
+    """The manifest of an earlier reproduction in ``out`` (empty where there is none), once
+    checked to be of the same scale, overrides and ensemble size: cases of another
+    configuration beside its cases would make one report of two experiments.
+
+    Raises
+    ------
+    InputError
+        One line naming what differs and the fix.
+    """
+    path = out / "reproduce.json"
+    if not path.is_file():
+        return {}
+    try:
+        earlier = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return {}           # unreadable: written anew (its cases are checked one by one)
+    if not isinstance(earlier, dict):
+        return {}
+    for key, now, shown in (("scale", scale.name, "scale"),
+                            ("overrides", overrides or {}, "--overrides"),
+                            ("ensemble", ensemble, "--ensemble")):
+        before = earlier.get(key, 1 if key == "ensemble" else None)
+        now = json.loads(json.dumps(now))          # as the manifest stores it (tuples: lists)
+        if before != now:
+            raise InputError(f"{out}: holds a reproduction of another {shown} ({key} "
+                             f"{json.dumps(before)}, now {json.dumps(now)}) whose cases its "
+                             "report covers; give another folder with -o, or the same "
+                             f"{shown} to add cases to it")
+    return earlier
+
+
 def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executor, scheduler,
                jobs, progress, report, log, kinetics=None, ensemble=1, device="cpu") -> Path:
     check_run_folder(out, cases, names, ensemble)    # refused: nothing written
+    earlier = earlier_manifest(out, scale, overrides, ensemble)
     client = None
     threads = None
     own = executor is None
@@ -371,9 +404,13 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
     out.mkdir(parents=True, exist_ok=True)
     from cfbmarkov import __version__
 
+    # an earlier reproduction's cases that are still there stay in its report
+    kept = [n for n in earlier.get("cases") or [] if isinstance(n, str) and (out / n).is_dir()]
+    listed = list(dict.fromkeys([*kept, *names]))
+    used = list(dict.fromkeys([*(earlier.get("models") or []), *models]))
     manifest = {"scale": scale.name, "description": scale.description,
                 "reductions": list(scale.reductions), "overrides": overrides or {},
-                "cases": names, "models": list(models), "version": __version__,
+                "cases": listed, "models": used, "version": __version__,
                 "ensemble": ensemble, "device": device}
     write_text_atomic(out / "reproduce.json", json.dumps(manifest, indent=2) + "\n")
     runs = "" if ensemble == 1 else f", {ensemble} CFD-DEM runs each ({device})"
