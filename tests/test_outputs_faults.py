@@ -69,6 +69,8 @@ def data(tmp_path_factory):
     folder = tmp_path_factory.mktemp("outputs")
     run = write_run(folder / "run.h5", RiserFlow(), 120, 1.5, seed=1)
     assert main(["fit", str(run), "--window", "0:1", "-o", str(folder / "model.h5")]) == 0
+    assert main(["predict", str(folder / "model.h5"), "--init", str(run), "--start", "0.5",
+                 "--duration", "1", "-q", "-o", str(folder / "pred.h5")]) == 0
     return folder
 
 
@@ -138,7 +140,7 @@ def test_output_of_another_kind_needs_force(data, tmp_path, capsys):
     (tmp_path / "full").mkdir()
     (tmp_path / "full" / "x").write_text("x")
     assert _fit(data, tmp_path / "full", "--force") == 2      # never a folder with files
-    assert main(["compare", str(data / "run.h5"), str(data / "run.h5"), "--window", "0:1",
+    assert main(["compare", str(data / "run.h5"), str(data / "pred.h5"), "--window", "0.5:1.5",
                  "--no-figures", "-o", str(text)]) == 2      # a file where a folder goes
     err = [line for line in capsys.readouterr().err.splitlines()
            if not line.startswith("warning:")]     # the fitting sample's, on the tiny window
@@ -176,7 +178,7 @@ def test_full_disk_markov_verbs(data, tmp_path, verb):
     args = {"fit": ["fit", data / "run.h5", "--window", "0:1", "-q", "-o", "out.h5"],
             "predict": ["predict", data / "model.h5", "--init", data / "run.h5", "--start",
                         "0.5", "--duration", "1", "-q", "-o", "out.h5"],
-            "compare": ["compare", data / "run.h5", data / "run.h5", "--window", "0:1.5",
+            "compare": ["compare", data / "run.h5", data / "pred.h5", "--window", "0.5:1.5",
                         "-q", "-o", "out"]}[verb]
     rc, _, err = run_cli(*args, cwd=tmp_path, preexec_fn=_file_size_limit(2000))
     assert rc == 2, err
@@ -202,7 +204,7 @@ def test_kill_at_random_points_then_rerun_is_clean(data, tmp_path):
             ("fit.h5", ["fit", data / "run.h5", "--window", "0:1", "-o", "fit.h5"]),
             ("pred.h5", ["predict", data / "model.h5", "--init", data / "run.h5", "--start",
                          "0.5", "--duration", "1", "-q", "-o", "pred.h5"]),
-            ("cmp", ["compare", data / "run.h5", data / "run.h5", "--window", "0:1.5",
+            ("cmp", ["compare", data / "run.h5", data / "pred.h5", "--window", "0.5:1.5",
                      "-o", "cmp"]),
             ("maps.png", ["maps", data / "model.h5", "--times", "0.05,0.1", "-o", "maps.png"]),
             ("vtk", ["export-vtk", data / "run.h5", "-o", "vtk"])]

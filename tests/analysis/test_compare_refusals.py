@@ -196,3 +196,25 @@ def test_md_order_refusals_say_what_is_wanted(pair, tmp_path, capsys, order, tex
                   tmp_path / "c")
     assert "argument --md-order: " + text in err
     assert not (tmp_path / "c").exists()
+
+
+def test_a_file_compared_with_itself_or_its_copy_is_refused(pair, tmp_path, capsys):
+    import shutil
+
+    ref, _ = pair
+    copy = shutil.copy(ref, tmp_path / "copy.h5")
+    for other in (ref, copy):
+        err = refused(capsys, [ref, other, "--window", "0.5:3"], tmp_path / "c")
+        assert "hold the same trajectories: a file compared with itself gives MD 0" in err
+    assert not (tmp_path / "c").exists()
+
+
+def test_the_default_windows_note_comes_only_after_the_checks(pair, tmp_path, capsys):
+    """Without --window, a refusal stays the one line (the note on the window chosen is
+    printed once the inputs are checked)."""
+    ref, pred = pair
+    err = refused(capsys, [ref, pred, "--bin-width", "100"], tmp_path / "c")
+    assert "--bin-width 100 s" in err
+    assert main(["compare", str(ref), str(pred), "-o", str(tmp_path / "d"), "--resamples", "0",
+                 "--no-figures", "-q"]) == 0
+    assert "no --window given: comparing over 0.5:3 s" in capsys.readouterr().err

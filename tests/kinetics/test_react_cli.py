@@ -517,4 +517,4 @@ def test_rtd_at_another_level_of_a_model_without_an_interval_is_refused(fitted, 
     assert main(["predict", str(bare), "--init", str(run), "--start", "0", "--duration",
                  "0.11", "-q", "-o", str(tmp_path / "p.h5")]) == 2
     err = capsys.readouterr().err
-    assert "not a whole multiple of the model's lag 0.025 s (e.g. 0.1 or 0.125 s)" in err
+    assert "duration 0.11 s is not a whole multiple of the model's lag 0.025 s (e.g. 0.1 or 0.125 s)" in err

@@ -388,6 +388,50 @@ def check_order(ref: Trajectories, pred: Trajectories) -> None:
                          f"{pred.path} {ref.path} ...)")
 
 
+def check_not_same(ref: Trajectories, pred: Trajectories) -> None:
+    """Refuse one file given as both the reference and the prediction (also through a link,
+    or a copy of a run): every figure would say the model is perfect. The command line's
+    check; in Python a run compared with itself is a sanity check and passes.
+
+    Parameters
+    ----------
+    ref, pred : Trajectories
+        The open reference and model files, as given.
+
+    Raises
+    ------
+    InputError
+        One line naming both files and what to give instead.
+    """
+    import os
+
+    try:
+        same = os.path.samefile(ref.path, pred.path)
+    except OSError:
+        same = False
+    if same or (ref.source != PREDICTION_SOURCE and pred.source != PREDICTION_SOURCE
+                and _same_content(ref, pred)):
+        raise InputError(f"the reference {ref.path} and the prediction {pred.path} hold the "
+                         "same trajectories: a file compared with itself gives MD 0 whatever "
+                         "the model; give the run and a prediction of it (cfbmarkov predict "
+                         "... -o PRED)")
+
+
+def _same_content(ref: Trajectories, pred: Trajectories) -> bool:
+    """Whether two runs (neither a prediction) hold the same data: the same content
+    identity over their whole span (a copy of one file)."""
+    from cfbmarkov.trajectory_identity import window_identity
+
+    if (ref.n_frames != pred.n_frames or ref.n_particles != pred.n_particles
+            or not np.array_equal(ref.times, pred.times)):
+        return False
+    span = (float(ref.times[0]), float(ref.times[-1]))
+    try:
+        return window_identity(ref, span) == window_identity(pred, span)
+    except Exception:       # noqa: BLE001 - unreadable: the comparison itself says why
+        return False
+
+
 def _check_same_start(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: int) -> None:
     """Open risers: the particles present at the window's first frame must be the same on
     both sides (the prediction started from the reference's state); newcomers may differ

@@ -37,6 +37,11 @@ def cmd_compare(args) -> int:
     from cfbmarkov.report.compare import compare
 
     started = time.perf_counter()
+    from cfbmarkov.analysis.compare_inputs import check_not_same
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(args.reference) as ref, Trajectories(args.prediction) as pred:
+        check_not_same(ref, pred)
     # --resamples given: the intervals were asked for, and a fitting file not found refuses
     required = args.resamples is not None
     if args.resamples is None:
@@ -45,11 +50,15 @@ def cmd_compare(args) -> int:
         from cfbmarkov.report.compare import check_fitting_file
 
         check_fitting_file(args.reference, args.prediction, required)
+    note = None
     if args.window is None:
-        args.window = _default_window(args.reference, args.prediction)
+        args.window, note = _default_window(args.reference, args.prediction)
 
     def checked() -> None:
-        """The progress line, once the inputs are checked: a refusal stays one line."""
+        """The default window's note and the progress line, once the inputs are checked:
+        a refusal stays one line."""
+        if note is not None:
+            print(note, file=sys.stderr, flush=True)
         if args.quiet:
             return
         a, b = args.window
@@ -135,10 +144,11 @@ def _number(value) -> str:
     return "n/d" if value is None or not value == value else f"{value:.4g}"
 
 
-def _default_window(reference: str, prediction: str) -> tuple[float, float]:
-    """``compare`` without ``--window``: the span both files cover, said on stderr; refused
-    in one line naming both spans where they do not overlap, and before it where the files
-    look swapped (:func:`~cfbmarkov.analysis.compare_inputs.check_order`)."""
+def _default_window(reference: str, prediction: str) -> tuple[tuple[float, float], str]:
+    """``compare`` without ``--window``: the span both files cover and the note that says
+    so (printed once the inputs are checked); refused in one line naming both spans where
+    they do not overlap, and before it where the files look swapped
+    (:func:`~cfbmarkov.analysis.compare_inputs.check_order`)."""
     from cfbmarkov.analysis.compare_inputs import check_order, overlap_of
     from cfbmarkov.trajectories import Trajectories
     from cfbmarkov.trajectory_format import time_text
@@ -146,10 +156,8 @@ def _default_window(reference: str, prediction: str) -> tuple[float, float]:
     with Trajectories(reference) as ref, Trajectories(prediction) as pred:
         check_order(ref, pred)
         (a, b), spans = overlap_of(ref, pred)
-    print(f"compare: no --window given: comparing over {time_text(a)}:{time_text(b)} s, the "
-          f"span both files "
-          f"cover ({spans})", file=sys.stderr, flush=True)
-    return a, b
+    return (a, b), (f"compare: no --window given: comparing over {time_text(a)}:"
+                    f"{time_text(b)} s, the span both files cover ({spans})")
 
 
 def _place(value: float, interval) -> str:

@@ -319,13 +319,15 @@ class MarkovModel:
         values and the errors raised."""
         return propagation.propagate(self, initial, steps, outflow)
 
-    def steps_for(self, time: float) -> int:
+    def steps_for(self, time: float, name: str = "time") -> int:
         """Number of lags in ``time``.
 
         Parameters
         ----------
         time : float
             A time (s), a whole multiple of the lag.
+        name : str, optional
+            What the time is, for messages (``duration``).
 
         Returns
         -------
@@ -338,13 +340,13 @@ class MarkovModel:
             If ``time`` is negative or not a whole multiple of the lag.
         """
         if not np.isfinite(time):
-            raise InputError(f"time {time:g} s is not a finite number")
+            raise InputError(f"{name} {time:g} s is not a finite number")
         k = int(round(time / self.lag))
         if k < 0 or abs(k * self.lag - time) > 1e-6 * max(self.lag, abs(time)):
             below = max(int(np.floor(time / self.lag + 1e-9)), 0) * self.lag
             nearest = f"{below:g} or {below + self.lag:g} s" if below > 0 else \
                 f"{self.lag:g} s"
-            raise InputError(f"time {time:g} s is not a whole multiple of the model's lag "
+            raise InputError(f"{name} {time:g} s is not a whole multiple of the model's lag "
                              f"{self.lag:g} s (e.g. {nearest})")
         return k
 

@@ -116,7 +116,7 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
         seed = check_seed(seed)
         duration = check_finite(duration, "duration", "s", positive=True)
         check_finite(start, "start time", "s")
-        n_steps = model.steps_for(duration)
+        n_steps = model.steps_for(duration, "duration")
         if n_steps < 1:
             raise InputError(f"duration {duration:g} s is shorter than one lag ({model.lag:g} s)")
         particles = traj.n_particles + (model.open_flow.inflow_per_lag * n_steps
