@@ -134,7 +134,7 @@ def test_version_1_files_still_read_and_a_newer_version_is_refused(tmp_path, cap
 
 
 @pytest.mark.parametrize("argv, purpose", [
-    (["compare", "{f}", "{f}", "--window", "0:0.1", "-o", "{o}"], "comparing runs"),
+    (["compare", "{f}", "{p}", "--window", "0:0.1", "-o", "{o}"], "comparing runs"),
 ])
 def test_what_cannot_use_absent_particles_refuses_them_in_one_line(tmp_path, capsys, argv,
                                                                        purpose):
@@ -145,8 +145,10 @@ def test_what_cannot_use_absent_particles_refuses_them_in_one_line(tmp_path, cap
     present[3:, 2] = False
     f = write_trajectories(tmp_path / "a.h5", np.arange(6) * 0.02, np.mod(pos, [W, H]),
                            width=W, height=H, present=present)
+    p = write_trajectories(tmp_path / "p.h5", np.arange(6) * 0.02, np.mod(pos, [W, H]),
+                           width=W, height=H, present=present, source="markov-prediction")
     out = tmp_path / "out"
-    args = [a.format(f=f, o=out) for a in argv]
+    args = [a.format(f=f, p=p, o=out) for a in argv]
     code = main(args)
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
