@@ -150,3 +150,36 @@ def test_the_kinetics_interval_says_how_many_resamples_it_took(prediction, tmp_p
     assert got["kinetics"]["X"]["model"]["interval_resamples"] == 4
     assert any("interval from 4 of 10 bootstrap resamples" in w
                for w in got.get("warnings", [])), got.get("warnings")
+
+
+def test_the_segregated_flow_comes_from_the_fitting_file_not_one_of_its_name(tmp_path,
+                                                                            monkeypatch):
+    """A model fitted on run.h5 in one folder, compared from another folder that holds a
+    different run.h5: the segregated-flow baseline is formed from the fitting window found
+    by its identity (beside the prediction), not from the file of that name."""
+    from cfbmarkov.cli import main
+
+    home, elsewhere = tmp_path / "a", tmp_path / "b"
+    home.mkdir()
+    elsewhere.mkdir()
+    flow = RiserFlow(columns=6, rows=10, lag=0.02, persistence=False)
+    write_run(home / "run.h5", flow, 200, 4.0, seed=2)
+    write_run(elsewhere / "run.h5", flow, 200, 4.0, seed=9)
+    monkeypatch.chdir(home)
+    assert main(["fit", "run.h5", "--cells", "6x10", "--lag", "0.02", "--window", "0:2",
+                 "--estimator", "mle", "--resamples", "0", "-o", "model.h5"]) == 0
+    assert main(["predict", "model.h5", "--init", "run.h5", "--start", "2", "--duration", "2",
+                 "-q", "-o", "pred.h5"]) == 0
+    kinetics = _kinetics(tmp_path, "uniform", "rate = 1.0")
+
+    def baseline():
+        from cfbmarkov.report.compare import compare
+
+        got = compare(home / "run.h5", home / "pred.h5", window=(2.0, 4.0),
+                      output=tmp_path / "out", figures=False, resamples=0,
+                      kinetics=kinetics)["kinetics"]["X"]["segregated_flow"]
+        return got["exit_mean"]
+
+    at_home = baseline()
+    monkeypatch.chdir(elsewhere)
+    assert baseline() == at_home

@@ -174,10 +174,30 @@ def _prediction_states(pred, model, window, warnings):
 
 
 def _fitting_source(model, ref):
-    """The file and window the model was fitted on: its own source where that is one
-    readable file, else the reference where the window lies inside it (None, None else)."""
+    """The file and window the model was fitted on: for a model that records its fitting
+    window's identity, the file that holds it (:func:`~cfbmarkov.analysis.intervals.
+    resolve_source`: as recorded, beside the model file, or the reference; of a pooled
+    fit, the reference where it is one of the runs); for one that records none, its own
+    source where that is one readable file, else the reference where the window lies
+    inside it. (None, None) where none is found."""
+    import os
+
+    from cfbmarkov.analysis.intervals import resolve_source
+
     window = model.window
     if window is None:
+        return None, None
+    if model.source_identity:
+        try:
+            found = resolve_source(model, candidates=[ref.path])
+        except InputError:
+            return None, None       # another file of that name, or none: no baseline
+        if isinstance(found.source, (str, Path)):
+            return found.source, tuple(window)
+        runs = [os.path.abspath(str(p)) for p in found.source]
+        if os.path.abspath(str(ref.path)) in runs:      # a pooled fit: its reference run
+            return ref, tuple(model.run_windows[runs.index(os.path.abspath(str(ref.path)))]
+                              if model.run_windows else window)
         return None, None
     source = model.source
     if isinstance(source, (str, Path)) and str(source) and Path(source).is_file():
