@@ -518,3 +518,21 @@ def test_rtd_at_another_level_of_a_model_without_an_interval_is_refused(fitted, 
                  "0.11", "-q", "-o", str(tmp_path / "p.h5")]) == 2
     err = capsys.readouterr().err
     assert "duration 0.11 s is not a whole multiple of the model's lag 0.025 s (e.g. 0.1 or 0.125 s)" in err
+
+
+def test_react_monte_carlo_prints_its_bed_means(fitted, tmp_path, capsys):
+    """The Monte Carlo's line: the bed mean over the particles present at the first and last
+    frames, the first the properties' start value (0 for a fresh feed)."""
+    import h5py as _h5py
+
+    folder, run, model = fitted
+    kin = _write(tmp_path, "[[property]]\nname = \"X\"\nlaw = \"first-order\"\nrate = 2.0\n")
+    out = tmp_path / "p.h5"
+    assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "1", "-q", "-o", str(out)]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    line = next(x for x in lines if x.startswith("Monte Carlo, bed mean"))
+    with _h5py.File(out, "r") as f:
+        last = f["properties"]["X"][-1]
+    assert "X 0 at 0.5 s" in line and f"{np.nanmean(last):.6g} at 1.5 s" in line
+    assert lines[-1] == str(out)

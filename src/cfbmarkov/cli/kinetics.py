@@ -150,9 +150,30 @@ def cmd_react(args) -> int:
             print("  exits counted downward, at the pass down through the bottom "
                   f"({DOWNWARD_LINE})")
     if args.output is not None:
+        _print_monte_carlo(args.output, [p.name for p in kinetics.properties])
         print(args.output)
     sys.stdout.flush()
     return 0
+
+
+def _print_monte_carlo(prediction, names) -> None:
+    """The Monte Carlo's bed means at its first and last frames (over the particles
+    present), and where to judge it: its exits carry the start's transient."""
+    import numpy as np
+
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(prediction) as pred:
+        t0, t1 = float(pred.times[0]), float(pred.times[-1])
+        parts = []
+        for name in names:
+            first = [pred.property_values(name, k)[pred.present(k)] for k in (0, -1)]
+            means = [float(np.nanmean(v)) if v.size else float("nan") for v in first]
+            parts.append(f"{name} {means[0]:.6g} at {t0:g} s, {means[1]:.6g} at {t1:g} s")
+    print(f"Monte Carlo, bed mean over the particles present: {'; '.join(parts)} (its "
+          "particles start from the values at the start, so a window shorter than a few "
+          "E(RT) carries that transient; `cfbmarkov compare RUN PREDICTION --kinetics FILE` "
+          "judges the exits and the bed over the window)")
 
 
 #: the passes after which ``react`` gives a carried property's exit value by default
