@@ -1,9 +1,11 @@
 """An open riser's trajectory file stores compactly the particles absent from most frames
-(chunks of frames x particles, deflated, blocks holding only absent particles never
-written), and reads back exactly what was written; a periodic riser's layout is unchanged."""
+(chunks of frames x particles, deflated for a prediction, blocks holding only absent
+particles never written), and reads back exactly what was written; a periodic riser's
+layout is unchanged."""
 
 import h5py
 import numpy as np
+import pytest
 
 from cfbmarkov import synthetic
 from cfbmarkov.cli import main
@@ -27,25 +29,31 @@ def _few_present(n_particles=3000, n_frames=400, seed=1):
     return present, positions
 
 
-def test_open_file_is_compact_and_reads_back_exactly(tmp_path):
+@pytest.mark.parametrize("source, deflated, share", [("markov-prediction", True, 20),
+                                                      ("test", False, 4)])
+def test_open_file_is_compact_and_reads_back_exactly(tmp_path, source, deflated, share):
+    """A prediction's chunks are deflated (a twentieth of the dense size here); a run's are
+    not (fitting reads it as fast as a periodic run), its blocks of absent particles still
+    unwritten (a quarter)."""
     present, positions = _few_present()
     n_frames, n = present.shape
     times = 0.025 * np.arange(n_frames)
     path = tmp_path / "open.h5"
-    with TrajectoryWriter(path, np.arange(n), width=0.09, height=0.95, source="test",
+    with TrajectoryWriter(path, np.arange(n), width=0.09, height=0.95, source=source,
                           boundary="open", frame_interval=0.025, max_step=1.0) as w:
         for i in range(0, n_frames, 37):          # blocks not aligned with the chunks
             k = slice(i, min(i + 37, n_frames))
             w.append_frames(times[k], positions[k], present=present[k])
     dense = n_frames * n * (2 * 8 + 4 + 1)        # positions, laps, presence uncompressed
-    assert path.stat().st_size < dense / 20, (path.stat().st_size, dense)
+    assert path.stat().st_size < dense / share, (path.stat().st_size, dense)
     with Trajectories(path) as t:
         np.testing.assert_array_equal(t.present(slice(None)), present)
         expected = np.where(present[..., None], positions, np.nan)
         np.testing.assert_array_equal(t.positions(slice(None)), expected)
         np.testing.assert_array_equal(t.laps(slice(None)), 0)
     with h5py.File(path) as f:
-        assert f["frames/position"].compression == "gzip"
+        assert f["frames/position"].chunks == (16, 256, 2)
+        assert f["frames/position"].compression == ("gzip" if deflated else None)
 
 
 def test_periodic_file_layout_is_unchanged(tmp_path):

@@ -25,6 +25,7 @@ from cfbmarkov import _interrupt
 from cfbmarkov._atomic import (discard, is_write_failure, publish, temporary_path, write_error,
                                write_method)
 from cfbmarkov._hdf5 import create_array_dataset, json_default
+from cfbmarkov._outputs import PREDICTION_SOURCE
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectory_checks import check_written_values
@@ -158,7 +159,11 @@ class TrajectoryWriter:
         f, d = self._file, self.dimensions
         f.attrs.update(attrs)
         self._compact = boundary.is_open   # particles present a short while each
-        self._chunk = create_frames(f, self.ids, d, self.with_velocity, self._compact)
+        # a prediction's chunks deflated (its particles present a short while each); a
+        # run's not, so that fitting on it reads as fast as on a periodic one's
+        self._deflate = self._compact and attrs.get("source") == PREDICTION_SOURCE
+        self._chunk = create_frames(f, self.ids, d, self.with_velocity, self._compact,
+                                    self._deflate)
         self._n_frames = 0
         self._series = FrameSeries(self._label, self.height, boundary.is_open, self.max_step,
                                    frame_interval)
@@ -260,7 +265,8 @@ class TrajectoryWriter:
             return
         n = self.ids.size
         ds = f.create_dataset("frames/present", shape=(self._n_frames, n), maxshape=(None, None),
-                              dtype="?", fillvalue=False, **frame_chunks(n, self._compact))
+                              dtype="?", fillvalue=False,
+                              **frame_chunks(n, self._compact, deflate=self._deflate))
         for i in range(0, self._n_frames, 1024):
             j = min(i + 1024, self._n_frames)
             write_frame_rows(ds, i, np.isfinite(f["frames/position"][i:j, :, 0]), self._compact)
