@@ -3,6 +3,8 @@
 particles never written), and reads back exactly what was written; a periodic riser's
 layout is unchanged."""
 
+import zlib
+
 import h5py
 import numpy as np
 import pytest
@@ -87,3 +89,52 @@ def test_open_riser_prediction_is_small_and_reads_the_same(tmp_path, capsys):
     capsys.readouterr()
     assert main(["info", str(pred)]) == 0
     assert "particles present per frame" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("kind", ["position", "lap", "present"])
+def test_chunks_deflated_in_threads_are_those_of_hdf5s_own_filters(tmp_path, kind):
+    """Frames written from a chunk's first frame are deflated by zlib in threads and written
+    as they are; the stored chunks hold the bytes HDF5's own shuffle and deflate filters
+    store for the same values (decompressed, byte for byte), chunks of fill values are not
+    written, and a later block that starts inside a chunk (HDF5 writes it) reads back too."""
+    from cfbmarkov.trajectory_groups import create_frames, write_frame_rows
+
+    present, positions = _few_present(n_particles=700, n_frames=70)
+    values = {"position": np.where(present[..., None], positions, np.nan),
+              "lap": np.where(present, np.arange(700) % 5 - 2, 0).astype(np.int32),
+              "present": present}[kind]
+    paths = {}
+    for how in ("threads", "hdf5"):
+        paths[how] = tmp_path / f"{how}.h5"
+        with h5py.File(paths[how], "w") as f:
+            create_frames(f, np.arange(700), 2, False, compact=True, deflate=True)
+            if kind == "present":
+                f.create_dataset("frames/present", shape=(0, 700), maxshape=(None, None),
+                                 dtype="?", fillvalue=False, chunks=(16, 256),
+                                 compression="gzip", compression_opts=1, shuffle=True)
+            ds = f[f"frames/{kind}"]
+            for i0, i1 in ((0, 32), (32, 51), (51, 70)):   # aligned, aligned, inside a chunk
+                ds.resize(i1, axis=0)
+                if how == "threads":
+                    write_frame_rows(ds, i0, values[i0:i1], compact=True)
+                else:
+                    ds[i0:i1] = values[i0:i1]
+    with h5py.File(paths["threads"]) as a, h5py.File(paths["hdf5"]) as b:
+        x, y = a[f"frames/{kind}"], b[f"frames/{kind}"]
+        np.testing.assert_array_equal(x[:], values)
+        np.testing.assert_array_equal(y[:], values)
+        stored = 0
+        for i0 in range(0, 64, 16):     # the chunks wholly written by the first two blocks
+            for j0 in range(0, 700, 256):
+                corner = (i0, j0) + (0,) * (x.ndim - 2)
+                chunk = values[i0:i0 + 16, j0:j0 + 256]
+                empty = (not chunk.any()) if kind != "position" else np.isnan(chunk).all()
+                if i0 == 48:            # written again by the block that starts inside it
+                    continue
+                if empty:
+                    assert x.id.get_chunk_info_by_coord(corner).byte_offset is None
+                    continue
+                stored += 1
+                assert (zlib.decompress(x.id.read_direct_chunk(corner)[1])
+                        == zlib.decompress(y.id.read_direct_chunk(corner)[1]))
+        assert stored > 3

@@ -12,12 +12,40 @@ from pathlib import Path
 import h5py
 import numpy as np
 
+try:                    # ISA-L's deflate: the same zlib format, about five times faster
+    from isal import isal_zlib
+except ImportError:     # pragma: no cover - isal is a dependency; zlib where it is missing
+    isal_zlib = None
+
 from cfbmarkov._names import check_not_pipe, first_line
 from cfbmarkov._version import __version__
 from cfbmarkov.errors import InputError
 
 #: elements an [S, S]-like array must have before :func:`create_array_dataset` compresses it
 COMPRESS_MIN_SIZE = 4096
+
+
+def deflate_bytes(raw: bytes, level: int = 1) -> bytes:
+    """``raw`` deflated in the zlib format (RFC 1950), which HDF5's deflate filter reads
+    and writes, at compression level ``level``: by ISA-L (``isal``, levels 0-3; about five
+    times zlib's speed at level 1, a few per cent larger) where it is installed, by zlib
+    otherwise. Releases the GIL, so that threads deflate chunks in parallel; the same
+    bytes for the same input.
+
+    Parameters
+    ----------
+    raw : bytes
+        The data (a chunk's bytes, filtered as the dataset's pipeline says before deflate).
+    level : int, optional
+        Compression level, as HDF5's ``compression_opts`` of gzip (default 1).
+
+    Returns
+    -------
+    bytes
+    """
+    if isal_zlib is not None and level <= 3:
+        return isal_zlib.compress(raw, level)
+    return zlib.compress(raw, level)
 
 
 def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
@@ -56,7 +84,7 @@ def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
     dataset = group.create_dataset(name, shape=value.shape, dtype=value.dtype,
                                    chunks=(rows, *value.shape[1:]), compression="gzip",
                                    compression_opts=1)
-    # the chunks deflated by zlib in threads (it releases the GIL), then written as they are:
+    # the chunks deflated in threads (deflate_bytes releases the GIL), then written as they are:
     # the same zlib stream HDF5's deflate filter writes, in a fraction of the time
     starts = range(0, value.shape[0], rows)
 
@@ -65,7 +93,7 @@ def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
         if chunk.shape[0] < rows:                      # the last chunk, padded as HDF5 does
             chunk = np.concatenate([chunk, np.zeros((rows - chunk.shape[0],
                                                      *value.shape[1:]), value.dtype)])
-        return zlib.compress(np.ascontiguousarray(chunk).tobytes(), 1)
+        return deflate_bytes(np.ascontiguousarray(chunk).tobytes(), 1)
 
     with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
         for start, deflated in zip(starts, pool.map(deflate, starts)):

@@ -8,10 +8,13 @@ and exact pass events (``/events``), appended block by block (the layout is desc
 from __future__ import annotations
 
 import json
+import os
+from concurrent.futures import ThreadPoolExecutor
 
 import h5py
 import numpy as np
 
+from cfbmarkov._hdf5 import deflate_bytes
 from cfbmarkov.errors import InputError
 
 #: fewest particles per chunk of a frame (a file whose particles grow by insertion)
@@ -48,18 +51,74 @@ def write_frame_rows(ds: h5py.Dataset, i0: int, values: np.ndarray, compact: boo
     dataset's fill value in these frames (NaN positions, lap 0, absent) is not written: its
     chunks stay unallocated and read back as that fill value, so an open riser's prediction,
     whose particles are present a short while each, stores only the particles present.
+    A deflated compact dataset written from a chunk's first frame has its chunks deflated
+    in threads and written as they are (:func:`_write_deflated_chunks`); the values read
+    back are those HDF5's own filters would have stored.
     """
     i1 = i0 + values.shape[0]
     if not compact:
         ds[i0:i1] = values
         return
+    if (ds.compression == "gzip" and ds.chunks is not None and i0 % ds.chunks[0] == 0
+            and ds.dtype.isnative and ds.dtype.kind in "fib"):
+        _write_deflated_chunks(ds, i0, np.asarray(values, dtype=ds.dtype))
+        return
     fill = ds.fillvalue
     for j0 in range(0, values.shape[1], MIN_CHUNK_PARTICLES):
         block = values[:, j0:j0 + MIN_CHUNK_PARTICLES]
-        empty = (np.isnan(block).all() if isinstance(fill, float) and np.isnan(fill)
-                 else not (block != fill).any())
-        if not empty:
+        if not _only_fill(block, fill):
             ds[i0:i1, j0:j0 + block.shape[1]] = block
+
+
+def _only_fill(block: np.ndarray, fill) -> bool:
+    """Whether ``block`` holds nothing but the fill value ``fill`` (NaN matching NaN)."""
+    if isinstance(fill, float) and np.isnan(fill):
+        return bool(np.isnan(block).all())
+    return not (block != fill).any()
+
+
+def _write_deflated_chunks(ds: h5py.Dataset, i0: int, values: np.ndarray) -> None:
+    """Write ``values`` (T frames from frame ``i0``, a multiple of the chunks' frames) to the
+    deflated dataset ``ds`` chunk by chunk, each deflated in a thread pool
+    (:func:`cfbmarkov._hdf5.deflate_bytes`, which releases the GIL) and written as it is
+    (``write_direct_chunk``).
+
+    A chunk holding only the fill value is not written (it reads back as that value); a
+    chunk that reaches past the values (the last frames of a block, the last particles) is
+    padded with the fill value, as HDF5 pads it. The bytes are those of the dataset's filter
+    pipeline, byte shuffle (where set) then deflate at its level: any HDF5 reader reads them.
+    Deterministic for any number of threads.
+    """
+    frames, particles = ds.chunks[0], ds.chunks[1]
+    tail = values.shape[2:]
+    fill = ds.fillvalue
+    level = int(ds.compression_opts or 1)
+    shuffle = bool(ds.shuffle) and values.dtype.itemsize > 1
+    starts = [(f0, j0) for f0 in range(0, values.shape[0], frames)
+              for j0 in range(0, values.shape[1], particles)
+              if not _only_fill(values[f0:f0 + frames, j0:j0 + particles], fill)]
+
+    def deflate(start: tuple[int, int]) -> bytes:
+        f0, j0 = start
+        part = values[f0:f0 + frames, j0:j0 + particles]
+        if part.shape[:2] != (frames, particles):
+            chunk = np.full((frames, particles, *tail), fill, dtype=values.dtype)
+            chunk[:part.shape[0], :part.shape[1]] = part
+        else:
+            chunk = np.ascontiguousarray(part)
+        raw = chunk.tobytes()
+        if shuffle:      # HDF5's shuffle filter: the elements' first bytes, then their second ...
+            raw = np.frombuffer(raw, np.uint8).reshape(-1, values.dtype.itemsize).T.tobytes()
+        return deflate_bytes(raw, level)
+
+    if len(starts) > 1:
+        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+            deflated = list(pool.map(deflate, starts))
+    else:
+        deflated = [deflate(start) for start in starts]
+    zeros = (0,) * len(tail)
+    for (f0, j0), data in zip(starts, deflated):
+        ds.id.write_direct_chunk((i0 + f0, j0, *zeros), data)
 
 
 def create_frames(f: h5py.File, ids: np.ndarray, d: int, with_velocity: bool,

@@ -129,7 +129,7 @@ def test_predict_progress_is_whole_lines_off_a_terminal(tmp_path, capsys, markov
                         "Monte Carlo, then the frames written")
     assert lines[1].startswith("predict: Monte Carlo done in 0:")
     assert "writing 61 frames" in lines[1]
-    assert lines[2].startswith("predict: 1.6/3 s written, ")      # 32 lags of 0.05 s
+    assert lines[2].startswith("predict: 1.55/3 s written, ")     # frames 0-31: 31 lags of 0.05 s
     assert "about" in lines[2] and lines[2].endswith(" left")
     assert lines[-1].startswith(f"predict: 3 s written to {out} in 0:")
     code, _, err = run_cli(capsys, "predict", model_path, "--init", markov_run, "--start", 5,

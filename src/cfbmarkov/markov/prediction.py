@@ -22,7 +22,7 @@ from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.model_file import model_datasets_and_attrs
 from cfbmarkov.markov.states import place_in_cells
 from cfbmarkov.trajectories import opened
-from cfbmarkov.trajectory_groups import MIN_CHUNK_PARTICLES
+from cfbmarkov.trajectory_groups import COMPACT_FRAMES, MIN_CHUNK_PARTICLES
 from cfbmarkov.trajectory_writer import TrajectoryWriter
 
 if TYPE_CHECKING:
@@ -322,15 +322,19 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                else PredictionProgress(progress, start, n_steps, model.lag, ids.size))
         first = np.full((ids.size, first_positions.shape[1]), np.nan)
         first[:first_positions.shape[0]] = first_positions
-        writer.append(times[0], first, lap=laps[0],
-                      present=(states[0] >= 0) if some_absent else None)
         cells = model.state_space.cell_of_state
-        block = 32
-        for k0 in range(1, n_steps + 1, block):
+        # blocks of whole chunks of frames (an open riser's file holds 16 frames a chunk):
+        # a block that ended inside a chunk would have it read back, merged and deflated again
+        block = 2 * COMPACT_FRAMES
+        for k0 in range(0, n_steps + 1, block):
             ks = range(k0, min(k0 + block, n_steps + 1))
-            positions = np.stack([place_in_cells(cells[np.maximum(states[k], 0)],
-                                                 model.state_space, seed, k, traj.depth)
-                                  for k in ks])
+            k1 = max(ks.start, 1)       # the first frame is the initial file's
+            block_states = states[k1:ks.stop]
+            positions = place_in_cells(np.where(block_states >= 0,
+                                                cells[np.maximum(block_states, 0)], -1),
+                                       model.state_space, seed, k1, traj.depth)
+            if ks.start == 0:
+                positions = np.concatenate([first[None], positions])
             writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop],
                                  present=(states[ks.start:ks.stop] >= 0) if some_absent else None)
             bar.written(ks.stop - 1)

@@ -367,12 +367,22 @@ class StateSpace(ABC):
 
 @nb.njit(cache=True, parallel=True)
 def _place_in_cells(cells, columns, cell_width, cell_height, seed, step, out):
-    for p in nb.prange(cells.size):
-        c = cells[p]
+    """Positions uniform in the cells ``cells`` [T, N] of steps step .. step + T - 1 into
+    ``out`` [T, N, 2]; NaN where a cell is negative (a particle absent)."""
+    n = cells.shape[1]
+    for i in nb.prange(cells.size):
+        t = i // n
+        p = i - t * n
+        k = step + np.uint64(t)
+        c = cells[t, p]
+        if c < 0:
+            out[t, p, 0] = np.nan
+            out[t, p, 1] = np.nan
+            continue
         row = c // columns
         col = c - row * columns
-        out[p, 0] = (col + uniform(seed, 1, p, step)) * cell_width
-        out[p, 1] = (row + uniform(seed, 2, p, step)) * cell_height
+        out[t, p, 0] = (col + uniform(seed, 1, p, k)) * cell_width
+        out[t, p, 1] = (row + uniform(seed, 2, p, k)) * cell_height
 
 
 @nb.njit(cache=True, parallel=True)
@@ -380,15 +390,24 @@ def _place_in_cells_3d(cells, columns, depth_columns, cell_width, cell_height, c
                        seed, step, out):
     """As :func:`_place_in_cells`, cells (row*d + k)*m + col, depth from stream 3 (with
     d = 1 and cell_depth = the riser's depth: uniform over the depth)."""
-    for p in nb.prange(cells.size):
-        c = cells[p]
+    n = cells.shape[1]
+    for i in nb.prange(cells.size):
+        t = i // n
+        p = i - t * n
+        k = step + np.uint64(t)
+        c = cells[t, p]
+        if c < 0:
+            out[t, p, 0] = np.nan
+            out[t, p, 1] = np.nan
+            out[t, p, 2] = np.nan
+            continue
         col = c % columns
         rest = c // columns
         row = rest // depth_columns
         lay = rest - row * depth_columns
-        out[p, 0] = (col + uniform(seed, 1, p, step)) * cell_width
-        out[p, 1] = (row + uniform(seed, 2, p, step)) * cell_height
-        out[p, 2] = (lay + uniform(seed, 3, p, step)) * cell_depth
+        out[t, p, 0] = (col + uniform(seed, 1, p, k)) * cell_width
+        out[t, p, 1] = (row + uniform(seed, 2, p, k)) * cell_height
+        out[t, p, 2] = (lay + uniform(seed, 3, p, k)) * cell_depth
 
 
 class CellGrid(StateSpace):
@@ -510,40 +529,46 @@ def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int,
                    depth: float | None = None) -> np.ndarray:
     """Positions drawn uniformly inside the given cells (``docs/definitions.md``, Monte Carlo).
 
-    The draw depends only on (seed, particle index, step), so it is reproducible. A 3D grid
-    gives 3D positions inside its cells; a 2D grid gives 2D positions, or with ``depth`` 3D
-    positions whose depth is drawn uniformly over 0 .. ``depth`` (a 2D cell spans the whole
-    depth). The across and vertical coordinates are the same draws in all cases.
+    The draw depends only on (seed, particle index, step), so it is reproducible: a block of
+    T steps gives the positions T calls one step each would. A 3D grid gives 3D positions
+    inside its cells; a 2D grid gives 2D positions, or with ``depth`` 3D positions whose
+    depth is drawn uniformly over 0 .. ``depth`` (a 2D cell spans the whole depth). The
+    across and vertical coordinates are the same draws in all cases.
 
     Parameters
     ----------
-    cells : array_like of int, shape (N,)
-        The cell (row*m + col, or (row*d + k)*m + col with depth columns) of each particle.
+    cells : array_like of int, shape (N,) or (T, N)
+        The cell (row*m + col, or (row*d + k)*m + col with depth columns) of each particle,
+        at one step or at T consecutive steps; negative for a particle absent (its position
+        NaN).
     space : StateSpace
         Gives the grid and the riser's size.
     seed : int
         Seed of the counter-based generator (:func:`cfbmarkov._random.uniform`).
     step : int
-        The step (lag) of the run, so that every step draws afresh.
+        The step (lag) of the run, so that every step draws afresh; with T steps of cells,
+        the first one's.
     depth : float, optional
         The riser's depth (m), for 3D positions from a 2D grid; ignored by a 3D grid (it
         has its own depth).
 
     Returns
     -------
-    ndarray of float64, shape (N, 2) or (N, 3)
+    ndarray of float64, shape (N, 2) or (N, 3), or (T, N, 2) or (T, N, 3)
         Positions (across, vertical[, depth]) in m.
     """
-    cells = np.ascontiguousarray(cells, dtype=np.int64)
+    cells = np.asarray(cells, dtype=np.int64)
+    one_step = cells.ndim == 1
+    cells = np.ascontiguousarray(cells.reshape(1, -1) if one_step else cells)
     if space.is_3d or depth is not None:
         d = space.depth_columns if space.is_3d else 1
-        out = np.empty((cells.size, 3))
+        out = np.empty((*cells.shape, 3))
         _place_in_cells_3d(cells, space.columns, d, space.width / space.columns,
                            space.height / space.rows,
                            (space.depth if space.is_3d else float(depth)) / d,
                            np.uint64(seed), np.uint64(step), out)
-        return out
-    out = np.empty((cells.size, 2))
-    _place_in_cells(cells, space.columns, space.width / space.columns,
-                    space.height / space.rows, np.uint64(seed), np.uint64(step), out)
-    return out
+    else:
+        out = np.empty((*cells.shape, 2))
+        _place_in_cells(cells, space.columns, space.width / space.columns,
+                        space.height / space.rows, np.uint64(seed), np.uint64(step), out)
+    return out[0] if one_step else out
