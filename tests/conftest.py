@@ -2,9 +2,12 @@
 
 The suite runs in two pytest-xdist workers (``-n auto --maxprocesses 2`` in pyproject.toml):
 Numba compiles kernels on one core, so two workers keep both cores busy while the other
-compiles. Each worker runs its Numba kernels on one thread, and the command lines that the
-tests of outputs and faults start get ``NUMBA_NUM_THREADS=1`` (their ``_env``), so that two
-workers do not oversubscribe the cores (OpenMP barriers wait for descheduled threads). The
+compiles. Each worker runs its Numba kernels and its BLAS (OpenBLAS, through threadpoolctl;
+``OPENBLAS_NUM_THREADS=1`` for the processes it starts) on one thread, and the command lines
+that the tests of outputs and faults start get ``NUMBA_NUM_THREADS=1`` (their ``_env``), so
+that two workers do not oversubscribe the cores (OpenMP barriers and OpenBLAS's threads spin
+waiting for descheduled threads; measured 2026-12-05: 452 s of CPU for the suite with two
+BLAS threads a worker, 377 s with one). The
 worker's own Numba still knows every core (``numba.config.NUMBA_NUM_THREADS``; it cannot
 change once its threads run), so tests of the thread count can set two.
 """
@@ -18,6 +21,10 @@ def pytest_configure(config):
         import numba
 
         numba.set_num_threads(1)
+        from threadpoolctl import threadpool_limits
+
+        threadpool_limits(1, user_api="blas")
+        os.environ["OPENBLAS_NUM_THREADS"] = "1"    # and in the processes the tests start
 
 
 #: the two longest tests (about 35 s each on 2 cores), run first, one per worker, so that
@@ -30,3 +37,4 @@ FIRST = ("tests/simulate/test_coupled_physics.py::"
 def pytest_collection_modifyitems(config, items):
     first = [item for item in items if item.nodeid in FIRST]
     items[:] = first + [item for item in items if item.nodeid not in FIRST]
+
