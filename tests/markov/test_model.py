@@ -306,3 +306,49 @@ def test_entry_chain_by_level_elimination_equals_the_full_fundamental_matrix(fal
         full = lu.solve(r)[np.searchsorted(idx, entries)]
         got = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries)
         assert np.abs(got - full).max() < 1e-13
+
+
+@pytest.mark.parametrize("falls", [0.0, 0.2])
+def test_the_fall_below_the_levels_solved_equals_the_full_matrix_and_the_propagation(falls):
+    """h_0, the probability of passing down from the deepest level kept, carried up the
+    levels by the block elimination (entry_matrix(with_falls=True)), equals the full
+    [S L, S L] solve of h = Q h + f to 1e-13, and the residences' loss it gives equals the
+    loss the exact RTD's propagation counts (deficit_unresolved) to 1e-9; the levels the
+    exact RTD chooses are those a loss below 1e-7 needs."""
+    import scipy.sparse as sp
+    from scipy.sparse.linalg import splu
+
+    from cfbmarkov.markov.entry_chain import entry_matrix
+    from cfbmarkov.markov.first_passage import (DEFICIT_TOL, _reaching, _rtd_on_levels,
+                                                deficit_matrix, rtd_of_split_chain,
+                                                split_by_pass)
+    from cfbmarkov.synthetic import long_tail_chain
+
+    seen = []
+    for chain in (long_tail_chain(columns=3, rows=8), ladder_model(8, 0.6, falls)):
+        p_up, p_down, p_stay = split_by_pass(chain.transition_matrix, chain.up_fraction,
+                                             chain.down_fraction)
+        s, whole = chain.n_states, (p_up + p_down + p_stay).tocsr()
+        for levels in (2, 3, 9):
+            q, exits = deficit_matrix(p_up, p_down, p_stay, levels)
+            live = _reaching(q, exits > 0)
+            idx = np.flatnonzero(live)
+            f = np.zeros(s * levels)
+            f[(levels - 1) * s:] = np.asarray(p_down.sum(axis=1)).ravel()
+            lu = splu(sp.csc_matrix(sp.identity(idx.size) - q[idx][:, idx]))
+            full = np.zeros(s * levels)
+            full[idx] = lu.solve(f[idx])
+            entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
+            _, h0 = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries,
+                                 with_falls=True)
+            assert np.abs(h0 - full[:s]).max() < 1e-13
+            rtd, lost = _rtd_on_levels(p_up, p_down, p_stay, chain.lag, levels - 1, 1e-14,
+                                       200_000, None, None, whole)
+            assert abs(rtd.entry_distribution @ h0 - lost[-1]) < 1e-9
+            seen.append(lost[-1])
+        rtd = rtd_of_split_chain(p_up, p_down, p_stay, chain.lag)
+        assert rtd.deficit_unresolved <= DEFICIT_TOL
+        shallower = _rtd_on_levels(p_up, p_down, p_stay, chain.lag, rtd.deficit_levels - 8,
+                                   1e-10, 200_000, None, None, whole)[1][-1]
+        assert rtd.deficit_levels == 8 or shallower > DEFICIT_TOL
+    assert max(seen) > 1e-3                     # the test sees a loss

@@ -34,8 +34,17 @@ from scipy.sparse.linalg import splu
 from threadpoolctl import threadpool_limits
 
 
-def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray) -> np.ndarray:
-    """B, the embedded chain of entry states (module docstring), dense.
+def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
+                 with_falls: bool = False):
+    """B, the embedded chain of entry states (module docstring), dense; with ``with_falls``
+    also the probability of falling below the deepest level.
+
+    The probability h of falling below the deepest level L - 1 before the residence ends
+    solves h = Q h + f, with f the down passes from level L - 1 (P_down's row sums there):
+    the same block elimination carries f up the levels, c_(L-1) = f_(L-1),
+    c_g = D_g T_(g+1)^-1 c_(g+1), and h_0 = T_0^-1 c_0, one more solve per level with the
+    factors B already needs (Kemeny and Snell's absorption probabilities, the fall below
+    the levels taken as a second absorbing state).
 
     Parameters
     ----------
@@ -45,6 +54,8 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray) ->
         The (level, state) pairs from which the top can be reached from level 0.
     entries : ndarray of int, shape (M,)
         The entry states (columns of P_up with a non-zero).
+    with_falls : bool, optional
+        Also return h_0.
 
     Returns
     -------
@@ -52,15 +63,22 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray) ->
         B[e, e']: from entry state entries[e] (at level 0), the probability that the
         residence ends landing in entries[e']; rows of entries that are not live are zero.
         Rows sum to 1 less the mass lost beyond the deepest level.
+    ndarray of float64, shape (S,)
+        With ``with_falls``: h_0, from each state at level 0 the probability that the
+        residence passes down from the deepest level (0 for a state not live there).
     """
     levels, s = live.shape
     kept = [np.flatnonzero(live[g]) for g in range(levels)]
     block = _Blocks(s)
     up_cols = up_block = None     # U_(g+1)'s non-zero columns, T_(g+1)^-1 U_(g+1) on them
+    carried = None                # T_(g+1)^-1 c_(g+1) on level g + 1's rows
+    down_probability = np.asarray(p_down.sum(axis=1)).ravel() if with_falls else None
     t = None
     for g in range(levels - 1, -1, -1):
         rows = kept[g]
         t = (sp.identity(rows.size, format="csr") - block(p_stay, rows, rows)).tocsr()
+        falls = (down_probability[rows] if g == levels - 1 else np.zeros(rows.size)
+                 ) if with_falls else None
         if up_block is not None and rows.size:
             d = block(p_down, rows, kept[g + 1]).tocsr()       # D_g, level g -> g + 1
             d_rows = np.flatnonzero(np.diff(d.indptr))
@@ -70,23 +88,32 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray) ->
                     (product.ravel(), (np.repeat(d_rows, up_cols.size),
                                        np.tile(up_cols, d_rows.size))),
                     shape=t.shape)
+        if with_falls and carried is not None and rows.size:
+            falls = falls + block(p_down, rows, kept[g + 1]) @ carried
         if g == 0 or rows.size == 0:
             up_cols = up_block = None
+            carried = None
             continue
         u = block(p_up, rows, kept[g - 1]).tocsc()             # U_g, level g -> g - 1
         up_cols = np.flatnonzero(np.diff(u.indptr))
-        up_block = (splu(sp.csc_matrix(t)).solve(u[:, up_cols].toarray()) if up_cols.size
-                    else None)
+        factors = splu(sp.csc_matrix(t)) if up_cols.size or with_falls else None
+        up_block = factors.solve(u[:, up_cols].toarray()) if up_cols.size else None
+        carried = factors.solve(falls) if with_falls else None
     out = np.zeros((entries.size, entries.size))
+    h0 = np.zeros(s)
     rows = kept[0]
     if rows.size == 0:
-        return out
+        return (out, h0) if with_falls else out
     position = -np.ones(s, np.int64)
     position[rows] = np.arange(rows.size)
-    solved = splu(sp.csc_matrix(t)).solve(block(p_up, rows, entries).toarray())   # N_00 R
+    factors = splu(sp.csc_matrix(t))
+    solved = factors.solve(block(p_up, rows, entries).toarray())   # N_00 R
     live_entries = position[entries] >= 0
     out[live_entries] = solved[position[entries[live_entries]]]
-    return out
+    if not with_falls:
+        return out
+    h0[rows] = factors.solve(falls)
+    return out, h0
 
 
 class _Blocks:

@@ -545,15 +545,19 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int | N
     if deficit_levels is not None:
         return _rtd_on_levels(p_up, p_down, p_stay, lag, int(deficit_levels), tol, max_steps,
                               entry, entry_flux, chain)[0]
+    # the depth from the mass each K loses below it, solved for (no propagation; the
+    # tries cost a block elimination each), then the RTD propagated once at the K chosen
     levels, tried = MIN_DEFICIT_LEVELS, []
     while True:
-        rtd, falls = _rtd_on_levels(p_up, p_down, p_stay, lag, levels, tol, max_steps, entry,
-                                    entry_flux, chain)
-        tried.append((levels, float(falls[-1])))
+        start = _start_on_levels(p_up, p_down, p_stay, levels + 1, entry, entry_flux, chain,
+                                 with_falls=True)
+        tried.append((levels, start.lost))
         deeper = deeper_levels(tried)
         if deeper == levels:
             break
         levels = deeper
+    rtd = _finish_levels(*start.finish_arguments(p_up, p_down, p_stay, tol, max_steps,
+                                                 lag))[0]
     if rtd.deficit_unresolved > DEFICIT_TOL and entry is None:
         rtd = replace(rtd, drift_mean=drift_residence_time(p_up, p_down, chain, lag))
     return rtd
@@ -622,8 +626,34 @@ def _rtd_on_levels(p_up, p_down, p_stay, lag: float, deficit_levels: int, tol: f
                    ) -> tuple[ResidenceTimeDistribution, np.ndarray]:
     """:func:`rtd_of_split_chain` with K = ``deficit_levels`` lap deficits kept; also the
     mass that passed down from each level (float64 [K + 1], the last lost below)."""
+    start = _start_on_levels(p_up, p_down, p_stay, deficit_levels + 1, entry, entry_flux,
+                             chain)
+    return _finish_levels(*start.finish_arguments(p_up, p_down, p_stay, tol, max_steps, lag))
+
+
+@dataclass(frozen=True)
+class _LevelStart:
+    """Where the residences start on the lap-deficit levels (:func:`_start_on_levels`)."""
+
+    live: np.ndarray                # bool [L, S]
+    exit_probability: np.ndarray    # float64 [S], from level 0
+    start: np.ndarray               # float64 [L, S], summing to 1
+    entry: np.ndarray               # float64 [S], the entry distribution
+    classes: int
+    lost: float                     # the mass that falls below level L - 1 (NaN if not asked)
+
+    def finish_arguments(self, p_up, p_down, p_stay, tol, max_steps, lag) -> tuple:
+        return ((p_down, p_stay, p_up), self.live, self.exit_probability, self.start, tol,
+                max_steps, lag, self.entry, self.classes)
+
+
+def _start_on_levels(p_up, p_down, p_stay, levels: int, entry, entry_flux, chain,
+                     with_falls: bool = False) -> _LevelStart:
+    """The live (level, state) pairs, the start distribution on level 0 (the given entry
+    distribution, or the stationary one of the embedded entry chain), and with
+    ``with_falls`` the mass of the residences that falls below the deepest of ``levels``
+    levels (:func:`cfbmarkov.markov.entry_chain.entry_matrix`)."""
     s = p_up.shape[0]
-    levels = deficit_levels + 1
     exit_probability = np.zeros(s * levels)
     exit_probability[:s] = np.asarray(p_up.sum(axis=1)).ravel()
     entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
@@ -641,6 +671,7 @@ def _rtd_on_levels(p_up, p_down, p_stay, lag: float, deficit_levels: int, tol: f
             f"every residence is trapped: from none of the {entries.size} state(s) particles "
             "enter through the inlet can the chain reach the top again (they lead to states "
             "that are never left; fit with --connected, or on a longer window)")
+    falls = None
     if entry is not None:
         entry = np.asarray(entry, dtype=np.float64)
         if entry.shape != (s,) or entry.min() < 0 or not entry[live[:s]].sum() > 0:
@@ -649,12 +680,18 @@ def _rtd_on_levels(p_up, p_down, p_stay, lag: float, deficit_levels: int, tol: f
         start = np.zeros((levels, s))
         start[0, live[:s]] = entry[live[:s]]
         start /= start.sum()
-        return _finish_levels((p_down, p_stay, p_up), live.reshape(levels, s),
-                              exit_probability[:s], start, tol, max_steps, lag,
-                              entry / entry.sum(), 1)
+        if with_falls:
+            falls = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries,
+                                 with_falls=True)[1]
+        return _LevelStart(live.reshape(levels, s), exit_probability[:s], start,
+                           entry / entry.sum(), 1,
+                           float(start[0] @ falls) if with_falls else float("nan"))
     # B, the embedded chain of entry states, by block elimination over the levels
     # (markov.entry_chain: no LU of the [S L, S L] matrix), and its stationary distribution
-    embedded = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries)
+    embedded = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries,
+                            with_falls=with_falls)
+    if with_falls:
+        embedded, falls = embedded
     live_entries = live[entries]
     classes = _closed_entry_classes(chain, entries)
     if len(classes) > 1:
@@ -684,9 +721,10 @@ def _rtd_on_levels(p_up, p_down, p_stay, lag: float, deficit_levels: int, tol: f
     entry[entries] = nu
     full_start = np.zeros(s * levels)
     full_start[idx] = start
-    return _finish_levels((p_down, p_stay, p_up), live.reshape(levels, s),
-                          exit_probability[:s], full_start.reshape(levels, s), tol, max_steps,
-                          lag, entry, max(1, len(classes)))
+    full_start = full_start.reshape(levels, s)
+    return _LevelStart(live.reshape(levels, s), exit_probability[:s], full_start, entry,
+                       max(1, len(classes)),
+                       float(full_start[0] @ falls) if with_falls else float("nan"))
 
 
 def open_rtd(absorbing: np.ndarray, exit_probability: np.ndarray, entry: np.ndarray, lag: float,
