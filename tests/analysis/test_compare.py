@@ -196,7 +196,20 @@ def test_model_figures_from_an_attached_model(tmp_path, make_run, write_run):
     model = fit_model(ref, grid, 0.025, (0.0, 1.0))
     pred = model.predict(ref, start=1.0, duration=2.0, seed=3, output=tmp_path / "pred.h5")
     out = tmp_path / "report"
-    saved = compare(ref, pred, window=(1.0, 3.0), output=out)
+    from cfbmarkov.markov import MarkovModel, model as model_module
+
+    read = []
+    real_from_group = MarkovModel.from_group.__func__
+
+    def counting(cls, group, *args):
+        read.append(group.file.filename)
+        return real_from_group(cls, group, *args)
+
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(model_module.MarkovModel, "from_group", classmethod(counting))
+        saved = compare(ref, pred, window=(1.0, 3.0), output=out)
+    # the attached model read once for the intervals, verdict, exact RTD and maps
+    assert read == [str(pred)], read
     for name in ("rtd.png", "snapshots.png", "mixing.png", "transition_matrix.png",
                  "probability_maps.png"):
         assert_png(out / name)

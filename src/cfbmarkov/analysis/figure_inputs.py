@@ -132,7 +132,7 @@ def model_maps(pred: Trajectories, reference_mean: float, warnings: list[str]
         warnings.append(f"model figures skipped: cfbmarkov.markov cannot be imported ({exc})")
         return None
     try:
-        model = MarkovModel.from_group(group)
+        model = MarkovModel.from_trajectories(pred)
         P = np.asarray(model.transition_matrix, dtype=np.float64)
         columns, rows = int(model.state_space.columns), int(model.state_space.rows)
         lag = float(getattr(model, "lag", pred.frame_interval))

@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import copy
 import os
+import weakref
 from dataclasses import InitVar, dataclass, field
 from functools import cached_property
 from pathlib import Path
@@ -44,6 +45,11 @@ if TYPE_CHECKING:
     import h5py
 
     from cfbmarkov.markov.first_passage import ResidenceTimeDistribution
+
+
+
+#: the model attached to each open prediction file, read once (:meth:`MarkovModel.from_trajectories`)
+_ATTACHED: "weakref.WeakKeyDictionary[Any, tuple]" = weakref.WeakKeyDictionary()
 
 
 @dataclass(frozen=True, eq=False)
@@ -638,12 +644,19 @@ class MarkovModel:
     @classmethod
     def from_trajectories(cls, trajectories) -> "MarkovModel | None":
         """The model attached to a prediction file (an open
-        :class:`~cfbmarkov.trajectories.Trajectories`), or None where it has none.
+        :class:`~cfbmarkov.trajectories.Trajectories`), or None where it has none. Read
+        once per open file: the verbs that ask it several times (``compare``: intervals,
+        verdict, exact RTD, maps, kinetics) share one model and its cached RTD.
 
         Raises
         ------
         InputError
             If the attached group is not a valid model.
         """
+        found = _ATTACHED.get(trajectories)
+        if found is not None and found[0] is cls:
+            return found[1]
         group = trajectories.group("model")
-        return None if group is None else cls.from_group(group, str(trajectories.path))
+        model = None if group is None else cls.from_group(group, str(trajectories.path))
+        _ATTACHED[trajectories] = (cls, model)
+        return model
