@@ -144,3 +144,93 @@ def test_resamples_of_a_chain_that_falls_deep_are_scaled_to_its_full_depth(tmp_p
                     deep.rt_mean_interval + deep.rt_sd_interval):
         assert a == pytest.approx(b, rel=0.03)
     assert scaled.rt_mean_interval[0] <= exact.mean <= scaled.rt_mean_interval[1]
+
+
+@pytest.mark.skipif(__import__("numba").config.NUMBA_NUM_THREADS < 2,
+                    reason="NUMBA_NUM_THREADS=1 in the environment: a second thread cannot start")
+def test_resamples_in_two_threads_give_the_same_interval_and_bins(stationary_run):
+    """The resampled models' exact RTDs are formed by as many threads as Numba's thread
+    count (bootstrap._in_threads): with two threads the interval, the per-bin band and the
+    E(RT) of every resample equal those of one thread, bit for bit and in order."""
+    import numba
+
+    from cfbmarkov.analysis import bootstrap
+
+    model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (2.0, 5.0), "mle")
+    threads = numba.get_num_threads()
+    results, seen = {}, {}
+    real = bootstrap._resampled_rtd
+    try:
+        for n in (1, 2):
+            numba.set_num_threads(n)
+            names = []
+
+            def counting(*args, **kwargs):
+                import threading
+
+                names.append(threading.current_thread().name)
+                return real(*args, **kwargs)
+
+            bootstrap._resampled_rtd = counting
+            u = model_intervals(model, resamples=24, seed=4)
+            edges = np.linspace(0.0, 2.0, 21)
+            boot = bootstrap.bootstrap_figures(model, None, "up", model.rtd().entry_distribution,
+                                               edges, 10, 24, 4)
+            results[n] = (u.rt_mean_interval, u.rt_sd_interval, u.rtd_interval, boot[0], boot[2])
+            seen[n] = set(names)
+    finally:
+        bootstrap._resampled_rtd = real
+        numba.set_num_threads(threads)
+    assert seen[1] == {"MainThread"} and len(seen[2]) >= 2, seen      # two threads did work
+    for a, b in zip(results[1], results[2]):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+
+
+def test_resamples_of_a_long_tail_solve_their_moments_and_propagate_as_far_as_the_bins(
+        tmp_path, monkeypatch):
+    """A chain whose RTD runs far beyond its interval's bins (the 99th percentile): each
+    resample's E(RT) and SD(RT) solved for (first_passage.rtd_moments: sum f = s N e,
+    sum k f = s N^2 e, sum k^2 f = s (2 N^3 - N^2) e) and its RTD propagated only as far as
+    the bins equal the figures of a whole propagation to 1e-7 (relative; the propagation
+    leaves 1e-10 of the mass), for the model's interval and every resample."""
+    from cfbmarkov.analysis import bootstrap
+    from cfbmarkov.markov.first_passage import rtd_moments, rtd_of_split_chain, split_by_pass
+    from cfbmarkov.synthetic import long_tail_chain
+
+    chain = long_tail_chain(columns=3, rows=8)
+    parts = split_by_pass(chain.transition_matrix, chain.up_fraction, chain.down_fraction)
+    rtd = rtd_of_split_chain(*parts, chain.lag, 8)
+    total, mean, sd = rtd_moments(*parts, chain.lag, 8, rtd.entry_distribution)
+    assert rtd.probability.size > 500                       # a long tail
+    assert total == pytest.approx(rtd.probability.sum(), rel=1e-9)
+    assert mean == pytest.approx(rtd.mean, rel=1e-8)
+    assert sd == pytest.approx(rtd.sd, rel=1e-7)        # the tail's 1e-10 weighs more here
+
+    flow = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.5, fall_velocity=-1.5,
+                               vertical_spread=1.0, lateral_probability=0.05,
+                               persistence=False)
+    path = tmp_path / "falls.h5"
+    synthetic.write_run(path, flow, 300, 20.0, seed=2)
+    model = fit_model(path, flow.grid, flow.lag, (2.0, 20.0), "mle")
+    exact = model.rtd()
+    edges = np.linspace(0.0, 1.0, 11)                        # bins far shorter than the tail
+    assert exact.probability.size > bootstrap.SOLVED_TAIL * 1.0 / model.lag
+    figures = {}
+    for tail in (bootstrap.SOLVED_TAIL, 10 ** 9):            # solved, then propagated whole
+        monkeypatch.setattr(bootstrap, "SOLVED_TAIL", tail)
+        calls = []
+        real = bootstrap._resampled_intrinsic
+        monkeypatch.setattr(bootstrap, "_resampled_intrinsic",
+                            lambda *a: calls.append(1) or real(*a))
+        figures[tail] = bootstrap.bootstrap_figures(
+            model, None, "up", exact.entry_distribution, edges, 10, 20, 3, deficit_levels=8)
+        assert (len(calls) == 20) == (tail != 10 ** 9)
+    solved, whole = figures.values()
+    for a, b in zip(solved[:3], whole[:3]):
+        np.testing.assert_allclose(np.asarray(a), np.asarray(b), rtol=1e-7, atol=1e-12)
+    iv = model_intervals(model, resamples=20, seed=3)
+    monkeypatch.setattr(bootstrap, "SOLVED_TAIL", 10 ** 9)
+    ref = model_intervals(model, resamples=20, seed=3)
+    np.testing.assert_allclose(iv.rt_mean_interval + iv.rt_sd_interval,
+                               ref.rt_mean_interval + ref.rt_sd_interval, rtol=1e-7)
+    np.testing.assert_allclose(iv.rtd_interval, ref.rtd_interval, rtol=1e-7, atol=1e-12)

@@ -11,7 +11,9 @@ Ch. 8 (the moving-block bootstrap for dependent data) and Ch. 13 (percentile int
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
+from itertools import islice
 
 import numpy as np
 from scipy.stats import norm
@@ -84,12 +86,40 @@ def _resampled_rtd(model, window_length: float, direction: str, entry,
                           max_steps=steps, entry=entry))
 
 
-def _binned(rtd, edges: np.ndarray) -> np.ndarray:
+def _resampled_intrinsic(chain, direction: str, entry, deficit_levels: int,
+                         edges: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """A resampled chain's intrinsic E(RT), SD(RT) and RTD per bin of ``edges``: the
+    moments solved for (:func:`~cfbmarkov.markov.first_passage.rtd_moments`), the RTD
+    propagated only as far as the last bin (a long tail's lags beyond it are not needed:
+    the bins' probabilities are of the whole mass). The figures of :func:`_resampled_rtd`,
+    but for the tail of 1e-10 of the mass that its propagation leaves."""
+    from cfbmarkov.markov.first_passage import rtd_moments_and_head
+
+    up, down = (chain.up, chain.down) if direction == "up" else (chain.down, chain.up)
+    total, mean, sd, head = rtd_moments_and_head(up, down, chain.stay, chain.lag,
+                                                 deficit_levels, entry, _reach(edges, chain.lag))
+    return mean, sd, _binned(head, edges, total)
+
+
+def _reach(edges: np.ndarray, lag: float) -> int:
+    """The lags an RTD must hold for its probabilities in every bin of ``edges``."""
+    return int(round(float(edges[-1]) / lag)) + 1
+
+
+#: a resample's moments are solved for, and its RTD propagated only as far as the bins
+#: reach, where the fitted model's RTD runs this many times longer than the bins (else the
+#: propagation of the whole RTD costs less than the solves)
+SOLVED_TAIL = 4
+
+
+def _binned(rtd, edges: np.ndarray, total: float | None = None) -> np.ndarray:
     """An exact RTD's probability per bin of ``edges``, with the sample histogram's rule
-    for times on an edge (whole lags on bins of one lag fall in the bin they start)."""
+    for times on an edge (whole lags on bins of one lag fall in the bin they start), as a
+    share of ``total`` (default: the RTD's resolved mass)."""
     width = float(edges[1] - edges[0])
+    total = rtd.probability.sum() if total is None else total
     hist, _ = np.histogram(rtd.times + 1e-6 * width, bins=edges,
-                           weights=rtd.probability / rtd.probability.sum())
+                           weights=rtd.probability / total)
     return hist
 
 
@@ -460,19 +490,56 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
         drawn = _bootstrap_chains(model, blocks, resamples, seed)
     else:
         drawn = block_bootstrap_models(model, blocks=blocks, resamples=resamples, seed=seed)
-    means, sds, rtds, curves = [], [], [], []
-    for resampled in drawn:
+    # a long tail beyond the bins: the resamples' moments solved for (_resampled_intrinsic)
+    solve = (window_length is None and deficit_levels is not None and entry is not None
+             and direction in ("up", "down") and model.rtd(None, direction).probability.size
+             > SOLVED_TAIL * _reach(edges, model.lag))
+
+    def figures(resampled):
+        mixing = None
         if curve is not None:      # the transitions' spread; defined with or without residences
-            curves.append(model_mixing_curve(resampled, curve[1], curve[2],
-                                             int(curve[0].max()))[0][curve[0]])
+            mixing = model_mixing_curve(resampled, curve[1], curve[2],
+                                        int(curve[0].max()))[0][curve[0]]
         try:
+            if solve and isinstance(resampled, _SplitChain):
+                return mixing, _resampled_intrinsic(resampled, direction, entry,
+                                                    deficit_levels, edges)
             rtd = _resampled_rtd(resampled, window_length, direction, entry, deficit_levels)
         except (CfbmarkovError, ValueError):
-            continue                 # a resample without residences: no figure
-        means.append(rtd.mean)
-        sds.append(rtd.sd)
-        rtds.append(_binned(rtd, edges))
+            return mixing, None      # a resample without residences: no figure
+        return mixing, (rtd.mean, rtd.sd, _binned(rtd, edges))
+
+    means, sds, rtds, curves = [], [], [], []
+    for mixing, figure in _in_threads(figures, drawn):
+        if mixing is not None:
+            curves.append(mixing)
+        if figure is not None:
+            means.append(figure[0])
+            sds.append(figure[1])
+            rtds.append(figure[2])
     return means, sds, rtds, curves
+
+
+def _in_threads(function, items):
+    """``function`` of each of ``items``, in their order, computed by as many threads as
+    Numba's thread count (each running its kernels on one thread: the exact RTD's
+    propagation releases the GIL), a few items ahead at most, so that the resampled models
+    are not all held at once. Each result depends on its item alone: the same results for
+    any thread count."""
+    import numba
+
+    workers = numba.get_num_threads()
+    if workers <= 1:
+        yield from map(function, items)
+        return
+    items = iter(items)
+    pool = ThreadPoolExecutor(max_workers=workers, initializer=numba.set_num_threads,
+                              initargs=(1,))
+    try:
+        while batch := list(islice(items, 2 * workers)):
+            yield from pool.map(function, batch)
+    finally:        # on Ctrl-C: the items not started are dropped, the running ones finish
+        pool.shutdown(wait=True, cancel_futures=True)
 
 
 def interval_bounds(value, boot, centre, level: float, se=0.0, se_flow=0.0):
