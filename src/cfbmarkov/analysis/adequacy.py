@@ -257,14 +257,14 @@ def within_run_limit(model, uncertainty, rt_mean: float,
     """
     if uncertainty is None or not rt_mean > 0:
         return tolerance
-    from scipy.stats import norm
+    from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's
 
     from cfbmarkov.analysis.bootstrap import fitting_runs, flow_variability
 
     lo, hi = (float(v) for v in uncertainty.rt_mean_interval)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return tolerance
-    z = float(norm.ppf(0.5 * (1.0 + float(uncertainty.level))))
+    z = float(ndtri(0.5 * (1.0 + float(uncertainty.level))))
     pooled = 0.0 if uncertainty.flow_sd is None else z * float(uncertainty.flow_sd[0]) * rt_mean
     try:
         runs = fitting_runs(model)
@@ -447,9 +447,9 @@ def _sampling_width(interval, uncertainty, rt_mean: float) -> float:
     flow = getattr(uncertainty, "flow_sd", None)
     if flow is None or not math.isfinite(float(flow[0])):
         return (hi - lo) / rt_mean
-    from scipy.stats import norm
+    from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's
 
-    z = float(norm.ppf(0.5 * (1.0 + float(uncertainty.level))))
+    z = float(ndtri(0.5 * (1.0 + float(uncertainty.level))))
     term = z * float(flow[0]) * rt_mean
     down = math.sqrt(max((rt_mean - lo) ** 2 - term ** 2, 0.0))
     up = math.sqrt(max((hi - rt_mean) ** 2 - term ** 2, 0.0))
@@ -495,9 +495,9 @@ def parts_limit(width: float, parts: int, level: float = 0.9, from_interval: boo
     """
     if not from_interval:
         return width * (math.sqrt(2.0) if parts == 4 else 1.0)
-    from scipy.stats import norm
+    from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's
 
-    z = float(norm.ppf(0.5 * (1.0 + level)))
+    z = float(ndtri(0.5 * (1.0 + level)))
     return min(max(RANGE_95[parts] * math.sqrt(parts) * width / (2.0 * z), MIN_PARTS_LIMIT),
                MAX_PARTS_LIMIT)
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from itertools import islice
 
 import numpy as np
-from scipy.stats import norm
+from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's (a light import)
 
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import CfbmarkovError, InputError
@@ -554,7 +554,7 @@ def interval_bounds(value, boot, centre, level: float, se=0.0, se_flow=0.0):
         Floats or arrays as ``value``.
     """
     lo_q, hi_q = 0.5 * (1 - level), 0.5 * (1 + level)
-    z = float(norm.ppf(hi_q))
+    z = float(ndtri(hi_q))
     lo, hi = np.quantile(boot, [lo_q, hi_q], axis=0)
     noise = (z * se) ** 2 + (z * se_flow) ** 2
     down = np.sqrt(np.maximum(centre - lo, 0.0) ** 2 + noise)

@@ -363,11 +363,11 @@ def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
 
 
 def _interval(value, se, level):
-    from scipy.stats import norm
+    from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's
 
     if not (np.isfinite(value) and np.isfinite(se)):
         return None
-    z = float(norm.ppf(0.5 * (1 + level)))
+    z = float(ndtri(0.5 * (1 + level)))
     return [float(value - z * se), float(value + z * se)]
 
 
