@@ -117,6 +117,17 @@ def test_fit_rtd_info_print_the_interval_and_resamples_0_leaves_it_out(stationar
     assert "at least 10" in capsys.readouterr().err
 
 
+def falling_walls_model(folder):
+    """A flow whose walls fall as fast as its core rises (its residences fall many laps,
+    its RTD runs far beyond its 99th percentile), fitted on 2-20 s of a 300-particle run."""
+    flow = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.5, fall_velocity=-1.5,
+                               vertical_spread=1.0, lateral_probability=0.05,
+                               persistence=False)
+    path = folder / "falls.h5"
+    synthetic.write_run(path, flow, 300, 20.0, seed=2)
+    return fit_model(path, flow.grid, flow.lag, (2.0, 20.0), "mle")
+
+
 def test_resamples_of_a_chain_that_falls_deep_are_scaled_to_its_full_depth(tmp_path,
                                                                           monkeypatch):
     """A flow whose walls fall as fast as its core rises: the fitted chain's residences
@@ -127,12 +138,7 @@ def test_resamples_of_a_chain_that_falls_deep_are_scaled_to_its_full_depth(tmp_p
     SD(RT) interval's bounds 5-6 % low."""
     import cfbmarkov.analysis.intervals as intervals
 
-    flow = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.5, fall_velocity=-1.5,
-                               vertical_spread=1.0, lateral_probability=0.05,
-                               persistence=False)
-    path = tmp_path / "falls.h5"
-    synthetic.write_run(path, flow, 300, 20.0, seed=2)
-    model = fit_model(path, flow.grid, flow.lag, (2.0, 20.0), "mle")
+    model = falling_walls_model(tmp_path)
     exact = model.rtd()
     assert exact.deficit_levels > intervals.BOOTSTRAP_DEFICIT_LEVELS
     shallow = intervals._shallow_rtd(model, exact, model.flow_direction)
@@ -206,12 +212,7 @@ def test_resamples_of_a_long_tail_solve_their_moments_and_propagate_as_far_as_th
     assert mean == pytest.approx(rtd.mean, rel=1e-8)
     assert sd == pytest.approx(rtd.sd, rel=1e-7)        # the tail's 1e-10 weighs more here
 
-    flow = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.5, fall_velocity=-1.5,
-                               vertical_spread=1.0, lateral_probability=0.05,
-                               persistence=False)
-    path = tmp_path / "falls.h5"
-    synthetic.write_run(path, flow, 300, 20.0, seed=2)
-    model = fit_model(path, flow.grid, flow.lag, (2.0, 20.0), "mle")
+    model = falling_walls_model(tmp_path)
     exact = model.rtd()
     edges = np.linspace(0.0, 1.0, 11)                        # bins far shorter than the tail
     assert exact.probability.size > bootstrap.SOLVED_TAIL * 1.0 / model.lag

@@ -366,48 +366,31 @@ class StateSpace(ABC):
 
 
 @nb.njit(cache=True, parallel=True)
-def _place_in_cells(cells, columns, cell_width, cell_height, seed, step, out):
-    """Positions uniform in the cells ``cells`` [T, N] of steps step .. step + T - 1 into
-    ``out`` [T, N, 2]; NaN where a cell is negative (a particle absent)."""
+def _place_in_cells(cells, columns, depth_columns, cell_width, cell_height, cell_depth, seed,
+                    step, out):
+    """Positions uniform in the cells ``cells`` [T, N] ((row*d + k)*m + col; d = 1 without
+    depth columns) of steps step .. step + T - 1 into ``out`` [T, N, D]: across from
+    stream 1, vertical from stream 2 and, where D = 3, depth from stream 3 (with d = 1 and
+    cell_depth the riser's depth: uniform over the depth); NaN where a cell is negative (a
+    particle absent)."""
     n = cells.shape[1]
+    dims = out.shape[2]
     for i in nb.prange(cells.size):
         t = i // n
         p = i - t * n
         k = step + np.uint64(t)
         c = cells[t, p]
         if c < 0:
-            out[t, p, 0] = np.nan
-            out[t, p, 1] = np.nan
-            continue
-        row = c // columns
-        col = c - row * columns
-        out[t, p, 0] = (col + uniform(seed, 1, p, k)) * cell_width
-        out[t, p, 1] = (row + uniform(seed, 2, p, k)) * cell_height
-
-
-@nb.njit(cache=True, parallel=True)
-def _place_in_cells_3d(cells, columns, depth_columns, cell_width, cell_height, cell_depth,
-                       seed, step, out):
-    """As :func:`_place_in_cells`, cells (row*d + k)*m + col, depth from stream 3 (with
-    d = 1 and cell_depth = the riser's depth: uniform over the depth)."""
-    n = cells.shape[1]
-    for i in nb.prange(cells.size):
-        t = i // n
-        p = i - t * n
-        k = step + np.uint64(t)
-        c = cells[t, p]
-        if c < 0:
-            out[t, p, 0] = np.nan
-            out[t, p, 1] = np.nan
-            out[t, p, 2] = np.nan
+            for a in range(dims):
+                out[t, p, a] = np.nan
             continue
         col = c % columns
         rest = c // columns
         row = rest // depth_columns
-        lay = rest - row * depth_columns
         out[t, p, 0] = (col + uniform(seed, 1, p, k)) * cell_width
         out[t, p, 1] = (row + uniform(seed, 2, p, k)) * cell_height
-        out[t, p, 2] = (lay + uniform(seed, 3, p, k)) * cell_depth
+        if dims == 3:
+            out[t, p, 2] = (rest - row * depth_columns + uniform(seed, 3, p, k)) * cell_depth
 
 
 class CellGrid(StateSpace):
@@ -560,15 +543,11 @@ def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int,
     cells = np.asarray(cells, dtype=np.int64)
     one_step = cells.ndim == 1
     cells = np.ascontiguousarray(cells.reshape(1, -1) if one_step else cells)
-    if space.is_3d or depth is not None:
-        d = space.depth_columns if space.is_3d else 1
-        out = np.empty((*cells.shape, 3))
-        _place_in_cells_3d(cells, space.columns, d, space.width / space.columns,
-                           space.height / space.rows,
-                           (space.depth if space.is_3d else float(depth)) / d,
-                           np.uint64(seed), np.uint64(step), out)
-    else:
-        out = np.empty((*cells.shape, 2))
-        _place_in_cells(cells, space.columns, space.width / space.columns,
-                        space.height / space.rows, np.uint64(seed), np.uint64(step), out)
+    three = space.is_3d or depth is not None
+    d = space.depth_columns if space.is_3d else 1
+    out = np.empty((*cells.shape, 3 if three else 2))
+    cell_depth = ((space.depth if space.is_3d else float(depth)) / d) if three else 0.0
+    _place_in_cells(cells, space.columns, d, space.width / space.columns,
+                    space.height / space.rows, cell_depth, np.uint64(seed), np.uint64(step),
+                    out)
     return out[0] if one_step else out
