@@ -317,7 +317,7 @@ def test_a_coupled_custom_law_declared_too_early_is_refused_and_divergence_warne
     early = Kinetics((conversion, temperature)).per_state(model.state_space)
     with pytest.raises(InputError, match="property X: its rate function gives nan at its start "
                                          "value 0 in state 0, with the properties it can read "
-                                         "filled \(none; the others NaN\)"):
+                                         r"filled \(none; the others NaN\)"):
         run_properties(early, LAG, states, laps, periodic=True)
     ordered = Kinetics((Property("X0", FirstOrder(), {"rate": Constant(1.0)}), temperature,
                         conversion)).per_state(model.state_space)
