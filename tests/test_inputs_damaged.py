@@ -121,6 +121,29 @@ def test_per_frame_checks_run_on_read_only(good, tmp_path):
             t.positions(slice(90, 110))
 
 
+def test_a_read_that_starts_after_a_lap_jump_checks_the_step_into_it(good, tmp_path):
+    """Frames read from frame 60 on are checked against frame 59: a lap jump between 59
+    and 60 is found by a read of 60-80 alone, and reported before a bad position later in
+    the block (the first problem, in frame order)."""
+    run, _ = good
+
+    def jump_and_outside(f):
+        laps = f["frames/lap"][()]
+        laps[60:, 3] += 2                   # one jump, between frames 59 and 60 only
+        f["frames/lap"][...] = laps
+        _set("frames/position", (70, 0, 1), -1.0)(f)
+
+    bad = damaged_copy(run, tmp_path, jump_and_outside)
+    with Trajectories(bad) as t:
+        t.positions(slice(0, 59))
+        with pytest.raises(Exception, match="laps inconsistent") as caught:
+            t.positions(slice(60, 80))
+    assert "particle" in str(caught.value) and "outside the domain" not in str(caught.value)
+    with Trajectories(bad) as t:
+        with pytest.raises(Exception, match="outside the domain"):
+            t.positions(slice(61, 80))
+
+
 def test_one_frame_file_refused_for_a_fit(good, tmp_path, capsys):
     run, _ = good
     with Trajectories(run) as t:

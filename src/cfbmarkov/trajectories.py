@@ -171,15 +171,17 @@ class Trajectories(FrameTimes):
         if i1 <= i0 or self._checked[i0:i1].all():
             return
         f = self._file
-        lo = i0 - 1 if i0 > 0 else i0
         pos = f["frames/position"][i0:i1] if positions is None else positions
         lap = f["frames/lap"][i0:i1] if laps is None else laps
-        if lo < i0:
-            pos = np.concatenate([f["frames/position"][lo:i0], pos])
-            lap = np.concatenate([f["frames/lap"][lo:i0], lap])
-        present = self.present(slice(lo, i1))
+        present = self.present(slice(i0, i1))
         extent = np.array([self.width, self.height] + ([self.depth] if self.dimensions == 3 else []))
-        check_stored_frames(self.path, self.ids, self.times[lo:i1], pos, lap, present, extent,
+        if i0 > 0:      # the step from the frame before, first: the first problem in order
+            check_stored_frames(self.path, self.ids, self.times[i0 - 1:i0 + 1],
+                                np.concatenate([f["frames/position"][i0 - 1:i0], pos[:1]]),
+                                np.concatenate([f["frames/lap"][i0 - 1:i0], lap[:1]]),
+                                self.present(slice(i0 - 1, i0 + 1)), extent, self.height,
+                                self.boundary.is_open)
+        check_stored_frames(self.path, self.ids, self.times[i0:i1], pos, lap, present, extent,
                             self.height, self.boundary.is_open)
         self._checked[i0:i1] = True
 

@@ -106,8 +106,10 @@ def check_stored_frames(path, ids: np.ndarray, times: np.ndarray, pos: np.ndarra
     InputError
         Naming the file, the particle, the time and what is wrong.
     """
-    code, k, n = _frame_problem(np.ascontiguousarray(pos, dtype=np.float64),
-                                np.ascontiguousarray(lap, dtype=np.int64),
+    lap = np.ascontiguousarray(lap)
+    if lap.dtype.kind not in "iu":      # the file's own integers as they are: no copy
+        lap = lap.astype(np.int64)
+    code, k, n = _frame_problem(np.ascontiguousarray(pos, dtype=np.float64), lap,
                                 np.ascontiguousarray(present, dtype=np.bool_), extent,
                                 POSITION_TOLERANCE, height, open_riser)
     if code == 1 or code == 2:
