@@ -507,3 +507,30 @@ def test_the_models_exact_e_rt_as_the_window_sees_it_stands_beside_the_predictio
     bare = compare(run, run, window=(1.0, 6.0), output=tmp_path / "b", figures=False,
                    resamples=0)
     assert "exact" not in bare["model"]
+
+
+def test_a_heat_map_of_more_states_than_pixels_keeps_every_non_zero(tmp_path):
+    """A 1500-state matrix is drawn by the largest entry of each 3 x 3 block (500 x 500
+    cells on the same state axes): an isolated entry, which a renderer sampling one entry a
+    pixel could drop, stays in its block; a matrix of at most HEATMAP_PIXELS states is
+    drawn as it is."""
+    from matplotlib.colors import LogNorm
+    from matplotlib.figure import Figure
+
+    from cfbmarkov.report.figures import HEATMAP_PIXELS, draw_heatmap, pooled_max
+
+    s = 1500
+    P = np.zeros((s, s))
+    P[np.arange(s), np.arange(s)] = 0.5
+    P[1000, 7] = 1e-4                            # isolated: row 1000 -> block 333, col 2
+    pooled = pooled_max(P, HEATMAP_PIXELS)
+    assert pooled.shape == (500, 500)
+    assert pooled[333, 2] == 1e-4 and np.count_nonzero(pooled) == 500 + 1
+    ax = Figure().add_subplot()
+    image = draw_heatmap(ax, P, LogNorm(1e-5, 1.0))
+    assert image.get_array().shape == (500, 500)
+    assert image.get_extent() == [-0.5, s - 0.5, s - 0.5, -0.5]
+    small = np.eye(HEATMAP_PIXELS)
+    assert pooled_max(small, HEATMAP_PIXELS) is small
+    odd = pooled_max(np.ones((601, 601)), HEATMAP_PIXELS)  # padded: 301 blocks of 2
+    assert odd.shape == (301, 301) and odd.min() == 1.0
