@@ -77,6 +77,11 @@ def _only_fill(block: np.ndarray, fill) -> bool:
     return not (block != fill).any()
 
 
+#: the fewest chunks a block deflates in threads: a one-tracer prediction's block of two
+#: chunks took 1.5x as long in threads as in one (the hand-over costs more than the deflate)
+THREADED_CHUNKS = 16
+
+
 def _write_deflated_chunks(ds: h5py.Dataset, i0: int, values: np.ndarray) -> None:
     """Write ``values`` (T frames from frame ``i0``, a multiple of the chunks' frames) to the
     deflated dataset ``ds`` chunk by chunk, each deflated in a thread pool
@@ -111,10 +116,11 @@ def _write_deflated_chunks(ds: h5py.Dataset, i0: int, values: np.ndarray) -> Non
             raw = np.frombuffer(raw, np.uint8).reshape(-1, values.dtype.itemsize).T.tobytes()
         return deflate_bytes(raw, level)
 
-    if len(starts) > 1:
-        with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
+    workers = min(4, os.cpu_count() or 1)
+    if workers > 1 and len(starts) >= THREADED_CHUNKS:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
             deflated = list(pool.map(deflate, starts))
-    else:
+    else:       # a few chunks (a prediction of a few particles): threads cost more than they save
         deflated = [deflate(start) for start in starts]
     zeros = (0,) * len(tail)
     for (f0, j0), data in zip(starts, deflated):

@@ -346,3 +346,26 @@ def test_absent_particles_are_left_out_of_their_frames(tmp_path):
     expected = (pos[0, :, 0] < W / 2).astype(int)
     expected[1] = -1
     np.testing.assert_array_equal(arrays["colour_group"], expected[present[1]])
+
+
+def test_a_frame_without_particles_is_a_file_without_points(tmp_path):
+    """An open riser emptied for a frame (every particle absent): the frame is a .vtu with
+    no point and every array empty (pyevtk refuses a piece without points), in the series
+    at its time; the frames around it keep their points."""
+    rng = np.random.default_rng(5)
+    times = T0 + DT * np.arange(3)
+    pos = rng.uniform(0, 1, (3, N, 2)) * [W, H]
+    present = np.ones((3, N), bool)
+    present[1] = False                   # nobody in the riser at the second frame
+    path = write_trajectories(tmp_path / "open.h5", times, pos, width=W, height=H,
+                              present=present, boundary="open")
+    out = export_vtk(path, tmp_path / "vtk")
+    root, arrays = read_vtk(out / "particles_000001.vtu")
+    assert root.find(".//Piece").get("NumberOfPoints") == "0"
+    assert set(arrays) >= {"points", "id", "lap", "colour_group"}
+    assert all(values.size == 0 for values in arrays.values())
+    assert arrays["points"].shape == (0, 3)
+    _, full = read_vtk(out / "particles_000002.vtu")
+    np.testing.assert_array_equal(full["id"], np.arange(N))
+    assert [name for _, name in read_pvd(out / "particles.pvd")] == [
+        f"particles_{k:06d}.vtu" for k in range(3)]

@@ -359,7 +359,10 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
                                 if isinstance(value, tuple) else np.ascontiguousarray(value[keep]))
                           for key, value in point_data.items()}
         name = f"{PARTICLES}_{frame:06d}"
-        hl.pointsToVTK(str(folder / name), x, y, z, data=point_data)
+        if x.size:
+            hl.pointsToVTK(str(folder / name), x, y, z, data=point_data)
+        else:                            # every particle absent (an open riser emptied)
+            _write_no_points(folder / (name + ".vtu"), point_data)
         particle_files.append((name + ".vtu", t))
         if gas is not None and g >= 0:
             name = f"{GAS}_{frame:06d}"
@@ -373,6 +376,38 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
                 group.addFile(filepath=str(folder / name), sim_time=float(f"{t:.12g}"))
             group.save()
     return len(gas_files)
+
+
+#: the VTK XML type names of the point-data arrays' dtypes
+_VTK_TYPES = {"f8": "Float64", "f4": "Float32", "i8": "Int64", "i4": "Int32", "i1": "Int8",
+              "u1": "UInt8"}
+
+
+def _write_no_points(path: Path, point_data: dict) -> None:
+    """A frame without particles as pyevtk writes a frame of points (an UnstructuredGrid,
+    raw appended data with UInt64 byte counts), with no point and every array of
+    ``point_data`` empty: pyevtk refuses a piece without points, and a ParaView series
+    needs a file for every time."""
+    arrays = [("points", 3, "Float64")]
+    arrays += [("connectivity", 1, "Int32"), ("offsets", 1, "Int32"), ("types", 1, "UInt8")]
+    for key, value in point_data.items():
+        first = value[0] if isinstance(value, tuple) else value
+        arrays.append((key, 3 if isinstance(value, tuple) else 1,
+                       _VTK_TYPES[np.dtype(first.dtype).str[1:]]))
+
+    def entry(k: int) -> str:
+        name, components, kind = arrays[k]
+        return (f'<DataArray Name="{name}" NumberOfComponents="{components}" type="{kind}" '
+                f'format="appended" offset="{8 * k}"/>\n')
+
+    text = ('<?xml version="1.0"?>\n<VTKFile type="UnstructuredGrid" version="1.0" '
+            'byte_order="LittleEndian" header_type="UInt64">\n<UnstructuredGrid>\n'
+            '<Piece NumberOfPoints="0" NumberOfCells="0">\n<Points>\n' + entry(0)
+            + '</Points>\n<Cells>\n' + entry(1) + entry(2) + entry(3) + '</Cells>\n'
+            + '<PointData>\n' + "".join(entry(k) for k in range(4, len(arrays)))
+            + '</PointData>\n</Piece>\n</UnstructuredGrid>\n<AppendedData encoding="raw">\n_')
+    path.write_bytes(text.encode() + bytes(8 * len(arrays))
+                     + b"\n</AppendedData>\n</VTKFile>\n")
 
 
 def _write_gas(hl, gas: GasFields, index: int, path: Path) -> None:
