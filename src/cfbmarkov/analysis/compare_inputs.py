@@ -346,7 +346,9 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
     columns = model_columns(pred)
     if columns is not None and columns % 2:
         raise InputError(f"{pred.path}: the model's state space has an odd column count "
-                         f"({columns}): mixing by halves (x < W/2) is undefined")
+                         f"({columns}): mixing by halves (x < W/2) is undefined, as the middle "
+                         "column's cells straddle W/2; compare a prediction of a model fitted "
+                         f"with an even count (--cells {columns + 1}xROWS)")
     if not (np.isclose(ref.width, pred.width) and np.isclose(ref.height, pred.height)):
         raise InputError(f"domains differ: {ref.path} is {ref.width:g} x {ref.height:g} m, "
                          f"{pred.path} is {pred.width:g} x {pred.height:g} m")

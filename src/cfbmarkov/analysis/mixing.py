@@ -171,7 +171,8 @@ def _left_states(space) -> np.ndarray:
     columns = int(space.columns)
     if columns % 2:
         raise InputError(f"the model's state space has an odd column count ({columns}): mixing "
-                         "by halves (x < W/2) is undefined")
+                         "by halves (x < W/2) is undefined, as the middle column's cells "
+                         f"straddle W/2; fit with an even count (--cells {columns + 1}xROWS)")
     column = np.asarray(space.cell_of_state, dtype=np.int64) % columns
     return (column < columns // 2).astype(np.float64)
 
