@@ -48,6 +48,22 @@ def deflate_bytes(raw: bytes, level: int = 1) -> bytes:
     return zlib.compress(raw, level)
 
 
+def deflated_chunks(chunk_bytes, starts: list, level: int = 1,
+                    threaded: bool = True) -> list[bytes]:
+    """``chunk_bytes(start)`` of each of ``starts`` deflated at ``level``
+    (:func:`deflate_bytes`), in order: in up to four threads where ``threaded`` and the
+    machine has more than one core (the deflate releases the GIL), else in this one. The
+    same bytes either way."""
+    def deflate(start):
+        return deflate_bytes(chunk_bytes(start), level)
+
+    workers = min(4, os.cpu_count() or 1)
+    if threaded and workers > 1 and len(starts) > 1:
+        with ThreadPoolExecutor(max_workers=workers) as pool:
+            return list(pool.map(deflate, starts))
+    return [deflate(start) for start in starts]
+
+
 def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
     """Write ``value`` as dataset ``name`` of ``group``, compressed where it pays.
 
@@ -88,16 +104,16 @@ def create_array_dataset(group: h5py.Group, name: str, value) -> h5py.Dataset:
     # the same zlib stream HDF5's deflate filter writes, in a fraction of the time
     starts = range(0, value.shape[0], rows)
 
-    def deflate(start: int) -> bytes:
+    def chunk_bytes(start: int) -> bytes:
         chunk = value[start:start + rows]
         if chunk.shape[0] < rows:                      # the last chunk, padded as HDF5 does
             chunk = np.concatenate([chunk, np.zeros((rows - chunk.shape[0],
                                                      *value.shape[1:]), value.dtype)])
-        return deflate_bytes(np.ascontiguousarray(chunk).tobytes(), 1)
+        return np.ascontiguousarray(chunk).tobytes()
 
-    with ThreadPoolExecutor(max_workers=min(4, os.cpu_count() or 1)) as pool:
-        for start, deflated in zip(starts, pool.map(deflate, starts)):
-            dataset.id.write_direct_chunk((start,) + (0,) * (value.ndim - 1), deflated)
+    starts = list(starts)
+    for start, deflated in zip(starts, deflated_chunks(chunk_bytes, starts)):
+        dataset.id.write_direct_chunk((start,) + (0,) * (value.ndim - 1), deflated)
     return dataset
 
 

@@ -8,13 +8,11 @@ and exact pass events (``/events``), appended block by block (the layout is desc
 from __future__ import annotations
 
 import json
-import os
-from concurrent.futures import ThreadPoolExecutor
 
 import h5py
 import numpy as np
 
-from cfbmarkov._hdf5 import deflate_bytes
+from cfbmarkov._hdf5 import deflated_chunks
 from cfbmarkov.errors import InputError
 
 #: fewest particles per chunk of a frame (a file whose particles grow by insertion)
@@ -84,9 +82,9 @@ THREADED_CHUNKS = 16
 
 def _write_deflated_chunks(ds: h5py.Dataset, i0: int, values: np.ndarray) -> None:
     """Write ``values`` (T frames from frame ``i0``, a multiple of the chunks' frames) to the
-    deflated dataset ``ds`` chunk by chunk, each deflated in a thread pool
-    (:func:`cfbmarkov._hdf5.deflate_bytes`, which releases the GIL) and written as it is
-    (``write_direct_chunk``).
+    deflated dataset ``ds`` chunk by chunk, each deflated (in threads from
+    :data:`THREADED_CHUNKS` chunks on: :func:`cfbmarkov._hdf5.deflated_chunks`) and written
+    as it is (``write_direct_chunk``).
 
     A chunk holding only the fill value is not written (it reads back as that value); a
     chunk that reaches past the values (the last frames of a block, the last particles) is
@@ -103,7 +101,7 @@ def _write_deflated_chunks(ds: h5py.Dataset, i0: int, values: np.ndarray) -> Non
               for j0 in range(0, values.shape[1], particles)
               if not _only_fill(values[f0:f0 + frames, j0:j0 + particles], fill)]
 
-    def deflate(start: tuple[int, int]) -> bytes:
+    def chunk_bytes(start: tuple[int, int]) -> bytes:
         f0, j0 = start
         part = values[f0:f0 + frames, j0:j0 + particles]
         if part.shape[:2] != (frames, particles):
@@ -114,14 +112,10 @@ def _write_deflated_chunks(ds: h5py.Dataset, i0: int, values: np.ndarray) -> Non
         raw = chunk.tobytes()
         if shuffle:      # HDF5's shuffle filter: the elements' first bytes, then their second ...
             raw = np.frombuffer(raw, np.uint8).reshape(-1, values.dtype.itemsize).T.tobytes()
-        return deflate_bytes(raw, level)
+        return raw
 
-    workers = min(4, os.cpu_count() or 1)
-    if workers > 1 and len(starts) >= THREADED_CHUNKS:
-        with ThreadPoolExecutor(max_workers=workers) as pool:
-            deflated = list(pool.map(deflate, starts))
-    else:       # a few chunks (a prediction of a few particles): threads cost more than they save
-        deflated = [deflate(start) for start in starts]
+    # a few chunks (a prediction of a few particles): threads cost more than they save
+    deflated = deflated_chunks(chunk_bytes, starts, level, len(starts) >= THREADED_CHUNKS)
     zeros = (0,) * len(tail)
     for (f0, j0), data in zip(starts, deflated):
         ds.id.write_direct_chunk((i0 + f0, j0, *zeros), data)
