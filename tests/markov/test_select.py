@@ -121,10 +121,12 @@ def test_cli_fit_with_auto_and_named_states(run, tmp_path, capsys):
     out = tmp_path / "m.h5"
     # (a short window and no interval: the CLI path of the choice, not the choice or the
     # interval, is under test here)
+    # (no --estimator: auto fits with mle by default)
     assert main(["fit", str(run), "--cells", "6x38", "--window", "0.5:1.5", "--states", "auto",
-                 "--estimator", "mle", "--resamples", "0", "-o", str(out)]) == 0
+                 "--resamples", "0", "-o", str(out)]) == 0
     text = capsys.readouterr().out
     assert "chosen automatically" in text
+    assert MarkovModel.load(out).estimator == "mle"
     selection = MarkovModel.load(out).selection
     assert selection is not None
     # every candidate scored in one table, the winner marked, visited states counted
@@ -135,10 +137,20 @@ def test_cli_fit_with_auto_and_named_states(run, tmp_path, capsys):
         assert any(line.split()[:1] == [c["states"]] or line.split()[1:2] == [c["states"]]
                    for line in text.splitlines() if line.strip())
         assert 0 < c["visited"] <= c["n_states"]
-    assert main(["fit", str(run), "--window", "0.5:4.5", "--states", "cells-direction",
-                 "-o", str(out)]) == 0
+    # a space with memory: mle by default, the paper's estimator only when named, and warned
+    fit = ["fit", str(run), "--window", "0.5:4.5", "--resamples", "0", "--no-adequacy",
+           "-o", str(out)]
+    capsys.readouterr()
+    assert main(fit + ["--states", "cells-direction"]) == 0
     model = MarkovModel.load(out)
-    assert model.state_space.kind == "cells-direction" and model.estimator == "paper"
+    assert model.state_space.kind == "cells-direction" and model.estimator == "mle"
+    assert "warning: the paper's estimator" not in capsys.readouterr().err
+    assert main(fit + ["--states", "cells-direction", "--estimator", "paper"]) == 0
+    assert MarkovModel.load(out).estimator == "paper"
+    assert "warning: the paper's estimator (Eq. 2-4)" in capsys.readouterr().err
+    assert main(fit) == 0       # the paper's cells: its estimator, without a warning
+    assert MarkovModel.load(out).estimator == "paper"
+    assert "warning: the paper's estimator" not in capsys.readouterr().err
     assert main(["fit", str(run), "--states", "cells-best", "-o", str(out)]) == 2
 
 

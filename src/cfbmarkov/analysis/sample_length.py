@@ -25,7 +25,7 @@ import numpy as np
 from cfbmarkov._json import jsonable
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import discretize
-from cfbmarkov.markov.estimate import estimator_from_name
+from cfbmarkov.markov.estimate import default_estimator, estimator_from_name
 from cfbmarkov.observed.residence import net_flow_direction, residence_flux, residence_times
 from cfbmarkov.trajectories import Trajectories
 
@@ -300,7 +300,8 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
         Where the windows start (s); default the run's first frame (the latest first frame
         of several runs).
     estimator : {"paper", "mle"}, optional
-        Default: ``mle`` for an open riser, else ``paper`` (as ``fit``).
+        Default: ``paper`` for the paper's cells on a periodic riser, else ``mle`` (as
+        ``fit``, :func:`~cfbmarkov.markov.estimate.default_estimator`).
     tolerance : float, optional
         Relative tolerance, default 0.1.
     lengths : sequence of float, optional
@@ -351,7 +352,7 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
             raise InputError(f"start {a:g} s lies outside the frames of {name} "
                              f"({first:g} to {last:g} s): give a start inside them")
         if estimator is None:
-            estimator = "mle" if runs[0].boundary.is_open else "paper"
+            estimator = default_estimator(runs[0].boundary.is_open, state_space.kind)
         usable = [float(n) for n in sorted(lengths) if a + n <= last + tol]
         if not usable:
             raise InputError(f"{name} runs {last - a:g} s from {a:g} s: shorter than the "

@@ -683,7 +683,8 @@ def add_stationarity(sub) -> None:
     s.add_argument("--cells", type=parse_cells, default=None,
                    help="with --sample-length: COLUMNSxROWS (default 6x38)")
     s.add_argument("--estimator", choices=["paper", "mle"], default=None,
-                   help="with --sample-length: as in fit (default paper, mle on an open riser)")
+                   help="with --sample-length: as in fit (default paper for the cells, mle on "
+                        "an open riser or for a state space with memory)")
     s.add_argument("--json", action="store_true", help="print JSON instead of a table")
     s.set_defaults(func=cmd_stationarity)
 

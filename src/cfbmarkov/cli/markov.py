@@ -69,8 +69,7 @@ def _fit(args) -> int:
         return _fit_pooled(args, columns, rows, depth_columns)
     args.run, args.window = args.run[0], _one_window(args.window)
     with Trajectories(args.run) as run:
-        if args.estimator is None:
-            args.estimator = "mle" if run.boundary.is_open else "paper"
+        _choose_estimator(args, run.boundary.is_open)
         if depth_columns is not None and run.dimensions != 3:
             raise InputError(f"{args.run} is 2D: cells {'x'.join(map(str, args.cells))} with "
                              "depth columns need 3D data (use COLUMNSxROWS)")
@@ -96,6 +95,21 @@ def _fit(args) -> int:
                 model = fit_model(run, space, args.lag, args.window, args.estimator,
                                   connected=args.connected, coherent=args.coherent)
     return _finish_fit(args, model, [args.run], [args.window])
+
+
+def _choose_estimator(args, open_boundary: bool) -> None:
+    """``args.estimator`` where none was given (:func:`~cfbmarkov.markov.estimate.
+    default_estimator`), and a ``warning:`` line where the paper's estimator is asked for on
+    a state space with memory."""
+    from cfbmarkov.markov.estimate import default_estimator
+
+    if args.estimator is None:
+        args.estimator = default_estimator(open_boundary, args.states)
+    elif args.estimator == "paper" and args.states != "cells":
+        print(f"warning: the paper's estimator (Eq. 2-4) is the paper's for its cells; on "
+              f"--states {args.states} its frame-averaged rows can carry the chain away from "
+              "the window's own flux (docs/method.md, Estimators): --estimator mle, the "
+              "default there, keeps it", file=sys.stderr)
 
 
 def _finish_fit(args, model, runs, windows) -> int:
@@ -146,8 +160,7 @@ def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int
     with contextlib.ExitStack() as stack:
         runs = [stack.enter_context(Trajectories(path)) for path in args.run]
         first = runs[0]
-        if args.estimator is None:
-            args.estimator = "mle" if first.boundary.is_open else "paper"
+        _choose_estimator(args, first.boundary.is_open)
         if depth_columns is not None and first.dimensions != 3:
             raise InputError(f"{first.path} is 2D: cells {'x'.join(map(str, args.cells))} "
                              "with depth columns need 3D data (use COLUMNSxROWS)")
@@ -367,8 +380,9 @@ def add_fit(sub) -> None:
                    help="fitting window START:STOP, s (default 10:15); with several runs one "
                         "window for all or one per run, comma-separated (10:15,12:17)")
     s.add_argument("--estimator", choices=["paper", "mle"], default=None,
-                   help="paper (Eq. 2-4; the default for a periodic riser) or mle (pooled "
-                        "counts; the default, and the only choice, for an open riser)")
+                   help="paper (Eq. 2-4; the default for the paper's cells on a periodic "
+                        "riser) or mle (pooled counts; the default for a state space with "
+                        "memory or auto, and the only choice for an open riser)")
     s.add_argument("--states", choices=["cells", "cells-direction", "cells-velocity",
                                         "cells-velocity-fine", "cells-previous",
                                         "cells-regime", "cells-direction-regime", "auto"],

@@ -508,6 +508,30 @@ ESTIMATORS: dict[str, type[TransitionEstimator]] = {
     "paper": PaperEstimator, "mle": MaximumLikelihoodEstimator}
 
 
+def default_estimator(open_boundary: bool, states: str) -> str:
+    """The estimator the command line fits with where none is named.
+
+    The paper's (Eq. 2-4) for the paper's cells on a periodic riser, as the paper fits;
+    maximum likelihood (``mle``) otherwise: on an open riser, where only it is defined, and
+    on a state space with memory or ``auto``, whose chains the paper's frame-averaged rows
+    carry away from the window's own flux (``docs/method.md``, Estimators; the reproduction's
+    models ``auto`` and ``STATES`` fit with ``mle`` too, :func:`~cfbmarkov.markov.select.
+    choice.parse_model_name`).
+
+    Parameters
+    ----------
+    open_boundary : bool
+        Whether the riser is open (inlet and outlet) rather than periodic.
+    states : str
+        The state space's name (``cells``, ``cells-velocity``, ..., or ``auto``).
+
+    Returns
+    -------
+    {"paper", "mle"}
+    """
+    return "paper" if states == "cells" and not open_boundary else "mle"
+
+
 def estimator_from_name(name: str, state_space: StateSpace, lag: float = 0.025,
                         connected: bool = False, coherent: bool = False
                         ) -> TransitionEstimator:
