@@ -256,3 +256,33 @@ def test_auto_fit_at_the_file_start_keeps_its_verdict_and_interval(tmp_path, cap
     model = MarkovModel.load(out)
     assert model.state_space.memory_lags >= 1        # a space with memory won here
     assert model.uncertainty is not None and model.adequacy is not None
+
+
+def test_a_space_whose_window_leaves_most_states_unvisited_is_not_chosen():
+    """The lowest score wins unless more than half of its states were never visited in the
+    window (the chosen model would warn that its space is too fine); the table says why it
+    was passed over. Where every candidate is that sparse, the lowest score still wins."""
+    import math
+
+    from cfbmarkov.markov.select.candidates import best_candidate
+    from cfbmarkov.markov.select.record import CandidateScore
+    from cfbmarkov.markov.selection_table import candidate_table
+
+    def score(states, n, visited, value):
+        return CandidateScore(states, 0.025, n, 1.0, 1.0, 0.0, 0.0, 0.1, value,
+                              visited=visited)
+
+    cells = score("cells", 228, 228, 1.0)
+    sparse = score("cells-velocity", 1824, 644, 0.4)       # 1180 of 1824 never visited
+    filled = score("cells-direction", 456, 300, 0.7)       # 156 of 456: kept
+    failed = CandidateScore("cells-previous", 0.025, 1596, *[math.nan] * 5, math.inf, "x")
+    assert best_candidate([cells, sparse, filled, failed]) is filled
+    assert best_candidate([cells, sparse]) is cells
+    lone = score("cells", 228, 100, 1.0)                   # every candidate sparse
+    assert best_candidate([lone, sparse]) is sparse
+    assert best_candidate([failed]) is None
+    record = {"method": "window RTD", "chosen": {"states": "cells-direction", "lag": 0.025},
+              "candidates": [c.as_dict() for c in (cells, sparse, filled)]}
+    notes = [line for line in candidate_table(record) if "not chosen" in line]
+    assert len(notes) == 1 and notes[0].startswith("cells-velocity at lag 0.025 s not chosen")
+    assert "1180 of its 1824 states never visited" in notes[0]

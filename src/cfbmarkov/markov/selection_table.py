@@ -96,7 +96,30 @@ def candidate_columns(selection: Mapping[str, Any]
             unjudged.setdefault(c.get("error") or "no held-out comparison", []).append(
                 f"{c.get('states')} at lag {_number(c.get('lag'), 'g')} s")
     notes += [f"{', '.join(names)} not judged: {why}" for why, names in unjudged.items()]
+    notes += _passed_over(scored, chosen)
     return headers, rows, notes
+
+
+def _passed_over(scored: list, chosen: Mapping[str, Any]) -> list[str]:
+    """Notes on the candidates that scored lower than the chosen one but were not chosen,
+    more than half of their states never visited in the window
+    (:func:`~cfbmarkov.markov.select.candidates.best_candidate`)."""
+    from cfbmarkov.markov.model_summary import UNVISITED_LIMIT
+
+    best = next((c for c in scored if (c.get("states"), c.get("lag"))
+                 == (chosen.get("states"), chosen.get("lag"))), None)
+    if best is None:
+        return []
+    notes = []
+    for c in scored:
+        n, visited = c.get("n_states"), c.get("visited")
+        if (c["score"] < best["score"] and n and visited is not None
+                and n - visited > UNVISITED_LIMIT * n):
+            notes.append(f"{c.get('states')} at lag {_number(c.get('lag'), 'g')} s not chosen "
+                         f"despite its lower score: {n - visited} of its {n} states never "
+                         f"visited in the window (more than {100 * UNVISITED_LIMIT:g} %), so "
+                         "its chain rests on the few states seen")
+    return notes
 
 
 def candidate_table(selection: Mapping[str, Any]) -> list[str]:

@@ -211,3 +211,34 @@ def score_candidates(judged: list[JudgedCandidate], criterion: Criterion, lag: f
             criterion.score(c.states, c.lag, c.n_states, c.table, reference),
             visited=c.visited))
     return scores
+
+
+def best_candidate(scores: list[CandidateScore]) -> CandidateScore | None:
+    """The candidate to choose: the lowest score among those judged, leaving out a state
+    space that more than :data:`~cfbmarkov.markov.model_summary.UNVISITED_LIMIT` of whose
+    states the window never visits (its chain rests on the few states seen, and the chosen
+    model would warn that its space is too fine), unless every judged candidate is such.
+
+    Parameters
+    ----------
+    scores : list of CandidateScore
+        Every candidate (:func:`score_candidates`).
+
+    Returns
+    -------
+    CandidateScore or None
+        None where no candidate was judged.
+    """
+    from cfbmarkov.markov.model_summary import UNVISITED_LIMIT
+
+    usable = [c for c in scores if math.isfinite(c.score)]
+    filled = [c for c in usable if not too_sparse(c, UNVISITED_LIMIT)]
+    return min(filled or usable, key=lambda c: c.score, default=None)
+
+
+def too_sparse(candidate: CandidateScore, limit: float) -> bool:
+    """Whether more than ``limit`` (a fraction) of a candidate's states are never visited
+    in the fitting window."""
+    return (candidate.visited is not None
+            and candidate.n_states - candidate.visited > limit * candidate.n_states)
+

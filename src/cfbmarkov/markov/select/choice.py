@@ -19,8 +19,9 @@ from cfbmarkov.markov.discrete import DiscreteTrajectories
 from cfbmarkov.markov.counting import count_transitions
 from cfbmarkov.markov.estimate import ESTIMATORS, estimator_from_name, fit_model
 from cfbmarkov.markov.select.blocks import judged_blocks
-from cfbmarkov.markov.select.candidates import (candidate_spaces, judge_candidates,
-                                                read_window_frames, score_candidates)
+from cfbmarkov.markov.select.candidates import (best_candidate, candidate_spaces,
+                                                judge_candidates, read_window_frames,
+                                                score_candidates)
 from cfbmarkov.markov.select.criteria import criterion_for
 from cfbmarkov.markov.select.record import kept_cells_record, selection_record
 from cfbmarkov.markov.spaces import STATE_SPACES, state_space_from_name
@@ -126,7 +127,7 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         if not usable:
             raise InputError("auto: no candidate state space could be fitted: "
                              + "; ".join(f"{c.states} lag {c.lag:g}: {c.error}" for c in scores))
-        best = min(usable, key=lambda c: c.score)
+        best = best_candidate(scores)
         model = _fit_chosen(traj, discrete_of[(best.states, best.lag)], best.lag, estimator,
                             coherent)
     return model.with_selection(selection_record(judge, estimator, best, scores, lag))

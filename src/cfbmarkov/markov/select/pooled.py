@@ -31,8 +31,9 @@ from cfbmarkov.markov.counting import count_transitions
 from cfbmarkov.markov.estimate import estimator_from_name
 from cfbmarkov.markov.pooling import check_runs_distinct, check_runs_match, run_windows
 from cfbmarkov.markov.select.blocks import MIN_RESIDENCES, JudgedBlocks, _open_riser_criterion
-from cfbmarkov.markov.select.candidates import (JudgedCandidate, candidate_spaces,
-                                                read_window_frames, score_candidates)
+from cfbmarkov.markov.select.candidates import (JudgedCandidate, best_candidate,
+                                                candidate_spaces, read_window_frames,
+                                                score_candidates)
 from cfbmarkov.markov.select.criteria import criterion_for
 from cfbmarkov.markov.select.record import kept_cells_record, selection_record
 from cfbmarkov.markov.spaces import state_space_from_name
@@ -179,7 +180,7 @@ def select_pooled(runs, *, windows, columns: int, rows: int, lag: float,
         raise InputError("auto: no candidate state space could be fitted on the pooled "
                          "windows: " + "; ".join(f"{c.states} lag {c.lag:g}: {c.error}"
                                                  for c in scores))
-    best = min(usable, key=lambda c: c.score)
+    best = best_candidate(scores)
     record = selection_record(judge, estimator, best, scores, lag)
     record["reason"] += f"; judged on the windows of {len(runs)} runs pooled"
     return _fit_pooled(runs, windows, discrete_of[(best.states, best.lag)], best.lag,
