@@ -27,7 +27,7 @@ def run(tmp_path):
     (("fit", "--lag", "0.002", "--window", "10:15", "-o", "m.h5"),
      "window 10:15 s lies outside the data of {run} (0 to 2 s)"),
     (("stationarity", "--span", "5:20"), "span 5:20 s lies outside the frames of {run} (0 to 2 s)"),
-    (("stationarity", "--window-length", "5"), "a window length below the span's 2 s"),
+    (("stationarity", "--window-length", "5"), "a --window-length of at most half the span's 2 s"),
     (("stationarity", "--window-length", "0.5", "--span", "0:1.5", "--judge", "3:4"),
      "--judge 3:4 s lies outside the span 0:1.5 s"),
     (("export-vtk", "--start", "15", "--stop", "16", "-o", "v"),
@@ -44,6 +44,22 @@ def test_errors_name_the_working_value(run, tmp_path, capsys, monkeypatch, args,
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "Traceback" not in err, err
     assert expected.format(run=run) in err, err
+
+
+def test_a_window_no_residence_fits_names_the_shortest_that_does(run, tmp_path, capsys):
+    """rtd --window-length shorter than every residence of the model: one line with the
+    length from which one fits (the chain on 38 rows moves at most a row a lag of 0.002 s:
+    38 lags at least)."""
+    model = tmp_path / "m.h5"
+    assert main(["fit", str(run), "--lag", "0.002", "--window", "0.5:1.5", "--resamples", "0",
+                 "--no-adequacy", "-q", "-o", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["rtd", str(model), "--window-length", "0.01"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no residence of this model fits in a window of 0.01 s" in err
+    shortest = float(err.split("give a window of at least ")[1].split(" s")[0])
+    assert shortest == pytest.approx(0.078)
+    assert main(["rtd", str(model), "--window-length", f"{shortest:g}"]) == 0
 
 
 def test_a_mistyped_option_names_the_verb_and_the_option_it_may_mean(capsys):

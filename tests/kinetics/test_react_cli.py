@@ -111,6 +111,9 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     # a misspelt parameter is named as an unknown key, not as a missing one
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrat = 1.0\n', None,
      "unknown key 'rat'"),
+    # a misspelt law key: the laws listed and the stray key named
+    ('[[property]]\nname = "X"\nlwa = "first-order"\nrate = 1.0\n', None,
+     "give law = \"...\" (one of first-order, deactivation, heat-exchange); unknown key 'lwa'"),
     # file lines as an editor numbers them, blank lines counted: the cell (col 2, row 4) on
     # line 16 (header on 1, cell k = 3 row + col on line k + 2) and again on line 21, after
     # a blank line 20

@@ -220,8 +220,8 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
                          f"more than {MAX_WINDOWS}; give --step {(b - a - length) / MAX_WINDOWS:.3g}"
                          " or more (or a shorter --span)")
     if count < 2:
-        fix = (f"a window length below the span's {b - a:g} s" if length > 0.5 * (b - a) + tol
-               else "a shorter --window-length or --step")
+        fix = (f"a --window-length of at most half the span's {b - a:g} s"
+               if length > 0.5 * (b - a) + tol else "a shorter --window-length or --step")
         raise InputError(f"{a:g}:{b:g} s of {traj.path} holds {max(count, 0)} window(s) of "
                          f"{length:g} s {step:g} s apart: two at least are needed ({fix})")
     if lag_frames * traj.frame_interval >= length - tol:

@@ -421,7 +421,14 @@ def _property(table, index: int, path: Path) -> Property:
         where = f"{path} property {table['name']!r}"
     for key in ("name", "law"):
         if not isinstance(table.get(key), str):
-            raise InputError(f"{where}: give {key} = \"...\"")
+            choices = f" (one of {', '.join(LAWS)})" if key == "law" else ""
+            # a misspelt key names itself: the keys no law takes
+            known = set(_PROPERTY_KEYS) | {"wall_temperature"} | {
+                f"{p}{suffix}" for law in LAWS.values() for p in law().parameter_names
+                for suffix in ("", "_by_cell", "_from", "_dense", "_dilute", "_threshold")}
+            stray = sorted(k for k in table if k not in known)
+            also = f"; unknown key {', '.join(map(repr, stray))}" if stray else ""
+            raise InputError(f"{where}: give {key} = \"...\"{choices}{also}")
     law_key = table["law"]
     if law_key not in LAWS:
         raise InputError(f"{where}: unknown law {law_key!r}; use one of {', '.join(LAWS)}")

@@ -139,7 +139,12 @@ class ResidenceTimeDistribution:
         weights = np.clip(n_window - k, 0, None).astype(np.float64)
         observed = self.probability * weights
         if observed.sum() <= 0:
-            raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s")
+            held = np.flatnonzero(self.probability > 0)
+            shortest = ("" if held.size == 0 else
+                        f": its shortest residence lasts {(held[0] + 1) * self.lag:g} s; give a "
+                        f"window of at least {(held[0] + 2) * self.lag:g} s")
+            raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s"
+                                 + shortest)
         observed = observed[: max(n_window - 1, 1)]
         return ResidenceTimeDistribution(self.lag, observed / observed.sum(), self.unresolved,
                                          self.entry_distribution, float(window),

@@ -78,7 +78,9 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
             cache[key] = exact_rtd(model.transition_matrix, model.up_fraction,
                                    model.down_fraction, model.lag, max_steps=steps,
                                    entry_flux=net_entry_flux(model))
-        return cache[key].in_window(window)
+        if cache[key].probability.any():
+            return cache[key].in_window(window)
+        # no residence ends within the lags propagated: the whole RTD names the shortest
     if "rtd" not in cache:
         cache["rtd"] = exact_rtd(model.transition_matrix, model.up_fraction,
                                  model.down_fraction, model.lag,
