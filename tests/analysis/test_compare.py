@@ -351,6 +351,32 @@ def _frames(path):
         return t.times, t.positions()
 
 
+def test_an_in_sample_window_and_a_baseline_of_another_length_are_warned(tmp_path, capsys):
+    """A compared window that overlaps the model's fitting window on its own run judges the
+    fit, not a prediction; a persistence baseline of another length than the compared
+    window is not like for like. Each says so once; a later window as long as the fitting
+    one says neither."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    run = write_run(tmp_path / "run.h5", RiserFlow(), 300, 4.0, seed=2)
+    model = tmp_path / "m.h5"
+    assert main(["fit", str(run), "--window", "0.5:2", "--resamples", "0", "--no-adequacy",
+                 "-q", "-o", str(model)]) == 0
+    overlap, length = "overlaps the model's fitting window 0.5-2 s", "is 1.5 s long"
+    cases = [(1.0, 1.0, True, True), (2.0, 1.5, False, False), (2.0, 2.0, False, True)]
+    for start, duration, inside, other_length in cases:
+        pred = tmp_path / f"p{start}-{duration}.h5"
+        assert main(["predict", str(model), "--init", str(run), "--start", str(start),
+                     "--duration", str(duration), "-q", "-o", str(pred)]) == 0
+        saved = compare(run, pred, window=(start, start + duration), figures=False,
+                        output=tmp_path / f"o{start}-{duration}")
+        said = saved["warnings"]
+        assert sum(overlap in line for line in said) == inside, said
+        assert sum(length in line for line in said) == other_length, said
+    capsys.readouterr()
+
+
 def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_path):
     """Block-bootstrap and Monte Carlo intervals: around the prediction's value, narrower at a
     lower level, the model's own wider for a model fitted on less data; none when

@@ -347,6 +347,7 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     _check_bins_resolve(rt_ref, bin_width, bin_width_from, (start, stop))
     beside = _baselines(ref, pred, (start, stop), on, bin_width=bin_width, md_order=md_order,
                         long_run_span=long_run_span)
+    warnings += _fitting_window_warnings(ref, pred, (start, stop), beside.baseline)
     tracers = None
     if ref.boundary.is_open:
         tracers = starting_tracers(ref, pred, ref_frames.start, pred_frames.start)
@@ -364,6 +365,45 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
                            columns, warnings, on, beside)
     comparison.bin_width_from = bin_width_from
     return comparison
+
+
+def _fitting_window_warnings(ref: Trajectories, pred: Trajectories,
+                             window: tuple[float, float],
+                             baseline: WindowDifference | None) -> list[str]:
+    """Lines about the model's fitting window beside the compared one: a compared window
+    that overlaps it on the run the model was fitted on (the reference holds the fitting
+    window's content, :func:`cfbmarkov.trajectory_identity.window_identity`), which judges
+    the fit rather than a prediction; and a persistence baseline whose window is of another
+    length than the compared one (a window sees residences up to its own length, so the
+    two RTDs are not alike even for a steady flow)."""
+    from cfbmarkov.trajectory_identity import window_identity
+
+    fitted = fitting_window(pred)
+    if fitted is None or fitting_runs_of(pred) is not None:
+        return []
+    start, stop = window
+    tol = max(ref.time_tolerance, pred.time_tolerance)
+    lines = []
+    group = pred.group("model")
+    identity = group.attrs.get("source_identity") if group is not None else None
+    if isinstance(identity, bytes):
+        identity = identity.decode()
+    if (fitted[0] < stop - tol and start < fitted[1] - tol and isinstance(identity, str)
+            and fitted[0] >= ref.times[0] - tol and fitted[1] <= ref.times[-1] + tol):
+        with contextlib.suppress(InputError):
+            if window_identity(ref, fitted) == identity:
+                lines.append(f"the compared window {start:g}-{stop:g} s overlaps the model's "
+                             f"fitting window {fitted[0]:g}-{fitted[1]:g} s of this run: the "
+                             "model was fitted on these frames, so the comparison judges its "
+                             "fit, not a prediction; compare a window after the fitting "
+                             "window")
+    length, fit_length = stop - start, fitted[1] - fitted[0]
+    if baseline is not None and abs(fit_length - length) > max(tol, 1e-6 * length):
+        lines.append(f"the persistence baseline's window {fitted[0]:g}-{fitted[1]:g} s is "
+                     f"{fit_length:g} s long and the compared one {length:g} s: a window sees "
+                     "residences up to its own length, so the baseline's RTD is not like for "
+                     "like; fit on a window as long as the compared one for a fair baseline")
+    return lines
 
 
 def _refuse_empty(ref: Trajectories, pred: Trajectories, side: str, traj: Trajectories,
