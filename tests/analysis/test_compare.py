@@ -374,6 +374,31 @@ def test_an_in_sample_window_and_a_baseline_of_another_length_are_warned(tmp_pat
         said = saved["warnings"]
         assert sum(overlap in line for line in said) == inside, said
         assert sum(length in line for line in said) == other_length, said
+        assert not any("mixing curves stay flat" in line for line in said)
+    capsys.readouterr()
+
+
+def test_mixing_curves_that_stay_flat_on_both_sides_are_warned_of(tmp_path, capsys):
+    """Particles that only rise, each at its own x: no tracer crosses W/2 in the run or in
+    the prediction (the chain's columns never change), so the mixing RMS of 0 is warned as
+    testing nothing."""
+    from cfbmarkov.cli import main
+
+    rng = np.random.default_rng(1)
+    t = 0.005 * np.arange(801)
+    x = np.broadcast_to(rng.uniform(0.0, 0.04, 200), (t.size, 200))
+    y = np.mod(rng.uniform(0.0, 0.3, 200) + rng.uniform(0.5, 1.5, 200) * t[:, None], 0.3)
+    run = write_trajectories(tmp_path / "r.h5", t, np.stack([x, y], axis=-1), width=0.04,
+                             height=0.3, source="cfd-dem")
+    model, pred = tmp_path / "m.h5", tmp_path / "p.h5"
+    assert main(["fit", str(run), "--cells", "4x12", "--lag", "0.01", "--window", "0:2",
+                 "--resamples", "0", "--no-adequacy", "-q", "-o", str(model)]) == 0
+    assert main(["predict", str(model), "--init", str(run), "--start", "2", "--duration", "2",
+                 "-q", "-o", str(pred)]) == 0
+    saved = compare(run, pred, window=(2.0, 4.0), figures=False, output=tmp_path / "o")
+    assert saved["mixing_rms"] == 0
+    flat = [line for line in saved["warnings"] if "mixing curves stay flat" in line]
+    assert len(flat) == 1 and "mixing RMS 0 tests nothing" in flat[0]
     capsys.readouterr()
 
 

@@ -609,6 +609,12 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
         warnings.append("the mixing curve is undefined where no tracer (a particle present at "
                         f"the window start) is left ({', '.join(ends)}): the mixing RMS is "
                         "undefined (null); a window that ends before that gives one")
+    if (np.isfinite(rms) and f_ref.size and f_mod.size and np.ptp(f_ref) == 0
+            and np.ptp(f_mod) == 0):
+        warnings.append(f"the mixing curves stay flat in both files (the tracers make no "
+                        f"net crossing of the mid-plane x = W/2 over the window): the mixing "
+                        f"RMS {rms:g} tests nothing; a longer window, or a flow whose "
+                        "particles move across, gives it a meaning")
     ref, pred = reference.traj, model.traj
     left_ref, left_mod = reference.left_group, model.left_group
     if ref.boundary.is_open:

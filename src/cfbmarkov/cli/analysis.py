@@ -199,7 +199,8 @@ def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -
     text = (f"the reference's E(RT) {rt_mean:.{dm}g} s lies {places[0]} the model's interval, "
             f"its SD(RT) {rt_sd:.{ds}g} s {places[1]}")
     if places == ["inside", "inside"]:
-        return text + ": the model is consistent with the reference within its uncertainty"
+        return text + (": the model's E(RT) and SD(RT) are consistent with the reference's "
+                       "within their uncertainty")
     missed = " and ".join(n for n, p in zip(("E(RT)", "SD(RT)"), places) if p != "inside")
     return text + f": the model misses the reference's {missed} beyond its uncertainty"
 
