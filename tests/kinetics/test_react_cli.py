@@ -55,10 +55,44 @@ def test_react_table_says_the_computing_time_is_one(fitted, tmp_path, capsys):
     folder, run, model = fitted
     kin = _write(tmp_path, GOOD, RATES)
     assert main(["react", str(model), "--kinetics", str(kin)]) == 0
-    last = capsys.readouterr().out.splitlines()[-1]
+    lines = capsys.readouterr().out.splitlines()
+    last = lines[-2]
     assert re.fullmatch(r"exact, per residence at the exit and over the bed in steady state, "
                         r"in the units of the kinetics file's values; computed in "
                         r"[0-9.e-]+ s", last), last
+    # and that these are the fitted chain's, without its sampling uncertainty
+    assert lines[-1].startswith("  exact for the fitted chain, without its sampling "
+                                "uncertainty: --resamples 100")
+
+
+def test_react_resamples_give_the_exit_means_intervals(fitted, tmp_path, capsys):
+    """--resamples N: each property's exit mean with an interval from the fitting window's
+    block bootstrap (each resample solved exactly), around the exact value, the same on a
+    second call; wider at a higher level; fewer than 10 resamples refused in one line."""
+    folder, run, model = fitted
+    kin = _write(tmp_path, GOOD, RATES)
+    argv = ["react", str(model), "--kinetics", str(kin), "--json", "--resamples", "20"]
+    assert main(argv) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert out["level"] == 0.9 and out["interval_resamples"] == 20
+    intervals = {}
+    for name in ("X", "T"):
+        value = out["properties"][name]
+        lo, hi = intervals[name] = value["exit_mean_interval"]
+        assert lo < value["exit_mean"] < hi
+    assert main(argv) == 0                      # seeded: the same interval again
+    again = json.loads(capsys.readouterr().out)["properties"]
+    assert {name: again[name]["exit_mean_interval"] for name in intervals} == intervals
+    assert main(argv + ["--level", "0.99"]) == 0
+    wide = json.loads(capsys.readouterr().out)["properties"]["T"]["exit_mean_interval"]
+    assert wide[0] <= intervals["T"][0] and wide[1] >= intervals["T"][1]
+    assert wide[1] - wide[0] > intervals["T"][1] - intervals["T"][0]
+    assert main(["react", str(model), "--kinetics", str(kin), "--resamples", "20"]) == 0
+    assert "90 % interval of X's exit mean: " in capsys.readouterr().out
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["properties"]["X"]["exit_mean_interval"] is None
+    assert main(["react", str(model), "--kinetics", str(kin), "--resamples", "5"]) == 2
+    assert "at least 10" in capsys.readouterr().err
 
 
 def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):

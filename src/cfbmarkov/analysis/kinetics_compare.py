@@ -315,10 +315,38 @@ def kinetics_resamples(n_states: int, resamples: int) -> int:
     return min(resamples, max(KINETICS_MIN_RESAMPLES, scaled))
 
 
-def _bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
+def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
                           direction: str = "up"):
-    """Exact exit means of each property on block-bootstrap resamples of the fitting
-    window ({name: list}), or None."""
+    """Exact exit means of each property on block-bootstrap resamples of the model's fitting
+    window (:func:`cfbmarkov.analysis.bootstrap.block_bootstrap_models`, 10 blocks, seed 0),
+    what the model's interval of an exit mean is formed from (`compare --kinetics`,
+    `react --resamples`).
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted model, its fitting file found (:func:`cfbmarkov.analysis.intervals.
+        resolve_source`).
+    kinetics : Kinetics
+        The properties (linear laws).
+    fields : CellFields or None
+        The cell fields the properties' parameters take (None: none needed).
+    resamples : int
+        Resamples asked for; fewer are solved on a large state space
+        (:func:`kinetics_resamples`, with a line in ``warnings``).
+    warnings : list of str
+        Appended to: why fewer resamples, or none, were taken.
+    direction : {"up", "down"}, optional
+        The direction exits are counted in.
+
+    Returns
+    -------
+    dict of str to list of float, or None
+        Each property's exit means over the resamples that have residences (a resample of
+        the lap deficits' depth cut to :data:`~cfbmarkov.analysis.intervals.
+        BOOTSTRAP_DEFICIT_LEVELS` is scaled by the model's full-depth ratio); None for no
+        resamples or a model whose fitting data cannot be read.
+    """
     if not resamples:
         return None
     from cfbmarkov.analysis.bootstrap import block_bootstrap_models
@@ -498,7 +526,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                         "the model side integrates them along the prediction's paths")
     exact = _exact(model, sk, warnings, on.direction)
     windowed = _windowed(model, sk, stop - start, warnings, on.direction) if exact else {}
-    boot = (_bootstrap_exit_means(model, kinetics, fields, resamples, warnings, on.direction)
+    boot = (bootstrap_exit_means(model, kinetics, fields, resamples, warnings, on.direction)
             if exact else None)
     rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings)
     n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)

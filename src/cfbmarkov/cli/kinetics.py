@@ -7,7 +7,7 @@ import sys
 import time
 
 from cfbmarkov._names import one_line
-from cfbmarkov.cli.options import count, finite_float, positive_float, seed
+from cfbmarkov.cli.options import count, finite_float, level, positive_float, seed
 from cfbmarkov.errors import InputError
 
 
@@ -43,6 +43,9 @@ def cmd_react(args) -> int:
     if not len(missing) < len(mc) and args.seed != 0:
         raise InputError("--seed seeds the Monte Carlo (--init RUN --start T --duration D "
                          "-o OUT); the exact answers use none: leave it out, or add those")
+    if 0 < args.resamples < 10:
+        raise InputError(f"--resamples {args.resamples}: an interval needs at least 10 "
+                         "bootstrap resamples (0 leaves it out)")
     kinetics = load_kinetics(args.kinetics)
     model = MarkovModel.load(args.model)
     fields, fields_from = None, None
@@ -101,13 +104,16 @@ def cmd_react(args) -> int:
     # exits are counted in the model's direction: down through the bottom for a periodic
     # model of a net downflow (docs/definitions.md, Net downflow), as fit and rtd say
     direction = model.flow_direction
+    intervals, taken = _exit_mean_intervals(args, model, kinetics, fields, answers, direction)
     for line in verdict:
         print(f"warning: {one_line(line)}", file=sys.stderr)
     if args.json:
         space = model.state_space
         out = {"properties": {name: {**a.to_dict(passes if p.start == "carried" else ()),
-                                     "law": p.law.key}
+                                     "law": p.law.key,
+                                     "exit_mean_interval": intervals.get(name)}
                               for (name, a), p in zip(answers.items(), kinetics.properties)},
+               "level": args.level, "interval_resamples": taken,
                "exact_seconds": seconds, "prediction": args.output,
                "cell_fields_from": fields_from, "direction": direction,
                "grid": {"columns": space.columns, "rows": space.rows,
@@ -128,6 +134,18 @@ def cmd_react(args) -> int:
                   f"{a.exit_sd:>12.6g} {a.bed_mean:>12.6g} {span:>26}")
         print("exact, per residence at the exit and over the bed in steady state, in the "
               f"units of the kinetics file's values; computed in {seconds:.3g} s")
+        if args.resamples:
+            for p in kinetics.properties:
+                bounds = intervals.get(p.name)
+                print(f"  {100 * args.level:g} % interval of {p.name}'s exit mean: "
+                      + ("none (too few resamples with residences)" if bounds is None else
+                         f"{bounds[0]:.6g}-{bounds[1]:.6g}")
+                      + f" (the fitting window's block bootstrap, {taken} resamples; the "
+                        "flow's variability between windows left out)")
+        else:
+            print("  exact for the fitted chain, without its sampling uncertainty: "
+                  "--resamples 100 adds the exit means' intervals (an exact solve per "
+                  "resample), `compare RUN PRED --kinetics FILE` judges them against a run")
         for p in kinetics.properties:
             if p.start == "carried":
                 a = answers[p.name]
@@ -154,6 +172,37 @@ def cmd_react(args) -> int:
         print(args.output)
     sys.stdout.flush()
     return 0
+
+
+def _exit_mean_intervals(args, model, kinetics, fields, answers, direction):
+    """The exit means' intervals at ``args.level`` from ``args.resamples`` block-bootstrap
+    resamples of the model's fitting window, each solved exactly
+    (:func:`cfbmarkov.analysis.kinetics_compare.bootstrap_exit_means`, as `compare
+    --kinetics` forms the model's), centred on the exact values: ({name: [lo, hi] or None},
+    resamples solved). Warnings go to stderr."""
+    if not args.resamples or not answers:
+        return {}, 0
+    from cfbmarkov.analysis.bootstrap import interval_bounds
+    from cfbmarkov.analysis.intervals import resolve_source
+    from cfbmarkov.analysis.kinetics_compare import bootstrap_exit_means, kinetics_resamples
+
+    import numpy as np
+
+    notes: list[str] = []
+    means = bootstrap_exit_means(resolve_source(model, [args.run] if args.run else []),
+                                 kinetics, fields, args.resamples, notes, direction=direction)
+    for note in notes:
+        print(f"warning: {one_line(note)}", file=sys.stderr)
+    intervals = {}
+    for name, answer in answers.items():
+        boot = np.asarray((means or {}).get(name, []), dtype=float)
+        boot = boot[np.isfinite(boot)]
+        if boot.size < 10:
+            intervals[name] = None
+            continue
+        lo, hi = interval_bounds(answer.exit_mean, boot, answer.exit_mean, args.level)
+        intervals[name] = [float(lo), float(hi)]
+    return intervals, kinetics_resamples(model.n_states, args.resamples) if means else 0
 
 
 def _print_monte_carlo(prediction, names) -> None:
@@ -215,5 +264,11 @@ def add_react(sub) -> None:
                    help="prediction trajectory file (.h5) with /properties/NAME per frame")
     s.add_argument("--force", action="store_true",
                    help="replace an existing output of another kind")
+    s.add_argument("--resamples", type=count(0, 10 ** 4), default=0,
+                   help="block-bootstrap resamples of the model's fitting window for the "
+                        "exit means' intervals, each an exact solve (default 0: none; 100 "
+                        "as fit; at least 10)")
+    s.add_argument("--level", type=level, default=0.9,
+                   help="coverage of the exit means' intervals (default 0.9)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_react)
