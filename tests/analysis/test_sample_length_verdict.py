@@ -37,6 +37,22 @@ def test_a_figure_off_at_every_length_calls_for_memory_not_a_longer_run():
     assert "longer run, or pool" not in line
 
 
+def test_a_reducible_chain_off_at_every_length_calls_for_coarser_cells_not_memory():
+    """A chain of several closed classes (particles in some cells never reaching others)
+    whose E(RT) stays off at every length: neither a longer run nor memory joins the
+    classes; the verdict names them and coarser cells, and --json carries their count."""
+    from dataclasses import replace
+
+    r = replace(_result([0.55, 0.54, 0.55, 0.54, 0.55], [1.0, 1.0, 1.0, 1.0, 1.0]),
+                closed_classes=6)
+    line = verdict_text(r, "cells")
+    assert "neither a longer run nor memory cures that" in line
+    assert "6 closed classes" in line and "coarser --cells" in line
+    assert "--states auto" not in line
+    assert r.to_dict()["closed_classes"] == 6
+    assert "state space with memory" in verdict_text(replace(r, closed_classes=1), "cells")
+
+
 def test_a_drifting_figure_calls_for_a_longer_run():
     r = _result([1.6, 1.4, 1.3, 1.2, 1.15], [1.0, 1.0, 1.0, 1.0, 1.0])
     assert r.steady_misses() == {}

@@ -71,6 +71,10 @@ class SampleLength:
     censored_share : float
         The share of the span's particle-time outside its complete residences, 1 - (their
         sum) / (N x span), in [0, 1]; NaN for an open riser (not measured).
+    closed_classes : int
+        The closed classes of the longest window's chain that residences run in (more than
+        1: a reducible chain, whose particles in some states never reach others; 0 where
+        no window gave a model).
     """
 
     file: str
@@ -87,6 +91,7 @@ class SampleLength:
     description: str
     long_run_observed_mean: float = math.nan
     censored_share: float = math.nan
+    closed_classes: int = 0
 
     @property
     def observed_shortfall(self) -> float:
@@ -174,6 +179,7 @@ class SampleLength:
                             pd_sd, self.missed())],
             "steady_misses": {k: [100 * lo, 100 * hi]
                               for k, (lo, hi) in self.steady_misses().items()},
+            "closed_classes": self.closed_classes,
             "sample_length": self.sample_length})
 
 
@@ -251,6 +257,12 @@ def verdict_text(result: SampleLength, states: str) -> str:
               "cells-previous or, for a flow that alternates between regimes, cells-regime; "
               "try it here with --states)"
               if states == "cells" else "with more memory (fit --states auto chooses one)")
+    if result.closed_classes > 1 and steady and not drifting:
+        # a reducible chain: memory cannot join what the counts keep apart
+        return (f"not reached within {longest:g} s{said}: neither a longer run nor memory "
+                f"cures that: the chain has {result.closed_classes} closed classes (its "
+                "particles in some cells never reach others, as none did in the windows); "
+                "coarser --cells (fewer columns) join them")
     if steady and not drifting:
         return (f"not reached within {longest:g} s{said}: a longer run does not cure that; a "
                 f"state space {memory} does")
@@ -361,12 +373,13 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
             check_runs_distinct(runs, [(a, t_last) for t_last in lasts])
         fitter = estimator_from_name(estimator, state_space, lag)
         data = [discretize(t, state_space, lag, (a, a + usable[-1])) for t in runs]
-        means, sds = [], []
+        means, sds, classes = [], [], 0
         for n in usable:
             try:
                 rtd = fitter.fit([d.block(a, a + n) for d in data]).rtd()
                 means.append(rtd.mean)
                 sds.append(rtd.sd)
+                classes = int(rtd.closed_classes)
             except CfbmarkovError:
                 means.append(math.nan)
                 sds.append(math.nan)
@@ -398,7 +411,7 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                           np.asarray(means, float), np.asarray(sds, float), float(tolerance),
                           math.nan, f"{state_space.describe()}, lag {lag:g} s, estimator "
                                     f"'{estimator}'{runs_text}",
-                          float(long_run.mean()), censored)
+                          float(long_run.mean()), censored, classes)
     return _with_length(result)
 
 
