@@ -216,3 +216,9 @@ def progress_mode(progress) -> str | None:
 __all__ = ["HEARTBEAT_EVERY", "NOTE", "clock_text", "heartbeat", "install_one_line_notes",
            "one_line_notes", "progress_mode",
            "write_line"]
+
+
+def plural(count: int, noun: str) -> str:
+    """``count`` and ``noun``, with an ``s`` unless the count is 1 (``1 particle``,
+    ``300 particles``); for nouns whose plural adds ``s``."""
+    return f"{count} {noun}" + ("" if count == 1 else "s")

@@ -400,6 +400,12 @@ def test_mixing_curves_that_stay_flat_on_both_sides_are_warned_of(tmp_path, caps
     flat = [line for line in saved["warnings"] if "mixing curves stay flat" in line]
     assert len(flat) == 1 and "mixing RMS 0 tests nothing" in flat[0]
     capsys.readouterr()
+    # another run as the reference: refused, naming the file the prediction started from
+    other = write_trajectories(tmp_path / "other.h5", t, np.stack([x, y], axis=-1)[:, :150],
+                               width=0.04, height=0.3, source="cfd-dem")
+    with pytest.raises(InputError, match=r"was predicted from \S*r\.h5: give that as the "
+                                         r"reference"):
+        compare(other, pred, window=(2.0, 4.0), figures=False, output=tmp_path / "x")
 
 
 def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_path):

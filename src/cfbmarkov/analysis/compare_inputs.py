@@ -362,9 +362,13 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
         _check_same_start(ref, pred, ref_frames.start, pred_frames.start)
     elif ref.n_particles != pred.n_particles or not np.array_equal(np.sort(ref.ids),
                                                                     np.sort(pred.ids)):
+        started = (pred.parameters.get("initial_frames")
+                   if isinstance(pred.parameters, dict) else None)
+        hint = (f" ({pred.path} was predicted from {started}: give that as the reference)"
+                if isinstance(started, str) and started else "")
         raise InputError(f"{ref.path} ({ref.n_particles} particles) and {pred.path} "
                          f"({pred.n_particles}) do not hold the same particle ids; mixing "
-                         "needs the same particles on both sides")
+                         f"needs the same particles on both sides{hint}")
     return ref_frames, pred_frames, columns
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cfbmarkov._console import plural
 from cfbmarkov.errors import InputError
 from cfbmarkov.io.csv import import_csv
 from cfbmarkov.io.lammps import import_lammps
@@ -173,7 +174,7 @@ def import_summary(path: str | os.PathLike, detected: str | None = None) -> str:
     -------
     str
         For example ``read 20 frames of 3 particles as CSV (--format); positions from x, y
-        (mm); ids from column 'TRACK_ID'; times in s; velocities from none; periodic
+        (mm); ids from column 'TRACK_ID'; times in s; no velocities; periodic
         boundary; laps from minimal-image rule``.
     """
     from cfbmarkov.trajectories import Trajectories
@@ -192,7 +193,7 @@ def import_summary(path: str | os.PathLike, detected: str | None = None) -> str:
     length = {units.get(a) for a in ("x", "y", "z") if units.get(a)}
     if length:
         positions += f" ({', '.join(sorted(length))})"
-    parts = [f"read {n_frames} frames of {n_particles} particles as "
+    parts = [f"read {plural(n_frames, 'frame')} of {plural(n_particles, 'particle')} as "
              f"{_FORMAT_NAMES.get(fmt, fmt)} ({told})", f"positions from {positions}"]
     if fmt == "csv":
         column = p.get("id_column")
@@ -200,7 +201,8 @@ def import_summary(path: str | os.PathLike, detected: str | None = None) -> str:
         parts.append(f"times in {units.get('t', 's')}")
     else:
         parts.append(f"times from {p.get('time_from')}")
-    parts.append(f"velocities from {', '.join(p.get('velocity_columns') or []) or 'none'}")
+    velocities = ", ".join(p.get("velocity_columns") or [])
+    parts.append(f"velocities from {velocities}" if velocities else "no velocities")
     if p.get("resample"):
         parts.append(f"resampled every {p['resample']:g} s from {p.get('samples')} samples")
     parts.append(f"{p.get('boundary_stored')} boundary")

@@ -6,6 +6,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+from cfbmarkov._console import plural
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import check_output
 from cfbmarkov.io.detect import first_file
@@ -110,8 +111,10 @@ def import_summary(path: str | os.PathLike) -> str:
     fmt = NAMES.get(p.get("format"), p.get("format"))
     told = (f"detected from the content: {p['format_detected_from']}"
             if p.get("format_detected_from") else "--format")
-    velocity = p.get("velocity_from") or "none"
-    return (f"read {n_frames} frames of {n_particles} particles as {fmt} ({told}); ids from "
-            f"{p.get('ids_from')}; times from {p.get('time_from')}; velocities from {velocity}; "
+    velocity = p.get("velocity_from")
+    velocity = f"velocities from {velocity}" if velocity else "no velocities"
+    return (f"read {plural(n_frames, 'frame')} of {plural(n_particles, 'particle')} as {fmt} "
+            f"({told}); ids from {p.get('ids_from')}; times from {p.get('time_from')}; "
+            f"{velocity}; "
             f"{p.get('boundary_stored')} boundary from {p.get('boundary_from')}; laps from "
             f"{p.get('laps_from')}")
