@@ -27,7 +27,6 @@ import numpy as np
 import pytest
 
 from cfbmarkov.cli import main
-from cfbmarkov.io import import_file
 from cfbmarkov.trajectories import Trajectories
 
 FIELD = Path(__file__).parent / "field"

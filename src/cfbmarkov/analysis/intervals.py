@@ -466,8 +466,6 @@ def _shallow_rtd(model, exact, direction: str):
     from its exact entry distribution, where its exact RTD keeps more (None otherwise): the
     depth of the bootstrap resamples, whose figures are scaled by the model's ratio of the
     two (``docs/definitions.md``, The model's interval)."""
-    from cfbmarkov.analysis.bootstrap import _resampled_rtd
-
     if exact.deficit_levels is None or exact.deficit_levels <= BOOTSTRAP_DEFICIT_LEVELS:
         return None
     shallow = _resampled_rtd(model, None, direction, exact.entry_distribution,

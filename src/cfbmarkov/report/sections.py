@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import math
 
-from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.report.document import (
     Bullets,
     Heading,

@@ -146,7 +146,6 @@ def _paper_sentences(cases: list[Case]) -> list[str]:
     pd_sd = [(_u(c), v) for c, s in rows if (v := finite_or_none(s.get("pd_rt_sd"))) is not None]
     paper_e = [float(v[0]) for v in PAPER_TABLE3.values()]
     paper_sd = [float(v[1]) for v in PAPER_TABLE3.values()]
-    worst_paper = max(abs(v) for v in paper_e)
     out = []
     if pd_e:
         out.append(
