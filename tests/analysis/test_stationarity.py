@@ -129,6 +129,12 @@ def test_cli_prints_the_windows_and_the_judged_window(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "relative SD" in text and "long run" in text and "persistence" in text
     assert "flux E(RT) (s)" in text and "net passes" in text
+    assert "the long run's one window" not in text
+    # a span of two windows: the long run is the persistence window, said once
+    assert main(["stationarity", str(path), "--window-length", "1", "--span", "2:4",
+                 "--judge", "3:4"]) == 0
+    text = capsys.readouterr().out
+    assert "persistence (the 2-3 s window): the long run's one window, so the same figures" in text
 
 
 def test_cli_refuses_a_window_longer_than_the_file_in_one_line(tmp_path, capsys):

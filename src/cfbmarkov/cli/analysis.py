@@ -421,7 +421,11 @@ def cmd_stationarity(args) -> int:
               f"pooled; what a perfect stationary model would predict): PD E(RT) "
               f"{pd_text(lr['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
               f"{pd_text(lr['pd_rt_sd'], '+.1f')} %, MD {value(lr['md_rtd'], '.3f')}")
-        if pe is not None:
+        others = int(round((s1 - s0) / (j1 - j0))) - 1    # the long run's windows
+        if pe is not None and others == 1:
+            print(f"  persistence (the {j0 - (j1 - j0):g}-{j0:g} s window): the long run's "
+                  "one window, so the same figures (a longer span gives the long run more)")
+        elif pe is not None:
             print(f"  persistence (the {j0 - (j1 - j0):g}-{j0:g} s window): PD E(RT) "
                   f"{pd_text(pe['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
                   f"{pd_text(pe['pd_rt_sd'], '+.1f')} %, MD {value(pe['md_rtd'], '.3f')}")
