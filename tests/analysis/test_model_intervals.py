@@ -141,8 +141,15 @@ def test_resamples_of_a_chain_that_falls_deep_are_scaled_to_its_full_depth(tmp_p
     model = falling_walls_model(tmp_path)
     exact = model.rtd()
     assert exact.deficit_levels > intervals.BOOTSTRAP_DEFICIT_LEVELS
-    shallow = intervals._shallow_rtd(model, exact, model.flow_direction)
+    shallow = intervals._shallow_rtd(model, exact, model.flow_direction,
+                                     intervals.model_rtd_edges(exact))
     assert shallow.mean < 0.99 * exact.mean
+    # its moments solved for: those of the 8-deficit RTD propagated, but for its 1e-10 tail
+    propagated = intervals._resampled_rtd(model, None, model.flow_direction,
+                                          exact.entry_distribution,
+                                          intervals.BOOTSTRAP_DEFICIT_LEVELS)
+    assert shallow.mean == pytest.approx(propagated.mean, rel=1e-7)
+    assert shallow.sd == pytest.approx(propagated.sd, rel=1e-6)
     scaled = model_intervals(model, resamples=30, seed=1)
     monkeypatch.setattr(intervals, "BOOTSTRAP_DEFICIT_LEVELS", 512)
     deep = model_intervals(model, resamples=30, seed=1)

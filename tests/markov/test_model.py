@@ -352,3 +352,39 @@ def test_the_fall_below_the_levels_solved_equals_the_full_matrix_and_the_propaga
                                    1e-10, 200_000, None, None, whole)[1][-1]
         assert rtd.deficit_levels == 8 or shallower > DEFICIT_TOL
     assert max(seen) > 1e-3                     # the test sees a loss
+
+
+@pytest.mark.parametrize("falls", [0.0, 0.2])
+def test_the_level_system_and_its_live_pairs_equal_the_full_deficit_matrixs(falls):
+    """I - Q on the live (level, state) pairs built by the kernel from the parts'
+    transposes equals the full [S L, S L] matrix restricted to them, entry for entry, and
+    the live pairs found backwards through the transposes equal those of the full matrix's
+    graph, on the long-tail chain, a ladder, and a chain with a trap (a state entered but
+    never left reaches no exit: dead on every level)."""
+    import scipy.sparse as sp
+
+    from cfbmarkov.markov.first_passage import (_level_system, _live_from_transposes,
+                                                _reaching, _transposed_parts, deficit_matrix,
+                                                split_by_pass)
+    from cfbmarkov.synthetic import long_tail_chain
+
+    trap = ladder_model(8, 0.6, falls)
+    matrix = np.array(trap.transition_matrix, dtype=float)
+    matrix[3] = 0.0
+    matrix[3, 3] = 1.0                  # state 3 entered, never left
+    for chain, p in ((long_tail_chain(columns=3, rows=8), None), (ladder_model(8, 0.6, falls), None),
+                     (trap, matrix)):
+        p = chain.transition_matrix if p is None else p
+        p_up, p_down, p_stay = split_by_pass(p, chain.up_fraction, chain.down_fraction)
+        s, levels = chain.n_states, 9
+        q, exits = deficit_matrix(p_up, p_down, p_stay, levels)
+        live = _reaching(q, exits > 0)
+        arrays = _transposed_parts((p_down, p_stay, p_up))
+        assert np.array_equal(_live_from_transposes(*arrays, levels, exits[:s] > 0), live)
+        idx = np.flatnonzero(live)
+        indptr, indices, data = _level_system(*arrays, np.ascontiguousarray(
+            live.reshape(levels, s).T))
+        got = sp.csc_matrix((data, indices, indptr), shape=(idx.size, idx.size))
+        full = sp.csc_matrix(sp.identity(idx.size) - q[idx][:, idx])
+        assert abs(got - full).max() == 0.0
+        assert got.has_sorted_indices and (p is not matrix or idx.size < s * levels)

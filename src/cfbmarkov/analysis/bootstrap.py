@@ -11,9 +11,9 @@ Ch. 8 (the moving-block bootstrap for dependent data) and Ch. 13 (percentile int
 
 from __future__ import annotations
 
+from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from itertools import islice
 
 import numpy as np
 from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's (a light import)
@@ -320,12 +320,22 @@ def _bootstrap_chains(model, blocks: int, resamples: int, seed: int):
     from sparse counts: for a periodic riser's model without the largest-set restriction,
     whose resamples are only asked for their RTD and mixing curve. The same chains to
     rounding (tested), without the [S, S] arrays of a model per resample."""
+    chain_of = _split_chain_former(model)
+    for total in _bootstrap_counts(model, blocks, resamples, seed, sparse=True):
+        yield chain_of(total)
+
+
+def _split_chain_former(model):
+    """The function that turns a resample's sparse counts into its :class:`_SplitChain`
+    (:func:`_bootstrap_chains`), for the threads that compute the resamples' figures."""
     from cfbmarkov.markov.estimate import estimator_from_name
 
-    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=True)
     estimator = estimator_from_name(model.estimator, model.state_space, model.lag)
-    for total in totals:
-        yield _SplitChain(*estimator.split_chain(total), model.state_space, model.lag)
+
+    def chain_of(total) -> _SplitChain:
+        return _SplitChain(*estimator.split_chain(total), model.state_space, model.lag)
+
+    return chain_of
 
 
 def flow_variability(model, window_length: float, *, direction: str | None = None,
@@ -488,10 +498,13 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
     """
     from cfbmarkov.analysis.mixing import model_mixing_curve
 
+    chain_of = None
     if (not Boundary(model.boundary).is_open and not model.connected and entry is not None
             and direction in ("up", "down")):
-        # the resamples' RTDs and mixing curves from sparse chains (no [S, S] model each)
-        drawn = _bootstrap_chains(model, blocks, resamples, seed)
+        # the resamples' RTDs and mixing curves from sparse chains (no [S, S] model each),
+        # each formed from its counts in the thread that computes its figures
+        drawn = _bootstrap_counts(model, blocks, resamples, seed, sparse=True)
+        chain_of = _split_chain_former(model)
     else:
         drawn = block_bootstrap_models(model, blocks=blocks, resamples=resamples, seed=seed)
     # a long tail beyond the bins, a small chain: the resamples' moments solved for
@@ -503,6 +516,8 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
              > SOLVED_TAIL * _reach(edges, model.lag))
 
     def figures(resampled):
+        if chain_of is not None:
+            resampled = chain_of(resampled)
         mixing = None
         if curve is not None:      # the transitions' spread; defined with or without residences
             mixing = model_mixing_curve(resampled, curve[1], curve[2],
@@ -539,12 +554,18 @@ def _in_threads(function, items):
     if workers <= 1:
         yield from map(function, items)
         return
-    items = iter(items)
     pool = ThreadPoolExecutor(max_workers=workers, initializer=numba.set_num_threads,
                               initargs=(1,))
+    pending: deque = deque()
     try:
-        while batch := list(islice(items, 2 * workers)):
-            yield from pool.map(function, batch)
+        # each item submitted as it is formed, so that forming the next ones (the bootstrap
+        # counts' sums, under the GIL) overlaps the threads' work on the earlier ones
+        for item in items:
+            pending.append(pool.submit(function, item))
+            if len(pending) >= 2 * workers:
+                yield pending.popleft().result()
+        while pending:
+            yield pending.popleft().result()
     finally:        # on Ctrl-C: the items not started are dropped, the running ones finish
         pool.shutdown(wait=True, cancel_futures=True)
 

@@ -46,7 +46,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from cfbmarkov.analysis.bootstrap import (FLOW_BLOCK_RESIDENCES, FLOW_BLOCKS,  # noqa: F401
-                                          _binned, _bootstrap_chains, _resampled_rtd,
+                                          _binned, _bootstrap_chains, _reach,
+                                          _resampled_rtd,
                                           block_bootstrap_models, bootstrap_figures,
                                           fitting_runs, flow_variability, interval_bounds)
 from cfbmarkov.analysis.mixing import _left_states, model_mixing_curve
@@ -461,16 +462,37 @@ def model_rtd_edges(rtd) -> np.ndarray:
 BOOTSTRAP_DEFICIT_LEVELS = 8
 
 
-def _shallow_rtd(model, exact, direction: str):
-    """The fitted model's intrinsic RTD on :data:`BOOTSTRAP_DEFICIT_LEVELS` lap deficits
-    from its exact entry distribution, where its exact RTD keeps more (None otherwise): the
-    depth of the bootstrap resamples, whose figures are scaled by the model's ratio of the
-    two (``docs/definitions.md``, The model's interval)."""
+@dataclass(frozen=True)
+class _Shallow:
+    """The fitted model's figures on :data:`BOOTSTRAP_DEFICIT_LEVELS` lap deficits."""
+
+    mean: float                 # E(RT), s
+    sd: float                   # SD(RT), s
+    binned: np.ndarray          # probability per bin of the interval's edges
+    deficit_levels: int
+
+
+def _shallow_rtd(model, exact, direction: str, edges: np.ndarray) -> _Shallow | None:
+    """The fitted model's intrinsic E(RT), SD(RT) and RTD per bin of ``edges`` on
+    :data:`BOOTSTRAP_DEFICIT_LEVELS` lap deficits from its exact entry distribution, where
+    its exact RTD keeps more (None otherwise): the depth of the bootstrap resamples, whose
+    figures are scaled by the model's ratio of the two (``docs/definitions.md``, The model's
+    interval). The moments solved for and the RTD propagated only as far as the bins, as
+    the resamples' (:func:`~cfbmarkov.analysis.bootstrap._resampled_intrinsic`)."""
     if exact.deficit_levels is None or exact.deficit_levels <= BOOTSTRAP_DEFICIT_LEVELS:
         return None
-    shallow = _resampled_rtd(model, None, direction, exact.entry_distribution,
-                             BOOTSTRAP_DEFICIT_LEVELS)
-    return shallow if shallow.mean > 0 and shallow.sd > 0 else None
+    from cfbmarkov.markov.first_passage import rtd_moments_and_head, split_by_pass
+
+    up, down = ((model.up_fraction, model.down_fraction) if direction == "up"
+                else (model.down_fraction, model.up_fraction))
+    p_up, p_down, p_stay = split_by_pass(model.transition_matrix, up, down)
+    total, mean, sd, head = rtd_moments_and_head(p_up, p_down, p_stay, model.lag,
+                                                 BOOTSTRAP_DEFICIT_LEVELS,
+                                                 exact.entry_distribution,
+                                                 _reach(edges, model.lag))
+    if not (mean > 0 and sd > 0):
+        return None
+    return _Shallow(mean, sd, _binned(head, edges, total), BOOTSTRAP_DEFICIT_LEVELS)
 
 
 def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: int = 100,
@@ -547,7 +569,7 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     direction = model.flow_direction if direction is None else direction
     exact = model.rtd(None, direction)
     edges = model_rtd_edges(exact)
-    shallow = _shallow_rtd(model, exact, direction)
+    shallow = _shallow_rtd(model, exact, direction, edges)
     means, sds, rtds, _ = bootstrap_figures(
         model, None, direction, exact.entry_distribution, edges, int(blocks), int(resamples),
         seed, deficit_levels=(exact if shallow is None else shallow).deficit_levels)
@@ -556,7 +578,7 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     if shallow is not None:     # each resample's spread, scaled to the full depth
         means = [value * exact.mean / shallow.mean for value in means]
         sds = [value * exact.sd / shallow.sd for value in sds]
-        full, part = _binned(exact, edges), _binned(shallow, edges)
+        full, part = _binned(exact, edges), shallow.binned
         scale = np.divide(full, part, out=np.ones_like(full), where=part > 0)
         rtds = [values * scale for values in rtds]
     length = float(np.mean([b - a for _, (a, b) in runs]))
