@@ -242,3 +242,46 @@ def test_resamples_of_a_long_tail_solve_their_moments_and_propagate_as_far_as_th
     np.testing.assert_allclose(iv.rt_mean_interval + iv.rt_sd_interval,
                                ref.rt_mean_interval + ref.rt_sd_interval, rtol=1e-7)
     np.testing.assert_allclose(iv.rtd_interval, ref.rtd_interval, rtol=1e-7, atol=1e-12)
+
+
+def test_heads_side_by_side_are_each_chains_own_bit_for_bit(tmp_path):
+    """The resamples' RTD heads propagated side by side on the union of their non-zeros
+    (first_passage.heads, chunks of HEAD_CHUNK chains) equal each chain's own propagation
+    (rtd_moments_and_head) bit for bit, over more chains than a chunk holds, on a long
+    tail and on a short one whose mass runs out before the last lag (zero after it); the
+    moments are the same solve's."""
+    from cfbmarkov.analysis import bootstrap
+    import scipy.sparse as sp
+
+    from cfbmarkov.markov.first_passage import (HEAD_CHUNK, _finish_levels, _start_on_levels,
+                                                heads, rtd_moments_and_head,
+                                                rtd_moments_and_start)
+
+    model = falling_walls_model(tmp_path)
+    entry = model.rtd().entry_distribution
+    chains = list(bootstrap._bootstrap_chains(model, 10, HEAD_CHUNK + 3, 5))
+    for steps, tol in ((400, 1e-10), (400, 0.5)):
+        starts, own = [], []
+        for chain in chains:
+            total, mean, sd, start = rtd_moments_and_start(chain.up, chain.down, chain.stay,
+                                                           chain.lag, 8, entry)
+            starts.append(start)
+            solved = rtd_moments_and_head(chain.up, chain.down, chain.stay, chain.lag, 8,
+                                          entry, steps)
+            assert (total, mean, sd) == solved[:3]
+            own.append(solved[3].probability)
+        got = heads(starts, steps, tol)
+        assert got.shape == (len(chains), steps)
+        if tol == 1e-10:
+            for row, f in zip(got, own):
+                assert f.size == steps and np.array_equal(row, f)
+            continue
+        # the head stops where a chain's mass left falls below tol, as the chain's own
+        assert (got[:, -1] == 0).all() and (got.sum(axis=1) > 0).all()
+        for row, chain in zip(got[:3], chains):
+            parts = [sp.csr_matrix(x) for x in (chain.up, chain.down, chain.stay)]
+            start = _start_on_levels(*parts, 9, entry, None, None)
+            ref = _finish_levels(*start.finish_arguments(*parts, tol, steps, chain.lag))[0]
+            assert ref.probability.size < steps
+            assert np.array_equal(row[:ref.probability.size], ref.probability)
+            assert not row[ref.probability.size:].any()

@@ -86,19 +86,35 @@ def _resampled_rtd(model, window_length: float, direction: str, entry,
                           max_steps=steps, entry=entry))
 
 
-def _resampled_intrinsic(chain, direction: str, entry, deficit_levels: int,
-                         edges: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """A resampled chain's intrinsic E(RT), SD(RT) and RTD per bin of ``edges``: the
-    moments solved for (:func:`~cfbmarkov.markov.first_passage.rtd_moments`), the RTD
-    propagated only as far as the last bin (a long tail's lags beyond it are not needed:
-    the bins' probabilities are of the whole mass). The figures of :func:`_resampled_rtd`,
-    but for the tail of 1e-10 of the mass that its propagation leaves."""
-    from cfbmarkov.markov.first_passage import rtd_moments_and_head
+def _resampled_intrinsic(chain, direction: str, entry, deficit_levels: int):
+    """A resampled chain's intrinsic E(RT) and SD(RT), solved for
+    (:func:`~cfbmarkov.markov.first_passage.rtd_moments`), its resolved mass, and its start
+    on the levels, from which its RTD is propagated beside the other resamples' only as
+    far as the last bin (:func:`_intrinsic_bins`; a long tail's lags beyond it are not
+    needed: the bins' probabilities are of the whole mass). The figures of
+    :func:`_resampled_rtd`, but for the tail of 1e-10 of the mass that its propagation
+    leaves."""
+    from cfbmarkov.markov.first_passage import rtd_moments_and_start
 
     up, down = (chain.up, chain.down) if direction == "up" else (chain.down, chain.up)
-    total, mean, sd, head = rtd_moments_and_head(up, down, chain.stay, chain.lag,
-                                                 deficit_levels, entry, _reach(edges, chain.lag))
-    return mean, sd, _binned(head, edges, total)
+    total, mean, sd, start = rtd_moments_and_start(up, down, chain.stay, chain.lag,
+                                                   deficit_levels, entry)
+    return mean, sd, total, start
+
+
+def _intrinsic_bins(solved: list, lag: float, edges: np.ndarray) -> list[np.ndarray]:
+    """The RTD per bin of ``edges`` of each of :func:`_resampled_intrinsic`'s resamples,
+    their heads propagated side by side (:func:`~cfbmarkov.markov.first_passage.heads`),
+    each as a share of its resolved mass."""
+    from cfbmarkov.markov.first_passage import heads
+
+    if not solved:
+        return []
+    probabilities = heads([start for _, _, _, start in solved], _reach(edges, lag))
+    width = float(edges[1] - edges[0])
+    times = lag * np.arange(1, probabilities.shape[1] + 1) + 1e-6 * width
+    return [np.histogram(times, bins=edges, weights=f / total)[0]
+            for f, (_, _, total, _) in zip(probabilities, solved)]
 
 
 def _reach(edges: np.ndarray, lag: float) -> int:
@@ -524,21 +540,27 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
                                         int(curve[0].max()))[0][curve[0]]
         try:
             if solve and isinstance(resampled, _SplitChain):
+                # the moments solved; the head propagated below, beside the others'
                 return mixing, _resampled_intrinsic(resampled, direction, entry,
-                                                    deficit_levels, edges)
+                                                    deficit_levels)
             rtd = _resampled_rtd(resampled, window_length, direction, entry, deficit_levels)
         except (CfbmarkovError, ValueError):
             return mixing, None      # a resample without residences: no figure
         return mixing, (rtd.mean, rtd.sd, _binned(rtd, edges))
 
-    means, sds, rtds, curves = [], [], [], []
+    means, sds, rtds, curves, solved = [], [], [], [], []
     for mixing, figure in _in_threads(figures, drawn):
         if mixing is not None:
             curves.append(mixing)
         if figure is not None:
             means.append(figure[0])
             sds.append(figure[1])
-            rtds.append(figure[2])
+            if len(figure) == 4:
+                solved.append(figure)
+            else:
+                rtds.append(figure[2])
+    if solved:
+        rtds = _intrinsic_bins(solved, model.lag, edges)
     return means, sds, rtds, curves
 
 

@@ -411,6 +411,80 @@ def _live_from_transposes(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay
     return live
 
 
+@nb.njit(cache=True, inline="always")
+def _add_products(dst, a, b):
+    """dst[r] += a[r] * b[r] over the chains of a chunk (unit strides: SIMD)."""
+    for r in range(dst.size):
+        dst[r] += a[r] * b[r]
+
+
+@nb.njit(cache=True)
+def _heads_of_chunk(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
+                    up_idx, up_val, exit_probability, live, start, tol, out):
+    """:func:`_heads_of_chains` for one chunk (its arrays without the chunk axis)."""
+    n, levels, width = start.shape
+    v = start.copy()
+    w = np.empty_like(v)
+    stopped = np.zeros(width, np.bool_)
+    absorbed = np.empty(width)
+    mass = np.empty(width)
+    for k in range(out.shape[0]):
+        absorbed[:] = 0.0
+        for i in range(n):
+            _add_products(absorbed, v[i, 0], exit_probability[i])
+        for r in range(width):
+            if not stopped[r]:
+                out[k, r] = absorbed[r]
+        w[:] = 0.0
+        for j in range(n):
+            for q in range(down_ptr[j], down_ptr[j + 1]):      # from level g - 1
+                values, source = down_val[q], v[down_idx[q]]
+                for g in range(1, levels):
+                    _add_products(w[j, g], values, source[g - 1])
+            for q in range(stay_ptr[j], stay_ptr[j + 1]):
+                values, source = stay_val[q], v[stay_idx[q]]
+                for g in range(levels):
+                    _add_products(w[j, g], values, source[g])
+            for q in range(up_ptr[j], up_ptr[j + 1]):          # from level g + 1
+                values, source = up_val[q], v[up_idx[q]]
+                for g in range(levels - 1):
+                    _add_products(w[j, g], values, source[g + 1])
+            for g in range(levels):
+                target, alive = w[j, g], live[j, g]
+                for r in range(width):
+                    if not alive[r]:
+                        target[r] = 0.0
+        v, w = w, v
+        mass[:] = 0.0
+        for g in range(levels):
+            for j in range(n):
+                row = v[j, g]
+                for r in range(width):
+                    mass[r] += row[r]
+        for r in range(width):
+            if mass[r] < tol:
+                stopped[r] = True
+
+
+@nb.njit(cache=True, parallel=True)
+def _heads_of_chains(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
+                     up_idx, up_val, exit_probability, live, start, tol, out):
+    """:func:`_first_passage_levels` for many chains of one sparsity pattern at once
+    (Numba kernel): the chains' values side by side, ``C`` chunks of ``W`` chains each
+    (``*_val`` [C, nnz, W] on the union of their non-zeros, ``exit_probability`` [C, S, W],
+    ``live`` [C, S, L, W], ``start`` [C, S, L, W]), so that each non-zero's index is read
+    once a lag for W chains and their arithmetic runs in SIMD. ``out`` [C, steps, W]: the
+    mass absorbed at each lag, as that kernel's ``out``, zero after a chain's mass left
+    falls below ``tol`` (where that kernel stops). Each chain's sums run in that kernel's
+    order, and a chain's zero at a non-zero of another adds nothing: the same bits as
+    :func:`_first_passage_levels` chain by chain, on any thread count (the chunks are
+    shared among the threads)."""
+    for c in nb.prange(start.shape[0]):
+        _heads_of_chunk(down_ptr, down_idx, down_val[c], stay_ptr, stay_idx, stay_val[c],
+                        up_ptr, up_idx, up_val[c], exit_probability[c], live[c], start[c],
+                        tol, out[c])
+
+
 #: non-zeros times levels above which a lag's product is shared among threads
 PARALLEL_LEVEL_WORK = 1_000_000
 
@@ -732,6 +806,80 @@ def rtd_moments_and_head(p_up, p_down, p_stay, lag: float, deficit_levels: int,
     head = _finish_levels(*start.finish_arguments(p_up, p_down, p_stay, 1e-10, int(steps),
                                                   lag), arrays=arrays)[0]
     return (*_moments_on_levels(p_up, p_down, p_stay, lag, start, arrays), head)
+
+
+@dataclass(frozen=True)
+class HeadStart:
+    """What a chain's RTD head needs from its start on the levels (:func:`heads`): the
+    parts' transposes (:func:`_transposed_parts` of P_down, P_stay, P_up), the exit
+    probabilities from level 0 and the live pairs and start, [L, S] each."""
+
+    arrays: list
+    exit_probability: np.ndarray
+    live: np.ndarray
+    start: np.ndarray
+
+
+def rtd_moments_and_start(p_up, p_down, p_stay, lag: float, deficit_levels: int,
+                          entry: np.ndarray) -> tuple[float, float, float, HeadStart]:
+    """:func:`rtd_moments`, and what :func:`heads` needs to propagate the chain's RTD head
+    beside others'."""
+    p_up, p_down, p_stay = (sp.csr_matrix(part) for part in (p_up, p_down, p_stay))
+    arrays = _transposed_parts((p_down, p_stay, p_up))
+    start = _start_on_levels(p_up, p_down, p_stay, int(deficit_levels) + 1, entry, None, None,
+                             arrays=arrays)
+    return (*_moments_on_levels(p_up, p_down, p_stay, lag, start, arrays),
+            HeadStart(arrays, start.exit_probability, start.live, start.start))
+
+
+#: chains whose heads :func:`heads` propagates side by side in one chunk
+HEAD_CHUNK = 16
+
+
+def heads(starts: list[HeadStart], steps: int, tol: float = 1e-10) -> np.ndarray:
+    """The first ``steps`` lags of the RTDs of many chains of one state space and depth
+    (:func:`rtd_moments_and_start`): f(k) of each, as :func:`rtd_moments_and_head`'s head
+    gives it, bit for bit (zero after the lag where its mass left fell below ``tol``),
+    propagated side by side on the union of their non-zeros (:func:`_heads_of_chains`).
+
+    Parameters
+    ----------
+    starts : list of HeadStart
+        The chains (at least one), all on S states and L levels.
+    steps : int
+        Lags propagated.
+    tol : float, optional
+        The mass left below which a chain's propagation stops.
+
+    Returns
+    -------
+    ndarray of float64, shape (len(starts), steps)
+    """
+    count = len(starts)
+    levels, n = starts[0].live.shape
+    chunks = -(-count // HEAD_CHUNK)
+    parts = []
+    for p in range(3):              # down, stay, up: the union of the chains' non-zeros
+        keys = [np.repeat(np.arange(n, dtype=np.int64), np.diff(h.arrays[3 * p])) * n
+                + h.arrays[3 * p + 1] for h in starts]
+        union = np.unique(np.concatenate(keys))
+        values = np.zeros((chunks, union.size, HEAD_CHUNK))
+        for k, (h, key) in enumerate(zip(starts, keys)):
+            values[k // HEAD_CHUNK, np.searchsorted(union, key), k % HEAD_CHUNK] = \
+                h.arrays[3 * p + 2]
+        indptr = np.searchsorted(union // n, np.arange(n + 1)).astype(np.int64)
+        parts += [indptr, (union % n).astype(np.int64), values]
+    exits = np.zeros((chunks, n, HEAD_CHUNK))
+    live = np.zeros((chunks, n, levels, HEAD_CHUNK), np.bool_)
+    start = np.zeros((chunks, n, levels, HEAD_CHUNK))
+    for k, h in enumerate(starts):
+        c, r = divmod(k, HEAD_CHUNK)
+        exits[c, :, r] = h.exit_probability
+        live[c, :, :, r] = h.live.T
+        start[c, :, :, r] = h.start.T
+    out = np.zeros((chunks, int(steps), HEAD_CHUNK))
+    _heads_of_chains(*parts, exits, live, start, float(tol), out)
+    return out.transpose(0, 2, 1).reshape(chunks * HEAD_CHUNK, int(steps))[:count]
 
 
 def _transposed_parts(parts) -> list[np.ndarray]:
