@@ -8,6 +8,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from cfbmarkov.markov.selection_table import UNVISITED_LIMIT
+
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
 
@@ -20,8 +22,6 @@ DOWNWARD_LINE = ("residences counted downward: the fitting window's net solids f
 #: unresolved mass of an exact RTD above which its E(RT) and SD(RT) are warned about
 #: (``docs/definitions.md``, Exact RTD of a model)
 UNRESOLVED_LIMIT = 0.01
-#: share of a model's states never visited above which the grid is warned about as too fine
-UNVISITED_LIMIT = 0.5
 
 
 def unresolved_warning(rtd) -> str | None:

@@ -11,6 +11,11 @@ from __future__ import annotations
 import math
 from typing import Any, Mapping
 
+#: share of a model's states never visited above which its grid is warned about as too fine
+#: (:func:`cfbmarkov.markov.model_summary.model_warnings`) and `--states auto` passes a
+#: candidate over (:func:`cfbmarkov.markov.select.candidates.best_candidate`)
+UNVISITED_LIMIT = 0.5
+
 
 def _number(value, spec: str) -> str:
     """``value`` formatted by ``spec``; "-" where it is missing or not finite."""
@@ -104,8 +109,6 @@ def _passed_over(scored: list, chosen: Mapping[str, Any]) -> list[str]:
     """Notes on the candidates that scored lower than the chosen one but were not chosen,
     more than half of their states never visited in the window
     (:func:`~cfbmarkov.markov.select.candidates.best_candidate`)."""
-    from cfbmarkov.markov.model_summary import UNVISITED_LIMIT
-
     best = next((c for c in scored if (c.get("states"), c.get("lag"))
                  == (chosen.get("states"), chosen.get("lag"))), None)
     if best is None:

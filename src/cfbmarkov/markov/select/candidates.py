@@ -215,7 +215,7 @@ def score_candidates(judged: list[JudgedCandidate], criterion: Criterion, lag: f
 
 def best_candidate(scores: list[CandidateScore]) -> CandidateScore | None:
     """The candidate to choose: the lowest score among those judged, leaving out a state
-    space that more than :data:`~cfbmarkov.markov.model_summary.UNVISITED_LIMIT` of whose
+    space that more than :data:`~cfbmarkov.markov.selection_table.UNVISITED_LIMIT` of whose
     states the window never visits (its chain rests on the few states seen, and the chosen
     model would warn that its space is too fine), unless every judged candidate is such.
 
@@ -229,7 +229,7 @@ def best_candidate(scores: list[CandidateScore]) -> CandidateScore | None:
     CandidateScore or None
         None where no candidate was judged.
     """
-    from cfbmarkov.markov.model_summary import UNVISITED_LIMIT
+    from cfbmarkov.markov.selection_table import UNVISITED_LIMIT
 
     usable = [c for c in scores if math.isfinite(c.score)]
     filled = [c for c in usable if not too_sparse(c, UNVISITED_LIMIT)]
