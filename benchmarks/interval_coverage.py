@@ -59,6 +59,7 @@ from cfbmarkov._json import jsonable
 from cfbmarkov.analysis.adequacy import assess_adequacy
 from cfbmarkov.analysis.intervals import model_intervals
 from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.markov.estimate import default_estimator
 from cfbmarkov.markov import fit_model
 from cfbmarkov.markov.states import CellGrid
 from cfbmarkov.observed.residence import net_flow_direction, net_passes, residence_flux
@@ -134,9 +135,10 @@ def fit_one(path: Path, traj, window, *, columns: int, rows: int, lag: float, au
             estimator: str | None = None) -> dict:
     """One fit as ``cfbmarkov fit`` makes it: E(RT) and its interval in ``direction`` (the
     residences' direction of the long run it is compared with) and the verdict's lines;
-    ``estimator`` None: ``fit``'s default (``paper`` for a periodic riser, ``mle`` open)."""
+    ``estimator`` None: ``fit``'s default (``paper`` for the cells on a periodic riser,
+    ``mle`` open or with ``auto``)."""
     if estimator is None:
-        estimator = "mle" if traj.boundary.is_open else "paper"
+        estimator = default_estimator(traj.boundary.is_open, "auto" if auto else "cells")
     if auto:
         from cfbmarkov.markov.select import select_model
 
@@ -381,7 +383,8 @@ def main(argv=None) -> int:
                    help="lag, s (default: case.json beside the run, else 0.025)")
     p.add_argument("--auto", action="store_true", help="also fit --states auto")
     p.add_argument("--estimator", choices=("paper", "mle"), default=None,
-                   help="estimator (default: fit's, paper for a periodic riser)")
+                   help="estimator (default: fit's, paper for the cells on a periodic "
+                        "riser, mle with --auto)")
     p.add_argument("--level", type=float, default=0.9, help="interval level (0.9)")
     p.add_argument("--resamples", type=int, default=100, help="bootstrap resamples (100)")
     p.add_argument("-o", "--output", default="coverage.json", help="JSON of every fit")

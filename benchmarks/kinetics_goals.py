@@ -72,6 +72,7 @@ from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.kinetics import ByCell, Constant, FirstOrder, Kinetics, Property, wall_cells
 from cfbmarkov.markov import fit_model, state_space_from_name
 from cfbmarkov.markov.discrete import discretize
+from cfbmarkov.markov.estimate import default_estimator
 from cfbmarkov.markov.kinetics_exact import exact_kinetics, windowed_exit_means
 from cfbmarkov.observed.residence import net_flow_direction, residence_times
 from cfbmarkov.trajectories import Trajectories
@@ -320,7 +321,7 @@ def run_goals(runs, *, in_sample=IN_SAMPLE, out_of_sample=OUT_OF_SAMPLE,
     for path in runs:
         with Trajectories(path) as traj:
             (columns, rows), model_lag = _grid(traj, cells, lag)
-            est = estimator or ("mle" if traj.boundary.is_open else "paper")
+            est = estimator or default_estimator(traj.boundary.is_open, states)
             space = state_space_from_name(states, columns, rows, traj.width, traj.height)
             fitted, facts_of = {}, {}
             for which, fit, judged in pairs:
