@@ -60,6 +60,11 @@ def test_a_window_no_residence_fits_names_the_shortest_that_does(run, tmp_path, 
     shortest = float(err.split("give a window of at least ")[1].split(" s")[0])
     assert shortest == pytest.approx(0.078)
     assert main(["rtd", str(model), "--window-length", f"{shortest:g}"]) == 0
+    # --resamples forms the intrinsic RTD's interval: with a window, refused in one line
+    capsys.readouterr()
+    assert main(["rtd", str(model), "--window-length", "0.2", "--resamples", "20"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "leave out --window-length" in err
 
 
 def test_a_mistyped_option_names_the_verb_and_the_option_it_may_mean(capsys):

@@ -327,6 +327,12 @@ def test_a_dump_given_as_csv_and_an_expanded_pattern_name_the_fix(tmp_path, caps
     with pytest.raises(InputError, match=r"the content is a LAMMPS/LIGGGHTS dump .*not csv; "
                                          r"import it with --format lammps"):
         import_file(dump, "csv", tmp_path / "a.h5", width=0.09, height=0.95)
+    table = tmp_path / "run.csv"       # and a CSV file given --format lammps: named as CSV
+    table.write_text("t,id,x,y\n0,1,0.01,0.2\n0.01,1,0.01,0.21\n")
+    with pytest.raises(InputError, match=r"\(read as CSV\), not lammps; import it with "
+                                         r"--format csv"):
+        import_file(table, "lammps", tmp_path / "b.h5", width=0.09, height=0.95)
+    assert not (tmp_path / "b.h5").exists()
     steps = [tmp_path / f"dump{k}.liggghts" for k in (0, 2000, 4000)]
     for k, path in zip((0, 2000, 4000), steps):
         path.write_text(dump.read_text().replace("TIMESTEP\n0\n", f"TIMESTEP\n{k}\n")

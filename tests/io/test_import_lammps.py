@@ -268,8 +268,12 @@ BAD_DUMPS = {
     "inf-velocity": (dump(frame(0), frame(1, ["3 1 0.03 0.31 0 inf", "1 1 0.01 0.11 0 1",
                                               "2 1 0.02 0.21 0 1"])),
                      r"velocity of particle 3 at t = 0.525 s is not a finite number"),
+    # the reader names the line; the command line, which checks --format first, the CSV
     "not-a-dump": ("t,id,x,y\n0,1,0.01,0.1\n",
-                   r"line 1: expected an 'ITEM:' line, found 't,id,x,y'"),
+                   r"line 1: expected an 'ITEM:' line, found 't,id,x,y'|"
+                   r"\(read as CSV\), not lammps; import it with --format csv"),
+    "not-a-dump-nor-a-table": ("hello world\n",
+                               r"line 1: expected an 'ITEM:' line, found 'hello world'"),
     "no-frames": ("ITEM: UNITS\nsi\n", r"no frames with atoms \(no 'ITEM: ATOMS' block\)"),
     "empty-file": ("", r"empty file"),
     "binary-file": (b"\x00\x01\x02\xff\xfe\x80", r"not a text file"),

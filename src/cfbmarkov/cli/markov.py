@@ -264,6 +264,11 @@ def cmd_rtd(args) -> int:
     from cfbmarkov.markov import MarkovModel
 
     _check_resamples(args.resamples)
+    if args.resamples and args.window_length:
+        raise InputError(f"--resamples forms the interval of the model's intrinsic RTD, not of "
+                         f"its RTD as a {args.window_length:g} s window sees it: leave out "
+                         "--window-length (or --resamples; `compare RUN PREDICTION` gives a "
+                         "window's intervals against a run)")
     model = MarkovModel.load(args.model)
     if args.resamples:
         from cfbmarkov.analysis.intervals import resolve_source
@@ -460,8 +465,9 @@ def add_rtd(sub) -> None:
                    help="coverage of the interval (default: the model's, else 0.9; another "
                         "than the model's needs --resamples)")
     s.add_argument("--resamples", type=count(0, 100000), default=0,
-                   help="form the interval anew from this many bootstrap resamples of the "
-                        "model's fitting window (default 0: the one stored in the model)")
+                   help="form the interval of the intrinsic RTD anew from this many "
+                        "bootstrap resamples of the model's fitting window (default 0: the "
+                        "one stored in the model; not with --window-length)")
     s.add_argument("-q", "--quiet", action="store_true",
                    help="no progress on stderr while --resamples forms the interval")
     s.set_defaults(func=cmd_rtd)

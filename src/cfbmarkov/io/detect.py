@@ -170,10 +170,26 @@ def _refuse_unread_text(path, head: bytes) -> None:
                          "PolyData, .vtp; MFiX writes those with its VTK output)")
 
 
+def _tabular(path) -> bool:
+    """Whether a text file's first line reads as a table's (a comma, semicolon or tab in it):
+    a CSV file rather than an empty, binary or damaged one, whose reader says what is
+    wrong."""
+    try:
+        with open(path, "rb") as fh:
+            head = fh.read(4096)
+    except OSError:
+        return False
+    if head[:2] == b"\x1f\x8b" or b"\x00" in head:
+        return False
+    first = head.lstrip(b"\xef\xbb\xbf").lstrip().split(b"\n", 1)[0]
+    return any(mark in first for mark in (b",", b";", b"\t"))
+
+
 def check_given_format(source, fmt: str) -> None:
     """Refuse a source whose content is plainly of another format than ``fmt``: a particle
-    file (VTK, H5MD) given as ``csv`` or ``lammps``, a LAMMPS dump given as ``csv``, or a
-    text file given as a particle format; the message names the content's format.
+    file (VTK, H5MD) given as ``csv`` or ``lammps``, a LAMMPS dump given as ``csv``, a CSV
+    file (text whose first line is no ``ITEM:``) given as ``lammps``, or a text file given
+    as a particle format; the message names the content's format.
 
     Raises
     ------
@@ -185,9 +201,11 @@ def check_given_format(source, fmt: str) -> None:
     except InputError:
         return                       # the reader of fmt reports what is wrong
     particle = ("h5md", "vtk", "vtp", "pvd")
-    # a dump's 'ITEM:' first line is never a CSV file's; other text is told by its reader
+    # a dump's 'ITEM:' first line is never a CSV file's, and a dump has no other (blank
+    # lines aside): text of one given as the other is refused, naming it
     same = found == fmt or {found, fmt} <= {"vtp", "pvd"} or (
-        found not in particle and fmt not in particle and not (found, fmt) == ("lammps", "csv"))
+        found not in particle and fmt not in particle and (found, fmt) != ("lammps", "csv")
+        and not ((found, fmt) == ("csv", "lammps") and _tabular(first_file(source))))
     if not same:
         raise InputError(f"{first_file(source)}: the content is {shown}, not {fmt}; import it "
                          f"with --format {found} (or without --format)")
