@@ -89,3 +89,23 @@ def test_a_model_given_to_import_and_a_folder_given_as_a_file(run, tmp_path, cap
         assert main([verb, str(tmp_path)]) == 2
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "is a folder, not a file" in err, err
+
+
+def test_a_model_without_residence_time_is_saved_and_said_so(tmp_path, capsys):
+    """Particles that move but never pass through the top: the fit is saved (exit 0) and
+    one warning line says the model has no residence time and which verbs refuse it; rtd
+    then refuses it in one line."""
+    t = 0.01 * np.arange(201)
+    rng = np.random.default_rng(2)
+    x = np.broadcast_to(rng.uniform(0.0, 0.04, 30), (t.size, 30))
+    y = 0.15 + 0.05 * np.sin(2 * np.pi * (t[:, None] + rng.uniform(0, 1, 30)))
+    run = write_trajectories(tmp_path / "still.h5", t, np.stack([x, y], axis=-1), width=0.04,
+                             height=0.3, source="cfd-dem")
+    model = tmp_path / "m.h5"
+    assert main(["fit", str(run), "--cells", "2x6", "--lag", "0.01", "--window", "0:2",
+                 "-q", "-o", str(model)]) == 0
+    err = capsys.readouterr().err
+    said = [line for line in err.splitlines() if "the model has no residence time" in line]
+    assert len(said) == 1 and said[0].startswith("warning: ") and "`rtd`" in said[0]
+    assert main(["rtd", str(model)]) == 2
+    assert capsys.readouterr().err.count("\n") == 1

@@ -132,6 +132,12 @@ def _finish_fit(args, model, runs, windows) -> int:
     model.save(args.output)
     for line in model.warnings():      # after the save: a failed fit prints one line
         print(f"warning: {one_line(line.strip())}", file=sys.stderr)
+    try:
+        model.rtd()
+    except CfbmarkovError as exc:      # saved (its maps and predictions stand), but said
+        print(f"warning: the model has no residence time ({one_line(str(exc))}): `rtd`, "
+              "`react` and the exact figures of `compare` refuse it; fit on a longer window "
+              "or one where particles pass through the top", file=sys.stderr)
     print(model.summary(warnings=False))   # each warning once, on stderr
     print(args.output)
     return 0
