@@ -161,18 +161,24 @@ def _throughput_line(model, rt_mean: float, window_mean: float,
            "occupancy (--estimator mle keeps the window's transitions and its throughput; "
            f"where it shows the same gap, {occupancy})"
            if model.estimator == "paper" else occupancy)
-    classes = len(model.closed_classes)
-    if classes > 1:     # a reducible chain: its classes weighted by their entry flux
-        why += (f"; the chain is reducible ({classes} closed classes: particles in some "
-                "cells never reach others), and its E(RT) weights the classes by their entry "
-                "flux, not by the window's occupancy")
     side = "above" if gap > 0 else "below"
     gap_text, limit_text = _percents(abs(gap), limit)
-    return (f"the model's E(RT) {rt_mean:.3g} s lies {gap_text} % {side} its "
-            f"fitting window's own throughput E(RT), {window_mean:.3g} s (the window's "
-            f"particle-time over its net passes; limit {limit_text} %): the chain does "
-            f"not carry the flow it was fitted on; {why}. The window's own flow may itself "
-            f"lie far from the run's long run: {_ADVICE}")
+    head = (f"the model's E(RT) {rt_mean:.3g} s lies {gap_text} % {side} its fitting "
+            f"window's own throughput E(RT), {window_mean:.3g} s (the window's particle-time "
+            f"over its net passes; limit {limit_text} %)")
+    classes = len(model.closed_classes)
+    if classes > 1:
+        # a reducible chain: its classes weighted by their entry flux, while the throughput
+        # counts every particle's time, in classes that never pass up too: unlike figures
+        reason = (f"; {why}" if model.estimator == "paper"
+                  else "")
+        return (f"{head}: the chain is reducible ({classes} closed classes: particles in "
+                "some cells never reach others, as none did in the window), and its E(RT) "
+                "weights the classes by their entry flux while the throughput counts every "
+                "particle's time, in classes that never pass up too, so the two need not "
+                f"agree{reason}; coarser --cells (fewer columns) join the classes")
+    return (f"{head}: the chain does not carry the flow it was fitted on; {why}. The "
+            f"window's own flow may itself lie far from the run's long run: {_ADVICE}")
 
 
 def _split(window: tuple[float, float], n: int) -> list[tuple[float, float]]:
