@@ -7,8 +7,8 @@ nothing had been asked. The command line installs :func:`handler`, which also re
 request; the writers call :func:`check` before each block of frames and before an output is
 renamed into place, so a swallowed interrupt is raised again at the next of those points and
 the output is never published. While a verb runs, such a swallowed KeyboardInterrupt is
-not printed ("Exception ignored ...", a traceback): the one line comes when it is raised
-again.
+not printed ("Exception ignored ...", a traceback; nor where C code that meets it prints it
+through ``sys.excepthook`` and carries on): the one line comes when it is raised again.
 """
 
 from __future__ import annotations
@@ -104,9 +104,10 @@ class installed:
         requested = False
         self._previous = None
         self._hook = sys.unraisablehook
+        self._excepthook = sys.excepthook
         if threading.current_thread() is threading.main_thread():
             self._previous = signal.signal(signal.SIGINT, handler)
-            previous_hook = self._hook
+            previous_hook, previous_except = self._hook, self._excepthook
 
             def quiet(unraisable):          # swallowed there, raised again at check()
                 if unraisable.exc_type is not None and issubclass(unraisable.exc_type,
@@ -114,7 +115,16 @@ class installed:
                     return
                 previous_hook(unraisable)
 
+            def quiet_print(exc_type, value, tb):
+                # C code that meets the interrupt (an import it makes, with the handler
+                # raising inside importlib) may print it with PyErr_Print, through this
+                # hook, and carry on: not printed; the request stands, raised at check()
+                if exc_type is not None and issubclass(exc_type, KeyboardInterrupt):
+                    return
+                previous_except(exc_type, value, tb)
+
             sys.unraisablehook = quiet
+            sys.excepthook = quiet_print
         return self
 
     def __exit__(self, *exc):
@@ -122,5 +132,6 @@ class installed:
         if self._previous is not None:
             signal.signal(signal.SIGINT, self._previous)
             sys.unraisablehook = self._hook
+            sys.excepthook = self._excepthook
         requested = False
         return False
