@@ -132,18 +132,23 @@ sys.exit(code)
 """
 
 
+def _run_script(script: Path, text: str) -> subprocess.CompletedProcess:
+    """``text`` written to ``script`` and run as a program with this checkout's package,
+    its own path as the argument (a file that exists, for `cfbmarkov info`)."""
+    script.write_text(text)
+    env = dict(os.environ)
+    env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
+    return subprocess.run([sys.executable, str(script), str(script)], capture_output=True,
+                          text=True, env=env, timeout=120)
+
+
 def test_failing_finalizers_of_what_the_interrupt_cut_short_stay_quiet(tmp_path):
     """An object the interrupt left half built, whose finalizer fails as it is freed (as
     llvmlite's ``ObjectRef`` does when Numba is interrupted while it loads its cache): the
     one line and exit code 130, no "Exception ignored" traceback after it, and the
     unraisable hook restored."""
 
-    script = tmp_path / "half_built.py"
-    script.write_text(HALF_BUILT)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
-    done = subprocess.run([sys.executable, str(script), str(script)], capture_output=True,
-                          text=True, env=env, timeout=120)
+    done = _run_script(tmp_path / "half_built.py", HALF_BUILT)
     assert done.returncode == 130, done.stderr
     assert done.stderr == "cfbmarkov info: interrupted\n", done.stderr
 
@@ -179,12 +184,7 @@ def test_an_interrupt_printed_by_c_code_is_not_a_traceback(tmp_path):
     traceback of importlib's _find_and_load before the one line): not printed while the
     verb runs, raised again at the next check: the one line, exit 130, other errors still
     printed, and the hook restored."""
-    script = tmp_path / "printed_by_c.py"
-    script.write_text(PRINTED_BY_C)
-    env = dict(os.environ)
-    env["PYTHONPATH"] = SRC + os.pathsep + env.get("PYTHONPATH", "")
-    done = subprocess.run([sys.executable, str(script), str(script)], capture_output=True,
-                          text=True, env=env, timeout=120)
+    done = _run_script(tmp_path / "printed_by_c.py", PRINTED_BY_C)
     assert done.returncode == 130, done.stderr
     assert "KeyboardInterrupt" not in done.stderr and "ValueError: kept" in done.stderr
     assert done.stderr.endswith("cfbmarkov info: interrupted\n"), done.stderr
