@@ -547,3 +547,26 @@ def test_a_pooled_fit_judges_short_halves_across_its_runs(tmp_path, capsys):
                            "--estimator", "mle", "--resamples", "0", "-o", tmp_path / "q.h5")
     short = [line for line in err.splitlines() if "(fewer than 30)" in line]
     assert code == 0 and len(short) == 1 and "of the pooled fitting windows (3 runs)" in short[0]
+
+
+def test_the_summary_says_a_reducible_chain_need_not_carry_the_throughput(tmp_path):
+    """Particles that never change column (each column a closed class): the summary's line
+    of the window's own E(RT) says a reducible chain need not carry it; an irreducible
+    chain's says it should."""
+    from cfbmarkov.markov import CellGrid
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    rng = np.random.default_rng(4)
+    t = 0.01 * np.arange(301)
+    x = np.broadcast_to(rng.uniform(0.0, 0.04, 120), (t.size, 120))
+    speed = np.where(x[0] < 0.02, 1.0, 0.6)
+    y = np.mod(rng.uniform(0.0, 0.3, 120) + speed * t[:, None], 0.3)
+    run = write_trajectories(tmp_path / "columns.h5", t, np.stack([x, y], axis=-1),
+                             width=0.04, height=0.3, source="cfd-dem")
+    space = CellGrid(4, 12, 0.04, 0.3)
+    model = fit_model(run, space, 0.01, (0.0, 3.0), "mle")
+    assert len(model.closed_classes) > 1
+    summary = model.with_adequacy(assess_adequacy(model, [run], [(0.0, 3.0)])).summary()
+    assert "a reducible chain, which weights its classes by their entry flux, need not " \
+           "carry it" in summary
+    assert "the throughput the chain should carry" not in summary

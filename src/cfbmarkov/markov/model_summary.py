@@ -209,9 +209,11 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         lines.append(f"  exact residence time: none ({exc})")
     own = None if model.adequacy is None else model.adequacy.window_rt_mean
     if own is not None and np.isfinite(own):
+        carry = ("a reducible chain, which weights its classes by their entry flux, need "
+                 "not carry it" if len(model.closed_classes) > 1 else
+                 "the throughput the chain should carry; the verdict warns beyond 10 %")
         lines.append(f"    the fitting window's own E(RT): {own:.4g} s (its particle-time over "
-                     "its net passes, the throughput the chain should carry; the verdict "
-                     "warns beyond 10 %)")
+                     f"its net passes, {carry})")
     passed = None if model.adequacy is None else model.adequacy.passed_line()
     if passed:
         lines.append(f"  {passed}")
