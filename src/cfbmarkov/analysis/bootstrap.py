@@ -111,9 +111,7 @@ def _intrinsic_bins(solved: list, lag: float, edges: np.ndarray) -> list[np.ndar
     if not solved:
         return []
     probabilities = heads([start for _, _, _, start in solved], _reach(edges, lag))
-    width = float(edges[1] - edges[0])
-    times = lag * np.arange(1, probabilities.shape[1] + 1) + 1e-6 * width
-    return [np.histogram(times, bins=edges, weights=f / total)[0]
+    return [_binned_lags(f, lag, edges, total)
             for f, (_, _, total, _) in zip(probabilities, solved)]
 
 
@@ -136,10 +134,16 @@ def _binned(rtd, edges: np.ndarray, total: float | None = None) -> np.ndarray:
     """An exact RTD's probability per bin of ``edges``, with the sample histogram's rule
     for times on an edge (whole lags on bins of one lag fall in the bin they start), as a
     share of ``total`` (default: the RTD's resolved mass)."""
+    return _binned_lags(rtd.probability, rtd.lag, edges,
+                        rtd.probability.sum() if total is None else total)
+
+
+def _binned_lags(probability: np.ndarray, lag: float, edges: np.ndarray,
+                 total: float) -> np.ndarray:
+    """:func:`_binned` of the probabilities of residences of 1, 2, ... lags."""
     width = float(edges[1] - edges[0])
-    total = rtd.probability.sum() if total is None else total
-    hist, _ = np.histogram(rtd.times + 1e-6 * width, bins=edges,
-                           weights=rtd.probability / total)
+    times = lag * np.arange(1, probability.size + 1)
+    hist, _ = np.histogram(times + 1e-6 * width, bins=edges, weights=probability / total)
     return hist
 
 
