@@ -8,6 +8,7 @@ from scipy import stats
 
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov import CellGrid, MarkovModel, fit_model
+from cfbmarkov.markov.connectivity import states_reaching
 from cfbmarkov.trajectories import Trajectories
 from cfbmarkov.trajectory_format import lap_increments
 
@@ -253,14 +254,14 @@ def test_level_propagation_equals_the_full_deficit_matrix(markov_flow, markov_ru
     through the bottom."""
     import scipy.sparse as sp
 
-    from cfbmarkov.markov.first_passage import (_finish, _reaching, deficit_matrix, exact_rtd,
+    from cfbmarkov.markov.first_passage import (_finish, deficit_matrix, exact_rtd,
                                       split_by_pass)
 
     def full(p_up, p_down, p_stay, start_level0, levels=9, steps=200_000):
         s = p_up.shape[0]
         q, exits = deficit_matrix(sp.csr_matrix(p_up), sp.csr_matrix(p_down),
                                   sp.csr_matrix(p_stay), levels)
-        live = _reaching(q, exits > 0)
+        live = states_reaching(q, np.flatnonzero(exits > 0))
         idx = np.flatnonzero(live)
         start = np.zeros(s * levels)
         start[:s] = start_level0
@@ -288,7 +289,7 @@ def test_entry_chain_by_level_elimination_equals_the_full_fundamental_matrix(fal
     from scipy.sparse.linalg import splu
 
     from cfbmarkov.markov.entry_chain import entry_matrix
-    from cfbmarkov.markov.first_passage import _reaching, deficit_matrix, split_by_pass
+    from cfbmarkov.markov.first_passage import deficit_matrix, split_by_pass
     from cfbmarkov.synthetic import long_tail_chain
 
     for chain in (long_tail_chain(columns=3, rows=8), ladder_model(8, 0.6, falls)):
@@ -296,7 +297,7 @@ def test_entry_chain_by_level_elimination_equals_the_full_fundamental_matrix(fal
                                              chain.down_fraction)
         s, levels = chain.n_states, 9
         q, exits = deficit_matrix(p_up, p_down, p_stay, levels)
-        live = _reaching(q, exits > 0)
+        live = states_reaching(q, np.flatnonzero(exits > 0))
         idx = np.flatnonzero(live)
         entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
         lu = splu(sp.csc_matrix(sp.identity(idx.size) - q[idx][:, idx]))
@@ -319,7 +320,7 @@ def test_the_fall_below_the_levels_solved_equals_the_full_matrix_and_the_propaga
     from scipy.sparse.linalg import splu
 
     from cfbmarkov.markov.entry_chain import entry_matrix
-    from cfbmarkov.markov.first_passage import (DEFICIT_TOL, _reaching, _rtd_on_levels,
+    from cfbmarkov.markov.first_passage import (DEFICIT_TOL, _rtd_on_levels,
                                                 deficit_matrix, rtd_of_split_chain,
                                                 split_by_pass)
     from cfbmarkov.synthetic import long_tail_chain
@@ -331,7 +332,7 @@ def test_the_fall_below_the_levels_solved_equals_the_full_matrix_and_the_propaga
         s, whole = chain.n_states, (p_up + p_down + p_stay).tocsr()
         for levels in (2, 3, 9):
             q, exits = deficit_matrix(p_up, p_down, p_stay, levels)
-            live = _reaching(q, exits > 0)
+            live = states_reaching(q, np.flatnonzero(exits > 0))
             idx = np.flatnonzero(live)
             f = np.zeros(s * levels)
             f[(levels - 1) * s:] = np.asarray(p_down.sum(axis=1)).ravel()
@@ -364,7 +365,7 @@ def test_the_level_system_and_its_live_pairs_equal_the_full_deficit_matrixs(fall
     import scipy.sparse as sp
 
     from cfbmarkov.markov.first_passage import (_level_system, _live_from_transposes,
-                                                _reaching, _transposed_parts, deficit_matrix,
+                                                _transposed_parts, deficit_matrix,
                                                 split_by_pass)
     from cfbmarkov.synthetic import long_tail_chain
 
@@ -378,7 +379,7 @@ def test_the_level_system_and_its_live_pairs_equal_the_full_deficit_matrixs(fall
         p_up, p_down, p_stay = split_by_pass(p, chain.up_fraction, chain.down_fraction)
         s, levels = chain.n_states, 9
         q, exits = deficit_matrix(p_up, p_down, p_stay, levels)
-        live = _reaching(q, exits > 0)
+        live = states_reaching(q, np.flatnonzero(exits > 0))
         arrays = _transposed_parts((p_down, p_stay, p_up))
         assert np.array_equal(_live_from_transposes(*arrays, levels, exits[:s] > 0), live)
         idx = np.flatnonzero(live)

@@ -79,22 +79,30 @@ def largest_connected_set(counts) -> np.ndarray:
 def states_reaching(matrix, targets) -> np.ndarray:
     """States from which the chain can reach any of ``targets`` (the targets included).
 
+    One breadth-first search of the reversed graph of P_ij > 0 (stored zeros are no
+    transitions), from a virtual node joined to every target.
+
     Parameters
     ----------
     matrix : array_like or sparse, shape (S, S)
     targets : array_like of int
+        Indices of the target states.
 
     Returns
     -------
     ndarray of bool, shape (S,)
     """
     graph = _graph(matrix)
-    reverse = graph.T.tocsr()
-    reach = np.zeros(graph.shape[0], bool)
-    for t in np.asarray(targets, dtype=np.int64).ravel():
-        if not reach[t]:
-            reach[breadth_first_order(reverse, int(t), directed=True,
-                                      return_predecessors=False)] = True
+    n = graph.shape[0]
+    targets = np.unique(np.asarray(targets, dtype=np.int64).ravel())
+    reach = np.zeros(n, bool)
+    if targets.size == 0:
+        return reach
+    hub = sp.csr_matrix((np.ones(targets.size), (np.full(targets.size, n), targets)),
+                        shape=(n + 1, n + 1))
+    reverse = sp.bmat([[graph.T, None], [None, sp.csr_matrix((1, 1))]], format="csr") + hub
+    order = breadth_first_order(reverse, n, directed=True, return_predecessors=False)
+    reach[order[order < n]] = True
     return reach
 
 

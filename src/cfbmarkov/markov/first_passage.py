@@ -29,7 +29,6 @@ from dataclasses import dataclass, replace
 import numba as nb
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import breadth_first_order
 
 from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import CfbmarkovError
@@ -374,9 +373,9 @@ def _level_system(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up
 @nb.njit(cache=True, nogil=True)
 def _live_from_transposes(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
                           up_idx, up_val, levels, targets):
-    """:func:`_live_levels` from the parts' transposes (Numba kernel): a breadth-first
-    search backwards from the exit states on level 0 (``targets``, bool [S]), each
-    transpose's row j listing the sources of destination j. Returns bool [L S], index
+    """The live pairs of :func:`_live_levels` from the parts' transposes (Numba kernel): a
+    breadth-first search backwards from the exit states on level 0 (``targets``, bool [S]),
+    each transpose's row j listing the sources of destination j. Returns bool [L S], index
     g S + i."""
     n = targets.size
     live = np.zeros(n * levels, np.bool_)
@@ -489,44 +488,17 @@ def _heads_of_chains(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val,
 PARALLEL_LEVEL_WORK = 1_000_000
 
 
-def _reaching(q: sp.csr_matrix, targets: np.ndarray) -> np.ndarray:
-    """Which states reach one of ``targets`` (bool [n]) through the non-zeros of ``q``
-    (themselves included): a breadth-first search of the reversed graph from a virtual node
-    joined to every target."""
-    n = q.shape[0]
-    reverse = sp.csr_matrix(q.T)
-    hub = sp.csr_matrix((np.ones(int(targets.sum())), (np.full(int(targets.sum()), n),
-                                                        np.flatnonzero(targets))),
-                        shape=(n + 1, n + 1))
-    graph = sp.vstack([reverse, sp.csr_matrix((1, n))]).tocsr()
-    graph = sp.hstack([graph, sp.csr_matrix((n + 1, 1))]).tocsr() + hub
-    order = breadth_first_order(graph, n, directed=True, return_predecessors=False)
-    live = np.zeros(n, dtype=bool)
-    live[order[order < n]] = True
-    return live
-
-
 def _live_levels(p_up, p_down, p_stay, levels: int, targets: np.ndarray) -> np.ndarray:
-    """:func:`_reaching` on the Q of :func:`deficit_matrix` (bool [S L]), its graph built
-    from the non-zeros of the three parts by index arithmetic, without forming Q."""
+    """The (level, state) pairs of :func:`deficit_matrix`'s Q from which one of ``targets``
+    (bool [S L]: exits, all on level 0) can be reached, themselves included (bool [S L],
+    index g S + i): :func:`_live_from_transposes` on the parts' transposes, without
+    forming Q. Stored zeros are no transitions."""
     s = p_up.shape[0]
-    n = s * levels
-    sources, dests = [], []
-    for part, shift, first, last in ((p_stay, 0, 0, levels), (p_down, 1, 0, levels - 1),
-                                     (p_up, -1, 1, levels)):
-        coo = part.tocoo()
-        g = np.arange(first, last, dtype=np.int64)[:, None]
-        sources.append((g * s + coo.row).ravel())
-        dests.append(((g + shift) * s + coo.col).ravel())
-    hub = np.flatnonzero(targets)
-    # the reversed graph (destination -> source) and a virtual node n joined to every target
-    rows = np.concatenate(dests + [np.full(hub.size, n)])
-    cols = np.concatenate(sources + [hub])
-    graph = sp.csr_matrix((np.ones(rows.size), (rows, cols)), shape=(n + 1, n + 1))
-    order = breadth_first_order(graph, n, directed=True, return_predecessors=False)
-    live = np.zeros(n, dtype=bool)
-    live[order[order < n]] = True
-    return live
+    targets = np.asarray(targets, dtype=bool)
+    if targets[s:].any():
+        raise ValueError("exits lie on level 0 only")
+    return _live_from_transposes(*_transposed_parts((p_down, p_stay, p_up)), levels,
+                                 np.ascontiguousarray(targets[:s]))
 
 
 def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.ndarray, lag: float,

@@ -48,8 +48,9 @@ from scipy.sparse.linalg import splu
 from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
 from cfbmarkov.kinetics import Kinetics, StateKinetics
-from cfbmarkov.markov.first_passage import (_live_levels, _reaching, deficit_matrix,
-                                            rtd_of_split_chain, split_by_pass)
+from cfbmarkov.markov.connectivity import states_reaching
+from cfbmarkov.markov.first_passage import (_live_levels, deficit_matrix, rtd_of_split_chain,
+                                            split_by_pass)
 
 
 @dataclass(frozen=True)
@@ -320,7 +321,7 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
         q = sp.csr_matrix(model.absorbing_matrix)
         r = np.asarray(model.open_flow.exit_probability, dtype=np.float64)
         e = model.open_flow.entry_distribution
-        live = _reaching(q, r > 0)
+        live = states_reaching(q, np.flatnonzero(r > 0))
         levels = 1
     else:
         direction = model.flow_direction if direction is None else direction
