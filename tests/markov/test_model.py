@@ -389,3 +389,26 @@ def test_the_level_system_and_its_live_pairs_equal_the_full_deficit_matrixs(fall
         full = sp.csc_matrix(sp.identity(idx.size) - q[idx][:, idx])
         assert abs(got - full).max() == 0.0
         assert got.has_sorted_indices and (p is not matrix or idx.size < s * levels)
+
+
+def test_states_reaching_equals_the_transitive_closure():
+    """One search from a hub joined to every target finds the states that reach any of
+    them (targets included): the same as the transitive closure of P_ij > 0, with stored
+    zeros no transitions and targets given twice or not at all."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(7)
+    for trial in range(20):
+        n = int(rng.integers(2, 30))
+        dense = (rng.random((n, n)) < 0.08) * rng.random((n, n))
+        matrix = sp.csr_matrix(dense)
+        if matrix.nnz:                                  # stored zeros: no transition
+            matrix.data[rng.integers(0, matrix.nnz, size=2)] = 0.0
+        stored = matrix.toarray() > 0
+        closure = stored | np.eye(n, dtype=bool)
+        for _ in range(n):
+            closure = closure | ((closure.astype(int) @ closure.astype(int)) > 0)
+        targets = rng.integers(0, n, size=int(rng.integers(0, 4)))
+        expected = closure[:, targets].any(axis=1) if targets.size else np.zeros(n, bool)
+        got = states_reaching(matrix, np.concatenate([targets, targets]))
+        assert np.array_equal(got, expected), trial
