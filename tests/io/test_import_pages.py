@@ -1,5 +1,6 @@
 """The import commands of docs/how-to/particle-files.md and docs/how-to/pept-ptv.md run as
-printed, each on a small file of tests/io/field named as the page names it."""
+printed, each on a small file of tests/io/field named as the page names it (the folder of
+`cfbmarkov export-vtk`, on a generated run)."""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ SOURCES = {"post/dump*.vtk": ("liggghts-custom-vtk/post", "post"),
            "dump_h5md.h5": ("lammps-h5md/dump_h5md.h5", "dump_h5md.h5"),
            "particles.csv": ("paraview-csv-export/particles.csv", "particles.csv"),
            "pept.csv": ("pept-pointdata.csv", "pept.csv"),
-           "tracks.csv": ("ptv-enter-leave.csv", "tracks.csv")}
+           "tracks.csv": ("ptv-enter-leave.csv", "tracks.csv"),
+           "vtk": (None, "vtk")}
 
 
 def _commands(page: str) -> list[str]:
@@ -41,7 +43,7 @@ CASES = [(page, line) for page in ("particle-files.md", "pept-ptv.md")
 
 
 def test_the_pages_show_their_commands():
-    assert len(CASES) == 6
+    assert len(CASES) == 7
     assert {shlex.split(line)[2] for _, line in CASES} == set(SOURCES)
 
 
@@ -49,7 +51,13 @@ def test_the_pages_show_their_commands():
 def test_import_command_of_the_page_runs(page, line, tmp_path, monkeypatch, capsys):
     argv = shlex.split(line)[1:]
     source, target = SOURCES[argv[1]]
-    if (FIELD / source).is_dir():
+    if source is None:                  # what export-vtk writes of a generated run
+        from cfbmarkov.io.vtk import export_vtk
+        from tests.io.test_vtk import make_run
+
+        make_run(tmp_path / "generated.h5")
+        export_vtk(tmp_path / "generated.h5", tmp_path / target)
+    elif (FIELD / source).is_dir():
         shutil.copytree(FIELD / source, tmp_path / target, dirs_exist_ok=True)
     else:
         shutil.copy(FIELD / source, tmp_path / target)
@@ -57,6 +65,7 @@ def test_import_command_of_the_page_runs(page, line, tmp_path, monkeypatch, caps
     code = main(argv)
     out, err = capsys.readouterr()
     assert code == 0, f"{page}: {line}: {err}"
-    assert out == "run.h5\n" and err.startswith("cfbmarkov import: read ")
-    with Trajectories(tmp_path / "run.h5") as t:
+    output = argv[argv.index("-o") + 1]
+    assert out == f"{output}\n" and err.startswith("cfbmarkov import: read ")
+    with Trajectories(tmp_path / output) as t:
         assert t.n_frames > 5 and t.n_particles >= 1

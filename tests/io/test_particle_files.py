@@ -148,10 +148,13 @@ def _encode(values: np.ndarray, mode: str) -> tuple[str, bytes]:
     return "", head + data
 
 
-def _write_vtp(path: Path, pos, vel, ids, mode: str, time: float | None = None):
+def _write_vtp(path: Path, pos, vel, ids, mode: str, time: float | None = None, image=None):
     arrays = [("Points", "Position", pos.astype("<f8"), "Float64"),
               ("PointData", "Velocity", vel.astype("<f4"), "Float32"),
               ("PointData", "ID", ids.astype("<i4"), "Int32")]
+    if image is not None:               # LIGGGHTS dump custom/vtk ... ix iy iz
+        arrays += [("PointData", name, image[:, k].astype("<i4"), "Int32")
+                   for k, name in enumerate(("ix", "iy", "iz"))]
     xml, appended, blocks = {"Points": "", "PointData": ""}, b"", []
     for section, name, values, kind in arrays:
         ncomp = 1 if values.ndim == 1 else values.shape[1]
@@ -234,6 +237,92 @@ def test_vtp_refuses_other_compressors_in_one_line(tmp_path, capsys):
 
 
 # --- H5MD ---------------------------------------------------------------------------------
+
+def test_image_flags_give_the_laps_of_particles_too_fast_for_the_minimal_image_rule(
+        tmp_path, capsys):
+    """Particles that move more than a quarter of the height between frames: without image
+    flags the import is refused (the laps cannot be told); with ``ix iy iz`` point arrays
+    the laps are the flags' passes along the vertical axis."""
+    vy = np.array([12.0, -9.0, 0.5])                   # 0.6 m and 0.45 m a frame
+    unwrapped = np.array([0.1, 0.8, 0.4]) + TIMES[:, None] * vy
+    laps = np.floor(unwrapped / H).astype(int)
+    pos = np.stack([np.broadcast_to([0.02, 0.045, 0.07], unwrapped.shape),
+                    unwrapped - laps * H, np.zeros(unwrapped.shape)], axis=2)
+    vel = np.broadcast_to(np.stack([0 * vy, vy, 0 * vy], axis=1), pos.shape)
+    names = [f"p_{k}.vtp" for k in range(TIMES.size)]
+    for flags, folder in ((False, tmp_path / "plain"), (True, tmp_path / "flags")):
+        folder.mkdir()
+        for k, name in enumerate(names):
+            image = np.stack([0 * laps[k], laps[k], 0 * laps[k]], axis=1) if flags else None
+            _write_vtp(folder / name, pos[k], vel[k], IDS, "ascii", image=image)
+        _write_pvd(folder / "p.pvd", names)
+    code = main(["import", str(tmp_path / "plain"), "--width", str(W), "--height", str(H),
+                 "-o", str(tmp_path / "plain.h5")])
+    assert code == 2 and "cannot be inferred" in capsys.readouterr().err
+    out = import_file(tmp_path / "flags", "auto", tmp_path / "f.h5", width=W, height=H)
+    *_, lp, params, _, _ = _read(out)
+    order = np.argsort(IDS)
+    np.testing.assert_array_equal(lp - lp[0], (laps - laps[0])[:, order])
+    assert params["laps_from"] == "image flags (point arrays 'ix', 'iy', 'iz')"
+
+
+def test_the_exports_lap_array_is_refused_along_another_vertical_axis(tmp_path, capsys):
+    from cfbmarkov.io.vtk import export_vtk
+    from tests.io.test_vtk import make_run
+
+    make_run(tmp_path / "run.h5", fields=False)
+    folder = export_vtk(tmp_path / "run.h5", tmp_path / "vtk")
+    assert main(["import", str(folder), "--width", "0.95", "--height", "0.09",
+                 "--vertical-axis", "x", "-o", str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "passes along y" in err and "vertical axis is x" in err
+    assert not (tmp_path / "x.h5").exists()
+
+
+def test_export_vtk_reads_back_as_vtu_from_its_folder(tmp_path, capsys):
+    """What ``export-vtk`` writes (particles as .vtu UnstructuredGrid in particles.pvd,
+    beside gas.pvd of .vtr grids) imports from the folder: the particles' collection is
+    chosen, and times, ids, positions, velocities and laps are the run's; the summary line
+    names the format and the axes."""
+    from cfbmarkov.io.vtk import export_vtk
+    from tests.io.test_vtk import H as RH, W as RW, make_run
+
+    data = make_run(tmp_path / "run.h5")
+    folder = export_vtk(tmp_path / "run.h5", tmp_path / "vtk")
+    assert (folder / "gas.pvd").exists() and (folder / "particles_000000.vtu").exists()
+    assert resolve_format(folder, "auto")[0] == "pvd"
+    assert main(["import", str(folder), "--width", str(RW), "--height", str(RH), "-o",
+                 str(tmp_path / "back.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "as VTK XML UnstructuredGrid" in err and "positions x across, y vertical" in err
+    with Trajectories(tmp_path / "back.h5") as t:
+        order = np.argsort(data["ids"])
+        np.testing.assert_array_equal(t.ids, data["ids"][order])
+        np.testing.assert_allclose(t.times, data["times"], rtol=0, atol=1e-15)
+        np.testing.assert_array_equal(t.positions(), data["pos"][:, order])
+        np.testing.assert_array_equal(t.velocities(), data["vel"][:, order])
+        laps = data["laps"][:, order]
+        np.testing.assert_array_equal(t.laps() - t.laps()[0], laps - laps[0])
+        assert t.parameters["format"] == "vtu"
+        assert t.parameters["laps_from"].startswith("point array 'lap' (passes along y")
+    # the .vtu files themselves, by a pattern, are read the same way
+    assert resolve_format(str(folder / "particles_*.vtu"), "auto")[0] == "vtu"
+
+
+def test_a_folder_of_two_particle_collections_is_refused_naming_them(tmp_path, capsys):
+    from cfbmarkov.io.vtk import export_vtk
+    from tests.io.test_vtk import make_run
+
+    make_run(tmp_path / "run.h5", fields=False)
+    folder = export_vtk(tmp_path / "run.h5", tmp_path / "vtk")
+    (folder / "copy.pvd").write_bytes((folder / "particles.pvd").read_bytes())
+    assert main(["import", str(folder), "--width", "0.09", "--height", "0.95", "-o",
+                 str(tmp_path / "x.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "copy.pvd, particles.pvd" in err
+    assert "import the one of the particles by its name" in err
+    assert not (tmp_path / "x.h5").exists()
+
 
 def _write_h5md(path: Path, pos, vel, image, with_id: bool, origin_zero: bool = True):
     with h5py.File(path, "w") as f:

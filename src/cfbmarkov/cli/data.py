@@ -131,16 +131,16 @@ def add_import(sub) -> None:
         The subparsers of ``cfbmarkov`` (:func:`cfbmarkov.cli.build_parser`).
     """
     s = sub.add_parser("import", help="import CSV, LAMMPS/LIGGGHTS dumps, VTK (.vtk, .vtp, "
-                       ".pvd) or H5MD particle files as a trajectory file")
+                       ".vtu, .pvd) or H5MD particle files as a trajectory file")
     s.add_argument("source", nargs="+",
-                   help="input file (.csv, dump, optionally .gz; .vtk, .vtp, .pvd, .h5), a "
+                   help="input file (.csv, dump, optionally .gz; .vtk, .vtp, .vtu, .pvd, .h5), a "
                         "folder of VTK files, a quoted pattern such as 'post/dump*.vtk', or "
                         "several dump files (read in timestep order)")
     s.add_argument("--format", default="auto",
-                   choices=["auto", "csv", "lammps", "vtk", "vtp", "pvd", "h5md"],
+                   choices=["auto", "csv", "lammps", "vtk", "vtp", "vtu", "pvd", "h5md"],
                    help="the source's format (default auto: told from the content, and said "
                         "so on stderr); csv: docs/how-to/csv.md, lammps: LAMMPS/LIGGGHTS text "
-                        "dumps, vtk/vtp/pvd/h5md: docs/how-to/particle-files.md")
+                        "dumps, vtk/vtp/vtu/pvd/h5md: docs/how-to/particle-files.md")
     s.add_argument("-o", "--output", required=True, help="output trajectory file (.h5)")
     s.add_argument("--width", type=positive_float, default=None,
                    help="riser width W, m: the riser is 0..W across in the source's own "

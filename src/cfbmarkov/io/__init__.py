@@ -1,5 +1,5 @@
 """Importers: CSV files, LAMMPS/LIGGGHTS text dumps, VTK particle files (legacy ``.vtk``,
-XML ``.vtp`` and ``.pvd``) and H5MD files -> trajectory files (HDF5).
+XML ``.vtp``, ``.vtu`` and ``.pvd``) and H5MD files -> trajectory files (HDF5).
 
 Each reads their input a frame at a time and write through
 :class:`~cfbmarkov.trajectory_writer.TrajectoryWriter`, which validates every frame and derives the
@@ -18,9 +18,9 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.io.csv import import_csv
 from cfbmarkov.io.lammps import import_lammps
 
-FORMATS = ("csv", "lammps", "vtk", "vtp", "pvd", "h5md")
+FORMATS = ("csv", "lammps", "vtk", "vtp", "vtu", "pvd", "h5md")
 #: the formats read by :mod:`cfbmarkov.io.particle_frames` (no CSV options apply)
-PARTICLE_FORMATS = ("vtk", "vtp", "pvd", "h5md")
+PARTICLE_FORMATS = ("vtk", "vtp", "vtu", "pvd", "h5md")
 
 
 def resolve_format(source, fmt: str | None) -> tuple[str, str | None]:
@@ -70,7 +70,7 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
     ----------
     source : str or os.PathLike
         The file to import (optionally gzip-compressed).
-    fmt : {'csv', 'lammps', 'vtk', 'vtp', 'pvd', 'h5md', 'auto'} or None
+    fmt : {'csv', 'lammps', 'vtk', 'vtp', 'vtu', 'pvd', 'h5md', 'auto'} or None
         Its format (case-insensitive); None or 'auto': detected from the content
         (:func:`resolve_format`), and recorded in the file's parameters.
     output : str or os.PathLike

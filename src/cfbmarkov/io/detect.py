@@ -2,10 +2,11 @@
 ``--format``, or ``--format auto``), and refusing a source given the wrong format.
 
 The first bytes decide: HDF5's signature with an ``/h5md`` group (H5MD), ``# vtk
-DataFile`` (legacy VTK), ``<VTKFile type="PolyData">`` (VTK XML PolyData) or
-``type="Collection"`` (a ParaView ``.pvd``), ``ITEM: TIMESTEP`` (a LAMMPS/LIGGGHTS dump);
-other text is read as CSV. A folder or a glob pattern is judged by its first file (a
-``.pvd`` first).
+DataFile`` (legacy VTK), ``<VTKFile type="PolyData">`` (VTK XML PolyData),
+``type="UnstructuredGrid"`` (VTK XML UnstructuredGrid) or ``type="Collection"`` (a ParaView
+``.pvd``), ``ITEM: TIMESTEP`` (a LAMMPS/LIGGGHTS dump); other text is read as CSV. A folder
+or a glob pattern is judged by its first file (a folder's ``.pvd`` of particle files
+first).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 DESCRIPTIONS = {"h5md": "H5MD (an HDF5 file with an /h5md group)",
                 "vtk": "legacy VTK ('# vtk DataFile' first line)",
                 "vtp": "VTK XML PolyData ('<VTKFile type=\"PolyData\">')",
+                "vtu": "VTK XML UnstructuredGrid ('<VTKFile type=\"UnstructuredGrid\">')",
                 "pvd": "a ParaView collection ('<VTKFile type=\"Collection\">')",
                 "lammps": "a LAMMPS/LIGGGHTS dump ('ITEM: TIMESTEP' first line)",
                 "csv": "text that is no dump or VTK file (read as CSV)"}
@@ -67,11 +69,16 @@ def first_file(source) -> Path:
     path = Path(text)
     if path.is_dir():
         files = sorted(p for p in path.iterdir() if p.is_file())
-        for suffix in (".pvd", ".vtp", ".vtk", ".h5", ".hdf5"):
+        from cfbmarkov.io.vtk_xml import particle_collection
+
+        collection = particle_collection(path)
+        if collection is not None:
+            return collection
+        for suffix in (".vtp", ".vtu", ".vtk", ".h5", ".hdf5"):
             chosen = [p for p in files if p.suffix.lower() == suffix]
             if chosen:
                 return chosen[0]
-        raise InputError(f"{path}: a folder without .pvd, .vtp, .vtk or .h5 files; "
+        raise InputError(f"{path}: a folder without .pvd, .vtp, .vtu, .vtk or .h5 files; "
                          f"{folder_advice(path)}")
     if not path.exists() and any(c in text for c in "*?["):
         matches = sorted(glob.glob(text))
@@ -142,10 +149,13 @@ def detect_format(source) -> tuple[str, str]:
         kind = match.group(1).decode()
         if kind == "PolyData":
             return "vtp", DESCRIPTIONS["vtp"]
+        if kind == "UnstructuredGrid":
+            return "vtu", DESCRIPTIONS["vtu"]
         if kind == "Collection":
             return "pvd", DESCRIPTIONS["pvd"]
         raise InputError(f"{path}: VTK XML of type {kind}; particle files are PolyData (.vtp) "
-                         "or a .pvd collection of them")
+                         "or UnstructuredGrid (.vtu) of the particle centres, or a .pvd "
+                         "collection of them")
     if stripped.startswith(b"ITEM: TIMESTEP") or stripped.startswith(b"ITEM:"):
         return "lammps", DESCRIPTIONS["lammps"]
     _refuse_unread_text(path, stripped)
@@ -200,10 +210,10 @@ def check_given_format(source, fmt: str) -> None:
         found, shown = detect_format(source)
     except InputError:
         return                       # the reader of fmt reports what is wrong
-    particle = ("h5md", "vtk", "vtp", "pvd")
+    particle = ("h5md", "vtk", "vtp", "vtu", "pvd")
     # a dump's 'ITEM:' first line is never a CSV file's, and a dump has no other (blank
     # lines aside): text of one given as the other is refused, naming it
-    same = found == fmt or {found, fmt} <= {"vtp", "pvd"} or (
+    same = found == fmt or {found, fmt} <= {"vtp", "vtu", "pvd"} or (
         found not in particle and fmt not in particle and (found, fmt) != ("lammps", "csv")
         and not ((found, fmt) == ("csv", "lammps") and _tabular(first_file(source))))
     if not same:

@@ -160,6 +160,12 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
                             where=first.where, default_boundary="periodic")
         velocity = first.velocities is not None
         image = first.image is not None and not riser.boundary.is_open
+        late = dict(series.late_provenance())
+        image_from = late.pop("image_from", None)
+        if image and image_from and "passes along y" in image_from and riser.vertical != 1:
+            raise InputError(f"{first.where}: the laps are {image_from}, but the vertical axis "
+                             f"is {'xyz'[riser.vertical]}; import without --vertical-axis (the "
+                             "export's vertical is y)")
         parameters = {
             "source_file": series.source_file, "format": series.fmt,
             "format_detected_from": detected, "box": None if box is None else box.tolist(),
@@ -168,9 +174,9 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
                               "the box's flags" if series.flags else
                               "default (the files carry no periodicity)"),
             "origin_shift": riser.region[:, 0].tolist(), **riser.provenance(),
-            "laps_from": ("image flags" if image else "minimal-image rule"
+            "laps_from": ((image_from or "image flags") if image else "minimal-image rule"
                           if not riser.boundary.is_open else "none (open riser)"),
-            **series.provenance, **series.late_provenance(),
+            **series.provenance, **late,
         }
         first_ids = np.unique(first.ids)
         flat_z = (float(first.positions[0, 2]) if not spread and first.positions.shape[0]

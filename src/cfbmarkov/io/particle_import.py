@@ -1,4 +1,4 @@
-"""``cfbmarkov import --format vtk|vtp|pvd|h5md``: particle files -> a trajectory file, and
+"""``cfbmarkov import --format vtk|vtp|vtu|pvd|h5md``: particle files -> a trajectory file, and
 the summary line the command prints about what was read."""
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from cfbmarkov.io.detect import first_file
 from cfbmarkov.io.particle_frames import import_particle_series
 
 #: the names of the formats in messages
-NAMES = {"vtk": "legacy VTK", "vtp": "VTK XML PolyData", "pvd": "VTK XML PolyData (.pvd)",
+NAMES = {"vtk": "legacy VTK", "vtp": "VTK XML PolyData", "vtu": "VTK XML UnstructuredGrid",
+         "pvd": "a ParaView collection (.pvd) of VTK XML files",
          "h5md": "H5MD"}
 
 
@@ -24,14 +25,15 @@ def import_particles(source, fmt: str, output: str | os.PathLike, *,
                      length_unit: str | None = None, time_unit: str | None = None,
                      resample: float | None = None, max_gap: float | None = None,
                      detected: str | None = None) -> Path:
-    """Import VTK (``vtk``), VTK XML (``vtp``, ``pvd``) or H5MD (``h5md``) particle files.
+    """Import VTK (``vtk``), VTK XML (``vtp``, ``vtu``, ``pvd``) or H5MD (``h5md``) particle
+    files.
 
     Parameters
     ----------
     source : str, os.PathLike or list
         A file, a folder, a glob pattern or a list of files (:mod:`cfbmarkov.io.vtk_read`);
         an H5MD source is one file.
-    fmt : {'vtk', 'vtp', 'pvd', 'h5md'}
+    fmt : {'vtk', 'vtp', 'vtu', 'pvd', 'h5md'}
         The format.
     output : str or os.PathLike
         The trajectory file to write.
@@ -114,7 +116,20 @@ def import_summary(path: str | os.PathLike) -> str:
     velocity = p.get("velocity_from")
     velocity = f"velocities from {velocity}" if velocity else "no velocities"
     return (f"read {plural(n_frames, 'frame')} of {plural(n_particles, 'particle')} as {fmt} "
-            f"({told}); ids from {p.get('ids_from')}; times from {p.get('time_from')}; "
+            f"({told}); {_axes_text(p)}; ids from {p.get('ids_from')}; times from "
+            f"{p.get('time_from')}; "
             f"{velocity}; "
             f"{p.get('boundary_stored')} boundary from {p.get('boundary_from')}; laps from "
             f"{p.get('laps_from')}")
+
+
+def _axes_text(parameters) -> str:
+    """Which of the points' axes are across, vertical and depth (or dropped): ``positions
+    x across, y vertical`` or ``positions x across, z vertical, y depth``."""
+    axes = [f"{parameters.get('across_axis')} across",
+            f"{parameters.get('vertical_axis')} vertical"]
+    if parameters.get("depth_axis"):
+        axes.append(f"{parameters['depth_axis']} depth")
+    elif parameters.get("depth_axis_dropped"):
+        axes.append(f"{parameters['depth_axis_dropped']} dropped (projected)")
+    return "positions " + ", ".join(axes)

@@ -27,9 +27,13 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import check_source
 from cfbmarkov.io.particle_frames import ParticleFrame, ParticleSeries
 from cfbmarkov.io.vtk_legacy import read_legacy
-from cfbmarkov.io.vtk_xml import read_pvd, read_vtp
+from cfbmarkov.io.vtk_xml import PARTICLE_SUFFIXES, particle_collection, read_pvd, read_vtp
 
 _ID_NAMES = ("id", "ids", "particle_id", "particleid", "globalid")
+#: image flags per axis (LAMMPS/LIGGGHTS ``ix iy iz``)
+_IMAGE_NAMES = ("ix", "iy", "iz")
+#: the passes along y that ``cfbmarkov export-vtk`` writes (its vertical axis)
+_LAP_NAME = "lap"
 _VELOCITY_NAMES = ("v", "vel", "velocity", "velocities")
 _TIME_NAMES = ("time", "timevalue")
 _STEP = re.compile(r"(\d+)(?!.*\d)")
@@ -110,21 +114,52 @@ def _ids(arrays: dict, n: int, where: str) -> tuple[np.ndarray, str | None]:
     return values.astype(np.int64), name
 
 
+def _whole(values, name: str, where: str) -> np.ndarray:
+    values = np.asarray(values)
+    if values.ndim != 1:
+        raise InputError(f"{where}: point array {name!r} has {values.shape[1]} components; "
+                         "expected one")
+    if values.dtype.kind == "f" and not (np.isfinite(values)
+                                         & (values == np.round(values))).all():
+        raise InputError(f"{where}: point array {name!r} holds a value that is not a whole "
+                         "number; image flags and laps are integers")
+    return values.astype(np.int64)
+
+
+def _image(arrays: dict, n: int, where: str) -> tuple[np.ndarray | None, str | None]:
+    """Image flags [n, 3] from ``ix iy iz`` point arrays, or from the ``lap`` array of
+    ``cfbmarkov export-vtk`` (passes along y, the others zero); with what gave them."""
+    names = [_find(arrays, (c,)) for c in _IMAGE_NAMES]
+    if all(names):
+        image = np.column_stack([_whole(arrays[k], k, where) for k in names])
+        return image, "image flags (point arrays " + ", ".join(repr(k) for k in names) + ")"
+    lap = _find(arrays, (_LAP_NAME,))
+    if lap is not None:
+        image = np.zeros((n, 3), np.int64)
+        image[:, 1] = _whole(arrays[lap], lap, where)
+        return image, f"point array {lap!r} (passes along y, as cfbmarkov export-vtk writes)"
+    return None, None
+
+
 class _Frames:
-    """Builds ParticleFrames from point arrays, checking that the id and velocity arrays stay
-    the same from file to file; records where ids and velocities come from."""
+    """Builds ParticleFrames from point arrays, checking that the id, velocity and image
+    arrays stay the same from file to file; records where ids, velocities and laps come
+    from."""
 
     def __init__(self):
         self.ids_from: str | None = ""
         self.velocity_from: str | None = ""
+        self.image_from: str | None = ""
         self.n_first: int | None = None
 
     def frame(self, time: float, points: np.ndarray, arrays: dict, box, where: str):
         n = points.shape[0]
         ids, ids_from = _ids(arrays, n, where)
         velocity, velocity_from = _velocity(arrays, n, where)
+        image, image_from = _image(arrays, n, where)
         if self.n_first is None:
             self.n_first, self.ids_from, self.velocity_from = n, ids_from, velocity_from
+            self.image_from = image_from
         elif ids_from != self.ids_from:
             raise InputError(f"{where}: the id array is {ids_from!r}, the first file's "
                              f"{self.ids_from!r}; every file must carry the same arrays")
@@ -135,14 +170,19 @@ class _Frames:
         if (velocity_from is None) != (self.velocity_from is None):
             raise InputError(f"{where}: velocity array {velocity_from!r}, the first file's "
                              f"{self.velocity_from!r}; every file must carry the same arrays")
+        if image_from != self.image_from:
+            raise InputError(f"{where}: laps from {image_from or 'no array'}, the first file's "
+                             f"from {self.image_from or 'no array'}; every file must carry the "
+                             "same arrays")
         return ParticleFrame(time=float(time), ids=ids, positions=points, velocities=velocity,
-                             box=box, where=where)
+                             image=image, box=box, where=where)
 
     def provenance(self) -> dict:
         return {"ids_from": (f"point array {self.ids_from!r}" if self.ids_from
                              else "point order (no id array): particle k is the k-th point"),
                 "velocity_from": (f"point array {self.velocity_from!r}" if self.velocity_from
-                                  else None)}
+                                  else None),
+                "image_from": self.image_from}
 
 
 def vtk_series(source, time_step: float | None = None) -> ParticleSeries:
@@ -258,14 +298,16 @@ def _sorted_by_time(frames: Iterator[ParticleFrame], label: str) -> Iterator[Par
 
 
 def vtp_series(source) -> ParticleSeries:
-    """The frames of a VTK XML PolyData series: a ``.pvd`` collection, or ``.vtp`` files.
+    """The frames of a VTK XML particle series: a ``.pvd`` collection, or ``.vtp``
+    (PolyData) or ``.vtu`` (UnstructuredGrid) files of the particle centres.
 
     Parameters
     ----------
     source : str, os.PathLike or list
-        A ``.pvd`` file (times from it), a folder (its one ``.pvd``, else its ``.vtp``
-        files), a ``.vtp`` file, a glob pattern or a list of ``.vtp`` files (times from MFiX's
-        ``<!-- Time = ... s -->`` comment or a ``TimeValue`` field array).
+        A ``.pvd`` file (times from it), a folder (its ``.pvd`` of particle files,
+        :func:`~cfbmarkov.io.vtk_xml.particle_collection`, else its ``.vtp`` and ``.vtu``
+        files), a ``.vtp`` or ``.vtu`` file, a glob pattern or a list of such files (times
+        from MFiX's ``<!-- Time = ... s -->`` comment or a ``TimeValue`` field array).
 
     Returns
     -------
@@ -278,9 +320,7 @@ def vtp_series(source) -> ParticleSeries:
     """
     path = Path(os.fspath(source)) if not isinstance(source, (list, tuple)) else None
     if path is not None and path.is_dir():
-        pvds = sorted(path.glob("*.pvd"))
-        if len(pvds) == 1:
-            path = pvds[0]
+        path = particle_collection(path) or path
     if path is not None and path.suffix.lower() == ".pvd":
         check_source(path)
         listing = read_pvd(path)
@@ -292,7 +332,7 @@ def vtp_series(source) -> ParticleSeries:
         time_from, label, first_name = "the .pvd collection", str(path), path.name
         names = [f.name for _, files in entries for f in files]
     else:
-        files = source_files(source, (".vtp",))
+        files = source_files(source, PARTICLE_SUFFIXES)
         entries = [(None, [f]) for f in files]
         time_from, label, first_name = ("each file's '<!-- Time = ... s -->' comment or "
                                           "TimeValue array"), _label(files), files[0].name
@@ -320,7 +360,9 @@ def vtp_series(source) -> ParticleSeries:
         for time, points, arrays, file in read:
             yield builder.frame(time, points, arrays, None, str(file))
 
-    series = ParticleSeries(label=label, fmt="vtp", frames=_sorted_by_time(frames(), label),
+    first_file = entries[0][1][0]
+    fmt = "vtu" if first_file.suffix.lower() == ".vtu" else "vtp"
+    series = ParticleSeries(label=label, fmt=fmt, frames=_sorted_by_time(frames(), label),
                             source_file=first_name, provenance=provenance,
                             late_provenance=builder.provenance)
     return series

@@ -1,9 +1,14 @@
-"""Reading VTK XML PolyData (``.vtp``) and ParaView collections (``.pvd``) as particle frames.
+"""Reading VTK XML PolyData (``.vtp``), UnstructuredGrid (``.vtu``) and ParaView collections
+(``.pvd``) as particle frames.
 
-What MFiX-DEM (``RUN_DES_0000.vtp`` + ``RUN_DES.pvd``), LAMMPS ``dump vtk`` with a ``.vtp``
-name and pyevtk write: a ``<VTKFile type="PolyData">`` whose ``<Points>`` are the particle
-centres and whose ``<PointData>`` holds the per-particle arrays; a ``.pvd`` lists the files
-with their times (``<DataSet timestep=... file=...>``). Data arrays in ``format="ascii"``,
+What MFiX-DEM (``RUN_DES_0000.vtp`` + ``RUN_DES.pvd``) and LAMMPS ``dump vtk`` or LIGGGHTS
+``dump custom/vtk`` with a ``.vtp`` name write: a ``<VTKFile type="PolyData">`` whose
+``<Points>`` are the particle centres and whose ``<PointData>`` holds the per-particle
+arrays. What the same dumps with a ``.vtu`` name, Yade's ``VTKRecorder``, pyevtk's
+``pointsToVTK`` and ``cfbmarkov export-vtk`` write: a ``<VTKFile type="UnstructuredGrid">``
+of the same ``<Points>`` and ``<PointData>`` (its ``<Cells>``, a vertex per particle, are
+not needed and not read). A ``.pvd`` lists the
+files with their times (``<DataSet timestep=... file=...>``). Data arrays in ``format="ascii"``,
 ``"binary"`` (base64) or ``"appended"`` (raw or base64 ``<AppendedData>``), uncompressed or
 zlib-compressed (``vtkZLibDataCompressor``), with UInt32 or UInt64 headers, are read; other
 compressors are refused. The format: "VTK File Formats", XML section (Kitware), and
@@ -31,9 +36,13 @@ _TYPES = {"Int8": "i1", "UInt8": "u1", "Int16": "i2", "UInt16": "u2", "Int32": "
 _TIME_COMMENT = re.compile(rb"<!--\s*Time\s*=\s*([-+0-9.eEdD]+)\s*s?\s*-->")
 
 
+#: the VTK XML data set types whose points are read as particles
+PARTICLE_TYPES = ("PolyData", "UnstructuredGrid")
+
+
 @dataclass
 class PolyData:
-    """The content of a ``.vtp`` file that particle imports use.
+    """The content of a ``.vtp`` or ``.vtu`` file that particle imports use.
 
     Attributes
     ----------
@@ -54,12 +63,12 @@ class PolyData:
 
 
 def read_vtp(path: Path) -> PolyData:
-    """Read a VTK XML PolyData file.
+    """Read the points and point arrays of a VTK XML PolyData or UnstructuredGrid file.
 
     Parameters
     ----------
     path : pathlib.Path
-        The ``.vtp`` file.
+        The ``.vtp`` or ``.vtu`` file.
 
     Returns
     -------
@@ -68,8 +77,8 @@ def read_vtp(path: Path) -> PolyData:
     Raises
     ------
     InputError
-        If it is not XML PolyData, is damaged or truncated, or uses an encoding, compressor
-        or data type that is not read (named in the message).
+        If it is neither XML PolyData nor UnstructuredGrid, is damaged or truncated, or uses
+        an encoding, compressor or data type that is not read (named in the message).
     """
     label = str(path)
     try:
@@ -89,13 +98,15 @@ def read_vtp(path: Path) -> PolyData:
         appended = body[underscore + 1:] if underscore >= 0 else b""
         data = data[:open_end + 1] + data[close:]
     root = _parse(data, label)
-    if root.tag != "VTKFile" or root.get("type") != "PolyData":
-        raise InputError(f"{label}: not VTK XML PolyData (VTKFile type={root.get('type')!r}); "
-                         "particle files are PolyData (.vtp)")
+    kind = root.get("type")
+    if root.tag != "VTKFile" or kind not in PARTICLE_TYPES:
+        raise InputError(f"{label}: not VTK XML PolyData or UnstructuredGrid (VTKFile type="
+                         f"{kind!r}); particle files are PolyData (.vtp) or UnstructuredGrid "
+                         "(.vtu) of the particle centres")
     decoder = _Decoder(root, appended, label)
-    pieces = root.findall("./PolyData/Piece")
+    pieces = root.findall(f"./{kind}/Piece")
     if not pieces:
-        raise InputError(f"{label}: no <Piece> in <PolyData>")
+        raise InputError(f"{label}: no <Piece> in <{kind}>")
     points, arrays = [], []
     for piece in pieces:
         n = _count(piece, "NumberOfPoints", "0", label)
@@ -114,7 +125,7 @@ def read_vtp(path: Path) -> PolyData:
         raise InputError(f"{label}: the pieces carry different point arrays")
     point_data = {k: np.concatenate([a[k] for a in arrays]) for k in arrays[0]}
     field_data = {a.get("Name", ""): decoder.array(a, None).ravel()
-                  for a in root.findall("./PolyData/FieldData/DataArray")}
+                  for a in root.findall(f"./{kind}/FieldData/DataArray")}
     match = _TIME_COMMENT.search(data[:start] if start >= 0 else data)
     comment_time = float(match.group(1).replace(b"d", b"e").replace(b"D", b"e")) if match else None
     return PolyData(np.concatenate(points), point_data, field_data, comment_time)
@@ -322,3 +333,49 @@ class _Decoder:
             raise InputError(f"{self.label}: array {name!r}: {len(raw)} bytes of {nbytes} "
                              "(truncated file)")
         return raw[:nbytes]
+
+
+#: the file names of particle data sets in a collection
+PARTICLE_SUFFIXES = (".vtp", ".vtu")
+
+
+def particle_collection(folder: Path) -> Path | None:
+    """The ``.pvd`` of a folder whose data sets are particle files, or None where it has no
+    ``.pvd``.
+
+    A folder written by ``cfbmarkov export-vtk`` (or ParaView) may hold several collections,
+    for example ``particles.pvd`` (``.vtu`` files) beside ``gas.pvd`` (``.vtr`` grids): the
+    one listing ``.vtp`` or ``.vtu`` files is taken; a lone ``.pvd`` is taken as it is (its
+    reader says what is wrong with it).
+
+    Parameters
+    ----------
+    folder : pathlib.Path
+
+    Returns
+    -------
+    pathlib.Path or None
+
+    Raises
+    ------
+    InputError
+        If several collections list particle files, or several list none of them.
+    """
+    pvds = sorted(p for p in folder.iterdir() if p.suffix.lower() == ".pvd" and p.is_file())
+    if len(pvds) <= 1:
+        return pvds[0] if pvds else None
+    particle = []
+    for pvd in pvds:
+        try:
+            listing = read_pvd(pvd)
+        except InputError:
+            continue
+        if all(f.suffix.lower() in PARTICLE_SUFFIXES for _, files in listing for f in files):
+            particle.append(pvd)
+    if len(particle) == 1:
+        return particle[0]
+    names = ", ".join(p.name for p in (particle or pvds))
+    raise InputError(f"{folder}: {len(particle or pvds)} collections ({names}) "
+                     + ("list particle files (.vtp, .vtu)" if particle else
+                        "and none lists particle files (.vtp, .vtu)")
+                     + "; import the one of the particles by its name")
