@@ -165,6 +165,15 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
      "rates and heat-exchange coefficients are read in 1/s"),
     ('[property]\nname = "X"\nlaw = "first-order"\nrate = 0.4\n', None,
      "a single [property] table; write it [[property]]"),
+    # the cells a table misses are named (the first three)
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n" + "".join(f"{c},{r},1\n" for r in range(6) for c in range(3)
+                                if (c, r) != (2, 4)), "misses 1 cell(s) of the grid 3x6 (col 2, row 4)"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n0,0,1.0\n", "(col 1, row 0, col 2, row 0, col 0, row 1 and 14 more)"),
+    # a name the particle files' arrays carry would replace that array in export-vtk
+    ('[[property]]\nname = "id"\nlaw = "first-order"\nrate = 0.4\n', None,
+     "property name 'id' is the name of an array the particle files carry"),
 ])
 def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rates, message):
     _, _, model = fitted
@@ -172,6 +181,28 @@ def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rate
     assert main(["react", str(model), "--kinetics", str(kin)]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and message in err and str(kin) in err
+
+
+def test_rate_tables_from_excel_read_or_refused_by_encoding(fitted, tmp_path, capsys):
+    """Excel's "CSV UTF-8" (a byte-order mark before the header) reads as plain UTF-8; its
+    "Unicode Text" (UTF-16) and other encodings are refused in one line naming the file
+    and how to save it (not a traceback); a kinetics TOML with a byte-order mark reads."""
+    _, _, model = fitted
+    kin = _write(tmp_path, GOOD)
+    (tmp_path / "rates.csv").write_bytes(b"\xef\xbb\xbf" + RATES.encode())
+    kin.write_bytes(b"\xef\xbb\xbf" + kin.read_bytes())
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    with_bom = json.loads(capsys.readouterr().out)["properties"]["X"]["exit_mean"]
+    (tmp_path / "rates.csv").write_text(RATES)
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["properties"]["X"]["exit_mean"] == with_bom
+    for data, says in ((RATES.encode("utf-16"), "is UTF-16 (Excel's 'Unicode Text')"),
+                       (RATES.replace("rate", "rate \u00b0").encode("cp1252"), "not UTF-8")):
+        (tmp_path / "rates.csv").write_bytes(data)
+        assert main(["react", str(model), "--kinetics", str(kin)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err and "save it as CSV in UTF-8" in err
+
 
 
 def test_rate_from_a_cell_field():

@@ -170,9 +170,15 @@ class ByCell(CellParameter):
                              f"{space.n_cells} cells of the grid {space.grid_text()} exactly "
                              "once")
         if seen.min() < 1:
-            what = f"misses {int(np.sum(seen == 0))} cell(s)"
-            raise InputError(f"{where}: the table {what} of the grid {space.grid_text()}; "
-                             f"give each of its {space.n_cells} cells exactly once")
+            missing = np.flatnonzero(seen == 0)
+            m = space.columns
+            named = ", ".join(f"col {c % m}, row {c // (m * d)}"
+                              + (f", depth {(c // m) % d}" if d > 1 else "")
+                              for c in missing[:3].tolist())
+            more = f" and {missing.size - 3} more" if missing.size > 3 else ""
+            raise InputError(f"{where}: the table misses {missing.size} cell(s) of the grid "
+                             f"{space.grid_text()} ({named}{more}); give each of its "
+                             f"{space.n_cells} cells exactly once")
         out = np.empty(space.n_cells)
         out[cell] = t[:, -1]
         return out

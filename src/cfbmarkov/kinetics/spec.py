@@ -31,6 +31,10 @@ from cfbmarkov.kinetics.laws import LAWS, Custom, HeatExchange, Law, affine_map
 STARTS = ("entry", "carried", "reference")
 
 
+#: names a property cannot take: the arrays ``export-vtk`` writes beside the properties
+RESERVED_NAMES = ("id", "lap", "colour_group", "speed", "velocity", "points")
+
+
 @dataclass(frozen=True)
 class Property:
     """One scalar carried by every particle.
@@ -70,6 +74,10 @@ class Property:
         if not (isinstance(self.name, str) and self.name
                 and all(c.isalnum() or c in "_-" for c in self.name)):
             raise InputError(f"property name {self.name!r}: use letters, digits, _ and -")
+        if self.name.lower() in RESERVED_NAMES:
+            raise InputError(f"property name {self.name!r} is the name of an array the "
+                             f"particle files carry ({', '.join(RESERVED_NAMES)}); choose "
+                             "another")
         if self.start not in STARTS:
             raise InputError(f"property {self.name}: start {self.start!r} is not one of "
                              f"{', '.join(STARTS)}")
@@ -156,6 +164,9 @@ class StateKinetics:
         The laws.
     source : str, optional
         The kinetics file they came from, for messages.
+    state_space : StateSpace, optional
+        The state space they were resolved on (:meth:`Kinetics.per_state` records it);
+        :meth:`on` refuses them on another.
     """
 
     __repr__ = compact_repr
@@ -169,6 +180,38 @@ class StateKinetics:
     parameters: tuple
     laws: tuple
     source: str = ""
+    state_space: object = None
+
+    def on(self, state_space) -> "StateKinetics":
+        """These kinetics, checked to be resolved on ``state_space`` (a model's).
+
+        Parameters
+        ----------
+        state_space : StateSpace
+
+        Returns
+        -------
+        StateKinetics
+            ``self``.
+
+        Raises
+        ------
+        InputError
+            If they were resolved on another state space, or hold another number of
+            states.
+        """
+        n = int(state_space.n_states)
+        if self.state_space is not None and self.state_space != state_space:
+            raise InputError(f"kinetics resolved on {self.state_space.describe()}, not on the "
+                             f"model's {state_space.describe()}: resolve them with "
+                             "kinetics.per_state(model.state_space, model.cell_fields), or pass "
+                             "the Kinetics itself")
+        if self.rate.shape[-1] != n or any(np.shape(q)[0] != n for q in self.parameters):
+            raise InputError(f"kinetics resolved on {self.rate.shape[-1]} states, not on the "
+                             f"model's {n}: resolve them with kinetics.per_state("
+                             "model.state_space, model.cell_fields), or pass the Kinetics "
+                             "itself")
+        return self
 
     @property
     def n_properties(self) -> int:
@@ -290,7 +333,8 @@ class Kinetics:
                              np.array([pr.initial for pr in self.properties]),
                              np.array([pr.law.linear for pr in self.properties]),
                              rate, target, tuple(params),
-                             tuple(pr.law for pr in self.properties), self.source)
+                             tuple(pr.law for pr in self.properties), self.source,
+                             state_space)
 
     def field_notes(self, cell_fields: CellFields | None) -> tuple[str, ...]:
         """Warnings on the parameters given as a function of a cell field: where the solids
@@ -346,6 +390,36 @@ class Kinetics:
 _PROPERTY_KEYS = {"name", "law", "start", "initial", "threshold"}
 
 
+def on_states(kinetics, state_space, cell_fields: CellFields | None = None) -> StateKinetics:
+    """Kinetics resolved on a model's state space: a :class:`Kinetics` resolved
+    (:meth:`Kinetics.per_state`), a :class:`StateKinetics` checked (:meth:`StateKinetics.on`).
+
+    Parameters
+    ----------
+    kinetics : Kinetics or StateKinetics
+    state_space : StateSpace
+        The model's states.
+    cell_fields : CellFields, optional
+        The fitting window's cell fields, for parameters given as a function of them.
+
+    Returns
+    -------
+    StateKinetics
+
+    Raises
+    ------
+    InputError
+        If ``kinetics`` is neither, was resolved on another state space, or does not resolve
+        (:meth:`Kinetics.per_state`).
+    """
+    if isinstance(kinetics, Kinetics):
+        return kinetics.per_state(state_space, cell_fields)
+    if isinstance(kinetics, StateKinetics):
+        return kinetics.on(state_space)
+    raise InputError(f"kinetics: a Kinetics (load_kinetics(path), or Kinetics((Property(...), "
+                     f"...))) or its StateKinetics, not {type(kinetics).__name__}")
+
+
 def _binary_kind(path: Path) -> str:
     """What a file that is not text seems to be, in words."""
     try:
@@ -390,7 +464,7 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
     path = Path(path)
     name = str(path)
     try:
-        data = tomllib.loads(path.read_text())
+        data = tomllib.loads(path.read_bytes().decode("utf-8-sig"))   # an editor's BOM too
     except OSError as exc:
         raise InputError(f"cannot read kinetics file {name}: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
@@ -526,9 +600,17 @@ def _read_table(file: Path, p: str, where: str, signed: bool) -> tuple[np.ndarra
     """The rows of a per-cell CSV table and the file line (from 1) of each; blank lines are
     skipped but counted, so that every message names the line an editor shows."""
     try:
-        text = file.read_text().splitlines()
+        raw = file.read_bytes()
     except OSError as exc:
         raise InputError(f"{where}: cannot read {file}: {exc.strerror or exc}") from None
+    try:                                 # Excel's "CSV UTF-8" starts with a byte-order mark
+        text = raw.decode("utf-8-sig").splitlines()
+    except UnicodeDecodeError:
+        kind = ("UTF-16 (Excel's 'Unicode Text')" if raw[:2] in (b"\xff\xfe", b"\xfe\xff")
+                else "not UTF-8")
+        raise InputError(f"{where}: {file} is {kind}; save it as CSV in UTF-8 (plain "
+                         "numbers and a header col,row[,depth],"
+                         f"{p})") from None
     numbered = [(n, ln.strip()) for n, ln in enumerate(text, start=1) if ln.strip()]
     if not numbered:
         raise InputError(f"{where}: {file} is empty; give a header col,row[,depth],{p}")

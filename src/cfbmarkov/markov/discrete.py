@@ -165,7 +165,8 @@ class DiscreteTrajectories:
         -------
         DiscreteTrajectories
             The same trajectories restricted to those frames (views, no copy), with
-            ``window = (start, stop)``.
+            ``window = (start, stop)`` clipped to the window these were discretized on
+            (a block reaching outside it holds only the frames inside).
 
         Raises
         ------
@@ -178,6 +179,8 @@ class DiscreteTrajectories:
         if i1 - i0 <= self.lag_frames:
             raise InputError(f"window {start:g}:{stop:g} s holds fewer than two frames one "
                              f"lag ({self.lag:g} s) apart")
+        if self.window is not None:      # what it holds: no wider than the window discretized
+            start, stop = max(start, self.window[0]), min(stop, self.window[1])
         rows = slice(i0, i1)
         return replace(self, states=self.states[rows], vertical=self.vertical[rows],
                        times=self.times[rows], window=(float(start), float(stop)),

@@ -94,6 +94,16 @@ class ResidenceTimeDistribution:
     deficit_unresolved: float = 0.0     # of ``unresolved``: fallen below deficit -K
     drift_mean: float | None = None     # E(RT) from the lap drift, where deficits were lost
 
+    def __post_init__(self):
+        # immutable as the model that caches it: its arrays are read-only copies (the
+        # caller's arrays are left as they are)
+        for name in ("probability", "entry_distribution"):
+            value = getattr(self, name)
+            if isinstance(value, np.ndarray) and value.flags.writeable:
+                value = value.copy()
+                value.setflags(write=False)
+                object.__setattr__(self, name, value)
+
     @property
     def times(self) -> np.ndarray:
         """Residence times k*lag (s) of :attr:`probability`."""

@@ -48,6 +48,7 @@ from scipy.sparse.linalg import splu
 from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
 from cfbmarkov.kinetics import Kinetics, StateKinetics
+from cfbmarkov.kinetics.spec import on_states
 from cfbmarkov.markov.connectivity import states_reaching
 from cfbmarkov.markov.first_passage import (_live_levels, deficit_matrix, rtd_of_split_chain,
                                             split_by_pass)
@@ -387,8 +388,8 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         For a non-linear (custom) law, a carried property with no relaxation, or a model
         without residences.
     """
-    sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
-        model.state_space, model.cell_fields if cell_fields is None else cell_fields)
+    sk = on_states(kinetics, model.state_space,
+                   model.cell_fields if cell_fields is None else cell_fields)
     for name, linear, law in zip(sk.names, sk.linear, sk.laws):
         if not linear:
             raise InputError(f"property {name}: law {law.key} has no exact answer; run the "
@@ -494,8 +495,8 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
         For a non-linear law, a window shorter than a lag, a negative or non-finite
         history, or a model without residences.
     """
-    sk = kinetics if isinstance(kinetics, StateKinetics) else kinetics.per_state(
-        model.state_space, model.cell_fields if cell_fields is None else cell_fields)
+    sk = on_states(kinetics, model.state_space,
+                   model.cell_fields if cell_fields is None else cell_fields)
     for name, linear, law in zip(sk.names, sk.linear, sk.laws):
         if not linear:
             raise InputError(f"property {name}: law {law.key} has no exact answer")

@@ -52,6 +52,32 @@ if TYPE_CHECKING:
 _ATTACHED: "weakref.WeakKeyDictionary[Any, tuple]" = weakref.WeakKeyDictionary()
 
 
+def _read_only(method):
+    """A cached property's array made read-only: the model is immutable, and what it returns
+    is what later questions read."""
+    def wrapped(self):
+        value = method(self)
+        if isinstance(value, np.ndarray):
+            value.setflags(write=False)
+        return value
+
+    wrapped.__doc__, wrapped.__name__ = method.__doc__, method.__name__
+    return wrapped
+
+
+def _whole_numbers(values, name: str) -> np.ndarray:
+    """``values`` as a one-dimensional int64 array, refusing other shapes and fractions."""
+    array = np.asarray(values)
+    if array.ndim != 1:
+        raise InputError(f"{name}: one value a particle, shape (N,), not {array.shape}")
+    if array.dtype.kind == "f":
+        if not (np.isfinite(array) & (array == np.round(array))).all():
+            raise InputError(f"{name}: whole numbers, not fractions")
+    elif array.dtype.kind not in "iu" and array.size:
+        raise InputError(f"{name}: whole numbers, not {array.dtype}")
+    return array.astype(np.int64)
+
+
 @dataclass(frozen=True, eq=False)
 class MarkovModel:
     """A fitted Markov chain model of particle motion; immutable.
@@ -201,6 +227,7 @@ class MarkovModel:
         return Boundary.PERIODIC if self.open_flow is None else Boundary.OPEN
 
     @cached_property
+    @_read_only
     def absorbing_matrix(self) -> np.ndarray:
         """Q = diag(1 - r) P, the sub-stochastic matrix of an open riser's chain (the
         transitions among the states; r leaves through the outlet), float64 [S, S]
@@ -228,6 +255,7 @@ class MarkovModel:
         return int(self.counts.sum())
 
     @cached_property
+    @_read_only
     def unvisited_states(self) -> np.ndarray:
         """States with no outgoing transition in the window, int64 [U].
 
@@ -242,6 +270,7 @@ class MarkovModel:
         return np.flatnonzero(left == 0)
 
     @cached_property
+    @_read_only
     def entered_never_left(self) -> np.ndarray:
         """States entered in the fitting window but never left (e.g. first entered in its
         last frame), int64 [E]: a subset of :attr:`unvisited_states` that is not "never
@@ -271,6 +300,7 @@ class MarkovModel:
         return closed_classes(self.transition_matrix, min_size=2)
 
     @cached_property
+    @_read_only
     def up_fraction(self) -> np.ndarray:
         """Fraction of the i -> j transitions that passed up through the top, float64 [S, S]."""
         if self.pass_fractions is not None:
@@ -279,6 +309,7 @@ class MarkovModel:
         return np.divide(self.counts_up, c, out=np.zeros_like(c), where=c > 0)
 
     @cached_property
+    @_read_only
     def down_fraction(self) -> np.ndarray:
         """Fraction of the i -> j transitions that passed down through the bottom, float64
         [S, S]."""
@@ -292,6 +323,7 @@ class MarkovModel:
         return SparseChain.from_matrix(self.transition_matrix, self.up_fraction, self.down_fraction)
 
     @cached_property
+    @_read_only
     def regime_chain(self) -> np.ndarray | None:
         """The regime chain G (R x R) of a regime model, read off its counts
         (:func:`~cfbmarkov.markov.regime_chain.regime_matrix`; from P itself for a model without
@@ -307,6 +339,7 @@ class MarkovModel:
                                  self.state_space)
 
     @cached_property
+    @_read_only
     def stationary_distribution(self) -> np.ndarray:
         """The long-run distribution over the states, float64 [S], summing to 1 (pi P = pi);
         for a reducible chain, the particle-frames observed in the fitting window (uniform
@@ -435,7 +468,9 @@ class MarkovModel:
         Raises
         ------
         InputError
-            If an initial state lies outside the state space.
+            If the initial states are not whole numbers in one dimension, one lies outside
+            the state space, ``n_steps`` is not a non-negative whole number, or
+            ``initial_laps`` is not N whole numbers.
 
         References
         ----------
@@ -444,9 +479,17 @@ class MarkovModel:
         doi:10.3390/pr13030614 (Eq. 7, the cumulative rule).
         """
         seed = check_seed(seed)
-        initial_states = np.asarray(initial_states)
+        initial_states = _whole_numbers(initial_states, "initial_states")
         if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
             raise InputError("initial states outside the model's state space")
+        if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 0:
+            raise InputError(f"n_steps {n_steps!r}: the number of lags to run, a whole number "
+                             ">= 0")
+        if initial_laps is not None:
+            initial_laps = _whole_numbers(initial_laps, "initial_laps")
+            if initial_laps.shape != initial_states.shape:
+                raise InputError(f"initial_laps holds {initial_laps.size} laps for "
+                                 f"{initial_states.size} particles: one a particle")
         chain, offset, retag = self._chain, None, None
         if self.regime_chain is not None:
             # one regime path for every particle, each moving by the chain conditioned on it

@@ -15,8 +15,8 @@ import numpy as np
 
 from cfbmarkov._console import clock_text, progress_mode, write_line
 from cfbmarkov.errors import InputError
-from cfbmarkov.kinetics import Kinetics
 from cfbmarkov.kinetics.fingerprint import FINGERPRINT_METHOD, property_fingerprint
+from cfbmarkov.kinetics.spec import on_states
 from cfbmarkov.limits import check_disk, check_finite, check_memory, check_seed
 from cfbmarkov.markov.discrete import discretize_frame
 from cfbmarkov.markov.model_file import model_datasets_and_attrs
@@ -110,8 +110,8 @@ def _warn_sample(model: "MarkovModel") -> None:
 
 def _predict(model, trajectories, start, duration, seed, output, progress, kinetics):
     """:func:`predict`, its output claimed."""
-    if isinstance(kinetics, Kinetics):
-        kinetics = kinetics.per_state(model.state_space, model.cell_fields)
+    if kinetics is not None:
+        kinetics = on_states(kinetics, model.state_space, model.cell_fields)
     with opened(trajectories) as traj:
         seed = check_seed(seed)
         duration = check_finite(duration, "duration", "s", positive=True)

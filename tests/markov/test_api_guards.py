@@ -1,0 +1,83 @@
+"""What the Python interface refuses or protects, so that a slip in a notebook gives one
+clear error and never a wrong number: kinetics resolved on another state space, laps and
+steps that do not fit the particles, cached arrays written into, and a block wider than
+the window it is cut from."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics import Kinetics, Property
+from cfbmarkov.kinetics.fields import Constant
+from cfbmarkov.kinetics.laws import FirstOrder
+from cfbmarkov.markov import CellGrid, discretize, fit_model
+from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
+
+@pytest.fixture(scope="module")
+def model(markov_flow, markov_run):
+    return fit_model(markov_run, markov_flow.grid, markov_flow.lag, (2.0, 6.0), "mle")
+
+
+def _kinetics():
+    return Kinetics((Property("X", FirstOrder(), {"rate": Constant(1.1)}),))
+
+
+def test_kinetics_resolved_on_another_grid_are_refused(model, markov_flow, markov_run):
+    """Kinetics resolved on a grid of more states, of fewer, and of the same count
+    (another arrangement) are refused by the exact answers and the Monte Carlo alike; the
+    model's own resolution, or the Kinetics itself, gives the same exit mean."""
+    flow = markov_flow
+    own = _kinetics().per_state(model.state_space)
+    mean = exact_kinetics(model, own)["X"].exit_mean
+    assert exact_kinetics(model, _kinetics())["X"].exit_mean == mean
+    for columns, rows in ((8, 16), (2, 16), (16, 4)):
+        other = _kinetics().per_state(CellGrid(columns, rows, flow.width, flow.height))
+        with pytest.raises(InputError, match="kinetics resolved on .*not on the model's"):
+            exact_kinetics(model, other)
+        with pytest.raises(InputError, match="kinetics resolved on .*not on the model's"):
+            model.predict(markov_run, start=6.0, duration=0.5, seed=1, kinetics=other)
+    with pytest.raises(InputError, match="a Kinetics .* not Property"):
+        exact_kinetics(model, _kinetics().properties[0])
+
+
+def test_monte_carlo_checks_its_particles_laps_and_steps(model):
+    start = np.array([0, 1, 2])
+    states, laps = model.monte_carlo(start, 4, seed=1, initial_laps=[5, 6, 7])
+    np.testing.assert_array_equal(laps[0], [5, 6, 7])
+    for kwargs, message in (({"initial_laps": [5]}, "1 laps for 3 particles"),
+                            ({"initial_laps": [1.5, 2, 3]}, "whole numbers"),
+                            ({"n_steps": 5.5}, "n_steps 5.5"),
+                            ({"n_steps": -3}, "n_steps -3")):
+        options = {"n_steps": 4, **kwargs}
+        with pytest.raises(InputError, match=message):
+            model.monte_carlo(start, seed=1, **options)
+    for states in (np.zeros((2, 3), int), np.array([0.9, 2.0])):
+        with pytest.raises(InputError, match="initial_states"):
+            model.monte_carlo(states, 4)
+
+
+def test_cached_answers_cannot_be_written_into(model):
+    """The model is immutable: the arrays it caches and returns are read-only, so a later
+    question gets the same answer whatever was done to an earlier one's arrays."""
+    rtd = model.rtd()
+    mean = rtd.mean
+    for array in (rtd.probability, rtd.entry_distribution, model.stationary_distribution,
+                  model.up_fraction, model.down_fraction):
+        with pytest.raises(ValueError, match="read-only"):
+            array[:1] = 0.0
+    assert model.rtd().mean == mean
+    entry = np.full(model.n_states, 1.0 / model.n_states)
+    from cfbmarkov.markov.first_passage import ResidenceTimeDistribution
+
+    ResidenceTimeDistribution(model.lag, np.array([0.5, 0.5]), 0.0, entry)
+    entry[0] = 0.0                      # the caller's own array stays writable
+
+
+def test_a_block_reaching_outside_its_window_records_what_it_holds(markov_flow, markov_run):
+    window = discretize(markov_run, markov_flow.grid, markov_flow.lag, (4.0, 6.0))
+    block = window.block(2.0, 5.0)
+    assert block.window == (4.0, 5.0) and block.times[0] >= 4.0 - 1e-9
+    assert window.block(4.5, 5.5).window == (4.5, 5.5)
