@@ -130,3 +130,22 @@ def test_compare_baseline_of_a_pooled_model_pools_its_runs_windows(tmp_path, cap
             counts.append(residence_times(traj, (0.5, 2.0), use_events=False,
                                           lag_frames=traj.lag_frames(FLOW.lag)).count)
     assert baseline["rt_count"] == sum(counts) and min(counts) > 0
+
+
+def test_assess_fit_of_a_pooled_model_takes_each_run_and_its_window(runs):
+    """``assess_fit`` of a model fitted on two runs with different windows, without
+    ``runs=`` or ``windows=``: the runs and windows the model records, the same interval as
+    given them by hand."""
+    from cfbmarkov.analysis.fit_checks import assess_fit
+
+    windows = [(0.5, 2.5), (0.25, 2.75)]
+    with contextlib.ExitStack() as stack:
+        opened = [stack.enter_context(Trajectories(p)) for p in runs[:2]]
+        data = discretize_runs(opened, FLOW.grid, FLOW.lag, windows)
+    pooled = estimator_from_name("mle", FLOW.grid, FLOW.lag).fit(data)
+    assert list(pooled.run_windows) == windows
+    found = assess_fit(pooled, resamples=20, verdict=False)
+    given = assess_fit(pooled, [str(p) for p in runs[:2]], windows, resamples=20,
+                       verdict=False)
+    assert found.uncertainty is not None
+    assert found.uncertainty.rt_mean_interval == given.uncertainty.rt_mean_interval

@@ -106,9 +106,18 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     pred = tmp_path / "pred.h5"
     assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
                  "0.5", "--duration", "1", "-o", str(pred), "-q"]) == 0
+    capsys.readouterr()
+    again = tmp_path / "pred-json.h5"
+    assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "1", "-o", str(again), "-q", "--json"]) == 0
+    carlo = json.loads(capsys.readouterr().out)["monte_carlo"]
+    assert out["monte_carlo"] is None and set(carlo) == {"X", "T"}
     with h5py.File(pred) as f:
         values = f["properties/X"][()]
         assert f["properties/X"].attrs["start"] == "entry"
+        # a periodic riser: every particle present, the bed mean over all of them
+        assert carlo["X"]["bed_mean"][1] == pytest.approx(float(np.mean(values[-1])), rel=1e-12)
+        assert carlo["X"]["bed_mean"][0] == 0.0 and carlo["X"]["times"] == [0.5, 1.5]
         assert values.shape == f["frames/lap"].shape
         assert np.all((values >= 0) & (values <= 1))
         assert np.all(np.diff(values, axis=0)[np.diff(f["frames/lap"][()], axis=0) == 0]

@@ -81,3 +81,42 @@ def test_a_block_reaching_outside_its_window_records_what_it_holds(markov_flow, 
     block = window.block(2.0, 5.0)
     assert block.window == (4.0, 5.0) and block.times[0] >= 4.0 - 1e-9
     assert window.block(4.5, 5.5).window == (4.5, 5.5)
+
+
+def test_kinetics_built_wrongly_in_python_say_how_to_build_them(model):
+    """A law class or name where an instance belongs, one Property where a tuple belongs
+    and a flat array of per-cell values each give one InputError naming the fix; an array
+    laid out as the grid is ``ByCell.from_grid``, equal to the table of the same values."""
+    from cfbmarkov.kinetics.fields import ByCell
+
+    with pytest.raises(InputError, match="the class FirstOrder is not a law"):
+        Property("X", FirstOrder, {"rate": Constant(1.0)})
+    with pytest.raises(InputError, match="'first-order' is not a law"):
+        Property("X", "first-order", {"rate": Constant(1.0)})
+    one = Property("X", FirstOrder(), {"rate": Constant(1.0)})
+    with pytest.raises(InputError, match=r"as a tuple, Kinetics\(\(Property"):
+        Kinetics(one)
+    space = model.state_space
+    values = np.arange(space.rows * space.columns, dtype=float).reshape(space.rows,
+                                                                         space.columns) / 10
+    flat = Kinetics((Property("X", FirstOrder(), {"rate": ByCell(values.ravel())}),))
+    with pytest.raises(InputError, match=r"ByCell.from_grid\(values\)"):
+        flat.per_state(space)
+    grid = Kinetics((Property("X", FirstOrder(), {"rate": ByCell.from_grid(values)}),))
+    table = np.array([[c, r, values[r, c]] for r in range(space.rows)
+                      for c in range(space.columns)])
+    by_table = Kinetics((Property("X", FirstOrder(), {"rate": ByCell(table)}),))
+    np.testing.assert_array_equal(grid.per_state(space).rate, by_table.per_state(space).rate)
+    np.testing.assert_array_equal(grid.per_state(space).rate[0], values.ravel())
+
+
+def test_compare_runs_takes_paths_as_open_files(model, markov_run, tmp_path):
+    from cfbmarkov.analysis.compare import compare_runs
+    from cfbmarkov.trajectories import Trajectories
+
+    prediction = tmp_path / "pred.h5"
+    model.predict(markov_run, start=6.0, duration=2.0, seed=3, output=prediction)
+    by_path = compare_runs(markov_run, prediction, (6.0, 8.0))
+    with Trajectories(markov_run) as ref, Trajectories(prediction) as pred:
+        opened = compare_runs(ref, pred, (6.0, 8.0))
+    assert by_path.md_rtd == opened.md_rtd and by_path.mixing_rms == opened.mixing_rms

@@ -272,7 +272,7 @@ class RunComparison:
 BASES = ("frames", "events")
 
 
-def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: float | None = None,
+def compare_runs(ref, pred, window, *, bin_width: float | None = None,
                  md_order: float = 2.0, basis: str = "frames",
                  long_run_span: tuple[float, float] | None = None,
                  allow_empty: bool = False) -> RunComparison:
@@ -280,9 +280,9 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
 
     Parameters
     ----------
-    ref, pred : Trajectories
-        Open reference (e.g. CFD-DEM) and model (e.g. prediction) files: the same riser
-        and the same particle ids.
+    ref, pred : Trajectories, str or os.PathLike
+        Reference (e.g. CFD-DEM) and model (e.g. prediction) files, open or by path: the
+        same riser and the same particle ids.
     window : (float, float)
         Analysis window (start, stop), s.
     bin_width : float, optional
@@ -327,6 +327,13 @@ def compare_runs(ref: Trajectories, pred: Trajectories, window, *, bin_width: fl
     (Eq. 9), mixing curves of Fig. 11.
     The paper: Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614.
     """
+    if not isinstance(ref, Trajectories) or not isinstance(pred, Trajectories):
+        from cfbmarkov.trajectories import opened
+
+        with opened(ref) as ref_run, opened(pred) as pred_run:
+            return compare_runs(ref_run, pred_run, window, bin_width=bin_width,
+                                md_order=md_order, basis=basis, long_run_span=long_run_span,
+                                allow_empty=allow_empty)
     start, stop = check_parameters(window, bin_width, md_order)
     bin_width_from = "given"
     if bin_width is None:

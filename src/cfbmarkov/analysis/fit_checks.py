@@ -43,9 +43,11 @@ def assess_fit(model, runs: Sequence | None = None,
     model : MarkovModel
         A model fitted on trajectory files (``model.source`` names them).
     runs : sequence of str, os.PathLike or Trajectories, optional
-        The run(s) it was fitted on; default ``[model.source]`` (a fit on one file).
+        The run(s) it was fitted on; default the files ``model.source`` names (one, or
+        each run of a pooled fit).
     windows : sequence of (float, float), optional
-        The fitting window (s) of each run; default ``[model.window]``.
+        The fitting window (s) of each run; default ``model.window``, or for a pooled fit
+        each run's own (``model.run_windows``).
     level : float, optional
         Coverage of the interval (default 0.9).
     resamples : int, optional
@@ -140,15 +142,28 @@ def record_fitting_data(model, runs: Sequence | None = None,
 
 
 def _runs_and_windows(model, runs, windows) -> tuple[list, list]:
-    """The runs and their fitting windows: as given, else the model's source and window;
-    one window per run."""
+    """The runs and their fitting windows: as given, else the model's source and window (a
+    model fitted on several runs: each run and its own window, ``run_windows``); one window
+    per run."""
+    pooled = (isinstance(model.source, (list, tuple)) and len(model.source) > 1
+              and model.run_windows is not None)
     if runs is None:
-        if not model.source or not isinstance(model.source, str):
+        if pooled:                       # a fit on several runs names each and its window
+            runs = list(model.source)
+        elif isinstance(model.source, (list, tuple)) and len(model.source) == 1:
+            runs = list(model.source)
+        elif not model.source or not isinstance(model.source, str):
             raise InputError("the model names no trajectory file it was fitted on: give "
                              "runs= and windows= (the files and fitting windows)")
-        runs = [model.source]
+        else:
+            runs = [model.source]
     runs = list(runs)
-    windows = [model.window] * len(runs) if windows is None else list(windows)
+    if windows is None:
+        if pooled and len(runs) == len(model.run_windows):
+            windows = [tuple(w) for w in model.run_windows]
+        else:
+            windows = [model.window] * len(runs)
+    windows = list(windows)
     if len(windows) != len(runs):
         raise InputError(f"{len(runs)} runs and {len(windows)} windows: give one fitting "
                          "window per run")

@@ -115,6 +115,8 @@ def cmd_react(args) -> int:
                               for (name, a), p in zip(answers.items(), kinetics.properties)},
                "level": args.level, "interval_resamples": taken,
                "exact_seconds": seconds, "prediction": args.output,
+               "monte_carlo": (None if args.output is None else
+                               _monte_carlo_bed_means(args.output, kinetics.names)),
                "cell_fields_from": fields_from, "direction": direction,
                "grid": {"columns": space.columns, "rows": space.rows,
                         "depth_columns": space.depth_columns,
@@ -205,20 +207,29 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction):
     return intervals, kinetics_resamples(model.n_states, args.resamples) if means else 0
 
 
-def _print_monte_carlo(prediction, names) -> None:
-    """The Monte Carlo's bed means at its first and last frames (over the particles
-    present), and where to judge it: its exits carry the start's transient."""
+def _monte_carlo_bed_means(prediction, names) -> dict:
+    """The Monte Carlo's bed mean of each property at its first and last frames, over the
+    particles present: ``{name: {"times": [t0, t1], "bed_mean": [m0, m1]}}``."""
     import numpy as np
 
     from cfbmarkov.trajectories import Trajectories
 
+    out = {}
     with Trajectories(prediction) as pred:
-        t0, t1 = float(pred.times[0]), float(pred.times[-1])
-        parts = []
+        times = [float(pred.times[0]), float(pred.times[-1])]
         for name in names:
-            first = [pred.property_values(name, k)[pred.present(k)] for k in (0, -1)]
-            means = [float(np.nanmean(v)) if v.size else float("nan") for v in first]
-            parts.append(f"{name} {means[0]:.6g} at {t0:g} s, {means[1]:.6g} at {t1:g} s")
+            values = [pred.property_values(name, k)[pred.present(k)] for k in (0, -1)]
+            out[name] = {"times": times, "bed_mean": [float(np.nanmean(v)) if v.size
+                                                      else float("nan") for v in values]}
+    return out
+
+
+def _print_monte_carlo(prediction, names) -> None:
+    """The Monte Carlo's bed means at its first and last frames (over the particles
+    present), and where to judge it: its exits carry the start's transient."""
+    parts = [f"{name} {m['bed_mean'][0]:.6g} at {m['times'][0]:g} s, {m['bed_mean'][1]:.6g} "
+             f"at {m['times'][1]:g} s"
+             for name, m in _monte_carlo_bed_means(prediction, names).items()]
     print(f"Monte Carlo, bed mean over the particles present: {'; '.join(parts)} (its "
           "particles start from the values at the start, so a window shorter than a few "
           "E(RT) carries that transient; `cfbmarkov compare RUN PREDICTION --kinetics FILE` "

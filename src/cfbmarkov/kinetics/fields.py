@@ -135,8 +135,45 @@ class ByCell(CellParameter):
     key: str = "value_by_cell"
     lines: np.ndarray | None = None
 
+    @classmethod
+    def from_grid(cls, values, source: str = "array", key: str = "value_by_cell") -> "ByCell":
+        """A value per cell from an array laid out as the grid.
+
+        Parameters
+        ----------
+        values : array_like of float, shape (rows, columns) or (rows, depth_columns, columns)
+            ``values[row, col]`` (row 0 at the bottom), or ``values[row, depth, col]``.
+        source, key : str, optional
+            For messages.
+
+        Returns
+        -------
+        ByCell
+
+        Raises
+        ------
+        InputError
+            If ``values`` is not two- or three-dimensional.
+        """
+        v = np.asarray(values, dtype=np.float64)
+        if v.ndim == 2:
+            rows, cols = np.meshgrid(np.arange(v.shape[0]), np.arange(v.shape[1]), indexing="ij")
+            table = np.column_stack([cols.ravel(), rows.ravel(), v.ravel()])
+        elif v.ndim == 3:
+            rows, depth, cols = np.meshgrid(*(np.arange(n) for n in v.shape), indexing="ij")
+            table = np.column_stack([cols.ravel(), rows.ravel(), depth.ravel(), v.ravel()])
+        else:
+            raise InputError(f"{source} ({key}): values of shape (rows, columns) or (rows, "
+                             f"depth_columns, columns), not {v.shape}")
+        return cls(table, source, key)
+
     def per_cell(self, space, fields=None):
         t = np.asarray(self.table, dtype=np.float64)
+        if t.ndim != 2 or t.shape[1] not in (3, 4):
+            raise InputError(f"{self.source} ({self.key}): a table of rows col, row[, depth], "
+                             f"value, shape (R, 3) or (R, 4), not {t.shape}; a value per "
+                             "cell in an array of the grid's shape is "
+                             "ByCell.from_grid(values)")
         cols = t[:, 0].astype(np.int64)
         rows = t[:, 1].astype(np.int64)
         depth = t[:, 2].astype(np.int64) if t.shape[1] == 4 else np.zeros(len(t), np.int64)

@@ -81,6 +81,15 @@ class Property:
         if self.start not in STARTS:
             raise InputError(f"property {self.name}: start {self.start!r} is not one of "
                              f"{', '.join(STARTS)}")
+        if not isinstance(self.law, Law):
+            what = (f"the class {self.law.__name__}" if isinstance(self.law, type)
+                    else repr(self.law))
+            raise InputError(f"property {self.name}: law {what} is not a law; give one, such "
+                             f"as FirstOrder() or LAWS['first-order']() (laws: "
+                             f"{', '.join(LAWS)}, or Custom(...))")
+        if not isinstance(self.parameters, Mapping):
+            raise InputError(f"property {self.name}: parameters as a dict of name to "
+                             "Constant(...), ByCell(...) or FromField(...)")
         names = set(self.law.parameter_names)
         given = set(self.parameters)
         if names - given:
@@ -268,7 +277,12 @@ class Kinetics:
     source: str = ""
 
     def __post_init__(self):
+        if isinstance(self.properties, Property):
+            raise InputError("kinetics: give the properties as a tuple, "
+                             "Kinetics((Property(...),)), not one Property")
         props = tuple(self.properties)
+        if any(not isinstance(p, Property) for p in props):
+            raise InputError("kinetics: every item must be a Property(name, law, parameters)")
         if not props:
             raise InputError(f"{self.source or 'kinetics'}: no property; add a [[property]] "
                              "table")
