@@ -95,6 +95,33 @@ def test_react_resamples_give_the_exit_means_intervals(fitted, tmp_path, capsys)
     assert "at least 10" in capsys.readouterr().err
 
 
+def test_react_resamples_give_the_activity_after_passes_its_intervals(fitted, tmp_path,
+                                                                      capsys):
+    """A carried deactivation, whose steady state is 0: its mean after each number of
+    passes gets an interval from the same resamples, around the exact value, each later
+    pass's below the earlier's, in the text and in --json."""
+    _, _, model = fitted
+    kin = _write(tmp_path, '[[property]]\nname = "a"\nlaw = "deactivation"\nrate = 0.8\n'
+                           'start = "carried"\n')
+    argv = ["react", str(model), "--kinetics", str(kin), "--resamples", "20",
+            "--passes", "1", "3"]
+    assert main(argv + ["--json"]) == 0
+    after = json.loads(capsys.readouterr().out)["properties"]["a"]["after_passes"]
+    bounds = []
+    for n in ("1", "3"):
+        lo, hi = after[n]["mean_interval"]
+        assert lo < after[n]["mean"] < hi
+        bounds.append((lo, hi))
+    assert bounds[1][1] < bounds[0][0]                # three passes leave less than one
+    assert main(argv) == 0
+    text = capsys.readouterr().out
+    assert (f"90 % intervals of a's mean after 1 / 3 passes: {bounds[0][0]:.6g}-"
+            f"{bounds[0][1]:.6g} / {bounds[1][0]:.6g}-{bounds[1][1]:.6g}") in text
+    assert main(["react", str(model), "--kinetics", str(kin), "--json", "--passes", "1"]) == 0
+    assert json.loads(capsys.readouterr().out)["properties"]["a"]["after_passes"]["1"][
+        "mean_interval"] is None
+
+
 def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     folder, run, model = fitted
     kin = _write(tmp_path, GOOD, RATES)

@@ -316,7 +316,7 @@ def kinetics_resamples(n_states: int, resamples: int) -> int:
 
 
 def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
-                          direction: str = "up"):
+                          direction: str = "up", passes=(), after_passes=None):
     """Exact exit means of each property on block-bootstrap resamples of the model's fitting
     window (:func:`cfbmarkov.analysis.bootstrap.block_bootstrap_models`, 10 blocks, seed 0),
     what the model's interval of an exit mean is formed from (`compare --kinetics`,
@@ -338,6 +338,12 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
         Appended to: why fewer resamples, or none, were taken.
     direction : {"up", "down"}, optional
         The direction exits are counted in.
+    passes : sequence of int, optional
+        Numbers of passes after which a carried property's mean exit value is also taken
+        (:meth:`~cfbmarkov.markov.kinetics_exact.PropertyAnswer.after_passes`).
+    after_passes : dict, optional
+        Filled, for each carried property and each of ``passes``, with
+        ``after_passes[(name, n)]``: its mean after n passes over the same resamples.
 
     Returns
     -------
@@ -371,6 +377,9 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
                               deficit_levels=BOOTSTRAP_DEFICIT_LEVELS)
         scale = {name: full[name].exit_mean / part[name].exit_mean for name in full
                  if part[name].exit_mean != 0}
+        scale.update({(name, n): full[name].after_passes(n)[0] / part[name].after_passes(n)[0]
+                      for name in full if full[name].start == "carried" for n in passes
+                      if part[name].after_passes(n)[0] != 0})
     depth = None if depth is None else min(depth, BOOTSTRAP_DEFICIT_LEVELS)
     try:
         drawn = block_bootstrap_models(model, blocks=10, resamples=resamples, seed=0)
@@ -384,6 +393,10 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
                 continue
             for name, answer in answers.items():
                 means[name].append(answer.exit_mean * scale.get(name, 1.0))
+                if after_passes is not None and answer.start == "carried":
+                    for n in passes:
+                        after_passes.setdefault((name, n), []).append(
+                            answer.after_passes(n)[0] * scale.get((name, n), 1.0))
     except InputError as exc:
         warnings.append(f"kinetics: no model intervals ({exc})")
         return None

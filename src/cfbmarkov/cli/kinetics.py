@@ -104,7 +104,8 @@ def cmd_react(args) -> int:
     # exits are counted in the model's direction: down through the bottom for a periodic
     # model of a net downflow (docs/definitions.md, Net downflow), as fit and rtd say
     direction = model.flow_direction
-    intervals, taken = _exit_mean_intervals(args, model, kinetics, fields, answers, direction)
+    intervals, taken, after_intervals = _exit_mean_intervals(args, model, kinetics, fields,
+                                                             answers, direction, passes)
     for line in verdict:
         print(f"warning: {one_line(line)}", file=sys.stderr)
     if args.json:
@@ -123,6 +124,9 @@ def cmd_react(args) -> int:
                         "bed_mean_by_cell": "cell = (row * depth_columns + depth column) * "
                                             "columns + column, from the bottom left"},
                "warnings": [one_line(n) for n in notes + verdict]}
+        for name, entry in out["properties"].items():
+            for n, after in entry.get("after_passes", {}).items():
+                after["mean_interval"] = after_intervals.get((name, int(n)))
         print(json.dumps(jsonable(out)))
         return 0
     if answers:
@@ -160,6 +164,12 @@ def cmd_react(args) -> int:
                       f"{a.initial:g}: exit mean {' / '.join(f'{m:.6g}' for m, _ in after)}"
                       f" (SD {' / '.join(f'{sd:.3g}' for _, sd in after)}; --passes N for "
                       "others)")
+                bounds = [after_intervals.get((p.name, n)) for n in passes]
+                if args.resamples:
+                    print(f"  {100 * args.level:g} % intervals of {p.name}'s mean after "
+                          f"{' / '.join(map(str, passes))} passes: "
+                          + " / ".join("none" if b is None else f"{b[0]:.6g}-{b[1]:.6g}"
+                                       for b in bounds))
             elif p.start == "reference" and args.init is None:
                 print(f"  {p.name} (start = reference): the exact answers are those of a fresh "
                       f"feed entering at {p.initial:g} (start = entry); the reference's values "
@@ -176,14 +186,15 @@ def cmd_react(args) -> int:
     return 0
 
 
-def _exit_mean_intervals(args, model, kinetics, fields, answers, direction):
+def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, passes=()):
     """The exit means' intervals at ``args.level`` from ``args.resamples`` block-bootstrap
     resamples of the model's fitting window, each solved exactly
     (:func:`cfbmarkov.analysis.kinetics_compare.bootstrap_exit_means`, as `compare
     --kinetics` forms the model's), centred on the exact values: ({name: [lo, hi] or None},
-    resamples solved). Warnings go to stderr."""
+    resamples solved, {(name, n): [lo, hi] or None} of the carried properties' means after
+    n of ``passes``). Warnings go to stderr."""
     if not args.resamples or not answers:
-        return {}, 0
+        return {}, 0, {}
     from cfbmarkov.analysis.bootstrap import interval_bounds
     from cfbmarkov.analysis.intervals import resolve_source
     from cfbmarkov.analysis.kinetics_compare import bootstrap_exit_means, kinetics_resamples
@@ -191,8 +202,10 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction):
     import numpy as np
 
     notes: list[str] = []
+    after: dict = {}
     means = bootstrap_exit_means(resolve_source(model, [args.run] if args.run else []),
-                                 kinetics, fields, args.resamples, notes, direction=direction)
+                                 kinetics, fields, args.resamples, notes, direction=direction,
+                                 passes=passes, after_passes=after)
     for note in notes:
         print(f"warning: {one_line(note)}", file=sys.stderr)
     intervals = {}
@@ -204,7 +217,16 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction):
             continue
         lo, hi = interval_bounds(answer.exit_mean, boot, answer.exit_mean, args.level)
         intervals[name] = [float(lo), float(hi)]
-    return intervals, kinetics_resamples(model.n_states, args.resamples) if means else 0
+    after_intervals = {}
+    for (name, n), values in after.items():
+        boot = np.asarray(values, dtype=float)
+        boot = boot[np.isfinite(boot)]
+        point = answers[name].after_passes(n)[0]
+        after_intervals[(name, n)] = (None if boot.size < 10 else
+                                      [float(b) for b in interval_bounds(point, boot, point,
+                                                                         args.level)])
+    return (intervals, kinetics_resamples(model.n_states, args.resamples) if means else 0,
+            after_intervals)
 
 
 def _monte_carlo_bed_means(prediction, names) -> dict:
