@@ -212,6 +212,30 @@ def test_pept_point_data_needs_resampling_and_then_gives_the_right_track(tmp_pat
     assert laps[ms < 750].max() == 0 and laps[-1] == 1
 
 
+def test_pept_gaps_longer_than_the_default_max_gap_are_warned(tmp_path, capsys):
+    """Resampled without --max-gap (default: the resample step), the irregular samples of
+    the pept file leave the tracer absent many times, each gap a broken residence: a
+    warning counts them and names --max-gap; with --max-gap given, none."""
+    from tests.io.test_csv_field_cases import FIELD as field
+
+    units = ["--format", "csv", "--vertical-axis", "y", "--drop-depth", "--length-unit", "mm",
+             "--time-unit", "ms", "--width", "0.09", "--height", "0.95", "--resample", "0.005"]
+    source = str(field / "pept-pointdata.csv")
+    assert cli_main(["import", source, "-o", str(tmp_path / "d.h5"), *units]) == 0
+    err = capsys.readouterr().err
+    with Trajectories(tmp_path / "d.h5") as t:
+        present = t.present()[:, 0]
+    after = present[int(np.argmax(present)):]        # from the tracer's first sample on
+    back = int(np.count_nonzero(~after[:-1] & after[1:]))       # absent, then present again
+    assert back > 1
+    assert (f"warning: the tracers are absent {back} time(s) between two of their samples "
+            "further apart than --max-gap, by default the resample step 0.005 s") in err
+    assert "give a larger --max-gap (such as 0.02)" in err
+    assert cli_main(["import", source, "-o", str(tmp_path / "g.h5"), *units,
+                     "--max-gap", "0.02"]) == 0
+    assert "warning:" not in capsys.readouterr().err
+
+
 def test_pept_style_file_at_even_times_reads_right(tmp_path):
     """The pept layout ('# t x y z error', spaces, mm and ms, no id) where the times are even."""
     t = np.arange(0.0, 50.0, 2.0)                       # ms

@@ -96,7 +96,9 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
     resample : float, optional
         CSV: interpolate tracks with irregular times onto frames this far apart (s).
     max_gap : float, optional
-        With ``resample``: a particle is absent between samples further apart (s).
+        With ``resample``: a particle is absent between samples further apart (s); default
+        the resample step (``cfbmarkov import`` warns where that leaves tracers absent
+        between their samples).
     length_unit : {"m", "cm", "mm"}, optional
         Unit of a CSV file's positions (and, over ``time_unit``, velocities) where its header
         gives none; default m (CSV only).

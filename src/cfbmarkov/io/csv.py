@@ -523,6 +523,7 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     positions = np.clip(tracks.positions, 0.0, extent)
     parameters = _parameters(path, layout, riser, "resampled")
     parameters.update({"resample": interval, "max_gap": interval if max_gap is None else max_gap,
+                       "max_gap_from": "--max-gap" if max_gap is not None else "default",
                        "velocity_columns": [], "samples": int(keep.sum()),
                        "laps_from": ("minimal-image rule between samples" if periodic
                                      else "none (open riser)")})

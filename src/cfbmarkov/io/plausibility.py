@@ -150,6 +150,44 @@ def presence_warnings(traj) -> list[str]:
             "coordinates) against the riser's walls"]
 
 
+def gap_warnings(traj) -> list[str]:
+    """A warning where a resampled import's tracers are absent between samples further apart
+    than the default ``--max-gap`` (the resample step) and present again after: on
+    irregularly sampled tracks (PEPT) each such gap breaks a residence, which a larger
+    ``--max-gap`` would bridge where the tracer stayed in the riser.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+
+    Returns
+    -------
+    list of str
+    """
+    p = traj.parameters
+    if not p.get("resample") or p.get("max_gap_from") != "default" or not traj.has_absences:
+        return []
+    seen = np.zeros(traj.n_particles, dtype=bool)
+    previous = np.zeros(traj.n_particles, dtype=bool)
+    gaps = 0
+    for start in range(0, traj.n_frames, 4096):        # blocks of frames: bounded memory
+        present = traj.present(slice(start, start + 4096))
+        rows = np.vstack([previous[None, :], present])
+        back = ~rows[:-1] & rows[1:]                   # absent, then present again
+        gaps += int(np.count_nonzero(back & np.logical_or.accumulate(
+            np.vstack([seen[None, :], rows[1:-1]]), axis=0)))
+        seen |= present.any(axis=0)
+        previous = present[-1]
+    if not gaps:
+        return []
+    step = float(p["resample"])
+    return [f"the tracers are absent {gaps} time(s) between two of their samples further "
+            f"apart than --max-gap, by default the resample step {step:g} s, and each such "
+            "gap breaks a residence; where the tracers stayed in the riser between samples, "
+            f"give a larger --max-gap (such as {4 * step:g})"]
+
+
 def median_stored_speed(traj) -> float:
     """The median speed (m/s) of the non-zero velocities stored in the file, at the frames
     that :func:`median_speed` samples; NaN where the file stores none."""
