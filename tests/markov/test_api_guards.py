@@ -120,3 +120,13 @@ def test_compare_runs_takes_paths_as_open_files(model, markov_run, tmp_path):
     with Trajectories(markov_run) as ref, Trajectories(prediction) as pred:
         opened = compare_runs(ref, pred, (6.0, 8.0))
     assert by_path.md_rtd == opened.md_rtd and by_path.mixing_rms == opened.mixing_rms
+
+
+def test_propagate_refuses_negative_mass_and_broken_steps(model):
+    s0 = np.zeros(model.n_states)
+    s0[0] = 1.0
+    assert model.propagate(s0, 3).shape == (4, model.n_states)
+    for initial, steps, message in ((-s0, 3, "non-negative"), (s0 * np.nan, 3, "finite"),
+                                    (s0, -1, "steps -1"), (s0, 5.9, "steps 5.9")):
+        with pytest.raises(InputError, match=message):
+            model.propagate(initial, steps)

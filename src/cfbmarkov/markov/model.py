@@ -352,10 +352,29 @@ class MarkovModel:
 
     # -- propagation (Eq. 5, 6, 8) -----------------------------------------------------
     def propagate(self, initial, steps: int, outflow: bool = False) -> np.ndarray:
-        """State vectors from ``initial`` by S(t + lag) = S(t) P, lag by lag (Eq. 5-6), float64
-        [steps + 1, S]; an open riser's by its absorbing matrix. See
-        :func:`cfbmarkov.markov.propagation.propagate` for the parameters, the returned
-        values and the errors raised."""
+        """State vectors from ``initial`` by S(t + lag) = S(t) P, lag by lag (Eq. 5-6); an
+        open riser's by its absorbing matrix (:func:`cfbmarkov.markov.propagation.propagate`).
+
+        Parameters
+        ----------
+        initial : array_like of float, shape (S,)
+            S(0), non-negative.
+        steps : int
+            Number of lags to propagate, >= 0.
+        outflow : bool, optional
+            Remove the mass that passes up through the top.
+
+        Returns
+        -------
+        ndarray of float64, shape (steps + 1, S)
+            S(k lag) for k = 0 .. steps; row 0 is ``initial``.
+
+        Raises
+        ------
+        InputError
+            For an ``initial`` of another shape, negative or not finite, or ``steps`` not a
+            whole number >= 0.
+        """
         return propagation.propagate(self, initial, steps, outflow)
 
     def steps_for(self, time: float, name: str = "time") -> int:
@@ -391,9 +410,20 @@ class MarkovModel:
 
     def batch_injection_maps(self, times: Sequence[float], outflow: bool = False) -> np.ndarray:
         """Eq. (8): where a batch fed evenly over the inlet cells at t = 0 is at ``times``
-        (s), float64 [len(times), rows, columns]. See
-        :func:`cfbmarkov.markov.propagation.batch_injection_maps` for the parameters, the
-        returned values and the errors raised."""
+        (:func:`cfbmarkov.markov.propagation.batch_injection_maps`).
+
+        Parameters
+        ----------
+        times : sequence of float
+            Times (s) after the injection, whole multiples of the lag.
+        outflow : bool, optional
+            Remove the mass that leaves up through the top.
+
+        Returns
+        -------
+        ndarray of float64, shape (len(times), rows, columns)
+            Probability per cell at each time; row 0 is the bottom (the paper's Fig. 4-7).
+        """
         return propagation.batch_injection_maps(self, times, outflow)
 
     # -- residence times (cfbmarkov.markov.model_rtd) ---------------------------------
@@ -508,9 +538,23 @@ class MarkovModel:
                          self.coherence)
 
     def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """States [N], positions [N, 2] (m) and laps [N] of the particles in the frame at
-        ``start`` (s); see :func:`cfbmarkov.markov.prediction.initial_states` for the
-        parameters, the returned values and the errors raised."""
+        """The particles' states, positions and laps in the frame at ``start``
+        (:func:`cfbmarkov.markov.prediction.initial_states`: what a prediction starts from).
+
+        Parameters
+        ----------
+        trajectories : str, os.PathLike or Trajectories
+            The file whose frame at ``start`` gives them.
+        start : float
+            The frame's time (s).
+
+        Returns
+        -------
+        states : ndarray of int, shape (N,)
+        positions : ndarray of float64, shape (N, 2) or (N, 3)
+            m.
+        laps : ndarray of int, shape (N,)
+        """
         from cfbmarkov.markov import prediction
 
         return prediction.initial_states(self, trajectories, start)
@@ -519,9 +563,39 @@ class MarkovModel:
                 output: str | os.PathLike | None = None, progress: bool | str = False,
                 kinetics=None, force: bool = False):
         """Monte Carlo prediction (Eq. 7) from the particles' states in the frame at
-        ``start`` (s) for ``duration`` (s), written as a trajectory file when ``output`` is
-        given; see :func:`cfbmarkov.markov.prediction.predict` for the parameters, the
-        returned values and the errors raised."""
+        ``start``, written as a trajectory file when ``output`` is given
+        (:func:`cfbmarkov.markov.prediction.predict`, which details each parameter).
+
+        Parameters
+        ----------
+        trajectories : str, os.PathLike or Trajectories
+            The file whose frame at ``start`` gives the initial states.
+        start, duration : float
+            Start time and length of the prediction (s); ``duration`` a whole number of lags.
+        seed : int, optional
+            Seed of the Monte Carlo: the same prediction for any thread count.
+        output : str or os.PathLike, optional
+            Write the prediction as a trajectory file.
+        progress : bool or {"bar", "lines"}, optional
+            Show progress on stderr.
+        kinetics : Kinetics or StateKinetics, optional
+            Particle properties carried along the paths, stored per frame.
+        force : bool, optional
+            Replace an existing ``output`` that is a run or a model file.
+
+        Returns
+        -------
+        pathlib.Path or tuple
+            The output path, or (times [K+1] s, states [K+1, N], laps [K+1, N]) without one
+            (and the properties [P, K+1, N] as a fourth item with ``kinetics``).
+
+        Raises
+        ------
+        InputError
+            For a file that does not fit the model or lacks the frame at ``start``, a
+            ``duration`` that is not a whole number of lags, kinetics of another state
+            space, or an output that cannot be written.
+        """
         from cfbmarkov.markov import prediction
 
         return prediction.predict(self, trajectories, start, duration, seed, output, progress,

@@ -47,7 +47,8 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     Raises
     ------
     InputError
-        If ``initial`` does not have shape (S,).
+        If ``initial`` does not have shape (S,) or holds a negative or non-finite entry, or
+        ``steps`` is not a whole number >= 0.
 
     References
     ----------
@@ -58,6 +59,12 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     s0 = np.asarray(initial, dtype=np.float64)
     if s0.shape != (model.n_states,):
         raise InputError(f"initial distribution has shape {s0.shape}, expected ({model.n_states},)")
+    if not (np.isfinite(s0).all() and (s0 >= 0).all()):
+        raise InputError("initial distribution: finite, non-negative probabilities (or "
+                         "masses) per state")
+    if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
+        raise InputError(f"steps {steps!r}: the number of lags to propagate, a whole number "
+                         ">= 0")
     if model.open_flow is not None:
         p = model.absorbing_matrix
     elif outflow:
