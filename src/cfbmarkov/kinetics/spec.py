@@ -562,6 +562,15 @@ def _property(table, index: int, path: Path) -> Property:
         raise InputError(f"{path}: {exc}") from None
 
 
+def _toml_text(value) -> str:
+    """A value as the TOML file spells it (``true``, ``"text"``), for messages."""
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, str):
+        return f'"{value}"'
+    return repr(value)
+
+
 def _finite(value) -> bool:
     return (isinstance(value, (int, float)) and not isinstance(value, bool)
             and math.isfinite(value))
@@ -583,7 +592,7 @@ def _parameter(table, p: str, where: str, path: Path, law: Law) -> CellParameter
                          f"{p}_from instead of {key})")
     if key == p:
         if not _finite(value) or (not signed and value < 0):
-            raise InputError(f"{where}: {p} = {value!r} must be a finite number"
+            raise InputError(f"{where}: {p} = {_toml_text(value)} must be a finite number"
                              + ("" if signed else " >= 0"))
         return Constant(float(value))
     if key.endswith("_by_cell"):
