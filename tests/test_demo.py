@@ -22,6 +22,11 @@ def test_demo_end_to_end(tmp_path, capsys):
     assert str(out) in printed
     # the exact E(RT) is labelled as the window sees it, not as fit's intrinsic one
     assert "exact, as a 5 s window sees it:" in printed
+    # the prediction's E(RT) with its interval, the summary's
+    for name in ("paper", "mle"):
+        lo, hi = json.loads((out / f"compare-{name}" / "summary.json").read_text())[
+            "model"]["rt_mean_interval"]
+        assert f"(its Monte Carlo sample, 90 % interval {lo:.3f}-{hi:.3f} s;" in printed
     # a closing verdict in the report's words, against the persistence baseline
     from cfbmarkov.report.table3 import baseline_clause, baseline_outcomes
 

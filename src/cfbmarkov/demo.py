@@ -331,8 +331,12 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
         seen = PREDICT_WINDOW[1] - PREDICT_WINDOW[0]
         exact = model.rtd(window=seen)
         rows[name] = {**summary, "exact_model_rt_mean": exact.mean, "exact_model_rt_sd": exact.sd}
+        interval = summary["model"].get("rt_mean_interval")
+        level = summary.get("level", 0.9)
+        within = ("" if not interval else f", {100 * level:g} % interval {interval[0]:.3f}-"
+                  f"{interval[1]:.3f} s")
         log(f"{name:>5}: E(RT) reference {summary['reference']['rt_mean']:.3f} s, model "
-            f"{summary['model']['rt_mean']:.3f} s (its Monte Carlo sample; exact, as a "
+            f"{summary['model']['rt_mean']:.3f} s (its Monte Carlo sample{within}; exact, as a "
             f"{seen:g} s window sees it: {exact.mean:.3f} s), PD E(RT) "
             f"{percentage_text(summary['pd_rt_mean'], '+.1f')} %, PD SD(RT) "
             f"{percentage_text(summary['pd_rt_sd'], '+.1f')} %, "
