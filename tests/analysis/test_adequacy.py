@@ -99,7 +99,8 @@ def test_the_parts_limit_from_the_interval_is_the_range_of_k_parts():
         assert parts_limit(wider, k, level=0.95) == pytest.approx(parts_limit(width, k))
     assert parts_limit(0.01, 4) == MIN_PARTS_LIMIT
     assert parts_limit(0.6, 2) == MAX_PARTS_LIMIT         # halves a factor 1.5 apart warn
-    assert parts_limit(0.3, 4, from_interval=False) == pytest.approx(0.3 * np.sqrt(2))
+    assert parts_limit(0.15, 4, from_interval=False) == pytest.approx(0.15 * np.sqrt(2))
+    assert parts_limit(0.3, 4, from_interval=False) == MAX_PARTS_LIMIT   # a quarter apart warns
 
 
 def test_a_stationary_flow_with_memory_does_not_warn_that_it_changed(tmp_path):

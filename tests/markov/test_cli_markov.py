@@ -115,8 +115,9 @@ def test_predict_progress_is_whole_lines_off_a_terminal(tmp_path, capsys, markov
     from cfbmarkov.markov import prediction
 
     model_path = tmp_path / "model.h5"
+    # no interval: its warning (a window shorter than the flow term needs) is not the point
     run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--lag", "0.05", "--window", "1:5",
-            "-o", model_path)
+            "--resamples", "0", "-o", model_path)
     monkeypatch.setattr(prediction, "LINE_INTERVAL", 0.0)      # a line at every block
     out = tmp_path / "p.h5"
     code, stdout, err = run_cli(capsys, "predict", model_path, "--init", markov_run,
@@ -192,3 +193,42 @@ def test_bench_prints_one_line_per_figure(capsys):
         name = line.split(":")[0]
         value, unit = line.split(": ")[1].split()
         assert float(value) > 0 and unit == ("x" if name.endswith("-ratio") else "s")
+
+
+def test_an_interval_without_the_flows_variability_is_warned_and_none_is_said(
+        tmp_path, capsys, markov_run):
+    """A window too short for the flow's term (two blocks of three mean residence times):
+    the interval is the window's sampling alone, and a `warning:` line says so in fit,
+    rtd and the model's verdict; a window long enough carries the term and no such line.
+    A model fitted with --resamples 0 says it has no interval in fit and rtd; compare
+    refuses 1-9 resamples as fit does."""
+    from cfbmarkov import synthetic
+    from cfbmarkov.markov import MarkovModel
+
+    fast = synthetic.write_run(tmp_path / "fast.h5", synthetic.RiserFlow(
+        columns=4, rows=16, rise_velocity=4.0, fall_velocity=-0.6, vertical_spread=0.5,
+        persistence=False), 400, 6.0, seed=3)              # E(RT) 0.45 s
+    said = "the model's interval leaves out the flow's variability between windows"
+    for window, short in (("1:2", True), ("1:6", False)):
+        model = tmp_path / f"m{window.replace(':', '-')}.h5"
+        code, _, err = run_cli(capsys, "fit", fast, "--cells", "4x16", "--window", window,
+                               "-o", model, "-q")
+        assert code == 0
+        u = MarkovModel.load(model).uncertainty
+        assert (u.flow_sd is None) == short, (window, u.flow_sd)
+        assert (f"warning: {said}" in err) == short, err
+        _, _, err = run_cli(capsys, "rtd", model)
+        assert (said in err) == short
+    bare = tmp_path / "bare.h5"
+    code, out, _ = run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--lag", "0.05",
+                           "--window", "1:3", "--resamples", "0", "-o", bare, "-q")
+    assert code == 0 and "(no interval: the model carries none;" in out
+    _, out, _ = run_cli(capsys, "rtd", bare)
+    assert "no interval: the model carries none" in out
+    pred = tmp_path / "p.h5"
+    assert run_cli(capsys, "predict", bare, "--init", markov_run, "--start", 3,
+                   "--duration", 1, "-o", pred, "-q")[0] == 0
+    code, _, err = run_cli(capsys, "compare", markov_run, pred, "--window", "3:4",
+                           "--resamples", "5", "-o", tmp_path / "c")
+    assert code == 2 and err.count("\n") == 1 and "at least 10 bootstrap resamples" in err
+    assert not (tmp_path / "c").exists()

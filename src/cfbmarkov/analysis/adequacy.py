@@ -415,6 +415,11 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     if throughput:
         lines.append(throughput)
     length = min(b - a for a, b in windows)
+    if uncertainty is not None and getattr(uncertainty, "flow_sd", 0) is None:
+        lines.append(f"the model's interval leaves out the flow's variability between windows "
+                     f"(the {length:g} s fitting window is shorter than two blocks of three "
+                     f"mean residence times): it holds this window's sampling alone, and the "
+                     f"flow's long run may lie outside it; {_ADVICE}")
     tail = _tail_share(model, length)
     if math.isfinite(tail) and tail > TAIL_LIMIT:
         lines.append(f"{100 * tail:.0f} % of the model's residences last longer than the "
@@ -482,7 +487,8 @@ def parts_limit(width: float, parts: int, level: float = 0.9, from_interval: boo
     for halves and 2.21 times for quarters, at least :data:`MIN_PARTS_LIMIT` and at most
     :data:`MAX_PARTS_LIMIT`. Without
     an interval ``width`` is a tolerance, taken as it is for halves and sqrt(2) times for
-    quarters.
+    quarters, and at most :data:`MAX_PARTS_LIMIT` too (parts a quarter apart always
+    warn).
 
     Parameters
     ----------
@@ -500,7 +506,7 @@ def parts_limit(width: float, parts: int, level: float = 0.9, from_interval: boo
     float
     """
     if not from_interval:
-        return width * (math.sqrt(2.0) if parts == 4 else 1.0)
+        return min(width * (math.sqrt(2.0) if parts == 4 else 1.0), MAX_PARTS_LIMIT)
     from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's
 
     z = float(ndtri(0.5 * (1.0 + level)))

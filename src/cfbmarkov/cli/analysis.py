@@ -44,6 +44,10 @@ def cmd_compare(args) -> int:
         check_not_same(ref, pred)
     # --resamples given: the intervals were asked for, and a fitting file not found refuses
     required = args.resamples is not None
+    if required and 0 < args.resamples < 10:
+        from cfbmarkov.cli.markov import _check_resamples
+
+        _check_resamples(args.resamples)      # one line, as fit and rtd say it
     if args.resamples is None:
         args.resamples = DEFAULT_RESAMPLES
     if args.resamples:      # a refusal stays one line, before any other line

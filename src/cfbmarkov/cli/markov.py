@@ -333,6 +333,9 @@ def cmd_rtd(args) -> int:
     if band is None and model.uncertainty is not None:
         print(f"  the model's {model.uncertainty.percent} % interval is of the intrinsic RTD: "
               "leave out --window-length to see it")
+    elif model.uncertainty is None and not args.window_length:
+        print("  no interval: the model carries none (fitted with --resamples 0, or in "
+              "Python); `rtd MODEL --resamples 100` or a fit without --resamples 0 gives one")
     return 0
 
 

@@ -204,7 +204,8 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
             lines.append(f"    interval from {where}{flow}")
         else:
             lines.append(f"  exact residence time: E(RT) = {r.mean:.4g} s, "
-                         f"SD(RT) = {r.sd:.4g} s")
+                         f"SD(RT) = {r.sd:.4g} s (no interval: the model carries none; `fit` "
+                         "without --resamples 0 adds one, and the verdict's limits with it)")
     except Exception as exc:  # a model without exits still has a summary
         lines.append(f"  exact residence time: none ({exc})")
     own = None if model.adequacy is None else model.adequacy.window_rt_mean
