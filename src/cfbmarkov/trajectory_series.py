@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, lap_increments, time_text
+from cfbmarkov.trajectory_format import (FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE,
+                                         lap_increments, time_text)
 
 #: steps before a block that join its own in the median a block's steps are judged against
 RECENT_STEPS = 64
@@ -198,6 +199,8 @@ class FrameSeries:
         t, n = present.shape
         if laps is not None:
             laps = np.where(present, np.asarray(laps, dtype=np.int32).reshape(t, n), 0)
+            if not self.open_riser:
+                self._check_given_laps(ids, times, positions[..., 1], laps, present)
             if self.last_y is None:
                 self.last_y = np.full(n, np.nan)
                 self.last_lap = np.zeros(n, np.int32)
@@ -229,6 +232,31 @@ class FrameSeries:
             prev_lap, prev_present, prev_t = lap, present[k], times[k]
         self.last_y, self.last_lap, self.last_present = prev_y, prev_lap, prev_present
         return out
+
+    def _check_given_laps(self, ids: np.ndarray, times: np.ndarray, y: np.ndarray,
+                          laps: np.ndarray, present: np.ndarray) -> None:
+        """Given laps (image flags, unwrapped coordinates, a source's own counter) may say
+        that a particle moved more than the riser's height between two frames, which a
+        trajectory file cannot hold (its laps must follow from the positions frame to frame:
+        docs/definitions.md, What is checked): refuse it here, before anything is kept."""
+        if self.last_y is not None and self.last_present is not None:
+            y = np.vstack([self.last_y[None, :], y])
+            laps = np.vstack([self.last_lap[None, :], laps])
+            present = np.vstack([self.last_present[None, :], present])
+            times = np.concatenate([[self.last_time], times])
+        if y.shape[0] < 2:
+            return
+        with np.errstate(invalid="ignore"):
+            moved = np.diff(y, axis=0) + np.diff(laps.astype(np.float64), axis=0) * self.height
+        bad = present[:-1] & present[1:] & ~(np.abs(moved) <= self.height + 2 * POSITION_TOLERANCE)
+        if bad.any():
+            k, p = np.unravel_index(int(np.argmax(bad)), bad.shape)
+            raise InputError(
+                f"{self.label}: particle {int(ids[p])} moves {moved[k, p]:+.4g} m vertically "
+                f"between t = {time_text(times[k])} and {time_text(times[k + 1])} s (its laps "
+                f"{int(laps[k, p])} -> {int(laps[k + 1, p])}), more than the riser's height "
+                f"{self.height:g} m in one frame, which a trajectory file cannot hold: give "
+                "frames closer together (every dump, or export-vtk with a smaller --every)")
 
     def _check_minimal_image(self, ids: np.ndarray, previous_y: np.ndarray, y: np.ndarray,
                              t0, t1, both: np.ndarray) -> None:

@@ -451,3 +451,30 @@ def test_damaged_particle_files_are_refused_in_one_line(tmp_path, mode):
         except InputError as exc:
             assert "\n" not in str(exc)
             assert not out.exists()
+
+
+def test_laps_of_a_step_over_the_height_are_refused_before_any_output(tmp_path, capsys):
+    """Image flags that say a particle moved more than the riser's height between two
+    frames: a trajectory file cannot hold that step, so the import refuses it in one line
+    naming the particle and the times, and an existing output is left as it was (it was
+    written, then found damaged on reading, over the old file)."""
+    vy = np.array([22.0, 0.3, -0.5])                   # 1.1 m a frame
+    unwrapped = np.array([0.1, 0.8, 0.4]) + TIMES[:, None] * vy
+    laps = np.floor(unwrapped / H).astype(int)
+    pos = np.stack([np.broadcast_to([0.02, 0.045, 0.07], unwrapped.shape),
+                    unwrapped - laps * H, np.zeros(unwrapped.shape)], axis=2)
+    vel = np.broadcast_to(np.stack([0 * vy, vy, 0 * vy], axis=1), pos.shape)
+    names = [f"p_{k}.vtp" for k in range(TIMES.size)]
+    for k, name in enumerate(names):
+        _write_vtp(tmp_path / name, pos[k], vel[k], IDS, "ascii",
+                   image=np.stack([0 * laps[k], laps[k], 0 * laps[k]], axis=1))
+    _write_pvd(tmp_path / "p.pvd", names)
+    kept = tmp_path / "kept.h5"
+    kept.write_bytes(b"an earlier output")
+    code = main(["import", str(tmp_path / "p.pvd"), "--width", str(W), "--height", str(H),
+                 "-o", str(kept), "--force"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "particle 7 moves +1.1 m vertically between t = 0 and 0.05 s" in err
+    assert "more than the riser's height 0.95 m in one frame" in err
+    assert kept.read_bytes() == b"an earlier output"
