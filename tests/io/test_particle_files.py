@@ -478,3 +478,55 @@ def test_laps_of_a_step_over_the_height_are_refused_before_any_output(tmp_path, 
     assert "particle 7 moves +1.1 m vertically between t = 0 and 0.05 s" in err
     assert "more than the riser's height 0.95 m in one frame" in err
     assert kept.read_bytes() == b"an earlier output"
+
+
+def test_an_open_risers_export_imports_open_again(tmp_path, capsys):
+    """``export-vtk`` records the riser's periodicity in each particle file (the
+    ``cfbmarkov_periodic`` field array): an open riser's export imports as an open riser,
+    with its particles' presence, and a periodic one's as periodic, each saying so."""
+    from cfbmarkov import synthetic
+    from cfbmarkov.io.vtk import export_vtk
+
+    flow = synthetic.RiserFlow(columns=4, rows=16)
+    runs = {"open": synthetic.write_open_run(tmp_path / "open.h5", flow, 200, 1.0, seed=2),
+            "periodic": synthetic.write_run(tmp_path / "periodic.h5", flow, 200, 1.0,
+                                            seed=2)}
+    for boundary, run in runs.items():
+        folder = export_vtk(run, tmp_path / f"vtk-{boundary}")
+        back = tmp_path / f"back-{boundary}.h5"
+        assert main(["import", str(folder), "--width", str(flow.width), "--height",
+                     str(flow.height), "-o", str(back)]) == 0
+        err = capsys.readouterr().err
+        assert (f"{boundary} boundary from the export's cfbmarkov_periodic field") in err
+        with Trajectories(run) as a, Trajectories(back) as b:
+            assert b.boundary == a.boundary
+            np.testing.assert_array_equal(b.present(), a.present())
+            np.testing.assert_array_equal(b.laps(), a.laps())
+
+
+def test_vtu_files_without_a_pvd_take_their_times_from_the_step_in_their_name(tmp_path,
+                                                                              capsys):
+    """pyevtk's ``pointsToVTK`` series (Yade's, LIGGGHTS' with a .vtu name) carry no time
+    and no .pvd: the import names --time-step with the file's step; with it, each file's
+    time is its step times the time step."""
+    from pyevtk.hl import pointsToVTK
+
+    pos, vel, laps = _motion()
+    steps = [0, 5000, 10000, 15000]                     # 0.05 s apart at 1e-5 s
+    for k, step in enumerate(steps):
+        p = pos[k][:, [0, 2, 1]].copy()
+        p[:, 2] = 0.0
+        pointsToVTK(str(tmp_path / f"part_{step}"), *(np.ascontiguousarray(p[:, c])
+                                                       for c in range(3)),
+                    data={"id": IDS.astype(np.int64)})
+    out = tmp_path / "t.h5"
+    argv = ["import", str(tmp_path), "--width", str(W), "--height", str(H), "-o", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--time-step (s): part_0.vtu is step 0" in err
+    assert main(argv + ["--time-step", "1e-5"]) == 0
+    with Trajectories(out) as t:            # no velocities in these files
+        order = np.argsort(t.ids)
+        np.testing.assert_allclose(t.times, TIMES[:4], rtol=0, atol=1e-12)
+        np.testing.assert_allclose(t.positions()[:, order],
+                                   pos[:4][:, np.argsort(IDS)][..., [0, 2]], atol=1e-12)

@@ -60,3 +60,17 @@ def test_a_sparse_tracer_read_in_the_wrong_time_unit_warns_and_is_stored_small(
                      "-o", right) == []
     # 399 frames of one tracer: about 10 kB of positions, laps and presence, not 256-fold
     assert right.stat().st_size < 100_000
+
+
+def test_a_riser_wider_than_high_warns_of_the_vertical_axis(tmp_path, capsys):
+    """A 2D dump of a 0.09 m x 0.95 m riser imported with --vertical-axis x: a riser
+    0.95 m across and 0.09 m high, which the import warns of, naming --vertical-axis; with
+    its right axis, no such warning."""
+    dump = _dump(tmp_path / "run.dump", range(0, 20000, 1000), 0.02, 2.0)
+    lines = _warnings(capsys, dump, "--time-step", "1e-5", "--vertical-axis", "x", "-o",
+                      tmp_path / "x.h5")
+    assert any(line.startswith("warning: the riser is 0.95 m across and 0.09 m high "
+                               "(vertical axis x): a riser is taller than it is wide")
+               and "--vertical-axis x|y|z" in line for line in lines), lines
+    lines = _warnings(capsys, dump, "--time-step", "1e-5", "-o", tmp_path / "y.h5")
+    assert not any("taller than it is wide" in line for line in lines), lines

@@ -196,8 +196,11 @@ def test_without_fields_writes_particles_only(tmp_path):
     assert sorted(p.name for p in out.iterdir()) == [
         "particles.pvd", "particles_000000.vtu", "particles_000005.vtu"]
     _, arrays = read_vtk(out / "particles_000005.vtu")
-    assert set(arrays) == {"points", "connectivity", "offsets", "types", "colour_group", "id", "lap"}
+    assert set(arrays) == {"points", "connectivity", "offsets", "types", "colour_group", "id", "lap",
+                           "cfbmarkov_periodic"}
     np.testing.assert_array_equal(arrays["lap"], data["laps"][5])
+    # the riser's periodicity per axis, for an import of the export: y (vertical) periodic
+    np.testing.assert_array_equal(arrays["cfbmarkov_periodic"].ravel(), [0, 1, 0])
 
 
 def test_fields_false_skips_gas(run, tmp_path):

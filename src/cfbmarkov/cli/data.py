@@ -37,12 +37,13 @@ def cmd_import(args) -> int:
     from cfbmarkov.trajectories import Trajectories
 
     from cfbmarkov.io.plausibility import (gap_warnings, presence_warnings, return_warnings,
-                                           unit_warnings)
+                                           shape_warnings, unit_warnings)
 
     with Trajectories(path) as written:     # what the import did beyond reading rows
         notes = list(written.parameters.get("import_notes", []))
-        warnings = (unit_warnings(written) + presence_warnings(written)
-                    + return_warnings(written) + gap_warnings(written))
+        warnings = (shape_warnings(written) + unit_warnings(written)
+                    + presence_warnings(written) + return_warnings(written)
+                    + gap_warnings(written))
     print(path)
     print(f"cfbmarkov import: {import_summary(path, detected)}", file=sys.stderr)
     for note in notes:

@@ -89,6 +89,8 @@ class ParticleSeries:
         Returns what the reader learnt from the first frame (e.g. ``ids_from``).
     close : callable
         Releases the source (an open HDF5 file).
+    flags_from : str
+        Where ``flags`` came from, for the summary (default the box's flags).
     """
 
     label: str
@@ -100,6 +102,7 @@ class ParticleSeries:
     box_origin_unknown: bool = False
     late_provenance: Callable[[], dict] = dict
     close: Callable[[], None] = lambda: None
+    flags_from: str = "the box's flags"
 
 
 def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
@@ -162,7 +165,8 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
         image = first.image is not None and not riser.boundary.is_open
         late = dict(series.late_provenance())
         image_from = late.pop("image_from", None)
-        if image and image_from and "passes along y" in image_from and riser.vertical != 1:
+        if (first.image is not None and image_from and "passes along y" in image_from
+                and riser.vertical != 1):
             raise InputError(f"{first.where}: the laps are {image_from}, but the vertical axis "
                              f"is {'xyz'[riser.vertical]}; import without --vertical-axis (the "
                              "export's vertical is y)")
@@ -171,7 +175,7 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
             "format_detected_from": detected, "box": None if box is None else box.tolist(),
             "boundary": list(series.flags),
             "boundary_from": ("--boundary" if boundary is not None else
-                              "the box's flags" if series.flags else
+                              series.flags_from if series.flags else
                               "default (the files carry no periodicity)"),
             "origin_shift": riser.region[:, 0].tolist(), **riser.provenance(),
             "laps_from": ((image_from or "image flags") if image else "minimal-image rule"

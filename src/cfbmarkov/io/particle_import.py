@@ -40,8 +40,8 @@ def import_particles(source, fmt: str, output: str | os.PathLike, *,
     width, height, vertical_axis, region, boundary, drop_depth
         As for :func:`cfbmarkov.io.import_file`.
     time_step : float, optional
-        Legacy VTK only: the simulation time step (s) dating files by the step in their
-        name.
+        VTK files without times (legacy, or XML without a ``.pvd``): the simulation time
+        step (s) dating files by the step in their name.
     length_unit, time_unit, resample, max_gap
         Refused: these files are in SI units at simulation steps.
     detected : str, optional
@@ -65,9 +65,9 @@ def import_particles(source, fmt: str, output: str | os.PathLike, *,
     if resample is not None or max_gap is not None:
         raise InputError(f"--resample and --max-gap apply to CSV files (tracks at irregular "
                          f"times); {name} files hold simulation frames")
-    if time_step is not None and fmt != "vtk":
-        raise InputError(f"--time-step applies to LAMMPS dumps and legacy VTK files; {name} "
-                         "files carry their times")
+    if time_step is not None and fmt in ("h5md", "pvd"):
+        raise InputError(f"--time-step applies to LAMMPS dumps and VTK files without times; "
+                         f"{name} files carry their times")
     check_output(output, first_file(source))
     if fmt == "h5md":
         from cfbmarkov.io.h5md import h5md_series
@@ -82,7 +82,7 @@ def import_particles(source, fmt: str, output: str | os.PathLike, *,
     else:
         from cfbmarkov.io.vtk_read import vtp_series
 
-        series = vtp_series(source)
+        series = vtp_series(source, time_step)
     try:
         return import_particle_series(series, output, width=width, height=height,
                                       vertical_axis=vertical_axis, region=region,

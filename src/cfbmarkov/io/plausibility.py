@@ -150,6 +150,31 @@ def presence_warnings(traj) -> list[str]:
             "coordinates) against the riser's walls"]
 
 
+def shape_warnings(traj) -> list[str]:
+    """A warning where the imported riser is wider (or deeper) than it is high: a riser is
+    tall, so the vertical axis is most likely wrong (``--vertical-axis``; a 2D source's
+    default is y).
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+
+    Returns
+    -------
+    list of str
+    """
+    p = traj.parameters
+    depth = getattr(traj, "depth", None) or 0.0
+    if traj.height >= max(traj.width, depth):
+        return []
+    axis = p.get("vertical_axis") or "y"
+    sides = f"{traj.width:g} m across" + (f", {depth:g} m deep" if depth else "")
+    return [f"the riser is {sides} and {traj.height:g} m high (vertical axis {axis}): a riser "
+            "is taller than it is wide, so the vertical axis is most likely wrong; give the "
+            "axis along which the particles rise and fall with --vertical-axis x|y|z"]
+
+
 def gap_warnings(traj) -> list[str]:
     """A warning where a resampled import's tracers are absent between samples further apart
     than the default ``--max-gap`` (the resample step) and present again after: on

@@ -151,6 +151,10 @@ class GasFields:
         return np.where(np.abs(self.times[nearest] - times) <= tol, nearest, -1).astype(np.int64)
 
 
+#: the field array of every particle file ``export-vtk`` writes: 1 where an axis (x, y, z)
+#: is periodic; y is the riser's vertical (``import`` takes the riser's boundary from it)
+PERIODIC_FIELD = "cfbmarkov_periodic"
+
 def read_gas_fields(traj: Trajectories) -> GasFields | None:
     """The ``/fields`` group of a trajectory file, checked against the layout.
 
@@ -360,7 +364,10 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
                           for key, value in point_data.items()}
         name = f"{PARTICLES}_{frame:06d}"
         if x.size:
-            hl.pointsToVTK(str(folder / name), x, y, z, data=point_data)
+            # the vertical boundary, for an import of the export: periodic per axis
+            periodic = np.array([0, 0 if traj.boundary.is_open else 1, 0], dtype=np.int32)
+            hl.pointsToVTK(str(folder / name), x, y, z, data=point_data,
+                           fieldData={PERIODIC_FIELD: periodic})
         else:                            # every particle absent (an open riser emptied)
             _write_no_points(folder / (name + ".vtu"), point_data)
         particle_files.append((name + ".vtu", t))

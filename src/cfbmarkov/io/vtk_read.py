@@ -297,7 +297,7 @@ def _sorted_by_time(frames: Iterator[ParticleFrame], label: str) -> Iterator[Par
         yield frame
 
 
-def vtp_series(source) -> ParticleSeries:
+def vtp_series(source, time_step: float | None = None) -> ParticleSeries:
     """The frames of a VTK XML particle series: a ``.pvd`` collection, or ``.vtp``
     (PolyData) or ``.vtu`` (UnstructuredGrid) files of the particle centres.
 
@@ -307,7 +307,11 @@ def vtp_series(source) -> ParticleSeries:
         A ``.pvd`` file (times from it), a folder (its ``.pvd`` of particle files,
         :func:`~cfbmarkov.io.vtk_xml.particle_collection`, else its ``.vtp`` and ``.vtu``
         files), a ``.vtp`` or ``.vtu`` file, a glob pattern or a list of such files (times
-        from MFiX's ``<!-- Time = ... s -->`` comment or a ``TimeValue`` field array).
+        from MFiX's ``<!-- Time = ... s -->`` comment or a ``TimeValue`` field array, else
+        from the step number in the file name times ``time_step``).
+    time_step : float, optional
+        The simulation time step (s) that dates files without a time by the step in their
+        name (pyevtk's, Yade's and LIGGGHTS' series without a ``.pvd``).
 
     Returns
     -------
@@ -335,7 +339,10 @@ def vtp_series(source) -> ParticleSeries:
         files = source_files(source, PARTICLE_SUFFIXES)
         entries = [(None, [f]) for f in files]
         time_from, label, first_name = ("each file's '<!-- Time = ... s -->' comment or "
-                                          "TimeValue array"), _label(files), files[0].name
+                                          "TimeValue array" + (
+                                              "" if time_step is None else
+                                              f", else its step number x --time-step "
+                                              f"{time_step:g} s")), _label(files), files[0].name
         names = [f.name for f in files]
     builder = _Frames()
     provenance = {"time_from": time_from, "box_from": None, "source_files": names}
@@ -351,7 +358,7 @@ def vtp_series(source) -> ParticleSeries:
             arrays = {k: np.concatenate([d.point_data[k] for d in datas])
                       for k in datas[0].point_data}
             if time is None:
-                time = _vtp_time(datas[0], files[0])
+                time = _vtp_time(datas[0], files[0], time_step)
             read.append((time, points, arrays, files[0]))
             if entries[0][0] is not None:                  # a .pvd: already in time order
                 yield builder.frame(time, points, arrays, None, str(files[0]))
@@ -362,17 +369,40 @@ def vtp_series(source) -> ParticleSeries:
 
     first_file = entries[0][1][0]
     fmt = "vtu" if first_file.suffix.lower() == ".vtu" else "vtp"
+    flags = _export_flags(first_file)
     series = ParticleSeries(label=label, fmt=fmt, frames=_sorted_by_time(frames(), label),
                             source_file=first_name, provenance=provenance,
-                            late_provenance=builder.provenance)
+                            late_provenance=builder.provenance, flags=flags,
+                            flags_from="the export's cfbmarkov_periodic field")
     return series
 
 
-def _vtp_time(data, path: Path) -> float:
+def _export_flags(path: Path) -> tuple[str, ...]:
+    """The periodicity per axis that ``cfbmarkov export-vtk`` records in each particle file
+    (its ``cfbmarkov_periodic`` field array: ``p`` periodic, ``f`` a wall or open); empty
+    for other writers' files."""
+    from cfbmarkov.io.vtk import PERIODIC_FIELD
+
+    try:
+        field_data = read_vtp(path).field_data
+    except InputError:
+        return ()                  # the frames' reading says what is wrong with it
+    values = field_data.get(PERIODIC_FIELD)
+    if values is None or np.size(values) != 3:
+        return ()
+    return tuple("p" if int(v) else "f" for v in np.ravel(values))
+
+
+def _vtp_time(data, path: Path, time_step: float | None = None) -> float:
     if data.comment_time is not None:
         return data.comment_time
     name = _find(data.field_data, _TIME_NAMES)
     if name is not None and data.field_data[name].size:
         return float(data.field_data[name][0])
+    step = _step_of(path)
+    if time_step is not None and step is not None:
+        return step * time_step
     raise InputError(f"{path}: no time in the file (no '<!-- Time = ... s -->' comment, no "
-                     "TimeValue field array); import the .pvd that lists it")
+                     "TimeValue field array); import the .pvd that lists it"
+                     + (f", or give the simulation time step with --time-step (s): "
+                        f"{path.name} is step {step}" if step is not None else ""))

@@ -124,8 +124,11 @@ def read_vtp(path: Path) -> PolyData:
     if any(set(a) != names for a in arrays):
         raise InputError(f"{label}: the pieces carry different point arrays")
     point_data = {k: np.concatenate([a[k] for a in arrays]) for k in arrays[0]}
+    # the data set's field arrays (ParaView's TimeValue), and those pyevtk writes in its
+    # piece (cfbmarkov export-vtk's periodicity)
     field_data = {a.get("Name", ""): decoder.array(a, None).ravel()
-                  for a in root.findall(f"./{kind}/FieldData/DataArray")}
+                  for a in root.findall(f"./{kind}/Piece/FieldData/DataArray")
+                  + root.findall(f"./{kind}/FieldData/DataArray")}
     match = _TIME_COMMENT.search(data[:start] if start >= 0 else data)
     comment_time = float(match.group(1).replace(b"d", b"e").replace(b"D", b"e")) if match else None
     return PolyData(np.concatenate(points), point_data, field_data, comment_time)
