@@ -148,7 +148,7 @@ def test_3d_dump_needs_its_vertical_axis(tmp_path, capsys):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1
     assert "3D positions" in err and "--vertical-axis" in err and "z 0..0.15" in err
-    assert "the longest, z" in err
+    assert "the box's longest, z" in err
     assert not (tmp_path / "g.h5").exists()
     out = import_file(source, "lammps", tmp_path / "g.h5", time_step=1e-5, vertical_axis="z")
     times, pos, laps, width, height, params = _read(out)

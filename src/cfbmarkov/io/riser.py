@@ -158,12 +158,13 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
         if spread:
             extents = (", ".join(f"{AXES[k]} {lo:g}..{hi:g}" for k, (lo, hi) in enumerate(box))
                        if box is not None else "x, y and z")
-            longest = (AXES[int(np.argmax(np.diff(box[:3], axis=1)))] if box is not None
-                       else "z")
+            guess = (f"a guess would take the box's longest, "
+                     f"{AXES[int(np.argmax(np.diff(box[:3], axis=1)))]}; " if box is not None
+                     else "")
             raise InputError(
                 f"{where}: 3D positions ({extents} m): say which axis is vertical with "
-                f"--vertical-axis x|y|z (a guess would take the longest, {longest}; LIGGGHTS "
-                "puts gravity along -z)")
+                f"--vertical-axis x|y|z ({guess}LIGGGHTS puts gravity along -z, "
+                "cfbmarkov export-vtk writes y)")
         vertical_axis = "y"
     vertical = AXES.index(vertical_axis)
     if vertical >= n_axes:

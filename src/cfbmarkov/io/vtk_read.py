@@ -141,6 +141,11 @@ def _image(arrays: dict, n: int, where: str) -> tuple[np.ndarray | None, str | N
     return None, None
 
 
+def _array_text(name: str | None) -> str:
+    """An array's name quoted, or ``none`` where a file has no such array (messages)."""
+    return repr(name) if name is not None else "none"
+
+
 class _Frames:
     """Builds ParticleFrames from point arrays, checking that the id, velocity and image
     arrays stay the same from file to file; records where ids, velocities and laps come
@@ -161,15 +166,17 @@ class _Frames:
             self.n_first, self.ids_from, self.velocity_from = n, ids_from, velocity_from
             self.image_from = image_from
         elif ids_from != self.ids_from:
-            raise InputError(f"{where}: the id array is {ids_from!r}, the first file's "
-                             f"{self.ids_from!r}; every file must carry the same arrays")
+            raise InputError(f"{where}: id array {_array_text(ids_from)} here, "
+                             f"{_array_text(self.ids_from)} in the first file; every file must "
+                             "carry the same arrays")
         elif self.ids_from is None and n != self.n_first:
             raise InputError(f"{where}: {n} points where the first file has {self.n_first}, and "
                              "no 'id' point array tells which particle is which; write the "
                              "particle ids (e.g. LIGGGHTS dump custom/vtk ... id)")
         if (velocity_from is None) != (self.velocity_from is None):
-            raise InputError(f"{where}: velocity array {velocity_from!r}, the first file's "
-                             f"{self.velocity_from!r}; every file must carry the same arrays")
+            raise InputError(f"{where}: velocity array {_array_text(velocity_from)} here, "
+                             f"{_array_text(self.velocity_from)} in the first file; every file "
+                             "must carry the same arrays")
         if image_from != self.image_from:
             raise InputError(f"{where}: laps from {image_from or 'no array'}, the first file's "
                              f"from {self.image_from or 'no array'}; every file must carry the "

@@ -223,7 +223,7 @@ class _Decoder:
 
     def array(self, node, n_tuples: int | None) -> np.ndarray:
         """The values of a DataArray: shape (n,) or (n, components); int64 or float64."""
-        name = node.get("Name", "?")
+        name = node.get("Name") or "(no Name)"
         kind = node.get("type")
         if kind not in _TYPES:
             raise InputError(f"{self.label}: array {name!r}: type {kind!r} is not read "
