@@ -109,3 +109,17 @@ def test_a_model_without_residence_time_is_saved_and_said_so(tmp_path, capsys):
     assert len(said) == 1 and said[0].startswith("warning: ") and "`rtd`" in said[0]
     assert main(["rtd", str(model)]) == 2
     assert capsys.readouterr().err.count("\n") == 1
+
+
+def test_an_abbreviated_option_is_refused_with_its_whole_name(tmp_path, capsys):
+    """Options are given whole: fit's `--resample 50` (a prefix of --resamples, and the name
+    of another option of import) is refused in one line naming --resamples, exit 2, not
+    taken as --resamples."""
+    from cfbmarkov.cli import main
+
+    code = main(["fit", str(tmp_path / "run.h5"), "--resample", "50", "-o",
+                 str(tmp_path / "m.h5")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1
+    assert "--resample: did you mean --resamples?" in err
+    assert not (tmp_path / "m.h5").exists()

@@ -22,6 +22,12 @@ from cfbmarkov.errors import CfbmarkovError, HistoryError, InputError, LagError
 
 
 class _Parser(argparse.ArgumentParser):
+    def __init__(self, *args, **kwargs):
+        # an option is given whole: a prefix (fit's --resample for --resamples, which is
+        # import's --resample for something else) is refused with the nearest name
+        kwargs.setdefault("allow_abbrev", False)
+        super().__init__(*args, **kwargs)
+
     def error(self, message: str):  # one line, exit code 2
         self.exit(2, f"{self.prog}: error: {message}\n")
 
