@@ -155,7 +155,7 @@ def _write_vtp(path: Path, pos, vel, ids, mode: str, time: float | None = None, 
     if image is not None:               # LIGGGHTS dump custom/vtk ... ix iy iz
         arrays += [("PointData", name, image[:, k].astype("<i4"), "Int32")
                    for k, name in enumerate(("ix", "iy", "iz"))]
-    xml, appended, blocks = {"Points": "", "PointData": ""}, b"", []
+    xml, appended = {"Points": "", "PointData": ""}, b""
     for section, name, values, kind in arrays:
         ncomp = 1 if values.ndim == 1 else values.shape[1]
         if mode == "ascii":
