@@ -130,3 +130,11 @@ def test_propagate_refuses_negative_mass_and_broken_steps(model):
                                     (s0, -1, "steps -1"), (s0, 5.9, "steps 5.9")):
         with pytest.raises(InputError, match=message):
             model.propagate(initial, steps)
+
+
+def test_select_model_of_several_runs_names_select_pooled(markov_flow, markov_run):
+    from cfbmarkov.markov.select import select_model
+
+    with pytest.raises(InputError, match=r"select_pooled\(runs, windows="):
+        select_model([markov_run, markov_run], window=(2.0, 4.0), columns=4, rows=16,
+                     lag=markov_flow.lag)

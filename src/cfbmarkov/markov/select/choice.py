@@ -109,6 +109,10 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
     if int(folds) < 2:
         raise InputError(f"auto: {folds} folds; cross-validation needs at least 2")
     folds = int(folds)
+    if isinstance(data, (list, tuple)):
+        raise InputError("select_model takes one run; several runs of one case are chosen "
+                         "on pooled by select_pooled(runs, windows=..., ...) (what `fit A.h5 "
+                         "B.h5 --states auto` does)")
     a, b = (float(v) for v in window)
     with opened(data) as traj:
         fitting = judged_blocks(traj, (a, b), lag, lag_multiples, folds, criterion,
