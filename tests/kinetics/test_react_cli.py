@@ -117,9 +117,12 @@ def test_react_resamples_give_the_activity_after_passes_its_intervals(fitted, tm
     text = capsys.readouterr().out
     assert (f"90 % intervals of a's mean after 1 / 3 passes: {bounds[0][0]:.6g}-"
             f"{bounds[0][1]:.6g} / {bounds[1][0]:.6g}-{bounds[1][1]:.6g}") in text
-    assert main(["react", str(model), "--kinetics", str(kin), "--json", "--passes", "1"]) == 0
-    assert json.loads(capsys.readouterr().out)["properties"]["a"]["after_passes"]["1"][
-        "mean_interval"] is None
+    assert main(["react", str(model), "--kinetics", str(kin), "--json", "--passes", "1",
+                 "1000000"]) == 0
+    after = json.loads(capsys.readouterr().out)["properties"]["a"]["after_passes"]
+    assert after["1"]["mean_interval"] is None
+    # far below the normal floats: 0, not the round-off of an underflow (5.9e-323)
+    assert after["1000000"]["mean"] == 0.0 and after["1000000"]["sd"] == 0.0
 
 
 def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):

@@ -135,9 +135,12 @@ class ExitMoments:
         mean, second : float
         """
         m, s = float(v0), float(v0) * float(v0)
+        tiny = np.finfo(np.float64).tiny
         for _ in range(int(passes)):
             m, s = (self.mean_a * m + self.mean_b,
                     self.mean_a2 * s + self.mean_2ab * m + self.mean_b2)
+            # below the normal floats a value is round-off of a far smaller one: 0
+            m, s = (0.0 if abs(m) < tiny else m), (0.0 if abs(s) < tiny else s)
         return m, s
 
 
