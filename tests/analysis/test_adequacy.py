@@ -510,8 +510,9 @@ def test_the_throughput_line_names_a_reducible_chain():
 
 def test_a_passed_verdict_says_so_with_its_numbers():
     """No warning: one line with the parts' spread and limit (times sqrt(2) for quarters, as
-    they are judged; left out for pooled runs, judged run by run), the throughput gap and
-    the share of residences beyond the window; a warning: no such line."""
+    they are judged; for pooled runs each run's E(RT) against the pool's instead), the
+    throughput gap and the share of residences beyond the window; a warning: no such
+    line."""
     from cfbmarkov.markov.adequacy import Adequacy
 
     parts = tuple((a, a + 1.0, 1.0, "up") for a in (0.0, 1.0, 2.0, 3.0))
@@ -524,8 +525,10 @@ def test_a_passed_verdict_says_so_with_its_numbers():
                                             1.0).passed_line()
     halves = Adequacy((), parts[:2], 1.0, 0.01, 0.05, 2.0, 1e-9).passed_line()
     assert "halves agree (E(RT) spread 1 %, limit 5 %)" in halves
-    pooled = Adequacy((), parts, 1.0, 0.01, 0.05, 2.0, 0.01, (("a.h5", 1.0), ("b.h5", 1.0)))
-    assert "agree" not in pooled.passed_line()
+    pooled = Adequacy((), parts, 1.0, 0.01, 0.05, 2.0, 0.01, (("a.h5", 0.98), ("b.h5", 1.03)))
+    assert "quarters agree" not in pooled.passed_line()       # judged run by run, not here
+    assert ("the 2 runs agree (E(RT) fitted on each alone 0.98, 1.03 s, pooled 1 s; their "
+            "parts' spread 1 %)") in pooled.passed_line()
     assert Adequacy(("a warning",), parts, 1.0, 0.1, 0.05).passed_line() is None
 
 

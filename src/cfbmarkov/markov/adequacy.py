@@ -94,6 +94,15 @@ class Adequacy:
                      else self.limit * (math.sqrt(2.0) if quarters else 1.0))
             said.append(f"the window's {'quarters' if quarters else 'halves'} agree (E(RT) "
                         f"spread {100 * self.spread:.2g} %, limit {100 * limit:.2g} %)")
+        alone = [m for _, m in self.runs if math.isfinite(m)]
+        if alone and math.isfinite(self.rt_mean):
+            # a pooled fit: each run's model against the pool's, and the parts' spread
+            said.append(f"the {len(self.runs)} runs agree (E(RT) fitted on each alone "
+                        f"{', '.join(f'{m:.3g}' for m in alone)} s, pooled "
+                        f"{self.rt_mean:.3g} s" + (f"; their parts' spread "
+                                                    f"{100 * self.spread:.2g} %"
+                                                    if math.isfinite(self.spread) else "")
+                        + ")")
         if math.isfinite(self.window_rt_mean) and math.isfinite(self.rt_mean):
             gap = abs(self.rt_mean / self.window_rt_mean - 1.0)
             said.append(f"the chain carries the window's throughput (within {100 * gap:.2g} %)")
