@@ -122,8 +122,11 @@ def test_compare_baseline_of_a_pooled_model_pools_its_runs_windows(tmp_path, cap
     out = tmp_path / "cmp"
     assert main(["compare", str(runs[0]), str(pred), "--window", "2:3", "-o", str(out),
                  "--no-figures", "--resamples", "0"]) == 0
-    capsys.readouterr()
+    printed = capsys.readouterr().out
     baseline = json.loads((out / "summary.json").read_text())["baseline"]
+    assert baseline["runs"] == 2
+    assert ("persistence baseline (the observed RTD of the model's fitting windows in its 2 "
+            "runs, pooled as it was fitted, taken as the prediction)") in printed
     counts = []
     for path in runs[:2]:
         with Trajectories(path) as traj:

@@ -51,13 +51,15 @@ class WindowDifference:
     pd_rt_mean: float
     pd_rt_sd: float
     md_rtd: float
+    runs: int = 1
 
     def summary(self) -> dict[str, Any]:
-        """JSON-ready: windows (s), E(RT) and SD(RT) of the stand-in (s), counts, PD (%), MD."""
+        """JSON-ready: windows (s), E(RT) and SD(RT) of the stand-in (s), counts, PD (%), MD,
+        and the runs whose windows were pooled for it (1: one run's)."""
         return {"windows": [list(w) for w in self.windows],
                 "rt_mean": self.predicted.mean, "rt_sd": self.predicted.sd,
                 "rt_count": self.predicted.count, "pd_rt_mean": self.pd_rt_mean,
-                "pd_rt_sd": self.pd_rt_sd, "md_rtd": self.md_rtd}
+                "pd_rt_sd": self.pd_rt_sd, "md_rtd": self.md_rtd, "runs": self.runs}
 
 
 #: MDs within this fraction of the baseline's MD are a tie
@@ -228,7 +230,7 @@ def pooled_window_difference(runs, ref, judged: tuple[float, float], *, bin_widt
     md = minkowski_distance(pa, pb, md_order) if pa.sum() > 0 and pb.sum() > 0 else float("nan")
     return WindowDifference((tuple(runs[0][1]), tuple(judged)), a, b,
                             percentage_difference(a.mean, b.mean),
-                            percentage_difference(a.sd, b.sd, scale=b.mean), md)
+                            percentage_difference(a.sd, b.sd, scale=b.mean), md, len(runs))
 
 
 def model_on_fitting_window(model: ResidenceTimes, model_rtd: np.ndarray,

@@ -235,9 +235,12 @@ def baseline_line(baseline: dict, md_model: float, md_halves: float | None = Non
     from cfbmarkov.observed.metrics import percentage_text as pd_text
 
     (a, b), _ = baseline["windows"]
+    runs = int(baseline.get("runs") or 1)
+    of = (f"{a:g}-{b:g} s" if runs == 1 else
+          f"the model's fitting windows in its {runs} runs, pooled as it was fitted,")
     md = baseline["md_rtd"]
     if not all(v is not None and math.isfinite(v) for v in (md, md_model)):
-        return (f"persistence baseline (the observed RTD of {a:g}-{b:g} s taken as the "
+        return (f"persistence baseline (the observed RTD of {of} taken as the "
                 "prediction): not judged, an MD is undefined (a side without residences)")
     judged = judge_baseline(md_model, md, md_halves)
     verdict = {"beats": "the model is closer", "loses": "the baseline is closer",
@@ -245,7 +248,7 @@ def baseline_line(baseline: dict, md_model: float, md_halves: float | None = Non
     if verdict is None:
         verdict = (f"not told apart (the gap is within the reference's own variability, "
                    f"its halves' MD {judged.md_halves:.4g})")
-    return (f"persistence baseline (the observed RTD of {a:g}-{b:g} s taken as the "
+    return (f"persistence baseline (the observed RTD of {of} taken as the "
             f"prediction): MD {md:.4g} against the model's {md_model:.4g}, PD E(RT) "
             f"{pd_text(baseline.get('pd_rt_mean'))} %: {verdict}")
 
