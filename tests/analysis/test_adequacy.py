@@ -3,6 +3,7 @@ must be (stationarity --sample-length), on generated risers."""
 
 import contextlib
 import json
+import math
 
 import h5py
 import numpy as np
@@ -10,7 +11,7 @@ import pytest
 
 from cfbmarkov import synthetic
 from cfbmarkov.analysis.adequacy import assess_adequacy
-from cfbmarkov.analysis.sample_length import sample_length
+from cfbmarkov.analysis.sample_length import sample_length, verdict_text
 from cfbmarkov.cli import main
 from cfbmarkov.markov import MarkovModel, fit_model
 from cfbmarkov.errors import InputError
@@ -574,3 +575,21 @@ def test_the_summary_says_a_reducible_chain_need_not_carry_the_throughput(tmp_pa
     assert "a reducible chain, which weights its classes by their entry flux, need not " \
            "carry it" in summary
     assert "the throughput the chain should carry" not in summary
+
+
+def test_sample_length_of_runs_of_different_flows_is_not_judged(tmp_path, capsys):
+    """Runs of two flows pooled (a fast and a slow chain): their long-run E(RT) lie far
+    apart, so no sample length is given and the verdict names each run's E(RT) and says to
+    judge each alone (it advised memory for the mixture's miss); two seeds of one flow are
+    judged as before."""
+    fast, fast2, slow = _pair_runs(tmp_path)
+    mixed = sample_length([fast, slow], _space(), lag=0.025, start=0.5)
+    assert len(mixed.run_rt_means) == 2 and math.isnan(mixed.sample_length)
+    text = verdict_text(mixed, "cells")
+    assert text.startswith("not judged: the runs' long-run E(RT) differ (fast.h5 ")
+    assert "judge each run alone" in text and "memory" not in text
+    same = sample_length([fast, fast2], _space(), lag=0.025, start=0.5)
+    assert not verdict_text(same, "cells").startswith("not judged")
+    code, out, _ = run_cli(capsys, "stationarity", fast, slow, "--sample-length", "--cells",
+                           "4x16", "--start", "0.5")
+    assert code == 0 and "sample length: not judged: the runs' long-run E(RT) differ" in out

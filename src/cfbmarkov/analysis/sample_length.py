@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
@@ -75,6 +76,10 @@ class SampleLength:
         The closed classes of the longest window's chain that residences run in (more than
         1: a reducible chain, whose particles in some states never reach others; 0 where
         no window gave a model).
+    run_rt_means : tuple of (str, float)
+        Several runs of a periodic riser: each run's long-run E(RT) over the span (its
+        particle-time over its passes, s); empty for one run. Runs more than
+        :data:`RUNS_DISAGREE` apart are not judged (:func:`verdict_text`).
     """
 
     file: str
@@ -92,6 +97,7 @@ class SampleLength:
     long_run_observed_mean: float = math.nan
     censored_share: float = math.nan
     closed_classes: int = 0
+    run_rt_means: tuple = ()
 
     @property
     def observed_shortfall(self) -> float:
@@ -180,6 +186,7 @@ class SampleLength:
             "steady_misses": {k: [100 * lo, 100 * hi]
                               for k, (lo, hi) in self.steady_misses().items()},
             "closed_classes": self.closed_classes,
+            "run_rt_means": {name: mean for name, mean in self.run_rt_means},
             "sample_length": self.sample_length})
 
 
@@ -208,6 +215,13 @@ def missed_text(miss: str, pd_mean: float, pd_sd: float) -> str:
     return f"no: {mean if miss == 'E(RT)' else sd if miss == 'SD(RT)' else f'both ({mean}, {sd})'}"
 
 
+#: the relative spread of several runs' long-run E(RT) beyond which they are judged not to
+#: be runs of one steady flow: runs of one case from different seeds scatter by a few % on
+#: generated risers, and a CFD-DEM riser's E(RT) moves by 10-28 % between 5 s windows, so
+#: only a larger gap is judged a different flow
+RUNS_DISAGREE = 0.25
+
+
 def verdict_text(result: SampleLength, states: str) -> str:
     """The closing line of ``stationarity --sample-length``: the length, or which figure
     misses and the cure (a longer run where a figure still drifts with the length, a state
@@ -226,6 +240,12 @@ def verdict_text(result: SampleLength, states: str) -> str:
         The text after "sample length: ".
     """
     tol = 100 * result.tolerance
+    if _runs_disagree(result):
+        each = ", ".join(f"{Path(name).name} {m:.3g} s" for name, m in result.run_rt_means)
+        return (f"not judged: the runs' long-run E(RT) differ ({each}; pooled "
+                f"{result.long_run_mean:.3g} s), more than {100 * RUNS_DISAGREE:g} % apart: "
+                "they are not runs of one steady flow, and windows of their pool judge a "
+                "mixture; judge each run alone (stationarity RUN --sample-length)")
     if np.isfinite(result.sample_length):
         figures = "E(RT) and SD(RT) lie" if result.sd_judged else "E(RT) lies"
         if result.sample_length == result.lengths[-1] and result.lengths.size > 1:
@@ -404,6 +424,8 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                                  "windows by (runs of one case, a longer span)")
             long_mean = particle_time / passes
             censored = min(1.0, max(0.0, 1.0 - float(long_run.sum()) / particle_time))
+            run_means = tuple((str(t.path), f[0] / f[1] if f[1] > 0 else math.nan)
+                              for t, f in zip(runs, flux)) if len(runs) > 1 else ()
     lengths_ = np.asarray(usable)
     runs_text = f", {len(paths)} runs pooled" if len(paths) > 1 else ""
     result = SampleLength(name, a, max(lasts), long_mean,
@@ -411,11 +433,20 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                           np.asarray(means, float), np.asarray(sds, float), float(tolerance),
                           math.nan, f"{state_space.describe()}, lag {lag:g} s, estimator "
                                     f"'{estimator}'{runs_text}",
-                          float(long_run.mean()), censored, classes)
+                          float(long_run.mean()), censored, classes,
+                          run_means if not runs[0].boundary.is_open else ())
     return _with_length(result)
+
+
+def _runs_disagree(result: SampleLength) -> bool:
+    """Whether several runs' long-run E(RT) lie more than :data:`RUNS_DISAGREE` apart."""
+    means = [m for _, m in result.run_rt_means if math.isfinite(m)]
+    return len(means) > 1 and (max(means) - min(means)) / result.long_run_mean > RUNS_DISAGREE
 
 
 def _with_length(result: SampleLength) -> SampleLength:
     from dataclasses import replace
 
-    return replace(result, sample_length=_first_stable(result.within(), result.lengths))
+    length = (math.nan if _runs_disagree(result)      # a mixture of flows is not judged
+              else _first_stable(result.within(), result.lengths))
+    return replace(result, sample_length=length)
