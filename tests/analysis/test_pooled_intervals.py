@@ -152,3 +152,10 @@ def test_assess_fit_of_a_pooled_model_takes_each_run_and_its_window(runs):
                        verdict=False)
     assert found.uncertainty is not None
     assert found.uncertainty.rt_mean_interval == given.uncertainty.rt_mean_interval
+    # once the model records its windows' content, other data are refused: one of its
+    # runs alone, or another run in its place
+    from cfbmarkov.errors import InputError
+
+    for other in ([str(runs[0])], [str(runs[0]), str(runs[2])]):
+        with pytest.raises(InputError, match="not the data the model was fitted on"):
+            assess_fit(found, other, windows[:len(other)], resamples=20, verdict=False)

@@ -209,7 +209,7 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
      "col,row,rate\n" + "".join(f"{c},{r},1\n" for r in range(6) for c in range(3)
                                 if (c, r) != (2, 4)), "misses 1 cell(s) of the grid 3x6 (col 2, row 4)"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
-     "col,row,rate\n0,0,1.0\n", "(col 1, row 0, col 2, row 0, col 0, row 1 and 14 more)"),
+     "col,row,rate\n0,0,1.0\n", "(col 1, row 0; col 2, row 0; col 0, row 1; and 14 more)"),
     # a name the particle files' arrays carry would replace that array in export-vtk
     ('[[property]]\nname = "id"\nlaw = "first-order"\nrate = 0.4\n', None,
      "property name 'id' is the name of an array the particle files carry"),
@@ -225,7 +225,8 @@ def test_bad_kinetics_files_one_line_exit_2(fitted, tmp_path, capsys, text, rate
 def test_rate_tables_from_excel_read_or_refused_by_encoding(fitted, tmp_path, capsys):
     """Excel's "CSV UTF-8" (a byte-order mark before the header) reads as plain UTF-8; its
     "Unicode Text" (UTF-16) and other encodings are refused in one line naming the file
-    and how to save it (not a traceback); a kinetics TOML with a byte-order mark reads."""
+    and how to save it (not a traceback); a kinetics TOML with a byte-order mark reads, one
+    in UTF-16 or cp1252 is named as text in that encoding (not as a binary file)."""
     _, _, model = fitted
     kin = _write(tmp_path, GOOD)
     (tmp_path / "rates.csv").write_bytes(b"\xef\xbb\xbf" + RATES.encode())
@@ -235,6 +236,14 @@ def test_rate_tables_from_excel_read_or_refused_by_encoding(fitted, tmp_path, ca
     (tmp_path / "rates.csv").write_text(RATES)
     assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
     assert json.loads(capsys.readouterr().out)["properties"]["X"]["exit_mean"] == with_bom
+    for text, says in ((GOOD.encode("utf-16"), "is text in UTF-16; save it as UTF-8"),
+                       (("# caf\u00e9\n" + GOOD).encode("cp1252"),
+                        "is text in another encoding than UTF-8; save it as UTF-8")):
+        other = tmp_path / "other.toml"
+        other.write_bytes(text)
+        assert main(["react", str(model), "--kinetics", str(other)]) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and says in err
     for data, says in ((RATES.encode("utf-16"), "is UTF-16 (Excel's 'Unicode Text')"),
                        (RATES.replace("rate", "rate \u00b0").encode("cp1252"), "not UTF-8")):
         (tmp_path / "rates.csv").write_bytes(data)

@@ -49,6 +49,7 @@ def test_monte_carlo_checks_its_particles_laps_and_steps(model):
     np.testing.assert_array_equal(laps[0], [5, 6, 7])
     for kwargs, message in (({"initial_laps": [5]}, "1 laps for 3 particles"),
                             ({"initial_laps": [1.5, 2, 3]}, "whole numbers"),
+                            ({"initial_laps": [2**40, 0, 0]}, "32-bit integer"),
                             ({"n_steps": 5.5}, "n_steps 5.5"),
                             ({"n_steps": -3}, "n_steps -3")):
         options = {"n_steps": 4, **kwargs}

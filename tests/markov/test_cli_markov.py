@@ -225,6 +225,8 @@ def test_an_interval_without_the_flows_variability_is_warned_and_none_is_said(
     assert code == 0 and "(no interval: the model carries none;" in out
     _, out, _ = run_cli(capsys, "rtd", bare)
     assert "no interval: the model carries none" in out
+    _, _, err = run_cli(capsys, "rtd", bare, "--resamples", "20", "-q")  # formed here: said
+    assert f"warning: {said}" in err
     pred = tmp_path / "p.h5"
     assert run_cli(capsys, "predict", bare, "--init", markov_run, "--start", 3,
                    "--duration", 1, "-o", pred, "-q")[0] == 0

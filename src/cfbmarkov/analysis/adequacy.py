@@ -416,10 +416,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
         lines.append(throughput)
     length = min(b - a for a, b in windows)
     if uncertainty is not None and getattr(uncertainty, "flow_sd", 0) is None:
-        lines.append(f"the model's interval leaves out the flow's variability between windows "
-                     f"(the {length:g} s fitting window is shorter than two blocks of three "
-                     f"mean residence times): it holds this window's sampling alone, and the "
-                     f"flow's long run may lie outside it; {_ADVICE}")
+        lines.append(flow_term_line(length))
     tail = _tail_share(model, length)
     if math.isfinite(tail) and tail > TAIL_LIMIT:
         lines.append(f"{100 * tail:.0f} % of the model's residences last longer than the "
@@ -446,6 +443,26 @@ MIN_PARTS_LIMIT = 0.1
 #: (quarters 1.18, 1.18, 1.55, 1.52 s) got a limit of 31 %; a paper-scale 1 s window at
 #: 4 m/s whose halves gave 0.67 and 0.40 s lay 84 % from the flow's long run
 MAX_PARTS_LIMIT = 0.25
+
+def flow_term_line(length: float) -> str:
+    """The verdict's line on an interval formed without the flow's variability between
+    windows (a fitting window of ``length`` s shorter than two blocks of three mean residence
+    times; :func:`cfbmarkov.analysis.bootstrap.flow_variability`).
+
+    Parameters
+    ----------
+    length : float
+        The fitting window's length (s; the shortest of a pooled fit's).
+
+    Returns
+    -------
+    str
+    """
+    return (f"the model's interval leaves out the flow's variability between windows (the "
+            f"{length:g} s fitting window is shorter than two blocks of three mean residence "
+            f"times): it holds this window's sampling alone, and the flow's long run may lie "
+            f"outside it; {_ADVICE}")
+
 
 def _sampling_width(interval, uncertainty, rt_mean: float) -> float:
     """The width of the model's E(RT) interval over E(RT) without its flow term: the

@@ -68,7 +68,9 @@ def assess_fit(model, runs: Sequence | None = None,
     ------
     InputError
         If the model was not fitted on files (no ``source``), ``runs`` and ``windows``
-        differ in number, ``resamples`` is 1-9, or the chain traps residences.
+        differ in number, their windows' content differs from the one the model records
+        (``source_identity``: not the data it was fitted on), ``resamples`` is 1-9, or the
+        chain traps residences.
 
     Warns
     -----
@@ -81,7 +83,13 @@ def assess_fit(model, runs: Sequence | None = None,
     if 0 < resamples < 10:
         raise InputError(f"resamples {resamples}: an interval needs at least 10 bootstrap "
                          "resamples (0 leaves it out)")
+    recorded = model.source_identity
     model = _with_window_fields(model, runs, windows)
+    if recorded is not None and model.source_identity != recorded:
+        raise InputError(f"{', '.join(map(str, runs))}: not the data the model was fitted on "
+                         "(the content of the fitting windows differs from the one the model "
+                         "records); give the runs and windows it was fitted on, or leave "
+                         "runs= and windows= out")
     has_rtd = True
     try:
         model.rtd()
@@ -100,6 +108,7 @@ def assess_fit(model, runs: Sequence | None = None,
             except CfbmarkovError as exc:
                 warnings.warn(f"no interval for the model's E(RT) and SD(RT): {exc}",
                               IntervalWarning, stacklevel=2)
+                model = model.with_uncertainty(None)     # not an interval of other data
     if verdict:
         from cfbmarkov.analysis.adequacy import assess_adequacy
 

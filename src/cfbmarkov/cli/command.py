@@ -73,9 +73,14 @@ def _refuse_unknown(parser: argparse.ArgumentParser, verb: str, extra: list[str]
     hints = []
     for word in extra:
         if word.startswith("-"):
-            close = difflib.get_close_matches(word.split("=")[0], options, n=1, cutoff=0.6)
+            name = word.split("=")[0]
+            # an option cut short (options are given whole) means the one it begins, where
+            # only one does; else the nearest by spelling
+            begun = [o for o in options if o.startswith(name) and o.startswith("--")]
+            close = (begun if len(begun) == 1 else
+                     difflib.get_close_matches(name, options, n=1, cutoff=0.6))
             if close:
-                hints.append(f"{word.split('=')[0]}: did you mean {close[0]}?")
+                hints.append(f"{name}: did you mean {close[0]}?")
     said = f" ({'; '.join(hints)})" if hints else ""
     print(f"cfbmarkov {verb}: error: unrecognized arguments: {' '.join(extra)}{said}; see "
           f"cfbmarkov {verb} --help", file=sys.stderr)

@@ -305,6 +305,16 @@ def cmd_rtd(args) -> int:
         warnings.append(unresolved)
     if band is not None:
         warnings += band.warnings()
+    if args.resamples and band is not None and band.flow_sd is None:
+        # an interval formed here, on a window too short for the flow's term: the verdict's
+        # line, as fit gives it
+        from cfbmarkov.analysis.adequacy import flow_term_line
+
+        windows = model.run_windows or ((model.window,) if model.window else ())
+        if windows:
+            line = flow_term_line(min(b - a for a, b in windows))
+            if not any(line.split(":")[0] in w for w in warnings):
+                warnings.append(line)
     if args.json:
         out = {"rt_mean": rtd.mean, "rt_sd": rtd.sd, "direction": model.flow_direction,
                "window_length": args.window_length, "unresolved": rtd.unresolved,

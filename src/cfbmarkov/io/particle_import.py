@@ -14,7 +14,7 @@ from cfbmarkov.io.particle_frames import import_particle_series
 
 #: the names of the formats in messages
 NAMES = {"vtk": "legacy VTK", "vtp": "VTK XML PolyData", "vtu": "VTK XML UnstructuredGrid",
-         "pvd": "a ParaView collection (.pvd) of VTK XML files",
+         "pvd": "ParaView collection (.pvd)",
          "h5md": "H5MD"}
 
 

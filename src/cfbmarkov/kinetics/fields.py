@@ -209,10 +209,10 @@ class ByCell(CellParameter):
         if seen.min() < 1:
             missing = np.flatnonzero(seen == 0)
             m = space.columns
-            named = ", ".join(f"col {c % m}, row {c // (m * d)}"
+            named = "; ".join(f"col {c % m}, row {c // (m * d)}"
                               + (f", depth {(c // m) % d}" if d > 1 else "")
                               for c in missing[:3].tolist())
-            more = f" and {missing.size - 3} more" if missing.size > 3 else ""
+            more = f"; and {missing.size - 3} more" if missing.size > 3 else ""
             raise InputError(f"{where}: the table misses {missing.size} cell(s) of the grid "
                              f"{space.grid_text()} ({named}{more}); give each of its "
                              f"{space.n_cells} cells exactly once")

@@ -438,11 +438,15 @@ def _binary_kind(path: Path) -> str:
     """What a file that is not text seems to be, in words."""
     try:
         with open(path, "rb") as fh:
-            head = fh.read(8)
+            head = fh.read(4096)
     except OSError:
         return "unreadable"
-    if head == b"\x89HDF\r\n\x1a\n":
+    if head[:8] == b"\x89HDF\r\n\x1a\n":
         return "an HDF5 file: a model or trajectory file?"
+    if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
+        return "text in UTF-16"
+    if b"\x00" not in head:
+        return "text in another encoding than UTF-8"
     return "a binary file"
 
 
@@ -483,6 +487,9 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
         raise InputError(f"cannot read kinetics file {name}: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
         what = _binary_kind(path)
+        if what.startswith("text"):
+            raise InputError(f"kinetics file {name} is {what}; save it as UTF-8 (a TOML file "
+                             "of [[property]] tables)") from None
         raise InputError(f"kinetics file {name} is not text ({what}): give the TOML file of "
                          "[[property]] tables (--kinetics kin.toml)") from None
     except tomllib.TOMLDecodeError as exc:

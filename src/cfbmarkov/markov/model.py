@@ -520,6 +520,10 @@ class MarkovModel:
             if initial_laps.shape != initial_states.shape:
                 raise InputError(f"initial_laps holds {initial_laps.size} laps for "
                                  f"{initial_states.size} particles: one a particle")
+            limit = np.iinfo(np.int32).max      # the lap counter of trajectory files
+            if initial_laps.size and np.abs(initial_laps).max() >= limit:
+                raise InputError(f"initial_laps: a lap beyond +-{limit} (the lap counter is "
+                                 "a 32-bit integer)")
         chain, offset, retag = self._chain, None, None
         if self.regime_chain is not None:
             # one regime path for every particle, each moving by the chain conditioned on it
