@@ -238,17 +238,24 @@ def test_vtp_refuses_other_compressors_in_one_line(tmp_path, capsys):
 
 # --- H5MD ---------------------------------------------------------------------------------
 
-def test_image_flags_give_the_laps_of_particles_too_fast_for_the_minimal_image_rule(
-        tmp_path, capsys):
-    """Particles that move more than a quarter of the height between frames: without image
-    flags the import is refused (the laps cannot be told); with ``ix iy iz`` point arrays
-    the laps are the flags' passes along the vertical axis."""
-    vy = np.array([12.0, -9.0, 0.5])                   # 0.6 m and 0.45 m a frame
+def _vertical_motion(vy):
+    """2D positions (T, N, 3: x, wrapped y, z = 0) of particles rising at ``vy`` m/s from
+    heights 0.1, 0.8, 0.4 m, their velocities and their laps (passes through the top)."""
+    vy = np.asarray(vy, dtype=float)
     unwrapped = np.array([0.1, 0.8, 0.4]) + TIMES[:, None] * vy
     laps = np.floor(unwrapped / H).astype(int)
     pos = np.stack([np.broadcast_to([0.02, 0.045, 0.07], unwrapped.shape),
                     unwrapped - laps * H, np.zeros(unwrapped.shape)], axis=2)
     vel = np.broadcast_to(np.stack([0 * vy, vy, 0 * vy], axis=1), pos.shape)
+    return pos, vel, laps
+
+
+def test_image_flags_give_the_laps_of_particles_too_fast_for_the_minimal_image_rule(
+        tmp_path, capsys):
+    """Particles that move more than a quarter of the height between frames: without image
+    flags the import is refused (the laps cannot be told); with ``ix iy iz`` point arrays
+    the laps are the flags' passes along the vertical axis."""
+    pos, vel, laps = _vertical_motion([12.0, -9.0, 0.5])   # 0.6 m and 0.45 m a frame
     names = [f"p_{k}.vtp" for k in range(TIMES.size)]
     for flags, folder in ((False, tmp_path / "plain"), (True, tmp_path / "flags")):
         folder.mkdir()
@@ -458,12 +465,7 @@ def test_laps_of_a_step_over_the_height_are_refused_before_any_output(tmp_path, 
     frames: a trajectory file cannot hold that step, so the import refuses it in one line
     naming the particle and the times, and an existing output is left as it was (it was
     written, then found damaged on reading, over the old file)."""
-    vy = np.array([22.0, 0.3, -0.5])                   # 1.1 m a frame
-    unwrapped = np.array([0.1, 0.8, 0.4]) + TIMES[:, None] * vy
-    laps = np.floor(unwrapped / H).astype(int)
-    pos = np.stack([np.broadcast_to([0.02, 0.045, 0.07], unwrapped.shape),
-                    unwrapped - laps * H, np.zeros(unwrapped.shape)], axis=2)
-    vel = np.broadcast_to(np.stack([0 * vy, vy, 0 * vy], axis=1), pos.shape)
+    pos, vel, laps = _vertical_motion([22.0, 0.3, -0.5])   # 1.1 m a frame
     names = [f"p_{k}.vtp" for k in range(TIMES.size)]
     for k, name in enumerate(names):
         _write_vtp(tmp_path / name, pos[k], vel[k], IDS, "ascii",
