@@ -123,3 +123,14 @@ def test_an_abbreviated_option_is_refused_with_its_whole_name(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1
     assert "--resample: did you mean --resamples?" in err
     assert not (tmp_path / "m.h5").exists()
+
+
+def test_a_required_option_typed_short_is_named_not_reported_missing(tmp_path, capsys):
+    """`fit RUN --out m.h5`: the mistyped --output is named (argparse alone said that
+    -o/--output is required)."""
+    from cfbmarkov.cli import main
+
+    assert main(["fit", str(tmp_path / "run.h5"), "--out", str(tmp_path / "m.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--out: did you mean --output?" in err
+    assert "required" not in err

@@ -28,7 +28,12 @@ class _Parser(argparse.ArgumentParser):
         kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)
 
+    #: (the root parser, argv) while ``main`` parses: what a "required" error looks back at
+    parsing = None
+
     def error(self, message: str):  # one line, exit code 2
+        if message.startswith("the following arguments are required") and _Parser.parsing:
+            _refuse_unknown_early(*_Parser.parsing)    # a required option typed short
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
@@ -87,6 +92,21 @@ def _refuse_unknown(parser: argparse.ArgumentParser, verb: str, extra: list[str]
     raise SystemExit(2)
 
 
+def _refuse_unknown_early(parser: argparse.ArgumentParser, argv: list[str]) -> None:
+    """Where argparse finds a required option missing, refuse the verb's unknown
+    ``--option`` instead: a required option typed short (``--out`` for ``--output``) is then
+    named as mistyped, not reported as missing."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    verb = next((word for word in argv if not word.startswith("-")), None)
+    if verb not in sub.choices or "--" in argv:
+        return
+    known = {o for action in sub.choices[verb]._actions for o in action.option_strings}
+    unknown = [word for word in argv if word.startswith("--") and len(word) > 2
+               and word.split("=")[0] not in known]
+    if unknown and not any(word in ("-h", "--help") for word in argv):
+        _refuse_unknown(parser, verb, unknown)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``cfbmarkov`` with ``argv`` (default: the process's arguments).
 
@@ -106,7 +126,11 @@ def main(argv: list[str] | None = None) -> int:
         parser = build_parser()
         try:
             argv = list(sys.argv[1:] if argv is None else argv)
-            args, extra = parser.parse_known_args(join_dash_values(parser, argv))
+            _Parser.parsing = (parser, argv)
+            try:
+                args, extra = parser.parse_known_args(join_dash_values(parser, argv))
+            finally:
+                _Parser.parsing = None
             if extra:
                 _refuse_unknown(parser, args.command, extra)
             if args.command == "demo":     # each kind of demo its own default folder
