@@ -369,3 +369,16 @@ def test_down_residences_mirror_up_ones():
         windowed_exit_means(up_model, kin, 2.0)["v"], rel=1e-12)
     with pytest.raises(InputError, match="up or down"):
         exact_kinetics(up_model, kin, direction="sideways")
+
+
+def test_an_exit_mean_beyond_its_range_by_round_off_is_put_on_it():
+    """A conversion's exit mean 1 + 7e-16 (a carried conversion's round-off) is 1, one
+    -1e-17 is 0; a value beyond the range by more than round-off is left as it is (a fault
+    to see, not to hide), and a law without a range leaves every value."""
+    from cfbmarkov.kinetics.laws import FirstOrder, HeatExchange
+    from cfbmarkov.markov.kinetics_exact import _in_range
+
+    assert _in_range(1.0000000000000007, FirstOrder()) == 1.0
+    assert _in_range(-1e-17, FirstOrder()) == 0.0
+    assert _in_range(1.01, FirstOrder()) == 1.01 and _in_range(0.5, FirstOrder()) == 0.5
+    assert _in_range(-5.0, HeatExchange()) == -5.0

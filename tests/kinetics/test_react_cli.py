@@ -93,6 +93,10 @@ def test_react_resamples_give_the_exit_means_intervals(fitted, tmp_path, capsys)
     assert json.loads(capsys.readouterr().out)["properties"]["X"]["exit_mean_interval"] is None
     assert main(["react", str(model), "--kinetics", str(kin), "--resamples", "5"]) == 2
     assert "at least 10" in capsys.readouterr().err
+    # a level without resamples sets nothing: refused in one line, not ignored
+    assert main(["react", str(model), "--kinetics", str(kin), "--level", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--level 0.5" in err and "--resamples" in err
 
 
 def test_react_resamples_give_the_activity_after_passes_its_intervals(fitted, tmp_path,

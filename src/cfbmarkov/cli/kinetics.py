@@ -46,6 +46,11 @@ def cmd_react(args) -> int:
     if 0 < args.resamples < 10:
         raise InputError(f"--resamples {args.resamples}: an interval needs at least 10 "
                          "bootstrap resamples (0 leaves it out)")
+    if args.level is not None and not args.resamples:
+        raise InputError(f"--level {args.level:g} sets the intervals' coverage, which "
+                         "--resamples N forms (the exact values carry none without it): add "
+                         "--resamples 100")
+    args.level = 0.9 if args.level is None else args.level
     kinetics = load_kinetics(args.kinetics)
     model = MarkovModel.load(args.model)
     fields, fields_from = None, None
@@ -301,7 +306,8 @@ def add_react(sub) -> None:
                    help="block-bootstrap resamples of the model's fitting window for the "
                         "exit means' intervals, each an exact solve (default 0: none; 100 "
                         "as fit; at least 10)")
-    s.add_argument("--level", type=level, default=0.9,
-                   help="coverage of the exit means' intervals (default 0.9)")
+    s.add_argument("--level", type=level, default=None,
+                   help="coverage of the exit means' intervals (default 0.9; with "
+                        "--resamples)")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=cmd_react)

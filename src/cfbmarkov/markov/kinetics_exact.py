@@ -282,6 +282,19 @@ class PropertyAnswer:
                                      for x in self.bed_mean_by_cell]}
 
 
+def _in_range(value: float, law) -> float:
+    """``value`` moved onto its law's range (a conversion's [0, 1], an activity's
+    [0, inf)) where it lies beyond it by round-off (1e-12 of the range's scale) alone: a
+    carried conversion's exit mean came out 1.0000000000000007."""
+    low, high = getattr(law, "initial_range", (None, None))
+    tol = 1e-12 * max(1.0, abs(value))
+    if high is not None and high < value <= high + tol:
+        return float(high)
+    if low is not None and low - tol <= value < low:
+        return float(low)
+    return value
+
+
 #: the relative size of E[v^2] below which the exit variance E[v^2] - E[v]^2 is round-off
 #: (an exit SD below 1e-6 of the value's scale is printed as 0)
 ROUND_OFF = 1e-12
@@ -431,6 +444,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         cmass = np.bincount(cell, mass, minlength=space.n_cells)
         ccount = np.bincount(cell, count, minlength=space.n_cells)
         by_cell = np.divide(cmass, ccount, out=np.full(cmass.size, np.nan), where=ccount > 0)
+        mean = _in_range(mean, sk.laws[i])
         out[name] = PropertyAnswer(name, sk.starts[i], float(v0), float(mean), sd,
                                    float(mass.sum() / count.sum()), by_state, by_cell,
                                    float(sk.initial[i]), m)
