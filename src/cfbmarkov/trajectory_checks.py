@@ -18,6 +18,28 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.trajectory_format import POSITION_TOLERANCE, PassEvents, time_text
 
 
+@nb.njit(cache=True, inline="always")
+def _laps_off(y0, y1, lap0, lap1, height, tol):
+    """Whether a particle's laps and heights in two consecutive frames where it is present
+    say it moved more than the riser's height: |dy + dL H| > H + 2 tol."""
+    return not abs(y1 - y0 + (lap1 - lap0) * height) <= height + 2 * tol
+
+
+@nb.njit(cache=True)
+def first_lap_jump(y, lap, present, height, tol):
+    """The first (frame, particle) of a block (heights ``y`` [T, N], laps, presence) whose
+    laps and heights in frames k and k + 1 say it moved more than the riser's height
+    (:func:`_laps_off`), or (-1, -1): the writer's check of given laps (Numba kernel, one
+    pass, no temporaries)."""
+    n_frames, n_particles = y.shape
+    for k in range(n_frames - 1):
+        for p in range(n_particles):
+            if present[k, p] and present[k + 1, p] and _laps_off(
+                    y[k, p], y[k + 1, p], lap[k, p], lap[k + 1, p], height, tol):
+                return k, p
+    return -1, -1
+
+
 @nb.njit(cache=True)
 def _frame_problem(pos, lap, present, extent, tol, height, open_riser):
     """The first problem of a block of frames, in one pass without temporaries: (code,
@@ -41,8 +63,8 @@ def _frame_problem(pos, lap, present, extent, tol, height, open_riser):
                 if lap[k, p] != 0:
                     return 3, k, p
             elif k > 0 and present[k - 1, p]:
-                moved = pos[k, p, 1] - pos[k - 1, p, 1] + (lap[k, p] - lap[k - 1, p]) * height
-                if not abs(moved) <= height + 2 * tol:
+                if _laps_off(pos[k - 1, p, 1], pos[k, p, 1], lap[k - 1, p], lap[k, p], height,
+                             tol):
                     return 4, k - 1, p
     return 0, 0, 0
 

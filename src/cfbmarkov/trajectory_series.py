@@ -239,24 +239,30 @@ class FrameSeries:
         that a particle moved more than the riser's height between two frames, which a
         trajectory file cannot hold (its laps must follow from the positions frame to frame:
         docs/definitions.md, What is checked): refuse it here, before anything is kept."""
-        if self.last_y is not None and self.last_present is not None:
-            y = np.vstack([self.last_y[None, :], y])
-            laps = np.vstack([self.last_lap[None, :], laps])
-            present = np.vstack([self.last_present[None, :], present])
-            times = np.concatenate([[self.last_time], times])
-        if y.shape[0] < 2:
-            return
-        with np.errstate(invalid="ignore"):
-            moved = np.diff(y, axis=0) + np.diff(laps.astype(np.float64), axis=0) * self.height
-        bad = present[:-1] & present[1:] & ~(np.abs(moved) <= self.height + 2 * POSITION_TOLERANCE)
-        if bad.any():
-            k, p = np.unravel_index(int(np.argmax(bad)), bad.shape)
+        from cfbmarkov.trajectory_checks import first_lap_jump
+
+        def refuse(y0, y1, lap0, lap1, t0, t1, p):
+            moved = y1 - y0 + (int(lap1) - int(lap0)) * self.height
             raise InputError(
-                f"{self.label}: particle {int(ids[p])} moves {moved[k, p]:+.4g} m vertically "
-                f"between t = {time_text(times[k])} and {time_text(times[k + 1])} s (its laps "
-                f"{int(laps[k, p])} -> {int(laps[k + 1, p])}), more than the riser's height "
-                f"{self.height:g} m in one frame, which a trajectory file cannot hold: give "
-                "frames closer together (every dump, or export-vtk with a smaller --every)")
+                f"{self.label}: particle {int(ids[p])} moves {moved:+.4g} m vertically "
+                f"between t = {time_text(t0)} and {time_text(t1)} s (its laps {int(lap0)} -> "
+                f"{int(lap1)}), more than the riser's height {self.height:g} m in one frame, "
+                "which a trajectory file cannot hold: give frames closer together (every "
+                "dump, or export-vtk with a smaller --every)")
+
+        if self.last_y is not None and self.last_present is not None:   # across blocks
+            k, p = first_lap_jump(np.vstack([self.last_y, y[0]]),
+                                  np.vstack([self.last_lap, laps[0]]),
+                                  np.vstack([self.last_present, present[0]]),
+                                  float(self.height), POSITION_TOLERANCE)
+            if k >= 0:
+                refuse(self.last_y[p], y[0, p], self.last_lap[p], laps[0, p], self.last_time,
+                       times[0], p)
+        k, p = first_lap_jump(np.ascontiguousarray(y, dtype=np.float64),
+                              np.ascontiguousarray(laps), np.ascontiguousarray(present),
+                              float(self.height), POSITION_TOLERANCE)
+        if k >= 0:
+            refuse(y[k, p], y[k + 1, p], laps[k, p], laps[k + 1, p], times[k], times[k + 1], p)
 
     def _check_minimal_image(self, ids: np.ndarray, previous_y: np.ndarray, y: np.ndarray,
                              t0, t1, both: np.ndarray) -> None:
