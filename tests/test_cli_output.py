@@ -23,7 +23,7 @@ def _env():
     return {**os.environ, "PYTHONPATH": SRC, "NUMBA_NUM_THREADS": "1"}
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def model(tmp_path_factory):
     """A 4x8-cell model fitted on 300 synthetic particles x 3 s, and its run."""
     folder = tmp_path_factory.mktemp("pipe")

@@ -24,7 +24,6 @@ PYTHONPATH), with ``NUMBA_NUM_THREADS=1``; after the first command of a list, a 
 
 from __future__ import annotations
 
-import fcntl
 import os
 import re
 import shlex
@@ -35,6 +34,8 @@ import sys
 from pathlib import Path
 
 import pytest
+
+from tests.shared_builds import built_once
 
 ROOT = Path(__file__).resolve().parent.parent
 TUTORIAL = ROOT / "docs" / "tutorial" / "index.md"
@@ -227,19 +228,13 @@ def shared_start(tmp_path_factory):
     (:func:`common_start`) and the folder they were run in, made once per test run (under
     xdist, by the first worker that asks; any other waits for it)."""
     start = common_start(doc_commands(TUTORIAL), doc_commands(README, SKIPPED_README))
-    base = tmp_path_factory.getbasetemp()
-    if os.environ.get("PYTEST_XDIST_WORKER"):
-        base = base.parent                  # this run's folder, shared by its workers
-    seed, done = base / "docs-shared-start", base / "docs-shared-start.done"
-    with open(base / "docs-shared-start.lock", "w") as lock:
-        fcntl.flock(lock, fcntl.LOCK_EX)
-        if not done.exists():
-            shutil.rmtree(seed, ignore_errors=True)
-            (seed / "work").mkdir(parents=True)
-            run_commands(start, seed / "work", _environment(seed / "bin"),
-                         "docs/tutorial/index.md and README.md")
-            done.touch()
-    return start, seed / "work"
+
+    def build(seed: Path) -> None:
+        (seed / "work").mkdir()
+        run_commands(start, seed / "work", _environment(seed / "bin"),
+                     "docs/tutorial/index.md and README.md")
+
+    return start, built_once(tmp_path_factory, "docs-shared-start", build) / "work"
 
 
 def _start_from(shared_start, commands: list[str], work: Path) -> list[str]:

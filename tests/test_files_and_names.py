@@ -36,7 +36,7 @@ end_time = 0.05
 """
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def good(tmp_path_factory):
     folder = tmp_path_factory.mktemp("files")
     run = synthetic.write_run(folder / "run.h5", FLOW, 40, 2.0, seed=2)

@@ -25,7 +25,7 @@ def _env(**extra):
     return env
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def checks():
     proc = subprocess.run([sys.executable, "-m", "cfbmarkov.simulate.gpu.checks", "--threads", "4"],
                           capture_output=True, text=True, env=_env(NUMBA_ENABLE_CUDASIM="1"),

@@ -16,7 +16,7 @@ FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-
                            vertical_spread=0.5, persistence=False)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def good(tmp_path_factory):
     """A small run (60 particles x 3 s from t = 0) and a model fitted on it."""
     folder = tmp_path_factory.mktemp("good")

@@ -64,7 +64,7 @@ def stray(folder: Path, expected) -> list[str]:
                   if not any(p.relative_to(folder).parts[0] == e for e in expected))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def data(tmp_path_factory):
     folder = tmp_path_factory.mktemp("outputs")
     run = write_run(folder / "run.h5", RiserFlow(), 120, 1.5, seed=1)

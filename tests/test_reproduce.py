@@ -24,6 +24,7 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.reproduce import SCALES, reproduce, scale_cases
 from cfbmarkov.simulate.dem import ContactLaw
 from cfbmarkov.trajectories import Trajectories
+from tests.shared_builds import built_once, worker_copy
 
 TINY = """
 [riser]
@@ -79,18 +80,23 @@ def assert_same_files(a: Path, b: Path, names=("cfd-dem.h5", "prediction-paper.h
 STDERR: dict[str, str] = {}
 
 
-@pytest.fixture(scope="module")
-def reference(tmp_path_factory):
-    """An uninterrupted miniature reproduction at 8 m/s (inline executor), with progress."""
-    tmp = tmp_path_factory.mktemp("repro")
-    overrides = tiny(tmp)
-    out = tmp / "ref"
+def _build_reference(folder: Path) -> None:
+    overrides = tiny(folder)
     err = io.StringIO()
     with contextlib.redirect_stderr(err):
         assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides),
-                     "--velocities", "8", "-o", str(out), "--jobs", "1"]) == 0
-    STDERR["reference"] = err.getvalue()
-    return out, overrides
+                     "--velocities", "8", "-o", str(folder / "ref"), "--jobs", "1"]) == 0
+    (folder / "stderr.txt").write_text(err.getvalue())
+
+
+@pytest.fixture(scope="session")
+def reference(tmp_path_factory):
+    """An uninterrupted miniature reproduction at 8 m/s (inline executor), with progress:
+    built once per test run, this worker's own copy."""
+    shared = built_once(tmp_path_factory, "reproduce-reference", _build_reference)
+    folder = worker_copy(tmp_path_factory, shared, "reproduce-reference")
+    STDERR["reference"] = (folder / "stderr.txt").read_text()
+    return folder / "ref", folder / "tiny.toml"
 
 
 def check_case_lines(err: str, cases) -> None:

@@ -15,6 +15,7 @@ from cfbmarkov.cli import main
 from cfbmarkov.markov import MarkovModel
 from cfbmarkov.simulate.ensemble import member_seeds
 from cfbmarkov.trajectories import Trajectories
+from tests.shared_builds import built_once, worker_copy
 
 # the miniature reproduction's case (tests/test_reproduce.py)
 TINY = """
@@ -39,16 +40,24 @@ interval_resamples = 20
 """
 
 
-@pytest.fixture(scope="module")
+def _argv(folder: Path) -> list[str]:
+    return ["reproduce", "--scale", "quick", "--overrides", str(folder / "tiny.toml"),
+            "--velocities", "8", "-o", str(folder / "run"), "--jobs", "1", "-q", "--models",
+            "paper", "--ensemble", "2"]
+
+
+def _build_ensemble(folder: Path) -> None:
+    (folder / "tiny.toml").write_text(TINY)
+    assert main(_argv(folder)) == 0
+
+
+@pytest.fixture(scope="session")
 def ensemble(tmp_path_factory):
-    tmp = tmp_path_factory.mktemp("ensemble")
-    overrides = tmp / "tiny.toml"
-    overrides.write_text(TINY)
-    out = tmp / "run"
-    argv = ["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities", "8",
-            "-o", str(out), "--jobs", "1", "-q", "--models", "paper", "--ensemble", "2"]
-    assert main(argv) == 0
-    return out, argv
+    """(output folder, argv) of a miniature ``reproduce --ensemble 2``, built once per test
+    run; this worker's own copy."""
+    shared = built_once(tmp_path_factory, "reproduce-ensemble", _build_ensemble)
+    folder = worker_copy(tmp_path_factory, shared, "reproduce-ensemble")
+    return folder / "run", _argv(folder)
 
 
 def test_members_are_written_and_the_report_says_n(ensemble):

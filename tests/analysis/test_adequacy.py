@@ -40,7 +40,7 @@ def _write(path, period, seed=3, n=3000, slow=False):
                                       regimes=regimes)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("adequacy")
     return {"switching": _write(folder / "switching.h5", SWITCH),

@@ -10,7 +10,7 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("spans")
     flow = synthetic.RiserFlow()

@@ -18,7 +18,7 @@ FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-
                            vertical_spread=0.5, persistence=False)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def coverage():
     spec = importlib.util.spec_from_file_location("coverage_study", SCRIPT)
     module = importlib.util.module_from_spec(spec)
@@ -26,7 +26,7 @@ def coverage():
     return module
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def run(tmp_path_factory):
     return synthetic.write_run(tmp_path_factory.mktemp("coverage") / "run.h5", FLOW, 200, 6.0,
                                seed=2)

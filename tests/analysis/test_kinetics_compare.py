@@ -43,7 +43,7 @@ def _kinetics(tmp_path, name, rate_lines):
     return path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def prediction(tmp_path_factory):
     from cfbmarkov.markov import CellGrid, fit_model
 

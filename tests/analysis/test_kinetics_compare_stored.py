@@ -23,7 +23,7 @@ def _toml(tmp_path, name, body):
     return path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
     """A run, a cells model and a cells-velocity model fitted on 0-4 s (the velocity one
     from 0.02 s: its first frame is history), predictions from 4 s with the first-order

@@ -17,7 +17,7 @@ FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-
                            vertical_spread=0.5, persistence=False)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def stationary_run(tmp_path_factory):
     """300 particles x 13 s of a chain on 3 x 8 cells, from its stationary distribution."""
     path = tmp_path_factory.mktemp("model-intervals") / "run.h5"

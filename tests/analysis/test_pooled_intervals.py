@@ -22,7 +22,7 @@ WINDOW = (0.5, 2.5)
 RUNS = 4
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
     """Four independent 3 s runs (seeds 10-13) of one stationary chain, 300 particles."""
     folder = tmp_path_factory.mktemp("pooled-intervals")

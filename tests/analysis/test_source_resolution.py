@@ -16,7 +16,7 @@ FLOW = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=
                            vertical_spread=0.5, persistence=False)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def fitted(tmp_path_factory):
     """A model fitted in ``fit/`` on ``synth/run.h5`` (a relative path), saved there."""
     import os

@@ -25,7 +25,7 @@ def _script():
     return module
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def run(tmp_path_factory):
     folder = tmp_path_factory.mktemp("goals")
     return write_run(folder / "run.h5", RiserFlow(columns=4, rows=10, persistence=False), 200,

@@ -12,7 +12,7 @@ from cfbmarkov.markov.states import CellGrid
 from cfbmarkov.synthetic import RiserFlow, write_run
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def fitted(tmp_path_factory):
     folder = tmp_path_factory.mktemp("react")
     run = write_run(folder / "run.h5", RiserFlow(columns=3, rows=6), 60, 2.0, seed=1)

@@ -16,7 +16,7 @@ from cfbmarkov.markov import CellGrid, discretize, fit_model
 from cfbmarkov.markov.kinetics_exact import exact_kinetics
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def model(markov_flow, markov_run):
     return fit_model(markov_run, markov_flow.grid, markov_flow.lag, (2.0, 6.0), "mle")
 

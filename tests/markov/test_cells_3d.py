@@ -26,7 +26,7 @@ def run_cli(capsys, *argv):
     return code, out, err
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
     """A small synthetic 2D periodic run and the same run with a random depth coordinate."""
     folder = tmp_path_factory.mktemp("cells3d")

@@ -25,7 +25,7 @@ def one_line_error(code, err):
     return lines[0]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def fitted(tmp_path_factory, markov_run):
     """A model on 1-5 s of ``markov_run`` (0-8 s, frames every 0.025 s) and its prediction
     of 5-7 s."""

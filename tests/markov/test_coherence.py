@@ -40,7 +40,7 @@ def _coherent_run(path, rho, seed):
     return path, states
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def coherent(tmp_path_factory):
     return _coherent_run(tmp_path_factory.mktemp("coherence") / "run.h5", 0.6, 3)
 

@@ -22,7 +22,7 @@ def _flow(persistence):
                                vertical_spread=0.5, persistence=persistence)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
     """1500 particles x 5 s of the generator without (Markov on cells) and with the hidden
     direction of motion."""
@@ -35,7 +35,7 @@ def runs(tmp_path_factory):
     return out
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def results(runs):
     """ITS and CK (height thirds, 8 steps) of a cells-only MLE model on both runs."""
     out = {}

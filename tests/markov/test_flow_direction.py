@@ -21,7 +21,7 @@ FLOW = RiserFlow(persistence=False)      # a Markov chain on the cells: the mode
 STOP = 10.0                              # 401 frames, 0.025 s apart
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
     """(up, down) trajectory files of one run and its mirror image (net flow down)."""
     folder = tmp_path_factory.mktemp("flow-direction")

@@ -337,12 +337,12 @@ def _write(tmp_path_factory, flow, name, seed):
     return path
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def resolved_run(tmp_path_factory):
     return _write(tmp_path_factory, RESOLVED, "resolved.h5", seed=1)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def default_run(tmp_path_factory):
     return _write(tmp_path_factory, DEFAULT, "default.h5", seed=0)
 

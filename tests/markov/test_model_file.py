@@ -31,7 +31,7 @@ def sparse_model(space, nnz: int = 7, seed: int = 0) -> MarkovModel:
     return MarkovModel(p, counts, up, down, space, 0.025, "mle", (10.0, 15.0), "run.h5", 5000)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def big_model():
     """1596 states: the second-order chain on the paper's 6 x 38 cells."""
     return sparse_model(SecondOrderCells(6, 38))

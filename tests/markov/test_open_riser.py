@@ -20,7 +20,7 @@ LAG = 0.02
 STEP = 1e-5
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def open_run(tmp_path_factory):
     q, r, e = open_chain()
     states, ids = draw(q, r, e, n_steps=400, inflow=6.0, n_start=150, seed=11)

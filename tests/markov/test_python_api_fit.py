@@ -18,7 +18,7 @@ from cfbmarkov.trajectories import Trajectories
 GRID = CellGrid(4, 16, 0.09, 0.95)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def fitted(markov_run):
     window = discretize(markov_run, GRID, lag=0.1, window=(2.0, 6.0))
     return PaperEstimator(GRID, lag=0.1).fit(window)

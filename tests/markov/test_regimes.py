@@ -31,20 +31,20 @@ LAG, DURATION, PARTICLES = 0.025, 60.0, 300
 ORDER = np.array([1, 0])
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def regime_run(tmp_path_factory):
     path = tmp_path_factory.mktemp("regimes") / "run.h5"
     return synthetic.write_regime_run(path, FLOWS, SWITCH, PARTICLES, DURATION, seed=4)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def joint():
     """The generator's joint chain in the fitted numbering (state = cell * 2 + fitted r)."""
     j, up, down = synthetic.regime_generator([FLOWS[k] for k in ORDER], SWITCH[ORDER][:, ORDER])
     return j, up, down
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def fitted(regime_run):
     space = state_space_from_name("cells-regime", 4, 16, 0.09, 0.95)
     return fit_model(regime_run, space, LAG, None)

@@ -28,7 +28,7 @@ FLOW = synthetic.RiserFlow()
 FIT, LATER = (0.5, 4.5), (4.5, 8.5)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def run(tmp_path_factory):
     path = tmp_path_factory.mktemp("select") / "run.h5"
     with (threadpool_limits(1) if threadpool_limits else contextlib.nullcontext()):

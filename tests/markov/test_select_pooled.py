@@ -17,7 +17,7 @@ FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-
 WINDOW = (0.5, 4.0)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def runs(tmp_path_factory):
     folder = tmp_path_factory.mktemp("select-pooled")
     return {"a": synthetic.write_run(folder / "a.h5", FLOW, 300, 4.0, seed=21),

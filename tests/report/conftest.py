@@ -17,6 +17,7 @@ from cfbmarkov import synthetic
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.markov import CellGrid, fit_model
 from cfbmarkov.report.compare import compare
+from tests.shared_builds import built_once
 
 PARTICLES = 400
 END = 6.0
@@ -70,8 +71,12 @@ def build_case(root: Path, u: float, rise: float, *, estimators=ESTIMATORS, comp
 @pytest.fixture(scope="session")
 def reproduction_template(tmp_path_factory) -> Path:
     """u3 and u6 finished; u8 fitted and predicted (files copied from u6) but not compared,
-    and without timings."""
-    root = tmp_path_factory.mktemp("reproduction-template")
+    and without timings: built once per test run, shared by the workers (read only: tests
+    copy it)."""
+    return built_once(tmp_path_factory, "reproduction-template", _build_template)
+
+
+def _build_template(root: Path) -> None:
     threads = numba.get_num_threads()
     # the Monte Carlo placement is a parallel kernel: on a busy machine, launching threads
     # for a few hundred particles costs more than it saves
@@ -88,7 +93,6 @@ def reproduction_template(tmp_path_factory) -> Path:
         shutil.copyfile(root / "u6" / name, unfinished / name)
     (root / "reproduce.json").write_text(json.dumps(
         {"scale": "quick", "cases": ["u6", "u8", "u3"], "version": "0.1.0"}))
-    return root
 
 
 @pytest.fixture
@@ -105,6 +109,9 @@ def report_of_template(reproduction_template, tmp_path_factory):
     tests that only read the report share it."""
     from cfbmarkov.report.reproduction import write_report
 
-    root = tmp_path_factory.mktemp("reported") / "reproduction"
-    shutil.copytree(reproduction_template, root)
-    return root, write_report(root)
+    def build(folder: Path) -> None:
+        shutil.copytree(reproduction_template, folder / "reproduction")
+        write_report(folder / "reproduction")
+
+    root = built_once(tmp_path_factory, "reported-template", build) / "reproduction"
+    return root, root / "report.html"

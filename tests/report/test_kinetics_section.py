@@ -11,6 +11,7 @@ import pytest
 
 from cfbmarkov.report.compare import compare
 from cfbmarkov.report.kinetics_section import HEADING, KineticsRow, verdict_sentence
+from tests.shared_builds import built_once
 
 KINETICS = """
 [[property]]
@@ -27,14 +28,23 @@ def _rates(columns: int, rows: int) -> str:
         for r in range(rows) for c in range(columns))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def reported(reproduction_template, tmp_path_factory):
+    """(folder, report.html) of the template with kinetics compared in u3 and u6 and its
+    report written: built once per test run, shared by the workers (read only)."""
+    def build(folder):
+        _build_reported(reproduction_template, folder / "reproduction")
+
+    root = built_once(tmp_path_factory, "kinetics-reported", build) / "reproduction"
+    return root, root / "report.html"
+
+
+def _build_reported(reproduction_template, root):
     import shutil
 
     from cfbmarkov.report.reproduction import write_report
     from tests.report.conftest import COLUMNS, PREDICT, ROWS
 
-    root = tmp_path_factory.mktemp("kinetic") / "reproduction"
     shutil.copytree(reproduction_template, root)
     kin = root / "kinetics.toml"
     kin.write_text(KINETICS)
@@ -49,7 +59,7 @@ def reported(reproduction_template, tmp_path_factory):
                     output=folder / "compare-paper", kinetics=kin, resamples=10)
     finally:
         numba.set_num_threads(threads)
-    return root, write_report(root)
+    write_report(root)
 
 
 def test_the_section_quotes_summary_json(reported):

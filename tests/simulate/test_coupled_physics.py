@@ -57,7 +57,7 @@ def test_single_particle_reaches_terminal_slip():
     assert 6.0 < slip_here < 8.0
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def bed_run():
     n = 3000
     case = small_case(n, 0.3)

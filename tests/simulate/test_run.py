@@ -53,7 +53,7 @@ def arrays(path):
                 ev.direction, t.field_times, *(t.field(name) for name in t.field_names))
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def reference(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sim")
     case = load(small_case(tmp))
