@@ -326,7 +326,9 @@ def test_flow_variability_sees_a_change_of_speed_and_no_steady_flow(tmp_path):
     rel = flow_variability(m_steady, 20.0)
     assert rel is not None and rel[0] < 0.01        # (a frame's round-off moves a few by one frame)
     m_change = fit_model(change, grid, 0.05, (0.0, 20.0), "mle")
-    rel_mean, _ = flow_variability(m_change, 20.0)
+    variability = flow_variability(m_change, 20.0)
+    rel_mean = variability.mean
+    assert variability.degrees_of_freedom == 3      # four 5 s blocks, each against the rest
     # blocks 0-1 see 0.5 s, blocks 2-3 0.25 s: each block differs from the others' pooled
     # by a third or more, and sqrt(3 / 4) of that RMS is one block's relative SD, kept for
     # the 20 s window (a longer window is not taken as independent blocks: not halved)
@@ -346,8 +348,30 @@ def test_flow_variability_sees_a_change_of_speed_and_no_steady_flow(tmp_path):
     # run's first window gave -0.89 s before they were cut)
     short = prediction_intervals(m_change, samples, np.linspace(0.0, 1.25, 26), 1.25,
                                  resamples=10)
-    assert short.flow[0] > 0.3 / 1.6449       # z * flow beyond the value: uncut, below 0
+    assert short.flow[0] > 0.3 / 2.3534       # t(3) * flow beyond the value: uncut, below 0
+    assert short.flow_degrees_of_freedom == 3
     assert short.rt_mean[0] == 0.0 and short.rt_sd[0] >= 0.0 and short.rt_mean[1] > 0.3
+
+
+def test_the_flow_term_takes_students_t_with_its_blocks_less_one():
+    """A standard deviation from B blocks has B - 1 degrees of freedom: the flow term's
+    multiplier is Student's t quantile with them (tables: t_0.95(1) = 6.314, t_0.95(3) =
+    2.353, t_0.975(9) = 2.262), the normal one only where none are recorded; the interval
+    adds t times the flow's SD to the bootstrap's half-widths in quadrature."""
+    from cfbmarkov.analysis.bootstrap import flow_quantile, interval_bounds
+
+    assert flow_quantile(0.9, 1) == pytest.approx(6.3138, abs=1e-4)
+    assert flow_quantile(0.9, 3) == pytest.approx(2.3534, abs=1e-4)
+    assert flow_quantile(0.95, 9) == pytest.approx(2.2622, abs=1e-4)
+    assert flow_quantile(0.9, None) == pytest.approx(1.6449, abs=1e-4)
+    assert flow_quantile(0.9, 10 ** 6) == pytest.approx(1.6449, abs=1e-4)
+    with pytest.raises(InputError, match="degree of freedom"):
+        flow_quantile(0.9, 0)
+    boot = np.array([0.9, 1.0, 1.1])
+    lo, hi = interval_bounds(1.0, boot, 1.0, 0.9, 0.0, 0.05, 1)
+    q = np.quantile(boot, [0.05, 0.95])
+    assert hi - 1.0 == pytest.approx(np.hypot(q[1] - 1.0, 6.3138 * 0.05), abs=1e-4)
+    assert 1.0 - lo == pytest.approx(np.hypot(1.0 - q[0], 6.3138 * 0.05), abs=1e-4)
 
 
 def test_model_mixing_curve_equals_the_matrix_powers(tmp_path):

@@ -3,6 +3,7 @@
 generated chain, the model file round trip, and the command line (fit, rtd --json, info)."""
 
 import json
+from dataclasses import replace
 
 import h5py
 import numpy as np
@@ -11,6 +12,7 @@ import pytest
 from cfbmarkov import synthetic
 from cfbmarkov.analysis.intervals import model_intervals
 from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
 from cfbmarkov.markov import MarkovModel, fit_model
 
 FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-0.6,
@@ -66,6 +68,18 @@ def test_model_file_round_trip_keeps_the_interval(stationary_run, tmp_path):
     assert np.array_equal(got.rtd_interval, u.rtd_interval)
     assert (got.resamples, got.blocks, got.block_length) == (u.resamples, u.blocks,
                                                              u.block_length)
+    assert u.flow_sd is None and u.flow_degrees_of_freedom is None  # 2 s: E(RT) 2.3 s
+    assert got.flow_degrees_of_freedom is None
+    # a flow term keeps its degrees of freedom; a file written before they were stored (its
+    # flow term formed with the normal quantile) reads so: None
+    flowing = model.with_uncertainty(replace(u, flow_sd=(0.1, 0.2), flow_degrees_of_freedom=3))
+    older = flowing.save(tmp_path / "flowing.h5")
+    assert MarkovModel.load(older).uncertainty.flow_degrees_of_freedom == 3
+    with h5py.File(older, "a") as f:
+        del f["uncertainty/flow_degrees_of_freedom"]
+    assert MarkovModel.load(older).uncertainty.flow_degrees_of_freedom is None
+    with pytest.raises(InputError, match="flow_degrees_of_freedom"):
+        replace(u, flow_degrees_of_freedom=2)               # without a flow term
     plain = MarkovModel.load(model.save(tmp_path / "without.h5"))
     assert plain.uncertainty is None
     with h5py.File(tmp_path / "with.h5", "a") as f:        # damaged: refused in one line

@@ -55,13 +55,32 @@ def test_unbiased_where_the_window_censors_the_residences(tmp_path):
     assert inside < 0.9 * exact
 
 
-def test_refused_without_lap_counters_or_with_absences(tmp_path):
+def test_refused_without_lap_counters(tmp_path):
     open_run = synthetic.write_open_run(tmp_path / "open.h5", LONG_TAIL, 50, 1.0)
     with Trajectories(open_run) as traj, pytest.raises(InputError, match="open riser"):
         flux_residence_time(traj, (0.0, 1.0))
-    laps = np.zeros((5, 3), dtype=np.int64)
-    present = np.ones((5, 3), dtype=bool)
-    present[2, 1] = False
-    with Trajectories(_laps_file(tmp_path / "absent.h5", laps, present=present)) as traj:
-        with pytest.raises(InputError, match="absent"):
-            flux_residence_time(traj, (0.0, 0.4))
+
+
+def test_with_absences_the_steps_tracked_at_both_ends_count(tmp_path):
+    """A particle never present (outside the walls) adds nothing: the same flux as the file
+    without it. A tracer absent for a while counts neither the time nor a lap change across
+    its absence: only the frame steps present at both ends (hand-counted)."""
+    t = np.arange(21) * 0.1
+    laps = np.column_stack([np.floor(t / 0.5 + 1e-9), np.floor(t / 1.0 + 1e-9),
+                            np.zeros(21)])
+    with Trajectories(_laps_file(tmp_path / "all.h5", laps[:, :2])) as traj:
+        whole = residence_flux(traj, (0.0, 2.0))
+    never = np.ones((21, 3), dtype=bool)
+    never[:, 2] = False
+    with Trajectories(_laps_file(tmp_path / "never.h5", laps, present=never)) as traj:
+        assert traj.has_absences
+        assert residence_flux(traj, (0.0, 2.0)) == (pytest.approx(whole[0]), whole[1])
+        assert flux_residence_time(traj, (0.0, 2.0)) == pytest.approx(2.0 / 3.0, rel=1e-12)
+    # particle 0 away over frames 4-11 (0.4-1.1 s): the steps 0.3-0.4 s ... 1.1-1.2 s are
+    # not tracked at both ends (9 steps of 0.1 s), and its lap change across them (1 -> 2,
+    # at 0.5 and 1.0 s: two passes) is not counted: 4 - 0.9 particle-s, 6 - 2 passes
+    gap = never.copy()
+    gap[4:12, 0] = False
+    with Trajectories(_laps_file(tmp_path / "gap.h5", laps, present=gap)) as traj:
+        particle_time, passes = residence_flux(traj, (0.0, 2.0))
+        assert particle_time == pytest.approx(3.1) and passes == 4

@@ -120,9 +120,9 @@ def _part_rt_mean(model, direction: str | None = None) -> float:
 def window_rt_mean(runs, windows, direction: str) -> float:
     """The fitting windows' own E(RT) from their net solids flux: their particle-time over
     their net passes in ``direction``, several runs' summed (Little's law,
-    :func:`~cfbmarkov.observed.residence.residence_flux`; s). NaN for an open riser or a
-    file with absent particles (no flux to read), and where the net passes do not run in
-    ``direction``."""
+    :func:`~cfbmarkov.observed.residence.residence_flux`, in a file with absent particles
+    over the frame steps a particle is tracked through; s). NaN for an open riser (no flux
+    to read), and where the net passes do not run in ``direction``."""
     particle_time, passes = 0.0, 0
     for run, window in zip(runs, windows):
         with opened(run) as traj:
@@ -236,10 +236,11 @@ def within_run_limit(model, uncertainty, rt_mean: float,
     within the runs, at most ``tolerance``: the limit of a pooled fit's cross-run check
     (the module docstring).
 
-    The interval's half-widths are the stratified block bootstrap's and z times the flow's
-    standard error added in quadrature
-    (:func:`~cfbmarkov.analysis.bootstrap.interval_bounds`, z the normal quantile at
-    (1 + level) / 2). The stored flow term (``flow_sd``, measured between the blocks of all
+    The interval's half-widths are the stratified block bootstrap's and the flow's
+    standard error times its quantile added in quadrature
+    (:func:`~cfbmarkov.analysis.bootstrap.interval_bounds`: Student's t at (1 + level) / 2
+    with the flow term's degrees of freedom, :func:`~cfbmarkov.analysis.bootstrap.flow_quantile`).
+    The stored flow term (``flow_sd``, measured between the blocks of all
     the runs, so widened by their disagreement) is taken out of each half-width in
     quadrature, and the flow's variability within the runs
     (:func:`~cfbmarkov.analysis.bootstrap.flow_variability` with ``within_runs``, over
@@ -263,22 +264,23 @@ def within_run_limit(model, uncertainty, rt_mean: float,
     """
     if uncertainty is None or not rt_mean > 0:
         return tolerance
-    from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's
-
-    from cfbmarkov.analysis.bootstrap import fitting_runs, flow_variability
+    from cfbmarkov.analysis.bootstrap import fitting_runs, flow_quantile, flow_variability
 
     lo, hi = (float(v) for v in uncertainty.rt_mean_interval)
     if not (math.isfinite(lo) and math.isfinite(hi)):
         return tolerance
-    z = float(ndtri(0.5 * (1.0 + float(uncertainty.level))))
-    pooled = 0.0 if uncertainty.flow_sd is None else z * float(uncertainty.flow_sd[0]) * rt_mean
+    level = float(uncertainty.level)
+    pooled = (0.0 if uncertainty.flow_sd is None else
+              flow_quantile(level, uncertainty.flow_degrees_of_freedom)
+              * float(uncertainty.flow_sd[0]) * rt_mean)
     try:
         runs = fitting_runs(model)
         length = float(np.mean([b - a for _, (a, b) in runs]))
         relative = flow_variability(model, length, within_runs=True)
     except CfbmarkovError:
         relative, runs = None, [None]
-    within = 0.0 if relative is None else z * relative[0] / math.sqrt(len(runs)) * rt_mean
+    within = (0.0 if relative is None else flow_quantile(level, relative.degrees_of_freedom)
+              * relative.mean / math.sqrt(len(runs)) * rt_mean)
     down = math.sqrt(max((rt_mean - lo) ** 2 - pooled ** 2, 0.0) + within ** 2)
     up = math.sqrt(max((hi - rt_mean) ** 2 - pooled ** 2, 0.0) + within ** 2)
     return min(max((down + up) / rt_mean, MIN_RUNS_LIMIT), tolerance)
@@ -466,8 +468,9 @@ def flow_term_line(length: float) -> str:
 
 def _sampling_width(interval, uncertainty, rt_mean: float) -> float:
     """The width of the model's E(RT) interval over E(RT) without its flow term: the
-    window's own sampling (the block bootstrap), each half-width with the flow's z sigma
-    taken out in quadrature (:func:`~cfbmarkov.analysis.bootstrap.interval_bounds` adds it
+    window's own sampling (the block bootstrap), each half-width with the flow's term (its
+    quantile times its sigma, :func:`~cfbmarkov.analysis.bootstrap.flow_quantile`) taken
+    out in quadrature (:func:`~cfbmarkov.analysis.bootstrap.interval_bounds` adds it
     so). The parts' check tests the flow's changes within the window, so its limit must not
     grow with them (a window straddling a 30 % step of a generated flow got a flow term of
     17 % of E(RT) and a limit that passed the step)."""
@@ -475,10 +478,11 @@ def _sampling_width(interval, uncertainty, rt_mean: float) -> float:
     flow = getattr(uncertainty, "flow_sd", None)
     if flow is None or not math.isfinite(float(flow[0])):
         return (hi - lo) / rt_mean
-    from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's
+    from cfbmarkov.analysis.bootstrap import flow_quantile
 
-    z = float(ndtri(0.5 * (1.0 + float(uncertainty.level))))
-    term = z * float(flow[0]) * rt_mean
+    term = (flow_quantile(float(uncertainty.level),
+                          getattr(uncertainty, "flow_degrees_of_freedom", None))
+            * float(flow[0]) * rt_mean)
     down = math.sqrt(max((rt_mean - lo) ** 2 - term ** 2, 0.0))
     up = math.sqrt(max((hi - rt_mean) ** 2 - term ** 2, 0.0))
     return (down + up) / rt_mean

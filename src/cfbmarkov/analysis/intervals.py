@@ -29,9 +29,11 @@ Three sources of uncertainty are combined:
 
 The interval at level L is centred on the prediction's value: its lower (upper) half-width is
 the distance from the fitted model's exact value to the bootstrap's (1 - L)/2 ((1 + L)/2)
-quantile, and z_(1+L)/2 times the Monte Carlo and the flow's standard errors, added in
-quadrature (for the RTD and the mixing curve, bin by bin and frame by frame, without a flow
-term: their bands are the model's own).
+quantile, z_(1+L)/2 times the Monte Carlo's standard error and t_(1+L)/2 times the flow's
+(Student's t with the flow estimate's degrees of freedom, the blocks compared less one:
+an SD from a few blocks is itself uncertain), added in quadrature (for the RTD and the
+mixing curve, bin by bin and frame by frame, without a flow term: their bands are the
+model's own).
 
 References
 ----------
@@ -86,6 +88,9 @@ class PredictionIntervals:
         The flow's standard deviations of a window's E(RT) and SD(RT) (s; the relative ones
         of :func:`flow_variability` times the prediction's values); None where not asked for
         or not measurable.
+    flow_degrees_of_freedom : int or None
+        Their degrees of freedom: the interval takes Student's t with them
+        (:func:`~cfbmarkov.analysis.bootstrap.flow_quantile`); None with ``flow``.
     """
 
     level: float
@@ -99,6 +104,7 @@ class PredictionIntervals:
     model_rt_mean: tuple[float, float] | None = None
     model_rt_sd: tuple[float, float] | None = None
     flow: tuple[float, float] | None = None
+    flow_degrees_of_freedom: int | None = None
 
 
 class SourceChanged(InputError):
@@ -405,10 +411,12 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
             m_se = np.zeros(int(curve[0].max()) + 1)
             m_se[curve[0]] = se_curve
 
-    def interval(value, boot, centre, se, se_flow=0.0):
-        return interval_bounds(value, boot, centre, level, se, se_flow)
-
     relative = flow_variability(model, window_length, direction=direction) if flow else None
+    dof = None if relative is None else relative.degrees_of_freedom
+
+    def interval(value, boot, centre, se, se_flow=0.0):
+        return interval_bounds(value, boot, centre, level, se, se_flow, dof)
+
     model_mean = interval(mean, np.asarray(means), exact.mean, se_mean)
     model_sd = interval(sd, np.asarray(sds), exact.sd, se_sd)
     f_mean, f_sd = (0.0, 0.0) if relative is None else (relative[0] * mean, relative[1] * sd)
@@ -427,7 +435,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         None if curve is None else m_times, band,
         (float(max(model_mean[0], 0.0)), float(model_mean[1])),
         (float(max(model_sd[0], 0.0)), float(model_sd[1])),
-        None if relative is None else (float(f_mean), float(f_sd)))
+        None if relative is None else (float(f_mean), float(f_sd)), dof)
 
 
 #: most bins of a model's RTD interval (:func:`model_rtd_edges`)
@@ -541,7 +549,8 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     -------
     cfbmarkov.markov.uncertainty.ModelUncertainty
         Bins from :func:`model_rtd_edges`; ``flow_sd`` None where the window is too short
-        for the flow's term (the intervals are then the bootstrap's alone).
+        for the flow's term (the intervals are then the bootstrap's alone); the flow's term
+        takes Student's t with its degrees of freedom (``flow_degrees_of_freedom``).
 
     Raises
     ------
@@ -582,20 +591,23 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
         scale = np.divide(full, part, out=np.ones_like(full), where=part > 0)
         rtds = [values * scale for values in rtds]
     length = float(np.mean([b - a for _, (a, b) in runs]))
-    relative = flow_variability(model, length, direction=direction)
-    if relative is not None:       # several independent runs: their mean's variability
-        relative = tuple(v / np.sqrt(len(runs)) for v in relative)
+    variability = flow_variability(model, length, direction=direction)
+    dof = None if variability is None else variability.degrees_of_freedom
+    relative = None
+    if variability is not None:     # several independent runs: their mean's variability
+        relative = tuple(v / np.sqrt(len(runs)) for v in variability[:2])
     f_mean, f_sd = (0.0, 0.0) if relative is None else (relative[0] * exact.mean,
                                                         relative[1] * exact.sd)
-    m_lo, m_hi = interval_bounds(exact.mean, np.asarray(means), exact.mean, level, 0.0, f_mean)
-    s_lo, s_hi = interval_bounds(exact.sd, np.asarray(sds), exact.sd, level, 0.0, f_sd)
+    m_lo, m_hi = interval_bounds(exact.mean, np.asarray(means), exact.mean, level, 0.0, f_mean,
+                                 dof)
+    s_lo, s_hi = interval_bounds(exact.sd, np.asarray(sds), exact.sd, level, 0.0, f_sd, dof)
     hist = _binned(exact, edges)
     r_lo, r_hi = interval_bounds(hist, np.asarray(rtds), hist, level)
     return ModelUncertainty(float(level), (max(float(m_lo), 0.0), float(m_hi)),
                             (max(float(s_lo), 0.0), float(s_hi)), edges,
                             np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means),
                             int(blocks) * len(runs), length / int(blocks), relative,
-                            int(resamples))
+                            int(resamples), dof)
 
 
 __all__ = ["PredictionIntervals", "SourceChanged", "SourceMissing", "block_bootstrap_models",

@@ -229,7 +229,7 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
                          f"time inside a {length:g} s window: a lag shorter than the window")
     starts = np.round(a + step * np.arange(count), 9)    # no 0.30000000000000004 s
     means, sds, counts, directions, fluxes = [], [], [], [], []
-    with_flux = not (traj.boundary.is_open or traj.has_absences)
+    with_flux = not traj.boundary.is_open
     exact = False
     for start in starts:
         window = (float(start), float(start + length))

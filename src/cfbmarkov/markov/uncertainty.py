@@ -52,6 +52,11 @@ class ModelUncertainty:
     requested : int or None, optional
         Bootstrap resamples drawn (``resamples`` of them gave a model with residences);
         None where not recorded.
+    flow_degrees_of_freedom : int or None, optional
+        The degrees of freedom of ``flow_sd`` (the blocks compared less one): the interval
+        multiplies it by Student's t quantile with them
+        (:func:`cfbmarkov.analysis.bootstrap.flow_quantile`); None without ``flow_sd``, or
+        where not recorded (the normal quantile).
 
     Raises
     ------
@@ -72,6 +77,7 @@ class ModelUncertainty:
     block_length: float
     flow_sd: tuple[float, float] | None = None
     requested: int | None = None
+    flow_degrees_of_freedom: int | None = None
 
     def __post_init__(self):
         if not 0.0 < float(self.level) < 1.0:
@@ -93,6 +99,12 @@ class ModelUncertainty:
         object.__setattr__(self, "level", float(self.level))
         if self.flow_sd is not None:
             object.__setattr__(self, "flow_sd", tuple(float(v) for v in self.flow_sd))
+        if self.flow_degrees_of_freedom is not None:
+            dof = int(self.flow_degrees_of_freedom)
+            if dof < 1 or self.flow_sd is None:
+                raise InputError(f"flow_degrees_of_freedom {self.flow_degrees_of_freedom!r}: "
+                                 "a whole number >= 1, with flow_sd")
+            object.__setattr__(self, "flow_degrees_of_freedom", dof)
 
     @property
     def percent(self) -> str:
@@ -116,8 +128,8 @@ class ModelUncertainty:
 
     def cut_at_zero(self) -> list[str]:
         """Lines saying which interval's lower end fell to zero or below and was cut at 0,
-        and why: the flow's variability between the fitting window's blocks, z times it
-        more than the figure itself (``flow_sd``), or bootstrap resamples whose figure is 0
+        and why: the flow's variability between the fitting window's blocks, its quantile
+        times it more than the figure itself (``flow_sd``), or bootstrap resamples whose figure is 0
         (``docs/definitions.md``, The model's interval).
 
         Returns
@@ -161,13 +173,15 @@ class ModelUncertainty:
 
     def to_dict(self) -> dict:
         """JSON-serialisable: level, the intervals, the RTD's edges and bounds, resamples,
-        blocks, block length and the flow's relative SDs (null where none)."""
+        blocks, block length, the flow's relative SDs and their degrees of freedom (null
+        where none)."""
         return {"level": self.level, "rt_mean_interval": list(self.rt_mean_interval),
                 "rt_sd_interval": list(self.rt_sd_interval),
                 "rtd_edges": self.rtd_edges.tolist(),
                 "rtd_interval": self.rtd_interval.tolist(), "resamples": int(self.resamples),
                 "blocks": int(self.blocks), "block_length": float(self.block_length),
                 "flow_sd": None if self.flow_sd is None else list(self.flow_sd),
+                "flow_degrees_of_freedom": self.flow_degrees_of_freedom,
                 "requested": self.requested}
 
     def file_fields(self) -> dict[str, np.ndarray]:
@@ -180,6 +194,8 @@ class ModelUncertainty:
                   "flow_sd": flow}
         if self.requested is not None:
             fields["requested"] = int(self.requested)
+        if self.flow_degrees_of_freedom is not None:
+            fields["flow_degrees_of_freedom"] = int(self.flow_degrees_of_freedom)
         return {f"{GROUP}/{name}": np.asarray(value) for name, value in fields.items()}
 
     @classmethod
@@ -200,4 +216,6 @@ class ModelUncertainty:
                    tuple(g["rt_sd_interval"][()]), g["rtd_edges"][()], g["rtd_interval"][()],
                    int(g["resamples"][()]), int(g["blocks"][()]), float(g["block_length"][()]),
                    None if np.isnan(flow).any() else (float(flow[0]), float(flow[1])),
-                   int(g["requested"][()]) if "requested" in g else None)
+                   int(g["requested"][()]) if "requested" in g else None,
+                   int(g["flow_degrees_of_freedom"][()]) if "flow_degrees_of_freedom" in g
+                   else None)

@@ -381,6 +381,23 @@ def net_passes(traj, window: tuple[float, float]) -> int:
     return int((last - first)[seen].sum())
 
 
+def _tracked_flux(traj, window: tuple[float, float]) -> tuple[float, int]:
+    """Particle-time and net passes over the window's frame steps at which the particle is
+    present at both ends (a file with absences: what is seen while tracked, never a lap
+    change across an absence)."""
+    frames = traj.window(float(window[0]), float(window[1]))
+    times = np.asarray(traj.times[frames], dtype=np.float64)
+    particle_time, passes = 0.0, 0
+    for k in range(frames.start, frames.stop - 1, _BLOCK_FRAMES):
+        block = slice(k, min(k + _BLOCK_FRAMES + 1, frames.stop))      # one frame shared
+        laps, here = traj.laps(block).astype(np.int64), np.asarray(traj.present(block))
+        both = here[1:] & here[:-1]
+        steps = np.diff(times[block.start - frames.start:block.stop - frames.start])
+        particle_time += float(steps @ both.sum(axis=1))
+        passes += int(np.diff(laps, axis=0)[both].sum())
+    return particle_time, passes
+
+
 def net_flow_direction(traj, window: tuple[float, float]) -> str:
     """The direction residences are counted in over a window: "down" where a periodic
     riser's net solids flow over it is downward (:func:`net_passes` < 0), else "up"
@@ -416,11 +433,17 @@ def flux_residence_time(traj, window: tuple[float, float], direction: str | None
     2.26 s from the flux, 0.99 s from the 246 510 residences inside). It is the observed
     counterpart of a chain's :func:`~cfbmarkov.markov.first_passage.drift_residence_time`.
 
+    In a file with absent particles (a tracer out of the field of view, a particle outside
+    the walls that is never present) both sides count the frame steps at which a particle is
+    present at both ends only: the particle-time and the passes seen while it is tracked,
+    never a lap change across an absence (what happens while it is away is not seen); a
+    particle never present counts for nothing. The chain fitted on such a file counts its
+    transitions so too.
+
     Parameters
     ----------
     traj : Trajectories
-        An open trajectory file of a periodic riser whose particles are present in every
-        frame.
+        An open trajectory file of a periodic riser.
     window : (float, float)
         The window (s).
     direction : {"up", "down"}, optional
@@ -436,8 +459,7 @@ def flux_residence_time(traj, window: tuple[float, float], direction: str | None
     Raises
     ------
     InputError
-        For an open riser (no lap counters), a file with absent particles (their passes
-        while absent are not seen), a bad direction, or a window as
+        For an open riser (no lap counters), a bad direction, or a window as
         :meth:`~cfbmarkov.trajectories.Trajectories.window` refuses.
 
     References
@@ -464,7 +486,8 @@ def residence_flux(traj, window: tuple[float, float],
     Returns
     -------
     particle_time : float
-        N (t_last - t_first), particle s.
+        N (t_last - t_first), particle s (with absences: the time of the frame steps with
+        the particle present at both ends, summed over the particles).
     passes : int
         Net passes in ``direction`` (negative where the flow runs the other way).
 
@@ -476,16 +499,16 @@ def residence_flux(traj, window: tuple[float, float],
     if traj.boundary.is_open:
         raise InputError(f"{traj.path}: the flux residence time reads a periodic riser's lap "
                          "counters (an open riser has none)")
-    if traj.has_absences:
-        raise InputError(f"{traj.path}: particles are absent from some frames, so their "
-                         "passes while absent are not seen: no net flux to form E(RT) from")
-    direction = net_flow_direction(traj, window) if direction is None else direction
-    if direction not in ("up", "down"):
+    if direction is not None and direction not in ("up", "down"):
         raise InputError(f"residence direction {direction!r}: up or down")
-    frames = traj.window(float(window[0]), float(window[1]))
-    length = float(traj.times[frames.stop - 1]) - float(traj.times[frames.start])
-    passes = (1 if direction == "up" else -1) * net_passes(traj, window)
-    return traj.n_particles * length, int(passes)
+    if traj.has_absences:
+        particle_time, passes = _tracked_flux(traj, window)
+    else:
+        frames = traj.window(float(window[0]), float(window[1]))
+        length = float(traj.times[frames.stop - 1]) - float(traj.times[frames.start])
+        particle_time, passes = traj.n_particles * length, net_passes(traj, window)
+    direction = net_flow_direction(traj, window) if direction is None else direction
+    return particle_time, int((1 if direction == "up" else -1) * passes)
 
 
 def residence_times(traj, window: tuple[float, float], use_events: bool = True,

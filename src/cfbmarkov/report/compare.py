@@ -367,7 +367,8 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
                            + (" and the flow's variability between windows"
                               if intervals.flow is not None else "") + ", in quadrature"),
                 "flow_sd": None if intervals.flow is None else {
-                    "rt_mean": intervals.flow[0], "rt_sd": intervals.flow[1]}}
+                    "rt_mean": intervals.flow[0], "rt_sd": intervals.flow[1],
+                    "degrees_of_freedom": intervals.flow_degrees_of_freedom}}
         comparison.intervals = intervals
         kinetic = None
         if kinetics is not None:
