@@ -217,7 +217,8 @@ class Trajectories(FrameTimes):
     def __repr__(self) -> str:
         span = f"{self.times[0]:g}..{self.times[-1]:g} s"
         every = (f", every {self.frame_interval:g} s" if np.isfinite(self.frame_interval) else "")
-        return (f"Trajectories({str(self.path)!r}: {self.n_particles} particles x {self.n_frames} "
+        return (f"Trajectories({str(self.path)!r}: {self.n_particles} "
+                f"particle{'' if self.n_particles == 1 else 's'} x {self.n_frames} "
                 f"frames, {span}{every}, source={self.source!r})")
 
     # -- metadata --------------------------------------------------------------------

@@ -118,10 +118,15 @@ def test_spots_without_tracks_are_refused_naming_the_columns(tmp_path, capsys):
     rows = [line.split(",") for line in lines]
     untracked = [r if k < 4 else r[:2] + [""] + r[3:] for k, r in enumerate(rows)]
     no_track = [r[:2] + r[3:] for r in rows]
+    # the next step a user takes: the text LABEL column dropped too, so that the spots' ID
+    # (one per detection) is the only id left: each id in one frame, no particle followed
+    spot_ids = [r[1:2] + r[3:] for r in rows]
     for name, table, match in (
             ("untracked.csv", untracked, r"all 61 data rows have an empty 'TRACK_ID'"),
             ("no-track.csv", no_track, r"'ID0' in column 'LABEL' \(read as 'id'\) is not a "
-                                       r"number; the particle id must be a whole number")):
+                                       r"number; the particle id must be a whole number"),
+            ("spot-ids.csv", spot_ids, r"each of the 61 ids in column 'ID' occurs in one "
+                                       r"frame only \(over 20 frames\).*TRACK_ID")):
         source = tmp_path / name
         source.write_text("\n".join(",".join(r) for r in table) + "\n")
         code = main(["import", str(source), "--width", "0.09", "--height", "0.95", "-o",

@@ -345,3 +345,34 @@ def test_a_dump_cut_inside_a_frame_names_the_lines_to_keep(tmp_path):
     import_file(tmp_path / "whole.dump", "lammps", tmp_path / "b.h5", time_step=1e-5)
     with Trajectories(tmp_path / "b.h5") as t:
         assert t.n_frames == 2
+
+
+def test_a_pattern_beside_a_file_and_the_same_timestep_twice(tmp_path, cli, assert_clean_failure):
+    """A quoted pattern given with another dump file reads all their files as one series
+    (in timestep order); a file that starts at a timestep another starts at (a copy, a
+    restart's dump) is refused naming both files; sources the shell cannot make one
+    pattern of (files in two folders) are refused with the folder as the cure."""
+    series = tmp_path / "post"
+    series.mkdir()
+    for k in range(3):
+        (series / f"dump{5000 * k}.riser").write_text(frame(k, time=False))
+    extra = tmp_path / "later" / "dump15000.riser"
+    extra.parent.mkdir()
+    extra.write_text(frame(0, time=False).replace("TIMESTEP\n0\n", "TIMESTEP\n15000\n"))
+    output = tmp_path / "run.h5"
+    code, _, err = cli("import", str(series / "dump*.riser"), str(extra), "--time-step",
+                       "1e-5", "-o", output, "--width", "0.09", "--height", "0.95")
+    assert code == 0, err
+    with Trajectories(output) as t:
+        np.testing.assert_allclose(t.times, [0.0, 0.05, 0.1, 0.15])
+    copy = tmp_path / "later" / "dump5000.riser"
+    copy.write_text((series / "dump5000.riser").read_text())
+    assert_clean_failure("import", str(series / "dump*.riser"), str(copy), "--time-step",
+                         "1e-5", "-o", tmp_path / "out" / "dup.h5", output=tmp_path / "out" / "dup.h5",
+                         match=r"dump5000.riser and .*dump5000.riser both start at timestep "
+                               r"5000: the same frames given twice")
+    notes = tmp_path / "notes.txt"
+    notes.write_text("not a dump\n")
+    assert_clean_failure("import", str(series / "dump*.riser"), str(notes), "-o",
+                         tmp_path / "out" / "mixed.h5", output=tmp_path / "out" / "mixed.h5",
+                         match=r"put the files of one series in one folder")

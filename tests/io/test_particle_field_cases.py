@@ -105,6 +105,24 @@ def test_mfix_des_vtp(tmp_path, capsys, source):
     np.testing.assert_allclose(vel[..., 1], 1.2)
 
 
+def test_pieces_of_one_frame_without_their_pvd_are_named_as_such(tmp_path, capsys):
+    """Files of one time (pieces written in parallel, or copies) given without the .pvd
+    that groups them: refused in one line naming them as pieces and the .pvd as the cure."""
+    import shutil
+
+    folder = tmp_path / "pieces"
+    folder.mkdir()
+    for name in ("RISER_DES_0000.vtp", "RISER_DES_0001.vtp"):
+        shutil.copy(FIELD / "mfix-des-vtp" / name, folder / name)
+    shutil.copy(FIELD / "mfix-des-vtp" / "RISER_DES_0000.vtp", folder / "RISER_DES_0000_p1.vtp")
+    code = main(["import", str(folder), "--width", "0.09", "--height", "0.95", "-o",
+                 str(tmp_path / "m.h5")])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "the files are pieces of one frame" in err and "import the .pvd" in err
+    assert not (tmp_path / "m.h5").exists()
+
+
 def test_mfix_des_vtp_without_geometry_is_refused(tmp_path, capsys):
     code = main(["import", str(FIELD / "mfix-des-vtp" / "RISER_DES.pvd"), "-o",
                  str(tmp_path / "m.h5")])

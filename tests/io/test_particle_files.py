@@ -314,6 +314,20 @@ def test_export_vtk_reads_back_as_vtu_from_its_folder(tmp_path, capsys):
         assert t.parameters["laps_from"].startswith("point array 'lap' (passes along y")
     # the .vtu files themselves, by a pattern, are read the same way
     assert resolve_format(str(folder / "particles_*.vtu"), "auto")[0] == "vtu"
+    # without their .pvd the files carry no time, and their number counts the frames
+    # written, not a simulation step: the message names the .pvd and the time between files
+    (folder / "particles.pvd").unlink()
+    pattern = str(folder / "particles_*.vtu")
+    argv = ["import", pattern, "--width", str(RW), "--height", str(RH), "-o",
+            str(tmp_path / "bare.h5")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "export-vtk wrote beside it" in err
+    assert "the time between its files with --time-step" in err
+    interval = float(np.diff(data["times"])[0])
+    assert main(argv + ["--time-step", repr(interval)]) == 0
+    with Trajectories(tmp_path / "bare.h5") as t:
+        np.testing.assert_allclose(t.times, data["times"] - data["times"][0], atol=1e-12)
 
 
 def test_a_folder_of_two_particle_collections_is_refused_naming_them(tmp_path, capsys):
@@ -331,7 +345,8 @@ def test_a_folder_of_two_particle_collections_is_refused_naming_them(tmp_path, c
     assert not (tmp_path / "x.h5").exists()
 
 
-def _write_h5md(path: Path, pos, vel, image, with_id: bool, origin_zero: bool = True):
+def _write_h5md(path: Path, pos, vel, image, with_id: bool, origin_zero: bool = True,
+                with_time: bool = True):
     with h5py.File(path, "w") as f:
         f.create_group("h5md").attrs["version"] = np.array([1, 0], dtype=np.int32)
         g = f.create_group("particles/all")
@@ -346,7 +361,8 @@ def _write_h5md(path: Path, pos, vel, image, with_id: bool, origin_zero: bool = 
         for name, value in elements.items():
             e = g.create_group(name)
             e["step"] = 5000 * np.arange(TIMES.size)
-            e["time"] = TIMES
+            if with_time:
+                e["time"] = TIMES
             e["value"] = value
 
 
@@ -369,6 +385,30 @@ def test_h5md_positions_ids_times_and_image_laps(tmp_path, with_id):
     assert ("id element" == params["ids_from"]) == with_id
 
 
+def test_h5md_with_steps_but_no_times_is_dated_by_the_time_step(tmp_path, capsys):
+    """H5MD makes an element's ``time`` optional: without it, the import asks for
+    --time-step in one line (not "damaged"), and with it each frame is at step x time step;
+    a file that holds its times refuses --time-step."""
+    pos, vel, laps = _motion()
+    pos2d = np.stack([pos[..., 0], pos[..., 2], np.zeros(pos.shape[:2])], axis=2)
+    image = np.stack([0 * laps, laps, 0 * laps], axis=2)
+    _write_h5md(tmp_path / "steps.h5", pos2d, vel[..., [0, 2, 1]], image, True,
+                with_time=False)
+    argv = ["import", str(tmp_path / "steps.h5"), "-o", str(tmp_path / "t.h5")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no 'time' dataset, only the steps: give the simulation " \
+        "time step with --time-step" in err and "damaged" not in err
+    step = float(TIMES[1] - TIMES[0]) / 5000
+    assert main(argv + ["--time-step", repr(step)]) == 0
+    times, *_ = _read(tmp_path / "t.h5")
+    np.testing.assert_allclose(times, TIMES, rtol=0, atol=1e-12)
+    _write_h5md(tmp_path / "timed.h5", pos2d, vel[..., [0, 2, 1]], image, True)
+    assert main(["import", str(tmp_path / "timed.h5"), "-o", str(tmp_path / "u.h5"),
+                 "--time-step", "1e-5"]) == 2
+    assert "holds its times ('time' dataset); leave --time-step out" in capsys.readouterr().err
+
+
 def test_h5md_box_not_at_the_origin_is_refused_until_a_region_is_given(tmp_path, capsys):
     pos, vel, laps = _motion()
     pos2d = np.stack([pos[..., 0], pos[..., 2], np.zeros(pos.shape[:2])], axis=2)
@@ -380,6 +420,8 @@ def test_h5md_box_not_at_the_origin_is_refused_until_a_region_is_given(tmp_path,
     assert not (tmp_path / "t.h5").exists()
     assert main(["import", str(tmp_path / "d.h5"), "--region=-0.045:0.045,0:0.95", "-o",
                  str(tmp_path / "t.h5")]) == 0
+    # H5MD gives no origin: no note that the region reaches beyond the box (0..edge)
+    assert "reaches beyond" not in capsys.readouterr().err
     out = import_file(tmp_path / "d.h5", "h5md", tmp_path / "r.h5",
                       region=((-0.045, 0.045), (0.0, H)))
     _, _, p, *_ = _read(out)

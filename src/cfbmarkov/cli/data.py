@@ -93,13 +93,17 @@ def _one_source(sources: list[str], fmt: str | None = None) -> str | list[str]:
     import glob
     from pathlib import Path
 
-    files = sources
+    files = []
+    for source in sources:      # quoted patterns given with other sources: their files
+        matched = ([] if Path(source).exists() or not glob.has_magic(source)
+                   else sorted(glob.glob(source)))
+        if len(sources) > 1 and glob.has_magic(source) and not Path(source).exists() \
+                and not matched:
+            raise InputError(f"{source}: no file matches this pattern")
+        files += matched or [source]
     if len(sources) == 1:
-        if Path(sources[0]).exists() or not glob.has_magic(sources[0]):
+        if files == sources:
             return sources[0]
-        files = sorted(glob.glob(sources[0]))     # a quoted pattern: its files' format
-        if not files:
-            return sources[0]                     # the reader names the empty pattern
     one_format = None
     if all(Path(p).is_file() for p in files):
         try:
@@ -109,19 +113,28 @@ def _one_source(sources: list[str], fmt: str | None = None) -> str | list[str]:
     if len(sources) == 1:
         if one_format == {"csv"}:
             raise InputError(f"{sources[0]}: matches {len(files)} CSV files; import reads one "
-                             "CSV file at a time (patterns are for dumps and VTK series): "
-                             "import each on its own, and fit A.h5 B.h5 ... pools them")
+                             "CSV file at a time, holding all its frames (patterns are for "
+                             "dumps and VTK series; text files of one frame each, as OpenPTV's "
+                             "res/ptv_is.*, are not read): the runs of one case, each in its "
+                             "own file, are imported one by one and pooled by fit A.h5 B.h5 "
+                             "...")
         return sources[0]
     if one_format == {"lammps"}:
-        return list(sources)
+        return files
     if one_format == {"csv"}:
         raise InputError(f"{len(sources)} CSV files given ({sources[0]}, ...): import reads "
-                         "one CSV file at a time: import each on its own, and fit A.h5 B.h5 "
-                         "... pools them")
-    pattern = pattern_of(sources)
+                         "one CSV file at a time, holding all its frames (text files of one "
+                         "frame each are not read): the runs of one case, each in its own "
+                         "file, are imported one by one and pooled by fit A.h5 B.h5 ...")
+    pattern = pattern_of(files)
+    if sorted(glob.glob(pattern)) != sorted(str(Path(f)) for f in files):
+        raise InputError(f"{len(sources)} sources given ({sources[0]}, ...): import reads one "
+                         "file, folder or pattern, or several dump files; put the files of "
+                         "one series in one folder and give the folder or a quoted pattern")
     raise InputError(f"{len(sources)} sources given ({sources[0]}, ...): import reads one "
-                     "file, folder or pattern; quote a pattern so that the shell leaves it "
-                     f"to cfbmarkov, which orders the files by their time: '{pattern}'")
+                     "file, folder or pattern, or several dump files; quote a pattern so "
+                     "that the shell leaves it to cfbmarkov, which orders the files by their "
+                     f"time: '{pattern}'")
 
 
 def add_import(sub) -> None:
@@ -152,9 +165,9 @@ def add_import(sub) -> None:
                    help="riser height H, m: 0..H vertically in the source's coordinates "
                         "(default: the dump's box; a CSV file needs it, or --region)")
     s.add_argument("--time-step", type=positive_float, default=None,
-                   help="simulation time step, s, for LAMMPS dumps without ITEM: TIME and "
-                        "legacy VTK files without a TIME array (dated by the step in their "
-                        "name)")
+                   help="simulation time step, s, for LAMMPS dumps without ITEM: TIME, "
+                        "H5MD files with steps but no times, and VTK files without times "
+                        "(dated by the step in their name)")
     s.add_argument("--vertical-axis", choices=["x", "y", "z"], default=None,
                    help="the source's vertical axis (gravity along minus it); required for a "
                         "3D dump or a CSV file with a z column")

@@ -361,9 +361,13 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
                        with_velocity=layout.velocity is not None, label=label,
                        **riser.writer_options()) as writer:
         columns = FrameColumns(writer)
+        followed = _FollowedIds()
         for rows, _last in progress(itertools.chain([first], frames), label):
             _append_frame(writer, columns, rows, layout, riser, label)
+            if layout.has_id:
+                followed.add(layout.ids(rows))
         _check_some_present(writer, riser, label)
+        followed.check(layout, label)
         writer.update_parameters(read_notes(layout))
 
 
@@ -408,6 +412,32 @@ def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
                      "positions' origin lies")
     return {"noise_rows_dropped": layout.noise_rows, "rows_merged": merged,
             "import_notes": notes}
+
+
+class _FollowedIds:
+    """Whether some particle id of a CSV file occurs in two frames or more: where none does
+    (over two frames or more), the id column numbers detections, not particles, and nothing
+    could be followed from frame to frame (TrackMate's ``ID`` without its ``TRACK_ID``)."""
+
+    def __init__(self):
+        self.frames, self.repeated = 0, False
+        self.ids = np.zeros(0, dtype=np.int64)
+
+    def add(self, ids: np.ndarray) -> None:
+        self.frames += 1
+        if not self.repeated:
+            ids = np.unique(ids)
+            self.repeated = bool(np.isin(ids, self.ids, assume_unique=True).any())
+            self.ids = np.union1d(self.ids, ids)
+
+    def check(self, layout: CsvLayout, label: str) -> None:
+        if self.frames >= 2 and not self.repeated:
+            raise InputError(
+                f"{label}: each of the {self.ids.size} ids in column {layout.id_column!r} "
+                f"occurs in one frame only (over {self.frames} frames): the column numbers "
+                "detections, not particles, so no particle can be followed; give the file "
+                "with the column that names each track (TrackMate: TRACK_ID; trackpy: "
+                "particle; pept: label), or link the detections into tracks first")
 
 
 def _check_some_present(writer: TrajectoryWriter, riser: RiserFrame, label: str) -> None:

@@ -27,7 +27,7 @@ DESCRIPTIONS = {"h5md": "H5MD (an HDF5 file with an /h5md group)",
                 "vtp": "VTK XML PolyData ('<VTKFile type=\"PolyData\">')",
                 "vtu": "VTK XML UnstructuredGrid ('<VTKFile type=\"UnstructuredGrid\">')",
                 "pvd": "a ParaView collection ('<VTKFile type=\"Collection\">')",
-                "lammps": "a LAMMPS/LIGGGHTS dump ('ITEM: TIMESTEP' first line)",
+                "lammps": "a LAMMPS/LIGGGHTS dump (an 'ITEM:' first line)",
                 "csv": "text that is no dump or VTK file (read as CSV)"}
 _VTK_TYPE = re.compile(rb"<VTKFile[^>]*\btype\s*=\s*[\"'](\w+)[\"']")
 

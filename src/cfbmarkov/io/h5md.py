@@ -29,7 +29,8 @@ from cfbmarkov.io.particle_frames import ParticleFrame, ParticleSeries
 HDF5_MAGIC = b"\x89HDF\r\n\x1a\n"
 
 
-def h5md_series(source: str | os.PathLike, group: str | None = None) -> ParticleSeries:
+def h5md_series(source: str | os.PathLike, group: str | None = None,
+                time_step: float | None = None) -> ParticleSeries:
     """The frames of an H5MD file.
 
     Parameters
@@ -39,6 +40,10 @@ def h5md_series(source: str | os.PathLike, group: str | None = None) -> Particle
     group : str, optional
         The particle group under ``/particles`` (default: the only one; LAMMPS names it
         after the dump's group, usually ``all``).
+    time_step : float, optional
+        The simulation time step (s), for a file whose time-dependent elements hold their
+        ``step`` but no ``time`` (H5MD makes ``time`` optional): frame k is at step_k x
+        time_step. Refused for a file that holds its times.
 
     Returns
     -------
@@ -49,8 +54,8 @@ def h5md_series(source: str | os.PathLike, group: str | None = None) -> Particle
     ------
     InputError
         If the file is not HDF5 or not H5MD, the group is missing or ambiguous, it has no
-        ``position``, its elements disagree in their times or particle counts, or a time is
-        not finite.
+        ``position``, its elements disagree in their times or particle counts, a time is
+        not finite, or the times are missing without ``time_step`` (or present with it).
     """
     path = check_source(Path(source))
     label = str(path)
@@ -63,7 +68,7 @@ def h5md_series(source: str | os.PathLike, group: str | None = None) -> Particle
         raise InputError(f"{label}: cannot read as HDF5 ({exc})") from None
     try:
         with _damaged(label):
-            return _series(handle, label, path, group)
+            return _series(handle, label, path, group, time_step)
     except BaseException:
         handle.close()
         raise
@@ -74,12 +79,15 @@ def _damaged(label: str):
     """HDF5 read failures (a damaged or cut file) as one-line InputErrors."""
     try:
         yield
+    except InputError:
+        raise                       # the reader's own finding, already one line
     except (OSError, KeyError, RuntimeError, ValueError, TypeError, IndexError) as exc:
         text = " ".join(str(exc).split())[:160]
         raise InputError(f"{label}: damaged HDF5 data ({text})") from None
 
 
-def _series(f: h5py.File, label: str, path: Path, group: str | None) -> ParticleSeries:
+def _series(f: h5py.File, label: str, path: Path, group: str | None,
+            time_step: float | None = None) -> ParticleSeries:
     if "h5md" not in f or "particles" not in f:
         raise InputError(f"{label}: an HDF5 file without the H5MD groups /h5md and /particles "
                          "(not H5MD; a cfbmarkov trajectory file needs no import)")
@@ -94,7 +102,7 @@ def _series(f: h5py.File, label: str, path: Path, group: str | None) -> Particle
     where = f"{label}:/particles/{group}"
     if "position" not in g:
         raise InputError(f"{where}: no 'position' element")
-    position = _element(g["position"], f"{where}/position")
+    position = _element(g["position"], f"{where}/position", time_step=time_step)
     n_frames, n_particles, dimension = position["value"].shape
     if dimension not in (2, 3):
         raise InputError(f"{where}/position: {dimension} components; expected 2 or 3")
@@ -102,21 +110,24 @@ def _series(f: h5py.File, label: str, path: Path, group: str | None) -> Particle
     others = {}
     for name in ("velocity", "image", "id"):
         if name in g:
-            element = _element(g[name], f"{where}/{name}", fixed_ok=name == "id")
+            element = _element(g[name], f"{where}/{name}", fixed_ok=name == "id",
+                               time_step=time_step)
             if "time" in element and not np.array_equal(element["time"], times):
                 raise InputError(f"{where}/{name}: its times differ from the positions'; every "
                                  "element must be written at the same steps")
             others[name] = element["value"]
     if not np.all(np.isfinite(times)):
         raise InputError(f"{where}/position/time: holds a time that is not finite")
-    box, flags = _box(g, where, dimension, times)
-    provenance = {"h5md_group": group, "time_from": "position/time",
+    box, flags = _box(g, where, dimension, times, time_step)
+    provenance = {"h5md_group": group,
+                  "time_from": ("position/time" if time_step is None else
+                                f"position/step x --time-step {time_step:g} s"),
                   "ids_from": "id element" if "id" in others
                   else "particle order (no id element): particle k is id k + 1, as LAMMPS "
                        "orders atoms",
                   "velocity_from": "velocity element" if "velocity" in others else None,
                   "box_from": "box/edges (origin taken at 0)" if box is not None else None,
-                  "creator": _creator(f), "time_step": None}
+                  "creator": _creator(f), "time_step": time_step}
 
     def frames() -> Iterator[ParticleFrame]:
         for k in range(n_frames):
@@ -143,8 +154,10 @@ def _series(f: h5py.File, label: str, path: Path, group: str | None) -> Particle
                           box_origin_unknown=box is not None, close=f.close)
 
 
-def _element(node, where: str, fixed_ok: bool = False) -> dict:
-    """step, time and value of a time-dependent element (or a fixed dataset's value)."""
+def _element(node, where: str, fixed_ok: bool = False, time_step: float | None = None
+             ) -> dict:
+    """step, time and value of a time-dependent element (or a fixed dataset's value); the
+    times from its steps where it has none and ``time_step`` is given."""
     if isinstance(node, h5py.Dataset):
         if not fixed_ok:
             raise InputError(f"{where}: a fixed dataset; expected a time-dependent group with "
@@ -157,8 +170,17 @@ def _element(node, where: str, fixed_ok: bool = False) -> dict:
         out["step"] = np.asarray(node["step"][()]).reshape(-1)
     if "time" in node:
         out["time"] = np.asarray(node["time"][()], dtype=np.float64).reshape(-1)
+    if "time" in out and time_step is not None:
+        raise InputError(f"{where}: the file holds its times ('time' dataset); leave "
+                         "--time-step out")
     if "time" not in out:
-        raise InputError(f"{where}: no 'time' dataset (H5MD files from LAMMPS have one)")
+        if "step" not in out:
+            raise InputError(f"{where}: neither a 'time' nor a 'step' dataset: no frame can "
+                             "be dated")
+        if time_step is None:
+            raise InputError(f"{where}: no 'time' dataset, only the steps: give the "
+                             "simulation time step with --time-step (s)")
+        out["time"] = out["step"].astype(np.float64) * float(time_step)
     if "step" not in out:
         out["step"] = np.arange(out["time"].size)
     if out["time"].size != out["value"].shape[0] or out["step"].size != out["value"].shape[0]:
@@ -166,7 +188,7 @@ def _element(node, where: str, fixed_ok: bool = False) -> dict:
     return out
 
 
-def _box(g, where: str, dimension: int, times: np.ndarray):
+def _box(g, where: str, dimension: int, times: np.ndarray, time_step: float | None = None):
     """Per-frame box [lo, hi] of each axis (origin 0, 3 axes), and the boundary flags."""
     if "box" not in g:
         return None, ()
@@ -177,7 +199,8 @@ def _box(g, where: str, dimension: int, times: np.ndarray):
         return None, flags
     edges = box["edges"]
     if isinstance(edges, h5py.Group):
-        element = _element(edges, f"{where}/box/edges")
+        element = _element(edges, f"{where}/box/edges",
+                           time_step=None if "time" in edges else time_step)
         values = np.asarray(element["value"][()], dtype=np.float64)
         if element["time"].size != times.size or not np.allclose(element["time"], times):
             raise InputError(f"{where}/box/edges: its times differ from the positions'")

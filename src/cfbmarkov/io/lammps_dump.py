@@ -413,7 +413,8 @@ def dump_files(source) -> list[Path]:
     Raises
     ------
     InputError
-        If a file is missing, a folder or empty, or a pattern matches no file.
+        If a file is missing, a folder or empty, a pattern matches no file, or two files
+        start at the same timestep.
     """
     if isinstance(source, (list, tuple)):
         paths = [Path(p) for p in source]
@@ -436,7 +437,13 @@ def dump_files(source) -> list[Path]:
     kept = [p for p in paths if p.stat().st_size > 0]      # empty files are skipped
     if not kept:
         raise InputError(f"{paths[0].parent}: all {len(paths)} dump files are empty")
-    return sorted(kept, key=_first_timestep)
+    ordered = sorted(((_first_timestep(p), p) for p in kept), key=lambda item: item[0])
+    for (before, a), (after, b) in zip(ordered[:-1], ordered[1:]):
+        if before[0] == after[0] < 2 ** 62:
+            raise InputError(f"{a} and {b} both start at timestep {before[0]}: the same "
+                             "frames given twice (a copy, or a restarted run's dump beside "
+                             "the first); leave one of them out")
+    return [p for _, p in ordered]
 
 
 def _first_timestep(path: Path) -> tuple[int, str]:

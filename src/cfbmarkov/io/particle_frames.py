@@ -196,8 +196,10 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
             if not writer.any_present:
                 raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
                                  "particle in any frame; check --region (or --width/--height)")
-            notes = region_notes(riser, box, columns.rows, columns.outside,
-                                 tuple(series.flags))
+            # a box whose origin the format does not give (H5MD: its edges only) says
+            # nothing of where the particles may lie: no note on a region beyond it
+            notes = region_notes(riser, None if series.box_origin_unknown else box,
+                                 columns.rows, columns.outside, tuple(series.flags))
             if notes:
                 writer.update_parameters({"import_notes": notes})
     return output

@@ -65,16 +65,16 @@ def import_particles(source, fmt: str, output: str | os.PathLike, *,
     if resample is not None or max_gap is not None:
         raise InputError(f"--resample and --max-gap apply to CSV files (tracks at irregular "
                          f"times); {name} files hold simulation frames")
-    if time_step is not None and fmt in ("h5md", "pvd"):
-        raise InputError(f"--time-step applies to LAMMPS dumps and VTK files without times; "
-                         f"{name} files carry their times")
+    if time_step is not None and fmt == "pvd":
+        raise InputError(f"--time-step applies to LAMMPS dumps, H5MD and VTK files without "
+                         f"times; {name} files carry their times")
     check_output(output, first_file(source))
     if fmt == "h5md":
         from cfbmarkov.io.h5md import h5md_series
 
         if isinstance(source, (list, tuple)) or Path(os.fspath(source)).is_dir():
             raise InputError(f"{source}: give the H5MD file itself")
-        series = h5md_series(source)
+        series = h5md_series(source, time_step=time_step)
     elif fmt == "vtk":
         from cfbmarkov.io.vtk_read import vtk_series
 

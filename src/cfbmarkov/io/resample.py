@@ -201,9 +201,11 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
                 k = coarse[0]
                 raise InputError(
                     f"{label}: particle {ids[j]} moves {step[k]:+.4g} m vertically between t = "
-                    f"{ts[k]:.9g} and {ts[k + 1]:.9g} s, more than max_step {max_step:g} x height "
-                    f"{period:g} m, so its passes through the top cannot be counted; sample more "
-                    f"often or give unwrapped coordinates")
+                    f"{ts[k]:.9g} and {ts[k + 1]:.9g} s, more than {max_step:g} x the height "
+                    f"{period:g} m, so its passes through the top between the two samples "
+                    f"cannot be counted; give --max-gap below {ts[k + 1] - ts[k]:.3g} s (the "
+                    "particle is then absent between them, its passes there not counted), or "
+                    "give unwrapped coordinates")
             lap[1:] = np.cumsum(np.where(joined, wrap, 0).astype(np.int64))
         k0 = max(int(math.ceil(ts[0] / interval - _TOL)) - first_k, 0)
         k1 = min(int(math.floor(ts[-1] / interval + _TOL)) - first_k, n_times - 1)

@@ -297,7 +297,12 @@ def _sorted_by_time(frames: Iterator[ParticleFrame], label: str) -> Iterator[Par
     """The frames, refused where a time does not increase (files out of order)."""
     last = None
     for frame in frames:
-        if last is not None and frame.time <= last:
+        if last is not None and frame.time == last:
+            raise InputError(f"{frame.where}: the same time {frame.time:g} s as the file "
+                             f"before (in {label}): the files are pieces of one frame "
+                             "(written in parallel, as MFiX's RISER_DES_*_p*.vtp) or copies; "
+                             "import the .pvd that lists the pieces of each frame")
+        if last is not None and frame.time < last:
             raise InputError(f"{frame.where}: time {frame.time:g} s does not follow "
                              f"{last:g} s of the file before (in {label})")
         last = frame.time
@@ -409,6 +414,13 @@ def _vtp_time(data, path: Path, time_step: float | None = None) -> float:
     step = _step_of(path)
     if time_step is not None and step is not None:
         return step * time_step
+    from cfbmarkov.io.vtk import PERIODIC_FIELD
+
+    if PERIODIC_FIELD in data.field_data:       # written by cfbmarkov export-vtk
+        raise InputError(f"{path}: no time in the file; import the .pvd that cfbmarkov "
+                         "export-vtk wrote beside it (it lists each frame's time), or give "
+                         "the time between its files with --time-step (s): export-vtk numbers "
+                         "the files it writes 0, 1, 2, ..., so their times then start at 0")
     raise InputError(f"{path}: no time in the file (no '<!-- Time = ... s -->' comment, no "
                      "TimeValue field array); import the .pvd that lists it"
                      + (f", or give the simulation time step with --time-step (s): "
