@@ -134,3 +134,26 @@ def test_a_required_option_typed_short_is_named_not_reported_missing(tmp_path, c
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "--out: did you mean --output?" in err
     assert "required" not in err
+
+
+def test_an_option_of_one_value_given_twice_is_refused(tmp_path, capsys):
+    """argparse keeps the last of a repeated option silently (`fit --window 5:10 --window
+    10:15` fitted 10:15): refused in one line naming it, nothing written; an option's value
+    that looks like an option is not counted as one."""
+    from cfbmarkov.cli import main
+
+    out = tmp_path / "m.h5"
+    for argv, named in ((["--window", "5:10", "--window", "10:15"], "--window given 2 times"),
+                        (["--cells", "6x38", "--cells=4x10"], "--cells given 2 times"),
+                        (["-o", str(tmp_path / "a.h5"), "--output", str(out)],
+                         "-o and --output given 2 times")):
+        code = main(["fit", str(tmp_path / "run.h5"), *argv] + (["-o", str(out)] if
+                                                                 "-o" not in argv else []))
+        err = capsys.readouterr().err
+        assert code == 2 and err.count("\n") == 1 and named in err, err
+        assert not out.exists()
+    from cfbmarkov.cli.command import _refuse_repeated, build_parser
+
+    parser = build_parser()
+    _refuse_repeated(parser, "import", ["import", "d.dump", "--width", "0.09", "--region",
+                                        "--width", "-o", "x.h5"])   # the value "--width"

@@ -239,9 +239,10 @@ def test_refused_reproduce_creates_no_folder(tmp_path):
 
 
 # -- 5. Ctrl-C ------------------------------------------------------------------------------
-def test_ctrl_c_exit_130_one_line_no_temporary(data, tmp_path):
-    """Ctrl-C while the prediction is being written (its temporary exists): exit 130, one
-    line, the temporary removed."""
+@pytest.mark.parametrize("signum", [signal.SIGINT, signal.SIGTERM], ids=["ctrl-c", "sigterm"])
+def test_ctrl_c_exit_130_one_line_no_temporary(data, tmp_path, signum):
+    """Ctrl-C, or SIGTERM (kill, a batch scheduler), while the prediction is being written
+    (its temporary exists): exit 130, one line, the temporary and the lock removed."""
     p = cli("predict", data / "model.h5", "--init", data / "run.h5", "--start", "0.5",
             "--duration", "3000", "-q", "-o", "pred.h5", cwd=tmp_path)
     deadline = time.monotonic() + 60
@@ -250,11 +251,28 @@ def test_ctrl_c_exit_130_one_line_no_temporary(data, tmp_path):
         assert time.monotonic() < deadline
         time.sleep(0.05)
     time.sleep(0.2)
-    p.send_signal(signal.SIGINT)
+    p.send_signal(signum)
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130, err
     assert err.splitlines() == ["cfbmarkov predict: interrupted"]
     assert stray(tmp_path, []) == []
+
+
+def test_a_folder_moved_aside_by_a_dead_writer_is_put_back(tmp_path):
+    """A writer killed between moving the previous output folder aside and renaming the new
+    one into place leaves NAME.old-XXXXXXXX and no NAME: the next writer's cleanup puts it
+    back, never deletes it; beside a NAME that exists, it is removed as a leftover."""
+    from cfbmarkov._outputs import remove_stale_temporaries
+
+    out = tmp_path / "compare"
+    aside = tmp_path / "compare.old-1a2b3c4d"
+    aside.mkdir()
+    (aside / "summary.json").write_text("{}")
+    remove_stale_temporaries(out)
+    assert (out / "summary.json").read_text() == "{}" and not aside.exists()
+    aside.mkdir()
+    remove_stale_temporaries(out)
+    assert not aside.exists() and (out / "summary.json").exists()
 
 
 # -- 6. umask -------------------------------------------------------------------------------

@@ -433,15 +433,36 @@ def _new_folder(parent: Path, prefix: str) -> Path:
     raise FileExistsError(f"no free temporary name {prefix}XXXX in {parent}")
 
 
+@contextlib.contextmanager
+def _signals_held():
+    """SIGINT and SIGTERM held (blocked) during the block, delivered when it ends (the
+    calling thread's mask; where signals cannot be masked, the block runs as it is)."""
+    import signal
+
+    held = {signal.SIGINT, signal.SIGTERM}
+    try:
+        previous = signal.pthread_sigmask(signal.SIG_BLOCK, held)
+    except (AttributeError, OSError, ValueError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, previous)
+
+
 def _replace(tmp: Path, output: Path) -> None:
     """Move the complete folder ``tmp`` onto ``output``; a previous export there is moved
     aside first and deleted only once the new one is in place (put back on failure)."""
     old = None
     try:
-        if output.is_dir():
-            old = _new_folder(output.parent, f"{helper_stem(output.name)}.old-")
-            os.replace(output, old)   # rename onto the empty folder
-        os.replace(tmp, output)
+        # the two renames are not cut apart by Ctrl-C or SIGTERM (held until both are
+        # done): between them the previous output lies aside and NAME is missing
+        with _signals_held():
+            if output.is_dir():
+                old = _new_folder(output.parent, f"{helper_stem(output.name)}.old-")
+                os.replace(output, old)   # rename onto the empty folder
+            os.replace(tmp, output)
     except OSError as exc:
         if old is not None and not output.exists():
             with contextlib.suppress(OSError):

@@ -24,7 +24,7 @@ requested = False
 
 
 def handler(signum, frame) -> None:
-    """SIGINT handler: record the request and interrupt (KeyboardInterrupt)."""
+    """SIGINT (and SIGTERM) handler: record the request and interrupt (KeyboardInterrupt)."""
     global requested
     requested = True
     raise KeyboardInterrupt
@@ -96,8 +96,8 @@ def finalizers_quiet():
 
 
 class installed:
-    """Context manager: :func:`handler` for SIGINT while a verb runs (main thread only), the
-    previous handler and a cleared request afterwards."""
+    """Context manager: :func:`handler` for SIGINT and SIGTERM while a verb runs (main thread
+    only), the previous handlers and a cleared request afterwards."""
 
     def __enter__(self):
         global requested
@@ -107,6 +107,9 @@ class installed:
         self._excepthook = sys.excepthook
         if threading.current_thread() is threading.main_thread():
             self._previous = signal.signal(signal.SIGINT, handler)
+            # SIGTERM (kill, a batch scheduler's stop) ends the verb as Ctrl-C does: one
+            # line, the temporaries removed, the previous output kept
+            self._previous_term = signal.signal(signal.SIGTERM, handler)
             previous_hook, previous_except = self._hook, self._excepthook
 
             def quiet(unraisable):          # swallowed there, raised again at check()
@@ -131,6 +134,7 @@ class installed:
         global requested
         if self._previous is not None:
             signal.signal(signal.SIGINT, self._previous)
+            signal.signal(signal.SIGTERM, self._previous_term)
             sys.unraisablehook = self._hook
             sys.excepthook = self._excepthook
         requested = False

@@ -282,6 +282,15 @@ def remove_stale_temporaries(target: str | os.PathLike) -> list[Path]:
     target = Path(target)
     removed = []
     patterns = temporary_patterns(target)
+    # a previous output moved aside by a writer that died before the new one took its
+    # place: put back, not deleted (the output itself is missing)
+    if not target.exists() and not target.is_symlink():
+        with contextlib.suppress(OSError):
+            aside = sorted(entry for entry in target.parent.iterdir()
+                           if re.match(rf"^{re.escape(helper_stem(target.name))}\.old-"
+                                       r"[0-9a-f]{8}$", entry.name) and entry.is_dir())
+            if aside:
+                os.replace(aside[-1], target)
     with contextlib.suppress(OSError):
         for entry in target.parent.iterdir():
             if any(p.match(entry.name) for p in patterns):

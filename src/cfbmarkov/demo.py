@@ -10,11 +10,12 @@ state at 15 s and compares the two on 15-20 s (RTD, mixing, figures).
 from __future__ import annotations
 
 import json
+import sys
 from pathlib import Path
 
 from cfbmarkov import synthetic
 from cfbmarkov._outputs import describe, output_helper, refuse_foreign
-from cfbmarkov.analysis.fit_checks import record_fitting_data
+from cfbmarkov.analysis.fit_checks import assess_fit
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.markov import CellGrid, fit_model
@@ -229,7 +230,7 @@ def _span(window) -> str:
 
 
 def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print,
-             progress=None, force: bool = False, note=None) -> Path:
+             progress=None, force: bool = False, note=None, warn=None) -> Path:
     """Run the Markov-chain pipeline on a synthetic reference (``cfbmarkov demo --synthetic``).
 
     Writes into ``output``: ``reference.h5`` (reused where the folder holds this demo's, of
@@ -258,6 +259,11 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
         folder's is not this demo's (:func:`check_demo_folder`).
     note : callable, optional
         Called with the line saying that the reference is reused (default None: quiet).
+    warn : callable, optional
+        Called with each warning of a model's fitting sample (its interval and verdict, as
+        ``cfbmarkov fit`` prints them: :func:`~cfbmarkov.analysis.fit_checks.assess_fit`),
+        ``warning: `` and the estimator's name first (default: printed on stderr). The
+        model files carry them, so that ``rtd`` and ``info`` repeat them.
 
     Returns
     -------
@@ -276,6 +282,9 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
     from cfbmarkov._console import clock_text, heartbeat
     from cfbmarkov.report.compare import compare
 
+    if warn is None:
+        def warn(line: str) -> None:
+            print(line, file=sys.stderr)
     out = Path(output)
     reuse = check_demo_folder(out, particles, seed, force)
     out.mkdir(parents=True, exist_ok=True)
@@ -315,10 +324,14 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
     rows = {}
     for name in ESTIMATORS:
         with stage(step, f"{name}: fitting 6x38 cells at lag 0.025 s on 10-15 s"):
-            # as fit records it: the fitting file is found by its window's content
-            # wherever the folder goes (cfbmarkov.analysis.intervals.resolve_source)
-            model = record_fitting_data(fit_model(reference, grid, LAG, FIT_WINDOW, name))
+            # as fit makes it: its fitting file found by its window's content wherever
+            # the folder goes (cfbmarkov.analysis.intervals.resolve_source), its interval
+            # and the verdict on its fitting sample, whose warnings are said
+            model = assess_fit(fit_model(reference, grid, LAG, FIT_WINDOW, name),
+                               [reference], [FIT_WINDOW])
             model.save(out / f"model-{name}.h5")
+            for line in model.warnings():
+                warn(f"warning: {name}: {line}")
         with stage(step + 1, f"{name}: predicting 15-20 s from the reference's state at 15 s"):
             prediction = model.predict(reference, start=PREDICT_WINDOW[0],
                                        duration=PREDICT_WINDOW[1] - PREDICT_WINDOW[0], seed=seed,
@@ -330,7 +343,8 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
         step += 3
         seen = PREDICT_WINDOW[1] - PREDICT_WINDOW[0]
         exact = model.rtd(window=seen)
-        rows[name] = {**summary, "exact_model_rt_mean": exact.mean, "exact_model_rt_sd": exact.sd}
+        rows[name] = {**summary, "exact_model_rt_mean": exact.mean, "exact_model_rt_sd": exact.sd,
+                      "fit_warnings": model.warnings()}
         interval = summary["model"].get("rt_mean_interval")
         level = summary.get("level", 0.9)
         within = ("" if not interval else f", {100 * level:g} % interval {interval[0]:.3f}-"

@@ -161,6 +161,10 @@ def check_finite(value, name: str, unit: str = "", *, positive: bool = False,
     InputError
         Naming the option and the value.
     """
+    if isinstance(value, (str, bytes, bool)) or getattr(getattr(value, "dtype", None),
+                                                        "kind", "") == "b":
+        # float("5") and float(True) would pass
+        raise InputError(f"{name} {value!r} is not a number")
     try:
         number = float(value)
     except (TypeError, ValueError):

@@ -103,6 +103,12 @@ def _limit_threads(threads: int) -> None:
 
     install_one_line_notes()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    # a parent killed (SIGKILL, SIGTERM) takes its workers with it, instead of leaving them
+    # to finish the cases unwatched (Linux's PR_SET_PDEATHSIG = 1; elsewhere left as is)
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGTERM), 0, 0, 0)
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
 

@@ -593,3 +593,12 @@ def test_sample_length_of_runs_of_different_flows_is_not_judged(tmp_path, capsys
     code, out, _ = run_cli(capsys, "stationarity", fast, slow, "--sample-length", "--cells",
                            "4x16", "--start", "0.5")
     assert code == 0 and "sample length: not judged: the runs' long-run E(RT) differ" in out
+
+
+def test_a_window_one_lag_long_is_judged_too_short_not_refused(runs):
+    """A window of one lag: its quarters hold no frame; the verdict says its halves hold no
+    residence (the window is too short), instead of failing on a quarter's window the user
+    never gave."""
+    verdict = _verdict(runs["stationary"], (10.0, 10.025))
+    assert any("holds 0 residences" in line and "too short" in line
+               for line in verdict.warnings), verdict.warnings

@@ -125,6 +125,22 @@ def test_a_bin_wider_than_half_the_window_is_refused(pair, tmp_path, capsys):
     assert not out.exists()
 
 
+def test_bins_that_hold_all_but_a_stray_residence_in_one_are_refused():
+    """300 residences of 0.1-0.9 s and one of 1.5 s: bins of 1 s put 99.7 % in the first
+    (the RTD spans one bin from its 1 % to its 99 % quantile) and are refused, naming a
+    width from that range; bins of 0.4 s span three and pass."""
+    from types import SimpleNamespace
+
+    from cfbmarkov.analysis.compare import _check_bins_resolve
+
+    samples = np.append(np.linspace(0.1, 0.9, 300), 1.5)
+    rt = SimpleNamespace(count=samples.size, samples=samples)
+    with pytest.raises(InputError, match=r"98 % or more of the 301 residences .* fall in one "
+                                         r"RTD bin of 1 s.*give --bin-width 0.39 s or less"):
+        _check_bins_resolve(rt, 1.0, "given", (0.0, 5.0))
+    _check_bins_resolve(rt, 0.4, "given", (0.0, 5.0))
+
+
 def test_bins_that_hold_all_the_references_residences_in_one_are_refused(pair, tmp_path,
                                                                          capsys):
     ref, pred = pair

@@ -299,3 +299,23 @@ def test_heads_side_by_side_are_each_chains_own_bit_for_bit(tmp_path):
             assert ref.probability.size < steps
             assert np.array_equal(row[:ref.probability.size], ref.probability)
             assert not row[ref.probability.size:].any()
+
+
+def test_a_level_beyond_the_resamples_tails_is_refused(stationary_run, tmp_path, capsys):
+    """A 99.9999 % interval from 10 resamples would be their extremes, narrower than the
+    90 % one: refused in Python and in one line by fit (nothing written), as by the other
+    verbs' check; 1 / (1 - level) resamples suffice."""
+    from cfbmarkov.analysis.bootstrap import check_interval_options
+
+    model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (1.0, 3.0), "mle")
+    with pytest.raises(InputError, match=r"a 99.9999 % interval needs at least 1000000 "):
+        model_intervals(model, level=0.999999, resamples=10)
+    check_interval_options(0.95, 20)
+    with pytest.raises(InputError, match="needs at least 20"):
+        check_interval_options(0.95, 19)
+    out = tmp_path / "m.h5"
+    code = main(["fit", str(stationary_run), "--window", "1:3", "--lag", str(FLOW.lag),
+                 "--cells", "3x8", "--level=0.999999", "--resamples", "10", "-o", str(out)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "give --resamples 1000000 or more" in err
+    assert not out.exists()

@@ -186,9 +186,20 @@ def test_a_fit_without_transitions_is_an_error(tmp_path, capsys):
     rows = ["t,id,x,y"] + [f"{0.005 * f:.3f},{3 * f + i},{0.01 + 0.02 * i:.3f},{0.1 + 0.01 * f:.3f}"
                            for f in range(20) for i in range(3)]
     (tmp_path / "spots.csv").write_text("\n".join(rows) + "\n")
-    assert main(["import", str(tmp_path / "spots.csv"), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o",
-                 str(tmp_path / "s.h5")]) == 0
-    capsys.readouterr()
+    # the import itself refuses such ids (each in one frame: detections, not particles)
+    assert main(["import", str(tmp_path / "spots.csv"), "--format", "csv", "--width", "0.09",
+                 "--height", "0.95", "-o", str(tmp_path / "s.h5")]) == 2
+    assert "occurs in one frame only" in capsys.readouterr().err
+    # a trajectory file written so in Python: fit finds no transition to count
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    n = 60
+    present = np.zeros((20, n), dtype=bool)
+    present[np.arange(n) // 3, np.arange(n)] = True
+    positions = np.full((20, n, 2), 0.05)
+    positions[..., 1] = 0.1 + 0.01 * np.arange(20)[:, None]
+    write_trajectories(tmp_path / "s.h5", 0.005 * np.arange(20), positions, width=0.09,
+                       height=0.95, present=present)
     code = main(["fit", str(tmp_path / "s.h5"), "--cells", "3x10", "--lag", "0.005",
                  "--window", "0:0.095", "-o", str(tmp_path / "m.h5")])
     err = capsys.readouterr().err

@@ -83,7 +83,9 @@ def test_react_resamples_give_the_exit_means_intervals(fitted, tmp_path, capsys)
     assert main(argv) == 0                      # seeded: the same interval again
     again = json.loads(capsys.readouterr().out)["properties"]
     assert {name: again[name]["exit_mean_interval"] for name in intervals} == intervals
-    assert main(argv + ["--level", "0.99"]) == 0
+    assert main(argv + ["--level", "0.99"]) == 2        # 20 resamples reach 95 %, not 99 %
+    assert "a 99 % interval needs at least 100 bootstrap resamples" in capsys.readouterr().err
+    assert main(argv + ["--level", "0.95"]) == 0
     wide = json.loads(capsys.readouterr().out)["properties"]["T"]["exit_mean_interval"]
     assert wide[0] <= intervals["T"][0] and wide[1] >= intervals["T"][1]
     assert wide[1] - wide[0] > intervals["T"][1] - intervals["T"][0]

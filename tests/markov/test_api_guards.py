@@ -139,3 +139,33 @@ def test_select_model_of_several_runs_names_select_pooled(markov_flow, markov_ru
     with pytest.raises(InputError, match=r"select_pooled\(runs, windows="):
         select_model([markov_run, markov_run], window=(2.0, 4.0), columns=4, rows=16,
                      lag=markov_flow.lag)
+
+
+def test_a_cell_grid_of_fractional_or_boolean_cells_is_refused():
+    """As `--cells 6.5x38` is refused: 6.9 columns are not truncated to 6, True is not 1."""
+    from cfbmarkov.markov import CellGrid
+
+    for columns, rows in ((6.9, 38), (True, 38), ("6", 38), (6, 37.99)):
+        with pytest.raises(InputError, match="a whole number of cells"):
+            CellGrid(columns, rows, 0.09, 0.95)
+    assert CellGrid(6.0, np.int64(38), 0.09, 0.95).n_states == 228
+
+
+def test_values_of_the_wrong_kind_are_refused_in_one_line(model):
+    """Text, booleans and scalars where numbers or sequences go: one InputError naming the
+    argument in the API's words (not a command-line option), never a numpy TypeError or a
+    silently converted string; a negative time is named as negative."""
+    calls = {
+        "initial distribution 'abc'": lambda: model.propagate("abc", steps=2),
+        r"times 0\.05: a sequence": lambda: model.batch_injection_maps(0.05),
+        r"times '0\.05': a sequence": lambda: model.batch_injection_maps("0.05"),
+        r"window length '5' is not a number": lambda: model.rtd(window="5"),
+        r"window length True is not a number": lambda: model.rtd(window=True),
+        r"window length 0 s must be positive": lambda: model.rtd(window=0),
+        r"time -0\.05 s is negative": lambda: model.batch_injection_maps([-0.05]),
+    }
+    for message, call in calls.items():
+        with pytest.raises(InputError, match=message):
+            call()
+    assert model.batch_injection_maps([model.lag]).shape == (1, model.state_space.rows,
+                                                             model.state_space.columns)

@@ -201,13 +201,16 @@ def _parts_of(traj, discrete: DiscreteTrajectories, window, model, fitter):
     counts, directions = {}, {}
     for n in (2, 4):
         for part in _split(window, n):
-            d = net_flow_direction(traj, part)
-            directions[part] = d
-            counts[part] = residence_times(traj, part, use_events=False,
-                                           lag_frames=lag_frames, direction=d,
-                                           split_at_absences=True,
-                                           face_band=traj.height / discrete.state_space.rows
-                                           ).count
+            try:
+                d = net_flow_direction(traj, part)
+                count = residence_times(traj, part, use_events=False,
+                                        lag_frames=lag_frames, direction=d,
+                                        split_at_absences=True,
+                                        face_band=traj.height / discrete.state_space.rows
+                                        ).count
+            except InputError:      # a part of a window a lag or two long holds no frame
+                d, count = model.flow_direction, 0
+            directions[part], counts[part] = d, count
     halves, quarters = _split(window, 2), _split(window, 4)
     use = quarters if min(counts[q] for q in quarters) >= MIN_PART_RESIDENCES else halves
     parts = []

@@ -445,21 +445,29 @@ def _refuse_empty(ref: Trajectories, pred: Trajectories, side: str, traj: Trajec
 
 def _check_bins_resolve(rt_ref: ResidenceTimes, bin_width: float, source: str,
                         window: tuple[float, float]) -> None:
-    """Refuse bins so wide that all the reference's residences (two or more, of different
-    lengths beyond round-off) fall in one: every RTD held in that bin would then be at an
-    MD of 0 from the reference's, the model's and the baselines' alike."""
+    """Refuse bins so wide that the reference's residences (two or more, of different
+    lengths beyond round-off) fall in one but for a stray few: its RTD then spans one bin
+    (:func:`~cfbmarkov.observed.metrics.rtd_span`: from its 1 % to its 99 % quantile), and
+    every RTD held in that bin is at an MD near 0 from the reference's, the model's and the
+    baselines' alike."""
+    from cfbmarkov.observed.metrics import rtd_span
+
     if rt_ref.count < 2:
         return
     samples = np.asarray(rt_ref.samples, dtype=np.float64)
     spread = float(samples.max() - samples.min())
     _, p = rtd_histogram(samples, bin_width, window_length=window[1] - window[0])
-    if spread <= 1e-6 * float(samples.max()) or np.count_nonzero(p) >= 2:
-        return          # residences of one length (to round-off), or in two bins or more
+    if spread <= 1e-6 * float(samples.max()) or rtd_span(p) >= 2:
+        return          # residences of one length (to round-off), or over two bins or more
+    one = np.count_nonzero(p) < 2
+    low, high = np.quantile(samples, [0.01, 0.99])
+    width = spread / 2 if one or not high > low else (high - low) / 2
     leave = ", or leave it out for the default width" if source == "given" else ""
-    raise InputError(f"all {rt_ref.count} residences of the reference in {window[0]:g}-"
+    held = "all" if one else "98 % or more of the"
+    raise InputError(f"{held} {rt_ref.count} residences of the reference in {window[0]:g}-"
                      f"{window[1]:g} s ({samples.min():.3g} to {samples.max():.3g} s long) "
                      f"fall in one RTD bin of {bin_width:g} s, where an MD cannot tell RTDs "
-                     f"apart: give --bin-width {spread / 2:.2g} s or less{leave}")
+                     f"apart: give --bin-width {width:.2g} s or less{leave}")
 
 
 @dataclass(frozen=True)

@@ -51,6 +51,7 @@ from cfbmarkov.analysis.bootstrap import (FLOW_BLOCK_RESIDENCES, FLOW_BLOCKS,  #
                                           _binned, _bootstrap_chains, _reach,
                                           _resampled_rtd,
                                           block_bootstrap_models, bootstrap_figures,
+                                          check_interval_options,
                                           fitting_runs, flow_variability, interval_bounds)
 from cfbmarkov.analysis.mixing import _left_states, model_mixing_curve
 from cfbmarkov.errors import InputError
@@ -356,11 +357,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     ``docs/definitions.md`` (Intervals); B. Efron and R. J. Tibshirani, An Introduction to
     the Bootstrap, Chapman & Hall (1993), Ch. 8 and 13.
     """
-    if not 0.0 < float(level) < 1.0:
-        raise InputError(f"interval level {level!r} must lie strictly between 0 and 1")
-    if int(blocks) < 2 or int(resamples) < 10:
-        raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
-                         f"{resamples})")
+    check_interval_options(level, resamples, blocks)
     samples = np.asarray(samples, dtype=np.float64)
     if samples.size < 2:
         raise InputError("intervals need at least 2 residence-time samples in the window")
@@ -568,11 +565,7 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
     """
     from cfbmarkov.markov.uncertainty import ModelUncertainty
 
-    if not 0.0 < float(level) < 1.0:
-        raise InputError(f"interval level {level!r} must lie strictly between 0 and 1")
-    if int(blocks) < 2 or int(resamples) < 10:
-        raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
-                         f"{resamples})")
+    check_interval_options(level, resamples, blocks)
     model = resolve_source(model)
     runs = fitting_runs(model)
     direction = model.flow_direction if direction is None else direction

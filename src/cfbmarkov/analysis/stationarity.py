@@ -200,7 +200,8 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
     InputError
         On a window length or step that is not finite and positive, a span outside the
         file's frames, a span that holds fewer than two windows or more than
-        ``MAX_WINDOWS``, or (from frames) a step shorter than the frame interval.
+        ``MAX_WINDOWS``, (from frames) a step shorter than the frame interval, or no
+        window holding a residence.
     """
     length, step = float(window_length), float(step)
     if not (np.isfinite(length) and length > 0):
@@ -243,6 +244,16 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
         if with_flux:
             fluxes.append(flux_residence_time(traj, window, d))
         exact = rt.exact
+    if not any(counts) and not any(
+            residence_times(traj, (a, b), use_events=use_events, lag_frames=lag_frames,
+                            face_band=face_band, direction=d).count for d in ("up", "down")):
+        raise InputError(f"{traj.path}: neither the span {a:g}-{b:g} s nor any of its "
+                         f"{len(counts)} windows of {length:g} s holds a whole residence "
+                         f"(from one pass "
+                         f"through the {'inlet' if traj.boundary.is_open else 'boundary'} "
+                         "to the next): the particles do not circulate over the span, so no "
+                         "flow's stationarity can be judged; check the span, or the file's "
+                         "height and vertical axis")
     return WindowStatistics(length, step, starts, np.asarray(means, float),
                             np.asarray(sds, float), np.asarray(counts, np.int64),
                             tuple(directions), exact,

@@ -50,6 +50,9 @@ def cmd_compare(args) -> int:
         _check_resamples(args.resamples)      # one line, as fit and rtd say it
     if args.resamples is None:
         args.resamples = DEFAULT_RESAMPLES
+    from cfbmarkov.cli.markov import _check_resamples
+
+    _check_resamples(args.resamples, args.level)
     if args.resamples:      # a refusal stays one line, before any other line
         from cfbmarkov.report.compare import check_fitting_file
 

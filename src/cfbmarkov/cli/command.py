@@ -107,6 +107,32 @@ def _refuse_unknown_early(parser: argparse.ArgumentParser, argv: list[str]) -> N
         _refuse_unknown(parser, verb, unknown)
 
 
+def _refuse_repeated(parser: argparse.ArgumentParser, verb: str, argv: list[str]) -> None:
+    """Exit 2 with one line where an option that takes one value is given twice (argparse
+    would keep the last silently: ``fit --window 5:10 --window 10:15`` fits 10:15)."""
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    single = {o: action for action in sub.choices[verb]._actions
+              if isinstance(action, argparse._StoreAction) for o in action.option_strings}
+    seen: dict[str, list[str]] = {}
+    expects_value = False
+    for word in argv[argv.index(verb) + 1:] if verb in argv else []:
+        if word == "--":
+            break
+        if expects_value:           # the value of the option before, whatever it looks like
+            expects_value = False
+            continue
+        name = word.split("=")[0]
+        action = single.get(name)
+        if action is not None:
+            seen.setdefault(action.dest, []).append(name)
+            expects_value = "=" not in word
+    for names in seen.values():
+        if len(names) > 1:
+            shown = " and ".join(dict.fromkeys(names))
+            sub.choices[verb].exit(2, f"cfbmarkov {verb}: error: {shown} given {len(names)} "
+                                      "times, and only one value is taken: give it once\n")
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run ``cfbmarkov`` with ``argv`` (default: the process's arguments).
 
@@ -133,6 +159,7 @@ def main(argv: list[str] | None = None) -> int:
                 _Parser.parsing = None
             if extra:
                 _refuse_unknown(parser, args.command, extra)
+            _refuse_repeated(parser, args.command, join_dash_values(parser, argv))
             if args.command == "demo":     # each kind of demo its own default folder
                 refused = run.demo_option_error(args)
                 if refused is not None:     # before anything starts: one line

@@ -51,6 +51,9 @@ def cmd_react(args) -> int:
                          "--resamples N forms (the exact values carry none without it): add "
                          "--resamples 100")
     args.level = 0.9 if args.level is None else args.level
+    from cfbmarkov.cli.markov import _check_resamples
+
+    _check_resamples(args.resamples, args.level)
     kinetics = load_kinetics(args.kinetics)
     model = MarkovModel.load(args.model)
     fields, fields_from = None, None
@@ -206,11 +209,16 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
 
     import numpy as np
 
+    from cfbmarkov.cli.markov import _stage
+
     notes: list[str] = []
     after: dict = {}
-    means = bootstrap_exit_means(resolve_source(model, [args.run] if args.run else []),
-                                 kinetics, fields, args.resamples, notes, direction=direction,
-                                 passes=passes, after_passes=after)
+    source = resolve_source(model, [args.run] if args.run else [])   # its refusal first
+    with _stage(args, "intervals", f"the exit means' {100 * args.level:g} % intervals: "
+                f"{args.resamples} bootstrap resamples of the fitting window, each solved "
+                "exactly"):
+        means = bootstrap_exit_means(source, kinetics, fields, args.resamples, notes,
+                                     direction=direction, passes=passes, after_passes=after)
     for note in notes:
         print(f"warning: {one_line(note)}", file=sys.stderr)
     intervals = {}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import contextlib
+import math
 import sys
 
 from cfbmarkov._names import one_line
@@ -40,7 +41,7 @@ def cmd_fit(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
-    _check_resamples(args.resamples)
+    _check_resamples(args.resamples, args.level)
     if args.window is None:       # the paper's window; a refusal of it says it is the default
         args.window = [DEFAULT_WINDOW]
         try:
@@ -198,11 +199,18 @@ def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int
     return _finish_fit(args, model, list(args.run), windows)
 
 
-def _check_resamples(resamples: int) -> None:
-    """Refuse 1-9 resamples in one line (0: no interval)."""
+def _check_resamples(resamples: int, level: float | None = None) -> None:
+    """Refuse 1-9 resamples in one line (0: no interval), and resamples too few for the
+    level's tails (:func:`~cfbmarkov.analysis.bootstrap.check_interval_options`)."""
     if 0 < resamples < 10:
         raise InputError(f"--resamples {resamples}: an interval needs at least 10 bootstrap "
                          "resamples (0 leaves it out)")
+    if resamples and level is not None:
+        from cfbmarkov.analysis.bootstrap import check_interval_options
+
+        check_interval_options(level, resamples,
+                               fix=f"give --resamples {math.ceil(1 / (1 - level) - 1e-9)} "
+                                   "or more, or a lower --level")
 
 
 def _with_interval(model, level: float, resamples: int):
@@ -269,7 +277,7 @@ def cmd_rtd(args) -> int:
     from cfbmarkov._json import jsonable
     from cfbmarkov.markov import MarkovModel
 
-    _check_resamples(args.resamples)
+    _check_resamples(args.resamples, args.level)
     if args.resamples and args.window_length:
         raise InputError(f"--resamples forms the interval of the model's intrinsic RTD, not of "
                          f"its RTD as a {args.window_length:g} s window sees it: leave out "

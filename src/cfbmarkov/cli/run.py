@@ -53,7 +53,7 @@ def cmd_demo(args) -> int:
         seed_ = SYNTHETIC_SEED if args.seed is None else args.seed
         out = run_demo(args.output, particles=particles, seed=seed_,
                        progress=None if args.quiet else _stderr_line, force=args.force,
-                       note=_stderr_line)
+                       note=_stderr_line, warn=_stderr_line)
         print(out)
         return 0
     from cfbmarkov.reproduce import reproduce

@@ -28,7 +28,7 @@ import numpy as np
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.kinetics.fields import CellFields
-from cfbmarkov.limits import check_seed
+from cfbmarkov.limits import check_finite, check_seed
 from cfbmarkov.markov import model_file, model_summary, propagation
 from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.model_arrays import (SQUARE_ARRAYS, checked_arrays, checked_coherence,
@@ -397,8 +397,9 @@ class MarkovModel:
         InputError
             If ``time`` is negative or not a whole multiple of the lag.
         """
-        if not np.isfinite(time):
-            raise InputError(f"{name} {time:g} s is not a finite number")
+        time = check_finite(time, name, "s")
+        if time < 0:
+            raise InputError(f"{name} {time:g} s is negative: a time after the start, >= 0")
         k = int(round(time / self.lag))
         if k < 0 or abs(k * self.lag - time) > 1e-6 * max(self.lag, abs(time)):
             below = max(int(np.floor(time / self.lag + 1e-9)), 0) * self.lag

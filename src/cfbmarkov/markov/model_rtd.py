@@ -55,9 +55,9 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
     (Residence time).
     """
     if window is not None:
-        window = check_finite(window, "--window-length", "s", positive=True)
+        window = check_finite(window, "window length", "s", positive=True)
         if window / model.lag > MAX_STEPS:
-            raise InputError(f"--window-length {window:g} s is {window / model.lag:.3g} lags "
+            raise InputError(f"window length {window:g} s is {window / model.lag:.3g} lags "
                              f"of {model.lag:g} s, more than {MAX_STEPS}")
     cache = model._cache
     if model.open_flow is not None:

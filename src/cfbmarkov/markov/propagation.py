@@ -56,7 +56,11 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
     doi:10.3390/pr13030614 (Eq. 5-6).
     """
-    s0 = np.asarray(initial, dtype=np.float64)
+    try:
+        s0 = np.asarray(initial, dtype=np.float64)
+    except (TypeError, ValueError):
+        raise InputError(f"initial distribution {initial!r}: probabilities per state, "
+                         f"({model.n_states},) numbers") from None
     if s0.shape != (model.n_states,):
         raise InputError(f"initial distribution has shape {s0.shape}, expected ({model.n_states},)")
     if not (np.isfinite(s0).all() and (s0 >= 0).all()):
@@ -106,6 +110,9 @@ def batch_injection_maps(model: "MarkovModel", times: Sequence[float], outflow: 
     Circulating Fluidized Bed Risers", Processes 13(3), 614 (2025),
     doi:10.3390/pr13030614 (Eq. 5-6 and Eq. 8).
     """
+    if isinstance(times, (str, bytes)) or np.ndim(times) != 1 or not len(times):
+        raise InputError(f"times {times!r}: a sequence of one or more times after the "
+                         "injection (s), e.g. [0.05, 0.1]")
     steps = [model.steps_for(t) for t in times]
     last = max(steps, default=0)
     if last > MAX_STEPS:
