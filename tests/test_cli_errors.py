@@ -157,3 +157,12 @@ def test_an_option_of_one_value_given_twice_is_refused(tmp_path, capsys):
     parser = build_parser()
     _refuse_repeated(parser, "import", ["import", "d.dump", "--width", "0.09", "--region",
                                         "--width", "-o", "x.h5"])   # the value "--width"
+
+
+def test_an_empty_output_name_is_named_as_such(tmp_path, capsys):
+    """`-o ''` was taken as the current folder ("is a folder, not a model file")."""
+    from cfbmarkov.cli import main
+
+    assert main(["fit", str(tmp_path / "run.h5"), "-o", ""]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "an empty output name (-o '')" in err

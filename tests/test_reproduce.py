@@ -307,6 +307,23 @@ def test_bad_override_value_names_the_field(tmp_path, capsys):
     assert "particles.number" in err and "\n" not in err
 
 
+@pytest.mark.parametrize("markov, named", [
+    ("columns = 3", "columns 3: an even count"),
+    ("interval_resamples = 5", "interval_resamples 5: at least 10"),
+    ("interval_level = 0.99\ninterval_resamples = 20", "a 99 % interval needs 100 or more")])
+def test_markov_settings_that_would_fail_after_the_cfd_dem_are_refused_first(
+        tmp_path, capsys, markov, named):
+    """An odd column count (the mixing's halves) or too few resamples for the intervals'
+    level were refused at the comparison stage, after the CFD-DEM, and the folder then held
+    a configuration a corrected rerun was refused for: refused before anything runs."""
+    path = tmp_path / "bad.toml"
+    path.write_text(f"[markov]\n{markov}\n")
+    assert main(["reproduce", "--overrides", str(path), "-o", str(tmp_path / "x")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert named in err and "\n" not in err
+    assert not (tmp_path / "x").exists()
+
+
 # -- the scales' claims ------------------------------------------------------------------
 def _holdup(case) -> float:
     d = case.particles.diameter

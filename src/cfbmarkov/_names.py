@@ -64,8 +64,10 @@ def check_output_name(path: str | os.PathLike) -> None:
     Raises
     ------
     InputError
-        If a component of ``path`` is longer than :data:`NAME_MAX` bytes.
+        If ``path`` is empty, or a component of it is longer than :data:`NAME_MAX` bytes.
     """
+    if not os.fspath(path):        # Path("") is "." (the current folder)
+        raise InputError("an empty output name (-o ''): give the file or folder to write")
     for part in Path(path).parts:
         if len(os.fsencode(part)) > NAME_MAX:
             raise InputError(f"{shown(path)}: a file name of {len(os.fsencode(part))} bytes, "

@@ -444,8 +444,8 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
     InputError
         When the output cannot be claimed.
     """
+    check_output_name(target)           # before Path(): Path("") is "."
     target = Path(target)
-    check_output_name(target)
     check_suffix(target, kind)
     key = str(lock_path(target).absolute())
     if key in _HELD:        # claimed by this process already (the command line, then the API)

@@ -229,8 +229,9 @@ def _length_attr(f: h5py.File, path: Path, name: str) -> float:
         raise InputError(f"{path}: damaged trajectory file (no '{name}' attribute)")
     value = _float_attr(f.attrs[name])
     if not (np.isfinite(value) and value > 0):
-        raise InputError(f"{path}: damaged trajectory file ({name} "
-                         f"{f.attrs[name]!r} is not a positive length in m)")
+        shown = repr(f.attrs[name]) if np.isnan(value) else f"{value:g}"
+        raise InputError(f"{path}: damaged trajectory file ({name} {shown} is not a "
+                         "positive length in m)")
     return value
 
 

@@ -139,6 +139,10 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
                                  "against the box")
             notes = region_notes(riser, first.box[:n_axes], columns.rows, columns.outside,
                                  tuple(first.boundary))
+            if first.time is not None and time_step is not None:
+                notes.append(f"--time-step {time_step:g} s not used: the dump's ITEM: TIME "
+                             "dates its frames (it also holds across a change of the time "
+                             "step)")
             if notes:
                 writer.update_parameters({"import_notes": notes})
     return output
