@@ -261,7 +261,7 @@ def test_options_that_do_not_apply(tmp_path, run, make_csv, save):
 def test_domain_too_small_for_the_data(tmp_path, run, make_csv, save, assert_clean_failure):
     source = save(tmp_path / "run.csv", make_csv(run))
     output = tmp_path / "out" / "run.h5"
-    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09",
                          "-o", output, "--height", "0.5",
                          output=output, match=r"lies outside the domain 0..0.09 x 0..0.5 m")
 

@@ -136,7 +136,7 @@ def test_coarse_vertical_step_is_refused_naming_the_particle():
     t = np.array([0.0, 0.1, 0.2])
     pos = np.column_stack([np.zeros(3), [0.1, 0.2, 0.2 + 0.3 * H]])
     with pytest.raises(InputError, match=r"particle 42 moves \+0\.285 m vertically between t = 0\.1 "
-                                         r"and 0\.2 s.*sample more often or give unwrapped coordinates"):
+                                         r"and 0\.2 s.*give --max-gap below 0\.1 s.*or give unwrapped coordinates"):
         resample_tracks(t, np.full(3, 42), pos, interval=0.1, height=H)
     # the same step across a gap (longer than max_gap) is no step: not refused
     t = np.array([0.0, 0.1, 0.5])
