@@ -460,6 +460,13 @@ def test_paraview_csv_export_names(tmp_path):
     np.testing.assert_allclose(p, ep[..., [0, 2]], rtol=0, atol=1e-12)
     np.testing.assert_allclose(v, ev[..., [0, 2]], rtol=0, atol=0)
     np.testing.assert_array_equal(lp - lp[0], el - el[0])
+    # saved without "Add Time": the step index alone; the message names the ParaView option
+    (tmp_path / "steps.csv").write_text("\n".join(
+        ",".join(c for k, c in enumerate(line.split(",")) if k != 1) for line in lines) + "\n")
+    with pytest.raises(InputError, match=r"ParaView wrote the step index 'TimeStep' but no "
+                                         r"time: save the data again with \"Add Time\""):
+        import_file(tmp_path / "steps.csv", "csv", tmp_path / "s.h5", vertical_axis="z",
+                    drop_depth=True, width=W, height=H)
 
 
 # --- damaged files ------------------------------------------------------------------------

@@ -225,6 +225,11 @@ def _no_time_advice(header: list[str], id_kind) -> str:
     ``frame`` and ``particle``): a t column from the frame rate; empty for other files."""
     frame = next((name for name in header if name.strip().lower() in ("frame", "frame_no",
                                                                        "frame number")), None)
+    if frame is None and any(name.strip() == "TimeStep" for name in header) and any(
+            name.strip().startswith("Points:") for name in header):
+        # ParaView's "Save Data" of a series with "Write Time Steps" but not "Add Time"
+        return (": ParaView wrote the step index 'TimeStep' but no time: save the data again "
+                "with \"Add Time\" ticked (a 'Time' column), or add a column t in s")
     if frame is None:
         return ""
     found = f"frame numbers in {frame!r}"
