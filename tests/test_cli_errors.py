@@ -146,7 +146,8 @@ def test_an_option_of_one_value_given_twice_is_refused(tmp_path, capsys):
     for argv, named in ((["--window", "5:10", "--window", "10:15"], "--window given 2 times"),
                         (["--cells", "6x38", "--cells=4x10"], "--cells given 2 times"),
                         (["-o", str(tmp_path / "a.h5"), "--output", str(out)],
-                         "-o and --output given 2 times")):
+                         "-o and --output given 2 times"),
+                        ([f"-o{tmp_path / 'a.h5'}", "-o", str(out)], "-o given 2 times")):
         code = main(["fit", str(tmp_path / "run.h5"), *argv] + (["-o", str(out)] if
                                                                  "-o" not in argv else []))
         err = capsys.readouterr().err

@@ -125,23 +125,26 @@ class MarkovConfig(_Model):
     coherent_auto: bool = Field(True, description="fit the automatically chosen model with "
                                 "coherent moves (the cluster model), -")
 
-    @model_validator(mode="after")
-    def _comparable(self):
-        # refused here, before a reproduction's CFD-DEM, not at its comparison stage
+    def comparison_problem(self) -> str | None:
+        """What keeps a reproduction's Markov stages from running on these settings, found
+        before its CFD-DEM rather than at its comparison (None where nothing does): an odd
+        column count (the comparison's mixing follows the left half, which the middle column
+        of an odd count straddles), or too few interval resamples for the level (1-9, or
+        fewer than 1 / (1 - level): the tails must hold a resample each). A case that is
+        only simulated is not judged by them."""
         if self.columns % 2:
-            raise ValueError(f"columns {self.columns}: an even count (the comparison's mixing "
-                             "follows the particles of the left half, x < W/2, which the "
-                             f"middle column of an odd count straddles; e.g. {self.columns + 1})")
+            return (f"columns {self.columns}: an even count (the comparison's mixing follows "
+                    "the particles of the left half, x < W/2, which the middle column of an "
+                    f"odd count straddles; e.g. {self.columns + 1})")
         if 0 < self.interval_resamples < 10:
-            raise ValueError(f"interval_resamples {self.interval_resamples}: at least 10 (0 "
-                             "leaves the intervals out)")
+            return (f"interval_resamples {self.interval_resamples}: at least 10 (0 leaves the "
+                    "intervals out)")
         needed = math.ceil(1.0 / (1.0 - self.interval_level) - 1e-9)
         if self.interval_resamples and self.interval_resamples < needed:
-            raise ValueError(f"interval_resamples {self.interval_resamples}: a "
-                             f"{100 * self.interval_level:g} % interval needs {needed} or more "
-                             "(its tails must hold a resample each), or a lower "
-                             "interval_level")
-        return self
+            return (f"interval_resamples {self.interval_resamples}: a "
+                    f"{100 * self.interval_level:g} % interval needs {needed} or more (its "
+                    "tails must hold a resample each), or a lower interval_level")
+        return None
 
 
 class CaseConfig(_Model):

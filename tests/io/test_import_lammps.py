@@ -371,6 +371,17 @@ def test_a_pattern_beside_a_file_and_the_same_timestep_twice(tmp_path, cli, asse
                          "1e-5", "-o", tmp_path / "out" / "dup.h5", output=tmp_path / "out" / "dup.h5",
                          match=r"dump5000.riser and .*dump5000.riser both start at timestep "
                                r"5000: the same frames given twice")
+    # a restart with reset_timestep 0: the same first timestep, but ITEM: TIME carries on
+    reset = tmp_path / "reset"
+    reset.mkdir()
+    (reset / "a.dump").write_text(frame(0, time=0.0) + frame(1, time=0.05))
+    (reset / "b.dump").write_text((frame(0, time=0.1) + frame(1, time=0.15)).replace(
+        "TIMESTEP\n5000\n", "TIMESTEP\n10000\n"))
+    code, _, err = cli("import", str(reset / "b.dump"), str(reset / "a.dump"), "-o",
+                       tmp_path / "reset.h5", "--width", "0.09", "--height", "0.95")
+    assert code == 0, err
+    with Trajectories(tmp_path / "reset.h5") as t:
+        np.testing.assert_allclose(t.times, [0.0, 0.05, 0.1, 0.15])
     notes = tmp_path / "notes.txt"
     notes.write_text("not a dump\n")
     assert_clean_failure("import", str(series / "dump*.riser"), str(notes), "-o",

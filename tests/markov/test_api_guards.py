@@ -145,10 +145,12 @@ def test_a_cell_grid_of_fractional_or_boolean_cells_is_refused():
     """As `--cells 6.5x38` is refused: 6.9 columns are not truncated to 6, True is not 1."""
     from cfbmarkov.markov import CellGrid
 
-    for columns, rows in ((6.9, 38), (True, 38), ("6", 38), (6, 37.99)):
+    for columns, rows in ((6.9, 38), (True, 38), ("6", 38), (6, 37.99), (float("nan"), 38),
+                          (float("inf"), 38)):
         with pytest.raises(InputError, match="a whole number of cells"):
             CellGrid(columns, rows, 0.09, 0.95)
     assert CellGrid(6.0, np.int64(38), 0.09, 0.95).n_states == 228
+    assert CellGrid(np.array(6), np.uint8(38), 0.09, 0.95).n_states == 228
 
 
 def test_values_of_the_wrong_kind_are_refused_in_one_line(model):
@@ -157,6 +159,8 @@ def test_values_of_the_wrong_kind_are_refused_in_one_line(model):
     silently converted string; a negative time is named as negative."""
     calls = {
         "initial distribution 'abc'": lambda: model.propagate("abc", steps=2),
+        r"initial distribution \['0', ": lambda: model.propagate(
+            ["0"] * model.n_states, steps=2),
         r"times 0\.05: a sequence": lambda: model.batch_injection_maps(0.05),
         r"times '0\.05': a sequence": lambda: model.batch_injection_maps("0.05"),
         r"window length '5' is not a number": lambda: model.rtd(window="5"),

@@ -200,8 +200,8 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
     InputError
         On a window length or step that is not finite and positive, a span outside the
         file's frames, a span that holds fewer than two windows or more than
-        ``MAX_WINDOWS``, (from frames) a step shorter than the frame interval, or no
-        window holding a residence.
+        ``MAX_WINDOWS``, (from frames) a step shorter than the frame interval, or (a
+        periodic riser) no pass through the boundary over the span.
     """
     length, step = float(window_length), float(step)
     if not (np.isfinite(length) and length > 0):
@@ -244,20 +244,27 @@ def window_statistics(traj, *, window_length: float = 5.0, step: float = 1.0,
         if with_flux:
             fluxes.append(flux_residence_time(traj, window, d))
         exact = rt.exact
-    if not any(counts) and not any(
-            residence_times(traj, (a, b), use_events=use_events, lag_frames=lag_frames,
-                            face_band=face_band, direction=d).count for d in ("up", "down")):
-        raise InputError(f"{traj.path}: neither the span {a:g}-{b:g} s nor any of its "
-                         f"{len(counts)} windows of {length:g} s holds a whole residence "
-                         f"(from one pass "
-                         f"through the {'inlet' if traj.boundary.is_open else 'boundary'} "
-                         "to the next): the particles do not circulate over the span, so no "
-                         "flow's stationarity can be judged; check the span, or the file's "
-                         "height and vertical axis")
+    if not any(counts) and not traj.boundary.is_open and not _passes_in(traj, (a, b)):
+        raise InputError(f"{traj.path}: no particle passes the periodic boundary over "
+                         f"{a:g}-{b:g} s (its lap counters never change), so no window "
+                         "holds a residence and no flow's stationarity can be judged; check "
+                         "the span, or with cfbmarkov info the file's height and vertical "
+                         "axis")
     return WindowStatistics(length, step, starts, np.asarray(means, float),
                             np.asarray(sds, float), np.asarray(counts, np.int64),
                             tuple(directions), exact,
                             np.asarray(fluxes, float) if with_flux else None)
+
+
+def _passes_in(traj, span: tuple[float, float]) -> bool:
+    """Whether some particle's lap counter changes between two frames of ``span`` (a pass
+    through the periodic boundary, in either direction)."""
+    frames = traj.window(float(span[0]), float(span[1]))
+    for k in range(frames.start, frames.stop - 1, 1024):
+        laps = traj.laps(slice(k, min(k + 1025, frames.stop)))
+        if np.any(laps[1:] != laps[:-1]):
+            return True
+    return False
 
 
 def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, float] | None

@@ -232,6 +232,9 @@ def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELO
             loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
             raise InputError(f"invalid configuration at '{loc}' for U = {u:g} m/s: "
                              f"{first['msg']}") from None
+        problem = cases[-1].markov.comparison_problem()
+        if problem is not None:
+            raise InputError(f"invalid configuration at 'markov' for U = {u:g} m/s: {problem}")
     return cases
 
 

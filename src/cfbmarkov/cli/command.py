@@ -122,15 +122,19 @@ def _refuse_repeated(parser: argparse.ArgumentParser, verb: str, argv: list[str]
             expects_value = False
             continue
         name = word.split("=")[0]
+        attached = False
+        if name not in single and word[:1] == "-" and word[1:2] != "-" and word[:2] in single:
+            name, attached = word[:2], True             # a short option's value attached: -oX
         action = single.get(name)
         if action is not None:
             seen.setdefault(action.dest, []).append(name)
-            expects_value = "=" not in word
+            expects_value = "=" not in word and not attached
     for names in seen.values():
         if len(names) > 1:
             shown = " and ".join(dict.fromkeys(names))
             sub.choices[verb].exit(2, f"cfbmarkov {verb}: error: {shown} given {len(names)} "
-                                      "times, and only one value is taken: give it once\n")
+                                      "times, and only the last would be taken: give it "
+                                      "once\n")
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -47,9 +47,11 @@ def cmd_react(args) -> int:
         raise InputError(f"--resamples {args.resamples}: an interval needs at least 10 "
                          "bootstrap resamples (0 leaves it out)")
     if args.level is not None and not args.resamples:
+        from cfbmarkov.cli.markov import resamples_for
+
         raise InputError(f"--level {args.level:g} sets the intervals' coverage, which "
                          "--resamples N forms (the exact values carry none without it): add "
-                         "--resamples 100")
+                         f"--resamples {resamples_for(args.level)}")
     args.level = 0.9 if args.level is None else args.level
     from cfbmarkov.cli.markov import _check_resamples
 

@@ -199,6 +199,12 @@ def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int
     return _finish_fit(args, model, list(args.run), windows)
 
 
+def resamples_for(level: float) -> int:
+    """The resamples to suggest for an interval at ``level``: 100, or as many as its tails
+    need (:func:`~cfbmarkov.analysis.bootstrap.check_interval_options`)."""
+    return max(100, math.ceil(1.0 / (1.0 - float(level)) - 1e-9))
+
+
 def _check_resamples(resamples: int, level: float | None = None) -> None:
     """Refuse 1-9 resamples in one line (0: no interval), and resamples too few for the
     level's tails (:func:`~cfbmarkov.analysis.bootstrap.check_interval_options`)."""
@@ -295,13 +301,15 @@ def cmd_rtd(args) -> int:
             model = _with_interval(model, level_, args.resamples)
     elif (args.level is not None and model.uncertainty is not None
           and abs(model.uncertainty.level - args.level) > 1e-12):
+        n = resamples_for(args.level)
         raise InputError(f"{args.model} holds a {model.uncertainty.percent} % interval, not "
-                         f"{100 * args.level:g} %: add --resamples 100 to form it from 100 "
+                         f"{100 * args.level:g} %: add --resamples {n} to form it from {n} "
                          "bootstrap resamples of the model's fitting window")
     elif args.level is not None and model.uncertainty is None:
+        n = resamples_for(args.level)
         raise InputError(f"{args.model} holds no interval (fitted with --resamples 0, or in "
-                         f"Python): add --resamples 100 to form a {100 * args.level:g} % one "
-                         "from 100 bootstrap resamples of the model's fitting window")
+                         f"Python): add --resamples {n} to form a {100 * args.level:g} % one "
+                         f"from {n} bootstrap resamples of the model's fitting window")
     rtd = model.rtd(window=args.window_length)
     band = rtd.uncertainty              # the intrinsic RTD's only
     adequacy = getattr(model, "adequacy", None)

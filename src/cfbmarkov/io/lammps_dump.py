@@ -437,29 +437,39 @@ def dump_files(source) -> list[Path]:
     kept = [p for p in paths if p.stat().st_size > 0]      # empty files are skipped
     if not kept:
         raise InputError(f"{paths[0].parent}: all {len(paths)} dump files are empty")
-    ordered = sorted(((_first_timestep(p), p) for p in kept), key=lambda item: item[0])
+    starts = [(_first_step(p), p) for p in kept]
+    # by time where every file dates its frames (ITEM: TIME carries on across a
+    # reset_timestep), else by timestep
+    timed = all(start[1] is not None for start, _ in starts)
+    ordered = sorted(starts, key=lambda item: ((item[0][1], item[0][0]) if timed
+                                               else (item[0][0], item[1].name)))
     for (before, a), (after, b) in zip(ordered[:-1], ordered[1:]):
-        if before[0] == after[0] < 2 ** 62:
-            raise InputError(f"{a} and {b} both start at timestep {before[0]}: the same "
-                             "frames given twice (a copy, or a restarted run's dump beside "
-                             "the first); leave one of them out")
+        if before[0] == after[0] < 2 ** 62 and before[1] == after[1]:
+            when = (f"timestep {before[0]}" if before[1] is None else
+                    f"timestep {before[0]}, t = {before[1]:g} s")
+            raise InputError(f"{a} and {b} both start at {when}: the same frames given twice "
+                             "(a copy, or a restarted run's dump beside the first); leave one "
+                             "of them out")
     return [p for _, p in ordered]
 
 
-def _first_timestep(path: Path) -> tuple[int, str]:
-    """(first ITEM: TIMESTEP, name) of a dump, to order files; files that do not say come
-    last (the reader then reports what is wrong)."""
+def _first_step(path: Path) -> tuple[int, float | None]:
+    """(first ITEM: TIMESTEP, its ITEM: TIME or None) of a dump, to order files; files that
+    do not say come last (the reader then reports what is wrong)."""
+    time = None
     try:
         with open_text(path) as fh:
             for _ in range(50):
                 line = fh.readline()
                 if not line:
                     break
-                if line.strip() == "ITEM: TIMESTEP":
-                    return int(fh.readline().split()[0]), path.name
+                if line.strip() == "ITEM: TIME":
+                    time = float(fh.readline().split()[0])
+                elif line.strip() == "ITEM: TIMESTEP":
+                    return int(fh.readline().split()[0]), time
     except (OSError, ValueError, IndexError, UnicodeDecodeError):
         pass
-    return 2 ** 62, path.name
+    return 2 ** 62, None
 
 
 def _frames_of(paths: list[Path], units: list, skipped: list) -> Iterator[tuple[str, DumpFrame]]:

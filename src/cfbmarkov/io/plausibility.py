@@ -209,8 +209,10 @@ def gap_warnings(traj) -> list[str]:
     step = float(p["resample"])
     return [f"the tracers are absent {gaps} time(s) between two of their samples further "
             f"apart than --max-gap, by default the resample step {step:g} s, and each such "
-            "gap breaks a residence; where the tracers stayed in the riser between samples, "
-            f"give a larger --max-gap (such as {4 * step:g})"]
+            "gap breaks a residence; where the tracers stayed in view between samples, "
+            f"give a larger --max-gap (such as {4 * step:g}); a gap over which a tracer moves "
+            "more than a quarter of the riser's height cannot be bridged and is refused, "
+            "naming the largest --max-gap that leaves it out"]
 
 
 def median_stored_speed(traj) -> float:

@@ -1004,9 +1004,10 @@ def _start_on_levels(p_up, p_down, p_stay, levels: int, entry, entry_flux, chain
     entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
     if entries.size == 0:
         raise CfbmarkovError("the model has no transition up through the top: particles never "
-                             "leave, so there is no residence time (its fitting window saw no "
-                             "particle pass the top: fit on a longer window, or check the "
-                             "run's height and vertical axis with cfbmarkov info)")
+                             "leave, so there is no residence time; its fitting window saw no "
+                             "particle pass the top: fit on a longer window, or check with "
+                             "cfbmarkov info the run's height and vertical axis, and whether "
+                             "its particles are tracked through the top")
     # keep the states from which an exit can be reached (others trap their mass): one
     # breadth-first search backwards from the exit states
     live = (_live_levels(p_up, p_down, p_stay, levels, exit_probability > 0) if arrays is None

@@ -193,7 +193,8 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
             flow = ("; the flow's variability left out (the window is shorter than two "
                     "blocks of three mean residence times)" if u.flow_sd is None else
                     f"; plus the flow's variability between its blocks ({100 * u.flow_sd[0]:.3g} "
-                    "% of E(RT)" + (", over sqrt(runs)" if model.run_windows else "") + ")")
+                    "% of E(RT)" + (", over sqrt(runs)" if model.run_windows else "")
+                    + f", times {u.flow_multiplier_text()})")
             lines.append(f"  exact residence time: {u.describe(r.mean, r.sd)}")
             runs = len(model.run_windows) if model.run_windows is not None else 1
             where = (f"the fitting windows of {runs} runs: {u.resamples} bootstrap "

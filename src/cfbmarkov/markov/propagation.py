@@ -57,6 +57,8 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     doi:10.3390/pr13030614 (Eq. 5-6).
     """
     try:
+        if np.asarray(initial).dtype.kind not in "biuf":    # text or objects
+            raise TypeError
         s0 = np.asarray(initial, dtype=np.float64)
     except (TypeError, ValueError):
         raise InputError(f"initial distribution {initial!r}: probabilities per state, "

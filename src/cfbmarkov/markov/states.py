@@ -435,12 +435,18 @@ class CellGrid(StateSpace):
     def __init__(self, columns: int, rows: int, width: float | None = None,
                  height: float | None = None, depth_columns: int = 1,
                  depth: float | None = None):
+        counts = []
         for name, value in (("columns", columns), ("rows", rows),
                             ("depth_columns", depth_columns)):
+            if isinstance(value, np.ndarray) and value.ndim == 0:
+                value = value.item()                    # np.array(6)
             if isinstance(value, (bool, np.bool_)) or not isinstance(
-                    value, (int, np.integer, float, np.floating)) or value != int(value):
+                    value, (int, np.integer, float, np.floating)) or not np.isfinite(
+                    value) or value != int(value):
                 raise InputError(f"cell grid {name} {value!r}: a whole number of cells (e.g. "
                                  "CellGrid(6, 38, width, height))")
+            counts.append(int(value))
+        columns, rows, depth_columns = counts
         if int(columns) < 1 or int(rows) < 1 or int(depth_columns) < 1:
             grid = f"{columns}x{depth_columns}x{rows}" if depth is not None else f"{columns}x{rows}"
             raise InputError(f"a cell grid needs at least 1x1 cells, got {grid}")

@@ -143,8 +143,10 @@ class ModelUncertainty:
             if lower > 0.0:
                 continue
             why = (f"the flow's variability between the fitting window's blocks is "
-                   f"{100 * self.flow_sd[k]:.3g} % of {name}, so the interval's lower "
-                   "half-width exceeds the figure itself"
+                   f"{100 * self.flow_sd[k]:.3g} % of {name}, times "
+                   f"{self.flow_multiplier_text()}: "
+                   f"{100 * self.flow_sd[k] * self.flow_multiplier():.3g} %, so the "
+                   "interval's lower half-width exceeds the figure itself"
                    if self.flow_sd is not None and self.flow_sd[k] > 0 else
                    f"at least {100 * (1 - self.level) / 2:g} % of the bootstrap resamples "
                    f"give {name} 0 (their chains have residences of one length only)")
@@ -154,6 +156,25 @@ class ModelUncertainty:
                          "window narrows it where the flow is steady (more residences per "
                          "block), not where its blocks see different flows")
         return lines
+
+    def flow_multiplier(self) -> float:
+        """The quantile the flow's standard deviation is multiplied by in the interval:
+        Student's t with :attr:`flow_degrees_of_freedom` at (1 + level) / 2, the normal one
+        where they are not recorded (:func:`cfbmarkov.analysis.bootstrap.flow_quantile`)."""
+        from scipy.special import ndtri, stdtrit
+
+        p = 0.5 * (1.0 + self.level)
+        dof = self.flow_degrees_of_freedom
+        return float(ndtri(p)) if dof is None else float(stdtrit(dof, p))
+
+    def flow_multiplier_text(self) -> str:
+        """``Student's t = 6.31 with 1 degree of freedom`` or ``z = 1.64``:
+        :meth:`flow_multiplier` as the lines about the interval name it."""
+        dof = self.flow_degrees_of_freedom
+        if dof is None:
+            return f"z = {self.flow_multiplier():.3g}"
+        return (f"Student's t = {self.flow_multiplier():.3g} with {dof} degree"
+                f"{'' if dof == 1 else 's'} of freedom")
 
     def short_of_resamples(self) -> list[str]:
         """A line where fewer resamples than drawn gave a model with residences: the
