@@ -14,6 +14,18 @@ change once its threads run), so tests of the thread count can set two.
 
 import os
 
+import pytest
+
+
+@pytest.fixture(autouse=True)
+def _no_heartbeat_lines(monkeypatch):
+    """No "still working" lines from commands run in-process: on a busy machine a step may
+    pass 5 s, and a line of progress would break the tests that count a refusal's lines
+    (the heartbeat's own tests set its period)."""
+    from cfbmarkov import _console
+
+    monkeypatch.setattr(_console, "HEARTBEAT_EVERY", 1e6)
+
 
 def pytest_configure(config):
     if os.environ.get("PYTEST_XDIST_WORKER"):
