@@ -158,10 +158,16 @@ class FrameSeries:
         bad = np.abs(steps[first:] - reference) > FRAME_SPACING_TOLERANCE * reference
         if np.any(bad):
             k = int(np.argmax(bad))
+            # two steps only: which is wrong cannot be told (a stray row's time makes the
+            # first one): both are named
+            which = (" (which of the two is wrong cannot be told from two steps: a row with "
+                     "a wrong time makes a first frame of its own)"
+                     if what == "the first step" and first + k == 1 else "")
             raise InputError(
-                f"{self.label}: frames unevenly spaced: {time_text(steps[first + k])} s between "
-                f"t = {time_text(times[k])} and {time_text(times[k + 1])} s, expected "
-                f"{time_text(reference)} s ({what}, within {FRAME_SPACING_TOLERANCE:.0%}); for "
+                f"{self.label}: frames unevenly spaced: {time_text(steps[first + k])} s "
+                f"between t = {time_text(times[k])} and {time_text(times[k + 1])} s, expected "
+                f"{time_text(reference)} s ({what}, within {FRAME_SPACING_TOLERANCE:.0%})"
+                f"{which}; for "
                 "irregular frame times (CSV tracking data such as PEPT) resample them with "
                 "--resample DT --max-gap G; a dump or VTK series that misses frames: import "
                 "the frames before and after the gap as two files (fit A.h5 B.h5 pools them)")

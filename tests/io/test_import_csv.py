@@ -469,3 +469,16 @@ def test_rows_outside_the_riser_are_counted_in_the_import_notes(tmp_path, capsys
     assert main(["import", str(source), "--width", "0.09", "--height", "0.95", "-o",
                  str(tmp_path / "b.h5")]) == 0
     assert "outside the riser's region" not in capsys.readouterr().err
+
+
+def test_a_stray_row_with_a_wrong_time_is_told_apart_from_a_gap(tmp_path, cli):
+    """A row appended with t = -1 makes a first frame of its own 1 s before the others
+    (0.025 s apart): the refusal says that two steps cannot tell which is wrong, not only
+    that the good frames are "unevenly spaced"."""
+    rows = ["id,t,x,y"] + [f"{i},{0.025 * k:.3f},0.02,{0.1 + 0.01 * k:.2f}"
+                           for k in range(6) for i in range(3)] + ["0,-1,0.01,0.01"]
+    (tmp_path / "stray.csv").write_text("\n".join(rows) + "\n")
+    code, _, err = cli("import", tmp_path / "stray.csv", "--width", "0.09", "--height", "0.95",
+                       "-o", tmp_path / "out" / "s.h5")
+    assert code == 2 and err.count("\n") == 1
+    assert "a row with a wrong time makes a first frame of its own" in err
