@@ -138,8 +138,8 @@ def test_a_required_option_typed_short_is_named_not_reported_missing(tmp_path, c
 
 def test_an_option_of_one_value_given_twice_is_refused(tmp_path, capsys):
     """argparse keeps the last of a repeated option silently (`fit --window 5:10 --window
-    10:15` fitted 10:15): refused in one line naming it, nothing written; an option's value
-    that looks like an option is not counted as one."""
+    10:15` would fit 10:15): refused in one line naming it, nothing written; an option's
+    value that looks like an option is not counted as one."""
     from cfbmarkov.cli import main
 
     out = tmp_path / "m.h5"
@@ -161,7 +161,7 @@ def test_an_option_of_one_value_given_twice_is_refused(tmp_path, capsys):
 
 
 def test_an_empty_output_name_is_named_as_such(tmp_path, capsys):
-    """`-o ''` was taken as the current folder ("is a folder, not a model file")."""
+    """`-o ''` is named as empty, not taken as the current folder."""
     from cfbmarkov.cli import main
 
     assert main(["fit", str(tmp_path / "run.h5"), "-o", ""]) == 2

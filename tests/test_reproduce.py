@@ -314,8 +314,8 @@ def test_bad_override_value_names_the_field(tmp_path, capsys):
 def test_markov_settings_that_would_fail_after_the_cfd_dem_are_refused_first(
         tmp_path, capsys, markov, named):
     """An odd column count (the mixing's halves) or too few resamples for the intervals'
-    level were refused at the comparison stage, after the CFD-DEM, and the folder then held
-    a configuration a corrected rerun was refused for: refused before anything runs."""
+    level would fail at the comparison stage, after the CFD-DEM, leaving a folder whose
+    configuration a corrected rerun is refused for: refused before anything runs."""
     path = tmp_path / "bad.toml"
     path.write_text(f"[markov]\n{markov}\n")
     assert main(["reproduce", "--overrides", str(path), "-o", str(tmp_path / "x")]) == 2
