@@ -84,6 +84,7 @@ def test_fingerprint_tells_definitions_apart_and_ignores_the_last_bits(tmp_path)
     for other in others:
         assert property_fingerprint(other, 0, 0.02) != same
     assert property_fingerprint(base, 0, 0.04) != same
+    assert property_fingerprint(base, 0, 0.02, "down") != same
     # one state's rate changed by 1e-9: another definition; by one ulp: the same
     rate = np.array(base.rate)
     rate[0, 7] *= 1 + 1e-9
@@ -122,7 +123,8 @@ def test_prediction_stores_the_fingerprint(runs):
     with h5py.File(runs["pred"], "r") as f:
         attrs = dict(f["properties/X"].attrs)
     assert str(attrs["fingerprint"]).startswith("sha256:")
-    assert attrs["fingerprint_method"] == "cfbmarkov-kinetics-1"
+    assert attrs["fingerprint_method"] == "cfbmarkov-kinetics-2"
+    assert attrs["entries"] == "up"
 
 
 # -- 1. stored values of another definition ------------------------------------------------
@@ -166,6 +168,27 @@ def test_stored_values_without_a_fingerprint_are_not_trusted(runs, tmp_path):
     model = got["kinetics"]["X"]["model"]
     assert model["values_from"] == "paths" and "without the fingerprint" in model["values_note"]
     assert any("without the fingerprint" in w for w in got["warnings"])
+
+
+def test_stored_values_of_an_older_recipe_or_another_direction_are_not_the_model(runs,
+                                                                                tmp_path):
+    """Values stored by the recipe that did not record the residence direction (a net
+    downflow's Monte Carlo then reset its entry properties at the wrong passes), or stored
+    for the other direction, are integrated along the prediction's paths instead."""
+    kin = _toml(tmp_path, "same", 'law = "first-order"\nrate = 1.0')
+    for label, attrs, said in [
+            ("older", {"fingerprint_method": "cfbmarkov-kinetics-1"}, "older recipe"),
+            ("down", {"entries": "down"}, "entries counted down stored, up here")]:
+        copy = shutil.copy(runs["pred"], tmp_path / f"{label}.h5")
+        with h5py.File(copy, "a") as f:
+            stored = f["properties/X"].attrs
+            if label == "older":
+                del stored["entries"]
+            stored["fingerprint"] = "sha256:" + "0" * 64
+            for key, value in attrs.items():
+                stored[key] = value
+        model = _compare(runs, copy, kin, tmp_path / label)["kinetics"]["X"]["model"]
+        assert model["values_from"] == "paths" and said in model["values_note"]
 
 
 # -- 2. a carried property -----------------------------------------------------------------

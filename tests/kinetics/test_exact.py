@@ -371,6 +371,36 @@ def test_down_residences_mirror_up_ones():
         exact_kinetics(up_model, kin, direction="sideways")
 
 
+def test_monte_carlo_of_a_net_downflow_resets_at_the_passes_down():
+    """A model of a net downflow counts residences from one pass down through the bottom to
+    the next: its Monte Carlo resets an entry property there, so that its exits agree with
+    the exact answer; reset at the passes up (which it never makes) they do not."""
+    p = periodic_model().transition_matrix
+    passes = np.array([[0.0, 0.0], [1.0, 0.0]])
+    zeros = np.zeros((2, 2), np.int64)
+    model = MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 2, 0.1, 1.0), LAG,
+                        estimator="given", pass_fractions=(np.zeros((2, 2)), passes),
+                        flow_direction="down")
+    kin = kinetics([1.5, 6.0])
+    exact = exact_kinetics(model, kin)["v"]
+    states, laps = model.monte_carlo(_draw(model.stationary_distribution, 4000, 1), 400,
+                                     seed=3)
+    assert laps.min() < -50 and laps.max() <= 0
+    sk = kin.per_state(model.state_space)
+    a, b = sk.over(LAG)
+    values = run_properties(sk, LAG, states, laps, periodic=True, direction=model.flow_direction)
+    exits, _, entered = exit_values(states, -laps, values[0], a[0], b[0], periodic=True)
+    exits = exits[entered < 300]
+    se = exits.std(ddof=1) / np.sqrt(exits.size)
+    assert exits.size > 10000
+    assert abs(exits.mean() - exact.exit_mean) < 3 * se
+    upward = run_properties(sk, LAG, states, laps, periodic=True, direction="up")
+    never_reset, _, _ = exit_values(states, -laps, upward[0], a[0], b[0], periodic=True)
+    assert never_reset.mean() > exact.exit_mean + 0.1
+    with pytest.raises(ValueError, match="up or down"):
+        run_properties(sk, LAG, states, laps, periodic=True, direction="sideways")
+
+
 def test_an_exit_mean_beyond_its_range_by_round_off_is_put_on_it():
     """A conversion's exit mean 1 + 7e-16 (a carried conversion's round-off) is 1, one
     -1e-17 is 0; a value beyond the range by more than round-off is left as it is (a fault

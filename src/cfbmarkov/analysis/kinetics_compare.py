@@ -97,14 +97,15 @@ def stored_property(traj, name: str, frames: slice) -> np.ndarray | None:
     return np.asarray(data, dtype=np.float64)
 
 
-def stored_definition_differs(traj, name: str, state_kinetics, lag: float) -> str | None:
+def stored_definition_differs(traj, name: str, state_kinetics, lag: float,
+                              direction: str = "up") -> str | None:
     """Why the values a prediction stored for ``name`` cannot stand for the property as
     ``state_kinetics`` defines it, or None where they can.
 
     The stored values stand for it only where the fingerprint stored with them
     (:func:`cfbmarkov.kinetics.fingerprint.property_fingerprint`: law, start rule, entry
-    value, lag and the per-state rates and targets) is that of ``state_kinetics`` at
-    ``lag``.
+    value, lag, residence direction and the per-state rates and targets) is that of
+    ``state_kinetics`` at ``lag`` in ``direction``.
 
     Parameters
     ----------
@@ -116,13 +117,15 @@ def stored_definition_differs(traj, name: str, state_kinetics, lag: float) -> st
         The comparison's kinetics on the model's states.
     lag : float
         The model's lag (s).
+    direction : {"up", "down"}, optional
+        The model's residence direction (``MarkovModel.flow_direction``).
 
     Returns
     -------
     str or None
         The reason in words (what differs), or None where the fingerprints match.
     """
-    from cfbmarkov.kinetics.fingerprint import property_fingerprint
+    from cfbmarkov.kinetics.fingerprint import FINGERPRINT_METHOD, property_fingerprint
 
     attrs = traj.property_attrs(name)
     q = state_kinetics.index(name)
@@ -130,9 +133,17 @@ def stored_definition_differs(traj, name: str, state_kinetics, lag: float) -> st
     if not stored:
         return (f"{traj.path} stores {name} without the fingerprint of its definition (a file "
                 "written by an older cfbmarkov): its values may be those of another kinetics")
-    if str(stored) == property_fingerprint(state_kinetics, q, lag):
+    if str(stored) == property_fingerprint(state_kinetics, q, lag, direction):
         return None
     differ = []
+    entries = attrs.get("entries")
+    if isinstance(entries, bytes):
+        entries = entries.decode(errors="replace")
+    if entries is None and str(attrs.get("fingerprint_method", "")) != FINGERPRINT_METHOD:
+        differ.append(f"stored by an older recipe ({attrs.get('fingerprint_method')}), "
+                      "which did not record the direction residences are counted in")
+    elif entries is not None and str(entries) != direction:
+        differ.append(f"entries counted {entries} stored, {direction} here")
     law = state_kinetics.laws[q].key
     if str(attrs.get("law", law)) != law:
         differ.append(f"law {attrs.get('law')} stored, {law} here")
@@ -516,7 +527,8 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
         name = m["name"]
         stored = stored_property(pred, name, slice(frames.start, frames.stop))
         if stored is not None:
-            notes[name] = stored_definition_differs(pred, name, sk, model.lag)
+            notes[name] = stored_definition_differs(pred, name, sk, model.lag,
+                                                    model.flow_direction)
             if notes[name] is None and stored.shape[0] != pred_discrete.n_frames:
                 notes[name] = (f"{pred.path} stores {name} in {stored.shape[0]} frames of "
                                f"{start:g}-{stop:g} s, not the {pred_discrete.n_frames} the "

@@ -6,8 +6,10 @@ values and their definition).
 The fingerprint is ``sha256:`` and the SHA-256 (hex) of, in order:
 
 1. a header, UTF-8 JSON with sorted keys: the method name (:data:`FINGERPRINT_METHOD`),
-   the law's key, the start rule, the entry value, the lag (s) and the number of states
-   (floats written as ``repr`` of the value quantised as below);
+   the law's key, the start rule, the entry value, the lag (s), the number of states and
+   the direction residences are counted in (``entries``: ``up``, or ``down`` for a model of
+   a net downflow, whose entries are passes down through the bottom) (floats written as
+   ``repr`` of the value quantised as below);
 2. for a linear law, the per-state rate k_s (1/s) and target v_inf,s; for a custom law its
    function's name and definition (the SHA-256 of its source text, or of its code object
    where Python has no source for it, :func:`function_digest`), its RK4 sub-steps and its
@@ -18,7 +20,7 @@ The fingerprint is ``sha256:`` and the SHA-256 (hex) of, in order:
 Hashing the rates and targets rather than the lag's affine maps (exp(-k lag) ...) and
 quantising them keeps the fingerprint the same where two machines' exponentials or two
 builds' arithmetic differ in the last bits, while any change of a rate, a target, the law,
-the start rule, the entry value or the lag beyond 1e-12 relative changes it.
+the start rule, the entry value, the direction or the lag beyond 1e-12 relative changes it.
 """
 
 from __future__ import annotations
@@ -29,7 +31,7 @@ import json
 import numpy as np
 
 #: the name of the fingerprint's recipe, stored with it (module docstring)
-FINGERPRINT_METHOD = "cfbmarkov-kinetics-1"
+FINGERPRINT_METHOD = "cfbmarkov-kinetics-2"
 #: mantissa bits kept before hashing
 MANTISSA_BITS = 40
 
@@ -71,7 +73,7 @@ def _number(value: float) -> str:
     return repr(float(np.ldexp(m[0] / 2.0 ** MANTISSA_BITS, int(e[0]))))
 
 
-def property_fingerprint(state_kinetics, index: int, lag: float) -> str:
+def property_fingerprint(state_kinetics, index: int, lag: float, direction: str = "up") -> str:
     """The fingerprint of property ``index`` of ``state_kinetics`` at ``lag``.
 
     Parameters
@@ -82,6 +84,9 @@ def property_fingerprint(state_kinetics, index: int, lag: float) -> str:
         The property's position.
     lag : float
         The lag (s) its Monte Carlo steps by.
+    direction : {"up", "down"}, optional
+        The model's residence direction (``MarkovModel.flow_direction``): where an
+        ``entry`` start resets the value.
 
     Returns
     -------
@@ -93,7 +98,7 @@ def property_fingerprint(state_kinetics, index: int, lag: float) -> str:
     linear = bool(sk.linear[index])
     header = {"method": FINGERPRINT_METHOD, "law": law.key, "start": sk.starts[index],
               "initial": _number(float(sk.initial[index])), "lag": _number(float(lag)),
-              "states": int(np.shape(sk.rate)[1])}
+              "states": int(np.shape(sk.rate)[1]), "entries": str(direction)}
     if not linear:
         header["function"] = str(getattr(law.function, "__name__", "?"))
         header["definition"] = function_digest(law.function)

@@ -7,7 +7,9 @@ particle in state s maps its value by v' = a_s v + b_s (a linear law, exact) or 
 ``substeps`` RK4 steps of its custom rate function with the state held. Where a particle
 enters (an open riser's newcomer at its first frame; in a periodic riser, for
 ``start = entry``, the frame after the pass up through the top that lifts its lap counter
-above every value it had) the value resets to the entry value. Each particle's values
+above every value it had; for a model of a net downflow, whose residences run from one pass
+down through the bottom to the next, the frame after the pass down that takes the counter
+below every value it had) the value resets to the entry value. Each particle's values
 depend only on its own path, so the result is the same for any number of threads.
 """
 
@@ -135,7 +137,8 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
 
 
 def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndarray,
-                   periodic: bool, initial: np.ndarray | None = None) -> np.ndarray:
+                   periodic: bool, initial: np.ndarray | None = None,
+                   direction: str = "up") -> np.ndarray:
     """Every property of every particle at every frame of a Monte Carlo run.
 
     Parameters
@@ -151,16 +154,30 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
         an open one (resets where a newcomer enters).
     initial : ndarray of float64, shape (P, N), optional
         Values at frame 0 (default: every property's entry value).
+    direction : {"up", "down"}, optional
+        The model's residence direction (``MarkovModel.flow_direction``): a periodic
+        riser's ``entry`` properties reset at passes up through the top to a new lap
+        maximum, or for "down" at passes down through the bottom to a new lap minimum, as
+        the chain's exact answers count residences.
 
     Returns
     -------
     ndarray of float64, shape (P, T, N)
         NaN where a particle is absent.
+
+    Raises
+    ------
+    ValueError
+        If ``direction`` is neither "up" nor "down".
     """
+    if direction not in ("up", "down"):
+        raise ValueError(f"direction {direction!r}: up or down")
     sk = state_kinetics
     n_props = sk.n_properties
     states = np.ascontiguousarray(states, dtype=np.int32)
     laps = np.ascontiguousarray(laps, dtype=np.int32)
+    if direction == "down":     # a new lap minimum is a new maximum of the negated counter
+        laps = np.negative(laps)
     n = states.shape[1]
     if initial is None:
         initial = np.repeat(sk.initial[:, None], n, axis=1)

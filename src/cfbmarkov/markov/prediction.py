@@ -195,7 +195,8 @@ def _properties(model, traj, kinetics, start, states, laps, present) -> np.ndarr
                                  "entry or carried")
             initial[q, :present.size] = traj.property_values(name, frame)[present]
     return run_properties(kinetics, model.lag, states, laps,
-                          periodic=not model.boundary.is_open, initial=initial)
+                          periodic=not model.boundary.is_open, initial=initial,
+                          direction=model.flow_direction)
 
 
 def _warn_stateless(states0: np.ndarray, positions0: np.ndarray, model: "MarkovModel",
@@ -344,7 +345,9 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                 writer.add_property(name, values[q], {
                     "law": kin.laws[q].key, "start": kin.starts[q],
                     "initial": float(kin.initial[q]),
-                    "fingerprint": property_fingerprint(kin, q, model.lag),
+                    "entries": model.flow_direction,
+                    "fingerprint": property_fingerprint(kin, q, model.lag,
+                                                        model.flow_direction),
                     "fingerprint_method": FINGERPRINT_METHOD})
     bar.close(output)
     return Path(output)
