@@ -532,3 +532,66 @@ def test_the_models_record_their_fitting_data(reference, tmp_path):
         model = MarkovModel.load(out / "u8" / f"model-{name}.h5")
         assert model.source_identity and model.cell_fields is not None, name
         assert check_fitting_file(model, copy) == tuple(model.window)
+
+
+# -- a kinetics file ---------------------------------------------------------------------
+def _kinetics_file(folder: Path, name: str, body: str) -> Path:
+    path = folder / f"{name}.toml"
+    path.write_text(f'[[property]]\nname = "X"\nlaw = "first-order"\n{body}\n')
+    return path
+
+
+def test_a_kinetics_table_of_another_grid_is_refused_before_the_cfd_dem(tmp_path, capsys):
+    """The table is checked on each case's grid (here 2 x 6) before any CFD-DEM runs."""
+    rows = "\n".join(f"{c},{r},1.0" for r in range(12) for c in range(4))
+    (tmp_path / "rates.csv").write_text("col,row,rate\n" + rows + "\n")
+    kin = _kinetics_file(tmp_path, "grid", 'rate_by_cell = "rates.csv"')
+    assert main(["reproduce", "--overrides", str(tiny(tmp_path)), "--velocities", "8",
+                 "--kinetics", str(kin), "-o", str(tmp_path / "x"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "outside the grid 2x6" in err and "\n" not in err
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_rerun_with_another_kinetics_file_is_refused_and_the_same_one_skips(
+        reference, tmp_path, capsys):
+    """The comparisons record the kinetics they integrated: a rerun with another definition
+    (or none) in the folder is refused in one line, the same file skips every stage."""
+    import shutil
+
+    out, overrides = reference
+    out = Path(shutil.copytree(out, tmp_path / "ref"))
+    first = _kinetics_file(tmp_path, "first", "rate = 5.0")
+    argv = ["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities", "8",
+            "-o", str(out), "--jobs", "1", "--models", "paper"]
+    assert main([*argv, "--kinetics", str(first)]) == 0
+    log = capsys.readouterr().out
+    assert "cfd-dem skipped" in log and "compare-paper done" in log
+    summary = json.loads((out / "u8" / "compare-paper" / "summary.json").read_text())
+    assert summary["kinetics_source"]["digest"].startswith("sha256:")
+    assert json.loads((out / "reproduce.json").read_text())["kinetics"]["file"] == str(first)
+    first.write_text(first.read_text().replace("rate = 5.0", "rate = 50.0"))
+    for extra in (["--kinetics", str(first)], ["--kinetics", str(_kinetics_file(
+            tmp_path, "second", "rate = 7.0"))], []):
+        assert main([*argv, *extra]) == 2
+        err = capsys.readouterr().err.strip()
+        assert "would mix two kinetics" in err and "\n" not in err
+    first.write_text(first.read_text().replace("rate = 50.0", "rate = 5.0"))
+    assert main([*argv, "--kinetics", str(first)]) == 0
+    assert "compare-paper skipped" in capsys.readouterr().out
+
+
+def test_a_comparison_is_formed_again_unless_it_holds_the_kinetics_asked_for(tmp_path):
+    from cfbmarkov.kinetics import load_kinetics
+    from cfbmarkov.kinetics.fingerprint import kinetics_digest
+    from cfbmarkov.reproduce_case import _same_kinetics
+
+    a = kinetics_digest(load_kinetics(_kinetics_file(tmp_path, "a", "rate = 1.0")))
+    assert a == kinetics_digest(load_kinetics(_kinetics_file(tmp_path, "b", "rate = 1.0")))
+    assert a != kinetics_digest(load_kinetics(_kinetics_file(tmp_path, "c", "rate = 1.5")))
+    block = {"X": {}}
+    assert _same_kinetics({}, None)
+    assert not _same_kinetics({"kinetics": block}, None)
+    assert not _same_kinetics({"kinetics": block}, a)          # recorded by no digest
+    assert _same_kinetics({"kinetics": block, "kinetics_source": {"digest": a}}, a)
+    assert not _same_kinetics({"kinetics": block, "kinetics_source": {"digest": "x"}}, a)

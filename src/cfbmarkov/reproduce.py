@@ -264,7 +264,7 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     if kinetics is not None:
         from cfbmarkov.kinetics import load_kinetics
 
-        load_kinetics(kinetics)                   # a bad file: one line, before any work
+        loaded = load_kinetics(kinetics)          # a bad file: one line, before any work
         kinetics = str(Path(kinetics).resolve())
     from cfbmarkov.simulate.ensemble import MAX_MEMBERS
 
@@ -282,6 +282,11 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     names = [case_name(c.gas.superficial_velocity) for c in cases]
     if len(set(names)) != len(names):
         raise InputError(f"velocities repeat: {', '.join(names)}")
+    if kinetics is not None:
+        from cfbmarkov.markov.states import CellGrid
+
+        for case in cases:                        # its tables on each case's grid, too
+            loaded.check_cells(CellGrid(case.markov.columns, case.markov.rows))
     out = Path(directory)
     if out.exists() and not out.is_dir():
         raise InputError(f"output {out} exists and is not a directory")
@@ -364,9 +369,13 @@ def check_run_folder(out: str | os.PathLike, cases, names, ensemble: int = 1) ->
         check_ensemble_folder(out / name, ensemble, record=False)
 
 
-def earlier_manifest(out: Path, scale: Scale, overrides, ensemble: int) -> dict:
+def earlier_manifest(out: Path, scale: Scale, overrides, ensemble: int,
+                     kinetics: dict | None = None) -> dict:
     """The manifest of an earlier reproduction in ``out`` (empty where there is none), once
-    checked to be of the same scale, overrides and ensemble size: cases of another
+    checked to be of the same scale, overrides, ensemble size and kinetics (``kinetics``:
+    ``{"file", "digest"}`` or None; an earlier reproduction without kinetics takes a
+    kinetics file, whose comparisons are formed in the cases run now, but one with a
+    kinetics file takes no other and cannot drop it): cases of another
     configuration beside its cases would make one report of two experiments.
 
     Raises
@@ -393,13 +402,29 @@ def earlier_manifest(out: Path, scale: Scale, overrides, ensemble: int) -> dict:
                              f"{json.dumps(before)}, now {json.dumps(now)}) whose cases its "
                              "report covers; give another folder with -o, or the same "
                              f"{shown} to add cases to it")
+    before = earlier.get("kinetics")
+    if isinstance(before, dict) and (kinetics is None
+                                     or before.get("digest") != kinetics.get("digest")):
+        now = ("none" if kinetics is None else
+               f"{kinetics.get('file')} (another definition)"
+               if before.get("file") == kinetics.get("file") else kinetics.get("file"))
+        raise InputError(f"{out}: holds a reproduction whose comparisons integrate the "
+                         f"kinetics of {before.get('file')}, now {now}: its report would mix "
+                         "two kinetics; give another folder with -o, or --kinetics "
+                         f"{before.get('file')} as it was to add or resume cases")
     return earlier
 
 
 def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executor, scheduler,
                jobs, progress, report, log, kinetics=None, ensemble=1, device="cpu") -> Path:
     check_run_folder(out, cases, names, ensemble)    # refused: nothing written
-    earlier = earlier_manifest(out, scale, overrides, ensemble)
+    source = None
+    if kinetics is not None:
+        from cfbmarkov.kinetics import load_kinetics
+        from cfbmarkov.kinetics.fingerprint import kinetics_digest
+
+        source = {"file": str(kinetics), "digest": kinetics_digest(load_kinetics(kinetics))}
+    earlier = earlier_manifest(out, scale, overrides, ensemble, source)
     client = None
     threads = None
     own = executor is None
@@ -417,7 +442,8 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
     manifest = {"scale": scale.name, "description": scale.description,
                 "reductions": list(scale.reductions), "overrides": overrides or {},
                 "cases": listed, "models": used, "version": __version__,
-                "ensemble": ensemble, "device": device}
+                "ensemble": ensemble, "device": device,
+                "kinetics": source or earlier.get("kinetics")}
     write_text_atomic(out / "reproduce.json", json.dumps(manifest, indent=2) + "\n")
     runs = "" if ensemble == 1 else f", {ensemble} CFD-DEM runs each ({device})"
     log(f"reproduce ({scale.name} scale): {len(cases)} case(s) {', '.join(names)}{runs} in {out}")

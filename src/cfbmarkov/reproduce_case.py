@@ -156,7 +156,8 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
         Simulated time between CFD-DEM checkpoints, s.
     kinetics : str, optional
         A kinetics file passed to each comparison (``compare --kinetics``); a comparison
-        in place without its ``kinetics`` block is redone.
+        in place of another kinetics definition (or without one, or with one where none is
+        given now) is redone.
     time_step_note : bool, optional
         Let the CFD-DEM say when its DEM time step resolves a contact in fewer than 10
         steps (:class:`~cfbmarkov.errors.TimeStepAdvisory`); False where the caller says it
@@ -256,6 +257,12 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     _record(folder, "cfd_dem", {**run_timing, **timing})
 
     summaries = {}
+    kinetics_id = None
+    if kinetics is not None:
+        from cfbmarkov.kinetics import load_kinetics
+        from cfbmarkov.kinetics.fingerprint import kinetics_digest
+
+        kinetics_id = kinetics_digest(load_kinetics(kinetics)) or "unserialisable"
     with Trajectories(reference) as ref:
         start, stop = m.predict_window
         span = long_run_span(m.fit_window, m.predict_window, float(ref.times[0]),
@@ -297,7 +304,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 stages[f"predict-{name}"] = "done"
             out = folder / f"compare-{name}"
             done = _read_json(out / SUMMARY) if (out / SUMMARY).exists() else None
-            if done is not None and (kinetics is None or done.get("kinetics")):
+            if done is not None and _same_kinetics(done, kinetics_id):
                 summaries[name] = done
                 stages[f"compare-{name}"] = "skipped"
             else:
@@ -312,6 +319,17 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 stages[f"compare-{name}"] = "done"
     return {"case": label, "velocity": case.gas.superficial_velocity, "stages": stages,
             "summaries": summaries}
+
+
+def _same_kinetics(summary: dict, digest: str | None) -> bool:
+    """Whether a finished comparison's summary holds the kinetics asked for now: none where
+    none is asked for, else the same definition (:func:`cfbmarkov.kinetics.fingerprint.kinetics_digest`;
+    a summary that does not record it is formed again)."""
+    if digest is None:
+        return "kinetics" not in summary
+    source = summary.get("kinetics_source")
+    return (bool(summary.get("kinetics")) and isinstance(source, dict)
+            and source.get("digest") == digest)
 
 
 def _fit(name: str, ref, members: Sequence[Path], m) -> Any:

@@ -216,6 +216,15 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
                                 if (c, r) != (2, 4)), "misses 1 cell(s) of the grid 3x6 (col 2, row 4)"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
      "col,row,rate\n0,0,1.0\n", "(col 1, row 0; col 2, row 0; col 0, row 1; and 14 more)"),
+    # a field-dependent parameter's bad value is named as such, not as a missing key
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_from = "solids_fraction"\n'
+     'rate_dense = -0.2\nrate_dilute = 1.0\nthreshold = 0.1\n', None,
+     "rate_dense = -0.2 must be a finite number >= 0"),
+    # a wall temperature beside a per-cell table would replace the table's wall cells
+    ('[[property]]\nname = "T"\nlaw = "heat-exchange"\ncoefficient = 1.0\n'
+     'temperature_by_cell = "rates.csv"\nwall_temperature = 600.0\ninitial = 300.0\n',
+     "col,row,temperature\n" + "".join(f"{c},{r},700\n" for r in range(6) for c in range(3)),
+     "wall_temperature would replace the wall cells' values of temperature_by_cell"),
     # a name the particle files' arrays carry would replace that array in export-vtk
     ('[[property]]\nname = "id"\nlaw = "first-order"\nrate = 0.4\n', None,
      "property name 'id' is the name of an array the particle files carry"),
@@ -580,6 +589,36 @@ def test_react_refuses_a_reference_start_before_the_monte_carlo(fitted, tmp_path
                  "0.5", "--duration", "0.5", "-o", str(out)]) == 2
     err = capsys.readouterr().err
     assert "starts from the reference" in err and "Monte Carlo done" not in err
+    assert not out.exists()
+
+
+def test_reference_values_of_another_law_or_range_are_refused(fitted, tmp_path, capsys):
+    """A ``reference`` start takes the stored values of the property of that name: stored
+    for another law, or outside the law's range, they are another quantity, refused in one
+    line before the Monte Carlo."""
+    import h5py
+
+    _, run, model = fitted
+    heat = _write(tmp_path, '[[property]]\nname = "T"\nlaw = "heat-exchange"\n'
+                  'coefficient = 2.0\ntemperature = 800.0\ninitial = 300.0\n')
+    first = tmp_path / "first.h5"
+    assert main(["react", str(model), "--kinetics", str(heat), "--init", str(run), "--start",
+                 "0.5", "--duration", "0.5", "-o", str(first)]) == 0
+    capsys.readouterr()
+    conversion = _write(tmp_path, '[[property]]\nname = "T"\nlaw = "first-order"\n'
+                        'rate = 1.0\nstart = "reference"\n')
+    out = tmp_path / "second.h5"
+    argv = ["react", str(model), "--kinetics", str(conversion), "--init", str(first),
+            "--start", "0.75", "--duration", "0.25", "-o", str(out)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "stores T of law heat-exchange, not first-order" in err
+    assert not out.exists()
+    with h5py.File(first, "a") as f:         # a file that does not say its law: the range
+        del f["properties/T"].attrs["law"]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "outside [0, 1], the range of" in err
     assert not out.exists()
 
 

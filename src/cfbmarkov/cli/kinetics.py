@@ -82,13 +82,10 @@ def cmd_react(args) -> int:
     if args.init is not None:       # a start from the reference, checked before the run
         from cfbmarkov.trajectories import Trajectories
 
+        from cfbmarkov.markov.prediction import check_reference_starts
+
         with Trajectories(args.init) as run:
-            for p in kinetics.properties:
-                if p.start == "reference" and p.name not in run.property_names:
-                    raise InputError(f"property {p.name} starts from the reference, but "
-                                     f"{args.init} holds no values of it (properties: "
-                                     f"{', '.join(run.property_names) or 'none'}); use start "
-                                     "= entry or carried")
+            check_reference_starts(run, kinetics, float(args.start))
     answers, seconds = {}, None
     if kinetics.linear:
         t0 = time.perf_counter()

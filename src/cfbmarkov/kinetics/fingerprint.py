@@ -113,6 +113,31 @@ def property_fingerprint(state_kinetics, index: int, lag: float, direction: str 
     return "sha256:" + digest.hexdigest()
 
 
+def kinetics_digest(kinetics) -> str | None:
+    """The SHA-256 of a whole kinetics definition as loaded (every property's name, law,
+    start rule, entry value and parameters, the per-cell tables' numbers among them): what
+    ``reproduce`` records beside a comparison so that a rerun with another kinetics file
+    redoes it rather than report the earlier one's results.
+
+    Parameters
+    ----------
+    kinetics : Kinetics
+
+    Returns
+    -------
+    str or None
+        ``sha256:`` and 64 hex digits; None for a definition that cannot be serialised (a
+        custom law's compiled function), which is then never taken as the same.
+    """
+    import pickle
+
+    try:
+        text = pickle.dumps(tuple(kinetics.properties), protocol=4)
+    except Exception:       # noqa: BLE001 - a compiled rate function: no stable form
+        return None
+    return "sha256:" + hashlib.sha256(text).hexdigest()
+
+
 def function_digest(function) -> str:
     """The SHA-256 (hex) of a rate function's definition: its source text where Python can
     find it (a module, a notebook cell), else its code object's bytecode, constants and
@@ -139,5 +164,6 @@ def function_digest(function) -> str:
     return hashlib.sha256(text).hexdigest()
 
 
-__all__ = ["FINGERPRINT_METHOD", "MANTISSA_BITS", "function_digest", "property_fingerprint",
+__all__ = ["FINGERPRINT_METHOD", "MANTISSA_BITS", "function_digest", "kinetics_digest",
+           "property_fingerprint",
            "quantised"]

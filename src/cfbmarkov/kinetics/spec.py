@@ -124,8 +124,12 @@ class Property:
             parameters[key] = value
         object.__setattr__(self, "parameters", parameters)
 
-    def per_cell(self, space, fields: CellFields | None = None) -> dict[str, np.ndarray]:
+    def per_cell(self, space, fields: CellFields | None = None,
+                 without_fields: bool = False) -> dict[str, np.ndarray]:
         """Each parameter per cell of ``space``'s grid, checked (float64 [C] each).
+
+        ``without_fields`` leaves out the parameters given as a function of a cell field
+        (a check of the others against a grid before any cell field exists).
 
         Raises
         ------
@@ -135,6 +139,8 @@ class Property:
         out = {}
         signed = self.law.signed_parameters()
         for name in self.law.parameter_names:
+            if without_fields and isinstance(self.parameters[name], FromField):
+                continue
             value = self.parameters[name].per_cell(space, fields)
             if not np.all(np.isfinite(value)):
                 raise InputError(f"property {self.name}: {name} is not finite in some cell")
@@ -301,6 +307,28 @@ class Kinetics:
     def linear(self) -> bool:
         """Whether every law is a linear relaxation (exact answers exist)."""
         return all(p.law.linear for p in self.properties)
+
+    def check_cells(self, state_space) -> None:
+        """Check the parameters given as constants or per-cell tables against a grid, before
+        any run: a table of another grid, a missing or repeated cell, a value that is not
+        finite or negative where it must not be. Parameters given as a function of a cell
+        field are checked where :meth:`per_state` resolves them.
+
+        Parameters
+        ----------
+        state_space : StateSpace
+            A state space on the grid the kinetics will be resolved on.
+
+        Raises
+        ------
+        InputError
+            One line naming the file, the property and the fix.
+        """
+        for prop in self.properties:
+            try:
+                prop.per_cell(state_space, None, without_fields=True)
+            except InputError as exc:
+                raise InputError(f"{self.source}: {exc}" if self.source else str(exc)) from None
 
     def per_state(self, state_space, cell_fields: CellFields | None = None) -> StateKinetics:
         """Resolve the parameters on a state space (cells to states through
@@ -552,6 +580,11 @@ def _property(table, index: int, path: Path) -> Property:
         raise InputError(f"{where}: unknown key {unknown[0]!r} for law {law_key}; it takes "
                          f"{', '.join(sorted(allowed))} (rates in 1/s)")
     params = {p: _parameter(table, p, where, path, law) for p in law.parameter_names}
+    if law_cls is HeatExchange and "wall_temperature" in table and \
+            "temperature_by_cell" in table:
+        raise InputError(f"{where}: wall_temperature would replace the wall cells' values of "
+                         "temperature_by_cell; give the wall cells' temperature in the table "
+                         "and remove wall_temperature (or give temperature = NUMBER beside it)")
     if "threshold" in table and not any(
             isinstance(v, FromField) and f"{p}_threshold" not in table
             for p, v in params.items()):
@@ -617,6 +650,9 @@ def _parameter(table, p: str, where: str, path: Path, law: Law) -> CellParameter
     threshold = f"{p}_threshold" if f"{p}_threshold" in table else "threshold"
     for k in (f"{p}_dense", f"{p}_dilute", threshold):
         v = table.get(k)
+        if k in table and (not _finite(v) or (k != threshold and not signed and v < 0)):
+            raise InputError(f"{where}: {k} = {_toml_text(v)} must be a finite number"
+                             + ("" if k == threshold or signed else " >= 0"))
         if not _finite(v) or (k != threshold and not signed and v < 0):
             raise InputError(f"{where}: {key} needs {k} = NUMBER (finite"
                              + (")" if k == threshold or signed else ", >= 0)")

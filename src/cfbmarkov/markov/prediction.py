@@ -185,18 +185,74 @@ def _properties(model, traj, kinetics, start, states, laps, present) -> np.ndarr
         raise InputError("a carried property needs a periodic riser: particles that leave an "
                          "open riser do not come back (use start = entry)")
     initial = np.repeat(kinetics.initial[:, None], states.shape[1], axis=1)
-    frame = int(np.argmin(np.abs(traj.times - start)))
+    frame = check_reference_starts(traj, kinetics, start)
     for q, (name, rule) in enumerate(zip(kinetics.names, kinetics.starts)):
         if rule == "reference":
-            if name not in traj.property_names:
-                raise InputError(f"property {name} starts from the reference, but {traj.path} "
-                                 f"holds no values of it (properties: "
-                                 f"{', '.join(traj.property_names) or 'none'}); use start = "
-                                 "entry or carried")
             initial[q, :present.size] = traj.property_values(name, frame)[present]
     return run_properties(kinetics, model.lag, states, laps,
                           periodic=not model.boundary.is_open, initial=initial,
                           direction=model.flow_direction)
+
+
+def check_reference_starts(traj, kinetics, start: float) -> int:
+    """Check the properties that start from the reference (``start = "reference"``) against
+    the file a prediction starts from, before its Monte Carlo runs.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        The open file the prediction starts from.
+    kinetics : Kinetics or StateKinetics
+        The properties (``names``/``starts`` and their laws).
+    start : float
+        The start time (s); its nearest frame is read.
+
+    Returns
+    -------
+    int
+        The frame read.
+
+    Raises
+    ------
+    InputError
+        Where the file holds no values of such a property, stores them for another law
+        (the file's ``law`` attribute), or holds values at the start outside the law's range
+        (a temperature read as a conversion).
+    """
+    frame = int(np.argmin(np.abs(traj.times - start)))
+    properties = getattr(kinetics, "properties", None)
+    names = [p.name for p in properties] if properties is not None else list(kinetics.names)
+    starts = ([p.start for p in properties] if properties is not None
+              else list(kinetics.starts))
+    laws = [p.law for p in properties] if properties is not None else list(kinetics.laws)
+    for name, rule, law in zip(names, starts, laws):
+        if rule != "reference":
+            continue
+        if name not in traj.property_names:
+            raise InputError(f"property {name} starts from the reference, but {traj.path} "
+                             f"holds no values of it (properties: "
+                             f"{', '.join(traj.property_names) or 'none'}); use start = "
+                             "entry or carried")
+        stored = traj.property_attrs(name).get("law")
+        if isinstance(stored, bytes):
+            stored = stored.decode(errors="replace")
+        if stored is not None and str(stored) != law.key:
+            raise InputError(f"property {name} starts from the reference, but {traj.path} "
+                             f"stores {name} of law {stored}, not {law.key}: its values are "
+                             "another quantity; name the property as the file does, or use "
+                             "start = entry")
+        low, high = getattr(law, "initial_range", (None, None))
+        values = np.asarray(traj.property_values(name, frame), dtype=np.float64)
+        finite = values[np.isfinite(values)]
+        if finite.size and ((low is not None and finite.min() < low)
+                            or (high is not None and finite.max() > high)):
+            span = f"[{low:g}, {high:g}]" if high is not None else f"[{low:g}, inf)"
+            raise InputError(f"property {name} starts from the reference, but {traj.path}'s "
+                             f"values of it at {float(traj.times[frame]):g} s run "
+                             f"{finite.min():g} to {finite.max():g}, outside {span}, the "
+                             f"range of {law.quantity} (law {law.key}); name the property as "
+                             "the file does, or use start = entry")
+    return frame
 
 
 def _warn_stateless(states0: np.ndarray, positions0: np.ndarray, model: "MarkovModel",

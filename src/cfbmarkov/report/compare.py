@@ -377,6 +377,10 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
             kinetic = compare_kinetics(ref, pred, comparison, kinetics, level=level,
                                        resamples=resamples, warnings=warnings)
             summary["kinetics"] = kinetic["summary"]
+            from cfbmarkov.kinetics.fingerprint import kinetics_digest
+
+            summary["kinetics_source"] = {"file": kinetics.source or None,
+                                          "digest": kinetics_digest(kinetics)}
         _check_replaceable(out)
         with atomic_folder(out) as folder:    # published whole: figures and summary, or none
             summary["figures"] = _draw(comparison, folder, warnings) if figures else []
