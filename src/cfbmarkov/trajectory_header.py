@@ -108,6 +108,11 @@ def header_attrs(*, width: float, height: float, depth: float | None,
         If the domain is not of positive size, the boundary is unknown, ``frame_interval``
         is not a positive number, or the origin has not D coordinates.
     """
+    from cfbmarkov.limits import check_finite
+
+    width = check_finite(width, "width", "m")
+    height = check_finite(height, "height", "m")
+    depth = None if depth is None else check_finite(depth, "depth", "m")
     if not (width > 0 and height > 0) or (depth is not None and not depth > 0):
         size = f"{width:g} x {height:g}" + ("" if depth is None else f" x {depth:g}")
         raise InputError(f"domain {size} m must have positive size")

@@ -204,7 +204,8 @@ class FrameSeries:
         """
         t, n = present.shape
         if laps is not None:
-            laps = np.where(present, np.asarray(laps, dtype=np.int32).reshape(t, n), 0)
+            laps = _whole_laps(laps, t, n, present)
+            laps = np.where(present, laps, 0)
             if not self.open_riser:
                 self._check_given_laps(ids, times, positions[..., 1], laps, present)
             if self.last_y is None:
@@ -286,3 +287,31 @@ class FrameSeries:
                 f"and {t1:g} s: the lap counter cannot be inferred from wrapped positions; "
                 "write frames more often, or give unwrapped coordinates (xu yu) or image "
                 "flags (ix iy)")
+
+
+def _whole_laps(laps, t: int, n: int, present: np.ndarray) -> np.ndarray:
+    """Given lap counters as int32 [T, N], refused where a present particle's counter is not
+    a finite whole number within int32 (a fractional counter cast to int32 would be another
+    count, silently)."""
+    from cfbmarkov.errors import InputError
+
+    try:
+        given = np.asarray(laps)
+        if given.dtype == bool or given.dtype.kind not in "iuf":
+            raise TypeError(given.dtype)
+        given = given.reshape(t, n)
+    except (TypeError, ValueError):
+        raise InputError(f"laps: whole numbers of shape ({t}, {n}), one per frame and "
+                         "particle") from None
+    if given.dtype.kind == "f":
+        shown = given[present]
+        bad = ~np.isfinite(shown) | (shown != np.round(shown))
+        if bad.any():
+            raise InputError(f"laps: {float(shown[bad][0]):g} is not a whole number; a lap counter "
+                             "counts passes through the periodic boundary (give integers)")
+    info = np.iinfo(np.int32)
+    if given.size and (given[present].min(initial=0) < info.min
+                       or given[present].max(initial=0) > info.max):
+        raise InputError("laps: a counter beyond the 32-bit range")
+    return given.astype(np.int32)
+

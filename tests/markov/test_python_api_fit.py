@@ -51,6 +51,27 @@ def test_assess_fit_refuses_what_it_cannot_use(fitted, markov_run):
         assess_fit(fitted, resamples=5)
     with pytest.raises(InputError, match="give runs= and windows="):
         assess_fit(fitted._derived(source=""))
+    for level, resamples, said in [(90, 100, "strictly between 0 and 1"),
+                                   (0.9, -1, "at least 10 bootstrap"),
+                                   (0.9, 2.5, "a whole number"),
+                                   (0.999, 100, "at least 1000 bootstrap")]:
+        with pytest.raises(InputError, match=said):
+            assess_fit(fitted, level=level, resamples=resamples)
+
+
+def test_windows_of_one_run_get_no_interval_of_pooled_runs(markov_run):
+    """Two windows of one file pool their counts, but they are not independent runs: no
+    interval (it would be narrowed by sqrt(2)) and no verdict that "the runs agree"."""
+    from cfbmarkov.analysis.fit_checks import IntervalWarning
+
+    windows = [(2.0, 4.0), (4.5, 6.5)]
+    pooled = PaperEstimator(GRID, lag=0.1).fit(
+        [discretize(markov_run, GRID, lag=0.1, window=w) for w in windows])
+    with pytest.warns(IntervalWarning, match="are of one run, not independent runs"):
+        judged = assess_fit(pooled, resamples=20)
+    assert judged.uncertainty is None and judged.adequacy is None
+    with pytest.warns(IntervalWarning, match="are of one run"):
+        assess_fit(pooled, [markov_run, Trajectories(markov_run)], windows, resamples=20)
 
 
 def test_a_python_prediction_repeats_the_verdicts_warnings(fitted, markov_run):
@@ -137,6 +158,52 @@ def test_arguments_of_the_wrong_kind_are_named_in_one_line(markov_run):
         with pytest.raises(InputError, match=message):
             call()
     assert Property("X", FirstOrder(), {"rate": 0.5}).parameters["rate"] == Constant(0.5)
+
+
+def test_numbers_given_as_text_are_named_in_one_line(markov_run, tmp_path):
+    """Text for a size, a lag or a bin width: one InputError naming the argument, not a
+    TypeError from a comparison deep inside."""
+    from cfbmarkov import write_trajectories
+    from cfbmarkov.analysis.compare import compare_runs
+    from cfbmarkov.markov.diagnostics import implied_timescales
+    from cfbmarkov.markov.select import select_model
+
+    times = np.arange(3) * 0.1
+    positions = np.full((3, 2, 2), 0.05)
+    for call, message in [
+            (lambda: CellGrid(6, 38, 0.09, "0.95"), "cell grid height '0.95' is not a number"),
+            (lambda: write_trajectories(tmp_path / "w.h5", times, positions, width="0.09",
+                                        height=0.95), "width '0.09' is not a number"),
+            (lambda: select_model(markov_run, window=(2.0, 6.0), columns=4, rows=16,
+                                  lag="0.1"), "lag '0.1' is not a number"),
+            (lambda: implied_timescales(markov_run, GRID, lags="0.1", window=(2.0, 6.0)),
+             "lag '0.1' is not a number"),
+            (lambda: compare_runs(markov_run, markov_run, (2.0, 6.0), bin_width="0.1"),
+             "bin width '0.1' is not a number")]:
+        with pytest.raises(InputError, match=message):
+            call()
+
+
+def test_laps_that_are_not_whole_numbers_are_refused(tmp_path):
+    from cfbmarkov import write_trajectories
+
+    times = np.arange(3) * 0.1
+    positions = np.full((3, 2, 2), 0.05)
+    with pytest.raises(InputError, match="laps: 0.5 is not a whole number"):
+        write_trajectories(tmp_path / "w.h5", times, positions, width=0.09, height=0.95,
+                           laps=np.full((3, 2), 0.5))
+    assert not (tmp_path / "w.h5").exists()
+    write_trajectories(tmp_path / "w.h5", times, positions, width=0.09, height=0.95,
+                       laps=np.zeros((3, 2)))          # whole numbers as floats: accepted
+
+
+def test_a_window_and_its_blocks_are_read_only(markov_run):
+    window = discretize(markov_run, GRID, lag=0.1, window=(2.0, 6.0))
+    half = window.block(2.0, 4.0)
+    for arrays in (window, half):
+        for name in ("states", "vertical", "times"):
+            with pytest.raises(ValueError, match="read-only"):
+                getattr(arrays, name)[:] = 0
 
 
 def test_result_objects_echo_in_a_line_or_two(fitted):

@@ -72,6 +72,12 @@ def check_parameters(window, bin_width: float | None, md_order: float) -> tuple[
         than two bins, or more than ``MAX_BINS``, over the window (:func:`check_bins`).
     """
     start, stop = check_window(window)
+    from cfbmarkov.limits import check_finite
+
+    if not (isinstance(md_order, float) and math.isinf(md_order)):
+        check_finite(md_order, "Minkowski order")
+    if bin_width is not None:
+        bin_width = check_finite(bin_width, "bin width", "s")
     if not md_order >= 1:
         raise InputError(f"Minkowski order {md_order:g} must be a finite number >= 1 (or inf, "
                          "the largest difference): below 1 the sum is not a distance")

@@ -7,6 +7,7 @@ figures and warnings as one fitted on the command line.
 from __future__ import annotations
 
 import contextlib
+import numbers
 import warnings
 from collections.abc import Callable, Sequence
 
@@ -69,20 +70,37 @@ def assess_fit(model, runs: Sequence | None = None,
     InputError
         If the model was not fitted on files (no ``source``), ``runs`` and ``windows``
         differ in number, their windows' content differs from the one the model records
-        (``source_identity``: not the data it was fitted on), ``resamples`` is 1-9, or the
-        chain traps residences.
+        (``source_identity``: not the data it was fitted on), ``resamples`` is negative,
+        1-9 or not a whole number, ``level`` lies outside (0, 1) or needs more resamples
+        (:func:`cfbmarkov.analysis.bootstrap.check_interval_options`), or the chain traps
+        residences.
 
     Warns
     -----
     IntervalWarning
-        Where no interval can be formed (the model is returned without one).
+        Where no interval can be formed (the model is returned without one), and where
+        ``runs`` name one file more than once: windows of one run are not independent runs,
+        so neither the interval nor the verdict of pooled runs is formed.
     """
     from cfbmarkov.markov.first_passage import TrappedResidences
 
     runs, windows = _runs_and_windows(model, runs, windows)
-    if 0 < resamples < 10:
+    if isinstance(resamples, bool) or not isinstance(resamples, numbers.Integral):
+        raise InputError(f"resamples {resamples!r}: a whole number (0 leaves the interval out)")
+    if resamples < 0 or 0 < resamples < 10:
         raise InputError(f"resamples {resamples}: an interval needs at least 10 bootstrap "
                          "resamples (0 leaves it out)")
+    if resamples:
+        from cfbmarkov.analysis.bootstrap import check_interval_options
+
+        check_interval_options(level, resamples)
+    repeated = _repeated_run(runs)
+    if repeated is not None and (resamples or verdict):
+        warnings.warn(f"{repeated}: the fitting windows "
+                      f"{', '.join(f'{a:g}-{b:g} s' for a, b in windows)} are of one run, not "
+                      "independent runs: no interval and no verdict of pooled runs (fit one "
+                      "window spanning them for both)", IntervalWarning, stacklevel=2)
+        resamples, verdict = 0, False
     recorded = model.source_identity
     model = _with_window_fields(model, runs, windows)
     if recorded is not None and model.source_identity != recorded:
@@ -148,6 +166,25 @@ def record_fitting_data(model, runs: Sequence | None = None,
         ``windows`` differ in number, or the fitting window lies outside the file.
     """
     return _with_window_fields(model, *_runs_and_windows(model, runs, windows))
+
+
+def _repeated_run(runs) -> str | None:
+    """The file named more than once among ``runs`` (paths or open Trajectories), or None:
+    windows of one run are not the independent runs a pooled interval takes."""
+    import os
+    from pathlib import Path
+
+    seen = set()
+    for run in runs:
+        path = getattr(run, "path", run)
+        try:
+            key = os.path.realpath(Path(path))
+        except TypeError:
+            continue
+        if key in seen:
+            return str(path)
+        seen.add(key)
+    return None
 
 
 def _runs_and_windows(model, runs, windows) -> tuple[list, list]:

@@ -268,7 +268,11 @@ def implied_timescales(data, state_space: StateSpace, lags: Sequence[float],
     J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
     validation", J. Chem. Phys. 134, 174105 (2011) (implied timescales).
     """
-    lags = [float(v) for v in lags]
+    from cfbmarkov.limits import check_finite
+
+    if isinstance(lags, (str, bytes)) or not hasattr(lags, "__iter__"):
+        lags = [lags]
+    lags = [check_finite(v, "lag", "s", positive=True) for v in lags]
     if not lags:
         raise InputError("no lag given")
     runs = data if isinstance(data, (list, tuple)) else [data]

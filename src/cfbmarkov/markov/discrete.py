@@ -127,6 +127,12 @@ class DiscreteTrajectories:
             raise InputError(f"lag of {self.lag_frames} frames: must be at least 1")
         if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
             raise InputError(f"frame interval {self.frame_interval!r} s must be positive")
+        for name in ("states", "vertical", "times", "positions", "laps"):
+            values = getattr(self, name)        # read-only views: as immutable as a model
+            if isinstance(values, np.ndarray) and values.flags.writeable:
+                view = values.view()
+                view.setflags(write=False)
+                object.__setattr__(self, name, view)
 
     @property
     def lag(self) -> float:

@@ -199,9 +199,15 @@ class TransitionEstimator:
                 windows, check_passes=check_passes)
         for window in windows:
             if window.state_space != self.state_space:
-                raise InputError(f"discrete trajectories are in {window.state_space.describe()}"
-                                 f", the estimator's state space is "
-                                 f"{self.state_space.describe()}")
+                theirs, ours = window.state_space.describe(), self.state_space.describe()
+                if theirs == ours:          # the same cells on another size: name what differs
+                    a, b = window.state_space.to_attrs(), self.state_space.to_attrs()
+                    differ = [f"{k} {a.get(k)!r} against {b.get(k)!r}"
+                              for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+                    theirs += f" ({', '.join(differ)})"
+                raise InputError(f"discrete trajectories are in {theirs}, the estimator's "
+                                 f"state space is {ours}: discretise on the estimator's "
+                                 "state space")
             if not window.matches_lag(self.lag):
                 raise InputError(f"discrete trajectories have a lag of {window.lag:g} s "
                                  f"({window.lag_frames} frames), the estimator's is "

@@ -455,6 +455,11 @@ class CellGrid(StateSpace):
         if (width is None) != (height is None):
             raise InputError("give the riser's width and height, or neither (the size of the "
                              "file the grid is used on)")
+        from cfbmarkov.limits import check_finite
+
+        width = None if width is None else check_finite(width, "cell grid width", "m")
+        height = None if height is None else check_finite(height, "cell grid height", "m")
+        depth = None if depth is None else check_finite(depth, "cell grid depth", "m")
         if width is not None and not (width > 0 and height > 0) or (
                 depth is not None and not depth > 0):
             size = (f"{width:g} x {height:g}" if width is not None else "?") + (

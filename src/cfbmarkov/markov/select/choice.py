@@ -104,6 +104,9 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
     J.-H. Prinz et al., "Markov models of molecular kinetics: generation and
     validation", J. Chem. Phys. 134, 174105 (2011) (the Chapman-Kolmogorov test).
     """
+    from cfbmarkov.limits import check_finite
+
+    lag = check_finite(lag, "lag", "s", positive=True)
     if criterion not in ("auto", "rtd", "ck", "window"):
         raise InputError(f"auto: unknown criterion '{criterion}' (window, rtd, ck or auto)")
     if int(folds) < 2:
