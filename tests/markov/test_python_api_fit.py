@@ -213,7 +213,8 @@ def test_result_objects_echo_in_a_line_or_two(fitted):
 
     rtd = fitted.rtd()
     text = repr(rtd)
-    assert text.startswith("ResidenceTimeDistribution(lag=0.1, probability=<array ")
+    assert text.startswith(f"ResidenceTimeDistribution(mean={rtd.mean:.6g} s, "
+                           f"sd={rtd.sd:.6g} s, lag=0.1, probability=<array ")
     assert len(text) < 400 and str(rtd.probability.size) in text
     answer = exact_kinetics(fitted, Kinetics((Property("X", FirstOrder(), {"rate": 0.5}),)))
     assert "bed_mean_by_cell=<array 64 float64>" in repr(answer["X"])

@@ -79,7 +79,14 @@ class ResidenceTimeDistribution:
     See ``docs/definitions.md`` (Residence time; Exact RTD of a model).
     """
 
-    __repr__ = compact_repr
+    def __repr__(self) -> str:
+        text = compact_repr(self)
+        head, _, rest = text.partition("(")
+        try:
+            moments = f"mean={self.mean:.6g} s, sd={self.sd:.6g} s, "
+        except (ValueError, ZeroDivisionError, FloatingPointError):
+            moments = ""
+        return f"{head}({moments}{rest}"
 
     lag: float
     probability: np.ndarray   # [K]: index 0 is k = 1
