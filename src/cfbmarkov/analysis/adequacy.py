@@ -19,7 +19,8 @@ tell from the window alone when that flow may not be the run's:
   :func:`~cfbmarkov.observed.residence.flux_residence_time`, which the window's length does
   not censor): the chain's stationary flow is not the flow it was fitted on (the paper's
   estimator weighting every frame's matrix alike whatever the cells' occupancy, or a flow
-  still changing in the window);
+  still changing in the window); not formed from fewer than :data:`MIN_THROUGHPUT_PASSES`
+  net passes;
 - and halves with fewer than :data:`MIN_PART_RESIDENCES` residences leave E(RT)
   unjudged, itself a warning (in a pooled fit, where the halves pooled over the runs hold
   that few: a run whose own halves are too short is judged across the runs).
@@ -117,12 +118,18 @@ def _part_rt_mean(model, direction: str | None = None) -> float:
         return math.nan
 
 
+#: the fewest net passes from which a window's throughput E(RT) is formed and checked
+MIN_THROUGHPUT_PASSES = 10
+
+
 def window_rt_mean(runs, windows, direction: str) -> float:
     """The fitting windows' own E(RT) from their net solids flux: their particle-time over
     their net passes in ``direction``, several runs' summed (Little's law,
     :func:`~cfbmarkov.observed.residence.residence_flux`, in a file with absent particles
     over the frame steps a particle is tracked through; s). NaN for an open riser (no flux
-    to read), and where the net passes do not run in ``direction``."""
+    to read), where the net passes do not run in ``direction``, and where they are fewer
+    than :data:`MIN_THROUGHPUT_PASSES` (the partial laps at the window's edges would
+    dominate the particle-time)."""
     particle_time, passes = 0.0, 0
     for run, window in zip(runs, windows):
         with opened(run) as traj:
@@ -132,7 +139,7 @@ def window_rt_mean(runs, windows, direction: str) -> float:
                 return math.nan
         particle_time += part[0]
         passes += part[1]
-    return particle_time / passes if passes > 0 else math.nan
+    return particle_time / passes if passes >= MIN_THROUGHPUT_PASSES else math.nan
 
 
 def _percents(value: float, limit: float) -> tuple[str, str]:
