@@ -480,6 +480,23 @@ def test_a_model_that_does_not_carry_its_windows_throughput_warns(runs, tmp_path
     assert np.isnan(window_rt_mean([open_run], [(0.0, 2.0)], "up"))
 
 
+def test_no_throughput_is_formed_from_fewer_than_ten_net_passes(tmp_path):
+    """One tracer passing the boundary a few times: its particle-time over so few passes is
+    mostly the partial laps at the window's edges, so no throughput is formed or checked."""
+    from cfbmarkov.analysis.adequacy import MIN_THROUGHPUT_PASSES, window_rt_mean
+    from cfbmarkov.observed.residence import residence_flux
+
+    few = synthetic.write_run(tmp_path / "few.h5", synthetic.RiserFlow(columns=2, rows=8), 1,
+                              4.0, seed=3)
+    with Trajectories(few) as run:
+        _, passes = residence_flux(run, (0.0, 4.0), "up")
+    assert 0 < passes < MIN_THROUGHPUT_PASSES
+    assert np.isnan(window_rt_mean([few], [(0.0, 4.0)], "up"))
+    many = synthetic.write_run(tmp_path / "many.h5", synthetic.RiserFlow(columns=2, rows=8), 40,
+                               4.0, seed=3)
+    assert np.isfinite(window_rt_mean([many], [(0.0, 4.0)], "up"))
+
+
 def test_a_figure_beyond_its_limit_is_printed_beyond_it():
     """A spread of 6.72 % against a limit of 6.58 % reads "6.7" and "6.6", not "7" twice;
     whole percents where they differ."""
