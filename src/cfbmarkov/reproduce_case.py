@@ -186,7 +186,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     """
     import numba
 
-    from cfbmarkov.analysis.fit_checks import record_fitting_data
+    from cfbmarkov.analysis.fit_checks import IntervalWarning, assess_fit
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.report.compare import SUMMARY, compare
     from cfbmarkov.simulate.run import simulate
@@ -281,11 +281,16 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 t0, c0 = _time.perf_counter(), _time.process_time()
                 model = _fit(name, ref, members, m)
                 # what fit records (the fitting window's identity, by which the fitting
-                # file is found wherever the folder goes, and the cell fields for react),
-                # not the paper's fit: not timed
+                # file is found wherever the folder goes, the cell fields for react, the
+                # model's interval and the verdict on its sample, which predict, compare
+                # and the report repeat), not the paper's fit: not timed
                 t1, c1 = _time.perf_counter(), _time.process_time()
-                model = record_fitting_data(model, [ref, *members[1:]],
-                                            [m.fit_window] * len(members))
+                with warnings.catch_warnings():     # no interval: the report says so
+                    warnings.simplefilter("ignore", IntervalWarning)
+                    model = assess_fit(model, [ref, *members[1:]],
+                                       [m.fit_window] * len(members),
+                                       level=m.interval_level,
+                                       resamples=m.interval_resamples)
                 t0 += _time.perf_counter() - t1
                 c0 += _time.process_time() - c1
                 model.save(model_path)

@@ -97,7 +97,8 @@ QUICK_REDUCTIONS = (
     "56 at 3 m/s), from 5 m/s of 0.002 s, from 7 m/s of 0.001 s: at 8 m/s the solids cross "
     "the 0.30 m in about 0.056 s, nearly as a plug, so the RTD must be binned this finely to "
     "span ten bins or more (at 0.01 s it spanned four, at 0.002 s 13 for the CFD-DEM and "
-    "10 for the automatic model in one run, at 0.001 s 27 and 46 in the same run), and a "
+    "10 for the automatic model in one run, at 0.001 s 27 for the CFD-DEM and 63-66 for "
+    "the models), and a "
     "mean residence time spans about 56 lags instead of the paper's 9",
     "from 5 m/s a neighbour-list skin of 0.8 mm instead of 0.4 mm: the fast solids cross the "
     "0.4 mm skin's half in a few DEM steps and the list was rebuilt that often (the skin "
