@@ -187,6 +187,7 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
     import numba
 
     from cfbmarkov.analysis.fit_checks import IntervalWarning, assess_fit
+    from cfbmarkov.errors import SampleWarning
     from cfbmarkov.markov import MarkovModel
     from cfbmarkov.report.compare import SUMMARY, compare
     from cfbmarkov.simulate.run import simulate
@@ -302,8 +303,10 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 stages[f"predict-{name}"] = "skipped"
             else:
                 t0, c0 = _time.perf_counter(), _time.process_time()
-                model.predict(ref, start=start, duration=stop - start, seed=case.seed,
-                              output=prediction)
+                with warnings.catch_warnings():     # the verdict: in the report's warnings
+                    warnings.simplefilter("ignore", SampleWarning)
+                    model.predict(ref, start=start, duration=stop - start, seed=case.seed,
+                                  output=prediction)
                 _record(folder, f"predict-{name}", {"wall_s": _time.perf_counter() - t0,
                                                     "cpu_s": _time.process_time() - c0})
                 stages[f"predict-{name}"] = "done"

@@ -253,8 +253,13 @@ def test_runs_of_another_geometry_or_frame_interval_are_refused(runs, tmp_path, 
 
 def test_sample_length(runs, capsys):
     stationary = sample_length(runs["stationary"], _space(), lag=0.025, start=0.0)
-    assert stationary.within().all()
-    assert stationary.sample_length == 0.5
+    # every window's figures lie within the tolerance, but the shortest ones cannot contain
+    # their model's residences (fit warns there): the sample length is the first that can
+    outlasts = stationary.outlasts()
+    assert outlasts[0] and not outlasts[2:].any()
+    assert stationary.within()[~outlasts].all() and not stationary.within()[outlasts].any()
+    assert stationary.sample_length == stationary.lengths[np.argmin(outlasts)]
+    assert stationary.missed()[0] == "outlasts"
     switching = sample_length(runs["switching"], _space(), lag=0.025, start=0.0)
     assert not switching.within()[:3].any()       # windows within the first (fast) chain
     assert np.isnan(switching.sample_length) or switching.sample_length >= 2 * SWITCH
@@ -262,7 +267,8 @@ def test_sample_length(runs, capsys):
                            "--cells", "4x16", "--json")
     assert code == 0
     data = json.loads(out)
-    assert data["sample_length"] == 0.5 and data["tolerance"] == 0.1
+    assert data["sample_length"] == stationary.sample_length and data["tolerance"] == 0.1
+    assert data["windows"][0]["outlasting_share"] > 0.1
     assert [w["length"] for w in data["windows"]] == [0.5, 1.0, 2.0, 5.0, 10.0, 20.0]
     code, out, _ = run_cli(capsys, "stationarity", runs["switching"], "--sample-length",
                            "--cells", "4x16", "--tolerance", "0.5")
@@ -333,7 +339,8 @@ def test_sample_length_of_several_runs_pools_windows_and_long_runs(runs, capsys)
     two = sample_length([runs["stationary"], runs["stationary2"]], _space(), lag=0.025,
                         start=0.0)
     assert two.long_run_count > 1.8 * one.long_run_count
-    assert two.within().all() and two.sample_length == 0.5
+    assert two.within()[~two.outlasts()].all()
+    assert two.sample_length == one.sample_length == two.lengths[np.argmin(two.outlasts())]
     assert "2 runs pooled" in two.description
     code, out, _ = run_cli(capsys, "stationarity", runs["stationary"], runs["stationary2"],
                            "--sample-length", "--cells", "4x16")
@@ -425,7 +432,8 @@ def test_sample_length_long_run_from_the_flux_where_the_span_cuts_residences(tmp
     assert result.long_run_observed_mean < 0.9 * exact.mean
     assert result.censored_share > 0.3 and not result.sd_judged
     assert np.isnan(result.deviations()[1]).all()
-    within = np.abs(result.rt_mean / result.long_run_mean - 1) <= result.tolerance
+    within = ((np.abs(result.rt_mean / result.long_run_mean - 1) <= result.tolerance)
+              & ~result.outlasts())
     assert (result.within() == within).all() and within[-1]
     code, out, _ = run_cli(capsys, "stationarity", path, "--sample-length", "--cells", "6x38",
                            "--estimator", "mle", "--json")
@@ -434,7 +442,7 @@ def test_sample_length_long_run_from_the_flux_where_the_span_cuts_residences(tmp
     assert long_run["rt_sd_judged"] is False
     assert long_run["rt_mean"] == pytest.approx(result.long_run_mean)
     assert long_run["rt_mean_observed"] < long_run["rt_mean"]
-    assert json.loads(out)["verdict"].startswith("0.5 s")
+    assert json.loads(out)["verdict"].startswith(f"{result.sample_length:g} s")
     code, out, _ = run_cli(capsys, "stationarity", path, "--sample-length", "--cells", "6x38",
                            "--estimator", "mle")
     assert code == 0 and "SD(RT) not judged" in out and "from its net solids flux" in out

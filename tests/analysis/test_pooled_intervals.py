@@ -159,3 +159,16 @@ def test_assess_fit_of_a_pooled_model_takes_each_run_and_its_window(runs):
     for other in ([str(runs[0])], [str(runs[0]), str(runs[2])]):
         with pytest.raises(InputError, match="not the data the model was fitted on"):
             assess_fit(found, other, windows[:len(other)], resamples=20, verdict=False)
+
+
+def test_a_run_whose_window_is_too_short_to_halve_is_judged_with_the_others(runs, tmp_path,
+                                                                           capsys):
+    """One run's window of one lag beside another's of seconds: the verdict's pooled halves
+    leave the short one out rather than refuse the fit naming a half-window never given."""
+    out = tmp_path / "m.h5"
+    long = [synthetic.write_run(tmp_path / f"long{k}.h5", FLOW, 500, 6.0, seed=30 + k)
+            for k in range(2)]
+    assert main(["fit", str(long[0]), str(long[1]), "--cells", "3x8", "--window",
+                 "1:5,1:1.025", "--estimator", "mle", "--resamples", "0", "-o",
+                 str(out)]) == 0
+    assert out.exists() and "1.0125" not in capsys.readouterr().err

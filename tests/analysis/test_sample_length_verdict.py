@@ -73,8 +73,10 @@ def test_cli_on_a_flow_with_hidden_direction(tmp_path, capsys):
     synthetic.write_run(run, synthetic.RiserFlow(), 300, 12.0, seed=1)
     assert main(["stationarity", str(run), "--sample-length", "--start", "1"]) == 0
     out = capsys.readouterr().out
-    rows = [line for line in out.splitlines() if line.strip().startswith(("0.5 ", "10 "))]
+    rows = [line for line in out.splitlines() if line.strip().startswith(("2 ", "10 "))]
     assert rows and all("no: SD(RT) -" in line for line in rows), out
+    short = next(line for line in out.splitlines() if line.strip().startswith("0.5 "))
+    assert "of its model's residences outlast the window (fit warns)" in short
     assert "docs/definitions.md, Sample length" in out
     last = out.strip().splitlines()[-1]
     assert "SD(RT) stays" in last and "state space with memory" in last, last

@@ -154,6 +154,10 @@ def test_interval_verdict_says_outside_means_a_miss():
         "the model misses the reference's E(RT) and SD(RT) beyond its uncertainty")
     assert "lies inside" in interval_verdict(0.83, 0.29, (0.81, 0.86), (0.28, 0.30))
     assert "SD(RT) 0.35 s above" in interval_verdict(0.83, 0.35, (0.81, 0.86), (0.28, 0.30))
+    assert "consistent" in interval_verdict(0.83, 0.29, (0.81, 0.86), (0.28, 0.30))
+    # an interval wider than its centre holds almost anything: said, not called consistent
+    wide = interval_verdict(2.0, 0.5, (0.0, 7.8), (0.0, 2.3))
+    assert "consistent" not in wide and "200 % of its centre wide, so this says little" in wide
     line = baseline_line({"windows": [[10, 15], [15, 20]], "md_rtd": 0.0122,
                           "pd_rt_mean": -0.5}, 0.2021)
     assert "10-15 s" in line and "MD 0.0122 against the model's 0.2021" in line

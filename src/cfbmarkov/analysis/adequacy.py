@@ -355,8 +355,10 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     lines: list[str] = []
     applied = math.nan
     if limit > WIDE_INTERVAL and interval is not None:
-        lines.append(f"the model's E(RT) interval {float(interval[0]):.3g}-"
-                     f"{float(interval[1]):.3g} s is {100 * limit:.0f} % of its E(RT) "
+        shown = (f"{float(interval[0]):.3g}-{float(interval[1]):.3g} s"
+                 if float(interval[0]) > 0 else
+                 f"up to {float(interval[1]):.3g} s (its lower end cut at 0)")
+        lines.append(f"the model's E(RT) interval {shown} is {100 * limit:.0f} % of its E(RT) "
                      f"{rt_mean:.4g} s wide: the fitting window cannot pin the chain down, and "
                      f"no check of its parts can pass or fail against such a limit; {_ADVICE}")
     all_parts: list[tuple[float, float, float, str]] = []
@@ -581,8 +583,13 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
         blocks = []
         for d, (a, b) in zip(data, windows):
             cut = _split((a, b), 2)[side]
-            blocks.append(d.block(*cut))
+            try:
+                blocks.append(d.block(*cut))
+            except InputError:      # a run's window too short to halve: the others' halves
+                continue
         try:
+            if not blocks:
+                raise CfbmarkovError("no run's window can be halved")
             means_of_halves.append(_part_rt_mean(fitter.fit(blocks), direction))
         except CfbmarkovError:
             means_of_halves.append(math.nan)

@@ -80,6 +80,11 @@ class SampleLength:
         Several runs of a periodic riser: each run's long-run E(RT) over the span (its
         particle-time over its passes, s); empty for one run. Runs more than
         :data:`RUNS_DISAGREE` apart are not judged (:func:`verdict_text`).
+    outlasting_share : ndarray, shape (n,), optional
+        The share of each window's model's residences that last longer than the window
+        (its exact RTD's mass beyond the length; NaN where no model): a window whose share
+        is above :data:`cfbmarkov.analysis.adequacy.TAIL_LIMIT` is not within, whatever
+        its E(RT), since ``fit`` warns that such a window cannot contain its residences.
     """
 
     file: str
@@ -98,6 +103,16 @@ class SampleLength:
     censored_share: float = math.nan
     closed_classes: int = 0
     run_rt_means: tuple = ()
+    outlasting_share: np.ndarray | None = None
+
+    def outlasts(self) -> np.ndarray:
+        """Whether each window's model has more than ``TAIL_LIMIT`` of its residences
+        longer than the window (``fit``'s warning), shape (n,)."""
+        from cfbmarkov.analysis.adequacy import TAIL_LIMIT
+
+        if self.outlasting_share is None:
+            return np.zeros(self.lengths.shape, bool)
+        return np.asarray(self.outlasting_share, float) > TAIL_LIMIT
 
     @property
     def observed_shortfall(self) -> float:
@@ -125,16 +140,19 @@ class SampleLength:
     def within(self) -> np.ndarray:
         """Whether each window's judged figures lie within the tolerance, shape (n,)."""
         m, s = self.deviations()
-        return (np.abs(m) <= self.tolerance) & ((np.abs(s) <= self.tolerance)
-                                                | (not self.sd_judged))
+        return ((np.abs(m) <= self.tolerance) & ((np.abs(s) <= self.tolerance)
+                                                 | (not self.sd_judged)) & ~self.outlasts())
 
     def missed(self) -> list[str]:
         """Which figure each window misses the tolerance by: "", "E(RT)", "SD(RT)",
-        "both", or "no model"."""
+        "both", "no model", or "outlasts" (its model's residences outlast it)."""
         out = []
-        for m, s in zip(*self.deviations()):
+        for m, s, long in zip(*self.deviations(), self.outlasts()):
             if not (np.isfinite(m) and (np.isfinite(s) or not self.sd_judged)):
                 out.append("no model")
+                continue
+            if long:
+                out.append("outlasts")
                 continue
             names = [n for n, d in (("E(RT)", m), ("SD(RT)", s)) if abs(d) > self.tolerance]
             out.append("both" if len(names) == 2 else (names[0] if names else ""))
@@ -179,10 +197,13 @@ class SampleLength:
                          "rt_sd_judged": self.sd_judged},
             "windows": [{"length": float(n), "rt_mean": float(m), "rt_sd": float(s),
                          "within": bool(w), "pd_rt_mean": 100 * float(a),
-                         "pd_rt_sd": 100 * float(b), "missed": miss or None}
-                        for n, m, s, w, a, b, miss in zip(
+                         "pd_rt_sd": 100 * float(b), "missed": miss or None,
+                         "outlasting_share": float(o)}
+                        for n, m, s, w, a, b, miss, o in zip(
                             self.lengths, self.rt_mean, self.rt_sd, self.within(), pd_mean,
-                            pd_sd, self.missed())],
+                            pd_sd, self.missed(),
+                            (self.outlasting_share if self.outlasting_share is not None
+                             else np.full(self.lengths.shape, np.nan)))],
             "steady_misses": {k: [100 * lo, 100 * hi]
                               for k, (lo, hi) in self.steady_misses().items()},
             "closed_classes": self.closed_classes,
@@ -190,7 +211,7 @@ class SampleLength:
             "sample_length": self.sample_length})
 
 
-def missed_text(miss: str, pd_mean: float, pd_sd: float) -> str:
+def missed_text(miss: str, pd_mean: float, pd_sd: float, outlasting: float = math.nan) -> str:
     """A window's "within" cell of ``stationarity --sample-length``: "yes", or which figure
     misses and by how much.
 
@@ -200,6 +221,8 @@ def missed_text(miss: str, pd_mean: float, pd_sd: float) -> str:
         :meth:`SampleLength.missed` of the window.
     pd_mean, pd_sd : float
         :meth:`SampleLength.deviations` of the window (relative, -).
+    outlasting : float, optional
+        The window's :attr:`SampleLength.outlasting_share`.
 
     Returns
     -------
@@ -210,6 +233,9 @@ def missed_text(miss: str, pd_mean: float, pd_sd: float) -> str:
         return "yes"
     if miss == "no model":
         return "no: no model (the window's fit failed)"
+    if miss == "outlasts":
+        return (f"no: {100 * outlasting:.0f} % of its model's residences outlast the window "
+                "(fit warns)")
     # three digits: a figure 10.14 % off is not printed "10 %" beside a 10 % tolerance
     mean, sd = f"E(RT) {100 * pd_mean:+.3g} %", f"SD(RT) {100 * pd_sd:+.3g} %"
     return f"no: {mean if miss == 'E(RT)' else sd if miss == 'SD(RT)' else f'both ({mean}, {sd})'}"
@@ -256,6 +282,11 @@ def verdict_text(result: SampleLength, states: str) -> str:
                 f"within {tol:g} % of the long run's)")
     longest = result.lengths[-1]
     steady = result.steady_misses()
+    if result.outlasts()[-1]:
+        share = float(result.outlasting_share[-1])
+        return (f"not reached within {longest:g} s: {100 * share:.0f} % of the longest "
+                "window's model's residences outlast it, so no window of this run can "
+                "contain them (fit warns so); a longer run, or pool runs with fit A B ...")
 
     def settled(figure: str) -> str:
         length = result.settled_from(figure)
@@ -393,16 +424,20 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
             check_runs_distinct(runs, [(a, t_last) for t_last in lasts])
         fitter = estimator_from_name(estimator, state_space, lag)
         data = [discretize(t, state_space, lag, (a, a + usable[-1])) for t in runs]
-        means, sds, classes = [], [], 0
+        means, sds, outlasting, classes = [], [], [], 0
         for n in usable:
             try:
                 rtd = fitter.fit([d.block(a, a + n) for d in data]).rtd()
                 means.append(rtd.mean)
                 sds.append(rtd.sd)
+                p = np.asarray(rtd.probability, float)
+                outlasting.append(float(p[rtd.times > n + 1e-9].sum() / p.sum())
+                                  if p.sum() > 0 else math.nan)
                 classes = int(rtd.closed_classes)
             except CfbmarkovError:
                 means.append(math.nan)
                 sds.append(math.nan)
+                outlasting.append(math.nan)
         directions = [net_flow_direction(t, (a, t_last)) for t, t_last in zip(runs, lasts)]
         long_run = np.concatenate([
             residence_times(t, (a, t_last), use_events=False, lag_frames=t.lag_frames(lag),
@@ -434,7 +469,8 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                           math.nan, f"{state_space.describe()}, lag {lag:g} s, estimator "
                                     f"'{estimator}'{runs_text}",
                           float(long_run.mean()), censored, classes,
-                          run_means if not runs[0].boundary.is_open else ())
+                          run_means if not runs[0].boundary.is_open else (),
+                          np.asarray(outlasting, float))
     return _with_length(result)
 
 

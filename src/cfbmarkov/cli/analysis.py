@@ -206,6 +206,14 @@ def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -
     text = (f"the reference's E(RT) {rt_mean:.{dm}g} s lies {places[0]} the model's interval, "
             f"its SD(RT) {rt_sd:.{ds}g} s {places[1]}")
     if places == ["inside", "inside"]:
+        lo, hi = (float(v) for v in mean_interval)
+        centre = 0.5 * (lo + hi)
+        if centre > 0 and (hi - lo) / centre > 1.0:
+            # an interval wider than its centre holds almost any value: no test of the model
+            return text + (f": inside, but the model's E(RT) interval is "
+                           f"{100 * (hi - lo) / centre:.0f} % of its centre wide, so this "
+                           "says little; its fitting sample cannot pin the chain down (its "
+                           "verdict says why)")
         return text + (": the model's E(RT) and SD(RT) are consistent with the reference's "
                        "within their uncertainty")
     missed = " and ".join(n for n, p in zip(("E(RT)", "SD(RT)"), places) if p != "inside")
@@ -553,9 +561,11 @@ def _sample_length(args) -> int:
     tol = 100 * result.tolerance
     print(f"{'length (s)':>10}  {'E(RT) (s)':>9}  {'SD(RT) (s)':>10}  within {tol:g} %")
     pd_mean, pd_sd = result.deviations()
-    for n, m, sd, miss, a, b in zip(result.lengths, result.rt_mean, result.rt_sd,
-                                    result.missed(), pd_mean, pd_sd):
-        print(f"{n:>10g}  {value(m):>9}  {value(sd):>10}  {missed_text(miss, a, b)}")
+    shares = (result.outlasting_share if result.outlasting_share is not None
+              else [math.nan] * len(result.lengths))
+    for n, m, sd, miss, a, b, o in zip(result.lengths, result.rt_mean, result.rt_sd,
+                                       result.missed(), pd_mean, pd_sd, shares):
+        print(f"{n:>10g}  {value(m):>9}  {value(sd):>10}  {missed_text(miss, a, b, o)}")
     print("sample length: " + verdict_text(result, args.states))
     return 0
 

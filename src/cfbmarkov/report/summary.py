@@ -245,10 +245,11 @@ def baseline_counts(cases: list[Case]) -> dict[str, int]:
 
 
 def _interval_sentence(cases: list[Case]) -> str | None:
-    """How often the CFD-DEM's E(RT) lies inside the model's interval."""
-    inside, total, level = [], 0, None
+    """How often the CFD-DEM's E(RT), and its SD(RT), lie inside the model's intervals."""
+    inside, sd_inside, total, sd_total, level = [], [], 0, 0, None
     for c, name, s in _rows(cases):
-        interval = (s.get("model") or {}).get("rt_mean_interval")
+        model = s.get("model") or {}
+        interval = model.get("rt_mean_interval")
         ref = finite_or_none((s.get("reference") or {}).get("rt_mean"))
         if not interval or ref is None:
             continue
@@ -256,11 +257,20 @@ def _interval_sentence(cases: list[Case]) -> str | None:
         level = 100 * float(s.get("level", 0.9))
         if interval[0] <= ref <= interval[1]:
             inside.append(f"{name} at {_u(c)} m/s")
+        sd_interval = model.get("rt_sd_interval")
+        ref_sd = finite_or_none((s.get("reference") or {}).get("rt_sd"))
+        if sd_interval and ref_sd is not None:
+            sd_total += 1
+            if sd_interval[0] <= ref_sd <= sd_interval[1]:
+                sd_inside.append(f"{name} at {_u(c)} m/s")
     if not total:
         return None
+    sd_text = (f" Its SD(RT) lies inside the model's SD(RT) interval in {len(sd_inside)} of "
+               f"{sd_total}" + (f" ({', '.join(sd_inside)})." if sd_inside else ".")
+               if sd_total else "")
     return (f"The CFD-DEM's E(RT) lies inside the model's {level:g} % interval in "
             f"{len(inside)} of {total} velocity-model pairs"
-            + (f" ({', '.join(inside)})." if inside else ".")
+            + (f" ({', '.join(inside)})." if inside else ".") + sd_text
             + (" Intervals that miss it this often are too narrow to cover the models' "
                "structural error (they hold the Monte Carlo noise and the fitting window's "
                "sampling)."
