@@ -135,8 +135,8 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
         where = f"{run.path} {window[0]:g}-{window[1]:g} s"
         if identity in seen:
             raise InputError(f"{seen[identity]} and {where} hold the same data: pooling a run "
-                             "with itself counts its transitions twice and narrows the "
-                             "interval falsely (pool independent runs of one case)")
+                             "with itself counts its transitions twice, as if it were twice "
+                             "the data (pool independent runs of one case)")
         seen[identity] = where
         for other, w in zip(runs[:k], windows[:k]):
             if os.path.realpath(other.path) != os.path.realpath(run.path):
