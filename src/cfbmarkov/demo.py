@@ -346,7 +346,7 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
         rows[name] = {**summary, "exact_model_rt_mean": exact.mean, "exact_model_rt_sd": exact.sd,
                       "fit_warnings": model.warnings()}
         interval = summary["model"].get("rt_mean_interval")
-        level = summary.get("level", 0.9)
+        level = summary.get("level") or 0.9
         within = ("" if not interval else f", {100 * level:g} % interval {interval[0]:.3f}-"
                   f"{interval[1]:.3f} s")
         log(f"{name:>5}: E(RT) reference {summary['reference']['rt_mean']:.3f} s, model "

@@ -274,8 +274,9 @@ def test_compare_runs_returns_the_numbers_of_the_summary(pair, tmp_path):
     for side in ("reference", "model"):
         assert numbers[side]["left_group_fraction"] == numbers[side]["purple_fraction"]
         assert numbers[side]["rt_mean"] == summary[side]["rt_mean"]
-    # drawing adds only the files and warnings
-    assert set(summary) - set(numbers) == {"figures", "warnings"}
+    # drawing adds only the files, warnings and the interval's level (null: no interval here)
+    assert set(summary) - set(numbers) == {"figures", "warnings", "level"}
+    assert summary["level"] is None and summary["model"]["rt_mean_interval"] is None
 
 
 def test_map_times_in_whole_lags():
@@ -448,7 +449,8 @@ def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_pa
                 < hi - lo
             none = compare(run, pred, window=(3.0, 5.0), output=tmp_path / "none",
                            figures=False, resamples=0)
-            assert "rt_mean_interval" not in none["model"] and "level" not in none
+            assert none["level"] is None and none["model"]["rt_mean_interval"] is None
+            assert none["model"]["rt_sd_interval"] is None and none["model"]["rtd_interval"] is None
     assert widths["short"] > widths["long"]
     assert mixing_widths["short"] > mixing_widths["long"]
 

@@ -116,7 +116,7 @@ def cmd_compare(args) -> int:
             print("  persistence baseline not judged: the model's MD is undefined in this "
                   "window")
     model = summary["model"]
-    if "rt_mean_interval" in model:
+    if model.get("rt_mean_interval"):
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
         with_flow = (summary.get("intervals") or {}).get("flow_sd") is not None
         own = ""
@@ -141,7 +141,7 @@ def cmd_compare(args) -> int:
               f"{pd_text(long_run['pd_rt_mean'])} %, SD(RT) PD {pd_text(long_run['pd_rt_sd'])} "
               f"%, MD {_number(long_run['md_rtd'])} (what a perfect stationary model would "
               "predict)")
-    _print_kinetics(summary.get("kinetics") or {}, summary.get("level", args.level))
+    _print_kinetics(summary.get("kinetics") or {}, summary.get("level") or args.level)
     print(Path(args.output) / "summary.json")
     return 0
 

@@ -344,7 +344,11 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
         if adequacy is not None:        # the verdict on the model's fitting sample, repeated
             summary["adequacy"] = adequacy.to_dict()
             warnings += [f"the model's fitting sample: {line}" for line in adequacy.warnings]
-        if intervals is not None:
+        if intervals is None:       # the keys scripts read, null: no interval was formed
+            summary["level"] = None
+            for key in ("rt_mean_interval", "rt_sd_interval", "rtd_interval"):
+                summary["model"][key] = None
+        else:
             summary["level"] = intervals.level
             summary["model"]["rt_mean_interval"] = list(intervals.rt_mean)
             summary["model"]["rt_sd_interval"] = list(intervals.rt_sd)

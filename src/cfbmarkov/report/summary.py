@@ -254,7 +254,7 @@ def _interval_sentence(cases: list[Case]) -> str | None:
         if not interval or ref is None:
             continue
         total += 1
-        level = 100 * float(s.get("level", 0.9))
+        level = 100 * float(s.get("level") or 0.9)
         if interval[0] <= ref <= interval[1]:
             inside.append(f"{name} at {_u(c)} m/s")
         sd_interval = model.get("rt_sd_interval")

@@ -255,7 +255,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
             if (v := finite_or_none(s.get("bin_width"))) is not None:
                 widths.add(v)
             if mod.get("rt_mean_interval"):
-                levels.add(100 * float(s.get("level", 0.9)))
+                levels.add(100 * float(s.get("level") or 0.9))
             if s.get("direction") == "down":
                 downward.add(u)
             size = sizes.setdefault(u, {"width": finite_or_none(s.get("bin_width")),
@@ -511,7 +511,7 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
     interval = model.get("rt_mean_interval")
     if interval and finite_or_none(ref.get("rt_mean")) is not None:
         inside = interval[0] <= ref["rt_mean"] <= interval[1]
-        level = 100 * float(summary.get("level", 0.9))
+        level = 100 * float(summary.get("level") or 0.9)
         # the value and the interval are in Table 3's row, the model's own interval in the
         # detail table: said in words here, not repeated
         parts.append(f"The CFD-DEM's E(RT) lies {'inside' if inside else 'outside'} the "
