@@ -225,10 +225,9 @@ def test_interval_coverage_on_independent_windows(tmp_path):
     outside with probability 1.6 % at the level, binomial: 0.15 % below, 1.5 % above), and
     for 168-194 of the 200 together (0.84-0.97; outside with probability about 1 % were
     they independent). Measured: 33 and 38 of 40 for the chain's values, the mixing
-    curve (37), 34 and 36 for the observed E(RT) and SD(RT); without the flow term the observed
-    ones are held in 34 and 31 of 40. On a stationary flow the flow term is the reference's
-    own sampling noise, small beside the model's; on a non-stationary one it is not
-    (``docs/results``).
+    curve (37), 36 and 38 for the observed E(RT) and SD(RT). On a stationary flow the flow
+    term is the reference's own sampling noise, small beside the model's; on a
+    non-stationary one it is not (``docs/results``).
     """
     import numba
 
@@ -368,10 +367,34 @@ def test_the_flow_term_takes_students_t_with_its_blocks_less_one():
     with pytest.raises(InputError, match="degree of freedom"):
         flow_quantile(0.9, 0)
     boot = np.array([0.9, 1.0, 1.1])
-    lo, hi = interval_bounds(1.0, boot, 1.0, 0.9, 0.0, 0.05, 1)
+    lo, hi = interval_bounds(1.0, boot, 1.0, 0.9, 0.0, 0.05, 1, blocks=10)
     q = np.quantile(boot, [0.05, 0.95])
-    assert hi - 1.0 == pytest.approx(np.hypot(q[1] - 1.0, 6.3138 * 0.05), abs=1e-4)
-    assert 1.0 - lo == pytest.approx(np.hypot(1.0 - q[0], 6.3138 * 0.05), abs=1e-4)
+    w = 1.1747         # the bootstrap's widening for 10 blocks (the test below)
+    assert hi - 1.0 == pytest.approx(np.hypot(w * (q[1] - 1.0), 6.3138 * 0.05), abs=1e-4)
+    assert 1.0 - lo == pytest.approx(np.hypot(w * (1.0 - q[0]), 6.3138 * 0.05), abs=1e-4)
+
+
+def test_the_bootstraps_spread_is_widened_for_its_blocks():
+    """The block bootstrap's spread from B blocks is sqrt((B - 1) / B) of the sum's standard
+    error and an estimate with R (B - 1) degrees of freedom: its half-widths are widened by
+    sqrt(B / (B - 1)) t_{R(B-1)} / z (t_0.95(9) = 1.8331, t_0.95(4) = 2.1318, t_0.95(18) =
+    1.7341, z = 1.6449; tables), the Monte Carlo term is not."""
+    from cfbmarkov.analysis.bootstrap import bootstrap_widening, interval_bounds
+
+    assert bootstrap_widening(0.9, 10) == pytest.approx(np.sqrt(10 / 9) * 1.8331 / 1.6449,
+                                                        abs=1e-4)
+    assert bootstrap_widening(0.9, 5) == pytest.approx(np.sqrt(5 / 4) * 2.1318 / 1.6449,
+                                                       abs=1e-4)
+    assert bootstrap_widening(0.9, 10, runs=2) == pytest.approx(
+        np.sqrt(10 / 9) * 1.7341 / 1.6449, abs=1e-4)
+    with pytest.raises(InputError, match="at least 2 blocks"):
+        bootstrap_widening(0.9, 1)
+    boot = np.array([0.8, 1.0, 1.2])
+    q = np.quantile(boot, [0.05, 0.95])
+    lo, hi = interval_bounds(1.0, boot, 1.0, 0.9, blocks=5)
+    assert hi - 1.0 == pytest.approx(bootstrap_widening(0.9, 5) * (q[1] - 1.0))
+    lo, hi = interval_bounds(1.0, np.ones(3), 1.0, 0.9, se=0.1, blocks=5)
+    assert hi - 1.0 == pytest.approx(1.6449 * 0.1, abs=1e-4)
 
 
 def test_model_mixing_curve_equals_the_matrix_powers(tmp_path):

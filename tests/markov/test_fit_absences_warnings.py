@@ -7,9 +7,11 @@ from __future__ import annotations
 import json
 
 import numpy as np
+import pytest
 
 from cfbmarkov import synthetic
 from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
 from cfbmarkov.markov import MarkovModel
 from cfbmarkov.markov.uncertainty import ModelUncertainty
 from cfbmarkov.trajectories import Trajectories
@@ -136,15 +138,15 @@ def test_an_interval_on_fewer_resamples_than_drawn_says_so(tmp_path):
     edges = np.array([0.0, 0.1, 0.2])
     band = np.array([[0.0, 0.0], [0.6, 0.6]])
     short = ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 38, 10, 0.1,
-                             None, 100)
+                             None, 100, bootstrap_widening=1.175)
     lines = short.warnings()
     assert len(lines) == 1 and lines[0].startswith(
         "the 90 % interval rests on 38 of the 100 bootstrap resamples drawn")
     assert short.to_dict()["requested"] == 100
     for whole in (ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10,
-                                   0.1, None, 100),
+                                   0.1, None, 100, bootstrap_widening=1.175),
                   ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 38, 10,
-                                   0.1)):
+                                   0.1, bootstrap_widening=1.175)):
         assert whole.warnings() == []
     with h5py.File(tmp_path / "u.h5", "w") as f:
         for name, value in short.file_fields().items():
@@ -152,3 +154,31 @@ def test_an_interval_on_fewer_resamples_than_drawn_says_so(tmp_path):
         assert ModelUncertainty.from_group(f).requested == 100
         del f[f"{GROUP}/requested"]
         assert ModelUncertainty.from_group(f).requested is None
+
+
+def test_an_interval_formed_without_the_bootstraps_widening_says_so(tmp_path):
+    """A model file whose interval records no bootstrap widening (an earlier cfbmarkov's)
+    loads with a warning naming the factor its bootstrap part lacks (1.17 for 10 blocks at
+    90 %); the recorded factor survives the model file and silences it."""
+    import h5py
+
+    from cfbmarkov.markov.uncertainty import GROUP
+
+    edges = np.array([0.0, 0.1, 0.2])
+    band = np.array([[0.0, 0.0], [0.6, 0.6]])
+    widened = ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10, 0.1,
+                               bootstrap_widening=1.175)
+    assert widened.warnings() == [] and widened.to_dict()["bootstrap_widening"] == 1.175
+    with h5py.File(tmp_path / "u.h5", "w") as f:
+        for name, value in widened.file_fields().items():
+            f[name] = value
+        assert ModelUncertainty.from_group(f).bootstrap_widening == 1.175
+        del f[f"{GROUP}/bootstrap_widening"]
+        older = ModelUncertainty.from_group(f)
+    lines = older.warnings()
+    assert older.bootstrap_widening is None and len(lines) == 1
+    assert lines[0].startswith("the 90 % interval was formed without the bootstrap's widening "
+                               "for its 10 blocks") and "about 1.17 times too narrow" in lines[0]
+    with pytest.raises(InputError, match="bootstrap_widening"):
+        ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10, 0.1,
+                         bootstrap_widening=0.5)

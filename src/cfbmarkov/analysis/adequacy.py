@@ -346,7 +346,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     sampling = math.nan
     if interval is not None and rt_mean > 0 and all(map(math.isfinite, interval)):
         limit = (float(interval[1]) - float(interval[0])) / rt_mean
-        sampling = _sampling_width(interval, uncertainty, rt_mean)
+        sampling = _sampling_width(interval, uncertainty, rt_mean, len(runs))
         from_interval = True
         limit_source = (": the range 95 % of {k} parts stay within where they scatter as "
                         "the window's sampling says (the model's interval without the flow's "
@@ -478,25 +478,37 @@ def flow_term_line(length: float) -> str:
             f"outside it; {_ADVICE}")
 
 
-def _sampling_width(interval, uncertainty, rt_mean: float) -> float:
-    """The width of the model's E(RT) interval over E(RT) without its flow term: the
-    window's own sampling (the block bootstrap), each half-width with the flow's term (its
-    quantile times its sigma, :func:`~cfbmarkov.analysis.bootstrap.flow_quantile`) taken
-    out in quadrature (:func:`~cfbmarkov.analysis.bootstrap.interval_bounds` adds it
-    so). The parts' check tests the flow's changes within the window, so its limit must not
-    grow with them (a window straddling a 30 % step of a generated flow got a flow term of
-    17 % of E(RT) and a limit that passed the step)."""
+def _sampling_width(interval, uncertainty, rt_mean: float, runs: int = 1) -> float:
+    """The width of the model's E(RT) interval over E(RT) without its flow term, as a
+    normal interval of the window's own sampling (the block bootstrap) would be: each
+    half-width with the flow's term (its quantile times its sigma,
+    :func:`~cfbmarkov.analysis.bootstrap.flow_quantile`) taken out in quadrature
+    (:func:`~cfbmarkov.analysis.bootstrap.interval_bounds` adds it so), and the rest
+    divided by the bootstrap's Student's t over the normal quantile where the interval was
+    so widened (its degrees of freedom from the blocks of ``runs`` runs,
+    :func:`~cfbmarkov.analysis.bootstrap.bootstrap_widening`): the width the parts' limit (:func:`parts_limit`) reads as 2 z
+    standard errors. The parts' check tests the flow's changes within the window, so its
+    limit must not grow with them (a window straddling a 30 % step of a generated flow got
+    a flow term of 17 % of E(RT) and a limit that passed the step)."""
     lo, hi = (float(v) for v in interval)
     flow = getattr(uncertainty, "flow_sd", None)
     if flow is None or not math.isfinite(float(flow[0])):
-        return (hi - lo) / rt_mean
-    from cfbmarkov.analysis.bootstrap import flow_quantile
+        down, up = rt_mean - lo, hi - rt_mean
+    else:
+        from cfbmarkov.analysis.bootstrap import flow_quantile
 
-    term = (flow_quantile(float(uncertainty.level),
-                          getattr(uncertainty, "flow_degrees_of_freedom", None))
-            * float(flow[0]) * rt_mean)
-    down = math.sqrt(max((rt_mean - lo) ** 2 - term ** 2, 0.0))
-    up = math.sqrt(max((hi - rt_mean) ** 2 - term ** 2, 0.0))
+        term = (flow_quantile(float(uncertainty.level),
+                              getattr(uncertainty, "flow_degrees_of_freedom", None))
+                * float(flow[0]) * rt_mean)
+        down = math.sqrt(max((rt_mean - lo) ** 2 - term ** 2, 0.0))
+        up = math.sqrt(max((hi - rt_mean) ** 2 - term ** 2, 0.0))
+    blocks = int(getattr(uncertainty, "blocks", 0) or 0) // max(int(runs), 1)
+    if blocks >= 2 and getattr(uncertainty, "bootstrap_widening", None) is not None:
+        from scipy.special import ndtri, stdtrit
+
+        q = 0.5 * (1.0 + float(uncertainty.level))
+        down, up = (v * float(ndtri(q) / stdtrit(max(int(runs), 1) * (blocks - 1), q))
+                    for v in (down, up))
     return (down + up) / rt_mean
 
 

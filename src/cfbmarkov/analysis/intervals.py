@@ -52,7 +52,8 @@ from cfbmarkov.analysis.bootstrap import (FLOW_BLOCK_RESIDENCES, FLOW_BLOCKS,  #
                                           _resampled_rtd,
                                           block_bootstrap_models, bootstrap_figures,
                                           check_interval_options,
-                                          fitting_runs, flow_variability, interval_bounds)
+                                          fitting_runs, flow_variability, interval_bounds,
+                                          bootstrap_widening)
 from cfbmarkov.analysis.mixing import _left_states, model_mixing_curve
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.residence import residence_times_from_laps, rtd_histogram
@@ -411,8 +412,11 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     relative = flow_variability(model, window_length, direction=direction) if flow else None
     dof = None if relative is None else relative.degrees_of_freedom
 
+    runs = len(fitting_runs(model))
+
     def interval(value, boot, centre, se, se_flow=0.0):
-        return interval_bounds(value, boot, centre, level, se, se_flow, dof)
+        return interval_bounds(value, boot, centre, level, se, se_flow, dof, blocks=blocks,
+                               runs=runs)
 
     model_mean = interval(mean, np.asarray(means), exact.mean, se_mean)
     model_sd = interval(sd, np.asarray(sds), exact.sd, se_sd)
@@ -591,16 +595,19 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: i
         relative = tuple(v / np.sqrt(len(runs)) for v in variability[:2])
     f_mean, f_sd = (0.0, 0.0) if relative is None else (relative[0] * exact.mean,
                                                         relative[1] * exact.sd)
+    drawn = {"blocks": int(blocks), "runs": len(runs)}
     m_lo, m_hi = interval_bounds(exact.mean, np.asarray(means), exact.mean, level, 0.0, f_mean,
-                                 dof)
-    s_lo, s_hi = interval_bounds(exact.sd, np.asarray(sds), exact.sd, level, 0.0, f_sd, dof)
+                                 dof, **drawn)
+    s_lo, s_hi = interval_bounds(exact.sd, np.asarray(sds), exact.sd, level, 0.0, f_sd, dof,
+                                 **drawn)
     hist = _binned(exact, edges)
-    r_lo, r_hi = interval_bounds(hist, np.asarray(rtds), hist, level)
+    r_lo, r_hi = interval_bounds(hist, np.asarray(rtds), hist, level, **drawn)
     return ModelUncertainty(float(level), (max(float(m_lo), 0.0), float(m_hi)),
                             (max(float(s_lo), 0.0), float(s_hi)), edges,
                             np.vstack([np.maximum(r_lo, 0.0), r_hi]), len(means),
                             int(blocks) * len(runs), length / int(blocks), relative,
-                            int(resamples), dof)
+                            int(resamples), dof,
+                            bootstrap_widening(level, int(blocks), len(runs)))
 
 
 __all__ = ["PredictionIntervals", "SourceChanged", "SourceMissing", "block_bootstrap_models",

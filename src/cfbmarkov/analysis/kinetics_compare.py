@@ -329,7 +329,8 @@ def kinetics_resamples(n_states: int, resamples: int) -> int:
 def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
                           direction: str = "up", passes=(), after_passes=None):
     """Exact exit means of each property on block-bootstrap resamples of the model's fitting
-    window (:func:`cfbmarkov.analysis.bootstrap.block_bootstrap_models`, 10 blocks, seed 0),
+    window (:func:`cfbmarkov.analysis.bootstrap.block_bootstrap_models`,
+    :data:`~cfbmarkov.analysis.bootstrap.BOOTSTRAP_BLOCKS` blocks, seed 0),
     what the model's interval of an exit mean is formed from (`compare --kinetics`,
     `react --resamples`).
 
@@ -366,7 +367,7 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
     """
     if not resamples:
         return None
-    from cfbmarkov.analysis.bootstrap import block_bootstrap_models
+    from cfbmarkov.analysis.bootstrap import BOOTSTRAP_BLOCKS, block_bootstrap_models
     from cfbmarkov.markov.kinetics_exact import exact_kinetics
 
     taken = kinetics_resamples(model.n_states, resamples)
@@ -393,7 +394,7 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
                       if part[name].after_passes(n)[0] != 0})
     depth = None if depth is None else min(depth, BOOTSTRAP_DEFICIT_LEVELS)
     try:
-        drawn = block_bootstrap_models(model, blocks=10, resamples=resamples, seed=0)
+        drawn = block_bootstrap_models(model, blocks=BOOTSTRAP_BLOCKS, resamples=resamples, seed=0)
         means: dict[str, list[float]] = {name: [] for name in kinetics.names}
         for resampled in drawn:
             try:
@@ -599,10 +600,13 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                     "Monte Carlo noise only (the fitting window's bootstrap spreads the "
                     "long-run steady state of a carried property, not a window's values)")
             elif values is not None and values.size >= 2:
-                from cfbmarkov.analysis.bootstrap import interval_bounds
+                from cfbmarkov.analysis.bootstrap import (BOOTSTRAP_BLOCKS, fitting_runs,
+                                                          interval_bounds)
 
                 lo, hi = interval_bounds(p.exit_mean, values, answer.exit_mean, level,
-                                         se=p.exit_se if np.isfinite(p.exit_se) else 0.0)
+                                         se=p.exit_se if np.isfinite(p.exit_se) else 0.0,
+                                         blocks=BOOTSTRAP_BLOCKS,
+                                         runs=len(fitting_runs(model)))
                 mod_block["exit_mean_interval"] = [float(lo), float(hi)]
                 mod_block["interval_method"] = ("block bootstrap of the fitting window (exact "
                                                 "exit means) and Monte Carlo noise, in "

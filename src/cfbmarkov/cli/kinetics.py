@@ -202,7 +202,7 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
     n of ``passes``). Warnings go to stderr."""
     if not args.resamples or not answers:
         return {}, 0, {}
-    from cfbmarkov.analysis.bootstrap import interval_bounds
+    from cfbmarkov.analysis.bootstrap import BOOTSTRAP_BLOCKS, fitting_runs, interval_bounds
     from cfbmarkov.analysis.intervals import resolve_source
     from cfbmarkov.analysis.kinetics_compare import bootstrap_exit_means, kinetics_resamples
 
@@ -220,6 +220,7 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
                                      direction=direction, passes=passes, after_passes=after)
     for note in notes:
         print(f"warning: {one_line(note)}", file=sys.stderr)
+    drawn = {"blocks": BOOTSTRAP_BLOCKS, "runs": len(fitting_runs(source))}
     intervals = {}
     for name, answer in answers.items():
         boot = np.asarray((means or {}).get(name, []), dtype=float)
@@ -227,7 +228,8 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
         if boot.size < 10:
             intervals[name] = None
             continue
-        lo, hi = interval_bounds(answer.exit_mean, boot, answer.exit_mean, args.level)
+        lo, hi = interval_bounds(answer.exit_mean, boot, answer.exit_mean, args.level,
+                                 **drawn)
         intervals[name] = [float(lo), float(hi)]
     after_intervals = {}
     for (name, n), values in after.items():
@@ -236,7 +238,8 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
         point = answers[name].after_passes(n)[0]
         after_intervals[(name, n)] = (None if boot.size < 10 else
                                       [float(b) for b in interval_bounds(point, boot, point,
-                                                                         args.level)])
+                                                                         args.level,
+                                                                         **drawn)])
     return (intervals, kinetics_resamples(model.n_states, args.resamples) if means else 0,
             after_intervals)
 

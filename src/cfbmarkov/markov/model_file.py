@@ -20,9 +20,11 @@ states:
   per bin, :class:`~cfbmarkov.markov.uncertainty.ModelUncertainty`): datasets ``level``,
   ``rt_mean_interval`` [2], ``rt_sd_interval`` [2] (s), ``rtd_edges`` [B + 1] (s),
   ``rtd_interval`` [2, B], ``resamples``, ``blocks``, ``block_length`` (s), ``flow_sd`` [2]
-  (NaN where not measured), optionally ``requested`` and ``flow_degrees_of_freedom`` (the
-  flow term's, for Student's t; a file without it: the normal quantile). A file without
-  the group loads as a model without intervals;
+  (NaN where not measured), optionally ``requested``, ``flow_degrees_of_freedom`` (the
+  flow term's, for Student's t; a file without it: the normal quantile) and
+  ``bootstrap_widening`` (the factor the bootstrap part was widened by for its blocks; a
+  file without it holds an interval formed without, which its warnings name). A file
+  without the group loads as a model without intervals;
 - optionally the fitting window's time-averaged cell fields
   (:class:`~cfbmarkov.kinetics.CellFields`, for kinetics whose rates depend on them):
   datasets ``cell_solids_fraction``, ``cell_wall_distance`` (m) and

@@ -57,6 +57,11 @@ class ModelUncertainty:
         multiplies it by Student's t quantile with them
         (:func:`cfbmarkov.analysis.bootstrap.flow_quantile`); None without ``flow_sd``, or
         where not recorded (the normal quantile).
+    bootstrap_widening : float or None, optional
+        The factor the bootstrap's distances to its quantiles were multiplied by for its
+        blocks (:func:`cfbmarkov.analysis.bootstrap.bootstrap_widening`); None for an
+        interval formed without it (a model file of an earlier cfbmarkov: its bootstrap
+        part is that much too narrow, and :meth:`warnings` says so).
 
     Raises
     ------
@@ -78,6 +83,7 @@ class ModelUncertainty:
     flow_sd: tuple[float, float] | None = None
     requested: int | None = None
     flow_degrees_of_freedom: int | None = None
+    bootstrap_widening: float | None = None
 
     def __post_init__(self):
         if not 0.0 < float(self.level) < 1.0:
@@ -105,6 +111,12 @@ class ModelUncertainty:
                 raise InputError(f"flow_degrees_of_freedom {self.flow_degrees_of_freedom!r}: "
                                  "a whole number >= 1, with flow_sd")
             object.__setattr__(self, "flow_degrees_of_freedom", dof)
+        if self.bootstrap_widening is not None:
+            widening = float(self.bootstrap_widening)
+            if not (np.isfinite(widening) and widening >= 1.0):
+                raise InputError(f"bootstrap_widening {self.bootstrap_widening!r}: a finite "
+                                 "factor >= 1")
+            object.__setattr__(self, "bootstrap_widening", widening)
 
     @property
     def percent(self) -> str:
@@ -188,14 +200,30 @@ class ModelUncertainty:
                 "describes the resamples that circulate and may be too narrow; a longer "
                 "fitting window or pooled runs give more"]
 
+    def not_widened(self) -> list[str]:
+        """A line where the interval was formed without the bootstrap's widening for its
+        blocks (:attr:`bootstrap_widening` None: a model file of an earlier cfbmarkov),
+        naming the factor its bootstrap part lacks; empty otherwise."""
+        if self.bootstrap_widening is not None or self.blocks < 2:
+            return []
+        from cfbmarkov.analysis.bootstrap import bootstrap_widening
+
+        factor = bootstrap_widening(self.level, self.blocks)
+        return [f"the {self.percent} % interval was formed without the bootstrap's widening "
+                f"for its {self.blocks} blocks (a model file of an earlier cfbmarkov): its "
+                f"bootstrap part is about {factor:.2f} times too narrow, so it holds the figure "
+                "less often than stated; fit again for an interval at its level"]
+
     def warnings(self) -> list[str]:
-        """Every line on the interval: :meth:`cut_at_zero` and :meth:`short_of_resamples`."""
-        return self.cut_at_zero() + self.short_of_resamples()
+        """Every line on the interval: :meth:`cut_at_zero`, :meth:`short_of_resamples` and
+        :meth:`not_widened`."""
+        return self.cut_at_zero() + self.short_of_resamples() + self.not_widened()
 
     def to_dict(self) -> dict:
         """JSON-serialisable: level, the intervals, the RTD's edges and bounds, resamples,
         blocks, block length, the flow's relative SDs and their degrees of freedom (null
-        where none)."""
+        where none), the bootstrap's widening (null where the interval was formed without
+        it)."""
         return {"level": self.level, "rt_mean_interval": list(self.rt_mean_interval),
                 "rt_sd_interval": list(self.rt_sd_interval),
                 "rtd_edges": self.rtd_edges.tolist(),
@@ -203,7 +231,7 @@ class ModelUncertainty:
                 "blocks": int(self.blocks), "block_length": float(self.block_length),
                 "flow_sd": None if self.flow_sd is None else list(self.flow_sd),
                 "flow_degrees_of_freedom": self.flow_degrees_of_freedom,
-                "requested": self.requested}
+                "requested": self.requested, "bootstrap_widening": self.bootstrap_widening}
 
     def file_fields(self) -> dict[str, np.ndarray]:
         """The datasets that store it, named ``uncertainty/<field>``."""
@@ -217,6 +245,8 @@ class ModelUncertainty:
             fields["requested"] = int(self.requested)
         if self.flow_degrees_of_freedom is not None:
             fields["flow_degrees_of_freedom"] = int(self.flow_degrees_of_freedom)
+        if self.bootstrap_widening is not None:
+            fields["bootstrap_widening"] = float(self.bootstrap_widening)
         return {f"{GROUP}/{name}": np.asarray(value) for name, value in fields.items()}
 
     @classmethod
@@ -239,4 +269,5 @@ class ModelUncertainty:
                    None if np.isnan(flow).any() else (float(flow[0]), float(flow[1])),
                    int(g["requested"][()]) if "requested" in g else None,
                    int(g["flow_degrees_of_freedom"][()]) if "flow_degrees_of_freedom" in g
-                   else None)
+                   else None,
+                   float(g["bootstrap_widening"][()]) if "bootstrap_widening" in g else None)
