@@ -16,7 +16,7 @@ cells and its interval formed from the window alone
 (:func:`cfbmarkov.analysis.intervals.model_intervals`, 100 resamples, 90 %) for each number
 of bootstrap blocks in ``--blocks``. Printed: how many intervals hold the generator's exact
 E(RT), and how many would without the bootstrap's widening for its blocks
-(:func:`cfbmarkov.analysis.bootstrap.bootstrap_widening`), their median width, the fitted
+(:func:`cfbmarkov.markov.uncertainty.bootstrap_widening`), their median width, the fitted
 E(RT)'s mean over the windows (its bias) and its standard deviation between windows beside
 the bootstrap's standard error (the median half-width over the widening times 1.645).
 Windows shorter than two blocks of three mean residence times (here shorter than about

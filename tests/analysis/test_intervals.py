@@ -379,7 +379,8 @@ def test_the_bootstraps_spread_is_widened_for_its_blocks():
     error and an estimate with R (B - 1) degrees of freedom: its half-widths are widened by
     sqrt(B / (B - 1)) t_{R(B-1)} / z (t_0.95(9) = 1.8331, t_0.95(4) = 2.1318, t_0.95(18) =
     1.7341, z = 1.6449; tables), the Monte Carlo term is not."""
-    from cfbmarkov.analysis.bootstrap import bootstrap_widening, interval_bounds
+    from cfbmarkov.analysis.bootstrap import interval_bounds
+    from cfbmarkov.markov.uncertainty import bootstrap_widening
 
     assert bootstrap_widening(0.9, 10) == pytest.approx(np.sqrt(10 / 9) * 1.8331 / 1.6449,
                                                         abs=1e-4)

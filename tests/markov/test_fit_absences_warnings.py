@@ -179,6 +179,9 @@ def test_an_interval_formed_without_the_bootstraps_widening_says_so(tmp_path):
     assert older.bootstrap_widening is None and len(lines) == 1
     assert lines[0].startswith("the 90 % interval was formed without the bootstrap's widening "
                                "for its 10 blocks") and "about 1.17 times too narrow" in lines[0]
+    pooled = ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 40, 0.1)
+    line = pooled.warnings(runs=4)[0]        # 10 blocks in each of 4 runs: t with 36 dof
+    assert "for its 10 blocks in each of 4 runs" in line and "about 1.08 times" in line
     with pytest.raises(InputError, match="bootstrap_widening"):
         ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10, 0.1,
                          bootstrap_widening=0.5)

@@ -24,12 +24,13 @@ from scipy.special import stdtrit    # Student's t quantile, scipy.stats.t.ppf's
 
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.markov.uncertainty import bootstrap_widening  # noqa: F401 (re-exported)
 from cfbmarkov.observed.residence import residence_times
 from cfbmarkov.trajectories import opened
 
 
 #: time blocks of the fitting window that the bootstrap resamples where none are given
-#: (``fit --blocks``' default; the kinetics' exit-mean intervals)
+#: (the model's interval's and a comparison's default; the kinetics' exit-mean intervals)
 BOOTSTRAP_BLOCKS = 10
 #: blocks of the fitting window that measure the flow's variability (:func:`flow_variability`)
 FLOW_BLOCKS = 4
@@ -681,57 +682,6 @@ def _in_threads(function, items):
             yield pending.popleft().result()
     finally:        # on Ctrl-C: the items not started are dropped, the running ones finish
         pool.shutdown(wait=True, cancel_futures=True)
-
-
-def bootstrap_widening(level: float, blocks: int, runs: int = 1) -> float:
-    """The factor by which an interval's block-bootstrap half-widths are widened: the
-    bootstrap's spread estimated from B blocks of each of R runs is a small-sample estimate
-    of the standard error, with R (B - 1) degrees of freedom, and biased low.
-
-    The block bootstrap's variance of a sum of B blocks drawn with replacement is
-    (B - 1) / B times the unbiased estimate of the sum's variance from its B blocks, and
-    that estimate has R (B - 1) degrees of freedom: an interval built on it takes Student's
-    t quantile, not the normal one, as the batch-means method of simulation output
-    analysis does. The factor is sqrt(B / (B - 1)) t_{R (B - 1)}(q) / z(q) at
-    q = (1 + level) / 2: 1.175 for 10 blocks of one run at 90 %, 1.45 for 5 blocks.
-    Measured on 200 independent runs of a known stationary chain
-    (``benchmarks/interval_scatter.py --independent``): 90 % intervals from 10 blocks held
-    the chain's E(RT) in 81.5 % (12 s runs) and 83.0 % (4 s) of the runs unwidened, 87.5 %
-    in both widened; from 5 blocks 76.0 and 80.0 % unwidened, 91.0 and 90.5 % widened.
-
-    Parameters
-    ----------
-    level : float
-        The interval's level, in (0, 1).
-    blocks : int
-        Time blocks B of each run's fitting window (at least 2).
-    runs : int, optional
-        Runs R whose blocks are resampled within each (a pooled fit's stratified bootstrap).
-
-    Returns
-    -------
-    float
-        The factor (> 1).
-
-    Raises
-    ------
-    InputError
-        For fewer than 2 blocks or 1 run.
-
-    References
-    ----------
-    B. Efron and R. J. Tibshirani, An Introduction to the Bootstrap, Chapman & Hall (1993),
-    Ch. 5.3 (the bootstrap standard error of a mean is sqrt((n - 1) / n) times the usual
-    one); B. Schmeiser, "Batch size effects in the analysis of simulation output",
-    Oper. Res. 30, 556 (1982) (Student's t with B - 1 degrees of freedom for B batch means).
-    """
-    blocks, runs = int(blocks), int(runs)
-    if blocks < 2 or runs < 1:
-        raise InputError(f"the bootstrap's widening needs at least 2 blocks and 1 run "
-                         f"({blocks}, {runs})")
-    q = 0.5 * (1.0 + float(level))
-    return float(math.sqrt(blocks / (blocks - 1.0)) * stdtrit(runs * (blocks - 1), q)
-                 / ndtri(q))
 
 
 def interval_bounds(value, boot, centre, level: float, se=0.0, se_flow=0.0,

@@ -47,7 +47,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from cfbmarkov.analysis.bootstrap import (FLOW_BLOCK_RESIDENCES, FLOW_BLOCKS,  # noqa: F401
+from cfbmarkov.analysis.bootstrap import (BOOTSTRAP_BLOCKS, FLOW_BLOCK_RESIDENCES,  # noqa: F401
+                                          FLOW_BLOCKS,
                                           _binned, _bootstrap_chains, _reach,
                                           _resampled_rtd,
                                           block_bootstrap_models, bootstrap_figures,
@@ -294,7 +295,8 @@ def _replicate_noise(model, states, left_group, n_steps: int, edges: np.ndarray,
 
 
 def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_length: float, *,
-                         level: float = 0.9, blocks: int = 10, resamples: int = 100,
+                         level: float = 0.9, blocks: int = BOOTSTRAP_BLOCKS,
+                         resamples: int = 100,
                          seed: int = 0, direction: str | None = None, mixing=None,
                          tracers=None, flow: bool = True,
                          candidates=()) -> PredictionIntervals:
@@ -504,8 +506,8 @@ def _shallow_rtd(model, exact, direction: str, edges: np.ndarray) -> _Shallow | 
     return _Shallow(mean, sd, _binned(head, edges, total), BOOTSTRAP_DEFICIT_LEVELS)
 
 
-def model_intervals(model, *, level: float = 0.9, blocks: int = 10, resamples: int = 100,
-                    seed: int = 0, direction: str | None = None):
+def model_intervals(model, *, level: float = 0.9, blocks: int = BOOTSTRAP_BLOCKS,
+                    resamples: int = 100, seed: int = 0, direction: str | None = None):
     """Intervals of a fitted model's exact E(RT), SD(RT) and RTD per bin, from its fitting
     window alone (``docs/definitions.md``, The model's interval).
 

@@ -314,13 +314,13 @@ def cmd_rtd(args) -> int:
     band = rtd.uncertainty              # the intrinsic RTD's only
     adequacy = getattr(model, "adequacy", None)
     warnings = [str(line) for line in getattr(adequacy, "warnings", ()) or ()]
-    from cfbmarkov.markov.model_summary import unresolved_warning
+    from cfbmarkov.markov.model_summary import fitting_run_count, unresolved_warning
 
     unresolved = unresolved_warning(rtd)
     if unresolved is not None:
         warnings.append(unresolved)
     if band is not None:
-        warnings += band.warnings()
+        warnings += band.warnings(fitting_run_count(model))
     if args.resamples and band is not None and band.flow_sd is None:
         # an interval formed here, on a window too short for the flow's term: the verdict's
         # line, as fit gives it

@@ -98,7 +98,7 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     if unresolved is not None:
         lines.append(f"  {unresolved}")
     if model.uncertainty is not None:
-        lines += [f"  {line}" for line in model.uncertainty.warnings()]
+        lines += [f"  {line}" for line in model.uncertainty.warnings(fitting_run_count(model))]
     trapped = model.entered_never_left
     if not trapped.size or model.trap_share == 0.0:
         return lines
@@ -306,3 +306,9 @@ def cells_text(space, cells: np.ndarray, limit: int = 8) -> str:
         axes = "column,depth column,row" if space.depth_columns > 1 else "column,row"
         parts.append(f"cell{'s' if len(named) > 1 else ''} {shown} as {axes}")
     return "; ".join(parts)
+
+
+def fitting_run_count(model) -> int:
+    """The runs a model was fitted on: those of a pooled fit (``source`` a list), else 1."""
+    source = getattr(model, "source", None)
+    return len(source) if isinstance(source, (list, tuple)) and source else 1
