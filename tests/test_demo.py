@@ -26,7 +26,10 @@ def test_demo_end_to_end(tmp_path, capsys):
     for name in ("paper", "mle"):
         lo, hi = json.loads((out / f"compare-{name}" / "summary.json").read_text())[
             "model"]["rt_mean_interval"]
-        assert f"(its Monte Carlo sample, 90 % interval {lo:.3f}-{hi:.3f} s;" in printed
+        from cfbmarkov.markov.uncertainty import outward_bounds
+
+        shown = "-".join(outward_bounds(lo, hi, digits=4))     # rounded outwards
+        assert f"(its Monte Carlo sample, 90 % interval {shown} s;" in printed
     # a closing verdict in the report's words, against the persistence baseline
     from cfbmarkov.report.table3 import baseline_clause, baseline_outcomes
 

@@ -19,6 +19,7 @@ from cfbmarkov.analysis.fit_checks import assess_fit
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.markov import CellGrid, fit_model
+from cfbmarkov.markov.uncertainty import outward_bounds
 
 #: the estimators the demo fits, in order
 ESTIMATORS = ("paper", "mle")
@@ -347,8 +348,8 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
                       "fit_warnings": model.warnings()}
         interval = summary["model"].get("rt_mean_interval")
         level = summary.get("level") or 0.9
-        within = ("" if not interval else f", {100 * level:g} % interval {interval[0]:.3f}-"
-                  f"{interval[1]:.3f} s")
+        within = ("" if not interval else f", {100 * level:g} % interval "
+                  f"{'-'.join(outward_bounds(*interval, digits=4))} s")
         log(f"{name:>5}: E(RT) reference {summary['reference']['rt_mean']:.3f} s, model "
             f"{summary['model']['rt_mean']:.3f} s (its Monte Carlo sample{within}; exact, as a "
             f"{seen:g} s window sees it: {exact.mean:.3f} s), PD E(RT) "

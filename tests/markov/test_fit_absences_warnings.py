@@ -115,14 +115,14 @@ def test_an_interval_cut_at_zero_says_so_instead_of_printing_a_bare_zero():
     cut = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1,
                            (0.13, 0.842))
     text = cut.describe(0.1811, 0.06647)
-    assert "0-0.159" not in text and "up to 0.159 s, its lower end cut at 0" in text
-    assert "(90 % interval 0.129-0.22 s)" in text
+    assert "0-0.159" not in text and "up to 0.1590 s, its lower end cut at 0" in text
+    assert "(90 % interval 0.1290-0.2200 s)" in text
     lines = cut.cut_at_zero()
     assert len(lines) == 1 and lines[0].startswith("the 90 % interval of SD(RT) reaches 0")
     assert "84.2 % of SD(RT)" in lines[0]
     whole = ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10, 0.1,
                              (0.13, 0.2))
-    assert whole.cut_at_zero() == [] and "0.03-0.159 s" in whole.describe(0.18, 0.066)
+    assert whole.cut_at_zero() == [] and "0.03000-0.1590 s" in whole.describe(0.18, 0.066)
     boot = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1)
     assert "resamples give SD(RT) 0" in boot.cut_at_zero()[0]
 
@@ -185,3 +185,26 @@ def test_an_interval_formed_without_the_bootstraps_widening_says_so(tmp_path):
     with pytest.raises(InputError, match="bootstrap_widening"):
         ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10, 0.1,
                          bootstrap_widening=0.5)
+
+
+def test_interval_bounds_print_rounded_outwards():
+    """The printed interval holds every value the stored one holds: each bound rounded to 3
+    significant digits away from the centre (2.3593 down to 2.35, 2.3940 up to 2.40, where
+    rounding to the nearest printed 2.36-2.39 and left 2.3595 outside), a bound already on
+    the grid kept, trailing zeros kept."""
+    from cfbmarkov.markov.uncertainty import outward_bounds
+
+    assert outward_bounds(2.3593, 2.3940) == ("2.35", "2.40")
+    assert outward_bounds(0.76809, 0.95003) == ("0.768", "0.951")
+    assert outward_bounds(0.768, 0.95) == ("0.768", "0.950")
+    assert outward_bounds(0.0, 1.95) == ("0", "1.95")
+    edges = np.array([0.0, 0.1, 0.2])
+    band = np.array([[0.0, 0.0], [0.6, 0.6]])
+    u = ModelUncertainty(0.9, (2.3593, 2.3940), (0.0, 0.8271), edges, band, 100, 10, 0.1,
+                         bootstrap_widening=1.175)
+    text = u.describe(2.377, 0.81)          # 4 digits, like the point values
+    assert "(90 % interval 2.359-2.394 s)" in text
+    assert "up to 0.8271 s, its lower end cut at 0" in text
+    u = ModelUncertainty(0.9, (2.35934, 2.39401), (0.0, 0.82712), edges, band, 100, 10, 0.1,
+                         bootstrap_widening=1.175)
+    assert "(90 % interval 2.359-2.395 s)" in u.describe(2.377, 0.81)

@@ -355,9 +355,11 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     lines: list[str] = []
     applied = math.nan
     if limit > WIDE_INTERVAL and interval is not None:
-        shown = (f"{float(interval[0]):.3g}-{float(interval[1]):.3g} s"
-                 if float(interval[0]) > 0 else
-                 f"up to {float(interval[1]):.3g} s (its lower end cut at 0)")
+        from cfbmarkov.markov.uncertainty import outward_bounds
+
+        lo_text, hi_text = outward_bounds(float(interval[0]), float(interval[1]))
+        shown = (f"{lo_text}-{hi_text} s" if float(interval[0]) > 0 else
+                 f"up to {hi_text} s (its lower end cut at 0)")
         lines.append(f"the model's E(RT) interval {shown} is {100 * limit:.0f} % of its E(RT) "
                      f"{rt_mean:.4g} s wide: the fitting window cannot pin the chain down, and "
                      f"no check of its parts can pass or fail against such a limit; {_ADVICE}")

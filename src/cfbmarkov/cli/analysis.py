@@ -117,15 +117,20 @@ def cmd_compare(args) -> int:
                   "window")
     model = summary["model"]
     if model.get("rt_mean_interval"):
+        from cfbmarkov.markov.uncertainty import outward_bounds
+
+        def shown(bounds) -> str:       # rounded outwards: it holds what the stored one holds
+            return "-".join(outward_bounds(*bounds, digits=4))
+
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
         with_flow = (summary.get("intervals") or {}).get("flow_sd") is not None
         own = ""
         if with_flow and "model_rt_mean_interval" in model:
-            (o0, o1), (p0, p1) = model["model_rt_mean_interval"], model["model_rt_sd_interval"]
-            own = f" (the model's own: E(RT) {o0:.4g}-{o1:.4g} s, SD(RT) {p0:.4g}-{p1:.4g} s)"
+            own = (f" (the model's own: E(RT) {shown(model['model_rt_mean_interval'])} s, "
+                   f"SD(RT) {shown(model['model_rt_sd_interval'])} s)")
         kind = " with the flow's variability" if with_flow else ""
-        print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) {m0:.4g}-{m1:.4g} s, "
-              f"SD(RT) {s0:.4g}-{s1:.4g} s{own}")
+        print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) {shown((m0, m1))} s, "
+              f"SD(RT) {shown((s0, s1))} s{own}")
         reference = summary["reference"]
         print("  " + interval_verdict(reference["rt_mean"], reference["rt_sd"],
                                       (m0, m1), (s0, s1)))

@@ -76,6 +76,36 @@ def bootstrap_widening(level: float, blocks: int, runs: int = 1) -> float:
                  / ndtri(q))
 
 
+def outward_bounds(lower: float, upper: float, digits: int = 3) -> tuple[str, str]:
+    """An interval's bounds as text of ``digits`` significant digits, rounded outwards (the
+    lower bound down, the upper up), so that the printed interval holds every value the
+    stored one holds: [2.3593, 2.3940] prints as 2.35-2.40, not 2.36-2.39.
+
+    Parameters
+    ----------
+    lower, upper : float
+        The bounds, lower first.
+    digits : int, optional
+        Significant digits of each.
+
+    Returns
+    -------
+    (str, str)
+        The two bounds in ``g`` format with trailing zeros kept (``2.40``; ``0`` for a
+        bound of 0).
+    """
+    def rounded(value: float, up: bool) -> str:
+        if value == 0.0 or not np.isfinite(value):
+            return f"{value:.{digits}g}"
+        scale = 10.0 ** (digits - 1 - int(np.floor(np.log10(abs(value)))))
+        scaled = value * scale
+        slack = 1e-9 * abs(scaled)       # a value already on the grid stays where it is
+        whole = np.ceil(scaled - slack) if up else np.floor(scaled + slack)
+        return f"{whole / scale:#.{digits}g}".rstrip(".")   # trailing zeros kept: 2.40
+
+    return rounded(float(lower), False), rounded(float(upper), True)
+
+
 @dataclass(frozen=True)
 class ModelUncertainty:
     """Intervals of a model's exact E(RT), SD(RT) and RTD per bin at ``level``.
@@ -177,19 +207,21 @@ class ModelUncertainty:
         return f"{100 * self.level:g}"
 
     def describe(self, mean: float, sd: float) -> str:
-        """``E(RT) = 0.591 s (90 % interval 0.41-0.83 s), SD(RT) = ...`` for the point values
-        ``mean`` and ``sd`` (s)."""
+        """``E(RT) = 0.591 s (90 % interval 0.4102-0.8301 s), SD(RT) = ...`` for the point
+        values ``mean`` and ``sd`` (s)."""
         (a, b), (c, d) = self.rt_mean_interval, self.rt_sd_interval
         return (f"E(RT) = {mean:.4g} s ({self.percent} % interval {self._bounds(a, b)}), "
                 f"SD(RT) = {sd:.4g} s ({self.percent} % interval {self._bounds(c, d)})")
 
     @staticmethod
     def _bounds(lower: float, upper: float) -> str:
-        """``0.41-0.83 s``, or for a lower bound cut at 0 (:meth:`cut_at_zero`) ``up to
-        0.83 s, its lower end cut at 0``."""
+        """``0.4102-0.8301 s`` (4 significant digits like the point values, rounded
+        outwards, :func:`outward_bounds`), or for a lower bound cut at 0
+        (:meth:`cut_at_zero`) ``up to 0.8301 s, its lower end cut at 0``."""
+        lo, hi = outward_bounds(lower, upper, digits=4)
         if lower > 0.0:
-            return f"{lower:.3g}-{upper:.3g} s"
-        return f"up to {upper:.3g} s, its lower end cut at 0"
+            return f"{lo}-{hi} s"
+        return f"up to {hi} s, its lower end cut at 0"
 
     def cut_at_zero(self) -> list[str]:
         """Lines saying which interval's lower end fell to zero or below and was cut at 0,
