@@ -489,9 +489,10 @@ def _sampling_width(interval, uncertainty, rt_mean: float, runs: int = 1) -> flo
     divided by the bootstrap's Student's t over the normal quantile where the interval was
     so widened (its degrees of freedom from the blocks of ``runs`` runs,
     :func:`~cfbmarkov.markov.uncertainty.bootstrap_widening`): the width the parts' limit
-    (:func:`parts_limit`) reads as 2 z standard errors. The parts' check tests the flow's changes within the window, so its
-    limit must not grow with them (a window straddling a 30 % step of a generated flow got
-    a flow term of 17 % of E(RT) and a limit that passed the step)."""
+    (:func:`parts_limit`) reads as 2 z standard errors. The parts' check tests the flow's
+    changes within the window, so its limit must not grow with them (a window straddling a
+    30 % step of a generated flow got a flow term of 17 % of E(RT) and a limit that passed
+    the step)."""
     lo, hi = (float(v) for v in interval)
     flow = getattr(uncertainty, "flow_sd", None)
     if flow is None or not math.isfinite(float(flow[0])):
