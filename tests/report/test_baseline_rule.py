@@ -98,7 +98,10 @@ def test_the_table_prints_both_mds_apart_from_the_models():
 
 
 def test_intervals_never_collapse():
-    assert interval_text(0.01384, 0.01442) == "0.0138–0.0144"
+    """Enough decimals to keep the ends apart, and each end rounded outwards (the lower
+    down, the upper up), so that the text holds every value the interval holds."""
+    assert interval_text(0.01384, 0.01442) == "0.0138–0.0145"
+    assert interval_text(0.2766, 0.3484) == "0.276–0.349"     # to the nearest: 0.277-0.348
     assert interval_text(0.01401, 0.01449) == "0.0140–0.0145"
     assert interval_text(0.276, 0.349) == "0.276–0.349"
     assert interval_text(0.0140001, 0.0140004, sep="-") == "0.0140001-0.0140004"
@@ -201,5 +204,5 @@ def test_one_sided_profiles_are_said_as_the_windows_flow():
 
 
 def test_narrow_intervals_keep_three_steps_between_their_ends():
-    assert interval_text(0.01331, 0.01412) == "0.0133–0.0141"
+    assert interval_text(0.01331, 0.01412) == "0.0133–0.0142"      # rounded outwards
     assert interval_text(0.051, 0.054) == "0.051–0.054"

@@ -187,7 +187,9 @@ def interval_text(lo, hi, decimals: int = 3, sep: str = "–") -> str:
     decimals : int, optional
         The fewest decimals; more are taken (up to 12) while the two ends, where they
         differ, would print fewer than three steps of the last digit apart, so that an
-        interval never collapses to "0.014-0.014" nor reads as "0.013-0.014".
+        interval never collapses to "0.014-0.014" nor reads as "0.013-0.014"; the lower
+        end rounded down and the upper up, so that the text holds every value the interval
+        holds.
     sep : str, optional
         Between the ends.
 
@@ -200,10 +202,15 @@ def interval_text(lo, hi, decimals: int = 3, sep: str = "–") -> str:
     if a is None or b is None:
         return "n/a"
     d = decimals
-    # ends at least three steps of the last digit apart: "0.0133–0.0141", not "0.013–0.014"
+    # ends at least three steps of the last digit apart: "0.0133-0.0142", not "0.013-0.015"
     while d < 12 and a != b and abs(round(b * 10 ** d) - round(a * 10 ** d)) < 3:
         d += 1
-    return f"{a:.{d}f}{sep}{b:.{d}f}"
+    # rounded outwards, so that the printed interval holds every value the stored one holds
+    scale = 10.0 ** d
+    low, high = a * scale, b * scale
+    low = math.floor(low + 1e-9 * abs(low)) / scale
+    high = math.ceil(high - 1e-9 * abs(high)) / scale
+    return f"{low:.{d}f}{sep}{high:.{d}f}"
 
 
 def duration_text(seconds) -> str:
