@@ -20,7 +20,9 @@ E(RT), and how many would without the bootstrap's widening for its blocks
 E(RT)'s mean over the windows (its bias) and its standard deviation between windows beside
 the bootstrap's standard error (the median half-width over the widening times 1.645).
 Windows shorter than two blocks of three mean residence times (here shorter than about
-14 s) carry no flow term, so the interval is the bootstrap's alone.
+14 s) carry no flow term, so the interval is the bootstrap's alone; on longer windows the
+unwidened count (the half-widths divided by the widening) is approximate, the flow term
+being divided too.
 """
 
 from __future__ import annotations

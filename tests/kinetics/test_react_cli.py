@@ -624,11 +624,19 @@ def test_reference_values_of_another_law_or_range_are_refused(fitted, tmp_path, 
 
 def test_a_value_beyond_an_interval_prints_apart_from_its_end():
     """The reference just above the interval's upper end is printed with the digits that
-    tell them apart, never "0.8855 lies above 0.8835-0.8855"."""
-    from cfbmarkov.cli.analysis import interval_verdict
+    put it beyond the end as the interval prints it (rounded outwards at those digits),
+    never "0.8855 lies above 0.8835-0.8855" nor "0.8854 lies above 0.8801-0.8855"."""
+    from cfbmarkov.cli.analysis import _digits, _interval_text, interval_verdict
 
     line = interval_verdict(0.885512, 0.3, (0.88351, 0.885504), (0.2, 0.4))
-    assert "E(RT) 0.88551 s lies above" in line          # 0.8855 at 4 digits, as the end
+    assert "E(RT) 0.885512 s lies above" in line   # the end prints 0.8856, 0.88551 at 4, 5
+    assert _interval_text((0.88351, 0.885504), _digits(0.885512, (0.88351, 0.885504))) \
+        == "0.883510-0.885504"
+    for value, interval in ((0.88546, (0.8801, 0.88541)), (0.74575, (0.74576, 0.9))):
+        d = _digits(value, interval)
+        lo, hi = (float(v) for v in _interval_text(interval, d).split("-"))
+        shown = float(f"{value:.{d}g}")
+        assert shown > hi if value > interval[1] else shown < lo, (value, d)
     assert "E(RT) 0.85 s lies below" in interval_verdict(0.85, 0.3, (0.88351, 0.885504),
                                                          (0.2, 0.4))
 

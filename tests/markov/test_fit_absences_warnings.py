@@ -198,6 +198,9 @@ def test_interval_bounds_print_rounded_outwards():
     assert outward_bounds(0.76809, 0.95003) == ("0.768", "0.951")
     assert outward_bounds(0.768, 0.95) == ("0.768", "0.950")
     assert outward_bounds(0.0, 1.95) == ("0", "1.95")
+    assert outward_bounds(-2.3593, -1.2345) == ("-2.36", "-1.23")
+    assert outward_bounds(-0.0, 1.0) == ("0", "1.00")
+    assert outward_bounds(5e-324, float("inf")) == ("4.94e-324", "inf")   # no overflow
     edges = np.array([0.0, 0.1, 0.2])
     band = np.array([[0.0, 0.0], [0.6, 0.6]])
     u = ModelUncertainty(0.9, (2.3593, 2.3940), (0.0, 0.8271), edges, band, 100, 10, 0.1,

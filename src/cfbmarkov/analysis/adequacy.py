@@ -357,7 +357,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     if limit > WIDE_INTERVAL and interval is not None:
         from cfbmarkov.markov.uncertainty import outward_bounds
 
-        lo_text, hi_text = outward_bounds(float(interval[0]), float(interval[1]))
+        lo_text, hi_text = outward_bounds(float(interval[0]), float(interval[1]), digits=4)
         shown = (f"{lo_text}-{hi_text} s" if float(interval[0]) > 0 else
                  f"up to {hi_text} s (its lower end cut at 0)")
         lines.append(f"the model's E(RT) interval {shown} is {100 * limit:.0f} % of its E(RT) "
@@ -506,11 +506,10 @@ def _sampling_width(interval, uncertainty, rt_mean: float, runs: int = 1) -> flo
         down = math.sqrt(max((rt_mean - lo) ** 2 - term ** 2, 0.0))
         up = math.sqrt(max((hi - rt_mean) ** 2 - term ** 2, 0.0))
     blocks = int(getattr(uncertainty, "blocks", 0) or 0) // max(int(runs), 1)
-    if blocks >= 2 and getattr(uncertainty, "bootstrap_widening", None) is not None:
-        from scipy.special import ndtri, stdtrit
-
-        q = 0.5 * (1.0 + float(uncertainty.level))
-        down, up = (v * float(ndtri(q) / stdtrit(max(int(runs), 1) * (blocks - 1), q))
+    widening = getattr(uncertainty, "bootstrap_widening", None)
+    if blocks >= 2 and widening is not None:
+        # t / z = the stored widening over its bias correction sqrt(B / (B - 1))
+        down, up = (v * math.sqrt(blocks / (blocks - 1.0)) / float(widening)
                     for v in (down, up))
     return (down + up) / rt_mean
 

@@ -155,7 +155,8 @@ def _binned_lags(probability: np.ndarray, lag: float, edges: np.ndarray,
     return hist
 
 
-def block_bootstrap_models(model, *, blocks: int = 10, resamples: int = 100, seed: int = 0):
+def block_bootstrap_models(model, *, blocks: int = BOOTSTRAP_BLOCKS, resamples: int = 100,
+                           seed: int = 0):
     """Models fitted on block-bootstrap resamples of a model's fitting window.
 
     The fitting window (re-read from the model's source file) is cut into ``blocks``

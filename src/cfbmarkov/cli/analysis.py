@@ -117,21 +117,19 @@ def cmd_compare(args) -> int:
                   "window")
     model = summary["model"]
     if model.get("rt_mean_interval"):
-        from cfbmarkov.markov.uncertainty import outward_bounds
-
-        def shown(bounds) -> str:       # rounded outwards: it holds what the stored one holds
-            return "-".join(outward_bounds(*bounds, digits=4))
-
         (m0, m1), (s0, s1) = model["rt_mean_interval"], model["rt_sd_interval"]
+        reference = summary["reference"]
+        # rounded outwards, at the digits the verdict below prints the reference at
+        dm = _digits(reference["rt_mean"], (m0, m1))
+        ds = _digits(reference["rt_sd"], (s0, s1))
         with_flow = (summary.get("intervals") or {}).get("flow_sd") is not None
         own = ""
         if with_flow and "model_rt_mean_interval" in model:
-            own = (f" (the model's own: E(RT) {shown(model['model_rt_mean_interval'])} s, "
-                   f"SD(RT) {shown(model['model_rt_sd_interval'])} s)")
+            own = (f" (the model's own: E(RT) {_interval_text(model['model_rt_mean_interval'])}"
+                   f" s, SD(RT) {_interval_text(model['model_rt_sd_interval'])} s)")
         kind = " with the flow's variability" if with_flow else ""
-        print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) {shown((m0, m1))} s, "
-              f"SD(RT) {shown((s0, s1))} s{own}")
-        reference = summary["reference"]
+        print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) "
+              f"{_interval_text((m0, m1), dm)} s, SD(RT) {_interval_text((s0, s1), ds)} s{own}")
         print("  " + interval_verdict(reference["rt_mean"], reference["rt_sd"],
                                       (m0, m1), (s0, s1)))
     exact = summary.get("exact_reference")
@@ -179,15 +177,29 @@ def _place(value: float, interval) -> str:
 
 
 def _digits(value: float, interval) -> int:
-    """Significant digits (4 or more) at which a value outside ``interval`` prints apart
-    from the end it lies beyond, so that "0.8855 lies above 0.8835-0.8855" cannot be
-    printed."""
-    lo, hi = interval
-    end = hi if value > hi else lo if value < lo else None
+    """Significant digits (4 or more) at which a value outside ``interval`` prints beyond
+    the end it lies beyond, the value rounded to the nearest and the interval's ends
+    outwards (:func:`~cfbmarkov.markov.uncertainty.outward_bounds`, as the interval is
+    printed at these digits), so that "0.8855 lies above 0.8835-0.8855" or "0.8854 lies
+    above 0.8801-0.8855" cannot be printed."""
+    from cfbmarkov.markov.uncertainty import outward_bounds
+
+    lo, hi = (float(v) for v in interval)
     digits = 4
-    while end is not None and digits < 12 and f"{value:.{digits}g}" == f"{end:.{digits}g}":
+    while digits < 12 and not lo <= value <= hi:
+        lo_text, hi_text = outward_bounds(lo, hi, digits)
+        shown = float(f"{value:.{digits}g}")
+        if (value > hi and shown > float(hi_text)) or (value < lo and shown < float(lo_text)):
+            break
         digits += 1
     return digits
+
+
+def _interval_text(interval, digits: int = 4) -> str:
+    """``lo-hi`` at ``digits`` significant digits rounded outwards."""
+    from cfbmarkov.markov.uncertainty import outward_bounds
+
+    return "-".join(outward_bounds(*(float(v) for v in interval), digits=digits))
 
 
 def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -> str:
@@ -346,7 +358,7 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
             if method.startswith("block bootstrap") else "Monte Carlo noise only")
     place = _place(reference_mean, (lo, hi))
     d = _digits(reference_mean, (lo, hi))
-    text = (f"{100 * level:g} % interval of the model's exit mean {lo:.{d}g}-{hi:.{d}g} ({kind}; "
+    text = (f"{100 * level:g} % interval of the model's exit mean {_interval_text((lo, hi), d)} ({kind}; "
             f"the flow's variability left out): the reference's {reference_mean:.{d}g} lies "
             f"{place} it")
     if place == "inside":

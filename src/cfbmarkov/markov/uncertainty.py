@@ -96,8 +96,11 @@ def outward_bounds(lower: float, upper: float, digits: int = 3) -> tuple[str, st
     """
     def rounded(value: float, up: bool) -> str:
         if value == 0.0 or not np.isfinite(value):
+            return f"{abs(value) if value == 0.0 else value:.{digits}g}"     # no "-0"
+        exponent = digits - 1 - int(np.floor(np.log10(abs(value))))
+        if abs(exponent) > 290:        # a scale that overflows (below ~1e-290): as it is
             return f"{value:.{digits}g}"
-        scale = 10.0 ** (digits - 1 - int(np.floor(np.log10(abs(value)))))
+        scale = 10.0 ** exponent
         scaled = value * scale
         slack = 1e-9 * abs(scaled)       # a value already on the grid stays where it is
         whole = np.ceil(scaled - slack) if up else np.floor(scaled + slack)
@@ -302,7 +305,7 @@ class ModelUncertainty:
                 f"for its {blocks} (a model file of an earlier cfbmarkov): its bootstrap "
                 f"part is about {factor:.2f} times too narrow, so it holds the figure less "
                 "often than stated; fit again, or form the interval anew with `cfbmarkov "
-                "rtd MODEL --resamples 100`"]
+                f"rtd MODEL --level {self.level:g} --resamples {self.requested or self.resamples}`"]
 
     def warnings(self, runs: int = 1) -> list[str]:
         """Every line on the interval: :meth:`cut_at_zero`, :meth:`short_of_resamples` and

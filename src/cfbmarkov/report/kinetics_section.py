@@ -109,7 +109,10 @@ def _with_interval(block: dict) -> str:
     interval = block.get("exit_mean_interval")
     if (text != "n/a" and isinstance(interval, list) and len(interval) == 2
             and all(finite_or_none(v) is not None for v in interval)):
-        text += f" [{interval[0]:.4g}, {interval[1]:.4g}]"
+        from cfbmarkov.markov.uncertainty import outward_bounds
+
+        lo, hi = outward_bounds(float(interval[0]), float(interval[1]), digits=4)
+        text += f" [{lo}, {hi}]"          # rounded outwards: it holds what the interval holds
     return text
 
 
