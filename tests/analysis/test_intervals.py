@@ -292,6 +292,11 @@ def test_compare_leaves_out_only_the_mixing_band_without_the_tracers_states(tmp_
     summary = compare(reference, pred, window=(2.0, 3.0), output=tmp_path / "cmp",
                       figures=False, resamples=20)
     assert "rt_mean_interval" in summary["model"] and "mixing_interval" not in summary["model"]
+    from cfbmarkov.markov.uncertainty import bootstrap_widening
+
+    # the summary records the factor its bootstrap part was widened by (10 blocks, 1 run)
+    assert summary["intervals"]["bootstrap_widening"] == pytest.approx(
+        bootstrap_widening(0.9, 10))
     assert any(w.startswith("no mixing interval: the tracers' states at 2 s") for w in
                summary["warnings"]), summary["warnings"]
 

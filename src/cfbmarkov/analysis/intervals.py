@@ -94,6 +94,9 @@ class PredictionIntervals:
     flow_degrees_of_freedom : int or None
         Their degrees of freedom: the interval takes Student's t with them
         (:func:`~cfbmarkov.analysis.bootstrap.flow_quantile`); None with ``flow``.
+    bootstrap_widening : float or None
+        The factor the bootstrap's distances to its quantiles were multiplied by for its
+        blocks (:func:`~cfbmarkov.markov.uncertainty.bootstrap_widening`).
     """
 
     level: float
@@ -108,6 +111,7 @@ class PredictionIntervals:
     model_rt_sd: tuple[float, float] | None = None
     flow: tuple[float, float] | None = None
     flow_degrees_of_freedom: int | None = None
+    bootstrap_widening: float | None = None
 
 
 class SourceChanged(InputError):
@@ -438,7 +442,8 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         None if curve is None else m_times, band,
         (float(max(model_mean[0], 0.0)), float(model_mean[1])),
         (float(max(model_sd[0], 0.0)), float(model_sd[1])),
-        None if relative is None else (float(f_mean), float(f_sd)), dof)
+        None if relative is None else (float(f_mean), float(f_sd)), dof,
+        bootstrap_widening(level, int(blocks), runs))
 
 
 #: most bins of a model's RTD interval (:func:`model_rtd_edges`)

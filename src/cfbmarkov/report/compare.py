@@ -367,6 +367,7 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
                                 "own")
             summary["intervals"] = {
                 "resamples": intervals.resamples, "blocks": intervals.blocks,
+                "bootstrap_widening": intervals.bootstrap_widening,
                 "method": ("block bootstrap of the fitting window, Monte Carlo noise"
                            + (" and the flow's variability between windows"
                               if intervals.flow is not None else "") + ", in quadrature"),
