@@ -312,8 +312,13 @@ def write_open_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, d
     The periodic run of :func:`write_run` with each pass through the top or the bottom
     turned into a visit outside: the particle is absent from the frame after the pass (it
     left through the outlet, or fell back out through the inlet) and present again from the
-    next one (re-inserted at the inlet, or back from below). Particle-frames, and so the work
-    of a fit or a prediction, stay those of the periodic run; the vertical boundary is open.
+    next one where the periodic run has it: after a pass up at the bottom (re-inserted at
+    the inlet), after a pass down at the top, so that such a track begins at the outlet and
+    the previous one ended at the inlet, both away from their faces (the fit counts them as
+    censored, and a residence continues across the gap as its definition has it). It is
+    therefore not a clean open riser of the periodic chain: its residences include the
+    down passes' gaps. Particle-frames, and so the work of a fit or a prediction, stay those
+    of the periodic run; the vertical boundary is open.
 
     Parameters
     ----------

@@ -93,7 +93,8 @@ def test_open_paths_equal_a_plain_integration(tmp_path):
         for k in range(1, y.shape[0]):
             if present[k - 1, p]:
                 v = a[discrete.states[k - 1, p]] * v + b[discrete.states[k - 1, p]]
-            if present[k, p] and not present[k - 1, p] and y[k, p] <= band:
+            if (present[k, p] and not present[k - 1, p] and y[k, p] <= band
+                    and math.isnan(entered)):              # a return within a residence: none
                 entered, v = discrete.times[k], 0.0
             elif present[k - 1, p] and not present[k, p] and last_y >= height - band:
                 if not math.isnan(entered):
@@ -104,6 +105,39 @@ def test_open_paths_equal_a_plain_integration(tmp_path):
     exits.sort(key=lambda e: (e[0], e[1]))
     assert got.count == len(exits) > 10
     np.testing.assert_allclose(got.exit_values, [e[2] for e in exits], atol=1e-13)
+
+
+def test_a_return_through_the_inlet_continues_the_residence_and_its_value(tmp_path):
+    """An open riser's particle that enters, falls back out through the inlet, returns and
+    leaves through the outlet makes one residence (as its residence time counts it): a
+    uniform rate's conversion at the exit is that of its time inside, not restarted at the
+    return (which gave 1 - exp(-k 0.3 s) for a residence of 0.7 s)."""
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    lag, height = 0.05, 1.0
+    times = lag * np.arange(21)
+    # present 0.1-0.25 s rising from the inlet, out 0.3-0.45 s, back at the inlet 0.5 s,
+    # rising to the outlet, gone from 0.85 s
+    y = np.full(times.size, 0.05)
+    present = np.zeros(times.size, bool)
+    for k, t in enumerate(times):
+        if 0.1 - 1e-9 <= t <= 0.25 + 1e-9:
+            present[k], y[k] = True, 0.05 + (t - 0.1)
+        elif 0.5 - 1e-9 <= t <= 0.8 + 1e-9:
+            present[k], y[k] = True, 0.05 + 3.0 * (t - 0.5)
+    y = np.minimum(y, 0.99)
+    positions = np.stack([np.full(times.size, 0.05), y], axis=1)[:, None, :]
+    path = write_trajectories(tmp_path / "open.h5", times, positions, width=0.1,
+                              height=height, present=present[:, None], boundary="open")
+    space = CellGrid(1, 10, 0.1, height)
+    discrete = discretize(path, space, lag, (0.0, 1.0), keep_positions=True)
+    k = 2.0
+    a = np.full(space.n_states, math.exp(-k * lag))
+    got = integrate_along_paths(discrete, a, 1.0 - a, 0.0, reset=True)
+    assert got.count == 1
+    np.testing.assert_allclose(got.residence_times, [0.75])     # 0.1 s to the exit at 0.85 s
+    inside = 0.2 + 0.35                    # lags advanced from 0.1 to 0.3 and 0.5 to 0.85 s
+    np.testing.assert_allclose(got.exit_values, [1.0 - math.exp(-k * inside)], atol=1e-12)
 
 
 def test_uniform_rate_exit_values_follow_the_residence_time(tmp_path):

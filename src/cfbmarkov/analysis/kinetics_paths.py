@@ -100,10 +100,13 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
     """Integrate a property along the paths of an open riser; return the exits written.
 
     A particle present in frame k - 1 in a state advances over the lag to frame k. An entry
-    is a frame where it is present, was absent before and lies within ``band`` of the inlet
-    (then, with ``reset``, its value restarts at ``v0``); an exit a frame where it is absent,
-    was present before within ``band`` of the outlet, recorded with the time since its
-    entry (NaN where the entry was not seen). A particle absent in the first frame is
+    is a frame where it is present, was absent before, lies within ``band`` of the inlet and
+    is in no residence (then, with ``reset``, its value restarts at ``v0``); an exit a frame
+    where it is absent, was present before within ``band`` of the outlet, recorded with the
+    time since its entry (NaN where the entry was not seen). A return through the inlet
+    within a residence (after falling back out, or out of view) continues it, its value
+    held while it was absent, as the residence times of
+    :func:`cfbmarkov.observed.residence.open_residence_times` count it. A particle absent in the first frame is
     not an entry there. ``exit_*`` must hold one slot per particle-frame that can be an
     exit. ``stored`` and ``use_stored`` as for :func:`integrate_periodic`.
     """
@@ -128,7 +131,7 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
                 s = states[k - 1, p]
                 if s >= 0:
                     value[p] = a[s] * value[p] + b[s]
-            if now and not before and vertical[k, p] <= band:
+            if now and not before and vertical[k, p] <= band and np.isnan(entered[p]):
                 entered[p] = t
                 if reset:
                     value[p] = v0
