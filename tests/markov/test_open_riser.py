@@ -169,6 +169,13 @@ def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys):
     assert summary["reference"]["rt_count"] > 50 and summary["model"]["rt_count"] > 50
     assert abs(summary["model"]["rt_mean"] / summary["reference"]["rt_mean"] - 1) < 0.15
     assert summary["units"]["mixing_rms"] == "fraction of the tracers still present"
+    # a later window holds other particles on the two sides: refused, naming where to start
+    capsys.readouterr()
+    assert main(["compare", run, pred, "--window", "5:7", "-o", str(tmp_path / "cmp5"),
+                 "--no-figures"]) == 2
+    err = capsys.readouterr().err
+    assert "do not start from the same particles" in err
+    assert "start the window at the prediction's first frame (4 s)" in err
     assert main(["maps", model, "--times", "0.1,0.2", "-o", str(tmp_path / "maps.png")]) == 0
     capsys.readouterr()
     assert main(["info", pred]) == 0

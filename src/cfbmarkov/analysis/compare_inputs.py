@@ -485,9 +485,12 @@ def starting_tracers(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: 
         return None
     if b.size and b.size < a.size and np.isin(b, a).all():
         return b
+    first = float(pred.times[0]) if pred.n_frames else float("nan")
     raise InputError(f"{ref.path} ({a.size} particles present at the window start) and "
                      f"{pred.path} ({b.size}) do not start from the same particles; mixing "
-                     "needs the same tracers on both sides")
+                     "needs the same tracers on both sides: start the window at the "
+                     f"prediction's first frame ({first:g} s), where it holds the reference's "
+                     "particles")
 
 
 __all__ = ["check_bins", "check_common_window", "check_order", "check_parameters",

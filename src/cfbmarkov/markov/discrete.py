@@ -425,7 +425,7 @@ def check_domain(state_space: StateSpace, width: float, height: float, source: s
     if state_space.depth is not None:
         if depth is None:
             raise InputError(f"state space {state_space.describe()} has depth columns but "
-                             f"{source} is 2D (use COLUMNSxROWS cells)")
+                             f"{source} is 2D: give a 3D file, or fit with COLUMNSxROWS cells")
         if not np.isclose(state_space.depth, depth):
             raise InputError(f"state space covers a depth of {state_space.depth:g} m but "
                              f"{source} is {depth:g} m deep")

@@ -232,7 +232,7 @@ def check_reference_starts(traj, kinetics, start: float) -> int:
             raise InputError(f"property {name} starts from the reference, but {traj.path} "
                              f"holds no values of it (properties: "
                              f"{', '.join(traj.property_names) or 'none'}); use start = "
-                             "entry or carried")
+                             "entry (or carried, on a periodic riser)")
         stored = traj.property_attrs(name).get("law")
         if isinstance(stored, bytes):
             stored = stored.decode(errors="replace")
