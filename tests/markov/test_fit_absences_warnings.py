@@ -211,3 +211,24 @@ def test_interval_bounds_print_rounded_outwards():
     u = ModelUncertainty(0.9, (2.35934, 2.39401), (0.0, 0.82712), edges, band, 100, 10, 0.1,
                          bootstrap_widening=1.175)
     assert "(90 % interval 2.359-2.395 s)" in u.describe(2.377, 0.81)
+
+
+def test_a_short_window_lengths_unresolved_mass_is_named_as_such(tmp_path, capsys):
+    """`rtd --window-length` shorter than most residences: the mass not ended within the
+    window is said to be the longer residences, not a chain that never reaches the top (the
+    advice to coarsen the grid does not apply); the intrinsic RTD of the same model has
+    none to speak of."""
+    flow = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                               vertical_spread=0.5, persistence=False)
+    run = synthetic.write_run(tmp_path / "run.h5", flow, 200, 4.0, seed=3)
+    model = tmp_path / "m.h5"
+    assert main(["fit", str(run), "--cells", "4x16", "--window", "0:4", "--estimator", "mle",
+                 "--resamples", "0", "-o", str(model)]) == 0
+    capsys.readouterr()
+    assert main(["rtd", str(model), "--window-length", "2"]) == 0
+    err = capsys.readouterr().err
+    line = next(x for x in err.splitlines() if "unresolved mass" in x)
+    assert "in the 2 s window: the share of the chain's residences that do not end" in line
+    assert "coarser grid" not in line
+    assert main(["rtd", str(model)]) == 0
+    assert "unresolved mass" not in capsys.readouterr().err

@@ -50,8 +50,16 @@ def unresolved_warning(rtd) -> str | None:
                 "another --states")
     if not u > UNRESOLVED_LIMIT:
         return None
-    window = ("; the window is short beside the residences: a longer --window-length"
-              if rtd.window is not None else "")
+    if rtd.window is not None:
+        # an RTD as a window sees it is followed only as far as the window's length: what
+        # has not ended by then is mostly the residences longer than the window
+        return (f"unresolved mass {u:.2g} in the {rtd.window:g} s window: the share of the "
+                "chain's residences that do not end within the window's length (the longer "
+                "ones, and any that never reach the top); E(RT) and SD(RT) describe the "
+                "others, as a window of this length sees them; leave out --window-length "
+                "for the intrinsic RTD, whose unresolved mass says whether the chain reaches "
+                "the top from every state, or give a longer --window-length")
+    window = ""
     return (f"unresolved mass {u:.2g} (above {100 * UNRESOLVED_LIMIT:g} %): E(RT) and SD(RT) "
             f"describe only the resolved {100 * (1.0 - u):.3g} % of the residences; the rest "
             "never reach the top in the chain (they stay in states where the fitting data "
