@@ -89,6 +89,22 @@ def test_uniform_rate_the_chain_and_the_segregated_flow_agree(prediction, tmp_pa
     assert seg["rate"] == pytest.approx(1.0)
 
 
+def test_a_segregated_flow_of_another_window_length_is_warned_of(prediction, tmp_path):
+    """The baseline's residences come from the 6 s fitting window: compared on 3 s, a
+    warning says it is not like for like (as for the persistence baseline); on 6 s none."""
+    from cfbmarkov.report.compare import compare
+
+    run, pred, _ = prediction
+    kin = _kinetics(tmp_path, "uniform", "rate = 1.0")
+    short = compare(run, pred, window=(6.0, 9.0), output=tmp_path / "s", figures=False,
+                    resamples=0, kinetics=kin)["warnings"]
+    assert any("segregated-flow baseline's residences are those of the 6 s fitting window"
+               in w and "compared window is 3 s long" in w for w in short), short
+    same = compare(run, pred, window=(6.0, 12.0), output=tmp_path / "t", figures=False,
+                   resamples=0, kinetics=kin)["warnings"]
+    assert not any("segregated-flow baseline's residences" in w for w in same), same
+
+
 def test_cli_compare_kinetics_prints_and_writes_the_block(prediction, tmp_path, capsys):
     from cfbmarkov.cli import main
 

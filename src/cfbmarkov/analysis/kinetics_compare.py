@@ -238,9 +238,12 @@ def _cell_fields(model, ref, warnings):
     return fields
 
 
-def _fitting_rtd_and_occupancy(model, ref, on, warnings):
+def _fitting_rtd_and_occupancy(model, ref, on, warnings, length: float | None = None):
     """The fitting window's residence-time samples (on the comparison's basis) and state
-    occupancy at the model's lag; (None, None) with a warning where unreadable."""
+    occupancy at the model's lag; (None, None) with a warning where unreadable. Where the
+    fitting window's length differs from the compared one's (``length``, s), a warning that
+    the segregated-flow baseline is built from residences a window of another length sees
+    (as the persistence baseline's)."""
     from cfbmarkov.markov.discrete import discretize
     from cfbmarkov.observed.residence import residence_times
     from cfbmarkov.trajectories import opened
@@ -262,6 +265,13 @@ def _fitting_rtd_and_occupancy(model, ref, on, warnings):
         return None, None
     states = discrete.states[::discrete.lag_frames]
     occupancy = np.bincount(states[states >= 0], minlength=model.n_states).astype(float)
+    fit_length = float(window[1] - window[0])
+    if length is not None and abs(fit_length - length) > max(0.5 * model.lag, 1e-6 * length):
+        warnings.append(f"kinetics: the segregated-flow baseline's residences are those of the "
+                        f"{fit_length:g} s fitting window {window[0]:g}-{window[1]:g} s and the "
+                        f"compared window is {length:g} s long: a window sees residences up "
+                        "to its own length, so the baseline is not like for like; fit on a "
+                        "window as long as the compared one for a fair baseline")
     return rt.samples, occupancy
 
 
@@ -554,7 +564,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     windowed = _windowed(model, sk, stop - start, warnings, on.direction) if exact else {}
     boot = (bootstrap_exit_means(model, kinetics, fields, resamples, warnings, on.direction)
             if exact else None)
-    rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings)
+    rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings, stop - start)
     n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)
     summary, figures = {}, {}
     for m in maps:
