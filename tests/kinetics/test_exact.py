@@ -214,6 +214,25 @@ def test_wall_temperature_replaces_the_wall_cells():
     np.testing.assert_array_equal(k.per_state(space).target[0], [500.0, 800.0, 500.0])
 
 
+def test_a_grid_of_wall_cells_only_is_warned_of():
+    """wall_temperature where every cell touches a wall (two depth columns of a 3D grid,
+    or two columns): a note says temperature is used nowhere; with a middle depth column
+    or without wall_temperature, none."""
+    k = Kinetics((Property("T", HeatExchange(500.0), {"coefficient": Constant(1.0),
+                                                       "temperature": Constant(800.0)},
+                           initial=300.0),))
+    flat = Kinetics((Property("T", HeatExchange(), {"coefficient": Constant(1.0),
+                                                    "temperature": Constant(800.0)},
+                              initial=300.0),))
+    two = CellGrid(4, 16, 0.09, 0.95, depth_columns=2, depth=0.02)
+    notes = k.grid_notes(two)
+    assert len(notes) == 1 and "its 2 depth columns put every cell at the front or back" \
+        in notes[0] and "temperature nowhere" in notes[0]
+    assert "its 2 columns put every cell at a side wall" in k.grid_notes(CellGrid(2, 8))[0]
+    assert k.grid_notes(CellGrid(4, 16, 0.09, 0.95, depth_columns=3, depth=0.03)) == ()
+    assert flat.grid_notes(two) == ()
+
+
 def _draw(p, n, seed):
     rng = np.random.default_rng(seed)
     return rng.choice(p.size, size=n, p=p / p.sum()).astype(np.int32)

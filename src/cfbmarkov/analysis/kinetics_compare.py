@@ -523,6 +523,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                          "side here; compare needs linear laws")
     fields = _cell_fields(model, ref, warnings) if needs_cell_fields(kinetics) else None
     warnings.extend(f"kinetics: {note}" for note in kinetics.field_notes(fields))
+    warnings.extend(f"kinetics: {note}" for note in kinetics.grid_notes(model.state_space))
     sk = kinetics.per_state(model.state_space, fields)
     maps = linear_maps(sk, model.lag)
     start, stop = comparison.window

@@ -68,7 +68,7 @@ def cmd_react(args) -> int:
 
         check_fitting_file(model, args.run, model_name=str(args.model))
     state_kinetics = kinetics.per_state(model.state_space, fields)
-    notes = list(kinetics.field_notes(fields))
+    notes = list(kinetics.field_notes(fields)) + list(kinetics.grid_notes(model.state_space))
     for note in notes:
         print(f"warning: {one_line(note)}", file=sys.stderr)
     # the model's own verdict, printed once the answers stand (a refusal stays one line):

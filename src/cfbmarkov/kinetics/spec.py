@@ -378,6 +378,35 @@ class Kinetics:
                              tuple(pr.law for pr in self.properties), self.source,
                              state_space)
 
+    def grid_notes(self, state_space) -> tuple[str, ...]:
+        """Warnings on a heat exchange's ``wall_temperature`` where every cell of the grid
+        touches a wall (a 3D grid of at most two depth columns: its front and back walls
+        take every cell), so that ``temperature`` is used nowhere.
+
+        Parameters
+        ----------
+        state_space : StateSpace
+            The model's states (their grid's cells).
+
+        Returns
+        -------
+        tuple of str
+            One line each, naming the property and what to do.
+        """
+        wall = wall_cells(state_space)
+        if not wall.all():
+            return ()
+        depth = int(getattr(state_space, "depth_columns", 1) or 1)
+        why = (f"its {depth} depth columns put every cell at the front or back wall"
+               if depth > 1 else f"its {state_space.columns} columns put every cell at a "
+               "side wall")
+        return tuple(
+            f"property {prop.name}: every cell of the grid touches a wall ({why}), so "
+            "wall_temperature applies everywhere and temperature nowhere; fit on a grid "
+            "with cells away from the walls (more columns or depth columns, or COLUMNSxROWS)"
+            for prop in self.properties
+            if isinstance(prop.law, HeatExchange) and prop.law.wall_temperature is not None)
+
     def field_notes(self, cell_fields: CellFields | None) -> tuple[str, ...]:
         """Warnings on the parameters given as a function of a cell field: where the solids
         fraction is a relative count (a fitting file without the particle diameter), and
