@@ -66,6 +66,8 @@ def test_fit_pooled_stores_and_prints_the_interval_and_refuses_a_run_with_itself
     printed = capsys.readouterr().out
     assert "90 % interval" in printed and "fitting windows of 2 runs" in printed
     assert "windows 0.5:2.5, 0.4:2.4 s" in printed
+    # the factor the bootstrap's spread was widened by, for 2 runs of 10 blocks: 18 dof
+    assert "(their spread widened 1.11 times, for its 18 degrees of freedom)" in printed
     model = MarkovModel.load(out)
     assert model.run_windows == ((0.5, 2.5), (0.4, 2.4))
     assert model.uncertainty is not None and model.uncertainty.blocks == 20

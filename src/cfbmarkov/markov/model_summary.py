@@ -205,11 +205,14 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
                     + f", times {u.flow_multiplier_text()})")
             lines.append(f"  exact residence time: {u.describe(r.mean, r.sd)}")
             runs = len(model.run_windows) if model.run_windows is not None else 1
+            widened = ("" if u.bootstrap_widening is None else
+                       f" (their spread widened {u.bootstrap_widening:.3g} times, for its "
+                       f"{u.blocks - runs} degrees of freedom)")
             where = (f"the fitting windows of {runs} runs: {u.resamples} bootstrap "
                      f"resamples of {u.blocks // runs} blocks of each run, about "
-                     f"{u.block_length:.3g} s long" if runs > 1 else
+                     f"{u.block_length:.3g} s long{widened}" if runs > 1 else
                      f"the fitting window alone: {u.resamples} bootstrap resamples of "
-                     f"{u.blocks} blocks of {u.block_length:.3g} s")
+                     f"{u.blocks} blocks of {u.block_length:.3g} s{widened}")
             lines.append(f"    interval from {where}{flow}")
         else:
             lines.append(f"  exact residence time: E(RT) = {r.mean:.4g} s, "
