@@ -75,6 +75,36 @@ def test_deeper_levels_from_the_losses_of_two_tries():
     assert deeper_levels([(8, 0.005), (16, 0.0049)]) > 16         # unwarned: go deeper
     assert deeper_levels([(4, 1e-2), (8, 1e-3)]) == 8 + 20        # rho^4 = 0.1
     assert deeper_levels([(64, 0.5)]) == 64                      # the cap
+    # one try and its decay: where a tenth of 1e-7 would be lost, at most twice as deep
+    assert deeper_levels([(8, 3e-7)], decay=0.18) == 8 + 2       # 3e-7 * 0.18^2 < 1e-8
+    assert deeper_levels([(8, 1e-2)], decay=0.6) == 16           # 8 + 23 capped
+    assert deeper_levels([(8, 1e-2)], decay=1.0) == 16           # no decay: double
+
+
+def test_one_try_measures_the_decay_of_the_loss_and_the_depth_follows():
+    """A walk's residences reach deficit -K before they end with probability
+    (r - 1) / (r^(K+1) - 1), r = up / down (gambler's ruin): the decay the first try's
+    block elimination measures is down / up, and the depth kept is where a
+    tenth of DEFICIT_TOL would be lost by it (13 for 0.1 / 0.4; doubling gave 16), with
+    the walk's Wald mean."""
+    import scipy.sparse as sp
+
+    from cfbmarkov.markov.entry_chain import entry_matrix
+    from cfbmarkov.markov.first_passage import split_by_pass
+
+    up, down = 0.4, 0.1
+    model = walk(up, down)
+    parts = split_by_pass(sp.csr_matrix(model.transition_matrix), model.up_fraction,
+                          model.down_fraction)
+    live = np.ones((MIN_DEFICIT_LEVELS + 1, 1), bool)
+    _, h0, decay = entry_matrix(*parts, live, np.array([0]), with_falls=True, with_decay=True)
+    assert decay == pytest.approx(down / up, rel=1e-4)
+    r, depth = up / down, MIN_DEFICIT_LEVELS + 1        # below level 8: deficit -9 first
+    assert h0[0] == pytest.approx((r - 1) / (r ** (depth + 1) - 1), rel=1e-9)  # ruin
+    rtd = model.rtd()
+    assert rtd.deficit_levels == MIN_DEFICIT_LEVELS + 5     # 0.25^14 < 1e-8 < 0.25^13
+    assert rtd.unresolved < DEFICIT_TOL
+    assert rtd.mean == pytest.approx(LAG / (up - down), rel=1e-7)
 
 
 def test_the_threaded_propagation_gives_the_same_bits(monkeypatch):

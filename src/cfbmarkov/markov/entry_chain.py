@@ -35,9 +35,10 @@ from threadpoolctl import threadpool_limits
 
 
 def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
-                 with_falls: bool = False):
+                 with_falls: bool = False, with_decay: bool = False):
     """B, the embedded chain of entry states (module docstring), dense; with ``with_falls``
-    also the probability of falling below the deepest level.
+    also the probability of falling below the deepest level, and with ``with_decay`` how
+    fast that probability falls with the depth.
 
     The probability h of falling below the deepest level L - 1 before the residence ends
     solves h = Q h + f, with f the down passes from level L - 1 (P_down's row sums there):
@@ -45,6 +46,16 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     c_g = D_g T_(g+1)^-1 c_(g+1), and h_0 = T_0^-1 c_0, one more solve per level with the
     factors B already needs (Kemeny and Snell's absorption probabilities, the fall below
     the levels taken as a second absorbing state).
+
+    The decay: T_g^-1 c_g is, from each state of level g, the probability of falling below
+    the deepest level before passing up from level g; one level nearer the top it is one
+    more level of depth to fall through. Far from the deepest level the Schur complements
+    T_g converge (to those of the unbounded levels, a quasi-birth-death process's), and the
+    ratio of those probabilities summed over a level's states, level 1 over level 2,
+    converges to the factor rho by which each further level multiplies the loss
+    (lost(K) ~ c rho^K; Latouche and Ramaswami 1999, Ch. 6: the level-crossing matrices of
+    a QBD). :func:`cfbmarkov.markov.first_passage.deeper_levels` uses it to choose the next
+    depth from one try.
 
     Parameters
     ----------
@@ -56,6 +67,9 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
         The entry states (columns of P_up with a non-zero).
     with_falls : bool, optional
         Also return h_0.
+    with_decay : bool, optional
+        With ``with_falls``, also return the decay (NaN where there are fewer than three
+        levels or nothing falls).
 
     Returns
     -------
@@ -66,6 +80,13 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     ndarray of float64, shape (S,)
         With ``with_falls``: h_0, from each state at level 0 the probability that the
         residence passes down from the deepest level (0 for a state not live there).
+    float
+        With ``with_decay``: rho, the factor by which one more level multiplies the loss.
+
+    References
+    ----------
+    G. Latouche and V. Ramaswami, Introduction to Matrix Analytic Methods in Stochastic
+    Modeling, SIAM, Philadelphia (1999), Ch. 6 (quasi-birth-death processes).
     """
     levels, s = live.shape
     kept = [np.flatnonzero(live[g]) for g in range(levels)]
@@ -74,6 +95,7 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     carried = None                # T_(g+1)^-1 c_(g+1) on level g + 1's rows
     down_probability = np.asarray(p_down.sum(axis=1)).ravel() if with_falls else None
     t = None
+    carried_sums = {}             # level g: the sum of T_g^-1 c_g over its states
     for g in range(levels - 1, -1, -1):
         rows = kept[g]
         t = (sp.identity(rows.size, format="csr") - block(p_stay, rows, rows)).tocsr()
@@ -99,11 +121,15 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
         factors = splu(sp.csc_matrix(t)) if up_cols.size or with_falls else None
         up_block = factors.solve(u[:, up_cols].toarray()) if up_cols.size else None
         carried = factors.solve(falls) if with_falls else None
+        if with_falls and g <= 2:
+            carried_sums[g] = float(carried.sum())
     out = np.zeros((entries.size, entries.size))
     h0 = np.zeros(s)
     rows = kept[0]
+    decay = (carried_sums[1] / carried_sums[2]
+             if carried_sums.get(1, 0.0) > 0 and carried_sums.get(2, 0.0) > 0 else float("nan"))
     if rows.size == 0:
-        return (out, h0) if with_falls else out
+        return ((out, h0, decay) if with_decay else (out, h0)) if with_falls else out
     position = -np.ones(s, np.int64)
     position[rows] = np.arange(rows.size)
     factors = splu(sp.csc_matrix(t))
@@ -113,7 +139,7 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     if not with_falls:
         return out
     h0[rows] = factors.solve(falls)
-    return out, h0
+    return (out, h0, decay) if with_decay else (out, h0)
 
 
 class _Blocks:

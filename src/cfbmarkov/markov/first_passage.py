@@ -662,19 +662,23 @@ DEFICIT_TOL = 1e-7
 UNRESOLVED_WARNED = 0.01
 
 
-def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> int:
+def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL,
+                  decay: float = float("nan")) -> int:
     """The lap deficits to keep next, from the tries so far: (K, the mass lost below level
     K) pairs, in order.
 
     The mass a chain's residences lose below level K falls about geometrically with K once
-    its deepest excursions dominate, lost(K) ~ c rho^K: after the first try (K =
-    :data:`MIN_DEFICIT_LEVELS`) the next doubles K; from two tries rho is estimated, and the
-    next K is where the loss would be a tenth of ``tol`` (the loss of the shallower tries
-    falls a little faster than the deeper ones'), at least 8 deeper than the last, at most
-    :data:`MAX_DEFICIT_LEVELS`. Where the loss is above :data:`UNRESOLVED_WARNED` and fell
-    by less than a tenth between the two tries, K stays:
-    residences counted against the chain's net drift (up passes of a net downflow) keep
-    falling at any depth, and their loss stays unresolved mass, warned of above 1 %.
+    its deepest excursions dominate, lost(K) ~ c rho^K. After the first try (K =
+    :data:`MIN_DEFICIT_LEVELS`) the next K is where the loss would be a tenth of ``tol``
+    by the ``decay`` that try measured (rho from its block elimination,
+    :func:`cfbmarkov.markov.entry_chain.entry_matrix`), at most twice the first K; without
+    a decay in (0, 1) it doubles K. From two tries rho is estimated from their losses, and
+    the next K is where the loss would be a tenth of ``tol`` (the loss of the shallower
+    tries falls a little faster than the deeper ones'), at least 8 deeper than the last,
+    at most :data:`MAX_DEFICIT_LEVELS`. Where the loss is above :data:`UNRESOLVED_WARNED`
+    and fell by less than a tenth between the two tries, K stays: residences counted
+    against the chain's net drift (up passes of a net downflow) keep falling at any depth,
+    and their loss stays unresolved mass, warned of above 1 %.
 
     Parameters
     ----------
@@ -682,6 +686,9 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> i
         The deficits kept and the mass lost below them, at least one try.
     tol : float, optional
         The loss accepted.
+    decay : float, optional
+        rho as the last try's block elimination measured it (used after the first try
+        only; NaN: unknown).
 
     Returns
     -------
@@ -694,6 +701,9 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL) -> i
     if lost <= tol or levels >= MAX_DEFICIT_LEVELS:
         return levels
     deeper = 2 * levels
+    if len(tried) == 1 and 0.0 < decay < 1.0:
+        deeper = min(deeper, levels + max(1, int(np.ceil(np.log(0.1 * tol / lost)
+                                                         / np.log(decay)))))
     if len(tried) >= 2:
         before, lost_before = tried[-2]
         if lost > UNRESOLVED_WARNED and not lost < 0.9 * lost_before:
@@ -725,7 +735,7 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int | N
         start = _start_on_levels(p_up, p_down, p_stay, levels + 1, entry, entry_flux, chain,
                                  with_falls=True)
         tried.append((levels, start.lost))
-        deeper = deeper_levels(tried)
+        deeper = deeper_levels(tried, decay=start.decay)
         if deeper == levels:
             break
         levels = deeper
@@ -992,6 +1002,7 @@ class _LevelStart:
     entry: np.ndarray               # float64 [S], the entry distribution
     classes: int
     lost: float                     # the mass that falls below level L - 1 (NaN if not asked)
+    decay: float = float("nan")     # rho, how fast ``lost`` falls with the depth (NaN: unknown)
 
     def finish_arguments(self, p_up, p_down, p_stay, tol, max_steps, lag) -> tuple:
         return ((p_down, p_stay, p_up), self.live, self.exit_probability, self.start, tol,
@@ -1036,18 +1047,20 @@ def _start_on_levels(p_up, p_down, p_stay, levels: int, entry, entry_flux, chain
         start = np.zeros((levels, s))
         start[0, live[:s]] = entry[live[:s]]
         start /= start.sum()
+        decay = float("nan")
         if with_falls:
-            falls = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries,
-                                 with_falls=True)[1]
+            _, falls, decay = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s),
+                                           entries, with_falls=True, with_decay=True)
         return _LevelStart(live.reshape(levels, s), exit_probability[:s], start,
                            entry / entry.sum(), 1,
-                           float(start[0] @ falls) if with_falls else float("nan"))
+                           float(start[0] @ falls) if with_falls else float("nan"), decay)
     # B, the embedded chain of entry states, by block elimination over the levels
     # (markov.entry_chain: no LU of the [S L, S L] matrix), and its stationary distribution
     embedded = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries,
-                            with_falls=with_falls)
+                            with_falls=with_falls, with_decay=with_falls)
+    decay = float("nan")
     if with_falls:
-        embedded, falls = embedded
+        embedded, falls, decay = embedded
     live_entries = live[entries]
     classes = _closed_entry_classes(chain, entries)
     if len(classes) > 1:
@@ -1080,7 +1093,7 @@ def _start_on_levels(p_up, p_down, p_stay, levels: int, entry, entry_flux, chain
     full_start = full_start.reshape(levels, s)
     return _LevelStart(live.reshape(levels, s), exit_probability[:s], full_start, entry,
                        max(1, len(classes)),
-                       float(full_start[0] @ falls) if with_falls else float("nan"))
+                       float(full_start[0] @ falls) if with_falls else float("nan"), decay)
 
 
 def open_rtd(absorbing: np.ndarray, exit_probability: np.ndarray, entry: np.ndarray, lag: float,
