@@ -237,3 +237,24 @@ def test_exact_rtd_mean_equals_monte_carlo_for_random_chains(seed, reducible):
     exact = model.rtd(window=n_steps * lag)
     se = samples.std(ddof=1) / np.sqrt(samples.size)
     assert abs(samples.mean() - exact.mean) < 5 * se, (samples.mean(), exact.mean, se)
+
+
+def test_a_lag_typed_near_a_frame_takes_the_frames_lag(tmp_path):
+    """Frames of a 120 Hz camera (times to 5 decimals) and --lag 0.0083 s: within the
+    files' tolerance of one frame, so accepted, and the model's lag is the frame's 1/120 s
+    that the transitions span; a tracer rising one lap every 37 frames then resides
+    37/120 s exactly (the typed lag gave 37 x 0.0083 s, 0.4 % short, and predictions
+    whose times no longer fell on the file's frames)."""
+    from cfbmarkov.markov import fit_model
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    n, period = 600, 37
+    y = (np.arange(n) % period + 0.5) / period
+    pos = np.stack([np.full(n, 0.05), y], axis=-1)[:, None, :]
+    run = write_trajectories(tmp_path / "cam.h5", np.round(np.arange(n) / 120, 5), pos,
+                             width=0.1, height=1.0)
+    model = fit_model(run, CellGrid(1, 8, 0.1, 1.0), 0.0083)
+    assert model.lag == pytest.approx(1 / 120, rel=1e-6)
+    exact = fit_model(run, CellGrid(1, 8, 0.1, 1.0), 1 / 120)
+    assert model.lag == exact.lag
+    assert model.rtd().mean == exact.rtd().mean == pytest.approx(period / 120, rel=0.01)
