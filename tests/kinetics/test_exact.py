@@ -431,3 +431,65 @@ def test_an_exit_mean_beyond_its_range_by_round_off_is_put_on_it():
     assert _in_range(-1e-17, FirstOrder()) == 0.0
     assert _in_range(1.01, FirstOrder()) == 1.01 and _in_range(0.5, FirstOrder()) == 0.5
     assert _in_range(-5.0, HeatExchange()) == -5.0
+
+
+def conveyor_model(eps, columns=3, rows=5):
+    """Particles rise one row a lag in their column and pass up through the top after
+    ``rows`` lags, landing in the same column with probability 1 - eps (as a pass up on a
+    riser's cells mostly does), else in any column alike."""
+    n = columns * rows
+    p = np.zeros((n, n))
+    up = np.zeros((n, n))
+    landing = (1 - eps) * np.eye(columns) + eps / columns
+    for c in range(columns):
+        for i in range(rows - 1):
+            p[i * columns + c, (i + 1) * columns + c] = 1.0
+        top = (rows - 1) * columns + c
+        p[top, :columns] = landing[c]
+        up[top, :columns] = 1.0
+    zeros = np.zeros((n, n), np.int64)
+    return MarkovModel(p, zeros, zeros, zeros, CellGrid(columns, rows, 0.3, 1.0), LAG,
+                       estimator="given", pass_fractions=(up, np.zeros((n, n)))), landing
+
+
+@pytest.mark.parametrize("eps", [1.0, 0.3, 0.05])
+def test_a_carried_value_follows_where_each_pass_lands(eps):
+    """Heat exchange carried across passes on a conveyor whose passes mostly land in the
+    column they left (wall columns fast, 5 1/s toward 600 K; the core slow, 0.5 1/s toward
+    800 K): the next residence starts where the last one landed, so the passes are not
+    independent. Hand: from column c a residence maps v to A_c v + B_c (A_c = exp(-5 h_c
+    lag), B_c = T_c (1 - A_c)), and the value mass u entering each column solves
+    u = L^T (A u + B nu), nu uniform; the mean is sum u, the second moment likewise, after
+    N passes the same recursion from v0 nu, the bed's value per cell T_c + (u_c / nu_c - T_c)
+    exp(-h_c i lag) in row i. Independent passes gave one answer for every eps (the eps = 1
+    one: 621.5 K against 659.9 K at eps = 0.05)."""
+    from cfbmarkov.kinetics import ByCell
+
+    model, landing = conveyor_model(eps)
+    h, target = np.array([5.0, 0.5, 5.0]), np.array([600.0, 800.0, 600.0])
+    cells = [(c, i) for i in range(5) for c in range(3)]
+    coefficient = ByCell(np.array([[c, i, h[c]] for c, i in cells]))
+    temperature = ByCell(np.array([[c, i, target[c]] for c, i in cells]))
+    kin = Kinetics((Property("T", HeatExchange(None), {"coefficient": coefficient,
+                                                        "temperature": temperature},
+                             "carried", 300.0),))
+    out = exact_kinetics(model, kin)["T"]
+    a_c = np.exp(-5 * h * LAG)
+    b_c = target * (1 - a_c)
+    nu = np.full(3, 1 / 3)
+    u = np.linalg.solve(np.eye(3) - landing.T @ np.diag(a_c), landing.T @ (b_c * nu))
+    s = np.linalg.solve(np.eye(3) - landing.T @ np.diag(a_c ** 2),
+                        landing.T @ (2 * a_c * b_c * u + b_c ** 2 * nu))
+    assert out.exit_mean == pytest.approx(u.sum(), rel=1e-12)
+    assert out.exit_sd == pytest.approx(np.sqrt(s.sum() - u.sum() ** 2), rel=1e-9)
+    entering = u / nu
+    for c, i in cells:
+        expected = target[c] + (entering[c] - target[c]) * np.exp(-h[c] * i * LAG)
+        assert out.bed_mean_by_cell[i * 3 + c] == pytest.approx(expected, rel=1e-12)
+    v = 300.0 * nu
+    for n in range(1, 6):
+        v = landing.T @ (a_c * v + b_c * nu)
+        assert out.after_passes(n)[0] == pytest.approx(v.sum(), rel=1e-12)
+    if eps < 1:       # what independent passes give: the eps = 1 answer
+        independent = exact_kinetics(conveyor_model(1.0)[0], kin)["T"].exit_mean
+        assert abs(out.exit_mean - independent) > 5.0

@@ -14,11 +14,19 @@ D = diag(a), conditioning on the exit (p = e (I - Q)^-1 r, 1 but for trapped mas
     E[B^2]  = e eps / p,     eps   = (I - Q)^-1 (b^2 o (r + Q gamma) + b o (Q delta))
 
 (o the element-wise product); E[v_exit] = E[A] v0 + E[B] and E[v_exit^2] =
-E[A^2] v0^2 + E[2AB] v0 + E[B^2]. A property carried across passes (v0 the previous exit
-value, independent of the next residence) has the steady mean m = E[B] / (1 - E[A]) and
-second moment (E[2AB] m + E[B^2]) / (1 - E[A^2]). The bed's steady state per state:
+E[A^2] v0^2 + E[2AB] v0 + E[B^2].
+
+Carried properties: a value carried across passes enters the next residence where the
+last one landed, and where that is depends on where the last one entered (a pass up
+keeps its column), so the passes are not independent. The same recursions with the exits
+split by landing state, R [n, M] instead of r, give from each entry state j the moments
+landing in each j' (conditioned on leaving; M x M: A_jj' = E[A 1{j'}] and so on), and the
+value's mass entering each entry state in the steady state solves u = A^T u + B^T nu (nu
+the stationary entry distribution), its second moment's s = (A^2)^T s + (2AB)^T u +
+(B^2)^T nu; the steady mean is sum u. The bed's steady state per state:
 occupancy nu = e (I - Q)^-1 and value mass mu = (v0 e + (nu o b) Q) (I - D Q)^-1, the mean
-mu / nu (the value at the frames, each lag's start).
+mu / nu (the value at the frames, each lag's start; for a carried property u at the entry
+states in place of v0 e).
 
 An open riser's chain is Q = diag(1 - r) P with the model's exit probabilities and entry
 distribution; a periodic riser's is the chain on (lap-deficit level, state) of
@@ -96,53 +104,6 @@ class ExitMoments:
         """E[v_exit^2] for the entry value ``v0``."""
         return self.mean_a2 * v0 * v0 + self.mean_2ab * v0 + self.mean_b2
 
-    def carried(self) -> tuple[float, float]:
-        """The steady mean and second moment of a value carried across residences.
-
-        Returns
-        -------
-        mean, second : float
-
-        Raises
-        ------
-        InputError
-            If E[A] = 1 (no relaxation anywhere a particle goes: the value never forgets
-            its start, and there is no steady state).
-        """
-        forget = self.mean_1ma if np.isfinite(self.mean_1ma) else 1.0 - self.mean_a
-        forget2 = self.mean_1ma2 if np.isfinite(self.mean_1ma2) else 1.0 - self.mean_a2
-        if not forget > 0.0:
-            raise InputError("a carried property with a zero rate wherever particles go has "
-                             "no steady state (it keeps its start value): use start = entry")
-        m = self.mean_b / forget
-        return m, (self.mean_2ab * m + self.mean_b2) / forget2
-
-    def after_passes(self, v0: float, passes: int) -> tuple[float, float]:
-        """Mean and second moment of the exit value after ``passes`` residences of a value
-        carried from ``v0``, each residence independent of the last (as :meth:`carried`,
-        its limit): m_k = E[A] m_(k-1) + E[B], s_k = E[A^2] s_(k-1) + E[2AB] m_(k-1) +
-        E[B^2], with m_0 = v0 and s_0 = v0^2.
-
-        Parameters
-        ----------
-        v0 : float
-            The value at the first entry.
-        passes : int
-            Residences, at least 1.
-
-        Returns
-        -------
-        mean, second : float
-        """
-        m, s = float(v0), float(v0) * float(v0)
-        tiny = np.finfo(np.float64).tiny
-        for _ in range(int(passes)):
-            m, s = (self.mean_a * m + self.mean_b,
-                    self.mean_a2 * s + self.mean_2ab * m + self.mean_b2)
-            # below the normal floats a value is round-off of a far smaller one: 0
-            m, s = (0.0 if abs(m) < tiny else m), (0.0 if abs(s) < tiny else s)
-        return m, s
-
 
 def exit_moments(q, r, e, a, b, lu_q=None, c=None) -> ExitMoments:
     """:class:`ExitMoments` of an absorbing chain (module docstring).
@@ -200,6 +161,161 @@ def exit_moments(q, r, e, a, b, lu_q=None, c=None) -> ExitMoments:
     return ExitMoments(float(e @ alpha) / p, float(e @ beta) / p, float(e @ gamma) / p,
                        float(e @ delta) / p, float(e @ eps) / p, occupancy, per_start, rest, p,
                        forget, forget2)
+
+
+@dataclass(frozen=True)
+class CarriedMoments:
+    """A carried property's exit moments resolved by entry state: the value a particle
+    brings back depends on where its previous residence landed, and where it lands next
+    depends on where it entered (a pass up keeps its column), so the passes are not
+    independent of each other (module docstring, Carried properties).
+
+    Attributes
+    ----------
+    entry : ndarray of float64, shape (M,)
+        nu, the stationary distribution of the entry states (the exact RTD's).
+    a, b, a2, ab2, b2, forget, forget2 : ndarray of float64, shape (M, M)
+        From entry state j, landing in j' (conditioned on leaving): E[A 1{j'}], E[B 1{j'}],
+        E[A^2 1{j'}], E[2AB 1{j'}], E[B^2 1{j'}], E[(1 - A) 1{j'}] and E[(1 - A^2) 1{j'}],
+        the last two formed without cancellation.
+    landing : ndarray of float64, shape (M, M)
+        L, from entry state j the probability of landing in j' (rows sum to 1).
+    mean_by_entry, second_by_entry : ndarray of float64, shape (M,)
+        u and s, the steady value's mass and second moment's mass by entry state
+        (sum u the steady mean).
+    """
+
+    entry: np.ndarray
+    a: np.ndarray
+    b: np.ndarray
+    a2: np.ndarray
+    ab2: np.ndarray
+    b2: np.ndarray
+    forget: np.ndarray
+    forget2: np.ndarray
+    landing: np.ndarray
+    mean_by_entry: np.ndarray = field(default=None, repr=False)
+    second_by_entry: np.ndarray = field(default=None, repr=False)
+
+    def carried(self) -> tuple[float, float]:
+        """The steady mean and second moment of a value carried across residences.
+
+        Returns
+        -------
+        mean, second : float
+
+        Raises
+        ------
+        InputError
+            If no relaxation acts wherever particles go (no steady state).
+        """
+        return float(self.mean_by_entry.sum()), float(self.second_by_entry.sum())
+
+    def after_passes(self, v0: float, passes: int) -> tuple[float, float]:
+        """Mean and second moment of the exit value after ``passes`` residences of a value
+        carried from ``v0``, the first entered with the stationary entry distribution:
+        u_k = A^T u_(k-1) + B^T nu, s_k = (A^2)^T s_(k-1) + (2AB)^T u_(k-1) + (B^2)^T nu
+        from u_0 = v0 nu, s_0 = v0^2 nu; the mean sum u_k, the second moment sum s_k.
+
+        Parameters
+        ----------
+        v0 : float
+            The value at the first entry.
+        passes : int
+            Residences, at least 1.
+
+        Returns
+        -------
+        mean, second : float
+        """
+        u = float(v0) * self.entry
+        sq = float(v0) * float(v0) * self.entry
+        tiny = np.finfo(np.float64).tiny
+        for _ in range(int(passes)):
+            u, sq = (self.a.T @ u + self.b.T @ self.entry,
+                     self.a2.T @ sq + self.ab2.T @ u + self.b2.T @ self.entry)
+            # below the normal floats a value is round-off of a far smaller one: 0
+            u = np.where(np.abs(u) < tiny, 0.0, u)
+            sq = np.where(np.abs(sq) < tiny, 0.0, sq)
+        return float(u.sum()), float(sq.sum())
+
+
+def _steady_by_entry(forget: np.ndarray, landing: np.ndarray, rhs: np.ndarray,
+                     entry: np.ndarray) -> np.ndarray:
+    """Solve u = (L - F)^T u + rhs for u, F = ``forget`` small where rates are (the
+    equations' sum, f . u = sum rhs with f the row sums of F, replaces the one at nu's
+    largest entry: I - L^T is singular, so the system's own rows lose every digit of f
+    that round-off in L leaves)."""
+    m = landing.shape[0]
+    system = np.eye(m) - landing.T + forget.T
+    rhs = np.array(rhs, dtype=np.float64)
+    k = int(np.argmax(entry))
+    system[k] = forget.sum(axis=1)
+    rhs[k] = rhs.sum()
+    return np.linalg.solve(system, rhs)
+
+
+def carried_moments(q, r, e, a, b, landing, entry_rows, lu_q=None, c=None) -> CarriedMoments:
+    """:class:`CarriedMoments` of a periodic riser's residence chain (module docstring,
+    Carried properties): the landing-resolved moments, by the recursions of
+    :func:`exit_moments` with the exits R split by landing state instead of r.
+
+    Parameters
+    ----------
+    q, r, e, a, b, lu_q, c
+        As :func:`exit_moments`.
+    landing : scipy.sparse matrix of float64, shape (n, M)
+        R, the exits split by the entry state they land in (:func:`residence_chain`).
+    entry_rows : ndarray of int64, shape (M,)
+        Each entry state's transient state (-1: not live).
+
+    Returns
+    -------
+    CarriedMoments
+
+    Raises
+    ------
+    InputError
+        If no relaxation acts wherever particles go: the value keeps its start, and there is
+        no steady state.
+    """
+    q = sp.csc_matrix(q, dtype=np.float64)
+    n = q.shape[0]
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    c = 1.0 - a if c is None else np.asarray(c, dtype=np.float64)
+    eye = sp.identity(n, format="csc")
+    if lu_q is None:
+        lu_q = splu(sp.csc_matrix(eye - q))
+    lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q))
+    lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q))
+    big_r = np.asarray(sp.csr_matrix(landing).toarray(), dtype=np.float64)
+    lands = lu_q.solve(big_r)                                   # (I - Q)^-1 R
+    alpha = lu_dq.solve(a[:, None] * big_r)
+    beta = lu_q.solve(b[:, None] * (big_r + q @ alpha))
+    gamma = lu_d2q.solve((a * a)[:, None] * big_r)
+    w = big_r + q @ gamma
+    delta = lu_dq.solve((2.0 * a * b)[:, None] * w)
+    eps = lu_q.solve((b * b)[:, None] * w + b[:, None] * (q @ delta))
+    forget = lu_dq.solve(c[:, None] * lands)                    # (I - D Q)^-1 ((1-a) o L)
+    forget2 = lu_d2q.solve((c * (2.0 - c))[:, None] * lands)  # 1 - a^2 = c (2 - c)
+    live = entry_rows >= 0
+    rows = np.where(live, entry_rows, 0)
+    leave = np.where(live, lands[rows].sum(axis=1), 0.0)
+    scale = np.divide(1.0, leave, out=np.zeros_like(leave), where=leave > 0)[:, None]
+
+    def on_entries(x):
+        return x[rows] * scale
+
+    nu = np.where(live, np.asarray(e, dtype=np.float64)[rows], 0.0)
+    nu = nu / nu.sum()
+    moments = [on_entries(x) for x in (alpha, beta, gamma, delta, eps, forget, forget2, lands)]
+    ma, mb, ma2, mab2, mb2, mf, mf2, land = moments
+    if not mf.sum() > 0.0:
+        raise InputError("a carried property with a zero rate wherever particles go has "
+                         "no steady state (it keeps its start value): use start = entry")
+    u = _steady_by_entry(mf, land, mb.T @ nu, nu)
+    second = _steady_by_entry(mf2, land, mab2.T @ u + mb2.T @ nu, nu)
+    return CarriedMoments(nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, u, second)
 
 
 @dataclass(frozen=True)
@@ -262,8 +378,9 @@ class PropertyAnswer:
         InputError
             If ``passes`` is below 1, or the answer holds no exit moments.
         """
-        if self.moments is None:
-            raise InputError(f"property {self.name}: no exit moments to follow passes with")
+        if not isinstance(self.moments, CarriedMoments):
+            raise InputError(f"property {self.name}: passes are followed for a carried "
+                             "property (start = \"carried\") only")
         if int(passes) != passes or passes < 1:
             raise InputError(f"passes {passes}: give a whole number of residences, at least 1")
         mean, second = self.moments.after_passes(self.initial, int(passes))
@@ -300,8 +417,8 @@ def _in_range(value: float, law) -> float:
 ROUND_OFF = 1e-12
 
 
-def residence_chain(model, direction: str | None = None, deficit_levels: int | None = None
-                    ) -> tuple[sp.csr_matrix, np.ndarray, np.ndarray, np.ndarray, int]:
+def residence_chain(model, direction: str | None = None, deficit_levels: int | None = None,
+                    landings: bool = False) -> tuple:
     """The absorbing chain of a model's residences, on the states from which an exit can be
     reached (module docstring).
 
@@ -318,6 +435,9 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
         its residences fall, :func:`~cfbmarkov.markov.first_passage.exact_rtd`); given, the
         entry distribution is that of the exact RTD on K deficits, computed here and not
         cached (a bootstrap resample's). Ignored for an open riser.
+    landings : bool, optional
+        Also return where each residence lands (a periodic riser's): the next residence's
+        entry state.
 
     Returns
     -------
@@ -327,6 +447,12 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
         The model's state of each transient state (a periodic riser's levels repeat them).
     levels : int
         Lap-deficit levels (1 for an open riser).
+    landing : scipy.sparse.csr_matrix, shape (n, M)
+        With ``landings`` (a periodic riser): the probability of leaving on the next lag
+        and landing in each of the M entry states (r split by landing; its rows sum to r).
+    entry_rows : ndarray of int64, shape (M,)
+        With ``landings``: each entry state's transient state at level 0 (-1 where no exit
+        can be reached from it: the particles landing there are trapped).
 
     Raises
     ------
@@ -367,7 +493,17 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
         raise InputError("no particle that enters can leave in the model: every residence is "
                          "trapped")
     state = np.tile(np.arange(s), levels)[keep]
-    return sp.csr_matrix(q)[keep][:, keep], r[keep], e / e.sum(), state, levels
+    chain = (sp.csr_matrix(q)[keep][:, keep], r[keep], e / e.sum(), state, levels)
+    if not landings:
+        return chain
+    if model.open_flow is not None:
+        raise InputError("an open riser's residences do not land back in it")
+    entries = np.flatnonzero(np.asarray(p_up.sum(axis=0)).ravel() > 0)
+    landing = sp.vstack([sp.csr_matrix(p_up)[:, entries],
+                         sp.csr_matrix((s * (levels - 1), entries.size))]).tocsr()[keep]
+    position = -np.ones(s * levels, np.int64)
+    position[keep] = np.arange(keep.size)
+    return (*chain, landing, position[entries])
 
 
 def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
@@ -416,30 +552,44 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         raise InputError(f"{where}property {name}: a carried property needs a periodic riser: "
                          "particles that leave an open riser do not come back (use start = "
                          "entry)")
-    q, r, e, state, _ = residence_chain(model, direction, deficit_levels)
+    carries = "carried" in sk.starts
+    q, r, e, state, _, *landed = residence_chain(model, direction, deficit_levels,
+                                                 landings=carries)
     a_all, b_all = sk.over(model.lag)
     c_all = -np.expm1(-np.asarray(sk.rate, dtype=np.float64) * model.lag)    # 1 - a, exact
     space = model.state_space
     cell = np.asarray(space.cell_of_state, dtype=np.int64)
     out = {}
     lu_q = splu(sp.csc_matrix(sp.identity(q.shape[0], format="csc") - q))
+    occupancy = lu_q.solve(e, trans="T")       # lags spent in each state per entry
     for i, name in enumerate(sk.names):
-        m = exit_moments(q, r, e, a_all[i][state], b_all[i][state], lu_q, c_all[i][state])
+        a, b, c = a_all[i][state], b_all[i][state], c_all[i][state]
+        m = exit_moments(q, r, e, a, b, lu_q, c)
+        values = m.mass_rest                # the value's mass by state, from the lags' b
         if sk.starts[i] == "carried":
             try:
-                v0, second = m.carried()
+                carried = carried_moments(q, r, e, a, b, *landed, lu_q, c)
             except InputError as exc:
                 raise InputError(f"{where}property {name}: {exc}") from None
+            v0, second = carried.carried()
             mean = v0
+            entering = np.zeros(q.shape[0])     # the value's mass entering by entry state
+            live = landed[1] >= 0
+            entering[landed[1][live]] = carried.mean_by_entry[live]
+            values = values + splu(sp.csc_matrix(
+                sp.identity(q.shape[0], format="csc") - sp.diags(a) @ q)).solve(entering,
+                                                                               trans="T")
+            m = carried
         else:
             v0 = float(sk.initial[i])
             mean, second = m.exit_mean(v0), m.exit_second(v0)
+            values = v0 * m.mass_per_start + values
         # E[v^2] - E[v]^2 cancels to round-off where every exit value is alike (a carried
         # value at a uniform target): below ROUND_OFF of E[v^2] the variance is zero
         variance = second - mean * mean
         sd = float(np.sqrt(variance)) if variance > ROUND_OFF * abs(second) else 0.0
-        mass = np.bincount(state, v0 * m.mass_per_start + m.mass_rest, minlength=model.n_states)
-        count = np.bincount(state, m.occupancy, minlength=model.n_states)
+        mass = np.bincount(state, values, minlength=model.n_states)
+        count = np.bincount(state, occupancy, minlength=model.n_states)
         by_state = np.divide(mass, count, out=np.full(mass.size, np.nan), where=count > 0)
         cmass = np.bincount(cell, mass, minlength=space.n_cells)
         ccount = np.bincount(cell, count, minlength=space.n_cells)
