@@ -233,7 +233,9 @@ def test_velocity_states_compare_from_the_predictions_start(runs, tmp_path, caps
     assert "comparison starts 1 lag(s) later" in err
     block = json.loads((tmp_path / "v" / "summary.json").read_text())["kinetics"]["X"]
     assert block["window"] == pytest.approx([4.02, 8.0])
-    assert block["model"]["values_from"] == "stored"
+    # the stored values have run a lag ahead of the reference's: the paths from 4.02 s
+    assert block["model"]["values_from"] == "paths"
+    assert "has run since its first frame at 4 s" in block["model"]["values_note"]
     assert block["reference"]["exit_count"] > 50
     # a prediction without properties (predict) and the plain comparison
     got = _compare(runs, runs["plain_v"], kin, tmp_path / "plain")
@@ -299,4 +301,28 @@ def test_a_carried_property_stored_from_before_a_later_start_is_not_used(runs, t
     block = _compare(runs, pred, kin, tmp_path / "pvc")["kinetics"]["X"]
     assert block["window"] == pytest.approx([4.02, 8.0])
     assert block["model"]["values_from"] == "paths"
-    assert "has run 1 lag(s)" in block["model"]["values_note"]
+    assert "has run since its first frame at 4 s" in block["model"]["values_note"]
+
+
+def test_stored_values_are_not_used_where_the_window_starts_after_the_prediction(runs,
+                                                                                 tmp_path):
+    """A prediction from 4 s that stores X, compared over 6-8 s: its values at 6 s carry
+    what happened since 4 s, while the reference's start every particle at the window's
+    start; the model side integrates X along the prediction's paths from 6 s, the same
+    answer as the same paths predicted without stored values (before: the stored values,
+    a model side that started ahead of the reference)."""
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    kin = _toml(tmp_path, "same", 'law = "first-order"\nrate = 1.0')
+    later = _compare(runs, runs["pred"], kin, tmp_path / "late", window=(6.0, 8.0))
+    block = later["kinetics"]["X"]["model"]
+    assert block["values_from"] == "paths"
+    assert "has run since its first frame at 4 s" in block["values_note"]
+    with Trajectories(runs["pred"]) as traj:
+        model = MarkovModel.from_trajectories(traj)
+    plain = model.predict(runs["run"], start=4.0, duration=4.0, seed=5,
+                          output=tmp_path / "plain.h5")
+    same = _compare(runs, plain, kin, tmp_path / "plain", window=(6.0, 8.0))
+    assert block["exit_mean"] == same["kinetics"]["X"]["model"]["exit_mean"]
+    assert block["bed_mean"] == same["kinetics"]["X"]["model"]["bed_mean"]

@@ -8,8 +8,11 @@ Per property of a kinetics file (linear laws):
   model's states at its lag (:mod:`cfbmarkov.analysis.kinetics_reference`);
 - *model*: the prediction's values over the same window, the ones its Monte Carlo stored
   (``/properties/NAME``) where their fingerprint is that of this kinetics on the model's
-  states (:func:`stored_definition_differs`), else (none stored, another definition, no
-  fingerprint; with a warning) the same integration along the prediction's own paths (on
+  states (:func:`stored_definition_differs`) and the window starts at the prediction's
+  first frame, else (none stored, another definition, no fingerprint, a window that starts
+  later, whose stored values carry what happened before it while the reference's start
+  there; with a warning) the same integration along the prediction's own paths from the
+  window's start (on
   a space of cells these are the chain's states, so the values are those a Monte Carlo
   with properties gives); beside them the chain's exact answers
   (:func:`cfbmarkov.markov.kinetics_exact.exact_kinetics`), its exact exit mean as a window
@@ -545,10 +548,13 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                 notes[name] = (f"{pred.path} stores {name} in {stored.shape[0]} frames of "
                                f"{start:g}-{stop:g} s, not the {pred_discrete.n_frames} the "
                                "comparison reads")
-            if notes[name] is None and late and not m["reset"]:
-                notes[name] = (f"the carried {name} stored in {pred.path} has run {late} "
-                               f"lag(s) from {float(pred.times[0]):g} s, while the reference "
-                               f"starts at {start:g} s")
+            first = float(pred.times[0])
+            if notes[name] is None and start > first + pred.time_tolerance:
+                # the stored values carry what happened since the prediction's start; the
+                # reference's start every particle at the window's start
+                notes[name] = (f"the {name} stored in {pred.path} has run since its first "
+                               f"frame at {first:g} s, while the reference's starts at "
+                               f"{start:g} s")
             if notes[name] is not None:
                 warnings.append(f"kinetics: {notes[name]}; the model side integrates {name} "
                                 "along the prediction's paths instead")
