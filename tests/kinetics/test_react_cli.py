@@ -718,3 +718,33 @@ def test_react_monte_carlo_prints_its_bed_means(fitted, tmp_path, capsys):
         last = f["properties"]["X"][-1]
     assert "X 0 at 0.5 s" in line and f"{np.nanmean(last):.6g} at 1.5 s" in line
     assert lines[-1] == str(out)
+
+
+def test_react_repeats_the_residences_the_chain_never_ends(tmp_path, capsys):
+    """A chain where a third of the residences fall into a state that is never left: fit,
+    rtd and info warn of the unresolved mass, and react, whose exit values average only the
+    residences that end, repeats it (on stderr and in --json's warnings)."""
+    import numpy as np
+
+    from cfbmarkov.markov.model import MarkovModel
+    from cfbmarkov.markov.states import CellGrid
+
+    p = np.zeros((6, 6))            # state = row x 2 + column, one row up a lag
+    p[0, 2] = p[2, 4] = 1.0         # column 0 rises to the top
+    p[1, 3] = p[1, 5] = 0.5         # column 1: half skip to the top row, half fall into
+    p[3, 3] = 1.0                   # a state that is never left (a trap)
+    up = np.zeros((6, 6))
+    p[4, :2] = p[5, :2] = up[4, :2] = up[5, :2] = 0.5     # the top passes up, landing anywhere
+    zeros = np.zeros((6, 6), np.int64)
+    model = MarkovModel(p, zeros, zeros, zeros, CellGrid(2, 3, 0.2, 1.0), 0.1,
+                        estimator="given", pass_fractions=(up, np.zeros((6, 6))))
+    assert model.rtd().unresolved > 0.01
+    path = tmp_path / "trap.h5"
+    model.save(path)
+    kin = _write(tmp_path, '[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\n')
+    assert main(["react", str(path), "--kinetics", str(kin), "--json"]) == 0
+    out, err = capsys.readouterr()
+    warned = json.loads(out)["warnings"]
+    assert any(w.startswith("the model: unresolved mass") and "average only the residences "
+               "that end" in w for w in warned)
+    assert "warning: the model: unresolved mass" in err

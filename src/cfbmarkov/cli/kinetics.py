@@ -8,7 +8,7 @@ import time
 
 from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import count, finite_float, level, positive_float, seed
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import CfbmarkovError, InputError
 
 
 def cmd_react(args) -> int:
@@ -75,6 +75,7 @@ def cmd_react(args) -> int:
     # exact answers rest on the chain as much as a Monte Carlo does
     verdict = [f"the model's fitting sample: {line}"
                for line in (model.adequacy.warnings if model.adequacy is not None else ())]
+    verdict += _chain_warnings(model)
     if args.passes and "carried" not in [p.start for p in kinetics.properties]:
         print("note: --passes follows carried properties (start = \"carried\"); this "
               "kinetics file has none, so it is left out", file=sys.stderr)
@@ -191,6 +192,26 @@ def cmd_react(args) -> int:
         print(args.output)
     sys.stdout.flush()
     return 0
+
+
+def _chain_warnings(model) -> list[str]:
+    """What `fit`, `rtd` and `info` say of the chain that the exact answers rest on as
+    well: residences it never ends (unresolved mass) and states that trap particles."""
+    from cfbmarkov.markov.model_summary import trap_warning, unresolved_warning
+
+    lines = []
+    try:
+        unresolved = unresolved_warning(model.rtd())
+    except CfbmarkovError:      # no residence: exact_kinetics refuses it in its own words
+        unresolved = None
+    if unresolved is not None:
+        lines.append(f"the model: {unresolved}; the exit values likewise average only the "
+                     "residences that end, and the bed means leave the particles that never "
+                     "leave out")
+    trapped = trap_warning(model)
+    if trapped is not None:
+        lines.append(f"the model: {trapped}")
+    return lines
 
 
 def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, passes=()):

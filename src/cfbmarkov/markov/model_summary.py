@@ -107,13 +107,29 @@ def model_warnings(model: "MarkovModel") -> list[str]:
         lines.append(f"  {unresolved}")
     if model.uncertainty is not None:
         lines += [f"  {line}" for line in model.uncertainty.warnings(fitting_run_count(model))]
+    trapped = trap_warning(model)
+    return lines if trapped is None else lines + [f"  {trapped}"]
+
+
+def trap_warning(model: "MarkovModel") -> str | None:
+    """The line about states entered but never left, where particle-frames can reach them
+    (None otherwise).
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    str or None
+    """
     trapped = model.entered_never_left
     if not trapped.size or model.trap_share == 0.0:
-        return lines
-    return lines + [f"  states entered but never left: {state_set_text(model.state_space, trapped)}: "
+        return None
+    return (f"states entered but never left: {state_set_text(model.state_space, trapped)}: "
             f"they keep their particles (P_ii = 1) or move as their cell; "
             f"{100 * model.trap_share:.1f} % of the particle-frames are in states that "
-            "can reach a trap (fit --connected leaves them out)"]
+            "can reach a trap (fit --connected leaves them out)")
 
 
 def _sources_text(source) -> str:
