@@ -36,8 +36,11 @@ def _misread_passes(vertical, laps, lag_frames, height):
     ``vertical`` float64 [T, N] heights in the period (NaN: absent), ``laps`` int [T, N]
     lap counters. For particle p from frame t to t + lag the file's pass is the change of
     its laps, and the minimal image's is +1 where the height drops by more than H / 2, -1
-    where it rises by more, else 0. Returns the number of moves where they differ, the
-    number of moves (both ends present), the number of moves with a pass (laps changed) and
+    where it rises by more, else 0. A move over frames where the particle was absent is
+    left out: a pass made while it was away is in no lap counter (a file's laps carry on
+    across an absence), so its laps cannot say how the move should read. Returns the number
+    of moves where they differ, the number of moves (present at both ends and between),
+    the number of moves with a pass (laps changed) and
     the largest |move| (m), the unwrapped height change vertical[t + lag] - vertical[t]
     + H (laps[t + lag] - laps[t])."""
     n_frames, n_particles = vertical.shape
@@ -51,6 +54,13 @@ def _misread_passes(vertical, laps, lag_frames, height):
             a = vertical[t, p]
             b = vertical[t + lag_frames, p]
             if np.isnan(a) or np.isnan(b):
+                continue
+            seen = True         # a pass while absent is not in the laps: no reading
+            for u in range(t + 1, t + lag_frames):
+                if np.isnan(vertical[u, p]):
+                    seen = False
+                    break
+            if not seen:
                 continue
             laps_change = laps[t + lag_frames, p] - laps[t, p]
             dy = b - a
@@ -76,7 +86,7 @@ class PassReading:
     misread : int
         Moves over one lag whose pass the minimal image reads otherwise than the laps.
     moves : int
-        Moves over one lag with both ends present.
+        Moves over one lag with the particle present at both ends and between.
     passes : int
         Moves with a pass (the laps changed).
     largest : float
