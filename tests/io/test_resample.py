@@ -147,6 +147,33 @@ def test_coarse_vertical_step_is_refused_naming_the_particle():
                     max_step=0.35)
 
 
+def test_a_bridged_gap_the_tracer_outruns_is_refused():
+    """A tracer rising at 5 m/s, sampled every 2 ms, unseen for 150 ms: it rose 0.75 m
+    (0.79 H) there, which the heights read as 0.2 m down, a pass up lost and a fall that never
+    happened. Its speed before and after the gap says it could move 0.75 m, more than a
+    quarter of H: bridged with --max-gap 0.2 it is refused naming a --max-gap that leaves the
+    gap out; a slow tracer (0.5 m/s, 0.075 m in the gap) is bridged."""
+    t = np.concatenate([np.arange(0.0, 0.3, 0.002), np.arange(0.45, 0.7, 0.002)])
+    for speed, refused in ((5.0, True), (0.5, False)):
+        pos = np.column_stack([np.full(t.size, 0.04), np.mod(0.1 + speed * t, H)])
+        if refused:
+            with pytest.raises(InputError, match=r"particle 7 moves at \+5 m/s vertically "
+                               r"before and after its samples at t = 0\.298 and 0\.45 s, so "
+                               r"between them it can move \+0\.76 m.*give --max-gap below "
+                               r"0\.152 s"):
+                resample_tracks(t, np.full(t.size, 7), pos, interval=0.005, max_gap=0.2,
+                                height=H)
+            out = resample_tracks(t, np.full(t.size, 7), pos, interval=0.005, max_gap=0.1,
+                                  height=H)
+            assert not out.present[70, 0]          # 0.35 s: in the gap, absent
+        else:
+            out = resample_tracks(t, np.full(t.size, 7), pos, interval=0.005, max_gap=0.2,
+                                  height=H)
+            assert out.present.all()
+            unwrapped = out.positions[:, 0, 1] + H * out.laps[:, 0]
+            np.testing.assert_allclose(unwrapped, 0.1 + speed * out.times, atol=1e-9)
+
+
 GOOD = (np.array([0.0, 0.5, 1.0]), np.zeros(3, dtype=np.int64), np.full((3, 2), 0.1))
 
 

@@ -69,6 +69,47 @@ def _positive(value, what: str) -> float:
     return value
 
 
+#: a bridged step is a gap where it spans this many times the track's median sample spacing
+GAP_SPACINGS = 4
+#: samples on each side of a gap from which the speed around it is measured
+SPEED_SAMPLES = 10
+
+
+def _speed(ts, height, lo, hi) -> float | None:
+    """The mean vertical speed (m/s) from sample ``lo`` to ``hi`` (None where they are one)."""
+    return None if hi <= lo else float((height[hi] - height[lo]) / (ts[hi] - ts[lo]))
+
+
+def _gap_outrun(ts, height, joined, limit):
+    """The first bridged gap across which the particle's own speed carries it further than
+    ``limit`` (m), and that speed: (index k of the gap's first sample, m/s), or None.
+
+    A gap is a step joined in one stretch that spans :data:`GAP_SPACINGS` times the
+    track's median joined spacing or more. Its minimal-image step cannot tell a move of
+    0.8 H up from one of 0.2 H down; the speed measured over up to :data:`SPEED_SAMPLES`
+    joined samples before it and after it (unwrapped ``height``, within the stretch),
+    averaged, times the gap's duration, can: where it exceeds ``limit`` the passes in the
+    gap are not countable. Gaps without a speed on either side are not judged."""
+    dt = np.diff(ts)
+    if not joined.any():
+        return None
+    typical = float(np.median(dt[joined]))
+    gaps = np.flatnonzero(joined & (dt >= GAP_SPACINGS * typical))
+    for k in gaps:
+        lo = k
+        while lo > 0 and k - lo < SPEED_SAMPLES and joined[lo - 1] and lo - 1 not in gaps:
+            lo -= 1
+        hi = k + 1
+        while (hi < joined.size and hi - (k + 1) < SPEED_SAMPLES and joined[hi]
+               and hi not in gaps):
+            hi += 1
+        speeds = [v for v in (_speed(ts, height, lo, k), _speed(ts, height, k + 1, hi))
+                  if v is not None]
+        if speeds and abs(np.mean(speeds) * dt[k]) > limit:
+            return int(k), float(np.mean(speeds))
+    return None
+
+
 def resample_tracks(times, particles, positions, *, interval, max_gap=None, height=None,
                     vertical=1, max_step=0.25, label="tracks", open_height=None
                     ) -> ResampledTracks:
@@ -131,8 +172,10 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
         If there are no rows, shapes disagree, a time or position is not finite, a particle
         has two rows at one time, ``interval``, ``max_gap``, ``height`` or ``max_step`` is
         not a positive finite number, ``interval`` is larger than the span of the data, a
-        minimal-image vertical step exceeds ``max_step * H``, or no grid time is present for
-        any particle.
+        minimal-image vertical step exceeds ``max_step * H`` or a bridged gap is one across
+        which the particle's speed before and after it carries it further than that (its
+        passes there cannot be counted: a move of 0.8 H up reads as 0.2 H down), or no grid
+        time is present for any particle.
     """
     interval = _positive(interval, "--resample (the resample step)")
     max_gap = interval if max_gap is None else _positive(max_gap, "--max-gap")
@@ -207,6 +250,18 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
                     "particle is then absent between them, its passes there not counted), or "
                     "give unwrapped coordinates")
             lap[1:] = np.cumsum(np.where(joined, wrap, 0).astype(np.int64))
+            fast = _gap_outrun(ts, y + period * lap, joined, max_step * period)
+            if fast is not None:
+                k, speed = fast
+                raise InputError(
+                    f"{label}: particle {ids[j]} moves at {speed:+.3g} m/s vertically before "
+                    f"and after its samples at t = {ts[k]:.9g} and {ts[k + 1]:.9g} s, so "
+                    f"between them it can move {speed * (ts[k + 1] - ts[k]):+.3g} m, more "
+                    f"than {max_step:g} x the height {period:g} m, while their heights differ "
+                    f"by {step[k]:+.3g} m: its passes through the top there cannot be counted; "
+                    f"give --max-gap below {ts[k + 1] - ts[k]:.3g} s (the particle is then "
+                    "absent between them, its passes there not counted), or give unwrapped "
+                    "coordinates")
         k0 = max(int(math.ceil(ts[0] / interval - _TOL)) - first_k, 0)
         k1 = min(int(math.floor(ts[-1] / interval + _TOL)) - first_k, n_times - 1)
         if k1 < k0:
