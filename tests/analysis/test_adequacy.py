@@ -627,3 +627,16 @@ def test_a_window_one_lag_long_is_judged_too_short_not_refused(runs):
     verdict = _verdict(runs["stationary"], (10.0, 10.025))
     assert any("holds 0 residences" in line and "too short" in line
                for line in verdict.warnings), verdict.warnings
+
+
+def test_the_flow_terms_absence_is_put_down_to_its_cause():
+    """A window shorter than two blocks of three mean residence times is said to be short;
+    a window long enough whose blocks saw too few residences whole (tracks of a second in a
+    flow of E(RT) 2.4 s) is not told to be longer, which would not help."""
+    from cfbmarkov.analysis.adequacy import flow_term_line
+
+    short = flow_term_line(4.0, 0.86)
+    assert "the 4 s fitting window is shorter than two blocks of three mean residence" in short
+    sparse = flow_term_line(30.0, 2.4)
+    assert "fewer than two blocks of the 30 s fitting window hold two residences seen whole" \
+        in sparse and "shorter than" not in sparse and "pool more runs or tracks" in sparse

@@ -432,7 +432,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
         lines.append(throughput)
     length = min(b - a for a, b in windows)
     if uncertainty is not None and getattr(uncertainty, "flow_sd", 0) is None:
-        lines.append(flow_term_line(length))
+        lines.append(flow_term_line(length, rt_mean))
     tail = _tail_share(model, length)
     if math.isfinite(tail) and tail > TAIL_LIMIT:
         lines.append(f"{100 * tail:.0f} % of the model's residences last longer than the "
@@ -460,24 +460,38 @@ MIN_PARTS_LIMIT = 0.1
 #: 4 m/s whose halves gave 0.67 and 0.40 s lay 84 % from the flow's long run
 MAX_PARTS_LIMIT = 0.25
 
-def flow_term_line(length: float) -> str:
+def flow_term_line(length: float, rt_mean: float | None = None) -> str:
     """The verdict's line on an interval formed without the flow's variability between
-    windows (a fitting window of ``length`` s shorter than two blocks of three mean residence
-    times; :func:`cfbmarkov.analysis.bootstrap.flow_variability`).
+    windows (:func:`cfbmarkov.analysis.bootstrap.flow_variability`): a fitting window of
+    ``length`` s shorter than two blocks of three mean residence times, or, where it is
+    longer than that by the model's ``rt_mean``, one whose blocks hold fewer than two
+    residences seen whole (tracks too short or too few).
 
     Parameters
     ----------
     length : float
         The fitting window's length (s; the shortest of a pooled fit's).
+    rt_mean : float, optional
+        The model's E(RT) (s), which tells the two reasons apart.
 
     Returns
     -------
     str
     """
-    return (f"the model's interval leaves out the flow's variability between windows (the "
-            f"{length:g} s fitting window is shorter than two blocks of three mean residence "
-            f"times): it holds this window's sampling alone, and the flow's long run may lie "
-            f"outside it; {_ADVICE}")
+    from cfbmarkov.analysis.bootstrap import FLOW_BLOCK_RESIDENCES
+
+    if rt_mean is not None and length >= 2 * FLOW_BLOCK_RESIDENCES * rt_mean:
+        why = (f"fewer than two blocks of the {length:g} s fitting window hold two "
+               "residences seen whole: the tracks are too short or too few to see residences "
+               "end to end")
+        advice = "pool more runs or tracks (fit A.h5 B.h5 ...)"
+    else:
+        why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "
+               "residence times")
+        advice = _ADVICE
+    return (f"the model's interval leaves out the flow's variability between windows ({why})"
+            f": it holds this window's sampling alone, and the flow's long run may lie "
+            f"outside it; {advice}")
 
 
 def _sampling_width(interval, uncertainty, rt_mean: float, runs: int = 1) -> float:
