@@ -232,3 +232,28 @@ def test_a_short_window_lengths_unresolved_mass_is_named_as_such(tmp_path, capsy
     assert "coarser grid" not in line
     assert main(["rtd", str(model)]) == 0
     assert "unresolved mass" not in capsys.readouterr().err
+
+
+def test_a_band_out_of_view_fitted_connected_is_not_told_to_fit_connected(tmp_path, capsys):
+    """Tracers never seen between 0.30 and 0.60 m: no transition climbs past the band, so
+    every residence is trapped below it, with or without --connected. The refusal with
+    --connected names the band's kind of cause, not the option just given."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.synthetic import RiserFlow, sample_run
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    flow = RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                     vertical_spread=0.5, persistence=False)
+    times, _, pos, laps = sample_run(flow, 3, 2401, seed=42)
+    present = ~((pos[..., 1] >= 0.30) & (pos[..., 1] < 0.60))
+    pos = pos.copy()
+    pos[~present] = np.nan
+    run = write_trajectories(tmp_path / "blind.h5", times, pos, width=flow.width,
+                             height=flow.height, laps=laps, present=present)
+    code = main(["fit", str(run), "--cells", "4x16", "--lag", str(flow.lag), "--connected",
+                 "-o", str(tmp_path / "m.h5")])
+    err = capsys.readouterr().err
+    assert code == 2 and "every residence is trapped" in err
+    assert "fit with --connected" not in err
+    assert "fitted with --connected: no transition of the window climbs past some height" \
+        in err

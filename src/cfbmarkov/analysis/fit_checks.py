@@ -112,7 +112,15 @@ def assess_fit(model, runs: Sequence | None = None,
     try:
         model.rtd()
     except TrappedResidences as exc:
-        raise InputError(f"{', '.join(map(str, runs))}: {exc}") from None
+        text = str(exc)
+        if model.connected:       # the advice is taken: say what else keeps the top away
+            text = text.replace(
+                "(they lead to states that are never left; fit with --connected, or on a "
+                "longer window)",
+                "(fitted with --connected: no transition of the window climbs past some "
+                "height, as where a band of the riser is out of view; check where the "
+                "particles are absent by height, or fit on coarser cells or a longer window)")
+        raise InputError(f"{', '.join(map(str, runs))}: {text}") from None
     except CfbmarkovError:
         has_rtd = False            # no circulation at all: a model without residence times
     if resamples and has_rtd:
