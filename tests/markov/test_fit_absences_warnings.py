@@ -257,3 +257,32 @@ def test_a_band_out_of_view_fitted_connected_is_not_told_to_fit_connected(tmp_pa
     assert "fit with --connected" not in err
     assert "fitted with --connected: no transition of the window climbs past some height" \
         in err
+
+
+def test_a_prediction_from_a_frame_where_tracks_are_out_of_view_says_who_it_leaves_out(
+        tmp_path):
+    """Tracks seen one second in four: at the start frame most particles are out of view;
+    the prediction moves those present and says how many it leaves out (it printed "23
+    particles" for a file of 500, nothing more)."""
+    from cfbmarkov.errors import CfbmarkovWarning
+    from cfbmarkov.markov import CellGrid, fit_model
+    from cfbmarkov.synthetic import RiserFlow, sample_run
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    flow = RiserFlow(columns=4, rows=8, persistence=False)
+    times, _, pos, laps = sample_run(flow, 40, 401, seed=3)
+    present = np.zeros(pos.shape[:2], bool)
+    for p in range(40):
+        for start in range(p % 4 * 10, 401, 160):
+            present[start:start + 40, p] = True
+    pos = pos.copy()
+    pos[~present] = np.nan
+    run = write_trajectories(tmp_path / "ptv.h5", times, pos, width=flow.width,
+                             height=flow.height, laps=laps, present=present)
+    model = fit_model(run, CellGrid(4, 8), flow.lag, None, "mle")
+    at = int(np.argmax(present.sum(axis=1) < 40))
+    here = int(present[at].sum())
+    with pytest.warns(CfbmarkovWarning, match=rf"{40 - here} of the 40 particles of .* are "
+                      rf"absent at .* and left out: the prediction moves the {here} present"):
+        model.predict(run, start=float(times[at]), duration=4 * flow.lag, seed=1,
+                      output=tmp_path / "p.h5")

@@ -154,6 +154,16 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
                              f"--start at a frame where particles are present{where}")
         _warn_stateless(states0, positions0, model, start)
         if not present0.all():          # only the particles present at the start move
+            if model.open_flow is None:     # a periodic riser's: tracks out of view then
+                import warnings
+
+                from cfbmarkov.errors import CfbmarkovWarning
+
+                warnings.warn(f"{int(np.count_nonzero(~present0))} of the "
+                              f"{present0.size} particles of {traj.path} are absent at "
+                              f"{start:g} s and left out: the prediction moves the "
+                              f"{int(np.count_nonzero(present0))} present there (`compare` "
+                              "follows those on both sides)", CfbmarkovWarning, stacklevel=2)
             states0, positions0, laps0, ids = (states0[present0], positions0[present0],
                                                laps0[present0], ids[present0])
         shown = (PredictionProgress(progress, start, n_steps, model.lag, states0.size)
