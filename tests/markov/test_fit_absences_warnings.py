@@ -286,3 +286,28 @@ def test_a_prediction_from_a_frame_where_tracks_are_out_of_view_says_who_it_leav
                       rf"absent at .* and left out: the prediction moves the {here} present"):
         model.predict(run, start=float(times[at]), duration=4 * flow.lag, seed=1,
                       output=tmp_path / "p.h5")
+
+
+def test_the_verdict_on_tracks_with_absences_does_not_send_to_stationarity(tmp_path, capsys):
+    """`stationarity` refuses a periodic run whose particles are absent from some frames
+    (no residence is observed across an absence), so the verdict's advice on such a run
+    leaves it out; on a run without absences it is kept."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.synthetic import RiserFlow, sample_run
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    flow = RiserFlow(columns=4, rows=8, persistence=False)
+    times, _, pos, laps = sample_run(flow, 40, 201, seed=3)
+    for name, hidden in (("gaps", True), ("whole", False)):
+        present = np.ones(pos.shape[:2], bool)
+        if hidden:
+            present[50:60, :20] = False
+        seen = np.where(present[..., None], pos, np.nan)
+        run = write_trajectories(tmp_path / f"{name}.h5", times, seen, width=flow.width,
+                                 height=flow.height, laps=laps, present=present)
+        assert main(["fit", str(run), "--cells", "4x8", "--lag", str(flow.lag), "--window",
+                     "0:1.5", "--estimator", "mle", "-o", str(tmp_path / f"{name}-m.h5"),
+                     "-q"]) == 0
+        err = capsys.readouterr().err
+        assert "warning:" in err
+        assert ("stationarity RUN --sample-length" in err) is not hidden

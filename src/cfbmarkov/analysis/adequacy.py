@@ -81,6 +81,9 @@ THROUGHPUT_LIMIT = 0.1
 
 _ADVICE = ("fit on a longer window or pool several runs (fit A.h5 B.h5 ...); `cfbmarkov "
            "stationarity RUN --sample-length` tells how long a window must be")
+#: the part of the advice that a run with absences cannot follow (`stationarity` refuses it)
+_STATIONARITY_ADVICE = ("; `cfbmarkov stationarity RUN --sample-length` tells how long a "
+                        "window must be")
 #: the advice of a pooled fit's lines: it pools runs already
 _POOLED_ADVICE = ("fit on longer windows or pool more runs; `cfbmarkov stationarity RUN "
                   "--sample-length` tells how long a window must be")
@@ -441,6 +444,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                      f"{_ADVICE}")
     if pooled:
         lines = [line.replace(_ADVICE, _POOLED_ADVICE) for line in lines]
+    if _any_absences(runs):     # stationarity observes no residence across an absence
+        lines = [line.replace(_STATIONARITY_ADVICE, "") for line in lines]
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
                     run_means, window_mean, applied if not pooled else math.nan)
 
@@ -459,6 +464,15 @@ MIN_PARTS_LIMIT = 0.1
 #: (quarters 1.18, 1.18, 1.55, 1.52 s) got a limit of 31 %; a paper-scale 1 s window at
 #: 4 m/s whose halves gave 0.67 and 0.40 s lay 84 % from the flow's long run
 MAX_PARTS_LIMIT = 0.25
+
+def _any_absences(runs) -> bool:
+    """Whether a run holds particles absent from some frames (PTV, PEPT out of view)."""
+    for run in runs:
+        with opened(run) as traj:
+            if traj.has_absences:
+                return True
+    return False
+
 
 def flow_term_line(length: float, rt_mean: float | None = None) -> str:
     """The verdict's line on an interval formed without the flow's variability between
