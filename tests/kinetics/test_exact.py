@@ -493,3 +493,16 @@ def test_a_carried_value_follows_where_each_pass_lands(eps):
     if eps < 1:       # what independent passes give: the eps = 1 answer
         independent = exact_kinetics(conveyor_model(1.0)[0], kin)["T"].exit_mean
         assert abs(out.exit_mean - independent) > 5.0
+
+
+@pytest.mark.parametrize("index, named", [((0.7, 1), "col 0.7"), ((1, -0.5), "row -0.5"),
+                                          ((np.nan, 1), "col nan")])
+def test_a_cell_numbered_by_a_fraction_is_refused_not_truncated(index, named):
+    """A Python table's cell indices cast to integers moved col 0.7 to column 0 and row
+    -0.5 to row 0 without a word (the CSV reader refuses them): refused in one line."""
+    from cfbmarkov.kinetics import ByCell
+
+    table = np.array([[c, r, 1.0] for r in range(2) for c in range(2)], dtype=float)
+    table[0, :2] = index
+    with pytest.raises(InputError, match=rf"row 0 gives {named}: cells are numbered by whole"):
+        ByCell(table, "rates", "rate").per_cell(CellGrid(2, 2, 0.1, 1.0))

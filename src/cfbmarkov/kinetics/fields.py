@@ -174,11 +174,18 @@ class ByCell(CellParameter):
                              f"value, shape (R, 3) or (R, 4), not {t.shape}; a value per "
                              "cell in an array of the grid's shape is "
                              "ByCell.from_grid(values)")
+        where = f"{self.source} ({self.key})"
+        index = t[:, :t.shape[1] - 1]
+        odd = ~(np.isfinite(index) & (index == np.round(index)))
+        if odd.any():       # a cast would move 0.7 to column 0 and -0.5 to 0 silently
+            r, c = (int(v) for v in np.argwhere(odd)[0])
+            raise InputError(f"{where}: row {r} gives {('col', 'row', 'depth')[c]} "
+                             f"{index[r, c]:g}: cells are numbered by whole numbers (col "
+                             "from 0 at the left, row from 0 at the bottom)")
         cols = t[:, 0].astype(np.int64)
         rows = t[:, 1].astype(np.int64)
         depth = t[:, 2].astype(np.int64) if t.shape[1] == 4 else np.zeros(len(t), np.int64)
         m, d, n = space.columns, space.depth_columns, space.rows
-        where = f"{self.source} ({self.key})"
         if t.shape[1] == 4 and d == 1 and np.any(depth != 0):
             raise InputError(f"{where}: a depth column for a 2D grid of {space.grid_text()}; "
                              "give col,row,VALUE")
