@@ -326,3 +326,36 @@ def test_stored_values_are_not_used_where_the_window_starts_after_the_prediction
     same = _compare(runs, plain, kin, tmp_path / "plain", window=(6.0, 8.0))
     assert block["exit_mean"] == same["kinetics"]["X"]["model"]["exit_mean"]
     assert block["bed_mean"] == same["kinetics"]["X"]["model"]["bed_mean"]
+
+
+@pytest.mark.parametrize("stored_by_prediction", [True, False])
+def test_a_reference_start_begins_both_sides_at_the_references_values(runs, tmp_path,
+                                                                      stored_by_prediction):
+    """A prediction started from a file that stores X (another prediction's, of another
+    rate) with start = "reference" takes the stored values; the comparison's reference side
+    started from X integrated along the file's paths from its first frame instead, and its
+    model side, where it integrates, from the entry value: the two sides began apart (0.3515
+    against 0.2932 in a trial). Both now start from the file's stored values: the bed means
+    of the first frame agree, whether the model side reads its stored values or integrates
+    along its paths (a prediction without kinetics)."""
+    from cfbmarkov.kinetics import load_kinetics
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    kin = _toml(tmp_path, "ref", 'law = "first-order"\nrate = 0.5\nstart = "reference"')
+    with Trajectories(runs["pred"]) as traj:
+        model = MarkovModel.from_trajectories(traj)
+        stored = traj.property_values("X", int(np.argmin(np.abs(traj.times - 5.0))))
+    per_state = load_kinetics(kin).per_state(model.state_space)
+    pred = model.predict(runs["pred"], start=5.0, duration=2.0, seed=7,
+                         output=tmp_path / "pr.h5",
+                         kinetics=per_state if stored_by_prediction else None)
+    from cfbmarkov.report.compare import compare
+
+    got = compare(runs["pred"], pred, window=(5.0, 7.0), output=tmp_path / "c", figures=False,
+                  resamples=0, kinetics=kin)["kinetics"]["X"]
+    assert got["model"]["values_from"] == ("stored" if stored_by_prediction else "paths")
+    first_ref = got["reference"]["bed_mean_over_time"]["mean"][0]
+    first_model = got["model"]["bed_mean_over_time"]["mean"][0]
+    assert first_ref == pytest.approx(float(np.nanmean(stored)), rel=1e-12)
+    assert first_model == pytest.approx(first_ref, rel=1e-12)

@@ -42,7 +42,8 @@ from typing import Any
 import numpy as np
 
 from cfbmarkov.analysis.kinetics_reference import (PathKinetics, integrate_along_paths,
-                                                   linear_maps, reference_kinetics)
+                                                   linear_maps, reference_kinetics,
+                                                   reference_starts)
 from cfbmarkov.analysis.segregated_flow import SegregatedFlow, segregated_flow
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
@@ -72,6 +73,19 @@ def needs_cell_fields(kinetics) -> bool:
 
     return any(isinstance(v, FromField) for p in kinetics.properties
                for v in p.parameters.values())
+
+
+def _on_particles(values: np.ndarray, ids: np.ndarray, wanted: np.ndarray,
+                  default: float) -> np.ndarray:
+    """``values`` (one per particle of ``ids``) taken for the particles ``wanted``, by id
+    (``default`` for an id not among ``ids``)."""
+    ids, wanted = np.asarray(ids), np.asarray(wanted)
+    if ids.size == 0:
+        return np.full(wanted.size, float(default))
+    order = np.argsort(ids, kind="stable")
+    at = np.clip(np.searchsorted(ids[order], wanted), 0, ids.size - 1)
+    found = ids[order][at] == wanted
+    return np.where(found, np.asarray(values, dtype=np.float64)[order][at], float(default))
 
 
 def stored_property(traj, name: str, frames: slice) -> np.ndarray | None:
@@ -535,7 +549,13 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                 comparison.direction)
     pred_discrete, late = _prediction_states(pred, model, (start, stop), warnings)
     start = float(pred_discrete.times[0]) if late else start
-    reference = reference_kinetics(ref, model, sk, (start, stop), direction=on.direction)
+    ref_starts = None
+    if any(m["start"] == "reference" for m in maps):
+        # the values both sides start from: the reference's at the window's start (those a
+        # prediction with --init takes), on the prediction's particles by id
+        ref_starts = reference_starts(ref, model, sk, start, direction=on.direction)
+    reference = reference_kinetics(ref, model, sk, (start, stop), direction=on.direction,
+                                   starts=ref_starts)
     frames = pred.window(start, stop)
     model_paths, sources, notes = {}, {}, {}
     for m in maps:
@@ -560,9 +580,13 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                                 "along the prediction's paths instead")
                 stored = None
         sources[name] = "stored" if stored is not None else "paths"
+        initial = m["initial"]
+        if m["start"] == "reference" and stored is None:
+            initial = _on_particles(ref_starts[maps.index(m)], ref.ids, pred.ids,
+                                    m["initial"])
         model_paths[name] = integrate_along_paths(
-            pred_discrete, m["a"], m["b"], m["initial"], reset=m["reset"], name=name,
-            direction=on.direction, stored=stored)
+            pred_discrete, m["a"], m["b"], initial, entry_value=m["initial"],
+            reset=m["reset"], name=name, direction=on.direction, stored=stored)
     unstored = [m["name"] for m in maps if m["name"] not in notes]
     if unstored:
         warnings.append(f"kinetics: the prediction stored no values of {', '.join(unstored)}; "

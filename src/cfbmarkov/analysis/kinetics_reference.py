@@ -200,7 +200,8 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
 
 def reference_kinetics(source, model, state_kinetics, window: tuple[float, float], *,
                        direction: str = "up", face_band: float | None = None,
-                       history: float = 0.0) -> dict[str, PathKinetics]:
+                       history: float = 0.0, starts: np.ndarray | None = None
+                       ) -> dict[str, PathKinetics]:
     """Every property of ``state_kinetics`` integrated along the paths of a file's window.
 
     Every particle starts the window at the property's entry value; a property whose start
@@ -235,6 +236,9 @@ def reference_kinetics(source, model, state_kinetics, window: tuple[float, float
     history : float, optional
         Seconds before the window from which exits' paths are followed (>= 0; 0: only
         residences wholly inside the window). Needs a periodic riser.
+    starts : ndarray of float64, shape (P, N), optional
+        The values at the window's first frame of the properties that start from the
+        reference (:func:`reference_starts`, computed here where not given).
 
     Returns
     -------
@@ -255,10 +259,9 @@ def reference_kinetics(source, model, state_kinetics, window: tuple[float, float
     with opened(source) as traj:
         discrete = discretize(traj, model.state_space, model.lag, tuple(window),
                               keep_positions=True)
-        starts = None
-        if any(m["start"] == "reference" for m in maps):
-            starts = values_at(traj, model, state_kinetics, float(discrete.times[0]),
-                               direction=direction, face_band=face_band)
+        if starts is None and any(m["start"] == "reference" for m in maps):
+            starts = reference_starts(traj, model, state_kinetics, float(discrete.times[0]),
+                                      direction=direction, face_band=face_band)
     out = {}
     for i, m in enumerate(maps):
         initial = starts[i] if m["start"] == "reference" else m["initial"]
@@ -313,11 +316,53 @@ def _with_history(source, model, maps, window, out, history, direction):
     return out
 
 
+def reference_starts(source, model, state_kinetics, time: float, *, direction: str = "up",
+                     face_band: float | None = None) -> np.ndarray:
+    """Every particle's values at ``time`` of the properties that start from the reference
+    (``start = "reference"``): those the file stores there (``/properties/NAME``, the values
+    a prediction with ``--init`` that file takes; the entry value where a particle's is
+    NaN), else the values integrated along its paths from its first frame
+    (:func:`values_at`); the other properties' entry values.
+
+    Parameters
+    ----------
+    source : str, os.PathLike or Trajectories
+        The reference trajectory file.
+    model, state_kinetics, time, direction, face_band
+        As :func:`values_at`.
+
+    Returns
+    -------
+    ndarray of float64, shape (P, N)
+        Per property, each particle's value (the file's particle order).
+
+    Raises
+    ------
+    InputError
+        As :func:`reference_kinetics`.
+    """
+    from cfbmarkov.trajectories import opened
+
+    maps = linear_maps(state_kinetics, model.lag)
+    with opened(source) as traj:
+        stored = set(traj.property_names)
+        integrate = any(m["start"] == "reference" and m["name"] not in stored for m in maps)
+        values = (values_at(traj, model, state_kinetics, time, direction=direction,
+                            face_band=face_band) if integrate
+                  else np.array([np.full(traj.n_particles, m["initial"]) for m in maps]))
+        frame = int(np.argmin(np.abs(traj.times - time)))
+        for i, m in enumerate(maps):
+            if m["start"] == "reference" and m["name"] in stored:
+                held = np.asarray(traj.property_values(m["name"], frame), dtype=np.float64)
+                values[i] = np.where(np.isfinite(held), held, m["initial"])
+    return values
+
+
 def values_at(source, model, state_kinetics, time: float, *, direction: str = "up",
               face_band: float | None = None) -> np.ndarray:
     """Every particle's values at ``time``, integrated along the file's paths from its first
-    frame (all particles at the entry value there): the reference's values a prediction
-    with ``start = reference`` takes.
+    frame (all particles at the entry value there): the reference's values where it stores
+    none (:func:`reference_starts`).
 
     Parameters
     ----------
