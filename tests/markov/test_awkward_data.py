@@ -261,3 +261,16 @@ def test_a_lag_typed_near_a_frame_takes_the_frames_lag(tmp_path):
     assert model.rtd().mean == pytest.approx(period / 120, rel=0.01)
     # a lag within the frame interval's own uncertainty is kept as given
     assert fit_model(run, CellGrid(1, 8, 0.1, 1.0), 0.00833334).lag == 0.00833334
+
+
+def test_a_window_late_in_a_long_record_is_printed_as_given():
+    """A window of a record an hour long, 3600.005-3600.78 s: `:g` printed 3600.01, which
+    typed back selects another window; printed to 10 digits."""
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.model_summary import model_summary
+
+    p = np.full((2, 2), 0.5)
+    zeros = np.zeros((2, 2), np.int64)
+    model = MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 2, 0.1, 1.0), 0.005,
+                        window=(3600.005, 3600.78))
+    assert "window 3600.005:3600.78 s" in model_summary(model)

@@ -39,7 +39,7 @@ from cfbmarkov.markov.frame_quantities import FrameQuantities
 from cfbmarkov.markov.states import StateSpace
 from cfbmarkov.observed.lag_resolution import PassReading
 from cfbmarkov.trajectories import Trajectories, opened
-from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE
+from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, time_text
 
 #: the state of a particle that is absent in a frame
 ABSENT = -1
@@ -215,7 +215,8 @@ class DiscreteTrajectories:
         return list(np.ascontiguousarray(self.states.T))
 
     def __repr__(self) -> str:
-        span = (f"{self.times[0]:g}..{self.times[-1]:g} s" if self.n_frames else "no frames")
+        span = (f"{time_text(self.times[0])}..{time_text(self.times[-1])} s" if self.n_frames
+                else "no frames")
         frames = "frame" if self.lag_frames == 1 else "frames"
         return (f"DiscreteTrajectories({self.state_space.describe()}, {self.n_particles} "
                 f"particles x {self.n_frames} frames, {span}, lag {self.lag_frames} {frames} = "

@@ -142,10 +142,13 @@ def _sources_text(source) -> str:
 def _windows_text(model: "MarkovModel") -> str:
     """``window 10:15 s``, ``windows 10:15, 12:17 s`` (a pooled fit's, one per run) or
     ``window all``."""
+    from cfbmarkov.trajectory_format import time_text      # 3600.005, not 3600.01
+
     if model.run_windows is not None and len({tuple(w) for w in model.run_windows}) > 1:
-        return "windows " + ", ".join(f"{a:g}:{b:g}" for a, b in model.run_windows) + " s"
+        return "windows " + ", ".join(f"{time_text(a)}:{time_text(b)}"
+                                      for a, b in model.run_windows) + " s"
     return 'window ' + ('all' if model.window is None
-                        else f'{model.window[0]:g}:{model.window[1]:g} s')
+                        else f'{time_text(model.window[0])}:{time_text(model.window[1])} s')
 
 
 def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
