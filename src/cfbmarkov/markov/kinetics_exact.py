@@ -105,6 +105,19 @@ class ExitMoments:
         return self.mean_a2 * v0 * v0 + self.mean_2ab * v0 + self.mean_b2
 
 
+def _factors(q, a, c=None, lu_q=None) -> tuple:
+    """Q as CSC, a, 1 - a (``c``, else formed), and the LU factors of I - Q (``lu_q`` where
+    given), I - D Q and I - D^2 Q that the exit moments solve with."""
+    q = sp.csc_matrix(q, dtype=np.float64)
+    a = np.asarray(a, dtype=np.float64)
+    c = 1.0 - a if c is None else np.asarray(c, dtype=np.float64)
+    eye = sp.identity(q.shape[0], format="csc")
+    if lu_q is None:
+        lu_q = splu(sp.csc_matrix(eye - q))
+    return (q, a, c, lu_q, splu(sp.csc_matrix(eye - sp.diags(a) @ q)),
+            splu(sp.csc_matrix(eye - sp.diags(a * a) @ q)))
+
+
 def exit_moments(q, r, e, a, b, lu_q=None, c=None) -> ExitMoments:
     """:class:`ExitMoments` of an absorbing chain (module docstring).
 
@@ -133,15 +146,8 @@ def exit_moments(q, r, e, a, b, lu_q=None, c=None) -> ExitMoments:
     InputError
         If no entering particle can leave.
     """
-    q = sp.csc_matrix(q, dtype=np.float64)
-    n = q.shape[0]
-    r, e, a, b = (np.asarray(x, dtype=np.float64) for x in (r, e, a, b))
-    c = 1.0 - a if c is None else np.asarray(c, dtype=np.float64)
-    eye = sp.identity(n, format="csc")
-    if lu_q is None:
-        lu_q = splu(sp.csc_matrix(eye - q))
-    lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q))
-    lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q))
+    r, e, b = (np.asarray(x, dtype=np.float64) for x in (r, e, b))
+    q, a, c, lu_q, lu_dq, lu_d2q = _factors(q, a, c, lu_q)
     leaves = lu_q.solve(r)
     p = float(e @ leaves)
     if not p > 0:
@@ -196,6 +202,13 @@ class CarriedMoments:
     landing: np.ndarray
     mean_by_entry: np.ndarray = field(default=None, repr=False)
     second_by_entry: np.ndarray = field(default=None, repr=False)
+    discounted: object = field(default=None, repr=False, compare=False)   # LU of I - D Q
+
+    def entering_mass(self, entering: np.ndarray) -> np.ndarray:
+        """The value's mass per transient state, summed over the lags spent there, of the
+        values ``entering`` per transient state (u at the entry states; mu's first term,
+        module docstring): entering (I - D Q)^-1."""
+        return self.discounted.solve(np.asarray(entering, dtype=np.float64), trans="T")
 
     def carried(self) -> tuple[float, float]:
         """The steady mean and second moment of a value carried across residences.
@@ -279,15 +292,8 @@ def carried_moments(q, r, e, a, b, landing, entry_rows, lu_q=None, c=None) -> Ca
         If no relaxation acts wherever particles go: the value keeps its start, and there is
         no steady state.
     """
-    q = sp.csc_matrix(q, dtype=np.float64)
-    n = q.shape[0]
-    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
-    c = 1.0 - a if c is None else np.asarray(c, dtype=np.float64)
-    eye = sp.identity(n, format="csc")
-    if lu_q is None:
-        lu_q = splu(sp.csc_matrix(eye - q))
-    lu_dq = splu(sp.csc_matrix(eye - sp.diags(a) @ q))
-    lu_d2q = splu(sp.csc_matrix(eye - sp.diags(a * a) @ q))
+    b = np.asarray(b, dtype=np.float64)
+    q, a, c, lu_q, lu_dq, lu_d2q = _factors(q, a, c, lu_q)
     big_r = np.asarray(sp.csr_matrix(landing).toarray(), dtype=np.float64)
     lands = lu_q.solve(big_r)                                   # (I - Q)^-1 R
     alpha = lu_dq.solve(a[:, None] * big_r)
@@ -315,7 +321,7 @@ def carried_moments(q, r, e, a, b, landing, entry_rows, lu_q=None, c=None) -> Ca
                          "no steady state (it keeps its start value): use start = entry")
     u = _steady_by_entry(mf, land, mb.T @ nu, nu)
     second = _steady_by_entry(mf2, land, mab2.T @ u + mb2.T @ nu, nu)
-    return CarriedMoments(nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, u, second)
+    return CarriedMoments(nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, u, second, lu_dq)
 
 
 @dataclass(frozen=True)
@@ -576,9 +582,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
             entering = np.zeros(q.shape[0])     # the value's mass entering by entry state
             live = landed[1] >= 0
             entering[landed[1][live]] = carried.mean_by_entry[live]
-            values = values + splu(sp.csc_matrix(
-                sp.identity(q.shape[0], format="csc") - sp.diags(a) @ q)).solve(entering,
-                                                                               trans="T")
+            values = values + carried.entering_mass(entering)
             m = carried
         else:
             v0 = float(sk.initial[i])
