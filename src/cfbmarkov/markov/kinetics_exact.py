@@ -570,24 +570,23 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     occupancy = lu_q.solve(e, trans="T")       # lags spent in each state per entry
     for i, name in enumerate(sk.names):
         a, b, c = a_all[i][state], b_all[i][state], c_all[i][state]
-        m = exit_moments(q, r, e, a, b, lu_q, c)
-        values = m.mass_rest                # the value's mass by state, from the lags' b
         if sk.starts[i] == "carried":
             try:
-                carried = carried_moments(q, r, e, a, b, *landed, lu_q, c)
+                m = carried_moments(q, r, e, a, b, *landed, lu_q, c)
             except InputError as exc:
                 raise InputError(f"{where}property {name}: {exc}") from None
-            v0, second = carried.carried()
+            v0, second = m.carried()
             mean = v0
             entering = np.zeros(q.shape[0])     # the value's mass entering by entry state
             live = landed[1] >= 0
-            entering[landed[1][live]] = carried.mean_by_entry[live]
-            values = values + carried.entering_mass(entering)
-            m = carried
+            entering[landed[1][live]] = m.mean_by_entry[live]
+            # mu = (u + (nu o b) Q) (I - D Q)^-1 (module docstring)
+            values = m.entering_mass(entering + q.T @ (occupancy * b))
         else:
+            m = exit_moments(q, r, e, a, b, lu_q, c)
             v0 = float(sk.initial[i])
             mean, second = m.exit_mean(v0), m.exit_second(v0)
-            values = v0 * m.mass_per_start + values
+            values = v0 * m.mass_per_start + m.mass_rest
         # E[v^2] - E[v]^2 cancels to round-off where every exit value is alike (a carried
         # value at a uniform target): below ROUND_OFF of E[v^2] the variance is zero
         variance = second - mean * mean
