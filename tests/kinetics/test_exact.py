@@ -506,3 +506,57 @@ def test_a_cell_numbered_by_a_fraction_is_refused_not_truncated(index, named):
     table[0, :2] = index
     with pytest.raises(InputError, match=rf"row 0 gives {named}: cells are numbered by whole"):
         ByCell(table, "rates", "rate").per_cell(CellGrid(2, 2, 0.1, 1.0))
+
+
+def _trap_model(f=0.01):
+    """Two states; a pass up from state 0 lands back in 0, but 1 % of state 0's moves go
+    to state 1, which is never left (a trap that residences land in)."""
+    p = np.array([[0.5 + 0.5 * (1 - f), 0.5 * f], [0.0, 1.0]])
+    up = np.array([[0.5 * (1 - f) / (0.5 + 0.5 * (1 - f)), 1.0], [0.0, 0.0]])
+    zeros = np.zeros((2, 2), np.int64)
+    return MarkovModel(p, zeros, zeros, zeros, CellGrid(2, 1, 0.1, 1.0), LAG,
+                       estimator="given", pass_fractions=(up, np.zeros((2, 2))))
+
+
+def test_a_carried_value_of_particles_that_keep_circulating_ignores_those_trapped():
+    """Particles that land in a trap never come back: the carried steady state is that of
+    the particles that keep circulating (every cell relaxes to 600 K: 600 K, no spread;
+    the trapped mass dropped at every pass gave 606 K, above every target), and a carried
+    activity after N passes is E[A]^N where the landing does not depend on the path."""
+    from cfbmarkov.kinetics import ByCell
+
+    model = _trap_model()
+    cells = [[0, 0], [1, 0]]
+    heat = Kinetics((Property("T", HeatExchange(None), {
+        "coefficient": ByCell(np.array([c + [5.0] for c in cells])),
+        "temperature": ByCell(np.array([c + [600.0] for c in cells]))}, "carried", 300.0),))
+    out = exact_kinetics(model, heat)["T"]
+    assert out.exit_mean == pytest.approx(600.0, rel=1e-12) and out.exit_sd == 0.0
+    activity = Kinetics((Property("a", Deactivation(), {
+        "rate": ByCell(np.array([c + [0.1] for c in cells]))}, "carried", 1.0),))
+    a = exact_kinetics(model, activity)["a"]
+    one = a.after_passes(1)[0]
+    for n in (10, 100):
+        assert a.after_passes(n)[0] == pytest.approx(one ** n, rel=1e-10)
+
+
+def test_a_carried_value_without_relaxation_in_a_closed_set_of_entries_is_refused():
+    """Two columns whose passes land back in their own column, the value relaxing in one
+    only: no steady state for the other column's particles. Refused in one line (the
+    solve raised a singular-matrix traceback); after a million passes the relaxing case
+    is its steady state, at once."""
+    from cfbmarkov.kinetics import ByCell
+
+    model, _ = conveyor_model(0.0, columns=2, rows=3)
+    cells = [(c, i) for i in range(3) for c in range(2)]
+    for rates, refused in (((0.0, 2.0), True), ((1.0, 2.0), False)):
+        kin = Kinetics((Property("T", HeatExchange(None), {
+            "coefficient": ByCell(np.array([[c, i, rates[c]] for c, i in cells])),
+            "temperature": ByCell(np.array([[c, i, 600.0 + 100 * c] for c, i in cells]))},
+            "carried", 300.0),))
+        if refused:
+            with pytest.raises(InputError, match="land back among themselves"):
+                exact_kinetics(model, kin)
+        else:
+            out = exact_kinetics(model, kin)["T"]
+            assert out.after_passes(10 ** 6)[0] == pytest.approx(out.exit_mean, rel=1e-12)

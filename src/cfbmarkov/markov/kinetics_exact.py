@@ -57,7 +57,7 @@ from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
 from cfbmarkov.kinetics import Kinetics, StateKinetics
 from cfbmarkov.kinetics.spec import on_states
-from cfbmarkov.markov.connectivity import states_reaching
+from cfbmarkov.markov.connectivity import closed_classes, states_reaching
 from cfbmarkov.markov.first_passage import (_live_levels, deficit_matrix, rtd_of_split_chain,
                                             split_by_pass)
 
@@ -176,12 +176,19 @@ class CarriedMoments:
     depends on where it entered (a pass up keeps its column), so the passes are not
     independent of each other (module docstring, Carried properties).
 
+    The entry states are those particles keep circulating through: an entry state from
+    which no exit can be reached (a trap) is left out, and every moment is conditioned on
+    the residence ending in a kept one (the particles that land in a trap never come back,
+    so they carry no value into the steady state of those that do).
+
     Attributes
     ----------
+    kept : ndarray of int64, shape (M,)
+        The entry states kept, as indices into the residence chain's entry states.
     entry : ndarray of float64, shape (M,)
-        nu, the stationary distribution of the entry states (the exact RTD's).
+        nu, the stationary distribution of the kept entry states (the exact RTD's).
     a, b, a2, ab2, b2, forget, forget2 : ndarray of float64, shape (M, M)
-        From entry state j, landing in j' (conditioned on leaving): E[A 1{j'}], E[B 1{j'}],
+        From entry state j, landing in j' (conditioned on landing in a kept one): E[A 1{j'}], E[B 1{j'}],
         E[A^2 1{j'}], E[2AB 1{j'}], E[B^2 1{j'}], E[(1 - A) 1{j'}] and E[(1 - A^2) 1{j'}],
         the last two formed without cancellation.
     landing : ndarray of float64, shape (M, M)
@@ -191,6 +198,7 @@ class CarriedMoments:
         (sum u the steady mean).
     """
 
+    kept: np.ndarray
     entry: np.ndarray
     a: np.ndarray
     b: np.ndarray
@@ -228,7 +236,10 @@ class CarriedMoments:
         """Mean and second moment of the exit value after ``passes`` residences of a value
         carried from ``v0``, the first entered with the stationary entry distribution:
         u_k = A^T u_(k-1) + B^T nu, s_k = (A^2)^T s_(k-1) + (2AB)^T u_(k-1) + (B^2)^T nu
-        from u_0 = v0 nu, s_0 = v0^2 nu; the mean sum u_k, the second moment sum s_k.
+        from u_0 = v0 nu, s_0 = v0^2 nu; the mean sum u_k, the second moment sum s_k. The
+        recursion is linear in (u, s, 1): its matrix raised to the power ``passes`` by
+        repeated squaring (2 log2(passes) products of (2M + 1)-square matrices, not one
+        step a pass).
 
         Parameters
         ----------
@@ -241,16 +252,19 @@ class CarriedMoments:
         -------
         mean, second : float
         """
-        u = float(v0) * self.entry
-        sq = float(v0) * float(v0) * self.entry
-        tiny = np.finfo(np.float64).tiny
-        for _ in range(int(passes)):
-            u, sq = (self.a.T @ u + self.b.T @ self.entry,
-                     self.a2.T @ sq + self.ab2.T @ u + self.b2.T @ self.entry)
-            # below the normal floats a value is round-off of a far smaller one: 0
-            u = np.where(np.abs(u) < tiny, 0.0, u)
-            sq = np.where(np.abs(sq) < tiny, 0.0, sq)
-        return float(u.sum()), float(sq.sum())
+        m = self.entry.size
+        step = np.zeros((2 * m + 1, 2 * m + 1))
+        step[:m, :m] = self.a.T
+        step[:m, 2 * m] = self.b.T @ self.entry
+        step[m:2 * m, :m] = self.ab2.T
+        step[m:2 * m, m:2 * m] = self.a2.T
+        step[m:2 * m, 2 * m] = self.b2.T @ self.entry
+        step[2 * m, 2 * m] = 1.0
+        state = np.concatenate([float(v0) * self.entry, float(v0) ** 2 * self.entry, [1.0]])
+        state = np.linalg.matrix_power(step, int(passes)) @ state
+        tiny = np.finfo(np.float64).tiny       # below the normal floats: round-off of 0
+        mean, second = float(state[:m].sum()), float(state[m:2 * m].sum())
+        return (0.0 if abs(mean) < tiny else mean), (0.0 if abs(second) < tiny else second)
 
 
 def _steady_by_entry(forget: np.ndarray, landing: np.ndarray, rhs: np.ndarray,
@@ -304,24 +318,35 @@ def carried_moments(q, r, e, a, b, landing, entry_rows, lu_q=None, c=None) -> Ca
     eps = lu_q.solve((b * b)[:, None] * w + b[:, None] * (q @ delta))
     forget = lu_dq.solve(c[:, None] * lands)                    # (I - D Q)^-1 ((1-a) o L)
     forget2 = lu_d2q.solve((c * (2.0 - c))[:, None] * lands)  # 1 - a^2 = c (2 - c)
-    live = entry_rows >= 0
-    rows = np.where(live, entry_rows, 0)
-    leave = np.where(live, lands[rows].sum(axis=1), 0.0)
-    scale = np.divide(1.0, leave, out=np.zeros_like(leave), where=leave > 0)[:, None]
+    kept = np.flatnonzero(entry_rows >= 0)
+    while kept.size:        # entries whose residences can land in a kept one
+        stays = lands[entry_rows[kept]][:, kept].sum(axis=1) > 0
+        if stays.all():
+            break
+        kept = kept[stays]
+    if not kept.size:
+        raise InputError("no particle that enters comes back to an entry from which the top "
+                         "can be reached: a carried property has no steady state")
+    rows = entry_rows[kept]
+    leave = lands[rows][:, kept].sum(axis=1)           # ends, landing in a kept entry
+    scale = (1.0 / leave)[:, None]
 
     def on_entries(x):
-        return x[rows] * scale
+        return x[rows][:, kept] * scale
 
-    nu = np.where(live, np.asarray(e, dtype=np.float64)[rows], 0.0)
+    nu = np.asarray(e, dtype=np.float64)[rows]
     nu = nu / nu.sum()
     moments = [on_entries(x) for x in (alpha, beta, gamma, delta, eps, forget, forget2, lands)]
     ma, mb, ma2, mab2, mb2, mf, mf2, land = moments
-    if not mf.sum() > 0.0:
-        raise InputError("a carried property with a zero rate wherever particles go has "
-                         "no steady state (it keeps its start value): use start = entry")
+    for members in closed_classes(sp.csr_matrix(land)):
+        if not mf[members].sum() > 0.0:
+            raise InputError("a carried property with a zero rate wherever the particles of "
+                             "some entry states go (they land back among themselves) has no "
+                             "steady state there (it keeps its start value): use start = "
+                             "entry")
     u = _steady_by_entry(mf, land, mb.T @ nu, nu)
     second = _steady_by_entry(mf2, land, mab2.T @ u + mb2.T @ nu, nu)
-    return CarriedMoments(nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, u, second, lu_dq)
+    return CarriedMoments(kept, nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, u, second, lu_dq)
 
 
 @dataclass(frozen=True)
@@ -578,8 +603,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
             v0, second = m.carried()
             mean = v0
             entering = np.zeros(q.shape[0])     # the value's mass entering by entry state
-            live = landed[1] >= 0
-            entering[landed[1][live]] = m.mean_by_entry[live]
+            entering[landed[1][m.kept]] = m.mean_by_entry
             # mu = (u + (nu o b) Q) (I - D Q)^-1 (module docstring)
             values = m.entering_mass(entering + q.T @ (occupancy * b))
         else:
