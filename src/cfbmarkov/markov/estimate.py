@@ -84,10 +84,12 @@ def open_chain(counts: TransitionCounts) -> OpenFlow:
 
 #: relative difference between a given lag and the frames it spans (lag frames x frame
 #: interval) beyond which a model takes the frames' lag (:meth:`TransitionEstimator.fit`):
-#: above the frame interval's own uncertainty (from times printed to 5 decimals, up to
-#: about 6e-5 of it on ten frames of 120 Hz), below a lag typed short (0.00833 s for one
-#: 1/120 s frame is 4e-4 short)
-LAG_ROUND_OFF = 1e-4
+#: below a lag typed short (0.008333 s for one 1/120 s frame is 4e-5 short, and a
+#: prediction's 4 s were then no whole number of its lags), above the round-off of frame
+#: times printed to 5 decimals over a few hundred frames (3e-8); where a file's few frames
+#: leave its interval less certain than this, the frames' lag is taken, as exact as the
+#: file's own times
+LAG_ROUND_OFF = 1e-6
 
 
 class TransitionEstimator:
@@ -182,8 +184,9 @@ class TransitionEstimator:
         -------
         MarkovModel
             Its ``lag`` is the one the transitions span, lag frames x frame interval: a lag
-            given within the files' time tolerance of it (half a percent of a frame:
-            0.0083 s for one frame of 1/120 s) is replaced by it.
+            given within the files' time tolerance of it (half a percent of a frame) but
+            further from it than round-off (:data:`LAG_ROUND_OFF`; 0.0083 or 0.008333 s for
+            one frame of 1/120 s) is replaced by it.
 
         Raises
         ------
