@@ -311,3 +311,11 @@ def test_the_verdict_on_tracks_with_absences_does_not_send_to_stationarity(tmp_p
         err = capsys.readouterr().err
         assert "warning:" in err
         assert ("stationarity RUN --sample-length" in err) is not hidden
+    # an open riser's absences are its entries and exits, which stationarity reads
+    from cfbmarkov.synthetic import write_open_run
+
+    run = write_open_run(tmp_path / "open.h5", flow, 40, 5.0, seed=3)
+    assert main(["fit", str(run), "--cells", "4x8", "--lag", str(flow.lag), "--window",
+                 "0:1.5", "-o", str(tmp_path / "open-m.h5"), "-q"]) == 0
+    err = capsys.readouterr().err
+    assert "warning:" in err and "stationarity RUN --sample-length" in err

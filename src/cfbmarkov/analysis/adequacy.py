@@ -444,7 +444,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                      f"{_ADVICE}")
     if pooled:
         lines = [line.replace(_ADVICE, _POOLED_ADVICE) for line in lines]
-    if _any_absences(runs):     # stationarity observes no residence across an absence
+    if _any_absences(runs):     # stationarity reads no periodic run with absences
         lines = [line.replace(_STATIONARITY_ADVICE, "") for line in lines]
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
                     run_means, window_mean, applied if not pooled else math.nan)
@@ -466,10 +466,11 @@ MIN_PARTS_LIMIT = 0.1
 MAX_PARTS_LIMIT = 0.25
 
 def _any_absences(runs) -> bool:
-    """Whether a run holds particles absent from some frames (PTV, PEPT out of view)."""
+    """Whether a periodic run holds particles absent from some frames (PTV, PEPT out of
+    view), which `stationarity` refuses (an open riser's entries and exits it reads)."""
     for run in runs:
         with opened(run) as traj:
-            if traj.has_absences:
+            if traj.has_absences and not traj.boundary.is_open:
                 return True
     return False
 
