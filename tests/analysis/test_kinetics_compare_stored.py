@@ -359,3 +359,24 @@ def test_a_reference_start_begins_both_sides_at_the_references_values(runs, tmp_
     first_model = got["model"]["bed_mean_over_time"]["mean"][0]
     assert first_ref == pytest.approx(float(np.nanmean(stored)), rel=1e-12)
     assert first_model == pytest.approx(first_ref, rel=1e-12)
+
+
+def test_a_reference_start_from_values_of_another_law_is_refused(runs, tmp_path):
+    """The reference stores X as a first-order conversion (0 to 1); a heat exchange named X
+    that starts from the reference would start at temperatures of 0-1 K: refused, as a
+    prediction from that file refuses it."""
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.report.compare import compare
+    from cfbmarkov.trajectories import Trajectories
+
+    kin = _toml(tmp_path, "heat", 'law = "heat-exchange"\ncoefficient = 1.0\n'
+                'temperature = 800.0\ninitial = 300.0\nstart = "reference"')
+    with Trajectories(runs["pred"]) as traj:
+        model = MarkovModel.from_trajectories(traj)
+    plain = model.predict(runs["pred"], start=5.0, duration=2.0, seed=7,
+                          output=tmp_path / "plain.h5")
+    with pytest.raises(InputError, match=r"stores X of law first-order, not heat-exchange"):
+        compare(runs["pred"], plain, window=(5.0, 7.0), output=tmp_path / "heat",
+                figures=False, resamples=0, kinetics=kin)
+    assert not (tmp_path / "heat").exists()

@@ -353,6 +353,14 @@ def reference_starts(source, model, state_kinetics, time: float, *, direction: s
         frame = int(np.argmin(np.abs(traj.times - time)))
         for i, m in enumerate(maps):
             if m["start"] == "reference" and m["name"] in stored:
+                law = traj.property_attrs(m["name"]).get("law")
+                law = law.decode(errors="replace") if isinstance(law, bytes) else law
+                if law is not None and str(law) != state_kinetics.laws[i].key:
+                    raise InputError(
+                        f"property {m['name']} starts from the reference, but {traj.path} "
+                        f"stores {m['name']} of law {law}, not {state_kinetics.laws[i].key}: "
+                        "its values cannot start it (a prediction from that file refuses "
+                        "them too); rename the property, or use start = entry")
                 held = np.asarray(traj.property_values(m["name"], frame), dtype=np.float64)
                 values[i] = np.where(np.isfinite(held), held, m["initial"])
     return values
