@@ -71,13 +71,22 @@ def _positive(value, what: str) -> float:
 
 #: a bridged step is a gap where it spans this many times the track's median sample spacing
 GAP_SPACINGS = 4
-#: samples on each side of a gap from which the speed around it is measured
+#: the span (s) before and after a gap over which the speed around it is fitted, at least
+#: (and at least :data:`SPEED_SAMPLES` spacings)
+SPEED_SPAN = 0.05
+#: samples on each side of a gap from which the speed around it is measured, at least
 SPEED_SAMPLES = 10
 
 
-def _speed(ts, height, lo, hi) -> float | None:
-    """The mean vertical speed (m/s) from sample ``lo`` to ``hi`` (None where they are one)."""
-    return None if hi <= lo else float((height[hi] - height[lo]) / (ts[hi] - ts[lo]))
+def _side_speed(ts, height, stop, first, last) -> float | None:
+    """The vertical speed (m/s) fitted by least squares to the samples ``first`` .. ``last``
+    (inclusive) of one side of a gap, None where they are fewer than half of
+    :data:`SPEED_SAMPLES` or span less than half the time asked for (``stop`` - the side's
+    other end)."""
+    t, y = ts[first:last + 1], height[first:last + 1]
+    if t.size < SPEED_SAMPLES // 2 or t[-1] - t[0] < 0.5 * stop:
+        return None
+    return float(np.polyfit(t - t.mean(), y, 1)[0])
 
 
 def _gap_outrun(ts, height, joined, limit):
@@ -86,27 +95,34 @@ def _gap_outrun(ts, height, joined, limit):
 
     A gap is a step joined in one stretch that spans :data:`GAP_SPACINGS` times the
     track's median joined spacing or more. Its minimal-image step cannot tell a move of
-    0.8 H up from one of 0.2 H down; the speed measured over up to :data:`SPEED_SAMPLES`
-    joined samples before it and after it (unwrapped ``height``, within the stretch),
-    averaged, times the gap's duration, can: where it exceeds ``limit`` the passes in the
-    gap are not countable. Gaps without a speed on either side are not judged."""
+    0.8 H up from one of 0.2 H down; the tracer's speed can. It is fitted by least squares
+    to the unwrapped ``height`` over :data:`SPEED_SPAN` s (at least :data:`SPEED_SAMPLES`
+    spacings) of the stretch before the gap and after it (a few samples close together
+    carry the location error, not the motion); where both sides give a speed, of one sign,
+    the smaller one times the gap's duration must stay within ``limit``. A tracer that
+    turns in the gap (speeds of opposite signs) or a side without enough samples is not
+    judged."""
     dt = np.diff(ts)
     if not joined.any():
         return None
     typical = float(np.median(dt[joined]))
-    gaps = np.flatnonzero(joined & (dt >= GAP_SPACINGS * typical))
-    for k in gaps:
-        lo = k
-        while lo > 0 and k - lo < SPEED_SAMPLES and joined[lo - 1] and lo - 1 not in gaps:
-            lo -= 1
-        hi = k + 1
-        while (hi < joined.size and hi - (k + 1) < SPEED_SAMPLES and joined[hi]
-               and hi not in gaps):
-            hi += 1
-        speeds = [v for v in (_speed(ts, height, lo, k), _speed(ts, height, k + 1, hi))
-                  if v is not None]
-        if speeds and abs(np.mean(speeds) * dt[k]) > limit:
-            return int(k), float(np.mean(speeds))
+    span = max(SPEED_SPAN, SPEED_SAMPLES * typical)
+    breaks = ~joined | (dt >= GAP_SPACINGS * typical)     # steps no stretch runs across
+    for k in np.flatnonzero(joined & (dt >= GAP_SPACINGS * typical)):
+        first = k                                          # back to span s or a break
+        while first > 0 and not breaks[first - 1] and ts[k] - ts[first - 1] <= span:
+            first -= 1
+        last = k + 1
+        while (last < joined.size and not breaks[last]
+               and ts[last + 1] - ts[k + 1] <= span):
+            last += 1
+        before = _side_speed(ts, height, span, first, k)
+        after = _side_speed(ts, height, span, k + 1, last)
+        if before is None or after is None or before * after <= 0:
+            continue
+        speed = float(np.sign(before) * min(abs(before), abs(after)))
+        if abs(speed * dt[k]) > limit:
+            return int(k), speed
     return None
 
 
@@ -254,8 +270,9 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
             if fast is not None:
                 k, speed = fast
                 raise InputError(
-                    f"{label}: particle {ids[j]} moves at {speed:+.3g} m/s vertically before "
-                    f"and after its samples at t = {ts[k]:.9g} and {ts[k + 1]:.9g} s, so "
+                    f"{label}: particle {ids[j]} moves at {speed:+.3g} m/s or faster "
+                    f"vertically before and after its samples at t = {ts[k]:.9g} and "
+                    f"{ts[k + 1]:.9g} s (its speed fitted on each side of the gap), so "
                     f"between them it can move {speed * (ts[k + 1] - ts[k]):+.3g} m, more "
                     f"than {max_step:g} x the height {period:g} m, while their heights differ "
                     f"by {step[k]:+.3g} m: its passes through the top there cannot be counted; "
