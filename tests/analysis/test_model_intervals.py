@@ -339,3 +339,19 @@ def test_the_flow_term_of_a_stationary_flow_seen_by_three_tracers_is_its_samplin
         model = fit_model(run, CellGrid(4, 16), flow.lag, (0.0, 120.0), "mle")
         term = flow_variability(model, 120.0)
         assert term.mean < 0.01 and term.sd < 0.05
+
+
+def test_compares_prediction_interval_keeps_the_reference_windows_sampling(tmp_path):
+    """The same three-tracer runs: what one window's observed E(RT) moves by includes its
+    own sampling, which `compare`'s prediction interval holds in the flow's term alone (the
+    bootstrap carries the fitting window's, the Monte Carlo term the prediction's)."""
+    from cfbmarkov.analysis.bootstrap import flow_variability
+    from cfbmarkov.markov import CellGrid, fit_model
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    flow = RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                     vertical_spread=0.5, persistence=False)
+    run = write_run(tmp_path / "r.h5", flow, 3, 120.0, seed=1)
+    model = fit_model(run, CellGrid(4, 16), flow.lag, (0.0, 120.0), "mle")
+    observed = flow_variability(model, 120.0, sampling=True)
+    assert observed.mean > 0.02 > flow_variability(model, 120.0).mean

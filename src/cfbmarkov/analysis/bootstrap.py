@@ -443,8 +443,8 @@ def flow_quantile(level: float, degrees_of_freedom: int | None = None) -> float:
 
 
 def flow_variability(model, window_length: float, *, direction: str | None = None,
-                     blocks: int = FLOW_BLOCKS, within_runs: bool = False
-                     ) -> FlowVariability | None:
+                     blocks: int = FLOW_BLOCKS, within_runs: bool = False,
+                     sampling: bool = False) -> FlowVariability | None:
     """How much the reference's E(RT) and SD(RT) in one window of ``window_length`` move by
     themselves from window to window, relative to their values, measured in the model's
     fitting window (the flow's own variability; module docstring).
@@ -488,6 +488,12 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
     within_runs : bool, optional
         Compare each block with the other blocks of its own run only (a pooled fit's
         within-run variability; default False: with all the other blocks).
+    sampling : bool, optional
+        Keep the blocks' own sampling in the spread (how much one window's *observed*
+        figure moves: `compare`'s prediction intervals, whose other terms carry the fitting
+        window's and the prediction's sampling but not the reference window's); default
+        False: the spread beyond it (the model's own interval, whose block bootstrap
+        carries that sampling already).
 
     Returns
     -------
@@ -567,6 +573,8 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
     count = float(np.mean([group.count(g) for g in group]))
     block = float(np.mean(lengths))
     factor = np.sqrt((count - 1.0) / count) * max(1.0, np.sqrt(block / float(window_length)))
+    if sampling:
+        noise_mean, noise_sd = [0.0] * len(rel_mean), [0.0] * len(rel_sd)
     return FlowVariability(_beyond_noise(rel_mean, noise_mean) * factor,
                            _beyond_noise(rel_sd, noise_sd) * factor,
                            max(len(rel_mean) - len(compared), 1))

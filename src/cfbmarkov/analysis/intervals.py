@@ -415,7 +415,9 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
             m_se = np.zeros(int(curve[0].max()) + 1)
             m_se[curve[0]] = se_curve
 
-    relative = flow_variability(model, window_length, direction=direction) if flow else None
+    # a window's observed figure moves by its own sampling too, which no other term holds
+    relative = (flow_variability(model, window_length, direction=direction, sampling=True)
+                if flow else None)
     dof = None if relative is None else relative.degrees_of_freedom
 
     runs = len(fitting_runs(model))
