@@ -108,21 +108,32 @@ def _gap_outrun(ts, height, joined, limit):
     typical = float(np.median(dt[joined]))
     span = max(SPEED_SPAN, SPEED_SAMPLES * typical)
     breaks = ~joined | (dt >= GAP_SPACINGS * typical)     # steps no stretch runs across
-    for k in np.flatnonzero(joined & (dt >= GAP_SPACINGS * typical)):
-        first = k                                          # back to span s or a break
-        while first > 0 and not breaks[first - 1] and ts[k] - ts[first - 1] <= span:
-            first -= 1
-        last = k + 1
-        while (last < joined.size and not breaks[last]
-               and ts[last + 1] - ts[k + 1] <= span):
-            last += 1
-        before = _side_speed(ts, height, span, first, k)
-        after = _side_speed(ts, height, span, k + 1, last)
+    gaps = np.flatnonzero(joined & (dt >= GAP_SPACINGS * typical))
+    if not gaps.size:
+        return None
+    # each side: back (on) to span s or the stretch's end, whichever comes first
+    piece = np.concatenate([[0], np.cumsum(breaks)])      # the stretch of each sample
+    starts = np.searchsorted(piece, piece, side="left")
+    ends = np.searchsorted(piece, piece, side="right") - 1
+    lo = np.maximum(np.searchsorted(ts, ts[gaps] - span, side="left"), starts[gaps])
+    hi = np.minimum(np.searchsorted(ts, ts[gaps + 1] + span, side="right") - 1,
+                    ends[gaps + 1])
+    # a first look from the sides' end points, then the fit where it may matter: the fit
+    # differs from it by the location error over span s, far below half of it
+    with np.errstate(divide="ignore", invalid="ignore"):
+        rough_before = (height[gaps] - height[lo]) / (ts[gaps] - ts[lo])
+        rough_after = (height[hi] - height[gaps + 1]) / (ts[hi] - ts[gaps + 1])
+    rough = np.minimum(np.abs(rough_before), np.abs(rough_after))
+    judged = ((rough_before * rough_after > 0) & (rough * dt[gaps] > 0.5 * limit))
+    for g in np.flatnonzero(judged):
+        k = int(gaps[g])
+        before = _side_speed(ts, height, span, int(lo[g]), k)
+        after = _side_speed(ts, height, span, k + 1, int(hi[g]))
         if before is None or after is None or before * after <= 0:
             continue
         speed = float(np.sign(before) * min(abs(before), abs(after)))
         if abs(speed * dt[k]) > limit:
-            return int(k), speed
+            return k, speed
     return None
 
 
