@@ -91,6 +91,38 @@ def test_fit_pooled_stores_and_prints_the_interval_and_refuses_a_run_with_itself
         assert not bad.exists()
 
 
+def test_a_copy_or_link_of_a_run_with_another_window_or_a_prediction_is_refused(
+        runs, tmp_path, capsys):
+    """A copy (or hard link) of a run pooled with it under another window counts the common
+    frames twice (overlap) or takes one run's windows as independent flow (apart): refused
+    as for one file given twice, naming the frame that shows it; a prediction pooled with a
+    run is refused; independent runs of the same times and ids still pool."""
+    copy, link = tmp_path / "copy.h5", tmp_path / "link.h5"
+    shutil.copy(runs[0], copy)
+    link.hardlink_to(runs[0])
+    model = tmp_path / "m.h5"
+    assert main(["fit", str(runs[0]), "--cells", "3x8", "--window", "0.5:2.5",
+                 "--resamples", "0", "-o", str(model)]) == 0
+    prediction = tmp_path / "p.h5"
+    assert main(["predict", str(model), "--init", str(runs[0]), "--start", "0.5",
+                 "--duration", "2", "--seed", "1", "-o", str(prediction)]) == 0
+    capsys.readouterr()
+    for other, windows, said in (
+            (copy, "0.5:2.5,0.6:2.6", "overlap"), (copy, "0.2:1.4,1.5:2.9", "are both of"),
+            (link, "0.5:2.5,0.6:2.6", "overlap"), (prediction, "0.5:2.5,0.5:1.9",
+                                                   "is a Markov chain's prediction")):
+        bad = tmp_path / "bad.h5"
+        assert main(["fit", str(runs[0]), str(other), "--cells", "3x8", "--window", windows,
+                     "-o", str(bad)]) == 2, (other, windows)
+        err = capsys.readouterr().err
+        assert said in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+        assert not bad.exists()
+        if other != prediction:
+            assert "which hold one run (their frames at t = 3 s are the same" in err, err
+    assert main(["fit", str(runs[0]), str(runs[1]), "--cells", "3x8", "--window",
+                 "0.5:2.5,0.6:2.6", "--resamples", "0", "-o", str(tmp_path / "ok.h5")]) == 0
+
+
 def test_pooled_fit_of_a_space_fitted_to_its_window(runs, tmp_path, capsys):
     """cells-velocity and cells-regime fit their bins on the window: pooled, the first run's
     bins are used for every run (the same states), and the interval is formed."""

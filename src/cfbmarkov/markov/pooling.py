@@ -18,6 +18,9 @@ import math
 import os
 from typing import Sequence
 
+import numpy as np
+
+from cfbmarkov._outputs import PREDICTION_SOURCE
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.discrete import DiscreteTrajectories, discretize
 from cfbmarkov.markov.states import StateSpace
@@ -126,9 +129,17 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
     InputError
         Where two windows have the same content
         (:func:`~cfbmarkov.trajectory_identity.window_identity`: a run given twice, or a
-        copy of it), or two windows are of one file (overlapping: counted twice; apart:
-        not independent runs).
+        copy of it), two windows are of one run (one file, or two files that hold the same
+        frame, :func:`same_run_frame`: a copy or a link; overlapping: counted twice; apart:
+        not independent runs), or one of several files is a Markov chain's prediction.
     """
+    if len(runs) > 1:
+        for run in runs:
+            if getattr(run, "source", None) == PREDICTION_SOURCE:
+                raise InputError(f"{run.path} is a Markov chain's prediction, not a run: pooled "
+                                 "with other files it would be counted as independent flow, "
+                                 "while it only repeats the chain it was drawn from (pool "
+                                 "CFD-DEM runs or measurements; fit a prediction on its own)")
     seen: dict[str, str] = {}
     for k, (run, window) in enumerate(zip(runs, windows)):
         identity = window_identity(run, window)
@@ -139,18 +150,67 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
                              "the data (pool independent runs of one case)")
         seen[identity] = where
         for other, w in zip(runs[:k], windows[:k]):
-            if os.path.realpath(other.path) != os.path.realpath(run.path):
+            one_file = os.path.realpath(other.path) == os.path.realpath(run.path)
+            common = None if one_file else same_run_frame(other, run)
+            if not one_file and common is None:
                 continue
+            what = (f"of {run.path}" if one_file else
+                    f"of {other.path} and {run.path}, which hold one run (their frames at "
+                    f"t = {common:.10g} s are the same: a copy or a link of one file),")
             if w[0] < window[1] and window[0] < w[1]:
                 raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
-                                 f"{window[1]:g} s of {run.path} overlap: their common frames "
+                                 f"{window[1]:g} s {what} overlap: their common frames "
                                  "would be counted twice (give windows that do not overlap)")
             raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
-                             f"{window[1]:g} s are both of {run.path}: pooled as runs they "
+                             f"{window[1]:g} s are both {what}: pooled as runs they "
                              "would be taken as independent flow and narrow the interval by "
                              "sqrt(2), while windows of one run share its slow changes; fit "
                              f"one window of it ({min(w[0], window[0]):g}:"
                              f"{max(w[1], window[1]):g}), or pool independent runs of the case")
+
+
+#: how many of the latest common frames :func:`same_run_frame` looks back through for one
+#: with a particle in view
+SAME_RUN_FRAMES = 64
+
+
+def same_run_frame(a, b) -> float | None:
+    """The time of a frame two files share with the same content: a sign that they hold one
+    run (a copy, a link, or a run and a part of it) rather than two.
+
+    Two runs of a case are told apart by their particles' positions at one time both files
+    hold: the latest such time (runs started from one state part at once, a chaotic flow
+    never meets again), compared with the particles' ids and presence.
+
+    Parameters
+    ----------
+    a, b : Trajectories
+        Open trajectory files.
+
+    Returns
+    -------
+    float or None
+        That frame's time (s) where its ids, presence and positions are the same in both
+        files (NaN positions of absent particles equal); None where the files share no
+        frame time, or differ at the latest shared frame with a particle in view (of the
+        last :data:`SAME_RUN_FRAMES` they share).
+    """
+    times_a, times_b = np.asarray(a.times), np.asarray(b.times)
+    common = np.intersect1d(times_a, times_b)
+    if common.size == 0 or not np.array_equal(np.asarray(a.ids), np.asarray(b.ids)):
+        return None
+    for t in common[::-1][:SAME_RUN_FRAMES]:
+        i = int(np.flatnonzero(times_a == t)[0])
+        j = int(np.flatnonzero(times_b == t)[0])
+        present = np.asarray(a.present(i))
+        if not present.any():       # no particle in view: this frame cannot tell them apart
+            continue
+        if not np.array_equal(present, np.asarray(b.present(j))):
+            return None
+        same = np.array_equal(np.asarray(a.positions(i)), np.asarray(b.positions(j)),
+                              equal_nan=True)
+        return float(t) if same else None
+    return None
 
 
 def run_windows(windows: Sequence[tuple[float, float]], n_runs: int
