@@ -88,6 +88,49 @@ def test_pept_tracers_are_told_apart_by_label_and_noise_is_dropped(tmp_path, cap
     assert "import: 1 rows with label -1" in capsys.readouterr().out
 
 
+PEPT_OPTIONS = ["--format", "csv", "--width", "0.09", "--height", "0.95", "--vertical-axis",
+                "y", "--drop-depth", "--length-unit", "mm", "--time-unit", "ms", "--resample",
+                "0.005", "--max-gap", "0.01"]
+
+
+@pytest.mark.parametrize("name", ["tracer", "track", "trackid", "trajectory"])
+def test_pept_tracers_under_other_id_names_are_told_apart(tmp_path, capsys, name):
+    """The pept file's label column renamed as other tools name a tracer's id: still two
+    tracers (the noise row, label -1, is then tracer -1: the file says so)."""
+    text = (FIELD / "pept-two-tracers-noise.csv").read_text()
+    rows = [line for line in text.splitlines() if not line.startswith("#")
+            and float(line.split()[5]) != -1]
+    path = tmp_path / "t.csv"
+    path.write_text(f"# t x y z error {name}\n" + "\n".join(rows) + "\n")
+    assert main(["import", str(path), *PEPT_OPTIONS, "-o", str(tmp_path / "p.h5")]) == 0
+    assert f"ids from column {name!r}" in capsys.readouterr().err
+    with Trajectories(tmp_path / "p.h5") as t:
+        assert t.ids.tolist() == [0, 1]
+
+
+def test_a_file_read_as_one_tracer_names_the_columns_it_did_not_use(tmp_path, capsys):
+    """Two tracers numbered in a column of no id name: read as one tracer, which jumps
+    between them; the refusal says the file was read as one tracer and names the column."""
+    text = (FIELD / "pept-two-tracers-noise.csv").read_text()
+    rows = [line for line in text.splitlines() if not line.startswith("#")
+            and float(line.split()[5]) != -1]
+    far = [" ".join(f[:2] + [str(float(f[2]) + (400 if float(f[5]) == 1 else 0))] + f[3:])
+           for f in (r.split() for r in rows)]
+    path = tmp_path / "t.csv"
+    path.write_text("# t x y z error mark\n" + "\n".join(far) + "\n")
+    assert main(["import", str(path), *PEPT_OPTIONS, "-o", str(tmp_path / "p.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "read as one tracer; not used: 'error', 'mark': if one of them numbers the " \
+           "tracers, name it id" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "p.h5").exists()
+    one = tmp_path / "one.csv"              # one tracer: imported, its unused columns named
+    one.write_text("# t x y z error mark\n" + "\n".join(
+        r for r, f in zip(far, rows) if float(f.split()[5]) == 0) + "\n")
+    assert main(["import", str(one), *PEPT_OPTIONS, "-o", str(tmp_path / "o.h5")]) == 0
+    assert "no id column, so the file is read as one tracer; not used: 'error', 'mark'" in \
+        capsys.readouterr().err
+
+
 def test_trackmate_spots_use_track_id(tmp_path, capsys):
     code = main(["import", str(FIELD / "trackmate-spots.csv"), "--format", "csv", "--width", "0.09", "--height", "0.95", "-o",
                  str(tmp_path / "s.h5"), "--vertical-axis", "y", "--drop-depth",

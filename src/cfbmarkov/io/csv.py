@@ -371,6 +371,11 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
         writer.update_parameters(read_notes(layout))
 
 
+def _unused_columns(layout: CsvLayout) -> list[str]:
+    """The file's columns that the import reads nothing from (the depth axis left out)."""
+    return [name for name in layout.ignored if not name.endswith("(depth axis)")]
+
+
 def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
     """What the import did beyond reading rows, for the provenance and the import's summary
     (``import_notes``, shown by ``cfbmarkov import`` and ``cfbmarkov info``).
@@ -398,6 +403,11 @@ def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
                      + ", ".join(repr(n) for n in layout.id_others))
     elif layout.has_id and layout.noise_id is not None:
         notes.append(f"particle ids from column {layout.id_column!r}")
+    unused = _unused_columns(layout)
+    if not layout.has_id and unused:
+        notes.append("no id column, so the file is read as one tracer; not used: "
+                     + ", ".join(repr(n) for n in unused) + " (a column that numbers the "
+                     "tracers must be named id, tracer, label or track)")
     if layout.noise_rows:
         notes.append(f"{layout.noise_rows} rows with {layout.id_column} {layout.noise_id} or "
                      "empty (noise, or no track) dropped")
@@ -546,10 +556,19 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     times, ids, relative, merged = merge_same_times(
         rows[keep, layout.index("t")], ids[keep], relative[keep],
         height=riser.height if periodic else None, vertical=1)
-    tracks = resample_tracks(times, ids, relative,
-                             interval=interval, max_gap=max_gap,
-                             height=riser.height if periodic else None, vertical=1,
-                             label=label, open_height=None if periodic else riser.height)
+    try:
+        tracks = resample_tracks(times, ids, relative,
+                                 interval=interval, max_gap=max_gap,
+                                 height=riser.height if periodic else None, vertical=1,
+                                 label=label, open_height=None if periodic else riser.height)
+    except InputError as error:
+        unused = _unused_columns(layout)
+        if layout.has_id or not unused:
+            raise
+        # several tracers under a column of another name jump between each other's places
+        raise InputError(f"{error} (the file has no id column and is read as one tracer; "
+                         f"not used: {', '.join(repr(n) for n in unused)}: if one of them "
+                         "numbers the tracers, name it id)") from None
     positions = np.clip(tracks.positions, 0.0, extent)
     parameters = _parameters(path, layout, riser, "resampled")
     parameters.update({"resample": interval, "max_gap": interval if max_gap is None else max_gap,

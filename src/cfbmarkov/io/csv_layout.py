@@ -27,8 +27,9 @@ _ALIASES = {"t": "t", "time": "t", "position t": "t"}
 #: the columns that may hold the particle id, most specific first: a track's id
 #: (TrackMate's TRACK_ID; its ID numbers detections), trackpy's ``particle``, pept's ``label``
 #: (a trajectory's index, -1 for noise), then the plain id names
-ID_COLUMNS = {"track id": 0, "particle": 1, "label": 2, "id": 3, "particle id": 3,
-              "particleid": 3, "pid": 3}
+ID_COLUMNS = {"track id": 0, "trackid": 0, "track": 0, "particle": 1, "label": 2, "id": 3,
+              "particle id": 3, "particleid": 3, "pid": 3, "tracer": 3, "tracer id": 3,
+              "tracerid": 3, "trajectory": 3, "trajectory id": 3, "traj": 3}
 #: ids that mark rows belonging to no particle, by the id column's kind: pept's noise label
 #: -1; a TrackMate spot without a track has an empty TRACK_ID, read as -1
 NOISE_IDS = {"label": -1, "track id": -1}
