@@ -193,6 +193,24 @@ def test_verdict_in_the_model_file_and_the_verbs(runs, tmp_path, capsys):
     assert any("fitting sample" in w for w in summary["warnings"])
 
 
+def test_rtd_with_a_new_interval_says_the_verdict_was_made_with_the_stored_one(
+        runs, tmp_path, capsys):
+    """`rtd --resamples N --level L` prints a new interval; the stored verdict's lines were
+    judged (and quote) the interval fit stored: a line says so, naming its level and bounds."""
+    out = tmp_path / "m.h5"
+    assert run_cli(capsys, "fit", runs["switching"], "--cells", "4x16", "--window",
+                   "1.5:4.5", "--resamples", "20", "-o", out)[0] == 0
+    stored = MarkovModel.load(out).uncertainty
+    code, text, _ = run_cli(capsys, "rtd", out, "--resamples", "20", "--level", "0.5", "--json")
+    assert code == 0
+    data = json.loads(text)
+    assert data["level"] == 0.5 and data["rt_mean_interval"] != list(stored.rt_mean_interval)
+    note = [w for w in data["warnings"] if w.startswith("the fitting sample's verdict above")]
+    assert len(note) == 1 and "stored 90 % E(RT) interval" in note[0], data["warnings"]
+    code, text, _ = run_cli(capsys, "rtd", out, "--json")      # the stored interval: no note
+    assert code == 0 and not any("verdict above" in w for w in json.loads(text)["warnings"])
+
+
 def test_pooling_windows_adds_their_counts(runs):
     """The counts of three windows of one run that do not overlap add; the same window
     pooled with itself is refused (here, from the files; by the estimators alike,

@@ -138,5 +138,9 @@ def test_compare_refuses_intervals_asked_for_without_the_fitting_file(fitted, tm
     assert main([*argv, "-o", "c"]) == 0
     err = capsys.readouterr().err
     assert "warning: no intervals: synth/run.h5 (the model's fitting file" in err
+    # the progress line does not announce the resamples that are not drawn
+    assert main([*argv[:-1], "-o", "c2"]) == 0
+    err = capsys.readouterr().err
+    assert "compare: pred.h5 against other.h5" in err and "bootstrap resamples" not in err
     summary = json.loads((alone / "c" / "summary.json").read_text())
     assert summary["model"]["rt_mean_interval"] is None and summary["level"] is None

@@ -53,10 +53,12 @@ def cmd_compare(args) -> int:
     from cfbmarkov.cli.markov import _check_resamples
 
     _check_resamples(args.resamples, args.level)
+    resampled = bool(args.resamples)
     if args.resamples:      # a refusal stays one line, before any other line
         from cfbmarkov.report.compare import check_fitting_file
 
-        check_fitting_file(args.reference, args.prediction, required)
+        # a fitting file not found: no interval (a warning says so), nor resamples to announce
+        resampled = check_fitting_file(args.reference, args.prediction, required)
     note = None
     if args.window is None:
         args.window, note = _default_window(args.reference, args.prediction)
@@ -72,7 +74,7 @@ def cmd_compare(args) -> int:
         print(f"compare: {args.prediction} against {args.reference} over {a:g}-{b:g} s "
               f"(residence times, baselines, mixing"
               + (f", {args.resamples} bootstrap resamples for the intervals"
-                 if args.resamples else "") + (", figures" if not args.no_figures else "")
+                 if resampled else "") + (", figures" if not args.no_figures else "")
               + ")", file=sys.stderr, flush=True)
     from cfbmarkov._console import heartbeat
 

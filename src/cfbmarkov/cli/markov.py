@@ -290,6 +290,7 @@ def cmd_rtd(args) -> int:
                          "--window-length (or --resamples; `compare RUN PREDICTION` gives a "
                          "window's intervals against a run)")
     model = MarkovModel.load(args.model)
+    stored = model.uncertainty          # the interval the fitting sample's verdict was made with
     if args.resamples:
         from cfbmarkov.analysis.intervals import resolve_source
 
@@ -314,6 +315,14 @@ def cmd_rtd(args) -> int:
     band = rtd.uncertainty              # the intrinsic RTD's only
     adequacy = getattr(model, "adequacy", None)
     warnings = [str(line) for line in getattr(adequacy, "warnings", ()) or ()]
+    if warnings and args.resamples and stored is not None:
+        # the verdict quotes and judges by the interval fit stored, not the one formed here
+        from cfbmarkov.markov.uncertainty import outward_bounds
+
+        lo, hi = outward_bounds(*map(float, stored.rt_mean_interval), digits=4)
+        warnings.append(f"the fitting sample's verdict above was made by fit with the model's "
+                        f"stored {100 * stored.level:g} % E(RT) interval {lo}-{hi} s, not with "
+                        "the interval formed here")
     from cfbmarkov.markov.model_summary import fitting_run_count, unresolved_warning
 
     unresolved = unresolved_warning(rtd)

@@ -107,7 +107,7 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
         return None
 
 
-def check_fitting_file(reference, prediction, required: bool = False) -> None:
+def check_fitting_file(reference, prediction, required: bool = False) -> bool:
     """Refuse, before any work, a comparison whose intervals cannot use the model the
     prediction carries: its fitting file replaced since the fit or, where ``required``, not
     found (:func:`cfbmarkov.analysis.intervals.resolve_source`, with ``reference`` as a
@@ -119,6 +119,12 @@ def check_fitting_file(reference, prediction, required: bool = False) -> None:
         The comparison's trajectory files.
     required : bool, optional
         The intervals were asked for: a fitting file not found is refused too.
+
+    Returns
+    -------
+    bool
+        False where the model's fitting file was not found (the comparison then forms no
+        model interval, and says so), else True.
 
     Raises
     ------
@@ -132,13 +138,15 @@ def check_fitting_file(reference, prediction, required: bool = False) -> None:
     with opened(prediction) as pred:
         model = MarkovModel.from_trajectories(pred)
         if model is None:
-            return
+            return True
         model._cache.setdefault("file", os.path.abspath(pred.path))
     try:
         resolve_source(model, [reference])
     except SourceMissing:
         if required:
             raise
+        return False
+    return True
 
 
 def _adequacy(pred):
