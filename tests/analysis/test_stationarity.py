@@ -148,6 +148,16 @@ def test_cli_prints_the_windows_and_the_judged_window(tmp_path, capsys):
     assert "relative SD" in text and "long run" in text and "persistence" in text
     assert "flux E(RT) (s)" in text and "net passes" in text
     assert "the long run's one window" not in text
+    # the flux E(RT)'s scatter, which a chain fitted on one window follows, summarised too
+    assert main(["stationarity", str(path), "--window-length", "1", "--judge", "3:4",
+                 "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    flux = np.asarray(out["flux_rt_mean"], float)
+    assert out["relative_sd_flux_rt_mean"] == pytest.approx(flux.std(ddof=1) / flux.mean(),
+                                                            rel=1e-9)
+    assert (f"flux E(RT) from {flux.min():.4g} to {flux.max():.4g} s (median "
+            f"{np.median(flux):.4g} s, relative SD {100 * flux.std(ddof=1) / flux.mean():.1f} "
+            "%): the throughput a chain fitted on one 1 s window carries") in text
     # a span of two windows: the long run is the persistence window, said once
     assert main(["stationarity", str(path), "--window-length", "1", "--span", "2:4",
                  "--judge", "3:4"]) == 0

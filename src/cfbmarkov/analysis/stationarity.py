@@ -115,6 +115,18 @@ class WindowStatistics:
         :attr:`relative_sd_rt_mean`."""
         return self._relative_sd(self.rt_sd)
 
+    @property
+    def average_flux_rt_mean(self) -> float | None:
+        """Mean of the windows' flux E(RT) (s; None for an open riser, which has none)."""
+        return None if self.flux_rt_mean is None else self._average(self.flux_rt_mean)
+
+    @property
+    def relative_sd_flux_rt_mean(self) -> float | None:
+        """Standard deviation of the windows' flux E(RT) over their mean (-), as
+        :attr:`relative_sd_rt_mean`: the scatter from window to window of the throughput a
+        chain fitted on one window carries (None for an open riser)."""
+        return None if self.flux_rt_mean is None else self._relative_sd(self.flux_rt_mean)
+
     def summary(self) -> dict[str, Any]:
         """JSON-ready: the windows (s), their E(RT), SD(RT) (s), counts and directions, the
         averages (s) and the relative standard deviations (-); undefined values as None."""
@@ -131,7 +143,11 @@ class WindowStatistics:
                 "relative_sd_rt_mean": finite([self.relative_sd_rt_mean])[0],
                 "relative_sd_rt_sd": finite([self.relative_sd_rt_sd])[0],
                 "flux_rt_mean": (None if self.flux_rt_mean is None
-                                 else finite(self.flux_rt_mean))}
+                                 else finite(self.flux_rt_mean)),
+                "average_flux_rt_mean": (None if self.flux_rt_mean is None
+                                         else finite([self.average_flux_rt_mean])[0]),
+                "relative_sd_flux_rt_mean": (None if self.flux_rt_mean is None else
+                                             finite([self.relative_sd_flux_rt_mean])[0])}
 
 
 def _span(traj, span: tuple[float, float] | None, option: str = "--span"

@@ -433,9 +433,16 @@ def cmd_stationarity(args) -> int:
           f"{value(100 * stats.relative_sd_rt_mean, '.1f')} %; SD(RT) "
           f"{value(stats.average_rt_sd)} s, relative SD "
           f"{value(100 * stats.relative_sd_rt_sd, '.1f')} % (the scatter of one {length:g} s "
-          "window about the run's average: a stationary prediction of a given window carries "
-          "about as much)")
+          "window's residences about the run's average: a stationary prediction of a given "
+          "window carries about as much)")
     if flux is not None:
+        finite = flux[np.isfinite(flux)]
+        if finite.size:
+            print(f"flux E(RT) from {value(finite.min())} to {value(finite.max())} s (median "
+                  f"{value(float(np.median(finite)))} s, relative SD "
+                  f"{value(100 * stats.relative_sd_flux_rt_mean, '.1f')} %): the throughput a "
+                  f"chain fitted on one {length:g} s window carries, so its E(RT) scatters "
+                  "about as much from window to window")
         print(f"(E(RT), SD(RT): of the residences wholly inside each window, which leaves out "
               f"those longer than {length:g} s; flux E(RT): the window's particle-time over its "
               "net passes, the flow's mean residence time without that cut; "
