@@ -267,6 +267,26 @@ def test_rate_tables_from_excel_read_or_refused_by_encoding(fitted, tmp_path, ca
         assert err.count("\n") == 1 and says in err and "save it as CSV in UTF-8" in err
 
 
+def test_rate_tables_with_comments_quotes_or_capitals_read_as_the_plain_table(
+        fitted, tmp_path, capsys):
+    """A '#' comment line, quoted fields and a capitalised header, as spreadsheets and
+    scripts write them, give the same exit mean as the plain table."""
+    _, _, model = fitted
+    kin = _write(tmp_path, GOOD)
+    (tmp_path / "rates.csv").write_text(RATES)
+    assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0
+    plain = json.loads(capsys.readouterr().out)["properties"]["X"]["exit_mean"]
+    header, *rows = RATES.strip().splitlines()
+    quoted = "\n".join(",".join(f'"{x}"' for x in line.split(",")) for line in rows)
+    for text in ("# rates from the zone map\n" + RATES,
+                 header.title() + "\n" + "\n".join(rows) + "\n",
+                 ",".join(f'"{x}"' for x in header.split(",")) + "\n" + quoted + "\n"):
+        (tmp_path / "rates.csv").write_text(text)
+        assert main(["react", str(model), "--kinetics", str(kin), "--json"]) == 0, \
+            capsys.readouterr().err
+        assert json.loads(capsys.readouterr().out)["properties"]["X"]["exit_mean"] == plain
+
+
 
 def test_rate_from_a_cell_field():
     from cfbmarkov.kinetics import CellFields

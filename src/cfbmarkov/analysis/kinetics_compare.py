@@ -201,6 +201,22 @@ def _prediction_states(pred, model, window, warnings):
     return discrete, late
 
 
+def _with_source_found(model, pred, ref):
+    """``model`` with its fitting file found wherever the comparison runs from: as recorded,
+    beside the prediction that carries it, or the reference
+    (:func:`~cfbmarkov.analysis.intervals.resolve_source`); as it is where none is found
+    (the bootstrap then says why it formed no interval)."""
+    import os
+
+    from cfbmarkov.analysis.intervals import resolve_source
+
+    model._cache.setdefault("file", os.path.abspath(pred.path))
+    try:
+        return resolve_source(model, candidates=[ref.path])
+    except InputError:
+        return model
+
+
 def _fitting_source(model, ref):
     """The file and window the model was fitted on: for a model that records its fitting
     window's identity, the file that holds it (:func:`~cfbmarkov.analysis.intervals.
@@ -593,8 +609,9 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                         "the model side integrates them along the prediction's paths")
     exact = _exact(model, sk, warnings, on.direction)
     windowed = _windowed(model, sk, stop - start, warnings, on.direction) if exact else {}
-    boot = (bootstrap_exit_means(model, kinetics, fields, resamples, warnings, on.direction)
-            if exact else None)
+    boot = (bootstrap_exit_means(_with_source_found(model, pred, ref), kinetics, fields,
+                                 resamples, warnings, on.direction)
+            if exact and resamples else None)
     rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings, stop - start)
     n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)
     summary, figures = {}, {}

@@ -692,8 +692,9 @@ def _parameter(table, p: str, where: str, path: Path, law: Law) -> CellParameter
 
 
 def _read_table(file: Path, p: str, where: str, signed: bool) -> tuple[np.ndarray, np.ndarray]:
-    """The rows of a per-cell CSV table and the file line (from 1) of each; blank lines are
-    skipped but counted, so that every message names the line an editor shows."""
+    """The rows of a per-cell CSV table and the file line (from 1) of each; blank and ``#``
+    lines are skipped but counted, so that every message names the line an editor shows;
+    quotes around fields and the header's case do not matter."""
     try:
         raw = file.read_bytes()
     except OSError as exc:
@@ -706,10 +707,13 @@ def _read_table(file: Path, p: str, where: str, signed: bool) -> tuple[np.ndarra
         raise InputError(f"{where}: {file} is {kind}; save it as CSV in UTF-8 (plain "
                          "numbers and a header col,row[,depth],"
                          f"{p})") from None
-    numbered = [(n, ln.strip()) for n, ln in enumerate(text, start=1) if ln.strip()]
+    # blank and '#' comment lines skipped; quotes around fields and the header's case, as
+    # spreadsheets write them, do not matter
+    numbered = [(n, ln.strip()) for n, ln in enumerate(text, start=1)
+                if ln.strip() and not ln.lstrip().startswith("#")]
     if not numbered:
         raise InputError(f"{where}: {file} is empty; give a header col,row[,depth],{p}")
-    header = [h.strip() for h in numbered[0][1].split(",")]
+    header = [h.strip().strip('"').strip("'").strip().lower() for h in numbered[0][1].split(",")]
     if header not in (["col", "row", p], ["col", "row", "depth", p], ["col", "row", "value"],
                       ["col", "row", "depth", "value"]):
         raise InputError(f"{where}: {file} has columns {','.join(header)}; give "
@@ -718,7 +722,7 @@ def _read_table(file: Path, p: str, where: str, signed: bool) -> tuple[np.ndarra
     example = "0,5,0.4" if width == 3 else "0,5,1,0.4"
     rows, lines = [], []
     for n, line in numbered[1:]:
-        parts = line.split(",")
+        parts = [x.strip().strip('"').strip("'") for x in line.split(",")]
         try:
             values = [float(x) for x in parts]
         except ValueError:
