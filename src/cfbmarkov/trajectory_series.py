@@ -125,8 +125,17 @@ class FrameSeries:
         steps = np.diff(allt)
         if np.any(steps <= 0):
             k = int(np.argmax(steps <= 0))
-            raise InputError(f"{self.label}: time does not increase at t = "
-                             f"{time_text(allt[k + 1])} s (after {time_text(allt[k])} s)")
+            if steps[k] == 0:
+                raise InputError(
+                    f"{self.label}: the frame at t = {time_text(allt[k])} s comes twice (a "
+                    "dump appended to after a restart repeats the restart's step; two files "
+                    "that overlap): keep each frame once, e.g. import the files before and "
+                    "after the restart as two files and pool them with fit A.h5 B.h5")
+            raise InputError(
+                f"{self.label}: time goes back from t = {time_text(allt[k])} to "
+                f"{time_text(allt[k + 1])} s (frames out of order, or a run restarted from an "
+                "earlier step and appended to the same file): keep the frames in time order, "
+                "each once, e.g. cut the file where the restart begins")
         known = np.concatenate([self.recent_steps, steps])
         self.check_spacing(allt, known, known.size - steps.size)
         self.recent_steps = known[-RECENT_STEPS:]

@@ -69,6 +69,24 @@ def test_other_delimiters_with_either_decimal_mark(tmp_path, delimiter):
         assert params["decimal_mark"] == ("comma" if comma else "point")
 
 
+@pytest.mark.parametrize("delimiter", [",", ";"])
+def test_every_field_quoted_reads_as_plain(tmp_path, delimiter):
+    """Exports that quote every field (pandas with QUOTE_ALL, some loggers): the values
+    inside the quotes, with either decimal mark; a quoted text column with the delimiter
+    inside stays one column."""
+    rows = [[f"{0.025 * k:.3f}", str(i), f"{0.02 * i:.3f}", f"{0.1 + 0.05 * k:.3f}",
+             "a, b; c"] for k in range(3) for i in (3, 1, 2)]
+    for comma in ((False, True) if delimiter == ";" else (False,)):
+        lines = [delimiter.join(f'"{x}"' for x in ["t", "id", "x", "y", "note"])]
+        lines += [delimiter.join(f'"{x.replace(".", ",") if comma else x}"' for x in row)
+                  for row in rows]
+        source = tmp_path / f"q{comma}.csv"
+        source.write_text("\n".join(lines) + "\n")
+        times, ids, pos, _, _ = _read(import_csv(source, tmp_path / f"q{comma}.h5",
+                                                 width=0.09, height=0.95))
+        _three_by_three(times, ids, pos)
+
+
 def test_decimal_comma_with_a_comma_delimiter_is_refused_by_line(tmp_path, assert_clean_failure):
     source = tmp_path / "bad.csv"
     source.write_text("t,id,x,y\n0,1,0.02,0.1\n0.025,1,0,02,0.1\n")

@@ -233,7 +233,8 @@ BAD_DUMPS = {
     "truncated-gzip": (gzip.compress(LONG.encode())[: len(gzip.compress(LONG.encode())) // 2],
                        r"file is truncated \(the compressed stream ends early\)"),
     "no-id-column": (dump(frame(0, [r[2:] for r in ATOMS[0]], columns="type x y vx vy")),
-                     r"ITEM: ATOMS has no 'id' column \(type x y vx vy\)"),
+                     r"ITEM: ATOMS has no 'id' column \(type x y vx vy\), so the frames' "
+                     r"particles cannot be matched; write the dump with id first"),
     "no-position-columns": (dump(frame(0, columns="id type a b vx vy")),
                             r"no position columns \(xu yu, xsu ysu, x y or xs ys\)"),
     "unknown-item": (GOOD.replace("ITEM: TIMESTEP\n5000", "ITEM: ENTRIES c_1\n5000"),
@@ -259,7 +260,10 @@ BAD_DUMPS = {
     "fractional-id": (dump(frame(0), frame(1, ATOMS[1][:2] + ["2.5 1 0.02 0.21 0 1"])),
                       r"particle id 2.5 is not a whole number"),
     "time-not-increasing": (dump(frame(0), frame(1, time=0.55), frame(2, time=0.525)),
-                            r"time does not increase at t = 0.525 s \(after 0.55 s\)"),
+                            r"time goes back from t = 0.55 to 0.525 s \(frames out of order"),
+    "frame-repeated": (dump(frame(0), frame(1), frame(1)),
+                       r"the frame at t = 0.525 s comes twice \(a dump appended to after a "
+                       r"restart repeats the restart's step"),
     "uneven-frames": (dump(frame(0), frame(1), frame(2, time=0.56)),
                       r"frames unevenly spaced: 0.035 s between t = 0.525 and 0.56 s"),
     "nan-position": (dump(frame(0), frame(1, ["3 1 0.03 0.31 0 1", "1 1 nan 0.11 0 1",

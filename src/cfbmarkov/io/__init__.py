@@ -131,8 +131,9 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
                          f"ignored; give --region alone, or {given} without it")
     if fmt == "csv":
         if time_step is not None:
-            raise InputError("--time-step applies to LAMMPS dumps only; a CSV file gives its "
-                             "times in column t")
+            raise InputError("--time-step dates the steps of LAMMPS dumps, H5MD and VTK "
+                             "series; a CSV file gives its times in column t (leave out "
+                             "--time-step)")
         return import_csv(source, output, width=width, height=height, length_unit=length_unit,
                           time_unit=time_unit, vertical_axis=vertical_axis, region=region,
                           boundary=boundary, drop_depth=drop_depth, resample=resample,

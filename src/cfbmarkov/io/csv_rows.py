@@ -91,7 +91,7 @@ def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -
             warnings.simplefilter("ignore", UserWarning)  # a block of blank lines
             values = np.loadtxt(text, delimiter=layout.delimiter, dtype=np.float64, ndmin=2,
                                 usecols=None if len(layout.usecols) == n else layout.usecols,
-                                converters=_noise_converter(layout))
+                                converters=_noise_converter(layout), quotechar='"')
     except ValueError as exc:
         raise InputError(_locate_bad_row(lines, line_no, layout, label, exc)) from None
     if values.size == 0:

@@ -119,7 +119,9 @@ class AtomColumns:
             Without an ``id`` column or any position pair (``where`` starts the message).
         """
         if "id" not in names:
-            raise InputError(f"{where}: ITEM: ATOMS has no 'id' column ({' '.join(names)})")
+            raise InputError(f"{where}: ITEM: ATOMS has no 'id' column ({' '.join(names)}), "
+                             "so the frames' particles cannot be matched; write the dump "
+                             "with id first (dump custom ... id type x y)")
         for family in POSITION_COLUMNS:
             if family[0] in names and family[1] in names:
                 break
