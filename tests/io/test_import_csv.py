@@ -241,7 +241,8 @@ def test_missing_input_file(tmp_path, assert_clean_failure):
 
 def test_options_that_do_not_apply(tmp_path, run, make_csv, save):
     source = save(tmp_path / "run.csv", make_csv(run))
-    with pytest.raises(InputError, match=r"--time-step dates the steps of LAMMPS dumps, H5MD and VTK series; a CSV file gives its times in column t"):
+    with pytest.raises(InputError, match=r"--time-step dates the steps of LAMMPS dumps, H5MD "
+                                         r"and VTK series; a CSV file gives its times in"):
         import_file(source, "csv", tmp_path / "run.h5", time_step=1e-5, width=0.09, height=0.95)
     with pytest.raises(InputError, match=r"unknown import format 'xyz'"):
         import_file(source, "xyz", tmp_path / "run.h5")
