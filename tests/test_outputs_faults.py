@@ -134,6 +134,8 @@ def test_output_of_another_kind_needs_force(data, tmp_path, capsys):
     assert _fit(data, text) == 2 and text.read_text() == "keep me"
     os.mkfifo(tmp_path / "fifo")
     assert _fit(data, tmp_path / "fifo") == 2
+    assert _fit(data, tmp_path / "fifo", "--force") == 2       # never replaced: /dev/null too
+    assert stat.S_ISFIFO((tmp_path / "fifo").stat().st_mode)
     (tmp_path / "dir.h5").mkdir()
     assert _fit(data, tmp_path / "dir.h5") == 2
     assert _fit(data, tmp_path / "dir.h5", "--force") == 0    # an empty folder
@@ -144,8 +146,9 @@ def test_output_of_another_kind_needs_force(data, tmp_path, capsys):
                  "--no-figures", "-o", str(text)]) == 2      # a file where a folder goes
     err = [line for line in capsys.readouterr().err.splitlines()
            if not line.startswith("warning:")]     # the fitting sample's, on the tiny window
-    assert len(err) == 5, err
-    assert "another format" in err[0] and "FIFO" in err[1] and "is a folder" in err[2]
+    assert len(err) == 6, err
+    assert "another format" in err[0] and "FIFO" in err[1] and "is a folder" in err[3]
+    assert "never replaces a device, pipe or socket" in err[2]
 
 
 # -- 3. full disk ---------------------------------------------------------------------------

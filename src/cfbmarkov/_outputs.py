@@ -208,6 +208,10 @@ _KIND_TEXT = {"trajectory": "a trajectory file", "model": "a model file", "png":
               "folder": "a folder", "prediction": "a prediction (a trajectory file)"}
 
 
+#: what :func:`_describe` calls paths that are no regular file nor folder
+_SPECIAL = ("a FIFO (named pipe)", "a device", "a socket", "not a regular file")
+
+
 def _check_kind(target: Path, kind: str, force: bool) -> None:
     """Refuse an existing ``target`` of another kind than ``kind`` unless ``force``
     (which removes it; a non-empty folder is never removed)."""
@@ -229,6 +233,9 @@ def _check_kind(target: Path, kind: str, force: bool) -> None:
             raise InputError(f"{target}: is a folder that is not empty; --force replaces "
                              "only an empty folder") from None
         return
+    if what in _SPECIAL:        # never replaced, even with --force (as root: /dev/null)
+        raise InputError(f"{target}: is {what}, not a file; the output is written as a file "
+                         "(and never replaces a device, pipe or socket): give a file name")
     shown = _KIND_TEXT.get(what, what)
     if kind == "prediction" and what == "trajectory":
         shown = "a simulated or imported trajectory file"
