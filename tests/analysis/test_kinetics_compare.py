@@ -171,8 +171,10 @@ def test_the_kinetics_interval_says_how_many_resamples_it_took(prediction, tmp_p
 def test_the_segregated_flow_comes_from_the_fitting_file_not_one_of_its_name(tmp_path,
                                                                             monkeypatch):
     """A model fitted on run.h5 in one folder, compared from another folder that holds a
-    different run.h5: the segregated-flow baseline is formed from the fitting window found
-    by its identity (beside the prediction), not from the file of that name."""
+    different run.h5: the segregated-flow baseline and the model's interval of the exit
+    mean are formed from the fitting window found by its identity (beside the prediction),
+    as at home: not from the file of that name, nor (the fitting file not found) from
+    Monte Carlo noise alone."""
     from cfbmarkov.cli import main
 
     home, elsewhere = tmp_path / "a", tmp_path / "b"
@@ -192,43 +194,14 @@ def test_the_segregated_flow_comes_from_the_fitting_file_not_one_of_its_name(tmp
         from cfbmarkov.report.compare import compare
 
         got = compare(home / "run.h5", home / "pred.h5", window=(2.0, 4.0),
-                      output=tmp_path / "out", figures=False, resamples=0,
-                      kinetics=kinetics)["kinetics"]["X"]["segregated_flow"]
-        return got["exit_mean"]
+                      output=tmp_path / "out", figures=False, resamples=10,
+                      kinetics=kinetics)
+        assert not any("no model intervals" in w for w in got.get("warnings", [])), got
+        block = got["kinetics"]["X"]
+        assert block["model"]["interval_resamples"] == 10
+        return block["segregated_flow"]["exit_mean"], block["model"]["exit_mean_interval"]
 
     at_home = baseline()
     monkeypatch.chdir(elsewhere)
     assert baseline() == at_home
 
-
-def test_the_models_kinetics_interval_finds_its_fitting_file_from_any_folder(tmp_path,
-                                                                             monkeypatch):
-    """A model fitted on run.h5 (a relative path) compared from another folder, with the
-    files given by their full paths: the exit mean's interval is formed from the fitting
-    window found beside the prediction, as at home, not from Monte Carlo noise alone."""
-    from cfbmarkov.cli import main
-    from cfbmarkov.report.compare import compare
-
-    home, elsewhere = tmp_path / "a", tmp_path / "b"
-    home.mkdir()
-    elsewhere.mkdir()
-    flow = RiserFlow(columns=6, rows=10, lag=0.02, persistence=False)
-    write_run(home / "run.h5", flow, 200, 4.0, seed=2)
-    monkeypatch.chdir(home)
-    assert main(["fit", "run.h5", "--cells", "6x10", "--lag", "0.02", "--window", "0:2",
-                 "--estimator", "mle", "--resamples", "0", "-o", "model.h5"]) == 0
-    assert main(["predict", "model.h5", "--init", "run.h5", "--start", "2", "--duration", "2",
-                 "-q", "-o", "pred.h5"]) == 0
-    kinetics = _kinetics(tmp_path, "uniform", "rate = 1.0")
-
-    def block(out):
-        got = compare(home / "run.h5", home / "pred.h5", window=(2.0, 4.0), output=out,
-                      figures=False, resamples=10, kinetics=kinetics)
-        assert not any("no model intervals" in w for w in got.get("warnings", [])), got
-        return got["kinetics"]["X"]["model"]
-
-    at_home = block(tmp_path / "home-out")
-    monkeypatch.chdir(elsewhere)
-    away = block(tmp_path / "away-out")
-    assert away["interval_resamples"] == at_home["interval_resamples"] == 10
-    assert away["exit_mean_interval"] == at_home["exit_mean_interval"]
