@@ -45,6 +45,19 @@ def test_exact_rtd_is_negative_binomial_for_a_ladder():
     assert rtd.entry_distribution[0] == pytest.approx(1.0)
 
 
+@pytest.mark.parametrize("lag", [0.025, 0.01, 0.1])
+def test_histogram_puts_whole_lags_in_the_bin_they_start(lag):
+    """Bins three lags wide, whose edges carry round-off (3 * 0.025 = 0.07500000000000001):
+    a residence of k lags lies in bin k // 3, as the sample histogram's edge rule puts it."""
+    model = ladder_model(10, 0.4, lag=lag)
+    rtd = model.rtd()
+    edges, probability = rtd.histogram(3 * lag, 60 * lag)
+    k = np.arange(1, rtd.probability.size + 1)
+    share = rtd.probability / rtd.probability.sum()
+    expected = np.bincount(k // 3, weights=share)[:probability.size]
+    np.testing.assert_allclose(probability, expected, rtol=0, atol=1e-15)
+
+
 def _samples_from_laps(laps, lag):
     """Residence times from lap counters [T, N] by SPEC section 3, written independently."""
     out = []

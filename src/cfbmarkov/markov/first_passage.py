@@ -168,7 +168,11 @@ class ResidenceTimeDistribution:
                                          deficit_unresolved=self.deficit_unresolved)
 
     def histogram(self, bin_width: float, upper: float) -> tuple[np.ndarray, np.ndarray]:
-        """Probability per bin on edges 0, bin_width, ..., upper (s).
+        """Probability per bin on edges 0, bin_width, ..., upper (s), each bin half-open
+        [a, b), a residence within 1e-6 bin widths below an edge counted on it: the rule of
+        the sample histogram (:func:`cfbmarkov.observed.residence.rtd_histogram`), so that
+        whole lags on bins of whole lags fall in the bin they start whatever the round-off
+        of ``bin_width`` (``docs/definitions.md``, Residence-time distribution).
 
         Parameters
         ----------
@@ -185,7 +189,8 @@ class ResidenceTimeDistribution:
             Probability per bin (of the resolved mass renormalised).
         """
         edges = np.arange(0.0, upper + 0.5 * bin_width, bin_width)
-        prob, _ = np.histogram(self.times, bins=edges, weights=self.probability / self.probability.sum())
+        prob, _ = np.histogram(self.times + 1e-6 * bin_width, bins=edges,
+                               weights=self.probability / self.probability.sum())
         return edges, prob
 
 
