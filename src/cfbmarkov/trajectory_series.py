@@ -308,10 +308,11 @@ def _whole_laps(laps, t: int, n: int, present: np.ndarray) -> np.ndarray:
         given = np.asarray(laps)
         if given.dtype == bool or given.dtype.kind not in "iuf":
             raise TypeError(given.dtype)
-        given = given.reshape(t, n)
+        if given.shape != (t, n):       # reshaped, (N, T) would pass as another layout
+            raise ValueError(given.shape)
     except (TypeError, ValueError):
         raise InputError(f"laps: whole numbers of shape ({t}, {n}), one per frame and "
-                         "particle") from None
+                         f"particle (frames, particles), got {np.shape(laps)}") from None
     if given.dtype.kind == "f":
         shown = given[present]
         bad = ~np.isfinite(shown) | (shown != np.round(shown))

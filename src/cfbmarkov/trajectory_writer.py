@@ -331,8 +331,13 @@ class TrajectoryWriter:
         if positions.shape != (t, n, d):
             raise InputError(f"{self._label}: expected positions of shape ({t}, {n}, {d}), "
                              f"got {positions.shape}")
-        present = np.ones((t, n), dtype=bool) if present is None else np.asarray(
-            present, dtype=bool).reshape(t, n)
+        if present is None:
+            present = np.ones((t, n), dtype=bool)
+        else:
+            present = np.asarray(present, dtype=bool)
+            if present.shape != (t, n):     # reshaped, (N, T) would pass as another layout
+                raise InputError(f"{self._label}: expected present of shape ({t}, {n}) (frames, "
+                                 f"particles), got {present.shape}")
         absent = not present.all()
         self._series.check_times(times)
         limits = [self.width, self.height] + ([] if self.depth is None else [self.depth])

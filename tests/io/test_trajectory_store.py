@@ -122,6 +122,27 @@ def test_writer_refuses_bad_frames_and_leaves_no_file(tmp_path, run, change, mat
     assert list(tmp_path.iterdir()) == []
 
 
+def test_present_and_laps_laid_out_otherwise_are_refused_not_reshaped(tmp_path, run):
+    """(T, N) is the layout: a present mask or lap counters given (N, T), or flat, were
+    reshaped into another frame and particle (particle 3's absence became frames' of 10
+    particles)."""
+    t, n = run.times.size, run.positions.shape[1]
+    assert t != n
+    present = np.ones((t, n), bool)
+    present[1:3, 3] = False
+    for layout in (present.T, present.ravel()):
+        with pytest.raises(InputError, match=rf"expected present of shape \({t}, {n}\)"):
+            write_trajectories(tmp_path / "bad.h5", run.times, run.positions, width=run.width,
+                               height=run.height, present=layout)
+        assert list(tmp_path.iterdir()) == []
+    laps = np.zeros((t, n), np.int64)
+    for layout in (laps.T, laps.ravel()):
+        with pytest.raises(InputError, match=rf"laps: whole numbers of shape \({t}, {n}\)"):
+            write_trajectories(tmp_path / "bad.h5", run.times, run.positions, width=run.width,
+                               height=run.height, laps=layout)
+        assert list(tmp_path.iterdir()) == []
+
+
 def test_writer_without_frames_or_with_bad_ids(tmp_path):
     writer = TrajectoryWriter(tmp_path / "empty.h5", [1, 2], width=0.09, height=0.95,
                               source="test")
