@@ -241,6 +241,29 @@ def test_derived_models_share_the_validated_arrays_and_new_arrays_are_checked():
     assert copied.transition_matrix is not given and np.array_equal(copied.transition_matrix, given)
 
 
+def test_state_spaces_are_immutable_so_a_fitted_model_keeps_its_states(markov_run):
+    """A model holds the grid it was fitted with: the grid cannot be changed after (it was
+    a plain object, and a caller's ``grid.rows = 19`` turned the 228-state model's repr,
+    predictions and saved file into a 114-state one's); ``with_size`` still gives a sized
+    copy, itself immutable."""
+    from cfbmarkov.markov.spaces import state_space_from_name
+
+    grid = CellGrid(6, 38, 0.09, 0.95)
+    model = fit_model(markov_run, grid, 0.025, (0.5, 2.0), "mle")
+    for name, value in (("rows", 19), ("width", 0.2), ("new_attribute", 1)):
+        with pytest.raises(AttributeError, match="CellGrid is immutable"):
+            setattr(grid, name, value)
+    assert model.state_space.n_states == 228 and grid.rows == 38
+    sized = CellGrid(6, 38).with_size(0.09, 0.95)
+    assert (sized.width, sized.height) == (0.09, 0.95)
+    with pytest.raises(AttributeError, match="immutable"):
+        sized.height = 1.0
+    for kind in ("cells-direction", "cells-previous"):
+        space = state_space_from_name(kind, 6, 38, 0.09, 0.95)
+        with pytest.raises(AttributeError, match="is immutable"):
+            space.per_cell = 1
+
+
 def test_adopted_arrays_are_kept_and_others_copied():
     """A model made with adopt=True keeps the given arrays (checked, made read-only); without
     it a caller's arrays are copied and stay the caller's."""

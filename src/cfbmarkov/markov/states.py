@@ -24,6 +24,7 @@ the memo of what the spaces derive from those frames
 from __future__ import annotations
 
 import copy
+import functools
 import json
 from abc import ABC, abstractmethod
 from collections.abc import Mapping
@@ -96,6 +97,24 @@ class StateSpace(ABC):
         super().__init_subclass__(**kwargs)
         if "kind" in cls.__dict__:
             _REGISTRY[cls.kind] = cls
+        init = cls.__dict__.get("__init__")
+        if init is not None:
+            # a space is immutable once made, as a fitted model that holds it is: its
+            # states cannot change under the model (a caller's grid changed after the fit
+            # made the model's arrays another size than its states)
+            @functools.wraps(init)
+            def frozen_init(self, *args, _init=init, _cls=cls, **kw):
+                _init(self, *args, **kw)
+                if type(self).__init__ is _cls.__init__:     # the outermost __init__ done
+                    object.__setattr__(self, "_frozen", True)
+
+            cls.__init__ = frozen_init
+
+    def __setattr__(self, name: str, value) -> None:
+        if self.__dict__.get("_frozen", False):
+            raise AttributeError(f"{type(self).__name__} is immutable: cannot set {name!r}; make "
+                                 "a new state space (e.g. CellGrid(6, 38, width, height))")
+        object.__setattr__(self, name, value)
 
     @staticmethod
     def registered_kinds() -> Mapping[str, type["StateSpace"]]:
@@ -160,7 +179,9 @@ class StateSpace(ABC):
         if not (width > 0 and height > 0):
             raise InputError(f"domain {width:g} x {height:g} m must have positive size")
         new = copy.copy(self)
+        object.__setattr__(new, "_frozen", False)       # the copy is made here, then frozen
         new._set_size(float(width), float(height))
+        object.__setattr__(new, "_frozen", True)
         return new
 
     def _set_size(self, width: float, height: float) -> None:
