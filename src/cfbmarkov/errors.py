@@ -107,6 +107,14 @@ class TimeStepAdvisory(CfbmarkovWarning):
     5 or more, below which the run is refused)."""
 
 
+class UnresolvedWarning(CfbmarkovWarning):
+    """A model's exact RTD leaves more than 1 % of its residences unresolved (they never
+    reach the boundary in the chain, fall deeper than the lap deficits followed, or outlast
+    the lags computed): its E(RT) and SD(RT) describe the others
+    (:meth:`cfbmarkov.markov.MarkovModel.rtd`; the command line prints the same line as a
+    ``warning:``)."""
+
+
 class SampleWarning(CfbmarkovWarning):
     """A model used for a prediction carries a warning of its fitting sample's verdict
     (:attr:`cfbmarkov.markov.MarkovModel.adequacy`): the message repeats it, as the command

@@ -178,6 +178,12 @@ def main(argv: list[str] | None = None) -> int:
     from cfbmarkov._console import one_line_notes
 
     with one_line_notes():             # cfbmarkov's warnings: one line, "note: ..."
+        import warnings
+
+        from cfbmarkov.errors import UnresolvedWarning
+
+        # the verbs that print E(RT) print the unresolved mass's line as a warning: of theirs
+        warnings.simplefilter("ignore", UnresolvedWarning)
         code = _run(args)
     from cfbmarkov import _atomic
 

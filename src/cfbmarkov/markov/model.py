@@ -455,6 +455,14 @@ class MarkovModel:
             residence ends), or no residence fits in ``window``; InputError for a
             ``direction`` that is neither up nor down.
 
+        Warns
+        -----
+        UnresolvedWarning
+            Once per model and direction, where the intrinsic RTD leaves more than 1 % of
+            its residences unresolved (e.g. ``direction="down"`` on a net upflow): its
+            E(RT) and SD(RT) then describe the others
+            (:func:`~cfbmarkov.markov.model_summary.unresolved_warning`).
+
         Notes
         -----
         See :func:`~cfbmarkov.markov.first_passage.exact_rtd` and ``docs/definitions.md`` (Residence
@@ -467,7 +475,19 @@ class MarkovModel:
         """
         from cfbmarkov.markov.model_rtd import model_rtd
 
-        return model_rtd(self, window, direction)
+        rtd = model_rtd(self, window, direction)
+        key = ("unresolved-warned", direction or self.flow_direction)
+        if window is None and key not in self._cache:
+            from cfbmarkov.markov.model_summary import unresolved_warning
+
+            self._cache[key] = line = unresolved_warning(rtd)
+            if line is not None:
+                import warnings
+
+                from cfbmarkov.errors import UnresolvedWarning
+
+                warnings.warn(line, UnresolvedWarning, stacklevel=2)
+        return rtd
 
     # -- Monte Carlo -------------------------------------------------------------------
     def monte_carlo(self, initial_states, n_steps: int, seed: int = 0, initial_laps=None
