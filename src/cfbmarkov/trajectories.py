@@ -139,15 +139,20 @@ class Trajectories(FrameTimes):
     """
 
     def __init__(self, path: str | os.PathLike):
+        if not isinstance(path, (str, os.PathLike)):
+            raise InputError(f"expected a trajectory file (its path, or an open Trajectories), "
+                             f"got a {type(path).__name__}"
+                             + ("; a model is no trajectories: give a run's file"
+                                if type(path).__name__ == "MarkovModel" else ""))
         self.path = Path(path)
-        self._file = open_h5(self.path)
+        self._h5 = open_h5(self.path)
         try:
-            header = read_header(self._file, self.path)
+            header = read_header(self._h5, self.path)
         except InputError:
-            self._file.close()
+            self._h5.close()
             raise
         except (KeyError, OSError, ValueError, TypeError) as exc:
-            self._file.close()
+            self._h5.close()
             raise InputError(f"{self.path}: damaged trajectory file ({exc})") from None
         self.version = header.version
         self.ids = header.ids
@@ -204,9 +209,28 @@ class Trajectories(FrameTimes):
         for i in np.unique(index).tolist():             # frame by frame, not the span
             self._check_frames(i, i + 1)
 
+    @property
+    def _file(self):
+        """The open HDF5 file; refused in one line once closed (h5py's own error is a
+        KeyError about an invalid identifier)."""
+        if not self._h5.id.valid:
+            raise InputError(f"{self.path}: the trajectory file is closed (read after its "
+                             "`with` block or close()); open it again: Trajectories(path)")
+        return self._h5
+
+    def __reduce__(self):
+        """Pickled by its path (an h5py file cannot be): unpickled, e.g. in a worker
+        process, it is the same file opened again."""
+        return (Trajectories, (str(self.path),))
+
+    @property
+    def closed(self) -> bool:
+        """Whether the file has been closed."""
+        return not self._h5.id.valid
+
     def close(self) -> None:
         """Close the file."""
-        self._file.close()
+        self._h5.close()
 
     def __enter__(self) -> "Trajectories":
         return self
@@ -219,7 +243,8 @@ class Trajectories(FrameTimes):
         every = (f", every {self.frame_interval:g} s" if np.isfinite(self.frame_interval) else "")
         return (f"Trajectories({str(self.path)!r}: {self.n_particles} "
                 f"particle{'' if self.n_particles == 1 else 's'} x {self.n_frames} "
-                f"frames, {span}{every}, source={self.source!r})")
+                f"frames, {span}{every}, source={self.source!r}"
+                + (", closed" if self.closed else "") + ")")
 
     # -- metadata --------------------------------------------------------------------
     @property

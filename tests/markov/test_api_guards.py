@@ -173,3 +173,28 @@ def test_values_of_the_wrong_kind_are_refused_in_one_line(model):
             call()
     assert model.batch_injection_maps([model.lag]).shape == (1, model.state_space.rows,
                                                              model.state_space.columns)
+
+
+def test_a_closed_file_or_a_model_where_trajectories_go_is_named_in_one_line(model, markov_run):
+    """A file read after its `with` block (h5py's KeyError about an invalid identifier), a
+    model given where a run's file goes (pathlib's TypeError): one InputError line each;
+    an open file pickles by its path (for worker processes)."""
+    import pickle
+
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(markov_run) as traj:
+        first = traj.positions(0)
+    assert traj.closed and repr(traj).endswith(", closed)")
+    for read in (lambda: traj.positions(0), lambda: traj.laps(0),
+                 lambda: discretize(traj, CellGrid(6, 38), 0.025, (0.5, 1.5))):
+        with pytest.raises(InputError, match="the trajectory file is closed .* open it again"):
+            read()
+    for call in (lambda: discretize(model, CellGrid(6, 38), 0.025, (0.5, 1.5)),
+                 lambda: model.predict(model, 0.5, 0.5)):
+        with pytest.raises(InputError, match="got a MarkovModel; a model is no trajectories"):
+            call()
+    with Trajectories(markov_run) as traj:
+        again = pickle.loads(pickle.dumps(traj))
+    np.testing.assert_array_equal(again.positions(0), first)
+    again.close()
