@@ -74,6 +74,7 @@ from cfbmarkov.markov import fit_model, state_space_from_name
 from cfbmarkov.markov.discrete import discretize
 from cfbmarkov.markov.estimate import default_estimator
 from cfbmarkov.markov.kinetics_exact import exact_kinetics, windowed_exit_means
+from cfbmarkov.markov.model_rtd import occupancy_at
 from cfbmarkov.observed.residence import net_flow_direction, residence_times
 from cfbmarkov.trajectories import Trajectories
 
@@ -228,8 +229,11 @@ def judge(traj, model, facts: dict, judge_window, damkoehler) -> list[dict]:
     direction = facts["direction"]
     exact = exact_kinetics(model, sk, direction=direction)
     history = facts["history"]
+    # the reference counts records from its first frame read: its particles' states there
+    first = max(float(traj.times[0]), judge_window[0] - history)
     windowed = windowed_exit_means(model, sk, judge_window[1] - judge_window[0],
-                                   direction=direction, history=history)
+                                   direction=direction, history=history,
+                                   occupancy=occupancy_at(model, traj, first))
     ref = reference_kinetics(traj, model, sk, tuple(judge_window), direction=direction,
                              history=history)
     wall = wall_cells(model.state_space)[np.asarray(model.state_space.cell_of_state)]

@@ -461,6 +461,9 @@ def test_sparse_bootstrap_chains_are_the_bootstrap_models(tmp_path, estimator):
     space = DirectionCells(FLOW.columns, FLOW.rows, FLOW.width, FLOW.height)
     model = fit_model(path, space, FLOW.lag, (0.5, 2.5), estimator)
     entry = model.rtd(1.0).entry_distribution
+    from cfbmarkov.markov.model_rtd import window_start_occupancy
+
+    occupancy = window_start_occupancy(model)
     states, positions, _ = model.initial_states(path, 2.5)
     left = positions[:, 0] < 0.5 * FLOW.width
     dense = list(block_bootstrap_models(model, blocks=6, resamples=8, seed=3))
@@ -469,8 +472,8 @@ def test_sparse_bootstrap_chains_are_the_bootstrap_models(tmp_path, estimator):
     for a, b in zip(dense, sparse):
         assert np.abs(a.transition_matrix - b.transition_matrix.toarray()).max() < 1e-14
         for direction in ("up", "down"):
-            ra = _resampled_rtd(a, 1.0, direction, entry)
-            rb = _resampled_rtd(b, 1.0, direction, entry)
+            ra = _resampled_rtd(a, 1.0, direction, entry, None, occupancy)
+            rb = _resampled_rtd(b, 1.0, direction, entry, None, occupancy)
             assert ra.mean == pytest.approx(rb.mean, rel=1e-10)
             assert ra.sd == pytest.approx(rb.sd, rel=1e-10)
         ma = model_mixing_curve(a, states, left, 12)[0]

@@ -560,3 +560,43 @@ def test_a_carried_value_without_relaxation_in_a_closed_set_of_entries_is_refuse
         else:
             out = exact_kinetics(model, kin)["T"]
             assert out.after_passes(10 ** 6)[0] == pytest.approx(out.exit_mean, rel=1e-12)
+
+
+def test_windowed_exit_means_count_records_from_the_first_frame_read():
+    """Walkers of a chain whose particles often fall a lap before they climb back, the
+    records of their lap counters counted from the first frame (as the reference's paths
+    are), exits inside a window after a history: their mean 1 - exp(-k t) equals
+    windowed_exit_means with that history and the walkers' start within 3 standard errors,
+    and without a history equals the RTD as the window sees it, averaged, to round-off."""
+    import sys
+    from pathlib import Path
+
+    from cfbmarkov.markov.kinetics_exact import windowed_exit_means
+    from cfbmarkov.observed.residence import residence_times_from_laps
+
+    sys.path.insert(0, str(Path(__file__).parents[1] / "markov"))
+    from test_model import _walk, two_column_model
+
+    model = two_column_model()
+    rate, window, history = 3.0, 0.6, 0.3
+    kinetics = Kinetics((Property("X", FirstOrder(), {"rate": Constant(rate)}),))
+    pi = np.asarray(model.stationary_distribution)
+    seen = model.rtd(window=window, occupancy=pi)
+    t = seen.lag * np.arange(1, seen.probability.size + 1)
+    assert windowed_exit_means(model, kinetics, window, occupancy=pi)["X"] == pytest.approx(
+        float(seen.probability @ -np.expm1(-rate * t)), rel=1e-12)
+    rng = np.random.default_rng(11)
+    _, laps = _walk(model, rng.choice(pi.size, size=40_000, p=pi), 90, rng)
+    times = 0.01 * np.arange(91)
+
+    def converted(frames):
+        samples = residence_times_from_laps(times[:frames], laps[:frames])
+        return -np.expm1(-rate * samples)
+
+    every, early = converted(91), converted(31)        # exits by frame 30 left out
+    total = every.sum() - early.sum()
+    count = every.size - early.size
+    mean = total / count
+    sd = np.sqrt((np.square(every).sum() - np.square(early).sum()) / count - mean ** 2)
+    expected = windowed_exit_means(model, kinetics, window, history=history, occupancy=pi)["X"]
+    assert abs(mean - expected) < 3 * sd / np.sqrt(count), (mean, expected)

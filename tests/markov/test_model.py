@@ -58,6 +58,70 @@ def test_histogram_puts_whole_lags_in_the_bin_they_start(lag):
     np.testing.assert_allclose(probability, expected, rtol=0, atol=1e-15)
 
 
+def _walk(model, start_states, steps, rng):
+    """Walkers of ``model``'s chain (dense P, pass fractions 0 or 1): states and lap counters
+    [steps + 1, N] (independent of the package's Monte Carlo)."""
+    p = np.asarray(model.transition_matrix)
+    cumulative = np.cumsum(p, axis=1)
+    states = np.empty((steps + 1, start_states.size), np.int64)
+    laps = np.zeros((steps + 1, start_states.size), np.int64)
+    states[0] = start_states
+    for t in range(steps):
+        i = states[t]
+        j = np.minimum((rng.random(i.size)[:, None] > cumulative[i]).sum(axis=1), p.shape[0] - 1)
+        states[t + 1] = j
+        laps[t + 1] = laps[t] + np.rint(model.up_fraction[i, j] - model.down_fraction[i, j])
+    return states, laps
+
+
+def two_column_model(rows=4, to_fall=0.25, to_rise=0.3, lag=0.01):
+    """Column 0 rises a row a lag (through the top: an up pass), column 1 falls a row a lag
+    (through the bottom: a down pass); each switches to the other with ``to_fall`` /
+    ``to_rise``: a net upflow whose particles often fall a lap before they climb back."""
+    s = 2 * rows
+    p, up, down = np.zeros((s, s)), np.zeros((s, s)), np.zeros((s, s))
+    for r in range(rows):
+        rising, falling = 2 * r, 2 * r + 1
+        above, below = 2 * ((r + 1) % rows), 2 * ((r - 1) % rows) + 1
+        p[rising, above] += 1 - to_fall
+        p[rising, falling] += to_fall
+        p[falling, below] += 1 - to_rise
+        p[falling, rising] += to_rise
+        up[rising, above] = float(r == rows - 1)
+        down[falling, below] = float(r == 0)
+    zeros = np.zeros((s, s), np.int64)
+    return MarkovModel(p, zeros, zeros, zeros, CellGrid(2, rows, 0.1, 1.0), lag,
+                       estimator="given", pass_fractions=(up, down))
+
+
+@pytest.mark.parametrize("falls", [False, True])
+def test_the_rtd_a_window_sees_counts_records_from_its_first_frame(falls):
+    """A window's samples count records of the lap counter from its first frame: with falls
+    through the bottom, a particle below its past maximum makes records that are not its
+    history's, and the window's mean residence is longer than the intrinsic f(k) weighted
+    by n_W - k says (in_window: 6.8 % here). model.rtd(window=W, occupancy=where the
+    walkers start) equals the walkers' window samples within 3 standard errors; without
+    falls it is the weighted f(k) to round-off."""
+    from cfbmarkov.observed.residence import residence_times_from_laps
+
+    model = two_column_model() if falls else ladder_model(10, 0.4, lag=0.01)
+    window = 0.6                                        # 60 lags
+    pi = np.asarray(model.stationary_distribution)
+    seen = model.rtd(window=window, occupancy=pi)
+    weighted = model.rtd().in_window(window)
+    if not falls:
+        np.testing.assert_allclose(seen.probability, weighted.probability, rtol=0, atol=1e-13)
+        return
+    rng = np.random.default_rng(7)
+    start = rng.choice(pi.size, size=40_000, p=pi)
+    _, laps = _walk(model, start, 60, rng)
+    samples = residence_times_from_laps(0.01 * np.arange(61), laps)
+    se = samples.std() / np.sqrt(samples.size)
+    assert abs(samples.mean() - seen.mean) < 3 * se, (samples.mean(), seen.mean, se)
+    assert abs(samples.std() - seen.sd) < 0.01 * seen.sd
+    assert samples.mean() - weighted.mean > 10 * se     # the weighted f(k) falls short
+
+
 def _samples_from_laps(laps, lag):
     """Residence times from lap counters [T, N] by SPEC section 3, written independently."""
     out = []

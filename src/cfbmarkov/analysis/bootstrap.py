@@ -67,31 +67,33 @@ def fitting_runs(model) -> list[tuple[str, tuple[float, float]]]:
 
 
 def _resampled_rtd(model, window_length: float, direction: str, entry,
-                   deficit_levels: int | None = None):
+                   deficit_levels: int | None = None, occupancy=None):
     """A resampled model's RTD in the window, from the fitted model's entry distribution
     (one sparse LU per resample saved: the spread of the entry distribution is left out,
     that of the transitions kept), on ``deficit_levels`` lap deficits (None: as deep as
-    its residences fall)."""
-    steps = (200_000 if window_length is None
-             else max(2, int(round(window_length / model.lag))))
-
-    def seen(rtd):
-        return rtd if window_length is None else rtd.in_window(window_length)
+    its residences fall); a periodic riser's in a window as the window counts its records,
+    its particles starting in ``occupancy`` (the fitted model's:
+    :func:`~cfbmarkov.markov.first_passage.window_rtd`)."""
+    from cfbmarkov.markov.first_passage import exact_rtd, rtd_of_split_chain, window_rtd
 
     if isinstance(model, _SplitChain):
-        from cfbmarkov.markov.first_passage import rtd_of_split_chain
-
         up, down = (model.up, model.down) if direction == "up" else (model.down, model.up)
-        return seen(rtd_of_split_chain(up, down, model.stay, model.lag, deficit_levels,
-                                       max_steps=steps, entry=entry))
+        if window_length is not None:
+            return window_rtd(up, down, model.stay, model.lag, window_length, occupancy,
+                              deficit_levels)
+        return rtd_of_split_chain(up, down, model.stay, model.lag, deficit_levels,
+                                  max_steps=200_000, entry=entry)
     if Boundary(model.boundary).is_open or entry is None:
-        return model.rtd(window_length, direction)
-    from cfbmarkov.markov.first_passage import exact_rtd
-
+        return model.rtd(window_length, direction, occupancy)
     up, down = ((model.up_fraction, model.down_fraction) if direction == "up"
                 else (model.down_fraction, model.up_fraction))
-    return seen(exact_rtd(model.transition_matrix, up, down, model.lag, deficit_levels,
-                          max_steps=steps, entry=entry))
+    if window_length is not None:
+        from cfbmarkov.markov.first_passage import split_by_pass
+
+        return window_rtd(*split_by_pass(model.transition_matrix, up, down), model.lag,
+                          window_length, occupancy, deficit_levels)
+    return exact_rtd(model.transition_matrix, up, down, model.lag, deficit_levels,
+                     max_steps=200_000, entry=entry)
 
 
 def _resampled_intrinsic(chain, direction: str, entry, deficit_levels: int):
@@ -610,7 +612,7 @@ def _beyond_noise(relative: list[float], noise: list[float]) -> float:
 
 def bootstrap_figures(model, window_length: float | None, direction: str, entry, edges,
                       blocks: int, resamples: int, seed: int, curve=None,
-                      deficit_levels: int | None = None):
+                      deficit_levels: int | None = None, occupancy=None):
     """E(RT), SD(RT) and the RTD per bin of ``edges`` of each block-bootstrap resample of
     the model's fitting window (and, with ``curve`` = (lags, states, left), its expected
     mixing curve at those lags): the model's spread, shared by both kinds of interval.
@@ -635,6 +637,9 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
     deficit_levels : int, optional
         The lap deficits each resample's exact RTD keeps (a periodic riser's; None: as
         deep as its residences fall, :func:`~cfbmarkov.markov.first_passage.exact_rtd`).
+    occupancy : ndarray of float64, shape (S,), optional
+        With ``window_length``, where the window's particles start (default the fitted
+        model's :func:`~cfbmarkov.markov.model_rtd.window_start_occupancy`).
 
     Returns
     -------
@@ -647,6 +652,10 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
     """
     from cfbmarkov.analysis.mixing import model_mixing_curve
 
+    if window_length is not None and occupancy is None and not Boundary(model.boundary).is_open:
+        from cfbmarkov.markov.model_rtd import window_start_occupancy
+
+        occupancy = window_start_occupancy(model)
     chain_of = None
     if (not Boundary(model.boundary).is_open and not model.connected and entry is not None
             and direction in ("up", "down")):
@@ -676,7 +685,8 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
                 # the moments solved; the head propagated below, beside the others'
                 return mixing, _resampled_intrinsic(resampled, direction, entry,
                                                     deficit_levels)
-            rtd = _resampled_rtd(resampled, window_length, direction, entry, deficit_levels)
+            rtd = _resampled_rtd(resampled, window_length, direction, entry, deficit_levels,
+                                 occupancy)
         except (CfbmarkovError, ValueError):
             return mixing, None      # a resample without residences: no figure
         return mixing, (rtd.mean, rtd.sd, _binned(rtd, edges))

@@ -303,7 +303,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
                          resamples: int = 100,
                          seed: int = 0, direction: str | None = None, mixing=None,
                          tracers=None, flow: bool = True,
-                         candidates=()) -> PredictionIntervals:
+                         candidates=(), occupancy=None) -> PredictionIntervals:
     """Intervals of a prediction's E(RT), SD(RT), RTD and mixing curve (module docstring).
 
     Parameters
@@ -342,6 +342,11 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     candidates : iterable of str or os.PathLike, optional
         Files that may be the model's fitting file where its recorded path does not lead
         to it (:func:`resolve_source`; e.g. `compare`'s reference).
+    occupancy : array_like of float, shape (S,), optional
+        A periodic riser's: where the window's particles start (the prediction's states
+        in its first frame of the window), for the exact RTD as the window sees it and its
+        resamples' (:meth:`MarkovModel.rtd <cfbmarkov.markov.model.MarkovModel.rtd>`);
+        default the fitting window's occupancy.
 
     Returns
     -------
@@ -371,7 +376,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     if (mixing is None) != (tracers is None):
         raise InputError("the mixing band needs both the prediction's curve and the tracers")
     direction = model.flow_direction if direction is None else direction
-    exact = model.rtd(window_length, direction)
+    exact = model.rtd(window_length, direction, occupancy)
     entry = exact.entry_distribution
     curve = None
     if mixing is not None:
@@ -390,7 +395,7 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     model = resolve_source(model, candidates)       # the fitting data, for the bootstrap
     means, sds, rtds, curves = bootstrap_figures(model, window_length, direction, entry,
                                                  edges, blocks, resamples, seed, curve,
-                                                 exact.deficit_levels)
+                                                 exact.deficit_levels, occupancy)
     if len(means) < 10:
         raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
     exact_hist = _binned(exact, edges)

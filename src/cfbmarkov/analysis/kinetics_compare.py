@@ -320,14 +320,16 @@ def _exact(model, sk, warnings, direction="up"):
         return None
 
 
-def _windowed(model, sk, length: float, warnings, direction: str = "up") -> dict:
-    """The chain's exact exit means as a window of ``length`` s sees them
-    (:func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`); {} with a warning where
-    they cannot be had."""
+def _windowed(model, sk, length: float, warnings, direction: str = "up",
+              occupancy=None) -> dict:
+    """The chain's exact exit means as a window of ``length`` s sees them, its particles
+    starting in ``occupancy`` (:func:`cfbmarkov.markov.kinetics_exact.windowed_exit_means`);
+    {} with a warning where they cannot be had."""
     from cfbmarkov.markov.kinetics_exact import windowed_exit_means
 
     try:
-        return windowed_exit_means(model, sk, length, direction=direction)
+        return windowed_exit_means(model, sk, length, direction=direction,
+                                   occupancy=occupancy)
     except CfbmarkovError as exc:
         warnings.append(f"kinetics: no windowed exact answers ({exc})")
         return {}
@@ -608,7 +610,10 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
         warnings.append(f"kinetics: the prediction stored no values of {', '.join(unstored)}; "
                         "the model side integrates them along the prediction's paths")
     exact = _exact(model, sk, warnings, on.direction)
-    windowed = _windowed(model, sk, stop - start, warnings, on.direction) if exact else {}
+    from cfbmarkov.markov.model_rtd import occupancy_at
+
+    windowed = (_windowed(model, sk, stop - start, warnings, on.direction,
+                          occupancy_at(model, pred, start)) if exact else {})
     boot = (bootstrap_exit_means(_with_source_found(model, pred, ref), kinetics, fields,
                                  resamples, warnings, on.direction)
             if exact and resamples else None)

@@ -16,10 +16,11 @@ propagating nu through Q. The result is exact up to the lap-deficit truncation K
 tail cut-off, both reported as ``unresolved`` mass.
 
 A residence can only be observed inside an analysis window of length W if it starts and ends
-in it: in a stationary process a residence of k lags fits in n_W - k of the n_W = W/lag
-frame positions, so the RTD seen in the window is f(k)(n_W - k)+ renormalised
-(:meth:`ResidenceTimeDistribution.in_window`). This is what a sample-based RTD on a window
-(CFD-DEM or Monte Carlo) estimates.
+in it, and the window counts the lap counter's records from its first frame: the RTD it sees
+(:func:`window_rtd`) is a renewal of those records from where its particles start, then the
+backward equations; where no particle falls through the bottom it is f(k)(n_W - k)+
+renormalised (:meth:`ResidenceTimeDistribution.in_window`). This is what a sample-based RTD
+on a window (CFD-DEM or Monte Carlo) estimates.
 """
 
 from __future__ import annotations
@@ -133,7 +134,11 @@ class ResidenceTimeDistribution:
         """The RTD as observed in an analysis window of ``window`` s.
 
         A residence of k lags fits in n_W - k of the n_W = window / lag frame positions, so
-        the observed RTD is f(k) (n_W - k)+ renormalised (see the module docstring).
+        the observed RTD is f(k) (n_W - k)+ renormalised (see the module docstring): where
+        every record the window counts is a true one (an open riser's entries; a periodic
+        riser whose particles never pass down through the bottom). A periodic riser's window
+        with falls sees :func:`window_rtd`, which :meth:`MarkovModel.rtd
+        <cfbmarkov.markov.model.MarkovModel.rtd>` returns.
 
         Parameters
         ----------
@@ -304,6 +309,54 @@ def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay
         if _level_mass(v) < tol:
             return k + 1
     return max_steps
+
+
+@nb.njit(cache=True, nogil=True)
+def _window_landings(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
+                     up_idx, up_val, live, start, landings):
+    """The records of a window counted from its first frame (Numba kernel): the chain on
+    the lap-deficit levels below the window's running maximum, started from ``start``
+    ([S, L], all on level 0), in which every pass up from level 0 (a new maximum, a record)
+    lands on level 0 again instead of leaving. ``landings[k, j]`` (float64 [M, S]) gets
+    the mass that lands in state j by the record of transition k + 1. Parts as
+    :func:`_first_passage_levels` (CSR of their transposes)."""
+    n = start.shape[0]
+    v = start.copy()
+    w = np.empty_like(v)
+    for k in range(landings.shape[0]):
+        for j in range(n):
+            _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
+                       up_idx, up_val, live, v, w)
+            landed = 0.0
+            for q in range(up_ptr[j], up_ptr[j + 1]):      # passes up from level 0
+                landed += up_val[q] * v[up_idx[q], 0]
+            landings[k, j] = landed
+            if live[j, 0]:
+                w[j, 0] += landed
+        v, w = w, v
+
+
+@nb.njit(cache=True, nogil=True)
+def _exits_backward(up_ptr, up_idx, up_val, stay_ptr, stay_idx, stay_val, down_ptr, down_idx,
+                    down_val, live, exit_probability, ends):
+    """``ends[k, i]``: from state i on level 0, the probability that the residence ends on
+    its (k + 1)-th transition (Numba kernel), b_1 = the exits, b_(k+1) = Q b_k on the
+    levels. The parts as CSR of themselves (rows: sources), P_up in the place of
+    :func:`_level_row`'s down passes and P_down in that of its up passes: from level g an
+    up pass reads level g - 1, a down pass level g + 1."""
+    n, levels = live.shape
+    b = np.zeros((n, levels))
+    w = np.empty_like(b)
+    for i in range(n):
+        if live[i, 0]:
+            b[i, 0] = exit_probability[i]
+    for k in range(ends.shape[0]):
+        for i in range(n):
+            ends[k, i] = b[i, 0]
+        for i in range(n):
+            _level_row(i, up_ptr, up_idx, up_val, stay_ptr, stay_idx, stay_val, down_ptr,
+                       down_idx, down_val, live, b, w)
+        b, w = w, b
 
 
 @nb.njit(cache=True, parallel=True)
@@ -590,6 +643,114 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
                               entry, entry_flux, chain)
 
 
+def window_rtd(p_up, p_down, p_stay, lag: float, window: float, occupancy: np.ndarray,
+               deficit_levels: int | None = None,
+               intrinsic: ResidenceTimeDistribution | None = None) -> ResidenceTimeDistribution:
+    """The RTD a window of ``window`` s observes of a periodic riser's chain, its records
+    counted from the window's first frame, as the window's samples are.
+
+    A window's residences are the times between successive records of each particle's lap
+    counter, the counter's running maximum taken from its value in the window's first frame
+    (:func:`cfbmarkov.observed.residence.residence_times_from_laps`). A particle that fell
+    through the bottom before the window starts it below its own past maximum: its next
+    passes up are records to the window, not to its history, and the residences between
+    them are shorter than its true one. The window's RTD is therefore not the intrinsic
+    f(k) weighted by the n_W - k places a residence fits
+    (:meth:`ResidenceTimeDistribution.in_window`, which counts true records alone and is
+    this function's answer where no particle falls); it is, with the particles started in
+    ``occupancy`` on deficit 0 and every record landing on deficit 0 again (a renewal: the
+    landings R(s) by the record of lag s, :func:`_window_landings`),
+
+        C(k) = sum_(s = 1 .. n_W - k) R(s) . b_k,    f_W(k) = C(k) / sum C,
+
+    b_k the probability from each landing state of ending k lags later (b_1 = the exits,
+    b_(k+1) = Q b_k on the lap-deficit levels: :func:`_exits_backward`), the residences
+    that begin and end inside the window. Two propagations of n_W lags; no per-entry work.
+
+    Parameters
+    ----------
+    p_up, p_down, p_stay : scipy.sparse matrix, shape (S, S)
+        P split by pass direction (the direction residences are counted in as "up").
+    lag : float
+        The lag (s).
+    window : float
+        The window's length (s), at least two lags.
+    occupancy : ndarray of float64, shape (S,)
+        Where the particles are at the window's start (non-negative; normalised here): the
+        fitting window's particle-frames per state, or the stationary distribution.
+    deficit_levels : int, optional
+        K, the deepest lap deficit below the running maximum followed (mass falling below
+        it is lost from the count); default :data:`WINDOW_DEFICIT_LEVELS`.
+    intrinsic : ResidenceTimeDistribution, optional
+        The chain's intrinsic RTD, whose ``unresolved``, entry distribution, closed classes
+        and deficit figures the result carries (as :meth:`ResidenceTimeDistribution.in_window`).
+
+    Returns
+    -------
+    ResidenceTimeDistribution
+        Probability per lag k = 1 .. n_W - 1, ``window`` set; its ``unresolved`` is the
+        share of the residences begun inside the window that do not end in it.
+
+    Raises
+    ------
+    CfbmarkovError
+        If no residence fits in the window, or the chain has no pass up through the top.
+
+    References
+    ----------
+    ``docs/definitions.md`` (Exact RTD of a model, As a window sees it); J. G. Kemeny and
+    J. L. Snell, Finite Markov Chains (1960), Ch. III (absorption by the backward equations).
+    """
+    p_up, p_down, p_stay = (sp.csr_matrix(part) for part in (p_up, p_down, p_stay))
+    s = p_up.shape[0]
+    if deficit_levels is None:
+        deficit_levels = WINDOW_DEFICIT_LEVELS
+    n_window = int(round(window / lag))
+    levels = int(deficit_levels) + 1
+    exit_probability = np.asarray(p_up.sum(axis=1), dtype=np.float64).ravel()
+    if not exit_probability.any():
+        raise CfbmarkovError("the model has no transition up through the top: particles never "
+                             "leave, so there is no residence time")
+    live = _live_levels(p_up, p_down, p_stay, levels, np.concatenate(
+        [exit_probability > 0, np.zeros(s * (levels - 1), bool)])).reshape(levels, s)
+    live_t = np.ascontiguousarray(live.T)
+    occupancy = np.clip(np.asarray(occupancy, dtype=np.float64).ravel(), 0.0, None)
+    start = np.zeros((s, levels))
+    if occupancy.sum() > 0:
+        start[:, 0] = occupancy / occupancy.sum()
+    start[~live_t] = 0.0
+    steps = max(n_window - 1, 1)
+    landings = np.zeros((steps, s))
+    _window_landings(*_transposed_parts((p_down, p_stay, p_up)), live_t, start, landings)
+    ends = np.zeros((steps, s))
+    arrays = []
+    for part in (p_up, p_stay, p_down):
+        own = part.tocsr().copy()
+        own.sort_indices()
+        arrays += [own.indptr.astype(np.int64), own.indices.astype(np.int64),
+                   own.data.astype(np.float64)]
+    _exits_backward(*arrays, live_t, exit_probability, ends)
+    # C(k) = R(1 .. n_W - k) . b_k: the landings summed up to n_W - k
+    landed = np.cumsum(landings, axis=0)
+    k = np.arange(1, steps + 1)
+    counts = np.zeros(steps)
+    fits = n_window - k >= 1
+    counts[fits] = np.einsum("ks,ks->k", landed[n_window - k[fits] - 1], ends[k[fits] - 1])
+    if not counts.sum() > 0:
+        raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s")
+    # of the residences that begin inside the window, the share that do not end in it (the
+    # longer ones, and any that never end)
+    begun = float(landings.sum())
+    outlasting = max(0.0, 1.0 - float(counts.sum()) / begun) if begun > 0 else 0.0
+    base = intrinsic
+    return ResidenceTimeDistribution(
+        lag, counts / counts.sum(), outlasting,
+        np.zeros(s) if base is None else base.entry_distribution, float(window),
+        1 if base is None else base.closed_classes,
+        deficit_levels=int(deficit_levels),
+        deficit_unresolved=0.0 if base is None else base.deficit_unresolved)
+
+
 def split_by_pass(matrix, up_fraction: np.ndarray, down_fraction: np.ndarray
                   ) -> tuple[sp.csr_matrix, sp.csr_matrix, sp.csr_matrix]:
     """P split by pass direction: P = P_up + P_down + P_stay, on P's non-zeros only.
@@ -655,6 +816,9 @@ def deficit_matrix(p_up, p_down, p_stay, levels: int) -> tuple[sp.csr_matrix, np
 
 #: the lap deficits an exact RTD keeps at least (:func:`exact_rtd`)
 MIN_DEFICIT_LEVELS = 8
+#: the lap deficits :func:`window_rtd` follows by default: more laps than particles fall
+#: through the bottom within a window (the cost grows little with them)
+WINDOW_DEFICIT_LEVELS = 16
 #: the most lap deficits an exact RTD keeps; mass below stays unresolved (and is warned of,
 #: with the chain's E(RT) from its lap drift: :func:`drift_residence_time`)
 MAX_DEFICIT_LEVELS = 64

@@ -484,6 +484,8 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
     entry_rows : ndarray of int64, shape (M,)
         With ``landings``: each entry state's transient state at level 0 (-1 where no exit
         can be reached from it: the particles landing there are trapped).
+    level_rows : ndarray of int64, shape (S,)
+        With ``landings``: every state's transient state at level 0 (-1 where none).
 
     Raises
     ------
@@ -534,7 +536,7 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
                          sp.csr_matrix((s * (levels - 1), entries.size))]).tocsr()[keep]
     position = -np.ones(s * levels, np.int64)
     position[keep] = np.arange(keep.size)
-    return (*chain, landing, position[entries])
+    return (*chain, landing, position[entries], position[:s])
 
 
 def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
@@ -586,6 +588,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     carries = "carried" in sk.starts
     q, r, e, state, _, *landed = residence_chain(model, direction, deficit_levels,
                                                  landings=carries)
+    landed = landed[:2]         # where residences land, and the entry states' rows
     a_all, b_all = sk.over(model.lag)
     c_all = -np.expm1(-np.asarray(sk.rate, dtype=np.float64) * model.lag)    # 1 - a, exact
     space = model.state_space
@@ -630,9 +633,10 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
 
 def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float,
                         cell_fields=None, direction: str | None = None,
-                        history: float = 0.0) -> dict[str, float]:
+                        history: float = 0.0, occupancy=None) -> dict[str, float]:
     """The mean exit value per residence as a window of ``length`` seconds observes it:
-    each residence of n lags weighted by the number of places it fits in the window.
+    each residence of n lags weighted by the number of places it fits in the window (a
+    periodic riser's counted from the window's first frame: Notes).
 
     A window of M = length / lag lags sees a residence of n lags that starts at one of its
     lag boundaries 1 .. M - n and ends inside it, M - n ways; in a steady state the exits
@@ -677,6 +681,22 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
     history : float, optional
         Seconds before the window that an exit's residence may have begun in (>= 0; 0:
         residences wholly inside the window).
+    occupancy : array_like of float, shape (S,), optional
+        A periodic riser's: where the particles are when the records begin to be counted
+        (the window's start less the history); default
+        :func:`~cfbmarkov.markov.model_rtd.window_start_occupancy`.
+
+    Notes
+    -----
+    A periodic riser's window counts the records of each particle's lap counter from the
+    first frame it reads, as the reference's paths do: a particle below its own past
+    maximum there makes records that are not its history's, so the exits are weighted as
+    :func:`~cfbmarkov.markov.first_passage.window_rtd` weights residences (a renewal of the
+    records from ``occupancy`` on the lap-deficit levels, landing on deficit 0 again, and
+    the backward equations of the value masses: A_1 = a r, B_1 = b r,
+    A_(k+1) = a (Q A_k), B_(k+1) = b (Q A_k) + Q B_k, the exit mean of a residence of k lags
+    from entry state e being v0 A_k(e) + B_k(e)); the weights w_n above are that count
+    where no particle falls through the bottom.
 
     Returns
     -------
@@ -700,6 +720,8 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
     if not (np.isfinite(history) and history >= 0):
         raise InputError(f"history {history!r} s: a finite number of seconds >= 0")
     back = int(round(float(history) / model.lag))
+    if model.open_flow is None:
+        return _windowed_records(model, sk, steps, back, direction, occupancy)
     q, r, e, state, _ = residence_chain(model, direction)
     qt = q.T.tocsr()
     a_all, b_all = sk.over(model.lag)
@@ -717,5 +739,59 @@ def windowed_exit_means(model, kinetics: Kinetics | StateKinetics, length: float
         u = (qt @ u.T).T
     if not weighted_prob > 0:
         raise InputError(f"no residence of the model fits a window of {length:g} s")
+    return {name: float(weighted_value[i] / weighted_prob) for i, name in enumerate(sk.names)
+            if sk.starts[i] != "carried"}
+
+
+def _windowed_records(model, sk: StateKinetics, steps: int, back: int,
+                      direction: str | None, occupancy) -> dict[str, float]:
+    """:func:`windowed_exit_means` of a periodic riser: the records counted from the first
+    frame read (``back`` lags before a window of ``steps`` lags), the particles starting in
+    ``occupancy`` on deficit 0 (its Notes)."""
+    from cfbmarkov.markov.model_rtd import window_start_occupancy
+
+    q, r, _, state, _, landing, entry_rows, level_rows = residence_chain(
+        model, direction, landings=True)
+    start = window_start_occupancy(model) if occupancy is None else occupancy
+    start = np.clip(np.asarray(start, dtype=np.float64).ravel(), 0.0, None)
+    if start.shape != (model.n_states,) or not start.sum() > 0:
+        raise InputError(f"occupancy: non-negative weights of shape ({model.n_states},) with "
+                         "some mass")
+    span = steps + back                         # lags read, from the first frame
+    n = q.shape[0]
+    v = np.zeros(n)
+    here = level_rows >= 0
+    v[level_rows[here]] = start[here] / start.sum()
+    qt = q.T.tocsr()
+    landing_t = landing.T.tocsr()
+    into = entry_rows >= 0
+    landed = np.zeros((span, entry_rows.size))      # landed[s - 1]: by the record of lag s
+    for k in range(span - 1):
+        landed[k] = landing_t @ v
+        v = qt @ v
+        v[entry_rows[into]] += landed[k][into]
+    cumulative = np.vstack([np.zeros(entry_rows.size), np.cumsum(landed, axis=0)])
+    a_all, b_all = sk.over(model.lag)
+    a, b = a_all[:, state], b_all[:, state]                      # [P, n]
+    initial = np.asarray(sk.initial, dtype=np.float64)[:, None]
+    ends = r.copy()                                               # b_k
+    scaled, added = a * r[None, :], b * r[None, :]                # A_k, B_k
+    weighted_value = np.zeros(sk.n_properties)
+    weighted_prob = 0.0
+    rows = np.where(into, entry_rows, 0)
+    for k in range(1, span):
+        # residences of k lags that begin at a record of lag s >= 1 and end inside the
+        # window: back < s + k <= span
+        lo, hi = max(1, back + 1 - k), span - k
+        if hi >= lo:
+            begun = np.where(into, cumulative[hi] - cumulative[lo - 1], 0.0)
+            weighted_prob += float(begun @ ends[rows])
+            weighted_value += (initial * scaled[:, rows] + added[:, rows]) @ begun
+        moved = (q @ scaled.T).T
+        added = b * moved + (q @ added.T).T
+        scaled = a * moved
+        ends = q @ ends
+    if not weighted_prob > 0:
+        raise InputError(f"no residence of the model fits a window of {steps * model.lag:g} s")
     return {name: float(weighted_value[i] / weighted_prob) for i, name in enumerate(sk.names)
             if sk.starts[i] != "carried"}

@@ -428,8 +428,8 @@ class MarkovModel:
         return propagation.batch_injection_maps(self, times, outflow)
 
     # -- residence times (cfbmarkov.markov.model_rtd) ---------------------------------
-    def rtd(self, window: float | None = None, direction: str | None = None
-            ) -> "ResidenceTimeDistribution":
+    def rtd(self, window: float | None = None, direction: str | None = None,
+            occupancy=None) -> "ResidenceTimeDistribution":
         """Exact residence-time distribution (no sampling noise), cached.
 
         Parameters
@@ -441,6 +441,11 @@ class MarkovModel:
             A periodic riser's residences from passes up through the top or, for a net
             downflow, down through the bottom (the pass fractions swapped;
             ``docs/definitions.md``, Net downflow); default :attr:`flow_direction`.
+        occupancy : array_like of float, shape (S,), optional
+            With ``window``, a periodic riser's: where the window's particles start
+            (weights per state; default the fitting window's particle-frames per state).
+            The window counts records of the lap counter from its first frame, as its
+            samples do (:func:`~cfbmarkov.markov.first_passage.window_rtd`).
 
         Returns
         -------
@@ -475,7 +480,7 @@ class MarkovModel:
         """
         from cfbmarkov.markov.model_rtd import model_rtd
 
-        rtd = model_rtd(self, window, direction)
+        rtd = model_rtd(self, window, direction, occupancy)
         key = ("unresolved-warned", direction or self.flow_direction)
         if window is None and key not in self._cache:
             from cfbmarkov.markov.model_summary import unresolved_warning

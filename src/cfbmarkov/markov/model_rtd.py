@@ -15,14 +15,14 @@ import scipy.sparse as sp
 from cfbmarkov.errors import InputError
 from cfbmarkov.limits import MAX_STEPS, check_finite
 from cfbmarkov.markov.first_passage import (ResidenceTimeDistribution, drift_residence_time,
-                                            exact_rtd, split_by_pass)
+                                            exact_rtd, split_by_pass, window_rtd)
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
 
 
 def model_rtd(model: "MarkovModel", window: float | None = None,
-              direction: str | None = None) -> ResidenceTimeDistribution:
+              direction: str | None = None, occupancy=None) -> ResidenceTimeDistribution:
     """Exact residence-time distribution of ``model`` (no sampling noise), cached in it.
 
     Parameters
@@ -34,6 +34,9 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
     direction : {"up", "down"}, optional
         A periodic riser's residences from passes up through the top or down through the
         bottom (the pass fractions swapped); default the model's ``flow_direction``.
+    occupancy : array_like of float, shape (S,), optional
+        With ``window``, for a periodic riser: where the window's particles start (weights
+        per state); default :func:`window_start_occupancy`.
 
     Returns
     -------
@@ -67,27 +70,16 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
     if direction not in ("up", "down"):
         raise InputError(f"residence direction {direction!r}: up or down")
     own = direction == model.flow_direction     # the direction the uncertainty is of
+    if window is not None:
+        return _periodic_window_rtd(model, window, direction, occupancy)
     if direction == "down":
         rtd = _down_rtd(model, window)
         return _with_uncertainty(model, rtd, window) if own else rtd
-    if window is not None and "rtd" not in cache:
-        # a window of n lags sees residence times below n lags only: propagate no further
-        steps = max(2, int(round(window / model.lag)))
-        key = ("rtd-steps", steps)
-        if key not in cache:
-            cache[key] = exact_rtd(model.transition_matrix, model.up_fraction,
-                                   model.down_fraction, model.lag, max_steps=steps,
-                                   entry_flux=net_entry_flux(model))
-        if cache[key].probability.any():
-            return cache[key].in_window(window)
-        # no residence ends within the lags propagated: the whole RTD names the shortest
     if "rtd" not in cache:
         cache["rtd"] = exact_rtd(model.transition_matrix, model.up_fraction,
                                  model.down_fraction, model.lag,
                                  entry_flux=net_entry_flux(model))
     intrinsic = cache["rtd"]
-    if window is not None:
-        return intrinsic.in_window(window)
     return _with_uncertainty(model, intrinsic) if own else intrinsic
 
 
@@ -121,6 +113,84 @@ def _with_uncertainty(model: "MarkovModel", rtd: ResidenceTimeDistribution,
     if window is not None or model.uncertainty is None:
         return rtd
     return dataclasses.replace(rtd, uncertainty=model.uncertainty)
+
+
+def window_start_occupancy(model: "MarkovModel") -> np.ndarray:
+    """Where a window's particles start, for the RTD it sees of a periodic riser's chain:
+    the fitting window's particle-frames per state (the counts' row sums), or the chain's
+    stationary distribution for a model given by its matrix alone.
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    ndarray of float64, shape (S,)
+    """
+    occupancy = np.asarray(model.counts.sum(axis=1), dtype=np.float64)
+    return occupancy if occupancy.sum() > 0 else np.asarray(model.stationary_distribution)
+
+
+def occupancy_at(model: "MarkovModel", source, time: float) -> np.ndarray | None:
+    """The particles per state of ``model`` in the frame of ``source`` at ``time``: where a
+    window that starts there finds them (the start of :func:`window_rtd
+    <cfbmarkov.markov.first_passage.window_rtd>` and of the windowed exit means).
+
+    Parameters
+    ----------
+    model : MarkovModel
+    source : str, os.PathLike or Trajectories
+        A run or a prediction.
+    time : float
+        The frame's time (s).
+
+    Returns
+    -------
+    ndarray of float64, shape (S,), or None
+        None for an open riser, or where the frame holds no particle in a state (the
+        model's default start, :func:`window_start_occupancy`, then applies).
+    """
+    from cfbmarkov.errors import CfbmarkovError
+
+    if model.open_flow is not None:
+        return None
+    try:
+        states = np.asarray(model.initial_states(source, float(time))[0])
+    except (CfbmarkovError, ValueError):
+        return None
+    states = states[(states >= 0) & (states < model.n_states)]
+    if states.size == 0:
+        return None
+    return np.bincount(states, minlength=model.n_states).astype(np.float64)
+
+
+def _periodic_window_rtd(model: "MarkovModel", window: float, direction: str,
+                         occupancy) -> ResidenceTimeDistribution:
+    """A periodic riser's RTD as a window sees it, its records counted from the window's
+    first frame (:func:`~cfbmarkov.markov.first_passage.window_rtd`), cached for the
+    default start."""
+    cache = model._cache
+    steps = int(round(window / model.lag))
+    key = ("rtd-window", direction, steps)
+    if occupancy is None and key in cache:
+        return cache[key]
+    # its unresolved mass and depth: the intrinsic RTD's (computed once, cached)
+    intrinsic = model_rtd(model, None, direction)
+    ends, back = ((model.up_fraction, model.down_fraction) if direction == "up"
+                  else (model.down_fraction, model.up_fraction))
+    p_up, p_down, p_stay = split_by_pass(sp.csr_matrix(model.transition_matrix), ends, back)
+    start = window_start_occupancy(model) if occupancy is None else occupancy
+    start = np.asarray(start, dtype=np.float64)
+    if start.shape != (model.n_states,) or not np.all(np.isfinite(start)) or start.min() < 0 \
+            or not start.sum() > 0:
+        raise InputError(f"occupancy: non-negative finite weights of shape ({model.n_states},) "
+                         "with some mass (where the window's particles start)")
+    rtd = window_rtd(p_up, p_down, p_stay, model.lag, window, start, intrinsic.deficit_levels,
+                     intrinsic)
+    if occupancy is None:
+        cache[key] = rtd
+    return rtd
 
 
 def _down_rtd(model: "MarkovModel", window: float | None) -> ResidenceTimeDistribution:

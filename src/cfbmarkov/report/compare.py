@@ -81,6 +81,7 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
         return None
     from cfbmarkov.analysis.intervals import SourceChanged, SourceMissing, prediction_intervals
     from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.model_rtd import occupancy_at
 
     try:
         model = MarkovModel.from_trajectories(pred)
@@ -97,7 +98,8 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
                                     stop - start, level=level, resamples=resamples,
                                     direction=comparison.direction, mixing=mixing,
                                     tracers=tracers,
-                                    candidates=[comparison.reference.traj.path])
+                                    candidates=[comparison.reference.traj.path],
+                                    occupancy=occupancy_at(model, pred, start))
     except SourceChanged:
         raise
     except InputError as exc:
@@ -169,11 +171,13 @@ def _model_exact(pred, comparison: RunComparison) -> dict | None:
 
     References
     ----------
-    ``docs/definitions.md`` (RTD as a window sees it): the windowed RTD weights the chain's
-    first-passage mass at n lags by max(M - n, 0) for a window of M lags.
+    ``docs/definitions.md`` (RTD as a window sees it): the window counts the records of the
+    lap counter from its first frame, the particles starting where the prediction's are
+    (:func:`~cfbmarkov.markov.first_passage.window_rtd`).
     """
     from cfbmarkov.errors import CfbmarkovError
     from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.model_rtd import occupancy_at
     from cfbmarkov.observed.metrics import percentage_difference
 
     try:
@@ -182,7 +186,8 @@ def _model_exact(pred, comparison: RunComparison) -> dict | None:
             return None
         length = float(comparison.window[1] - comparison.window[0])
         full = model.rtd(direction=comparison.direction)
-        seen = model.rtd(window=length, direction=comparison.direction)
+        seen = model.rtd(window=length, direction=comparison.direction,
+                         occupancy=occupancy_at(model, pred, comparison.window[0]))
     except CfbmarkovError:
         return None
     reference = comparison.reference.residence

@@ -28,7 +28,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from cfbmarkov.markov.discrete import DiscreteTrajectories
-from cfbmarkov.markov.first_passage import rtd_of_split_chain
+from cfbmarkov.markov.first_passage import window_rtd
 from cfbmarkov.markov.groups import core_annulus, group_labels, height_bands, product_groups
 from cfbmarkov.markov.select.blocks import MIN_RESIDENCES, JudgedBlocks
 from cfbmarkov.markov.select.record import CandidateScore
@@ -165,12 +165,12 @@ class _RTDCriterion(Criterion):
         # its RTD from where particles entered in the counts it was fitted on
         block, direction = self.fitting.judged[k], self.fitting.direction
         up, down, stay = estimator.split_chain(training)
-        entry = _entry_distribution(training, direction)
         if direction == "down":     # the mirror image: in at the top, out below
             up, down = down, up
-        steps = max(2, int(round((block[1] - block[0]) / lag)))
-        rtd = rtd_of_split_chain(up, down, stay, lag, max_steps=steps, entry=entry
-                                 ).in_window(block[1] - block[0])
+        # as the block's samples count them: records from its first frame, the particles
+        # starting where the block's are
+        rtd = window_rtd(up, down, stay, lag, block[1] - block[0],
+                         _block_start_occupancy(discrete, block[0], up.shape[0]))
         observed, histogram = self.fitting.observed[k], self.histograms[k]
         return (percentage_difference(rtd.mean, observed.mean),
                 percentage_difference(rtd.sd, observed.sd, scale=observed.mean),
@@ -361,11 +361,13 @@ def _natural_tolerances(observed) -> tuple[float, float]:
     return max(GOAL_PD_MEAN, rms(pd_mean)), max(GOAL_PD_SD, rms(pd_sd))
 
 
-def _entry_distribution(counts, direction: str = "up") -> np.ndarray:
-    """Where particles entered in the counted data: the landing states of up passes (of down
-    passes where residences run downward)."""
-    passes = counts.counts_up if direction == "up" else counts.counts_down
-    return np.asarray(passes.sum(axis=0), dtype=np.float64).ravel()
+def _block_start_occupancy(discrete: DiscreteTrajectories, start: float, n_states: int
+                           ) -> np.ndarray:
+    """The particles per state in the frame of ``discrete`` at ``start`` (s), the nearest."""
+    i = int(np.argmin(np.abs(np.asarray(discrete.times) - start)))
+    states = np.asarray(discrete.states[i])
+    states = states[(states >= 0) & (states < n_states)]
+    return np.bincount(states, minlength=n_states).astype(np.float64)
 
 
 def _held_out_ck_error(block: DiscreteTrajectories, matrix: np.ndarray, times: np.ndarray
