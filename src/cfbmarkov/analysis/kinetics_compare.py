@@ -612,8 +612,10 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     exact = _exact(model, sk, warnings, on.direction)
     from cfbmarkov.markov.model_rtd import occupancy_at
 
+    found = occupancy_at(model, pred, start)     # the reference's where pred lacks history
     windowed = (_windowed(model, sk, stop - start, warnings, on.direction,
-                          occupancy_at(model, pred, start)) if exact else {})
+                          found if found is not None else occupancy_at(model, ref, start))
+                if exact else {})
     boot = (bootstrap_exit_means(_with_source_found(model, pred, ref), kinetics, fields,
                                  resamples, warnings, on.direction)
             if exact and resamples else None)

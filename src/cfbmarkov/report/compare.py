@@ -81,7 +81,6 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
         return None
     from cfbmarkov.analysis.intervals import SourceChanged, SourceMissing, prediction_intervals
     from cfbmarkov.markov import MarkovModel
-    from cfbmarkov.markov.model_rtd import occupancy_at
 
     try:
         model = MarkovModel.from_trajectories(pred)
@@ -99,7 +98,7 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
                                     direction=comparison.direction, mixing=mixing,
                                     tracers=tracers,
                                     candidates=[comparison.reference.traj.path],
-                                    occupancy=occupancy_at(model, pred, start))
+                                    occupancy=_window_start(model, pred, comparison, start))
     except SourceChanged:
         raise
     except InputError as exc:
@@ -177,7 +176,6 @@ def _model_exact(pred, comparison: RunComparison) -> dict | None:
     """
     from cfbmarkov.errors import CfbmarkovError
     from cfbmarkov.markov import MarkovModel
-    from cfbmarkov.markov.model_rtd import occupancy_at
     from cfbmarkov.observed.metrics import percentage_difference
 
     try:
@@ -187,7 +185,8 @@ def _model_exact(pred, comparison: RunComparison) -> dict | None:
         length = float(comparison.window[1] - comparison.window[0])
         full = model.rtd(direction=comparison.direction)
         seen = model.rtd(window=length, direction=comparison.direction,
-                         occupancy=occupancy_at(model, pred, comparison.window[0]))
+                         occupancy=_window_start(model, pred, comparison,
+                                                comparison.window[0]))
     except CfbmarkovError:
         return None
     reference = comparison.reference.residence
@@ -195,6 +194,17 @@ def _model_exact(pred, comparison: RunComparison) -> dict | None:
             "windowed_rt_mean": seen.mean, "windowed_rt_sd": seen.sd,
             "pd_windowed_rt_mean": float(percentage_difference(seen.mean, reference.mean)),
             "pd_windowed_rt_sd": float(percentage_difference(seen.sd, reference.sd))}
+
+
+def _window_start(model, pred, comparison: RunComparison, start: float):
+    """Where the particles are at the compared window's start, per state of the model: the
+    prediction's, or the reference's where the prediction's first frame lacks the history a
+    state space with memory needs (a prediction starts from the reference's particles)."""
+    from cfbmarkov.markov.model_rtd import occupancy_at
+
+    found = occupancy_at(model, pred, start)
+    return found if found is not None else occupancy_at(model, comparison.reference.traj,
+                                                        start)
 
 
 def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str]:
