@@ -737,7 +737,13 @@ def window_rtd(p_up, p_down, p_stay, lag: float, window: float, occupancy: np.nd
     fits = n_window - k >= 1
     counts[fits] = np.einsum("ks,ks->k", landed[n_window - k[fits] - 1], ends[k[fits] - 1])
     if not counts.sum() > 0:
-        raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s")
+        held = (np.zeros(0, np.int64) if intrinsic is None
+                else np.flatnonzero(intrinsic.probability > 0))
+        shortest = ("" if held.size == 0 else
+                    f": its shortest residence lasts {(held[0] + 1) * lag:g} s; give a "
+                    f"window of at least {(held[0] + 2) * lag:g} s")
+        raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s"
+                             + shortest)
     # of the residences that begin inside the window, the share that do not end in it (the
     # longer ones, and any that never end)
     begun = float(landings.sum())
