@@ -219,6 +219,12 @@ def test_result_objects_echo_in_a_line_or_two(fitted):
     answer = exact_kinetics(fitted, Kinetics((Property("X", FirstOrder(), {"rate": 0.5}),)))
     assert "bed_mean_by_cell=<array 64 float64>" in repr(answer["X"])
     assert len(repr(answer["X"])) < 400
+    # the fields a model carries, and a comparison's sides, by shape too
+    from cfbmarkov.kinetics import CellFields
+
+    fields = CellFields(np.zeros(64), np.ones(64), np.zeros(64))
+    assert repr(fields).startswith("CellFields(solids_fraction=<array 64 float64>")
+    assert len(repr(fields)) < 200
 
 
 def test_a_prediction_keeps_the_source_frame_of_its_initial_file(markov_run, tmp_path):

@@ -63,6 +63,8 @@ class ComparedRun:
         The left tracer group (x < W/2 in the window's first frame), in the file's order.
     """
 
+    __repr__ = compact_repr   # arrays by their shape: a notebook's echo stays short
+
     traj: Trajectories
     frames: slice
     residence: ResidenceTimes

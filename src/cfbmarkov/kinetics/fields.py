@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cfbmarkov.errors import InputError
+from cfbmarkov._repr import compact_repr
 
 #: the cell fields a parameter may be a function of, and the side that counts as dense
 FIELDS = {"solids_fraction": "above", "wall_distance": "below", "vertical_velocity": "below"}
@@ -48,6 +49,8 @@ class CellFields:
     InputError
         If the arrays are not all 1D of the same length.
     """
+
+    __repr__ = compact_repr   # arrays by their shape: a notebook's echo stays short
 
     solids_fraction: np.ndarray
     wall_distance: np.ndarray

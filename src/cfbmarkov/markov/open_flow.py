@@ -22,6 +22,7 @@ from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.montecarlo import SparseChain
 from cfbmarkov.markov.open_montecarlo import run_open_chain
+from cfbmarkov._repr import compact_repr
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.first_passage import ResidenceTimeDistribution
@@ -66,6 +67,8 @@ class OpenFlow:
     J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton (1960),
     Ch. III (absorbing chains).
     """
+
+    __repr__ = compact_repr   # arrays by their shape: a notebook's echo stays short
 
     exit_probability: np.ndarray
     exit_counts: np.ndarray
