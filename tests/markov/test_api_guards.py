@@ -58,6 +58,13 @@ def test_monte_carlo_checks_its_particles_laps_and_steps(model):
     for states in (np.zeros((2, 3), int), np.array([0.9, 2.0])):
         with pytest.raises(InputError, match="initial_states"):
             model.monte_carlo(states, 4)
+    # initial_states' -1 of a particle absent from the frame: named, with the fix
+    with pytest.raises(InputError, match=r"from -1 to 2 \(-1 marks a particle absent .* "
+                                         r"states\[states >= 0\]\)"):
+        model.monte_carlo(np.array([-1, 0, 2]), 4)
+    with pytest.raises(InputError, match=rf"0 \.\. {model.n_states - 1}: from 0 to "
+                                         rf"{model.n_states}$"):
+        model.monte_carlo(np.array([0, model.n_states]), 4)
 
 
 def test_cached_answers_cannot_be_written_into(model):

@@ -537,7 +537,11 @@ class MarkovModel:
         seed = check_seed(seed)
         initial_states = _whole_numbers(initial_states, "initial_states")
         if initial_states.size and (initial_states.min() < 0 or initial_states.max() >= self.n_states):
-            raise InputError("initial states outside the model's state space")
+            low, high = int(initial_states.min()), int(initial_states.max())
+            absent = (" (-1 marks a particle absent from the frame initial_states read: "
+                      "run the present ones, states[states >= 0])" if low == -1 else "")
+            raise InputError(f"initial states outside the model's state space 0 .. "
+                             f"{self.n_states - 1}: from {low} to {high}{absent}")
         if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 0:
             raise InputError(f"n_steps {n_steps!r}: the number of lags to run, a whole number "
                              ">= 0")
@@ -581,6 +585,7 @@ class MarkovModel:
         Returns
         -------
         states : ndarray of int, shape (N,)
+            -1 for a particle absent from the frame (an open riser's, a tracer out of view).
         positions : ndarray of float64, shape (N, 2) or (N, 3)
             m.
         laps : ndarray of int, shape (N,)
