@@ -436,7 +436,8 @@ class MarkovModel:
         ----------
         window : float, optional
             Length (s) of an analysis window: the RTD as seen in it, the quantity a
-            sample-based RTD estimates (None: the intrinsic RTD).
+            sample-based RTD estimates (None: the intrinsic RTD); taken as the nearest
+            whole number of lags (a window's frame pairs one lag apart).
         direction : {"up", "down"}, optional
             A periodic riser's residences from passes up through the top or, for a net
             downflow, down through the bottom (the pass fractions swapped;
