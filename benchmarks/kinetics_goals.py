@@ -232,7 +232,7 @@ def judge(traj, model, facts: dict, judge_window, damkoehler) -> list[dict]:
     # the reference counts records from its first frame read: its particles' states there
     first = max(float(traj.times[0]), judge_window[0] - history)
     windowed = windowed_exit_means(model, sk, judge_window[1] - judge_window[0],
-                                   direction=direction, history=history,
+                                   direction=direction, history=judge_window[0] - first,
                                    occupancy=occupancy_at(model, traj, first))
     ref = reference_kinetics(traj, model, sk, tuple(judge_window), direction=direction,
                              history=history)

@@ -139,6 +139,8 @@ class Trajectories(FrameTimes):
     """
 
     def __init__(self, path: str | os.PathLike):
+        if isinstance(path, Trajectories):     # another handle on the same file
+            path = path.path
         if not isinstance(path, (str, os.PathLike)):
             raise InputError(f"expected a trajectory file (its path, or an open Trajectories), "
                              f"got a {type(path).__name__}"
@@ -221,7 +223,7 @@ class Trajectories(FrameTimes):
     def __reduce__(self):
         """Pickled by its path (an h5py file cannot be): unpickled, e.g. in a worker
         process, it is the same file opened again."""
-        return (Trajectories, (str(self.path),))
+        return (type(self), (os.path.abspath(self.path),))
 
     @property
     def closed(self) -> bool:

@@ -206,3 +206,33 @@ def test_a_run_whose_window_is_too_short_to_halve_is_judged_with_the_others(runs
                  "1:5,1:1.025", "--estimator", "mle", "--resamples", "0", "-o",
                  str(out)]) == 0
     assert out.exists() and "1.0125" not in capsys.readouterr().err
+
+
+def test_a_copy_of_a_tracer_out_of_view_at_its_end_is_one_run(tmp_path):
+    """One tracer out of view for its last 100 frames (a PEPT track's way): a copy of its
+    file is still found to hold the same run (the latest common frame with the tracer in
+    view), and runs of another seed are not."""
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.markov.pooling import check_runs_distinct, same_run_frame
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    def track(path, seed):
+        rng = np.random.default_rng(seed)
+        t = 0.01 * np.arange(400)
+        y = np.mod(0.3 + np.cumsum(rng.normal(0.01, 0.004, t.size)), 0.95)
+        x = 0.045 + 0.01 * np.sin(t + seed)
+        present = np.ones((t.size, 1), bool)
+        present[-100:] = False
+        return write_trajectories(path, t, np.stack([x, y], axis=-1)[:, None, :], width=0.09,
+                                  height=0.95, present=present)
+
+    one, other = track(tmp_path / "a.h5", 1), track(tmp_path / "b.h5", 2)
+    copy = tmp_path / "copy.h5"
+    shutil.copy(one, copy)
+    with contextlib.ExitStack() as stack:
+        a, b, c = (stack.enter_context(Trajectories(p)) for p in (one, copy, other))
+        assert same_run_frame(a, b) == pytest.approx(2.99)
+        assert same_run_frame(a, c) is None
+        with pytest.raises(InputError, match="which hold one run"):
+            check_runs_distinct([a, b], [(0.0, 1.5), (1.6, 3.0)])
+        check_runs_distinct([a, c], [(0.0, 1.5), (1.6, 3.0)])

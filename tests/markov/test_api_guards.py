@@ -182,7 +182,8 @@ def test_values_of_the_wrong_kind_are_refused_in_one_line(model):
                                                              model.state_space.columns)
 
 
-def test_a_closed_file_or_a_model_where_trajectories_go_is_named_in_one_line(model, markov_run):
+def test_a_closed_file_or_a_model_where_trajectories_go_is_named_in_one_line(
+        model, markov_run, tmp_path, monkeypatch):
     """A file read after its `with` block (h5py's KeyError about an invalid identifier), a
     model given where a run's file goes (pathlib's TypeError): one InputError line each;
     an open file pickles by its path (for worker processes)."""
@@ -201,7 +202,15 @@ def test_a_closed_file_or_a_model_where_trajectories_go_is_named_in_one_line(mod
                  lambda: model.predict(model, 0.5, 0.5)):
         with pytest.raises(InputError, match="got a MarkovModel; a model is no trajectories"):
             call()
-    with Trajectories(markov_run) as traj:
-        again = pickle.loads(pickle.dumps(traj))
+    # opened by a relative path, unpickled in another working folder (a worker's)
+    from pathlib import Path
+
+    monkeypatch.chdir(Path(markov_run).parent)
+    with Trajectories(Path(markov_run).name) as traj:
+        pickled = pickle.dumps(traj)
+        with Trajectories(traj) as handle:          # another handle on the same file
+            np.testing.assert_array_equal(handle.positions(0), first)
+    monkeypatch.chdir(tmp_path)
+    again = pickle.loads(pickled)
     np.testing.assert_array_equal(again.positions(0), first)
     again.close()

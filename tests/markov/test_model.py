@@ -512,3 +512,30 @@ def test_states_reaching_equals_the_transitive_closure():
         expected = closure[:, targets].any(axis=1) if targets.size else np.zeros(n, bool)
         got = states_reaching(matrix, np.concatenate([targets, targets]))
         assert np.array_equal(got, expected), trial
+
+
+def test_a_window_of_a_matrix_model_with_a_trap_starts_where_records_can_happen():
+    """A model given by its matrix (no counts) whose long run lies in a state never left:
+    the window's default start is every state from which the top is reached, alike (its
+    stationary distribution, all in the trap, let no residence begin); a start with all its
+    particles in the trap is refused saying so."""
+    import warnings
+
+    from cfbmarkov.errors import CfbmarkovError
+
+    p = np.zeros((6, 6))            # state = row x 2 + column, one row up a lag
+    p[0, 2] = p[2, 4] = 1.0
+    p[1, 3] = p[1, 5] = 0.5
+    p[3, 3] = 1.0                   # the trap
+    up = np.zeros((6, 6))
+    p[4, :2] = p[5, :2] = up[4, :2] = up[5, :2] = 0.5
+    zeros = np.zeros((6, 6), np.int64)
+    model = MarkovModel(p, zeros, zeros, zeros, CellGrid(2, 3, 0.2, 1.0), 0.1,
+                        estimator="given", pass_fractions=(up, np.zeros((6, 6))))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        seen = model.rtd(window=4.0)
+    reaching = np.array([1, 1, 1, 0, 1, 1], float)
+    assert seen.mean == pytest.approx(model.rtd(window=4.0, occupancy=reaching).mean, rel=1e-12)
+    with pytest.raises(CfbmarkovError, match="holds no particle in a state from which the top"):
+        model.rtd(window=4.0, occupancy=np.array([0, 0, 0, 1.0, 0, 0]))

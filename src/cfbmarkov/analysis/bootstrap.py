@@ -655,7 +655,7 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
     if window_length is not None and occupancy is None and not Boundary(model.boundary).is_open:
         from cfbmarkov.markov.model_rtd import window_start_occupancy
 
-        occupancy = window_start_occupancy(model)
+        occupancy = window_start_occupancy(model, direction)
     chain_of = None
     if (not Boundary(model.boundary).is_open and not model.connected and entry is not None
             and direction in ("up", "down")):

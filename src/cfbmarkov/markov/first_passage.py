@@ -719,6 +719,10 @@ def window_rtd(p_up, p_down, p_stay, lag: float, window: float, occupancy: np.nd
     if occupancy.sum() > 0:
         start[:, 0] = occupancy / occupancy.sum()
     start[~live_t] = 0.0
+    if not start.any():
+        raise CfbmarkovError("the window's start (its occupancy) holds no particle in a state "
+                             "from which the top can be reached: all are in states the chain "
+                             "never leaves, so no residence begins")
     steps = max(n_window - 1, 1)
     landings = np.zeros((steps, s))
     _window_landings(*_transposed_parts((p_down, p_stay, p_up)), live_t, start, landings)

@@ -752,7 +752,7 @@ def _windowed_records(model, sk: StateKinetics, steps: int, back: int,
 
     q, r, _, state, _, landing, entry_rows, level_rows = residence_chain(
         model, direction, landings=True)
-    start = window_start_occupancy(model) if occupancy is None else occupancy
+    start = window_start_occupancy(model, direction) if occupancy is None else occupancy
     start = np.clip(np.asarray(start, dtype=np.float64).ravel(), 0.0, None)
     if start.shape != (model.n_states,) or not start.sum() > 0:
         raise InputError(f"occupancy: non-negative weights of shape ({model.n_states},) with "

@@ -115,21 +115,38 @@ def _with_uncertainty(model: "MarkovModel", rtd: ResidenceTimeDistribution,
     return dataclasses.replace(rtd, uncertainty=model.uncertainty)
 
 
-def window_start_occupancy(model: "MarkovModel") -> np.ndarray:
+def window_start_occupancy(model: "MarkovModel", direction: str | None = None) -> np.ndarray:
     """Where a window's particles start, for the RTD it sees of a periodic riser's chain:
-    the fitting window's particle-frames per state (the counts' row sums), or the chain's
-    stationary distribution for a model given by its matrix alone.
+    the fitting window's particle-frames per state (the counts' row sums), or for a model
+    given by its matrix alone the chain's stationary distribution (every state from which
+    the boundary can be reached, alike, where that distribution lies in traps).
 
     Parameters
     ----------
     model : MarkovModel
+    direction : {"up", "down"}, optional
+        The boundary whose passes end a residence; default the model's ``flow_direction``.
 
     Returns
     -------
     ndarray of float64, shape (S,)
     """
     occupancy = np.asarray(model.counts.sum(axis=1), dtype=np.float64)
-    return occupancy if occupancy.sum() > 0 else np.asarray(model.stationary_distribution)
+    if occupancy.sum() > 0:
+        return occupancy
+    stationary = np.asarray(model.stationary_distribution, dtype=np.float64)
+    # a chain with traps holds its long run there, where no record can happen: then every
+    # state from which the boundary can be reached, alike
+    from cfbmarkov.markov.connectivity import states_reaching
+
+    direction = model.flow_direction if direction is None else direction
+    ends = model.up_fraction if direction == "up" else model.down_fraction
+    exits = np.flatnonzero((np.asarray(model.transition_matrix) * ends).sum(axis=1) > 0)
+    reaching = np.zeros(model.n_states, bool)
+    reaching[states_reaching(model.transition_matrix, exits)] = True
+    if stationary[reaching].sum() > 1e-9:
+        return stationary
+    return reaching.astype(np.float64)
 
 
 def occupancy_at(model: "MarkovModel", source, time: float) -> np.ndarray | None:
@@ -180,7 +197,7 @@ def _periodic_window_rtd(model: "MarkovModel", window: float, direction: str,
     ends, back = ((model.up_fraction, model.down_fraction) if direction == "up"
                   else (model.down_fraction, model.up_fraction))
     p_up, p_down, p_stay = split_by_pass(sp.csr_matrix(model.transition_matrix), ends, back)
-    start = window_start_occupancy(model) if occupancy is None else occupancy
+    start = window_start_occupancy(model, direction) if occupancy is None else occupancy
     start = np.asarray(start, dtype=np.float64)
     if start.shape != (model.n_states,) or not np.all(np.isfinite(start)) or start.min() < 0 \
             or not start.sum() > 0:

@@ -156,20 +156,20 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
                 continue
             what = (f"of {run.path}" if one_file else
                     f"of {other.path} and {run.path}, which hold one run (their frames at "
-                    f"t = {common:.10g} s are the same: a copy or a link of one file),")
+                    f"t = {common:.10g} s are the same: a copy or a link of one file)")
             if w[0] < window[1] and window[0] < w[1]:
                 raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
                                  f"{window[1]:g} s {what} overlap: their common frames "
                                  "would be counted twice (give windows that do not overlap)")
             raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
-                             f"{window[1]:g} s are both {what}: pooled as runs they "
+                             f"{window[1]:g} s are both {what}; pooled as runs they "
                              "would be taken as independent flow and narrow the interval by "
                              "sqrt(2), while windows of one run share its slow changes; fit "
                              f"one window of it ({min(w[0], window[0]):g}:"
                              f"{max(w[1], window[1]):g}), or pool independent runs of the case")
 
 
-#: how many of the latest common frames :func:`same_run_frame` looks back through for one
+#: the common frames :func:`same_run_frame` reads at a time, looking back for the latest
 #: with a particle in view
 SAME_RUN_FRAMES = 64
 
@@ -192,25 +192,32 @@ def same_run_frame(a, b) -> float | None:
     float or None
         That frame's time (s) where its ids, presence and positions are the same in both
         files (NaN positions of absent particles equal); None where the files share no
-        frame time, or differ at the latest shared frame with a particle in view (of the
-        last :data:`SAME_RUN_FRAMES` they share).
+        frame time with a particle in view, or differ at the latest such frame.
     """
     times_a, times_b = np.asarray(a.times), np.asarray(b.times)
     common = np.intersect1d(times_a, times_b)
     if common.size == 0 or not np.array_equal(np.asarray(a.ids), np.asarray(b.ids)):
         return None
-    for t in common[::-1][:SAME_RUN_FRAMES]:
-        i = int(np.flatnonzero(times_a == t)[0])
-        j = int(np.flatnonzero(times_b == t)[0])
-        present = np.asarray(a.present(i))
-        if not present.any():       # no particle in view: this frame cannot tell them apart
-            continue
-        if not np.array_equal(present, np.asarray(b.present(j))):
-            return None
-        same = np.array_equal(np.asarray(a.positions(i)), np.asarray(b.positions(j)),
-                              equal_nan=True)
-        return float(t) if same else None
-    return None
+    rows_a = np.searchsorted(times_a, common)
+    rows_b = np.searchsorted(times_b, common)
+    # the latest common frame with a particle in view (a tracer out of view for long, the
+    # usual PEPT track, leaves many empty ones), looked for a block of frames at a time
+    found = None
+    for stop in range(common.size, 0, -SAME_RUN_FRAMES):
+        rows = rows_a[max(stop - SAME_RUN_FRAMES, 0):stop]
+        seen = np.asarray(a.present(slice(int(rows[0]), int(rows[-1]) + 1)))
+        in_view = seen[rows - rows[0]].any(axis=1)
+        if in_view.any():
+            found = stop - rows.size + int(np.flatnonzero(in_view)[-1])
+            break
+    if found is None:
+        return None
+    i, j = int(rows_a[found]), int(rows_b[found])
+    present = np.asarray(a.present(i))
+    if not np.array_equal(present, np.asarray(b.present(j))):
+        return None
+    same = np.array_equal(np.asarray(a.positions(i)), np.asarray(b.positions(j)), equal_nan=True)
+    return float(common[found]) if same else None
 
 
 def run_windows(windows: Sequence[tuple[float, float]], n_runs: int

@@ -363,11 +363,16 @@ def _natural_tolerances(observed) -> tuple[float, float]:
 
 def _block_start_occupancy(discrete: DiscreteTrajectories, start: float, n_states: int
                            ) -> np.ndarray:
-    """The particles per state in the frame of ``discrete`` at ``start`` (s), the nearest."""
-    i = int(np.argmin(np.abs(np.asarray(discrete.times) - start)))
-    states = np.asarray(discrete.states[i])
-    states = states[(states >= 0) & (states < n_states)]
-    return np.bincount(states, minlength=n_states).astype(np.float64)
+    """The particles per state in the first frame of ``discrete`` at or after ``start`` (s)
+    that holds a particle in a state (a space with memory skips its first frames)."""
+    times = np.asarray(discrete.times)
+    for i in range(int(np.searchsorted(times, start - 1e-9 * max(1.0, abs(start)))),
+                   times.size):
+        states = np.asarray(discrete.states[i])
+        states = states[(states >= 0) & (states < n_states)]
+        if states.size:
+            return np.bincount(states, minlength=n_states).astype(np.float64)
+    return np.ones(n_states)
 
 
 def _held_out_ck_error(block: DiscreteTrajectories, matrix: np.ndarray, times: np.ndarray
