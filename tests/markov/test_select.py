@@ -286,3 +286,41 @@ def test_a_space_whose_window_leaves_most_states_unvisited_is_not_chosen():
     notes = [line for line in candidate_table(record) if "not chosen" in line]
     assert len(notes) == 1 and notes[0].startswith("cells-velocity at lag 0.025 s not chosen")
     assert "1180 of its 1824 states never visited" in notes[0]
+
+
+def test_a_choice_that_passed_over_a_lower_score_says_so():
+    """A candidate that scored lower but left most of its states never visited is passed
+    over: the reason says the chosen one is the closest among the others, naming it (it
+    said "had the exact RTD closest" beside a table whose closer row was that candidate)."""
+    from types import SimpleNamespace
+
+    from cfbmarkov.markov.select.record import _passed_over
+
+    chosen = SimpleNamespace(states="cells", score=1.0, n_states=228, visited=228)
+    sparse = SimpleNamespace(states="cells-previous", score=0.442, n_states=336, visited=96)
+    filled = SimpleNamespace(states="cells-direction", score=1.3, n_states=456, visited=450)
+    said = _passed_over(chosen, [chosen, sparse, filled])
+    assert said == ("; closest among the candidates whose states the window visits: "
+                    "cells-previous (score 0.442, 240 of 336 states never visited) scored "
+                    "lower but leaves more than 50 % of its states never visited")
+    assert _passed_over(chosen, [chosen, filled]) == ""
+
+
+def test_the_stored_selection_is_strict_json(run, tmp_path):
+    """The choice over the fitting window has no PD units (NaN in memory): the model file
+    stores them as null, JSON that strict parsers read (json.loads with no NaN allowed)."""
+    import h5py
+
+    out = tmp_path / "auto.h5"
+    assert main(["fit", str(run), "--window", "0.5:3", "--states", "auto", "--estimator",
+                 "mle", "--resamples", "0", "--no-adequacy", "-q", "-o", str(out)]) == 0
+    with h5py.File(out, "r") as f:
+        text = next(g.attrs["selection"] for g in [f, *f.values()]
+                    if isinstance(g, h5py.Group) and "selection" in g.attrs)
+
+    def refuse(constant):
+        raise ValueError(constant)
+
+    record = json.loads(text, parse_constant=refuse)
+    assert record["units"] == {"pd_rt_mean": None, "pd_rt_sd": None}
+    assert MarkovModel.load(out).selection["chosen"] == record["chosen"]

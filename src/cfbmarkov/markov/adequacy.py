@@ -36,8 +36,9 @@ class Adequacy:
         (largest - smallest) E(RT) of the parts over ``rt_mean`` (-; NaN with fewer than two
         parts that have one).
     limit : float
-        The relative spread beyond which the parts disagree (-): the relative width of the
-        model's E(RT) interval where one was given, else the default tolerance.
+        The relative width of the model's E(RT) interval where one was given, else the
+        default tolerance (-): what :attr:`part_limit`, the spread the parts are judged
+        against, is formed from (the name kept for the files that store it).
     window_length : float
         Length of the fitting window (s; the shortest where several runs were pooled).
     tail_share : float

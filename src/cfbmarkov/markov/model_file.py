@@ -57,6 +57,7 @@ import h5py
 import numpy as np
 
 from cfbmarkov._atomic import atomic_path, h5_file
+from cfbmarkov._json import jsonable
 from cfbmarkov._hdf5 import create_array_dataset, open_h5
 from cfbmarkov.boundary import BOUNDARIES, Boundary
 from cfbmarkov.errors import InputError
@@ -109,7 +110,8 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
     if model.source_identity:
         attrs["source_identity"] = str(model.source_identity)
     if model.selection:
-        attrs["selection"] = json.dumps(model.selection)
+        # strict JSON (undefined figures as null, not NaN): jq and JSON.parse read it
+        attrs["selection"] = json.dumps(jsonable(model.selection), allow_nan=False)
     if model.connected:
         attrs["connected"] = 1
     if model.coherence:

@@ -17,6 +17,14 @@ from typing import Any, Mapping
 UNVISITED_LIMIT = 0.5
 
 
+def too_sparse(candidate, limit: float) -> bool:
+    """Whether more than ``limit`` (a fraction) of a candidate's states (a
+    :class:`~cfbmarkov.markov.select.record.CandidateScore`) are never visited in the
+    fitting window."""
+    return (candidate.visited is not None
+            and candidate.n_states - candidate.visited > limit * candidate.n_states)
+
+
 def _number(value, spec: str) -> str:
     """``value`` formatted by ``spec``; "-" where it is missing or not finite."""
     if value is None or (isinstance(value, float) and not math.isfinite(value)):

@@ -229,16 +229,8 @@ def best_candidate(scores: list[CandidateScore]) -> CandidateScore | None:
     CandidateScore or None
         None where no candidate was judged.
     """
-    from cfbmarkov.markov.selection_table import UNVISITED_LIMIT
+    from cfbmarkov.markov.selection_table import UNVISITED_LIMIT, too_sparse
 
     usable = [c for c in scores if math.isfinite(c.score)]
     filled = [c for c in usable if not too_sparse(c, UNVISITED_LIMIT)]
     return min(filled or usable, key=lambda c: c.score, default=None)
-
-
-def too_sparse(candidate: CandidateScore, limit: float) -> bool:
-    """Whether more than ``limit`` (a fraction) of a candidate's states are never visited
-    in the fitting window."""
-    return (candidate.visited is not None
-            and candidate.n_states - candidate.visited > limit * candidate.n_states)
-

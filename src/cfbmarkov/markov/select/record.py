@@ -104,9 +104,33 @@ def selection_record(criterion: Criterion, estimator: str, best: CandidateScore,
                          for o in fitting.observed],
             "direction": fitting.direction,
             "estimator": estimator, "chosen": {"states": best.states, "lag": best.lag},
-            "units": {"pd_rt_mean": unit_mean, "pd_rt_sd": unit_sd},
-            "reason": criterion.reason(best, cells),
+            # undefined units (a criterion on the window judges no PD) as None, not NaN:
+            # the record is stored as strict JSON and reads back the same
+            "units": {"pd_rt_mean": _defined(unit_mean), "pd_rt_sd": _defined(unit_sd)},
+            "reason": criterion.reason(best, cells) + _passed_over(best, candidates),
             "candidates": [c.as_dict() for c in candidates]}
+
+
+def _defined(value):
+    """``value``, or None where it is a non-finite float."""
+    return None if isinstance(value, float) and not math.isfinite(value) else value
+
+
+def _passed_over(best: CandidateScore, candidates) -> str:
+    """The words that qualify a choice where a lower-scored candidate was passed over for
+    leaving too many of its states never visited (:func:`~cfbmarkov.markov.select.
+    candidates.best_candidate`); empty where the chosen one scored lowest."""
+    from cfbmarkov.markov.selection_table import UNVISITED_LIMIT, too_sparse
+
+    lower = [c for c in candidates if math.isfinite(c.score) and c.score < best.score
+             and too_sparse(c, UNVISITED_LIMIT)]
+    if not lower:
+        return ""
+    names = ", ".join(f"{c.states} (score {c.score:.3g}, {c.n_states - c.visited} of "
+                      f"{c.n_states} states never visited)" for c in lower)
+    return (f"; closest among the candidates whose states the window visits: {names} "
+            f"scored lower but leaves more than {100 * UNVISITED_LIMIT:g} % of its states "
+            "never visited")
 
 
 def kept_cells_record(criterion: HeldOutCK, estimator: str, candidates: list[CandidateScore],
