@@ -188,8 +188,10 @@ def check_written_values(label: str, name: str, values: np.ndarray, times: np.nd
                                          np.asarray(limits, dtype=np.float64),
                                          POSITION_TOLERANCE, domain)
     if code == 1:
+        hint = (" (a particle out of view is left out of its frame: present False)"
+                if name == "position" else "")
         raise InputError(f"{label}: {name} of particle {ids[p_idx]} at t = "
-                         f"{times[t_idx]:g} s is not a finite number")
+                         f"{times[t_idx]:g} s is not a finite number{hint}")
     if code == 2:
         where = ", ".join(f"{v:g}" for v in values[t_idx, p_idx])
         size = " x ".join(f"0..{v:g}" for v in limits)

@@ -268,7 +268,8 @@ BAD_DUMPS = {
                       r"frames unevenly spaced: 0.035 s between t = 0.525 and 0.56 s"),
     "nan-position": (dump(frame(0), frame(1, ["3 1 0.03 0.31 0 1", "1 1 nan 0.11 0 1",
                                               "2 1 0.02 0.21 0 1"])),
-                     r"position of particle 1 at t = 0.525 s is not a finite number"),
+                     (r"position of particle 1 at t = 0.525 s is not a finite number \(the "
+                      r"simulation had diverged by this frame: keep only the frames written")),
     "inf-velocity": (dump(frame(0), frame(1, ["3 1 0.03 0.31 0 inf", "1 1 0.01 0.11 0 1",
                                               "2 1 0.02 0.21 0 1"])),
                      r"velocity of particle 3 at t = 0.525 s is not a finite number"),

@@ -109,7 +109,9 @@ def test_lap_increments_minimal_image():
 
 # -- validation on write ----------------------------------------------------------------------------
 @pytest.mark.parametrize("change, match", [
-    (lambda t, p: (t, np.where(p == p[2, 1, 0], np.nan, p)), r"position of particle .* finite"),
+    (lambda t, p: (t, np.where(p == p[2, 1, 0], np.nan, p)),
+     r"position of particle .* finite number \(a particle out of view is left out of its "
+     r"frame: present False\)"),
     (lambda t, p: (t, p + np.array([0.1, 0.0])), r"lies outside the domain"),
     (lambda t, p: (t[::-1], p), r"time goes back from t ="),
     (lambda t, p: (t ** 1.5, p), r"frames unevenly spaced"),

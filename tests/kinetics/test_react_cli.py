@@ -165,6 +165,9 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     ('[[property]]\nname = "X"\nlaw = "second-order"\nrate = 1.0\n', None, "unknown law"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = -1.0\n', None, "rate = -1.0"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = nan\n', None, "finite"),
+    # TOML reads 1e400 as inf: the message says so, not "rate = inf" alone
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1e400\n', None,
+     "rate = inf (a number beyond 1.8e308 reads as inf) must be a finite number"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\nspeed = 2\n', None,
      "unknown key 'speed'"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',

@@ -239,7 +239,8 @@ def _append_frame(writer, columns: FrameColumns, frame: DumpFrame, first: DumpFr
     if bad.any():
         k = int(np.argmax(bad))
         raise InputError(f"{where}: position of particle {int(ids[k])} at t = {time:g} s is not "
-                         "a finite number")
+                         "a finite number (the simulation had diverged by this frame: keep only "
+                         "the frames written before it)")
     if flat_z is not None and np.any(raw[:, 2] != flat_z):
         k = int(np.argmax(raw[:, 2] != flat_z))
         raise InputError(

@@ -637,6 +637,8 @@ def _toml_text(value) -> str:
         return "true" if value else "false"
     if isinstance(value, str):
         return f'"{value}"'
+    if isinstance(value, float) and math.isinf(value):     # as TOML reads 1e400 too
+        return f"{'-' if value < 0 else ''}inf (a number beyond 1.8e308 reads as inf)"
     return repr(value)
 
 
