@@ -117,6 +117,12 @@ def test_cli_compare_kinetics_prints_and_writes_the_block(prediction, tmp_path, 
     assert "X at the exit: reference" in printed and "segregated flow" in printed
     summary = json.loads((tmp_path / "c" / "summary.json").read_text())
     block = summary["kinetics"]["X"]
+    # the bed's line tells the window means from the segregated flow's steady state
+    bed = next(line for line in printed.splitlines() if "X in the bed" in line)
+    assert bed == (f"  X in the bed: mean over the window, reference "
+                   f"{block['reference']['bed_mean']:.4g}, model {block['model']['bed_mean']:.4g}; "
+                   f"segregated flow {block['segregated_flow']['bed_mean']:.4g} (its steady "
+                   "state over the age distribution)")
     assert set(block) >= {"reference", "model", "segregated_flow"}
     assert block["reference"]["exit_mean"] > 0
     assert "kinetics-X.png" in summary["figures"]

@@ -98,17 +98,27 @@ def test_a_report_without_kinetics_has_no_section(report_of_template):
 
 
 def test_the_sentence_names_where_the_chain_loses():
-    def row(case, chain, seg):
+    def row(case, chain, seg, half_width=0.03):
+        mean = 0.5 * (1 + chain / 100)
         return KineticsRow(case, "paper", {
             "reference": {"exit_mean": 0.5, "exit_mean_interval": [0.49, 0.51]},
-            "model": {"exit_mean": 0.5 * (1 + chain / 100), "pd_exit_mean": chain,
-                      "exact": {"exit_mean": 0.5 * (1 + chain / 100), "pd_exit_mean": chain}},
+            "model": {"exit_mean": mean, "pd_exit_mean": chain,
+                      "exit_mean_interval": [mean - half_width, mean + half_width],
+                      "exact": {"exit_mean": mean, "pd_exit_mean": chain}},
             "segregated_flow": {"exit_mean": 0.5 * (1 + seg / 100), "pd_exit_mean": seg}})
 
     text = verdict_sentence("X", [row("U = 3 m/s", 0.5, -4.0), row("U = 6 m/s", 3.0, 1.0)])
-    assert "in 1 of 2 comparisons" in text
+    assert "in 1 of 2 comparisons (largest" in text
     assert "U = 6 m/s (paper): chain +3.00 %, segregated flow +1.00 %" in text
-    assert "inside the reference's interval in 1 of 2" in text
+    # the test compare's verdict makes: the reference inside the chain's interval (both
+    # chains' intervals of +-0.03 hold 0.5), not the chain's mean in the reference's
+    # narrow sampling interval (the second's 0.515 lies outside 0.49-0.51)
+    assert "lies inside the chain's interval" in text and "in 2 of 2 comparisons" in text
+    text = verdict_sentence("X", [row("a", 3.0, 1.0, 0.006), row("b", 6.0, 1.0, 0.003),
+                                  row("c", 0.5, 1.0)])
+    assert "in 1 of 3 comparisons: the chain is consistent" in text
+    assert "in 1 it lies outside but the reference's own interval overlaps" in text
+    assert "in 1 the chain misses it beyond its uncertainty" in text
 
 
 def test_a_carried_propertys_chain_is_its_monte_carlo_not_the_steady_state():
@@ -121,3 +131,28 @@ def test_a_carried_propertys_chain_is_its_monte_carlo_not_the_steady_state():
         "segregated_flow": None, "segregated_flow_note": "not defined for a carried property"})
     assert row.chain_mean == pytest.approx(0.62) and row.chain_error == pytest.approx(3.33)
     assert row.baseline_error is None
+
+
+def test_the_section_names_its_kinetics_file_and_what_it_holds(tmp_path):
+    """The kinetics file, its digest and settings are named: the report can be made
+    again from its own text; a file changed since is said to differ."""
+    from cfbmarkov.kinetics import load_kinetics
+    from cfbmarkov.kinetics.fingerprint import kinetics_digest
+    from cfbmarkov.report.kinetics_section import source_text
+
+    kin = tmp_path / "kin.toml"
+    kin.write_text('# a comment\n[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.1\n')
+    source = {"file": str(kin), "digest": kinetics_digest(load_kinetics(kin))}
+    rows = {"X": [KineticsRow("U = 3 m/s", "paper", {"law": "first-order", "start": "entry",
+                                                      "initial": 0.0})]}
+    text = source_text(source, rows)
+    assert text.startswith(f"The kinetics file {kin} ({source['digest']}): X: first-order, "
+                           "start entry, initial 0.")
+    assert 'It holds: [[property]]; name = "X"; law = "first-order"; rate = 1.1.' in text
+    assert "comment" not in text and "rates in 1/s" in text
+    kin.write_text('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 2.2\n')
+    text = source_text(source, rows)
+    assert "rate = 2.2" not in text and "its definition has changed since" in text
+    kin.unlink()
+    assert "no longer there" in source_text(source, rows)
+    assert source_text(None, rows).startswith("The properties: X: first-order, start entry")

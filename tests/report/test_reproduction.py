@@ -97,6 +97,8 @@ def test_sections_and_paper_numbers(report_of_template):
     # header
     for text in ("Scale: quick", "6 columns x 12 rows", "cfbmarkov version: "):
         assert text in md, text
+    assert re.search(r"^- Made by: cfbmarkov reproduce --scale quick --velocities 3,6,8 "
+                     rf"(--models \S+ )?-o {root.name}$", md, re.MULTILINE)
     # the riser, particles, windows and lag once, in the operating conditions
     conditions = section(md, "Operating conditions and physics checks")
     row = [line for line in conditions.splitlines() if line.startswith("| 3 |")][0]

@@ -230,3 +230,21 @@ def test_a_long_state_space_description_leaves_the_matrix_title_whole(tmp_path, 
     title = fig.axes[0].title.get_window_extent(renderer)
     width = fig.bbox.width
     assert title.x0 >= 0 and title.x1 <= width, (title.x0, title.x1, width)
+
+
+def test_the_command_that_makes_the_run_again():
+    from types import SimpleNamespace
+
+    from cfbmarkov.report.sections import command_text
+
+    cases = [SimpleNamespace(velocity=3.0), SimpleNamespace(velocity=6.5)]
+    meta = {"scale": "paper", "models": ["paper", "mle"], "ensemble": 3, "device": "gpu",
+            "kinetics": {"file": "/a b/kin.toml", "digest": "sha256:x"},
+            "overrides": {"output": {"end_time": 30}}}
+    assert command_text(meta, cases, "/runs/out") == (
+        "cfbmarkov reproduce --scale paper --velocities 3,6.5 --models paper,mle --kinetics "
+        "'/a b/kin.toml' --ensemble 3 --device gpu --overrides OVERRIDES.toml -o out "
+        '(OVERRIDES.toml holding {"output": {"end_time": 30}})')
+    assert command_text({"scale": "quick", "models": ["auto"], "device": "cpu"},
+                        cases[:1], "r") == (
+        "cfbmarkov reproduce --scale quick --velocities 3 --models auto -o r")

@@ -460,6 +460,45 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
     return means
 
 
+def exit_mean_agreement(reference_mean, model_interval, reference_interval=None
+                        ) -> str | None:
+    """How a reference's exit mean stands against the model's interval of it, as
+    ``compare --kinetics`` judges it.
+
+    Parameters
+    ----------
+    reference_mean : float or None
+        The reference's exit mean.
+    model_interval : (float, float) or None
+        The model's interval of its exit mean (``model.exit_mean_interval`` of the
+        summary's kinetics block).
+    reference_interval : (float, float), optional
+        The reference's own interval (its exits' sampling).
+
+    Returns
+    -------
+    {"inside", "not told apart", "missed"} or None
+        ``inside``: the reference's value lies in the model's interval (the model is
+        consistent with it within its uncertainty); ``not told apart``: it lies outside but
+        the reference's own interval overlaps the model's; ``missed``: neither. None where
+        the model has no interval or the reference no finite exit mean.
+    """
+    def finite(v):
+        return isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+
+    if (not finite(reference_mean) or not isinstance(model_interval, (list, tuple))
+            or len(model_interval) != 2 or not all(finite(v) for v in model_interval)):
+        return None
+    lo, hi = model_interval
+    if lo <= reference_mean <= hi:
+        return "inside"
+    if (isinstance(reference_interval, (list, tuple)) and len(reference_interval) == 2
+            and all(finite(v) for v in reference_interval)
+            and reference_interval[0] <= hi and lo <= reference_interval[1]):
+        return "not told apart"
+    return "missed"
+
+
 def _interval(value, se, level):
     from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's
 
@@ -710,5 +749,6 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
 
 
 __all__ = ["CARRIED_SEGREGATED_NOTE", "EXIT_BINS", "PROPERTIES_GROUP", "carried_exact_note",
+           "exit_mean_agreement",
            "compare_kinetics", "exit_bins", "exit_distribution", "needs_cell_fields",
            "stored_definition_differs", "stored_property"]

@@ -320,9 +320,10 @@ def _print_kinetics(block: dict, level: float = 0.9) -> None:
                                    ref.get("exit_mean_interval"))
         if verdict:
             print("  " + verdict)
-        print(f"  {name} in the bed (mean over the window): reference "
+        print(f"  {name} in the bed: mean over the window, reference "
               f"{value(ref['bed_mean'])}, model {value(mod['bed_mean'])}"
-              + (f", segregated flow {value(seg['bed_mean'])}" if seg else ""))
+              + (f"; segregated flow {value(seg['bed_mean'])} (its steady state over the "
+                 "age distribution)" if seg else ""))
 
 
 def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float,
@@ -350,9 +351,11 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
     str
         Empty where the model has no interval or the reference no exit mean.
     """
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_agreement
+
     interval = model.get("exit_mean_interval")
-    if not interval or None in interval or reference_mean is None \
-            or not reference_mean == reference_mean:
+    agreement = exit_mean_agreement(reference_mean, interval, reference_interval)
+    if agreement is None:
         return ""
     lo, hi = interval
     method = model.get("interval_method") or "Monte Carlo noise only"
@@ -363,10 +366,9 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
     text = (f"{100 * level:g} % interval of the model's exit mean {_interval_text((lo, hi), d)} ({kind}; "
             f"the flow's variability left out): the reference's {reference_mean:.{d}g} lies "
             f"{place} it")
-    if place == "inside":
+    if agreement == "inside":
         return text + ": the model is consistent with the reference within its uncertainty"
-    if reference_interval and None not in reference_interval and (
-            reference_interval[0] <= hi and lo <= reference_interval[1]):
+    if agreement == "not told apart":
         r0, r1 = reference_interval
         return text + (f", but the reference's own {100 * level:g} % interval "
                        f"{r0:.{d}g}-{r1:.{d}g} (its exits' sampling) overlaps it: the two are "

@@ -149,8 +149,9 @@ def collect_rows(done) -> dict[str, list[KineticsRow]]:
 def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
     """The paragraph on one property, written from the numbers: in how many rows the chain's
     exit mean is at least as close to the reference as the segregated-flow baseline's, the
-    rows where it is not (both errors), and how often the chain's exit mean lies inside the
-    reference's interval.
+    rows where it is not (both errors), and in how many the reference's exit mean lies
+    inside the chain's interval, outside it but not told apart, or missed
+    (:func:`~cfbmarkov.analysis.kinetics_compare.exit_mean_agreement`, as ``compare`` says).
 
     Parameters
     ----------
@@ -182,20 +183,27 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
                 f"{r.baseline_error:+.2f} %" for r in worse) + ".")
         else:
             parts.append("In none is the baseline closer.")
-    inside, known = 0, 0
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_agreement
+
+    agreement = {"inside": 0, "not told apart": 0, "missed": 0}
     for r in rows:
-        interval = r.side("reference").get("exit_mean_interval")
-        value = r.chain_mean
-        if value is None or not (isinstance(interval, list) and len(interval) == 2):
-            continue
-        lo, hi = finite_or_none(interval[0]), finite_or_none(interval[1])
-        if lo is None or hi is None:
-            continue
-        known += 1
-        inside += lo <= value <= hi
+        said = exit_mean_agreement(r.side("reference").get("exit_mean"),
+                                   r.side("model").get("exit_mean_interval"),
+                                   r.side("reference").get("exit_mean_interval"))
+        if said is not None:
+            agreement[said] += 1
+    known = sum(agreement.values())
     if known:
-        parts.append(f"The chain's exit mean lies inside the reference's interval in {inside} "
-                     f"of {known}.")
+        parts.append(
+            f"The reference's exit mean lies inside the chain's interval (the fitting "
+            f"window's bootstrap and the Monte Carlo noise) in {agreement['inside']} of "
+            f"{known} comparisons: the chain is consistent with it within its uncertainty, "
+            "as compare says"
+            + (f"; in {agreement['not told apart']} it lies outside but the reference's own "
+               "interval overlaps the chain's (not told apart)"
+               if agreement["not told apart"] else "")
+            + (f"; in {agreement['missed']} the chain misses it beyond its uncertainty"
+               if agreement["missed"] else "") + ".")
     return " ".join(parts)
 
 
@@ -245,7 +253,53 @@ def _copy_figure(c, name: str, figures_dir: Path, written: list[str]) -> tuple[s
     return None
 
 
-def kinetics_blocks(done, figures_dir: Path, written: list[str]) -> list:
+def source_text(source, rows: dict[str, list[KineticsRow]]) -> str:
+    """The paragraph naming the kinetics file the comparisons integrated, its digest, each
+    property's law, start and initial value, and, where the file is still there with the
+    same definition, its settings line by line.
+
+    Parameters
+    ----------
+    source : dict or None
+        ``reproduce.json``'s ``kinetics`` entry (``{"file", "digest"}``).
+    rows : dict of str to list of KineticsRow
+        The properties' rows (:func:`collect_rows`).
+
+    Returns
+    -------
+    str
+    """
+    laws = "; ".join(
+        f"{name}: {r[0].entry.get('law', 'n/a')}, start {r[0].entry.get('start', 'n/a')}"
+        + (f", initial {r[0].entry['initial']:g}" if isinstance(r[0].entry.get("initial"),
+                                                              (int, float)) else "")
+        for name, r in rows.items())
+    units = ("Values are in the kinetics file's units (a temperature in those of its "
+             "temperatures and initial value), rates in 1/s.")
+    if not (isinstance(source, dict) and isinstance(source.get("file"), str)):
+        return f"The properties: {laws}. {units}"
+    file, digest = source["file"], str(source.get("digest", ""))
+    text = f"The kinetics file {file} ({digest or 'no digest recorded'}): {laws}."
+    path = Path(file)
+    try:
+        from cfbmarkov.kinetics import load_kinetics
+        from cfbmarkov.kinetics.fingerprint import kinetics_digest
+
+        same = path.is_file() and kinetics_digest(load_kinetics(path)) == digest
+    except Exception:       # a file changed since into one that no longer reads
+        same = False
+    if same:
+        lines = [ln.strip() for ln in path.read_text(encoding="utf-8").splitlines()
+                 if ln.strip() and not ln.strip().startswith("#")]
+        if len(lines) <= 40:
+            text += " It holds: " + "; ".join(lines) + "."
+    else:
+        text += (" The file is no longer there or its definition has changed since (its "
+                 "digest differs): the figures are of the definition of that digest.")
+    return f"{text} {units}"
+
+
+def kinetics_blocks(done, figures_dir: Path, written: list[str], source=None) -> list:
     """The section on properties along particle paths (empty where no comparison has a
     ``kinetics`` block).
 
@@ -257,6 +311,8 @@ def kinetics_blocks(done, figures_dir: Path, written: list[str]) -> list:
         Folder the figures are copied into.
     written : list of str
         Receives the file names of the PNGs copied.
+    source : dict, optional
+        ``reproduce.json``'s ``kinetics`` entry: the file is named (:func:`source_text`).
 
     Returns
     -------
@@ -277,7 +333,8 @@ def kinetics_blocks(done, figures_dir: Path, written: list[str]) -> list:
         "at its lag), the chain's (its prediction, and its exact answer by the "
         "absorbing-chain algebra), and the segregated-flow baseline (the bed-averaged law "
         "over the fitting window's observed residence times). The chain is worth its name "
-        "where it is closer to the reference than the baseline.")]
+        "where it is closer to the reference than the baseline."),
+        Para(source_text(source, by_name))]
     warnings = []
     for c in done:
         for e in c.finished:
@@ -307,5 +364,5 @@ def kinetics_blocks(done, figures_dir: Path, written: list[str]) -> list:
     return blocks
 
 
-__all__ = ["HEADING", "KineticsRow", "collect_rows", "kinetics_blocks", "safe_name",
+__all__ = ["HEADING", "KineticsRow", "collect_rows", "kinetics_blocks", "safe_name", "source_text",
            "verdict_sentence"]

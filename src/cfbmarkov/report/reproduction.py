@@ -147,14 +147,14 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None,
     checks = physics_checks(done, measures)
     blocks += summary_blocks(meta, cases, done, measures, estimators, checks)
     blocks += conditions_blocks(done, measures, checks)
-    blocks += header_blocks(meta, cases, estimators)
+    blocks += header_blocks(meta, cases, estimators, root)
     blocks += not_finished_blocks(cases)
     blocks += table3_blocks(cases, estimators)
     blocks += computing_blocks(cases)
     blocks += fig3_blocks(done, measures, figures_dir, written)
     blocks += maps_blocks(cases, done, measures, figures_dir, written)
     blocks += rtd_blocks(done, measures, estimators, figures_dir, written)
-    blocks += kinetics_blocks(done, figures_dir, written)
+    blocks += kinetics_blocks(done, figures_dir, written, meta.get("kinetics"))
     parts = ([later.result(), diagnostics.result()] if executor is not None else
              [_section(_later_sections, done, measures, estimators, figures_dir),
               _section(diagnostics_blocks, done, figures_dir)])

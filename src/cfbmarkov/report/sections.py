@@ -93,7 +93,57 @@ def ensemble_text(meta: dict) -> str:
             "member 0's prediction window, cfd-dem-m0.h5)")
 
 
-def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
+def command_text(meta: dict, cases: list[Case], root) -> str:
+    """The ``cfbmarkov reproduce`` command that makes this run folder again, from its
+    ``reproduce.json`` and its cases.
+
+    Parameters
+    ----------
+    meta : dict
+        The run's ``reproduce.json``.
+    cases : list of cfbmarkov.report.run_folder.Case
+        All cases of the run (their velocities U).
+    root : path-like
+        The run folder.
+
+    Returns
+    -------
+    str
+        One shell line; the changes of ``--overrides`` follow it as TOML-like text (the
+        file itself is not kept).
+    """
+    import math
+    import shlex
+    from pathlib import Path
+
+    words = ["cfbmarkov", "reproduce", "--scale", str(meta.get("scale", "quick"))]
+    velocities = [c.velocity for c in cases if math.isfinite(c.velocity)]
+    if velocities and len(velocities) == len(cases):
+        words += ["--velocities", ",".join(f"{u:g}" for u in velocities)]
+    models = [m for m in meta.get("models") or [] if isinstance(m, str)]
+    if models:
+        words += ["--models", ",".join(models)]
+    kinetics = meta.get("kinetics")
+    if isinstance(kinetics, dict) and isinstance(kinetics.get("file"), str):
+        words += ["--kinetics", kinetics["file"]]
+    ensemble = meta.get("ensemble", 1)
+    if isinstance(ensemble, int) and ensemble > 1:
+        words += ["--ensemble", str(ensemble)]
+    if meta.get("device", "cpu") not in ("cpu", None):
+        words += ["--device", str(meta["device"])]
+    overrides = meta.get("overrides")
+    if overrides:
+        words += ["--overrides", "OVERRIDES.toml"]
+    words += ["-o", Path(root).name]         # the folder as named from its parent
+    text = " ".join(shlex.quote(w) for w in words)
+    if overrides:
+        import json
+
+        text += f" (OVERRIDES.toml holding {json.dumps(overrides, sort_keys=True)})"
+    return text
+
+
+def header_blocks(meta: dict, cases: list[Case], estimators: list[str], root=None) -> list:
     """The run: scale, cases, cells, estimators, version (the riser, particles, windows and
     lag of each case are in the operating conditions,
     :func:`cfbmarkov.report.summary.conditions_blocks`).
@@ -106,6 +156,8 @@ def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
         All cases of the run, sorted by U.
     estimators : list of str
         The estimators of the run, in report order.
+    root : path-like, optional
+        The run folder: the command that makes it again (:func:`command_text`) is listed.
 
     Returns
     -------
@@ -134,6 +186,8 @@ def header_blocks(meta: dict, cases: list[Case], estimators: list[str]) -> list:
         + (f" (pipeline recorded {meta['version']})" if meta.get("version") not in (None, "")
            else ""),
     ]
+    if root is not None:
+        items.append("Made by: " + command_text(meta, cases, root))
     return [Heading(2, "Reproduction"), Bullets(items)]
 
 
@@ -353,6 +407,6 @@ def warning_blocks(cases: list[Case], notes: list[str]) -> list:
     return [Heading(2, "Warnings"),
             Bullets(items) if items else Para("No warnings from the comparisons.")]
 
-__all__ = ["DEFAULT_BIN_WIDTH", "PAPER_TABLE3", "computing_blocks", "header_blocks",
+__all__ = ["DEFAULT_BIN_WIDTH", "PAPER_TABLE3", "command_text", "computing_blocks", "header_blocks",
            "not_finished_blocks", "paper_row", "shared_text", "warning_blocks",
            "window_text"]
