@@ -83,6 +83,10 @@ def test_sections_and_paper_numbers(report_of_template):
         for estimator in ("paper", "mle"):
             row = table_row(md, u, estimator)
             assert row[-1] == " / ".join(PAPER_TABLE3[float(u)]), (u, estimator, row)
+            if u != "8":    # the template's intervals leave out the flow's variability: marked
+                assert row[3].endswith("]†") and row[6].endswith("]†"), row
+    assert "†: the interval leaves out the flow's variability between windows" in md
+    assert "4 of the 4 intervals leave out the flow's variability" in section(md, "Summary")
     assert "0.380" in md and "11.89" in html and "-45.16" in html
     assert not [line for line in md.splitlines() if line.startswith("| 4 |")]   # no U = 4
     # the verdict first, its physics checks judged from the run's numbers (E(RT) 0.746 s at
@@ -115,10 +119,12 @@ def test_table3_quotes_the_summaries(report_of_template):
             s = json.loads((root / case / f"compare-{estimator}" / "summary.json").read_text())
             row = table_row(md, u, estimator)
             lo, hi = s["model"]["rt_mean_interval"]
-            # the interval in the cell, beside its value
-            assert row[3] == f"{s['model']['rt_mean']:.3f} [{interval_text(lo, hi)}]"
+            # the interval in the cell, beside its value; marked where it leaves out the
+            # flow's variability (the method says so)
+            mark = "" if "flow's variability" in s["intervals"]["method"] else "†"
+            assert row[3] == f"{s['model']['rt_mean']:.3f} [{interval_text(lo, hi)}]{mark}"
             lo, hi = s["model"]["rt_sd_interval"]
-            assert row[6] == f"{s['model']['rt_sd']:.3f} [{interval_text(lo, hi)}]"
+            assert row[6] == f"{s['model']['rt_sd']:.3f} [{interval_text(lo, hi)}]{mark}"
             assert row[2] == f"{s['reference']['rt_mean']:.3f}"
             assert row[4] == f"{s['pd_rt_mean']:.2f}"
             assert row[5] == f"{s['reference']['rt_sd']:.3f}"

@@ -55,6 +55,25 @@ def _with_interval(value, interval) -> str:
     return f"{text} [{interval_text(lo, hi)}]"
 
 
+#: marks an interval of Table 3 that leaves out the flow's variability between windows
+SAMPLING_ONLY = "†"
+
+
+def _as_number(text: str) -> tuple:
+    try:
+        return (0, float(text))
+    except ValueError:
+        return (1, text)
+
+
+def leaves_out_the_flow(summary: dict) -> bool:
+    """Whether a compare summary's model intervals leave out the flow's variability between
+    windows (its fitting window too short to show it): they then hold the fitting window's
+    sampling and the Monte Carlo noise alone (``intervals.method``)."""
+    method = (summary.get("intervals") or {}).get("method")
+    return isinstance(method, str) and "flow's variability" not in method
+
+
 def _interval_text(interval) -> str:
     return interval_text(*(interval or [None, None])[:2])
 
@@ -226,6 +245,7 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     """
     rows, orders, widths, levels = [], set(), set(), set()
     downward: set[str] = set()
+    sampling_only: set[str] = set()
     sizes: dict[str, dict] = {}
     for c in cases:
         values = paper_row(c.velocity)
@@ -237,11 +257,16 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                 rows.append([u, e.name if e else "—"] + ["not finished"] * 8 + [paper])
                 continue
             ref, mod = s["reference"], s["model"]
-            row = [u, e.name, number_text(ref.get("rt_mean"), ".3f"),
-                   _with_interval(mod.get("rt_mean"), mod.get("rt_mean_interval")),
+            mark = SAMPLING_ONLY if leaves_out_the_flow(s) else ""
+            mean_cell = _with_interval(mod.get("rt_mean"), mod.get("rt_mean_interval"))
+            sd_cell = _with_interval(mod.get("rt_sd"), mod.get("rt_sd_interval"))
+            if mark:
+                sampling_only.add(u)
+                mean_cell += mark if mod.get("rt_mean_interval") else ""
+                sd_cell += mark if mod.get("rt_sd_interval") else ""
+            row = [u, e.name, number_text(ref.get("rt_mean"), ".3f"), mean_cell,
                    percentage_text(s.get("pd_rt_mean"), ".2f"),
-                   number_text(ref.get("rt_sd"), ".3f"),
-                   _with_interval(mod.get("rt_sd"), mod.get("rt_sd_interval")),
+                   number_text(ref.get("rt_sd"), ".3f"), sd_cell,
                    percentage_text(s.get("pd_rt_sd"), ".2f"),
                    number_text(s.get("md_rtd"), ".4g"), _baseline_cell(s), paper]
             # a side without a complete residence in the net flow's direction: say so
@@ -283,6 +308,12 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
         "and the halves' MD. Mixing, the CFD-DEM's own variability, the model's own intervals and the "
         f"residence-time basis: {link(DETAIL_HEADING, DETAIL_HEADING)}.",
     ]
+    if sampling_only:
+        notes.insert(1, f"{SAMPLING_ONLY}: the interval leaves out the flow's variability "
+                        "between windows, the fitting window being too short to show it (at "
+                        f"U = {', '.join(sorted(sampling_only, key=_as_number))} m/s): it "
+                        "holds the fitting window's sampling and the Monte Carlo noise alone, "
+                        "and the flow's long run may lie outside it; the others include it.")
     sizes_text = _sizes_text(sizes)
     if sizes_text:
         notes.insert(2, "RTD bins and residences per case (the bin width; the residences "
@@ -548,6 +579,6 @@ def trust_blocks(cases: list[Case]) -> list:
 
 
 __all__ = ["COMPACT_HEADER", "DETAIL_HEADER", "DETAIL_HEADING", "NO_RESIDENCES",
-           "TABLE3_HEADING", "baseline_clause", "baseline_judgement", "baseline_outcomes",
-           "baseline_step", "table3_blocks", "table3_detail_blocks", "trust_blocks",
+           "SAMPLING_ONLY", "TABLE3_HEADING", "baseline_clause", "baseline_judgement", "baseline_outcomes",
+           "baseline_step", "leaves_out_the_flow", "table3_blocks", "table3_detail_blocks", "trust_blocks",
            "trust_text"]
