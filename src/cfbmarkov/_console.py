@@ -206,14 +206,26 @@ def progress_mode(progress) -> str | None:
     if progress in ("bar", "lines"):
         return progress
     if progress is True:
-        try:
-            return "bar" if sys.stderr.isatty() else "lines"
-        except (AttributeError, ValueError):        # no stderr, or a closed one
-            return "lines"
+        return "bar" if draws_bars() else "lines"
     raise InputError(f"progress {progress!r}: choose True, False, 'bar' or 'lines'")
 
 
-__all__ = ["HEARTBEAT_EVERY", "NOTE", "clock_text", "heartbeat", "install_one_line_notes",
+def draws_bars() -> bool:
+    """Whether stderr is a terminal a progress bar can be drawn on: a tty that reports a
+    width (a pseudo-terminal of 0 columns, as ``script`` and some container shells open,
+    cuts a bar to nothing: whole lines show there)."""
+    import os
+
+    try:
+        if not sys.stderr.isatty():
+            return False
+        return os.get_terminal_size(sys.stderr.fileno()).columns > 0
+    except (AttributeError, ValueError, OSError):   # no stderr, a closed one, no size
+        return False
+
+
+__all__ = ["HEARTBEAT_EVERY", "NOTE", "clock_text", "draws_bars", "heartbeat",
+           "install_one_line_notes",
            "one_line_notes", "progress_mode",
            "write_line"]
 

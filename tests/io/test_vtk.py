@@ -3,6 +3,7 @@ frame selection, gas fields, bad arguments and atomic output."""
 
 from __future__ import annotations
 
+import re
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -227,7 +228,11 @@ def test_open_trajectories_stay_open_and_progress_bar(run, tmp_path, capsys):
     with Trajectories(path) as traj:
         export_vtk(traj, tmp_path / "vtk", every=9, progress=True)
         np.testing.assert_array_equal(traj.positions(1), data["pos"][1])   # still readable
-    assert "export vtk" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    # stderr is no terminal here: whole lines, no bar's carriage returns
+    lines = err.splitlines()
+    assert "\r" not in err and lines[0].startswith("export vtk: ") and lines[0].endswith(
+        " frames") and re.match(r"export vtk: \d+ frames in ", lines[-1])
 
 
 def test_reexport_replaces_a_previous_export(run, tmp_path):

@@ -2,6 +2,7 @@
 (also after kill -9), configuration errors."""
 
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -215,3 +216,42 @@ def test_resume_to_an_end_before_the_checkpoint_is_refused(tmp_path, reference):
     with pytest.raises(InputError, match="past the end asked for"):
         simulate(case, out, until=0.025, progress=False, resume=True)
     assert not out.exists() and (tmp_path / "c.h5.parts" / "checkpoint.h5").exists()
+
+
+def test_resume_of_a_finished_run_says_it_is_finished(tmp_path, reference):
+    """--resume on a finished output of another case or end said the run "stopped before
+    its first checkpoint"; it says the file is a finished run, which keeps no checkpoint.
+    The same case and end is resumed as done."""
+    case, ref = reference
+    out = tmp_path / "done.h5"
+    shutil.copyfile(ref, out)
+    before = out.read_bytes()
+    other = case.model_copy(update={"seed": case.seed + 1})
+    with pytest.raises(InputError, match=r"done\.h5 is a finished run of another case \(its "
+                                         r"settings differ from these\), and a finished run "
+                                         "keeps no checkpoint"):
+        simulate(other, out, progress=False, resume=True)
+    end = case.output.end_time
+    with pytest.raises(InputError, match=rf"done\.h5 is this case's finished run, which ends "
+                                         rf"at {end:g} s, and a finished run keeps no"):
+        simulate(case, out, until=2 * end, progress=False, resume=True)
+    assert simulate(case, out, progress=False, resume=True) == out
+    assert out.read_bytes() == before and not (tmp_path / "done.h5.parts").exists()
+
+
+def test_info_of_a_run_with_an_interrupted_rerun_beside_it_says_so(tmp_path, reference,
+                                                                   capsys):
+    """A rerun into a finished output, interrupted, leaves the earlier run in place and its
+    checkpoint in OUTPUT.parts: ``info`` says which one the file is."""
+    case, ref = reference
+    out = tmp_path / "done.h5"
+    shutil.copyfile(ref, out)
+    assert main(["info", str(out)]) == 0
+    assert "note:" not in capsys.readouterr().err
+    other = case.model_copy(update={"seed": case.seed + 1})
+    simulate(other, out, checkpoint_every=0.025, progress=False, stop_after_frames=3)
+    assert (tmp_path / "done.h5.parts" / "checkpoint.h5").is_file() and out.is_file()
+    assert main(["info", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.startswith(f"note: {tmp_path / 'done.h5.parts'} holds an interrupted simulate "
+                          "run to this file; until it is resumed")

@@ -405,6 +405,13 @@ def cmd_info(args) -> int:
 
         with Trajectories(args.file) as t:
             print("\n".join(describe(t)))
+        from cfbmarkov._names import parts_folder
+
+        waiting = parts_folder(args.file) / "checkpoint.h5"
+        if waiting.is_file():
+            print(f"note: {waiting.parent} holds an interrupted simulate run to this file; "
+                  "until it is resumed (simulate --resume) or deleted, this file is the "
+                  "earlier run", file=sys.stderr)
     del h5py
     return 0
 

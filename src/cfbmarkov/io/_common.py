@@ -442,7 +442,9 @@ def progress(frames: Iterable, label: str) -> Iterable:
     Iterable
         ``frames``, wrapped when stderr is a terminal.
     """
-    if not sys.stderr.isatty():
+    from cfbmarkov._console import draws_bars
+
+    if not draws_bars():
         return frames
     from tqdm import tqdm
 

@@ -246,7 +246,7 @@ def export_vtk(run: str | os.PathLike | Trajectories, output: str | os.PathLike,
     fields : bool, optional
         Write the gas fields when the file has them.
     progress : bool, optional
-        Show a progress bar on stderr.
+        Show a progress bar on stderr, where it is a terminal.
 
     Returns
     -------
@@ -284,7 +284,7 @@ def export_vtk_summary(run: str | os.PathLike | Trajectories, output: str | os.P
     fields : bool, optional
         Write the gas fields when the file has them.
     progress : bool, optional
-        Show a progress bar on stderr.
+        Show a progress bar on stderr, where it is a terminal.
 
     Returns
     -------
@@ -497,11 +497,36 @@ def _check_output(output: Path, source: Path) -> None:
 
 
 def _progress(items: Iterable, total: int, enabled: bool) -> Iterable:
+    """``items`` in a bar on stderr where ``enabled`` and stderr is a terminal that can draw
+    one; elsewhere (a log, a pipe) whole lines: at the start, every
+    :data:`~cfbmarkov._console.HEARTBEAT_EVERY` s, and at the end."""
+    from cfbmarkov._console import draws_bars
+
     if not enabled:
         return items
+    if not draws_bars():
+        return _progress_lines(items, total)
     from tqdm import tqdm
 
     return tqdm(items, total=total, desc="export vtk", unit="frame", file=sys.stderr, leave=False)
+
+
+def _progress_lines(items: Iterable, total: int) -> Iterable:
+    import time
+
+    from cfbmarkov._console import HEARTBEAT_EVERY, clock_text, write_line
+
+    started = last = time.perf_counter()
+    write_line(f"export vtk: {total} frames")
+    done = 0
+    for item in items:
+        yield item
+        done += 1
+        now = time.perf_counter()
+        if now - last >= HEARTBEAT_EVERY and done < total:
+            write_line(f"export vtk: {done}/{total} frames, {clock_text(now - started)} so far")
+            last = now
+    write_line(f"export vtk: {done} frames in {clock_text(time.perf_counter() - started)}")
 
 
 __all__ = ["GasFields", "VtkExport", "export_vtk", "export_vtk_summary", "read_gas_fields"]

@@ -138,6 +138,10 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     if not checkpoint.exists() and parts.is_dir():
         _remove_parts(parts)     # segments of a run whose checkpoint is gone: useless
     if resume:
+        if not checkpoint.exists() and (finished := _finished_run(output, case)):
+            raise InputError(f"nothing to resume: {output} is {finished}, and a finished run "
+                             "keeps no checkpoint to continue from; run the case without "
+                             "--resume (which replaces the file) or to another output")
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist (the run "
                              "stopped before its first checkpoint); start it again without "
@@ -277,6 +281,23 @@ def _complete(output: Path, case: CaseConfig, end) -> bool:
     except (OSError, KeyError, ValueError, IndexError, TypeError):
         return False
     return same and abs(last - end) <= 0.5 * case.output.frame_interval
+
+
+def _finished_run(output: Path, case: CaseConfig) -> str | None:
+    """Why ``output``, a finished run that ``--resume`` cannot continue, is not this one: of
+    another case, or of this case to another end (a clause); None where it is no finished
+    run."""
+    if not output.is_file():
+        return None
+    try:
+        with h5py.File(output, "r") as f:
+            same = json.loads(f.attrs["parameters"]) == json.loads(case.model_dump_json())
+            last = float(f["frames/time"][-1])
+    except (OSError, KeyError, ValueError, IndexError, TypeError):
+        return None
+    if not same:
+        return "a finished run of another case (its settings differ from these)"
+    return f"this case's finished run, which ends at {last:g} s"
 
 
 def _remove_parts(parts: Path) -> None:
