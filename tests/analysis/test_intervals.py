@@ -297,6 +297,7 @@ def test_compare_leaves_out_only_the_mixing_band_without_the_tracers_states(tmp_
     # the summary records the factor its bootstrap part was widened by (10 blocks, 1 run)
     assert summary["intervals"]["bootstrap_widening"] == pytest.approx(
         bootstrap_widening(0.9, 10))
+    assert summary["units"]["flow_sd"].startswith("s (intervals.flow_sd")   # not relative
     assert any(w.startswith("no mixing interval: the tracers' states at 2 s") for w in
                summary["warnings"]), summary["warnings"]
 

@@ -539,3 +539,21 @@ def test_a_window_of_a_matrix_model_with_a_trap_starts_where_records_can_happen(
     assert seen.mean == pytest.approx(model.rtd(window=4.0, occupancy=reaching).mean, rel=1e-12)
     with pytest.raises(CfbmarkovError, match="holds no particle in a state from which the top"):
         model.rtd(window=4.0, occupancy=np.array([0, 0, 0, 1.0, 0, 0]))
+
+
+def test_batch_share_fallen_through_the_bottom_is_the_monte_carlos(markov_flow, markov_run):
+    """The report's Fig. 4-7 caption gives, for a net downflow, the share of the batch that
+    has fallen through the bottom: the chain with the passes down taken out, checked
+    against walkers counting a lap lost (first passages down)."""
+    from cfbmarkov.analysis.reproduction import batch_injection
+
+    model = fit_model(markov_run, markov_flow.grid, markov_flow.lag)
+    steps = 10
+    batch = batch_injection(model, [steps * model.lag])
+    inlet = model.state_space.inlet_distribution()
+    start = np.random.default_rng(1).choice(model.n_states, 40000, p=inlet / inlet.sum())
+    _, laps = model.monte_carlo(start, steps, seed=3)
+    fallen = float((laps.min(axis=0) < laps[0]).mean())
+    se = np.sqrt(fallen * (1 - fallen) / start.size)
+    assert 0.0 < batch.fallen_share < 1.0 and se > 0
+    assert abs(batch.fallen_share - fallen) < 4 * se, (batch.fallen_share, fallen, se)

@@ -264,6 +264,8 @@ class RunComparison:
                                         else self.on_fitting_window.summary()),
             "long_run": None if self.long_run is None else self.long_run.summary(),
             "units": {"time": "s", "pd": "%",
+                      "flow_sd": "s (intervals.flow_sd: SD of E(RT) and SD(RT) between "
+                                 "windows, not relative)",
                       "mixing_rms": ("fraction of the tracers still present"
                                      if self.reference.traj.boundary.is_open
                                      else "fraction of all particles")},

@@ -351,12 +351,16 @@ class BatchInjection:
         Mean height of the part still inside at each time, m.
     left_share : float
         Share of the batch that has left through the top by the last time (-).
+    fallen_share : float or None
+        Share of the batch that has passed down through the bottom by the last time (-),
+        first passages only (a periodic riser's; None for an open riser).
     """
 
     maps: np.ndarray
     inside: np.ndarray
     mean_heights: list[float]
     left_share: float
+    fallen_share: float | None = None
 
 
 def batch_injection(model, times) -> BatchInjection:
@@ -382,7 +386,16 @@ def batch_injection(model, times) -> BatchInjection:
     space = model.state_space
     centres = (np.arange(space.rows) + 0.5) * space.height / space.rows
     heights = [float((m.sum(axis=1) * centres).sum() / max(m.sum(), 1e-300)) for m in inside]
-    return BatchInjection(maps, inside, heights, 1.0 - float(inside[-1].sum()))
+    fallen = None
+    if model.open_flow is None:
+        # the batch with the passes down through the bottom taken out (as the top's are for
+        # ``inside``): what is missing has fallen through the bottom at least once
+        below = model.transition_matrix * (1.0 - model.down_fraction)
+        s = np.asarray(space.inlet_distribution(), dtype=np.float64)
+        for _ in range(max(model.steps_for(t) for t in times)):
+            s = s @ below
+        fallen = 1.0 - float(s.sum())
+    return BatchInjection(maps, inside, heights, 1.0 - float(inside[-1].sum()), fallen)
 
 
 def nanmean(values: np.ndarray) -> float:

@@ -182,10 +182,14 @@ def maps_blocks(cases, done, measures, figures_dir: Path, written: list[str]) ->
                     f"the batch that has not yet passed up through the top is "
                     f"{', '.join(f'{h:.2f}' for h in batch.mean_heights)} m (riser {space.height:g} m high); "
                     f"{100 * batch.left_share:.1f} % of the batch has passed up through the top by "
-                    f"{used[-1]:g} s. The riser is periodic, so nothing leaves it: the maps, like "
+                    f"{used[-1]:g} s"
+                    + (f", and {100 * batch.fallen_share:.1f} % has fallen through the bottom "
+                       "(the direction the solids' net flow takes here)"
+                       if down and batch.fallen_share is not None else "")
+                    + ". The riser is periodic, so nothing leaves it: the maps, like "
                     "the paper's, show what passes the top wrapped to the bottom"
-                    + (", and what falls through the bottom (the solids' net flow runs downward "
-                       "here) wrapped to the top." if down else "."))
+                    + (", and what falls through the bottom wrapped to the top." if down
+                       else "."))
         if rounded:
             sentence += (f" The paper's times {', '.join(f'{t:g}' for t in wanted)} s are not "
                          f"whole multiples of the lag {model.lag:g} s and were rounded to the "
