@@ -600,3 +600,36 @@ def test_windowed_exit_means_count_records_from_the_first_frame_read():
     sd = np.sqrt((np.square(every).sum() - np.square(early).sum()) / count - mean ** 2)
     expected = windowed_exit_means(model, kinetics, window, history=history, occupancy=pi)["X"]
     assert abs(mean - expected) < 3 * sd / np.sqrt(count), (mean, expected)
+
+
+@pytest.mark.parametrize("start", ["entry", "carried"])
+def test_the_exit_sd_keeps_its_digits_far_from_zero(start):
+    """E[v^2] - E[v]^2 lost every digit where the values lie far from zero against their
+    spread: a heat exchange 300 -> 700-900 shifted by 1e8 printed an exit SD of 0 (1e7:
+    wrong in the 5th digit). A shift moves the mean with it and leaves the SD as it was;
+    a carried value at a uniform target keeps an SD of exactly 0."""
+    u, w, k0, k1 = 0.3, 0.4, 1.5, 6.0
+    model = periodic_model(u, w)
+
+    def answer(offset, temps=(700.0, 900.0)):
+        return exact_kinetics(model, kinetics(
+            [k0, k1], law="heat-exchange", temps=tuple(t + offset for t in temps),
+            initial=300.0 + offset, start=start))["v"]
+
+    plain = answer(0.0)
+    assert plain.exit_sd > 10.0
+    for offset in (1e7, 1e8, 1e12):
+        shifted = answer(offset)
+        assert shifted.exit_mean - offset == pytest.approx(plain.exit_mean,
+                                                           abs=1e-15 * offset * 8)
+        assert shifted.exit_sd == pytest.approx(plain.exit_sd, rel=1e-18 * offset + 1e-10)
+        if start == "carried":      # and after a few passes from the first entry
+            for n in (1, 3):
+                mean, sd = shifted.after_passes(n)
+                assert mean - offset == pytest.approx(plain.after_passes(n)[0],
+                                                      abs=1e-15 * offset * 8)
+                assert sd == pytest.approx(plain.after_passes(n)[1],
+                                           rel=1e-18 * offset + 1e-10)
+    if start == "carried":
+        assert answer(1e8, (800.0, 800.0)).exit_sd == 0.0
+        assert answer(0.0, (800.0, 800.0)).exit_sd == 0.0

@@ -369,6 +369,14 @@ class Kinetics:
             if prop.law.linear:
                 k, v_inf = prop.law.relaxation(values, wall)
                 rate[i], target[i] = k[cell], v_inf[cell]
+                largest = max(float(np.max(np.abs(target[i]), initial=0.0)),
+                              abs(float(prop.initial)))
+                if largest > MAX_VALUE:
+                    where = f"{self.source}: " if self.source else ""
+                    raise InputError(
+                        f"{where}property {prop.name}: a value of {largest:.3g} (its "
+                        f"initial value or a cell's limit) lies beyond {MAX_VALUE:g}, where "
+                        "the exit SD's squares overflow; give the values in other units")
         for arr in (rate, target):
             arr.setflags(write=False)
         return StateKinetics(self.names, tuple(pr.start for pr in self.properties),
@@ -629,6 +637,11 @@ def _property(table, index: int, path: Path) -> Property:
         return Property(table["name"], law, params, start, initial)
     except InputError as exc:
         raise InputError(f"{path}: {exc}") from None
+
+
+#: the largest magnitude of a property's values (its initial value, the limit it relaxes
+#: to): their squares, which the exit SD is formed from, stay below 1.8e308
+MAX_VALUE = 1e100
 
 
 def _toml_text(value) -> str:

@@ -375,6 +375,12 @@ class PropertyAnswer:
         The value at the first entry (the kinetics file's ``initial``).
     moments : ExitMoments, optional
         The residence's exit moments, for :meth:`after_passes`.
+    centred : CarriedMoments, optional
+        A carried property's moments of v - ``centre`` (``centre`` its steady exit mean),
+        formed where the values lie so far from zero against their spread that the moments
+        of v lose their SD (:data:`CENTRE_ABOVE`); :meth:`after_passes` uses them.
+    centre : float, optional
+        The shift of ``centred`` (0 without it).
     """
 
     __repr__ = compact_repr
@@ -389,6 +395,8 @@ class PropertyAnswer:
     bed_mean_by_cell: np.ndarray
     initial: float = float("nan")
     moments: ExitMoments | None = field(default=None, repr=False, compare=False)
+    centred: "CarriedMoments | None" = field(default=None, repr=False, compare=False)
+    centre: float = 0.0
 
     def after_passes(self, passes: int) -> tuple[float, float]:
         """Mean and SD of the exit value after ``passes`` residences of a value carried
@@ -415,8 +423,11 @@ class PropertyAnswer:
         if int(passes) != passes or passes < 1:
             raise InputError(f"passes {passes}: give a whole number of residences, at least 1")
         mean, second = self.moments.after_passes(self.initial, int(passes))
-        variance = second - mean * mean
-        return mean, float(np.sqrt(variance)) if variance > ROUND_OFF * abs(second) else 0.0
+        variance, floor = second - mean * mean, ROUND_OFF * abs(second)
+        if self.centred is not None:     # the moments of v - centre keep the SD's digits
+            mw, sw = self.centred.after_passes(self.initial - self.centre, int(passes))
+            variance, floor = sw - mw * mw, (CENTRED_ROUND_OFF * mean) ** 2
+        return mean, float(np.sqrt(variance)) if variance > floor else 0.0
 
     def to_dict(self, passes=()) -> dict:
         """JSON-serialisable (the per-cell means as a list, null where NaN; with
@@ -446,6 +457,11 @@ def _in_range(value: float, law) -> float:
 #: the relative size of E[v^2] below which the exit variance E[v^2] - E[v]^2 is round-off
 #: (an exit SD below 1e-6 of the value's scale is printed as 0)
 ROUND_OFF = 1e-12
+#: where E[v^2] exceeds the variance E[v^2] - E[v]^2 by more than this (four of the sixteen
+#: digits lost), the exit SD is computed again from the moments of v - E[v]
+CENTRE_ABOVE = 1e4
+#: an exit SD computed from the moments of v - E[v] below this share of |E[v]| is zero
+CENTRED_ROUND_OFF = 1e-12
 
 
 def residence_chain(model, direction: str | None = None, deficit_levels: int | None = None,
@@ -614,20 +630,36 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
             v0 = float(sk.initial[i])
             mean, second = m.exit_mean(v0), m.exit_second(v0)
             values = v0 * m.mass_per_start + m.mass_rest
-        # E[v^2] - E[v]^2 cancels to round-off where every exit value is alike (a carried
-        # value at a uniform target): below ROUND_OFF of E[v^2] the variance is zero
-        variance = second - mean * mean
-        sd = float(np.sqrt(variance)) if variance > ROUND_OFF * abs(second) else 0.0
+        variance, shifted = second - mean * mean, None
+        # the variance is round-off where every exit value is alike (a carried value at a
+        # uniform target): below ROUND_OFF of E[v^2], the values' own scale, it is zero
+        floor = ROUND_OFF * abs(second)
+        if abs(second) > CENTRE_ABOVE * max(variance, 0.0) and mean != 0.0:
+            # values far from zero against their spread (a temperature of 1e8 +- 50): E[v^2]
+            # - E[v]^2 keeps few or no digits. The same moments of w = v - mean, whose law
+            # is w' = a w + (b - (1 - a) mean), lose none
+            centred = b - c * mean
+            if sk.starts[i] == "carried":
+                shifted = carried_moments(q, r, e, a, centred, *landed, lu_q, c)
+                mw, sw = shifted.carried()
+            else:
+                mc = exit_moments(q, r, e, a, centred, lu_q, c)
+                mw, sw = mc.exit_mean(v0 - mean), mc.exit_second(v0 - mean)
+            # what is left of w's round-off: b - (1 - a) mean and v0 - mean carry an
+            # absolute error of a few ulps of the mean, so an SD within 1e-12 of it is zero
+            variance, floor = sw - mw * mw, (CENTRED_ROUND_OFF * mean) ** 2
+        sd = float(np.sqrt(variance)) if variance > floor else 0.0
         mass = np.bincount(state, values, minlength=model.n_states)
         count = np.bincount(state, occupancy, minlength=model.n_states)
         by_state = np.divide(mass, count, out=np.full(mass.size, np.nan), where=count > 0)
         cmass = np.bincount(cell, mass, minlength=space.n_cells)
         ccount = np.bincount(cell, count, minlength=space.n_cells)
         by_cell = np.divide(cmass, ccount, out=np.full(cmass.size, np.nan), where=ccount > 0)
+        centre = float(mean) if shifted is not None else 0.0
         mean = _in_range(mean, sk.laws[i])
         out[name] = PropertyAnswer(name, sk.starts[i], float(v0), float(mean), sd,
                                    float(mass.sum() / count.sum()), by_state, by_cell,
-                                   float(sk.initial[i]), m)
+                                   float(sk.initial[i]), m, shifted, centre)
     return out
 
 
