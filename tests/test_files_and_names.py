@@ -280,3 +280,24 @@ def test_a_read_error_inside_h5py_names_the_damaged_file(tmp_path):
     assert message.startswith(f"{path}: damaged file, cannot be read (")
     assert "\n" not in message
     assert _damaged_input(KeyError("not from h5py")) is None
+
+
+def test_the_current_folder_as_an_output_is_refused_in_one_line(good, tmp_path, capsys,
+                                                                 monkeypatch):
+    """``-o .`` (and ``./``, ``dir/..``, ``/``) for a verb that writes a folder raised a
+    traceback (PosixPath('.') has an empty name); a folder above the current one would be
+    replaced whole, leaving the shell in a deleted folder: one line each, nothing
+    written."""
+    run, _ = good
+    work = tmp_path / "work"
+    (work / "sub").mkdir(parents=True)
+    monkeypatch.chdir(work / "sub")
+    for output in (".", "./", "..", "sub/..", "/", ""):
+        err = one_line_error(capsys, ["export-vtk", run, "-o", output, "-q"])
+        assert ("names no file or folder of its own" if output else "an empty output name"
+                ) in err, (output, err)
+    err = one_line_error(capsys, ["export-vtk", run, "-o", str(work), "-q"])
+    assert "holds the current folder" in err
+    assert sorted(p.name for p in work.rglob("*")) == ["sub"]
+    with pytest.raises(InputError, match="names no file or folder of its own"):
+        parts_folder(".")

@@ -289,11 +289,17 @@ def test_process_pool_runs_cases_in_parallel(tmp_path, capfd):
 @pytest.mark.parametrize("argv, message", [
     (["--velocities", "3,-4"], "must be positive"),
     (["--models", "paper,best"], "unknown model 'best'"),
-    (["--overrides", "missing.toml"], "cannot read overrides"),
+    (["--overrides", "missing.toml"], "cannot read overrides file missing.toml"),
+    # a model given as overrides, or an empty file (it was applied as no change at all)
+    (["--overrides", "binary.h5"], "overrides file binary.h5 is not text (an HDF5 file"),
+    (["--overrides", "empty.toml"], "overrides file empty.toml is empty (it sets nothing)"),
     (["--jobs", "0"], "must be at least 1"),
+    (["--scheduler", "localhost"], "--scheduler 'localhost' is not a scheduler's address"),
 ])
 def test_bad_input_is_one_line_and_exit_2(tmp_path, capsys, argv, message, monkeypatch):
     monkeypatch.chdir(tmp_path)
+    (tmp_path / "binary.h5").write_bytes(b"\x89HDF\r\n\x1a\n" + bytes(100))
+    (tmp_path / "empty.toml").write_text("# nothing set\n")
     assert main(["reproduce", "-o", str(tmp_path / "x"), *argv]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0]

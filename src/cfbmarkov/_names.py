@@ -51,10 +51,40 @@ def helper_stem(name: str) -> str:
     return f"{keep}~{digest}"
 
 
+def named_output(output: str | os.PathLike) -> Path:
+    """``output`` as a path whose last part is a name; ``.``, ``..``, ``./``, ``dir/..`` and
+    the root folder are refused: a verb's output is replaced whole when it is complete, and
+    the current folder (or one above it) cannot be.
+
+    Parameters
+    ----------
+    output : str or os.PathLike
+
+    Returns
+    -------
+    pathlib.Path
+
+    Raises
+    ------
+    InputError
+        For a name that is no name (``.``, ``..``, a path ending in them, the root folder).
+    """
+    path = Path(output)
+    text = os.fspath(output).rstrip("/")
+    if path.name in ("", ".", "..") or text in ("", ".", "..") or text.endswith(("/..", "/.")):
+        from cfbmarkov.errors import InputError
+
+        raise InputError(f"output {os.fspath(output)!r} names no file or folder of its own (a "
+                         "verb replaces its output whole when it is complete, which the "
+                         "current folder, a folder above it or the root cannot be); give a "
+                         "new one by name (e.g. -o results)")
+    return path
+
+
 def parts_folder(output: str | os.PathLike) -> Path:
     """The checkpoint folder of a run written to ``output``: ``OUTPUT.parts`` beside it
     (built from :func:`helper_stem` for a name near the length limit)."""
-    output = Path(output)
+    output = named_output(output)
     return output.with_name(helper_stem(output.name) + ".parts")
 
 

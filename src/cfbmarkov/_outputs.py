@@ -22,7 +22,7 @@ import shutil
 import socket
 from pathlib import Path
 
-from cfbmarkov._names import check_output_name, helper_stem, parts_folder
+from cfbmarkov._names import check_output_name, helper_stem, named_output, parts_folder
 from cfbmarkov.errors import InputError
 
 try:
@@ -452,7 +452,11 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
         When the output cannot be claimed.
     """
     check_output_name(target)           # before Path(): Path("") is "."
-    target = Path(target)
+    target = named_output(target)       # "-o ." is refused, not replaced
+    if kind == "folder" and Path.cwd().is_relative_to(target.absolute()):
+        raise InputError(f"{target}: holds the current folder, which a verb cannot replace "
+                         "whole when its output is complete; give a new folder by name "
+                         "(e.g. -o results)")
     check_suffix(target, kind)
     key = str(lock_path(target).absolute())
     if key in _HELD:        # claimed by this process already (the command line, then the API)

@@ -187,21 +187,18 @@ def load_case(source: str | Path) -> CaseConfig:
         When the file cannot be read, is not valid TOML, or fails validation (the message
         names the first offending field), or the name is unknown.
     """
-    text: str
     path = Path(source)
     if path.suffix == ".toml" or path.exists():
-        try:
-            text = path.read_text()
-        except OSError as exc:
-            raise InputError(f"cannot read case file {source}: {exc.strerror}") from None
+        from cfbmarkov._toml import read_toml
+
+        data = read_toml(path, "case file", "a TOML file of the case's tables ([riser], "
+                         "[particles], [gas], ...; a shipped case by name: "
+                         + ", ".join(case_names()) + ")")
     elif str(source) in case_names():
         text = resources.files("cfbmarkov.cases").joinpath(f"{source}.toml").read_text()
+        data = tomllib.loads(text)
     else:
         raise InputError(f"unknown case '{source}': not a file, and not one of {', '.join(case_names())}")
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{source}: not valid TOML: {exc}") from None
     try:
         return CaseConfig.model_validate(data)
     except ValidationError as exc:

@@ -184,6 +184,9 @@ def dask_executor(address: str) -> tuple[cf.Executor, Any]:
         client = Client(address, timeout=30)
     except (OSError, TimeoutError) as exc:
         raise InputError(f"cannot reach the Dask scheduler at {address}: {exc}") from None
+    except (ValueError, TypeError) as exc:     # an address Dask cannot parse ("localhost")
+        raise InputError(f"--scheduler {address!r} is not a scheduler's address ({exc}); give "
+                         "it as tcp://HOST:PORT, e.g. tcp://localhost:8786") from None
     return client.get_executor(pure=False), client
 
 

@@ -255,3 +255,22 @@ def test_info_of_a_run_with_an_interrupted_rerun_beside_it_says_so(tmp_path, ref
     err = capsys.readouterr().err
     assert err.startswith(f"note: {tmp_path / 'done.h5.parts'} holds an interrupted simulate "
                           "run to this file; until it is resumed")
+
+
+@pytest.mark.parametrize("content, message", [
+    (b"", "case file {p} is empty (it sets nothing): give a TOML file of the case's tables"),
+    (b"# only a comment\n", "case file {p} is empty"),
+    (b"\x89HDF\r\n\x1a\n" + bytes(64), "case file {p} is not text (an HDF5 file: a model or "
+                                       "trajectory file?)"),
+    (b"\xff\xfe[\x00", "case file {p} is text in UTF-16; save it as UTF-8"),
+])
+def test_a_case_file_that_is_empty_or_not_text_is_one_line(tmp_path, capsys, content,
+                                                          message):
+    """An empty case file ran the paper's 20 s, 27000-particle case without a word; a model
+    given as the case raised a UnicodeDecodeError traceback."""
+    path = tmp_path / "case.toml"
+    path.write_bytes(content)
+    assert main(["simulate", str(path), "-o", str(tmp_path / "x.h5"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message.format(p=path) in err[0], err
+    assert not (tmp_path / "x.h5").exists()

@@ -9,7 +9,6 @@ import json
 import math
 import os
 from dataclasses import dataclass, field
-from pathlib import Path
 from typing import Any, Iterable
 
 from pydantic import ValidationError
@@ -255,13 +254,9 @@ def load_overrides(path: str | os.PathLike) -> dict[str, Any]:
     Raises
     ------
     InputError
-        When the file cannot be read or is not valid TOML.
+        When the file cannot be read, is not UTF-8 text or valid TOML, or sets nothing.
     """
-    import tomllib
+    from cfbmarkov._toml import read_toml
 
-    try:
-        return tomllib.loads(Path(path).read_text())
-    except OSError as exc:
-        raise InputError(f"cannot read overrides {path}: {exc.strerror}") from None
-    except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{path}: not valid TOML: {exc}") from None
+    return read_toml(path, "overrides file", "a TOML file with the tables of a case file "
+                     "to change, e.g. [output] end_time = 10.0")

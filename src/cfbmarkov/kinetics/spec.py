@@ -500,19 +500,10 @@ def on_states(kinetics, state_space, cell_fields: CellFields | None = None) -> S
 
 
 def _binary_kind(path: Path) -> str:
-    """What a file that is not text seems to be, in words."""
-    try:
-        with open(path, "rb") as fh:
-            head = fh.read(4096)
-    except OSError:
-        return "unreadable"
-    if head[:8] == b"\x89HDF\r\n\x1a\n":
-        return "an HDF5 file: a model or trajectory file?"
-    if head[:2] in (b"\xff\xfe", b"\xfe\xff"):
-        return "text in UTF-16"
-    if b"\x00" not in head:
-        return "text in another encoding than UTF-8"
-    return "a binary file"
+    """What a file that is not text seems to be, in words (:func:`cfbmarkov._toml.binary_kind`)."""
+    from cfbmarkov._toml import binary_kind
+
+    return binary_kind(path)
 
 
 def load_kinetics(path: str | os.PathLike) -> Kinetics:
