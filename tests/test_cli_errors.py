@@ -85,6 +85,13 @@ def test_a_model_given_to_import_and_a_folder_given_as_a_file(run, tmp_path, cap
     assert main(["import", str(model), "-o", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "it is a cfbmarkov model file (from fit)" in err
+    # a truncated HDF5 file: named as truncated, not HDF5's own words
+    truncated = tmp_path / "cut.h5"
+    truncated.write_bytes(run.read_bytes()[:1000])
+    assert main(["import", str(truncated), "-o", str(tmp_path / "y.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot read as HDF5 (the file is truncated" in err, err
+    assert "sblock" not in err
     for verb in ("info", "rtd"):
         assert main([verb, str(tmp_path)]) == 2
         err = capsys.readouterr().err

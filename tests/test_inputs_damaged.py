@@ -75,8 +75,9 @@ TRAJECTORY_DAMAGE = {
     "nan-position": (_set("frames/position", (60, 3, 1), np.nan), "not a finite number"),
     "out-of-domain": (_set("frames/position", (60, 3, 0), 5.0), "outside the domain"),
     "lap-jump": (_set("frames/lap", (60, 3), 7), "laps inconsistent"),
-    "frame-interval-0": (_attr("frame_interval", 0.0), "frame_interval"),
-    "frame-interval-nan": (_attr("frame_interval", np.nan), "frame_interval"),
+    "frame-interval-0": (_attr("frame_interval", 0.0), "frame_interval 0 is not"),
+    # as a reader writes it, not numpy's repr (np.float64(nan))
+    "frame-interval-nan": (_attr("frame_interval", np.nan), "frame_interval nan is not"),
     "width-0": (_attr("width", 0.0), "width"),
     "height-nan": (_attr("height", np.nan), "height"),
     "parameters-not-json": (_attr("parameters", "{not json"), "not JSON"),

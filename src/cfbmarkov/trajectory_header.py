@@ -220,7 +220,8 @@ def read_header(f: h5py.File, path: Path) -> TrajectoryHeader:
         frame_interval = _float_attr(f.attrs["frame_interval"])
         if not (np.isfinite(frame_interval) and frame_interval > 0):
             raise InputError(f"{path}: damaged trajectory file (frame_interval "
-                             f"{f.attrs['frame_interval']!r} is not a positive number of s)")
+                             f"{_attribute_text(f.attrs['frame_interval'])} is not a positive "
+                             "number of s)")
     else:
         frame_interval = estimate_frame_interval(times)
     _check_times(path, times, frame_interval)
@@ -298,3 +299,16 @@ def _whole_attr(value, name: str, path) -> int:
     if not (np.isfinite(number) and number == round(number)):
         raise InputError(f"{path}: damaged trajectory file ({name} {value!r} is not a whole number)")
     return int(number)
+
+
+def _attribute_text(value) -> str:
+    """An HDF5 attribute as a reader would write it (``nan``, ``0.025``, ``'text'``), not
+    numpy's repr (``np.float64(nan)``)."""
+    if isinstance(value, bytes):
+        value = value.decode(errors="replace")
+    if isinstance(value, str):
+        return repr(value)
+    item = getattr(value, "item", None)
+    if callable(item) and getattr(value, "size", 1) == 1:
+        value = item()
+    return f"{value:g}" if isinstance(value, float) else str(value)

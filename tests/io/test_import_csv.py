@@ -176,9 +176,11 @@ BAD_CSV = {
     "non-numeric": (table(changed(1, 1, x="abc")), r"line 6: 'abc' in column 'x' is not a number"),
     "empty-value": (table(changed(1, 1, y="")), r"line 6: column 'y' is empty"),
     "nan-position": (table(changed(1, 1, x="nan")),
-                     (r"position of particle 1 at t = 0.025 s is not a finite number \(a "
-                      r"particle out of view is left out of its frame: drop the rows that hold NaN")),
-    "inf-position": (table(changed(2, 0, y="inf")), r"position of particle 1 at t = 0.05 s"),
+                     (r"position of particle 1 at t = 0.025 s is not a finite number "
+                      r"\(\[nan, [0-9.]+\]; a particle out of view is left out of its frame: "
+                      r"drop the rows that hold such values\)")),
+    "inf-position": (table(changed(2, 0, y="inf")),
+                     r"position of particle 1 at t = 0.05 s is not a finite number \(\[[0-9.]+, inf\]"),
     "nan-time": (table(changed(1, 0, t="nan")), r"line 5: time t = nan is not a finite number"),
     "fractional-id": (table(changed(1, 0, id=2.5)), r"line 5: particle id 2.5 is not a whole"),
     "frame-repeated": (table([FRAMES[0], FRAMES[1], FRAMES[2], FRAMES[1]]),

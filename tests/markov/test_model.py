@@ -273,6 +273,14 @@ def test_save_load_round_trip_and_bad_files(tmp_path, markov_flow, markov_run):
         model.transition_matrix[0, 0] = 0.5            # immutable
     with pytest.raises(InputError, match="not a cfbmarkov model file"):
         MarkovModel.load(markov_run)
+    import h5py
+
+    with h5py.File(tmp_path / "foreign.h5", "w") as f:
+        f["x"] = [1.0]
+    with pytest.raises(InputError, match=r"not a cfbmarkov model file \(an HDF5 file without "
+                                         r"cfbmarkov's 'format' attribute\): give a model that "
+                                         "cfbmarkov fit wrote"):
+        MarkovModel.load(tmp_path / "foreign.h5")
     truncated = tmp_path / "t.h5"
     truncated.write_bytes(path.read_bytes()[:1000])
     with pytest.raises(InputError, match="not a readable HDF5 file"):

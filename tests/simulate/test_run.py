@@ -129,8 +129,13 @@ def test_resume_with_another_search_grid_names_it(tmp_path, reference):
     simulate(case, out, checkpoint_every=0.025, progress=False, stop_after_frames=2)
     auto = case.model_copy(update={"numerics": case.numerics.model_copy(
         update={"dem_cells": "auto"})})
-    with pytest.raises(Exception, match=r"numerics\.dem_cells: saved \[30, 74\], now 'auto'"):
+    with pytest.raises(Exception, match=r"numerics\.dem_cells: saved \[30, 74\], now 'auto'\); "
+                                        r"resume with the saved value, or delete .*c\.h5\.parts "
+                                        "and run without --resume"):
         simulate(auto, out, progress=False, resume=True)
+    # the fix it names is taken: a plain run is refused while the checkpoint waits
+    with pytest.raises(InputError, match="holds an interrupted run: add --resume"):
+        simulate(auto, out, progress=False)
 
 
 def test_automatic_search_grid(tmp_path):

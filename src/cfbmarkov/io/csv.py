@@ -489,8 +489,8 @@ def _riser_positions(rows: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids
     if bad.any():
         k = int(np.argmax(bad))
         raise InputError(f"{label}: position of particle {int(ids[k])} at t = {t[k]:g} s is not "
-                         "a finite number (a particle out of view is left out of its frame: "
-                         "drop the rows that hold NaN)")
+                         f"a finite number ({raw[k].tolist()}; a particle out of view is left "
+                         "out of its frame: drop the rows that hold such values)")
     relative = raw - riser.region[:, 0]
     extent = riser.region[:, 1] - riser.region[:, 0]
     tol = 1e-9

@@ -133,7 +133,11 @@ def detect_format(source) -> tuple[str, str]:
                 fmt = fmt.decode() if isinstance(fmt, bytes) else fmt
         except (OSError, KeyError, RuntimeError, ValueError) as exc:
             text = " ".join(str(exc).split())[:160]
-            raise InputError(f"{path}: cannot read as HDF5 ({text})") from None
+            cut = "truncated" in text.lower()
+            raise InputError(f"{path}: cannot read as HDF5 ("
+                             + ("the file is truncated: it ends before the size its header "
+                                "gives, as a copy or a run stopped while writing leaves it; "
+                                "copy or write it again" if cut else text) + ")") from None
         if not h5md:
             hint = ("; it is a cfbmarkov trajectory file already: use it as it is" if ours
                     else "; it is a cfbmarkov model file (from fit): import reads particle "

@@ -65,7 +65,11 @@ def h5md_series(source: str | os.PathLike, group: str | None = None,
     try:
         handle = h5py.File(path, "r")
     except OSError as exc:
-        raise InputError(f"{label}: cannot read as HDF5 ({exc})") from None
+        cut = "truncated" in str(exc).lower()
+        raise InputError(f"{label}: cannot read as HDF5 ("
+                         + ("the file is truncated: it ends before the size its header gives; "
+                            "copy or write it again" if cut else " ".join(str(exc).split()))
+                         + ")") from None
     try:
         with _damaged(label):
             return _series(handle, label, path, group, time_step)

@@ -192,7 +192,11 @@ def read_model_group(group: h5py.Group | h5py.File, model_class: Callable[..., "
                          f"model on it first (cfbmarkov fit {label} -o model.h5) and give "
                          "that model")
     if fmt != MODEL_FORMAT:
-        raise InputError(f"{label}: not a cfbmarkov model file (format attribute is {fmt!r})")
+        raise InputError(f"{label}: not a cfbmarkov model file ("
+                         + ("an HDF5 file without cfbmarkov's 'format' attribute" if fmt is None
+                            else f"its format attribute is {fmt!r}")
+                         + "): give a model that cfbmarkov fit wrote (cfbmarkov fit RUN -o "
+                           "model.h5)")
     try:
         return _read_model_group(group, model_class)
     except KeyError as exc:

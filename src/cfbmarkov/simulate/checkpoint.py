@@ -134,8 +134,9 @@ def _read_checkpoint(path: Path, case: CaseConfig):
         saved = CaseConfig.model_validate_json(f.attrs["case"])
         if saved != case:
             raise InputError(f"{path}: the checkpoint was made with another configuration "
-                             f"({case_difference(saved, case)}); run without --resume to "
-                             "start again, or with the saved value")
+                             f"({case_difference(saved, case)}); resume with the saved value, "
+                             f"or delete {path.parent} and run without --resume to start "
+                             "again")
         state = {"dem": _read_group(f["dem"]), "gas": _read_group(f["gas"]),
                  "cfd_steps": int(f.attrs["cfd_steps"])}
         meta = int(f.attrs["n_segments"]), int(f.attrs["frames"]), float(f.attrs["wall_time"])

@@ -296,8 +296,9 @@ def _read(path: Path, case: CaseConfig, n: int, threads):
             saved = CaseConfig.model_validate_json(f.attrs["case"])
             if saved != case:
                 raise InputError(f"{path}: the checkpoint was made with another configuration "
-                                 f"({case_difference(saved, case)}); run without --resume to "
-                                 "start again, or with the saved value")
+                                 f"({case_difference(saved, case)}); resume with the saved value, "
+                                 f"or delete {path.parent} and run without --resume to start "
+                                 "again")
             if int(f.attrs["members"]) != n:
                 raise InputError(f"{path}: the checkpoint holds {int(f.attrs['members'])} "
                                  f"members, not {n}; resume with --ensemble "
