@@ -289,6 +289,8 @@ def test_process_pool_runs_cases_in_parallel(tmp_path, capfd):
 @pytest.mark.parametrize("argv, message", [
     (["--velocities", "3,-4"], "must be positive"),
     (["--models", "paper,best"], "unknown model 'best'"),
+    (["--models", "paper,paper"], "names 'paper,paper' repeat a name: give each once"),
+    (["--velocities", "4,,6"], "velocities '4,,6' hold an empty entry between commas"),
     (["--overrides", "missing.toml"], "cannot read overrides file missing.toml"),
     # a model given as overrides, or an empty file (it was applied as no change at all)
     (["--overrides", "binary.h5"], "overrides file binary.h5 is not text (an HDF5 file"),

@@ -248,7 +248,7 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
     ------
     InputError
         For an unknown model name or scale, unusable velocities or overrides, repeated
-        velocities, an output that exists and is not a directory, a folder holding what a
+        velocities or models, an output that exists and is not a directory, a folder holding what a
         reproduction did not write or a case folder of another configuration
         (:func:`check_run_folder`, before anything is written), an unusable executor
         setting, an ensemble size out of range or another than the folder's, a failed case,
@@ -264,6 +264,10 @@ def reproduce(directory: str | os.PathLike, scale: str | Scale = "quick",
 
     for name in models:
         parse_model_name(name)
+    repeated = sorted({m for m in models if list(models).count(m) > 1})
+    if repeated:
+        raise InputError(f"models repeat: {', '.join(repeated)} (each model is fitted and "
+                         "compared once per case; give it once)")
     if kinetics is not None:
         from cfbmarkov.kinetics import load_kinetics
 

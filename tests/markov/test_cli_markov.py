@@ -54,6 +54,13 @@ def test_fit_predict_rtd_info(tmp_path, capsys, markov_run):
     code, _, err = run_cli(capsys, "maps", model_path, "--times", "0.07", "-o", tmp_path / "x.png")
     assert "not a whole multiple of the model's lag" in err
     assert_clean_failure(code, err, tmp_path / "x.png")
+    # a typo between commas was dropped, a time given twice drew two panels: refused
+    for times, said in (("0.05,,0.1", "hold an empty entry between commas"),
+                        ("0.1,0.1", "repeat a time: give each once")):
+        code, _, err = run_cli(capsys, "maps", model_path, "--times", times, "-o",
+                               tmp_path / "x.png")
+        assert said in err
+        assert_clean_failure(code, err, tmp_path / "x.png")
     code, out, _ = run_cli(capsys, "info", model_path)
     assert code == 0 and "Markov chain model" in out
     code, out, _ = run_cli(capsys, "info", pred)

@@ -205,21 +205,34 @@ MAX_PARTICLES = 10_000_000
 MAX_JOBS = 1024
 
 
+def _entries(text: str, what: str) -> list[str]:
+    """The comma-separated entries of ``text``; an empty one between commas is refused (a
+    typo, not a value left out on purpose); one trailing comma is let pass."""
+    entries = [v.strip() for v in text.split(",")]
+    if entries and not entries[-1] and len(entries) > 1:
+        entries = entries[:-1]
+    if any(not v for v in entries):
+        raise argparse.ArgumentTypeError(f"{what} '{text}' hold an empty entry between commas")
+    return entries
+
+
 def parse_times(text: str) -> list[float]:
     try:
-        times = [float(v) for v in text.split(",") if v.strip()]
+        times = [float(v) for v in _entries(text, "times")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"times '{text}' are not comma-separated seconds") from None
     if not all(map(math.isfinite, times)):
         raise argparse.ArgumentTypeError(f"times '{text}' must be finite numbers of seconds")
     if not times or min(times) < 0:
         raise argparse.ArgumentTypeError(f"times '{text}' must be one or more values >= 0 s")
+    if len(set(times)) != len(times):
+        raise argparse.ArgumentTypeError(f"times '{text}' repeat a time: give each once")
     return times
 
 
 def parse_velocities(text: str) -> list[float]:
     try:
-        values = [float(v) for v in text.split(",") if v.strip()]
+        values = [float(v) for v in _entries(text, "velocities")]
     except ValueError:
         raise argparse.ArgumentTypeError(f"velocities '{text}' are not comma-separated numbers "
                                          "in m/s") from None
@@ -229,9 +242,11 @@ def parse_velocities(text: str) -> list[float]:
 
 
 def parse_names(text: str) -> list[str]:
-    names = [v.strip() for v in text.split(",") if v.strip()]
-    if not names:
+    if not text.strip():
         raise argparse.ArgumentTypeError("no names given")
+    names = _entries(text, "names")
+    if len(set(names)) != len(names):
+        raise argparse.ArgumentTypeError(f"names '{text}' repeat a name: give each once")
     return names
 
 
