@@ -301,3 +301,22 @@ def test_the_current_folder_as_an_output_is_refused_in_one_line(good, tmp_path, 
     assert sorted(p.name for p in work.rglob("*")) == ["sub"]
     with pytest.raises(InputError, match="names no file or folder of its own"):
         parts_folder(".")
+
+
+def test_free_lock_files_are_removed_and_held_ones_kept(tmp_path):
+    import fcntl
+
+    from cfbmarkov._outputs import remove_free_locks
+
+    (tmp_path / "u4").mkdir()
+    free, held = tmp_path / "u4" / ".cfd-dem.h5.lock", tmp_path / ".report.html.lock"
+    free.write_text('{"pid": 1}')
+    held.write_text("{}")
+    fd = os.open(held, os.O_RDWR)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        assert remove_free_locks(tmp_path) == [free]
+        assert not free.exists() and held.exists()
+    finally:
+        os.close(fd)
+    assert remove_free_locks(tmp_path) == [held] and not held.exists()

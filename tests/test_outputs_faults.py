@@ -385,3 +385,6 @@ def test_ctrl_c_of_a_reproduce_with_two_workers_is_one_line(tmp_path):
     lines = [line for line in err.strip().splitlines()    # the workers' advice, if given
              if not line.startswith("note: ")]
     assert lines == ["cfbmarkov reproduce: interrupted; rerun the same command to resume"]
+    # the workers, terminated, could not remove their outputs' lock files: the parent does
+    assert (tmp_path / "out").is_dir()
+    assert not list((tmp_path / "out").rglob(".*.lock")), list((tmp_path / "out").rglob("*"))

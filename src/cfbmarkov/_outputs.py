@@ -147,6 +147,47 @@ def _release(target: Path) -> None:
         os.close(held[0])
 
 
+def remove_free_locks(folder: str | os.PathLike, depth: int = 2) -> list[Path]:
+    """Remove the lock files (``.NAME.lock``) in ``folder`` and its sub-folders down to
+    ``depth`` that no process holds: those of workers stopped outright (a process pool's
+    workers terminated on Ctrl-C), whose lock the system released with them. A lock still
+    held is left; where ``fcntl`` is missing nothing is removed.
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+    depth : int, optional
+        How many levels of sub-folders to look in.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The lock files removed.
+    """
+    removed: list[Path] = []
+    if fcntl is None:  # pragma: no cover - Windows
+        return removed
+    folder = Path(folder)
+    patterns = [".*.lock"] + ["/".join(["*"] * k + [".*.lock"]) for k in range(1, depth + 1)]
+    for lock in (p for pattern in patterns for p in folder.glob(pattern)):
+        if str(lock.absolute()) in _HELD:
+            continue
+        try:
+            fd = os.open(lock, os.O_RDWR)
+        except OSError:
+            continue
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+            if os.path.samestat(os.fstat(fd), os.stat(lock)):
+                lock.unlink()       # unlinked while locked, as _release does
+                removed.append(lock)
+        except OSError:
+            pass                    # held by a running process, or gone meanwhile
+        finally:
+            os.close(fd)
+    return removed
+
+
 def release_all() -> None:
     """Release every lock of this process (before ``os._exit``)."""
     for key in list(_HELD):

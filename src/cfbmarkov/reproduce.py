@@ -112,12 +112,23 @@ def _limit_threads(threads: int) -> None:
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
 
 
-def _stop_workers(executor) -> None:
+def _stop_workers(executor, folder: Path | None = None) -> None:
     """Terminate a process pool's workers now (Ctrl-C: their cases resume from their last
-    checkpoint on a rerun)."""
-    for process in list(getattr(executor, "_processes", {}).values()):
+    checkpoint on a rerun), and remove the lock files they leave in ``folder`` once they
+    are gone (:func:`cfbmarkov._outputs.remove_free_locks`)."""
+    processes = list(getattr(executor, "_processes", {}).values())
+    for process in processes:
         with contextlib.suppress(Exception):
             process.terminate()
+    if folder is None:
+        return
+    for process in processes:
+        with contextlib.suppress(Exception):
+            process.join(timeout=10)
+    from cfbmarkov._outputs import remove_free_locks
+
+    with contextlib.suppress(OSError):
+        remove_free_locks(folder)
 
 
 def local_executor(jobs: int | None = None, n_cases: int = 1) -> tuple[cf.Executor, int]:
@@ -515,7 +526,7 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
                     log(f"report: done, {_time.perf_counter() - started:.0f} s in all")
     except KeyboardInterrupt:
         if own:
-            _stop_workers(executor)
+            _stop_workers(executor, out)
         raise
     finally:
         if own:
