@@ -320,3 +320,16 @@ def test_free_lock_files_are_removed_and_held_ones_kept(tmp_path):
     finally:
         os.close(fd)
     assert remove_free_locks(tmp_path) == [held] and not held.exists()
+
+
+def test_a_run_of_another_riser_given_to_a_model_names_the_fix(good, tmp_path, capsys):
+    """The message spoke to the Python API only ("make the space with that size")."""
+    from dataclasses import replace
+
+    _, model = good
+    wide = synthetic.write_run(tmp_path / "wide.h5", replace(FLOW, width=0.2), 40, 2.0, seed=2)
+    err = one_line_error(capsys, ["predict", model, "--init", wide, "--start", 1.0,
+                                  "--duration", 0.5, "-q", "-o", tmp_path / "p.h5"],
+                         tmp_path / "p.h5")
+    assert "but" in err and "0.2 x 0.95 m" in err
+    assert "give a run of that riser, or fit a model on this one" in err

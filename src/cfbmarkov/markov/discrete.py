@@ -421,8 +421,10 @@ def check_domain(state_space: StateSpace, width: float, height: float, source: s
         state_space = state_space.with_size(width, height)
     if not (np.isclose(state_space.width, width) and np.isclose(state_space.height, height)):
         raise InputError(f"state space covers {state_space.width:g} x {state_space.height:g} m "
-                         f"but {source} is {width:g} x {height:g} m: make the space with that "
-                         "size, or without one (it then takes the file's)")
+                         f"but {source} is {width:g} x {height:g} m: a model's states are of "
+                         "the riser it was fitted on (give a run of that riser, or fit a model "
+                         "on this one); a state space made in Python takes that size, or none "
+                         "(then the file's)")
     if state_space.depth is not None:
         if depth is None:
             raise InputError(f"state space {state_space.describe()} has depth columns but "
