@@ -35,6 +35,14 @@ def test_segregated_flow_by_hand():
     # mean over the bed's age distribution: sum_i int_0^tau_i (1 - e^-2a) da / sum_i tau_i
     integral = tau - (1 - np.exp(-2 * tau)) / 2
     assert seg.bed_mean == pytest.approx(integral.sum() / tau.sum(), rel=1e-14)
+    # sampled at the frames, as the chain's exact bed mean and the reference's are: each
+    # lag's start, the entry frame holding v0 (the continuous form lay k lag / 2 above)
+    frames = segregated_flow(tau, np.full(2, 2.0), np.ones(2), [1, 1], 0.0, name="X",
+                             lag=0.1)
+    by_hand = [1 - np.exp(-2 * j * 0.1) for t in tau for j in range(round(t / 0.1))]
+    assert frames.bed_mean == pytest.approx(np.mean(by_hand), rel=1e-13)
+    assert frames.bed_mean < seg.bed_mean
+    np.testing.assert_array_equal(frames.exit_values, seg.exit_values)
 
 
 def _kinetics(tmp_path, name, rate_lines):

@@ -668,7 +668,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
         seg: SegregatedFlow | None = None
         if rt_fit is not None and not carried:
             seg = segregated_flow(rt_fit, m["rate"], m["target"], occupancy, m["initial"],
-                                  name=name)
+                                  name=name, lag=model.lag)
         edges = exit_bins([r.exit_values, p.exit_values]
                           + ([seg.exit_values] if seg is not None else []), n_bins)
         dist_ref = exit_distribution(r.exit_values, edges)

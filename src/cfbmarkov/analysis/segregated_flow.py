@@ -19,7 +19,16 @@ what the chain is fitted on and nothing of where in the riser a particle spends 
 The bed's mean is the value averaged over the bed's age distribution,
 I(a) = (1 - F(a)) / E(RT): with residence-time samples tau_i,
 
-    mean over the bed = sum_i integral_0^tau_i v(a) da / sum_i tau_i.
+    mean over the bed = sum_i integral_0^tau_i v(a) da / sum_i tau_i,
+
+or, sampled at the frames as the chain's exact bed mean and the reference's are (each
+lag's start, the entry frame holding v0; ``lag`` given), with n_i = tau_i / lag,
+
+    mean over the bed = sum_i sum_(j < n_i) v(j lag) / sum_i n_i,
+    sum_(j < n) v(j lag) = n v_bar + (v0 - v_bar) (1 - e^(-k_bar n lag)) / (1 - e^(-k_bar lag)).
+
+The continuous form lies above the sampled one by about k_bar lag / 2 of the relaxation
+(1.95 % at k = 1.3 1/s, lag 0.1 s).
 """
 
 from __future__ import annotations
@@ -122,7 +131,7 @@ def relaxation_value(times, rate: float, target: float, initial: float) -> np.nd
 
 
 def segregated_flow(residence_times, rate, target, occupancy, initial: float, *,
-                    name: str = "") -> SegregatedFlow:
+                    name: str = "", lag: float | None = None) -> SegregatedFlow:
     """One property by the segregated-flow model over an observed RTD.
 
     Parameters
@@ -137,6 +146,9 @@ def segregated_flow(residence_times, rate, target, occupancy, initial: float, *,
         The value at entry v0.
     name : str, optional
         The property.
+    lag : float, optional
+        The model's lag (s): the bed's mean is sampled at each lag's start, as the chain's
+        and the reference's are (module docstring); None: the continuous integral.
 
     Returns
     -------
@@ -160,7 +172,15 @@ def segregated_flow(residence_times, rate, target, occupancy, initial: float, *,
     k_bar, v_bar = bed_averaged(rate, target, occupancy)
     exits = relaxation_value(tau, k_bar, v_bar, float(initial))
     total = tau.sum()
-    if total > 0:
+    if total > 0 and lag is not None:
+        n = np.maximum(np.rint(tau / lag), 1.0)         # lags of each residence
+        if k_bar > 0:
+            frames = n * v_bar + (initial - v_bar) * (np.expm1(-k_bar * n * lag)
+                                                      / np.expm1(-k_bar * lag))
+        else:
+            frames = n * initial
+        bed = float(frames.sum() / n.sum())
+    elif total > 0:
         if k_bar > 0:
             integral = v_bar * tau + (initial - v_bar) * -np.expm1(-k_bar * tau) / k_bar
         else:
