@@ -196,6 +196,13 @@ class CarriedMoments:
     mean_by_entry, second_by_entry : ndarray of float64, shape (M,)
         u and s, the steady value's mass and second moment's mass by entry state
         (sum u the steady mean).
+    survivors : ndarray of float64, shape (M,), optional
+        Where residences from some entry states end in a trap more often than from others
+        (L's rows sum to less than 1 by more than :data:`SURVIVAL_TOL`, unequally): the
+        moments and L are not conditioned on landing, and this is phi, the entry
+        distribution of the particles still circulating after many passes (L's Perron
+        vector); u and s are theirs. None where every residence lands in a kept entry
+        state (the moments conditioned on it).
     """
 
     kept: np.ndarray
@@ -211,6 +218,7 @@ class CarriedMoments:
     mean_by_entry: np.ndarray = field(default=None, repr=False)
     second_by_entry: np.ndarray = field(default=None, repr=False)
     discounted: object = field(default=None, repr=False, compare=False)   # LU of I - D Q
+    survivors: np.ndarray | None = field(default=None, repr=False)
 
     def entering_mass(self, entering: np.ndarray) -> np.ndarray:
         """The value's mass per transient state, summed over the lags spent there, of the
@@ -253,6 +261,19 @@ class CarriedMoments:
         mean, second : float
         """
         m = self.entry.size
+        if self.survivors is not None:
+            # the surviving mass w_k = L^T w_(k-1) too (:func:`_pass_step`); the mean among
+            # the particles that complete the passes
+            step = _pass_step(self.a, self.b, self.a2, self.ab2, self.b2, self.landing)
+            state = np.concatenate([float(v0) * self.entry, float(v0) ** 2 * self.entry,
+                                    self.entry])
+            state = np.linalg.matrix_power(step, int(passes)) @ state
+            mass = float(state[2 * m:].sum())
+            if not mass > 0.0:
+                raise InputError(f"after {passes} passes no particle is left circulating "
+                                 "(every one has landed in a trap)")
+            mean, second = float(state[:m].sum()) / mass, float(state[m:2 * m].sum()) / mass
+            return mean, second
         step = np.zeros((2 * m + 1, 2 * m + 1))
         step[:m, :m] = self.a.T
         step[:m, 2 * m] = self.b.T @ self.entry
@@ -329,24 +350,74 @@ def carried_moments(q, r, e, a, b, landing, entry_rows, lu_q=None, c=None) -> Ca
                          "can be reached: a carried property has no steady state")
     rows = entry_rows[kept]
     leave = lands[rows][:, kept].sum(axis=1)           # ends, landing in a kept entry
-    scale = (1.0 / leave)[:, None]
-
-    def on_entries(x):
-        return x[rows][:, kept] * scale
-
     nu = np.asarray(e, dtype=np.float64)[rows]
     nu = nu / nu.sum()
-    moments = [on_entries(x) for x in (alpha, beta, gamma, delta, eps, forget, forget2, lands)]
-    ma, mb, ma2, mab2, mb2, mf, mf2, land = moments
-    for members in closed_classes(sp.csr_matrix(land)):
-        if not mf[members].sum() > 0.0:
+    raw = [x[rows][:, kept] for x in (alpha, beta, gamma, delta, eps, forget, forget2, lands)]
+    if np.max(np.abs(leave - 1.0)) > SURVIVAL_TOL:
+        return _survivors(kept, nu, *raw, lu_dq)
+    scale = (1.0 / leave)[:, None]
+    ma, mb, ma2, mab2, mb2, mf, mf2, land = (x * scale for x in raw)
+    _check_relaxation(mf, land)
+    u = _steady_by_entry(mf, land, mb.T @ nu, nu)
+    second = _steady_by_entry(mf2, land, mab2.T @ u + mb2.T @ nu, nu)
+    return CarriedMoments(kept, nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, u, second, lu_dq)
+
+
+def _check_relaxation(forget: np.ndarray, landing: np.ndarray) -> None:
+    for members in closed_classes(sp.csr_matrix(landing)):
+        if not forget[members].sum() > 0.0:
             raise InputError("a carried property with a zero rate wherever the particles of "
                              "some entry states go (they land back among themselves) has no "
                              "steady state there (it keeps its start value): use start = "
                              "entry")
-    u = _steady_by_entry(mf, land, mb.T @ nu, nu)
-    second = _steady_by_entry(mf2, land, mab2.T @ u + mb2.T @ nu, nu)
-    return CarriedMoments(kept, nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, u, second, lu_dq)
+
+
+def _pass_step(a, b, a2, ab2, b2, landing) -> np.ndarray:
+    """The linear map of one pass on (u, s, w), the value's and its square's mass by entry
+    state and the mass still circulating: u' = A^T u + B^T w, s' = (A^2)^T s + (2AB)^T u +
+    (B^2)^T w, w' = L^T w (moments not conditioned on landing)."""
+    m = landing.shape[0]
+    step = np.zeros((3 * m, 3 * m))
+    step[:m, :m] = a.T
+    step[:m, 2 * m:] = b.T
+    step[m:2 * m, :m] = ab2.T
+    step[m:2 * m, m:2 * m] = a2.T
+    step[m:2 * m, 2 * m:] = b2.T
+    step[2 * m:, 2 * m:] = landing.T
+    return step
+
+
+def _survivors(kept, nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, lu_dq) -> "CarriedMoments":
+    """:class:`CarriedMoments` where residences from some entry states end in a trap more
+    often than from others (the landing matrix's rows sum to less than 1 by more than
+    :data:`SURVIVAL_TOL`): the moments are kept unconditioned, and the steady state is that
+    of the particles still circulating after many passes, first entered with ``nu``: the
+    limit of (u_N, s_N) / sum w_N under :func:`_pass_step`, taken by squaring the step
+    (2^k passes after k squarings, each normalised) until it no longer changes (at most
+    2^64 passes; a relaxation leaves its start value behind long before, and none at all
+    is refused). Where no residence ends in a trap this is the fixed point that
+    :func:`_steady_by_entry` solves for."""
+    _check_relaxation(mf, land)
+    m = nu.size
+    step = _pass_step(ma, mb, ma2, mab2, mb2, land)
+    start = np.concatenate([0.0 * nu, 0.0 * nu, nu])    # the steady state forgets v0
+    power, state = step, None
+    for _ in range(64):
+        now = power @ start
+        mass = now[2 * m:].sum()
+        if not mass > 0.0:
+            raise InputError("no particle keeps circulating: every residence ends, sooner or "
+                             "later, in a trap; a carried property has no steady state")
+        now = now / mass
+        if state is not None and np.max(np.abs(now - state)) <= 1e-15 * np.max(np.abs(now)):
+            state = now
+            break
+        state = now
+        power = power @ power
+        power /= np.max(np.abs(power))
+    u, second, phi = state[:m], state[m:2 * m], state[2 * m:]
+    return CarriedMoments(kept, nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, u, second, lu_dq,
+                          survivors=phi)
 
 
 @dataclass(frozen=True)
@@ -454,6 +525,10 @@ def _in_range(value: float, law) -> float:
     return value
 
 
+#: where the landing matrix's rows sum to 1 within this, every residence is taken to land in
+#: a kept entry state (the rest is the lap-deficit truncation's loss); beyond it, some
+#: residences end in traps, and a carried property is followed among the survivors
+SURVIVAL_TOL = 1e-6
 #: the relative size of E[v^2] below which the exit variance E[v^2] - E[v]^2 is round-off
 #: (an exit SD below 1e-6 of the value's scale is printed as 0)
 ROUND_OFF = 1e-12
@@ -614,6 +689,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     occupancy = lu_q.solve(e, trans="T")       # lags spent in each state per entry
     for i, name in enumerate(sk.names):
         a, b, c = a_all[i][state], b_all[i][state], c_all[i][state]
+        occ = occupancy
         if sk.starts[i] == "carried":
             try:
                 m = carried_moments(q, r, e, a, b, *landed, lu_q, c)
@@ -623,8 +699,12 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
             mean = v0
             entering = np.zeros(q.shape[0])     # the value's mass entering by entry state
             entering[landed[1][m.kept]] = m.mean_by_entry
+            if m.survivors is not None:         # the bed of the particles still circulating
+                start = np.zeros(q.shape[0])
+                start[landed[1][m.kept]] = m.survivors
+                occ = lu_q.solve(start, trans="T")
             # mu = (u + (nu o b) Q) (I - D Q)^-1 (module docstring)
-            values = m.entering_mass(entering + q.T @ (occupancy * b))
+            values = m.entering_mass(entering + q.T @ (occ * b))
         else:
             m = exit_moments(q, r, e, a, b, lu_q, c)
             v0 = float(sk.initial[i])
@@ -650,7 +730,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
             variance, floor = sw - mw * mw, (CENTRED_ROUND_OFF * mean) ** 2
         sd = float(np.sqrt(variance)) if variance > floor else 0.0
         mass = np.bincount(state, values, minlength=model.n_states)
-        count = np.bincount(state, occupancy, minlength=model.n_states)
+        count = np.bincount(state, occ, minlength=model.n_states)
         by_state = np.divide(mass, count, out=np.full(mass.size, np.nan), where=count > 0)
         cmass = np.bincount(cell, mass, minlength=space.n_cells)
         ccount = np.bincount(cell, count, minlength=space.n_cells)
