@@ -138,6 +138,13 @@ def test_a_walk_deeper_than_the_deficits_kept_says_so_with_its_drift_mean():
     assert rtd.mean < 0.8 * rtd.drift_mean
     line = unresolved_warning(rtd)
     assert "64 laps" in line and "10 s" in line
+    # react's exact answers lean as E(RT) does: said of residences followed too short, not
+    # of particles that never leave (a kinetics review read the latter as wrong)
+    from cfbmarkov.cli.kinetics import _chain_warnings
+
+    said = _chain_warnings(model)
+    assert said and "follow only the residences that stay within the lap deficits" in said[0]
+    assert "never leave" not in said[0]
 
 
 def test_the_drift_mean_is_the_exact_rtds_mean():

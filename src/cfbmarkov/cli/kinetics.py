@@ -200,11 +200,18 @@ def _chain_warnings(model) -> list[str]:
     from cfbmarkov.markov.model_summary import trap_warning, unresolved_warning
 
     lines = []
+    from cfbmarkov.markov.first_passage import DEFICIT_TOL
+
     try:
-        unresolved = unresolved_warning(model.rtd())
+        rtd = model.rtd()
+        unresolved = unresolved_warning(rtd)
     except CfbmarkovError:      # no residence: exact_kinetics refuses it in its own words
-        unresolved = None
-    if unresolved is not None:
+        rtd, unresolved = None, None
+    if unresolved is not None and (rtd.deficit_unresolved or 0.0) > DEFICIT_TOL:
+        lines.append(f"the model: {unresolved}; the exact exit values and bed means likewise "
+                     "follow only the residences that stay within the lap deficits computed, "
+                     "and lean as E(RT) does")
+    elif unresolved is not None:
         lines.append(f"the model: {unresolved}; the exit values likewise average only the "
                      "residences that end, and the bed means leave the particles that never "
                      "leave out")
