@@ -179,6 +179,16 @@ MODEL_DAMAGE = {
     "matrix-shape": (_replace("transition_matrix", np.eye(5)), "shape"),
     "counts-missing": (lambda f: f.__delitem__("counts"), "missing"),
     "window-nan-one": (_attr("window", [1.0, np.inf]), "window"),
+    # a layout version that is none (read as version 1 without a word)
+    "version-0": (_attr("version", 0), "damaged model file (layout version 0: this cfbmarkov"),
+    "version-nan": (_attr("version", np.nan), "damaged model file (layout version nan"),
+    # a newer layout is no damage: it names the upgrade
+    "version-2": (_attr("version", 2), "model file layout version 2, written by a newer "
+                                       "cfbmarkov (this one reads version 1); upgrade"),
+    # valid JSON of another shape: info raised an AttributeError traceback
+    "selection-a-list": (_attr("selection", "[1, 2]"), "selection is not a record"),
+    "selection-candidates-text": (_attr("selection", '{"candidates": "cells"}'),
+                                  "selection is not a record"),
 }
 
 
@@ -187,8 +197,9 @@ def test_damaged_model_refused_in_one_line(good, tmp_path, capsys, damage):
     run, model = good
     edit, message = MODEL_DAMAGE[damage]
     bad = damaged_copy(model, tmp_path, edit)
-    err = one_line_error(capsys, ["rtd", bad])
-    assert message in err and "bad-model.h5" in err
+    for verb in ("rtd", "info"):
+        err = one_line_error(capsys, [verb, bad])
+        assert message in err and "bad-model.h5" in err
     out = tmp_path / "p.h5"
     one_line_error(capsys, ["predict", bad, "--init", run, "--start", 1.5, "--duration", 0.5,
                             "-o", out], out)

@@ -210,8 +210,8 @@ def test_a_model_with_another_coherence_keeps_what_its_chain_derived(coherent):
     assert trial._chain is model._chain and trial.coherence == 0.4
     assert trial.rtd().probability is rtd.probability
     assert model.with_selection({"how": "test"})._chain is model._chain
-    fresh = dataclasses.replace(model, coherence=0.4, _cache={})
-    assert "_chain" not in fresh.__dict__
+    fresh = dataclasses.replace(model, coherence=0.4)       # a cache of its own
+    assert "_chain" not in fresh.__dict__ and fresh._cache == {}
     for a, b in zip(trial.monte_carlo(states[0], 20, seed=5),
                     fresh.monte_carlo(states[0], 20, seed=5)):
         np.testing.assert_array_equal(a, b)

@@ -192,10 +192,24 @@ class MarkovModel:
     cell_fields: CellFields | None = None
     run_windows: tuple[tuple[float, float], ...] | None = None
     flow_direction: str | None = None
-    _cache: dict = field(default_factory=dict, repr=False, compare=False)
+    # results derived once (RTDs, ...): a model's own, never passed on by dataclasses.replace
+    _cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
     adopt: InitVar[bool] = field(default=False, kw_only=True)
 
+    def __setstate__(self, state: dict) -> None:
+        """Unpickled or deep-copied: the arrays read-only again (pickle does not keep the
+        flag), so that nothing derived and cached can go stale."""
+        from cfbmarkov._frozen import freeze_arrays
+
+        self.__dict__.update(state)
+        freeze_arrays(state)
+
     def __post_init__(self, adopt: bool):
+        from cfbmarkov._frozen import frozen_record
+
+        # the selection record and a pooled fit's sources: read-only, not the caller's
+        object.__setattr__(self, "selection", frozen_record(self.selection))
+        object.__setattr__(self, "source", frozen_record(self.source))
         s = self.state_space.n_states
         arrays, fractions = checked_arrays({name: getattr(self, name) for name in SQUARE_ARRAYS},
                                            self.pass_fractions, self.lag, self.state_space,
@@ -292,12 +306,15 @@ class MarkovModel:
                      / occupancy.sum())
 
     @cached_property
-    def closed_classes(self) -> list[np.ndarray]:
-        """Closed classes of P with two or more states, largest first: more than one means a
-        reducible chain (particles in one never reach the other's states)."""
+    def closed_classes(self) -> tuple[np.ndarray, ...]:
+        """Closed classes of P with two or more states, largest first (read-only): more than
+        one means a reducible chain (particles in one never reach the other's states)."""
         from cfbmarkov.markov.connectivity import closed_classes
 
-        return closed_classes(self.transition_matrix, min_size=2)
+        classes = tuple(closed_classes(self.transition_matrix, min_size=2))
+        for members in classes:
+            members.setflags(write=False)
+        return classes
 
     @cached_property
     @_read_only
@@ -709,17 +726,20 @@ class MarkovModel:
         Returns
         -------
         dict
-            JSON-serialisable.
+            JSON-serialisable; a copy the caller may change.
         """
+        from cfbmarkov._frozen import thawed_record
+
         out = {"estimator": self.estimator, "lag": self.lag,
                "window": list(self.window) if self.window else None,
-               "state_space": self.state_space.to_attrs(), "source": self.source}
+               "state_space": self.state_space.to_attrs(),
+               "source": thawed_record(self.source)}
         if self.coherence:
             out["coherence"] = self.coherence
         if self.flow_direction == "down":
             out["flow_direction"] = "down"
         if self.selection:
-            out["selection"] = self.selection
+            out["selection"] = thawed_record(self.selection)
         return out
 
     def warnings(self) -> list[str]:

@@ -198,6 +198,16 @@ def read_model_group(group: h5py.Group | h5py.File, model_class: Callable[..., "
                          + "): give a model that cfbmarkov fit wrote (cfbmarkov fit RUN -o "
                            "model.h5)")
     try:
+        version = _attr_number(group.attrs.get("version", 1), "version")
+    except InputError as exc:
+        raise InputError(f"{label}: damaged model file ({exc})") from None
+    if np.isfinite(version) and version == round(version) and version > 1:
+        raise InputError(f"{label}: model file layout version {version:g}, written by a newer "
+                         "cfbmarkov (this one reads version 1); upgrade cfbmarkov")
+    if version != 1:
+        raise InputError(f"{label}: damaged model file (layout version {version:g}: this "
+                         "cfbmarkov writes and reads version 1)")
+    try:
         return _read_model_group(group, model_class)
     except KeyError as exc:
         raise InputError(f"{label}: damaged model file (missing {exc})") from None
@@ -212,10 +222,6 @@ def read_model_group(group: h5py.Group | h5py.File, model_class: Callable[..., "
 
 def _read_model_group(group, model_class) -> "MarkovModel":
     """The model of a group whose format has been checked (errors raised as they come)."""
-    version = _attr_number(group.attrs.get("version", 1), "version")
-    if version > 1:
-        raise InputError(f"model file layout version {version:g}, written by a newer cfbmarkov "
-                         "(this one reads version 1); upgrade cfbmarkov")
     window = np.asarray(group.attrs["window"], dtype=float)
     if window.shape != (2,):
         raise InputError(f"window attribute of shape {window.shape}, not 2 times")
@@ -231,7 +237,7 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         frame_pairs=int(frame_pairs),
         pass_fractions=(group["pass_up_fraction"][()], group["pass_down_fraction"][()])
         if "pass_up_fraction" in group else None,
-        selection=json.loads(group.attrs["selection"])
+        selection=_selection(json.loads(group.attrs["selection"]))
         if "selection" in group.attrs else None,
         connected=bool(group.attrs.get("connected", 0)),
         coherence=_attr_number(group.attrs.get("coherence", 0.0), "coherence"),
@@ -269,6 +275,17 @@ def _attr_number(value, name: str) -> float:
     if array.size != 1:
         raise InputError(f"{name} attribute holds {array.size} values, not one number")
     return float(array.reshape(()))
+
+
+def _selection(record):
+    """The ``selection`` attribute, a record of the automatic choice: a dict, its
+    ``candidates`` a list of dicts (a damaged file's other JSON is refused here, not met
+    by a traceback where the record is read)."""
+    candidates = record.get("candidates", []) if isinstance(record, dict) else None
+    if not (isinstance(candidates, list) and all(isinstance(c, dict) for c in candidates)):
+        raise InputError("selection is not a record of the automatic choice (a JSON object "
+                         "with a list of candidates)")
+    return record
 
 
 def _open_flow(group) -> OpenFlow | None:

@@ -1,0 +1,77 @@
+"""What a caller does with a model's copies and containers cannot change its answers: a
+model review found dataclasses.replace sharing the RTD cache (a copy with another lag
+answered with the original's RTD, and the other way round), unpickled and deep-copied
+models with writable arrays beside their cached RTD, and mutable selection records,
+sources and closed classes."""
+
+from __future__ import annotations
+
+import copy
+import dataclasses
+import json
+import pickle
+
+import numpy as np
+import pytest
+
+from cfbmarkov.markov.model import MarkovModel
+from cfbmarkov.markov.states import CellGrid
+
+
+def _model(**fields) -> MarkovModel:
+    """A column of three cells: up one cell a lag with probability 0.5, a pass up through
+    the top back to the bottom."""
+    p = np.array([[0.5, 0.5, 0.0], [0.0, 0.5, 0.5], [0.5, 0.0, 0.5]])
+    up = np.zeros((3, 3))
+    up[2, 0] = 1.0
+    zeros = np.zeros((3, 3), np.int64)
+    return MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 3, 0.1, 1.0), 0.1,
+                       estimator="given", pass_fractions=(up, np.zeros((3, 3))), **fields)
+
+
+def test_replace_gives_a_model_with_its_own_results():
+    model = _model()
+    slower = dataclasses.replace(model, lag=0.2)
+    assert slower.rtd().mean == pytest.approx(2 * model.rtd().mean, rel=1e-12)
+    assert model.rtd().mean == pytest.approx(0.6, rel=1e-9)      # 6 lags of 0.1 s
+    other = _model()
+    twice = dataclasses.replace(other, lag=0.2)
+    assert twice.rtd().mean == pytest.approx(1.2, rel=1e-9)      # asked first, then:
+    assert other.rtd().mean == pytest.approx(0.6, rel=1e-9)
+
+
+@pytest.mark.parametrize("clone", [copy.deepcopy, lambda m: pickle.loads(pickle.dumps(m))])
+def test_copies_keep_their_arrays_read_only(clone):
+    model = _model()
+    model.rtd()
+    twin = clone(model)
+    assert twin.rtd().mean == pytest.approx(model.rtd().mean, rel=1e-15)
+    for array in (twin.transition_matrix, twin.counts, twin.rtd().probability,
+                  *twin.pass_fractions):
+        with pytest.raises(ValueError, match="read-only"):
+            array[0] = 0.0
+
+
+def test_selection_source_and_classes_are_read_only():
+    selection = {"reason": "chosen", "candidates": [{"name": "cells", "score": 1.0}]}
+    source = ["a.h5", "b.h5"]
+    model = _model(selection=selection, source=source)
+    selection["reason"] = "changed by the caller afterwards"
+    source.append("c.h5")
+    assert model.selection["reason"] == "chosen" and list(model.source) == ["a.h5", "b.h5"]
+    with pytest.raises(TypeError, match="belongs to an immutable object"):
+        model.selection["reason"] = "rewritten"
+    with pytest.raises(TypeError, match="belongs to an immutable object"):
+        model.selection["candidates"].append({})
+    with pytest.raises(TypeError, match="belongs to an immutable object"):
+        model.source.append("d.h5")
+    described = model.describe()        # a copy the caller may change, not the model's
+    described["selection"]["reason"] = "mine"
+    described["source"].append("e.h5")
+    assert model.selection["reason"] == "chosen" and len(model.source) == 2
+    assert json.loads(json.dumps(model.describe()))["selection"] == {
+        "reason": "chosen", "candidates": [{"name": "cells", "score": 1.0}]}
+    classes = model.closed_classes
+    assert isinstance(classes, tuple) and len(classes) == 1
+    with pytest.raises(ValueError, match="read-only"):
+        classes[0][0] = 5
