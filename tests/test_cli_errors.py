@@ -174,3 +174,16 @@ def test_an_empty_output_name_is_named_as_such(tmp_path, capsys):
     assert main(["fit", str(tmp_path / "run.h5"), "-o", ""]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "an empty output name (-o '')" in err
+
+
+def test_info_of_a_foreign_hdf5_file_names_both_kinds_it_reads(tmp_path, capsys):
+    """info reads trajectory and model files: a foreign format was "not a cfbmarkov
+    trajectory file", as if a model would not do."""
+    import h5py
+
+    with h5py.File(tmp_path / "foreign.h5", "w") as f:
+        f.attrs["format"] = "h5md"
+    assert main(["info", str(tmp_path / "foreign.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "neither a cfbmarkov trajectory nor model file (its " \
+        "format attribute is 'h5md'); import particle data first" in err

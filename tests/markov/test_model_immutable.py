@@ -75,3 +75,12 @@ def test_selection_source_and_classes_are_read_only():
     assert isinstance(classes, tuple) and len(classes) == 1
     with pytest.raises(ValueError, match="read-only"):
         classes[0][0] = 5
+
+
+def test_a_window_rtd_says_the_window_asked_for():
+    """Window RTDs are cached by whole lags: rtd(window=5.01) then rtd(window=4.99)
+    returned the first object, its window 5.01."""
+    model = _model()
+    first, second = model.rtd(window=5.01), model.rtd(window=4.99)
+    assert first.window == 5.01 and second.window == 4.99
+    assert second.probability is first.probability      # the same numbers, computed once

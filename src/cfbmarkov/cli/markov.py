@@ -394,7 +394,11 @@ def cmd_info(args) -> int:
     with open_h5(args.file) as f:
         fmt = f.attrs.get("format")
     if isinstance(fmt, bytes):
-        fmt = fmt.decode()
+        fmt = fmt.decode(errors="replace")
+    if fmt is not None and fmt not in ("cfbmarkov.model", "cfbmarkov.trajectories"):
+        raise InputError(f"{args.file}: neither a cfbmarkov trajectory nor model file (its "
+                         f"format attribute is {fmt!r}); import particle data first "
+                         "(cfbmarkov import), or give a model that cfbmarkov fit wrote")
     if fmt == "cfbmarkov.model":
         from cfbmarkov.markov import MarkovModel
 

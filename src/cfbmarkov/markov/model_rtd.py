@@ -191,7 +191,9 @@ def _periodic_window_rtd(model: "MarkovModel", window: float, direction: str,
     steps = int(round(window / model.lag))
     key = ("rtd-window", direction, steps)
     if occupancy is None and key in cache:
-        return cache[key]
+        cached = cache[key]     # the same whole lags; the window as this call gave it
+        return (cached if cached.window == window
+                else dataclasses.replace(cached, window=window))
     # its unresolved mass and depth: the intrinsic RTD's (computed once, cached)
     intrinsic = model_rtd(model, None, direction)
     ends, back = ((model.up_fraction, model.down_fraction) if direction == "up"
