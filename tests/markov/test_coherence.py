@@ -215,3 +215,17 @@ def test_a_model_with_another_coherence_keeps_what_its_chain_derived(coherent):
     for a, b in zip(trial.monte_carlo(states[0], 20, seed=5),
                     fresh.monte_carlo(states[0], 20, seed=5)):
         np.testing.assert_array_equal(a, b)
+
+
+def test_a_coherence_calibrated_to_zero_is_said(tmp_path, capsys):
+    """fit --coherent whose calibration found no coherence printed what a plain fit prints:
+    nothing said it was asked for and found to be 0."""
+    run = synthetic.write_run(tmp_path / "run.h5", synthetic.RiserFlow(), 300, 4.0, seed=1)
+    assert main(["fit", str(run), "--window", "0:4", "--coherent", "--resamples", "0",
+                 "--no-adequacy", "-o", str(tmp_path / "m.h5")]) == 0
+    out = capsys.readouterr().out
+    assert MarkovModel.load(tmp_path / "m.h5").coherence == 0.0
+    assert "coherent moves: calibrated to a coherence of 0 on the fitting window" in out
+    assert main(["fit", str(run), "--window", "0:4", "--resamples", "0", "--no-adequacy",
+                 "-o", str(tmp_path / "p.h5")]) == 0
+    assert "coherent moves" not in capsys.readouterr().out

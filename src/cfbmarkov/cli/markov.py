@@ -140,6 +140,10 @@ def _finish_fit(args, model, runs, windows) -> int:
               "`react` and the exact figures of `compare` refuse it; fit on a longer window "
               "or one where particles pass through the top", file=sys.stderr)
     print(model.summary(warnings=False))   # each warning once, on stderr
+    if getattr(args, "coherent", False) and not model.coherence:
+        print("  coherent moves: calibrated to a coherence of 0 on the fitting window (its "
+              "particles move together no more than the chain's own moves make them): the "
+              "model is the plain chain")
     print(args.output)
     return 0
 
