@@ -296,8 +296,13 @@ def test_the_current_folder_as_an_output_is_refused_in_one_line(good, tmp_path, 
         err = one_line_error(capsys, ["export-vtk", run, "-o", output, "-q"])
         assert ("names no file or folder of its own" if output else "an empty output name"
                 ) in err, (output, err)
-    err = one_line_error(capsys, ["export-vtk", run, "-o", str(work), "-q"])
+    for output in (str(work), "../../work", "../sub/../../work"):
+        err = one_line_error(capsys, ["export-vtk", run, "-o", output, "-q"])
+        assert "holds the current folder" in err, output
+    (tmp_path / "link").symlink_to(work)
+    err = one_line_error(capsys, ["export-vtk", run, "-o", str(tmp_path / "link"), "-q"])
     assert "holds the current folder" in err
+    (tmp_path / "link").unlink()
     assert sorted(p.name for p in work.rglob("*")) == ["sub"]
     with pytest.raises(InputError, match="names no file or folder of its own"):
         parts_folder(".")

@@ -494,7 +494,8 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
     """
     check_output_name(target)           # before Path(): Path("") is "."
     target = named_output(target)       # "-o ." is refused, not replaced
-    if kind == "folder" and Path.cwd().is_relative_to(target.absolute()):
+    if kind == "folder" and Path(os.path.realpath(Path.cwd())).is_relative_to(
+            os.path.realpath(target)):
         raise InputError(f"{target}: holds the current folder, which a verb cannot replace "
                          "whole when its output is complete; give a new folder by name "
                          "(e.g. -o results)")

@@ -68,6 +68,7 @@ def read_toml(path: str | os.PathLike, what: str, example: str) -> dict:
         if kind.startswith("text"):
             raise InputError(f"{what} {name} is {kind}; save it as UTF-8 ({example})") from None
         raise InputError(f"{what} {name} is not text ({kind}): give {example}") from None
+    text = text.replace("\r\n", "\n").replace("\r", "\n")    # as text mode reads line ends
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:

@@ -1,8 +1,7 @@
-"""What a caller does with a model's copies and containers cannot change its answers: a
-model review found dataclasses.replace sharing the RTD cache (a copy with another lag
-answered with the original's RTD, and the other way round), unpickled and deep-copied
-models with writable arrays beside their cached RTD, and mutable selection records,
-sources and closed classes."""
+"""What a caller does with a model's copies and containers cannot change its answers:
+dataclasses.replace gives a model with its own results (not the original's RTD cache),
+unpickled and deep-copied models keep their arrays read-only beside their cached RTD, and
+selection records, sources and closed classes refuse changes."""
 
 from __future__ import annotations
 
@@ -84,3 +83,14 @@ def test_a_window_rtd_says_the_window_asked_for():
     first, second = model.rtd(window=5.01), model.rtd(window=4.99)
     assert first.window == 5.01 and second.window == 4.99
     assert second.probability is first.probability      # the same numbers, computed once
+
+
+def test_a_selection_given_afterwards_is_read_only_too():
+    """with_selection (the automatic choice's models) and a source set by _derived."""
+    model = _model().with_selection({"reason": "chosen", "candidates": [{"name": "cells"}]})
+    with pytest.raises(TypeError, match="belongs to an immutable object"):
+        model.selection["candidates"].append({})
+    runs = ["a.h5"]
+    other = model._derived(source=runs)
+    runs.append("b.h5")
+    assert list(other.source) == ["a.h5"]

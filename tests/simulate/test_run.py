@@ -271,11 +271,25 @@ def test_info_of_a_run_with_an_interrupted_rerun_beside_it_says_so(tmp_path, ref
 ])
 def test_a_case_file_that_is_empty_or_not_text_is_one_line(tmp_path, capsys, content,
                                                           message):
-    """An empty case file ran the paper's 20 s, 27000-particle case without a word; a model
-    given as the case raised a UnicodeDecodeError traceback."""
+    """An empty case file is refused (not run as the paper's 20 s, 27000-particle case); a
+    model given as the case is named as such (no UnicodeDecodeError)."""
     path = tmp_path / "case.toml"
     path.write_bytes(content)
     assert main(["simulate", str(path), "-o", str(tmp_path / "x.h5"), "-q"]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message.format(p=path) in err[0], err
     assert not (tmp_path / "x.h5").exists()
+
+
+def test_a_case_file_with_old_mac_line_ends_reads():
+    """Line ends of a lone carriage return, as text mode reads them."""
+    from cfbmarkov.config import load_case
+
+    import tempfile
+    from pathlib import Path
+
+    with tempfile.TemporaryDirectory() as folder:
+        path = Path(folder) / "case.toml"
+        path.write_bytes(b'name = "cr"\r[particles]\rnumber = 200\r')
+        case = load_case(path)
+    assert case.name == "cr" and case.particles.number == 200

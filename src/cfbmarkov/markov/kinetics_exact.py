@@ -118,7 +118,7 @@ def _factors(q, a, c=None, lu_q=None) -> tuple:
             splu(sp.csc_matrix(eye - sp.diags(a * a) @ q)))
 
 
-def exit_moments(q, r, e, a, b, lu_q=None, c=None) -> ExitMoments:
+def exit_moments(q, r, e, a, b, lu_q=None, c=None, factors=None) -> ExitMoments:
     """:class:`ExitMoments` of an absorbing chain (module docstring).
 
     Parameters
@@ -136,6 +136,9 @@ def exit_moments(q, r, e, a, b, lu_q=None, c=None) -> ExitMoments:
         The LU factors of I - Q (``splu``), shared by the properties of one chain.
     c : ndarray of float64, shape (n,), optional
         1 - a computed without cancellation (``-expm1(-k lag)``); default 1 - a.
+    factors : tuple, optional
+        What :func:`_factors` returns for these q, a, c (the LU factors of I - D Q and
+        I - D^2 Q), where already formed: another b on the same chain and law.
 
     Returns
     -------
@@ -147,7 +150,7 @@ def exit_moments(q, r, e, a, b, lu_q=None, c=None) -> ExitMoments:
         If no entering particle can leave.
     """
     r, e, b = (np.asarray(x, dtype=np.float64) for x in (r, e, b))
-    q, a, c, lu_q, lu_dq, lu_d2q = _factors(q, a, c, lu_q)
+    q, a, c, lu_q, lu_dq, lu_d2q = factors if factors is not None else _factors(q, a, c, lu_q)
     leaves = lu_q.solve(r)
     p = float(e @ leaves)
     if not p > 0:
@@ -177,9 +180,12 @@ class CarriedMoments:
     independent of each other (module docstring, Carried properties).
 
     The entry states are those particles keep circulating through: an entry state from
-    which no exit can be reached (a trap) is left out, and every moment is conditioned on
-    the residence ending in a kept one (the particles that land in a trap never come back,
-    so they carry no value into the steady state of those that do).
+    which no exit can be reached (a trap) is left out. Where every residence ends in a kept
+    one (the rows of L sum to 1 within :data:`SURVIVAL_TOL`), every moment is conditioned on
+    that; where some end in a trap, or fall deeper than the lap deficits followed, the
+    moments are not conditioned and the particles still circulating are followed
+    (``survivors``), their survival counted per pass (the particles that land in a trap
+    never come back, so they carry no value into the steady state of those that do).
 
     Attributes
     ----------
@@ -188,21 +194,23 @@ class CarriedMoments:
     entry : ndarray of float64, shape (M,)
         nu, the stationary distribution of the kept entry states (the exact RTD's).
     a, b, a2, ab2, b2, forget, forget2 : ndarray of float64, shape (M, M)
-        From entry state j, landing in j' (conditioned on landing in a kept one): E[A 1{j'}], E[B 1{j'}],
+        From entry state j, landing in j' (conditioned on landing in a kept one unless
+        ``survivors``): E[A 1{j'}], E[B 1{j'}],
         E[A^2 1{j'}], E[2AB 1{j'}], E[B^2 1{j'}], E[(1 - A) 1{j'}] and E[(1 - A^2) 1{j'}],
         the last two formed without cancellation.
     landing : ndarray of float64, shape (M, M)
-        L, from entry state j the probability of landing in j' (rows sum to 1).
+        L, from entry state j the probability of landing in j' (rows sum to 1 unless
+        ``survivors``).
     mean_by_entry, second_by_entry : ndarray of float64, shape (M,)
         u and s, the steady value's mass and second moment's mass by entry state
         (sum u the steady mean).
     survivors : ndarray of float64, shape (M,), optional
-        Where residences from some entry states end in a trap more often than from others
-        (L's rows sum to less than 1 by more than :data:`SURVIVAL_TOL`, unequally): the
-        moments and L are not conditioned on landing, and this is phi, the entry
-        distribution of the particles still circulating after many passes (L's Perron
-        vector); u and s are theirs. None where every residence lands in a kept entry
-        state (the moments conditioned on it).
+        Where some residences end in a trap or fall deeper than the lap deficits followed
+        (L's rows sum to less than 1 by more than :data:`SURVIVAL_TOL`): the moments and L
+        are not conditioned on landing, and this is phi, the entry distribution of the
+        particles still circulating after many passes, first entered with ``entry``; u
+        and s are theirs. None where every residence lands in a kept entry state (the
+        moments conditioned on it).
     """
 
     kept: np.ndarray
@@ -247,7 +255,10 @@ class CarriedMoments:
         from u_0 = v0 nu, s_0 = v0^2 nu; the mean sum u_k, the second moment sum s_k. The
         recursion is linear in (u, s, 1): its matrix raised to the power ``passes`` by
         repeated squaring (2 log2(passes) products of (2M + 1)-square matrices, not one
-        step a pass).
+        step a pass). With ``survivors`` the surviving mass w is followed as well
+        (:func:`_pass_step`: u_k = A^T u_(k-1) + B^T w_(k-1), w_k = L^T w_(k-1) from
+        w_0 = nu), the mean and second moment those of the particles that complete the
+        passes, sum u_k / sum w_k and sum s_k / sum w_k, each squaring rescaled.
 
         Parameters
         ----------
@@ -264,16 +275,23 @@ class CarriedMoments:
         if self.survivors is not None:
             # the surviving mass w_k = L^T w_(k-1) too (:func:`_pass_step`); the mean among
             # the particles that complete the passes
-            step = _pass_step(self.a, self.b, self.a2, self.ab2, self.b2, self.landing)
+            power = _pass_step(self.a, self.b, self.a2, self.ab2, self.b2, self.landing)
             state = np.concatenate([float(v0) * self.entry, float(v0) ** 2 * self.entry,
                                     self.entry])
-            state = np.linalg.matrix_power(step, int(passes)) @ state
+            left = int(passes)
+            while left:     # step^passes by squaring, each product rescaled: the surviving
+                if left & 1:        # mass falls as rho^N and would underflow, the ratios not
+                    state = power @ state
+                    state /= max(float(np.max(np.abs(state))), np.finfo(np.float64).tiny)
+                left >>= 1
+                if left:
+                    power = power @ power
+                    power /= max(float(np.max(np.abs(power))), np.finfo(np.float64).tiny)
             mass = float(state[2 * m:].sum())
             if not mass > 0.0:
                 raise InputError(f"after {passes} passes no particle is left circulating "
                                  "(every one has landed in a trap)")
-            mean, second = float(state[:m].sum()) / mass, float(state[m:2 * m].sum()) / mass
-            return mean, second
+            return float(state[:m].sum()) / mass, float(state[m:2 * m].sum()) / mass
         step = np.zeros((2 * m + 1, 2 * m + 1))
         step[:m, :m] = self.a.T
         step[:m, 2 * m] = self.b.T @ self.entry
@@ -303,14 +321,15 @@ def _steady_by_entry(forget: np.ndarray, landing: np.ndarray, rhs: np.ndarray,
     return np.linalg.solve(system, rhs)
 
 
-def carried_moments(q, r, e, a, b, landing, entry_rows, lu_q=None, c=None) -> CarriedMoments:
+def carried_moments(q, r, e, a, b, landing, entry_rows, lu_q=None, c=None,
+                    factors=None) -> CarriedMoments:
     """:class:`CarriedMoments` of a periodic riser's residence chain (module docstring,
     Carried properties): the landing-resolved moments, by the recursions of
     :func:`exit_moments` with the exits R split by landing state instead of r.
 
     Parameters
     ----------
-    q, r, e, a, b, lu_q, c
+    q, r, e, a, b, lu_q, c, factors
         As :func:`exit_moments`.
     landing : scipy.sparse matrix of float64, shape (n, M)
         R, the exits split by the entry state they land in (:func:`residence_chain`).
@@ -328,7 +347,7 @@ def carried_moments(q, r, e, a, b, landing, entry_rows, lu_q=None, c=None) -> Ca
         no steady state.
     """
     b = np.asarray(b, dtype=np.float64)
-    q, a, c, lu_q, lu_dq, lu_d2q = _factors(q, a, c, lu_q)
+    q, a, c, lu_q, lu_dq, lu_d2q = factors if factors is not None else _factors(q, a, c, lu_q)
     big_r = np.asarray(sp.csr_matrix(landing).toarray(), dtype=np.float64)
     lands = lu_q.solve(big_r)                                   # (I - Q)^-1 R
     alpha = lu_dq.solve(a[:, None] * big_r)
@@ -388,8 +407,8 @@ def _pass_step(a, b, a2, ab2, b2, landing) -> np.ndarray:
 
 
 def _survivors(kept, nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, lu_dq) -> "CarriedMoments":
-    """:class:`CarriedMoments` where residences from some entry states end in a trap more
-    often than from others (the landing matrix's rows sum to less than 1 by more than
+    """:class:`CarriedMoments` where some residences end in a trap or fall deeper than the
+    lap deficits followed (the landing matrix's rows sum to less than 1 by more than
     :data:`SURVIVAL_TOL`): the moments are kept unconditioned, and the steady state is that
     of the particles still circulating after many passes, first entered with ``nu``: the
     limit of (u_N, s_N) / sum w_N under :func:`_pass_step`, taken by squaring the step
@@ -435,7 +454,9 @@ class PropertyAnswer:
         mean of the values they come back with).
     exit_mean, exit_sd : float
         Mean and standard deviation of the value at the exit, per residence (the SD is
-        sqrt(E[v^2] - E[v]^2), 0 where that lies within :data:`ROUND_OFF` of E[v^2]).
+        sqrt(E[v^2] - E[v]^2), 0 where that lies within :data:`ROUND_OFF` of E[v^2];
+        formed from the moments of v - E[v] where E[v^2] exceeds the variance by more
+        than :data:`CENTRE_ABOVE`, then 0 within :data:`CENTRED_ROUND_OFF` of |E[v]|).
     bed_mean : float
         The bed's steady-state mean over all particles (per particle, at the frames).
     bed_mean_by_state : ndarray of float64, shape (S,)
@@ -690,9 +711,10 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     for i, name in enumerate(sk.names):
         a, b, c = a_all[i][state], b_all[i][state], c_all[i][state]
         occ = occupancy
+        factors = _factors(q, a, c, lu_q)       # shared by the centred moments below
         if sk.starts[i] == "carried":
             try:
-                m = carried_moments(q, r, e, a, b, *landed, lu_q, c)
+                m = carried_moments(q, r, e, a, b, *landed, lu_q, c, factors)
             except InputError as exc:
                 raise InputError(f"{where}property {name}: {exc}") from None
             v0, second = m.carried()
@@ -706,7 +728,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
             # mu = (u + (nu o b) Q) (I - D Q)^-1 (module docstring)
             values = m.entering_mass(entering + q.T @ (occ * b))
         else:
-            m = exit_moments(q, r, e, a, b, lu_q, c)
+            m = exit_moments(q, r, e, a, b, lu_q, c, factors)
             v0 = float(sk.initial[i])
             mean, second = m.exit_mean(v0), m.exit_second(v0)
             values = v0 * m.mass_per_start + m.mass_rest
@@ -720,10 +742,10 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
             # is w' = a w + (b - (1 - a) mean), lose none
             centred = b - c * mean
             if sk.starts[i] == "carried":
-                shifted = carried_moments(q, r, e, a, centred, *landed, lu_q, c)
+                shifted = carried_moments(q, r, e, a, centred, *landed, lu_q, c, factors)
                 mw, sw = shifted.carried()
             else:
-                mc = exit_moments(q, r, e, a, centred, lu_q, c)
+                mc = exit_moments(q, r, e, a, centred, lu_q, c, factors)
                 mw, sw = mc.exit_mean(v0 - mean), mc.exit_second(v0 - mean)
             # what is left of w's round-off: b - (1 - a) mean and v0 - mean carry an
             # absolute error of a few ulps of the mean, so an SD within 1e-12 of it is zero

@@ -660,9 +660,13 @@ class MarkovModel:
         The copy shares this model's validated read-only arrays (not checked again) and what
         it has already derived (sampling chain, pass fractions, exact RTDs, ...), not
         recomputed: calibrating the coherence runs the same chain with many values of it."""
+        from cfbmarkov._frozen import frozen_record
+
         model = copy.copy(self)         # the fields and the cached properties, shared
         object.__setattr__(model, "_cache", dict(self._cache))
         for name, value in changes.items():
+            if name in ("selection", "source"):     # read-only, as __post_init__ makes them
+                value = frozen_record(value)
             object.__setattr__(model, name, value)
         return model
 
