@@ -177,8 +177,7 @@ def test_an_empty_output_name_is_named_as_such(tmp_path, capsys):
 
 
 def test_info_of_a_foreign_hdf5_file_names_both_kinds_it_reads(tmp_path, capsys):
-    """info reads trajectory and model files: a foreign format was "not a cfbmarkov
-    trajectory file", as if a model would not do."""
+    """info reads trajectory and model files: a foreign format is named as neither."""
     import h5py
 
     with h5py.File(tmp_path / "foreign.h5", "w") as f:

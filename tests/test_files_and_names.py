@@ -284,10 +284,9 @@ def test_a_read_error_inside_h5py_names_the_damaged_file(tmp_path):
 
 def test_the_current_folder_as_an_output_is_refused_in_one_line(good, tmp_path, capsys,
                                                                  monkeypatch):
-    """``-o .`` (and ``./``, ``dir/..``, ``/``) for a verb that writes a folder raised a
-    traceback (PosixPath('.') has an empty name); a folder above the current one would be
-    replaced whole, leaving the shell in a deleted folder: one line each, nothing
-    written."""
+    """``-o .`` (and ``./``, ``dir/..``, ``/``) for a verb that writes a folder, and a
+    folder above the current one (replaced whole, it would leave the shell in a deleted
+    folder): one line each, no traceback, nothing written."""
     run, _ = good
     work = tmp_path / "work"
     (work / "sub").mkdir(parents=True)
@@ -328,7 +327,7 @@ def test_free_lock_files_are_removed_and_held_ones_kept(tmp_path):
 
 
 def test_a_run_of_another_riser_given_to_a_model_names_the_fix(good, tmp_path, capsys):
-    """The message spoke to the Python API only ("make the space with that size")."""
+    """The message names the command line's fix, not only the Python API's."""
     from dataclasses import replace
 
     _, model = good

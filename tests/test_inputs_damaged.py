@@ -179,13 +179,13 @@ MODEL_DAMAGE = {
     "matrix-shape": (_replace("transition_matrix", np.eye(5)), "shape"),
     "counts-missing": (lambda f: f.__delitem__("counts"), "missing"),
     "window-nan-one": (_attr("window", [1.0, np.inf]), "window"),
-    # a layout version that is none (read as version 1 without a word)
+    # a layout version that is none, not read as version 1
     "version-0": (_attr("version", 0), "damaged model file (layout version 0: this cfbmarkov"),
     "version-nan": (_attr("version", np.nan), "damaged model file (layout version nan"),
     # a newer layout is no damage: it names the upgrade
     "version-2": (_attr("version", 2), "model file layout version 2, written by a newer "
                                        "cfbmarkov (this one reads version 1); upgrade"),
-    # valid JSON of another shape: info raised an AttributeError traceback
+    # valid JSON of another shape: one line from info too, no traceback
     "selection-a-list": (_attr("selection", "[1, 2]"), "selection is not a record"),
     "selection-candidates-text": (_attr("selection", '{"candidates": "cells"}'),
                                   "selection is not a record"),

@@ -292,7 +292,7 @@ def test_process_pool_runs_cases_in_parallel(tmp_path, capfd):
     (["--models", "paper,paper"], "names 'paper,paper' repeat a name: give each once"),
     (["--velocities", "4,,6"], "velocities '4,,6' hold an empty entry between commas"),
     (["--overrides", "missing.toml"], "cannot read overrides file missing.toml"),
-    # a model given as overrides, or an empty file (it was applied as no change at all)
+    # a model given as overrides, or a file that sets nothing
     (["--overrides", "binary.h5"], "overrides file binary.h5 is not text (an HDF5 file"),
     (["--overrides", "empty.toml"], "overrides file empty.toml is empty (it sets nothing)"),
     (["--jobs", "0"], "must be at least 1"),

@@ -604,10 +604,10 @@ def test_windowed_exit_means_count_records_from_the_first_frame_read():
 
 @pytest.mark.parametrize("start", ["entry", "carried"])
 def test_the_exit_sd_keeps_its_digits_far_from_zero(start):
-    """E[v^2] - E[v]^2 lost every digit where the values lie far from zero against their
-    spread: a heat exchange 300 -> 700-900 shifted by 1e8 printed an exit SD of 0 (1e7:
-    wrong in the 5th digit). A shift moves the mean with it and leaves the SD as it was;
-    a carried value at a uniform target keeps an SD of exactly 0."""
+    """Values far from zero against their spread (a heat exchange 300 -> 700-900 shifted
+    by up to 1e12), where E[v^2] - E[v]^2 keeps few digits: a shift moves the mean with it
+    and leaves the exit SD and the SD after N passes as they are; a carried value at a
+    uniform target keeps an SD of exactly 0."""
     u, w, k0, k1 = 0.3, 0.4, 1.5, 6.0
     model = periodic_model(u, w)
 

@@ -165,7 +165,7 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     ('[[property]]\nname = "X"\nlaw = "second-order"\nrate = 1.0\n', None, "unknown law"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = -1.0\n', None, "rate = -1.0"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = nan\n', None, "finite"),
-    # values whose squares overflow (the exit SD printed 0, the bed mean nan)
+    # values whose squares overflow the exit SD's moments
     ('[[property]]\nname = "T"\nlaw = "heat-exchange"\ncoefficient = 2.0\n'
      'temperature = 1e155\ninitial = 300.0\n', None,
      "property T: a value of 1e+155 (its initial value or a cell's limit) lies beyond 1e+100"),

@@ -54,7 +54,7 @@ def test_fit_predict_rtd_info(tmp_path, capsys, markov_run):
     code, _, err = run_cli(capsys, "maps", model_path, "--times", "0.07", "-o", tmp_path / "x.png")
     assert "not a whole multiple of the model's lag" in err
     assert_clean_failure(code, err, tmp_path / "x.png")
-    # a typo between commas was dropped, a time given twice drew two panels: refused
+    # an empty entry between commas (a typo) and a time given twice: refused
     for times, said in (("0.05,,0.1", "hold an empty entry between commas"),
                         ("0.1,0.1", "repeat a time: give each once")):
         code, _, err = run_cli(capsys, "maps", model_path, "--times", times, "-o",

@@ -218,8 +218,8 @@ def test_a_model_with_another_coherence_keeps_what_its_chain_derived(coherent):
 
 
 def test_a_coherence_calibrated_to_zero_is_said(tmp_path, capsys):
-    """fit --coherent whose calibration found no coherence printed what a plain fit prints:
-    nothing said it was asked for and found to be 0."""
+    """fit --coherent whose calibration finds no coherence says so (the model is then the
+    plain chain, and a plain fit's output alone would not tell)."""
     run = synthetic.write_run(tmp_path / "run.h5", synthetic.RiserFlow(), 300, 4.0, seed=1)
     assert main(["fit", str(run), "--window", "0:4", "--coherent", "--resamples", "0",
                  "--no-adequacy", "-o", str(tmp_path / "m.h5")]) == 0

@@ -139,7 +139,7 @@ def test_a_walk_deeper_than_the_deficits_kept_says_so_with_its_drift_mean():
     line = unresolved_warning(rtd)
     assert "64 laps" in line and "10 s" in line
     # react's exact answers lean as E(RT) does: said of residences followed too short, not
-    # of particles that never leave (a kinetics review read the latter as wrong)
+    # of particles that never leave
     from cfbmarkov.cli.kinetics import _chain_warnings
 
     said = _chain_warnings(model)

@@ -77,8 +77,7 @@ def test_selection_source_and_classes_are_read_only():
 
 
 def test_a_window_rtd_says_the_window_asked_for():
-    """Window RTDs are cached by whole lags: rtd(window=5.01) then rtd(window=4.99)
-    returned the first object, its window 5.01."""
+    """Window RTDs are cached by whole lags; each says the window it was asked for."""
     model = _model()
     first, second = model.rtd(window=5.01), model.rtd(window=4.99)
     assert first.window == 5.01 and second.window == 4.99

@@ -224,9 +224,9 @@ def test_resume_to_an_end_before_the_checkpoint_is_refused(tmp_path, reference):
 
 
 def test_resume_of_a_finished_run_says_it_is_finished(tmp_path, reference):
-    """--resume on a finished output of another case or end said the run "stopped before
-    its first checkpoint"; it says the file is a finished run, which keeps no checkpoint.
-    The same case and end is resumed as done."""
+    """--resume on a finished output of another case or end says the file is a finished
+    run, which keeps no checkpoint (not that the run stopped before its first one); the
+    same case and end is resumed as done."""
     case, ref = reference
     out = tmp_path / "done.h5"
     shutil.copyfile(ref, out)
