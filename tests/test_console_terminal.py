@@ -19,8 +19,8 @@ def _size(fd: int, rows: int, columns: int) -> None:
 
 
 def test_a_terminal_of_no_width_gets_lines_not_an_empty_bar(monkeypatch):
-    """A pseudo-terminal that reports 0 columns (``script``, some container shells) cut
-    the bars of simulate, predict and react to nothing, with no line either."""
+    """A pseudo-terminal that reports 0 columns (``script``, some container shells) cuts
+    a bar to nothing: simulate, predict and react write whole lines there."""
     main, side = os.openpty()
     try:
         with os.fdopen(side, "w", closefd=False) as stream:
