@@ -93,3 +93,10 @@ def test_a_selection_given_afterwards_is_read_only_too():
     other = model._derived(source=runs)
     runs.append("b.h5")
     assert list(other.source) == ["a.h5"]
+
+
+def test_the_repr_tells_models_apart_by_window_and_coherence():
+    model = _model(window=(10.0, 15.0))
+    assert repr(model) == ("MarkovModel(cells 1x3 (3 states), lag=0.1 s, estimator='given', "
+                           "window=10-15 s, transitions=0)")
+    assert repr(model.with_coherence(0.6)).endswith(", transitions=0, coherence=0.6)")

@@ -775,8 +775,14 @@ class MarkovModel:
         return model_summary.model_summary(self, warnings)
 
     def __repr__(self) -> str:
+        window = (f", window={self.window[0]:g}-{self.window[1]:g} s" if self.window
+                  else "")
+        extra = (f", coherence={self.coherence:.3g}" if self.coherence else "") + (
+            ", open riser" if self.open_flow is not None else "") + (
+            f", runs={len(self.run_windows)}" if self.run_windows else "")
         return (f"MarkovModel({self.state_space.describe()}, lag={self.lag:g} s, "
-                f"estimator={self.estimator!r}, transitions={self.n_transitions})")
+                f"estimator={self.estimator!r}{window}, transitions={self.n_transitions}"
+                f"{extra})")
 
     # -- persistence (the file layout lives in cfbmarkov.markov.model_file) --------------
     def save(self, path: str | os.PathLike, force: bool = False) -> Path:
