@@ -177,7 +177,8 @@ MODEL_DAMAGE = {
     "state-space-not-json": (_attr("state_space", "cells 3x8"), "JSON"),
     "state-space-unknown": (_attr("state_space", '{"kind": "nope"}'), "unknown state space"),
     "matrix-shape": (_replace("transition_matrix", np.eye(5)), "shape"),
-    "counts-missing": (lambda f: f.__delitem__("counts"), "missing"),
+    "counts-missing": (lambda f: f.__delitem__("counts"), "missing the dataset 'counts'"),
+    "lag-missing": (lambda f: f.attrs.__delitem__("lag"), "missing the attribute 'lag'"),
     "window-nan-one": (_attr("window", [1.0, np.inf]), "window"),
     # a layout version that is none, not read as version 1
     "version-0": (_attr("version", 0), "damaged model file (layout version 0: this cfbmarkov"),

@@ -210,7 +210,7 @@ def read_model_group(group: h5py.Group | h5py.File, model_class: Callable[..., "
     try:
         return _read_model_group(group, model_class)
     except KeyError as exc:
-        raise InputError(f"{label}: damaged model file (missing {exc})") from None
+        raise InputError(f"{label}: damaged model file (missing {_missing(exc)})") from None
     except InputError as exc:
         raise InputError(f"{label}: damaged model file ({exc})") from None
     except json.JSONDecodeError as exc:
@@ -264,6 +264,21 @@ def _cell_fields(group) -> CellFields | None:
 def _text_attr(value) -> str:
     """A text attribute as str (h5py may give bytes)."""
     return value.decode() if isinstance(value, bytes) else str(value)
+
+
+def _missing(exc: KeyError) -> str:
+    """What a KeyError from h5py says is missing, in words (the attribute or dataset by
+    name), or its text."""
+    import re
+
+    text = str(exc.args[0]) if exc.args else str(exc)
+    found = re.search(r"can't locate attribute: '([^']+)'", text)
+    if found:
+        return f"the attribute {found.group(1)!r}"
+    found = re.search(r"object '([^']+)' doesn't exist", text)
+    if found:
+        return f"the dataset {found.group(1)!r}"
+    return text
 
 
 def _attr_number(value, name: str) -> float:
