@@ -596,3 +596,52 @@ def test_a_heat_map_of_more_states_than_pixels_keeps_every_non_zero(tmp_path):
     assert pooled_max(small, HEATMAP_PIXELS) is small
     odd = pooled_max(np.ones((601, 601)), HEATMAP_PIXELS)  # padded: 301 blocks of 2
     assert odd.shape == (301, 301) and odd.min() == 1.0
+
+
+def _lap_file(path, times, laps, **kw):
+    laps = np.asarray(laps, np.int32)
+    t, n = laps.shape
+    pos = np.empty((t, n, 2))
+    pos[..., 0], pos[..., 1] = 0.025, 0.5
+    return write_trajectories(path, np.asarray(times, float), pos, width=0.1, height=1.0,
+                              laps=laps, **kw)
+
+
+def test_a_lag_of_a_fraction_of_a_frame_more_is_not_rounded_to_whole_frames(tmp_path):
+    """Frames of 0.01 s against a model's lag of 1.005 s (100.5 frames): the stride is not
+    taken as 101 frames (a tolerance of 1 % of the lag allowed it) but every frame is used,
+    with the warning the docs give."""
+    from cfbmarkov.observed.residence import WHOLE_FRAMES
+    from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE
+
+    assert WHOLE_FRAMES == 0.5 * FRAME_SPACING_TOLERANCE
+    tr = np.round(0.01 * np.arange(2011), 10)
+    tp = np.round(1.005 * np.arange(21), 10)
+    phase = np.array([0.1, 0.7, 1.3, 1.9])
+    lr = np.floor((tr[:, None] + phase) / 2.5).astype(int)
+    lp = np.floor((tp[:, None] + phase) / 2.5).astype(int)
+    ref = _lap_file(tmp_path / "r.h5", tr, lr - lr[0], source="cfd-dem")
+    pred = _lap_file(tmp_path / "p.h5", tp, lp - lp[0], source="markov-prediction",
+                     parameters={"columns": 2})
+    c = compare_runs(ref, pred, (0, 20.1), bin_width=0.5)
+    assert c.lag_frames == 1
+    assert any("is not a whole number of the reference's frames" in w for w in c.warnings)
+
+
+def test_flat_mixing_curves_of_an_open_riser_whose_tracers_leave_are_warned_of(tmp_path):
+    """Both curves flat (every tracer stays in the left half) until the tracers leave
+    (NaN after): the mixing RMS of 0 tests nothing, and compare says so."""
+    t = np.arange(8.0)
+    y = np.array([[.5, .7, .95, np.nan, np.nan, np.nan, np.nan, np.nan],
+                  [np.nan, .05, .3, .5, .7, .95, np.nan, np.nan]]).T
+
+    def run(path, source, parameters=None):
+        return write_trajectories(path, t, np.stack([np.full_like(y, .02), y], -1), width=0.1,
+                                  height=1.0, present=np.isfinite(y), boundary="open",
+                                  source=source, parameters=parameters)
+
+    c = compare_runs(run(tmp_path / "r.h5", "cfd-dem"),
+                     run(tmp_path / "m.h5", "markov-prediction", {"columns": 2, "rows": 10}),
+                     (0, 7))
+    assert np.isnan(c.reference.mixing_fraction).any() and c.mixing_rms == 0.0
+    assert any("the mixing curves stay flat in both files" in w for w in c.warnings)

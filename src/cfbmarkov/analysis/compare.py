@@ -36,7 +36,7 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.observed.clusters import cluster_index
 from cfbmarkov.observed.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
-from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, ResidenceTimes,
+from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, WHOLE_FRAMES, ResidenceTimes,
                                           net_flow_direction, residence_times, rtd_histogram)
 from cfbmarkov.trajectories import Trajectories
 from cfbmarkov.trajectory_format import time_text
@@ -506,7 +506,7 @@ def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float,
     lag_frames = 1
     if basis == "frames":
         ratio = pred.frame_interval / ref.frame_interval
-        if round(ratio) >= 1 and abs(ratio - round(ratio)) <= 0.01 * ratio:
+        if round(ratio) >= 1 and abs(ratio - round(ratio)) <= WHOLE_FRAMES:
             lag_frames = int(round(ratio))
         else:
             warnings.append(f"the model's lag {pred.frame_interval:g} s is not a whole number "
@@ -628,8 +628,11 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
         warnings.append("the mixing curve is undefined where no tracer (a particle present at "
                         f"the window start) is left ({', '.join(ends)}): the mixing RMS is "
                         "undefined (null); a window that ends before that gives one")
-    if (np.isfinite(rms) and f_ref.size and f_mod.size and np.ptp(f_ref) == 0
-            and np.ptp(f_mod) == 0):
+    def flat(curve):     # where the tracers are there to say (an open riser's leave: NaN)
+        known = curve[np.isfinite(curve)]
+        return known.size > 0 and np.ptp(known) == 0
+
+    if np.isfinite(rms) and flat(f_ref) and flat(f_mod):
         warnings.append(f"the mixing curves stay flat in both files (the tracers make no "
                         f"net crossing of the mid-plane x = W/2 over the window): the mixing "
                         f"RMS {rms:g} tests nothing; a longer window, or a flow whose "

@@ -27,7 +27,7 @@ import numpy as np
 from cfbmarkov.analysis.development import development
 from cfbmarkov.analysis.mixing import mixing_curve_of
 from cfbmarkov.errors import InputError
-from cfbmarkov.observed.residence import (net_flow_direction, residence_times,
+from cfbmarkov.observed.residence import (WHOLE_FRAMES, net_flow_direction, residence_times,
                                           rtd_histogram)
 
 
@@ -259,7 +259,7 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
             lag = pred.frame_interval
     with reading_errors(reference), Trajectories(reference) as ref:
         ratio = lag / ref.frame_interval
-        if math.isfinite(ratio) and round(ratio) >= 1 and abs(ratio - round(ratio)) <= 0.01 * ratio:
+        if math.isfinite(ratio) and round(ratio) >= 1 and abs(ratio - round(ratio)) <= WHOLE_FRAMES:
             lag_frames = int(round(ratio))
         direction = net_flow_direction(ref, window)
         measured = measure_run(ref, window, bin_width, use_events=False, lag_frames=lag_frames,

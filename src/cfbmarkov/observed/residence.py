@@ -341,6 +341,13 @@ class ResidenceTimes:
 
 
 #: rows of the paper's cell grid: an open riser's face band defaults to H / 38 (one cell)
+#: how far (in frames) a model's lag may lie from a whole number of a reference's frames and
+#: be taken as that many: the time tolerance of a frame (half of
+#: :data:`~cfbmarkov.trajectory_format.FRAME_SPACING_TOLERANCE`, as
+#: ``Trajectories.lag_frames`` holds a lag to), not a share of the lag (1 % of 100 frames
+#: would take 100.5 as 101)
+WHOLE_FRAMES = 0.005
+
 DEFAULT_FACE_ROWS = 38
 
 
@@ -732,5 +739,5 @@ def rtd_histogram(samples, bin_width: float = 0.025, *, window_length: float
     return edges, (counts / total if total > 0 else counts)
 
 
-__all__ = ["ResidenceTimes", "residence_times", "residence_times_from_events",
+__all__ = ["WHOLE_FRAMES", "ResidenceTimes", "residence_times", "residence_times_from_events",
            "residence_times_from_laps", "rtd_histogram"]
