@@ -293,3 +293,21 @@ def test_passevents_type_is_accepted(tmp_path):
     with Trajectories(path) as traj:
         rt = residence_times(traj, (0.0, 0.5))
     np.testing.assert_allclose(rt.samples, [0.3])
+
+
+def test_events_of_a_window_that_starts_between_frames_count_from_its_start(tmp_path):
+    """Passes up at 1.3, 3.1 (after one down at 2.6), 5.7 and 8.2 s on frames every second,
+    the window 1.2-9 s: the counter at 1.2 s is 0, so the records are 1.3, 5.7 and 8.2
+    (samples 4.4 and 2.5), not those after the first frame at 2 s (the pass at 1.3 lost)."""
+    passes = [(1.3, 1), (2.6, -1), (3.1, 1), (5.7, 1), (8.2, 1)]
+    times = np.arange(10.0)
+    laps = np.array([[sum(d for t, d in passes if t <= ti)] for ti in times], np.int32)
+    positions = np.stack([np.full((10, 1), 0.025), np.full((10, 1), 0.5)], axis=-1)
+    events = PassEvents(np.array([t for t, _ in passes]), np.zeros(5, np.int32),
+                        np.array([d for _, d in passes], np.int8))
+    path = write_trajectories(tmp_path / "e.h5", times, positions, width=0.1, height=1.0,
+                              laps=laps, events=events)
+    with Trajectories(path) as traj:
+        np.testing.assert_allclose(residence_times(traj, (1.2, 9.0)).samples, [4.4, 2.5])
+        np.testing.assert_allclose(residence_times(traj, (0.0, 8.5)).samples, [4.4, 2.5])
+        np.testing.assert_allclose(residence_times(traj, (2.7, 9.0)).samples, [2.6, 2.5])

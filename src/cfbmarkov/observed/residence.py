@@ -524,7 +524,8 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     """Residence-time samples of a trajectory file in a window.
 
     Uses the file's exact pass events when it has them and ``use_events`` is true (counted
-    from the lap counter of the window's first frame, events with t_first < t <= stop);
+    from the lap counter at the window's start, the first frame's less the passes between
+    the start and that frame, events with start < t <= stop);
     otherwise the lap counters frame by frame, read in blocks.
 
     Parameters
@@ -618,10 +619,17 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         if not stop > t_first:                   # a window of a single frame
             return ResidenceTimes(np.zeros(0), True, (start, stop))
         try:
-            samples = residence_times_from_events(sign * traj.laps(i0).astype(np.int64),
-                                                  events.time, events.particle,
+            # the counters at the window's start: the first frame's, less the passes made
+            # between the start and that frame (a window may start between frames)
+            laps = traj.laps(i0).astype(np.int64)
+            between = (events.time > start) & (events.time <= t_first)
+            if between.any():
+                np.subtract.at(laps, events.particle[between].astype(np.int64),
+                               events.direction[between].astype(np.int64))
+            first = min(start, t_first)
+            samples = residence_times_from_events(sign * laps, events.time, events.particle,
                                                   sign * events.direction.astype(np.int64),
-                                                  t_first, stop)
+                                                  first, stop)
         except InputError as exc:
             raise InputError(f"{traj.path}: damaged pass events ({exc})") from None
         return ResidenceTimes(samples, True, (start, stop))
