@@ -311,3 +311,17 @@ def test_events_of_a_window_that_starts_between_frames_count_from_its_start(tmp_
         np.testing.assert_allclose(residence_times(traj, (1.2, 9.0)).samples, [4.4, 2.5])
         np.testing.assert_allclose(residence_times(traj, (0.0, 8.5)).samples, [4.4, 2.5])
         np.testing.assert_allclose(residence_times(traj, (2.7, 9.0)).samples, [2.6, 2.5])
+
+
+def test_an_open_risers_particle_inside_at_the_start_that_returns_through_the_inlet():
+    """Inside at the window's first frame, back out through the inlet, in again and out
+    through the outlet: one residence begun before the window (no sample), not a new one
+    from its return; a particle that enters in the window gives its sample."""
+    from cfbmarkov.observed.residence import open_residence_times
+
+    nan = np.nan
+    times = np.arange(9.0)
+    y = np.array([[0.3, 0.05, nan, nan, 0.05, 0.5, 0.9, 0.99, nan],     # the returning one
+                  [nan, 0.05, 0.4, 0.8, 0.99, nan, nan, nan, nan]]).T   # in at 1, out at 5
+    samples = open_residence_times(times, np.isfinite(y), y, 0.1, 1.0)
+    np.testing.assert_allclose(samples, [4.0])

@@ -106,8 +106,9 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
     time since its entry (NaN where the entry was not seen). A return through the inlet
     within a residence (after falling back out, or out of view) continues it, its value
     held while it was absent, as the residence times of
-    :func:`cfbmarkov.observed.residence.open_residence_times` count it. A particle absent in the first frame is
-    not an entry there. ``exit_*`` must hold one slot per particle-frame that can be an
+    :func:`cfbmarkov.observed.residence.open_residence_times` count it; so does that of a
+    particle inside at the first frame (its entry unknown). A particle absent in the first
+    frame is not an entry there. ``exit_*`` must hold one slot per particle-frame that can be an
     exit. ``stored`` and ``use_stored`` as for :func:`integrate_periodic`.
     """
     n_frames, n_particles = states.shape
@@ -119,6 +120,7 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
     for p in range(n_particles):
         if present[0, p]:
             last_height[p] = vertical[0, p]
+            entered[p] = -np.inf        # inside at the start: in a residence, its entry unknown
     n_out = 0
     if n_frames > 0:
         _bed(0, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
@@ -138,7 +140,7 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
             elif before and not now and last_height[p] >= height - band:
                 exit_value[n_out] = value[p]
                 exit_time[n_out] = t
-                exit_residence[n_out] = t - entered[p]
+                exit_residence[n_out] = t - entered[p] if np.isfinite(entered[p]) else np.nan
                 n_out += 1
                 entered[p] = np.nan
             if now:

@@ -97,12 +97,13 @@ def _scan_open(times, present, vertical, band, height, was_present, last_height,
 
     Per particle: ``was_present`` [N] (int8: 1 present, 0 absent, -1 before the window's
     first frame), ``last_height`` [N] (its height when last present) and ``entered`` [N]
-    (time of the entry of its current residence, NaN outside one) carry over between
-    blocks. An entry is a frame where the particle is present, was absent in the frame
-    before and lies within ``band`` of the inlet (height <= band); an exit is a frame where
-    it is absent, was present before and was within ``band`` of the outlet (height >=
-    H - band). A residence runs from an entry to the next exit; other absences (back out
-    through the inlet, out of view) do not end it.
+    (time of the entry of its current residence, -inf in one begun before the window, NaN
+    outside one) carry over between blocks. An entry is a frame where the particle is
+    present, was absent in the frame before and lies within ``band`` of the inlet (height
+    <= band); an exit is a frame where it is absent, was present before and was within
+    ``band`` of the outlet (height >= H - band). A residence runs from an entry to the next
+    exit; other absences (back out through the inlet, out of view) do not end it, also for
+    a particle inside at the window's first frame, whose entry is unknown (no sample).
     """
     n_frames, n_particles = present.shape
     n_out = 0
@@ -111,10 +112,12 @@ def _scan_open(times, present, vertical, band, height, was_present, last_height,
         for p in range(n_particles):
             now = present[k, p]
             before = was_present[p]
-            if now and before == 0 and vertical[k, p] <= band and np.isnan(entered[p]):
+            if now and before == -1:
+                entered[p] = -np.inf        # inside at the start: its entry unknown
+            elif now and before == 0 and vertical[k, p] <= band and np.isnan(entered[p]):
                 entered[p] = t
             elif not now and before == 1 and last_height[p] >= height - band:
-                if not np.isnan(entered[p]):
+                if np.isfinite(entered[p]):
                     out[n_out] = t - entered[p]
                     n_out += 1
                 entered[p] = np.nan
