@@ -337,3 +337,12 @@ def test_a_run_of_another_riser_given_to_a_model_names_the_fix(good, tmp_path, c
                          tmp_path / "p.h5")
     assert "but" in err and "0.2 x 0.95 m" in err
     assert "give a run of that riser, or fit a model on this one" in err
+
+
+def test_a_folders_name_given_where_a_file_is_written(good, tmp_path, capsys):
+    run, _ = good
+    err = one_line_error(capsys, ["fit", run, "--cells", "4x8", "--window", "0:1.5", "-o",
+                                  f"{tmp_path}/newdir/"])
+    assert "a folder's name, where this verb writes one file; give the file's name (e.g. " \
+        f"{tmp_path}/newdir/model.h5: the folder is created)" in err
+    assert not (tmp_path / "newdir").exists()

@@ -77,7 +77,7 @@ def named_output(output: str | os.PathLike) -> Path:
         raise InputError(f"output {os.fspath(output)!r} names no file or folder of its own (a "
                          "verb replaces its output whole when it is complete, which the "
                          "current folder, a folder above it or the root cannot be); give a "
-                         "new one by name (e.g. -o results)")
+                         "new one by name (e.g. -o model.h5, or -o results for a folder)")
     return path
 
 

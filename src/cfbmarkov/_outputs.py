@@ -147,6 +147,11 @@ def _release(target: Path) -> None:
         os.close(held[0])
 
 
+#: a file name to suggest for an output of each kind
+_EXAMPLE_NAME = {"model": "model.h5", "prediction": "prediction.h5", "trajectory": "run.h5",
+                 "png": "maps.png"}
+
+
 def remove_free_locks(folder: str | os.PathLike, depth: int = 2) -> list[Path]:
     """Remove the lock files (``.NAME.lock``) in ``folder`` and its sub-folders down to
     ``depth`` that no process holds: those of workers stopped outright (a process pool's
@@ -493,6 +498,10 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
         When the output cannot be claimed.
     """
     check_output_name(target)           # before Path(): Path("") is "."
+    if kind != "folder" and os.fspath(target).endswith(("/", os.sep)):
+        raise InputError(f"{os.fspath(target)}: a folder's name, where this verb writes one "
+                         f"file; give the file's name (e.g. {os.fspath(target)}"
+                         f"{_EXAMPLE_NAME.get(kind, 'out.h5')}: the folder is created)")
     target = named_output(target)       # "-o ." is refused, not replaced
     if kind == "folder" and Path(os.path.realpath(Path.cwd())).is_relative_to(
             os.path.realpath(target)):

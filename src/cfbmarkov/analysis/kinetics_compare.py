@@ -299,7 +299,9 @@ def _fitting_rtd_and_occupancy(model, ref, on, warnings, length: float | None = 
     states = discrete.states[::discrete.lag_frames]
     occupancy = np.bincount(states[states >= 0], minlength=model.n_states).astype(float)
     fit_length = float(window[1] - window[0])
-    if length is not None and abs(fit_length - length) > max(0.5 * model.lag, 1e-6 * length):
+    # within a lag and a half: a comparison of a model with memory starts a lag late (its
+    # first frame is the states' history), which the user cannot lengthen
+    if length is not None and abs(fit_length - length) > max(1.5 * model.lag, 1e-6 * length):
         warnings.append(f"kinetics: the segregated-flow baseline's residences are those of the "
                         f"{fit_length:g} s fitting window {window[0]:g}-{window[1]:g} s and the "
                         f"compared window is {length:g} s long: a window sees residences up "
