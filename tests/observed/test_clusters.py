@@ -60,3 +60,24 @@ def test_snapshot_index_equals_numpy_and_maps_states_to_cells():
                           equal_nan=True)
     with pytest.raises(ValueError, match="outside the grid"):
         snapshot_cluster_index(states, n_cells)                  # states are not cells
+
+
+def test_a_position_on_a_cell_edge_is_in_the_cell_the_models_states_give():
+    """0.29 m on rows of 0.01 m is row 29 by the states' edge rule (28.999999999999996 in
+    floating point): the cluster index counts it there, as the model's cells do."""
+    import tempfile
+    from pathlib import Path
+
+    from cfbmarkov.markov.cells import EDGE_TOLERANCE, cell_index
+    from cfbmarkov.observed import clusters
+
+    assert clusters.EDGE_TOLERANCE == EDGE_TOLERANCE
+    pos = np.array([[0.01, 0.29], [0.01, 0.29], [0.01, 0.295], [0.01, 0.295]])
+    assert set(cell_index(pos, 0.04, 1.0, 2, 100)) == {58}          # all in row 29
+    with tempfile.TemporaryDirectory() as folder:
+        path = write_trajectories(Path(folder) / "e.h5", [0.0], pos[None], width=0.04,
+                                  height=1.0)
+        with Trajectories(path) as t:
+            index = cluster_index(t, slice(0, 1), 2, 100)[0]
+    cells = 200
+    assert index == pytest.approx((4 / cells) * (cells - 1), rel=1e-12)   # one cell: 3.98

@@ -86,6 +86,17 @@ def snapshot_cluster_index(cells: np.ndarray, n_cells: int,
     return index
 
 
+#: values within this many cells below a cell edge count as on it, the rule of the model's
+#: states (:data:`cfbmarkov.markov.cells.EDGE_TOLERANCE`): 0.29 m on 0.01 m rows is row 29,
+#: not 28.999999999999996
+EDGE_TOLERANCE = 1e-9
+
+
+def _cell_floor(v: np.ndarray) -> np.ndarray:
+    """The cell of each value in cells, an edge (to round-off) belonging to the cell above."""
+    return np.floor(v + EDGE_TOLERANCE * np.maximum(1.0, np.abs(v)))
+
+
 def cluster_index(traj, frames: slice, columns: int, rows: int, block: int = 64
                   ) -> tuple[float, float]:
     """Mean and SD over frames of the index of dispersion of the cell counts.
@@ -114,9 +125,9 @@ def cluster_index(traj, frames: slice, columns: int, rows: int, block: int = 64
         pos = traj.positions(rows_)[..., :2]
         present = traj.present(rows_) & np.isfinite(pos).all(axis=-1)
         with np.errstate(invalid="ignore"):
-            col = np.clip(np.floor(np.nan_to_num(pos[..., 0]) / traj.width * columns), 0,
+            col = np.clip(_cell_floor(np.nan_to_num(pos[..., 0]) / traj.width * columns), 0,
                           columns - 1).astype(np.int64)
-            row = np.clip(np.floor(np.nan_to_num(pos[..., 1]) / traj.height * rows), 0,
+            row = np.clip(_cell_floor(np.nan_to_num(pos[..., 1]) / traj.height * rows), 0,
                           rows - 1).astype(np.int64)
         values.append(snapshot_cluster_index(np.where(present, row * columns + col, -1),
                                              n_cells))
