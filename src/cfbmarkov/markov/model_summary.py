@@ -219,6 +219,11 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
             u = r.uncertainty
             flow = ("; the flow's variability left out (the window is shorter than two "
                     "blocks of three mean residence times)" if u.flow_sd is None else
+                    "; the flow's variability between its blocks taken as 0 (their E(RT) "
+                    "differ no more than their own sampling, which the bootstrap holds; an "
+                    f"estimate on {u.flow_degrees_of_freedom} degree(s) of freedom, itself "
+                    "uncertain: a longer window or more runs pin it down)"
+                    if u.flow_sd[0] == 0.0 else
                     f"; plus the flow's variability between its blocks ({100 * u.flow_sd[0]:.3g} "
                     "% of E(RT)" + (", over sqrt(runs)" if model.run_windows else "")
                     + f", times {u.flow_multiplier_text()})")
