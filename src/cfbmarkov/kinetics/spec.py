@@ -499,13 +499,6 @@ def on_states(kinetics, state_space, cell_fields: CellFields | None = None) -> S
                      f"...))) or its StateKinetics, not {type(kinetics).__name__}")
 
 
-def _binary_kind(path: Path) -> str:
-    """What a file that is not text seems to be, in words (:func:`cfbmarkov._toml.binary_kind`)."""
-    from cfbmarkov._toml import binary_kind
-
-    return binary_kind(path)
-
-
 def load_kinetics(path: str | os.PathLike) -> Kinetics:
     """Read a kinetics file (TOML; ``docs/how-to/kinetics.md``).
 
@@ -542,7 +535,9 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
     except OSError as exc:
         raise InputError(f"cannot read kinetics file {name}: {exc.strerror or exc}") from None
     except UnicodeDecodeError:
-        what = _binary_kind(path)
+        from cfbmarkov._toml import binary_kind
+
+        what = binary_kind(path)
         if what.startswith("text"):
             raise InputError(f"kinetics file {name} is {what}; save it as UTF-8 (a TOML file "
                              "of [[property]] tables)") from None
