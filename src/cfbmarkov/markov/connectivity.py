@@ -18,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import breadth_first_order, connected_components
-from threadpoolctl import threadpool_limits
+
+from cfbmarkov._blas import one_blas_thread
 
 
 def _graph(matrix) -> sp.csr_matrix:
@@ -215,7 +216,7 @@ def stationary_distribution(matrix: np.ndarray, occupancy: np.ndarray) -> np.nda
     classes = closed_classes(matrix)
     if len(classes) > 1:
         return long_run_distribution(matrix, classes, occupancy)
-    with threadpool_limits(1):          # BLAS threads only contend on a dense eig here
+    with one_blas_thread():          # BLAS threads only contend on a dense eig here
         values, vectors = np.linalg.eig(matrix.T)
     lead = int(np.argmin(np.abs(values - 1.0)))
     pi = np.abs(vectors[:, lead].real)

@@ -30,8 +30,10 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.linalg import lu_factor, lu_solve
 from scipy.sparse.linalg import splu
-from threadpoolctl import threadpool_limits
+
+from cfbmarkov._blas import one_blas_thread
 
 
 def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
@@ -89,6 +91,9 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     Modeling, SIAM, Philadelphia (1999), Ch. 6 (quasi-birth-death processes).
     """
     levels, s = live.shape
+    if s <= DENSE_STATES:
+        return _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls,
+                                   with_decay)
     kept = [np.flatnonzero(live[g]) for g in range(levels)]
     block = _Blocks(s)
     up_cols = up_block = None     # U_(g+1)'s non-zero columns, T_(g+1)^-1 U_(g+1) on them
@@ -142,6 +147,67 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     return (out, h0, decay) if with_decay else (out, h0)
 
 
+#: chains of at most this many states are eliminated with dense blocks (LAPACK's LU on one
+#: thread): at a few hundred states their blocks are dense enough that a sparse LU costs
+#: more in bookkeeping than in arithmetic
+DENSE_STATES = 512
+
+
+def _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls, with_decay):
+    """:func:`entry_matrix` with dense blocks: the same elimination, the same returns."""
+    levels, s = live.shape
+    kept = [np.flatnonzero(live[g]) for g in range(levels)]
+    stay, down, up = (np.asarray(sp.csr_matrix(part).toarray()) for part in
+                      (p_stay, p_down, p_up))
+    down_probability = down.sum(axis=1) if with_falls else None
+    up_cols = up_block = None
+    carried = None
+    carried_sums = {}
+    t = None
+    with one_blas_thread():      # the same bits on any thread count
+        for g in range(levels - 1, -1, -1):
+            rows = kept[g]
+            t = np.identity(rows.size) - stay[np.ix_(rows, rows)]
+            falls = (down_probability[rows] if g == levels - 1 else np.zeros(rows.size)
+                     ) if with_falls else None
+            if rows.size and (up_block is not None or (with_falls and carried is not None)):
+                d = down[np.ix_(rows, kept[g + 1])]            # D_g, level g -> g + 1
+                if up_block is not None:
+                    t[:, up_cols] -= d @ up_block
+                if with_falls and carried is not None:
+                    falls = falls + d @ carried
+            if g == 0 or rows.size == 0:
+                up_cols = up_block = None
+                carried = None
+                continue
+            u = up[np.ix_(rows, kept[g - 1])]                  # U_g, level g -> g - 1
+            up_cols = np.flatnonzero(u.any(axis=0))
+            factors = lu_factor(t, check_finite=False) if up_cols.size or with_falls else None
+            up_block = (lu_solve(factors, u[:, up_cols], check_finite=False)
+                        if up_cols.size else None)
+            carried = lu_solve(factors, falls, check_finite=False) if with_falls else None
+            if with_falls and g <= 2:
+                carried_sums[g] = float(carried.sum())
+        out = np.zeros((entries.size, entries.size))
+        h0 = np.zeros(s)
+        rows = kept[0]
+        decay = (carried_sums[1] / carried_sums[2]
+                 if carried_sums.get(1, 0.0) > 0 and carried_sums.get(2, 0.0) > 0
+                 else float("nan"))
+        if rows.size == 0:
+            return ((out, h0, decay) if with_decay else (out, h0)) if with_falls else out
+        position = -np.ones(s, np.int64)
+        position[rows] = np.arange(rows.size)
+        factors = lu_factor(t, check_finite=False)
+        solved = lu_solve(factors, up[np.ix_(rows, entries)], check_finite=False)
+        live_entries = position[entries] >= 0
+        out[live_entries] = solved[position[entries[live_entries]]]
+        if not with_falls:
+            return out
+        h0[rows] = lu_solve(factors, falls, check_finite=False)
+    return (out, h0, decay) if with_decay else (out, h0)
+
+
 class _Blocks:
     """Sub-matrices part[rows][:, cols], the whole part where both are every state, and
     each asked for once (the levels usually keep the same states)."""
@@ -181,7 +247,7 @@ def embedded_stationary(embedded: np.ndarray, live_entries: np.ndarray) -> np.nd
     m = embedded.shape[0]
     if m > 8:
         b = np.where(live_entries[:, None], embedded, 0.0)
-        with threadpool_limits(1):
+        with one_blas_thread():
             values, vectors = np.linalg.eig(b.T)
         lead = int(np.argmax(np.abs(values)))
         nu = np.abs(vectors[:, lead].real)
@@ -195,7 +261,7 @@ def stationary(embedded: np.ndarray) -> np.ndarray:
     dominant left eigenvector), non-negative and summing to 1."""
     rows = embedded.sum(axis=1, keepdims=True)
     k = np.divide(embedded, rows, out=np.zeros_like(embedded), where=rows > 0)
-    with threadpool_limits(1):    # a small dense eig: threads only contend (100x slower
+    with one_blas_thread():    # a small dense eig: threads only contend (100x slower
         values, vectors = np.linalg.eig(k.T)             # on a busy 2-core machine)
     lead = int(np.argmax(values.real))
     nu = np.abs(vectors[:, lead].real)

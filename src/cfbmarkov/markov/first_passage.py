@@ -35,6 +35,8 @@ from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import CfbmarkovError
 from cfbmarkov.markov.connectivity import closed_classes
 from cfbmarkov.markov.entry_chain import embedded_stationary, entry_matrix
+from cfbmarkov.markov.tail_closure import FIRST_TRY, krylov_dimension, next_try, try_closure
+from cfbmarkov.markov.tail_closure import level_row as _level_row
 
 
 class TrappedResidences(CfbmarkovError):
@@ -199,62 +201,6 @@ class ResidenceTimeDistribution:
         return edges, prob
 
 
-@nb.njit(cache=True, nogil=True)
-def _first_passage(indptr, indices, data, exit_probability, start, tol, max_steps, out):
-    """f(k) for k = 1.. by propagating ``start`` through Q (CSR of Q transposed). Returns
-    the number of steps taken. One thread: a lag's product is a few microseconds of work,
-    less than a parallel region costs to start and join (on a busy 2-core machine that
-    wait made the exact RTD 10-100 times slower), and the bits are the same on any
-    machine."""
-    v = start.copy()
-    w = np.empty_like(v)
-    n = v.size
-    for k in range(max_steps):
-        absorbed = 0.0
-        for i in range(n):
-            absorbed += v[i] * exit_probability[i]
-        out[k] = absorbed
-        for j in range(n):
-            acc = 0.0
-            for q in range(indptr[j], indptr[j + 1]):
-                acc += data[q] * v[indices[q]]
-            w[j] = acc
-        remaining = 0.0
-        for j in range(n):
-            remaining += w[j]
-        v, w = w, v
-        if remaining < tol:
-            return k + 1
-    return max_steps
-
-
-@nb.njit(cache=True, inline="always")
-def _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr, up_idx,
-               up_val, live, v, w):
-    """One lag of :func:`_first_passage_levels` into destination state ``j``, every level."""
-    levels = v.shape[1]
-    for g in range(levels):
-        w[j, g] = 0.0
-    for q in range(down_ptr[j], down_ptr[j + 1]):      # from level g - 1
-        value = down_val[q]
-        i = down_idx[q]
-        for g in range(1, levels):
-            w[j, g] += value * v[i, g - 1]
-    for q in range(stay_ptr[j], stay_ptr[j + 1]):
-        value = stay_val[q]
-        i = stay_idx[q]
-        for g in range(levels):
-            w[j, g] += value * v[i, g]
-    for q in range(up_ptr[j], up_ptr[j + 1]):          # from level g + 1
-        value = up_val[q]
-        i = up_idx[q]
-        for g in range(levels - 1):
-            w[j, g] += value * v[i, g + 1]
-    for g in range(levels):
-        if not live[j, g]:
-            w[j, g] = 0.0
-
-
 @nb.njit(cache=True)
 def _level_exits(v, exit_probability, down_probability, falls):
     """The mass absorbed this lag (level 0's exits); ``falls[g]`` gathers the mass passing
@@ -281,34 +227,41 @@ def _level_mass(v):
 
 @nb.njit(cache=True, nogil=True)
 def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val,
-                          up_ptr, up_idx, up_val, exit_probability, live, start, tol,
-                          max_steps, out, down_probability, falls):
-    """:func:`_first_passage` on the lap-deficit levels without the [S L, S L] matrix
-    (Numba kernel). The mass is held as ``v[i, g]`` (state i, level g = 0 .. L-1, the
-    levels of a state side by side); one lag moves it by P_stay within a level, P_down one
-    level deeper and P_up one level up (from level 0: the exit). The three parts come as
-    CSR of their transposes (rows: destination j), so each non-zero is read once a lag and
-    gathers the L levels of its source at once. Mass on a state and level from which no
-    exit can be reached (``live`` false) is dropped, as :func:`exact_rtd` drops those
-    states. The terms of each destination and level are summed in the order of the full
-    matrix's transpose (down passes, stays, up passes): the same bits as the full matrix's
-    propagation. One thread, as :func:`_first_passage` (:func:`_first_passage_levels_parallel`
-    for large chains: the same bits). ``falls[g]`` (float64 [L]) gathers the mass that
-    passes down from level g (``down_probability``: each state's probability of a pass
-    down, P_down's row sums); ``falls[L - 1]`` is the mass lost below the deepest level.
-    Returns the number of steps taken."""
-    n = start.shape[0]
-    v = start.copy()
+                          up_ptr, up_idx, up_val, exit_probability, live, state, tol,
+                          first, max_steps, out, down_probability, falls):
+    """f(k) for k = first + 1 .. by propagating the mass left on the lap-deficit levels,
+    without the [S L, S L] matrix (Numba kernel). The mass is held as ``v[i, g]`` (state i,
+    level g = 0 .. L-1, the levels of a state side by side); one lag moves it by P_stay
+    within a level, P_down one level deeper and P_up one level up (from level 0: the exit).
+    The three parts come as CSR of their transposes (rows: destination j), so each non-zero
+    is read once a lag and gathers the L levels of its source at once. Mass on a state and
+    level from which no exit can be reached (``live`` false) is dropped, as
+    :func:`exact_rtd` drops those states. The terms of each destination and level are
+    summed in the order of the full matrix's transpose (down passes, stays, up passes): the
+    same bits as the full matrix's propagation. One thread: a lag's product is a few
+    microseconds of work, less than a parallel region costs to start and join (on a busy
+    2-core machine that wait made the exact RTD 10-100 times slower), and the bits are the
+    same on any machine (:func:`_first_passage_levels_parallel` for large chains: the same
+    bits). ``falls[g]`` (float64 [L]) gathers the mass that passes down from level g
+    (``down_probability``: each state's probability of a pass down, P_down's row sums);
+    ``falls[L - 1]`` is the mass lost below the deepest level. ``state`` [S, L] holds the
+    mass left at lag ``first`` on entry and at the last lag taken on return. Returns the
+    number of lags reached (``max_steps`` unless the mass left fell below ``tol`` first)."""
+    n = state.shape[0]
+    v = state.copy()
     w = np.empty_like(v)
-    for k in range(max_steps):
+    reached = max_steps
+    for k in range(first, max_steps):
         out[k] = _level_exits(v, exit_probability, down_probability, falls)
         for j in range(n):
             _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
                        up_idx, up_val, live, v, w)
         v, w = w, v
         if _level_mass(v) < tol:
-            return k + 1
-    return max_steps
+            reached = k + 1
+            break
+    state[:, :] = v
+    return reached
 
 
 @nb.njit(cache=True, nogil=True)
@@ -362,22 +315,25 @@ def _exits_backward(up_ptr, up_idx, up_val, stay_ptr, stay_idx, stay_val, down_p
 @nb.njit(cache=True, parallel=True)
 def _first_passage_levels_parallel(down_ptr, down_idx, down_val, stay_ptr, stay_idx,
                                    stay_val, up_ptr, up_idx, up_val, exit_probability, live,
-                                   start, tol, max_steps, out, down_probability, falls):
+                                   state, tol, first, max_steps, out, down_probability, falls):
     """:func:`_first_passage_levels` with the destinations of each lag shared among the
     threads (each destination's levels summed by one thread in the same order, the sums in
     one thread: the same bits on any thread count)."""
-    n = start.shape[0]
-    v = start.copy()
+    n = state.shape[0]
+    v = state.copy()
     w = np.empty_like(v)
-    for k in range(max_steps):
+    reached = max_steps
+    for k in range(first, max_steps):
         out[k] = _level_exits(v, exit_probability, down_probability, falls)
         for j in nb.prange(n):
             _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
                        up_idx, up_val, live, v, w)
         v, w = w, v
         if _level_mass(v) < tol:
-            return k + 1
-    return max_steps
+            reached = k + 1
+            break
+    state[:, :] = v
+    return reached
 
 
 @nb.njit(cache=True, nogil=True)
@@ -982,7 +938,7 @@ def rtd_moments_and_head(p_up, p_down, p_stay, lag: float, deficit_levels: int,
     start = _start_on_levels(p_up, p_down, p_stay, int(deficit_levels) + 1, entry, None, None,
                              arrays=arrays)
     head = _finish_levels(*start.finish_arguments(p_up, p_down, p_stay, 1e-10, int(steps),
-                                                  lag), arrays=arrays)[0]
+                                                  lag), arrays=arrays, closure=False)[0]
     return (*_moments_on_levels(p_up, p_down, p_stay, lag, start, arrays), head)
 
 
@@ -1344,17 +1300,24 @@ def _closed_entry_classes(chain: sp.csr_matrix, entries: np.ndarray) -> list[np.
 
 def _finish(q_live, exit_probability, start, tol, max_steps, lag, entry
             ) -> ResidenceTimeDistribution:
-    qt = sp.csr_matrix(q_live.T)
+    """f(k) of an open riser's chain: its Q as the one level of :func:`_propagate_levels`
+    (no pass down or up between levels), its tail closed as a periodic riser's."""
+    n = q_live.shape[0]
+    nothing = sp.csr_matrix((n, n))
+    arrays = _transposed_parts((nothing, q_live, nothing))
     out = np.zeros(max_steps)
-    steps = _first_passage(qt.indptr, qt.indices, qt.data, exit_probability, start, tol,
-                           max_steps, out)
+    steps, bound = _propagate_levels(arrays, np.ones((n, 1), np.bool_),
+                                     np.ascontiguousarray(start, np.float64).reshape(n, 1),
+                                     exit_probability, np.zeros(n), tol, max_steps, out,
+                                     np.zeros(1))
     f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
-    return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry)
+    return ResidenceTimeDistribution(lag, f, min(1.0, max(0.0, 1.0 - float(f.sum())) + bound),
+                                     entry)
 
 
 def _finish_levels(parts, live, exit_probability, start, tol, max_steps, lag, entry,
-                   classes: int, arrays: list[np.ndarray] | None = None
-                   ) -> tuple[ResidenceTimeDistribution, np.ndarray]:
+                   classes: int, arrays: list[np.ndarray] | None = None,
+                   closure: bool = True) -> tuple[ResidenceTimeDistribution, np.ndarray]:
     """:func:`_finish` on the levels: ``parts`` (P_down, P_stay, P_up), ``live`` and
     ``start`` [L, S] (passed to the kernel as [S, L]), ``exit_probability`` [S] (from
     level 0); ``arrays``, the parts' transposes where already formed
@@ -1366,13 +1329,43 @@ def _finish_levels(parts, live, exit_probability, start, tol, max_steps, lag, en
     levels = live.shape[0]
     falls = np.zeros(levels)
     down_probability = np.asarray(parts[0].sum(axis=1), dtype=np.float64).ravel()
-    work = sum(part.nnz for part in parts) * levels
+    steps, bound = _propagate_levels(arrays, np.ascontiguousarray(live.T),
+                                     np.ascontiguousarray(start.T),
+                                     np.ascontiguousarray(exit_probability, np.float64),
+                                     down_probability, tol, max_steps, out, falls, closure)
+    f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
+    unresolved = min(1.0, max(0.0, 1.0 - float(f.sum())) + bound)
+    return ResidenceTimeDistribution(lag, f, unresolved, entry, None, classes,
+                                     deficit_levels=levels - 1,
+                                     deficit_unresolved=float(falls[-1])), falls
+
+
+def _propagate_levels(arrays, live, start, exit_probability, down_probability, tol: float,
+                      max_steps: int, out: np.ndarray, falls: np.ndarray,
+                      closure: bool = True) -> tuple[int, float]:
+    """f(k) into ``out`` and the passes down into ``falls`` from ``start`` [S, L] on the
+    levels (``live`` [S, L]; ``arrays`` the parts' transposes), until the mass left falls
+    below ``tol`` or ``max_steps`` lags: lag by lag, its tail closed by a Krylov projection
+    (:mod:`cfbmarkov.markov.tail_closure`) from :data:`~cfbmarkov.markov.tail_closure.
+    FIRST_TRY` lags on (then at twice as many, and so on) where the bound on its error is
+    at most ``tol``. Returns the lags reached and that bound (0 where no closure was taken).
+    The same bits on any thread count."""
+    levels = live.shape[1]
+    work = sum(array.size for array in arrays[2::3]) * levels
     kernel = (_first_passage_levels_parallel if work > PARALLEL_LEVEL_WORK
               and nb.get_num_threads() > 1 else _first_passage_levels)
-    steps = kernel(*arrays, np.ascontiguousarray(exit_probability, np.float64),
-                                  np.ascontiguousarray(live.T), np.ascontiguousarray(start.T),
-                                  tol, max_steps, out, down_probability, falls)
-    f = out[:steps].copy()   # out[k] = mass absorbed on transition k+1 = P(RT = (k+1) lag)
-    return ResidenceTimeDistribution(lag, f, max(0.0, 1.0 - float(f.sum())), entry, None,
-                                     classes, deficit_levels=levels - 1,
-                                     deficit_unresolved=float(falls[-1])), falls
+    state = start.copy()
+    dimension = krylov_dimension(int(live.sum()), *live.shape) if closure else 0
+    reached, stop, tries = 0, (FIRST_TRY if dimension else max_steps), []
+    while True:
+        stop = min(stop, max_steps)
+        reached = kernel(*arrays, exit_probability, live, state, tol, reached, stop, out,
+                         down_probability, falls)
+        if reached < stop or stop >= max_steps or _level_mass(state) < tol:
+            return reached, 0.0
+        steps, bound = try_closure(arrays, live, state, exit_probability, down_probability,
+                                   reached, tol, tol, max_steps, out, falls, dimension)
+        if steps >= 0:
+            return steps, bound
+        tries.append((reached, bound))
+        stop = next_try(tries, tol)

@@ -1,0 +1,319 @@
+"""The tail of an exact RTD from a Krylov projection, with a bound on its error.
+
+Past its first few hundred lags a residence-time distribution f(k) = s Q^(k-1) e decays as
+a handful of Q's slowest modes, and on a real riser's chain those modes are slow (the
+largest eigenvalues of a paper-scale model's Q on the lap-deficit levels lie near 0.996,
+several of them within 0.1 % of each other): propagating the tail lag by lag to a mass of
+1e-10 takes thousands of lags, most of the exact RTD's cost. Here, once the fast modes have
+died out, the state vector v = s Q^k0 is projected on the Krylov space of dimension m that
+it spans (Arnoldi with classical Gram-Schmidt applied twice: A V_m = V_m H_m +
+h q_(m+1) e_m^T, A = Q^T acting on columns), and the rest of the tail follows from the m x m
+Hessenberg matrix: v Q^k ~ V_m H_m^k (|v| e_1), f(k0 + k + 1) ~ (e^T V_m) H_m^k |v| e_1.
+
+The error of that tail is bounded, not estimated. With z_k = V_m H_m^k y_0, the Arnoldi
+relation gives z_(k+1) = A z_k - rho_k with rho_k = h q_(m+1) (H_m^k y_0)_m (plus the
+relation's rounding, bounded per column as in Higham, Accuracy and Stability of Numerical
+Algorithms, 2nd ed., SIAM (2002), Ch. 3). The error e_k = A^k v - z_k then obeys
+e_(k+1) = A e_k + rho_k, and as Q is sub-stochastic (its rows sum to at most one) A does
+not grow any vector's 1-norm, and a mass x is absorbed at most ||x||_1 in all later lags:
+the tail's distribution is off by at most sum_k ||rho_k||_1 in total (the sum of |error|
+over all its lags; the mass lost below the deepest lap deficit likewise). The closure is
+taken only where that bound, accumulated as the tail is evaluated, stays below a given
+tolerance; elsewhere the propagation goes on and tries again later.
+
+References
+----------
+W. E. Arnoldi, "The principle of minimized iterations in the solution of the matrix
+eigenvalue problem", Quart. Appl. Math. 9, 17 (1951); Y. Saad, Numerical Methods for Large
+Eigenvalue Problems, 2nd ed., SIAM (2011), Ch. 6 (the Arnoldi relation, Gram-Schmidt applied
+twice); L. Giraud, J. Langou, M. Rozloznik, "The loss of orthogonality in the Gram-Schmidt
+orthogonalization process", Comput. Math. Appl. 50, 1069 (2005).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba as nb
+import numpy as np
+
+#: the dimension of the Krylov space (fewer where the chain has fewer live pairs, or where
+#: its basis would take more than :data:`BASIS_BYTES`)
+DIMENSION = 40
+
+#: the most memory the Krylov basis may take (bytes)
+BASIS_BYTES = 64 * 2 ** 20
+
+#: the first lag at which the closure is tried; then at twice as many lags, and so on
+FIRST_TRY = 512
+
+#: unit round-off of float64 (with a margin for the rounding of the bound itself)
+ROUND_OFF = 1.2e-16
+
+
+@nb.njit(cache=True, inline="always")
+def level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr, up_idx,
+              up_val, live, v, w):
+    """One lag of the chain on the lap-deficit levels into destination state ``j``, every
+    level: ``w[j, g]`` from ``v`` [S, L] by P_down (from level g - 1), P_stay and P_up (from
+    level g + 1), given as CSR of their transposes; zero where ``live[j, g]`` is false."""
+    levels = v.shape[1]
+    for g in range(levels):
+        w[j, g] = 0.0
+    for q in range(down_ptr[j], down_ptr[j + 1]):      # from level g - 1
+        value = down_val[q]
+        i = down_idx[q]
+        for g in range(1, levels):
+            w[j, g] += value * v[i, g - 1]
+    for q in range(stay_ptr[j], stay_ptr[j + 1]):
+        value = stay_val[q]
+        i = stay_idx[q]
+        for g in range(levels):
+            w[j, g] += value * v[i, g]
+    for q in range(up_ptr[j], up_ptr[j + 1]):          # from level g + 1
+        value = up_val[q]
+        i = up_idx[q]
+        for g in range(levels - 1):
+            w[j, g] += value * v[i, g + 1]
+    for g in range(levels):
+        if not live[j, g]:
+            w[j, g] = 0.0
+
+
+@nb.njit(cache=True)
+def _dot(a, b):
+    """sum a * b over [S, L] arrays, in four interleaved partial sums (a fixed order that
+    the compiler can vectorise: the same bits on any machine of the same instruction set)."""
+    x = a.ravel()
+    y = b.ravel()
+    size = x.size
+    s0 = s1 = s2 = s3 = 0.0
+    whole = size - size % 4
+    for i in range(0, whole, 4):
+        s0 += x[i] * y[i]
+        s1 += x[i + 1] * y[i + 1]
+        s2 += x[i + 2] * y[i + 2]
+        s3 += x[i + 3] * y[i + 3]
+    for i in range(whole, size):
+        s0 += x[i] * y[i]
+    return (s0 + s1) + (s2 + s3)
+
+
+@nb.njit(cache=True)
+def _subtract(w, h, q):
+    """w -= h q, [S, L] arrays."""
+    x = w.ravel()
+    y = q.ravel()
+    for i in range(x.size):
+        x[i] -= h * y[i]
+
+
+@nb.njit(cache=True)
+def _norm1(a):
+    n, levels = a.shape
+    total = 0.0
+    for i in range(n):
+        for g in range(levels):
+            total += abs(a[i, g])
+    return total
+
+
+@nb.njit(cache=True, nogil=True)
+def arnoldi_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
+                   up_idx, up_val, live, v, basis, hessenberg, rounding, row_terms):
+    """The Arnoldi relation of the chain on the levels from ``v`` (Numba kernel).
+
+    Parameters
+    ----------
+    (parts), live :
+        As :func:`level_row`.
+    v : ndarray of float64, shape (S, L)
+        The start vector (not all zero).
+    basis : ndarray of float64, shape (m + 1, S, L)
+        Filled with the orthonormal basis q_1 .. q_(m+1).
+    hessenberg : ndarray of float64, shape (m + 1, m)
+        Zeros on entry; filled with H.
+    rounding : ndarray of float64, shape (m,)
+        Filled with a bound on the 1-norm of the rounding error of each column of the
+        Arnoldi relation.
+    row_terms : int
+        The most terms a destination's sum can have (for the rounding bound).
+
+    Returns
+    -------
+    (int, float, float)
+        The dimension reached (m, or fewer where the Krylov space is invariant), |v|_2, and
+        ||q_(dim+1)||_1 (0 where the space is invariant).
+    """
+    dim = hessenberg.shape[1]
+    n, levels = v.shape
+    norm = math.sqrt(_dot(v, v))
+    one_norms = np.zeros(dim + 1)
+    for i in range(n):
+        for g in range(levels):
+            basis[0, i, g] = v[i, g] / norm
+    one_norms[0] = _norm1(basis[0])
+    w = np.empty((n, levels))
+    for j in range(dim):
+        for r in range(n):
+            level_row(r, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
+                      up_idx, up_val, live, basis[j], w)
+        for _sweep in range(2):                       # classical Gram-Schmidt, twice
+            for i in range(j + 1):
+                h = _dot(basis[i], w)
+                hessenberg[i, j] += h
+                _subtract(w, h, basis[i])
+        spread = one_norms[j]                        # ||A|| |q_j| <= ||q_j||_1 (Q sub-stochastic)
+        for i in range(j + 1):
+            spread += abs(hessenberg[i, j]) * one_norms[i]
+        rounding[j] = (row_terms + 4 * (j + 2)) * ROUND_OFF * spread
+        next_norm = math.sqrt(_dot(w, w))
+        if next_norm == 0.0:                         # an invariant subspace: exact
+            return j + 1, norm, 0.0
+        hessenberg[j + 1, j] = next_norm
+        for r in range(n):
+            for g in range(levels):
+                basis[j + 1, r, g] = w[r, g] / next_norm
+        one_norms[j + 1] = _norm1(basis[j + 1])
+    return dim, norm, one_norms[dim]
+
+
+@nb.njit(cache=True, nogil=True)
+def projections(basis, dim, exit_probability, down_probability):
+    """The functionals of the tail on the basis: exits (from level 0), passes down from
+    each level, and the mass left, each as a row over the first ``dim`` basis vectors."""
+    levels = basis.shape[2]
+    n = basis.shape[1]
+    exits = np.zeros(dim)
+    falls = np.zeros((levels, dim))
+    mass = np.zeros(dim)
+    for k in range(dim):
+        for i in range(n):
+            exits[k] += exit_probability[i] * basis[k, i, 0]
+            for g in range(levels):
+                falls[g, k] += down_probability[i] * basis[k, i, g]
+                mass[k] += basis[k, i, g]
+    return exits, falls, mass
+
+
+@nb.njit(cache=True, nogil=True)
+def closed_tail(hessenberg, dim, residual, rounding, exits, falls_on, mass, norm, first, tol,
+                error_tol, max_steps, out, falls, bound):
+    """The RTD's tail from lag ``first`` by the Krylov projection (Numba kernel).
+
+    ``out[k]`` for k = first .. (the mass absorbed on transition k + 1), ``falls[g]``
+    gathers the mass passing down from level g, as the propagation does; ``residual`` is
+    h ||q_(m+1)||_1. Stops where the mass left falls below ``tol`` or at ``max_steps``;
+    gives up (returns -1) where the bound on the tail's error exceeds ``error_tol``, once
+    the bound has nearly stopped growing (or is 1e12 times too large): how far it is off
+    tells the caller when to try again.
+    ``bound`` is the error of the start vector's projection. Returns the number of lags
+    reached and the bound (the 1-norm of the tail's error, summed over its lags, at
+    most)."""
+    y = np.zeros(dim)
+    z = np.empty(dim)
+    y[0] = norm
+    levels = falls.shape[0]
+    for k in range(first, max_steps):
+        absorbed = 0.0
+        for i in range(dim):
+            absorbed += exits[i] * y[i]
+        out[k] = absorbed
+        for g in range(levels):
+            for i in range(dim):
+                falls[g] += falls_on[g, i] * y[i]
+        step = residual * abs(y[dim - 1])
+        for i in range(dim):
+            step += rounding[i] * abs(y[i])
+        bound += step
+        if bound > error_tol and (k - first >= 8 and step < 1e-3 * bound
+                                  or bound > 1e12 * error_tol):
+            return -1, bound        # refused: the bound, as far as it is worth knowing
+        for r in range(dim):
+            acc = 0.0
+            for i in range(max(r - 1, 0), dim):     # H is upper Hessenberg
+                acc += hessenberg[r, i] * y[i]
+            z[r] = acc
+        y, z = z, y
+        left = 0.0
+        for i in range(dim):
+            left += mass[i] * y[i]
+        if left < tol:
+            return k + 1, bound
+    return max_steps, bound
+
+
+def krylov_dimension(live_pairs: int, states: int, levels: int) -> int:
+    """The Krylov dimension used for a chain of ``live_pairs`` live (state, level) pairs:
+    :data:`DIMENSION`, at most the live pairs, and at most what :data:`BASIS_BYTES` holds."""
+    fits = BASIS_BYTES // (8 * states * levels) - 1
+    return int(max(0, min(DIMENSION, live_pairs, fits)))
+
+
+def try_closure(arrays, live, v, exit_probability, down_probability, first: int, tol: float,
+                error_tol: float, max_steps: int, out: np.ndarray, falls: np.ndarray,
+                dimension: int) -> tuple[int, float]:
+    """Close the tail of a propagation at lag ``first`` from its state ``v`` [S, L].
+
+    Parameters
+    ----------
+    arrays : list of ndarray
+        The parts' transposes as CSR arrays (down, stay, up), as the propagation takes them.
+    live : ndarray of bool, shape (S, L)
+    v : ndarray of float64, shape (S, L)
+        The mass not yet absorbed, ``first`` lags after the start.
+    exit_probability, down_probability : ndarray of float64, shape (S,)
+    first : int
+        The lag the tail starts at.
+    tol : float
+        The mass left at which the tail stops.
+    error_tol : float
+        The largest bound on the tail's error accepted.
+    max_steps : int
+        The last lag.
+    out, falls : ndarray of float64
+        As the propagation's (written only where the closure is taken).
+    dimension : int
+        The Krylov dimension (:func:`krylov_dimension`).
+
+    Returns
+    -------
+    (int, float)
+        The lags reached and the bound on the tail's error; the lags are -1 where the bound
+        exceeded ``error_tol`` (``out`` beyond ``first`` then holds nothing of use,
+        ``falls`` is unchanged), the bound then as far as it was followed.
+    """
+    n, levels = v.shape
+    basis = np.zeros((dimension + 1, n, levels))
+    hessenberg = np.zeros((dimension + 1, dimension))
+    rounding = np.zeros(dimension)
+    row_terms = 3 * int(max(np.diff(arrays[3 * p]).max(initial=0) for p in range(3))) + 1
+    dim, norm, next_one_norm = arnoldi_levels(*arrays, live, v, basis, hessenberg, rounding,
+                                              row_terms)
+    exits, falls_on, mass = projections(basis, dim, exit_probability, down_probability)
+    residual = float(hessenberg[dim, dim - 1]) * next_one_norm if dim == dimension else 0.0
+    gathered = np.zeros_like(falls)
+    steps, bound = closed_tail(np.ascontiguousarray(hessenberg[:dim, :dim]), dim, residual,
+                               rounding[:dim].copy(), exits, falls_on, mass, norm, first, tol,
+                               error_tol, max_steps, out, gathered,
+                               2.0 * ROUND_OFF * float(np.abs(v).sum()))
+    if steps >= 0:
+        falls += gathered
+    return steps, bound
+
+
+def next_try(tries: list[tuple[int, float]], error_tol: float) -> int:
+    """The lag to try the closure at next, from the tries refused so far ((lag, bound)
+    pairs): the bound falls about geometrically with the lag it is taken at (the fast
+    modes left outside the Krylov space die out), so from two tries the lag where it would
+    be a third of ``error_tol``, at least 64 lags and at most twice as far as the last
+    try; from one try, twice as far."""
+    last, bound = tries[-1]
+    if len(tries) < 2 or not 0.0 < bound < np.inf:
+        return 2 * last
+    before, bound_before = tries[-2]
+    if not bound < bound_before:
+        return 2 * last
+    rate = np.log(bound / bound_before) / (last - before)
+    ahead = np.log(error_tol / (3.0 * bound)) / rate
+    return int(last + min(max(64, np.ceil(ahead)), last))
