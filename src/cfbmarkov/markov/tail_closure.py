@@ -55,8 +55,26 @@ ROUND_OFF = 1.2e-16
 def level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr, up_idx,
               up_val, live, v, w):
     """One lag of the chain on the lap-deficit levels into destination state ``j``, every
-    level: ``w[j, g]`` from ``v`` [S, L] by P_down (from level g - 1), P_stay and P_up (from
-    level g + 1), given as CSR of their transposes; zero where ``live[j, g]`` is false."""
+    level (Numba kernel, inlined).
+
+    Parameters
+    ----------
+    j : int
+        The destination state.
+    down_ptr, down_idx, down_val : ndarray
+        P_down as the CSR arrays of its transpose (rows: destinations; int64 pointers and
+        indices, float64 values).
+    stay_ptr, stay_idx, stay_val, up_ptr, up_idx, up_val : ndarray
+        P_stay and P_up likewise.
+    live : ndarray of bool, shape (S, L)
+        The (state, level) pairs from which the top can be reached.
+    v : ndarray of float64, shape (S, L)
+        The mass on each state and level.
+    w : ndarray of float64, shape (S, L)
+        Row ``j`` is overwritten: ``w[j, g]`` = the mass arriving from level g - 1 by
+        P_down, from level g by P_stay and from level g + 1 by P_up, or 0 where
+        ``live[j, g]`` is false.
+    """
     levels = v.shape[1]
     for g in range(levels):
         w[j, g] = 0.0
@@ -179,7 +197,7 @@ def arnoldi_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, u
 
 
 @nb.njit(cache=True, nogil=True)
-def projections(basis, dim, exit_probability, down_probability):
+def _projections(basis, dim, exit_probability, down_probability):
     """The functionals of the tail on the basis: exits (from level 0), passes down from
     each level, and the mass left, each as a row over the first ``dim`` basis vectors."""
     levels = basis.shape[2]
@@ -197,7 +215,7 @@ def projections(basis, dim, exit_probability, down_probability):
 
 
 @nb.njit(cache=True, nogil=True)
-def closed_tail(hessenberg, dim, residual, rounding, exits, falls_on, mass, norm, first, tol,
+def _closed_tail(hessenberg, dim, residual, rounding, exits, falls_on, mass, norm, first, tol,
                 error_tol, max_steps, out, falls, bound):
     """The RTD's tail from lag ``first`` by the Krylov projection (Numba kernel).
 
@@ -244,8 +262,21 @@ def closed_tail(hessenberg, dim, residual, rounding, exits, falls_on, mass, norm
 
 
 def krylov_dimension(live_pairs: int, states: int, levels: int) -> int:
-    """The Krylov dimension used for a chain of ``live_pairs`` live (state, level) pairs:
-    :data:`DIMENSION`, at most the live pairs, and at most what :data:`BASIS_BYTES` holds."""
+    """The Krylov dimension used for a chain on the levels.
+
+    Parameters
+    ----------
+    live_pairs : int
+        The live (state, level) pairs.
+    states, levels : int
+        S and L.
+
+    Returns
+    -------
+    int
+        :data:`DIMENSION`, at most ``live_pairs`` and at most what :data:`BASIS_BYTES`
+        holds of (dimension + 1) x S x L float64 values; 0 where none fits.
+    """
     fits = BASIS_BYTES // (8 * states * levels) - 1
     return int(max(0, min(DIMENSION, live_pairs, fits)))
 
@@ -290,10 +321,10 @@ def try_closure(arrays, live, v, exit_probability, down_probability, first: int,
     row_terms = 3 * int(max(np.diff(arrays[3 * p]).max(initial=0) for p in range(3))) + 1
     dim, norm, next_one_norm = arnoldi_levels(*arrays, live, v, basis, hessenberg, rounding,
                                               row_terms)
-    exits, falls_on, mass = projections(basis, dim, exit_probability, down_probability)
+    exits, falls_on, mass = _projections(basis, dim, exit_probability, down_probability)
     residual = float(hessenberg[dim, dim - 1]) * next_one_norm if dim == dimension else 0.0
     gathered = np.zeros_like(falls)
-    steps, bound = closed_tail(np.ascontiguousarray(hessenberg[:dim, :dim]), dim, residual,
+    steps, bound = _closed_tail(np.ascontiguousarray(hessenberg[:dim, :dim]), dim, residual,
                                rounding[:dim].copy(), exits, falls_on, mass, norm, first, tol,
                                error_tol, max_steps, out, gathered,
                                2.0 * ROUND_OFF * float(np.abs(v).sum()))
@@ -303,11 +334,25 @@ def try_closure(arrays, live, v, exit_probability, down_probability, first: int,
 
 
 def next_try(tries: list[tuple[int, float]], error_tol: float) -> int:
-    """The lag to try the closure at next, from the tries refused so far ((lag, bound)
-    pairs): the bound falls about geometrically with the lag it is taken at (the fast
-    modes left outside the Krylov space die out), so from two tries the lag where it would
-    be a third of ``error_tol``, at least 64 lags and at most twice as far as the last
-    try; from one try, twice as far."""
+    """The lag to try the closure at next, from the tries refused so far.
+
+    The bound falls about geometrically with the lag it is taken at (the fast modes left
+    outside the Krylov space die out), so from two tries the next lag is where it would be
+    a third of ``error_tol``, at least 64 lags and at most twice as far as the last try;
+    from one try (or a bound that did not fall), twice as far.
+
+    Parameters
+    ----------
+    tries : list of (int, float)
+        The (lag, bound) of each refused try, in order.
+    error_tol : float
+        The bound accepted.
+
+    Returns
+    -------
+    int
+        The lag of the next try.
+    """
     last, bound = tries[-1]
     if len(tries) < 2 or not 0.0 < bound < np.inf:
         return 2 * last
