@@ -30,7 +30,7 @@ from __future__ import annotations
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.linalg import lu_factor, lu_solve
+from scipy.linalg import get_lapack_funcs
 from scipy.sparse.linalg import splu
 
 from cfbmarkov._blas import one_blas_thread
@@ -159,6 +159,25 @@ def _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls, with_de
     kept = [np.flatnonzero(live[g]) for g in range(levels)]
     stay, down, up = (np.asarray(sp.csr_matrix(part).toarray()) for part in
                       (p_stay, p_down, p_up))
+    getrf, getrs = get_lapack_funcs(("getrf", "getrs"), (stay,))
+
+    def block(part, rows, cols):         # part[rows][:, cols], no copy of a whole part
+        if rows.size == s and cols.size == s:
+            return part
+        return part[np.ix_(rows, cols)]
+
+    def factor(matrix):
+        lu, pivots, info = getrf(matrix)
+        if info != 0:     # (a live level's block is never singular: its states reach the top)
+            raise RuntimeError(f"entry chain: LAPACK getrf returned {info} on a level's block")
+        return lu, pivots
+
+    def solve(factors, rhs):
+        x, info = getrs(*factors, rhs)
+        if info != 0:
+            raise RuntimeError(f"entry chain: LAPACK getrs returned {info}")
+        return x
+
     down_probability = down.sum(axis=1) if with_falls else None
     up_cols = up_block = None
     carried = None
@@ -167,11 +186,11 @@ def _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls, with_de
     with one_blas_thread():      # the same bits on any thread count
         for g in range(levels - 1, -1, -1):
             rows = kept[g]
-            t = np.identity(rows.size) - stay[np.ix_(rows, rows)]
+            t = np.identity(rows.size) - block(stay, rows, rows)
             falls = (down_probability[rows] if g == levels - 1 else np.zeros(rows.size)
                      ) if with_falls else None
             if rows.size and (up_block is not None or (with_falls and carried is not None)):
-                d = down[np.ix_(rows, kept[g + 1])]            # D_g, level g -> g + 1
+                d = block(down, rows, kept[g + 1])            # D_g, level g -> g + 1
                 if up_block is not None:
                     t[:, up_cols] -= d @ up_block
                 if with_falls and carried is not None:
@@ -180,12 +199,11 @@ def _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls, with_de
                 up_cols = up_block = None
                 carried = None
                 continue
-            u = up[np.ix_(rows, kept[g - 1])]                  # U_g, level g -> g - 1
+            u = block(up, rows, kept[g - 1])                  # U_g, level g -> g - 1
             up_cols = np.flatnonzero(u.any(axis=0))
-            factors = lu_factor(t, check_finite=False) if up_cols.size or with_falls else None
-            up_block = (lu_solve(factors, u[:, up_cols], check_finite=False)
-                        if up_cols.size else None)
-            carried = lu_solve(factors, falls, check_finite=False) if with_falls else None
+            factors = factor(t) if up_cols.size or with_falls else None
+            up_block = solve(factors, u[:, up_cols]) if up_cols.size else None
+            carried = solve(factors, falls) if with_falls else None
             if with_falls and g <= 2:
                 carried_sums[g] = float(carried.sum())
         out = np.zeros((entries.size, entries.size))
@@ -198,13 +216,13 @@ def _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls, with_de
             return ((out, h0, decay) if with_decay else (out, h0)) if with_falls else out
         position = -np.ones(s, np.int64)
         position[rows] = np.arange(rows.size)
-        factors = lu_factor(t, check_finite=False)
-        solved = lu_solve(factors, up[np.ix_(rows, entries)], check_finite=False)
+        factors = factor(t)
+        solved = solve(factors, up[np.ix_(rows, entries)])
         live_entries = position[entries] >= 0
         out[live_entries] = solved[position[entries[live_entries]]]
         if not with_falls:
             return out
-        h0[rows] = lu_solve(factors, falls, check_finite=False)
+        h0[rows] = solve(factors, falls)
     return (out, h0, decay) if with_decay else (out, h0)
 
 

@@ -11,9 +11,11 @@ l = L - L_entry in {0, -1, ..., -K}:
 
 Entry states are distributed as the stationary distribution nu of the embedded chain of
 landing states (entry -> next entry), found from the absorption probabilities B = (I-Q)^-1 R
-by block elimination over the lap-deficit levels (:mod:`cfbmarkov.markov.entry_chain`). The residence-time probabilities f(k) = P(RT = k lag) follow by
-propagating nu through Q. The result is exact up to the lap-deficit truncation K and the
-tail cut-off, both reported as ``unresolved`` mass.
+by block elimination over the lap-deficit levels (:mod:`cfbmarkov.markov.entry_chain`). The
+residence-time probabilities f(k) = P(RT = k lag) follow by propagating nu through Q, the
+tail of a long RTD from a Krylov projection whose error is bounded
+(:mod:`cfbmarkov.markov.tail_closure`). The result is exact up to the lap-deficit
+truncation K, the tail cut-off and that bound, all reported as ``unresolved`` mass.
 
 A residence can only be observed inside an analysis window of length W if it starts and ends
 in it, and the window counts the lap counter's records from its first frame: the RTD it sees
@@ -35,7 +37,8 @@ from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import CfbmarkovError
 from cfbmarkov.markov.connectivity import closed_classes
 from cfbmarkov.markov.entry_chain import embedded_stationary, entry_matrix
-from cfbmarkov.markov.tail_closure import FIRST_TRY, krylov_dimension, next_try, try_closure
+from cfbmarkov.markov.tail_closure import (FIRST_TRY, MAX_TRIES, krylov_dimension, next_try,
+                                           try_closure)
 from cfbmarkov.markov.tail_closure import level_row as _level_row
 
 
@@ -1355,7 +1358,8 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
     kernel = (_first_passage_levels_parallel if work > PARALLEL_LEVEL_WORK
               and nb.get_num_threads() > 1 else _first_passage_levels)
     state = start.copy()
-    dimension = krylov_dimension(int(live.sum()), *live.shape) if closure else 0
+    dimension = (krylov_dimension(int(live.sum()), *live.shape, work + 3 * live.size)
+                 if closure and tol > 0 else 0)
     reached, stop, tries = 0, (FIRST_TRY if dimension else max_steps), []
     while True:
         stop = min(stop, max_steps)
@@ -1368,4 +1372,4 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
         if steps >= 0:
             return steps, bound
         tries.append((reached, bound))
-        stop = next_try(tries, tol)
+        stop = next_try(tries, tol) if len(tries) < MAX_TRIES else max_steps

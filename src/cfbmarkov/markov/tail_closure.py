@@ -37,9 +37,17 @@ import math
 import numba as nb
 import numpy as np
 
+from cfbmarkov._blas import one_blas_thread
+
 #: the dimension of the Krylov space (fewer where the chain has fewer live pairs, or where
 #: its basis would take more than :data:`BASIS_BYTES`)
 DIMENSION = 40
+
+#: the smallest Krylov dimension worth a try (a chain that allows fewer is propagated)
+MIN_DIMENSION = 8
+
+#: the most tries of the closure in one RTD (refused tries cost an Arnoldi each)
+MAX_TRIES = 6
 
 #: the most memory the Krylov basis may take (bytes)
 BASIS_BYTES = 64 * 2 ** 20
@@ -216,18 +224,20 @@ def _projections(basis, dim, exit_probability, down_probability):
 
 @nb.njit(cache=True, nogil=True)
 def _closed_tail(hessenberg, dim, residual, rounding, exits, falls_on, mass, norm, first, tol,
-                error_tol, max_steps, out, falls, bound):
+                error_tol, max_steps, out, falls, bound, decay):
     """The RTD's tail from lag ``first`` by the Krylov projection (Numba kernel).
 
     ``out[k]`` for k = first .. (the mass absorbed on transition k + 1), ``falls[g]``
     gathers the mass passing down from level g, as the propagation does; ``residual`` is
-    h ||q_(m+1)||_1. Stops where the mass left falls below ``tol`` or at ``max_steps``;
-    gives up (returns -1) where the bound on the tail's error exceeds ``error_tol``, once
-    the bound has nearly stopped growing (or is 1e12 times too large): how far it is off
-    tells the caller when to try again.
-    ``bound`` is the error of the start vector's projection. Returns the number of lags
-    reached and the bound (the 1-norm of the tail's error, summed over its lags, at
-    most)."""
+    h ||q_(m+1)||_1, ``bound`` the error of the start vector's projection. Stops where the
+    projected mass left falls below ``tol`` or at ``max_steps``. Gives up (returns -1)
+    wherever the bound on the tail's error exceeds ``error_tol``; it then follows the
+    bound on until the last lag's increment, continued as a geometric series of ratio
+    ``decay`` (the largest modulus of H's eigenvalues), would add less than a tenth of it
+    (or until the bound is a million times too large), and returns the bound reached plus
+    that rest: an estimate of the whole tail's bound, which tells the caller when to try
+    again. Returns the number of lags reached (-1: refused) and the bound (the 1-norm of
+    the tail's error, summed over its lags, at most)."""
     y = np.zeros(dim)
     z = np.empty(dim)
     y[0] = norm
@@ -244,9 +254,10 @@ def _closed_tail(hessenberg, dim, residual, rounding, exits, falls_on, mass, nor
         for i in range(dim):
             step += rounding[i] * abs(y[i])
         bound += step
-        if bound > error_tol and (k - first >= 8 and step < 1e-3 * bound
-                                  or bound > 1e12 * error_tol):
-            return -1, bound        # refused: the bound, as far as it is worth knowing
+        if bound > error_tol:       # refused: followed on while the bound still grows
+            rest = step * decay / (1.0 - decay)
+            if rest < 0.1 * bound or bound > 1e6 * error_tol:
+                return -1, bound + rest
         for r in range(dim):
             acc = 0.0
             for i in range(max(r - 1, 0), dim):     # H is upper Hessenberg
@@ -256,13 +267,18 @@ def _closed_tail(hessenberg, dim, residual, rounding, exits, falls_on, mass, nor
         left = 0.0
         for i in range(dim):
             left += mass[i] * y[i]
-        if left < tol:
-            return k + 1, bound
-    return max_steps, bound
+        if left < tol:              # (the projected mass: taken only if the bound holds)
+            return (k + 1 if bound <= error_tol else -1), bound
+    return (max_steps if bound <= error_tol else -1), bound
 
 
-def krylov_dimension(live_pairs: int, states: int, levels: int) -> int:
+def krylov_dimension(live_pairs: int, states: int, levels: int, work: int) -> int:
     """The Krylov dimension used for a chain on the levels.
+
+    A lag of the closed tail costs about m^2 / 2 + (L + 4) m multiply-adds (H is upper
+    Hessenberg; the exits, passes down per level and mass on the basis), a lag of the
+    propagation ``work``: the closure is used only where its lags cost at most a quarter
+    of the propagation's, with m as large as that allows up to :data:`DIMENSION`.
 
     Parameters
     ----------
@@ -270,15 +286,21 @@ def krylov_dimension(live_pairs: int, states: int, levels: int) -> int:
         The live (state, level) pairs.
     states, levels : int
         S and L.
+    work : int
+        The propagation's multiply-adds a lag (the parts' non-zeros times L).
 
     Returns
     -------
     int
-        :data:`DIMENSION`, at most ``live_pairs`` and at most what :data:`BASIS_BYTES`
-        holds of (dimension + 1) x S x L float64 values; 0 where none fits.
+        m: at most :data:`DIMENSION`, ``live_pairs`` and what :data:`BASIS_BYTES` holds of
+        (m + 1) x S x L float64 values, and within the cost above; 0 (no closure) where
+        that leaves fewer than :data:`MIN_DIMENSION`.
     """
     fits = BASIS_BYTES // (8 * states * levels) - 1
-    return int(max(0, min(DIMENSION, live_pairs, fits)))
+    dimension = max(0, min(DIMENSION, live_pairs, fits))
+    while dimension and dimension * dimension / 2 + (levels + 4) * dimension > work / 4:
+        dimension -= 1
+    return int(dimension) if dimension >= MIN_DIMENSION else 0
 
 
 def try_closure(arrays, live, v, exit_probability, down_probability, first: int, tol: float,
@@ -315,19 +337,26 @@ def try_closure(arrays, live, v, exit_probability, down_probability, first: int,
         ``falls`` is unchanged), the bound then as far as it was followed.
     """
     n, levels = v.shape
+    scale = float(np.abs(v).max())
+    if not 0.0 < scale < np.inf or not error_tol > 0.0:
+        return -1, np.inf
     basis = np.zeros((dimension + 1, n, levels))
     hessenberg = np.zeros((dimension + 1, dimension))
     rounding = np.zeros(dimension)
     row_terms = 3 * int(max(np.diff(arrays[3 * p]).max(initial=0) for p in range(3))) + 1
-    dim, norm, next_one_norm = arnoldi_levels(*arrays, live, v, basis, hessenberg, rounding,
-                                              row_terms)
+    # on v scaled to a largest entry of 1: the 2-norm of a tiny mass does not underflow
+    dim, norm, next_one_norm = arnoldi_levels(*arrays, live, v / scale, basis, hessenberg,
+                                              rounding, row_terms)
     exits, falls_on, mass = _projections(basis, dim, exit_probability, down_probability)
     residual = float(hessenberg[dim, dim - 1]) * next_one_norm if dim == dimension else 0.0
+    small = np.ascontiguousarray(hessenberg[:dim, :dim])
+    with one_blas_thread():
+        decay = float(np.abs(np.linalg.eigvals(small)).max())
     gathered = np.zeros_like(falls)
-    steps, bound = _closed_tail(np.ascontiguousarray(hessenberg[:dim, :dim]), dim, residual,
-                               rounding[:dim].copy(), exits, falls_on, mass, norm, first, tol,
-                               error_tol, max_steps, out, gathered,
-                               2.0 * ROUND_OFF * float(np.abs(v).sum()))
+    steps, bound = _closed_tail(small, dim, residual, rounding[:dim].copy(), exits, falls_on,
+                                mass, norm * scale, first, tol, error_tol, max_steps, out,
+                                gathered, 2.0 * ROUND_OFF * float(np.abs(v).sum()),
+                                min(decay, 1.0 - 1e-9))
     if steps >= 0:
         falls += gathered
     return steps, bound
@@ -354,7 +383,7 @@ def next_try(tries: list[tuple[int, float]], error_tol: float) -> int:
         The lag of the next try.
     """
     last, bound = tries[-1]
-    if len(tries) < 2 or not 0.0 < bound < np.inf:
+    if len(tries) < 2 or not 0.0 < bound < np.inf or not error_tol > 0.0:
         return 2 * last
     before, bound_before = tries[-2]
     if not bound < bound_before:
