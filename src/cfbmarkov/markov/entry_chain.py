@@ -91,7 +91,8 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     Modeling, SIAM, Philadelphia (1999), Ch. 6 (quasi-birth-death processes).
     """
     levels, s = live.shape
-    if s <= DENSE_STATES:
+    if s <= DENSE_STATES and sum(sp.csr_matrix(part).nnz for part in (p_up, p_down, p_stay)
+                                 ) >= DENSE_FILL * s * s:
         return _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls,
                                    with_decay)
     kept = [np.flatnonzero(live[g]) for g in range(levels)]
@@ -147,10 +148,15 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     return (out, h0, decay) if with_decay else (out, h0)
 
 
-#: chains of at most this many states are eliminated with dense blocks (LAPACK's LU on one
-#: thread): at a few hundred states their blocks are dense enough that a sparse LU costs
-#: more in bookkeeping than in arithmetic
+#: chains of at most this many states, with transitions to at least :data:`DENSE_FILL` of
+#: the pairs of states, are eliminated with dense blocks (LAPACK's LU on one thread): a
+#: riser's chain of a few hundred cells (13 % filled at 6 x 38 cells) costs a sparse LU
+#: more in bookkeeping than in arithmetic, a banded chain of 500 states (0.6 % filled) ten
+#: times less than a dense one
 DENSE_STATES = 512
+
+#: the share of the [S, S] transitions a chain must hold to be eliminated densely
+DENSE_FILL = 0.05
 
 
 def _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls, with_decay):
