@@ -1,22 +1,49 @@
 """One BLAS thread for small dense linear algebra.
 
-A small dense LU or eigenproblem is microseconds of arithmetic; BLAS threads only contend
-over it (100 times slower on a busy 2-core machine), and a thread count that changes the
-order of a sum changes its last bits. threadpoolctl finds the BLAS libraries once per
-controller, which costs milliseconds: the controller is made once, on first use.
+A small dense LU or eigenproblem is microseconds of arithmetic: BLAS threads only contend
+over it (on a busy 2-core machine, many times slower), and a thread count that changes the
+order of a sum changes its last bits. The limit is taken and given back under a lock with a
+count of the Python threads inside: the first in sets it, the last out restores it, and a
+thread leaving never lifts it under another still inside. A pool of threads that does
+such linear algebra holds the limit in the thread that runs the pool, around the whole
+pool (:func:`cfbmarkov.analysis.bootstrap._in_threads`): a limit set and lifted in the
+workers alone left one resample's RTD in 150 with other last bits than the serial run's
+(a paper-scale 6 m/s model's chain perturbed 150 times, 2 threads, OpenBLAS 0.3.30,
+2026-12-06). threadpoolctl finds the BLAS libraries once per controller, which costs
+milliseconds; the controller is made when this module is imported, after NumPy's and
+SciPy's linear algebra (and so their BLAS libraries) are loaded.
 """
 
 from __future__ import annotations
 
+import threading
+from contextlib import contextmanager
+
+import numpy.linalg  # noqa: F401  (loads NumPy's BLAS before the controller looks)
+import scipy.linalg  # noqa: F401  (and SciPy's)
 from threadpoolctl import ThreadpoolController
 
-_controller: ThreadpoolController | None = None
+_controller = ThreadpoolController()
+_lock = threading.Lock()
+_inside = 0
+_limiter = None
 
 
+@contextmanager
 def one_blas_thread():
-    """A context manager that limits the BLAS libraries to one thread while it is open
-    (``threadpoolctl.ThreadpoolController.limit``)."""
-    global _controller
-    if _controller is None:
-        _controller = ThreadpoolController()
-    return _controller.limit(limits=1, user_api="blas")
+    """Limit the BLAS libraries to one thread while any thread is inside this context
+    (``threadpoolctl.ThreadpoolController.limit``; nested and concurrent uses share one
+    limit, lifted when the last of them leaves)."""
+    global _inside, _limiter
+    with _lock:
+        if _inside == 0:
+            _limiter = _controller.limit(limits=1, user_api="blas")
+        _inside += 1
+    try:
+        yield
+    finally:
+        with _lock:
+            _inside -= 1
+            if _inside == 0:
+                _limiter.restore_original_limits()
+                _limiter = None

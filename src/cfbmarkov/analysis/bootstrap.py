@@ -22,6 +22,7 @@ from typing import NamedTuple
 from scipy.special import ndtri      # the normal quantile, scipy.stats.norm.ppf's (a light import)
 from scipy.special import stdtrit    # Student's t quantile, scipy.stats.t.ppf's
 
+from cfbmarkov._blas import one_blas_thread
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.uncertainty import bootstrap_widening  # noqa: F401 (re-exported)
@@ -722,17 +723,23 @@ def _in_threads(function, items):
     pool = ThreadPoolExecutor(max_workers=workers, initializer=numba.set_num_threads,
                               initargs=(1,))
     pending: deque = deque()
-    try:
-        # each item submitted as it is formed, so that forming the next ones (the bootstrap
-        # counts' sums, under the GIL) overlaps the threads' work on the earlier ones
-        for item in items:
-            pending.append(pool.submit(function, item))
-            if len(pending) >= 2 * workers:
+    # one BLAS thread for the whole pool, set from this thread: OpenBLAS takes a thread
+    # count set in a pool's thread as no limit at all, so that the resamples' small LU
+    # factorisations would run on as many threads as the process's default and change
+    # their last bits with it
+    with one_blas_thread():
+        try:
+            # each item submitted as it is formed, so that forming the next ones (the
+            # bootstrap counts' sums, under the GIL) overlaps the threads' work on the
+            # earlier ones
+            for item in items:
+                pending.append(pool.submit(function, item))
+                if len(pending) >= 2 * workers:
+                    yield pending.popleft().result()
+            while pending:
                 yield pending.popleft().result()
-        while pending:
-            yield pending.popleft().result()
-    finally:        # on Ctrl-C: the items not started are dropped, the running ones finish
-        pool.shutdown(wait=True, cancel_futures=True)
+        finally:    # on Ctrl-C: the items not started are dropped, the running ones finish
+            pool.shutdown(wait=True, cancel_futures=True)
 
 
 def interval_bounds(value, boot, centre, level: float, se=0.0, se_flow=0.0,
