@@ -14,18 +14,18 @@ import cfbmarkov.markov.tail_closure as tc
 LAG = 0.05
 
 
-def slow_column(states=60, stay=0.985, seed=3, reach=5):
+def slow_column(states=60, stay=0.985, seed=3, reach=5, bias=1.6):
     """A periodic riser's chain of ``states`` states in a column whose residences last
     hundreds of lags: a lazy walk up and down the column (probability ``stay`` of staying
-    put) by 1 to ``reach`` states at random rates, more up than down; a move up past the
-    top state passes up through the top (landing at the bottom), one down past the bottom
-    passes down through the bottom. Returns P and the up and down fractions."""
+    put) by 1 to ``reach`` states at random rates, ``bias`` times more up than down; a move
+    up past the top state passes up through the top (landing at the bottom), one down past
+    the bottom passes down through the bottom. Returns P and the up and down fractions."""
     rng = np.random.default_rng(seed)
     p = np.zeros((states, states))
     up, down = np.zeros_like(p), np.zeros_like(p)
     for i in range(states):
         p[i, i] += stay
-        rates = rng.uniform(0.5, 1.0, 2 * reach) * np.r_[np.full(reach, 1.6), np.ones(reach)]
+        rates = rng.uniform(0.5, 1.0, 2 * reach) * np.r_[np.full(reach, bias), np.ones(reach)]
         rates *= (1.0 - stay) / rates.sum()
         for d in range(1, reach + 1):
             above, below = i + d, i - d
@@ -69,6 +69,31 @@ def test_the_closed_tail_is_the_propagated_one_within_its_tolerance(monkeypatch)
     assert closed.mean == pytest.approx(propagated.mean, rel=1e-9)
     assert closed.sd == pytest.approx(propagated.sd, rel=1e-8)
     assert closed.unresolved <= propagated.unresolved + 1e-10
+
+
+def test_the_closures_bound_is_counted_unresolved_and_covers_the_deficit_loss(monkeypatch):
+    """One lap deficit kept: 15 % of the residences fall below it. The closed tail's
+    loss below the deepest level (``deficit_unresolved``, from the projection's passes
+    down) is the propagated one within the bound, and ``unresolved`` holds the bound."""
+    p, up, down = slow_column(stay=0.8, bias=1.1)
+    bounds = []
+    original = fp.try_closure
+
+    def recording(*args, **kwargs):
+        result = original(*args, **kwargs)
+        if result[0] >= 0:
+            bounds.append(result[1])
+        return result
+
+    monkeypatch.setattr(fp, "try_closure", recording)
+    closed = fp.exact_rtd(p, up, down, LAG, deficit_levels=1)
+    assert len(bounds) == 1 and bounds[0] > 0
+    assert closed.unresolved == min(1.0, max(0.0, 1.0 - float(closed.probability.sum()))
+                                    + bounds[0])
+    without_closure(monkeypatch)
+    propagated = fp.exact_rtd(p, up, down, LAG, deficit_levels=1)
+    assert propagated.deficit_unresolved > 0.1
+    assert abs(closed.deficit_unresolved - propagated.deficit_unresolved) <= bounds[0]
 
 
 def open_column(states=60, stay=0.985, seed=5):
