@@ -1,10 +1,10 @@
 """The tail of an exact RTD from a Krylov projection, with a bound on its error.
 
 Past its first few hundred lags a residence-time distribution f(k) = s Q^(k-1) e decays as
-a handful of Q's slowest modes, and on a real riser's chain those modes are slow (the
-largest eigenvalues of a paper-scale model's Q on the lap-deficit levels lie near 0.996,
-several of them within 0.1 % of each other): propagating the tail lag by lag to a mass of
-1e-10 takes thousands of lags, most of the exact RTD's cost. Here, once the fast modes have
+a handful of Q's slowest modes, and on a real riser's chain those modes are slow and close
+together (``benchmarks/exact_rtd_closure.py --eigenvalues 4`` prints them for a model):
+propagating the tail lag by lag to a mass of 1e-10 takes thousands of lags, most of the
+exact RTD's cost. Here, once the fast modes have
 died out, the state vector v = s Q^k0 is projected on the Krylov space of dimension m that
 it spans (Arnoldi with classical Gram-Schmidt applied twice: A V_m = V_m H_m +
 h q_(m+1) e_m^T, A = Q^T acting on columns), and the rest of the tail follows from the m x m
@@ -15,11 +15,14 @@ relation gives z_(k+1) = A z_k - rho_k with rho_k = h q_(m+1) (H_m^k y_0)_m (plu
 relation's rounding, bounded per column as in Higham, Accuracy and Stability of Numerical
 Algorithms, 2nd ed., SIAM (2002), Ch. 3). The error e_k = A^k v - z_k then obeys
 e_(k+1) = A e_k + rho_k, and as Q is sub-stochastic (its rows sum to at most one) A does
-not grow any vector's 1-norm, and a mass x is absorbed at most ||x||_1 in all later lags:
-the tail's distribution is off by at most sum_k ||rho_k||_1 in total (the sum of |error|
-over all its lags; the mass lost below the deepest lap deficit likewise). The closure is
-taken only where that bound, accumulated as the tail is evaluated, stays below a given
-tolerance; elsewhere the propagation goes on and tries again later.
+not grow any vector's 1-norm, and a mass x is absorbed, by the top or below the deepest
+lap deficit, at most ||x||_1 in all later lags: the tail's distribution and its loss below
+the deepest deficit together are off by at most sum_k ||rho_k||_1 (the sum of |error| over
+all its lags). Left out of the bound is the rounding of evaluating the tail itself, the
+m x m product H y and the functionals e^T V a lag, relative errors of order m times the
+unit round-off, as in the propagation's own sums. The closure is taken only where the
+bound, accumulated as the tail is evaluated, stays below a given tolerance; elsewhere the
+propagation goes on and tries again later.
 
 References
 ----------
@@ -151,8 +154,12 @@ def arnoldi_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, u
 
     Parameters
     ----------
-    (parts), live :
-        As :func:`level_row`.
+    down_ptr, down_idx, down_val : ndarray
+        P_down as the CSR arrays of its transpose (:func:`level_row`).
+    stay_ptr, stay_idx, stay_val, up_ptr, up_idx, up_val : ndarray
+        P_stay and P_up likewise.
+    live : ndarray of bool, shape (S, L)
+        The (state, level) pairs from which the top can be reached.
     v : ndarray of float64, shape (S, L)
         The start vector (not all zero).
     basis : ndarray of float64, shape (m + 1, S, L)
@@ -313,9 +320,14 @@ def try_closure(arrays, live, v, exit_probability, down_probability, first: int,
     arrays : list of ndarray
         The parts' transposes as CSR arrays (down, stay, up), as the propagation takes them.
     live : ndarray of bool, shape (S, L)
+        The (state, level) pairs from which the top can be reached.
     v : ndarray of float64, shape (S, L)
         The mass not yet absorbed, ``first`` lags after the start.
-    exit_probability, down_probability : ndarray of float64, shape (S,)
+    exit_probability : ndarray of float64, shape (S,)
+        Each state's probability of passing up through the top in a lag (from level 0:
+        the residence's end).
+    down_probability : ndarray of float64, shape (S,)
+        Each state's probability of passing down through the bottom in a lag.
     first : int
         The lag the tail starts at.
     tol : float
