@@ -2,14 +2,15 @@
 
 A small dense LU or eigenproblem is microseconds of arithmetic: BLAS threads only contend
 over it (on a busy 2-core machine, many times slower), and a thread count that changes the
-order of a sum changes its last bits. The limit is taken and given back under a lock with a
-count of the Python threads inside: the first in sets it, the last out restores it, and a
-thread leaving never lifts it under another still inside. A pool of threads that does
-such linear algebra holds the limit in the thread that runs the pool, around the whole
-pool (:func:`cfbmarkov.analysis.bootstrap._in_threads`): a limit set and lifted in the
-workers alone left one resample's RTD in 150 with other last bits than the serial run's
-(a paper-scale 6 m/s model's chain perturbed 150 times, 2 threads, OpenBLAS 0.3.30,
-2026-12-06). threadpoolctl finds the BLAS libraries once per controller, which costs
+order of a sum changes its last bits. The limit is the process's (BLAS keeps one thread
+count), so it is taken and given back under a lock with a count of the Python threads
+inside: the first in sets it, the last out restores it, and a thread leaving never lifts
+it under another still inside (limits that each thread set and restored on its own left
+one resample's RTD in 150 with other last bits than the serial run's, where the
+bootstrap's resamples run in two threads: a paper-scale 6 m/s model's chain perturbed 150
+times, OpenBLAS 0.3.30, 2026-12-06). A pool of threads that does such linear algebra also
+holds the limit around the whole pool (:func:`cfbmarkov.analysis.bootstrap._in_threads`).
+threadpoolctl finds the BLAS libraries once per controller, which costs
 milliseconds; the controller is made when this module is imported, after NumPy's and
 SciPy's linear algebra (and so their BLAS libraries) are loaded.
 """

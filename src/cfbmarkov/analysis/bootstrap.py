@@ -723,10 +723,8 @@ def _in_threads(function, items):
     pool = ThreadPoolExecutor(max_workers=workers, initializer=numba.set_num_threads,
                               initargs=(1,))
     pending: deque = deque()
-    # one BLAS thread for the whole pool, set from this thread: OpenBLAS takes a thread
-    # count set in a pool's thread as no limit at all, so that the resamples' small LU
-    # factorisations would run on as many threads as the process's default and change
-    # their last bits with it
+    # one BLAS thread (a process-wide limit) held for the whole pool: the resamples' small
+    # LU factorisations on the process's default BLAS threads would change their last bits
     with one_blas_thread():
         try:
             # each item submitted as it is formed, so that forming the next ones (the
