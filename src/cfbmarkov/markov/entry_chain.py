@@ -28,6 +28,8 @@ Johns Hopkins (2013), Sec. 4.5.1 (block tridiagonal systems).
 
 from __future__ import annotations
 
+from contextlib import nullcontext
+
 import numpy as np
 import scipy.sparse as sp
 from scipy.linalg import get_lapack_funcs
@@ -91,43 +93,44 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     Modeling, SIAM, Philadelphia (1999), Ch. 6 (quasi-birth-death processes).
     """
     levels, s = live.shape
-    if s <= DENSE_STATES and sum(sp.csr_matrix(part).nnz for part in (p_up, p_down, p_stay)
-                                 ) >= DENSE_FILL * s * s:
-        return _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls,
-                                   with_decay)
+    dense = s <= DENSE_STATES and sum(sp.csr_matrix(part).nnz for part in
+                                      (p_up, p_down, p_stay)) >= DENSE_FILL * s * s
+    algebra = (_DenseBlocks if dense else _SparseBlocks)(p_up, p_down, p_stay)
+    with algebra.context():
+        return _eliminate(algebra, live, entries, with_falls, with_decay)
+
+
+def _eliminate(algebra, live, entries, with_falls, with_decay):
+    """:func:`entry_matrix`'s block elimination, its blocks' arithmetic by ``algebra``
+    (:class:`_SparseBlocks` or :class:`_DenseBlocks`)."""
+    levels, s = live.shape
     kept = [np.flatnonzero(live[g]) for g in range(levels)]
-    block = _Blocks(s)
     up_cols = up_block = None     # U_(g+1)'s non-zero columns, T_(g+1)^-1 U_(g+1) on them
     carried = None                # T_(g+1)^-1 c_(g+1) on level g + 1's rows
-    down_probability = np.asarray(p_down.sum(axis=1)).ravel() if with_falls else None
+    down_probability = algebra.down_probability() if with_falls else None
     t = None
     carried_sums = {}             # level g: the sum of T_g^-1 c_g over its states
     for g in range(levels - 1, -1, -1):
         rows = kept[g]
-        t = (sp.identity(rows.size, format="csr") - block(p_stay, rows, rows)).tocsr()
+        t = algebra.identity_less_stay(rows)
         falls = (down_probability[rows] if g == levels - 1 else np.zeros(rows.size)
                  ) if with_falls else None
-        if up_block is not None and rows.size:
-            d = block(p_down, rows, kept[g + 1]).tocsr()       # D_g, level g -> g + 1
-            d_rows = np.flatnonzero(np.diff(d.indptr))
-            if d_rows.size:
-                product = d[d_rows] @ up_block                 # [rows with a down pass, C]
-                t = t - sp.csr_matrix(
-                    (product.ravel(), (np.repeat(d_rows, up_cols.size),
-                                       np.tile(up_cols, d_rows.size))),
-                    shape=t.shape)
-        if with_falls and carried is not None and rows.size:
-            falls = falls + block(p_down, rows, kept[g + 1]) @ carried
+        if rows.size and (up_block is not None or (with_falls and carried is not None)):
+            d = algebra.down(rows, kept[g + 1])                # D_g, level g -> g + 1
+            if up_block is not None:
+                t = algebra.less_product(t, d, up_block, up_cols)
+            if with_falls and carried is not None:
+                falls = falls + d @ carried
         if g == 0 or rows.size == 0:
             up_cols = up_block = None
             carried = None
             continue
-        u = block(p_up, rows, kept[g - 1]).tocsc()             # U_g, level g -> g - 1
-        up_cols = np.flatnonzero(np.diff(u.indptr))
-        factors = (splu(sp.csc_matrix(t), permc_spec=ORDERING) if up_cols.size or with_falls
-                   else None)
-        up_block = factors.solve(u[:, up_cols].toarray()) if up_cols.size else None
-        carried = factors.solve(falls) if with_falls else None
+        u = algebra.up(rows, kept[g - 1])                      # U_g, level g -> g - 1
+        up_cols = algebra.nonzero_columns(u)
+        factors = algebra.factor(t) if up_cols.size or with_falls else None
+        up_block = (algebra.solve(factors, algebra.columns(u, up_cols)) if up_cols.size
+                    else None)
+        carried = algebra.solve(factors, falls) if with_falls else None
         if with_falls and g <= 2:
             carried_sums[g] = float(carried.sum())
     out = np.zeros((entries.size, entries.size))
@@ -139,13 +142,13 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
         return ((out, h0, decay) if with_decay else (out, h0)) if with_falls else out
     position = -np.ones(s, np.int64)
     position[rows] = np.arange(rows.size)
-    factors = splu(sp.csc_matrix(t), permc_spec=ORDERING)
-    solved = factors.solve(block(p_up, rows, entries).toarray())   # N_00 R
+    factors = algebra.factor(t)
+    solved = algebra.solve(factors, algebra.columns(algebra.up(rows, entries)))   # N_00 R
     live_entries = position[entries] >= 0
     out[live_entries] = solved[position[entries[live_entries]]]
     if not with_falls:
         return out
-    h0[rows] = factors.solve(falls)
+    h0[rows] = algebra.solve(factors, falls)
     return (out, h0, decay) if with_decay else (out, h0)
 
 
@@ -167,94 +170,116 @@ DENSE_STATES = 512
 DENSE_FILL = 0.05
 
 
-def _entry_matrix_dense(p_up, p_down, p_stay, live, entries, with_falls, with_decay):
-    """:func:`entry_matrix` with dense blocks: the same elimination, the same returns."""
-    levels, s = live.shape
-    kept = [np.flatnonzero(live[g]) for g in range(levels)]
-    stay, down, up = (np.asarray(sp.csr_matrix(part).toarray()) for part in
-                      (p_stay, p_down, p_up))
-    getrf, getrs = get_lapack_funcs(("getrf", "getrs"), (stay,))
+class _SparseBlocks:
+    """The elimination's blocks as scipy.sparse matrices, factored by SuperLU; each
+    sub-matrix part[rows][:, cols] formed once (the levels usually keep the same states),
+    the whole part where both are every state."""
 
-    def block(part, rows, cols):         # part[rows][:, cols], no copy of a whole part
-        if rows.size == s and cols.size == s:
-            return part
-        return part[np.ix_(rows, cols)]
-
-    def factor(matrix):
-        lu, pivots, info = getrf(matrix)
-        if info != 0:     # (a live level's block is never singular: its states reach the top)
-            raise RuntimeError(f"entry chain: LAPACK getrf returned {info} on a level's block")
-        return lu, pivots
-
-    def solve(factors, rhs):
-        x, info = getrs(*factors, rhs)
-        if info != 0:
-            raise RuntimeError(f"entry chain: LAPACK getrs returned {info}")
-        return x
-
-    down_probability = down.sum(axis=1) if with_falls else None
-    up_cols = up_block = None
-    carried = None
-    carried_sums = {}
-    t = None
-    with one_blas_thread():      # the same bits on any thread count
-        for g in range(levels - 1, -1, -1):
-            rows = kept[g]
-            t = np.identity(rows.size) - block(stay, rows, rows)
-            falls = (down_probability[rows] if g == levels - 1 else np.zeros(rows.size)
-                     ) if with_falls else None
-            if rows.size and (up_block is not None or (with_falls and carried is not None)):
-                d = block(down, rows, kept[g + 1])            # D_g, level g -> g + 1
-                if up_block is not None:
-                    t[:, up_cols] -= d @ up_block
-                if with_falls and carried is not None:
-                    falls = falls + d @ carried
-            if g == 0 or rows.size == 0:
-                up_cols = up_block = None
-                carried = None
-                continue
-            u = block(up, rows, kept[g - 1])                  # U_g, level g -> g - 1
-            up_cols = np.flatnonzero(u.any(axis=0))
-            factors = factor(t) if up_cols.size or with_falls else None
-            up_block = solve(factors, u[:, up_cols]) if up_cols.size else None
-            carried = solve(factors, falls) if with_falls else None
-            if with_falls and g <= 2:
-                carried_sums[g] = float(carried.sum())
-        out = np.zeros((entries.size, entries.size))
-        h0 = np.zeros(s)
-        rows = kept[0]
-        decay = (carried_sums[1] / carried_sums[2]
-                 if carried_sums.get(1, 0.0) > 0 and carried_sums.get(2, 0.0) > 0
-                 else float("nan"))
-        if rows.size == 0:
-            return ((out, h0, decay) if with_decay else (out, h0)) if with_falls else out
-        position = -np.ones(s, np.int64)
-        position[rows] = np.arange(rows.size)
-        factors = factor(t)
-        solved = solve(factors, up[np.ix_(rows, entries)])
-        live_entries = position[entries] >= 0
-        out[live_entries] = solved[position[entries[live_entries]]]
-        if not with_falls:
-            return out
-        h0[rows] = solve(factors, falls)
-    return (out, h0, decay) if with_decay else (out, h0)
-
-
-class _Blocks:
-    """Sub-matrices part[rows][:, cols], the whole part where both are every state, and
-    each asked for once (the levels usually keep the same states)."""
-
-    def __init__(self, s: int):
-        self.s = s
+    def __init__(self, p_up, p_down, p_stay):
+        self.up_part, self.down_part, self.stay_part = (sp.csr_matrix(part) for part in
+                                                        (p_up, p_down, p_stay))
+        self.s = self.stay_part.shape[0]
         self.memo = {}
 
-    def __call__(self, part, rows: np.ndarray, cols: np.ndarray):
+    def context(self):
+        return nullcontext()
+
+    def _block(self, part, rows, cols):
         if rows.size == self.s and cols.size == self.s:
             return part
         key = (id(part), rows.tobytes(), cols.tobytes())
         if key not in self.memo:
             self.memo[key] = part[rows][:, cols]
         return self.memo[key]
+
+    def down_probability(self):
+        return np.asarray(self.down_part.sum(axis=1)).ravel()
+
+    def identity_less_stay(self, rows):
+        return (sp.identity(rows.size, format="csr")
+                - self._block(self.stay_part, rows, rows)).tocsr()
+
+    def down(self, rows, cols):
+        return self._block(self.down_part, rows, cols).tocsr()
+
+    def up(self, rows, cols):
+        return self._block(self.up_part, rows, cols).tocsc()
+
+    def less_product(self, t, d, up_block, up_cols):
+        """t - d @ up_block on the columns up_cols (rows of d with a down pass only)."""
+        d_rows = np.flatnonzero(np.diff(d.indptr))
+        if not d_rows.size:
+            return t
+        product = d[d_rows] @ up_block                         # [rows with a down pass, C]
+        return t - sp.csr_matrix((product.ravel(), (np.repeat(d_rows, up_cols.size),
+                                                    np.tile(up_cols, d_rows.size))),
+                                 shape=t.shape)
+
+    def nonzero_columns(self, u):
+        return np.flatnonzero(np.diff(u.indptr))
+
+    def columns(self, u, cols=None):
+        return (u if cols is None else u[:, cols]).toarray()
+
+    def factor(self, t):
+        return splu(sp.csc_matrix(t), permc_spec=ORDERING)
+
+    def solve(self, factors, rhs):
+        return factors.solve(rhs)
+
+
+class _DenseBlocks:
+    """The elimination's blocks as dense arrays, factored by LAPACK (getrf, getrs) on one
+    BLAS thread."""
+
+    def __init__(self, p_up, p_down, p_stay):
+        self.up_part, self.down_part, self.stay_part = (sp.csr_matrix(part).toarray() for part
+                                                        in (p_up, p_down, p_stay))
+        self.s = self.stay_part.shape[0]
+        self.getrf, self.getrs = get_lapack_funcs(("getrf", "getrs"), (self.stay_part,))
+
+    def context(self):
+        return one_blas_thread()             # the same bits on any thread count
+
+    def _block(self, part, rows, cols):
+        if rows.size == self.s and cols.size == self.s:
+            return part
+        return part[np.ix_(rows, cols)]
+
+    def down_probability(self):
+        return self.down_part.sum(axis=1)
+
+    def identity_less_stay(self, rows):
+        return np.identity(rows.size) - self._block(self.stay_part, rows, rows)
+
+    def down(self, rows, cols):
+        return self._block(self.down_part, rows, cols)
+
+    def up(self, rows, cols):
+        return self._block(self.up_part, rows, cols)
+
+    def less_product(self, t, d, up_block, up_cols):
+        t = t.copy()
+        t[:, up_cols] -= d @ up_block
+        return t
+
+    def nonzero_columns(self, u):
+        return np.flatnonzero(u.any(axis=0))
+
+    def columns(self, u, cols=None):
+        return u if cols is None else u[:, cols]
+
+    def factor(self, t):
+        lu, pivots, info = self.getrf(t)
+        if info != 0:     # (a live level's block is never singular: its states reach the top)
+            raise RuntimeError(f"entry chain: LAPACK getrf returned {info} on a level's block")
+        return lu, pivots
+
+    def solve(self, factors, rhs):
+        x, info = self.getrs(*factors, rhs)
+        if info != 0:
+            raise RuntimeError(f"entry chain: LAPACK getrs returned {info}")
+        return x
 
 
 def embedded_stationary(embedded: np.ndarray, live_entries: np.ndarray) -> np.ndarray:
