@@ -39,7 +39,8 @@ from cfbmarkov._blas import one_blas_thread
 
 
 def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
-                 with_falls: bool = False, with_decay: bool = False):
+                 with_falls: bool = False, with_decay: bool = False,
+                 elimination: "DepthElimination | None" = None):
     """B, the embedded chain of entry states (module docstring), dense; with ``with_falls``
     also the probability of falling below the deepest level, and with ``with_decay`` how
     fast that probability falls with the depth.
@@ -74,6 +75,9 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     with_decay : bool, optional
         With ``with_falls``, also return the decay (NaN where there are fewer than three
         levels or nothing falls).
+    elimination : DepthElimination, optional
+        The same chain's elimination at other depths, whose steps this call reuses where
+        the levels keep the same states, and extends (the same results, bit for bit).
 
     Returns
     -------
@@ -92,17 +96,44 @@ def entry_matrix(p_up, p_down, p_stay, live: np.ndarray, entries: np.ndarray,
     G. Latouche and V. Ramaswami, Introduction to Matrix Analytic Methods in Stochastic
     Modeling, SIAM, Philadelphia (1999), Ch. 6 (quasi-birth-death processes).
     """
-    levels, s = live.shape
-    dense = s <= DENSE_STATES and sum(sp.csr_matrix(part).nnz for part in
-                                      (p_up, p_down, p_stay)) >= DENSE_FILL * s * s
-    algebra = (_DenseBlocks if dense else _SparseBlocks)(p_up, p_down, p_stay)
-    with algebra.context():
-        return _eliminate(algebra, live, entries, with_falls, with_decay)
+    shared = elimination if elimination is not None else DepthElimination(p_up, p_down,
+                                                                           p_stay)
+    with shared.algebra.context():
+        return _eliminate(shared.algebra, live, entries, with_falls, with_decay,
+                          shared.steps if elimination is not None else None)
 
 
-def _eliminate(algebra, live, entries, with_falls, with_decay):
+class DepthElimination:
+    """The block elimination of one chain shared by :func:`entry_matrix`'s calls at several
+    depths (the tries of :func:`cfbmarkov.markov.first_passage.deeper_levels`).
+
+    The elimination runs from the deepest level up, and its step at a level depends only
+    on the states kept at that level and its two neighbours and on the step below: at the
+    same distance from the deepest level, a deeper try repeats a shallower one's steps
+    wherever the levels keep the same states (every level but the top, as a rule). Each
+    step's result (U's non-zero columns, T^-1 U on them, T^-1 c) is kept by its distance
+    from the deepest level and reused while the states agree, with the same bits; the
+    first step that differs and all above it are computed again. The blocks (and the
+    dense parts) are formed once for all the calls.
+
+    Parameters
+    ----------
+    p_up, p_down, p_stay : scipy.sparse matrix, shape (S, S)
+        P split by pass direction, as :func:`entry_matrix` takes them.
+    """
+
+    def __init__(self, p_up, p_down, p_stay):
+        s = p_stay.shape[0]
+        dense = s <= DENSE_STATES and sum(sp.csr_matrix(part).nnz for part in
+                                          (p_up, p_down, p_stay)) >= DENSE_FILL * s * s
+        self.algebra = (_DenseBlocks if dense else _SparseBlocks)(p_up, p_down, p_stay)
+        self.steps: list = []     # (key, (up_cols, up_block, carried)) by distance
+
+
+def _eliminate(algebra, live, entries, with_falls, with_decay, steps=None):
     """:func:`entry_matrix`'s block elimination, its blocks' arithmetic by ``algebra``
-    (:class:`_SparseBlocks` or :class:`_DenseBlocks`)."""
+    (:class:`_SparseBlocks` or :class:`_DenseBlocks`); ``steps`` a
+    :class:`DepthElimination`'s steps, reused and extended."""
     levels, s = live.shape
     kept = [np.flatnonzero(live[g]) for g in range(levels)]
     up_cols = up_block = None     # U_(g+1)'s non-zero columns, T_(g+1)^-1 U_(g+1) on them
@@ -112,6 +143,17 @@ def _eliminate(algebra, live, entries, with_falls, with_decay):
     carried_sums = {}             # level g: the sum of T_g^-1 c_g over its states
     for g in range(levels - 1, -1, -1):
         rows = kept[g]
+        distance = levels - 1 - g
+        key = None
+        if steps is not None and g > 0:
+            key = (with_falls, rows.tobytes(), kept[g - 1].tobytes(),
+                   kept[g + 1].tobytes() if g + 1 < levels else b"deepest")
+            if distance < len(steps) and steps[distance][0] == key:
+                up_cols, up_block, carried = steps[distance][1]
+                if with_falls and g <= 2:
+                    carried_sums[g] = float(carried.sum())
+                continue
+            del steps[distance:]
         t = algebra.identity_less_stay(rows)
         falls = (down_probability[rows] if g == levels - 1 else np.zeros(rows.size)
                  ) if with_falls else None
@@ -124,15 +166,17 @@ def _eliminate(algebra, live, entries, with_falls, with_decay):
         if g == 0 or rows.size == 0:
             up_cols = up_block = None
             carried = None
-            continue
-        u = algebra.up(rows, kept[g - 1])                      # U_g, level g -> g - 1
-        up_cols = algebra.nonzero_columns(u)
-        factors = algebra.factor(t) if up_cols.size or with_falls else None
-        up_block = (algebra.solve(factors, algebra.columns(u, up_cols)) if up_cols.size
-                    else None)
-        carried = algebra.solve(factors, falls) if with_falls else None
-        if with_falls and g <= 2:
-            carried_sums[g] = float(carried.sum())
+        else:
+            u = algebra.up(rows, kept[g - 1])                  # U_g, level g -> g - 1
+            up_cols = algebra.nonzero_columns(u)
+            factors = algebra.factor(t) if up_cols.size or with_falls else None
+            up_block = (algebra.solve(factors, algebra.columns(u, up_cols)) if up_cols.size
+                        else None)
+            carried = algebra.solve(factors, falls) if with_falls else None
+            if with_falls and g <= 2:
+                carried_sums[g] = float(carried.sum())
+        if key is not None:
+            steps.append((key, (up_cols, up_block, carried)))
     out = np.zeros((entries.size, entries.size))
     h0 = np.zeros(s)
     rows = kept[0]

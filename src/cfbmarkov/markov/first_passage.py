@@ -36,7 +36,8 @@ import scipy.sparse as sp
 from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import CfbmarkovError
 from cfbmarkov.markov.connectivity import closed_classes
-from cfbmarkov.markov.entry_chain import embedded_stationary, entry_matrix
+from cfbmarkov.markov.entry_chain import (DepthElimination, embedded_stationary,
+                                          entry_matrix)
 from cfbmarkov.markov.tail_closure import (FIRST_TRY, MAX_TRIES, krylov_dimension, next_try,
                                            try_closure)
 from cfbmarkov.markov.tail_closure import level_row as _level_row
@@ -869,9 +870,10 @@ def rtd_of_split_chain(p_up, p_down, p_stay, lag: float, deficit_levels: int | N
     # the depth from the mass each K loses below it, solved for (no propagation; the
     # tries cost a block elimination each), then the RTD propagated once at the K chosen
     levels, tried = MIN_DEFICIT_LEVELS, []
+    elimination = DepthElimination(p_up, p_down, p_stay)     # the tries share their steps
     while True:
         start = _start_on_levels(p_up, p_down, p_stay, levels + 1, entry, entry_flux, chain,
-                                 with_falls=True)
+                                 with_falls=True, elimination=elimination)
         tried.append((levels, start.lost))
         deeper = deeper_levels(tried, decay=start.decay)
         if deeper == levels:
@@ -1148,8 +1150,8 @@ class _LevelStart:
 
 
 def _start_on_levels(p_up, p_down, p_stay, levels: int, entry, entry_flux, chain,
-                     with_falls: bool = False, arrays: list[np.ndarray] | None = None
-                     ) -> _LevelStart:
+                     with_falls: bool = False, arrays: list[np.ndarray] | None = None,
+                     elimination: DepthElimination | None = None) -> _LevelStart:
     """The live (level, state) pairs, the start distribution on level 0 (the given entry
     distribution, or the stationary one of the embedded entry chain), and with
     ``with_falls`` the mass of the residences that falls below the deepest of ``levels``
@@ -1188,14 +1190,16 @@ def _start_on_levels(p_up, p_down, p_stay, levels: int, entry, entry_flux, chain
         decay = float("nan")
         if with_falls:
             _, falls, decay = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s),
-                                           entries, with_falls=True, with_decay=True)
+                                           entries, with_falls=True, with_decay=True,
+                                           elimination=elimination)
         return _LevelStart(live.reshape(levels, s), exit_probability[:s], start,
                            entry / entry.sum(), 1,
                            float(start[0] @ falls) if with_falls else float("nan"), decay)
     # B, the embedded chain of entry states, by block elimination over the levels
     # (markov.entry_chain: no LU of the [S L, S L] matrix), and its stationary distribution
     embedded = entry_matrix(p_up, p_down, p_stay, live.reshape(levels, s), entries,
-                            with_falls=with_falls, with_decay=with_falls)
+                            with_falls=with_falls, with_decay=with_falls,
+                            elimination=elimination)
     decay = float("nan")
     if with_falls:
         embedded, falls, decay = embedded
