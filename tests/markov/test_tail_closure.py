@@ -42,19 +42,26 @@ def without_closure(monkeypatch):
     monkeypatch.setattr(fp, "krylov_dimension", lambda *args: 0)
 
 
-def test_the_closed_tail_is_the_propagated_one_within_its_tolerance(monkeypatch):
+@pytest.mark.parametrize("closure_tol", [1e-10, fp.CLOSURE_TOL])
+def test_the_closed_tail_is_the_propagated_one_within_its_tolerance(monkeypatch, closure_tol):
+    """The closed RTD's probabilities are the propagated ones within the bound taken, the
+    bound is within the tolerance and counted unresolved; E(RT) and SD(RT) move by far
+    less than they are printed with (4 digits)."""
     p, up, down = slow_column()
     taken = []
     original = fp.try_closure
 
-    def counting(*args, **kwargs):
+    def recording(*args, **kwargs):
         result = original(*args, **kwargs)
-        taken.append(result[0] >= 0)
+        taken.append(result)
         return result
 
-    monkeypatch.setattr(fp, "try_closure", counting)
+    monkeypatch.setattr(fp, "CLOSURE_TOL", closure_tol)
+    monkeypatch.setattr(fp, "try_closure", recording)
     closed = fp.exact_rtd(p, up, down, LAG)
-    assert any(taken)                                       # the closure was taken
+    assert taken and taken[-1][0] >= 0                      # the closure was taken
+    bound = taken[-1][1]
+    assert 0 < bound <= closure_tol
     without_closure(monkeypatch)
     taken.clear()
     propagated = fp.exact_rtd(p, up, down, LAG)
@@ -65,10 +72,34 @@ def test_the_closed_tail_is_the_propagated_one_within_its_tolerance(monkeypatch)
     b = np.zeros(size)
     a[:closed.probability.size] = closed.probability
     b[:propagated.probability.size] = propagated.probability
-    assert np.abs(a - b).sum() <= 1e-10
-    assert closed.mean == pytest.approx(propagated.mean, rel=1e-9)
-    assert closed.sd == pytest.approx(propagated.sd, rel=1e-8)
-    assert closed.unresolved <= propagated.unresolved + 1e-10
+    assert np.abs(a - b).sum() <= bound
+    assert closed.mean == pytest.approx(propagated.mean, rel=1e-7)
+    assert closed.sd == pytest.approx(propagated.sd, rel=1e-6)
+    # the closed tail's mass may differ by the bound, and the bound is added to it
+    assert closed.unresolved <= propagated.unresolved + 2 * bound
+
+
+def test_the_closure_tolerance_is_the_deficit_loss_accepted():
+    """The closure's error is held to the share of the residences that may pass below the
+    deepest lap deficit, and is taken earlier than a tolerance of 1e-10 allows on a chain
+    whose bound falls slowly (fewer lags propagated)."""
+    assert fp.CLOSURE_TOL == fp.DEFICIT_TOL
+    p, up, down = slow_column()
+    lags = {}
+    original = fp.try_closure
+    for closure_tol in (1e-10, fp.CLOSURE_TOL):
+        def recording(*args, key=closure_tol, **kwargs):
+            result = original(*args, **kwargs)
+            if result[0] >= 0:
+                lags[key] = args[5]
+            return result
+
+        fp.try_closure, fp.CLOSURE_TOL = recording, closure_tol
+        try:
+            fp.exact_rtd(p, up, down, LAG)
+        finally:
+            fp.try_closure, fp.CLOSURE_TOL = original, fp.DEFICIT_TOL
+    assert lags[fp.CLOSURE_TOL] < lags[1e-10] / 2
 
 
 def test_the_closures_bound_is_counted_unresolved_and_covers_the_deficit_loss(monkeypatch):
@@ -123,8 +154,10 @@ def test_an_open_risers_closed_tail_is_its_matrix_powers():
     assert direct.size > 2 * tc.FIRST_TRY
     assert rtd.probability.size == pytest.approx(direct.size, abs=2)
     n = min(rtd.probability.size, direct.size)
-    assert np.abs(rtd.probability[:n] - direct[:n]).max() < 1e-13
-    assert np.abs(rtd.probability[:n] - direct[:n]).sum() < 1e-10
+    gap = np.abs(rtd.probability[:n] - direct[:n])
+    assert gap.max() < 1e-12
+    bound = rtd.unresolved - max(0.0, 1.0 - rtd.probability.sum())
+    assert 0 < bound <= fp.CLOSURE_TOL and gap.sum() <= bound
 
 
 @pytest.mark.parametrize("dimension", [2, 4])

@@ -561,7 +561,10 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
         kept, or :data:`MAX_DEFICIT_LEVELS` is reached (:func:`deeper_levels`); the mass
         below stays ``unresolved``.
     tol : float, optional
-        Stop when the mass not yet absorbed falls below this.
+        Stop when the mass not yet absorbed falls below this. Past lag
+        :data:`~cfbmarkov.markov.tail_closure.FIRST_TRY` the tail may be closed by a
+        Krylov projection whose bound on its error, at most :data:`CLOSURE_TOL` (or
+        ``tol`` where larger), counts as unresolved (0: propagated to the end).
     max_steps : int, optional
         Propagate at most this many lags (the rest counts as unresolved).
     entry : ndarray of float64, shape (S,), optional
@@ -794,6 +797,11 @@ WINDOW_DEFICIT_LEVELS = 16
 MAX_DEFICIT_LEVELS = 64
 #: the share of the residences that may pass below the deepest lap deficit kept
 DEFICIT_TOL = 1e-7
+#: the largest bound on a closed tail's error accepted (the 1-norm of the error of its
+#: probabilities and of its loss below the deepest deficit, summed over its lags): the share
+#: of the residences that may pass below the deepest deficit, an error of the same kind
+#: (residences whose times are not known)
+CLOSURE_TOL = DEFICIT_TOL
 #: the unresolved mass that `fit`, `rtd` and `info` warn of (equal to
 #: :data:`cfbmarkov.markov.model_summary.UNRESOLVED_LIMIT`, tested; that module stays free of
 #: scipy): a loss above it that deeper deficits do not reduce is left there, said, rather
@@ -1355,8 +1363,8 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
     below ``tol`` or ``max_steps`` lags: lag by lag, its tail closed by a Krylov projection
     (:mod:`cfbmarkov.markov.tail_closure`) from :data:`~cfbmarkov.markov.tail_closure.
     FIRST_TRY` lags on (then at twice as many, and so on) where the bound on its error is
-    at most ``tol``. Returns the lags reached and that bound (0 where no closure was taken).
-    The same bits on any thread count."""
+    at most :data:`CLOSURE_TOL` (or ``tol`` where larger). Returns the lags reached and
+    that bound (0 where no closure was taken). The same bits on any thread count."""
     levels = live.shape[1]
     work = sum(array.size for array in arrays[2::3]) * levels
     kernel = (_first_passage_levels_parallel if work > PARALLEL_LEVEL_WORK
@@ -1364,6 +1372,7 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
     state = start.copy()
     dimension = (krylov_dimension(int(live.sum()), *live.shape, work + 3 * live.size)
                  if closure and tol > 0 else 0)
+    error_tol = max(tol, CLOSURE_TOL)
     reached, stop, tries = 0, (FIRST_TRY if dimension else max_steps), []
     while True:
         stop = min(stop, max_steps)
@@ -1372,8 +1381,8 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
         if reached < stop or stop >= max_steps or _level_mass(state) < tol:
             return reached, 0.0
         steps, bound = try_closure(arrays, live, state, exit_probability, down_probability,
-                                   reached, tol, tol, max_steps, out, falls, dimension)
+                                   reached, tol, error_tol, max_steps, out, falls, dimension)
         if steps >= 0:
             return steps, bound
         tries.append((reached, bound))
-        stop = next_try(tries, tol) if len(tries) < MAX_TRIES else max_steps
+        stop = next_try(tries, error_tol) if len(tries) < MAX_TRIES else max_steps
