@@ -903,8 +903,9 @@ def rtd_moments(p_up, p_down, p_stay, lag: float, deficit_levels: int,
     (level, state) pairs, N = (I - Q)^-1): sum f = s N e, sum k f = s N^2 e and
     sum k^2 f = s (2 N^3 - N^2) e (the generating function sum k^2 x^(k-1) =
     (1 + x) / (1 - x)^3). The same RTD as :func:`rtd_of_split_chain` with ``entry`` and
-    ``deficit_levels``, which stops where 1e-10 of the mass is left: its mean and SD differ
-    from these by that tail alone. For the bootstrap resamples of a model's interval, whose
+    ``deficit_levels``, which stops where 1e-10 of the mass is left and may close its tail
+    with an error of at most :data:`CLOSURE_TOL` of the mass: its mean and SD differ from
+    these by that tail and that error alone. For the bootstrap resamples of a model's interval, whose
     RTD per bin is needed only as far as the bins reach (:mod:`cfbmarkov.analysis.bootstrap`).
 
     Parameters
