@@ -233,6 +233,14 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
      'temperature_by_cell = "rates.csv"\nwall_temperature = 600.0\ninitial = 300.0\n',
      "col,row,temperature\n" + "".join(f"{c},{r},700\n" for r in range(6) for c in range(3)),
      "wall_temperature would replace the wall cells' values of temperature_by_cell"),
+    # a depth column on a 2D grid: only its one depth, 0, and the line that gives another
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,depth,rate\n" + "".join(f"{c},{r},{int((c, r) == (1, 2))},1\n"
+                                      for r in range(6) for c in range(3)),
+     "line 9 gives depth 1, but the 2D grid of 3x6 has the one depth 0; give col,row,VALUE"),
+    # a table that is not there: where its path is read from
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "missing.csv"\n', None,
+     "a table's path is relative to the kinetics file's folder"),
     # a name the particle files' arrays carry would replace that array in export-vtk
     ('[[property]]\nname = "id"\nlaw = "first-order"\nrate = 0.4\n', None,
      "property name 'id' is the name of an array the particle files carry"),
@@ -278,7 +286,8 @@ def test_rate_tables_from_excel_read_or_refused_by_encoding(fitted, tmp_path, ca
 def test_rate_tables_with_comments_quotes_or_capitals_read_as_the_plain_table(
         fitted, tmp_path, capsys):
     """A '#' comment line, quoted fields and a capitalised header, as spreadsheets and
-    scripts write them, give the same exit mean as the plain table."""
+    scripts write them, and a depth column of zeros on a 2D grid, give the same exit mean
+    as the plain table."""
     _, _, model = fitted
     kin = _write(tmp_path, GOOD)
     (tmp_path / "rates.csv").write_text(RATES)
@@ -286,7 +295,10 @@ def test_rate_tables_with_comments_quotes_or_capitals_read_as_the_plain_table(
     plain = json.loads(capsys.readouterr().out)["properties"]["X"]["exit_mean"]
     header, *rows = RATES.strip().splitlines()
     quoted = "\n".join(",".join(f'"{x}"' for x in line.split(",")) for line in rows)
+    with_depth = "col,row,depth,rate\n" + "".join(
+        f"{c},{r},0,{v}\n" for c, r, v in (line.split(",") for line in rows))
     for text in ("# rates from the zone map\n" + RATES,
+                 with_depth,                 # a 2D grid's one depth, 0, on every row
                  header.title() + "\n" + "\n".join(rows) + "\n",
                  ",".join(f'"{x}"' for x in header.split(",")) + "\n" + quoted + "\n"):
         (tmp_path / "rates.csv").write_text(text)

@@ -706,8 +706,8 @@ def add_stationarity(sub) -> None:
                    help="START:STOP, s, the part of the file used (default all; leave out a "
                         "start-up from rest)")
     s.add_argument("--lag", type=positive_float, default=None,
-                   help="frames every LAG s (a model's lag; default every frame); also the "
-                        "RTD bins of the MD")
+                   help="frames every LAG s (a model's lag; default every frame, and 0.025 s "
+                        "with --sample-length); also the RTD bins of the MD")
     s.add_argument("--basis", choices=["frames", "events"], default="frames",
                    help="residence times from frames (every --lag) or from the file's exact "
                         "pass events (as in compare); default frames")

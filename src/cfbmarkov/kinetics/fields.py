@@ -190,8 +190,12 @@ class ByCell(CellParameter):
         depth = t[:, 2].astype(np.int64) if t.shape[1] == 4 else np.zeros(len(t), np.int64)
         m, d, n = space.columns, space.depth_columns, space.rows
         if t.shape[1] == 4 and d == 1 and np.any(depth != 0):
-            raise InputError(f"{where}: a depth column for a 2D grid of {space.grid_text()}; "
-                             "give col,row,VALUE")
+            i = int(np.flatnonzero(depth != 0)[0])
+            line = (f"line {int(self.lines[i])}" if self.lines is not None
+                    else f"data row {i + 1}")
+            raise InputError(f"{where}: {line} gives depth {depth[i]}, but the 2D grid of "
+                             f"{space.grid_text()} has the one depth 0; give col,row,VALUE "
+                             "(or depth 0 on every row)")
         if t.shape[1] == 3 and d > 1:
             raise InputError(f"{where}: the grid {space.grid_text()} has {d} depth columns; "
                              "give col,row,depth,VALUE")

@@ -699,7 +699,9 @@ def _read_table(file: Path, p: str, where: str, signed: bool) -> tuple[np.ndarra
     try:
         raw = file.read_bytes()
     except OSError as exc:
-        raise InputError(f"{where}: cannot read {file}: {exc.strerror or exc}") from None
+        raise InputError(f"{where}: cannot read {file}: {exc.strerror or exc}; a table's path "
+                         "is relative to the kinetics file's folder: check the name and the "
+                         "folder, or give an absolute path") from None
     try:                                 # Excel's "CSV UTF-8" starts with a byte-order mark
         text = raw.decode("utf-8-sig").splitlines()
     except UnicodeDecodeError:
