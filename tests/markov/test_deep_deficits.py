@@ -2,6 +2,7 @@
 as many lap deficits as the chain's residences need (first_passage.deeper_levels), so that
 E(RT), SD(RT) and exit means are those of the whole chain, not of its first 8 deficits."""
 
+import numba
 import numpy as np
 import pytest
 
@@ -107,20 +108,40 @@ def test_one_try_measures_the_decay_of_the_loss_and_the_depth_follows():
     assert rtd.mean == pytest.approx(LAG / (up - down), rel=1e-7)
 
 
-def test_the_threaded_propagation_gives_the_same_bits(monkeypatch):
+@pytest.mark.parametrize("states", [12, 150])
+def test_the_threaded_propagation_gives_the_same_bits(monkeypatch, states):
+    """The threaded kernel (destinations in blocks, fewer states than blocks and more)
+    gives the serial kernel's bits."""
     import cfbmarkov.markov.first_passage as fp
 
     rng = np.random.default_rng(3)
-    p = rng.random((12, 12)) * (rng.random((12, 12)) < 0.4) + np.eye(12)
+    n, edge = states, max(3, states // 12)
+    p = rng.random((n, n)) * (rng.random((n, n)) < min(0.4, 5 / n)) + np.eye(n)
     p /= p.sum(axis=1, keepdims=True)
-    up = np.zeros((12, 12))
-    down = np.zeros((12, 12))
-    up[9:, :3] = 1.0                    # the top rows pass up onto the bottom ones
-    down[:3, 9:] = 0.25                 # and the bottom ones fall back often
+    up = np.zeros((n, n))
+    down = np.zeros((n, n))
+    up[n - edge:, :edge] = 1.0          # the top rows pass up onto the bottom ones
+    down[:edge, n - edge:] = 0.25       # and the bottom ones fall back often
     serial = fp.exact_rtd(p, up, down, LAG)
     monkeypatch.setattr(fp, "PARALLEL_LEVEL_WORK", 0)
-    threaded = fp.exact_rtd(p, up, down, LAG)
+    calls = []
+    kernel = fp._first_passage_levels_parallel
+
+    def counted(*args):
+        calls.append(args[11].shape)          # the state [S, L]
+        return kernel(*args)
+
+    monkeypatch.setattr(fp, "_first_passage_levels_parallel", counted)
+    threads = numba.get_num_threads()
+    numba.set_num_threads(2)                  # the suite's workers run one thread
+    try:
+        threaded = fp.exact_rtd(p, up, down, LAG)
+    finally:
+        numba.set_num_threads(threads)
+    assert calls and calls[0][0] == n         # the threaded kernel ran
+    assert (n > fp.PARALLEL_CHUNKS) == (states == 150)
     assert serial.deficit_levels == threaded.deficit_levels
+    assert serial.probability.size > 10
     assert np.array_equal(serial.probability, threaded.probability)
 
 

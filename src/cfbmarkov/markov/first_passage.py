@@ -251,15 +251,16 @@ def _first_passage_levels(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay
     ``falls[L - 1]`` is the mass lost below the deepest level. ``state`` [S, L] holds the
     mass left at lag ``first`` on entry and at the last lag taken on return. Returns the
     number of lags reached (``max_steps`` unless the mass left fell below ``tol`` first)."""
-    n = state.shape[0]
+    n, levels = state.shape
     v = state.copy()
     w = np.empty_like(v)
+    acc = np.empty(levels)
     reached = max_steps
     for k in range(first, max_steps):
         out[k] = _level_exits(v, exit_probability, down_probability, falls)
         for j in range(n):
             _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
-                       up_idx, up_val, live, v, w)
+                       up_idx, up_val, live, v, w, acc)
         v, w = w, v
         if _level_mass(v) < tol:
             reached = k + 1
@@ -277,13 +278,14 @@ def _window_landings(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val,
     lands on level 0 again instead of leaving. ``landings[k, j]`` (float64 [M, S]) gets
     the mass that lands in state j by the record of transition k + 1. Parts as
     :func:`_first_passage_levels` (CSR of their transposes)."""
-    n = start.shape[0]
+    n, levels = start.shape
     v = start.copy()
     w = np.empty_like(v)
+    acc = np.empty(levels)
     for k in range(landings.shape[0]):
         for j in range(n):
             _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
-                       up_idx, up_val, live, v, w)
+                       up_idx, up_val, live, v, w, acc)
             landed = 0.0
             for q in range(up_ptr[j], up_ptr[j + 1]):      # passes up from level 0
                 landed += up_val[q] * v[up_idx[q], 0]
@@ -304,6 +306,7 @@ def _exits_backward(up_ptr, up_idx, up_val, stay_ptr, stay_idx, stay_val, down_p
     n, levels = live.shape
     b = np.zeros((n, levels))
     w = np.empty_like(b)
+    acc = np.empty(levels)
     for i in range(n):
         if live[i, 0]:
             b[i, 0] = exit_probability[i]
@@ -312,7 +315,7 @@ def _exits_backward(up_ptr, up_idx, up_val, stay_ptr, stay_idx, stay_val, down_p
             ends[k, i] = b[i, 0]
         for i in range(n):
             _level_row(i, up_ptr, up_idx, up_val, stay_ptr, stay_idx, stay_val, down_ptr,
-                       down_idx, down_val, live, b, w)
+                       down_idx, down_val, live, b, w, acc)
         b, w = w, b
 
 
@@ -322,16 +325,20 @@ def _first_passage_levels_parallel(down_ptr, down_idx, down_val, stay_ptr, stay_
                                    state, tol, first, max_steps, out, down_probability, falls):
     """:func:`_first_passage_levels` with the destinations of each lag shared among the
     threads (each destination's levels summed by one thread in the same order, the sums in
-    one thread: the same bits on any thread count)."""
-    n = state.shape[0]
+    one thread: the same bits on any thread count). The destinations go in
+    :data:`PARALLEL_CHUNKS` blocks, each with its own scratch row of sums."""
+    n, levels = state.shape
     v = state.copy()
     w = np.empty_like(v)
+    chunks = min(PARALLEL_CHUNKS, n)
+    acc = np.empty((chunks, levels))
     reached = max_steps
     for k in range(first, max_steps):
         out[k] = _level_exits(v, exit_probability, down_probability, falls)
-        for j in nb.prange(n):
-            _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_ptr,
-                       up_idx, up_val, live, v, w)
+        for c in nb.prange(chunks):
+            for j in range(c * n // chunks, (c + 1) * n // chunks):
+                _level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val,
+                           up_ptr, up_idx, up_val, live, v, w, acc[c])
         v, w = w, v
         if _level_mass(v) < tol:
             reached = k + 1
@@ -521,6 +528,8 @@ def _heads_of_chains(down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val,
 
 #: non-zeros times levels above which a lag's product is shared among threads
 PARALLEL_LEVEL_WORK = 1_000_000
+#: blocks of destinations a lag's product is shared out in (threads take whole blocks)
+PARALLEL_CHUNKS = 64
 
 
 def _live_levels(p_up, p_down, p_stay, levels: int, targets: np.ndarray) -> np.ndarray:
