@@ -91,7 +91,10 @@ def test_intervals_and_verdict_follow_the_direction(runs):
     band = model_intervals(model, level=0.9, resamples=20)
     exact = model.rtd().mean
     assert band.rt_mean_interval[0] <= exact <= band.rt_mean_interval[1]
-    assert band.rt_mean_interval[1] < model.rtd(direction="up").mean
+    from cfbmarkov.errors import UnresolvedWarning
+
+    with pytest.warns(UnresolvedWarning, match="counted upward"):    # against the net flow
+        assert band.rt_mean_interval[1] < model.rtd(direction="up").mean
     model = model.with_uncertainty(band)
     assert model.rtd().uncertainty is band
     assert model.rtd(direction="up").uncertainty is None
@@ -150,3 +153,29 @@ def test_compare_counts_as_the_model_and_says_where_the_reference_differs(runs, 
     assert other["direction"] == "down"
     lines = [w for w in other["warnings"] if "the model counts residences downward" in w]
     assert len(lines) == 1 and "runs up" in lines[0]
+
+
+def test_residences_counted_against_the_net_flow_warn_that_they_drift_away(runs):
+    """Counted against the chain's net flow, nearly every residence drifts away from its
+    end: the warning says so, with the share that ends, and names the direction to count
+    in, not a coarser grid; in the net flow's direction no warning."""
+    import warnings
+
+    from cfbmarkov.errors import UnresolvedWarning
+
+    up, down = runs
+    for path, flow, other in ((up, "up", "down"), (down, "down", "up")):
+        model = fit_model(path, grid(), FLOW.lag, (0.0, STOP), "mle")
+        with pytest.warns(UnresolvedWarning) as caught:
+            against = model.rtd(direction=other)
+        line = str(caught[0].message)
+        assert against.unresolved > 0.5
+        assert line.startswith(f"unresolved mass {against.unresolved:.2g}: counted {other}ward")
+        assert f"since the chain's net flow runs {flow}ward" in line
+        resolved = 100 * float(against.probability.sum())
+        assert f"describe the resolved {resolved:.2g} % alone" in line
+        assert f'(direction="{flow}", the model\'s flow_direction' in line
+        assert "coarser grid" not in line
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            model.rtd()                   # the net flow's direction: no warning

@@ -78,7 +78,7 @@ def assess_fit(model, runs: Sequence | None = None,
     Warns
     -----
     IntervalWarning
-        Where no interval can be formed (the model is returned without one), and where
+        (:class:`cfbmarkov.analysis.fit_checks.IntervalWarning`) Where no interval can be formed (the model is returned without one), and where
         ``runs`` name one file more than once: windows of one run are not independent runs,
         so neither the interval nor the verdict of pooled runs is formed.
     """

@@ -246,12 +246,13 @@ def implied_timescales(data, state_space: StateSpace, lags: Sequence[float],
         Lags tau (s), each a whole multiple of the frame interval.
     window : tuple of float, optional
         The fitting window (A, B) in s (None: every frame).
-    estimator : {"mle", "paper"}
-        The estimator of every model.
-    k : int
-        Number of timescales after the stationary one.
-    connected : bool
-        Restrict P to its largest strongly connected set first.
+    estimator : {"mle", "paper"}, optional
+        The estimator of every model (default ``"mle"``).
+    k : int, optional
+        Number of timescales after the stationary one (default 6).
+    connected : bool, optional
+        Restrict P to its largest strongly connected set first (default True here;
+        :func:`~cfbmarkov.markov.estimate.fit_model` and the estimators default to False).
 
     Returns
     -------

@@ -606,10 +606,12 @@ def fit_model(source, state_space: StateSpace, lag: float,
         The lag (s), a whole multiple of the file's frame interval.
     window : tuple of float, optional
         The fitting window (A, B) in s; None: every frame.
-    estimator : {"paper", "mle"}
-        Paper Eq. 2-4, or the pooled maximum-likelihood estimate.
+    estimator : {"paper", "mle"}, optional
+        Paper Eq. 2-4, or the pooled maximum-likelihood estimate (default ``"mle"``; the
+        command line's default differs, :func:`default_estimator`).
     connected : bool, optional
-        Restrict to the largest strongly connected set (see :class:`TransitionEstimator`).
+        Restrict to the largest strongly connected set (see :class:`TransitionEstimator`;
+        default False).
     coherent : bool, optional
         Also fit the coherence of the moves (see :class:`TransitionEstimator`).
 

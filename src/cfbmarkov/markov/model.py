@@ -503,7 +503,7 @@ class MarkovModel:
         if window is None and key not in self._cache:
             from cfbmarkov.markov.model_summary import unresolved_warning
 
-            self._cache[key] = line = unresolved_warning(rtd)
+            self._cache[key] = line = unresolved_warning(rtd, key[1], self.flow_direction)
             if line is not None:
                 import warnings
 

@@ -24,7 +24,8 @@ DOWNWARD_LINE = ("residences counted downward: the fitting window's net solids f
 UNRESOLVED_LIMIT = 0.01
 
 
-def unresolved_warning(rtd) -> str | None:
+def unresolved_warning(rtd, direction: str | None = None,
+                       flow_direction: str | None = None) -> str | None:
     """The line that says an exact RTD's E(RT) and SD(RT) describe only its resolved
     residences, where its unresolved mass exceeds :data:`UNRESOLVED_LIMIT`; else None.
 
@@ -32,6 +33,10 @@ def unresolved_warning(rtd) -> str | None:
     ----------
     rtd : ResidenceTimeDistribution
         An exact RTD (:meth:`MarkovModel.rtd <cfbmarkov.markov.model.MarkovModel.rtd>`).
+    direction, flow_direction : {"up", "down"}, optional
+        The direction its residences were counted in, and the chain's net flow direction
+        (the model's ``flow_direction``): counted against the net flow, most residences
+        drift away from their end, and the line says so and names the direction to count in.
 
     Returns
     -------
@@ -40,6 +45,18 @@ def unresolved_warning(rtd) -> str | None:
     u = float(rtd.unresolved)
     drift = getattr(rtd, "drift_mean", None)
     fallen = float(getattr(rtd, "deficit_unresolved", 0.0))
+    if (direction is not None and flow_direction is not None and direction != flow_direction
+            and u > UNRESOLVED_LIMIT and fallen > 0.5 * u and rtd.window is None):
+        ends = "up through the top" if direction == "up" else "down through the bottom"
+        resolved = float(np.sum(rtd.probability))
+        return (f"unresolved mass {u:.2g}: counted {direction}ward (residences that end "
+                f"{ends}), {fallen:.2g} of them drift more than {rtd.deficit_levels} laps "
+                f"the other way before one ends, since the chain's net flow runs "
+                f"{flow_direction}ward; E(RT) and SD(RT) describe the resolved "
+                f"{100 * resolved:.2g} % alone and are not the flow's residence time: count "
+                f"residences in the net flow's direction (direction=\"{flow_direction}\", "
+                "the model's flow_direction, as fit and rtd do; docs/definitions.md, Net "
+                "downflow)")
     if drift is not None and abs(rtd.mean - drift) > UNRESOLVED_LIMIT * drift:
         return (f"{fallen:.2g} of the residences fall more than {rtd.deficit_levels} laps "
                 "below their entry, deeper than the exact RTD follows them: E(RT) and SD(RT) "

@@ -76,7 +76,7 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
         Judge by the RTD over the whole fitting window (``window``), by the held-out RTD of
         blocked cross-validation (``rtd``), by the held-out Chapman-Kolmogorov error
         (``ck``), or ``auto``: ``window`` where the window holds at least
-        ``MIN_RESIDENCES`` residences, else ``ck``.
+        :data:`cfbmarkov.markov.select.blocks.MIN_RESIDENCES` residences, else ``ck``.
     coherent : bool, optional
         Also fit the chosen model's coherence (:mod:`cfbmarkov.markov.coherence`); it does
         not change the choice (the RTD and CK test are single-particle figures).
