@@ -78,9 +78,10 @@ def assess_fit(model, runs: Sequence | None = None,
     Warns
     -----
     IntervalWarning
-        (:class:`cfbmarkov.analysis.fit_checks.IntervalWarning`) Where no interval can be formed (the model is returned without one), and where
-        ``runs`` name one file more than once: windows of one run are not independent runs,
-        so neither the interval nor the verdict of pooled runs is formed.
+        (:class:`cfbmarkov.analysis.fit_checks.IntervalWarning`) Where no interval can be
+        formed (the model is returned without one), and where ``runs`` name one file more
+        than once: windows of one run are not independent runs, so neither the interval
+        nor the verdict of pooled runs is formed.
     """
     from cfbmarkov.markov.first_passage import TrappedResidences
 
