@@ -279,7 +279,13 @@ def test_two_rows_at_one_time_without_id(tmp_path, assert_clean_failure):
     output = tmp_path / "o" / "x.h5"
     assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
                          "-o", output, output=output,
-                         match=r"2 rows at this time, but the file has no id column")
+                         match=r"2 rows at this time, but the file has no id column, so it")
+    # a column that numbers the tracers under another name is named, with the fix
+    source.write_text("t,tag,x,y\n0,1,0.01,0.1\n0,2,0.02,0.2\n")
+    assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
+                         "-o", output, output=output,
+                         match=r"no id column \(not used: 'tag'\), so it is read as one tracer; "
+                               r"name the column that numbers the particles id")
 
 
 def test_ptv_particles_entering_and_leaving_are_present_as_in_the_file(tmp_path):

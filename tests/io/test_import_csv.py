@@ -191,9 +191,9 @@ BAD_CSV = {
     "duplicate-id": (table(changed(1, 0, id=2)), r"particle id 2 appears more than once"),
     "duplicate-id-first-frame": (table(changed(0, 2, id=2)), r"id 2 appears more than once"),
     "outside-height": (table(changed(2, 2, y=-0.01)), r"particle 3 at t = 0.05 s lies outside"),
-    "empty-file": ("", r"empty file"),
-    "blank-file": ("\n \n", r"empty file \(no header line\)"),
-    "header-only": (HEADER + "\n", r"no data rows after the header"),
+    "empty-file": ("", r"empty file \(0 bytes\): nothing to import; check the path"),
+    "blank-file": ("\n \n", r"empty file \(no header line\): nothing to import"),
+    "header-only": (HEADER + "\n", r"no data rows after the header: nothing to import"),
     "truncated-mid-row": (table()[:-9], (r"line 10: 3 values, the header names 4 columns "
                                          r"\(the file ends inside this row: truncated\?\)")),
     "binary-file": (b"\x89HDF\r\n\x1a\n\x00\x00\xff\xfe", r"not a text file"),
@@ -393,6 +393,9 @@ def test_sizes_that_suggest_a_unit_mistake_warn(tmp_path, capsys):
             assert warnings == []
         else:
             assert expected in "\n".join(warnings) and len(warnings) == count, warnings
+        if options == ("--length-unit", "mm"):       # or a depth read as the heights
+            assert ("or the heights come from another axis than the vertical one (3D "
+                    "positions: --vertical-axis names the vertical)") in warnings[0]
     assert "the particles move at a median 2.5e+04 m/s" in "\n".join(
         [line for line in _import_err(main, capsys, source, tmp_path, "--time-unit", "ms")])
     slower = tmp_path / "slower.csv"    # a 0.5 m/s flow written in ms: 5 mm/s read as s

@@ -283,6 +283,7 @@ def test_the_exports_lap_array_is_refused_along_another_vertical_axis(tmp_path, 
                  "--vertical-axis", "x", "-o", str(tmp_path / "x.h5")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "passes along y" in err and "vertical axis is x" in err
+    assert "give --vertical-axis y, the export's vertical" in err
     assert not (tmp_path / "x.h5").exists()
 
 

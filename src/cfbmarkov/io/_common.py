@@ -51,7 +51,8 @@ def check_source(source: str | os.PathLike) -> Path:
         raise InputError(f"{path}: is a folder, not a file; {folder_advice(path)}")
     check_not_pipe(path)
     if path.stat().st_size == 0:
-        raise InputError(f"{path}: empty file")
+        raise InputError(f"{path}: empty file (0 bytes): nothing to import; check the path, "
+                         "or that the program writing it has finished")
     return path
 
 

@@ -340,7 +340,8 @@ def _no_rows(label: str, layout: CsvLayout) -> str:
             what, fix = f"{layout.noise_id} (noise) in", "label the tracers' points first"
         return (f"{label}: all {layout.noise_rows} data rows have {what} "
                 f"{layout.id_column!r}: they belong to no particle, nothing to import; {fix}")
-    return f"{label}: no data rows after the header"
+    return (f"{label}: no data rows after the header: nothing to import; check that the "
+            "export wrote its rows (a run or an export still writing, or stopped)")
 
 
 def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
@@ -465,9 +466,11 @@ def _append_frame(writer: TrajectoryWriter, columns: FrameColumns, rows: np.ndar
     if layout.has_id:
         ids = layout.ids(rows)
     elif rows.shape[0] > 1:
+        unused = _unused_columns(layout)
+        named = (f" (not used: {', '.join(repr(n) for n in unused)})" if unused else "")
         raise InputError(f"{where}: {rows.shape[0]} rows at this time, but the file has no id "
-                         "column, so it is read as one tracer; add an id column for several "
-                         "particles")
+                         f"column{named}, so it is read as one tracer; name the column that "
+                         "numbers the particles id (or tracer, label, track), or add one")
     else:
         ids = np.zeros(1, dtype=np.int64)
     positions, inside = _riser_positions(rows, layout, riser, ids, label)

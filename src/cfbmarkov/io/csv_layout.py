@@ -316,7 +316,8 @@ def _find_header(fh: TextIO, label: str) -> tuple[str, int, list[str], int, list
         if comment is not None:
             return comment, comment_no, _read_ahead(fh, [line]), line_no, titles
         raise InputError(f"{label}: line {line_no} is not a header ({text!r}); {_EXPECTED}")
-    raise InputError(f"{label}: empty file (no header line)")
+    raise InputError(f"{label}: empty file (no header line): nothing to import; check the "
+                     "path, or that the export wrote the file")
 
 
 def _read_ahead(fh: TextIO, lines: list[str]) -> list[str]:

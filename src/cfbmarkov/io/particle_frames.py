@@ -168,8 +168,8 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
         if (first.image is not None and image_from and "passes along y" in image_from
                 and riser.vertical != 1):
             raise InputError(f"{first.where}: the laps are {image_from}, but the vertical axis "
-                             f"is {'xyz'[riser.vertical]}; import without --vertical-axis (the "
-                             "export's vertical is y)")
+                             f"is {'xyz'[riser.vertical]}; give --vertical-axis y, the export's "
+                             "vertical (or leave it out where the export is 2D)")
         parameters = {
             "source_file": series.source_file, "format": series.fmt,
             "format_detected_from": detected, "box": None if box is None else box.tolist(),

@@ -60,7 +60,9 @@ def unit_warnings(traj) -> list[str]:
             lines.append(f"the particles' heights span {span:.3g} m of the riser's {height:g} m "
                          f"(in {frames.size} frames from the first to the last): the positions' "
                          "unit and the riser's may differ (CSV: --length-unit; --width and "
-                         "--height are in m, --region in the source's own units)")
+                         "--height are in m, --region in the source's own units), or the "
+                         "heights come from another axis than the vertical one (3D positions: "
+                         "--vertical-axis names the vertical)")
     speed = median_speed(traj)
     stored = median_stored_speed(traj)
     if np.isfinite(speed) and np.isfinite(stored) and speed > 0 and stored > 0 and (
