@@ -304,6 +304,12 @@ def test_derived_models_share_the_validated_arrays_and_new_arrays_are_checked():
     doubled = np.array(model.transition_matrix) * 2.0
     with pytest.raises(InputError, match="rows do not sum to 1"):
         dataclasses.replace(model, transition_matrix=doubled)
+    # within 1e-9 as documented: a leak of 1e-6 a lag (numpy's default rtol would pass it)
+    leaking = np.array(model.transition_matrix) * (1.0 - 1e-6)
+    with pytest.raises(InputError, match="rows do not sum to 1"):
+        dataclasses.replace(model, transition_matrix=leaking)
+    dataclasses.replace(model, transition_matrix=np.array(model.transition_matrix)
+                        * (1.0 - 1e-12))                  # round-off: accepted
     negative = np.array(model.counts)
     negative[0, 0] = -1
     with pytest.raises(InputError, match="negative counts"):

@@ -187,7 +187,7 @@ def checked_arrays(square: dict[str, Any], pass_fractions, lag, state_space: Sta
     if not np.all(np.isfinite(p)) or (p.size and p.min() < 0):
         raise InputError("transition matrix holds negative or non-finite entries")
     rows = p.sum(axis=1)
-    if not np.allclose(rows, 1.0, atol=1e-9):
+    if not np.allclose(rows, 1.0, rtol=0.0, atol=1e-9):     # within 1e-9, as documented
         k = int(np.argmax(np.abs(rows - 1.0)))
         raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to {rows[k]:.6g})")
     for name in ("counts", "counts_up", "counts_down"):

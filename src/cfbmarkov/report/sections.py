@@ -18,7 +18,6 @@ from cfbmarkov.report.document import (
     Table,
     duration_text,
     finite_or_none,
-    number_text,
 )
 from cfbmarkov.report.run_folder import Case
 
@@ -314,7 +313,7 @@ def computing_blocks(cases: list[Case]) -> list:
             rows.append([f"{c.velocity:g}", run_text, window_text, rate, e.name,
                          _pair(fit_wall, fit_cpu), _pair(pred_wall, pred_cpu),
                          _pair(total, total_cpu),
-                         f"{number_text(ratio, '.3g')} ({number_text(wall_ratio, '.3g')})"])
+                         f"{_ratio_text(ratio)} ({_ratio_text(wall_ratio)})"])
     rows.append(["paper (3–8)", f"5 s / about {duration_text(PAPER_CFD_DEM_S)} (27000 "
                  "particles)", "—", "—", "MCM", "—", "—", f"about {duration_text(PAPER_MCM_S)}",
                  f"about {PAPER_SPEEDUP:g}"])
@@ -339,22 +338,33 @@ def computing_blocks(cases: list[Case]) -> list:
     blocks = [Heading(2, "Computing time (paper §3.1)"), Table(header, rows, notes)]
     if ratios:
         blocks.append(Para(
-            f"Over the predict window the MCM (fit + predict) takes {min(ratios):.3g} to "
-            f"{max(ratios):.3g} times less CPU time than the CFD-DEM (the CFD-DEM's CPU time "
-            f"pro rata over the window, against the fit's and the prediction's; on wall time "
-            f"{min(wall_ratios):.3g} to {max(wall_ratios):.3g} times, which the machine's "
+            f"Over the predict window the MCM (fit + predict) takes {_ratio_text(min(ratios))} to "
+            f"{_ratio_text(max(ratios))} times less CPU time than the CFD-DEM (the CFD-DEM's "
+            f"CPU time pro rata over the window, against the fit's and the prediction's; on "
+            f"wall time {_ratio_text(min(wall_ratios))} to {_ratio_text(max(wall_ratios))} "
+            f"times, which the machine's "
             f"load moves). The paper: about {PAPER_SPEEDUP:g} times, 50 h against 30 min, wall "
             "time of its own runs."))
     elif wall_ratios:
         blocks.append(Para(
-            f"Over the predict window the MCM (fit + predict) is {min(wall_ratios):.3g} to "
-            f"{max(wall_ratios):.3g} times faster than the CFD-DEM on wall time (no CPU times "
+            f"Over the predict window the MCM (fit + predict) is {_ratio_text(min(wall_ratios))} "
+            f"to {_ratio_text(max(wall_ratios))} times faster than the CFD-DEM on wall time "
+            f"(no CPU times "
             f"recorded, so the machine's load is in these figures; paper: about "
             f"{PAPER_SPEEDUP:g} times, 50 h against 30 min)."))
     else:
         blocks.append(Para("No speed-up can be given: the wall times of the CFD-DEM over the "
                             "predict window or of the MCM were not recorded."))
     return blocks
+
+
+def _ratio_text(value) -> str:
+    """A speed-up as text: three significant digits below 1000, whole numbers above (not
+    1e+03), "n/a" where not finite."""
+    v = finite_or_none(value)
+    if v is None:
+        return "n/a"
+    return f"{v:.0f}" if abs(v) >= 999.5 else f"{v:.3g}"
 
 
 def _stage(timings: dict, key: str) -> tuple[float | None, float | None]:
