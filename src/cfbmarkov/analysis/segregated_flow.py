@@ -1,5 +1,5 @@
 """The baseline an engineer would use without the chain: the segregated-flow model
-(``docs/definitions.md``, The segregated-flow baseline).
+(``docs/kinetics-reference.md``, The segregated-flow baseline).
 
 Every particle is a small batch reactor whose property depends on its residence time
 alone; the exit value is averaged over the residence-time distribution (RTD),

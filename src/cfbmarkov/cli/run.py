@@ -233,7 +233,8 @@ def add_demo(sub) -> None:
                         "min(4 cases, cores))")
     s.add_argument("--synthetic", action="store_true",
                    help="instead, the Markov part alone on synthetic core-annulus trajectories "
-                        "of 0-20 s (under a minute on 2 quiet cores)")
+                        "of 0-20 s (under a minute on 2 quiet cores): its verdict on stdout, "
+                        "demo.json and each model's comparison, no report")
     s.add_argument("--particles", type=count(1, MAX_PARTICLES), default=None,
                    help=f"with --synthetic only (refused without it): particles (default "
                         f"{SYNTHETIC_PARTICLES})")
