@@ -158,7 +158,10 @@ class FrameTimes:
         i0 = int(np.searchsorted(self.times, start - tol, side="left"))
         i1 = int(np.searchsorted(self.times, stop + tol, side="right"))
         if i1 - i0 < 1:
-            raise InputError(f"window {start:g}:{stop:g} s holds no frame of {self.path}")
+            every = (f" (frames every {self.frame_interval:g} s)"
+                     if np.isfinite(self.frame_interval) else "")
+            raise InputError(f"window {start:g}:{stop:g} s holds no frame of {self.path}"
+                             f"{every}; give a window that holds at least one frame")
         return slice(i0, i1)
 
     def lag_frames(self, lag: float) -> int:

@@ -409,6 +409,29 @@ def test_mixing_curves_that_stay_flat_on_both_sides_are_warned_of(tmp_path, caps
         compare(other, pred, window=(2.0, 4.0), figures=False, output=tmp_path / "x")
 
 
+def test_a_window_after_the_predictions_start_is_said_to_be_so(tmp_path):
+    """A window that starts after the prediction's first frame (where it holds the
+    reference's state): the tracer groups differ because the particles have moved apart
+    since, and the warning says so, with the window that starts alike; from the
+    prediction's start the groups agree and nothing is warned."""
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    run = write_run(tmp_path / "run.h5", RiserFlow(), 300, 4.0, seed=1)
+    model, pred = tmp_path / "m.h5", tmp_path / "p.h5"
+    assert main(["fit", str(run), "--window", "0:2", "--resamples", "0", "--no-adequacy",
+                 "-q", "-o", str(model)]) == 0
+    assert main(["predict", str(model), "--init", str(run), "--start", "2", "--duration", "2",
+                 "--seed", "3", "-q", "-o", str(pred)]) == 0
+    later = compare(run, pred, window=(2.5, 4.0), figures=False, output=tmp_path / "later")
+    moved = [line for line in later["warnings"] if "left tracer group" in line]
+    assert len(moved) == 1, later["warnings"]
+    assert ("(t = 2.5 s) disagree on which particles are in the left tracer group" in moved[0]
+            and "the window starts after the prediction's first frame (2 s)" in moved[0]
+            and "(--window 2:...)" in moved[0])
+    alike = compare(run, pred, window=(2.0, 4.0), figures=False, output=tmp_path / "alike")
+    assert not [line for line in alike["warnings"] if "left tracer group" in line]
+
+
 def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_path):
     """Block-bootstrap and Monte Carlo intervals: around the prediction's value, narrower at a
     lower level, the model's own wider for a model fitted on less data; none when

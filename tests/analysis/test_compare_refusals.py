@@ -234,3 +234,17 @@ def test_the_default_windows_note_comes_only_after_the_checks(pair, tmp_path, ca
     assert main(["compare", str(ref), str(pred), "-o", str(tmp_path / "d"), "--resamples", "0",
                  "--no-figures", "-q"]) == 0
     assert "no --window given: comparing over 0.5:3 s" in capsys.readouterr().err
+
+
+def test_an_output_folder_holding_other_files_is_refused_before_any_line(pair, tmp_path,
+                                                                          capsys):
+    """A folder holding files a comparison did not write: refused in one line before the
+    default window's note or the progress line, the files left as they were."""
+    ref, pred = pair
+    busy = tmp_path / "busy"
+    busy.mkdir()
+    (busy / "keep.txt").write_text("mine")
+    for quiet in (["-q"], []):           # without --window: the note would come first
+        err = refused(capsys, [ref, pred, *quiet], busy)
+        assert "keep.txt" in err and "give a new or empty folder" in err, err
+    assert folder_bytes(busy) == {"keep.txt": b"mine"}

@@ -46,6 +46,11 @@ def test_fit_predict_rtd_info(tmp_path, capsys, markov_run):
         np.testing.assert_array_equal(t.positions(), first)        # seeded, reproducible
     code, out, _ = run_cli(capsys, "rtd", model_path, "--window-length", 5)
     assert code == 0 and "E(RT) =" in out
+    # a window length between lags: refused with the lengths that are, not rounded silently
+    code, out, err = run_cli(capsys, "rtd", model_path, "--window-length", 5.02)
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "--window-length 5.02 s is not a whole multiple of the model's lag 0.05 s " \
+           "(e.g. 5 or 5.05 s)" in err
     code, out, _ = run_cli(capsys, "maps", model_path, "--times", "0,0.1,0.5", "--outflow",
                            "-o", tmp_path / "maps.png")
     fractions = [float(line.split()[-1]) for line in out.splitlines()[:3]]

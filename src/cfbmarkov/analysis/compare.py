@@ -34,6 +34,7 @@ from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.clusters import cluster_index
+from cfbmarkov.trajectory_format import TIME_TOLERANCE
 from cfbmarkov.observed.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
 from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, WHOLE_FRAMES, ResidenceTimes,
@@ -644,9 +645,20 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
     else:
         same = bool(np.array_equal(left_ref[np.argsort(ref.ids)], left_mod[np.argsort(pred.ids)]))
     if not same:
-        warnings.append("the two files' first frames of the window disagree on which "
-                        "particles are in the left tracer group (x < W/2): the prediction did "
-                        "not start from the reference's state at the window start")
+        first = float(pred.times[model.frames.start])
+        start = float(pred.times[0])
+        if abs(first - start) > TIME_TOLERANCE * max(abs(start), 1.0):
+            # the prediction carries the reference's state at its own start, not later
+            warnings.append(f"the two files' first frames of the window (t = {first:g} s) "
+                            "disagree on which particles are in the left tracer group (x < "
+                            f"W/2): the window starts after the prediction's first frame "
+                            f"({start:g} s), where it carries the reference's state, and the "
+                            "particles have moved apart since; start the window there "
+                            f"(--window {start:g}:...) for the mixing curves to start alike")
+        else:
+            warnings.append("the two files' first frames of the window disagree on which "
+                            "particles are in the left tracer group (x < W/2): the prediction "
+                            "did not start from the reference's state at the window start")
     return RunComparison(
         window=window, bin_width=float(bin_width), md_order=float(md_order), edges=edges,
         reference=reference, model=model,

@@ -294,6 +294,9 @@ def cmd_rtd(args) -> int:
                          "--window-length (or --resamples; `compare RUN PREDICTION` gives a "
                          "window's intervals against a run)")
     model = MarkovModel.load(args.model)
+    if args.window_length:
+        # a whole number of lags, as the window's frame pairs are (not rounded silently)
+        model.steps_for(args.window_length, "--window-length")
     stored = model.uncertainty          # the interval the fitting sample's verdict was made with
     if args.resamples:
         from cfbmarkov.analysis.intervals import resolve_source

@@ -295,7 +295,8 @@ class Kinetics:
         names = [p.name for p in props]
         if len(set(names)) != len(names):
             raise InputError(f"{self.source or 'kinetics'}: two properties are named "
-                             f"{next(n for n in names if names.count(n) > 1)!r}")
+                             f"{next(n for n in names if names.count(n) > 1)!r}; give each "
+                             "[[property]] a name of its own")
         object.__setattr__(self, "properties", props)
 
     @property

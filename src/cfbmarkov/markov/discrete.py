@@ -601,7 +601,8 @@ def discretize(source, state_space: StateSpace, lag: float,
         discrete = frames.discretize(state_space, lag_frames, keep_positions=keep_positions)
     if discrete.n_frames <= lag_frames:
         raise InputError(f"window {_describe(window)} of {discrete.source} holds fewer than "
-                         f"two frames one lag ({lag:g} s) apart")
+                         f"two frames one lag ({lag:g} s) apart; give a lag shorter than the "
+                         "window, or a longer window")
     return discrete
 
 

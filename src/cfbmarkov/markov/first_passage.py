@@ -1245,7 +1245,8 @@ def _start_on_levels(p_up, p_down, p_stay, levels: int, entry, entry_flux, chain
     start[position[entries[ok]]] = nu[ok]
     if not start.sum() > 0:
         raise TrappedResidences("every residence is trapped: the chain's entries carry no "
-                             "stationary mass from which the top can be reached")
+                                "stationary mass from which the top can be reached (fit on "
+                                "a longer window, with fewer cells, or with --connected)")
     entry = np.zeros(s)
     entry[entries] = nu
     full_start = np.zeros(s * levels)

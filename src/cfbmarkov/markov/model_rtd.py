@@ -61,7 +61,8 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
         window = check_finite(window, "window length", "s", positive=True)
         if window / model.lag > MAX_STEPS:
             raise InputError(f"window length {window:g} s is {window / model.lag:.3g} lags "
-                             f"of {model.lag:g} s, more than {MAX_STEPS}")
+                             f"of {model.lag:g} s, more than {MAX_STEPS}; give a window "
+                             f"length of at most {MAX_STEPS * model.lag:g} s")
     cache = model._cache
     if model.open_flow is not None:
         return _with_uncertainty(model, _open_rtd(model, window), window)

@@ -344,6 +344,7 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     out = Path(output)
     if out.exists() and not out.is_dir():
         raise InputError(f"output {out} exists and is not a directory")
+    _check_replaceable(out)     # before any work or line: a refusal stays one line
     if kinetics is not None and not hasattr(kinetics, "properties"):
         from cfbmarkov.kinetics import load_kinetics
 
