@@ -246,3 +246,20 @@ def test_an_interval_without_the_flows_variability_is_warned_and_none_is_said(
                            "--resamples", "5", "-o", tmp_path / "c")
     assert code == 2 and err.count("\n") == 1 and "at least 10 bootstrap resamples" in err
     assert not (tmp_path / "c").exists()
+
+
+def test_a_window_between_frames_is_said_with_the_frames_it_holds(tmp_path, capsys,
+                                                                    markov_run):
+    """A fitting window whose ends fall between the run's frames: a note names the frames
+    the model is fitted on; a window on frames gives none."""
+    code, _, err = run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--lag", "0.05",
+                           "--window", "1.01:4.99", "--resamples", "0", "-q",
+                           "-o", tmp_path / "m.h5")
+    notes = [line for line in err.splitlines() if line.startswith("note: the window")]
+    assert code == 0 and len(notes) == 1, err
+    assert notes[0].endswith("falls between the frames of " + str(markov_run) + " (every "
+                             "0.025 s): the model is fitted on those it holds, 1.025 to "
+                             "4.975 s")
+    code, _, err = run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--lag", "0.05",
+                           "--window", "1:5", "--resamples", "0", "-q", "-o", tmp_path / "n.h5")
+    assert code == 0 and "falls between the frames" not in err

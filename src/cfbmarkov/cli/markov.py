@@ -95,7 +95,21 @@ def _fit(args) -> int:
             with _stage(args, "counting", None):    # a refusal stays one line: no start line
                 model = fit_model(run, space, args.lag, args.window, args.estimator,
                                   connected=args.connected, coherent=args.coherent)
-    return _finish_fit(args, model, [args.run], [args.window])
+        notes = _between_frames(run, args.window)
+    return _finish_fit(args, model, [args.run], [args.window], notes)
+
+
+def _between_frames(run, window) -> list[str]:
+    """A note where a fitting window's ends fall between the run's frames: the frames it
+    holds, which the model is fitted on (the window is stored as given)."""
+    frames = run.window(*window)
+    first, last = float(run.times[frames.start]), float(run.times[frames.stop - 1])
+    tol = run.time_tolerance
+    if abs(first - window[0]) <= tol and abs(last - window[1]) <= tol:
+        return []
+    return [f"the window {window[0]:g}:{window[1]:g} s falls between the frames of "
+            f"{run.path} (every {run.frame_interval:g} s): the model is fitted on those it "
+            f"holds, {first:g} to {last:g} s"]
 
 
 def _choose_estimator(args, open_boundary: bool) -> None:
@@ -113,8 +127,9 @@ def _choose_estimator(args, open_boundary: bool) -> None:
               "default there, keeps it", file=sys.stderr)
 
 
-def _finish_fit(args, model, runs, windows) -> int:
-    """The end of ``fit``: the exact RTD, the sample's verdict, warnings, save, summary."""
+def _finish_fit(args, model, runs, windows, notes=()) -> int:
+    """The end of ``fit``: the exact RTD, the sample's verdict, warnings, save, summary;
+    ``notes`` printed as ``note:`` lines once the model is saved."""
     import warnings
 
     from cfbmarkov.analysis.fit_checks import IntervalWarning, assess_fit
@@ -131,6 +146,8 @@ def _finish_fit(args, model, runs, windows) -> int:
             warnings.warn_explicit(caught_warning.message, caught_warning.category,
                                    caught_warning.filename, caught_warning.lineno)
     model.save(args.output)
+    for line in notes:
+        print(f"note: {line}", file=sys.stderr)
     for line in model.warnings():      # after the save: a failed fit prints one line
         print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     try:

@@ -15,6 +15,9 @@ A parameter of a rate law is given per cell of the model's grid in one of three 
 
 from __future__ import annotations
 
+import math
+import numbers
+import os
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 
@@ -110,6 +113,12 @@ class Constant(CellParameter):
 
     value: float
 
+    def __post_init__(self):
+        v = self.value
+        if not isinstance(v, numbers.Real) or isinstance(v, bool) or not math.isfinite(float(v)):
+            raise InputError(f"Constant({v!r}): a constant takes one finite number; a value "
+                             "per cell is ByCell(table) or ByCell.from_grid(values)")
+
     def per_cell(self, space, fields=None):
         return np.full(space.n_cells, float(self.value))
 
@@ -137,6 +146,13 @@ class ByCell(CellParameter):
     source: str = "table"
     key: str = "value_by_cell"
     lines: np.ndarray | None = None
+
+    def __post_init__(self):
+        if isinstance(self.table, (str, bytes, os.PathLike)):
+            raise InputError(f"ByCell({self.table!r}): a table of rows col, row[, depth], "
+                             "value (an array), not a file name; a CSV file is read by "
+                             "load_kinetics from a kinetics file's rate_by_cell = \"...\" "
+                             "(or ByCell.from_grid(values) for an array of the grid's shape)")
 
     @classmethod
     def from_grid(cls, values, source: str = "array", key: str = "value_by_cell") -> "ByCell":

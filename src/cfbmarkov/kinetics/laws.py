@@ -22,6 +22,8 @@ per lag, and no exact answer exists for it.
 
 from __future__ import annotations
 
+import math
+import numbers
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -144,6 +146,13 @@ class HeatExchange(Law):
 
     key: ClassVar[str] = "heat-exchange"
     wall_temperature: float | None = None
+
+    def __post_init__(self):
+        t = self.wall_temperature
+        if t is not None and (not isinstance(t, numbers.Real) or isinstance(t, bool)
+                              or not math.isfinite(float(t))):
+            raise InputError(f"wall_temperature = {t!r} must be a finite number (the wall's "
+                             "temperature, in the units of temperature and initial), or None")
 
     @property
     def parameter_names(self) -> tuple[str, ...]:

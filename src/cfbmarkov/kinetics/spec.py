@@ -102,9 +102,10 @@ class Property:
         if initial is None:
             initial = (self.law.initial if isinstance(self.law, Custom)
                        else self.law.default_initial)
-        if initial is None or not math.isfinite(float(initial)):
-            raise InputError(f"property {self.name}: give its finite start value, initial = "
-                             "... (the feed's value)")
+        if (initial is None or not isinstance(initial, numbers.Real)
+                or isinstance(initial, bool) or not math.isfinite(float(initial))):
+            raise InputError(f"property {self.name}: give its finite start value as a number, "
+                             f"initial = ... (the feed's value), not {initial!r}")
         low, high = getattr(self.law, "initial_range", (None, None))
         if (low is not None and float(initial) < low) or (high is not None
                                                           and float(initial) > high):
@@ -123,6 +124,12 @@ class Property:
                                  "ByCell(...) or FromField(...) (cfbmarkov.kinetics)")
             parameters[key] = value
         object.__setattr__(self, "parameters", parameters)
+        wall = getattr(self.law, "wall_temperature", None)
+        if wall is not None and isinstance(parameters.get("temperature"), ByCell):
+            raise InputError(f"property {self.name}: wall_temperature would replace the wall "
+                             "cells' values of the temperature table; give the wall cells' "
+                             "own in the table, or a constant temperature beside "
+                             "wall_temperature")
 
     def per_cell(self, space, fields: CellFields | None = None,
                  without_fields: bool = False) -> dict[str, np.ndarray]:
@@ -529,6 +536,9 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
         parsed, an unknown law or key, a missing parameter, a negative or non-finite value,
         a bad table.
     """
+    if not isinstance(path, (str, os.PathLike)):
+        raise InputError(f"load_kinetics({path!r}): give the path of a kinetics file (TOML); "
+                         "a Kinetics built in Python needs no loading")
     path = Path(path)
     name = str(path)
     try:

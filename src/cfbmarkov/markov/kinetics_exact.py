@@ -47,6 +47,7 @@ distribution of CFB risers. O. Levenspiel, Chemical Reaction Engineering, 3rd ed
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -697,9 +698,18 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     Raises
     ------
     InputError
-        For a non-linear (custom) law, a carried property with no relaxation, or a model
-        without residences.
+        For a non-linear (custom) law, a carried property with no relaxation, a model
+        without residences, something other than a fitted model, or ``deficit_levels`` that
+        is not a whole number >= 0.
     """
+    if not hasattr(model, "state_space") or not hasattr(model, "transition_matrix"):
+        raise InputError(f"exact_kinetics: {model!r} is not a fitted model; give one "
+                         "(cfbmarkov.markov.MarkovModel.load(PATH) for a model file)")
+    if deficit_levels is not None and (not isinstance(deficit_levels, numbers.Integral)
+                                       or isinstance(deficit_levels, bool)
+                                       or deficit_levels < 0):
+        raise InputError(f"deficit_levels = {deficit_levels!r}: a whole number of lap "
+                         "deficits >= 0, or None (those of the model's exact RTD)")
     sk = on_states(kinetics, model.state_space,
                    model.cell_fields if cell_fields is None else cell_fields)
     for name, linear, law in zip(sk.names, sk.linear, sk.laws):

@@ -1,0 +1,80 @@
+"""Kinetics built in Python: wrong kinds of arguments are refused in one line naming the
+form expected (InputError), as a kinetics file's are, before any work."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cfbmarkov.errors import InputError
+from cfbmarkov.kinetics import ByCell, Constant, FirstOrder, HeatExchange, Property, load_kinetics
+
+
+@pytest.mark.parametrize("value", ["fast", "0.4", None, np.ones(3), float("nan"), True])
+def test_a_constant_takes_one_finite_number(value):
+    with pytest.raises(InputError, match=r"Constant\(.*\): a constant takes one finite number"):
+        Constant(value)
+
+
+def test_a_constant_of_a_number_stands():
+    assert Constant(0.4).value == 0.4 and Constant(np.float32(2)).describe() == 2.0
+
+
+def test_a_table_is_an_array_not_a_file_name(tmp_path):
+    with pytest.raises(InputError, match=r"not a file name; a CSV file is read by "
+                                         r"load_kinetics"):
+        ByCell("rates.csv")
+    with pytest.raises(InputError, match="not a file name"):
+        ByCell(tmp_path / "rates.csv")
+
+
+@pytest.mark.parametrize("wall", [float("nan"), "hot", float("inf")])
+def test_a_wall_temperature_is_a_finite_number(wall):
+    with pytest.raises(InputError, match=r"wall_temperature = .* must be a finite number"):
+        HeatExchange(wall_temperature=wall)
+
+
+def test_a_wall_temperature_beside_a_temperature_table_is_refused_as_in_a_file():
+    table = np.array([[c, r, 700.0] for r in range(2) for c in range(2)])
+    with pytest.raises(InputError, match="wall_temperature would replace the wall cells' "
+                                         "values of the temperature table"):
+        Property("T", HeatExchange(wall_temperature=600.0),
+                 {"coefficient": 1.0, "temperature": ByCell(table)}, initial=300.0)
+    # a constant temperature beside it stands
+    Property("T", HeatExchange(wall_temperature=600.0),
+             {"coefficient": 1.0, "temperature": 800.0}, initial=300.0)
+
+
+@pytest.mark.parametrize("initial", ["0.5", "abc", float("nan")])
+def test_a_start_value_is_a_finite_number(initial):
+    with pytest.raises(InputError, match="give its finite start value as a number"):
+        Property("X", FirstOrder(), {"rate": 1.0}, initial=initial)
+
+
+def test_load_kinetics_takes_a_path():
+    with pytest.raises(InputError, match=r"load_kinetics\(3\): give the path of a kinetics "
+                                         r"file"):
+        load_kinetics(3)
+
+
+def test_exact_kinetics_checks_its_model_and_depth():
+    from cfbmarkov.kinetics import Kinetics
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+    from cfbmarkov.markov.model import MarkovModel
+    from cfbmarkov.markov.states import CellGrid
+
+    kinetics = Kinetics((Property("X", FirstOrder(), {"rate": 1.0}),))
+    with pytest.raises(InputError, match="is not a fitted model; give one"):
+        exact_kinetics("model.h5", kinetics)
+    p = np.array([[0.0, 1.0], [0.0, 0.0]])
+    up = np.array([[0.0, 0.0], [1.0, 0.0]])
+    p[1, 0] = 1.0
+    zeros = np.zeros((2, 2), np.int64)
+    model = MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 2, 0.1, 1.0), 0.1,
+                        estimator="given", pass_fractions=(up, np.zeros((2, 2))))
+    for levels in (-1, 1.5, "2", True):
+        with pytest.raises(InputError, match=r"deficit_levels = .*: a whole number of lap "
+                                             r"deficits >= 0"):
+            exact_kinetics(model, kinetics, deficit_levels=levels)
+    answer = exact_kinetics(model, kinetics)["X"]
+    assert answer.exit_mean == pytest.approx(1.0 - np.exp(-0.2), rel=1e-12)   # two lags
