@@ -34,13 +34,12 @@ from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.stationarity import long_run_baseline
 from cfbmarkov.errors import InputError
 from cfbmarkov.observed.clusters import cluster_index
-from cfbmarkov.trajectory_format import TIME_TOLERANCE
 from cfbmarkov.observed.metrics import (ROUNDOFF, minkowski_distance, mixing_rms,
                                         percentage_difference, rtd_span)
 from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, WHOLE_FRAMES, ResidenceTimes,
                                           net_flow_direction, residence_times, rtd_histogram)
 from cfbmarkov.trajectories import Trajectories
-from cfbmarkov.trajectory_format import time_text
+from cfbmarkov.trajectory_format import TIME_TOLERANCE, time_text
 
 
 @dataclass

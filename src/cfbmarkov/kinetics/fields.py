@@ -15,8 +15,6 @@ A parameter of a rate law is given per cell of the model's grid in one of three 
 
 from __future__ import annotations
 
-import math
-import numbers
 import os
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
@@ -24,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.limits import check_finite
 from cfbmarkov._repr import compact_repr
 
 #: the cell fields a parameter may be a function of, and the side that counts as dense
@@ -114,10 +113,12 @@ class Constant(CellParameter):
     value: float
 
     def __post_init__(self):
-        v = self.value
-        if not isinstance(v, numbers.Real) or isinstance(v, bool) or not math.isfinite(float(v)):
-            raise InputError(f"Constant({v!r}): a constant takes one finite number; a value "
-                             "per cell is ByCell(table) or ByCell.from_grid(values)")
+        try:
+            check_finite(self.value, "value")
+        except InputError:
+            raise InputError(f"Constant({self.value!r}): a constant takes one finite number; "
+                             "a value per cell is ByCell(table) or ByCell.from_grid(values)"
+                             ) from None
 
     def per_cell(self, space, fields=None):
         return np.full(space.n_cells, float(self.value))

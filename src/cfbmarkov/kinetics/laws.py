@@ -22,8 +22,6 @@ per lag, and no exact answer exists for it.
 
 from __future__ import annotations
 
-import math
-import numbers
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -31,6 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.limits import check_finite
 
 
 class Law(ABC):
@@ -148,11 +147,14 @@ class HeatExchange(Law):
     wall_temperature: float | None = None
 
     def __post_init__(self):
-        t = self.wall_temperature
-        if t is not None and (not isinstance(t, numbers.Real) or isinstance(t, bool)
-                              or not math.isfinite(float(t))):
-            raise InputError(f"wall_temperature = {t!r} must be a finite number (the wall's "
-                             "temperature, in the units of temperature and initial), or None")
+        if self.wall_temperature is None:
+            return
+        try:
+            check_finite(self.wall_temperature, "wall_temperature")
+        except InputError:
+            raise InputError(f"wall_temperature = {self.wall_temperature!r} must be a finite "
+                             "number (the wall's temperature, in the units of temperature and "
+                             "initial), or None") from None
 
     @property
     def parameter_names(self) -> tuple[str, ...]:

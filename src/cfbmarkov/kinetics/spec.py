@@ -22,6 +22,7 @@ import numpy as np
 
 from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
+from cfbmarkov.limits import check_finite
 from cfbmarkov.kinetics.fields import (FIELDS, ByCell, CellFields, CellParameter, Constant,
                                        FromField, wall_cells)
 from cfbmarkov.kinetics.laws import LAWS, Custom, HeatExchange, Law, affine_map
@@ -102,10 +103,13 @@ class Property:
         if initial is None:
             initial = (self.law.initial if isinstance(self.law, Custom)
                        else self.law.default_initial)
-        if (initial is None or not isinstance(initial, numbers.Real)
-                or isinstance(initial, bool) or not math.isfinite(float(initial))):
+        try:
+            if initial is None:
+                raise InputError("no start value")
+            check_finite(initial, "initial")
+        except InputError:
             raise InputError(f"property {self.name}: give its finite start value as a number, "
-                             f"initial = ... (the feed's value), not {initial!r}")
+                             f"initial = ... (the feed's value), not {initial!r}") from None
         low, high = getattr(self.law, "initial_range", (None, None))
         if (low is not None and float(initial) < low) or (high is not None
                                                           and float(initial) > high):
