@@ -102,6 +102,43 @@ def test_the_closure_tolerance_is_the_deficit_loss_accepted():
     assert lags[fp.CLOSURE_TOL] < lags[1e-10] / 2
 
 
+def test_a_tail_that_empties_fast_is_closed_before_the_first_try(monkeypatch):
+    """A chain whose mass left falls below EARLY_MASS before FIRST_TRY lags is closed at the
+    first check (every EARLY_STEP lags) where it does, within the closure's bound of the
+    propagated RTD; a chain that holds more at FIRST_TRY is first tried there, and one whose
+    mass falls so fast that the propagation ends about as soon is not tried."""
+    tries = []
+    original = fp.try_closure
+
+    def recording(*args, **kwargs):
+        result = original(*args, **kwargs)
+        tries.append((args[5], *result))
+        return result
+
+    monkeypatch.setattr(fp, "try_closure", recording)
+    p, up, down = slow_column(stay=0.7, bias=3.0)
+    closed = fp.exact_rtd(p, up, down, LAG)
+    [(lag, reached, bound)] = tries
+    assert lag < tc.FIRST_TRY and lag % tc.EARLY_STEP == 0 and reached > tc.FIRST_TRY
+    with monkeypatch.context() as m:
+        m.setattr(fp, "krylov_dimension", lambda *args: 0)
+        propagated = fp.exact_rtd(p, up, down, LAG)
+    left = 1.0 - np.cumsum(propagated.probability)
+    assert left[lag - 1] < tc.EARLY_MASS <= left[lag - tc.EARLY_STEP - 1]
+    size = propagated.probability.size
+    assert closed.probability.size == size
+    assert 0 < bound <= fp.CLOSURE_TOL
+    assert np.abs(closed.probability - propagated.probability).sum() <= bound
+    tries.clear()
+    p, up, down = slow_column(stay=0.9)
+    fp.exact_rtd(p, up, down, LAG)
+    assert tries[0][0] == tc.FIRST_TRY
+    tries.clear()                   # ends within 146 lags, its mass 1.6e-9 at lag 128: the
+    p, up, down = slow_column(states=20, stay=0.2, bias=4.0)     # propagation, no Arnoldi
+    assert fp.exact_rtd(p, up, down, LAG).probability.size > 2 * tc.EARLY_STEP
+    assert not tries
+
+
 def test_the_closures_bound_is_counted_unresolved_and_covers_the_deficit_loss(monkeypatch):
     """One lap deficit kept: 15 % of the residences fall below it. The closed tail's
     loss below the deepest level (``deficit_unresolved``, from the projection's passes

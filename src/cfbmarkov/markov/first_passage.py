@@ -38,8 +38,8 @@ from cfbmarkov.errors import CfbmarkovError
 from cfbmarkov.markov.connectivity import closed_classes
 from cfbmarkov.markov.entry_chain import (DepthElimination, embedded_stationary,
                                           entry_matrix)
-from cfbmarkov.markov.tail_closure import (FIRST_TRY, MAX_TRIES, krylov_dimension, next_try,
-                                           try_closure)
+from cfbmarkov.markov.tail_closure import (EARLY_MASS, EARLY_STEP, FIRST_TRY, MAX_TRIES,
+                                           krylov_dimension, next_try, try_closure)
 from cfbmarkov.markov.tail_closure import level_row as _level_row
 
 
@@ -571,7 +571,8 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
         below stays ``unresolved``.
     tol : float, optional
         Stop when the mass not yet absorbed falls below this. Past lag
-        :data:`~cfbmarkov.markov.tail_closure.FIRST_TRY` the tail may be closed by a
+        :data:`~cfbmarkov.markov.tail_closure.FIRST_TRY` (earlier where less than
+        :data:`~cfbmarkov.markov.tail_closure.EARLY_MASS` is left) the tail may be closed by a
         Krylov projection whose bound on its error, at most :data:`CLOSURE_TOL` (or
         ``tol`` where larger), counts as unresolved (0: propagated to the end).
     max_steps : int, optional
@@ -1373,7 +1374,8 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
     levels (``live`` [S, L]; ``arrays`` the parts' transposes), until the mass left falls
     below ``tol`` or ``max_steps`` lags: lag by lag, its tail closed by a Krylov projection
     (:mod:`cfbmarkov.markov.tail_closure`) from :data:`~cfbmarkov.markov.tail_closure.
-    FIRST_TRY` lags on (then at twice as many, and so on) where the bound on its error is
+    FIRST_TRY` lags on (then at twice as many, and so on; earlier where little mass is
+    left, :data:`~cfbmarkov.markov.tail_closure.EARLY_MASS`) where the bound on its error is
     at most :data:`CLOSURE_TOL` (or ``tol`` where larger). Returns the lags reached and
     that bound (0 where no closure was taken). The same bits on any thread count."""
     levels = live.shape[1]
@@ -1384,13 +1386,23 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
     dimension = (krylov_dimension(int(live.sum()), *live.shape, work + 3 * live.size)
                  if closure and tol > 0 else 0)
     error_tol = max(tol, CLOSURE_TOL)
-    reached, stop, tries = 0, (FIRST_TRY if dimension else max_steps), []
+    reached, stop, tries = 0, (EARLY_STEP if dimension else max_steps), []
+    left = 1.0
     while True:
         stop = min(stop, max_steps)
         reached = kernel(*arrays, exit_probability, live, state, tol, reached, stop, out,
                          down_probability, falls)
         if reached < stop or stop >= max_steps or _level_mass(state) < tol:
             return reached, 0.0
+        if reached < FIRST_TRY and not tries:
+            before, left = left, _level_mass(state)
+            # an early try where less than EARLY_MASS is left, unless the last EARLY_STEP
+            # lags' decay, continued for twice as many, ends the propagation (sooner than
+            # an Arnoldi would pay for itself)
+            if (reached < 2 * EARLY_STEP or left >= EARLY_MASS
+                    or left * (left / before) ** 2 < tol):
+                stop = min(reached + EARLY_STEP, FIRST_TRY)
+                continue
         steps, bound = try_closure(arrays, live, state, exit_probability, down_probability,
                                    reached, tol, error_tol, max_steps, out, falls, dimension)
         if steps >= 0:

@@ -58,6 +58,18 @@ BASIS_BYTES = 64 * 2 ** 20
 #: the first lag at which the closure is tried; then at twice as many lags, and so on
 FIRST_TRY = 512
 
+#: before :data:`FIRST_TRY`, the closure is tried at the first multiple of
+#: :data:`EARLY_STEP` lags from :data:`EARLY_STEP` x 2 on where the mass not yet absorbed is
+#: below this (unless the decay of the last :data:`EARLY_STEP` lags, continued for twice
+#: as many, ends the propagation): the tail of a chain that empties fast is then closed
+#: early (the bound on the closure's error scales with the mass it projects, and a try
+#: refused there costs one Arnoldi); the riser chains whose tails run for thousands of
+#: lags hold more than this at lag 512, and are tried there first
+EARLY_MASS = 1e-2
+
+#: the lags between the checks of the mass before :data:`FIRST_TRY`
+EARLY_STEP = 64
+
 #: unit round-off of float64 (with a margin for the rounding of the bound itself)
 ROUND_OFF = 1.2e-16
 
