@@ -531,7 +531,10 @@ def plot_snapshots(positions_ref, positions_model, left_group_ref, left_group_mo
     panel_w = panel_h * width / height
     fig = Figure(figsize=(1.1 + k * (panel_w + 0.32), 2 * panel_h + 1.4), layout="constrained")
     area = (72 * panel_w) * (72 * panel_h)      # panel area in points squared
-    axes = fig.subplots(2, k, squeeze=False, sharex=True, sharey=True)
+    # not shared: every panel gets the same limits and ticks below, and the inner panels'
+    # tick labels are hidden as sharing would (label_outer); shared axes would be kept in
+    # step on every draw (a third of the figure's time)
+    axes = fig.subplots(2, k, squeeze=False)
     rng = np.random.default_rng(0)     # interleave colours so neither is drawn on top
     for r, (pos, mask, label) in enumerate(((pref, masks[0], labels[0]),
                                             (pmod, masks[1], labels[1]))):
@@ -549,6 +552,7 @@ def plot_snapshots(positions_ref, positions_model, left_group_ref, left_group_mo
                 ax.set_title(f"t = {times[c]:g} s", fontsize=9)
             if c == 0:
                 ax.set_ylabel(f"{label}\ny (m)", fontsize=9)
+            ax.label_outer()
     fig.suptitle(title or "Particle snapshots: purple = left half (x < W/2) at the window start, "
                  "green = right half", fontsize=10)
     return _save(fig, path)
