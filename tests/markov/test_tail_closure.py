@@ -102,11 +102,43 @@ def test_the_closure_tolerance_is_the_deficit_loss_accepted():
     assert lags[fp.CLOSURE_TOL] < lags[1e-10] / 2
 
 
+def _early_try_lag(probability: np.ndarray, tol: float = 1e-10) -> int | None:
+    """The lag of the first early try that the rule of ``_propagate_levels`` makes on an
+    RTD whose mass left after lag k is 1 - sum f(1..k): the first multiple of EARLY_STEP
+    from 2 EARLY_STEP below FIRST_TRY where less than EARLY_MASS is left and the decay of
+    the last EARLY_STEP lags, continued, does not end the propagation before FIRST_TRY."""
+    left = 1.0 - np.cumsum(probability)
+    for lag in range(2 * tc.EARLY_STEP, min(tc.FIRST_TRY, left.size + 1), tc.EARLY_STEP):
+        now, before = left[lag - 1], left[lag - tc.EARLY_STEP - 1]
+        if now < tc.EARLY_MASS and now * (now / before) ** (
+                (tc.FIRST_TRY - lag) / tc.EARLY_STEP) >= tol:
+            return lag
+    return None
+
+
+def _pocket(states=30, into=0.003, stay=0.995):
+    """A fast column (``slow_column`` at stay 0.2) whose bottom state sends ``into`` of its
+    particles into a pocket they leave at 1 - ``stay`` a lag: less than 1 % of the mass is
+    left after 64 lags, and the pocket's tail runs for thousands."""
+    p, up, down = slow_column(states=states, stay=0.2, bias=4.0)
+    n = states + 1
+    chain, up_fraction, down_fraction = np.zeros((n, n)), np.zeros((n, n)), np.zeros((n, n))
+    chain[:states, :states], up_fraction[:states, :states] = p, up
+    down_fraction[:states, :states] = down
+    chain[0, :states] *= 1.0 - into
+    chain[0, states] = into
+    chain[states, states], chain[states, 0] = stay, 1.0 - stay
+    return chain, up_fraction, down_fraction
+
+
 def test_a_tail_that_empties_fast_is_closed_before_the_first_try(monkeypatch):
-    """A chain whose mass left falls below EARLY_MASS before FIRST_TRY lags is closed at the
-    first check (every EARLY_STEP lags) where it does, within the closure's bound of the
-    propagated RTD; a chain that holds more at FIRST_TRY is first tried there, and one whose
-    mass falls so fast that the propagation ends about as soon is not tried."""
+    """The closure is tried before FIRST_TRY lags at the first check (every EARLY_STEP lags
+    from 2 EARLY_STEP) where less than EARLY_MASS is left and the propagation would not
+    end before FIRST_TRY anyway, within its bound of the propagated RTD; not before lag
+    2 EARLY_STEP even where the mass is below EARLY_MASS earlier; a chain that holds more
+    at FIRST_TRY is first tried there; one whose decay ends it before FIRST_TRY is not
+    tried (the old code made no try there either); a refused early try is followed by one
+    at twice its lag (``next_try``), not at the next check."""
     tries = []
     original = fp.try_closure
 
@@ -115,28 +147,48 @@ def test_a_tail_that_empties_fast_is_closed_before_the_first_try(monkeypatch):
         tries.append((args[5], *result))
         return result
 
+    def propagated(p, up, down, **kwargs):
+        with monkeypatch.context() as m:
+            m.setattr(fp, "krylov_dimension", lambda *args: 0)
+            return fp.exact_rtd(p, up, down, LAG, **kwargs)
+
     monkeypatch.setattr(fp, "try_closure", recording)
     p, up, down = slow_column(stay=0.7, bias=3.0)
     closed = fp.exact_rtd(p, up, down, LAG)
+    reference = propagated(p, up, down)
     [(lag, reached, bound)] = tries
-    assert lag < tc.FIRST_TRY and lag % tc.EARLY_STEP == 0 and reached > tc.FIRST_TRY
-    with monkeypatch.context() as m:
-        m.setattr(fp, "krylov_dimension", lambda *args: 0)
-        propagated = fp.exact_rtd(p, up, down, LAG)
-    left = 1.0 - np.cumsum(propagated.probability)
-    assert left[lag - 1] < tc.EARLY_MASS <= left[lag - tc.EARLY_STEP - 1]
-    size = propagated.probability.size
-    assert closed.probability.size == size
+    assert lag == _early_try_lag(reference.probability) == 320 and reached > tc.FIRST_TRY
+    assert closed.probability.size == reference.probability.size
     assert 0 < bound <= fp.CLOSURE_TOL
-    assert np.abs(closed.probability - propagated.probability).sum() <= bound
+    assert np.abs(closed.probability - reference.probability).sum() <= bound
+
+    tries.clear()                   # below 1 % at lag 64 already: tried at 128, not 64
+    p, up, down = _pocket()
+    fp.exact_rtd(p, up, down, LAG)
+    assert 1.0 - propagated(p, up, down).probability[:tc.EARLY_STEP].sum() < tc.EARLY_MASS
+    assert [t[0] for t in tries] == [2 * tc.EARLY_STEP] and tries[0][1] > 0
+
     tries.clear()
     p, up, down = slow_column(stay=0.9)
     fp.exact_rtd(p, up, down, LAG)
     assert tries[0][0] == tc.FIRST_TRY
-    tries.clear()                   # ends within 146 lags, its mass 1.6e-9 at lag 128: the
-    p, up, down = slow_column(states=20, stay=0.2, bias=4.0)     # propagation, no Arnoldi
-    assert fp.exact_rtd(p, up, down, LAG).probability.size > 2 * tc.EARLY_STEP
-    assert not tries
+
+    tries.clear()          # 325 lags, 2e-3 left at lag 192 falling 20-fold in 64 lags: no
+    p, up, down = slow_column(133, 0.2277, 236, 4, 4.0923)      # Arnoldi (as before lag 512)
+    size = fp.exact_rtd(p, up, down, LAG, deficit_levels=8).probability.size
+    assert 2 * tc.EARLY_STEP < size < tc.FIRST_TRY and not tries
+    assert _early_try_lag(propagated(p, up, down, deficit_levels=8).probability) is None
+
+    tries.clear()          # a riser chain refused at lag 128 (bound 4e-7), then taken at 256
+    from cfbmarkov.synthetic import RiserFlow, generator
+
+    flow = RiserFlow(columns=6, rows=16, persistence=True, rise_velocity=3.83,
+                     fall_velocity=-1.678, lateral_probability=0.0702)
+    p, up, down, lag = generator(flow)
+    p[p < 5.0e-5] = 0.0
+    p /= p.sum(axis=1, keepdims=True)
+    fp.exact_rtd(p, up, down, lag, deficit_levels=8)
+    assert [(t[0], t[1] >= 0) for t in tries] == [(128, False), (256, True)]
 
 
 def test_the_closures_bound_is_counted_unresolved_and_covers_the_deficit_loss(monkeypatch):

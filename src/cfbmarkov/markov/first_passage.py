@@ -1397,10 +1397,10 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
         if reached < FIRST_TRY and not tries:
             before, left = left, _level_mass(state)
             # an early try where less than EARLY_MASS is left, unless the last EARLY_STEP
-            # lags' decay, continued for twice as many, ends the propagation (sooner than
-            # an Arnoldi would pay for itself)
+            # lags' decay, continued, ends the propagation before FIRST_TRY (where no try
+            # would be made at all: an Arnoldi costs more than the lags it would save)
             if (reached < 2 * EARLY_STEP or left >= EARLY_MASS
-                    or left * (left / before) ** 2 < tol):
+                    or left * (left / before) ** ((FIRST_TRY - reached) / EARLY_STEP) < tol):
                 stop = min(reached + EARLY_STEP, FIRST_TRY)
                 continue
         steps, bound = try_closure(arrays, live, state, exit_probability, down_probability,
