@@ -379,6 +379,32 @@ def test_an_in_sample_window_and_a_baseline_of_another_length_are_warned(tmp_pat
     capsys.readouterr()
 
 
+def test_a_pooled_models_in_sample_window_and_baseline_length_are_warned(tmp_path, capsys):
+    """The same two warnings for a model fitted on two runs: a compared window over one
+    run's fitting window on that run, and a baseline whose windows (one per run) are of
+    another length than the compared one; a window after both fitting windows, as long as
+    they are, says neither."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    runs = [write_run(tmp_path / f"run{k}.h5", RiserFlow(), 300, 4.0, seed=k) for k in (2, 3)]
+    model = tmp_path / "m.h5"
+    assert main(["fit", *map(str, runs), "--window", "0.5:2", "--resamples", "0",
+                 "--no-adequacy", "-q", "-o", str(model)]) == 0
+    overlap = "overlaps the model's fitting window 0.5-2 s of this run (run 2 of 2 pooled)"
+    length = "windows (one per pooled run) are 1.5 s long and the compared one 1 s"
+    for start, duration, inside, other_length in [(1.0, 1.0, True, True),
+                                                  (2.0, 1.5, False, False)]:
+        pred = tmp_path / f"p{start}.h5"
+        assert main(["predict", str(model), "--init", str(runs[1]), "--start", str(start),
+                     "--duration", str(duration), "-q", "-o", str(pred)]) == 0
+        said = compare(runs[1], pred, window=(start, start + duration), figures=False,
+                       output=tmp_path / f"o{start}")["warnings"]
+        assert sum(overlap in line for line in said) == inside, said
+        assert sum(length in line for line in said) == other_length, said
+    capsys.readouterr()
+
+
 def test_mixing_curves_that_stay_flat_on_both_sides_are_warned_of(tmp_path, capsys):
     """Particles that only rise, each at its own x: no tracer crosses W/2 in the run or in
     the prediction (the chain's columns never change), so the mixing RMS of 0 is warned as

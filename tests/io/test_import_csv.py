@@ -267,7 +267,9 @@ def test_domain_too_small_for_the_data(tmp_path, run, make_csv, save, assert_cle
     output = tmp_path / "out" / "run.h5"
     assert_clean_failure("import", source, "--format", "csv", "--width", "0.09",
                          "-o", output, "--height", "0.5",
-                         output=output, match=r"lies outside the domain 0..0.09 x 0..0.5 m")
+                         output=output, match=r"lies outside the domain 0..0.09 x 0..0.5 m.*"
+                         r"a periodic riser holds every particle, so its vertical range must "
+                         r"cover every height: give a taller --height")
 
 
 def test_failed_import_keeps_an_existing_output(tmp_path, run, make_csv, save):
@@ -435,6 +437,24 @@ def test_info_names_origin_and_region_by_the_sources_axes(tmp_path, capsys):
     printed = text.split("riser region ")[1].split(" m\n")[0]
     again = ",".join(part.split(" ")[1] for part in printed.split(", "))
     assert again == region
+
+
+def test_a_height_beyond_a_periodic_risers_region_names_the_vertical_range(tmp_path):
+    """A 3D file whose heights run past --region's vertical range on a periodic riser:
+    refused naming the domain with its depth, and the fix (a taller vertical range, or an
+    open riser), not --region to keep particles out, which a periodic riser cannot do."""
+    rows = ["t,id,x,y,z"] + [f"{0.01 * k:.2f},{i},{0.02 + 0.02 * i:.3f},0.001,{0.2 + 0.2 * k:.3f}"
+                             for k in range(5) for i in range(3)]
+    source = tmp_path / "run.csv"
+    source.write_text("\n".join(rows) + "\n")
+    with pytest.raises(InputError) as refused:
+        import_file(source, "csv", tmp_path / "a.h5", vertical_axis="z",
+                    region=[(0.0, 0.09), (0.0, 0.003), (0.0, 0.9)])
+    message = str(refused.value)
+    assert "lies outside the domain 0..0.09 x 0..0.9 x 0..0.003 m: 'z' = 1 m" in message
+    assert "its vertical range must cover every height" in message
+    assert "--boundary open" in message and "to keep only the particles" not in message
+    assert not (tmp_path / "a.h5").exists()
 
 
 def test_a_missing_option_and_a_folder_of_dumps_name_the_fix(tmp_path):

@@ -381,16 +381,19 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
 def _fitting_window_warnings(ref: Trajectories, pred: Trajectories,
                              window: tuple[float, float],
                              baseline: WindowDifference | None) -> list[str]:
-    """Lines about the model's fitting window beside the compared one: a compared window
-    that overlaps it on the run the model was fitted on (the reference holds the fitting
-    window's content, :func:`cfbmarkov.trajectory_identity.window_identity`), which judges
-    the fit rather than a prediction; and a persistence baseline whose window is of another
-    length than the compared one (a window sees residences up to its own length, so the
-    two RTDs are not alike even for a steady flow)."""
+    """Lines about the model's fitting window(s) beside the compared one: a compared window
+    that overlaps a fitting window on the run it was taken from (the reference holds that
+    window's content, :func:`cfbmarkov.trajectory_identity.window_identity`; a pooled
+    model's runs each), which judges the fit rather than a prediction; and a persistence
+    baseline whose window (any of a pooled model's) is of another length than the compared
+    one (a window sees residences up to its own length, so the two RTDs are not alike even
+    for a steady flow)."""
     from cfbmarkov.trajectory_identity import window_identity
 
+    runs = fitting_runs_of(pred)
     fitted = fitting_window(pred)
-    if fitted is None or fitting_runs_of(pred) is not None:
+    windows = [w for _, w in runs] if runs is not None else [fitted] if fitted else []
+    if not windows:
         return []
     start, stop = window
     tol = max(ref.time_tolerance, pred.time_tolerance)
@@ -399,21 +402,34 @@ def _fitting_window_warnings(ref: Trajectories, pred: Trajectories,
     identity = group.attrs.get("source_identity") if group is not None else None
     if isinstance(identity, bytes):
         identity = identity.decode()
-    if (fitted[0] < stop - tol and start < fitted[1] - tol and isinstance(identity, str)
-            and fitted[0] >= ref.times[0] - tol and fitted[1] <= ref.times[-1] + tol):
+    identities = identity.split(";") if isinstance(identity, str) else []
+    for k, (w, recorded) in enumerate(zip(windows, identities)):
+        if not (w[0] < stop - tol and start < w[1] - tol and w[0] >= ref.times[0] - tol
+                and w[1] <= ref.times[-1] + tol):
+            continue
         with contextlib.suppress(InputError):
-            if window_identity(ref, fitted) == identity:
+            if window_identity(ref, w) == recorded:
+                run = "" if runs is None else f" (run {k + 1} of {len(runs)} pooled)"
                 lines.append(f"the compared window {start:g}-{stop:g} s overlaps the model's "
-                             f"fitting window {fitted[0]:g}-{fitted[1]:g} s of this run: the "
+                             f"fitting window {w[0]:g}-{w[1]:g} s of this run{run}: the "
                              "model was fitted on these frames, so the comparison judges its "
                              "fit, not a prediction; compare a window after the fitting "
                              "window")
-    length, fit_length = stop - start, fitted[1] - fitted[0]
-    if baseline is not None and abs(fit_length - length) > max(tol, 1e-6 * length):
-        lines.append(f"the persistence baseline's window {fitted[0]:g}-{fitted[1]:g} s is "
-                     f"{fit_length:g} s long and the compared one {length:g} s: a window sees "
-                     "residences up to its own length, so the baseline's RTD is not like for "
-                     "like; fit on a window as long as the compared one for a fair baseline")
+                break
+    length = stop - start
+    other = [w for w in windows if abs((w[1] - w[0]) - length) > max(tol, 1e-6 * length)]
+    if baseline is not None and other:
+        if runs is None:
+            said = f"window {other[0][0]:g}-{other[0][1]:g} s is {other[0][1] - other[0][0]:g} s"
+        else:
+            lengths = sorted({round(w[1] - w[0], 9) for w in windows})
+            said = ("windows (one per pooled run) are "
+                    + " and ".join(f"{x:g}" for x in lengths) + " s")
+        lines.append(f"the persistence baseline's {said} long and the compared one "
+                     f"{length:g} s: a window sees residences up to its own length, so the "
+                     "baseline's RTD is not like for like; fit on "
+                     f"{'a window' if runs is None else 'windows'} as long as the compared "
+                     "one for a fair baseline")
     return lines
 
 

@@ -532,12 +532,21 @@ def _refuse_outside(row: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids: 
     hint = ("; if the file is not in m, give --length-unit cm|mm" if layout.unit_from[axis] ==
             "default" else "" if unit == "m" else
             f"; --region is read in the file's unit ({unit}), --width and --height in m")
+    depth = "" if riser.depth_extent is None else f" x 0..{riser.depth_extent:g}"
+    if k == 1 and not riser.from_box:
+        # a periodic riser holds every particle (they pass through its top and bottom):
+        # no region keeps heights out
+        fix = ("a periodic riser holds every particle, so its vertical range must cover "
+               "every height: give a taller --height or --region's vertical range, or "
+               "--boundary open if particles leave through the top and bottom")
+    else:
+        fix = ("set the riser with --width and --height, or give --region to keep only the "
+               "particles inside it")
     raise InputError(
         f"{label}: particle {int(ids[p])} at t = {time:g} s lies outside the domain "
-        f"0..{riser.width:g} x 0..{riser.height:g} m: {layout.column(axis)!r} = {written:g} "
-        f"{unit}; positions are measured from the riser's lower corner, {layout.across} across "
-        f"and {layout.vertical} vertical (set the riser with --width and --height, or give "
-        f"--region to keep only the particles inside it){hint}")
+        f"0..{riser.width:g} x 0..{riser.height:g}{depth} m: {layout.column(axis)!r} = "
+        f"{written:g} {unit}; positions are measured from the riser's lower corner, "
+        f"{layout.across} across and {layout.vertical} vertical ({fix}){hint}")
 
 
 def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
