@@ -402,6 +402,15 @@ def test_a_pooled_models_in_sample_window_and_baseline_length_are_warned(tmp_pat
                        output=tmp_path / f"o{start}")["warnings"]
         assert sum(overlap in line for line in said) == inside, said
         assert sum(length in line for line in said) == other_length, said
+        assert not any("could not pool" in line for line in said)
+    # a run gone: the baseline falls back to the reference's own window, and says so
+    runs[0].rename(tmp_path / "moved.h5")
+    saved = compare(runs[1], tmp_path / "p2.0.h5", window=(2.0, 3.5), figures=False,
+                    output=tmp_path / "gone")
+    [note] = [line for line in saved["warnings"] if "could not pool" in line]
+    assert str(runs[0]) in note and note.endswith(
+        "the reference's own window 0.5-2 s instead (one run's, not the model's pooled runs')")
+    assert saved["baseline"]["runs"] == 1
     capsys.readouterr()
 
 

@@ -68,6 +68,7 @@ def test_fit_pooled_stores_and_prints_the_interval_and_refuses_a_run_with_itself
     assert "windows 0.5:2.5, 0.4:2.4 s" in printed
     # the factor the bootstrap's spread was widened by, for 2 runs of 10 blocks: 18 dof
     assert "(their spread widened 1.11 times, for its 18 degrees of freedom)" in printed
+    assert "10 blocks of each run, about 0.2 s long" in printed
     model = MarkovModel.load(out)
     assert model.run_windows == ((0.5, 2.5), (0.4, 2.4))
     assert model.uncertainty is not None and model.uncertainty.blocks == 20
@@ -77,6 +78,11 @@ def test_fit_pooled_stores_and_prints_the_interval_and_refuses_a_run_with_itself
     assert lo <= data["rt_mean"] <= hi
     assert main(["info", str(out)]) == 0
     assert "fitting windows of 2 runs" in capsys.readouterr().out
+    # windows of other lengths: their blocks' lengths by run, not one figure for both
+    assert main(["fit", str(runs[0]), str(runs[1]), "--cells", "3x8", "--estimator", "mle",
+                 "--window", "0.5:2.5,0.5:1.5", "--resamples", "20", "-q",
+                 "-o", str(tmp_path / "unequal.h5")]) == 0
+    assert "10 blocks of each run, 0.1 to 0.2 s long by run" in capsys.readouterr().out
     # the same run twice, a copy of it, or overlapping windows of one file: one line, exit 2
     copy = tmp_path / "copy.h5"
     shutil.copy(runs[0], copy)

@@ -68,6 +68,15 @@ def test_a_drifting_figure_calls_for_a_longer_run():
     assert "for E(RT) a longer run" in both and "for SD(RT) a state space with memory" in both
 
 
+def test_a_miss_under_one_percent_is_printed_with_its_digits():
+    """With a tolerance under 1 %, a figure 0.06 % off is said to be so, not "+0 % off"."""
+    from dataclasses import replace
+
+    r = _result([1.2, 1.1, 1.05, 1.01, 1.0006], [1.0, 1.0, 1.0, 1.0, 1.0])
+    line = verdict_text(_with_length(replace(r, tolerance=1e-4)), "cells")
+    assert "the longest window's E(RT) +0.06 % off" in line, line
+
+
 def test_cli_on_a_flow_with_hidden_direction(tmp_path, capsys):
     run = tmp_path / "run.h5"
     synthetic.write_run(run, synthetic.RiserFlow(), 300, 12.0, seed=1)
@@ -83,6 +92,24 @@ def test_cli_on_a_flow_with_hidden_direction(tmp_path, capsys):
     assert main(["stationarity", str(run), "--sample-length", "--start", "1", "--json"]) == 0
     data = json.loads(capsys.readouterr().out)
     assert "SD(RT)" in data["steady_misses"]
+
+
+def test_a_run_too_short_names_the_fix_that_exists(tmp_path, capsys):
+    """A run shorter than the shortest window from its first frame needs a longer run (no
+    earlier start exists); from a later start, an earlier one; a start outside the frames
+    that several runs all hold names them as such."""
+    short = synthetic.write_run(tmp_path / "short.h5", synthetic.RiserFlow(), 100, 0.4, seed=1)
+    other = synthetic.write_run(tmp_path / "other.h5", synthetic.RiserFlow(), 100, 0.8, seed=2)
+    assert main(["stationarity", str(short), "--sample-length"]) == 2
+    err = capsys.readouterr().err
+    assert "shorter than the shortest window (0.5 s); a run longer than 0.5 s" in err
+    assert main(["stationarity", str(other), "--sample-length", "--start", "0.4"]) == 2
+    assert "shorter than the shortest window (0.5 s); an earlier --start" in \
+        capsys.readouterr().err
+    assert main(["stationarity", str(short), str(other), "--sample-length", "--start",
+                 "0.6"]) == 2
+    assert (f"start 0.6 s lies outside the frames all of {short}, {other} hold (0 to 0.4 s)"
+            in capsys.readouterr().err)
 
 
 def test_a_length_only_the_longest_window_meets_is_not_confirmed():

@@ -116,8 +116,12 @@ def test_3d_grid_refuses_2d_positions_and_data(runs):
         grid.discretize(np.zeros((3, 2)))
     with pytest.raises(InputError, match="is 2D"):
         discretize(runs[0], grid, 0.05)
-    with pytest.raises(InputError, match="depth of 0.03 m"):
+    with pytest.raises(InputError, match="depth of 0.03 m.*: give a run of the riser the "
+                                         "model was fitted on, or fit a model on this one"):
         discretize(runs[1], CellGrid(4, 16, 0.09, 0.95, depth_columns=2, depth=0.03), 0.05)
+    with pytest.raises(InputError, match=r"2 depth column\(s\) need 3D data .*: give a 3D "
+                                         "file, or cells as COLUMNSxROWS"):
+        state_space_from_name("cells", 4, 16, 0.09, 0.95, 2, None)
     with pytest.raises(InputError, match="need the riser's depth"):
         CellGrid(4, 16, depth_columns=2)
     with pytest.raises(InputError, match="positive size"):

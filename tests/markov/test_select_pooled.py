@@ -51,8 +51,14 @@ def test_fit_states_auto_on_several_runs(runs, tmp_path, capsys):
                  "-o", str(out)]) == 0, capsys.readouterr().err
     printed = capsys.readouterr().out
     assert "chosen automatically" in printed and "fitting windows of 2 runs" in printed
+    assert ("closest to the one observed over the fitting windows of 2 runs (0.5-4 s, "
+            "0.5-4 s); the percentages set the chain's RTD as seen in each run's window") \
+        in printed
     model = MarkovModel.load(out)
     assert model.selection["runs"][1][0] == str(runs["b"])
+    # the states visited in any run's window, as one run's table gives them
+    assert all(isinstance(c["visited"], int) and 0 < c["visited"] <= c["n_states"]
+               for c in model.selection["candidates"]), model.selection["candidates"]
     assert model.source == [str(runs["a"]), str(runs["b"])]
     assert main(["fit", str(runs["a"]), str(runs["a"]), "--states", "auto", "--cells", "3x8",
                  "--window", "0.5:4", "-o", str(tmp_path / "x.h5")]) == 2

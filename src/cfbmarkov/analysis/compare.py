@@ -358,7 +358,8 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
     _check_bins_resolve(rt_ref, bin_width, bin_width_from, (start, stop))
     beside = _baselines(ref, pred, (start, stop), on, bin_width=bin_width, md_order=md_order,
                         long_run_span=long_run_span)
-    warnings += _fitting_window_warnings(ref, pred, (start, stop), beside.baseline)
+    warnings += [*beside.notes, *_fitting_window_warnings(ref, pred, (start, stop),
+                                                          beside.baseline)]
     tracers = None
     if ref.boundary.is_open:
         tracers = starting_tracers(ref, pred, ref_frames.start, pred_frames.start)
@@ -551,6 +552,7 @@ class _Beside:
     baseline: WindowDifference | None
     long_run: WindowDifference | None
     variability: WindowDifference | None
+    notes: tuple[str, ...] = ()
 
 
 def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float], on: _Basis,
@@ -567,16 +569,25 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
     basis_args = {"bin_width": bin_width, "md_order": md_order, "use_events": on.events,
                   "lag_frames": on.lag_frames, "face_band": on.band,
                   "window_length": stop - start, "direction": on.direction}
-    baseline = None
+    baseline, unread = None, None
     fitted = fitting_window(pred)
     pooled = fitting_runs_of(pred)
     if pooled is not None:          # a pooled fit: its runs' windows pooled, as fitted
-        with contextlib.suppress(InputError):
+        try:
             baseline = pooled_window_difference(pooled, ref, (start, stop), **basis_args)
+        except InputError as exc:
+            unread = str(exc)
     if baseline is None and fitted is not None and fitted[0] >= ref.times[0] - ref.time_tolerance and (
             fitted[1] <= ref.times[-1] + ref.time_tolerance):
         with contextlib.suppress(InputError):     # a window without frames: no baseline
             baseline = window_difference(ref, fitted, (start, stop), **basis_args)
+    notes = ()
+    if unread is not None:
+        instead = (f"the reference's own window {fitted[0]:g}-{fitted[1]:g} s instead (one "
+                   "run's, not the model's pooled runs')" if baseline is not None else
+                   "no persistence baseline")
+        notes = (f"the persistence baseline could not pool the model's {len(pooled)} runs' "
+                 f"fitting windows ({unread}): {instead}",)
     long_run = None
     if long_run_span is not None:
         long_run = long_run_baseline(ref, (start, stop), span=long_run_span,
@@ -588,7 +599,7 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
     variability = None
     with contextlib.suppress(InputError):
         variability = window_difference(ref, (start, middle), (middle, stop), **basis_args)
-    return _Beside(exact_reference, baseline, long_run, variability)
+    return _Beside(exact_reference, baseline, long_run, variability, notes)
 
 
 def _compared_run(traj: Trajectories, frames: slice, rt: ResidenceTimes,

@@ -127,8 +127,9 @@ def assess_fit(model, runs: Sequence | None = None,
     if resamples and has_rtd:
         from cfbmarkov.analysis.intervals import model_intervals
 
+        pooled = "s" if isinstance(model.source, (list, tuple)) else ""
         with stage("interval", f"the model's {100 * level:g} % interval: {resamples} "
-                   "bootstrap resamples of the fitting window"):
+                   f"bootstrap resamples of the fitting window{pooled}"):
             try:
                 model = model.with_uncertainty(model_intervals(model, level=level,
                                                                resamples=resamples))

@@ -241,6 +241,13 @@ def missed_text(miss: str, pd_mean: float, pd_sd: float, outlasting: float = mat
     return f"no: {mean if miss == 'E(RT)' else sd if miss == 'SD(RT)' else f'both ({mean}, {sd})'}"
 
 
+def _percent(fraction: float) -> str:
+    """A relative difference in % with its sign: whole percent from 1 % up, two significant
+    digits below (a tolerance under 1 % is not answered "+0 % off")."""
+    value = 100 * fraction
+    return f"{value:+.0f}" if abs(value) >= 1 else f"{value:+.2g}"
+
+
 #: the relative spread of several runs' long-run E(RT) beyond which they are judged not to
 #: be runs of one steady flow: runs of one case from different seeds scatter by a few % on
 #: generated risers, and a CFD-DEM riser's E(RT) moves by 10-28 % between 5 s windows, so
@@ -296,8 +303,8 @@ def verdict_text(result: SampleLength, states: str) -> str:
 
     settles = [settled(figure) for figure in ("E(RT)", "SD(RT)")
                if np.isfinite(result.settled_from(figure))]
-    stays = [f"the {states} model's {figure} stays {50 * (lo + hi):+.0f} % off at every "
-             f"length ({100 * lo:+.0f} to {100 * hi:+.0f} %)"
+    stays = [f"the {states} model's {figure} stays {_percent(0.5 * (lo + hi))} % off at every "
+             f"length ({_percent(lo)} to {_percent(hi)} %)"
              for figure, (lo, hi) in steady.items()]
     judged = ("E(RT)", "SD(RT)") if result.sd_judged else ("E(RT)",)
     drifting = [f for f in judged
@@ -319,7 +326,7 @@ def verdict_text(result: SampleLength, states: str) -> str:
                 f"state space {memory} does")
     pd_mean, pd_sd = result.deviations()
     last = {"E(RT)": pd_mean[-1], "SD(RT)": pd_sd[-1]}
-    off = " and ".join(f"{f} {100 * last[f]:+.0f} %" for f in drifting if np.isfinite(last[f]))
+    off = " and ".join(f"{f} {_percent(last[f])} %" for f in drifting if np.isfinite(last[f]))
     off = f"; the longest window's {off} off" if off else ""
     cure = "a longer run, or pool runs with fit A B ..."
     if steady:
@@ -411,15 +418,18 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
             lasts = [min(t_last, float(stop)) for t_last in lasts]
         last = min(lasts)
         a = first if start is None else float(start)
+        held = f"the frames of {name}" if len(runs) == 1 else f"the frames all of {name} hold"
         if not first - tol <= a < last:
-            raise InputError(f"start {a:g} s lies outside the frames of {name} "
-                             f"({first:g} to {last:g} s): give a start inside them")
+            raise InputError(f"start {a:g} s lies outside {held} ({first:g} to {last:g} s): "
+                             "give a start inside them")
         if estimator is None:
             estimator = default_estimator(runs[0].boundary.is_open, state_space.kind)
         usable = [float(n) for n in sorted(lengths) if a + n <= last + tol]
         if not usable:
+            fix = ("an earlier --start" if a > first + tol else
+                   f"a run longer than {min(lengths):g} s")
             raise InputError(f"{name} runs {last - a:g} s from {a:g} s: shorter than the "
-                             f"shortest window ({min(lengths):g} s); an earlier --start")
+                             f"shortest window ({min(lengths):g} s); {fix}")
         if len(runs) > 1:
             check_runs_distinct(runs, [(a, t_last) for t_last in lasts])
         fitter = estimator_from_name(estimator, state_space, lag)

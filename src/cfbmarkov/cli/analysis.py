@@ -564,7 +564,8 @@ def _sample_length(args) -> int:
     def value(v):
         return format(v, ".4g") if np.isfinite(v) else "n/d"
 
-    span = f"{result.start:g}-{result.span_end:g} s"
+    span = (f"{result.start:g}-{result.span_end:g} s" if len(args.file) == 1 else
+            f"from {result.start:g} s to each run's last frame (at most {result.span_end:g} s)")
     if np.isfinite(result.censored_share):
         print(f"{result.file}: models ({result.description}) on windows from {result.start:g} s "
               f"against the long run {span}: E(RT) {value(result.long_run_mean)} s from its "

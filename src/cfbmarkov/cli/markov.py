@@ -321,8 +321,9 @@ def cmd_rtd(args) -> int:
         # its fitting file found (or the refusal, one line) before the progress line
         model = resolve_source(model.with_uncertainty(None))
         level_ = args.level if args.level is not None else 0.9
+        pooled = "s" if isinstance(model.source, (list, tuple)) else ""
         with _stage(args, "interval", f"the model's {100 * level_:g} % interval: "
-                    f"{args.resamples} bootstrap resamples of the fitting window"):
+                    f"{args.resamples} bootstrap resamples of the fitting window{pooled}"):
             model = _with_interval(model, level_, args.resamples)
     elif (args.level is not None and model.uncertainty is not None
           and abs(model.uncertainty.level - args.level) > 1e-12):

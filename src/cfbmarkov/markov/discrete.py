@@ -431,7 +431,8 @@ def check_domain(state_space: StateSpace, width: float, height: float, source: s
                              f"{source} is 2D: give a 3D file, or fit with COLUMNSxROWS cells")
         if not np.isclose(state_space.depth, depth):
             raise InputError(f"state space covers a depth of {state_space.depth:g} m but "
-                             f"{source} is {depth:g} m deep")
+                             f"{source} is {depth:g} m deep: give a run of the riser the "
+                             "model was fitted on, or fit a model on this one")
     return state_space
 
 

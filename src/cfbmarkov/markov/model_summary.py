@@ -249,9 +249,14 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
             widened = ("" if u.bootstrap_widening is None else
                        f" (their spread widened {u.bootstrap_widening:.3g} times, for its "
                        f"{u.blocks - runs} degrees of freedom)")
+            if runs > 1:        # each run's window cut into as many blocks
+                spans = [(b - a) / max(u.blocks // runs, 1) for a, b in model.run_windows]
+                long_ = (f"about {u.block_length:.3g} s long"
+                         if max(spans) - min(spans) <= 1e-9 * max(spans) else
+                         f"{min(spans):.3g} to {max(spans):.3g} s long by run")
             where = (f"the fitting windows of {runs} runs: {u.resamples} bootstrap "
-                     f"resamples of {u.blocks // runs} blocks of each run, about "
-                     f"{u.block_length:.3g} s long{widened}" if runs > 1 else
+                     f"resamples of {u.blocks // runs} blocks of each run, "
+                     f"{long_}{widened}" if runs > 1 else
                      f"the fitting window alone: {u.resamples} bootstrap resamples of "
                      f"{u.blocks} blocks of {u.block_length:.3g} s{widened}")
             lines.append(f"    interval from {where}{flow}")

@@ -74,7 +74,8 @@ def state_space_from_name(name: str, columns: int, rows: int, width: float | Non
         raise InputError(f"state space {name} has no depth columns yet: use --states cells "
                          "with COLUMNSxDEPTHxROWS, or COLUMNSxROWS (the projection)")
     if depth is None:
-        raise InputError(f"{depth_columns} depth column(s) need 3D data (the riser's depth)")
+        raise InputError(f"{depth_columns} depth column(s) need 3D data (the riser's depth): "
+                         "give a 3D file, or cells as COLUMNSxROWS")
     return space(columns, rows, width, height, depth_columns=depth_columns, depth=depth)
 
 

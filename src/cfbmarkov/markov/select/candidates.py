@@ -143,7 +143,7 @@ def judge_candidates(traj, frames: WindowFrames, spaces: dict[tuple[str, float],
         try:
             discrete = frames.discretize(space, traj.lag_frames(lag))
             space = discrete.state_space          # fitted to the window (bins, sub-rows)
-            visited = _visited(discrete)
+            visited = visited_states(discrete)
             est = estimator_from_name(estimator, space, lag)
             same = next((other for (other, t), d in discrete_of.items()
                          if t == lag and d.state_space.n_states == space.n_states
@@ -169,11 +169,14 @@ def judge_candidates(traj, frames: WindowFrames, spaces: dict[tuple[str, float],
     return judged, discrete_of
 
 
-def _visited(discrete: DiscreteTrajectories) -> int:
-    """How many states are occupied in some frame of ``discrete`` (absent particles aside)."""
-    states = discrete.states.ravel()
-    return int(np.count_nonzero(np.bincount(states[states >= 0],
-                                            minlength=discrete.state_space.n_states)))
+def visited_states(*discrete: DiscreteTrajectories) -> int:
+    """How many states are occupied in some frame of any of ``discrete`` (several runs on
+    one state space: the union; absent particles aside)."""
+    occupied = np.zeros(discrete[0].state_space.n_states, dtype=bool)
+    for d in discrete:
+        states = d.states.ravel()
+        occupied[states[states >= 0]] = True
+    return int(np.count_nonzero(occupied))
 
 
 def score_candidates(judged: list[JudgedCandidate], criterion: Criterion, lag: float

@@ -224,13 +224,20 @@ class WindowRTD(_RTDCriterion):
     def _reason(self, best, cells):
         a, b = self.fitting.window
         observed = self.fitting.whole
+        judged = self.fitting.judged
+        if len(judged) > 1:         # pooled runs: each run's window judged
+            where = (f"the fitting windows of {len(judged)} runs ("
+                     + ", ".join(f"{lo:g}-{hi:g} s" for lo, hi in judged) + ")")
+            seen, held = "each run's window", "the windows hold"
+        else:
+            where, seen, held = (f"the fitting window {a:g}-{b:g} s", f"a {b - a:g} s window",
+                                 "the window holds")
         # what the table's percentages are against: the chain's RTD as a window of that
         # length sees it, against the window's observed one (not the intrinsic E(RT))
         return (f"{best.states} at lag {best.lag:g} s had the exact RTD closest to the one "
-                f"observed over the fitting window {a:g}-{b:g} s; the percentages set the "
-                f"chain's RTD as seen in a {b - a:g} s window (E(RT) {best.rt_mean:.3g} s) "
-                f"against the residences the window holds whole, E(RT) {observed.mean:.3g} s, SD(RT) "
-                f"{observed.sd:.3g} s")
+                f"observed over {where}; the percentages set the chain's RTD as seen in "
+                f"{seen} (E(RT) {best.rt_mean:.3g} s) against the residences {held} whole, "
+                f"E(RT) {observed.mean:.3g} s, SD(RT) {observed.sd:.3g} s")
 
 
 class CrossValidatedRTD(_RTDCriterion):

@@ -33,7 +33,7 @@ from cfbmarkov.markov.pooling import check_runs_distinct, check_runs_match, run_
 from cfbmarkov.markov.select.blocks import MIN_RESIDENCES, JudgedBlocks, _open_riser_criterion
 from cfbmarkov.markov.select.candidates import (JudgedCandidate, best_candidate,
                                                 candidate_spaces, read_window_frames,
-                                                score_candidates)
+                                                score_candidates, visited_states)
 from cfbmarkov.markov.select.criteria import criterion_for
 from cfbmarkov.markov.select.record import kept_cells_record, selection_record
 from cfbmarkov.markov.spaces import state_space_from_name
@@ -145,18 +145,21 @@ def select_pooled(runs, *, windows, columns: int, rows: int, lag: float,
                                                                  // len(windows))]
     judged, discrete_of = [], {}
     for (name, cand_lag), space in spaces.items():
+        visited = None
         try:
             first = frames[0].discretize(space, runs[0].lag_frames(cand_lag))
             fitted = first.state_space
             data = [first] + [f.discretize(fitted, run.lag_frames(cand_lag))
                               for f, run in zip(frames[1:], runs[1:])]
+            visited = visited_states(*data)     # in any run's window
             same = next((other for (other, t), ds in discrete_of.items()
                          if t == cand_lag and ds[0].state_space.n_states == fitted.n_states
                          and all(np.array_equal(d.states, e.states) for d, e in zip(ds, data))),
                         None)
             if same is not None:
                 judged.append(JudgedCandidate(name, cand_lag, fitted.n_states, None,
-                                              f"the same states as {same} on these windows"))
+                                              f"the same states as {same} on these windows",
+                                              visited))
                 continue
             discrete_of[(name, cand_lag)] = data
             est = estimator_from_name(estimator, fitted, cand_lag)
@@ -166,9 +169,11 @@ def select_pooled(runs, *, windows, columns: int, rows: int, lag: float,
             table = [judge.judge(data[judged_run[k]], k, est, judge.training(parts, k),
                                  cand_lag) for k in range(len(fitting.judged))]
         except (InputError, CfbmarkovError) as exc:
-            judged.append(JudgedCandidate(name, cand_lag, space.n_states, None, str(exc)))
+            judged.append(JudgedCandidate(name, cand_lag, space.n_states, None, str(exc),
+                                          visited))
             continue
-        judged.append(JudgedCandidate(name, cand_lag, fitted.n_states, np.asarray(table), ""))
+        judged.append(JudgedCandidate(name, cand_lag, fitted.n_states, np.asarray(table), "",
+                                      visited))
     scores = score_candidates(judged, judge, lag)
     usable = [c for c in scores if math.isfinite(c.score)]
     if not usable and judge.name == "ck":      # nothing judged: the paper's cells kept
