@@ -171,7 +171,18 @@ def judge_candidates(traj, frames: WindowFrames, spaces: dict[tuple[str, float],
 
 def visited_states(*discrete: DiscreteTrajectories) -> int:
     """How many states are occupied in some frame of any of ``discrete`` (several runs on
-    one state space: the union; absent particles aside)."""
+    one state space: the union; absent particles aside).
+
+    Parameters
+    ----------
+    *discrete : DiscreteTrajectories
+        One or more runs' states on the same state space (at least one).
+
+    Returns
+    -------
+    int
+        The states occupied in any frame of any run, at most the state space's S.
+    """
     occupied = np.zeros(discrete[0].state_space.n_states, dtype=bool)
     for d in discrete:
         states = d.states.ravel()
