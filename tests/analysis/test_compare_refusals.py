@@ -186,6 +186,13 @@ def test_two_predictions_are_compared_as_given(pair, tmp_path):
                   resamples=0)
     assert np.isfinite(one["pd_rt_mean"]) and one["pd_rt_mean"] != 0
     assert np.sign(one["pd_rt_mean"]) == -np.sign(two["pd_rt_mean"])
+    # and said to be two models, not a model against the flow
+    for summary, reference in ((one, pred), (two, other)):
+        [said] = [w for w in summary["warnings"] if "is itself a Markov prediction" in w]
+        assert said.startswith(f"the reference {reference} is itself")
+    run = compare(ref, pred, window=(0.5, 3.0), output=tmp_path / "c", figures=False,
+                  resamples=0)
+    assert not any("itself a Markov prediction" in w for w in run["warnings"])
 
 
 # -- 4. messages naming compare's own options -------------------------------------------------

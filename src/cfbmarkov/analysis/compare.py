@@ -345,6 +345,10 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
         check_bins((start, stop), bin_width, bin_width_from)
     ref_frames, pred_frames, columns = check_runs(ref, pred, start, stop)
     warnings: list[str] = []
+    if ref.source == PREDICTION_SOURCE and pred.source == PREDICTION_SOURCE:
+        warnings.append(f"the reference {ref.path} is itself a Markov prediction: the figures "
+                        "compare two models, not a model against the flow; give a run (a "
+                        "CFD-DEM run or an imported file) as the reference to judge a model")
     on = _residence_basis(ref, pred, (start, stop), basis, warnings)
     # residence times (an open riser: entries and exits within one cell of the faces), on
     # one time basis: frames at the model's lag, or the reference's exact events
