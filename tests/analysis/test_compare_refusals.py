@@ -195,6 +195,33 @@ def test_two_predictions_are_compared_as_given(pair, tmp_path):
     assert not any("itself a Markov prediction" in w for w in run["warnings"])
 
 
+def test_two_imported_runs_compare_though_their_columns_name_csv_columns(tmp_path):
+    """An imported file's parameters name its source's columns (``columns`` = the CSV
+    header, a list): compared with another import it is no grid width to read (a
+    TypeError traceback once), and the comparison runs on the paper's grid."""
+    from cfbmarkov.io import import_file
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    imported = []
+    for seed in (1, 2):
+        run = write_run(tmp_path / f"run{seed}.h5", RiserFlow(), 150, 3.0, seed=seed)
+        with Trajectories(run) as t:
+            times, positions = t.times, t.positions()
+            width, height = t.width, t.height
+        rows = ["t,id,x,y"] + [f"{time:.4f},{i},{x:.6f},{y:.6f}"
+                               for time, frame in zip(times, positions)
+                               for i, (x, y) in enumerate(frame)]
+        source = tmp_path / f"run{seed}.csv"
+        source.write_text("\n".join(rows) + "\n")
+        imported.append(import_file(source, "csv", tmp_path / f"imported{seed}.h5",
+                                    width=width, height=height))
+    with Trajectories(imported[1]) as t:
+        assert isinstance(t.parameters["columns"], list)
+    summary = compare(*imported, window=(0.5, 3.0), output=tmp_path / "c", figures=False,
+                      resamples=0)
+    assert summary["cluster_index"]["grid"] == [6, 38] and np.isfinite(summary["pd_rt_mean"])
+
+
 # -- 4. messages naming compare's own options -------------------------------------------------
 
 def test_a_long_run_span_outside_the_reference_names_compares_option(pair, tmp_path, capsys):

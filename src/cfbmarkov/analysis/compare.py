@@ -28,7 +28,7 @@ from cfbmarkov.analysis.baseline import (WindowDifference, fitting_runs_of, fitt
                                          model_on_fitting_window, pooled_window_difference,
                                          window_difference)
 from cfbmarkov.analysis.compare_inputs import (check_bins, check_parameters, check_runs,
-                                               common_span, default_bin_width,
+                                               common_span, default_bin_width, grid_parameter,
                                                model_flow_direction, starting_tracers)
 from cfbmarkov.analysis.mixing import left_tracer_group, mixing_curve_of
 from cfbmarkov.analysis.stationarity import long_run_baseline
@@ -522,7 +522,7 @@ def _residence_basis(ref: Trajectories, pred: Trajectories, window: tuple[float,
         raise InputError(f"{ref.path} holds no exact pass events: --basis events needs a "
                          "reference that logged them (cfbmarkov simulate writes them); "
                          "compare on --basis frames")
-    rows = pred.parameters.get("rows") or DEFAULT_FACE_ROWS
+    rows = grid_parameter(pred, "rows") or DEFAULT_FACE_ROWS
     band = ref.height / float(rows)
     lag_frames = 1
     if basis == "frames":
@@ -702,8 +702,7 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
 
 def _clusters(ref, pred, ref_frames: slice, pred_frames: slice, columns: int | None) -> dict:
     """Both sides' cluster index on the model's grid (else the paper's 6 x 38)."""
-    rows = pred.parameters.get("rows") if isinstance(pred.parameters, dict) else None
-    columns, rows = (columns or 6), int(rows or DEFAULT_FACE_ROWS)
+    columns, rows = (columns or 6), grid_parameter(pred, "rows") or DEFAULT_FACE_ROWS
     r_mean, r_sd = cluster_index(ref, ref_frames, columns, rows)
     m_mean, m_sd = cluster_index(pred, pred_frames, columns, rows)
     return {"grid": [columns, rows], "reference": {"mean": r_mean, "sd": r_sd},

@@ -189,8 +189,29 @@ def model_columns(traj: Trajectories) -> int | None:
         if space is not None:
             with contextlib.suppress(ValueError, TypeError, KeyError):
                 return int(json.loads(space)["columns"])
-    columns = traj.parameters.get("columns") if isinstance(traj.parameters, dict) else None
-    return None if columns is None else int(columns)
+    return grid_parameter(traj, "columns")
+
+
+def grid_parameter(traj: Trajectories, name: str) -> int | None:
+    """A whole-number grid parameter (``columns``, ``rows``) of a file's ``parameters``,
+    else None: an imported file's ``columns`` are its source's column names, not a grid's
+    width.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+    name : str
+        The parameter.
+
+    Returns
+    -------
+    int or None
+    """
+    value = traj.parameters.get(name) if isinstance(traj.parameters, dict) else None
+    if isinstance(value, (int, np.integer)) and not isinstance(value, bool) and value > 0:
+        return int(value)
+    return None
 
 
 def model_flow_direction(traj: Trajectories) -> str | None:

@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from cfbmarkov.analysis.compare_inputs import grid_parameter
 from cfbmarkov.analysis.kinetics_reference import (PathKinetics, integrate_along_paths,
                                                    linear_maps, reference_kinetics,
                                                    reference_starts)
@@ -604,7 +605,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     maps = linear_maps(sk, model.lag)
     start, stop = comparison.window
     on = _Basis(comparison.basis, comparison.basis == "events", comparison.lag_frames,
-                ref.height / float(pred.parameters.get("rows") or model.state_space.rows),
+                ref.height / float(grid_parameter(pred, "rows") or model.state_space.rows),
                 comparison.direction)
     pred_discrete, late = _prediction_states(pred, model, (start, stop), warnings)
     start = float(pred_discrete.times[0]) if late else start
