@@ -2,6 +2,7 @@
 (also after kill -9), configuration errors."""
 
 import os
+import re
 import shutil
 import signal
 import subprocess
@@ -178,6 +179,40 @@ def test_resume_after_kill_9(tmp_path, reference):
         np.testing.assert_array_equal(a, b)
 
 
+def test_a_blow_up_is_one_line_naming_its_step_time_and_checkpoint(tmp_path, capsys,
+                                                                    monkeypatch):
+    """A DEM blow-up after a checkpoint: one line, exit 2, the engine's message with the
+    time and the checkpoint kept; the error keeps its type and attributes (re-raising it as
+    a new one of its class needed the step, particle and reason: a TypeError traceback)."""
+    from cfbmarkov.simulate.dem import SimulationBlowUp
+    from cfbmarkov.simulate.riser import CoupledRiser
+
+    toml = small_case(tmp_path, n=100, end=0.1)
+    original, calls = CoupledRiser.step, []
+
+    def failing(self, *args, **kwargs):
+        calls.append(1)
+        if len(calls) > 1100:           # 0.055 s of gas steps: after two checkpoints
+            raise SimulationBlowUp("DEM blow-up in step 7: particle 3 overlaps", 7, 3,
+                                   "overlap")
+        return original(self, *args, **kwargs)
+
+    monkeypatch.setattr(CoupledRiser, "step", failing)
+    out = tmp_path / "run.h5"
+    assert main(["simulate", str(toml), "-o", str(out), "--checkpoint-every", "0.025",
+                 "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    errors = [line for line in err.splitlines() if not line.startswith("note: ")]
+    assert len(errors) == 1 and "Traceback" not in err, err
+    assert re.search(r"error: DEM blow-up in step 7: particle 3 overlaps \(at t = 0\.05\d* s\); "
+                     r"the last good checkpoint is in \S+", errors[0]), errors[0]
+    with pytest.raises(SimulationBlowUp) as raised:
+        simulate(CaseConfig.model_validate_json(CaseConfig.model_validate(
+            __import__("tomllib").loads(toml.read_text())).model_dump_json()),
+            tmp_path / "again.h5", progress=False)
+    assert (raised.value.step, raised.value.particle, raised.value.reason) == (7, 3, "overlap")
+
+
 def test_configuration_errors(tmp_path, capsys):
     bad = tmp_path / "bad.toml"     # 2e-5 s resolves a contact in 1.3 steps: refused
     bad.write_text(SMALL.format(n=100, end=0.05).replace(
@@ -191,6 +226,20 @@ def test_configuration_errors(tmp_path, capsys):
     assert main(["simulate", str(unknown), "-o", str(tmp_path / "x.h5")]) == 2
     assert "gas.velocity" in capsys.readouterr().err
     assert CaseConfig().particles.number == 27000
+    # an end between frames (0.025 s apart): the run would step on to the next frame and
+    # record the end asked for; refused, naming the two whole-frame ends
+    between = tmp_path / "between.toml"
+    between.write_text(SMALL.format(n=100, end=0.06))
+    for argv, where in (([], "output.end_time in the case file"), (["--until", "0.03"],
+                                                                    "--until")):
+        assert main(["simulate", str(between), "-o", str(tmp_path / "y.h5"), "-q",
+                     *argv]) == 2
+        err = capsys.readouterr().err.strip()
+        end = argv[1] if argv else "0.06"
+        low, high = ("0.025", "0.05") if argv else ("0.05", "0.075")
+        assert err.endswith(f"end time {end} s is not a whole number of frames (0.025 s "
+                            f"apart): give {low} or {high} s ({where})"), err
+        assert not (tmp_path / "y.h5").exists()
 
 
 def test_time_step_advisory_is_one_line_and_progress_whole_lines(tmp_path, capsys):

@@ -123,7 +123,16 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     steps_per_checkpoint = max(1, int(round(checkpoint_every / frame_dt))) * steps_per_frame
     total_steps = int(round(end / cfd_dt))
     if total_steps < steps_per_frame:
-        raise InputError(f"run length {end:g} s is shorter than one frame ({frame_dt:g} s)")
+        raise InputError(f"run length {end:g} s is shorter than one frame ({frame_dt:g} s): "
+                         "give a later --until or output.end_time")
+    whole = end / frame_dt
+    if abs(whole - round(whole)) > 1e-6 * max(whole, 1.0):
+        # the run steps whole frames: it would end at the next one and say it ended here
+        below, above = math.floor(whole) * frame_dt, math.ceil(whole) * frame_dt
+        where = "--until" if until is not None else "output.end_time in the case file"
+        raise InputError(f"end time {end:g} s is not a whole number of frames "
+                         f"({frame_dt:g} s apart): give {below:.10g} or {above:.10g} s "
+                         f"({where})")
     parts = parts_folder(output)
     checkpoint = parts / "checkpoint.h5"
     grid = GasGrid.from_config(case)
@@ -203,7 +212,10 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     except CfbmarkovError as exc:
         writer.abort()
         kept = f"; the last good checkpoint is in {checkpoint}" if checkpoint.exists() else ""
-        raise type(exc)(f"{exc} (at t = {riser.time:.6g} s){kept}") from None
+        # the same error (its type and attributes: a SimulationBlowUp's step, particle and
+        # reason), its message told when and where the last good state is
+        exc.args = (f"{exc} (at t = {riser.time:.6g} s){kept}", *exc.args[1:])
+        raise exc from None
     except BaseException:
         writer.abort()
         raise
