@@ -198,6 +198,57 @@ def test_propagation_eq6_and_outflow_matches_rtd():
     np.testing.assert_allclose(remaining, 1.0 - cdf, atol=1e-12)
 
 
+def test_outflow_of_a_periodic_riser_leaves_as_residences_end(markov_flow, markov_run):
+    """With particles that fall out of the bottom (and come back at the top), the batch
+    leaves where its residences end, not at its first pass up through the top: propagated
+    from the exact RTD's entry distribution, the mass left is the RTD's survival to
+    round-off (1e-12), while removing every pass up (what the maps did) loses more than
+    a tenth of the batch too early; the maps' batch splits each bottom cell over its states as the window's
+    particles entered them (cells: one state a cell, 1/m each)."""
+    from cfbmarkov.markov.propagation import inlet_batch
+
+    model = fit_model(markov_run, markov_flow.grid, markov_flow.lag)
+    assert model.counts_down.sum() > 0                 # particles do fall out of the bottom
+    rtd = model.rtd()
+    left = model.propagate(rtd.entry_distribution, 80, outflow=True).sum(axis=1)
+    survival = np.concatenate([[1.0], 1.0 - np.cumsum(rtd.probability)])[:81]
+    np.testing.assert_allclose(left, survival, atol=1e-12)
+    every_pass = rtd.entry_distribution.copy()
+    first_pass = [1.0]
+    p = model.transition_matrix * (1.0 - model.up_fraction)
+    for _ in range(80):
+        every_pass = every_pass @ p
+        first_pass.append(every_pass.sum())
+    assert np.max(survival - np.asarray(first_pass)) > 0.1
+    np.testing.assert_array_equal(inlet_batch(model), model.state_space.inlet_distribution())
+
+
+def test_the_batch_of_a_state_space_with_memory_enters_as_particles_did(markov_flow,
+                                                                       markov_run):
+    """cells-direction: each bottom cell's 1/m is split over its rising and falling states
+    by the window's landings of passes up through the top (particles enter rising), not
+    evenly; a cell without landings keeps the even split."""
+    from cfbmarkov.markov import PaperEstimator, discretize, state_space_from_name
+    from cfbmarkov.markov.propagation import inlet_batch
+
+    space = state_space_from_name("cells-direction", markov_flow.columns, markov_flow.rows,
+                                  markov_flow.width, markov_flow.height)
+    model = PaperEstimator(space, markov_flow.lag).fit(
+        discretize(markov_run, space, markov_flow.lag, (1.0, 6.0)))
+    batch = inlet_batch(model)
+    cell = space.cell_of_state
+    bottom = cell < space.cells_per_row
+    landings = model.counts_up.sum(axis=0)
+    assert batch.sum() == pytest.approx(1.0) and batch[~bottom].sum() == 0
+    np.testing.assert_allclose(np.bincount(cell[bottom], batch[bottom]),
+                               1.0 / space.cells_per_row)
+    for c in range(space.cells_per_row):
+        members = np.flatnonzero(cell == c)
+        share = landings[members] / landings[members].sum()
+        np.testing.assert_allclose(batch[members], share / space.cells_per_row)
+    assert not np.allclose(batch, space.inlet_distribution())
+
+
 def test_batch_injection_maps(markov_flow, markov_run):
     model = fit_model(markov_run, markov_flow.grid, markov_flow.lag)
     maps = model.batch_injection_maps([0.0, 0.1, 0.25])

@@ -23,10 +23,12 @@ if TYPE_CHECKING:
 def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) -> np.ndarray:
     """State vectors from ``initial`` by S(t + lag) = S(t) P, lag by lag.
 
-    With ``outflow`` the transitions up through the top are taken out, so the total
-    mass is the fraction still in the riser (a batch leaving through the outlet). An
-    open riser's model always propagates by its absorbing matrix Q = diag(1 - r) P:
-    what leaves through the outlet is gone.
+    With ``outflow`` the mass leaves where a residence ends, so the total mass is the
+    fraction of a batch still in the riser: a particle that falls out of the bottom of a
+    periodic riser (and comes back at the top) leaves only once it has risen through the
+    top once more than it fell, as in the exact RTD (its lap-deficit levels); the first
+    pass up through the top does not end it. An open riser's model always propagates by
+    its absorbing matrix Q = diag(1 - r) P: what leaves through the outlet is gone.
 
     Parameters
     ----------
@@ -37,7 +39,8 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     steps : int
         Number of lags to propagate.
     outflow : bool, optional
-        Remove the mass that passes up through the top.
+        Remove the mass whose residence ends (it passes up through the top once more
+        than it fell out of the bottom).
 
     Returns
     -------
@@ -74,13 +77,53 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     if model.open_flow is not None:
         p = model.absorbing_matrix
     elif outflow:
-        p = model.transition_matrix * (1.0 - model.up_fraction)
+        return _periodic_outflow(model, s0, int(steps))
     else:
         p = model.transition_matrix
     out = np.empty((int(steps) + 1, model.n_states))
     out[0] = s0
     for k in range(1, int(steps) + 1):   # one S x S product per lag, not per particle
         out[k] = out[k - 1] @ p
+    return out
+
+
+def _periodic_outflow(model: "MarkovModel", s0: np.ndarray, steps: int) -> np.ndarray:
+    """:func:`propagate` with outflow on a periodic riser: on the lap-deficit levels of the
+    exact RTD (docs/definitions.md, Exact RTD of a model), so that a particle that falls
+    out of the bottom (and comes back at the top) leaves only when it has risen through the
+    top once more than it fell, as a residence ends: the mass that passes up from level 0
+    leaves; a pass down lowers the level, a pass up raises it. The levels are as deep as
+    the model's exact RTD keeps (below its deepest, at most 1e-7 of the residences, the
+    mass stays on the deepest level). Returns S(k lag) summed over the levels, (steps + 1,
+    S)."""
+    import warnings
+
+    import scipy.sparse as sp
+
+    from cfbmarkov.errors import CfbmarkovError
+    from cfbmarkov.markov.first_passage import MIN_DEFICIT_LEVELS, split_by_pass
+
+    try:
+        with warnings.catch_warnings():          # the RTD's own warnings are not the maps'
+            warnings.simplefilter("ignore")
+            depth = int(model.rtd().deficit_levels)
+    except CfbmarkovError:                       # no residence ends: none leaves either
+        depth = MIN_DEFICIT_LEVELS
+    up, down, stay = (part.T.tocsr() for part in split_by_pass(
+        sp.csr_matrix(model.transition_matrix), model.up_fraction, model.down_fraction))
+    levels = depth + 1
+    v = np.zeros((model.n_states, levels))       # columns: lap deficit 0 .. -depth
+    v[:, 0] = s0
+    out = np.empty((steps + 1, model.n_states))
+    out[0] = s0
+    for k in range(1, steps + 1):    # one product per part and lag over all the levels
+        fallen = down @ v
+        w = stay @ v
+        w[:, 1:] += fallen[:, :-1]
+        w[:, -1] += fallen[:, -1]                # below the deepest level: kept there
+        w[:, :-1] += (up @ v[:, 1:])             # risen back: one level up; from 0: gone
+        v = w
+        out[k] = v.sum(axis=1)
     return out
 
 
@@ -122,6 +165,43 @@ def batch_injection_maps(model: "MarkovModel", times: Sequence[float], outflow: 
                          f"{MAX_STEPS} to propagate; give earlier --times")
     check_memory(8.0 * (last + 1) * model.n_states, f"maps up to {max(times):g} s "
                  f"({last} lags x {model.n_states} states)", "give earlier --times")
-    history = propagate(model, model.state_space.inlet_distribution(), max(steps, default=0),
-                       outflow=outflow)
+    history = propagate(model, inlet_batch(model), max(steps, default=0), outflow=outflow)
     return model.state_space.cell_maps(history[steps])
+
+
+def inlet_batch(model: "MarkovModel") -> np.ndarray:
+    """The batch of Eq. (8) as a state vector: 1/m in each of the m bottom cells (m d with
+    depth columns), each cell's share split over its states (a state space with memory has
+    several a cell) as the fitting window's particles entered them through the inlet (the
+    landings of their passes up through the top, ``counts_up``), so that a batch fed over
+    the inlet enters rising as particles do; evenly where a cell saw no entry (and on an
+    open riser, whose inlet is its own boundary).
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    ndarray of float64, shape (S,)
+        S(0), summing to 1 (:meth:`StateSpace.inlet_distribution
+        <cfbmarkov.markov.states.StateSpace.inlet_distribution>` where each bottom cell
+        holds one state).
+    """
+    space = model.state_space
+    even = space.inlet_distribution()
+    counts = getattr(model, "counts_up", None)
+    if model.open_flow is not None or counts is None:
+        return even
+    cell = space.cell_of_state
+    bottom = cell < space.cells_per_row
+    if np.bincount(cell[bottom]).max(initial=0) <= 1:
+        return even                              # one state a cell: nothing to split
+    landings = np.asarray(counts.sum(axis=0), dtype=np.float64).ravel() * bottom
+    per_cell = np.bincount(cell[bottom], weights=landings[bottom],
+                           minlength=space.cells_per_row)
+    batch = even.copy()
+    seen = np.flatnonzero(bottom)
+    seen = seen[per_cell[cell[seen]] > 0]
+    batch[seen] = (1.0 / space.cells_per_row) * landings[seen] / per_cell[cell[seen]]
+    return batch
