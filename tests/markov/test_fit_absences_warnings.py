@@ -228,8 +228,9 @@ def test_a_short_window_lengths_unresolved_mass_is_named_as_such(tmp_path, capsy
     assert main(["rtd", str(model), "--window-length", "2"]) == 0
     err = capsys.readouterr().err
     line = next(x for x in err.splitlines() if "unresolved mass" in x)
-    assert "in the 2 s window: the share of the chain's residences that do not end" in line
-    assert "coarser grid" not in line
+    assert "in the 2 s window: the share of the residences begun in the window that do " \
+           "not end in it (those begun too late in it to end" in line
+    assert "coarser grid" not in line and "longer --window-length" not in line
     assert main(["rtd", str(model)]) == 0
     assert "unresolved mass" not in capsys.readouterr().err
 

@@ -346,11 +346,12 @@ class BatchInjection:
     maps : numpy.ndarray, shape (K, rows, columns)
         Probability per cell (what leaves through the top re-enters at the bottom).
     inside : numpy.ndarray, shape (K, rows, columns)
-        The same with what leaves through the top taken out.
+        The same with what passes up through the top taken out (a periodic riser's: at its
+        first pass, first passages only; an open riser's: what leaves).
     mean_heights : list of float
         Mean height of the part still inside at each time, m.
     left_share : float
-        Share of the batch that has left through the top by the last time (-).
+        Share of the batch that has passed up through the top by the last time (-).
     fallen_share : float or None
         Share of the batch that has passed down through the bottom by the last time (-),
         first passages only (a periodic riser's; None for an open riser).
@@ -381,20 +382,30 @@ def batch_injection(model, times) -> BatchInjection:
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Eqs. 5-6 and 8, Figs. 4-7;
     ``docs/definitions.md`` (States and transitions, Batch injection).
     """
+    from cfbmarkov.markov.propagation import inlet_batch
+
     maps = np.asarray(model.batch_injection_maps(times), dtype=np.float64)
-    inside = np.asarray(model.batch_injection_maps(times, outflow=True), dtype=np.float64)
     space = model.state_space
-    centres = (np.arange(space.rows) + 0.5) * space.height / space.rows
-    heights = [float((m.sum(axis=1) * centres).sum() / max(m.sum(), 1e-300)) for m in inside]
     fallen = None
     if model.open_flow is None:
-        # the batch with the passes down through the bottom taken out (as the top's are for
-        # ``inside``): what is missing has fallen through the bottom at least once
+        # the batch with the passes up through the top taken out (``inside``: what is
+        # missing has passed up through the top at least once; not where its residences
+        # end, which the lap deficits of maps --outflow follow), and with the passes down
+        # through the bottom taken out (what is missing has fallen through it at least once)
+        above = model.transition_matrix * (1.0 - model.up_fraction)
         below = model.transition_matrix * (1.0 - model.down_fraction)
-        s = np.asarray(space.inlet_distribution(), dtype=np.float64)
-        for _ in range(max(model.steps_for(t) for t in times)):
-            s = s @ below
+        steps = [model.steps_for(t) for t in times]
+        s = a = np.asarray(inlet_batch(model), dtype=np.float64)
+        kept = {0: a}
+        for k in range(1, max(steps) + 1):
+            a, s = a @ above, s @ below
+            kept[k] = a
+        inside = space.cell_maps(np.array([kept[k] for k in steps]))
         fallen = 1.0 - float(s.sum())
+    else:
+        inside = np.asarray(model.batch_injection_maps(times, outflow=True), dtype=np.float64)
+    centres = (np.arange(space.rows) + 0.5) * space.height / space.rows
+    heights = [float((m.sum(axis=1) * centres).sum() / max(m.sum(), 1e-300)) for m in inside]
     return BatchInjection(maps, inside, heights, 1.0 - float(inside[-1].sum()), fallen)
 
 

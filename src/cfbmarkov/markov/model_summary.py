@@ -68,14 +68,16 @@ def unresolved_warning(rtd, direction: str | None = None,
     if not u > UNRESOLVED_LIMIT:
         return None
     if rtd.window is not None:
-        # an RTD as a window sees it is followed only as far as the window's length: what
-        # has not ended by then is mostly the residences longer than the window
+        # an RTD as a window sees it: the residences begun in the window that do not end in
+        # it, about E(RT) / W of them from those begun late in it, besides the longer ones
         return (f"unresolved mass {u:.2g} in the {rtd.window:g} s window: the share of the "
-                "chain's residences that do not end within the window's length (the longer "
-                "ones, and any that never reach the top); E(RT) and SD(RT) describe the "
-                "others, as a window of this length sees them; leave out --window-length "
-                "for the intrinsic RTD, whose unresolved mass says whether the chain reaches "
-                "the top from every state, or give a longer --window-length")
+                "residences begun in the window that do not end in it (those begun too late "
+                "in it to end, about E(RT) over the window's length, as well as any longer "
+                "than the window or that never reach the top), as a window of observed data "
+                "cuts them; E(RT) and SD(RT) describe those that end in it, as a window of "
+                "this length sees them; leave out --window-length for the intrinsic RTD, "
+                "whose unresolved mass says whether the chain reaches the top from every "
+                "state")
     window = ""
     return (f"unresolved mass {u:.2g} (above {100 * UNRESOLVED_LIMIT:g} %): E(RT) and SD(RT) "
             f"describe only the resolved {100 * (1.0 - u):.3g} % of the residences; the rest "
