@@ -1,5 +1,7 @@
 """A Markov core that is right on awkward data: each case with its hand-computed value."""
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -143,6 +145,18 @@ def test_state_entered_in_the_last_frame_is_reported_and_connected_set_frees_it(
     assert "states never visited: 3 of 8 (cells (1,0), (1,1), (1,3) as column,row)" in text
     connected = fit_model(path, grid, 1.0, connected=True)
     assert connected.connected and connected.trap_share == 0.0
+    assert ("entered but never left: 1 of 8 (cell (1,2) as column,row): no state that holds "
+            "particles in the window leads to those that keep their particles"
+            in connected.summary())
+    # its row led on (as a state space with memory fills it from its cell's other states):
+    # it traps nothing, and the summary says that, not that no state leads to it
+    led_on = connected.transition_matrix.copy()
+    led_on[5] = 0.0
+    led_on[5, 4] = 1.0
+    filled = dataclasses.replace(connected, transition_matrix=led_on)
+    assert filled.entered_never_left.tolist() == [5] and filled.trap_share == 0.0
+    assert ("1 of 8 (cell (1,2) as column,row): their rows lead on (none keeps its "
+            "particles), so they trap nothing" in filled.summary())
     assert connected.transition_matrix[:, 5].sum() == 1.0      # only its own row, P_55
     assert connected.stationary_distribution[[0, 2, 4, 6]].sum() == pytest.approx(1.0)
     # the CLI warns in fit (exit 0) and info, and --connected is recorded in the file

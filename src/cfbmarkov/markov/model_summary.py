@@ -205,9 +205,13 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     if warnings:
         lines.extend(f"  {line}" for line in model.warnings())
     if model.entered_never_left.size and model.trap_share == 0.0:
+        keeps = any(model.transition_matrix[i, i] == 1.0 for i in model.entered_never_left)
         lines.append("  states entered but never left: "
                      f"{state_set_text(model.state_space, model.entered_never_left)}: "
-                     "no state leads to them")
+                     + ("no state that holds particles in the window leads to those that "
+                        "keep their particles" if keeps else
+                        "their rows lead on (none keeps its particles), so they trap "
+                        "nothing"))
     if model.connected:
         lines.append("  fitted on the largest strongly connected set of the counts")
     if model.regime_chain is not None:
