@@ -256,6 +256,12 @@ def test_auto_fit_at_the_file_start_keeps_its_verdict_and_interval(tmp_path, cap
     model = MarkovModel.load(out)
     assert model.state_space.memory_lags >= 1        # a space with memory won here
     assert model.uncertainty is not None and model.adequacy is not None
+    # and the window it was fitted on, after the history's first frames, is said
+    start = model.window[0]
+    assert start > 0.0 and (f"note: the window starts at {start:g} s, the first frame with "
+                            f"the history that {model.state_space.kind} needs (the file "
+                            f"starts at 0 s): the model is fitted on {start:g}:2.5 s"
+                            in captured.err), captured.err
 
 
 def test_a_space_whose_window_leaves_most_states_unvisited_is_not_chosen():

@@ -96,6 +96,14 @@ def _fit(args) -> int:
                 model = fit_model(run, space, args.lag, args.window, args.estimator,
                                   connected=args.connected, coherent=args.coherent)
         notes = _between_frames(run, args.window)
+        if (model.window is not None
+                and model.window[0] > args.window[0] + run.time_tolerance):
+            # a space with memory needs the frames before the window's first: at the
+            # file's start, auto judges and fits from where that history begins
+            notes.append(f"the window starts at {model.window[0]:g} s, the first frame with "
+                         f"the history that {model.state_space.kind} needs (the file starts "
+                         f"at {float(run.times[0]):g} s): the model is fitted on "
+                         f"{model.window[0]:g}:{model.window[1]:g} s")
     return _finish_fit(args, model, [args.run], [args.window], notes)
 
 
