@@ -263,8 +263,9 @@ class FrameSeries:
                 f"{self.label}: particle {int(ids[p])} moves {moved:+.4g} m vertically "
                 f"between t = {time_text(t0)} and {time_text(t1)} s (its laps {int(lap0)} -> "
                 f"{int(lap1)}), more than the riser's height {self.height:g} m in one frame, "
-                "which a trajectory file cannot hold: give frames closer together (every "
-                "dump, or export-vtk with a smaller --every)")
+                "which a trajectory file cannot hold: give frames closer together (an "
+                "import: every dump, or export-vtk with a smaller --every; a simulation: a "
+                "smaller output.frame_interval)")
 
         if self.last_y is not None and self.last_present is not None:   # across blocks
             k, p = first_lap_jump(np.vstack([self.last_y, y[0]]),

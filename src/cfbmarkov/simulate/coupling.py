@@ -186,12 +186,15 @@ def check_placement(n: int, diameter: float, width: float, height: float,
         When ``n`` discs do not fit on the lattice, naming how many do.
     """
     spacing = (1.0 + gap) * diameter
-    nx = int(np.floor((width - diameter) / spacing)) + 1
-    ny = int(np.floor(height / spacing))
+    nx = max(int(np.floor((width - diameter) / spacing)) + 1, 0)
+    ny = max(int(np.floor(height / spacing)), 0)
     if n > nx * ny:
+        fix = ("give fewer particles (--particles)" if nx * ny > 0 else
+               "give a particles.diameter smaller than the riser, or a wider and taller "
+               "riser")
         raise InputError(f"{n} particles of {diameter:g} m do not fit in the {width:g} x "
                          f"{height:g} m riser (at most {nx * ny} on the starting lattice of "
-                         f"{nx} x {ny} sites); give fewer particles (--particles)")
+                         f"{nx} x {ny} sites); {fix}")
     return nx, ny
 
 

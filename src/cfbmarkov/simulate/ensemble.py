@@ -170,7 +170,9 @@ def _simulate_gpu(case, output, paths, seeds, until, checkpoint_every, resume, p
     steps_per_frame = frame_dt / cfd_dt
     if abs(steps_per_frame - round(steps_per_frame)) > 1e-6 * steps_per_frame:
         raise InputError(f"frame interval {frame_dt:g} s is not a whole number of gas steps "
-                         f"({cfd_dt:g} s)")
+                         f"({cfd_dt:g} s): give an output.frame_interval that is (e.g. "
+                         f"{max(1, round(steps_per_frame)) * cfd_dt:.10g} s), or another "
+                         "numerics.cfd_time_step")
     steps_per_frame = int(round(steps_per_frame))
     steps_per_checkpoint = max(1, int(round(checkpoint_every / frame_dt))) * steps_per_frame
     total_steps = int(round(end / cfd_dt))

@@ -448,7 +448,8 @@ class GasSolver:
                 f"gas time step {dt:.6g} s exceeds the stability limit {info[_I_DTMAX]:.6g} s "
                 f"(advective limit {info[_I_DTADV]:.6g} s at max |u| = {info[_I_UMAX]:.6g} m/s, "
                 f"max |v| = {info[_I_VMAX]:.6g} m/s, Courant {ADVECTIVE_COURANT}; "
-                f"viscous limit {info[_I_DTVIS]:.6g} s)")
+                f"viscous limit {info[_I_DTVIS]:.6g} s): give a smaller "
+                "numerics.cfd_time_step, or fewer numerics.cfd_cells")
         if code == _BAD_VOID:
             k = int(info[_I_BADCELL])
             i, j = divmod(k, self.grid.ny)

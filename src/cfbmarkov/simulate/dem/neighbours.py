@@ -66,7 +66,9 @@ def search_grid(width: float, height: float, cut: float, search_cells, periodic:
         raise InputError(
             f"search cells {ncx} x {ncy} are {cw * 1e3:.4g} x {ch * 1e3:.4g} mm, smaller "
             f"than the neighbour cutoff 2*R_max + skin = {cut * 1e3:.4g} mm; use fewer "
-            f"cells (at most {int(width / cut)} x {int(height / cut)}) or search_cells=None")
+            f"cells (at most {int(width / cut)} x {int(height / cut)}), or the automatic "
+            "grid (numerics.dem_cells = \"auto\" in a case file, search_cells=None in "
+            "Python)")
     if periodic and ncy < 3:
         raise InputError(f"a periodic height needs at least 3 search-cell rows (the period "
                          f"H = {height:g} m must be at least 3 cutoffs of {cut:g} m)")

@@ -1,0 +1,47 @@
+"""Refusals of a case that name the case file's key to change, not a Python argument or a
+fix that cannot help."""
+
+import pytest
+
+from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
+from cfbmarkov.simulate.coupling import place_without_overlap
+from cfbmarkov.simulate.dem.neighbours import search_grid
+
+CASE = """
+[riser]
+width = 0.03
+height = 0.12
+[particles]
+number = 40
+[numerics]
+cfd_cells = [3, 12]
+dem_cells = [10, 40]
+[output]
+end_time = 0.05
+frame_interval = {frame}
+"""
+
+
+def test_a_particle_wider_than_the_riser_asks_for_a_smaller_diameter():
+    with pytest.raises(InputError, match=r"at most 0 on the starting lattice of 0 x 2 sites\); "
+                                         r"give a particles.diameter smaller than the riser"):
+        place_without_overlap(10, 0.05, 0.03, 0.12, seed=1)
+    with pytest.raises(InputError, match=r"give fewer particles \(--particles\)"):
+        place_without_overlap(10_000, 0.001, 0.03, 0.12, seed=1)
+
+
+def test_search_cells_too_small_name_the_automatic_grid_of_a_case_file():
+    with pytest.raises(InputError, match=r'numerics.dem_cells = "auto" in a case file'):
+        search_grid(0.03, 0.12, 0.0014, (100, 400), True)
+
+
+def test_a_frame_interval_between_gas_steps_names_the_keys(tmp_path, capsys):
+    case = tmp_path / "case.toml"
+    case.write_text(CASE.format(frame=0.00012))          # gas steps of 5e-5 s
+    assert main(["simulate", str(case), "-o", str(tmp_path / "run.h5"), "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.endswith("frame interval 0.00012 s is not a whole number of gas steps (5e-05 "
+                        "s): give an output.frame_interval that is (e.g. 0.0001 s), or "
+                        "another numerics.cfd_time_step"), err
+    assert not (tmp_path / "run.h5").exists()
