@@ -15,7 +15,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Annotated, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (BaseModel, ConfigDict, Field, ValidationError, field_validator,
+                      model_validator)
 
 from cfbmarkov.errors import InputError
 
@@ -28,9 +29,39 @@ Cells = Annotated[int, Field(gt=0, le=100_000)]
 MAX_PARTICLES = 10_000_000
 
 
+def _numeric(annotation) -> bool:
+    """Whether a field holds a number, or a tuple of numbers (its annotation)."""
+    import typing
+
+    origin = typing.get_origin(annotation)
+    if origin is Annotated:
+        return _numeric(typing.get_args(annotation)[0])
+    if origin is tuple:
+        return all(_numeric(a) for a in typing.get_args(annotation) if a is not Ellipsis)
+    return annotation in (int, float)
+
+
 class _Model(BaseModel):
     # every number finite (no inf or nan): a case value out of range is refused in one line
     model_config = ConfigDict(extra="forbid", frozen=True, allow_inf_nan=False)
+
+    @field_validator("*", mode="before")
+    @classmethod
+    def _a_number_is_written_as_one(cls, value, info):
+        """true/false or text where a number is meant is refused (pydantic would read true
+        as 1 particle and "0.03" as 0.03 m)."""
+        field = cls.model_fields.get(info.field_name)
+        if field is None or not _numeric(field.annotation):
+            return value
+        items = value if isinstance(value, (list, tuple)) else [value]
+        if any(isinstance(v, (bool, str, bytes)) for v in items):
+            import json
+
+            written = json.dumps(list(value) if isinstance(value, tuple) else value,
+                                 default=str)
+            raise ValueError(f"a number is meant, not {written} (write the number itself, "
+                             "without quotes)")
+        return value
 
 
 class RiserConfig(_Model):
@@ -165,7 +196,8 @@ def _format_validation_error(err: ValidationError, source: str) -> str:
     given = first.get("input")
     value = (f" (given {given!r})" if isinstance(given, (int, float, str)) and
              not isinstance(given, bool) else "")
-    return f"{source}: invalid configuration at '{loc}'{value}: {first['msg']}"
+    message = str(first["msg"]).removeprefix("Value error, ")
+    return f"{source}: invalid configuration at '{loc}'{value}: {message}"
 
 
 def load_case(source: str | Path) -> CaseConfig:

@@ -45,3 +45,25 @@ def test_a_frame_interval_between_gas_steps_names_the_keys(tmp_path, capsys):
                         "s): give an output.frame_interval that is (e.g. 0.0001 s), or "
                         "another numerics.cfd_time_step"), err
     assert not (tmp_path / "run.h5").exists()
+
+
+@pytest.mark.parametrize("line, key, written", [
+    ("number = true", "particles.number", "true"),
+    ('width = "0.03"', "riser.width", '"0.03"'),
+    ("cfd_cells = [true, 12]", "numerics.cfd_cells", "[true, 12]"),
+])
+def test_true_or_text_where_a_number_is_meant_is_refused(tmp_path, capsys, line, key,
+                                                         written):
+    """true read as 1 particle, "0.03" as 0.03 m: refused, naming the key and the value as
+    the file writes it."""
+    text = CASE.format(frame=0.01)
+    old = {"particles.number": "number = 40", "riser.width": "width = 0.03",
+           "numerics.cfd_cells": "cfd_cells = [3, 12]"}[key]
+    case = tmp_path / "case.toml"
+    case.write_text(text.replace(old, line))
+    assert main(["simulate", str(case), "-o", str(tmp_path / "run.h5"), "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "Traceback" not in err
+    assert f"invalid configuration at '{key}'" in err
+    assert f"a number is meant, not {written} (write the number itself, without quotes)" in err
+    assert not (tmp_path / "run.h5").exists()
