@@ -448,7 +448,8 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
             fix, earliest = "", None
             if int(history) < trajectories.n_frames:
                 earliest = float(trajectories.times[int(history)])
-                fix = f": start the window at {earliest:g} s or later"
+                what = "start the window" if window is not None else "start"
+                fix = f": {what} at {earliest:g} s or later"
             raise HistoryError(f"the state space needs {history} frame(s) of history before "
                                f"{where}; {trajectories.path} has {start}{fix}", earliest,
                                None if window is None else float(window[1]))
