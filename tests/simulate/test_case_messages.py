@@ -7,20 +7,12 @@ from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
 from cfbmarkov.simulate.coupling import place_without_overlap
 from cfbmarkov.simulate.dem.neighbours import search_grid
+from tests.test_reproduce import TINY
 
-CASE = """
-[riser]
-width = 0.03
-height = 0.12
-[particles]
-number = 40
-[numerics]
-cfd_cells = [3, 12]
-dem_cells = [10, 40]
-[output]
-end_time = 0.05
-frame_interval = {frame}
-"""
+#: the miniature reproduction's case (240 particles in a 0.03 x 0.12 m riser), its frame
+#: interval and end set here
+CASE = (TINY.replace("frame_interval = 0.01", "frame_interval = {frame}")
+        .replace("end_time = 0.8", "end_time = 0.05"))
 
 
 def test_a_particle_wider_than_the_riser_asks_for_a_smaller_diameter():
@@ -57,7 +49,7 @@ def test_true_or_text_where_a_number_is_meant_is_refused(tmp_path, capsys, line,
     """true read as 1 particle, "0.03" as 0.03 m: refused, naming the key and the value as
     the file writes it."""
     text = CASE.format(frame=0.01)
-    old = {"particles.number": "number = 40", "riser.width": "width = 0.03",
+    old = {"particles.number": "number = 240", "riser.width": "width = 0.03",
            "numerics.cfd_cells": "cfd_cells = [3, 12]"}[key]
     case = tmp_path / "case.toml"
     case.write_text(text.replace(old, line))
