@@ -29,7 +29,8 @@ def test_demo_end_to_end(tmp_path, capsys):
         from cfbmarkov.markov.uncertainty import outward_bounds
 
         shown = "-".join(outward_bounds(lo, hi, digits=4))     # rounded outwards
-        assert f"(its Monte Carlo sample, 90 % interval {shown} s;" in printed
+        assert f"(its Monte Carlo sample, 90 % interval with the flow's variability {shown} s;" \
+            in printed
     # a closing verdict in the report's words, against the persistence baseline
     from cfbmarkov.report.table3 import baseline_clause, baseline_outcomes
 

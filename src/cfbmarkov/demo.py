@@ -348,8 +348,8 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
                       "fit_warnings": model.warnings()}
         interval = summary["model"].get("rt_mean_interval")
         level = summary.get("level") or 0.9
-        within = ("" if not interval else f", {100 * level:g} % interval "
-                  f"{'-'.join(outward_bounds(*interval, digits=4))} s")
+        within = ("" if not interval else f", {100 * level:g} % interval with the flow's "
+                  f"variability {'-'.join(outward_bounds(*interval, digits=4))} s")
         log(f"{name:>5}: E(RT) reference {summary['reference']['rt_mean']:.3f} s, model "
             f"{summary['model']['rt_mean']:.3f} s (its Monte Carlo sample{within}; exact, as a "
             f"{seen:g} s window sees it: {exact.mean:.3f} s), PD E(RT) "

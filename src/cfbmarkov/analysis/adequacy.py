@@ -364,7 +364,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
         shown = (f"{lo_text}-{hi_text} s" if float(interval[0]) > 0 else
                  f"up to {hi_text} s (its lower end cut at 0)")
         lines.append(f"the model's {100 * level:g} % E(RT) interval {shown} is "
-                     f"{100 * limit:.0f} % of its E(RT) "
+                     f"{100 * limit:.0f} % of its intrinsic E(RT) "
                      f"{rt_mean:.4g} s wide: the fitting window cannot pin the chain down, and "
                      f"no check of its parts can pass or fail against such a limit; {_ADVICE}")
     all_parts: list[tuple[float, float, float, str]] = []
