@@ -177,7 +177,15 @@ def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys):
     assert "do not start from the same particles" in err
     assert "start the window at the prediction's first frame (4 s)" in err
     assert main(["maps", model, "--times", "0.1,0.2", "-o", str(tmp_path / "maps.png")]) == 0
-    capsys.readouterr()
+    plain = capsys.readouterr()
+    assert "--outflow changes nothing" not in plain.err
+    # --outflow: the same maps (an open riser always takes out what leaves), said so
+    assert main(["maps", model, "--times", "0.1,0.2", "--outflow",
+                 "-o", str(tmp_path / "maps-outflow.png")]) == 0
+    outflow = capsys.readouterr()
+    assert "note: an open riser's maps always take out what leaves through its outlet; " \
+           "--outflow changes nothing here" in outflow.err
+    assert outflow.out.splitlines()[:2] == plain.out.splitlines()[:2]
     assert main(["info", pred]) == 0
     assert "vertical boundary open" in capsys.readouterr().out
 

@@ -623,11 +623,14 @@ def cmd_maps(args) -> int:
         raise InputError(f"--times gives {len(args.times)} times: one figure draws at most "
                          f"{MAX_MAP_PANELS} maps; give fewer times (or several figures)")
     model = MarkovModel.load(args.model)
+    if args.outflow and model.open_flow is not None:
+        print("note: an open riser's maps always take out what leaves through its outlet; "
+              "--outflow changes nothing here", file=sys.stderr)
     maps = model.batch_injection_maps(args.times, outflow=args.outflow)
     space = model.state_space
     title = (f"Batch fed over the inlet at t = 0 ({space.describe()}"
              + (", summed over the depth" if space.depth_columns > 1 else "") + f", lag {model.lag:g} s"
-             + (", outflow through the top removed)" if args.outflow else ")"))
+             + (", what has left taken out)" if args.outflow else ")"))
     plot_probability_maps(maps, args.times, space.width, space.height, args.output, title=title)
     for t, m in zip(args.times, maps):
         print(f"t = {t:g} s: fraction in riser {m.sum():.4f}")

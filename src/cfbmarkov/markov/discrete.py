@@ -423,8 +423,8 @@ def check_domain(state_space: StateSpace, width: float, height: float, source: s
         raise InputError(f"state space covers {state_space.width:g} x {state_space.height:g} m "
                          f"but {source} is {width:g} x {height:g} m: a model's states are of "
                          "the riser it was fitted on (give a run of that riser, or fit a model "
-                         "on this one); a state space made in Python takes that size, or none "
-                         "(then the file's)")
+                         "on this one; in Python, a state space made without a size takes the "
+                         "file's)")
     if state_space.depth is not None:
         if depth is None:
             raise InputError(f"state space {state_space.describe()} has depth columns but "
