@@ -9,11 +9,12 @@ DEM's neighbour-list skin (not in the paper) and its search grid (``"auto"``; th
 
 from __future__ import annotations
 
+import json
 import math
 import tomllib
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Literal
+from typing import Annotated, Literal, get_args, get_origin
 
 from pydantic import (BaseModel, ConfigDict, Field, ValidationError, field_validator,
                       model_validator)
@@ -31,13 +32,11 @@ MAX_PARTICLES = 10_000_000
 
 def _numeric(annotation) -> bool:
     """Whether a field holds a number, or a tuple of numbers (its annotation)."""
-    import typing
-
-    origin = typing.get_origin(annotation)
+    origin = get_origin(annotation)
     if origin is Annotated:
-        return _numeric(typing.get_args(annotation)[0])
+        return _numeric(get_args(annotation)[0])
     if origin is tuple:
-        return all(_numeric(a) for a in typing.get_args(annotation) if a is not Ellipsis)
+        return all(_numeric(a) for a in get_args(annotation) if a is not Ellipsis)
     return annotation in (int, float)
 
 
@@ -55,8 +54,6 @@ class _Model(BaseModel):
             return value
         items = value if isinstance(value, (list, tuple)) else [value]
         if any(isinstance(v, (bool, str, bytes)) for v in items):
-            import json
-
             written = json.dumps(list(value) if isinstance(value, tuple) else value,
                                  default=str)
             raise ValueError(f"a number is meant, not {written} (write the number itself, "

@@ -101,7 +101,8 @@ def _periodic_outflow(model: "MarkovModel", s0: np.ndarray, steps: int) -> np.nd
     import scipy.sparse as sp
 
     from cfbmarkov.errors import CfbmarkovError
-    from cfbmarkov.markov.first_passage import MIN_DEFICIT_LEVELS, split_by_pass
+    from cfbmarkov.markov.first_passage import (MIN_DEFICIT_LEVELS, deficit_matrix,
+                                                split_by_pass)
 
     try:
         with warnings.catch_warnings():          # the RTD's own warnings are not the maps'
@@ -109,21 +110,19 @@ def _periodic_outflow(model: "MarkovModel", s0: np.ndarray, steps: int) -> np.nd
             depth = int(model.rtd().deficit_levels)
     except CfbmarkovError:                       # no residence ends: none leaves either
         depth = MIN_DEFICIT_LEVELS
-    up, down, stay = (part.T.tocsr() for part in split_by_pass(
-        sp.csr_matrix(model.transition_matrix), model.up_fraction, model.down_fraction))
+    up, down, stay = split_by_pass(sp.csr_matrix(model.transition_matrix), model.up_fraction,
+                                   model.down_fraction)
     levels = depth + 1
-    v = np.zeros((model.n_states, levels))       # columns: lap deficit 0 .. -depth
-    v[:, 0] = s0
+    q, _ = deficit_matrix(up, down, stay, levels)       # the exact RTD's chain on the levels
+    deepest = sp.csr_matrix(([1.0], ([levels - 1], [levels - 1])), shape=(levels, levels))
+    moves = (q + sp.kron(deepest, down)).T.tocsr()      # below the deepest level: kept there
+    v = np.zeros(levels * model.n_states)               # index: level * S + state
+    v[:model.n_states] = s0
     out = np.empty((steps + 1, model.n_states))
     out[0] = s0
-    for k in range(1, steps + 1):    # one product per part and lag over all the levels
-        fallen = down @ v
-        w = stay @ v
-        w[:, 1:] += fallen[:, :-1]
-        w[:, -1] += fallen[:, -1]                # below the deepest level: kept there
-        w[:, :-1] += (up @ v[:, 1:])             # risen back: one level up; from 0: gone
-        v = w
-        out[k] = v.sum(axis=1)
+    for k in range(1, steps + 1):                       # one sparse product a lag
+        v = moves @ v
+        out[k] = v.reshape(levels, model.n_states).sum(axis=0)
     return out
 
 
