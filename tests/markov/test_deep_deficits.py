@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from cfbmarkov.kinetics import Constant, FirstOrder, Kinetics, Property
+import cfbmarkov.markov.first_passage as fp
 from cfbmarkov.markov.first_passage import (DEFICIT_TOL, MIN_DEFICIT_LEVELS, deeper_levels,
                                             exact_rtd)
 from cfbmarkov.markov.kinetics_exact import exact_kinetics
@@ -76,9 +77,12 @@ def test_deeper_levels_from_the_losses_of_two_tries():
     assert deeper_levels([(8, 0.005), (16, 0.0049)]) > 16         # unwarned: go deeper
     assert deeper_levels([(4, 1e-2), (8, 1e-3)]) == 8 + 20        # rho^4 = 0.1
     assert deeper_levels([(64, 0.5)]) == 64                      # the cap
-    # one try and its decay: where a tenth of 1e-7 would be lost, at most twice as deep
+    # one try and its decay: where a tenth of 1e-7 would be lost, at most four times as
+    # deep (the paper-scale 3 m/s mle model: 8 then 32, where at most twice gave 8, 16, 32)
+    assert fp.MEASURED_DEPTH_FACTOR == 4
     assert deeper_levels([(8, 3e-7)], decay=0.18) == 8 + 2       # 3e-7 * 0.18^2 < 1e-8
-    assert deeper_levels([(8, 1e-2)], decay=0.6) == 16           # 8 + 23 capped
+    assert deeper_levels([(8, 1e-2)], decay=0.5) == 8 + 20       # 0.5^20 < 1e-6
+    assert deeper_levels([(8, 1e-2)], decay=0.6) == 32           # 8 + 28 capped
     assert deeper_levels([(8, 1e-2)], decay=1.0) == 16           # no decay: double
 
 

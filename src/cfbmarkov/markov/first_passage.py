@@ -41,6 +41,7 @@ from cfbmarkov.markov.entry_chain import (DepthElimination, embedded_stationary,
 from cfbmarkov.markov.tail_closure import (EARLY_MASS, EARLY_STEP, FIRST_TRY, MAX_TRIES,
                                            krylov_dimension, next_try, try_closure)
 from cfbmarkov.markov.tail_closure import level_row as _level_row
+from cfbmarkov.markov.shift_invert import level_inverse
 
 
 class TrappedResidences(CfbmarkovError):
@@ -807,6 +808,9 @@ WINDOW_DEFICIT_LEVELS = 16
 MAX_DEFICIT_LEVELS = 64
 #: the share of the residences that may pass below the deepest lap deficit kept
 DEFICIT_TOL = 1e-7
+#: after the first try, the deepest K :func:`deeper_levels` goes to by the decay that try
+#: measured, as a multiple of the first K
+MEASURED_DEPTH_FACTOR = 4
 #: the largest bound on a closed tail's error accepted (the 1-norm of the error of its
 #: probabilities and of its loss below the deepest deficit, summed over its lags): the share
 #: of the residences that may pass below the deepest deficit, an error of the same kind
@@ -859,8 +863,8 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL,
         return levels
     deeper = 2 * levels
     if len(tried) == 1 and 0.0 < decay < 1.0:
-        deeper = min(deeper, levels + max(1, int(np.ceil(np.log(0.1 * tol / lost)
-                                                         / np.log(decay)))))
+        deeper = min(MEASURED_DEPTH_FACTOR * levels,
+                     levels + max(1, int(np.ceil(np.log(0.1 * tol / lost) / np.log(decay)))))
     if len(tried) >= 2:
         before, lost_before = tried[-2]
         if lost > UNRESOLVED_WARNED and not lost < 0.9 * lost_before:
@@ -1387,6 +1391,7 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
                  if closure and tol > 0 else 0)
     error_tol = max(tol, CLOSURE_TOL)
     reached, stop, tries = 0, (EARLY_STEP if dimension else max_steps), []
+    inverse, factored = None, False
     left = 1.0
     while True:
         stop = min(stop, max_steps)
@@ -1403,8 +1408,13 @@ def _propagate_levels(arrays, live, start, exit_probability, down_probability, t
                     or left * (left / before) ** ((FIRST_TRY - reached) / EARLY_STEP) < tol):
                 stop = min(reached + EARLY_STEP, FIRST_TRY)
                 continue
+        if reached >= FIRST_TRY and not factored:
+            # a long tail: I - Q factored once for all its tries, where worth its cost
+            inverse = level_inverse(*_level_system(*arrays, live), live, work + 3 * live.size)
+            factored = True
         steps, bound = try_closure(arrays, live, state, exit_probability, down_probability,
-                                   reached, tol, error_tol, max_steps, out, falls, dimension)
+                                   reached, tol, error_tol, max_steps, out, falls, dimension,
+                                   inverse)
         if steps >= 0:
             return steps, bound
         tries.append((reached, bound))

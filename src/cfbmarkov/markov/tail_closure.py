@@ -41,6 +41,8 @@ import numba as nb
 import numpy as np
 
 from cfbmarkov._blas import one_blas_thread
+from cfbmarkov.markov.shift_invert import (InverseArnoldi, LevelInverse, gather_pairs,
+                                           pair_functionals)
 
 #: the dimension of the Krylov space (fewer where the chain has fewer live pairs, or where
 #: its basis would take more than :data:`BASIS_BYTES`)
@@ -247,54 +249,120 @@ def _projections(basis, dim, exit_probability, down_probability):
     return exits, falls, mass
 
 
+#: the lags of the closed tail evaluated from one state of the projected vector: each lag's
+#: functionals come from the rows e^T T^j precomputed for j < TAIL_BLOCK, the vector moves
+#: TAIL_BLOCK lags at once (about 4 m + 2 m^2 / TAIL_BLOCK multiply-adds a lag instead of
+#: m^2 + 4 m)
+TAIL_BLOCK = 32
+
+
 @nb.njit(cache=True, nogil=True)
-def _closed_tail(hessenberg, dim, residual, rounding, exits, falls_on, mass, norm, first, tol,
-                error_tol, max_steps, out, falls, bound, decay):
+def _closed_tail(small, dim, residual, direction, rounding, exits, falls_on, mass, norm,
+                 first, tol, error_tol, max_steps, out, falls, bound, decay):
     """The RTD's tail from lag ``first`` by the Krylov projection (Numba kernel).
 
     ``out[k]`` for k = first .. (the mass absorbed on transition k + 1), ``falls[g]``
-    gathers the mass passing down from level g, as the propagation does; ``residual`` is
-    h ||q_(m+1)||_1, ``bound`` the error of the start vector's projection. Stops where the
-    projected mass left falls below ``tol`` or at ``max_steps``. Gives up (returns -1)
-    wherever the bound on the tail's error exceeds ``error_tol``; it then follows the
-    bound on until the last lag's increment, continued as a geometric series of ratio
-    ``decay`` (the largest modulus of H's eigenvalues), would add less than a tenth of it
-    (or until the bound is a million times too large), and returns the bound reached plus
-    that rest: an estimate of the whole tail's bound, which tells the caller when to try
-    again. Returns the number of lags reached (-1: refused) and the bound (the 1-norm of
-    the tail's error, summed over its lags, at most)."""
+    gathers the mass passing down from level g, as the propagation does. ``small`` is the
+    projected matrix T; the relation A V = V T + u c^T + E has ``residual`` = ||u||_1,
+    ``direction`` = c and ``rounding`` bounding the 1-norms of E's columns; ``bound`` is
+    the error of the start vector's projection. With y_k = T^k y_0 the tail's error grows
+    a lag by at most ||u||_1 |c^T y_k| + rounding^T |y_k|, and |y_(k+j)| <= |T^j| |y_k|:
+    the lags are taken :data:`TAIL_BLOCK` at a time from one y_k, with the rows e^T T^j,
+    c^T T^j, mass^T T^j and rounding^T |T^j| formed once. Stops where the projected mass
+    left falls below ``tol`` or at ``max_steps``. Gives up (returns -1) wherever the bound
+    on the tail's error exceeds ``error_tol``; it then follows the bound on until the last
+    lag's increment, continued as a geometric series of ratio ``decay`` (the largest
+    modulus of T's eigenvalues), would add less than a tenth of it (or until the bound is a
+    million times too large), and returns the bound reached plus that rest: an estimate of
+    the whole tail's bound, which tells the caller when to try again. Returns the number
+    of lags reached (-1: refused) and the bound (the 1-norm of the tail's error, summed
+    over its lags, at most)."""
+    block = TAIL_BLOCK
+    powers = np.zeros((block + 1, dim, dim))
+    for i in range(dim):
+        powers[0, i, i] = 1.0
+    for j in range(1, block + 1):
+        for r in range(dim):
+            for i in range(dim):
+                value = small[r, i]
+                if value != 0.0:
+                    for c in range(dim):
+                        powers[j, r, c] += value * powers[j - 1, i, c]
+    exit_rows = np.zeros((block, dim))
+    along_rows = np.zeros((block, dim))
+    rounding_rows = np.zeros((block, dim))
+    mass_rows = np.zeros((block + 1, dim))
+    block_sum = np.zeros((dim, dim))
+    for j in range(block + 1):
+        for r in range(dim):
+            for c in range(dim):
+                value = powers[j, r, c]
+                mass_rows[j, c] += mass[r] * value
+                if j < block:
+                    exit_rows[j, c] += exits[r] * value
+                    along_rows[j, c] += direction[r] * value
+                    rounding_rows[j, c] += rounding[r] * abs(value)
+                    block_sum[r, c] += value
     y = np.zeros(dim)
     z = np.empty(dim)
+    summed = np.zeros(dim)          # sum of y over the lags: the passes down at the end
     y[0] = norm
     levels = falls.shape[0]
-    for k in range(first, max_steps):
-        absorbed = 0.0
-        for i in range(dim):
-            absorbed += exits[i] * y[i]
-        out[k] = absorbed
-        for g in range(levels):
+    reached = max_steps
+    k = first
+    while k < max_steps:
+        taken = min(block, max_steps - k)
+        stopped = -1
+        for j in range(taken):
+            absorbed = 0.0
+            along = 0.0
+            step = 0.0
+            left = 0.0
             for i in range(dim):
-                falls[g] += falls_on[g, i] * y[i]
-        step = residual * abs(y[dim - 1])
-        for i in range(dim):
-            step += rounding[i] * abs(y[i])
-        bound += step
-        if bound > error_tol:       # refused: followed on while the bound still grows
-            rest = step * decay / (1.0 - decay)
-            if rest < 0.1 * bound or bound > 1e6 * error_tol:
-                return -1, bound + rest
+                absorbed += exit_rows[j, i] * y[i]
+                along += along_rows[j, i] * y[i]
+                step += rounding_rows[j, i] * abs(y[i])
+                left += mass_rows[j + 1, i] * y[i]
+            out[k + j] = absorbed
+            step += residual * abs(along)
+            bound += step
+            if bound > error_tol:   # refused: followed on while the bound still grows
+                rest = step * decay / (1.0 - decay)
+                if rest < 0.1 * bound or bound > 1e6 * error_tol:
+                    return -1, bound + rest
+            if left < tol:          # (the projected mass: taken only if the bound holds)
+                stopped = j
+                break
+        last = taken - 1 if stopped < 0 else stopped
+        if stopped >= 0 or last < block - 1:    # a part of a block: its own sums
+            for j in range(last + 1):
+                for r in range(dim):
+                    acc = 0.0
+                    for i in range(dim):
+                        acc += powers[j, r, i] * y[i]
+                    summed[r] += acc
+        else:
+            for r in range(dim):
+                acc = 0.0
+                for i in range(dim):
+                    acc += block_sum[r, i] * y[i]
+                summed[r] += acc
+        if stopped >= 0:
+            reached = k + stopped + 1
+            break
         for r in range(dim):
             acc = 0.0
-            for i in range(max(r - 1, 0), dim):     # H is upper Hessenberg
-                acc += hessenberg[r, i] * y[i]
+            for i in range(dim):
+                acc += powers[block, r, i] * y[i]
             z[r] = acc
         y, z = z, y
-        left = 0.0
+        k += taken
+    if bound > error_tol:
+        return -1, bound
+    for g in range(levels):
         for i in range(dim):
-            left += mass[i] * y[i]
-        if left < tol:              # (the projected mass: taken only if the bound holds)
-            return (k + 1 if bound <= error_tol else -1), bound
-    return (max_steps if bound <= error_tol else -1), bound
+            falls[g] += falls_on[g, i] * summed[i]
+    return reached, bound
 
 
 def krylov_dimension(live_pairs: int, states: int, levels: int, work: int) -> int:
@@ -330,7 +398,7 @@ def krylov_dimension(live_pairs: int, states: int, levels: int, work: int) -> in
 
 def try_closure(arrays, live, v, exit_probability, down_probability, first: int, tol: float,
                 error_tol: float, max_steps: int, out: np.ndarray, falls: np.ndarray,
-                dimension: int) -> tuple[int, float]:
+                dimension: int, inverse: LevelInverse | None = None) -> tuple[int, float]:
     """Close the tail of a propagation at lag ``first`` from its state ``v`` [S, L].
 
     Parameters
@@ -358,6 +426,10 @@ def try_closure(arrays, live, v, exit_probability, down_probability, first: int,
         As the propagation's (written only where the closure is taken).
     dimension : int
         The Krylov dimension (:func:`krylov_dimension`).
+    inverse : LevelInverse, optional
+        I - Q factored (:func:`~cfbmarkov.markov.shift_invert.level_inverse`): the Krylov
+        space is then that of (I - Q^T)^-1 (:mod:`cfbmarkov.markov.shift_invert`), else
+        that of Q^T.
 
     Returns
     -------
@@ -370,6 +442,11 @@ def try_closure(arrays, live, v, exit_probability, down_probability, first: int,
     scale = float(np.abs(v).max())
     if not 0.0 < scale < np.inf or not error_tol > 0.0:
         return -1, np.inf
+    start_bound = 2.0 * ROUND_OFF * float(np.abs(v).sum())
+    if inverse is not None:
+        return _try_inverse_closure(inverse, v, scale, exit_probability, down_probability,
+                                    first, tol, error_tol, max_steps, out, falls, dimension,
+                                    start_bound)
     basis = np.zeros((dimension + 1, n, levels))
     hessenberg = np.zeros((dimension + 1, dimension))
     rounding = np.zeros(dimension)
@@ -382,14 +459,67 @@ def try_closure(arrays, live, v, exit_probability, down_probability, first: int,
     small = np.ascontiguousarray(hessenberg[:dim, :dim])
     with one_blas_thread():
         decay = float(np.abs(np.linalg.eigvals(small)).max())
+    direction = np.zeros(dim)
+    direction[dim - 1] = 1.0
     gathered = np.zeros_like(falls)
-    steps, bound = _closed_tail(small, dim, residual, rounding[:dim].copy(), exits, falls_on,
-                                mass, norm * scale, first, tol, error_tol, max_steps, out,
-                                gathered, 2.0 * ROUND_OFF * float(np.abs(v).sum()),
-                                min(decay, 1.0 - 1e-9))
+    steps, bound = _closed_tail(small, dim, residual, direction, rounding[:dim].copy(),
+                                exits, falls_on, mass, norm * scale, first, tol, error_tol,
+                                max_steps, out, gathered, start_bound, min(decay, 1.0 - 1e-9))
     if steps >= 0:
         falls += gathered
     return steps, bound
+
+
+#: the Krylov dimensions the shift-and-invert closure tries, from the smallest on, up to
+#: the dimension allowed (each try extends the last one's basis; the bound's rank-one part
+#: is checked first, E's columns formed only where it holds)
+INVERSE_DIMENSIONS = (16, 24, 32, 40)
+
+
+def _try_inverse_closure(inverse: LevelInverse, v, scale, exit_probability, down_probability,
+                         first, tol, error_tol, max_steps, out, falls, dimension, start_bound
+                         ) -> tuple[int, float]:
+    """:func:`try_closure` on the Krylov space of (I - Q^T)^-1
+    (:class:`~cfbmarkov.markov.shift_invert.InverseArnoldi`), at the smallest dimension of
+    :data:`INVERSE_DIMENSIONS` (or ``dimension``) whose bound holds. E's columns are
+    bounded by their computed 1-norms plus the rounding of forming them (each entry a sum
+    of the row's terms of I - A, the m of V T, u c^T and q_j: Higham's gamma on the 1-norm
+    of its terms)."""
+    start = gather_pairs(v / scale, inverse.pair_state, inverse.pair_level)
+    dimension = min(dimension, start.size)
+    arnoldi = InverseArnoldi(inverse, start, dimension)
+    sizes = sorted({size for size in INVERSE_DIMENSIONS if size < dimension} | {dimension})
+    bound = np.inf
+    for size in sizes:
+        arnoldi.extend(size)
+        last = size == sizes[-1] or arnoldi.invariant
+        for with_error in (False, True):
+            with one_blas_thread():
+                relation = arnoldi.relation(with_error)
+                if relation is None:
+                    return -1, np.inf
+                small = relation["small"]
+                decay = float(np.abs(np.linalg.eigvals(small)).max())
+            dim = relation["dim"]
+            terms = inverse.row_terms + dim + 4
+            rounding = relation["error_norms"] + terms * ROUND_OFF * relation["magnitudes"]
+            exits, falls_on, mass = pair_functionals(arnoldi.basis, dim, inverse.pair_state,
+                                                     inverse.pair_level, falls.size,
+                                                     exit_probability, down_probability)
+            gathered = np.zeros_like(falls)
+            steps, bound = _closed_tail(small, dim, relation["residual"],
+                                        relation["direction"], rounding, exits, falls_on,
+                                        mass, relation["norm"] * scale, first, tol,
+                                        error_tol, max_steps, out, gathered, start_bound,
+                                        min(decay, 1.0 - 1e-9))
+            if steps < 0:
+                break
+            if with_error:
+                falls += gathered
+                return steps, bound
+        if last:
+            break
+    return -1, bound
 
 
 def next_try(tries: list[tuple[int, float]], error_tol: float) -> int:

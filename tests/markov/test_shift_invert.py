@@ -1,0 +1,191 @@
+"""The exact RTD's tail closed on the Krylov space of (I - Q^T)^-1 (markov.shift_invert): it
+closes where the Krylov space of Q cannot yet, within its bound of the propagated RTD; the
+bound holds where the factored matrix is not the chain's; the closed tail's lags taken a
+block at a time are the lag-by-lag ones; the LU's fill stays within the envelope."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.linalg import splu
+
+import cfbmarkov.markov.first_passage as fp
+import cfbmarkov.markov.shift_invert as si
+import cfbmarkov.markov.tail_closure as tc
+
+from tests.markov.test_tail_closure import LAG, open_column, slow_column
+
+
+def closure_lags(monkeypatch, p, up, down, fill_limit):
+    """The lags of the closure's tries on the exact RTD with ``si.FILL_LIMIT`` set, and
+    the RTD."""
+    tries = []
+    original = fp.try_closure
+
+    def recording(*args, **kwargs):
+        result = original(*args, **kwargs)
+        tries.append((args[5], result[0] >= 0, args[12] is not None, result[1]))
+        return result
+
+    with monkeypatch.context() as m:
+        m.setattr(fp, "try_closure", recording)
+        m.setattr(si, "FILL_LIMIT", fill_limit)
+        rtd = fp.exact_rtd(p, up, down, LAG, deficit_levels=8)
+    return tries, rtd
+
+
+def test_the_inverse_closes_a_tail_of_close_slow_modes_where_arnoldi_cannot_yet(monkeypatch):
+    """A lazy column whose slowest modes lie close together: the Krylov space of Q is
+    refused at lag 512 and its closure taken four tries later (3234); that of (I - Q^T)^-1
+    is taken at 512, and both are the propagated RTD within their bounds."""
+    p, up, down = slow_column(states=120, stay=0.99, seed=4, reach=3, bias=2.0)
+    arnoldi, by_arnoldi = closure_lags(monkeypatch, p, up, down, 0.0)
+    inverse, by_inverse = closure_lags(monkeypatch, p, up, down, si.FILL_LIMIT)
+    assert not any(t[2] for t in arnoldi) and all(t[2] for t in inverse)
+    assert arnoldi[0][:2] == (tc.FIRST_TRY, False) and arnoldi[-1][1]
+    assert arnoldi[-1][0] > 4 * tc.FIRST_TRY
+    assert inverse == [inverse[0]] and inverse[0][:2] == (tc.FIRST_TRY, True)
+    monkeypatch.setattr(fp, "krylov_dimension", lambda *args: 0)
+    propagated = fp.exact_rtd(p, up, down, LAG, deficit_levels=8)
+    for tries, rtd in ((arnoldi, by_arnoldi), (inverse, by_inverse)):
+        size = max(rtd.probability.size, propagated.probability.size)
+        a, b = np.zeros(size), np.zeros(size)
+        a[:rtd.probability.size] = rtd.probability
+        b[:propagated.probability.size] = propagated.probability
+        assert 0 < tries[-1][3] <= fp.CLOSURE_TOL
+        assert np.abs(a - b).sum() <= tries[-1][3]
+        assert rtd.mean == pytest.approx(propagated.mean, rel=1e-8)
+        assert abs(rtd.deficit_unresolved - propagated.deficit_unresolved) <= tries[-1][3]
+
+
+def _open_problem(first=40, steps=3000):
+    q, exits, entry = open_column()
+    n = q.shape[0]
+    nothing = sp.csr_matrix((n, n))
+    arrays = fp._transposed_parts((nothing, sp.csr_matrix(q), nothing))
+    v = entry.copy()
+    truth = np.zeros(steps)
+    for k in range(steps):
+        if k == first:
+            start = v.copy()
+        truth[k] = v @ exits
+        v = v @ q
+    return q, exits, arrays, start, truth
+
+
+def _closure(arrays, q, exits, start, first, steps, dimension, inverse):
+    n = q.shape[0]
+    out = np.zeros(steps)
+    reached, bound = tc.try_closure(arrays, np.ones((n, 1), np.bool_), start.reshape(n, 1),
+                                    exits, np.zeros(n), first, 0.0, np.inf, steps, out,
+                                    np.zeros(1), dimension, inverse)
+    return reached, bound, out
+
+
+def _inverse_of(matrix, factored=None):
+    """A LevelInverse of I - ``matrix`` (one level, every pair live), its solves with
+    I - ``factored`` where given."""
+    system = sp.csc_matrix(np.identity(matrix.shape[0]) - matrix)
+    system.sort_indices()
+    inverse = si.LevelInverse(system.indptr.astype(np.int64),
+                              system.indices.astype(np.int64), system.data,
+                              np.ones((matrix.shape[0], 1), np.bool_))
+    if factored is not None:
+        inverse.factors = splu(sp.csc_matrix(np.identity(matrix.shape[0]) - factored))
+    return inverse
+
+
+@pytest.mark.parametrize("dimension", [2, 4])
+def test_the_inverse_closures_bound_holds_where_its_space_is_poor(dimension):
+    """2 or 4 vectors of (I - Q^T)^-1's space cannot hold the tail 40 lags in: off by far
+    more than round-off, and the bound covers it."""
+    q, exits, arrays, start, truth = _open_problem()
+    reached, bound, out = _closure(arrays, q, exits, start, 40, 3000, dimension,
+                                   _inverse_of(q))
+    assert reached == 3000
+    error = np.abs(out[40:] - truth[40:]).sum()
+    assert error > 1e-6
+    assert error <= bound
+
+
+def test_the_bound_holds_where_the_factored_matrix_is_not_the_chains():
+    """The relation is formed, not assumed: with I - 0.98 Q factored instead of I - Q (an
+    LU that solves another system) the space is a poor one, and the bound (from
+    E = A V - V T - u c^T formed with the chain's A) still covers the error, where the
+    true inverse's bound is far smaller."""
+    q, exits, arrays, start, truth = _open_problem(first=200)
+    _, true_bound, _ = _closure(arrays, q, exits, start, 200, 3000, 16, _inverse_of(q))
+    reached, bound, out = _closure(arrays, q, exits, start, 200, 3000, 16,
+                                   _inverse_of(q, 0.98 * q))
+    error = np.abs(out[200:] - truth[200:]).sum()
+    assert reached == 3000
+    assert error > 1e3 * true_bound
+    assert error <= bound
+
+
+def test_the_closed_tails_blocks_are_its_lags():
+    """The tail taken TAIL_BLOCK lags at a time from one projected vector: each lag's
+    exit, the passes down summed and the lag it stops at are those of y_(k+1) = T y_k lag
+    by lag, and its bound is at least the lag-by-lag one (|T^j y| <= |T^j| |y|), within a
+    few times it; in whole blocks, a block cut short by the end, and one cut by the stop."""
+    rng = np.random.default_rng(7)
+    dim, levels = 6, 3
+    small = rng.uniform(0, 0.005, (dim, dim)) + np.diag(rng.uniform(0.9, 0.97, dim))
+    exits, mass = rng.uniform(0, 1, dim), rng.uniform(0.5, 1, dim)
+    direction, rounding = rng.uniform(-1, 1, dim), rng.uniform(0, 1e-12, dim)
+    falls_on = rng.uniform(0, 1, (levels, dim))
+    for max_steps, tol in ((10 * tc.TAIL_BLOCK, 0.0), (7 * tc.TAIL_BLOCK + 5, 0.0),
+                           (100_000, 1e-6)):
+        first = 3
+        out = np.zeros(max_steps)
+        falls = np.zeros(levels)
+        reached, bound = tc._closed_tail(small, dim, 1e-9, direction, rounding, exits,
+                                         falls_on, mass, 2.0, first, tol, np.inf, max_steps,
+                                         out, falls, 0.0, 0.99)
+        y = np.zeros(dim)
+        y[0] = 2.0
+        expected = np.zeros(max_steps)
+        summed = np.zeros(dim)
+        lag_bound = 0.0
+        stop = max_steps
+        for k in range(first, max_steps):
+            expected[k] = exits @ y
+            summed += y
+            lag_bound += 1e-9 * abs(direction @ y) + rounding @ np.abs(y)
+            y = small @ y
+            if mass @ y < tol:
+                stop = k + 1
+                break
+        assert reached == stop
+        np.testing.assert_allclose(out[first:stop], expected[first:stop], rtol=1e-12,
+                                   atol=1e-15)
+        np.testing.assert_allclose(falls, falls_on @ summed, rtol=1e-12)
+        assert lag_bound <= bound * (1 + 1e-12) and bound <= 10 * lag_bound
+    assert 7 * tc.TAIL_BLOCK < stop < 100_000 and stop % tc.TAIL_BLOCK
+
+
+def test_an_lu_in_the_levels_order_fills_only_its_envelope():
+    """The envelope the choice rests on holds SuperLU's L and U in the natural order, on a
+    level system of a chain (its pivots the diagonal); and a chain whose envelope is more
+    than FILL_LIMIT lags is left to the Krylov space of Q."""
+    p, up, down = slow_column(states=80, stay=0.9, seed=2, reach=4)
+    p_up, p_down, p_stay = fp.split_by_pass(sp.csr_matrix(p), up, down)
+    arrays = fp._transposed_parts((p_down, p_stay, p_up))
+    live = np.ones((80, 5), np.bool_)
+    indptr, indices, data = fp._level_system(*arrays, live)
+    n = indptr.size - 1
+    factors = splu(sp.csc_matrix((data, indices, indptr), shape=(n, n)),
+                   permc_spec="NATURAL")
+    assert np.array_equal(factors.perm_r, np.arange(n))
+    fill = factors.L.nnz + factors.U.nnz - n
+    envelope = si.envelope(indptr, indices)
+    assert fill <= envelope
+    dense = np.zeros((n, n), bool)
+    dense[indices, np.repeat(np.arange(n), np.diff(indptr))] = True
+    rows = np.arange(n)
+    first_row = np.array([np.flatnonzero(dense[:, j] | (rows == j))[0] for j in range(n)])
+    first_col = np.array([np.flatnonzero(dense[i] | (rows == i))[0] for i in range(n)])
+    assert envelope == n + (rows - first_row).sum() + (rows - first_col).sum()
+    work = sum(array.size for array in arrays[2::3]) * 5
+    assert si.level_inverse(indptr, indices, data, live, work) is not None
+    assert si.level_inverse(indptr, indices, data, live, envelope // (si.FILL_LIMIT + 1)) \
+        is None
