@@ -24,6 +24,11 @@ unit round-off, as in the propagation's own sums. The closure is taken only wher
 bound, accumulated as the tail is evaluated, stays below a given tolerance; elsewhere the
 propagation goes on and tries again later.
 
+Where I - Q is cheap to factor, a long tail's space is that of (I - A)^-1 instead
+(:mod:`cfbmarkov.markov.shift_invert`), whose relation A V_m = V_m T + u c^T + E has the
+same form with a dense T and a residual along c rather than e_m; the bound is then
+sum_k ||u||_1 |c^T y_k| + sum_j ||E_j||_1 |y_k,j|, the same argument.
+
 References
 ----------
 W. E. Arnoldi, "The principle of minimized iterations in the solution of the matrix
@@ -368,10 +373,12 @@ def _closed_tail(small, dim, residual, direction, rounding, exits, falls_on, mas
 def krylov_dimension(live_pairs: int, states: int, levels: int, work: int) -> int:
     """The Krylov dimension used for a chain on the levels.
 
-    A lag of the closed tail costs about m^2 / 2 + (L + 4) m multiply-adds (H is upper
-    Hessenberg; the exits, passes down per level and mass on the basis), a lag of the
-    propagation ``work``: the closure is used only where its lags cost at most a quarter
-    of the propagation's, with m as large as that allows up to :data:`DIMENSION`.
+    A lag of the closed tail is counted as m^2 / 2 + (L + 4) m multiply-adds (a lag of H
+    on the vector, the exits, passes down per level and mass on the basis; an upper count:
+    the lags are taken :data:`TAIL_BLOCK` at a time and the passes down summed once at
+    the end), a lag of the propagation ``work``: the closure is used only where its lags
+    cost at most a quarter of the propagation's, with m as large as that allows up to
+    :data:`DIMENSION`.
 
     Parameters
     ----------
