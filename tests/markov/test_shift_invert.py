@@ -189,3 +189,30 @@ def test_an_lu_in_the_levels_order_fills_only_its_envelope():
     assert si.level_inverse(indptr, indices, data, live, work) is not None
     assert si.level_inverse(indptr, indices, data, live, envelope // (si.FILL_LIMIT + 1)) \
         is None
+
+
+def test_a_chain_singular_in_floating_point_keeps_the_space_of_q():
+    """A closed 2-cycle that leaks 1e-17 a lag makes I - Q exactly singular in floating
+    point: SuperLU refuses it, and the RTD goes on without the inverse (half the entries
+    never leave: unresolved), as it did before there was one."""
+    states = 40
+    rng = np.random.default_rng(1)
+    q = np.zeros((states, states))
+    block = rng.uniform(0, 1, (states - 2, states - 2))
+    block *= 0.99 / block.sum(axis=1, keepdims=True)
+    q[2:, 2:] = block
+    exits = np.zeros(states)
+    exits[2:] = 0.01
+    q[0, 1] = q[1, 0] = 1.0
+    q[1, 2] = 1e-17
+    entry = np.zeros(states)
+    entry[0] = entry[5] = 0.5
+    system = sp.csc_matrix(np.identity(states) - q)
+    system.sort_indices()
+    arguments = (system.indptr.astype(np.int64), system.indices.astype(np.int64),
+                 system.data, np.ones((states, 1), np.bool_))
+    with pytest.raises(RuntimeError):
+        si.LevelInverse(*arguments)
+    assert si.level_inverse(*arguments, work=10 ** 9) is None
+    rtd = fp.open_rtd(q, exits, entry, 0.01, max_steps=5000)
+    assert rtd.unresolved == pytest.approx(0.5, abs=1e-9)

@@ -832,7 +832,8 @@ def deeper_levels(tried: list[tuple[int, float]], tol: float = DEFICIT_TOL,
     its deepest excursions dominate, lost(K) ~ c rho^K. After the first try (K =
     :data:`MIN_DEFICIT_LEVELS`) the next K is where the loss would be a tenth of ``tol``
     by the ``decay`` that try measured (rho from its block elimination,
-    :func:`cfbmarkov.markov.entry_chain.entry_matrix`), at most twice the first K; without
+    :func:`cfbmarkov.markov.entry_chain.entry_matrix`), at most :data:`MEASURED_DEPTH_FACTOR`
+    times the first K; without
     a decay in (0, 1) it doubles K. From two tries rho is estimated from their losses, and
     the next K is where the loss would be a tenth of ``tol`` (the loss of the shallower
     tries falls a little faster than the deeper ones'), at least 8 deeper than the last,

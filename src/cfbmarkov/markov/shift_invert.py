@@ -111,10 +111,15 @@ def level_inverse(indptr, indices, data, live, work: int) -> LevelInverse | None
     Returns
     -------
     LevelInverse or None
+        None also where SuperLU finds I - Q singular (states that leak less than the
+        round-off: the space of Q^T is used there).
     """
     if envelope(indptr, indices) > FILL_LIMIT * work:
         return None
-    return LevelInverse(indptr, indices, data, live)
+    try:
+        return LevelInverse(indptr, indices, data, live)
+    except RuntimeError:     # singular in floating point (a closed loop that leaks 1e-17)
+        return None
 
 
 @nb.njit(cache=True)

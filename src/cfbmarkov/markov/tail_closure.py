@@ -449,7 +449,8 @@ def try_closure(arrays, live, v, exit_probability, down_probability, first: int,
     scale = float(np.abs(v).max())
     if not 0.0 < scale < np.inf or not error_tol > 0.0:
         return -1, np.inf
-    start_bound = 2.0 * ROUND_OFF * float(np.abs(v).sum())
+    # V y_0 = fl(fl(v / scale) / |.|) fl(|.| scale): three roundings of each entry
+    start_bound = 4.0 * ROUND_OFF * float(np.abs(v).sum())
     if inverse is not None:
         return _try_inverse_closure(inverse, v, scale, exit_probability, down_probability,
                                     first, tol, error_tol, max_steps, out, falls, dimension,
