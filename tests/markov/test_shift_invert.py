@@ -189,6 +189,9 @@ def test_an_lu_in_the_levels_order_fills_only_its_envelope():
     assert si.level_inverse(indptr, indices, data, live, work) is not None
     assert si.level_inverse(indptr, indices, data, live, envelope // (si.FILL_LIMIT + 1)) \
         is None
+    with pytest.MonkeyPatch.context() as m:          # nor one whose LU would not fit
+        m.setattr(si, "LU_BYTES", 12 * envelope - 1)
+        assert si.level_inverse(indptr, indices, data, live, work) is None
 
 
 def test_a_chain_singular_in_floating_point_keeps_the_space_of_q():

@@ -41,6 +41,10 @@ from scipy.sparse.linalg import splu
 #: :func:`~cfbmarkov.markov.tail_closure.arnoldi_levels`
 FILL_LIMIT = 8
 
+#: the most memory the LU may take, counted as 12 bytes (a value and an index) an entry of
+#: the envelope (the 1824-state velocity memory's: 17.6 million entries, 212 MB)
+LU_BYTES = 512 * 2 ** 20
+
 
 @nb.njit(cache=True)
 def envelope(indptr, indices):
@@ -99,7 +103,7 @@ class LevelInverse:
 
 def level_inverse(indptr, indices, data, live, work: int) -> LevelInverse | None:
     """The factored I - Q where its envelope is at most :data:`FILL_LIMIT` times ``work``
-    (the propagation's multiply-adds a lag), else None.
+    (the propagation's multiply-adds a lag) and within :data:`LU_BYTES`, else None.
 
     Parameters
     ----------
@@ -114,7 +118,8 @@ def level_inverse(indptr, indices, data, live, work: int) -> LevelInverse | None
         None also where SuperLU finds I - Q singular (states that leak less than the
         round-off: the space of Q^T is used there).
     """
-    if envelope(indptr, indices) > FILL_LIMIT * work:
+    filled = envelope(indptr, indices)
+    if filled > FILL_LIMIT * work or 12 * filled > LU_BYTES:
         return None
     try:
         return LevelInverse(indptr, indices, data, live)
