@@ -67,7 +67,9 @@ class Progress:
             rate = self.particles * dem_steps / max(now - self.t_wall, 1e-9)
             self.t_wall = now
             self.bar.set_postfix_str(f"{rate:.3g} particle-steps/s", refresh=False)
-            self.bar.update(simulated)
+            # never past the total: frame times summed in floats overshoot it by an ulp,
+            # which tqdm shows as a time left of "-00:00"
+            self.bar.update(min(simulated, max(self.bar.total - self.bar.n, 0.0)))
             return
         mark = first = self.steps == dem_steps      # rates count from the first frame
         if self.done >= self.next_line - 1e-9 and self.done < self.end - 1e-9:
