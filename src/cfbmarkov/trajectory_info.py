@@ -49,6 +49,9 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     lines.append(f"  axes from the source: {axes}"
                  + (f", depth axis {dropped} dropped (projection)" if dropped else "")
                  + f"; origin at {origin} m in the source's coordinates" + region)
+    case = case_line(t)
+    if case:
+        lines.append(case)
     if "laps_from" in p:
         lines.append(f"  laps from: {p['laps_from']}")
     lines.extend(f"  import: {note}" for note in p.get("import_notes", []))
@@ -83,3 +86,41 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
         lines.append(f"  particle property {name}" + (f" ({how})" if how else "")
                      + " per frame (cfbmarkov react --init; compare --kinetics reads it)")
     return lines
+
+
+def case_line(trajectories: Trajectories) -> str | None:
+    """The case a CFD-DEM run was simulated from, in one line for ``cfbmarkov info``: its
+    name and seed, the superficial gas velocity, the particles, the steps and the end time
+    it runs to (the file's own span is in the line above), or None for another source.
+
+    Parameters
+    ----------
+    trajectories : Trajectories
+        An open file.
+
+    Returns
+    -------
+    str or None
+    """
+    p = trajectories.parameters
+    if trajectories.source != "cfd-dem" or not isinstance(p.get("particles"), dict):
+        return None
+    parts = []
+    gas, particles = p.get("gas", {}), p["particles"]
+    numerics, output = p.get("numerics", {}), p.get("output", {})
+    if "superficial_velocity" in gas:
+        parts.append(f"superficial gas velocity {gas['superficial_velocity']:g} m/s")
+    if {"number", "diameter", "density"} <= particles.keys():
+        parts.append(f"{particles['number']} particles of {1e3 * particles['diameter']:g} mm, "
+                     f"{particles['density']:g} kg/m3")
+    steps = [f"{label} {numerics[key]:g} s" for label, key in (("DEM step", "dem_time_step"),
+                                                               ("CFD step", "cfd_time_step"))
+             if isinstance(numerics.get(key), (int, float))]
+    if steps:
+        parts.append(", ".join(steps))
+    if isinstance(output.get("end_time"), (int, float)):
+        parts.append(f"end time {output['end_time']:g} s")
+    name = p.get("name")
+    head = "  case" + (f" {name}" if name else "") + (
+        f" (seed {p['seed']})" if "seed" in p else "")
+    return head + (": " + "; ".join(parts) if parts else "")

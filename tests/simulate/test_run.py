@@ -293,6 +293,20 @@ def test_resume_of_a_finished_run_says_it_is_finished(tmp_path, reference):
     assert out.read_bytes() == before and not (tmp_path / "done.h5.parts").exists()
 
 
+def test_info_of_a_run_names_its_case(reference, capsys):
+    """``info`` of a CFD-DEM run says which case it was simulated from: name, seed, gas
+    velocity, particles, steps, end time (an imported file has no such line)."""
+    case, ref = reference
+    assert main(["info", str(ref)]) == 0
+    out = capsys.readouterr().out
+    line = next(line for line in out.splitlines() if line.startswith("  case "))
+    assert line.startswith(f"  case {case.name} (seed {case.seed}): superficial gas velocity "
+                           f"{case.gas.superficial_velocity:g} m/s; {case.particles.number} "
+                           f"particles of {1e3 * case.particles.diameter:g} mm, "
+                           f"{case.particles.density:g} kg/m3; DEM step ")
+    assert line.endswith(f"; end time {case.output.end_time:g} s")
+
+
 def test_info_of_a_run_with_an_interrupted_rerun_beside_it_says_so(tmp_path, reference,
                                                                    capsys):
     """A rerun into a finished output, interrupted, leaves the earlier run in place and its
