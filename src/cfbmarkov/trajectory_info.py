@@ -119,7 +119,10 @@ def case_line(trajectories: Trajectories) -> str | None:
     if steps:
         parts.append(", ".join(steps))
     if isinstance(output.get("end_time"), (int, float)):
-        parts.append(f"end time {output['end_time']:g} s")
+        end = float(output["end_time"])
+        last = float(trajectories.times[-1]) if trajectories.n_frames else end
+        parts.append(f"end time {end:g} s" + (f" (this file ends at {last:g} s)"
+                                                if last < end - 1e-9 else ""))
     name = p.get("name")
     head = "  case" + (f" {name}" if name else "") + (
         f" (seed {p['seed']})" if "seed" in p else "")

@@ -658,3 +658,19 @@ def test_the_flow_terms_absence_is_put_down_to_its_cause():
     sparse = flow_term_line(30.0, 2.4)
     assert "fewer than two blocks of the 30 s fitting window hold two residences seen whole" \
         in sparse and "shorter than" not in sparse and "pool more runs or tracks" in sparse
+
+
+def test_a_wide_interval_says_what_limit_the_parts_are_held_to(tmp_path):
+    """An E(RT) interval three times E(RT) wide is warned of, and the warning says the
+    checks of the window's parts still hold them to at most MAX_PARTS_LIMIT (it said no
+    check could pass or fail, and then the halves' check warned at 25 %)."""
+    from cfbmarkov.analysis.adequacy import MAX_PARTS_LIMIT
+
+    run = synthetic.write_run(tmp_path / "wide.h5", synthetic.RiserFlow(), 300, 6.0, seed=2)
+    model = fit_model(run, CellGrid(6, 38), 0.025, (1.0, 5.0), "paper")
+    mean = model.rtd().mean
+    verdict = assess_adequacy(model, [run], [(1.0, 5.0)], interval=(0.5 * mean, 3.5 * mean))
+    wide = [line for line in verdict.warnings if "cannot pin the chain down" in line]
+    assert len(wide) == 1
+    assert f"hold them to at most {100 * MAX_PARTS_LIMIT:g} %" in wide[0]
+    assert "no check of its parts can pass or fail" not in wide[0]

@@ -365,8 +365,9 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                  f"up to {hi_text} s (its lower end cut at 0)")
         lines.append(f"the model's {100 * level:g} % E(RT) interval {shown} is "
                      f"{100 * limit:.0f} % of its intrinsic E(RT) "
-                     f"{rt_mean:.4g} s wide: the fitting window cannot pin the chain down, and "
-                     f"no check of its parts can pass or fail against such a limit; {_ADVICE}")
+                     f"{rt_mean:.4g} s wide: the fitting window cannot pin the chain down (the "
+                     f"checks of its parts hold them to at most "
+                     f"{100 * MAX_PARTS_LIMIT:g} %, not to that width); {_ADVICE}")
     all_parts: list[tuple[float, float, float, str]] = []
     spread = math.nan
     pooled = len(runs) > 1

@@ -278,6 +278,10 @@ def baseline_line(baseline: dict, md_model: float, md_halves: float | None = Non
     if verdict is None:
         verdict = (f"not told apart (the gap is within the reference's own variability, "
                    f"its halves' MD {judged.md_halves:.4g})")
+    elif judged.outcome != "tie" and judged.md_halves is None:
+        verdict += (" (by the 1 % tie margin alone: the reference window's halves give no "
+                    "measure of its own variability, as where a half holds no residence in "
+                    "the window's direction)")
     return (f"persistence baseline (the observed RTD of {of} taken as the "
             f"prediction): MD {md:.4g} against the model's {md_model:.4g}, PD E(RT) "
             f"{pd_text(baseline.get('pd_rt_mean'))} %: {verdict}")
@@ -626,9 +630,16 @@ def cmd_maps(args) -> int:
     if args.outflow and model.open_flow is not None:
         print("note: an open riser's maps always take out what leaves through its outlet; "
               "--outflow changes nothing here", file=sys.stderr)
+    downward = args.outflow and model.open_flow is None and model.flow_direction == "down"
+    if downward:
+        print("note: the model's residences run downward (its fitting window's net solids "
+              "flow runs down, as rtd counts them): with --outflow the batch is fed over the "
+              "top cells and leaves through the bottom; without --outflow it is Eq. (8)'s "
+              "batch over the bottom cells", file=sys.stderr)
     maps = model.batch_injection_maps(args.times, outflow=args.outflow)
     space = model.state_space
-    title = (f"Batch fed over the inlet at t = 0 ({space.describe()}"
+    title = (f"Batch fed over the {'top cells' if downward else 'inlet'} at t = 0 "
+             f"({space.describe()}"
              + (", summed over the depth" if space.depth_columns > 1 else "") + f", lag {model.lag:g} s"
              + (", what has left taken out)" if args.outflow else ")"))
     plot_probability_maps(maps, args.times, space.width, space.height, args.output, title=title)
@@ -759,6 +770,8 @@ def add_maps(sub) -> None:
     s.add_argument("--times", type=parse_times, default=[0.05, 0.1, 0.15],
                    help="comma-separated times after injection, s (default 0.05,0.1,0.15)")
     s.add_argument("--outflow", action="store_true",
-                   help="remove what passes up through the top (fraction still in the riser)")
+                   help="remove what leaves as a residence ends (fraction still in the "
+                        "riser; a model whose residences run downward feeds the batch over "
+                        "the top cells and takes out what leaves through the bottom)")
     s.add_argument("-o", "--output", required=True, help="PNG file")
     s.set_defaults(func=cmd_maps)

@@ -27,8 +27,11 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     fraction of a batch still in the riser: a particle that falls out of the bottom of a
     periodic riser (and comes back at the top) leaves only once it has risen through the
     top once more than it fell, as in the exact RTD (its lap-deficit levels); the first
-    pass up through the top does not end it. An open riser's model always propagates by
-    its absorbing matrix Q = diag(1 - r) P: what leaves through the outlet is gone.
+    pass up through the top does not end it. A model whose residences run downward
+    (``flow_direction`` "down", a net downflow) counts them as its RTD does: the mass
+    leaves once it has fallen through the bottom once more than it rose. An open riser's
+    model always propagates by its absorbing matrix Q = diag(1 - r) P: what leaves through
+    the outlet is gone.
 
     Parameters
     ----------
@@ -40,7 +43,8 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
         Number of lags to propagate.
     outflow : bool, optional
         Remove the mass whose residence ends (it passes up through the top once more
-        than it fell out of the bottom).
+        than it fell out of the bottom; down through the bottom once more than it rose,
+        for a model whose residences run downward).
 
     Returns
     -------
@@ -92,10 +96,12 @@ def _periodic_outflow(model: "MarkovModel", s0: np.ndarray, steps: int) -> np.nd
     exact RTD (docs/definitions.md, Exact RTD of a model), so that a particle that falls
     out of the bottom (and comes back at the top) leaves only when it has risen through the
     top once more than it fell, as a residence ends: the mass that passes up from level 0
-    leaves; a pass down lowers the level, a pass up raises it. The levels are as deep as
-    the model's exact RTD keeps (below its deepest, at most 1e-7 of the residences, the
-    mass stays on the deepest level). Returns S(k lag) summed over the levels, (steps + 1,
-    S)."""
+    leaves; a pass down lowers the level, a pass up raises it. For a model whose residences
+    run downward (``flow_direction`` "down") the same with the passes' directions swapped:
+    the mass leaves when it has fallen through the bottom once more than it rose through
+    the top. The levels are as deep as the model's exact RTD keeps (below its deepest, at
+    most 1e-7 of the residences, the mass stays on the deepest level). Returns S(k lag)
+    summed over the levels, (steps + 1, S)."""
     import warnings
 
     import scipy.sparse as sp
@@ -112,6 +118,8 @@ def _periodic_outflow(model: "MarkovModel", s0: np.ndarray, steps: int) -> np.nd
         depth = MIN_DEFICIT_LEVELS
     up, down, stay = split_by_pass(sp.csr_matrix(model.transition_matrix), model.up_fraction,
                                    model.down_fraction)
+    if model.flow_direction == "down":        # residences counted downward: the mirror image
+        up, down = down, up
     levels = depth + 1
     q, _ = deficit_matrix(up, down, stay, levels)       # the exact RTD's chain on the levels
     deepest = sp.csr_matrix(([1.0], ([levels - 1], [levels - 1])), shape=(levels, levels))
@@ -136,7 +144,11 @@ def batch_injection_maps(model: "MarkovModel", times: Sequence[float], outflow: 
     times : sequence of float
         Times (s) after the injection, whole multiples of the lag.
     outflow : bool, optional
-        Remove the mass that leaves up through the top (see :func:`propagate`).
+        Remove the mass whose residence ends (see :func:`propagate`). For a periodic
+        riser's model whose residences run downward (``flow_direction`` "down") the batch
+        is then fed over the top cells, where those residences start
+        (:func:`inlet_batch`), and leaves through the bottom: the mirror image of Eq. (8)'s,
+        whose mass left is the model's RTD survival as the batch's entries weight it.
 
     Returns
     -------
@@ -164,11 +176,13 @@ def batch_injection_maps(model: "MarkovModel", times: Sequence[float], outflow: 
                          f"{MAX_STEPS} to propagate; give earlier --times")
     check_memory(8.0 * (last + 1) * model.n_states, f"maps up to {max(times):g} s "
                  f"({last} lags x {model.n_states} states)", "give earlier --times")
-    history = propagate(model, inlet_batch(model), max(steps, default=0), outflow=outflow)
+    downward = outflow and model.open_flow is None and model.flow_direction == "down"
+    history = propagate(model, inlet_batch(model, "down" if downward else "up"),
+                        max(steps, default=0), outflow=outflow)
     return model.state_space.cell_maps(history[steps])
 
 
-def inlet_batch(model: "MarkovModel") -> np.ndarray:
+def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     """The batch of Eq. (8) as a state vector: 1/m in each of the m bottom cells (m d with
     depth columns), each cell's share split over its states (a state space with memory has
     several a cell) as the fitting window's particles entered them through the inlet (the
@@ -176,9 +190,15 @@ def inlet_batch(model: "MarkovModel") -> np.ndarray:
     the inlet enters rising as particles do; evenly where a cell saw no entry (and on an
     open riser, whose inlet is its own boundary).
 
+    With ``direction`` "down" the mirror image: 1/m in each of the m top cells, split as
+    particles entered them through the bottom (the landings of their passes down through
+    the bottom, ``counts_down``), where a downward residence starts.
+
     Parameters
     ----------
     model : MarkovModel
+    direction : {"up", "down"}, optional
+        Fed over the bottom cells (Eq. 8) or over the top cells.
 
     Returns
     -------
@@ -188,6 +208,8 @@ def inlet_batch(model: "MarkovModel") -> np.ndarray:
         holds one state).
     """
     space = model.state_space
+    if direction == "down" and model.open_flow is None:
+        return _top_batch(model)
     even = space.inlet_distribution()
     counts = getattr(model, "counts_up", None)
     if model.open_flow is not None or counts is None:
@@ -203,4 +225,28 @@ def inlet_batch(model: "MarkovModel") -> np.ndarray:
     seen = np.flatnonzero(bottom)
     seen = seen[per_cell[cell[seen]] > 0]
     batch[seen] = (1.0 / space.cells_per_row) * landings[seen] / per_cell[cell[seen]]
+    return batch
+
+
+def _top_batch(model: "MarkovModel") -> np.ndarray:
+    """:func:`inlet_batch` over the top cells: 1/m a cell, split over its states as the
+    window's particles landed in them from passes down through the bottom (evenly where a
+    cell saw none)."""
+    space = model.state_space
+    cell = space.cell_of_state
+    per_row = space.cells_per_row
+    first = space.n_cells - per_row
+    top = cell >= first
+    place = cell - first
+    batch = np.zeros(model.n_states)
+    states_per_cell = np.bincount(place[top], minlength=per_row)
+    batch[top] = 1.0 / per_row / states_per_cell[place[top]]
+    counts = getattr(model, "counts_down", None)
+    if counts is None or states_per_cell.max(initial=0) <= 1:
+        return batch
+    landings = np.asarray(counts.sum(axis=0), dtype=np.float64).ravel() * top
+    per_cell = np.bincount(place[top], weights=landings[top], minlength=per_row)
+    seen = np.flatnonzero(top)
+    seen = seen[per_cell[place[seen]] > 0]
+    batch[seen] = (1.0 / per_row) * landings[seen] / per_cell[place[seen]]
     return batch
