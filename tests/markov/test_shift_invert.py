@@ -12,7 +12,7 @@ import cfbmarkov.markov.first_passage as fp
 import cfbmarkov.markov.shift_invert as si
 import cfbmarkov.markov.tail_closure as tc
 
-from tests.markov.test_tail_closure import LAG, open_column, slow_column
+from tests.markov.test_tail_closure import LAG, open_problem, slow_column
 
 
 def closure_lags(monkeypatch, p, up, down, fill_limit):
@@ -57,21 +57,6 @@ def test_the_inverse_closes_a_tail_of_close_slow_modes_where_arnoldi_cannot_yet(
         assert abs(rtd.deficit_unresolved - propagated.deficit_unresolved) <= tries[-1][3]
 
 
-def _open_problem(first=40, steps=3000):
-    q, exits, entry = open_column()
-    n = q.shape[0]
-    nothing = sp.csr_matrix((n, n))
-    arrays = fp._transposed_parts((nothing, sp.csr_matrix(q), nothing))
-    v = entry.copy()
-    truth = np.zeros(steps)
-    for k in range(steps):
-        if k == first:
-            start = v.copy()
-        truth[k] = v @ exits
-        v = v @ q
-    return q, exits, arrays, start, truth
-
-
 def _closure(arrays, q, exits, start, first, steps, dimension, inverse):
     n = q.shape[0]
     out = np.zeros(steps)
@@ -98,7 +83,7 @@ def _inverse_of(matrix, factored=None):
 def test_the_inverse_closures_bound_holds_where_its_space_is_poor(dimension):
     """2 or 4 vectors of (I - Q^T)^-1's space cannot hold the tail 40 lags in: off by far
     more than round-off, and the bound covers it."""
-    q, exits, arrays, start, truth = _open_problem()
+    q, exits, arrays, start, truth = open_problem()
     reached, bound, out = _closure(arrays, q, exits, start, 40, 3000, dimension,
                                    _inverse_of(q))
     assert reached == 3000
@@ -112,7 +97,7 @@ def test_the_bound_holds_where_the_factored_matrix_is_not_the_chains():
     LU that solves another system) the space is a poor one, and the bound (from
     E = A V - V T - u c^T formed with the chain's A) still covers the error, where the
     true inverse's bound is far smaller."""
-    q, exits, arrays, start, truth = _open_problem(first=200)
+    q, exits, arrays, start, truth = open_problem(first=200)
     _, true_bound, _ = _closure(arrays, q, exits, start, 200, 3000, 16, _inverse_of(q))
     reached, bound, out = _closure(arrays, q, exits, start, 200, 3000, 16,
                                    _inverse_of(q, 0.98 * q))

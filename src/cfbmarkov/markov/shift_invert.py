@@ -137,9 +137,9 @@ def gather_pairs(v, pair_state, pair_level):
 
 
 @nb.njit(cache=True)
-def _dot(x, y):
-    """sum x * y, in four interleaved partial sums (a fixed order: the same bits on any
-    thread count)."""
+def dot(x, y):
+    """sum x * y over 1-D arrays, in four interleaved partial sums (a fixed order that the
+    compiler can vectorise: the same bits on any thread count)."""
     size = x.size
     s0 = s1 = s2 = s3 = 0.0
     whole = size - size % 4
@@ -159,12 +159,12 @@ def orthogonalise(basis, j, w, hessenberg):
     are added to hessenberg[:j + 1, j], ``w`` is overwritten; returns |w|_2 after."""
     for _sweep in range(2):
         for i in range(j + 1):
-            h = _dot(basis[i], w)
+            h = dot(basis[i], w)
             hessenberg[i, j] += h
             row = basis[i]
             for p in range(w.size):
                 w[p] -= h * row[p]
-    return math.sqrt(_dot(w, w))
+    return math.sqrt(dot(w, w))
 
 
 @nb.njit(cache=True)
@@ -251,7 +251,7 @@ class InverseArnoldi:
         self.inverse = inverse
         self.basis = np.zeros((dimension + 1, start.size))
         self.hessenberg = np.zeros((dimension + 1, dimension))
-        self.norm = math.sqrt(_dot(start, start))
+        self.norm = math.sqrt(dot(start, start))
         self.basis[0] = start / self.norm
         self.dim = 0                  # the columns of H formed
         self.invariant = False        # the space is invariant: no residual

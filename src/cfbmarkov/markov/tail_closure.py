@@ -46,7 +46,7 @@ import numba as nb
 import numpy as np
 
 from cfbmarkov._blas import one_blas_thread
-from cfbmarkov.markov.shift_invert import (InverseArnoldi, LevelInverse, gather_pairs,
+from cfbmarkov.markov.shift_invert import (InverseArnoldi, LevelInverse, dot, gather_pairs,
                                            pair_functionals)
 
 #: the dimension of the Krylov space (fewer where the chain has fewer live pairs, or where
@@ -135,21 +135,10 @@ def level_row(j, down_ptr, down_idx, down_val, stay_ptr, stay_idx, stay_val, up_
 
 @nb.njit(cache=True)
 def _dot(a, b):
-    """sum a * b over [S, L] arrays, in four interleaved partial sums (a fixed order that
-    the compiler can vectorise: the same bits on any machine of the same instruction set)."""
-    x = a.ravel()
-    y = b.ravel()
-    size = x.size
-    s0 = s1 = s2 = s3 = 0.0
-    whole = size - size % 4
-    for i in range(0, whole, 4):
-        s0 += x[i] * y[i]
-        s1 += x[i + 1] * y[i + 1]
-        s2 += x[i + 2] * y[i + 2]
-        s3 += x[i + 3] * y[i + 3]
-    for i in range(whole, size):
-        s0 += x[i] * y[i]
-    return (s0 + s1) + (s2 + s3)
+    """sum a * b over [S, L] arrays, in four interleaved partial sums
+    (:func:`~cfbmarkov.markov.shift_invert.dot`: a fixed order that the compiler can
+    vectorise, the same bits on any machine of the same instruction set)."""
+    return dot(a.ravel(), b.ravel())
 
 
 @nb.njit(cache=True)
