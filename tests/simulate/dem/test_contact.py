@@ -369,3 +369,32 @@ def test_summing_only_the_touched_particles_moves_them_by_the_same_bits(mono, pe
     np.testing.assert_array_equal(so_a, so_b)
     np.testing.assert_array_equal(wh_a, wh_b)
     assert walls_a == walls_b and moved_a == moved_b
+
+
+def test_a_tangential_spring_stiffer_than_two_sevenths_kn_sets_the_step_check():
+    """The tangential spring (effective mass 2/7 m_ab, its dashpot) oscillates with the
+    half-period pi / omega_d that an integrated damped oscillator crosses zero at; with
+    kt = kn it is about half the normal contact, and a step that resolves the normal
+    contact in 12 steps resolves it in fewer than 10: the check says so (with the default
+    kt = 2/7 kn the normal contact stays the shorter, the message unchanged)."""
+    from cfbmarkov.simulate.dem.law import contact_resolution
+
+    stiff = ContactLaw(kn=LAW.kn, kt=LAW.kn, en=LAW.en, et=LAW.et, mu=LAW.mu, mass=M)
+    m_ab = M / 2
+    m_t, eta = 2 / 7 * m_ab, stiff.tangential_damping(m_ab)
+    crossing = lambda t, y: y[0]                       # noqa: E731
+    crossing.terminal, crossing.direction = True, -1
+    solution = solve_ivp(lambda t, y: [y[1], -(stiff.kt * y[0] + eta * y[1]) / m_t],
+                         (0, 1.0), [0.0, 1.0], events=crossing, rtol=1e-11, atol=1e-14,
+                         max_step=stiff.tangential_time(m_ab) / 200)
+    assert solution.t_events[0][0] == pytest.approx(stiff.tangential_time(m_ab), rel=1e-6)
+    dt = stiff.contact_times(M)[0] / 12                # the normal contact in 12 steps
+    worst, message = contact_resolution(stiff, M, dt)
+    assert worst < 10 and worst == pytest.approx(stiff.tangential_time(m_ab) / dt)
+    assert "12.00 steps (particle-particle" in message
+    assert "tangential spring's half-period in" in message
+    plain = ContactLaw(kn=LAW.kn, kt=2 / 7 * LAW.kn * 0.999, en=LAW.en, et=LAW.et, mu=LAW.mu,
+                       mass=M)
+    worst, message = contact_resolution(plain, M, dt)
+    assert worst == pytest.approx(min(plain.contact_times(M)) / dt)
+    assert "tangential" not in message

@@ -97,6 +97,18 @@ class ContactLaw:
         eta = self.normal_damping(m_ab)
         return math.pi / math.sqrt(self.kn / m_ab - (eta / (2.0 * m_ab)) ** 2)
 
+    def tangential_time(self, m_ab: float) -> float:
+        """Half-period of the tangential spring-dashpot of a contact of reduced mass
+        ``m_ab`` (effective mass 2/7 m_ab): pi / sqrt(kt/m_t - (eta_t/(2 m_t))^2), or inf
+        where the dashpot damps it past oscillating. With kt = 2/7 kn (the default) it is
+        the normal contact's duration but for the damping; a stiffer tangential spring
+        oscillates faster than the normal contact lasts, and the step must resolve it
+        too."""
+        m_t = 2.0 / 7.0 * m_ab
+        eta = self.tangential_damping(m_ab)
+        omega2 = self.kt / m_t - (eta / (2.0 * m_t)) ** 2
+        return math.pi / math.sqrt(omega2) if omega2 > 0 else math.inf
+
     def contact_times(self, mass: float | None = None) -> tuple[float, float]:
         """(particle-particle, particle-wall) contact durations for equal particles of
         ``mass`` (default: the reference mass)."""
@@ -136,12 +148,21 @@ def contact_resolution(law: ContactLaw, mass: float, time_step: float) -> tuple[
     Returns
     -------
     worst : float
-        The fewer steps of a particle-particle and a particle-wall contact.
+        The fewer steps of a particle-particle and a particle-wall contact, or of the
+        tangential spring's half-period where that is shorter
+        (:meth:`ContactLaw.tangential_time`).
     message : str
         ``DEM time step ... resolves a contact in ... steps (particle-particle, ...) and ...``.
     """
     pp, pw = law.contact_times(mass)
     spp, spw = pp / time_step, pw / time_step
-    return min(spp, spw), (f"DEM time step {time_step:g} s resolves a contact in {spp:.2f} "
-                           f"steps (particle-particle, t_c = {pp:.4g} s) and {spw:.2f} steps "
-                           f"(particle-wall, t_c = {pw:.4g} s)")
+    message = (f"DEM time step {time_step:g} s resolves a contact in {spp:.2f} steps "
+               f"(particle-particle, t_c = {pp:.4g} s) and {spw:.2f} steps (particle-wall, "
+               f"t_c = {pw:.4g} s)")
+    tangential = min(law.tangential_time(0.5 * mass), law.tangential_time(mass))
+    worst = min(spp, spw)
+    if tangential / time_step < worst:      # a tangential spring stiffer than 2/7 kn
+        worst = tangential / time_step
+        message += (f", and the tangential spring's half-period in {worst:.2f} steps "
+                    f"({tangential:.4g} s; kt = {law.kt:g} N/m against kn = {law.kn:g} N/m)")
+    return worst, message
