@@ -208,45 +208,21 @@ def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
         holds one state).
     """
     space = model.state_space
-    if direction == "down" and model.open_flow is None:
-        return _top_batch(model)
-    even = space.inlet_distribution()
-    counts = getattr(model, "counts_up", None)
-    if model.open_flow is not None or counts is None:
-        return even
-    cell = space.cell_of_state
-    bottom = cell < space.cells_per_row
-    if np.bincount(cell[bottom]).max(initial=0) <= 1:
-        return even                              # one state a cell: nothing to split
-    landings = np.asarray(counts.sum(axis=0), dtype=np.float64).ravel() * bottom
-    per_cell = np.bincount(cell[bottom], weights=landings[bottom],
-                           minlength=space.cells_per_row)
-    batch = even.copy()
-    seen = np.flatnonzero(bottom)
-    seen = seen[per_cell[cell[seen]] > 0]
-    batch[seen] = (1.0 / space.cells_per_row) * landings[seen] / per_cell[cell[seen]]
-    return batch
-
-
-def _top_batch(model: "MarkovModel") -> np.ndarray:
-    """:func:`inlet_batch` over the top cells: 1/m a cell, split over its states as the
-    window's particles landed in them from passes down through the bottom (evenly where a
-    cell saw none)."""
-    space = model.state_space
+    top = direction == "down" and model.open_flow is None
     cell = space.cell_of_state
     per_row = space.cells_per_row
-    first = space.n_cells - per_row
-    top = cell >= first
-    place = cell - first
+    first = space.n_cells - per_row if top else 0
+    row = cell >= first if top else cell < per_row          # the cells fed
+    place = cell - first                                    # their place in the row
+    states_per_cell = np.bincount(place[row], minlength=per_row)
     batch = np.zeros(model.n_states)
-    states_per_cell = np.bincount(place[top], minlength=per_row)
-    batch[top] = 1.0 / per_row / states_per_cell[place[top]]
-    counts = getattr(model, "counts_down", None)
-    if counts is None or states_per_cell.max(initial=0) <= 1:
-        return batch
-    landings = np.asarray(counts.sum(axis=0), dtype=np.float64).ravel() * top
-    per_cell = np.bincount(place[top], weights=landings[top], minlength=per_row)
-    seen = np.flatnonzero(top)
+    batch[row] = 1.0 / per_row / states_per_cell[place[row]]   # even (Eq. 8 at the bottom)
+    counts = getattr(model, "counts_down" if top else "counts_up", None)
+    if model.open_flow is not None or counts is None or states_per_cell.max(initial=0) <= 1:
+        return batch                             # one state a cell: nothing to split
+    landings = np.asarray(counts.sum(axis=0), dtype=np.float64).ravel() * row
+    per_cell = np.bincount(place[row], weights=landings[row], minlength=per_row)
+    seen = np.flatnonzero(row)
     seen = seen[per_cell[place[seen]] > 0]
     batch[seen] = (1.0 / per_row) * landings[seen] / per_cell[place[seen]]
     return batch
