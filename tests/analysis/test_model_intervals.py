@@ -120,6 +120,10 @@ def test_fit_rtd_info_print_the_interval_and_resamples_0_leaves_it_out(stationar
     # the exact RTD itself: its mean is the printed E(RT)
     times, probability = np.array(data["rtd"]["times"]), np.array(data["rtd"]["probability"])
     assert times[0] == pytest.approx(data["rtd"]["lag"])
+    # the times are the lag's decimal multiples, as a script compares them (0.03, not
+    # 0.030000000000000002)
+    lag = data["rtd"]["lag"]
+    assert data["rtd"]["times"] == [round((k + 1) * lag, 10) for k in range(times.size)]
     assert times @ probability / probability.sum() == pytest.approx(data["rt_mean"], rel=1e-9)
     assert main(["rtd", str(out)]) == 0
     assert "(90 % interval" in capsys.readouterr().out

@@ -214,3 +214,16 @@ def test_a_closed_file_or_a_model_where_trajectories_go_is_named_in_one_line(
     again = pickle.loads(pickled)
     np.testing.assert_array_equal(again.positions(0), first)
     again.close()
+
+
+def test_residence_times_are_the_lags_decimal_multiples():
+    """An RTD's times are k * lag rounded to the lag's own decimals (0.075, not
+    0.07500000000000001, in a JSON file or a comparison); a lag without a short decimal
+    form keeps the plain product."""
+    from cfbmarkov.markov.first_passage import ResidenceTimeDistribution, lag_multiples
+
+    rtd = ResidenceTimeDistribution(0.025, np.full(400, 1 / 400), 0.0, np.ones(1))
+    assert rtd.times.tolist() == [float(f"{0.025 * k:.6f}") for k in range(1, 401)]
+    assert np.abs(rtd.times - 0.025 * np.arange(1, 401)).max() < 1e-13
+    third = lag_multiples(1 / 30, np.arange(1, 50))
+    assert np.array_equal(third, np.arange(1, 50) * (1 / 30))

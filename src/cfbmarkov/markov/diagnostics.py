@@ -57,6 +57,7 @@ from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.discrete import as_discrete_list, discretize
 from cfbmarkov.markov.estimate import estimator_from_name
+from cfbmarkov.markov.first_passage import lag_multiples
 from cfbmarkov.markov.groups import core_annulus, group_labels, height_bands, product_groups
 from cfbmarkov.markov.model import MarkovModel
 from cfbmarkov.markov.states import StateSpace
@@ -337,7 +338,7 @@ class CKTest:
     @property
     def times(self) -> np.ndarray:
         """The times k * lag (s), float64 [K]."""
-        return self.steps * self.lag
+        return lag_multiples(self.lag, self.steps)
 
     @property
     def error(self) -> np.ndarray:

@@ -44,6 +44,34 @@ from cfbmarkov.markov.tail_closure import level_row as _level_row
 from cfbmarkov.markov.shift_invert import level_inverse
 
 
+def lag_multiples(lag: float, steps: np.ndarray) -> np.ndarray:
+    """The times ``steps * lag`` (s) as their decimal values where the lag has a short one.
+
+    ``3 * 0.025`` is 0.07500000000000001 in floating point; rounded to the lag's own
+    decimals (as :func:`repr` writes it, at most 12) it is the float nearest 0.075, which
+    prints and compares as such. A lag without such a decimal form (1/30 s) is left as the
+    product.
+
+    Parameters
+    ----------
+    lag : float
+        The lag (s).
+    steps : ndarray of int, shape (K,)
+        The multiples.
+
+    Returns
+    -------
+    ndarray of float64, shape (K,)
+        The times (s), within one unit of round-off of ``steps * lag``.
+    """
+    times = lag * np.asarray(steps, dtype=np.float64)
+    text = repr(float(lag))
+    if "e" in text or "." not in text:
+        return times
+    decimals = len(text.split(".")[1])
+    return np.round(times, decimals) if decimals <= 12 else times
+
+
 class TrappedResidences(CfbmarkovError):
     """Every residence of the chain is trapped: no particle that enters can reach the top
     again (the states it enters lead only to states that are never left)."""
@@ -122,7 +150,7 @@ class ResidenceTimeDistribution:
     @property
     def times(self) -> np.ndarray:
         """Residence times k*lag (s) of :attr:`probability`."""
-        return self.lag * np.arange(1, self.probability.size + 1)
+        return lag_multiples(self.lag, np.arange(1, self.probability.size + 1))
 
     @property
     def mean(self) -> float:
