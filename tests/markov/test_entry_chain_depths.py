@@ -1,6 +1,6 @@
 """The entry chain's block elimination shared by the depth search's tries
 (entry_chain.DepthElimination): the same embedded chain, fall probabilities and decay, bit
-for bit, as each depth eliminated on its own, with fewer factorisations, also where a
+for bit, as each depth eliminated on its own, with fewer steps, also where a
 deeper try's levels keep other states (those steps are eliminated again)."""
 
 import numpy as np
@@ -27,15 +27,16 @@ def column_chain(states=40, seed=7):
 
 
 def counting(monkeypatch):
-    count = {"factors": 0}
+    """Counts the levels' steps (each takes level g + 1's result down: D_g X)."""
+    count = {"steps": 0}
     for algebra in (entry_chain._SparseBlocks, entry_chain._DenseBlocks):
-        original = algebra.factor
+        original = algebra.down_solved
 
-        def factor(self, t, original=original):
-            count["factors"] += 1
-            return original(self, t)
+        def down_solved(self, rows, below, x, original=original):
+            count["steps"] += 1
+            return original(self, rows, below, x)
 
-        monkeypatch.setattr(algebra, "factor", factor)
+        monkeypatch.setattr(algebra, "down_solved", down_solved)
     return count
 
 
@@ -53,8 +54,8 @@ def test_shared_depths_give_each_depths_own_elimination_bit_for_bit(monkeypatch,
     own = []
     for live in lives:
         own.append(entry_chain.entry_matrix(p_up, p_down, p_stay, live, entries, True, True))
-    alone = count["factors"]
-    count["factors"] = 0
+    alone = count["steps"]
+    count["steps"] = 0
     shared = entry_chain.DepthElimination(p_up, p_down, p_stay)
     for live, expected in zip(lives, own):
         got = entry_chain.entry_matrix(p_up, p_down, p_stay, live, entries, True, True,
@@ -62,4 +63,4 @@ def test_shared_depths_give_each_depths_own_elimination_bit_for_bit(monkeypatch,
         assert np.array_equal(got[0], expected[0]) and np.array_equal(got[1], expected[1])
         assert got[2] == expected[2] or (np.isnan(got[2]) and np.isnan(expected[2]))
     assert expected[1].max() > 1e-8                  # something falls below the levels
-    assert count["factors"] < alone - 10             # the shared steps were not redone
+    assert count["steps"] < alone - 10               # the shared steps were not redone

@@ -14,21 +14,22 @@ levels onto level 0, formed from the deepest level up (block Gaussian eliminatio
     T_(L-1) = I - S_(L-1),   T_g = I - S_g - D_g T_(g+1)^-1 U_(g+1),   N_00 = T_0^-1,
 
 with S_g, D_g, U_g the blocks of P_stay, P_down and P_up between the levels' states that
-can still reach the top (the others trap their mass and are left out). Each step is one
-sparse LU of an [S, S] matrix and a solve with as many right-hand sides as the states that
-up passes land in (U's non-zero columns): the [S L, S L] matrix is never formed or factored
-(its LU fills in across the levels).
+can still reach the top (the others trap their mass and are left out). T_g differs from
+A_g = I - S_g only in the few columns where up passes land (U's non-zero columns), so it
+is applied through A_g's LU and the Sherman-Morrison-Woodbury formula rather than factored:
+A_g is factored once for all the levels that keep the same states, and a level costs a
+product and a solve with as many right-hand sides as those columns. The [S L, S L] matrix
+is never formed or factored (its LU fills in across the levels).
 
 References
 ----------
 J. G. Kemeny and J. L. Snell, Finite Markov Chains, Van Nostrand, Princeton (1960), Ch. III
 (absorbing chains, B = N R). G. H. Golub and C. F. Van Loan, Matrix Computations, 4th ed.,
-Johns Hopkins (2013), Sec. 4.5.1 (block tridiagonal systems).
+Johns Hopkins (2013), Sec. 4.5.1 (block tridiagonal systems), Sec. 2.1.4 (the
+Sherman-Morrison-Woodbury formula).
 """
 
 from __future__ import annotations
-
-from contextlib import nullcontext
 
 import numpy as np
 import scipy.sparse as sp
@@ -133,14 +134,27 @@ class DepthElimination:
 def _eliminate(algebra, live, entries, with_falls, with_decay, steps=None):
     """:func:`entry_matrix`'s block elimination, its blocks' arithmetic by ``algebra``
     (:class:`_SparseBlocks` or :class:`_DenseBlocks`); ``steps`` a
-    :class:`DepthElimination`'s steps, reused and extended."""
+    :class:`DepthElimination`'s steps, reused and extended.
+
+    T_g is never formed or factored: it differs from A_g = I - S_g only in the C columns
+    (``up_cols``) where level g + 1's up passes land, T_g = A_g - W E^T with
+    W = D_g T_(g+1)^-1 U_(g+1) and E those columns of the identity, so by the
+    Sherman-Morrison-Woodbury formula
+
+        T_g^-1 x = y + Z K^-1 y[up_cols],  y = A_g^-1 x,  Z = A_g^-1 W,  K = I - Z[up_cols]
+
+    (Golub and Van Loan, Sec. 2.1.4). A_g is factored once for all the levels that keep
+    the same states, and A_g^-1 D_g once for each pair of such levels: a level costs one
+    product with C columns and a C x C solve instead of an LU of T_g. K is the identity
+    less the probabilities of leaving level g down and coming back to it, landing in the
+    columns: a non-singular M-matrix wherever level g's states can reach the top."""
     levels, s = live.shape
     kept = [np.flatnonzero(live[g]) for g in range(levels)]
     up_cols = up_block = None     # U_(g+1)'s non-zero columns, T_(g+1)^-1 U_(g+1) on them
     carried = None                # T_(g+1)^-1 c_(g+1) on level g + 1's rows
     down_probability = algebra.down_probability() if with_falls else None
-    t = None
     carried_sums = {}             # level g: the sum of T_g^-1 c_g over its states
+    inverse = None                # T_0^-1 (as a function) once the loop ends
     for g in range(levels - 1, -1, -1):
         rows = kept[g]
         distance = levels - 1 - g
@@ -154,27 +168,28 @@ def _eliminate(algebra, live, entries, with_falls, with_decay, steps=None):
                     carried_sums[g] = float(carried.sum())
                 continue
             del steps[distance:]
-        t = algebra.identity_less_stay(rows)
-        falls = (down_probability[rows] if g == levels - 1 else np.zeros(rows.size)
-                 ) if with_falls else None
-        if rows.size and (up_block is not None or (with_falls and carried is not None)):
-            d = algebra.down(rows, kept[g + 1])                # D_g, level g -> g + 1
-            if up_block is not None:
-                t = algebra.less_product(t, d, up_block, up_cols)
-            if with_falls and carried is not None:
-                falls = falls + d @ carried
-        if g == 0 or rows.size == 0:
-            up_cols = up_block = None
-            carried = None
-        else:
-            u = algebra.up(rows, kept[g - 1])                  # U_g, level g -> g - 1
-            up_cols = algebra.nonzero_columns(u)
-            factors = algebra.factor(t) if up_cols.size or with_falls else None
-            up_block = (algebra.solve(factors, algebra.columns(u, up_cols)) if up_cols.size
-                        else None)
-            carried = algebra.solve(factors, falls) if with_falls else None
-            if with_falls and g <= 2:
-                carried_sums[g] = float(carried.sum())
+        if rows.size == 0:
+            up_cols = up_block = carried = None
+            inverse = None
+            if key is not None:
+                steps.append((key, (up_cols, up_block, carried)))
+            continue
+        falls = None                              # A_g^-1 c_g
+        if with_falls:
+            falls = (algebra.stay_solved(rows, down_probability[rows]) if g == levels - 1
+                     else np.zeros(rows.size))
+        inverse = _woodbury(algebra, rows, kept[g + 1] if g + 1 < levels else None,
+                            up_block, up_cols)
+        if with_falls and carried is not None:
+            falls = falls + algebra.down_solved(rows, kept[g + 1], carried)
+        if g == 0:
+            break
+        up_cols = algebra.up_columns(rows, kept[g - 1])
+        up_block = inverse(algebra.up_solved(rows, kept[g - 1], up_cols)) if up_cols.size \
+            else None
+        carried = inverse(falls) if with_falls else None
+        if with_falls and g <= 2:
+            carried_sums[g] = float(carried.sum())
         if key is not None:
             steps.append((key, (up_cols, up_block, carried)))
     out = np.zeros((entries.size, entries.size))
@@ -186,21 +201,41 @@ def _eliminate(algebra, live, entries, with_falls, with_decay, steps=None):
         return ((out, h0, decay) if with_decay else (out, h0)) if with_falls else out
     position = -np.ones(s, np.int64)
     position[rows] = np.arange(rows.size)
-    factors = algebra.factor(t)
-    solved = algebra.solve(factors, algebra.columns(algebra.up(rows, entries)))   # N_00 R
+    solved = inverse(algebra.up_solved(rows, entries, None))            # N_00 R
     live_entries = position[entries] >= 0
     out[live_entries] = solved[position[entries[live_entries]]]
     if not with_falls:
         return out
-    h0[rows] = algebra.solve(factors, falls)
+    h0[rows] = inverse(falls)
     return (out, h0, decay) if with_decay else (out, h0)
 
 
-#: SuperLU's column ordering for a level's block: the states' own order (cells row by row,
-#: their memory or regime within a cell) keeps each block's fill near its band, and
-#: ordering it anew costs more than the fill it saves (a 1824-state velocity memory at
-#: 4 m/s: 17 levels eliminated in 0.63-0.86 s against 0.94-1.5 s with COLAMD, SuperLU's
-#: default; a 1596-state previous-cell memory 0.26-0.29 s against 0.45-0.73 s)
+def _woodbury(algebra, rows, below, up_block, up_cols):
+    """T_g^-1 as a function of A_g^-1 x (:func:`_eliminate`): the identity where nothing
+    comes back from level g + 1 (``up_block`` None), else y -> y + Z K^-1 y[up_cols]."""
+    if up_block is None:
+        return lambda solved: solved
+    z = algebra.down_solved(rows, below, up_block)                 # A_g^-1 D_g X, [rows, C]
+    k = np.identity(up_cols.size) - z[up_cols]
+    lu, pivots, info = _GETRF(k)
+    if info != 0:         # (K is an M-matrix wherever level g's states can reach the top)
+        raise RuntimeError(f"entry chain: LAPACK getrf returned {info} on a level's return")
+
+    def apply(solved):
+        x, info = _GETRS(lu, pivots, solved[up_cols].reshape(up_cols.size, -1))
+        if info != 0:
+            raise RuntimeError(f"entry chain: LAPACK getrs returned {info}")
+        return solved + (z @ x).reshape(solved.shape)
+    return apply
+
+
+_GETRF, _GETRS = get_lapack_funcs(("getrf", "getrs"), (np.zeros(1),))
+
+
+#: SuperLU's column ordering for a level's block A_g = I - S_g: the states' own order
+#: (cells row by row, their memory or regime within a cell) keeps its fill near its band,
+#: and ordering it anew cost more than the fill it saved (measured on a 1824-state velocity
+#: memory and a 1596-state previous-cell memory, with COLAMD, SuperLU's default)
 ORDERING = "NATURAL"
 
 #: chains of at most this many states, with transitions to at least :data:`DENSE_FILL` of
@@ -215,9 +250,9 @@ DENSE_FILL = 0.05
 
 
 class _SparseBlocks:
-    """The elimination's blocks as scipy.sparse matrices, factored by SuperLU; each
-    sub-matrix part[rows][:, cols] formed once (the levels usually keep the same states),
-    the whole part where both are every state."""
+    """The elimination's blocks as scipy.sparse matrices, A_g = I - S_g factored by
+    SuperLU; each sub-matrix part[rows][:, cols] and each A_g's factors formed once (the
+    levels usually keep the same states), the whole part where both are every state."""
 
     def __init__(self, p_up, p_down, p_stay):
         self.up_part, self.down_part, self.stay_part = (sp.csr_matrix(part) for part in
@@ -226,7 +261,7 @@ class _SparseBlocks:
         self.memo = {}
 
     def context(self):
-        return nullcontext()
+        return one_blas_thread()             # the dense products: the same bits on any count
 
     def _block(self, part, rows, cols):
         if rows.size == self.s and cols.size == self.s:
@@ -236,51 +271,49 @@ class _SparseBlocks:
             self.memo[key] = part[rows][:, cols]
         return self.memo[key]
 
+    def _factors(self, rows):
+        key = ("A", rows.tobytes())
+        if key not in self.memo:
+            a = sp.identity(rows.size, format="csc") - self._block(self.stay_part, rows, rows)
+            self.memo[key] = splu(sp.csc_matrix(a), permc_spec=ORDERING)
+        return self.memo[key]
+
     def down_probability(self):
         return np.asarray(self.down_part.sum(axis=1)).ravel()
 
-    def identity_less_stay(self, rows):
-        return (sp.identity(rows.size, format="csr")
-                - self._block(self.stay_part, rows, rows)).tocsr()
+    def stay_solved(self, rows, x):
+        """A_g^-1 x."""
+        return self._factors(rows).solve(x)
 
-    def down(self, rows, cols):
-        return self._block(self.down_part, rows, cols).tocsr()
+    def down_solved(self, rows, below, x):
+        """A_g^-1 D_g x, D_g the passes down from ``rows`` to level g + 1's ``below``."""
+        return self._factors(rows).solve(np.asarray(self._block(self.down_part, rows, below)
+                                                    @ x))
 
-    def up(self, rows, cols):
-        return self._block(self.up_part, rows, cols).tocsc()
+    def up_columns(self, rows, above):
+        """The columns (positions in ``above``) of U_g that an up pass lands in."""
+        return np.flatnonzero(np.diff(self._block(self.up_part, rows, above).tocsc().indptr))
 
-    def less_product(self, t, d, up_block, up_cols):
-        """t - d @ up_block on the columns up_cols (rows of d with a down pass only)."""
-        d_rows = np.flatnonzero(np.diff(d.indptr))
-        if not d_rows.size:
-            return t
-        product = d[d_rows] @ up_block                         # [rows with a down pass, C]
-        return t - sp.csr_matrix((product.ravel(), (np.repeat(d_rows, up_cols.size),
-                                                    np.tile(up_cols, d_rows.size))),
-                                 shape=t.shape)
-
-    def nonzero_columns(self, u):
-        return np.flatnonzero(np.diff(u.indptr))
-
-    def columns(self, u, cols=None):
-        return (u if cols is None else u[:, cols]).toarray()
-
-    def factor(self, t):
-        return splu(sp.csc_matrix(t), permc_spec=ORDERING)
-
-    def solve(self, factors, rhs):
-        return factors.solve(rhs)
+    def up_solved(self, rows, above, cols):
+        """A_g^-1 U_g on the columns ``cols`` (every column where None), dense."""
+        key = ("P", rows.tobytes(), above.tobytes(), None if cols is None else cols.tobytes())
+        if key not in self.memo:
+            u = self._block(self.up_part, rows, above).tocsc()
+            self.memo[key] = self._factors(rows).solve((u if cols is None
+                                                        else u[:, cols]).toarray())
+        return self.memo[key]
 
 
 class _DenseBlocks:
-    """The elimination's blocks as dense arrays, factored by LAPACK (getrf, getrs) on one
-    BLAS thread."""
+    """The elimination's blocks as dense arrays, A_g = I - S_g factored by LAPACK (getrf,
+    getrs) on one BLAS thread, and A_g^-1 D_g formed once for each pair of levels' states,
+    so that a level's step is a matrix product."""
 
     def __init__(self, p_up, p_down, p_stay):
         self.up_part, self.down_part, self.stay_part = (sp.csr_matrix(part).toarray() for part
                                                         in (p_up, p_down, p_stay))
         self.s = self.stay_part.shape[0]
-        self.getrf, self.getrs = get_lapack_funcs(("getrf", "getrs"), (self.stay_part,))
+        self.memo = {}
 
     def context(self):
         return one_blas_thread()             # the same bits on any thread count
@@ -290,40 +323,45 @@ class _DenseBlocks:
             return part
         return part[np.ix_(rows, cols)]
 
-    def down_probability(self):
-        return self.down_part.sum(axis=1)
+    def _factors(self, rows):
+        key = ("A", rows.tobytes())
+        if key not in self.memo:
+            lu, pivots, info = _GETRF(np.identity(rows.size)
+                                      - self._block(self.stay_part, rows, rows))
+            if info != 0:     # (a live level's block is never singular: it reaches the top)
+                raise RuntimeError(f"entry chain: LAPACK getrf returned {info} on a level's "
+                                   "block")
+            self.memo[key] = (lu, pivots)
+        return self.memo[key]
 
-    def identity_less_stay(self, rows):
-        return np.identity(rows.size) - self._block(self.stay_part, rows, rows)
-
-    def down(self, rows, cols):
-        return self._block(self.down_part, rows, cols)
-
-    def up(self, rows, cols):
-        return self._block(self.up_part, rows, cols)
-
-    def less_product(self, t, d, up_block, up_cols):
-        t = t.copy()
-        t[:, up_cols] -= d @ up_block
-        return t
-
-    def nonzero_columns(self, u):
-        return np.flatnonzero(u.any(axis=0))
-
-    def columns(self, u, cols=None):
-        return u if cols is None else u[:, cols]
-
-    def factor(self, t):
-        lu, pivots, info = self.getrf(t)
-        if info != 0:     # (a live level's block is never singular: its states reach the top)
-            raise RuntimeError(f"entry chain: LAPACK getrf returned {info} on a level's block")
-        return lu, pivots
-
-    def solve(self, factors, rhs):
-        x, info = self.getrs(*factors, rhs)
+    def _solve(self, rows, x):
+        x, info = _GETRS(*self._factors(rows), x)
         if info != 0:
             raise RuntimeError(f"entry chain: LAPACK getrs returned {info}")
         return x
+
+    def down_probability(self):
+        return self.down_part.sum(axis=1)
+
+    def stay_solved(self, rows, x):
+        return self._solve(rows, x)
+
+    def down_solved(self, rows, below, x):
+        key = ("M", rows.tobytes(), below.tobytes())
+        if key not in self.memo:
+            self.memo[key] = self._solve(rows, self._block(self.down_part, rows, below))
+        return self.memo[key] @ x
+
+    def up_columns(self, rows, above):
+        return np.flatnonzero(self._block(self.up_part, rows, above).any(axis=0))
+
+    def up_solved(self, rows, above, cols):
+        key = ("P", rows.tobytes(), above.tobytes(), None if cols is None else cols.tobytes())
+        if key not in self.memo:
+            u = self._block(self.up_part, rows, above)
+            self.memo[key] = self._solve(rows, np.ascontiguousarray(u if cols is None
+                                                                    else u[:, cols]))
+        return self.memo[key]
 
 
 def embedded_stationary(embedded: np.ndarray, live_entries: np.ndarray) -> np.ndarray:
