@@ -11,12 +11,13 @@ from __future__ import annotations
 
 import json
 import sys
+import warnings
 from pathlib import Path
 
 from cfbmarkov import synthetic
 from cfbmarkov._outputs import describe, output_helper, refuse_foreign
 from cfbmarkov.analysis.fit_checks import assess_fit
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import InputError, SampleWarning
 from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.markov import CellGrid, fit_model
 from cfbmarkov.markov.uncertainty import outward_bounds
@@ -328,8 +329,10 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
             # as fit makes it: its fitting file found by its window's content wherever
             # the folder goes (cfbmarkov.analysis.intervals.resolve_source), its interval
             # and the verdict on its fitting sample, whose warnings are said
-            model = assess_fit(fit_model(reference, grid, LAG, FIT_WINDOW, name),
-                               [reference], [FIT_WINDOW])
+            with warnings.catch_warnings():        # the verdict's lines: said below
+                warnings.simplefilter("ignore", SampleWarning)
+                model = assess_fit(fit_model(reference, grid, LAG, FIT_WINDOW, name),
+                                   [reference], [FIT_WINDOW])
             model.save(out / f"model-{name}.h5")
             for line in model.warnings():
                 warn(f"warning: {name}: {line}")

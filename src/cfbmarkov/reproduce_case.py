@@ -286,8 +286,9 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 # model's interval and the verdict on its sample, which predict, compare
                 # and the report repeat), not the paper's fit: not timed
                 t1, c1 = _time.perf_counter(), _time.process_time()
-                with warnings.catch_warnings():     # no interval: the report says so
-                    warnings.simplefilter("ignore", IntervalWarning)
+                with warnings.catch_warnings():     # no interval, the verdict: the report
+                    warnings.simplefilter("ignore", IntervalWarning)        # says them
+                    warnings.simplefilter("ignore", SampleWarning)
                     model = assess_fit(model, [ref, *members[1:]],
                                        [m.fit_window] * len(members),
                                        level=m.interval_level,

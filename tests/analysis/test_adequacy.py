@@ -4,6 +4,7 @@ must be (stationarity --sample-length), on generated risers."""
 import contextlib
 import json
 import math
+import warnings
 
 import h5py
 import numpy as np
@@ -168,6 +169,7 @@ def test_verdict_in_the_model_file_and_the_verbs(runs, tmp_path, capsys):
     assert code == 0
     warned = [line for line in err.splitlines() if line.startswith("warning:")]
     assert any("disagree" in line and "cfbmarkov stationarity" in line for line in warned)
+    assert len(warned) == len(set(warned))                    # each line once
     model = MarkovModel.load(out)
     assert model.adequacy is not None and not model.adequacy.adequate
     assert any("disagree" in line for line in model.warnings())
@@ -191,6 +193,26 @@ def test_verdict_in_the_model_file_and_the_verbs(runs, tmp_path, capsys):
     summary = json.loads((tmp_path / "cmp" / "summary.json").read_text())
     assert summary["adequacy"]["warnings"]
     assert any("fitting sample" in w for w in summary["warnings"])
+
+
+def test_assess_fit_in_python_warns_each_line_of_the_verdict(runs):
+    """A model fitted in Python and given its verdict by assess_fit says it as it comes (a
+    notebook shows it): each warning line of the verdict once, a SampleWarning; a window
+    whose verdict has none warns nothing."""
+    from cfbmarkov.analysis.fit_checks import assess_fit
+    from cfbmarkov.errors import SampleWarning
+    from cfbmarkov.markov import fit_model
+
+    model = fit_model(runs["switching"], _space(), 0.025, (1.5, 4.5), "paper")
+    with pytest.warns(SampleWarning) as caught:
+        model = assess_fit(model, resamples=0)
+    said = [str(w.message) for w in caught if issubclass(w.category, SampleWarning)]
+    assert said == list(model.adequacy.warnings) and any("disagree" in w for w in said)
+    steady = fit_model(runs["stationary"], _space(), 0.025, (1.5, 4.5), "paper")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", SampleWarning)
+        steady = assess_fit(steady, resamples=0)
+    assert steady.adequacy.warnings == ()
 
 
 def test_rtd_with_a_new_interval_says_the_verdict_was_made_with_the_stored_one(

@@ -392,3 +392,25 @@ def test_a_pattern_beside_a_file_and_the_same_timestep_twice(tmp_path, cli, asse
     assert_clean_failure("import", str(series / "dump*.riser"), str(notes), "-o",
                          tmp_path / "out" / "mixed.h5", output=tmp_path / "out" / "mixed.h5",
                          match=r"put the files of one series in one folder")
+
+
+def test_a_2d_dump_read_with_z_as_the_vertical_is_refused_and_nothing_kept(
+        tmp_path, assert_clean_failure):
+    """A 2D dump (z the same for every atom) imported with --vertical-axis z put every
+    particle at one height of a riser 1 mm high, and wrote it with warnings (exit 0): no
+    pass, residence or model could come of it. It is refused in one line naming the
+    option, and nothing is written; without the option the same dump imports."""
+    frames = [(k * 1000, [f"{i} {0.01 + 0.02 * i} {0.1 + 0.05 * k + 0.2 * i} 0.0"
+                          for i in range(1, 4)]) for k in range(6)]
+    text = "".join(f"ITEM: TIMESTEP\n{ts}\nITEM: NUMBER OF ATOMS\n3\nITEM: BOX BOUNDS pp pp pp\n"
+                   "0 0.09\n0 0.95\n-0.0005 0.0005\nITEM: ATOMS id x y z\n" + "\n".join(rows) + "\n"
+                   for ts, rows in frames)
+    source = tmp_path / "flat.dump"
+    source.write_text(text)
+    output = tmp_path / "out" / "run.h5"
+    assert_clean_failure("import", source, "--format", "lammps", "-o", output, "--time-step",
+                         "1e-5", "--vertical-axis", "z", output=output,
+                         match=r"every particle lies at the height [0-9.e-]+ m in every frame read "
+                               r"\(the vertical axis z\).*leave --vertical-axis out")
+    got = read_back(import_lammps(source, tmp_path / "flat.h5", time_step=1e-5))
+    assert got["positions"].shape == (6, 3, 2)

@@ -78,3 +78,16 @@ def test_exact_kinetics_checks_its_model_and_depth():
             exact_kinetics(model, kinetics, deficit_levels=levels)
     answer = exact_kinetics(model, kinetics)["X"]
     assert answer.exit_mean == pytest.approx(1.0 - np.exp(-0.2), rel=1e-12)   # two lags
+
+
+def test_a_negative_rate_is_refused_when_the_property_is_made_as_in_a_file():
+    """A rate or coefficient below 0 is refused by Property itself (as load_kinetics
+    refuses it in a file), not first when an answer is asked; a signed parameter (a
+    temperature) keeps its sign."""
+    with pytest.raises(InputError, match=r"property X: rate -1 < 0; rates and coefficients "
+                                         r"must be >= 0"):
+        Property("X", FirstOrder(), {"rate": -1.0})
+    table = np.array([[c, r, 0.4 if r else -0.2] for r in range(2) for c in range(2)])
+    with pytest.raises(InputError, match=r"property X: rate -0.2 < 0"):
+        Property("X", FirstOrder(), {"rate": ByCell(table)})
+    Property("T", HeatExchange(), {"coefficient": 1.0, "temperature": -20.0}, initial=300.0)

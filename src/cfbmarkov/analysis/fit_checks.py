@@ -11,7 +11,7 @@ import numbers
 import warnings
 from collections.abc import Callable, Sequence
 
-from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError
+from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, SampleWarning
 
 __all__ = ["IntervalWarning", "assess_fit", "record_fitting_data"]
 
@@ -82,6 +82,9 @@ def assess_fit(model, runs: Sequence | None = None,
         formed (the model is returned without one), and where ``runs`` name one file more
         than once: windows of one run are not independent runs, so neither the interval
         nor the verdict of pooled runs is formed.
+    SampleWarning
+        (:class:`cfbmarkov.errors.SampleWarning`) Each warning line of the verdict
+        (``model.adequacy.warnings``, the lines ``cfbmarkov fit`` prints), once.
     """
     from cfbmarkov.markov.first_passage import TrappedResidences
 
@@ -144,6 +147,8 @@ def assess_fit(model, runs: Sequence | None = None,
                    "and quarters refitted and compared"):
             model = model.with_adequacy(assess_adequacy(model, runs, windows,
                                                         uncertainty=model.uncertainty))
+        for line in model.adequacy.warnings:      # seen in a notebook, as predict repeats them
+            warnings.warn(line, SampleWarning, stacklevel=2)
     return model
 
 

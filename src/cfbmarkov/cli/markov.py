@@ -9,7 +9,7 @@ import sys
 from cfbmarkov._names import one_line
 from cfbmarkov.cli.options import (count, finite_float, level, parse_cells, parse_windows,
                                    positive_float, seed)
-from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.errors import CfbmarkovError, InputError, SampleWarning
 
 
 @contextlib.contextmanager
@@ -150,6 +150,8 @@ def _finish_fit(args, model, runs, windows, notes=()) -> int:
     for caught_warning in caught:
         if issubclass(caught_warning.category, IntervalWarning):
             print(f"warning: {one_line(str(caught_warning.message))}", file=sys.stderr)
+        elif issubclass(caught_warning.category, SampleWarning):
+            continue                   # the verdict's lines: printed below, after the save
         else:
             warnings.warn_explicit(caught_warning.message, caught_warning.category,
                                    caught_warning.filename, caught_warning.lineno)
@@ -280,8 +282,6 @@ def cmd_predict(args) -> int:
     from cfbmarkov.trajectories import Trajectories
 
     import warnings
-
-    from cfbmarkov.errors import SampleWarning
 
     model = MarkovModel.load(args.model)
     with Trajectories(args.init) as run, warnings.catch_warnings():

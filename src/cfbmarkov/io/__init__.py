@@ -116,9 +116,29 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
         For an unknown format, a non-positive size, time step, resample step or gap, a
         region given with a width or height, ``drop_depth`` on 2D positions, a time step
         given with a CSV file, a length or time unit or resampling given with a dump,
-        or bad input (see
+        a file whose particles all lie at one height in every frame (the vertical axis is
+        not the riser's: :func:`~cfbmarkov.io.plausibility.flat_heights`; the file
+        written is removed), or bad input (see
         :func:`import_csv` and :func:`import_lammps`).
     """
+    path = _import_file(source, fmt, output, width=width, height=height, time_step=time_step,
+                        vertical_axis=vertical_axis, region=region, length_unit=length_unit,
+                        time_unit=time_unit, boundary=boundary, drop_depth=drop_depth,
+                        resample=resample, max_gap=max_gap)
+    from cfbmarkov.io.plausibility import flat_heights
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(path) as written:
+        refused = flat_heights(written)
+    if refused is not None:              # nothing of it is kept
+        Path(path).unlink(missing_ok=True)
+        raise InputError(f"{source}: {refused}")
+    return path
+
+
+def _import_file(source, fmt, output, *, width, height, time_step, vertical_axis, region,
+                 length_unit, time_unit, boundary, drop_depth, resample, max_gap) -> Path:
+    """:func:`import_file` before the written file is checked."""
     fmt, detected = resolve_format(source, fmt)
     for name, value in (("--width", width), ("--height", height), ("--time-step", time_step),
                         ("--resample", resample), ("--max-gap", max_gap)):

@@ -91,6 +91,39 @@ def unit_warnings(traj) -> list[str]:
     return lines
 
 
+def flat_heights(traj) -> str | None:
+    """Why an imported file cannot be a riser run, where its particles all lie at one and
+    the same height in every frame read (:data:`SAMPLED_FRAMES`, first to last): the axis
+    taken as the vertical is one along which they never move (a 2D dump's z given as
+    ``--vertical-axis z``), and no pass, residence or model can come of it. Unlike
+    :func:`unit_warnings`' findings, which may be meant, this one is refused.
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+
+    Returns
+    -------
+    str or None
+        The line for the refusal; None where two or more particles are seen and their
+        heights differ somewhere.
+    """
+    frames = np.unique(np.linspace(0, traj.n_frames - 1, SAMPLED_FRAMES).round().astype(int))
+    heights = np.stack([traj.positions(int(k))[:, 1] for k in frames])
+    seen = np.isfinite(heights)
+    if np.count_nonzero(seen.any(axis=0)) < 2:
+        return None
+    values = heights[seen]
+    if values.max() > values.min():
+        return None
+    axis = traj.parameters.get("vertical_axis") or "y"
+    return (f"every particle lies at the height {values[0]:g} m in every frame read (the "
+            f"vertical axis {axis}): the particles never move along it, so it is not the "
+            "riser's vertical; give the axis along which they rise and fall with "
+            "--vertical-axis x|y|z (a 2D dump: leave --vertical-axis out, y is vertical)")
+
+
 def median_speed(traj) -> float:
     """The particles' median speed (m/s) between consecutive frames, over
     :data:`SAMPLED_PAIRS` pairs spread through the file: |displacement| / frame interval
@@ -308,5 +341,5 @@ def return_warnings(traj) -> list[str]:
             "periodic if the riser recycles its particles, or give them new ids on re-entry"]
 
 
-__all__ = ["median_speed", "median_stored_speed", "presence_warnings", "return_warnings",
+__all__ = ["flat_heights", "median_speed", "median_stored_speed", "presence_warnings", "return_warnings",
            "unit_warnings"]

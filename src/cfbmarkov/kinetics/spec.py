@@ -61,8 +61,10 @@ class Property:
     Raises
     ------
     InputError
-        For a bad name, start, a parameter missing or unknown, or a start value that is not
-        finite or lies outside the law's range (a conversion in [0, 1], an activity >= 0).
+        For a bad name, start, a parameter missing or unknown, a constant or per-cell table
+        value below 0 where the law needs it >= 0 (a value from a cell field is checked
+        when the fields are known), or a start value that is not finite or lies outside the
+        law's range (a conversion in [0, 1], an activity >= 0).
     """
 
     name: str
@@ -126,6 +128,12 @@ class Property:
                 raise InputError(f"property {self.name}: parameter {key} = {value!r} is a "
                                  f"{type(value).__name__}; give a number, Constant(...), "
                                  "ByCell(...) or FromField(...) (cfbmarkov.kinetics)")
+            low = (value.value if isinstance(value, Constant) else
+                   float(np.min(value.table[:, -1])) if isinstance(value, ByCell)
+                   and value.table.size else None)
+            if low is not None and low < 0 and key not in self.law.signed_parameters():
+                raise InputError(f"property {self.name}: {key} {low:g} < 0; rates and "
+                                 "coefficients must be >= 0")
             parameters[key] = value
         object.__setattr__(self, "parameters", parameters)
         wall = getattr(self.law, "wall_temperature", None)

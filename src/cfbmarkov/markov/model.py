@@ -4,7 +4,7 @@ A :class:`MarkovModel` holds the transition matrix P (S x S), the pooled counts 
 fitting window, the counts of transitions that passed up through the top or down through
 the bottom of the periodic riser, and its state space. It answers:
 
-- :meth:`propagate` (Eq. 5-6), with or without outflow through the top, and
+- :meth:`propagate` (Eq. 5-6), with or without the outflow of ended residences, and
   :meth:`batch_injection_maps` (Eq. 8, the paper's Fig. 4-7);
 - :meth:`rtd`: the exact residence-time distribution (first passage of the lap counter);
 - :meth:`monte_carlo` / :meth:`predict`: Monte Carlo of every particle (Eq. 7) with lap
@@ -379,7 +379,9 @@ class MarkovModel:
         steps : int
             Number of lags to propagate, >= 0.
         outflow : bool, optional
-            Remove the mass that passes up through the top.
+            Remove the mass whose residence ends: it passes up through the top once more
+            than it fell out of the bottom, or, for a model whose residences run downward
+            (``flow_direction`` "down"), down through the bottom once more than it rose.
 
         Returns
         -------
@@ -435,7 +437,9 @@ class MarkovModel:
         times : sequence of float
             Times (s) after the injection, whole multiples of the lag.
         outflow : bool, optional
-            Remove the mass that leaves up through the top.
+            Remove the mass whose residence ends (:meth:`propagate`); for a model whose
+            residences run downward the batch is then fed over the top cells and leaves
+            through the bottom.
 
         Returns
         -------
