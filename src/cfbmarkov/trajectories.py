@@ -368,6 +368,36 @@ class Trajectories(FrameTimes):
             return np.ones((len(range(*frames.indices(self.n_frames))), self.n_particles), bool)
         return np.ones(self.n_particles, dtype=bool)
 
+    def absent_throughout(self, frames: slice) -> np.ndarray | None:
+        """The particles absent from every one of ``frames``, where every other particle
+        is present in all of them; None where some particle is present in part of them.
+
+        Such absences hide no pass: a particle outside the riser's region in every frame (a
+        dump's atom beyond the walls) is simply not part of the flow there, and residences,
+        mixing and comparisons over ``frames`` follow the others as in a file without
+        absences (``docs/definitions.md``, Residence times across absences).
+
+        Parameters
+        ----------
+        frames : slice
+            A range of frames (step 1).
+
+        Returns
+        -------
+        ndarray of bool, shape (N,), or None
+            True for each particle absent throughout (all False in a file without
+            absences).
+        """
+        ever = np.zeros(self.n_particles, dtype=bool)
+        always = np.ones(self.n_particles, dtype=bool)
+        if self.has_absences:
+            start, stop, _ = frames.indices(self.n_frames)
+            for k in range(start, stop, 256):           # blocks of frames: bounded memory
+                present = self.present(slice(k, min(k + 256, stop)))
+                ever |= present.any(axis=0)
+                always &= present.all(axis=0)
+        return ~ever if np.array_equal(ever, always) else None
+
     def velocities(self, frames: int | slice = slice(None)) -> np.ndarray | None:
         """Velocities like :meth:`positions`, or None when the source had none.
 

@@ -320,3 +320,51 @@ def test_the_verdict_on_tracks_with_absences_does_not_send_to_stationarity(tmp_p
                  "0:1.5", "-o", str(tmp_path / "open-m.h5"), "-q"]) == 0
     err = capsys.readouterr().err
     assert "warning:" in err and "stationarity RUN --sample-length" in err
+
+
+def test_a_particle_outside_the_riser_in_every_frame_leaves_predict_and_compare_to_the_others(
+        tmp_path, capsys):
+    """A periodic run with one particle absent from every frame (a dump's atom beyond the
+    walls, cut by --region): predict moves the others and says so, and compare follows the
+    same particles on both sides, its reference residences those of the file without the
+    absent particle (compare refused the file, pointing to an import that refuses a
+    periodic box). A particle absent from part of the window is still refused."""
+    from cfbmarkov.observed.residence import residence_times
+    from cfbmarkov.synthetic import RiserFlow, sample_run
+
+    flow = RiserFlow(columns=4, rows=8, persistence=False)
+    times, _, pos, laps = sample_run(flow, 60, 321, seed=5)
+    present = np.ones(pos.shape[:2], bool)
+    present[:, 7] = False
+    ghost = pos.copy()
+    ghost[:, 7] = np.nan
+    run = write_trajectories(tmp_path / "ghost.h5", times, ghost, width=flow.width,
+                             height=flow.height, laps=laps, present=present)
+    keep = np.arange(60) != 7
+    plain = write_trajectories(tmp_path / "plain.h5", times, pos[:, keep], width=flow.width,
+                               height=flow.height, laps=laps[:, keep],
+                               ids=np.arange(60)[keep])
+    model = tmp_path / "m.h5"
+    assert run_cli(capsys, "fit", run, "--cells", "4x8", "--lag", str(flow.lag), "--window",
+                   "0:4", "--resamples", "0", "-o", model)[0] == 0
+    code, _, err = run_cli(capsys, "predict", model, "--init", run, "--start", "4",
+                           "--duration", "4", "--seed", "3", "-q", "-o", tmp_path / "p.h5")
+    assert code == 0 and "1 of the 60 particles" in err
+    code, _, err = run_cli(capsys, "compare", run, tmp_path / "p.h5", "--window", "4:8",
+                           "--resamples", "0", "--no-figures", "-o", tmp_path / "cmp")
+    assert code == 0, err
+    summary = json.loads((tmp_path / "cmp" / "summary.json").read_text())
+    with Trajectories(plain) as t:
+        own = residence_times(t, (4.0, 8.0), use_events=False)
+    assert summary["reference"]["rt_count"] == own.count > 20
+    with Trajectories(run) as t:
+        got = residence_times(t, (4.0, 8.0), use_events=False)
+    np.testing.assert_array_equal(np.sort(got.samples), np.sort(own.samples))
+    # a particle out of view in part of the window hides passes: refused, as before
+    present[200:240, 3] = False
+    ghost[200:240, 3] = np.nan
+    gap = write_trajectories(tmp_path / "gap.h5", times, ghost, width=flow.width,
+                             height=flow.height, laps=laps, present=present)
+    code, _, err = run_cli(capsys, "compare", gap, tmp_path / "p.h5", "--window", "4:8",
+                           "--resamples", "0", "--no-figures", "-o", tmp_path / "cmp2")
+    assert code == 2 and "absent from some frames" in err

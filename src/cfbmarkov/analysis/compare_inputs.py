@@ -360,8 +360,12 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
         particles present at the window start).
     """
     for run in (ref, pred):
-        run.require_supported("comparing runs", three_d=True, absent=run.boundary.is_open,
-                              open_boundary=True)
+        # a periodic run's particles absent throughout the window are not part of its flow
+        # there; one present in part of it would hide passes
+        whole = (run.has_absences and not run.boundary.is_open
+                 and _absent_throughout(run, start, stop) is not None)
+        run.require_supported("comparing runs", three_d=True,
+                              absent=run.boundary.is_open or whole, open_boundary=True)
     check_order(ref, pred)
     if ref.boundary != pred.boundary:
         raise InputError(f"{ref.path} is a{'n open' if ref.boundary.is_open else ' periodic'} "
@@ -387,16 +391,32 @@ def check_runs(ref: Trajectories, pred: Trajectories, start: float, stop: float
                          + (f" ({pred.depth:g} m deep)" if pred.depth is not None else ""))
     if ref.boundary.is_open:
         _check_same_start(ref, pred, ref_frames.start, pred_frames.start)
-    elif ref.n_particles != pred.n_particles or not np.array_equal(np.sort(ref.ids),
-                                                                    np.sort(pred.ids)):
+    elif not np.array_equal(np.sort(_window_ids(ref, start, stop)),
+                            np.sort(_window_ids(pred, start, stop))):
         started = (pred.parameters.get("initial_frames")
                    if isinstance(pred.parameters, dict) else None)
         hint = (f" ({pred.path} was predicted from {started}: give that as the reference)"
                 if isinstance(started, str) and started else "")
-        raise InputError(f"{ref.path} ({ref.n_particles} particles) and {pred.path} "
-                         f"({pred.n_particles}) do not hold the same particle ids; mixing "
-                         f"needs the same particles on both sides{hint}")
+        raise InputError(f"{ref.path} ({_window_ids(ref, start, stop).size} particles) and "
+                         f"{pred.path} ({_window_ids(pred, start, stop).size}) do not hold "
+                         f"the same particle ids; mixing needs the same particles on both "
+                         f"sides{hint}")
     return ref_frames, pred_frames, columns
+
+
+def _absent_throughout(run: Trajectories, start: float, stop: float) -> np.ndarray | None:
+    """:meth:`~cfbmarkov.trajectories.Trajectories.absent_throughout` over a window (s);
+    None also where the window holds no frame (refused later, by the window's check)."""
+    try:
+        return run.absent_throughout(run.window(start, stop))
+    except InputError:
+        return None
+
+
+def _window_ids(run: Trajectories, start: float, stop: float) -> np.ndarray:
+    """The ids of a periodic run's particles in a window: those not absent throughout it."""
+    absent = _absent_throughout(run, start, stop) if run.has_absences else None
+    return run.ids if absent is None else run.ids[~absent]
 
 
 def check_order(ref: Trajectories, pred: Trajectories) -> None:

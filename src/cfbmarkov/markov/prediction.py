@@ -163,7 +163,8 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
                               f"{present0.size} particles of {traj.path} are absent at "
                               f"{start:g} s and left out: the prediction moves the "
                               f"{int(np.count_nonzero(present0))} present there (`compare` "
-                              "follows those on both sides)", CfbmarkovWarning, stacklevel=2)
+                              "follows those on both sides over a window where the others "
+                              "stay absent throughout)", CfbmarkovWarning, stacklevel=2)
             states0, positions0, laps0, ids = (states0[present0], positions0[present0],
                                                laps0[present0], ids[present0])
         shown = (PredictionProgress(progress, start, n_steps, model.lag, states0.size)

@@ -556,8 +556,11 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         residences within each stretch of frames where it is present, a stretch standing
         for a window of its own (a pass while absent is not seen, so a residence across an
         absence is not a sample; ``docs/definitions.md``, Residence times across
-        absences). Default False: such a file is refused. Without absences it changes
-        nothing.
+        absences). Default False: such a file is refused, unless every particle is present
+        throughout the window or absent throughout
+        (:meth:`~cfbmarkov.trajectories.Trajectories.absent_throughout`: the absent ones
+        are left out, the others counted as in a file without absences). Without absences
+        it changes nothing.
 
     Returns
     -------
@@ -572,13 +575,17 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         When the window is empty, lies outside the file's frames or holds no frame
         (:meth:`~cfbmarkov.trajectories.Trajectories.window`), the file's pass events are
         damaged (unsorted, unequal lengths, bad particle index or direction), or a periodic
-        riser has particles absent from some frames and ``split_at_absences`` is false.
+        riser has particles absent from part of the window and ``split_at_absences`` is
+        false.
 
     References
     ----------
     ``docs/definitions.md`` (Residence time, Residence-time samples).
     """
     split = bool(split_at_absences) and traj.has_absences and not traj.boundary.is_open
+    if traj.has_absences and not (traj.boundary.is_open or split) and \
+            traj.absent_throughout(traj.window(float(window[0]), float(window[1]))) is not None:
+        split = True      # each particle present throughout the window or absent throughout
     if traj.has_absences and not (traj.boundary.is_open or split):
         raise InputError(f"{traj.path}: residences on a periodic riser cannot be observed "
                          "across particles' absences (a pass while absent is not seen): "
