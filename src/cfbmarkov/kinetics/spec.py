@@ -128,9 +128,10 @@ class Property:
                 raise InputError(f"property {self.name}: parameter {key} = {value!r} is a "
                                  f"{type(value).__name__}; give a number, Constant(...), "
                                  "ByCell(...) or FromField(...) (cfbmarkov.kinetics)")
+            table = np.asarray(value.table) if isinstance(value, ByCell) else None
             low = (value.value if isinstance(value, Constant) else
-                   float(np.min(value.table[:, -1])) if isinstance(value, ByCell)
-                   and value.table.size else None)
+                   float(np.nanmin(table[:, -1])) if table is not None and table.ndim == 2
+                   and table.shape[1] in (3, 4) and table.shape[0] else None)
             if low is not None and low < 0 and key not in self.law.signed_parameters():
                 raise InputError(f"property {self.name}: {key} {low:g} < 0; rates and "
                                  "coefficients must be >= 0")
