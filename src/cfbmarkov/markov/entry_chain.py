@@ -286,9 +286,18 @@ class _SparseBlocks:
         return self._factors(rows).solve(x)
 
     def down_solved(self, rows, below, x):
-        """A_g^-1 D_g x, D_g the passes down from ``rows`` to level g + 1's ``below``."""
-        return self._factors(rows).solve(np.asarray(self._block(self.down_part, rows, below)
-                                                    @ x))
+        """A_g^-1 D_g x, D_g the passes down from ``rows`` to level g + 1's ``below``: D_g
+        has rows only for the few states that pass down (the bottom row's), so it is
+        A_g^-1 on those columns (solved once, dense) times those rows of D_g x."""
+        key = ("W", rows.tobytes(), below.tobytes())
+        if key not in self.memo:
+            d = self._block(self.down_part, rows, below).tocsr()
+            passing = np.flatnonzero(np.diff(d.indptr))
+            unit = np.zeros((rows.size, passing.size))
+            unit[passing, np.arange(passing.size)] = 1.0
+            self.memo[key] = (self._factors(rows).solve(unit), d[passing])
+        solved, d = self.memo[key]
+        return solved @ np.asarray(d @ x)
 
     def up_columns(self, rows, above):
         """The columns (positions in ``above``) of U_g that an up pass lands in."""
@@ -306,8 +315,9 @@ class _SparseBlocks:
 
 class _DenseBlocks:
     """The elimination's blocks as dense arrays, A_g = I - S_g factored by LAPACK (getrf,
-    getrs) on one BLAS thread, and A_g^-1 D_g formed once for each pair of levels' states,
-    so that a level's step is a matrix product."""
+    getrs) on one BLAS thread, and A_g^-1 on the columns of the states that pass down
+    formed once for each pair of levels' states, so that a level's step is two small
+    matrix products."""
 
     def __init__(self, p_up, p_down, p_stay):
         self.up_part, self.down_part, self.stay_part = (sp.csr_matrix(part).toarray() for part
@@ -347,10 +357,15 @@ class _DenseBlocks:
         return self._solve(rows, x)
 
     def down_solved(self, rows, below, x):
-        key = ("M", rows.tobytes(), below.tobytes())
+        key = ("W", rows.tobytes(), below.tobytes())
         if key not in self.memo:
-            self.memo[key] = self._solve(rows, self._block(self.down_part, rows, below))
-        return self.memo[key] @ x
+            d = self._block(self.down_part, rows, below)
+            passing = np.flatnonzero(d.any(axis=1))
+            unit = np.zeros((rows.size, passing.size))
+            unit[passing, np.arange(passing.size)] = 1.0
+            self.memo[key] = (self._solve(rows, unit), np.ascontiguousarray(d[passing]))
+        solved, d = self.memo[key]
+        return solved @ (d @ x)
 
     def up_columns(self, rows, above):
         return np.flatnonzero(self._block(self.up_part, rows, above).any(axis=0))
