@@ -136,7 +136,7 @@ def test_a_window_pooled_with_itself_is_refused_as_on_the_command_line(markov_ru
     for estimator in (PaperEstimator(GRID, lag=0.1), MaximumLikelihoodEstimator(GRID, lag=0.1)):
         with pytest.raises(InputError, match="hold the same data"):
             estimator.fit([window, window])
-        with pytest.raises(InputError, match="2-6 s and 4-7 s\\) hold the same data"):
+        with pytest.raises(InputError, match="2-6 s and 4-7 s\\) overlap: pooling"):
             estimator.fit([window, overlapping])
         pooled = estimator.fit([window, later])       # windows that do not overlap: pooled
         assert pooled.counts.sum() > estimator.fit(window).counts.sum()
@@ -261,3 +261,12 @@ def test_a_prediction_from_a_frame_with_no_particle_is_refused_first(markov_run,
                                          "present from 0 s to 8 s"):
         model.predict(gappy, start=6.5, duration=0.5, output=tmp_path / "p.h5")
     assert not (tmp_path / "p.h5").exists()
+
+
+def test_a_window_of_another_lag_names_its_frames_in_words(markov_run):
+    """The estimator's refusal of discrete trajectories at another lag says "1 frame",
+    not "1 frames"."""
+    window = discretize(markov_run, GRID, lag=0.025, window=(2.0, 4.0))
+    with pytest.raises(InputError, match=r"a lag of 0.025 s \(1 frame\), the estimator's is "
+                                         r"0.05 s"):
+        PaperEstimator(GRID, lag=0.05).fit(window)

@@ -217,6 +217,14 @@ def _entries(text: str, what: str) -> list[str]:
 
 
 def parse_times(text: str) -> list[float]:
+    """argparse type of ``--times``: comma-separated times (s), each finite, >= 0 and
+    given once.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Naming what is wrong with the text.
+    """
     try:
         times = [float(v) for v in _entries(text, "times")]
     except ValueError:
@@ -231,6 +239,14 @@ def parse_times(text: str) -> list[float]:
 
 
 def parse_velocities(text: str) -> list[float]:
+    """argparse type of ``--velocities``: comma-separated superficial gas velocities (m/s),
+    each positive and finite.
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Naming what is wrong with the text.
+    """
     try:
         values = [float(v) for v in _entries(text, "velocities")]
     except ValueError:
@@ -242,6 +258,13 @@ def parse_velocities(text: str) -> list[float]:
 
 
 def parse_names(text: str) -> list[str]:
+    """argparse type of a list of names (comma-separated, each given once).
+
+    Raises
+    ------
+    argparse.ArgumentTypeError
+        Where no name is given or one repeats.
+    """
     if not text.strip():
         raise argparse.ArgumentTypeError("no names given")
     names = _entries(text, "names")

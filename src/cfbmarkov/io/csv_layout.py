@@ -115,6 +115,8 @@ class CsvLayout:
         return names if all(n in self.used for n in names) else None
 
     def shown(self) -> str:
+        """The header as the file writes it (its names joined by its delimiter), for
+        messages."""
         return (self.delimiter or " ").join(self.header)
 
 

@@ -696,7 +696,7 @@ def check_distinct_windows(windows: list[DiscreteTrajectories]) -> None:
     Raises
     ------
     InputError
-        Where two of them hold the same data.
+        Where two of them hold the same data, or overlap in one file.
     """
     import os
 
@@ -711,9 +711,11 @@ def check_distinct_windows(windows: list[DiscreteTrajectories]) -> None:
                     and np.array_equal(other.times, window.times)
                     and np.array_equal(other.states, window.states)):
                 name = window.source or "discrete trajectories"
+                what = "hold the same data" if other is window or not same_file or (
+                    np.array_equal(other.times, window.times)) else "overlap"
                 raise InputError(
                     f"windows {j} and {k} ({name}, {other.times[0]:g}-{other.times[-1]:g} s "
-                    f"and {window.times[0]:g}-{window.times[-1]:g} s) hold the same data: "
+                    f"and {window.times[0]:g}-{window.times[-1]:g} s) {what}: "
                     "pooling a window with itself counts its transitions twice and narrows "
                     "the interval falsely (pool windows of independent runs, or windows of "
                     "one run that do not overlap)")

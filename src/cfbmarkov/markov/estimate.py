@@ -28,6 +28,7 @@ import os
 import numpy as np
 import scipy.sparse as sp
 
+from cfbmarkov._console import plural
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.limits import check_fit
@@ -224,7 +225,7 @@ class TransitionEstimator:
                                  "state space")
             if not window.matches_lag(self.lag):
                 raise InputError(f"discrete trajectories have a lag of {window.lag:g} s "
-                                 f"({window.lag_frames} frames), the estimator's is "
+                                 f"({plural(window.lag_frames, 'frame')}), the estimator's is "
                                  f"{self.lag:g} s")
         if abs(windows[0].lag - self.lag) > LAG_ROUND_OFF * windows[0].lag:
             # a lag typed near a whole number of frames (0.0083 s for one 1/120 s frame):
