@@ -32,6 +32,8 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import splu
 
+from cfbmarkov._blas import one_blas_thread
+
 #: the shift-and-invert closure is used where the envelope (profile) of I - Q on the live
 #: pairs, in the levels' natural order, which holds its LU's fill, is at most this many
 #: times the propagation's multiply-adds a lag: 1.8 on the paper-scale 3 m/s models of
@@ -153,17 +155,15 @@ def dot(x, y):
     return (s0 + s1) + (s2 + s3)
 
 
-@nb.njit(cache=True)
 def orthogonalise(basis, j, w, hessenberg):
-    """Classical Gram-Schmidt, twice, of ``w`` against basis[0 .. j]; the coefficients
-    are added to hessenberg[:j + 1, j], ``w`` is overwritten; returns |w|_2 after."""
+    """Classical Gram-Schmidt, twice, of ``w`` against basis[0 .. j] (two BLAS products a
+    sweep, on the caller's one BLAS thread); the coefficients are added to
+    hessenberg[:j + 1, j], ``w`` is overwritten; returns |w|_2 after."""
+    rows = basis[:j + 1]
     for _sweep in range(2):
-        for i in range(j + 1):
-            h = dot(basis[i], w)
-            hessenberg[i, j] += h
-            row = basis[i]
-            for p in range(w.size):
-                w[p] -= h * row[p]
+        h = rows @ w
+        hessenberg[:j + 1, j] += h
+        w -= h @ rows
     return math.sqrt(dot(w, w))
 
 
@@ -177,7 +177,6 @@ def _identity_less_a(indptr, indices, data, x, out):
         out[r] = acc
 
 
-@nb.njit(cache=True)
 def relation_error(indptr, indices, data, basis, dim, small, residual_direction,
                    residual_vector):
     """The columns of E = A V - V T - u c^T (module docstring), as 1-norms, and beside each
@@ -185,33 +184,19 @@ def relation_error(indptr, indices, data, basis, dim, small, residual_direction,
 
     ``basis`` [m + 1, n] (V's columns as rows), ``small`` T [dim, dim],
     ``residual_direction`` c [dim], ``residual_vector`` u [n]. A q_j is formed as
-    q_j - (I - A) q_j. Returns (norms, magnitudes), float64 [dim] each."""
+    q_j - (I - A) q_j, (I - A) V by one sparse product and V T by one BLAS product (on the
+    caller's one BLAS thread): each entry of E a sum of the row's terms of I - A, the dim
+    of V T, u c^T and q_j, whatever their order, as the bound counts them.
+    Returns (norms, magnitudes), float64 [dim] each."""
     n = basis.shape[1]
-    norms = np.zeros(dim)
-    magnitudes = np.zeros(dim)
-    column = np.empty(n)
-    u_norm = 0.0
-    for p in range(n):
-        u_norm += abs(residual_vector[p])
-    one_norms = np.zeros(dim)
-    for j in range(dim):
-        for p in range(n):
-            one_norms[j] += abs(basis[j, p])
-    for j in range(dim):
-        _identity_less_a(indptr, indices, data, basis[j], column)
-        for p in range(n):
-            column[p] = basis[j, p] - column[p] - residual_vector[p] * residual_direction[j]
-        for i in range(dim):
-            coefficient = small[i, j]
-            row = basis[i]
-            for p in range(n):
-                column[p] -= row[p] * coefficient
-        for p in range(n):
-            norms[j] += abs(column[p])
-        spread = 3.0 * one_norms[j] + u_norm * abs(residual_direction[j])
-        for i in range(dim):
-            spread += abs(small[i, j]) * one_norms[i]
-        magnitudes[j] = spread
+    rows = basis[:dim]
+    identity_less_a = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    error = (rows - np.asarray(identity_less_a @ rows.T).T
+             - residual_direction[:, None] * residual_vector[None, :] - small.T @ rows)
+    norms = np.abs(error).sum(axis=1)
+    one_norms = np.abs(rows).sum(axis=1)
+    magnitudes = (3.0 * one_norms + np.abs(residual_vector).sum() * np.abs(residual_direction)
+                  + np.abs(small).T @ one_norms)
     return norms, magnitudes
 
 
@@ -258,7 +243,12 @@ class InverseArnoldi:
         self.failed = False           # a solve gave a number that is not finite
 
     def extend(self, dimension: int) -> None:
-        """Extend the basis to ``dimension`` vectors (fewer where the space is invariant)."""
+        """Extend the basis to ``dimension`` vectors (fewer where the space is invariant),
+        on one BLAS thread (the same bits on any thread count)."""
+        with one_blas_thread():
+            self._extend(dimension)
+
+    def _extend(self, dimension: int) -> None:
         for j in range(self.dim, min(dimension, self.hessenberg.shape[1])):
             if self.invariant or self.failed:
                 return
