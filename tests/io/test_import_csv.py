@@ -395,6 +395,8 @@ def test_sizes_that_suggest_a_unit_mistake_warn(tmp_path, capsys):
             assert warnings == []
         else:
             assert expected in "\n".join(warnings) and len(warnings) == count, warnings
+        if "--width" in options:         # the sizes typed in mm: the fix in metres
+            assert "given in mm? --width 0.09 --height 0.95 (m)" in warnings[0]
         if options == ("--length-unit", "mm"):       # or a depth read as the heights
             assert ("or the heights come from another axis than the vertical one (3D "
                     "positions: --vertical-axis names the vertical)") in warnings[0]

@@ -46,14 +46,20 @@ def unit_warnings(traj) -> list[str]:
     lines = []
     height, width = traj.height, traj.width
     low, high = HEIGHT_RANGE
+    frames = np.unique(np.linspace(0, traj.n_frames - 1, SAMPLED_FRAMES).round().astype(int))
+    sampled = np.concatenate([traj.positions(int(k)) for k in frames])
+    sampled = sampled[np.isfinite(sampled).all(axis=1)]
+    heights = sampled[:, 1]
     if not low <= height <= high:
+        # sizes typed in mm where they are in m: the particles fill a thousandth of them
+        inside = (height > high and sampled.size
+                  and np.all(np.abs(sampled[:, :2]) <= 1e-3 * np.array([width, height]) * 1.01))
+        hint = (f"; given in mm? --width {width / 1000:g} --height {height / 1000:g} (m) "
+                "would hold the particles" if inside else "")
         lines.append(f"the riser is {height:g} m high and {width:g} m wide: lengths are in "
                      "metres (CSV: --length-unit for the positions' unit; --width and --height "
                      "in m, --region in the source's own units); check the units if that is "
-                     "not the riser")
-    frames = np.unique(np.linspace(0, traj.n_frames - 1, SAMPLED_FRAMES).round().astype(int))
-    heights = np.concatenate([traj.positions(int(k))[:, 1] for k in frames])
-    heights = heights[np.isfinite(heights)]
+                     f"not the riser{hint}")
     if heights.size > 1:
         span = float(heights.max() - heights.min())
         if span < SPAN_SHARE * height:
