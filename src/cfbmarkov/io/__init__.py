@@ -116,8 +116,8 @@ def import_file(source: str | os.PathLike, fmt: str, output: str | os.PathLike, 
         For an unknown format, a non-positive size, time step, resample step or gap, a
         region given with a width or height, ``drop_depth`` on 2D positions, a time step
         given with a CSV file, a length or time unit or resampling given with a dump,
-        a file whose particles all lie at one height in every frame (the vertical axis is
-        not the riser's: :func:`~cfbmarkov.io.plausibility.flat_heights`; the file
+        a 3D file whose particles all lie at one height in every frame (the vertical axis
+        is not the riser's: :func:`~cfbmarkov.io.plausibility.flat_heights`; the file
         written is removed), or bad input (see
         :func:`import_csv` and :func:`import_lammps`).
     """

@@ -98,11 +98,12 @@ def unit_warnings(traj) -> list[str]:
 
 
 def flat_heights(traj) -> str | None:
-    """Why an imported file cannot be a riser run, where its particles all lie at one and
-    the same height in every frame read (:data:`SAMPLED_FRAMES`, first to last): the axis
-    taken as the vertical is one along which they never move (a 2D dump's z given as
-    ``--vertical-axis z``), and no pass, residence or model can come of it. Unlike
-    :func:`unit_warnings`' findings, which may be meant, this one is refused.
+    """Why an imported 3D file cannot be a riser run, where its particles all lie at one
+    and the same height in every frame read (:data:`SAMPLED_FRAMES`, first to last) while
+    they move along another axis: the axis taken as the vertical is one along which they
+    never move (a 2D dump's z given as ``--vertical-axis z``), and no pass, residence or
+    model can come of it. Unlike :func:`unit_warnings`' findings, which may be meant, this
+    one is refused (a 2D file of flat heights keeps :func:`unit_warnings`' line).
 
     Parameters
     ----------
@@ -115,16 +116,18 @@ def flat_heights(traj) -> str | None:
         The line for the refusal; None where two or more particles are seen and their
         heights differ somewhere.
     """
+    if traj.dimensions != 3:
+        return None
     frames = np.unique(np.linspace(0, traj.n_frames - 1, SAMPLED_FRAMES).round().astype(int))
-    heights = np.stack([traj.positions(int(k))[:, 1] for k in frames])
-    seen = np.isfinite(heights)
+    positions = np.stack([traj.positions(int(k)) for k in frames])
+    seen = np.isfinite(positions).all(axis=2)
     if np.count_nonzero(seen.any(axis=0)) < 2:
         return None
-    values = heights[seen]
-    if values.max() > values.min():
+    values = positions[seen]
+    if values[:, 1].max() > values[:, 1].min() or np.ptp(values[:, 2]) == 0:
         return None
     axis = traj.parameters.get("vertical_axis") or "y"
-    return (f"every particle lies at the height {values[0]:g} m in every frame read (the "
+    return (f"every particle lies at the height {values[0, 1]:g} m in every frame read (the "
             f"vertical axis {axis}): the particles never move along it, so it is not the "
             "riser's vertical; give the axis along which they rise and fall with "
             "--vertical-axis x|y|z (a 2D dump: leave --vertical-axis out, y is vertical)")
