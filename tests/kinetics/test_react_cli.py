@@ -699,11 +699,21 @@ def test_a_kinetics_miss_within_the_references_own_sampling_is_not_told_apart():
     interval overlaps it: not a miss."""
     from cfbmarkov.cli.analysis import kinetics_verdict
 
-    model = {"exit_mean_interval": [0.8613, 0.8643], "interval_method": "Monte Carlo noise"}
+    model = {"exit_mean_interval": [0.8613, 0.8643],
+             "interval_method": "block bootstrap of the fitting window (exact exit means) "
+                                "and Monte Carlo noise, in quadrature"}
     line = kinetics_verdict("activity", 0.8648, model, 0.9, [0.8634, 0.8663])
     assert line.endswith("overlaps it: the two are not told apart")
     assert kinetics_verdict("activity", 0.8648, model, 0.9, [0.8646, 0.8663]).endswith(
         "the model misses the reference's activity beyond its uncertainty")
+    # an interval of the Monte Carlo noise alone (compare --resamples 0, a carried
+    # property) leaves out the fitting sample's uncertainty: no verdict from it
+    noise = {"exit_mean_interval": [0.8613, 0.8643], "interval_method": "Monte Carlo noise"}
+    line = kinetics_verdict("activity", 0.8648, noise, 0.9, [0.8646, 0.8663])
+    assert "beyond the Monte Carlo noise; the fitting sample's uncertainty, the larger part, " \
+        "is not in this interval (`--resamples 100` forms it), so no verdict" in line
+    assert "misses" not in line
+    assert "within the Monte Carlo noise" in kinetics_verdict("activity", 0.8620, noise, 0.9)
 
 
 def test_react_options_that_would_be_ignored_are_refused(fitted, tmp_path, capsys):

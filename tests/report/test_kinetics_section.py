@@ -98,12 +98,14 @@ def test_a_report_without_kinetics_has_no_section(report_of_template):
 
 
 def test_the_sentence_names_where_the_chain_loses():
-    def row(case, chain, seg, half_width=0.03):
+    def row(case, chain, seg, half_width=0.03, method="block bootstrap of the fitting "
+            "window (exact exit means) and Monte Carlo noise, in quadrature"):
         mean = 0.5 * (1 + chain / 100)
         return KineticsRow(case, "paper", {
             "reference": {"exit_mean": 0.5, "exit_mean_interval": [0.49, 0.51]},
             "model": {"exit_mean": mean, "pd_exit_mean": chain,
                       "exit_mean_interval": [mean - half_width, mean + half_width],
+                      "interval_method": method,
                       "exact": {"exit_mean": mean, "pd_exit_mean": chain}},
             "segregated_flow": {"exit_mean": 0.5 * (1 + seg / 100), "pd_exit_mean": seg}})
 
@@ -119,6 +121,11 @@ def test_the_sentence_names_where_the_chain_loses():
     assert "in 1 of 3 comparisons: the chain is consistent" in text
     assert "in 1 it lies outside but the reference's own interval overlaps" in text
     assert "in 1 the chain misses it beyond its uncertainty" in text
+    # an interval of the Monte Carlo noise alone draws no verdict, as compare says
+    text = verdict_sentence("X", [row("a", 3.0, 1.0, 0.006), row("b", 6.0, 1.0, 0.003,
+                                                                 "Monte Carlo noise only")])
+    assert "in 0 of 1 comparisons" in text and "misses it" not in text
+    assert "In 1 comparison the chain's interval holds the Monte Carlo noise alone" in text
 
 
 def test_a_carried_propertys_chain_is_its_monte_carlo_not_the_steady_state():

@@ -363,13 +363,22 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
         return ""
     lo, hi = interval
     method = model.get("interval_method") or "Monte Carlo noise only"
-    kind = ("the fitting window's bootstrap and Monte Carlo noise"
-            if method.startswith("block bootstrap") else "Monte Carlo noise only")
+    sampled = method.startswith("block bootstrap")
+    kind = ("the fitting window's bootstrap and Monte Carlo noise" if sampled
+            else "Monte Carlo noise only")
     place = _place(reference_mean, (lo, hi))
     d = _digits(reference_mean, (lo, hi))
     text = (f"{100 * level:g} % interval of the model's exit mean {_interval_text((lo, hi), d)} ({kind}; "
             f"the flow's variability left out): the reference's {reference_mean:.{d}g} lies "
             f"{place} it")
+    if not sampled and agreement != "not told apart":
+        # the fitting sample's uncertainty, most of it, is not in this interval
+        why = ("not formed for a carried property" if "carried" in method
+               else "`--resamples 100` forms it")
+        return text + (": within the Monte Carlo noise" if agreement == "inside" else
+                       ": beyond the Monte Carlo noise") + (
+            f"; the fitting sample's uncertainty, the larger part, is not in this interval "
+            f"({why}), so no verdict is drawn from it")
     if agreement == "inside":
         return text + ": the model is consistent with the reference within its uncertainty"
     if agreement == "not told apart":

@@ -186,12 +186,17 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
     from cfbmarkov.analysis.kinetics_compare import exit_mean_agreement
 
     agreement = {"inside": 0, "not told apart": 0, "missed": 0}
+    noise_only = 0
     for r in rows:
         said = exit_mean_agreement(r.side("reference").get("exit_mean"),
                                    r.side("model").get("exit_mean_interval"),
                                    r.side("reference").get("exit_mean_interval"))
-        if said is not None:
-            agreement[said] += 1
+        if said is None:
+            continue
+        if not str(r.side("model").get("interval_method") or "").startswith("block bootstrap"):
+            noise_only += 1   # the Monte Carlo noise alone: no verdict, as compare says
+            continue
+        agreement[said] += 1
     known = sum(agreement.values())
     if known:
         parts.append(
@@ -204,6 +209,11 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
                if agreement["not told apart"] else "")
             + (f"; in {agreement['missed']} the chain misses it beyond its uncertainty"
                if agreement["missed"] else "") + ".")
+    if noise_only:
+        parts.append(f"In {noise_only} comparison{'' if noise_only == 1 else 's'} the chain's "
+                     "interval holds the Monte Carlo noise alone (no bootstrap of the fitting "
+                     "window: a carried property, or none asked), which leaves out most of its "
+                     "uncertainty: no verdict is drawn from it.")
     return " ".join(parts)
 
 
