@@ -132,6 +132,30 @@ def test_react_resamples_give_the_activity_after_passes_its_intervals(fitted, tm
     assert after["1000000"]["mean"] == 0.0 and after["1000000"]["sd"] == 0.0
 
 
+def test_an_interval_beyond_the_laws_range_is_cut_there(fitted, tmp_path, capsys,
+                                                        monkeypatch):
+    """An activity cannot be negative nor a conversion exceed 1: where the bootstrap's
+    widened spread reaches beyond (after many passes a carried activity's mean nears 0;
+    a real model gave -5.6e-11 to 2.5e-7), the interval is cut at the law's range, and
+    the text says so (a minus beside the dash could not be read)."""
+    import cfbmarkov.analysis.bootstrap as bootstrap
+
+    _, _, model = fitted
+    monkeypatch.setattr(bootstrap, "interval_bounds",
+                        lambda point, *args, **kwargs: (point - 2.0, point + 2.0))
+    kin = _write(tmp_path, '[[property]]\nname = "a"\nlaw = "deactivation"\nrate = 0.8\n'
+                           'start = "carried"\n[[property]]\nname = "X"\n'
+                           'law = "first-order"\nrate = 0.4\n')
+    argv = ["react", str(model), "--kinetics", str(kin), "--resamples", "20", "--passes", "5"]
+    assert main(argv + ["--json"]) == 0
+    out = json.loads(capsys.readouterr().out)["properties"]
+    lo, hi = out["a"]["after_passes"]["5"]["mean_interval"]
+    assert lo == 0.0 and hi == pytest.approx(out["a"]["after_passes"]["5"]["mean"] + 2.0)
+    assert out["X"]["exit_mean_interval"] == [0.0, 1.0]
+    assert main(argv) == 0
+    assert "(cut at the least value its law allows)" in capsys.readouterr().out
+
+
 def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     folder, run, model = fitted
     kin = _write(tmp_path, GOOD, RATES)

@@ -153,7 +153,7 @@ def cmd_react(args) -> int:
                 bounds = intervals.get(p.name)
                 print(f"  {100 * args.level:g} % interval of {p.name}'s exit mean: "
                       + ("none (too few resamples with residences)" if bounds is None else
-                         f"{bounds[0]:.6g}-{bounds[1]:.6g}")
+                         _span(bounds))
                       + f" (the fitting window's block bootstrap, {taken} resamples; the "
                         "flow's variability between windows left out)")
         else:
@@ -176,8 +176,11 @@ def cmd_react(args) -> int:
                 if args.resamples:
                     print(f"  {100 * args.level:g} % intervals of {p.name}'s mean after "
                           f"{' / '.join(map(str, passes))} passes: "
-                          + " / ".join("none" if b is None else f"{b[0]:.6g}-{b[1]:.6g}"
-                                       for b in bounds))
+                          + " / ".join("none" if b is None else _span(b) for b in bounds)
+                          + (" (cut at the least value its law allows)" if any(
+                              b is not None and b[0] == getattr(p.law, "initial_range",
+                                                                (None,))[0]
+                              for b in bounds) else ""))
             elif p.start == "reference" and args.init is None:
                 print(f"  {p.name} (start = reference): the exact answers are those of a fresh "
                       f"feed entering at {p.initial:g} (start = entry); the reference's values "
@@ -249,27 +252,34 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
     for note in notes:
         print(f"warning: {one_line(note)}", file=sys.stderr)
     drawn = {"blocks": BOOTSTRAP_BLOCKS, "runs": len(fitting_runs(source))}
-    intervals = {}
-    for name, answer in answers.items():
-        boot = np.asarray((means or {}).get(name, []), dtype=float)
-        boot = boot[np.isfinite(boot)]
-        if boot.size < 10:
-            intervals[name] = None
-            continue
-        lo, hi = interval_bounds(answer.exit_mean, boot, answer.exit_mean, args.level,
-                                 **drawn)
-        intervals[name] = [float(lo), float(hi)]
-    after_intervals = {}
-    for (name, n), values in after.items():
+    # a property's values lie in its law's range (a conversion in [0, 1], an activity
+    # >= 0): an interval's end beyond it is cut there, as SD(RT)'s lower end is cut at 0
+    ranges = {p.name: getattr(p.law, "initial_range", (None, None))
+              for p in kinetics.properties}
+
+    def bounds(name, point, values):
         boot = np.asarray(values, dtype=float)
         boot = boot[np.isfinite(boot)]
-        point = answers[name].after_passes(n)[0]
-        after_intervals[(name, n)] = (None if boot.size < 10 else
-                                      [float(b) for b in interval_bounds(point, boot, point,
-                                                                         args.level,
-                                                                         **drawn)])
+        if boot.size < 10:
+            return None
+        lo, hi = interval_bounds(point, boot, point, args.level, **drawn)
+        low, high = ranges.get(name, (None, None))
+        return [float(lo if low is None else max(lo, low)),
+                float(hi if high is None else min(hi, high))]
+
+    intervals = {name: bounds(name, answer.exit_mean, (means or {}).get(name, []))
+                 for name, answer in answers.items()}
+    after_intervals = {(name, n): bounds(name, answers[name].after_passes(n)[0], values)
+                       for (name, n), values in after.items()}
     return (intervals, kinetics_resamples(model.n_states, args.resamples) if means else 0,
             after_intervals)
+
+
+def _span(bounds) -> str:
+    """An interval as text, 'a-b', or 'a to b' where an end is negative (a minus beside
+    the dash cannot be read)."""
+    lo, hi = bounds
+    return f"{lo:.6g} to {hi:.6g}" if min(lo, hi) < 0 else f"{lo:.6g}-{hi:.6g}"
 
 
 def _monte_carlo_bed_means(prediction, names) -> dict:
