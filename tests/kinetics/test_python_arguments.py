@@ -91,3 +91,11 @@ def test_a_negative_rate_is_refused_when_the_property_is_made_as_in_a_file():
     with pytest.raises(InputError, match=r"property X: rate -0.2 < 0"):
         Property("X", FirstOrder(), {"rate": ByCell(table)})
     Property("T", HeatExchange(), {"coefficient": 1.0, "temperature": -20.0}, initial=300.0)
+
+
+def test_a_heat_exchange_without_a_start_value_says_none_is_given():
+    """A temperature has no default start value: the refusal says none is given (it said
+    "not None", Python's word)."""
+    with pytest.raises(InputError, match=r"initial = \.\.\. \(the feed's value\), none is "
+                                         r"given$"):
+        Property("T", HeatExchange(), {"coefficient": 1.0, "temperature": 800.0})

@@ -111,7 +111,9 @@ class Property:
             check_finite(initial, "initial")
         except InputError:
             raise InputError(f"property {self.name}: give its finite start value as a number, "
-                             f"initial = ... (the feed's value), not {initial!r}") from None
+                             "initial = ... (the feed's value), "
+                             + ("none is given" if initial is None else f"not {initial!r}")
+                             ) from None
         low, high = getattr(self.law, "initial_range", (None, None))
         if (low is not None and float(initial) < low) or (high is not None
                                                           and float(initial) > high):
