@@ -26,6 +26,12 @@ SAMPLED_PAIRS = 10
 VELOCITY_MISMATCH = (5.0, 30.0)
 
 
+def _sampled_frames(traj) -> np.ndarray:
+    """The frames read to measure the particles' span: :data:`SAMPLED_FRAMES` of them,
+    evenly from the first to the last."""
+    return np.unique(np.linspace(0, traj.n_frames - 1, SAMPLED_FRAMES).round().astype(int))
+
+
 def unit_warnings(traj) -> list[str]:
     """The unit warnings of an imported trajectory file.
 
@@ -46,7 +52,7 @@ def unit_warnings(traj) -> list[str]:
     lines = []
     height, width = traj.height, traj.width
     low, high = HEIGHT_RANGE
-    frames = np.unique(np.linspace(0, traj.n_frames - 1, SAMPLED_FRAMES).round().astype(int))
+    frames = _sampled_frames(traj)
     sampled = np.concatenate([traj.positions(int(k)) for k in frames])
     sampled = sampled[np.isfinite(sampled).all(axis=1)]
     heights = sampled[:, 1]
@@ -118,7 +124,7 @@ def flat_heights(traj) -> str | None:
     """
     if traj.dimensions != 3:
         return None
-    frames = np.unique(np.linspace(0, traj.n_frames - 1, SAMPLED_FRAMES).round().astype(int))
+    frames = _sampled_frames(traj)
     positions = np.stack([traj.positions(int(k)) for k in frames])
     seen = np.isfinite(positions).all(axis=2)
     if np.count_nonzero(seen.any(axis=0)) < 2:
