@@ -144,8 +144,9 @@ def _eliminate(algebra, live, entries, with_falls, with_decay, steps=None):
         T_g^-1 x = y + Z K^-1 y[up_cols],  y = A_g^-1 x,  Z = A_g^-1 W,  K = I - Z[up_cols]
 
     (Golub and Van Loan, Sec. 2.1.4). A_g is factored once for all the levels that keep
-    the same states, and A_g^-1 D_g once for each pair of such levels: a level costs one
-    product with C columns and a C x C solve instead of an LU of T_g. K is the identity
+    the same states, and A_g^-1 on the columns of the states that pass down (D_g's
+    non-zero rows) once for each pair of such levels: a level costs two small products
+    with C columns and a C x C solve instead of an LU of T_g. K is the identity
     less the probabilities of leaving level g down and coming back to it, landing in the
     columns: a non-singular M-matrix wherever level g's states can reach the top."""
     levels, s = live.shape
