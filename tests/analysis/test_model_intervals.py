@@ -272,7 +272,7 @@ def test_resamples_of_a_long_tail_solve_their_moments_and_propagate_as_far_as_th
 
 def test_heads_side_by_side_are_each_chains_own_bit_for_bit(tmp_path):
     """The resamples' RTD heads propagated side by side on the union of their non-zeros
-    (first_passage.heads, chunks of HEAD_CHUNK chains) equal each chain's own propagation
+    (first_passage.heads, in chunks of any width) equal each chain's own propagation
     (rtd_moments_and_head) bit for bit, over more chains than a chunk holds, on a long
     tail and on a short one whose mass runs out before the last lag (zero after it); the
     moments are the same solve's."""
@@ -301,6 +301,10 @@ def test_heads_side_by_side_are_each_chains_own_bit_for_bit(tmp_path):
         if tol == 1e-10:
             for row, f in zip(got, own):
                 assert f.size == steps and np.array_equal(row, f)
+            # any chunk width (lanes of one SIMD register, a chunk per chain ...) gives the
+            # same bits: the chunks follow the thread count
+            for width in (1, 8, 24):
+                assert np.array_equal(heads(starts, steps, tol, chunk=width), got)
             continue
         # the head stops where a chain's mass left falls below tol, as the chain's own
         assert (got[:, -1] == 0).all() and (got.sum(axis=1) > 0).all()
@@ -367,3 +371,116 @@ def test_compares_prediction_interval_keeps_the_reference_windows_sampling(tmp_p
     model = fit_model(run, CellGrid(4, 16), flow.lag, (0.0, 120.0), "mle")
     observed = flow_variability(model, 120.0, sampling=True)
     assert observed.mean > 0.02 > flow_variability(model, 120.0).mean
+
+
+def test_head_chunks_give_each_thread_one_chunk_of_whole_lanes():
+    """first_passage.head_chunk: ceil(chains / threads) rounded up to whole SIMD lanes,
+    within its bounds, so that 100 resamples on 2 threads run as 2 chunks, not 7."""
+    from cfbmarkov.markov.first_passage import (HEAD_CHUNK, HEAD_CHUNK_MAX, HEAD_LANES,
+                                                head_chunk)
+
+    assert head_chunk(100, 2) == 56 and -(-100 // head_chunk(100, 2)) == 2
+    assert head_chunk(100, 1) == 104
+    assert head_chunk(100, 16) == HEAD_CHUNK
+    assert head_chunk(10_000, 2) == HEAD_CHUNK_MAX
+    for count in (1, 17, 99, 250):
+        for threads in (1, 2, 3, 8):
+            width = head_chunk(count, threads)
+            assert width % HEAD_LANES == 0 and HEAD_CHUNK <= width <= HEAD_CHUNK_MAX
+            assert width >= min(-(-count // threads), HEAD_CHUNK_MAX)
+
+
+@pytest.mark.parametrize("estimator", ["mle", "paper"])
+def test_stacked_resamples_form_the_estimators_chain_bit_for_bit(stationary_run, estimator):
+    """A resample's chain formed on the stacked counts (bootstrap._StackedCounts.split_chain)
+    is the estimator's split_chain of its summed counts, bit for bit, for both estimators;
+    a resample in which a state is never left gets None (the estimator fills that row)."""
+    from cfbmarkov.analysis import bootstrap
+    from cfbmarkov.markov.estimate import estimator_from_name
+
+    model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (1.0, 2.0), estimator)
+    est = estimator_from_name(estimator, model.state_space, model.lag)
+    weights = "frame_average_sum" if estimator == "paper" else "counts"
+    drawn = list(bootstrap._bootstrap_counts(model, 10, 12, 4, sparse=True))
+    assert all(isinstance(r, bootstrap._Resample) for r in drawn)
+    for resample in drawn:
+        got = resample.stacked.split_chain(resample.times, weights)
+        assert got is not None
+        for mine, theirs in zip(got, est.split_chain(resample.counts())):
+            theirs = theirs.tocsr()
+            theirs.sort_indices()
+            assert np.array_equal(mine.indptr, theirs.indptr)
+            assert np.array_equal(mine.indices, theirs.indices)
+            assert np.array_equal(mine.data, theirs.data)
+    # two blocks of a 3-state chain whose state 2 is left in the first block only
+    import scipy.sparse as sp
+
+    from cfbmarkov.markov.counting import TransitionCounts
+
+    def block(c):
+        c = sp.csr_array(np.array(c, np.int64))
+        zero = sp.csr_array((3, 3), dtype=np.int64)
+        return TransitionCounts(c, zero, zero, sp.csr_array(c, dtype=np.float64),
+                                np.ones(3, np.int64), 10)
+
+    stacked = bootstrap._StackedCounts([block([[1, 2, 0], [0, 1, 1], [1, 0, 1]]),
+                                        block([[2, 1, 0], [1, 1, 0], [0, 0, 0]])])
+    assert stacked.split_chain(np.array([1, 1]), weights) is not None
+    assert stacked.split_chain(np.array([0, 2]), weights) is None
+
+
+def test_fit_reads_its_window_once_for_the_interval_and_the_verdict(stationary_run,
+                                                                   monkeypatch):
+    """assess_fit discretises the fitting window once for the bootstrap and the verdict's
+    parts (each read it before), with the same interval and verdict as each reading its own;
+    runs other than those the model names are read by each stage as before."""
+    from cfbmarkov.analysis import fit_checks
+    from cfbmarkov.analysis.adequacy import assess_adequacy
+    from cfbmarkov.markov import discrete as discrete_module
+
+    model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (1.0, 4.0), "mle")
+    reads = []
+    original = discrete_module.discretize
+
+    def counting(*args, **kwargs):
+        reads.append(args[3] if len(args) > 3 else kwargs.get("window"))
+        return original(*args, **kwargs)
+
+    monkeypatch.setattr(discrete_module, "discretize", counting)
+    with pytest.warns(Warning):
+        assessed = fit_checks.assess_fit(model, resamples=20)
+    assert len(reads) == 1, reads
+    separate = model_intervals(fit_checks.record_fitting_data(model), resamples=20)
+    assert assessed.uncertainty.rt_mean_interval == separate.rt_mean_interval
+    assert np.array_equal(assessed.uncertainty.rtd_interval, separate.rtd_interval)
+    verdict = assess_adequacy(assessed, [stationary_run], [(1.0, 4.0)],
+                              uncertainty=assessed.uncertainty)
+    assert verdict.warnings == assessed.adequacy.warnings
+    # not the model's own run (a copy): no shared read, each stage its own
+    assert fit_checks._fitting_windows(model, [str(stationary_run) + ".other"],
+                                       [(1.0, 4.0)]) is None
+    assert fit_checks._fitting_windows(model, [stationary_run], [(1.0, 3.0)]) is None
+
+
+def test_the_flow_term_opens_each_run_once(tmp_path, monkeypatch):
+    """flow_variability reads the whole window and its blocks from one open file per run
+    (each open re-ran the frames' checks and reads)."""
+    from cfbmarkov.analysis import bootstrap
+
+    from cfbmarkov.markov import CellGrid
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    flow = RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                     vertical_spread=0.5, persistence=False)
+    run = write_run(tmp_path / "three.h5", flow, 3, 40.0, seed=1)
+    model = fit_model(run, CellGrid(4, 16), flow.lag, (0.0, 40.0), "mle")
+    opens = []
+    original = bootstrap.opened
+
+    def counting(source):
+        opens.append(source)
+        return original(source)
+
+    monkeypatch.setattr(bootstrap, "opened", counting)
+    assert bootstrap.flow_variability(model, 40.0) is not None
+    assert len(opens) == 1

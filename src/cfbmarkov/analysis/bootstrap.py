@@ -11,6 +11,8 @@ Ch. 8 (the moving-block bootstrap for dependent data) and Ch. 13 (percentile int
 
 from __future__ import annotations
 
+import contextlib
+
 import math
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -65,6 +67,29 @@ def fitting_runs(model) -> list[tuple[str, tuple[float, float]]]:
         return [(str(path), tuple(w)) for path, w in zip(model.source, runs)]
     raise InputError("intervals need the model's fitting data (its source file(s) and the "
                      "window of each)")
+
+
+def fitting_windows(model) -> list:
+    """The model's fitting window(s) discretised in its state space at its lag, as it was
+    fitted (a window at the file's start, of a space with memory: the frames with the
+    history it needs, ``short_history="skip"``), one per run of :func:`fitting_runs`: what
+    the bootstrap counts (``discrete`` of :func:`bootstrap_figures`, read here where not
+    given).
+
+    Returns
+    -------
+    list of cfbmarkov.markov.discrete.DiscreteTrajectories
+
+    Raises
+    ------
+    InputError
+        As :func:`fitting_runs`, or where a file cannot be read or the window lies outside
+        it (:func:`cfbmarkov.markov.discrete.discretize`).
+    """
+    from cfbmarkov.markov.discrete import discretize
+
+    return [discretize(source, model.state_space, model.lag, window, short_history="skip")
+            for source, window in fitting_runs(model)]
 
 
 def _resampled_rtd(model, window_length: float, direction: str, entry,
@@ -159,7 +184,7 @@ def _binned_lags(probability: np.ndarray, lag: float, edges: np.ndarray,
 
 
 def block_bootstrap_models(model, *, blocks: int = BOOTSTRAP_BLOCKS, resamples: int = 100,
-                           seed: int = 0):
+                           seed: int = 0, discrete=None):
     """Models fitted on block-bootstrap resamples of a model's fitting window.
 
     The fitting window (re-read from the model's source file) is cut into ``blocks``
@@ -182,6 +207,9 @@ def block_bootstrap_models(model, *, blocks: int = BOOTSTRAP_BLOCKS, resamples: 
         Resamples drawn (at least 1).
     seed : int, optional
         Seed of the resampling.
+    discrete : list of DiscreteTrajectories, optional
+        The fitting windows already discretised (:func:`fitting_windows`, one per run);
+        read from the files where not given.
 
     Returns
     -------
@@ -204,7 +232,8 @@ def block_bootstrap_models(model, *, blocks: int = BOOTSTRAP_BLOCKS, resamples: 
     """
     from cfbmarkov.markov.estimate import estimator_from_name
 
-    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=False)
+    totals = _bootstrap_counts(model, blocks, resamples, seed, sparse=False,
+                               discrete=discrete)
     estimator = estimator_from_name(model.estimator, model.state_space, model.lag,
                                     connected=model.connected)
 
@@ -219,11 +248,12 @@ def block_bootstrap_models(model, *, blocks: int = BOOTSTRAP_BLOCKS, resamples: 
     return draw()
 
 
-def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: bool):
+def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: bool,
+                      discrete=None):
     """The summed counts of each block-bootstrap resample of the model's fitting window
     (:func:`block_bootstrap_models`; dense, or scipy.sparse with ``sparse``). Checks and
-    counts on the call; the sums are formed as the iterator is consumed."""
-    from cfbmarkov.markov.discrete import discretize
+    counts on the call; the sums are formed as the iterator is consumed. ``discrete``: the
+    fitting windows already discretised (:func:`fitting_windows`), one per run."""
     from cfbmarkov.markov.counting import count_transitions
 
     if int(blocks) < 2 or int(resamples) < 1:
@@ -232,10 +262,13 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
     blocks = int(blocks)
     frame_average = model.estimator == "paper"
     counts = []           # blocks of run r at counts[r * blocks: (r + 1) * blocks]
-    for source, window in fitting_runs(model):
-        # as the model was fitted (an automatic choice at the file's start: "skip")
-        discrete = discretize(source, model.state_space, model.lag, window,
-                              short_history="skip")
+    runs = fitting_runs(model)
+    if discrete is None:
+        discrete = fitting_windows(model)
+    elif len(discrete) != len(runs):
+        raise InputError(f"{len(discrete)} discretised windows for a model fitted on "
+                         f"{len(runs)} run(s): give one per run, or none")
+    for (source, window), discrete in zip(runs, discrete):
         # the frame pairs (t, t + lag) are split, by their first frame, into contiguous
         # blocks: each pair is counted in exactly one block, none across a block's edge lost
         lag_frames = int(discrete.lag_frames)
@@ -260,7 +293,8 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
             picked = np.concatenate([r * blocks + rng.integers(0, blocks, blocks)
                                      for r in range(runs)])
             if stacked is not None:
-                yield stacked.total(np.bincount(picked, minlength=len(counts)))
+                # the sums formed where the resample's figures are (a worker thread)
+                yield _Resample(stacked, np.bincount(picked, minlength=len(counts)))
                 continue
             total = counts[picked[0]]
             for k in picked[1:]:
@@ -268,6 +302,19 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
             yield total
 
     return draw()
+
+
+@dataclass(frozen=True)
+class _Resample:
+    """One resample of :class:`_StackedCounts`: block b taken ``times[b]`` times; its
+    counts (:meth:`counts`) or its chain (:meth:`_StackedCounts.split_chain`) formed where
+    it is used."""
+
+    stacked: "_StackedCounts"
+    times: np.ndarray
+
+    def counts(self):
+        return self.stacked.total(self.times)
 
 
 class _StackedCounts:
@@ -328,6 +375,54 @@ class _StackedCounts:
                                 fields["frame_average_sum"], occupied,
                                 int(times @ self.frame_pairs))
 
+    def split_chain(self, times: np.ndarray, weights: str):
+        """The resample's chain split by pass direction, (P_up, P_down, P_stay) as
+        :meth:`~cfbmarkov.markov.estimate.TransitionEstimator.split_chain` forms it from
+        :meth:`total`'s counts: the same operations on each non-zero (row sums by the same
+        numpy reduction), so the same bits, in a few numpy operations on the stacked
+        non-zeros instead of a dozen scipy.sparse ones (3.6 ms a resample of a 228-state
+        chain, mostly under the GIL that the threads computing the resamples' figures
+        share). ``weights``: the field whose rows are normalised (``counts``: maximum
+        likelihood; ``frame_average_sum``: the paper's). None where a state is never left
+        in the resample (the estimator fills its row from its cell, or keeps it in place:
+        :meth:`total`'s counts and the estimator then)."""
+        import scipy.sparse as sp
+
+        names = ("counts", "counts_up", "counts_down", weights)
+        if any(self.stacks.get(name) is None for name in names):
+            return None
+        fields = {}
+        for name in names:
+            data = times.astype(np.float64) @ self.stacks[name]
+            if self.integer[name]:      # as total(): whole counts, then float64
+                data = np.rint(data).astype(np.int64).astype(np.float64)
+            fields[name] = data
+        c, w = fields["counts"], fields[weights]
+        lengths = np.diff(self.indptr)
+        rows = np.repeat(np.arange(self.s), lengths)
+        counted = c != 0.0
+        if np.bincount(rows[counted], minlength=self.s).min() == 0:
+            return None                # a state never left: the estimator's fill
+        # the weights' row sums as scipy sums a CSR matrix's rows (np.add.reduceat over
+        # the non-zeros of each non-empty row): the same bits
+        nonzero = w != 0.0
+        ends = np.concatenate([[0], np.cumsum(nonzero)])[self.indptr]
+        filled = np.flatnonzero(ends[1:] > ends[:-1])
+        totals = np.zeros(self.s)
+        totals[filled] = np.add.reduceat(w[nonzero], ends[:-1][filled])
+        scale = np.divide(1.0, totals, out=np.zeros_like(totals), where=totals > 0)
+        inverse = np.divide(1.0, c, out=np.zeros_like(c), where=counted)
+        share = (scale[rows] * w) * inverse        # P_ij / C_ij on the counted pairs
+        up, down = fields["counts_up"], fields["counts_down"]
+        parts = []
+        for values in (up, down, (c - up) - down):
+            part = share * values
+            keep = part != 0.0
+            indptr = np.concatenate([[0], np.cumsum(keep)])[self.indptr]
+            parts.append(sp.csr_matrix((part[keep], self.indices[keep], indptr),
+                                       shape=(self.s, self.s)))
+        return tuple(parts)
+
 
 @dataclass(frozen=True)
 class _SplitChain:
@@ -364,7 +459,14 @@ def _split_chain_former(model):
 
     estimator = estimator_from_name(model.estimator, model.state_space, model.lag)
 
+    weights = "frame_average_sum" if model.estimator == "paper" else "counts"
+
     def chain_of(total) -> _SplitChain:
+        if isinstance(total, _Resample):
+            parts = total.stacked.split_chain(total.times, weights)
+            if parts is not None:
+                return _SplitChain(*parts, model.state_space, model.lag)
+            total = total.counts()
         return _SplitChain(*estimator.split_chain(total), model.state_space, model.lag)
 
     return chain_of
@@ -524,35 +626,33 @@ def flow_variability(model, window_length: float, *, direction: str | None = Non
         raise InputError(f"the flow's variability needs at least 2 blocks ({blocks})")
     direction = model.flow_direction if direction is None else direction
     runs = fitting_runs(model)
-    whole = []
-    for source, window in runs:
-        with opened(source) as traj:
-            whole.append(residence_times(traj, window, use_events=False,
-                                         lag_frames=traj.lag_frames(model.lag),
-                                         direction=direction, split_at_absences=True,
-                                         face_band=traj.height / model.state_space.rows
-                                         ).samples)
-    pooled = np.concatenate(whole)
-    if pooled.size < 2:
-        return None
-    observed, lengths, group = [], [], []
-    for r, (source, (a, b)) in enumerate(runs):
-        # blocks at least FLOW_BLOCK_RESIDENCES mean residences long, so that a block's own
-        # window cuts off few of its residences
-        n = min(int(blocks), int((b - a) / (FLOW_BLOCK_RESIDENCES * pooled.mean())))
-        if n < 1 or (n < 2 and (len(runs) == 1 or within_runs)):
-            continue
-        cuts = a + (b - a) * np.arange(n + 1) / n
-        with opened(source) as traj:
-            lag_frames = traj.lag_frames(model.lag)
-            observed += [residence_times(traj, (float(cuts[k]), float(cuts[k + 1])),
-                                         use_events=False, lag_frames=lag_frames,
-                                         direction=direction, split_at_absences=True,
-                                         face_band=traj.height / model.state_space.rows
-                                         ).samples
+    with contextlib.ExitStack() as stack:
+        # each file opened once: its frames' checks and reads serve the whole window and
+        # its blocks
+        files = [stack.enter_context(opened(source)) for source, _ in runs]
+
+        def samples(traj, window):
+            return residence_times(traj, window, use_events=False,
+                                   lag_frames=traj.lag_frames(model.lag), direction=direction,
+                                   split_at_absences=True,
+                                   face_band=traj.height / model.state_space.rows).samples
+
+        pooled = np.concatenate([samples(traj, window)
+                                 for traj, (_, window) in zip(files, runs)])
+        if pooled.size < 2:
+            return None
+        observed, lengths, group = [], [], []
+        for r, (traj, (_, (a, b))) in enumerate(zip(files, runs)):
+            # blocks at least FLOW_BLOCK_RESIDENCES mean residences long, so that a block's
+            # own window cuts off few of its residences
+            n = min(int(blocks), int((b - a) / (FLOW_BLOCK_RESIDENCES * pooled.mean())))
+            if n < 1 or (n < 2 and (len(runs) == 1 or within_runs)):
+                continue
+            cuts = a + (b - a) * np.arange(n + 1) / n
+            observed += [samples(traj, (float(cuts[k]), float(cuts[k + 1])))
                          for k in range(n)]
-        lengths += [(b - a) / n] * n
-        group += [r if within_runs else 0] * n
+            lengths += [(b - a) / n] * n
+            group += [r if within_runs else 0] * n
     if len(observed) < 2:
         return None
     rel_mean, rel_sd, noise_mean, noise_sd, compared = [], [], [], [], set()
@@ -613,7 +713,7 @@ def _beyond_noise(relative: list[float], noise: list[float]) -> float:
 
 def bootstrap_figures(model, window_length: float | None, direction: str, entry, edges,
                       blocks: int, resamples: int, seed: int, curve=None,
-                      deficit_levels: int | None = None, occupancy=None):
+                      deficit_levels: int | None = None, occupancy=None, discrete=None):
     """E(RT), SD(RT) and the RTD per bin of ``edges`` of each block-bootstrap resample of
     the model's fitting window (and, with ``curve`` = (lags, states, left), its expected
     mixing curve at those lags): the model's spread, shared by both kinds of interval.
@@ -641,6 +741,9 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
     occupancy : ndarray of float64, shape (S,), optional
         With ``window_length``, where the window's particles start (default the fitted
         model's :func:`~cfbmarkov.markov.model_rtd.window_start_occupancy`).
+    discrete : list of DiscreteTrajectories, optional
+        The fitting windows already discretised (:func:`fitting_windows`); read where not
+        given.
 
     Returns
     -------
@@ -662,10 +765,12 @@ def bootstrap_figures(model, window_length: float | None, direction: str, entry,
             and direction in ("up", "down")):
         # the resamples' RTDs and mixing curves from sparse chains (no [S, S] model each),
         # each formed from its counts in the thread that computes its figures
-        drawn = _bootstrap_counts(model, blocks, resamples, seed, sparse=True)
+        drawn = _bootstrap_counts(model, blocks, resamples, seed, sparse=True,
+                                  discrete=discrete)
         chain_of = _split_chain_former(model)
     else:
-        drawn = block_bootstrap_models(model, blocks=blocks, resamples=resamples, seed=seed)
+        drawn = block_bootstrap_models(model, blocks=blocks, resamples=resamples, seed=seed,
+                                       discrete=discrete)
     # a long tail beyond the bins, a small chain: the resamples' moments solved for
     # (_resampled_intrinsic)
     solve = (window_length is None and deficit_levels is not None and entry is not None

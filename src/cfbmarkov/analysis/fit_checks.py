@@ -127,6 +127,8 @@ def assess_fit(model, runs: Sequence | None = None,
         raise InputError(f"{', '.join(map(str, runs))}: {text}") from None
     except CfbmarkovError:
         has_rtd = False            # no circulation at all: a model without residence times
+    discrete = (_fitting_windows(model, runs, windows) if resamples and has_rtd and verdict
+                else None)
     if resamples and has_rtd:
         from cfbmarkov.analysis.intervals import model_intervals
 
@@ -135,7 +137,8 @@ def assess_fit(model, runs: Sequence | None = None,
                    f"bootstrap resamples of the fitting window{pooled}"):
             try:
                 model = model.with_uncertainty(model_intervals(model, level=level,
-                                                               resamples=resamples))
+                                                               resamples=resamples,
+                                                               discrete=discrete))
             except CfbmarkovError as exc:
                 warnings.warn(f"no interval for the model's E(RT) and SD(RT): {exc}",
                               IntervalWarning, stacklevel=2)
@@ -146,10 +149,37 @@ def assess_fit(model, runs: Sequence | None = None,
         with stage("sample verdict", "the fitting sample's verdict: the window's halves "
                    "and quarters refitted and compared"):
             model = model.with_adequacy(assess_adequacy(model, runs, windows,
+                                                        discrete=discrete,
                                                         uncertainty=model.uncertainty))
         for line in model.adequacy.warnings:      # seen in a notebook, as predict repeats them
             warnings.warn(line, SampleWarning, stacklevel=2)
     return model
+
+
+def _fitting_windows(model, runs, windows):
+    """The fitting windows discretised once, for the interval's bootstrap and the verdict's
+    parts (each read them on its own before: 0.2-0.25 s a read of a paper-scale window),
+    where ``runs`` and ``windows`` are the files and windows the model names, in its order
+    (the interval reads those); else None (each stage reads its own, and says why where it
+    cannot)."""
+    import os
+
+    from cfbmarkov.analysis.bootstrap import fitting_runs
+    from cfbmarkov.markov.discrete import discretize
+
+    try:
+        named = fitting_runs(model)
+        if len(named) != len(runs):
+            return None
+        for (source, window), run, given in zip(named, runs, windows):
+            path = getattr(run, "path", run)
+            if (os.path.realpath(path) != os.path.realpath(source)
+                    or tuple(map(float, window)) != tuple(map(float, given))):
+                return None
+        return [discretize(run, model.state_space, model.lag, window, short_history="skip")
+                for run, window in zip(runs, windows)]
+    except (CfbmarkovError, TypeError, OSError):
+        return None
 
 
 def record_fitting_data(model, runs: Sequence | None = None,

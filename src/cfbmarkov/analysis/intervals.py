@@ -519,7 +519,8 @@ def _shallow_rtd(model, exact, direction: str, edges: np.ndarray) -> _Shallow | 
 
 
 def model_intervals(model, *, level: float = 0.9, blocks: int = BOOTSTRAP_BLOCKS,
-                    resamples: int = 100, seed: int = 0, direction: str | None = None):
+                    resamples: int = 100, seed: int = 0, direction: str | None = None,
+                    discrete=None):
     """Intervals of a fitted model's exact E(RT), SD(RT) and RTD per bin, from its fitting
     window alone (``docs/definitions.md``, The model's interval).
 
@@ -559,6 +560,10 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = BOOTSTRAP_BLOCKS
     direction : {"up", "down"}, optional
         The direction residences are counted in (:meth:`MarkovModel.rtd`); default the
         model's ``flow_direction``, the direction of its fitting window's net solids flow.
+    discrete : list of DiscreteTrajectories, optional
+        The fitting window(s) already discretised, one per run
+        (:func:`cfbmarkov.analysis.bootstrap.fitting_windows`: what ``fit`` reads once for
+        the interval and the verdict); read from the file(s) where not given.
 
     Returns
     -------
@@ -592,7 +597,8 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = BOOTSTRAP_BLOCKS
     shallow = _shallow_rtd(model, exact, direction, edges)
     means, sds, rtds, _ = bootstrap_figures(
         model, None, direction, exact.entry_distribution, edges, int(blocks), int(resamples),
-        seed, deficit_levels=(exact if shallow is None else shallow).deficit_levels)
+        seed, deficit_levels=(exact if shallow is None else shallow).deficit_levels,
+        discrete=discrete)
     if len(means) < 10:
         raise InputError("intervals: fewer than 10 bootstrap resamples had residences")
     if shallow is not None:     # each resample's spread, scaled to the full depth
