@@ -484,3 +484,21 @@ def test_the_flow_term_opens_each_run_once(tmp_path, monkeypatch):
     monkeypatch.setattr(bootstrap, "opened", counting)
     assert bootstrap.flow_variability(model, 40.0) is not None
     assert len(opens) == 1
+
+
+def test_the_interval_cost_script_times_the_heads_in_chunks_of_each_width(stationary_run,
+                                                                         tmp_path, capsys):
+    """benchmarks/interval_cost.py on a small model: the interval's time, its window read,
+    and the heads in chunks of each width given, every width the same bits."""
+    import runpy
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[2] / "benchmarks" / "interval_cost.py"
+    model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (1.0, 3.0), "mle")
+    path = model.save(tmp_path / "m.h5")
+    main_of = runpy.run_path(str(script))["main"]
+    assert main_of([str(path), "--resamples", "12", "--repeats", "1", "--widths", "8,24"]) == 0
+    out = capsys.readouterr().out
+    assert "model_intervals:" in out and "its window read alone" in out
+    assert "2 chunk(s) of 8: " in out and "1 chunk(s) of 24: " in out
+    assert out.count("(same bits)") == 2 and "DIFFER" not in out

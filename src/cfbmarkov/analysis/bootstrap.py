@@ -380,9 +380,8 @@ class _StackedCounts:
         :meth:`~cfbmarkov.markov.estimate.TransitionEstimator.split_chain` forms it from
         :meth:`total`'s counts: the same operations on each non-zero (row sums by the same
         numpy reduction), so the same bits, in a few numpy operations on the stacked
-        non-zeros instead of a dozen scipy.sparse ones (3.6 ms a resample of a 228-state
-        chain, mostly under the GIL that the threads computing the resamples' figures
-        share). ``weights``: the field whose rows are normalised (``counts``: maximum
+        non-zeros instead of a dozen scipy.sparse ones, whose Python overhead holds the
+        GIL that the threads computing the resamples' figures share. ``weights``: the field whose rows are normalised (``counts``: maximum
         likelihood; ``frame_average_sum``: the paper's). None where a state is never left
         in the resample (the estimator fills its row from its cell, or keeps it in place:
         :meth:`total`'s counts and the estimator then)."""

@@ -1037,12 +1037,14 @@ def head_chunk(count: int, threads: int) -> int:
     ceil(count / threads) rounded up to a multiple of :data:`HEAD_LANES`, within
     [:data:`HEAD_CHUNK`, :data:`HEAD_CHUNK_MAX`].
 
-    The kernel's cost per chain falls as the chunk widens (each non-zero's index and
-    source row are read once a lag for the whole chunk): 100 resamples of a 228-state
-    model on 9 levels, 1001 lags, took 2.3 s in chunks of 16 chains and 1.4 s in one of
-    104 on one thread (0.82 s in two of 56 on two, against 1.29 s in seven of 16), so one
-    chunk per thread is the fastest. Each chain's sums run in the same order whatever its
-    chunk (:func:`_heads_of_chains`): the width changes no bit."""
+    The kernel's cost per chain falls as the chunk widens (each non-zero's index is read
+    once a lag for the whole chunk, and the loop over its chains runs longer), and a
+    thread left without a chunk is lost: 100 resamples of the paper-scale 3 m/s mle model
+    (228 states on 9 levels, 1001 lags) took 1.05 s in two chunks of 56 on two threads
+    against 1.43 s in seven of 16, and 1.94 s in one chunk of 104 on one thread against
+    2.43 s in seven of 16 (``python benchmarks/interval_cost.py MODEL.h5``, 2026-12-07).
+    Each chain's sums run in the same order whatever its chunk
+    (:func:`_heads_of_chains`): the width changes no bit."""
     per_thread = -(-int(count) // max(int(threads), 1))
     width = HEAD_LANES * -(-per_thread // HEAD_LANES)
     return int(min(max(width, HEAD_CHUNK), HEAD_CHUNK_MAX))
