@@ -74,9 +74,9 @@ def main(argv=None) -> int:
         model = MarkovModel.load(path)
         model.rtd()
         model_intervals(model, resamples=args.resamples)          # loads the kernels
-        whole = _median_time(lambda: model_intervals(model, resamples=args.resamples),
+        whole = _median_time(lambda m=model: model_intervals(m, resamples=args.resamples),
                              args.repeats)
-        read = _median_time(lambda: fitting_windows(model), args.repeats)
+        read = _median_time(lambda m=model: fitting_windows(m), args.repeats)
         starts, steps = _head_starts(model, args.resamples)
         widths = ([int(w) for w in args.widths.split(",")] if args.widths else
                   sorted({head_chunk(len(starts), threads), 16}))
@@ -89,7 +89,8 @@ def main(argv=None) -> int:
             if reference is None:
                 reference = got
             same = "same bits" if np.array_equal(got, reference) else "BITS DIFFER"
-            seconds = _median_time(lambda: heads(starts, steps, chunk=width), args.repeats)
+            seconds = _median_time(lambda s=starts, n=steps, w=width: heads(s, n, chunk=w),
+                                   args.repeats)
             chunks = -(-len(starts) // width)
             print(f"  heads, {steps} lags, {chunks} chunk(s) of {width}: {seconds:.3f} s "
                   f"({same})")

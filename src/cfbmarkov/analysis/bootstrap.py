@@ -12,7 +12,6 @@ Ch. 8 (the moving-block bootstrap for dependent data) and Ch. 13 (percentile int
 from __future__ import annotations
 
 import contextlib
-
 import math
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
@@ -268,19 +267,19 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
     elif len(discrete) != len(runs):
         raise InputError(f"{len(discrete)} discretised windows for a model fitted on "
                          f"{len(runs)} run(s): give one per run, or none")
-    for (source, window), discrete in zip(runs, discrete):
+    for (source, window), frames in zip(runs, discrete):
         # the frame pairs (t, t + lag) are split, by their first frame, into contiguous
         # blocks: each pair is counted in exactly one block, none across a block's edge lost
-        lag_frames = int(discrete.lag_frames)
-        pairs = discrete.times.size - lag_frames
+        lag_frames = int(frames.lag_frames)
+        pairs = frames.times.size - lag_frames
         if pairs < blocks:
             raise InputError(f"the fitting window {window[0]:g}-{window[1]:g} s of {source} "
                              f"holds {max(pairs, 0)} frame pairs one lag apart, fewer than the "
                              f"{blocks} bootstrap blocks")
         cuts = np.rint(np.linspace(0, pairs, blocks + 1)).astype(np.int64)
-        times = discrete.times
-        counts += [count_transitions(discrete.block(float(times[a]),
-                                                    float(times[b - 1 + lag_frames])),
+        times = frames.times
+        counts += [count_transitions(frames.block(float(times[a]),
+                                                  float(times[b - 1 + lag_frames])),
                                      frame_average=frame_average, sparse=sparse)
                    for a, b in zip(cuts[:-1], cuts[1:])]
     runs = len(counts) // blocks
@@ -381,9 +380,10 @@ class _StackedCounts:
         :meth:`total`'s counts: the same operations on each non-zero (row sums by the same
         numpy reduction), so the same bits, in a few numpy operations on the stacked
         non-zeros instead of a dozen scipy.sparse ones, whose Python overhead holds the
-        GIL that the threads computing the resamples' figures share. ``weights``: the field whose rows are normalised (``counts``: maximum
-        likelihood; ``frame_average_sum``: the paper's). None where a state is never left
-        in the resample (the estimator fills its row from its cell, or keeps it in place:
+        GIL that the threads computing the resamples' figures share. ``weights``: the
+        field whose rows are normalised (``counts``: maximum likelihood;
+        ``frame_average_sum``: the paper's). None where a state is never left in the
+        resample (the estimator fills its row from its cell, or keeps it in place:
         :meth:`total`'s counts and the estimator then)."""
         import scipy.sparse as sp
 

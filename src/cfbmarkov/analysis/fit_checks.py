@@ -159,9 +159,9 @@ def assess_fit(model, runs: Sequence | None = None,
 def _fitting_windows(model, runs, windows):
     """The fitting windows discretised once, for the interval's bootstrap and the verdict's
     parts (0.22 s a read of the paper-scale 3 m/s window: ``python
-    benchmarks/interval_cost.py MODEL.h5``, 2026-12-07), where ``runs`` and ``windows`` are the files and windows the model names, in its order
-    (the interval reads those); else None (each stage reads its own, and says why where it
-    cannot)."""
+    benchmarks/interval_cost.py MODEL.h5``, 2026-12-07), where ``runs`` and ``windows``
+    are the files and windows the model names, in its order (the interval reads those);
+    else None (each stage reads its own, and says why where it cannot)."""
     import os
 
     from cfbmarkov.analysis.bootstrap import fitting_runs
