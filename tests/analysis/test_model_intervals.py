@@ -502,3 +502,24 @@ def test_the_interval_cost_script_times_the_heads_in_chunks_of_each_width(statio
     assert "model_intervals:" in out and "its window read alone" in out
     assert "2 chunk(s) of 8: " in out and "1 chunk(s) of 24: " in out
     assert out.count("(same bits)") == 2 and "DIFFER" not in out
+
+
+def test_discretised_windows_given_to_the_interval_must_be_the_models_own(stationary_run):
+    """model_intervals(discrete=...) counts the windows it is given: one of another window,
+    lag or state space is refused in one line (no interval of other data), as is a list of
+    another length; the model's own (fitting_windows) give the interval read from the file."""
+    from cfbmarkov.analysis.bootstrap import fitting_windows
+    from cfbmarkov.markov import CellGrid
+    from cfbmarkov.markov.discrete import discretize
+
+    model = fit_model(stationary_run, FLOW.grid, FLOW.lag, (1.0, 3.0), "mle")
+    own = fitting_windows(model)
+    given = model_intervals(model, resamples=12, discrete=own)
+    assert given.rt_mean_interval == model_intervals(model, resamples=12).rt_mean_interval
+    for other in (discretize(stationary_run, FLOW.grid, FLOW.lag, (1.0, 2.5)),
+                  discretize(stationary_run, FLOW.grid, 2 * FLOW.lag, (1.0, 3.0)),
+                  discretize(stationary_run, CellGrid(3, 4), FLOW.lag, (1.0, 3.0))):
+        with pytest.raises(InputError, match="not the model's fitting window"):
+            model_intervals(model, resamples=12, discrete=[other])
+    with pytest.raises(InputError, match="give one per run"):
+        model_intervals(model, resamples=12, discrete=own * 2)

@@ -267,6 +267,16 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
     elif len(discrete) != len(runs):
         raise InputError(f"{len(discrete)} discretised windows for a model fitted on "
                          f"{len(runs)} run(s): give one per run, or none")
+    for k, (frames, (_, window)) in enumerate(zip(discrete, runs)):
+        lag = frames.lag_frames * frames.frame_interval
+        if (frames.state_space != model.state_space
+                or not math.isclose(lag, model.lag, rel_tol=1e-6)
+                or frames.window is None
+                or not all(math.isclose(a, b, abs_tol=1e-9)
+                           for a, b in zip(frames.window, window))):
+            raise InputError(f"discretised window {k + 1} is not the model's fitting window "
+                             f"(its state space, lag or window differs): give those of "
+                             f"bootstrap.fitting_windows(model), or none")
     for (source, window), frames in zip(runs, discrete):
         # the frame pairs (t, t + lag) are split, by their first frame, into contiguous
         # blocks: each pair is counted in exactly one block, none across a block's edge lost
