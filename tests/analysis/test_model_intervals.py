@@ -383,11 +383,19 @@ def test_head_chunks_give_each_thread_one_chunk_of_whole_lanes():
     assert head_chunk(100, 1) == 104
     assert head_chunk(100, 16) == HEAD_CHUNK
     assert head_chunk(10_000, 2) == HEAD_CHUNK_MAX
-    for count in (1, 17, 99, 250):
+    # beyond HEAD_CHUNK_MAX chains a thread: the chains shared evenly, not one full chunk
+    # and one nearly empty
+    assert head_chunk(129, 1) == 72 and head_chunk(300, 2) == 80
+    for count in (1, 17, 99, 129, 250, 257, 1000):
         for threads in (1, 2, 3, 8):
             width = head_chunk(count, threads)
             assert width % HEAD_LANES == 0 and HEAD_CHUNK <= width <= HEAD_CHUNK_MAX
-            assert width >= min(-(-count // threads), HEAD_CHUNK_MAX)
+            chunks = -(-count // width)
+            # as few chunks as the widest allows, as many for each thread
+            assert width == HEAD_CHUNK or \
+                chunks <= threads * -(-count // (threads * HEAD_CHUNK_MAX)), (count, threads)
+            if width > HEAD_CHUNK:     # the empty places: less than a lane group a chunk
+                assert chunks * width - count < chunks * HEAD_LANES, (count, threads)
 
 
 @pytest.mark.parametrize("estimator", ["mle", "paper"])
@@ -504,10 +512,12 @@ def test_the_interval_cost_script_times_the_heads_in_chunks_of_each_width(statio
     assert out.count("(same bits)") == 2 and "DIFFER" not in out
 
 
-def test_discretised_windows_given_to_the_interval_must_be_the_models_own(stationary_run):
+def test_discretised_windows_given_to_the_interval_must_be_the_models_own(stationary_run,
+                                                                          tmp_path):
     """model_intervals(discrete=...) counts the windows it is given: one of another window,
-    lag or state space is refused in one line (no interval of other data), as is a list of
-    another length; the model's own (fitting_windows) give the interval read from the file."""
+    lag, state space or file is refused in one line (no interval of other data), as are a
+    list of another length and what is not a discretised window; the model's own
+    (fitting_windows, in a list or an iterator) give the interval read from the file."""
     from cfbmarkov.analysis.bootstrap import fitting_windows
     from cfbmarkov.markov import CellGrid
     from cfbmarkov.markov.discrete import discretize
@@ -523,3 +533,14 @@ def test_discretised_windows_given_to_the_interval_must_be_the_models_own(statio
             model_intervals(model, resamples=12, discrete=[other])
     with pytest.raises(InputError, match="give one per run"):
         model_intervals(model, resamples=12, discrete=own * 2)
+    # the same window of another run (a copy of the file elsewhere) is other data
+    import shutil
+
+    copy = shutil.copy(stationary_run, tmp_path / "copy.h5")
+    with pytest.raises(InputError, match="its file, state space, lag or window differs"):
+        model_intervals(model, resamples=12,
+                        discrete=[discretize(copy, FLOW.grid, FLOW.lag, (1.0, 3.0))])
+    with pytest.raises(InputError, match="is a NoneType, not a DiscreteTrajectories"):
+        model_intervals(model, resamples=12, discrete=[None])
+    assert model_intervals(model, resamples=12, discrete=iter(own)).rt_mean_interval == \
+        given.rt_mean_interval

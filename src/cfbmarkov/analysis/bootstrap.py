@@ -262,21 +262,8 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
     frame_average = model.estimator == "paper"
     counts = []           # blocks of run r at counts[r * blocks: (r + 1) * blocks]
     runs = fitting_runs(model)
-    if discrete is None:
-        discrete = fitting_windows(model)
-    elif len(discrete) != len(runs):
-        raise InputError(f"{len(discrete)} discretised windows for a model fitted on "
-                         f"{len(runs)} run(s): give one per run, or none")
-    for k, (frames, (_, window)) in enumerate(zip(discrete, runs)):
-        lag = frames.lag_frames * frames.frame_interval
-        if (frames.state_space != model.state_space
-                or not math.isclose(lag, model.lag, rel_tol=1e-6)
-                or frames.window is None
-                or not all(math.isclose(a, b, abs_tol=1e-9)
-                           for a, b in zip(frames.window, window))):
-            raise InputError(f"discretised window {k + 1} is not the model's fitting window "
-                             f"(its state space, lag or window differs): give those of "
-                             f"bootstrap.fitting_windows(model), or none")
+    discrete = fitting_windows(model) if discrete is None else _checked_windows(
+        model, runs, discrete)
     for (source, window), frames in zip(runs, discrete):
         # the frame pairs (t, t + lag) are split, by their first frame, into contiguous
         # blocks: each pair is counted in exactly one block, none across a block's edge lost
@@ -311,6 +298,35 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
             yield total
 
     return draw()
+
+
+def _checked_windows(model, runs, discrete) -> list:
+    """``discrete`` as a list, refused in one line unless it holds each of ``runs``' fitting
+    window in the model's state space and lag, read from that run's file: the interval is
+    of the model's own fitting data or none."""
+    import os
+
+    from cfbmarkov.markov.discrete import DiscreteTrajectories
+
+    discrete = list(discrete)
+    if len(discrete) != len(runs):
+        raise InputError(f"{len(discrete)} discretised windows for a model fitted on "
+                         f"{len(runs)} run(s): give one per run, or none")
+    fix = "give those of bootstrap.fitting_windows(model), or none"
+    for k, (frames, (source, window)) in enumerate(zip(discrete, runs)):
+        if not isinstance(frames, DiscreteTrajectories):
+            raise InputError(f"discretised window {k + 1} is a {type(frames).__name__}, not "
+                             f"a DiscreteTrajectories: {fix}")
+        lag = frames.lag_frames * frames.frame_interval
+        if (frames.state_space != model.state_space
+                or not math.isclose(lag, model.lag, rel_tol=1e-6)
+                or frames.window is None
+                or not all(math.isclose(a, b, abs_tol=1e-9)
+                           for a, b in zip(frames.window, window))
+                or os.path.realpath(str(frames.source)) != os.path.realpath(str(source))):
+            raise InputError(f"discretised window {k + 1} is not the model's fitting window "
+                             f"(its file, state space, lag or window differs): {fix}")
+    return discrete
 
 
 @dataclass(frozen=True)

@@ -1034,19 +1034,23 @@ HEAD_LANES = 8
 
 def head_chunk(count: int, threads: int) -> int:
     """The chains per chunk of :func:`heads` for ``count`` chains on ``threads`` threads:
-    ceil(count / threads) rounded up to a multiple of :data:`HEAD_LANES`, within
-    [:data:`HEAD_CHUNK`, :data:`HEAD_CHUNK_MAX`].
+    the chunks as few as :data:`HEAD_CHUNK_MAX` chains a chunk allows, rounded up to a
+    multiple of the threads (each thread as many chunks), and the chains shared evenly
+    among them, each chunk rounded up to a multiple of :data:`HEAD_LANES`, within
+    [:data:`HEAD_CHUNK`, :data:`HEAD_CHUNK_MAX`] (129 chains on one thread: two chunks
+    of 72, not of 128 with 127 empty).
 
     The kernel's cost per chain falls as the chunk widens (each non-zero's index is read
-    once a lag for the whole chunk, and the loop over its chains runs longer), and a
-    thread left without a chunk is lost: 100 resamples of the paper-scale 3 m/s mle model
-    (228 states on 9 levels, 1001 lags) took 1.05 s in two chunks of 56 on two threads
-    against 1.43 s in seven of 16, and 1.94 s in one chunk of 104 on one thread against
-    2.43 s in seven of 16 (``python benchmarks/interval_cost.py MODEL.h5``, 2026-12-07).
-    Each chain's sums run in the same order whatever its chunk
-    (:func:`_heads_of_chains`): the width changes no bit."""
-    per_thread = -(-int(count) // max(int(threads), 1))
-    width = HEAD_LANES * -(-per_thread // HEAD_LANES)
+    once a lag for the whole chunk, and the loop over its chains runs longer), an empty
+    place in a chunk costs what a chain does, and a thread left without a chunk is lost:
+    100 resamples of the paper-scale 3 m/s mle model (228 states on 9 levels, 1001 lags)
+    took 1.05 s in two chunks of 56 on two threads against 1.43 s in seven of 16, and
+    1.94 s in one chunk of 104 on one thread against 2.43 s in seven of 16 (``python
+    benchmarks/interval_cost.py MODEL.h5``, 2026-12-07). Each chain's sums run in the same
+    order whatever its chunk (:func:`_heads_of_chains`): the width changes no bit."""
+    count, threads = max(int(count), 1), max(int(threads), 1)
+    chunks = threads * -(-(-(-count // HEAD_CHUNK_MAX)) // threads)
+    width = HEAD_LANES * -(-(-(-count // chunks)) // HEAD_LANES)
     return int(min(max(width, HEAD_CHUNK), HEAD_CHUNK_MAX))
 
 
