@@ -231,6 +231,11 @@ def test_rtd_with_a_new_interval_says_the_verdict_was_made_with_the_stored_one(
     assert len(note) == 1 and "stored 90 % E(RT) interval" in note[0], data["warnings"]
     code, text, _ = run_cli(capsys, "rtd", out, "--json")      # the stored interval: no note
     assert code == 0 and not any("verdict above" in w for w in json.loads(text)["warnings"])
+    # the same resamples and level form the same interval: nothing to tell apart
+    code, text, _ = run_cli(capsys, "rtd", out, "--resamples", "20", "--json")
+    data = json.loads(text)
+    assert code == 0 and data["rt_mean_interval"] == list(stored.rt_mean_interval)
+    assert not any("verdict above" in w for w in data["warnings"]), data["warnings"]
 
 
 def test_pooling_windows_adds_their_counts(runs):

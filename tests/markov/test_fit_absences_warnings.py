@@ -123,8 +123,22 @@ def test_an_interval_cut_at_zero_says_so_instead_of_printing_a_bare_zero():
     whole = ModelUncertainty(0.9, (0.129, 0.22), (0.03, 0.159), edges, band, 100, 10, 0.1,
                              (0.13, 0.2))
     assert whole.cut_at_zero() == [] and "0.03000-0.1590 s" in whole.describe(0.18, 0.066)
-    boot = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1)
-    assert "resamples give SD(RT) 0" in boot.cut_at_zero()[0]
+    # no flow term: the bootstrap's spread below the figure reached it (skewed resamples,
+    # a few far below the figure or at 0), not "resamples give 0", which a window whose
+    # net flow turns reaches without any resample at 0
+    boot = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1,
+                            bootstrap_widening=1.17)
+    line = boot.cut_at_zero()[0]
+    assert "the spread of the bootstrap resamples' SD(RT) below the figure, widened 1.17 " \
+        "times for the few blocks drawn, exceeds the figure itself" in line
+    assert "a few of them far below SD(RT) (or at 0)" in line and "give SD(RT) 0" not in line
+    # a flow term too small to reach 0 alone: the bootstrap's spread with it added
+    small = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1,
+                             (0.13, 0.1))
+    line = small.cut_at_zero()[0]
+    assert "with the flow's variability between its blocks (16.4 % of SD(RT) with its " \
+        "quantile) added exceeds the figure itself" in line
+    assert "so the interval's lower half-width exceeds" not in line
 
 
 def test_an_interval_on_fewer_resamples_than_drawn_says_so(tmp_path):

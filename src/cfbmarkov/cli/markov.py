@@ -348,8 +348,12 @@ def cmd_rtd(args) -> int:
     band = rtd.uncertainty              # the intrinsic RTD's only
     adequacy = getattr(model, "adequacy", None)
     warnings = [str(line) for line in getattr(adequacy, "warnings", ()) or ()]
-    if warnings and args.resamples and stored is not None:
+    formed = model.uncertainty
+    if (warnings and args.resamples and stored is not None
+            and (formed is None or formed.level != stored.level
+                 or tuple(formed.rt_mean_interval) != tuple(stored.rt_mean_interval))):
         # the verdict quotes and judges by the interval fit stored, not the one formed here
+        # (said where they differ: the same resamples form the same interval)
         from cfbmarkov.markov.uncertainty import outward_bounds
 
         lo, hi = outward_bounds(*map(float, stored.rt_mean_interval), digits=4)

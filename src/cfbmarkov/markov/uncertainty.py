@@ -229,8 +229,9 @@ class ModelUncertainty:
     def cut_at_zero(self) -> list[str]:
         """Lines saying which interval's lower end fell to zero or below and was cut at 0,
         and why: the flow's variability between the fitting window's blocks, its quantile
-        times it more than the figure itself (``flow_sd``), or bootstrap resamples whose figure is 0
-        (``docs/definitions.md``, The model's interval).
+        times it more than the figure itself (``flow_sd``), or else the bootstrap's spread
+        below the figure (widened by ``bootstrap_widening``, the flow's term added), skewed
+        resamples far below it or at 0 (``docs/definitions.md``, The model's interval).
 
         Returns
         -------
@@ -242,14 +243,26 @@ class ModelUncertainty:
                                                 ("SD(RT)", self.rt_sd_interval))):
             if lower > 0.0:
                 continue
-            why = (f"the flow's variability between the fitting window's blocks is "
-                   f"{100 * self.flow_sd[k]:.3g} % of {name}, times "
-                   f"{self.flow_multiplier_text()}: "
-                   f"{100 * self.flow_sd[k] * self.flow_multiplier():.3g} %, so the "
-                   "interval's lower half-width exceeds the figure itself"
-                   if self.flow_sd is not None and self.flow_sd[k] > 0 else
-                   f"at least {100 * (1 - self.level) / 2:g} % of the bootstrap resamples "
-                   f"give {name} 0 (their chains have residences of one length only)")
+            flow = (self.flow_sd[k] * self.flow_multiplier()
+                    if self.flow_sd is not None and self.flow_sd[k] > 0 else 0.0)
+            if flow >= 1.0:
+                why = (f"the flow's variability between the fitting window's blocks is "
+                       f"{100 * self.flow_sd[k]:.3g} % of {name}, times "
+                       f"{self.flow_multiplier_text()}: {100 * flow:.3g} %, so the "
+                       "interval's lower half-width exceeds the figure itself")
+            else:
+                # the bootstrap's lower spread (widened), with any flow term in quadrature,
+                # reaches the figure: a skewed bootstrap (a few resamples far below it, or at
+                # 0); which it is, the quantiles alone would tell
+                widened = (f", widened {self.bootstrap_widening:.3g} times for the few "
+                           "blocks drawn," if self.bootstrap_widening
+                           and self.bootstrap_widening > 1.0 else "")
+                flow_text = (f" with the flow's variability between its blocks "
+                             f"({100 * flow:.3g} % of {name} with its quantile) added"
+                             if flow > 0 else "")
+                why = (f"the spread of the bootstrap resamples' {name} below the figure"
+                       f"{widened}{flow_text} exceeds the figure itself: the resamples are "
+                       f"skewed, a few of them far below {name} (or at 0)")
             lines.append(f"the {self.percent} % interval of {name} reaches 0 and is cut "
                          f"there ({name} cannot be negative): {why}; the interval says only "
                          "that the figure lies below its upper end; a longer fitting "
