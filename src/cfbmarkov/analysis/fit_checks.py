@@ -164,8 +164,7 @@ def _fitting_windows(model, runs, windows):
     else None (each stage reads its own, and says why where it cannot)."""
     import os
 
-    from cfbmarkov.analysis.bootstrap import fitting_runs
-    from cfbmarkov.markov.discrete import discretize
+    from cfbmarkov.analysis.bootstrap import fitting_runs, fitting_windows
 
     try:
         named = fitting_runs(model)
@@ -176,8 +175,7 @@ def _fitting_windows(model, runs, windows):
             if (os.path.realpath(path) != os.path.realpath(source)
                     or tuple(map(float, window)) != tuple(map(float, given))):
                 return None
-        return [discretize(run, model.state_space, model.lag, window, short_history="skip")
-                for run, window in zip(runs, windows)]
+        return fitting_windows(model)     # the bootstrap's own read, once
     except (CfbmarkovError, TypeError, OSError):
         return None
 
