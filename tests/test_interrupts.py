@@ -110,6 +110,58 @@ def test_ctrl_c_during_fit_states_auto_is_clean(tmp_path, delay):
 
 
 
+LATE_CTRL_C = """
+import os, signal, sys, time, types
+
+
+class LastWord:                 # freed as the interpreter tears its modules down
+    def __del__(self):
+        os.kill(os.getpid(), signal.SIGINT)
+        time.sleep(0.2)
+
+
+late = types.ModuleType("late_finalizer")
+late.keep = LastWord()
+sys.modules["late_finalizer"] = late
+del late
+from cfbmarkov.cli import program
+
+sys.argv = ["cfbmarkov", "info", sys.argv[1]]
+program()
+"""
+
+
+def test_ctrl_c_while_the_interpreter_shuts_down_after_a_complete_verb_is_ignored(tmp_path):
+    """A Ctrl-C after the verb has returned (its output published), while the interpreter
+    tears down its modules, where Python has put the default handler back: the run ends
+    with the verb's code, not killed by the signal with nothing said."""
+    synthetic.write_run(tmp_path / "run.h5", synthetic.RiserFlow(), 8, 0.5, seed=3)
+    script = tmp_path / "late.py"
+    script.write_text(LATE_CTRL_C)
+    done = subprocess.run([sys.executable, str(script), "run.h5"], cwd=tmp_path, env=_env(),
+                          capture_output=True, text=True, timeout=300)
+    assert done.returncode == 0, (done.returncode, done.stderr)
+    assert "trajectories" in done.stdout.lower() and "interrupted" not in done.stderr
+
+
+def test_program_after_an_interrupt_past_the_verb_says_one_line(monkeypatch, capsys):
+    from cfbmarkov import cli
+
+    def interrupted_on_return(argv=None):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli, "main", interrupted_on_return)
+    previous = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as exited:
+            cli.program()
+        assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGINT, previous)
+    assert exited.value.code == 130
+    assert capsys.readouterr().err == "cfbmarkov: interrupted\n"
+
+
 HALF_BUILT = """
 import sys
 from cfbmarkov.cli import main

@@ -58,6 +58,32 @@ def main(argv: list[str] | None = None) -> int:
             sys.unraisablehook = previous
 
 
+def program() -> None:
+    """The ``cfbmarkov`` program (and ``python -m cfbmarkov``): :func:`main` on the
+    process's arguments, then exit with its code.
+
+    Once the verb has returned, its output is published and a Ctrl-C has nothing left to
+    stop: SIGINT is ignored while the interpreter shuts down. Python puts the default
+    handler back as it finalizes, and a Ctrl-C landing then would end the process by the
+    signal (exit status -2, 130 in a shell) with nothing said, after a complete run.
+
+    Raises
+    ------
+    SystemExit
+        Always, with the code of :func:`main`.
+    """
+    import signal
+
+    try:
+        code = main()
+    except KeyboardInterrupt:           # between the verb's end and main's return
+        print("cfbmarkov: interrupted", file=sys.stderr)
+        code = 130
+    finally:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    sys.exit(code)
+
+
 def _ignore(unraisable) -> None:
     """``sys.unraisablehook`` while an interrupted start winds down: drops everything."""
 
@@ -91,4 +117,4 @@ def __getattr__(name: str):
     raise AttributeError(f"module 'cfbmarkov.cli' has no attribute {name!r}")
 
 
-__all__ = ["main", "build_parser", "parse_cells", "parse_window", "InputError"]
+__all__ = ["main", "program", "build_parser", "parse_cells", "parse_window", "InputError"]
