@@ -261,6 +261,35 @@ def test_ctrl_c_exit_130_one_line_no_temporary(data, tmp_path, signum):
     assert stray(tmp_path, []) == []
 
 
+@pytest.mark.parametrize("replacing", [False, True], ids=["new", "replacing"])
+def test_ctrl_c_after_the_model_is_saved_says_it_is_whole(data, tmp_path, capsys,
+                                                          monkeypatch, replacing):
+    """Ctrl-C while `fit` prints its summary, after the model was renamed into place: exit
+    130 and one line that says the file is complete (it loads); where nothing was written
+    (Ctrl-C before the save), no such claim, and a file replaced is the earlier one."""
+    from cfbmarkov.markov import MarkovModel
+
+    out = tmp_path / "model.h5"
+    if replacing:
+        assert _fit(data, out) == 0
+    before = out.read_bytes() if replacing else None
+    capsys.readouterr()
+
+    def cut_short(self, *args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(MarkovModel, "summary", cut_short)
+    assert _fit(data, out, "--resamples", "0") == 130
+    err = capsys.readouterr().err.splitlines()
+    assert err[-1] == (f"cfbmarkov fit: interrupted after {out} was written whole (the file is "
+                       "complete; only the lines printed after it were cut short)")
+    assert MarkovModel.load(out).n_states > 0 and out.read_bytes() != before
+    assert stray(tmp_path, ["model.h5"]) == []
+    monkeypatch.setattr(MarkovModel, "save", cut_short)    # cut short before it is saved
+    assert _fit(data, out, "--resamples", "0") == 130
+    assert capsys.readouterr().err.splitlines()[-1] == "cfbmarkov fit: interrupted"
+
+
 def test_a_folder_moved_aside_by_a_dead_writer_is_put_back(tmp_path):
     """A writer killed between moving the previous output folder aside and renaming the new
     one into place leaves NAME.old-XXXXXXXX and no NAME: the next writer's cleanup puts it

@@ -210,6 +210,7 @@ def _run(args) -> int:
     """Run the verb of ``args`` with its output claimed; errors become one line."""
     from cfbmarkov import _interrupt
 
+    before = _output_stamp(args)
     with contextlib.ExitStack() as winding_down:
         try:
             with _interrupt.installed():
@@ -222,8 +223,8 @@ def _run(args) -> int:
             # what the interrupt cut short is freed with it, after this block: its failing
             # finalizers stay quiet until the stack closes
             winding_down.enter_context(_interrupt.finalizers_quiet())
-            print(f"cfbmarkov {args.command}: interrupted{_resumable(args)}",
-                  file=sys.stderr)
+            print(f"cfbmarkov {args.command}: interrupted{_resumable(args)}"
+                  f"{_written_whole(args, before)}", file=sys.stderr)
             return 130
         except (OSError, KeyError, RuntimeError) as exc:
             if isinstance(exc, BrokenPipeError) and stdout_closed():
@@ -307,6 +308,29 @@ def _run_claimed(args) -> int:
         return int(args.func(args) or 0)
     finally:
         _interrupt.check()
+
+
+def _output_stamp(args):
+    """The file output's identity and time of change (None where absent or a folder)."""
+    if OUTPUTS.get(args.command, ("folder",))[0] == "folder" or not getattr(args, "output",
+                                                                            None):
+        return None
+    try:
+        stat = os.stat(args.output)
+    except (OSError, ValueError, TypeError):
+        return None
+    return stat.st_ino, stat.st_mtime_ns
+
+
+def _written_whole(args, before) -> str:
+    """Where an interrupted verb had already published its file output (written to a
+    temporary and renamed into place, so whole): says so, as the summary it prints after
+    it was cut short; empty otherwise."""
+    after = _output_stamp(args)
+    if after is None or after == before:
+        return ""
+    return (f" after {args.output} was written whole (the file is complete; only the lines "
+            "printed after it were cut short)")
 
 
 def _resumable(args) -> str:
