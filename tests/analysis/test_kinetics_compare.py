@@ -223,3 +223,38 @@ def test_the_segregated_flow_comes_from_the_fitting_file_not_one_of_its_name(tmp
     monkeypatch.chdir(elsewhere)
     assert baseline() == at_home
 
+
+
+def test_an_interval_not_formed_says_why_and_the_verdict_line_repeats_it(prediction, tmp_path):
+    """A carried activity that never relaxes has no exact answers, nor then has the other
+    property of the file: with resamples asked for, neither model block has the bootstrap's
+    interval, each says why (not "`--resamples 100` forms it", which they were given), and
+    the verdict line repeats the reason."""
+    from cfbmarkov.cli.analysis import kinetics_verdict
+    from cfbmarkov.report.compare import compare
+
+    run, pred, _ = prediction
+    kin = tmp_path / "two.toml"
+    kin.write_text('[[property]]\nname = "A"\nlaw = "deactivation"\nrate = 0.0\n'
+                   'start = "carried"\n\n[[property]]\nname = "X"\nlaw = "first-order"\n'
+                   'rate = 1.0\n')
+    got = compare(run, pred, window=(6.0, 12.0), output=tmp_path / "c", figures=False,
+                  resamples=10, kinetics=kin)
+    assert any("kinetics: no exact answers" in w and "use start = entry" in w
+               for w in got["warnings"]), got["warnings"]
+    carried, entry = got["kinetics"]["A"]["model"], got["kinetics"]["X"]["model"]
+    assert "exact" not in carried and "exact" not in entry
+    assert carried["interval_not_formed"] == "not formed for a carried property"
+    assert entry["interval_not_formed"] == ("not formed without the chain's exact answers, "
+                                            "which the bootstrap spreads")
+    reference = got["kinetics"]["X"]["reference"]["exit_mean"]
+    line = kinetics_verdict("X", reference, entry, 0.9)
+    assert line.endswith("is not in this interval (not formed without the chain's exact "
+                         "answers, which the bootstrap spreads), so no verdict is drawn from "
+                         "it"), line
+    # with the exact answers and resamples: the bootstrap's interval, no reason
+    kin.write_text('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\n')
+    got = compare(run, pred, window=(6.0, 12.0), output=tmp_path / "d", figures=False,
+                  resamples=10, kinetics=kin)
+    assert "interval_not_formed" not in got["kinetics"]["X"]["model"]
+    assert got["kinetics"]["X"]["model"]["interval_method"].startswith("block bootstrap")

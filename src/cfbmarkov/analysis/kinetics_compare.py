@@ -706,6 +706,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                 mod_block["interval_method"] = (
                     "Monte Carlo noise only (the fitting window's bootstrap spreads the "
                     "long-run steady state of a carried property, not a window's values)")
+                mod_block["interval_not_formed"] = "not formed for a carried property"
             elif values is not None and values.size >= 2:
                 from cfbmarkov.analysis.bootstrap import (BOOTSTRAP_BLOCKS, fitting_runs,
                                                           interval_bounds)
@@ -719,6 +720,15 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                                                 "exit means) and Monte Carlo noise, in "
                                                 "quadrature")
                 mod_block["interval_resamples"] = int(values.size)
+            elif resamples:
+                mod_block["interval_not_formed"] = (
+                    "not formed: the fitting window could not be resampled, as the warning "
+                    "says" if values is None else
+                    "not formed: fewer than 2 bootstrap resamples have exact answers")
+        elif resamples:            # the bootstrap spreads the exact answers, and none exist
+            mod_block["interval_not_formed"] = (
+                "not formed for a carried property" if carried else
+                "not formed without the chain's exact answers, which the bootstrap spreads")
         seg_block = None
         dist_seg = None
         if seg is not None:

@@ -343,7 +343,7 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
         The reference's exit mean.
     model : dict
         The property's ``model`` block of ``summary.json`` (``exit_mean_interval``,
-        ``interval_method``).
+        ``interval_method``, ``interval_not_formed``).
     level : float
         The intervals' coverage.
     reference_interval : (float, float), optional
@@ -373,8 +373,7 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
             f"{place} it")
     if not sampled and agreement != "not told apart":
         # the fitting sample's uncertainty, most of it, is not in this interval
-        why = ("not formed for a carried property" if "carried" in method
-               else "`--resamples 100` forms it")
+        why = model.get("interval_not_formed") or "`--resamples 100` forms it"
         return text + (": within the Monte Carlo noise" if agreement == "inside" else
                        ": beyond the Monte Carlo noise") + (
             f"; the fitting sample's uncertainty, the larger part, is not in this interval "
