@@ -168,8 +168,9 @@ def test_full_disk_import_one_line_no_temporary(tmp_path):
             for i in range(100):
                 f.write(f"{k * 0.01:.2f},{i},{rng.uniform(0.001, 0.089):.5f},"
                         f"{rng.uniform(0.001, 0.949):.5f}\n")
+    # random heights each frame: an open riser (no laps from them), as the writes are tested
     rc, _, err = run_cli("import", csv, "--format", "csv", "--width", "0.09", "--height", "0.95",
-                         "-o", "out.h5", cwd=tmp_path,
+                         "--boundary", "open", "-o", "out.h5", cwd=tmp_path,
                          preexec_fn=_file_size_limit(150_000))
     assert rc == 2, err
     assert err.splitlines() == ["cfbmarkov import: error: out.h5: cannot write (File too large)"]
@@ -203,7 +204,7 @@ def test_kill_at_random_points_then_rerun_is_clean(data, tmp_path):
                 f.write(f"{k * 0.01:.2f},{i},{rng.uniform(0.001, 0.089):.5f},"
                         f"{rng.uniform(0.001, 0.949):.5f}\n")
     jobs = [("imp.h5", ["import", csv, "--format", "csv", "--width", "0.09", "--height", "0.95",
-                         "-o", "imp.h5"]),
+                         "--boundary", "open", "-o", "imp.h5"]),    # random heights: no laps
             ("fit.h5", ["fit", data / "run.h5", "--window", "0:1", "-o", "fit.h5"]),
             ("pred.h5", ["predict", data / "model.h5", "--init", data / "run.h5", "--start",
                          "0.5", "--duration", "1", "-q", "-o", "pred.h5"]),

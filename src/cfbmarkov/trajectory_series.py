@@ -44,6 +44,9 @@ class FrameSeries:
         frames, as a fraction of H.
     frame_interval : float, optional
         The reference frame interval (s); None to judge steps by their median.
+    laps_advice : str, optional
+        How the source can give laps itself (e.g. a LAMMPS dump's unwrapped coordinates),
+        added to the refusal of a step too large; none: frames written more often only.
 
     Attributes
     ----------
@@ -59,8 +62,9 @@ class FrameSeries:
     """
 
     def __init__(self, label: str, height: float, open_riser: bool, max_step: float,
-                 frame_interval: float | None = None):
+                 frame_interval: float | None = None, laps_advice: str | None = None):
         self.label = label
+        self.laps_advice = laps_advice
         self.height = height
         self.open_riser = open_riser
         self.max_step = max_step
@@ -295,8 +299,8 @@ class FrameSeries:
                 f"{self.label}: particle {int(ids[worst])} moved {step[worst]:.4g} m "
                 f"(more than {self.max_step:g} of the height {self.height:g} m) between t = {t0:g} "
                 f"and {t1:g} s: the lap counter cannot be inferred from wrapped positions; "
-                "write frames more often, or give unwrapped coordinates (xu yu) or image "
-                "flags (ix iy)")
+                "write frames more often"
+                + (f", or give {self.laps_advice}" if self.laps_advice else ""))
 
 
 def _whole_laps(laps, t: int, n: int, present: np.ndarray) -> np.ndarray:

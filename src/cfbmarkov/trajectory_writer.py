@@ -105,6 +105,10 @@ class TrajectoryWriter:
         may make between frames, as a fraction of the height H (default 0.5: beyond it the
         minimal-image rule cannot work; the importers use ``IMPORT_MAX_STEP`` = 0.25); a
         larger step is refused, naming the particle and the times.
+    laps_advice : str, optional
+        How the source can give the laps itself, named in that refusal (a LAMMPS dump:
+        "unwrapped coordinates (xu yu) or image flags (ix iy)"); none: frames written more
+        often is the only fix named.
 
     Raises
     ------
@@ -122,9 +126,10 @@ class TrajectoryWriter:
                  with_velocity: bool = False, frame_interval: float | None = None,
                  label: str | None = None, max_step: float = 0.5, depth: float | None = None,
                  boundary: str | Boundary = "periodic", axes: dict[str, str] | None = None,
-                 region_origin=None):
+                 region_origin=None, laps_advice: str | None = None):
         self.path = Path(path)
         self.max_step = float(max_step)
+        self._laps_advice = laps_advice
         self.ids = np.asarray(ids, dtype=np.int64).reshape(-1)
         if np.unique(self.ids).size != self.ids.size:
             raise InputError("particle ids are not unique")
@@ -166,7 +171,7 @@ class TrajectoryWriter:
                                     self._deflate)
         self._n_frames = 0
         self._series = FrameSeries(self._label, self.height, boundary.is_open, self.max_step,
-                                   frame_interval)
+                                   frame_interval, self._laps_advice)
         self._any_present = False
 
     # -- context manager ---------------------------------------------------------------

@@ -43,7 +43,9 @@ def generate_run(n_particles: int = 6, n_frames: int = 16, *, t0: float = 0.5,
     rng = np.random.default_rng(seed)
     times = t0 + interval * np.arange(n_frames)
     ids = np.sort(rng.choice(np.arange(1, 10 * n_particles), n_particles, replace=False))
-    steps = rng.uniform(-0.1, 0.1, (n_frames - 1, n_particles))
+    # steps of at most 0.1 m on the paper's height, scaled with the height: within the
+    # quarter of it that laps from wrapped heights allow
+    steps = rng.uniform(-0.1, 0.1, (n_frames - 1, n_particles)) * (height / HEIGHT)
     y0 = rng.uniform(0.05, height - 0.05, n_particles)
     half = (n_frames - 1) // 3
     y0[0] = 0.92 * height

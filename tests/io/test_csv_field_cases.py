@@ -141,8 +141,8 @@ def test_header_units_are_honoured_and_not_contradicted(tmp_path, assert_clean_f
     source.write_text(source.read_text().replace("(mm)", "(in)", 1))
     assert_clean_failure("import", source, "--format", "csv", "--width", "0.09", "--height", "0.95",
                          "-o", output, output=output,
-                         match=r"'Position X \(in\)': unit 'in' is not known; --length-unit "
-                               r"takes m, cm, mm")
+                         match=r"'Position X \(in\)': unit 'in' is not known; convert the "
+                               r"column to one of m, cm, mm, um and name that unit in the header")
 
 
 def test_unknown_names_are_refused_naming_the_columns_expected(tmp_path, assert_clean_failure):
@@ -332,7 +332,7 @@ def test_wrong_option_values_give_one_line(tmp_path, assert_clean_failure, args,
 
 def test_wrong_option_values_through_the_api(tmp_path):
     source = FIELD / "semicolon-decimal-comma.csv"
-    for options, match in (({"length_unit": "km"}, r"--length-unit 'km': choose m, cm or mm"),
+    for options, match in (({"length_unit": "km"}, r"--length-unit 'km': choose m, cm, mm or um"),
                            ({"time_unit": "min"}, r"--time-unit 'min': choose s or ms"),
                            ({"vertical_axis": "w"}, r"--vertical-axis 'w': choose x, y or z")):
         with pytest.raises(InputError, match=match):

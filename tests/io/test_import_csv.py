@@ -4,6 +4,7 @@ Python API and through ``cfbmarkov import``."""
 from __future__ import annotations
 
 import gzip
+import re
 
 import numpy as np
 import pytest
@@ -191,6 +192,13 @@ BAD_CSV = {
     "duplicate-id": (table(changed(1, 0, id=2)), r"particle id 2 appears more than once"),
     "duplicate-id-first-frame": (table(changed(0, 2, id=2)), r"id 2 appears more than once"),
     "outside-height": (table(changed(2, 2, y=-0.01)), r"particle 3 at t = 0.05 s lies outside"),
+    # laps from wrapped heights: a step beyond a quarter of the height is refused, as a
+    # dump's is (the minimal image would count a wrong pass silently up to a half); a CSV
+    # has no unwrapped coordinates or image flags to name as the fix
+    "step-too-large": (table(changed(2, 1, y=0.51)),
+                       r"particle 2 moved 0.3 m \(more than 0.25 of the height 0.95 m\) "
+                       r"between t = 0.025 and 0.05 s: the lap counter cannot be inferred "
+                       r"from wrapped positions; write frames more often$"),
     "empty-file": ("", r"empty file \(0 bytes\): nothing to import; check the path"),
     "blank-file": ("\n \n", r"empty file \(no header line\): nothing to import"),
     "header-only": (HEADER + "\n", r"no data rows after the header: nothing to import"),
@@ -511,3 +519,69 @@ def test_a_stray_row_with_a_wrong_time_is_told_apart_from_a_gap(tmp_path, cli):
                        "-o", tmp_path / "out" / "s.h5")
     assert code == 2 and err.count("\n") == 1
     assert "a row with a wrong time makes a first frame of its own" in err
+
+
+@pytest.mark.parametrize("unit", ["um", "µm", "μm", "micron", "Microns"])
+def test_micrometre_columns_in_any_spelling_are_read(tmp_path, unit):
+    """TrackMate writes "(micron)", others µm (the micro sign or the Greek mu) or um: all
+    are micrometres, converted to m, recorded as um."""
+    source = tmp_path / "um.csv"
+    source.write_text(f"t (sec),id,x ({unit}),y ({unit})\n0,1,20000,100000\n0,2,40000,350000\n"
+                      "0.01,1,20000,110000\n0.01,2,40000,360000\n", encoding="utf-8")
+    output = import_csv(source, tmp_path / "um.h5", width=0.09, height=0.95)
+    with Trajectories(output) as t:
+        np.testing.assert_allclose(t.positions()[1], [[0.02, 0.11], [0.04, 0.36]], rtol=1e-12)
+        assert t.parameters["units"]["x"] == "um"
+
+
+@pytest.mark.parametrize("header, fix", [
+    ("t,id,x (pixel),y (pixel)", "convert it with the pixel size (m per pixel) to one of m, "
+                                 "cm, mm, um and name that unit in the header"),
+    ("t (frame),id,x,y", "convert it with the frame rate (frames per second) to one of s, ms "
+                         "and name that unit in the header"),
+    ("t,id,x (in),y (in)", "unit 'in' is not known; convert the column to one of m, cm, mm, "
+                           "um and name that unit in the header (--length-unit sets the unit "
+                           "of columns that name none)")])
+def test_a_unit_with_no_scale_or_unknown_names_the_conversion_not_the_option(
+        tmp_path, assert_clean_failure, header, fix):
+    """A column counted in pixels or frames, or in a unit not read: one line naming the
+    conversion to make in the file; --length-unit, which cannot override a header's unit,
+    is not offered as the fix."""
+    source = tmp_path / "px.csv"
+    source.write_text(header + "\n0,1,2,3\n1,1,2,4\n")
+    output = tmp_path / "out" / "px.h5"
+    line = assert_clean_failure("import", source, "--width", "0.09", "--height", "0.95",
+                                "--length-unit", "mm", "-o", output, output=output,
+                                match=re.escape(fix))
+    assert line.startswith("cfbmarkov import: error: ")
+
+
+def test_vertical_bar_delimiter_and_columns_in_their_own_units(tmp_path, cli):
+    """A '|'-separated file is read like a ';'-separated one; where the position columns
+    name different units, the summary gives each column its own, in the columns' order."""
+    source = tmp_path / "bar.csv"
+    source.write_text("t (s)|id|x (mm)|y (m)\n0|1|20|0.1\n0|2|40|0.35\n0.01|1|20|0.11\n"
+                      "0.01|2|40|0.36\n")
+    code, out, err = cli("import", source, "--width", "0.09", "--height", "0.95", "-o",
+                         tmp_path / "bar.h5")
+    assert code == 0, err
+    assert "positions from x (mm), y (m); ids from column 'id'" in err
+    with Trajectories(tmp_path / "bar.h5") as t:
+        np.testing.assert_allclose(t.positions()[1], [[0.02, 0.11], [0.04, 0.36]], rtol=1e-12)
+        assert t.parameters["delimiter"] == "vertical bar"
+
+
+@pytest.mark.parametrize("content, fault", [
+    (b"", "empty file (0 bytes)"),
+    (b"\x89PNG\r\n\x1a\n\x00\x00\x00\rIHDR", "not a text file (it holds binary data"),
+    (b"caf\xe9,id\n", "line 1: byte 0xe9 is not UTF-8 text")])
+def test_time_step_given_for_a_file_told_csv_by_elimination_names_the_files_fault(
+        tmp_path, assert_clean_failure, content, fault):
+    """An empty or binary file is told to be CSV only because it is nothing else: with
+    --time-step, its own fault is named, not that a CSV file takes no time step."""
+    source = tmp_path / "in.dump"
+    source.write_bytes(content)
+    output = tmp_path / "out" / "x.h5"
+    line = assert_clean_failure("import", source, "--time-step", "1e-5", "-o", output,
+                                output=output)
+    assert fault in line and "--time-step" not in line, line

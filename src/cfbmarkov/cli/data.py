@@ -185,7 +185,7 @@ def add_import(sub) -> None:
     s.add_argument("--max-gap", type=positive_float, default=None, metavar="G",
                    help="with --resample: a particle is absent between samples more than G s "
                         "apart (default DT)")
-    s.add_argument("--length-unit", choices=["m", "cm", "mm"], default=None,
+    s.add_argument("--length-unit", choices=["m", "cm", "mm", "um"], default=None,
                    help="CSV: unit of positions (and, per --time-unit, velocities) in columns "
                         "whose header names none (default m)")
     s.add_argument("--time-unit", choices=["s", "ms"], default=None,

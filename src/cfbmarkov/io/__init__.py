@@ -151,6 +151,10 @@ def _import_file(source, fmt, output, *, width, height, time_step, vertical_axis
                          f"ignored; give --region alone, or {given} without it")
     if fmt == "csv":
         if time_step is not None:
+            if detected is not None:      # CSV by elimination: an empty or binary file's
+                from cfbmarkov.io._common import check_text     # own fault named first
+
+                check_text(source)
             raise InputError("--time-step dates the steps of LAMMPS dumps, H5MD and VTK "
                              "series; a CSV file gives its times in column t (leave out "
                              "--time-step)")
@@ -212,10 +216,13 @@ def import_summary(path: str | os.PathLike, detected: str | None = None) -> str:
         return particle_summary(path)
     told = f"detected from the content: {detected}" if detected else "--format"
     units = p.get("units") if isinstance(p.get("units"), dict) else {}   # CSV: per column
-    positions = ", ".join(p.get("position_columns") or [])
-    length = {units.get(a) for a in ("x", "y", "z") if units.get(a)}
-    if length:
-        positions += f" ({', '.join(sorted(length))})"
+    columns = list(p.get("position_columns") or [])
+    positions = ", ".join(columns)
+    length = [units.get(a) for a in columns if units.get(a)]
+    if len(set(length)) == 1:
+        positions += f" ({length[0]})"
+    elif length:                       # each column in its own unit
+        positions = ", ".join(f"{a} ({units[a]})" if units.get(a) else a for a in columns)
     parts = [f"read {plural(n_frames, 'frame')} of {plural(n_particles, 'particle')} as "
              f"{_FORMAT_NAMES.get(fmt, fmt)} ({told})", f"positions from {positions}"]
     if fmt == "csv":

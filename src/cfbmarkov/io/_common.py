@@ -114,6 +114,35 @@ def open_text(path: Path) -> TextIO:
         raise InputError(f"{path}: cannot open ({exc.strerror or exc})") from None
 
 
+def check_text(source: str | os.PathLike) -> None:
+    """Refuse a source that is missing, empty or not text (:func:`check_source`,
+    :func:`not_text_message`), read from its first 8 KiB: where an option that does not
+    apply to text is refused for a file told to be CSV by elimination, the file's own fault
+    is named first.
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        The file (plain or gzip-compressed).
+
+    Raises
+    ------
+    InputError
+        As :func:`check_source`, or naming the file as not text.
+    """
+    path = check_source(source)
+    try:
+        with open_text(path) as fh:
+            fh.read(8192)
+    except (UnicodeDecodeError, EOFError, gzip.BadGzipFile, zlib.error):
+        raise InputError(not_text_message(str(path))) from None
+    with open(path, "rb") as fh:
+        head = fh.read(2)
+        if head != GZIP_MAGIC and head not in (b"\xff\xfe", b"\xfe\xff") \
+                and b"\x00" in fh.read(8190):
+            raise InputError(not_text_message(str(path)))
+
+
 def text_encoding(start: bytes) -> str:
     """The encoding of a text file from its first bytes: UTF-16 where a UTF-16 byte-order
     mark starts it, else UTF-8 (a UTF-8 byte-order mark skipped).

@@ -93,7 +93,7 @@ from cfbmarkov.io.csv_layout import (
 from cfbmarkov.io.csv_rows import UnsortedRows, frame_rows, row_blocks
 from cfbmarkov.io.resample import merge_same_times, resample_tracks
 from cfbmarkov.io.riser import FrameColumns, RiserFrame
-from cfbmarkov.trajectory_writer import TrajectoryWriter
+from cfbmarkov.trajectory_writer import IMPORT_MAX_STEP, TrajectoryWriter
 
 
 def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
@@ -217,7 +217,7 @@ def check_units(length_unit: str | None, time_unit: str | None) -> None:
         Naming the option and the units it takes.
     """
     if length_unit is not None and length_unit not in LENGTH_UNITS:
-        raise InputError(f"--length-unit {length_unit!r}: choose m, cm or mm")
+        raise InputError(f"--length-unit {length_unit!r}: choose m, cm, mm or um")
     if time_unit is not None and time_unit not in TIME_UNITS:
         raise InputError(f"--time-unit {time_unit!r}: choose s or ms")
 
@@ -360,7 +360,7 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
     parameters["laps_from"] = "minimal-image rule" if periodic else "none (open riser)"
     with create_writer(output, reference, source="import:csv", parameters=parameters,
                        with_velocity=layout.velocity is not None, label=label,
-                       **riser.writer_options()) as writer:
+                       max_step=IMPORT_MAX_STEP, **riser.writer_options()) as writer:
         columns = FrameColumns(writer)
         followed = _FollowedIds()
         for rows, _last in progress(itertools.chain([first], frames), label):

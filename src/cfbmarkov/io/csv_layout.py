@@ -15,8 +15,16 @@ from cfbmarkov.io._common import IdCodes
 #: the source's axes, in the order of a region's ranges
 AXES = ("x", "y", "z")
 #: length and time units: the number a value is divided by to give m or s
-LENGTH_UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0}
+LENGTH_UNITS = {"m": 1.0, "cm": 100.0, "mm": 1000.0, "um": 1e6}
 TIME_UNITS = {"s": 1.0, "ms": 1000.0}
+#: other spellings of those units in headers (TrackMate writes "micron")
+UNIT_SPELLINGS = {"\u00b5m": "um", "\u03bcm": "um", "micron": "um", "microns": "um",
+                  "micrometre": "um", "micrometer": "um", "micrometres": "um",
+                  "micrometers": "um", "sec": "s", "second": "s", "seconds": "s",
+                  "msec": "ms"}
+#: units that count pixels or frames: no scale to metres or seconds is in the file
+COUNTS = {"pixel": "pixels", "pixels": "pixels", "px": "pixels", "frame": "frames",
+          "frames": "frames"}
 #: characters of text parsed per call (about 70000 rows of six columns)
 CHUNK_CHARS = 1 << 22
 #: data rows read after the header to tell the delimiter and the decimal mark
@@ -34,7 +42,6 @@ ID_COLUMNS = {"track id": 0, "trackid": 0, "track": 0, "particle": 1, "label": 2
 #: -1; a TrackMate spot without a track has an empty TRACK_ID, read as -1
 NOISE_IDS = {"label": -1, "track id": -1}
 #: units written as words in some exports (TrackMate's '(sec)')
-_UNIT_WORDS = {"sec": "s", "second": "s", "seconds": "s", "msec": "ms"}
 for _axis in AXES:
     _ALIASES.update({_axis: _axis, f"position {_axis}": _axis, f"pos {_axis}": _axis,
                      f"v{_axis}": f"v{_axis}", f"velocity {_axis}": f"v{_axis}",
@@ -44,7 +51,8 @@ for _k, _axis in enumerate(AXES):
     _ALIASES.update({f"points:{_k}": _axis, **{f"{v}:{_k}": f"v{_axis}" for v in
                                                ("v", "vel", "velocity")}})
 _UNIT = re.compile(r"^(.*?)\s*[(\[]\s*([^)\]]*?)\s*[)\]]$")
-_DELIMITERS = {";": "semicolon", "\t": "tab", ",": "comma", None: "whitespace"}
+_DELIMITERS = {";": "semicolon", "\t": "tab", "|": "vertical bar", ",": "comma",
+               None: "whitespace"}
 
 
 @dataclass
@@ -267,7 +275,7 @@ def _description_rows(pending: list[str]) -> tuple[list[str], list[str]]:
     described = []
     while len(described) < 3 and pending and pending[0].strip() and \
             not pending[0].lstrip().startswith("#") and not any(
-                _is_number(f.strip().strip('"')) for f in re.split(r"[;,\s]", pending[0])
+                _is_number(f.strip().strip('"')) for f in re.split(r"[;,|\s]", pending[0])
                 if f.strip()):
         described.append(pending.pop(0))
     return described, pending
@@ -281,7 +289,7 @@ def _units_row(described: list[str], delimiter: str | None, n: int) -> list[str 
         if len(fields) == n and any(fields) and all(
                 not f or (f.startswith("(") and f.endswith(")")) for f in fields):
             units = [f[1:-1].strip() or None if f else None for f in fields]
-            return [_UNIT_WORDS.get(u, u) if u else None for u in units]
+            return units
     return [None] * n
 
 
@@ -350,13 +358,14 @@ def _names_columns(text: str) -> bool:
 
 
 def _delimiter(header: str, data: str | None) -> str | None:
-    """The delimiter: the first of ';', tab, ',' in the header under which the first data row
-    has as many fields as the header (None: whitespace)."""
-    candidates = [d for d in (";", "\t", ",") if d in header] + [None]
+    """The delimiter: the first of ';', tab, '|', ',' in the header under which the first
+    data row has as many fields as the header (None: whitespace)."""
+    candidates = [d for d in (";", "\t", "|", ",") if d in header] + [None]
     if data is None:
         return candidates[0]
     data = data.split("#", 1)[0]
-    for delimiter in candidates + [d for d in (";", "\t", ",", None) if d not in candidates]:
+    for delimiter in candidates + [d for d in (";", "\t", "|", ",", None)
+                                   if d not in candidates]:
         n = len(_split(header, delimiter))
         if n >= 2 and len(_split(data, delimiter)) == n:
             return delimiter
@@ -424,10 +433,10 @@ def _units(used: list[str], units: dict[str, str | None], length_unit: str | Non
         else:
             length, time = length_unit or "m", time_unit or "s"
             if written is not None:
-                parts = written.replace(" ", "").split("/")
+                parts = [_spelled(part) for part in written.replace(" ", "").split("/")]
                 if len(parts) != 2 or parts[0] not in LENGTH_UNITS or parts[1] not in TIME_UNITS:
                     raise InputError(f"{label}: column {column!r}: unit {written!r} is not "
-                                     "known; velocities in m/s, cm/s or mm/s (or per ms)")
+                                     "known; velocities in m/s, cm/s, mm/s or um/s (or per ms)")
                 length, time = parts
             unit = f"{length}/{time}"
             divisor = LENGTH_UNITS[length] / TIME_UNITS[time]
@@ -440,13 +449,27 @@ def _unit(written: str | None, known: dict[str, float], option: str | None, flag
           column: str, label: str) -> str:
     if written is None:
         return option or next(iter(known))
+    shown, written = written, _spelled(written)
+    if written in COUNTS:
+        scale = ("the pixel size (m per pixel)" if COUNTS[written] == "pixels"
+                 else "the frame rate (frames per second)")
+        raise InputError(f"{label}: column {column!r} is in {shown} (a count of "
+                         f"{COUNTS[written]}, with no scale in the file): convert it with "
+                         f"{scale} to one of {', '.join(known)} and name that unit in the "
+                         "header")
     if written not in known:
-        raise InputError(f"{label}: column {column!r}: unit {written!r} is not known; "
-                         f"{flag} takes {', '.join(known)}")
+        raise InputError(f"{label}: column {column!r}: unit {shown!r} is not known; convert "
+                         f"the column to one of {', '.join(known)} and name that unit in the "
+                         f"header ({flag} sets the unit of columns that name none)")
     if option is not None and option != written:
         raise InputError(f"{label}: column {column!r} is in {written} but {flag} {option} was "
                          f"given; drop {flag} or correct the header")
     return written
+
+
+def _spelled(unit: str) -> str:
+    """A unit as :data:`LENGTH_UNITS` and :data:`TIME_UNITS` name it (µm, micron: um)."""
+    return UNIT_SPELLINGS.get(unit.strip().lower(), unit.strip())
 
 
 def _is_number(text: str) -> bool:

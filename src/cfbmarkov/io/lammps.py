@@ -123,6 +123,7 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
         velocity = layout.velocity_columns(riser.axes)
         first_ids = np.unique(_frame_ids(first, layout, where))
         with create_writer(output, first_ids, max_step=IMPORT_MAX_STEP,
+                           laps_advice="unwrapped coordinates (xu yu) or image flags (ix iy)",
                            source="import:lammps", parameters=parameters,
                            with_velocity=velocity is not None, label=label,
                            **riser.writer_options()) as writer:

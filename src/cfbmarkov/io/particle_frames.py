@@ -63,6 +63,13 @@ class ParticleFrame:
     where: str = ""
 
 
+#: where each format can give the laps itself (named where the minimal-image rule refuses)
+LAPS_ADVICE = {"h5md": "image flags (the image element of the H5MD particles group)",
+               "vtk": "image flags (point arrays ix iy iz)",
+               "vtp": "image flags (point arrays ix iy iz)",
+               "vtu": "image flags (point arrays ix iy iz)"}
+
+
 @dataclass
 class ParticleSeries:
     """The frames of a particle source and what the reader found out about it.
@@ -186,6 +193,7 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
         flat_z = (float(first.positions[0, 2]) if not spread and first.positions.shape[0]
                   else None)
         with create_writer(output, first_ids, max_step=IMPORT_MAX_STEP,
+                           laps_advice=LAPS_ADVICE.get(series.fmt),
                            source=f"import:{series.fmt}", parameters=parameters,
                            with_velocity=velocity, label=label,
                            **riser.writer_options()) as writer:
