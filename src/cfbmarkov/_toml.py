@@ -37,6 +37,11 @@ def binary_kind(path: str | os.PathLike) -> str:
     return "a binary file"
 
 
+#: the fix named after a TOML syntax error (its line and column are in the parser's text)
+SYNTAX_FIX = ("correct the file there: each setting `key = value` on its own line, text in "
+              "double quotes, a key once in each table")
+
+
 def read_toml(path: str | os.PathLike, what: str, example: str) -> dict:
     """The tables of a TOML file that must hold something.
 
@@ -72,10 +77,10 @@ def read_toml(path: str | os.PathLike, what: str, example: str) -> dict:
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"{name}: not valid TOML: {exc}") from None
+        raise InputError(f"{name}: not valid TOML: {exc}; {SYNTAX_FIX}") from None
     if not data:
         raise InputError(f"{what} {name} is empty (it sets nothing): give {example}")
     return data
 
 
-__all__ = ["binary_kind", "read_toml"]
+__all__ = ["SYNTAX_FIX", "binary_kind", "read_toml"]

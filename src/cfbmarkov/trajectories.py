@@ -245,7 +245,8 @@ class Trajectories(FrameTimes):
         every = (f", every {self.frame_interval:g} s" if np.isfinite(self.frame_interval) else "")
         return (f"Trajectories({str(self.path)!r}: {self.n_particles} "
                 f"particle{'' if self.n_particles == 1 else 's'} x {self.n_frames} "
-                f"frames, {span}{every}, source={self.source!r}"
+                f"frame{'' if self.n_frames == 1 else 's'}, {span}{every}, "
+                f"source={self.source!r}"
                 + (", closed" if self.closed else "") + ")")
 
     # -- metadata --------------------------------------------------------------------

@@ -585,3 +585,10 @@ def test_time_step_given_for_a_file_told_csv_by_elimination_names_the_files_faul
     line = assert_clean_failure("import", source, "--time-step", "1e-5", "-o", output,
                                 output=output)
     assert fault in line and "--time-step" not in line, line
+
+
+def test_a_file_of_one_frame_is_said_in_the_singular(tmp_path):
+    source = tmp_path / "one.csv"
+    source.write_text("t,id,x,y\n0,1,0.02,0.1\n0,2,0.03,0.2\n")
+    with Trajectories(import_csv(source, tmp_path / "one.h5", width=0.09, height=0.95)) as t:
+        assert ": 2 particles x 1 frame, 0..0 s, source='import:csv')" in repr(t)

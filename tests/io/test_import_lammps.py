@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import gzip
 import itertools
+import re
 
 import numpy as np
 import pytest
@@ -414,3 +415,39 @@ def test_a_2d_dump_read_with_z_as_the_vertical_is_refused_and_nothing_kept(
                                r"\(the vertical axis z\).*leave --vertical-axis out")
     got = read_back(import_lammps(source, tmp_path / "flat.h5", time_step=1e-5))
     assert got["positions"].shape == (6, 3, 2)
+
+
+CENTRED_BOX = """ITEM: TIMESTEP
+{step}
+ITEM: NUMBER OF ATOMS
+2
+ITEM: BOX BOUNDS pp pp pp
+-0.045 0.045
+{lo} {hi}
+-0.001 0.001
+ITEM: ATOMS id type x y z
+1 1 0.01 {y1} 0
+2 1 -0.02 {y2} 0
+"""
+
+
+@pytest.mark.parametrize("lo, hi, fix", [(-0.475, 0.475, "give y as -0.475:0.475 (--region), or"),
+                                         (0.0, 0.95, "give y as 0:0.95 (--region, or --height "
+                                                     "0.95), or")])
+def test_a_riser_that_is_not_the_periodic_box_names_the_options_that_can_give_it(
+        tmp_path, lo, hi, fix):
+    """A periodic riser other than the box's period: the fix names --height only where the
+    box starts at 0 (--height sets 0..H; a centred box needs --region)."""
+    source = tmp_path / "box.dump"
+    y = (lo + 0.1, lo + 0.2)
+    source.write_text("".join(CENTRED_BOX.format(step=s, lo=lo, hi=hi, y1=y[0] + d, y2=y[1] + d)
+                              for s, d in ((0, 0.0), (1000, 0.01))))
+    with pytest.raises(InputError, match=re.escape(fix)):
+        import_lammps(source, tmp_path / "box.h5", time_step=1e-5, region=((-0.045, 0.045),
+                                                                           (lo + 0.05, hi - 0.05)))
+    import_lammps(source, tmp_path / "box.h5", time_step=1e-5,
+                  region=((-0.045, 0.045), (lo, hi)))
+    with Trajectories(tmp_path / "box.h5") as t:
+        assert t.height == pytest.approx(0.95) and t.n_frames == 2
+        assert repr(t).endswith("2 particles x 2 frames, 0..0.01 s, every 0.01 s, "
+                                "source='import:lammps')")

@@ -208,6 +208,18 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     ('[[property]]\nname = "X"\nlaw = "heat-exchange"\ncoefficient = 1.0\n'
      'temperature = 800\n', None, "initial"),
     ('[[property]\nname = "X"\n', None, "not valid TOML"),
+    # a TOML error names the fix, not the parser's words alone
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\nrate = 2.0\n', None,
+     "(at line 5, column 11); correct the file there: each setting `key = value` on its own "
+     "line, text in double quotes, a key once in each table"),
+    # a table's non-finite value or bad cell index is named as such
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n0,0,nan\n", "line 2: rate is nan, not a finite number; give col,row,rate"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n-1,0,1.0\n", "line 2: col -1 is not a cell index (a whole number >= 0, "
+                                  "counted from 0)"),
+    ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
+     "col,row,rate\n0,inf,1.0\n", "line 2: row is inf, not a finite number"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\ninitial = 1.5\n', None,
      "initial = 1.5 is outside [0, 1]"),
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\ninitial = -0.1\n', None,

@@ -72,6 +72,7 @@ from pathlib import Path
 import numpy as np
 
 from cfbmarkov.boundary import Boundary
+from cfbmarkov._console import plural
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import (
     check_output,
@@ -410,11 +411,11 @@ def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
                      + ", ".join(repr(n) for n in unused) + " (a column that numbers the "
                      "tracers must be named id, tracer, label or track)")
     if layout.noise_rows:
-        notes.append(f"{layout.noise_rows} rows with {layout.id_column} {layout.noise_id} or "
-                     "empty (noise, or no track) dropped")
+        notes.append(f"{plural(layout.noise_rows, 'row')} with {layout.id_column} "
+                     f"{layout.noise_id} or empty (noise, or no track) dropped")
     if merged:
-        notes.append(f"{merged} rows at the same time as another row of their particle merged "
-                     "(positions averaged) before resampling")
+        notes.append(f"{plural(merged, 'row')} at the same time as another row of their "
+                     "particle merged (positions averaged) before resampling")
     if layout.outside_rows:
         share = 100 * layout.outside_rows / max(layout.placed_rows, 1)
         notes.append(f"{layout.outside_rows} of {layout.placed_rows} rows ({share:.3g} %) lie "

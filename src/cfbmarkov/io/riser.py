@@ -239,7 +239,9 @@ def _wrap(axes, bounds: np.ndarray, periodic, boundary: Boundary, box, where: st
                     f"{where}: the riser's vertical range {bounds[1, 0]:g}..{bounds[1, 1]:g} m "
                     f"is not the periodic box's {box[a][0]:g}..{box[a][1]:g} m: a periodic "
                     f"riser is the whole period; give {AXES[a]} as {box[a][0]:g}:{box[a][1]:g} "
-                    "(--region or --height), or --boundary open to import the section")
+                    + ("(--region)" if box[a][0] != 0 else
+                       f"(--region, or --height {box[a][1]:g})")
+                    + ", or --boundary open to import the section")
         elif k == 1:
             wrap[k] = (bounds[1, 0], bounds[1, 1] - bounds[1, 0])
     return wrap

@@ -570,7 +570,10 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
         raise InputError(f"kinetics file {name} is not text ({what}): give the TOML file of "
                          "[[property]] tables (--kinetics kin.toml)") from None
     except tomllib.TOMLDecodeError as exc:
-        raise InputError(f"kinetics file {name} is not valid TOML: {exc}") from None
+        from cfbmarkov._toml import SYNTAX_FIX
+
+        raise InputError(f"kinetics file {name} is not valid TOML: {exc}; {SYNTAX_FIX}") \
+            from None
     unknown = set(data) - {"property"}
     if unknown:
         raise InputError(f"{name}: unknown key {sorted(unknown)[0]!r}; a kinetics file holds "
@@ -759,10 +762,14 @@ def _read_table(file: Path, p: str, where: str, signed: bool) -> tuple[np.ndarra
         if values is None or len(values) != width:
             raise InputError(f"{where}: {file} line {n} ({line!r}) is not {width} numbers; "
                              f"give {','.join(header)} on each line, such as {example}")
-        if any(v != int(v) or v < 0 for v in values[:-1] if math.isfinite(v)) or not all(
-                math.isfinite(v) for v in values):
-            raise InputError(f"{where}: {file} line {n}: cells are integers >= 0 and the "
-                             f"{p} finite; give {','.join(header)}, such as {example}")
+        for name, v in zip(header, values):
+            if not math.isfinite(v):
+                raise InputError(f"{where}: {file} line {n}: {name} is {v:g}, not a finite "
+                                 f"number; give {','.join(header)}, such as {example}")
+            if name != header[-1] and (v != int(v) or v < 0):
+                raise InputError(f"{where}: {file} line {n}: {name} {v:g} is not a cell index "
+                                 f"(a whole number >= 0, counted from 0); give "
+                                 f"{','.join(header)}, such as {example}")
         if not signed and values[-1] < 0:
             raise InputError(f"{where}: {file} line {n}: {p} {values[-1]:g} < 0; rates and "
                              "coefficients must be >= 0")
