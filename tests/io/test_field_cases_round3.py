@@ -71,7 +71,7 @@ def test_pept_tracers_are_told_apart_by_label_and_noise_is_dropped(tmp_path, cap
                  "--max-gap", "0.01"])
     out = capsys.readouterr().err                 # the notes go to stderr, after the summary
     assert code == 0
-    assert "particle ids from column 'label'" in out and "1 rows with label -1" in out
+    assert "particle ids from column 'label'" in out and "1 row with label -1" in out
     with Trajectories(tmp_path / "p.h5") as t:
         assert t.ids.tolist() == [0, 1]
         x = t.positions()[..., 0]
@@ -85,7 +85,7 @@ def test_pept_tracers_are_told_apart_by_label_and_noise_is_dropped(tmp_path, cap
         assert abs(x[present[:, 0], 0].mean() - x[present[:, 1], 1].mean()) > 0.02
         assert t.parameters["noise_rows_dropped"] == 1
     assert main(["info", str(tmp_path / "p.h5")]) == 0
-    assert "import: 1 rows with label -1" in capsys.readouterr().out
+    assert "import: 1 row with label -1" in capsys.readouterr().out
 
 
 PEPT_OPTIONS = ["--format", "csv", "--width", "0.09", "--height", "0.95", "--vertical-axis",
@@ -138,7 +138,7 @@ def test_trackmate_spots_use_track_id(tmp_path, capsys):
     out = capsys.readouterr().err
     assert code == 0
     assert "particle ids from column 'TRACK_ID'; not from 'LABEL', 'ID'" in out
-    assert "1 rows with TRACK_ID -1 or empty" in out
+    assert "1 row with TRACK_ID -1 or empty" in out
     rows = [line.split(",") for line in
             (FIELD / "trackmate-spots.csv").read_text().splitlines()[4:]]
     rows = [r for r in rows if r[2]]
@@ -261,7 +261,7 @@ def test_pept_rows_at_one_printed_time_are_merged(tmp_path, capsys):
                  "--length-unit", "mm", "--time-unit", "ms", "--resample", "0.001",
                  "--max-gap", "0.002"])
     out = capsys.readouterr().err
-    assert code == 0 and "1 rows at the same time" in out
+    assert code == 0 and "1 row at the same time" in out
     with Trajectories(tmp_path / "p.h5") as p:
         k = int(np.argmin(np.abs(p.times - 0.00377)))
         if abs(p.times[k] - 0.00377) < 1e-9:

@@ -60,7 +60,7 @@ def one_frame(tmp_path):
 def test_one_frame_file_has_no_interval_and_says_so(one_frame):
     with Trajectories(one_frame) as t:
         assert t.n_frames == 1 and np.isnan(t.frame_interval)
-        assert "frames" in repr(t) and "nan" not in repr(t)
+        assert "x 1 frame," in repr(t) and "nan" not in repr(t)
         for lag in (0.025, 1.0):
             with pytest.raises(InputError, match=r"one.h5 holds one frame: no frame interval, so "
                                                  r"no transition can be counted"):

@@ -131,6 +131,28 @@ def test_legacy_vtk_needs_a_time(tmp_path, capsys):
     assert code == 2 and err.count("\n") == 1 and "--time-step" in err and "step 100" in err
 
 
+def test_legacy_vtk_series_takes_its_step_from_the_number_that_varies(tmp_path):
+    """Names with a fixed number after the step (a version, a processor): the step is the
+    number that differs between the files, not the last one (which would date every file
+    at step 2); and a step beyond a quarter of the height without image flags is refused
+    naming the image flags as the fix."""
+    pos, vel, laps = _motion()
+    for k in range(TIMES.size):
+        _write_legacy(tmp_path / f"dump{5000 * k}_v2.vtk", pos[k], vel[k], IDS, False)
+    out = import_file(str(tmp_path / "dump*_v2.vtk"), "vtk", tmp_path / "v.h5", time_step=1e-5,
+                      vertical_axis="z", region=((0, W), (0, DEPTH), (0, H)), drop_depth=True)
+    times, *_ = _read(out)
+    np.testing.assert_allclose(times, TIMES, rtol=0, atol=1e-15)
+    fast, vel, _ = _vertical_motion([6.0, 0.3, -0.5])            # 0.3 m a frame
+    for k in range(TIMES.size):
+        _write_legacy(tmp_path / f"fast{5000 * k}.vtk", fast[k], vel[k], IDS, False)
+    with pytest.raises(InputError, match=r"particle 7 moved 0.3 m \(more than 0.25 of the "
+                       r"height 0.95 m\) .*; write frames more often, or give image flags "
+                       r"\(point arrays ix iy iz\)$"):
+        import_file(str(tmp_path / "fast*.vtk"), "vtk", tmp_path / "f.h5", time_step=1e-5,
+                    width=W, height=H)
+
+
 # --- VTK XML ------------------------------------------------------------------------------
 
 def _encode(values: np.ndarray, mode: str) -> tuple[str, bytes]:

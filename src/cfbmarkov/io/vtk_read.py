@@ -36,7 +36,7 @@ _IMAGE_NAMES = ("ix", "iy", "iz")
 _LAP_NAME = "lap"
 _VELOCITY_NAMES = ("v", "vel", "velocity", "velocities")
 _TIME_NAMES = ("time", "timevalue")
-_STEP = re.compile(r"(\d+)(?!.*\d)")
+_DIGITS = re.compile(r"\d+")
 BOUNDING_BOX = "_boundingBox"
 
 
@@ -73,9 +73,22 @@ def _label(paths: list[Path]) -> str:
     return str(paths[0]) if len(paths) == 1 else f"{paths[0].parent}/ ({len(paths)} files)"
 
 
-def _step_of(path: Path) -> int | None:
-    match = _STEP.search(path.stem)
-    return int(match.group(1)) if match else None
+def _step_position(paths: list[Path]) -> int:
+    """Which number in the files' names is the step, counted from the end (-1: the last):
+    in a series whose names all hold as many numbers, the only one that differs between
+    them (``dump10000_v2.vtk``, ``dump20000_v2.vtk``: the first); else the last."""
+    groups = [_DIGITS.findall(p.stem) for p in paths]
+    if len(paths) > 1 and groups[0] and all(len(g) == len(groups[0]) for g in groups):
+        varying = [k for k in range(len(groups[0])) if len({int(g[k]) for g in groups}) > 1]
+        if len(varying) == 1:
+            return varying[0] - len(groups[0])
+    return -1
+
+
+def _step_of(path: Path, position: int = -1) -> int | None:
+    """The step number in ``path``'s name: its number at ``position`` (:func:`_step_position`)."""
+    numbers = _DIGITS.findall(path.stem)
+    return int(numbers[position]) if numbers else None
 
 
 def _find(arrays: dict, names: tuple[str, ...]) -> str | None:
@@ -225,11 +238,12 @@ def vtk_series(source, time_step: float | None = None) -> ParticleSeries:
         raise InputError(f"{_label(paths)}: only bounding-box files, no particle file")
     label = _label(particles)
     first = read_legacy(particles[0])
-    first_time = _legacy_time(first, particles[0], time_step)
+    position = _step_position(particles)
+    first_time = _legacy_time(first, particles[0], time_step, position)
     if len(particles) > 1:
         stamped = []
         for path in particles:
-            step = _step_of(path)
+            step = _step_of(path, position)
             if step is None and first_time[1] != "TIME":
                 raise InputError(f"{path}: no step number in the file name and no TIME array: "
                                  "the files cannot be put in time order")
@@ -251,7 +265,7 @@ def vtk_series(source, time_step: float | None = None) -> ParticleSeries:
                                  "(POLYDATA or UNSTRUCTURED_GRID with POINTS)")
             if data.points is None:
                 raise InputError(f"{path}: no POINTS")
-            time = _legacy_time(data, path, time_step)[0]
+            time = _legacy_time(data, path, time_step, position)[0]
             if time in seen:
                 raise InputError(f"{path}: time {time:g} s again (as in {seen[time]}); one file "
                                  "per time step")
@@ -266,14 +280,15 @@ def vtk_series(source, time_step: float | None = None) -> ParticleSeries:
     return series
 
 
-def _legacy_time(data, path: Path, time_step: float | None) -> tuple[float, str]:
+def _legacy_time(data, path: Path, time_step: float | None,
+                 position: int = -1) -> tuple[float, str]:
     name = _find(data.field_data, _TIME_NAMES)
     if name is not None and np.asarray(data.field_data[name]).size:
         time = float(np.asarray(data.field_data[name]).ravel()[0])
         if not np.isfinite(time):
             raise InputError(f"{path}: the TIME array holds {time}")
         return time, "TIME"
-    step = _step_of(path)
+    step = _step_of(path, position)
     if step is None:
         raise InputError(f"{path}: no TIME field array and no step number in the file name: "
                          "the frame's time is unknown")
@@ -356,6 +371,7 @@ def vtp_series(source, time_step: float | None = None) -> ParticleSeries:
                                               f", else its step number x --time-step "
                                               f"{time_step:g} s")), _label(files), files[0].name
         names = [f.name for f in files]
+    position = _step_position([files[0] for _, files in entries])
     builder = _Frames()
     provenance = {"time_from": time_from, "box_from": None, "source_files": names}
 
@@ -370,7 +386,7 @@ def vtp_series(source, time_step: float | None = None) -> ParticleSeries:
             arrays = {k: np.concatenate([d.point_data[k] for d in datas])
                       for k in datas[0].point_data}
             if time is None:
-                time = _vtp_time(datas[0], files[0], time_step)
+                time = _vtp_time(datas[0], files[0], time_step, position)
             read.append((time, points, arrays, files[0]))
             if entries[0][0] is not None:                  # a .pvd: already in time order
                 yield builder.frame(time, points, arrays, None, str(files[0]))
@@ -405,13 +421,13 @@ def _export_flags(path: Path) -> tuple[str, ...]:
     return tuple("p" if int(v) else "f" for v in np.ravel(values))
 
 
-def _vtp_time(data, path: Path, time_step: float | None = None) -> float:
+def _vtp_time(data, path: Path, time_step: float | None = None, position: int = -1) -> float:
     if data.comment_time is not None:
         return data.comment_time
     name = _find(data.field_data, _TIME_NAMES)
     if name is not None and data.field_data[name].size:
         return float(data.field_data[name][0])
-    step = _step_of(path)
+    step = _step_of(path, position)
     if time_step is not None and step is not None:
         return step * time_step
     from cfbmarkov.io.vtk import PERIODIC_FIELD
