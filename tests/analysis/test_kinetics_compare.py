@@ -258,3 +258,20 @@ def test_an_interval_not_formed_says_why_and_the_verdict_line_repeats_it(predict
                   resamples=10, kinetics=kin)
     assert "interval_not_formed" not in got["kinetics"]["X"]["model"]
     assert got["kinetics"]["X"]["model"]["interval_method"].startswith("block bootstrap")
+
+
+def test_a_rate_table_off_the_models_grid_is_one_line_before_the_progress_line(
+        prediction, tmp_path, capsys):
+    """Without -q, compare prints a progress line once its inputs are checked: a rate table
+    that misses cells of the model's grid is refused before it, in one line."""
+    from cfbmarkov.cli import main
+
+    run, pred, _ = prediction
+    (tmp_path / "few.csv").write_text("col,row,rate\n0,0,1.0\n")
+    kin = _kinetics(tmp_path, "few", 'rate_by_cell = "few.csv"')
+    code = main(["compare", str(run), str(pred), "--window", "6:12", "-o", str(tmp_path / "c"),
+                 "--kinetics", str(kin)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1, err
+    assert "the table misses 59 cell(s) of the grid 6x10" in err
+    assert not (tmp_path / "c").exists()

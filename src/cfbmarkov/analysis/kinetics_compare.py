@@ -557,6 +557,43 @@ def exit_distribution(values, edges: np.ndarray) -> np.ndarray:
     return counts / total if total else counts.astype(float)
 
 
+def check_kinetics_inputs(pred, kinetics):
+    """The prediction's model, once the kinetics can be compared on it: what
+    :func:`compare_kinetics` refuses before any work, so that ``compare`` refuses it in one
+    line before its progress line (a rate table is checked against the model's grid here
+    where no parameter needs the fitting window's cell fields; else where they are read).
+
+    Parameters
+    ----------
+    pred : Trajectories
+        The prediction (it carries its model).
+    kinetics : Kinetics
+        The properties.
+
+    Returns
+    -------
+    MarkovModel
+
+    Raises
+    ------
+    InputError
+        When the prediction carries no model, a law is not linear, or a rate table does not
+        fit the model's grid.
+    """
+    from cfbmarkov.markov import MarkovModel
+
+    model = MarkovModel.from_trajectories(pred)
+    if model is None:
+        raise InputError(f"{pred.path} carries no model (/provenance/model): --kinetics needs "
+                         "the model's states and lag; predict with cfbmarkov predict")
+    if not kinetics.linear:
+        raise InputError(f"{kinetics.source or 'kinetics'}: a custom law has no reference "
+                         "side here; compare needs linear laws")
+    if not needs_cell_fields(kinetics):
+        kinetics.per_state(model.state_space)
+    return model
+
+
 def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                      resamples: int = 100, warnings: list[str]) -> dict[str, Any]:
     """The ``kinetics`` block of ``summary.json`` and the figures' inputs.
@@ -589,15 +626,8 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
         fit the model's grid, or the reference cannot be discretised on its states.
     """
     from cfbmarkov.analysis.compare import _Basis
-    from cfbmarkov.markov import MarkovModel
 
-    model = MarkovModel.from_trajectories(pred)
-    if model is None:
-        raise InputError(f"{pred.path} carries no model (/provenance/model): --kinetics needs "
-                         "the model's states and lag; predict with cfbmarkov predict")
-    if not kinetics.linear:
-        raise InputError(f"{kinetics.source or 'kinetics'}: a custom law has no reference "
-                         "side here; compare needs linear laws")
+    model = check_kinetics_inputs(pred, kinetics)
     fields = _cell_fields(model, ref, warnings) if needs_cell_fields(kinetics) else None
     warnings.extend(f"kinetics: {note}" for note in kinetics.field_notes(fields))
     warnings.extend(f"kinetics: {note}" for note in kinetics.grid_notes(model.state_space))
@@ -762,6 +792,6 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
 
 
 __all__ = ["CARRIED_SEGREGATED_NOTE", "EXIT_BINS", "PROPERTIES_GROUP", "carried_exact_note",
-           "exit_mean_agreement",
+           "check_kinetics_inputs", "exit_mean_agreement",
            "compare_kinetics", "exit_bins", "exit_distribution", "needs_cell_fields",
            "stored_definition_differs", "stored_property"]

@@ -352,6 +352,10 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     with contextlib.ExitStack() as stack:
         ref = _open(reference, stack)
         pred = _open(prediction, stack)
+        if kinetics is not None:     # a refusal before the progress line: one line
+            from cfbmarkov.analysis.kinetics_compare import check_kinetics_inputs
+
+            check_kinetics_inputs(pred, kinetics)
         comparison = compare_runs(ref, pred, window, bin_width=bin_width, md_order=md_order,
                                   basis=basis, long_run_span=long_run_span,
                                   allow_empty=allow_empty)
