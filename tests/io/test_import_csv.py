@@ -170,7 +170,9 @@ BAD_CSV = {
     "misnamed-column": (table(header="tijd,id,x,y"),
                         r"missing column 't' in the header 'tijd,id,x,y'; expected t, x, y"),
     "z-column-without-vertical-axis": (table(header="t,id,x,y,z"),
-                                       r"has a z column.*--vertical-axis x\|y\|z"),
+                                       r"has a z column.*--vertical-axis x\|y\|z.*a 2D export "
+                                       r"whose z is all 0 \(TrackMate, PTV\): --vertical-axis "
+                                       r"y --drop-depth$"),
     "duplicate-column": (table(header="t,id,x,y,x"), r"column 'x' appears twice"),
     "half-velocity": (table(header="t,id,x,y,vx"), r"only one of vx, vy"),
     "no-header": (table().split("\n", 1)[1], r"line 1 is not a header"),

@@ -395,7 +395,8 @@ def _axes(canonical: dict[str, int], vertical_axis: str | None, shown: str,
             raise InputError(
                 f"{label}: the header {shown!r} has a z column (3D positions): say which axis "
                 "is vertical with --vertical-axis x|y|z (nothing is guessed; a 2D file would "
-                "take y, LIGGGHTS and EDEM usually put gravity along -z)")
+                "take y, LIGGGHTS and EDEM usually put gravity along -z); a 2D export whose z "
+                "is all 0 (TrackMate, PTV): --vertical-axis y --drop-depth")
         vertical_axis = "y"
     if vertical_axis not in AXES:
         raise InputError(f"--vertical-axis {vertical_axis!r}: choose x, y or z")
