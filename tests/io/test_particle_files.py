@@ -532,6 +532,22 @@ def test_damaged_particle_files_are_refused_in_one_line(tmp_path, mode):
             assert not out.exists()
 
 
+@pytest.mark.parametrize("binary", [False, True], ids=["ascii", "binary"])
+def test_a_legacy_file_cut_inside_a_data_type_says_truncated(tmp_path, binary):
+    """A file cut in the line "SCALARS id int 1" ("... id in"): truncated, not a data type
+    that is not read."""
+    pos, vel, _ = _motion()
+    _write_legacy(tmp_path / "d0.vtk", pos[0], vel[0], IDS, binary)
+    data = (tmp_path / "d0.vtk").read_bytes()
+    words = b"POINTS 3 double" if not binary else b"SCALARS id int"
+    cut = data.index(words) + len(words) - 1 if binary else data.index(words) + len(words) - 2
+    (tmp_path / "d0.vtk").write_bytes(data[:cut])
+    with pytest.raises(InputError, match=r"the file ends in the line that names the data type "
+                                         r"\('(in|doub)', no values after it\): truncated"):
+        import_file(tmp_path / "d0.vtk", None, tmp_path / "o.h5", vertical_axis="z",
+                    time_step=1e-5, region=((0, W), (0, DEPTH), (0, H)))
+
+
 def test_laps_of_a_step_over_the_height_are_refused_before_any_output(tmp_path, capsys):
     """Image flags that say a particle moved more than the riser's height between two
     frames: a trajectory file cannot hold that step, so the import refuses it in one line

@@ -85,6 +85,9 @@ class _Cursor:
     def values(self, count: int, vtk_type: str) -> np.ndarray:
         """``count`` values of ``vtk_type`` (integers as int64, reals as float64)."""
         kind = _TYPES.get(vtk_type.lower())
+        if kind is None and self.pos >= len(self.data):   # its line is the file's last
+            raise InputError(f"{self.label}: the file ends in the line that names the data "
+                             f"type ({vtk_type!r}, no values after it): truncated")
         if kind is None:
             raise InputError(f"{self.label}: data type {vtk_type!r} is not read (integers, "
                              "float or double are)")
