@@ -701,3 +701,33 @@ def test_a_wide_interval_says_what_limit_the_parts_are_held_to(tmp_path):
     assert len(wide) == 1
     assert f"hold them to at most {100 * MAX_PARTS_LIMIT:g} %" in wide[0]
     assert "no check of its parts can pass or fail" not in wide[0]
+
+
+def test_a_python_fitted_model_judged_on_other_data_or_another_window_is_refused(tmp_path):
+    """assess_fit on a model fitted in Python (it records no identity of its data): runs
+    whose transitions are not its counts, or a window that is not its fitting window, are
+    refused in one line, not judged (its verdict and fields were another file's); its own
+    run and window, given or not, give the same model as leaving them out."""
+    from cfbmarkov.analysis.fit_checks import assess_fit
+    from cfbmarkov.markov import PaperEstimator
+
+    grid = CellGrid(4, 16)
+    run = synthetic.write_run(tmp_path / "run.h5", FAST, 300, 6.0, seed=1)
+    other = synthetic.write_run(tmp_path / "other.h5", SLOW, 300, 6.0, seed=2)
+    model = PaperEstimator(grid, FAST.lag).fit(discretize(run, grid, FAST.lag, (1.0, 5.0)))
+    with pytest.raises(InputError, match=r"other.h5: not the data the model was fitted on "
+                                         r"\(the windows' transitions are not the model's "
+                                         r"counts\)"):
+        assess_fit(model, runs=[other], resamples=0)
+    with pytest.raises(InputError, match=r"window 0.5-4.5 s: not the model's fitting window "
+                                         r"1-5 s; give the window it was fitted on"):
+        assess_fit(model, windows=[(0.5, 4.5)], resamples=0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        judged = assess_fit(model, resamples=20)
+        again = assess_fit(model, runs=[run], windows=[(1.0, 5.0)], resamples=20)
+        # a model that records its data's identity: another window is refused as well
+        with pytest.raises(InputError, match=r"window 0.5-4.5 s: not the model's fitting"):
+            assess_fit(judged, windows=[(0.5, 4.5)], resamples=0)
+    assert judged.uncertainty.rt_mean_interval == again.uncertainty.rt_mean_interval
+    assert judged.adequacy == again.adequacy

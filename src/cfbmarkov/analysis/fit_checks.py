@@ -11,6 +11,8 @@ import numbers
 import warnings
 from collections.abc import Callable, Sequence
 
+import numpy as np
+
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, SampleWarning
 
 __all__ = ["IntervalWarning", "assess_fit", "record_fitting_data"]
@@ -69,8 +71,10 @@ def assess_fit(model, runs: Sequence | None = None,
     ------
     InputError
         If the model was not fitted on files (no ``source``), ``runs`` and ``windows``
-        differ in number, their windows' content differs from the one the model records
-        (``source_identity``: not the data it was fitted on), ``resamples`` is negative,
+        differ in number, a window given is not the model's fitting window, their windows'
+        content differs from the one the model records (``source_identity``), or, where it
+        records none (fitted in Python), their transitions are not the model's counts (not
+        the data it was fitted on), ``resamples`` is negative,
         1-9 or not a whole number, ``level`` lies outside (0, 1) or needs more resamples
         (:func:`cfbmarkov.analysis.bootstrap.check_interval_options`), or the chain traps
         residences.
@@ -88,6 +92,7 @@ def assess_fit(model, runs: Sequence | None = None,
     """
     from cfbmarkov.markov.first_passage import TrappedResidences
 
+    explicit_windows = windows is not None
     runs, windows = _runs_and_windows(model, runs, windows)
     if isinstance(resamples, bool) or not isinstance(resamples, numbers.Integral):
         raise InputError(f"resamples {resamples!r}: a whole number (0 leaves the interval out)")
@@ -106,6 +111,10 @@ def assess_fit(model, runs: Sequence | None = None,
                       "window spanning them for both)", IntervalWarning, stacklevel=2)
         resamples, verdict = 0, False
     recorded = model.source_identity
+    # the windows as fitted, read once: the data checked to be the model's where it records
+    # no identity of it (fitted in Python) or windows are given; then the verdict's read
+    given = (_given_windows(model, runs, windows, check_counts=recorded is None)
+             if recorded is None or explicit_windows else None)
     model = _with_window_fields(model, runs, windows)
     if recorded is not None and model.source_identity != recorded:
         raise InputError(f"{', '.join(map(str, runs))}: not the data the model was fitted on "
@@ -127,8 +136,8 @@ def assess_fit(model, runs: Sequence | None = None,
         raise InputError(f"{', '.join(map(str, runs))}: {text}") from None
     except CfbmarkovError:
         has_rtd = False            # no circulation at all: a model without residence times
-    discrete = (_fitting_windows(model, runs, windows) if resamples and has_rtd and verdict
-                else None)
+    discrete = (_fitting_windows(model, runs, windows, given)
+                if resamples and has_rtd and verdict else None)
     if resamples and has_rtd:
         from cfbmarkov.analysis.intervals import model_intervals
 
@@ -149,14 +158,51 @@ def assess_fit(model, runs: Sequence | None = None,
         with stage("sample verdict", "the fitting sample's verdict: the window's halves "
                    "and quarters refitted and compared"):
             model = model.with_adequacy(assess_adequacy(model, runs, windows,
-                                                        discrete=discrete,
+                                                        discrete=discrete or given,
                                                         uncertainty=model.uncertainty))
         for line in model.adequacy.warnings:      # seen in a notebook, as predict repeats them
             warnings.warn(line, SampleWarning, stacklevel=2)
     return model
 
 
-def _fitting_windows(model, runs, windows):
+def _given_windows(model, runs, windows, check_counts: bool) -> list:
+    """``runs``' ``windows`` discretised as the model was fitted (``short_history="skip"``:
+    a space with memory starts after its history), once each is checked to be the model's
+    fitting window (its end, and its start after the history), and with ``check_counts``
+    their transitions to be the model's counts (the data it was fitted on, where it records
+    no identity of it).
+
+    Raises
+    ------
+    InputError
+        Naming the window that is not the model's, or the runs whose transitions are not
+        its counts.
+    """
+    from cfbmarkov.markov.counting import count_transitions
+    from cfbmarkov.markov.discrete import discretize
+
+    read = [discretize(run, model.state_space, model.lag, window, short_history="skip")
+            for run, window in zip(runs, windows)]
+    own = (list(model.run_windows) if model.run_windows is not None
+           and len(model.run_windows) == len(read) else [model.window] * len(read))
+    for d, window, mine in zip(read, windows, own):
+        if mine is not None and d.window is not None and not np.allclose(
+                d.window, mine, rtol=0, atol=1e-9):
+            raise InputError(f"window {window[0]:g}-{window[1]:g} s: not the model's fitting "
+                             f"window {mine[0]:g}-{mine[1]:g} s; give the window it was fitted "
+                             "on, or leave windows= out")
+    if check_counts:
+        counts = count_transitions(read, sparse=True).counts
+        if counts.shape != model.counts.shape or not np.array_equal(counts.toarray(),
+                                                                    model.counts):
+            names = ", ".join(str(getattr(run, "path", run)) for run in runs)
+            raise InputError(f"{names}: not the data the model was fitted on (the windows' "
+                             "transitions are not the model's counts); give the runs and "
+                             "windows it was fitted on, or leave runs= and windows= out")
+    return read
+
+
+def _fitting_windows(model, runs, windows, read=None):
     """The fitting windows discretised once, for the interval's bootstrap and the verdict's
     parts (0.22 s a read of the paper-scale 3 m/s window: ``python
     benchmarks/interval_cost.py MODEL.h5``, 2026-12-07), where ``runs`` and ``windows``
@@ -175,7 +221,7 @@ def _fitting_windows(model, runs, windows):
             if (os.path.realpath(path) != os.path.realpath(source)
                     or tuple(map(float, window)) != tuple(map(float, given))):
                 return None
-        return fitting_windows(model)     # the bootstrap's own read, once
+        return read if read is not None else fitting_windows(model)   # read once
     except (CfbmarkovError, TypeError, OSError):
         return None
 
