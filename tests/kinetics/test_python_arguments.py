@@ -99,3 +99,28 @@ def test_a_heat_exchange_without_a_start_value_says_none_is_given():
     with pytest.raises(InputError, match=r"initial = \.\.\. \(the feed's value\), none is "
                                          r"given$"):
         Property("T", HeatExchange(), {"coefficient": 1.0, "temperature": 800.0})
+
+
+@pytest.mark.parametrize("args, message", [
+    (("porosity", 0.2, 2.0, 0.1), "FromField: 'porosity' is not a cell field; use one of "
+                                  "solids_fraction, wall_distance, vertical_velocity"),
+    (("solids_fraction", 0.2, 2.0, float("nan")), "FromField('solids_fraction') threshold nan "
+                                                   "is not a finite number"),
+    (("solids_fraction", 0.2, 2.0, float("inf")), "threshold inf is not a finite number"),
+    (("wall_distance", float("nan"), 2.0, 0.01), "dense nan is not a finite number"),
+    (("wall_distance", 0.2, "2", 0.01), "dilute '2' is not a number")])
+def test_a_parameter_from_a_cell_field_takes_a_known_field_and_finite_numbers(args, message):
+    """A NaN threshold would put every cell on the dilute side silently; an unknown field
+    would fail only where the fields are read: both refused when built."""
+    from cfbmarkov.kinetics import FromField
+
+    with pytest.raises(InputError, match=message.replace("(", r"\(").replace(")", r"\)")):
+        FromField(*args)
+
+
+def test_a_negative_value_from_a_cell_field_is_refused_as_a_negative_rate():
+    from cfbmarkov.kinetics import FromField
+
+    with pytest.raises(InputError, match="property X: rate -0.2 < 0; rates and coefficients "
+                                         "must be >= 0"):
+        Property("X", FirstOrder(), {"rate": FromField("solids_fraction", -0.2, 2.0, 0.1)})

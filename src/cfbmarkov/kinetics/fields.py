@@ -267,6 +267,17 @@ class FromField(CellParameter):
     threshold: float
     key: str = "value_from"
 
+    def __post_init__(self):
+        """Refuse a field that is not one of :data:`FIELDS` and a value or threshold that is
+        not a finite number (InputError): a NaN threshold would put every cell on the
+        dilute side with nothing said."""
+        if self.field not in FIELDS:
+            raise InputError(f"FromField: {self.field!r} is not a cell field; use one of "
+                             f"{', '.join(FIELDS)}")
+        for name in ("dense", "dilute", "threshold"):
+            object.__setattr__(self, name, check_finite(getattr(self, name),
+                                                        f"FromField({self.field!r}) {name}"))
+
     def per_cell(self, space, fields=None):
         if fields is None:
             raise InputError(f"{self.key} = {self.field!r} needs the fitting window's cell "

@@ -132,6 +132,7 @@ class Property:
                                  "ByCell(...) or FromField(...) (cfbmarkov.kinetics)")
             table = np.asarray(value.table) if isinstance(value, ByCell) else None
             low = (value.value if isinstance(value, Constant) else
+                   min(value.dense, value.dilute) if isinstance(value, FromField) else
                    float(np.nanmin(table[:, -1])) if table is not None and table.ndim == 2
                    and table.shape[1] in (3, 4) and table.shape[0] else None)
             if low is not None and low < 0 and key not in self.law.signed_parameters():
