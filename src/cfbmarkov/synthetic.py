@@ -17,7 +17,8 @@ from pathlib import Path
 
 import numpy as np
 
-from cfbmarkov.limits import check_memory
+from cfbmarkov.errors import InputError
+from cfbmarkov.limits import check_finite, check_memory, check_seed
 from cfbmarkov.markov.montecarlo import SparseChain, run_chain
 from cfbmarkov.markov.states import CellGrid, place_in_cells
 
@@ -59,6 +60,26 @@ class RiserFlow:
     lateral_probability: float = 0.15  # probability of stepping to each neighbouring column
     switch_probability: float = 0.08   # base probability per lag of changing direction
     persistence: bool = True           # False: no hidden direction (a pure chain on cells)
+
+    def __post_init__(self):
+        """Refuse parameters that give no chain (InputError naming the parameter): whole
+        numbers of at least 1 column and 4 rows, finite sizes, lag, velocities and spread
+        (positive where a size), probabilities whose stay probabilities stay in [0, 1]."""
+        for name, least in (("columns", 1), ("rows", 4)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) \
+                    or value < least:
+                raise InputError(f"RiserFlow {name} {value!r}: a whole number >= {least}")
+        for name in ("width", "height", "lag", "vertical_spread"):
+            check_finite(getattr(self, name), f"RiserFlow {name}", positive=True)
+        for name in ("rise_velocity", "fall_velocity"):
+            check_finite(getattr(self, name), f"RiserFlow {name}")
+        # each side's step and the switches toward the walls (1.7 x) are probabilities
+        for name, most in (("lateral_probability", 0.5), ("switch_probability", 1 / 1.7)):
+            value = check_finite(getattr(self, name), f"RiserFlow {name}", non_negative=True)
+            if value > most:
+                raise InputError(f"RiserFlow {name} {value:g} must be at most {most:.4g} (the "
+                                 "probability of staying would be negative)")
 
     @property
     def grid(self) -> CellGrid:
@@ -240,8 +261,15 @@ def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
     Raises
     ------
     InputError
-        Where the run would not fit in memory (:func:`cfbmarkov.limits.check_memory`).
+        Where the counts are not whole numbers >= 1, the seed not one of 0 .. 2^64 - 1, the
+        start time not finite, or the run would not fit in memory
+        (:func:`cfbmarkov.limits.check_memory`).
     """
+    for name, value in (("n_particles", n_particles), ("n_frames", n_frames)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise InputError(f"{name} {value!r}: a whole number >= 1")
+    seed = check_seed(seed)
+    start_time = check_finite(start_time, "start_time", "s")
     check_memory(RUN_BYTES * float(n_frames) * float(n_particles),
                  f"a synthetic run of {n_particles} particles x {n_frames} frames",
                  "give fewer particles (--particles) or a shorter run")
@@ -264,6 +292,7 @@ def sample_run(flow: RiserFlow, n_particles: int, n_frames: int, seed: int = 0,
 
 def _sampled(flow: RiserFlow, n_particles: int, duration: float, seed: int, start_time: float):
     """(times, positions, laps, parameters) of a sampled run for the writers."""
+    duration = check_finite(duration, "duration", "s", positive=True)
     n_frames = int(round(duration / flow.lag)) + 1
     times, _, positions, laps = sample_run(flow, n_particles, n_frames, seed, start_time)
     params = {k: getattr(flow, k) for k in flow.__dataclass_fields__}
