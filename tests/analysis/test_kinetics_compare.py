@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -274,4 +275,23 @@ def test_a_rate_table_off_the_models_grid_is_one_line_before_the_progress_line(
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
     assert "the table misses 59 cell(s) of the grid 6x10" in err
+    assert not (tmp_path / "c").exists()
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"level": 2.0}, "interval level 2.0 must be a number strictly between 0 and 1"),
+    ({"level": float("nan"), "resamples": 0}, "interval level nan must be a number"),
+    ({"resamples": -1}, "resamples -1: a whole number, 0 (no intervals) or at least 10"),
+    ({"resamples": 5}, "intervals need at least 2 blocks and 10 resamples"),
+    ({"resamples": 10.5}, "resamples 10.5: a whole number")])
+def test_compare_in_python_refuses_interval_options_as_the_command_line(prediction, tmp_path,
+                                                                       options, message):
+    """A level of 2 or 5 resamples dropped the intervals with one line among the summary's
+    warnings; refused as `compare --level 2` is, before anything is written."""
+    from cfbmarkov.report.compare import compare
+
+    run, pred, _ = prediction
+    with pytest.raises(InputError, match=re.escape(message)):
+        compare(run, pred, window=(6.0, 12.0), output=tmp_path / "c", figures=False,
+                **options)
     assert not (tmp_path / "c").exists()

@@ -3,6 +3,7 @@
 generated chain, the model file round trip, and the command line (fit, rtd --json, info)."""
 
 import json
+import re
 from dataclasses import replace
 
 import h5py
@@ -544,3 +545,27 @@ def test_discretised_windows_given_to_the_interval_must_be_the_models_own(statio
         model_intervals(model, resamples=12, discrete=[None])
     assert model_intervals(model, resamples=12, discrete=iter(own)).rt_mean_interval == \
         given.rt_mean_interval
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"blocks": 2.5}, "blocks 2.5 must be a whole number"),
+    ({"resamples": 10.5}, "resamples 10.5 must be a whole number"),
+    ({"level": "0.9"}, "interval level '0.9' must be a number strictly between 0 and 1"),
+    ({"seed": -3}, "seed -3 must lie in 0 .. 2"),
+    ({"seed": 1.5}, "seed 1.5 is not a whole number")])
+def test_model_intervals_refuse_options_that_would_be_cut_or_fail_in_numpy(options, message):
+    """blocks=2.5 ran with 2 blocks (another interval), resamples=10.5 with 10; a seed or a
+    level of another type failed in numpy: each refused naming the option."""
+    from cfbmarkov.analysis.intervals import model_intervals
+    from cfbmarkov.markov import CellGrid, PaperEstimator
+    from cfbmarkov.markov.discrete import DiscreteTrajectories
+
+    states = np.zeros((3, 2), np.int32)
+    model = PaperEstimator(CellGrid(1, 2), 1.0).fit(DiscreteTrajectories(
+        states=states, vertical=states + 0.5, times=np.arange(3.0), lag_frames=1,
+        frame_interval=1.0, height=2.0, state_space=CellGrid(1, 2, 1.0, 2.0)))
+    with pytest.raises(InputError, match=re.escape(message)):
+        model_intervals(model, **options)
+    with pytest.raises(InputError, match=r"model_intervals\('model.h5'\): give a fitted "
+                                         r"MarkovModel \(MarkovModel.load\(path\)"):
+        model_intervals("model.h5")

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import math
+import numbers
 from collections import deque
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
@@ -520,10 +521,16 @@ def check_interval_options(level: float, resamples: int, blocks: int = 2,
     Raises
     ------
     InputError
-        Naming the problem and what to change.
+        Naming the problem and what to change (also a level that is not a number, blocks
+        or resamples that are not whole numbers).
     """
-    if not 0.0 < float(level) < 1.0:
-        raise InputError(f"interval level {level!r} must lie strictly between 0 and 1")
+    if isinstance(level, (bool, str, bytes)) or not isinstance(level, numbers.Real) \
+            or not 0.0 < float(level) < 1.0:
+        raise InputError(f"interval level {level!r} must be a number strictly between 0 "
+                         "and 1")
+    for name, value in (("blocks", blocks), ("resamples", resamples)):
+        if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+            raise InputError(f"{name} {value!r} must be a whole number")
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")

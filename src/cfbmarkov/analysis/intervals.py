@@ -369,7 +369,10 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     ``docs/definitions.md`` (Intervals); B. Efron and R. J. Tibshirani, An Introduction to
     the Bootstrap, Chapman & Hall (1993), Ch. 8 and 13.
     """
+    from cfbmarkov.limits import check_seed
+
     check_interval_options(level, resamples, blocks)
+    seed = check_seed(seed)
     samples = np.asarray(samples, dtype=np.float64)
     if samples.size < 2:
         raise InputError("intervals need at least 2 residence-time samples in the window")
@@ -575,9 +578,11 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = BOOTSTRAP_BLOCKS
     Raises
     ------
     InputError
-        For a level outside (0, 1), fewer than 2 blocks or 10 resamples, a model without its
-        fitting data (:func:`fitting_runs`), a fitting window too short for the blocks, or
-        fewer than 10 resamples with residences.
+        For a model that is not a MarkovModel, a level that is not a number in (0, 1),
+        blocks or resamples that are not whole numbers (at least 2 and 10), a seed that is
+        not one of 0 .. 2^64 - 1, a model without its fitting data (:func:`fitting_runs`),
+        a fitting window too short for the blocks, or fewer than 10 resamples with
+        residences.
     CfbmarkovError
         If the model has no residence time (:meth:`MarkovModel.rtd`).
 
@@ -586,9 +591,15 @@ def model_intervals(model, *, level: float = 0.9, blocks: int = BOOTSTRAP_BLOCKS
     B. Efron and R. J. Tibshirani, An Introduction to the Bootstrap, Chapman & Hall (1993),
     Ch. 8 and 13; H. Flyvbjerg and H. G. Petersen, J. Chem. Phys. 91, 461 (1989).
     """
+    from cfbmarkov.limits import check_seed
+    from cfbmarkov.markov.model import MarkovModel
     from cfbmarkov.markov.uncertainty import ModelUncertainty
 
+    if not isinstance(model, MarkovModel):
+        raise InputError(f"model_intervals({model!r}): give a fitted MarkovModel "
+                         "(MarkovModel.load(path) for a model file)")
     check_interval_options(level, resamples, blocks)
+    seed = check_seed(seed)
     model = resolve_source(model)
     runs = fitting_runs(model)
     direction = model.flow_direction if direction is None else direction

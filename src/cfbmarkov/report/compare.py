@@ -260,6 +260,27 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
     return written
 
 
+def _check_interval_options(level, resamples) -> None:
+    """Refuse what the command line refuses: resamples that are not a whole number, 0 or
+    at least 10 (with enough for the level's tails), a level that is not a number in
+    (0, 1). Without this a Python call had its intervals dropped with one line in the
+    summary's warnings."""
+    import numbers
+
+    from cfbmarkov.analysis.bootstrap import check_interval_options
+
+    if isinstance(resamples, bool) or not isinstance(resamples, numbers.Integral) \
+            or resamples < 0:
+        raise InputError(f"resamples {resamples!r}: a whole number, 0 (no intervals) or at "
+                         "least 10")
+    if resamples:
+        check_interval_options(level, resamples)
+    elif isinstance(level, (bool, str, bytes)) or not isinstance(level, numbers.Real) \
+            or not 0.0 < float(level) < 1.0:
+        raise InputError(f"interval level {level!r} must be a number strictly between 0 "
+                         "and 1")
+
+
 def compare(reference, prediction, *, window, output, bin_width: float | None = None,
             basis: str = "frames",
             level: float = 0.9, resamples: int = 100,
@@ -328,7 +349,9 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     Raises
     ------
     InputError
-        For unusable parameters or files (:func:`cfbmarkov.analysis.compare.compare_runs`:
+        For unusable parameters (a level outside (0, 1), resamples other than 0 or at
+        least 10, as the command line refuses them) or files
+        (:func:`cfbmarkov.analysis.compare.compare_runs`:
         among them a side without a complete residence in the window, bins too wide to tell
         RTDs apart, a prediction given as the reference of a run), an ``output`` that
         exists and is not a directory, a model's fitting file replaced since the fit
@@ -341,6 +364,7 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
     Y. Zhuang, Processes 13(3), 614 (2025), doi:10.3390/pr13030614, Table 3, Eq. 9 and Figs. 3-11.
     """
     check_parameters(window, bin_width, md_order)
+    _check_interval_options(level, resamples)
     out = Path(output)
     if out.exists() and not out.is_dir():
         raise InputError(f"output {out} exists and is not a directory")
