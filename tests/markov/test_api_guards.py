@@ -227,3 +227,19 @@ def test_residence_times_are_the_lags_decimal_multiples():
     assert np.abs(rtd.times - 0.025 * np.arange(1, 401)).max() < 1e-13
     third = lag_multiples(1 / 30, np.arange(1, 50))
     assert np.array_equal(third, np.arange(1, 50) * (1 / 30))
+
+
+def test_a_lag_that_is_not_a_positive_finite_number_and_a_window_outside_are_named(
+        markov_flow, markov_run):
+    """discretize with a NaN or infinite lag said "lag of 0 frames"; select_model with a
+    window outside the data named its first block (30:31.675 s), not the window given."""
+    from cfbmarkov.markov.select import select_model
+
+    for lag in (float("nan"), float("inf"), -0.025):
+        with pytest.raises(InputError, match=r"lag (nan|inf|-0.025) s must be a positive "
+                                             r"finite number"):
+            discretize(markov_run, CellGrid(markov_flow.columns, markov_flow.rows), lag,
+                       (0.5, 1.0))
+    with pytest.raises(InputError, match=r"window 30:35 s lies outside the data"):
+        select_model(markov_run, window=(30.0, 35.0), columns=markov_flow.columns,
+                     rows=markov_flow.rows, lag=markov_flow.lag)

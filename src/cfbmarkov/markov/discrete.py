@@ -535,6 +535,9 @@ def check_arguments(state_space, lag, window=None) -> None:
     if isinstance(lag, bool) or not isinstance(lag, numbers.Real):
         raise InputError(f"lag {lag!r} is a {type(lag).__name__}, not a number of seconds: "
                          "give e.g. lag=0.025")
+    if not (np.isfinite(float(lag)) and float(lag) > 0):
+        raise InputError(f"lag {float(lag):g} s must be a positive finite number (a whole "
+                         "number of frame intervals): give e.g. lag=0.025")
     if window is None:
         return
     ok = (isinstance(window, (tuple, list, np.ndarray)) and len(window) == 2 and all(

@@ -123,8 +123,9 @@ def judged_blocks(traj, window: tuple[float, float], lag: float, lag_multiples: 
     blocks = [(float(edges[k]), float(edges[k + 1])) for k in range(folds)]
     # like for like: the held-out residence times from frames at the lag, the time
     # basis of the model's RTD (docs/definitions.md, Comparison basis)
-    for block in blocks:
-        traj.window(*block)         # a window outside the data is refused as such first
+    traj.window(a, b)               # a window outside the data is refused as such first,
+    for block in blocks:            # named as given
+        traj.window(*block)
     lag_frames = traj.lag_frames(lag)
     # residences counted as the fitting window's net solids flow runs (docs/definitions.md,
     # Net downflow), as the comparison of the prediction will count them
