@@ -243,3 +243,18 @@ def test_a_lag_that_is_not_a_positive_finite_number_and_a_window_outside_are_nam
     with pytest.raises(InputError, match=r"window 30:35 s lies outside the data"):
         select_model(markov_run, window=(30.0, 35.0), columns=markov_flow.columns,
                      rows=markov_flow.rows, lag=markov_flow.lag)
+
+
+def test_an_occupancy_without_a_window_and_one_run_given_alone(model, markov_run):
+    """rtd(occupancy=...) without a window ignored the occupancy; assess_fit(runs="x.h5")
+    read the name letter by letter ("s: no such file")."""
+    from cfbmarkov.analysis.fit_checks import assess_fit
+
+    with pytest.raises(InputError, match=r"occupancy= says where a window's particles start: "
+                                         r"give the window's length with it"):
+        model.rtd(occupancy=np.ones(model.n_states))
+    assert model.rtd(window=1.0, occupancy=np.ones(model.n_states)).mean > 0
+    alone = assess_fit(model, runs=str(markov_run), resamples=0, verdict=False)
+    listed = assess_fit(model, runs=[str(markov_run)], resamples=0, verdict=False)
+    assert alone.source_identity is not None
+    assert alone.source_identity == listed.source_identity

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import numbers
+import os
 import warnings
 from collections.abc import Callable, Sequence
 
@@ -208,8 +209,6 @@ def _fitting_windows(model, runs, windows, read=None):
     benchmarks/interval_cost.py MODEL.h5``, 2026-12-07), where ``runs`` and ``windows``
     are the files and windows the model names, in its order (the interval reads those);
     else None (each stage reads its own, and says why where it cannot)."""
-    import os
-
     from cfbmarkov.analysis.bootstrap import fitting_runs, fitting_windows
 
     try:
@@ -260,7 +259,6 @@ def record_fitting_data(model, runs: Sequence | None = None,
 def _repeated_run(runs) -> str | None:
     """The file named more than once among ``runs`` (paths or open Trajectories), or None:
     windows of one run are not the independent runs a pooled interval takes."""
-    import os
     from pathlib import Path
 
     seen = set()
@@ -292,6 +290,8 @@ def _runs_and_windows(model, runs, windows) -> tuple[list, list]:
                              "runs= and windows= (the files and fitting windows)")
         else:
             runs = [model.source]
+    if isinstance(runs, (str, os.PathLike)) or hasattr(runs, "positions"):
+        runs = [runs]                    # one run given alone, not in a list
     runs = list(runs)
     if windows is None:
         if pooled and len(runs) == len(model.run_windows):

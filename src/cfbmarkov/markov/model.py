@@ -480,7 +480,7 @@ class MarkovModel:
         CfbmarkovError
             If the model has no transition through the boundary in ``direction`` (no
             residence ends), or no residence fits in ``window``; InputError for a
-            ``direction`` that is neither up nor down.
+            ``direction`` that is neither up nor down, or ``occupancy`` without ``window``.
 
         Warns
         -----
@@ -502,6 +502,10 @@ class MarkovModel:
         """
         from cfbmarkov.markov.model_rtd import model_rtd
 
+        if occupancy is not None and window is None:
+            raise InputError("occupancy= says where a window's particles start: give the "
+                             "window's length with it (rtd(window=..., occupancy=...)); the "
+                             "intrinsic RTD starts from the entry distribution")
         rtd = model_rtd(self, window, direction, occupancy)
         key = ("unresolved-warned", direction or self.flow_direction)
         if window is None and key not in self._cache:
@@ -796,6 +800,18 @@ class MarkovModel:
         An existing model file at ``path`` is replaced; a file of another kind (a
         trajectory file, an image) only with ``force=True``, as ``cfbmarkov fit -o``
         with ``--force``.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The model file to write (HDF5, ``.h5``); its folder is created if missing.
+        force : bool, optional
+            Replace a file of another kind at ``path`` (default False: refused).
+
+        Returns
+        -------
+        pathlib.Path
+            The path written.
 
         Raises
         ------
