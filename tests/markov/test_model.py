@@ -289,6 +289,11 @@ def test_monte_carlo_follows_the_matrix_and_is_reproducible(markov_flow, markov_
 def test_predict_writes_a_trajectory_file(tmp_path, markov_flow, markov_run):
     model = fit_model(markov_run, markov_flow.grid, markov_flow.lag, (0, 4))
     out = model.predict(markov_run, start=4.0, duration=1.0, seed=7, output=tmp_path / "pred.h5")
+    # a prediction loaded as a model: named as one, with where its model is
+    with pytest.raises(InputError, match=r"is a prediction \(a trajectory file\), not a "
+                                         r"cfbmarkov model file: give the model file it was "
+                                         r"predicted with"):
+        MarkovModel.load(out)
     with Trajectories(out) as pred, Trajectories(markov_run) as run:
         assert pred.n_frames == 41 and pred.source == "markov-prediction"
         np.testing.assert_allclose(pred.times, 4.0 + 0.025 * np.arange(41))

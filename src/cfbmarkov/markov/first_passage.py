@@ -86,10 +86,14 @@ class ResidenceTimeDistribution:
     lag : float
         The lag (s).
     probability : ndarray of float64, shape (K,)
-        f(k); index 0 is k = 1.
+        f(k); index 0 is k = 1. The intrinsic RTD's sums with ``unresolved`` to 1; an RTD
+        as a window sees it (``window`` set) is the distribution of the residences the
+        window holds whole, summing to 1 by itself.
     unresolved : float
-        Mass not resolved (lap-deficit truncation, traps, tail cut-off; for an RTD
-        computed only as far as a window, the rest too).
+        The intrinsic RTD's mass not resolved (lap-deficit truncation, traps, tail
+        cut-off); for an RTD as a window sees it, the share of the residences begun in the
+        window that do not end in it (:func:`window_rtd`), not part of the sum of
+        ``probability``.
     entry_distribution : ndarray of float64, shape (S,)
         The distribution of the states residences start in.
     window : float or None

@@ -188,6 +188,11 @@ def read_model_group(group: h5py.Group | h5py.File, model_class: Callable[..., "
     if isinstance(fmt, bytes):
         fmt = fmt.decode(errors="replace")
     if fmt == "cfbmarkov.trajectories":
+        if "provenance/model" in group:      # a prediction: it carries the model it ran
+            raise InputError(f"{label} is a prediction (a trajectory file), not a cfbmarkov "
+                             "model file: give the model file it was predicted with (in "
+                             "Python, MarkovModel.from_trajectories(Trajectories(path)) is "
+                             "the model it carries)")
         raise InputError(f"{label} is a trajectory file, not a cfbmarkov model file: fit a "
                          f"model on it first (cfbmarkov fit {label} -o model.h5) and give "
                          "that model")
