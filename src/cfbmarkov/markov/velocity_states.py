@@ -87,7 +87,10 @@ class VelocityCells(_CellProductSpace):
     bins); the model keeps the fitted space. Fixed edges cannot fit every flow: at the
     paper's 4 m/s the solids fall at up to 4 m/s, and the edges -1, 0, 1, 3 m/s put all
     that falling motion into two bins, so the chain forgot how fast a particle was falling
-    (``docs/method.md``, Velocity bins).
+    (``docs/method.md``, Velocity bins). ``VelocityCells(m, n)`` with no ``edges`` takes
+    those fixed edges (the model files of that space read as they were written); the
+    command line's ``cells-velocity`` is ``VelocityCells.with_defaults(m, n)`` (or
+    ``edges=None``, or ``state_space_from_name("cells-velocity", m, n)``).
 
     With ``sub_rows`` k > 1 (:class:`FineVelocityCells`, ``cells-velocity-fine`` by name,
     fits k) each cell row is split into
