@@ -82,7 +82,7 @@ def test_import_prints_only_the_path_on_stdout(tmp_path, capsys):
         assert lines[0].startswith(f"cfbmarkov import: read 2 frames of 2 particles as CSV "
                                    f"({told}") and "ids from column 'TRACK_ID'" in lines[0]
         assert lines[1:] == ["  particle ids from column 'TRACK_ID'; not from 'ID'",
-                             "  1 rows with TRACK_ID -1 or empty (noise, or no track) dropped"]
+                             "  1 row with TRACK_ID -1 or empty (noise, or no track) dropped"]
 
 
 def _options(verb: str) -> set[str]:
