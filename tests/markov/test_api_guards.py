@@ -258,3 +258,11 @@ def test_an_occupancy_without_a_window_and_one_run_given_alone(model, markov_run
     listed = assess_fit(model, runs=[str(markov_run)], resamples=0, verdict=False)
     assert alone.source_identity is not None
     assert alone.source_identity == listed.source_identity
+
+
+def test_an_rtd_and_an_interval_compare_by_identity_as_the_model_does(model):
+    """`==` on two RTDs raised numpy's "truth value of an array is ambiguous"; as for a
+    MarkovModel it is identity (their contents compared field by field where wanted)."""
+    rtd, again = model.rtd(), model.rtd(window=1.0)
+    assert rtd == rtd and (rtd == again) is False and rtd != again
+    assert (model == model) and rtd.uncertainty == rtd.uncertainty

@@ -77,7 +77,7 @@ class TrappedResidences(CfbmarkovError):
     again (the states it enters lead only to states that are never left)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)     # == is identity, as for a MarkovModel (array fields)
 class ResidenceTimeDistribution:
     """f(k) = probability that a residence lasts k lags (k = 1, 2, ...).
 

@@ -109,7 +109,7 @@ def outward_bounds(lower: float, upper: float, digits: int = 3) -> tuple[str, st
     return rounded(float(lower), False), rounded(float(upper), True)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)     # == is identity, as for a MarkovModel (array fields)
 class ModelUncertainty:
     """Intervals of a model's exact E(RT), SD(RT) and RTD per bin at ``level``.
 
