@@ -164,13 +164,17 @@ def test_short_window_and_net_flow_turn_warn(runs, tmp_path):
 
 def test_verdict_in_the_model_file_and_the_verbs(runs, tmp_path, capsys):
     out = tmp_path / "m.h5"
-    code, _, err = run_cli(capsys, "fit", runs["switching"], "--cells", "4x16", "--window",
-                           "1.5:4.5", "-o", out)
+    code, printed, err = run_cli(capsys, "fit", runs["switching"], "--cells", "4x16",
+                                 "--window", "1.5:4.5", "-o", out)
     assert code == 0
     warned = [line for line in err.splitlines() if line.startswith("warning:")]
     assert any("disagree" in line and "cfbmarkov stationarity" in line for line in warned)
     assert len(warned) == len(set(warned))                    # each line once
     model = MarkovModel.load(out)
+    # standard output alone (a log) says there are warnings, and how many of the verdict's
+    count = len(model.adequacy.warnings)
+    assert (f"  the fitting sample's verdict: {count} warning{'' if count == 1 else 's'} "
+            "(printed as `warning:` lines; `cfbmarkov info MODEL` repeats them)") in printed
     assert model.adequacy is not None and not model.adequacy.adequate
     assert any("disagree" in line for line in model.warnings())
     assert Adequacy.from_attr(model.adequacy.to_attr()) == model.adequacy

@@ -282,6 +282,14 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     passed = None if model.adequacy is None else model.adequacy.passed_line()
     if passed:
         lines.append(f"  {passed}")
+    elif model.adequacy is not None and not warnings:
+        # the warnings went to stderr: the summary still says there are some, so that a
+        # reader of standard output alone (a log) does not take silence for no warning
+        count = len(model.adequacy.warnings)
+        lines.append(f"  the fitting sample's verdict: {count} warning"
+                     f"{'' if count == 1 else 's'} (printed as `warning:` lines; `cfbmarkov info "
+                     "MODEL` repeats them): the figures above may lie far from the flow's "
+                     "long run")
     return "\n".join(lines)
 
 
