@@ -77,6 +77,15 @@ def test_a_mistyped_option_names_the_verb_and_the_option_it_may_mean(capsys):
                                               "surplus; see")
 
 
+@pytest.mark.parametrize("typed, meant", [("fitt", "fit"), ("compar", "compare"),
+                                           ("stationarty", "stationarity"), ("zzz", None)])
+def test_a_mistyped_verb_names_the_verb_it_may_mean(capsys, typed, meant):
+    assert main([typed, "x.h5"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"invalid choice: '{typed}'" in err
+    assert (err.endswith(f"; did you mean {meant}?\n") if meant else "did you mean" not in err)
+
+
 def test_a_model_given_to_import_and_a_folder_given_as_a_file(run, tmp_path, capsys):
     model = tmp_path / "m.h5"
     assert main(["fit", str(run), "--lag", "0.002", "--window", "0.5:1.5", "--cells", "2x4",

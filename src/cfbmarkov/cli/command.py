@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import os
+import re
 import sys
 from pathlib import Path
 
@@ -34,6 +35,14 @@ class _Parser(argparse.ArgumentParser):
     def error(self, message: str):  # one line, exit code 2
         if message.startswith("the following arguments are required") and _Parser.parsing:
             _refuse_unknown_early(*_Parser.parsing)    # a required option typed short
+        typed = re.match(r"argument command: invalid choice: '([^']*)'", message)
+        if typed:                                       # a misspelt verb: the nearest named
+            import difflib
+
+            verbs = [v for v in re.findall(r"'([^']+)'", message)[1:]]
+            close = difflib.get_close_matches(typed.group(1), verbs, n=1)
+            if close:
+                message += f"; did you mean {close[0]}?"
         self.exit(2, f"{self.prog}: error: {message}\n")
 
 
