@@ -247,6 +247,14 @@ def test_a_short_window_lengths_unresolved_mass_is_named_as_such(tmp_path, capsy
     assert "coarser grid" not in line and "longer --window-length" not in line
     assert main(["rtd", str(model)]) == 0
     assert "unresolved mass" not in capsys.readouterr().err
+    # a window long for the flow: its share cut (about E(RT) / W) is stated, not warned of
+    assert main(["rtd", str(model), "--window-length", "20"]) == 0
+    out, err = capsys.readouterr()
+    assert "unresolved mass" not in err
+    share = float(out.split("unresolved mass ")[1].split(":")[0])
+    assert 0.01 < share < 0.5
+    assert out.splitlines()[0].endswith(": the share of the residences begun in the window "
+                                        "that outlast it)")
 
 
 def test_a_band_out_of_view_fitted_connected_is_not_told_to_fit_connected(tmp_path, capsys):

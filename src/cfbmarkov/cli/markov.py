@@ -397,7 +397,9 @@ def cmd_rtd(args) -> int:
             else 'intrinsic')
     figures = (band.describe(rtd.mean, rtd.sd) if band is not None
                else f"E(RT) = {rtd.mean:.4f} s, SD(RT) = {rtd.sd:.4f} s")
-    print(f"{figures} ({kind}, unresolved mass {rtd.unresolved:.2g})")
+    print(f"{figures} ({kind}, unresolved mass {rtd.unresolved:.2g}"
+          + (": the share of the residences begun in the window that outlast it)"
+             if args.window_length else ")"))
     if model.flow_direction == "down":
         from cfbmarkov.markov.model_summary import DOWNWARD_LINE
 

@@ -24,10 +24,19 @@ DOWNWARD_LINE = ("residences counted downward: the fitting window's net solids f
 UNRESOLVED_LIMIT = 0.01
 
 
+#: an RTD as a window sees it: a warning where more than this share of the residences
+#: begun in the window outlast it (a window short for the flow's residences); below it the
+#: share, about E(RT) over the window's length, is what any window of data cuts, and the
+#: RTD's line states it
+WINDOW_UNRESOLVED_LIMIT = 0.5
+
+
 def unresolved_warning(rtd, direction: str | None = None,
                        flow_direction: str | None = None) -> str | None:
     """The line that says an exact RTD's E(RT) and SD(RT) describe only its resolved
-    residences, where its unresolved mass exceeds :data:`UNRESOLVED_LIMIT`; else None.
+    residences, where its unresolved mass exceeds :data:`UNRESOLVED_LIMIT` (an RTD as a
+    window sees it: :data:`WINDOW_UNRESOLVED_LIMIT`, the window short for the flow); else
+    None.
 
     Parameters
     ----------
@@ -67,6 +76,8 @@ def unresolved_warning(rtd, direction: str | None = None,
                 "another --states")
     if not u > UNRESOLVED_LIMIT:
         return None
+    if rtd.window is not None and not u > WINDOW_UNRESOLVED_LIMIT:
+        return None        # a window cuts about E(RT) / W of its residences: said, no warning
     if rtd.window is not None:
         # an RTD as a window sees it: the residences begun in the window that do not end in
         # it, about E(RT) / W of them from those begun late in it, besides the longer ones
