@@ -448,8 +448,37 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
         lines = [line.replace(_ADVICE, _POOLED_ADVICE) for line in lines]
     if _any_absences(runs):     # stationarity reads no periodic run with absences
         lines = [line.replace(_STATIONARITY_ADVICE, "") for line in lines]
+    on_window = () if pooled else _on_window(model, runs[0], data[0])
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
-                    run_means, window_mean, applied if not pooled else math.nan)
+                    run_means, window_mean, applied if not pooled else math.nan, on_window)
+
+
+def _on_window(model, run, discrete: DiscreteTrajectories) -> tuple[float, ...]:
+    """The chain against its own fitting window (:attr:`Adequacy.on_window`): its RTD as a
+    window of that length sees it, from where the window's particles are at its first
+    frame (:func:`~cfbmarkov.markov.model_rtd.occupancy_at`), against the residences the
+    window holds whole, counted at the model's lag in its flow direction, as
+    ``--states auto`` judges its candidates; empty for an open riser, fewer than
+    :data:`MIN_PART_RESIDENCES` residences, or a chain whose window RTD cannot be had."""
+    from cfbmarkov.markov.model_rtd import occupancy_at
+
+    if model.open_flow is not None or discrete.window is None:
+        return ()
+    a, b = (float(v) for v in discrete.window)
+    try:
+        with opened(run) as traj:
+            seen = residence_times(traj, (a, b), use_events=False,
+                                   lag_frames=traj.lag_frames(model.lag),
+                                   direction=model.flow_direction,
+                                   face_band=traj.height / model.state_space.rows)
+            if seen.count < MIN_PART_RESIDENCES:
+                return ()
+            occupancy = occupancy_at(model, traj, a)
+        chain = model.rtd(window=b - a, direction=model.flow_direction, occupancy=occupancy)
+    except CfbmarkovError:
+        return ()
+    return (b - a, float(chain.mean), float(chain.sd), float(seen.mean), float(seen.sd),
+            float(seen.count))
 
 
 #: the least limit of the parts' spread (-). A short window's interval is narrower than

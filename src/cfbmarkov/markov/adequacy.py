@@ -17,6 +17,11 @@ from typing import Any
 from cfbmarkov.errors import InputError
 
 
+#: the keys of the verdict's ``on_fitting_window`` (JSON), in :attr:`Adequacy.on_window`'s order
+ON_WINDOW_KEYS = ("window_length", "rt_mean", "rt_sd", "observed_rt_mean", "observed_rt_sd",
+                  "residences")
+
+
 @dataclass(frozen=True)
 class Adequacy:
     """Whether a model's fitting sample can carry it, in numbers.
@@ -56,6 +61,12 @@ class Adequacy:
         the limit the warning compares with
         (:func:`cfbmarkov.analysis.adequacy.parts_limit`); NaN for a pooled fit or a
         verdict stored without it.
+    on_window : tuple of float
+        The chain against its own fitting window (one run of a periodic riser; empty
+        otherwise, or for a verdict stored without it): (window length W s, the chain's
+        E(RT) and SD(RT) as a W s window sees it from the window's first frame, s, the
+        E(RT) and SD(RT) of the residences the window holds whole, s, and their count). It
+        informs; the verdict does not judge it (``docs/definitions.md``, Sample adequacy).
     """
 
     warnings: tuple[str, ...] = ()
@@ -68,6 +79,25 @@ class Adequacy:
     runs: tuple[tuple[str, float], ...] = ()
     window_rt_mean: float = math.nan
     part_limit: float = math.nan
+    on_window: tuple[float, ...] = ()
+
+    def on_window_line(self) -> str | None:
+        """The chain against its fitting window, one line of numbers (None without it):
+        PD = 100 (chain - observed) / observed (Eq. 8 of the paper, as ``compare`` gives
+        it) of its RTD as the window sees it against the residences the window holds
+        whole."""
+        if len(self.on_window) != 6:
+            return None
+        length, mean, sd, seen_mean, seen_sd, count = self.on_window
+        if not (seen_mean > 0 and seen_sd > 0 and all(map(math.isfinite, (mean, sd)))):
+            return None
+        pd_mean = 100.0 * (mean - seen_mean) / seen_mean
+        pd_sd = 100.0 * (sd - seen_sd) / seen_sd
+        return (f"on its fitting window: the chain's E(RT) {mean:.3g} s (PD {pd_mean:+.1f} %), "
+                f"SD(RT) {sd:.3g} s (PD {pd_sd:+.1f} %) as a {length:g} s window sees it, "
+                f"against the {int(count)} residences the window holds whole (E(RT) "
+                f"{seen_mean:.3g} s, SD(RT) {seen_sd:.3g} s): how well the chain carries the "
+                "data it was fitted on")
 
     @property
     def adequate(self) -> bool:
@@ -131,7 +161,9 @@ class Adequacy:
                 "tail_share": number(self.tail_share),
                 "runs": [{"run": r, "rt_mean": number(m)} for r, m in self.runs],
                 "window_rt_mean": number(self.window_rt_mean),
-                "part_limit": number(self.part_limit)}
+                "part_limit": number(self.part_limit),
+                "on_fitting_window": (None if len(self.on_window) != 6 else dict(zip(
+                    ON_WINDOW_KEYS, (number(v) for v in self.on_window))))}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Adequacy":
@@ -162,7 +194,9 @@ class Adequacy:
                        number(data.get("tail_share")),
                        tuple((str(r["run"]), number(r.get("rt_mean")))
                              for r in data.get("runs", [])),
-                       number(data.get("window_rt_mean")), number(data.get("part_limit")))
+                       number(data.get("window_rt_mean")), number(data.get("part_limit")),
+                       tuple(number(data["on_fitting_window"][k]) for k in ON_WINDOW_KEYS)
+                       if data.get("on_fitting_window") else ())
         except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
             raise InputError(f"adequacy attribute is not a verdict ({exc})") from None
 

@@ -290,6 +290,9 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
                  "the throughput the chain should carry; the verdict warns beyond 10 %")
         lines.append(f"    the fitting window's own E(RT): {own:.4g} s (its particle-time over "
                      f"its net passes, {carry})")
+    on_window = None if model.adequacy is None else model.adequacy.on_window_line()
+    if on_window:
+        lines.append(f"    {on_window}")
     passed = None if model.adequacy is None else model.adequacy.passed_line()
     if passed:
         lines.append(f"  {passed}")
