@@ -39,7 +39,7 @@ class _Parser(argparse.ArgumentParser):
         if typed:                                       # a misspelt verb: the nearest named
             import difflib
 
-            verbs = [v for v in re.findall(r"'([^']+)'", message)[1:]]
+            verbs = re.findall(r"'([^']+)'", message)[1:]      # the choices listed
             close = difflib.get_close_matches(typed.group(1), verbs, n=1)
             if close:
                 message += f"; did you mean {close[0]}?"
