@@ -37,3 +37,16 @@ def test_every_argument_has_help_and_states_its_default():
                     no_default.append(f"{label} (default {action.default!r})")
     assert not missing, f"arguments without help: {missing}"
     assert not no_default, f"options whose help does not state the default: {no_default}"
+
+
+def test_every_verbs_help_page_opens_with_what_the_verb_does():
+    """`cfbmarkov VERB --help` opens (below its usage) with the verb's line of `cfbmarkov
+    --help`, as a sentence."""
+    parser = build_parser()
+    verbs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    said = {action.dest: action.help for action in verbs._choices_actions}
+    for name, verb in verbs.choices.items():
+        assert said[name], name
+        assert verb.description == said[name][0].upper() + said[name][1:] + ".", name
+        assert verb.format_help().split("\n\n")[1].replace("\n", " ").startswith(
+            said[name][0].upper() + said[name][1:20]), name

@@ -69,6 +69,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", required=True, parser_class=_Parser)
     for add in VERBS:
         add(sub)
+    # each verb's help page opens with what the verb does (its line in cfbmarkov --help)
+    said = {action.dest: action.help for action in sub._choices_actions}
+    for name, verb in sub.choices.items():
+        if verb.description is None and said.get(name):
+            verb.description = said[name][0].upper() + said[name][1:] + "."
     for name, verb in sub.choices.items():
         if name in OUTPUTS:
             verb.add_argument("--force", action="store_true",
