@@ -201,6 +201,63 @@ def test_a_chain_singular_in_floating_point_keeps_the_space_of_q():
                  system.data, np.ones((states, 1), np.bool_))
     with pytest.raises(RuntimeError):
         si.LevelInverse(*arguments)
+    with pytest.raises(RuntimeError):
+        si.LevelInverse(*arguments, blocks=True)
     assert si.level_inverse(*arguments, work=10 ** 9) is None
     rtd = fp.open_rtd(q, exits, entry, 0.01, max_steps=5000)
     assert rtd.unresolved == pytest.approx(0.5, abs=1e-9)
+
+
+def _column_system(levels, states=80, live=None):
+    p, up, down = slow_column(states=states, stay=0.9, seed=2, reach=4)
+    p_up, p_down, p_stay = fp.split_by_pass(sp.csr_matrix(p), up, down)
+    arrays = fp._transposed_parts((p_down, p_stay, p_up))
+    if live is None:
+        live = np.ones((states, levels), np.bool_)
+    work = sum(array.size for array in arrays[2::3]) * levels
+    return fp._level_system(*arrays, live), live, work
+
+
+@pytest.mark.parametrize("levels", [1, 2, 7])
+def test_the_block_factorisation_solves_the_level_system(levels):
+    """By blocks (one level: no boundary system; two: a single block step; seven), the
+    solve with I - Q^T leaves a residual of round-off and equals SuperLU's to 1e-12; it
+    is the one taken for such a chain on several levels (whose passes span the envelope
+    across a level), not on one."""
+    (indptr, indices, data), live, work = _column_system(levels)
+    blocks = si.LevelInverse(indptr, indices, data, live, blocks=True)
+    sparse = si.LevelInverse(indptr, indices, data, live)
+    assert isinstance(blocks.factors, si.LevelBlocks)
+    assert blocks.factors.boundary.size == (0 if levels == 1 else 8)   # 4 + 4 cells
+    n = indptr.size - 1
+    identity_less_a = sp.csr_matrix((data, indices, indptr), shape=(n, n))
+    x = np.random.default_rng(5).random(n)
+    y = blocks.solve(x)
+    assert np.abs(identity_less_a @ y - x).max() <= 1e-12 * np.abs(x).max()
+    assert np.abs(y - sparse.solve(x)).max() <= 1e-12 * np.abs(y).max()
+    chosen = si.level_inverse(indptr, indices, data, live, work)
+    # one level of a banded column: its envelope is small, the sparse LU cheaper
+    assert isinstance(chosen.factors, si.LevelBlocks) == (levels > 1)
+
+
+def test_superlu_factors_where_blocks_do_not_apply(monkeypatch):
+    """A pair not live, a chain above BLOCK_STATES, or one whose dense solve would cost
+    more than BLOCK_ADVANTAGE times the envelope: SuperLU's LU, as before."""
+    (indptr, indices, data), live, work = _column_system(5)
+    assert isinstance(si.level_inverse(indptr, indices, data, live, work).factors,
+                      si.LevelBlocks)
+    monkeypatch.setattr(si, "BLOCK_STATES", 79)
+    assert not isinstance(si.level_inverse(indptr, indices, data, live, work).factors,
+                          si.LevelBlocks)
+    monkeypatch.setattr(si, "BLOCK_STATES", 80)
+    monkeypatch.setattr(si, "BLOCK_ADVANTAGE", 80 * 80 * 5 / si.envelope(indptr, indices) - 1e-9)
+    assert not isinstance(si.level_inverse(indptr, indices, data, live, work).factors,
+                          si.LevelBlocks)
+    monkeypatch.setattr(si, "BLOCK_ADVANTAGE", 8)
+    live = np.ones((80, 5), np.bool_)
+    live[3, 4] = False
+    (indptr, indices, data), live, work = _column_system(5, live=live)
+    assert not isinstance(si.level_inverse(indptr, indices, data, live, work).factors,
+                          si.LevelBlocks)
+    with pytest.raises(ValueError, match="every pair live"):
+        si.LevelInverse(indptr, indices, data, live, blocks=True)
