@@ -469,6 +469,14 @@ class PaperEstimator(TransitionEstimator):
     the fraction of frames in which a state was occupied; each row is divided by its sum,
     which equals averaging P' over the frames in which the state was occupied.
 
+    Notes
+    -----
+    The estimator is the paper's for its cells. On a state space with memory its
+    frame-averaged rows can carry the chain away from the window's own flux (docs/method.md,
+    Estimators): :class:`MaximumLikelihoodEstimator` is the one to fit such spaces with (the
+    command line's default there, which warns where ``--estimator paper`` is asked for;
+    this class does not warn).
+
     References
     ----------
     Y. Zhuang, "Markov-Chain-Based Statistic Model for Predicting Particle Movement in

@@ -84,7 +84,7 @@ BLOCK_STATES = 512
 BLOCK_ADVANTAGE = 8
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _boundary_solve(inverses, lower, upper, right):
     """The block-tridiagonal system on the boundary states (Numba kernel), by the factors
     of :class:`LevelBlocks`: ``right`` [L, r] the right-hand side level by level; returns
@@ -113,7 +113,7 @@ def _boundary_solve(inverses, lower, upper, right):
     return out
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _level_blocks(indptr, indices, data, states, levels):
     """I - P_stay^T, P_down^T and P_up^T as dense [S, S] blocks (Numba kernel), read from
     I - Q's CSC arrays (every pair live, numbered g S + i): level 0's diagonal block, the
@@ -135,7 +135,7 @@ def _level_blocks(indptr, indices, data, states, levels):
     return stay, down, up
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _boundary_factors(below, above, levels):
     """Block Gaussian elimination of the boundary system u_g - G_down u_(g-1) - G_up
     u_(g+1) = c_g (Numba kernel; ``below`` G_down, ``above`` G_up, [r, r]): Schur
@@ -158,9 +158,48 @@ def _boundary_factors(below, above, levels):
     return inverses, lower, upper
 
 
+class _BlockSystem:
+    """D y_g - B_prev y_(g-1) - B_next y_(g+1) = x_g on L levels, y_(-1) = y_L = 0, D
+    given by the LU of D (``trans`` 0) or of D^T (``trans`` 1), its boundary eliminated
+    (:class:`LevelBlocks`)."""
+
+    def __init__(self, lu, trans: int, previous, following, levels: int):
+        from scipy.linalg import lu_solve
+
+        self._lu_solve, self.lu, self.trans, self.levels = lu_solve, lu, trans, levels
+        self.states = previous.shape[0]
+        self.boundary = np.flatnonzero(np.any(previous != 0.0, axis=0)
+                                       | np.any(following != 0.0, axis=0))
+        self.from_previous = lu_solve(lu, previous[:, self.boundary], trans=trans,
+                                      check_finite=False)
+        self.from_following = lu_solve(lu, following[:, self.boundary], trans=trans,
+                                       check_finite=False)
+        try:
+            self.inverses_t, self.lower_t, self.upper_t = _boundary_factors(
+                np.ascontiguousarray(self.from_previous[self.boundary]),
+                np.ascontiguousarray(self.from_following[self.boundary]), levels)
+        except np.linalg.LinAlgError:
+            raise RuntimeError("a Schur complement is singular") from None
+        if not all(np.all(np.isfinite(a)) for a in (self.inverses_t, self.lower_t,
+                                                    self.upper_t, self.from_previous,
+                                                    self.from_following)):
+            raise RuntimeError("the block factors are not finite")
+
+    def solve(self, x: np.ndarray) -> np.ndarray:
+        s, levels = self.states, self.levels
+        t = self._lu_solve(self.lu, x.reshape(levels, s).T, trans=self.trans,
+                           check_finite=False)
+        if self.boundary.size:
+            u = _boundary_solve(self.inverses_t, self.lower_t, self.upper_t,
+                                np.ascontiguousarray(t[self.boundary].T))
+            t[:, 1:] += self.from_previous @ u[:-1].T
+            t[:, :-1] += self.from_following @ u[1:].T
+        return np.ascontiguousarray(t.T).ravel()
+
+
 class LevelBlocks:
     """I - Q on every (level, state) pair factored by its block structure: solves with
-    I - Q^T (the interface of SuperLU's ``solve(x, trans="T")``).
+    I - Q^T or I - Q (the interface of SuperLU's ``solve(x, trans)``).
 
     On level g, (I - Q^T) y = x reads
 
@@ -180,8 +219,10 @@ class LevelBlocks:
     non-negative matrix of spectral radius below 1, whose Schur complements stay
     M-matrices; Golub and Van Loan, Matrix Computations, 4th ed., Sec. 4.5.4). A solve is
     then one LU solve with L right-hand sides, the boundary system's two sweeps and two
-    products of Z. The tail closure does not take its accuracy on trust
-    (:func:`relation_error`).
+    products of Z. (I - Q) y = x is the same with D^T = I - P_stay (the same LU, solved
+    transposed), P_up coupling level g - 1 and P_down level g + 1 (on the states where
+    passes land); its boundary is eliminated on the first such solve. The tail closure
+    does not take the solves' accuracy on trust (:func:`relation_error`).
 
     Parameters
     ----------
@@ -189,22 +230,26 @@ class LevelBlocks:
         I - Q as CSC arrays, the pairs numbered g S + i (every pair live).
     states, levels : int
         S and L.
+    trans : {"T", "N"}, optional
+        The system whose boundary is eliminated here (I - Q^T or I - Q); the other's is
+        on its first solve.
 
     Raises
     ------
     RuntimeError
-        If I - P_stay^T or a Schur complement is singular in floating point (a pivot at
-        most S times the machine epsilon of the largest) or not finite.
+        If I - P_stay^T or a Schur complement of ``trans``'s boundary system is singular in
+        floating point (a pivot at most S times the machine epsilon of the largest) or not
+        finite.
     """
 
-    def __init__(self, indptr, indices, data, states: int, levels: int):
-        from scipy.linalg import LinAlgWarning, lu_factor, lu_solve
+    def __init__(self, indptr, indices, data, states: int, levels: int, trans: str = "T"):
+        from scipy.linalg import LinAlgWarning, lu_factor
 
         s = states
         stay, down, up = _level_blocks(indptr, indices, data, s, levels)
-        self.boundary = np.flatnonzero(np.any(down != 0.0, axis=0) | np.any(up != 0.0, axis=0))
         self.states, self.levels = s, levels
-        self._lu_solve = lu_solve
+        self._passes = (down, up)
+        self._systems = {}
         with one_blas_thread():
             with warnings.catch_warnings():       # a zero pivot: refused just below
                 warnings.simplefilter("ignore", LinAlgWarning)
@@ -213,31 +258,41 @@ class LevelBlocks:
             if not (np.all(np.isfinite(pivots))
                     and pivots.min() > s * np.finfo(np.float64).eps * pivots.max()):
                 raise RuntimeError("I - P_stay is singular in floating point")
-            self.from_below = lu_solve(self.lu, down[:, self.boundary], check_finite=False)
-            self.from_above = lu_solve(self.lu, up[:, self.boundary], check_finite=False)
-            try:
-                self.inverses_t, self.lower_t, self.upper_t = _boundary_factors(
-                    np.ascontiguousarray(self.from_below[self.boundary]),
-                    np.ascontiguousarray(self.from_above[self.boundary]), levels)
-            except np.linalg.LinAlgError:
-                raise RuntimeError("a Schur complement is singular") from None
-        if not all(np.all(np.isfinite(a)) for a in (self.inverses_t, self.lower_t,
-                                                    self.upper_t, self.from_below,
-                                                    self.from_above)):
-            raise RuntimeError("the block factors are not finite")
+            self._system(trans)         # its boundary's failures are the constructor's
+
+    def _system(self, trans: str) -> _BlockSystem:
+        """The system of ``trans`` ("T": I - Q^T, "N": I - Q), its boundary eliminated on
+        the first call."""
+        if trans not in self._systems:
+            down, up = self._passes
+            with one_blas_thread():
+                if trans == "T":
+                    self._systems[trans] = _BlockSystem(self.lu, 0, down, up, self.levels)
+                else:
+                    self._systems[trans] = _BlockSystem(
+                        self.lu, 1, np.ascontiguousarray(up.T), np.ascontiguousarray(down.T),
+                        self.levels)
+        return self._systems[trans]
+
+    @property
+    def boundary(self) -> np.ndarray:
+        """The states that pass down or up (int64 [r]), I - Q^T's boundary."""
+        return self._system("T").boundary
 
     def solve(self, x: np.ndarray, trans: str = "T") -> np.ndarray:
-        """(I - Q^T)^-1 x, x level by level [S L] (on the caller's BLAS threads)."""
-        if trans != "T":
-            raise ValueError("LevelBlocks solves with I - Q^T only")
-        s, levels = self.states, self.levels
-        t = self._lu_solve(self.lu, x.reshape(levels, s).T, check_finite=False)
-        if self.boundary.size:
-            u = _boundary_solve(self.inverses_t, self.lower_t, self.upper_t,
-                                np.ascontiguousarray(t[self.boundary].T))
-            t[:, 1:] += self.from_below @ u[:-1].T
-            t[:, :-1] += self.from_above @ u[1:].T
-        return np.ascontiguousarray(t.T).ravel()
+        """(I - Q^T)^-1 x (``trans`` "T") or (I - Q)^-1 x ("N"), x level by level [S L]
+        (on the caller's BLAS threads).
+
+        Raises
+        ------
+        RuntimeError
+            Where a Schur complement of the other system's boundary (not the
+            constructor's ``trans``) is singular or its factors are not finite (on its
+            first solve).
+        """
+        if trans not in ("T", "N"):
+            raise ValueError(f"trans is 'T' or 'N', not {trans!r}")
+        return self._system(trans).solve(x)
 
 
 class LevelInverse:
@@ -285,6 +340,46 @@ class LevelInverse:
         return self.factors.solve(x, trans="T")
 
 
+def by_blocks(live: np.ndarray, filled: int) -> bool:
+    """Whether I - Q on the levels is factored by :class:`LevelBlocks`: every pair live
+    (``live`` bool [S, L]), S at most :data:`BLOCK_STATES`, and S^2 L at most
+    :data:`BLOCK_ADVANTAGE` times ``filled``, the envelope (:func:`envelope`)."""
+    states, levels = live.shape
+    return bool(live.all() and states <= BLOCK_STATES
+                and states * states * levels <= BLOCK_ADVANTAGE * filled)
+
+
+def factor_levels(indptr, indices, data, live: np.ndarray, trans: str = "N"):
+    """I - Q on the live pairs factored for a few solves with it (``trans`` "N") or with
+    I - Q^T ("T") (``solve(x, trans)``, as SuperLU's):
+    by :class:`LevelBlocks` where :func:`by_blocks`, else (or where the blocks are singular
+    in floating point) by SuperLU in the levels' natural order.
+
+    Parameters
+    ----------
+    indptr, indices, data : ndarray
+        I - Q on the live pairs as CSC arrays (:class:`LevelInverse`).
+    live : ndarray of bool, shape (S, L)
+    trans : {"N", "T"}, optional
+
+    Returns
+    -------
+    LevelBlocks or scipy.sparse.linalg.SuperLU
+
+    Raises
+    ------
+    RuntimeError
+        From SuperLU, where I - Q is exactly singular.
+    """
+    if by_blocks(live, envelope(indptr, indices)):
+        try:
+            return LevelBlocks(indptr, indices, data, *live.shape, trans=trans)
+        except RuntimeError:
+            pass
+    n = indptr.size - 1
+    return splu(sp.csc_matrix((data, indices, indptr), shape=(n, n)), permc_spec="NATURAL")
+
+
 def level_inverse(indptr, indices, data, live, work: int) -> LevelInverse | None:
     """The factored I - Q where its envelope is at most :data:`FILL_LIMIT` times ``work``
     (the propagation's multiply-adds a lag) and within :data:`LU_BYTES`, else None;
@@ -308,9 +403,7 @@ def level_inverse(indptr, indices, data, live, work: int) -> LevelInverse | None
     filled = envelope(indptr, indices)
     if filled > FILL_LIMIT * work or 12 * filled > LU_BYTES:
         return None
-    states, levels = live.shape
-    blocks = bool(live.all() and states <= BLOCK_STATES
-                  and states * states * levels <= BLOCK_ADVANTAGE * filled)
+    blocks = by_blocks(live, filled)
     try:
         return LevelInverse(indptr, indices, data, live, blocks=blocks)
     except RuntimeError:     # singular in floating point (a closed loop that leaks 1e-17)
@@ -365,7 +458,7 @@ def _identity_less_a(indptr, indices, data, x, out):
         out[r] = acc
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, nogil=True)
 def _error_columns(indptr, indices, data, columns, products, direction, residual_vector):
     """The columns' 1-norms of E = A V - V T - u c^T (Numba kernel): ``columns`` V [n, m]
     (a pair's entries of the m vectors side by side), ``products`` V T [n, m], (I - A) as
