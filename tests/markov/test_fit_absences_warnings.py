@@ -390,3 +390,27 @@ def test_a_particle_outside_the_riser_in_every_frame_leaves_predict_and_compare_
     code, _, err = run_cli(capsys, "compare", gap, tmp_path / "p.h5", "--window", "4:8",
                            "--resamples", "0", "--no-figures", "-o", tmp_path / "cmp2")
     assert code == 2 and "absent from some frames" in err
+
+
+def test_the_summary_counts_the_verdicts_lines_and_the_models_others_apart(markov_run,
+                                                                           markov_flow):
+    """A verdict of two lines on a model whose interval is cut at 0: the `warning:` lines
+    ``fit`` prints are said as the verdict's two and the others about the model (the lines
+    add up)."""
+    from cfbmarkov.markov import fit_model
+    from cfbmarkov.markov.adequacy import Adequacy
+
+    model = fit_model(markov_run, markov_flow.grid, markov_flow.lag, (2.0, 6.0), "mle")
+    edges = np.array([0.0, 0.1, 0.2])
+    band = np.array([[0.0, 0.0], [0.6, 0.6]])
+    cut = ModelUncertainty(0.9, (0.129, 0.22), (0.0, 0.159), edges, band, 100, 10, 0.1,
+                           (0.13, 0.842))
+    model = model.with_uncertainty(cut).with_adequacy(
+        Adequacy(warnings=("the halves disagree", "the runs disagree")))
+    others = len(model.warnings()) - 2
+    assert others >= 1 and any("cut there" in line for line in model.warnings())
+    text = model.summary(warnings=False)
+    assert ("the fitting sample's verdict: 2 warnings (printed as `warning:` lines, beside "
+            f"{others} more about the model; `cfbmarkov info MODEL` repeats them)") in text
+    alone = model.with_uncertainty(None).summary(warnings=False)
+    assert "2 warnings (printed as `warning:` lines; `cfbmarkov info" in alone

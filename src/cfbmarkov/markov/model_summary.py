@@ -300,10 +300,14 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         # the warnings went to stderr: the summary still says there are some, so that a
         # reader of standard output alone (a log) does not take silence for no warning
         count = len(model.adequacy.warnings)
+        # the model's other lines (an interval cut at 0, states never visited, ...) are
+        # printed beside the verdict's: counted apart, so that the lines add up
+        others = len(model_warnings(model)) - count
+        beside = (f", beside {others} more about the model" if others > 0 else "")
         lines.append(f"  the fitting sample's verdict: {count} warning"
-                     f"{'' if count == 1 else 's'} (printed as `warning:` lines; `cfbmarkov info "
-                     "MODEL` repeats them): the figures above may lie far from the flow's "
-                     "long run")
+                     f"{'' if count == 1 else 's'} (printed as `warning:` lines{beside}; "
+                     "`cfbmarkov info MODEL` repeats them): the figures above may lie far "
+                     "from the flow's long run")
     return "\n".join(lines)
 
 
