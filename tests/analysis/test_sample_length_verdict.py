@@ -102,10 +102,10 @@ def test_a_run_too_short_names_the_fix_that_exists(tmp_path, capsys):
     other = synthetic.write_run(tmp_path / "other.h5", synthetic.RiserFlow(), 100, 0.8, seed=2)
     assert main(["stationarity", str(short), "--sample-length"]) == 2
     err = capsys.readouterr().err
-    assert "shorter than the shortest window (0.5 s); a run longer than 0.5 s" in err
+    assert ("no window of 0.5 s or more is shorter than that span, the long run each window "
+            "is judged against; a run longer than 0.5 s") in err
     assert main(["stationarity", str(other), "--sample-length", "--start", "0.4"]) == 2
-    assert "shorter than the shortest window (0.5 s); an earlier --start" in \
-        capsys.readouterr().err
+    assert "judged against; an earlier --start" in capsys.readouterr().err
     assert main(["stationarity", str(short), str(other), "--sample-length", "--start",
                  "0.6"]) == 2
     assert (f"start 0.6 s lies outside the frames all of {short}, {other} hold (0 to 0.4 s)"
@@ -117,8 +117,26 @@ def test_a_length_only_the_longest_window_meets_is_not_confirmed():
     assert r.sample_length == 10.0
     line = verdict_text(r, "cells")
     assert line.startswith("10 s at most") and "no longer window confirms it" in line
-    assert verdict_text(_result([1.6, 1.4, 1.3, 1.05, 1.0], [1.0] * 5), "cells").startswith(
-        "5 s (from it on")
+    assert r.at_most and r.to_dict()["sample_length_at_most"] is True
+    confirmed = _result([1.6, 1.4, 1.3, 1.05, 1.0], [1.0] * 5)
+    assert verdict_text(confirmed, "cells").startswith("5 s (from it on")
+    assert not confirmed.at_most and confirmed.to_dict()["sample_length_at_most"] is False
+
+
+def test_no_window_spans_the_whole_long_run(tmp_path, capsys):
+    """From 10 s on a run ending at 20 s the long run is 10 s long: the 10 s window would
+    be that long run judged against itself, so the windows stop at 5 s; a run from 18 s
+    (a 2 s long run) has windows of 0.5 and 1 s only."""
+    run = tmp_path / "run.h5"
+    synthetic.write_run(run, synthetic.RiserFlow(), 300, 20.0, seed=1)
+    assert main(["stationarity", str(run), "--sample-length", "--start", "10", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert data["span_end"] == pytest.approx(20.0)
+    assert [w["length"] for w in data["windows"]] == [0.5, 1.0, 2.0, 5.0]
+    assert main(["stationarity", str(run), "--sample-length", "--start", "18", "--json"]) == 0
+    data = json.loads(capsys.readouterr().out)
+    assert [w["length"] for w in data["windows"]] == [0.5, 1.0]
+    assert data["sample_length"] != 2.0
 
 
 def test_a_figure_within_only_at_the_longest_window_is_said_so():

@@ -178,6 +178,13 @@ class SampleLength:
                 out[name] = (float(dev.min()), float(dev.max()))
         return out
 
+    @property
+    def at_most(self) -> bool:
+        """Whether the sample length is the longest window's alone ("at most" that length:
+        no longer window confirms it); False where it is not reached."""
+        return bool(np.isfinite(self.sample_length) and self.lengths.size > 1
+                    and self.sample_length == self.lengths[-1])
+
     def settled_from(self, figure: str) -> float:
         """The shortest length from which every longer window has ``figure`` ("E(RT)" or
         "SD(RT)") within the tolerance (s; NaN: none)."""
@@ -208,7 +215,8 @@ class SampleLength:
                               for k, (lo, hi) in self.steady_misses().items()},
             "closed_classes": self.closed_classes,
             "run_rt_means": {name: mean for name, mean in self.run_rt_means},
-            "sample_length": self.sample_length})
+            "sample_length": self.sample_length,
+            "sample_length_at_most": self.at_most})
 
 
 def missed_text(miss: str, pd_mean: float, pd_sd: float, outlasting: float = math.nan) -> str:
@@ -281,7 +289,7 @@ def verdict_text(result: SampleLength, states: str) -> str:
                 "mixture; judge each run alone (stationarity RUN --sample-length)")
     if np.isfinite(result.sample_length):
         figures = "E(RT) and SD(RT) lie" if result.sd_judged else "E(RT) lies"
-        if result.sample_length == result.lengths[-1] and result.lengths.size > 1:
+        if result.at_most:
             return (f"{result.sample_length:g} s at most: only the longest window's {figures} "
                     f"within {tol:g} % of the long run's, and no longer window confirms it "
                     "(a longer run, or pool runs with fit A B ...)")
@@ -375,8 +383,9 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
     tolerance : float, optional
         Relative tolerance, default 0.1.
     lengths : sequence of float, optional
-        The lengths tried (s); those that end beyond the (shortest) run or ``stop`` are left
-        out.
+        The lengths tried (s); those that do not end before the (shortest) run's last frame
+        or ``stop`` are left out (a window spanning the whole long run would be judged
+        against itself).
     stop : float, optional
         Where the long run ends (s); default each run's last frame. Windows end by it.
 
@@ -424,12 +433,14 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                              "give a start inside them")
         if estimator is None:
             estimator = default_estimator(runs[0].boundary.is_open, state_space.kind)
-        usable = [float(n) for n in sorted(lengths) if a + n <= last + tol]
+        # a window as long as the span would be the long run itself, judged against itself
+        usable = [float(n) for n in sorted(lengths) if a + n < last - tol]
         if not usable:
             fix = ("an earlier --start" if a > first + tol else
                    f"a run longer than {min(lengths):g} s")
-            raise InputError(f"{name} runs {last - a:g} s from {a:g} s: shorter than the "
-                             f"shortest window ({min(lengths):g} s); {fix}")
+            raise InputError(f"{name} runs {last - a:g} s from {a:g} s: no window of "
+                             f"{min(lengths):g} s or more is shorter than that span, the long "
+                             f"run each window is judged against; {fix}")
         if len(runs) > 1:
             check_runs_distinct(runs, [(a, t_last) for t_last in lasts])
         fitter = estimator_from_name(estimator, state_space, lag)
