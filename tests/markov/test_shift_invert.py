@@ -269,8 +269,8 @@ def test_the_moments_by_blocks_are_superlus(monkeypatch):
 
 
 def test_superlu_factors_where_blocks_do_not_apply(monkeypatch):
-    """A pair not live, a chain above BLOCK_STATES, or one whose dense solve would cost
-    more than BLOCK_ADVANTAGE times the envelope: SuperLU's LU, as before."""
+    """A pair not live, a chain above BLOCK_STATES, one whose dense solve would cost more
+    than BLOCK_ADVANTAGE times the envelope, or blocks that refuse: SuperLU's LU."""
     (indptr, indices, data), live, work = _column_system(5)
     assert isinstance(si.level_inverse(indptr, indices, data, live, work).factors,
                       si.LevelBlocks)
@@ -289,3 +289,14 @@ def test_superlu_factors_where_blocks_do_not_apply(monkeypatch):
                           si.LevelBlocks)
     with pytest.raises(ValueError, match="every pair live"):
         si.LevelInverse(indptr, indices, data, live, blocks=True)
+    # blocks that refuse (I - P_stay singular in floating point): SuperLU decides, as
+    # factor_levels does for the moments
+    (indptr, indices, data), live, work = _column_system(5)
+
+    def refused(*args, **kwargs):
+        raise RuntimeError("refused")
+
+    blocks = si.LevelBlocks
+    monkeypatch.setattr(si, "LevelBlocks", refused)
+    fallback = si.level_inverse(indptr, indices, data, live, work)
+    assert fallback is not None and not isinstance(fallback.factors, blocks)

@@ -397,15 +397,21 @@ def level_inverse(indptr, indices, data, live, work: int) -> LevelInverse | None
     Returns
     -------
     LevelInverse or None
-        None also where I - Q is singular in floating point (states that leak less than
-        the round-off: the space of Q^T is used there).
+        None also where I - Q is singular in floating point for SuperLU (states that leak
+        less than the round-off: the space of Q^T is used there); where only the blocks
+        are (I - P_stay singular in floating point), SuperLU's factors, as for
+        :func:`factor_levels`.
     """
     filled = envelope(indptr, indices)
     if filled > FILL_LIMIT * work or 12 * filled > LU_BYTES:
         return None
-    blocks = by_blocks(live, filled)
+    if by_blocks(live, filled):
+        try:
+            return LevelInverse(indptr, indices, data, live, blocks=True)
+        except RuntimeError:     # I - P_stay or the boundary singular: SuperLU decides
+            pass
     try:
-        return LevelInverse(indptr, indices, data, live, blocks=blocks)
+        return LevelInverse(indptr, indices, data, live)
     except RuntimeError:     # singular in floating point (a closed loop that leaks 1e-17)
         return None
 
