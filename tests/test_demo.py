@@ -193,7 +193,11 @@ def test_demo_models_find_their_reference_from_inside_the_folder(tmp_path, capsy
     capsys.readouterr()
     assert main(["rtd", "model-paper.h5", "--resamples", "20"]) == 0
     captured = capsys.readouterr()
-    assert "90 % interval" in captured.out and "warning" not in captured.err
+    # the reference found: no warning but the paper's chain's own (its SD(RT) misses its
+    # fitting window, a line of the model's)
+    others = [line for line in captured.err.splitlines() if "warning" in line
+              and "the chain does not carry its own fitting window" not in line]
+    assert "90 % interval" in captured.out and not others, captured.err
     (tmp_path / "kin.toml").write_text('[[property]]\nname = "T"\nlaw = "heat-exchange"\n'
                                        "coefficient = 2.0\ntemperature = 800.0\n"
                                        "wall_temperature = 600.0\ninitial = 300.0\n")

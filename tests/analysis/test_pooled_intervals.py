@@ -242,3 +242,23 @@ def test_a_copy_of_a_tracer_out_of_view_at_its_end_is_one_run(tmp_path):
         with pytest.raises(InputError, match="which hold one run"):
             check_runs_distinct([a, b], [(0.0, 1.5), (1.6, 3.0)])
         check_runs_distinct([a, c], [(0.0, 1.5), (1.6, 3.0)])
+
+
+def test_a_copy_with_its_clock_shifted_is_one_run(tmp_path, capsys):
+    """The same particles and positions under times shifted by 10 s (a copy re-exported
+    from another origin) share no frame time, so no frame of one time shows them one run;
+    the frames as far into each window do: refused in one line, nothing written. An
+    independent run under the shifted clock still pools."""
+    original = synthetic.write_run(tmp_path / "a.h5", FLOW, 300, 3.0, seed=20)
+    shifted = synthetic.write_run(tmp_path / "b.h5", FLOW, 300, 3.0, seed=20,
+                                  start_time=10.0)
+    bad = tmp_path / "bad.h5"
+    assert main(["fit", str(original), str(shifted), "--cells", "3x8", "--window",
+                 "0.5:2.5,10.5:12.5", "-o", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "hold the same particles at the same positions at 2.5 s and 12.5 s" in err, err
+    assert "one run under two clocks" in err and len(err.strip().splitlines()) == 1
+    assert not bad.exists()
+    other = synthetic.write_run(tmp_path / "c.h5", FLOW, 300, 3.0, seed=21, start_time=10.0)
+    assert main(["fit", str(original), str(other), "--cells", "3x8", "--window",
+                 "0.5:2.5,10.5:12.5", "--resamples", "0", "-o", str(tmp_path / "ok.h5")]) == 0

@@ -647,7 +647,8 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
     if off:
         text = ", ".join(f"{name} {m:.3g} s" for name, m in off)
         lines.append(f"the runs disagree: E(RT) of the model fitted on each run alone, {text}, "
-                     f"lies more than {100 * run_limit:.0f} % from the pooled model's "
+                     f"{'lies' if len(off) == 1 else 'lie'} more than "
+                     f"{100 * run_limit:.0f} % from the pooled model's "
                      f"{rt_mean:.3g} s (all runs: "
                      + ", ".join(f"{m:.3g}" for m in means) + " s): the runs may not be "
                      "samples of one flow (check their cases, or `cfbmarkov stationarity` "

@@ -290,6 +290,9 @@ def cmd_predict(args) -> int:
                       output=args.output, progress=not args.quiet)
     for line in model.adequacy.warnings if model.adequacy is not None else ():
         print(f"warning: the model's fitting sample: {one_line(line)}", file=sys.stderr)
+    missed = None if model.adequacy is None else model.adequacy.on_window_warning()
+    if missed:
+        print(f"warning: the model: {one_line(missed)}", file=sys.stderr)
     print(args.output)
     return 0
 
@@ -362,6 +365,9 @@ def cmd_rtd(args) -> int:
                         "the interval formed here")
     from cfbmarkov.markov.model_summary import fitting_run_count, unresolved_warning
 
+    missed = None if adequacy is None else adequacy.on_window_warning()
+    if missed:                          # the chain misses its own fitting window
+        warnings.append(missed)
     unresolved = unresolved_warning(rtd)
     if unresolved is not None:
         warnings.append(unresolved)

@@ -103,7 +103,9 @@ def unresolved_warning(rtd, direction: str | None = None,
 def model_warnings(model: "MarkovModel") -> list[str]:
     """Lines about states entered but never left (traps), for an open riser about many
     tracks that ended or began away from the faces, the fitting sample's verdict
-    (``model.adequacy``), more than :data:`UNVISITED_LIMIT` of the states never visited, an
+    (``model.adequacy``) and a chain that misses its own fitting window
+    (:meth:`~cfbmarkov.markov.adequacy.Adequacy.on_window_warning`), more than
+    :data:`UNVISITED_LIMIT` of the states never visited, an
     exact RTD whose unresolved mass exceeds :data:`UNRESOLVED_LIMIT`
     (:func:`unresolved_warning`) and an interval whose lower end is cut at 0
     (:meth:`~cfbmarkov.markov.uncertainty.ModelUncertainty.warnings`).
@@ -119,6 +121,9 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     lines = [] if model.open_flow is None else model.open_flow.warnings()
     if model.adequacy is not None:
         lines += [f"  {line}" for line in model.adequacy.warnings]
+        missed = model.adequacy.on_window_warning()
+        if missed:
+            lines.append(f"  {missed}")
     never = np.setdiff1d(model.unvisited_states, model.entered_never_left).size
     if never > UNVISITED_LIMIT * model.n_states:
         split = model.n_states > model.state_space.n_cells     # states that split cells
@@ -295,6 +300,10 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         lines.append(f"    {on_window}")
     passed = None if model.adequacy is None else model.adequacy.passed_line()
     if passed:
+        others = 0 if warnings else len(model_warnings(model))
+        if others:          # printed on stderr: said here too, for a log of stdout alone
+            passed += (f"; {others} warning{'' if others == 1 else 's'} about the model "
+                       "(printed as `warning:` lines; `cfbmarkov info MODEL` repeats them)")
         lines.append(f"  {passed}")
     elif model.adequacy is not None and not warnings:
         # the warnings went to stderr: the summary still says there are some, so that a

@@ -131,7 +131,9 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
         (:func:`~cfbmarkov.trajectory_identity.window_identity`: a run given twice, or a
         copy of it), two windows are of one run (one file, or two files that hold the same
         frame, :func:`same_run_frame`: a copy or a link; overlapping: counted twice; apart:
-        not independent runs), or one of several files is a Markov chain's prediction.
+        not independent runs), two windows of two files hold the same frames under two
+        clocks (:func:`same_window_frames`: a copy with its times shifted), or one of
+        several files is a Markov chain's prediction.
     """
     if len(runs) > 1:
         for run in runs:
@@ -153,6 +155,15 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
             one_file = os.path.realpath(other.path) == os.path.realpath(run.path)
             common = None if one_file else same_run_frame(other, run)
             if not one_file and common is None:
+                shifted = same_window_frames(other, w, run, window)
+                if shifted is not None:
+                    raise InputError(
+                        f"{other.path} {w[0]:g}-{w[1]:g} s and {where} hold the same "
+                        f"particles at the same positions at {shifted[0]:.10g} s and "
+                        f"{shifted[1]:.10g} s, as far into each window: one run under two "
+                        "clocks (a copy whose times were shifted, or exported twice); "
+                        "pooled it would count its transitions twice, as if it were twice "
+                        "the data (pool independent runs of one case)")
                 continue
             what = (f"of {run.path}" if one_file else
                     f"of {other.path} and {run.path}, which hold one run (their frames at "
@@ -167,6 +178,42 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
                              "sqrt(2), while windows of one run share its slow changes; fit "
                              f"one window of it ({min(w[0], window[0]):g}:"
                              f"{max(w[1], window[1]):g}), or pool independent runs of the case")
+
+
+def same_window_frames(a, window_a: tuple[float, float], b,
+                       window_b: tuple[float, float]) -> tuple[float, float] | None:
+    """The times of two windows' frames as far into each (the last frame of the shorter
+    window's length) where both hold the same particles at the same positions: one run
+    under two clocks (a copy with its times shifted), which :func:`same_run_frame`, reading
+    one time in both files, does not see. Independent runs, even members started from one
+    state, differ there (a chaotic flow never meets again).
+
+    Parameters
+    ----------
+    a, b : Trajectories
+        Open trajectory files.
+    window_a, window_b : (float, float)
+        Their windows (s).
+
+    Returns
+    -------
+    (float, float) or None
+        The two frames' times (s) where ids, presence and positions (NaN of absent
+        particles equal) are the same, else None.
+    """
+    if not np.array_equal(np.asarray(a.ids), np.asarray(b.ids)):
+        return None
+    frames_a, frames_b = a.window(*window_a), b.window(*window_b)
+    span = min(frames_a.stop - frames_a.start, frames_b.stop - frames_b.start) - 1
+    if span < 0:
+        return None
+    i, j = frames_a.start + span, frames_b.start + span
+    if not np.array_equal(np.asarray(a.present(i)), np.asarray(b.present(j))):
+        return None
+    if not np.array_equal(np.asarray(a.positions(i)), np.asarray(b.positions(j)),
+                          equal_nan=True):
+        return None
+    return float(a.times[i]), float(b.times[j])
 
 
 #: the common frames :func:`same_run_frame` reads at a time, looking back for the latest

@@ -99,13 +99,17 @@ def predict(model: "MarkovModel", trajectories, start: float, duration: float, s
 
 
 def _warn_sample(model: "MarkovModel") -> None:
-    """Repeat the warnings of the model's fitting-sample verdict (:class:`SampleWarning`)."""
+    """Repeat the warnings of the model's fitting-sample verdict, and the one of a chain that
+    misses its own fitting window (:class:`SampleWarning`)."""
     import warnings
 
     from cfbmarkov.errors import SampleWarning
 
     for line in model.adequacy.warnings if model.adequacy is not None else ():
         warnings.warn(f"the model's fitting sample: {line}", SampleWarning, stacklevel=4)
+    missed = None if model.adequacy is None else model.adequacy.on_window_warning()
+    if missed:                   # the chain misses its own fitting window
+        warnings.warn(f"the model: {missed}", SampleWarning, stacklevel=4)
 
 
 def _predict(model, trajectories, start, duration, seed, output, progress, kinetics):

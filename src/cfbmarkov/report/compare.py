@@ -396,6 +396,9 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
         if adequacy is not None:        # the verdict on the model's fitting sample, repeated
             summary["adequacy"] = adequacy.to_dict()
             warnings += [f"the model's fitting sample: {line}" for line in adequacy.warnings]
+            missed = adequacy.on_window_warning()
+            if missed:                  # the chain misses its own fitting window
+                warnings.append(f"the model: {missed}")
         if intervals is None:       # the keys scripts read, null: no interval was formed
             summary["level"] = None
             for key in ("rt_mean_interval", "rt_sd_interval", "rtd_interval"):
