@@ -779,6 +779,13 @@ def test_the_chain_on_its_fitting_window_tells_a_memoryless_fit_from_a_missed_me
     if line is not None:
         assert "its SD(RT)" in line and "below the window's" in line and "limit 25 %" in line
         assert "`fit --states auto`" in line
+    # react's answers rest on the chain's RTD: its --json warnings carry the line too
+    (tmp_path / "k.toml").write_text('[[property]]\nname = "X"\nlaw = "first-order"\n'
+                                     'rate = 1.0\n')
+    assert main(["react", str(tmp_path / "hidden-m.h5"), "--kinetics",
+                 str(tmp_path / "k.toml"), "--json"]) == 0
+    listed = json.loads(capsys.readouterr().out)["warnings"]
+    assert any(w.startswith("the model: the chain does not carry its own") for w in listed)
     # the verdict's own lines and its judgement are the sample's: unchanged by the miss
     hidden_model = MarkovModel.load(tmp_path / "hidden-m.h5")
     assert not any("does not carry its own" in w for w in hidden_model.adequacy.warnings)

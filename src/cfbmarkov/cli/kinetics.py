@@ -199,7 +199,8 @@ def cmd_react(args) -> int:
 
 def _chain_warnings(model) -> list[str]:
     """What `fit`, `rtd` and `info` say of the chain that the exact answers rest on as
-    well: residences it never ends (unresolved mass) and states that trap particles."""
+    well: residences it never ends (unresolved mass), states that trap particles, and a
+    chain that misses its own fitting window."""
     from cfbmarkov.markov.model_summary import trap_warning, unresolved_warning
 
     lines = []
@@ -221,6 +222,9 @@ def _chain_warnings(model) -> list[str]:
     trapped = trap_warning(model)
     if trapped is not None:
         lines.append(f"the model: {trapped}")
+    missed = None if model.adequacy is None else model.adequacy.on_window_warning()
+    if missed:           # an RTD that misses its window's spread misses the conversion too
+        lines.append(f"the model: {missed}")
     return lines
 
 
