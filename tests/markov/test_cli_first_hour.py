@@ -58,6 +58,17 @@ def test_rtd_at_another_level_names_a_number_of_resamples(capsys, fitted):
     assert "--resamples 100" in line and "--resamples N" not in line
 
 
+def test_fit_refuses_a_level_that_no_interval_uses(tmp_path, capsys, markov_run):
+    """--level with --resamples 0 sets the coverage of an interval that is not formed: one
+    line, nothing written (it was taken and ignored)."""
+    out = tmp_path / "m.h5"
+    line = one_line_error(*run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--window",
+                                   "1:5", "--resamples", "0", "--level", "0.95",
+                                   "-o", out)[::2])
+    assert "--level 0.95 sets the interval's coverage, which --resamples 0 leaves out" in line
+    assert not out.exists()
+
+
 def test_compare_without_window_compares_over_the_span_both_cover(tmp_path, capsys,
                                                                   markov_run, fitted):
     _, pred = fitted

@@ -41,6 +41,11 @@ def cmd_fit(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
+    if args.level is not None and not args.resamples:
+        raise InputError(f"--level {args.level:g} sets the interval's coverage, which "
+                         "--resamples 0 leaves out (the model then carries no interval): "
+                         "leave out --level or --resamples 0")
+    args.level = 0.9 if args.level is None else args.level
     _check_resamples(args.resamples, args.level)
     if args.window is None:       # the paper's window; a refusal of it says it is the default
         args.window = [DEFAULT_WINDOW]
@@ -511,9 +516,9 @@ def add_fit(sub) -> None:
                    help="leave out the verdict on the fitting sample (the window's halves and "
                         "quarters refitted and compared, the net flow per part, the residences "
                         "longer than the window)")
-    s.add_argument("--level", type=level, default=0.9,
+    s.add_argument("--level", type=level, default=None,
                    help="coverage of the interval of the model's E(RT), SD(RT) and RTD "
-                        "(default 0.9)")
+                        "(default 0.9; refused with --resamples 0)")
     s.add_argument("--resamples", type=count(0, 100000), default=100,
                    help="bootstrap resamples of the fitting window for the model's interval "
                         "(0: no interval; default 100)")
