@@ -262,3 +262,32 @@ def test_a_copy_with_its_clock_shifted_is_one_run(tmp_path, capsys):
     other = synthetic.write_run(tmp_path / "c.h5", FLOW, 300, 3.0, seed=21, start_time=10.0)
     assert main(["fit", str(original), str(other), "--cells", "3x8", "--window",
                  "0.5:2.5,10.5:12.5", "--resamples", "0", "-o", str(tmp_path / "ok.h5")]) == 0
+
+
+def test_a_pooled_chain_is_held_against_its_runs_windows_together(runs):
+    """The pooled model against its own fitting windows: each run's window seen by the
+    chain, pooled (the residences' counts add, their mean and SD from the runs' moments);
+    windows of different lengths give none."""
+    import math
+
+    from cfbmarkov.analysis.adequacy import _on_window, _pooled_on_window
+
+    windows = [WINDOW, WINDOW]
+    with contextlib.ExitStack() as stack:
+        opened = [stack.enter_context(Trajectories(p)) for p in runs[:2]]
+        data = discretize_runs(opened, FLOW.grid, FLOW.lag, windows)
+        model = estimator_from_name("mle", FLOW.grid, FLOW.lag).fit(data)
+        each = [_on_window(model, run, d) for run, d in zip(opened, data)]
+        pooled = _pooled_on_window(model, opened, data)
+        assert len(pooled) == 6 and all(len(e) == 6 for e in each)
+        assert pooled[0] == pytest.approx(2.0) and pooled[5] == each[0][5] + each[1][5]
+        n = np.array([e[5] for e in each])
+        for k in (1, 3):                  # E(RT), SD(RT): the chain's, then the residences'
+            mean = float(n @ [e[k] for e in each]) / n.sum()
+            second = float(n @ [e[k + 1] ** 2 + e[k] ** 2 for e in each]) / n.sum()
+            assert pooled[k] == pytest.approx(mean, rel=1e-12)
+            assert pooled[k + 1] == pytest.approx(math.sqrt(second - mean ** 2), rel=1e-12)
+        # a chain on the cells of a flow that is a chain on them: within the limit
+        assert abs(pooled[2] / pooled[4] - 1) < 0.25
+        other = discretize_runs(opened, FLOW.grid, FLOW.lag, [WINDOW, (0.5, 2.0)])
+        assert _pooled_on_window(model, opened, other) == ()

@@ -448,7 +448,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
         lines = [line.replace(_ADVICE, _POOLED_ADVICE) for line in lines]
     if _any_absences(runs):     # stationarity reads no periodic run with absences
         lines = [line.replace(_STATIONARITY_ADVICE, "") for line in lines]
-    on_window = () if pooled else _on_window(model, runs[0], data[0])
+    on_window = (_pooled_on_window(model, runs, data) if pooled
+                 else _on_window(model, runs[0], data[0]))
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
                     run_means, window_mean, applied if not pooled else math.nan, on_window)
 
@@ -479,6 +480,28 @@ def _on_window(model, run, discrete: DiscreteTrajectories) -> tuple[float, ...]:
         return ()
     return (b - a, float(chain.mean), float(chain.sd), float(seen.mean), float(seen.sd),
             float(seen.count))
+
+
+def _pooled_on_window(model, runs, data) -> tuple[float, ...]:
+    """:func:`_on_window` of a pooled fit: each run's window against the chain, pooled (the
+    residences' mean and SD from their counts, means and SDs together; the chain's, as each
+    window sees it, weighted by the residences that window holds); empty where the windows
+    differ in length or one run gives none."""
+    each = [_on_window(model, run, discrete) for run, discrete in zip(runs, data)]
+    if not each or any(len(e) != 6 for e in each) or len({e[0] for e in each}) != 1:
+        return ()
+    counts = np.array([e[5] for e in each])
+    weights = counts / counts.sum()
+
+    def pooled(means, sds):
+        means, sds = np.asarray(means), np.asarray(sds)
+        mean = float(weights @ means)
+        second = float(weights @ (sds ** 2 + means ** 2))
+        return mean, math.sqrt(max(second - mean * mean, 0.0))
+
+    chain_mean, chain_sd = pooled([e[1] for e in each], [e[2] for e in each])
+    seen_mean, seen_sd = pooled([e[3] for e in each], [e[4] for e in each])
+    return (each[0][0], chain_mean, chain_sd, seen_mean, seen_sd, float(counts.sum()))
 
 
 #: the least limit of the parts' spread (-). A short window's interval is narrower than

@@ -69,11 +69,13 @@ class Adequacy:
         (:func:`cfbmarkov.analysis.adequacy.parts_limit`); NaN for a pooled fit or a
         verdict stored without it.
     on_window : tuple of float
-        The chain against its own fitting window (one run of a periodic riser; empty
-        otherwise, or for a verdict stored without it): (window length W s, the chain's
-        E(RT) and SD(RT) as a W s window sees it from the window's first frame, s, the
-        E(RT) and SD(RT) of the residences the window holds whole, s, and their count). It
-        informs; the verdict does not judge it (``docs/definitions.md``, Sample adequacy).
+        The chain against its own fitting window (a periodic riser; several runs' windows
+        of one length pooled; empty otherwise, or for a verdict stored without it): (window
+        length W s, the chain's E(RT) and SD(RT) as a W s window sees it from the window's
+        first frame, s, the E(RT) and SD(RT) of the residences the window holds whole, s,
+        and their count). The sample's verdict does not judge it; beyond
+        :data:`ON_WINDOW_LIMIT` it is the model's warning (:meth:`on_window_warning`;
+        ``docs/definitions.md``, Sample adequacy).
     """
 
     warnings: tuple[str, ...] = ()
@@ -100,9 +102,10 @@ class Adequacy:
             return None
         pd_mean = 100.0 * (mean - seen_mean) / seen_mean
         pd_sd = 100.0 * (sd - seen_sd) / seen_sd
+        held = "the runs' windows hold" if self.runs else "the window holds"
         return (f"on its fitting window: the chain's E(RT) {mean:.3g} s (PD {pd_mean:+.1f} %), "
                 f"SD(RT) {sd:.3g} s (PD {pd_sd:+.1f} %) as a {length:g} s window sees it, "
-                f"against the {int(count)} residences the window holds whole (E(RT) "
+                f"against the {int(count)} residences {held} whole (E(RT) "
                 f"{seen_mean:.3g} s, SD(RT) {seen_sd:.3g} s): how well the chain carries the "
                 "data it was fitted on")
 
@@ -135,8 +138,10 @@ class Adequacy:
                               f"% {side} the window's {seen:.3g} s")
         if not misses:
             return None
+        held = (f"the {int(count)} residences the {len(self.runs)} runs' windows hold whole"
+                if self.runs else f"its {int(count)} residences held whole")
         return (f"the chain does not carry its own fitting window: as a {length:g} s window "
-                f"sees it, {' and '.join(misses)} (its {int(count)} residences held whole; "
+                f"sees it, {' and '.join(misses)} ({held}; "
                 f"limit {100 * limit:g} %): the model's figures and their interval are the "
                 "chain's, and the flow's may lie far from them; a state space with memory may "
                 "carry it (`fit --states auto` compares them on this window)")
