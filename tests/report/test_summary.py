@@ -248,3 +248,34 @@ def test_the_command_that_makes_the_run_again():
     assert command_text({"scale": "quick", "models": ["auto"], "device": "cpu"},
                         cases[:1], "r") == (
         "cfbmarkov reproduce --scale quick --velocities 3 --models auto -o r")
+
+
+def test_snapshot_caption_ends_at_the_last_snapshot_in_the_window(tmp_path):
+    """compare draws snapshots at the window start + 0, 0.1, ... 0.7 s inside its window:
+    a 0.2 s predict window gives three, and the caption's times and mixing figures end at
+    the last of them, not 0.7 s after the start."""
+    from cfbmarkov.report.document import FigureBlock
+    from cfbmarkov.report.figure_sections import PNG_SIGNATURE, snapshot_blocks
+
+    compare_dir = tmp_path / "compare-paper"
+    compare_dir.mkdir()
+    (compare_dir / "snapshots.png").write_bytes(PNG_SIGNATURE + b"rest")
+    cases, measures = fake_run({5.0: 0.2})
+    cases[0].finished[0].compare_dir = compare_dir
+    times = np.array([0.4, 0.5, 0.6])
+
+    def side(shares):
+        return SimpleNamespace(mix_t=times, mix_f=np.asarray(shares))
+
+    measures["u5"].window = (0.4, 0.6)
+    measures["u5"].reference = side([0.51, 0.40, 0.33])
+    measures["u5"].models = {"paper": side([0.51, 0.45, 0.30])}
+    blocks = snapshot_blocks(cases, measures, tmp_path, [])
+    caption = next(b for b in blocks if isinstance(b, FigureBlock)).sentence
+    assert "from 0.4 to 0.6 s" in caption and "by 0.6 s" in caption
+    assert "0.510 to 0.330 (CFD-DEM) and 0.300 (MCM)" in caption and "n/a" not in caption
+    # a window of 1 s: the last snapshot is 0.7 s after its start
+    measures["u5"].window = (0.4, 1.4)
+    caption = next(b for b in snapshot_blocks(cases, measures, tmp_path, [])
+                   if isinstance(b, FigureBlock)).sentence
+    assert "from 0.4 to 1.1 s" in caption

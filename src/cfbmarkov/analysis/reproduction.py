@@ -426,6 +426,61 @@ def nanmean(values: np.ndarray) -> float:
     return float(finite.mean()) if finite.size else math.nan
 
 
+#: the share of the riser's width that each wall layer takes in the wall/core figures
+WALL_LAYER = 1.0 / 6.0
+
+
+def wall_zone_weights(bins: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """How much of each of ``bins`` equal bins across the riser lies in the left wall
+    layer, the core and the right wall layer (each wall layer the outer sixth of the width).
+
+    A bin cut by a layer's edge counts for the part of its width inside the layer, so the
+    layers are a sixth of the width whatever the number of bins (with 8 bins, one bin and a
+    third of the next).
+
+    Parameters
+    ----------
+    bins : int
+        Number of equal bins across the riser, at least 1.
+
+    Returns
+    -------
+    (numpy.ndarray, numpy.ndarray, numpy.ndarray), each shape (bins,)
+        The fraction (0 to 1) of each bin's width in the left wall layer, the core and the
+        right wall layer; the three sum to 1 for every bin.
+    """
+    edges = np.linspace(0.0, 1.0, int(bins) + 1)
+    low, high = edges[:-1], edges[1:]
+
+    def inside(a: float, b: float) -> np.ndarray:
+        return np.clip(np.minimum(high, b) - np.maximum(low, a), 0.0, None) * bins
+
+    return (inside(0.0, WALL_LAYER), inside(WALL_LAYER, 1.0 - WALL_LAYER),
+            inside(1.0 - WALL_LAYER, 1.0))
+
+
+def zone_mean(values: np.ndarray, weights: np.ndarray) -> float:
+    """The mean of a binned profile over a zone across the riser.
+
+    Parameters
+    ----------
+    values : numpy.ndarray, shape (K,)
+        The profile's value in each of K equal bins (NaN where a bin has none).
+    weights : numpy.ndarray, shape (K,)
+        The fraction of each bin's width in the zone (:func:`wall_zone_weights`).
+
+    Returns
+    -------
+    float
+        The mean over the zone, each finite bin by its share of the zone's width; NaN where
+        no finite bin lies in it.
+    """
+    weights = np.where(np.isfinite(values), weights, 0.0)
+    total = weights.sum()
+    return float(np.sum(np.where(weights > 0, values, 0.0) * weights) / total) if total > 0 \
+        else math.nan
+
+
 def wall_core_contrast(fraction: np.ndarray, velocity: np.ndarray
                        ) -> tuple[float, float, float, float]:
     """Wall and core averages of radial solids profiles (the core-annulus structure).
@@ -434,20 +489,23 @@ def wall_core_contrast(fraction: np.ndarray, velocity: np.ndarray
     ----------
     fraction, velocity : numpy.ndarray, shape (K,)
         Solids volume fraction (-) and mean vertical solids velocity (m/s) across the riser
-        (:func:`solids_profile`).
+        in K equal bins (:func:`solids_profile`).
 
     Returns
     -------
     (float, float, float, float)
         Solids fraction at the walls and in the core, velocity (m/s) at the walls and in
-        the core; the walls are the outer sixth of the bins on each side.
+        the core. The walls are the outer sixth of the width on each side
+        (:func:`wall_zone_weights`: a bin cut by a layer's edge counts for its part inside),
+        the core the middle two thirds; each is the mean of the bins' values over its
+        width, and a bin with no particles (velocity NaN) is left out of the velocity's.
     """
-    k = max(1, fraction.size // 6)
-    wall = float(np.r_[fraction[:k], fraction[-k:]].mean())
-    core = float(fraction[k:-k].mean()) if fraction.size > 2 * k else wall
-    v_wall = nanmean(np.r_[velocity[:k], velocity[-k:]])
-    v_core = nanmean(velocity[k:-k]) if velocity.size > 2 * k else v_wall
-    return wall, core, v_wall, v_core
+    left, core, right = wall_zone_weights(len(fraction))
+    walls = left + right
+    return (zone_mean(np.asarray(fraction, float), walls),
+            zone_mean(np.asarray(fraction, float), core),
+            zone_mean(np.asarray(velocity, float), walls),
+            zone_mean(np.asarray(velocity, float), core))
 
 
 @dataclass
@@ -521,4 +579,5 @@ def operating_point(config, measures: CaseMeasures) -> OperatingPoint:
 __all__ = ["BatchInjection", "CaseMeasures", "OperatingPoint", "RunMeasures", "batch_injection",
            "implied_vertical_velocity", "measure_case", "measure_run", "nanmean",
            "operating_point",
-           "paper_map_times", "reading_errors", "solids_profile", "wall_core_contrast"]
+           "paper_map_times", "reading_errors", "solids_profile", "wall_core_contrast",
+           "wall_zone_weights", "zone_mean"]

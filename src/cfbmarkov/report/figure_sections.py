@@ -24,11 +24,14 @@ from pathlib import Path
 import numpy as np
 
 from cfbmarkov._atomic import atomic_path
+from cfbmarkov.analysis.figure_inputs import SNAPSHOT_OFFSETS
 from cfbmarkov.analysis.reproduction import (
     RunMeasures,
     batch_injection,
     implied_vertical_velocity,
     paper_map_times,
+    wall_zone_weights,
+    zone_mean,
 )
 from cfbmarkov.report.document import FigureBlock, Heading, Para, link, number_text
 from cfbmarkov.report.figures import plot_probability_maps
@@ -48,8 +51,6 @@ from cfbmarkov.report.sections import shared_text, window_text
 PAPER_MAP_FIGURE: dict[float, int] = {3.0: 4, 4.0: 5, 6.0: 6, 8.0: 7}
 #: Fig. 10 is drawn at this velocity (m/s), or the case nearest to it
 SNAPSHOT_VELOCITY = 6.0
-#: snapshots span window start + 0 ... 0.7 s
-SNAPSHOT_SPAN = 0.7
 PNG_SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
 
@@ -310,8 +311,9 @@ def snapshot_blocks(done, measures, figures_dir: Path, written: list[str]) -> li
         shutil.copyfile(png, tmp)
     written.append(name)
     measured = measures[c.name]
-    t0 = measured.window[0]
-    at = t0 + SNAPSHOT_SPAN
+    t0, t1 = measured.window
+    # the last snapshot compare drew: start + 0, 0.1, ... 0.7 s within the window
+    at = t0 + max(o for o in SNAPSHOT_OFFSETS if t0 + o <= t1 + 1e-9 * max(1.0, abs(t1)))
     ref, mod = measured.reference, measured.models[e.name]
 
     def _at(side: RunMeasures) -> str:
@@ -393,8 +395,8 @@ def _one_sided_text(done, measures) -> str:
     sides = []
     for c in done:
         fraction = np.asarray(measures[c.name].solids_fraction, dtype=float)
-        k = max(1, fraction.size // 6)
-        left, right = np.nanmean(fraction[:k]), np.nanmean(fraction[-k:])
+        left_layer, _, right_layer = wall_zone_weights(fraction.size)
+        left, right = zone_mean(fraction, left_layer), zone_mean(fraction, right_layer)
         if (math.isfinite(left) and math.isfinite(right) and max(left, right) > 0
                 and abs(left - right) > 0.2 * max(left, right)):
             sides.append(f"{c.label} {left:.3g} at the left wall, {right:.3g} at the right")
