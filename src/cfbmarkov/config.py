@@ -186,6 +186,46 @@ class CaseConfig(_Model):
     output: OutputConfig = OutputConfig()
     markov: MarkovConfig = MarkovConfig()
 
+    def reproduction_problem(self) -> str | None:
+        """What keeps a reproduction's Markov stages from running on this case, found before
+        its CFD-DEM (None where nothing does).
+
+        Besides :meth:`MarkovConfig.comparison_problem`: a fitting or predict window whose
+        start is not before its stop, that starts before 0 s, ends after ``output.end_time``
+        or is shorter than one lag, and a lag that is not a whole multiple of
+        ``output.frame_interval`` (the frames the CFD-DEM stores). Each would otherwise stop
+        the case after its CFD-DEM has run.
+
+        Returns
+        -------
+        str or None
+            The problem, naming the setting and a value that works.
+        """
+        markov, output = self.markov, self.output
+        problem = markov.comparison_problem()
+        if problem is not None:
+            return problem
+        frames = markov.lag / output.frame_interval
+        if round(frames) < 1 or abs(frames - round(frames)) > 1e-9 * frames:
+            nearest = max(1, round(frames)) * output.frame_interval
+            return (f"lag {markov.lag:g} s: a whole multiple of output.frame_interval "
+                    f"{output.frame_interval:g} s (the frames the CFD-DEM stores), e.g. "
+                    f"{nearest:g}")
+        for key in ("fit_window", "predict_window"):
+            a, b = getattr(markov, key)
+            if not (0.0 <= a < b):
+                return (f"{key} [{a:g}, {b:g}] s: [start, stop] with 0 <= start < stop, e.g. "
+                        f"[{min(a, b):g}, {max(a, b):g}]" if a != b and min(a, b) >= 0 else
+                        f"{key} [{a:g}, {b:g}] s: [start, stop] with 0 <= start < stop")
+            if b > output.end_time * (1 + 1e-12):
+                return (f"{key} [{a:g}, {b:g}] s ends after the CFD-DEM's output.end_time "
+                        f"{output.end_time:g} s: a window within 0-{output.end_time:g} s, or a "
+                        "later end_time")
+            if b - a < markov.lag * (1 - 1e-9):
+                return (f"{key} [{a:g}, {b:g}] s is shorter than one lag ({markov.lag:g} s): a "
+                        "longer window or a shorter lag")
+        return None
+
 
 def _format_validation_error(err: ValidationError, source: str) -> str:
     first = err.errors()[0]

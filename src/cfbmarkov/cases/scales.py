@@ -214,6 +214,14 @@ def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELO
     velocities = [float(u) for u in velocities]
     if not velocities:
         raise InputError("no velocities given")
+    for key, option in ((("gas", "superficial_velocity"), "--velocities"),
+                        (("name",), "the case names, <scale>-u<U>")):
+        table = overrides or {}
+        for part in key[:-1]:
+            table = table.get(part, {}) if isinstance(table, dict) else {}
+        if isinstance(table, dict) and key[-1] in table:
+            raise InputError(f"overrides may not set {'.'.join(key)}: a reproduction sets it "
+                             f"per case ({option}); leave it out of the overrides file")
     for u in velocities:
         if not (math.isfinite(u) and u > 0):
             raise InputError(f"velocity {u:g} m/s must be positive")
@@ -232,9 +240,16 @@ def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELO
             loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
             raise InputError(f"invalid configuration at '{loc}' for U = {u:g} m/s: "
                              f"{first['msg']}") from None
-        problem = cases[-1].markov.comparison_problem()
+        problem = cases[-1].reproduction_problem()
         if problem is not None:
             raise InputError(f"invalid configuration at 'markov' for U = {u:g} m/s: {problem}")
+        from cfbmarkov.simulate.run import check_periodic_case
+
+        try:
+            check_periodic_case(cases[-1])
+        except InputError as exc:
+            raise InputError(f"invalid configuration for U = {u:g} m/s: "
+                             f"{exc}") from None
     return cases
 
 

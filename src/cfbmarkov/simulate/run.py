@@ -36,6 +36,7 @@ from cfbmarkov.simulate.cfd import GasGrid, gas_stability_limit
 from cfbmarkov.simulate.checkpoint import checkpoint_cpu_time, read_checkpoint, write_checkpoint
 from cfbmarkov.simulate.coupling import check_placement
 from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
+from cfbmarkov.simulate.dem.neighbours import search_grid
 from cfbmarkov.simulate.progress import Progress
 from cfbmarkov.simulate.riser import CoupledRiser
 
@@ -158,6 +159,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
                              "stopped before its first checkpoint); start it again without "
                              "--resume")
         check_resources(case, output, end, fields, resuming=True)
+        check_periodic_case(case)
         _advise_time_step(case, label)
         riser, n_segments, frames, wall_time, history, run_id = read_checkpoint(checkpoint,
                                                                                 case)
@@ -175,6 +177,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
                              "or delete the folder to start again")
         _check_safety(case)
         check_resources(case, output, end, fields, resuming=False)
+        check_periodic_case(case)
         _advise_time_step(case, label)
         with warnings.catch_warnings():     # said once above, with the label
             warnings.simplefilter("ignore", TimeStepAdvisory)
@@ -341,6 +344,35 @@ def time_step_advisory(case: CaseConfig) -> str | None:
     law = ContactLaw.from_config(case.contact, p.diameter, p.density)
     worst, message = contact_resolution(law, law.mass, case.numerics.dem_time_step)
     return message + "; 10 or more are recommended" if 5 <= worst < 10 else None
+
+
+def check_periodic_case(case: CaseConfig) -> None:
+    """Refuse, before anything is said or allocated, settings that the periodic riser's
+    CFD-DEM cannot run: a DEM neighbour-search grid that does not fit the riser
+    (:func:`cfbmarkov.simulate.dem.neighbours.search_grid`, with the cutoff of its
+    particles, d + ``numerics.dem_skin``, and a periodic height), and a distributor
+    pressure drop (a bed on a floor's, which the periodic riser has not).
+
+    Parameters
+    ----------
+    case : CaseConfig
+        The case.
+
+    Raises
+    ------
+    InputError
+        For ``numerics.dem_cells`` smaller than the cutoff or with fewer than 3 rows, a
+        skin that makes the cutoff wider than the riser, or a positive
+        ``riser.distributor_pressure_drop``; the message names the setting.
+    """
+    if case.riser.distributor_pressure_drop > 0:
+        raise InputError(f"riser.distributor_pressure_drop {case.riser.distributor_pressure_drop:g}"
+                         " Pa: the periodic riser has no distributor (the plate is a bed's on "
+                         "a floor, bottom_wall=True in Python); leave it out")
+    cells = case.numerics.dem_cells
+    search_grid(case.riser.width, case.riser.height,
+                case.particles.diameter + case.numerics.dem_skin,
+                None if cells == "auto" else cells, periodic=True)
 
 
 def _advise_time_step(case: CaseConfig, label: str = "") -> None:

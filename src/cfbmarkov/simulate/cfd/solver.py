@@ -313,6 +313,11 @@ class GasSolver:
         a plate with the case's ``riser.distributor_pressure_drop``."""
         if distributor:
             kwargs.setdefault("distributor_pressure_drop", case.riser.distributor_pressure_drop)
+        elif case.riser.distributor_pressure_drop > 0:
+            raise InputError(f"riser.distributor_pressure_drop "
+                             f"{case.riser.distributor_pressure_drop:g} Pa: the periodic riser "
+                             "has no distributor (the plate is a bed's on a floor, "
+                             "bottom_wall=True in Python); leave it out")
         return cls(GasGrid.from_config(case, distributor=distributor), density=case.gas.density,
                    viscosity=case.gas.viscosity,
                    superficial_velocity=case.gas.superficial_velocity,

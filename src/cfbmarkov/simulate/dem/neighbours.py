@@ -48,12 +48,21 @@ def search_grid(width: float, height: float, cut: float, search_cells, periodic:
     Raises
     ------
     InputError
-        For cells that are not two positive integers, smaller than the cutoff, or fewer
-        than 3 rows of a periodic height.
+        For a cutoff wider than the domain or than a third of a periodic height (the skin
+        at fault), and for cells that are not two positive integers, smaller than the
+        cutoff, or fewer than 3 rows of a periodic height.
     """
+    rows_needed = 3 if periodic else 1
+    if cut > width * (1 + 1e-12) or cut * rows_needed > height * (1 + 1e-12):
+        side = (f"the width W = {width * 1e3:.4g} mm" if cut > width * (1 + 1e-12) else
+                f"a third of the periodic height H = {height * 1e3:.4g} mm")
+        raise InputError(
+            f"the neighbour cutoff 2*R_max + skin = {cut * 1e3:.4g} mm exceeds {side}: a "
+            "smaller numerics.dem_skin (it changes the speed only; the default is 0.4 mm), "
+            "or a wider or taller riser")
+    most = (int(width / cut), int(height / cut))
     if search_cells is None:
-        ncx = max(1, int(width / cut))
-        ncy = max(1, int(height / cut))
+        ncx, ncy = most
     else:
         try:
             ncx, ncy = (int(c) for c in search_cells)
@@ -66,12 +75,14 @@ def search_grid(width: float, height: float, cut: float, search_cells, periodic:
         raise InputError(
             f"search cells {ncx} x {ncy} are {cw * 1e3:.4g} x {ch * 1e3:.4g} mm, smaller "
             f"than the neighbour cutoff 2*R_max + skin = {cut * 1e3:.4g} mm; use fewer "
-            f"cells (at most {int(width / cut)} x {int(height / cut)}), or the automatic "
+            f"cells (at most {most[0]} x {most[1]}), or the automatic "
             "grid (numerics.dem_cells = \"auto\" in a case file, search_cells=None in "
             "Python)")
-    if periodic and ncy < 3:
-        raise InputError(f"a periodic height needs at least 3 search-cell rows (the period "
-                         f"H = {height:g} m must be at least 3 cutoffs of {cut:g} m)")
+    if ncy < rows_needed:
+        raise InputError(f"search cells {ncx} x {ncy}: a periodic height needs at least 3 rows "
+                         f"of search cells; use 3 to {most[1]} rows, or the automatic grid "
+                         "(numerics.dem_cells = \"auto\" in a case file, search_cells=None "
+                         "in Python)")
     return ncx, ncy
 
 
