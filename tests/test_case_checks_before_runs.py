@@ -63,8 +63,8 @@ def _with(section, **values):
     (_with("gas", superficial_velocity=3.0), "overrides may not set gas.superficial_velocity: "
      "a reproduction sets it per case (--velocities)"),
     ({**OVERRIDES, "name": "mine"}, "overrides may not set name"),
-    (_with("markov", fit_window=[0.4, 0.2]), "fit_window [0.4, 0.2] s: [start, stop] with 0 <= "
-     "start < stop, e.g. [0.2, 0.4]"),
+    (_with("markov", fit_window=[0.4, 0.2]), "at 'markov.fit_window' for U = 5 m/s: [0.4, 0.2] "
+     "s is not [start, stop] with 0 <= start < stop (e.g. [0.2, 0.4])"),
     (_with("markov", predict_window=[0.4, 0.8]), "predict_window [0.4, 0.8] s ends after the "
      "CFD-DEM's output.end_time 0.6 s"),
     (_with("markov", lag=0.015), "lag 0.015 s: a whole multiple of output.frame_interval "
@@ -77,6 +77,14 @@ def test_reproduction_settings_are_checked_before_its_cfd_dem(overrides, said):
     with pytest.raises(InputError) as caught:
         scale_cases("quick", [5.0], overrides)
     assert said in str(caught.value), str(caught.value)
+
+
+def test_simulate_refuses_a_reversed_window_in_its_case_file(tmp_path, capsys):
+    case = tmp_path / "c.toml"
+    case.write_text(CASE.format(riser="", numerics="") + "[markov]\nfit_window = [0.4, 0.2]\n")
+    assert main(["simulate", str(case), "-o", str(tmp_path / "r.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "markov.fit_window" in err and "(e.g. [0.2, 0.4])" in err
 
 
 def test_the_same_overrides_without_the_fault_pass():

@@ -153,6 +153,16 @@ class MarkovConfig(_Model):
     coherent_auto: bool = Field(True, description="fit the automatically chosen model with "
                                 "coherent moves (the cluster model), -")
 
+    @field_validator("fit_window", "predict_window")
+    @classmethod
+    def _window_in_order(cls, window: tuple[float, float]) -> tuple[float, float]:
+        start, stop = window
+        if not (math.isfinite(start) and math.isfinite(stop) and 0.0 <= start < stop):
+            raise ValueError(f"[{start:g}, {stop:g}] s is not [start, stop] with "
+                             "0 <= start < stop" + (f" (e.g. [{stop:g}, {start:g}])"
+                                                    if 0.0 <= stop < start else ""))
+        return window
+
     def comparison_problem(self) -> str | None:
         """What keeps a reproduction's Markov stages from running on these settings, found
         before its CFD-DEM rather than at its comparison (None where nothing does): an odd
@@ -190,9 +200,8 @@ class CaseConfig(_Model):
         """What keeps a reproduction's Markov stages from running on this case, found before
         its CFD-DEM (None where nothing does).
 
-        Besides :meth:`MarkovConfig.comparison_problem`: a fitting or predict window whose
-        start is not before its stop, that starts before 0 s, ends after ``output.end_time``
-        or is shorter than one lag, and a lag that is not a whole multiple of
+        Besides :meth:`MarkovConfig.comparison_problem`: a fitting or predict window that
+        ends after ``output.end_time`` or is shorter than one lag, and a lag that is not a whole multiple of
         ``output.frame_interval`` (the frames the CFD-DEM stores). Each would otherwise stop
         the case after its CFD-DEM has run.
 
@@ -212,11 +221,7 @@ class CaseConfig(_Model):
                     f"{output.frame_interval:g} s (the frames the CFD-DEM stores), e.g. "
                     f"{nearest:g}")
         for key in ("fit_window", "predict_window"):
-            a, b = getattr(markov, key)
-            if not (0.0 <= a < b):
-                return (f"{key} [{a:g}, {b:g}] s: [start, stop] with 0 <= start < stop, e.g. "
-                        f"[{min(a, b):g}, {max(a, b):g}]" if a != b and min(a, b) >= 0 else
-                        f"{key} [{a:g}, {b:g}] s: [start, stop] with 0 <= start < stop")
+            a, b = getattr(markov, key)       # in order (MarkovConfig checks it)
             if b > output.end_time * (1 + 1e-12):
                 return (f"{key} [{a:g}, {b:g}] s ends after the CFD-DEM's output.end_time "
                         f"{output.end_time:g} s: a window within 0-{output.end_time:g} s, or a "

@@ -238,8 +238,9 @@ def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELO
         except ValidationError as exc:   # one line
             first = exc.errors()[0]
             loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
+            message = str(first["msg"]).removeprefix("Value error, ")
             raise InputError(f"invalid configuration at '{loc}' for U = {u:g} m/s: "
-                             f"{first['msg']}") from None
+                             f"{message}") from None
         problem = cases[-1].reproduction_problem()
         if problem is not None:
             raise InputError(f"invalid configuration at 'markov' for U = {u:g} m/s: {problem}")
