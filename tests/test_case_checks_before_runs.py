@@ -101,3 +101,60 @@ def test_reproduce_writes_nothing_for_a_fault_of_its_markov_settings(tmp_path, c
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "ends after the CFD-DEM's output.end_time 0.6 s" in err
     assert not out.exists()
+
+
+#: the tables of a small case that runs, as TOML lines per table
+TABLES = {"riser": ["width = 0.02", "height = 0.10"], "particles": ["number = 300"],
+          "numerics": ["cfd_cells = [2, 10]", "dem_time_step = 1e-5", "cfd_time_step = 1e-4"],
+          "output": ["end_time = 0.2", "frame_interval = 0.01"]}
+
+
+def _case_text(table: str, line: str) -> str:
+    """The small case with ``line`` in ``table`` (replacing a line of the same key)."""
+    tables = {name: list(lines) for name, lines in TABLES.items()}
+    key = line.split("=")[0].strip()
+    tables[table] = [x for x in tables.get(table, []) if x.split("=")[0].strip() != key]
+    tables[table].append(line)
+    return "".join(f"[{name}]\n" + "".join(x + "\n" for x in lines)
+                   for name, lines in tables.items())
+
+
+@pytest.mark.parametrize("table, line, said", [
+    ("contact", "friction_coeficient = 0.3", "at 'contact.friction_coeficient': unknown key "
+     "'friction_coeficient' in [contact]; did you mean 'friction_coefficient'? ([contact] "
+     "takes: normal_stiffness,"),
+    ("output", "dem_time_step = 1e-5", "unknown key 'dem_time_step' in [output]; it belongs "
+     "in [numerics]"),
+    ("riser", "depth = 0.01", "unknown key 'depth' in [riser]: the CFD-DEM simulates a 2D "
+     "periodic riser; a 3D riser comes from imported data (cfbmarkov import)"),
+    ("riser", 'boundary = "open"', "an open riser comes from imported data"),
+    ("numerics", 'dem_cells = "Auto"', "at 'numerics.dem_cells': expected DEM "
+     "neighbour-search cells [across, up], or \"auto\""),
+    ("numerics", "cfd_cells = [2, 10, 4]", "at 'numerics.cfd_cells': expected gas grid cells "
+     "[across, up]"),
+    ("markov", "fit_window = [0.2]", "at 'markov.fit_window': expected fitting window "
+     "[start, stop], s"),
+    ("numerics", "dem_time_step = 5e-5", "at least 5 are needed (10 or more recommended): "
+     "numerics.dem_time_step at most 5.18e-06 s (2.59e-06 s recommended"),
+    ("numerics", "cfd_cells = [200, 1000]", "numerics.cfd_time_step at most"),
+])
+def test_a_case_files_faults_name_the_setting_and_what_it_takes(tmp_path, capsys, table, line,
+                                                                said):
+    case = tmp_path / "c.toml"
+    case.write_text(_case_text(table, line))
+    assert main(["simulate", str(case), "-o", str(tmp_path / "r.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and said in err and "Traceback" not in err, err
+
+
+def test_unlikely_units_are_noted():
+    from cfbmarkov.config import CaseConfig
+    from cfbmarkov.simulate.run import unlikely_units
+
+    assert unlikely_units(CaseConfig()) == []
+    slip = CaseConfig.model_validate({"riser": {"width": 20.0}, "particles": {"density": 2.5}})
+    notes = unlikely_units(slip)
+    assert notes == ["riser.width 20 m is 20000 particle diameters (d = 0.001 m): lengths are "
+                     "in m (20 mm would be 0.02)",
+                     "particles.density 2.5 kg/m^3 is below 100 kg/m^3: densities are in "
+                     "kg/m^3 (2.5 g/cm^3 would be 2500)"]

@@ -111,9 +111,9 @@ class ContactConfig(_Model):
 
 class NumericsConfig(_Model):
     cfd_cells: tuple[Cells, Cells] = Field(
-        (9, 95), description="gas grid cells (across, up), - (Table 1: 9 x 95)")
+        (9, 95), description="gas grid cells [across, up], - (Table 1: 9 x 95)")
     dem_cells: tuple[Cells, Cells] | Literal["auto"] = Field(
-        "auto", description="DEM neighbour-search cells (across, up), or \"auto\": the finest "
+        "auto", description="DEM neighbour-search cells [across, up], or \"auto\": the finest "
         "grid whose cells are at least the search cutoff 2 R_max + skin (Table 1: 30 x 351; "
         "the grid changes the speed and the round-off, not the physics)")
     dem_skin: Positive = Field(
@@ -144,8 +144,8 @@ class MarkovConfig(_Model):
     columns: int = Field(6, gt=0, le=100_000, description="cell columns m across the riser, - (paper: 6)")
     rows: int = Field(38, gt=0, le=100_000, description="cell rows n up the riser, - (paper: 38)")
     lag: Positive = Field(0.025, description="transition time step, s (paper: 0.025)")
-    fit_window: tuple[float, float] = Field((10.0, 15.0), description="fitting window A:B, s")
-    predict_window: tuple[float, float] = Field((15.0, 20.0), description="prediction/comparison window, s")
+    fit_window: tuple[float, float] = Field((10.0, 15.0), description="fitting window [start, stop], s (paper: [10, 15])")
+    predict_window: tuple[float, float] = Field((15.0, 20.0), description="prediction and comparison window [start, stop], s (paper: [15, 20])")
     interval_level: float = Field(0.9, gt=0.0, lt=1.0,
                                   description="coverage of the prediction's intervals, -")
     interval_resamples: int = Field(100, ge=0, description="bootstrap resamples of the fitting "
@@ -232,14 +232,91 @@ class CaseConfig(_Model):
         return None
 
 
-def _format_validation_error(err: ValidationError, source: str) -> str:
+#: keys a user may look for in a case that the 2D periodic CFD-DEM has not, and where
+#: such a riser comes from instead
+NOT_SIMULATED = {"depth": "a 3D riser", "boundary": "an open riser",
+                 "dimensions": "a 3D riser"}
+
+
+def _fields_along(loc: tuple) -> tuple[list[str], type[BaseModel] | None, object]:
+    """The case's settings named along an error's location: (their names, the model that
+    holds the last, the last one's field info or None)."""
+    model: type[BaseModel] | None = CaseConfig
+    names: list[str] = []
+    field = None
+    for part in loc:
+        if not (isinstance(part, str) and model is not None and part in model.model_fields):
+            break
+        names.append(part)
+        field = model.model_fields[part]
+        annotation = field.annotation
+        holder = model
+        model = annotation if isinstance(annotation, type) and issubclass(annotation,
+                                                                          BaseModel) else None
+        if model is None:
+            return names, holder, field
+    return names, model, field
+
+
+def describe_validation_error(err: ValidationError) -> tuple[str, str]:
+    """Where a case's first fault lies and what it is, in the case file's words.
+
+    An unknown key names the keys its table takes (and the nearest, for a typing slip; for
+    ``depth`` or ``boundary``, that the CFD-DEM is 2D and periodic); a value of the wrong
+    shape (a pair given three values, ``"Auto"`` for ``"auto"``) names what the setting
+    takes, from its description.
+
+    Parameters
+    ----------
+    err : pydantic.ValidationError
+        The error of :meth:`CaseConfig.model_validate`.
+
+    Returns
+    -------
+    (str, str)
+        The setting's dotted name (``(top level)`` for the case itself) and the message
+        (with the value given, where it is a number or text).
+    """
+    import difflib
+
     first = err.errors()[0]
-    loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
+    loc = tuple(first["loc"])
+    names, model, field = _fields_along(loc)
     given = first.get("input")
     value = (f" (given {given!r})" if isinstance(given, (int, float, str)) and
              not isinstance(given, bool) else "")
     message = str(first["msg"]).removeprefix("Value error, ")
-    return f"{source}: invalid configuration at '{loc}'{value}: {message}"
+    if first["type"] == "extra_forbidden" and model is not None and len(names) == len(loc) - 1:
+        key = str(loc[-1])
+        table = f"[{'.'.join(names)}]" if names else "the top level"
+        keys = list(model.model_fields)
+        near = difflib.get_close_matches(key, keys, n=1, cutoff=0.75)
+        message = f"unknown key '{key}' in {table}"
+        elsewhere = [name for name, f in CaseConfig.model_fields.items()
+                     if isinstance(f.annotation, type) and issubclass(f.annotation, BaseModel)
+                     and key in f.annotation.model_fields]
+        if near:
+            message += f"; did you mean '{near[0]}'?"
+        elif elsewhere:
+            message += f"; it belongs in [{elsewhere[0]}]"
+        elif key in NOT_SIMULATED:
+            message += (f": the CFD-DEM simulates a 2D periodic riser; {NOT_SIMULATED[key]} "
+                        "comes from imported data (cfbmarkov import)")
+        message += f" ({table} takes: {', '.join(keys)})"
+        where = ".".join([*names, key])
+        return where, message
+    where = ".".join(names) or ".".join(str(p) for p in loc) or "(top level)"
+    shape = first["type"] in ("too_long", "too_short", "tuple_type", "list_type", "missing",
+                              "literal_error")
+    if field is not None and field.description and (len(names) < len(loc) or shape):
+        # a value of the wrong shape: an item of a pair, one branch of "auto" or a pair
+        message = f"expected {field.description}"
+    return where, message if first["type"] == "value_error" else message + value
+
+
+def _format_validation_error(err: ValidationError, source: str) -> str:
+    where, message = describe_validation_error(err)
+    return f"{source}: invalid configuration at '{where}': {message}"
 
 
 def load_case(source: str | Path) -> CaseConfig:

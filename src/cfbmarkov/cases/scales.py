@@ -13,7 +13,7 @@ from typing import Any, Iterable
 
 from pydantic import ValidationError
 
-from cfbmarkov.config import CaseConfig, load_case
+from cfbmarkov.config import CaseConfig, describe_validation_error, load_case
 from cfbmarkov.errors import InputError
 
 
@@ -236,10 +236,8 @@ def scale_cases(scale: str | Scale = "quick", velocities: Iterable[float] = VELO
         try:
             cases.append(CaseConfig.model_validate(data))
         except ValidationError as exc:   # one line
-            first = exc.errors()[0]
-            loc = ".".join(str(p) for p in first["loc"]) or "(top level)"
-            message = str(first["msg"]).removeprefix("Value error, ")
-            raise InputError(f"invalid configuration at '{loc}' for U = {u:g} m/s: "
+            where, message = describe_validation_error(exc)
+            raise InputError(f"invalid configuration at '{where}' for U = {u:g} m/s: "
                              f"{message}") from None
         problem = cases[-1].reproduction_problem()
         if problem is not None:

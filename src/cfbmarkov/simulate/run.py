@@ -160,6 +160,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
                              "--resume")
         check_resources(case, output, end, fields, resuming=True)
         check_periodic_case(case)
+        _note_unlikely_units(case, label)
         _advise_time_step(case, label)
         riser, n_segments, frames, wall_time, history, run_id = read_checkpoint(checkpoint,
                                                                                 case)
@@ -178,6 +179,7 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         _check_safety(case)
         check_resources(case, output, end, fields, resuming=False)
         check_periodic_case(case)
+        _note_unlikely_units(case, label)
         _advise_time_step(case, label)
         with warnings.catch_warnings():     # said once above, with the label
             warnings.simplefilter("ignore", TimeStepAdvisory)
@@ -375,6 +377,50 @@ def check_periodic_case(case: CaseConfig) -> None:
                 None if cells == "auto" else cells, periodic=True)
 
 
+#: riser sizes beyond this many particle diameters are noted as a likely slip of units
+#: (the paper's riser: 90 across, 950 up)
+DIAMETERS_NOTED = 2000.0
+
+#: particle densities below this (kg/m^3) are noted as a likely slip of units (g/cm^3)
+DENSITY_NOTED = 100.0
+
+
+def unlikely_units(case: CaseConfig) -> list[str]:
+    """Settings whose values look like a slip of units: a riser more than
+    :data:`DIAMETERS_NOTED` particle diameters across (a width in mm given as m), a
+    particle density below :data:`DENSITY_NOTED` kg/m^3 (g/cm^3 given as kg/m^3).
+
+    Parameters
+    ----------
+    case : CaseConfig
+        The case.
+
+    Returns
+    -------
+    list of str
+        One sentence per such setting, naming it and the value in the case's units.
+    """
+    p, r = case.particles, case.riser
+    notes = []
+    for name, length in (("width", r.width), ("height", r.height)):
+        across = length / p.diameter
+        if across > (DIAMETERS_NOTED if name == "width" else 50 * DIAMETERS_NOTED):
+            notes.append(f"riser.{name} {length:g} m is {across:.0f} particle diameters "
+                         f"(d = {p.diameter:g} m): lengths are in m ({length:g} mm would be "
+                         f"{length / 1000:g})")
+    if p.density < DENSITY_NOTED:
+        notes.append(f"particles.density {p.density:g} kg/m^3 is below {DENSITY_NOTED:g} kg/m^3: "
+                     f"densities are in kg/m^3 ({p.density:g} g/cm^3 would be "
+                     f"{p.density * 1000:g})")
+    return notes
+
+
+def _note_unlikely_units(case: CaseConfig, label: str = "") -> None:
+    """Warn (:class:`~cfbmarkov.errors.CfbmarkovWarning`) of :func:`unlikely_units`."""
+    for note in unlikely_units(case):
+        warnings.warn((f"{label}: " if label else "") + note, CfbmarkovWarning, stacklevel=3)
+
+
 def _advise_time_step(case: CaseConfig, label: str = "") -> None:
     """Warn (:class:`~cfbmarkov.errors.TimeStepAdvisory`) when the DEM step resolves a
     contact in fewer than 10 steps; ``label`` (a case) starts the message."""
@@ -437,6 +483,8 @@ def _check_safety(case: CaseConfig) -> None:
     if case.numerics.cfd_time_step > limit:
         raise InputError(f"gas time step {case.numerics.cfd_time_step:g} s exceeds its stability "
                          f"limit {limit:.3g} s at velocities up to {expected:g} m/s "
-                         f"(grid {grid.nx} x {grid.ny})")
+                         f"(grid {grid.nx} x {grid.ny}): numerics.cfd_time_step at most "
+                         f"{limit:.3g} s (a whole multiple of dem_time_step), or fewer, larger "
+                         "gas cells (numerics.cfd_cells)")
     if not math.isfinite(limit):
         warnings.warn("gas stability limit could not be evaluated", CfbmarkovWarning, stacklevel=2)

@@ -133,6 +133,32 @@ class ContactTimes(NamedTuple):
     particle_wall: float
 
 
+def too_coarse_a_step(worst: float, time_step: float, message: str) -> str:
+    """The refusal of a DEM step that resolves a contact in fewer than 5 steps, naming the
+    settings to change and the largest step that would do.
+
+    Parameters
+    ----------
+    worst : float
+        Steps in the shortest contact (:func:`contact_resolution`).
+    time_step : float
+        The DEM step, s.
+    message : str
+        :func:`contact_resolution`'s sentence.
+
+    Returns
+    -------
+    str
+        The message, ending with the fix: ``numerics.dem_time_step`` at most a fifth of the
+        shortest contact (a tenth recommended), or softer contacts.
+    """
+    shortest = worst * time_step
+    return (f"{message}; at least 5 are needed (10 or more recommended): "
+            f"numerics.dem_time_step at most {shortest / 5:.3g} s ({shortest / 10:.3g} s "
+            "recommended; cfd_time_step a whole multiple of it), or softer contacts "
+            "(contact.normal_stiffness and tangential_stiffness)")
+
+
 def contact_resolution(law: ContactLaw, mass: float, time_step: float) -> tuple[float, str]:
     """How many DEM steps a contact of the lightest particle lasts, and a sentence saying it.
 

@@ -41,7 +41,7 @@ from cfbmarkov.simulate.dem import order, stepping
 from cfbmarkov.simulate.dem import layout as L
 from cfbmarkov.simulate.dem.contact import CONTACT_BLOCK
 from cfbmarkov.simulate.dem.layout import DEMParams, empty_list, particle_arrays
-from cfbmarkov.simulate.dem.law import ContactLaw, ContactTimes, contact_resolution
+from cfbmarkov.simulate.dem.law import ContactLaw, ContactTimes, contact_resolution, too_coarse_a_step
 from cfbmarkov.simulate.dem.neighbours import search_grid
 
 STATE_VERSION = 1
@@ -218,7 +218,7 @@ class DEMSystem:
     def _check_steps_per_contact(self):
         worst, msg = contact_resolution(self._law, self._min_mass, self._dt)
         if worst < 5:
-            raise InputError(msg + "; at least 5 are needed (10 or more recommended)")
+            raise InputError(too_coarse_a_step(worst, self._dt, msg))
         if worst < 10:
             warnings.warn(msg + "; 10 or more are recommended", TimeStepAdvisory, stacklevel=3)
 

@@ -18,7 +18,7 @@ import numpy as np
 from numba.core.errors import NumbaPerformanceWarning
 
 from cfbmarkov.errors import CfbmarkovError, InputError, TimeStepAdvisory
-from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution
+from cfbmarkov.simulate.dem.law import ContactLaw, contact_resolution, too_coarse_a_step
 from cfbmarkov.simulate.dem.neighbours import search_grid
 from cfbmarkov.simulate.dem.system import _REASONS, MAX_OVERLAP, SimulationBlowUp
 from cfbmarkov.simulate.gpu import require_gpu, simulator
@@ -134,7 +134,7 @@ class GpuEnsembleDEM:
         mmin = float(mass.min())
         worst, msg = contact_resolution(law, mmin, dt)
         if worst < 5:
-            raise InputError(msg + "; at least 5 are needed (10 or more recommended)")
+            raise InputError(too_coarse_a_step(worst, dt, msg))
         if worst < 10:
             warnings.warn(msg + "; 10 or more are recommended", TimeStepAdvisory, stacklevel=2)
         rec = np.zeros((8, m * n))
