@@ -72,6 +72,9 @@ def _with(section, **values):
     (_with("markov", fit_window=[0.2, 0.205]), "fit_window [0.2, 0.205] s is shorter than one "
      "lag"),
     (_with("numerics", dem_cells=[13, 100]), "search cells 13 x 100 are 1.538 x 1 mm"),
+    (_with("markov", fit_window=[0.3, 0.5]), "predict_window [0.4, 0.6] s starts inside "
+     "fit_window [0.3, 0.5] s: a reproduction compares the model on the window after the one "
+     "it was fitted on (predict_window from 0.5 s on"),
 ])
 def test_reproduction_settings_are_checked_before_its_cfd_dem(overrides, said):
     with pytest.raises(InputError) as caught:
@@ -158,3 +161,20 @@ def test_unlikely_units_are_noted():
                      "in m (20 mm would be 0.02)",
                      "particles.density 2.5 kg/m^3 is below 100 kg/m^3: densities are in "
                      "kg/m^3 (2.5 g/cm^3 would be 2500)"]
+
+
+def test_the_time_step_note_says_when_the_overrides_set_the_step():
+    """The run's note names the scale's step, or the step the overrides made."""
+    import warnings
+
+    from cfbmarkov.errors import TimeStepAdvisory
+    from cfbmarkov.reproduce import SCALES, _advise_time_step
+
+    cases = scale_cases("quick", [5.0], OVERRIDES)
+    for overridden, whose in ((False, "(the quick scale's step;"),
+                              (True, "(the quick scale's step and contacts with the overrides;")):
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            _advise_time_step(SCALES["quick"], cases, ["u5"], overridden)
+        (note,) = [w for w in caught if w.category is TimeStepAdvisory]
+        assert whose in str(note.message), str(note.message)

@@ -127,6 +127,15 @@ def test_every_stage_is_a_file_and_the_report_has_every_section(reference, capsy
     out, _ = reference
     manifest = json.loads((out / "reproduce.json").read_text())
     assert manifest["scale"] == "quick" and manifest["cases"] == ["u8"]
+    # the scale's description and reductions say that the overrides changed them
+    assert manifest["description"].endswith(
+        "every case then changed by the overrides of riser.width, riser.height, "
+        "particles.number, numerics.cfd_cells, numerics.dem_cells, output.end_time, "
+        "output.frame_interval, markov.columns, markov.rows, markov.lag, markov.fit_window, "
+        "markov.predict_window, markov.interval_resamples")
+    assert manifest["reductions"][-1].startswith(
+        "then the overrides, which replace what the lines above say of the same settings: "
+        "riser.width = 0.03, riser.height = 0.12, particles.number = 240")
     for name in STAGES:
         assert (out / "u8" / name).exists(), name
     timings = json.loads((out / "u8" / "timings.json").read_text())

@@ -201,7 +201,8 @@ class CaseConfig(_Model):
         its CFD-DEM (None where nothing does).
 
         Besides :meth:`MarkovConfig.comparison_problem`: a fitting or predict window that
-        ends after ``output.end_time`` or is shorter than one lag, and a lag that is not a whole multiple of
+        ends after ``output.end_time`` or is shorter than one lag, a predict window that
+        starts before the fitting window ends, and a lag that is not a whole multiple of
         ``output.frame_interval`` (the frames the CFD-DEM stores). Each would otherwise stop
         the case after its CFD-DEM has run.
 
@@ -229,6 +230,12 @@ class CaseConfig(_Model):
             if b - a < markov.lag * (1 - 1e-9):
                 return (f"{key} [{a:g}, {b:g}] s is shorter than one lag ({markov.lag:g} s): a "
                         "longer window or a shorter lag")
+        (fa, fb), (pa, pb) = markov.fit_window, markov.predict_window
+        if pa < fb * (1 - 1e-12):
+            return (f"predict_window [{pa:g}, {pb:g}] s starts inside fit_window [{fa:g}, "
+                    f"{fb:g}] s: a reproduction compares the model on the window after the one "
+                    f"it was fitted on (predict_window from {fb:g} s on; `cfbmarkov compare` "
+                    "judges any window)")
         return None
 
 

@@ -457,8 +457,15 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
     kept = [n for n in earlier.get("cases") or [] if isinstance(n, str) and (out / n).is_dir()]
     listed = list(dict.fromkeys([*kept, *names]))
     used = list(dict.fromkeys([*(earlier.get("models") or []), *models]))
-    manifest = {"scale": scale.name, "description": scale.description,
-                "reductions": list(scale.reductions), "overrides": overrides or {},
+    changed = overridden_settings(overrides)
+    description, reductions = scale.description, list(scale.reductions)
+    if changed:
+        description += f", every case then changed by the overrides of {', '.join(changed)}"
+        reductions.append("then the overrides, which replace what the lines above say of "
+                          "the same settings: " + ", ".join(f"{k} = {v}"
+                                                            for k, v in changed.items()))
+    manifest = {"scale": scale.name, "description": description,
+                "reductions": reductions, "overrides": overrides or {},
                 "cases": listed, "models": used, "version": __version__,
                 "ensemble": ensemble, "device": device,
                 "kinetics": source or earlier.get("kinetics")}
@@ -512,7 +519,9 @@ def _reproduce(out: Path, scale: Scale, cases, names, overrides, models, executo
         if not failures:
             log(f"all cases done in {_time.perf_counter() - started:.0f} s")
             # said once for the run, and only for a run that finished: a refusal stays one line
-            _advise_time_step(scale, cases, names)
+            _advise_time_step(scale, cases, names, any(
+                k.startswith(("contact.", "particles.diameter", "particles.density",
+                              "numerics.dem_time_step")) for k in changed))
             if report:
                 from cfbmarkov.report.reproduction import write_report
 
@@ -557,10 +566,33 @@ def _log_case(log, name: str, result: dict) -> None:
         log(rtd_line(name, result["summaries"]))
 
 
-def _advise_time_step(scale: Scale, cases, names) -> None:
+def overridden_settings(overrides: dict | None) -> dict[str, object]:
+    """The settings an overrides table sets, as ``{"section.key": value}`` in file order.
+
+    Parameters
+    ----------
+    overrides : dict or None
+        Nested tables of a case file.
+
+    Returns
+    -------
+    dict
+        Dotted names to the values given (empty for none).
+    """
+    def flat(table, prefix=""):
+        for key, value in table.items():
+            if isinstance(value, dict):
+                yield from flat(value, f"{prefix}{key}.")
+            else:
+                yield f"{prefix}{key}", value
+    return dict(flat(overrides or {}))
+
+
+def _advise_time_step(scale: Scale, cases, names, overridden: bool = False) -> None:
     """Say once for the run (:class:`~cfbmarkov.errors.TimeStepAdvisory`), not once per
     case, where the scale's DEM time step resolves a contact in fewer than 10 steps: the
-    step is the scale's, the same in each case."""
+    step is the scale's (with the overrides, where they change the step, the contacts or
+    the particles), the same in each case."""
     import warnings
 
     from cfbmarkov.config import CaseConfig
@@ -580,7 +612,9 @@ def _advise_time_step(scale: Scale, cases, names) -> None:
     for message, which in said.items():
         where = ("" if len(names) == 1 else ", the same in every case"
                  if len(which) == len(names) else ", in " + ", ".join(which))
-        warnings.warn(f"{message} (the {scale.name} scale's step{where}; the paper's settings "
+        whose = (f"the {scale.name} scale's step and contacts with the overrides" if overridden
+                 else f"the {scale.name} scale's step")
+        warnings.warn(f"{message} ({whose}{where}; the paper's settings "
                       f"give {paper_steps:.2f} steps)", TimeStepAdvisory, stacklevel=4)
 
 
@@ -622,4 +656,5 @@ def _fmt(value, spec: str) -> str:
 
 __all__ = ["MODELS", "InlineExecutor", "QUICK_REDUCTIONS", "SCALES", "Scale", "VELOCITIES",
            "case_name", "check_run_folder", "dask_executor", "is_reproduce_entry",
-           "load_overrides", "local_executor", "reproduce", "rtd_line", "scale_cases"]
+           "load_overrides", "local_executor", "overridden_settings", "reproduce", "rtd_line",
+           "scale_cases"]
