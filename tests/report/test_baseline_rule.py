@@ -210,3 +210,29 @@ def test_one_sided_profiles_are_said_as_the_windows_flow():
 def test_narrow_intervals_keep_three_steps_between_their_ends():
     assert interval_text(0.01331, 0.01412) == "0.0133–0.0142"      # rounded outwards
     assert interval_text(0.051, 0.054) == "0.051–0.054"
+
+
+def test_winners_named_without_the_halves_say_so():
+    """Where the reference's halves hold no residence, a winner is named by the tie margin
+    alone: Table 3's cell, the outcome counts and the verdict's clause say so."""
+    from cfbmarkov.report.table3 import (BY_TIE_MARGIN_ALONE, _baseline_cell, baseline_clause,
+                                         baseline_outcomes)
+
+    def summary(md, base, halves):
+        return {"md_rtd": md, "baseline": {"md_rtd": base, "rt_count": 10},
+                "natural_variability": {"md_rtd": halves}}
+
+    alone = summary(0.10676, 0.09676, None)
+    assert judge_baseline(0.10676, 0.09676, None).by_tie_margin_alone
+    assert not judge_baseline(0.10676, 0.09676, 0.001).by_tie_margin_alone
+    assert _baseline_cell(alone) == "baseline better, by the tie margin alone (0.09676 / n/a)"
+    counts = baseline_outcomes([alone, alone, summary(0.2, 0.1, 0.01)])
+    assert counts["loses"] == 3 and counts[BY_TIE_MARGIN_ALONE] == 2
+    clause = baseline_clause(counts)
+    assert clause.startswith("reusing the fitting window's RTD (the persistence baseline) "
+                             "predicts better than the models in all 3 velocity-model pairs")
+    assert clause.endswith("(2 of the 3 with a winner by the 1 % tie margin alone: the "
+                           "CFD-DEM's halves hold no residence, so its own variability is not "
+                           "known and a gap may be its sampling noise)")
+    counts = baseline_outcomes([summary(0.2, 0.1, 0.01)])
+    assert "tie margin alone" not in baseline_clause(counts)

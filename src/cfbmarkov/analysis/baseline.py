@@ -100,6 +100,12 @@ class BaselineJudgement:
         return self.outcome == "beats"
 
     @property
+    def by_tie_margin_alone(self) -> bool:
+        """Whether a winner was named without the reference's own variability (its halves'
+        MD unknown: a half without residences), by the tie margin alone."""
+        return self.md_halves is None and self.outcome in ("beats", "loses")
+
+    @property
     def gap(self) -> float:
         """The baseline's MD minus the model's (positive where the model is closer)."""
         return self.md_base - self.md

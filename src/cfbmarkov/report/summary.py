@@ -191,8 +191,10 @@ def _baseline_sentences(cases: list[Case]) -> list[str]:
         if j is None:
             continue
         total += 1
+        alone = (" (by the tie margin alone: the CFD-DEM's halves hold no residence)"
+                 if j.by_tie_margin_alone else "")
         if j.outcome == "beats":
-            beat.append(f"{name} at {_u(c)} m/s")
+            beat.append(f"{name} at {_u(c)} m/s{alone}")
             continue
         md_own = finite_or_none((s.get("model_on_fitting_window") or {}).get("md_rtd"))
         if j.outcome == "tie":
@@ -208,6 +210,7 @@ def _baseline_sentences(cases: list[Case]) -> list[str]:
             reason = ("worse: the model's own error" + (f" ({md_own:.3g} already on its "
                                                          "fitting window)"
                                                          if md_own is not None else ""))
+        reason += alone
         reasons = why.setdefault(_u(c), (j.md_base, {}))[1]
         reasons.setdefault(reason, []).append(f"{name} {j.md:.4g}")
     if not total:

@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import math
 
-from cfbmarkov.analysis.baseline import BASELINE_TIE, BaselineJudgement, judge_baseline
+from cfbmarkov.analysis.baseline import BASELINE_TIE, OUTCOMES, BaselineJudgement, judge_baseline
 from cfbmarkov.observed.metrics import percentage_text
 from cfbmarkov.report.document import (Heading, Para, Table, finite_or_none, interval_text,
                                        link, number_text)
@@ -79,6 +79,9 @@ def _interval_text(interval) -> str:
 
 
 #: the report's words for each outcome of :func:`cfbmarkov.analysis.baseline.judge_baseline`
+#: the key of :func:`baseline_outcomes` counting the winners named without the reference's
+#: own variability (by the tie margin alone)
+BY_TIE_MARGIN_ALONE = "by the tie margin alone"
 OUTCOME_WORDS = {"beats": "model better", "loses": "baseline better",
                  "tie": f"tie (within {100 * BASELINE_TIE:g} %)", "not told apart": "not told apart"}
 #: the rule, as the report states it once in Table 3's note and in the summary
@@ -130,13 +133,16 @@ def baseline_outcomes(summaries) -> dict[str, int]:
     -------
     dict of str to int
         Keys "beats", "loses", "tie", "not told apart"
-        (:func:`cfbmarkov.analysis.baseline.judge_baseline`).
+        (:func:`cfbmarkov.analysis.baseline.judge_baseline`), and
+        :data:`BY_TIE_MARGIN_ALONE`: how many of the "beats" and "loses" were judged
+        without the reference's own variability.
     """
-    counts = {k: 0 for k in ("beats", "loses", "tie", "not told apart")}
+    counts = {k: 0 for k in (*OUTCOMES, BY_TIE_MARGIN_ALONE)}
     for summary in summaries:
         j = baseline_judgement(summary)
         if j is not None:
             counts[j.outcome] += 1
+            counts[BY_TIE_MARGIN_ALONE] += j.by_tie_margin_alone
     return counts
 
 
@@ -158,9 +164,25 @@ def baseline_clause(counts: dict[str, int], unit: str = "velocity-model pair",
     str or None
         The clause; None where no comparison was judged.
     """
-    total = sum(counts.values())
+    total = sum(counts[k] for k in OUTCOMES)
     if not total:
         return None
+    return _clause(counts, total, unit, reference) + _margin_alone(counts, reference)
+
+
+def _margin_alone(counts: dict[str, int], reference: str) -> str:
+    """The caveat on winners named by the tie margin alone (their number, and why)."""
+    alone = counts.get(BY_TIE_MARGIN_ALONE, 0)
+    if not alone:
+        return ""
+    judged = counts["beats"] + counts["loses"]
+    which = "all of them" if alone == judged else f"{alone} of the {judged} with a winner"
+    return (f" ({which} by the {100 * BASELINE_TIE:g} % tie margin alone: {reference}'s "
+            "halves hold no residence, so its own variability is not known and a gap may be "
+            "its sampling noise)")
+
+
+def _clause(counts: dict[str, int], total: int, unit: str, reference: str) -> str:
     hidden = counts["not told apart"] + counts["tie"]
     every = (f"all {total} {unit}s" if total > 2 else f"both {unit}s" if total == 2
              else f"the one {unit}")
@@ -179,7 +201,7 @@ def baseline_clause(counts: dict[str, int], unit: str = "velocity-model pair",
 
 def baseline_step(counts: dict[str, int], reference: str = "the CFD-DEM") -> str:
     """The next step the baseline rule's outcomes call for (:func:`baseline_outcomes`)."""
-    total = sum(counts.values())
+    total = sum(counts[k] for k in OUTCOMES)
     hidden = counts["not told apart"] + counts["tie"]
     if total and 2 * hidden > total:
         return (f"longer predict windows (more residences), so that {reference}'s own "
@@ -200,7 +222,8 @@ def _baseline_cell(summary: dict) -> str:
     if j is None:
         return "n/a"
     halves = "n/a" if j.md_halves is None else f"{j.md_halves:.4g}"
-    return f"{OUTCOME_WORDS[j.outcome]} ({j.md_base:.4g} / {halves})"
+    alone = ", by the tie margin alone" if j.by_tie_margin_alone else ""
+    return f"{OUTCOME_WORDS[j.outcome]}{alone} ({j.md_base:.4g} / {halves})"
 
 
 def _count(value) -> str:
@@ -578,7 +601,7 @@ def trust_blocks(cases: list[Case]) -> list:
     return [Heading(3, "How far to trust these predictions")] + [Para(t) for t in texts]
 
 
-__all__ = ["COMPACT_HEADER", "DETAIL_HEADER", "DETAIL_HEADING", "NO_RESIDENCES",
+__all__ = ["BY_TIE_MARGIN_ALONE", "COMPACT_HEADER", "DETAIL_HEADER", "DETAIL_HEADING", "NO_RESIDENCES",
            "SAMPLING_ONLY", "TABLE3_HEADING", "baseline_clause", "baseline_judgement", "baseline_outcomes",
            "baseline_step", "leaves_out_the_flow", "table3_blocks", "table3_detail_blocks", "trust_blocks",
            "trust_text"]
