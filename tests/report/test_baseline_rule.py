@@ -236,3 +236,15 @@ def test_winners_named_without_the_halves_say_so():
                            "known and a gap may be its sampling noise)")
     counts = baseline_outcomes([summary(0.2, 0.1, 0.01)])
     assert "tie margin alone" not in baseline_clause(counts)
+
+
+def test_the_cluster_clause_does_not_say_how_the_models_particles_move():
+    """A low share of the clustering kept is said without claiming the model's particles
+    move independently: a coherent model (moves shared by the particles of a cell) can keep
+    a third."""
+    from cfbmarkov.report.table3 import _cluster_clause
+
+    clause = _cluster_clause(7.61, 3.44)
+    assert clause.startswith(": the model keeps 37 % of the CFD-DEM's clustering above 1")
+    assert "its particles move independently" not in clause
+    assert _cluster_clause(2.0, 2.0) == ": the model keeps 100 % of the CFD-DEM's clustering above 1"

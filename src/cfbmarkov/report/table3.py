@@ -459,7 +459,8 @@ def _cluster_clause(c_ref: float, c_mod: float) -> str:
     share = (c_mod - 1.0) / (c_ref - 1.0)
     if share < 0.5:
         return (f": the model keeps {100 * max(share, 0.0):.0f} % of the CFD-DEM's clustering "
-                "above 1 (its particles move independently)")
+                "above 1 (a chain whose particles move independently keeps none; coherent "
+                "moves keep some)")
     if share <= 1.25:
         return f": the model keeps {100 * share:.0f} % of the CFD-DEM's clustering above 1"
     return f": the model clusters more than the CFD-DEM ({100 * share:.0f} % of its clustering above 1)"
