@@ -234,6 +234,13 @@ def test_a_long_run_span_outside_the_reference_names_compares_option(pair, tmp_p
                   tmp_path / "c")
     assert "(give a longer --long-run-span)" in err
     assert not (tmp_path / "c").exists()
+    # one other whole window beside the judged one would be a persistence baseline again
+    err = refused(capsys, [ref, pred, "--window", "2:3", "--long-run-span", "0.5:3", "-q"],
+                  tmp_path / "c")
+    assert ("span 0.5:3 s holds only 1 other whole 1 s window beside 2:3 s: one window is a "
+            "persistence baseline again, not a long run; give a longer --long-run-span (at "
+            "least 2 other windows)") in err
+    assert not (tmp_path / "c").exists()
 
 
 @pytest.mark.parametrize("order, text", [

@@ -595,7 +595,7 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
     long_run = None
     if long_run_span is not None:
         long_run = long_run_baseline(ref, (start, stop), span=long_run_span,
-                                     option="--long-run-span",
+                                     option="--long-run-span", at_least=2,
                                      bin_width=bin_width, md_order=md_order,
                                      use_events=on.events, lag_frames=on.lag_frames,
                                      face_band=on.band, direction=on.direction)

@@ -286,7 +286,8 @@ def _passes_in(traj, span: tuple[float, float]) -> bool:
 def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, float] | None
                       = None, bin_width: float, md_order: float = 2.0, use_events: bool = False,
                       lag_frames: int = 1, face_band: float | None = None,
-                      direction: str = "auto", option: str = "--span") -> WindowDifference:
+                      direction: str = "auto", option: str = "--span",
+                      at_least: int = 1) -> WindowDifference:
     """The reference's RTD pooled over the span's other windows, as the prediction of one.
 
     The span is tiled with whole windows of the judged window's length, aligned with it
@@ -318,6 +319,9 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
     option : str, optional
         The command-line option that gave ``span``, named in the refusals (``--span`` of
         ``stationarity``, ``--long-run-span`` of ``compare``).
+    at_least : int, optional
+        The fewest other windows the span must hold (``compare`` asks for 2: one other
+        window beside the fitting window's is the persistence baseline again).
 
     Returns
     -------
@@ -329,8 +333,8 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
     Raises
     ------
     InputError
-        On a judged window that is empty or outside the span, or a span without another
-        whole window of the judged window's length.
+        On a judged window that is empty or outside the span, or a span without
+        ``at_least`` other whole windows of the judged window's length.
     """
     a, b = _span(traj, span, option)
     j0, j1 = float(judged[0]), float(judged[1])
@@ -348,6 +352,11 @@ def long_run_baseline(traj, judged: tuple[float, float], *, span: tuple[float, f
     if not tiles:
         raise InputError(f"span {a:g}:{b:g} s holds no other whole {length:g} s window beside "
                          f"{j0:g}:{j1:g} s (give a longer {option})")
+    if len(tiles) < at_least:
+        raise InputError(f"span {a:g}:{b:g} s holds only {len(tiles)} other whole {length:g} s "
+                         f"window beside {j0:g}:{j1:g} s: one window is a persistence baseline "
+                         f"again, not a long run; give a longer {option} (at least "
+                         f"{at_least} other windows)")
     kwargs = {"use_events": use_events, "lag_frames": lag_frames, "face_band": face_band,
               "direction": d}
     pooled = [residence_times(traj, tile, **kwargs) for tile in tiles]
