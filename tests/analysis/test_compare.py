@@ -398,8 +398,11 @@ def test_a_pooled_models_in_sample_window_and_baseline_length_are_warned(tmp_pat
         pred = tmp_path / f"p{start}.h5"
         assert main(["predict", str(model), "--init", str(runs[1]), "--start", str(start),
                      "--duration", str(duration), "-q", "-o", str(pred)]) == 0
-        said = compare(runs[1], pred, window=(start, start + duration), figures=False,
-                       output=tmp_path / f"o{start}")["warnings"]
+        saved = compare(runs[1], pred, window=(start, start + duration), figures=False,
+                        output=tmp_path / f"o{start}")
+        said = saved["warnings"]
+        # the model's own error is against both runs' fitting windows, pooled: said so
+        assert saved["baseline"]["runs"] == saved["model_on_fitting_window"]["runs"] == 2
         assert sum(overlap in line for line in said) == inside, said
         assert sum(length in line for line in said) == other_length, said
         assert not any("could not pool" in line for line in said)

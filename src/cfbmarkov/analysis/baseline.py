@@ -268,8 +268,9 @@ def model_on_fitting_window(model: ResidenceTimes, model_rtd: np.ndarray,
     -------
     WindowDifference
         ``windows``: (analysis window, fitting window); ``predicted`` the model's,
-        ``observed`` the fitting window's residence times; PD (%) and MD of the first
-        against the second (Eq. 7-9 of the paper, as the comparison's).
+        ``observed`` the fitting window's residence times (of every run the baseline
+        pooled, ``runs`` as the baseline's); PD (%) and MD of the first against the second
+        (Eq. 7-9 of the paper, as the comparison's).
     """
     fit = baseline.predicted
     _, p_fit = rtd_histogram(fit.samples, bin_width, window_length=window_length)
@@ -277,7 +278,8 @@ def model_on_fitting_window(model: ResidenceTimes, model_rtd: np.ndarray,
           if model_rtd.sum() > 0 and p_fit.sum() > 0 else float("nan"))
     return WindowDifference((tuple(baseline.windows[1]), tuple(baseline.windows[0])), model,
                             fit, percentage_difference(model.mean, fit.mean),
-                            percentage_difference(model.sd, fit.sd, scale=fit.mean), md)
+                            percentage_difference(model.sd, fit.sd, scale=fit.mean), md,
+                            runs=baseline.runs)
 
 
 def fitting_window(pred) -> tuple[float, float] | None:
