@@ -405,6 +405,22 @@ def test_a_dropped_in_cfd_dem_file_must_match_the_case(reference, tmp_path, caps
                  "6", "-o", str(tmp_path / "d"), "--jobs", "1", "-q"]) == 2
     err = capsys.readouterr().err.strip()
     assert "simulated with other seed, gas" in err and "\n" not in err
+    # refused before anything is written: the folder holds the linked file alone
+    assert sorted(p.name for p in (tmp_path / "d").rglob("*")) == ["cfd-dem.h5", "u6"]
+    # a file of another source (no case in it) with another particle count: the report
+    # would state the case's 240 particles for it
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    (tmp_path / "f" / "u8").mkdir(parents=True)
+    write_run(tmp_path / "f" / "u8" / "cfd-dem.h5", RiserFlow(width=0.03, height=0.12), 100,
+              0.9, seed=1)
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides), "--velocities",
+                 "8", "-o", str(tmp_path / "f"), "--jobs", "1", "-q"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.endswith("f/u8/cfd-dem.h5 holds 100 particles in a 0.03 m x 0.12 m riser, case "
+                        "quick-u8 240 in 0.03 m x 0.12 m: give overrides that match the file "
+                        "(particles.number, riser.width, riser.height), or move it away"), err
+    assert not (tmp_path / "f" / "reproduce.json").exists()
     longer = tmp_path / "longer.toml"
     longer.write_text(TINY.replace("predict_window = [0.5, 0.8]", "predict_window = [0.5, 0.9]")
                       .replace("end_time = 0.8", "end_time = 0.9"))
@@ -415,17 +431,17 @@ def test_a_dropped_in_cfd_dem_file_must_match_the_case(reference, tmp_path, caps
     assert "before the end of the prediction window" in capsys.readouterr().err
     # the search grid and the skin change the speed only: a file made with others serves
     from cfbmarkov.cases.scales import load_overrides
-    from cfbmarkov.reproduce_case import _check_reference
+    from cfbmarkov.reproduce_case import check_reference
 
     changed = load_overrides(overrides)
     changed["numerics"] = {**changed["numerics"], "dem_cells": "auto", "dem_skin": 6e-4}
     case = scale_cases("quick", [8.0], overrides=changed)[0]
     with Trajectories(ref / "u8" / "cfd-dem.h5") as t:
         assert t.parameters["numerics"]["dem_cells"] != "auto"
-    _check_reference(ref / "u8" / "cfd-dem.h5", case)
+    check_reference(ref / "u8" / "cfd-dem.h5", case)
     changed["numerics"]["dem_time_step"] = 0.5 * case.numerics.dem_time_step
     with pytest.raises(InputError, match="simulated with other numerics"):
-        _check_reference(ref / "u8" / "cfd-dem.h5", scale_cases("quick", [8.0],
+        check_reference(ref / "u8" / "cfd-dem.h5", scale_cases("quick", [8.0],
                                                                overrides=changed)[0])
 
 

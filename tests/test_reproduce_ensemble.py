@@ -120,17 +120,17 @@ GPU_STAGE = """
 import sys
 from pathlib import Path
 from cfbmarkov.config import load_case
-from cfbmarkov.reproduce_case import _check_reference
+from cfbmarkov.reproduce_case import check_reference
 from cfbmarkov.reproduce_ensemble import run_ensemble_cfd_dem
 import cfbmarkov.simulate.gpu.riser as gpu_riser
 gpu_riser.GPU_DEPOSIT_CHUNKS = 3  # not 256 mostly empty chunks, each a simulated thread
 case, folder = load_case(sys.argv[1]), Path(sys.argv[2])
 stage, paths = run_ensemble_cfd_dem(case, folder, 2, device="gpu", checkpoint_every=0.0002,
-                                    progress=False, check=_check_reference)
+                                    progress=False, check=check_reference)
 assert stage == "done" and [p.name for p in paths] == ["cfd-dem-m0.h5", "cfd-dem-m1.h5"]
 assert all(p.is_file() for p in paths)
 stage, _ = run_ensemble_cfd_dem(case, folder, 2, device="gpu", progress=False,
-                                check=_check_reference)
+                                check=check_reference)
 assert stage == "skipped", stage
 print("ok")
 """

@@ -356,7 +356,9 @@ def check_run_folder(out: str | os.PathLike, cases, names, ensemble: int = 1) ->
     """Refuse, before anything is written, a folder that a reproduction must not write into:
     one holding entries that are not a reproduction's (:func:`is_reproduce_entry`), a case
     folder of another configuration (:func:`~cfbmarkov.reproduce_case.check_case_folder`)
-    or of another ensemble size (:func:`~cfbmarkov.reproduce_ensemble.check_ensemble_folder`).
+    or of another ensemble size (:func:`~cfbmarkov.reproduce_ensemble.check_ensemble_folder`),
+    or a CFD-DEM file linked into a new case folder that does not serve its case
+    (:func:`~cfbmarkov.reproduce_case.check_reference`).
 
     Parameters
     ----------
@@ -375,7 +377,7 @@ def check_run_folder(out: str | os.PathLike, cases, names, ensemble: int = 1) ->
         One line naming the folder, what it holds and the fix.
     """
     from cfbmarkov._outputs import refuse_foreign
-    from cfbmarkov.reproduce_case import check_case_folder
+    from cfbmarkov.reproduce_case import check_case_folder, check_reference
     from cfbmarkov.reproduce_ensemble import check_ensemble_folder
 
     out = Path(out)
@@ -385,6 +387,9 @@ def check_run_folder(out: str | os.PathLike, cases, names, ensemble: int = 1) ->
     for case, name in zip(cases, names):
         check_case_folder(out / name, case)
         check_ensemble_folder(out / name, ensemble, record=False)
+        dropped_in = out / name / "cfd-dem.h5"
+        if ensemble == 1 and dropped_in.is_file() and not (out / name / "case.json").exists():
+            check_reference(dropped_in, case)       # a file linked in: before any writing
 
 
 def earlier_manifest(out: Path, scale: Scale, overrides, ensemble: int,

@@ -217,14 +217,14 @@ def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
                 warnings.simplefilter("ignore", TimeStepAdvisory)
             stages["cfd-dem"], members = run_ensemble_cfd_dem(
                 case, folder, ensemble, device=device, checkpoint_every=checkpoint_every,
-                progress=progress, label=label, check=_check_reference)
+                progress=progress, label=label, check=check_reference)
         reference = members[0]
         if stages["cfd-dem"] != "skipped":
             timing["cpu_s"] = _time.process_time() - cpu
         timing["ensemble_members"] = ensemble
         timing["ensemble_device"] = device
     elif reference.exists():
-        _check_reference(reference, case)
+        check_reference(reference, case)
         stages["cfd-dem"] = "skipped"
         previous = _read_json(folder / "timings.json").get("cfd_dem")
         if isinstance(previous, dict) and "cpu_s" in previous:
@@ -397,14 +397,42 @@ def long_run_span(fit_window, predict_window, first: float, last: float
 PHYSICS = ("seed", "riser", "particles", "gas", "contact", "numerics")
 
 
-def _check_reference(path: Path, case: CaseConfig) -> None:
-    """A CFD-DEM file found in place must come from this case's physics and cover its
+def check_reference(path: Path, case: CaseConfig) -> None:
+    """Refuse a CFD-DEM file found in place that does not serve ``case``.
+
+    It must come from this case's physics and cover its
     prediction window (one made by ``cfbmarkov simulate`` may be dropped in; the settings
-    that change the speed only, :data:`cfbmarkov.config.SPEED_ONLY`, may differ)."""
+    that change the speed only, :data:`cfbmarkov.config.SPEED_ONLY`, may differ); a file
+    of another source must hold the case's particles in its riser (the report states the
+    case's operating conditions).
+
+    Parameters
+    ----------
+    path : pathlib.Path
+        The trajectory file (``DIR/u<U>/cfd-dem.h5``).
+    case : CaseConfig
+        The case it is to serve.
+
+    Raises
+    ------
+    InputError
+        One line: another particle count or riser size, another physics than the case's
+        (a file made by ``simulate``), or an end before the prediction window's.
+    """
     from cfbmarkov.trajectories import Trajectories
 
     with Trajectories(path) as traj:
         made_by, last = traj.parameters, float(traj.times[-1])
+        held = (traj.n_particles, float(traj.width), float(traj.height))
+    wanted = (case.particles.number, case.riser.width, case.riser.height)
+    if held[0] != wanted[0] or any(abs(a - b) > 1e-9 * max(1.0, b)
+                                   for a, b in zip(held[1:], wanted[1:])):
+        # the report's operating conditions (hold-up, particles) are the case's: a file of
+        # another riser would be reported as this case's
+        raise InputError(f"{path} holds {held[0]} particles in a {held[1]:g} m x {held[2]:g} m "
+                         f"riser, case {case.name} {wanted[0]} in {wanted[1]:g} m x "
+                         f"{wanted[2]:g} m: give overrides that match the file "
+                         "(particles.number, riser.width, riser.height), or move it away")
     if made_by:
         try:
             made = CaseConfig.model_validate(made_by)
@@ -475,4 +503,4 @@ def compile_kernels(case_json: str, part: str) -> float:
 
 
 __all__ = ["PHYSICS", "WARM_UP_PARTICLES", "cfd_dem_timing", "check_case_folder",
-           "compile_kernels", "long_run_span", "run_case"]
+           "check_reference", "compile_kernels", "long_run_span", "run_case"]
