@@ -4,6 +4,7 @@ figure functions."""
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -60,6 +61,12 @@ def test_summary_matches_direct_calls(pair, tmp_path):
     assert saved["mixing_rms"] == pytest.approx(rms)
     assert saved["bin_width"] == 0.05
     assert saved["exact_events"] == {"reference": False, "model": False}
+    # the maximum norm's order is kept as "inf" (strict JSON writes infinity as null)
+    compare(ref_path, pred_path, window=WINDOW, output=tmp_path / "inf", bin_width=0.05,
+            md_order=math.inf, figures=False, resamples=0)
+    inf = json.loads((tmp_path / "inf" / "summary.json").read_text())
+    assert inf["md_order"] == "inf"
+    assert inf["md_rtd"] == pytest.approx(np.abs(p_ref - p_mod).max())
     assert saved["same_tracer_groups"] is True
     assert saved["same_purple_particles"] is True          # the former name, kept
     assert saved["model_columns"] == 6

@@ -17,6 +17,7 @@ docs/definitions.md, sections "residence time", "mixing" and "file formats" (sum
 from __future__ import annotations
 
 import contextlib
+import math
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -216,8 +217,8 @@ class RunComparison:
         -------
         dict
             Window (s), both sides (:meth:`ComparedRun.summary`), ``pd_rt_mean`` and
-            ``pd_rt_sd`` (%), ``md_rtd`` and ``md_order``, ``mixing_rms`` (fraction of all
-            particles), the RTD bins (s), the source of the pass times, the mixing frames,
+            ``pd_rt_sd`` (%), ``md_rtd`` and ``md_order`` (``"inf"`` for the maximum norm),
+            ``mixing_rms`` (fraction of all particles), the RTD bins (s), the source of the pass times, the mixing frames,
             the tracer-group check, the model's columns and the units. Undefined values are
             NaN; the ``figures`` and ``warnings`` keys are added by the writer.
 
@@ -234,7 +235,8 @@ class RunComparison:
             "pd_rt_mean": self.pd_rt_mean,
             "pd_rt_sd": self.pd_rt_sd,
             "md_rtd": self.md_rtd,
-            "md_order": float(self.md_order),
+            # strict JSON has no infinity: the maximum norm's order is written "inf"
+            "md_order": float(self.md_order) if math.isfinite(self.md_order) else "inf",
             "mixing_rms": self.mixing_rms,
             "bin_width": float(self.bin_width),
             "bin_width_from": self.bin_width_from,

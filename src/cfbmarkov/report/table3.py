@@ -298,7 +298,8 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
                     for k in (*columns, 4, 7, 8):
                         row[k] = NO_RESIDENCES
             rows.append(row)
-            if (v := finite_or_none(s.get("md_order"))) is not None:
+            order = s.get("md_order")
+            if (v := math.inf if order == "inf" else finite_or_none(order)) is not None:
                 orders.add(v)
             if (v := finite_or_none(s.get("bin_width"))) is not None:
                 widths.add(v)
