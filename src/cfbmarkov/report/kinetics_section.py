@@ -239,7 +239,10 @@ def _table(rows: list[KineticsRow]) -> Table:
              "is per residence of the chain. Errors are 100 (side - reference) / reference, "
              "the chain's from its exact answer as the window sees it where there is one, "
              "else from its exact answer, else from its Monte Carlo; MD: Minkowski distance "
-             "of the exit distributions to the reference's on shared bins."]
+             "of the exit distributions to the reference's on bins shared by the row's three "
+             "sides (the range of the reference's, the chain's and the segregated flow's exit "
+             "values), so a row's two MDs compare with each other, and the segregated flow's "
+             "MD differs from row to row with the chain's range."]
     return Table(header, body, notes)
 
 
