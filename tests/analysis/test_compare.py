@@ -713,3 +713,24 @@ def test_flat_mixing_curves_of_an_open_riser_whose_tracers_leave_are_warned_of(t
                      (0, 7))
     assert np.isnan(c.reference.mixing_fraction).any() and c.mixing_rms == 0.0
     assert any("the mixing curves stay flat in both files" in w for w in c.warnings)
+
+
+def test_first_frames_on_other_grids_are_said_with_both_times(tmp_path):
+    """A window that starts on a frame of the reference but between the prediction's (its
+    frames twice as far apart): the warning names both first frames and a start on both
+    grids, not one time for the two files."""
+    from tests.observed.conftest import HEIGHT, WIDTH, generate_run
+
+    ref = generate_run(seed=1, dt=0.025)
+    pred = generate_run(seed=2, rise=1.3, t0=0.5, dt=0.05, initial=ref.positions[20])
+    ref_path = write_trajectories(tmp_path / "reference.h5", ref.times, ref.positions,
+                                  width=WIDTH, height=HEIGHT, source="cfd-dem")
+    pred_path = write_trajectories(tmp_path / "prediction.h5", pred.times, pred.positions,
+                                   width=WIDTH, height=HEIGHT, source="markov-prediction",
+                                   parameters={"columns": 6, "rows": 38})
+    said = compare(ref_path, pred_path, window=(0.525, 3.0), figures=False, resamples=0,
+                   output=tmp_path / "c")["warnings"]
+    [line] = [w for w in said if "first frames" in w]
+    assert line.startswith("the window's first frames differ: the reference's at 0.525 s, the "
+                           "prediction's at 0.55 s (its frames are 0.05 s apart from 0.5 s)")
+    assert line.endswith("(--window 0.55:... or 0.5:...)")

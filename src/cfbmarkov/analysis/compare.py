@@ -678,8 +678,17 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
         same = bool(np.array_equal(left_ref[np.argsort(ref.ids)], left_mod[np.argsort(pred.ids)]))
     if not same:
         first = float(pred.times[model.frames.start])
+        first_ref = float(ref.times[reference.frames.start])
         start = float(pred.times[0])
-        if abs(first - start) > TIME_TOLERANCE * max(abs(start), 1.0):
+        if abs(first - first_ref) > TIME_TOLERANCE * max(abs(first), 1.0):
+            # the two files' frames lie on other grids: their tracer groups are taken apart
+            warnings.append(f"the window's first frames differ: the reference's at "
+                            f"{first_ref:g} s, the prediction's at {first:g} s (its frames are "
+                            f"{float(pred.frame_interval):g} s apart from {start:g} s), so "
+                            "their tracer groups (x < W/2) and mixing curves start at "
+                            "different times and disagree; start the window on a frame of "
+                            f"both (--window {first:g}:... or {start:g}:...)")
+        elif abs(first - start) > TIME_TOLERANCE * max(abs(start), 1.0):
             # the prediction carries the reference's state at its own start, not later
             warnings.append(f"the two files' first frames of the window (t = {first:g} s) "
                             "disagree on which particles are in the left tracer group (x < "
