@@ -178,3 +178,12 @@ def test_the_time_step_note_says_when_the_overrides_set_the_step():
             _advise_time_step(SCALES["quick"], cases, ["u5"], overridden)
         (note,) = [w for w in caught if w.category is TimeStepAdvisory]
         assert whose in str(note.message), str(note.message)
+
+
+def test_an_item_out_of_range_keeps_its_index_and_pydantics_words(tmp_path, capsys):
+    """A value constraint on one item of a pair is said as it is, at the item's location."""
+    case = tmp_path / "c.toml"
+    case.write_text(_case_text("numerics", "cfd_cells = [0, 5]"))
+    assert main(["simulate", str(case), "-o", str(tmp_path / "r.h5")]) == 2
+    err = capsys.readouterr().err
+    assert "at 'numerics.cfd_cells.0': Input should be greater than 0 (given 0)" in err

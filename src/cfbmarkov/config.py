@@ -312,12 +312,17 @@ def describe_validation_error(err: ValidationError) -> tuple[str, str]:
         message += f" ({table} takes: {', '.join(keys)})"
         where = ".".join([*names, key])
         return where, message
-    where = ".".join(names) or ".".join(str(p) for p in loc) or "(top level)"
+    rest = loc[len(names):]
+    items = [str(p) for p in rest if isinstance(p, int)]
+    where = ".".join([*names, *items]) or ".".join(str(p) for p in loc) or "(top level)"
+    # a union's branch named in the location ("tuple[...]", "literal['auto']") or a value
+    # of the wrong shape (three items for a pair, one for a window): say what it takes
+    branch = any(isinstance(p, str) for p in rest)
     shape = first["type"] in ("too_long", "too_short", "tuple_type", "list_type", "missing",
                               "literal_error")
-    if field is not None and field.description and (len(names) < len(loc) or shape):
-        # a value of the wrong shape: an item of a pair, one branch of "auto" or a pair
+    if field is not None and field.description and (branch or shape):
         message = f"expected {field.description}"
+        where = ".".join(names)
     return where, message if first["type"] == "value_error" else message + value
 
 
