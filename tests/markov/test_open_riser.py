@@ -296,3 +296,22 @@ def test_a_memory_model_says_which_particles_it_cannot_start(tmp_path):
     said = [w for w in summary["warnings"] if "the prediction started" in w]
     assert said and "the mixing curves follow those it started, on both sides" in said[0]
     assert summary["mixing_rms"] == summary["mixing_rms"]        # a number, not NaN
+
+
+def test_a_memory_space_counts_the_entries_where_the_particles_were_first_seen(tmp_path):
+    """A state space with memory gives a newcomer its first state a lag after it is first
+    seen; a particle first seen within one cell of the inlet entered there, even where it
+    has risen past that cell by its first state. cells-direction then counts every entry
+    that cells counts, none censored (it counted the risen ones as tracks that began away
+    from the inlet, and its inflow fell short)."""
+    from cfbmarkov.markov import state_space_from_name
+
+    run = _fast_open_riser(tmp_path / "fast.h5", rise=0.08, n=300, frames=300)
+    cells = fit_model(run, CellGrid(4, 10, 0.09, 0.95), 0.01, (0.3, 2.5), estimator="mle")
+    memory = fit_model(run, state_space_from_name("cells-direction", 4, 10, 0.09, 0.95), 0.01,
+                       (0.3, 2.5), estimator="mle")
+    entered = int(cells.open_flow.entry_counts.sum())
+    assert entered > 150 and cells.open_flow.censored_tracks == (0, 0)
+    assert int(memory.open_flow.entry_counts.sum()) == entered
+    assert memory.open_flow.censored_tracks[1] == 0
+    assert memory.open_flow.inflow_per_lag == pytest.approx(cells.open_flow.inflow_per_lag)

@@ -198,7 +198,11 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
     (``exits[i] += 1``) when its height at t lies within ``band`` (one cell) of the outlet
     face at H, else a disappearance (``vanished[i]``); absent then present is an entry
     (``entries[j] += 1``) when its height at t + lag lies within ``band`` of the inlet face
-    at 0, else an appearance (``appeared[j]``). Returns nothing; arrays are updated.
+    at 0, else an appearance (``appeared[j]``). A state space with memory defines a
+    particle's state only from a lag after it is first seen (its history), so an entry is
+    judged by the height where the particle was first seen, lags before its first state
+    (present frames hold a finite height, absent ones NaN). Returns nothing; arrays are
+    updated.
     """
     n_frames, n_particles = states.shape
     for t in range(n_frames - lag_frames):
@@ -211,7 +215,11 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
                 else:
                     vanished[i] += 1
             elif i < 0 and j >= 0:
-                if vertical[t + lag_frames, p] <= band:
+                first = t + lag_frames
+                while (first >= lag_frames and states[first - lag_frames, p] < 0
+                       and not np.isnan(vertical[first - lag_frames, p])):
+                    first -= lag_frames
+                if vertical[first, p] <= band:
                     entries[j] += 1
                 else:
                     appeared[j] += 1
