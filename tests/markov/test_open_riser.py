@@ -315,3 +315,23 @@ def test_a_memory_space_counts_the_entries_where_the_particles_were_first_seen(t
     assert int(memory.open_flow.entry_counts.sum()) == entered
     assert memory.open_flow.censored_tracks[1] == 0
     assert memory.open_flow.inflow_per_lag == pytest.approx(cells.open_flow.inflow_per_lag)
+
+
+def test_an_open_memory_models_batch_enters_as_its_particles_entered(tmp_path):
+    """Eq. (8)'s batch on an open riser with a state space with memory: each bottom cell's
+    share is split over its states as the fitting window's particles entered them through
+    the inlet face (all rising here), not evenly."""
+    from cfbmarkov.markov import state_space_from_name
+    from cfbmarkov.markov.propagation import inlet_batch
+
+    run = _fast_open_riser(tmp_path / "fast.h5", n=300, frames=300)
+    memory = fit_model(run, state_space_from_name("cells-direction", 4, 10, 0.09, 0.95), 0.01,
+                       (0.3, 2.5), estimator="mle")
+    space, entries = memory.state_space, memory.open_flow.entry_counts
+    batch = inlet_batch(memory)
+    bottom = space.cell_of_state < space.cells_per_row
+    assert batch.sum() == pytest.approx(1.0)
+    rising = bottom & ~space.falling(np.arange(memory.n_states))
+    assert entries[bottom & ~rising].sum() == 0 and entries[rising].sum() > 100
+    assert np.all(batch[bottom & ~rising] == 0)
+    assert batch[rising] == pytest.approx(np.full(rising.sum(), 1.0 / space.cells_per_row))

@@ -187,8 +187,8 @@ def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     depth columns), each cell's share split over its states (a state space with memory has
     several a cell) as the fitting window's particles entered them through the inlet (the
     landings of their passes up through the top, ``counts_up``), so that a batch fed over
-    the inlet enters rising as particles do; evenly where a cell saw no entry (and on an
-    open riser, whose inlet is its own boundary).
+    the inlet enters rising as particles do; on an open riser as they entered through its
+    inlet face (``open_flow.entry_counts``); evenly where a cell saw no entry.
 
     With ``direction`` "down" the mirror image: 1/m in each of the m top cells, split as
     particles entered them through the bottom (the landings of their passes down through
@@ -217,10 +217,15 @@ def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     states_per_cell = np.bincount(place[row], minlength=per_row)
     batch = np.zeros(model.n_states)
     batch[row] = 1.0 / per_row / states_per_cell[place[row]]   # even (Eq. 8 at the bottom)
-    counts = getattr(model, "counts_down" if top else "counts_up", None)
-    if model.open_flow is not None or counts is None or states_per_cell.max(initial=0) <= 1:
+    if states_per_cell.max(initial=0) <= 1:
         return batch                             # one state a cell: nothing to split
-    landings = np.asarray(counts.sum(axis=0), dtype=np.float64).ravel() * row
+    if model.open_flow is not None:              # the entries through the inlet, per state
+        landings = np.asarray(model.open_flow.entry_counts, dtype=np.float64) * row
+    else:
+        counts = getattr(model, "counts_down" if top else "counts_up", None)
+        if counts is None:
+            return batch
+        landings = np.asarray(counts.sum(axis=0), dtype=np.float64).ravel() * row
     per_cell = np.bincount(place[row], weights=landings[row], minlength=per_row)
     seen = np.flatnonzero(row)
     seen = seen[per_cell[place[seen]] > 0]
