@@ -221,8 +221,8 @@ def test_options_of_the_other_mode_and_a_percentage_tolerance_are_refused(tmp_pa
     path = str(_stationary(tmp_path))
     for args, message in (
             (["--start", "1"], "--start: of --sample-length only"),
-            (["--cells", "4x10", "--tolerance", "0.2"],
-             "--tolerance, --cells: of --sample-length only"),
+            (["--states", "cells-direction", "--tolerance", "0.2"],
+             "--tolerance, --states: of --sample-length only"),
             (["--sample-length", "--step", "2"], "--step: of the sliding windows"),
             (["--sample-length", "--basis", "events"], "--basis: of the sliding windows"),
             (["--sample-length", "--tolerance", "10"], "(0.1 for 10 %)")):
@@ -231,3 +231,13 @@ def test_options_of_the_other_mode_and_a_percentage_tolerance_are_refused(tmp_pa
         assert len(err) == 1 and message in err[0], err
     assert main(["stationarity", path, "--window-length", "1", "--step", "1"]) == 0
     capsys.readouterr()
+
+
+def test_a_face_band_on_a_periodic_riser_is_refused(tmp_path, capsys):
+    from cfbmarkov.cli import main
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    run = write_run(tmp_path / "r.h5", RiserFlow(), 100, 3.0, seed=1)
+    assert main(["stationarity", str(run), "--window-length", "1", "--cells", "4x10"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is a periodic riser: a face band (--cells)" in err

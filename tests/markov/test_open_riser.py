@@ -335,3 +335,33 @@ def test_an_open_memory_models_batch_enters_as_its_particles_entered(tmp_path):
     assert entries[bottom & ~rising].sum() == 0 and entries[rising].sum() > 100
     assert np.all(batch[bottom & ~rising] == 0)
     assert batch[rising] == pytest.approx(np.full(rising.sum(), 1.0 / space.cells_per_row))
+
+
+def test_stationarity_on_an_open_riser_takes_the_models_face_band_and_warns(tmp_path, capsys):
+    """The sliding windows of an open riser count entries and exits within a face band of
+    one cell (H/38 by default, --cells sets the rows): where most tracks end outside it, a
+    warning names how many and the option; with the model's 10 rows every residence counts
+    as compare counts it."""
+    import json
+
+    from cfbmarkov.analysis.stationarity import check_stationarity
+    from cfbmarkov.cli import main
+
+    run = _fast_open_riser(tmp_path / "fast.h5", rise=0.08, n=300, frames=300)
+    thin = check_stationarity(run, window_length=1.0, step=1.0, span=(0.5, 2.5))
+    band = check_stationarity(run, window_length=1.0, step=1.0, span=(0.5, 2.5),
+                              face_band=0.95 / 10)
+    with Trajectories(run) as t:
+        counted = residence_times(t, (0.5, 1.5), face_band=t.height / 10).count
+    assert band.statistics.rt_count[0] == counted > 50
+    assert thin.statistics.rt_count[0] < 0.5 * counted
+    [line] = thin.warnings
+    assert "tracks that ended in 0.5-2.5 s ended farther than the face band from the outlet" \
+        in line and "give --cells with the rows of your model" in line
+    assert band.warnings == ()
+    assert main(["stationarity", str(run), "--span", "0.5:2.5", "--window-length", "1",
+                 "--cells", "4x10", "--json"]) == 0
+    out = capsys.readouterr()
+    assert json.loads(out.out)["warnings"] == [] and "warning:" not in out.err
+    assert main(["stationarity", str(run), "--span", "0.5:2.5", "--window-length", "1"]) == 0
+    assert capsys.readouterr().err.count("warning: ") == 1

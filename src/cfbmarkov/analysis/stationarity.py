@@ -30,9 +30,9 @@ import numpy as np
 from cfbmarkov._json import jsonable
 from cfbmarkov.analysis.baseline import WindowDifference, window_difference
 from cfbmarkov.observed.metrics import minkowski_distance, percentage_difference
-from cfbmarkov.observed.residence import (ResidenceTimes, flux_residence_time,
-                                          net_flow_direction, residence_times,
-                                          rtd_histogram)
+from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, ResidenceTimes,
+                                          flux_residence_time, net_flow_direction,
+                                          residence_times, rtd_histogram)
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
 
@@ -433,6 +433,9 @@ class StationarityCheck:
         The sliding windows (:func:`window_statistics`).
     judged : JudgedWindow or None
         The judged window, where one was asked for.
+    warnings : tuple of str
+        What the figures leave out: on an open riser, tracks that begin or end away from
+        its faces (:func:`face_band_warning`).
     """
 
     file: str
@@ -441,6 +444,7 @@ class StationarityCheck:
     rtd_bin_width: float
     statistics: WindowStatistics
     judged: JudgedWindow | None = None
+    warnings: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready, the output of ``cfbmarkov stationarity --json``.
@@ -450,20 +454,73 @@ class StationarityCheck:
         dict
             ``file``, ``span`` (s), ``basis`` (``events`` or ``frames``), ``rtd_bin_width``
             (s), the keys of :meth:`WindowStatistics.summary` and, where a window was judged,
-            ``judged`` (:meth:`JudgedWindow.to_dict`); undefined values as None.
+            ``judged`` (:meth:`JudgedWindow.to_dict`), and ``warnings`` (a list of
+            lines); undefined values as None.
         """
         summary = {"file": self.file, "span": list(self.span),
                    "basis": "events" if self.exact_events else "frames",
-                   "rtd_bin_width": self.rtd_bin_width, **self.statistics.summary()}
+                   "rtd_bin_width": self.rtd_bin_width, **self.statistics.summary(),
+                   "warnings": list(self.warnings)}
         if self.judged is not None:
             summary["judged"] = self.judged.to_dict()
         return jsonable(summary)
 
 
+#: the share of an open riser's tracks beginning (or ending) away from its faces beyond
+#: which the residence times' face band is warned of
+FACE_MISS_LIMIT = 0.2
+
+
+def face_band_warning(traj, span: tuple[float, float], band: float, lag_frames: int = 1,
+                      option: str = "--cells") -> str | None:
+    """The warning where an open riser's residence times leave out many of its tracks: more
+    than :data:`FACE_MISS_LIMIT` of those begun in ``span`` began farther than ``band`` from
+    the inlet, or of those ended farther from the outlet (counted as censored, not as
+    entries or exits; :func:`cfbmarkov.observed.residence.open_face_tracks`).
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open trajectory file.
+    span : (float, float)
+        The part of the file read, s.
+    band : float
+        The face band, m (one cell height of the model, H / rows).
+    lag_frames : int, optional
+        Every ``lag_frames``-th frame, as the residence times read them.
+    option : str, optional
+        The option that sets the band, named in the fix.
+
+    Returns
+    -------
+    str or None
+        The line, or None on a periodic riser or where few tracks are left out.
+    """
+    from cfbmarkov.observed.residence import open_face_tracks
+
+    if not traj.boundary.is_open:
+        return None
+    begun, at_inlet, ended, at_outlet = open_face_tracks(traj, span, band, lag_frames)
+    missed = [(begun - at_inlet, begun, "began", "inlet"),
+              (ended - at_outlet, ended, "ended", "outlet")]
+    missed = [m for m in missed if m[1] and m[0] > FACE_MISS_LIMIT * m[1]]
+    if not missed:
+        return None
+    rows = traj.height / band
+    said = " and ".join(f"{away} of the {total} tracks that {verb} in {span[0]:g}-{span[1]:g} s "
+                        f"{verb} farther than the face band from the {face}"
+                        for away, total, verb, face in missed)
+    return (f"{said} (the band: {1e3 * band:.3g} mm, H/{rows:.3g}, one cell of {rows:.3g} "
+            "rows): the residence times count only those within it as entries and exits and "
+            "leave the others out as censored; where particles enter or leave the riser "
+            f"there (an insertion region, frames far apart), give {option} with the rows of "
+            "your model (the band is one cell height)")
+
+
 def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
                        span: tuple[float, float] | None = None, lag: float | None = None,
-                       basis: str = "frames", judge: tuple[float, float] | None = None
-                       ) -> StationarityCheck:
+                       basis: str = "frames", judge: tuple[float, float] | None = None,
+                       face_band: float | None = None) -> StationarityCheck:
     """Sliding-window statistics of a trajectory file and, optionally, one window judged
     against the run's long run and against the window before it (persistence).
 
@@ -483,6 +540,11 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
     judge : (float, float), optional
         A window (s) to compare with the span's other whole windows of its length, pooled
         (:func:`long_run_baseline`), and with the window of its length before it.
+    face_band : float, optional
+        Open riser: how close to a face (m) a track must begin or end to have entered or
+        left (a model's cell height, H / rows); default H / 38, the paper's rows. Where many
+        tracks begin or end outside it, the result carries a warning
+        (:func:`face_band_warning`).
 
     Returns
     -------
@@ -500,16 +562,23 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
         if events and not (traj.has_events and not traj.boundary.is_open):
             raise InputError(f"{path} holds no exact pass events: residence times from "
                              "frames need no --basis events")
+        if face_band is not None and not traj.boundary.is_open:
+            raise InputError(f"{path} is a periodic riser: a face band (--cells) sets where "
+                             "an open riser's particles enter and leave; leave it out")
         lag_frames = traj.lag_frames(lag) if lag is not None else 1
         bin_width = lag if lag is not None else traj.frame_interval
-        kwargs = {"use_events": events, "lag_frames": 1 if events else lag_frames}
+        kwargs = {"use_events": events, "lag_frames": 1 if events else lag_frames,
+                  "face_band": face_band}
         extent = span or (float(traj.times[0]), float(traj.times[-1]))
         stats = window_statistics(traj, window_length=window_length, step=step, span=span,
                                   **kwargs)
         judged = None
         if judge is not None:
             judged = _judged_window(traj, judge, span, extent, bin_width, kwargs)
-    return StationarityCheck(str(path), extent, events, bin_width, stats, judged)
+        band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
+        warning = face_band_warning(traj, extent, band, kwargs["lag_frames"])
+    return StationarityCheck(str(path), extent, events, bin_width, stats, judged,
+                             () if warning is None else (warning,))
 
 
 def _judged_window(traj, judge: tuple[float, float], span: tuple[float, float] | None,
@@ -531,5 +600,5 @@ def _judged_window(traj, judge: tuple[float, float], span: tuple[float, float] |
     if j0 - length >= extent[0] - tol:
         persistence = window_difference(
             traj, (j0 - length, j0), (j0, j1), bin_width=bin_width, md_order=2.0,
-            face_band=None, window_length=length, direction=direction, **kwargs)
+            window_length=length, direction=direction, **kwargs)
     return JudgedWindow((j0, j1), direction, long_run, persistence)

@@ -420,9 +420,17 @@ def cmd_stationarity(args) -> int:
         raise InputError(f"{len(args.file)} runs: the sliding windows are of one run (several "
                          "runs pool only with --sample-length)")
     args.file = args.file[0]
+    face_band = None
+    if args.cells is not None:          # an open riser's face band: one cell of the rows
+        from cfbmarkov.trajectories import Trajectories
+
+        with Trajectories(args.file) as run:
+            face_band = run.height / args.cells[-1]
     check = check_stationarity(args.file, window_length=args.window_length, step=args.step,
                                span=args.span, lag=args.lag, basis=args.basis,
-                               judge=args.judge)
+                               judge=args.judge, face_band=face_band)
+    for line in check.warnings:
+        print(f"warning: {one_line(line)}", file=sys.stderr)
     if args.json:
         print(json.dumps(check.to_dict(), indent=1, allow_nan=False))
         return 0
@@ -494,9 +502,9 @@ def cmd_stationarity(args) -> int:
 
 #: stationarity's options of each mode: the sliding windows' and --sample-length's
 _SLIDING_ONLY = ("window_length", "step")
-_SAMPLE_LENGTH_ONLY = ("start", "tolerance", "states", "cells", "estimator")
+_SAMPLE_LENGTH_ONLY = ("start", "tolerance", "states", "estimator")
 _STATIONARITY_DEFAULTS = {"window_length": 5.0, "step": 1.0, "tolerance": 0.1,
-                          "states": "cells", "cells": (6, 38)}
+                          "states": "cells"}
 
 
 def _option_names(names: list[str]) -> tuple[str, str]:
@@ -526,6 +534,8 @@ def _check_stationarity_options(args) -> None:
     for name, value in _STATIONARITY_DEFAULTS.items():
         if getattr(args, name) is None:
             setattr(args, name, value)
+    if args.sample_length and args.cells is None:
+        args.cells = (6, 38)
 
 
 def _sample_length(args) -> int:
@@ -568,8 +578,20 @@ def _sample_length(args) -> int:
         print(f"note: the windows start at {exc.earliest:g} s, the first frame with the "
               f"history that {args.states} needs (--start sets another)", file=sys.stderr)
         result = measure(exc.earliest)
+    from cfbmarkov.analysis.stationarity import face_band_warning
+
+    warned = []
+    for path in args.file:              # an open riser's tracks left out of the long run
+        with Trajectories(path) as run:
+            end = min(result.span_end, float(run.times[-1]))
+            line = face_band_warning(run, (result.start, end), run.height / rows,
+                                     run.lag_frames(args.lag or 0.025))
+        if line is not None:
+            warned.append(line if len(args.file) == 1 else f"{path}: {line}")
+            print(f"warning: {one_line(warned[-1])}", file=sys.stderr)
     if args.json:
-        print(json.dumps(result.to_dict() | {"verdict": verdict_text(result, args.states)},
+        print(json.dumps(result.to_dict() | {"verdict": verdict_text(result, args.states),
+                                             "warnings": warned},
                          indent=1, allow_nan=False))
         return 0
 
@@ -757,7 +779,10 @@ def add_stationarity(sub) -> None:
                                         "cells-regime", "cells-direction-regime"],
                    default=None, help="with --sample-length: the models' states (default cells)")
     s.add_argument("--cells", type=parse_cells, default=None,
-                   help="with --sample-length: COLUMNSxROWS (default 6x38)")
+                   help="COLUMNSxROWS: with --sample-length the models' cells (default "
+                        "6x38); on an open riser also the face band of the residences, one "
+                        "cell height H/ROWS (default H/38): a particle first seen within it "
+                        "of the inlet entered, last seen within it of the outlet left")
     s.add_argument("--estimator", choices=["paper", "mle"], default=None,
                    help="with --sample-length: as in fit (default paper for the cells, mle on "
                         "an open riser or for a state space with memory)")

@@ -127,6 +127,66 @@ def _scan_open(times, present, vertical, band, height, was_present, last_height,
     return n_out
 
 
+@nb.njit(cache=True)
+def _face_tracks(present, vertical, band, height, was_present, last_height, counts):
+    """Count an open riser's tracks that begin or end, and those of them within ``band`` of
+    the inlet or the outlet, over a block of frames (Numba kernel): ``counts`` [4] +=
+    (begun, begun at the inlet, ended, ended at the outlet). ``was_present`` (int8, -1
+    before the first frame) and ``last_height`` carry over between blocks."""
+    n_frames, n_particles = present.shape
+    for k in range(n_frames):
+        for p in range(n_particles):
+            now = present[k, p]
+            before = was_present[p]
+            if now and before == 0:
+                counts[0] += 1
+                if vertical[k, p] <= band:
+                    counts[1] += 1
+            elif not now and before == 1:
+                counts[2] += 1
+                if last_height[p] >= height - band:
+                    counts[3] += 1
+            if now:
+                last_height[p] = vertical[k, p]
+            was_present[p] = 1 if now else 0
+
+
+def open_face_tracks(traj, window: tuple[float, float], band: float,
+                     lag_frames: int = 1) -> tuple[int, int, int, int]:
+    """How many of an open riser's tracks begin or end in a window, and how many of them
+    within ``band`` of the inlet or the outlet: those the residence times count as entries
+    and exits (:func:`residence_times`), the others being censored.
+
+    Parameters
+    ----------
+    traj : cfbmarkov.trajectories.Trajectories
+        An open trajectory file of an open riser.
+    window : (float, float)
+        The window (s).
+    band : float
+        How close to a face a track must begin or end to have crossed it, m.
+    lag_frames : int, optional
+        Every ``lag_frames``-th frame, as the residence times read them.
+
+    Returns
+    -------
+    (int, int, int, int)
+        Tracks begun after the window's first frame, those begun within ``band`` of the
+        inlet, tracks ended before its last frame, those ended within ``band`` of the outlet.
+    """
+    frames = traj.window(float(window[0]), float(window[1]))
+    n = traj.n_particles
+    was, last = np.full(n, -1, np.int8), np.full(n, np.nan)
+    counts = np.zeros(4, np.int64)
+    span = _BLOCK_FRAMES * int(lag_frames)
+    for k in range(frames.start, frames.stop, span):
+        block = slice(k, min(k + span, frames.stop), int(lag_frames))
+        _face_tracks(np.ascontiguousarray(traj.present(block)),
+                     np.ascontiguousarray(traj.positions(block)[..., 1]), float(band),
+                     float(traj.height), was, last, counts)
+    return int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3])
+
+
 def open_residence_times(times, present, vertical, band: float, height: float) -> np.ndarray:
     """Residence-time samples of an open riser from frames (``docs/definitions.md``,
     Residence time in an open riser).
@@ -757,5 +817,5 @@ def rtd_histogram(samples, bin_width: float = 0.025, *, window_length: float
     return edges, (counts / total if total > 0 else counts)
 
 
-__all__ = ["WHOLE_FRAMES", "ResidenceTimes", "residence_times", "residence_times_from_events",
-           "residence_times_from_laps", "rtd_histogram"]
+__all__ = ["WHOLE_FRAMES", "ResidenceTimes", "open_face_tracks", "residence_times",
+           "residence_times_from_events", "residence_times_from_laps", "rtd_histogram"]
