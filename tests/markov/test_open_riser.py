@@ -83,6 +83,13 @@ def test_exact_rtd_is_the_fundamental_matrix_result(open_run, tmp_path):
     for k in range(5):                      # f(k) = e Q^(k-1) r
         assert rtd.probability[k] == pytest.approx(v @ r, abs=1e-15)
         v = v @ q
+    # as a window sees it: the share of the residences begun in it that do not end in it,
+    # 1 - sum f(k) (n_W - k)+ / n_W, as a periodic riser's window says it
+    n_window = 40
+    seen = loaded.rtd(window=n_window * LAG)
+    k = np.arange(1, rtd.probability.size + 1)
+    outlast = 1.0 - np.sum(rtd.probability * np.clip(n_window - k, 0, None)) / n_window
+    assert seen.unresolved == pytest.approx(outlast, rel=1e-12) and outlast > 0.05
 
 
 def test_reference_rtd_from_frames_equals_the_hand_count(open_run):

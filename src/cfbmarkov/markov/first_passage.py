@@ -188,7 +188,11 @@ class ResidenceTimeDistribution:
         Returns
         -------
         ResidenceTimeDistribution
-            With ``window`` set and residences longer than the window left out.
+            With ``window`` set and residences longer than the window left out; its
+            ``unresolved`` is, as :func:`window_rtd`'s, the share of the residences begun
+            inside the window that do not end in it: 1 - sum_k f(k) (n_W - k)+ / n_W (a
+            residence begins at any of the n_W frame positions alike; those that never end,
+            the intrinsic ``unresolved``, included).
 
         Raises
         ------
@@ -199,6 +203,8 @@ class ResidenceTimeDistribution:
         k = np.arange(1, self.probability.size + 1)
         weights = np.clip(n_window - k, 0, None).astype(np.float64)
         observed = self.probability * weights
+        resolved = (1.0 - self.unresolved) * float(observed.sum()) / (
+            float(self.probability.sum()) * n_window) if self.probability.sum() > 0 else 0.0
         if observed.sum() <= 0:
             held = np.flatnonzero(self.probability > 0)
             shortest = ("" if held.size == 0 else
@@ -207,7 +213,8 @@ class ResidenceTimeDistribution:
             raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s"
                                  + shortest)
         observed = observed[: max(n_window - 1, 1)]
-        return ResidenceTimeDistribution(self.lag, observed / observed.sum(), self.unresolved,
+        return ResidenceTimeDistribution(self.lag, observed / observed.sum(),
+                                         min(1.0, max(0.0, 1.0 - resolved)),
                                          self.entry_distribution, float(window),
                                          self.closed_classes, deficit_levels=self.deficit_levels,
                                          deficit_unresolved=self.deficit_unresolved)
