@@ -372,3 +372,22 @@ def test_stationarity_on_an_open_riser_takes_the_models_face_band_and_warns(tmp_
     assert json.loads(out.out)["warnings"] == [] and "warning:" not in out.err
     assert main(["stationarity", str(run), "--span", "0.5:2.5", "--window-length", "1"]) == 0
     assert capsys.readouterr().err.count("warning: ") == 1
+
+
+def test_an_open_riser_imported_as_periodic_is_refused_at_fit(tmp_path, capsys):
+    """An open riser written as periodic (imported without --boundary open): its particles
+    come and go and none passes through the boundary; fit refuses in one line naming
+    --boundary open, and writes no model."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    with Trajectories(_fast_open_riser(tmp_path / "fast.h5", n=300, frames=300)) as t:
+        times, positions, present = t.times[:], t.positions(), t.present(slice(None))
+    periodic = write_trajectories(tmp_path / "as-periodic.h5", times, positions, width=0.09,
+                                  height=0.95, present=present)
+    out = tmp_path / "m.h5"
+    assert main(["fit", str(periodic), "--cells", "4x10", "--lag", "0.01", "--window",
+                 "0.3:2.5", "-o", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "is read as a periodic riser" in err
+    assert "imported with --boundary open" in err and not out.exists()

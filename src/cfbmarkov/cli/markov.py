@@ -100,6 +100,7 @@ def _fit(args) -> int:
             with _stage(args, "counting", None):    # a refusal stays one line: no start line
                 model = fit_model(run, space, args.lag, args.window, args.estimator,
                                   connected=args.connected, coherent=args.coherent)
+        _refuse_an_open_riser_read_as_periodic(run, model, args.run, args.window)
         notes = _between_frames(run, args.window)
         if (model.window is not None
                 and model.window[0] > args.window[0] + run.time_tolerance):
@@ -110,6 +111,31 @@ def _fit(args) -> int:
                          f"at {float(run.times[0]):g} s): the model is fitted on "
                          f"{model.window[0]:g}:{model.window[1]:g} s")
     return _finish_fit(args, model, [args.run], [args.window], notes)
+
+
+def _refuse_an_open_riser_read_as_periodic(run, model, path, window) -> None:
+    """Refuse, before the model is written, a periodic riser's model that no particle's
+    pass through the top or the bottom fed, on a file whose particles come and go in the
+    window: an open riser imported without ``--boundary open`` (its model has no residence
+    time, and the advice of a longer window would not help)."""
+    if run.boundary.is_open or not run.has_absences or model.open_flow is not None:
+        return
+    passes = sum(abs(getattr(model, name)).sum() for name in ("counts_up", "counts_down")
+                 if getattr(model, name, None) is not None)
+    if passes:
+        return
+    frames = run.window(*window)
+    present = run.present(frames)
+    began = int((present[1:] & ~present[:-1]).sum())
+    ended = int((~present[1:] & present[:-1]).sum())
+    if began + ended == 0:
+        return
+    raise InputError(f"{path} is read as a periodic riser, but in {window[0]:g}-{window[1]:g} s "
+                     f"its particles come and go ({began} tracks begin, {ended} end) and none "
+                     "passes through the top or the bottom, so its model would have no "
+                     "residence time: an open riser, whose particles enter at the inlet and "
+                     "leave at the outlet, is imported with --boundary open; a periodic one "
+                     "needs a window long enough for passes (a longer --window)")
 
 
 def _between_frames(run, window) -> list[str]:
