@@ -391,3 +391,30 @@ def test_an_open_riser_imported_as_periodic_is_refused_at_fit(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is read as a periodic riser" in err
     assert "imported with --boundary open" in err and not out.exists()
+
+
+def test_compare_against_another_open_run_names_the_run_the_prediction_started_from(
+        tmp_path, capsys):
+    """A prediction compared from its first frame with another run's file: the particles
+    differ because the reference is not the run it started from, and the refusal says so
+    (it advised starting the window at the prediction's first frame, where it started)."""
+    from cfbmarkov.cli import main
+
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    run = _fast_open_riser(tmp_path / "fast.h5", n=300, frames=300)
+    with Trajectories(run) as t:            # another run: the same riser, other particles
+        other = write_trajectories(tmp_path / "other.h5", t.times[:], t.positions(),
+                                   width=0.09, height=0.95, ids=t.ids + 1000,
+                                   present=t.present(slice(None)), boundary="open")
+    model = tmp_path / "m.h5"
+    assert main(["fit", str(run), "--cells", "4x10", "--lag", "0.01", "--window", "0.3:2",
+                 "--resamples", "0", "--no-adequacy", "-q", "-o", str(model)]) == 0
+    pred = tmp_path / "p.h5"
+    assert main(["predict", str(model), "--init", str(run), "--start", "2", "--duration", "0.9",
+                 "-q", "-o", str(pred)]) == 0
+    capsys.readouterr()
+    assert main(["compare", str(other), str(pred), "--window", "2:2.9", "-q",
+                 "-o", str(tmp_path / "c")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"was predicted from {run}: give that as the reference" in err

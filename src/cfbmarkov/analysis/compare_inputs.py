@@ -527,11 +527,19 @@ def starting_tracers(ref: Trajectories, pred: Trajectories, i_ref: int, i_pred: 
     if b.size and b.size < a.size and np.isin(b, a).all():
         return b
     first = float(pred.times[0]) if pred.n_frames else float("nan")
+    started = (pred.parameters.get("initial_frames")
+               if isinstance(pred.parameters, dict) else None)
+    at_start = i_pred == 0
+    if at_start:       # the prediction's own first frame: it started from another file
+        fix = (f"{pred.path} was predicted from {started}: give that as the reference"
+               if isinstance(started, str) and started else
+               f"give the run {pred.path} was predicted from as the reference")
+    else:
+        fix = (f"start the window at the prediction's first frame ({first:g} s), where it "
+               "holds the reference's particles")
     raise InputError(f"{ref.path} ({a.size} particles present at the window start) and "
                      f"{pred.path} ({b.size}) do not start from the same particles; mixing "
-                     "needs the same tracers on both sides: start the window at the "
-                     f"prediction's first frame ({first:g} s), where it holds the reference's "
-                     "particles")
+                     f"needs the same tracers on both sides: {fix}")
 
 
 __all__ = ["check_bins", "check_common_window", "check_order", "check_parameters",
