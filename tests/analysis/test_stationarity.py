@@ -199,19 +199,21 @@ def test_cli_refusals_and_undefined_values(tmp_path, capsys):
         assert main(["stationarity", str(path), "--window-length", "1", *args]) == 2
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and message in err[0], err
-    tiny = ["stationarity", str(path), "--window-length", "0.05", "--step", "0.05", "--lag",
-            "0.025", "--judge", "0:0.05"]
+    # windows of 0.4 s, most of which hold no residence (a residence lasts about 0.19 s,
+    # frames every 0.025 s)
+    tiny = ["stationarity", str(path), "--window-length", "0.4", "--step", "0.05", "--lag",
+            "0.025", "--judge", "0:0.4"]
     assert main([*tiny, "--json"]) == 0
 
     def no_nan(name):
         raise AssertionError(f"{name} in the JSON")
     out = json.loads(capsys.readouterr().out, parse_constant=no_nan)
-    assert out["windows"][5] == [0.25, 0.3]          # no round-off in the window times
+    assert out["windows"][5] == [0.25, 0.65]          # no round-off in the window times
     assert None in out["rt_mean"] and out["judged"]["persistence"] is None
     assert main(tiny) == 0
     text = capsys.readouterr().out
     assert "n/d" in text and "nan" not in text and "fewer than 100 residences" in text
-    assert "persistence: no whole 0.05 s window before 0 s in the span" in text
+    assert "persistence: no whole 0.4 s window before 0 s in the span" in text
 
 
 def test_options_of_the_other_mode_and_a_percentage_tolerance_are_refused(tmp_path, capsys):
@@ -241,3 +243,18 @@ def test_a_face_band_on_a_periodic_riser_is_refused(tmp_path, capsys):
     assert main(["stationarity", str(run), "--window-length", "1", "--cells", "4x10"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "is a periodic riser: a face band (--cells)" in err
+
+
+def test_windows_that_hold_no_residence_are_refused(tmp_path, capsys):
+    """Windows too short for any residence would print a table of n/d: refused in one line
+    naming --window-length, as compare refuses a window without residences."""
+    from cfbmarkov.cli import main
+
+    path = str(_stationary(tmp_path))
+    assert main(["stationarity", path, "--window-length", "0.05", "--step", "0.05",
+                 "--span", "1:1.2"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no residence begins and ends in any of the 4 windows" in err
+    assert "give a longer --window-length" in err
+    assert main(["stationarity", path, "--window-length", "1", "--step", "1"]) == 0
+    capsys.readouterr()

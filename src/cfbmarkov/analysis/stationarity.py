@@ -554,7 +554,8 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
     ------
     InputError
         For ``basis="events"`` on a file without exact pass events (or an open riser), a
-        lag that is not a whole number of frames, a judged window outside the span, and
+        lag that is not a whole number of frames, windows none of which holds a residence,
+        a judged window outside the span, and
         the errors of :func:`window_statistics` and :func:`long_run_baseline`.
     """
     events = basis == "events"
@@ -572,6 +573,12 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
         extent = span or (float(traj.times[0]), float(traj.times[-1]))
         stats = window_statistics(traj, window_length=window_length, step=step, span=span,
                                   **kwargs)
+        if stats.starts.size and not np.any(stats.rt_count > 0):
+            raise InputError(f"no residence begins and ends in any of the {stats.starts.size} "
+                             f"windows of {stats.window_length:g} s in {path} "
+                             f"({extent[0]:g}-{extent[1]:g} s): a residence must fit in a "
+                             "window; give a longer --window-length (several mean residence "
+                             "times)")
         judged = None
         if judge is not None:
             judged = _judged_window(traj, judge, span, extent, bin_width, kwargs)
