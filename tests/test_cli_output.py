@@ -203,8 +203,8 @@ def test_a_model_file_for_a_trajectory_names_the_fix(model, capsys):
 
 
 def test_an_output_named_as_another_format_is_refused(model, tmp_path, capsys):
-    """A model named .txt, a prediction .csv, a map .h5: refused naming the suffix to use,
-    nothing written; a name without a suffix is taken as given."""
+    """A model named .txt, a prediction .csv, a map .h5, a folder of VTK files .h5: refused
+    naming the suffix to use, nothing written; a name without a suffix is taken as given."""
     run = str(model.parent / "run.h5")
     for argv, message in (
             (["fit", run, "--cells", "4x8", "-o", str(tmp_path / "m.txt")],
@@ -212,7 +212,10 @@ def test_an_output_named_as_another_format_is_refused(model, tmp_path, capsys):
             (["predict", str(model), "--init", run, "--start", "0", "--duration", "0.1",
               "-q", "-o", str(tmp_path / "p.csv")], "not a .csv file; name it p.h5"),
             (["maps", str(model), "-o", str(tmp_path / "maps.h5")],
-             "the output is a PNG image, not a .h5 file; name it maps.png")):
+             "the output is a PNG image, not a .h5 file; name it maps.png"),
+            (["export-vtk", run, "-o", str(tmp_path / "vtk.h5")],
+             "the output is a folder of files, not a .h5 file; name the folder without the "
+             "suffix (e.g. vtk)")):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and message in err, err

@@ -443,13 +443,16 @@ _FOREIGN_SUFFIXES = {
              ".vtk", ".vtp", ".pvd", ".dump", ".toml", ".xlsx", ".dat"},
     "png": {".h5", ".hdf5", ".csv", ".txt", ".json", ".jpg", ".jpeg", ".pdf", ".svg",
             ".vtk"},
+    "folder": {".h5", ".hdf5", ".png", ".csv", ".txt", ".json", ".vtk", ".vtp", ".vtu",
+               ".pvd", ".pdf", ".svg", ".toml", ".dump"},
 }
-_WRITES = {"trajectory": "hdf5", "prediction": "hdf5", "model": "hdf5", "png": "png"}
+_WRITES = {"trajectory": "hdf5", "prediction": "hdf5", "model": "hdf5", "png": "png",
+           "folder": "folder"}
 
 
 def check_suffix(target: str | os.PathLike, kind: str) -> None:
     """Refuse an output name whose suffix says another format than the one written (a
-    model written as ``model.txt``, a map as ``maps.h5``).
+    model written as ``model.txt``, a map as ``maps.h5``, a folder as ``vtk.h5``).
 
     Raises
     ------
@@ -460,6 +463,10 @@ def check_suffix(target: str | os.PathLike, kind: str) -> None:
     suffix = Path(target).suffix.lower()
     if written is None or suffix not in _FOREIGN_SUFFIXES[written]:
         return
+    if written == "folder":
+        raise InputError(f"{target}: the output is a folder of files, not a {suffix} file; "
+                         f"name the folder without the suffix (e.g. "
+                         f"{Path(target).with_suffix('').name})")
     what, right = (("an HDF5 file", ".h5") if written == "hdf5" else ("a PNG image", ".png"))
     raise InputError(f"{target}: the output is {what}, not a {suffix} file; name it "
                      f"{Path(target).with_suffix(right).name}")
