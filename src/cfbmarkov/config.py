@@ -144,8 +144,11 @@ class MarkovConfig(_Model):
     columns: int = Field(6, gt=0, le=100_000, description="cell columns m across the riser, - (paper: 6)")
     rows: int = Field(38, gt=0, le=100_000, description="cell rows n up the riser, - (paper: 38)")
     lag: Positive = Field(0.025, description="transition time step, s (paper: 0.025)")
-    fit_window: tuple[float, float] = Field((10.0, 15.0), description="fitting window [start, stop], s (paper: [10, 15])")
-    predict_window: tuple[float, float] = Field((15.0, 20.0), description="prediction and comparison window [start, stop], s (paper: [15, 20])")
+    fit_window: tuple[float, float] = Field(
+        (10.0, 15.0), description="fitting window [start, stop], s (paper: [10, 15])")
+    predict_window: tuple[float, float] = Field(
+        (15.0, 20.0),
+        description="prediction and comparison window [start, stop], s (paper: [15, 20])")
     interval_level: float = Field(0.9, gt=0.0, lt=1.0,
                                   description="coverage of the prediction's intervals, -")
     interval_resamples: int = Field(100, ge=0, description="bootstrap resamples of the fitting "

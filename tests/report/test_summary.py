@@ -121,7 +121,8 @@ def test_the_verdict_is_written_from_the_numbers():
     assert "inside the model's 90 % interval in 0 of 2" in summary
     # a model that beats the baseline is named
     good = {"pd_rt_mean": 2.0, "pd_rt_sd": -40.0, "md_rtd": 0.05, "baseline": {"md_rtd": 0.1},
-            "natural_variability": {"md_rtd": 0.01}, "reference": {"rt_mean": 0.5}, "model": {"rt_mean_interval": [0.4, 0.6]}}
+            "natural_variability": {"md_rtd": 0.01}, "reference": {"rt_mean": 0.5},
+            "model": {"rt_mean_interval": [0.4, 0.6]}}
     cases, measures = fake_run({3.0: 0.8}, summary=good)
     summary = summary_text(cases, measures).split("## Operating conditions", 1)[0]
     assert "the models beat the persistence baseline in the one velocity-model pair" in summary

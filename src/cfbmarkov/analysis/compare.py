@@ -218,8 +218,9 @@ class RunComparison:
         dict
             Window (s), both sides (:meth:`ComparedRun.summary`), ``pd_rt_mean`` and
             ``pd_rt_sd`` (%), ``md_rtd`` and ``md_order`` (``"inf"`` for the maximum norm),
-            ``mixing_rms`` (fraction of all particles), the RTD bins (s), the source of the pass times, the mixing frames,
-            the tracer-group check, the model's columns and the units. Undefined values are
+            ``mixing_rms`` (fraction of all particles), the RTD bins (s), the source of the
+            pass times, the mixing frames, the tracer-group check, the model's columns and
+            the units. Undefined values are
             NaN; the ``figures`` and ``warnings`` keys are added by the writer.
 
         References
