@@ -144,3 +144,24 @@ def test_a_figure_within_only_at_the_longest_window_is_said_so():
     line = verdict_text(r, "cells")
     assert "E(RT) lies within 10 % at the longest window (10 s) only" in line
     assert "settles" not in line
+
+
+def test_a_window_whose_fit_failed_says_why(tmp_path, capsys, monkeypatch):
+    """A window whose model fails prints 'no model'; the fit's own refusal is said once
+    under the table (and in --json's fit_failure), where it only said that the fit failed."""
+    from cfbmarkov.analysis import sample_length as module
+    from cfbmarkov.errors import CfbmarkovError
+
+    run = synthetic.write_run(tmp_path / "r.h5", synthetic.RiserFlow(), 100, 8.0, seed=1)
+
+    class Refusing:
+        def fit(self, windows):
+            raise CfbmarkovError("no pass in the window: a lag of at most 0.01 s (--lag)")
+
+    monkeypatch.setattr(module, "estimator_from_name", lambda *a, **k: Refusing())
+    assert main(["stationarity", str(run), "--sample-length", "--start", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "no: no model (the window's fit failed)" in out
+    assert out.count("(no model: no pass in the window: a lag of at most 0.01 s (--lag))") == 1
+    assert main(["stationarity", str(run), "--sample-length", "--start", "1", "--json"]) == 0
+    assert json.loads(capsys.readouterr().out)["fit_failure"].startswith("no pass in the window")

@@ -85,6 +85,8 @@ class SampleLength:
         (its exact RTD's mass beyond the length; NaN where no model): a window whose share
         is above :data:`cfbmarkov.analysis.adequacy.TAIL_LIMIT` is not within, whatever
         its E(RT), since ``fit`` warns that such a window cannot contain its residences.
+    fit_failure : str, optional
+        Why the first window whose model failed has none (the fit's refusal), or "".
     """
 
     file: str
@@ -104,6 +106,7 @@ class SampleLength:
     closed_classes: int = 0
     run_rt_means: tuple = ()
     outlasting_share: np.ndarray | None = None
+    fit_failure: str = ""
 
     def outlasts(self) -> np.ndarray:
         """Whether each window's model has more than ``TAIL_LIMIT`` of its residences
@@ -211,6 +214,7 @@ class SampleLength:
                             pd_sd, self.missed(),
                             (self.outlasting_share if self.outlasting_share is not None
                              else np.full(self.lengths.shape, np.nan)))],
+            "fit_failure": self.fit_failure or None,
             "steady_misses": {k: [100 * lo, 100 * hi]
                               for k, (lo, hi) in self.steady_misses().items()},
             "closed_classes": self.closed_classes,
@@ -445,7 +449,7 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
             check_runs_distinct(runs, [(a, t_last) for t_last in lasts])
         fitter = estimator_from_name(estimator, state_space, lag)
         data = [discretize(t, state_space, lag, (a, a + usable[-1])) for t in runs]
-        means, sds, outlasting, classes = [], [], [], 0
+        means, sds, outlasting, classes, failure = [], [], [], 0, ""
         for n in usable:
             try:
                 rtd = fitter.fit([d.block(a, a + n) for d in data]).rtd()
@@ -455,7 +459,8 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                 outlasting.append(float(p[rtd.times > n + 1e-9].sum() / p.sum())
                                   if p.sum() > 0 else math.nan)
                 classes = int(rtd.closed_classes)
-            except CfbmarkovError:
+            except CfbmarkovError as exc:
+                failure = failure or str(exc)
                 means.append(math.nan)
                 sds.append(math.nan)
                 outlasting.append(math.nan)
@@ -491,7 +496,7 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                                     f"'{estimator}'{runs_text}",
                           float(long_run.mean()), censored, classes,
                           run_means if not runs[0].boundary.is_open else (),
-                          np.asarray(outlasting, float))
+                          np.asarray(outlasting, float), failure)
     return _with_length(result)
 
 

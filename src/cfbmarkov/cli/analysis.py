@@ -629,6 +629,8 @@ def _sample_length(args) -> int:
     for n, m, sd, miss, a, b, o in zip(result.lengths, result.rt_mean, result.rt_sd,
                                        result.missed(), pd_mean, pd_sd, shares):
         print(f"{n:>10g}  {value(m):>9}  {value(sd):>10}  {missed_text(miss, a, b, o)}")
+    if result.fit_failure:
+        print(f"  (no model: {one_line(result.fit_failure)})")
     print("sample length: " + verdict_text(result, args.states))
     return 0
 
