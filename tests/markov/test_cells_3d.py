@@ -255,3 +255,33 @@ def test_a_rate_table_cell_outside_a_3d_grid_names_its_depth():
     with pytest.raises(InputError, match=r"cell col 0, row 0, depth 4 is outside the grid "
                                          r".*\(col 0\.\.1, row 0\.\.2, depth 0\.\.1\)"):
         ByCell(np.array(rows, dtype=float)).per_cell(grid)
+
+
+def test_a_particles_depth_is_drawn_apart_from_its_pass(tmp_path):
+    """A 3D prediction on rows so coarse that a move from the upper to the lower half is a
+    pass up through the top or a fall: the particle's depth in its cell after the move is
+    uniform whether it passed or fell (it was drawn from the pass direction's own random
+    stream, which put the passes at the front of the cell and the falls at the back)."""
+    from scipy import stats
+
+    from cfbmarkov.markov import fit_model
+
+    run = synthetic.write_run(tmp_path / "r2.h5", synthetic.RiserFlow(), 300, 12.0, seed=2)
+    with Trajectories(run) as t:
+        times, positions, laps = t.times[:], t.positions(), t.laps()
+        width, height = t.width, t.height
+    depth = np.random.default_rng(0).uniform(0.0, 0.03, positions.shape[:2])
+    run3d = write_trajectories(tmp_path / "r3.h5", times, np.concatenate(
+        [positions, depth[..., None]], axis=2), width=width, height=height, depth=0.03,
+        laps=laps)
+    model = fit_model(run3d, CellGrid(6, 2, width, height, depth_columns=1, depth=0.03),
+                      0.025, (2.0, 10.0))
+    pred = model.predict(run3d, 10.0, 2.0, seed=4, output=tmp_path / "p.h5")
+    with Trajectories(pred) as p:
+        y, z, lap = p.positions()[..., 1] / height, p.positions()[..., 2] / 0.03, p.laps()
+    moved = (y[:-1] >= 0.5) & (y[1:] < 0.5)
+    passed = np.diff(lap, axis=0) == 1
+    after_pass, after_fall = z[1:][moved & passed], z[1:][moved & ~passed]
+    assert after_pass.size > 200 and after_fall.size > 200
+    assert stats.ks_2samp(after_pass, after_fall).pvalue > 1e-3
+    assert abs(after_pass.mean() - 0.5) < 0.05 and abs(after_fall.mean() - 0.5) < 0.05

@@ -16,7 +16,8 @@ import numpy as np
 
 from cfbmarkov._random import uniform
 
-#: random-number streams: next state, x and y placement (states.py), pass direction
+#: random-number streams: next state, pass direction (x, y and depth placement use 1, 2
+#: and 10, :mod:`cfbmarkov.markov.states`)
 STREAM_STATE, STREAM_DIRECTION = 0, 3
 #: streams of coherent moves (:mod:`cfbmarkov.markov.coherence`): whether a particle takes its
 #: row's common draw, and the common draw of a row (the open riser uses 4-6, regimes 7)

@@ -39,6 +39,11 @@ from cfbmarkov.errors import InputError
 from cfbmarkov.markov.cells import cell_index
 from cfbmarkov.markov.frame_quantities import FrameQuantities
 
+#: random-number streams of a particle's place within its cell: across, up, and in depth
+#: (the depth's own stream: stream 3 draws the pass direction of the same particle and step,
+#: :mod:`cfbmarkov.markov.montecarlo`, and a shared draw tied the depth to the pass)
+STREAM_X, STREAM_Y, STREAM_DEPTH = 1, 2, 10
+
 #: every subclass of :class:`StateSpace` that sets ``kind``, by kind (filled as they are
 #: defined)
 _REGISTRY: dict[str, type["StateSpace"]] = {}
@@ -408,10 +413,11 @@ def _place_in_cells(cells, columns, depth_columns, cell_width, cell_height, cell
         col = c % columns
         rest = c // columns
         row = rest // depth_columns
-        out[t, p, 0] = (col + uniform(seed, 1, p, k)) * cell_width
-        out[t, p, 1] = (row + uniform(seed, 2, p, k)) * cell_height
+        out[t, p, 0] = (col + uniform(seed, STREAM_X, p, k)) * cell_width
+        out[t, p, 1] = (row + uniform(seed, STREAM_Y, p, k)) * cell_height
         if dims == 3:
-            out[t, p, 2] = (rest - row * depth_columns + uniform(seed, 3, p, k)) * cell_depth
+            out[t, p, 2] = ((rest - row * depth_columns + uniform(seed, STREAM_DEPTH, p, k))
+                            * cell_depth)
 
 
 class CellGrid(StateSpace):
