@@ -291,3 +291,23 @@ def test_fit_without_a_window_says_10_15_is_the_default(markov_run, tmp_path, ca
     err = capsys.readouterr().err
     assert "window 10:15 s lies outside" in err and "no --window was given: 10:15 s is its " \
         "default" in err
+
+
+def test_an_rtd_window_that_would_not_fit_in_memory_is_refused(tmp_path, capsys, monkeypatch):
+    """rtd --window-length holds a few numbers a lag and state: a window that would need more
+    memory than there is is refused in one line with the longest that fits (it ran out of
+    memory with a traceback)."""
+    from cfbmarkov import synthetic
+    from cfbmarkov.cli import main
+
+    run = synthetic.write_run(tmp_path / "r.h5", synthetic.RiserFlow(), 100, 6.0, seed=1)
+    model = tmp_path / "m.h5"
+    assert main(["fit", str(run), "--window", "1:5", "--resamples", "0", "--no-adequacy",
+                 "-q", "-o", str(model)]) == 0
+    capsys.readouterr()
+    monkeypatch.setenv("CFBMARKOV_MEMORY_LIMIT", "50000000")
+    assert main(["rtd", str(model), "--window-length", "1000"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "the RTD as a 1000 s window sees it (40000 lags x 228 " \
+        "states) would need about" in err and "give a window length of at most 114 s" in err
+    assert main(["rtd", str(model), "--window-length", "5"]) == 0

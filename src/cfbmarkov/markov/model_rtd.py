@@ -13,12 +13,17 @@ import numpy as np
 import scipy.sparse as sp
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.limits import MAX_STEPS, check_finite
+from cfbmarkov.limits import MAX_STEPS, check_finite, check_memory, memory_limit
 from cfbmarkov.markov.first_passage import (ResidenceTimeDistribution, drift_residence_time,
                                             exact_rtd, split_by_pass, window_rtd)
 
 if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
+
+
+#: bytes per lag and state that the RTD as a window sees it holds (the landings and the
+#: exits per lag on the lap-deficit levels; measured about 35-39, 2026-12-07)
+WINDOW_BYTES = 48
 
 
 def model_rtd(model: "MarkovModel", window: float | None = None,
@@ -47,7 +52,8 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
     ------
     InputError
         If ``window`` is not a positive finite time of at most
-        :data:`~cfbmarkov.limits.MAX_STEPS` lags, or ``direction`` is neither up nor down.
+        :data:`~cfbmarkov.limits.MAX_STEPS` lags or needs more memory than there is
+        (:data:`WINDOW_BYTES` a lag and state), or ``direction`` is neither up nor down.
     CfbmarkovError
         If the model has no transition through the boundary in ``direction`` (no residence
         ends), or no residence fits in ``window``.
@@ -63,6 +69,12 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
             raise InputError(f"window length {window:g} s is {window / model.lag:.3g} lags "
                              f"of {model.lag:g} s, more than {MAX_STEPS}; give a window "
                              f"length of at most {MAX_STEPS * model.lag:g} s")
+        lags = window / model.lag
+        fits = memory_limit() / (WINDOW_BYTES * model.n_states) * model.lag
+        check_memory(WINDOW_BYTES * lags * model.n_states,
+                     f"the RTD as a {window:g} s window sees it ({lags:.0f} lags x "
+                     f"{model.n_states} states)",
+                     f"give a window length of at most {fits:.3g} s")
     cache = model._cache
     if model.open_flow is not None:
         return _with_uncertainty(model, _open_rtd(model, window), window)
