@@ -843,3 +843,31 @@ def test_react_repeats_the_residences_the_chain_never_ends(tmp_path, capsys):
                "that end" in w for w in warned)
     assert "warning: the model: unresolved mass" in err
     assert "note: unresolved mass" not in err      # the command line's own warning only
+
+
+def test_the_memory_check_of_a_monte_carlo_counts_its_properties(fitted, tmp_path, capsys,
+                                                                  monkeypatch):
+    """react --init carries a float64 of each property for every particle at every lag: its
+    memory check counts them (with two properties a run needs twice what predict needs),
+    so a run that fits without them is refused with them, naming them."""
+    import math
+
+    from cfbmarkov.markov.model import MarkovModel
+    from cfbmarkov.trajectories import Trajectories
+
+    folder, run, model = fitted
+    kin = _write(tmp_path, GOOD, RATES)
+    with Trajectories(run) as t:
+        particles, dims = t.n_particles, t.dimensions
+    lag = MarkovModel.load(model).lag
+    steps = round(1.0 / lag)
+    plain = (steps + 1) * particles * 8 + 8 * particles * dims
+    monkeypatch.setenv("CFBMARKOV_MEMORY_LIMIT", str(math.ceil(1.5 * plain)))
+    assert main(["predict", str(model), "--init", str(run), "--start", "0.5", "--duration", "1",
+                 "-q", "-o", str(tmp_path / "p.h5")]) == 0
+    capsys.readouterr()
+    assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "1", "-q", "-o", str(tmp_path / "r.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "particles with 2 properties) would need about" in err
+    assert not (tmp_path / "r.h5").exists()

@@ -125,17 +125,22 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
             raise InputError(f"duration {duration:g} s is shorter than one lag ({model.lag:g} s)")
         particles = traj.n_particles + (model.open_flow.inflow_per_lag * n_steps
                                         if model.open_flow is not None else 0)
-        # states and laps (int32 each) of every particle at every lag, and the positions
-        check_memory((n_steps + 1.0) * particles * 8 + 8.0 * particles * traj.dimensions,
+        # states and laps (int32 each) of every particle at every lag, and the positions;
+        # each property carried: a float64 of every particle at every lag
+        n_properties = 0 if kinetics is None else len(kinetics.names)
+        carried = f" with {n_properties} properties" if n_properties else ""
+        check_memory((n_steps + 1.0) * particles * (8 + 8 * n_properties)
+                     + 8.0 * particles * traj.dimensions,
                      f"a prediction of {duration:g} s ({n_steps} lags of {model.lag:g} s x "
-                     f"{particles:.0f} particles)", "shorten --duration")
+                     f"{particles:.0f} particles{carried})", "shorten --duration")
         if output is not None:          # uncompressed: every particle a column in every frame;
             stored = particles          # an open riser's file stores the blocks of 256
             if model.open_flow is not None:     # particles present (trajectory_groups)
                 stored = min(particles, traj.n_particles + 2.0 * MIN_CHUNK_PARTICLES)
-            check_disk((n_steps + 1.0) * stored * (8.0 * traj.dimensions + 5.0) + 1e6,
+            check_disk((n_steps + 1.0) * stored * (8.0 * traj.dimensions + 5.0
+                                                    + 8.0 * n_properties) + 1e6,
                        output, f"a prediction of {duration:g} s ({n_steps + 1} frames x "
-                       f"{stored:.0f} particles stored per frame)",
+                       f"{stored:.0f} particles stored per frame{carried})",
                        "shorten --duration, or write to a disk with more space")
         if model.boundary.is_open and not traj.boundary.is_open:
             raise InputError(f"{traj.path} is a periodic riser; the model is of an open one "
