@@ -521,3 +521,45 @@ def test_spaces_discretised_on_shared_frames_equal_each_alone(default_run):
     cells = [sum(1 for key in memo.derived if key[0] == "cells") for memo in memos]
     assert max(cells) == 1 and min(cells) >= 0         # one grid: at most one cell array
     assert any(key[0] == "displacement" for memo in memos for key in memo.derived)
+
+
+def test_a_gap_before_the_start_is_said_as_a_gap_on_a_periodic_riser(tmp_path):
+    """A periodic file whose particles are absent one frame before the start: a model with
+    memory has no state for them. Half absent: a note that says they were absent (a gap),
+    not that they are absent at the start or that newcomers stand for them; all absent: a
+    refusal that names the later start where their history is whole."""
+    import warnings
+
+    from cfbmarkov.errors import CfbmarkovWarning, InputError
+    from cfbmarkov.markov import fit_model, state_space_from_name
+    from cfbmarkov.synthetic import RiserFlow, write_run
+    from cfbmarkov.trajectories import Trajectories
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    run = write_run(tmp_path / "r.h5", RiserFlow(), 100, 6.0, seed=1)
+    space = state_space_from_name("cells-direction", 6, 38, 0.09, 0.95)
+    model = fit_model(run, space, 0.025, (1.0, 4.0), estimator="mle")
+    with Trajectories(run) as t:
+        times, positions, laps = t.times[:], t.positions(), t.laps()
+    gap = int(np.argmin(np.abs(times - 4.0)))
+
+    def with_gap(name, absent):
+        present = np.ones(positions.shape[:2], bool)
+        present[gap, :absent] = False
+        where = np.where(present[..., None], positions, np.nan)
+        return write_trajectories(tmp_path / name, times, where, width=0.09, height=0.95,
+                                  laps=laps, present=present)
+
+    half = with_gap("half.h5", 50)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        model.predict(half, 4.025, 0.2, seed=1)
+    said = [str(w.message) for w in caught if issubclass(w.category, CfbmarkovWarning)]
+    stateless = [line for line in said if "have no state" in line]
+    assert len(stateless) == 1 and "50 of 100 particles present at 4.025 s" in stateless[0]
+    assert "absent within its memory" in stateless[0] and "newcomers" not in stateless[0]
+    assert not any("are absent at 4.025 s" in line for line in said)
+    every = with_gap("all.h5", 100)
+    with pytest.raises(InputError, match=r"the 100 particles present at 4\.025 s have no state "
+                                         r"in cells-direction.*from 4\.05 s"):
+        model.predict(every, 4.025, 0.2, seed=1)

@@ -151,6 +151,15 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
         states0, positions0, laps0 = initial_states(model, traj, start)
         ids = traj.ids
         present0 = states0 >= 0
+        here = np.isfinite(positions0).all(axis=1)      # present, with or without a state
+        if not present0.any() and model.open_flow is None and here.any():
+            memory = model.state_space.memory_lags
+            raise InputError(f"{traj.path}: the {int(here.sum())} particles present at "
+                             f"{start:g} s have no state in {model.state_space.kind}, which "
+                             f"needs them present {memory} lag(s) before (they were absent "
+                             "then: a gap in the file), so the prediction has nothing to "
+                             f"move; give a later --start (from {start + memory * model.lag:g} "
+                             "s, where their history is whole)")
         if not present0.any() and model.open_flow is None:   # nothing to move, no newcomers
             seen = traj.present(slice(None)).any(axis=1) if traj.has_absences else None
             where = ""
@@ -163,17 +172,18 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
                              f"--start at a frame where particles are present{where}")
         _warn_stateless(states0, positions0, model, start)
         if not present0.all():          # only the particles present at the start move
-            if model.open_flow is None:     # a periodic riser's: tracks out of view then
+            if model.open_flow is None and not here.all():  # a periodic riser's: out of view
                 import warnings
 
                 from cfbmarkov.errors import CfbmarkovWarning
 
-                warnings.warn(f"{int(np.count_nonzero(~present0))} of the "
+                warnings.warn(f"{int(np.count_nonzero(~here))} of the "
                               f"{present0.size} particles of {traj.path} are absent at "
                               f"{start:g} s and left out: the prediction moves the "
-                              f"{int(np.count_nonzero(present0))} present there (`compare` "
-                              "follows those on both sides over a window where the others "
-                              "stay absent throughout)", CfbmarkovWarning, stacklevel=2)
+                              f"{int(np.count_nonzero(present0))} present there with a state "
+                              "(`compare` follows those on both sides over a window where "
+                              "the others stay absent throughout)", CfbmarkovWarning,
+                              stacklevel=2)
             states0, positions0, laps0, ids = (states0[present0], positions0[present0],
                                                laps0[present0], ids[present0])
         shown = (PredictionProgress(progress, start, n_steps, model.lag, states0.size)
@@ -278,22 +288,30 @@ def check_reference_starts(traj, kinetics, start: float) -> int:
 def _warn_stateless(states0: np.ndarray, positions0: np.ndarray, model: "MarkovModel",
                     start: float) -> None:
     """Warn where particles present in the start frame have no state: on an open riser,
-    those that entered within the state space's memory before it (their history is
-    incomplete); they are left out of the prediction."""
+    those that entered within the state space's memory before it, on a periodic one those
+    absent within it (a gap); their history is incomplete, and they are left out of the
+    prediction."""
     import warnings
 
     from cfbmarkov.errors import CfbmarkovWarning
 
     seen = np.isfinite(positions0).all(axis=1)
     missing = int(np.count_nonzero(seen & (states0 < 0)))
-    if missing:
-        warnings.warn(f"{missing} of {int(seen.sum())} particles present at {start:g} s have no "
-                      f"state in {model.state_space.kind} (they entered less than its memory, "
-                      f"{model.state_space.memory_lags} lag(s), before that frame) and are left "
-                      "out of the prediction (its newcomers of the next lags stand for them; "
-                      "`compare` follows the particles it started on both sides); a model on "
-                      "cells keeps them all", CfbmarkovWarning,
-                      stacklevel=3)
+    if not missing:
+        return
+    memory = model.state_space.memory_lags
+    if model.open_flow is not None:
+        why = (f"they entered less than its memory, {memory} lag(s), before that frame) and "
+               "are left out of the prediction (its newcomers of the next lags stand for "
+               "them; ")
+    else:
+        why = (f"they were absent within its memory, {memory} lag(s), before that frame: a "
+               "gap in the file) and are left out of the prediction (a later --start, where "
+               "their history is whole, keeps them; ")
+    warnings.warn(f"{missing} of {int(seen.sum())} particles present at {start:g} s have no "
+                  f"state in {model.state_space.kind} ({why}`compare` follows the particles "
+                  "it started on both sides); a model on cells keeps them all",
+                  CfbmarkovWarning, stacklevel=3)
 
 
 def initial_states(model: "MarkovModel", trajectories, start: float
