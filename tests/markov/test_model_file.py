@@ -130,3 +130,22 @@ def test_create_array_dataset(tmp_path, shape, dtype, compressed):
         assert d.dtype == dtype and np.array_equal(d[()], value)
         if compressed:      # deflated chunks that HDF5's own filter reads back
             assert np.array_equal(d[3:7], value[3:7])
+
+
+def test_a_predictions_copy_of_the_model_keeps_the_models_created_time(tmp_path):
+    """The model a prediction carries (/provenance/model) keeps the time the model file was
+    written, not the prediction's."""
+    import h5py
+
+    from cfbmarkov.markov import MarkovModel, fit_model
+    from cfbmarkov.markov.states import CellGrid
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    run = write_run(tmp_path / "r.h5", RiserFlow(), 60, 3.0, seed=1)
+    path = fit_model(run, CellGrid(6, 38, 0.09, 0.95), 0.025, (0.5, 2.5)).save(tmp_path / "m.h5")
+    with h5py.File(path, "r+") as f:            # as if fitted an hour before
+        f.attrs["created"] = "2026-01-01T00:00:00+00:00"
+    pred = MarkovModel.load(path).predict(run, 2.5, 0.2, seed=1, output=tmp_path / "p.h5")
+    with h5py.File(pred) as f:
+        assert f["provenance/model"].attrs["created"] == "2026-01-01T00:00:00+00:00"
+        assert f.attrs["created"] != "2026-01-01T00:00:00+00:00"

@@ -73,6 +73,8 @@ if TYPE_CHECKING:
     from cfbmarkov.markov.model import MarkovModel
 
 #: the ``format`` attribute of a model file
+#: the model cache's key of the ``created`` time read from a model file
+CREATED = "created"
 MODEL_FORMAT = "cfbmarkov.model"
 
 
@@ -101,7 +103,9 @@ def model_datasets_and_attrs(model: "MarkovModel") -> tuple[dict[str, np.ndarray
         "source": json.dumps(model.source), "frame_pairs": int(model.frame_pairs),
         "n_transitions": model.n_transitions,
         "n_unvisited_states": int(model.unvisited_states.size),
-        "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
+        # when the model was first written: a copy (a prediction's provenance) keeps it
+        "created": model._cache.get(CREATED)
+        or _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "cfbmarkov_version": _version(),
         "flow_direction": model.flow_direction,
     }
@@ -213,7 +217,12 @@ def read_model_group(group: h5py.Group | h5py.File, model_class: Callable[..., "
         raise InputError(f"{label}: damaged model file (layout version {version:g}: this "
                          "cfbmarkov writes and reads version 1)")
     try:
-        return _read_model_group(group, model_class)
+        model = _read_model_group(group, model_class)
+        created = group.attrs.get("created")
+        if created is not None:     # kept, so that a copy (a prediction's) keeps the fit's
+            model._cache[CREATED] = created.decode() if isinstance(created, bytes) \
+                else str(created)
+        return model
     except KeyError as exc:
         raise InputError(f"{label}: damaged model file (missing {_missing(exc)})") from None
     except InputError as exc:
