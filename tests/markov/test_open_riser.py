@@ -418,3 +418,17 @@ def test_compare_against_another_open_run_names_the_run_the_prediction_started_f
                  "-o", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"was predicted from {run}: give that as the reference" in err
+
+
+def test_auto_on_an_open_riser_says_it_judges_by_the_chapman_kolmogorov_test(tmp_path, capsys):
+    """The progress line of fit --states auto names the criterion it uses: on an open riser
+    the Chapman-Kolmogorov test (it said the candidates' RTDs were compared)."""
+    from cfbmarkov.cli import main
+
+    run = _fast_open_riser(tmp_path / "fast.h5", n=350, frames=400)
+    assert main(["fit", str(run), "--cells", "4x10", "--lag", "0.01", "--window", "0.3:3.5",
+                 "--states", "auto", "--resamples", "0", "--no-adequacy",
+                 "-o", str(tmp_path / "m.h5")]) == 0
+    err = capsys.readouterr().err
+    assert "(each fitted and judged by the Chapman-Kolmogorov test, an open riser's criterion)" \
+        in err and "RTD" not in err.split("judging the candidate", 1)[1].split("\n", 1)[0]

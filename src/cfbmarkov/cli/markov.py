@@ -85,8 +85,11 @@ def _fit(args) -> int:
             run.window(*args.window)        # a refusal stays one line, before any progress
             with _stage(args, "choosing the state space",
                         f"judging the candidate state spaces on {args.run}, "
-                        f"{args.window[0]:g}-{args.window[1]:g} s (each fitted and its RTD "
-                        "compared with the window's)"):
+                        f"{args.window[0]:g}-{args.window[1]:g} s (each fitted and judged "
+                        + ("by the Chapman-Kolmogorov test, an open riser's criterion)"
+                           if run.boundary.is_open else
+                           "by its RTD against the window's, or by the Chapman-Kolmogorov test "
+                           "where the window holds too few residences)")):
                 model = select_model(run, window=args.window, columns=columns, rows=rows,
                                      lag=args.lag, estimator=args.estimator,
                                      coherent=args.coherent)
@@ -239,7 +242,8 @@ def _fit_pooled(args, columns: int, rows: int, depth_columns: int | None) -> int
 
             if not args.quiet:
                 print(f"fit: judging the candidate state spaces on {len(runs)} runs' windows "
-                      "pooled (each fitted and its RTD compared with the windows')",
+                      "pooled (each fitted and judged by its RTD against the windows', or "
+                      "by the Chapman-Kolmogorov test where they hold too few residences)",
                       file=sys.stderr, flush=True)
             model = select_pooled(runs, windows=windows, columns=columns, rows=rows,
                                   lag=args.lag, states=DEFAULT_STATES,
