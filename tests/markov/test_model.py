@@ -627,3 +627,30 @@ def test_batch_share_fallen_through_the_bottom_is_the_monte_carlos(markov_flow, 
     se = np.sqrt(fallen * (1 - fallen) / start.size)
     assert 0.0 < batch.fallen_share < 1.0 and se > 0
     assert abs(batch.fallen_share - fallen) < 4 * se, (batch.fallen_share, fallen, se)
+
+
+@pytest.mark.parametrize("coherence, regimes", [(0.0, False), (0.4, False), (0.0, True)])
+def test_a_run_in_pieces_draws_what_one_piece_draws(monkeypatch, coherence, regimes):
+    """run_chain runs a long Monte Carlo in pieces, so that a Ctrl-C is taken between them;
+    the draws depend on the step alone, so any piece size gives the same states and laps
+    bit for bit (with coherent moves, and with a regime path's row offsets)."""
+    from cfbmarkov.markov import montecarlo
+    from cfbmarkov.markov.montecarlo import SparseChain, run_chain
+
+    rng = np.random.default_rng(3)
+    s = 12
+    matrix = rng.random((2 * s if regimes else s, s)) * (rng.random((2 * s if regimes else s,
+                                                                     s)) < 0.4)
+    matrix[np.arange(matrix.shape[0]), np.arange(matrix.shape[0]) % s] += 0.1
+    matrix /= matrix.sum(axis=1, keepdims=True)
+    up = np.where(rng.random(matrix.shape) < 0.2, 0.5, 0.0)
+    down = np.where(rng.random(matrix.shape) < 0.1, 0.3, 0.0)
+    chain = SparseChain.from_matrix(matrix, up, down)
+    initial = rng.integers(0, s, 50)
+    steps = 97
+    offset = (rng.integers(0, 2, steps + 1) * s) if regimes else None
+    whole = run_chain(chain, initial, steps, 11, row_offset=offset, coherence=coherence)
+    monkeypatch.setattr(montecarlo, "PIECE_PARTICLE_STEPS", 50 * 7)     # pieces of 7 steps
+    pieces = run_chain(chain, initial, steps, 11, row_offset=offset, coherence=coherence)
+    assert np.array_equal(whole[0], pieces[0]) and np.array_equal(whole[1], pieces[1])
+    assert np.any(whole[1] != 0)                                         # laps moved

@@ -19,6 +19,9 @@ from cfbmarkov._random import uniform
 #: random-number streams: next state, pass direction (x, y and depth placement use 1, 2
 #: and 10, :mod:`cfbmarkov.markov.states`)
 STREAM_STATE, STREAM_DIRECTION = 0, 3
+#: particle-steps of one piece of a run (:func:`run_chain`; about 0.1-0.5 s on 2 cores)
+PIECE_PARTICLE_STEPS = 20_000_000
+
 #: streams of coherent moves (:mod:`cfbmarkov.markov.coherence`): whether a particle takes its
 #: row's common draw, and the common draw of a row (the open riser uses 4-6, regimes 7)
 STREAM_SHARE, STREAM_COMMON = 8, 9
@@ -115,7 +118,7 @@ def state_draw(seed, particle, row, step, coherence):
 @nb.njit(cache=True, parallel=True)
 def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulative, up_probability,
                       down_probability, row_offset, coherence, n_steps, seed, states_out,
-                      laps_out):
+                      laps_out, first_step=0):
     """Advance every particle ``n_steps`` transitions (Numba kernel, parallel over particles).
 
     Each step draws u in [0, 1) and takes the first entry of the row whose cumulative
@@ -141,6 +144,9 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
         Seed of the counter-based generator (:func:`cfbmarkov._random.uniform`).
     states_out, laps_out : ndarray of int32, shape (n_steps + 1, N)
         Filled in place; row 0 holds the initial values.
+    first_step : int, optional
+        The run's step of row 0: the draws of row k are those of step ``first_step + k``,
+        so that a run made in pieces (:func:`run_chain`) draws what one piece would.
 
     References
     ----------
@@ -155,15 +161,16 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
         states_out[0, p] = s
         laps_out[0, p] = lap
         for k in range(1, n_steps + 1):
+            step = first_step + k
             row = row_offset[k] + s
             a = row_start[row]
             b = row_start[row + 1]
             if b > a:
-                lo = first_above(cumulative, a, b - 1, state_draw(seed, p, row, k, coherence))
+                lo = first_above(cumulative, a, b - 1, state_draw(seed, p, row, step, coherence))
                 pu = up_probability[lo]
                 pd = down_probability[lo]
                 if pu > 0.0 or pd > 0.0:
-                    v = uniform(seed, STREAM_DIRECTION, p, k)
+                    v = uniform(seed, STREAM_DIRECTION, p, step)
                     if v < pu:
                         lap += 1
                     elif v < pu + pd:
@@ -214,8 +221,14 @@ def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initi
     laps = np.empty((n_steps + 1, n), np.int32)
     offset = (np.zeros(n_steps + 1, np.int64) if row_offset is None
               else np.ascontiguousarray(row_offset, dtype=np.int64))
-    monte_carlo_steps(initial_states, laps0, chain.row_start, chain.column, chain.cumulative,
-                      chain.up_probability, chain.down_probability, offset, float(coherence),
-                      int(n_steps),
-                      np.uint64(seed), states, laps)
+    # in pieces of about PIECE_PARTICLE_STEPS, so that a Ctrl-C is taken between them (the
+    # draws depend on the step, not the piece: the same run in one piece or many)
+    piece = max(1, PIECE_PARTICLE_STEPS // max(n, 1))
+    states[0], laps[0] = initial_states, laps0
+    for k0 in range(0, int(n_steps), piece):
+        k1 = min(int(n_steps), k0 + piece)
+        monte_carlo_steps(states[k0], laps[k0], chain.row_start, chain.column,
+                          chain.cumulative, chain.up_probability, chain.down_probability,
+                          offset[k0:k1 + 1], float(coherence), k1 - k0, np.uint64(seed),
+                          states[k0:k1 + 1], laps[k0:k1 + 1], k0)
     return states, laps
