@@ -388,17 +388,33 @@ def case_names() -> list[str]:
 SPEED_ONLY = ("numerics.dem_cells", "numerics.dem_skin")
 
 
+def flat_tables(tables: dict, prefix: str = "") -> dict[str, object]:
+    """Nested tables of a case file as ``{"section.name": value}``, in the tables' order.
+
+    Parameters
+    ----------
+    tables : dict
+        Nested tables (a case's, or an overrides file's).
+    prefix : str, optional
+        Put before every name.
+
+    Returns
+    -------
+    dict
+        Dotted names to the values.
+    """
+    out: dict[str, object] = {}
+    for key, value in tables.items():
+        if isinstance(value, dict):
+            out.update(flat_tables(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def flat_settings(case: CaseConfig) -> dict[str, object]:
     """A case's settings as ``{"section.name": value}`` (JSON values: tuples as lists)."""
-    def flat(d, prefix=""):
-        out = {}
-        for key, value in d.items():
-            if isinstance(value, dict):
-                out.update(flat(value, f"{prefix}{key}."))
-            else:
-                out[f"{prefix}{key}"] = value
-        return out
-    return flat(case.model_dump(mode="json"))
+    return flat_tables(case.model_dump(mode="json"))
 
 
 def case_difference(saved: CaseConfig, case: CaseConfig, limit: int = 3) -> str:

@@ -584,13 +584,9 @@ def overridden_settings(overrides: dict | None) -> dict[str, object]:
     dict
         Dotted names to the values given (empty for none).
     """
-    def flat(table, prefix=""):
-        for key, value in table.items():
-            if isinstance(value, dict):
-                yield from flat(value, f"{prefix}{key}.")
-            else:
-                yield f"{prefix}{key}", value
-    return dict(flat(overrides or {}))
+    from cfbmarkov.config import flat_tables
+
+    return flat_tables(overrides or {})
 
 
 def _advise_time_step(scale: Scale, cases, names, overridden: bool = False) -> None:
