@@ -689,3 +689,34 @@ def test_a_carried_value_where_survival_depends_on_the_entry_state():
     once = exact_kinetics(model, Kinetics((Property("T", HeatExchange(None), dict(
         heat.properties[0].parameters), "entry", 300.0),)))["T"]
     assert out.after_passes(1)[0] == pytest.approx(once.exit_mean, rel=1e-12)
+
+
+def test_properties_in_pieces_equal_one_piece(monkeypatch):
+    """run_properties goes over a long run in pieces (a Ctrl-C between them): the linear
+    and the custom laws' values, with resets at passes and a carried property, are the same
+    bits in pieces of 3 frames as in one, and the progress reaches its total."""
+    import numba as nb
+
+    from cfbmarkov.kinetics import ByCell, Custom
+    from cfbmarkov.markov import montecarlo
+
+    @nb.njit
+    def first_order(v, row, others):
+        return row[0] * (1.0 - v)
+
+    model = periodic_model()
+    states, laps = model.monte_carlo(np.array([0, 1] * 30, np.int32), 40, seed=6)
+    table = np.array([[0, 0, 1.5], [0, 1, 6.0]])
+    props = (Property("v", FirstOrder(), {"rate": ByCell(table)}),
+             Property("w", FirstOrder(), {"rate": Constant(0.7)}, start="carried"),
+             Property("c", Custom(first_order, ("rate",), substeps=4), {"rate": ByCell(table)}))
+    sk = Kinetics(props).per_state(model.state_space)
+    whole = run_properties(sk, LAG, states, laps, periodic=True)
+    shown = []
+    monkeypatch.setattr(montecarlo, "PIECE_PARTICLE_STEPS", 3 * 60 * 2)    # linear: 3 frames
+    pieces = run_properties(sk, LAG, states, laps, periodic=True,
+                            progress=lambda done, total: shown.append((done, total)))
+    np.testing.assert_array_equal(whole, pieces)
+    assert shown[-1] == (80, 80) and len(shown) > 20                 # two passes of 40 lags
+    assert all(b[0] >= a[0] for a, b in zip(shown, shown[1:]))
+    assert np.any(laps[-1] > laps[0]) and not np.allclose(whole[0], whole[1], equal_nan=True)

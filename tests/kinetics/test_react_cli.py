@@ -871,3 +871,34 @@ def test_the_memory_check_of_a_monte_carlo_counts_its_properties(fitted, tmp_pat
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "particles with 2 properties) would need about" in err
     assert not (tmp_path / "r.h5").exists()
+
+
+def test_react_monte_carlo_shows_its_progress_while_it_runs(fitted, tmp_path, capsys,
+                                                           monkeypatch):
+    """Off a terminal, `react --init` prints a line while the Monte Carlo runs and while
+    its properties are carried (pieces of one lag here, a line at each), before the frames
+    are written; the prediction is the same as one made quietly in one piece."""
+    from cfbmarkov.markov import montecarlo, prediction
+
+    folder, run, model = fitted
+    kin = _write(tmp_path, GOOD, RATES)
+    quiet = tmp_path / "quiet.h5"
+    assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "1", "-o", str(quiet), "-q"]) == 0
+    capsys.readouterr()
+    monkeypatch.setattr(prediction, "LINE_INTERVAL", 0.0)
+    monkeypatch.setattr(montecarlo, "PIECE_PARTICLE_STEPS", 1)
+    shown = tmp_path / "shown.h5"
+    assert main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "1", "-o", str(shown)]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    run_lines = [k for k, line in enumerate(lines) if line.startswith("predict: Monte Carlo ")
+                 and " s run, " in line]
+    carried = [k for k, line in enumerate(lines) if line.startswith("predict: properties ")]
+    done = [k for k, line in enumerate(lines) if line.startswith("predict: Monte Carlo done")]
+    assert run_lines and carried and done, lines
+    assert max(run_lines) < min(carried) and max(carried) < done[0]
+    assert "% carried" in lines[carried[0]] and lines[carried[0]].endswith(" left")
+    with h5py.File(quiet) as a, h5py.File(shown) as b:
+        for name in ("frames/position", "frames/lap", "properties/X", "properties/T"):
+            np.testing.assert_array_equal(a[name][()], b[name][()])

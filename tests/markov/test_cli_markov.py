@@ -159,12 +159,19 @@ def test_prediction_progress_bar_and_modes(capsys):
     from cfbmarkov.markov.prediction import PredictionProgress
 
     shown = PredictionProgress("bar", 0.0, 40, 0.025, 10)
+    shown.ran(20)
+    assert shown.run_bar.n == 20 and shown.run_bar.total == 40      # the lags run
+    shown.ran(40)
+    shown.carried(30, 80)
+    assert (shown.run_bar.n, shown.run_bar.total) == (30, 80)       # then the properties
+    assert shown.run_bar.desc.startswith("predict 1 s: properties")
     shown.chain_done()
     for k in (32, 40):
         shown.written(k)
     shown.close("x.h5")
     err = capsys.readouterr().err
     assert "\r" in err and "40/40 lags written" in err and "predict 1 s" in err
+    assert "predict 1 s: Monte Carlo" in err and "/40 lags run" in err
     assert "s/s" not in err and "-00:00" not in err
     quiet = PredictionProgress(False, 0.0, 40, 0.025, 10)
     quiet.chain_done()

@@ -654,3 +654,33 @@ def test_a_run_in_pieces_draws_what_one_piece_draws(monkeypatch, coherence, regi
     pieces = run_chain(chain, initial, steps, 11, row_offset=offset, coherence=coherence)
     assert np.array_equal(whole[0], pieces[0]) and np.array_equal(whole[1], pieces[1])
     assert np.any(whole[1] != 0)                                         # laps moved
+
+
+@pytest.mark.parametrize("coherence", [0.0, 0.4])
+def test_an_open_riser_run_in_pieces_draws_what_one_piece_draws(monkeypatch, coherence):
+    """run_open_chain also runs in pieces (a Ctrl-C between them): any piece size gives the
+    same states, newcomers and exits bit for bit, and its progress counts the lags run up
+    to the end."""
+    from cfbmarkov.markov import montecarlo
+    from cfbmarkov.markov.montecarlo import SparseChain
+    from cfbmarkov.markov.open_montecarlo import run_open_chain
+
+    rng = np.random.default_rng(5)
+    s = 9
+    matrix = rng.random((s, s)) * (rng.random((s, s)) < 0.5) + 0.05 * np.eye(s)
+    matrix /= matrix.sum(axis=1, keepdims=True)
+    zeros = np.zeros((s, s))
+    chain = SparseChain.from_matrix(matrix, zeros, zeros)
+    exit_probability = np.where(np.arange(s) >= s - 3, 0.3, 0.0)
+    entry = np.where(np.arange(s) < 3, 1.0, 0.0)
+    initial = rng.integers(0, s, 40)
+    steps = 83
+    whole, start = run_open_chain(chain, exit_probability, entry, 2.5, initial, steps, 13,
+                                  coherence=coherence)
+    shown = []
+    monkeypatch.setattr(montecarlo, "PIECE_PARTICLE_STEPS", 5 * whole.shape[1])
+    pieces, start_p = run_open_chain(chain, exit_probability, entry, 2.5, initial, steps, 13,
+                                     coherence=coherence, progress=shown.append)
+    assert np.array_equal(whole, pieces) and np.array_equal(start, start_p)
+    assert shown == list(range(4, steps, 5)) + [steps]
+    assert (whole[-1] == -1).sum() > 40 and whole.shape[1] > 150     # exits and newcomers

@@ -15,14 +15,19 @@ depend only on its own path, so the result is the same for any number of threads
 
 from __future__ import annotations
 
+from functools import partial
+
 import numba as nb
 import numpy as np
 
+from cfbmarkov.markov import montecarlo
+
 
 @nb.njit(cache=True, parallel=True)
-def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic, out):
-    """The values of the linear properties of every particle at every frame (Numba,
-    parallel over particles).
+def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic, first, last,
+                      top, out):
+    """The values of the linear properties of every particle at the frames ``first`` ..
+    ``last`` (Numba, parallel over particles).
 
     Parameters
     ----------
@@ -39,27 +44,33 @@ def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic,
     periodic : bool
         A periodic riser (passes from the lap counters) or an open one (entries at the
         first frame a newcomer is present).
+    first, last : int
+        The frames filled (0 <= first <= last < T); for ``first`` > 0 the frame
+        ``first - 1`` is read as filled, so that a run is made in pieces
+        (:func:`run_properties`) with the same values as in one.
+    top : ndarray of int64, shape (N,)
+        Each particle's highest lap counter so far: set at frame 0, read and updated after.
     out : ndarray of float64, shape (P, T, N)
-        Filled in place; NaN where a particle is absent.
+        Frames ``first`` .. ``last`` filled in place; NaN where a particle is absent.
     """
     n_props = a.shape[0]
-    n_frames, n = states.shape
+    n = states.shape[1]
     block = 256                 # particles side by side: each frame's row is read in order
     for c in nb.prange((n + block - 1) // block):
         lo = c * block
         hi = min(lo + block, n)
-        top = np.empty(hi - lo, np.int64)
-        for p in range(lo, hi):
-            top[p - lo] = laps[0, p]
-            for q in range(n_props):
-                out[q, 0, p] = initial[q, p] if states[0, p] >= 0 else np.nan
-        for k in range(1, n_frames):
+        if first == 0:
+            for p in range(lo, hi):
+                top[p] = laps[0, p]
+                for q in range(n_props):
+                    out[q, 0, p] = initial[q, p] if states[0, p] >= 0 else np.nan
+        for k in range(max(first, 1), last + 1):
             for p in range(lo, hi):
                 s_prev = states[k - 1, p]
                 s = states[k, p]
                 passed = False
-                if periodic and laps[k, p] > top[p - lo]:
-                    top[p - lo] = laps[k, p]
+                if periodic and laps[k, p] > top[p]:
+                    top[p] = laps[k, p]
                     passed = True
                 for q in range(n_props):
                     if s < 0:
@@ -75,10 +86,10 @@ def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic,
 
 @nb.njit(cache=False, parallel=True)
 def custom_property(function, states, laps, parameters, lag, substeps, reset, initial,
-                    entry_value, periodic, index, values):
-    """The values of a custom-law property (Numba, parallel over particles): each lag
-    ``substeps`` classical RK4 steps of dv/dt = function(v, parameters[s], values at the
-    lag's start), the state s held.
+                    entry_value, periodic, index, first, last, top, values):
+    """The values of a custom-law property at the frames ``first`` .. ``last`` (Numba,
+    parallel over particles): each lag ``substeps`` classical RK4 steps of
+    dv/dt = function(v, parameters[s], values at the lag's start), the state s held.
 
     Parameters
     ----------
@@ -100,19 +111,28 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
     periodic : bool
     index : int
         The property's position q in ``values``.
+    first, last : int
+        The frames filled, as in :func:`linear_properties`.
+    top : ndarray of int64, shape (N,)
+        Each particle's highest lap counter so far (set at frame 0, updated after).
     values : ndarray of float64, shape (P, T, N)
-        All properties; row ``index`` is filled in place (the earlier rows are read).
+        All properties; row ``index`` is filled in place at those frames (the earlier rows
+        are read).
     """
     n_props = values.shape[0]
-    n_frames, n = states.shape
+    n = states.shape[1]
     h = lag / substeps
     for p in nb.prange(n):
         others = np.empty(n_props)
-        s = states[0, p]
-        v = initial[p] if s >= 0 else np.nan
-        values[index, 0, p] = v
-        top = laps[0, p]
-        for k in range(1, n_frames):
+        if first == 0:
+            s = states[0, p]
+            v = initial[p] if s >= 0 else np.nan
+            values[index, 0, p] = v
+            top[p] = laps[0, p]
+        else:
+            s = states[first - 1, p]
+            v = values[index, first - 1, p]
+        for k in range(max(first, 1), last + 1):
             s_prev = s
             s = states[k, p]
             if s < 0:
@@ -129,8 +149,8 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
                     k3 = function(v + 0.5 * h * k2, row, others)
                     k4 = function(v + h * k3, row, others)
                     v = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-                if periodic and laps[k, p] > top:
-                    top = laps[k, p]
+                if periodic and laps[k, p] > top[p]:
+                    top[p] = laps[k, p]
                     if reset:
                         v = entry_value
             values[index, k, p] = v
@@ -138,7 +158,7 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
 
 def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndarray,
                    periodic: bool, initial: np.ndarray | None = None,
-                   direction: str = "up") -> np.ndarray:
+                   direction: str = "up", progress=None) -> np.ndarray:
     """Every property of every particle at every frame of a Monte Carlo run.
 
     Parameters
@@ -159,6 +179,12 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
         riser's ``entry`` properties reset at passes up through the top to a new lap
         maximum, or for "down" at passes down through the bottom to a new lap minimum, as
         the chain's exact answers count residences.
+    progress : callable, optional
+        ``progress(done, total)`` is called after each piece of the work, in lags: one
+        pass over the run for the linear properties together and one for each custom law
+        (pieces of about :data:`~cfbmarkov.markov.montecarlo.PIECE_PARTICLE_STEPS`
+        particle-steps, RK4 substeps counted, between which a Ctrl-C is taken; the values
+        do not depend on the pieces).
 
     Returns
     -------
@@ -185,27 +211,51 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
     reset = np.array([st != "carried" for st in sk.starts])
     values = np.empty((n_props,) + states.shape)
     linear = np.flatnonzero(sk.linear)
+    custom = np.flatnonzero(~sk.linear)
+    last_frame = states.shape[0] - 1
+    passes = (1 if linear.size else 0) + custom.size
+    top = np.empty(n, np.int64)
+    done = 0
+
+    def in_pieces(cost, run):
+        """run(first, last) over the frames in pieces of about PIECE_PARTICLE_STEPS
+        particle-steps of ``cost`` each."""
+        nonlocal done
+        piece = max(1, int(montecarlo.PIECE_PARTICLE_STEPS // max(n * cost, 1)))
+        for first in range(0, last_frame + 1, piece):
+            last = min(last_frame, first + piece - 1)
+            run(first, last)
+            if progress is not None:
+                progress(done + last, passes * last_frame)
+        done += last_frame
+
     if linear.size:
         a, b = sk.over(lag)
         # all linear (the usual case): straight into the result, no copy
         part = values if linear.size == n_props else np.empty((linear.size,) + states.shape)
-        linear_properties(states, laps, np.ascontiguousarray(a[linear]),
-                          np.ascontiguousarray(b[linear]), reset[linear],
-                          np.ascontiguousarray(initial[linear]), sk.initial[linear],
-                          bool(periodic), part)
+        maps = (np.ascontiguousarray(a[linear]), np.ascontiguousarray(b[linear]),
+                reset[linear], np.ascontiguousarray(initial[linear]), sk.initial[linear],
+                bool(periodic))
+        in_pieces(linear.size, lambda first, last: linear_properties(
+            states, laps, *maps, first, last, top, part))
         if part is not values:
             values[linear] = part
-    custom = np.flatnonzero(~sk.linear)
     values[custom] = np.nan        # a custom law that reads one not yet computed reads NaN
     for q in custom:
         law = sk.laws[q]
         _check_custom_start(sk, int(q), states)
-        custom_property(law.function, states, laps,
-                        np.ascontiguousarray(sk.parameters[q], dtype=np.float64), float(lag),
-                        int(law.substeps), bool(reset[q]), initial[q], float(sk.initial[q]),
-                        bool(periodic), int(q), values)
+        arguments = (law.function, states, laps,
+                     np.ascontiguousarray(sk.parameters[q], dtype=np.float64), float(lag),
+                     int(law.substeps), bool(reset[q]), initial[q], float(sk.initial[q]),
+                     bool(periodic), int(q))
+        in_pieces(4 * int(law.substeps), partial(_custom_piece, arguments, top, values))
         _warn_not_finite(sk.names[q], values[q], states >= 0)
     return values
+
+
+def _custom_piece(arguments, top, values, first, last) -> None:
+    """:func:`custom_property` over the frames ``first`` .. ``last``."""
+    custom_property(*arguments, first, last, top, values)
 
 
 def _check_custom_start(sk, q: int, states: np.ndarray) -> None:

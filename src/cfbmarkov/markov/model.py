@@ -521,8 +521,8 @@ class MarkovModel:
         return rtd
 
     # -- Monte Carlo -------------------------------------------------------------------
-    def monte_carlo(self, initial_states, n_steps: int, seed: int = 0, initial_laps=None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+    def monte_carlo(self, initial_states, n_steps: int, seed: int = 0, initial_laps=None,
+                    progress=None) -> tuple[np.ndarray, np.ndarray]:
         """Monte Carlo of the chain (paper Eq. 7): every particle draws its next state from
         its row of P, lag by lag, and carries a lap counter.
 
@@ -537,6 +537,10 @@ class MarkovModel:
             step), whatever the thread count.
         initial_laps : array_like of int, shape (N,), optional
             Lap counters at the start (0 when None).
+        progress : callable, optional
+            ``progress(steps)`` is called with the lags run so far after each piece of the
+            run (pieces of about 2e7 particle-steps, between which a Ctrl-C is taken; the
+            draws do not depend on the pieces).
 
         Returns
         -------
@@ -592,10 +596,10 @@ class MarkovModel:
                 return with_regime(states, path[steps], space)
         if self.open_flow is not None:
             states = self.open_flow.monte_carlo(chain, initial_states, n_steps, seed, offset,
-                                                retag, self.coherence)
+                                                retag, self.coherence, progress)
             return states, np.zeros_like(states)
         return run_chain(chain, initial_states, n_steps, seed, initial_laps, offset,
-                         self.coherence)
+                         self.coherence, progress)
 
     def initial_states(self, trajectories, start: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The particles' states, positions and laps in the frame at ``start``

@@ -181,7 +181,8 @@ def monte_carlo_steps(initial_states, initial_laps, row_start, column, cumulativ
 
 
 def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initial_laps=None,
-              row_offset=None, coherence: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+              row_offset=None, coherence: float = 0.0, progress=None
+              ) -> tuple[np.ndarray, np.ndarray]:
     """States and laps of a Monte Carlo run from ``initial_states``.
 
     Parameters
@@ -201,6 +202,10 @@ def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initi
         times S, :mod:`cfbmarkov.markov.regimes`); None: zeros.
     coherence : float, optional
         Probability that a particle takes its row's common draw (:mod:`.coherence`).
+    progress : callable, optional
+        ``progress(steps)`` is called with the lags run so far after each piece of the run
+        (pieces of about :data:`PIECE_PARTICLE_STEPS` particle-steps, between which a
+        Ctrl-C is taken).
 
     Returns
     -------
@@ -231,4 +236,6 @@ def run_chain(chain: SparseChain, initial_states, n_steps: int, seed: int, initi
                           chain.cumulative, chain.up_probability, chain.down_probability,
                           offset[k0:k1 + 1], float(coherence), k1 - k0, np.uint64(seed),
                           states[k0:k1 + 1], laps[k0:k1 + 1], k0)
+        if progress is not None:
+            progress(k1)
     return states, laps

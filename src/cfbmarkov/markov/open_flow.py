@@ -149,8 +149,8 @@ class OpenFlow:
         return open_rtd(absorbing, self.exit_probability, self.entry_distribution, lag)
 
     def monte_carlo(self, chain: SparseChain, initial_states: np.ndarray, n_steps: int,
-                    seed: int, row_offset=None, retag=None, coherence: float = 0.0
-                    ) -> np.ndarray:
+                    seed: int, row_offset=None, retag=None, coherence: float = 0.0,
+                    progress=None) -> np.ndarray:
         """States of a Monte Carlo run with outflow and inflow
         (:func:`~cfbmarkov.markov.open_montecarlo.run_open_chain`).
 
@@ -171,6 +171,9 @@ class OpenFlow:
             entry steps.
         coherence : float, optional
             Probability that a particle takes its row's common draw.
+        progress : callable, optional
+            ``progress(steps)``, called with the lags run so far after each piece of the
+            run.
 
         Returns
         -------
@@ -180,7 +183,7 @@ class OpenFlow:
         """
         states, _ = run_open_chain(chain, self.exit_probability, self.entry_distribution,
                                    self.inflow_per_lag, initial_states, n_steps, seed,
-                                   row_offset, retag, coherence)
+                                   row_offset, retag, coherence, progress)
         return states
 
     # -- the model file ----------------------------------------------------------------

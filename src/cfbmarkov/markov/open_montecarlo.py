@@ -17,6 +17,7 @@ import numba as nb
 import numpy as np
 
 from cfbmarkov._random import uniform
+from cfbmarkov.markov import montecarlo
 from cfbmarkov.markov.montecarlo import SparseChain, first_above, state_draw
 
 #: random-number streams of the open riser (the periodic ones use 0-3)
@@ -50,8 +51,8 @@ def _entry_states(seed, cumulative, first, out):
 
 @nb.njit(cache=True, parallel=True)
 def open_steps(initial_states, start_step, exit_probability, row_start, column, cumulative,
-               row_offset, coherence, n_steps, seed, states_out):
-    """Advance every particle from its start step to ``n_steps`` (Numba, parallel over
+               row_offset, coherence, first, last, seed, states_out):
+    """Advance every particle over the steps ``first`` .. ``last`` (Numba, parallel over
     particles): each lag it leaves through the outlet with probability r_s (then it is
     absent, -1, for good), else it takes the first entry of its row of P whose cumulative
     probability exceeds a uniform draw (Eq. 7).
@@ -72,16 +73,21 @@ def open_steps(initial_states, start_step, exit_probability, row_start, column, 
     coherence : float
         Probability that a particle takes its row's common draw
         (:func:`~cfbmarkov.markov.montecarlo.state_draw`).
-    n_steps : int
-        Lags to run.
+    first, last : int
+        The steps filled (0 <= first <= last <= n_steps); for ``first`` > 0 the row
+        ``first - 1`` is read as filled. The draws of step k depend on (seed, particle, k)
+        alone, so a run made in pieces (:func:`run_open_chain`) draws what one piece would.
     seed : numpy.uint64
         Seed of the counter-based generator.
     states_out : ndarray of int32, shape (n_steps + 1, N)
-        Filled in place (-1 where a particle is absent).
+        Rows ``first`` .. ``last`` filled in place (-1 where a particle is absent).
     """
     for p in nb.prange(initial_states.size):
-        s = initial_states[p]
-        for k in range(0, n_steps + 1):
+        if first == 0 or start_step[p] >= first:
+            s = initial_states[p]
+        else:
+            s = states_out[first - 1, p]
+        for k in range(first, last + 1):
             if k < start_step[p]:
                 states_out[k, p] = -1
                 continue
@@ -100,7 +106,7 @@ def open_steps(initial_states, start_step, exit_probability, row_start, column, 
 
 def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.ndarray,
                    inflow_per_lag: float, initial_states, n_steps: int, seed: int,
-                   row_offset=None, retag=None, coherence: float = 0.0
+                   row_offset=None, retag=None, coherence: float = 0.0, progress=None
                    ) -> tuple[np.ndarray, np.ndarray]:
     """States of an open riser's Monte Carlo run.
 
@@ -128,6 +134,10 @@ def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.n
         entry steps (a regime model sets the regime of the path at entry).
     coherence : float, optional
         Probability that a particle takes its row's common draw.
+    progress : callable, optional
+        ``progress(steps)`` is called with the lags run so far after each piece of the run
+        (pieces of about :data:`~cfbmarkov.markov.montecarlo.PIECE_PARTICLE_STEPS`
+        particle-steps, between which a Ctrl-C is taken).
 
     Returns
     -------
@@ -152,9 +162,14 @@ def run_open_chain(chain: SparseChain, exit_probability: np.ndarray, entry: np.n
     offset = (np.zeros(n_steps + 1, np.int64) if row_offset is None
               else np.ascontiguousarray(row_offset, dtype=np.int64))
     states = np.empty((n_steps + 1, states0.size), np.int32)
-    open_steps(states0, start, np.ascontiguousarray(exit_probability, dtype=np.float64),
-               chain.row_start, chain.column, chain.cumulative, offset, float(coherence),
-               int(n_steps),
-               np.uint64(seed),
-               states)
+    exit_probability = np.ascontiguousarray(exit_probability, dtype=np.float64)
+    # in pieces, so that a Ctrl-C is taken between them (the same bits in one or many)
+    piece = max(1, montecarlo.PIECE_PARTICLE_STEPS // max(states0.size, 1))
+    for first in range(0, int(n_steps) + 1, piece):
+        last = min(int(n_steps), first + piece - 1)
+        open_steps(states0, start, exit_probability, chain.row_start, chain.column,
+                   chain.cumulative, offset, float(coherence), first, last, np.uint64(seed),
+                   states)
+        if progress is not None:
+            progress(last)
     return states, start

@@ -188,9 +188,8 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
                                                laps0[present0], ids[present0])
         shown = (PredictionProgress(progress, start, n_steps, model.lag, states0.size)
                  if output is not None else None)
-        states, laps = model.monte_carlo(states0, n_steps, seed, laps0)
-        if shown is not None:
-            shown.chain_done()
+        states, laps = model.monte_carlo(states0, n_steps, seed, laps0,
+                                         None if shown is None else shown.ran)
         times = start + model.lag * np.arange(n_steps + 1)
         if states.shape[1] > ids.size:      # newcomers through the inlet: new ids
             first = int(traj.ids.max()) + 1 if traj.ids.size else 0
@@ -198,7 +197,10 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
         values = None
         if kinetics is not None:
             values = _properties(model, traj, kinetics, start, states, laps,
-                                 np.flatnonzero(present0))
+                                 np.flatnonzero(present0),
+                                 None if shown is None else shown.carried)
+        if shown is not None:
+            shown.chain_done()
         if output is None:
             return (times, states, laps) if values is None else (times, states, laps, values)
         return write_prediction(model, traj, times, states, laps, positions0, seed, output,
@@ -206,9 +208,11 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
                                 properties=None if values is None else (kinetics, values))
 
 
-def _properties(model, traj, kinetics, start, states, laps, present) -> np.ndarray:
+def _properties(model, traj, kinetics, start, states, laps, present, progress=None
+                ) -> np.ndarray:
     """The properties [P, K+1, N] of a run (:func:`predict`), the reference's values at
-    ``start`` for a ``reference`` start."""
+    ``start`` for a ``reference`` start; ``progress(done, total)`` as in
+    :func:`~cfbmarkov.markov.kinetics_mc.run_properties`."""
     from cfbmarkov.markov.kinetics_mc import run_properties
 
     if model.boundary.is_open and "carried" in kinetics.starts:
@@ -221,7 +225,7 @@ def _properties(model, traj, kinetics, start, states, laps, present) -> np.ndarr
             initial[q, :present.size] = traj.property_values(name, frame)[present]
     return run_properties(kinetics, model.lag, states, laps,
                           periodic=not model.boundary.is_open, initial=initial,
-                          direction=model.flow_direction)
+                          direction=model.flow_direction, progress=progress)
 
 
 def check_reference_starts(traj, kinetics, start: float) -> int:
@@ -447,17 +451,20 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
     return Path(output)
 
 
-#: wall seconds between two lines of progress (``progress="lines"``) while frames are written
+#: wall seconds between two lines of progress (``progress="lines"``) while the Monte Carlo
+#: runs, its properties are carried or frames are written
 LINE_INTERVAL = 10.0
 
 
 class PredictionProgress:
-    """Progress of a prediction on stderr: the Monte Carlo run, then its frames written.
+    """Progress of a prediction on stderr: the Monte Carlo run (with the properties it
+    carries), then its frames written.
 
-    As a bar of the lags written, redrawn in place (for a terminal), or as whole lines
-    starting with ``predict:`` (readable in a log file): one at the start, one when the
-    Monte Carlo is done, one every :data:`LINE_INTERVAL` s of wall time while frames are
-    written and one at the end.
+    As bars redrawn in place (for a terminal: the lags run, the properties' share done,
+    then the lags written), or as whole lines starting with ``predict:`` (readable in a log
+    file): one at the start, one every :data:`LINE_INTERVAL` s of wall time while the Monte
+    Carlo runs, its properties are carried or frames are written, one when the Monte Carlo
+    is done and one at the end.
 
     Parameters
     ----------
@@ -482,28 +489,71 @@ class PredictionProgress:
     def __init__(self, progress, start: float, n_steps: int, lag: float, particles: int):
         self.mode = progress_mode(progress)
         self.start, self.n_steps, self.lag = start, n_steps, lag
-        self.t0 = self.t_line = time.perf_counter()
+        self.t0 = self.t_line = self.t_stage = time.perf_counter()
         self.t_chain = None
         self.done = 0
-        self.bar = None
+        self.bar = self.run_bar = None
+        self.carrying = False
         span = f"{n_steps * lag:g} s from t = {start:g} s ({n_steps} lags of {lag:g} s)"
         if self.mode == "bar":
-            from tqdm import tqdm
-
-            self.bar = tqdm(total=n_steps, unit="lag", file=sys.stderr, leave=True,
-                            desc=f"predict {n_steps * lag:g} s", dynamic_ncols=True,
-                            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
-                                       "lags written [{elapsed} so far, {remaining} left]")
+            self.run_bar = self._bar(n_steps, f"predict {n_steps * lag:g} s: Monte Carlo",
+                                     "lags run", leave=False)
         elif self.mode == "lines":
             self._line(f"{span}, {particles} particles: Monte Carlo, then the frames written")
+
+    @staticmethod
+    def _bar(total: int, desc: str, counted: str, leave: bool):
+        from tqdm import tqdm
+
+        return tqdm(total=total, file=sys.stderr, leave=leave, desc=desc, dynamic_ncols=True,
+                    bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} "
+                               f"{counted} [{{elapsed}} so far, {{remaining}} left]")
 
     def _line(self, text: str) -> None:
         write_line(f"predict: {text}")
 
+    def _due(self) -> float | None:
+        """The wall time now where a line is due, else None."""
+        now = time.perf_counter()
+        return now if now - self.t_line >= LINE_INTERVAL else None
+
+    def ran(self, steps: int) -> None:
+        """The Monte Carlo has run ``steps`` of its lags (0 .. n_steps)."""
+        if self.run_bar is not None:
+            self.run_bar.update(steps - self.run_bar.n)
+        elif self.mode == "lines" and 0 < steps < self.n_steps and (now := self._due()):
+            left = (now - self.t0) * (self.n_steps - steps) / steps
+            self._line(f"Monte Carlo {steps * self.lag:g}/{self.n_steps * self.lag:g} s run, "
+                       f"{clock_text(now - self.t0)} so far, about {clock_text(left)} left")
+            self.t_line = now
+
+    def carried(self, done: int, total: int) -> None:
+        """The properties are carried along ``done`` of the ``total`` lags to go over (a
+        pass over the run for the linear laws, one for each custom law)."""
+        if not self.carrying:
+            self.carrying, self.t_stage = True, time.perf_counter()
+            if self.run_bar is not None:
+                self.run_bar.reset(total=total)
+                self.run_bar.set_description(f"predict {self.n_steps * self.lag:g} s: "
+                                             "properties")
+        if self.run_bar is not None:
+            self.run_bar.update(done - self.run_bar.n)
+        elif self.mode == "lines" and 0 < done < total and (now := self._due()):
+            left = (now - self.t_stage) * (total - done) / done
+            self._line(f"properties {100.0 * done / total:.0f} % carried, "
+                       f"{clock_text(now - self.t0)} so far, about {clock_text(left)} left")
+            self.t_line = now
+
     def chain_done(self) -> None:
-        """The Monte Carlo run is done; the frames are written next."""
+        """The Monte Carlo run (and its properties) is done; the frames are written next."""
         self.t_chain = time.perf_counter()
-        if self.mode == "lines":
+        if self.run_bar is not None:
+            self.run_bar.close()
+            self.run_bar = None
+        if self.mode == "bar":
+            self.bar = self._bar(self.n_steps, f"predict {self.n_steps * self.lag:g} s",
+                                 "lags written", leave=True)
+        elif self.mode == "lines":
             self._line(f"Monte Carlo done in {clock_text(self.t_chain - self.t0)}; writing "
                        f"{self.n_steps + 1} frames")
 
