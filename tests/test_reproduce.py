@@ -195,6 +195,48 @@ def test_other_configuration_in_the_same_folder_is_refused(reference, tmp_path, 
     assert len(err) == 1 and "another configuration" in err[0]
 
 
+def test_other_markov_settings_are_refused_with_the_way_to_refit_the_same_cfd_dem(
+        reference, tmp_path, capsys):
+    """Overrides that differ in [markov] alone are refused in the earlier folder, naming the
+    way to fit them on the same CFD-DEM: a new folder with the case's cfd-dem.h5 linked in,
+    where only the Markov stages run. The case folder's own check says the same; a change of
+    physics does not get the hint."""
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.reproduce_case import check_case_folder
+
+    out, _ = reference
+    other = tmp_path / "other.toml"
+    other.write_text(TINY.replace("fit_window = [0.2, 0.5]", "fit_window = [0.3, 0.5]"))
+    capsys.readouterr()
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(other), "--velocities", "8",
+                 "-o", str(out), "--jobs", "1", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "differ in [markov] alone" in err[0], err
+    assert f"link {out / 'u8' / 'cfd-dem.h5'} into the new folder's u8/" in err[0]
+    # the way it names is open: the linked file passes the checks made before any stage
+    from cfbmarkov.cases.scales import load_overrides, scale_cases
+    from cfbmarkov.reproduce import check_run_folder
+
+    new = tmp_path / "refit"
+    (new / "u8").mkdir(parents=True)
+    (new / "u8" / "cfd-dem.h5").symlink_to(out / "u8" / "cfd-dem.h5")
+    saved = scale_cases("quick", [8.0], load_overrides(other))[0]
+    assert saved.markov.fit_window == (0.3, 0.5)
+    check_run_folder(new, [saved], ["u8"], 1)
+    with pytest.raises(InputError, match=r"differ in \[markov\] alone: to fit them"):
+        check_case_folder(out / "u8", saved)
+    # cases of other velocities in that folder: the manifest's overrides say the same
+    assert main(["reproduce", "--scale", "quick", "--overrides", str(other), "--velocities", "9",
+                 "-o", str(out), "--jobs", "1", "-q"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "another --overrides" in err[0], err
+    assert f"link each case's cfd-dem.h5, {out / '<case>' / 'cfd-dem.h5'}" in err[0]
+    physics = saved.model_copy(update={"seed": saved.seed + 1})
+    with pytest.raises(InputError, match="another configuration") as refused:
+        check_case_folder(out / "u8", physics)
+    assert "[markov]" not in str(refused.value)
+
+
 @pytest.mark.slow
 def test_resume_after_kill_mid_simulation_equals_uninterrupted(reference, tmp_path):
     ref, overrides = reference

@@ -421,10 +421,18 @@ def earlier_manifest(out: Path, scale: Scale, overrides, ensemble: int,
         before = earlier.get(key, 1 if key == "ensemble" else None)
         now = json.loads(json.dumps(now))          # as the manifest stores it (tuples: lists)
         if before != now:
+            hint = ""
+            if (key == "overrides" and isinstance(before, dict) and isinstance(now, dict)
+                    and {k: v for k, v in before.items() if k != "markov"}
+                    == {k: v for k, v in now.items() if k != "markov"}):
+                hint = (" (they differ in [markov] alone: to fit those on the same CFD-DEM, "
+                        f"link each case's cfd-dem.h5, {out / '<case>' / 'cfd-dem.h5'}, into "
+                        "the new folder's <case>/ before the run, and only the Markov stages "
+                        "run)")
             raise InputError(f"{out}: holds a reproduction of another {shown} ({key} "
                              f"{json.dumps(before)}, now {json.dumps(now)}) whose cases its "
                              "report covers; give another folder with -o, or the same "
-                             f"{shown} to add cases to it")
+                             f"{shown} to add cases to it{hint}")
     before = earlier.get("kinetics")
     if isinstance(before, dict) and (kinetics is None
                                      or before.get("digest") != kinetics.get("digest")):

@@ -126,8 +126,18 @@ def check_case_folder(folder: str | os.PathLike, case: CaseConfig) -> bool:
     if previous != case:
         raise InputError(f"{folder} holds a run of another configuration ({saved}: "
                          f"{case_difference(previous, case)}); use another output directory "
-                         "or delete that folder")
+                         "or delete that folder" + markov_only_hint(previous, case, folder))
     return True
+
+
+def markov_only_hint(previous: CaseConfig, case: CaseConfig, folder: Path) -> str:
+    """The way to other Markov settings on a case's CFD-DEM, where the two cases differ in
+    their ``[markov]`` tables alone (else "")."""
+    if previous.model_dump(exclude={"markov"}) != case.model_dump(exclude={"markov"}):
+        return ""
+    return (f" (the two differ in [markov] alone: to fit them on this CFD-DEM, link "
+            f"{folder / 'cfd-dem.h5'} into the new folder's {folder.name}/ before the run, "
+            "and only the Markov stages run)")
 
 
 def run_case(case_json: str, directory: str, models: Sequence[str] = MODELS,
