@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from cfbmarkov.cli import main
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import CfbmarkovWarning, InputError
 from cfbmarkov.io import import_file, resolve_format
 from cfbmarkov.trajectories import Trajectories
 
@@ -108,8 +108,10 @@ def test_legacy_vtk_without_ids_numbers_points_and_refuses_a_changing_count(tmp_
     pos, vel, _ = _motion()
     for k in range(3):
         _write_legacy(tmp_path / f"dump{k * 10}.vtk", pos[k], vel[k], IDS, False, with_id=False)
-    out = import_file(str(tmp_path / "dump*.vtk"), None, tmp_path / "n.h5", time_step=1e-3,
-                      vertical_axis="z", region=((0, W), (0, DEPTH), (0, H)), drop_depth=True)
+    with pytest.warns(CfbmarkovWarning, match="no 'id' point array: particle k is taken"):
+        out = import_file(str(tmp_path / "dump*.vtk"), None, tmp_path / "n.h5", time_step=1e-3,
+                          vertical_axis="z", region=((0, W), (0, DEPTH), (0, H)),
+                          drop_depth=True)
     with Trajectories(out) as t:
         np.testing.assert_array_equal(t.ids, [1, 2, 3])
         assert "point order" in t.parameters["ids_from"]
@@ -118,9 +120,40 @@ def test_legacy_vtk_without_ids_numbers_points_and_refuses_a_changing_count(tmp_
     code = main(["import", str(tmp_path / "dump*.vtk"), "--time-step", "1e-3", "--vertical-axis",
                  "z", "--drop-depth", "--region", "0:0.09,0:0.003,0:0.95", "-o",
                  str(tmp_path / "m.h5")])
-    err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1 and "no 'id' point array" in err
+    lines = capsys.readouterr().err.splitlines()
+    assert code == 2 and len(lines) == 2 and "no 'id' point array tells" in lines[1]
+    assert lines[0].startswith("note: ") and "the tracks are mixed" in lines[0]
     assert not (tmp_path / "m.h5").exists()
+
+
+def test_a_height_beyond_the_given_riser_is_refused_not_wrapped(tmp_path, capsys):
+    """Files with no periodic box (legacy VTK without its box, export-vtk's .vtu) on a
+    periodic riser: a particle above the given --height is refused in one line, not wrapped
+    into the riser by a period the files do not give (it moved particle 3 from 0.7 to 0.2 m
+    with --height 0.5); the riser's own height imports."""
+    from cfbmarkov.io.vtk import export_vtk
+    from tests.io.test_vtk import H as RH, W as RW, make_run
+
+    pos, vel, _ = _motion()
+    for k in range(3):
+        _write_legacy(tmp_path / f"dump{k * 10}.vtk", pos[k], vel[k], IDS, False)
+    argv = ["import", str(tmp_path / "dump*.vtk"), "--time-step", "1e-3", "--vertical-axis",
+            "z", "--drop-depth", "--region", f"0:{W},0:{DEPTH},0:0.6", "-o", str(tmp_path / "s.h5")]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "particle 7 at t = 0 s lies at z = 0.85 m, outside the " \
+        "riser's vertical range 0..0.6 m" in err and "give a taller --height" in err
+    assert not (tmp_path / "s.h5").exists()
+    argv[argv.index("--region") + 1] = f"0:{W},0:{DEPTH},0:{H}"
+    assert main(argv) == 0
+    capsys.readouterr()
+    make_run(tmp_path / "run.h5")
+    folder = export_vtk(tmp_path / "run.h5", tmp_path / "vtk")
+    short = ["import", str(folder), "--width", str(RW), "--height", str(0.8 * RH), "-o",
+             str(tmp_path / "back.h5")]
+    assert main(short) == 2
+    assert "outside the riser's vertical range" in capsys.readouterr().err
+    assert main(short[:5] + [str(RH)] + short[6:]) == 0
 
 
 def test_legacy_vtk_needs_a_time(tmp_path, capsys):

@@ -198,9 +198,12 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
                            with_velocity=velocity, label=label,
                            **riser.writer_options()) as writer:
             columns = FrameColumns(writer)
+            v = riser.vertical
+            period_from_box = bool(riser.periodic[1] and box is not None and v < len(box)
+                                   and np.all(np.isfinite(box[v])) and box[v][1] > box[v][0])
             for frame in progress(itertools.chain([first], frames), label):
                 _append(writer, columns, frame, first, riser, flat_z, image,
-                        series.box_origin_unknown and riser.from_box)
+                        series.box_origin_unknown and riser.from_box, period_from_box)
             if not writer.any_present:
                 raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
                                  "particle in any frame; check --region (or --width/--height)")
@@ -232,7 +235,8 @@ def _depth_spread(first: ParticleFrame, frames):
 
 
 def _append(writer, columns: FrameColumns, frame: ParticleFrame, first: ParticleFrame, riser,
-            flat_z: float | None, use_image: bool, check_origin: bool) -> None:
+            flat_z: float | None, use_image: bool, check_origin: bool,
+            period_from_box: bool) -> None:
     where = frame.where
     if riser.from_box and frame.box is not None and first.box is not None:
         scale = float(np.abs(first.box).max()) or 1.0
@@ -256,6 +260,7 @@ def _append(writer, columns: FrameColumns, frame: ParticleFrame, first: Particle
             "is vertical with --vertical-axis x|y|z (or --drop-depth with it for a projection)")
     if check_origin:
         _check_inside_box(raw, frame, riser)
+    _check_periodic_height(raw, frame, riser, period_from_box)
     image = frame.image[:, riser.vertical] if use_image and frame.image is not None else None
     positions, inside, laps = riser_positions(raw, riser, image=image)
     vel = None
@@ -266,6 +271,30 @@ def _append(writer, columns: FrameColumns, frame: ParticleFrame, first: Particle
     full, v, lap, present = columns.frame(frame.ids, positions, inside, vel, laps,
                                           f"{where}, t = {frame.time:g} s")
     writer.append(frame.time, full, v, lap, present)
+
+
+def _check_periodic_height(raw: np.ndarray, frame: ParticleFrame, riser,
+                           period_from_box: bool) -> None:
+    """A periodic riser whose period is the given region's, not a periodic box's (a file
+    with no box, or ``export-vtk``'s, which says periodic and gives no box): every height
+    must lie in the region. Particles above or below it would be wrapped into it by a period
+    that is the user's guess (a --height shorter than the riser), moved silently."""
+    if riser.boundary.is_open or riser.from_box or period_from_box:
+        return                  # a periodic box's wrap (the region must equal its period)
+    lo, hi = riser.region[1]
+    y = raw[:, riser.vertical]
+    tol = POSITION_TOLERANCE + 1e-9 * max(abs(lo), abs(hi))
+    outside = (y < lo - tol) | (y > hi + tol)
+    if outside.any():
+        k = int(np.argmax(outside))
+        axis = AXES[riser.vertical]
+        raise InputError(
+            f"{frame.where}: particle {int(frame.ids[k])} at t = {frame.time:g} s lies at "
+            f"{axis} = {y[k]:g} m, outside the riser's vertical range {lo:g}..{hi:g} m: a "
+            "periodic riser holds every particle, so its vertical range must cover every "
+            "height (the files carry no periodic box to wrap by); give a taller --height or "
+            f"--region's {axis} range, or --boundary open if particles leave through the top "
+            "and bottom")
 
 
 def _check_inside_box(raw: np.ndarray, frame: ParticleFrame, riser) -> None:

@@ -2,8 +2,9 @@
 ``dump vtk``) and VTK XML ``.vtp`` series with their ``.pvd`` (MFiX-DEM, LAMMPS, pyevtk).
 
 One file holds one time step. A particle's id is its ``id`` point array (``ID``, ``Id``);
-without one, particles are numbered by their point order (1..N), which holds only while no
-particle is inserted or deleted: a file with another number of points is then refused. The
+without one, particles are numbered by their point order (1..N), with a warning: that holds
+only while the writer keeps its points in one order and no particle is inserted or deleted
+(a file with another number of points is refused). The
 velocity is the ``v``, ``vel`` or ``velocity`` vector (or ``vx vy vz`` scalars).
 
 Times: a legacy series takes them from a ``TIME`` field array where the files carry one, else
@@ -178,6 +179,17 @@ class _Frames:
         if self.n_first is None:
             self.n_first, self.ids_from, self.velocity_from = n, ids_from, velocity_from
             self.image_from = image_from
+            if ids_from is None and n > 1:
+                import warnings
+
+                from cfbmarkov.errors import CfbmarkovWarning
+
+                warnings.warn(f"{where}: no 'id' point array: particle k is taken to be the "
+                              "k-th point of every file, which holds only where the writer "
+                              "keeps its points in one order (LAMMPS sorts its atoms in "
+                              "memory, atom_modify sort, and a dump vtk follows that order); "
+                              "where it may not, write the ids (dump custom/vtk ... id), or "
+                              "the tracks are mixed", CfbmarkovWarning, stacklevel=2)
         elif ids_from != self.ids_from:
             raise InputError(f"{where}: id array {_array_text(ids_from)} here, "
                              f"{_array_text(self.ids_from)} in the first file; every file must "
