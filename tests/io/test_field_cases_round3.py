@@ -110,7 +110,7 @@ def test_pept_tracers_under_other_id_names_are_told_apart(tmp_path, capsys, name
 
 def test_a_file_read_as_one_tracer_names_the_columns_it_did_not_use(tmp_path, capsys):
     """Two tracers numbered in a column of no id name: read as one tracer, which jumps
-    between them; the refusal says the file was read as one tracer and names the column."""
+    between them; the refusal names the column, whose values split the jumps away."""
     text = (FIELD / "pept-two-tracers-noise.csv").read_text()
     rows = [line for line in text.splitlines() if not line.startswith("#")
             and float(line.split()[5]) != -1]
@@ -120,8 +120,8 @@ def test_a_file_read_as_one_tracer_names_the_columns_it_did_not_use(tmp_path, ca
     path.write_text("# t x y z error mark\n" + "\n".join(far) + "\n")
     assert main(["import", str(path), *PEPT_OPTIONS, "-o", str(tmp_path / "p.h5")]) == 2
     err = capsys.readouterr().err
-    assert "read as one tracer; not used: 'error', 'mark': if one of them numbers the " \
-           "tracers, name it id" in err and len(err.strip().splitlines()) == 1
+    assert "column 'mark' seems to number the tracers (2 whole values): read as one " \
+           "tracer, the samples jump" in err and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "p.h5").exists()
     one = tmp_path / "one.csv"              # one tracer: imported, its unused columns named
     one.write_text("# t x y z error mark\n" + "\n".join(

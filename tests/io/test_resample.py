@@ -272,3 +272,43 @@ def test_an_open_riser_does_not_interpolate_across_a_return_through_the_faces():
     assert periodic.positions[at[0.765], 0, 1] == pytest.approx(
         (0.9496 + (0.0225 + 0.95 - 0.9496) * (0.765 - 0.7598) / (0.7690 - 0.7598)) - 0.95)
     assert periodic.laps[at[0.765], 0] == 1
+
+
+def test_tracers_under_a_column_of_another_name_are_refused_not_merged(tmp_path, capsys):
+    """Two PEPT tracers numbered by a column the import does not know ('tid'): read as one
+    tracer the samples jump between them, which resampling would smooth into a plausible
+    path; the import refuses, naming the column. Named 'tracer', each is a particle; one
+    tracer with a whole-number column that does not split its samples (a detector number)
+    imports."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.trajectories import Trajectories
+
+    rng = np.random.default_rng(4)
+    t = np.sort(rng.uniform(0, 400, 600))                     # ms
+    tracer = rng.integers(0, 2, t.size)
+    x = np.where(tracer == 0, 25.0, 65.0) + 2 * np.sin(t / 50)  # mm
+    y = (100 + 2.0 * t + 300 * tracer) % 950                  # 2 m/s up
+    detector = rng.integers(1, 4, t.size)
+
+    def write(name, column):
+        path = tmp_path / name
+        rows = "\n".join(f"{a:.4f},{b:.4f},{c:.4f},{d}" for a, b, c, d in zip(t, x, y, column))
+        path.write_text(f"t,x,y,{name.split('.')[0]}\n{rows}\n")
+        return path
+
+    options = ["--length-unit", "mm", "--time-unit", "ms", "--width", "0.09", "--height",
+               "0.95", "--resample", "0.005", "--max-gap", "0.02"]
+    out = tmp_path / "p.h5"
+    assert main(["import", str(write("tid.csv", tracer)), "-o", str(out), *options]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "column 'tid' seems to number the tracers (2 whole" in err
+    assert "name the column id, tracer, label or track" in err and not out.exists()
+    assert main(["import", str(write("tracer.csv", tracer)), "-o", str(out), *options]) == 0
+    with Trajectories(out) as run:
+        assert run.n_particles == 2
+    one = write("detector.csv", detector)
+    keep = tracer == 0
+    one.write_text("\n".join(line for line, k in zip(one.read_text().splitlines(),
+                                                     [True, *keep]) if k) + "\n")
+    assert main(["import", str(one), "-o", str(tmp_path / "one.h5"), *options]) == 0
+    assert "not used: 'detector'" in capsys.readouterr().err

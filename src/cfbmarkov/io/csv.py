@@ -192,6 +192,8 @@ def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
             riser = csv_riser(layout, label, **geometry)
         rows = np.concatenate(rows) if rows else np.empty((0, len(layout.used)))
         if resample is not None:
+            if not layout.has_id:
+                _refuse_an_unnamed_tracer_column(path, label, options, layout, riser, rows)
             _write_resampled(output, path, layout, riser, rows, resample, max_gap)
             return output
         keys = (layout.ids(rows), rows[:, layout.index("t")]) if layout.has_id else (
@@ -371,6 +373,71 @@ def _write(output: Path, path: Path, layout: CsvLayout, riser: RiserFrame,
         _check_some_present(writer, riser, label)
         followed.check(layout, label)
         writer.update_parameters(read_notes(layout))
+
+
+#: a column of whole numbers is taken to number the tracers where the samples, read as one
+#: tracer, move this many times faster (median) than the samples of each of its values
+TRACER_SPEED_RATIO = 3.0
+
+
+def _refuse_an_unnamed_tracer_column(path: Path, label: str, options: dict,
+                                     layout: CsvLayout, riser: RiserFrame,
+                                     rows: np.ndarray) -> None:
+    """Refuse a file without an id column whose unused column of a few whole numbers numbers
+    its tracers (PEPT's multi-tracer output under a name that is not id, tracer, label or
+    track): read as one tracer, the track would jump between the tracers' places, which
+    resampling smooths into a plausible path. The column is read again and the samples'
+    median speed compared with that within each of its values (:data:`TRACER_SPEED_RATIO`)."""
+    import dataclasses
+
+    skipped = set(layout.usecols)
+    extra = [k for k, name in enumerate(layout.header) if k not in skipped
+             and any(ignored.startswith(name) for ignored in _unused_columns(layout))]
+    if not extra or rows.shape[0] < 4:
+        return
+    wide = dataclasses.replace(
+        layout, used=layout.used + [f"column {k}" for k in extra],
+        usecols=layout.usecols + extra, divisors=layout.divisors + [1.0] * len(extra))
+    try:
+        with open_text(path) as fh:
+            fresh = read_layout(fh, label, **options)
+            wide.pending = fresh.pending
+            table = np.concatenate(list(row_blocks(fh, wide, label, streaming=False)))
+    except (InputError, ValueError):
+        return                      # text, or rows too short: not a tracer number
+    if table.shape[0] != rows.shape[0]:
+        return
+    t = table[:, layout.index("t")]
+    xy = table[:, [layout.index(layout.across), layout.index(layout.vertical)]]
+    period = None if riser.boundary.is_open else riser.height
+
+    def median_speed(order, same=None):
+        dt = np.diff(t[order])
+        d = np.diff(xy[order], axis=0)
+        if period:
+            d[:, 1] -= period * np.round(d[:, 1] / period)
+        ok = dt > 0 if same is None else (dt > 0) & same
+        return float(np.median(np.hypot(d[ok, 0], d[ok, 1]) / dt[ok])) if ok.any() else None
+
+    overall = median_speed(np.argsort(t, kind="stable"))
+    for j, k in enumerate(extra):
+        v = table[:, len(layout.used) + j]
+        values = np.unique(v)
+        if (not np.all(np.isfinite(v)) or np.any(v != np.round(v)) or values.size < 2
+                or values.size > max(2, rows.shape[0] // 20)):
+            continue
+        order = np.lexsort((t, v))
+        within = median_speed(order, np.diff(v[order]) == 0)
+        if overall is None or within is None or overall <= TRACER_SPEED_RATIO * within:
+            continue
+        name = layout.header[k]
+        raise InputError(
+            f"{label}: column {name!r} seems to number the tracers ({values.size} whole "
+            f"values): read as one tracer, the samples jump between their places (median "
+            f"{overall:.3g} m/s from one sample to the next), while those of each value move "
+            f"at a median {within:.3g} m/s; name the column id, tracer, label or track to "
+            "import each tracer apart (or leave the column out where the file holds one "
+            "tracer)")
 
 
 def _unused_columns(layout: CsvLayout) -> list[str]:
