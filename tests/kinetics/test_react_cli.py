@@ -234,6 +234,9 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     # a misspelt parameter is named as an unknown key, not as a missing one
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrat = 1.0\n', None,
      "unknown key 'rat'"),
+    # a name that is not text: said so, not read as "the third property"
+    ('[[property]]\nname = 3\nlaw = "first-order"\nrate = 1.0\n', None,
+     "[[property]] 1: give name = \"...\" (a text in quotes: name = 3 is not)"),
     # a misspelt law key: the laws listed and the stray key named
     ('[[property]]\nname = "X"\nlwa = "first-order"\nrate = 1.0\n', None,
      "give law = \"...\" (one of first-order, deactivation, heat-exchange); unknown key 'lwa'"),
@@ -902,3 +905,11 @@ def test_react_monte_carlo_shows_its_progress_while_it_runs(fitted, tmp_path, ca
     with h5py.File(quiet) as a, h5py.File(shown) as b:
         for name in ("frames/position", "frames/lap", "properties/X", "properties/T"):
             np.testing.assert_array_equal(a[name][()], b[name][()])
+
+
+def test_a_missing_kinetics_file_says_what_to_give(fitted, capsys):
+    _, _, model = fitted
+    assert main(["react", str(model), "--kinetics", "no-such-kinetics.toml"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "cannot read kinetics file no-such-kinetics.toml: No such " \
+        "file or directory (give the path of a TOML file of [[property]] tables" in err

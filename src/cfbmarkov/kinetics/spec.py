@@ -560,7 +560,9 @@ def load_kinetics(path: str | os.PathLike) -> Kinetics:
     try:
         data = tomllib.loads(path.read_bytes().decode("utf-8-sig"))   # an editor's BOM too
     except OSError as exc:
-        raise InputError(f"cannot read kinetics file {name}: {exc.strerror or exc}") from None
+        raise InputError(f"cannot read kinetics file {name}: {exc.strerror or exc} (give the "
+                         "path of a TOML file of [[property]] tables, relative to the folder "
+                         "the command runs in)") from None
     except UnicodeDecodeError:
         from cfbmarkov._toml import binary_kind
 
@@ -593,7 +595,7 @@ def _property(table, index: int, path: Path) -> Property:
     where = f"{path} [[property]] {index + 1}"
     if not isinstance(table, dict):
         raise InputError(f"{where}: not a table")
-    if "name" in table:
+    if isinstance(table.get("name"), str):
         where = f"{path} property {table['name']!r}"
     for key in ("name", "law"):
         if not isinstance(table.get(key), str):
@@ -604,7 +606,9 @@ def _property(table, index: int, path: Path) -> Property:
                 for suffix in ("", "_by_cell", "_from", "_dense", "_dilute", "_threshold")}
             stray = sorted(k for k in table if k not in known)
             also = f"; unknown key {', '.join(map(repr, stray))}" if stray else ""
-            raise InputError(f"{where}: give {key} = \"...\"{choices}{also}")
+            given = (f" (a text in quotes: {key} = {table[key]!r} is not)" if key in table
+                     else "")
+            raise InputError(f"{where}: give {key} = \"...\"{given}{choices}{also}")
     law_key = table["law"]
     if law_key not in LAWS:
         raise InputError(f"{where}: unknown law {law_key!r}; use one of {', '.join(LAWS)}")

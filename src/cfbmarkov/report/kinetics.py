@@ -1,7 +1,7 @@
 """The kinetics section of a comparison: per property, maps of the bed's mean per cell
-(reference, model, and the chain's exact steady state where known) and the distribution of
-the value at the exit (reference, model, segregated flow); ``kinetics-NAME.png`` in the
-output of ``cfbmarkov compare --kinetics``.
+(reference, model, and the chain's exact steady state where known) and the cumulative
+distribution of the value at the exit (reference, model, segregated flow);
+``kinetics-NAME.png`` in the output of ``cfbmarkov compare --kinetics``.
 
 References
 ----------
@@ -26,7 +26,7 @@ def _grid(values, space) -> np.ndarray:
 
 def plot_kinetics(drawn: dict, name: str, path, *, window) -> Path:
     """One property of a comparison: maps of the bed's mean per cell and its exit
-    distribution.
+    distribution, drawn cumulative (the share of exits at or below each bin's upper edge).
 
     Parameters
     ----------
@@ -77,7 +77,6 @@ def plot_kinetics(drawn: dict, name: str, path, *, window) -> Path:
                      shrink=0.8)
     ax = axes[-1]
     edges = np.asarray(drawn["edges"], dtype=np.float64)
-    centres = 0.5 * (edges[:-1] + edges[1:])
     means = drawn["means"]
     for key, label, style, mean in (("reference", "reference", "-", means[0]),
                                     ("model", "model", "--", means[1]),
@@ -86,9 +85,12 @@ def plot_kinetics(drawn: dict, name: str, path, *, window) -> Path:
         if dist is None:
             continue
         text = f"{label} (mean {mean:.4g})" if mean is not None and np.isfinite(mean) else label
-        ax.step(centres, dist, where="mid", linestyle=style, label=text)
+        # cumulative: the exit values of a chain are discrete (one a whole number of lags),
+        # which equal bins alias into a comb of full and empty bins
+        ax.step(edges, np.concatenate([[0.0], np.cumsum(dist)]), where="post",
+                linestyle=style, label=text)
     ax.set_xlabel(f"{name} at the exit")
-    ax.set_ylabel("probability per bin")
+    ax.set_ylabel("share of the exits at or below")
     ax.legend(fontsize=8)
     fig.suptitle(f"{name} along particle paths, window {window[0]:g}-{window[1]:g} s")
     path = Path(path)
