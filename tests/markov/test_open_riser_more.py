@@ -122,3 +122,22 @@ def test_one_long_pept_like_tracer_gives_the_model_of_many_particles(tmp_path):
     reference = fit_model(many, CellGrid(6, 38, flow.width, flow.height), flow.lag,
                           estimator="mle")
     assert single.rtd().mean == pytest.approx(reference.rtd().mean, rel=0.1)
+
+
+def test_an_inflow_that_does_not_balance_the_outflow_is_warned_of():
+    """Entries through the inlet far below the exits through the outlet (most tracks begin
+    away from the inlet and are censored): the model's Monte Carlo would drain the riser, and
+    a warning says so; counts that differ by their noise alone give no such line, and a fill
+    is named as one."""
+    from cfbmarkov.markov.open_flow import OpenFlow
+
+    def lines(entries, exits):
+        flow = OpenFlow(np.array([0.0, 0.2]), np.array([0, exits]), np.array([entries, 0]),
+                        entries / 240)
+        return [line for line in flow.warnings() if "does not balance" in line]
+
+    drained = lines(185, 3847)
+    assert len(drained) == 1 and "saw 185 entries through the inlet and 3847 exits" in \
+        drained[0] and "drains the riser" in drained[0]
+    assert lines(1000, 1080) == [] and lines(20, 34) == []      # noise: within 3 sigma
+    assert "fills the riser" in lines(3000, 1200)[0]

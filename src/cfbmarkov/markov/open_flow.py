@@ -30,6 +30,9 @@ if TYPE_CHECKING:
 #: share of an open riser's tracks ending (beginning) away from the outlet (inlet) above
 #: which :meth:`OpenFlow.warnings` says so
 CENSORED_SHARE = 0.05
+#: relative difference of the entries through the inlet and the exits through the outlet
+#: above which :meth:`OpenFlow.warnings` says the inflow does not balance the outflow
+IMBALANCE_SHARE = 0.25
 #: the [S] datasets of an open riser's model file
 OPEN_DATASETS = ("exit_probability", "exit_counts", "entry_counts")
 
@@ -245,13 +248,28 @@ class OpenFlow:
 
     def warnings(self) -> list[str]:
         """Lines about many tracks that ended or began away from the faces (more than
-        :data:`CENSORED_SHARE` of those that ended or began).
+        :data:`CENSORED_SHARE` of those that ended or began), and about entries through the
+        inlet that do not balance the exits through the outlet (a difference beyond
+        :data:`IMBALANCE_SHARE` of the larger and beyond three standard deviations of the
+        two counts' Poisson noise): the model's Monte Carlo then drains or fills the riser.
 
         Returns
         -------
         list of str
         """
         lines = []
+        entries, exits = int(self.entry_counts.sum()), int(self.exit_counts.sum())
+        if abs(entries - exits) > max(IMBALANCE_SHARE * max(entries, exits),
+                                      3.0 * np.sqrt(entries + exits)):
+            lines.append(
+                f"  the fitting window saw {entries} entries through the inlet and {exits} "
+                "exits through the outlet: the model's inflow "
+                f"({self.inflow_per_lag:.4g} a lag) does not balance its outflow, so its "
+                f"Monte Carlo (predict, react --init) {'drains' if exits > entries else 'fills'}"
+                " the riser toward another hold-up than the data's, and its bed means are "
+                "of that riser; the answers per residence (the RTD, exit means) are not "
+                "affected. Fit on a window of steady flow, or import the riser from its "
+                "inlet to its outlet where solids leave or enter elsewhere")
         for what, censored, counted, face in (
                 ("ended", self.censored_tracks[0], int(self.exit_counts.sum()), "outlet"),
                 ("began", self.censored_tracks[1], int(self.entry_counts.sum()), "inlet")):
