@@ -183,7 +183,9 @@ class FrameSeries:
                 f"{which}; for "
                 "irregular frame times (CSV tracking data such as PEPT) resample them with "
                 "--resample DT --max-gap G; a dump or VTK series that misses frames: import "
-                "the frames before and after the gap as two files (fit A.h5 B.h5 pools them)")
+                "the frames before and after the gap as two files (fit A.h5 B.h5 pools them); "
+                "one whose missing frames come later in the file, out of order: put its "
+                "frames in time order")
 
     def laps(self, ids: np.ndarray, times: np.ndarray, positions: np.ndarray,
              present: np.ndarray, laps) -> np.ndarray:

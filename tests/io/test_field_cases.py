@@ -372,3 +372,20 @@ def test_a_dump_flat_in_z_at_first_that_spreads_later_is_refused(tmp_path, capsy
     out = import_file(source, "lammps", tmp_path / "g.h5", time_step=1e-5, vertical_axis="z")
     with Trajectories(out) as t:
         assert t.dimensions == 3 and t.present().tolist() == [[True, True, False], [True] * 3]
+
+
+def test_a_pair_of_frames_out_of_order_is_named_as_such(tmp_path, capsys):
+    """Two frames swapped in a dump: the first gap (twice the interval) is refused with the
+    way out for frames that come later in the file, not only for missing ones."""
+    from cfbmarkov.cli import main
+
+    frames = (FIELD / "unwrapped-fine.dump").read_text().split("ITEM: TIMESTEP")[1:]
+    frames[2], frames[3] = frames[3], frames[2]
+    swapped = tmp_path / "swap.dump"
+    swapped.write_text("".join("ITEM: TIMESTEP" + f for f in frames))
+    assert main(["import", str(swapped), "--time-step", "5e-6", "-o", str(tmp_path / "s.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "frames unevenly spaced" in err
+    assert "missing frames come later in the file, out of order: put its frames in time " \
+        "order" in err
+    assert not (tmp_path / "s.h5").exists()

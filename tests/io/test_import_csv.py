@@ -178,6 +178,10 @@ BAD_CSV = {
     "no-header": (table().split("\n", 1)[1], r"line 1 is not a header"),
     "non-numeric": (table(changed(1, 1, x="abc")), r"line 6: 'abc' in column 'x' is not a number"),
     "empty-value": (table(changed(1, 1, y="")), r"line 6: column 'y' is empty"),
+    # a spreadsheet's missing value begins with the comment mark: named, not cut short
+    "spreadsheet-na": (table(changed(1, 1, x="#N/A")),
+                       r"line 6: '#N/A' in column 'x' is a spreadsheet's error or missing "
+                       r"value, not a number"),
     "nan-position": (table(changed(1, 1, x="nan")),
                      (r"position of particle 1 at t = 0.025 s is not a finite number "
                       r"\(\[nan, [0-9.]+\]; a particle out of view is left out of its frame: "

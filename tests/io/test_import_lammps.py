@@ -376,7 +376,8 @@ def test_a_pattern_beside_a_file_and_the_same_timestep_twice(tmp_path, cli, asse
     assert_clean_failure("import", str(series / "dump*.riser"), str(copy), "--time-step",
                          "1e-5", "-o", tmp_path / "out" / "dup.h5", output=tmp_path / "out" / "dup.h5",
                          match=r"dump5000.riser and .*dump5000.riser both start at timestep "
-                               r"5000: the same frames given twice")
+                               r"5000: the same frames given twice .* leave one of them "
+                               r"out; or pieces of one frame, .* write the dump without % in")
     # a restart with reset_timestep 0: the same first timestep, but ITEM: TIME carries on
     reset = tmp_path / "reset"
     reset.mkdir()

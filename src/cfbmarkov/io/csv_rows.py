@@ -6,6 +6,8 @@ frames. The columns, units and delimiter come from the file's layout
 
 from __future__ import annotations
 
+import re
+
 import warnings
 from collections.abc import Iterator
 from typing import TextIO
@@ -97,6 +99,9 @@ def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -
     if values.size == 0:
         return np.empty((0, len(layout.used)))
     if values.shape[1] != len(layout.used):
+        spreadsheet = _spreadsheet_error(lines, line_no, layout, label)
+        if spreadsheet:
+            raise InputError(spreadsheet)
         line = _data_line_numbers(lines, line_no)[0]
         raise InputError(f"{label}: line {line}: {values.shape[1]} values, the header names "
                          f"{n} columns")
@@ -119,6 +124,9 @@ def _noise_converter(layout: CsvLayout) -> dict | None:
 def _locate_bad_row(lines: list[str], line_no: int, layout: CsvLayout, label: str,
                     exc: Exception) -> str:
     """Message naming the first line of a block that numpy could not parse."""
+    spreadsheet = _spreadsheet_error(lines, line_no, layout, label)
+    if spreadsheet:
+        return spreadsheet
     n = len(layout.header)
     for k, line in enumerate(lines):
         content = line.split("#", 1)[0].strip()
@@ -146,6 +154,29 @@ def _locate_bad_row(lines: list[str], line_no: int, layout: CsvLayout, label: st
                 return (f"{label}: line {line_no + k}: {value!r} in column {column} is "
                         f"not a number{mark}{cut}")
     return f"{label}: lines {line_no}-{line_no + len(lines) - 1}: {exc}"
+
+
+#: a spreadsheet's error and missing-value cells (Excel, LibreOffice), which begin with the
+#: comment mark '#'
+SPREADSHEET_ERRORS = re.compile(r"#(N/A|VALUE!|DIV/0!|NUM!|REF!|NAME\?|NULL!|N/V)")
+
+
+def _spreadsheet_error(lines: list[str], line_no: int, layout: CsvLayout, label: str
+                       ) -> str | None:
+    """The message for the first row holding a spreadsheet's error cell (``#N/A``), which
+    the '#' of comments would otherwise cut short; None where no row does."""
+    for k, line in enumerate(lines):
+        found = SPREADSHEET_ERRORS.search(line)
+        if found is None or not line.split("#", 1)[0].strip():
+            continue
+        fields = _split(line.strip(), layout.delimiter)
+        column = next((layout.header[c].strip() for c, f in enumerate(fields)
+                       if c < len(layout.header) and found.group(0) in f), None)
+        where = f" in column {column!r}" if column else ""
+        return (f"{label}: line {line_no + k}: {found.group(0)!r}{where} is a spreadsheet's "
+                "error or missing value, not a number; remove the row, or fill the value "
+                "before exporting")
+    return None
 
 
 def _is_plain_number(text: str) -> bool:

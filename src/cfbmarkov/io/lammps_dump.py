@@ -450,8 +450,10 @@ def dump_files(source) -> list[Path]:
             when = (f"timestep {before[0]}" if before[1] is None else
                     f"timestep {before[0]}, t = {before[1]:g} s")
             raise InputError(f"{a} and {b} both start at {when}: the same frames given twice "
-                             "(a copy, or a restarted run's dump beside the first); leave one "
-                             "of them out")
+                             "(a copy, or a restarted run's dump beside the first): leave one "
+                             "of them out; or pieces of one frame, each holding other atoms "
+                             "(a LAMMPS dump named with %, one file per processor), which "
+                             "the import does not join: write the dump without % in its name")
     return [p for _, p in ordered]
 
 

@@ -63,7 +63,8 @@ def unit_warnings(traj) -> list[str]:
         hint = (f"; given in mm? --width {width / 1000:g} --height {height / 1000:g} (m) "
                 "would hold the particles" if inside else "")
         lines.append(f"the riser is {height:g} m high and {width:g} m wide: lengths are in "
-                     "metres (CSV: --length-unit for the positions' unit; --width and --height "
+                     "metres (CSV: --length-unit for the positions' unit; a dump is read "
+                     "in SI units, so write it with LAMMPS's units si; --width and --height "
                      "in m, --region in the source's own units); check the units if that is "
                      f"not the riser{hint}")
     if heights.size > 1:
@@ -71,7 +72,8 @@ def unit_warnings(traj) -> list[str]:
         if span < SPAN_SHARE * height:
             lines.append(f"the particles' heights span {span:.3g} m of the riser's {height:g} m "
                          f"(in {frames.size} frames from the first to the last): the positions' "
-                         "unit and the riser's may differ (CSV: --length-unit; --width and "
+                         "unit and the riser's may differ (CSV: --length-unit; a dump: "
+                         "written in SI units, LAMMPS's units si; --width and "
                          "--height are in m, --region in the source's own units), or the "
                          "heights come from another axis than the vertical one (3D positions: "
                          "--vertical-axis names the vertical)")
@@ -94,7 +96,8 @@ def unit_warnings(traj) -> list[str]:
     elif speed > fast:
         lines.append(f"the particles move at a median {speed:.3g} m/s between frames: times "
                      "in seconds read as milliseconds, or lengths in mm read as m? (CSV: "
-                     "--time-unit, --length-unit); check the units if the flow is that fast")
+                     "--time-unit, --length-unit; dumps: --time-step in s, and SI units, "
+                     "LAMMPS's units si); check the units if the flow is that fast")
     interval = traj.frame_interval
     if np.isfinite(interval) and 0 < interval < SHORTEST_FRAME_INTERVAL:
         lines.append(f"frames {interval:g} s apart: the times are read too small (CSV: a "
