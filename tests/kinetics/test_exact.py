@@ -1,6 +1,7 @@
 """Exact answers of linear kinetics on small chains against hand-computed values, and the
 Monte Carlo against them."""
 
+import numba as nb
 import numpy as np
 import pytest
 
@@ -13,6 +14,13 @@ from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.states import CellGrid
 
 LAG = 0.1
+
+
+@nb.njit
+def first_order(v, row, others):
+    """dv/dt = k (1 - v), k = row[0]: a custom law whose RK4 kernel compiles once per test
+    process, shared by the tests that use it."""
+    return row[0] * (1.0 - v)
 
 
 def periodic_model(u=0.3, w=0.4):
@@ -284,13 +292,7 @@ def test_monte_carlo_values_depend_on_each_particle_alone():
 
 
 def test_custom_law_integrates_like_the_linear_one():
-    import numba as nb
-
     from cfbmarkov.kinetics import Custom
-
-    @nb.njit
-    def first_order(v, row, others):
-        return row[0] * (1.0 - v)
 
     model = periodic_model()
     states, laps = model.monte_carlo(np.array([0, 1] * 20, np.int32), 60, seed=4)
@@ -695,14 +697,8 @@ def test_properties_in_pieces_equal_one_piece(monkeypatch):
     """run_properties goes over a long run in pieces (a Ctrl-C between them): the linear
     and the custom laws' values, with resets at passes and a carried property, are the same
     bits in pieces of 3 frames as in one, and the progress reaches its total."""
-    import numba as nb
-
     from cfbmarkov.kinetics import ByCell, Custom
     from cfbmarkov.markov import montecarlo
-
-    @nb.njit
-    def first_order(v, row, others):
-        return row[0] * (1.0 - v)
 
     model = periodic_model()
     states, laps = model.monte_carlo(np.array([0, 1] * 30, np.int32), 40, seed=6)
