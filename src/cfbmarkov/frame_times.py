@@ -37,14 +37,16 @@ class FrameTimes:
     path : pathlib.Path
         The file.
     times : ndarray of float64, shape (T,)
-        Frame times (s).
+        Frame times (s), a read-only copy.
     frame_interval : float
         Time between frames (s), or NaN.
     """
 
     def __init__(self, path: str | os.PathLike, times: np.ndarray, frame_interval: float):
         self.path = Path(path)
-        self.times = times
+        # read-only: every later answer (windows, frames, a fit's provenance) reads them
+        self.times = np.array(times, dtype=np.float64)
+        self.times.setflags(write=False)
         self.frame_interval = frame_interval
 
     @property

@@ -157,7 +157,8 @@ class Trajectories(FrameTimes):
             self._h5.close()
             raise InputError(f"{self.path}: damaged trajectory file ({exc})") from None
         self.version = header.version
-        self.ids = header.ids
+        self.ids = np.array(header.ids, dtype=np.int64)
+        self.ids.setflags(write=False)      # read-only, as the times: answers read them
         self.dimensions = header.dimensions
         self.width, self.height, self.depth = header.width, header.height, header.depth
         self.boundary = header.boundary

@@ -310,3 +310,15 @@ def test_writer_interrupted_while_it_opens_leaves_no_file(tmp_path, run, monkeyp
         TrajectoryWriter(tmp_path / "run.h5", run.ids, width=run.width, height=run.height,
                          source="test")
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_open_files_times_and_ids_are_read_only(tmp_path, run):
+    """Every later answer reads an open file's times and ids (windows, frames, a fit's
+    provenance): shifting them in place (``t.times[:] -= 10``) made a fit on 10-15 s say it
+    was of 0-5 s; they are now read-only."""
+    path = write_run(tmp_path / "r.h5", run)
+    with Trajectories(path) as t:
+        for name in ("times", "ids"):
+            with pytest.raises(ValueError, match="read-only"):
+                getattr(t, name)[:] = 0
+        assert t.times[0] == run.times[0]

@@ -684,3 +684,31 @@ def test_an_open_riser_run_in_pieces_draws_what_one_piece_draws(monkeypatch, coh
     assert np.array_equal(whole, pieces) and np.array_equal(start, start_p)
     assert shown == list(range(4, steps, 5)) + [steps]
     assert (whole[-1] == -1).sum() > 40 and whole.shape[1] > 150     # exits and newcomers
+
+
+def test_exact_rtd_and_a_models_pass_counts_are_checked_as_the_model_checks_p():
+    """The public exact_rtd refuses what MarkovModel refuses (a negative lag gave a negative
+    E(RT), a doubled P a NaN, a short fraction array an IndexError), and a model whose pass
+    counts exceed its transition counts is refused (its fractions, their shares, exceeded 1:
+    E(RT) one lag)."""
+    from cfbmarkov.markov import exact_rtd
+
+    model = ladder_model(6, 0.4)
+    p, up, down = model.transition_matrix, model.up_fraction, model.down_fraction
+    assert exact_rtd(p, up, down, 0.01).mean == pytest.approx(model.rtd().mean, rel=1e-12)
+    for args, match in (((p, up, down, -0.01), "lag -0.01 s must be a positive"),
+                        ((2 * p, up, down, 0.01), "rows do not sum to 1"),
+                        ((p, up[:3], down, 0.01), r"up_fraction has shape \(3, 6\)"),
+                        ((p, 2 * up, down, 0.01), r"pass fractions must lie in \[0, 1\]")):
+        with pytest.raises(InputError, match=match):
+            exact_rtd(*args)
+    counts = np.diag(np.full(6, 50)) + np.roll(np.diag(np.full(6, 30)), 1, axis=1)
+    p_counts = counts / counts.sum(axis=1, keepdims=True)
+    passed = np.zeros((6, 6), np.int64)
+    passed[5, 0] = 30
+    grid = CellGrid(1, 6, 0.1, 1.0)
+    fitted = MarkovModel(p_counts, counts, passed, 0 * passed, grid, 0.01)
+    assert fitted.rtd().mean > 0.05
+    with pytest.raises(InputError, match=r"counts_up \+ counts_down exceed counts \(90 passes "
+                                         r"of the 30 transitions 5 -> 0\)"):
+        MarkovModel(p_counts, counts, 3 * passed, 0 * passed, grid, 0.01)

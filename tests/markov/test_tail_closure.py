@@ -184,10 +184,10 @@ def test_a_tail_that_empties_fast_is_closed_before_the_first_try(monkeypatch):
 
     flow = RiserFlow(columns=6, rows=16, persistence=True, rise_velocity=3.83,
                      fall_velocity=-1.678, lateral_probability=0.0702)
-    p, up, down, lag = generator(flow)
+    p, up, down, _ = generator(flow)
     p[p < 5.0e-5] = 0.0
     p /= p.sum(axis=1, keepdims=True)
-    fp.exact_rtd(p, up, down, lag, deficit_levels=8)
+    fp.exact_rtd(p, up, down, flow.lag, deficit_levels=8)
     assert [(t[0], t[1] >= 0) for t in tries] == [(128, False), (256, True)]
 
 

@@ -35,7 +35,7 @@ import scipy.sparse as sp
 
 from cfbmarkov._blas import one_blas_thread
 from cfbmarkov._repr import compact_repr
-from cfbmarkov.errors import CfbmarkovError
+from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.connectivity import closed_classes
 from cfbmarkov.markov.entry_chain import (DepthElimination, embedded_stationary,
                                           entry_matrix)
@@ -638,6 +638,10 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
 
     Raises
     ------
+    InputError
+        If P is not a square row-stochastic matrix of finite non-negative entries, the
+        pass fractions are not (S, S) in [0, 1] with up + down <= 1 where P is non-zero, or
+        the lag is not positive and finite.
     CfbmarkovError
         If the chain has no transition up through the top, or ``entry`` is not a
         non-negative [S] vector with mass on states from which the top can be reached.
@@ -652,9 +656,51 @@ def exact_rtd(matrix: np.ndarray, up_fraction: np.ndarray, down_fraction: np.nda
     (1960) (Ch. III, absorbing chains: absorption probabilities B = (I - Q)^-1 R).
     """
     chain = sp.csr_matrix(matrix)
+    up_fraction, down_fraction = _checked_chain(chain, up_fraction, down_fraction, lag)
     p_up, p_down, p_stay = split_by_pass(chain, up_fraction, down_fraction)
     return rtd_of_split_chain(p_up, p_down, p_stay, lag, deficit_levels, tol, max_steps,
                               entry, entry_flux, chain)
+
+
+def _checked_chain(chain: sp.csr_matrix, up_fraction, down_fraction, lag
+                   ) -> tuple[np.ndarray, np.ndarray]:
+    """The pass fractions as float64 arrays, once P (its non-zeros: O(nnz)), the fractions on
+    them and the lag are checked as :class:`~cfbmarkov.markov.model.MarkovModel` checks
+    them: P square, finite, non-negative, rows summing to 1 within 1e-9; the fractions
+    (S, S) in [0, 1] with up + down <= 1 where P is non-zero; the lag positive and finite.
+
+    Raises
+    ------
+    InputError
+        Naming the first rule broken.
+    """
+    s = chain.shape[0]
+    if chain.shape != (s, s) or s == 0:
+        raise InputError(f"transition matrix of shape {chain.shape}: give a square (S, S) "
+                         "matrix")
+    if not (isinstance(lag, (int, float, np.number)) and not isinstance(lag, bool)
+            and np.isfinite(lag) and lag > 0):
+        raise InputError(f"lag {lag!r} s must be a positive finite number")
+    if chain.nnz and (not np.all(np.isfinite(chain.data)) or chain.data.min() < 0):
+        raise InputError("transition matrix holds negative or non-finite entries")
+    rows = np.asarray(chain.sum(axis=1)).ravel()
+    if not np.allclose(rows, 1.0, rtol=0.0, atol=1e-9):
+        k = int(np.argmax(np.abs(rows - 1.0)))
+        raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to "
+                         f"{rows[k]:.6g})")
+    fractions = []
+    for name, given in (("up_fraction", up_fraction), ("down_fraction", down_fraction)):
+        value = np.asarray(given, dtype=np.float64)
+        if value.shape != (s, s):
+            raise InputError(f"{name} has shape {value.shape}, expected ({s}, {s}) as P")
+        fractions.append(value)
+    where = np.repeat(np.arange(s), np.diff(chain.indptr)), chain.indices
+    up, down = fractions[0][where], fractions[1][where]
+    if up.size and (not (np.all(np.isfinite(up)) and np.all(np.isfinite(down)))
+                    or min(up.min(), down.min()) < 0 or (up + down).max() > 1.0 + 1e-9):
+        raise InputError("pass fractions must lie in [0, 1] with up + down <= 1 for each "
+                         "transition of P")
+    return fractions[0], fractions[1]
 
 
 def window_rtd(p_up, p_down, p_stay, lag: float, window: float, occupancy: np.ndarray,

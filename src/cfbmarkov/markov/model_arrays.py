@@ -164,7 +164,8 @@ def checked_arrays(square: dict[str, Any], pass_fractions, lag, state_space: Sta
     ------
     InputError
         If an array does not have shape (S, S), the counts are not whole or are negative,
-        the lag is not positive and finite, P holds negative or non-finite entries or its
+        the pass counts of a transition exceed its count (where ``pass_fractions`` is None and
+        the fractions are the counts' shares), the lag is not positive and finite, P holds negative or non-finite entries or its
         rows do not sum to 1, or the pass fractions are not (up, down) of shape (S, S) in
         [0, 1] with up + down <= 1.
     """
@@ -194,6 +195,14 @@ def checked_arrays(square: dict[str, Any], pass_fractions, lag, state_space: Sta
         value = arrays[name]
         if value.size and value.min() < 0:
             raise InputError(f"model {name} holds negative counts")
+    passes = arrays["counts_up"] + arrays["counts_down"]
+    # where the pass fractions are not given they are the pass counts' shares of the counts
+    if pass_fractions is None and passes.size and np.any(passes > arrays["counts"]):
+        i, j = np.unravel_index(int(np.argmax(passes - arrays["counts"])), passes.shape)
+        raise InputError(f"model counts_up + counts_down exceed counts ({int(passes[i, j])} "
+                         f"passes of the {int(arrays['counts'][i, j])} transitions {i} -> {j}): "
+                         "a pass through the top or the bottom is one of the transitions "
+                         "counted")
     if pass_fractions is None:
         return arrays, None
     if len(pass_fractions) != 2:
