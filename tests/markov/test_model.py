@@ -712,3 +712,37 @@ def test_exact_rtd_and_a_models_pass_counts_are_checked_as_the_model_checks_p():
     with pytest.raises(InputError, match=r"counts_up \+ counts_down exceed counts \(90 passes "
                                          r"of the 30 transitions 5 -> 0\)"):
         MarkovModel(p_counts, counts, 3 * passed, 0 * passed, grid, 0.01)
+
+
+def test_python_api_guards_name_the_argument():
+    """From a notebook user's review: a tuple for a grid, an estimator's state space set
+    after construction, a file name for assess_fit, one state-space name as a string, a
+    grid of no cells and a cell beyond the grid are refused in one line (they ended in an
+    AttributeError, letters read as names, cells numbered -7 or a height of 4.15 m in a
+    0.95 m riser); an RTD window between whole lags says the length it used."""
+    from cfbmarkov.analysis.fit_checks import assess_fit
+    from cfbmarkov.markov import PaperEstimator, cell_index
+    from cfbmarkov.markov.select.candidates import candidate_spaces
+    from cfbmarkov.markov.states import place_in_cells
+
+    model = ladder_model(6, 0.4)
+    arrays = [model.transition_matrix, model.counts, model.counts_up, model.counts_down]
+    with pytest.raises(InputError, match=r"state_space \(1, 6\) is a tuple"):
+        MarkovModel(*arrays, (1, 6), 0.01)
+    estimator = PaperEstimator(CellGrid(1, 6, 0.1, 1.0), 0.01)
+    estimator.state_space = (1, 6)
+    with pytest.raises(InputError, match="is a tuple, not a state space"):
+        estimator.fit(None)
+    with pytest.raises(InputError, match="assess_fit takes a fitted MarkovModel, not a str"):
+        assess_fit("model.h5")
+
+    class Riser:
+        width, height = 0.1, 1.0
+
+    assert [k[0] for k in candidate_spaces(Riser(), "cells", [1], 0.01, 1, 6)] == ["cells"]
+    with pytest.raises(InputError, match="columns -6 must be a whole number >= 1"):
+        cell_index(np.zeros((5, 2)), 0.09, 0.95, -6, 38)
+    with pytest.raises(InputError, match="cell 999 outside the grid's 6 cells"):
+        place_in_cells(np.array([999]), CellGrid(1, 6, 0.1, 1.0), seed=1, step=0)
+    assert model.rtd(window=0.503).window == pytest.approx(0.5)
+    assert model.rtd(window=0.5).window == 0.5

@@ -71,7 +71,7 @@ def assess_fit(model, runs: Sequence | None = None,
     Raises
     ------
     InputError
-        If the model was not fitted on files (no ``source``), ``runs`` and ``windows``
+        If ``model`` is not a MarkovModel, the model was not fitted on files (no ``source``), ``runs`` and ``windows``
         differ in number, a window given is not the model's fitting window, their windows'
         content differs from the one the model records (``source_identity``), or, where it
         records none (fitted in Python), their transitions are not the model's counts (not
@@ -89,10 +89,18 @@ def assess_fit(model, runs: Sequence | None = None,
         nor the verdict of pooled runs is formed.
     SampleWarning
         (:class:`cfbmarkov.errors.SampleWarning`) Each warning line of the verdict
-        (``model.adequacy.warnings``, the lines ``cfbmarkov fit`` prints), once.
+        (``model.adequacy.warnings``, the lines ``cfbmarkov fit`` prints), once, and the
+        line of a chain that does not carry its own fitting window
+        (:meth:`~cfbmarkov.markov.adequacy.Adequacy.on_window_warning`).
     """
     from cfbmarkov.markov.first_passage import TrappedResidences
 
+    from cfbmarkov.markov.model import MarkovModel
+
+    if not isinstance(model, MarkovModel):
+        raise InputError(f"assess_fit takes a fitted MarkovModel, not a "
+                         f"{type(model).__name__} ({model!r}): load a model file with "
+                         "MarkovModel.load(path)")
     explicit_windows = windows is not None
     runs, windows = _runs_and_windows(model, runs, windows)
     if isinstance(resamples, bool) or not isinstance(resamples, numbers.Integral):
@@ -163,6 +171,9 @@ def assess_fit(model, runs: Sequence | None = None,
                                                         uncertainty=model.uncertainty))
         for line in model.adequacy.warnings:      # seen in a notebook, as predict repeats them
             warnings.warn(line, SampleWarning, stacklevel=2)
+        missed = model.adequacy.on_window_warning()     # the model's own, as fit prints it
+        if missed:
+            warnings.warn(missed, SampleWarning, stacklevel=2)
     return model
 
 

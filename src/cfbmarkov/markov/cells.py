@@ -72,7 +72,8 @@ def cell_index(positions: np.ndarray, width: float, height: float, columns: int,
     positions : array_like, shape (..., 2) or (..., 3)
         Positions (across, vertical[, depth]) in m; points outside the domain are clipped
         into the nearest cell. Without ``depth``, 3D positions are projected on (across,
-        vertical).
+        vertical). A NaN position (an absent particle) gets no meaningful cell: the caller
+        masks absent particles.
     width, height : float
         The riser W x H (m).
     columns, rows : int
@@ -90,11 +91,19 @@ def cell_index(positions: np.ndarray, width: float, height: float, columns: int,
     Raises
     ------
     InputError
-        If positions are not 2D or 3D, or a depth is given for 2D positions.
+        If positions are not 2D or 3D, a depth is given for 2D positions, the grid's counts
+        are not whole numbers >= 1 or its sizes not positive.
     """
     positions = np.asarray(positions, dtype=np.float64)
     if positions.ndim < 1 or positions.shape[-1] not in (2, 3):
         raise InputError(f"positions of shape {positions.shape} are neither 2D nor 3D")
+    for name, value in (("columns", columns), ("rows", rows), ("depth_columns", depth_columns)):
+        if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+            raise InputError(f"cell_index: {name} {value!r} must be a whole number >= 1")
+    for name, value in (("width", width), ("height", height)) + (
+            (("depth", depth),) if depth is not None else ()):
+        if not (isinstance(value, (int, float, np.number)) and np.isfinite(value) and value > 0):
+            raise InputError(f"cell_index: {name} {value!r} m must be a positive finite number")
     out = np.empty(positions.shape[:-1], dtype=np.int32)
     if depth is not None:
         if positions.shape[-1] != 3:

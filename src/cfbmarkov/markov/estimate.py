@@ -169,7 +169,9 @@ class TransitionEstimator:
         raise NotImplementedError
 
     def fit(self, data, *, check_passes: bool = True) -> MarkovModel:
-        """Fit on discrete trajectories (arrays in, model out, as deeptime's estimators).
+        """Fit on discrete trajectories: a new immutable model out, the estimator unchanged
+        (deeptime's ``fit`` returns the estimator and hands the model by ``fetch_model()``;
+        here ``fit`` returns the model itself).
 
         Parameters
         ----------
@@ -196,6 +198,8 @@ class TransitionEstimator:
             or lag, or holds no transition, or (``check_passes``) its lag misreads the
             passes (:meth:`cfbmarkov.observed.lag_resolution.PassReading.check`).
         """
+        # the settings as they are now: an attribute set after construction is checked too
+        check_arguments(self.state_space, self.lag)
         windows = as_discrete_list(data)
         check_distinct_windows(windows)
         if check_passes:

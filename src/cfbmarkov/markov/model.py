@@ -210,6 +210,10 @@ class MarkovModel:
         # the selection record and a pooled fit's sources: read-only, not the caller's
         object.__setattr__(self, "selection", frozen_record(self.selection))
         object.__setattr__(self, "source", frozen_record(self.source))
+        if not isinstance(self.state_space, StateSpace):
+            raise InputError(f"model state_space {self.state_space!r} is a "
+                             f"{type(self.state_space).__name__}, not a state space: give e.g. "
+                             "CellGrid(6, 38, 0.09, 0.95) (cfbmarkov.markov)")
         s = self.state_space.n_states
         arrays, fractions = checked_arrays({name: getattr(self, name) for name in SQUARE_ARRAYS},
                                            self.pass_fractions, self.lag, self.state_space,
@@ -458,7 +462,8 @@ class MarkovModel:
         window : float, optional
             Length (s) of an analysis window: the RTD as seen in it, the quantity a
             sample-based RTD estimates (None: the intrinsic RTD); taken as the nearest
-            whole number of lags (a window's frame pairs one lag apart).
+            whole number of lags (a window's frame pairs one lag apart), the length the
+            result's ``window`` gives.
         direction : {"up", "down"}, optional
             A periodic riser's residences from passes up through the top or, for a net
             downflow, down through the bottom (the pass fractions swapped;
@@ -843,9 +848,26 @@ class MarkovModel:
 
     @classmethod
     def load(cls, path: str | os.PathLike) -> "MarkovModel":
-        """Read a model file written by :meth:`save`
-        (:func:`~cfbmarkov.markov.model_file.read_model`; InputError if the file is
-        missing, empty, not HDF5, not a model file, or damaged)."""
+        """Read a model file written by :meth:`save` (or by ``cfbmarkov fit``)
+        (:func:`~cfbmarkov.markov.model_file.read_model`).
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The model file (HDF5).
+
+        Returns
+        -------
+        MarkovModel
+            The model as saved: its arrays read-only, with its interval, verdict, cell
+            fields and selection record where the file holds them.
+
+        Raises
+        ------
+        InputError
+            If the file is missing, empty, not HDF5, not a model file (a trajectory file,
+            say), or damaged.
+        """
         return model_file.read_model(path, cls)
 
     @classmethod

@@ -36,6 +36,8 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
         The fitted model.
     window : float, optional
         Length (s) of an analysis window: the RTD as seen in it (None: the intrinsic RTD).
+        A length between two whole numbers of lags is taken as the nearest, which the
+        result's ``window`` gives.
     direction : {"up", "down"}, optional
         A periodic riser's residences from passes up through the top or down through the
         bottom (the pass fractions swapped); default the model's ``flow_direction``.
@@ -70,6 +72,11 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
                              f"of {model.lag:g} s, more than {MAX_STEPS}; give a window "
                              f"length of at most {MAX_STEPS * model.lag:g} s")
         lags = window / model.lag
+        # the RTD is of whole lags: a length between two is taken as the nearest, and the
+        # result says so (not the length given)
+        if abs(lags - round(lags)) > 1e-9 * max(lags, 1.0) and round(lags) >= 1:
+            window = round(lags) * model.lag
+            lags = float(round(lags))
         fits = memory_limit() / (WINDOW_BYTES * model.n_states) * model.lag
         check_memory(WINDOW_BYTES * lags * model.n_states,
                      f"the RTD as a {window:g} s window sees it ({lags:.0f} lags x "

@@ -583,8 +583,16 @@ def place_in_cells(cells: np.ndarray, space: StateSpace, seed: int, step: int,
     -------
     ndarray of float64, shape (N, 2) or (N, 3), or (T, N, 2) or (T, N, 3)
         Positions (across, vertical[, depth]) in m.
+
+    Raises
+    ------
+    InputError
+        If a cell lies beyond the grid (a state given for a cell, say).
     """
     cells = np.asarray(cells, dtype=np.int64)
+    if cells.size and cells.max() >= space.n_cells:
+        raise InputError(f"place_in_cells: cell {int(cells.max())} outside the grid's "
+                         f"{space.n_cells} cells (0 .. {space.n_cells - 1}; negative: absent)")
     one_step = cells.ndim == 1
     cells = np.ascontiguousarray(cells.reshape(1, -1) if one_step else cells)
     three = space.is_3d or depth is not None

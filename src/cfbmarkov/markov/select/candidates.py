@@ -60,8 +60,8 @@ def candidate_spaces(traj, states: Sequence[str], lag_multiples: Sequence[int], 
     ----------
     traj : Trajectories
         The open trajectory file (its width and height).
-    states : sequence of str
-        Names of the state spaces.
+    states : sequence of str, or str
+        Names of the state spaces (one name: that one alone).
     lag_multiples : sequence of int
         Candidate lags, in multiples of ``lag``.
     lag : float
@@ -78,6 +78,8 @@ def candidate_spaces(traj, states: Sequence[str], lag_multiples: Sequence[int], 
     InputError
         For an unknown state space name or a grid that does not fit.
     """
+    if isinstance(states, str):         # one name, not its letters
+        states = [states]
     return {(name, lag * int(m)): state_space_from_name(
         name, columns, rows, traj.width, traj.height)
         for name in states for m in lag_multiples}
