@@ -311,3 +311,25 @@ def test_an_rtd_window_that_would_not_fit_in_memory_is_refused(tmp_path, capsys,
     assert err.count("\n") == 1 and "the RTD as a 1000 s window sees it (40000 lags x 228 " \
         "states) would need about" in err and "give a window length of at most 114 s" in err
     assert main(["rtd", str(model), "--window-length", "5"]) == 0
+
+
+def test_rtd_says_it_is_alive_while_the_exact_rtd_runs(tmp_path, capsys, fitted, monkeypatch):
+    """A long exact RTD (a long tail, a long --window-length) prints `rtd (exact RTD): still
+    working` lines; -q prints none."""
+    import time
+
+    from cfbmarkov.markov.model import MarkovModel
+
+    model, _ = fitted
+    monkeypatch.setattr(_console, "HEARTBEAT_EVERY", 0.05)
+    real = MarkovModel.rtd
+
+    def slow_rtd(self, *args, **kwargs):        # at least a few beats long on any machine
+        time.sleep(0.3)
+        return real(self, *args, **kwargs)
+
+    monkeypatch.setattr(MarkovModel, "rtd", slow_rtd)
+    code, _, err = run_cli(capsys, "rtd", model, "--window-length", "2")
+    assert code == 0 and "rtd (exact RTD): still working, 0:0" in err
+    code, _, err = run_cli(capsys, "rtd", model, "--window-length", "2", "-q")
+    assert code == 0 and "still working" not in err

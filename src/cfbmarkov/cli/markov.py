@@ -382,7 +382,9 @@ def cmd_rtd(args) -> int:
         raise InputError(f"{args.model} holds no interval (fitted with --resamples 0, or in "
                          f"Python): add --resamples {n} to form a {100 * args.level:g} % one "
                          f"from {n} bootstrap resamples of the model's fitting window")
-    rtd = model.rtd(window=args.window_length)
+    # a line every 5 s of work where the exact RTD takes long (a long tail, a long window)
+    with _stage(args, "exact RTD", None):
+        rtd = model.rtd(window=args.window_length)
     band = rtd.uncertainty              # the intrinsic RTD's only
     adequacy = getattr(model, "adequacy", None)
     warnings = [str(line) for line in getattr(adequacy, "warnings", ()) or ()]
