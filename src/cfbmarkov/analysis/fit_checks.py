@@ -71,12 +71,12 @@ def assess_fit(model, runs: Sequence | None = None,
     Raises
     ------
     InputError
-        If ``model`` is not a MarkovModel, the model was not fitted on files (no ``source``), ``runs`` and ``windows``
-        differ in number, a window given is not the model's fitting window, their windows'
-        content differs from the one the model records (``source_identity``), or, where it
-        records none (fitted in Python), their transitions are not the model's counts (not
-        the data it was fitted on), ``resamples`` is negative,
-        1-9 or not a whole number, ``level`` lies outside (0, 1) or needs more resamples
+        If ``model`` is not a MarkovModel, the model was not fitted on files (no
+        ``source``), ``runs`` and ``windows`` differ in number, a window given is not the
+        model's fitting window, their windows' content differs from the one the model
+        records (``source_identity``), or, where it records none (fitted in Python), their
+        transitions are not the model's counts (not the data it was fitted on),
+        ``resamples`` is negative, 1-9 or not a whole number, ``level`` lies outside (0, 1) or needs more resamples
         (:func:`cfbmarkov.analysis.bootstrap.check_interval_options`), or the chain traps
         residences.
 

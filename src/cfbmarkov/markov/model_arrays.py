@@ -164,9 +164,10 @@ def checked_arrays(square: dict[str, Any], pass_fractions, lag, state_space: Sta
     ------
     InputError
         If an array does not have shape (S, S), the counts are not whole or are negative,
-        the pass counts of a transition exceed its count (where ``pass_fractions`` is None and
-        the fractions are the counts' shares), the lag is not positive and finite, P holds negative or non-finite entries or its
-        rows do not sum to 1, or the pass fractions are not (up, down) of shape (S, S) in
+        the pass counts of a transition exceed its count (where ``pass_fractions`` is None
+        and the fractions are the counts' shares), the lag is not positive and finite, P
+        holds negative or non-finite entries or its rows do not sum to 1, or the pass
+        fractions are not (up, down) of shape (S, S) in
         [0, 1] with up + down <= 1.
     """
     s = state_space.n_states
