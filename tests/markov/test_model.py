@@ -746,3 +746,25 @@ def test_python_api_guards_name_the_argument():
         place_in_cells(np.array([999]), CellGrid(1, 6, 0.1, 1.0), seed=1, step=0)
     assert model.rtd(window=0.503).window == pytest.approx(0.5)
     assert model.rtd(window=0.5).window == 0.5
+
+
+def test_the_dense_to_sparse_conversion_equals_scipys():
+    """exact_rtd reads a dense P in two Numba passes: the same CSR matrix as scipy's
+    (sorted indices, no explicit zeros), and a NaN is kept for the checks to refuse."""
+    import scipy.sparse as sp
+
+    from cfbmarkov.markov import exact_rtd
+    from cfbmarkov.markov.first_passage import csr_of
+
+    rng = np.random.default_rng(8)
+    dense = rng.random((37, 37)) * (rng.random((37, 37)) < 0.2)
+    dense[5] = 0.0                                   # an empty row
+    ours, theirs = csr_of(dense), sp.csr_matrix(dense)
+    assert ours.has_sorted_indices and ours.nnz == theirs.nnz
+    np.testing.assert_array_equal(ours.toarray(), dense)
+    assert (ours != theirs).nnz == 0
+    model = ladder_model(6, 0.4)
+    p = model.transition_matrix.copy()
+    p[2, 3] = np.nan
+    with pytest.raises(InputError, match="negative or non-finite"):
+        exact_rtd(p, model.up_fraction, model.down_fraction, 0.01)
