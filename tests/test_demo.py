@@ -147,12 +147,15 @@ def test_demo_force_makes_the_reference_again(tmp_path, capsys, monkeypatch):
     out = tmp_path / "d"
     _reference(out, 12, seed=2)
     (out / "notes.txt").write_text("mine")
+    (out / "demo.json").write_text('{"paper": {"rt_mean": 1.0}}')     # the earlier set's
     _stop_at_fit(monkeypatch)
     assert main(["demo", "--synthetic", "-o", str(out), "--particles", "10", "--force"]) == 2
     assert "stopped at the fit" in capsys.readouterr().err
     with Trajectories(out / "reference.h5") as run:
         assert run.n_particles == 10 and run.parameters["seed"] == 1
     assert (out / "notes.txt").read_text() == "mine"
+    # cut short with a new reference: no summary of the earlier set's files is left
+    assert not (out / "demo.json").exists()
 
 
 def _summary(md, md_base, md_halves=0.01):

@@ -122,7 +122,7 @@ import os, signal, sys, time, types
 
 class LastWord:                 # freed as the interpreter tears its modules down
     def __del__(self):
-        os.kill(os.getpid(), signal.SIGINT)
+        os.kill(os.getpid(), getattr(signal, sys.argv[2]))
         time.sleep(0.2)
 
 
@@ -137,15 +137,17 @@ program()
 """
 
 
-def test_ctrl_c_while_the_interpreter_shuts_down_after_a_complete_verb_is_ignored(tmp_path):
-    """A Ctrl-C after the verb has returned (its output published), while the interpreter
-    tears down its modules, where Python has put the default handler back: the run ends
-    with the verb's code, not killed by the signal with nothing said."""
+@pytest.mark.parametrize("signal_name", ["SIGINT", "SIGTERM"])
+def test_ctrl_c_while_the_interpreter_shuts_down_after_a_complete_verb_is_ignored(
+        tmp_path, signal_name):
+    """A Ctrl-C (or a SIGTERM) after the verb has returned (its output published), while the
+    interpreter tears down its modules, where Python has put the default handler back: the
+    run ends with the verb's code, not killed by the signal with nothing said."""
     synthetic.write_run(tmp_path / "run.h5", synthetic.RiserFlow(), 8, 0.5, seed=3)
     script = tmp_path / "late.py"
     script.write_text(LATE_CTRL_C)
-    done = subprocess.run([sys.executable, str(script), "run.h5"], cwd=tmp_path, env=_env(),
-                          capture_output=True, text=True, timeout=300)
+    done = subprocess.run([sys.executable, str(script), "run.h5", signal_name], cwd=tmp_path,
+                          env=_env(), capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, (done.returncode, done.stderr)
     assert "trajectories" in done.stdout.lower() and "interrupted" not in done.stderr
 
@@ -157,13 +159,15 @@ def test_program_after_an_interrupt_past_the_verb_says_one_line(monkeypatch, cap
         raise KeyboardInterrupt
 
     monkeypatch.setattr(cli, "main", interrupted_on_return)
-    previous = signal.getsignal(signal.SIGINT)
+    previous = signal.getsignal(signal.SIGINT), signal.getsignal(signal.SIGTERM)
     try:
         with pytest.raises(SystemExit) as exited:
             cli.program()
         assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
     finally:
-        signal.signal(signal.SIGINT, previous)
+        signal.signal(signal.SIGINT, previous[0])
+        signal.signal(signal.SIGTERM, previous[1])
     assert exited.value.code == 130
     assert capsys.readouterr().err == "cfbmarkov: interrupted\n"
 

@@ -418,3 +418,26 @@ def test_ctrl_c_of_a_reproduce_with_two_workers_is_one_line(tmp_path):
     # the workers, terminated, could not remove their outputs' lock files: the parent does
     assert (tmp_path / "out").is_dir()
     assert not list((tmp_path / "out").rglob(".*.lock")), list((tmp_path / "out").rglob("*"))
+
+
+def test_the_temporaries_of_terminated_workers_are_removed(tmp_path):
+    """What a reproduction's terminated workers leave (a comparison's folder under way, a
+    report figure's and a model's temporaries; a comparison moved aside before its
+    replacement took its place) is cleared once they are gone: temporaries removed, the
+    moved-aside output put back, every finished file left."""
+    from cfbmarkov._outputs import remove_dead_temporaries
+
+    case = tmp_path / "u8"
+    (case / "compare-mle.tmp-dc88b590").mkdir(parents=True)
+    (case / "compare-mle.tmp-dc88b590" / ".snapshots.png.7v1db4e2.tmp.png").write_bytes(b"")
+    (case / ".model-paper.h5.ab12cd34.tmp").write_bytes(b"x")
+    (case / "compare-paper.old-0123abcd").mkdir()
+    (case / "compare-paper.old-0123abcd" / "summary.json").write_text("{}")
+    (case / "model-mle.h5").write_bytes(b"done")
+    (tmp_path / "figures").mkdir()
+    (tmp_path / "figures" / ".fig11-mixing.png.dn5ml9e9.tmp.png").write_bytes(b"y")
+    (tmp_path / "figures" / "fig10.png").write_bytes(b"z")
+    remove_dead_temporaries(tmp_path)
+    left = sorted(str(p.relative_to(tmp_path)) for p in tmp_path.rglob("*"))
+    assert left == ["figures", "figures/fig10.png", "u8", "u8/compare-paper",
+                    "u8/compare-paper/summary.json", "u8/model-mle.h5"], left

@@ -193,6 +193,46 @@ def remove_free_locks(folder: str | os.PathLike, depth: int = 2) -> list[Path]:
     return removed
 
 
+def remove_dead_temporaries(folder: str | os.PathLike, depth: int = 2) -> list[Path]:
+    """Remove the temporaries in ``folder`` and its sub-folders down to ``depth`` left by
+    writers that are gone (a process pool's workers terminated on Ctrl-C): for each
+    temporary found, :func:`remove_stale_temporaries` of the output it was for. Call only
+    where no live writer works in ``folder`` (the caller holds its lock, the workers are
+    joined).
+
+    Parameters
+    ----------
+    folder : str or os.PathLike
+    depth : int, optional
+        How many levels of sub-folders to look in.
+
+    Returns
+    -------
+    list of pathlib.Path
+        What was removed.
+    """
+    folder = Path(folder)
+    hidden = re.compile(rf"^\.(?P<name>.+)\.{_RANDOM}\.tmp(\.\w+)?$")
+    aside = re.compile(r"^(?P<name>.+)\.(tmp|old)-[0-9a-f]{8}$")
+    targets: set[Path] = set()
+    folders = [folder]
+    for level in range(depth + 1):
+        found = []
+        for current in folders:
+            with contextlib.suppress(OSError):
+                for entry in current.iterdir():
+                    match = hidden.match(entry.name) or aside.match(entry.name)
+                    if match:
+                        targets.add(current / match.group("name"))
+                    elif level < depth and entry.is_dir() and not entry.is_symlink():
+                        found.append(entry)
+        folders = found
+    removed: list[Path] = []
+    for target in sorted(targets):
+        removed += remove_stale_temporaries(target)
+    return removed
+
+
 def release_all() -> None:
     """Release every lock of this process (before ``os._exit``)."""
     for key in list(_HELD):
@@ -554,5 +594,6 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
 
 
 __all__ = ["KINDS", "claim_output", "describe", "foreign_entries", "lock_path",
-           "output_helper", "refuse_foreign", "release_all", "remove_stale_temporaries",
+           "output_helper", "refuse_foreign", "release_all", "remove_dead_temporaries",
+           "remove_stale_temporaries",
            "temporary_patterns"]

@@ -195,6 +195,16 @@ def check_demo_folder(output: str | Path, particles: int, seed: int,
     return reuse
 
 
+def _remove_own_summary(summary: Path) -> None:
+    """Delete ``demo.json`` where it is the demo's (a dict keyed by its estimators)."""
+    try:
+        rows = json.loads(summary.read_text())
+    except (OSError, ValueError):
+        return
+    if isinstance(rows, dict) and set(rows) <= set(ESTIMATORS):
+        summary.unlink(missing_ok=True)
+
+
 def demo_verdict(summaries: dict[str, dict]) -> str:
     """The demo's closing line: the models against the persistence baseline by the report's
     rule, in the words of the report's verdict
@@ -290,6 +300,10 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
     out = Path(output)
     reuse = check_demo_folder(out, particles, seed, force)
     out.mkdir(parents=True, exist_ok=True)
+    if not reuse:
+        # a new reference (other parameters, or none yet): the summary of an earlier set
+        # goes first, so that a run cut short leaves no demo.json of files replaced since
+        _remove_own_summary(out / "demo.json")
     flow = synthetic.RiserFlow()
     reference = out / "reference.h5"
     if reuse and note is not None:

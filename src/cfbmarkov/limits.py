@@ -21,6 +21,15 @@ MEMORY_ENV = "CFBMARKOV_MEMORY_LIMIT"
 #: the dense [S, S] arrays a fit holds at once (counts, passes up and down, the per-frame
 #: sum, P, pass fractions): its memory is about FIT_ARRAYS x 8 bytes x S^2
 FIT_ARRAYS = 6
+#: the dense [S, S] arrays' worth of memory a model's exact RTD holds at its peak, the
+#: model's own six included (its split chain, the levels' blocks, the entry chain's
+#: eliminations): 12.8 measured on a velocity memory of 4104 states (1.98 GB peak of
+#: ``cfbmarkov info MODEL``, ``/usr/bin/time -f %M``, less the 0.25 GB of an empty run;
+#: 2026-12-07), 7.2 on the tutorial's 1596-state automatic model
+RTD_ARRAYS = 13
+#: below this estimate (bytes) a model's exact RTD is not checked against the memory limit
+#: (a small model's arrays are a fraction of the process's own memory)
+RTD_CHECK_FROM = 64e6
 #: the largest seed (the Monte Carlo generator takes an unsigned 64-bit seed)
 MAX_SEED = 2 ** 64 - 1
 #: the most lags a residence-time distribution or a map may be propagated over
@@ -140,7 +149,9 @@ def fit_memory(n_states: int) -> float:
 
 
 def check_fit(state_space) -> None:
-    """Refuse a state space whose fit would not fit in memory (:func:`fit_memory`).
+    """Refuse a state space whose fit would not fit in memory: its counting
+    (:func:`fit_memory`) or the exact RTD its summary needs (:data:`RTD_ARRAYS`),
+    whichever is larger.
 
     Raises
     ------
@@ -148,8 +159,37 @@ def check_fit(state_space) -> None:
         Naming the states, the estimate and the limit.
     """
     s = int(state_space.n_states)
-    check_memory(fit_memory(s), f"a fit of {state_space.describe()} ({FIT_ARRAYS} dense "
-                 f"{s} x {s} arrays of 8 bytes)", "use fewer --cells")
+    arrays = max(FIT_ARRAYS, RTD_ARRAYS)
+    check_memory(arrays * 8.0 * float(s) ** 2, f"a fit of {state_space.describe()} (its "
+                 f"exact RTD: about {arrays} dense {s} x {s} arrays of 8 bytes)",
+                 "use fewer --cells, or a state space with fewer states per cell")
+
+
+def rtd_memory(n_states: int) -> float:
+    """Estimated peak bytes of a model's exact RTD (:data:`RTD_ARRAYS` dense [S, S]
+    arrays); 0 below :data:`RTD_CHECK_FROM`, where it is not counted."""
+    need = RTD_ARRAYS * 8.0 * float(n_states) ** 2
+    return need if need >= RTD_CHECK_FROM else 0.0
+
+
+def check_rtd(n_states: int, extra: float = 0.0, what: str = "") -> None:
+    """Refuse an exact RTD of a model of ``n_states`` states that would not fit in memory
+    (:data:`RTD_ARRAYS` dense [S, S] arrays, plus ``extra`` bytes; not checked below
+    :data:`RTD_CHECK_FROM`).
+
+    Raises
+    ------
+    InputError
+        Naming the states, the estimate and the limit.
+    """
+    s = int(n_states)
+    if rtd_memory(s) < RTD_CHECK_FROM:
+        return
+    check_memory(RTD_ARRAYS * 8.0 * float(s) ** 2 + extra,
+                 what or f"the exact RTD of a model of {s} states (about {RTD_ARRAYS} dense "
+                         f"{s} x {s} arrays of 8 bytes)",
+                 "fit the model on fewer --cells, or a state space with fewer states per "
+                 "cell")
 
 
 def check_finite(value, name: str, unit: str = "", *, positive: bool = False,

@@ -114,8 +114,9 @@ def _limit_threads(threads: int) -> None:
 
 def _stop_workers(executor, folder: Path | None = None) -> None:
     """Terminate a process pool's workers now (Ctrl-C: their cases resume from their last
-    checkpoint on a rerun), and remove the lock files they leave in ``folder`` once they
-    are gone (:func:`cfbmarkov._outputs.remove_free_locks`)."""
+    checkpoint on a rerun), and remove the lock files and the temporaries they leave in
+    ``folder`` once they are gone (:func:`cfbmarkov._outputs.remove_free_locks`,
+    :func:`cfbmarkov._outputs.remove_dead_temporaries`)."""
     processes = list(getattr(executor, "_processes", {}).values())
     for process in processes:
         with contextlib.suppress(Exception):
@@ -125,10 +126,12 @@ def _stop_workers(executor, folder: Path | None = None) -> None:
     for process in processes:
         with contextlib.suppress(Exception):
             process.join(timeout=10)
-    from cfbmarkov._outputs import remove_free_locks
+    from cfbmarkov._outputs import remove_dead_temporaries, remove_free_locks
 
     with contextlib.suppress(OSError):
         remove_free_locks(folder)
+    with contextlib.suppress(OSError):
+        remove_dead_temporaries(folder)
 
 
 def local_executor(jobs: int | None = None, n_cases: int = 1) -> tuple[cf.Executor, int]:

@@ -913,3 +913,22 @@ def test_a_missing_kinetics_file_says_what_to_give(fitted, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "cannot read kinetics file no-such-kinetics.toml: No such " \
         "file or directory (give the path of a TOML file of [[property]] tables" in err
+
+
+def test_react_claims_its_output_before_any_work(fitted, tmp_path, capsys, monkeypatch):
+    """The Monte Carlo's output is claimed (locked and checked) first, as every writing
+    verb's: an output that is the model itself is refused before the exact solve (it came
+    after, and a second writer of the same output was not refused at all)."""
+    from cfbmarkov.markov import kinetics_exact
+
+    folder, run, model = fitted
+    kin = _write(tmp_path, GOOD, RATES)
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("the exact solve ran before the output was claimed")
+
+    monkeypatch.setattr(kinetics_exact, "exact_kinetics", no_work)
+    code = main(["react", str(model), "--kinetics", str(kin), "--init", str(run), "--start",
+                 "0.5", "--duration", "1", "-o", str(model)])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "input" in err, err

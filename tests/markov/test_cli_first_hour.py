@@ -333,3 +333,28 @@ def test_rtd_says_it_is_alive_while_the_exact_rtd_runs(tmp_path, capsys, fitted,
     assert code == 0 and "rtd (exact RTD): still working, 0:0" in err
     code, _, err = run_cli(capsys, "rtd", model, "--window-length", "2", "-q")
     assert code == 0 and "still working" not in err
+
+
+def test_ctrl_c_after_the_comparison_is_published_says_it_is_whole(tmp_path, capsys,
+                                                                    markov_run, fitted,
+                                                                    monkeypatch):
+    """Ctrl-C after compare's folder was renamed into place (while the lines are printed):
+    the one line says the folder is complete, as fit's says of its file."""
+    import importlib
+
+    report_compare = importlib.import_module("cfbmarkov.report.compare")
+    _, pred = fitted
+    real = report_compare.compare
+
+    def then_interrupted(*args, **kwargs):
+        real(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(report_compare, "compare", then_interrupted)
+    out = tmp_path / "c"
+    code, _, err = run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
+                           "--no-figures", "--resamples", "0", "-o", out)
+    assert code == 130 and (out / "summary.json").is_file()
+    assert err.splitlines()[-1] == (f"cfbmarkov compare: interrupted after {out} was written "
+                                    "whole (the folder is complete; only the lines printed "
+                                    "after it were cut short)")

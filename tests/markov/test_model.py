@@ -768,3 +768,22 @@ def test_the_dense_to_sparse_conversion_equals_scipys():
     p[2, 3] = np.nan
     with pytest.raises(InputError, match="negative or non-finite"):
         exact_rtd(p, model.up_fraction, model.down_fraction, 0.01)
+
+
+def test_an_exact_rtd_beyond_the_memory_limit_is_refused_before_it_runs(monkeypatch):
+    """A model too large for its exact RTD (13 dense [S, S] arrays at its peak, measured)
+    is refused in one line naming the estimate, before any work (a 16416-state model's
+    `rtd` was killed by the system after 68 s with nothing said); small models are not
+    checked."""
+    from cfbmarkov import limits
+
+    model = ladder_model(800, 0.4)
+    need = limits.RTD_ARRAYS * 8.0 * 800 ** 2
+    monkeypatch.setenv(limits.MEMORY_ENV, str(int(need / 2)))
+    with pytest.raises(InputError, match=r"the exact RTD of a model of 800 states \(about 13 "
+                                         r"dense 800 x 800 arrays of 8 bytes\) would need"):
+        model.rtd()
+    monkeypatch.setenv(limits.MEMORY_ENV, str(int(need * 2)))
+    assert model.rtd().mean > 0
+    monkeypatch.setenv(limits.MEMORY_ENV, "1000")
+    assert ladder_model(6, 0.4).rtd().mean > 0              # far below RTD_CHECK_FROM

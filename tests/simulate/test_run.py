@@ -275,7 +275,7 @@ def test_resume_to_an_end_before_the_checkpoint_is_refused(tmp_path, reference):
 def test_resume_of_a_finished_run_says_it_is_finished(tmp_path, reference):
     """--resume on a finished output of another case or end says the file is a finished
     run, which keeps no checkpoint (not that the run stopped before its first one); the
-    same case and end is resumed as done."""
+    same case and end is resumed as done, saying so (it said nothing)."""
     case, ref = reference
     out = tmp_path / "done.h5"
     shutil.copyfile(ref, out)
@@ -289,7 +289,11 @@ def test_resume_of_a_finished_run_says_it_is_finished(tmp_path, reference):
     with pytest.raises(InputError, match=rf"done\.h5 is this case's finished run, which ends "
                                          rf"at {end:g} s, and a finished run keeps no"):
         simulate(case, out, until=2 * end, progress=False, resume=True)
-    assert simulate(case, out, progress=False, resume=True) == out
+    from cfbmarkov.errors import CfbmarkovWarning
+
+    with pytest.warns(CfbmarkovWarning, match=rf"nothing left to resume: .*done\.h5 already "
+                                              rf"holds this run to {end:g} s, finished"):
+        assert simulate(case, out, progress=False, resume=True) == out
     assert out.read_bytes() == before and not (tmp_path / "done.h5.parts").exists()
 
 

@@ -62,10 +62,11 @@ def program() -> None:
     """The ``cfbmarkov`` program (and ``python -m cfbmarkov``): :func:`main` on the
     process's arguments, then exit with its code.
 
-    Once the verb has returned, its output is published and a Ctrl-C has nothing left to
-    stop: SIGINT is ignored while the interpreter shuts down. Python puts the default
-    handler back as it finalizes, and a Ctrl-C landing then would end the process by the
-    signal (exit status -2, 130 in a shell) with nothing said, after a complete run.
+    Once the verb has returned, its output is published and a Ctrl-C or a SIGTERM has
+    nothing left to stop: both are ignored while the interpreter shuts down. Python puts the
+    default handlers back as it finalizes, and a signal landing then would end the process
+    by the signal (exit status -2 or -15, 130 or 143 in a shell) with nothing said, after a
+    complete run. Before that, a SIGTERM is taken as a Ctrl-C, as while the verb runs.
 
     Raises
     ------
@@ -74,6 +75,7 @@ def program() -> None:
     """
     import signal
 
+    signal.signal(signal.SIGTERM, _term_as_interrupt)
     try:
         code = main()
     except KeyboardInterrupt:           # between the verb's end and main's return
@@ -81,7 +83,13 @@ def program() -> None:
         code = 130
     finally:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)
     sys.exit(code)
+
+
+def _term_as_interrupt(signum, frame) -> None:
+    """SIGTERM outside a verb's own handler (:mod:`cfbmarkov._interrupt`): a Ctrl-C."""
+    raise KeyboardInterrupt
 
 
 def _ignore(unraisable) -> None:

@@ -324,10 +324,16 @@ def _run_claimed(args) -> int:
         _interrupt.check()
 
 
+#: the verbs whose output folder is published whole (written aside, renamed into place)
+WHOLE_FOLDERS = ("compare", "export-vtk")
+
+
 def _output_stamp(args):
-    """The file output's identity and time of change (None where absent or a folder)."""
-    if OUTPUTS.get(args.command, ("folder",))[0] == "folder" or not getattr(args, "output",
-                                                                            None):
+    """The output's identity and time of change: a file's, or a folder published whole
+    (:data:`WHOLE_FOLDERS`); None where absent or a folder built in place."""
+    kind = OUTPUTS.get(args.command, ("folder",))[0]
+    if (kind == "folder" and args.command not in WHOLE_FOLDERS) or not getattr(
+            args, "output", None):
         return None
     try:
         stat = os.stat(args.output)
@@ -343,7 +349,8 @@ def _written_whole(args, before) -> str:
     after = _output_stamp(args)
     if after is None or after == before:
         return ""
-    return (f" after {args.output} was written whole (the file is complete; only the lines "
+    what = "folder" if args.command in WHOLE_FOLDERS else "file"
+    return (f" after {args.output} was written whole (the {what} is complete; only the lines "
             "printed after it were cut short)")
 
 

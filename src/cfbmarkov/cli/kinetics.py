@@ -25,15 +25,6 @@ def cmd_react(args) -> int:
     int
         The exit code, 0 (errors are raised as :class:`~cfbmarkov.errors.CfbmarkovError`).
     """
-    import json
-
-    from cfbmarkov._json import jsonable
-    from cfbmarkov.analysis.cell_fields import model_cell_fields
-    from cfbmarkov.analysis.kinetics_compare import needs_cell_fields
-    from cfbmarkov.kinetics import load_kinetics
-    from cfbmarkov.markov import MarkovModel
-    from cfbmarkov.markov.kinetics_exact import exact_kinetics
-
     mc = {"--init RUN": args.init, "--start T": args.start, "--duration D": args.duration,
           "-o OUT": args.output}
     missing = [name for name, value in mc.items() if value is None]
@@ -56,6 +47,28 @@ def cmd_react(args) -> int:
     from cfbmarkov.cli.markov import _check_resamples
 
     _check_resamples(args.resamples, args.level)
+    if args.output is not None:
+        # the Monte Carlo's output claimed (locked, checked) before any work, as every
+        # writing verb's is: a second writer of it is refused at once, not overwritten later
+        from cfbmarkov._outputs import claim_output
+
+        with claim_output(args.output, "react", "prediction", [args.model, args.init],
+                          force=args.force):
+            return _react(args)
+    return _react(args)
+
+
+def _react(args) -> int:
+    """:func:`cmd_react` once its options are checked (and its output claimed)."""
+    import json
+
+    from cfbmarkov._json import jsonable
+    from cfbmarkov.analysis.cell_fields import model_cell_fields
+    from cfbmarkov.analysis.kinetics_compare import needs_cell_fields
+    from cfbmarkov.kinetics import load_kinetics
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
     kinetics = load_kinetics(args.kinetics)
     model = MarkovModel.load(args.model)
     fields, fields_from = None, None
@@ -103,7 +116,7 @@ def cmd_react(args) -> int:
         from cfbmarkov.trajectories import Trajectories
 
         with claim_output(args.output, "react", "prediction", [args.model, args.init],
-                          force=args.force):
+                          force=args.force):         # re-entrant: claimed by cmd_react
             with Trajectories(args.init) as run, warnings.catch_warnings():
                 warnings.simplefilter("ignore", SampleWarning)  # printed below
                 model.predict(run, start=args.start, duration=args.duration, seed=args.seed,

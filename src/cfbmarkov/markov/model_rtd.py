@@ -13,7 +13,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from cfbmarkov.errors import InputError
-from cfbmarkov.limits import MAX_STEPS, check_finite, check_memory, memory_limit
+from cfbmarkov.limits import (MAX_STEPS, check_finite, check_memory, check_rtd,
+                              memory_limit, rtd_memory)
 from cfbmarkov.markov.first_passage import (ResidenceTimeDistribution, drift_residence_time,
                                             exact_rtd, split_by_pass, window_rtd)
 
@@ -77,11 +78,17 @@ def model_rtd(model: "MarkovModel", window: float | None = None,
         if abs(lags - round(lags)) > 1e-9 * max(lags, 1.0) and round(lags) >= 1:
             window = round(lags) * model.lag
             lags = float(round(lags))
-        fits = memory_limit() / (WINDOW_BYTES * model.n_states) * model.lag
-        check_memory(WINDOW_BYTES * lags * model.n_states,
+        chain = rtd_memory(model.n_states)       # the model's exact RTD, where it counts
+        fits = max(memory_limit() - chain, 0.0) / (WINDOW_BYTES * model.n_states) * model.lag
+        check_memory(WINDOW_BYTES * lags * model.n_states + chain,
                      f"the RTD as a {window:g} s window sees it ({lags:.0f} lags x "
-                     f"{model.n_states} states)",
-                     f"give a window length of at most {fits:.3g} s")
+                     f"{model.n_states} states)" + (" with the model's exact RTD" if chain
+                                                     else ""),
+                     f"give a window length of at most {fits:.3g} s" if fits >= model.lag
+                     else "fit the model on fewer --cells, or a state space with fewer "
+                          "states per cell")
+    elif not any(str(key).startswith("rtd") for key in model._cache):
+        check_rtd(model.n_states)   # none computed yet: the exact RTD's peak memory, first
     cache = model._cache
     if model.open_flow is not None:
         return _with_uncertainty(model, _open_rtd(model, window), window)
