@@ -39,6 +39,7 @@ from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.connectivity import closed_classes
 from cfbmarkov.markov.entry_chain import (DepthElimination, embedded_stationary,
                                           entry_matrix)
+from cfbmarkov.markov.model_arrays import check_pass_fractions, check_stochastic
 from cfbmarkov.markov.tail_closure import (EARLY_MASS, EARLY_STEP, FIRST_TRY, MAX_TRIES,
                                            krylov_dimension, next_try, try_closure)
 from cfbmarkov.markov.tail_closure import level_row as _level_row
@@ -733,13 +734,7 @@ def _checked_chain(chain: sp.csr_matrix, up_fraction, down_fraction, lag
     if not (isinstance(lag, (int, float, np.number)) and not isinstance(lag, bool)
             and np.isfinite(lag) and lag > 0):
         raise InputError(f"lag {lag!r} s must be a positive finite number")
-    if chain.nnz and (not np.all(np.isfinite(chain.data)) or chain.data.min() < 0):
-        raise InputError("transition matrix holds negative or non-finite entries")
-    rows = np.asarray(chain.sum(axis=1)).ravel()
-    if not np.allclose(rows, 1.0, rtol=0.0, atol=1e-9):
-        k = int(np.argmax(np.abs(rows - 1.0)))
-        raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to "
-                         f"{rows[k]:.6g})")
+    check_stochastic(chain.data, np.asarray(chain.sum(axis=1)).ravel())
     fractions = []
     for name, given in (("up_fraction", up_fraction), ("down_fraction", down_fraction)):
         value = np.asarray(given, dtype=np.float64)
@@ -747,11 +742,7 @@ def _checked_chain(chain: sp.csr_matrix, up_fraction, down_fraction, lag
             raise InputError(f"{name} has shape {value.shape}, expected ({s}, {s}) as P")
         fractions.append(value)
     where = np.repeat(np.arange(s), np.diff(chain.indptr)), chain.indices
-    up, down = fractions[0][where], fractions[1][where]
-    if up.size and (not (np.all(np.isfinite(up)) and np.all(np.isfinite(down)))
-                    or min(up.min(), down.min()) < 0 or (up + down).max() > 1.0 + 1e-9):
-        raise InputError("pass fractions must lie in [0, 1] with up + down <= 1 for each "
-                         "transition of P")
+    check_pass_fractions(fractions[0][where], fractions[1][where])
     return fractions[0], fractions[1]
 
 

@@ -186,12 +186,7 @@ def checked_arrays(square: dict[str, Any], pass_fractions, lag, state_space: Sta
     if not (isinstance(lag, (int, float, np.number)) and np.isfinite(lag) and lag > 0):
         raise InputError(f"model lag {lag!r} s must be a positive finite number")
     p = arrays["transition_matrix"]
-    if not np.all(np.isfinite(p)) or (p.size and p.min() < 0):
-        raise InputError("transition matrix holds negative or non-finite entries")
-    rows = p.sum(axis=1)
-    if not np.allclose(rows, 1.0, rtol=0.0, atol=1e-9):     # within 1e-9, as documented
-        k = int(np.argmax(np.abs(rows - 1.0)))
-        raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to {rows[k]:.6g})")
+    check_stochastic(p, p.sum(axis=1))
     for name in ("counts", "counts_up", "counts_down"):
         value = arrays[name]
         if value.size and value.min() < 0:
@@ -211,10 +206,39 @@ def checked_arrays(square: dict[str, Any], pass_fractions, lag, state_space: Sta
     fractions = tuple(owned_array(f, np.float64, adopt) for f in pass_fractions)
     if any(f.shape != (s, s) for f in fractions):
         raise InputError(f"pass fractions must have shape ({s}, {s})")
-    up, down = fractions
+    check_pass_fractions(*fractions)
+    return arrays, fractions
+
+
+def check_stochastic(values: np.ndarray, row_sums: np.ndarray) -> None:
+    """Refuse a transition matrix (its entries, dense or a sparse matrix's non-zeros, and
+    its row sums) with a negative or non-finite entry or a row not summing to 1 within
+    1e-9 (as documented).
+
+    Raises
+    ------
+    InputError
+        Naming the rule broken (and the first row off).
+    """
+    if not np.all(np.isfinite(values)) or (values.size and values.min() < 0):
+        raise InputError("transition matrix holds negative or non-finite entries")
+    if not np.allclose(row_sums, 1.0, rtol=0.0, atol=1e-9):
+        k = int(np.argmax(np.abs(row_sums - 1.0)))
+        raise InputError(f"transition matrix rows do not sum to 1 (row {k} sums to "
+                         f"{row_sums[k]:.6g})")
+
+
+def check_pass_fractions(up: np.ndarray, down: np.ndarray) -> None:
+    """Refuse pass fractions (of every transition, or of P's non-zeros) outside [0, 1] or
+    with up + down > 1.
+
+    Raises
+    ------
+    InputError
+        Naming the largest value.
+    """
     if not (np.all(np.isfinite(up)) and np.all(np.isfinite(down))) or (up.size and (
             min(up.min(), down.min()) < 0 or (up + down).max() > 1.0 + 1e-9)):
         worst = float(max(np.nanmax(np.abs(up)), np.nanmax(np.abs(down)))) if up.size else 0
         raise InputError("pass fractions must lie in [0, 1] with up + down <= 1 for each "
                          f"transition (largest {worst:.6g})")
-    return arrays, fractions
