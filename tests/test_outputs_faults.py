@@ -408,7 +408,13 @@ def test_ctrl_c_of_a_reproduce_with_two_workers_is_one_line(tmp_path):
     (tmp_path / "tiny.toml").write_text(text.replace("end_time = 0.8", "end_time = 3.0"))
     p = cli("reproduce", "--scale", "quick", "--overrides", "tiny.toml", "--velocities", "6,8",
             "-o", "out", "--jobs", "2", "-q", cwd=tmp_path)
-    time.sleep(5.0)
+    # the signal comes once both workers hold their CFD-DEM's lock (a fixed wait came
+    # before the workers started on a busy machine)
+    deadline = time.monotonic() + 120.0
+    while (len(list((tmp_path / "out").glob("u*/.cfd-dem.h5.lock"))) < 2
+           and time.monotonic() < deadline and p.poll() is None):
+        time.sleep(0.2)
+    time.sleep(1.0)
     p.send_signal(signal.SIGINT)
     _, err = p.communicate(timeout=60)
     assert p.returncode == 130, err
