@@ -115,6 +115,12 @@ class UnresolvedWarning(CfbmarkovWarning):
     ``warning:``)."""
 
 
+class IntervalWarning(CfbmarkovWarning):
+    """No interval could be formed for a model's E(RT) and SD(RT) (the message says why);
+    the model is returned without one
+    (:func:`cfbmarkov.analysis.fit_checks.assess_fit`)."""
+
+
 class SampleWarning(CfbmarkovWarning):
     """A model used for a prediction carries a warning of its fitting sample's verdict
     (:attr:`cfbmarkov.markov.MarkovModel.adequacy`): the message repeats it, as the command

@@ -62,7 +62,7 @@ def test_assess_fit_refuses_what_it_cannot_use(fitted, markov_run):
 def test_windows_of_one_run_get_no_interval_of_pooled_runs(markov_run):
     """Two windows of one file pool their counts, but they are not independent runs: no
     interval (it would be narrowed by sqrt(2)) and no verdict that "the runs agree"."""
-    from cfbmarkov.analysis.fit_checks import IntervalWarning
+    from cfbmarkov.errors import IntervalWarning    # where the how-to names it
 
     windows = [(2.0, 4.0), (4.5, 6.5)]
     pooled = PaperEstimator(GRID, lag=0.1).fit(

@@ -14,14 +14,10 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, SampleWarning
+from cfbmarkov.errors import (CfbmarkovError, CfbmarkovWarning, InputError,  # noqa: F401
+                              IntervalWarning, SampleWarning)
 
 __all__ = ["IntervalWarning", "assess_fit", "record_fitting_data"]
-
-
-class IntervalWarning(CfbmarkovWarning):
-    """No interval could be formed for a model's E(RT) and SD(RT) (the message says why);
-    the model is returned without one."""
 
 
 def _no_stage(short: str, text: str | None):
