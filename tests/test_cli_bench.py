@@ -35,3 +35,24 @@ def test_only_the_named_figure_is_measured(capsys):
     captured = capsys.readouterr()
     assert [line.split(":")[0] for line in captured.out.splitlines()] == ["mcm-exact-rtd"]
     assert "bench: mcm-exact-rtd done" in captured.err and "\r" not in captured.err
+
+
+def test_a_simulation_figure_alone_runs_nothing_else(monkeypatch):
+    """``--only dem-throughput`` measures the dilute DEM alone: neither the dense DEM nor
+    the coupled riser (half a second of the paper's riser to develop) runs."""
+    from cfbmarkov.simulate import bench as simulation
+
+    ran = []
+    monkeypatch.setattr(simulation, "_dem_rate",
+                        lambda state, particles, repeat: ran.append(state) or 1.0)
+    monkeypatch.setattr(simulation, "_lammps_lines", lambda *args: iter(()))
+    monkeypatch.setattr(simulation, "fluidized_riser",
+                        lambda particles: ran.append("coupled") or None)
+    rows = list(simulation.simulation_benchmarks(
+        repeat=1, particles=10, wanted=lambda name: selects(["dem-throughput"], name)))
+    assert [row[0] for row in rows] == ["dem-throughput"] and ran == ["dilute"]
+    ran.clear()
+    rows = list(simulation.simulation_benchmarks(
+        repeat=1, particles=10, wanted=lambda name: selects(["dem"], name)))
+    assert [row[0] for row in rows] == ["dem-throughput", "dem-throughput-dense"]
+    assert ran == ["dilute", "dense"]

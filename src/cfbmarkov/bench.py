@@ -295,12 +295,14 @@ def _refit(model, run):
 BENCHMARKS = {"mcm": markov_benchmarks}
 
 
-def _simulation_benchmarks(repeat: int, particles: int) -> Iterator[tuple[str, float, str]]:
+def _simulation_benchmarks(repeat: int, particles: int, only: list[str] | None
+                           ) -> Iterator[tuple[str, float, str]]:
     try:
         from cfbmarkov.simulate.bench import simulation_benchmarks
     except ImportError:
         return
-    yield from simulation_benchmarks(repeat=repeat, particles=particles)
+    yield from simulation_benchmarks(repeat=repeat, particles=particles,
+                                     wanted=lambda name: selects(only, name))
 
 
 def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: int = 27000
@@ -331,6 +333,6 @@ def run_benchmarks(only: list[str] | None = None, repeat: int = 5, particles: in
     if not only or any(o.startswith("mcm") for o in only):
         yield from markov_benchmarks(repeat, particles, only=only)
     if not only or any(not o.startswith("mcm") for o in only):
-        for row in _simulation_benchmarks(repeat, particles):
+        for row in _simulation_benchmarks(repeat, particles, only):
             if selects(only, row[0]):
                 yield row

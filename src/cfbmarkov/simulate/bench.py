@@ -26,7 +26,7 @@ from __future__ import annotations
 import statistics
 import time
 import warnings
-from typing import Iterator
+from typing import Callable, Iterator
 
 from cfbmarkov.simulate.dem.bench import _cache_dir, make_system
 
@@ -99,7 +99,8 @@ def _lammps_lines(name: str, state: str, ours: float, particles: int, repeat: in
     yield f"{name}-over-lammps", ours / rate, "x"
 
 
-def simulation_benchmarks(repeat: int = 5, particles: int = 27000
+def simulation_benchmarks(repeat: int = 5, particles: int = 27000,
+                          wanted: Callable[[str], bool] | None = None
                           ) -> Iterator[tuple[str, float, str]]:
     """The ``dem-*`` and ``cfd-dem-*`` figures (module docstring; docs/performance.md).
 
@@ -109,22 +110,36 @@ def simulation_benchmarks(repeat: int = 5, particles: int = 27000
         Timed runs per figure (the median is reported).
     particles : int, optional
         Number of particles.
+    wanted : callable, optional
+        ``wanted(name)`` says whether a figure is asked for (``cfbmarkov bench --only``);
+        what no asked figure needs is not run. All figures when None.
 
     Yields
     ------
     tuple of (str, float, str)
         (name, value, unit): particle-steps/s, or ``'x'`` for the ratio over LAMMPS.
     """
+    if wanted is None:
+        def wanted(name: str) -> bool:
+            return True
+    # the coupled run's ratio needs LAMMPS's dense DEM figure
+    over = wanted("cfd-dem-throughput-over-lammps-dense")
     lammps_dense = None
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")     # the paper's DEM step warning
         for name, state in (("dem-throughput", "dilute"), ("dem-throughput-dense", "dense")):
+            if not (wanted(name) or (state == "dense" and over)):
+                continue
             ours = _dem_rate(state, particles, repeat)
-            yield name, ours, "particle-steps/s"
+            if wanted(name):
+                yield name, ours, "particle-steps/s"
             for line in _lammps_lines(name, state, ours, particles, repeat):
                 if state == "dense" and line[2] == "particle-steps/s":
                     lammps_dense = line[1]
-                yield line
+                if wanted(line[0]):
+                    yield line
+        if not (wanted("cfd-dem-throughput") or over):
+            return
         riser = fluidized_riser(particles)
         gas_steps = 50
         riser.step()
@@ -135,7 +150,8 @@ def simulation_benchmarks(repeat: int = 5, particles: int = 27000
                 riser.step()
             rates.append(particles * gas_steps * riser.dem_steps_per_cfd
                          / (time.perf_counter() - t0))
-        yield "cfd-dem-throughput", statistics.median(rates), "particle-steps/s"
-        if lammps_dense:     # the coupled run against LAMMPS's pure dense DEM (issue 15)
+        if wanted("cfd-dem-throughput"):
+            yield "cfd-dem-throughput", statistics.median(rates), "particle-steps/s"
+        if lammps_dense and over:   # the coupled run against LAMMPS's pure dense DEM (issue 15)
             yield ("cfd-dem-throughput-over-lammps-dense", statistics.median(rates) / lammps_dense,
                    "x")
