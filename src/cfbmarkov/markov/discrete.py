@@ -713,7 +713,8 @@ def check_distinct_windows(windows: list[DiscreteTrajectories]) -> None:
                     other.states.shape == window.states.shape
                     and np.array_equal(other.times, window.times)
                     and np.array_equal(other.states, window.states)):
-                name = window.source or "discrete trajectories"
+                names = [w.source or "discrete trajectories" for w in (other, window)]
+                name = names[0] if names[0] == names[1] else " and ".join(names)
                 what = "hold the same data" if other is window or not same_file or (
                     np.array_equal(other.times, window.times)) else "overlap"
                 raise InputError(

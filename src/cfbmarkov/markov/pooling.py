@@ -167,11 +167,17 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
                 continue
             what = (f"of {run.path}" if one_file else
                     f"of {other.path} and {run.path}, which hold one run (their frames at "
-                    f"t = {common:.10g} s are the same: a copy or a link of one file)")
+                    f"t = {common:.10g} s hold the same particles at the same positions: a "
+                    "copy or a link of one file, or of a part of it, or its particles "
+                    "reordered)")
             if w[0] < window[1] and window[0] < w[1]:
                 raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
                                  f"{window[1]:g} s {what} overlap: their common frames "
-                                 "would be counted twice (give windows that do not overlap)")
+                                 "would be counted twice ("
+                                 + (f"fit one window spanning both, {min(w[0], window[0]):g}:"
+                                    f"{max(w[1], window[1]):g}" if one_file else
+                                    "fit one of the files alone")
+                                 + ", or pool independent runs of the case)")
             raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
                              f"{window[1]:g} s are both {what}; pooled as runs they "
                              "would be taken as independent flow and narrow the interval by "
@@ -198,20 +204,15 @@ def same_window_frames(a, window_a: tuple[float, float], b,
     Returns
     -------
     (float, float) or None
-        The two frames' times (s) where ids, presence and positions (NaN of absent
-        particles equal) are the same, else None.
+        The two frames' times (s) where they hold one run's particles
+        (:func:`shared_positions`), else None.
     """
-    if not np.array_equal(np.asarray(a.ids), np.asarray(b.ids)):
-        return None
     frames_a, frames_b = a.window(*window_a), b.window(*window_b)
     span = min(frames_a.stop - frames_a.start, frames_b.stop - frames_b.start) - 1
     if span < 0:
         return None
     i, j = frames_a.start + span, frames_b.start + span
-    if not np.array_equal(np.asarray(a.present(i)), np.asarray(b.present(j))):
-        return None
-    if not np.array_equal(np.asarray(a.positions(i)), np.asarray(b.positions(j)),
-                          equal_nan=True):
+    if not shared_positions(a, i, b, j):
         return None
     return float(a.times[i]), float(b.times[j])
 
@@ -227,7 +228,8 @@ def same_run_frame(a, b) -> float | None:
 
     Two runs of a case are told apart by their particles' positions at one time both files
     hold: the latest such time (runs started from one state part at once, a chaotic flow
-    never meets again), compared with the particles' ids and presence.
+    never meets again), compared whatever the particles' ids and order
+    (:func:`shared_positions`: a reordered, renumbered or partial copy is one run too).
 
     Parameters
     ----------
@@ -237,13 +239,13 @@ def same_run_frame(a, b) -> float | None:
     Returns
     -------
     float or None
-        That frame's time (s) where its ids, presence and positions are the same in both
-        files (NaN positions of absent particles equal); None where the files share no
-        frame time with a particle in view, or differ at the latest such frame.
+        That frame's time (s) where both files hold one run's particles
+        (:func:`shared_positions`); None where the files share no frame time with a
+        particle in view, or differ at the latest such frame.
     """
     times_a, times_b = np.asarray(a.times), np.asarray(b.times)
     common = np.intersect1d(times_a, times_b)
-    if common.size == 0 or not np.array_equal(np.asarray(a.ids), np.asarray(b.ids)):
+    if common.size == 0:
         return None
     rows_a = np.searchsorted(times_a, common)
     rows_b = np.searchsorted(times_b, common)
@@ -260,11 +262,47 @@ def same_run_frame(a, b) -> float | None:
     if found is None:
         return None
     i, j = int(rows_a[found]), int(rows_b[found])
-    present = np.asarray(a.present(i))
-    if not np.array_equal(present, np.asarray(b.present(j))):
-        return None
-    same = np.array_equal(np.asarray(a.positions(i)), np.asarray(b.positions(j)), equal_nan=True)
-    return float(common[found]) if same else None
+    return float(common[found]) if shared_positions(a, i, b, j) else None
+
+
+#: the share of the particles in view (of the file with fewer) at exactly the same
+#: coordinates in both files beyond which two frames are taken for one run's
+SHARED_POSITIONS = 0.5
+
+
+def shared_positions(a, i: int, b, j: int) -> bool:
+    """Whether frame ``i`` of ``a`` and frame ``j`` of ``b`` hold one run's particles: more
+    than :data:`SHARED_POSITIONS` of the particles in view of the frame with fewer sit at
+    exactly the same coordinates (bit for bit) in the other, whatever their ids and order.
+
+    A copy, a link, a copy with its particles reordered or renumbered, or a part of a run
+    (some of its particles) shares them all; two independent runs share none (a chaotic
+    flow's particles never meet the same floating-point coordinates again), and coordinates
+    rounded to a coarse grid (PEPT to 1 mm) share a few per cent by chance.
+
+    Parameters
+    ----------
+    a, b : Trajectories
+        Open trajectory files.
+    i, j : int
+        Frame indices of ``a`` and ``b``.
+
+    Returns
+    -------
+    bool
+    """
+    first = np.asarray(a.positions(i))[np.asarray(a.present(i), dtype=bool)]
+    second = np.asarray(b.positions(j))[np.asarray(b.present(j), dtype=bool)]
+    if first.shape[1:] != second.shape[1:]:
+        return False
+    fewer = min(len(first), len(second))
+    if fewer == 0:
+        return False
+    rows = [np.ascontiguousarray(x, dtype=np.float64) for x in (first, second)]
+    as_bytes = [x.view(np.dtype((np.void, x.dtype.itemsize * x.shape[1]))).ravel()
+                for x in rows]
+    found = np.isin(as_bytes[0], as_bytes[1]).sum()
+    return found > SHARED_POSITIONS * fewer
 
 
 def run_windows(windows: Sequence[tuple[float, float]], n_runs: int
