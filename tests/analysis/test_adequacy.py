@@ -604,10 +604,21 @@ def test_a_passed_verdict_says_so_with_its_numbers():
                                             1.0).passed_line()
     halves = Adequacy((), parts[:2], 1.0, 0.01, 0.05, 2.0, 1e-9).passed_line()
     assert "halves agree (E(RT) spread 1 %, limit 5 %)" in halves
-    pooled = Adequacy((), parts, 1.0, 0.01, 0.05, 2.0, 0.01, (("a.h5", 0.98), ("b.h5", 1.03)))
+    pooled = Adequacy((), parts, 1.0, 0.01, 0.05, 2.0, 0.01, (("a.h5", 0.98), ("b.h5", 1.03)),
+                      runs_limit=0.071)
     assert "quarters agree" not in pooled.passed_line()       # judged run by run, not here
-    assert ("the 2 runs agree (E(RT) fitted on each alone 0.98, 1.03 s, pooled 1 s; their "
-            "parts' spread 1 %)") in pooled.passed_line()
+    assert ("the 2 runs agree (E(RT) fitted on each alone 0.980, 1.03 s, pooled 1.00 s; each "
+            "within 3 % of the pooled model's, limit 7.1 %; their parts' spread 1 %)"
+            ) in pooled.passed_line()
+    # without an interval the runs are judged against the default tolerance alone: runs
+    # 24 % apart passed it and read "agree"
+    blunt = Adequacy((), parts, 2.08, 0.022, 0.3, 4.0, 0.013, (("a.h5", 2.37), ("b.h5", 1.86)),
+                     runs_limit=0.3, runs_interval=False)
+    line = blunt.passed_line()
+    assert "runs agree" not in line and "2 runs not judged against their own uncertainty" in line
+    assert "each within 14 % of the pooled model's, limit 30 %" in line
+    assert "give --resamples to judge them" in line
+    assert Adequacy.from_dict(blunt.to_dict()) == blunt
     assert Adequacy(("a warning",), parts, 1.0, 0.1, 0.05).passed_line() is None
 
 

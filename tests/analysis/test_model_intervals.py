@@ -74,14 +74,21 @@ def test_model_file_round_trip_keeps_the_interval(stationary_run, tmp_path):
     # a flow term keeps its degrees of freedom; a file without them (its flow term formed
     # with the normal quantile) reads so: None
     flowing = model.with_uncertainty(replace(u, flow_sd=(0.1, 0.2), flow_degrees_of_freedom=3))
-    assert "plus the flow's variability between its blocks (10 % of E(RT)" in flowing.summary()
+    assert ("plus the flow's variability between its blocks (10 % of E(RT); 20 % of SD(RT), "
+            "times") in flowing.summary()
     # a flow term of 0 (the blocks differ no more than their sampling) is said as such, not
     # as "0 % of E(RT), times Student's t = 6.31"
     zero = model.with_uncertainty(replace(u, flow_sd=(0.0, 0.0), flow_degrees_of_freedom=1))
-    assert "the flow's variability between its blocks taken as 0 (their E(RT) differ no " \
-        "more than their own sampling, which the bootstrap holds; an estimate on 1 " \
-        "degree(s) of freedom, itself uncertain" in zero.summary()
-    assert "0 % of E(RT)" not in zero.summary()
+    assert "the flow's variability of E(RT) between its blocks taken as 0 (their E(RT) " \
+        "differ no more than their own sampling, which the bootstrap holds; an estimate " \
+        "on 1 degree(s) of freedom, itself uncertain" in zero.summary()
+    assert "0 % of E(RT)" not in zero.summary() and "of SD(RT)" not in zero.summary()
+    # E(RT)'s term 0 but SD(RT)'s not: the SD(RT) interval's term is said (it was left
+    # unsaid, the interval 14.5 % wide against E(RT)'s 1.1 %)
+    sd_only = model.with_uncertainty(replace(u, flow_sd=(0.0, 0.0227),
+                                             flow_degrees_of_freedom=1))
+    assert "taken as 0" in sd_only.summary()
+    assert "plus that of SD(RT) (2.27 %, times Student's t = " in sd_only.summary()
     older = flowing.save(tmp_path / "flowing.h5")
     assert MarkovModel.load(older).uncertainty.flow_degrees_of_freedom == 3
     with h5py.File(older, "a") as f:

@@ -418,11 +418,15 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                          f"): the flow changed within the window, and the model may lie far "
                          f"from the flow's long run; {_ADVICE}")
     run_means: tuple[tuple[str, float], ...] = ()
+    runs_limit, runs_interval = math.nan, True
     if pooled:
+        cross_limit = within_run_limit(model, uncertainty, rt_mean, tolerance)
+        runs_limit = cross_limit * math.sqrt(len(runs) - 1)
+        runs_interval = from_interval and cross_limit < tolerance
         run_means, pooled_lines, pooled_spread = _pooled_checks(
             fitter, data, names, windows, rt_mean,
             parts_limit(sampling if from_interval else limit, 2, level, from_interval),
-            within_run_limit(model, uncertainty, rt_mean, tolerance),
+            cross_limit,
             halves=pooled_fewest >= MIN_PART_RESIDENCES, direction=model.flow_direction)
         lines += pooled_lines
         if pooled_fewest < MIN_PART_RESIDENCES:
@@ -451,7 +455,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     on_window = (_pooled_on_window(model, runs, data) if pooled
                  else _on_window(model, runs[0], data[0]))
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
-                    run_means, window_mean, applied if not pooled else math.nan, on_window)
+                    run_means, window_mean, applied if not pooled else math.nan, on_window,
+                    runs_limit, runs_interval)
 
 
 def _on_window(model, run, discrete: DiscreteTrajectories) -> tuple[float, ...]:

@@ -76,6 +76,14 @@ class Adequacy:
         and their count). The sample's verdict does not judge it; beyond
         :data:`ON_WINDOW_LIMIT` it is the model's warning (:meth:`on_window_warning`;
         ``docs/definitions.md``, Sample adequacy).
+    runs_limit : float
+        A pooled fit's limit (-): the distance of a run's own model's E(RT) from the pooled
+        model's, relative, beyond which the run is named (NaN for one run, or a verdict
+        stored without it).
+    runs_interval : bool
+        Whether :attr:`runs_limit` came from the model's interval (the runs' own
+        uncertainty); False where it is the default tolerance, with no interval to tell
+        the runs' differences from their sampling (``--resamples 0``).
     """
 
     warnings: tuple[str, ...] = ()
@@ -89,6 +97,8 @@ class Adequacy:
     window_rt_mean: float = math.nan
     part_limit: float = math.nan
     on_window: tuple[float, ...] = ()
+    runs_limit: float = math.nan
+    runs_interval: bool = True
 
     def on_window_line(self) -> str | None:
         """The chain against its fitting window, one line of numbers (None without it):
@@ -173,14 +183,23 @@ class Adequacy:
             said.append(f"the window's {'quarters' if quarters else 'halves'} agree (E(RT) "
                         f"spread {100 * self.spread:.2g} %, limit {100 * limit:.2g} %)")
         alone = [m for _, m in self.runs if math.isfinite(m)]
-        if alone and math.isfinite(self.rt_mean):
+        if alone and math.isfinite(self.rt_mean) and self.rt_mean > 0:
             # a pooled fit: each run's model against the pool's, and the parts' spread
-            said.append(f"the {len(self.runs)} runs agree (E(RT) fitted on each alone "
-                        f"{', '.join(f'{m:.3g}' for m in alone)} s, pooled "
-                        f"{self.rt_mean:.3g} s" + (f"; their parts' spread "
-                                                    f"{100 * self.spread:.2g} %"
-                                                    if math.isfinite(self.spread) else "")
-                        + ")")
+            furthest = max(abs(m / self.rt_mean - 1.0) for m in alone)
+            within = (f"; each within {100 * furthest:.2g} % of the pooled model's, limit "
+                      f"{100 * self.runs_limit:.2g} %" if math.isfinite(self.runs_limit)
+                      else "")
+            figures = (f"E(RT) fitted on each alone {', '.join(f'{m:#.3g}' for m in alone)} "
+                       f"s, pooled {self.rt_mean:#.3g} s{within}"
+                       + (f"; their parts' spread {100 * self.spread:.2g} %"
+                          if math.isfinite(self.spread) else ""))
+            if self.runs_interval:
+                said.append(f"the {len(self.runs)} runs agree ({figures})")
+            else:
+                said.append(f"the {len(self.runs)} runs not judged against their own "
+                            f"uncertainty ({figures}: without an interval, the default "
+                            "tolerance alone, which cannot tell the runs' differences from "
+                            "their sampling; give --resamples to judge them)")
         if math.isfinite(self.window_rt_mean) and math.isfinite(self.rt_mean):
             gap = abs(self.rt_mean / self.window_rt_mean - 1.0)
             said.append(f"the chain carries the window's throughput (within {100 * gap:.2g} %)")
@@ -210,7 +229,8 @@ class Adequacy:
                 "window_rt_mean": number(self.window_rt_mean),
                 "part_limit": number(self.part_limit),
                 "on_fitting_window": (None if len(self.on_window) != 6 else dict(zip(
-                    ON_WINDOW_KEYS, (number(v) for v in self.on_window))))}
+                    ON_WINDOW_KEYS, (number(v) for v in self.on_window)))),
+                "runs_limit": number(self.runs_limit), "runs_interval": bool(self.runs_interval)}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Adequacy":
@@ -243,7 +263,8 @@ class Adequacy:
                              for r in data.get("runs", [])),
                        number(data.get("window_rt_mean")), number(data.get("part_limit")),
                        tuple(number(data["on_fitting_window"][k]) for k in ON_WINDOW_KEYS)
-                       if data.get("on_fitting_window") else ())
+                       if data.get("on_fitting_window") else (),
+                       number(data.get("runs_limit")), bool(data.get("runs_interval", True)))
         except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
             raise InputError(f"adequacy attribute is not a verdict ({exc})") from None
 

@@ -256,16 +256,24 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         r = model.rtd()
         if r.uncertainty is not None:
             u = r.uncertainty
+            pooled_runs = len(model.run_windows) if model.run_windows else 1
+            over = (f", already over sqrt({pooled_runs}) runs" if pooled_runs > 1 else "")
+            sd_term = ("" if u.flow_sd is None or len(u.flow_sd) < 2 else
+                       "; of SD(RT) taken as 0" if u.flow_sd[1] == 0.0 else
+                       f"; {100 * u.flow_sd[1]:.3g} % of SD(RT)")
             flow = ("; the flow's variability left out (the window is shorter than two "
                     "blocks of three mean residence times)" if u.flow_sd is None else
-                    "; the flow's variability between its blocks taken as 0 (their E(RT) "
-                    "differ no more than their own sampling, which the bootstrap holds; an "
-                    f"estimate on {u.flow_degrees_of_freedom} degree(s) of freedom, itself "
-                    "uncertain: a longer window or more runs pin it down)"
+                    "; the flow's variability of E(RT) between its blocks taken as 0 (their "
+                    "E(RT) differ no more than their own sampling, which the bootstrap "
+                    f"holds; an estimate on {u.flow_degrees_of_freedom} degree(s) of "
+                    "freedom, itself uncertain: a longer window or more runs pin it down)"
+                    + (f"; plus that of SD(RT) ({100 * u.flow_sd[1]:.3g} %{over}, times "
+                       f"{u.flow_multiplier_text()})" if len(u.flow_sd) > 1
+                       and u.flow_sd[1] > 0.0 else "")
                     if u.flow_sd[0] == 0.0 else
-                    f"; plus the flow's variability between its blocks ({100 * u.flow_sd[0]:.3g} "
-                    "% of E(RT)" + (", over sqrt(runs)" if model.run_windows else "")
-                    + f", times {u.flow_multiplier_text()})")
+                    f"; plus the flow's variability between its blocks "
+                    f"({100 * u.flow_sd[0]:.3g} % of E(RT){sd_term}{over}, times "
+                    f"{u.flow_multiplier_text()})")
             lines.append(f"  exact residence time: {u.describe(r.mean, r.sd)}")
             runs = len(model.run_windows) if model.run_windows is not None else 1
             widened = ("" if u.bootstrap_widening is None else
