@@ -465,6 +465,13 @@ def test_blow_up_is_reported():
     with pytest.raises(SimulationBlowUp, match=r"step 0 .*overlaps") as exc:
         s.step(1)
     assert exc.value.step == 0
+    assert "Reduce the time step" in str(exc.value) and "soft" not in str(exc.value)
+    # contacts too soft, not a step too long: the message names the stiffness
+    soft = ContactLaw(kn=2.0, kt=0.57)
+    s = make([[0.005, 0.005], [0.005, 0.0058]], [[0, 0], [0, 0]], law=soft)
+    with pytest.raises(SimulationBlowUp, match=r"overlaps") as exc:
+        s.step(1)
+    assert "contact.normal_stiffness 2 N/m lets a collision at 1 m/s overlap by" in str(exc.value)
 
 
 def test_settled_bed_is_stable():

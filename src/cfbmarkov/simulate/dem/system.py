@@ -451,8 +451,26 @@ class DEMSystem:
         msg = (f"DEM blow-up in step {step} (t = {self._t0 + (step + 1) * self._dt:.9g} s): "
                f"particle {pid} {_REASONS.get(code, 'is invalid')} (x = {st[k, 0]:.6g} m, "
                f"y = {st[k, 1]:.6g} m, v = ({st[k, 2]:.4g}, {st[k, 3]:.4g}) m/s); "
-               f"{len(where)} particle(s) affected. Reduce the time step or check the input.")
+               f"{len(where)} particle(s) affected. {self._blowup_advice(code)}")
         raise SimulationBlowUp(msg, step=step, particle=pid, reason=_REASONS.get(code, "invalid"))
+
+    def _blowup_advice(self, code: int) -> str:
+        """What to change after a blow-up: the time step, and where the contacts are soft
+        enough that a collision at 1 m/s alone overlaps by more than half the blow-up limit
+        (the linear spring's largest overlap v sqrt(m / kn)), the normal stiffness."""
+        advice = "Reduce the time step (numerics.dem_time_step) or check the input."
+        if code != L.BAD_OVERLAP:
+            return advice
+        # the lightest particle's diameter (its mass at the densest particles' density)
+        diameter = (6.0 * self._min_mass / (math.pi * float(np.max(self._density)))) ** (1 / 3)
+        kn = float(self._law.kn)
+        overlap = 1.0 * math.sqrt(self._min_mass / kn)      # m, at 1 m/s
+        if math.isfinite(diameter) and overlap > 0.5 * MAX_OVERLAP * diameter:
+            return (f"The contacts are soft: contact.normal_stiffness {kn:g} N/m lets a "
+                    f"collision at 1 m/s overlap by {100 * overlap / diameter:.0f} % of d "
+                    f"(v sqrt(m / kn)); stiffen them (the overlap falls as 1 / sqrt(kn), and "
+                    "the time step with it: numerics.dem_time_step), or check the input.")
+        return advice
 
     @property
     def wall_impulse(self) -> np.ndarray:
