@@ -409,7 +409,9 @@ class GpuEnsembleDEM:
         raise SimulationBlowUp(
             f"DEM blow-up in member {k}, step {step} (t = {self._t0 + (step + 1) * self._dt:.9g}"
             f" s): particle {pid} {reason} (x = {p[0]:.6g} m, y = {p[1]:.6g} m); "
-            f"{len(where)} particle(s) affected. Reduce the time step (numerics.dem_time_step), stiffen soft contacts (contact.normal_stiffness) or check the input.",
+            f"{len(where)} particle(s) affected. Reduce the time step "
+            "(numerics.dem_time_step), stiffen soft contacts (contact.normal_stiffness) or "
+            "check the input.",
             step=step, particle=pid, reason=reason)
 
     def drain_pass_events(self, member: int):
