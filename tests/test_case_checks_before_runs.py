@@ -187,3 +187,47 @@ def test_an_item_out_of_range_keeps_its_index_and_pydantics_words(tmp_path, caps
     assert main(["simulate", str(case), "-o", str(tmp_path / "r.h5")]) == 2
     err = capsys.readouterr().err
     assert "at 'numerics.cfd_cells.0': Input should be greater than 0 (given 0)" in err
+
+
+def test_gas_cells_smaller_than_a_particle_are_refused_and_narrow_ones_noted(tmp_path, capsys):
+    """Gas cells narrower than a particle (d = 15 mm in 10 mm cells) put a cell's void
+    fraction at its floor from one particle: the run went on with no word; now refused
+    before anything runs. Cells of 1-3 diameters are noted."""
+    from cfbmarkov.config import load_case
+    from cfbmarkov.simulate.run import doubtful_physics
+
+    case = tmp_path / "c.toml"
+    case.write_text(CASE.format(riser="", numerics="").replace("number = 300",
+                                                               "number = 5\ndiameter = 0.015"))
+    assert main(["simulate", str(case), "-o", str(tmp_path / "r.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "gas cells 0.01 x 0.01 m are smaller than the particles" \
+        in err, err
+    assert list(tmp_path.iterdir()) == [case]
+    case.write_text(CASE.format(riser="", numerics="").replace("number = 300",
+                                                               "number = 20\ndiameter = 0.004"))
+    notes = doubtful_physics(load_case(case))
+    assert "are 2.5 particle diameters across" in notes[0]
+    case.write_text(CASE.format(riser="", numerics=""))
+    assert doubtful_physics(load_case(case)) == []
+
+
+def test_a_gas_too_slow_to_fluidise_and_frames_too_far_apart_are_noted(tmp_path):
+    """A superficial velocity below the case's minimum fluidization velocity (the solids fall
+    as in a downer) and frames so far apart that a falling particle crosses the riser between
+    two (the run stopped at its first checkpoint, its work lost) are said before the run."""
+    from cfbmarkov.config import load_case
+    from cfbmarkov.simulate.run import doubtful_physics
+
+    case = tmp_path / "c.toml"
+    case.write_text(CASE.format(riser="", numerics="") + "[gas]\nsuperficial_velocity = 0.1\n")
+    notes = doubtful_physics(load_case(case))
+    assert len(notes) == 1 and "0.1 m/s is below the case's minimum fluidization velocity " \
+        "0.44 m/s" in notes[0]
+    slow_frames = CASE.format(riser="", numerics="").replace("frame_interval = 0.01",
+                                                             "frame_interval = 0.02")
+    case.write_text(slow_frames + "[gas]\nsuperficial_velocity = 3.0\n")
+    notes = doubtful_physics(load_case(case))
+    assert len(notes) == 1 and "frames 0.02 s apart" in notes[0]
+    assert "(6.99 m/s) crosses the riser's height 0.1 m" in notes[0]
+    assert "output.frame_interval at most 0.014 s" in notes[0]

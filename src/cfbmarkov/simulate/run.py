@@ -418,9 +418,66 @@ def unlikely_units(case: CaseConfig) -> list[str]:
     return notes
 
 
+#: gas cells narrower than this many particle diameters are noted: the void fraction of a
+#: cell then moves by a large step with each particle that enters it (unresolved CFD-DEM
+#: wants cells of several diameters; e.g. Peng et al., Powder Technol. 257 (2014) 15)
+CELL_DIAMETERS_NOTED = 3.0
+
+
+def doubtful_physics(case: CaseConfig) -> list[str]:
+    """Settings the CFD-DEM runs but whose results may not be what the case means: gas cells
+    fewer than :data:`CELL_DIAMETERS_NOTED` particle diameters across, a superficial
+    velocity below the case's minimum fluidization velocity, and frames so far apart that a
+    particle rising at the superficial velocity or falling at its terminal velocity would
+    cross the riser's height between two of them (the trajectory file cannot hold that move, and the run would stop
+    at its next checkpoint).
+
+    Parameters
+    ----------
+    case : CaseConfig
+        The case.
+
+    Returns
+    -------
+    list of str
+        One sentence per such setting, with its numbers and what to change.
+    """
+    from cfbmarkov.simulate.cfd import terminal_velocity
+
+    p, r, gas = case.particles, case.riser, case.gas
+    notes = []
+    nx, ny = case.numerics.cfd_cells
+    cell = min(r.width / nx, r.height / ny)
+    if cell < CELL_DIAMETERS_NOTED * p.diameter:
+        notes.append(f"gas cells {r.width / nx:.3g} x {r.height / ny:.3g} m are "
+                     f"{cell / p.diameter:.2g} particle diameters across (d = {p.diameter:g} "
+                     f"m; {CELL_DIAMETERS_NOTED:g} or more recommended): a cell's void fraction "
+                     "jumps with each particle that enters it, and the drag follows; give "
+                     "fewer gas cells (numerics.cfd_cells)")
+    if gas.superficial_velocity < gas.minimum_fluidization_velocity:
+        notes.append(f"gas.superficial_velocity {gas.superficial_velocity:g} m/s is below the "
+                     f"case's minimum fluidization velocity {gas.minimum_fluidization_velocity:g}"
+                     " m/s: the gas does not carry the solids, which fall through the periodic "
+                     "riser as in a downer")
+    try:
+        fastest = max(gas.superficial_velocity,
+                      terminal_velocity(p.diameter, p.density, gas, r.gravity))
+    except (InputError, ValueError, ZeroDivisionError):
+        fastest = math.nan
+    frame = case.output.frame_interval
+    if math.isfinite(fastest) and fastest * frame > r.height:
+        notes.append(f"frames {frame:g} s apart: a particle rising with the gas or falling at "
+                     f"its terminal velocity ({fastest:.3g} m/s) crosses the riser's height "
+                     f"{r.height:g} m in {r.height / fastest:.3g} s, and a move of more than "
+                     "the height between two frames stops the run at its next checkpoint; "
+                     f"give output.frame_interval at most {r.height / fastest:.2g} s")
+    return notes
+
+
 def _note_unlikely_units(case: CaseConfig, label: str = "") -> None:
-    """Warn (:class:`~cfbmarkov.errors.CfbmarkovWarning`) of :func:`unlikely_units`."""
-    for note in unlikely_units(case):
+    """Warn (:class:`~cfbmarkov.errors.CfbmarkovWarning`) of :func:`unlikely_units` and
+    :func:`doubtful_physics`."""
+    for note in unlikely_units(case) + doubtful_physics(case):
         warnings.warn((f"{label}: " if label else "") + note, CfbmarkovWarning, stacklevel=3)
 
 
@@ -489,5 +546,11 @@ def _check_safety(case: CaseConfig) -> None:
                          f"(grid {grid.nx} x {grid.ny}): numerics.cfd_time_step at most "
                          f"{limit:.3g} s (a whole multiple of dem_time_step), or fewer, larger "
                          "gas cells (numerics.cfd_cells)")
+    if min(grid.dx, grid.dy) < p.diameter:
+        raise InputError(f"gas cells {grid.dx:.3g} x {grid.dy:.3g} m are smaller than the "
+                         f"particles (d = {p.diameter:g} m): one particle fills a cell to the "
+                         "void fraction's floor, and the drag is computed on that clipped "
+                         f"value; give fewer gas cells (numerics.cfd_cells), each at least "
+                         f"{CELL_DIAMETERS_NOTED:g} d across")
     if not math.isfinite(limit):
         warnings.warn("gas stability limit could not be evaluated", CfbmarkovWarning, stacklevel=2)
