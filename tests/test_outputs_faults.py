@@ -332,7 +332,8 @@ def _case(tmp_path, end=0.1):
 def test_simulate_killed_at_random_points_resumes_or_reruns_clean(tmp_path):
     case = _case(tmp_path, end=0.1)
     rng = random.Random(7)
-    args = ["simulate", case, "-o", "s.h5", "-q", "--checkpoint-every", "0.01"]
+    # --force: the second round reruns over the first's finished run
+    args = ["simulate", case, "-o", "s.h5", "-q", "--checkpoint-every", "0.01", "--force"]
     for _ in range(2):
         p = cli(*args, cwd=tmp_path)
         time.sleep(rng.uniform(1.0, 3.5))

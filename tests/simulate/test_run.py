@@ -321,7 +321,15 @@ def test_info_of_a_run_with_an_interrupted_rerun_beside_it_says_so(tmp_path, ref
     assert main(["info", str(out)]) == 0
     assert "note:" not in capsys.readouterr().err
     other = case.model_copy(update={"seed": case.seed + 1})
-    simulate(other, out, checkpoint_every=0.025, progress=False, stop_after_frames=3)
+    before = out.read_bytes()
+    with pytest.raises(InputError, match="holds a finished run of another case .*a finished "
+                       "run is not replaced without --force"):
+        simulate(other, out, checkpoint_every=0.025, progress=False)
+    with pytest.raises(InputError, match="holds this case's finished run, which ends at"):
+        simulate(case, out, until=0.025, progress=False)
+    assert out.read_bytes() == before and not (tmp_path / "done.h5.parts").exists()
+    simulate(other, out, checkpoint_every=0.025, progress=False, stop_after_frames=3,
+             force=True)
     assert (tmp_path / "done.h5.parts" / "checkpoint.h5").is_file() and out.is_file()
     assert main(["info", str(out)]) == 0
     err = capsys.readouterr().err

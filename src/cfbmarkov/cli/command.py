@@ -78,7 +78,9 @@ def build_parser() -> argparse.ArgumentParser:
         if name in OUTPUTS:
             verb.add_argument("--force", action="store_true",
                               help="replace an existing output of another kind (a file of "
-                                   "another format, a FIFO, an empty folder, ...)")
+                                   "another format, a FIFO, an empty folder, ...)"
+                                   + ("; or one that holds a finished run, which keeps no "
+                                      "checkpoint" if name == "simulate" else ""))
     return p
 
 

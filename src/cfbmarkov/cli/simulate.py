@@ -28,13 +28,14 @@ def cmd_simulate(args) -> int:
     if args.ensemble is None and args.device == "cpu":
         out = simulate(case, args.output, until=args.until,
                        checkpoint_every=args.checkpoint_every, resume=args.resume,
-                       progress=not args.quiet)
+                       progress=not args.quiet, force=args.force)
         print(out)
         return 0
     from cfbmarkov.simulate.ensemble import simulate_ensemble
     for out in simulate_ensemble(case, args.output, args.ensemble, device=args.device,
                                  until=args.until, checkpoint_every=args.checkpoint_every,
-                                 resume=args.resume, progress=not args.quiet):
+                                 resume=args.resume, progress=not args.quiet,
+                                 force=args.force):
         print(out)
     return 0
 

@@ -36,7 +36,7 @@ from cfbmarkov.simulate.cfd import GasGrid
 from cfbmarkov.simulate.checkpoint import _read_group, _write_group
 from cfbmarkov.simulate.progress import Progress
 from cfbmarkov.simulate.run import (FRAMES_PER_WRITE, _advise_time_step, _check_safety,
-                                    _complete, _PendingFrames, simulate)
+                                    _complete, _PendingFrames, refuse_finished_run, simulate)
 
 MAX_MEMBERS = 1000
 
@@ -74,7 +74,8 @@ def member_paths(output: str | Path, n: int) -> list[Path]:
 def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None, *,
                       device: str = "cpu", until: float | None = None, checkpoint_every: float = 1.0,
                       resume: bool = False, progress: bool | str = True, threads=None,
-                      stop_after_frames: int | None = None, label: str = "") -> list[Path]:
+                      stop_after_frames: int | None = None, label: str = "",
+                      force: bool = False) -> list[Path]:
     """Run ``members`` independent runs of ``case`` (seeds :func:`member_seeds`) to ``until``.
 
     Parameters
@@ -89,8 +90,9 @@ def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None,
         GPU run).
     device : {"cpu", "gpu"}
         Where the DEM runs (see the module doc).
-    until, checkpoint_every, resume, progress
-        As :func:`cfbmarkov.simulate.run.simulate`.
+    until, checkpoint_every, resume, progress, force
+        As :func:`cfbmarkov.simulate.run.simulate` (``force``: replace members that hold
+        finished runs).
     threads : int, optional
         GPU threads per member (default :func:`~cfbmarkov.simulate.gpu.ensemble.default_threads`).
     stop_after_frames : int, optional
@@ -125,8 +127,10 @@ def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None,
         require_gpu()
         mode = progress_mode(progress)
         with contextlib.ExitStack() as stack:
-            for p in paths:
+            for p, seed in zip(paths, seeds):
                 stack.enter_context(claim_output(p, "simulate", "trajectory"))
+                if not resume:
+                    refuse_finished_run(p, member_case(case, seed), force)
             return _simulate_gpu(case, output, paths, seeds, until, checkpoint_every, resume,
                                  mode, threads, stop_after_frames, label)
     end = case.output.end_time if until is None else float(until)
@@ -138,7 +142,7 @@ def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None,
             continue
         simulate(mcase, path, until=until, checkpoint_every=checkpoint_every,
                  resume=resume and started, progress=progress,
-                 label=f"{label} member {m}".strip())
+                 label=f"{label} member {m}".strip(), force=force)
     return paths
 
 

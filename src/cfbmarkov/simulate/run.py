@@ -43,8 +43,8 @@ from cfbmarkov.simulate.riser import CoupledRiser
 
 def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None = None,
              checkpoint_every: float = 1.0, resume: bool = False, progress: bool | str = True,
-             stop_after_frames: int | None = None, fields: bool = True, label: str = ""
-             ) -> Path:
+             stop_after_frames: int | None = None, fields: bool = True, label: str = "",
+             force: bool = False) -> Path:
     """Run a case from t = 0 (or the last checkpoint with ``resume``) to ``until`` (default:
     the case's end time) and write the trajectory file ``output``.
 
@@ -76,6 +76,10 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
         under ``/fields``.
     label : str, optional
         Prefix of the progress and of the time-step advisory (e.g. the case, ``u6``).
+    force : bool, optional
+        Replace ``output`` where it holds a finished CFD-DEM run (of this case or another):
+        without it such a file is refused, since a finished run keeps no checkpoint and
+        cannot be had back.
 
     Returns
     -------
@@ -87,7 +91,7 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
     InputError
         For settings that do not fit (a frame interval that is not a whole number of gas
         steps, a gas step beyond its stability limit, nothing to resume, an interrupted run
-        without ``resume``).
+        without ``resume``), or an ``output`` that holds a finished run, without ``force``.
     CfbmarkovError
         When the simulation fails (e.g. a blow-up); the last good checkpoint stays on disk.
 
@@ -100,6 +104,8 @@ def simulate(case: CaseConfig, output: str | os.PathLike, *, until: float | None
     mode = progress_mode(progress)
     output = Path(output)
     with claim_output(output, "simulate", "trajectory"):   # before any work: lock, folder
+        if not resume:
+            refuse_finished_run(output, case, force)
         parts = parts_folder(output)
         try:
             return _simulate(case, output, until, checkpoint_every, resume, mode,
@@ -156,7 +162,8 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
         if not checkpoint.exists() and (finished := _finished_run(output, case)):
             raise InputError(f"nothing to resume: {output} is {finished}, and a finished run "
                              "keeps no checkpoint to continue from; run the case without "
-                             "--resume (which replaces the file) or to another output")
+                             "--resume and with --force (which replaces the file) or to "
+                             "another output")
         if not checkpoint.exists():
             raise InputError(f"nothing to resume: {checkpoint} does not exist (the run "
                              "stopped before its first checkpoint); start it again without "
@@ -320,6 +327,22 @@ def _finished_run(output: Path, case: CaseConfig) -> str | None:
     if not same:
         return "a finished run of another case (its settings differ from these)"
     return f"this case's finished run, which ends at {last:g} s"
+
+
+def refuse_finished_run(output: Path, case: CaseConfig, force: bool) -> None:
+    """Refuse to start a run over ``output`` where it holds a finished CFD-DEM run, unless
+    ``force``: a finished run keeps no checkpoint, so what it took is lost once replaced.
+
+    Raises
+    ------
+    InputError
+        Naming what the file holds and the fixes.
+    """
+    finished = None if force else _finished_run(Path(output), case)
+    if finished is not None:
+        raise InputError(f"{output}: holds {finished}; a finished run is not replaced "
+                         "without --force (in Python force=True): give another output name, "
+                         "or add --force to run it again")
 
 
 def _remove_parts(parts: Path) -> None:
