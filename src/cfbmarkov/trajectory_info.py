@@ -76,7 +76,18 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     every = " (every particle in every frame)" if not t.has_absences else ""
     lines.append(f"  particles present per frame: min {int(counts.min())}, max {int(counts.max())}"
                  f" of {t.n_particles}{every}")
-    if not t.boundary.is_open:
+    if not t.boundary.is_open and t.has_events:
+        # the exact events hold the passes a particle undoes within one frame interval,
+        # which the lap counters' frame-to-frame changes net out
+        events = t.events()
+        times = np.asarray(events.time)
+        inside = (times > t.times[0]) & (times <= t.times[-1])
+        direction = np.asarray(events.direction)[inside]
+        lines.append(f"  passes through the periodic boundary: {int((direction > 0).sum())} "
+                     f"up, {int((direction < 0).sum())} down (the exact pass events; "
+                     f"{up} up, {down} down from the lap counters frame to frame, which net "
+                     "out a pass undone within one frame interval)")
+    elif not t.boundary.is_open:
         lines.append(f"  passes through the periodic boundary: {up} up, {down} down"
                      + (" (not counted across a particle's absence)" if t.has_absences else ""))
     lines.append(f"  entries {entries}, exits {exits} (after the first frame)")

@@ -368,3 +368,30 @@ def test_a_case_file_with_old_mac_line_ends_reads():
         path.write_bytes(b'name = "cr"\r[particles]\rnumber = 200\r')
         case = load_case(path)
     assert case.name == "cr" and case.particles.number == 200
+
+
+def test_info_counts_a_runs_passes_from_its_exact_events(tmp_path, reference, capsys):
+    """A CFD-DEM run stores every pass: ``info`` counts those (977 up, 127 down in a review's
+    run), and says the lap counters' frame-to-frame count beside them (960 and 110: a pass
+    undone within a frame interval nets out); a file without events keeps that count."""
+    import h5py
+
+    _, out = reference
+    with h5py.File(out, "r") as f:
+        direction = f["events/direction"][()]
+        times = f["events/time"][()]
+        frame_times = f["frames/time"][()]
+    inside = (times > frame_times[0]) & (times <= frame_times[-1])
+    up, down = int((direction[inside] > 0).sum()), int((direction[inside] < 0).sum())
+    assert up + down > 0
+    assert main(["info", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert f"passes through the periodic boundary: {up} up, {down} down (the exact pass " \
+        "events; " in text
+    bare = tmp_path / "bare.h5"
+    shutil.copyfile(out, bare)
+    with h5py.File(bare, "a") as f:
+        del f["events"]
+    assert main(["info", str(bare)]) == 0
+    text = capsys.readouterr().out
+    assert "passes through the periodic boundary: " in text and "exact pass events" not in text
