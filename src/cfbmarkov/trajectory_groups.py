@@ -205,7 +205,11 @@ def append_field_frames(f: h5py.File, label: str, times, spacing, fields: dict) 
         g.attrs.update({"spacing": np.asarray(spacing, dtype=np.float64),
                         "origin": np.zeros(2), "shape": np.asarray([nx, ny]),
                         "units": json.dumps({"void_fraction": "-", "gas_velocity": "m/s",
-                                             "pressure": "Pa"})})
+                                             "pressure": "Pa"}),
+                        "pressure": "the periodic part of the gas pressure, zero mean over "
+                                    "the domain: the full pressure adds -G y, G (Pa/m) the "
+                                    "driving gradient that carries the riser's weight, not "
+                                    "stored"})
         g.create_dataset("time", shape=(0,), maxshape=(None,), dtype="f8", chunks=(1024,))
         for name, a in arrays.items():
             g.create_dataset(name, shape=(0, *a.shape[1:]), maxshape=(None, *a.shape[1:]),

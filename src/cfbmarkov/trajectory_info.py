@@ -91,6 +91,8 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
         lines.append(f"  passes through the periodic boundary: {up} up, {down} down"
                      + (" (not counted across a particle's absence)" if t.has_absences else ""))
     lines.append(f"  entries {entries}, exits {exits} (after the first frame)")
+    if t.has_fields:
+        lines.append(fields_line(t))
     for name in t.property_names:
         attrs = t.property_attrs(name)
         how = ", ".join(f"{key} {attrs[key]}" for key in ("law", "start") if key in attrs)
@@ -138,3 +140,28 @@ def case_line(trajectories: Trajectories) -> str | None:
     head = "  case" + (f" {name}" if name else "") + (
         f" (seed {p['seed']})" if "seed" in p else "")
     return head + (": " + "; ".join(parts) if parts else "")
+
+
+def fields_line(t) -> str:
+    """The gas fields a CFD-DEM file stores, and what its ``pressure`` is: the periodic
+    part, with the weight per unit volume that the driving gradient G carries, (1 - eps)
+    (rho_p - rho_g) g + rho_g g from the fields' mean void fraction (an estimate of G, which
+    the file does not store)."""
+    names = ", ".join(t.field_names)
+    shape = t.field(t.field_names[0], 0).shape
+    line = (f"  gas fields: {names} on {shape[1]} x {shape[0]} cells at "
+            f"{len(t.field_times)} times")
+    if "pressure" not in t.field_names:
+        return line
+    p = t.parameters
+    weight = ""
+    try:
+        eps = float(np.mean(t.field("void_fraction", slice(None))))
+        rho_p, rho_g = float(p["particles"]["density"]), float(p["gas"]["density"])
+        g = float(p["riser"]["gravity"])
+        weight = (f", about {(1.0 - eps) * (rho_p - rho_g) * g + rho_g * g:.4g} Pa/m here "
+                  f"(the weight per volume at the mean void fraction {eps:.4g})")
+    except (KeyError, TypeError, ValueError):
+        pass
+    return (line + "; pressure is its periodic part (zero mean): the full pressure adds "
+            f"-G y, with G the driving gradient that carries the riser's weight{weight}")
