@@ -1,6 +1,7 @@
 """The coupled CFD-DEM run end to end: output, exact events, checkpoint/resume bit for bit
 (also after kill -9), configuration errors."""
 
+import json
 import os
 import re
 import shutil
@@ -9,7 +10,6 @@ import subprocess
 import sys
 import time
 
-import json
 import numpy as np
 import pytest
 
@@ -391,7 +391,6 @@ def test_info_counts_a_runs_passes_from_its_exact_events(tmp_path, reference, ca
         "events; " in text
     # the stored pressure is the periodic part, said with the weight G carries (the drop
     # over the height is in no stored field: a review read a 1 Pa drop for a 229 Pa one)
-    import re
     said = re.search(r"pressure is its periodic part \(zero mean\): the full pressure adds "
                      r"-G y, with G the driving gradient that carries the riser's weight, "
                      r"about ([0-9.]+) Pa/m here \(the weight per volume at the mean void "
