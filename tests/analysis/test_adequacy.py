@@ -814,3 +814,15 @@ def test_the_chains_miss_of_its_window_is_warned_beyond_the_limit():
     assert "(its 9920 residences held whole; limit 25 %)" in line
     assert both.on_window_warning(limit=0.5) is None
     assert Adequacy().on_window_warning() is None and both.adequate
+
+
+def test_sample_length_of_runs_sharing_no_span_names_them_and_the_fix(tmp_path):
+    """Runs of one flow written under two time origins (0-3 s and 100-103 s) share no
+    window: the refusal named a start of 100 s "outside 100 to 3 s", which no start can
+    meet; it now names the runs' spans and the two ways on."""
+    a = synthetic.write_run(tmp_path / "a.h5", FAST, 200, 3.0, seed=1)
+    b = synthetic.write_run(tmp_path / "b.h5", FAST, 200, 3.0, seed=2, start_time=100.0)
+    with pytest.raises(InputError, match=r"the runs share no span of time \(.*a.h5 0-3 s, "
+                       r".*b.h5 100-103 s\): --sample-length takes the same windows of every "
+                       r"run; .*window per run"):
+        sample_length([a, b], _space(), lag=0.025)

@@ -430,6 +430,13 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                                  f"{name} ({min(lasts):g} s)")
             lasts = [min(t_last, float(stop)) for t_last in lasts]
         last = min(lasts)
+        if len(runs) > 1 and first >= last - tol:
+            spans = ", ".join(f"{t.path} {float(t.times[0]):g}-{float(t.times[-1]):g} s"
+                              for t in runs)
+            raise InputError(f"the runs share no span of time ({spans}): --sample-length "
+                             "takes the same windows of every run; give runs on one time "
+                             "axis (their times from a common origin), or fit them with a "
+                             "window per run (fit A.h5 B.h5 --window 10:15,110:115)")
         a = first if start is None else float(start)
         held = f"the frames of {name}" if len(runs) == 1 else f"the frames all of {name} hold"
         if not first - tol <= a < last:
