@@ -184,8 +184,14 @@ def test_cli_compare(pair, tmp_path, capsys):
     out = tmp_path / "cli"
     assert main(["compare", str(ref_path), str(pred_path), "--window", "0.5:3",
                  "-o", str(out), "--no-figures"]) == 0
-    assert "E(RT) reference" in capsys.readouterr().out
+    printed = capsys.readouterr().out
+    assert "E(RT) reference" in printed and "; MD 0." in printed    # the default order: unsaid
     assert (out / "summary.json").exists()
+    # another order is said where the text prints the MD (it read as the default order's)
+    assert main(["compare", str(ref_path), str(pred_path), "--window", "0.5:3", "-o",
+                 str(tmp_path / "inf"), "--no-figures", "--md-order", "inf",
+                 "--resamples", "0"]) == 0
+    assert "; MD (order inf) 0." in capsys.readouterr().out
     bad = tmp_path / "cli-bad"
     assert main(["compare", str(ref_path), str(pred_path), "--window", "5:9",
                  "-o", str(bad)]) == 2

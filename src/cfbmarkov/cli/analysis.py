@@ -18,6 +18,15 @@ from cfbmarkov.errors import HistoryError, InputError
 DEFAULT_RESAMPLES = 100
 
 
+def _order_text(summary: dict) -> str:
+    """`` (order P)`` after "MD" where the Minkowski order is not the default 2 (every MD
+    the text prints is of that order), else nothing."""
+    order = summary.get("md_order", 2)
+    if order in (2, 2.0, "2"):
+        return ""
+    return f" (order {order:g})" if isinstance(order, (int, float)) else f" (order {order})"
+
+
 def cmd_compare(args) -> int:
     """``cfbmarkov compare``: compare, then print the summary's figures and its file.
 
@@ -92,7 +101,8 @@ def cmd_compare(args) -> int:
         print(f"warning: {one_line(line.strip())}", file=sys.stderr)
     print(f"E(RT) reference {summary['reference']['rt_mean']:.4g} s, model "
           f"{summary['model']['rt_mean']:.4g} s (PD {pd_text(summary['pd_rt_mean'])} %); "
-          f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD {_number(summary['md_rtd'])}; "
+          f"SD(RT) PD {pd_text(summary['pd_rt_sd'])} %; MD{_order_text(summary)} "
+          f"{_number(summary['md_rtd'])}; "
           f"mixing RMS {_number(summary['mixing_rms'])}")
     exact_model = summary["model"].get("exact")
     if exact_model:
