@@ -149,6 +149,7 @@ def draw_heatmap(ax, P, norm, *, row_of_state=None, rows: int = 0, fontsize: flo
         right = ax.secondary_yaxis("right")
         right.set_yticks(ticks[0])
         right.set_yticklabels(ticks[1], fontsize=fontsize - 1)
+        right.set_ylabel("riser row of state i's cell", fontsize=fontsize)
     return image
 
 
