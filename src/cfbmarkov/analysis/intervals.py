@@ -472,13 +472,18 @@ def model_rtd_edges(rtd) -> np.ndarray:
     Returns
     -------
     ndarray of float64, shape (B + 1,)
-        Bin edges (s).
+        Bin edges (s), whole multiples of the lag written as the RTD's times are
+        (:func:`~cfbmarkov.markov.first_passage.lag_multiples`: 0.3, not
+        0.30000000000000004), so that a residence of a whole number of lags falls, with
+        ``numpy.histogram``'s rule, in the bin whose lower edge it equals.
     """
+    from cfbmarkov.markov.first_passage import lag_multiples
+
     cumulative = np.cumsum(rtd.probability) / rtd.probability.sum()
     upper = int(np.searchsorted(cumulative, 0.99)) + 1            # lags
     width = max(1, -(-upper // MODEL_RTD_BINS))
     bins = -(-upper // width)
-    return rtd.lag * width * np.arange(bins + 1, dtype=np.float64)
+    return lag_multiples(rtd.lag, width * np.arange(bins + 1)).astype(np.float64)
 
 
 #: the deepest lap deficit a model interval's resamples keep (the fewest an exact RTD keeps,
