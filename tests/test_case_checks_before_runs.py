@@ -189,6 +189,18 @@ def test_an_item_out_of_range_keeps_its_index_and_pydantics_words(tmp_path, caps
     assert "at 'numerics.cfd_cells.0': Input should be greater than 0 (given 0)" in err
 
 
+def test_a_number_out_of_range_says_the_settings_unit(tmp_path, capsys):
+    """A diameter of 1 (1 mm written as 1) was refused as "Input should be less than or
+    equal to 0.1" with no unit: the message now says what the setting is, in its unit."""
+    case = tmp_path / "c.toml"
+    case.write_text(_case_text("particles", "diameter = 1.0"))
+    assert main(["simulate", str(case), "-o", str(tmp_path / "r.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1
+    assert ("at 'particles.diameter': Input should be less than or equal to 0.1 (given 1.0); "
+            "it is the particle diameter d, m (Table 1: 0.001 m)") in err, err
+
+
 def test_gas_cells_smaller_than_a_particle_are_refused_and_narrow_ones_noted(tmp_path, capsys):
     """Gas cells narrower than a particle (d = 15 mm in 10 mm cells) put a cell's void
     fraction at its floor from one particle: the run went on with no word; now refused

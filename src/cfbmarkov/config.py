@@ -326,6 +326,12 @@ def describe_validation_error(err: ValidationError) -> tuple[str, str]:
     if field is not None and field.description and (branch or shape):
         message = f"expected {field.description}"
         where = ".".join(names)
+    # a number out of range: say the setting's unit and the paper's value, where a slip of
+    # units (a diameter of 1 for 1 mm) is the likely cause
+    bounded = first["type"] in ("greater_than", "greater_than_equal", "less_than",
+                                "less_than_equal")
+    if bounded and field is not None and field.description:
+        return where, f"{message}{value}; it is the {field.description}"
     return where, message if first["type"] == "value_error" else message + value
 
 
