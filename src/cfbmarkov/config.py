@@ -125,9 +125,11 @@ class NumericsConfig(_Model):
     def _steps_commensurate(self):
         ratio = self.cfd_time_step / self.dem_time_step
         if abs(ratio - round(ratio)) > 1e-9 * ratio or round(ratio) < 1:
+            nearest = max(1, round(ratio)) * self.dem_time_step
             raise ValueError(
                 f"cfd_time_step {self.cfd_time_step:g} s must be a whole multiple of "
-                f"dem_time_step {self.dem_time_step:g} s")
+                f"dem_time_step {self.dem_time_step:g} s (e.g. {nearest:.10g} s, "
+                f"{max(1, round(ratio))} DEM steps per gas step)")
         return self
 
     @property

@@ -2,6 +2,7 @@
 fix that cannot help."""
 
 import pytest
+from pydantic import ValidationError
 
 from cfbmarkov.cli import main
 from cfbmarkov.errors import InputError
@@ -19,7 +20,7 @@ def test_a_particle_wider_than_the_riser_asks_for_a_smaller_diameter():
     with pytest.raises(InputError, match=r"at most 0 on the starting lattice of 0 x 2 sites\); "
                                          r"give a particles.diameter smaller than the riser"):
         place_without_overlap(10, 0.05, 0.03, 0.12, seed=1)
-    with pytest.raises(InputError, match=r"give fewer particles \(--particles\)"):
+    with pytest.raises(InputError, match=r"give fewer particles \(particles.number, or --particles\)"):
         place_without_overlap(10_000, 0.001, 0.03, 0.12, seed=1)
 
 
@@ -59,3 +60,12 @@ def test_true_or_text_where_a_number_is_meant_is_refused(tmp_path, capsys, line,
     assert f"invalid configuration at '{key}'" in err
     assert f"a number is meant, not {written} (write the number itself, without quotes)" in err
     assert not (tmp_path / "run.h5").exists()
+
+
+def test_a_gas_step_not_a_multiple_of_the_dem_step_names_one_that_is():
+    """cfd_time_step 5.2e-5 s on a 5e-6 s DEM step: the refusal gives the nearest multiple."""
+    from cfbmarkov.config import CaseConfig
+
+    with pytest.raises(ValidationError, match=r"must be a whole multiple of dem_time_step "
+                       r"5e-06 s \(e.g. 5e-05 s, 10 DEM steps per gas step\)"):
+        CaseConfig.model_validate({"numerics": {"cfd_time_step": 5.2e-5}})

@@ -189,7 +189,7 @@ def check_placement(n: int, diameter: float, width: float, height: float,
     nx = max(int(np.floor((width - diameter) / spacing)) + 1, 0)
     ny = max(int(np.floor(height / spacing)), 0)
     if n > nx * ny:
-        fix = ("give fewer particles (--particles)" if nx * ny > 0 else
+        fix = ("give fewer particles (particles.number, or --particles)" if nx * ny > 0 else
                "give a particles.diameter smaller than the riser, or a wider and taller "
                "riser")
         raise InputError(f"{n} particles of {diameter:g} m do not fit in the {width:g} x "

@@ -544,7 +544,8 @@ def check_resources(case: CaseConfig, output: Path, end: float, fields: bool,
     cells = nx * ny
     check_memory(n * PARTICLE_BYTES + cells * (CELL_BYTES + 8.0 * nx) + 50e6,
                  f"a CFD-DEM run of {n} particles on {nx} x {ny} gas cells",
-                 "run fewer particles (--particles) or a coarser gas grid")
+                 "run fewer particles (particles.number, or --particles) or a coarser gas "
+                 "grid (numerics.cfd_cells)")
     frames = math.floor(end / case.output.frame_interval + 1e-9) + 1
     per_frame = 36.0 * n + (16.0 * cells if fields else 0.0)
     copies = 1.0 if resuming else 2.0
