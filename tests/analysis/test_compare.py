@@ -640,6 +640,14 @@ def test_the_models_exact_e_rt_as_the_window_sees_it_stands_beside_the_predictio
                  "--no-figures", "--resamples", "0", "-q"]) == 0
     assert (f"  the model's exact E(RT) as a 5 s window sees it: {seen.mean:.4g} s"
             in capsys.readouterr().out)
+    # a window given between frames: the frames it holds, 1.025 to 5.975 s, are what the
+    # residences are counted on and what the chain's window is (it said 4.98 s)
+    off = compare(run, pred, window=(1.01, 5.99), output=tmp_path / "off", figures=False,
+                  resamples=0)["model"]["exact"]
+    states = model.initial_states(pred, 1.025)[0]
+    seen = model.rtd(window=4.95, occupancy=np.bincount(states, minlength=model.n_states))
+    assert off["window_length"] == pytest.approx(4.95, abs=1e-9)
+    assert off["windowed_rt_mean"] == pytest.approx(seen.mean, rel=1e-12)
     bare = compare(run, run, window=(1.0, 6.0), output=tmp_path / "b", figures=False,
                    resamples=0)
     assert "exact" not in bare["model"]

@@ -182,11 +182,18 @@ def _model_exact(pred, comparison: RunComparison) -> dict | None:
         model = MarkovModel.from_trajectories(pred)
         if model is None:
             return None
-        length = float(comparison.window[1] - comparison.window[0])
+        # the frames the comparison counts residences on: a window given between frames
+        # (15.01:19.99 s) holds those from 15.025 to 19.975 s, 4.95 s
+        times = np.asarray(pred.times)
+        tol = pred.time_tolerance
+        inside = times[(times >= comparison.window[0] - tol)
+                       & (times <= comparison.window[1] + tol)]
+        first, length = ((float(inside[0]), float(inside[-1] - inside[0])) if inside.size
+                         else (float(comparison.window[0]),
+                               float(comparison.window[1] - comparison.window[0])))
         full = model.rtd(direction=comparison.direction)
         seen = model.rtd(window=length, direction=comparison.direction,
-                         occupancy=_window_start(model, pred, comparison,
-                                                comparison.window[0]))
+                         occupancy=_window_start(model, pred, comparison, first))
     except CfbmarkovError:
         return None
     reference = comparison.reference.residence
