@@ -92,6 +92,20 @@ def test_mixing_rms():
     assert mixing_rms([15.0, 20.0], [0.5, 0.3], [15.0, 20.0 + 1e-12], [0.5, 0.3]) == 0.0
 
 
+def test_mixing_rms_takes_a_time_within_round_off_of_a_frame_as_that_frame():
+    """An open riser's reference curve defined up to 0.02 s: a prediction's time one ulp
+    above it (2.2800000000000002 for 2.28, as a run's times accumulate) is that frame, not
+    a time beside it where the reference is undefined: the frame was dropped and the RMS
+    read 0 instead of 0.577 (0.311 instead of 0.337 on a review's open riser)."""
+    times = np.array([0.0, 0.01, 0.02, 0.03])
+    reference = np.array([0.5, 0.5, 1.0, np.nan])
+    model = np.array([0.5, 0.5, 0.0, np.nan])
+    nudged = times.copy()
+    nudged[2] = np.nextafter(0.02, 1.0)
+    assert mixing_rms(times, reference, nudged, model) == pytest.approx(np.sqrt(1 / 3))
+    assert mixing_rms(times, reference, times, model) == pytest.approx(np.sqrt(1 / 3))
+
+
 def test_mixing_rms_refuses_model_times_outside_the_reference():
     with pytest.raises(InputError, match="leave"):
         mixing_rms([0.0, 1.0], [0.5, 0.3], [0.5, 1.5], [0.4, 0.3])

@@ -101,7 +101,9 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
 
     A particle present in frame k - 1 in a state advances over the lag to frame k. An entry
     is a frame where it is present, was absent before, lies within ``band`` of the inlet and
-    is in no residence (then, with ``reset``, its value restarts at ``v0``); an exit a frame
+    is in no residence (then, with ``reset``, its value restarts at ``v0``); a particle
+    present without a state (a state space with memory: the lag before its first state)
+    advances over that lag with its next state's law; an exit a frame
     where it is absent, was present before within ``band`` of the outlet, recorded with the
     time since its entry (NaN where the entry was not seen). A return through the inlet
     within a residence (after falling back out, or out of view) continues it, its value
@@ -131,6 +133,10 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
             before = present[k - 1, p]
             if before:
                 s = states[k - 1, p]
+                if s < 0 and now:
+                    # first seen without the history a state with memory needs: its first
+                    # lag with its first state's law, as the chain's exact answer takes it
+                    s = states[k, p]
                 if s >= 0:
                     value[p] = a[s] * value[p] + b[s]
             if now and not before and vertical[k, p] <= band and np.isnan(entered[p]):

@@ -655,6 +655,8 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
                          "trapped")
     state = np.tile(np.arange(s), levels)[keep]
     chain = (sp.csr_matrix(q)[keep][:, keep], r[keep], e / e.sum(), state, levels)
+    if model.open_flow is not None:
+        chain = _with_entry_delay(chain, model)
     if not landings:
         return chain
     if model.open_flow is not None:
@@ -665,6 +667,27 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
     position = -np.ones(s * levels, np.int64)
     position[keep] = np.arange(keep.size)
     return (*chain, landing, position[entries], position[:s])
+
+
+def _with_entry_delay(chain: tuple, model) -> tuple:
+    """An open riser's residence chain with the lags between the inlet and a particle's
+    first state (:func:`~cfbmarkov.markov.model_rtd.entry_delay`: a state space with memory
+    gives a particle its first state a lag after it is first seen): a copy of the states
+    ahead of them, entered with the entry distribution, each moving to its state with
+    probability 1 and exiting never, so that a residence runs from the inlet as the data's
+    do. A copy carries its state's law: over the delay the rate is taken as the entry
+    state's (exact for a rate the same in every cell)."""
+    from cfbmarkov.markov.model_rtd import entry_delay
+
+    q, r, e, state, levels = chain
+    for _ in range(entry_delay(model)):
+        n = q.shape[0]
+        q = sp.bmat([[sp.csr_matrix((n, n)), sp.identity(n, format="csr")],
+                     [sp.csr_matrix((n, n)), q]], format="csr")
+        r = np.concatenate([np.zeros(n), r])
+        e = np.concatenate([e, np.zeros(n)])
+        state = np.concatenate([state, state])
+    return q, r, e, state, levels
 
 
 def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,

@@ -24,8 +24,8 @@ from cfbmarkov.markov import montecarlo
 
 
 @nb.njit(cache=True, parallel=True)
-def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic, first, last,
-                      top, out):
+def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic, entry_lags,
+                      first, last, top, out):
     """The values of the linear properties of every particle at the frames ``first`` ..
     ``last`` (Numba, parallel over particles).
 
@@ -44,6 +44,10 @@ def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic,
     periodic : bool
         A periodic riser (passes from the lap counters) or an open one (entries at the
         first frame a newcomer is present).
+    entry_lags : int
+        Lags from an open riser's inlet to a newcomer's first state (a state space with
+        memory, :func:`~cfbmarkov.markov.model_rtd.entry_delay`): its entry value is
+        carried over them with its first state's map, as the exact answers take it.
     first, last : int
         The frames filled (0 <= first <= last < T); for ``first`` > 0 the frame
         ``first - 1`` is read as filled, so that a run is made in pieces
@@ -77,6 +81,8 @@ def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic,
                         v = np.nan
                     elif s_prev < 0:
                         v = entry_value[q]
+                        for _ in range(entry_lags):    # inlet to first state: its law
+                            v = a[q, s] * v + b[q, s]
                     elif passed and reset[q]:
                         v = entry_value[q]
                     else:
@@ -86,7 +92,7 @@ def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic,
 
 @nb.njit(cache=False, parallel=True)
 def custom_property(function, states, laps, parameters, lag, substeps, reset, initial,
-                    entry_value, periodic, index, first, last, top, values):
+                    entry_value, periodic, entry_lags, index, first, last, top, values):
     """The values of a custom-law property at the frames ``first`` .. ``last`` (Numba,
     parallel over particles): each lag ``substeps`` classical RK4 steps of
     dv/dt = function(v, parameters[s], values at the lag's start), the state s held.
@@ -109,6 +115,9 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
     entry_value : float
         The value where a particle enters.
     periodic : bool
+    entry_lags : int
+        As in :func:`linear_properties` (the law integrated over them in the first state,
+        the properties not yet computed for that frame NaN).
     index : int
         The property's position q in ``values``.
     first, last : int
@@ -139,6 +148,17 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
                 v = np.nan
             elif s_prev < 0:
                 v = entry_value
+                if entry_lags > 0:      # inlet to first state: its law, the others held
+                    for q in range(n_props):
+                        others[q] = values[q, k, p] if q < index else np.nan
+                    others[index] = v
+                    row = parameters[s]
+                    for _ in range(entry_lags * substeps):
+                        k1 = function(v, row, others)
+                        k2 = function(v + 0.5 * h * k1, row, others)
+                        k3 = function(v + 0.5 * h * k2, row, others)
+                        k4 = function(v + h * k3, row, others)
+                        v = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
             else:
                 for q in range(n_props):
                     others[q] = values[q, k - 1, p]
@@ -158,7 +178,7 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
 
 def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndarray,
                    periodic: bool, initial: np.ndarray | None = None,
-                   direction: str = "up", progress=None) -> np.ndarray:
+                   direction: str = "up", progress=None, entry_lags: int = 0) -> np.ndarray:
     """Every property of every particle at every frame of a Monte Carlo run.
 
     Parameters
@@ -185,6 +205,9 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
         (pieces of about :data:`~cfbmarkov.markov.montecarlo.PIECE_PARTICLE_STEPS`
         particle-steps, RK4 substeps counted, between which a Ctrl-C is taken; the values
         do not depend on the pieces).
+    entry_lags : int, optional
+        An open riser's lags from the inlet to a newcomer's first state
+        (:func:`~cfbmarkov.markov.model_rtd.entry_delay`; 0 for the cells).
 
     Returns
     -------
@@ -235,7 +258,7 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
         part = values if linear.size == n_props else np.empty((linear.size,) + states.shape)
         maps = (np.ascontiguousarray(a[linear]), np.ascontiguousarray(b[linear]),
                 reset[linear], np.ascontiguousarray(initial[linear]), sk.initial[linear],
-                bool(periodic))
+                bool(periodic), int(entry_lags))
         in_pieces(linear.size, lambda first, last: linear_properties(
             states, laps, *maps, first, last, top, part))
         if part is not values:
@@ -247,7 +270,7 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
         arguments = (law.function, states, laps,
                      np.ascontiguousarray(sk.parameters[q], dtype=np.float64), float(lag),
                      int(law.substeps), bool(reset[q]), initial[q], float(sk.initial[q]),
-                     bool(periodic), int(q))
+                     bool(periodic), int(entry_lags), int(q))
         in_pieces(4 * int(law.substeps), partial(_custom_piece, arguments, top, values))
         _warn_not_finite(sk.names[q], values[q], states >= 0)
     return values

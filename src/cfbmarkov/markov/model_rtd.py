@@ -249,11 +249,25 @@ def _down_rtd(model: "MarkovModel", window: float | None) -> ResidenceTimeDistri
     return intrinsic if window is None else intrinsic.in_window(window)
 
 
+def entry_delay(model: "MarkovModel") -> int:
+    """Lags between an open riser's particle first seen at the inlet and its first state:
+    a state space with memory from displacements (``memory_lags``, one lag of history)
+    gives a particle its first state a lag after it is first seen, and its entry is counted
+    into that state (``counting._open_kernel``); 0 for the cells."""
+    return int(getattr(model.state_space, "memory_lags", 0) or 0)
+
+
 def _open_rtd(model: "MarkovModel", window: float | None) -> ResidenceTimeDistribution:
     """First passage to the outside from the entry distribution (fundamental matrix of the
-    absorbing chain): f(k) = e Q^(k-1) r."""
+    absorbing chain): f(k) = e Q^(k-1-d) r, d = :func:`entry_delay` lags from the inlet to
+    the first state (a residence runs from the inlet, as the data's do)."""
     if "open-rtd" not in model._cache:
-        model._cache["open-rtd"] = model.open_flow.rtd(model.absorbing_matrix, model.lag)
+        chain = model.open_flow.rtd(model.absorbing_matrix, model.lag)
+        delay = entry_delay(model)
+        if delay:
+            chain = dataclasses.replace(chain, probability=np.concatenate(
+                [np.zeros(delay), np.asarray(chain.probability, dtype=np.float64)]))
+        model._cache["open-rtd"] = chain
     intrinsic = model._cache["open-rtd"]
     return intrinsic if window is None else intrinsic.in_window(window)
 

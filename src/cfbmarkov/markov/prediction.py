@@ -190,6 +190,9 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
                  if output is not None else None)
         states, laps = model.monte_carlo(states0, n_steps, seed, laps0,
                                          None if shown is None else shown.ran)
+        inlet = None
+        if model.open_flow is not None:
+            states, inlet = with_inlet_frames(model, states, states0.size)
         times = start + model.lag * np.arange(n_steps + 1)
         if states.shape[1] > ids.size:      # newcomers through the inlet: new ids
             first = int(traj.ids.max()) + 1 if traj.ids.size else 0
@@ -205,7 +208,54 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
             return (times, states, laps) if values is None else (times, states, laps, values)
         return write_prediction(model, traj, times, states, laps, positions0, seed, output,
                                 shown, duration=duration, ids=ids,
-                                properties=None if values is None else (kinetics, values))
+                                properties=None if values is None else (kinetics, values),
+                                inlet=inlet)
+
+
+def with_inlet_frames(model: "MarkovModel", states: np.ndarray, n_initial: int
+                      ) -> tuple[np.ndarray, np.ndarray | None]:
+    """An open riser's run with each newcomer present from the inlet: a state space with
+    memory gives a particle its first state :func:`~cfbmarkov.markov.model_rtd.entry_delay`
+    lags after it is first seen at the inlet (its entry is counted into that state), so the
+    chain's newcomers are shown at the inlet over those lags, in the entry state, as the
+    data's particles were; their residences then run from the inlet as the data's do.
+
+    Parameters
+    ----------
+    model : MarkovModel
+        An open riser's model.
+    states : ndarray of int32, shape (T, N)
+        The run (-1 where absent); the newcomers follow the ``n_initial`` particles.
+    n_initial : int
+        The particles present at the start.
+
+    Returns
+    -------
+    states : ndarray of int32, shape (T, N)
+        The run with each newcomer (but those of the first lags: frame 0 holds the initial
+        file's particles alone) present over the delay before its first state, in that
+        state.
+    inlet : ndarray of bool, shape (T, N), or None
+        Where a particle is shown at the inlet (placed in the bottom row's cell below its
+        state's cell); None where the delay is 0 (the cells).
+    """
+    from cfbmarkov.markov.model_rtd import entry_delay
+
+    delay = entry_delay(model)
+    if not delay or states.shape[1] <= n_initial:
+        return states, None
+    states = np.array(states)
+    newcomers = states[:, n_initial:]
+    present = newcomers >= 0
+    first = np.where(present.any(axis=0), present.argmax(axis=0), -1)
+    inlet = np.zeros(states.shape, dtype=bool)
+    for shift in range(1, delay + 1):
+        has = first - shift >= 1        # frame 0 holds the initial file's particles alone
+        columns = np.flatnonzero(has)
+        rows = first[has] - shift
+        newcomers[rows, columns] = newcomers[first[has], columns]
+        inlet[rows, n_initial + columns] = True
+    return states, inlet
 
 
 def _properties(model, traj, kinetics, start, states, laps, present, progress=None
@@ -223,9 +273,13 @@ def _properties(model, traj, kinetics, start, states, laps, present, progress=No
     for q, (name, rule) in enumerate(zip(kinetics.names, kinetics.starts)):
         if rule == "reference":
             initial[q, :present.size] = traj.property_values(name, frame)[present]
+    # a newcomer shown at the inlet over the lags before its first state
+    # (with_inlet_frames) carries its value over them there, with its state's law (one of
+    # the first lags, with no earlier frame, starts at the entry value in its first state)
     return run_properties(kinetics, model.lag, states, laps,
                           periodic=not model.boundary.is_open, initial=initial,
-                          direction=model.flow_direction, progress=progress)
+                          direction=model.flow_direction, progress=progress,
+                          entry_lags=0)
 
 
 def check_reference_starts(traj, kinetics, start: float) -> int:
@@ -354,7 +408,7 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
                      seed: int, output: str | os.PathLike,
                      progress: "bool | str | PredictionProgress" = False,
                      duration: float | None = None, ids: np.ndarray | None = None,
-                     properties=None) -> Path:
+                     properties=None, inlet: np.ndarray | None = None) -> Path:
     """Write a Monte Carlo run of ``model`` as a trajectory file (a prediction).
 
     The first frame keeps the actual positions it started from; later frames place each
@@ -389,6 +443,9 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
         the first frame's positions are those of the first ``first_positions.shape[0]``.
     properties : tuple (StateKinetics, ndarray of float64 [P, K+1, N]), optional
         Particle properties to store as ``/properties/NAME`` (:func:`predict`).
+    inlet : ndarray of bool, shape (K+1, N), optional
+        Where a newcomer is shown at the inlet before its first state
+        (:func:`with_inlet_frames`): placed in the bottom row's cell below its state's.
 
     Returns
     -------
@@ -429,9 +486,12 @@ def write_prediction(model: "MarkovModel", trajectories, times: np.ndarray,
             ks = range(k0, min(k0 + block, n_steps + 1))
             k1 = max(ks.start, 1)       # the first frame is the initial file's
             block_states = states[k1:ks.stop]
-            positions = place_in_cells(np.where(block_states >= 0,
-                                                cells[np.maximum(block_states, 0)], -1),
-                                       model.state_space, seed, k1, traj.depth)
+            block_cells = np.where(block_states >= 0, cells[np.maximum(block_states, 0)], -1)
+            if inlet is not None:       # at the inlet: the bottom row's cell below it
+                per_row = model.state_space.columns * (
+                    model.state_space.depth_columns if model.state_space.is_3d else 1)
+                block_cells = np.where(inlet[k1:ks.stop], block_cells % per_row, block_cells)
+            positions = place_in_cells(block_cells, model.state_space, seed, k1, traj.depth)
             if ks.start == 0:
                 positions = np.concatenate([first[None], positions])
             writer.append_frames(times[ks.start:ks.stop], positions, laps=laps[ks.start:ks.stop],

@@ -166,6 +166,13 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
         raise InputError(f"model frames {mt.min():g} to {mt.max():g} s leave the reference's "
                          f"{rt[0]:g} to {rt[-1]:g} s")
     at = np.clip(mt, rt[0], rt[-1])
+    # a model time within round-off of a reference frame is that frame (2.2800000000000002
+    # for 2.28): interpolated beside the frame where a curve's tracers are last seen, an
+    # open riser's frame was dropped
+    above = np.clip(np.searchsorted(rt, at), 0, rt.size - 1)
+    below = np.clip(above - 1, 0, rt.size - 1)
+    nearest = np.where(np.abs(rt[above] - at) < np.abs(rt[below] - at), above, below)
+    at = np.where(np.abs(rt[nearest] - at) <= tol, rt[nearest], at)
     finite = np.isfinite(rf)
     if finite.all() and np.isfinite(mf).all():
         return float(np.sqrt(np.mean((mf - np.interp(at, rt, rf)) ** 2)))
