@@ -202,3 +202,34 @@ def test_a_state_space_with_memory_counts_an_open_residence_from_the_inlet(tmp_p
     assert x_memory == pytest.approx(x_cells, rel=0.002)        # one lag is 3 %
     assert seen_memory == pytest.approx(seen_cells, rel=0.002)
     assert seen_memory == pytest.approx(x_memory, rel=0.02)
+
+
+def test_compare_warns_where_the_reference_loses_tracks_at_the_models_lag(tmp_path):
+    """Frames every 0.01 s of a chain that climbs a row in half of its lags: at a lag of two
+    frames many tracks are last seen a row below the outlet's cell, and the reference's
+    residences leave them out as censored (its E(RT) biased, with no word in `compare`,
+    while `fit` warned); `compare` now says so. At the frames' own lag it does not."""
+    from cfbmarkov.analysis.compare import compare_runs
+    from cfbmarkov.markov.spaces import state_space_from_name
+
+    rows = 10
+    q, r, e = open_chain(columns=1, rows=rows, up=0.5, stay=0.5, side=0.0)
+    states, ids = draw(q, r, e, n_steps=600, inflow=2.0, n_start=0, seed=7, columns=1,
+                       rows=rows)
+    pos = positions_of(states, seed=8, columns=1, rows=rows)
+    pos[..., 0] *= 0.02 / W
+    pos[..., 1] *= 0.2 / H
+    path = write_trajectories(tmp_path / "chain.h5", np.arange(states.shape[0]) * 0.01, pos,
+                              width=0.02, height=0.2, ids=ids, present=states >= 0,
+                              boundary="open")
+    space = state_space_from_name("cells", 2, rows, 0.02, 0.2)    # two halves to mix
+    said = {}
+    for lag in (0.01, 0.02):
+        model = fit_model(path, space, lag, (0.5, 3.0), "mle")
+        pred = model.predict(path, start=3.0, duration=2.9, seed=1,
+                             output=tmp_path / f"p{lag}.h5")
+        comparison = compare_runs(path, pred, (3.0, 5.9))
+        said[lag] = [w for w in comparison.warnings if w.startswith("the reference at the "
+                                                                   "model's lag")]
+    assert said[0.01] == []
+    assert len(said[0.02]) == 1 and "farther than the face band from the outlet" in said[0.02][0]

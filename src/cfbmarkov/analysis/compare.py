@@ -362,6 +362,20 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
     for side, traj, rt in (("reference", ref, rt_ref), ("model", pred, rt_mod)):
         if rt.count == 0 and (not allow_empty or (side == "reference" and ref.boundary.is_open)):
             _refuse_empty(ref, pred, side, traj, (start, stop), on)
+    if ref.boundary.is_open and not on.events:
+        # tracks that end (begin) away from the faces at the model's lag are censored, not
+        # residences: many of them (fast particles a lag's travel below the outlet) bias
+        # the reference's RTD, as fit warns of its window
+        from cfbmarkov.analysis.stationarity import face_band_warning
+        from cfbmarkov.markov.open_flow import CENSORED_SHARE
+
+        line = face_band_warning(ref, (start, stop), on.band, on.lag_frames,
+                                 option="the shortest residences may be those left out "
+                                 "(particles that cross more than a cell in a lag); a model "
+                                 "of taller cells or a shorter lag keeps them",
+                                 limit=CENSORED_SHARE)
+        if line:
+            warnings.append(f"the reference at the model's lag: {line}")
     _check_bins_resolve(rt_ref, bin_width, bin_width_from, (start, stop))
     beside = _baselines(ref, pred, (start, stop), on, bin_width=bin_width, md_order=md_order,
                         long_run_span=long_run_span)

@@ -472,7 +472,7 @@ FACE_MISS_LIMIT = 0.2
 
 
 def face_band_warning(traj, span: tuple[float, float], band: float, lag_frames: int = 1,
-                      option: str = "--cells") -> str | None:
+                      option: str = "--cells", limit: float = FACE_MISS_LIMIT) -> str | None:
     """The warning where an open riser's residence times leave out many of its tracks: more
     than :data:`FACE_MISS_LIMIT` of those begun in ``span`` began farther than ``band`` from
     the inlet, or of those ended farther from the outlet (counted as censored, not as
@@ -489,7 +489,12 @@ def face_band_warning(traj, span: tuple[float, float], band: float, lag_frames: 
     lag_frames : int, optional
         Every ``lag_frames``-th frame, as the residence times read them.
     option : str, optional
-        The option that sets the band, named in the fix.
+        The option that sets the band, named in the fix; or, not starting with ``--``, the
+        fix itself.
+    limit : float, optional
+        The share of the tracks begun (ended) away from the face beyond which it warns
+        (default :data:`FACE_MISS_LIMIT`; ``compare`` takes the model's
+        :data:`~cfbmarkov.markov.open_flow.CENSORED_SHARE`, as ``fit`` warns of its window).
 
     Returns
     -------
@@ -503,7 +508,7 @@ def face_band_warning(traj, span: tuple[float, float], band: float, lag_frames: 
     begun, at_inlet, ended, at_outlet = open_face_tracks(traj, span, band, lag_frames)
     missed = [(begun - at_inlet, begun, "began", "inlet"),
               (ended - at_outlet, ended, "ended", "outlet")]
-    missed = [m for m in missed if m[1] and m[0] > FACE_MISS_LIMIT * m[1]]
+    missed = [m for m in missed if m[1] and m[0] > limit * m[1]]
     if not missed:
         return None
     rows = traj.height / band
@@ -512,9 +517,10 @@ def face_band_warning(traj, span: tuple[float, float], band: float, lag_frames: 
                         for away, total, verb, face in missed)
     return (f"{said} (the band: {1e3 * band:.3g} mm, H/{rows:.3g}, one cell of {rows:.3g} "
             "rows): the residence times count only those within it as entries and exits and "
-            "leave the others out as censored; where particles enter or leave the riser "
-            f"there (an insertion region, frames far apart), give {option} with the rows of "
-            "your model (the band is one cell height)")
+            "leave the others out as censored; "
+            + (f"where particles enter or leave the riser there (an insertion region, "
+               f"frames far apart), give {option} with the rows of your model (the band is "
+               "one cell height)" if option.startswith("--") else option))
 
 
 def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
