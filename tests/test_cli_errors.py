@@ -195,3 +195,27 @@ def test_info_of_a_foreign_hdf5_file_names_both_kinds_it_reads(tmp_path, capsys)
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "neither a cfbmarkov trajectory nor model file (its " \
         "format attribute is 'h5md'); import particle data first" in err
+
+
+def test_a_time_beyond_the_floats_is_one_line_not_an_overflow(run, tmp_path, capsys,
+                                                             monkeypatch):
+    """1e308 s over a lag is inf lags, which int() refused with a 40-line OverflowError
+    traceback in seven commands; each is now one line, exit 2, nothing written."""
+    monkeypatch.chdir(tmp_path)
+    assert main(["fit", str(run), "--lag", "0.002", "--window", "0.5:1.5", "--resamples", "0",
+                 "-o", "m.h5", "-q"]) == 0
+    capsys.readouterr()
+    for argv, said in (
+            (["fit", str(run), "--lag", "1e308", "-o", "x.h5"], "lag 1e+308 s is inf frame"),
+            (["stationarity", str(run), "--lag", "1e308"], "lag 1e+308 s is inf frame"),
+            (["rtd", "m.h5", "--window-length", "1e308"],
+             "--window-length 1e+308 s is inf lags"),
+            (["maps", "m.h5", "--times", "1e308", "-o", "x.png"], "time 1e+308 s is inf lags"),
+            (["predict", "m.h5", "--init", str(run), "--start", "1", "--duration", "1e308",
+              "-o", "x.h5"], "duration 1e+308 s is inf lags"),
+            (["simulate", "paper-u3", "--until", "1e308", "-o", "x.h5"],
+             "--until (the run's end) 1e+308 s is inf gas steps")):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and said in err, err
+        assert not list(tmp_path.glob("x.*")), argv

@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from cfbmarkov.errors import InputError, LagError
+from cfbmarkov.limits import MAX_LAGS
 from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, TIME_TOLERANCE, time_text
 
 
@@ -194,7 +195,12 @@ class FrameTimes:
         if not np.isfinite(self.frame_interval):
             raise InputError(f"{self.path} holds one frame: no frame interval, so no transition "
                              f"can be counted (lag {lag:g} s)")
-        k = int(round(lag / self.frame_interval))
+        intervals = lag / self.frame_interval
+        if not intervals < MAX_LAGS:    # inf beyond the floats: int() would overflow
+            raise InputError(f"lag {lag:g} s is {intervals:.3g} frame intervals of "
+                             f"{time_text(self.frame_interval)} s, far beyond the file's "
+                             "span: give a lag of a few frame intervals")
+        k = int(round(intervals))
         if k < 1 or not abs(lag - k * self.frame_interval) <= self.time_tolerance:
             interval = time_text(self.frame_interval)
             nearest = time_text(max(k, 1) * self.frame_interval)

@@ -34,6 +34,10 @@ RTD_CHECK_FROM = 64e6
 MAX_SEED = 2 ** 64 - 1
 #: the most lags a residence-time distribution or a map may be propagated over
 MAX_STEPS = 10_000_000
+#: the most lags, frames or steps a time given may count (beyond, the quotient is refused
+#: before it is rounded to a whole number: 1e308 s / 0.025 s is inf, which int() refuses
+#: with a traceback); every run and its memory is refused well before
+MAX_LAGS = 2.0 ** 62
 #: the most bins of a residence-time histogram
 MAX_BINS = 10_000_000
 

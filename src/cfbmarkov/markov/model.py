@@ -28,7 +28,7 @@ import numpy as np
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
 from cfbmarkov.kinetics.fields import CellFields
-from cfbmarkov.limits import check_finite, check_seed
+from cfbmarkov.limits import MAX_LAGS, check_finite, check_seed
 from cfbmarkov.markov import model_file, model_summary, propagation
 from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.model_arrays import (SQUARE_ARRAYS, checked_arrays, checked_coherence,
@@ -423,7 +423,11 @@ class MarkovModel:
         time = check_finite(time, name, "s")
         if time < 0:
             raise InputError(f"{name} {time:g} s is negative: a time after the start, >= 0")
-        k = int(round(time / self.lag))
+        lags = time / self.lag
+        if not lags < MAX_LAGS:         # inf beyond the floats: int() would overflow
+            raise InputError(f"{name} {time:g} s is {lags:.3g} lags of {self.lag:g} s, beyond "
+                             f"any run ({MAX_LAGS:.0e} lags at most): give a shorter {name}")
+        k = int(round(lags))
         if k < 0 or abs(k * self.lag - time) > 1e-6 * max(self.lag, abs(time)):
             below = max(int(np.floor(time / self.lag + 1e-9)), 0) * self.lag
             nearest = f"{below:g} or {below + self.lag:g} s" if below > 0 else \

@@ -122,6 +122,12 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     end = case.output.end_time if until is None else float(until)
     frame_dt = case.output.frame_interval
     cfd_dt = case.numerics.cfd_time_step
+    from cfbmarkov.limits import MAX_LAGS
+    for what, value in (("--until (the run's end)", end),
+                        ("--checkpoint-every", float(checkpoint_every))):
+        if not value / cfd_dt < MAX_LAGS:    # inf beyond the floats: int() would overflow
+            raise InputError(f"{what} {value:g} s is {value / cfd_dt:.3g} gas steps of "
+                             f"{cfd_dt:g} s, beyond any run: give a time of seconds to hours")
     steps_per_frame = frame_dt / cfd_dt
     if abs(steps_per_frame - round(steps_per_frame)) > 1e-6 * steps_per_frame:
         raise InputError(f"frame interval {frame_dt:g} s is not a whole number of gas steps "
