@@ -30,6 +30,15 @@ def run(tmp_path):
     (("stationarity", "--window-length", "5"), "a --window-length of at most half the span's 2 s"),
     (("stationarity", "--window-length", "0.5", "--span", "0:1.5", "--judge", "3:4"),
      "--judge 3:4 s lies outside the span 0:1.5 s"),
+    # windows hold whole frames: a step or judged end between frames labelled its rows with
+    # times its figures were not of
+    (("stationarity", "--window-length", "0.5", "--step", "0.003"),
+     "--step 0.003 s is not a whole number of the file's frame intervals (0.002 s): give "
+     "0.002 or 0.004 s"),
+    (("stationarity", "--window-length", "0.5011"),
+     "--window-length 0.5011 s is not a whole number of the file's frame intervals"),
+    (("stationarity", "--window-length", "0.5", "--judge", "1:1.5011"),
+     "--judge 1:1.5011 s: 1.5011 s falls between the file's frames (the nearest at 1.502 s)"),
     (("export-vtk", "--start", "15", "--stop", "16", "-o", "v"),
      "window 15:16 s lies outside the data of {run} (0 to 2 s)"),
     (("export-vtk", "--start", "15", "-o", "v"),

@@ -35,6 +35,7 @@ from cfbmarkov.observed.residence import (DEFAULT_FACE_ROWS, ResidenceTimes,
                                           residence_times, rtd_histogram)
 from cfbmarkov.errors import InputError
 from cfbmarkov.trajectories import Trajectories
+from cfbmarkov.trajectory_format import time_text
 
 #: residence directions a caller may ask for; "auto" follows each window's net solids flow
 DIRECTIONS = ("auto", "up", "down")
@@ -573,6 +574,7 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
             raise InputError(f"{path} is a periodic riser: a face band (--cells) sets where "
                              "an open riser's particles enter and leave; leave it out")
         lag_frames = traj.lag_frames(lag) if lag is not None else 1
+        _check_on_frames(traj, window_length, step, judge)
         bin_width = lag if lag is not None else traj.frame_interval
         kwargs = {"use_events": events, "lag_frames": 1 if events else lag_frames,
                   "face_band": face_band}
@@ -592,6 +594,38 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
         warning = face_band_warning(traj, extent, band, kwargs["lag_frames"])
     return StationarityCheck(str(path), extent, events, bin_width, stats, judged,
                              () if warning is None else (warning,))
+
+
+def _check_on_frames(traj, window_length: float, step: float,
+                     judge: tuple[float, float] | None) -> None:
+    """Refuse a window length or step that is not a whole number of frame intervals, and a
+    judged window whose ends fall between frames: the windows hold whole frames, so their
+    figures were of other windows than their labels said (a row "0.03-5.03" of the frames
+    0.05-5.025 s)."""
+    interval = float(traj.frame_interval)
+    if not np.isfinite(interval):
+        return
+    tol = traj.time_tolerance
+
+    def off(value: float) -> bool:
+        return abs(value - round(value / interval) * interval) > tol
+
+    for option, value in (("--window-length", window_length), ("--step", step)):
+        if np.isfinite(value) and value > 0 and off(value):
+            below = max(np.floor(value / interval), 1.0) * interval
+            raise InputError(f"{option} {value:g} s is not a whole number of the file's frame "
+                             f"intervals ({time_text(interval)} s): give {below:.10g} or "
+                             f"{below + interval:.10g} s")
+    if judge is not None:
+        times = np.asarray(traj.times)
+        for end in judge:
+            if not times[0] - tol <= end <= times[-1] + tol:
+                continue                # outside the frames: refused as such later
+            nearest = float(times[np.argmin(np.abs(times - end))])
+            if abs(nearest - end) > tol:
+                raise InputError(f"--judge {judge[0]:g}:{judge[1]:g} s: {end:g} s falls "
+                                 f"between the file's frames (the nearest at "
+                                 f"{time_text(nearest)} s): give a window on its frames")
 
 
 def _judged_window(traj, judge: tuple[float, float], span: tuple[float, float] | None,
