@@ -337,6 +337,12 @@ def test_a_level_beyond_the_resamples_tails_is_refused(stationary_run, tmp_path,
     check_interval_options(0.95, 20)
     with pytest.raises(InputError, match="needs at least 20"):
         check_interval_options(0.95, 19)
+    # a level so low that its bounds lie within two resamples: a "1e-10 %" interval from
+    # 100 resamples came out as wide as the 1 % one
+    check_interval_options(0.02, 100)
+    with pytest.raises(InputError, match=r"a 1e-10 % interval spans fewer than 2 of the 100 "
+                       r"bootstrap resamples.*at least 0.02"):
+        check_interval_options(1e-12, 100)
     out = tmp_path / "m.h5"
     code = main(["fit", str(stationary_run), "--window", "1:3", "--lag", str(FLOW.lag),
                  "--cells", "3x8", "--level=0.999999", "--resamples", "10", "-o", str(out)])

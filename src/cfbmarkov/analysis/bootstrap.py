@@ -501,7 +501,8 @@ def _split_chain_former(model):
 def check_interval_options(level: float, resamples: int, blocks: int = 2,
                            fix: str = "more resamples, or a lower level") -> None:
     """Refuse an interval's options that cannot give it: a level outside (0, 1), fewer than
-    2 blocks or 10 resamples, or too few resamples to reach the level's tails.
+    2 blocks or 10 resamples, too few resamples to reach the level's tails, or a level so
+    low that its bounds lie within two resamples of each other.
 
     A percentile interval's bounds are the bootstrap's (1 - level)/2 and (1 + level)/2
     quantiles; with fewer than 1 / (1 - level) resamples each tail holds less than half a
@@ -534,6 +535,14 @@ def check_interval_options(level: float, resamples: int, blocks: int = 2,
     if int(blocks) < 2 or int(resamples) < 10:
         raise InputError(f"intervals need at least 2 blocks and 10 resamples ({blocks}, "
                          f"{resamples})")
+    if float(level) * int(resamples) < 2.0:
+        # the bounds' quantiles lie within two resamples of each other: the interval is the
+        # gap between neighbouring resamples, whatever the level (a "1e-10 %" interval came
+        # out as wide as the 1 % one)
+        raise InputError(f"a {100 * float(level):.3g} % interval spans fewer than 2 of the "
+                         f"{int(resamples)} bootstrap resamples, so its bounds are a gap "
+                         "between neighbouring resamples whatever the level: give a level "
+                         f"of at least {2.0 / int(resamples):.3g} (e.g. 0.9)")
     needed = int(math.ceil(1.0 / (1.0 - float(level)) - 1e-9))
     if int(resamples) < needed:
         raise InputError(f"a {100 * float(level):g} % interval needs at least {needed} "
