@@ -45,7 +45,8 @@ def make_run(path: Path, *, velocities: bool = True, fields: bool = True,
     if fields:
         k = np.arange(T) if field_frames is None else np.asarray(field_frames)
         j, i = np.mgrid[0:NY, 0:NX]
-        vf = (k[:, None, None] * 100 + j * 10 + i).astype(np.float32)   # [t, ny, nx]: 100 t + 10 j + i
+        # [t, ny, nx]: (100 t + 10 j + i) / 1e4, a fraction that names its place
+        vf = ((k[:, None, None] * 100 + j * 10 + i) / 1e4).astype(np.float32)
         gv = np.stack([vf + 0.5, -vf], axis=-1)
         with h5py.File(path, "a") as f:
             g = f.create_group("fields")
@@ -162,7 +163,8 @@ def test_gas_grid_read_back(run, tmp_path):
     # VTK numbers cells with x fastest: cell (i, j) is value 10 j + i at index j * NX + i
     vf = arrays["void_fraction"]
     assert vf.size == NX * NY
-    assert vf[0] == 100 * k and vf[1] == 100 * k + 1 and vf[NX] == 100 * k + 10
+    assert vf[0] == np.float32(k / 100) and vf[1] == np.float32((100 * k + 1) / 1e4)
+    assert vf[NX] == np.float32((100 * k + 10) / 1e4)
     np.testing.assert_array_equal(vf, data["void_fraction"][k].ravel())
     np.testing.assert_array_equal(arrays["pressure"], data["pressure"][k].ravel())
     gv = data["gas_velocity"][k].reshape(-1, 2)
@@ -220,7 +222,8 @@ def test_frames_without_gas_field_are_skipped_and_counted(tmp_path):
     assert [f for _, f in read_pvd(summary.output / "gas.pvd")] == [
         f"gas_{k:06d}.vtr" for k in (0, 2, 4, 6, 8)]
     _, arrays = read_vtk(summary.output / "gas_000004.vtr")
-    assert arrays["void_fraction"][0] == 4 * 100      # the gas frame matched by time, the group's 3rd
+    # the gas frame matched by time, the group's 3rd
+    assert arrays["void_fraction"][0] == np.float32(4 * 100 / 1e4)
 
 
 def test_open_trajectories_stay_open_and_progress_bar(run, tmp_path, capsys):
@@ -289,6 +292,24 @@ def test_damaged_fields_group_is_refused(run, tmp_path):
     with pytest.raises(InputError, match="damaged /fields group.*'pressure' has shape"):
         export_vtk(path, tmp_path / "vtk")
     assert not (tmp_path / "vtk").exists() and leftovers(tmp_path) == []
+
+
+@pytest.mark.parametrize("name, value, said", [
+    ("void_fraction", 7.0, "not a fraction between 0 and 1"),
+    ("void_fraction", np.nan, "not a fraction between 0 and 1"),
+    ("pressure", np.inf, "not a finite number"),
+])
+def test_a_field_value_out_of_range_is_refused_not_drawn(run, tmp_path, name, value, said):
+    """A NaN or a void fraction of 7 in a stored field was written into the .vtr files; the
+    export is refused, naming the field and time, and leaves nothing."""
+    path, _ = run
+    with h5py.File(path, "a") as f:
+        f[f"fields/{name}"][1, 0, 0] = value
+    with pytest.raises(InputError, match=f"damaged /fields group: {name} at t = .* holds 1 "
+                                         f"value\\(s\\) {said}"):
+        export_vtk(path, tmp_path / "vtk")
+    assert not (tmp_path / "vtk").exists() and leftovers(tmp_path) == []
+    export_vtk(path, tmp_path / "particles", fields=False)
 
 
 @pytest.mark.parametrize("previous", [False, True])

@@ -426,12 +426,26 @@ def _write_gas(hl, gas: GasFields, index: int, path: Path) -> None:
         # VTK numbers the cells
         return np.asfortranarray(np.asarray(values).T[:, :, None])
 
+    def checked(name: str, values) -> np.ndarray:
+        # a damaged field is refused, not drawn (a NaN or a void fraction of 7 was exported)
+        values = np.asarray(values)
+        bad = ~np.isfinite(values) if name != "void_fraction" else ~(
+            (values >= 0.0) & (values <= 1.0))
+        if bad.any():
+            what = ("not a finite number" if name != "void_fraction"
+                    else "not a fraction between 0 and 1")
+            raise InputError(f"damaged /fields group: {name} at t = {gas.times[index]:g} s "
+                             f"holds {int(bad.sum())} value(s) {what}; write the file again "
+                             "from its source, or export --no-fields")
+        return values
+
     if gas.void_fraction is not None:
-        cells["void_fraction"] = cell_array(gas.void_fraction[index])
+        cells["void_fraction"] = cell_array(checked("void_fraction",
+                                                    gas.void_fraction[index]))
     if gas.pressure is not None:
-        cells["pressure"] = cell_array(gas.pressure[index])
+        cells["pressure"] = cell_array(checked("pressure", gas.pressure[index]))
     if gas.gas_velocity is not None:
-        u = gas.gas_velocity[index]
+        u = checked("gas_velocity", gas.gas_velocity[index])
         ux, uy = cell_array(u[..., 0]), cell_array(u[..., 1])
         cells["gas_velocity"] = (ux, uy, np.zeros_like(ux, order="F"))
     hl.gridToVTK(str(path), gas.x_edges, gas.y_edges, np.zeros(1, dtype=np.float64),
