@@ -190,6 +190,13 @@ MODEL_DAMAGE = {
     "selection-a-list": (_attr("selection", "[1, 2]"), "selection is not a record"),
     "selection-candidates-text": (_attr("selection", '{"candidates": "cells"}'),
                                   "selection is not a record"),
+    # NaN marks a cell never visited: in a visited one a kinetics law took the cell for
+    # another, silently (NaN compares false with every threshold)
+    "cell-velocity-nan": (_set("cell_vertical_velocity", (0,), np.nan),
+                          "cell_vertical_velocity is not a number in cell 0, which the fit "
+                          "saw particles leave"),
+    "cell-solids-inf": (_set("cell_solids_fraction", (3,), np.inf),
+                        "cell_solids_fraction is not a number in cell 3"),
 }
 
 

@@ -242,7 +242,7 @@ def _read_model_group(group, model_class) -> "MarkovModel":
     frame_pairs = _attr_number(group.attrs.get("frame_pairs", 0), "frame_pairs")
     if not (np.isfinite(frame_pairs) and frame_pairs >= 0 and frame_pairs == round(frame_pairs)):
         raise InputError(f"frame_pairs {frame_pairs:g} is not a count")
-    return model_class(
+    model = model_class(
         **{name: group[name][()] for name in SQUARE_ARRAYS},
         state_space=state_space_from_attrs(group.attrs["state_space"]),
         lag=_attr_number(group.attrs["lag"], "lag"), estimator=str(group.attrs["estimator"]),
@@ -264,6 +264,36 @@ def _read_model_group(group, model_class) -> "MarkovModel":
         run_windows=json.loads(_text_attr(group.attrs["run_windows"]))
         if "run_windows" in group.attrs else None,
         flow_direction=_text_attr(group.attrs.get("flow_direction", "up")))
+    _check_cell_fields(model)
+    return model
+
+
+def _check_cell_fields(model) -> None:
+    """Refuse cell fields a fit cannot have written: a solids fraction or wall distance that
+    is not finite, or a vertical velocity NaN (the mark of a cell never visited) in a cell
+    whose states have transitions; a kinetics law on the field would take such a cell for
+    another (a NaN compares false with every threshold)."""
+    fields = model.cell_fields
+    if fields is None:
+        return
+    space = model.state_space
+    visited = np.zeros(space.n_cells, dtype=bool)
+    moved = np.asarray(model.counts).sum(axis=1) > 0
+    visited[np.asarray(space.cell_of_state)[moved]] = True
+    for name, values, where in (
+            ("solids_fraction", fields.solids_fraction, np.ones_like(visited)),
+            ("wall_distance", fields.wall_distance, np.ones_like(visited)),
+            ("vertical_velocity", fields.vertical_velocity, visited)):
+        values = np.asarray(values, dtype=np.float64)
+        if values.shape != (space.n_cells,):
+            raise InputError(f"cell_{name} holds {values.size} values for the grid's "
+                             f"{space.n_cells} cells")
+        bad = where & ~np.isfinite(values)
+        if bad.any():
+            left = ", which the fit saw particles leave" if name == "vertical_velocity" else ""
+            raise InputError(f"cell_{name} is not a number in cell "
+                             f"{int(np.flatnonzero(bad)[0])}{left} (NaN marks only a cell "
+                             "never visited)")
 
 
 def _cell_fields(group) -> CellFields | None:
