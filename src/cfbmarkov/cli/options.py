@@ -146,6 +146,9 @@ def positive_float(text: str) -> float:
     value = finite_float(text)
     if not value > 0:
         raise argparse.ArgumentTypeError(f"'{text}' must be positive")
+    if value < 1e-300:      # subnormal: a quotient by it overflows to inf
+        raise argparse.ArgumentTypeError(f"'{text}' is too small to compute with (below "
+                                         "1e-300): give the value in the option's unit")
     return value
 
 
