@@ -449,7 +449,8 @@ def unlikely_units(case: CaseConfig) -> list[str]:
 
 #: gas cells narrower than this many particle diameters are noted: the void fraction of a
 #: cell then moves by a large step with each particle that enters it (unresolved CFD-DEM
-#: wants cells of several diameters; e.g. Peng et al., Powder Technol. 257 (2014) 15)
+#: wants cells of several diameters: Z. Peng, E. Doroodchi, C. Luo, B. Moghtaderi,
+#: AIChE J. 60, 2000 (2014), on the void fraction's calculation in CFD-DEM)
 CELL_DIAMETERS_NOTED = 3.0
 
 
@@ -458,8 +459,8 @@ def doubtful_physics(case: CaseConfig) -> list[str]:
     fewer than :data:`CELL_DIAMETERS_NOTED` particle diameters across, a superficial
     velocity below the case's minimum fluidization velocity, and frames so far apart that a
     particle rising at the superficial velocity or falling at its terminal velocity would
-    cross the riser's height between two of them (the trajectory file cannot hold that move, and the run would stop
-    at its next checkpoint).
+    cross the riser's height between two of them (the trajectory file cannot hold that
+    move, and the run would stop at its next checkpoint).
 
     Parameters
     ----------
