@@ -126,7 +126,10 @@ class FrameTimes:
         """
         if not np.isfinite(time):
             raise InputError(f"time {time:g} s is not a finite number")
-        i = int(np.argmin(np.abs(self.times - time)))
+        # nearest frame to the time brought into the frames' span: far beyond it the
+        # differences round alike (1e15 s named a frame at 19.95 s of a 0-20 s file)
+        inside = min(max(time, float(self.times[0])), float(self.times[-1]))
+        i = int(np.argmin(np.abs(self.times - inside)))
         if not abs(self.times[i] - time) <= self.time_tolerance:
             nearest = ("" if self.n_frames == 1
                        else f"; the nearest is at {time_text(self.times[i])} s")

@@ -10,6 +10,7 @@ import pytest
 
 from cfbmarkov import _console
 from cfbmarkov.cli import build_parser, main
+from cfbmarkov.trajectories import Trajectories
 
 
 def run_cli(capsys, *argv):
@@ -45,6 +46,12 @@ def test_predict_off_a_frame_names_the_nearest(tmp_path, capsys, markov_run, fit
     line = one_line_error(*run_cli(capsys, "predict", model, "--init", markov_run, "--start",
                                    "5.01", "--duration", "1", "-o", tmp_path / "p.h5")[::2])
     assert "no frame at t = 5.01 s" in line and "the nearest is at 5 s" in line
+    # far beyond the frames the differences round alike: the nearest is the last frame
+    with Trajectories(markov_run) as t:
+        last = float(t.times[-1])
+    line = one_line_error(*run_cli(capsys, "predict", model, "--init", markov_run, "--start",
+                                   "1e15", "--duration", "1", "-o", tmp_path / "p.h5")[::2])
+    assert f"the nearest is at {last:g} s" in line, line
 
 
 def test_rtd_of_a_trajectory_file_says_fit_first(capsys, markov_run):
