@@ -111,6 +111,17 @@ def test_an_output_name_past_the_limit_is_refused_naming_it(good, tmp_path, caps
     assert stray(tmp_path, []) == []
 
 
+def test_an_output_inside_a_file_names_the_file(good, tmp_path, capsys):
+    """-o model.h5/o.h5 where model.h5 is a file: said as such ("cannot create its folder
+    model.h5 (File exists)" read as if a folder were in the way)."""
+    run, _ = good
+    (tmp_path / "model.h5").write_bytes(b"x")
+    err = one_line_error(capsys, ["fit", run, "--cells", "4x8", "-o",
+                                  tmp_path / "model.h5" / "a" / "o.h5"])
+    assert f"{tmp_path / 'model.h5'} is a file, not a folder" in err
+    assert (tmp_path / "model.h5").read_bytes() == b"x"
+
+
 def test_segments_of_a_long_output_name(tmp_path):
     out = tmp_path / ("s" * 250 + ".h5")
     writer = SegmentedTrajectoryWriter(out, np.arange(3), width=0.1, height=1.0,

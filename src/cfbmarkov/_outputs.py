@@ -569,6 +569,12 @@ def claim_output(target: str | os.PathLike, verb: str, kind: str, inputs=(),
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
+        blocking = next((p for p in reversed(target.parent.parents) if p.is_file()), None)
+        if blocking is None and target.parent.is_file():
+            blocking = target.parent
+        if blocking is not None:        # a file where a folder of the path should be
+            raise InputError(f"{target}: {blocking} is a file, not a folder: give an output "
+                             "name beside it, not inside it") from None
         raise InputError(f"{target}: cannot create its folder {target.parent} "
                          f"({exc.strerror or exc})") from None
     created = False
