@@ -376,8 +376,8 @@ def test_a_pattern_beside_a_file_and_the_same_timestep_twice(tmp_path, cli, asse
     assert_clean_failure("import", str(series / "dump*.riser"), str(copy), "--time-step",
                          "1e-5", "-o", tmp_path / "out" / "dup.h5", output=tmp_path / "out" / "dup.h5",
                          match=r"dump5000.riser and .*dump5000.riser both start at timestep "
-                               r"5000: the same frames given twice .* leave one of them "
-                               r"out; or pieces of one frame, .* write the dump without % in")
+                               r"5000 with the same atoms: the same frames given twice .* "
+                               r"leave one of them out")
     # a restart with reset_timestep 0: the same first timestep, but ITEM: TIME carries on
     reset = tmp_path / "reset"
     reset.mkdir()
@@ -452,3 +452,36 @@ def test_a_riser_that_is_not_the_periodic_box_names_the_options_that_can_give_it
         assert t.height == pytest.approx(0.95) and t.n_frames == 2
         assert repr(t).endswith("2 particles x 2 frames, 0..0.01 s, every 0.01 s, "
                                 "source='import:lammps')")
+
+
+def test_the_pieces_of_a_dump_written_per_processor_are_joined(tmp_path, make_run, make_dump,
+                                                                assert_clean_failure):
+    """A LAMMPS dump named with % writes one file per processor, each holding other atoms of
+    every frame: given together (a pattern), their frames are joined, and the file equals
+    the import of the whole dump. They were refused. Pieces of different timesteps are
+    refused naming the pieces."""
+    import dataclasses
+
+    run = make_run(n_particles=8)
+    whole = tmp_path / "whole.dump"
+    whole.write_text(make_dump(run))
+    folder = tmp_path / "pieces"
+    folder.mkdir()
+    for k, part in enumerate((np.arange(0, 8, 2), np.arange(1, 8, 2), np.arange(0))):
+        piece = dataclasses.replace(run, ids=run.ids[part], positions=run.positions[:, part],
+                                    velocities=run.velocities[:, part], laps=run.laps[:, part],
+                                    unwrapped_y=run.unwrapped_y[:, part])
+        (folder / f"dump.{k}.txt").write_text(make_dump(piece))   # processor 2 holds none
+    options = dict(vertical_axis="y", drop_depth=True, width=run.width, height=run.height)
+    import_file(whole, "lammps", tmp_path / "whole.h5", **options)
+    import_file(str(folder / "dump.*.txt"), "lammps", tmp_path / "joined.h5", **options)
+    with Trajectories(tmp_path / "whole.h5") as a, Trajectories(tmp_path / "joined.h5") as b:
+        assert np.array_equal(a.ids, b.ids) and np.array_equal(a.times, b.times)
+        assert np.array_equal(a.positions(slice(None)), b.positions(slice(None)))
+        assert np.array_equal(a.laps(slice(None)), b.laps(slice(None)))
+    text = (folder / "dump.1.txt").read_text()
+    (folder / "dump.1.txt").write_text(text[:text.rindex("ITEM: TIME\n")])   # a frame short
+    with pytest.raises(InputError, match=r"the pieces of one dump \(files starting at one "
+                                         r"timestep\) hold other timesteps here"):
+        import_file(str(folder / "dump.*.txt"), "lammps", tmp_path / "bad.h5", **options)
+    assert not (tmp_path / "bad.h5").exists()

@@ -19,6 +19,8 @@ frames mean for the riser is :mod:`cfbmarkov.io.lammps`.
 
 from __future__ import annotations
 
+import contextlib
+import dataclasses
 import glob
 import itertools
 import os
@@ -446,15 +448,62 @@ def dump_files(source) -> list[Path]:
     ordered = sorted(starts, key=lambda item: ((item[0][1], item[0][0]) if timed
                                                else (item[0][0], item[1].name)))
     for (before, a), (after, b) in zip(ordered[:-1], ordered[1:]):
-        if before[0] == after[0] < 2 ** 62 and before[1] == after[1]:
+        if before[0] == after[0] < 2 ** 62 and before[1] == after[1] and not _pieces(a, b):
             when = (f"timestep {before[0]}" if before[1] is None else
                     f"timestep {before[0]}, t = {before[1]:g} s")
-            raise InputError(f"{a} and {b} both start at {when}: the same frames given twice "
-                             "(a copy, or a restarted run's dump beside the first): leave one "
-                             "of them out; or pieces of one frame, each holding other atoms "
-                             "(a LAMMPS dump named with %, one file per processor), which "
-                             "the import does not join: write the dump without % in its name")
+            raise InputError(f"{a} and {b} both start at {when} with the same atoms: the same "
+                             "frames given twice (a copy, or a restarted run's dump beside "
+                             "the first): leave one of them out")
     return [p for _, p in ordered]
+
+
+def _first_ids(path: Path) -> np.ndarray | None:
+    """The atom ids of a dump's first frame (None where it has no id column or cannot be
+    read: the reader says what is wrong later)."""
+    try:
+        with open_text(path) as fh:
+            frame = next(iter(DumpReader(fh, str(path))), None)
+    except (InputError, OSError, UnicodeDecodeError, ValueError):
+        return None
+    return None if frame is None else frame.ids
+
+
+def _pieces(a: Path, b: Path) -> bool:
+    """Whether two dumps that start at one timestep are pieces of one dump, each holding
+    other atoms (a LAMMPS dump named with %, one file per processor): their first frames'
+    ids are disjoint, and the files differ."""
+    first, second = _first_ids(a), _first_ids(b)
+    if first is None or second is None:
+        return False
+    if first.size == 0 and second.size == 0:        # a copy of a frame without atoms?
+        return a.stat().st_size != b.stat().st_size or a.read_bytes() != b.read_bytes()
+    return not np.intersect1d(first, second).size
+
+
+def piece_groups(paths: list[Path]) -> list[list[Path]]:
+    """The ordered dumps of :func:`dump_files` grouped into the files that hold one stretch
+    of frames: one file each, or the pieces of one dump written per processor (files that
+    start at one timestep, ``dump ... dump.%.txt`` in LAMMPS), whose frames are joined.
+
+    Parameters
+    ----------
+    paths : list of pathlib.Path
+        As :func:`dump_files` orders them.
+
+    Returns
+    -------
+    list of list of pathlib.Path
+    """
+    groups: list[list[Path]] = []
+    last = None
+    for path in paths:
+        start = _first_step(path)
+        if groups and start == last and start[0] < 2 ** 62:
+            groups[-1].append(path)
+        else:
+            groups.append([path])
+        last = start
+    return groups
 
 
 def _first_step(path: Path) -> tuple[int, float | None]:
@@ -477,19 +526,48 @@ def _first_step(path: Path) -> tuple[int, float | None]:
 
 
 def _frames_of(paths: list[Path], units: list, skipped: list) -> Iterator[tuple[str, DumpFrame]]:
-    """(label, frame) of every frame, file after file, from the first frame that holds
+    """(label, frame) of every frame, file after file (the pieces of a dump written per
+    processor joined frame by frame, :func:`piece_groups`), from the first frame that holds
     atoms; the frames before it (the empty first file of a LIGGGHTS run, say) are counted
     in ``skipped[0]``."""
     started = False
-    for path in paths:
-        label = str(path)
-        with open_text(path) as fh:
-            reader = DumpReader(fh, label)
-            for frame in reader:
-                if not units and reader.units:
-                    units.append(reader.units)
+    for group in piece_groups(paths):
+        label = str(group[0]) if len(group) == 1 else f"{group[0]} (+{len(group) - 1} pieces)"
+        with contextlib.ExitStack() as stack:
+            readers = [DumpReader(stack.enter_context(open_text(path)), str(path))
+                       for path in group]
+            for frame in _joined(readers, label):
+                for reader in readers:
+                    if not units and reader.units:
+                        units.append(reader.units)
                 if not started and frame.atoms.shape[0] == 0:
                     skipped[0] += 1         # before any atom exists: nothing to store
                     continue
                 started = True
                 yield label, frame
+
+
+def _joined(readers: list, label: str) -> Iterator[DumpFrame]:
+    """The frames of one dump, or of its pieces joined: each piece's frame of a timestep
+    holds other atoms of the same box; the pieces must hold the same timesteps."""
+    if len(readers) == 1:
+        yield from readers[0]
+        return
+    iterators = [iter(reader) for reader in readers]
+    while True:
+        frames = [next(it, None) for it in iterators]
+        if all(f is None for f in frames):
+            return
+        if any(f is None for f in frames) or len({f.timestep for f in frames}) > 1:
+            steps = ", ".join("end" if f is None else str(f.timestep) for f in frames)
+            raise InputError(f"{label}: the pieces of one dump (files starting at one "
+                             f"timestep) hold other timesteps here ({steps}): give pieces "
+                             "written by one run, each with every frame")
+        first = frames[0]
+        if any(f.columns != first.columns or not np.array_equal(f.box, first.box)
+               for f in frames[1:]):
+            raise InputError(f"{label}: the pieces of timestep {first.timestep} differ in "
+                             "their columns or box: give pieces of one dump")
+        ids = (None if any(f.ids is None for f in frames)
+               else np.concatenate([f.ids for f in frames]))
+        yield dataclasses.replace(first, atoms=np.vstack([f.atoms for f in frames]), ids=ids)
