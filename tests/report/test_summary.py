@@ -28,9 +28,10 @@ VELOCITY = np.r_[[-0.5, -0.5], np.full(8, 2.0), [-0.5, -0.5]]
 
 
 def fake_run(means: dict[float, float], fraction=ANNULUS, velocity=VELOCITY,
-             summary: dict | None = None):
-    """Finished cases at the velocities of ``means`` (CFD-DEM E(RT) in s) with one 'paper'
-    comparison each, and their measures."""
+             summary: dict | None = None, flux: dict[float, float] | None = None):
+    """Finished cases at the velocities of ``means`` (CFD-DEM E(RT) in s, of the residences
+    held whole and, unless ``flux`` gives others, from the net solids flux) with one
+    'paper' comparison each, and their measures."""
     cases, measures = [], {}
     for u, mean in means.items():
         s = summary or {"pd_rt_mean": 50.0, "pd_rt_sd": -20.0, "md_rtd": 0.3,
@@ -45,6 +46,7 @@ def fake_run(means: dict[float, float], fraction=ANNULUS, velocity=VELOCITY,
         cases.append(case)
         measures[case.name] = SimpleNamespace(
             reference=SimpleNamespace(rt=SimpleNamespace(mean=mean)),
+            flux_rt_mean=mean if flux is None else flux[u],
             solids_fraction=np.asarray(fraction, dtype=float),
             solids_velocity=np.asarray(velocity, dtype=float))
     return cases, measures
@@ -88,6 +90,14 @@ def test_e_rt_falling_with_u_passes_and_rising_fails():
     # one case: not judged
     cases, measures = fake_run({6.0: 0.4})
     assert physics_checks(cases, measures)[0].passed is None
+    # judged on the flux's E(RT): the residences held whole in a short window leave out
+    # the long ones (the demo's 0.200 s at 3 m/s against 0.301 s at 4 m/s read FAILED,
+    # while the flux's 0.401 and 0.354 s fall)
+    cases, measures = fake_run({3.0: 0.200, 4.0: 0.301, 6.0: 0.12, 8.0: 0.06},
+                               flux={3.0: 0.401, 4.0: 0.354, 6.0: 0.0965, 8.0: 0.0549})
+    fall, _ = physics_checks(cases, measures)
+    assert fall.passed is True and "0.401 s at 3 m/s, 0.354 s at 4 m/s" in fall.evidence
+    assert fall.evidence.startswith("E(RT) from the net solids flux over each predict window")
 
 
 def test_a_dense_core_fails_the_core_annulus_check():

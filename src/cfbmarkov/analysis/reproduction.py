@@ -27,8 +27,8 @@ import numpy as np
 from cfbmarkov.analysis.development import development
 from cfbmarkov.analysis.mixing import mixing_curve_of
 from cfbmarkov.errors import InputError
-from cfbmarkov.observed.residence import (WHOLE_FRAMES, net_flow_direction, residence_times,
-                                          rtd_histogram)
+from cfbmarkov.observed.residence import (WHOLE_FRAMES, flux_residence_time,
+                                          net_flow_direction, residence_times, rtd_histogram)
 
 
 @contextlib.contextmanager
@@ -113,6 +113,10 @@ class CaseMeasures:
     development : dict or None
         The solids' mean vertical velocity before the fitting window, over it and over the
         predict window (:func:`cfbmarkov.analysis.development.development`).
+    flux_rt_mean : float
+        The CFD-DEM's E(RT) over the predict window from its net solids flux, in the net
+        flow's direction (:func:`cfbmarkov.observed.residence.flux_residence_time`: free of
+        the window's censoring of long residences), s; NaN where not computed.
     """
 
     window: tuple[float, float]
@@ -126,6 +130,7 @@ class CaseMeasures:
     model_name: str | None = None
     model: Any = None
     development: dict | None = None
+    flux_rt_mean: float = math.nan
 
 
 def measure_run(traj, window: tuple[float, float], bin_width: float, *,
@@ -266,6 +271,7 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
                                direction=direction)
         across, solids, solids_velocity = solids_profile(ref, window, config)
         flow = development(ref, tuple(config.markov.fit_window), window)
+        flux_rt = flux_residence_time(ref, window, direction)
     edges, _ = rtd_histogram(np.zeros(0), bin_width, window_length=window[1] - window[0])
     models = {}
     for name, path in predictions.items():
@@ -275,6 +281,7 @@ def measure_case(reference: Path, predictions: Mapping[str, Path], model: tuple[
                             solids_velocity)
     measures.model_name = model[0]
     measures.development = flow
+    measures.flux_rt_mean = float(flux_rt)
     with reading_errors(model[1]):
         measures.model = MarkovModel.load(model[1])
     return measures
