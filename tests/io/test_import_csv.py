@@ -473,6 +473,19 @@ def test_a_height_beyond_a_periodic_risers_region_names_the_vertical_range(tmp_p
     assert not (tmp_path / "a.h5").exists()
 
 
+def test_a_depth_range_for_2d_positions_is_refused(tmp_path):
+    """--region with a z range on a file of x, y positions: the range was left unused with
+    no word (as --drop-depth on such a file is refused); two ranges import it."""
+    source = tmp_path / "run.csv"
+    source.write_text("t,id,x,y\n0,1,0.01,0.2\n0.01,1,0.01,0.21\n")
+    with pytest.raises(InputError, match=r"--region gives a z range, but the file's positions "
+                                         r"are 2D \(x across, y vertical\)"):
+        import_file(source, "csv", tmp_path / "a.h5",
+                    region=[(0.0, 0.09), (0.0, 0.95), (0.0, 1.0)])
+    assert not (tmp_path / "a.h5").exists()
+    import_file(source, "csv", tmp_path / "b.h5", region=[(0.0, 0.09), (0.0, 0.95)])
+
+
 def test_a_missing_option_and_a_folder_of_dumps_name_the_fix(tmp_path):
     """--width alone: the message asks for --height and says --width is given; a folder of
     dumps given as the source: the quoted pattern of its dumps, whatever --format."""

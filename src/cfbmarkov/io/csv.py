@@ -286,6 +286,11 @@ def csv_riser(layout: CsvLayout, label: str, *, width: float | None, height: flo
         axes.append(AXES.index(layout.depth))
     if region is not None:
         ranges = np.asarray(region, dtype=np.float64)
+        if ranges.shape[0] > 2 and layout.depth is None and layout.dropped is None:
+            raise InputError(f"{label}: --region gives a z range, but the file's positions are "
+                             f"2D ({layout.across} across, {layout.vertical} vertical), which "
+                             "would leave it unused: give two ranges, --region "
+                             "XMIN:XMAX,YMIN:YMAX")
         if max(axes) >= ranges.shape[0]:
             raise InputError(f"--region gives {ranges.shape[0]} ranges but the riser uses the "
                              f"{AXES[max(axes)]} axis: give x, y and z ranges")

@@ -182,6 +182,10 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
                          "(x and y): leave --drop-depth out")
     if region is not None:
         ranges = [tuple(float(v) for v in r) for r in region]
+        if len(ranges) > 2 and n_axes == 2 and not spread:
+            raise InputError(f"{where}: --region gives a z range, but the source's positions "
+                             "are 2D (x and y), which it would leave unused: give two "
+                             "ranges, --region XMIN:XMAX,YMIN:YMAX")
         if max(axes) >= len(ranges):
             raise InputError(f"--region gives {len(ranges)} ranges but the riser uses the "
                              f"{AXES[max(axes)]} axis: give x, y and z ranges")
