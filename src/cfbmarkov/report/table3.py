@@ -318,7 +318,11 @@ def table3_blocks(cases: list[Case], estimators: list[str]) -> list:
     level_text = ", ".join(f"{v:g}" for v in sorted(levels)) or "n/a"
     notes = [
         "PD = 100 (MCM − CFD-DEM) / CFD-DEM, in % (docs/definitions.md, residence time); "
-        "E(RT) and SD(RT) over the predict window, SD with ddof = 1. [interval]: the MCM's "
+        "E(RT) and SD(RT) over the predict window, SD with ddof = 1: of the residences that "
+        "begin and end inside it (a particle's time from one pass through the boundary to the "
+        "next), on both sides alike, so that residences longer than the window are left out "
+        "of both and the figures are of the window, not of the flow's long run (the "
+        "physics checks take E(RT) from the net solids flux instead). [interval]: the MCM's "
         f"{level_text} % interval (docs/definitions.md, Intervals). The paper's column quotes "
         "its Table 3; '—' where the paper has no case at this U.",
         "The paper reports MD under a '%' heading. Our MD is Eq. 9 of order k = "
