@@ -370,7 +370,7 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
         from cfbmarkov.markov.open_flow import CENSORED_SHARE
 
         line = face_band_warning(ref, (start, stop), on.band, on.lag_frames,
-                                 option="the shortest residences may be those left out "
+                                 fix="the shortest residences may be those left out "
                                  "(particles that cross more than a cell in a lag); a model "
                                  "of taller cells or a shorter lag keeps them",
                                  limit=CENSORED_SHARE)

@@ -473,7 +473,8 @@ FACE_MISS_LIMIT = 0.2
 
 
 def face_band_warning(traj, span: tuple[float, float], band: float, lag_frames: int = 1,
-                      option: str = "--cells", limit: float = FACE_MISS_LIMIT) -> str | None:
+                      option: str = "--cells", limit: float = FACE_MISS_LIMIT,
+                      fix: str | None = None) -> str | None:
     """The warning where an open riser's residence times leave out many of its tracks: more
     than :data:`FACE_MISS_LIMIT` of those begun in ``span`` began farther than ``band`` from
     the inlet, or of those ended farther from the outlet (counted as censored, not as
@@ -490,12 +491,13 @@ def face_band_warning(traj, span: tuple[float, float], band: float, lag_frames: 
     lag_frames : int, optional
         Every ``lag_frames``-th frame, as the residence times read them.
     option : str, optional
-        The option that sets the band, named in the fix; or, not starting with ``--``, the
-        fix itself.
+        The option that sets the band, named in the fix.
     limit : float, optional
         The share of the tracks begun (ended) away from the face beyond which it warns
         (default :data:`FACE_MISS_LIMIT`; ``compare`` takes the model's
         :data:`~cfbmarkov.markov.open_flow.CENSORED_SHARE`, as ``fit`` warns of its window).
+    fix : str, optional
+        What to do, in place of the advice naming ``option``.
 
     Returns
     -------
@@ -519,9 +521,10 @@ def face_band_warning(traj, span: tuple[float, float], band: float, lag_frames: 
     return (f"{said} (the band: {1e3 * band:.3g} mm, H/{rows:.3g}, one cell of {rows:.3g} "
             "rows): the residence times count only those within it as entries and exits and "
             "leave the others out as censored; "
-            + (f"where particles enter or leave the riser there (an insertion region, "
+            + (fix if fix is not None else
+               f"where particles enter or leave the riser there (an insertion region, "
                f"frames far apart), give {option} with the rows of your model (the band is "
-               "one cell height)" if option.startswith("--") else option))
+               "one cell height)"))
 
 
 def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,

@@ -31,6 +31,7 @@ from cfbmarkov._names import parts_folder
 from cfbmarkov._outputs import claim_output
 from cfbmarkov.config import CaseConfig
 from cfbmarkov.errors import CfbmarkovError, CfbmarkovWarning, InputError, TimeStepAdvisory
+from cfbmarkov.limits import MAX_LAGS
 from cfbmarkov.segmented import SegmentedTrajectoryWriter
 from cfbmarkov.simulate.cfd import GasGrid, gas_stability_limit
 from cfbmarkov.simulate.checkpoint import checkpoint_cpu_time, read_checkpoint, write_checkpoint
@@ -122,7 +123,6 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     end = case.output.end_time if until is None else float(until)
     frame_dt = case.output.frame_interval
     cfd_dt = case.numerics.cfd_time_step
-    from cfbmarkov.limits import MAX_LAGS
     for what, value in (("--until (the run's end)", end),
                         ("--checkpoint-every", float(checkpoint_every))):
         if not value / cfd_dt < MAX_LAGS:    # inf beyond the floats: int() would overflow
