@@ -611,3 +611,41 @@ def test_a_file_of_one_frame_is_said_in_the_singular(tmp_path):
     source.write_text("t,id,x,y\n0,1,0.02,0.1\n0,2,0.03,0.2\n")
     with Trajectories(import_csv(source, tmp_path / "one.h5", width=0.09, height=0.95)) as t:
         assert ": 2 particles x 1 frame, 0..0 s, source='import:csv')" in repr(t)
+
+
+def test_a_unit_written_apart_from_its_name_in_a_whitespace_header_stays_with_it(tmp_path,
+                                                                                   cli):
+    """``x (m)`` under whitespace made "(m)" a column of its own and shifted every column
+    after it by one: y was read from a later column, with exit 0."""
+    rows = [(0.025 * k, i, 0.02 * i, 0.1 + 0.01 * k, 0.0005, 0.3) for k in range(4)
+            for i in (1, 2)]
+    source = tmp_path / "ws.csv"
+    source.write_text("t id x (m) y [ m ] q r s\n"
+                      + "".join("%g %g %g %g %g %g\n" % r for r in rows))
+    code, out, err = cli("import", source, "--width", "0.09", "--height", "0.95", "-o",
+                         tmp_path / "ws.h5")
+    assert code == 0, err
+    assert "positions from x, y (m)" in err
+    with Trajectories(tmp_path / "ws.h5") as t:
+        np.testing.assert_allclose(t.positions()[:, 0, 1], [0.1, 0.11, 0.12, 0.13])
+        np.testing.assert_allclose(t.positions()[:, 1, 0], 0.04)
+
+
+def test_two_far_apart_rows_of_one_tracer_at_one_time_are_refused_not_averaged(tmp_path):
+    """With --resample, rows of one tracer sharing a time stamp are one sample printed
+    twice and are averaged; two rows 0.3 m apart are not, and were averaged into a height
+    0.15 m off the track."""
+    lines = ["t x y"] + [f"{0.002 * k:.4f} 0.045 {0.1 + 0.005 * k:.4f}" for k in range(40)]
+    near = lines[:11] + ["0.0200 0.0451 0.1501"] + lines[11:]
+    far = lines[:11] + ["0.0200 0.045 0.4500"] + lines[11:]
+    for name, text in (("near.csv", near), ("far.csv", far)):
+        (tmp_path / name).write_text("\n".join(text) + "\n")
+    out = import_csv(tmp_path / "near.csv", tmp_path / "near.h5", width=0.09, height=0.95,
+                     resample=0.004)
+    with Trajectories(out) as t:
+        assert abs(t.positions()[5, 0, 1] - 0.15005) < 1e-9     # the two rows' mean
+    with pytest.raises(InputError, match=r"two rows of particle 0 at t = 0\.02 s lie 0\.3 m "
+                                         "apart .* not one sample of one track"):
+        import_csv(tmp_path / "far.csv", tmp_path / "far.h5", width=0.09, height=0.95,
+                   resample=0.004)
+    assert not (tmp_path / "far.h5").exists()

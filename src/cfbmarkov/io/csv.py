@@ -97,6 +97,11 @@ from cfbmarkov.io.riser import FrameColumns, RiserFrame
 from cfbmarkov.trajectory_writer import IMPORT_MAX_STEP, TrajectoryWriter
 
 
+#: rows of one tracer at one time (printed at a fixed precision) are averaged into one
+#: sample only where they lie within this fraction of the riser's width of each other
+SAME_TIME_SPREAD = 0.05
+
+
 def import_csv(source: str | os.PathLike, output: str | os.PathLike, *,
                width: float | None = None, height: float | None = None,
                length_unit: str | None = None, time_unit: str | None = None,
@@ -641,7 +646,8 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
                          "particle in any row; check --region and --length-unit")
     times, ids, relative, merged = merge_same_times(
         rows[keep, layout.index("t")], ids[keep], relative[keep],
-        height=riser.height if periodic else None, vertical=1)
+        height=riser.height if periodic else None, vertical=1,
+        spread_limit=SAME_TIME_SPREAD * riser.width, label=label)
     try:
         tracks = resample_tracks(times, ids, relative,
                                  interval=interval, max_gap=max_gap,

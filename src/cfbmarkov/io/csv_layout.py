@@ -162,8 +162,8 @@ def read_layout(fh: TextIO, label: str, *, length_unit: str | None = None,
     data = [line for line in pending if line.split("#", 1)[0].strip()]
     delimiter = _delimiter(header_text, data[0] if data else None)
     decimal_comma = delimiter != "," and any("," in line.split("#", 1)[0] for line in data)
-    header = [name.strip().strip('"').strip("'").strip() for name in _split(header_text,
-                                                                               delimiter)]
+    header = [name.strip().strip('"').strip("'").strip()
+              for name in _header_names(header_text, delimiter)]
     shown = (delimiter or " ").join(header)
     row_units = _units_row(described, delimiter, len(header))
     canonical: dict[str, int] = {}
@@ -353,7 +353,7 @@ def _names_time(text: str) -> bool:
 
 def _names_columns(text: str) -> bool:
     """Whether a '#' line names columns: t and at least two known position columns."""
-    keys = {_canonical(name)[0] for name in _split(text, _delimiter(text, None))}
+    keys = {_canonical(name)[0] for name in _header_names(text, _delimiter(text, None))}
     return "t" in keys and len(keys & set(AXES)) >= 2
 
 
@@ -366,7 +366,7 @@ def _delimiter(header: str, data: str | None) -> str | None:
     data = data.split("#", 1)[0]
     for delimiter in candidates + [d for d in (";", "\t", "|", ",", None)
                                    if d not in candidates]:
-        n = len(_split(header, delimiter))
+        n = len(_header_names(header, delimiter))
         if n >= 2 and len(_split(data, delimiter)) == n:
             return delimiter
     return candidates[0]     # the rows are then refused line by line
@@ -374,6 +374,24 @@ def _delimiter(header: str, data: str | None) -> str | None:
 
 def _split(text: str, delimiter: str | None) -> list[str]:
     return text.split() if delimiter is None else text.strip("\r\n").split(delimiter)
+
+
+def _header_names(text: str, delimiter: str | None) -> list[str]:
+    """The names of a header line; under whitespace, a unit in brackets written apart from
+    its name (``x (mm)``, ``v [m / s]``) stays with the name before it."""
+    fields = _split(text, delimiter)
+    if delimiter is not None:
+        return fields
+    names: list[str] = []
+    open_unit = False
+    for field in fields:
+        if names and (open_unit or field[:1] in "([" and not _is_number(field)):
+            names[-1] += " " + field
+            open_unit = not field.endswith((")", "]"))
+        else:
+            names.append(field)
+            open_unit = False
+    return names
 
 
 def _canonical(name: str) -> tuple[str | None, str | None]:

@@ -332,7 +332,9 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
 
 
 def merge_same_times(times, particles, positions, *, height: float | None = None,
-                     vertical: int = 1) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+                     vertical: int = 1, spread_limit: float | None = None,
+                     label: str = "the file"
+                     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
     """Merge the rows of a particle that share a time stamp into one, at their mean position.
 
     PEPT locations are printed at a fixed precision, so two locations of one tracer may carry
@@ -351,6 +353,11 @@ def merge_same_times(times, particles, positions, *, height: float | None = None
         image about the group's first row, then wrapped into 0..H. None: plain means.
     vertical : int, optional
         The column of ``positions`` that holds the height.
+    spread_limit : float, optional
+        m: rows of one time that lie farther than this from the group's first row are
+        refused, not averaged (they are not one sample of one track). None: no limit.
+    label : str, optional
+        Names the file in error messages.
 
     Returns
     -------
@@ -358,6 +365,11 @@ def merge_same_times(times, particles, positions, *, height: float | None = None
         The rows with each (particle, time) once, sorted by particle then time.
     merged : int
         The number of rows merged away (R minus the rows returned).
+
+    Raises
+    ------
+    InputError
+        If rows of one particle at one time lie farther apart than ``spread_limit``.
     """
     t = np.asarray(times, dtype=np.float64)
     pid = np.asarray(particles).astype(np.int64)
@@ -373,6 +385,15 @@ def merge_same_times(times, particles, positions, *, height: float | None = None
     if height is not None:
         offset = pos[:, vertical] - pos[first[group], vertical]
         pos[:, vertical] = pos[first[group], vertical] + offset - height * np.round(offset / height)
+    if spread_limit is not None:
+        spread = np.linalg.norm(pos - pos[first[group]], axis=1)
+        if spread.max() > spread_limit:
+            k = int(np.argmax(spread))
+            raise InputError(
+                f"{label}: two rows of particle {pid[k]} at t = {t[k]:g} s lie "
+                f"{spread[k]:.3g} m apart (more than {spread_limit:.3g} m, 5 % of the "
+                "riser's width), so they are not one sample of one track; check the id "
+                "column (two tracers under one id?) or remove the wrong row")
     sums = np.zeros((first.size, pos.shape[1]))
     np.add.at(sums, group, pos)
     mean = sums / np.bincount(group)[:, None]
