@@ -233,3 +233,58 @@ def test_compare_warns_where_the_reference_loses_tracks_at_the_models_lag(tmp_pa
                                                                    "model's lag")]
     assert said[0.01] == []
     assert len(said[0.02]) == 1 and "farther than the face band from the outlet" in said[0.02][0]
+
+
+def test_an_open_beds_means_count_the_lag_before_a_state_with_memory_at_the_inlet(tmp_path):
+    """On a known open chain (2 x 8 cells), the bed's means under a state space with memory
+    count each newcomer over the lag before its first state, where it is: at the inlet.
+    Along the data's paths its frames had been left out (the bed mean 5 % high), and the
+    exact answer per cell had put them in the first state's cell (the second row's cell
+    low, the inlet's high); both now equal the cells' to the chains' own difference."""
+    from cfbmarkov.analysis.kinetics_reference import reference_kinetics
+    from cfbmarkov.kinetics import Constant, FirstOrder, Kinetics, Property
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+    from cfbmarkov.markov.spaces import state_space_from_name
+
+    columns, rows, lag = 2, 8, 0.01
+    q, r, e = open_chain(columns=columns, rows=rows, up=0.5, stay=0.4, side=0.0)
+    states, ids = draw(q, r, e, n_steps=1500, inflow=3.0, n_start=0, seed=7,
+                       columns=columns, rows=rows)
+    pos = positions_of(states, seed=8, columns=columns, rows=rows)
+    pos[..., 0] *= 0.02 / W
+    pos[..., 1] *= 0.2 / H
+    times = np.arange(states.shape[0]) * lag
+    path = write_trajectories(tmp_path / "chain.h5", times, pos, width=0.02, height=0.2,
+                              ids=ids, present=states >= 0, boundary="open")
+    kinetics = Kinetics((Property("X", FirstOrder(), {"rate": Constant(5.0)}, "entry", 0.0),))
+    got = {}
+    for name in ("cells", "cells-direction"):
+        space = state_space_from_name(name, columns, rows, 0.02, 0.2)
+        model = fit_model(path, space, lag, (1.0, 14.0), "mle")
+        sk = kinetics.per_state(space)
+        exact = exact_kinetics(model, sk)["X"]
+        along = reference_kinetics(path, model, sk, (1.0, 14.0))["X"]
+        got[name] = (exact.bed_mean, np.asarray(exact.bed_mean_by_cell),
+                     along.time_mean, np.asarray(along.cell_mean))
+    (bed, by_cell, seen, seen_cells), (bed_m, by_cell_m, seen_m, seen_cells_m) = got.values()
+    assert seen_m == pytest.approx(seen, rel=0.005)
+    np.testing.assert_allclose(seen_cells_m, seen_cells, rtol=0.01)
+    assert bed_m == pytest.approx(bed, rel=0.005)
+    # the two chains differ by up to 3 % in the inlet's cells (they were 30 % apart in the
+    # inlet's cells, 17 % in the second row's)
+    np.testing.assert_allclose(by_cell_m, by_cell, rtol=0.04)
+    # a carried property on an open riser: refused by compare as by react (compare had
+    # judged the model's fresh newcomers against the reference's re-entries, +534 %)
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.kinetics.laws import Deactivation
+    from cfbmarkov.report.compare import compare
+
+    model = fit_model(path, CellGrid(columns, rows, 0.02, 0.2), lag, (1.0, 8.0), "mle")
+    pred = model.predict(path, start=8.0, duration=6.0, seed=2, output=tmp_path / "p.h5")
+    carried = Kinetics((Property("a", Deactivation(), {"rate": Constant(1.0)}, "carried",
+                                 1.0),))
+    with pytest.raises(InputError, match="property a: a carried property needs a periodic "
+                                         "riser"):
+        compare(path, pred, window=(8.0, 14.0), output=tmp_path / "cmp", figures=False,
+                resamples=0, kinetics=carried)
+    assert not (tmp_path / "cmp").exists()

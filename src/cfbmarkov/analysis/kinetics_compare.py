@@ -623,7 +623,8 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     ------
     InputError
         When the prediction carries no model, a law is not linear, a rate table does not
-        fit the model's grid, or the reference cannot be discretised on its states.
+        fit the model's grid, a property is carried on an open riser, or the reference
+        cannot be discretised on its states.
     """
     from cfbmarkov.analysis.compare import _Basis
 
@@ -632,6 +633,12 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
     warnings.extend(f"kinetics: {note}" for note in kinetics.field_notes(fields))
     warnings.extend(f"kinetics: {note}" for note in kinetics.grid_notes(model.state_space))
     sk = kinetics.per_state(model.state_space, fields)
+    if model.open_flow is not None and "carried" in sk.starts:
+        name = sk.names[list(sk.starts).index("carried")]
+        where = f"{sk.source}: " if getattr(sk, "source", "") else ""
+        raise InputError(f"{where}property {name}: a carried property needs a periodic riser: "
+                         "particles that leave an open riser do not come back (use start = "
+                         "entry)")
     maps = linear_maps(sk, model.lag)
     start, stop = comparison.window
     on = _Basis(comparison.basis, comparison.basis == "events", comparison.lag_frames,

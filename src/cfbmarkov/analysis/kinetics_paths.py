@@ -20,6 +20,10 @@ Layout (T frames one lag apart, N particles, S states, C cells)::
     present  bool    [T, N]   open riser: the particle is in the frame
     vertical float64 [T, N]   open riser: its height (m)
     a, b     float64 [S]      the lag's affine map per state
+    bed_cells int64  [T, N]   the cell a particle counts in for the bed's means (-1: not
+                              in the bed); an open riser's particle present without a
+                              state (the lag before a state with memory) counts in the
+                              cell where it is
 """
 
 from __future__ import annotations
@@ -29,16 +33,16 @@ import numpy as np
 
 
 @nb.njit(cache=True)
-def _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count):
-    """Frame ``k``'s mean value over the particles in a state and its sums per cell."""
+def _bed(k, bed_cells, value, bed_mean, cell_sum, cell_count):
+    """Frame ``k``'s mean value over the particles in the bed (a cell >= 0) and its sums
+    per cell."""
     total = 0.0
     n = 0
-    for p in range(states.shape[1]):
-        s = states[k, p]
-        if s >= 0:
+    for p in range(bed_cells.shape[1]):
+        c = bed_cells[k, p]
+        if c >= 0:
             total += value[p]
             n += 1
-            c = cell_of_state[s]
             cell_sum[c] += value[p]
             cell_count[c] += 1
     bed_mean[k] = total / n if n > 0 else np.nan
@@ -46,7 +50,7 @@ def _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count):
 
 @nb.njit(cache=True)
 def integrate_periodic(times, states, laps, a, b, v0, reset, value, stored, use_stored,
-                       cell_of_state, exit_value, exit_time, exit_residence, bed_mean,
+                       bed_cells, exit_value, exit_time, exit_residence, bed_mean,
                        cell_sum, cell_count):
     """Integrate a property along the paths of a periodic riser; return the exits written.
 
@@ -55,7 +59,8 @@ def integrate_periodic(times, states, laps, a, b, v0, reset, value, stored, use_
     records an exit (once per new level), with the time since its previous record as the
     residence time (NaN before its first record: its entry is unknown), then, with
     ``reset``, an entry at ``v0``. ``exit_*`` must hold the number of records;
-    ``bed_mean`` [T], ``cell_sum`` and ``cell_count`` [C] are filled. With
+    ``bed_mean`` [T], ``cell_sum`` and ``cell_count`` [C] are filled over the particles
+    whose ``bed_cells`` is a cell. With
     ``use_stored``, the values of ``stored`` [T, N] (a Monte Carlo run's) stand in each
     frame instead of the integrated ones; an exit's value is then the lag's map of the
     stored value in the frame before it.
@@ -70,7 +75,7 @@ def integrate_periodic(times, states, laps, a, b, v0, reset, value, stored, use_
         running_max[p] = laps[0, p]
     n_out = 0
     if n_frames > 0:
-        _bed(0, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
+        _bed(0, bed_cells, value, bed_mean, cell_sum, cell_count)
     for k in range(1, n_frames):
         t = times[k]
         for p in range(n_particles):
@@ -89,13 +94,13 @@ def integrate_periodic(times, states, laps, a, b, v0, reset, value, stored, use_
                     value[p] = v0
             if use_stored:
                 value[p] = stored[k, p]
-        _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
+        _bed(k, bed_cells, value, bed_mean, cell_sum, cell_count)
     return n_out
 
 
 @nb.njit(cache=True)
 def integrate_open(times, states, present, vertical, band, height, a, b, v0, reset, value,
-                   stored, use_stored, cell_of_state, exit_value, exit_time, exit_residence,
+                   stored, use_stored, bed_cells, exit_value, exit_time, exit_residence,
                    bed_mean, cell_sum, cell_count):
     """Integrate a property along the paths of an open riser; return the exits written.
 
@@ -125,7 +130,7 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
             entered[p] = -np.inf        # inside at the start: in a residence, its entry unknown
     n_out = 0
     if n_frames > 0:
-        _bed(0, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
+        _bed(0, bed_cells, value, bed_mean, cell_sum, cell_count)
     for k in range(1, n_frames):
         t = times[k]
         for p in range(n_particles):
@@ -153,7 +158,7 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
                 last_height[p] = vertical[k, p]
                 if use_stored:
                     value[p] = stored[k, p]
-        _bed(k, states, value, cell_of_state, bed_mean, cell_sum, cell_count)
+        _bed(k, bed_cells, value, bed_mean, cell_sum, cell_count)
     return n_out
 
 

@@ -37,6 +37,7 @@ import numpy as np
 from cfbmarkov.analysis.kinetics_paths import integrate_open, integrate_periodic, records_bound
 from cfbmarkov.analysis.exit_statistics import ExitStatistics
 from cfbmarkov.errors import InputError
+from cfbmarkov.markov.cells import cell_index
 from cfbmarkov.observed.residence import DEFAULT_FACE_ROWS
 
 
@@ -168,9 +169,21 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
     else:
         stored = np.zeros((1, 1))
     cell_sum, cell_count = np.zeros(n_cells), np.zeros(n_cells)
+    bed_cells = np.where(states >= 0, cell_of_state[np.maximum(states, 0)], -1)
     if discrete.boundary == "open":
         vertical = np.ascontiguousarray(discrete.vertical[rows], dtype=np.float64)
         present = np.isfinite(vertical)
+        stateless = present & (states < 0)
+        if stateless.any():
+            # a particle in the riser without a state yet (a state space with memory, the
+            # lag after its entry) is in the bed: in the cell where it is
+            if discrete.positions is None:
+                raise InputError("the discrete trajectories of an open riser with a state "
+                                 "space with memory carry no positions: discretise with "
+                                 "keep_positions=True")
+            bed_cells[stateless] = cell_index(
+                discrete.positions[rows][stateless], space.width, space.height,
+                space.columns, space.rows, space.depth, space.depth_columns)
         band = discrete.height / space.rows if face_band is None else float(face_band)
         if not np.isfinite(band):
             band = discrete.height / DEFAULT_FACE_ROWS
@@ -178,7 +191,7 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
         exit_value, exit_time, exit_rt = np.empty(size), np.empty(size), np.empty(size)
         n = integrate_open(times, states, present, np.nan_to_num(vertical), band,
                            float(discrete.height), a, b, float(entry_value), bool(reset), value,
-                           stored, use_stored, cell_of_state, exit_value, exit_time, exit_rt,
+                           stored, use_stored, bed_cells, exit_value, exit_time, exit_rt,
                            bed_mean, cell_sum, cell_count)
     else:
         if discrete.laps is None:
@@ -189,7 +202,7 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
         size = records_bound(laps)
         exit_value, exit_time, exit_rt = np.empty(size), np.empty(size), np.empty(size)
         n = integrate_periodic(times, states, laps, a, b, float(entry_value), bool(reset), value,
-                               stored, use_stored, cell_of_state, exit_value, exit_time,
+                               stored, use_stored, bed_cells, exit_value, exit_time,
                                exit_rt, bed_mean, cell_sum, cell_count)
     keep = np.isfinite(exit_rt[:n]) if reset else np.ones(n, bool)
     with np.errstate(invalid="ignore", divide="ignore"):
@@ -453,4 +466,4 @@ def linear_maps(state_kinetics, lag: float) -> list[dict]:
 
 
 __all__ = ["PathKinetics", "integrate_along_paths", "linear_maps", "reference_kinetics",
-           "values_at"]
+           "reference_starts", "values_at"]

@@ -690,6 +690,25 @@ def _with_entry_delay(chain: tuple, model) -> tuple:
     return q, r, e, state, levels
 
 
+def _bed_cells(model, row_cell: np.ndarray, n_rows: int) -> np.ndarray:
+    """The cell each row of a residence chain counts in for the bed's means per cell: its
+    state's, but for the copies :func:`_with_entry_delay` puts ahead of an open riser's
+    states, which count at the inlet, in the bottom row's cell below their state's (where
+    a prediction shows its newcomers, :func:`~cfbmarkov.markov.prediction.with_inlet_frames`,
+    and where the data's particles are over that lag)."""
+    if model.open_flow is None:
+        return row_cell
+    from cfbmarkov.markov.model_rtd import entry_delay
+
+    delay = entry_delay(model)
+    if not delay:
+        return row_cell
+    copies = n_rows - (n_rows >> delay)     # each lag of delay doubles the chain's rows
+    row_cell = np.array(row_cell)
+    row_cell[:copies] %= model.state_space.cells_per_row
+    return row_cell
+
+
 def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
                    direction: str | None = None, deficit_levels: int | None = None
                    ) -> dict[str, PropertyAnswer]:
@@ -756,6 +775,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     out = {}
     lu_q = _lu(sp.identity(q.shape[0], format="csc") - q)
     occupancy = lu_q.solve(e, trans="T")       # lags spent in each state per entry
+    row_cell = _bed_cells(model, cell[state], q.shape[0])
     for i, name in enumerate(sk.names):
         a, b, c = a_all[i][state], b_all[i][state], c_all[i][state]
         occ = occupancy
@@ -802,8 +822,8 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
         mass = np.bincount(state, values, minlength=model.n_states)
         count = np.bincount(state, occ, minlength=model.n_states)
         by_state = np.divide(mass, count, out=np.full(mass.size, np.nan), where=count > 0)
-        cmass = np.bincount(cell, mass, minlength=space.n_cells)
-        ccount = np.bincount(cell, count, minlength=space.n_cells)
+        cmass = np.bincount(row_cell, values, minlength=space.n_cells)
+        ccount = np.bincount(row_cell, occ, minlength=space.n_cells)
         by_cell = np.divide(cmass, ccount, out=np.full(cmass.size, np.nan), where=ccount > 0)
         centre = float(mean) if shifted is not None else 0.0
         mean = _in_range(mean, sk.laws[i])
