@@ -19,6 +19,36 @@ from cfbmarkov.limits import MAX_LAGS
 from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, TIME_TOLERANCE, time_text
 
 
+def window_pair(window) -> tuple[float, float]:
+    """An analysis window given as two numbers, as two floats.
+
+    Parameters
+    ----------
+    window : sequence of two real numbers
+        (start, stop), s.
+
+    Returns
+    -------
+    (float, float)
+        (start, stop), s; whether they are finite, ordered and inside a file is for the
+        file's frames to judge (:meth:`FrameTimes.window`).
+
+    Raises
+    ------
+    InputError
+        If ``window`` is text, None or anything but two real numbers (a text "15" would
+        otherwise be read as the window 1:5).
+    """
+    import numbers
+
+    ok = (not isinstance(window, (str, bytes)) and hasattr(window, "__len__")
+          and len(window) == 2 and all(isinstance(v, numbers.Real)
+                                       and not isinstance(v, bool) for v in window))
+    if not ok:
+        raise InputError(f"window {window!r} is not (start, stop) in s: give two numbers, "
+                         "e.g. window=(10.0, 15.0)")
+    return float(window[0]), float(window[1])
+
 class FrameTimes:
     """The frame times of a file, located by time, window or lag.
 

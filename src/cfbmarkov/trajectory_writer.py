@@ -49,8 +49,10 @@ class TrajectoryWriter:
 
     Every frame is validated (finite, inside the domain, times increasing and evenly spaced);
     the lap counter is derived from the positions by the minimal-image rule when not given.
-    On an error, or when used as a context manager that exits by an exception, the partial
-    file is removed.
+    When used as a context manager that exits by an exception, or on an error writing to
+    the file, the partial file is removed. A frame refused by its checks (an
+    :class:`~cfbmarkov.errors.InputError` from :meth:`append_frames`, caught by the caller)
+    is not written, and the frames before it are kept: :meth:`close` then publishes them.
 
     Even spacing: every step between frames must lie within
     :data:`~cfbmarkov.trajectory_format.FRAME_SPACING_TOLERANCE` (1 %) of the reference
@@ -325,8 +327,9 @@ class TrajectoryWriter:
         InputError
             If an array has the wrong shape, a present value is not finite, a present
             position lies outside the domain, the times do not increase or are unevenly
-            spaced, velocities are missing, or (laps derived) a particle moved more than
-            ``max_step`` of the height between frames.
+            spaced, velocities are missing (or given to a file made without them), no frame
+            is given, or (laps derived) a particle moved more than ``max_step`` of the
+            height between frames.
         """
         _interrupt.check()            # a Ctrl-C swallowed by a finalizer stops here
         times = np.asarray(times, dtype=np.float64).reshape(-1)
@@ -348,6 +351,12 @@ class TrajectoryWriter:
         limits = [self.width, self.height] + ([] if self.depth is None else [self.depth])
         check_written_values(self._label, "position", positions, times, present, self.ids,
                              limits, domain=True)
+        if t == 0:
+            raise InputError(f"{self._label}: no frame to append (times and positions hold "
+                             "0 frames); give at least one frame")
+        if velocities is not None and not self.with_velocity:
+            raise InputError(f"{self._label}: velocities given to a file made without them; "
+                             "make it with with_velocity=True to store them")
         if self.with_velocity:
             if velocities is None:
                 raise InputError(f"{self._label}: this file stores velocities; none were given")

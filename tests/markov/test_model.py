@@ -409,7 +409,9 @@ def test_adopted_arrays_are_kept_and_others_copied():
     assert copied.transition_matrix is not mine and mine.flags.writeable
     given = np.array(model.transition_matrix)
     adopted = dataclasses.replace(model, transition_matrix=given, adopt=True)
-    assert adopted.transition_matrix is given and not given.flags.writeable
+    assert np.shares_memory(adopted.transition_matrix, given) and not given.flags.writeable
+    with pytest.raises(ValueError):        # what a model returns cannot be made writeable
+        adopted.transition_matrix.setflags(write=True)
     bad = np.array(model.transition_matrix) * 3.0      # adopted, still checked
     with pytest.raises(InputError, match="rows do not sum to 1"):
         dataclasses.replace(model, transition_matrix=bad, adopt=True)

@@ -23,6 +23,7 @@ import math
 import numpy as np
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.frame_times import window_pair
 from cfbmarkov.markov.cells import cell_index
 
 #: frames read per block
@@ -86,7 +87,7 @@ def _window_sums(traj, space, window: tuple[float, float]):
         space = space.with_size(traj.width, traj.height)
     if space.depth is not None and traj.dimensions != 3:
         raise InputError(f"{traj.path}: a 3D grid needs a 3D file")
-    frames = traj.window(float(window[0]), float(window[1]))
+    frames = traj.window(*window_pair(window))
     n_cells = space.n_cells
     counts = np.zeros(n_cells)
     velocity_sum = np.zeros(n_cells)

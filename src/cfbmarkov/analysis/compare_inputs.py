@@ -13,6 +13,7 @@ import numpy as np
 
 from cfbmarkov._outputs import PREDICTION_SOURCE
 from cfbmarkov.errors import InputError
+from cfbmarkov.frame_times import window_pair
 from cfbmarkov.limits import MAX_BINS
 from cfbmarkov.trajectories import Trajectories
 from cfbmarkov.trajectory_format import time_text
@@ -36,10 +37,7 @@ def check_window(window) -> tuple[float, float]:
     InputError
         When the window is not two finite numbers with stop > start.
     """
-    try:
-        start, stop = (float(v) for v in window)
-    except (TypeError, ValueError):
-        raise InputError(f"window {window!r} is not (start, stop) in seconds") from None
+    start, stop = window_pair(window)
     if not (math.isfinite(start) and math.isfinite(stop)):
         raise InputError(f"window {start:g}:{stop:g} s is not finite")
     if not stop > start:

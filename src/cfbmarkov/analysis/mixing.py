@@ -27,6 +27,7 @@ import numpy as np
 
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import InputError
+from cfbmarkov.frame_times import window_pair
 
 
 def left_tracer_group(x, half_width: float) -> np.ndarray:
@@ -126,7 +127,7 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=
     """
     traj.require_supported("the mixing curve", three_d=True, absent=True,
                            open_boundary=True)     # the across coordinate only
-    frames = traj.window(float(window[0]), float(window[1]))
+    frames = traj.window(*window_pair(window))
     half = 0.5 * traj.width
     if traj.has_absences:
         return _mixing_of_present(traj, frames, half, block,

@@ -39,7 +39,7 @@ from cfbmarkov.markov.frame_quantities import FrameQuantities
 from cfbmarkov.markov.states import StateSpace
 from cfbmarkov.observed.lag_resolution import PassReading
 from cfbmarkov.trajectories import Trajectories, opened
-from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, time_text
+from cfbmarkov.trajectory_format import FRAME_SPACING_TOLERANCE, POSITION_TOLERANCE, time_text
 
 #: the state of a particle that is absent in a frame
 ABSENT = -1
@@ -87,9 +87,11 @@ class DiscreteTrajectories:
     Raises
     ------
     InputError
-        If ``states`` is not 2-D, ``vertical`` has another shape, ``times`` does not hold
-        one time per frame, ``lag_frames < 1``, or ``frame_interval`` is not a positive
-        finite number.
+        If ``states`` is not 2-D or not whole numbers in -1 .. S-1, ``vertical`` has
+        another shape or a height that is not finite or lies outside 0 .. ``height`` where
+        a particle is present, ``times`` does not hold one time per frame,
+        ``lag_frames < 1``, ``frame_interval`` is not a positive finite number, or the
+        times are not spaced by it.
 
     See Also
     --------
@@ -97,7 +99,9 @@ class DiscreteTrajectories:
 
     Notes
     -----
-    See ``docs/definitions.md`` (Discrete trajectories).
+    The arrays are held read-only; an array given writeable (a caller's buffer) is copied
+    first, so that writing to it afterwards cannot change the trajectories. See
+    ``docs/definitions.md`` (Discrete trajectories).
     """
 
     states: np.ndarray
@@ -117,6 +121,13 @@ class DiscreteTrajectories:
     def __post_init__(self):
         if self.boundary not in ("periodic", "open"):
             raise InputError(f"boundary {self.boundary!r}: choose periodic or open")
+        for name in ("states", "vertical", "times"):
+            if not isinstance(getattr(self, name), np.ndarray):
+                try:
+                    object.__setattr__(self, name, np.asarray(getattr(self, name)))
+                except (TypeError, ValueError) as error:
+                    raise InputError(f"discrete trajectories: {name} is not an array "
+                                     f"({error}); give a numpy array") from None
         if self.states.ndim != 2 or self.vertical.shape != self.states.shape:
             raise InputError(f"discrete trajectories: states {self.states.shape} and heights "
                              f"{self.vertical.shape} must both be [T, N]")
@@ -127,12 +138,55 @@ class DiscreteTrajectories:
             raise InputError(f"lag of {self.lag_frames} frames: must be at least 1")
         if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
             raise InputError(f"frame interval {self.frame_interval!r} s must be positive")
+        steps = np.diff(self.times)
+        if steps.size and not np.all(np.abs(steps - self.frame_interval)
+                                     <= FRAME_SPACING_TOLERANCE * self.frame_interval):
+            raise InputError(f"discrete trajectories: the times are not spaced by the frame "
+                             f"interval {self.frame_interval:g} s (steps {steps.min():g} .. "
+                             f"{steps.max():g} s); give frames evenly spaced by it")
+        self._check_states()
+        self._check_heights()
         for name in ("states", "vertical", "times", "positions", "laps"):
-            values = getattr(self, name)        # read-only views: as immutable as a model
+            values = getattr(self, name)
+            # as immutable as a model: a writeable array (a caller's buffer) is copied, so
+            # that writing to it later cannot change these trajectories
             if isinstance(values, np.ndarray) and values.flags.writeable:
-                view = values.view()
-                view.setflags(write=False)
-                object.__setattr__(self, name, view)
+                object.__setattr__(self, name, _frozen(values.copy()))
+
+    def _check_states(self):
+        """Refuse states that are not whole numbers in -1 .. S-1 (the counting kernels
+        index arrays with them)."""
+        states = self.states
+        if states.dtype.kind not in "iu":
+            raise InputError(f"discrete trajectories: states of type {states.dtype} must be "
+                             "integers (the state index, -1 where a particle is absent); "
+                             "give an int32 array")
+        if states.size:
+            low, high = int(states.min()), int(states.max())
+            n = self.state_space.n_states
+            if low < ABSENT or high >= n:
+                raise InputError(f"discrete trajectories: states run {low} .. {high}, outside "
+                                 f"the state space's 0 .. {n - 1} (and {ABSENT} for an absent "
+                                 "particle); number the states from 0 "
+                                 "(state_space.discretize gives them)")
+        if states.dtype != np.int32:
+            object.__setattr__(self, "states", states.astype(np.int32))
+
+    def _check_heights(self):
+        """Refuse heights that are not finite, or outside 0 .. H, where a particle is
+        present (the boundary's passes are read from them)."""
+        heights = self.vertical[self.states != ABSENT]
+        if heights.size == 0:
+            return
+        if not np.all(np.isfinite(heights)):
+            raise InputError("discrete trajectories: a height is NaN or infinite where its "
+                             "particle is present; give every present particle its height "
+                             "(m), or the state -1")
+        low, high = float(heights.min()), float(heights.max())
+        if low < -POSITION_TOLERANCE or high > self.height + POSITION_TOLERANCE:
+            raise InputError(f"discrete trajectories: heights run {low:g} .. {high:g} m, "
+                             f"outside the riser's 0 .. {self.height:g} m; give the heights "
+                             "in m within the riser")
 
     @property
     def lag(self) -> float:
@@ -361,14 +415,33 @@ class WindowFrames:
         rows = slice(start, None)
         if start not in self._heights:
             self._heights[start] = np.ascontiguousarray(self.positions[rows, :, 1])
+            self._heights[start].setflags(write=False)
+        # read-only views of arrays these frames own: not copied by DiscreteTrajectories
         return DiscreteTrajectories(
-            states=np.ascontiguousarray(states[offset:]),
+            states=_frozen(np.ascontiguousarray(states[offset:])),
             vertical=self._heights[start],
-            times=self.times[rows], lag_frames=lag_frames, frame_interval=self.frame_interval,
+            times=_read_only(self.times[rows]), lag_frames=lag_frames,
+            frame_interval=self.frame_interval,
             height=self.height, state_space=state_space, window=window, source=self.source,
-            positions=self.positions[rows] if keep_positions else None,
-            laps=None if (self.laps is None or not keep_positions) else self.laps[rows],
+            positions=_read_only(self.positions[rows]) if keep_positions else None,
+            laps=None if (self.laps is None or not keep_positions)
+            else _read_only(self.laps[rows]),
             boundary=self.boundary, pass_reading=reading)
+
+
+def _read_only(values: np.ndarray) -> np.ndarray:
+    """A read-only view of ``values``, whose owner keeps it."""
+    view = values.view()
+    view.setflags(write=False)
+    return view
+
+
+def _frozen(values: np.ndarray) -> np.ndarray:
+    """A read-only view of ``values`` (which this code owns from here on)."""
+    values.setflags(write=False)
+    view = values.view()
+    view.setflags(write=False)
+    return view
 
 
 def _known(present: np.ndarray, history: int, lag_frames: int) -> np.ndarray:

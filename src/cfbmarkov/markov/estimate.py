@@ -239,7 +239,8 @@ class TransitionEstimator:
         open_riser = Boundary(windows[0].boundary).is_open
         if self.name == "paper" and open_riser:
             raise InputError("the paper's estimator (Eq. 2-4) averages per-frame matrices of a "
-                             "closed (periodic) riser; fit an open riser with --estimator mle")
+                             "closed (periodic) riser; fit an open riser with --estimator mle (in "
+                             "Python MaximumLikelihoodEstimator)")
         if self.coherent and open_riser:
             raise InputError("coherent moves (--coherent) are fitted for periodic risers only "
                              "yet; fit an open riser without it")

@@ -59,6 +59,8 @@ def _read_only(method):
         value = method(self)
         if isinstance(value, np.ndarray):
             value.setflags(write=False)
+            value = value.view()   # a view of a read-only base cannot be made writeable
+            value.setflags(write=False)
         return value
 
     wrapped.__doc__, wrapped.__name__ = method.__doc__, method.__name__
@@ -458,7 +460,8 @@ class MarkovModel:
 
     # -- residence times (cfbmarkov.markov.model_rtd) ---------------------------------
     def rtd(self, window: float | None = None, direction: str | None = None,
-            occupancy=None) -> "ResidenceTimeDistribution":
+            occupancy=None, *, window_length: float | None = None
+            ) -> "ResidenceTimeDistribution":
         """Exact residence-time distribution (no sampling noise), cached.
 
         Parameters
@@ -467,7 +470,8 @@ class MarkovModel:
             Length (s) of an analysis window: the RTD as seen in it, the quantity a
             sample-based RTD estimates (None: the intrinsic RTD); taken as the nearest
             whole number of lags (a window's frame pairs one lag apart), the length the
-            result's ``window`` gives.
+            result's ``window`` gives. ``window_length`` is the same argument under the
+            name the other functions give a window's length (give one of them).
         direction : {"up", "down"}, optional
             A periodic riser's residences from passes up through the top or, for a net
             downflow, down through the bottom (the pass fractions swapped;
@@ -511,6 +515,14 @@ class MarkovModel:
         """
         from cfbmarkov.markov.model_rtd import model_rtd
 
+        if window_length is not None:
+            if window is not None:
+                raise InputError("rtd(): give the window's length once, as window_length= "
+                                 "(window= is the same argument)")
+            window = window_length
+        if isinstance(window, (tuple, list, np.ndarray)):
+            raise InputError(f"rtd(): window {window!r} is a (start, stop) pair; the RTD "
+                             "seen in a window takes its length: window_length=stop - start")
         if occupancy is not None and window is None:
             raise InputError("occupancy= says where a window's particles start: give the "
                              "window's length with it (rtd(window=..., occupancy=...)); the "

@@ -44,7 +44,9 @@ def owned_array(value, dtype, adopt: bool) -> np.ndarray:
     else:
         owned = np.array(value, dtype=dtype)
     owned.setflags(write=False)
-    return owned
+    view = owned.view()      # a view of a read-only base cannot be made writeable again
+    view.setflags(write=False)
+    return view
 
 
 def checked_coherence(value) -> float:

@@ -272,7 +272,7 @@ def _open_rtd(model: "MarkovModel", window: float | None) -> ResidenceTimeDistri
     return intrinsic if window is None else intrinsic.in_window(window)
 
 
-__all__ = ["model_rtd"]
+__all__ = ["drift_rt_mean", "entry_delay", "model_rtd"]
 
 
 def drift_rt_mean(model: "MarkovModel", direction: str | None = None) -> float | None:

@@ -164,7 +164,8 @@ def trap_warning(model: "MarkovModel") -> str | None:
     return (f"states entered but never left: {state_set_text(model.state_space, trapped)}: "
             f"they keep their particles (P_ii = 1) or move as their cell; "
             f"{100 * model.trap_share:.1f} % of the particle-frames are in states that "
-            "can reach a trap (fit --connected leaves them out)")
+            "can reach a trap (fit --connected leaves them out; in Python "
+            "connected=True)")
 
 
 def _sources_text(source) -> str:
@@ -293,7 +294,8 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         else:
             lines.append(f"  exact residence time: E(RT) = {r.mean:.4g} s, "
                          f"SD(RT) = {r.sd:.4g} s (no interval: the model carries none; `fit` "
-                         "without --resamples 0 adds one, and the verdict's limits with it)")
+                         "without --resamples 0 adds one, and the verdict's limits with it; in "
+                         "Python assess_fit(model))")
     except Exception as exc:  # a model without exits still has a summary
         lines.append(f"  exact residence time: none ({exc})")
     own = None if model.adequacy is None else model.adequacy.window_rt_mean

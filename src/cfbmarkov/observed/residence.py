@@ -26,6 +26,7 @@ import numba as nb
 import numpy as np
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.frame_times import window_pair
 
 #: frames read per block by :func:`residence_times` (27000 particles: ~28 MB of int32 laps)
 _BLOCK_FRAMES = 256
@@ -174,7 +175,7 @@ def open_face_tracks(traj, window: tuple[float, float], band: float,
         Tracks begun after the window's first frame, those begun within ``band`` of the
         inlet, tracks ended before its last frame, those ended within ``band`` of the outlet.
     """
-    frames = traj.window(float(window[0]), float(window[1]))
+    frames = traj.window(*window_pair(window))
     n = traj.n_particles
     was, last = np.full(n, -1, np.int8), np.full(n, np.nan)
     counts = np.zeros(4, np.int64)
@@ -431,7 +432,7 @@ def net_passes(traj, window: tuple[float, float]) -> int:
     -------
     int
     """
-    frames = traj.window(float(window[0]), float(window[1]))
+    frames = traj.window(*window_pair(window))
     if not traj.has_absences:
         first = traj.laps(frames.start).astype(np.int64)
         last = traj.laps(frames.stop - 1).astype(np.int64)
@@ -455,7 +456,7 @@ def _tracked_flux(traj, window: tuple[float, float]) -> tuple[float, int]:
     """Particle-time and net passes over the window's frame steps at which the particle is
     present at both ends (a file with absences: what is seen while tracked, never a lap
     change across an absence)."""
-    frames = traj.window(float(window[0]), float(window[1]))
+    frames = traj.window(*window_pair(window))
     times = np.asarray(traj.times[frames], dtype=np.float64)
     particle_time, passes = 0.0, 0
     for k in range(frames.start, frames.stop - 1, _BLOCK_FRAMES):
@@ -574,7 +575,7 @@ def residence_flux(traj, window: tuple[float, float],
     if traj.has_absences:
         particle_time, passes = _tracked_flux(traj, window)
     else:
-        frames = traj.window(float(window[0]), float(window[1]))
+        frames = traj.window(*window_pair(window))
         length = float(traj.times[frames.stop - 1]) - float(traj.times[frames.start])
         particle_time, passes = traj.n_particles * length, net_passes(traj, window)
     direction = net_flow_direction(traj, window) if direction is None else direction
@@ -644,7 +645,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     """
     split = bool(split_at_absences) and traj.has_absences and not traj.boundary.is_open
     if traj.has_absences and not (traj.boundary.is_open or split) and \
-            traj.absent_throughout(traj.window(float(window[0]), float(window[1]))) is not None:
+            traj.absent_throughout(traj.window(*window_pair(window))) is not None:
         split = True      # each particle present throughout the window or absent throughout
     if traj.has_absences and not (traj.boundary.is_open or split):
         raise InputError(f"{traj.path}: residences on a periodic riser cannot be observed "
@@ -655,7 +656,7 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
                          "particles enter and leave through the riser's faces")
     traj.require_supported("residence times", three_d=True,
                            absent=traj.boundary.is_open or split, open_boundary=True)
-    start, stop = float(window[0]), float(window[1])
+    start, stop = window_pair(window)
     frames = traj.window(start, stop)
     i0, i1 = frames.start, frames.stop
     lag_frames = int(lag_frames)
@@ -794,7 +795,8 @@ def rtd_histogram(samples, bin_width: float = 0.025, *, window_length: float
     Raises
     ------
     InputError
-        When ``bin_width`` or ``window_length`` is not finite and positive.
+        When ``bin_width`` or ``window_length`` is not finite and positive, or a sample is
+        negative or not finite.
 
     References
     ----------
@@ -806,6 +808,11 @@ def rtd_histogram(samples, bin_width: float = 0.025, *, window_length: float
         raise InputError(f"RTD bin width {bin_width:g} s must be positive")
     if not (np.isfinite(window_length) and window_length > 0):
         raise InputError(f"window length {window_length:g} s must be positive")
+    bad = ~(np.isfinite(samples) & (samples >= 0))
+    if bad.any():
+        raise InputError(f"{int(bad.sum())} of {samples.size} residence times are not "
+                         f"finite numbers >= 0 (e.g. {samples[bad][0]:g} s); give the "
+                         "residence times in s")
     n_bins = max(1, int(np.ceil(window_length / bin_width - 1e-6)))
     edges = bin_width * np.arange(n_bins + 1)
     index = np.floor(samples / bin_width + 1e-6).astype(np.int64)
@@ -817,5 +824,6 @@ def rtd_histogram(samples, bin_width: float = 0.025, *, window_length: float
     return edges, (counts / total if total > 0 else counts)
 
 
-__all__ = ["WHOLE_FRAMES", "ResidenceTimes", "open_face_tracks", "residence_times",
+__all__ = ["WHOLE_FRAMES", "ResidenceTimes", "flux_residence_time", "net_flow_direction",
+           "open_face_tracks", "residence_times",
            "residence_times_from_events", "residence_times_from_laps", "rtd_histogram"]

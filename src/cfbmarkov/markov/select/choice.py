@@ -12,9 +12,11 @@ the best one from its counts and stores the selection record
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Sequence
 
 from cfbmarkov.errors import InputError
+from cfbmarkov.frame_times import window_pair
 from cfbmarkov.markov.discrete import DiscreteTrajectories
 from cfbmarkov.markov.counting import count_transitions
 from cfbmarkov.markov.estimate import ESTIMATORS, estimator_from_name, fit_model
@@ -109,14 +111,15 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
     lag = check_finite(lag, "lag", "s", positive=True)
     if criterion not in ("auto", "rtd", "ck", "window"):
         raise InputError(f"auto: unknown criterion '{criterion}' (window, rtd, ck or auto)")
-    if int(folds) < 2:
-        raise InputError(f"auto: {folds} folds; cross-validation needs at least 2")
+    if isinstance(folds, bool) or not isinstance(folds, numbers.Integral) or folds < 2:
+        raise InputError(f"auto: folds={folds!r}; cross-validation needs a whole number of "
+                         "at least 2, e.g. folds=3")
     folds = int(folds)
     if isinstance(data, (list, tuple)):
         raise InputError("select_model takes one run; several runs of one case are chosen "
                          "on pooled by select_pooled(runs, windows=..., ...) (what `fit A.h5 "
                          "B.h5 --states auto` does)")
-    a, b = (float(v) for v in window)
+    a, b = window_pair(window)
     with opened(data) as traj:
         fitting = judged_blocks(traj, (a, b), lag, lag_multiples, folds, criterion,
                                 face_band=traj.height / rows)
