@@ -653,3 +653,21 @@ def test_vtu_files_without_a_pvd_take_their_times_from_the_step_in_their_name(tm
         np.testing.assert_allclose(t.times, TIMES[:4], rtol=0, atol=1e-12)
         np.testing.assert_allclose(t.positions()[:, order],
                                    pos[:4][:, np.argsort(IDS)][..., [0, 2]], atol=1e-12)
+
+
+def test_a_nan_position_names_its_time_and_an_empty_vtp_says_empty(tmp_path):
+    pos, vel, _ = _motion()
+    pos = np.array(pos)
+    pos[1, 2, 0] = np.nan
+    names = [f"p_{k}.vtp" for k in range(TIMES.size)]
+    for k, name in enumerate(names):
+        _write_vtp(tmp_path / name, pos[k], vel[k], IDS, "ascii")
+    _write_pvd(tmp_path / "p.pvd", names)
+    options = {"vertical_axis": "z", "region": ((0, W), (0, DEPTH), (0, H))}
+    with pytest.raises(InputError, match=rf"p_1\.vtp: position \[nan, .*\] of particle "
+                                         rf"{IDS[2]} at t = {TIMES[1]:g} s is not a finite "
+                                         "number; .* repair this file"):
+        import_file(tmp_path / "p.pvd", None, tmp_path / "o.h5", **options)
+    (tmp_path / names[1]).write_bytes(b"")
+    with pytest.raises(InputError, match=r"p_1\.vtp: empty file \(no XML in it\)"):
+        import_file(tmp_path / "p.pvd", None, tmp_path / "o.h5", **options)

@@ -250,8 +250,10 @@ def _append(writer, columns: FrameColumns, frame: ParticleFrame, first: Particle
     bad = ~np.isfinite(raw).all(axis=1)
     if bad.any():
         k = int(np.argmax(bad))
-        raise InputError(f"{where}: position of particle {int(frame.ids[k])} is not a finite "
-                         "number")
+        raise InputError(f"{where}: position {raw[k].tolist()} of particle "
+                         f"{int(frame.ids[k])} at t = {frame.time:g} s is not a finite number; "
+                         "the writer left a particle without a position: repair this file, or "
+                         "import the files before it")
     if flat_z is not None and np.any(raw[:, 2] != flat_z):
         k = int(np.argmax(raw[:, 2] != flat_z))
         raise InputError(

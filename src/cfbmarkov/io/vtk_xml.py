@@ -195,6 +195,9 @@ def _count(node, attribute: str, default: str, label: str) -> int:
 
 
 def _parse(data: bytes, label: str):
+    if not data.strip():
+        raise InputError(f"{label}: empty file (no XML in it): nothing to import; check "
+                         "that the program writing it has finished")
     try:
         return ElementTree.fromstring(data)
     except ElementTree.ParseError as exc:
