@@ -228,3 +228,19 @@ def test_demo_refuses_synthetic_options_without_synthetic(tmp_path, capsys, monk
         assert len(err) == 1 and captured.out == "" and named in err[0]
         assert "add --synthetic" in err[0]
         assert not (tmp_path / "d").exists()
+
+
+def test_a_comparison_left_half_written_by_a_killed_demo_is_removed(tmp_path, capsys,
+                                                                    monkeypatch):
+    """A demo killed while drawing a comparison leaves ``compare-paper.tmp-XXXXXXXX`` with
+    partial figures; the next demo in the folder removes it (it had stayed beside the
+    results through reruns, --force included)."""
+    out = tmp_path / "d"
+    _reference(out, 10, seed=3)
+    left = out / "compare-paper.tmp-0123abcd"
+    left.mkdir()
+    (left / "rtd.png").write_bytes(b"partial")
+    _stop_at_fit(monkeypatch)
+    assert main(["demo", "--synthetic", "-o", str(out), "--particles", "10", "--seed", "3"]) == 2
+    capsys.readouterr()
+    assert not left.exists() and (out / "reference.h5").exists()

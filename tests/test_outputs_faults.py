@@ -291,6 +291,29 @@ def test_ctrl_c_after_the_model_is_saved_says_it_is_whole(data, tmp_path, capsys
     assert capsys.readouterr().err.splitlines()[-1] == "cfbmarkov fit: interrupted"
 
 
+def test_ctrl_c_after_reacts_prediction_is_written_says_it_is_whole(data, tmp_path, capsys,
+                                                                    monkeypatch):
+    """react --init writes its prediction, then computes the exit means' intervals: a
+    Ctrl-C there says the file is whole, as fit's does (it said only "interrupted")."""
+    from cfbmarkov.cli import kinetics as cli_kinetics
+
+    kinetics = tmp_path / "kin.toml"
+    kinetics.write_text('[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\n')
+    out = tmp_path / "ri.h5"
+
+    def cut_short(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cli_kinetics, "_exit_mean_intervals", cut_short)
+    assert main(["react", str(data / "model.h5"), "--kinetics", str(kinetics), "--init",
+                 str(data / "run.h5"), "--start", "0.5", "--duration", "0.5", "-q", "-o",
+                 str(out)]) == 130
+    assert capsys.readouterr().err.splitlines()[-1] == (
+        f"cfbmarkov react: interrupted after {out} was written whole (the file is complete; "
+        "only the lines printed after it were cut short)")
+    assert stray(tmp_path, ["ri.h5", "kin.toml"]) == []
+
+
 def test_a_folder_moved_aside_by_a_dead_writer_is_put_back(tmp_path):
     """A writer killed between moving the previous output folder aside and renaming the new
     one into place leaves NAME.old-XXXXXXXX and no NAME: the next writer's cleanup puts it
@@ -355,6 +378,8 @@ def test_simulate_full_disk_keeps_last_checkpoint_and_ctrl_c(tmp_path):
     assert rc == 2, err
     lines = err.splitlines()
     assert len(lines) == 1 and "cannot write (File too large)" in lines[0], err
+    assert lines[0].endswith("its last checkpoint is kept: once it can write again (space "
+                             "freed), rerun with --resume")
     assert not [p for p in tmp_path.rglob(".*.tmp*")]
     rc, _, err = run_cli(*args, "--resume", cwd=tmp_path, timeout=300)
     assert rc == 0, err

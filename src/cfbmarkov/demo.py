@@ -15,7 +15,8 @@ import warnings
 from pathlib import Path
 
 from cfbmarkov import synthetic
-from cfbmarkov._outputs import describe, output_helper, refuse_foreign
+from cfbmarkov._outputs import (describe, output_helper, refuse_foreign,
+                                remove_stale_temporaries)
 from cfbmarkov.analysis.fit_checks import assess_fit
 from cfbmarkov.errors import InputError, SampleWarning
 from cfbmarkov.observed.metrics import percentage_text
@@ -339,6 +340,11 @@ def run_demo(output: str | Path, particles: int = 6000, seed: int = 1, log=print
     grid = CellGrid(*CELLS, flow.width, flow.height)
     rows = {}
     for name in ESTIMATORS:
+        # what an earlier demo killed in this folder left half-written (a comparison's
+        # NAME.tmp-XXXXXXXX folder of partial figures): the demo holds the folder's lock
+        for target in (out / f"model-{name}.h5", out / f"prediction-{name}.h5",
+                       out / f"compare-{name}"):
+            remove_stale_temporaries(target)
         with stage(step, f"{name}: fitting 6x38 cells at lag 0.025 s on 10-15 s"):
             # as fit makes it: its fitting file found by its window's content wherever
             # the folder goes (cfbmarkov.analysis.intervals.resolve_source), its interval

@@ -78,7 +78,8 @@ def build_parser() -> argparse.ArgumentParser:
         if name in OUTPUTS:
             verb.add_argument("--force", action="store_true",
                               help="replace an existing output of another kind (a file of "
-                                   "another format, a FIFO, an empty folder, ...)"
+                                   "another format, an empty folder, ...; never a FIFO, "
+                                   "device or socket)"
                                    + ("; or one that holds a finished run, which keeps no "
                                       "checkpoint" if name == "simulate" else ""))
     return p
@@ -232,8 +233,12 @@ def _run(args) -> int:
             with _interrupt.installed():
                 return _run_claimed(args)
         except CfbmarkovError as exc:
-            print(f"cfbmarkov {args.command}: error: {one_line(_for_verb(exc, args))}",
-                  file=sys.stderr)
+            text = _for_verb(exc, args)
+            if args.command == "simulate" and "cannot write (" in text and _resumable(args):
+                # a full disk or a write error mid-run: the checkpoint written before it stays
+                text += ("; its last checkpoint is kept: once it can write again (space "
+                         "freed), rerun with --resume")
+            print(f"cfbmarkov {args.command}: error: {one_line(text)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:
             # what the interrupt cut short is freed with it, after this block: its failing
@@ -333,7 +338,9 @@ WHOLE_FOLDERS = ("compare", "export-vtk")
 def _output_stamp(args):
     """The output's identity and time of change: a file's, or a folder published whole
     (:data:`WHOLE_FOLDERS`); None where absent or a folder built in place."""
-    kind = OUTPUTS.get(args.command, ("folder",))[0]
+    # react writes a prediction file only with --init (claimed then by its own code)
+    kind = OUTPUTS.get(args.command, ("prediction" if args.command == "react"
+                                      else "folder",))[0]
     if (kind == "folder" and args.command not in WHOLE_FOLDERS) or not getattr(
             args, "output", None):
         return None

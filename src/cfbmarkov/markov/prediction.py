@@ -594,8 +594,8 @@ class PredictionProgress:
             self.carrying, self.t_stage = True, time.perf_counter()
             if self.run_bar is not None:
                 self.run_bar.reset(total=total)
-                self.run_bar.set_description(f"predict {self.n_steps * self.lag:g} s: "
-                                             "properties")
+                self.run_bar.set_description_str(f"predict {self.n_steps * self.lag:g} s: "
+                                                 "properties")
         if self.run_bar is not None:
             self.run_bar.update(done - self.run_bar.n)
         elif self.mode == "lines" and 0 < done < total and (now := self._due()):

@@ -159,8 +159,9 @@ def _simulate(case: CaseConfig, output: Path, until, checkpoint_every, resume, p
     if resume and not checkpoint.exists() and _complete(output, case, end):
         _remove_parts(parts)     # killed while cleaning up after the final rename
         warnings.warn(f"nothing left to resume: {output} already holds this run to "
-                      f"{end:g} s, finished (a finished run keeps no checkpoint; --until a "
-                      "later time extends it)", CfbmarkovWarning, stacklevel=2)
+                      f"{end:g} s, finished (a finished run keeps no checkpoint, so it cannot "
+                      "be extended: a longer run starts again from t = 0, with --until and "
+                      "--force)", CfbmarkovWarning, stacklevel=2)
         return output
     if not checkpoint.exists() and parts.is_dir():
         _remove_parts(parts)     # segments of a run whose checkpoint is gone: useless
