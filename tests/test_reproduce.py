@@ -670,3 +670,17 @@ def test_a_comparison_is_formed_again_unless_it_holds_the_kinetics_asked_for(tmp
     assert not _same_kinetics({"kinetics": block}, a)          # recorded by no digest
     assert _same_kinetics({"kinetics": block, "kinetics_source": {"digest": a}}, a)
     assert not _same_kinetics({"kinetics": block, "kinetics_source": {"digest": "x"}}, a)
+
+
+def test_stopped_workers_leave_no_empty_checkpoint_folder(tmp_path):
+    """A Ctrl-C to `reproduce --jobs 2` before the cases' first checkpoints left their empty
+    `cfd-dem.h5.parts/` folders; a case's folder with a checkpoint is kept (it resumes)."""
+    from cfbmarkov.reproduce import _stop_workers
+
+    (tmp_path / "u6" / "cfd-dem.h5.parts").mkdir(parents=True)
+    kept = tmp_path / "u8" / "cfd-dem.h5.parts"
+    kept.mkdir(parents=True)
+    (kept / "checkpoint.h5").write_bytes(b"state")
+    _stop_workers(object(), tmp_path)
+    assert not (tmp_path / "u6" / "cfd-dem.h5.parts").exists()
+    assert (kept / "checkpoint.h5").exists()

@@ -114,8 +114,9 @@ def _limit_threads(threads: int) -> None:
 
 def _stop_workers(executor, folder: Path | None = None) -> None:
     """Terminate a process pool's workers now (Ctrl-C: their cases resume from their last
-    checkpoint on a rerun), and remove the lock files and the temporaries they leave in
-    ``folder`` once they are gone (:func:`cfbmarkov._outputs.remove_free_locks`,
+    checkpoint on a rerun), and remove the lock files, the temporaries and the empty
+    checkpoint folders they leave in ``folder`` once they are gone
+    (:func:`cfbmarkov._outputs.remove_free_locks`,
     :func:`cfbmarkov._outputs.remove_dead_temporaries`)."""
     processes = list(getattr(executor, "_processes", {}).values())
     for process in processes:
@@ -132,6 +133,10 @@ def _stop_workers(executor, folder: Path | None = None) -> None:
         remove_free_locks(folder)
     with contextlib.suppress(OSError):
         remove_dead_temporaries(folder)
+    # a case stopped before its first checkpoint leaves its checkpoint folder empty
+    for parts in folder.glob("*/*.parts"):
+        with contextlib.suppress(OSError):
+            parts.rmdir()                   # only if empty
 
 
 def local_executor(jobs: int | None = None, n_cases: int = 1) -> tuple[cf.Executor, int]:

@@ -671,3 +671,21 @@ def test_a_nan_position_names_its_time_and_an_empty_vtp_says_empty(tmp_path):
     (tmp_path / names[1]).write_bytes(b"")
     with pytest.raises(InputError, match=r"p_1\.vtp: empty file \(no XML in it\)"):
         import_file(tmp_path / "p.pvd", None, tmp_path / "o.h5", **options)
+
+
+def test_a_pvd_whose_times_contradict_its_files_own_is_refused(tmp_path):
+    """MFiX writes each file's time in a comment and in the .pvd; a .pvd that lists two
+    files swapped had put the particles stepping back and forth, with exit 0."""
+    pos, vel, _ = _motion()
+    names = [f"p_{k}.vtp" for k in range(TIMES.size)]
+    for k, name in enumerate(names):
+        _write_vtp(tmp_path / name, pos[k], vel[k], IDS, "ascii", time=float(TIMES[k]))
+    options = {"vertical_axis": "z", "region": ((0, W), (0, DEPTH), (0, H))}
+    _write_pvd(tmp_path / "p.pvd", names)
+    import_file(tmp_path / "p.pvd", None, tmp_path / "ok.h5", **options)
+    swapped = [names[0], names[2], names[1], *names[3:]]
+    _write_pvd(tmp_path / "p.pvd", swapped)
+    with pytest.raises(InputError, match=rf"lists p_2\.vtp at t = {TIMES[1]:g} s, while the "
+                                         rf"file says Time = {TIMES[2]:g} s"):
+        import_file(tmp_path / "p.pvd", None, tmp_path / "o.h5", **options)
+    assert not (tmp_path / "o.h5").exists()

@@ -384,6 +384,8 @@ def vtp_series(source, time_step: float | None = None) -> ParticleSeries:
                                               f"{time_step:g} s")), _label(files), files[0].name
         names = [f.name for f in files]
     position = _step_position([files[0] for _, files in entries])
+    listed = sorted({t for t, _ in entries if t is not None})
+    spacing = float(np.diff(listed).min()) if len(listed) > 1 else None
     builder = _Frames()
     provenance = {"time_from": time_from, "box_from": None, "source_files": names}
 
@@ -399,6 +401,8 @@ def vtp_series(source, time_step: float | None = None) -> ParticleSeries:
                       for k in datas[0].point_data}
             if time is None:
                 time = _vtp_time(datas[0], files[0], time_step, position)
+            elif datas[0].comment_time is not None:
+                _check_listed_time(time, datas[0].comment_time, spacing, files[0], label)
             read.append((time, points, arrays, files[0]))
             if entries[0][0] is not None:                  # a .pvd: already in time order
                 yield builder.frame(time, points, arrays, None, str(files[0]))
@@ -415,6 +419,19 @@ def vtp_series(source, time_step: float | None = None) -> ParticleSeries:
                             late_provenance=builder.provenance, flags=flags,
                             flags_from="the export's cfbmarkov_periodic field")
     return series
+
+
+def _check_listed_time(listed: float, written: float, spacing: float | None, file: Path,
+                       label: str) -> None:
+    """Refuse a .pvd whose time for ``file`` contradicts the file's own
+    ``<!-- Time = ... s -->`` comment (MFiX writes both): the frames would be put in
+    another order, the particles stepping back and forth."""
+    tolerance = 0.25 * spacing if spacing else 1e-6 * max(1.0, abs(listed))
+    if abs(written - listed) > tolerance:
+        raise InputError(f"{label}: lists {file.name} at t = {listed:g} s, while the file "
+                         f"says Time = {written:g} s in its header comment; correct the "
+                         ".pvd's timestep, or import the files themselves (their comments "
+                         "give the times)")
 
 
 def _export_flags(path: Path) -> tuple[str, ...]:
