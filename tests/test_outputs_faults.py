@@ -378,8 +378,8 @@ def test_simulate_full_disk_keeps_last_checkpoint_and_ctrl_c(tmp_path):
     assert rc == 2, err
     lines = err.splitlines()
     assert len(lines) == 1 and "cannot write (File too large)" in lines[0], err
-    assert lines[0].endswith("its last checkpoint is kept: once it can write again (space "
-                             "freed), rerun with --resume")
+    assert lines[0].endswith("its last checkpoint is kept: once it can write there again, "
+                             "rerun with --resume")
     assert not [p for p in tmp_path.rglob(".*.tmp*")]
     rc, _, err = run_cli(*args, "--resume", cwd=tmp_path, timeout=300)
     assert rc == 0, err

@@ -41,13 +41,16 @@ def window_pair(window) -> tuple[float, float]:
     """
     import numbers
 
-    ok = (not isinstance(window, (str, bytes)) and hasattr(window, "__len__")
-          and len(window) == 2 and all(isinstance(v, numbers.Real)
-                                       and not isinstance(v, bool) for v in window))
+    from collections.abc import Sequence
+
+    ok = (isinstance(window, (Sequence, np.ndarray)) and not isinstance(window, (str, bytes))
+          and np.ndim(window) == 1 and len(window) == 2
+          and all(isinstance(v, numbers.Real) and not isinstance(v, bool) for v in window))
     if not ok:
         raise InputError(f"window {window!r} is not (start, stop) in s: give two numbers, "
                          "e.g. window=(10.0, 15.0)")
     return float(window[0]), float(window[1])
+
 
 class FrameTimes:
     """The frame times of a file, located by time, window or lag.

@@ -649,3 +649,11 @@ def test_two_far_apart_rows_of_one_tracer_at_one_time_are_refused_not_averaged(t
         import_csv(tmp_path / "far.csv", tmp_path / "far.h5", width=0.09, height=0.95,
                    resample=0.004)
     assert not (tmp_path / "far.h5").exists()
+    # a tracer at 5 m/s located every 0.5 ms, its times printed to 1 ms: rows of one stamp
+    # lie up to 5 mm apart (more than 5 % of the width), a step of its own track: merged
+    t = np.arange(0, 0.15, 0.0005)
+    rows = [f"{a:.3f} {0.045 + 0.0005 * np.sin(k):.5f} {0.05 + 5.0 * a:.5f}"
+            for k, a in enumerate(t)]
+    (tmp_path / "fast.csv").write_text("t x y\n" + "\n".join(rows) + "\n")
+    import_csv(tmp_path / "fast.csv", tmp_path / "fast.h5", width=0.09, height=0.95,
+               resample=0.002)

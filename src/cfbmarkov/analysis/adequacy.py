@@ -178,14 +178,15 @@ def _throughput_line(model, rt_mean: float, window_mean: float,
             f"over its net passes; limit {limit_text} %)")
     classes = len(model.closed_classes)
     if classes > 1:
-        # a reducible chain: its classes weighted by their entry flux, while the throughput
-        # counts every particle's time, in classes that never pass up too: unlike figures
+        # a reducible chain: its classes weighted by their net entry flux, while the
+        # throughput counts every particle's time, in classes of no net flow too
         reason = (f"; {why}" if model.estimator == "paper"
                   else "")
         return (f"{head}: the chain is reducible ({classes} closed classes: particles in "
                 "some cells never reach others, as none did in the window), and its E(RT) "
-                "weights the classes by their entry flux while the throughput counts every "
-                "particle's time, in classes that never pass up too, so the two need not "
+                "weights the classes by their net entry flux while the throughput counts "
+                "every particle's time, in classes whose net flow runs the other way (left "
+                "out of the E(RT)) too, so the two need not "
                 f"agree{reason}; coarser --cells (fewer columns) join the classes")
     return (f"{head}: the chain does not carry the flow it was fitted on; {why}. The "
             f"window's own flow may itself lie far from the run's long run: {_ADVICE}")

@@ -462,7 +462,8 @@ MODEL_RTD_BINS = 40
 
 def model_rtd_edges(rtd) -> np.ndarray:
     """The bins of a model's RTD interval: whole lags wide, at most ``MODEL_RTD_BINS`` (40)
-    of them, from 0 to the exact RTD's 99th percentile rounded up to a bin.
+    of them, from 0 to past the exact RTD's 99th percentile (the bin that holds it
+    included), rounded up to a bin.
 
     Parameters
     ----------
@@ -480,7 +481,9 @@ def model_rtd_edges(rtd) -> np.ndarray:
     from cfbmarkov.markov.first_passage import lag_multiples
 
     cumulative = np.cumsum(rtd.probability) / rtd.probability.sum()
-    upper = int(np.searchsorted(cumulative, 0.99)) + 1            # lags
+    # the residence of k + 1 lags at which the cumulative mass reaches 99 % falls in the
+    # bin it starts, [k + 1, k + 2) lags: the edges reach k + 2 lags
+    upper = int(np.searchsorted(cumulative, 0.99)) + 2            # lags
     width = max(1, -(-upper // MODEL_RTD_BINS))
     bins = -(-upper // width)
     return lag_multiples(rtd.lag, width * np.arange(bins + 1)).astype(np.float64)

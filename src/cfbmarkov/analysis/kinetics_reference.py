@@ -99,8 +99,9 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
     Parameters
     ----------
     discrete : DiscreteTrajectories
-        The window's states; a periodic riser's must hold ``laps``
-        (:func:`cfbmarkov.markov.discretize` with ``keep_positions=True``). Every
+        The window's states; a periodic riser's must hold ``laps``, and an open riser's
+        with a state space with memory ``positions`` (:func:`cfbmarkov.markov.discretize`
+        with ``keep_positions=True``). Every
         ``lag_frames``-th frame from the first is used.
     a, b : array_like of float64, shape (S,)
         The lag's affine map per state, v' = a v + b.
@@ -133,7 +134,8 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
     ------
     InputError
         When the maps do not hold one value per state, are not finite, a periodic riser's
-        trajectories carry no laps, or ``direction`` is unknown.
+        trajectories carry no laps, an open riser's with a state space with memory no
+        positions, or ``direction`` is unknown.
     """
     space = discrete.state_space
     a = np.ascontiguousarray(a, dtype=np.float64)

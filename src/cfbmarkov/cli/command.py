@@ -236,8 +236,8 @@ def _run(args) -> int:
             text = _for_verb(exc, args)
             if args.command == "simulate" and "cannot write (" in text and _resumable(args):
                 # a full disk or a write error mid-run: the checkpoint written before it stays
-                text += ("; its last checkpoint is kept: once it can write again (space "
-                         "freed), rerun with --resume")
+                text += ("; its last checkpoint is kept: once it can write there again, "
+                         "rerun with --resume")
             print(f"cfbmarkov {args.command}: error: {one_line(text)}", file=sys.stderr)
             return 2
         except KeyboardInterrupt:

@@ -384,12 +384,15 @@ def _header_names(text: str, delimiter: str | None) -> list[str]:
         return fields
     names: list[str] = []
     open_unit = False
-    for field in fields:
-        if names and (open_unit or field[:1] in "([" and not _is_number(field)):
-            names[-1] += " " + field
-            open_unit = not field.endswith((")", "]"))
+    for token in fields:
+        # a bracket after a name without a unit is that name's unit; after a unit, a
+        # column of its own (``y (mm) (error)``)
+        if names and (open_unit or (token[:1] in "([" and not _is_number(token)
+                                    and not names[-1].endswith((")", "]")))):
+            names[-1] += " " + token
+            open_unit = not token.endswith((")", "]"))
         else:
-            names.append(field)
+            names.append(token)
             open_unit = False
     return names
 

@@ -331,6 +331,38 @@ def resample_tracks(times, particles, positions, *, interval, max_gap=None, heig
     return ResampledTracks(times=grid, ids=ids, positions=out, present=present, laps=laps)
 
 
+#: rows of one time stamp may lie this many of their particle's median steps apart
+SPREAD_STEPS = 3.0
+
+
+def _check_spread(pos, pid, t, first, group, limit, height, vertical, label) -> None:
+    """Refuse rows of one particle and time that lie farther from their group's first row
+    than ``limit`` and than :data:`SPREAD_STEPS` times the particle's median step between
+    consecutive distinct times (rows sorted by particle, then time)."""
+    spread = np.linalg.norm(pos - pos[first[group]], axis=1)
+    suspects = np.flatnonzero(spread > limit)
+    if suspects.size == 0:
+        return
+    heads = pos[first]
+    steps = heads[1:] - heads[:-1]
+    if height is not None:
+        steps[:, vertical] -= height * np.round(steps[:, vertical] / height)
+    step = np.linalg.norm(steps, axis=1)
+    same = pid[first][1:] == pid[first][:-1]
+    for particle in np.unique(pid[suspects]):       # the few particles with a wide spread
+        own = step[same & (pid[first][1:] == particle)]
+        allowed = max(limit, SPREAD_STEPS * float(np.median(own)) if own.size else limit)
+        rows = suspects[(pid[suspects] == particle) & (spread[suspects] > allowed)]
+        if rows.size:
+            k = int(rows[np.argmax(spread[rows])])
+            raise InputError(
+                f"{label}: two rows of particle {pid[k]} at t = {t[k]:g} s lie "
+                f"{spread[k]:.3g} m apart (more than {allowed:.3g} m: {limit:.3g} m and "
+                f"{SPREAD_STEPS:g} times its median step between samples), so they are "
+                "not one sample of one track; check the id column (two tracers under one "
+                "id?) or remove the wrong row")
+
+
 def merge_same_times(times, particles, positions, *, height: float | None = None,
                      vertical: int = 1, spread_limit: float | None = None,
                      label: str = "the file"
@@ -354,8 +386,11 @@ def merge_same_times(times, particles, positions, *, height: float | None = None
     vertical : int, optional
         The column of ``positions`` that holds the height.
     spread_limit : float, optional
-        m: rows of one time that lie farther than this from the group's first row are
-        refused, not averaged (they are not one sample of one track). None: no limit.
+        m: rows of one time that lie farther than this, and farther than
+        :data:`SPREAD_STEPS` times the particle's median step between its samples of
+        distinct times, from the group's first row are refused, not averaged (they are not
+        one sample of one track: a tracer moves about a step within a time stamp's
+        precision). None: no limit.
     label : str, optional
         Names the file in error messages.
 
@@ -386,14 +421,7 @@ def merge_same_times(times, particles, positions, *, height: float | None = None
         offset = pos[:, vertical] - pos[first[group], vertical]
         pos[:, vertical] = pos[first[group], vertical] + offset - height * np.round(offset / height)
     if spread_limit is not None:
-        spread = np.linalg.norm(pos - pos[first[group]], axis=1)
-        if spread.max() > spread_limit:
-            k = int(np.argmax(spread))
-            raise InputError(
-                f"{label}: two rows of particle {pid[k]} at t = {t[k]:g} s lie "
-                f"{spread[k]:.3g} m apart (more than {spread_limit:.3g} m, 5 % of the "
-                "riser's width), so they are not one sample of one track; check the id "
-                "column (two tracers under one id?) or remove the wrong row")
+        _check_spread(pos, pid, t, first, group, spread_limit, height, vertical, label)
     sums = np.zeros((first.size, pos.shape[1]))
     np.add.at(sums, group, pos)
     mean = sums / np.bincount(group)[:, None]

@@ -195,7 +195,7 @@ def _count(node, attribute: str, default: str, label: str) -> int:
 
 
 def _parse(data: bytes, label: str):
-    if not data.strip():
+    if not data or data.isspace():
         raise InputError(f"{label}: empty file (no XML in it): nothing to import; check "
                          "that the program writing it has finished")
     try:

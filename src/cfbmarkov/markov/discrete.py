@@ -100,7 +100,9 @@ class DiscreteTrajectories:
     Notes
     -----
     The arrays are held read-only; an array given writeable (a caller's buffer) is copied
-    first, so that writing to it afterwards cannot change the trajectories. See
+    first, so that writing to it afterwards cannot change the trajectories. The checks of
+    states, heights and times run on arrays given that way (or as lists); the read-only
+    arrays :func:`discretize` makes were checked where they were read. See
     ``docs/definitions.md`` (Discrete trajectories).
     """
 
@@ -121,8 +123,14 @@ class DiscreteTrajectories:
     def __post_init__(self):
         if self.boundary not in ("periodic", "open"):
             raise InputError(f"boundary {self.boundary!r}: choose periodic or open")
-        for name in ("states", "vertical", "times"):
-            if not isinstance(getattr(self, name), np.ndarray):
+        # made by discretize or a block of it: read-only arrays, checked where they were
+        # made; a caller's arrays (writeable, or not arrays) are checked here
+        given = any(not isinstance(getattr(self, name), np.ndarray)
+                    or getattr(self, name).flags.writeable
+                    for name in ("states", "vertical", "times"))
+        for name in ("states", "vertical", "times", "positions", "laps"):
+            if getattr(self, name) is not None and not isinstance(getattr(self, name),
+                                                                  np.ndarray):
                 try:
                     object.__setattr__(self, name, np.asarray(getattr(self, name)))
                 except (TypeError, ValueError) as error:
@@ -138,20 +146,31 @@ class DiscreteTrajectories:
             raise InputError(f"lag of {self.lag_frames} frames: must be at least 1")
         if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
             raise InputError(f"frame interval {self.frame_interval!r} s must be positive")
-        steps = np.diff(self.times)
-        if steps.size and not np.all(np.abs(steps - self.frame_interval)
-                                     <= FRAME_SPACING_TOLERANCE * self.frame_interval):
-            raise InputError(f"discrete trajectories: the times are not spaced by the frame "
-                             f"interval {self.frame_interval:g} s (steps {steps.min():g} .. "
-                             f"{steps.max():g} s); give frames evenly spaced by it")
-        self._check_states()
-        self._check_heights()
+        if given:
+            self._check_times()
+            self._check_states()
+            self._check_heights()
         for name in ("states", "vertical", "times", "positions", "laps"):
             values = getattr(self, name)
             # as immutable as a model: a writeable array (a caller's buffer) is copied, so
             # that writing to it later cannot change these trajectories
             if isinstance(values, np.ndarray) and values.flags.writeable:
                 object.__setattr__(self, name, _frozen(values.copy()))
+
+    def _check_times(self):
+        """Refuse times not evenly spaced by the frame interval (as a trajectory file's
+        writer judges them: every step within 1 % of their median, and the median within
+        1 % of the frame interval)."""
+        steps = np.diff(self.times)
+        if not steps.size:
+            return
+        median = float(np.median(steps))
+        tolerance = FRAME_SPACING_TOLERANCE * self.frame_interval
+        if not (abs(median - self.frame_interval) <= tolerance
+                and np.all(np.abs(steps - median) <= tolerance)):
+            raise InputError(f"discrete trajectories: the times are not spaced by the frame "
+                             f"interval {self.frame_interval:g} s (steps {steps.min():g} .. "
+                             f"{steps.max():g} s); give frames evenly spaced by it")
 
     def _check_states(self):
         """Refuse states that are not whole numbers in -1 .. S-1 (the counting kernels
@@ -175,9 +194,10 @@ class DiscreteTrajectories:
     def _check_heights(self):
         """Refuse heights that are not finite, or outside 0 .. H, where a particle is
         present (the boundary's passes are read from them)."""
-        heights = self.vertical[self.states != ABSENT]
-        if heights.size == 0:
+        present = self.states != ABSENT
+        if not present.any():
             return
+        heights = self.vertical if present.all() else self.vertical[present]
         if not np.all(np.isfinite(heights)):
             raise InputError("discrete trajectories: a height is NaN or infinite where its "
                              "particle is present; give every present particle its height "

@@ -470,8 +470,7 @@ class MarkovModel:
             Length (s) of an analysis window: the RTD as seen in it, the quantity a
             sample-based RTD estimates (None: the intrinsic RTD); taken as the nearest
             whole number of lags (a window's frame pairs one lag apart), the length the
-            result's ``window`` gives. ``window_length`` is the same argument under the
-            name the other functions give a window's length (give one of them).
+            result's ``window`` gives.
         direction : {"up", "down"}, optional
             A periodic riser's residences from passes up through the top or, for a net
             downflow, down through the bottom (the pass fractions swapped;
@@ -481,6 +480,9 @@ class MarkovModel:
             (weights per state; default the fitting window's particle-frames per state).
             The window counts records of the lap counter from its first frame, as its
             samples do (:func:`~cfbmarkov.markov.first_passage.window_rtd`).
+        window_length : float, optional
+            The same as ``window``, under the name the other functions give a window's
+            length (give one of the two).
 
         Returns
         -------
@@ -493,7 +495,9 @@ class MarkovModel:
         CfbmarkovError
             If the model has no transition through the boundary in ``direction`` (no
             residence ends), or no residence fits in ``window``; InputError for a
-            ``direction`` that is neither up nor down, or ``occupancy`` without ``window``.
+            ``direction`` that is neither up nor down, ``occupancy`` without ``window``,
+            ``window`` and ``window_length`` both given, or a window given as a (start,
+            stop) pair or other sequence instead of a length.
 
         Warns
         -----
@@ -520,9 +524,13 @@ class MarkovModel:
                 raise InputError("rtd(): give the window's length once, as window_length= "
                                  "(window= is the same argument)")
             window = window_length
-        if isinstance(window, (tuple, list, np.ndarray)):
-            raise InputError(f"rtd(): window {window!r} is a (start, stop) pair; the RTD "
-                             "seen in a window takes its length: window_length=stop - start")
+        if isinstance(window, (tuple, list, np.ndarray)) and np.ndim(window) >= 1:
+            if np.size(window) == 2:
+                raise InputError(f"rtd(): window {window!r} is a (start, stop) pair; the RTD "
+                                 "seen in a window takes its length: "
+                                 "window_length=stop - start")
+            raise InputError(f"rtd(): window {window!r} is not a length (s): give one "
+                             "number, e.g. window_length=5.0")
         if occupancy is not None and window is None:
             raise InputError("occupancy= says where a window's particles start: give the "
                              "window's length with it (rtd(window=..., occupancy=...)); the "

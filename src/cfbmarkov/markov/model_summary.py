@@ -107,7 +107,8 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     (:meth:`~cfbmarkov.markov.adequacy.Adequacy.on_window_warning`), more than
     :data:`UNVISITED_LIMIT` of the states never visited, an
     exact RTD whose unresolved mass exceeds :data:`UNRESOLVED_LIMIT`
-    (:func:`unresolved_warning`) and an interval whose lower end is cut at 0
+    (:func:`unresolved_warning`), closed classes the exact answers leave out
+    (:func:`left_out_classes_warning`) and an interval whose lower end is cut at 0
     (:meth:`~cfbmarkov.markov.uncertainty.ModelUncertainty.warnings`).
 
     Parameters
@@ -142,8 +143,51 @@ def model_warnings(model: "MarkovModel") -> list[str]:
         lines.append(f"  {unresolved}")
     if model.uncertainty is not None:
         lines += [f"  {line}" for line in model.uncertainty.warnings(fitting_run_count(model))]
+    left_out = left_out_classes_warning(model)
+    if left_out is not None:
+        lines.append(f"  {left_out}")
     trapped = trap_warning(model)
     return lines if trapped is None else lines + [f"  {trapped}"]
+
+
+def left_out_classes_warning(model: "MarkovModel") -> str | None:
+    """The line for a reducible periodic chain whose exact answers leave classes out: the
+    exact RTD weights each closed class by its observed net entry flux
+    (:func:`~cfbmarkov.markov.model_rtd.net_entry_flux`), so a class whose net flow runs
+    against the residences' direction (or is zero) gets no weight, and its particles are
+    in neither the exact RTD nor the kinetics' exact answers.
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    str or None
+        The line, naming how many classes, their states and share of the fitting window's
+        particle-frames; None where no class is left out.
+    """
+    classes = model.closed_classes
+    if model.open_flow is not None or len(classes) < 2:
+        return None
+    from cfbmarkov.markov.model_rtd import net_entry_flux
+
+    direction = model.flow_direction
+    flux = net_entry_flux(model, direction)
+    if flux is None:
+        return None
+    out = [c for c in classes if not flux[c].sum() > 0]
+    if not out:
+        return None
+    frames = np.asarray(model.counts.sum(axis=1), dtype=np.float64)
+    states = np.concatenate(out)
+    share = frames[states].sum() / frames.sum() if frames.sum() > 0 else float("nan")
+    return (f"{len(out)} of the chain's {len(classes)} closed classes ({states.size} states, "
+            f"{100 * share:.3g} % of the fitting window's particle-frames) have no net "
+            f"{direction}ward flow through the boundary, so the exact RTD and the kinetics' "
+            "exact answers, which weight each class by its net entry flux, leave their "
+            "particles out and describe the other classes alone; coarser --cells (fewer "
+            "columns) join the classes")
 
 
 def trap_warning(model: "MarkovModel") -> str | None:
