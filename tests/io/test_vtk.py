@@ -392,9 +392,37 @@ def test_a_frame_without_particles_is_a_file_without_points(tmp_path):
     root, arrays = read_vtk(out / "particles_000001.vtu")
     assert root.find(".//Piece").get("NumberOfPoints") == "0"
     assert set(arrays) >= {"points", "id", "lap", "colour_group"}
-    assert all(values.size == 0 for values in arrays.values())
+    assert all(values.size == 0 for name, values in arrays.items()
+               if name != "cfbmarkov_periodic")
+    np.testing.assert_array_equal(arrays["cfbmarkov_periodic"].ravel(), [0, 0, 0])  # open
     assert arrays["points"].shape == (0, 3)
     _, full = read_vtk(out / "particles_000002.vtu")
     np.testing.assert_array_equal(full["id"], np.arange(N))
     assert [name for _, name in read_pvd(out / "particles.pvd")] == [
         f"particles_{k:06d}.vtu" for k in range(3)]
+
+
+def test_an_open_export_whose_first_frame_is_empty_imports_back_open(tmp_path):
+    """A riser that starts empty: its export's first frame has no point. Reading a file of
+    no points had crashed the import with a traceback (any .vtp/.vtu series, MFiX's before
+    its first injection too), and the empty frame carried no periodicity, so the export
+    would have come back periodic."""
+    from cfbmarkov.io import import_file
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    times = 0.01 * np.arange(6)
+    pos = np.full((6, 2, 2), 0.05)
+    pos[:, :, 1] = 0.02 + 0.03 * np.arange(6)[:, None]
+    present = np.ones((6, 2), bool)
+    present[:2] = False                      # nobody yet
+    src = write_trajectories(tmp_path / "open.h5", times, pos, width=0.1, height=0.2,
+                             present=present, boundary="open")
+    export_vtk(src, tmp_path / "vtk")
+    first = (tmp_path / "vtk" / "particles_000000.vtu").read_bytes()
+    assert b'NumberOfPoints="0"' in first and b'Name="cfbmarkov_periodic"' in first
+    back = import_file(tmp_path / "vtk", None, tmp_path / "back.h5",
+                       region=((0, 0.1), (0, 0.2)))
+    with Trajectories(back) as t, Trajectories(src) as s:
+        assert t.boundary.is_open
+        np.testing.assert_array_equal(t.present(), s.present())
+        np.testing.assert_allclose(t.positions()[2:], s.positions()[2:])

@@ -126,9 +126,9 @@ def test_one_long_pept_like_tracer_gives_the_model_of_many_particles(tmp_path):
 
 def test_an_inflow_that_does_not_balance_the_outflow_is_warned_of():
     """Entries through the inlet far below the exits through the outlet (most tracks begin
-    away from the inlet and are censored): the model's Monte Carlo would drain the riser, and
-    a warning says so; counts that differ by their noise alone give no such line, and a fill
-    is named as one."""
+    away from the inlet and are censored): the window's flow was not steady, and a warning
+    says so; counts that differ by their noise alone give no such line, and a fill is named
+    as one."""
     from cfbmarkov.markov.open_flow import OpenFlow
 
     def lines(entries, exits):
@@ -138,9 +138,9 @@ def test_an_inflow_that_does_not_balance_the_outflow_is_warned_of():
 
     drained = lines(185, 3847)
     assert len(drained) == 1 and "saw 185 entries through the inlet and 3847 exits" in \
-        drained[0] and "drains the riser" in drained[0]
+        drained[0] and "riser drains over the window" in drained[0]
     assert lines(1000, 1080) == [] and lines(20, 34) == []      # noise: within 3 sigma
-    assert "fills the riser" in lines(3000, 1200)[0]
+    assert "riser fills over the window" in lines(3000, 1200)[0]
 
 
 def test_a_state_space_with_memory_counts_an_open_residence_from_the_inlet(tmp_path):
@@ -288,3 +288,40 @@ def test_an_open_beds_means_count_the_lag_before_a_state_with_memory_at_the_inle
         compare(path, pred, window=(8.0, 14.0), output=tmp_path / "cmp", figures=False,
                 resamples=0, kinetics=carried)
     assert not (tmp_path / "cmp").exists()
+
+
+def test_a_chain_whose_hold_up_is_not_the_datas_is_warned_of(tmp_path):
+    """Little's law: an open chain holds its inflow x E(RT) particles in a steady state. On a
+    known chain fitted whole, that is the data's mean hold-up (no line); with half the
+    inflow (tracks lost as censored do that) its Monte Carlo would drain the riser to half,
+    which `predict` had not said, and the line says so in numbers."""
+    import dataclasses
+
+    from cfbmarkov.markov.model_summary import hold_up_warning, monte_carlo_warnings
+
+    q, r, e = open_chain(columns=2, rows=8, up=0.5, stay=0.4, side=0.0)
+    states, ids = draw(q, r, e, n_steps=1200, inflow=3.0, n_start=0, seed=9, columns=2,
+                       rows=8)
+    pos = positions_of(states, seed=10, columns=2, rows=8)
+    path = write_trajectories(tmp_path / "chain.h5", 0.01 * np.arange(states.shape[0]), pos,
+                              width=W, height=H, ids=ids, present=states >= 0,
+                              boundary="open")
+    model = fit_model(path, CellGrid(2, 8, W, H), 0.01, (2.0, 11.0), "mle")
+    seen = (model.counts.sum() + model.open_flow.exit_counts.sum()) / model.frame_pairs
+    lags = model.rtd().mean / model.lag
+    assert model.open_flow.inflow_per_lag * lags == pytest.approx(seen, rel=0.05)
+    assert hold_up_warning(model) is None and monte_carlo_warnings(model) == []
+    halved = dataclasses.replace(model, open_flow=dataclasses.replace(
+        model.open_flow, inflow_per_lag=model.open_flow.inflow_per_lag / 2))
+    line = hold_up_warning(halved)
+    assert line is not None and "% below the fitting window's mean of" in line
+    assert "its Monte Carlo (predict, react --init) drains the riser" in line
+    assert line in halved.warnings() and line in monte_carlo_warnings(halved)
+    # the stationary distribution of an open riser is where its steady particles are:
+    # e (I - Q)^-1 normalised, as the data's particle-frames (the stationary vector of P,
+    # which leaves the exits out, had put 88 % of them in the top two rows)
+    q = model.absorbing_matrix
+    lags = np.linalg.solve((np.eye(q.shape[0]) - q).T, model.open_flow.entry_distribution)
+    np.testing.assert_allclose(model.stationary_distribution, lags / lags.sum(), atol=1e-12)
+    frames = model.counts.sum(axis=1) + model.open_flow.exit_counts
+    np.testing.assert_allclose(model.stationary_distribution, frames / frames.sum(), atol=0.01)

@@ -89,6 +89,10 @@ def _react(args) -> int:
     verdict = [f"the model's fitting sample: {line}"
                for line in (model.adequacy.warnings if model.adequacy is not None else ())]
     verdict += _chain_warnings(model)
+    if args.init is not None:        # what its Monte Carlo inherits (an open riser's hold-up)
+        from cfbmarkov.markov.model_summary import monte_carlo_warnings
+
+        verdict += [f"the model: {line}" for line in monte_carlo_warnings(model)]
     if args.passes and "carried" not in [p.start for p in kinetics.properties]:
         print("note: --passes follows carried properties (start = \"carried\"); this "
               "kinetics file has none, so it is left out", file=sys.stderr)

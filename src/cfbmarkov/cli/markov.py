@@ -328,6 +328,10 @@ def cmd_predict(args) -> int:
     missed = None if model.adequacy is None else model.adequacy.on_window_warning()
     if missed:
         print(f"warning: the model: {one_line(missed)}", file=sys.stderr)
+    from cfbmarkov.markov.model_summary import monte_carlo_warnings
+
+    for line in monte_carlo_warnings(model):
+        print(f"warning: the model: {one_line(line)}", file=sys.stderr)
     print(args.output)
     return 0
 

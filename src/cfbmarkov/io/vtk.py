@@ -369,7 +369,8 @@ def _write(hl, traj: Trajectories, gas: GasFields | None, frames: np.ndarray,
             hl.pointsToVTK(str(folder / name), x, y, z, data=point_data,
                            fieldData={PERIODIC_FIELD: periodic})
         else:                            # every particle absent (an open riser emptied)
-            _write_no_points(folder / (name + ".vtu"), point_data)
+            _write_no_points(folder / (name + ".vtu"), point_data,
+                             np.array([0, 0 if traj.boundary.is_open else 1, 0]))
         particle_files.append((name + ".vtu", t))
         if gas is not None and g >= 0:
             name = f"{GAS}_{frame:06d}"
@@ -390,11 +391,13 @@ _VTK_TYPES = {"f8": "Float64", "f4": "Float32", "i8": "Int64", "i4": "Int32", "i
               "u1": "UInt8"}
 
 
-def _write_no_points(path: Path, point_data: dict) -> None:
+def _write_no_points(path: Path, point_data: dict, periodic: np.ndarray) -> None:
     """A frame without particles as pyevtk writes a frame of points (an UnstructuredGrid,
     raw appended data with UInt64 byte counts), with no point and every array of
     ``point_data`` empty: pyevtk refuses a piece without points, and a ParaView series
-    needs a file for every time."""
+    needs a file for every time. It carries the periodicity per axis (``periodic``, the
+    :data:`PERIODIC_FIELD` field array) as the files with points do, so that an import of
+    an export whose first frame is empty knows the boundary."""
     arrays = [("points", 3, "Float64")]
     arrays += [("connectivity", 1, "Int32"), ("offsets", 1, "Int32"), ("types", 1, "UInt8")]
     for key, value in point_data.items():
@@ -407,13 +410,18 @@ def _write_no_points(path: Path, point_data: dict) -> None:
         return (f'<DataArray Name="{name}" NumberOfComponents="{components}" type="{kind}" '
                 f'format="appended" offset="{8 * k}"/>\n')
 
+    flags = np.asarray(periodic, dtype="<i4")       # appended after the empty arrays
     text = ('<?xml version="1.0"?>\n<VTKFile type="UnstructuredGrid" version="1.0" '
             'byte_order="LittleEndian" header_type="UInt64">\n<UnstructuredGrid>\n'
             '<Piece NumberOfPoints="0" NumberOfCells="0">\n<Points>\n' + entry(0)
             + '</Points>\n<Cells>\n' + entry(1) + entry(2) + entry(3) + '</Cells>\n'
             + '<PointData>\n' + "".join(entry(k) for k in range(4, len(arrays)))
-            + '</PointData>\n</Piece>\n</UnstructuredGrid>\n<AppendedData encoding="raw">\n_')
+            + '</PointData>\n<FieldData>\n'     # as pyevtk writes it, inside the piece
+            + f'<DataArray Name="{PERIODIC_FIELD}" NumberOfComponents="1" type="Int32" '
+            + f'format="appended" offset="{8 * len(arrays)}"/>\n</FieldData>\n'
+            + '</Piece>\n</UnstructuredGrid>\n<AppendedData encoding="raw">\n_')
     path.write_bytes(text.encode() + bytes(8 * len(arrays))
+                     + np.uint64(flags.nbytes).astype("<u8").tobytes() + flags.tobytes()
                      + b"\n</AppendedData>\n</VTKFile>\n")
 
 

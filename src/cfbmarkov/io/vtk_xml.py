@@ -116,7 +116,10 @@ def read_vtp(path: Path) -> PolyData:
                 raise InputError(f"{label}: a piece of {n} points has no <Points> array")
             pts = np.zeros((0, 3))
         else:
-            pts = decoder.array(array, n).reshape(n, -1).astype(np.float64)
+            values = decoder.array(array, n)
+            # a piece of no points (a frame before the first injection) has no values to
+            # infer the components from
+            pts = (values.reshape(n, -1) if n else np.zeros((0, 3))).astype(np.float64)
         points.append(pts)
         arrays.append({a.get("Name", ""): decoder.array(a, n)
                        for a in piece.findall("./PointData/DataArray")})

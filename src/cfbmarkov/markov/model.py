@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 from cfbmarkov.boundary import Boundary
-from cfbmarkov.errors import InputError
+from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.kinetics.fields import CellFields
 from cfbmarkov.limits import MAX_LAGS, check_finite, check_seed
 from cfbmarkov.markov import model_file, model_summary, propagation
@@ -364,10 +364,41 @@ class MarkovModel:
     @cached_property
     @_read_only
     def stationary_distribution(self) -> np.ndarray:
-        """The long-run distribution over the states, float64 [S], summing to 1 (pi P = pi);
-        for a reducible chain, the particle-frames observed in the fitting window (uniform
-        for a model given by its matrix) carried into the closed classes
-        (:func:`~cfbmarkov.markov.connectivity.stationary_distribution`)."""
+        """The long-run distribution over the states, float64 [S], summing to 1.
+
+        A periodic riser's: pi P = pi; for a reducible chain, the particle-frames observed
+        in the fitting window (uniform for a model given by its matrix) carried into the
+        closed classes (:func:`~cfbmarkov.markov.connectivity.stationary_distribution`).
+        An open riser's: where the particles of a steady riser are, fed at its inflow,
+        e (I - Q)^-1 normalised (e the entry distribution, Q the absorbing matrix; the
+        expected lags a particle spends in each state, Kemeny & Snell, Ch. III), not the
+        stationary vector of P, which leaves out the exits and piles the particles up at
+        the top.
+
+        Raises
+        ------
+        CfbmarkovError
+            For an open riser's chain from whose entries some state that is entered is
+            never left (a trap: no steady state; fit with ``connected=True``).
+        """
+        if self.open_flow is not None:
+            from scipy.sparse import csc_matrix, identity
+            from scipy.sparse.linalg import spsolve
+
+            q = csc_matrix(self.absorbing_matrix)
+            with np.errstate(all="ignore"):
+                try:
+                    lags = np.atleast_1d(spsolve((identity(q.shape[0], format="csc")
+                                                  - q).T.tocsc(),
+                                                 self.open_flow.entry_distribution))
+                except RuntimeError:                     # singular: a trap
+                    lags = np.full(q.shape[0], np.nan)
+            if not (np.all(np.isfinite(lags)) and lags.min() >= -1e-9 and lags.sum() > 0):
+                raise CfbmarkovError(
+                    "an open riser's chain with states that are entered and never left has "
+                    "no steady state (its particles pile up there): fit with connected=True "
+                    "(fit --connected) for the stationary distribution")
+            return np.clip(lags, 0.0, None) / np.clip(lags, 0.0, None).sum()
         from cfbmarkov.markov.connectivity import stationary_distribution
 
         return stationary_distribution(self.transition_matrix,

@@ -146,8 +146,89 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     left_out = left_out_classes_warning(model)
     if left_out is not None:
         lines.append(f"  {left_out}")
+    hold_up = hold_up_warning(model)
+    if hold_up is not None:
+        lines.append(f"  {hold_up}")
     trapped = trap_warning(model)
     return lines if trapped is None else lines + [f"  {trapped}"]
+
+
+def monte_carlo_warnings(model: "MarkovModel") -> list[str]:
+    """The model's lines that a Monte Carlo run of it (``predict``, ``react --init``)
+    repeats: an open riser's inflow and censored tracks
+    (:meth:`~cfbmarkov.markov.open_flow.OpenFlow.warnings`) and its hold-up
+    (:func:`hold_up_warning`).
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    list of str
+        One line each, without indentation; empty for a periodic riser.
+    """
+    if model.open_flow is None:
+        return []
+    lines = [line.strip() for line in model.open_flow.warnings()]
+    hold_up = hold_up_warning(model)
+    return lines if hold_up is None else lines + [hold_up]
+
+
+#: an open riser's chain whose steady hold-up lies farther than this share from its
+#: fitting window's mean hold-up is warned of (its Monte Carlo drains or fills the riser)
+HOLD_UP_LIMIT = 0.2
+
+
+def hold_up_warning(model: "MarkovModel") -> str | None:
+    """The line for an open riser's chain whose steady hold-up differs from the data's.
+
+    In a steady state the riser holds inflow x the mean time a particle spends in its
+    states (Little's law): the chain's hold-up is ``inflow_per_lag * e (I - Q)^-1 1`` (its
+    E(RT) in lags, less :func:`~cfbmarkov.markov.model_rtd.entry_delay`), the
+    fitting window's the particles in a state at the start of its frame pairs, averaged
+    over them. Where the two differ by more than :data:`HOLD_UP_LIMIT`, the model's Monte
+    Carlo (``predict``, ``react --init``) drains or fills the riser toward the chain's,
+    and its bed means are of that riser (censored tracks, which the chain does not count
+    as entries or exits, are a common cause).
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    str or None
+        The line; None for a periodic riser, a model without frame pairs, or hold-ups that
+        agree.
+
+    References
+    ----------
+    J. D. C. Little, "A proof for the queuing formula L = lambda W", Operations Research
+    9(3), 383-387 (1961).
+    """
+    flow = model.open_flow
+    if flow is None or not model.frame_pairs:
+        return None
+    seen = (float(model.counts.sum()) + float(flow.exit_counts.sum())) / model.frame_pairs
+    from cfbmarkov.markov.model_rtd import entry_delay
+
+    try:     # E(RT) in lags, less the lags before a state with memory's first state
+        lags = model.rtd().mean / model.lag - entry_delay(model)
+    except Exception:            # no residence: the model's other lines say why
+        return None
+    chain = flow.inflow_per_lag * lags
+    if not seen > 0 or abs(chain - seen) <= HOLD_UP_LIMIT * seen:
+        return None
+    way = "drains" if chain < seen else "fills"
+    return (f"the chain holds {chain:.4g} particles in a steady state (its inflow "
+            f"{flow.inflow_per_lag:.4g} a lag x {lags:.4g} lags in the riser per particle), "
+            f"{100 * abs(chain - seen) / seen:.0f} % {'below' if chain < seen else 'above'} "
+            f"the fitting window's mean of {seen:.4g}: its Monte Carlo (predict, react "
+            f"--init) {way} the riser toward that hold-up, and its bed means are of that "
+            "riser (the RTD and the exit means are not affected); tracks left out as "
+            "censored, or a window of unsteady flow, are the usual causes: import the riser "
+            "from its inlet to its outlet, or fit on a window of steady flow")
 
 
 def left_out_classes_warning(model: "MarkovModel") -> str | None:

@@ -251,7 +251,9 @@ class OpenFlow:
         :data:`CENSORED_SHARE` of those that ended or began), and about entries through the
         inlet that do not balance the exits through the outlet (a difference beyond
         :data:`IMBALANCE_SHARE` of the larger and beyond three standard deviations of the
-        two counts' Poisson noise): the model's Monte Carlo then drains or fills the riser.
+        two counts' Poisson noise): the window's flow was not steady. (Whether the model's
+        Monte Carlo then drains or fills the riser, its hold-up against the data's, is
+        :func:`~cfbmarkov.markov.model_summary.hold_up_warning`'s line.)
 
         Returns
         -------
@@ -263,12 +265,12 @@ class OpenFlow:
                                       3.0 * np.sqrt(entries + exits)):
             lines.append(
                 f"  the fitting window saw {entries} entries through the inlet and {exits} "
-                "exits through the outlet: the model's inflow "
-                f"({self.inflow_per_lag:.4g} a lag) does not balance its outflow, so its "
-                f"Monte Carlo (predict, react --init) {'drains' if exits > entries else 'fills'}"
-                " the riser toward another hold-up than the data's, and its bed means are "
-                "of that riser; the answers per residence (the RTD, exit means) are not "
-                "affected. Fit on a window of steady flow, or import the riser from its "
+                "exits through the outlet: its inflow does not balance its outflow (the "
+                f"riser {'drains' if exits > entries else 'fills'} over the window, or "
+                "solids leave or enter elsewhere), and the model's inflow "
+                f"({self.inflow_per_lag:.4g} a lag) is that window's; the answers per "
+                "residence (the RTD, exit means) are not affected, its Monte Carlo's hold-up "
+                "may be. Fit on a window of steady flow, or import the riser from its "
                 "inlet to its outlet where solids leave or enter elsewhere")
         for what, censored, counted, face in (
                 ("ended", self.censored_tracks[0], int(self.exit_counts.sum()), "outlet"),
