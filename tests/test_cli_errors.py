@@ -228,3 +228,18 @@ def test_a_time_beyond_the_floats_is_one_line_not_an_overflow(run, tmp_path, cap
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and said in err, err
         assert not list(tmp_path.glob("x.*")), argv
+
+
+@pytest.mark.parametrize("args", [("stationarity",), ("stationarity", "--sample-length"),
+                                  ("fit", "--states", "auto", "--estimator", "mle", "-o",
+                                   "m.h5")])
+def test_a_one_frame_file_is_named_as_such(tmp_path, capsys, monkeypatch, args):
+    """One frame: these verbs had said "start 0 s lies outside the frames (0 to 0 s)",
+    suggested the empty window 0:0, or a window length of at most half of 0 s."""
+    monkeypatch.chdir(tmp_path)
+    one = write_trajectories(tmp_path / "one.h5", np.array([0.0]), np.full((1, 3, 2), 0.01),
+                             width=0.04, height=0.3)
+    verb, *rest = args
+    assert main([verb, str(one), *rest]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and f"{one} holds one frame: no frame interval" in err, err

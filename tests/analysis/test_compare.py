@@ -67,6 +67,18 @@ def test_summary_matches_direct_calls(pair, tmp_path):
     inf = json.loads((tmp_path / "inf" / "summary.json").read_text())
     assert inf["md_order"] == "inf"
     assert inf["md_rtd"] == pytest.approx(np.abs(p_ref - p_mod).max())
+    # coarse bins: an RTD spanning fewer than ten is warned of (it was said in the docs
+    # only); the 0.05 s bins span more and say nothing
+    coarse = [w for w in saved["warnings"] if "bins of" in w and "span only" in w]
+    assert coarse == []
+    compare(ref_path, pred_path, window=WINDOW, output=tmp_path / "coarse", bin_width=0.5,
+            figures=False, resamples=0)
+    coarse = json.loads((tmp_path / "coarse" / "summary.json").read_text())
+    spans = coarse["rtd_bins_spanned"]
+    assert min(spans.values()) < 10
+    assert [w for w in coarse["warnings"] if w.startswith(
+        f"the RTDs span only {spans['reference']} (reference) and {spans['model']} (model) "
+        "bins of 0.5 s")]
     assert saved["same_tracer_groups"] is True
     assert saved["same_purple_particles"] is True          # the former name, kept
     assert saved["model_columns"] == 6

@@ -143,3 +143,23 @@ def test_a_models_arrays_cannot_be_made_writeable_and_rtd_takes_window_length(
     with pytest.raises(InputError, match="once"):
         model.rtd(window=2.0, window_length=2.0)
     assert dataclasses.is_dataclass(model)
+
+
+def test_an_interval_with_no_room_on_one_side_is_read_as_one_sided(markov_flow, markov_run):
+    """A bootstrap whose resamples lie nearly all above the fitted chain's E(RT) gives an
+    interval whose lower end is the figure itself (0.4750-0.7089 s on 0.4751 s on a LAMMPS
+    riser), printed with no word; the model now says it is one-sided and the figure likely
+    low. A two-sided interval says nothing."""
+    from cfbmarkov.markov.model_summary import one_sided_interval_warnings
+    from cfbmarkov.analysis.fit_checks import assess_fit
+
+    model = assess_fit(fit_model(markov_run, markov_flow.grid, markov_flow.lag, (2.0, 6.0),
+                                 "mle"), resamples=20, verdict=False)
+    assert one_sided_interval_warnings(model) == []
+    mean = model.rtd().mean
+    skewed = dataclasses.replace(model, uncertainty=dataclasses.replace(
+        model.uncertainty, rt_mean_interval=(mean - 1e-4, mean + 0.2)))
+    lines = one_sided_interval_warnings(skewed)
+    assert len(lines) == 1 and lines[0].startswith("the E(RT) interval ")
+    assert "almost no lower side" in lines[0] and "figure as likely low" in lines[0]
+    assert lines[0] in skewed.warnings()

@@ -180,9 +180,10 @@ def test_interval_verdict_says_outside_means_a_miss():
                           "pd_rt_mean": -0.5}, 0.2021)
     assert "10-15 s" in line and "MD 0.0122 against the model's 0.2021" in line
     # without the halves' MD (a half without residences) the tie margin alone judges: said
-    assert line.endswith("the baseline is closer (by the 1 % tie margin alone: the reference "
-                         "window's halves give no measure of its own variability, as where a "
-                         "half holds no residence in the window's direction)")
+    assert line.endswith("the baseline is closer (judged against no measure of the "
+                         "reference's own variability, only beyond a 1 % tie: the reference "
+                         "window's halves give none, as where a half holds no residence in "
+                         "the window's direction)")
     assert baseline_line({"windows": [[10, 15], [15, 20]], "md_rtd": 0.0122,
                           "pd_rt_mean": -0.5}, 0.2021, 0.01).endswith("the baseline is closer")
     # the report's rule: a gap within the reference halves' MD cannot be told apart

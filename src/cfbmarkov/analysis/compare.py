@@ -639,6 +639,10 @@ def _compared_run(traj: Trajectories, frames: slice, rt: ResidenceTimes,
     return edges, ComparedRun(traj, frames, rt, rtd, times, fraction, left)
 
 
+#: RTDs spanning fewer bins than this (1st to 99th percentile) are warned of as coarse
+COARSE_SPAN = 10
+
+
 def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
               window: tuple[float, float], bin_width: float, md_order: float,
               columns: int | None, warnings: list[str], on: _Basis, beside: _Beside
@@ -653,6 +657,14 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
                             "E(RT), SD(RT) or the RTD are undefined (a longer window helps)")
     if p_ref.sum() > 0 and p_mod.sum() > 0:
         md = minkowski_distance(p_ref, p_mod, md_order)
+        spans = {name: rtd_span(p) for name, p in (("reference", p_ref), ("model", p_mod))}
+        if min(spans.values()) < COARSE_SPAN:
+            warnings.append(
+                f"the RTDs span only {spans['reference']} (reference) and {spans['model']} "
+                f"(model) bins of {bin_width:g} s from their 1st to their 99th percentile: "
+                f"below about {COARSE_SPAN}, MD and SD(RT) say little about the RTD's shape "
+                "(a residence one bin off moves them much); a lag or --bin-width shorter "
+                "against the residence times resolves them, where the frames allow")
     else:
         md = float("nan")
     on_fit = None

@@ -289,9 +289,9 @@ def baseline_line(baseline: dict, md_model: float, md_halves: float | None = Non
         verdict = (f"not told apart (the gap is within the reference's own variability, "
                    f"its halves' MD {judged.md_halves:.4g})")
     elif judged.outcome != "tie" and judged.md_halves is None:
-        verdict += (" (by the 1 % tie margin alone: the reference window's halves give no "
-                    "measure of its own variability, as where a half holds no residence in "
-                    "the window's direction)")
+        verdict += (" (judged against no measure of the reference's own variability, "
+                    "only beyond a 1 % tie: the reference window's halves give none, as "
+                    "where a half holds no residence in the window's direction)")
     return (f"persistence baseline (the observed RTD of {of} taken as the "
             f"prediction): MD {md:.4g} against the model's {md_model:.4g}, PD E(RT) "
             f"{pd_text(baseline.get('pd_rt_mean'))} %: {verdict}")
@@ -424,6 +424,14 @@ def cmd_stationarity(args) -> int:
     from cfbmarkov.observed.metrics import percentage_text as pd_text
 
     _check_stationarity_options(args)
+    from cfbmarkov.trajectories import Trajectories
+
+    for path in args.file:           # windows need frames, before any other word on them
+        with Trajectories(path) as run:
+            if run.n_frames < 2:
+                raise InputError(f"{path} holds one frame: no frame interval, so no window "
+                                 "of residences or transitions can be judged; import more "
+                                 "frames of the run")
     if args.sample_length:
         return _sample_length(args)
     if len(args.file) > 1:

@@ -82,7 +82,8 @@ def _fit(args) -> int:
         if args.states == "auto" and depth_columns is not None:
             raise InputError("--states auto has no depth columns yet: use COLUMNSxROWS cells")
         if args.states == "auto":
-            run.window(*args.window)        # a refusal stays one line, before any progress
+            run.lag_frames(args.lag)        # a refusal stays one line, before any progress
+            run.window(*args.window)
             with _stage(args, "choosing the state space",
                         f"judging the candidate state spaces on {args.run}, "
                         f"{args.window[0]:g}-{args.window[1]:g} s (each fitted and judged "

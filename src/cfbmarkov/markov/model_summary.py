@@ -108,7 +108,9 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     :data:`UNVISITED_LIMIT` of the states never visited, an
     exact RTD whose unresolved mass exceeds :data:`UNRESOLVED_LIMIT`
     (:func:`unresolved_warning`), closed classes the exact answers leave out
-    (:func:`left_out_classes_warning`) and an interval whose lower end is cut at 0
+    (:func:`left_out_classes_warning`), an open riser's hold-up
+    (:func:`hold_up_warning`), a one-sided interval
+    (:func:`one_sided_interval_warnings`) and an interval whose lower end is cut at 0
     (:meth:`~cfbmarkov.markov.uncertainty.ModelUncertainty.warnings`).
 
     Parameters
@@ -143,6 +145,7 @@ def model_warnings(model: "MarkovModel") -> list[str]:
         lines.append(f"  {unresolved}")
     if model.uncertainty is not None:
         lines += [f"  {line}" for line in model.uncertainty.warnings(fitting_run_count(model))]
+        lines += [f"  {line}" for line in one_sided_interval_warnings(model)]
     left_out = left_out_classes_warning(model)
     if left_out is not None:
         lines.append(f"  {left_out}")
@@ -173,6 +176,53 @@ def monte_carlo_warnings(model: "MarkovModel") -> list[str]:
     lines = [line.strip() for line in model.open_flow.warnings()]
     hold_up = hold_up_warning(model)
     return lines if hold_up is None else lines + [hold_up]
+
+
+#: an interval whose one side is below this share of the other is called one-sided
+ONE_SIDED_SHARE = 0.05
+
+
+def one_sided_interval_warnings(model: "MarkovModel") -> list[str]:
+    """Lines for an E(RT) or SD(RT) interval with (almost) no room on one side of the
+    figure: the bootstrap's resamples of the fitting window lie almost all on the other
+    side of the fitted chain's value (each half-width is the distance from the figure to
+    a quantile of the resamples, none where the quantile lies beyond it), so the fitted
+    value sits at the edge of what the window's blocks give, and the interval is no
+    two-sided statement. Side below :data:`ONE_SIDED_SHARE` of the other.
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    list of str
+        Empty where the model has no interval, or both intervals have room on both sides.
+    """
+    u = model.uncertainty
+    if u is None:
+        return []
+    try:
+        rtd = model.rtd()
+    except Exception:            # no residence: the summary says why
+        return []
+    lines = []
+    for name, value, (lower, upper) in (("E(RT)", rtd.mean, u.rt_mean_interval),
+                                        ("SD(RT)", rtd.sd, u.rt_sd_interval)):
+        below, above = value - lower, upper - value
+        if not (np.isfinite(below) and np.isfinite(above)) or below + above <= 0:
+            continue
+        if below < ONE_SIDED_SHARE * above or above < ONE_SIDED_SHARE * below:
+            side, other = ("lower", "above") if below < above else ("upper", "below")
+            lines.append(
+                f"the {name} interval {lower:.4g}-{upper:.4g} s has almost no {side} side "
+                f"on the figure {value:.4g} s: the bootstrap's resamples of the fitting "
+                f"window lie nearly all {other} the fitted chain's, so the figure sits at "
+                "the edge of what the window's blocks give (a short or unsteady sample, or "
+                "one a few blocks dominate); read the interval as one-sided, and the figure "
+                f"as likely {'low' if other == 'above' else 'high'}; a longer window or "
+                "several runs (fit A.h5 B.h5 ...) give a two-sided one")
+    return lines
 
 
 #: an open riser's chain whose steady hold-up lies farther than this share from its
@@ -360,8 +410,9 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         g = model.regime_chain
         stay = ", ".join(f"{g[r, r]:.3f}" for r in range(g.shape[0]))
         lines.append(f"  regime chain: stays per lag {stay} (mean durations "
-                     + ", ".join(f"{model.lag / max(1.0 - g[r, r], 1e-12):.3g}"
-                                 for r in range(g.shape[0])) + " s)")
+                     + ", ".join(f"{model.lag / (1.0 - g[r, r]):.3g} s" if g[r, r] < 1.0
+                                 else "never left in the fitting window"
+                                 for r in range(g.shape[0])) + ")")
     if model.coherence:
         lines.append(f"  coherent moves (the cluster model): coherence {model.coherence:.3f} "
                      "(share of a state's particles that move together each lag)")
