@@ -661,7 +661,7 @@ def test_the_summary_says_a_reducible_chain_need_not_carry_the_throughput(tmp_pa
     model = fit_model(run, space, 0.01, (0.0, 3.0), "mle")
     assert len(model.closed_classes) > 1
     summary = model.with_adequacy(assess_adequacy(model, [run], [(0.0, 3.0)])).summary()
-    assert "a reducible chain, which weights its classes by their entry flux, need not " \
+    assert "a reducible chain, which weights its classes by their net entry flux, need not " \
            "carry it" in summary
     assert "the throughput the chain should carry" not in summary
 

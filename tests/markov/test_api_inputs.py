@@ -161,5 +161,5 @@ def test_an_interval_with_no_room_on_one_side_is_read_as_one_sided(markov_flow, 
         model.uncertainty, rt_mean_interval=(mean - 1e-4, mean + 0.2)))
     lines = one_sided_interval_warnings(skewed)
     assert len(lines) == 1 and lines[0].startswith("the E(RT) interval ")
-    assert "almost no lower side" in lines[0] and "figure as likely low" in lines[0]
+    assert "almost no lower side" in lines[0] and "nothing of the other side" in lines[0]
     assert lines[0] in skewed.warnings()

@@ -6,6 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cfbmarkov.errors import CfbmarkovError
 from cfbmarkov.observed.residence import residence_times
 from cfbmarkov.io import import_file
 from cfbmarkov.markov import CellGrid, fit_model
@@ -325,3 +326,55 @@ def test_a_chain_whose_hold_up_is_not_the_datas_is_warned_of(tmp_path):
     np.testing.assert_allclose(model.stationary_distribution, lags / lags.sum(), atol=1e-12)
     frames = model.counts.sum(axis=1) + model.open_flow.exit_counts
     np.testing.assert_allclose(model.stationary_distribution, frames / frames.sum(), atol=0.01)
+
+
+def test_entries_and_exits_at_a_lag_of_several_frames_are_judged_where_seen(tmp_path):
+    """At a lag of 3 frames, a pair (t, t + lag) judged an exit by the height at t and an
+    entry by the height at t + lag, frames away from the face: 45 % of complete tracks were
+    censored and the inflow undercounted (5.4 a lag for 9). They are judged where the
+    particle was last and first seen: the inflow is three times the one-frame lag's, no
+    track is censored, and the chain's hold-up is the data's. A grid with cells nobody
+    visits keeps a stationary distribution (0 there); a trap the entries reach has none,
+    and the hold-up line says the Monte Carlo fills the riser."""
+    import warnings as _warnings
+
+    from cfbmarkov.markov.model_summary import hold_up_warning
+
+    q, r, e = open_chain(columns=2, rows=8, up=0.5, stay=0.4, side=0.0)
+    states, ids = draw(q, r, e, n_steps=1200, inflow=3.0, n_start=0, seed=9, columns=2,
+                       rows=8)
+    pos = positions_of(states, seed=10, columns=2, rows=8)
+    times = 0.01 * np.arange(states.shape[0])
+    path = write_trajectories(tmp_path / "chain.h5", times, pos, width=W, height=H, ids=ids,
+                              present=states >= 0, boundary="open")
+    one, three = (fit_model(path, CellGrid(2, 8, W, H), lag, (2.0, 11.0), "mle")
+                  for lag in (0.01, 0.03))
+    assert three.open_flow.censored_tracks == (0, 0)
+    assert three.open_flow.inflow_per_lag == pytest.approx(
+        3 * one.open_flow.inflow_per_lag, rel=0.01)
+    assert hold_up_warning(three) is None
+    # half the riser's width: columns 2 and 3 of a 4-column grid are never visited
+    narrow = pos.copy()
+    narrow[..., 0] *= 0.5
+    half = write_trajectories(tmp_path / "half.h5", times, narrow, width=W, height=H,
+                              ids=ids, present=states >= 0, boundary="open")
+    wide = fit_model(half, CellGrid(4, 8, W, H), 0.01, (2.0, 11.0), "mle")
+    with _warnings.catch_warnings():
+        _warnings.simplefilter("error")            # no scipy rank warning either
+        pi = wide.stationary_distribution
+    cells = wide.state_space.cell_of_state % 4
+    assert pi[cells >= 2].sum() == 0 and pi.sum() == pytest.approx(1.0)
+    # 20 particles that enter and stay for ever in column 3
+    trapped = np.full((times.size, 20, 2), np.nan)
+    for k in range(20):
+        trapped[300 + 10 * k, k] = (0.1 * W, 0.01)
+        trapped[301 + 10 * k:, k] = (0.9 * W, 0.5 * H)
+    with_trap = np.concatenate([narrow, trapped], axis=1)
+    path = write_trajectories(tmp_path / "trap.h5", times, with_trap, width=W, height=H,
+                              ids=np.arange(with_trap.shape[1]),
+                              present=np.isfinite(with_trap[..., 0]), boundary="open")
+    trap = fit_model(path, CellGrid(4, 8, W, H), 0.01, (2.0, 11.0), "mle")
+    line = hold_up_warning(trap)
+    assert line is not None and "never leave" in line and "fills the riser" in line
+    with pytest.raises(CfbmarkovError, match="a trap"):
+        trap.stationary_distribution

@@ -405,7 +405,9 @@ def cmd_rtd(args) -> int:
         warnings.append(f"the fitting sample's verdict above was made by fit with the model's "
                         f"stored {100 * stored.level:g} % E(RT) interval {lo}-{hi} s, not with "
                         "the interval formed here")
-    from cfbmarkov.markov.model_summary import fitting_run_count, unresolved_warning
+    from cfbmarkov.markov.model_summary import (fitting_run_count, left_out_classes_warning,
+                                                one_sided_interval_warnings,
+                                                unresolved_warning)
 
     missed = None if adequacy is None else adequacy.on_window_warning()
     if missed:                          # the chain misses its own fitting window
@@ -415,6 +417,11 @@ def cmd_rtd(args) -> int:
         warnings.append(unresolved)
     if band is not None:
         warnings += band.warnings(fitting_run_count(model))
+    left_out = left_out_classes_warning(model)
+    if left_out is not None:
+        warnings.append(left_out)
+    if band is not None and args.window_length is None:
+        warnings += one_sided_interval_warnings(model, rtd, band)
     if args.resamples and band is not None and band.flow_sd is None:
         # an interval formed here, on a window too short for the flow's term: the verdict's
         # line, as fit gives it

@@ -665,7 +665,8 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     parameters = _parameters(path, layout, riser, "resampled")
     parameters.update({"resample": interval, "max_gap": interval if max_gap is None else max_gap,
                        "max_gap_from": "--max-gap" if max_gap is not None else "default",
-                       "velocity_columns": [], "samples": int(keep.sum()),
+                       # the samples after rows of one time stamp were merged into one
+                       "velocity_columns": [], "samples": int(times.size),
                        "laps_from": ("minimal-image rule between samples" if periodic
                                      else "none (open riser)")})
     with create_writer(output, tracks.ids, source="import:csv", parameters=parameters,

@@ -195,14 +195,16 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
     """Count what crosses the faces of an open riser (Numba kernel).
 
     For every frame pair (t, t + lag) of a particle: present then absent is an exit
-    (``exits[i] += 1``) when its height at t lies within ``band`` (one cell) of the outlet
-    face at H, else a disappearance (``vanished[i]``); absent then present is an entry
-    (``entries[j] += 1``) when its height at t + lag lies within ``band`` of the inlet face
-    at 0, else an appearance (``appeared[j]``). A state space with memory defines a
-    particle's state only from a lag after it is first seen (its history), so an entry is
-    judged by the height where the particle was first seen, lags before its first state
-    (present frames hold a finite height, absent ones NaN). Returns nothing; arrays are
-    updated.
+    (``exits[i] += 1``) when its height where it was last seen (at t, or a frame after t
+    within the lag) lies within ``band`` (one cell) of the outlet face at H, else a
+    disappearance (``vanished[i]``); absent then present is an entry (``entries[j] += 1``)
+    when its height where it was first seen (its first frame of the presence that holds
+    t + lag) lies within ``band`` of the inlet face at 0, else an appearance
+    (``appeared[j]``). With a lag of several frames, the frames within it are where the
+    particle crossed the face, not t or t + lag; a state space with memory defines a
+    particle's state only from a lag after it is first seen (its history), so its entry is
+    judged where it was first seen too (present frames hold a finite height, absent ones
+    NaN). Returns nothing; arrays are updated.
     """
     n_frames, n_particles = states.shape
     for t in range(n_frames - lag_frames):
@@ -210,15 +212,17 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
             i = states[t, p]
             j = states[t + lag_frames, p]
             if i >= 0 and j < 0:
-                if vertical[t, p] >= height - band:
+                last = t          # where it was last seen, frames after t within the lag
+                while last + 1 < t + lag_frames and not np.isnan(vertical[last + 1, p]):
+                    last += 1
+                if vertical[last, p] >= height - band:
                     exits[i] += 1
                 else:
                     vanished[i] += 1
             elif i < 0 and j >= 0:
-                first = t + lag_frames
-                while (first >= lag_frames and states[first - lag_frames, p] < 0
-                       and not np.isnan(vertical[first - lag_frames, p])):
-                    first -= lag_frames
+                first = t + lag_frames    # where it was first seen: frames before, back to
+                while first >= 1 and not np.isnan(vertical[first - 1, p]):   # its first
+                    first -= 1
                 if vertical[first, p] <= band:
                     entries[j] += 1
                 else:

@@ -378,27 +378,40 @@ class MarkovModel:
         Raises
         ------
         CfbmarkovError
-            For an open riser's chain from whose entries some state that is entered is
-            never left (a trap: no steady state; fit with ``connected=True``).
+            For an open riser's chain whose entering particles reach a state they never
+            leave (a trap: no steady state; fit with ``connected=True``). States the
+            entries never reach (unvisited cells) hold 0.
         """
         if self.open_flow is not None:
+            import warnings
+
             from scipy.sparse import csc_matrix, identity
             from scipy.sparse.linalg import spsolve
 
+            from cfbmarkov.markov.connectivity import states_reaching
+
             q = csc_matrix(self.absorbing_matrix)
-            with np.errstate(all="ignore"):
+            entry = self.open_flow.entry_distribution
+            # the states the entries reach (unvisited cells keep P_ii = 1 and are never
+            # reached: they hold no particle)
+            reached = np.flatnonzero(states_reaching(q.T, np.flatnonzero(entry > 0)))
+            block = q[reached][:, reached]
+            with np.errstate(all="ignore"), warnings.catch_warnings():
+                warnings.simplefilter("ignore")          # scipy's MatrixRankWarning
                 try:
-                    lags = np.atleast_1d(spsolve((identity(q.shape[0], format="csc")
-                                                  - q).T.tocsc(),
-                                                 self.open_flow.entry_distribution))
+                    lags = np.atleast_1d(spsolve(
+                        (identity(reached.size, format="csc") - block).T.tocsc(),
+                        entry[reached]))
                 except RuntimeError:                     # singular: a trap
-                    lags = np.full(q.shape[0], np.nan)
+                    lags = np.full(reached.size, np.nan)
             if not (np.all(np.isfinite(lags)) and lags.min() >= -1e-9 and lags.sum() > 0):
                 raise CfbmarkovError(
-                    "an open riser's chain with states that are entered and never left has "
-                    "no steady state (its particles pile up there): fit with connected=True "
-                    "(fit --connected) for the stationary distribution")
-            return np.clip(lags, 0.0, None) / np.clip(lags, 0.0, None).sum()
+                    "an open riser's chain in which the entering particles reach a state "
+                    "they never leave (a trap) has no steady state: its particles pile up "
+                    "there; fit with connected=True (fit --connected) or on a longer window")
+            full = np.zeros(self.n_states)
+            full[reached] = np.clip(lags, 0.0, None)
+            return full / full.sum()
         from cfbmarkov.markov.connectivity import stationary_distribution
 
         return stationary_distribution(self.transition_matrix,

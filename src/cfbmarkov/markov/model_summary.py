@@ -182,7 +182,8 @@ def monte_carlo_warnings(model: "MarkovModel") -> list[str]:
 ONE_SIDED_SHARE = 0.05
 
 
-def one_sided_interval_warnings(model: "MarkovModel") -> list[str]:
+def one_sided_interval_warnings(model: "MarkovModel", rtd=None, uncertainty=None
+                                ) -> list[str]:
     """Lines for an E(RT) or SD(RT) interval with (almost) no room on one side of the
     figure: the bootstrap's resamples of the fitting window lie almost all on the other
     side of the fitted chain's value (each half-width is the distance from the figure to
@@ -193,41 +194,57 @@ def one_sided_interval_warnings(model: "MarkovModel") -> list[str]:
     Parameters
     ----------
     model : MarkovModel
+    rtd : ResidenceTimeDistribution, optional
+        The intrinsic RTD the interval is of (default ``model.rtd()``).
+    uncertainty : ModelUncertainty, optional
+        The interval (default ``model.uncertainty``; one formed apart, by ``rtd
+        --resamples``, may be given).
 
     Returns
     -------
     list of str
-        Empty where the model has no interval, or both intervals have room on both sides.
+        Empty where the model has no interval, both intervals have room on both sides, or
+        a lower end was cut at 0 (its own line, :meth:`ModelUncertainty.cut_at_zero
+        <cfbmarkov.markov.uncertainty.ModelUncertainty.cut_at_zero>`, says why).
     """
-    u = model.uncertainty
+    from cfbmarkov.markov.uncertainty import outward_bounds
+
+    u = model.uncertainty if uncertainty is None else uncertainty
     if u is None:
         return []
-    try:
-        rtd = model.rtd()
-    except Exception:            # no residence: the summary says why
-        return []
+    if rtd is None:
+        try:
+            rtd = model.rtd()
+        except Exception:        # no residence: the summary says why
+            return []
     lines = []
     for name, value, (lower, upper) in (("E(RT)", rtd.mean, u.rt_mean_interval),
                                         ("SD(RT)", rtd.sd, u.rt_sd_interval)):
         below, above = value - lower, upper - value
-        if not (np.isfinite(below) and np.isfinite(above)) or below + above <= 0:
+        if (not (np.isfinite(below) and np.isfinite(above)) or below + above <= 0
+                or lower <= 0.0):
             continue
         if below < ONE_SIDED_SHARE * above or above < ONE_SIDED_SHARE * below:
             side, other = ("lower", "above") if below < above else ("upper", "below")
+            lo, hi = outward_bounds(lower, upper, digits=4)
             lines.append(
-                f"the {name} interval {lower:.4g}-{upper:.4g} s has almost no {side} side "
-                f"on the figure {value:.4g} s: the bootstrap's resamples of the fitting "
-                f"window lie nearly all {other} the fitted chain's, so the figure sits at "
-                "the edge of what the window's blocks give (a short or unsteady sample, or "
-                "one a few blocks dominate); read the interval as one-sided, and the figure "
-                f"as likely {'low' if other == 'above' else 'high'}; a longer window or "
-                "several runs (fit A.h5 B.h5 ...) give a two-sided one")
+                f"the {name} interval {lo}-{hi} s has almost no {side} side on the figure "
+                f"{value:.4g} s: the bootstrap's resamples of the fitting window lie nearly "
+                f"all {other} the fitted chain's, so the figure sits at the edge of what the "
+                "window's blocks give (a short or unsteady sample, or one a few blocks "
+                "dominate) and the interval says nothing of the other side; a longer window "
+                "or several runs (fit A.h5 B.h5 ...) give a two-sided one")
     return lines
 
 
 #: an open riser's chain whose steady hold-up lies farther than this share from its
 #: fitting window's mean hold-up is warned of (its Monte Carlo drains or fills the riser)
 HOLD_UP_LIMIT = 0.2
+
+
+#: an open chain whose exact RTD leaves more than this share of its entries unresolved
+#: (particles that reach a trap) has no steady hold-up
+TRAPPED_SHARE = 1e-6
 
 
 def hold_up_warning(model: "MarkovModel") -> str | None:
@@ -250,7 +267,9 @@ def hold_up_warning(model: "MarkovModel") -> str | None:
     -------
     str or None
         The line; None for a periodic riser, a model without frame pairs, or hold-ups that
-        agree.
+        agree. A chain whose exact RTD leaves more than :data:`TRAPPED_SHARE` of its
+        entries unresolved (a trap) has no steady hold-up: the line says its Monte Carlo
+        fills the riser.
 
     References
     ----------
@@ -263,10 +282,20 @@ def hold_up_warning(model: "MarkovModel") -> str | None:
     seen = (float(model.counts.sum()) + float(flow.exit_counts.sum())) / model.frame_pairs
     from cfbmarkov.markov.model_rtd import entry_delay
 
-    try:     # E(RT) in lags, less the lags before a state with memory's first state
-        lags = model.rtd().mean / model.lag - entry_delay(model)
+    try:
+        rtd = model.rtd()
     except Exception:            # no residence: the model's other lines say why
         return None
+    if rtd.unresolved > TRAPPED_SHARE:
+        # particles that never leave: no steady hold-up, the riser fills for as long as
+        # the Monte Carlo runs
+        return (f"{100 * rtd.unresolved:.3g} % of the chain's entering particles never "
+                "leave (a trap, or residences longer than the RTD follows), so it has no "
+                "steady hold-up: its Monte Carlo (predict, react --init) fills the riser for "
+                "as long as it runs, and its bed means are of that riser; fit with "
+                "--connected or on a longer window")
+    # E(RT) in lags, less the lags before a state with memory's first state
+    lags = rtd.mean / model.lag - entry_delay(model)
     chain = flow.inflow_per_lag * lags
     if not seen > 0 or abs(chain - seen) <= HOLD_UP_LIMIT * seen:
         return None
@@ -420,8 +449,11 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     if len(classes) > 1:
         lines.append(f"  closed classes: {len(classes)} (sizes "
                      f"{', '.join(str(c.size) for c in classes[:6])}"
-                     f"{', ...' if len(classes) > 6 else ''}): a reducible chain; the "
-                     "exact RTD weights each class by its observed entry flux")
+                     f"{', ...' if len(classes) > 6 else ''}): a reducible chain; "
+                     + ("its particles enter by the observed entries"
+                        if model.open_flow is not None else
+                        "the exact RTD weights each class by its observed net entry "
+                        "flux"))
     if model.selection:
         from cfbmarkov.markov.selection_table import candidate_table
 
@@ -476,7 +508,7 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         lines.append(f"  exact residence time: none ({exc})")
     own = None if model.adequacy is None else model.adequacy.window_rt_mean
     if own is not None and np.isfinite(own):
-        carry = ("a reducible chain, which weights its classes by their entry flux, need "
+        carry = ("a reducible chain, which weights its classes by their net entry flux, need "
                  "not carry it" if len(model.closed_classes) > 1 else
                  "the throughput the chain should carry; the verdict warns beyond 10 %")
         lines.append(f"    the fitting window's own E(RT): {own:.4g} s (its particle-time over "
