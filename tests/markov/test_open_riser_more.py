@@ -144,6 +144,20 @@ def test_an_inflow_that_does_not_balance_the_outflow_is_warned_of():
     assert "riser fills over the window" in lines(3000, 1200)[0]
 
 
+def _small_chain_file(path, columns: int, rows: int, *, stay: float, inflow: float,
+                      seed: int):
+    """A known open chain (up 0.5 a lag, no sideways moves) drawn for 1500 lags of 0.01 s
+    into a riser 0.02 m wide and 0.2 m high."""
+    q, r, e = open_chain(columns=columns, rows=rows, up=0.5, stay=stay, side=0.0)
+    states, ids = draw(q, r, e, n_steps=1500, inflow=inflow, n_start=0, seed=seed,
+                       columns=columns, rows=rows)
+    pos = positions_of(states, seed=seed + 1, columns=columns, rows=rows)
+    pos[..., 0] *= 0.02 / W
+    pos[..., 1] *= 0.2 / H
+    return write_trajectories(path, 0.01 * np.arange(states.shape[0]), pos, width=0.02,
+                              height=0.2, ids=ids, present=states >= 0, boundary="open")
+
+
 def test_a_state_space_with_memory_counts_an_open_residence_from_the_inlet(tmp_path):
     """A known open chain on 1 x 10 cells (E(RT) 20 lags): a state space with memory gives a
     particle its first state a lag after it is first seen at the inlet. Its exact RTD, its
@@ -158,15 +172,7 @@ def test_a_state_space_with_memory_counts_an_open_residence_from_the_inlet(tmp_p
     from cfbmarkov.markov.spaces import state_space_from_name
 
     rows, lag = 10, 0.01
-    q, r, e = open_chain(columns=1, rows=rows, up=0.5, stay=0.5, side=0.0)
-    states, ids = draw(q, r, e, n_steps=1500, inflow=2.0, n_start=0, seed=5, columns=1,
-                       rows=rows)
-    pos = positions_of(states, seed=6, columns=1, rows=rows)
-    pos[..., 0] *= 0.02 / W                       # a riser 0.02 m wide
-    pos[..., 1] *= 0.2 / H                        # and 0.2 m high
-    times = np.arange(states.shape[0]) * lag
-    path = write_trajectories(tmp_path / "chain.h5", times, pos, width=0.02, height=0.2,
-                              ids=ids, present=states >= 0, boundary="open")
+    path = _small_chain_file(tmp_path / "chain.h5", 1, rows, stay=0.5, inflow=2.0, seed=5)
     kinetics = Kinetics((Property("X", FirstOrder(), {"rate": Constant(5.0)}, "entry", 0.0),))
     answers = {}
     for name in ("cells", "cells-direction"):
@@ -248,15 +254,8 @@ def test_an_open_beds_means_count_the_lag_before_a_state_with_memory_at_the_inle
     from cfbmarkov.markov.spaces import state_space_from_name
 
     columns, rows, lag = 2, 8, 0.01
-    q, r, e = open_chain(columns=columns, rows=rows, up=0.5, stay=0.4, side=0.0)
-    states, ids = draw(q, r, e, n_steps=1500, inflow=3.0, n_start=0, seed=7,
-                       columns=columns, rows=rows)
-    pos = positions_of(states, seed=8, columns=columns, rows=rows)
-    pos[..., 0] *= 0.02 / W
-    pos[..., 1] *= 0.2 / H
-    times = np.arange(states.shape[0]) * lag
-    path = write_trajectories(tmp_path / "chain.h5", times, pos, width=0.02, height=0.2,
-                              ids=ids, present=states >= 0, boundary="open")
+    path = _small_chain_file(tmp_path / "chain.h5", columns, rows, stay=0.4, inflow=3.0,
+                             seed=7)
     kinetics = Kinetics((Property("X", FirstOrder(), {"rate": Constant(5.0)}, "entry", 0.0),))
     got = {}
     for name in ("cells", "cells-direction"):
