@@ -357,7 +357,12 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
     # one time basis: frames at the model's lag, or the reference's exact events
     rt_ref = residence_times(ref, (start, stop), use_events=on.events, face_band=on.band,
                              lag_frames=on.lag_frames, direction=on.direction)
-    rt_mod = residence_times(pred, (start, stop), use_events=on.events, face_band=on.band,
+    # a Markov prediction of an open riser has no other way in or out than the inlet and
+    # the outlet: every appearance is an entry, every disappearance an exit (its newcomers
+    # are shown in their first state's cell, rows above the inlet at a lag of many frames)
+    model_band = (pred.height if pred.boundary.is_open and pred.source == PREDICTION_SOURCE
+                  else on.band)
+    rt_mod = residence_times(pred, (start, stop), use_events=on.events, face_band=model_band,
                              direction=on.direction)
     for side, traj, rt in (("reference", ref, rt_ref), ("model", pred, rt_mod)):
         if rt.count == 0 and (not allow_empty or (side == "reference" and ref.boundary.is_open)):
@@ -370,12 +375,14 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
         from cfbmarkov.markov.open_flow import CENSORED_SHARE
 
         line = face_band_warning(ref, (start, stop), on.band, on.lag_frames,
-                                 fix="the shortest residences may be those left out "
-                                 "(particles that cross more than a cell in a lag); a model "
-                                 "of taller cells or a shorter lag keeps them",
+                                 fix="their residences are left out (tracks that begin or end "
+                                 "in mid-riser: out of view, or a section's faces), as fit "
+                                 "leaves them out of its window; a model of taller cells "
+                                 "keeps those that cross the faces farther than a cell from "
+                                 "where they were last seen",
                                  limit=CENSORED_SHARE)
         if line:
-            warnings.append(f"the reference at the model's lag: {line}")
+            warnings.append(f"the reference: {line}")
     _check_bins_resolve(rt_ref, bin_width, bin_width_from, (start, stop))
     beside = _baselines(ref, pred, (start, stop), on, bin_width=bin_width, md_order=md_order,
                         long_run_span=long_run_span)

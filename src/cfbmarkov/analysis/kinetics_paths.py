@@ -18,7 +18,11 @@ Layout (T frames one lag apart, N particles, S states, C cells)::
     states   int32   [T, N]   state (-1: absent or undefined: the value is held)
     laps     int64   [T, N]   lap counter (periodic riser; sign-flipped for net downflow)
     present  bool    [T, N]   open riser: the particle is in the frame
-    vertical float64 [T, N]   open riser: its height (m)
+    vertical float64 [T, N]   open riser: its height where first seen (m), the first frame
+                              of the presence that holds the frame (read on every frame of
+                              the file, also between the lag's)
+    last_vertical    [T, N]   open riser: its height where last seen (m), the last frame of
+                              that presence
     a, b     float64 [S]      the lag's affine map per state
     bed_cells int64  [T, N]   the cell a particle counts in for the bed's means (-1: not
                               in the bed); an open riser's particle present without a
@@ -99,17 +103,20 @@ def integrate_periodic(times, states, laps, a, b, v0, reset, value, stored, use_
 
 
 @nb.njit(cache=True)
-def integrate_open(times, states, present, vertical, band, height, a, b, v0, reset, value,
-                   stored, use_stored, bed_cells, exit_value, exit_time, exit_residence,
-                   bed_mean, cell_sum, cell_count):
+def integrate_open(times, states, present, vertical, last_vertical, band, height, a, b, v0,
+                   reset, value, stored, use_stored, bed_cells, exit_value, exit_time,
+                   exit_residence, bed_mean, cell_sum, cell_count):
     """Integrate a property along the paths of an open riser; return the exits written.
 
     A particle present in frame k - 1 in a state advances over the lag to frame k. An entry
     is a frame where it is present, was absent before, lies within ``band`` of the inlet and
-    is in no residence (then, with ``reset``, its value restarts at ``v0``); a particle
+    is in no residence (then, with ``reset``, its value restarts at ``v0``), ``vertical``
+    holding the height where it was first seen (the first frame of its presence, which may
+    lie between the lag's frames); a particle
     present without a state (a state space with memory: the lag before its first state)
     advances over that lag with its next state's law; an exit a frame
-    where it is absent, was present before within ``band`` of the outlet, recorded with the
+    where it is absent, was present before and was last seen (``last_vertical``: the height
+    at the last frame of its presence) within ``band`` of the outlet, recorded with the
     time since its entry (NaN where the entry was not seen). A return through the inlet
     within a residence (after falling back out, or out of view) continues it, its value
     held while it was absent, as the residence times of
@@ -126,7 +133,7 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
     last_height = np.full(n_particles, np.nan)
     for p in range(n_particles):
         if present[0, p]:
-            last_height[p] = vertical[0, p]
+            last_height[p] = last_vertical[0, p]
             entered[p] = -np.inf        # inside at the start: in a residence, its entry unknown
     n_out = 0
     if n_frames > 0:
@@ -155,7 +162,7 @@ def integrate_open(times, states, present, vertical, band, height, a, b, v0, res
                 n_out += 1
                 entered[p] = np.nan
             if now:
-                last_height[p] = vertical[k, p]
+                last_height[p] = last_vertical[k, p]
                 if use_stored:
                     value[p] = stored[k, p]
         _bed(k, bed_cells, value, bed_mean, cell_sum, cell_count)

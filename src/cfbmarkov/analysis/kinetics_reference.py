@@ -91,6 +91,36 @@ class PathKinetics(ExitStatistics):
         return float(finite.mean()) if finite.size else float("nan")
 
 
+def presence_ends(vertical: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where each particle's presence began and ended, per frame.
+
+    Parameters
+    ----------
+    vertical : ndarray of float64, shape (T, N)
+        Heights (m), NaN where a particle is absent.
+
+    Returns
+    -------
+    first_seen, last_seen : ndarray of float64, shape (T, N)
+        In each frame where the particle is present, its height at the first and at the
+        last frame of that run of presence (a run begun before the first frame begins
+        there); NaN where it is absent.
+    """
+    vertical = np.asarray(vertical, dtype=np.float64)
+    n_frames, n_particles = vertical.shape
+    present = np.isfinite(vertical)
+    frame = np.arange(n_frames)[:, None]
+    starts = present.copy()
+    starts[1:] &= ~present[:-1]
+    ends = present.copy()
+    ends[:-1] &= ~present[1:]
+    first = np.maximum.accumulate(np.where(starts, frame, 0), axis=0)
+    last = np.minimum.accumulate(np.where(ends, frame, n_frames - 1)[::-1], axis=0)[::-1]
+    column = np.arange(n_particles)[None, :]
+    return (np.where(present, vertical[first, column], np.nan),
+            np.where(present, vertical[last, column], np.nan))
+
+
 def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "",
                           direction: str = "up", face_band: float | None = None,
                           entry_value: float | None = None, stored=None) -> PathKinetics:
@@ -173,7 +203,11 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
     cell_sum, cell_count = np.zeros(n_cells), np.zeros(n_cells)
     bed_cells = np.where(states >= 0, cell_of_state[np.maximum(states, 0)], -1)
     if discrete.boundary == "open":
-        vertical = np.ascontiguousarray(discrete.vertical[rows], dtype=np.float64)
+        # the heights where each presence began and ended, on every frame: a particle
+        # crosses a face between the lag's frames (read on the lag's frames alone, the exits
+        # of those first seen above the inlet's band were dropped, the conversion biased)
+        first_seen, last_seen = presence_ends(discrete.vertical)
+        vertical = np.ascontiguousarray(first_seen[rows])
         present = np.isfinite(vertical)
         stateless = present & (states < 0)
         if stateless.any():
@@ -191,7 +225,8 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
             band = discrete.height / DEFAULT_FACE_ROWS
         size = int(present.sum())
         exit_value, exit_time, exit_rt = np.empty(size), np.empty(size), np.empty(size)
-        n = integrate_open(times, states, present, np.nan_to_num(vertical), band,
+        n = integrate_open(times, states, present, np.nan_to_num(vertical),
+                           np.ascontiguousarray(np.nan_to_num(last_seen[rows])), band,
                            float(discrete.height), a, b, float(entry_value), bool(reset), value,
                            stored, use_stored, bed_cells, exit_value, exit_time, exit_rt,
                            bed_mean, cell_sum, cell_count)
@@ -467,5 +502,5 @@ def linear_maps(state_kinetics, lag: float) -> list[dict]:
     return out
 
 
-__all__ = ["PathKinetics", "integrate_along_paths", "linear_maps", "reference_kinetics",
-           "reference_starts", "values_at"]
+__all__ = ["PathKinetics", "integrate_along_paths", "linear_maps", "presence_ends",
+           "reference_kinetics", "reference_starts", "values_at"]
