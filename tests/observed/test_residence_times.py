@@ -325,3 +325,34 @@ def test_an_open_risers_particle_inside_at_the_start_that_returns_through_the_in
                   [nan, 0.05, 0.4, 0.8, 0.99, nan, nan, nan, nan]]).T   # in at 1, out at 5
     samples = open_residence_times(times, np.isfinite(y), y, 0.1, 1.0)
     np.testing.assert_allclose(samples, [4.0])
+
+
+def test_an_open_riser_read_a_lag_apart_judges_its_faces_on_the_frames_between(tmp_path):
+    """Frames every 0.01 s, a lag of 3 frames: particle 0 is first seen at frame 5 at the
+    inlet (at frame 6, the lag's, it is above the inlet's band), climbs, hovers at the
+    outlet, drops out of view at frame 28 alone and is last seen at frame 30: one residence
+    from the lag's frame 6 to 33, 0.27 s (read on the lag's frames alone its entry was not
+    seen: no residence). Particle 1 appears and vanishes between two lag frames: never
+    seen at a lag frame, no residence (it had given one of 0 s)."""
+    from cfbmarkov.observed.residence import lag_face_heights
+
+    times = 0.01 * np.arange(60)
+    y = np.full((60, 2), np.nan)
+    y[5:20, 0] = np.linspace(0.015, 0.19, 15)    # frame 6: 0.0275 m, above the band
+    y[20:31, 0] = 0.19                        # hovering in the outlet's band
+    y[28, 0] = np.nan                         # out of view for one frame
+    y[40:42, 1] = (0.01, 0.19)
+    present = np.isfinite(y)
+    pos = np.stack([np.full_like(y, 0.01), np.nan_to_num(y, nan=0.1)], axis=-1)
+    path = write_trajectories(tmp_path / "open.h5", times, pos, width=0.02, height=0.2,
+                              present=present, boundary="open")
+    with Trajectories(path) as traj:
+        samples = residence_times(traj, (0.0, 0.59), lag_frames=3, face_band=0.02).samples
+        np.testing.assert_allclose(samples, [0.27])
+        # at the frames' own lag the gap at the outlet is an exit (0.23 s), and particle
+        # 1 crosses the riser in 0.02 s
+        np.testing.assert_allclose(
+            residence_times(traj, (0.0, 0.59), face_band=0.02).samples, [0.23, 0.02])
+    first, last = lag_face_heights(y, 3, np.arange(0, 60, 3))
+    assert first[2, 0] == pytest.approx(0.015)          # frame 6: first seen at frame 5
+    assert last[9, 0] == pytest.approx(0.19)            # frame 27: last seen at 29/30

@@ -355,7 +355,9 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
     on = _residence_basis(ref, pred, (start, stop), basis, warnings)
     # residence times (an open riser: entries and exits within one cell of the faces), on
     # one time basis: frames at the model's lag, or the reference's exact events
-    rt_ref = residence_times(ref, (start, stop), use_events=on.events, face_band=on.band,
+    ref_band = (ref.height if ref.boundary.is_open and ref.source == PREDICTION_SOURCE
+                else on.band)        # a prediction as the reference: as the model side
+    rt_ref = residence_times(ref, (start, stop), use_events=on.events, face_band=ref_band,
                              lag_frames=on.lag_frames, direction=on.direction)
     # a Markov prediction of an open riser has no other way in or out than the inlet and
     # the outlet: every appearance is an entry, every disappearance an exit (its newcomers
@@ -367,7 +369,7 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
     for side, traj, rt in (("reference", ref, rt_ref), ("model", pred, rt_mod)):
         if rt.count == 0 and (not allow_empty or (side == "reference" and ref.boundary.is_open)):
             _refuse_empty(ref, pred, side, traj, (start, stop), on)
-    if ref.boundary.is_open and not on.events:
+    if ref.boundary.is_open and not on.events and ref.source != PREDICTION_SOURCE:
         # tracks that end (begin) away from the faces at the model's lag are censored, not
         # residences: many of them (fast particles a lag's travel below the outlet) bias
         # the reference's RTD, as fit warns of its window

@@ -19,10 +19,10 @@ Layout (T frames one lag apart, N particles, S states, C cells)::
     laps     int64   [T, N]   lap counter (periodic riser; sign-flipped for net downflow)
     present  bool    [T, N]   open riser: the particle is in the frame
     vertical float64 [T, N]   open riser: its height where first seen (m), the first frame
-                              of the presence that holds the frame (read on every frame of
-                              the file, also between the lag's)
-    last_vertical    [T, N]   open riser: its height where last seen (m), the last frame of
-                              that presence
+                              present since the lag's frame before, read on every frame of
+                              the file (:func:`~cfbmarkov.observed.residence.lag_face_heights`)
+    last_vertical    [T, N]   open riser: its height where last seen (m), the last frame
+                              present before the lag's next frame
     a, b     float64 [S]      the lag's affine map per state
     bed_cells int64  [T, N]   the cell a particle counts in for the bed's means (-1: not
                               in the bed); an open riser's particle present without a
@@ -111,12 +111,12 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
     A particle present in frame k - 1 in a state advances over the lag to frame k. An entry
     is a frame where it is present, was absent before, lies within ``band`` of the inlet and
     is in no residence (then, with ``reset``, its value restarts at ``v0``), ``vertical``
-    holding the height where it was first seen (the first frame of its presence, which may
-    lie between the lag's frames); a particle
+    holding the height where it was first seen (a frame between the lag's, may be); a
+    particle
     present without a state (a state space with memory: the lag before its first state)
     advances over that lag with its next state's law; an exit a frame
     where it is absent, was present before and was last seen (``last_vertical``: the height
-    at the last frame of its presence) within ``band`` of the outlet, recorded with the
+    at the last frame present before this one) within ``band`` of the outlet, recorded with the
     time since its entry (NaN where the entry was not seen). A return through the inlet
     within a residence (after falling back out, or out of view) continues it, its value
     held while it was absent, as the residence times of

@@ -38,7 +38,7 @@ from cfbmarkov.analysis.kinetics_paths import integrate_open, integrate_periodic
 from cfbmarkov.analysis.exit_statistics import ExitStatistics
 from cfbmarkov.errors import InputError
 from cfbmarkov.markov.cells import cell_index
-from cfbmarkov.observed.residence import DEFAULT_FACE_ROWS
+from cfbmarkov.observed.residence import DEFAULT_FACE_ROWS, lag_face_heights
 
 
 @dataclass(frozen=True)
@@ -89,36 +89,6 @@ class PathKinetics(ExitStatistics):
         """The bed's mean value averaged over the frames."""
         finite = self.bed_mean[np.isfinite(self.bed_mean)]
         return float(finite.mean()) if finite.size else float("nan")
-
-
-def presence_ends(vertical: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Where each particle's presence began and ended, per frame.
-
-    Parameters
-    ----------
-    vertical : ndarray of float64, shape (T, N)
-        Heights (m), NaN where a particle is absent.
-
-    Returns
-    -------
-    first_seen, last_seen : ndarray of float64, shape (T, N)
-        In each frame where the particle is present, its height at the first and at the
-        last frame of that run of presence (a run begun before the first frame begins
-        there); NaN where it is absent.
-    """
-    vertical = np.asarray(vertical, dtype=np.float64)
-    n_frames, n_particles = vertical.shape
-    present = np.isfinite(vertical)
-    frame = np.arange(n_frames)[:, None]
-    starts = present.copy()
-    starts[1:] &= ~present[:-1]
-    ends = present.copy()
-    ends[:-1] &= ~present[1:]
-    first = np.maximum.accumulate(np.where(starts, frame, 0), axis=0)
-    last = np.minimum.accumulate(np.where(ends, frame, n_frames - 1)[::-1], axis=0)[::-1]
-    column = np.arange(n_particles)[None, :]
-    return (np.where(present, vertical[first, column], np.nan),
-            np.where(present, vertical[last, column], np.nan))
 
 
 def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "",
@@ -203,12 +173,13 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
     cell_sum, cell_count = np.zeros(n_cells), np.zeros(n_cells)
     bed_cells = np.where(states >= 0, cell_of_state[np.maximum(states, 0)], -1)
     if discrete.boundary == "open":
-        # the heights where each presence began and ended, on every frame: a particle
-        # crosses a face between the lag's frames (read on the lag's frames alone, the exits
-        # of those first seen above the inlet's band were dropped, the conversion biased)
-        first_seen, last_seen = presence_ends(discrete.vertical)
-        vertical = np.ascontiguousarray(first_seen[rows])
-        present = np.isfinite(vertical)
+        # the heights where a particle is first and last seen on the frames between the
+        # lag's: it crosses a face there (judged on the lag's frames alone, the exits of
+        # those first seen above the inlet's band were dropped, the conversion biased)
+        first_seen, last_seen = lag_face_heights(discrete.vertical, discrete.lag_frames,
+                                                 np.arange(discrete.n_frames)[rows])
+        present = np.isfinite(np.asarray(discrete.vertical[rows], dtype=np.float64))
+        vertical = np.ascontiguousarray(first_seen)
         stateless = present & (states < 0)
         if stateless.any():
             # a particle in the riser without a state yet (a state space with memory, the
@@ -226,7 +197,7 @@ def integrate_along_paths(discrete, a, b, initial, *, reset: bool, name: str = "
         size = int(present.sum())
         exit_value, exit_time, exit_rt = np.empty(size), np.empty(size), np.empty(size)
         n = integrate_open(times, states, present, np.nan_to_num(vertical),
-                           np.ascontiguousarray(np.nan_to_num(last_seen[rows])), band,
+                           np.ascontiguousarray(np.nan_to_num(last_seen)), band,
                            float(discrete.height), a, b, float(entry_value), bool(reset), value,
                            stored, use_stored, bed_cells, exit_value, exit_time, exit_rt,
                            bed_mean, cell_sum, cell_count)
@@ -502,5 +473,5 @@ def linear_maps(state_kinetics, lag: float) -> list[dict]:
     return out
 
 
-__all__ = ["PathKinetics", "integrate_along_paths", "linear_maps", "presence_ends",
-           "reference_kinetics", "reference_starts", "values_at"]
+__all__ = ["PathKinetics", "integrate_along_paths", "linear_maps", "reference_kinetics",
+           "reference_starts", "values_at"]

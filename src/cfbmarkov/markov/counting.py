@@ -195,12 +195,14 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
     """Count what crosses the faces of an open riser (Numba kernel).
 
     For every frame pair (t, t + lag) of a particle: present then absent is an exit
-    (``exits[i] += 1``) when its height where it was last seen (at t, or a frame after t
-    within the lag) lies within ``band`` (one cell) of the outlet face at H, else a
+    (``exits[i] += 1``) when its height where it was last seen (the last frame present in
+    [t, t + lag)) lies within ``band`` (one cell) of the outlet face at H, else a
     disappearance (``vanished[i]``); absent then present is an entry (``entries[j] += 1``)
-    when its height where it was first seen (its first frame of the presence that holds
-    t + lag) lies within ``band`` of the inlet face at 0, else an appearance
-    (``appeared[j]``). With a lag of several frames, the frames within it are where the
+    when its height where it was first seen (the first frame present in (t, t + lag], and
+    back through a presence that began before it) lies within ``band`` of the inlet face
+    at 0, else an appearance (``appeared[j]``); a gap shorter than the lag between them
+    does not move these frames (:func:`cfbmarkov.observed.residence.lag_face_heights`
+    reads the residences so). With a lag of several frames, the frames within it are where the
     particle crossed the face, not t or t + lag; a state space with memory defines a
     particle's state only from a lag after it is first seen (its history), so its entry is
     judged where it was first seen too (present frames hold a finite height, absent ones
@@ -212,17 +214,21 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
             i = states[t, p]
             j = states[t + lag_frames, p]
             if i >= 0 and j < 0:
-                last = t          # where it was last seen, frames after t within the lag
-                while last + 1 < t + lag_frames and not np.isnan(vertical[last + 1, p]):
-                    last += 1
+                last = t          # where it was last seen: the last frame present before
+                for f in range(t + 1, t + lag_frames):              # t + lag (a gap
+                    if not np.isnan(vertical[f, p]):                # shorter than the lag
+                        last = f                                    # does not end it)
                 if vertical[last, p] >= height - band:
                     exits[i] += 1
                 else:
                     vanished[i] += 1
             elif i < 0 and j >= 0:
-                first = t + lag_frames    # where it was first seen: frames before, back to
-                while first >= 1 and not np.isnan(vertical[first - 1, p]):   # its first
-                    first -= 1
+                first = t + lag_frames    # where it was first seen: the first frame present
+                for f in range(t + lag_frames - 1, t, -1):          # after t, and back
+                    if not np.isnan(vertical[f, p]):                # through its presence
+                        first = f                                   # (a state with memory
+                while first >= 1 and not np.isnan(vertical[first - 1, p]):   # has none
+                    first -= 1                                      # before its history)
                 if vertical[first, p] <= band:
                     entries[j] += 1
                 else:

@@ -91,8 +91,8 @@ def _scan_laps_present(times, laps, seen, running_max, last_record, started, out
 
 
 @nb.njit(cache=True)
-def _scan_open(times, present, vertical, band, height, was_present, last_height, entered,
-               out):
+def _scan_open(times, present, vertical, last_vertical, band, height, was_present,
+               last_height, entered, out):
     """Advance the residences of an open riser over a block of frames; write samples into
     ``out`` and return how many.
 
@@ -100,9 +100,11 @@ def _scan_open(times, present, vertical, band, height, was_present, last_height,
     first frame), ``last_height`` [N] (its height when last present) and ``entered`` [N]
     (time of the entry of its current residence, -inf in one begun before the window, NaN
     outside one) carry over between blocks. An entry is a frame where the particle is
-    present, was absent in the frame before and lies within ``band`` of the inlet (height
-    <= band); an exit is a frame where it is absent, was present before and was within
-    ``band`` of the outlet (height >= H - band). A residence runs from an entry to the next
+    present, was absent in the frame before and lies within ``band`` of the inlet where it
+    was first seen (``vertical``: height <= band); an exit is a frame where it is absent,
+    was present before and was within ``band`` of the outlet where it was last seen
+    (``last_vertical`` of the frame before: height >= H - band). Frames a lag apart take
+    those heights from the frames between (:func:`lag_face_heights`). A residence runs from an entry to the next
     exit; other absences (back out through the inlet, out of view) do not end it, also for
     a particle inside at the window's first frame, whose entry is unknown (no sample).
     """
@@ -123,13 +125,14 @@ def _scan_open(times, present, vertical, band, height, was_present, last_height,
                     n_out += 1
                 entered[p] = np.nan
             if now:
-                last_height[p] = vertical[k, p]
+                last_height[p] = last_vertical[k, p]
             was_present[p] = 1 if now else 0
     return n_out
 
 
 @nb.njit(cache=True)
-def _face_tracks(present, vertical, band, height, was_present, last_height, counts):
+def _face_tracks(present, vertical, last_vertical, band, height, was_present, last_height,
+                 counts):
     """Count an open riser's tracks that begin or end, and those of them within ``band`` of
     the inlet or the outlet, over a block of frames (Numba kernel): ``counts`` [4] +=
     (begun, begun at the inlet, ended, ended at the outlet). ``was_present`` (int8, -1
@@ -148,8 +151,50 @@ def _face_tracks(present, vertical, band, height, was_present, last_height, coun
                 if last_height[p] >= height - band:
                     counts[3] += 1
             if now:
-                last_height[p] = vertical[k, p]
+                last_height[p] = last_vertical[k, p]
             was_present[p] = 1 if now else 0
+
+
+def lag_face_heights(vertical: np.ndarray, lag_frames: int, rows) -> tuple[np.ndarray,
+                                                                            np.ndarray]:
+    """Where a particle is first and last seen around each of the lag's frames: the
+    heights an open riser's faces are judged by when it is read a lag apart.
+
+    Parameters
+    ----------
+    vertical : ndarray of float64, shape (F, N)
+        Heights on every frame (m), NaN where a particle is absent.
+    lag_frames : int
+        The lag, in frames.
+    rows : slice or ndarray of int
+        The lag's frames g among the F.
+
+    Returns
+    -------
+    first_seen, last_seen : ndarray of float64, shape (T, N)
+        Per lag frame g: the height at the first frame the particle is present in
+        (g - lag, g] (an entry at g is judged there) and at the last frame it is present in
+        [g, g + lag) (an exit at g + lag is judged there); NaN where it is present in none.
+        A gap shorter than a lag between two lag frames does not end a presence.
+    """
+    vertical = np.asarray(vertical, dtype=np.float64)
+    frames = np.arange(vertical.shape[0])[rows]
+    first = np.full((frames.size, vertical.shape[1]), np.nan)
+    last = np.full_like(first, np.nan)
+    for back in range(int(lag_frames) - 1, -1, -1):      # the earliest present wins
+        f = frames - back
+        ok = f >= 0
+        seen = np.where(ok[:, None], vertical[np.clip(f, 0, None)], np.nan)
+        take = np.isnan(first) & np.isfinite(seen)
+        first[take] = seen[take]
+    for ahead in range(int(lag_frames) - 1, -1, -1):     # the latest present wins
+        f = frames + ahead
+        ok = f < vertical.shape[0]
+        seen = np.where(ok[:, None], vertical[np.clip(f, None, vertical.shape[0] - 1)],
+                        np.nan)
+        take = np.isnan(last) & np.isfinite(seen)
+        last[take] = seen[take]
+    return first, last
 
 
 def open_face_tracks(traj, window: tuple[float, float], band: float,
@@ -167,8 +212,8 @@ def open_face_tracks(traj, window: tuple[float, float], band: float,
     band : float
         How close to a face a track must begin or end to have crossed it, m.
     lag_frames : int, optional
-        Kept for the callers; every frame is read, as the residence times of an open riser
-        read them at any lag.
+        Every ``lag_frames``-th frame, as the residence times read them, with the faces
+        judged where a particle is first and last seen on the frames between.
 
     Returns
     -------
@@ -180,12 +225,27 @@ def open_face_tracks(traj, window: tuple[float, float], band: float,
     n = traj.n_particles
     was, last = np.full(n, -1, np.int8), np.full(n, np.nan)
     counts = np.zeros(4, np.int64)
-    for k in range(frames.start, frames.stop, _BLOCK_FRAMES):     # every frame, as they
-        block = slice(k, min(k + _BLOCK_FRAMES, frames.stop))     # are read whatever the lag
-        _face_tracks(np.ascontiguousarray(traj.present(block)),
-                     np.ascontiguousarray(traj.positions(block)[..., 1]), float(band),
-                     float(traj.height), was, last, counts)
+    for block, present, first_seen, last_seen in _lag_blocks(traj, frames.start, frames.stop,
+                                                            int(lag_frames)):
+        _face_tracks(present, first_seen, last_seen, float(band), float(traj.height), was,
+                     last, counts)
     return int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3])
+
+
+def _lag_blocks(traj, i0: int, i1: int, lag_frames: int):
+    """The frames i0, i0 + lag, ... before i1 in blocks: (slice, presence [T, N], heights
+    where first seen, heights where last seen), the heights from every frame around each
+    (:func:`lag_face_heights`, within the frames i0 .. i1 - 1)."""
+    span = _BLOCK_FRAMES * lag_frames
+    for k in range(i0, i1, span):
+        block = slice(k, min(k + span, i1), lag_frames)
+        lo, hi = max(k - lag_frames + 1, i0), min(block.stop + lag_frames - 1, i1)
+        heights = traj.positions(slice(lo, hi))[..., 1]
+        present = np.ascontiguousarray(traj.present(block))
+        first_seen, last_seen = lag_face_heights(
+            np.where(np.ascontiguousarray(traj.present(slice(lo, hi))), heights, np.nan),
+            lag_frames, np.arange(block.start, block.stop, lag_frames) - lo)
+        yield block, present, np.nan_to_num(first_seen), np.nan_to_num(last_seen)
 
 
 def open_residence_times(times, present, vertical, band: float, height: float) -> np.ndarray:
@@ -214,8 +274,9 @@ def open_residence_times(times, present, vertical, band: float, height: float) -
     present = np.ascontiguousarray(present, dtype=np.bool_)
     n = present.shape[1]
     out = np.empty(present.size)
-    k = _scan_open(np.ascontiguousarray(times, dtype=np.float64), present,
-                   np.ascontiguousarray(vertical, dtype=np.float64), float(band), float(height),
+    vertical = np.ascontiguousarray(vertical, dtype=np.float64)
+    k = _scan_open(np.ascontiguousarray(times, dtype=np.float64), present, vertical, vertical,
+                   float(band), float(height),
                    np.full(n, -1, np.int8), np.full(n, np.nan), np.full(n, np.nan), out)
     return out[:k].copy()
 
@@ -607,9 +668,8 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
         From frames: use every ``lag_frames``-th frame of the window from its first (a model's
         lag when the file's frames are finer), so that both sides of a comparison see
         passes on the same time basis (``docs/definitions.md``, Comparison basis). An open
-        riser's residences are read on every frame at any lag: entries and exits are judged
-        where the particle is first and last seen, as the model counts them, and timed at
-        the lag's next frame (whole lags).
+        riser's faces are judged where the particle is first and last seen on the frames
+        between the lag's, as the model counts them (:func:`lag_face_heights`).
     direction : {"up", "down"}, optional
         Periodic riser: residences from passes up through the top (the solids' net flow
         upward, the default) or, where the net flow is downward, down through the bottom
@@ -670,24 +730,16 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
     sign = 1 if direction == "up" else -1
     span = _BLOCK_FRAMES * lag_frames
     if traj.boundary.is_open:
-        # every frame, whatever the lag: a particle crosses a face between the lag's
-        # frames, and is judged where it is first and last seen (read a lag apart, a lag of
-        # 3 frames lost 68 % of a known chain's residences, the short ones first); its entry
-        # and exit are then timed at the lag's next frame, so that the residences are whole
-        # lags, as the model's (frames past the window's last lag frame are not read)
+        # the lag's frames, the faces judged where a particle is first and last seen on
+        # every frame between them (judged on the lag's frames alone, a lag of 3 frames
+        # lost 68 % of a known chain's residences, the short ones first)
         band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
         n = traj.n_particles
         was, last, entered, chunks = np.full(n, -1, np.int8), np.full(n, np.nan), np.full(n, np.nan), []
-        end = i0 + ((i1 - 1 - i0) // lag_frames) * lag_frames + 1 if i1 > i0 else i0
-        for k in range(i0, end, _BLOCK_FRAMES):
-            block = slice(k, min(k + _BLOCK_FRAMES, end))
-            frame = np.arange(block.start, block.stop)
-            on_lag = i0 - ((i0 - frame) // lag_frames) * lag_frames   # the lag's next frame
-            present = np.ascontiguousarray(traj.present(block))
+        for block, present, first_seen, last_seen in _lag_blocks(traj, i0, i1, lag_frames):
             out = np.empty(present.size)
-            m = _scan_open(np.ascontiguousarray(traj.times[on_lag], dtype=np.float64), present,
-                           np.ascontiguousarray(traj.positions(block)[..., 1]), band, traj.height,
-                           was, last, entered, out)
+            m = _scan_open(np.ascontiguousarray(traj.times[block], dtype=np.float64), present,
+                           first_seen, last_seen, band, traj.height, was, last, entered, out)
             chunks.append(out[:m])
         return ResidenceTimes(np.concatenate(chunks) if chunks else np.zeros(0), False,
                               (start, stop))
@@ -835,6 +887,6 @@ def rtd_histogram(samples, bin_width: float = 0.025, *, window_length: float
     return edges, (counts / total if total > 0 else counts)
 
 
-__all__ = ["WHOLE_FRAMES", "ResidenceTimes", "flux_residence_time", "net_flow_direction",
-           "open_face_tracks", "residence_times",
+__all__ = ["WHOLE_FRAMES", "ResidenceTimes", "flux_residence_time", "lag_face_heights",
+           "net_flow_direction", "open_face_tracks", "residence_times",
            "residence_times_from_events", "residence_times_from_laps", "rtd_histogram"]
