@@ -384,3 +384,16 @@ def test_entries_and_exits_at_a_lag_of_several_frames_are_judged_where_seen(tmp_
     assert line is not None and "never leave" in line and "fills the riser" in line
     with pytest.raises(CfbmarkovError, match="a trap"):
         trap.stationary_distribution
+
+
+def test_states_auto_names_why_it_kept_the_cells(tmp_path):
+    """On 2 columns no candidate of the CK criterion can be judged (no core column); the
+    record said the blocks held too few residences ("only 543 ... fewer than 30"), which
+    was not the reason. It now names the candidates' own."""
+    from cfbmarkov.markov.select import select_model
+
+    path = _small_chain_file(tmp_path / "chain.h5", 2, 8, stay=0.4, inflow=3.0, seed=7)
+    reason = select_model(path, window=(2.0, 8.0), columns=2, rows=8,
+                          lag=0.01).selection["reason"]
+    assert "fewer than" not in reason and "leave no core in 2 columns" in reason
+    assert reason.endswith("so the paper's cells were kept")

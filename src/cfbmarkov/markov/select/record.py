@@ -154,11 +154,16 @@ def kept_cells_record(criterion: HeldOutCK, estimator: str, candidates: list[Can
         ``method``, ``blocks``, ``estimator``, ``chosen``, ``reason`` and ``candidates``.
     """
     fitting = criterion.fitting
+    if fitting.fewest < MIN_RESIDENCES:
+        why = (f"the blocks of the fitting window are too short to judge: a block holds only "
+               f"{fitting.fewest} residence times (fewer than {MIN_RESIDENCES}) and is "
+               f"shorter than the CK test's {criterion.times.max():g} s")
+    else:       # the blocks were long enough: every candidate failed for its own reason
+        errors = list(dict.fromkeys(f"{c.states}: {c.error}" for c in candidates if c.error))
+        why = ("no candidate could be judged by the CK test on the fitting window's blocks ("
+               + "; ".join(errors[:3]) + ("; ..." if len(errors) > 3 else "") + ")")
     return {"method": f"{fitting.folds}-fold blocked cross-validation",
             "blocks": [list(x) for x in fitting.blocks], "estimator": estimator,
             "chosen": {"states": "cells", "lag": lag},
-            "reason": f"the blocks of the fitting window are too short to judge: a block "
-                      f"holds only {fitting.fewest} residence times (fewer than "
-                      f"{MIN_RESIDENCES}) and is shorter than the CK test's "
-                      f"{criterion.times.max():g} s, so the paper's cells were kept",
+            "reason": f"{why}, so the paper's cells were kept",
             "candidates": [c.as_dict() for c in candidates]}
