@@ -114,7 +114,10 @@ def _fit(args) -> int:
                          f"the history that {model.state_space.kind} needs (the file starts "
                          f"at {float(run.times[0]):g} s): the model is fitted on "
                          f"{model.window[0]:g}:{model.window[1]:g} s")
-    return _finish_fit(args, model, [args.run], [args.window], notes)
+    # the window the model was fitted on (a space with memory may start it a lag late):
+    # its verdict and throughput are of those frames
+    fitted = tuple(model.window) if model.window is not None else args.window
+    return _finish_fit(args, model, [args.run], [fitted], notes)
 
 
 def _refuse_an_open_riser_read_as_periodic(run, model, path, window) -> None:
