@@ -355,17 +355,11 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
     on = _residence_basis(ref, pred, (start, stop), basis, warnings)
     # residence times (an open riser: entries and exits within one cell of the faces), on
     # one time basis: frames at the model's lag, or the reference's exact events
-    ref_band = (ref.height if ref.boundary.is_open and ref.source == PREDICTION_SOURCE
-                else on.band)        # a prediction as the reference: as the model side
-    rt_ref = residence_times(ref, (start, stop), use_events=on.events, face_band=ref_band,
-                             lag_frames=on.lag_frames, direction=on.direction)
-    # a Markov prediction of an open riser has no other way in or out than the inlet and
-    # the outlet: every appearance is an entry, every disappearance an exit (its newcomers
-    # are shown in their first state's cell, rows above the inlet at a lag of many frames)
-    model_band = (pred.height if pred.boundary.is_open and pred.source == PREDICTION_SOURCE
-                  else on.band)
-    rt_mod = residence_times(pred, (start, stop), use_events=on.events, face_band=model_band,
+    rt_ref = residence_times(ref, (start, stop), use_events=on.events,
+                             face_band=reading_band(ref, on.band), lag_frames=on.lag_frames,
                              direction=on.direction)
+    rt_mod = residence_times(pred, (start, stop), use_events=on.events,
+                             face_band=reading_band(pred, on.band), direction=on.direction)
     for side, traj, rt in (("reference", ref, rt_ref), ("model", pred, rt_mod)):
         if rt.count == 0 and (not allow_empty or (side == "reference" and ref.boundary.is_open)):
             _refuse_empty(ref, pred, side, traj, (start, stop), on)
@@ -646,6 +640,29 @@ def _compared_run(traj: Trajectories, frames: slice, rt: ResidenceTimes,
         if tracers is not None:
             left &= np.isin(traj.ids, tracers)
     return edges, ComparedRun(traj, frames, rt, rtd, times, fraction, left)
+
+
+def reading_band(traj, band: float | None) -> float | None:
+    """The face band an open riser's file is read with: ``band`` (one cell of the model),
+    or for a Markov prediction the whole height: its Monte Carlo has no other way in or
+    out than the inlet and the outlet, so every appearance is an entry and every
+    disappearance an exit (its newcomers are shown in their first state's cell, rows above
+    the inlet's at a lag of many frames).
+
+    Parameters
+    ----------
+    traj : Trajectories
+        An open file (reference or prediction).
+    band : float or None
+        The band for a file of data (m).
+
+    Returns
+    -------
+    float or None
+    """
+    if traj.boundary.is_open and traj.source == PREDICTION_SOURCE:
+        return float(traj.height)
+    return band
 
 
 #: RTDs spanning fewer bins than this (1st to 99th percentile) are warned of as coarse

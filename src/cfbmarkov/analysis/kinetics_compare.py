@@ -626,7 +626,7 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
         fit the model's grid, a property is carried on an open riser, or the reference
         cannot be discretised on its states.
     """
-    from cfbmarkov.analysis.compare import _Basis
+    from cfbmarkov.analysis.compare import _Basis, reading_band
 
     model = check_kinetics_inputs(pred, kinetics)
     fields = _cell_fields(model, ref, warnings) if needs_cell_fields(kinetics) else None
@@ -681,12 +681,10 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
         if m["start"] == "reference" and stored is None:
             initial = _on_particles(ref_starts[maps.index(m)], ref.ids, pred.ids,
                                     m["initial"])
-        # a Markov prediction's every appearance is an entry and disappearance an exit
-        # (its newcomers are shown in their first state's cell), as its residences count
-        model_paths[name] = integrate_along_paths(
+        model_paths[name] = integrate_along_paths(     # read as its residences are
             pred_discrete, m["a"], m["b"], initial, entry_value=m["initial"],
             reset=m["reset"], name=name, direction=on.direction, stored=stored,
-            face_band=pred.height if pred_discrete.boundary == "open" else None)
+            face_band=reading_band(pred, None))
     unstored = [m["name"] for m in maps if m["name"] not in notes]
     if unstored:
         warnings.append(f"kinetics: the prediction stored no values of {', '.join(unstored)}; "
