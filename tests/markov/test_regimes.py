@@ -17,6 +17,7 @@ from cfbmarkov.markov import MarkovModel, fit_model
 from cfbmarkov.markov.regime_chain import regime_matrix
 from cfbmarkov.markov.regimes import DirectionRegimeCells, RegimeCells, regime_edges
 from cfbmarkov.markov.first_passage import exact_rtd
+from cfbmarkov.markov.model_summary import model_summary
 from cfbmarkov.markov.select import select_model
 from cfbmarkov.markov.spaces import state_space_from_attrs, state_space_from_name
 from cfbmarkov.trajectories import Trajectories
@@ -167,6 +168,30 @@ def test_regime_matrix_from_counts():
     counts[2, 2] = 1          # regime 0 -> 0
     g = regime_matrix(counts, space)
     np.testing.assert_allclose(g, [[0.25, 0.75], [0.0, 1.0]])   # regime 1 never left: stays
+
+
+def _two_regime_model(counts):
+    space = RegimeCells(2, 2, 1.0, 1.0, edges=[0.0])
+    rows = counts.sum(axis=1)
+    matrix = np.eye(8)
+    matrix[rows > 0] = counts[rows > 0] / rows[rows > 0, None]
+    return MarkovModel(transition_matrix=matrix, counts=counts, counts_up=np.zeros_like(counts),
+                       counts_down=np.zeros_like(counts), state_space=space, lag=0.01,
+                       estimator="paper", window=None, source="x.h5", frame_pairs=5)
+
+
+def test_summary_tells_a_regime_never_visited_from_one_never_left():
+    counts = np.zeros((8, 8), np.int64)
+    for cell in range(4):                    # regime 0 (even states) cycles through the cells
+        counts[2 * cell, 2 * ((cell + 1) % 4)] = 5
+    line = [s for s in model_summary(_two_regime_model(counts)).splitlines()
+            if "regime chain" in s][0]
+    assert line.endswith("(mean durations never left in the fitting window, "
+                         "never visited in the fitting window)"), line
+    counts[1, 1] = 4                         # regime 1 entered, its particles stay in it
+    line = [s for s in model_summary(_two_regime_model(counts)).splitlines()
+            if "regime chain" in s][0]
+    assert line.endswith("never left in the fitting window, never left in the fitting window)")
 
 
 def test_auto_considers_and_picks_the_regime_model(regime_run):

@@ -439,8 +439,7 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         g = model.regime_chain
         stay = ", ".join(f"{g[r, r]:.3f}" for r in range(g.shape[0]))
         lines.append(f"  regime chain: stays per lag {stay} (mean durations "
-                     + ", ".join(f"{model.lag / (1.0 - g[r, r]):.3g} s" if g[r, r] < 1.0
-                                 else "never left in the fitting window"
+                     + ", ".join(_regime_duration_text(model, g, r)
                                  for r in range(g.shape[0])) + ")")
     if model.coherence:
         lines.append(f"  coherent moves (the cluster model): coherence {model.coherence:.3f} "
@@ -628,3 +627,18 @@ def fitting_run_count(model) -> int:
     """The runs a model was fitted on: those of a pooled fit (``source`` a list), else 1."""
     source = getattr(model, "source", None)
     return len(source) if isinstance(source, (list, tuple)) and source else 1
+
+
+def _regime_duration_text(model: "MarkovModel", g: np.ndarray, regime: int) -> str:
+    """The mean duration of one regime of a regime model's chain G (lag / (1 - G_rr)), or
+    why it has none: a regime whose states no counted transition leaves was never visited
+    in the fitting window (its G_rr = 1 is a convention of
+    :func:`~cfbmarkov.markov.regime_chain.regime_matrix`); one whose transitions all stay
+    in it was never left."""
+    if g[regime, regime] < 1.0:
+        return f"{model.lag / (1.0 - g[regime, regime]):.3g} s"
+    if model.n_transitions:
+        states = model.state_space.regime_of(np.arange(model.state_space.n_states)) == regime
+        if not model.counts[states].any():
+            return "never visited in the fitting window"
+    return "never left in the fitting window"
