@@ -578,7 +578,8 @@ def test_the_throughput_line_names_a_reducible_chain():
     two = SimpleNamespace(estimator="mle", closed_classes=[np.arange(3), np.arange(3, 5)])
     line = _throughput_line(two, 1.5, 1.0)
     assert "%): the chain is reducible (2 closed classes" in line
-    assert "need not agree; coarser --cells" in line and "does not carry" not in line
+    assert "need not agree; coarser --cells" in line and "does not carry the flow" not in line
+    assert "no 'does not carry its own fitting window' line" in line    # keep it only so
     paper = SimpleNamespace(estimator="paper", closed_classes=two.closed_classes)
     assert "need not agree; the paper's estimator averages" in _throughput_line(paper, 1.5, 1.0)
     one = SimpleNamespace(estimator="mle", closed_classes=[np.arange(5)])

@@ -309,6 +309,8 @@ def test_a_class_whose_net_flow_runs_down_is_named_as_left_out(tmp_path, write_s
     assert len(left) == 1 and left[0].startswith(
         "1 of the chain's 3 closed classes (38 states, 33.3 % of the fitting window's "
         "particle-frames) have no net upward flow")
+    # coarser cells join the classes, kept only where they carry the fitting window
+    assert left[0].endswith("the finer cells' figures describe those that flow through")
     two = write_states(tmp_path / "two.h5", states[:, :2], columns=3, rows=38, width=0.09,
                        height=0.95, dt=0.025)
     rising = fit_model(two, CellGrid(3, 38, 0.09, 0.95), 0.025)

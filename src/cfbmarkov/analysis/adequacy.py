@@ -55,6 +55,7 @@ from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.discrete import DiscreteTrajectories, discretize
 from cfbmarkov.markov.estimate import estimator_from_name
+from cfbmarkov.markov.model_summary import CLOSED_CLASSES_ADVICE
 from cfbmarkov.observed.residence import net_flow_direction, residence_flux, residence_times
 from cfbmarkov.trajectories import opened
 
@@ -187,7 +188,7 @@ def _throughput_line(model, rt_mean: float, window_mean: float,
                 "weights the classes by their net entry flux while the throughput counts "
                 "every particle's time, in classes whose net flow runs the other way (left "
                 "out of the E(RT)) too, so the two need not "
-                f"agree{reason}; coarser --cells (fewer columns) join the classes")
+                f"agree{reason}; {CLOSED_CLASSES_ADVICE}")
     return (f"{head}: the chain does not carry the flow it was fitted on; {why}. The "
             f"window's own flow may itself lie far from the run's long run: {_ADVICE}")
 

@@ -27,6 +27,7 @@ from cfbmarkov._json import jsonable
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.discrete import discretize
 from cfbmarkov.markov.estimate import default_estimator, estimator_from_name
+from cfbmarkov.markov.model_summary import CLOSED_CLASSES_ADVICE
 from cfbmarkov.observed.residence import net_flow_direction, residence_flux, residence_times
 from cfbmarkov.trajectories import Trajectories
 
@@ -332,7 +333,7 @@ def verdict_text(result: SampleLength, states: str) -> str:
         return (f"not reached within {longest:g} s{said}: neither a longer run nor memory "
                 f"cures that: the chain has {result.closed_classes} closed classes (its "
                 "particles in some cells never reach others, as none did in the windows); "
-                "coarser --cells (fewer columns) join them")
+                + CLOSED_CLASSES_ADVICE)
     if steady and not drifting:
         return (f"not reached within {longest:g} s{said}: a longer run does not cure that; a "
                 f"state space {memory} does")

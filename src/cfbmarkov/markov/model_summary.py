@@ -19,6 +19,15 @@ DOWNWARD_LINE = ("residences counted downward: the fitting window's net solids f
                  "down")
 
 
+#: what a reducible chain's lines advise: coarser cells join its closed classes, but they
+#: mix columns the window's particles kept apart, so the coarser model is kept only where
+#: it carries its own fitting window; where it does not, the classes are the flow's own
+CLOSED_CLASSES_ADVICE = ("coarser --cells (fewer columns) join the classes but mix columns "
+                         "whose particles did not cross in the window: keep the coarser "
+                         "model only where fit prints no 'does not carry its own fitting "
+                         "window' line for it; where it does, the classes are the flow's "
+                         "own, and the finer cells' figures describe those that flow through")
+
 #: unresolved mass of an exact RTD above which its E(RT) and SD(RT) are warned about
 #: (``docs/definitions.md``, Exact RTD of a model)
 UNRESOLVED_LIMIT = 0.01
@@ -346,8 +355,7 @@ def left_out_classes_warning(model: "MarkovModel") -> str | None:
             f"{100 * share:.3g} % of the fitting window's particle-frames) have no net "
             f"{direction}ward flow through the boundary, so the exact RTD and the kinetics' "
             "exact answers, which weight each class by its net entry flux, leave their "
-            "particles out and describe the other classes alone; coarser --cells (fewer "
-            "columns) join the classes")
+            "particles out and describe the other classes alone; " + CLOSED_CLASSES_ADVICE)
 
 
 def trap_warning(model: "MarkovModel") -> str | None:
