@@ -311,8 +311,9 @@ class Trajectories(FrameTimes):
             hint = (" (a 3D dump imported with --drop-depth gives 2D positions)"
                     if self.dimensions == 3 and not three_d else
                     ": a periodic riser's passes cannot be followed across a particle's gap; "
-                    "import the tracks again with --boundary open (an open view: each gap an "
-                    "exit and an entry)"
+                    "import the tracks again with --boundary open where particles enter and "
+                    "leave through the riser's faces (each gap an exit and an entry; not "
+                    "where a tracer is out of view)"
                     if self.has_absences and not absent and not self.boundary.is_open else "")
             raise InputError(f"{self.path}: {purpose} cannot use {' and '.join(reasons)} yet{hint}")
 

@@ -153,6 +153,8 @@ def test_what_cannot_use_absent_particles_refuses_them_in_one_line(tmp_path, cap
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1, err
     assert f"{purpose} cannot use particles absent from some frames yet" in err
+    assert "--boundary open where particles enter and leave" in err
+    assert "not where a tracer is out of view" in err
     assert not out.exists()
 
 

@@ -80,8 +80,11 @@ def test_without_the_split_a_periodic_file_with_absences_is_refused_naming_the_w
     present[4] = False
     with Trajectories(_one_particle(tmp_path, [0] * 10, present)) as t:
         with pytest.raises(InputError, match=r"across particles' absences.*--states cells.*"
-                                             r"--boundary open"):
+                                             r"present throughout.*--boundary open only where"
+                                             r".*not where a tracer is out of view"):
             residence_times(t, (0, 9))
+        # a window of the file without the gap is read as it is
+        assert residence_times(t, (5, 9)).samples.size == 0
 
 
 def test_net_passes_count_each_particle_between_its_frames_present(tmp_path):

@@ -715,8 +715,11 @@ def residence_times(traj, window: tuple[float, float], use_events: bool = True,
                          "across particles' absences (a pass while absent is not seen): "
                          "`fit` with the states given (--states cells) fits the model, its "
                          "verdict and interval counting residences within each particle's "
-                         "stretches of presence; import with --boundary open where "
-                         "particles enter and leave through the riser's faces")
+                         "stretches of presence; a window or span of the file in which "
+                         "every particle is present throughout (or absent throughout) is "
+                         "read as it is; import with --boundary open only where particles "
+                         "enter and leave through the riser's faces (not where a tracer "
+                         "is out of view)")
     traj.require_supported("residence times", three_d=True,
                            absent=traj.boundary.is_open or split, open_boundary=True)
     start, stop = window_pair(window)
