@@ -527,6 +527,12 @@ def test_prediction_intervals_bracket_the_prediction_and_shrink_with_data(tmp_pa
         mixing_widths[name] = float(np.mean(upper - lower))
         own_lo, own_hi = saved["model"]["model_rt_mean_interval"]
         assert lo <= own_lo < own_hi <= hi          # the flow's variability only widens them
+        # the reference's own intervals: its window's residences' sampling, mean +- z SE
+        ref = saved["reference"]
+        r_lo, r_hi = ref["rt_mean_interval"]
+        assert r_lo < ref["rt_mean"] < r_hi and ref["rt_sd_interval"][0] < ref["rt_sd"]
+        z_se = 1.6448536 * ref["rt_sd"] / np.sqrt(ref["rt_count"])
+        assert 0.5 * (r_hi - r_lo) == pytest.approx(z_se, rel=1e-6)
         widths[name] = own_hi - own_lo
         if name == "long":
             half = compare(run, pred, window=(3.0, 5.0), output=tmp_path / "half",

@@ -173,6 +173,18 @@ def test_interval_verdict_says_outside_means_a_miss():
     assert "lies inside" in interval_verdict(0.83, 0.29, (0.81, 0.86), (0.28, 0.30))
     assert "SD(RT) 0.35 s above" in interval_verdict(0.83, 0.35, (0.81, 0.86), (0.28, 0.30))
     assert "consistent" in interval_verdict(0.83, 0.29, (0.81, 0.86), (0.28, 0.30))
+    # where the model's interval leaves the reference's sampling out, a reference figure
+    # whose own interval overlaps it is not told apart (not a miss)
+    own = ((0.70, 0.80), (0.50, 0.56))
+    apart = interval_verdict(0.74, 0.53, (0.78, 0.86), (0.28, 0.30), own)
+    assert "misses the reference's SD(RT) beyond" in apart and "E(RT) and SD(RT)" not in apart
+    assert ("its E(RT) is not told apart: the reference's own 90 % interval (E(RT) "
+            "0.7000-0.8000 s;") in apart
+    both = interval_verdict(0.74, 0.53, (0.78, 0.86), (0.54, 0.60), own, level=0.95)
+    assert both.endswith("overlaps it: the two are not told apart") and "95 %" in both
+    assert "misses" not in both
+    far = interval_verdict(0.74, 0.53, (0.81, 0.86), (0.28, 0.30), own)
+    assert far.endswith("misses the reference's E(RT) and SD(RT) beyond its uncertainty")
     # an interval wider than its centre holds almost anything: said, not called consistent
     wide = interval_verdict(2.0, 0.5, (0.0, 7.8), (0.0, 2.3))
     assert "consistent" not in wide and "200 % of its centre wide, so this says little" in wide

@@ -142,8 +142,11 @@ def cmd_compare(args) -> int:
         kind = " with the flow's variability" if with_flow else ""
         print(f"  {100 * summary['level']:g} % intervals{kind}: E(RT) "
               f"{_interval_text((m0, m1), dm)} s, SD(RT) {_interval_text((s0, s1), ds)} s{own}")
+        own_intervals = None
+        if not with_flow and reference.get("rt_mean_interval"):
+            own_intervals = (reference["rt_mean_interval"], reference["rt_sd_interval"])
         print("  " + interval_verdict(reference["rt_mean"], reference["rt_sd"],
-                                      (m0, m1), (s0, s1)))
+                                      (m0, m1), (s0, s1), own_intervals, summary["level"]))
     exact = summary.get("exact_reference")
     if exact:
         print(f"  (residence times from frames at the model's lag on both sides; the reference's "
@@ -214,7 +217,8 @@ def _interval_text(interval, digits: int = 4) -> str:
     return "-".join(outward_bounds(*(float(v) for v in interval), digits=digits))
 
 
-def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -> str:
+def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval,
+                     reference_intervals=None, level: float = 0.9) -> str:
     """One line saying whether the reference's E(RT) and SD(RT) lie inside the model's
     intervals, and what that means.
 
@@ -224,6 +228,13 @@ def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -
         The reference's E(RT) and SD(RT), s.
     mean_interval, sd_interval : (float, float)
         The model's intervals of E(RT) and SD(RT), s.
+    reference_intervals : ((float, float), (float, float)), optional
+        The reference's own intervals of E(RT) and SD(RT) (its residences' sampling), given
+        where the model's intervals leave the reference window's sampling out (no flow
+        term): a figure outside the model's interval whose own interval overlaps it is not
+        told apart from the model's, as :func:`kinetics_interval_line` judges an exit mean.
+    level : float, optional
+        The intervals' level, for the text.
 
     Returns
     -------
@@ -231,6 +242,13 @@ def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -
         ``the reference's E(RT) 0.7446 s lies below the model's interval, SD(RT) ...``.
     """
     places = [_place(rt_mean, mean_interval), _place(rt_sd, sd_interval)]
+    names = ("E(RT)", "SD(RT)")
+    apart = [False, False]          # outside the model's interval, inside the reference's own
+    if reference_intervals is not None:
+        for k, (own, model) in enumerate(zip(reference_intervals, (mean_interval, sd_interval))):
+            apart[k] = (places[k] != "inside" and own is not None
+                        and all(math.isfinite(v) for v in own)
+                        and own[0] <= model[1] and model[0] <= own[1])
     dm, ds = _digits(rt_mean, mean_interval), _digits(rt_sd, sd_interval)
     text = (f"the reference's E(RT) {rt_mean:.{dm}g} s lies {places[0]} the model's interval, "
             f"its SD(RT) {rt_sd:.{ds}g} s {places[1]}")
@@ -245,7 +263,17 @@ def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval) -
                            "verdict says why)")
         return text + (": the model's E(RT) and SD(RT) are consistent with the reference's "
                        "within their uncertainty")
-    missed = " and ".join(n for n, p in zip(("E(RT)", "SD(RT)"), places) if p != "inside")
+    missed = " and ".join(n for n, p, a in zip(names, places, apart) if p != "inside" and not a)
+    if any(apart):
+        owns = "; ".join(f"{n} {_interval_text(own, d)} s" for n, own, a, d in
+                         zip(names, reference_intervals, apart, (dm, ds)) if a)
+        told = (f"the reference's own {100 * level:g} % interval ({owns}; its residences' "
+                "sampling, which the model's interval leaves out here) overlaps it")
+        if not missed:
+            return text + f", but {told}: the two are not told apart"
+        return (text + f": the model misses the reference's {missed} beyond its uncertainty; "
+                f"its {' and '.join(n for n, a in zip(names, apart) if a)} is not told "
+                f"apart: {told}")
     return text + f": the model misses the reference's {missed} beyond its uncertainty"
 
 

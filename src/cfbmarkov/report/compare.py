@@ -108,6 +108,39 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
         return None
 
 
+def reference_sampling_intervals(samples, level: float):
+    """The reference's own intervals of E(RT) and SD(RT): its window's residences' sampling
+    alone, as though independent (mean +- z SD / sqrt(n), SD +- z SD / sqrt(2 (n - 1)), the
+    normal approximation the Monte Carlo's noise takes; ``docs/definitions.md``,
+    Intervals). `compare` judges with them where the model's intervals leave the
+    reference window's sampling out (no flow term): a reference figure outside the model's
+    interval whose own interval overlaps it is not told apart from the model's.
+
+    Parameters
+    ----------
+    samples : ndarray of float64, shape (K,)
+        The reference's residence times in the window (s).
+    level : float
+        Coverage, in (0, 1).
+
+    Returns
+    -------
+    ((float, float), (float, float)) or None
+        The intervals of E(RT) and SD(RT) (s, lower ends cut at 0); None for fewer than 2
+        residences.
+    """
+    from scipy.special import ndtri
+
+    samples = np.asarray(samples, dtype=np.float64)
+    n = samples.size
+    if n < 2:
+        return None
+    z = float(ndtri(0.5 * (1.0 + level)))
+    mean, sd = float(samples.mean()), float(samples.std(ddof=1))
+    h_mean, h_sd = z * sd / np.sqrt(n), z * sd / np.sqrt(2.0 * (n - 1))
+    return ([max(mean - h_mean, 0.0), mean + h_mean], [max(sd - h_sd, 0.0), sd + h_sd])
+
+
 def check_fitting_file(reference, prediction, required: bool = False) -> bool:
     """Refuse, before any work, a comparison whose intervals cannot use the model the
     prediction carries: its fitting file replaced since the fit or, where ``required``, not
@@ -421,6 +454,11 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
                     "lower": intervals.mixing[0].tolist(), "upper": intervals.mixing[1].tolist()}
             summary["model"]["model_rt_mean_interval"] = list(intervals.model_rt_mean)
             summary["model"]["model_rt_sd_interval"] = list(intervals.model_rt_sd)
+            own = reference_sampling_intervals(comparison.reference.residence.samples,
+                                               intervals.level)
+            if own is not None:
+                summary["reference"]["rt_mean_interval"], \
+                    summary["reference"]["rt_sd_interval"] = own
             if intervals.flow is None:
                 warnings.append("the intervals leave out the flow's variability between "
                                 "windows: the fitting window is too short to show it (it "

@@ -609,10 +609,12 @@ def plot_mixing(times_ref, frac_ref, times_model, frac_model, path, *,
         tb, (lower, upper) = np.asarray(band[0], float), np.asarray(band[1], float)
         if tb.shape == lower.shape == upper.shape:
             ax.fill_between(tb, lower, upper, color=MODEL_COLOUR, alpha=0.2, lw=0,
-                            label=f"model, {100 * float(band[2]):g} % interval")
+                            label=f"model's own {100 * float(band[2]):g} % band (the reference's "
+                                  "sampling left out)")
     if well_mixed is not None and np.isfinite(well_mixed):
         ax.axhline(well_mixed, color="0.4", ls=":", lw=1.0,
-                   label=f"fully mixed: (purple fraction)² = {well_mixed:.3f}")
+                   label=f"fully mixed, the left half's share as at the start: "
+                         f"(purple fraction)² = {well_mixed:.3f}")
     top = max(float(np.nanmax(fr, initial=0)), float(np.nanmax(fm, initial=0)), 0.05)
     ax.set_ylim(0.0, min(1.0, 1.15 * top))
     lo = min(tr.min(initial=np.inf), tm.min(initial=np.inf))
