@@ -176,6 +176,43 @@ def test_state_entered_in_the_last_frame_is_reported_and_connected_set_frees_it(
     assert MarkovModel.load(out).connected
 
 
+def test_maps_feed_no_cell_never_visited_and_runs_repeat_the_trap(tmp_path, write_states,
+                                                                   capsys):
+    """The ring of column 0 with a trap entered in column 1: column 1's bottom cell was
+    never visited, so Eq. (8)'s batch goes to column 0's alone (fed there it would stay in
+    place at every time); `maps` says so and, as `predict` does, repeats the trap."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.markov import fit_model
+    from cfbmarkov.markov.propagation import fed_inlet_cells, inlet_batch
+
+    t = np.arange(41)
+    states = np.stack([(t % 4) * 2, ((t + 2) % 4) * 2], axis=1)      # column 0 ring
+    states[-1, 1] = 5                                                 # row 2, column 1
+    path = write_states(tmp_path / "last.h5", states, columns=2, rows=4)
+    model = fit_model(path, CellGrid(2, 4, 1.0, 2.0), 1.0)
+    assert fed_inlet_cells(model).tolist() == [True, False]
+    np.testing.assert_array_equal(inlet_batch(model), np.eye(8)[0])
+    maps = model.batch_injection_maps([0.0, 1.0, 4.0])
+    assert maps[0, 0].tolist() == [1.0, 0.0]
+    assert maps[:, [0, 1, 3], 1].sum() == 0.0 and maps[2, 2, 1] > 0.0   # only the trap
+    saved = model.save(tmp_path / "m.h5")
+    assert main(["maps", str(saved), "--times", "1,2", "-o", str(tmp_path / "maps.png")]) == 0
+    err = capsys.readouterr().err
+    assert ("note: the batch is fed over 1 of the 2 bottom cells: cell (1,0) as column,row "
+            "was never visited in the fitting window") in err
+    assert "warning: the model: states entered but never left: 1 of 8" in err
+    assert main(["predict", str(saved), "--init", str(path), "--start", "0", "--duration",
+                 "2", "-q", "-o", str(tmp_path / "p.h5")]) == 0
+    assert "warning: the model: states entered but never left: 1 of 8" in \
+        capsys.readouterr().err
+    # a grid whose bottom cells were all visited: Eq. (8) as the paper gives it
+    ring = write_states(tmp_path / "ring.h5", np.stack([(t % 8), ((t + 3) % 8)], axis=1),
+                        columns=2, rows=4)
+    full = fit_model(ring, CellGrid(2, 4, 1.0, 2.0), 1.0)
+    assert fed_inlet_cells(full).all()
+    np.testing.assert_array_equal(inlet_batch(full), full.state_space.inlet_distribution())
+
+
 def test_every_residence_trapped_is_one_line_and_exit_2(tmp_path, write_states, capsys):
     """A particle rises through column 0 and passes the top into column 1 in the last
     frame: the only entry state is never left, so no residence can end."""

@@ -716,6 +716,22 @@ def cmd_maps(args) -> int:
               "batch over the bottom cells", file=sys.stderr)
     maps = model.batch_injection_maps(args.times, outflow=args.outflow)
     space = model.state_space
+    from cfbmarkov.markov.model_summary import cells_text, monte_carlo_warnings
+    from cfbmarkov.markov.propagation import fed_inlet_cells
+
+    import numpy as np
+
+    fed = fed_inlet_cells(model, "down" if downward else "up")
+    if not fed.all():
+        first = space.n_cells - space.cells_per_row if downward else 0
+        left_out = first + np.flatnonzero(~fed)
+        print(f"note: the batch is fed over {int(fed.sum())} of the {fed.size} "
+              f"{'top' if downward else 'bottom'} cells: {cells_text(space, left_out)} "
+              f"{'was' if left_out.size == 1 else 'were'} never visited in the fitting window, "
+              "where the chain would keep a share in place at every time (Eq. (8) spreads "
+              "it over the cells particles pass through)", file=sys.stderr)
+    for line in monte_carlo_warnings(model):
+        print(f"warning: the model: {one_line(line)}", file=sys.stderr)
     title = (f"Batch fed over the {'top cells' if downward else 'inlet'} at t = 0 "
              f"({space.describe()}"
              + (", summed over the depth" if space.depth_columns > 1 else "") + f", lag {model.lag:g} s"

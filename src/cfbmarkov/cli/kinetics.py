@@ -92,7 +92,8 @@ def _react(args) -> int:
     if args.init is not None:        # what its Monte Carlo inherits (an open riser's hold-up)
         from cfbmarkov.markov.model_summary import monte_carlo_warnings
 
-        verdict += [f"the model: {line}" for line in monte_carlo_warnings(model)]
+        verdict += [line for line in (f"the model: {text}" for text in
+                                      monte_carlo_warnings(model)) if line not in verdict]
     if args.passes and "carried" not in [p.start for p in kinetics.properties]:
         print("note: --passes follows carried properties (start = \"carried\"); this "
               "kinetics file has none, so it is left out", file=sys.stderr)

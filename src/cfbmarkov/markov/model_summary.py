@@ -166,10 +166,11 @@ def model_warnings(model: "MarkovModel") -> list[str]:
 
 
 def monte_carlo_warnings(model: "MarkovModel") -> list[str]:
-    """The model's lines that a Monte Carlo run of it (``predict``, ``react --init``)
-    repeats: an open riser's inflow and censored tracks
-    (:meth:`~cfbmarkov.markov.open_flow.OpenFlow.warnings`) and its hold-up
-    (:func:`hold_up_warning`).
+    """The model's lines that a run of its chain (``predict``, ``react --init``, ``maps``)
+    repeats: states entered but never left that keep their particles
+    (:func:`trap_warning`: the run piles particles up there), and an open riser's inflow
+    and censored tracks (:meth:`~cfbmarkov.markov.open_flow.OpenFlow.warnings`) and its
+    hold-up (:func:`hold_up_warning`).
 
     Parameters
     ----------
@@ -178,11 +179,13 @@ def monte_carlo_warnings(model: "MarkovModel") -> list[str]:
     Returns
     -------
     list of str
-        One line each, without indentation; empty for a periodic riser.
+        One line each, without indentation; empty where none applies.
     """
+    trapped = trap_warning(model)
+    lines = [] if trapped is None else [trapped]
     if model.open_flow is None:
-        return []
-    lines = [line.strip() for line in model.open_flow.warnings()]
+        return lines
+    lines += [line.strip() for line in model.open_flow.warnings()]
     hold_up = hold_up_warning(model)
     return lines if hold_up is None else lines + [hold_up]
 

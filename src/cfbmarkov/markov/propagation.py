@@ -184,7 +184,8 @@ def batch_injection_maps(model: "MarkovModel", times: Sequence[float], outflow: 
 
 def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     """The batch of Eq. (8) as a state vector: 1/m in each of the m bottom cells (m d with
-    depth columns), each cell's share split over its states (a state space with memory has
+    depth columns; the cells the fitting window never visited left out and m counting the
+    others, :func:`fed_inlet_cells`), each cell's share split over its states (a state space with memory has
     several a cell) as the fitting window's particles entered them through the inlet (the
     landings of their passes up through the top, ``counts_up``), so that a batch fed over
     the inlet enters rising as particles do; on an open riser as they entered through its
@@ -214,9 +215,12 @@ def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     first = space.n_cells - per_row if top else 0
     row = cell >= first if top else cell < per_row          # the cells fed
     place = cell - first                                    # their place in the row
+    fed = fed_inlet_cells(model, direction)
+    row &= fed[np.clip(place, 0, per_row - 1)]
+    cells_fed = max(int(fed.sum()), 1)
     states_per_cell = np.bincount(place[row], minlength=per_row)
     batch = np.zeros(model.n_states)
-    batch[row] = 1.0 / per_row / states_per_cell[place[row]]   # even (Eq. 8 at the bottom)
+    batch[row] = 1.0 / cells_fed / states_per_cell[place[row]]   # even (Eq. 8 at the bottom)
     if states_per_cell.max(initial=0) <= 1:
         return batch                             # one state a cell: nothing to split
     if model.open_flow is not None:              # the entries through the inlet, per state
@@ -229,5 +233,39 @@ def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     per_cell = np.bincount(place[row], weights=landings[row], minlength=per_row)
     seen = np.flatnonzero(row)
     seen = seen[per_cell[place[seen]] > 0]
-    batch[seen] = (1.0 / per_row) * landings[seen] / per_cell[place[seen]]
+    batch[seen] = (1.0 / cells_fed) * landings[seen] / per_cell[place[seen]]
     return batch
+
+
+def fed_inlet_cells(model: "MarkovModel", direction: str = "up") -> np.ndarray:
+    """Which cells of the row :func:`inlet_batch` feeds take a share of the batch: those
+    the fitting window's particles visited. A cell none of whose states was visited (no
+    transition from it and none into it in the window) has no row in the chain beyond
+    the convention that keeps its particles in place (P_ii = 1), so a share fed there
+    would stay there at every time; it is left out and the batch spread over the others
+    (all of them where none was visited).
+
+    Parameters
+    ----------
+    model : MarkovModel
+    direction : {"up", "down"}, optional
+        The bottom row (up) or, for a periodic riser's downward residences, the top row.
+
+    Returns
+    -------
+    ndarray of bool, shape (cells_per_row,)
+        Per cell of the row, across then depth (as :attr:`StateSpace.cells_per_row`
+        counts them): fed or not.
+    """
+    space = model.state_space
+    per_row = space.cells_per_row
+    first = space.n_cells - per_row if direction == "down" and model.open_flow is None else 0
+    never = np.setdiff1d(model.unvisited_states, model.entered_never_left)
+    visited = np.ones(space.n_cells, bool)
+    if never.size:
+        seen = np.zeros(space.n_cells, bool)
+        others = np.setdiff1d(np.arange(model.n_states), never)
+        seen[space.cell_of_state[others]] = True
+        visited = seen
+    fed = visited[first:first + per_row]
+    return fed if fed.any() else np.ones(per_row, bool)
