@@ -92,6 +92,25 @@ def test_mixing_rms():
     assert mixing_rms([15.0, 20.0], [0.5, 0.3], [15.0, 20.0 + 1e-12], [0.5, 0.3]) == 0.0
 
 
+def test_mixing_rms_weights_frames_by_their_tracers():
+    """An open riser's frames weigh as the tracers still present: the last frame's few
+    tracers move the RMS little; a weight of 0 leaves a frame out, and the frames
+    compared are counted."""
+    times = [0.0, 1.0, 2.0, 3.0]
+    reference = [0.5, 0.4, 0.3, 0.2]
+    model = [0.5, 0.5, 0.3, 0.9]           # 0.1 off at 1 s, 0.7 off at 3 s
+    plain, n = mixing_rms(times, reference, times, model, frames=True)
+    assert n == 4 and plain == pytest.approx(np.sqrt((0.01 + 0.49) / 4))
+    weighted = mixing_rms(times, reference, times, model, [100, 100, 90, 2])
+    assert weighted == pytest.approx(np.sqrt((100 * 0.01 + 2 * 0.49) / 292))
+    assert weighted < plain / 3
+    assert mixing_rms(times, reference, times, model, [1, 1, 1, 0], frames=True) == \
+        (pytest.approx(np.sqrt(0.01 / 3)), 3)
+    assert mixing_rms(times, [0.5, 0.4, np.nan, np.nan], times, model, frames=True)[1] == 2
+    with pytest.raises(InputError, match="weights"):
+        mixing_rms(times, reference, times, model, [1, 1, -1, 1])
+
+
 def test_mixing_rms_takes_a_time_within_round_off_of_a_frame_as_that_frame():
     """An open riser's reference curve defined up to 0.02 s: a prediction's time one ulp
     above it (2.2800000000000002 for 2.28, as a run's times accumulate) is that frame, not

@@ -303,6 +303,20 @@ def test_a_memory_model_says_which_particles_it_cannot_start(tmp_path):
     said = [w for w in summary["warnings"] if "the prediction started" in w]
     assert said and "the mixing curves follow those it started, on both sides" in said[0]
     assert summary["mixing_rms"] == summary["mixing_rms"]        # a number, not NaN
+    # the frames weigh as the tracers still present on both sides (the fewer of the two)
+    from cfbmarkov.analysis.mixing import mixing_curve_of
+    from cfbmarkov.trajectories import Trajectories
+
+    with Trajectories(run) as ref, Trajectories(pred) as mod:
+        tracers = mod.ids[mod.present(mod.window(2.5, 3.9).start)]
+        t_ref, f_ref, n_ref = mixing_curve_of(ref, (2.5, 3.9), tracers=tracers, counts=True)
+        t_mod, f_mod, n_mod = mixing_curve_of(mod, (2.5, 3.9), tracers=tracers, counts=True)
+    assert n_mod[0] == n_ref[0] == tracers.size and n_mod[-1] < n_mod[0]
+    weights = np.minimum(n_mod, n_ref)
+    both = np.isfinite(f_ref) & np.isfinite(f_mod) & (weights > 0)
+    hand = np.sqrt(np.sum(weights[both] * (f_mod[both] - f_ref[both]) ** 2) / weights[both].sum())
+    assert summary["mixing_rms"] == pytest.approx(hand, rel=1e-9)
+    assert summary["mixing_frames"] == both.sum()
 
 
 def test_a_memory_space_counts_the_entries_where_the_particles_were_first_seen(tmp_path):

@@ -62,6 +62,8 @@ class ComparedRun:
         the left tracer group and lie at x < W/2.
     left_group : numpy.ndarray of bool, shape (N,)
         The left tracer group (x < W/2 in the window's first frame), in the file's order.
+    mixing_tracers : numpy.ndarray of int64, shape (T,), or None
+        The tracers present at each frame of the mixing curve (an open riser's leave).
     """
 
     __repr__ = compact_repr   # arrays by their shape: a notebook's echo stays short
@@ -73,6 +75,7 @@ class ComparedRun:
     mixing_times: np.ndarray
     mixing_fraction: np.ndarray
     left_group: np.ndarray
+    mixing_tracers: np.ndarray | None = None
 
     @property
     def left_group_fraction(self) -> float:
@@ -244,7 +247,7 @@ class RunComparison:
             "rtd_bins": {"from": 0.0, "to": float(self.edges[-1]),
                          "count": int(self.edges.size - 1)},
             "exact_events": {"reference": ref.exact, "model": mod.exact},
-            "mixing_frames": int(self.model.mixing_times.size),
+            "mixing_frames": mixing_frames_compared(self.reference, self.model),
             "same_purple_particles": bool(self.same_tracer_groups),
             "same_tracer_groups": bool(self.same_tracer_groups),
             "model_columns": self.model_columns,
@@ -633,13 +636,54 @@ def _compared_run(traj: Trajectories, frames: slice, rt: ResidenceTimes,
     mixing curve and its left tracer group (of an open riser: among the particles present
     at the window start, or the ids ``tracers`` among them)."""
     edges, rtd = rtd_histogram(rt.samples, bin_width, window_length=window[1] - window[0])
-    times, fraction = mixing_curve_of(traj, window, tracers=tracers)
+    times, fraction, present = mixing_curve_of(traj, window, tracers=tracers, counts=True)
     left = left_tracer_group(traj.positions(frames.start)[:, 0], 0.5 * traj.width)
     if traj.boundary.is_open:      # the tracers: the particles present at the window start
         left = left & traj.present(frames.start)
         if tracers is not None:
             left &= np.isin(traj.ids, tracers)
-    return edges, ComparedRun(traj, frames, rt, rtd, times, fraction, left)
+    return edges, ComparedRun(traj, frames, rt, rtd, times, fraction, left, present)
+
+
+def mixing_weights(reference: ComparedRun, model: ComparedRun) -> np.ndarray | None:
+    """The weight of each of the model's frames in the mixing RMS: None (equal weights)
+    where every tracer stays (a periodic riser); on an open riser, where tracers leave and
+    each curve is a fraction of those still present, the smaller of the two sides' tracer
+    counts at that frame (the reference's at its frame nearest in time), so that the last
+    frames, whose few tracers make the curves' noise, weigh as little as they tell
+    (inverse-variance weighting of a fraction of n tracers; ``docs/definitions.md``,
+    Mixing RMS).
+
+    Parameters
+    ----------
+    reference, model : ComparedRun
+        The two sides, with their ``mixing_tracers``.
+
+    Returns
+    -------
+    ndarray of float64, shape (T,), or None
+    """
+    if reference.mixing_tracers is None or model.mixing_tracers is None:
+        return None
+    ref_count = np.asarray(reference.mixing_tracers, dtype=np.float64)
+    mod_count = np.asarray(model.mixing_tracers, dtype=np.float64)
+    if (np.all(ref_count == ref_count[0]) and np.all(mod_count == mod_count[0])
+            and not (reference.traj.boundary.is_open or model.traj.boundary.is_open)):
+        return None
+    t_ref = np.asarray(reference.mixing_times, dtype=np.float64)
+    nearest = np.clip(np.searchsorted(t_ref, model.mixing_times), 0, t_ref.size - 1)
+    before = np.clip(nearest - 1, 0, t_ref.size - 1)
+    closer = np.where(np.abs(t_ref[before] - model.mixing_times)
+                      < np.abs(t_ref[nearest] - model.mixing_times), before, nearest)
+    return np.minimum(mod_count, ref_count[closer])
+
+
+def mixing_frames_compared(reference: ComparedRun, model: ComparedRun) -> int:
+    """How many of the model's frames the mixing RMS compares: those where both curves are
+    defined (an open riser's is undefined once its tracers have all left) and, on an open
+    riser, where both sides still hold a tracer (:func:`mixing_weights`)."""
+    return mixing_rms(reference.mixing_times, reference.mixing_fraction, model.mixing_times,
+                      model.mixing_fraction, mixing_weights(reference, model), frames=True)[1]
 
 
 def reading_band(traj, band: float | None) -> float | None:
@@ -706,7 +750,8 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
                         "on the other")
     t_ref, f_ref = reference.mixing_times, reference.mixing_fraction
     t_mod, f_mod = model.mixing_times, model.mixing_fraction
-    rms = mixing_rms(t_ref, f_ref, t_mod, f_mod)
+    weights = mixing_weights(reference, model)
+    rms = mixing_rms(t_ref, f_ref, t_mod, f_mod, weights)
     if not np.isfinite(rms):
         ends = [f"{name} at {times[~np.isfinite(curve)][0]:g} s"
                 for name, times, curve in (("reference", t_ref, f_ref), ("model", t_mod, f_mod))

@@ -91,8 +91,8 @@ def mixing_curve(x, half_width: float, left_group: np.ndarray | None = None) -> 
     return np.count_nonzero(x[:, left_group] < half_width, axis=1) / n
 
 
-def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=None
-                    ) -> tuple[np.ndarray, np.ndarray]:
+def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=None,
+                    counts: bool = False):
     """Mixing curve of a trajectory file over a window.
 
     Parameters
@@ -107,6 +107,8 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=
     tracers : ndarray of int64, optional
         A file with absences (an open riser): the ids of the tracers among the particles
         present at the window's first frame (default all of them).
+    counts : bool, optional
+        Also return the tracers present at each frame.
 
     Returns
     -------
@@ -114,6 +116,9 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=
         Frame times, s.
     fraction : numpy.ndarray, shape (T,)
         The mixing curve of :func:`mixing_curve` (dimensionless).
+    present : numpy.ndarray of int64, shape (T,)
+        With ``counts``: the tracers present at each frame (every particle of a file
+        without absences).
 
     Raises
     ------
@@ -130,8 +135,9 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=
     frames = traj.window(*window_pair(window))
     half = 0.5 * traj.width
     if traj.has_absences:
-        return _mixing_of_present(traj, frames, half, block,
-                                  None if tracers is None else np.isin(traj.ids, tracers))
+        times, fraction, present = _mixing_of_present(
+            traj, frames, half, block, None if tracers is None else np.isin(traj.ids, tracers))
+        return (times, fraction, present) if counts else (times, fraction)
     left_group = None
     times, parts = [], []
     for t, positions, _ in traj.iter_frames(frames, block=block):
@@ -140,7 +146,10 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=
             left_group = x[0] < half
         times.append(t)
         parts.append(mixing_curve(x, half, left_group))
-    return np.concatenate(times).astype(np.float64), np.concatenate(parts)
+    times, fraction = np.concatenate(times).astype(np.float64), np.concatenate(parts)
+    if counts:
+        return times, fraction, np.full(times.size, traj.n_particles, dtype=np.int64)
+    return times, fraction
 
 
 def _mixing_of_present(traj, frames: slice, half: float, block: int, chosen=None
@@ -148,9 +157,10 @@ def _mixing_of_present(traj, frames: slice, half: float, block: int, chosen=None
     """The mixing curve where particles come and go (``docs/definitions.md``, Mixing in an
     open riser): the particles present at the window's first frame (those of them marked in
     ``chosen``, where given) are the tracers; at each frame the fraction of those still
-    present that belong to the left group and lie at x < W/2 (NaN once none is left)."""
+    present that belong to the left group and lie at x < W/2 (NaN once none is left), and
+    the tracers present at each frame."""
     cohort = left = None
-    times, parts = [], []
+    times, parts, present_counts = [], [], []
     for i in range(frames.start, frames.stop, block):
         rows = slice(i, min(i + block, frames.stop))
         x = traj.positions(rows)[..., 0]
@@ -163,8 +173,10 @@ def _mixing_of_present(traj, frames: slice, half: float, block: int, chosen=None
         count = still.sum(axis=1)
         parts.append(np.divide(inside.sum(axis=1), count, out=np.full(count.size, np.nan),
                                where=count > 0))
+        present_counts.append(count.astype(np.int64))
         times.append(traj.times[rows])
-    return np.concatenate(times).astype(np.float64), np.concatenate(parts)
+    return (np.concatenate(times).astype(np.float64), np.concatenate(parts),
+            np.concatenate(present_counts))
 
 
 def _left_states(space) -> np.ndarray:

@@ -114,11 +114,14 @@ def minkowski_distance(e, f, order: float = 2.0) -> float:
     return scale * float(np.sum((d / scale) ** order) ** (1.0 / order))
 
 
-def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
+def mixing_rms(ref_times, ref_fraction, model_times, model_fraction, weights=None,
+               frames: bool = False):
     """RMS difference of two mixing curves on the model's frames (a fraction).
 
     The reference is evaluated at the model's frame times by linear interpolation; the
-    model's times must lie inside the reference's range (to round-off).
+    model's times must lie inside the reference's range (to round-off). With ``weights``
+    each frame's squared difference is weighted (an open riser's: the tracers still
+    present, whose sampling noise in the curve falls as one over their count).
 
     Parameters
     ----------
@@ -130,13 +133,20 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
         Frame times of the model curve, s.
     model_fraction : array_like, shape (T,)
         The model mixing curve (fraction of all particles, -).
+    weights : array_like, shape (T,), optional
+        Non-negative weight of each of the model's frames (default equal weights).
+    frames : bool, optional
+        Also return how many of the model's frames were compared.
 
     Returns
     -------
     float
-        sqrt(mean((model - reference)^2)) over the model's frames, a fraction of all
-        particles; frames where a curve is NaN (an open riser whose tracers have all left)
-        are skipped, and NaN is returned when none is left to compare.
+        sqrt(mean((model - reference)^2)) over the model's frames, weighted where
+        ``weights`` are given (sum w d^2 / sum w), a fraction of all particles; frames
+        where a curve is NaN (an open riser whose tracers have all left) or whose weight
+        is 0 are skipped, and NaN is returned when none is left to compare.
+    int
+        With ``frames``: the frames compared.
 
     Raises
     ------
@@ -156,6 +166,10 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
         raise InputError("mixing curve times and fractions differ in length")
     if rt.size == 0 or mt.size == 0:
         raise InputError("mixing RMS of an empty curve")
+    w = (np.ones(mt.size) if weights is None
+         else np.asarray(weights, dtype=np.float64).reshape(-1))
+    if w.size != mt.size or not np.all(np.isfinite(w)) or np.any(w < 0):
+        raise InputError("mixing RMS weights must be finite, non-negative, one per model frame")
     if np.any(np.diff(rt) <= 0):
         raise InputError("reference mixing curve times do not increase")
     span = max(rt[-1] - rt[0], abs(rt[-1]), 1.0)
@@ -174,15 +188,17 @@ def mixing_rms(ref_times, ref_fraction, model_times, model_fraction) -> float:
     nearest = np.where(np.abs(rt[above] - at) < np.abs(rt[below] - at), above, below)
     at = np.where(np.abs(rt[nearest] - at) <= tol, rt[nearest], at)
     finite = np.isfinite(rf)
-    if finite.all() and np.isfinite(mf).all():
-        return float(np.sqrt(np.mean((mf - np.interp(at, rt, rf)) ** 2)))
+    if weights is None and finite.all() and np.isfinite(mf).all():
+        rms = float(np.sqrt(np.mean((mf - np.interp(at, rt, rf)) ** 2)))
+        return (rms, int(mt.size)) if frames else rms
     # an open riser: a curve is NaN where none of its tracers is left; only frames where
     # both are defined (the reference on both sides of the time) are compared
-    ok = np.isfinite(mf) & (np.interp(at, rt, finite.astype(np.float64)) == 1.0)
+    ok = np.isfinite(mf) & (np.interp(at, rt, finite.astype(np.float64)) == 1.0) & (w > 0)
     if not ok.any():
-        return float("nan")
+        return (float("nan"), 0) if frames else float("nan")
     ref_at_model = np.interp(at[ok], rt[finite], rf[finite])
-    return float(np.sqrt(np.mean((mf[ok] - ref_at_model) ** 2)))
+    rms = float(np.sqrt(np.average((mf[ok] - ref_at_model) ** 2, weights=w[ok])))
+    return (rms, int(ok.sum())) if frames else rms
 
 
 def rtd_span(probability, tail: float = 0.01) -> int:
