@@ -400,6 +400,8 @@ def test_an_in_sample_window_and_a_baseline_of_another_length_are_warned(tmp_pat
         said = saved["warnings"]
         assert sum(overlap in line for line in said) == inside, said
         assert sum(length in line for line in said) == other_length, said
+        assert sum("nor is the model's own error on its fitting window" in line
+                   for line in said) == other_length
         assert not any("mixing curves stay flat" in line for line in said)
     capsys.readouterr()
 

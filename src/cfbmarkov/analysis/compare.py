@@ -455,7 +455,10 @@ def _fitting_window_warnings(ref: Trajectories, pred: Trajectories,
                     + " and ".join(f"{x:g}" for x in lengths) + " s")
         lines.append(f"the persistence baseline's {said} long and the compared one "
                      f"{length:g} s: a window sees residences up to its own length, so the "
-                     "baseline's RTD is not like for like; fit on "
+                     "baseline's RTD is not like for like, nor is the model's own error on its "
+                     "fitting window (model_on_fitting_window, the prediction's residences "
+                     "against that window's), which carries the lengths' difference too; "
+                     "fit on "
                      f"{'a window' if runs is None else 'windows'} as long as the compared "
                      "one for a fair baseline")
     return lines
