@@ -308,6 +308,35 @@ def test_custom_law_integrates_like_the_linear_one():
         exact_kinetics(model, custom)
 
 
+def test_too_few_rk4_substeps_are_warned_while_the_values_are_finite():
+    """A custom first-order law with k lag / substeps beyond RK4's stability limit (about
+    2.8) grows its values by orders of magnitude each lag while they stay finite: warned
+    from the step-doubling check; with enough sub-steps, not warned, and the values equal
+    the exact linear law's."""
+    import warnings
+
+    from cfbmarkov.errors import CfbmarkovWarning
+    from cfbmarkov.kinetics import Constant, Custom
+
+    model = periodic_model()
+    states, laps = model.monte_carlo(np.array([0, 1] * 20, np.int32), 12, seed=4)
+    rate = 4.0 * 8 / LAG          # k lag / substeps = 4 with 8 sub-steps
+    few = Kinetics((Property("v", Custom(first_order, ("rate",), substeps=8),
+                             {"rate": Constant(rate)}),)).per_state(model.state_space)
+    with pytest.warns(CfbmarkovWarning, match=r"with 8 sub-steps and with 16 differ up to "
+                                              r".* the sub-steps are too few"):
+        values = run_properties(few, LAG, states, laps, periodic=True)
+    assert np.isfinite(values).all() and np.abs(values).max() > 10.0     # finite, wrong
+    enough = Kinetics((Property("v", Custom(first_order, ("rate",), substeps=400),
+                                {"rate": Constant(rate)}),)).per_state(model.state_space)
+    exact = kinetics([rate, rate]).per_state(model.state_space)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CfbmarkovWarning)
+        rk4 = run_properties(enough, LAG, states, laps, periodic=True)
+    np.testing.assert_allclose(rk4, run_properties(exact, LAG, states, laps, periodic=True),
+                               atol=1e-6)
+
+
 def test_a_coupled_custom_law_declared_too_early_is_refused_and_divergence_warned():
     """An Arrhenius-like rate of a custom temperature declared after it reads NaN: refused
     before the run, naming the property and what it can read (not a bare SystemError from

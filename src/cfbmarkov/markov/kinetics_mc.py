@@ -272,8 +272,87 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
                      int(law.substeps), bool(reset[q]), initial[q], float(sk.initial[q]),
                      bool(periodic), int(entry_lags), int(q))
         in_pieces(4 * int(law.substeps), partial(_custom_piece, arguments, top, values))
-        _warn_not_finite(sk.names[q], values[q], states >= 0)
+        if not _warn_not_finite(sk.names[q], values[q], states >= 0):
+            _warn_too_few_substeps(sk, int(q), float(lag), states, values)
     return values
+
+
+#: the relative difference over one lag between RK4 with ``substeps`` and with twice as
+#: many, above which a custom law's sub-steps are said to be too few
+SUBSTEP_TOLERANCE = 1e-3
+#: particle-lags a custom law's sub-steps are checked on (every k-th of those held)
+SUBSTEP_SAMPLES = 4096
+
+
+@nb.njit(cache=True)
+def _rk4_lag(function, v, row, others, lag, substeps):
+    """One lag of ``substeps`` classical RK4 steps of dv/dt = function(v, row, others)."""
+    h = lag / substeps
+    for _ in range(substeps):
+        k1 = function(v, row, others)
+        k2 = function(v + 0.5 * h * k1, row, others)
+        k3 = function(v + 0.5 * h * k2, row, others)
+        k4 = function(v + h * k3, row, others)
+        v = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return v
+
+
+@nb.njit(cache=True)
+def _step_doubling(function, start, rows, others, lag, substeps):
+    """The largest relative difference, over the particle-lags given, between one lag of
+    RK4 with ``substeps`` steps and with twice as many (Numba kernel); inf where either
+    is not finite from a finite start."""
+    worst = 0.0
+    for i in range(start.size):
+        v = start[i]
+        if not np.isfinite(v):
+            continue
+        coarse = _rk4_lag(function, v, rows[i], others[i], lag, substeps)
+        fine = _rk4_lag(function, v, rows[i], others[i], lag, 2 * substeps)
+        if not (np.isfinite(coarse) and np.isfinite(fine)):
+            return np.inf
+        scale = max(abs(fine), abs(v), 1e-300)
+        worst = max(worst, abs(coarse - fine) / scale)
+    return worst
+
+
+def _warn_too_few_substeps(sk, q: int, lag: float, states: np.ndarray,
+                           values: np.ndarray) -> None:
+    """Warn where a custom law's RK4 sub-steps are too few for its rates: on up to
+    :data:`SUBSTEP_SAMPLES` particle-lags of the run (a particle present at both ends, its
+    value, state and the other properties at the lag's start as the run held them), one
+    lag with ``substeps`` steps and one with twice as many differ by more than
+    :data:`SUBSTEP_TOLERANCE` (relative). An unstable step (k lag / substeps beyond about
+    2.8 for a rate k) grows the values by orders of magnitude per lag while they stay
+    finite for many lags; the step-doubling difference shows it from the first lag
+    (E. Hairer, S. P. Norsett and G. Wanner, Solving Ordinary Differential Equations I,
+    Springer 1993, Ch. II.4: step-size control by step doubling)."""
+    import warnings
+
+    from cfbmarkov.errors import CfbmarkovWarning
+
+    law = sk.laws[q]
+    held = (states[:-1] >= 0) & (states[1:] >= 0)
+    frames, particles = np.nonzero(held)
+    if not frames.size:
+        return
+    every = max(1, frames.size // SUBSTEP_SAMPLES)
+    frames, particles = frames[::every], particles[::every]
+    parameters = np.ascontiguousarray(sk.parameters[q], dtype=np.float64)
+    rows = np.ascontiguousarray(parameters[states[frames, particles]])
+    others = np.ascontiguousarray(values[:, frames, particles].T)
+    start = np.ascontiguousarray(values[q, frames, particles])
+    worst = _step_doubling(law.function, start, rows, others, float(lag), int(law.substeps))
+    if worst > SUBSTEP_TOLERANCE:
+        said = (f"up to {worst:.3g} (relative)" if np.isfinite(worst)
+                else "so much that one of them is not finite")
+        warnings.warn(f"property {sk.names[q]}: over one lag its RK4 integration with "
+                      f"{law.substeps} sub-steps and with {2 * law.substeps} differ {said} "
+                      f"on {frames.size} particle-lags of the run: the sub-steps are "
+                      "too few for its rates (RK4 is unstable beyond a rate times the "
+                      "sub-step of about 2.8, and inaccurate well before), so its values "
+                      "may be far off while finite; give more (Custom(..., substeps=...))",
+                      CfbmarkovWarning, stacklevel=3)
 
 
 def _custom_piece(arguments, top, values, first, last) -> None:
@@ -316,9 +395,10 @@ def _check_custom_start(sk, q: int, states: np.ndarray) -> None:
                          "properties it reads before it, and give it a finite rate there")
 
 
-def _warn_not_finite(name: str, values: np.ndarray, present: np.ndarray) -> None:
+def _warn_not_finite(name: str, values: np.ndarray, present: np.ndarray) -> bool:
     """Warn where a custom law's values are not finite for particles present (a rate
-    function that diverges): they are stored, and every figure from them is NaN."""
+    function that diverges): they are stored, and every figure from them is NaN. Returns
+    whether it warned."""
     import warnings
 
     from cfbmarkov.errors import CfbmarkovWarning
@@ -330,6 +410,7 @@ def _warn_not_finite(name: str, values: np.ndarray, present: np.ndarray) -> None
                       "function diverges (a rate growing with the value) or the RK4 "
                       "sub-steps are too few for it (Custom(..., substeps=...))",
                       CfbmarkovWarning, stacklevel=3)
+    return bool(bad)
 
 
 @nb.njit(cache=True)
