@@ -806,6 +806,9 @@ def test_react_monte_carlo_prints_its_bed_means(fitted, tmp_path, capsys):
     with _h5py.File(out, "r") as f:
         last = f["properties"]["X"][-1]
     assert "X 0 at 0.5 s" in line and f"{np.nanmean(last):.6g} at 1.5 s" in line
+    present = last[np.isfinite(last)]
+    se = present.std(ddof=1) / np.sqrt(present.size)
+    assert f"(standard error {se:.2g} over its {present.size} particles)" in line
     assert lines[-1] == str(out)
 
 

@@ -311,7 +311,9 @@ def _span(bounds) -> str:
 
 def _monte_carlo_bed_means(prediction, names) -> dict:
     """The Monte Carlo's bed mean of each property at its first and last frames, over the
-    particles present: ``{name: {"times": [t0, t1], "bed_mean": [m0, m1]}}``."""
+    particles present, with its standard error (SD / sqrt(n) of the frame's particles, as
+    independent draws) and the particle count: ``{name: {"times": [t0, t1], "bed_mean":
+    [m0, m1], "bed_mean_se": [s0, s1], "particles": [n0, n1]}}``."""
     import numpy as np
 
     from cfbmarkov.trajectories import Trajectories
@@ -321,8 +323,13 @@ def _monte_carlo_bed_means(prediction, names) -> dict:
         times = [float(pred.times[0]), float(pred.times[-1])]
         for name in names:
             values = [pred.property_values(name, k)[pred.present(k)] for k in (0, -1)]
-            out[name] = {"times": times, "bed_mean": [float(np.nanmean(v)) if v.size
-                                                      else float("nan") for v in values]}
+            values = [v[np.isfinite(v)] for v in values]
+            out[name] = {"times": times,
+                         "bed_mean": [float(v.mean()) if v.size else float("nan")
+                                      for v in values],
+                         "bed_mean_se": [float(v.std(ddof=1) / np.sqrt(v.size)) if v.size > 1
+                                         else float("nan") for v in values],
+                         "particles": [int(v.size) for v in values]}
     return out
 
 
@@ -330,7 +337,8 @@ def _print_monte_carlo(prediction, names) -> None:
     """The Monte Carlo's bed means at its first and last frames (over the particles
     present), and where to judge it: its exits carry the start's transient."""
     parts = [f"{name} {m['bed_mean'][0]:.6g} at {m['times'][0]:g} s, {m['bed_mean'][1]:.6g} "
-             f"at {m['times'][1]:g} s"
+             f"at {m['times'][1]:g} s (standard error {m['bed_mean_se'][1]:.2g} over its "
+             f"{m['particles'][1]} particles)"
              for name, m in _monte_carlo_bed_means(prediction, names).items()]
     print(f"Monte Carlo, bed mean over the particles present: {'; '.join(parts)} (its "
           "particles start from the values at the start, so a window shorter than a few "
