@@ -118,13 +118,14 @@ def test_the_sentence_names_where_the_chain_loses():
     assert "lies inside the chain's interval" in text and "in 2 of 2 comparisons" in text
     text = verdict_sentence("X", [row("a", 3.0, 1.0, 0.006), row("b", 6.0, 1.0, 0.003),
                                   row("c", 0.5, 1.0)])
-    assert "in 1 of 3 comparisons: the chain is consistent" in text
+    assert "in 1 of 3 comparisons: there the chain is consistent" in text
     assert "in 1 it lies outside but the reference's own interval overlaps" in text
     assert "in 1 the chain misses it beyond its uncertainty" in text
     # an interval of the Monte Carlo noise alone draws no verdict, as compare says
     text = verdict_sentence("X", [row("a", 3.0, 1.0, 0.006), row("b", 6.0, 1.0, 0.003,
                                                                  "Monte Carlo noise only")])
     assert "in 0 of 1 comparisons" in text and "misses it" not in text
+    assert "consistent" not in text           # none inside: nothing said to be consistent
     assert "In 1 comparison the chain's interval holds the Monte Carlo noise alone" in text
 
 

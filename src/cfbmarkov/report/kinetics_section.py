@@ -202,8 +202,9 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
         parts.append(
             f"The reference's exit mean lies inside the chain's interval (the fitting "
             f"window's bootstrap and the Monte Carlo noise) in {agreement['inside']} of "
-            f"{known} comparisons: the chain is consistent with it within its uncertainty, "
-            "as compare says"
+            f"{known} comparisons"
+            + (": there the chain is consistent with it within its uncertainty, as compare "
+               "says" if agreement["inside"] else "")
             + (f"; in {agreement['not told apart']} it lies outside but the reference's own "
                "interval overlaps the chain's (not told apart)"
                if agreement["not told apart"] else "")
