@@ -53,7 +53,33 @@ def one_line_error(capsys, argv, output=None):
 def test_fit_records_the_content_identity_of_its_window(good):
     _, model, pred = good
     identity = MarkovModel.load(model).source_identity
-    assert identity and identity.startswith("window-sha256-1:")
+    assert identity and identity.startswith("window-sha256-2:")
+
+
+def test_the_identity_sees_a_value_changed_in_any_frame_and_reads_the_earlier_rule(good,
+                                                                                  tmp_path):
+    """One coordinate changed in a frame between the window's first, middle and last (which
+    the earlier rule alone read) changes the identity; an identity recorded by the earlier
+    rule is still compared by it."""
+    import h5py
+
+    from cfbmarkov.trajectories import Trajectories
+    from cfbmarkov.trajectory_identity import same_window, window_identity
+
+    run, model, _ = good
+    copy = tmp_path / "copy.h5"
+    shutil.copy(run, copy)
+    window = MarkovModel.load(model).window
+    with Trajectories(copy) as t:
+        frames = t.window(*window)
+        v1, v2 = window_identity(t, window, 1), window_identity(t, window)
+        assert same_window(t, window, v1) and same_window(t, window, v2)
+    k = frames.start + (frames.stop - frames.start) // 4          # none of the three
+    with h5py.File(copy, "r+") as f:
+        f["frames/position"][k, 3, 0] += 1e-9
+    with Trajectories(copy) as t:
+        assert window_identity(t, window, 1) == v1                # the earlier rule misses it
+        assert not same_window(t, window, v2) and same_window(t, window, v1)
 
 
 def test_compare_refuses_intervals_from_a_replaced_source(good, tmp_path, capsys, monkeypatch):

@@ -319,7 +319,7 @@ def check_fitting_file(model, run, *, model_name: str = "the model") -> tuple[fl
     import os
 
     from cfbmarkov.trajectories import opened
-    from cfbmarkov.trajectory_identity import window_identity
+    from cfbmarkov.trajectory_identity import same_window
 
     runs = _fitting_runs(model)
     identities = (str(model.source_identity).split(";") if model.source_identity else None)
@@ -332,7 +332,7 @@ def check_fitting_file(model, run, *, model_name: str = "the model") -> tuple[fl
             window = window or span
             if identities is not None:
                 try:
-                    if window_identity(traj, window) == identities[k]:
+                    if same_window(traj, window, identities[k]):
                         return window
                 except InputError:        # the window lies outside this file
                     continue

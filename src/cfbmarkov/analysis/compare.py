@@ -416,7 +416,7 @@ def _fitting_window_warnings(ref: Trajectories, pred: Trajectories,
     baseline whose window (any of a pooled model's) is of another length than the compared
     one (a window sees residences up to its own length, so the two RTDs are not alike even
     for a steady flow)."""
-    from cfbmarkov.trajectory_identity import window_identity
+    from cfbmarkov.trajectory_identity import same_window
 
     runs = fitting_runs_of(pred)
     fitted = fitting_window(pred)
@@ -436,7 +436,7 @@ def _fitting_window_warnings(ref: Trajectories, pred: Trajectories,
                 and w[1] <= ref.times[-1] + tol):
             continue
         with contextlib.suppress(InputError):
-            if window_identity(ref, w) == recorded:
+            if same_window(ref, w, recorded):
                 run = "" if runs is None else f" (run {k + 1} of {len(runs)} pooled)"
                 lines.append(f"the compared window {start:g}-{stop:g} s overlaps the model's "
                              f"fitting window {w[0]:g}-{w[1]:g} s of this run{run}: the "

@@ -180,7 +180,7 @@ def resolve_source(model, candidates=()):
     from pathlib import Path
 
     from cfbmarkov.trajectories import Trajectories
-    from cfbmarkov.trajectory_identity import window_identity
+    from cfbmarkov.trajectory_identity import same_window
 
     if not model.source_identity:
         _check_sources_exist(model)
@@ -210,7 +210,7 @@ def resolve_source(model, candidates=()):
                 existing.append(path)     # of whether the fitting file was replaced)
             try:
                 with Trajectories(path) as traj:
-                    if window_identity(traj, window) == identity:
+                    if same_window(traj, window, identity):
                         match = path
                         break
             except InputError:
@@ -252,12 +252,12 @@ def check_source_identity(model) -> None:
         Where the source cannot be read or the window holds no frame of it.
     """
     from cfbmarkov.trajectories import Trajectories
-    from cfbmarkov.trajectory_identity import window_identity
+    from cfbmarkov.trajectory_identity import same_window
 
     if not model.source_identity or not isinstance(model.source, str):
         return
     with Trajectories(model.source) as traj:
-        if window_identity(traj, model.window) == model.source_identity:
+        if same_window(traj, model.window, model.source_identity):
             return
     raise SourceChanged(
         f"{model.source} is not the data the model was fitted on (its fitting window's "
