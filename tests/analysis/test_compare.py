@@ -768,3 +768,21 @@ def test_first_frames_on_other_grids_are_said_with_both_times(tmp_path):
     assert line.startswith("the window's first frames differ: the reference's at 0.525 s, the "
                            "prediction's at 0.55 s (its frames are 0.05 s apart from 0.5 s)")
     assert line.endswith("(--window 0.55:... or 0.5:...)")
+
+
+def test_the_references_own_sd_interval_covers_a_long_tailed_rtd():
+    """The reference's own 90 % interval of SD(RT) on exponential residence times (a long
+    tail, as a riser's RTD has): the delta method's standard error covers the true SD in
+    about 90 % of samples, where SD / sqrt(2 (n - 1)) (normal samples) covers about 60 %."""
+    from cfbmarkov.report.compare import reference_sampling_intervals
+
+    rng = np.random.default_rng(11)
+    held_sd = held_mean = 0
+    draws = 400
+    for _ in range(draws):
+        samples = rng.exponential(0.8, 300)
+        (m0, m1), (s0, s1) = reference_sampling_intervals(samples, 0.9)
+        held_mean += m0 <= 0.8 <= m1
+        held_sd += s0 <= 0.8 <= s1
+    assert 0.85 <= held_sd / draws <= 0.95 and 0.85 <= held_mean / draws <= 0.95
+    assert reference_sampling_intervals(np.array([1.0]), 0.9) is None

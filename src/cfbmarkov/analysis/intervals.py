@@ -14,7 +14,9 @@ Three sources of uncertainty are combined:
   into the spread, which a multinomial (Bayesian counts) model of independent transitions
   would not;
 - *the Monte Carlo's*: the prediction's own sampling noise, the standard error of its
-  mean (SD / sqrt(n)), of its SD (SD / sqrt(2 (n - 1))), of a bin probability
+  mean (SD / sqrt(n)), of its SD (SD sqrt((kurtosis - 1) / (4 n)), the delta method,
+  Kendall & Stuart, Vol. 1, 10.7: a riser's RTD is skewed and long-tailed, where
+  SD / sqrt(2 (n - 1)) would hold for normal samples alone), of a bin probability
   (sqrt(p (1 - p) / n)) and of the mixing curve (exact for the fitted model and the
   tracers' states, :func:`~cfbmarkov.analysis.mixing.model_mixing_curve`), normal
   approximation;
@@ -49,7 +51,7 @@ import numpy as np
 
 from cfbmarkov.analysis.bootstrap import (BOOTSTRAP_BLOCKS, FLOW_BLOCK_RESIDENCES,  # noqa: F401
                                           FLOW_BLOCKS,
-                                          _binned, _bootstrap_chains, _reach,
+                                          _binned, _bootstrap_chains, _reach, _sd_noise,
                                           _resampled_rtd,
                                           block_bootstrap_models, bootstrap_figures,
                                           check_interval_options,
@@ -406,7 +408,9 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
     mean, sd = float(samples.mean()), float(samples.std(ddof=1))
     _, p_mc = rtd_histogram(samples, float(edges[1] - edges[0]),
                             window_length=float(edges[-1]))
-    se_mean, se_sd = sd / np.sqrt(n), sd / np.sqrt(2 * (n - 1))
+    # the SD's standard error by the delta method (kurtosis - 1) / (4 n), which holds for
+    # a riser's skewed RTD, where SD / sqrt(2 (n - 1)) holds for normal samples alone
+    se_mean, se_sd = sd / np.sqrt(n), sd * np.sqrt(_sd_noise(samples))
     se_bins = np.sqrt(p_mc * (1 - p_mc) / n)
     if getattr(model, "coherence", 0.0) > 0.0:
         # coherent moves: the particles' residences are correlated; the Monte Carlo noise

@@ -110,9 +110,10 @@ def _intervals(pred, comparison: RunComparison, level: float, resamples: int,
 
 def reference_sampling_intervals(samples, level: float):
     """The reference's own intervals of E(RT) and SD(RT): its window's residences' sampling
-    alone, as though independent (mean +- z SD / sqrt(n), SD +- z SD / sqrt(2 (n - 1)), the
-    normal approximation the Monte Carlo's noise takes; ``docs/definitions.md``,
-    Intervals). `compare` judges with them where the model's intervals leave the
+    alone, as though independent (mean +- z SD / sqrt(n), SD +- z SD sqrt((kurtosis - 1) /
+    (4 n)), the delta method on the variance, which holds for the skewed, long-tailed
+    RTDs of a riser where SD / sqrt(2 (n - 1)) holds only for normal samples; Kendall &
+    Stuart, Vol. 1, 10.7; ``docs/definitions.md``, Intervals). `compare` judges with them where the model's intervals leave the
     reference window's sampling out (no flow term): a reference figure outside the model's
     interval whose own interval overlaps it is not told apart from the model's.
 
@@ -131,13 +132,15 @@ def reference_sampling_intervals(samples, level: float):
     """
     from scipy.special import ndtri
 
+    from cfbmarkov.analysis.bootstrap import _sd_noise
+
     samples = np.asarray(samples, dtype=np.float64)
     n = samples.size
     if n < 2:
         return None
     z = float(ndtri(0.5 * (1.0 + level)))
     mean, sd = float(samples.mean()), float(samples.std(ddof=1))
-    h_mean, h_sd = z * sd / np.sqrt(n), z * sd / np.sqrt(2.0 * (n - 1))
+    h_mean, h_sd = z * sd / np.sqrt(n), z * sd * np.sqrt(_sd_noise(samples))
     return ([max(mean - h_mean, 0.0), mean + h_mean], [max(sd - h_sd, 0.0), sd + h_sd])
 
 
