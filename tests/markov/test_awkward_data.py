@@ -199,12 +199,22 @@ def test_maps_feed_no_cell_never_visited_and_runs_repeat_the_trap(tmp_path, writ
     assert main(["maps", str(saved), "--times", "1,2", "-o", str(tmp_path / "maps.png")]) == 0
     err = capsys.readouterr().err
     assert ("note: the batch is fed over 1 of the 2 bottom cells: cell (1,0) as column,row "
-            "was never visited in the fitting window") in err
+            "was never left in the fitting window (never visited, or entered last)") in err
     assert "warning: the model: states entered but never left: 1 of 8" in err
     assert main(["predict", str(saved), "--init", str(path), "--start", "0", "--duration",
                  "2", "-q", "-o", str(tmp_path / "p.h5")]) == 0
     assert "warning: the model: states entered but never left: 1 of 8" in \
         capsys.readouterr().err
+    # a bottom cell entered only in the last frame keeps what it gets (P_ii = 1): left out
+    last = states.copy()
+    last[-1, 1] = 1                                                   # row 0, column 1
+    entered = fit_model(write_states(tmp_path / "entered.h5", last, columns=2, rows=4),
+                        CellGrid(2, 4, 1.0, 2.0), 1.0)
+    assert entered.entered_never_left.tolist() == [1]
+    assert fed_inlet_cells(entered).tolist() == [True, False]
+    start, late = entered.batch_injection_maps([0.0, 20.0], outflow=True)
+    assert start[0].tolist() == [1.0, 0.0]
+    assert late[0, 1] < 0.1          # what the ring's transitions carry in, not half the batch
     # a grid whose bottom cells were all visited: Eq. (8) as the paper gives it
     ring = write_states(tmp_path / "ring.h5", np.stack([(t % 8), ((t + 3) % 8)], axis=1),
                         columns=2, rows=4)

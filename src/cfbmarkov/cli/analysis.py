@@ -727,9 +727,10 @@ def cmd_maps(args) -> int:
         left_out = first + np.flatnonzero(~fed)
         print(f"note: the batch is fed over {int(fed.sum())} of the {fed.size} "
               f"{'top' if downward else 'bottom'} cells: {cells_text(space, left_out)} "
-              f"{'was' if left_out.size == 1 else 'were'} never visited in the fitting window, "
-              "where the chain would keep a share in place at every time (Eq. (8) spreads "
-              "it over the cells particles pass through)", file=sys.stderr)
+              f"{'was' if left_out.size == 1 else 'were'} never left in the fitting window "
+              "(never visited, or entered last), where the chain would keep a share in place "
+              "at every time (Eq. (8) spreads it over the cells particles pass through)",
+              file=sys.stderr)
     for line in monte_carlo_warnings(model):
         print(f"warning: the model: {one_line(line)}", file=sys.stderr)
     title = (f"Batch fed over the {'top cells' if downward else 'inlet'} at t = 0 "

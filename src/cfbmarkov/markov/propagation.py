@@ -206,7 +206,7 @@ def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     ndarray of float64, shape (S,)
         S(0), summing to 1 (:meth:`StateSpace.inlet_distribution
         <cfbmarkov.markov.states.StateSpace.inlet_distribution>` where each bottom cell
-        holds one state).
+        holds one state and every bottom cell is fed).
     """
     space = model.state_space
     top = direction == "down" and model.open_flow is None
@@ -239,11 +239,11 @@ def inlet_batch(model: "MarkovModel", direction: str = "up") -> np.ndarray:
 
 def fed_inlet_cells(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     """Which cells of the row :func:`inlet_batch` feeds take a share of the batch: those
-    the fitting window's particles visited. A cell none of whose states was visited (no
-    transition from it and none into it in the window) has no row in the chain beyond
-    the convention that keeps its particles in place (P_ii = 1), so a share fed there
-    would stay there at every time; it is left out and the batch spread over the others
-    (all of them where none was visited).
+    whose particles the chain moves on. A cell none of whose states was left in the
+    fitting window, each never visited or entered but never left, and keeping its
+    particles (P_ii = 1: no row in the chain beyond that convention), would keep a share
+    fed there at every time; it is left out and the batch spread over the others (all of
+    them where none is left).
 
     Parameters
     ----------
@@ -260,12 +260,12 @@ def fed_inlet_cells(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     space = model.state_space
     per_row = space.cells_per_row
     first = space.n_cells - per_row if direction == "down" and model.open_flow is None else 0
-    never = np.setdiff1d(model.unvisited_states, model.entered_never_left)
-    visited = np.ones(space.n_cells, bool)
-    if never.size:
-        seen = np.zeros(space.n_cells, bool)
-        others = np.setdiff1d(np.arange(model.n_states), never)
-        seen[space.cell_of_state[others]] = True
-        visited = seen
-    fed = visited[first:first + per_row]
+    unvisited = np.asarray(model.unvisited_states, dtype=np.int64)
+    keeps = unvisited[np.diagonal(model.transition_matrix)[unvisited] == 1.0]
+    moving = np.ones(space.n_cells, bool)
+    if keeps.size:
+        moving = np.zeros(space.n_cells, bool)
+        others = np.setdiff1d(np.arange(model.n_states), keeps)
+        moving[space.cell_of_state[others]] = True
+    fed = moving[first:first + per_row]
     return fed if fed.any() else np.ones(per_row, bool)
