@@ -188,6 +188,11 @@ def test_summary_tells_a_regime_never_visited_from_one_never_left():
             if "regime chain" in s][0]
     assert line.endswith("(mean durations never left in the fitting window, "
                          "never visited in the fitting window)"), line
+    counts[0, 1] = 3                         # regime 1 entered (last), never left
+    line = [s for s in model_summary(_two_regime_model(counts)).splitlines()
+            if "regime chain" in s][0]
+    assert line.endswith("entered but never left in the fitting window)"), line
+    counts[0, 1] = 0
     counts[1, 1] = 4                         # regime 1 entered, its particles stay in it
     line = [s for s in model_summary(_two_regime_model(counts)).splitlines()
             if "regime chain" in s][0]

@@ -643,13 +643,14 @@ def fitting_run_count(model) -> int:
 def _regime_duration_text(model: "MarkovModel", g: np.ndarray, regime: int) -> str:
     """The mean duration of one regime of a regime model's chain G (lag / (1 - G_rr)), or
     why it has none: a regime whose states no counted transition leaves was never visited
-    in the fitting window (its G_rr = 1 is a convention of
-    :func:`~cfbmarkov.markov.regime_chain.regime_matrix`); one whose transitions all stay
-    in it was never left."""
+    in the fitting window, or entered but never left where transitions led into it (its
+    G_rr = 1 is a convention of :func:`~cfbmarkov.markov.regime_chain.regime_matrix`); one
+    whose transitions all stay in it was never left."""
     if g[regime, regime] < 1.0:
         return f"{model.lag / (1.0 - g[regime, regime]):.3g} s"
     if model.n_transitions:
         states = model.state_space.regime_of(np.arange(model.state_space.n_states)) == regime
-        if not model.counts[states].any():
-            return "never visited in the fitting window"
+        if not model.counts[states].any():      # no transition out of the regime
+            return ("entered but never left in the fitting window"
+                    if model.counts[:, states].any() else "never visited in the fitting window")
     return "never left in the fitting window"
