@@ -299,10 +299,13 @@ def _rk4_lag(function, v, row, others, lag, substeps):
 
 @nb.njit(cache=True)
 def _step_doubling(function, start, rows, others, lag, substeps):
-    """The largest relative difference, over the particle-lags given, between one lag of
-    RK4 with ``substeps`` steps and with twice as many (Numba kernel); inf where either
-    is not finite from a finite start."""
+    """The largest difference, over the particle-lags given, between one lag of RK4 with
+    ``substeps`` steps and with twice as many, relative to the largest value met (the
+    property's scale, so that a value near 0, at a kink or a depletion, does not magnify
+    a small difference) (Numba kernel); inf where either is not finite from a finite
+    start."""
     worst = 0.0
+    scale = 1e-300
     for i in range(start.size):
         v = start[i]
         if not np.isfinite(v):
@@ -311,20 +314,20 @@ def _step_doubling(function, start, rows, others, lag, substeps):
         fine = _rk4_lag(function, v, rows[i], others[i], lag, 2 * substeps)
         if not (np.isfinite(coarse) and np.isfinite(fine)):
             return np.inf
-        scale = max(abs(fine), abs(v), 1e-300)
-        worst = max(worst, abs(coarse - fine) / scale)
-    return worst
+        scale = max(scale, abs(fine), abs(v))
+        worst = max(worst, abs(coarse - fine))
+    return worst / scale
 
 
 def _warn_too_few_substeps(sk, q: int, lag: float, states: np.ndarray,
                            values: np.ndarray) -> None:
     """Warn where a custom law's RK4 sub-steps are too few for its rates: on up to
-    :data:`SUBSTEP_SAMPLES` particle-lags of the run (a particle present at both ends, its
-    value, state and the other properties at the lag's start as the run held them), one
-    lag with ``substeps`` steps and one with twice as many differ by more than
-    :data:`SUBSTEP_TOLERANCE` (relative). An unstable step (k lag / substeps beyond about
-    2.8 for a rate k) grows the values by orders of magnitude per lag while they stay
-    finite for many lags; the step-doubling difference shows it from the first lag
+    :data:`SUBSTEP_SAMPLES` particle-lags of the run spread over it (a particle present at
+    both ends, its value, state and the other properties at the lag's start as the run
+    held them), one lag with ``substeps`` steps and one with twice as many differ by more
+    than :data:`SUBSTEP_TOLERANCE` of the largest value met. An unstable step (k lag /
+    substeps beyond about 2.8 for a rate k) grows the values by orders of magnitude per
+    lag while they stay finite for many lags; the step-doubling difference shows it from the first lag
     (E. Hairer, S. P. Norsett and G. Wanner, Solving Ordinary Differential Equations I,
     Springer 1993, Ch. II.4: step-size control by step doubling)."""
     import warnings
@@ -332,11 +335,18 @@ def _warn_too_few_substeps(sk, q: int, lag: float, states: np.ndarray,
     from cfbmarkov.errors import CfbmarkovWarning
 
     law = sk.laws[q]
-    held = (states[:-1] >= 0) & (states[1:] >= 0)
-    frames, particles = np.nonzero(held)
+    n = states.shape[1]
+    lags = (states.shape[0] - 1) * n
+    if lags <= 0:
+        return
+    # strided candidates first (no index array over every particle-frame), then those held
+    candidates = np.arange(0, lags, max(1, lags // (8 * SUBSTEP_SAMPLES)), dtype=np.int64)
+    frames, particles = np.divmod(candidates, n)
+    held = (states[frames, particles] >= 0) & (states[frames + 1, particles] >= 0)
+    frames, particles = frames[held], particles[held]
     if not frames.size:
         return
-    every = max(1, frames.size // SUBSTEP_SAMPLES)
+    every = -(-frames.size // SUBSTEP_SAMPLES)
     frames, particles = frames[::every], particles[::every]
     parameters = np.ascontiguousarray(sk.parameters[q], dtype=np.float64)
     rows = np.ascontiguousarray(parameters[states[frames, particles]])
@@ -344,7 +354,7 @@ def _warn_too_few_substeps(sk, q: int, lag: float, states: np.ndarray,
     start = np.ascontiguousarray(values[q, frames, particles])
     worst = _step_doubling(law.function, start, rows, others, float(lag), int(law.substeps))
     if worst > SUBSTEP_TOLERANCE:
-        said = (f"up to {worst:.3g} (relative)" if np.isfinite(worst)
+        said = (f"up to {worst:.3g} of its largest value" if np.isfinite(worst)
                 else "so much that one of them is not finite")
         warnings.warn(f"property {sk.names[q]}: over one lag its RK4 integration with "
                       f"{law.substeps} sub-steps and with {2 * law.substeps} differ {said} "
