@@ -199,6 +199,36 @@ def test_one_interval_is_stated_once():
     assert "lies outside the model's 90 % interval (Table 3)" in text
 
 
+def test_a_reference_within_its_own_sampling_is_not_told_apart_in_the_report():
+    """Where the model's intervals leave the flow's term out, a reference figure outside
+    them whose own interval overlaps them is "not told apart" in the report as `compare`
+    says, not "outside"; with the flow's term (or no overlap) it stays outside."""
+    from cfbmarkov.report.summary import _interval_sentence
+    from cfbmarkov.report.table3 import reference_place, trust_text
+
+    own = {"md_rtd": 0.3, "level": 0.9,
+           "intervals": {"method": "block bootstrap of the fitting window, Monte Carlo "
+                                   "noise, in quadrature"},
+           "reference": {"rt_mean": 0.36, "rt_mean_interval": [0.34, 0.38],
+                         "rt_sd": 0.2, "rt_sd_interval": [0.13, 0.27]},
+           "model": {"rt_mean_interval": [0.276, 0.349], "rt_sd_interval": [0.1, 0.14]}}
+    assert reference_place(own) == "not told apart" and reference_place(own, "rt_sd") == \
+        "not told apart"
+    assert "not told apart" in trust_text("6", "paper", own)
+    flow = dict(own, intervals={"method": "block bootstrap of the fitting window, Monte "
+                                          "Carlo noise and the flow's variability between "
+                                          "windows, in quadrature"})
+    assert reference_place(flow) == "outside"
+    far = dict(own, reference=dict(own["reference"], rt_mean_interval=[0.355, 0.365]))
+    assert reference_place(far) == "outside"
+    case = SimpleNamespace(name="u6", velocity=6.0, problems=[],
+                           finished=[SimpleNamespace(name="paper", summary=own)])
+    text = _interval_sentence([case])
+    assert "inside the model's 90 % interval in 0 of 1" in text
+    assert "In 1 more (paper at 6 m/s) its E(RT) lies outside, but within its own" in text
+    assert "too narrow" not in text
+
+
 def test_matrix_heat_map_labelled_by_its_state_space(tmp_path):
     from cfbmarkov.report.figures import plot_transition_matrix, row_ticks
 

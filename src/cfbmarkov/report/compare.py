@@ -113,9 +113,10 @@ def reference_sampling_intervals(samples, level: float):
     alone, as though independent (mean +- z SD / sqrt(n), SD +- z SD sqrt((kurtosis - 1) /
     (4 n)), the delta method on the variance, which holds for the skewed, long-tailed
     RTDs of a riser where SD / sqrt(2 (n - 1)) holds only for normal samples; Kendall &
-    Stuart, Vol. 1, 10.7; ``docs/definitions.md``, Intervals). `compare` judges with them where the model's intervals leave the
-    reference window's sampling out (no flow term): a reference figure outside the model's
-    interval whose own interval overlaps it is not told apart from the model's.
+    Stuart, Vol. 1, 10.7; ``docs/definitions.md``, Intervals). `compare` judges with them
+    where the model's intervals leave the reference window's sampling out (no flow term):
+    a reference figure outside the model's interval whose own interval overlaps it is not
+    told apart from the model's.
 
     Parameters
     ----------

@@ -74,6 +74,38 @@ def leaves_out_the_flow(summary: dict) -> bool:
     return isinstance(method, str) and "flow's variability" not in method
 
 
+def reference_place(summary: dict, figure: str = "rt_mean") -> str | None:
+    """Where a compare summary's reference figure (``rt_mean`` or ``rt_sd``) stands against
+    the model's interval of it, as `compare` judges it: ``inside``; ``not told apart``
+    where it lies outside but the model's interval leaves out the flow's variability
+    (:func:`leaves_out_the_flow`) and the reference's own interval (its residences'
+    sampling, ``reference.<figure>_interval``) overlaps it; else ``outside``. None where
+    either is missing.
+
+    Parameters
+    ----------
+    summary : dict
+        A comparison's ``summary.json``.
+    figure : {"rt_mean", "rt_sd"}, optional
+
+    Returns
+    -------
+    str or None
+    """
+    interval = (summary.get("model") or {}).get(f"{figure}_interval")
+    ref = summary.get("reference") or {}
+    value = finite_or_none(ref.get(figure))
+    if not interval or value is None:
+        return None
+    if interval[0] <= value <= interval[1]:
+        return "inside"
+    own = ref.get(f"{figure}_interval")
+    if (leaves_out_the_flow(summary) and own and len(own) == 2
+            and own[0] <= interval[1] and interval[0] <= own[1]):
+        return "not told apart"
+    return "outside"
+
+
 def _interval_text(interval) -> str:
     return interval_text(*(interval or [None, None])[:2])
 
@@ -566,16 +598,15 @@ def trust_text(u: str, estimator: str, summary: dict) -> str:
                      f"higher: clusters and voids; the nearer the CFD-DEM's, the better): "
                      f"CFD-DEM {c_ref:.3g}, model {c_mod:.3g}"
                      + _cluster_clause(c_ref, c_mod) + ".")
-    model = summary.get("model") or {}
-    ref = summary.get("reference") or {}
-    interval = model.get("rt_mean_interval")
-    if interval and finite_or_none(ref.get("rt_mean")) is not None:
-        inside = interval[0] <= ref["rt_mean"] <= interval[1]
+    place = reference_place(summary)
+    if place is not None:
         level = 100 * float(summary.get("level") or 0.9)
         # the value and the interval are in Table 3's row, the model's own interval in the
         # detail table: said in words here, not repeated
-        parts.append(f"The CFD-DEM's E(RT) lies {'inside' if inside else 'outside'} the "
-                     f"model's {level:g} % interval (Table 3).")
+        parts.append(f"The CFD-DEM's E(RT) lies {'outside' if place != 'inside' else place} "
+                     f"the model's {level:g} % interval (Table 3)"
+                     + (", but within its own sampling of it (the interval leaves that out "
+                        "here): not told apart" if place == "not told apart" else "") + ".")
     verdict = (summary.get("adequacy") or {}).get("warnings") or []
     if verdict:
         parts.append("The model's fitting sample was warned about when it was fitted: "
