@@ -149,7 +149,7 @@ def test_compare_says_it_is_alive_every_few_seconds(tmp_path, capsys, markov_run
 # -- compare's printed lines judge --------------------------------------------------------
 
 def test_compare_prints_counts_baseline_and_whether_inside(tmp_path, capsys, markov_run,
-                                                           fitted):
+                                                           fitted, monkeypatch):
     _, pred = fitted
     code, out, _ = run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
                            "--no-figures", "--resamples", "20", "-q", "-o", tmp_path / "c")
@@ -163,6 +163,19 @@ def test_compare_prints_counts_baseline_and_whether_inside(tmp_path, capsys, mar
     lo, hi = model["rt_mean_interval"]
     place = "inside" if lo <= ref["rt_mean"] <= hi else "below" if ref["rt_mean"] < lo else "above"
     assert f"the reference's E(RT) {ref['rt_mean']:.4g} s lies {place} the model's interval" in out
+    # the verdict is given the reference's own intervals where the flow's term is left out
+    from cfbmarkov.cli import analysis
+
+    given = []
+    real = analysis.interval_verdict
+    monkeypatch.setattr(analysis, "interval_verdict",
+                        lambda *a, **k: given.append(a) or real(*a, **k))
+    assert main(["compare", str(markov_run), str(pred), "--window", "5:7", "--no-figures",
+                 "--resamples", "20", "-q", "-o", str(tmp_path / "c2")]) == 0
+    capsys.readouterr()
+    flow = (summary.get("intervals") or {}).get("flow_sd") is not None
+    assert given and given[0][4] == (None if flow else (ref["rt_mean_interval"],
+                                                          ref["rt_sd_interval"]))
 
 
 def test_interval_verdict_says_outside_means_a_miss():

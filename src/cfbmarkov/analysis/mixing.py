@@ -153,7 +153,7 @@ def mixing_curve_of(traj, window: tuple[float, float], block: int = 64, tracers=
 
 
 def _mixing_of_present(traj, frames: slice, half: float, block: int, chosen=None
-                       ) -> tuple[np.ndarray, np.ndarray]:
+                       ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The mixing curve where particles come and go (``docs/definitions.md``, Mixing in an
     open riser): the particles present at the window's first frame (those of them marked in
     ``chosen``, where given) are the tracers; at each frame the fraction of those still
