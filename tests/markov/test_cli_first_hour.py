@@ -391,3 +391,17 @@ def test_ctrl_c_after_the_comparison_is_published_says_it_is_whole(tmp_path, cap
     assert err.splitlines()[-1] == (f"cfbmarkov compare: interrupted after {out} was written "
                                     "whole (the folder is complete; only the lines printed "
                                     "after it were cut short)")
+
+
+def test_compare_refuses_a_level_without_intervals(tmp_path, capsys, markov_run, fitted):
+    """--level with --resamples 0 sets the coverage of intervals that are not formed: refused
+    in one line, as fit refuses it, before any output."""
+    _, pred = fitted
+    line = one_line_error(*run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
+                                   "--no-figures", "--resamples", "0", "--level", "0.5",
+                                   "-o", tmp_path / "c")[::2])
+    assert "--level 0.5 sets the intervals' coverage" in line and "--resamples 0" in line
+    assert not (tmp_path / "c").exists()
+    code, _, _ = run_cli(capsys, "compare", markov_run, pred, "--window", "5:7",
+                         "--no-figures", "--resamples", "0", "-q", "-o", tmp_path / "d")
+    assert code == 0

@@ -59,6 +59,11 @@ def cmd_compare(args) -> int:
         _check_resamples(args.resamples)      # one line, as fit and rtd say it
     if args.resamples is None:
         args.resamples = DEFAULT_RESAMPLES
+    if args.level is not None and not args.resamples and not args.kinetics:
+        raise InputError(f"--level {args.level:g} sets the intervals' coverage, which "
+                         "--resamples 0 leaves out (no interval is formed): leave out "
+                         "--level or --resamples 0")
+    args.level = 0.9 if args.level is None else args.level
     from cfbmarkov.cli.markov import _check_resamples
 
     _check_resamples(args.resamples, args.level)
@@ -769,8 +774,10 @@ def add_compare(sub) -> None:
                    help="Minkowski order k >= 1 of the MD (Eq. 9; inf: the largest difference; "
                         "default 2)")
     s.add_argument("--no-figures", action="store_true", help="write summary.json only")
-    s.add_argument("--level", type=level, default=0.9,
-                   help="coverage of the prediction's intervals (default 0.9)")
+    s.add_argument("--level", type=level, default=None,
+                   help="coverage of the prediction's intervals (default 0.9; refused with "
+                        "--resamples 0 unless --kinetics, whose Monte Carlo and reference "
+                        "intervals take it)")
     s.add_argument("--resamples", type=count(0, 100000), default=None,
                    help="bootstrap resamples of the model's fitting window for the intervals "
                         f"(0: no intervals; default {DEFAULT_RESAMPLES}, left out with a "
