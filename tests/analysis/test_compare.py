@@ -786,3 +786,21 @@ def test_the_references_own_sd_interval_covers_a_long_tailed_rtd():
         held_sd += s0 <= 0.8 <= s1
     assert 0.85 <= held_sd / draws <= 0.95 and 0.85 <= held_mean / draws <= 0.95
     assert reference_sampling_intervals(np.array([1.0]), 0.9) is None
+
+
+def test_a_model_fitted_on_another_run_says_why_it_has_no_baseline(tmp_path):
+    """The model's fitting window lies outside the reference's frames (fitted on another
+    run): no persistence baseline, and a warning names the windows and the model's run."""
+    from cfbmarkov.markov import CellGrid, fit_model
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    other = write_run(tmp_path / "other.h5", RiserFlow(), 200, 4.0, seed=3)
+    run = write_run(tmp_path / "run.h5", RiserFlow(), 200, 1.6, seed=4)
+    model = fit_model(other, CellGrid(6, 38), 0.025, (2.0, 4.0), "mle")
+    pred = model.predict(run, 0.4, 1.2, seed=1, output=tmp_path / "p.h5")
+    saved = compare(run, pred, window=(0.4, 1.6), output=tmp_path / "c", figures=False,
+                    resamples=0)
+    assert saved["baseline"] is None
+    said = [w for w in saved["warnings"] if w.startswith("no persistence baseline")]
+    assert len(said) == 1 and "fitting window 2-4 s does not lie in the reference's frames " \
+        "(0-1.6 s)" in said[0] and f"another run ({other})" in said[0]

@@ -17,6 +17,7 @@ docs/definitions.md, sections "residence time", "mixing" and "file formats" (sum
 from __future__ import annotations
 
 import contextlib
+import json
 import math
 from dataclasses import dataclass, field
 from typing import Any
@@ -618,6 +619,22 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
                    "no persistence baseline")
         notes = (f"the persistence baseline could not pool the model's {len(pooled)} runs' "
                  f"fitting windows ({unread}): {instead}",)
+    elif baseline is None and fitted is not None:
+        group = pred.group("model")
+        source = group.attrs.get("source") if group is not None else None
+        if isinstance(source, bytes):
+            source = source.decode()
+        with contextlib.suppress(ValueError, TypeError):
+            source = json.loads(source)       # stored as JSON (a path, or a list of them)
+        if isinstance(source, list):
+            source = ", ".join(map(str, source))
+        notes = (f"no persistence baseline: the model's fitting window {fitted[0]:g}-"
+                 f"{fitted[1]:g} s does not lie in the reference's frames "
+                 f"({float(ref.times[0]):g}-{float(ref.times[-1]):g} s)"
+                 + (f", so the model was fitted on another run ({source})" if source else "")
+                 + "; the baseline, the reference's RTD over the fitting window, needs that "
+                 "window in the reference: compare against the run the model was fitted on "
+                 "to have it",)
     long_run = None
     if long_run_span is not None:
         long_run = long_run_baseline(ref, (start, stop), span=long_run_span,
