@@ -194,6 +194,16 @@ def test_an_empty_output_name_is_named_as_such(tmp_path, capsys):
     assert err.count("\n") == 1 and "an empty output name (-o '')" in err
 
 
+@pytest.mark.parametrize("argv", [["info", ""], ["fit", "", "-o", "m.h5"], ["rtd", ""],
+                                  ["compare", "", "p.h5", "-o", "c"]])
+def test_an_empty_input_name_is_named_as_such(tmp_path, capsys, monkeypatch, argv):
+    """An empty input path is named as empty, not read as the current folder."""
+    monkeypatch.chdir(tmp_path)
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "an empty file name ('')" in err, err
+
+
 def test_info_of_a_foreign_hdf5_file_names_both_kinds_it_reads(tmp_path, capsys):
     """info reads trajectory and model files: a foreign format is named as neither."""
     import h5py

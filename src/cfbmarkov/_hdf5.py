@@ -155,6 +155,9 @@ def open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
         program writing it, not HDF5 (truncated, or another format), or damaged (its root
         group cannot be read).
     """
+    if str(path) == "":
+        raise InputError("an empty file name (''): give the path of a cfbmarkov trajectory or "
+                         "model file (.h5)")
     path = Path(path)
     if not path.exists():
         raise InputError(f"{path}: no such file")

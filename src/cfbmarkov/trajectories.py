@@ -146,6 +146,8 @@ class Trajectories(FrameTimes):
                              f"got a {type(path).__name__}"
                              + ("; a model is no trajectories: give a run's file"
                                 if type(path).__name__ == "MarkovModel" else ""))
+        if not os.fspath(path):     # Path("") is "." (the current folder)
+            open_h5("")             # refused in one line: an empty file name
         self.path = Path(path)
         self._h5 = open_h5(self.path)
         try:

@@ -660,6 +660,10 @@ def test_react_follows_a_carried_activity_pass_by_pass(fitted, tmp_path, capsys)
     assert carried["after_passes"]["3"]["mean"] == pytest.approx(answer.after_passes(3)[0],
                                                                  rel=1e-12)
     assert "after_passes" not in out["properties"]["fresh"]
+    # a number of passes given twice is refused in one line, as maps --times refuses it
+    assert main(["react", str(model), "--kinetics", str(kin), "--passes", "5", "3", "5"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "--passes gives 5 more than once" in err
     assert out["grid"]["columns"] == 3 and out["grid"]["rows"] == 6
     # the model's verdict (a short fitting window here) travels with the answers
     assert out["warnings"] and all(w.startswith("the model's fitting sample: ")

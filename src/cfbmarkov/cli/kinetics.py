@@ -34,6 +34,10 @@ def cmd_react(args) -> int:
     if not len(missing) < len(mc) and args.seed != 0:
         raise InputError("--seed seeds the Monte Carlo (--init RUN --start T --duration D "
                          "-o OUT); the exact answers use none: leave it out, or add those")
+    if args.passes and len(set(args.passes)) < len(args.passes):
+        twice = sorted({n for n in args.passes if args.passes.count(n) > 1})
+        raise InputError(f"--passes gives {', '.join(map(str, twice))} more than once: give "
+                         "each number of passes once")
     if 0 < args.resamples < 10:
         raise InputError(f"--resamples {args.resamples}: an interval needs at least 10 "
                          "bootstrap resamples (0 leaves it out)")
