@@ -193,10 +193,15 @@ def not_text_message(label: str) -> str:
                 except UnicodeDecodeError as exc:
                     byte = raw[exc.start]
                     shown = bytes([byte]).decode("cp1252", errors="replace")
+                    spreadsheet = str(label).lower().removesuffix(".gz").endswith(
+                        (".csv", ".tsv", ".txt"))
+                    how = ("save it as UTF-8 (Excel: 'CSV UTF-8') or as 'Unicode Text'"
+                           if spreadsheet else
+                           f"convert it to UTF-8 (iconv -f cp1252 -t utf-8 {label} > "
+                           "NEW), or remove the stray byte")
                     return (f"{label}: line {number}: byte 0x{byte:02x} is not UTF-8 text (in "
                             f"Windows cp1252 it is {shown!r}): the file is not UTF-8 or "
-                            "UTF-16; save it as UTF-8 (Excel: 'CSV UTF-8') or as 'Unicode "
-                            "Text'")
+                            f"UTF-16; {how}")
     except (OSError, EOFError, gzip.BadGzipFile, zlib.error):
         pass
     return (f"{label}: not a text file (it holds bytes that are not UTF-8 or UTF-16 text); "
