@@ -702,6 +702,11 @@ def test_the_flow_terms_absence_is_put_down_to_its_cause():
 
     short = flow_term_line(4.0, 0.86)
     assert "the 4 s fitting window is shorter than two blocks of three mean residence" in short
+    # the length that gives the flow's term is named (2 x 3 x 0.86 s), and sample-length's
+    # answer, which can be shorter, is not offered as that length
+    assert "residence times, 5.16 s here" in short and "fit on a window of 5.16 s or more" \
+        in short and "which can be shorter" in short
+    assert "tells how long a window must be" in flow_term_line(4.0)   # E(RT) unknown
     sparse = flow_term_line(30.0, 2.4)
     assert "fewer than two blocks of the 30 s fitting window hold two residences seen whole" \
         in sparse and "shorter than" not in sparse and "pool more runs or tracks" in sparse

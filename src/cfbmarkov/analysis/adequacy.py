@@ -561,6 +561,14 @@ def flow_term_line(length: float, rt_mean: float | None = None) -> str:
                "residences seen whole: the tracks are too short or too few to see residences "
                "end to end")
         advice = "pool more runs or tracks (fit A.h5 B.h5 ...)"
+    elif rt_mean is not None and math.isfinite(rt_mean) and rt_mean > 0:
+        need = 2 * FLOW_BLOCK_RESIDENCES * rt_mean
+        why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "
+               f"residence times, {need:.3g} s here")
+        advice = (f"fit on a window of {need:.3g} s or more, or pool several runs (fit A.h5 "
+                  "B.h5 ...), for the interval to hold it (`cfbmarkov stationarity RUN "
+                  "--sample-length` tells from which length the fitted E(RT) and SD(RT) "
+                  "settle, which can be shorter)")
     else:
         why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "
                "residence times")
