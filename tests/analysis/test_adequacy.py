@@ -600,7 +600,9 @@ def test_a_passed_verdict_says_so_with_its_numbers():
     assert calm.passed_line() == (
         "the fitting sample's verdict: no warning: the window's quarters agree (E(RT) spread "
         "3.1 %, limit 8.1 %); the chain carries the window's throughput (within 2 %); 0.2 % "
-        "of its residences outlast the window")
+        "of its residences outlast the window (judged on this window alone: a flow that "
+        "changes over longer times than it can lie elsewhere, which `cfbmarkov stationarity` "
+        "on a longer run, or runs pooled, show)")
     assert "under 0.1 % of its" in Adequacy((), parts[:2], 1.0, 0.01, 0.05, 2.0, 1e-9, (),
                                             1.0).passed_line()
     halves = Adequacy((), parts[:2], 1.0, 0.01, 0.05, 2.0, 1e-9).passed_line()
@@ -608,6 +610,7 @@ def test_a_passed_verdict_says_so_with_its_numbers():
     pooled = Adequacy((), parts, 1.0, 0.01, 0.05, 2.0, 0.01, (("a.h5", 0.98), ("b.h5", 1.03)),
                       runs_limit=0.071)
     assert "quarters agree" not in pooled.passed_line()       # judged run by run, not here
+    assert "judged on this window alone" not in pooled.passed_line()      # runs pooled
     assert ("the 2 runs agree (E(RT) fitted on each alone 0.980, 1.03 s, pooled 1.00 s; each "
             "within 3 % of the pooled model's, limit 7.1 %; their parts' spread 1 %)"
             ) in pooled.passed_line()

@@ -207,8 +207,12 @@ class Adequacy:
             share = 100 * self.tail_share
             said.append(f"{f'{share:.2g} %' if share >= 0.1 else 'under 0.1 %'} of its "
                         "residences outlast the window")
+        alone_note = ("" if self.runs else
+                      " (judged on this window alone: a flow that changes over longer times "
+                      "than it can lie elsewhere, which `cfbmarkov stationarity` on a longer "
+                      "run, or runs pooled, show)")
         return ("the fitting sample's verdict: no warning" +
-                (f": {'; '.join(said)}" if said else ""))
+                (f": {'; '.join(said)}" if said else "") + alone_note)
 
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready (NaN as None): the attributes, ``parts`` as a list of objects.
