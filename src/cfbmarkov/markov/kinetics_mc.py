@@ -90,6 +90,19 @@ def linear_properties(states, laps, a, b, reset, initial, entry_value, periodic,
                     out[q, k, p] = v
 
 
+@nb.njit(cache=True)
+def _rk4_lag(function, v, row, others, lag, substeps):
+    """One lag of ``substeps`` classical RK4 steps of dv/dt = function(v, row, others)."""
+    h = lag / substeps
+    for _ in range(substeps):
+        k1 = function(v, row, others)
+        k2 = function(v + 0.5 * h * k1, row, others)
+        k3 = function(v + 0.5 * h * k2, row, others)
+        k4 = function(v + h * k3, row, others)
+        v = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return v
+
+
 @nb.njit(cache=False, parallel=True)
 def custom_property(function, states, laps, parameters, lag, substeps, reset, initial,
                     entry_value, periodic, entry_lags, index, first, last, top, values):
@@ -130,7 +143,6 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
     """
     n_props = values.shape[0]
     n = states.shape[1]
-    h = lag / substeps
     for p in nb.prange(n):
         others = np.empty(n_props)
         if first == 0:
@@ -153,22 +165,13 @@ def custom_property(function, states, laps, parameters, lag, substeps, reset, in
                         others[q] = values[q, k, p] if q < index else np.nan
                     others[index] = v
                     row = parameters[s]
-                    for _ in range(entry_lags * substeps):
-                        k1 = function(v, row, others)
-                        k2 = function(v + 0.5 * h * k1, row, others)
-                        k3 = function(v + 0.5 * h * k2, row, others)
-                        k4 = function(v + h * k3, row, others)
-                        v = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+                    for _ in range(entry_lags):
+                        v = _rk4_lag(function, v, row, others, lag, substeps)
             else:
                 for q in range(n_props):
                     others[q] = values[q, k - 1, p]
                 row = parameters[s_prev]
-                for _ in range(substeps):
-                    k1 = function(v, row, others)
-                    k2 = function(v + 0.5 * h * k1, row, others)
-                    k3 = function(v + 0.5 * h * k2, row, others)
-                    k4 = function(v + h * k3, row, others)
-                    v = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+                v = _rk4_lag(function, v, row, others, lag, substeps)
                 if periodic and laps[k, p] > top[p]:
                     top[p] = laps[k, p]
                     if reset:
@@ -282,19 +285,6 @@ def run_properties(state_kinetics, lag: float, states: np.ndarray, laps: np.ndar
 SUBSTEP_TOLERANCE = 1e-3
 #: particle-lags a custom law's sub-steps are checked on (every k-th of those held)
 SUBSTEP_SAMPLES = 4096
-
-
-@nb.njit(cache=True)
-def _rk4_lag(function, v, row, others, lag, substeps):
-    """One lag of ``substeps`` classical RK4 steps of dv/dt = function(v, row, others)."""
-    h = lag / substeps
-    for _ in range(substeps):
-        k1 = function(v, row, others)
-        k2 = function(v + 0.5 * h * k1, row, others)
-        k3 = function(v + 0.5 * h * k2, row, others)
-        k4 = function(v + h * k3, row, others)
-        v = v + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
-    return v
 
 
 @nb.njit(cache=True)
