@@ -195,7 +195,8 @@ def test_an_empty_output_name_is_named_as_such(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv", [["info", ""], ["fit", "", "-o", "m.h5"], ["rtd", ""],
-                                  ["compare", "", "p.h5", "-o", "c"]])
+                                  ["compare", "", "p.h5", "-o", "c"],
+                                  ["import", "", "-o", "x.h5"]])
 def test_an_empty_input_name_is_named_as_such(tmp_path, capsys, monkeypatch, argv):
     """An empty input path is named as empty, not read as the current folder."""
     monkeypatch.chdir(tmp_path)

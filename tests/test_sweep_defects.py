@@ -12,6 +12,7 @@ import pytest
 
 from cfbmarkov import synthetic
 from cfbmarkov.cli import main
+from cfbmarkov.errors import InputError
 from cfbmarkov.markov import MarkovModel
 
 FLOW = synthetic.RiserFlow(columns=3, rows=8, rise_velocity=1.2, fall_velocity=-0.6,
@@ -80,6 +81,41 @@ def test_the_identity_sees_a_value_changed_in_any_frame_and_reads_the_earlier_ru
     with Trajectories(copy) as t:
         assert window_identity(t, window, 1) == v1                # the earlier rule misses it
         assert not same_window(t, window, v2) and same_window(t, window, v1)
+
+
+def test_the_identity_does_not_depend_on_the_blocks_read(good, monkeypatch):
+    """The folds of every frame are digested whole, stream by stream: reading the window in
+    blocks of another size gives the same identity (a recorded one stays valid)."""
+    import cfbmarkov.trajectory_identity as identity
+    from cfbmarkov.trajectories import Trajectories
+
+    run, model, _ = good
+    window = MarkovModel.load(model).window
+    with Trajectories(run) as t:
+        whole = identity.window_identity(t, window)
+        for values in (1, 7 * t.n_particles * t.dimensions, 10 ** 9):
+            monkeypatch.setattr(identity, "_BLOCK_VALUES", values)
+            assert identity.window_identity(t, window) == whole
+    with pytest.raises(InputError, match="unknown rule .*newer cfbmarkov"):
+        identity.identity_version("window-sha256-9:00")
+
+
+def test_a_model_recorded_by_the_earlier_identity_rule_is_assessed_on_its_data(good):
+    """assess_fit forms the identity by the rule the model recorded it with: a model of the
+    earlier rule (three frames) passes on its own unchanged data."""
+    import dataclasses
+
+    from cfbmarkov.analysis.fit_checks import assess_fit
+    from cfbmarkov.trajectories import Trajectories
+    from cfbmarkov.trajectory_identity import window_identity
+
+    run, model_path, _ = good
+    model = MarkovModel.load(model_path)
+    with Trajectories(run) as t:
+        v1 = window_identity(t, model.window, 1)
+    older = dataclasses.replace(model, source=str(run), source_identity=v1)
+    assessed = assess_fit(older, resamples=0)
+    assert assessed.source_identity == v1
 
 
 def test_compare_refuses_intervals_from_a_replaced_source(good, tmp_path, capsys, monkeypatch):

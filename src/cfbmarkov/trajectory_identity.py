@@ -8,7 +8,8 @@ the riser's size and boundary, and a 64-bit fold of every frame's positions, lap
 and presence: each value's bits times an odd multiplier of its place, summed modulo 2^64,
 so that a change of any one value, in any frame, changes the fold (an odd multiplier is
 invertible modulo 2^64). The fold is numpy arithmetic over the frames as they are read, in
-blocks, so the identity costs one read of the window. Version 1 (``window-sha256-1:``)
+blocks of a fixed number of values, so the identity costs one read of the window and
+does not depend on how it is read. Version 1 (``window-sha256-1:``)
 digested three frames only (first, middle, last); an identity recorded so is still
 compared by its own rule (:func:`same_window`).
 """
@@ -23,8 +24,8 @@ import numpy as np
 IDENTITY_PREFIX = "window-sha256-2:"
 #: the prefix of identities recorded by the earlier rule (three frames)
 IDENTITY_PREFIX_V1 = "window-sha256-1:"
-#: frames read per block while folding
-_BLOCK = 64
+#: particle-frame values read per block while folding (the identity does not depend on it)
+_BLOCK_VALUES = 2 ** 21
 
 
 def _multipliers(n: int) -> np.ndarray:
@@ -38,9 +39,7 @@ def _fold(values: np.ndarray, multipliers: np.ndarray) -> np.ndarray:
     """Per frame (axis 0): sum of each value's 64 bits times its place's multiplier,
     modulo 2^64."""
     bits = np.ascontiguousarray(values).reshape(values.shape[0], -1)
-    if bits.dtype.itemsize != 8:
-        bits = bits.astype(np.int64)
-    bits = bits.view(np.uint64)
+    bits = bits.astype("<i8" if bits.dtype.kind in "iub" else "<f8", copy=False).view("<u8")
     with np.errstate(over="ignore"):
         return (bits * multipliers[:bits.shape[1]]).sum(axis=1, dtype=np.uint64)
 
@@ -92,17 +91,39 @@ def window_identity(traj, window: tuple[float, float] | None, version: int = 2) 
     digest = hashlib.sha256(IDENTITY_PREFIX.encode())
     _header(digest, traj, i0, i1)
     n = traj.n_particles
-    multipliers = _multipliers(n * max(int(traj.dimensions), 1))
-    folds = []
-    for start in range(i0, i1, _BLOCK):
-        rows = slice(start, min(start + _BLOCK, i1))
+    values = n * max(int(traj.dimensions), 1)
+    multipliers = _multipliers(values)
+    block = max(1, _BLOCK_VALUES // max(values, 1))
+    streams = ([], [], [])                  # per frame: positions, laps, presence
+    for start in range(i0, i1, block):
+        rows = slice(start, min(start + block, i1))
         positions = np.nan_to_num(np.asarray(traj.positions(rows), dtype="<f8"), nan=-1.0)
-        folds.append(_fold(positions, multipliers))
-        folds.append(_fold(np.asarray(traj.laps(rows), dtype=np.int64), multipliers))
-        folds.append(_fold(np.asarray(traj.present(rows), dtype=np.int64), multipliers))
-    for fold in folds:
-        digest.update(np.ascontiguousarray(fold, dtype="<u8").tobytes())
+        streams[0].append(_fold(positions, multipliers))
+        streams[1].append(_fold(np.asarray(traj.laps(rows), dtype="<i8"), multipliers))
+        streams[2].append(_fold(np.asarray(traj.present(rows), dtype="<i8"), multipliers))
+    for stream in streams:                  # each whole, so the blocks read do not show
+        digest.update(np.concatenate(stream).astype("<u8").tobytes())
     return IDENTITY_PREFIX + digest.hexdigest()[:32]
+
+
+def identity_version(identity: str) -> int:
+    """The rule an identity was recorded with: 1 (``window-sha256-1:``) or 2 (this
+    version's, and the one used for a new identity where ``identity`` is empty).
+
+    Raises
+    ------
+    InputError
+        For an identity of another rule (a newer cfbmarkov's): upgrade to compare it.
+    """
+    from cfbmarkov.errors import InputError
+
+    identity = str(identity or "")
+    if not identity or identity.startswith(IDENTITY_PREFIX):
+        return 2
+    if identity.startswith(IDENTITY_PREFIX_V1):
+        return 1
+    raise InputError(f"a fitting-window identity of an unknown rule ({identity.split(':')[0]}"
+                     "): recorded by a newer cfbmarkov; upgrade cfbmarkov to compare it")
 
 
 def same_window(traj, window: tuple[float, float] | None, recorded: str) -> bool:
@@ -123,10 +144,11 @@ def same_window(traj, window: tuple[float, float] | None, recorded: str) -> bool
     Raises
     ------
     InputError
-        As :func:`window_identity`.
+        As :func:`window_identity`, and for an identity of an unknown rule
+        (:func:`identity_version`).
     """
-    version = 1 if str(recorded).startswith(IDENTITY_PREFIX_V1) else 2
-    return window_identity(traj, window, version) == recorded
+    return window_identity(traj, window, identity_version(recorded)) == recorded
 
 
-__all__ = ["IDENTITY_PREFIX", "IDENTITY_PREFIX_V1", "same_window", "window_identity"]
+__all__ = ["IDENTITY_PREFIX", "IDENTITY_PREFIX_V1", "identity_version", "same_window",
+           "window_identity"]

@@ -1,6 +1,8 @@
 """Exact answers of linear kinetics on small chains against hand-computed values, and the
 Monte Carlo against them."""
 
+import re
+
 import numba as nb
 import numpy as np
 import pytest
@@ -14,6 +16,12 @@ from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.states import CellGrid
 
 LAG = 0.1
+
+
+@nb.njit
+def depleting(v, row, others):
+    """dv/dt = -k while v > 0, else 0: a zero-order law with a kink at depletion."""
+    return -row[0] if v > 0.0 else 0.0
 
 
 @nb.njit
@@ -324,8 +332,10 @@ def test_too_few_rk4_substeps_are_warned_while_the_values_are_finite():
     few = Kinetics((Property("v", Custom(first_order, ("rate",), substeps=8),
                              {"rate": Constant(rate)}),)).per_state(model.state_space)
     with pytest.warns(CfbmarkovWarning, match=r"with 8 sub-steps and with 16 differ up to "
-                                              r".* the sub-steps are too few"):
+                                              r".* the sub-steps are too few") as said:
         values = run_properties(few, LAG, states, laps, periodic=True)
+    checked = int(re.search(r"on (\d+) particle-lags", str(said[0].message)).group(1))
+    assert 0 < checked <= 4096
     assert np.isfinite(values).all() and np.abs(values).max() > 10.0     # finite, wrong
     enough = Kinetics((Property("v", Custom(first_order, ("rate",), substeps=400),
                                 {"rate": Constant(rate)}),)).per_state(model.state_space)
@@ -335,6 +345,14 @@ def test_too_few_rk4_substeps_are_warned_while_the_values_are_finite():
         rk4 = run_properties(enough, LAG, states, laps, periodic=True)
     np.testing.assert_allclose(rk4, run_properties(exact, LAG, states, laps, periodic=True),
                                atol=1e-6)
+    # a rate with a kink (zero order until depleted) and enough sub-steps: no false alarm
+    # where the value nears 0
+    kinked = Kinetics((Property("v", Custom(depleting, ("rate",), substeps=64),
+                                {"rate": Constant(3.0)}, start="carried", initial=1.0),)
+                      ).per_state(model.state_space)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", CfbmarkovWarning)
+        run_properties(kinked, LAG, states, laps, periodic=True)
 
 
 def test_a_coupled_custom_law_declared_too_early_is_refused_and_divergence_warned():

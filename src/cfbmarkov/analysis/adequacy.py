@@ -85,6 +85,21 @@ _ADVICE = ("fit on a longer window or pool several runs (fit A.h5 B.h5 ...); `cf
 #: the part of the advice that a run with absences cannot follow (`stationarity` refuses it)
 _STATIONARITY_ADVICE = ("; `cfbmarkov stationarity RUN --sample-length` tells how long a "
                         "window must be")
+#: the aside on the sample length beside the flow term's length (left out, as
+#: :data:`_STATIONARITY_ADVICE` is, for a run that `stationarity` cannot read)
+_SAMPLE_LENGTH_ASIDE = (" (`cfbmarkov stationarity RUN --sample-length` tells from which "
+                        "length the fitted E(RT) and SD(RT) settle, which can be shorter)")
+
+
+def _up(seconds: float) -> str:
+    """A length in s at 3 significant digits, rounded up (a window of the printed length
+    holds at least what is asked)."""
+    digits = 3 - 1 - math.floor(math.log10(seconds)) if seconds > 0 else 0
+    step = 10.0 ** -digits
+    text = f"{math.ceil(seconds / step - 1e-9) * step:.{max(digits, 0)}f}"
+    return text.rstrip("0").rstrip(".") if "." in text else text
+
+
 #: the advice of a pooled fit's lines: it pools runs already
 _POOLED_ADVICE = ("fit on longer windows or pool more runs; `cfbmarkov stationarity RUN "
                   "--sample-length` tells how long a window must be")
@@ -453,7 +468,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
     if pooled:
         lines = [line.replace(_ADVICE, _POOLED_ADVICE) for line in lines]
     if _any_absences(runs):     # stationarity reads no periodic run with absences
-        lines = [line.replace(_STATIONARITY_ADVICE, "") for line in lines]
+        lines = [line.replace(_STATIONARITY_ADVICE, "").replace(_SAMPLE_LENGTH_ASIDE, "")
+                 for line in lines]
     on_window = (_pooled_on_window(model, runs, data) if pooled
                  else _on_window(model, runs[0], data[0]))
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
@@ -564,11 +580,9 @@ def flow_term_line(length: float, rt_mean: float | None = None) -> str:
     elif rt_mean is not None and math.isfinite(rt_mean) and rt_mean > 0:
         need = 2 * FLOW_BLOCK_RESIDENCES * rt_mean
         why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "
-               f"residence times, {need:.3g} s here")
-        advice = (f"fit on a window of {need:.3g} s or more, or pool several runs (fit A.h5 "
-                  "B.h5 ...), for the interval to hold it (`cfbmarkov stationarity RUN "
-                  "--sample-length` tells from which length the fitted E(RT) and SD(RT) "
-                  "settle, which can be shorter)")
+               f"residence times, {_up(need)} s here")
+        advice = (f"fit on a window of {_up(need)} s or more, or pool several runs (fit A.h5 "
+                  "B.h5 ...), for the interval to hold it" + _SAMPLE_LENGTH_ASIDE)
     else:
         why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "
                "residence times")

@@ -608,10 +608,14 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
             baseline = pooled_window_difference(pooled, ref, (start, stop), **basis_args)
         except InputError as exc:
             unread = str(exc)
-    if baseline is None and fitted is not None and fitted[0] >= ref.times[0] - ref.time_tolerance and (
-            fitted[1] <= ref.times[-1] + ref.time_tolerance):
-        with contextlib.suppress(InputError):     # a window without frames: no baseline
+    inside = fitted is not None and fitted[0] >= ref.times[0] - ref.time_tolerance and (
+        fitted[1] <= ref.times[-1] + ref.time_tolerance)
+    unreadable = None
+    if baseline is None and inside:
+        try:
             baseline = window_difference(ref, fitted, (start, stop), **basis_args)
+        except InputError as exc:                 # a window without residences, say
+            unreadable = str(exc)
     notes = ()
     if unread is not None:
         instead = (f"the reference's own window {fitted[0]:g}-{fitted[1]:g} s instead (one "
@@ -619,7 +623,10 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
                    "no persistence baseline")
         notes = (f"the persistence baseline could not pool the model's {len(pooled)} runs' "
                  f"fitting windows ({unread}): {instead}",)
-    elif baseline is None and fitted is not None:
+    elif baseline is None and unreadable is not None:
+        notes = (f"no persistence baseline: the reference's fitting window {fitted[0]:g}-"
+                 f"{fitted[1]:g} s could not be read as one ({unreadable})",)
+    elif baseline is None and fitted is not None and not inside:
         group = pred.group("model")
         source = group.attrs.get("source") if group is not None else None
         if isinstance(source, bytes):

@@ -313,9 +313,21 @@ def _runs_and_windows(model, runs, windows) -> tuple[list, list]:
 
 
 def _with_window_fields(model, runs, windows):
-    """``model`` with its fitting window's identity and time-averaged cell fields."""
+    """``model`` with its fitting window's identity and time-averaged cell fields. Where the
+    model records an identity already, each run's is formed by the rule it was recorded
+    with (:func:`~cfbmarkov.trajectory_identity.identity_version`), so that a model
+    recorded by the earlier rule still matches its own data."""
     from cfbmarkov.trajectories import Trajectories, opened
-    from cfbmarkov.trajectory_identity import window_identity
+    from cfbmarkov.trajectory_identity import identity_version
+
+    recorded = (str(model.source_identity).split(";") if model.source_identity else [])
+    if len(recorded) != len(runs):
+        recorded = [""] * len(runs)
+
+    def window_identity(run, window, k=0):
+        from cfbmarkov.trajectory_identity import window_identity as identity
+
+        return identity(run, window, identity_version(recorded[k]))
 
     if len(runs) == 1:
         from cfbmarkov.analysis.cell_fields import fitting_cell_fields
@@ -331,7 +343,7 @@ def _with_window_fields(model, runs, windows):
         files = [stack.enter_context(Trajectories(p)) if not isinstance(p, Trajectories)
                  else p for p in runs]
         model = model.with_source_identity(";".join(
-            window_identity(run, w) for run, w in zip(files, windows)))
+            window_identity(run, w, k) for k, (run, w) in enumerate(zip(files, windows))))
         try:
             return model.with_cell_fields(pooled_cell_fields(files, model.state_space,
                                                              windows))

@@ -93,6 +93,9 @@ def _one_source(sources: list[str], fmt: str | None = None) -> str | list[str]:
     import glob
     from pathlib import Path
 
+    if any(not str(source) for source in sources):      # Path("") is the current folder
+        raise InputError("an empty file name (''): give the file, folder or quoted pattern "
+                         "to import")
     files = []
     for source in sources:      # quoted patterns given with other sources: their files
         matched = ([] if Path(source).exists() or not glob.has_magic(source)

@@ -9,6 +9,7 @@ import decimal
 import gzip
 import os
 import re
+import shlex
 import sys
 import zlib
 from collections.abc import Iterable
@@ -195,10 +196,13 @@ def not_text_message(label: str) -> str:
                     shown = bytes([byte]).decode("cp1252", errors="replace")
                     spreadsheet = str(label).lower().removesuffix(".gz").endswith(
                         (".csv", ".tsv", ".txt"))
+                    quoted = shlex.quote(str(label))
+                    convert = (f"gunzip -c {quoted} | iconv -f cp1252 -t utf-8 | gzip > "
+                               "NEW.gz" if str(label).lower().endswith(".gz") else
+                               f"iconv -f cp1252 -t utf-8 {quoted} > NEW")
                     how = ("save it as UTF-8 (Excel: 'CSV UTF-8') or as 'Unicode Text'"
                            if spreadsheet else
-                           f"convert it to UTF-8 (iconv -f cp1252 -t utf-8 {label} > "
-                           "NEW), or remove the stray byte")
+                           f"convert it to UTF-8 ({convert}), or remove the stray byte")
                     return (f"{label}: line {number}: byte 0x{byte:02x} is not UTF-8 text (in "
                             f"Windows cp1252 it is {shown!r}): the file is not UTF-8 or "
                             f"UTF-16; {how}")

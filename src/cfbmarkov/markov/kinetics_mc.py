@@ -329,8 +329,11 @@ def _warn_too_few_substeps(sk, q: int, lag: float, states: np.ndarray,
     lags = (states.shape[0] - 1) * n
     if lags <= 0:
         return
-    # strided candidates first (no index array over every particle-frame), then those held
-    candidates = np.arange(0, lags, max(1, lags // (8 * SUBSTEP_SAMPLES)), dtype=np.int64)
+    # candidates drawn at random over the run (seeded: the same warning for any thread
+    # count; a stride would fall on few particles where it shares factors with N), then
+    # those held; no index array over every particle-frame
+    draws = min(lags, 8 * SUBSTEP_SAMPLES)
+    candidates = np.sort(np.random.default_rng(0).choice(lags, size=draws, replace=False))
     frames, particles = np.divmod(candidates, n)
     held = (states[frames, particles] >= 0) & (states[frames + 1, particles] >= 0)
     frames, particles = frames[held], particles[held]
