@@ -254,3 +254,18 @@ def test_a_one_frame_file_is_named_as_such(tmp_path, capsys, monkeypatch, args):
     assert main([verb, str(one), *rest]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and f"{one} holds one frame: no frame interval" in err, err
+
+
+@pytest.mark.parametrize("argv, said", [
+    (["compare", "r.h5", "p.h5", "--md-order", "-inf", "-o", "c"],
+     "argument --md-order: '-inf' must be a finite number >= 1"),
+    (["fit", "r.h5", "--lag", "-inf", "-o", "m.h5"], "argument --lag: '-inf' is not a finite"),
+    (["fit", "r.h5", "--lag", "-nan", "-o", "m.h5"], "argument --lag: '-nan' is not a finite")])
+def test_a_negative_infinity_is_judged_by_the_option_not_read_as_an_option(capsys, argv,
+                                                                          said):
+    """-inf and -nan reach the option's own check (argparse read them as options and said
+    'expected one argument')."""
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and said in err and "expected one argument" not in err, err
+

@@ -279,13 +279,14 @@ def parse_names(text: str) -> list[str]:
 #: an option value that argparse would take for an option: a minus and then a digit or a
 #: point (``-0.045:0.045,0:0.95``, ``-1e-3``), which argparse reads as a value only when it
 #: is a plain negative number
-_DASH_VALUE = re.compile(r"^-\.?\d")
+_DASH_VALUE = re.compile(r"^-(\.?\d|inf(inity)?$|nan$)", re.IGNORECASE)
 
 
 def join_dash_values(parser: argparse.ArgumentParser, argv: list[str]) -> list[str]:
     """``argv`` with each option that takes one value and is followed by a value starting
-    with ``-`` and a digit joined to it (``--region -0.045:0.045,0:0.95`` ->
-    ``--region=-0.045:0.045,0:0.95``), so that argparse reads the value as written.
+    with ``-`` and a digit (or ``-inf``, ``-nan``) joined to it (``--region
+    -0.045:0.045,0:0.95`` -> ``--region=-0.045:0.045,0:0.95``), so that argparse reads
+    the value as written and the option's own check names what is wrong with it.
 
     Parameters
     ----------
