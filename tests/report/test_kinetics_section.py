@@ -88,6 +88,14 @@ def test_the_section_quotes_summary_json(reported):
     assert "| mle |" not in section
     # one sentence written from the numbers
     assert re.search(r"in \d of 2 comparisons", section)
+    # and the summary's verdict counts them the same way
+    beats = sum(abs(e["model"]["exact"]["pd_windowed_exit_mean"])
+                <= abs(e["segregated_flow"]["pd_exit_mean"]) for e in (
+        json.loads((root / case / "compare-paper" / "summary.json").read_text())["kinetics"]["X"]
+        for case in ("u3", "u6")))
+    summary = md[:md.index(f"## {HEADING}")]
+    assert (f"the segregated-flow baseline's (the property as a function of residence time "
+            f"alone) for X in {beats} of 2 comparisons") in summary
     html = html_path.read_text()
     assert f'id="{HEADING.lower().replace(" ", "-")}"' in html
 
@@ -110,7 +118,8 @@ def test_the_sentence_names_where_the_chain_loses():
             "segregated_flow": {"exit_mean": 0.5 * (1 + seg / 100), "pd_exit_mean": seg}})
 
     text = verdict_sentence("X", [row("U = 3 m/s", 0.5, -4.0), row("U = 6 m/s", 3.0, 1.0)])
-    assert "in 1 of 2 comparisons (largest" in text
+    assert "in 1 of 2 comparisons (the chain's error from its exact answer" in text
+    assert "among these, the largest is 0.50 %" in text
     assert "U = 6 m/s (paper): chain +3.00 %, segregated flow +1.00 %" in text
     # the test compare's verdict makes: the reference inside the chain's interval (both
     # chains' intervals of +-0.03 hold 0.5), not the chain's mean in the reference's

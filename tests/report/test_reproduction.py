@@ -160,6 +160,8 @@ def test_every_figure_linked_and_valid(report_of_template):
     assert all(len(text) > 40 for _, text in captions)
     assert "widest at U = 3 m/s" in md
     assert "falls as U rises" in md
+    # the plausibility figure draws the E(RT) the physics check judges beside Table 3's
+    assert "dotted, the E(RT) from the window's net solids flux, which the physics check" in md
 
 
 def test_unfinished_case_is_reported(report_of_template):

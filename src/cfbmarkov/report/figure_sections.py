@@ -439,11 +439,16 @@ def plausibility_blocks(done, measures, estimators, figures_dir: Path,
                    if any(n in measures[c.name].models for c in done)}
     profiles = [(c.label, measures[c.name].band_positions, measures[c.name].solids_fraction,
                  measures[c.name].solids_velocity) for c in done]
+    flux = [getattr(measures[c.name], "flux_rt_mean", math.nan) for c in done]
     plot_plausibility(u, means, sds, model_means, profiles, figures_dir / name,
                        "Plausibility of the CFD-DEM: residence time against U, core-annulus "
-                       "profiles")
+                       "profiles", flux_means=flux)
     written.append(name)
-    sentence = ("(a) E(RT) and SD(RT) of the CFD-DEM, and E(RT) of each MCM, against U; (b) "
+    sentence = ("(a) E(RT) and SD(RT) of the CFD-DEM, and E(RT) of each MCM, against U: "
+                "the E(RT) of the residences each predict window holds whole (Table 3's, "
+                "which the window's length censors: it can rise where the flow's falls) "
+                "and, dotted, the E(RT) from the window's net solids flux, which the physics "
+                "check judges; (b) "
                 "solids volume fraction and (c) mean vertical solids velocity of the CFD-DEM "
                 "across the riser (pseudo-2D, one particle diameter thick), averaged over the "
                 "predict window; a core-annulus flow has denser, slower or falling wall layers. "

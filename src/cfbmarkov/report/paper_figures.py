@@ -219,7 +219,8 @@ def plot_mixing_grid(panels, path, title: str) -> Path:
     return _save(fig, path)
 
 
-def plot_plausibility(velocities, means, sds, model_means, profiles, path, title: str) -> Path:
+def plot_plausibility(velocities, means, sds, model_means, profiles, path, title: str,
+                      flux_means=None) -> Path:
     """The plausibility figure of the CFD-DEM, written as a PNG.
 
     (a) E(RT) and SD(RT) of the CFD-DEM (and E(RT) of each estimator) against U; (b)
@@ -241,6 +242,11 @@ def plot_plausibility(velocities, means, sds, model_means, profiles, path, title
         Output PNG file.
     title : str
         Figure title.
+    flux_means : sequence of float, length C, optional
+        E(RT) of the CFD-DEM from the net solids flux over each window (particle-time over
+        net passes, which the window's length does not censor; the physics check's), s,
+        drawn beside ``means`` (the residences the window holds whole), which can rise
+        where it falls.
 
     Returns
     -------
@@ -254,7 +260,11 @@ def plot_plausibility(velocities, means, sds, model_means, profiles, path, title
     fig = Figure(figsize=(15.0, 4.6), layout="constrained")
     ax, bx, cx = fig.subplots(1, 3)
     u = np.asarray(velocities, float)
-    ax.plot(u, means, "o-", color=CFD_DEM_COLOUR, label="E(RT), CFD-DEM")
+    ax.plot(u, means, "o-", color=CFD_DEM_COLOUR,
+            label="E(RT), CFD-DEM (residences held whole, as Table 3)")
+    if flux_means is not None:
+        ax.plot(u, flux_means, "D:", color=CFD_DEM_COLOUR, mfc="white",
+                label="E(RT), CFD-DEM, from the net solids flux (the physics check's)")
     ax.plot(u, sds, "s--", color=CFD_DEM_COLOUR, mfc="white", label="SD(RT), CFD-DEM")
     names = list(model_means)
     for name, values in model_means.items():

@@ -292,10 +292,40 @@ def _interval_sentence(cases: list[Case]) -> str | None:
             + sd_text
             + (f" {sampling_only} of the {total} intervals leave out the flow's variability "
                f"between windows (marked {SAMPLING_ONLY} in Table 3)." if sampling_only else "")
-            + (" Intervals that miss it this often are too narrow to cover the models' "
-               "structural error (they hold the Monte Carlo noise and the fitting window's "
-               "sampling)."
-               if total and len(inside) + len(apart) < 0.5 * total else ""))
+            + _too_narrow(total and len(inside) + len(apart) < 0.5 * total,
+                          sd_total and len(sd_inside) + len(sd_apart) < 0.5 * sd_total))
+
+
+def _kinetics_sentence(done: list[Case]) -> str | None:
+    """The properties along the paths (a run with a kinetics file) in one sentence: for
+    each property, in how many comparisons the chain's exit mean is at least as close to
+    the CFD-DEM's as the segregated-flow baseline's, as the section on them counts it
+    (:func:`cfbmarkov.report.kinetics_section.verdict_sentence`); None without kinetics."""
+    from cfbmarkov.report.kinetics_section import HEADING, collect_rows
+
+    counts = []
+    for name, rows in collect_rows(done).items():
+        judged = [r for r in rows if r.chain_error is not None and r.baseline_error is not None]
+        if judged:
+            beats = sum(abs(r.chain_error) <= abs(r.baseline_error) for r in judged)
+            counts.append(f"{name} in {beats} of {len(judged)}")
+    if not counts:
+        return None
+    return ("Along the particle paths (the kinetics file), the chain's exit mean is at least "
+            "as close to the CFD-DEM's as the segregated-flow baseline's (the property as a "
+            "function of residence time alone) for " + "; ".join(counts)
+            + f" comparisons ({link(HEADING.lower(), HEADING)}).")
+
+
+def _too_narrow(mean_missed: bool, sd_missed: bool) -> str:
+    """The remark on intervals that miss the CFD-DEM in most pairs, naming which figure's."""
+    which = ("E(RT) and SD(RT)" if mean_missed and sd_missed else
+             "E(RT)" if mean_missed else "SD(RT)" if sd_missed else "")
+    if not which:
+        return ""
+    return (f" {which} intervals that miss it this often are too narrow to cover the models' "
+            "structural error (they hold the Monte Carlo noise and the fitting window's "
+            "sampling).")
 
 
 def _cannot_show(meta: dict, done: list[Case], checks: list[PhysicsCheck]) -> list[str]:
@@ -496,6 +526,9 @@ def summary_blocks(meta: dict, cases: list[Case], done: list[Case], measures: di
     interval = _interval_sentence(cases)
     if interval:
         verdict.append(interval)
+    reactions = _kinetics_sentence(done)
+    if reactions:
+        verdict.append(reactions)
     blocks = [Heading(2, SUMMARY_HEADING), Para(headline(meta, cases, checks), css="verdict"),
               Bullets(verdict), Para(ran)]
     windows = windows_text(done, measures)
