@@ -611,6 +611,10 @@ def test_a_passed_verdict_says_so_with_its_numbers():
                       runs_limit=0.071)
     assert "quarters agree" not in pooled.passed_line()       # judged run by run, not here
     assert "judged on this window alone" not in pooled.passed_line()      # runs pooled
+    # no throughput figure (a file with absences, which stationarity cannot read): the
+    # aside does not send there
+    gapped = Adequacy((), parts, 1.02, 0.031, 0.057, 4.0, 0.002, (), float("nan"))
+    assert gapped.passed_line().endswith("which a longer run, or runs pooled, show)")
     assert ("the 2 runs agree (E(RT) fitted on each alone 0.980, 1.03 s, pooled 1.00 s; each "
             "within 3 % of the pooled model's, limit 7.1 %; their parts' spread 1 %)"
             ) in pooled.passed_line()

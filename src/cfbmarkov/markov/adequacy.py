@@ -207,10 +207,13 @@ class Adequacy:
             share = 100 * self.tail_share
             said.append(f"{f'{share:.2g} %' if share >= 0.1 else 'under 0.1 %'} of its "
                         "residences outlast the window")
+        # `stationarity` reads no periodic file with absent particles, whose window has no
+        # throughput figure (NaN, as an open riser's and an older verdict's): not named there
+        shown_by = ("`cfbmarkov stationarity` on a longer run, or runs pooled, show"
+                    if math.isfinite(self.window_rt_mean) else "a longer run, or runs pooled, show")
         alone_note = ("" if self.runs else
                       " (judged on this window alone: a flow that changes over longer times "
-                      "than it can lie elsewhere, which `cfbmarkov stationarity` on a longer "
-                      "run, or runs pooled, show)")
+                      f"than it can lie elsewhere, which {shown_by})")
         return ("the fitting sample's verdict: no warning" +
                 (f": {'; '.join(said)}" if said else "") + alone_note)
 
