@@ -221,18 +221,19 @@ def test_a_reference_within_its_own_sampling_is_not_told_apart_in_the_report():
     assert reference_place(flow) == "outside"
     far = dict(own, reference=dict(own["reference"], rt_mean_interval=[0.355, 0.365]))
     assert reference_place(far) == "outside"
-    case = SimpleNamespace(name="u6", velocity=6.0, problems=[],
-                           finished=[SimpleNamespace(name="paper", summary=own)])
-    text = _interval_sentence([case])
+    def sentence(summary):
+        return _interval_sentence([SimpleNamespace(
+            name="u6", velocity=6.0, problems=[],
+            finished=[SimpleNamespace(name="paper", summary=summary)])])
+
+    text = sentence(own)
     assert "inside the model's 90 % interval in 0 of 1" in text
     assert "In 1 more (paper at 6 m/s) its E(RT) lies outside, but within its own" in text
     assert "too narrow" not in text
     # SD(RT) intervals that miss in most pairs are remarked on too (E(RT)'s hold here)
     wide_mean = dict(own, model=dict(own["model"], rt_mean_interval=[0.3, 0.4]),
                      reference=dict(own["reference"], rt_sd_interval=[0.19, 0.21]))
-    case = SimpleNamespace(name="u6", velocity=6.0, problems=[],
-                           finished=[SimpleNamespace(name="paper", summary=wide_mean)])
-    text = _interval_sentence([case])
+    text = sentence(wide_mean)
     assert "inside the model's 90 % interval in 1 of 1" in text
     assert " SD(RT) intervals that miss it this often are too narrow" in text
     assert "E(RT) and SD(RT) intervals" not in text

@@ -91,15 +91,6 @@ _SAMPLE_LENGTH_ASIDE = (" (`cfbmarkov stationarity RUN --sample-length` tells fr
                         "length the fitted E(RT) and SD(RT) settle, which can be shorter)")
 
 
-def _up(seconds: float) -> str:
-    """A length in s at 3 significant digits, rounded up (a window of the printed length
-    holds at least what is asked)."""
-    digits = 3 - 1 - math.floor(math.log10(seconds)) if seconds > 0 else 0
-    step = 10.0 ** -digits
-    text = f"{math.ceil(seconds / step - 1e-9) * step:.{max(digits, 0)}f}"
-    return text.rstrip("0").rstrip(".") if "." in text else text
-
-
 #: the advice of a pooled fit's lines: it pools runs already
 _POOLED_ADVICE = ("fit on longer windows or pool more runs; `cfbmarkov stationarity RUN "
                   "--sample-length` tells how long a window must be")
@@ -578,10 +569,13 @@ def flow_term_line(length: float, rt_mean: float | None = None) -> str:
                "end to end")
         advice = "pool more runs or tracks (fit A.h5 B.h5 ...)"
     elif rt_mean is not None and math.isfinite(rt_mean) and rt_mean > 0:
-        need = 2 * FLOW_BLOCK_RESIDENCES * rt_mean
+        from cfbmarkov.markov.uncertainty import outward_bounds
+
+        # rounded up: a window of the printed length holds at least what is asked
+        need = outward_bounds(0.0, 2 * FLOW_BLOCK_RESIDENCES * rt_mean, digits=3)[1]
         why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "
-               f"residence times, {_up(need)} s here")
-        advice = (f"fit on a window of {_up(need)} s or more, or pool several runs (fit A.h5 "
+               f"residence times, {need} s here")
+        advice = (f"fit on a window of {need} s or more, or pool several runs (fit A.h5 "
                   "B.h5 ...), for the interval to hold it" + _SAMPLE_LENGTH_ASIDE)
     else:
         why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "

@@ -132,6 +132,9 @@ class RunComparison:
     mixing_rms : float
         RMS difference of the mixing curves on the model's frames (fraction of all
         particles).
+    mixing_frames : int
+        The model's frames the mixing RMS compared (both curves defined; on an open riser,
+        a tracer left on each side: :func:`mixing_weights`).
     same_tracer_groups : bool
         Whether both files put the same particles (by id) in the left tracer group.
     model_columns : int or None
@@ -198,6 +201,7 @@ class RunComparison:
     intervals: Any = None
     direction: str = "up"
     cluster: dict | None = None
+    mixing_frames: int = 0
     bin_width_from: str = "given"
 
     @property
@@ -248,7 +252,7 @@ class RunComparison:
             "rtd_bins": {"from": 0.0, "to": float(self.edges[-1]),
                          "count": int(self.edges.size - 1)},
             "exact_events": {"reference": ref.exact, "model": mod.exact},
-            "mixing_frames": mixing_frames_compared(self.reference, self.model),
+            "mixing_frames": int(self.mixing_frames),
             "same_purple_particles": bool(self.same_tracer_groups),
             "same_tracer_groups": bool(self.same_tracer_groups),
             "model_columns": self.model_columns,
@@ -705,14 +709,6 @@ def mixing_weights(reference: ComparedRun, model: ComparedRun) -> np.ndarray | N
     return np.minimum(mod_count, ref_count[closer])
 
 
-def mixing_frames_compared(reference: ComparedRun, model: ComparedRun) -> int:
-    """How many of the model's frames the mixing RMS compares: those where both curves are
-    defined (an open riser's is undefined once its tracers have all left) and, on an open
-    riser, where both sides still hold a tracer (:func:`mixing_weights`)."""
-    return mixing_rms(reference.mixing_times, reference.mixing_fraction, model.mixing_times,
-                      model.mixing_fraction, mixing_weights(reference, model), frames=True)[1]
-
-
 def reading_band(traj, band: float | None) -> float | None:
     """The face band an open riser's file is read with: ``band`` (one cell of the model),
     or for a Markov prediction the whole height: its Monte Carlo has no other way in or
@@ -777,8 +773,8 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
                         "on the other")
     t_ref, f_ref = reference.mixing_times, reference.mixing_fraction
     t_mod, f_mod = model.mixing_times, model.mixing_fraction
-    weights = mixing_weights(reference, model)
-    rms = mixing_rms(t_ref, f_ref, t_mod, f_mod, weights)
+    rms, compared = mixing_rms(t_ref, f_ref, t_mod, f_mod, mixing_weights(reference, model),
+                               frames=True)
     if not np.isfinite(rms):
         ends = [f"{name} at {times[~np.isfinite(curve)][0]:g} s"
                 for name, times, curve in (("reference", t_ref, f_ref), ("model", t_mod, f_mod))
@@ -828,7 +824,8 @@ def _assemble(reference: ComparedRun, model: ComparedRun, edges: np.ndarray,
     return RunComparison(
         window=window, bin_width=float(bin_width), md_order=float(md_order), edges=edges,
         reference=reference, model=model,
-        md_rtd=md, mixing_rms=rms, same_tracer_groups=same, model_columns=columns,
+        md_rtd=md, mixing_rms=rms, mixing_frames=compared, same_tracer_groups=same,
+        model_columns=columns,
         warnings=warnings, basis=on.name, lag_frames=on.lag_frames,
         exact_reference=beside.exact_reference, baseline=beside.baseline,
         natural_variability=beside.variability, on_fitting_window=on_fit,

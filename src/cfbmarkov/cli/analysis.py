@@ -246,14 +246,15 @@ def interval_verdict(rt_mean: float, rt_sd: float, mean_interval, sd_interval,
     str
         ``the reference's E(RT) 0.7446 s lies below the model's interval, SD(RT) ...``.
     """
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_agreement
+
     places = [_place(rt_mean, mean_interval), _place(rt_sd, sd_interval)]
     names = ("E(RT)", "SD(RT)")
-    apart = [False, False]          # outside the model's interval, inside the reference's own
-    if reference_intervals is not None:
-        for k, (own, model) in enumerate(zip(reference_intervals, (mean_interval, sd_interval))):
-            apart[k] = (places[k] != "inside" and own is not None
-                        and all(math.isfinite(v) for v in own)
-                        and own[0] <= model[1] and model[0] <= own[1])
+    # outside the model's interval, inside the reference's own: compare --kinetics's rule
+    owns = reference_intervals if reference_intervals is not None else (None, None)
+    apart = [exit_mean_agreement(float(value), list(model), own) == "not told apart"
+             for value, model, own in zip((rt_mean, rt_sd), (mean_interval, sd_interval),
+                                          owns)]
     dm, ds = _digits(rt_mean, mean_interval), _digits(rt_sd, sd_interval)
     text = (f"the reference's E(RT) {rt_mean:.{dm}g} s lies {places[0]} the model's interval, "
             f"its SD(RT) {rt_sd:.{ds}g} s {places[1]}")

@@ -92,18 +92,13 @@ def reference_place(summary: dict, figure: str = "rt_mean") -> str | None:
     -------
     str or None
     """
-    interval = (summary.get("model") or {}).get(f"{figure}_interval")
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_agreement
+
     ref = summary.get("reference") or {}
-    value = finite_or_none(ref.get(figure))
-    if not interval or value is None:
-        return None
-    if interval[0] <= value <= interval[1]:
-        return "inside"
-    own = ref.get(f"{figure}_interval")
-    if (leaves_out_the_flow(summary) and own and len(own) == 2
-            and own[0] <= interval[1] and interval[0] <= own[1]):
-        return "not told apart"
-    return "outside"
+    own = ref.get(f"{figure}_interval") if leaves_out_the_flow(summary) else None
+    place = exit_mean_agreement(finite_or_none(ref.get(figure)),
+                                (summary.get("model") or {}).get(f"{figure}_interval"), own)
+    return "outside" if place == "missed" else place
 
 
 def _interval_text(interval) -> str:
