@@ -827,6 +827,26 @@ def test_the_chains_miss_of_its_window_is_warned_beyond_the_limit():
     assert "(its 9920 residences held whole; limit 25 %)" in line
     assert both.on_window_warning(limit=0.5) is None
     assert Adequacy().on_window_warning() is None and both.adequate
+    # the advice: a state space the user named is sent to `fit --states auto`; one that
+    # `--states auto` chose is not sent there again (a review followed the advice from a
+    # coarse grid, got the same line back from the chosen model, and found finer cells
+    # were what carried the window)
+    from cfbmarkov.markov.model_summary import on_window_warning
+
+    p = np.full((2, 2), 0.5)
+    zeros = np.zeros((2, 2), np.int64)
+    named = MarkovModel(p, zeros, zeros, zeros, CellGrid(1, 2, 0.1, 1.0), 0.025,
+                        adequacy=both)
+    assert on_window_warning(named).endswith(
+        "a state space with memory may carry it (`fit --states auto` compares them on this "
+        "window)")
+    chosen = named.with_selection({"chosen": {"states": "cells", "lag": 0.025}})
+    advice = on_window_warning(chosen)
+    assert "--states auto` compares" not in advice
+    assert advice.endswith("finer --cells (more columns keep a downflowing wall layer apart "
+                           "from the rising core) or more flow (a longer window, several "
+                           "runs pooled) may carry it")
+    assert on_window_warning(chosen.with_adequacy(within)) is None
 
 
 def test_sample_length_of_runs_sharing_no_span_names_them_and_the_fix(tmp_path):

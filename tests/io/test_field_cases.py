@@ -340,7 +340,11 @@ def test_insert_stream_growing_atom_count_with_image_flags(tmp_path):
 
 def test_a_region_that_holds_no_particle_and_bad_new_options(tmp_path, capsys):
     dump = str(FIELD / "outlet-delete-reinsert.dump")
-    for args, match in ((["--region", "0.5:0.6,0:0.95"], "holds no particle in any frame"),
+    # the region named axis by axis in the order --region takes, beside the dump's box
+    for args, match in ((["--region", "0.5:0.6,0:0.95"],
+                         "the riser region x 0.5:0.6 (across), y 0:0.95 (vertical) m holds no "
+                         "particle in any frame; check --region (or --width/--height) against "
+                         "the first frame's box, x 0:0.09, y 0:0.95, z -0.0005:0.0005 m"),
                         (["--boundary", "shut"], "argument --boundary: invalid choice"),
                         (["--resample", "0.01"], "--resample and --max-gap apply to CSV files"),
                         (["--region", "0:0.09,0.95:0"], "region")):
@@ -349,6 +353,16 @@ def test_a_region_that_holds_no_particle_and_bad_new_options(tmp_path, capsys):
         err = capsys.readouterr().err
         assert code == 2 and err.count("\n") == 1 and match in err, (args, err)
     assert not (tmp_path / "x.h5").exists()
+    # 3D, vertical z: the ranges in the order typed (x, y, z), not stored (across, vertical,
+    # depth), so that the wrong one shows (a review read y and z swapped, unnamed)
+    assert main(["import", str(FIELD / "liggghts-per-timestep" / "post" / "dump*.newModels"),
+                 "--format", "lammps", "--time-step", "1e-5", "--vertical-axis", "z",
+                 "--region", "-0.045:0.045,-0.0005:0.0005,0:0.95",
+                 "-o", str(tmp_path / "x.h5")]) == 2
+    assert ("the riser region x -0.045:0.045 (across), y -0.0005:0.0005 (depth), z 0:0.95 "
+            "(vertical) m holds no particle in any frame; check --region (or --width/--height) "
+            "against the first frame's box, x -0.05:0.05, y -0.05:0.05, z 0:0.15 m"
+            ) in capsys.readouterr().err
 
 
 def test_a_dump_flat_in_z_at_first_that_spreads_later_is_refused(tmp_path, capsys):

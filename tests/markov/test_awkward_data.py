@@ -338,7 +338,7 @@ def test_a_window_late_in_a_long_record_is_printed_as_given():
     assert "window 3600.005:3600.78 s" in model_summary(model)
 
 
-def test_a_class_whose_net_flow_runs_down_is_named_as_left_out(tmp_path, write_states):
+def test_a_class_whose_net_flow_runs_down_is_named_as_left_out(tmp_path, write_states, capsys):
     """Three particles in columns that never exchange: two rise (one a row a frame, one
     every other frame) and one falls a row a frame. The falling particle's class has a
     negative net entry flux, gets no weight in the exact RTD (which is the two risers'
@@ -365,3 +365,19 @@ def test_a_class_whose_net_flow_runs_down_is_named_as_left_out(tmp_path, write_s
     # the exact RTD is the two risers' alone (0.95 s and 1.9 s laps)
     assert model.rtd().mean == pytest.approx(rising.rtd().mean, rel=1e-9)
     assert 0.95 < rising.rtd().mean < 1.9
+    # maps: a third of Eq. (8)'s batch fed into the falling column stays there, so the
+    # fraction in riser levels off at 1/3 with --outflow; the maps say so (a review saw
+    # 0.3333 at 5 s printed with no word)
+    from cfbmarkov.cli import main
+
+    saved = model.save(tmp_path / "m.h5")
+    assert main(["maps", str(saved), "--times", "2,5", "--outflow",
+                 "-o", str(tmp_path / "maps.png")]) == 0
+    out, err = capsys.readouterr()
+    assert "t = 5 s: fraction in riser 0.3333" in out
+    assert ("warning: the model: 0.333 of the batch is fed into 1 closed class of the chain "
+            "with no net upward flow through the boundary (38 states;") in err
+    assert "0.333 of the batch is still there at 5 s and counted in the fraction" in err
+    assert main(["maps", str(fit_model(two, CellGrid(3, 38, 0.09, 0.95), 0.025).save(
+        tmp_path / "r.h5")), "--times", "2", "--outflow", "-o", str(tmp_path / "r.png")]) == 0
+    assert "closed class" not in capsys.readouterr().err

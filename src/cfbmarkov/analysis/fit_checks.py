@@ -159,6 +159,7 @@ def assess_fit(model, runs: Sequence | None = None,
                 model = model.with_uncertainty(None)     # not an interval of other data
     if verdict:
         from cfbmarkov.analysis.adequacy import assess_adequacy
+        from cfbmarkov.markov.model_summary import on_window_warning
 
         with stage("sample verdict", "the fitting sample's verdict: the window's halves "
                    "and quarters refitted and compared"):
@@ -167,7 +168,7 @@ def assess_fit(model, runs: Sequence | None = None,
                                                         uncertainty=model.uncertainty))
         for line in model.adequacy.warnings:      # seen in a notebook, as predict repeats them
             warnings.warn(line, SampleWarning, stacklevel=2)
-        missed = model.adequacy.on_window_warning()     # the model's own, as fit prints it
+        missed = on_window_warning(model)     # the model's own, as fit prints it
         if missed:
             warnings.warn(missed, SampleWarning, stacklevel=2)
     return model

@@ -722,7 +722,8 @@ def cmd_maps(args) -> int:
               "batch over the bottom cells", file=sys.stderr)
     maps = model.batch_injection_maps(args.times, outflow=args.outflow)
     space = model.state_space
-    from cfbmarkov.markov.model_summary import cells_text, monte_carlo_warnings
+    from cfbmarkov.markov.model_summary import (cells_text, maps_left_out_warning,
+                                                monte_carlo_warnings)
     from cfbmarkov.markov.propagation import fed_inlet_cells
 
     import numpy as np
@@ -739,6 +740,10 @@ def cmd_maps(args) -> int:
               file=sys.stderr)
     for line in monte_carlo_warnings(model):
         print(f"warning: the model: {one_line(line)}", file=sys.stderr)
+    left_out = maps_left_out_warning(model, args.times, args.outflow,
+                                     "down" if downward else "up")
+    if left_out is not None:
+        print(f"warning: the model: {left_out}", file=sys.stderr)
     title = (f"Batch fed over the {'top cells' if downward else 'inlet'} at t = 0 "
              f"({space.describe()}"
              + (", summed over the depth" if space.depth_columns > 1 else "") + f", lag {model.lag:g} s"

@@ -223,8 +223,8 @@ def _chain_warnings(model) -> list[str]:
     """What `fit`, `rtd` and `info` say of the chain that the exact answers rest on as
     well: residences it never ends (unresolved mass), states that trap particles, closed
     classes its exact answers leave out, and a chain that misses its own fitting window."""
-    from cfbmarkov.markov.model_summary import (left_out_classes_warning, trap_warning,
-                                                unresolved_warning)
+    from cfbmarkov.markov.model_summary import (left_out_classes_warning, on_window_warning,
+                                                trap_warning, unresolved_warning)
 
     lines = []
     from cfbmarkov.markov.first_passage import DEFICIT_TOL
@@ -249,7 +249,7 @@ def _chain_warnings(model) -> list[str]:
     if left_out is not None:
         lines.append(f"the model: {left_out}; the bed means are those of the other classes "
                      "(the cells of the classes left out have none)")
-    missed = None if model.adequacy is None else model.adequacy.on_window_warning()
+    missed = on_window_warning(model)
     if missed:           # an RTD that misses its window's spread misses the conversion too
         lines.append(f"the model: {missed}")
     return lines

@@ -329,7 +329,9 @@ def cmd_predict(args) -> int:
                       output=args.output, progress=not args.quiet)
     for line in model.adequacy.warnings if model.adequacy is not None else ():
         print(f"warning: the model's fitting sample: {one_line(line)}", file=sys.stderr)
-    missed = None if model.adequacy is None else model.adequacy.on_window_warning()
+    from cfbmarkov.markov.model_summary import on_window_warning
+
+    missed = on_window_warning(model)
     if missed:
         print(f"warning: the model: {one_line(missed)}", file=sys.stderr)
     from cfbmarkov.markov.model_summary import monte_carlo_warnings
@@ -412,7 +414,7 @@ def cmd_rtd(args) -> int:
                                                 one_sided_interval_warnings,
                                                 unresolved_warning)
 
-    missed = None if adequacy is None else adequacy.on_window_warning()
+    missed = None if adequacy is None else on_window_warning(model, adequacy)
     if missed:                          # the chain misses its own fitting window
         warnings.append(missed)
     unresolved = unresolved_warning(rtd)

@@ -531,7 +531,7 @@ class _FollowedIds:
 
 def _check_some_present(writer: TrajectoryWriter, riser: RiserFrame, label: str) -> None:
     if not writer.any_present:
-        raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no particle "
+        raise InputError(f"{label}: the riser region {riser.region_text()} holds no particle "
                          "in any frame; check --region and --length-unit")
 
 
@@ -642,7 +642,7 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
     periodic = not riser.boundary.is_open
     keep = inside
     if not keep.any():
-        raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
+        raise InputError(f"{label}: the riser region {riser.region_text()} holds no "
                          "particle in any row; check --region and --length-unit")
     times, ids, relative, merged = merge_same_times(
         rows[keep, layout.index("t")], ids[keep], relative[keep],

@@ -42,7 +42,7 @@ from cfbmarkov.io._common import (
     whole_ids,
 )
 from cfbmarkov.io.lammps_dump import AXES, AtomColumns, DumpFrame, _frames_of, dump_files
-from cfbmarkov.io.riser import (FrameColumns, RiserFrame, region_notes, riser_frame,
+from cfbmarkov.io.riser import (FrameColumns, RiserFrame, box_text, region_notes, riser_frame,
                                 riser_positions)
 from cfbmarkov.trajectory_writer import IMPORT_MAX_STEP
 
@@ -135,9 +135,9 @@ def import_lammps(source: str | os.PathLike, output: str | os.PathLike, *,
                 _append_frame(writer, columns, frame, first, layout, time_step, frame_label,
                               riser, flat_z)
             if not writer.any_present:
-                raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
+                raise InputError(f"{label}: the riser region {riser.region_text()} holds no "
                                  "particle in any frame; check --region (or --width/--height) "
-                                 "against the box")
+                                 f"against the first frame's box, {box_text(first.box[:n_axes])}")
             notes = region_notes(riser, first.box[:n_axes], columns.rows, columns.outside,
                                  tuple(first.boundary))
             if first.time is not None and time_step is not None:

@@ -23,7 +23,7 @@ import numpy as np
 
 from cfbmarkov.errors import InputError
 from cfbmarkov.io._common import create_writer, progress, removing_new_folders
-from cfbmarkov.io.riser import (AXES, FrameColumns, region_notes, riser_frame,
+from cfbmarkov.io.riser import (AXES, FrameColumns, box_text, region_notes, riser_frame,
                                 riser_positions)
 from cfbmarkov.trajectory_format import POSITION_TOLERANCE
 from cfbmarkov.trajectory_writer import IMPORT_MAX_STEP
@@ -205,8 +205,10 @@ def import_particle_series(series: ParticleSeries, output: str | os.PathLike, *,
                 _append(writer, columns, frame, first, riser, flat_z, image,
                         series.box_origin_unknown and riser.from_box, period_from_box)
             if not writer.any_present:
-                raise InputError(f"{label}: the riser region {riser.region.tolist()} m holds no "
-                                 "particle in any frame; check --region (or --width/--height)")
+                raise InputError(f"{label}: the riser region {riser.region_text()} holds no "
+                                 "particle in any frame; check --region (or --width/--height)"
+                                 + ("" if box is None or series.box_origin_unknown
+                                    else f" against the box, {box_text(box)}"))
             # a box whose origin the format does not give (H5MD: its edges only) says
             # nothing of where the particles may lie: no note on a region beyond it
             notes = region_notes(riser, None if series.box_origin_unknown else box,

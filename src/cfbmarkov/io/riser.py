@@ -91,6 +91,14 @@ class RiserFrame:
         """Extent in depth (m) of a 3D riser, else None."""
         return float(self.region[2, 1] - self.region[2, 0]) if len(self.axes) == 3 else None
 
+    def region_text(self) -> str:
+        """The region in the source's axis order, as ``--region`` takes it, each range
+        named by its axis and role: ``x -0.045:0.045 (across), z 0:0.95 (vertical) m``."""
+        roles = ("across", "vertical", "depth")
+        ranges = sorted((a, k) for k, a in enumerate(self.axes))
+        return ", ".join(f"{AXES[a]} {self.region[k, 0]:g}:{self.region[k, 1]:g} ({roles[k]})"
+                         for a, k in ranges) + " m"
+
     def writer_options(self) -> dict:
         """The geometry options of :class:`~cfbmarkov.trajectory_writer.TrajectoryWriter`."""
         names = ("across", "vertical", "depth")
@@ -104,6 +112,12 @@ class RiserFrame:
                 "depth_axis": None if self.depth is None else AXES[self.depth],
                 "depth_axis_dropped": None if self.dropped is None else AXES[self.dropped],
                 "region": self.region.tolist(), "boundary_stored": self.boundary.value}
+
+
+def box_text(box) -> str:
+    """A source's box as ``--region`` would give it: ``x 0:0.1, y 0:0.15, z 0:0.95 m``."""
+    return ", ".join(f"{AXES[a]} {lo:g}:{hi:g}" for a, (lo, hi) in enumerate(np.asarray(box))) \
+        + " m"
 
 
 def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: tuple[str, ...],
@@ -147,8 +161,8 @@ def riser_frame(*, n_axes: int, spread: bool, vertical_axis: str | None, flags: 
     ------
     InputError
         For a 3D source without ``vertical_axis`` (the message lists the extents and the
-        axis a guess would take), an unknown axis or boundary, ``drop_depth`` on a 2D source, a region that does not fit the source's
-        axes, or a riser of no size.
+        axis a guess would take), an unknown axis or boundary, ``drop_depth`` on a 2D
+        source, a region that does not fit the source's axes, or a riser of no size.
     """
     if boundary is not None:
         boundary = Boundary.parse(boundary, "--boundary")

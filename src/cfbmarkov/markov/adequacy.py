@@ -24,6 +24,17 @@ from cfbmarkov.errors import InputError
 #: 47-48 %, the tutorial's automatic choice by 3 %
 ON_WINDOW_LIMIT = 0.25
 
+#: how :meth:`Adequacy.on_window_warning` ends for a state space the user named
+CARRY_ADVICE = ("a state space with memory may carry it (`fit --states auto` compares them on "
+                "this window)")
+
+#: ... and for one that ``fit --states auto`` chose on this window, which would choose it
+#: again: what is left is the grid and the amount of flow
+CHOSEN_CARRY_ADVICE = ("`fit --states auto` chose this state space as the closest to this "
+                       "window of those it compares: finer --cells (more columns keep a "
+                       "downflowing wall layer apart from the rising core) or more flow (a "
+                       "longer window, several runs pooled) may carry it")
+
 #: the keys of the verdict's ``on_fitting_window`` (JSON), in :attr:`Adequacy.on_window`'s order
 ON_WINDOW_KEYS = ("window_length", "rt_mean", "rt_sd", "observed_rt_mean", "observed_rt_sd",
                   "residences")
@@ -119,7 +130,8 @@ class Adequacy:
                 f"{seen_mean:.3g} s, SD(RT) {seen_sd:.3g} s): how well the chain carries the "
                 "data it was fitted on")
 
-    def on_window_warning(self, limit: float = ON_WINDOW_LIMIT) -> str | None:
+    def on_window_warning(self, limit: float = ON_WINDOW_LIMIT,
+                          advice: str = CARRY_ADVICE) -> str | None:
         """One warning line where the chain misses its own fitting window (:attr:`on_window`)
         by more than ``limit`` (relative) in E(RT) or SD(RT), else None.
 
@@ -132,6 +144,10 @@ class Adequacy:
         ----------
         limit : float, optional
             Relative, default :data:`ON_WINDOW_LIMIT`.
+        advice : str, optional
+            What the line ends with: what may carry the window (:data:`CARRY_ADVICE`; for a
+            state space ``fit --states auto`` chose, :data:`CHOSEN_CARRY_ADVICE`, as
+            :func:`~cfbmarkov.markov.model_summary.on_window_warning` picks it).
 
         Returns
         -------
@@ -153,8 +169,7 @@ class Adequacy:
         return (f"the chain does not carry its own fitting window: as a {length:g} s window "
                 f"sees it, {' and '.join(misses)} ({held}; "
                 f"limit {100 * limit:g} %): the model's figures and their interval are the "
-                "chain's, and the flow's may lie far from them; a state space with memory may "
-                "carry it (`fit --states auto` compares them on this window)")
+                f"chain's, and the flow's may lie far from them; {advice}")
 
     @property
     def adequate(self) -> bool:

@@ -133,7 +133,7 @@ def model_warnings(model: "MarkovModel") -> list[str]:
     lines = [] if model.open_flow is None else model.open_flow.warnings()
     if model.adequacy is not None:
         lines += [f"  {line}" for line in model.adequacy.warnings]
-        missed = model.adequacy.on_window_warning()
+        missed = on_window_warning(model)
         if missed:
             lines.append(f"  {missed}")
     never = np.setdiff1d(model.unvisited_states, model.entered_never_left).size
@@ -322,6 +322,33 @@ def hold_up_warning(model: "MarkovModel") -> str | None:
             "from its inlet to its outlet, or fit on a window of steady flow")
 
 
+def left_out_classes(model: "MarkovModel") -> list[np.ndarray]:
+    """The closed classes of a reducible periodic chain that its exact answers leave out:
+    those with no net entry flux in the residences' direction
+    (:func:`~cfbmarkov.markov.model_rtd.net_entry_flux`), whose particles never end a
+    residence.
+
+    Parameters
+    ----------
+    model : MarkovModel
+
+    Returns
+    -------
+    list of ndarray of int64
+        The states of each class left out; empty for an open riser, an irreducible chain,
+        or where every class has a net entry flux.
+    """
+    classes = model.closed_classes
+    if model.open_flow is not None or len(classes) < 2:
+        return []
+    from cfbmarkov.markov.model_rtd import net_entry_flux
+
+    flux = net_entry_flux(model, model.flow_direction)
+    if flux is None:
+        return []
+    return [c for c in classes if not flux[c].sum() > 0]
+
+
 def left_out_classes_warning(model: "MarkovModel") -> str | None:
     """The line for a reducible periodic chain whose exact answers leave classes out: the
     exact RTD weights each closed class by its observed net entry flux
@@ -340,17 +367,10 @@ def left_out_classes_warning(model: "MarkovModel") -> str | None:
         particle-frames; None where no class is left out.
     """
     classes = model.closed_classes
-    if model.open_flow is not None or len(classes) < 2:
-        return None
-    from cfbmarkov.markov.model_rtd import net_entry_flux
-
-    direction = model.flow_direction
-    flux = net_entry_flux(model, direction)
-    if flux is None:
-        return None
-    out = [c for c in classes if not flux[c].sum() > 0]
+    out = left_out_classes(model)
     if not out:
         return None
+    direction = model.flow_direction
     frames = np.asarray(model.counts.sum(axis=1), dtype=np.float64)
     states = np.concatenate(out)
     share = frames[states].sum() / frames.sum() if frames.sum() > 0 else float("nan")
@@ -359,6 +379,78 @@ def left_out_classes_warning(model: "MarkovModel") -> str | None:
             f"{direction}ward flow through the boundary, so the exact RTD and the kinetics' "
             "exact answers, which weight each class by its net entry flux, leave their "
             "particles out and describe the other classes alone; " + CLOSED_CLASSES_ADVICE)
+
+
+def maps_left_out_warning(model: "MarkovModel", times, outflow: bool,
+                          direction: str = "up") -> str | None:
+    """The line for a batch of Eq. (8) (``maps``) partly fed into closed classes that the
+    exact answers leave out (:func:`left_out_classes`): the chain keeps that share there,
+    where the fitting window's particles stayed, instead of carrying it through the riser;
+    with ``outflow`` the fraction in the riser levels off at what is still there.
+
+    Parameters
+    ----------
+    model : MarkovModel
+    times : sequence of float
+        The maps' times after the injection (s), whole multiples of the lag.
+    outflow : bool
+        Whether the maps take out what leaves (:func:`~cfbmarkov.markov.propagation.
+        propagate`).
+    direction : {"up", "down"}, optional
+        The row the batch is fed over (:func:`~cfbmarkov.markov.propagation.inlet_batch`).
+
+    Returns
+    -------
+    str or None
+        The line, naming the share fed into those classes and the share still in them at
+        the last time; None where no class is left out or none of the batch is fed there.
+    """
+    out = left_out_classes(model)
+    if not out:
+        return None
+    from cfbmarkov.markov.propagation import inlet_batch, propagate
+
+    states = np.concatenate(out)
+    batch = inlet_batch(model, direction)
+    fed = float(batch[states].sum())
+    if not fed > 0:
+        return None
+    last = max(times)
+    held = float(propagate(model, batch, model.steps_for(last), outflow)[-1][states].sum())
+    flow = model.flow_direction
+    return (f"{fed:.3g} of the batch is fed into {len(out)} closed "
+            f"{'class' if len(out) == 1 else 'classes'} of the chain with no net {flow}ward "
+            f"flow through the boundary ({states.size} states; the fitting window's "
+            "particles in them never moved into the other cells), where the chain keeps it: "
+            f"{held:.3g} of the batch is still there at {last:g} s"
+            + (" and counted in the fraction in riser" if outflow else "")
+            + ", while the exact RTD leaves those particles out; " + CLOSED_CLASSES_ADVICE)
+
+
+def on_window_warning(model: "MarkovModel", adequacy=None) -> str | None:
+    """The model's line where its chain misses its own fitting window
+    (:meth:`~cfbmarkov.markov.adequacy.Adequacy.on_window_warning`), ending with the advice
+    that fits how its state space was chosen: a state space ``fit --states auto`` chose on
+    this window is not sent to ``--states auto`` again.
+
+    Parameters
+    ----------
+    model : MarkovModel
+    adequacy : Adequacy, optional
+        The verdict to read (default: the model's own, ``model.adequacy``).
+
+    Returns
+    -------
+    str or None
+        None where there is no verdict or the chain carries its window.
+    """
+    from cfbmarkov.markov.adequacy import CARRY_ADVICE, CHOSEN_CARRY_ADVICE
+
+    adequacy = model.adequacy if adequacy is None else adequacy
+    if adequacy is None:
+        return None
+    return adequacy.on_window_warning(
+        advice=CHOSEN_CARRY_ADVICE if model.selection is not None else CARRY_ADVICE)
 
 
 def trap_warning(model: "MarkovModel") -> str | None:

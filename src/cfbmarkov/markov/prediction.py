@@ -107,7 +107,9 @@ def _warn_sample(model: "MarkovModel") -> None:
 
     for line in model.adequacy.warnings if model.adequacy is not None else ():
         warnings.warn(f"the model's fitting sample: {line}", SampleWarning, stacklevel=4)
-    missed = None if model.adequacy is None else model.adequacy.on_window_warning()
+    from cfbmarkov.markov.model_summary import on_window_warning
+
+    missed = on_window_warning(model)
     if missed:                   # the chain misses its own fitting window
         warnings.warn(f"the model: {missed}", SampleWarning, stacklevel=4)
 

@@ -187,16 +187,15 @@ def check_fitting_file(reference, prediction, required: bool = False) -> bool:
     return True
 
 
-def _adequacy(pred):
-    """The verdict on the fitting sample of the model a prediction carries (None where it
-    carries no model, or a model without one)."""
+def _carried_model(pred):
+    """The model a prediction carries (None where it carries none, or one that cannot be
+    read)."""
     from cfbmarkov.markov import MarkovModel
 
     try:
-        model = MarkovModel.from_trajectories(pred)
+        return MarkovModel.from_trajectories(pred)
     except InputError:
         return None
-    return None if model is None else model.adequacy
 
 
 def _model_exact(pred, comparison: RunComparison) -> dict | None:
@@ -433,14 +432,17 @@ def compare(reference, prediction, *, window, output, bin_width: float | None = 
         warnings = list(comparison.warnings)
         intervals = _intervals(pred, comparison, level, resamples, warnings,
                                required=intervals_required)
-        adequacy = _adequacy(pred)
+        carried = _carried_model(pred)
+        adequacy = None if carried is None else carried.adequacy  # its fitting sample's verdict
         exact_model = _model_exact(pred, comparison)
         if exact_model is not None:
             summary["model"]["exact"] = exact_model
         if adequacy is not None:        # the verdict on the model's fitting sample, repeated
             summary["adequacy"] = adequacy.to_dict()
             warnings += [f"the model's fitting sample: {line}" for line in adequacy.warnings]
-            missed = adequacy.on_window_warning()
+            from cfbmarkov.markov.model_summary import on_window_warning
+
+            missed = on_window_warning(carried)
             if missed:                  # the chain misses its own fitting window
                 warnings.append(f"the model: {missed}")
         if intervals is None:       # the keys scripts read, null: no interval was formed
