@@ -59,6 +59,30 @@ def thawed_record(value: Any) -> Any:
     return value
 
 
+def read_only_copy(value, dtype=None):
+    """A read-only copy of an array (a view of a read-only base, which cannot be made
+    writeable again): what an immutable object keeps of an array it is given, so that the
+    caller's later writes to theirs change nothing.
+
+    Parameters
+    ----------
+    value : array_like
+    dtype : numpy dtype, optional
+        Converted to it (numpy's rules: ``ValueError`` or ``TypeError`` where it cannot).
+
+    Returns
+    -------
+    numpy.ndarray
+    """
+    import numpy as np
+
+    owned = np.array(value, dtype=dtype)
+    owned.setflags(write=False)
+    view = owned.view()
+    view.setflags(write=False)
+    return view
+
+
 def freeze_arrays(value: Any, seen: set | None = None) -> None:
     """Set every numpy array reachable from ``value`` (through objects' attributes,
     tuples, lists and dicts) read-only: what an unpickled or deep-copied immutable object
@@ -80,4 +104,5 @@ def freeze_arrays(value: Any, seen: set | None = None) -> None:
             freeze_arrays(v, seen)
 
 
-__all__ = ["ReadOnlyDict", "ReadOnlyList", "freeze_arrays", "frozen_record", "thawed_record"]
+__all__ = ["ReadOnlyDict", "ReadOnlyList", "freeze_arrays", "frozen_record", "read_only_copy",
+           "thawed_record"]

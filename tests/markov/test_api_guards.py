@@ -39,6 +39,14 @@ def test_kinetics_resolved_on_another_grid_are_refused(model, markov_flow, marko
             exact_kinetics(model, other)
         with pytest.raises(InputError, match="kinetics resolved on .*not on the model's"):
             model.predict(markov_run, start=6.0, duration=0.5, seed=1, kinetics=other)
+    # the same cells on a riser of another size: the refusal names what differs (a
+    # review read "cells 6x38 (228 states), not on the model's cells 6x38 (228 states)")
+    space = model.state_space
+    taller = _kinetics().per_state(CellGrid(space.columns, space.rows, flow.width,
+                                            2 * flow.height))
+    with pytest.raises(InputError, match=rf"kinetics resolved on .* \(height "
+                       rf"{2 * flow.height!r} against {flow.height!r}\), not on the model's"):
+        exact_kinetics(model, taller)
     with pytest.raises(InputError, match="a Kinetics .* not Property"):
         exact_kinetics(model, _kinetics().properties[0])
 
@@ -116,6 +124,15 @@ def test_kinetics_built_wrongly_in_python_say_how_to_build_them(model):
     by_table = Kinetics((Property("X", FirstOrder(), {"rate": ByCell(table)}),))
     np.testing.assert_array_equal(grid.per_state(space).rate, by_table.per_state(space).rate)
     np.testing.assert_array_equal(grid.per_state(space).rate[0], values.ravel())
+    # the table is the parameter's own: the caller's later write changes no answer (a
+    # review saw a frozen Kinetics' exit mean go from 0.559 to 0.972 when its table did)
+    before = by_table.per_state(space).rate.copy()
+    table[:, 2] = 5.0
+    np.testing.assert_array_equal(by_table.per_state(space).rate, before)
+    with pytest.raises(ValueError):
+        by_table.properties[0].parameters["rate"].table[0, 2] = 1.0
+    with pytest.raises(InputError, match=r"t \(rate\): a table of numbers"):
+        ByCell([["a", "b", "c"]], "t", "rate")
 
 
 def test_compare_runs_takes_paths_as_open_files(model, markov_run, tmp_path):

@@ -308,6 +308,12 @@ def test_predict_writes_a_trajectory_file(tmp_path, markov_flow, markov_run):
         attached = MarkovModel.from_trajectories(pred)
         np.testing.assert_array_equal(attached.transition_matrix, model.transition_matrix)
         assert pred.parameters["seed"] == 7
+    # by its path too (a review met weakref's TypeError), anything else in one line
+    np.testing.assert_array_equal(MarkovModel.from_trajectories(out).transition_matrix,
+                                  model.transition_matrix)
+    assert MarkovModel.from_trajectories(str(markov_run)) is None
+    with pytest.raises(InputError, match=r"from_trajectories\(3\): give a prediction file's"):
+        MarkovModel.from_trajectories(3)
     times, states, _ = model.predict(markov_run, start=4.0, duration=1.0, seed=7)
     np.testing.assert_array_equal(model.state_space.discretize(Trajectories(out).positions(5)),
                                   states[5])

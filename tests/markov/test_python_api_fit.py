@@ -44,6 +44,33 @@ def test_assess_fit_gives_a_python_fit_the_command_lines_interval_and_verdict(
     assert np.array_equal(cli.cell_fields.solids_fraction, judged.cell_fields.solids_fraction)
 
 
+def test_assess_fit_finds_a_relative_source_beside_the_model_file(markov_run, tmp_path,
+                                                                   monkeypatch):
+    """A model fitted in Python on ``../run.h5`` from a folder, saved there and loaded from
+    another folder: its source is a path from the folder it was fitted in, taken from the
+    model file's folder where the current one has no such file (a review met "no such
+    file"); the data are still checked to be the model's; neither found: one line."""
+    (tmp_path / "a" / "fits").mkdir(parents=True)
+    (tmp_path / "elsewhere").mkdir()
+    shutil.copy(markov_run, tmp_path / "a" / "run.h5")
+    monkeypatch.chdir(tmp_path / "a" / "fits")
+    model = PaperEstimator(GRID, lag=0.1).fit(discretize("../run.h5", GRID, lag=0.1,
+                                                         window=(2.0, 6.0)))
+    model.save("m.h5")
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    loaded = MarkovModel.load(tmp_path / "a" / "fits" / "m.h5")
+    assert loaded.source == "../run.h5"
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        judged = assess_fit(loaded, resamples=0)
+    assert judged.adequacy is not None
+    (tmp_path / "a" / "run.h5").rename(tmp_path / "a" / "gone.h5")
+    with pytest.raises(InputError, match=r"\.\./run.h5 \(the model's fitting file, named from "
+                       r"the folder it was fitted in\): not found from this folder nor from "
+                       r"the model file's \(.*fits\); give runs="):
+        assess_fit(loaded, resamples=0)
+
+
 def test_assess_fit_refuses_what_it_cannot_use(fitted, markov_run):
     with pytest.raises(InputError, match="one fitting window per run"):
         assess_fit(fitted, [markov_run, markov_run], [(2.0, 6.0)])

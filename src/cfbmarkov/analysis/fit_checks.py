@@ -282,6 +282,23 @@ def _repeated_run(runs) -> str | None:
     return None
 
 
+def _found_source(model, source) -> str:
+    """A fitting file the model names, as recorded (a path from the folder it was fitted
+    in): from the current folder, else from the folder of the model file it was loaded
+    from (a model saved where it was fitted and loaded from elsewhere). Whichever is taken,
+    the data are then checked to be the model's (its recorded identity, or its counts)."""
+    source = str(source)
+    home = model._cache.get("file")
+    if os.path.isfile(source) or os.path.isabs(source) or home is None:
+        return source
+    beside = os.path.join(os.path.dirname(home), source)
+    if os.path.isfile(beside):
+        return beside
+    raise InputError(f"{source} (the model's fitting file, named from the folder it was "
+                     f"fitted in): not found from this folder nor from the model file's "
+                     f"({os.path.dirname(home)}); give runs= (the files it was fitted on)")
+
+
 def _runs_and_windows(model, runs, windows) -> tuple[list, list]:
     """The runs and their fitting windows: as given, else the model's source and window (a
     model fitted on several runs: each run and its own window, ``run_windows``); one window
@@ -298,6 +315,7 @@ def _runs_and_windows(model, runs, windows) -> tuple[list, list]:
                              "runs= and windows= (the files and fitting windows)")
         else:
             runs = [model.source]
+        runs = [_found_source(model, run) for run in runs]
     if isinstance(runs, (str, os.PathLike)) or hasattr(runs, "positions"):
         runs = [runs]                    # one run given alone, not in a list
     runs = list(runs)

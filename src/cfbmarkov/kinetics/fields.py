@@ -154,6 +154,18 @@ class ByCell(CellParameter):
                              "value (an array), not a file name; a CSV file is read by "
                              "load_kinetics from a kinetics file's rate_by_cell = \"...\" "
                              "(or ByCell.from_grid(values) for an array of the grid's shape)")
+        # the table and line numbers are the parameter's own: a later write to the caller's
+        # array changes no answer of the frozen kinetics that holds it
+        from cfbmarkov._frozen import read_only_copy
+
+        try:
+            table = read_only_copy(self.table, np.float64)
+        except (TypeError, ValueError):
+            raise InputError(f"{self.source} ({self.key}): a table of numbers (rows col, "
+                             "row[, depth], value) is needed") from None
+        object.__setattr__(self, "table", table)
+        if self.lines is not None:
+            object.__setattr__(self, "lines", read_only_copy(self.lines))
 
     @classmethod
     def from_grid(cls, values, source: str = "array", key: str = "value_by_cell") -> "ByCell":

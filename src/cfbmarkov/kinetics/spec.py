@@ -240,7 +240,8 @@ class StateKinetics:
         """
         n = int(state_space.n_states)
         if self.state_space is not None and self.state_space != state_space:
-            raise InputError(f"kinetics resolved on {self.state_space.describe()}, not on the "
+            raise InputError(f"kinetics resolved on "
+                             f"{self.state_space.describe_against(state_space)}, not on the "
                              f"model's {state_space.describe()}: resolve them with "
                              "kinetics.per_state(model.state_space, model.cell_fields), or pass "
                              "the Kinetics itself")

@@ -218,12 +218,8 @@ class TransitionEstimator:
                 windows, check_passes=check_passes)
         for window in windows:
             if window.state_space != self.state_space:
-                theirs, ours = window.state_space.describe(), self.state_space.describe()
-                if theirs == ours:          # the same cells on another size: name what differs
-                    a, b = window.state_space.to_attrs(), self.state_space.to_attrs()
-                    differ = [f"{k} {a.get(k)!r} against {b.get(k)!r}"
-                              for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
-                    theirs += f" ({', '.join(differ)})"
+                theirs = window.state_space.describe_against(self.state_space)
+                ours = self.state_space.describe()
                 raise InputError(f"discrete trajectories are in {theirs}, the estimator's "
                                  f"state space is {ours}: discretise on the estimator's "
                                  "state space")

@@ -115,6 +115,10 @@ class ResidenceTimeDistribution:
         Where more than :data:`DEFICIT_TOL` fell below the deepest deficit kept
         (:data:`MAX_DEFICIT_LEVELS`), the chain's E(RT) from its lap drift
         (:func:`drift_residence_time`, s), which counts those residences too; else None.
+    times : ndarray of float64, shape (K,)
+        The residence times k lag (s) of ``probability`` (a property).
+    mean, sd : float
+        E(RT) and SD(RT) (s) of the resolved mass, renormalised (properties).
 
     Notes
     -----

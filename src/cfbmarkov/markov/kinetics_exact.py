@@ -457,7 +457,9 @@ def _survivors(kept, nu, ma, mb, ma2, mab2, mb2, mf, mf2, land, lu_dq) -> "Carri
 
 @dataclass(frozen=True)
 class PropertyAnswer:
-    """The exact answers for one property of a model.
+    """The exact answers for one property of a model. Every value is in the property's own
+    unit, as its kinetics gives it (a conversion or an activity: a fraction, 0-1; a
+    temperature: the unit of its ``temperature`` and ``initial``, K or degrees C alike).
 
     Attributes
     ----------

@@ -940,16 +940,32 @@ class MarkovModel:
 
     @classmethod
     def from_trajectories(cls, trajectories) -> "MarkovModel | None":
-        """The model attached to a prediction file (an open
-        :class:`~cfbmarkov.trajectories.Trajectories`), or None where it has none. Read
-        once per open file: the verbs that ask it several times (``compare``: intervals,
-        verdict, exact RTD, maps, kinetics) share one model and its cached RTD.
+        """The model attached to a prediction file, or None where it has none. An open
+        :class:`~cfbmarkov.trajectories.Trajectories` is read once: the verbs that ask it
+        several times (``compare``: intervals, verdict, exact RTD, maps, kinetics) share
+        one model and its cached RTD.
+
+        Parameters
+        ----------
+        trajectories : Trajectories or str or os.PathLike
+            The prediction file, open or by its path (then opened, read and closed).
 
         Raises
         ------
         InputError
-            If the attached group is not a valid model.
+            If the attached group is not a valid model, or the file is not a trajectory
+            file.
         """
+        if isinstance(trajectories, (str, os.PathLike)):
+            from cfbmarkov.trajectories import Trajectories
+
+            with Trajectories(trajectories) as opened:
+                return cls.from_trajectories(opened)
+        from cfbmarkov.trajectories import Trajectories
+
+        if not isinstance(trajectories, Trajectories):
+            raise InputError(f"MarkovModel.from_trajectories({trajectories!r}): give a "
+                             "prediction file's path or its open Trajectories")
         found = _ATTACHED.get(trajectories)
         if found is not None and found[0] is cls:
             return found[1]

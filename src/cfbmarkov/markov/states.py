@@ -384,6 +384,18 @@ class StateSpace(ABC):
         states)``."""
         return f"{self.kind} {self.grid_text()} ({self.n_states} states)"
 
+    def describe_against(self, other: "StateSpace") -> str:
+        """:meth:`describe`, with what differs from ``other`` where both describe alike
+        (the same cells on a riser of another size: ``cells 6x38 (228 states) (height 2.0
+        against 0.95, width 0.2 against 0.09)``), for a refusal that names the difference."""
+        text = self.describe()
+        if text != other.describe() or self == other:
+            return text
+        a, b = self.to_attrs(), other.to_attrs()
+        differ = [f"{k} {a.get(k)!r} against {b.get(k)!r}"
+                  for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k)]
+        return f"{text} ({', '.join(differ)})"
+
     def __eq__(self, other) -> bool:
         return isinstance(other, StateSpace) and self.to_attrs() == other.to_attrs()
 
