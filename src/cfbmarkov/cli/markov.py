@@ -411,6 +411,7 @@ def cmd_rtd(args) -> int:
                         f"stored {100 * stored.level:g} % E(RT) interval {lo}-{hi} s, not with "
                         "the interval formed here")
     from cfbmarkov.markov.model_summary import (fitting_run_count, left_out_classes_warning,
+                                                on_window_warning,
                                                 one_sided_interval_warnings,
                                                 unresolved_warning)
 

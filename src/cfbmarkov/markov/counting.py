@@ -191,7 +191,7 @@ def _sparse_count_kernel(states, vertical, lag_frames, height, n_states, with_fr
 
 @nb.njit(cache=True)
 def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, vanished,
-                 appeared):
+                 appeared, returns):
     """Count what crosses the faces of an open riser (Numba kernel).
 
     For every frame pair (t, t + lag) of a particle: present then absent is an exit
@@ -206,7 +206,9 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
     particle crossed the face, not t or t + lag; a state space with memory defines a
     particle's state only from a lag after it is first seen (its history), so its entry is
     judged where it was first seen too (present frames hold a finite height, absent ones
-    NaN). Returns nothing; arrays are updated.
+    NaN). An entry whose particle was seen before in the window, last within ``band`` of
+    the inlet face (it fell back out through the inlet and came back), is a return as well
+    (``returns[j] += 1``). Returns nothing; arrays are updated.
     """
     n_frames, n_particles = states.shape
     for t in range(n_frames - lag_frames):
@@ -231,6 +233,11 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
                     first -= 1                                      # before its history)
                 if vertical[first, p] <= band:
                     entries[j] += 1
+                    before = first - 1            # where it was last seen before
+                    while before >= 0 and np.isnan(vertical[before, p]):
+                        before -= 1
+                    if before >= 0 and vertical[before, p] <= band:
+                        returns[j] += 1           # fell out through the inlet, came back
                 else:
                     appeared[j] += 1
 
@@ -250,16 +257,21 @@ class FaceCounts:
     vanished, appeared : ndarray of int64, shape (S,)
         Tracks that ended or began elsewhere (out of a camera's view, a gap): not counted
         as transitions, exits or entries (censored).
+    returns : ndarray of int64, shape (S,)
+        The entries among ``entries`` that are returns: the particle was seen before in
+        the window, last within one cell of the inlet (it fell back out through the inlet).
     """
 
     exits: np.ndarray
     entries: np.ndarray
     vanished: np.ndarray
     appeared: np.ndarray
+    returns: np.ndarray
 
     def __add__(self, other: "FaceCounts") -> "FaceCounts":
         return FaceCounts(self.exits + other.exits, self.entries + other.entries,
-                          self.vanished + other.vanished, self.appeared + other.appeared)
+                          self.vanished + other.vanished, self.appeared + other.appeared,
+                          self.returns + other.returns)
 
 
 @dataclass(frozen=True)
@@ -382,7 +394,7 @@ def count_transitions(data, frame_average: bool = True, sparse: bool = False
 def _new_faces(windows) -> FaceCounts | None:
     """Empty face counts for windows of an open riser; None for a periodic one."""
     s = windows[0].state_space.n_states
-    return (FaceCounts(*(np.zeros(s, np.int64) for _ in range(4)))
+    return (FaceCounts(*(np.zeros(s, np.int64) for _ in range(5)))
             if Boundary(windows[0].boundary).is_open else None)
 
 
@@ -404,7 +416,7 @@ def _window_arrays(windows, faces: FaceCounts | None):
         if open_riser:
             _open_kernel(states, vertical, int(window.lag_frames), face_band(space),
                          float(window.height), faces.exits, faces.entries, faces.vanished,
-                         faces.appeared)
+                         faces.appeared, faces.returns)
         yield window, states, vertical
 
 

@@ -62,7 +62,8 @@ def open_chain(counts: TransitionCounts) -> OpenFlow:
     -------
     OpenFlow
         ``exit_probability`` [S], ``exit_counts`` [S], ``entry_counts`` [S],
-        ``inflow_per_lag`` and ``censored_tracks`` (vanished, appeared).
+        ``inflow_per_lag``, ``censored_tracks`` (vanished, appeared) and
+        ``returned_entries``.
 
     Raises
     ------
@@ -80,7 +81,8 @@ def open_chain(counts: TransitionCounts) -> OpenFlow:
     return OpenFlow(exit_probability=exit_probability, exit_counts=faces.exits.copy(),
                     entry_counts=faces.entries.copy(),
                     inflow_per_lag=float(faces.entries.sum()) / max(counts.frame_pairs, 1),
-                    censored_tracks=(int(faces.vanished.sum()), int(faces.appeared.sum())))
+                    censored_tracks=(int(faces.vanished.sum()), int(faces.appeared.sum())),
+                    returned_entries=int(faces.returns.sum()))
 
 
 #: relative difference between a given lag and the frames it spans (lag frames x frame

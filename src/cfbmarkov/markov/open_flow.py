@@ -57,6 +57,10 @@ class OpenFlow:
     censored_tracks : tuple of int
         (vanished, appeared): tracks that ended or began more than one cell from the outlet
         or inlet face, left out as censored.
+    returned_entries : int
+        The entries among ``entry_counts`` that are returns of particles that fell back
+        out through the inlet earlier in the fitting window (0 in a model file written
+        without the count).
 
     Raises
     ------
@@ -78,6 +82,7 @@ class OpenFlow:
     entry_counts: np.ndarray
     inflow_per_lag: float = 0.0
     censored_tracks: tuple[int, int] = (0, 0)
+    returned_entries: int = 0
 
     def __post_init__(self):
         s = int(np.size(self.exit_probability))
@@ -102,6 +107,9 @@ class OpenFlow:
                              "that recycles its particles with --boundary periodic")
         if not (np.isfinite(self.inflow_per_lag) and self.inflow_per_lag >= 0):
             raise InputError(f"model inflow {self.inflow_per_lag!r} per lag must be >= 0")
+        if not 0 <= self.returned_entries <= self.entry_counts.sum():
+            raise InputError(f"model returned_entries {self.returned_entries!r} must be a count "
+                             f"of the {int(self.entry_counts.sum())} entries")
 
     @property
     def n_states(self) -> int:
@@ -193,8 +201,8 @@ class OpenFlow:
     def file_fields(self) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         """What a model file stores of the open riser: the datasets ``exit_probability``
         [S] float64, ``exit_counts`` and ``entry_counts`` [S] int64, and the attributes
-        ``boundary = "open"``, ``inflow_per_lag`` and ``censored_tracks`` (vanished,
-        appeared; int64).
+        ``boundary = "open"``, ``inflow_per_lag``, ``censored_tracks`` (vanished,
+        appeared; int64) and ``returned_entries``.
 
         Returns
         -------
@@ -202,7 +210,8 @@ class OpenFlow:
         attrs : dict of str to value
         """
         attrs = {"boundary": Boundary.OPEN.value, "inflow_per_lag": float(self.inflow_per_lag),
-                 "censored_tracks": np.asarray(self.censored_tracks, dtype=np.int64)}
+                 "censored_tracks": np.asarray(self.censored_tracks, dtype=np.int64),
+                 "returned_entries": int(self.returned_entries)}
         return {name: getattr(self, name) for name in OPEN_DATASETS}, attrs
 
     @classmethod
@@ -228,6 +237,7 @@ class OpenFlow:
         censored = group.attrs.get("censored_tracks", (0, 0))
         return cls(inflow_per_lag=float(group.attrs["inflow_per_lag"]),
                    censored_tracks=(int(censored[0]), int(censored[1])),
+                   returned_entries=int(group.attrs.get("returned_entries", 0)),
                    **{name: group[name][()] for name in OPEN_DATASETS})
 
     # -- description -------------------------------------------------------------------
@@ -241,7 +251,9 @@ class OpenFlow:
         """
         return (f"  open riser: {int(self.exit_counts.sum())} exits through the outlet, "
                 f"{int(self.entry_counts.sum())} entries through the inlet "
-                f"({self.inflow_per_lag:.4g} per lag) into "
+                + (f"({self.returned_entries} of them returns after a fall out through it) "
+                   if self.returned_entries else "")
+                + f"({self.inflow_per_lag:.4g} per lag) into "
                 f"{int(np.count_nonzero(self.entry_counts))} states; tracks censored (ended or "
                 f"began away from the faces): {self.censored_tracks[0]}, "
                 f"{self.censored_tracks[1]}")
@@ -272,6 +284,19 @@ class OpenFlow:
                 "residence (the RTD, exit means) are not affected, its Monte Carlo's hold-up "
                 "may be. Fit on a window of steady flow, or import the riser from its "
                 "inlet to its outlet where solids leave or enter elsewhere")
+        returned, share = int(self.returned_entries), self.returned_entries / max(entries, 1)
+        if returned > CENSORED_SHARE * entries:
+            lines.append(
+                f"  {returned} of the {entries} entries through the inlet ({100 * share:.0f} %) "
+                "are returns of particles that fell back out through it earlier in the "
+                "fitting window: the chain takes each return for a new entry (and the fall "
+                "for a censored track), while a residence observed (compare's reference, the "
+                "kinetics' reference) runs from the particle's first entry across its falls "
+                "(docs/definitions.md, Open risers); the chain's RTD runs from the last "
+                "entry, so its E(RT) may fall short of the flow's, and its inflow "
+                f"({self.inflow_per_lag:.4g} a lag) counts the returns with the new "
+                "particles. Import the riser from farther below the inlet, so that the falls "
+                "stay inside it")
         for what, censored, counted, face in (
                 ("ended", self.censored_tracks[0], int(self.exit_counts.sum()), "outlet"),
                 ("began", self.censored_tracks[1], int(self.entry_counts.sum()), "inlet")):
@@ -284,7 +309,8 @@ class OpenFlow:
                     f"the {'inlet' if face == 'outlet' else 'outlet'} face ("
                     + ("solids falling back out through a section's bottom" if what == "ended"
                        else "solids falling into a section through its top")
-                    + ", which the open model does not count: import the riser from its "
+                    + ", which the open model counts as no exit or entry: import the riser "
+                      "from its "
                     "inlet to its outlet), a side or a gap in the tracking; if they crossed "
                     f"the {face} farther than a cell per lag, use taller cells or a shorter lag")
         return lines
