@@ -451,3 +451,28 @@ def test_returns_through_the_inlet_are_counted_and_warned_of(tmp_path, capsys):
                      estimator="mle").open_flow
     assert kept.returned_entries == 0 and int(kept.entry_counts.sum()) == 25
     assert not any("returns" in w for w in kept.warnings())
+
+
+def test_maps_refuse_a_bottom_row_the_chain_never_leaves(tmp_path, capsys):
+    """Every particle rises a row a frame from the inlet: a direction space counts each
+    entry into the state a row up, a lag after it is first seen, and never visits the
+    bottom row, so Eq. (8)'s batch fed there stayed in the riser at every time (a review
+    saw "fraction in riser 1.0000" at 2 s against an RTD over by 0.4 s); refused in one
+    line. The cells' maps feed it: gone by 0.4 s."""
+    from cfbmarkov.cli import main
+
+    run = _rows_file(tmp_path / "rise.h5", [0, 1, 2, 3], range(1, 30))
+    for states, code in (("cells-direction", 2), ("cells", 0)):
+        model = tmp_path / f"{states}.h5"
+        assert main(["fit", str(run), "--cells", "1x4", "--lag", "0.1", "--window", "0.1:4",
+                     "--states", states, "--resamples", "0", "-q", "-o", str(model)]) == 0
+        capsys.readouterr()
+        assert main(["maps", str(model), "--times", "0.4,2", "-o",
+                     str(tmp_path / f"{states}.png")]) == code
+        out, err = capsys.readouterr()
+        if code:
+            assert err.count("\n") == 1 and ("no cell of the chain's bottom row was left in "
+                                              "the fitting window") in err
+            assert "fit with --states cells for the maps" in err
+        else:
+            assert "t = 0.4 s: fraction in riser 0.0000" in out

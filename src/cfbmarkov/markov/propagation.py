@@ -242,8 +242,7 @@ def fed_inlet_cells(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     whose particles the chain moves on. A cell none of whose states was left in the
     fitting window, each never visited or entered but never left, and keeping its
     particles (P_ii = 1: no row in the chain beyond that convention), would keep a share
-    fed there at every time; it is left out and the batch spread over the others (all of
-    them where none is left).
+    fed there at every time; it is left out and the batch spread over the others.
 
     Parameters
     ----------
@@ -256,6 +255,13 @@ def fed_inlet_cells(model: "MarkovModel", direction: str = "up") -> np.ndarray:
     ndarray of bool, shape (cells_per_row,)
         Per cell of the row, across then depth (as :attr:`StateSpace.cells_per_row`
         counts them): fed or not.
+
+    Raises
+    ------
+    InputError
+        Where no cell of the row is left: the whole batch would stay in place at every
+        time (an open riser's state space with memory, whose entries are counted into
+        the states a lag above the inlet, can leave its bottom row unvisited).
     """
     space = model.state_space
     per_row = space.cells_per_row
@@ -268,4 +274,15 @@ def fed_inlet_cells(model: "MarkovModel", direction: str = "up") -> np.ndarray:
         others = np.setdiff1d(np.arange(model.n_states), keeps)
         moving[space.cell_of_state[others]] = True
     fed = moving[first:first + per_row]
-    return fed if fed.any() else np.ones(per_row, bool)
+    if not fed.any():
+        from cfbmarkov.markov.model_rtd import entry_delay
+
+        row = "top" if first else "bottom"
+        why = (": an open riser's state space with memory counts its entries into the "
+               "states a lag above the inlet; fit with --states cells for the maps"
+               if model.open_flow is not None and entry_delay(model) > 0 else
+               "; fit on a window in which particles pass through it")
+        raise InputError(f"no cell of the chain's {row} row was left in the fitting window "
+                         "(each never visited, or entered but never left): a batch fed "
+                         f"over it would stay in place at every time{why}")
+    return fed
