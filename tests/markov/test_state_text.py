@@ -33,7 +33,7 @@ def test_states_with_memory_are_counted_by_cell():
     of_cell = lambda c: np.flatnonzero(cell_of == c)       # noqa: E731
     one_each = np.array([of_cell(0)[0], of_cell(5)[0]])
     assert state_set_text(space, one_each) == \
-        "2 of 12 (in 2 of 6 cells, each with other states visited)"
+        "2 of 12 (in 2 of 6 cells, none of them with all its states)"
     whole = np.concatenate([of_cell(4), of_cell(5), of_cell(0)[:1]])
     assert state_set_text(space, whole) == \
         "5 of 12 (in 3 of 6 cells; all the states of 2 of them: row 2)"

@@ -681,7 +681,7 @@ def state_set_text(space, states: np.ndarray, limit: int = 8) -> str:
     if whole.size:
         return text + (f"; all the states of {whole.size} of them: "
                        f"{cells_text(space, whole, limit)})")
-    return text + ", each with other states visited)"
+    return text + ", none of them with all its states)"
 
 
 def cells_text(space, cells: np.ndarray, limit: int = 8) -> str:
