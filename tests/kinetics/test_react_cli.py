@@ -84,6 +84,13 @@ def test_react_resamples_give_the_exit_means_intervals(fitted, tmp_path, capsys)
     assert main(argv) == 0                      # seeded: the same interval again
     again = json.loads(capsys.readouterr().out)["properties"]
     assert {name: again[name]["exit_mean_interval"] for name in intervals} == intervals
+    # the same from Python, which had no call for it (a review rebuilt it by hand)
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_intervals
+    from cfbmarkov.kinetics import load_kinetics
+    from cfbmarkov.markov import MarkovModel
+
+    formed = exit_mean_intervals(MarkovModel.load(model), load_kinetics(kin), resamples=20)
+    assert formed["exit_mean"] == intervals and formed["resamples"] == 20
     assert main(argv + ["--level", "0.99"]) == 2        # 20 resamples reach 95 %, not 99 %
     assert "a 99 % interval needs at least 100 bootstrap resamples" in capsys.readouterr().err
     assert main(argv + ["--level", "0.95"]) == 0

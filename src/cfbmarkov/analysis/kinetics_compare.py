@@ -463,6 +463,97 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
     return means
 
 
+def exit_mean_intervals(model, kinetics, answers=None, *, level: float = 0.9,
+                        resamples: int = 100, fields=None, direction: str | None = None,
+                        passes=(), candidates=(), warnings: list | None = None) -> dict:
+    """The intervals of a model's exact exit means (``react --resamples``): each property's
+    exit mean solved exactly on block-bootstrap resamples of the fitting window
+    (:func:`bootstrap_exit_means`, as ``compare --kinetics`` forms the model's), the
+    interval of :func:`cfbmarkov.analysis.bootstrap.interval_bounds` centred on the exact
+    value, its ends cut to the law's range (a conversion's to [0, 1], an activity's at 0,
+    as SD(RT)'s lower end is cut at 0).
+
+    Parameters
+    ----------
+    model : MarkovModel
+        A model fitted on trajectory files (its fitting file found from the current folder,
+        beside the model file or among ``candidates``:
+        :func:`cfbmarkov.analysis.intervals.resolve_source`).
+    kinetics : Kinetics
+        The properties (linear laws).
+    answers : dict of str to PropertyAnswer, optional
+        The exact answers the intervals are centred on (default: solved here,
+        :func:`~cfbmarkov.markov.kinetics_exact.exact_kinetics`).
+    level : float, optional
+        Coverage, in (0, 1); default 0.9.
+    resamples : int, optional
+        Bootstrap resamples (fewer are solved on a large state space,
+        :func:`kinetics_resamples`); 0 forms none.
+    fields : CellFields, optional
+        The cell fields the properties' parameters take (default the model's).
+    direction : {"up", "down"}, optional
+        The direction exits are counted in (default the model's ``flow_direction``).
+    passes : sequence of int, optional
+        Numbers of passes after which a carried property's mean exit value gets an
+        interval too.
+    candidates : sequence of str or os.PathLike, optional
+        Files that may be the fitting file.
+    warnings : list of str, optional
+        Appended to: why fewer resamples, or none, were taken.
+
+    Returns
+    -------
+    dict
+        ``exit_mean``: {name: [lo, hi] or None (fewer than 10 resamples solved)};
+        ``after_passes``: {(name, n): [lo, hi] or None} of the carried properties;
+        ``resamples``: the resamples solved; ``level``.
+
+    Raises
+    ------
+    InputError
+        Where the level or resamples cannot form an interval, or the fitting file is not
+        found or is not the model's (:func:`~cfbmarkov.analysis.intervals.resolve_source`).
+    """
+    from cfbmarkov.analysis.bootstrap import (BOOTSTRAP_BLOCKS, check_interval_options,
+                                              fitting_runs, interval_bounds)
+    from cfbmarkov.analysis.intervals import resolve_source
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
+    direction = model.flow_direction if direction is None else direction
+    fields = model.cell_fields if fields is None else fields
+    warnings = [] if warnings is None else warnings
+    if answers is None:
+        answers = exact_kinetics(model, kinetics.per_state(model.state_space, fields),
+                                 direction=direction)
+    if not resamples or not answers:
+        return {"exit_mean": {}, "after_passes": {}, "resamples": 0, "level": level}
+    check_interval_options(level, resamples)
+    source = resolve_source(model, candidates)
+    after: dict = {}
+    means = bootstrap_exit_means(source, kinetics, fields, resamples, warnings,
+                                 direction=direction, passes=passes, after_passes=after)
+    drawn = {"blocks": BOOTSTRAP_BLOCKS, "runs": len(fitting_runs(source))}
+    ranges = {p.name: getattr(p.law, "initial_range", (None, None))
+              for p in kinetics.properties}
+
+    def bounds(name, point, values):
+        boot = np.asarray(values, dtype=float)
+        boot = boot[np.isfinite(boot)]
+        if boot.size < 10:
+            return None
+        lo, hi = interval_bounds(point, boot, point, level, **drawn)
+        low, high = ranges.get(name, (None, None))
+        return [float(lo if low is None else max(lo, low)),
+                float(hi if high is None else min(hi, high))]
+
+    return {"exit_mean": {name: bounds(name, answer.exit_mean, (means or {}).get(name, []))
+                          for name, answer in answers.items()},
+            "after_passes": {(name, n): bounds(name, answers[name].after_passes(n)[0], values)
+                             for (name, n), values in after.items()},
+            "resamples": kinetics_resamples(model.n_states, resamples) if means else 0,
+            "level": level}
+
+
 def exit_mean_agreement(reference_mean, model_interval, reference_interval=None
                         ) -> str | None:
     """How a reference's exit mean stands against the model's interval of it, as
@@ -800,6 +891,6 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
 
 
 __all__ = ["CARRIED_SEGREGATED_NOTE", "EXIT_BINS", "PROPERTIES_GROUP", "carried_exact_note",
-           "check_kinetics_inputs", "exit_mean_agreement",
+           "check_kinetics_inputs", "exit_mean_agreement", "exit_mean_intervals",
            "compare_kinetics", "exit_bins", "exit_distribution", "needs_cell_fields",
            "stored_definition_differs", "stored_property"]

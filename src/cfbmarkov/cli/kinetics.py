@@ -256,54 +256,29 @@ def _chain_warnings(model) -> list[str]:
 
 
 def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, passes=()):
-    """The exit means' intervals at ``args.level`` from ``args.resamples`` block-bootstrap
-    resamples of the model's fitting window, each solved exactly
-    (:func:`cfbmarkov.analysis.kinetics_compare.bootstrap_exit_means`, as `compare
-    --kinetics` forms the model's), centred on the exact values: ({name: [lo, hi] or None},
-    resamples solved, {(name, n): [lo, hi] or None} of the carried properties' means after
-    n of ``passes``). Warnings go to stderr."""
+    """:func:`cfbmarkov.analysis.kinetics_compare.exit_mean_intervals` at ``args.level``
+    from ``args.resamples`` resamples, its progress shown: ({name: [lo, hi] or None},
+    resamples solved, {(name, n): [lo, hi] or None}). Warnings go to stderr."""
     if not args.resamples or not answers:
         return {}, 0, {}
-    from cfbmarkov.analysis.bootstrap import BOOTSTRAP_BLOCKS, fitting_runs, interval_bounds
     from cfbmarkov.analysis.intervals import resolve_source
-    from cfbmarkov.analysis.kinetics_compare import bootstrap_exit_means, kinetics_resamples
-
-    import numpy as np
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_intervals
 
     from cfbmarkov.cli.markov import _stage
 
     notes: list[str] = []
-    after: dict = {}
-    source = resolve_source(model, [args.run] if args.run else [])   # its refusal first
+    candidates = [args.run] if args.run else []
+    resolve_source(model, candidates)                                # its refusal first
     with _stage(args, "intervals", f"the exit means' {100 * args.level:g} % intervals: "
                 f"{args.resamples} bootstrap resamples of the fitting window, each solved "
                 "exactly"):
-        means = bootstrap_exit_means(source, kinetics, fields, args.resamples, notes,
-                                     direction=direction, passes=passes, after_passes=after)
+        formed = exit_mean_intervals(model, kinetics, answers, level=args.level,
+                                     resamples=args.resamples, fields=fields,
+                                     direction=direction, passes=passes,
+                                     candidates=candidates, warnings=notes)
     for note in notes:
         print(f"warning: {one_line(note)}", file=sys.stderr)
-    drawn = {"blocks": BOOTSTRAP_BLOCKS, "runs": len(fitting_runs(source))}
-    # a property's values lie in its law's range (a conversion in [0, 1], an activity
-    # >= 0): an interval's end beyond it is cut there, as SD(RT)'s lower end is cut at 0
-    ranges = {p.name: getattr(p.law, "initial_range", (None, None))
-              for p in kinetics.properties}
-
-    def bounds(name, point, values):
-        boot = np.asarray(values, dtype=float)
-        boot = boot[np.isfinite(boot)]
-        if boot.size < 10:
-            return None
-        lo, hi = interval_bounds(point, boot, point, args.level, **drawn)
-        low, high = ranges.get(name, (None, None))
-        return [float(lo if low is None else max(lo, low)),
-                float(hi if high is None else min(hi, high))]
-
-    intervals = {name: bounds(name, answer.exit_mean, (means or {}).get(name, []))
-                 for name, answer in answers.items()}
-    after_intervals = {(name, n): bounds(name, answers[name].after_passes(n)[0], values)
-                       for (name, n), values in after.items()}
-    return (intervals, kinetics_resamples(model.n_states, args.resamples) if means else 0,
-            after_intervals)
+    return formed["exit_mean"], formed["resamples"], formed["after_passes"]
 
 
 def _span(bounds) -> str:
