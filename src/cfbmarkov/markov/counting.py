@@ -191,7 +191,7 @@ def _sparse_count_kernel(states, vertical, lag_frames, height, n_states, with_fr
 
 @nb.njit(cache=True)
 def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, vanished,
-                 appeared, returns):
+                 appeared, returns, returned_frames):
     """Count what crosses the faces of an open riser (Numba kernel).
 
     For every frame pair (t, t + lag) of a particle: present then absent is an exit
@@ -206,9 +206,12 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
     particle crossed the face, not t or t + lag; a state space with memory defines a
     particle's state only from a lag after it is first seen (its history), so its entry is
     judged where it was first seen too (present frames hold a finite height, absent ones
-    NaN). An entry whose particle was seen before in the window, last within ``band`` of
-    the inlet face (it fell back out through the inlet and came back), is a return as well
-    (``returns[j] += 1``). Returns nothing; arrays are updated.
+    NaN). A particle seen before in the window whose presence before did not end at the
+    outlet (it fell back out through the inlet, or left the view, and came back) makes no
+    entry when it comes back through the inlet but a return (``returns[j] += 1``;
+    ``returned_frames[j]`` += the frames from where it was last seen to where it is seen
+    again): its residence goes on, as a residence observed does. Returns nothing; arrays
+    are updated.
     """
     n_frames, n_particles = states.shape
     for t in range(n_frames - lag_frames):
@@ -232,12 +235,14 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
                 while first >= 1 and not np.isnan(vertical[first - 1, p]):   # has none
                     first -= 1                                      # before its history)
                 if vertical[first, p] <= band:
-                    entries[j] += 1
                     before = first - 1            # where it was last seen before
                     while before >= 0 and np.isnan(vertical[before, p]):
                         before -= 1
-                    if before >= 0 and vertical[before, p] <= band:
-                        returns[j] += 1           # fell out through the inlet, came back
+                    if before >= 0 and vertical[before, p] < height - band:
+                        returns[j] += 1           # back after a fall or out of view:
+                        returned_frames[j] += first - before     # its residence goes on
+                    else:
+                        entries[j] += 1
                 else:
                     appeared[j] += 1
 
@@ -258,8 +263,13 @@ class FaceCounts:
         Tracks that ended or began elsewhere (out of a camera's view, a gap): not counted
         as transitions, exits or entries (censored).
     returns : ndarray of int64, shape (S,)
-        The entries among ``entries`` that are returns: the particle was seen before in
-        the window, last within one cell of the inlet (it fell back out through the inlet).
+        Returns through the inlet into each state, not among ``entries``: the particle was
+        seen before in the window and did not leave through the outlet then (it fell back
+        out through the inlet, or left the view): its residence goes on.
+    returned_time : ndarray of float64, shape (S,)
+        The time (s) from where each returning particle was last seen to where it is seen
+        again, summed: the residence time spent below the inlet or out of view, which no
+        transition counts.
     """
 
     exits: np.ndarray
@@ -267,11 +277,12 @@ class FaceCounts:
     vanished: np.ndarray
     appeared: np.ndarray
     returns: np.ndarray
+    returned_time: np.ndarray
 
     def __add__(self, other: "FaceCounts") -> "FaceCounts":
         return FaceCounts(self.exits + other.exits, self.entries + other.entries,
                           self.vanished + other.vanished, self.appeared + other.appeared,
-                          self.returns + other.returns)
+                          self.returns + other.returns, self.returned_time + other.returned_time)
 
 
 @dataclass(frozen=True)
@@ -394,7 +405,7 @@ def count_transitions(data, frame_average: bool = True, sparse: bool = False
 def _new_faces(windows) -> FaceCounts | None:
     """Empty face counts for windows of an open riser; None for a periodic one."""
     s = windows[0].state_space.n_states
-    return (FaceCounts(*(np.zeros(s, np.int64) for _ in range(5)))
+    return (FaceCounts(*(np.zeros(s, np.int64) for _ in range(5)), np.zeros(s))
             if Boundary(windows[0].boundary).is_open else None)
 
 
@@ -414,9 +425,11 @@ def _window_arrays(windows, faces: FaceCounts | None):
         states = np.ascontiguousarray(window.states, dtype=np.int32)
         vertical = np.ascontiguousarray(window.vertical, dtype=np.float64)
         if open_riser:
+            frames = np.zeros(space.n_states, np.int64)
             _open_kernel(states, vertical, int(window.lag_frames), face_band(space),
                          float(window.height), faces.exits, faces.entries, faces.vanished,
-                         faces.appeared, faces.returns)
+                         faces.appeared, faces.returns, frames)
+            faces.returned_time[:] += frames * float(window.frame_interval)
         yield window, states, vertical
 
 

@@ -62,8 +62,8 @@ def open_chain(counts: TransitionCounts) -> OpenFlow:
     -------
     OpenFlow
         ``exit_probability`` [S], ``exit_counts`` [S], ``entry_counts`` [S],
-        ``inflow_per_lag``, ``censored_tracks`` (vanished, appeared) and
-        ``returned_entries``.
+        ``inflow_per_lag``, ``censored_tracks`` (vanished less those that came back,
+        appeared), ``returned_entries`` and ``returned_time``.
 
     Raises
     ------
@@ -81,8 +81,11 @@ def open_chain(counts: TransitionCounts) -> OpenFlow:
     return OpenFlow(exit_probability=exit_probability, exit_counts=faces.exits.copy(),
                     entry_counts=faces.entries.copy(),
                     inflow_per_lag=float(faces.entries.sum()) / max(counts.frame_pairs, 1),
-                    censored_tracks=(int(faces.vanished.sum()), int(faces.appeared.sum())),
-                    returned_entries=int(faces.returns.sum()))
+                    # a fall out through the inlet that came back is no censored end
+                    censored_tracks=(max(int(faces.vanished.sum() - faces.returns.sum()), 0),
+                                     int(faces.appeared.sum())),
+                    returned_entries=int(faces.returns.sum()),
+                    returned_time=float(faces.returned_time.sum()))
 
 
 #: relative difference between a given lag and the frames it spans (lag frames x frame

@@ -318,7 +318,7 @@ def hold_up_warning(model: "MarkovModel") -> str | None:
             f"the fitting window's mean of {seen:.4g}: its Monte Carlo (predict, react "
             f"--init) {way} the riser toward that hold-up, and its bed means are of that "
             "riser (the RTD and the exit means are not affected); tracks left out as "
-            "censored" + (", entries that are returns after a fall out through the inlet"
+            "censored" + (", time out of view after falls through the inlet (returns)"
                           if flow.returned_entries else "")
             + ", or a window of unsteady flow, are the usual causes: import the riser "
             "from its inlet to its outlet, or fit on a window of steady flow")

@@ -58,9 +58,13 @@ class OpenFlow:
         (vanished, appeared): tracks that ended or began more than one cell from the outlet
         or inlet face, left out as censored.
     returned_entries : int
-        The entries among ``entry_counts`` that are returns of particles that fell back
-        out through the inlet earlier in the fitting window (0 in a model file written
-        without the count).
+        Returns through the inlet in the fitting window, not among ``entry_counts``:
+        particles seen before in it, which did not leave through the outlet then (they fell
+        back out through the inlet, or left the view) and came back; their residences go
+        on (0 in a model file written without the count).
+    returned_time : float
+        The time (s) the returns spent out of view, from where each was last seen to where
+        it was seen again, summed: residence time that no transition of the chain counts.
 
     Raises
     ------
@@ -83,6 +87,7 @@ class OpenFlow:
     inflow_per_lag: float = 0.0
     censored_tracks: tuple[int, int] = (0, 0)
     returned_entries: int = 0
+    returned_time: float = 0.0
 
     def __post_init__(self):
         s = int(np.size(self.exit_probability))
@@ -107,9 +112,12 @@ class OpenFlow:
                              "that recycles its particles with --boundary periodic")
         if not (np.isfinite(self.inflow_per_lag) and self.inflow_per_lag >= 0):
             raise InputError(f"model inflow {self.inflow_per_lag!r} per lag must be >= 0")
-        if not 0 <= self.returned_entries <= self.entry_counts.sum():
-            raise InputError(f"model returned_entries {self.returned_entries!r} must be a count "
-                             f"of the {int(self.entry_counts.sum())} entries")
+        if not (isinstance(self.returned_entries, (int, np.integer))
+                and self.returned_entries >= 0):
+            raise InputError(f"model returned_entries {self.returned_entries!r} must be a "
+                             "count >= 0")
+        if not (np.isfinite(self.returned_time) and self.returned_time >= 0):
+            raise InputError(f"model returned_time {self.returned_time!r} s must be >= 0")
 
     @property
     def n_states(self) -> int:
@@ -202,7 +210,7 @@ class OpenFlow:
         """What a model file stores of the open riser: the datasets ``exit_probability``
         [S] float64, ``exit_counts`` and ``entry_counts`` [S] int64, and the attributes
         ``boundary = "open"``, ``inflow_per_lag``, ``censored_tracks`` (vanished,
-        appeared; int64) and ``returned_entries``.
+        appeared; int64), ``returned_entries`` and ``returned_time``.
 
         Returns
         -------
@@ -211,7 +219,8 @@ class OpenFlow:
         """
         attrs = {"boundary": Boundary.OPEN.value, "inflow_per_lag": float(self.inflow_per_lag),
                  "censored_tracks": np.asarray(self.censored_tracks, dtype=np.int64),
-                 "returned_entries": int(self.returned_entries)}
+                 "returned_entries": int(self.returned_entries),
+                 "returned_time": float(self.returned_time)}
         return {name: getattr(self, name) for name in OPEN_DATASETS}, attrs
 
     @classmethod
@@ -238,6 +247,7 @@ class OpenFlow:
         return cls(inflow_per_lag=float(group.attrs["inflow_per_lag"]),
                    censored_tracks=(int(censored[0]), int(censored[1])),
                    returned_entries=int(group.attrs.get("returned_entries", 0)),
+                   returned_time=float(group.attrs.get("returned_time", 0.0)),
                    **{name: group[name][()] for name in OPEN_DATASETS})
 
     # -- description -------------------------------------------------------------------
@@ -251,19 +261,21 @@ class OpenFlow:
         """
         return (f"  open riser: {int(self.exit_counts.sum())} exits through the outlet, "
                 f"{int(self.entry_counts.sum())} entries through the inlet "
-                + (f"({self.returned_entries} of them returns after a fall out through it) "
-                   if self.returned_entries else "")
-                + f"({self.inflow_per_lag:.4g} per lag) into "
-                f"{int(np.count_nonzero(self.entry_counts))} states; tracks censored (ended or "
-                f"began away from the faces): {self.censored_tracks[0]}, "
-                f"{self.censored_tracks[1]}")
+                f"({self.inflow_per_lag:.4g} per lag) into "
+                f"{int(np.count_nonzero(self.entry_counts))} states"
+                + (f", {self.returned_entries} returns through it (back after a fall out "
+                   "or out of view: no entry)" if self.returned_entries else "")
+                + "; tracks censored (ended or began away from the faces): "
+                f"{self.censored_tracks[0]}, {self.censored_tracks[1]}")
 
     def warnings(self) -> list[str]:
         """Lines about many tracks that ended or began away from the faces (more than
         :data:`CENSORED_SHARE` of those that ended or began), and about entries through the
         inlet that do not balance the exits through the outlet (a difference beyond
         :data:`IMBALANCE_SHARE` of the larger and beyond three standard deviations of the
-        two counts' Poisson noise): the window's flow was not steady. (Whether the model's
+        two counts' Poisson noise): the window's flow was not steady; and about returns
+        through the inlet beyond :data:`CENSORED_SHARE` of the entries, with the time out of
+        view the chain leaves out of their residences. (Whether the model's
         Monte Carlo then drains or fills the riser, its hold-up against the data's, is
         :func:`~cfbmarkov.markov.model_summary.hold_up_warning`'s line.)
 
@@ -284,19 +296,18 @@ class OpenFlow:
                 "residence (the RTD, exit means) are not affected, its Monte Carlo's hold-up "
                 "may be. Fit on a window of steady flow, or import the riser from its "
                 "inlet to its outlet where solids leave or enter elsewhere")
-        returned, share = int(self.returned_entries), self.returned_entries / max(entries, 1)
+        returned = int(self.returned_entries)
         if returned > CENSORED_SHARE * entries:
             lines.append(
-                f"  {returned} of the {entries} entries through the inlet ({100 * share:.0f} %) "
-                "are returns of particles that fell back out through it earlier in the "
-                "fitting window: the chain takes each return for a new entry (and the fall "
-                "for a censored track), while a residence observed (compare's reference, the "
-                "kinetics' reference) runs from the particle's first entry across its falls "
-                "(docs/definitions.md, Open risers); the chain's RTD runs from the last "
-                "entry, so its E(RT) may fall short of the flow's, and its inflow "
-                f"({self.inflow_per_lag:.4g} a lag) counts the returns with the new "
-                "particles. Import the riser from farther below the inlet, so that the falls "
-                "stay inside it")
+                f"  {returned} returns through the inlet against {entries} entries: particles "
+                "that fell back out through it (or left the view) and came back within the "
+                "fitting window; the chain goes on with their residences across the fall, as "
+                "a residence observed does (docs/definitions.md, Open risers), but has no "
+                f"state below the inlet and leaves out the {self.returned_time / returned:.3g} s "
+                "a return spent out of view on average, "
+                f"{self.returned_time / max(entries, 1):.3g} s a residence: the flow's E(RT) may "
+                "be that much longer than the chain's. Import the riser from farther below "
+                "the inlet, so that the falls stay inside it")
         for what, censored, counted, face in (
                 ("ended", self.censored_tracks[0], int(self.exit_counts.sum()), "outlet"),
                 ("began", self.censored_tracks[1], int(self.entry_counts.sum()), "inlet")):
