@@ -90,7 +90,9 @@ def describe(trajectories: Trajectories, block: int = 256) -> list[str]:
     elif not t.boundary.is_open:
         lines.append(f"  passes through the periodic boundary: {up} up, {down} down"
                      + (" (not counted across a particle's absence)" if t.has_absences else ""))
-    lines.append(f"  entries {entries}, exits {exits} (after the first frame)")
+    lines.append(f"  tracks begun {entries}, ended {exits} (after the first frame, anywhere"
+                 + ("; fit counts those within one cell of the inlet and the outlet as "
+                    "entries and exits)" if t.boundary.is_open else ")"))
     if t.has_fields:
         lines.append(fields_line(t))
     for name in t.property_names:

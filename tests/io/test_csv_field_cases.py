@@ -307,7 +307,7 @@ def test_ptv_particles_entering_and_leaving_are_present_as_in_the_file(tmp_path)
     assert present[4:, list(ids).index(2)].sum() == 0
     text = "\n".join(lines)
     assert "particles present per frame: min 4, max 5 of 5" in text
-    assert "entries 1, exits 1" in text
+    assert "tracks begun 1, ended 1 (after the first frame, anywhere" in text
 
 
 # -- the new options, given wrong ----------------------------------------------------------------

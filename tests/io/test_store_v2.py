@@ -72,7 +72,7 @@ def test_presence_mask_laps_across_gaps_and_late_particles(tmp_path):
         assert t.unsupported() == ["particles absent from some frames"]
     assert "present per frame: min 1, max 2 of 2" in text
     assert "passes through the periodic boundary: 2 up, 0 down" in text
-    assert "entries 2, exits 1" in text
+    assert "tracks begun 2, ended 1 (after the first frame, anywhere" in text
 
 
 def test_a_step_across_a_gap_is_not_refused_but_one_between_present_frames_is(tmp_path):

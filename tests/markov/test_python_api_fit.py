@@ -64,10 +64,22 @@ def test_assess_fit_finds_a_relative_source_beside_the_model_file(markov_run, tm
         warnings.simplefilter("ignore")
         judged = assess_fit(loaded, resamples=0)
     assert judged.adequacy is not None
+    # the tutorial's layout: fitted on synth/run.h5 from a project's root, saved beside
+    # it as synth/m.h5: from elsewhere its name alone is found beside the model file
+    monkeypatch.chdir(tmp_path / "a")
+    (tmp_path / "a" / "synth").mkdir()
+    shutil.copy(markov_run, tmp_path / "a" / "synth" / "run.h5")
+    PaperEstimator(GRID, lag=0.1).fit(discretize("synth/run.h5", GRID, lag=0.1,
+                                                 window=(2.0, 6.0))).save("synth/m.h5")
+    monkeypatch.chdir(tmp_path / "elsewhere")
+    beside = MarkovModel.load(tmp_path / "a" / "synth" / "m.h5")
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        assert assess_fit(beside, resamples=0).adequacy is not None
     (tmp_path / "a" / "run.h5").rename(tmp_path / "a" / "gone.h5")
     with pytest.raises(InputError, match=r"\.\./run.h5 \(the model's fitting file, named from "
-                       r"the folder it was fitted in\): not found from this folder nor from "
-                       r"the model file's \(.*fits\); give runs="):
+                       r"the folder it was fitted in\): not found from this folder nor beside "
+                       r"the model file \(.*fits\); give runs="):
         assess_fit(loaded, resamples=0)
 
 

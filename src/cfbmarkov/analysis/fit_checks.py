@@ -282,21 +282,36 @@ def _repeated_run(runs) -> str | None:
     return None
 
 
-def _found_source(model, source) -> str:
-    """A fitting file the model names, as recorded (a path from the folder it was fitted
-    in): from the current folder, else from the folder of the model file it was loaded
-    from (a model saved where it was fitted and loaded from elsewhere). Whichever is taken,
-    the data are then checked to be the model's (its recorded identity, or its counts)."""
-    source = str(source)
+def _found_sources(model, sources: list) -> list:
+    """The fitting files a model names (paths from the folder it was fitted in), found as
+    ``rtd``, ``compare`` and ``react`` find them: a model that records its data's identity
+    by :func:`~cfbmarkov.analysis.intervals.resolve_source` (the path from this folder,
+    beside the model file, its name alone beside it; each kept only where its fitting
+    window's content is the model's); one that records none (fitted in Python) at the
+    first of those places that holds a file, its counts then checked to be the model's."""
+    if model.source_identity:
+        from cfbmarkov.analysis.intervals import resolve_source
+
+        found = resolve_source(model).source
+        return list(found) if isinstance(found, (list, tuple)) else [found]
     home = model._cache.get("file")
-    if os.path.isfile(source) or os.path.isabs(source) or home is None:
-        return source
-    beside = os.path.join(os.path.dirname(home), source)
-    if os.path.isfile(beside):
-        return beside
-    raise InputError(f"{source} (the model's fitting file, named from the folder it was "
-                     f"fitted in): not found from this folder nor from the model file's "
-                     f"({os.path.dirname(home)}); give runs= (the files it was fitted on)")
+    found = []
+    for source in map(str, sources):
+        tried = [source]
+        if home is not None:
+            folder = os.path.dirname(home)
+            if not os.path.isabs(source):
+                tried.append(os.path.join(folder, source))
+            tried.append(os.path.join(folder, os.path.basename(source)))
+        match = next((path for path in tried if os.path.isfile(path)), None)
+        if match is None:
+            where = ("from this folder nor beside the model file "
+                     f"({os.path.dirname(home)})" if home is not None else "from this folder")
+            raise InputError(f"{source} (the model's fitting file, named from the folder it "
+                             f"was fitted in): not found {where}; give runs= (the files it "
+                             "was fitted on)")
+        found.append(match)
+    return found
 
 
 def _runs_and_windows(model, runs, windows) -> tuple[list, list]:
@@ -315,7 +330,7 @@ def _runs_and_windows(model, runs, windows) -> tuple[list, list]:
                              "runs= and windows= (the files and fitting windows)")
         else:
             runs = [model.source]
-        runs = [_found_source(model, run) for run in runs]
+        runs = _found_sources(model, runs)
     if isinstance(runs, (str, os.PathLike)) or hasattr(runs, "positions"):
         runs = [runs]                    # one run given alone, not in a list
     runs = list(runs)

@@ -465,7 +465,8 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
 
 def exit_mean_intervals(model, kinetics, answers=None, *, level: float = 0.9,
                         resamples: int = 100, fields=None, direction: str | None = None,
-                        passes=(), candidates=(), warnings: list | None = None) -> dict:
+                        passes=(), candidates=(), warnings: list | None = None,
+                        resolve: bool = True) -> dict:
     """The intervals of a model's exact exit means (``react --resamples``): each property's
     exit mean solved exactly on block-bootstrap resamples of the fitting window
     (:func:`bootstrap_exit_means`, as ``compare --kinetics`` forms the model's), the
@@ -500,6 +501,10 @@ def exit_mean_intervals(model, kinetics, answers=None, *, level: float = 0.9,
         Files that may be the fitting file.
     warnings : list of str, optional
         Appended to: why fewer resamples, or none, were taken.
+    resolve : bool, optional
+        Find the fitting file (default); False for a model that
+        :func:`~cfbmarkov.analysis.intervals.resolve_source` returned, whose file is not
+        read again to check it.
 
     Returns
     -------
@@ -528,7 +533,7 @@ def exit_mean_intervals(model, kinetics, answers=None, *, level: float = 0.9,
     if not resamples or not answers:
         return {"exit_mean": {}, "after_passes": {}, "resamples": 0, "level": level}
     check_interval_options(level, resamples)
-    source = resolve_source(model, candidates)
+    source = resolve_source(model, candidates) if resolve else model
     after: dict = {}
     means = bootstrap_exit_means(source, kinetics, fields, resamples, warnings,
                                  direction=direction, passes=passes, after_passes=after)

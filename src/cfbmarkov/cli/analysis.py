@@ -711,10 +711,13 @@ def cmd_maps(args) -> int:
         raise InputError(f"--times gives {len(args.times)} times: one figure draws at most "
                          f"{MAX_MAP_PANELS} maps; give fewer times (or several figures)")
     model = MarkovModel.load(args.model)
+    from cfbmarkov.markov.propagation import fed_inlet_cells
+
+    downward = args.outflow and model.open_flow is None and model.flow_direction == "down"
+    fed = fed_inlet_cells(model, "down" if downward else "up")    # its refusal first
     if args.outflow and model.open_flow is not None:
         print("note: an open riser's maps always take out what leaves through its outlet; "
               "--outflow changes nothing here", file=sys.stderr)
-    downward = args.outflow and model.open_flow is None and model.flow_direction == "down"
     if downward:
         print("note: the model's residences run downward (its fitting window's net solids "
               "flow runs down, as rtd counts them): with --outflow the batch is fed over the "
@@ -724,11 +727,8 @@ def cmd_maps(args) -> int:
     space = model.state_space
     from cfbmarkov.markov.model_summary import (cells_text, maps_left_out_warning,
                                                 monte_carlo_warnings)
-    from cfbmarkov.markov.propagation import fed_inlet_cells
-
     import numpy as np
 
-    fed = fed_inlet_cells(model, "down" if downward else "up")
     if not fed.all():
         first = space.n_cells - space.cells_per_row if downward else 0
         left_out = first + np.flatnonzero(~fed)
@@ -740,8 +740,10 @@ def cmd_maps(args) -> int:
               file=sys.stderr)
     for line in monte_carlo_warnings(model):
         print(f"warning: the model: {one_line(line)}", file=sys.stderr)
-    left_out = maps_left_out_warning(model, args.times, args.outflow,
-                                     "down" if downward else "up")
+    # with --outflow the fraction in riser of what the chain keeps levels off; without it a
+    # periodic riser keeps the whole batch, whatever its classes
+    left_out = (maps_left_out_warning(model, args.times, True, "down" if downward else "up")
+                if args.outflow else None)
     if left_out is not None:
         print(f"warning: the model: {left_out}", file=sys.stderr)
     title = (f"Batch fed over the {'top cells' if downward else 'inlet'} at t = 0 "

@@ -267,15 +267,15 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
     from cfbmarkov.cli.markov import _stage
 
     notes: list[str] = []
-    candidates = [args.run] if args.run else []
-    resolve_source(model, candidates)                                # its refusal first
+    source = resolve_source(model, [args.run] if args.run else [])     # its refusal first
+    runs = len(source.source) if isinstance(source.source, (list, tuple)) else 1
+    where = (f"the {runs} runs' fitting windows" if runs > 1 else "the fitting window")
     with _stage(args, "intervals", f"the exit means' {100 * args.level:g} % intervals: "
-                f"{args.resamples} bootstrap resamples of the fitting window, each solved "
-                "exactly"):
-        formed = exit_mean_intervals(model, kinetics, answers, level=args.level,
+                f"{args.resamples} bootstrap resamples of {where}, each solved exactly"):
+        formed = exit_mean_intervals(source, kinetics, answers, level=args.level,
                                      resamples=args.resamples, fields=fields,
-                                     direction=direction, passes=passes,
-                                     candidates=candidates, warnings=notes)
+                                     direction=direction, passes=passes, warnings=notes,
+                                     resolve=False)
     for note in notes:
         print(f"warning: {one_line(note)}", file=sys.stderr)
     return formed["exit_mean"], formed["resamples"], formed["after_passes"]

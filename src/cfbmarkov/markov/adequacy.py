@@ -28,10 +28,11 @@ ON_WINDOW_LIMIT = 0.25
 CARRY_ADVICE = ("a state space with memory may carry it (`fit --states auto` compares them on "
                 "this window)")
 
-#: ... and for one that ``fit --states auto`` chose on this window, which would choose it
-#: again: what is left is the grid and the amount of flow
-CHOSEN_CARRY_ADVICE = ("`fit --states auto` chose this state space as the closest to this "
-                       "window of those it compares: finer --cells (more columns keep a "
+#: ... and for one chosen among others on this window (``fit --states auto``,
+#: ``select_model``), which the same choice would give again: what is left is the grid and
+#: the amount of flow
+CHOSEN_CARRY_ADVICE = ("its state space was chosen among others on this window (`fit "
+                       "--states auto`, select_model): finer --cells (more columns keep a "
                        "downflowing wall layer apart from the rising core) or more flow (a "
                        "longer window, several runs pooled) may carry it")
 

@@ -206,9 +206,10 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
     particle crossed the face, not t or t + lag; a state space with memory defines a
     particle's state only from a lag after it is first seen (its history), so its entry is
     judged where it was first seen too (present frames hold a finite height, absent ones
-    NaN). A particle seen before in the window whose presence before did not end at the
-    outlet (it fell back out through the inlet, or left the view, and came back) makes no
-    entry when it comes back through the inlet but a return (``returns[j] += 1``;
+    NaN). A particle in a state before on a frame of the pair's sequence (t, t - lag, ...:
+    that sequence's chain had it) whose presence did not end at the outlet since (it fell
+    back out through the inlet, or left the view, and came back) makes no entry when it
+    comes back through the inlet but a return (``returns[j] += 1``;
     ``returned_frames[j]`` += the frames from where it was last seen to where it is seen
     again): its residence goes on, as a residence observed does. Returns nothing; arrays
     are updated.
@@ -235,10 +236,16 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
                 while first >= 1 and not np.isnan(vertical[first - 1, p]):   # has none
                     first -= 1                                      # before its history)
                 if vertical[first, p] <= band:
-                    before = first - 1            # where it was last seen before
+                    # a return: in a state on a frame of this pair's sequence (t, t - lag,
+                    # ...) before, so that this sequence's chain had it, and not gone
+                    # through the outlet since (where it was last seen before)
+                    g = t
+                    while g >= 0 and (g >= first or states[g, p] < 0):
+                        g -= lag_frames
+                    before = first - 1
                     while before >= 0 and np.isnan(vertical[before, p]):
                         before -= 1
-                    if before >= 0 and vertical[before, p] < height - band:
+                    if g >= 0 and before >= 0 and vertical[before, p] < height - band:
                         returns[j] += 1           # back after a fall or out of view:
                         returned_frames[j] += first - before     # its residence goes on
                     else:

@@ -105,11 +105,16 @@ class OpenFlow:
         if self.exit_probability.max() > 1.0:
             raise InputError("model exit probabilities exceed 1")
         if self.entry_counts.sum() == 0:
+            began = int(self.censored_tracks[1])
+            away = (f"; {began} tracks began in it more than one cell from the inlet, "
+                    "censored: where particles are inserted or come into view above the "
+                    "inlet's cell, taller --cells (or a shorter lag) count them as entries"
+                    if began else "")
             raise InputError("an open riser's model without any entry through the inlet: the "
                              "fitting window saw no particle enter (its entry distribution is "
-                             "empty); fit on a window in which particles enter through the "
-                             "bottom (cfbmarkov info shows the entries), or import a riser "
-                             "that recycles its particles with --boundary periodic")
+                             f"empty){away}; fit on a window in which particles enter through "
+                             "the bottom, or import a riser that recycles its particles with "
+                             "--boundary periodic")
         if not (np.isfinite(self.inflow_per_lag) and self.inflow_per_lag >= 0):
             raise InputError(f"model inflow {self.inflow_per_lag!r} per lag must be >= 0")
         if not (isinstance(self.returned_entries, (int, np.integer))

@@ -134,9 +134,11 @@ def _scan_open(times, present, vertical, last_vertical, band, height, was_presen
 def _face_tracks(present, vertical, last_vertical, band, height, was_present, last_height,
                  counts):
     """Count an open riser's tracks that begin or end, and those of them within ``band`` of
-    the inlet or the outlet, over a block of frames (Numba kernel): ``counts`` [4] +=
-    (begun, begun at the inlet, ended, ended at the outlet). ``was_present`` (int8, -1
-    before the first frame) and ``last_height`` carry over between blocks."""
+    the inlet or the outlet, over a block of frames (Numba kernel): ``counts`` [5] +=
+    (begun, begun at the inlet, ended, ended at the outlet, returns: begun at the inlet by
+    a particle seen before that did not end at the outlet then, whose residence goes on).
+    ``was_present`` (int8, -1 before the first frame) and ``last_height`` carry over
+    between blocks."""
     n_frames, n_particles = present.shape
     for k in range(n_frames):
         for p in range(n_particles):
@@ -146,6 +148,8 @@ def _face_tracks(present, vertical, last_vertical, band, height, was_present, la
                 counts[0] += 1
                 if vertical[k, p] <= band:
                     counts[1] += 1
+                    if last_height[p] < height - band:      # False for NaN: never seen
+                        counts[4] += 1
             elif not now and before == 1:
                 counts[2] += 1
                 if last_height[p] >= height - band:
@@ -220,16 +224,21 @@ def open_face_tracks(traj, window: tuple[float, float], band: float,
     (int, int, int, int)
         Tracks begun after the window's first frame, those begun within ``band`` of the
         inlet, tracks ended before its last frame, those ended within ``band`` of the outlet.
+        A particle that comes back through the inlet after it fell out (or left the view)
+        goes on with its track, as its residence does: neither its fall nor its return is
+        counted.
     """
     frames = traj.window(*window_pair(window))
     n = traj.n_particles
     was, last = np.full(n, -1, np.int8), np.full(n, np.nan)
-    counts = np.zeros(4, np.int64)
+    counts = np.zeros(5, np.int64)
     for block, present, first_seen, last_seen in _lag_blocks(traj, frames.start, frames.stop,
                                                             int(lag_frames)):
         _face_tracks(present, first_seen, last_seen, float(band), float(traj.height), was,
                      last, counts)
-    return int(counts[0]), int(counts[1]), int(counts[2]), int(counts[3])
+    returns = int(counts[4])
+    return (int(counts[0]) - returns, int(counts[1]) - returns, int(counts[2]) - returns,
+            int(counts[3]))
 
 
 def _lag_blocks(traj, i0: int, i1: int, lag_frames: int):
