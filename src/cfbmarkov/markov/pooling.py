@@ -155,13 +155,14 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
             one_file = os.path.realpath(other.path) == os.path.realpath(run.path)
             common = None if one_file else same_run_frame(other, run)
             if not one_file and common is None:
-                shifted = same_window_frames(other, w, run, window)
+                shifted = (same_window_frames(other, w, run, window)
+                           or same_index_frames(other, run))
                 if shifted is not None:
                     raise InputError(
                         f"{other.path} {w[0]:g}-{w[1]:g} s and {where} hold the same "
                         f"particles at the same positions at {shifted[0]:.10g} s and "
-                        f"{shifted[1]:.10g} s, as far into each window: one run under two "
-                        "clocks (a copy whose times were shifted, or exported twice); "
+                        f"{shifted[1]:.10g} s: one run under two clocks (a copy whose "
+                        "times were shifted, or exported twice); "
                         "pooled it would count its transitions twice, as if it were twice "
                         "the data (pool independent runs of one case)")
                 continue
@@ -215,6 +216,30 @@ def same_window_frames(a, window_a: tuple[float, float], b,
     if not shared_positions(a, i, b, j):
         return None
     return float(a.times[i]), float(b.times[j])
+
+
+def same_index_frames(a, b) -> tuple[float, float] | None:
+    """The times of two files' frames of one index (the first, the middle and the last
+    both hold) where both hold the same particles at the same positions: a copy exported
+    under another clock, whatever windows are taken of it (:func:`same_window_frames`
+    compares the frames as far into each window, which windows offset from each other's
+    pass by).
+
+    Parameters
+    ----------
+    a, b : Trajectories
+        Open trajectory files.
+
+    Returns
+    -------
+    (float, float) or None
+        The two frames' times (s), else None.
+    """
+    last = min(a.n_frames, b.n_frames) - 1
+    for i in sorted({0, last // 2, last}) if last >= 0 else ():
+        if shared_positions(a, i, b, i):
+            return float(a.times[i]), float(b.times[i])
+    return None
 
 
 #: the common frames :func:`same_run_frame` reads at a time, looking back for the latest
