@@ -433,6 +433,26 @@ def test_a_pooled_models_in_sample_window_and_baseline_length_are_warned(tmp_pat
         assert sum(overlap in line for line in said) == inside, said
         assert sum(length in line for line in said) == other_length, said
         assert not any("could not pool" in line for line in said)
+    # fitted on the runs' names from their folder, compared from another: the baseline
+    # finds them beside the prediction, as the intervals do (a review saw it fall back to
+    # one run's window while the intervals used all three)
+    import os
+
+    here = os.getcwd()
+    try:
+        os.chdir(tmp_path)
+        assert main(["fit", "run2.h5", "run3.h5", "--window", "0.5:2", "--resamples", "0",
+                     "--no-adequacy", "-q", "-o", "named.h5"]) == 0
+        assert main(["predict", "named.h5", "--init", "run3.h5", "--start", "2",
+                     "--duration", "1.5", "-q", "-o", "pn.h5"]) == 0
+        (tmp_path / "sub").mkdir()
+        os.chdir(tmp_path / "sub")
+        saved = compare("../run3.h5", "../pn.h5", window=(2.0, 3.5), figures=False,
+                        output="o")
+    finally:
+        os.chdir(here)
+    assert not any("could not pool" in line for line in saved["warnings"])
+    assert saved["baseline"]["runs"] == 2
     # a run gone: the baseline falls back to the reference's own window, and says so
     runs[0].rename(tmp_path / "moved.h5")
     saved = compare(runs[1], tmp_path / "p2.0.h5", window=(2.0, 3.5), figures=False,

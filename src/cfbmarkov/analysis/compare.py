@@ -590,6 +590,32 @@ class _Beside:
     notes: tuple[str, ...] = ()
 
 
+def _found_runs(pred, ref, pooled):
+    """A pooled model's runs and windows (:func:`~cfbmarkov.analysis.baseline.
+    fitting_runs_of`) with each run's file found as the intervals find it (from this
+    folder, beside the prediction, or the reference itself:
+    :func:`~cfbmarkov.analysis.intervals.resolve_source`); as recorded where they cannot
+    be found (the baseline then says which is missing), None for a model of one run."""
+    if pooled is None:
+        return None
+    import os
+
+    from cfbmarkov.analysis.intervals import resolve_source
+    from cfbmarkov.markov import MarkovModel
+
+    try:
+        model = MarkovModel.from_trajectories(pred)
+        if model is None:
+            return pooled
+        model._cache.setdefault("file", os.path.abspath(pred.path))
+        found = resolve_source(model, [ref.path]).source
+    except InputError:
+        return pooled
+    if not isinstance(found, (list, tuple)) or len(found) != len(pooled):
+        return pooled
+    return [(str(path), window) for path, (_, window) in zip(found, pooled)]
+
+
 def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float], on: _Basis,
                *, bin_width: float, md_order: float,
                long_run_span: tuple[float, float] | None) -> _Beside:
@@ -606,7 +632,7 @@ def _baselines(ref: Trajectories, pred: Trajectories, window: tuple[float, float
                   "window_length": stop - start, "direction": on.direction}
     baseline, unread = None, None
     fitted = fitting_window(pred)
-    pooled = fitting_runs_of(pred)
+    pooled = _found_runs(pred, ref, fitting_runs_of(pred))
     if pooled is not None:          # a pooled fit: its runs' windows pooled, as fitted
         try:
             baseline = pooled_window_difference(pooled, ref, (start, stop), **basis_args)
