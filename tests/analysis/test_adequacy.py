@@ -623,7 +623,7 @@ def test_a_passed_verdict_says_so_with_its_numbers():
     blunt = Adequacy((), parts, 2.08, 0.022, 0.3, 4.0, 0.013, (("a.h5", 2.37), ("b.h5", 1.86)),
                      runs_limit=0.3, runs_interval=False)
     line = blunt.passed_line()
-    assert "runs agree" not in line and "2 runs not judged against their own uncertainty" in line
+    assert "runs agree" not in line and "2 runs are not judged against their own uncertainty" in line
     assert "each within 14 % of the pooled model's, limit 30 %" in line
     assert "give --resamples to judge them" in line
     assert Adequacy.from_dict(blunt.to_dict()) == blunt

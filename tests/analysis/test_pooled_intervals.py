@@ -291,11 +291,17 @@ def test_a_pooled_chain_is_held_against_its_runs_windows_together(runs):
         assert len(pooled) == 6 and all(len(e) == 6 for e in each)
         assert pooled[0] == pytest.approx(2.0) and pooled[5] == each[0][5] + each[1][5]
         n = np.array([e[5] for e in each])
-        for k in (1, 3):                  # E(RT), SD(RT): the chain's, then the residences'
-            mean = float(n @ [e[k] for e in each]) / n.sum()
-            second = float(n @ [e[k + 1] ** 2 + e[k] ** 2 for e in each]) / n.sum()
-            assert pooled[k] == pytest.approx(mean, rel=1e-12)
-            assert pooled[k + 1] == pytest.approx(math.sqrt(second - mean ** 2), rel=1e-12)
+        # E(RT), SD(RT): the chain's, a mixture of distributions
+        mean = float(n @ [e[1] for e in each]) / n.sum()
+        second = float(n @ [e[2] ** 2 + e[1] ** 2 for e in each]) / n.sum()
+        assert pooled[1] == pytest.approx(mean, rel=1e-12)
+        assert pooled[2] == pytest.approx(math.sqrt(second - mean ** 2), rel=1e-12)
+        # the residences': samples whose SDs are with ddof = 1, pooled as all of them would
+        # give it (a review found the mixture's divisor n - runs, not n - 1)
+        mean = float(n @ [e[3] for e in each]) / n.sum()
+        squares = sum((m - 1) * e[4] ** 2 + m * (e[3] - mean) ** 2 for m, e in zip(n, each))
+        assert pooled[3] == pytest.approx(mean, rel=1e-12)
+        assert pooled[4] == pytest.approx(math.sqrt(squares / (n.sum() - 1)), rel=1e-12)
         # a chain on the cells of a flow that is a chain on them: within the limit
         assert abs(pooled[2] / pooled[4] - 1) < 0.25
         other = discretize_runs(opened, FLOW.grid, FLOW.lag, [WINDOW, (0.5, 2.0)])

@@ -504,17 +504,22 @@ def _pooled_on_window(model, runs, data) -> tuple[float, ...]:
     each = [_on_window(model, run, discrete) for run, discrete in zip(runs, data)]
     if not each or any(len(e) != 6 for e in each) or len({e[0] for e in each}) != 1:
         return ()
-    counts = np.array([e[5] for e in each])
+    counts = np.array([e[5] for e in each], dtype=np.float64)
     weights = counts / counts.sum()
 
-    def pooled(means, sds):
+    def pooled(means, sds, samples: bool):
+        """The mixture's mean and SD: of distributions (the chain's), or of samples whose
+        SDs are with ddof = 1 (the residences', the pooled SD then with ddof = 1 too)."""
         means, sds = np.asarray(means), np.asarray(sds)
         mean = float(weights @ means)
+        if samples:
+            squares = float(np.sum((counts - 1.0) * sds ** 2 + counts * (means - mean) ** 2))
+            return mean, math.sqrt(max(squares / max(counts.sum() - 1.0, 1.0), 0.0))
         second = float(weights @ (sds ** 2 + means ** 2))
         return mean, math.sqrt(max(second - mean * mean, 0.0))
 
-    chain_mean, chain_sd = pooled([e[1] for e in each], [e[2] for e in each])
-    seen_mean, seen_sd = pooled([e[3] for e in each], [e[4] for e in each])
+    chain_mean, chain_sd = pooled([e[1] for e in each], [e[2] for e in each], False)
+    seen_mean, seen_sd = pooled([e[3] for e in each], [e[4] for e in each], True)
     return (each[0][0], chain_mean, chain_sd, seen_mean, seen_sd, float(counts.sum()))
 
 
@@ -696,9 +701,12 @@ def _pooled_checks(fitter, data, names, windows, rt_mean: float, limit: float,
                      f"{'lies' if len(off) == 1 else 'lie'} more than "
                      f"{100 * run_limit:.0f} % from the pooled model's "
                      f"{rt_mean:.3g} s (all runs: "
-                     + ", ".join(f"{m:.3g}" for m in means) + " s): the runs may not be "
-                     "samples of one flow (check their cases, or `cfbmarkov stationarity` "
-                     "each); pool runs of one case and state")
+                     + ", ".join(f"{m:.3g}" for m in means) + " s): the runs are of "
+                     "different cases, or each window saw its own state of a flow that "
+                     "changes slower than a window (`cfbmarkov stationarity` each shows "
+                     "it); check their cases: where they are one, the pooled model "
+                     "averages the states the runs saw, and more runs or longer windows "
+                     "narrow its interval")
     means_of_halves = []
     for side in ((0, 1) if halves else ()):
         blocks = []

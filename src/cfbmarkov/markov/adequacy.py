@@ -212,7 +212,7 @@ class Adequacy:
             if self.runs_interval:
                 said.append(f"the {len(self.runs)} runs agree ({figures})")
             else:
-                said.append(f"the {len(self.runs)} runs not judged against their own "
+                said.append(f"the {len(self.runs)} runs are not judged against their own "
                             f"uncertainty ({figures}: without an interval, the default "
                             "tolerance alone, which cannot tell the runs' differences from "
                             "their sampling; give --resamples to judge them)")
