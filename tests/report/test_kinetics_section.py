@@ -125,6 +125,9 @@ def test_the_sentence_names_where_the_chain_loses():
     # chains' intervals of +-0.03 hold 0.5), not the chain's mean in the reference's
     # narrow sampling interval (the second's 0.515 lies outside 0.49-0.51)
     assert "lies inside the chain's interval" in text and "in 2 of 2 comparisons" in text
+    # "consistent" says no more than the intervals' width: given (+-0.03 of 0.5025, 0.515)
+    assert ("which is no closer than those intervals' half-widths, 5.8-6 % of the chain's "
+            "exit mean") in text
     text = verdict_sentence("X", [row("a", 3.0, 1.0, 0.006), row("b", 6.0, 1.0, 0.003),
                                   row("c", 0.5, 1.0)])
     assert "in 1 of 3 comparisons: there the chain is consistent" in text

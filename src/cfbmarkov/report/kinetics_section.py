@@ -189,9 +189,10 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
 
     agreement = {"inside": 0, "not told apart": 0, "missed": 0}
     noise_only = 0
+    widths = []          # the intervals that hold the reference: their half-width, relative
     for r in rows:
-        said = exit_mean_agreement(r.side("reference").get("exit_mean"),
-                                   r.side("model").get("exit_mean_interval"),
+        interval = r.side("model").get("exit_mean_interval")
+        said = exit_mean_agreement(r.side("reference").get("exit_mean"), interval,
                                    r.side("reference").get("exit_mean_interval"))
         if said is None:
             continue
@@ -199,6 +200,9 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
             noise_only += 1   # the Monte Carlo noise alone: no verdict, as compare says
             continue
         agreement[said] += 1
+        centre = r.side("model").get("exit_mean")
+        if said == "inside" and centre:
+            widths.append(100 * (interval[1] - interval[0]) / 2 / abs(centre))
     known = sum(agreement.values())
     if known:
         parts.append(
@@ -207,7 +211,9 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
             f"mean) in {agreement['inside']} of "
             f"{known} comparisons"
             + (": there the chain is consistent with it within its uncertainty, as compare "
-               "says" if agreement["inside"] else "")
+               "says" + (f", which is no closer than those intervals' half-widths, "
+                         f"{_range_text(widths)} % of the chain's exit mean" if widths else "")
+               if agreement["inside"] else "")
             + (f"; in {agreement['not told apart']} it lies outside but the reference's own "
                "interval overlaps the chain's (not told apart)"
                if agreement["not told apart"] else "")
@@ -219,6 +225,12 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
                      "window: a carried property, or none asked), which leaves out most of its "
                      "uncertainty: no verdict is drawn from it.")
     return " ".join(parts)
+
+
+def _range_text(values: list[float]) -> str:
+    """``a-b`` (or ``a`` where they round alike) to two significant figures."""
+    lo, hi = f"{min(values):.2g}", f"{max(values):.2g}"
+    return lo if lo == hi else f"{lo}-{hi}"
 
 
 def _table(rows: list[KineticsRow]) -> Table:
