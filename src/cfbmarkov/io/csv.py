@@ -546,6 +546,9 @@ def _append_frame(writer: TrajectoryWriter, columns: FrameColumns, rows: np.ndar
     elif rows.shape[0] > 1:
         unused = _unused_columns(layout)
         named = (f" (not used: {', '.join(repr(n) for n in unused)})" if unused else "")
+        coarse = time_resolution_note(rows[:, layout.index("t")])
+        if coarse:
+            raise InputError(f"{where}: {rows.shape[0]} rows at this time{coarse}")
         raise InputError(f"{where}: {rows.shape[0]} rows at this time, but the file has no id "
                          f"column{named}, so it is read as one tracer; name the column that "
                          "numbers the particles id (or tracer, label, track), or add one")
@@ -554,8 +557,36 @@ def _append_frame(writer: TrajectoryWriter, columns: FrameColumns, rows: np.ndar
     positions, inside = _riser_positions(rows, layout, riser, ids, label)
     velocity = layout.velocity
     velocity = rows[:, [layout.index(v) for v in velocity]] if velocity else None
-    full, vel, _, present = columns.frame(ids, positions, inside, velocity, None, where)
+    try:
+        full, vel, _, present = columns.frame(ids, positions, inside, velocity, None, where)
+    except InputError as exc:     # a particle twice at one time: why, where times are large
+        coarse = time_resolution_note(rows[:, layout.index("t")])
+        if not coarse or "more than once" not in str(exc):
+            raise
+        raise InputError(f"{exc}{coarse}") from None
     writer.append(time, full, vel, None, present)
+
+
+#: the time step (s) a double must hold at a file's times, below which rows stamped apart
+#: may read as one time: times since an epoch (1.7e9 s is held to 2.4e-7 s)
+TIME_RESOLUTION = 1e-9
+
+
+def time_resolution_note(times) -> str:
+    """``"; the times lie near ... s"``: why rows stamped apart may read as one time (a
+    double holds times as large as the file's to more than :data:`TIME_RESOLUTION`, e.g.
+    seconds since 1970), and the fix; ``""`` where it holds them finer."""
+    times = np.asarray(times, dtype=np.float64)
+    finite = times[np.isfinite(times)]
+    if not finite.size:
+        return ""
+    largest = float(np.abs(finite).max())
+    step = float(np.spacing(largest))
+    if step <= TIME_RESOLUTION:
+        return ""
+    return (f"; the times lie near {largest:.6g} s, where a double holds them only to "
+            f"{step:.2g} s, so rows stamped closer than that read as one time: give the times "
+            "from the run's start (subtract the first time from the column)")
 
 
 def _riser_positions(rows: np.ndarray, layout: CsvLayout, riser: RiserFrame, ids: np.ndarray,
@@ -648,6 +679,10 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
         rows[keep, layout.index("t")], ids[keep], relative[keep],
         height=riser.height if periodic else None, vertical=1,
         spread_limit=SAME_TIME_SPREAD * riser.width, label=label)
+    coarse = time_resolution_note(times)
+    if merged and coarse:        # distinct samples read as one time: no mean of them
+        raise InputError(f"{label}: {plural(merged, 'row')} share a time with another row "
+                         f"of their particle{coarse}")
     try:
         tracks = resample_tracks(times, ids, relative,
                                  interval=interval, max_gap=max_gap,
