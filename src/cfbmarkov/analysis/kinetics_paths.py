@@ -119,7 +119,8 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
     at the last frame present before this one) within ``band`` of the outlet, recorded with the
     time since its entry (NaN where the entry was not seen). A return through the inlet
     within a residence (after falling back out, or out of view) continues it, its value
-    held while it was absent, as the residence times of
+    held from its last frame before it went out of view to its return (no transition of
+    the chain counts that time either), as the residence times of
     :func:`cfbmarkov.observed.residence.open_residence_times` count it; so does that of a
     particle inside at the first frame (its entry unknown). A particle absent in the first
     frame is not an entry there. ``exit_*`` must hold one slot per particle-frame that can be an
@@ -143,7 +144,10 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
         for p in range(n_particles):
             now = present[k, p]
             before = present[k - 1, p]
-            if before:
+            # the lag in which a particle goes out of view away from the outlet (a fall
+            # back through the inlet, out of view) is no transition of the chain: its value
+            # is held from its last frame, as over the frames it is out of view
+            if before and (now or last_height[p] >= height - band):
                 s = states[k - 1, p]
                 if s < 0 and now:
                     # first seen without the history a state with memory needs: its first

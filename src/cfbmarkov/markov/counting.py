@@ -189,6 +189,38 @@ def _sparse_count_kernel(states, vertical, lag_frames, height, n_states, with_fr
             average[:nnz] if with_frame_average else average, pairs)
 
 
+@nb.njit(cache=True, nogil=True)
+def _residence_begun(vertical, p, t, lag_frames, band, height):
+    """The frame where particle ``p``'s residence in progress at frame ``t`` began (``t``
+    before the appearance judged, the particle absent there), read on
+    the frames t, t - lag, ... as the residence times read them
+    (:func:`cfbmarkov.observed.residence.residence_times`): walking back, an exit through
+    the outlet (last seen within ``band`` of H) ends the search with -1 (no residence), an
+    entry through the inlet (first seen within ``band`` of 0) gives the frame first seen,
+    and a particle present at the sequence's first frame is in one begun before it (that
+    frame); appearances and disappearances elsewhere change nothing. -1 where none."""
+    u = t
+    while u >= lag_frames:
+        a = u - lag_frames
+        was, now = not np.isnan(vertical[a, p]), not np.isnan(vertical[u, p])
+        if was and not now:
+            last = a
+            for f in range(a + 1, u):
+                if not np.isnan(vertical[f, p]):
+                    last = f
+            if vertical[last, p] >= height - band:
+                return -1                                  # left through the outlet
+        elif now and not was:
+            first = u
+            for f in range(u - 1, a, -1):
+                if not np.isnan(vertical[f, p]):
+                    first = f
+            if vertical[first, p] <= band:
+                return first                               # entered through the inlet
+        u = a
+    return u if not np.isnan(vertical[u, p]) else -1
+
+
 @nb.njit(cache=True)
 def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, vanished,
                  appeared, returns, returned_frames):
@@ -206,13 +238,16 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
     particle crossed the face, not t or t + lag; a state space with memory defines a
     particle's state only from a lag after it is first seen (its history), so its entry is
     judged where it was first seen too (present frames hold a finite height, absent ones
-    NaN). A particle in a state before on a frame of the pair's sequence (t, t - lag, ...:
-    that sequence's chain had it) whose presence did not end at the outlet since (it fell
-    back out through the inlet, or left the view, and came back) makes no entry when it
-    comes back through the inlet but a return (``returns[j] += 1``;
-    ``returned_frames[j]`` += the frames from where it was last seen to where it is seen
-    again): its residence goes on, as a residence observed does. Returns nothing; arrays
-    are updated.
+    NaN). A particle that comes back through the inlet within a residence (it fell back
+    out through the inlet, or left the view: :func:`_residence_begun` on the pair's
+    sequence of lag frames t, t - lag, ...), in which that sequence's chain had it in a
+    state, makes no entry but a return (``returns[j] += 1``; ``returned_frames[j]`` += the
+    frames from its last frame in a state on the sequence, g, to t + lag, which no
+    transition counts): its residence goes on, as a residence observed does. Where the
+    sequence's chain never had it in a state in that residence (a stay before the fall
+    shorter than a state with memory's history), it is the chain's entry (the time before
+    it is the chain's to miss, as at any entry delay). Returns nothing; arrays are
+    updated.
     """
     n_frames, n_particles = states.shape
     for t in range(n_frames - lag_frames):
@@ -236,18 +271,21 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
                 while first >= 1 and not np.isnan(vertical[first - 1, p]):   # has none
                     first -= 1                                      # before its history)
                 if vertical[first, p] <= band:
-                    # a return: in a state on a frame of this pair's sequence (t, t - lag,
-                    # ...) before, so that this sequence's chain had it, and not gone
-                    # through the outlet since (where it was last seen before)
-                    g = t
-                    while g >= 0 and (g >= first or states[g, p] < 0):
+                    # a return: in a residence on this pair's sequence of lag frames (t,
+                    # t - lag, ...: entered through the inlet, or inside at its first
+                    # frame, and not gone through the outlet since), in which the
+                    # sequence's chain had it in a state (frame g, its last before)
+                    u = t                         # the sequence's last frame before it
+                    while u >= first:
+                        u -= lag_frames
+                    begun = (_residence_begun(vertical, p, u, lag_frames, band, height)
+                             if u >= 0 else -1)
+                    g = u
+                    while g >= 0 and g >= begun and (g >= first or states[g, p] < 0):
                         g -= lag_frames
-                    before = first - 1
-                    while before >= 0 and np.isnan(vertical[before, p]):
-                        before -= 1
-                    if g >= 0 and before >= 0 and vertical[before, p] < height - band:
-                        returns[j] += 1           # back after a fall or out of view:
-                        returned_frames[j] += first - before     # its residence goes on
+                    if begun >= 0 and g >= begun:
+                        returns[j] += 1           # its residence goes on; no transition
+                        returned_frames[j] += t + lag_frames - g      # counts g .. t + lag
                     else:
                         entries[j] += 1
                 else:
@@ -270,13 +308,13 @@ class FaceCounts:
         Tracks that ended or began elsewhere (out of a camera's view, a gap): not counted
         as transitions, exits or entries (censored).
     returns : ndarray of int64, shape (S,)
-        Returns through the inlet into each state, not among ``entries``: the particle was
-        seen before in the window and did not leave through the outlet then (it fell back
-        out through the inlet, or left the view): its residence goes on.
+        Returns through the inlet into each state, not among ``entries``: the particle
+        comes back within a residence (it fell back out through the inlet, or left the
+        view, after an entry or from the window's start, and did not leave through the
+        outlet since): its residence goes on.
     returned_time : ndarray of float64, shape (S,)
-        The time (s) from where each returning particle was last seen to where it is seen
-        again, summed: the residence time spent below the inlet or out of view, which no
-        transition counts.
+        The residence time (s) around the returns that no transition counts: from a
+        returning particle's last state before its fall to its first after it, summed.
     """
 
     exits: np.ndarray

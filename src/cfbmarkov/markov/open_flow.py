@@ -59,12 +59,13 @@ class OpenFlow:
         or inlet face, left out as censored.
     returned_entries : int
         Returns through the inlet in the fitting window, not among ``entry_counts``:
-        particles seen before in it, which did not leave through the outlet then (they fell
-        back out through the inlet, or left the view) and came back; their residences go
+        particles that came back within a residence (they fell back out through the inlet,
+        or left the view, and did not leave through the outlet since); their residences go
         on (0 in a model file written without the count).
     returned_time : float
-        The time (s) the returns spent out of view, from where each was last seen to where
-        it was seen again, summed: residence time that no transition of the chain counts.
+        The residence time (s) that no transition of the chain counts around the returns:
+        from a returning particle's last state before its fall to its first after it,
+        summed.
 
     Raises
     ------
@@ -307,12 +308,12 @@ class OpenFlow:
                 f"  {returned} returns through the inlet against {entries} entries: particles "
                 "that fell back out through it (or left the view) and came back within the "
                 "fitting window; the chain goes on with their residences across the fall, as "
-                "a residence observed does (docs/definitions.md, Open risers), but has no "
-                f"state below the inlet and leaves out the {self.returned_time / returned:.3g} s "
-                "a return spent out of view on average, "
-                f"{self.returned_time / max(entries, 1):.3g} s a residence: the flow's E(RT) may "
-                "be that much longer than the chain's. Import the riser from farther below "
-                "the inlet, so that the falls stay inside it")
+                "a residence observed does (docs/definitions.md, Open risers), but it has no "
+                "state below the inlet or out of view, and its transitions leave out the time "
+                "from a particle's last state before the fall to its first after it, "
+                f"{self.returned_time / max(entries, 1):.3g} s a residence on average: the "
+                "flow's E(RT) may be that much longer than the chain's. Import the riser from "
+                "farther below the inlet, so that the falls stay inside it")
         for what, censored, counted, face in (
                 ("ended", self.censored_tracks[0], int(self.exit_counts.sum()), "outlet"),
                 ("began", self.censored_tracks[1], int(self.entry_counts.sum()), "inlet")):
