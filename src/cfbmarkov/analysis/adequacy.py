@@ -449,7 +449,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
         lines.append(throughput)
     length = min(b - a for a, b in windows)
     if uncertainty is not None and getattr(uncertainty, "flow_sd", 0) is None:
-        lines.append(flow_term_line(length, rt_mean))
+        lines.append(flow_term_line(length, rt_mean, len(runs)))
     tail = _tail_share(model, length)
     if math.isfinite(tail) and tail > TAIL_LIMIT:
         lines.append(f"{100 * tail:.0f} % of the model's residences last longer than the "
@@ -548,7 +548,7 @@ def _any_absences(runs) -> bool:
     return False
 
 
-def flow_term_line(length: float, rt_mean: float | None = None) -> str:
+def flow_term_line(length: float, rt_mean: float | None = None, runs: int = 1) -> str:
     """The verdict's line on an interval formed without the flow's variability between
     windows (:func:`cfbmarkov.analysis.bootstrap.flow_variability`): a fitting window of
     ``length`` s shorter than two blocks of three mean residence times, or, where it is
@@ -561,6 +561,9 @@ def flow_term_line(length: float, rt_mean: float | None = None) -> str:
         The fitting window's length (s; the shortest of a pooled fit's).
     rt_mean : float, optional
         The model's E(RT) (s), which tells the two reasons apart.
+    runs : int, optional
+        The runs of a pooled fit, whose blocks are compared across its runs: each run's
+        window needs one block, not two.
 
     Returns
     -------
@@ -568,7 +571,8 @@ def flow_term_line(length: float, rt_mean: float | None = None) -> str:
     """
     from cfbmarkov.analysis.bootstrap import FLOW_BLOCK_RESIDENCES
 
-    if rt_mean is not None and length >= 2 * FLOW_BLOCK_RESIDENCES * rt_mean:
+    blocks = 1 if runs > 1 else 2              # of each window, for two blocks in all
+    if rt_mean is not None and length >= blocks * FLOW_BLOCK_RESIDENCES * rt_mean:
         why = (f"fewer than two blocks of the {length:g} s fitting window hold two "
                "residences seen whole: the tracks are too short or too few to see residences "
                "end to end")
@@ -577,17 +581,25 @@ def flow_term_line(length: float, rt_mean: float | None = None) -> str:
         from cfbmarkov.markov.uncertainty import outward_bounds
 
         # rounded up: a window of the printed length holds at least what is asked
-        need = outward_bounds(0.0, 2 * FLOW_BLOCK_RESIDENCES * rt_mean, digits=3)[1]
-        why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "
-               f"residence times, {need} s here")
-        advice = (f"fit on a window of {need} s or more, or pool several runs (fit A.h5 "
-                  "B.h5 ...), for the interval to hold it" + _SAMPLE_LENGTH_ASIDE)
+        need = outward_bounds(0.0, blocks * FLOW_BLOCK_RESIDENCES * rt_mean, digits=3)[1]
+        if runs > 1:       # pooled: a block of each run's window, compared across the runs
+            why = (f"each of the {runs} runs' {length:g} s fitting windows is shorter than a "
+                   f"block of three mean residence times, {need} s here, and a pooled fit "
+                   "compares the blocks of all its runs")
+            advice = (f"fit on windows of {need} s or more for the interval to hold it"
+                      + _SAMPLE_LENGTH_ASIDE)
+        else:
+            why = (f"the {length:g} s fitting window is shorter than two blocks of three "
+                   f"mean residence times, {need} s here")
+            advice = (f"fit on a window of {need} s or more, or pool several runs (fit A.h5 "
+                      "B.h5 ...), for the interval to hold it" + _SAMPLE_LENGTH_ASIDE)
     else:
         why = (f"the {length:g} s fitting window is shorter than two blocks of three mean "
                "residence times")
         advice = _ADVICE
+    held = "these windows'" if runs > 1 else "this window's"
     return (f"the model's interval leaves out the flow's variability between windows ({why})"
-            f": it holds this window's sampling alone, and the flow's long run may lie "
+            f": it holds {held} sampling alone, and the flow's long run may lie "
             f"outside it; {advice}")
 
 

@@ -435,7 +435,7 @@ def cmd_rtd(args) -> int:
 
         windows = model.run_windows or ((model.window,) if model.window else ())
         if windows:
-            line = flow_term_line(min(b - a for a, b in windows), rtd.mean)
+            line = flow_term_line(min(b - a for a, b in windows), rtd.mean, len(windows))
             if not any(line.split(":")[0] in w for w in warnings):
                 warnings.append(line)
     if args.json:
