@@ -135,7 +135,8 @@ def test_cli_compare_kinetics_prints_and_writes_the_block(prediction, tmp_path, 
     assert bed == (f"  X in the bed: mean over the window, reference "
                    f"{block['reference']['bed_mean']:.4g}, model {block['model']['bed_mean']:.4g}; "
                    f"segregated flow {block['segregated_flow']['bed_mean']:.4g} (its steady "
-                   "state over the age distribution)")
+                   "state over the age distribution, where the window's means carry its start "
+                   "from the first frame's values)")
     assert set(block) >= {"reference", "model", "segregated_flow"}
     assert block["reference"]["exit_mean"] > 0
     assert "kinetics-X.png" in summary["figures"]

@@ -371,7 +371,8 @@ def _print_kinetics(block: dict, level: float = 0.9) -> None:
         print(f"  {name} in the bed: mean over the window, reference "
               f"{value(ref['bed_mean'])}, model {value(mod['bed_mean'])}"
               + (f"; segregated flow {value(seg['bed_mean'])} (its steady state over the "
-                 "age distribution)" if seg else ""))
+                 "age distribution, where the window's means carry its start from the first "
+                 "frame's values)" if seg else ""))
 
 
 def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float,
