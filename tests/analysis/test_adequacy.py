@@ -820,6 +820,11 @@ def test_the_chain_on_its_fitting_window_tells_a_memoryless_fit_from_a_missed_me
     # the verdict's own lines and its judgement are the sample's: unchanged by the miss
     hidden_model = MarkovModel.load(tmp_path / "hidden-m.h5")
     assert not any("does not carry its own" in w for w in hidden_model.adequacy.warnings)
+    # info's summary, where the model's lines stand inline, counts them beside a verdict
+    # of "no warning" (a new user read "no warning" on a model 47 % too narrow)
+    assert hidden_model.adequacy.adequate
+    assert main(["info", str(tmp_path / "hidden-m.h5")]) == 0
+    assert "warning about the model (the lines above)" in capsys.readouterr().out
 
 
 def test_the_chains_miss_of_its_window_is_warned_beyond_the_limit():

@@ -624,10 +624,12 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
         lines.append(f"    {on_window}")
     passed = None if model.adequacy is None else model.adequacy.passed_line()
     if passed:
-        others = 0 if warnings else len(model_warnings(model))
-        if others:          # printed on stderr: said here too, for a log of stdout alone
+        others = len(model_warnings(model))
+        if others:          # said beside "no warning", which is the sample's verdict alone
+            where = ("the lines above" if warnings else "printed as `warning:` lines; "
+                     "`cfbmarkov info MODEL` repeats them")
             passed += (f"; {others} warning{'' if others == 1 else 's'} about the model "
-                       "(printed as `warning:` lines; `cfbmarkov info MODEL` repeats them)")
+                       f"({where})")
         lines.append(f"  {passed}")
     elif model.adequacy is not None and not warnings:
         # the warnings went to stderr: the summary still says there are some, so that a
