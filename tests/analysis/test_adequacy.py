@@ -717,8 +717,8 @@ def test_the_flow_terms_absence_is_put_down_to_its_cause():
     # a pooled fit compares the blocks of all its runs: a block of each window will do (a
     # review was told to pool the runs it had pooled, and a length twice the one needed)
     pooled = flow_term_line(4.0, 2.387, runs=3)
-    assert ("each of the 3 runs' 4 s fitting windows is shorter than a block of three mean "
-            "residence times, 7.17 s here") in pooled
+    assert ("fewer than two of the 3 runs' fitting windows (the shortest 4 s) hold a block "
+            "of three mean residence times, 7.17 s here") in pooled
     assert "fit on windows of 7.17 s or more" in pooled and "pool several" not in pooled
     assert "these windows' sampling alone" in pooled
     sparse = flow_term_line(30.0, 2.4)

@@ -232,3 +232,31 @@ def test_history_counts_every_exit_in_the_window_with_its_whole_path(tmp_path):
     assert abs(back.exit_mean - exact) < 4 * back.exit_se + 0.01 * exact
     with pytest.raises(Exception, match="history"):
         reference_kinetics(path, model, sk, window, history=-1.0)
+
+
+def test_a_return_with_a_memory_advances_no_lag_before_its_first_state(tmp_path):
+    """A direction memory's first state comes a lag after a particle is seen: at an entry
+    that lag is integrated with the first state's law (the chain's entry delay), but back
+    in view after a fall the chain counts no transition until its first state, as over the
+    fall, and the paths now hold the value there too (they had reacted a lag longer)."""
+    from cfbmarkov.markov.spaces import state_space_from_name
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    rows = [0, 0, 1, -1, -1, 0, 1, 2, 3]
+    frames = np.full((14, 1), -1)
+    frames[2:2 + len(rows), 0] = rows
+    present = frames >= 0
+    y = np.where(present, (frames + 0.5) * 0.95 / 4, np.nan)
+    path = write_trajectories(tmp_path / "open.h5", np.round(0.1 * np.arange(14), 10),
+                              np.stack([np.where(present, 0.02, np.nan), y], -1), width=0.09,
+                              height=0.95, present=present, boundary="open")
+    space = state_space_from_name("cells-direction", 1, 4, 0.09, 0.95)
+    discrete = discretize(path, space, 0.1, (0.1, 1.3), keep_positions=True)
+    k = 2.0
+    a = np.full(space.n_states, math.exp(-k * 0.1))
+    got = integrate_along_paths(discrete, a, 1.0 - a, 0.0, reset=True)
+    assert got.count == 1
+    # lags advanced: the entry's first (no state yet), two to the fall, none over the fall
+    # nor back before the first state, two rising and the exit's: 5 of the 0.9 s observed
+    np.testing.assert_allclose(got.residence_times, [0.9])
+    np.testing.assert_allclose(got.exit_values, [1.0 - math.exp(-k * 0.5)], atol=1e-12)

@@ -346,3 +346,26 @@ def test_a_copy_reordered_renumbered_or_in_part_is_one_run(runs, tmp_path, capsy
         last = len(times) - 1
         assert not shared_positions(a, last, b, last)
         assert shared_positions(a, last, c, last)
+
+
+def test_members_started_from_one_state_are_independent_runs(tmp_path):
+    """Two random walks from one first frame (an ensemble's members) share that frame and
+    nothing later: pooled, whatever their windows (the check of frames of one index had
+    refused them as one run under two clocks, at 0 s and 0 s)."""
+    from cfbmarkov.markov.pooling import check_runs_distinct
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    rng = np.random.default_rng(0)
+    start = np.stack([rng.uniform(0, 0.09, 50), rng.uniform(0, 0.95, 50)], -1)
+    paths = []
+    for member in range(2):
+        steps = np.random.default_rng(100 + member).normal(0, 1e-3, (199, 50, 2))
+        pos = np.concatenate([start[None], start[None] + np.cumsum(steps, axis=0)])
+        pos[..., 0] = np.clip(pos[..., 0], 0, 0.09)
+        pos[..., 1] = np.mod(pos[..., 1], 0.95)
+        paths.append(write_trajectories(tmp_path / f"m{member}.h5", np.arange(200) * 0.01,
+                                        pos, width=0.09, height=0.95))
+    with contextlib.ExitStack() as stack:
+        runs = [stack.enter_context(Trajectories(p)) for p in paths]
+        for windows in ([(0.5, 1.99)] * 2, [(0.0, 1.99)] * 2):
+            check_runs_distinct(runs, windows)          # no refusal

@@ -344,27 +344,36 @@ def test_wrong_option_values_through_the_api(tmp_path):
 
 def test_times_since_an_epoch_that_a_double_cannot_tell_apart_are_named(tmp_path, capsys):
     """Rows 1e-7 s apart at 1.7e9 s (seconds since 1970) read as one time in a double (held
-    to 2.4e-7 s): the refusal said "2 rows at this time, but the file has no id column" or
-    merged them as one sample; it now names the times' size and the fix, in each path. The
-    same times with the first subtracted import; epoch times 1 ms apart import as they are."""
-    def write(name, start, step, with_id):
+    to 2.4e-7 s): the refusal said only "2 rows at this time, but the file has no id
+    column"; it now names the times' size and the fix beside that advice, and the rows a
+    resampling merges carry the same note. The same times with the first subtracted
+    import; epoch times 1 ms apart import as they are."""
+    def write(name, start, step, with_id, repeat=None):
         head = "t,id,x,y\n" if with_id else "t,x,y\n"
-        body = "".join(f"{start + k * step:.7f}," + ("1," if with_id else "")
-                       + f"0.02,{0.1 + 0.004 * k:.4f}\n" for k in range(60))
+        rows = [f"{start + k * step:.7f}," + ("1," if with_id else "")
+                + f"0.02,{0.1 + 0.004 * k:.4f}\n" for k in range(60)]
+        if repeat is not None:
+            rows.insert(repeat, rows[repeat])
         path = tmp_path / name
-        path.write_text(head + body)
+        path.write_text(head + "".join(rows))
         return path
 
     fix = ("where a double holds them only to 2.4e-07 s, so rows stamped closer than that read "
            "as one time: give the times from the run's start")
-    for path, extra in ((write("one.csv", 1.7e9, 1e-7, False), []),
-                        (write("ids.csv", 1.7e9, 1e-7, True), []),
-                        (write("one.csv", 1.7e9, 1e-7, False), ["--resample", "0.001"])):
-        code = cli_main(["import", str(path), "--width", "0.09", "--height", "0.95", *extra,
+    for path, said in ((write("one.csv", 1.7e9, 1e-7, False), "or add one; or the times lie"),
+                       (write("ids.csv", 1.7e9, 1e-7, True), "appears more than once")):
+        code = cli_main(["import", str(path), "--width", "0.09", "--height", "0.95",
                          "-o", str(tmp_path / "x.h5")])
         err = capsys.readouterr().err
-        assert code == 2 and err.count("\n") == 1 and fix in err, err
+        assert code == 2 and err.count("\n") == 1 and fix in err and said in err, err
         assert not (tmp_path / "x.h5").exists()
+    # resampled: a row given twice is merged, and the note names the times' size
+    twice = write("twice.csv", 1.7e9, 1e-3, True, repeat=10)
+    assert cli_main(["import", str(twice), "--width", "0.09", "--height", "0.95",
+                     "--resample", "0.001", "-o", str(tmp_path / "t.h5")]) == 0
+    with Trajectories(tmp_path / "t.h5") as t:
+        [note] = [n for n in t.parameters["import_notes"] if "merged" in n]
+    assert note.startswith("1 row at the same time as another row") and fix in note
     for path in (write("from0.csv", 0.0, 1e-7, True), write("ms.csv", 1.7e9, 1e-3, True)):
         assert cli_main(["import", str(path), "--width", "0.09", "--height", "0.95", "-o",
                          str(tmp_path / f"{path.stem}.h5")]) == 0

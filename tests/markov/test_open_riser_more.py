@@ -491,6 +491,22 @@ def test_returns_through_the_inlet_are_no_entries_and_their_time_out_of_view_is_
     begun = fit_model(mid, CellGrid(1, 4, 0.09, 0.95), 0.1, window=(0.0, 4.0),
                       estimator="mle").open_flow
     assert (int(begun.entry_counts.sum()), begun.returned_entries) == (25, 0)
+    # so on every lag sequence: a particle first seen mid-riser on a frame between the
+    # window's first frame and a sequence's is not inside at the window's start there
+    late = _rows_file(tmp_path / "late.h5", [2, 1, 0, -1, -1, 0, 1, 2, 3],
+                      [1] * 10 + [3] * 10, frames=30)
+    two = fit_model(late, CellGrid(1, 4, 0.09, 0.95), 0.2, window=(0.0, 2.9),
+                    estimator="mle").open_flow
+    assert (int(two.entry_counts.sum()), two.returned_entries) == (40, 0)
+    # a residence's start is its first entry, not a return after a stay too short for a
+    # memory's state: the second fall's return is a return too (it was counted an entry)
+    twice = _rows_file(tmp_path / "twice.h5", [0, 1, 2, 1, 0, -1, -1, 0, -1, -1, 0, 1, 2, 3],
+                       range(2, 22), frames=45)
+    from cfbmarkov.markov.spaces import state_space_from_name
+
+    memory = fit_model(twice, state_space_from_name("cells-direction", 1, 4, 0.09, 0.95), 0.1,
+                       window=(0.1, 4.4), estimator="mle").open_flow
+    assert (int(memory.entry_counts.sum()), memory.returned_entries) == (20, 20)
     stay = _rows_file(tmp_path / "stay.h5", [0, 1, 0, 0, 1, 2, 3], range(1, 26))
     kept = fit_model(stay, CellGrid(1, 4, 0.09, 0.95), 0.1, window=(0.0, 4.0),
                      estimator="mle").open_flow

@@ -126,8 +126,11 @@ def test_the_sentence_names_where_the_chain_loses():
     # narrow sampling interval (the second's 0.515 lies outside 0.49-0.51)
     assert "lies inside the chain's interval" in text and "in 2 of 2 comparisons" in text
     # "consistent" says no more than the intervals' width: given (+-0.03 of 0.5025, 0.515)
-    assert ("which is no closer than those intervals' half-widths, 5.8-6 % of the chain's "
-            "exit mean") in text
+    assert ("which is no closer than those intervals' half-widths, 5.8 to 6 % of the "
+            "chain's exit mean") in text
+    # written out, not 1.2e+02, beside the other end (a slow reaction's wide interval)
+    wide = verdict_sentence("X", [row("a", 0.5, -4.0, 0.6), row("b", 0.5, -4.0, 0.01)])
+    assert "half-widths, 2 to 120 % of the chain's exit mean" in wide
     text = verdict_sentence("X", [row("a", 3.0, 1.0, 0.006), row("b", 6.0, 1.0, 0.003),
                                   row("c", 0.5, 1.0)])
     assert "in 1 of 3 comparisons: there the chain is consistent" in text

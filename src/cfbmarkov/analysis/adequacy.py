@@ -583,9 +583,9 @@ def flow_term_line(length: float, rt_mean: float | None = None, runs: int = 1) -
         # rounded up: a window of the printed length holds at least what is asked
         need = outward_bounds(0.0, blocks * FLOW_BLOCK_RESIDENCES * rt_mean, digits=3)[1]
         if runs > 1:       # pooled: a block of each run's window, compared across the runs
-            why = (f"each of the {runs} runs' {length:g} s fitting windows is shorter than a "
-                   f"block of three mean residence times, {need} s here, and a pooled fit "
-                   "compares the blocks of all its runs")
+            why = (f"fewer than two of the {runs} runs' fitting windows (the shortest "
+                   f"{length:g} s) hold a block of three mean residence times, {need} s here, "
+                   "and a pooled fit compares the blocks of all its runs")
             advice = (f"fit on windows of {need} s or more for the interval to hold it"
                       + _SAMPLE_LENGTH_ASIDE)
         else:

@@ -132,6 +132,7 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
             value[p] = stored[0, p]
     entered = np.full(n_particles, np.nan)
     last_height = np.full(n_particles, np.nan)
+    back = np.zeros(n_particles, np.bool_)   # back in view within a residence, no state yet
     for p in range(n_particles):
         if present[0, p]:
             last_height[p] = last_vertical[0, p]
@@ -149,16 +150,23 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
             # is held from its last frame, as over the frames it is out of view
             if before and (now or last_height[p] >= height - band):
                 s = states[k - 1, p]
-                if s < 0 and now:
+                if s >= 0:
+                    back[p] = False
+                elif now and not back[p]:
                     # first seen without the history a state with memory needs: its first
                     # lag with its first state's law, as the chain's exact answer takes it
+                    # (not back after a fall or out of view: the chain counts no transition
+                    # until its first state there, as over the time it was out of view)
                     s = states[k, p]
                 if s >= 0:
                     value[p] = a[s] * value[p] + b[s]
             if now and not before and vertical[k, p] <= band and np.isnan(entered[p]):
                 entered[p] = t
+                back[p] = False
                 if reset:
                     value[p] = v0
+            elif now and not before and not np.isnan(entered[p]):
+                back[p] = True
             elif before and not now and last_height[p] >= height - band:
                 exit_value[n_out] = value[p]
                 exit_time[n_out] = t

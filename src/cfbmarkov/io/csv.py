@@ -455,7 +455,7 @@ def _unused_columns(layout: CsvLayout) -> list[str]:
     return [name for name in layout.ignored if not name.endswith("(depth axis)")]
 
 
-def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
+def read_notes(layout: CsvLayout, merged: int = 0, time_note: str = "") -> dict:
     """What the import did beyond reading rows, for the provenance and the import's summary
     (``import_notes``, shown by ``cfbmarkov import`` and ``cfbmarkov info``).
 
@@ -465,6 +465,8 @@ def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
         The file's layout, after every row was read (its ``noise_rows`` counted).
     merged : int, optional
         Rows merged with another row of the same particle at the same time (resampling).
+    time_note : str, optional
+        Why rows may share a time (:func:`time_resolution_note`), added to the merge's note.
 
     Returns
     -------
@@ -492,7 +494,7 @@ def read_notes(layout: CsvLayout, merged: int = 0) -> dict:
                      f"{layout.noise_id} or empty (noise, or no track) dropped")
     if merged:
         notes.append(f"{plural(merged, 'row')} at the same time as another row of their "
-                     "particle merged (positions averaged) before resampling")
+                     f"particle merged (positions averaged) before resampling{time_note}")
     if layout.outside_rows:
         share = 100 * layout.outside_rows / max(layout.placed_rows, 1)
         notes.append(f"{layout.outside_rows} of {layout.placed_rows} rows ({share:.3g} %) lie "
@@ -547,11 +549,11 @@ def _append_frame(writer: TrajectoryWriter, columns: FrameColumns, rows: np.ndar
         unused = _unused_columns(layout)
         named = (f" (not used: {', '.join(repr(n) for n in unused)})" if unused else "")
         coarse = time_resolution_note(rows[:, layout.index("t")])
-        if coarse:
-            raise InputError(f"{where}: {rows.shape[0]} rows at this time{coarse}")
         raise InputError(f"{where}: {rows.shape[0]} rows at this time, but the file has no id "
                          f"column{named}, so it is read as one tracer; name the column that "
-                         "numbers the particles id (or tracer, label, track), or add one")
+                         "numbers the particles id (or tracer, label, track), or add one"
+                         + (f"{coarse.replace('; the times', '; or the times', 1)}"
+                            if coarse else ""))
     else:
         ids = np.zeros(1, dtype=np.int64)
     positions, inside = _riser_positions(rows, layout, riser, ids, label)
@@ -679,10 +681,7 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
         rows[keep, layout.index("t")], ids[keep], relative[keep],
         height=riser.height if periodic else None, vertical=1,
         spread_limit=SAME_TIME_SPREAD * riser.width, label=label)
-    coarse = time_resolution_note(times)
-    if merged and coarse:        # distinct samples read as one time: no mean of them
-        raise InputError(f"{label}: {plural(merged, 'row')} share a time with another row "
-                         f"of their particle{coarse}")
+    coarse = time_resolution_note(times) if merged else ""   # why rows may share a time
     try:
         tracks = resample_tracks(times, ids, relative,
                                  interval=interval, max_gap=max_gap,
@@ -708,4 +707,4 @@ def _write_resampled(output: Path, path: Path, layout: CsvLayout, riser: RiserFr
                        label=label, frame_interval=interval, **riser.writer_options()) as writer:
         writer.append_frames(tracks.times, positions, None, tracks.laps, tracks.present)
         _check_some_present(writer, riser, label)
-        writer.update_parameters(read_notes(layout, merged))
+        writer.update_parameters(read_notes(layout, merged, coarse))

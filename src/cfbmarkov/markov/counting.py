@@ -192,13 +192,15 @@ def _sparse_count_kernel(states, vertical, lag_frames, height, n_states, with_fr
 @nb.njit(cache=True, nogil=True)
 def _residence_begun(vertical, p, t, lag_frames, band, height):
     """The frame where particle ``p``'s residence in progress at frame ``t`` began (``t``
-    before the appearance judged, the particle absent there), read on
-    the frames t, t - lag, ... as the residence times read them
-    (:func:`cfbmarkov.observed.residence.residence_times`): walking back, an exit through
-    the outlet (last seen within ``band`` of H) ends the search with -1 (no residence), an
-    entry through the inlet (first seen within ``band`` of 0) gives the frame first seen,
-    and a particle present at the sequence's first frame is in one begun before it (that
-    frame); appearances and disappearances elsewhere change nothing. -1 where none."""
+    before the appearance judged, the particle absent there), read on the frames t,
+    t - lag, ... as the residence times read them
+    (:func:`cfbmarkov.observed.residence.residence_times`): the first entry through the
+    inlet (first seen within ``band`` of 0) after the last exit through the outlet (last
+    seen within ``band`` of H) before ``t``, or 0 for a particle present at the window's
+    first frame (a residence begun before it) that has not left through the outlet since;
+    appearances and disappearances elsewhere change nothing. -1 where none (Numba
+    kernel)."""
+    begun = -1
     u = t
     while u >= lag_frames:
         a = u - lag_frames
@@ -209,16 +211,25 @@ def _residence_begun(vertical, p, t, lag_frames, band, height):
                 if not np.isnan(vertical[f, p]):
                     last = f
             if vertical[last, p] >= height - band:
-                return -1                                  # left through the outlet
+                return begun                               # left through the outlet
         elif now and not was:
             first = u
             for f in range(u - 1, a, -1):
                 if not np.isnan(vertical[f, p]):
                     first = f
             if vertical[first, p] <= band:
-                return first                               # entered through the inlet
+                begun = first                              # entered through the inlet
         u = a
-    return u if not np.isnan(vertical[u, p]) else -1
+    # the sequence's first frame u < lag: present there, the particle was seen first at
+    # the window's first frame (inside at its start) or came into view after it
+    if np.isnan(vertical[u, p]):
+        return begun
+    first = u
+    while first >= 1 and not np.isnan(vertical[first - 1, p]):
+        first -= 1
+    if first == 0:
+        return 0                                           # inside at the window's start
+    return first if vertical[first, p] <= band else begun
 
 
 @nb.njit(cache=True)

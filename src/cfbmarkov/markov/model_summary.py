@@ -322,8 +322,7 @@ def hold_up_warning(model: "MarkovModel") -> str | None:
                           if flow.returned_entries else "")
             + ", or a window of unsteady flow, are the usual causes: import the riser "
             "from its inlet to its outlet, use taller cells or a shorter lag where tracks "
-            "end or begin a row short of a face (the censoring lines above say how many), "
-            "or fit on a window of steady flow")
+            "end or begin a row short of a face, or fit on a window of steady flow")
 
 
 def left_out_classes(model: "MarkovModel") -> list[np.ndarray]:

@@ -219,11 +219,12 @@ def same_window_frames(a, window_a: tuple[float, float], b,
 
 
 def same_index_frames(a, b) -> tuple[float, float] | None:
-    """The times of two files' frames of one index (the first, the middle and the last
-    both hold) where both hold the same particles at the same positions: a copy exported
-    under another clock, whatever windows are taken of it (:func:`same_window_frames`
-    compares the frames as far into each window, which windows offset from each other's
-    pass by).
+    """The times of two files' frames of one index (the middle and the last both hold)
+    where both hold the same particles at the same positions under different times: a
+    copy exported under another clock, whatever windows are taken of it
+    (:func:`same_window_frames` compares the frames as far into each window, which windows
+    offset from each other's pass by). The first frames are not compared: independent runs
+    started from one state (an ensemble's members) share them.
 
     Parameters
     ----------
@@ -236,8 +237,8 @@ def same_index_frames(a, b) -> tuple[float, float] | None:
         The two frames' times (s), else None.
     """
     last = min(a.n_frames, b.n_frames) - 1
-    for i in sorted({0, last // 2, last}) if last >= 0 else ():
-        if shared_positions(a, i, b, i):
+    for i in sorted({last // 2, last} - {0}) if last >= 1 else ():
+        if a.times[i] != b.times[i] and shared_positions(a, i, b, i):
             return float(a.times[i]), float(b.times[i])
     return None
 

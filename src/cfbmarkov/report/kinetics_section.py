@@ -35,6 +35,8 @@ import shutil
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
+
 from cfbmarkov._atomic import atomic_path
 from cfbmarkov.report.document import Bullets, FigureBlock, Heading, Para, Table, finite_or_none
 from cfbmarkov.report.run_folder import input_error
@@ -228,9 +230,13 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
 
 
 def _range_text(values: list[float]) -> str:
-    """``a-b`` (or ``a`` where they round alike) to two significant figures."""
-    lo, hi = f"{min(values):.2g}", f"{max(values):.2g}"
-    return lo if lo == hi else f"{lo}-{hi}"
+    """``a-b`` (or ``a`` where they round alike) to two significant figures, written out
+    (120, not 1.2e+02, which a dash beside it would garble)."""
+    def text(value: float) -> str:
+        return np.format_float_positional(float(f"{value:.2g}"), trim="-")
+
+    lo, hi = text(min(values)), text(max(values))
+    return lo if lo == hi else f"{lo} to {hi}"
 
 
 def _table(rows: list[KineticsRow]) -> Table:
