@@ -247,6 +247,17 @@ def test_a_grid_of_wall_cells_only_is_warned_of():
     assert "its 2 columns put every cell at a side wall" in k.grid_notes(CellGrid(2, 8))[0]
     assert k.grid_notes(CellGrid(4, 16, 0.09, 0.95, depth_columns=3, depth=0.03)) == ()
     assert flat.grid_notes(two) == ()
+    # one depth column spans front to back: every cell at those walls, as the wall distance
+    # measures it (the two had disagreed: a 6x1x38 grid's core cells were no wall cells
+    # but 0.015 m from a wall)
+    from cfbmarkov.analysis.cell_fields import wall_distance
+    from cfbmarkov.kinetics import wall_cells
+
+    one = CellGrid(6, 38, 0.09, 0.95, depth_columns=1, depth=0.03)
+    assert wall_cells(one).all() and (wall_distance(one) <= 0.015 + 1e-15).all()
+    assert "its 1 depth column puts every cell at the front or back wall" in k.grid_notes(one)[0]
+    plane = CellGrid(6, 38, 0.09, 0.95)
+    assert wall_cells(plane).sum() == 2 * 38 and wall_distance(plane).max() > 0.03
 
 
 def _draw(p, n, seed):

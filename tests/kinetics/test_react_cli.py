@@ -283,7 +283,8 @@ def test_react_json_and_monte_carlo(fitted, tmp_path, capsys):
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "rates.csv"\n',
      "col,row,depth,rate\n" + "".join(f"{c},{r},{int((c, r) == (1, 2))},1\n"
                                       for r in range(6) for c in range(3)),
-     "line 9 gives depth 1, but the 2D grid of 3x6 has the one depth 0; give col,row,VALUE"),
+     "line 9 gives depth 1, but the grid 3x6 has the one depth 0: for values that differ in "
+     "depth fit the model on COLUMNSxDEPTHxROWS cells of a 3D run; else give col,row,VALUE"),
     # a table that is not there: where its path is read from
     ('[[property]]\nname = "X"\nlaw = "first-order"\nrate_by_cell = "missing.csv"\n', None,
      "a table's path is relative to the kinetics file's folder"),

@@ -169,7 +169,7 @@ def test_old_2d_model_files_load_unchanged():
 
 
 # -- the verbs on a 3D periodic run ----------------------------------------------------------
-def test_fit_rtd_maps_predict_compare_vtk_on_3d_run(tmp_path, capsys, runs):
+def test_fit_rtd_maps_predict_compare_vtk_on_3d_run(tmp_path, capsys, runs, monkeypatch):
     _, run3 = runs
     model = tmp_path / "m3.h5"
     code, out, _ = run_cli(capsys, "fit", run3, "--cells", "4x2x16", "--lag", "0.05",
@@ -195,11 +195,19 @@ def test_fit_rtd_maps_predict_compare_vtk_on_3d_run(tmp_path, capsys, runs):
     # every later position lies in the 3D cell of its Monte Carlo state (same seed, same run)
     _, states, _ = MarkovModel.load(model).predict(run3, start=1.0, duration=2.0, seed=4)
     np.testing.assert_array_equal(grid.discretize(later), states[1:])
+    import cfbmarkov.report.figures as figures
+
+    titles = []
+    drawn = figures.plot_probability_maps
+    monkeypatch.setattr(figures, "plot_probability_maps",
+                        lambda *a, **k: (titles.append(k.get("title")), drawn(*a, **k))[1])
     code, out, err = run_cli(capsys, "compare", run3, pred, "--window", "1:3", "-o",
                              tmp_path / "cmp")
     assert code == 0, err
     assert (tmp_path / "cmp" / "summary.json").exists()
     assert (tmp_path / "cmp" / "probability_maps.png").exists()
+    # the maps are the depth's sums, and the title says so, as `maps` does
+    assert len(titles) == 1 and "summed over the depth" in titles[0]
     code, out, err = run_cli(capsys, "export-vtk", pred, "-o", tmp_path / "vtk", "--quiet",
                              "--every", "20")
     assert code == 0, err

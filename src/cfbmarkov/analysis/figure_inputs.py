@@ -88,11 +88,14 @@ class ModelMaps:
     times : list of float
         Times of the batch-injection maps, s (:func:`map_times`).
     maps : numpy.ndarray, shape (len(times), rows, columns)
-        Probability per cell of a batch fed evenly over the inlet at t = 0 (Eq. 8).
+        Probability per cell of a batch fed evenly over the inlet at t = 0 (Eq. 8); on a
+        grid with several depth columns summed over the depth (``depth_columns``).
     states : str
         The state space's description, e.g. ``cells 6x38 (228 states)``.
     row_of_state : numpy.ndarray of int, shape (S,)
         The riser row (0 = bottom) of each state's cell.
+    depth_columns : int
+        The grid's depth columns, which ``maps`` sums over (1 on a 2D grid).
     """
 
     transition_matrix: np.ndarray
@@ -103,6 +106,7 @@ class ModelMaps:
     maps: np.ndarray
     states: str = ""
     row_of_state: np.ndarray | None = None
+    depth_columns: int = 1
 
 
 def model_maps(pred: Trajectories, reference_mean: float, warnings: list[str]
@@ -145,7 +149,8 @@ def model_maps(pred: Trajectories, reference_mean: float, warnings: list[str]
         warnings.append(f"model figures skipped: the model of {pred.path} cannot be used "
                         f"({type(exc).__name__}: {exc})")
         return None
-    return ModelMaps(P, columns, rows, lag, times, maps, states, row_of_state)
+    return ModelMaps(P, columns, rows, lag, times, maps, states, row_of_state,
+                     int(space.depth_columns))
 
 
 __all__ = ["ModelMaps", "SNAPSHOT_OFFSETS", "map_times", "model_maps", "snapshot_frames"]

@@ -222,9 +222,10 @@ class ByCell(CellParameter):
             i = int(np.flatnonzero(depth != 0)[0])
             line = (f"line {int(self.lines[i])}" if self.lines is not None
                     else f"data row {i + 1}")
-            raise InputError(f"{where}: {line} gives depth {depth[i]}, but the 2D grid of "
-                             f"{space.grid_text()} has the one depth 0; give col,row,VALUE "
-                             "(or depth 0 on every row)")
+            raise InputError(f"{where}: {line} gives depth {depth[i]}, but the grid "
+                             f"{space.grid_text()} has the one depth 0: for values that "
+                             "differ in depth fit the model on COLUMNSxDEPTHxROWS cells of a "
+                             "3D run; else give col,row,VALUE (or depth 0 on every row)")
         if t.shape[1] == 3 and d > 1:
             raise InputError(f"{where}: the grid {space.grid_text()} has {d} depth columns; "
                              "give col,row,depth,VALUE")
@@ -310,12 +311,14 @@ class FromField(CellParameter):
 
 def wall_cells(space) -> np.ndarray:
     """Whether each cell of ``space``'s grid touches a side wall (its column is the first or
-    the last across, or in the depth of a 3D grid), bool [C]."""
+    the last across, or, on a grid with a depth, the first or last in depth: on one depth
+    column every cell touches the front and back walls, as
+    :func:`cfbmarkov.analysis.cell_fields.wall_distance` measures it), bool [C]."""
     c = np.arange(space.n_cells)
     m, d = space.columns, space.depth_columns
     col = c % m
     depth = (c // m) % d
     wall = (col == 0) | (col == m - 1)
-    if d > 1:
+    if getattr(space, "depth", None) is not None:
         wall |= (depth == 0) | (depth == d - 1)
     return wall

@@ -413,7 +413,7 @@ class Kinetics:
 
     def grid_notes(self, state_space) -> tuple[str, ...]:
         """Warnings on a heat exchange's ``wall_temperature`` where every cell of the grid
-        touches a wall (a 3D grid of at most two depth columns: its front and back walls
+        touches a wall (a 3D grid of one or two depth columns: its front and back walls
         take every cell), so that ``temperature`` is used nowhere.
 
         Parameters
@@ -430,9 +430,9 @@ class Kinetics:
         if not wall.all():
             return ()
         depth = int(getattr(state_space, "depth_columns", 1) or 1)
-        why = (f"its {depth} depth columns put every cell at the front or back wall"
-               if depth > 1 else f"its {state_space.columns} columns put every cell at a "
-               "side wall")
+        why = (f"its {depth} depth column{'s put' if depth > 1 else ' puts'} every cell at "
+               "the front or back wall" if getattr(state_space, "depth", None) is not None
+               else f"its {state_space.columns} columns put every cell at a side wall")
         return tuple(
             f"property {prop.name}: every cell of the grid touches a wall ({why}), so "
             "wall_temperature applies everywhere and temperature nowhere; fit on a grid "

@@ -298,7 +298,8 @@ def _draw(comparison: RunComparison, out: Path, warnings: list[str]) -> list[str
                                  out / "probability_maps.png",
                                  title=f"Batch fed over the inlet at t = 0\nmodel: "
                                        f"{maps.states or f'{maps.columns} x {maps.rows} cells'}"
-                                       f", lag {maps.lag:g} s")
+                                       + (", summed over the depth" if maps.depth_columns > 1
+                                          else "") + f", lag {maps.lag:g} s")
         written += ["transition_matrix.png", "probability_maps.png"]
     return written
 
