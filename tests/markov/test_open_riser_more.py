@@ -507,6 +507,22 @@ def test_returns_through_the_inlet_are_no_entries_and_their_time_out_of_view_is_
     memory = fit_model(twice, state_space_from_name("cells-direction", 1, 4, 0.09, 0.95), 0.1,
                        window=(0.1, 4.4), estimator="mle").open_flow
     assert (int(memory.entry_counts.sum()), memory.returned_entries) == (20, 20)
+    # a gap shorter than the lag ends no presence, as the residence times read it: seen at
+    # the window's first frame and two frames later (lag three frames), the particle is
+    # inside at the start on every sequence, and its return through the inlet is one
+    gap = _rows_file(tmp_path / "gap.h5", [1, -1, 1, -1, -1, -1, -1, -1, 0, 1, 2, 3],
+                     [0] * 20, frames=14)
+    lag3 = fit_model(gap, CellGrid(1, 4, 0.09, 0.95), 0.3, window=(0.0, 1.3),
+                     estimator="mle").open_flow
+    assert lag3.returned_entries == 40              # on the sequences from frames 0 and 2
+    # ... and a memory's first state after such a gap is no entry on the sequence that saw
+    # the particle mid-riser at the window's first frame (it was counted one there); the
+    # sequence that first sees it at the inlet, after the gap, enters it
+    mid_gap = _rows_file(tmp_path / "midgap.h5", [1, -1, -1, 0, 0, 1, 2, 3], [3] * 20,
+                         frames=12)
+    seen = fit_model(mid_gap, state_space_from_name("cells-direction", 1, 4, 0.09, 0.95), 0.3,
+                     window=(0.3, 1.1), estimator="mle").open_flow
+    assert int(seen.entry_counts.sum()) == 20 and seen.censored_tracks[1] == 20
     stay = _rows_file(tmp_path / "stay.h5", [0, 1, 0, 0, 1, 2, 3], range(1, 26))
     kept = fit_model(stay, CellGrid(1, 4, 0.09, 0.95), 0.1, window=(0.0, 4.0),
                      estimator="mle").open_flow

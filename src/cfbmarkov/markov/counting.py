@@ -224,9 +224,10 @@ def _residence_begun(vertical, p, t, lag_frames, band, height):
     # the window's first frame (inside at its start) or came into view after it
     if np.isnan(vertical[u, p]):
         return begun
-    first = u
-    while first >= 1 and not np.isnan(vertical[first - 1, p]):
-        first -= 1
+    first = u                       # first seen: the first frame present up to u
+    for f in range(u - 1, -1, -1):
+        if not np.isnan(vertical[f, p]):
+            first = f
     if first == 0:
         return 0                                           # inside at the window's start
     return first if vertical[first, p] <= band else begun
@@ -275,12 +276,16 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
                 else:
                     vanished[i] += 1
             elif i < 0 and j >= 0:
-                first = t + lag_frames    # where it was first seen: the first frame present
-                for f in range(t + lag_frames - 1, t, -1):          # after t, and back
-                    if not np.isnan(vertical[f, p]):                # through its presence
-                        first = f                                   # (a state with memory
-                while first >= 1 and not np.isnan(vertical[first - 1, p]):   # has none
-                    first -= 1                                      # before its history)
+                # where it was first seen: back over the sequence's lag frames it is present
+                # at (a state with memory has none before its history), then the first frame
+                # present within the lag before the earliest, as lag_face_heights reads it
+                g = t + lag_frames
+                while g >= lag_frames and not np.isnan(vertical[g - lag_frames, p]):
+                    g -= lag_frames
+                first = g
+                for f in range(g - 1, max(g - lag_frames, -1), -1):
+                    if not np.isnan(vertical[f, p]):
+                        first = f
                 if vertical[first, p] <= band:
                     # a return: in a residence on this pair's sequence of lag frames (t,
                     # t - lag, ...: entered through the inlet, or inside at its first
