@@ -260,3 +260,29 @@ def test_a_return_with_a_memory_advances_no_lag_before_its_first_state(tmp_path)
     # nor back before the first state, two rising and the exit's: 5 of the 0.9 s observed
     np.testing.assert_allclose(got.residence_times, [0.9])
     np.testing.assert_allclose(got.exit_values, [1.0 - math.exp(-k * 0.5)], atol=1e-12)
+
+
+def test_a_return_the_memory_chain_never_had_a_state_before_is_its_entry(tmp_path):
+    """A one-frame stay before the fall has no direction state: the chain's first state
+    comes after the return, where it enters the particle, carrying that lag with the first
+    state's law; the paths do the same (they had held the value over it: the conversion
+    0.593 against the chain's exact 0.667 on a deterministic path)."""
+    from cfbmarkov.markov.spaces import state_space_from_name
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    rows = [0, -1, -1, 0, 1, 2, 3]
+    frames = np.full((12, 1), -1)
+    frames[2:2 + len(rows), 0] = rows
+    present = frames >= 0
+    y = np.where(present, (frames + 0.5) * 0.95 / 4, np.nan)
+    path = write_trajectories(tmp_path / "open.h5", np.round(0.1 * np.arange(12), 10),
+                              np.stack([np.where(present, 0.02, np.nan), y], -1), width=0.09,
+                              height=0.95, present=present, boundary="open")
+    space = state_space_from_name("cells-direction", 1, 4, 0.09, 0.95)
+    discrete = discretize(path, space, 0.1, (0.1, 1.1), keep_positions=True)
+    k = 2.0
+    a = np.full(space.n_states, math.exp(-k * 0.1))
+    got = integrate_along_paths(discrete, a, 1.0 - a, 0.0, reset=True)
+    assert got.count == 1
+    # the lag back in view before the first state, two rising and the exit's: 4 lags
+    np.testing.assert_allclose(got.exit_values, [1.0 - math.exp(-k * 0.4)], atol=1e-12)

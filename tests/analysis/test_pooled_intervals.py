@@ -369,3 +369,17 @@ def test_members_started_from_one_state_are_independent_runs(tmp_path):
         runs = [stack.enter_context(Trajectories(p)) for p in paths]
         for windows in ([(0.5, 1.99)] * 2, [(0.0, 1.99)] * 2):
             check_runs_distinct(runs, windows)          # no refusal
+
+
+def test_a_pooled_summary_names_the_pooled_rule_for_the_flow_term(runs, tmp_path):
+    """A pooled fit whose 2 s windows hold no block of three mean residence times: its
+    summary's interval line names the pooled rule (a block of each run's window), as its
+    warning does, not the single window's two blocks."""
+    model = tmp_path / "pooled.h5"
+    assert main(["fit", *map(str, runs[:2]), "--cells", "3x8", "--window", "0.5:2.5",
+                 "--resamples", "20", "-q", "-o", str(model)]) == 0
+    fitted = MarkovModel.load(model)
+    assert fitted.uncertainty.flow_sd is None
+    text = fitted.summary(warnings=False)
+    assert ("the flow's variability left out (fewer than two of the runs' windows hold a "
+            "block of three mean residence times)") in text

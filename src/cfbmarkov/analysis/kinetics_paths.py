@@ -133,6 +133,7 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
     entered = np.full(n_particles, np.nan)
     last_height = np.full(n_particles, np.nan)
     back = np.zeros(n_particles, np.bool_)   # back in view within a residence, no state yet
+    had_state = np.zeros(n_particles, np.bool_)  # in a state since its residence began
     for p in range(n_particles):
         if present[0, p]:
             last_height[p] = last_vertical[0, p]
@@ -145,6 +146,8 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
         for p in range(n_particles):
             now = present[k, p]
             before = present[k - 1, p]
+            if before and states[k - 1, p] >= 0:
+                had_state[p] = True                 # the chain has it in this residence
             # the lag in which a particle goes out of view away from the outlet (a fall
             # back through the inlet, out of view) is no transition of the chain: its value
             # is held from its last frame, as over the frames it is out of view
@@ -162,17 +165,22 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
                     value[p] = a[s] * value[p] + b[s]
             if now and not before and vertical[k, p] <= band and np.isnan(entered[p]):
                 entered[p] = t
-                back[p] = False
+                back[p] = had_state[p] = False
                 if reset:
                     value[p] = v0
             elif now and not before and not np.isnan(entered[p]):
-                back[p] = True
+                # back in view: the chain counts no lag before its first state there where
+                # it had the particle in a state in this residence; where it had none (a
+                # stay before the fall too short for a memory's history) the return is the
+                # chain's entry, whose first lag it carries with the first state's law
+                back[p] = had_state[p]
             elif before and not now and last_height[p] >= height - band:
                 exit_value[n_out] = value[p]
                 exit_time[n_out] = t
                 exit_residence[n_out] = t - entered[p] if np.isfinite(entered[p]) else np.nan
                 n_out += 1
                 entered[p] = np.nan
+                had_state[p] = False
             if now:
                 last_height[p] = last_vertical[k, p]
                 if use_stored:

@@ -318,9 +318,7 @@ def hold_up_warning(model: "MarkovModel") -> str | None:
             f"the fitting window's mean of {seen:.4g}: its Monte Carlo (predict, react "
             f"--init) {way} the riser toward that hold-up, and its bed means are of that "
             "riser (the RTD and the exit means are not affected); tracks left out as "
-            "censored" + (", time out of view after falls through the inlet (returns)"
-                          if flow.returned_entries else "")
-            + ", or a window of unsteady flow, are the usual causes: import the riser "
+            "censored, or a window of unsteady flow, are the usual causes: import the riser "
             "from its inlet to its outlet, use taller cells or a shorter lag where tracks "
             "end or begin a row short of a face, or fit on a window of steady flow")
 
@@ -575,8 +573,10 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
             sd_term = ("" if u.flow_sd is None or len(u.flow_sd) < 2 else
                        "; of SD(RT) taken as 0" if u.flow_sd[1] == 0.0 else
                        f"; {100 * u.flow_sd[1]:.3g} % of SD(RT)")
-            flow = ("; the flow's variability left out (the window is shorter than two "
-                    "blocks of three mean residence times)" if u.flow_sd is None else
+            short = ("fewer than two of the runs' windows hold a block of three mean "
+                     "residence times" if pooled_runs > 1 else "the window is shorter than "
+                     "two blocks of three mean residence times")
+            flow = (f"; the flow's variability left out ({short})" if u.flow_sd is None else
                     "; the flow's variability of E(RT) between its blocks taken as 0 (their "
                     "E(RT) differ no more than their own sampling, which the bootstrap "
                     f"holds; an estimate on {u.flow_degrees_of_freedom} degree(s) of "
