@@ -577,3 +577,18 @@ def test_no_entry_names_the_tracks_begun_away_from_the_inlet(tmp_path, capsys):
     assert ("tracks begun 29, ended 29 (after the first frame, anywhere; fit counts those "
             "within one cell of the inlet and the outlet as entries and exits)"
             ) in capsys.readouterr().out
+
+
+def test_a_memory_trapped_by_falls_is_refused_naming_them(tmp_path, capsys):
+    """Every particle's one state before its fall has no transition out (the fall is none):
+    every residence is trapped, and the refusal names the falls and their cure beside a
+    longer window (which cannot help here)."""
+    from cfbmarkov.cli import main
+
+    run = _rows_file(tmp_path / "trap.h5", [0, 0, -1, -1, 0, 1, 2, 3], range(1, 30))
+    assert main(["fit", str(run), "--cells", "1x4", "--lag", "0.1", "--window", "0.1:4",
+                 "--states", "cells-direction", "-o", str(tmp_path / "m.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "every residence is trapped" in err
+    assert ("falls back out through the inlet, out of view), the states they end in keep "
+            "them: import the riser from farther below its inlet") in err

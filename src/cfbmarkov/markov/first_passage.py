@@ -1477,7 +1477,11 @@ def open_rtd(absorbing: np.ndarray, exit_probability: np.ndarray, entry: np.ndar
         raise TrappedResidences("no particle that enters the open riser can reach the outlet "
                                 "in the model: every residence is trapped (the fitting "
                                 "window holds no path from an entry to an exit); fit on a "
-                                "longer window, or with fewer cells")
+                                "longer window, or with fewer cells; where tracks end away "
+                                "from the outlet (falls back out through the inlet, out of "
+                                "view), the states they end in keep them: import the riser "
+                                "from farther below its inlet, or use a state space without "
+                                "memory")
     return result
 
 
