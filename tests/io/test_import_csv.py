@@ -163,6 +163,15 @@ def changed(frame: int, row: int, **values) -> list:
     return frames
 
 
+def with_unused_column(text: str, extra_at: int | None = None, delimiter: str = ",") -> str:
+    """The table with a 'quality' column the reader leaves unused; the data row at index
+    ``extra_at`` (or every row where None) carries one value more than the header names."""
+    head, *rows = text.rstrip("\n").split("\n")
+    rows = [r.replace(",", delimiter) + f"{delimiter}5"
+            + (f"{delimiter}9" if extra_at in (None, k) else "") for k, r in enumerate(rows)]
+    return "\n".join([head.replace(",", delimiter) + f"{delimiter}quality"] + rows) + "\n"
+
+
 LONG = table([[(0.025 * k, i, 0.01 * i, 0.1 * i) for i in (1, 2, 3)] for k in range(400)])
 
 BAD_CSV = {
@@ -210,6 +219,14 @@ BAD_CSV = {
     "header-only": (HEADER + "\n", r"no data rows after the header: nothing to import"),
     "truncated-mid-row": (table()[:-9], (r"line 10: 3 values, the header names 4 columns "
                                          r"\(the file ends inside this row: truncated\?\)")),
+    # np.loadtxt reads a longer row's first columns where one column is unused: refused
+    "row-index-without-name": (with_unused_column(table()),
+                               r"line 2: 6 values, the header names 5 columns, so every value "
+                               r"would be read from the wrong column; .*index=False\)$"),
+    "one-row-longer": (with_unused_column(table(), extra_at=4),
+                       r"line 6: 6 values, the header names 5 columns"),
+    "whitespace-row-index": (with_unused_column(table(), delimiter=" "),
+                             r"line 2: 6 values, the header names 5 columns"),
     "binary-file": (b"\x89HDF\r\n\x1a\n\x00\x00\xff\xfe", r"not a text file"),
     "truncated-gzip": (gzip.compress(LONG.encode())[: len(gzip.compress(LONG.encode())) // 2],
                        r"file is truncated \(the compressed stream ends early\)"),
@@ -244,6 +261,17 @@ def test_bad_csv_through_cli(tmp_path, assert_clean_failure, case):
                                 "-o", output, output=output,
                                 match=match)
     assert line.startswith("cfbmarkov import: error: ")
+
+
+def test_empty_cells_after_the_named_columns_are_read_as_a_spreadsheets_ghost_cells(tmp_path):
+    plain = import_csv(write_case(tmp_path, table()), tmp_path / "plain.h5", width=0.09,
+                       height=0.95)
+    head, *rows = table().rstrip("\n").split("\n")
+    ghost = "\n".join([head + ",quality"] + [r + ",5,," for r in rows]) + "\n"
+    (tmp_path / "ghost.csv").write_text(ghost)
+    out = import_csv(tmp_path / "ghost.csv", tmp_path / "ghost.h5", width=0.09, height=0.95)
+    for a, b in zip(read_back(plain)[:5], read_back(out)[:5]):
+        np.testing.assert_array_equal(a, b)
 
 
 def test_missing_input_file(tmp_path, assert_clean_failure):
@@ -659,3 +687,20 @@ def test_two_far_apart_rows_of_one_tracer_at_one_time_are_refused_not_averaged(t
     (tmp_path / "fast.csv").write_text("t x y\n" + "\n".join(rows) + "\n")
     import_csv(tmp_path / "fast.csv", tmp_path / "fast.h5", width=0.09, height=0.95,
                resample=0.002)
+
+
+@pytest.mark.parametrize("fmt", [None, "csv", "lammps"])
+@pytest.mark.parametrize("content, match", [
+    ('<?xml version="1.0" encoding="UTF-8"?>\n<TrackMate version="7.0">\n<Model>\n',
+     r"TrackMate XML tracks: not read; export the tracks as CSV"),
+    ('TITLE = "particles"\nVARIABLES = "X" "Y"\nZONE T="t0"\n0.1 0.2\n',
+     r"Tecplot ASCII \(TITLE/VARIABLES/ZONE lines\): not read")])
+def test_a_text_format_no_reader_reads_is_named_whatever_format_is_given(
+        tmp_path, assert_clean_failure, fmt, content, match):
+    source = tmp_path / "tracks.txt"
+    source.write_text(content)
+    output = tmp_path / "out" / "run.h5"
+    line = assert_clean_failure("import", source, *(["--format", fmt] if fmt else []),
+                                "--width", "0.09", "--height", "0.95", "-o", output,
+                                output=output, match=match)
+    assert "missing column" not in line and "ITEM" not in line

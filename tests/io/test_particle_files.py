@@ -484,6 +484,26 @@ def test_h5md_box_not_at_the_origin_is_refused_until_a_region_is_given(tmp_path,
     np.testing.assert_allclose(p[..., 0], pos2d[:, np.argsort(IDS), 0], rtol=0, atol=1e-12)
 
 
+def test_h5md_with_two_particle_groups_is_refused_naming_the_fix_that_then_imports(
+        tmp_path, capsys):
+    pos, vel, laps = _motion()
+    pos2d = np.stack([pos[..., 0], pos[..., 2], np.zeros(pos.shape[:2])], axis=2)
+    image = np.stack([0 * laps, laps, 0 * laps], axis=2)
+    _write_h5md(tmp_path / "d.h5", pos2d, vel[..., [0, 2, 1]], image, True)
+    with h5py.File(tmp_path / "d.h5", "a") as f:
+        f.copy("particles/all", "particles/tracers")
+    assert main(["import", str(tmp_path / "d.h5"), "-o", str(tmp_path / "t.h5")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "holds the groups ['all', 'tracers']; one is read" in err
+    assert "Group.copy" in err and not (tmp_path / "t.h5").exists()
+    with h5py.File(tmp_path / "d.h5") as f, h5py.File(tmp_path / "one.h5", "w") as one:
+        f.copy("h5md", one)
+        one.create_group("particles")
+        f.copy("particles/tracers", one["particles"])
+    assert main(["import", str(tmp_path / "one.h5"), "-o", str(tmp_path / "t.h5")]) == 0
+    np.testing.assert_array_equal(_read(tmp_path / "t.h5")[4], laps[:, np.argsort(IDS)])
+
+
 def test_hdf5_that_is_not_h5md_and_a_wrong_format_are_refused(tmp_path, capsys):
     with h5py.File(tmp_path / "other.h5", "w") as f:
         f["data"] = np.zeros(3)

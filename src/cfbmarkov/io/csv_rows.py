@@ -6,6 +6,7 @@ frames. The columns, units and delimiter come from the file's layout
 
 from __future__ import annotations
 
+import csv
 import re
 
 import warnings
@@ -96,6 +97,8 @@ def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -
                                 converters=_noise_converter(layout), quotechar='"')
     except ValueError as exc:
         raise InputError(_locate_bad_row(lines, line_no, layout, label, exc)) from None
+    if len(layout.usecols) != n:          # np.loadtxt reads a longer row's first columns
+        _check_row_lengths(text, line_no, layout, label)
     if values.size == 0:
         return np.empty((0, len(layout.used)))
     if values.shape[1] != len(layout.used):
@@ -109,6 +112,29 @@ def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -
         if divisor != 1.0:
             values[:, k] /= divisor
     return values
+
+
+def _check_row_lengths(text: list[str], line_no: int, layout: CsvLayout, label: str) -> None:
+    """Refuse a row with more values than the header names (a row index written without a
+    name, as ``DataFrame.to_csv`` does): its values would be read one column off. Empty
+    values after the last named column (a spreadsheet's ghost cells) are allowed."""
+    n = len(layout.header)
+    if layout.delimiter is None:
+        longer = [k for k, line in enumerate(text) if len(line.split("#", 1)[0].split()) > n]
+    else:
+        longer = [k for k, line in enumerate(text) if line.count(layout.delimiter) >= n]
+    for k in longer:
+        content = text[k].split("#", 1)[0].strip()
+        if layout.delimiter is not None and '"' in content:
+            fields = next(csv.reader([content], delimiter=layout.delimiter))
+        else:
+            fields = _split(content, layout.delimiter)
+        if len(fields) > n and any(field.strip() for field in fields[n:]):
+            raise InputError(
+                f"{label}: line {line_no + k}: {len(fields)} values, the header names {n} "
+                "columns, so every value would be read from the wrong column; name every "
+                "column in the header (a row index written without a name, as pandas' "
+                "to_csv writes it: save with index=False)")
 
 
 def _noise_converter(layout: CsvLayout) -> dict | None:

@@ -166,6 +166,10 @@ def detect_format(source) -> tuple[str, str]:
     return "csv", DESCRIPTIONS["csv"]
 
 
+class UnreadFormat(InputError):
+    """A text format no importer reads (XML other than VTK, Tecplot ASCII)."""
+
+
 def _refuse_unread_text(path, head: bytes) -> None:
     """Refuse, naming the format and what to export instead, text formats no importer
     reads (their first line would otherwise be read as a CSV header): XML other than VTK
@@ -174,12 +178,12 @@ def _refuse_unread_text(path, head: bytes) -> None:
     if lower.startswith(b"<"):
         what = ("TrackMate XML tracks" if b"<trackmate" in lower or b"<tracks" in lower
                 else "XML that is no VTK file")
-        raise InputError(f"{path}: {what}: not read; export the tracks as CSV (TrackMate: "
+        raise UnreadFormat(f"{path}: {what}: not read; export the tracks as CSV (TrackMate: "
                          "the spots table, with TRACK_ID, POSITION_T, POSITION_X, POSITION_Y; "
                          "docs/how-to/pept-ptv.md) or as VTK PolyData (.vtp)")
     first = lower.split(b"\n", 1)[0].strip()
     if first.startswith((b"title", b"variables", b"zone")) or b"\nvariables" in lower[:1024]:
-        raise InputError(f"{path}: Tecplot ASCII (TITLE/VARIABLES/ZONE lines): not read; "
+        raise UnreadFormat(f"{path}: Tecplot ASCII (TITLE/VARIABLES/ZONE lines): not read; "
                          "export the particles as CSV with columns t, id, x, y (or VTK "
                          "PolyData, .vtp; MFiX writes those with its VTK output)")
 
@@ -203,7 +207,8 @@ def check_given_format(source, fmt: str) -> None:
     """Refuse a source whose content is plainly of another format than ``fmt``: a particle
     file (VTK, H5MD) given as ``csv`` or ``lammps``, a LAMMPS dump given as ``csv``, a CSV
     file (text whose first line is no ``ITEM:``) given as ``lammps``, or a text file given
-    as a particle format; the message names the content's format.
+    as a particle format, or a text format no importer reads (TrackMate XML, Tecplot);
+    the message names the content's format.
 
     Raises
     ------
@@ -212,6 +217,8 @@ def check_given_format(source, fmt: str) -> None:
     """
     try:
         found, shown = detect_format(source)
+    except UnreadFormat:
+        raise                        # no reader reads it, whatever --format says
     except InputError:
         return                       # the reader of fmt reports what is wrong
     particle = ("h5md", "vtk", "vtp", "vtu", "pvd")

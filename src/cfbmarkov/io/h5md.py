@@ -98,7 +98,10 @@ def _series(f: h5py.File, label: str, path: Path, group: str | None,
     groups = sorted(f["particles"])
     if group is None:
         if len(groups) != 1:
-            raise InputError(f"{label}: /particles holds the groups {groups}; one is read")
+            raise InputError(f"{label}: /particles holds the groups {groups}; one is read: "
+                             "copy /h5md and the group of the particles to follow into a "
+                             "file of their own (h5copy, or h5py's Group.copy) and import "
+                             "that")
         group = groups[0]
     if group not in f["particles"]:
         raise InputError(f"{label}: no particle group /particles/{group} (groups: {groups})")
