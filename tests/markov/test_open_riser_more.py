@@ -592,3 +592,29 @@ def test_a_memory_trapped_by_falls_is_refused_naming_them(tmp_path, capsys):
     assert err.count("\n") == 1 and "every residence is trapped" in err
     assert ("falls back out through the inlet, out of view), the states they end in keep "
             "them: import the riser from farther below its inlet") in err
+
+
+@pytest.mark.parametrize("boundary", ["open", "periodic"])
+def test_memory_of_a_fast_rise_takes_the_minimal_image_only_through_a_periodic_boundary(
+        tmp_path, boundary):
+    """A particle rising 0.65 m of a 1 m riser in one lag: on an open riser (no top joined
+    to the bottom) it rose, and came from 3 rows below; through a periodic boundary the
+    minimal image reads it as a fall of 0.35 m from above."""
+    from cfbmarkov.markov import discretize
+    from cfbmarkov.markov.spaces import state_space_from_name
+
+    times = np.round(0.1 * np.arange(6), 10)
+    y = np.array([0.05, 0.1, 0.2, 0.85, 0.9, 0.95])
+    pos = np.stack([np.full(6, 0.05), y], -1)[:, None, :]
+    path = write_trajectories(tmp_path / "fast.h5", times, pos, width=0.1, height=1.0,
+                              boundary=boundary, present=np.ones((6, 1), bool))
+    direction = state_space_from_name("cells-direction", 1, 4, 0.1, 1.0)
+    states = discretize(path, direction, 0.1, (0.1, 0.5)).states[:, 0]
+    jump = int(np.flatnonzero(np.round(times[1:], 10) == 0.3)[0])      # frame 0.3 s
+    falling = direction.falling(states)
+    assert falling[jump] == (boundary == "periodic")
+    assert not falling[jump + 1]
+    previous = state_space_from_name("cells-previous", 1, 4, 0.1, 1.0)
+    drow, _ = previous.offsets(discretize(path, previous, 0.1, (0.1, 0.5)).states[:, 0])
+    # rows 0 -> 3 in one lag: 3 rows below on an open riser, 1 row above (of 4) periodic
+    assert drow[jump] == (-3 if boundary == "open" else 1)

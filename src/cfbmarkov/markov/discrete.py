@@ -418,7 +418,8 @@ class WindowFrames:
             start = self.history
         frames = slice(first, None)
         if first not in self._memos:
-            self._memos[first] = FrameQuantities(self.positions[frames])
+            self._memos[first] = FrameQuantities(self.positions[frames],
+                                                 periodic=self.boundary != "open")
         memo = self._memos[first]
         positions = memo.positions
         velocities = None if self.velocities is None else self.velocities[frames]

@@ -9,9 +9,10 @@ hand out and pass it to :meth:`StateSpace.discretize
 <cfbmarkov.markov.states.StateSpace.fit_to_frames>`, so each [T, N] array is computed (and
 costs its page faults) once instead of once per space. The arrays are never written.
 
-Vertical displacements take the minimal image through the periodic boundary, wrapped into
+Vertical displacements take the minimal image through a periodic boundary, wrapped into
 (-H/2, H/2] (a particle moves less than H/2 in one lag, ``docs/definitions.md``, Pass
-direction).
+direction); on an open riser, which joins no top to its bottom, they are the plain
+difference of heights.
 """
 
 from __future__ import annotations
@@ -26,11 +27,11 @@ PARTICLE_BLOCK = 1024
 
 
 @nb.njit(cache=True, parallel=True)
-def _wrapped_step(y, lag_frames, height, out):
-    """out[t, p] = y[t, p] - y[t - lag_frames, p] wrapped into (-H/2, H/2]; 0 where
-    t < lag_frames (no previous frame)."""
+def _wrapped_step(y, lag_frames, height, periodic, out):
+    """out[t, p] = y[t, p] - y[t - lag_frames, p], wrapped into (-H/2, H/2] where
+    ``periodic``; 0 where t < lag_frames (no previous frame)."""
     n_frames, n = y.shape
-    half = 0.5 * height
+    half = 0.5 * height if periodic else np.inf
     blocks = (n + PARTICLE_BLOCK - 1) // PARTICLE_BLOCK    # frames x particle blocks
     for k in nb.prange(n_frames * blocks):
         t = k // blocks
@@ -57,21 +58,28 @@ class FrameQuantities:
     ----------
     positions : ndarray of float64, shape (T, N, D) or (N, D)
         The frames' positions (m), D = 2 or 3; the memo holds this very object.
+    periodic : bool, optional
+        Whether the riser's top joins its bottom (a periodic riser, the default), so that
+        vertical displacements take the minimal image; False for an open riser.
 
     Attributes
     ----------
     positions : ndarray
         The positions the quantities are derived from.
+    periodic : bool
+        As given.
     """
 
-    def __init__(self, positions: np.ndarray):
+    def __init__(self, positions: np.ndarray, periodic: bool = True):
         self.positions = positions
+        self.periodic = bool(periodic)
         self._arrays: dict[tuple, np.ndarray] = {}
 
     @classmethod
     def of(cls, positions: np.ndarray, memo: FrameQuantities | None) -> FrameQuantities:
         """``memo`` where it was made for ``positions`` (this very object), else a new memo
-        of them (a memo of other positions, even a view or a copy, is not used).
+        of them (a memo of other positions, even a view or a copy, is not used) on the
+        boundary of ``memo`` (periodic where None).
 
         Parameters
         ----------
@@ -86,7 +94,7 @@ class FrameQuantities:
         """
         if memo is not None and memo.positions is positions:
             return memo
-        return cls(positions)
+        return cls(positions, periodic=True if memo is None else memo.periodic)
 
     @property
     def derived(self) -> tuple[tuple, ...]:
@@ -121,15 +129,16 @@ class FrameQuantities:
 
     def vertical_step(self, lag_frames: int, height: float) -> np.ndarray:
         """The vertical displacement of every particle over the previous lag, by the minimal
-        image through the periodic boundary (wrapped into (-H/2, H/2]); 0 in the first
-        ``lag_frames`` frames (no previous frame) and for a single frame.
+        image through the periodic boundary (wrapped into (-H/2, H/2]) on a periodic riser,
+        the plain difference on an open one; 0 in the first ``lag_frames`` frames (no
+        previous frame) and for a single frame.
 
         Parameters
         ----------
         lag_frames : int
             The lag in frames (>= 1).
         height : float
-            The riser's height H (m), the period.
+            The riser's height H (m), the period of a periodic riser.
 
         Returns
         -------
@@ -143,7 +152,7 @@ class FrameQuantities:
                 self._arrays[key] = np.zeros_like(y)
             else:
                 out = np.empty_like(y)
-                _wrapped_step(y, lag_frames, height, out)
+                _wrapped_step(y, lag_frames, height, self.periodic, out)
                 self._arrays[key] = out
         return self._arrays[key]
 

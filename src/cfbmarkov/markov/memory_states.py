@@ -39,8 +39,9 @@ from cfbmarkov.markov.states import CellGrid, StateSpace
 # reads them and drops them again), returns states for every frame, and the state of frame t
 # uses the frames t - lag_frames and t. The first ``lag_frames`` frames have no previous
 # frame; they get the sub-state of a zero displacement (any valid state: callers drop them).
-# Vertical displacements take the minimal image through the periodic boundary, wrapped into
-# (-H/2, H/2] (a particle moves less than H/2 in one lag, docs/definitions.md, Pass direction).
+# Vertical displacements take the minimal image through a periodic boundary, wrapped into
+# (-H/2, H/2] (a particle moves less than H/2 in one lag, docs/definitions.md, Pass direction);
+# on an open riser (the memo's ``periodic`` False) they are the plain difference of heights.
 
 
 @nb.njit(cache=True, parallel=True)
@@ -54,11 +55,12 @@ def _direction_states(cells, vertical, out):
 
 
 @nb.njit(cache=True, parallel=True)
-def _previous_cell_states(cells, lag_frames, columns, rows, reach, column_reach, out):
+def _previous_cell_states(cells, lag_frames, columns, rows, reach, column_reach, periodic,
+                          out):
     """out = cell*K + (dcol + Rc)*(2R + 1) + (drow + R), K = (2R+1)(2Rc+1), where drow and
     dcol are the row and column of the cell one lag earlier minus the current ones, drow by
-    the minimal image on the periodic rows (wrapped into (-n/2, n/2]), both clipped to the
-    reach; 0 where t < lag_frames."""
+    the minimal image on the rows of a ``periodic`` riser (wrapped into (-n/2, n/2]), both
+    clipped to the reach; 0 where t < lag_frames."""
     n_frames, n = cells.shape
     span = 2 * reach + 1
     per_cell = span * (2 * column_reach + 1)
@@ -74,9 +76,11 @@ def _previous_cell_states(cells, lag_frames, columns, rows, reach, column_reach,
                 prev = cells[t - lag_frames, p]
                 row = c // columns
                 prow = prev // columns
-                drow = (prow - row) % rows          # 0..n-1 (Python-style modulo in numba)
-                if 2 * drow > rows:
-                    drow -= rows                     # into (-n/2, n/2]
+                drow = prow - row
+                if periodic:
+                    drow = drow % rows               # 0..n-1 (Python-style modulo in numba)
+                    if 2 * drow > rows:
+                        drow -= rows                 # into (-n/2, n/2]
                 dcol = (prev - prow * columns) - (c - row * columns)
                 drow = min(max(drow, -reach), reach)
                 dcol = min(max(dcol, -column_reach), column_reach)
@@ -164,9 +168,10 @@ class DirectionCells(_CellProductSpace):
     """Cells x {rising, falling}: state = 2*cell + (1 if falling else 0).
 
     ``source="displacement"`` (default): the direction is the sign of the vertical
-    displacement over the previous lag (minimal image through the periodic boundary), so the
-    space needs one lag of history (``memory_lags = 1``) and no velocities; a particle that
-    stayed at the same height (dy = 0, e.g. the first frames) counts as rising.
+    displacement over the previous lag (minimal image through a periodic boundary, the plain
+    difference on an open riser), so the space needs one lag of history
+    (``memory_lags = 1``) and no velocities; a particle that stayed at the same height
+    (dy = 0, e.g. the first frames) counts as rising.
     ``source="velocity"``: the sign of v_y in the frame itself (``needs_velocity``; no
     history); v_y = 0 counts as rising.
 
@@ -275,9 +280,10 @@ class SecondOrderCells(_CellProductSpace):
     """The second-order chain on cells, with the previous cell stored relative to the
     current one: state = cell*K + (dcol + Rc)*(2R + 1) + (drow + R), K = (2R+1)(2Rc+1).
 
-    drow = (row one lag earlier) - (row now), by the minimal image on the periodic rows,
-    clipped to [-R, R] (R = ``reach``); dcol = (column one lag earlier) - (column now),
-    clipped to [-Rc, Rc] (Rc = ``column_reach``). ``memory_lags = 1``. The defaults (R = 3,
+    drow = (row one lag earlier) - (row now), by the minimal image on the rows of a periodic
+    riser (the plain difference on an open one), clipped to [-R, R] (R = ``reach``);
+    dcol = (column one lag earlier) - (column now), clipped to [-Rc, Rc]
+    (Rc = ``column_reach``). ``memory_lags = 1``. The defaults (R = 3,
     Rc = 0) give 7 sub-states per cell, 1596 states on 6 x 38.
 
     What clipping loses: a particle that moved more than R rows in one lag (faster than
@@ -349,6 +355,7 @@ class SecondOrderCells(_CellProductSpace):
             If ``lag_frames < 1``.
         """
         cells = self._cells(positions, memo)
+        periodic = FrameQuantities.of(positions, memo).periodic
         lag_frames = int(lag_frames)
         if lag_frames < 1:
             raise InputError(f"lag of {lag_frames} frames: must be at least 1")
@@ -356,11 +363,11 @@ class SecondOrderCells(_CellProductSpace):
             cells = cells[None]
             out = np.empty_like(cells)
             _previous_cell_states(cells, lag_frames, self.columns, self.rows, self.reach,
-                                  self.column_reach, out)
+                                  self.column_reach, periodic, out)
             return out[0]
         out = np.empty_like(cells)
         _previous_cell_states(cells, lag_frames, self.columns, self.rows, self.reach,
-                              self.column_reach, out)
+                              self.column_reach, periodic, out)
         return out
 
     def offsets(self, states: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
