@@ -148,6 +148,37 @@ def test_a_return_through_the_inlet_continues_the_residence_and_its_value(tmp_pa
     np.testing.assert_allclose(got.exit_values, [1.0 - math.exp(-k * inside)], atol=1e-12)
 
 
+@pytest.mark.parametrize("reset", [True, False], ids=["entry", "carried"])
+def test_a_particle_seen_again_away_from_the_inlet_after_its_exit_restarts_at_entry(
+        tmp_path, reset):
+    """A particle that left through the outlet and is seen again mid-riser (a tracer found
+    again above the inlet) is in a residence whose entry was not seen: in the bed's means
+    it carries the entry value, as a particle never seen before does, not the value it
+    left with (0.8347 had stood in the bed mean); a carried property keeps its value."""
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    times = np.round(0.1 * np.arange(30), 10)
+    y = np.full(30, np.nan)
+    y[2:11] = 0.05 + 0.1 * np.arange(9)       # enters at 0.2 s, rises to the top row
+    y[10] = 0.95
+    y[15:21] = 0.5                            # seen again mid-riser 1.5-2.0 s
+    present = np.isfinite(y)
+    pos = np.stack([np.where(present, 0.05, np.nan), y], -1)[:, None, :]
+    path = write_trajectories(tmp_path / "again.h5", times, pos, width=0.1, height=1.0,
+                              present=present[:, None], boundary="open")
+    space = CellGrid(1, 10, 0.1, 1.0)
+    discrete = discretize(path, space, 0.1, (0.0, 2.9), keep_positions=True)
+    k = 2.0
+    a = np.full(10, math.exp(-k * 0.1))
+    got = integrate_along_paths(discrete, a, 1 - a, 0.0, reset=reset)
+    left = 1.0 - math.exp(-k * 0.9)                         # 0.2 s to the exit at 1.1 s
+    np.testing.assert_allclose(got.exit_values, [left], atol=1e-12)
+    again = np.flatnonzero(np.isclose(got.times, 1.5))[0]
+    start = 0.0 if reset else left
+    expected = 1.0 - (1.0 - start) * np.exp(-k * 0.1 * np.arange(6))
+    np.testing.assert_allclose(got.bed_mean[again:again + 6], expected, atol=1e-12)
+
+
 def test_uniform_rate_exit_values_follow_the_residence_time(tmp_path):
     path = write_run(tmp_path / "run.h5", FLOW, 40, 2.0, seed=5)
     space = CellGrid(FLOW.columns, FLOW.rows, FLOW.width, FLOW.height)

@@ -879,7 +879,8 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                          "segregated_flow": seg_block,
                          **({"segregated_flow_note": CARRIED_SEGREGATED_NOTE}
                             if carried else {}),
-                         "window": [float(start), float(stop)],
+                         # a frame's time (k x interval) to the digits it is given in
+                         "window": [float(f"{start:.12g}"), float(f"{stop:.12g}")],
                          **({"window_note": f"starts {late} lag(s) after the window's start "
                                             "(the prediction's first frames serve as the "
                                             "model's states' history)"} if late else {}),

@@ -123,7 +123,10 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
     the chain counts that time either), as the residence times of
     :func:`cfbmarkov.observed.residence.open_residence_times` count it; so does that of a
     particle inside at the first frame (its entry unknown). A particle absent in the first
-    frame is not an entry there. ``exit_*`` must hold one slot per particle-frame that can be an
+    frame is not an entry there. One seen again away from the inlet after it left through
+    the outlet is in a residence whose entry was not seen: with ``reset`` its value
+    restarts at ``v0`` there, as a particle's that was never seen before starts at its
+    start value (not the value it left with). ``exit_*`` must hold one slot per particle-frame that can be an
     exit. ``stored`` and ``use_stored`` as for :func:`integrate_periodic`.
     """
     n_frames, n_particles = states.shape
@@ -134,6 +137,7 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
     last_height = np.full(n_particles, np.nan)
     back = np.zeros(n_particles, np.bool_)   # back in view within a residence, no state yet
     had_state = np.zeros(n_particles, np.bool_)  # in a state since its residence began
+    left = np.zeros(n_particles, np.bool_)   # left through the outlet, not entered since
     for p in range(n_particles):
         if present[0, p]:
             last_height[p] = last_vertical[0, p]
@@ -165,7 +169,11 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
                     value[p] = a[s] * value[p] + b[s]
             if now and not before and vertical[k, p] <= band and np.isnan(entered[p]):
                 entered[p] = t
-                back[p] = had_state[p] = False
+                back[p] = had_state[p] = left[p] = False
+                if reset:
+                    value[p] = v0
+            elif now and not before and left[p]:
+                left[p] = False             # seen again away from the inlet: entry unseen
                 if reset:
                     value[p] = v0
             elif now and not before and not np.isnan(entered[p]):
@@ -181,6 +189,7 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
                 n_out += 1
                 entered[p] = np.nan
                 had_state[p] = False
+                left[p] = True
             if now:
                 last_height[p] = last_vertical[k, p]
                 if use_stored:
