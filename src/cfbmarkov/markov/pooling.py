@@ -170,7 +170,7 @@ def check_runs_distinct(runs: Sequence, windows: Sequence[tuple[float, float]]) 
                     f"of {other.path} and {run.path}, which hold one run (their frames at "
                     f"t = {common:.10g} s hold the same particles at the same positions: a "
                     "copy or a link of one file, or of a part of it, or its particles "
-                    "reordered)")
+                    "reordered, or its coordinates rounded)")
             if w[0] < window[1] and window[0] < w[1]:
                 raise InputError(f"the windows {w[0]:g}-{w[1]:g} s and {window[0]:g}-"
                                  f"{window[1]:g} s {what} overlap: their common frames "
@@ -291,20 +291,29 @@ def same_run_frame(a, b) -> float | None:
     return float(common[found]) if shared_positions(a, i, b, j) else None
 
 
-#: the share of the particles in view (of the file with fewer) at exactly the same
-#: coordinates in both files beyond which two frames are taken for one run's
+#: the share of the particles in view (of the file with fewer) at the same coordinates in
+#: both files beyond which two frames are taken for one run's
 SHARED_POSITIONS = 0.5
+
+#: how close (a fraction of the riser's larger side) two particles must be to sit at the
+#: same coordinates: a copy written again with its coordinates rounded (to 0.1 mm of a
+#: 0.95 m riser) is one run; independent runs' particles come that close by chance for a
+#: few per cent of them at most (2 % in a 2D bed packed to a solids fraction of 0.6)
+SAME_POSITION_TOLERANCE = 1e-4
 
 
 def shared_positions(a, i: int, b, j: int) -> bool:
     """Whether frame ``i`` of ``a`` and frame ``j`` of ``b`` hold one run's particles: more
     than :data:`SHARED_POSITIONS` of the particles in view of the frame with fewer sit at
-    exactly the same coordinates (bit for bit) in the other, whatever their ids and order.
+    the same coordinates in the other, bit for bit or within
+    :data:`SAME_POSITION_TOLERANCE` of the riser's larger side, whatever their ids and
+    order.
 
-    A copy, a link, a copy with its particles reordered or renumbered, or a part of a run
-    (some of its particles) shares them all; two independent runs share none (a chaotic
-    flow's particles never meet the same floating-point coordinates again), and coordinates
-    rounded to a coarse grid (PEPT to 1 mm) share a few per cent by chance.
+    A copy, a link, a copy with its particles reordered or renumbered, a part of a run
+    (some of its particles), or a copy with its coordinates rounded (written again to five
+    decimals) shares them all; two independent runs share none (a chaotic flow's particles
+    never meet the same coordinates again), and coordinates rounded to a coarse grid (PEPT
+    to 1 mm) share a few per cent by chance.
 
     Parameters
     ----------
@@ -328,7 +337,18 @@ def shared_positions(a, i: int, b, j: int) -> bool:
     as_bytes = [x.view(np.dtype((np.void, x.dtype.itemsize * x.shape[1]))).ravel()
                 for x in rows]
     found = np.isin(as_bytes[0], as_bytes[1]).sum()
-    return found > SHARED_POSITIONS * fewer
+    if found > SHARED_POSITIONS * fewer:
+        return True
+    from scipy.spatial import cKDTree
+
+    extent = max(float(a.width), float(a.height))
+    small, large = sorted(rows, key=len)
+    small, large = small[np.isfinite(small).all(axis=1)], large[np.isfinite(large).all(axis=1)]
+    if len(small) == 0 or len(large) == 0:
+        return False
+    distance, _ = cKDTree(large).query(small, distance_upper_bound=SAME_POSITION_TOLERANCE
+                                       * extent)
+    return np.isfinite(distance).sum() > SHARED_POSITIONS * fewer
 
 
 def run_windows(windows: Sequence[tuple[float, float]], n_runs: int
