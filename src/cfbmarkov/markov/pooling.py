@@ -298,7 +298,7 @@ SHARED_POSITIONS = 0.5
 #: how close (a fraction of the riser's larger side) two particles must be to sit at the
 #: same coordinates: a copy written again with its coordinates rounded (to 0.1 mm of a
 #: 0.95 m riser) is one run; independent runs' particles come that close by chance for a
-#: few per cent of them at most (2 % in a 2D bed packed to a solids fraction of 0.6)
+#: few per cent of them (about 2 % of 1 mm discs packed to a solids fraction of 0.6)
 SAME_POSITION_TOLERANCE = 1e-4
 
 
