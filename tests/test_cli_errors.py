@@ -74,6 +74,11 @@ def test_a_window_no_residence_fits_names_the_shortest_that_does(run, tmp_path, 
     assert main(["rtd", str(model), "--window-length", "0.2", "--resamples", "20"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "leave out --window-length" in err
+    # so does --level, which had sent to --resamples, then refused
+    assert main(["rtd", str(model), "--window-length", "0.2", "--level", "0.5"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "window sees it has none: leave out --window-length" in err
+    assert "add --resamples" not in err
 
 
 def test_a_mistyped_option_names_the_verb_and_the_option_it_may_mean(capsys):

@@ -584,13 +584,16 @@ def flow_term_line(length: float, rt_mean: float | None = None, runs: int = 1) -
         need = outward_bounds(0.0, blocks * FLOW_BLOCK_RESIDENCES * rt_mean, digits=3)[1]
         if runs > 1:       # pooled: a block of each run's window, compared across the runs
             why = (f"fewer than two of the {runs} runs' fitting windows (the shortest "
-                   f"{length:g} s) hold a block of three mean residence times, {need} s here, "
-                   "and a pooled fit compares the blocks of all its runs")
+                   f"{length:g} s) hold a block of three mean residence times, {need} s here "
+                   "by the model's E(RT) (by the residences a window holds whole, shorter, "
+                   "a little less may do), and a pooled fit compares the blocks of all its "
+                   "runs")
             advice = (f"fit on windows of {need} s or more for the interval to hold it"
                       + _SAMPLE_LENGTH_ASIDE)
         else:
             why = (f"the {length:g} s fitting window is shorter than two blocks of three "
-                   f"mean residence times, {need} s here")
+                   f"mean residence times, {need} s here by the model's E(RT) (by the "
+                   "residences a window holds whole, shorter, a little less may do)")
             advice = (f"fit on a window of {need} s or more, or pool several runs (fit A.h5 "
                       "B.h5 ...), for the interval to hold it" + _SAMPLE_LENGTH_ASIDE)
     else:

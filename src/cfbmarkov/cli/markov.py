@@ -366,6 +366,11 @@ def cmd_rtd(args) -> int:
                          f"its RTD as a {args.window_length:g} s window sees it: leave out "
                          "--window-length (or --resamples; `compare RUN PREDICTION` gives a "
                          "window's intervals against a run)")
+    if args.level is not None and args.window_length:
+        raise InputError(f"--level sets the interval of the model's intrinsic RTD; its RTD as "
+                         f"a {args.window_length:g} s window sees it has none: leave out "
+                         "--window-length (or --level; `compare RUN PREDICTION` gives a "
+                         "window's intervals against a run)")
     model = MarkovModel.load(args.model)
     if args.window_length:
         # a whole number of lags, as the window's frame pairs are (not rounded silently)
