@@ -35,3 +35,24 @@ def test_a_terminal_of_no_width_gets_lines_not_an_empty_bar(monkeypatch):
     finally:
         os.close(main)
         os.close(side)
+
+
+def test_a_warning_of_a_figure_that_may_be_far_off_is_printed_as_the_verbs_print_it(capsys):
+    """The model's fitting-sample warning, repeated by a prediction run from Python (the
+    synthetic demo), is a ``warning:`` line as `predict` prints it, not a ``note:``; an
+    advisory stays a note."""
+    import warnings
+
+    from cfbmarkov._console import one_line_notes
+    from cfbmarkov.errors import (CfbmarkovWarning, IntervalWarning, SampleWarning,
+                                  TimeStepAdvisory, UnresolvedWarning)
+
+    with one_line_notes():
+        warnings.simplefilter("always")
+        for category in (SampleWarning, UnresolvedWarning, IntervalWarning, TimeStepAdvisory,
+                         CfbmarkovWarning):
+            warnings.warn(f"the model:  {category.__name__}\n text", category)
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == [f"warning: the model: {name} text" for name in
+                     ("SampleWarning", "UnresolvedWarning", "IntervalWarning")] + [
+        f"note: the model: {name} text" for name in ("TimeStepAdvisory", "CfbmarkovWarning")]

@@ -91,7 +91,8 @@ def quit_closed_stdout() -> int:
 def _show(previous):
     def show(message, category, filename, lineno, file=None, line=None):
         if isinstance(category, type) and issubclass(category, CfbmarkovWarning):
-            write_line(NOTE + " ".join(str(message).split()), file)
+            write_line(getattr(category, "prefix", NOTE) + " ".join(str(message).split()),
+                       file)
         else:
             previous(message, category, filename, lineno, file, line)
     show.cfbmarkov_notes = True

@@ -98,8 +98,13 @@ class CfbmarkovWarning(UserWarning):
     From Python they are ordinary warnings (``warnings.catch_warnings``, ``pytest.warns``,
     ``-W error::cfbmarkov.errors.CfbmarkovWarning``); the command line and the worker
     processes of ``cfbmarkov reproduce`` print each as one line on stderr, ``note: MESSAGE``,
-    without the Python source line (:func:`cfbmarkov._console.one_line_notes`).
+    without the Python source line (:func:`cfbmarkov._console.one_line_notes`); a
+    category whose ``prefix`` is ``"warning: "`` (a figure that may be far off) as
+    ``warning: MESSAGE``, as the verbs print the same lines.
     """
+
+    #: how the command line starts the warning's line
+    prefix = "note: "
 
 
 class TimeStepAdvisory(CfbmarkovWarning):
@@ -114,14 +119,20 @@ class UnresolvedWarning(CfbmarkovWarning):
     (:meth:`cfbmarkov.markov.MarkovModel.rtd`; the command line prints the same line as a
     ``warning:``)."""
 
+    prefix = "warning: "
+
 
 class IntervalWarning(CfbmarkovWarning):
     """No interval could be formed for a model's E(RT) and SD(RT) (the message says why);
     the model is returned without one
     (:func:`cfbmarkov.analysis.fit_checks.assess_fit`)."""
 
+    prefix = "warning: "
+
 
 class SampleWarning(CfbmarkovWarning):
     """A model used for a prediction carries a warning of its fitting sample's verdict
     (:attr:`cfbmarkov.markov.MarkovModel.adequacy`): the message repeats it, as the command
     line's ``warning: the model's fitting sample: ...`` line does."""
+
+    prefix = "warning: "

@@ -163,5 +163,11 @@ def test_a_window_whose_fit_failed_says_why(tmp_path, capsys, monkeypatch):
     out = capsys.readouterr().out
     assert "no: no model (the window's fit failed)" in out
     assert out.count("(no model: no pass in the window: a lag of at most 0.01 s (--lag))") == 1
+    # the verdict sends to that refusal, not to a longer run (which cures no failing fit)
+    verdict = out.split("sample length: ")[1]
+    assert verdict.startswith("not judged: the longest window") and "follow its refusal" in verdict
+    assert "a longer run, or pool runs" not in verdict
     assert main(["stationarity", str(run), "--sample-length", "--start", "1", "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["fit_failure"].startswith("no pass in the window")
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["fit_failure"].startswith("no pass in the window")
+    assert summary["verdict"].startswith("not judged: the longest window")

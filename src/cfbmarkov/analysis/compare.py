@@ -361,6 +361,16 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
                         "compare two models, not a model against the flow; give a run (a "
                         "CFD-DEM run or an imported file) as the reference to judge a model")
     on = _residence_basis(ref, pred, (start, stop), basis, warnings)
+    interval = float(ref.frame_interval)
+    if (bin_width_from == "given" and not on.events and math.isfinite(interval)
+            and bin_width < interval * (1.0 - 1e-9)):
+        raise InputError(f"--bin-width {bin_width:g} s is narrower than the reference's frames "
+                         f"({interval:g} s apart): residence times read at frames are whole "
+                         "numbers of frames, so narrower bins only add empty ones (and "
+                         "hide the warning that the RTDs span few bins); give --bin-width "
+                         f"{interval:g} or more"
+                         + (", or --basis events (the reference holds exact pass events)"
+                            if ref.has_events else ""))
     # residence times (an open riser: entries and exits within one cell of the faces), on
     # one time basis: frames at the model's lag, or the reference's exact events
     rt_ref = residence_times(ref, (start, stop), use_events=on.events,

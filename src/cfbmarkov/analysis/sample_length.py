@@ -301,6 +301,11 @@ def verdict_text(result: SampleLength, states: str) -> str:
         return (f"{result.sample_length:g} s (from it on, every window's {figures} "
                 f"within {tol:g} % of the long run's)")
     longest = result.lengths[-1]
+    if result.fit_failure and not np.isfinite(result.rt_mean[-1]):
+        # no longer run cures a fit that fails: its refusal names the fix
+        return (f"not judged: the longest window ({longest:g} s) has no model; a longer run "
+                "does not cure a fit that fails: follow its refusal (\"no model:\", "
+                "fit_failure in --json)")
     steady = result.steady_misses()
     if result.outlasts()[-1]:
         share = float(result.outlasting_share[-1])
