@@ -28,7 +28,7 @@ def run(tmp_path):
      "window 10:15 s lies outside the data of {run} (0 to 2 s)"),
     (("stationarity", "--span", "5:20"), "span 5:20 s lies outside the frames of {run} (0 to 2 s)"),
     (("stationarity", "--span", "1:20"),
-     "span 1:20 s lies partly outside (only 1:2 s inside) the frames of {run} (0 to 2 s)"),
+     "span 1:20 s lies partly outside the frames of {run} (0 to 2 s; only 1:2 s lies inside)"),
     (("stationarity", "--window-length", "5"), "a --window-length of at most half the span's 2 s"),
     (("stationarity", "--window-length", "0.5", "--span", "0:1.5", "--judge", "3:4"),
      "--judge 3:4 s lies outside the span 0:1.5 s"),

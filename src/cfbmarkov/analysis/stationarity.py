@@ -163,10 +163,11 @@ def _span(traj, span: tuple[float, float] | None, option: str = "--span"
     if not (np.isfinite(a) and np.isfinite(b) and b > a):
         raise InputError(f"span {a:g}:{b:g} s must be finite with its end after its start")
     if a < first - tol or b > last + tol:
-        where = ("lies outside" if b <= first or a >= last else
-                 f"lies partly outside (only {max(a, first):g}:{min(b, last):g} s inside)")
-        raise InputError(f"span {a:g}:{b:g} s {where} the frames of {traj.path} "
-                         f"({first:g} to {last:g} s): give {option} inside them, e.g. "
+        partly = not (b <= first or a >= last)
+        inside = f"; only {max(a, first):g}:{min(b, last):g} s lies inside" if partly else ""
+        raise InputError(f"span {a:g}:{b:g} s lies {'partly ' if partly else ''}outside the "
+                         f"frames of {traj.path} ({first:g} to {last:g} s{inside}): give "
+                         f"{option} inside them, e.g. "
                          f"{option} {first:g}:{last:g}"
                          + (", or leave --span out for all of them" if option == "--span"
                             else ""))
