@@ -154,6 +154,31 @@ def test_a_carried_propertys_chain_is_its_monte_carlo_not_the_steady_state():
         "segregated_flow": None, "segregated_flow_note": "not defined for a carried property"})
     assert row.chain_mean == pytest.approx(0.62) and row.chain_error == pytest.approx(3.33)
     assert row.baseline_error is None
+    # the table marks the steady state, which a reader had taken for a miss of the window
+    from cfbmarkov.report.kinetics_section import _table
+
+    table = _table([row])
+    assert table.rows[0][6] == "0 (long run)"
+    assert any("'(long run)': a carried property's exact answer is the circulating "
+               "inventory's long-run steady state" in note for note in table.notes)
+    plain = KineticsRow("U = 3 m/s", "mle", {
+        "reference": {"exit_mean": 0.6}, "model": {"exit_mean": 0.62,
+                                                   "exact": {"exit_mean": 0.61}},
+        "segregated_flow": None})
+    table = _table([plain])
+    assert table.rows[0][6] == "0.61" and not any("long run" in n for n in table.notes)
+
+
+def test_the_reference_interval_of_a_kinetics_verdict_is_rounded_outwards():
+    """Both intervals of a 'not told apart' line hold what they hold: the reference's
+    0.905656-0.921391 had printed 0.9057-0.9214, leaving out its own lower end."""
+    from cfbmarkov.cli.analysis import kinetics_verdict
+
+    model = {"exit_mean": 0.93, "exit_mean_interval": [0.92, 0.94],
+             "interval_method": "block bootstrap of the fitting window and Monte Carlo noise"}
+    line = kinetics_verdict("X", 0.9135, model, 0.9,
+                            reference_interval=(0.905656, 0.921391))
+    assert "the reference's own 90 % interval 0.9056-0.9214" in line, line
 
 
 def test_the_section_names_its_kinetics_file_and_what_it_holds(tmp_path):

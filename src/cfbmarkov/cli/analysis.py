@@ -426,10 +426,9 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
     if agreement == "inside":
         return text + ": the model is consistent with the reference within its uncertainty"
     if agreement == "not told apart":
-        r0, r1 = reference_interval
         return text + (f", but the reference's own {100 * level:g} % interval "
-                       f"{r0:.{d}g}-{r1:.{d}g} (its exits' sampling) overlaps it: the two are "
-                       "not told apart")
+                       f"{_interval_text(tuple(reference_interval), d)} (its exits' sampling) "
+                       "overlaps it: the two are not told apart")
     return text + f": the model misses the reference's {name} beyond its uncertainty"
 
 
