@@ -155,7 +155,7 @@ def test_open_and_periodic_models_and_data_do_not_mix(open_run, tmp_path, capsys
     assert not (tmp_path / "x.h5").exists()
 
 
-def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys):
+def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys, monkeypatch):
     """fit (mle by default), info, rtd, predict, compare and maps on open data."""
     from cfbmarkov.cli import main
 
@@ -183,9 +183,17 @@ def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys):
     err = capsys.readouterr().err
     assert "do not start from the same particles" in err
     assert "start the window at the prediction's first frame (4 s)" in err
+    import cfbmarkov.report.figures as figures
+
+    titles = []
+    draw = figures.plot_probability_maps
+    monkeypatch.setattr(figures, "plot_probability_maps",
+                        lambda *a, title, **k: titles.append(title) or draw(*a, title=title, **k))
     assert main(["maps", model, "--times", "0.1,0.2", "-o", str(tmp_path / "maps.png")]) == 0
     plain = capsys.readouterr()
     assert "--outflow changes nothing" not in plain.err
+    # the title says what an open riser's maps are, with --outflow or without
+    assert titles[-1].endswith(", what has left taken out)")
     # --outflow: the same maps (an open riser always takes out what leaves), said so
     assert main(["maps", model, "--times", "0.1,0.2", "--outflow",
                  "-o", str(tmp_path / "maps-outflow.png")]) == 0
@@ -193,6 +201,7 @@ def test_the_verbs_work_on_an_open_riser(open_run, tmp_path, capsys):
     assert "note: an open riser's maps always take out what leaves through its outlet; " \
            "--outflow changes nothing here" in outflow.err
     assert outflow.out.splitlines()[:2] == plain.out.splitlines()[:2]
+    assert titles[0] == titles[1]
     assert main(["info", pred]) == 0
     assert "vertical boundary open" in capsys.readouterr().out
 

@@ -78,6 +78,9 @@ def test_sections_and_paper_numbers(report_of_template):
     for wanted in HEADINGS:
         assert any(h.startswith(wanted) for h in headings), wanted
         assert any(h.startswith(wanted) for h in html_headings), wanted
+    # the fit times are the paper's steps: what fit adds beyond them is said not timed
+    assert ("The model's interval (its block bootstrap) and the verdict on its fitting "
+            "sample" in " ".join(section(md, "Computing time (paper §3.1)").split()))
     # the paper's Table 3 beside ours, for each U the paper has (U = 3, 6 finished; 8 not)
     for u in ("3", "6", "8"):
         for estimator in ("paper", "mle"):

@@ -749,7 +749,8 @@ def cmd_maps(args) -> int:
     title = (f"Batch fed over the {'top cells' if downward else 'inlet'} at t = 0 "
              f"({space.describe()}"
              + (", summed over the depth" if space.depth_columns > 1 else "") + f", lag {model.lag:g} s"
-             + (", what has left taken out)" if args.outflow else ")"))
+             + (", what has left taken out)" if args.outflow or model.open_flow is not None
+                else ")"))
     plot_probability_maps(maps, args.times, space.width, space.height, args.output, title=title)
     for t, m in zip(args.times, maps):
         print(f"t = {t:g} s: fraction in riser {m.sum():.4f}")

@@ -327,7 +327,11 @@ def computing_blocks(cases: list[Case]) -> list:
              "CFD-DEM run.",
              "The first fit and predict in a worker process also load (or, without Numba's "
              "cache, compile) the Markov kernels, a one-time cost of seconds; 'auto' fits and "
-             "judges several state spaces before it keeps one."]
+             "judges several state spaces before it keeps one.",
+             "A fit here is the paper's: counting and estimating the chain. The model's "
+             "interval (its block bootstrap) and the verdict on its fitting sample, which "
+             "`cfbmarkov fit` adds and the paper has no counterpart of, are made after it "
+             "and not timed; the ratios compare the paper's steps alone."]
     if loads:
         low = min(loads, key=lambda x: x[1])
         notes.append("The CFD-DEM's CPU time over its wall time: " + ", ".join(
