@@ -265,27 +265,33 @@ def test_history_counts_every_exit_in_the_window_with_its_whole_path(tmp_path):
         reference_kinetics(path, model, sk, window, history=-1.0)
 
 
+def _direction_path(tmp_path, rows, n_frames, window, k):
+    """A first-order conversion at rate k along one particle's open-riser path on a
+    cells-direction chain of 1 x 4 cells (0.09 x 0.95 m), lag 0.1 s: ``rows`` its row from
+    the frame at 0.2 s (-1: out of view)."""
+    from cfbmarkov.markov.spaces import state_space_from_name
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    frames = np.full((n_frames, 1), -1)
+    frames[2:2 + len(rows), 0] = rows
+    present = frames >= 0
+    y = np.where(present, (frames + 0.5) * 0.95 / 4, np.nan)
+    path = write_trajectories(tmp_path / "open.h5", np.round(0.1 * np.arange(n_frames), 10),
+                              np.stack([np.where(present, 0.02, np.nan), y], -1), width=0.09,
+                              height=0.95, present=present, boundary="open")
+    space = state_space_from_name("cells-direction", 1, 4, 0.09, 0.95)
+    discrete = discretize(path, space, 0.1, window, keep_positions=True)
+    a = np.full(space.n_states, math.exp(-k * 0.1))
+    return integrate_along_paths(discrete, a, 1.0 - a, 0.0, reset=True)
+
+
 def test_a_return_with_a_memory_advances_no_lag_before_its_first_state(tmp_path):
     """A direction memory's first state comes a lag after a particle is seen: at an entry
     that lag is integrated with the first state's law (the chain's entry delay), but back
     in view after a fall the chain counts no transition until its first state, as over the
     fall, and the paths now hold the value there too (they had reacted a lag longer)."""
-    from cfbmarkov.markov.spaces import state_space_from_name
-    from cfbmarkov.trajectory_writer import write_trajectories
-
-    rows = [0, 0, 1, -1, -1, 0, 1, 2, 3]
-    frames = np.full((14, 1), -1)
-    frames[2:2 + len(rows), 0] = rows
-    present = frames >= 0
-    y = np.where(present, (frames + 0.5) * 0.95 / 4, np.nan)
-    path = write_trajectories(tmp_path / "open.h5", np.round(0.1 * np.arange(14), 10),
-                              np.stack([np.where(present, 0.02, np.nan), y], -1), width=0.09,
-                              height=0.95, present=present, boundary="open")
-    space = state_space_from_name("cells-direction", 1, 4, 0.09, 0.95)
-    discrete = discretize(path, space, 0.1, (0.1, 1.3), keep_positions=True)
     k = 2.0
-    a = np.full(space.n_states, math.exp(-k * 0.1))
-    got = integrate_along_paths(discrete, a, 1.0 - a, 0.0, reset=True)
+    got = _direction_path(tmp_path, [0, 0, 1, -1, -1, 0, 1, 2, 3], 14, (0.1, 1.3), k)
     assert got.count == 1
     # lags advanced: the entry's first (no state yet), two to the fall, none over the fall
     # nor back before the first state, two rising and the exit's: 5 of the 0.9 s observed
@@ -298,22 +304,8 @@ def test_a_return_the_memory_chain_never_had_a_state_before_is_its_entry(tmp_pat
     comes after the return, where it enters the particle, carrying that lag with the first
     state's law; the paths do the same (they had held the value over it: the conversion
     0.593 against the chain's exact 0.667 on a deterministic path)."""
-    from cfbmarkov.markov.spaces import state_space_from_name
-    from cfbmarkov.trajectory_writer import write_trajectories
-
-    rows = [0, -1, -1, 0, 1, 2, 3]
-    frames = np.full((12, 1), -1)
-    frames[2:2 + len(rows), 0] = rows
-    present = frames >= 0
-    y = np.where(present, (frames + 0.5) * 0.95 / 4, np.nan)
-    path = write_trajectories(tmp_path / "open.h5", np.round(0.1 * np.arange(12), 10),
-                              np.stack([np.where(present, 0.02, np.nan), y], -1), width=0.09,
-                              height=0.95, present=present, boundary="open")
-    space = state_space_from_name("cells-direction", 1, 4, 0.09, 0.95)
-    discrete = discretize(path, space, 0.1, (0.1, 1.1), keep_positions=True)
     k = 2.0
-    a = np.full(space.n_states, math.exp(-k * 0.1))
-    got = integrate_along_paths(discrete, a, 1.0 - a, 0.0, reset=True)
+    got = _direction_path(tmp_path, [0, -1, -1, 0, 1, 2, 3], 12, (0.1, 1.1), k)
     assert got.count == 1
     # the lag back in view before the first state, two rising and the exit's: 4 lags
     np.testing.assert_allclose(got.exit_values, [1.0 - math.exp(-k * 0.4)], atol=1e-12)
