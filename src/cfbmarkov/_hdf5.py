@@ -177,9 +177,9 @@ def open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
         if Path(path).is_dir():
             raise InputError(f"{path}: is a folder, not a file; give a cfbmarkov trajectory "
                              "or model file (.h5) in it") from None
-        raise InputError(f"{path}: not a readable HDF5 file (truncated, or another format); "
-                         "give a cfbmarkov trajectory or model file (.h5), or import the "
-                         "data first (cfbmarkov import)") from None
+        raise InputError(f"{path}: not a readable HDF5 file: truncated (copy it or write it "
+                         "again: fit again for a model) or of another format (particle data: "
+                         "cfbmarkov import it first)") from None
     try:                                # a damaged root group fails only when it is read
         handle.attrs.get("format")
         list(handle.keys())

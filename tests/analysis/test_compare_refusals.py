@@ -101,6 +101,14 @@ def test_a_window_of_one_frame_is_refused(pair, tmp_path, capsys):
             "residence times read at frames are whole numbers of frames") in err
     assert "give --bin-width 0.025 or more" in err
     assert not (tmp_path / "c").exists()
+    # a width of no whole number of frames bins one or two frame times alternately: warned
+    summary = compare(ref, pred, window=(0.5, 3.0), output=tmp_path / "comb", bin_width=0.03,
+                      figures=False)
+    assert any("--bin-width 0.03 s is no whole number of the reference's frames (0.025 s "
+               "apart)" in w and "e.g. 0.025 or 0.05" in w for w in summary["warnings"])
+    summary = compare(ref, pred, window=(0.5, 3.0), output=tmp_path / "whole", bin_width=0.05,
+                      figures=False)
+    assert not any("no whole number" in w for w in summary["warnings"])
 
 
 def test_the_baseline_line_of_an_undefined_md_is_not_judged():

@@ -163,7 +163,7 @@ def test_what_cannot_use_absent_particles_refuses_them_in_one_line(tmp_path, cap
     (OSError("Unable to synchronously open file (unable to lock file, errno = 11, error "
              "message = 'Resource temporarily unavailable')"), "locked by another program"),
     (OSError("Unable to synchronously open file (file signature not found)"),
-     "not a readable HDF5 file (truncated, or another format)"),
+     "not a readable HDF5 file: truncated (copy it or write it again"),
 ])
 def test_open_errors_say_what_happened(tmp_path, monkeypatch, capsys, error, message):
     """A file unreadable for lack of permission, or locked by a writer, is not called

@@ -244,7 +244,7 @@ def missing_file(tmp_path, run):
 
 BAD_STORES = {
     "truncated": (truncated,
-                  r"truncated.h5: not a readable HDF5 file \(truncated, or another format\)"),
+                  r"truncated.h5: not a readable HDF5 file: truncated \(copy it or write it again"),
     "foreign": (foreign, r"not a cfbmarkov trajectory file \(no 'format' attribute\)"),
     "model": (model_file, r"a cfbmarkov model file, not a trajectory file"),
     "other-format": (other_format,

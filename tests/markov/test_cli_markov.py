@@ -120,6 +120,16 @@ def test_predict_bad_start(tmp_path, capsys, markov_run):
                            "--duration", 1, "-o", out)
     assert "not a cfbmarkov model file" in err
     assert_clean_failure(code, err, out)
+    # a start typed a little off its frame (within the file's tolerance) is read there and
+    # dated there: the frames had been dated 5.0001 s, and compare refused them
+    code, _, err = run_cli(capsys, "predict", model_path, "--init", markov_run, "--start",
+                           "5.0001", "--duration", 3, "-q", "-o", out)
+    assert code == 0, err
+    with Trajectories(out) as t:
+        assert t.times[0] == 5.0 and np.allclose(np.diff(t.times), 0.025, rtol=0, atol=1e-12)
+    code, _, err = run_cli(capsys, "compare", markov_run, out, "--no-figures", "--resamples",
+                           "0", "-o", tmp_path / "cmp")
+    assert code == 0, err
 
 
 def test_predict_progress_is_whole_lines_off_a_terminal(tmp_path, capsys, markov_run,

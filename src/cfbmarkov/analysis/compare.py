@@ -371,6 +371,15 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
                          f"{interval:g} or more"
                          + (", or --basis events (the reference holds exact pass events)"
                             if ref.has_events else ""))
+    if bin_width_from == "given" and not on.events and math.isfinite(interval):
+        ratio = bin_width / interval
+        if abs(ratio - round(ratio)) > 1e-6 * max(ratio, 1.0):
+            low = max(1, math.floor(ratio)) * interval
+            warnings.append(f"--bin-width {bin_width:g} s is no whole number of the reference's "
+                            f"frames ({interval:g} s apart): residence times read at frames "
+                            f"fall {math.floor(ratio):d} or {math.ceil(ratio):d} to a bin, a "
+                            "comb in the binned RTDs and their MD; give a multiple of "
+                            f"{interval:g} s (e.g. {low:g} or {low + interval:g})")
     # residence times (an open riser: entries and exits within one cell of the faces), on
     # one time basis: frames at the model's lag, or the reference's exact events
     rt_ref = residence_times(ref, (start, stop), use_events=on.events,

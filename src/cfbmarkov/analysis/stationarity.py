@@ -588,11 +588,16 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
         stats = window_statistics(traj, window_length=window_length, step=step, span=span,
                                   **kwargs)
         if stats.starts.size and not np.any(stats.rt_count > 0):
+            band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
+            missed = face_band_warning(traj, extent, band, kwargs["lag_frames"])
+            # an open riser whose tracks begin and end away from a thin face band has no
+            # residence at any window length: the band is the cause, and the line names it
             raise InputError(f"no residence begins and ends in any of the {stats.starts.size} "
                              f"windows of {stats.window_length:g} s in {path} "
-                             f"({extent[0]:g}-{extent[1]:g} s): a residence must fit in a "
-                             "window; give a longer --window-length (several mean residence "
-                             "times)")
+                             f"({extent[0]:g}-{extent[1]:g} s): "
+                             + (f"{missed}" if missed else
+                                "a residence must fit in a window; give a longer "
+                                "--window-length (several mean residence times)"))
         judged = None
         if judge is not None:
             judged = _judged_window(traj, judge, span, extent, bin_width, kwargs)

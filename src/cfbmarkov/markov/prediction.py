@@ -151,6 +151,9 @@ def _predict(model, trajectories, start, duration, seed, output, progress, kinet
             raise InputError(f"{traj.path} is an open riser; the model is of a periodic one "
                              "(fit a model on open data)")
         states0, positions0, laps0 = initial_states(model, traj, start)
+        # the frame read, within the file's time tolerance of the typed start: its own
+        # time dates the prediction (10.0333 typed for a frame at 10.033333333333333)
+        start = float(traj.times[traj.frame_index(start)])
         ids = traj.ids
         present0 = states0 >= 0
         here = np.isfinite(positions0).all(axis=1)      # present, with or without a state
