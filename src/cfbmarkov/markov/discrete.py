@@ -30,6 +30,7 @@ See ``docs/definitions.md`` (States and transitions) for the definitions.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -90,8 +91,10 @@ class DiscreteTrajectories:
         If ``states`` is not 2-D or not whole numbers in -1 .. S-1, ``vertical`` has
         another shape or a height that is not finite or lies outside 0 .. ``height`` where
         a particle is present, ``times`` does not hold one time per frame,
-        ``lag_frames < 1``, ``frame_interval`` is not a positive finite number, or the
-        times are not spaced by it.
+        ``lag_frames`` is not a whole number >= 1, ``frame_interval`` is not a positive
+        finite number, the times are not spaced by it, ``state_space`` is no state space,
+        or (arrays given by a caller) ``positions`` or ``laps`` do not match the states'
+        shape, ``height`` is not the state space's, or ``window`` holds none of the frames.
 
     See Also
     --------
@@ -142,20 +145,58 @@ class DiscreteTrajectories:
         if self.times.shape != (self.states.shape[0],):
             raise InputError(f"discrete trajectories: {self.times.size} times for "
                              f"{self.states.shape[0]} frames")
+        if not (isinstance(self.lag_frames, (int, np.integer))
+                or (isinstance(self.lag_frames, (float, np.floating))
+                    and float(self.lag_frames).is_integer())):
+            # a fractional lag counts transitions of whole frames labelled with its length
+            raise InputError(f"lag of {self.lag_frames!r} frames: a whole number of frames "
+                             "(the lag's length over the frame interval)")
         if int(self.lag_frames) < 1:
             raise InputError(f"lag of {self.lag_frames} frames: must be at least 1")
+        object.__setattr__(self, "lag_frames", int(self.lag_frames))
         if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
             raise InputError(f"frame interval {self.frame_interval!r} s must be positive")
+        if not hasattr(self.state_space, "n_states"):
+            raise InputError(f"discrete trajectories: state_space {self.state_space!r} is no "
+                             "state space; give one (e.g. CellGrid(6, 38, 0.09, 0.95))")
         if given:
             self._check_times()
             self._check_states()
             self._check_heights()
+            self._check_others()
         for name in ("states", "vertical", "times", "positions", "laps"):
             values = getattr(self, name)
             # as immutable as a model: a writeable array (a caller's buffer) is copied, so
             # that writing to it later cannot change these trajectories
             if isinstance(values, np.ndarray) and values.flags.writeable:
                 object.__setattr__(self, name, _frozen(values.copy()))
+
+    def _check_others(self):
+        """Refuse positions or laps of another shape than the states', a height other than
+        the state space's, and a window that holds none of the frames."""
+        shape = self.states.shape
+        if self.positions is not None and (self.positions.ndim != 3
+                                           or self.positions.shape[:2] != shape):
+            raise InputError(f"discrete trajectories: positions {self.positions.shape} for "
+                             f"states {shape}: give them [T, N, D]")
+        if self.laps is not None and (self.laps.shape != shape
+                                      or self.laps.dtype.kind not in "iu"):
+            raise InputError(f"discrete trajectories: laps {self.laps.shape} of type "
+                             f"{self.laps.dtype} for states {shape}: give whole numbers [T, N]")
+        space_height = getattr(self.state_space, "height", None)
+        if space_height is not None and not math.isclose(float(space_height),
+                                                         float(self.height), rel_tol=1e-9):
+            raise InputError(f"discrete trajectories: height {self.height:g} m, but the state "
+                             f"space's grid is {float(space_height):g} m high; give the "
+                             "riser's height in m, as the grid has it")
+        if self.window is not None and self.times.size:
+            a, b = (float(v) for v in self.window)
+            tol = self._tolerance()
+            if not (a <= b and a <= float(self.times[-1]) + tol
+                    and b >= float(self.times[0]) - tol):
+                raise InputError(f"discrete trajectories: window {a:g}:{b:g} s holds none of "
+                                 f"the frames ({float(self.times[0]):g} to "
+                                 f"{float(self.times[-1]):g} s); give the window they are of")
 
     def _check_times(self):
         """Refuse times not evenly spaced by the frame interval (as a trajectory file's
