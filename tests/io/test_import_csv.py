@@ -221,10 +221,17 @@ BAD_CSV = {
                                          r"\(the file ends inside this row: truncated\?\)")),
     # np.loadtxt reads a longer row's first columns where one column is unused: refused
     "row-index-without-name": (with_unused_column(table()),
-                               r"line 2: 6 values, the header names 5 columns, so every value "
-                               r"would be read from the wrong column; .*index=False\)$"),
-    "one-row-longer": (with_unused_column(table(), extra_at=4),
-                       r"line 6: 6 values, the header names 5 columns"),
+                               r"line 2: 6 values, the header names 5 columns in every row, so "
+                               r"each value would be read from the wrong column; .*give it a "
+                               r"name\)$"),
+    # a text value holding the delimiter before a used column shifts that column
+    "unquoted-delimiter-in-text": (
+        "t,note,id,x,y\n" + "".join(
+            ",".join([str(row[0]), "a, b" if (k, j) == (1, 0) else "ok"]
+                     + [str(v) for v in row[1:]]) + "\n"
+            for k, frame in enumerate(FRAMES) for j, row in enumerate(frame)),
+        r"line 5: 6 values, the header names 5 columns: a value holds the delimiter ',' "
+        r"unquoted"),
     "whitespace-row-index": (with_unused_column(table(), delimiter=" "),
                              r"line 2: 6 values, the header names 5 columns"),
     "binary-file": (b"\x89HDF\r\n\x1a\n\x00\x00\xff\xfe", r"not a text file"),
@@ -261,6 +268,25 @@ def test_bad_csv_through_cli(tmp_path, assert_clean_failure, case):
                                 "-o", output, output=output,
                                 match=match)
     assert line.startswith("cfbmarkov import: error: ")
+
+
+def test_a_longer_row_whose_used_columns_come_first_is_read(tmp_path):
+    """A free-text last column with an unquoted comma in one row: the used columns before
+    it are read right, so the row is read (quoted, a value holding delimiters or spaces is
+    one value)."""
+    plain = import_csv(write_case(tmp_path, table()), tmp_path / "plain.h5", width=0.09,
+                       height=0.95)
+    head, *rows = table().rstrip("\n").split("\n")
+    notes = [r + (",bad frame, see log" if k == 3 else ",ok") for k, r in enumerate(rows)]
+    (tmp_path / "notes.csv").write_text("\n".join([head + ",note"] + notes) + "\n")
+    spaced = [" ".join(r.split(",")) + (' "track 1"' if k % 2 else " ok")
+              for k, r in enumerate(rows)]
+    (tmp_path / "spaced.txt").write_text("\n".join([" ".join(head.split(",")) + " note"]
+                                                    + spaced) + "\n")
+    for name in ("notes.csv", "spaced.txt"):
+        out = import_csv(tmp_path / name, tmp_path / f"{name}.h5", width=0.09, height=0.95)
+        for a, b in zip(read_back(plain)[:5], read_back(out)[:5]):
+            np.testing.assert_array_equal(a, b)
 
 
 def test_empty_cells_after_the_named_columns_are_read_as_a_spreadsheets_ghost_cells(tmp_path):
@@ -704,3 +730,15 @@ def test_a_text_format_no_reader_reads_is_named_whatever_format_is_given(
                                 "--width", "0.09", "--height", "0.95", "-o", output,
                                 output=output, match=match)
     assert "missing column" not in line and "ITEM" not in line
+
+
+@pytest.mark.parametrize("fmt", [None, "csv"])
+def test_a_csv_whose_first_column_is_named_zone_or_title_is_read(tmp_path, fmt):
+    """Tecplot's ZONE and TITLE lines take '='; a table's column named so is no Tecplot
+    file (such a CSV had been refused as Tecplot ASCII)."""
+    for name in ("zone", "title"):
+        source = tmp_path / f"{name}.csv"
+        source.write_text(f"{name},t,id,x,y\n1,0.0,1,0.01,0.1\n1,0.025,1,0.01,0.12\n"
+                          "1,0.05,1,0.01,0.14\n")
+        out = import_file(source, fmt, tmp_path / f"{name}.h5", width=0.09, height=0.95)
+        np.testing.assert_allclose(read_back(out)[2][:, 0, 1], [0.1, 0.12, 0.14])

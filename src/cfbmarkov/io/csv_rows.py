@@ -115,26 +115,57 @@ def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -
 
 
 def _check_row_lengths(text: list[str], line_no: int, layout: CsvLayout, label: str) -> None:
-    """Refuse a row with more values than the header names (a row index written without a
-    name, as ``DataFrame.to_csv`` does): its values would be read one column off. Empty
-    values after the last named column (a spreadsheet's ghost cells) are allowed."""
+    """Refuse rows with more values than the header names where their values would be read
+    from the wrong columns: every row longer (a column without a name in the header, as a
+    row index written by R's ``write.table`` or pandas' ``to_csv(index_label=False)``), or
+    a row longer where a used column lies after an unused one (a text value holding the
+    delimiter, unquoted). Empty values after the named columns (a spreadsheet's ghost
+    cells), and a longer row whose used columns all come before the unused ones (read
+    right), are allowed."""
     n = len(layout.header)
     if layout.delimiter is None:
         longer = [k for k, line in enumerate(text) if len(line.split("#", 1)[0].split()) > n]
     else:
         longer = [k for k, line in enumerate(text) if line.count(layout.delimiter) >= n]
+    if not longer:
+        return
+    bad = []
     for k in longer:
-        content = text[k].split("#", 1)[0].strip()
-        if layout.delimiter is not None and '"' in content:
-            fields = next(csv.reader([content], delimiter=layout.delimiter))
-        else:
-            fields = _split(content, layout.delimiter)
+        fields = _fields(text[k].split("#", 1)[0].strip(), layout.delimiter)
         if len(fields) > n and any(field.strip() for field in fields[n:]):
-            raise InputError(
-                f"{label}: line {line_no + k}: {len(fields)} values, the header names {n} "
-                "columns, so every value would be read from the wrong column; name every "
-                "column in the header (a row index written without a name, as pandas' "
-                "to_csv writes it: save with index=False)")
+            bad.append((k, len(fields)))
+    if not bad:
+        return
+    rows = sum(1 for line in text if line.split("#", 1)[0].strip())
+    k, count = bad[0]
+    where = f"{label}: line {line_no + k}: {count} values, the header names {n} columns"
+    if len(bad) == rows:
+        raise InputError(f"{where} in every row, so each value would be read from the wrong "
+                         "column; name every column in the header (a row index written "
+                         "without a name: R's write.table, or pandas' to_csv with "
+                         "index_label=False; save without the index, or give it a name)")
+    if _shifted(layout):
+        raise InputError(f"{where}: {_UNQUOTED.format(layout.delimiter or 'space')}")
+
+
+_UNQUOTED = ("a value holds the delimiter {!r} unquoted, so the values after it would be read "
+             "one column off; quote that value in the file (\"...\")")
+
+
+def _shifted(layout: CsvLayout) -> bool:
+    """Whether a used column lies after an unused one (a longer row shifts it)."""
+    unused = sorted(set(range(len(layout.header))) - set(layout.usecols))
+    return bool(unused) and max(layout.usecols) > unused[0]
+
+
+def _fields(content: str, delimiter: str | None) -> list[str]:
+    """The values of a row as np.loadtxt(quotechar='"') reads them: a quoted value is one,
+    whatever delimiters or spaces it holds."""
+    if '"' not in content:
+        return _split(content, delimiter)
+    if delimiter is None:
+        return re.findall(r'"[^"]*"|[^\s"]+', content)
+    return next(csv.reader([content], delimiter=delimiter))
 
 
 def _noise_converter(layout: CsvLayout) -> dict | None:
@@ -159,10 +190,13 @@ def _locate_bad_row(lines: list[str], line_no: int, layout: CsvLayout, label: st
         if not content:
             continue
         cut = "" if line.endswith("\n") else " (the file ends inside this row: truncated?)"
-        fields = _split(content, layout.delimiter)
+        fields = _fields(content, layout.delimiter)
         if len(fields) != n and (len(fields) < n or len(layout.usecols) == n):
             return (f"{label}: line {line_no + k}: {len(fields)} values, the header names "
                     f"{n} columns{cut}")
+        if len(fields) > n and _shifted(layout):
+            return (f"{label}: line {line_no + k}: {len(fields)} values, the header names "
+                    f"{n} columns: {_UNQUOTED.format(layout.delimiter or 'space')}{cut}")
         for name, col in zip(layout.used, layout.usecols):
             value = fields[col].strip()
             number = value.replace(",", ".") if layout.decimal_comma else value

@@ -166,6 +166,10 @@ def detect_format(source) -> tuple[str, str]:
     return "csv", DESCRIPTIONS["csv"]
 
 
+_TECPLOT = re.compile(rb"^(title|variables)\s*=|^zone(\s+|\s*,\s*)[a-z]+\s*=")
+_TECPLOT_VARIABLES = re.compile(rb"\nvariables\s*=")
+
+
 class UnreadFormat(InputError):
     """A text format no importer reads (XML other than VTK, Tecplot ASCII)."""
 
@@ -182,7 +186,9 @@ def _refuse_unread_text(path, head: bytes) -> None:
                          "the spots table, with TRACK_ID, POSITION_T, POSITION_X, POSITION_Y; "
                          "docs/how-to/pept-ptv.md) or as VTK PolyData (.vtp)")
     first = lower.split(b"\n", 1)[0].strip()
-    if first.startswith((b"title", b"variables", b"zone")) or b"\nvariables" in lower[:1024]:
+    # Tecplot's keywords take "=" (TITLE = "...", VARIABLES = "X" "Y", ZONE T="..."): a
+    # CSV header that merely begins with a column named zone or title is no such file
+    if _TECPLOT.match(first) or _TECPLOT_VARIABLES.search(lower[:1024]):
         raise UnreadFormat(f"{path}: Tecplot ASCII (TITLE/VARIABLES/ZONE lines): not read; "
                          "export the particles as CSV with columns t, id, x, y (or VTK "
                          "PolyData, .vtp; MFiX writes those with its VTK output)")
@@ -218,7 +224,9 @@ def check_given_format(source, fmt: str) -> None:
     try:
         found, shown = detect_format(source)
     except UnreadFormat:
-        raise                        # no reader reads it, whatever --format says
+        if fmt in ("csv", "lammps"):  # a text reader would misread its first line
+            raise
+        return
     except InputError:
         return                       # the reader of fmt reports what is wrong
     particle = ("h5md", "vtk", "vtp", "vtu", "pvd")
