@@ -295,25 +295,23 @@ def same_run_frame(a, b) -> float | None:
 #: both files beyond which two frames are taken for one run's
 SHARED_POSITIONS = 0.5
 
-#: how close (a fraction of the riser's larger side) two particles must be to sit at the
-#: same coordinates: a copy written again with its coordinates rounded (to 0.1 mm of a
-#: 0.95 m riser) is one run; independent runs' particles come that close by chance for a
-#: few per cent of them (about 2 % of 1 mm discs packed to a solids fraction of 0.6)
-SAME_POSITION_TOLERANCE = 1e-4
+#: the most decimals (of m) to which a file's coordinates are told to be written: a copy
+#: written again to k decimals (k <= 9)
+MOST_DECIMALS = 9
 
 
 def shared_positions(a, i: int, b, j: int) -> bool:
     """Whether frame ``i`` of ``a`` and frame ``j`` of ``b`` hold one run's particles: more
     than :data:`SHARED_POSITIONS` of the particles in view of the frame with fewer sit at
-    the same coordinates in the other, bit for bit or within
-    :data:`SAME_POSITION_TOLERANCE` of the riser's larger side, whatever their ids and
-    order.
+    the same coordinates in the other, whatever their ids and order: bit for bit, or, where
+    a frame's coordinates were written to k decimals (:func:`rounding_step`: a copy written
+    again, rounded), within half that step (10^-k m) in every coordinate.
 
     A copy, a link, a copy with its particles reordered or renumbered, a part of a run
-    (some of its particles), or a copy with its coordinates rounded (written again to five
-    decimals) shares them all; two independent runs share none (a chaotic flow's particles
-    never meet the same coordinates again), and coordinates rounded to a coarse grid (PEPT
-    to 1 mm) share a few per cent by chance.
+    (some of its particles), or a copy with its coordinates rounded shares them all; two
+    independent runs share none (a chaotic flow's particles never meet the same
+    coordinates again), and coordinates rounded to a coarse grid (PEPT to 1 mm) share a
+    few per cent by chance.
 
     Parameters
     ----------
@@ -334,21 +332,70 @@ def shared_positions(a, i: int, b, j: int) -> bool:
     if fewer == 0:
         return False
     rows = [np.ascontiguousarray(x, dtype=np.float64) for x in (first, second)]
-    as_bytes = [x.view(np.dtype((np.void, x.dtype.itemsize * x.shape[1]))).ravel()
-                for x in rows]
-    found = np.isin(as_bytes[0], as_bytes[1]).sum()
-    if found > SHARED_POSITIONS * fewer:
+    if _share_found(rows) > SHARED_POSITIONS * fewer:
         return True
+    steps = [s for s in (rounding_step(x) for x in rows) if s is not None]
+    if not steps:
+        return False
     from scipy.spatial import cKDTree
 
-    extent = max(float(a.width), float(a.height))
+    # within half the coarser step in every coordinate: how far rounding moves a value
+    reach = 0.5 * max(steps) * (1.0 + 1e-6)
     small, large = sorted(rows, key=len)
-    small, large = small[np.isfinite(small).all(axis=1)], large[np.isfinite(large).all(axis=1)]
-    if len(small) == 0 or len(large) == 0:
-        return False
-    distance, _ = cKDTree(large).query(small, distance_upper_bound=SAME_POSITION_TOLERANCE
-                                       * extent)
-    return np.isfinite(distance).sum() > SHARED_POSITIONS * fewer
+    distance, _ = cKDTree(large).query(small, p=np.inf, distance_upper_bound=reach)
+    return int(np.isfinite(distance).sum()) > SHARED_POSITIONS * fewer
+
+
+def _share_found(rows: list[np.ndarray]) -> int:
+    """How many rows of the first array (positions, [n, D]) the second holds, bit for bit."""
+    as_bytes = [np.ascontiguousarray(x).view(np.dtype((np.void, x.dtype.itemsize
+                                                       * x.shape[1]))).ravel() for x in rows]
+    return int(np.isin(as_bytes[0], as_bytes[1]).sum())
+
+
+def rounding_step(positions: np.ndarray) -> float | None:
+    """The largest step (m) by which the coordinates of ``positions`` were rounded when
+    written: 10^-k for k fixed decimals (``%.4f``: 1e-4), or for s significant digits
+    (``%.6g``) the step of the largest coordinate's magnitude, 10^(floor(log10 max|x|) + 1 - s);
+    None where the coordinates are of full precision (more than :data:`MOST_DECIMALS`
+    decimals). Nine in ten coordinates must keep to the rule.
+
+    Parameters
+    ----------
+    positions : ndarray of float64, shape (n, D)
+
+    Returns
+    -------
+    float or None
+    """
+    values = positions[np.isfinite(positions)]
+    if values.size == 0:
+        return None
+    decimals = np.full(values.shape, MOST_DECIMALS + 1)
+    for k in range(MOST_DECIMALS, -1, -1):
+        scaled = values * 10.0 ** k
+        # a decimal read back as the nearest double: within a few units of its last place
+        on = np.abs(scaled - np.rint(scaled)) <= 1e-6 + 4e-16 * np.abs(scaled)
+        decimals[on] = k
+    written = decimals <= MOST_DECIMALS
+    if written.mean() < KEPT_TO_RULE:
+        return None
+    # the two rules' steps, of nine in ten coordinates: the coarser is how far a value
+    # may have moved (fixed decimals give the same step both ways)
+    fixed = float(np.quantile(decimals[written], KEPT_TO_RULE, method="higher"))
+    nonzero = written & (values != 0.0)
+    if not nonzero.any():
+        return 10.0 ** -fixed
+    magnitude = np.floor(np.log10(np.abs(values[nonzero])))
+    digits = decimals[nonzero] + magnitude + 1
+    significant = float(np.quantile(digits, KEPT_TO_RULE, method="higher"))
+    top = float(np.floor(np.log10(np.max(np.abs(values)))))
+    return max(10.0 ** -fixed, 10.0 ** (top + 1 - significant))
+
+
+#: the share of a file's coordinates that must keep to one rounding rule
+#: (:func:`rounding_step`)
+KEPT_TO_RULE = 0.9
 
 
 def run_windows(windows: Sequence[tuple[float, float]], n_runs: int
