@@ -97,15 +97,16 @@ def test_a_window_of_one_frame_is_refused(pair, tmp_path, capsys):
     # bins finer than the frames add only empty ones (and had hidden the few-bins warning)
     err = refused(capsys, [ref, pred, "--window", "1:1.01", "--bin-width", "0.001", "-q"],
                   tmp_path / "c")
-    assert ("--bin-width 0.001 s is narrower than the reference's frames (0.025 s apart): "
-            "residence times read at frames are whole numbers of frames") in err
+    assert ("--bin-width 0.001 s is narrower than the residence times' step, 0.025 s (the "
+            "model's lag and the reference's frames read at it): they are whole numbers of "
+            "it") in err
     assert "give --bin-width 0.025 or more" in err
     assert not (tmp_path / "c").exists()
     # a width of no whole number of frames bins one or two frame times alternately: warned
     summary = compare(ref, pred, window=(0.5, 3.0), output=tmp_path / "comb", bin_width=0.03,
                       figures=False)
-    assert any("--bin-width 0.03 s is no whole number of the reference's frames (0.025 s "
-               "apart)" in w and "e.g. 0.025 or 0.05" in w for w in summary["warnings"])
+    assert any("--bin-width 0.03 s is no whole number of the residence times' step, 0.025 s"
+               in w and "e.g. 0.025 or 0.05" in w for w in summary["warnings"])
     summary = compare(ref, pred, window=(0.5, 3.0), output=tmp_path / "whole", bin_width=0.05,
                       figures=False)
     assert not any("no whole number" in w for w in summary["warnings"])

@@ -361,25 +361,8 @@ def compare_runs(ref, pred, window, *, bin_width: float | None = None,
                         "compare two models, not a model against the flow; give a run (a "
                         "CFD-DEM run or an imported file) as the reference to judge a model")
     on = _residence_basis(ref, pred, (start, stop), basis, warnings)
-    interval = float(ref.frame_interval)
-    if (bin_width_from == "given" and not on.events and math.isfinite(interval)
-            and bin_width < interval * (1.0 - 1e-9)):
-        raise InputError(f"--bin-width {bin_width:g} s is narrower than the reference's frames "
-                         f"({interval:g} s apart): residence times read at frames are whole "
-                         "numbers of frames, so narrower bins only add empty ones (and "
-                         "hide the warning that the RTDs span few bins); give --bin-width "
-                         f"{interval:g} or more"
-                         + (", or --basis events (the reference holds exact pass events)"
-                            if ref.has_events else ""))
-    if bin_width_from == "given" and not on.events and math.isfinite(interval):
-        ratio = bin_width / interval
-        if abs(ratio - round(ratio)) > 1e-6 * max(ratio, 1.0):
-            low = max(1, math.floor(ratio)) * interval
-            warnings.append(f"--bin-width {bin_width:g} s is no whole number of the reference's "
-                            f"frames ({interval:g} s apart): residence times read at frames "
-                            f"fall {math.floor(ratio):d} or {math.ceil(ratio):d} to a bin, a "
-                            "comb in the binned RTDs and their MD; give a multiple of "
-                            f"{interval:g} s (e.g. {low:g} or {low + interval:g})")
+    if bin_width_from == "given":
+        _check_given_bins(ref, pred, bin_width, on, warnings)
     # residence times (an open riser: entries and exits within one cell of the faces), on
     # one time basis: frames at the model's lag, or the reference's exact events
     rt_ref = residence_times(ref, (start, stop), use_events=on.events,
@@ -516,6 +499,38 @@ def _refuse_empty(ref: Trajectories, pred: Trajectories, side: str, traj: Trajec
             "outlet" if traj.boundary.is_open else "")
     raise InputError(f"no residence begins and ends in {start:g}-{stop:g} s on the {side} "
                      f"side ({traj.path}{what}{counted}): compare over a longer window ({hint})")
+
+
+def _check_given_bins(ref: Trajectories, pred: Trajectories, bin_width: float, on,
+                      warnings: list[str]) -> None:
+    """Refuse a given RTD bin width narrower than the step of the residence times (on
+    frames: the reference's frames at the model's lag, and the prediction's frames; on
+    events: the prediction's frames), whose bins would only add empty ones and hide the
+    few-bins warning; warn of one that is no whole number of that step (a comb)."""
+    steps = [float(pred.frame_interval)]
+    if not on.events:
+        steps.append(float(ref.frame_interval) * on.lag_frames)
+    steps = [x for x in steps if math.isfinite(x) and x > 0]
+    if not steps:
+        return
+    step = max(steps)
+    what = ("the model's lag and the reference's frames read at it" if not on.events
+            else "the prediction's frames")
+    if bin_width < step * (1.0 - 1e-9):
+        raise InputError(f"--bin-width {bin_width:g} s is narrower than the residence times' "
+                         f"step, {step:g} s ({what}): they are whole numbers of it, so "
+                         "narrower bins only add empty ones (and hide the warning that the "
+                         f"RTDs span few bins); give --bin-width {step:g} or more"
+                         + (", or --basis events (the reference holds exact pass events)"
+                            if ref.has_events and not on.events else ""))
+    ratio = bin_width / step
+    if abs(ratio - round(ratio)) > 1e-6 * max(ratio, 1.0):
+        low = math.floor(ratio) * step
+        warnings.append(f"--bin-width {bin_width:g} s is no whole number of the residence "
+                        f"times' step, {step:g} s ({what}): they fall {math.floor(ratio):d} "
+                        f"or {math.ceil(ratio):d} to a bin, a comb in the binned RTDs and "
+                        f"their MD; give a multiple of {step:g} s (e.g. {low:g} or "
+                        f"{low + step:g})")
 
 
 def _check_bins_resolve(rt_ref: ResidenceTimes, bin_width: float, source: str,
