@@ -76,7 +76,7 @@ def test_a_window_no_residence_fits_names_the_shortest_that_does(run, tmp_path, 
     assert main(["rtd", str(model), "--window-length", "0.2", "--resamples", "20"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "leave out --window-length" in err
-    # so does --level, which had sent to --resamples, then refused
+    # so does --level (not sent to --resamples, which is then refused)
     assert main(["rtd", str(model), "--window-length", "0.2", "--level", "0.5"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "window sees it has none: leave out --window-length" in err

@@ -94,7 +94,7 @@ def test_a_window_of_one_frame_is_refused(pair, tmp_path, capsys):
     err = refused(capsys, [ref, pred, "--window", "1:1.01", "-q"], tmp_path / "c")
     assert ("window 1:1.01 s (0.01 s long) holds fewer than two RTD bins of 0.025 s (the "
             "reference's frame interval): compare over a window of 0.05 s or more") in err
-    # bins finer than the frames add only empty ones (and had hidden the few-bins warning)
+    # bins finer than the frames add only empty ones (and would hide the few-bins warning)
     err = refused(capsys, [ref, pred, "--window", "1:1.01", "--bin-width", "0.001", "-q"],
                   tmp_path / "c")
     assert ("--bin-width 0.001 s is narrower than the residence times' step, 0.025 s (the "

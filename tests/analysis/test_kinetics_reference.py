@@ -154,7 +154,7 @@ def test_a_particle_seen_again_away_from_the_inlet_after_its_exit_restarts_at_en
     """A particle that left through the outlet and is seen again mid-riser (a tracer found
     again above the inlet) is in a residence whose entry was not seen: in the bed's means
     it carries the entry value, as a particle never seen before does, not the value it
-    left with (0.8347 had stood in the bed mean); a carried property keeps its value."""
+    left with (0.8347 here); a carried property keeps its value."""
     from cfbmarkov.trajectory_writer import write_trajectories
 
     times = np.round(0.1 * np.arange(30), 10)
@@ -289,7 +289,7 @@ def test_a_return_with_a_memory_advances_no_lag_before_its_first_state(tmp_path)
     """A direction memory's first state comes a lag after a particle is seen: at an entry
     that lag is integrated with the first state's law (the chain's entry delay), but back
     in view after a fall the chain counts no transition until its first state, as over the
-    fall, and the paths now hold the value there too (they had reacted a lag longer)."""
+    fall, and the paths hold the value there too (not a lag more of reaction)."""
     k = 2.0
     got = _direction_path(tmp_path, [0, 0, 1, -1, -1, 0, 1, 2, 3], 14, (0.1, 1.3), k)
     assert got.count == 1
@@ -309,3 +309,17 @@ def test_a_return_the_memory_chain_never_had_a_state_before_is_its_entry(tmp_pat
     assert got.count == 1
     # the lag back in view before the first state, two rising and the exit's: 4 lags
     np.testing.assert_allclose(got.exit_values, [1.0 - math.exp(-k * 0.4)], atol=1e-12)
+
+
+def test_a_particle_back_in_view_that_leaves_then_reappears_carries_its_first_lag(tmp_path):
+    """Back in view within its residence (out of view mid-riser), the particle leaves
+    through the outlet before its memory gives it a state, and is seen again mid-riser: a
+    residence whose entry was not seen, whose first lag is carried with its first state's
+    law as a particle's first seen anywhere (the flag 'back in view' is cleared at the
+    exit, so that lag is not held)."""
+    k = 2.0
+    rows = [0, 1, 2, -1, 3, -1, -1, 1, 2, 3]
+    got = _direction_path(tmp_path, rows, 14, (0.1, 1.3), k)
+    again = np.flatnonzero(np.isclose(got.times, 0.9))[0]        # seen again at 0.9 s
+    assert got.bed_mean[again] == 0.0                            # the entry value
+    np.testing.assert_allclose(got.bed_mean[again + 1], 1.0 - math.exp(-k * 0.1), atol=1e-12)

@@ -392,7 +392,7 @@ def test_copies_on_a_decimal_grid_are_one_run_and_packed_independent_runs_are_no
     """A copy written to 4 decimals (or 6 significant digits) of a small riser's run is one
     run; two independent
     dense packings of 0.5 mm discs in a 3 m riser are not (compared within a tolerance set
-    by the riser's size, 64 % of their particles had matched and they were refused)."""
+    by the riser's size, 64 % of their particles would match and they would be refused)."""
     from cfbmarkov.markov.pooling import rounding_step, shared_positions
     from cfbmarkov.trajectory_writer import write_trajectories
 

@@ -165,7 +165,7 @@ def test_a_window_whose_fit_failed_says_why(tmp_path, capsys, monkeypatch):
     assert out.count("(no model: no pass in the window: a lag of at most 0.01 s (--lag))") == 1
     # the verdict sends to that refusal, not to a longer run (which cures no failing fit)
     verdict = out.split("sample length: ")[1]
-    assert verdict.startswith("not judged: the longest window") and "follow its refusal" in verdict
+    assert verdict.startswith("not judged: the longest window") and "its fit was refused" in verdict
     assert "a longer run, or pool runs" not in verdict
     assert main(["stationarity", str(run), "--sample-length", "--start", "1", "--json"]) == 0
     summary = json.loads(capsys.readouterr().out)

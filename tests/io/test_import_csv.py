@@ -735,7 +735,7 @@ def test_a_text_format_no_reader_reads_is_named_whatever_format_is_given(
 @pytest.mark.parametrize("fmt", [None, "csv"])
 def test_a_csv_whose_first_column_is_named_zone_or_title_is_read(tmp_path, fmt):
     """Tecplot's ZONE and TITLE lines take '='; a table's column named so is no Tecplot
-    file (such a CSV had been refused as Tecplot ASCII)."""
+    file, and is read as the CSV it is."""
     for name in ("zone", "title"):
         source = tmp_path / f"{name}.csv"
         source.write_text(f"{name},t,id,x,y\n1,0.0,1,0.01,0.1\n1,0.025,1,0.01,0.12\n"

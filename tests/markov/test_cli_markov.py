@@ -121,7 +121,7 @@ def test_predict_bad_start(tmp_path, capsys, markov_run):
     assert "not a cfbmarkov model file" in err
     assert_clean_failure(code, err, out)
     # a start typed a little off its frame (within the file's tolerance) is read there and
-    # dated there: the frames had been dated 5.0001 s, and compare refused them
+    # dated there (not 5.0001 s, which compare could not match with the file's frames)
     code, _, err = run_cli(capsys, "predict", model_path, "--init", markov_run, "--start",
                            "5.0001", "--duration", 3, "-q", "-o", out)
     assert code == 0, err

@@ -154,7 +154,7 @@ def test_a_carried_propertys_chain_is_its_monte_carlo_not_the_steady_state():
         "segregated_flow": None, "segregated_flow_note": "not defined for a carried property"})
     assert row.chain_mean == pytest.approx(0.62) and row.chain_error == pytest.approx(3.33)
     assert row.baseline_error is None
-    # the table marks the steady state, which a reader had taken for a miss of the window
+    # the table marks the steady state, which a reader would take for a miss of the window
     from cfbmarkov.report.kinetics_section import _table
 
     table = _table([row])
@@ -171,7 +171,8 @@ def test_a_carried_propertys_chain_is_its_monte_carlo_not_the_steady_state():
 
 def test_the_reference_interval_of_a_kinetics_verdict_is_rounded_outwards():
     """Both intervals of a 'not told apart' line hold what they hold: the reference's
-    0.905656-0.921391 had printed 0.9057-0.9214, leaving out its own lower end."""
+    0.905656-0.921391 prints 0.9056-0.9214, not 0.9057-0.9214 (which leaves out its own
+    lower end)."""
     from cfbmarkov.cli.analysis import kinetics_verdict
 
     model = {"exit_mean": 0.93, "exit_mean_interval": [0.92, 0.94],

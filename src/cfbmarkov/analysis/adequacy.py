@@ -585,15 +585,14 @@ def flow_term_line(length: float, rt_mean: float | None = None, runs: int = 1) -
         if runs > 1:       # pooled: a block of each run's window, compared across the runs
             why = (f"fewer than two of the {runs} runs' fitting windows (the shortest "
                    f"{length:g} s) hold a block of three mean residence times, {need} s here "
-                   "by the model's E(RT) (by the residences a window holds whole, shorter, "
-                   "a little less may do), and a pooled fit compares the blocks of all its "
-                   "runs")
+                   "by the model's E(RT) or a little less by the shorter residences a window "
+                   "holds whole, and a pooled fit compares the blocks of all its runs")
             advice = (f"fit on windows of {need} s or more for the interval to hold it"
                       + _SAMPLE_LENGTH_ASIDE)
         else:
             why = (f"the {length:g} s fitting window is shorter than two blocks of three "
-                   f"mean residence times, {need} s here by the model's E(RT) (by the "
-                   "residences a window holds whole, shorter, a little less may do)")
+                   f"mean residence times, {need} s here by the model's E(RT) or a little "
+                   "less by the shorter residences a window holds whole")
             advice = (f"fit on a window of {need} s or more, or pool several runs (fit A.h5 "
                       "B.h5 ...), for the interval to hold it" + _SAMPLE_LENGTH_ASIDE)
     else:

@@ -188,7 +188,7 @@ def integrate_open(times, states, present, vertical, last_vertical, band, height
                 exit_residence[n_out] = t - entered[p] if np.isfinite(entered[p]) else np.nan
                 n_out += 1
                 entered[p] = np.nan
-                had_state[p] = False
+                had_state[p] = back[p] = False
                 left[p] = True
             if now:
                 last_height[p] = last_vertical[k, p]

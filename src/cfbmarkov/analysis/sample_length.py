@@ -87,7 +87,7 @@ class SampleLength:
         is above :data:`cfbmarkov.analysis.adequacy.TAIL_LIMIT` is not within, whatever
         its E(RT), since ``fit`` warns that such a window cannot contain its residences.
     fit_failure : str, optional
-        Why the first window whose model failed has none (the fit's refusal), or "".
+        Why the longest window whose model failed has none (the fit's refusal), or "".
     """
 
     file: str
@@ -302,10 +302,10 @@ def verdict_text(result: SampleLength, states: str) -> str:
                 f"within {tol:g} % of the long run's)")
     longest = result.lengths[-1]
     if result.fit_failure and not np.isfinite(result.rt_mean[-1]):
-        # no longer run cures a fit that fails: its refusal names the fix
-        return (f"not judged: the longest window ({longest:g} s) has no model; a longer run "
-                "does not cure a fit that fails: follow its refusal (\"no model:\", "
-                "fit_failure in --json)")
+        # its fit's refusal names the fix (a lag, the cells), which a longer run may not be
+        return (f"not judged: the longest window ({longest:g} s) has no model: its fit was "
+                "refused (\"no model:\" above, fit_failure in --json), which says what to "
+                "change")
     steady = result.steady_misses()
     if result.outlasts()[-1]:
         share = float(result.outlasting_share[-1])
@@ -473,7 +473,7 @@ def sample_length(path, state_space, *, lag: float = 0.025, start: float | None 
                                   if p.sum() > 0 else math.nan)
                 classes = int(rtd.closed_classes)
             except CfbmarkovError as exc:
-                failure = failure or str(exc)
+                failure = str(exc)         # the longest window's that failed
                 means.append(math.nan)
                 sds.append(math.nan)
                 outlasting.append(math.nan)

@@ -254,7 +254,10 @@ class StateSpace(ABC):
         memo : FrameQuantities, optional
             What is derived from ``positions`` (this very array) and shared by the spaces
             discretised on it (cells, vertical displacements); None, or a memo of other
-            positions: computed here.
+            positions: computed here. It also carries the riser's boundary: without one,
+            a space with memory reads vertical moves by the periodic riser's minimal image;
+            for an open riser give ``FrameQuantities(positions, periodic=False)``
+            (:func:`cfbmarkov.markov.discretize` does so from the file).
 
         Returns
         -------
