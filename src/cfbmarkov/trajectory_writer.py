@@ -579,8 +579,13 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
                        ids=None, velocities=None, laps=None, source: str = "arrays",
                        parameters: dict[str, Any] | None = None, events: PassEvents | None = None,
                        present=None, depth: float | None = None, boundary: str | Boundary = "periodic",
-                       axes: dict[str, str] | None = None, region_origin=None) -> Path:
+                       axes: dict[str, str] | None = None, region_origin=None,
+                       force: bool = False) -> Path:
     """Write whole arrays as a trajectory file.
+
+    An existing trajectory file or prediction at ``path`` is replaced; a file of another
+    kind (a model, a text file) only with ``force``, as ``cfbmarkov import`` replaces one
+    only with ``--force``.
 
     Parameters
     ----------
@@ -608,6 +613,8 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
         Which particles are in each frame (default: all).
     depth, boundary, axes, region_origin : optional
         As :class:`TrajectoryWriter`.
+    force : bool, optional
+        Replace an existing file of another kind than a trajectory file.
 
     Returns
     -------
@@ -617,9 +624,12 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
     Raises
     ------
     InputError
-        If ``positions`` is not (T, N, D) with D = 2 (3 with a depth), or as
-        :class:`TrajectoryWriter`.
+        If ``positions`` is not (T, N, D) with D = 2 (3 with a depth), ``path`` holds a
+        file of another kind and ``force`` is not given, or as :class:`TrajectoryWriter`.
     """
+    from cfbmarkov._outputs import _check_kind
+
+    _check_kind(Path(path), "trajectory", force)
     positions = np.asarray(positions, dtype=np.float64)
     d = 2 if depth is None else 3
     if positions.ndim != 3 or positions.shape[-1] != d:

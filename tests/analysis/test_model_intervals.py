@@ -71,6 +71,10 @@ def test_model_file_round_trip_keeps_the_interval(stationary_run, tmp_path):
                                                              u.block_length)
     assert u.flow_sd is None and u.flow_degrees_of_freedom is None  # 2 s: E(RT) 2.3 s
     assert got.flow_degrees_of_freedom is None
+    # assess_fit(resamples=0) leaves the interval out, a loaded model's stored one too
+    from cfbmarkov.analysis.fit_checks import assess_fit
+
+    assert assess_fit(back, [stationary_run], resamples=0, verdict=False).uncertainty is None
     # a flow term keeps its degrees of freedom; a file without them (its flow term formed
     # with the normal quantile) reads so: None
     flowing = model.with_uncertainty(replace(u, flow_sd=(0.1, 0.2), flow_degrees_of_freedom=3))

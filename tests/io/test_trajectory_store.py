@@ -322,3 +322,24 @@ def test_an_open_files_times_and_ids_are_read_only(tmp_path, run):
             with pytest.raises(ValueError, match="read-only"):
                 getattr(t, name)[:] = 0
         assert t.times[0] == run.times[0]
+
+
+def test_write_trajectories_replaces_a_run_but_not_a_file_of_another_kind(tmp_path):
+    """As `cfbmarkov import` replaces a model file only with --force: writing arrays over a
+    model or a text file is refused unless force=True (it had replaced a model silently)."""
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.trajectory_writer import write_trajectories
+
+    times = np.array([0.0, 0.1])
+    positions = np.full((2, 3, 2), 0.5)
+    target = tmp_path / "run.h5"
+    write_trajectories(target, times, positions, width=1.0, height=1.0)
+    write_trajectories(target, times, positions, width=1.0, height=1.0)     # a run: replaced
+    text = tmp_path / "notes.h5"
+    text.write_text("my notes")
+    with pytest.raises(InputError, match=r"notes.h5: exists and is .*force=True"):
+        write_trajectories(text, times, positions, width=1.0, height=1.0)
+    assert text.read_text() == "my notes"
+    write_trajectories(text, times, positions, width=1.0, height=1.0, force=True)
+    with Trajectories(text) as t:
+        assert t.n_frames == 2

@@ -283,3 +283,16 @@ def test_an_rtd_and_an_interval_compare_by_identity_as_the_model_does(model):
     rtd, again = model.rtd(), model.rtd(window=1.0)
     assert rtd == rtd and (rtd == again) is False and rtd != again
     assert (model == model) and rtd.uncertainty == rtd.uncertainty
+
+
+def test_a_model_loaded_or_saved_with_no_path_is_refused_in_one_line(tmp_path):
+    """None (a variable never set in a notebook) as a path: an InputError naming it, not a
+    TypeError from pathlib."""
+    from cfbmarkov.errors import InputError
+    from cfbmarkov.markov import MarkovModel
+    from tests.markov.test_model import ladder_model
+
+    with pytest.raises(InputError, match=r"None is no file name: give the path"):
+        MarkovModel.load(None)
+    with pytest.raises(InputError, match=r"None is no file name: give the output's path"):
+        ladder_model(4, 0.5).save(None)

@@ -795,3 +795,16 @@ def test_an_exact_rtd_beyond_the_memory_limit_is_refused_before_it_runs(monkeypa
     assert model.rtd().mean > 0
     monkeypatch.setenv(limits.MEMORY_ENV, "1000")
     assert ladder_model(6, 0.4).rtd().mean > 0              # far below RTD_CHECK_FROM
+
+
+def test_propagate_and_monte_carlo_beyond_memory_are_refused_in_one_line():
+    """As predict and the maps refuse work the memory cannot hold: a numpy MemoryError
+    (1.66 TiB asked for) is an InputError naming the size and what to shorten."""
+    model = ladder_model(4, 0.5)
+    with pytest.raises(InputError, match=r"the distribution over 4 states at 1000000000001 "
+                       r"lags would need about .* of memory.*; propagate fewer steps"):
+        model.propagate(np.full(4, 0.25), 10 ** 12)
+    with pytest.raises(InputError, match=r"a Monte Carlo of 1000000 particles over 1000000 "
+                       r"lags would need .*; run fewer particles or lags"):
+        model.monte_carlo(np.zeros(10 ** 6, int), 10 ** 6)
+    assert model.propagate(np.full(4, 0.25), 3).shape == (4, 4)

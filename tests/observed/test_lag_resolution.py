@@ -90,6 +90,8 @@ def test_frames_too_far_apart_are_refused_with_the_frame_interval_that_works(tmp
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "the file's frames, 0.1 s apart, are too far apart" in err
     assert "write frames at most 0.05 s apart" in err
+    # the other cause is named beside it: laps that contradict the positions
+    assert "the file's laps contradict its positions: laps written as zeros" in err
 
 
 def test_residences_shorter_than_the_lag_are_refused(tmp_path):

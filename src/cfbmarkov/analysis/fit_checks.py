@@ -143,6 +143,8 @@ def assess_fit(model, runs: Sequence | None = None,
         has_rtd = False            # no circulation at all: a model without residence times
     discrete = (_fitting_windows(model, runs, windows, given)
                 if resamples and has_rtd and verdict else None)
+    if not resamples and model.uncertainty is not None:
+        model = model.with_uncertainty(None)     # 0 leaves the interval out, a stored one too
     if resamples and has_rtd:
         from cfbmarkov.analysis.intervals import model_intervals
 

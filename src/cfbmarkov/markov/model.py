@@ -28,7 +28,7 @@ import numpy as np
 from cfbmarkov.boundary import Boundary
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.kinetics.fields import CellFields
-from cfbmarkov.limits import MAX_LAGS, check_finite, check_seed
+from cfbmarkov.limits import MAX_LAGS, check_finite, check_memory, check_seed
 from cfbmarkov.markov import model_file, model_summary, propagation
 from cfbmarkov.markov.adequacy import Adequacy
 from cfbmarkov.markov.model_arrays import (SQUARE_ARRAYS, checked_arrays, checked_coherence,
@@ -628,8 +628,9 @@ class MarkovModel:
         ------
         InputError
             If the initial states are not whole numbers in one dimension, one lies outside
-            the state space, ``n_steps`` is not a non-negative whole number, or
-            ``initial_laps`` is not N whole numbers.
+            the state space, ``n_steps`` is not a non-negative whole number,
+            ``initial_laps`` is not N whole numbers, or the run's states and laps would not
+            fit in memory.
 
         References
         ----------
@@ -648,6 +649,13 @@ class MarkovModel:
         if isinstance(n_steps, bool) or not isinstance(n_steps, (int, np.integer)) or n_steps < 0:
             raise InputError(f"n_steps {n_steps!r}: the number of lags to run, a whole number "
                              ">= 0")
+        # states and laps (int32 each) of every particle at every lag; an open riser's
+        # newcomers add their columns
+        newcomers = (0.0 if self.open_flow is None
+                     else float(self.open_flow.inflow_per_lag) * int(n_steps))
+        check_memory(8.0 * (int(n_steps) + 1.0) * (initial_states.size + newcomers),
+                     f"a Monte Carlo of {initial_states.size} particles over {int(n_steps)} "
+                     "lags", "run fewer particles or lags")
         if initial_laps is not None:
             initial_laps = _whole_numbers(initial_laps, "initial_laps")
             if initial_laps.shape != initial_states.shape:

@@ -55,7 +55,8 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     ------
     InputError
         If ``initial`` does not have shape (S,) or holds a negative or non-finite entry, or
-        ``steps`` is not a whole number >= 0.
+        ``steps`` is not a whole number >= 0, or the distributions would not fit in
+        memory.
 
     References
     ----------
@@ -78,6 +79,9 @@ def propagate(model: "MarkovModel", initial, steps: int, outflow: bool = False) 
     if isinstance(steps, bool) or not isinstance(steps, (int, np.integer)) or steps < 0:
         raise InputError(f"steps {steps!r}: the number of lags to propagate, a whole number "
                          ">= 0")
+    check_memory(8.0 * (int(steps) + 1.0) * model.n_states,
+                 f"the distribution over {model.n_states} states at {int(steps) + 1} lags",
+                 "propagate fewer steps")
     if model.open_flow is not None:
         p = model.absorbing_matrix
     elif outflow:

@@ -141,7 +141,10 @@ class PassReading:
                          f"{self.passes} that the file's laps count, in "
                          f"{self.moves} particle moves: particles move half the riser's "
                          f"height ({half:g} m) or more within the lag, up to "
-                         f"{self.largest:.3g} m; {fix}")
+                         f"{self.largest:.3g} m; {fix} (or, where the frames are close, the "
+                         "file's laps contradict its positions: laps written as zeros, or for "
+                         "another height; write the laps the passes make, or none to have "
+                         "them derived)")
 
 
 def read_passes(vertical, laps, lag_frames: int, height: float, frame_interval: float,
