@@ -296,3 +296,11 @@ def test_a_model_loaded_or_saved_with_no_path_is_refused_in_one_line(tmp_path):
         MarkovModel.load(None)
     with pytest.raises(InputError, match=r"None is no file name: give the output's path"):
         ladder_model(4, 0.5).save(None)
+
+
+def test_a_misspelt_parameter_of_a_law_is_named_beside_the_one_missing():
+    from cfbmarkov.kinetics import Constant, FirstOrder
+
+    with pytest.raises(InputError, match=r"law first-order needs rate \(given rat, which it "
+                       r"takes no: a misspelt name\?\)"):
+        Property("X", FirstOrder(), {"rat": Constant(1.0)})

@@ -96,8 +96,11 @@ class Property:
         names = set(self.law.parameter_names)
         given = set(self.parameters)
         if names - given:
+            unknown = sorted(given - names)
             raise InputError(f"property {self.name}: law {self.law.key} needs "
-                             f"{', '.join(sorted(names - given))}")
+                             f"{', '.join(sorted(names - given))}"
+                             + (f" (given {', '.join(unknown)}, which it takes no: a misspelt "
+                                "name?)" if unknown else ""))
         if given - names:
             raise InputError(f"property {self.name}: law {self.law.key} takes no "
                              f"{', '.join(sorted(given - names))}")
