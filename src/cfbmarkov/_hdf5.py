@@ -158,7 +158,7 @@ def open_h5(path: str | os.PathLike, mode: str = "r") -> h5py.File:
     if str(path) == "":
         raise InputError("an empty file name (''): give the path of a cfbmarkov trajectory or "
                          "model file (.h5)")
-    if not isinstance(path, (str, bytes, os.PathLike)):
+    if not isinstance(path, (str, os.PathLike)):
         raise InputError(f"{path!r} is no file name: give the path of a cfbmarkov trajectory "
                          "or model file (.h5) as a str or pathlib.Path")
     path = Path(path)

@@ -96,7 +96,7 @@ def check_output_name(path: str | os.PathLike) -> None:
     InputError
         If ``path`` is empty, or a component of it is longer than :data:`NAME_MAX` bytes.
     """
-    if not isinstance(path, (str, bytes, os.PathLike)):
+    if not isinstance(path, (str, os.PathLike)):
         raise InputError(f"{path!r} is no file name: give the output's path as a str or "
                          "pathlib.Path")
     if not os.fspath(path):        # Path("") is "." (the current folder)

@@ -627,8 +627,10 @@ def write_trajectories(path: str | os.PathLike, times, positions, *, width: floa
         If ``positions`` is not (T, N, D) with D = 2 (3 with a depth), ``path`` holds a
         file of another kind and ``force`` is not given, or as :class:`TrajectoryWriter`.
     """
+    from cfbmarkov._names import check_output_name
     from cfbmarkov._outputs import _check_kind
 
+    check_output_name(path)             # a missing or empty name, before Path("") is "."
     _check_kind(Path(path), "trajectory", force)
     positions = np.asarray(positions, dtype=np.float64)
     d = 2 if depth is None else 3

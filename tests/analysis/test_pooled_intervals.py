@@ -416,9 +416,13 @@ def test_copies_on_a_decimal_grid_are_one_run_and_packed_independent_runs_are_no
         assert rounding_step(np.asarray(b.positions(1))) == pytest.approx(1e-4)
         assert rounding_step(np.asarray(a.positions(1))) is None
         assert shared_positions(a, 1, b, 1)
-    # written to 6 significant digits ('%.6g': a step per magnitude), one run too
-    sig = np.array([[float(f"{v:.6g}") for v in row] for row in small])
-    with Trajectories(run) as a, Trajectories(write("sig.h5", sig, 0.04, 0.3)) as b:
-        assert shared_positions(a, 1, b, 1)
+    # written to 6 significant digits ('%.6g': a step per magnitude), to 10, or as
+    # float32: one run too
+    for name, copied in (("g6", [[float(f"{v:.6g}") for v in row] for row in small]),
+                         ("g10", [[float(f"{v:.10g}") for v in row] for row in small]),
+                         ("f32", small.astype(np.float32).astype(np.float64))):
+        with Trajectories(run) as a, Trajectories(write(f"{name}.h5", np.array(copied), 0.04,
+                                                        0.3)) as b:
+            assert shared_positions(a, 1, b, 1), name
     with Trajectories(packed[0]) as a, Trajectories(packed[1]) as b:
         assert not shared_positions(a, 1, b, 1)

@@ -742,3 +742,21 @@ def test_a_csv_whose_first_column_is_named_zone_or_title_is_read(tmp_path, fmt):
                           "1,0.05,1,0.01,0.14\n")
         out = import_file(source, fmt, tmp_path / f"{name}.h5", width=0.09, height=0.95)
         np.testing.assert_allclose(read_back(out)[2][:, 0, 1], [0.1, 0.12, 0.14])
+
+
+def test_a_lone_longer_row_after_the_first_rows_and_ghost_cells_before_a_bad_value(tmp_path):
+    """The rows a file begins with decide whether a column has no name: a longer row read
+    in a later block alone (the sixth, after the five read ahead) is not taken for an
+    unnamed index; and a bad value after rows of ghost cells is named where it is."""
+    head, *rows = table().rstrip("\n").split("\n")
+    notes = [r + (",bad frame, see log" if k == 5 else ",ok") for k, r in enumerate(rows)]
+    (tmp_path / "late.csv").write_text("\n".join([head + ",note"] + notes) + "\n")
+    out = import_csv(tmp_path / "late.csv", tmp_path / "late.h5", width=0.09, height=0.95)
+    np.testing.assert_array_equal(read_back(out)[2], read_back(import_csv(
+        write_case(tmp_path, table()), tmp_path / "plain.h5", width=0.09, height=0.95))[2])
+    ghost = ["t,note,id,x,y"] + [f"{r.split(',')[0]},ok,{','.join(r.split(',')[1:])},"
+                                 for r in rows]
+    ghost[8] = ghost[8].replace(",0.02,", ",abc,")
+    (tmp_path / "ghost.csv").write_text("\n".join(ghost) + "\n")
+    with pytest.raises(InputError, match=r"line 9: 'abc' in column 'x' is not a number"):
+        import_csv(tmp_path / "ghost.csv", tmp_path / "ghost.h5", width=0.09, height=0.95)

@@ -163,3 +163,30 @@ def test_an_interval_with_no_room_on_one_side_is_read_as_one_sided(markov_flow, 
     assert len(lines) == 1 and lines[0].startswith("the E(RT) interval ")
     assert "almost no lower side" in lines[0] and "nothing of the other side" in lines[0]
     assert lines[0] in skewed.warnings()
+
+
+def test_a_fractional_lag_and_mismatched_arrays_are_refused(window):
+    """lag_frames=1.5 counted one-frame transitions labelled with a 1.5-frame lag (E(RT)
+    1.5 times too long): refused, as are a state space that is none, positions or laps of
+    another shape, a height other than the grid's and a window holding none of the frames;
+    a lag computed as a quotient (0.3 / 0.1 = 2.9999999999999996) is taken as 3."""
+    def made(**changes):
+        given = {"states": np.array(window.states), "vertical": np.array(window.vertical),
+                 "times": np.array(window.times), "lag_frames": window.lag_frames,
+                 "frame_interval": window.frame_interval, "height": window.height,
+                 "state_space": window.state_space, "window": window.window}
+        given.update(changes)
+        return DiscreteTrajectories(**given)
+
+    shape = window.states.shape
+    for changes, message in (
+            ({"lag_frames": 1.5}, r"lag of 1.5 frames: a whole number of frames"),
+            ({"lag_frames": True}, r"lag of True frames"),
+            ({"state_space": (6, 38)}, r"state_space \(6, 38\) is no state space"),
+            ({"positions": np.zeros(shape + (3,))[:, :-1]}, r"positions .* for states"),
+            ({"laps": np.zeros((shape[0], 5), int)}, r"laps \(.*, 5\) of type"),
+            ({"height": 950.0}, r"height 950 m, but the state space's grid is 0.95 m high"),
+            ({"window": (100.0, 200.0)}, r"window 100:200 s holds none of the frames")):
+        with pytest.raises(InputError, match=message):
+            made(**changes)
+    assert made(lag_frames=0.3 / 0.1 * window.lag_frames / 3).lag_frames == window.lag_frames

@@ -595,9 +595,9 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
             raise InputError(f"no residence begins and ends in any of the {stats.starts.size} "
                              f"windows of {stats.window_length:g} s in {path} "
                              f"({extent[0]:g}-{extent[1]:g} s): "
-                             + (f"{missed}" if missed else
-                                "a residence must fit in a window; give a longer "
-                                "--window-length (several mean residence times)"))
+                             + (f"{missed}; and " if missed else "")
+                             + "a residence must fit in a window: give a longer "
+                             "--window-length (several mean residence times)")
         judged = None
         if judge is not None:
             judged = _judged_window(traj, judge, span, extent, bin_width, kwargs)

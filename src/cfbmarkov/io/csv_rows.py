@@ -60,7 +60,8 @@ def row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
     while lines or (lines := fh.readlines(CHUNK_CHARS)):
         if not lines[-1].endswith("\n"):          # the file's last line, unterminated
             _check_last_line(lines, line_no, layout, label, shortest)
-        values = _parse_rows(lines, line_no, layout, label)
+        values = _parse_rows(lines, line_no, layout, label,
+                             first=line_no == layout.first_data_line)
         _check_keys(values, it, iid, lines, line_no, label)
         if iid is not None:
             ids = _exact_block_ids(values[:, iid], lines, line_no, layout, label)
@@ -82,8 +83,10 @@ def row_blocks(fh: TextIO, layout: CsvLayout, label: str, *, streaming: bool
             yield values
 
 
-def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -> np.ndarray:
-    """Rows of numbers from CSV lines (blank and '#' lines skipped); line_no numbers lines[0]."""
+def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str,
+                first: bool = True) -> np.ndarray:
+    """Rows of numbers from CSV lines (blank and '#' lines skipped); line_no numbers lines[0];
+    ``first``: the file's first rows (where a column without a name shows in every row)."""
     text = [line.replace(",", ".") for line in lines] if layout.decimal_comma else lines
     if layout.delimiter is not None:      # a spreadsheet's ghost rows (only delimiters) are blank
         ghost = layout.delimiter + " \t\r\n"
@@ -98,7 +101,7 @@ def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -
     except ValueError as exc:
         raise InputError(_locate_bad_row(lines, line_no, layout, label, exc)) from None
     if len(layout.usecols) != n:          # np.loadtxt reads a longer row's first columns
-        _check_row_lengths(text, line_no, layout, label)
+        _check_row_lengths(text, line_no, layout, label, first)
     if values.size == 0:
         return np.empty((0, len(layout.used)))
     if values.shape[1] != len(layout.used):
@@ -114,14 +117,15 @@ def _parse_rows(lines: list[str], line_no: int, layout: CsvLayout, label: str) -
     return values
 
 
-def _check_row_lengths(text: list[str], line_no: int, layout: CsvLayout, label: str) -> None:
+def _check_row_lengths(text: list[str], line_no: int, layout: CsvLayout, label: str,
+                       first: bool = True) -> None:
     """Refuse rows with more values than the header names where their values would be read
-    from the wrong columns: every row longer (a column without a name in the header, as a
-    row index written by R's ``write.table`` or pandas' ``to_csv(index_label=False)``), or
-    a row longer where a used column lies after an unused one (a text value holding the
-    delimiter, unquoted). Empty values after the named columns (a spreadsheet's ghost
-    cells), and a longer row whose used columns all come before the unused ones (read
-    right), are allowed."""
+    from the wrong columns: every one of the file's first rows longer (``first``: a column
+    without a name in the header, as a row index written by R's ``write.table`` or pandas'
+    ``to_csv(index_label=False)``), or a row longer where a used column lies after an unused
+    one (a text value holding the delimiter, unquoted). Empty values after the named columns
+    (a spreadsheet's ghost cells), and a longer row whose used columns all come before the
+    unused ones (read right), are allowed."""
     n = len(layout.header)
     if layout.delimiter is None:
         longer = [k for k, line in enumerate(text) if len(line.split("#", 1)[0].split()) > n]
@@ -139,7 +143,7 @@ def _check_row_lengths(text: list[str], line_no: int, layout: CsvLayout, label: 
     rows = sum(1 for line in text if line.split("#", 1)[0].strip())
     k, count = bad[0]
     where = f"{label}: line {line_no + k}: {count} values, the header names {n} columns"
-    if len(bad) == rows:
+    if first and len(bad) == rows:
         raise InputError(f"{where} in every row, so each value would be read from the wrong "
                          "column; name every column in the header (a row index written "
                          "without a name: R's write.table, or pandas' to_csv with "
@@ -194,7 +198,7 @@ def _locate_bad_row(lines: list[str], line_no: int, layout: CsvLayout, label: st
         if len(fields) != n and (len(fields) < n or len(layout.usecols) == n):
             return (f"{label}: line {line_no + k}: {len(fields)} values, the header names "
                     f"{n} columns{cut}")
-        if len(fields) > n and _shifted(layout):
+        if len(fields) > n and any(f.strip() for f in fields[n:]) and _shifted(layout):
             return (f"{label}: line {line_no + k}: {len(fields)} values, the header names "
                     f"{n} columns: {_UNQUOTED.format(layout.delimiter or 'space')}{cut}")
         for name, col in zip(layout.used, layout.usecols):

@@ -30,7 +30,6 @@ See ``docs/definitions.md`` (States and transitions) for the definitions.
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -145,15 +144,18 @@ class DiscreteTrajectories:
         if self.times.shape != (self.states.shape[0],):
             raise InputError(f"discrete trajectories: {self.times.size} times for "
                              f"{self.states.shape[0]} frames")
-        if not (isinstance(self.lag_frames, (int, np.integer))
-                or (isinstance(self.lag_frames, (float, np.floating))
-                    and float(self.lag_frames).is_integer())):
+        whole = (not isinstance(self.lag_frames, bool)
+                 and isinstance(self.lag_frames, (int, np.integer, float, np.floating))
+                 and np.isfinite(self.lag_frames)
+                 and abs(self.lag_frames - round(self.lag_frames)) <= 1e-9 * abs(
+                     self.lag_frames))
+        if not whole:
             # a fractional lag counts transitions of whole frames labelled with its length
             raise InputError(f"lag of {self.lag_frames!r} frames: a whole number of frames "
-                             "(the lag's length over the frame interval)")
+                             "(round(lag / frame_interval))")
+        object.__setattr__(self, "lag_frames", int(round(self.lag_frames)))
         if int(self.lag_frames) < 1:
             raise InputError(f"lag of {self.lag_frames} frames: must be at least 1")
-        object.__setattr__(self, "lag_frames", int(self.lag_frames))
         if not (np.isfinite(self.frame_interval) and self.frame_interval > 0):
             raise InputError(f"frame interval {self.frame_interval!r} s must be positive")
         if not hasattr(self.state_space, "n_states"):
@@ -184,11 +186,12 @@ class DiscreteTrajectories:
             raise InputError(f"discrete trajectories: laps {self.laps.shape} of type "
                              f"{self.laps.dtype} for states {shape}: give whole numbers [T, N]")
         space_height = getattr(self.state_space, "height", None)
-        if space_height is not None and not math.isclose(float(space_height),
-                                                         float(self.height), rel_tol=1e-9):
-            raise InputError(f"discrete trajectories: height {self.height:g} m, but the state "
-                             f"space's grid is {float(space_height):g} m high; give the "
-                             "riser's height in m, as the grid has it")
+        if space_height is not None and not np.isclose(float(space_height),
+                                                       float(self.height)):
+            # the tolerance of discretize's domain check (check_domain)
+            raise InputError(f"discrete trajectories: height {self.height:.10g} m, but the "
+                             f"state space's grid is {float(space_height):.10g} m high; give "
+                             "the riser's height in m, as the grid has it")
         if self.window is not None and self.times.size:
             a, b = (float(v) for v in self.window)
             tol = self._tolerance()

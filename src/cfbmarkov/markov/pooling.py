@@ -295,6 +295,10 @@ def same_run_frame(a, b) -> float | None:
 #: both files beyond which two frames are taken for one run's
 SHARED_POSITIONS = 0.5
 
+#: the relative resolution below which two coordinates are the same written again
+#: (2^-20, a little coarser than float32's 2^-24)
+FLOAT32_RESOLUTION = 2.0 ** -20
+
 #: the most decimals (of m) to which a file's coordinates are told to be written: a copy
 #: written again to k decimals (k <= 9)
 MOST_DECIMALS = 9
@@ -303,9 +307,11 @@ MOST_DECIMALS = 9
 def shared_positions(a, i: int, b, j: int) -> bool:
     """Whether frame ``i`` of ``a`` and frame ``j`` of ``b`` hold one run's particles: more
     than :data:`SHARED_POSITIONS` of the particles in view of the frame with fewer sit at
-    the same coordinates in the other, whatever their ids and order: bit for bit, or, where
-    a frame's coordinates were written to k decimals (:func:`rounding_step`: a copy written
-    again, rounded), within half that step (10^-k m) in every coordinate.
+    the same coordinates in the other, whatever their ids and order: bit for bit, or within
+    half the step to which a frame's coordinates were written (:func:`rounding_step`: a copy
+    written again, rounded) and at least :data:`FLOAT32_RESOLUTION` of the largest
+    coordinate (a copy written to 10 significant digits, or as float32), in every
+    coordinate.
 
     A copy, a link, a copy with its particles reordered or renumbered, a part of a run
     (some of its particles), or a copy with its coordinates rounded shares them all; two
@@ -335,12 +341,16 @@ def shared_positions(a, i: int, b, j: int) -> bool:
     if _share_found(rows) > SHARED_POSITIONS * fewer:
         return True
     steps = [s for s in (rounding_step(x) for x in rows) if s is not None]
-    if not steps:
-        return False
     from scipy.spatial import cKDTree
 
-    # within half the coarser step in every coordinate: how far rounding moves a value
-    reach = 0.5 * max(steps) * (1.0 + 1e-6)
+    # within half the coarser step in every coordinate (how far rounding moves a value),
+    # and at least a float32's resolution of the coordinates (a copy written to 10
+    # significant digits, or as float32: 1 um on a 1 m riser, which independent runs'
+    # particles come within for some 1e-4 of them even packed as 70 um grains)
+    scale = max(float(np.nanmax(np.abs(x))) if x.size else 0.0 for x in rows)
+    reach = max(0.5 * max(steps, default=0.0) * (1.0 + 1e-6), FLOAT32_RESOLUTION * scale)
+    if not reach > 0.0:
+        return False
     small, large = sorted(rows, key=len)
     distance, _ = cKDTree(large).query(small, p=np.inf, distance_upper_bound=reach)
     return int(np.isfinite(distance).sum()) > SHARED_POSITIONS * fewer
