@@ -618,3 +618,27 @@ def test_memory_of_a_fast_rise_takes_the_minimal_image_only_through_a_periodic_b
     drow, _ = previous.offsets(discretize(path, previous, 0.1, (0.1, 0.5)).states[:, 0])
     # rows 0 -> 3 in one lag: 3 rows below on an open riser, 1 row above (of 4) periodic
     assert drow[jump] == (-3 if boundary == "open" else 1)
+
+
+def test_an_open_risers_counts_at_a_lag_of_several_frames_are_one_sequences(tmp_path):
+    """At a lag of k frames every frame starts a transition, so the model's counts hold
+    each exit, entry and censored track once for each of the lag's k sequences of frames:
+    its summary and warnings give one sequence's (the counts over k; 598 exits had printed
+    for the 200 of a lag of one frame, and the inflow-outflow test ran on k-fold counts),
+    and the model file keeps k."""
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.spaces import state_space_from_name
+
+    path = _small_chain_file(tmp_path / "chain.h5", 2, 8, stay=0.4, inflow=3.0, seed=7)
+    space = state_space_from_name("cells", 2, 8, 0.02, 0.2)
+    lines = {}
+    for k in (1, 3):
+        model = fit_model(path, space, 0.01 * k, (2.0, 8.0), "mle")
+        flow = model.open_flow
+        assert flow.lag_sequences == k
+        lines[k] = flow.summary_line()
+        assert MarkovModel.load(model.save(tmp_path / f"m{k}.h5")).open_flow.lag_sequences == k
+    exits = {k: int(line.split("open riser: ")[1].split(" exits")[0]) for k, line in
+             lines.items()}
+    assert abs(exits[3] - exits[1]) <= 0.02 * exits[1] + 2, lines
+    assert "are 3 times these" in lines[3] and "times these" not in lines[1]

@@ -43,7 +43,7 @@ from cfbmarkov.markov.open_flow import OpenFlow
 from cfbmarkov.markov.states import StateSpace
 
 
-def open_chain(counts: TransitionCounts) -> OpenFlow:
+def open_chain(counts: TransitionCounts, lag_sequences: int = 1) -> OpenFlow:
     """The open riser's part of a model from its counts (pooled, maximum likelihood).
 
     Each state i leaves to the outside with probability r_i = X_i / (sum_j C_ij + X_i)
@@ -57,6 +57,9 @@ def open_chain(counts: TransitionCounts) -> OpenFlow:
     ----------
     counts : TransitionCounts
         Counts of an open riser (``faces`` not None).
+    lag_sequences : int, optional
+        The lag in frames: the sequences of frames one lag apart the counts were summed
+        over (:attr:`OpenFlow.lag_sequences`).
 
     Returns
     -------
@@ -85,7 +88,8 @@ def open_chain(counts: TransitionCounts) -> OpenFlow:
                     censored_tracks=(max(int(faces.vanished.sum() - faces.returns.sum()), 0),
                                      int(faces.appeared.sum())),
                     returned_entries=int(faces.returns.sum()),
-                    returned_time=float(faces.returned_time.sum()))
+                    returned_time=float(faces.returned_time.sum()),
+                    lag_sequences=int(lag_sequences))
 
 
 #: relative difference between a given lag and the frames it spans (lag frames x frame
@@ -251,7 +255,8 @@ class TransitionEstimator:
         pooled = len(windows) > 1 and all(w.window is not None for w in windows)
         model = self.fit_counts(counts, window=windows[0].window,     # counted for it alone
                                 source=sources[0] if len(sources) == 1 else sources, adopt=True,
-                                run_windows=[w.window for w in windows] if pooled else None)
+                                run_windows=[w.window for w in windows] if pooled else None,
+                                lag_sequences=int(windows[0].lag_frames))
         if self.coherent:
             model = model.with_coherence(calibrate_coherence(model, windows))
         return model
@@ -357,7 +362,8 @@ class TransitionEstimator:
         return pooled
 
     def fit_counts(self, counts: TransitionCounts, window=None, source="", *,
-                   adopt: bool = False, run_windows=None) -> MarkovModel:
+                   adopt: bool = False, run_windows=None,
+                   lag_sequences: int = 1) -> MarkovModel:
         """Form the model from counts already gathered (e.g. by cross-validation).
 
         Parameters
@@ -375,6 +381,9 @@ class TransitionEstimator:
         run_windows : sequence of (float, float), optional
             A pooled fit's window (s) of each run of ``source`` (a list), recorded in the
             model.
+        lag_sequences : int, optional
+            An open riser's lag in frames, the sequences of frames its counts were summed
+            over (:attr:`~cfbmarkov.markov.open_flow.OpenFlow.lag_sequences`).
 
         Returns
         -------
@@ -391,7 +400,8 @@ class TransitionEstimator:
                   "counts_down": counts.counts_down}
         if not adopt:       # the model's own copies
             square = {name: np.array(value) for name, value in square.items()}
-        open_flow = open_chain(counts) if counts.faces is not None else None
+        open_flow = (open_chain(counts, lag_sequences) if counts.faces is not None
+                     else None)
         return MarkovModel(
             transition_matrix=matrix, **square, state_space=self.state_space, lag=self.lag,
             estimator=self.name, window=tuple(window) if window is not None else None,

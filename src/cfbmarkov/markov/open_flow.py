@@ -66,6 +66,12 @@ class OpenFlow:
         The residence time (s) that no transition of the chain counts around the returns:
         from a returning particle's last state before its fall to its first after it,
         summed.
+    lag_sequences : int
+        The sequences of frames one lag apart the counts were summed over: the lag in
+        frames (every frame starts a transition), so that an exit, entry, return or
+        censored track every sequence sees is counted that many times; one sequence's
+        counts, on average, are the counts over it (:meth:`observed`). 1 in a model file
+        written without it.
 
     Raises
     ------
@@ -89,6 +95,7 @@ class OpenFlow:
     censored_tracks: tuple[int, int] = (0, 0)
     returned_entries: int = 0
     returned_time: float = 0.0
+    lag_sequences: int = 1
 
     def __post_init__(self):
         s = int(np.size(self.exit_probability))
@@ -105,8 +112,13 @@ class OpenFlow:
             object.__setattr__(self, name, value)
         if self.exit_probability.max() > 1.0:
             raise InputError("model exit probabilities exceed 1")
+        if (isinstance(self.lag_sequences, bool)
+                or not isinstance(self.lag_sequences, (int, np.integer))
+                or self.lag_sequences < 1):
+            raise InputError(f"model lag_sequences {self.lag_sequences!r} must be a whole "
+                             "number >= 1")
         if self.entry_counts.sum() == 0:
-            began = int(self.censored_tracks[1])
+            began = self.observed(self.censored_tracks[1])
             away = (f"; {began} tracks began in it more than one cell from the inlet, "
                     "censored: where particles are inserted or come into view above the "
                     "inlet's cell, taller --cells (or a shorter lag) count them as entries"
@@ -124,6 +136,22 @@ class OpenFlow:
                              "count >= 0")
         if not (np.isfinite(self.returned_time) and self.returned_time >= 0):
             raise InputError(f"model returned_time {self.returned_time!r} s must be >= 0")
+
+    def observed(self, count) -> int:
+        """A count summed over the :attr:`lag_sequences` as one sequence of frames a lag
+        apart sees it, on average (the count over the sequences, rounded): each exit,
+        entry, return or censored track once where every sequence sees it.
+
+        Parameters
+        ----------
+        count : int or float
+            A count of the model's (e.g. ``exit_counts.sum()``).
+
+        Returns
+        -------
+        int
+        """
+        return int(round(float(count) / int(self.lag_sequences)))
 
     @property
     def n_states(self) -> int:
@@ -216,7 +244,7 @@ class OpenFlow:
         """What a model file stores of the open riser: the datasets ``exit_probability``
         [S] float64, ``exit_counts`` and ``entry_counts`` [S] int64, and the attributes
         ``boundary = "open"``, ``inflow_per_lag``, ``censored_tracks`` (vanished,
-        appeared; int64), ``returned_entries`` and ``returned_time``.
+        appeared; int64), ``returned_entries``, ``returned_time`` and ``lag_sequences``.
 
         Returns
         -------
@@ -226,7 +254,8 @@ class OpenFlow:
         attrs = {"boundary": Boundary.OPEN.value, "inflow_per_lag": float(self.inflow_per_lag),
                  "censored_tracks": np.asarray(self.censored_tracks, dtype=np.int64),
                  "returned_entries": int(self.returned_entries),
-                 "returned_time": float(self.returned_time)}
+                 "returned_time": float(self.returned_time),
+                 "lag_sequences": int(self.lag_sequences)}
         return {name: getattr(self, name) for name in OPEN_DATASETS}, attrs
 
     @classmethod
@@ -254,6 +283,7 @@ class OpenFlow:
                    censored_tracks=(int(censored[0]), int(censored[1])),
                    returned_entries=int(group.attrs.get("returned_entries", 0)),
                    returned_time=float(group.attrs.get("returned_time", 0.0)),
+                   lag_sequences=int(group.attrs.get("lag_sequences", 1)),
                    **{name: group[name][()] for name in OPEN_DATASETS})
 
     # -- description -------------------------------------------------------------------
@@ -265,14 +295,18 @@ class OpenFlow:
         -------
         str
         """
-        return (f"  open riser: {int(self.exit_counts.sum())} exits through the outlet, "
-                f"{int(self.entry_counts.sum())} entries through the inlet "
+        seen = self.observed
+        return (f"  open riser: {seen(self.exit_counts.sum())} exits through the outlet, "
+                f"{seen(self.entry_counts.sum())} entries through the inlet "
                 f"({self.inflow_per_lag:.4g} per lag) into "
                 f"{int(np.count_nonzero(self.entry_counts))} states"
-                + (f", {self.returned_entries} returns through it (back after a fall out "
-                   "or out of view: no entry)" if self.returned_entries else "")
+                + (f", {seen(self.returned_entries)} returns through it (back after a fall "
+                   "out or out of view: no entry)" if self.returned_entries else "")
                 + "; tracks censored (ended or began away from the faces): "
-                f"{self.censored_tracks[0]}, {self.censored_tracks[1]}")
+                f"{seen(self.censored_tracks[0])}, {seen(self.censored_tracks[1])}"
+                + (f" (one sequence of frames a lag apart, on average: the model's "
+                   f"counts, of every pair of frames, are {self.lag_sequences} times these)"
+                   if self.lag_sequences > 1 else ""))
 
     def warnings(self) -> list[str]:
         """Lines about many tracks that ended or began away from the faces (more than
@@ -290,7 +324,10 @@ class OpenFlow:
         list of str
         """
         lines = []
-        entries, exits = int(self.entry_counts.sum()), int(self.exit_counts.sum())
+        # one sequence's counts (the lag's sequences of frames summed count an event once
+        # a sequence): the Poisson noise is that of one sequence's events
+        entries, exits = self.observed(self.entry_counts.sum()), self.observed(
+            self.exit_counts.sum())
         if abs(entries - exits) > max(IMBALANCE_SHARE * max(entries, exits),
                                       3.0 * np.sqrt(entries + exits)):
             lines.append(
@@ -302,7 +339,7 @@ class OpenFlow:
                 "residence (the RTD, exit means) are not affected, its Monte Carlo's hold-up "
                 "may be. Fit on a window of steady flow, or import the riser from its "
                 "inlet to its outlet where solids leave or enter elsewhere")
-        returned = int(self.returned_entries)
+        returned = self.observed(self.returned_entries)
         if returned > CENSORED_SHARE * entries:
             lines.append(
                 f"  {returned} returns through the inlet against {entries} entries: particles "
@@ -311,12 +348,13 @@ class OpenFlow:
                 "a residence observed does (docs/definitions.md, Open risers), but it has no "
                 "state below the inlet or out of view, and its transitions leave out the time "
                 "from a particle's last state before the fall to its first after it, "
-                f"{self.returned_time / max(entries, 1):.3g} s a residence on average: the "
+                f"{self.returned_time / max(float(self.entry_counts.sum()), 1.0):.3g} s a "
+                "residence on average: the "
                 "flow's E(RT) may be that much longer than the chain's. Import the riser from "
                 "farther below the inlet, so that the falls stay inside it")
         for what, censored, counted, face in (
-                ("ended", self.censored_tracks[0], int(self.exit_counts.sum()), "outlet"),
-                ("began", self.censored_tracks[1], int(self.entry_counts.sum()), "inlet")):
+                ("ended", self.observed(self.censored_tracks[0]), exits, "outlet"),
+                ("began", self.observed(self.censored_tracks[1]), entries, "inlet")):
             if censored > CENSORED_SHARE * (censored + counted):
                 lines.append(
                     f"  {censored} tracks {what} more than one cell from the {face} "
