@@ -348,8 +348,8 @@ def write_open_run(path: str | os.PathLike, flow: RiserFlow, n_particles: int, d
     a pass down, as far below the top. Those tracks begin (and the ones before a pass down
     end) away from the faces: the fit counts most of them as censored, not as entries
     (117 entries and 32 returns against 3215 exits on 1000 particles, 2-7 s, seed 1), and
-    warns that the inflow
-    does not balance the outflow, so a prediction from such a model drains the riser. It is
+    warns that the inflow does not balance the outflow, so a prediction from such a model
+    drains the riser. It is
     therefore not a clean open riser of the periodic chain, only a file of the open kind
     whose particle-frames, and so the work of a fit or a prediction, stay those of the
     periodic run (``cfbmarkov bench``'s open figures); the open risers of the tests are
