@@ -214,6 +214,8 @@ def test_one_sided_profiles_are_said_as_the_windows_flow():
 def test_narrow_intervals_keep_three_steps_between_their_ends():
     assert interval_text(0.01331, 0.01412) == "0.0133–0.0142"      # rounded outwards
     assert interval_text(0.051, 0.054) == "0.051–0.054"
+    # a digit more where the outward rounding widens it by more than a quarter
+    assert interval_text(0.05098, 0.05374) == "0.0509–0.0538"
 
 
 def test_winners_named_without_the_halves_say_so():

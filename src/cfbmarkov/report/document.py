@@ -189,7 +189,8 @@ def interval_text(lo, hi, decimals: int = 3, sep: str = "–") -> str:
         differ, would print fewer than three steps of the last digit apart, so that an
         interval never collapses to "0.014-0.014" nor reads as "0.013-0.014"; the lower
         end rounded down and the upper up, so that the text holds every value the interval
-        holds.
+        holds, with a digit more where that rounding widens it by more than
+        :data:`WIDENED`.
     sep : str, optional
         Between the ends.
 
@@ -205,12 +206,21 @@ def interval_text(lo, hi, decimals: int = 3, sep: str = "–") -> str:
     # ends at least three steps of the last digit apart: "0.0133-0.0142", not "0.013-0.015"
     while d < 12 and a != b and abs(round(b * 10 ** d) - round(a * 10 ** d)) < 3:
         d += 1
-    # rounded outwards, so that the printed interval holds every value the stored one holds
-    scale = 10.0 ** d
-    low, high = a * scale, b * scale
-    low = math.floor(low + 1e-9 * abs(low)) / scale
-    high = math.ceil(high - 1e-9 * abs(high)) / scale
-    return f"{low:.{d}f}{sep}{high:.{d}f}"
+    while True:
+        # rounded outwards, so that the printed interval holds every value the stored one
+        # holds; a digit more where that widens it by more than a quarter ("0.0509-0.0538"
+        # for 0.05098-0.05374, not "0.050-0.054")
+        scale = 10.0 ** d
+        low, high = a * scale, b * scale
+        low = math.floor(low + 1e-9 * abs(low)) / scale
+        high = math.ceil(high - 1e-9 * abs(high)) / scale
+        if d >= 12 or not b > a or high - low <= WIDENED * (b - a):
+            return f"{low:.{d}f}{sep}{high:.{d}f}"
+        d += 1
+
+
+#: how much wider than the stored interval its printed ends may be (:func:`interval_text`)
+WIDENED = 1.25
 
 
 def duration_text(seconds) -> str:
