@@ -524,7 +524,7 @@ def _check_given_bins(ref: Trajectories, pred: Trajectories, bin_width: float, o
                          + (", or --basis events (the reference holds exact pass events)"
                             if ref.has_events and not on.events else ""))
     ratio = bin_width / step
-    if abs(ratio - round(ratio)) > 1e-6 * max(ratio, 1.0):
+    if abs(ratio - round(ratio)) > WHOLE_FRAMES:    # the rule a lag's whole frames keep
         low = math.floor(ratio) * step
         warnings.append(f"--bin-width {bin_width:g} s is no whole number of the residence "
                         f"times' step, {step:g} s ({what}): they fall {math.floor(ratio):d} "
