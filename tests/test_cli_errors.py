@@ -23,7 +23,8 @@ def run(tmp_path):
 
 @pytest.mark.parametrize("args, expected", [
     (("fit", "--lag", "0.025", "--window", "0.5:1.5", "-o", "m.h5"),
-     "its frames are 0.002 s apart: use --lag 0.002 or a multiple (the nearest: 0.024)"),
+     "its frames are 0.002 s apart: use --lag 0.002 or a multiple (lag=0.002 from Python; "
+     "the nearest: 0.024)"),
     (("fit", "--lag", "0.002", "--window", "10:15", "-o", "m.h5"),
      "window 10:15 s lies outside the data of {run} (0 to 2 s)"),
     (("stationarity", "--span", "5:20"), "span 5:20 s lies outside the frames of {run} (0 to 2 s)"),

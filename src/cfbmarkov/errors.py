@@ -31,7 +31,7 @@ class LagError(InputError):
         self.lag, self.interval, self.nearest, self.path = lag, interval, nearest, path
         super().__init__(f"lag {lag:g} s is not a whole multiple of the frame interval of "
                          f"{path}: its frames are {interval} s apart: use --lag {interval} or "
-                         f"a multiple (the nearest: {nearest})")
+                         f"a multiple (lag={interval} from Python; the nearest: {nearest})")
 
     def for_model(self) -> str:
         """The message where the lag is a fitted model's.

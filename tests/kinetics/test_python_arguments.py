@@ -124,3 +124,39 @@ def test_a_negative_value_from_a_cell_field_is_refused_as_a_negative_rate():
     with pytest.raises(InputError, match="property X: rate -0.2 < 0; rates and coefficients "
                                          "must be >= 0"):
         Property("X", FirstOrder(), {"rate": FromField("solids_fraction", -0.2, 2.0, 0.1)})
+
+
+def test_a_setting_of_the_law_given_as_a_parameter_is_sent_to_the_law():
+    """A kinetics file gives wall_temperature beside the parameters; in Python it is the
+    law's own (HeatExchange(wall_temperature=...)), and the refusal says so."""
+    with pytest.raises(InputError, match=r"takes no wall_temperature as a parameter; give it "
+                                         r"to the law: HeatExchange\(wall_temperature=\.\.\.\)"):
+        Property("T", HeatExchange(), {"coefficient": 2.0, "temperature": 800.0,
+                                       "wall_temperature": 600.0}, initial=300.0)
+    with pytest.raises(InputError, match=r"takes no bogus as a parameter$"):
+        Property("X", FirstOrder(), {"rate": 1.0, "bogus": 1.0})
+
+
+def test_a_non_finite_value_in_a_table_is_named_by_its_row_and_cell():
+    table = np.array([[c, r, 1.0] for r in range(3) for c in range(2)])
+    table[3, 2] = np.nan
+    with pytest.raises(InputError, match=r"data row 4 \(col 1, row 1\) gives the value nan; "
+                                         "give a finite number for every cell"):
+        ByCell(table)
+
+
+def test_a_grid_array_of_the_wrong_shape_is_named_by_its_shape():
+    """ByCell.from_grid(values) takes values[row, col]; an array laid out (columns, rows)
+    is named as transposed, with the shape the grid needs and the parameter's name."""
+    from cfbmarkov.markov import CellGrid
+
+    grid = CellGrid(2, 5, 0.04, 0.3)
+    rate = ByCell.from_grid(np.ones((2, 5)))
+    prop = Property("X", FirstOrder(), {"rate": rate})
+    with pytest.raises(InputError, match=r"array \(rate\): values of shape \(2, 5\) "
+                                         r"\(transposed: values\[row, col\], row 0 at the "
+                                         r"bottom\); the model's grid 2x5 needs shape "
+                                         r"\(rows, columns\) = \(5, 2\)"):
+        prop.per_cell(grid)
+    good = Property("X", FirstOrder(), {"rate": ByCell.from_grid(np.arange(10.0).reshape(5, 2))})
+    np.testing.assert_array_equal(good.per_cell(grid)["rate"], np.arange(10.0))

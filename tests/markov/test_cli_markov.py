@@ -279,6 +279,13 @@ def test_a_window_between_frames_is_said_with_the_frames_it_holds(tmp_path, caps
     assert notes[0].endswith("falls between the frames of " + str(markov_run) + " (every "
                              "0.025 s): the model is fitted on those it holds, 1.025 to "
                              "4.975 s")
+    # and stores them as its window: its figures "as the window sees it" are of 3.95 s of
+    # frames (79 lags), not of the 3.98 s typed (80 lags)
+    from cfbmarkov.markov.model import MarkovModel
+
+    model = MarkovModel.load(tmp_path / "m.h5")
+    assert model.window == pytest.approx((1.025, 4.975))
+    assert "window 1.025:4.975 s" in model.summary()
     code, _, err = run_cli(capsys, "fit", markov_run, "--cells", "4x16", "--lag", "0.05",
                            "--window", "1:5", "--resamples", "0", "-q", "-o", tmp_path / "n.h5")
     assert code == 0 and "falls between the frames" not in err

@@ -808,3 +808,47 @@ def test_propagate_and_monte_carlo_beyond_memory_are_refused_in_one_line():
                        r"lags would need .*; run fewer particles or lags"):
         model.monte_carlo(np.zeros(10 ** 6, int), 10 ** 6)
     assert model.propagate(np.full(4, 0.25), 3).shape == (4, 4)
+
+
+def test_an_rtd_already_seen_in_a_window_is_not_weighted_again():
+    """in_window() weights the intrinsic f(k) by (n_W - k)+; on an RTD that is already a
+    window's it would weight twice (E(RT) 8 % low on the demo's model with no word):
+    refused, naming the model's rtd(window=...)."""
+    model = ladder_model(10, 0.4, lag=0.01)
+    seen = model.rtd(window=0.6)
+    assert seen.window == pytest.approx(0.6)
+    with pytest.raises(InputError, match=r"already the one a 0\.6 s window sees.*"
+                                         r"model\.rtd\(window=\.\.\.\)"):
+        seen.in_window(0.8)
+    intrinsic = model.rtd()
+    assert intrinsic.in_window(0.6).mean == pytest.approx(seen.mean, rel=1e-12)
+
+
+@pytest.mark.parametrize("window, message", [
+    (float("nan"), "window length nan s is not a finite number"),
+    (-1.0, "window length -1 s must be positive"),
+    ((0.1, 0.6), r"window \(0\.1, 0\.6\) is not a length"),
+    ("0.6", "is not a number"),
+    (1e9, "more than 10000000"),
+])
+def test_in_window_refuses_what_is_not_a_length(window, message):
+    with pytest.raises(InputError, match=message):
+        ladder_model(10, 0.4, lag=0.01).rtd().in_window(window)
+
+
+def test_a_window_shorter_than_a_lag_holds_no_residence():
+    with pytest.raises(CfbmarkovError, match="no residence of this model fits in a window of "
+                                             "0.001 s"):
+        ladder_model(10, 0.4, lag=0.01).rtd().in_window(0.001)
+
+
+@pytest.mark.parametrize("bin_width, upper, message", [
+    (0.0, 1.0, "RTD bin width 0 s must be positive"),
+    (-0.05, 1.0, "RTD bin width -0.05 s must be positive"),
+    (float("nan"), 1.0, "RTD bin width nan s is not a finite number"),
+    (0.05, -1.0, "upper edge -1 s must be positive"),
+    (1e-9, 1.0, r"1e\+09 bins, more than 10000000; give a bin width of at least 1e-07 s"),
+])
+def test_rtd_histogram_refuses_bins_it_cannot_draw(bin_width, upper, message):
+    with pytest.raises(InputError, match=message):
+        ladder_model(10, 0.4, lag=0.01).rtd().histogram(bin_width, upper)

@@ -106,8 +106,9 @@ def _fit(args) -> int:
                                   connected=args.connected, coherent=args.coherent)
         _refuse_an_open_riser_read_as_periodic(run, model, args.run, args.window)
         notes = _between_frames(run, args.window)
+        held_from = float(run.times[run.window(*args.window).start])   # its first frame
         if (model.window is not None
-                and model.window[0] > args.window[0] + run.time_tolerance):
+                and model.window[0] > held_from + run.time_tolerance):
             # a space with memory needs the frames before the window's first: at the
             # file's start, auto judges and fits from where that history begins
             notes.append(f"the window starts at {model.window[0]:g} s, the first frame with "
@@ -147,7 +148,7 @@ def _refuse_an_open_riser_read_as_periodic(run, model, path, window) -> None:
 
 def _between_frames(run, window) -> list[str]:
     """A note where a fitting window's ends fall between the run's frames: the frames it
-    holds, which the model is fitted on (the window is stored as given)."""
+    holds, which the model is fitted on and stores as its window)."""
     frames = run.window(*window)
     first, last = float(run.times[frames.start]), float(run.times[frames.stop - 1])
     tol = run.time_tolerance

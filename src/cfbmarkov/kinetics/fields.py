@@ -141,12 +141,22 @@ class ByCell(CellParameter):
         The key that named it (``rate_by_cell``), for messages.
     lines : ndarray of int64, shape (R,), optional
         The file line (from 1) of each row, for messages; None: the rows are numbered from 1.
+    shape : tuple of int, optional
+        The shape of the array :meth:`from_grid` read the table from, for messages (a
+        transposed array is named as such); None for a table given as rows.
+
+    Raises
+    ------
+    InputError
+        If the table is a file name or not numbers, or a value is not finite (naming its
+        row and cell).
     """
 
     table: np.ndarray
     source: str = "table"
     key: str = "value_by_cell"
     lines: np.ndarray | None = None
+    shape: tuple | None = None
 
     def __post_init__(self):
         if isinstance(self.table, (str, bytes, os.PathLike)):
@@ -166,6 +176,17 @@ class ByCell(CellParameter):
         object.__setattr__(self, "table", table)
         if self.lines is not None:
             object.__setattr__(self, "lines", read_only_copy(self.lines))
+        if table.ndim == 2 and table.shape[1] in (3, 4) and table.shape[0]:
+            bad = ~np.isfinite(table[:, -1])
+            if bad.any():    # named here, where the row is known, not later as "some cell"
+                i = int(np.flatnonzero(bad)[0])
+                line = (f"line {int(self.lines[i])}" if self.lines is not None
+                        else f"data row {i + 1}")
+                cell = ", ".join(f"{name} {table[i, c]:g}" for c, name in
+                                 enumerate(("col", "row", "depth")[:table.shape[1] - 1]))
+                raise InputError(f"{self.source} ({self.key}): {line} ({cell}) gives the "
+                                 f"value {table[i, -1]:g}; give a finite number for every "
+                                 "cell")
 
     @classmethod
     def from_grid(cls, values, source: str = "array", key: str = "value_by_cell") -> "ByCell":
@@ -197,9 +218,19 @@ class ByCell(CellParameter):
         else:
             raise InputError(f"{source} ({key}): values of shape (rows, columns) or (rows, "
                              f"depth_columns, columns), not {v.shape}")
-        return cls(table, source, key)
+        return cls(table, source, key, shape=tuple(int(n) for n in v.shape))
 
     def per_cell(self, space, fields=None):
+        if self.shape is not None:       # an array laid out as the grid: its shape says it
+            m, d, n = space.columns, space.depth_columns, space.rows
+            needed = (n, m) if d == 1 else (n, d, m)
+            if tuple(self.shape) != needed:
+                layout = "(rows, columns)" if d == 1 else "(rows, depth_columns, columns)"
+                flipped = (" (transposed: values[row, col], row 0 at the bottom)"
+                           if tuple(self.shape) == needed[::-1] else "")
+                raise InputError(f"{self.source} ({self.key}): values of shape "
+                                 f"{tuple(self.shape)}{flipped}; the model's grid "
+                                 f"{space.grid_text()} needs shape {layout} = {needed}")
         t = np.asarray(self.table, dtype=np.float64)
         if t.ndim != 2 or t.shape[1] not in (3, 4):
             raise InputError(f"{self.source} ({self.key}): a table of rows col, row[, depth], "

@@ -10,6 +10,7 @@ k and limit v_inf of every linear law and, over a lag, the exact affine maps.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import numbers
 import os
@@ -102,8 +103,14 @@ class Property:
                              + (f" (given {', '.join(unknown)}, which it takes no: a misspelt "
                                 "name?)" if unknown else ""))
         if given - names:
+            extra = sorted(given - names)
+            # a setting of the law itself (HeatExchange(wall_temperature=...)), which a
+            # kinetics file gives beside the parameters
+            own = [k for k in extra if k in getattr(type(self.law), "__dataclass_fields__", {})]
             raise InputError(f"property {self.name}: law {self.law.key} takes no "
-                             f"{', '.join(sorted(given - names))}")
+                             f"{', '.join(extra)} as a parameter"
+                             + (f"; give it to the law: {type(self.law).__name__}("
+                                + ", ".join(f"{k}=..." for k in own) + ")" if own else ""))
         initial = self.initial
         if initial is None:
             initial = (self.law.initial if isinstance(self.law, Custom)
@@ -133,6 +140,8 @@ class Property:
                 raise InputError(f"property {self.name}: parameter {key} = {value!r} is a "
                                  f"{type(value).__name__}; give a number, Constant(...), "
                                  "ByCell(...) or FromField(...) (cfbmarkov.kinetics)")
+            if isinstance(value, ByCell) and value.key == "value_by_cell":
+                value = dataclasses.replace(value, key=key)     # messages name the parameter
             table = np.asarray(value.table) if isinstance(value, ByCell) else None
             low = (value.value if isinstance(value, Constant) else
                    min(value.dense, value.dilute) if isinstance(value, FromField) else
@@ -169,7 +178,12 @@ class Property:
                 continue
             value = self.parameters[name].per_cell(space, fields)
             if not np.all(np.isfinite(value)):
-                raise InputError(f"property {self.name}: {name} is not finite in some cell")
+                cell = int(np.flatnonzero(~np.isfinite(value))[0])
+                m, d = space.columns, space.depth_columns
+                at = (f"col {cell % m}, row {cell // (m * d)}"
+                      + (f", depth {cell // m % d}" if d > 1 else ""))
+                raise InputError(f"property {self.name}: {name} is {value[cell]:g} in the cell "
+                                 f"{at}; give a finite value in every cell")
             if name not in signed and value.min() < 0:
                 raise InputError(f"property {self.name}: {name} {value.min():g} < 0; rates "
                                  "and coefficients must be >= 0")

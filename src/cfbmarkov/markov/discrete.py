@@ -593,6 +593,13 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
                                None if window is None else float(window[1]))
         first = 0
     rows = slice(first, stop)
+    if window is not None and stop > start:
+        # a window whose ends fall between frames is the frames it holds: its length is
+        # what the model's figures "as the window sees it" are of (4.975 s of frames for
+        # 10.01:15 on frames every 0.025 s, not 4.99 s)
+        held = float(trajectories.times[start]), float(trajectories.times[stop - 1])
+        tol = trajectories.time_tolerance
+        window = tuple(float(w) if abs(w - h) <= tol else h for w, h in zip(window, held))
     return WindowFrames(
         positions=trajectories.positions(rows),
         velocities=trajectories.velocities(rows) if velocities else None,

@@ -36,6 +36,7 @@ import scipy.sparse as sp
 from cfbmarkov._blas import one_blas_thread
 from cfbmarkov._repr import compact_repr
 from cfbmarkov.errors import CfbmarkovError, InputError
+from cfbmarkov.limits import MAX_BINS, MAX_STEPS, check_finite
 from cfbmarkov.markov.connectivity import closed_classes
 from cfbmarkov.markov.entry_chain import (DepthElimination, embedded_stationary,
                                           entry_matrix)
@@ -201,15 +202,31 @@ class ResidenceTimeDistribution:
 
         Raises
         ------
+        InputError
+            If ``window`` is not a positive finite length (s) of at most
+            :data:`~cfbmarkov.limits.MAX_STEPS` lags, or this RTD is already one a window
+            sees (its ``window`` set: weighting it again would count the window twice; ask
+            the model, :meth:`MarkovModel.rtd(window=...)
+            <cfbmarkov.markov.model.MarkovModel.rtd>`).
         CfbmarkovError
             If no residence fits in the window.
         """
+        if self.window is not None:
+            raise InputError(f"in_window(): this RTD is already the one a {self.window:g} s "
+                             "window sees, and weighting it again would count the window "
+                             "twice; ask the model for the window: model.rtd(window=...)")
+        if isinstance(window, (tuple, list, np.ndarray)) and np.ndim(window) >= 1:
+            raise InputError(f"in_window(): window {window!r} is not a length (s): give one "
+                             "number, the window's stop - start")
+        window = check_finite(window, "window length", "s", positive=True)
+        if window / self.lag > MAX_STEPS:
+            raise InputError(f"window length {window:g} s is {window / self.lag:.3g} lags of "
+                             f"{self.lag:g} s, more than {MAX_STEPS}; give a window length of "
+                             f"at most {MAX_STEPS * self.lag:g} s")
         n_window = int(round(window / self.lag))
         k = np.arange(1, self.probability.size + 1)
         weights = np.clip(n_window - k, 0, None).astype(np.float64)
         observed = self.probability * weights
-        resolved = (1.0 - self.unresolved) * float(observed.sum()) / (
-            float(self.probability.sum()) * n_window) if self.probability.sum() > 0 else 0.0
         if observed.sum() <= 0:
             held = np.flatnonzero(self.probability > 0)
             shortest = ("" if held.size == 0 else
@@ -217,6 +234,8 @@ class ResidenceTimeDistribution:
                         f"window of at least {(held[0] + 2) * self.lag:g} s")
             raise CfbmarkovError(f"no residence of this model fits in a window of {window:g} s"
                                  + shortest)
+        resolved = (1.0 - self.unresolved) * float(observed.sum()) / (
+            float(self.probability.sum()) * n_window)
         observed = observed[: max(n_window - 1, 1)]
         return ResidenceTimeDistribution(self.lag, observed / observed.sum(),
                                          min(1.0, max(0.0, 1.0 - resolved)),
@@ -244,7 +263,19 @@ class ResidenceTimeDistribution:
             Bin edges (s).
         probability : ndarray of float64, shape (B,)
             Probability per bin (of the resolved mass renormalised).
+
+        Raises
+        ------
+        InputError
+            If ``bin_width`` or ``upper`` is not a positive finite time, or the edges would
+            make more than :data:`~cfbmarkov.limits.MAX_BINS` bins.
         """
+        bin_width = check_finite(bin_width, "RTD bin width", "s", positive=True)
+        upper = check_finite(upper, "RTD histogram's upper edge", "s", positive=True)
+        if upper / bin_width > MAX_BINS:
+            raise InputError(f"RTD bins of {bin_width:g} s up to {upper:g} s are "
+                             f"{upper / bin_width:.3g} bins, more than {MAX_BINS}; give a "
+                             f"bin width of at least {upper / MAX_BINS:.3g} s")
         edges = np.arange(0.0, upper + 0.5 * bin_width, bin_width)
         prob, _ = np.histogram(self.times + 1e-6 * bin_width, bins=edges,
                                weights=self.probability / self.probability.sum())
