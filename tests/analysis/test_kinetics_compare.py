@@ -296,3 +296,39 @@ def test_compare_in_python_refuses_interval_options_as_the_command_line(predicti
         compare(run, pred, window=(6.0, 12.0), output=tmp_path / "c", figures=False,
                 **options)
     assert not (tmp_path / "c").exists()
+
+
+def test_the_models_exit_interval_carries_the_flow_term_its_rtd_interval_carries(tmp_path):
+    """Where the comparison's RTD interval carries the flow's variability between windows,
+    the model's exit-mean interval carries it too, as a stretch of every residence (its
+    relative SD of E(RT) times |d(exit mean)/d(ln s)|, on the same degrees of freedom), and
+    the interval method and the console verdict say so."""
+    from cfbmarkov.analysis.kinetics_compare import stretch_sensitivity
+    from cfbmarkov.cli.analysis import kinetics_verdict
+    from cfbmarkov.kinetics import load_kinetics
+    from cfbmarkov.markov import CellGrid, fit_model
+    from cfbmarkov.report.compare import compare
+
+    # E(RT) near 0.5 s: a 4 s fitting window holds two blocks of three of them
+    fast = RiserFlow(columns=4, rows=8, lag=0.02, persistence=False, rise_velocity=4.0,
+                     fall_velocity=-1.0)
+    run = write_run(tmp_path / "run.h5", fast, 150, 8.0, seed=2)
+    model = fit_model(run, CellGrid(fast.columns, fast.rows), fast.lag, (0.0, 4.0), "mle")
+    pred = model.predict(run, start=4.0, duration=4.0, seed=4, output=tmp_path / "pred.h5")
+    kin = _kinetics(tmp_path, "u", "rate = 1.0")
+    got = compare(run, pred, window=(4.0, 8.0), output=tmp_path / "a", figures=False,
+                  resamples=10, kinetics=kin)
+    flow = got["intervals"]["flow_sd"]
+    assert flow is not None, "the set-up's RTD interval carries a flow term"
+    block = got["kinetics"]["X"]["model"]
+    relative = flow["rt_mean"] / got["model"]["rt_mean"]
+    slope = stretch_sensitivity(model, load_kinetics(kin).per_state(model.state_space),
+                                model.flow_direction)["X"]
+    assert block["flow_sd"]["rt_mean_relative"] == pytest.approx(relative, rel=1e-9)
+    assert block["flow_sd"]["exit_mean"] == pytest.approx(abs(slope) * relative, rel=1e-9)
+    assert block["flow_sd"]["degrees_of_freedom"] == flow["degrees_of_freedom"]
+    assert "the flow's variability between windows" in block["interval_method"]
+    verdict = kinetics_verdict("X", got["kinetics"]["X"]["reference"]["exit_mean"], block,
+                               got["level"])
+    assert "with the flow's variability between windows" in verdict
+    assert "left out" not in verdict

@@ -947,3 +947,53 @@ def test_react_claims_its_output_before_any_work(fitted, tmp_path, capsys, monke
                  "0.5", "--duration", "1", "-o", str(model)])
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "input" in err, err
+
+
+def test_a_stretch_of_every_residence_moves_the_exit_mean_by_its_derivative(fitted):
+    """stretch_sensitivity: for a uniform first-order rate k the exit conversion of a
+    residence of n lags is 1 - exp(-k n lag), so d(exit mean)/d(ln s) is the RTD's mean of
+    k t exp(-k t), which the central difference in the rates gives to O(step^2)."""
+    from cfbmarkov.analysis.kinetics_compare import stretch_sensitivity
+    from cfbmarkov.kinetics import FirstOrder, Kinetics, Property
+    from cfbmarkov.markov import MarkovModel
+
+    _, _, path = fitted
+    model = MarkovModel.load(path)
+    k = 1.5
+    sk = Kinetics((Property("X", FirstOrder(), {"rate": k}),)).per_state(model.state_space)
+    rtd = model.rtd()
+    w = rtd.probability / rtd.probability.sum()
+    expected = float(np.sum(w * k * rtd.times * np.exp(-k * rtd.times)))
+    got = stretch_sensitivity(model, sk, model.flow_direction)["X"]
+    assert got == pytest.approx(expected, rel=1e-3)
+
+
+def test_the_exit_means_interval_carries_the_models_flow_term(fitted, tmp_path):
+    """A model whose E(RT) interval carries the flow's variability between windows (a
+    relative SD of E(RT) on some degrees of freedom) gives its exit means' intervals that
+    term too, as a stretch of every residence: |d(exit mean)/d(ln s)| times it, with
+    Student's t on its degrees of freedom; without it the bootstrap alone."""
+    import dataclasses
+
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_intervals, stretch_sensitivity
+    from cfbmarkov.markov import MarkovModel
+
+    folder, _, path = fitted
+    kin = load_kinetics(_write(tmp_path, GOOD, RATES))
+    model = MarkovModel.load(path)
+    plain = model.with_uncertainty(dataclasses.replace(
+        model.uncertainty, flow_sd=None, flow_degrees_of_freedom=None))
+    flowing = model.with_uncertainty(dataclasses.replace(
+        model.uncertainty, flow_sd=(0.1, 0.05), flow_degrees_of_freedom=3))
+    without = exit_mean_intervals(plain, kin, resamples=20, candidates=[folder / "run.h5"])
+    with_flow = exit_mean_intervals(flowing, kin, resamples=20,
+                                    candidates=[folder / "run.h5"])
+    assert without["flow_sd"] == {}
+    slope = stretch_sensitivity(model, kin.per_state(model.state_space, model.cell_fields),
+                                model.flow_direction)
+    for name in ("X", "T"):
+        term = with_flow["flow_sd"][name]
+        assert term["exit_mean"] == pytest.approx(abs(slope[name]) * 0.1, rel=1e-12)
+        assert term["rt_mean_relative"] == 0.1 and term["degrees_of_freedom"] == 3
+        (a, b), (c, d) = without["exit_mean"][name], with_flow["exit_mean"][name]
+        assert c < a and d > b

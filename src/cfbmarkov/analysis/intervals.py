@@ -99,6 +99,9 @@ class PredictionIntervals:
     bootstrap_widening : float or None
         The factor the bootstrap's distances to its quantiles were multiplied by for its
         blocks (:func:`~cfbmarkov.markov.uncertainty.bootstrap_widening`).
+    flow_relative : (float, float) or None
+        ``flow`` relative to the prediction's E(RT) and SD(RT) (fractions: what
+        :func:`flow_variability` measured); None with ``flow``.
     """
 
     level: float
@@ -114,6 +117,7 @@ class PredictionIntervals:
     flow: tuple[float, float] | None = None
     flow_degrees_of_freedom: int | None = None
     bootstrap_widening: float | None = None
+    flow_relative: tuple[float, float] | None = None
 
 
 class SourceChanged(InputError):
@@ -457,7 +461,8 @@ def prediction_intervals(model, samples: np.ndarray, edges: np.ndarray, window_l
         (float(max(model_mean[0], 0.0)), float(model_mean[1])),
         (float(max(model_sd[0], 0.0)), float(model_sd[1])),
         None if relative is None else (float(f_mean), float(f_sd)), dof,
-        bootstrap_widening(level, int(blocks), runs))
+        bootstrap_widening(level, int(blocks), runs),
+        None if relative is None else (float(relative[0]), float(relative[1])))
 
 
 #: most bins of a model's RTD interval (:func:`model_rtd_edges`)

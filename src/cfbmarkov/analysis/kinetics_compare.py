@@ -36,6 +36,7 @@ equal bins as the RTD has, at most :data:`EXIT_BINS`.
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 from typing import Any
 
@@ -338,6 +339,47 @@ def _windowed(model, sk, length: float, warnings, direction: str = "up",
         return {}
 
 
+#: the relative change of every rate by which :func:`stretch_sensitivity` differentiates
+STRETCH_STEP = 0.01
+
+
+def stretch_sensitivity(model, sk, direction: str = "up") -> dict[str, float]:
+    """How much each property's exact exit mean moves per relative stretch of every
+    residence: d(exit mean) / d(ln s) at s = 1, where every time the chain spends in a
+    state lasts s times as long.
+
+    For a linear law dv/dt = k_s (v_s - v) a stretch of time by s is the rate k_s s, so
+    the derivative is taken by central differences of :data:`STRETCH_STEP` in every rate
+    (``docs/definitions.md``, Properties: the flow's variability in the kinetics
+    intervals).
+
+    Parameters
+    ----------
+    model : MarkovModel
+        The fitted model.
+    sk : StateKinetics
+        The properties resolved on its states (linear laws).
+    direction : {"up", "down"}, optional
+        The direction exits are counted in.
+
+    Returns
+    -------
+    dict of str to float
+        Per property, in its own unit; {} where the exact answers cannot be had.
+    """
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
+    rate = np.asarray(sk.rate, dtype=np.float64)
+    try:
+        faster, slower = (exact_kinetics(model, dataclasses.replace(sk, rate=rate * factor),
+                                         direction=direction)
+                          for factor in (1.0 + STRETCH_STEP, 1.0 - STRETCH_STEP))
+    except CfbmarkovError:
+        return {}
+    return {name: (faster[name].exit_mean - slower[name].exit_mean) / (2.0 * STRETCH_STEP)
+            for name in faster if name in slower}
+
+
 #: state count up to which the kinetics interval takes every bootstrap resample
 KINETICS_FULL_STATES = 500
 #: the fewest resamples the kinetics interval takes on a large state space
@@ -511,7 +553,12 @@ def exit_mean_intervals(model, kinetics, answers=None, *, level: float = 0.9,
     dict
         ``exit_mean``: {name: [lo, hi] or None (fewer than 10 resamples solved)};
         ``after_passes``: {(name, n): [lo, hi] or None} of the carried properties;
-        ``resamples``: the resamples solved; ``level``.
+        ``resamples``: the resamples solved; ``level``; ``flow_sd``: {name: {"exit_mean":
+        absolute SD, "rt_mean_relative": E(RT)'s, "degrees_of_freedom": ...}} of the
+        properties whose exit-mean interval carries the flow's variability between windows
+        (the model's own, :attr:`MarkovModel.uncertainty` ``flow_sd``, as a stretch of every
+        residence: :func:`stretch_sensitivity`; a property that starts at entry; none where
+        the model's interval has no flow term).
 
     Raises
     ------
@@ -531,7 +578,8 @@ def exit_mean_intervals(model, kinetics, answers=None, *, level: float = 0.9,
         answers = exact_kinetics(model, kinetics.per_state(model.state_space, fields),
                                  direction=direction)
     if not resamples or not answers:
-        return {"exit_mean": {}, "after_passes": {}, "resamples": 0, "level": level}
+        return {"exit_mean": {}, "after_passes": {}, "resamples": 0, "level": level,
+                "flow_sd": {}}
     check_interval_options(level, resamples)
     source = resolve_source(model, candidates) if resolve else model
     after: dict = {}
@@ -540,19 +588,41 @@ def exit_mean_intervals(model, kinetics, answers=None, *, level: float = 0.9,
     drawn = {"blocks": BOOTSTRAP_BLOCKS, "runs": len(fitting_runs(source))}
     ranges = {p.name: getattr(p.law, "initial_range", (None, None))
               for p in kinetics.properties}
+    # the model's own flow term (E(RT)'s relative SD between windows, as its E(RT)
+    # interval carries it), as a stretch of every residence, for the properties that
+    # start at entry (a carried one's exit mean is a long-run steady state)
+    uncertainty = getattr(model, "uncertainty", None)
+    relative = (None if uncertainty is None or uncertainty.flow_sd is None
+                else float(uncertainty.flow_sd[0]))
+    flow: dict = {}
+    if relative is not None and np.isfinite(relative) and relative > 0:
+        entering = [p.name for p in kinetics.properties if p.start != "carried"]
+        if entering:
+            sensitivity = stretch_sensitivity(
+                model, kinetics.per_state(model.state_space, fields), direction)
+            flow = {name: {"exit_mean": abs(sensitivity[name]) * relative,
+                           "rt_mean_relative": relative,
+                           "degrees_of_freedom": uncertainty.flow_degrees_of_freedom}
+                    for name in entering if np.isfinite(sensitivity.get(name, np.nan))}
 
-    def bounds(name, point, values):
+    def bounds(name, point, values, with_flow=False):
         boot = np.asarray(values, dtype=float)
         boot = boot[np.isfinite(boot)]
         if boot.size < 10:
             return None
-        lo, hi = interval_bounds(point, boot, point, level, **drawn)
+        term = flow.get(name) if with_flow else None
+        lo, hi = interval_bounds(point, boot, point, level, 0.0,
+                                 0.0 if term is None else term["exit_mean"],
+                                 None if term is None else term["degrees_of_freedom"],
+                                 **drawn)
         low, high = ranges.get(name, (None, None))
         return [float(lo if low is None else max(lo, low)),
                 float(hi if high is None else min(hi, high))]
 
-    return {"exit_mean": {name: bounds(name, answer.exit_mean, (means or {}).get(name, []))
+    return {"exit_mean": {name: bounds(name, answer.exit_mean, (means or {}).get(name, []),
+                                       with_flow=True)
                           for name, answer in answers.items()},
+            "flow_sd": flow,
             "after_passes": {(name, n): bounds(name, answers[name].after_passes(n)[0], values)
                              for (name, n), values in after.items()},
             "resamples": kinetics_resamples(model.n_states, resamples) if means else 0,
@@ -796,6 +866,12 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                                  resamples, warnings, on.direction)
             if exact and resamples else None)
     rt_fit, occupancy = _fitting_rtd_and_occupancy(model, ref, on, warnings, stop - start)
+    # the flow's variability between windows, as the RTD's interval carries it (E(RT)'s
+    # relative SD), taken into the exit means as a stretch of every residence
+    intervals = getattr(comparison, "intervals", None)
+    stretch = getattr(intervals, "flow_relative", None)
+    sensitivity = (stretch_sensitivity(model, sk, on.direction)
+                   if stretch is not None and boot is not None else {})
     n_bins = min(int(comparison.edges.size - 1), EXIT_BINS)
     summary, figures = {}, {}
     for m in maps:
@@ -845,14 +921,28 @@ def compare_kinetics(ref, pred, comparison, kinetics, *, level: float = 0.9,
                 from cfbmarkov.analysis.bootstrap import (BOOTSTRAP_BLOCKS, fitting_runs,
                                                           interval_bounds)
 
+                flow_sd = (abs(sensitivity[name]) * stretch[0] if name in sensitivity
+                           and np.isfinite(sensitivity[name]) else None)
+                dof = None if flow_sd is None else intervals.flow_degrees_of_freedom
                 lo, hi = interval_bounds(p.exit_mean, values, answer.exit_mean, level,
                                          se=p.exit_se if np.isfinite(p.exit_se) else 0.0,
+                                         se_flow=flow_sd or 0.0, flow_degrees_of_freedom=dof,
                                          blocks=BOOTSTRAP_BLOCKS,
                                          runs=len(fitting_runs(model)))
-                mod_block["exit_mean_interval"] = [float(lo), float(hi)]
-                mod_block["interval_method"] = ("block bootstrap of the fitting window (exact "
-                                                "exit means) and Monte Carlo noise, in "
-                                                "quadrature")
+                low, high = getattr(kinetics.properties[kinetics.names.index(name)].law,
+                                    "initial_range", (None, None))
+                mod_block["exit_mean_interval"] = [float(lo if low is None else max(lo, low)),
+                                                   float(hi if high is None
+                                                         else min(hi, high))]
+                mod_block["interval_method"] = (
+                    "block bootstrap of the fitting window (exact exit means), Monte Carlo "
+                    "noise" + ("" if flow_sd is None else
+                               f" and the flow's variability between windows (E(RT)'s "
+                               f"{100 * stretch[0]:.3g} %, taken as a stretch of every "
+                               "residence)") + ", in quadrature")
+                mod_block["flow_sd"] = None if flow_sd is None else {
+                    "exit_mean": float(flow_sd), "rt_mean_relative": float(stretch[0]),
+                    "degrees_of_freedom": dof}
                 mod_block["interval_resamples"] = int(values.size)
             elif resamples:
                 mod_block["interval_not_formed"] = (

@@ -409,13 +409,16 @@ def kinetics_verdict(name: str, reference_mean: float, model: dict, level: float
     lo, hi = interval
     method = model.get("interval_method") or "Monte Carlo noise only"
     sampled = method.startswith("block bootstrap")
+    flow = model.get("flow_sd") if sampled else None
     kind = ("the fitting window's bootstrap and Monte Carlo noise" if sampled
             else "Monte Carlo noise only")
+    kind += ("; the flow's variability left out" if flow is None else
+             f", with the flow's variability between windows (E(RT)'s "
+             f"{100 * flow['rt_mean_relative']:.3g} %, as a stretch of every residence)")
     place = _place(reference_mean, (lo, hi))
     d = _digits(reference_mean, (lo, hi))
-    text = (f"{100 * level:g} % interval of the model's exit mean {_interval_text((lo, hi), d)} ({kind}; "
-            f"the flow's variability left out): the reference's {reference_mean:.{d}g} lies "
-            f"{place} it")
+    text = (f"{100 * level:g} % interval of the model's exit mean {_interval_text((lo, hi), d)} "
+            f"({kind}): the reference's {reference_mean:.{d}g} lies {place} it")
     if not sampled and agreement != "not told apart":
         # the fitting sample's uncertainty, most of it, is not in this interval
         why = model.get("interval_not_formed") or "`--resamples 100` forms it"

@@ -134,15 +134,16 @@ def _react(args) -> int:
     # exits are counted in the model's direction: down through the bottom for a periodic
     # model of a net downflow (docs/definitions.md, Net downflow), as fit and rtd say
     direction = model.flow_direction
-    intervals, taken, after_intervals = _exit_mean_intervals(args, model, kinetics, fields,
-                                                             answers, direction, passes)
+    intervals, taken, after_intervals, flow = _exit_mean_intervals(
+        args, model, kinetics, fields, answers, direction, passes)
     for line in verdict:
         print(f"warning: {one_line(line)}", file=sys.stderr)
     if args.json:
         space = model.state_space
         out = {"properties": {name: {**a.to_dict(passes if p.start == "carried" else ()),
                                      "law": p.law.key,
-                                     "exit_mean_interval": intervals.get(name)}
+                                     "exit_mean_interval": intervals.get(name),
+                                     "exit_mean_flow_sd": flow.get(name)}
                               for (name, a), p in zip(answers.items(), kinetics.properties)},
                "level": args.level, "interval_resamples": taken,
                "exact_seconds": seconds, "prediction": args.output,
@@ -176,8 +177,12 @@ def _react(args) -> int:
                 print(f"  {100 * args.level:g} % interval of {p.name}'s exit mean: "
                       + ("none (too few resamples with residences)" if bounds is None else
                          _span(bounds))
-                      + f" (the fitting window's block bootstrap, {taken} resamples; the "
-                        "flow's variability between windows left out)")
+                      + f" (the fitting window's block bootstrap, {taken} resamples"
+                      + ("; the flow's variability between windows left out)"
+                         if p.name not in flow else
+                         f", with the flow's variability between windows as its E(RT) "
+                         f"interval carries it, {100 * flow[p.name]['rt_mean_relative']:.3g} "
+                         "%, as a stretch of every residence)"))
         else:
             print("  exact for the fitted chain, without its sampling uncertainty: "
                   "--resamples 100 adds the exit means' intervals (an exact solve per "
@@ -260,7 +265,7 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
     from ``args.resamples`` resamples, its progress shown: ({name: [lo, hi] or None},
     resamples solved, {(name, n): [lo, hi] or None}). Warnings go to stderr."""
     if not args.resamples or not answers:
-        return {}, 0, {}
+        return {}, 0, {}, {}
     from cfbmarkov.analysis.intervals import resolve_source
     from cfbmarkov.analysis.kinetics_compare import exit_mean_intervals
 
@@ -278,7 +283,7 @@ def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, pass
                                      resolve=False)
     for note in notes:
         print(f"warning: {one_line(note)}", file=sys.stderr)
-    return formed["exit_mean"], formed["resamples"], formed["after_passes"]
+    return formed["exit_mean"], formed["resamples"], formed["after_passes"], formed["flow_sd"]
 
 
 def _span(bounds) -> str:
