@@ -558,6 +558,45 @@ def test_no_throughput_is_formed_from_fewer_than_ten_net_passes(tmp_path):
     assert np.isfinite(window_rt_mean([many], [(0.0, 4.0)], "up"))
 
 
+def test_the_throughput_limit_widens_for_the_windows_cut_through_few_particles_laps(tmp_path):
+    """The window's net passes miss each particle's fraction of a lap between its heights at
+    the window's ends (variance at most 1/6 a particle): few particles over a short window
+    leave the window's throughput E(RT) that uncertain, where the chain counts no cut. A
+    stationary known chain of 300 particles over 1 s (about 150 net passes): the limit is
+    3 x sqrt(300 / 6) / passes, wider than 10 %, and no throughput line is printed where the
+    chain is right; the same line still warns beyond it, naming the cut."""
+    from cfbmarkov.analysis.adequacy import (THROUGHPUT_LIMIT, _throughput_line,
+                                             throughput_limit, window_throughput)
+    from cfbmarkov.observed.residence import residence_flux
+
+    flow = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                               vertical_spread=0.5, persistence=False)
+    run = synthetic.write_run(tmp_path / "r.h5", flow, 300, 1.0, seed=1010)
+    mean, edge_sd = window_throughput([run], [(0.0, 1.0)], "up")
+    with Trajectories(run) as traj:
+        particle_time, passes = residence_flux(traj, (0.0, 1.0), "up")
+    assert mean == pytest.approx(particle_time / passes)
+    assert edge_sd == pytest.approx(np.sqrt(particle_time / 1.0 / 6.0) / passes, rel=1e-12)
+    limit = throughput_limit(edge_sd)
+    assert limit == pytest.approx(3.0 * edge_sd) and limit > THROUGHPUT_LIMIT
+    assert throughput_limit(0.01) == THROUGHPUT_LIMIT
+    assert throughput_limit(float("nan")) == THROUGHPUT_LIMIT
+    model = fit_model(run, CellGrid(4, 16), 0.025, (0.0, 1.0), "mle")
+    truth = synthetic.cell_chain(flow).rtd().mean
+    verdict = assess_adequacy(model, [run], [(0.0, 1.0)])
+    assert verdict.throughput_limit == pytest.approx(limit)
+    assert abs(model.rtd().mean / truth - 1) < 0.05     # the chain is right about the flow
+    assert abs(model.rtd().mean / mean - 1) > THROUGHPUT_LIMIT      # the window's is off
+    assert not any("throughput E(RT)" in line for line in verdict.warnings)
+    assert Adequacy.from_dict(verdict.to_dict()).throughput_limit == pytest.approx(limit)
+    assert f"the verdict warns beyond {100 * limit:.2g} %, widened from 10 %" in (
+        model.with_adequacy(verdict).summary())
+    # beyond the widened limit the line still warns, and names the cut
+    line = _throughput_line(model, mean * (1 + 1.2 * limit), mean, edge_sd=edge_sd)
+    assert line is not None and "cut through the particles' laps" in line
+    assert _throughput_line(model, mean * (1 + 0.9 * limit), mean, edge_sd=edge_sd) is None
+
+
 def test_a_figure_beyond_its_limit_is_printed_beyond_it():
     """A spread of 6.72 % against a limit of 6.58 % reads "6.7" and "6.6", not "7" twice;
     whole percents where they differ."""
@@ -871,3 +910,22 @@ def test_sample_length_of_runs_sharing_no_span_names_them_and_the_fix(tmp_path):
                        r".*b.h5 100-103 s\): --sample-length takes the same windows of every "
                        r"run; .*window per run"):
         sample_length([a, b], _space(), lag=0.025)
+
+
+def test_parts_too_short_to_judge_by_residences_still_name_a_flow_that_changed(tmp_path):
+    """A window across a fourfold change of the flow whose slow half holds no whole
+    residence: the halves are too short to judge by their residences, but their chains
+    (from thousands of transitions) differ far beyond the 25 % the parts are held to at
+    most, and the line says the flow may have changed; the verdict keeps that spread."""
+    flows = [synthetic.RiserFlow(columns=4, rows=16, rise_velocity=v, fall_velocity=-0.6,
+                                 vertical_spread=0.5, persistence=False) for v in (2.4, 1.0)]
+    times = 0.025 * np.arange(int(round(12 / 0.025)) + 1)
+    run = synthetic.write_regime_run(tmp_path / "sw.h5", flows, [[0.99, 0.01], [0.01, 0.99]],
+                                     300, 12.0, seed=9, regimes=(times >= 6.0).astype(int))
+    model = fit_model(run, CellGrid(4, 16), 0.025, (5.0, 7.0), "mle")
+    verdict = assess_adequacy(model, [run], [(5.0, 7.0)])
+    line = next(x for x in verdict.warnings if x.startswith("a half of the fitting window"))
+    assert "beyond the 25 % the parts are held to at most: the flow may have changed" in line
+    means = [m for _, _, m, _ in verdict.parts]
+    assert max(means) > 2.5 * min(means)
+    assert verdict.spread == pytest.approx((max(means) - min(means)) / verdict.rt_mean)

@@ -273,3 +273,22 @@ def test_windows_that_hold_no_residence_are_refused(tmp_path, capsys):
     assert "give a longer --window-length" in err
     assert main(["stationarity", path, "--window-length", "1", "--step", "1"]) == 0
     capsys.readouterr()
+
+
+def test_windows_of_both_directions_are_warned_of_as_not_one_flows_figures():
+    """A span whose net flow turns: its windows count residences in both directions, and
+    their average and scatter mix them; the warning names each direction's windows. Windows
+    of one direction give none."""
+    from types import SimpleNamespace
+
+    from cfbmarkov.analysis.stationarity import turned_direction_warning
+
+    stats = SimpleNamespace(direction=("up", "down", "down"),
+                            starts=np.array([1.5, 2.5, 3.5]), window_length=1.0)
+    line = turned_direction_warning(stats)
+    assert line.startswith("the net solids flow turns within the span: 1 window(s) count "
+                           "residences up through the top (1.5-2.5 s), 2 down through the "
+                           "bottom (2.5-3.5, 3.5-4.5 s)")
+    assert "mix the two directions" in line
+    assert turned_direction_warning(SimpleNamespace(
+        direction=("up", "up"), starts=np.array([0.0, 1.0]), window_length=1.0)) is None

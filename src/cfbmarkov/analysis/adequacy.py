@@ -140,16 +140,53 @@ def window_rt_mean(runs, windows, direction: str) -> float:
     to read), where the net passes do not run in ``direction``, and where they are fewer
     than :data:`MIN_THROUGHPUT_PASSES` (the partial laps at the window's edges would
     dominate the particle-time)."""
-    particle_time, passes = 0.0, 0
-    for run, window in zip(runs, windows):
+    return window_throughput(runs, windows, direction)[0]
+
+
+#: standard deviations of the window's partial laps within which the model's E(RT) and the
+#: window's throughput E(RT) are not told apart (:func:`throughput_limit`)
+THROUGHPUT_EDGE_SDS = 3.0
+
+
+def window_throughput(runs, windows, direction: str) -> tuple[float, float]:
+    """:func:`window_rt_mean` and the relative standard deviation of its net passes that the
+    window's ends alone give: a particle's pass count over the window misses the fraction
+    of a lap between its heights at the two ends, (h_end - h_start) / H, whose variance is
+    at most 1/6 (two independent uniform heights), so the net passes of N particles carry
+    up to sqrt(N / 6) passes of the window's cut (N: the particle-time over the window's
+    length, several runs' summed). Both from the same transitions as the chain, which
+    counts no cut: its E(RT) and the window's differ by that much with no change of flow.
+
+    Returns
+    -------
+    (float, float)
+        E(RT) (s) and the relative SD (fraction); NaN, NaN where :func:`window_rt_mean` is
+        NaN.
+    """
+    particle_time, passes, edge_variance = 0.0, 0, 0.0
+    for run, (a, b) in zip(runs, windows):
         with opened(run) as traj:
             try:
-                part = residence_flux(traj, window, direction)
+                part = residence_flux(traj, (a, b), direction)
             except InputError:
-                return math.nan
+                return math.nan, math.nan
         particle_time += part[0]
         passes += part[1]
-    return particle_time / passes if passes >= MIN_THROUGHPUT_PASSES else math.nan
+        edge_variance += part[0] / max(b - a, 1e-300) / 6.0
+    if passes < MIN_THROUGHPUT_PASSES:
+        return math.nan, math.nan
+    return particle_time / passes, math.sqrt(edge_variance) / passes
+
+
+def throughput_limit(edge_sd: float) -> float:
+    """The relative distance between the model's E(RT) and the window's throughput E(RT)
+    beyond which the throughput line warns: :data:`THROUGHPUT_LIMIT`, or
+    :data:`THROUGHPUT_EDGE_SDS` times the relative SD the window's cut gives its net passes
+    (:func:`window_throughput`) where that is larger (a short window of few particles: 300
+    particles over 1 s, 146 net passes, 4.8 % and a limit of 15 %)."""
+    if not math.isfinite(edge_sd):
+        return THROUGHPUT_LIMIT
+    return max(THROUGHPUT_LIMIT, THROUGHPUT_EDGE_SDS * edge_sd)
 
 
 def _percents(value: float, limit: float) -> tuple[str, str]:
@@ -163,12 +200,17 @@ def _percents(value: float, limit: float) -> tuple[str, str]:
 
 
 def _throughput_line(model, rt_mean: float, window_mean: float,
-                     limit: float = THROUGHPUT_LIMIT) -> str | None:
-    """The warning where the model's E(RT) lies further than ``limit`` from the window's
-    own from its net flux (None where it does not, or either is not finite)."""
+                     limit: float = THROUGHPUT_LIMIT, edge_sd: float = math.nan
+                     ) -> str | None:
+    """The warning where the model's E(RT) lies further than ``limit`` (widened by
+    :func:`throughput_limit` for the window's cut, ``edge_sd``) from the window's own from
+    its net flux (None where it does not, or either is not finite)."""
     if not (math.isfinite(rt_mean) and math.isfinite(window_mean) and window_mean > 0):
         return None
     gap = rt_mean / window_mean - 1.0
+    widened = throughput_limit(edge_sd)
+    if widened > limit:
+        limit = widened
     if abs(gap) <= limit:
         return None
     occupancy = ("the window's occupancy is not the chain's stationary one: a flow still "
@@ -180,9 +222,12 @@ def _throughput_line(model, rt_mean: float, window_mean: float,
            if model.estimator == "paper" else occupancy)
     side = "above" if gap > 0 else "below"
     gap_text, limit_text = _percents(abs(gap), limit)
+    cut = (f", {THROUGHPUT_EDGE_SDS:g} times the {100 * edge_sd:.2g} % that the window's "
+           "cut through the particles' laps gives its net passes"
+           if limit > THROUGHPUT_LIMIT else "")
     head = (f"the model's E(RT) {rt_mean:.3g} s lies {gap_text} % {side} its fitting "
             f"window's own throughput E(RT), {window_mean:.3g} s (the window's particle-time "
-            f"over its net passes; limit {limit_text} %)")
+            f"over its net passes; limit {limit_text} %{cut})")
     classes = len(model.closed_classes)
     if classes > 1:
         # a reducible chain: its classes weighted by their net entry flux, while the
@@ -400,10 +445,19 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
             # (the pooled halves' line below, where those too hold too few)
             if not pooled:
                 means = [m for _, _, m, _ in parts if math.isfinite(m)]
+                part_spread = _spread(means, rt_mean) if len(means) >= 2 else math.nan
+                if math.isfinite(part_spread):     # the parts' chains, from transitions
+                    spread = (part_spread if not math.isfinite(spread)
+                              else max(spread, part_spread))
+                far = math.isfinite(part_spread) and part_spread > MAX_PARTS_LIMIT
                 seen = ("" if len(means) < 2 else
                         f" (its parts' chains give E(RT) "
-                        f"{', '.join(f'{m:.3g}' for m in means)} s, too few residences to "
-                        "judge the difference)")
+                        f"{', '.join(f'{m:.3g}' for m in means)} s"
+                        + (f", a spread of {100 * part_spread:.0f} % of the model's "
+                           f"{rt_mean:.3g} s, beyond the {100 * MAX_PARTS_LIMIT:g} % the parts "
+                           "are held to at most: the flow may have changed within the window, "
+                           "which its residences are too few to confirm)" if far else
+                           ", too few residences to judge the difference)"))
                 lines.append(f"a half of the fitting window {window[0]:g}-{window[1]:g} s of "
                              f"{name} holds {fewest} residences (fewer than "
                              f"{MIN_PART_RESIDENCES}): the window is too short to judge its "
@@ -443,8 +497,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                          f"the windows are too short to judge their E(RT); {_ADVICE}")
         if math.isfinite(pooled_spread):
             spread = pooled_spread if not math.isfinite(spread) else max(spread, pooled_spread)
-    window_mean = window_rt_mean(runs, windows, model.flow_direction)
-    throughput = _throughput_line(model, rt_mean, window_mean)
+    window_mean, edge_sd = window_throughput(runs, windows, model.flow_direction)
+    throughput = _throughput_line(model, rt_mean, window_mean, edge_sd=edge_sd)
     if throughput:
         lines.append(throughput)
     length = min(b - a for a, b in windows)
@@ -465,7 +519,8 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                  else _on_window(model, runs[0], data[0]))
     return Adequacy(tuple(lines), tuple(all_parts), rt_mean, spread, limit, length, tail,
                     run_means, window_mean, applied if not pooled else math.nan, on_window,
-                    runs_limit, runs_interval)
+                    runs_limit, runs_interval,
+                    throughput_limit(edge_sd) if math.isfinite(window_mean) else math.nan)
 
 
 def _on_window(model, run, discrete: DiscreteTrajectories) -> tuple[float, ...]:

@@ -246,11 +246,14 @@ def missed_text(miss: str, pd_mean: float, pd_sd: float, outlasting: float = mat
         return "yes"
     if miss == "no model":
         return "no: no model (the window's fit failed)"
-    if miss == "outlasts":
-        return (f"no: {100 * outlasting:.0f} % of its model's residences outlast the window "
-                "(fit warns)")
     # three digits: a figure 10.14 % off is not printed "10 %" beside a 10 % tolerance
     mean, sd = f"E(RT) {100 * pd_mean:+.3g} %", f"SD(RT) {100 * pd_sd:+.3g} %"
+    if miss == "outlasts":
+        # the figures as well: a window that cannot hold its residences may miss by far
+        off = ", ".join(text for text, value in ((mean, pd_mean), (sd, pd_sd))
+                        if math.isfinite(value))
+        return (f"no: {100 * outlasting:.0f} % of its model's residences outlast the window "
+                f"(fit warns{f'; {off}' if off else ''})")
     return f"no: {mean if miss == 'E(RT)' else sd if miss == 'SD(RT)' else f'both ({mean}, {sd})'}"
 
 

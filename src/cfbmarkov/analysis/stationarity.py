@@ -603,8 +603,41 @@ def check_stationarity(path, *, window_length: float = 5.0, step: float = 1.0,
             judged = _judged_window(traj, judge, span, extent, bin_width, kwargs)
         band = traj.height / DEFAULT_FACE_ROWS if face_band is None else float(face_band)
         warning = face_band_warning(traj, extent, band, kwargs["lag_frames"])
+    warnings = [] if warning is None else [warning]
+    turned = turned_direction_warning(stats)
+    if turned:
+        warnings.append(turned)
     return StationarityCheck(str(path), extent, events, bin_width, stats, judged,
-                             () if warning is None else (warning,))
+                             tuple(warnings))
+
+
+def turned_direction_warning(stats: WindowStatistics) -> str | None:
+    """A warning where the windows count residences in different directions (the net solids
+    flow turns within the span): their average and scatter then mix residences up through
+    the top with residences down through the bottom, which are not one flow's figures.
+
+    Returns
+    -------
+    str or None
+        The warning, naming the windows of each direction; None where all agree.
+    """
+    directions = list(stats.direction)
+    if len(set(directions)) < 2:
+        return None
+    length = stats.window_length
+    named = {d: [f"{a:g}-{a + length:g}" for a, w in zip(stats.starts, directions) if w == d]
+             for d in ("up", "down")}
+
+    def listed(d):
+        windows = named[d]
+        return (", ".join(windows[:3]) + (f" and {len(windows) - 3} more" if len(windows) > 3
+                                          else ""))
+    return (f"the net solids flow turns within the span: {len(named['up'])} window(s) count "
+            f"residences up through the top ({listed('up')} s), {len(named['down'])} down "
+            f"through the bottom ({listed('down')} s); the averages and relative SDs below "
+            "mix the two directions, which are not one flow's figures: judge the windows of "
+            "one direction (a --span where the flow runs one way; docs/definitions.md, Net "
+            "downflow)")
 
 
 def _check_on_frames(traj, window_length: float, step: float,

@@ -96,6 +96,12 @@ class Adequacy:
         Whether :attr:`runs_limit` came from the model's interval (the runs' own
         uncertainty); False where it is the default tolerance, with no interval to tell
         the runs' differences from their sampling (``--resamples 0``).
+    throughput_limit : float
+        The relative distance from :attr:`window_rt_mean` beyond which the model's E(RT)
+        was warned of (-): 10 %, or more for a window whose cut through the particles'
+        laps makes its net passes uncertain
+        (:func:`cfbmarkov.analysis.adequacy.throughput_limit`); NaN without a throughput
+        or for a verdict stored without it (then 10 %).
     """
 
     warnings: tuple[str, ...] = ()
@@ -111,6 +117,7 @@ class Adequacy:
     on_window: tuple[float, ...] = ()
     runs_limit: float = math.nan
     runs_interval: bool = True
+    throughput_limit: float = math.nan
 
     def on_window_line(self) -> str | None:
         """The chain against its fitting window, one line of numbers (None without it):
@@ -253,7 +260,8 @@ class Adequacy:
                 "part_limit": number(self.part_limit),
                 "on_fitting_window": (None if len(self.on_window) != 6 else dict(zip(
                     ON_WINDOW_KEYS, (number(v) for v in self.on_window)))),
-                "runs_limit": number(self.runs_limit), "runs_interval": bool(self.runs_interval)}
+                "runs_limit": number(self.runs_limit), "runs_interval": bool(self.runs_interval),
+                "throughput_limit": number(self.throughput_limit)}
 
     @classmethod
     def from_dict(cls, data: dict[str, Any]) -> "Adequacy":
@@ -287,7 +295,8 @@ class Adequacy:
                        number(data.get("window_rt_mean")), number(data.get("part_limit")),
                        tuple(number(data["on_fitting_window"][k]) for k in ON_WINDOW_KEYS)
                        if data.get("on_fitting_window") else (),
-                       number(data.get("runs_limit")), bool(data.get("runs_interval", True)))
+                       number(data.get("runs_limit")), bool(data.get("runs_interval", True)),
+                       number(data.get("throughput_limit")))
         except (TypeError, ValueError, KeyError, IndexError, AttributeError) as exc:
             raise InputError(f"adequacy attribute is not a verdict ({exc})") from None
 

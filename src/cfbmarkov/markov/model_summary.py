@@ -4,6 +4,7 @@ summary for ``fit`` and ``info`` and its warnings (traps; an open riser's censor
 
 from __future__ import annotations
 
+import math
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -495,6 +496,16 @@ def _windows_text(model: "MarkovModel") -> str:
                         else f'{time_text(model.window[0])}:{time_text(model.window[1])} s')
 
 
+def _throughput_limit_text(adequacy) -> str:
+    """``10 %``, or the wider limit a verdict applied for its window's cut through the
+    particles' laps (:attr:`~cfbmarkov.markov.adequacy.Adequacy.throughput_limit`)."""
+    limit = getattr(adequacy, "throughput_limit", math.nan)
+    if not math.isfinite(limit) or limit <= 0.1 + 1e-12:
+        return "10 %"
+    return (f"{100 * limit:.2g} %, widened from 10 % for the few net passes that the "
+            "window's cut through the particles' laps makes uncertain")
+
+
 def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     """A few lines of text: state space, lag, fitting data, passes (or an open riser's exits
     and entries), unvisited states, warnings, regimes, coherence, closed classes, the
@@ -615,7 +626,8 @@ def model_summary(model: "MarkovModel", warnings: bool = True) -> str:
     if own is not None and np.isfinite(own):
         carry = ("a reducible chain, which weights its classes by their net entry flux, need "
                  "not carry it" if len(model.closed_classes) > 1 else
-                 "the throughput the chain should carry; the verdict warns beyond 10 %")
+                 "the throughput the chain should carry; the verdict warns beyond "
+                 f"{_throughput_limit_text(model.adequacy)}")
         lines.append(f"    the fitting window's own E(RT): {own:.4g} s (its particle-time over "
                      f"its net passes, {carry})")
     on_window = None if model.adequacy is None else model.adequacy.on_window_line()
