@@ -78,15 +78,17 @@ def assert_same_files(a: Path, b: Path, names=("cfd-dem.h5", "prediction-paper.h
 
 #: what the reference reproduction printed on stderr
 STDERR: dict[str, str] = {}
+STDOUT: dict[str, str] = {}
 
 
 def _build_reference(folder: Path) -> None:
     overrides = tiny(folder)
-    err = io.StringIO()
-    with contextlib.redirect_stderr(err):
+    err, out = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stderr(err), contextlib.redirect_stdout(out):
         assert main(["reproduce", "--scale", "quick", "--overrides", str(overrides),
                      "--velocities", "8", "-o", str(folder / "ref"), "--jobs", "1"]) == 0
     (folder / "stderr.txt").write_text(err.getvalue())
+    (folder / "stdout.txt").write_text(out.getvalue())
 
 
 @pytest.fixture(scope="session")
@@ -96,7 +98,33 @@ def reference(tmp_path_factory):
     shared = built_once(tmp_path_factory, "reproduce-reference", _build_reference)
     folder = worker_copy(tmp_path_factory, shared, "reproduce-reference")
     STDERR["reference"] = (folder / "stderr.txt").read_text()
+    STDOUT["reference"] = (folder / "stdout.txt").read_text()
     return folder / "ref", folder / "tiny.toml"
+
+
+def test_each_models_line_says_where_the_reference_lies_and_its_warnings(reference):
+    """The terminal's line of each model's figures says where the CFD-DEM's E(RT) lies
+    against the model's interval and how many warnings its comparison carries (its
+    summary.json's), and the run ends with the report's verdict line, links as text."""
+    out, _ = reference
+    printed = STDOUT["reference"].splitlines()
+    names = [p.name[len("compare-"):] for p in sorted((out / "u8").glob("compare-*"))]
+    assert names
+    for name in names:
+        summary_path = out / "u8" / f"compare-{name}" / "summary.json"
+        summary = json.loads(summary_path.read_text())
+        line = next(x for x in printed if x.startswith(f"u8 {name:>5}: PD E(RT) "))
+        lo, hi = summary["model"]["rt_mean_interval"]
+        ref = summary["reference"]["rt_mean"]
+        place = "inside" if lo <= ref <= hi else "below" if ref < lo else "above"
+        assert (f"; the CFD-DEM's E(RT) {ref:.4g} s lies {place} the model's 90 % interval "
+                f"{lo:.4g}-{hi:.4g} s") in line, line
+        warned = len(summary["warnings"])
+        assert (f"; {warned} warning" in line) == (warned > 0), line
+    verdict = [x for x in printed if x.startswith("verdict: ")]
+    assert len(verdict) == 1 and verdict[0].startswith("verdict: Verdict at the quick scale: ")
+    assert "](#" not in verdict[0] and "Next step: " in verdict[0]
+    assert printed[-1].endswith("report.html")     # the path last, as scripts read it
 
 
 def check_case_lines(err: str, cases) -> None:

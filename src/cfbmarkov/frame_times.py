@@ -203,6 +203,31 @@ class FrameTimes:
                              f"{every}; give a window that holds at least one frame")
         return slice(i0, i1)
 
+    def held(self, start: float, stop: float) -> tuple[float, float]:
+        """The window as the frames it holds: an end that falls between frames moves to the
+        first (last) frame inside; an end on a frame (within :attr:`time_tolerance`) is kept
+        as given. What a model fitted on the window stores as its window.
+
+        Parameters
+        ----------
+        start, stop : float
+            The window (s).
+
+        Returns
+        -------
+        (float, float)
+
+        Raises
+        ------
+        InputError
+            As :meth:`window`.
+        """
+        frames = self.window(start, stop)
+        first, last = float(self.times[frames.start]), float(self.times[frames.stop - 1])
+        tol = self.time_tolerance
+        return (float(start) if abs(start - first) <= tol else first,
+                float(stop) if abs(stop - last) <= tol else last)
+
     def lag_frames(self, lag: float) -> int:
         """The lag as a whole number of frame intervals.
 

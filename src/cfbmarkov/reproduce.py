@@ -582,7 +582,7 @@ def _log_case(log, name: str, result: dict) -> None:
     for est, s in result["summaries"].items():
         log(f"{name} {est:>5}: PD E(RT) {_fmt(s.get('pd_rt_mean'), '+.1f')} %, PD SD(RT) "
             f"{_fmt(s.get('pd_rt_sd'), '+.1f')} %, MD {_fmt(s.get('md_rtd'), '.3g')}, "
-            f"mixing RMS {_fmt(s.get('mixing_rms'), '.3g')}")
+            f"mixing RMS {_fmt(s.get('mixing_rms'), '.3g')}{_judged(s, est)}")
     if result["summaries"]:
         log(rtd_line(name, result["summaries"]))
 
@@ -663,6 +663,27 @@ def rtd_line(case: str, summaries: dict[str, dict]) -> str:
     parts += [f"{est} {side(s, 'model')}" for est, s in summaries.items()]
     return (f"{case} RTD (bins of {_fmt(width, 'g')} s spanned, residences): "
             + "; ".join(parts))
+
+
+def _judged(summary: dict, model: str) -> str:
+    """The clause after a model's figures: where the CFD-DEM's E(RT) lies against the
+    model's interval, and how many warnings its comparison carries (its ``summary.json``),
+    so that no figure reaches the terminal without its uncertainty and warnings."""
+    out = ""
+    interval = (summary.get("model") or {}).get("rt_mean_interval")
+    reference = (summary.get("reference") or {}).get("rt_mean")
+    level = summary.get("level")
+    if interval and reference is not None and level:
+        lo, hi = interval
+        place = ("inside" if lo <= reference <= hi else "below" if reference < lo else
+                 "above")
+        out += (f"; the CFD-DEM's E(RT) {reference:.4g} s lies {place} the model's "
+                f"{100 * level:g} % interval {lo:.4g}-{hi:.4g} s")
+    warned = len(summary.get("warnings") or [])
+    if warned:
+        out += (f"; {warned} warning{'' if warned == 1 else 's'} (compare-{model}/"
+                "summary.json, the report's How far to trust)")
+    return out
 
 
 def _fmt(value, spec: str) -> str:

@@ -135,6 +135,10 @@ def test_a_setting_of_the_law_given_as_a_parameter_is_sent_to_the_law():
                                        "wall_temperature": 600.0}, initial=300.0)
     with pytest.raises(InputError, match=r"takes no bogus as a parameter$"):
         Property("X", FirstOrder(), {"rate": 1.0, "bogus": 1.0})
+    # a class constant of the law is no setting of it: no hint to pass it
+    for constant in ("key", "quantity", "initial_range"):
+        with pytest.raises(InputError, match=rf"takes no {constant} as a parameter$"):
+            Property("X", FirstOrder(), {"rate": 1.0, constant: 1.0})
 
 
 def test_a_non_finite_value_in_a_table_is_named_by_its_row_and_cell():
@@ -160,3 +164,7 @@ def test_a_grid_array_of_the_wrong_shape_is_named_by_its_shape():
         prop.per_cell(grid)
     good = Property("X", FirstOrder(), {"rate": ByCell.from_grid(np.arange(10.0).reshape(5, 2))})
     np.testing.assert_array_equal(good.per_cell(grid)["rate"], np.arange(10.0))
+    # a depth axis of one on a grid of one depth is the same layout
+    deep = Property("X", FirstOrder(),
+                    {"rate": ByCell.from_grid(np.arange(10.0).reshape(5, 1, 2))})
+    np.testing.assert_array_equal(deep.per_cell(grid)["rate"], np.arange(10.0))

@@ -985,6 +985,13 @@ def test_the_exit_means_interval_carries_the_models_flow_term(fitted, tmp_path):
         model.uncertainty, flow_sd=None, flow_degrees_of_freedom=None))
     flowing = model.with_uncertainty(dataclasses.replace(
         model.uncertainty, flow_sd=(0.1, 0.05), flow_degrees_of_freedom=3))
+    measured_zero = model.with_uncertainty(dataclasses.replace(
+        model.uncertainty, flow_sd=(0.0, 0.0), flow_degrees_of_freedom=2))
+    zero = exit_mean_intervals(measured_zero, kin, resamples=20,
+                               candidates=[folder / "run.h5"])
+    # a flow term measured as 0 is carried (as 0), as compare carries it: not "left out"
+    assert zero["flow_sd"]["X"]["exit_mean"] == 0.0
+    assert zero["flow_sd"]["X"]["degrees_of_freedom"] == 2
     without = exit_mean_intervals(plain, kin, resamples=20, candidates=[folder / "run.h5"])
     with_flow = exit_mean_intervals(flowing, kin, resamples=20,
                                     candidates=[folder / "run.h5"])

@@ -848,6 +848,7 @@ def test_a_window_shorter_than_a_lag_holds_no_residence():
     (float("nan"), 1.0, "RTD bin width nan s is not a finite number"),
     (0.05, -1.0, "upper edge -1 s must be positive"),
     (1e-9, 1.0, r"1e\+09 bins, more than 10000000; give a bin width of at least 1e-07 s"),
+    (1.0, 0.5, "RTD bin width 1 s is wider than the histogram's upper edge 0.5 s"),
 ])
 def test_rtd_histogram_refuses_bins_it_cannot_draw(bin_width, upper, message):
     with pytest.raises(InputError, match=message):

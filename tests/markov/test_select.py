@@ -346,3 +346,21 @@ def test_a_window_started_late_by_its_history_is_judged_as_fitted(run, tmp_path,
     model = MarkovModel.load(out)
     assert model.window[0] > first
     assert model.adequacy.window_length == pytest.approx(model.window[1] - model.window[0])
+
+
+def test_auto_judges_a_window_between_frames_on_the_frames_it_holds(tmp_path):
+    """A window typed between frames (1.01:4.99 on frames every 0.025 s): the candidates
+    are judged on the frames it holds, 1.025-4.975 s, seen as a 3.95 s window, as the
+    chosen model is fitted and stored."""
+    from cfbmarkov.markov.select import select_model
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    run = write_run(tmp_path / "a.h5", RiserFlow(columns=4, rows=8, lag=0.025,
+                                                 persistence=False, rise_velocity=4.0,
+                                                 fall_velocity=-1.0), 100, 5.0, seed=1)
+    model = select_model(run, window=(1.01, 4.99), columns=4, rows=8, lag=0.025,
+                         states=("cells", "cells-direction"), lag_multiples=(1,))
+    assert model.window == pytest.approx((1.025, 4.975))
+    text = model.summary()
+    assert "the fitting window 1.025-4.975 s" in text and "a 3.95 s window" in text
+    assert "1.01" not in text and "3.98 s" not in text

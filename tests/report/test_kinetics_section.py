@@ -142,6 +142,15 @@ def test_the_sentence_names_where_the_chain_loses():
     assert "in 0 of 1 comparisons" in text and "misses it" not in text
     assert "consistent" not in text           # none inside: nothing said to be consistent
     assert "In 1 comparison the chain's interval holds the Monte Carlo noise alone" in text
+    assert "flow's variability" not in text
+    # an interval that carries the flow's variability says so, and in how many
+    flowing = row("a", 0.5, -4.0)
+    flowing.side("model")["flow_sd"] = {"exit_mean": 0.01, "rt_mean_relative": 0.05,
+                                        "degrees_of_freedom": 2}
+    text = verdict_sentence("X", [flowing, row("b", 0.5, -4.0)])
+    assert ("the fitting window's bootstrap and the Monte Carlo noise, with the flow's "
+            "variability between windows as a stretch of every residence in 1 of them, "
+            "around") in text
 
 
 def test_a_carried_propertys_chain_is_its_monte_carlo_not_the_steady_state():

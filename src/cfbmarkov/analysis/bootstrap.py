@@ -12,6 +12,7 @@ Ch. 8 (the moving-block bootstrap for dependent data) and Ch. 13 (percentile int
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import numbers
 from collections import deque
@@ -254,7 +255,7 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
     (:func:`block_bootstrap_models`; dense, or scipy.sparse with ``sparse``). Checks and
     counts on the call; the sums are formed as the iterator is consumed. ``discrete``: the
     fitting windows already discretised (:func:`fitting_windows`), one per run."""
-    from cfbmarkov.markov.counting import count_transitions
+    from cfbmarkov.markov.counting import block_face_counts, count_transitions
 
     if int(blocks) < 2 or int(resamples) < 1:
         raise InputError(f"a block bootstrap needs at least 2 blocks and 1 resample ({blocks}, "
@@ -276,10 +277,16 @@ def _bootstrap_counts(model, blocks: int, resamples: int, seed: int, sparse: boo
                              f"{blocks} bootstrap blocks")
         cuts = np.rint(np.linspace(0, pairs, blocks + 1)).astype(np.int64)
         times = frames.times
-        counts += [count_transitions(frames.block(float(times[a]),
-                                                  float(times[b - 1 + lag_frames])),
-                                     frame_average=frame_average, sparse=sparse)
-                   for a, b in zip(cuts[:-1], cuts[1:])]
+        block_counts = [count_transitions(frames.block(float(times[a]),
+                                                       float(times[b - 1 + lag_frames])),
+                                          frame_average=frame_average, sparse=sparse)
+                        for a, b in zip(cuts[:-1], cuts[1:])]
+        if block_counts[0].faces is not None:
+            # an open riser's entries and returns read with the frames before each block:
+            # a fall back out through the inlet across a block's edge stays a return
+            block_counts = [dataclasses.replace(c, faces=f) for c, f in
+                            zip(block_counts, block_face_counts(frames, cuts))]
+        counts += block_counts
     runs = len(counts) // blocks
     rng = np.random.default_rng(seed)
     stacked = _StackedCounts(counts) if sparse and counts[0].faces is None else None
@@ -313,6 +320,8 @@ def _checked_windows(model, runs, discrete) -> list:
     if len(discrete) != len(runs):
         raise InputError(f"{len(discrete)} discretised windows for a model fitted on "
                          f"{len(runs)} run(s): give one per run, or none")
+    from cfbmarkov.markov.discrete import held_window
+
     fix = "give those of bootstrap.fitting_windows(model), or none"
     for k, (frames, (source, window)) in enumerate(zip(discrete, runs)):
         if not isinstance(frames, DiscreteTrajectories):
@@ -323,7 +332,7 @@ def _checked_windows(model, runs, discrete) -> list:
                 or not math.isclose(lag, model.lag, rel_tol=1e-6)
                 or frames.window is None
                 or not all(math.isclose(a, b, abs_tol=1e-9)
-                           for a, b in zip(frames.window, window))
+                           for a, b in zip(frames.window, held_window(source, window)))
                 or os.path.realpath(str(frames.source)) != os.path.realpath(str(source))):
             raise InputError(f"discretised window {k + 1} is not the model's fitting window "
                              f"(its file, state space, lag or window differs): {fix}")

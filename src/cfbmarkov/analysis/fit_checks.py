@@ -190,15 +190,17 @@ def _given_windows(model, runs, windows, check_counts: bool) -> list:
         its counts.
     """
     from cfbmarkov.markov.counting import count_transitions
-    from cfbmarkov.markov.discrete import discretize
+    from cfbmarkov.markov.discrete import discretize, held_window
 
     read = [discretize(run, model.state_space, model.lag, window, short_history="skip")
             for run, window in zip(runs, windows)]
     own = (list(model.run_windows) if model.run_windows is not None
            and len(model.run_windows) == len(read) else [model.window] * len(read))
-    for d, window, mine in zip(read, windows, own):
+    for run, d, window, mine in zip(runs, read, windows, own):
+        # the frames the model's window holds: a model file may keep a window typed between
+        # frames, which its fit read as the frames inside
         if mine is not None and d.window is not None and not np.allclose(
-                d.window, mine, rtol=0, atol=1e-9):
+                d.window, held_window(run, mine), rtol=0, atol=1e-9):
             raise InputError(f"window {window[0]:g}-{window[1]:g} s: not the model's fitting "
                              f"window {mine[0]:g}-{mine[1]:g} s; give the window it was fitted "
                              "on, or leave windows= out")

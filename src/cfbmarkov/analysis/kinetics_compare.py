@@ -350,8 +350,7 @@ def stretch_sensitivity(model, sk, direction: str = "up") -> dict[str, float]:
 
     For a linear law dv/dt = k_s (v_s - v) a stretch of time by s is the rate k_s s, so
     the derivative is taken by central differences of :data:`STRETCH_STEP` in every rate
-    (``docs/definitions.md``, Properties: the flow's variability in the kinetics
-    intervals).
+    (``docs/kinetics-reference.md``, the model block's intervals).
 
     Parameters
     ----------
@@ -595,7 +594,7 @@ def exit_mean_intervals(model, kinetics, answers=None, *, level: float = 0.9,
     relative = (None if uncertainty is None or uncertainty.flow_sd is None
                 else float(uncertainty.flow_sd[0]))
     flow: dict = {}
-    if relative is not None and np.isfinite(relative) and relative > 0:
+    if relative is not None and np.isfinite(relative) and relative >= 0:
         entering = [p.name for p in kinetics.properties if p.start != "carried"]
         if entering:
             sensitivity = stretch_sensitivity(

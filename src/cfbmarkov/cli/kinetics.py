@@ -263,7 +263,8 @@ def _chain_warnings(model) -> list[str]:
 def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, passes=()):
     """:func:`cfbmarkov.analysis.kinetics_compare.exit_mean_intervals` at ``args.level``
     from ``args.resamples`` resamples, its progress shown: ({name: [lo, hi] or None},
-    resamples solved, {(name, n): [lo, hi] or None}). Warnings go to stderr."""
+    resamples solved, {(name, n): [lo, hi] or None}, {name: the flow term} of the
+    properties whose interval carries it). Warnings go to stderr."""
     if not args.resamples or not answers:
         return {}, 0, {}, {}
     from cfbmarkov.analysis.intervals import resolve_source

@@ -28,6 +28,7 @@ def cmd_reproduce(args) -> int:
                        models=args.models, scheduler=args.scheduler, jobs=args.jobs,
                        progress=not args.quiet, log=lambda line: print(line, flush=True),
                        kinetics=args.kinetics, ensemble=args.ensemble, device=args.device)
+    _print_verdict(report)
     print(report)
     return 0
 
@@ -60,8 +61,21 @@ def cmd_demo(args) -> int:
 
     report = reproduce(args.output, "quick", jobs=args.jobs, progress=not args.quiet,
                        log=lambda line: print(line, flush=True))
+    _print_verdict(report)
     print(f"report: {report}")
     return 0
+
+
+def _print_verdict(report) -> None:
+    """The report's verdict line on the terminal, as the synthetic demo prints its own
+    (nothing where the run wrote no report)."""
+    if report is None or not str(report).endswith(".html"):
+        return
+    from cfbmarkov.report.reproduction import report_verdict
+
+    verdict = report_verdict(report)
+    if verdict:
+        print(f"verdict: {verdict}")
 
 
 def _stderr_line(text: str) -> None:

@@ -224,7 +224,8 @@ class ByCell(CellParameter):
         if self.shape is not None:       # an array laid out as the grid: its shape says it
             m, d, n = space.columns, space.depth_columns, space.rows
             needed = (n, m) if d == 1 else (n, d, m)
-            if tuple(self.shape) != needed:
+            # a depth axis of one on a grid of one depth is the same layout
+            if tuple(self.shape) not in (needed, (n, 1, m) if d == 1 else needed):
                 layout = "(rows, columns)" if d == 1 else "(rows, depth_columns, columns)"
                 flipped = (" (transposed: values[row, col], row 0 at the bottom)"
                            if tuple(self.shape) == needed[::-1] else "")

@@ -106,7 +106,9 @@ class Property:
             extra = sorted(given - names)
             # a setting of the law itself (HeatExchange(wall_temperature=...)), which a
             # kinetics file gives beside the parameters
-            own = [k for k in extra if k in getattr(type(self.law), "__dataclass_fields__", {})]
+            settings = ({f.name for f in dataclasses.fields(self.law)}
+                        if dataclasses.is_dataclass(self.law) else set())
+            own = [k for k in extra if k in settings]
             raise InputError(f"property {self.name}: law {self.law.key} takes no "
                              f"{', '.join(extra)} as a parameter"
                              + (f"; give it to the law: {type(self.law).__name__}("

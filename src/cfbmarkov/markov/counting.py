@@ -235,7 +235,7 @@ def _residence_begun(vertical, p, t, lag_frames, band, height):
 
 @nb.njit(cache=True)
 def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, vanished,
-                 appeared, returns, returned_frames):
+                 appeared, returns, returned_frames, first_pair, stop_pair):
     """Count what crosses the faces of an open riser (Numba kernel).
 
     For every frame pair (t, t + lag) of a particle: present then absent is an exit
@@ -258,11 +258,13 @@ def _open_kernel(states, vertical, lag_frames, band, height, exits, entries, van
     transition counts): its residence goes on, as a residence observed does. Where the
     sequence's chain never had it in a state in that residence (a stay before the fall
     shorter than a state with memory's history), it is the chain's entry (the time before
-    it is the chain's to miss, as at any entry delay). Returns nothing; arrays are
-    updated.
+    it is the chain's to miss, as at any entry delay). Only the pairs whose first frame t
+    lies in [``first_pair``, ``stop_pair``) are counted, each read with all the frames
+    before it (a block of the window counts its returns as the whole window does).
+    Returns nothing; arrays are updated.
     """
     n_frames, n_particles = states.shape
-    for t in range(n_frames - lag_frames):
+    for t in range(max(first_pair, 0), min(stop_pair, n_frames - lag_frames)):
         for p in range(n_particles):
             i = states[t, p]
             j = states[t + lag_frames, p]
@@ -463,6 +465,40 @@ def count_transitions(data, frame_average: bool = True, sparse: bool = False
                             pairs, faces)
 
 
+def block_face_counts(window, cuts) -> list[FaceCounts]:
+    """An open riser's face counts of each block of a window, the blocks' frame pairs
+    starting at frames ``cuts[k]`` .. ``cuts[k + 1] - 1``, each pair read with the whole
+    window's frames before it (:func:`_open_kernel`): a return through the inlet whose fall
+    began in an earlier block is a return, as in the whole window, not an entry, and the
+    blocks' counts sum to the window's.
+
+    Parameters
+    ----------
+    window : DiscreteTrajectories
+        An open riser's window.
+    cuts : array_like of int, shape (B + 1,)
+        The blocks' first pair frames, ascending, and the end.
+
+    Returns
+    -------
+    list of FaceCounts
+        One per block.
+    """
+    faces_of = []
+    states = np.ascontiguousarray(window.states, dtype=np.int32)
+    vertical = np.ascontiguousarray(window.vertical, dtype=np.float64)
+    space = window.state_space
+    for a, b in zip(cuts[:-1], cuts[1:]):
+        faces = _new_faces([window])
+        frames = np.zeros(space.n_states, np.int64)
+        _open_kernel(states, vertical, int(window.lag_frames), face_band(space),
+                     float(window.height), faces.exits, faces.entries, faces.vanished,
+                     faces.appeared, faces.returns, frames, int(a), int(b))
+        faces.returned_time[:] += frames * float(window.frame_interval)
+        faces_of.append(faces)
+    return faces_of
+
+
 def _new_faces(windows) -> FaceCounts | None:
     """Empty face counts for windows of an open riser; None for a periodic one."""
     s = windows[0].state_space.n_states
@@ -489,7 +525,7 @@ def _window_arrays(windows, faces: FaceCounts | None):
             frames = np.zeros(space.n_states, np.int64)
             _open_kernel(states, vertical, int(window.lag_frames), face_band(space),
                          float(window.height), faces.exits, faces.entries, faces.vanished,
-                         faces.appeared, faces.returns, frames)
+                         faces.appeared, faces.returns, frames, 0, states.shape[0])
             faces.returned_time[:] += frames * float(window.frame_interval)
         yield window, states, vertical
 

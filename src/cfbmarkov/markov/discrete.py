@@ -615,6 +615,29 @@ def _read_rows(trajectories: Trajectories, start: int, stop: int, history: int,
         boundary=trajectories.boundary, depth=trajectories.depth)
 
 
+def held_window(run, window: tuple[float, float]) -> tuple[float, float]:
+    """``window`` as the frames of ``run`` it holds (:meth:`Trajectories.held
+    <cfbmarkov.frame_times.FrameTimes.held>`): what a model fitted on it stores, whatever
+    the window typed (a file written before models stored the frames held keeps the typed
+    one); the window as given where it does not lie in the run's frames.
+
+    Parameters
+    ----------
+    run : str, os.PathLike or Trajectories
+    window : (float, float)
+        Start and end (s).
+
+    Returns
+    -------
+    (float, float)
+    """
+    try:
+        with opened(run) as traj:
+            return traj.held(float(window[0]), float(window[1]))
+    except (InputError, OSError):
+        return float(window[0]), float(window[1])
+
+
 def read_frames(trajectories: Trajectories, window: tuple[float, float] | None,
                 history: int = 0, *, velocities: bool = False, laps: bool = False,
                 short_history: str = "error") -> WindowFrames:

@@ -267,11 +267,16 @@ class ResidenceTimeDistribution:
         Raises
         ------
         InputError
-            If ``bin_width`` or ``upper`` is not a positive finite time, or the edges would
-            make more than :data:`~cfbmarkov.limits.MAX_BINS` bins.
+            If ``bin_width`` or ``upper`` is not a positive finite time, the bin is wider than
+            ``upper``, or the edges would make more than :data:`~cfbmarkov.limits.MAX_BINS`
+            bins.
         """
         bin_width = check_finite(bin_width, "RTD bin width", "s", positive=True)
         upper = check_finite(upper, "RTD histogram's upper edge", "s", positive=True)
+        if bin_width > upper:
+            raise InputError(f"RTD bin width {bin_width:g} s is wider than the histogram's "
+                             f"upper edge {upper:g} s: no bin fits; give an upper edge of at "
+                             "least one bin width")
         if upper / bin_width > MAX_BINS:
             raise InputError(f"RTD bins of {bin_width:g} s up to {upper:g} s are "
                              f"{upper / bin_width:.3g} bins, more than {MAX_BINS}; give a "

@@ -190,7 +190,7 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
     from cfbmarkov.analysis.kinetics_compare import exit_mean_agreement
 
     agreement = {"inside": 0, "not told apart": 0, "missed": 0}
-    noise_only = 0
+    noise_only = with_flow = 0
     widths = []          # the intervals that hold the reference: their half-width, relative
     for r in rows:
         interval = r.side("model").get("exit_mean_interval")
@@ -202,6 +202,7 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
             noise_only += 1   # the Monte Carlo noise alone: no verdict, as compare says
             continue
         agreement[said] += 1
+        with_flow += r.side("model").get("flow_sd") is not None
         centre = r.side("model").get("exit_mean")
         if said == "inside" and centre:
             widths.append(100 * (interval[1] - interval[0]) / 2 / abs(centre))
@@ -209,8 +210,11 @@ def verdict_sentence(name: str, rows: list[KineticsRow]) -> str:
     if known:
         parts.append(
             f"The reference's exit mean lies inside the chain's interval (the fitting "
-            f"window's bootstrap and the Monte Carlo noise, around the Monte Carlo's exit "
-            f"mean) in {agreement['inside']} of "
+            f"window's bootstrap and the Monte Carlo noise"
+            + ("" if not with_flow else
+               ", with the flow's variability between windows as a stretch of every "
+               "residence" + ("" if with_flow == known else f" in {with_flow} of them"))
+            + f", around the Monte Carlo's exit mean) in {agreement['inside']} of "
             f"{known} comparisons"
             + (": there the chain is consistent with it within its uncertainty, as compare "
                "says" + (f", which is no closer than those intervals' half-widths, "

@@ -182,4 +182,31 @@ def write_report(directory: str | os.PathLike, *, title: str | None = None,
     return html_path
 
 
-__all__ = ["REPORT_HTML", "REPORT_MD", "write_report"]
+__all__ = ["REPORT_HTML", "REPORT_MD", "report_verdict", "write_report"]
+
+
+def report_verdict(report) -> str | None:
+    """The report's verdict line (its summary's first sentence, "Verdict at the ... scale:
+    ... Next step: ..."), as plain text for a terminal: read from the ``report.md`` beside
+    ``report`` (the HTML's path), its links reduced to their text.
+
+    Parameters
+    ----------
+    report : str or os.PathLike
+        The report's HTML file (what :func:`write_report` returns).
+
+    Returns
+    -------
+    str or None
+        None where the markdown report or its verdict line cannot be read.
+    """
+    markdown = Path(report).with_name(REPORT_MD)
+    try:
+        lines = markdown.read_text(encoding="utf-8").splitlines()
+    except (OSError, UnicodeDecodeError):
+        return None
+    line = next((x for x in lines if x.startswith("Verdict at the ")), None)
+    if line is None:
+        return None
+    return re.sub(r"\[([^\]]*)\]\([^)]*\)", r"\1", line)
+

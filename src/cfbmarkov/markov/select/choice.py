@@ -121,6 +121,9 @@ def select_model(data, *, window: tuple[float, float], columns: int, rows: int, 
                          "B.h5 --states auto` does)")
     a, b = window_pair(window)
     with opened(data) as traj:
+        # the frames the window holds: its blocks, and the RTD the candidates are judged
+        # against, are of that length (as the chosen model's window is)
+        a, b = traj.held(a, b)
         fitting = judged_blocks(traj, (a, b), lag, lag_multiples, folds, criterion,
                                 face_band=traj.height / rows)
         judge = criterion_for(fitting, lag)

@@ -28,6 +28,7 @@ import numpy as np
 
 from cfbmarkov.errors import CfbmarkovError, InputError
 from cfbmarkov.markov.counting import count_transitions
+from cfbmarkov.markov.discrete import held_window
 from cfbmarkov.markov.estimate import estimator_from_name
 from cfbmarkov.markov.pooling import check_runs_distinct, check_runs_match, run_windows
 from cfbmarkov.markov.select.blocks import MIN_RESIDENCES, JudgedBlocks, _open_riser_criterion
@@ -136,6 +137,8 @@ def select_pooled(runs, *, windows, columns: int, rows: int, lag: float,
     check_runs_match(runs)
     windows = run_windows(windows, len(runs))
     check_runs_distinct(runs, windows)
+    # the frames each window holds, which the blocks and the chosen model are of
+    windows = [held_window(run, w) for run, w in zip(runs, windows)]
     fitting, judged_run = pooled_blocks(runs, windows, lag, lag_multiples, folds, criterion,
                                         face_band=runs[0].height / rows)
     judge = criterion_for(fitting, lag)
