@@ -176,11 +176,20 @@ class FrameSeries:
             which = (" (which of the two is wrong cannot be told from two steps: a row with "
                      "a wrong time makes a first frame of its own)"
                      if what == "the first step" and first + k == 1 else "")
+            step = float(steps[first + k])
+            missing = int(round(step / reference)) - 1
+            # a whole number of frames with no row: nobody in view (an open riser's track
+            # file writes no row for an empty frame), or frames lost
+            empty = (f" ({missing} frame(s) with no row: where no particle is in view, as "
+                     "between the particles of an open riser's track file, --resample DT "
+                     "reads them as empty frames)"
+                     if missing >= 1 and abs(step - (missing + 1) * reference)
+                     <= FRAME_SPACING_TOLERANCE * reference else "")
             raise InputError(
                 f"{self.label}: frames unevenly spaced: {time_text(steps[first + k])} s "
                 f"between t = {time_text(times[k])} and {time_text(times[k + 1])} s, expected "
                 f"{time_text(reference)} s ({what}, within {FRAME_SPACING_TOLERANCE:.0%})"
-                f"{which}; for "
+                f"{which}{empty}; for "
                 "irregular frame times (CSV tracking data such as PEPT) resample them with "
                 "--resample DT --max-gap G; a dump or VTK series that misses frames: import "
                 "the frames before and after the gap as two files (fit A.h5 B.h5 pools them); "

@@ -245,6 +245,9 @@ def test_uneven_spacing_is_refused_naming_the_time(tmp_path, t0, kind, message, 
             write(tmp_path / "bad.h5", times)
     assert "\n" not in str(info.value)
     assert list(tmp_path.iterdir()) == []
+    # a whole frame with no row is named as such, with the way to read it as an empty one
+    assert ("(1 frame(s) with no row: where no particle is in view" in str(info.value)) == (
+        kind == "missing")
 
 
 @pytest.mark.parametrize("t0", [0.0, 10.0])

@@ -204,7 +204,8 @@ BAD_CSV = {
                         r"for one particle at one time\)")),
     "uneven-frames": (table(FRAMES[:2] + [[(0.06,) + r[1:] for r in FRAMES[2]]]),
                       r"frames unevenly spaced: 0.035 s between t = 0.025 and 0.06 s"),
-    "duplicate-id": (table(changed(1, 0, id=2)), r"particle id 2 appears more than once"),
+    "duplicate-id": (table(changed(1, 0, id=2)), r"particle id 2 appears more than once \(two "
+                     r"rows for one particle at one time\): remove one of them"),
     "duplicate-id-first-frame": (table(changed(0, 2, id=2)), r"id 2 appears more than once"),
     "outside-height": (table(changed(2, 2, y=-0.01)), r"particle 3 at t = 0.05 s lies outside"),
     # laps from wrapped heights: a step beyond a quarter of the height is refused, as a

@@ -1004,3 +1004,29 @@ def test_the_exit_means_interval_carries_the_models_flow_term(fitted, tmp_path):
         assert term["rt_mean_relative"] == 0.1 and term["degrees_of_freedom"] == 3
         (a, b), (c, d) = without["exit_mean"][name], with_flow["exit_mean"][name]
         assert c < a and d > b
+
+
+def test_react_repeats_an_open_risers_returns_and_its_intervals_lines(tmp_path, capsys):
+    """The exit means rest on the exits the chain was fitted on: react repeats the open
+    riser's lines (returns through the inlet, as predict does) and, with --resamples, the
+    model's lines on its interval (the same bootstrap)."""
+    from tests.analysis.test_model_intervals import _returning_riser_csv
+
+    csv = _returning_riser_csv(tmp_path / "r.csv")
+    run, model = tmp_path / "r.h5", tmp_path / "m.h5"
+    assert main(["import", str(csv), "--format", "csv", "--width", "0.1", "--height", "1",
+                 "--boundary", "open", "-o", str(run)]) == 0
+    assert main(["fit", str(run), "--cells", "2x10", "--lag", "0.1", "--window", "2:7.5",
+                 "--resamples", "20", "-q", "-o", str(model)]) == 0
+    capsys.readouterr()
+    kin = _write(tmp_path, '[[property]]\nname = "X"\nlaw = "first-order"\nrate = 0.7\n')
+    assert main(["react", str(model), "--kinetics", str(kin), "--resamples", "20"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: the model: " in err and " returns through the inlet against " in err
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.model_summary import fitting_run_count, one_sided_interval_warnings
+
+    m = MarkovModel.load(model)
+    for line in (m.uncertainty.warnings(fitting_run_count(m))
+                 + one_sided_interval_warnings(m)):
+        assert line in err

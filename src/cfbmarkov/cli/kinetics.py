@@ -93,6 +93,8 @@ def _react(args) -> int:
     verdict = [f"the model's fitting sample: {line}"
                for line in (model.adequacy.warnings if model.adequacy is not None else ())]
     verdict += _chain_warnings(model)
+    if args.resamples:          # the exit means' intervals share the model's bootstrap
+        verdict += [line for line in _interval_warnings(model) if line not in verdict]
     if args.init is not None:        # what its Monte Carlo inherits (an open riser's hold-up)
         from cfbmarkov.markov.model_summary import monte_carlo_warnings
 
@@ -257,7 +259,23 @@ def _chain_warnings(model) -> list[str]:
     missed = on_window_warning(model)
     if missed:           # an RTD that misses its window's spread misses the conversion too
         lines.append(f"the model: {missed}")
+    if model.open_flow is not None:     # returns through the inlet, censored tracks: the
+        # exits the exact answers follow are read as the chain's
+        lines += [f"the model: {text.strip()}" for text in model.open_flow.warnings()]
     return lines
+
+
+def _interval_warnings(model) -> list[str]:
+    """The model's lines on its E(RT) interval (one-sided, or its lower end cut at 0):
+    the bootstrap of the fitting window that the exit means' intervals come from has the
+    same resamples (:func:`~cfbmarkov.markov.model_summary.one_sided_interval_warnings`)."""
+    from cfbmarkov.markov.model_summary import fitting_run_count, one_sided_interval_warnings
+
+    if model.uncertainty is None:
+        return []
+    return [f"the model: {line}" for line in
+            model.uncertainty.warnings(fitting_run_count(model))
+            + one_sided_interval_warnings(model)]
 
 
 def _exit_mean_intervals(args, model, kinetics, fields, answers, direction, passes=()):

@@ -416,7 +416,9 @@ class FrameColumns:
             srt = np.sort(ids)
             repeated = srt[1:][srt[1:] == srt[:-1]][0]
             raise InputError(f"{where}: particle id {repeated} appears more than once (two rows "
-                             "for one particle at one time)")
+                             "for one particle at one time): remove one of them (a CSV "
+                             "imported with --resample DT merges the rows of a particle at one "
+                             "time)")
         pos = np.searchsorted(self._sorted, ids)
         known = (pos < self._sorted.size) & (self._sorted[np.minimum(pos, self._sorted.size - 1)]
                                              == ids) if self._sorted.size else np.zeros(ids.size, bool)
