@@ -712,3 +712,18 @@ def test_stopped_workers_leave_no_empty_checkpoint_folder(tmp_path):
     _stop_workers(object(), tmp_path)
     assert not (tmp_path / "u6" / "cfd-dem.h5.parts").exists()
     assert (kept / "checkpoint.h5").exists()
+
+
+def test_a_models_line_gives_no_place_for_a_reference_without_residences():
+    """A reference window without residences (E(RT) NaN in the summary compare returns, null
+    in its summary.json) and an interval of NaN are not placed against each other."""
+    from cfbmarkov.reproduce import _judged
+
+    summary = {"model": {"rt_mean_interval": [1.0, 2.0]}, "reference": {"rt_mean": float("nan")},
+               "level": 0.9, "warnings": []}
+    assert _judged(summary, "mle") == ""
+    summary["reference"]["rt_mean"], summary["model"]["rt_mean_interval"] = 1.5, [float("nan")] * 2
+    assert _judged(summary, "mle") == ""
+    summary["model"]["rt_mean_interval"] = [1.0, 2.0]
+    assert _judged(summary, "mle") == ("; the CFD-DEM's E(RT) 1.5 s lies inside the model's "
+                                       "90 % interval 1-2 s")

@@ -180,9 +180,9 @@ class FrameSeries:
             missing = int(round(step / reference)) - 1
             # a whole number of frames with no row: nobody in view (an open riser's track
             # file writes no row for an empty frame), or frames lost
-            empty = (f" ({missing} frame(s) with no row: where no particle is in view, as "
-                     "between the particles of an open riser's track file, --resample DT "
-                     "reads them as empty frames)"
+            empty = (f" ({missing} frame(s) missing: a CSV track file of an open riser "
+                     "writes no row while no particle is in view, and --resample DT reads "
+                     "such frames as empty)"
                      if missing >= 1 and abs(step - (missing + 1) * reference)
                      <= FRAME_SPACING_TOLERANCE * reference else "")
             raise InputError(

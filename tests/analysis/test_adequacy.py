@@ -559,29 +559,35 @@ def test_no_throughput_is_formed_from_fewer_than_ten_net_passes(tmp_path):
 
 
 def test_the_throughput_limit_widens_for_the_windows_cut_through_few_particles_laps(tmp_path):
-    """The window's net passes miss each particle's fraction of a lap between its heights at
-    the window's ends (variance at most 1/6 a particle): few particles over a short window
-    leave the window's throughput E(RT) that uncertain, where the chain counts no cut. A
-    stationary known chain of 300 particles over 1 s (about 150 net passes): the limit is
-    3 x sqrt(300 / 6) / passes, wider than 10 %, and no throughput line is printed where the
-    chain is right; the same line still warns beyond it, naming the cut."""
-    from cfbmarkov.analysis.adequacy import (THROUGHPUT_LIMIT, _throughput_line,
+    """The window's net passes differ from the chain's flux by what each particle still had
+    ahead of it where the window cut it, g(s_start) - g(s_end), g the chain's pass
+    potential: few particles over a short window leave the window's throughput E(RT) that
+    uncertain, where the chain counts no cut. A stationary known chain of 300 particles over
+    1 s (about 150 net passes): the limit is 3 x sqrt(2 Var(g) 300) / passes, wider than
+    10 %, and no throughput line is printed where the chain is right; the same line still
+    warns beyond it, naming the cut."""
+    from cfbmarkov.analysis.adequacy import (THROUGHPUT_LIMIT, UNIFORM_POTENTIAL_VARIANCE,
+                                             _throughput_line, pass_potential_variance,
                                              throughput_limit, window_throughput)
     from cfbmarkov.observed.residence import residence_flux
 
     flow = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
                                vertical_spread=0.5, persistence=False)
     run = synthetic.write_run(tmp_path / "r.h5", flow, 300, 1.0, seed=1010)
-    mean, edge_sd = window_throughput([run], [(0.0, 1.0)], "up")
+    model = fit_model(run, CellGrid(4, 16), 0.025, (0.0, 1.0), "mle")
+    mean, edge_sd = window_throughput([run], [(0.0, 1.0)], "up", model)
     with Trajectories(run) as traj:
         particle_time, passes = residence_flux(traj, (0.0, 1.0), "up")
     assert mean == pytest.approx(particle_time / passes)
-    assert edge_sd == pytest.approx(np.sqrt(particle_time / 1.0 / 6.0) / passes, rel=1e-12)
+    variance = pass_potential_variance(model)
+    assert edge_sd == pytest.approx(np.sqrt(2 * variance * 300) / passes, rel=1e-12)
+    # without the chain, heights uniform in a riser climbed alike: 1/12 lap^2
+    assert window_throughput([run], [(0.0, 1.0)], "up")[1] == pytest.approx(
+        np.sqrt(2 * UNIFORM_POTENTIAL_VARIANCE * 300) / passes, rel=1e-12)
     limit = throughput_limit(edge_sd)
     assert limit == pytest.approx(3.0 * edge_sd) and limit > THROUGHPUT_LIMIT
     assert throughput_limit(0.01) == THROUGHPUT_LIMIT
     assert throughput_limit(float("nan")) == THROUGHPUT_LIMIT
-    model = fit_model(run, CellGrid(4, 16), 0.025, (0.0, 1.0), "mle")
     truth = synthetic.cell_chain(flow).rtd().mean
     verdict = assess_adequacy(model, [run], [(0.0, 1.0)])
     assert verdict.throughput_limit == pytest.approx(limit)
@@ -925,7 +931,47 @@ def test_parts_too_short_to_judge_by_residences_still_name_a_flow_that_changed(t
     model = fit_model(run, CellGrid(4, 16), 0.025, (5.0, 7.0), "mle")
     verdict = assess_adequacy(model, [run], [(5.0, 7.0)])
     line = next(x for x in verdict.warnings if x.startswith("a half of the fitting window"))
-    assert "beyond the 25 % the parts are held to at most: the flow may have changed" in line
+    assert ("beyond twice the 25 % the parts are held to at most: the flow may have "
+            "changed") in line
     means = [m for _, _, m, _ in verdict.parts]
     assert max(means) > 2.5 * min(means)
     assert verdict.spread == pytest.approx((max(means) - min(means)) / verdict.rt_mean)
+
+
+def test_the_pass_potential_takes_the_gap_between_the_window_and_its_chain_exactly(tmp_path):
+    """For the maximum-likelihood chain fitted on a window, the window's net passes minus
+    the chain's expected ones over the window's frame pairs are exactly the pass potential
+    summed over the particles' first states minus their last (n (I - P) = starts - ends),
+    the identity the throughput limit's spread rests on; a core rising beside falling walls
+    spreads the potential beyond the uniform climb's 1/12."""
+    from cfbmarkov.analysis.adequacy import (UNIFORM_POTENTIAL_VARIANCE,
+                                             pass_potential_variance)
+    from cfbmarkov.analysis.bootstrap import fitting_windows
+    from cfbmarkov.markov.counting import count_transitions
+
+    flow = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.5, fall_velocity=-1.2,
+                               lateral_probability=0.03, vertical_spread=0.5,
+                               persistence=False)
+    run = synthetic.write_run(tmp_path / "c.h5", flow, 200, 3.0, seed=3)
+    model = fit_model(run, CellGrid(4, 16), 0.025, (0.5, 2.5), "mle")
+    (window,) = fitting_windows(model)
+    counts = count_transitions(window)
+    p = np.asarray(model.transition_matrix.toarray() if hasattr(model.transition_matrix,
+                                                                "toarray")
+                   else model.transition_matrix)
+    net = np.asarray(model.up_fraction) - np.asarray(model.down_fraction)
+    reward = (p * net).sum(axis=1)
+    occupancy = np.asarray(counts.counts.sum(axis=1)).ravel()
+    observed = float(np.sum(np.asarray(counts.counts_up) - np.asarray(counts.counts_down)))
+    assert observed == pytest.approx(float(occupancy @ reward), rel=1e-9)
+    pi = np.asarray(model.stationary_distribution)
+    phi = float(pi @ reward)
+    a = np.eye(p.shape[0]) - p
+    g = np.zeros(p.shape[0])
+    g[1:] = np.linalg.solve(a[1:, 1:], (reward - phi)[1:])
+    starts, ends = window.states[0], window.states[-1]
+    assert occupancy @ (reward - phi) == pytest.approx(float(g[starts].sum() - g[ends].sum()),
+                                                       abs=1e-6)
+    assert pass_potential_variance(model) == pytest.approx(
+        float(pi @ (g - pi @ g) ** 2), rel=1e-9)
+    assert pass_potential_variance(model) > 1.3 * UNIFORM_POTENTIAL_VARIANCE

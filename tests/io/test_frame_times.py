@@ -246,8 +246,8 @@ def test_uneven_spacing_is_refused_naming_the_time(tmp_path, t0, kind, message, 
     assert "\n" not in str(info.value)
     assert list(tmp_path.iterdir()) == []
     # a whole frame with no row is named as such, with the way to read it as an empty one
-    assert ("(1 frame(s) with no row: where no particle is in view" in str(info.value)) == (
-        kind == "missing")
+    assert ("(1 frame(s) missing: a CSV track file of an open riser writes no row while "
+            "no particle is in view" in str(info.value)) == (kind == "missing")
 
 
 @pytest.mark.parametrize("t0", [0.0, 10.0])

@@ -148,14 +148,33 @@ def window_rt_mean(runs, windows, direction: str) -> float:
 THROUGHPUT_EDGE_SDS = 3.0
 
 
-def window_throughput(runs, windows, direction: str) -> tuple[float, float]:
+def window_throughput(runs, windows, direction: str, model=None) -> tuple[float, float]:
     """:func:`window_rt_mean` and the relative standard deviation of its net passes that the
-    window's ends alone give: a particle's pass count over the window misses the fraction
-    of a lap between its heights at the two ends, (h_end - h_start) / H, whose variance is
-    at most 1/6 (two independent uniform heights), so the net passes of N particles carry
-    up to sqrt(N / 6) passes of the window's cut (N: the particle-time over the window's
-    length, several runs' summed). Both from the same transitions as the chain, which
-    counts no cut: its E(RT) and the window's differ by that much with no change of flow.
+    window's cut through the particles' laps alone gives, where the chain, fitted on the
+    same transitions, counts no cut.
+
+    A window's net passes differ from the chain's flux times its particle-time by what each
+    tracked stretch of a particle still had ahead of it where the window cut it: g(s_end) -
+    g(s_start), g the chain's pass potential (the solution of (I - P) g = r - phi, r_i the
+    expected net passes of a lag from state i, phi = pi r: the passes a particle in state i
+    makes beyond the mean rate, Kemeny & Snell's fundamental matrix applied to a reward;
+    W. J. Stewart, Introduction to the Numerical Solution of Markov Chains, 1994, Ch. 1).
+    With the two ends far apart, each stretch adds 2 Var_pi(g) to the variance of the net
+    passes: a particle's heights taken uniform in a riser it climbs alike everywhere give
+    Var(g) = 1/12 lap^2, while a core rising beside falling walls spreads g further. Without
+    ``model`` (or for a reducible chain) that 1/12 is taken. The stretches: the particles
+    tracked in the window (each presence run in a file with absent particles; several
+    runs' summed).
+
+    Parameters
+    ----------
+    runs : sequence of str, os.PathLike or Trajectories
+    windows : sequence of (float, float)
+        Each run's window (s).
+    direction : {"up", "down"}
+        The net flow's direction.
+    model : MarkovModel, optional
+        The chain fitted on the windows (its pass potential).
 
     Returns
     -------
@@ -163,27 +182,77 @@ def window_throughput(runs, windows, direction: str) -> tuple[float, float]:
         E(RT) (s) and the relative SD (fraction); NaN, NaN where :func:`window_rt_mean` is
         NaN.
     """
-    particle_time, passes, edge_variance = 0.0, 0, 0.0
+    particle_time, passes, stretches = 0.0, 0, 0
     for run, (a, b) in zip(runs, windows):
         with opened(run) as traj:
             try:
                 part = residence_flux(traj, (a, b), direction)
             except InputError:
                 return math.nan, math.nan
+            if traj.has_absences:     # each presence run is cut at both its ends
+                present = np.asarray(traj.present(traj.window(a, b)), dtype=bool)
+                stretches += int(present[0].sum() + (present[1:] & ~present[:-1]).sum())
+            else:
+                stretches += int(traj.n_particles)
         particle_time += part[0]
         passes += part[1]
-        edge_variance += part[0] / max(b - a, 1e-300) / 6.0
     if passes < MIN_THROUGHPUT_PASSES:
         return math.nan, math.nan
-    return particle_time / passes, math.sqrt(edge_variance) / passes
+    variance = pass_potential_variance(model) if model is not None else math.nan
+    if not math.isfinite(variance):
+        variance = UNIFORM_POTENTIAL_VARIANCE
+    return particle_time / passes, math.sqrt(2.0 * variance * stretches) / passes
+
+
+#: Var(g) of the pass potential, in laps^2, of heights uniform in a riser climbed alike
+#: everywhere (g = -h / H + const): what :func:`window_throughput` takes without a chain
+UNIFORM_POTENTIAL_VARIANCE = 1.0 / 12.0
+
+
+def pass_potential_variance(model) -> float:
+    """Var_pi(g) of a periodic riser's chain's pass potential g, laps^2: (I - P) g = r - phi
+    with r_i = sum_j P_ij (up_ij - down_ij), the expected net passes up of a lag from state
+    i, and phi = pi r (:func:`window_throughput`). Solved with g fixed at 0 in one state
+    (the minor of I - P is regular for an irreducible chain; Var does not depend on the
+    constant).
+
+    Returns
+    -------
+    float
+        NaN for an open riser, a reducible chain, or a system that cannot be solved.
+    """
+    import scipy.sparse as sp
+    import scipy.sparse.linalg as spla
+
+    if getattr(model, "open_flow", None) is not None or len(model.closed_classes) > 1:
+        return math.nan
+    try:
+        p = sp.csr_array(model.transition_matrix, dtype=np.float64)
+        net = sp.csr_array(np.asarray(model.up_fraction) - np.asarray(model.down_fraction))
+        reward = np.asarray(p.multiply(net).sum(axis=1)).ravel()
+        pi = np.asarray(model.stationary_distribution, dtype=np.float64)
+        centred = reward - float(pi @ reward)
+        # states the chain visits: the others hold no probability and no equation
+        keep = np.flatnonzero(pi > 0)
+        if keep.size < 2:
+            return math.nan
+        a = (sp.identity(p.shape[0], format="csr") - p)[keep][:, keep]
+        g = np.zeros(p.shape[0])
+        with np.errstate(all="ignore"):
+            g[keep[1:]] = spla.spsolve(sp.csc_array(a[1:, 1:]), centred[keep[1:]])
+        if not np.all(np.isfinite(g)):
+            return math.nan
+        mean = float(pi @ g)
+        return float(pi @ (g - mean) ** 2)
+    except (ValueError, RuntimeError, np.linalg.LinAlgError):
+        return math.nan
 
 
 def throughput_limit(edge_sd: float) -> float:
     """The relative distance between the model's E(RT) and the window's throughput E(RT)
     beyond which the throughput line warns: :data:`THROUGHPUT_LIMIT`, or
     :data:`THROUGHPUT_EDGE_SDS` times the relative SD the window's cut gives its net passes
-    (:func:`window_throughput`) where that is larger (a short window of few particles: 300
-    particles over 1 s, 146 net passes, 4.8 % and a limit of 15 %)."""
+    (:func:`window_throughput`) where that is larger (a short window of few particles)."""
     if not math.isfinite(edge_sd):
         return THROUGHPUT_LIMIT
     return max(THROUGHPUT_LIMIT, THROUGHPUT_EDGE_SDS * edge_sd)
@@ -449,14 +518,16 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                 if math.isfinite(part_spread):     # the parts' chains, from transitions
                     spread = (part_spread if not math.isfinite(spread)
                               else max(spread, part_spread))
-                far = math.isfinite(part_spread) and part_spread > MAX_PARTS_LIMIT
+                # twice the most the parts are held to: halves of few residences scatter
+                # by their sampling up to about that on a steady flow
+                far = math.isfinite(part_spread) and part_spread > 2 * MAX_PARTS_LIMIT
                 seen = ("" if len(means) < 2 else
                         f" (its parts' chains give E(RT) "
                         f"{', '.join(f'{m:.3g}' for m in means)} s"
                         + (f", a spread of {100 * part_spread:.0f} % of the model's "
-                           f"{rt_mean:.3g} s, beyond the {100 * MAX_PARTS_LIMIT:g} % the parts "
-                           "are held to at most: the flow may have changed within the window, "
-                           "which its residences are too few to confirm)" if far else
+                           f"{rt_mean:.3g} s, beyond twice the {100 * MAX_PARTS_LIMIT:g} % the "
+                           "parts are held to at most: the flow may have changed within the "
+                           "window, which its residences are too few to confirm)" if far else
                            ", too few residences to judge the difference)"))
                 lines.append(f"a half of the fitting window {window[0]:g}-{window[1]:g} s of "
                              f"{name} holds {fewest} residences (fewer than "
@@ -497,7 +568,7 @@ def assess_adequacy(model, runs: Sequence, windows: Sequence[tuple[float, float]
                          f"the windows are too short to judge their E(RT); {_ADVICE}")
         if math.isfinite(pooled_spread):
             spread = pooled_spread if not math.isfinite(spread) else max(spread, pooled_spread)
-    window_mean, edge_sd = window_throughput(runs, windows, model.flow_direction)
+    window_mean, edge_sd = window_throughput(runs, windows, model.flow_direction, model)
     throughput = _throughput_line(model, rt_mean, window_mean, edge_sd=edge_sd)
     if throughput:
         lines.append(throughput)
