@@ -721,7 +721,11 @@ def test_two_far_apart_rows_of_one_tracer_at_one_time_are_refused_not_averaged(t
     ('<?xml version="1.0" encoding="UTF-8"?>\n<TrackMate version="7.0">\n<Model>\n',
      r"TrackMate XML tracks: not read; export the tracks as CSV"),
     ('TITLE = "particles"\nVARIABLES = "X" "Y"\nZONE T="t0"\n0.1 0.2\n',
-     r"Tecplot ASCII \(TITLE/VARIABLES/ZONE lines\): not read")])
+     r"Tecplot ASCII \(TITLE/VARIABLES/ZONE lines\): not read"),
+    ("# a riser\nunits si\natom_style sphere\ndimension 2\nboundary f p p\n"
+     "dump d1 all custom 100 riser.dump id x y\nrun 1000\n",
+     r"a LAMMPS input script \(units, atom_style, dimension, boundary commands\), not its "
+     r"output: import the file its dump command writes \(here: riser\.dump\)")])
 def test_a_text_format_no_reader_reads_is_named_whatever_format_is_given(
         tmp_path, assert_clean_failure, fmt, content, match):
     source = tmp_path / "tracks.txt"

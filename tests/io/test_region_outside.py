@@ -108,6 +108,6 @@ def test_particles_outside_the_region_in_every_frame_warn_on_import(tmp_path, ca
     assert main(["import", str(source), "--region", "0:0.045,0:0.95", "-o",
                  str(tmp_path / "cut.h5")]) == 0
     err = capsys.readouterr().err
-    assert "warning: 1 of the 2 particles lie outside the riser's region in every frame" in err
+    assert "warning: 1 of the 2 particles lies outside the riser's region in every frame" in err
     assert main(["import", str(source), "-o", str(tmp_path / "whole.h5")]) == 0
     assert "warning" not in capsys.readouterr().err

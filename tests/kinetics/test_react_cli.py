@@ -1030,3 +1030,32 @@ def test_react_repeats_an_open_risers_returns_and_its_intervals_lines(tmp_path, 
     for line in (m.uncertainty.warnings(fitting_run_count(m))
                  + one_sided_interval_warnings(m)):
         assert line in err
+
+
+def test_a_reducible_chains_exit_interval_has_the_rtd_intervals_definition(tmp_path):
+    """Columns whose particles never cross (closed classes of different E(RT)): the
+    resamples of an exit mean start from the fitted model's entry distribution, as the
+    RTD's do, so a slow first-order conversion (X ~ k E(RT)) has the relative interval of
+    E(RT), where each resample's own entry distribution re-weighted the classes and spread
+    it several times as far."""
+    from cfbmarkov.analysis.intervals import model_intervals
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_intervals
+    from cfbmarkov.kinetics import FirstOrder, Kinetics, Property
+    from cfbmarkov.markov import MarkovModel, fit_model
+
+    flow = RiserFlow(columns=4, rows=8, lag=0.025, persistence=False, rise_velocity=2.0,
+                     fall_velocity=-1.0, lateral_probability=0.0)
+    run = write_run(tmp_path / "run.h5", flow, 200, 4.0, seed=3)
+    model = fit_model(run, CellGrid(4, 8), 0.025, (0.0, 4.0), "mle")
+    assert len(model.closed_classes) > 1
+    path = model.save(tmp_path / "m.h5")
+    model = MarkovModel.load(path)
+    rt = model_intervals(model, resamples=40)
+    k = 0.01
+    kin = Kinetics((Property("X", FirstOrder(), {"rate": k}),))
+    formed = exit_mean_intervals(model, kin, resamples=40, candidates=[run])
+    lo, hi = formed["exit_mean"]["X"]
+    mean = model.rtd().mean
+    width_rt = (rt.rt_mean_interval[1] - rt.rt_mean_interval[0]) / mean
+    width_x = (hi - lo) / (k * mean)
+    assert width_x == pytest.approx(width_rt, rel=0.3)

@@ -421,7 +421,10 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
     window (:func:`cfbmarkov.analysis.bootstrap.block_bootstrap_models`,
     :data:`~cfbmarkov.analysis.bootstrap.BOOTSTRAP_BLOCKS` blocks, seed 0),
     what the model's interval of an exit mean is formed from (`compare --kinetics`,
-    `react --resamples`).
+    `react --resamples`). A periodic riser's resamples start their residences from the
+    fitted model's entry distribution, as the RTD's interval's resamples do
+    (:func:`cfbmarkov.analysis.bootstrap.bootstrap_figures`: the spread of the entry
+    distribution left out, one definition for both).
 
     Parameters
     ----------
@@ -482,6 +485,12 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
                       for name in full if full[name].start == "carried" for n in passes
                       if part[name].after_passes(n)[0] != 0})
     depth = None if depth is None else min(depth, BOOTSTRAP_DEFICIT_LEVELS)
+    # a periodic riser's resamples start from the fitted model's entry distribution, as its
+    # RTD's resamples do (bootstrap_figures): the same definition as the E(RT) interval's
+    # (a resample's own would re-weight a reducible chain's classes, spreading the exit
+    # mean ten times as far as E(RT) on a LAMMPS riser of six column classes)
+    entry = (None if model.open_flow is not None
+             else model.rtd(direction=direction).entry_distribution)
     try:
         drawn = block_bootstrap_models(model, blocks=BOOTSTRAP_BLOCKS, resamples=resamples, seed=0)
         means: dict[str, list[float]] = {name: [] for name in kinetics.names}
@@ -489,7 +498,8 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
             try:
                 answers = exact_kinetics(resampled, kinetics.per_state(resampled.state_space,
                                                                        fields),
-                                         direction=direction, deficit_levels=depth)
+                                         direction=direction, deficit_levels=depth,
+                                         entry=entry)
             except (CfbmarkovError, ValueError):
                 continue
             for name, answer in answers.items():

@@ -185,6 +185,13 @@ def _refuse_unread_text(path, head: bytes) -> None:
         raise UnreadFormat(f"{path}: {what}: not read; export the tracks as CSV (TrackMate: "
                          "the spots table, with TRACK_ID, POSITION_T, POSITION_X, POSITION_Y; "
                          "docs/how-to/pept-ptv.md) or as VTK PolyData (.vtp)")
+    commands = _lammps_commands(lower)
+    if len(commands) >= 3:
+        dump = re.search(rb"^\s*dump\s+\S+\s+\S+\s+\S+\s+\S+\s+(\S+)", lower, re.M)
+        writes = (f" (here: {dump.group(1).decode(errors='replace')})" if dump else "")
+        raise UnreadFormat(f"{path}: a LAMMPS input script ({', '.join(commands[:4])} "
+                           "commands), not its output: import the file its dump command "
+                           f"writes{writes}, a dump of atom or custom style")
     first = lower.split(b"\n", 1)[0].strip()
     # Tecplot's keywords take "=" (TITLE = "...", VARIABLES = "X" "Y", ZONE T="..."): a
     # CSV header that merely begins with a column named zone or title is no such file
@@ -192,6 +199,26 @@ def _refuse_unread_text(path, head: bytes) -> None:
         raise UnreadFormat(f"{path}: Tecplot ASCII (TITLE/VARIABLES/ZONE lines): not read; "
                          "export the particles as CSV with columns t, id, x, y (or VTK "
                          "PolyData, .vtp; MFiX writes those with its VTK output)")
+
+
+#: commands of a LAMMPS/LIGGGHTS input script that no CSV header or data line starts with
+_LAMMPS_COMMANDS = (b"units", b"atom_style", b"dimension", b"boundary", b"region",
+                    b"create_box", b"create_atoms", b"lattice", b"pair_style", b"pair_coeff",
+                    b"fix", b"dump", b"run", b"timestep", b"neighbor", b"neigh_modify",
+                    b"thermo", b"variable", b"read_data", b"comm_modify")
+
+
+def _lammps_commands(text: bytes) -> list[str]:
+    """The LAMMPS commands the lines of ``text`` start with (a word, then a space), in the
+    order first seen; a CSV's first line never does."""
+    seen: list[str] = []
+    for line in text.split(b"\n")[:200]:
+        words = line.split(None, 1)
+        if len(words) == 2 and words[0] in _LAMMPS_COMMANDS:
+            word = words[0].decode()
+            if word not in seen:
+                seen.append(word)
+    return seen
 
 
 def _tabular(path) -> bool:

@@ -197,7 +197,8 @@ def presence_warnings(traj) -> list[str]:
     never = int(np.count_nonzero(~seen))
     if not never:
         return []
-    return [f"{never} of the {traj.n_particles} particles lie outside the riser's region in "
+    verb = "lies" if never == 1 else "lie"
+    return [f"{never} of the {traj.n_particles} particles {verb} outside the riser's region in "
             "every frame: the region leaves out part of the riser, or its origin is not the "
             "riser's corner; check --region (or --width/--height, from 0 in the source's "
             "coordinates) against the riser's walls"]

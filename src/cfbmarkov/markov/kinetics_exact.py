@@ -579,7 +579,7 @@ CENTRED_ROUND_OFF = 1e-12
 
 
 def residence_chain(model, direction: str | None = None, deficit_levels: int | None = None,
-                    landings: bool = False) -> tuple:
+                    landings: bool = False, entry=None) -> tuple:
     """The absorbing chain of a model's residences, on the states from which an exit can be
     reached (module docstring).
 
@@ -599,6 +599,10 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
     landings : bool, optional
         Also return where each residence lands (a periodic riser's): the next residence's
         entry state.
+    entry : array_like of float, shape (S,), optional
+        A periodic riser's entry distribution to start the residences from instead of the
+        model's own (a bootstrap resample started from the fitted model's, as its RTD is:
+        :func:`cfbmarkov.analysis.bootstrap.bootstrap_figures`). Ignored for an open riser.
 
     Returns
     -------
@@ -644,7 +648,13 @@ def residence_chain(model, direction: str | None = None, deficit_levels: int | N
 
             exact = rtd_of_split_chain(p_up, p_down, p_stay, model.lag, int(deficit_levels),
                                        entry_flux=net_entry_flux(model, direction))
-        entry = exact.entry_distribution
+        if entry is None:
+            entry = exact.entry_distribution
+        else:
+            entry = np.asarray(entry, dtype=np.float64)
+            if entry.shape != (s,):
+                raise InputError(f"entry distribution of shape {entry.shape}: one value per "
+                                 f"state ({s})")
         levels = exact.deficit_levels + 1
         q, r = deficit_matrix(p_up, p_down, p_stay, levels)
         live = _live_levels(p_up, p_down, p_stay, levels, r > 0)
@@ -712,8 +722,8 @@ def _bed_cells(model, row_cell: np.ndarray, n_rows: int) -> np.ndarray:
 
 
 def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
-                   direction: str | None = None, deficit_levels: int | None = None
-                   ) -> dict[str, PropertyAnswer]:
+                   direction: str | None = None, deficit_levels: int | None = None,
+                   entry=None) -> dict[str, PropertyAnswer]:
     """Exact answers of every property of linear kinetics on a model.
 
     Parameters
@@ -732,6 +742,9 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
     deficit_levels : int, optional
         The lap deficits kept (:func:`residence_chain`); default those of the model's
         exact RTD.
+    entry : array_like of float, shape (S,), optional
+        A periodic riser's entry distribution instead of the model's own
+        (:func:`residence_chain`): a bootstrap resample's answers from the fitted model's.
 
     Returns
     -------
@@ -768,7 +781,7 @@ def exact_kinetics(model, kinetics: Kinetics | StateKinetics, cell_fields=None,
                          "entry)")
     carries = "carried" in sk.starts
     q, r, e, state, _, *landed = residence_chain(model, direction, deficit_levels,
-                                                 landings=carries)
+                                                 landings=carries, entry=entry)
     landed = landed[:2]         # where residences land, and the entry states' rows
     a_all, b_all = sk.over(model.lag)
     c_all = -np.expm1(-np.asarray(sk.rate, dtype=np.float64) * model.lag)    # 1 - a, exact
