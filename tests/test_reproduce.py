@@ -724,6 +724,8 @@ def test_a_models_line_gives_no_place_for_a_reference_without_residences():
     assert _judged(summary, "mle") == ""
     summary["reference"]["rt_mean"], summary["model"]["rt_mean_interval"] = 1.5, [float("nan")] * 2
     assert _judged(summary, "mle") == ""
+    summary["model"]["rt_mean_interval"] = [None, None]      # NaN read back from JSON
+    assert _judged(summary, "mle") == ""
     summary["model"]["rt_mean_interval"] = [1.0, 2.0]
     assert _judged(summary, "mle") == ("; the CFD-DEM's E(RT) 1.5 s lies inside the model's "
                                        "90 % interval 1-2 s")

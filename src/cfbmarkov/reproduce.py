@@ -674,7 +674,8 @@ def _judged(summary: dict, model: str) -> str:
     reference = (summary.get("reference") or {}).get("rt_mean")
     level = summary.get("level")
     if (interval and reference is not None and level
-            and all(math.isfinite(float(v)) for v in (*interval, reference))):
+            and all(v is not None and math.isfinite(float(v))
+                    for v in (*interval, reference))):
         lo, hi = interval
         place = ("inside" if lo <= reference <= hi else "below" if reference < lo else
                  "above")

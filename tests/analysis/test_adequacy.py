@@ -975,3 +975,48 @@ def test_the_pass_potential_takes_the_gap_between_the_window_and_its_chain_exact
     assert pass_potential_variance(model) == pytest.approx(
         float(pi @ (g - pi @ g) ** 2), rel=1e-9)
     assert pass_potential_variance(model) > 1.3 * UNIFORM_POTENTIAL_VARIANCE
+
+
+def test_a_particle_stuck_in_a_cell_of_its_own_leaves_the_pass_potential_of_the_flow(
+        tmp_path):
+    """One particle held in a cell no other visits is a closed class of one state, with
+    long-run probability and no passes: the potential is solved on the flow's one closed
+    class, as without it (no singular solve, no numpy warning, no fallback to 1/12)."""
+    import warnings
+
+    from cfbmarkov.analysis.adequacy import pass_potential_variance
+    from cfbmarkov.trajectory_writer import TrajectoryWriter
+
+    flow = synthetic.RiserFlow(columns=4, rows=16, rise_velocity=1.2, fall_velocity=-0.6,
+                               vertical_spread=0.5, persistence=False)
+    times, _, positions, laps = synthetic.sample_run(flow, 30, 101, seed=4)
+    cw, ch = flow.width / 12, flow.height / 48
+    cells = (np.clip((positions[..., 1] / ch).astype(int), 0, 47) * 12
+             + np.clip((positions[..., 0] / cw).astype(int), 0, 11))
+    free = np.setdiff1d(np.arange(576), cells)
+    c = int(free[free.size // 2])
+    positions[:, 0] = ((c % 12 + 0.5) * cw, (c // 12 + 0.5) * ch)
+    laps[:, 0] = 0
+    with TrajectoryWriter(tmp_path / "stuck.h5", np.arange(30), width=flow.width,
+                          height=flow.height, source="test", frame_interval=flow.lag) as w:
+        w.append_frames(times, positions, laps=laps)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        model = fit_model(tmp_path / "stuck.h5", CellGrid(12, 48), flow.lag, (0.0, 2.5), "mle")
+        variance = pass_potential_variance(model)
+    assert np.isfinite(variance) and 0.02 < variance < 0.3
+
+
+def test_presence_runs_are_counted_block_by_block_as_whole():
+    """The runs of presence a window's cut counts: read a few frames at a time, the same
+    as over the whole mask (a run across a block's edge counted once)."""
+    from types import SimpleNamespace
+
+    from cfbmarkov.analysis.adequacy import _presence_runs
+
+    rng = np.random.default_rng(2)
+    mask = rng.random((53, 7)) < 0.7
+    traj = SimpleNamespace(present=lambda frames: mask[frames])
+    whole = int(mask[5].sum() + (mask[6:50] & ~mask[5:49]).sum())
+    for block in (1, 3, 8, 256):
+        assert _presence_runs(traj, slice(5, 50), block) == whole

@@ -723,9 +723,10 @@ def test_two_far_apart_rows_of_one_tracer_at_one_time_are_refused_not_averaged(t
     ('TITLE = "particles"\nVARIABLES = "X" "Y"\nZONE T="t0"\n0.1 0.2\n',
      r"Tecplot ASCII \(TITLE/VARIABLES/ZONE lines\): not read"),
     ("# a riser\nunits si\natom_style sphere\ndimension 2\nboundary f p p\n"
-     "dump d1 all custom 100 riser.dump id x y\nrun 1000\n",
-     r"a LAMMPS input script \(units, atom_style, dimension, boundary commands\), not its "
-     r"output: import the file its dump command writes \(here: riser\.dump\)")])
+     "dump d1 all custom 100 post/Riser_Run3.dump id x y\nrun 1000\n",
+     r"LAMMPS commands \(units, atom_style, dimension, boundary\): an input script or its "
+     r"log, not a dump: import the file its dump command writes \(here: "
+     r"post/Riser_Run3\.dump\)")])
 def test_a_text_format_no_reader_reads_is_named_whatever_format_is_given(
         tmp_path, assert_clean_failure, fmt, content, match):
     source = tmp_path / "tracks.txt"

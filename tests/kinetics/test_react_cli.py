@@ -1059,3 +1059,47 @@ def test_a_reducible_chains_exit_interval_has_the_rtd_intervals_definition(tmp_p
     width_rt = (rt.rt_mean_interval[1] - rt.rt_mean_interval[0]) / mean
     width_x = (hi - lo) / (k * mean)
     assert width_x == pytest.approx(width_rt, rel=0.3)
+
+
+def test_a_carried_propertys_resamples_keep_their_own_circulation(fitted):
+    """A carried property's steady state closes each resample's own circulation (its
+    landings fed back as its entries): with a uniform target every chain's steady exit mean
+    is the target, and so is every resample's, so the interval is that one value (a
+    foreign entry distribution gave 348.75-350.93 around 350)."""
+    from cfbmarkov.analysis.kinetics_compare import exit_mean_intervals
+    from cfbmarkov.kinetics import HeatExchange, Kinetics, Property
+    from cfbmarkov.markov import MarkovModel
+
+    folder, _, path = fitted
+    kin = Kinetics((Property("T", HeatExchange(), {"coefficient": 2.0, "temperature": 350.0},
+                             initial=300.0, start="carried"),
+                    Property("X", HeatExchange(), {"coefficient": 2.0,
+                                                   "temperature": 350.0}, initial=300.0)))
+    formed = exit_mean_intervals(MarkovModel.load(path), kin, resamples=20,
+                                 candidates=[folder / "run.h5"])
+    lo, hi = formed["exit_mean"]["T"]
+    assert lo == pytest.approx(350.0, abs=1e-9) and hi == pytest.approx(350.0, abs=1e-9)
+    lo, hi = formed["exit_mean"]["X"]              # entering at 300: below, with a spread
+    assert lo < hi < 350.0
+
+
+@pytest.mark.parametrize("rate", [1e-3, 1e-7])
+def test_the_spread_after_passes_keeps_its_digits_at_slow_rates(fitted, rate):
+    """A slowly deactivating carried catalyst: after one pass a = exp(-k RT) ~ 1 - k RT, so
+    its SD is k SD(RT) to O(k); formed from E[a^2] - E[a]^2 around 0 it lost every digit
+    (printed 0 at 1e-6 1/s). The moments of a - mean keep them; 1000 passes spread it about
+    sqrt(1000) times as far (the passes correlated a little)."""
+    from cfbmarkov.kinetics import Deactivation, Kinetics, Property
+    from cfbmarkov.markov import MarkovModel
+    from cfbmarkov.markov.kinetics_exact import exact_kinetics
+
+    _, _, path = fitted
+    model = MarkovModel.load(path)
+    answer = exact_kinetics(model, Kinetics((Property("a", Deactivation(), {"rate": rate},
+                                                      start="carried"),)))["a"]
+    mean, sd = answer.after_passes(1)
+    rtd = model.rtd()
+    assert mean == pytest.approx(1.0 - rate * rtd.mean, rel=10 * rate)
+    assert sd == pytest.approx(rate * rtd.sd, rel=10 * rate + 1e-6)
+    many = answer.after_passes(1000)[1]
+    assert 10 * sd < many < 100 * sd

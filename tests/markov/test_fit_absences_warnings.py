@@ -215,6 +215,13 @@ def test_interval_bounds_print_rounded_outwards():
     assert outward_bounds(-2.3593, -1.2345) == ("-2.36", "-1.23")
     assert outward_bounds(-0.0, 1.0) == ("0", "1.00")
     assert outward_bounds(5e-324, float("inf")) == ("4.94e-324", "inf")   # no overflow
+    # many digits (a reference within 1e-8 of a bound asks for them): still outwards, the
+    # on-grid slack a few units in the last place, not a unit of the 9th or 10th digit
+    assert outward_bounds(0.6480012345678, 0.6480012345699, 10) == ("0.6480012345",
+                                                                     "0.6480012346")
+    assert outward_bounds(0.9999999999944935, 0.999999999999519, 10) == ("0.9999999999",
+                                                                         "1.000000000")
+    assert outward_bounds(0.1 + 0.2, 0.3, 4) == ("0.3000", "0.3000")    # on the grid
     edges = np.array([0.0, 0.1, 0.2])
     band = np.array([[0.0, 0.0], [0.6, 0.6]])
     u = ModelUncertainty(0.9, (2.3593, 2.3940), (0.0, 0.8271), edges, band, 100, 10, 0.1,

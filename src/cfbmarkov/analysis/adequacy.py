@@ -190,8 +190,7 @@ def window_throughput(runs, windows, direction: str, model=None) -> tuple[float,
             except InputError:
                 return math.nan, math.nan
             if traj.has_absences:     # each presence run is cut at both its ends
-                present = np.asarray(traj.present(traj.window(a, b)), dtype=bool)
-                stretches += int(present[0].sum() + (present[1:] & ~present[:-1]).sum())
+                stretches += _presence_runs(traj, traj.window(a, b))
             else:
                 stretches += int(traj.n_particles)
         particle_time += part[0]
@@ -204,6 +203,19 @@ def window_throughput(runs, windows, direction: str, model=None) -> tuple[float,
     return particle_time / passes, math.sqrt(2.0 * variance * stretches) / passes
 
 
+def _presence_runs(traj, frames: slice, block: int = 256) -> int:
+    """The runs of presence of the particles over ``frames``, read ``block`` frames at a
+    time (a presence mask of many frames and particles is not read whole)."""
+    runs, last = 0, None
+    for start in range(frames.start, frames.stop, block):
+        present = np.asarray(traj.present(slice(start, min(start + block, frames.stop))),
+                             dtype=bool)
+        before = np.zeros(present.shape[1], bool) if last is None else last
+        runs += int((present[0] & ~before).sum() + (present[1:] & ~present[:-1]).sum())
+        last = present[-1]
+    return runs
+
+
 #: Var(g) of the pass potential, in laps^2, of heights uniform in a riser climbed alike
 #: everywhere (g = -h / H + const): what :func:`window_throughput` takes without a chain
 UNIFORM_POTENTIAL_VARIANCE = 1.0 / 12.0
@@ -212,40 +224,58 @@ UNIFORM_POTENTIAL_VARIANCE = 1.0 / 12.0
 def pass_potential_variance(model) -> float:
     """Var_pi(g) of a periodic riser's chain's pass potential g, laps^2: (I - P) g = r - phi
     with r_i = sum_j P_ij (up_ij - down_ij), the expected net passes up of a lag from state
-    i, and phi = pi r (:func:`window_throughput`). Solved with g fixed at 0 in one state
-    (the minor of I - P is regular for an irreducible chain; Var does not depend on the
-    constant).
+    i, and phi = pi r (:func:`window_throughput`), on the chain's one closed class of two or
+    more states (states outside it, transient or single traps, hold no probability in the
+    long run and make no passes). Solved with g fixed at 0 in one state of the class (the
+    minor of I - P is regular on a closed communicating class; Var does not depend on the
+    constant), and checked against its equations.
 
     Returns
     -------
     float
-        NaN for an open riser, a reducible chain, or a system that cannot be solved.
+        NaN for an open riser, a chain of several closed classes (or none), or a system
+        that does not solve.
     """
+    import warnings
+
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
 
-    if getattr(model, "open_flow", None) is not None or len(model.closed_classes) > 1:
+    from cfbmarkov.markov.connectivity import closed_classes
+
+    if getattr(model, "open_flow", None) is not None:
         return math.nan
+    p = sp.csr_array(model.transition_matrix, dtype=np.float64)
+    classes = closed_classes(p, min_size=2)
+    if len(classes) != 1:
+        return math.nan
+    keep = np.sort(classes[0])
+    p = p[keep][:, keep]
+    net = sp.csr_array(np.asarray(model.up_fraction) - np.asarray(model.down_fraction)
+                       )[keep][:, keep]
+    reward = np.asarray(p.multiply(net).sum(axis=1)).ravel()
+    a = sp.identity(keep.size, format="csr") - p
     try:
-        p = sp.csr_array(model.transition_matrix, dtype=np.float64)
-        net = sp.csr_array(np.asarray(model.up_fraction) - np.asarray(model.down_fraction))
-        reward = np.asarray(p.multiply(net).sum(axis=1)).ravel()
-        pi = np.asarray(model.stationary_distribution, dtype=np.float64)
-        centred = reward - float(pi @ reward)
-        # states the chain visits: the others hold no probability and no equation
-        keep = np.flatnonzero(pi > 0)
-        if keep.size < 2:
-            return math.nan
-        a = (sp.identity(p.shape[0], format="csr") - p)[keep][:, keep]
-        g = np.zeros(p.shape[0])
-        with np.errstate(all="ignore"):
-            g[keep[1:]] = spla.spsolve(sp.csc_array(a[1:, 1:]), centred[keep[1:]])
-        if not np.all(np.isfinite(g)):
-            return math.nan
-        mean = float(pi @ g)
-        return float(pi @ (g - mean) ** 2)
+        # the class's own stationary vector: the left null vector of I - P on it
+        pi = np.zeros(keep.size)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            rest = spla.spsolve(sp.csc_array(a[1:, 1:].T), -np.asarray(a[0, 1:].todense()
+                                                                        ).ravel())
+            pi[0], pi[1:] = 1.0, rest
+            pi /= pi.sum()
+            centred = reward - float(pi @ reward)
+            g = np.zeros(keep.size)
+            g[1:] = spla.spsolve(sp.csc_array(a[1:, 1:]), centred[1:])
     except (ValueError, RuntimeError, np.linalg.LinAlgError):
         return math.nan
+    if not (np.all(np.isfinite(g)) and np.all(np.isfinite(pi)) and np.all(pi >= -1e-12)):
+        return math.nan
+    scale = max(float(np.abs(centred).max()), 1e-300)
+    if np.abs(a @ g - centred).max() > 1e-6 * scale * max(1.0, float(np.abs(g).max())):
+        return math.nan          # the minor was singular: g solves no equation
+    mean = float(pi @ g)
+    return float(pi @ (g - mean) ** 2)
 
 
 def throughput_limit(edge_sd: float) -> float:

@@ -460,6 +460,7 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
     if not resamples:
         return None
     from cfbmarkov.analysis.bootstrap import BOOTSTRAP_BLOCKS, block_bootstrap_models
+    from cfbmarkov.kinetics import Kinetics
     from cfbmarkov.markov.kinetics_exact import exact_kinetics
 
     taken = kinetics_resamples(model.n_states, resamples)
@@ -489,17 +490,25 @@ def bootstrap_exit_means(model, kinetics, fields, resamples: int, warnings,
     # RTD's resamples do (bootstrap_figures): the same definition as the E(RT) interval's
     # (a resample's own would re-weight a reducible chain's classes, spreading the exit
     # mean ten times as far as E(RT) on a LAMMPS riser of six column classes)
+    # A carried property's steady state is the resample's own circulation (its landings
+    # fed back as its entries), which a foreign entry distribution would not close: those
+    # keep each resample's own
     entry = (None if model.open_flow is not None
              else model.rtd(direction=direction).entry_distribution)
+    groups = [(Kinetics(tuple(group), kinetics.source), entry if not carried else None)
+              for carried in (False, True)
+              for group in [[p for p in kinetics.properties
+                             if (p.start == "carried") == carried]] if group]
     try:
         drawn = block_bootstrap_models(model, blocks=BOOTSTRAP_BLOCKS, resamples=resamples, seed=0)
         means: dict[str, list[float]] = {name: [] for name in kinetics.names}
         for resampled in drawn:
             try:
-                answers = exact_kinetics(resampled, kinetics.per_state(resampled.state_space,
-                                                                       fields),
-                                         direction=direction, deficit_levels=depth,
-                                         entry=entry)
+                answers = {}
+                for group, start_from in groups:
+                    answers.update(exact_kinetics(
+                        resampled, group.per_state(resampled.state_space, fields),
+                        direction=direction, deficit_levels=depth, entry=start_from))
             except (CfbmarkovError, ValueError):
                 continue
             for name, answer in answers.items():

@@ -187,10 +187,12 @@ def _refuse_unread_text(path, head: bytes) -> None:
                          "docs/how-to/pept-ptv.md) or as VTK PolyData (.vtp)")
     commands = _lammps_commands(lower)
     if len(commands) >= 3:
-        dump = re.search(rb"^\s*dump\s+\S+\s+\S+\s+\S+\s+\S+\s+(\S+)", lower, re.M)
+        # the file name as written (the search on the original text, not the lower-case)
+        dump = re.search(rb"^\s*dump\s+\S+\s+\S+\s+\S+\s+\S+\s+(\S+)", head[:4096],
+                         re.M | re.I)
         writes = (f" (here: {dump.group(1).decode(errors='replace')})" if dump else "")
-        raise UnreadFormat(f"{path}: a LAMMPS input script ({', '.join(commands[:4])} "
-                           "commands), not its output: import the file its dump command "
+        raise UnreadFormat(f"{path}: LAMMPS commands ({', '.join(commands[:4])}): an input "
+                           "script or its log, not a dump: import the file its dump command "
                            f"writes{writes}, a dump of atom or custom style")
     first = lower.split(b"\n", 1)[0].strip()
     # Tecplot's keywords take "=" (TITLE = "...", VARIABLES = "X" "Y", ZONE T="..."): a

@@ -250,6 +250,32 @@ class CarriedMoments:
         module docstring): entering (I - D Q)^-1."""
         return self.discounted.solve(np.asarray(entering, dtype=np.float64), trans="T")
 
+    def shifted(self, c: float) -> "CarriedMoments":
+        """The same moments for w = v - ``c``: a residence's w_exit = A w_entry + B', B' =
+        B - (1 - A) c, so E[B'] = b - c forget, E[2AB'] = ab2 + 2c (forget - forget2)
+        (A - A^2 = (1 - A^2) - (1 - A)) and E[B'^2] = b2 - 2c (b - ab2 / 2) + c^2 (2 forget
+        - forget2) ((1 - A)^2 = 2 (1 - A) - (1 - A^2)), every term free of the cancellation
+        that E[v^2] - E[v]^2 suffers where the values lie far from 0 against their spread
+        (an activity of 0.999999 after a pass at a slow rate, its SD 3e-7). For
+        :meth:`after_passes`; the steady masses are left out.
+
+        Parameters
+        ----------
+        c : float
+            The shift (a value near the moments' mean).
+
+        Returns
+        -------
+        CarriedMoments
+        """
+        c = float(c)
+        return CarriedMoments(
+            self.kept, self.entry, self.a, self.b - c * self.forget, self.a2,
+            self.ab2 + 2.0 * c * (self.forget - self.forget2),
+            self.b2 - 2.0 * c * (self.b - 0.5 * self.ab2)
+            + c * c * (2.0 * self.forget - self.forget2),
+            self.forget, self.forget2, self.landing, survivors=self.survivors)
+
     def carried(self) -> tuple[float, float]:
         """The steady mean and second moment of a value carried across residences.
 
@@ -533,10 +559,15 @@ class PropertyAnswer:
         if int(passes) != passes or passes < 1:
             raise InputError(f"passes {passes}: give a whole number of residences, at least 1")
         mean, second = self.moments.after_passes(self.initial, int(passes))
-        variance, floor = second - mean * mean, ROUND_OFF * abs(second)
-        if self.centred is not None:     # the moments of v - centre keep the SD's digits
-            mw, sw = self.centred.after_passes(self.initial - self.centre, int(passes))
-            variance, floor = sw - mw * mw, (CENTRED_ROUND_OFF * mean) ** 2
+        # the spread from the moments of w = v - mean: E[v^2] - E[v]^2 keeps few digits
+        # where the values lie far from 0 against their spread (an activity of 0.999999
+        # after a pass at a slow rate; a temperature far from its steady state)
+        # taken from the law centred on the steady state where there is one (its per-lag
+        # maps shifted before they are summed keep the digits of values far from 0)
+        base, centre = ((self.centred, self.centre) if self.centred is not None
+                        else (self.moments, 0.0))
+        mw, sw = base.shifted(mean - centre).after_passes(self.initial - mean, int(passes))
+        variance, floor = sw - mw * mw, (CENTRED_ROUND_OFF * mean) ** 2
         return mean, float(np.sqrt(variance)) if variance > floor else 0.0
 
     def to_dict(self, passes=()) -> dict:

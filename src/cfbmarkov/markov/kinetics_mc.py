@@ -347,7 +347,8 @@ def _warn_too_few_substeps(sk, q: int, lag: float, states: np.ndarray,
     start = np.ascontiguousarray(values[q, frames, particles])
     worst = _step_doubling(law.function, start, rows, others, float(lag), int(law.substeps))
     if worst > SUBSTEP_TOLERANCE:
-        said = (f"up to {worst:.3g} of its largest value" if np.isfinite(worst)
+        said = (f"by up to {worst:.3g} times its largest value" if worst >= 1.0 else
+                f"by up to {100 * worst:.3g} % of its largest value" if np.isfinite(worst)
                 else "so much that one of them is not finite")
         warnings.warn(f"property {sk.names[q]}: over one lag its RK4 integration with "
                       f"{law.substeps} sub-steps and with {2 * law.substeps} differ {said} "

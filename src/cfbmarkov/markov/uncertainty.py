@@ -102,7 +102,9 @@ def outward_bounds(lower: float, upper: float, digits: int = 3) -> tuple[str, st
             return f"{value:.{digits}g}"
         scale = 10.0 ** exponent
         scaled = value * scale
-        slack = 1e-9 * abs(scaled)       # a value already on the grid stays where it is
+        # a value already on the grid stays where it is: the product's round-off, a few
+        # units in the last place of ``scaled``, never a unit of the last digit printed
+        slack = min(16.0 * np.finfo(np.float64).eps * abs(scaled), 0.1)
         whole = np.ceil(scaled - slack) if up else np.floor(scaled + slack)
         return f"{whole / scale:#.{digits}g}".rstrip(".")   # trailing zeros kept: 2.40
 
