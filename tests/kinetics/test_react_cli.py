@@ -1103,3 +1103,16 @@ def test_the_spread_after_passes_keeps_its_digits_at_slow_rates(fitted, rate):
     assert sd == pytest.approx(rate * rtd.sd, rel=10 * rate + 1e-6)
     many = answer.after_passes(1000)[1]
     assert 10 * sd < many < 100 * sd
+
+
+def test_a_passes_note_without_a_carried_property_is_in_the_json_warnings(fitted, tmp_path,
+                                                                           capsys):
+    """--passes on a kinetics file with no carried property is noted on stderr and, with
+    --json, among the warnings a script reads."""
+    _, _, model = fitted
+    kin = _write(tmp_path, '[[property]]\nname = "X"\nlaw = "first-order"\nrate = 1.0\n')
+    assert main(["react", str(model), "--kinetics", str(kin), "--passes", "5", "--json"]) == 0
+    captured = capsys.readouterr()
+    assert "note: --passes follows carried properties" in captured.err
+    assert any(w.startswith("--passes follows carried properties")
+               for w in json.loads(captured.out)["warnings"])

@@ -100,9 +100,11 @@ def _react(args) -> int:
 
         verdict += [line for line in (f"the model: {text}" for text in
                                       monte_carlo_warnings(model)) if line not in verdict]
+    said = []                # notes that --json's warnings repeat
     if args.passes and "carried" not in [p.start for p in kinetics.properties]:
-        print("note: --passes follows carried properties (start = \"carried\"); this "
-              "kinetics file has none, so it is left out", file=sys.stderr)
+        said.append("--passes follows carried properties (start = \"carried\"); this "
+                    "kinetics file has none, so it is left out")
+        print(f"note: {said[-1]}", file=sys.stderr)
     passes = tuple(args.passes) if args.passes else PASSES
     if args.init is not None:       # a start from the reference, checked before the run
         from cfbmarkov.trajectories import Trajectories
@@ -156,7 +158,7 @@ def _react(args) -> int:
                         "depth_columns": space.depth_columns,
                         "bed_mean_by_cell": "cell = (row * depth_columns + depth column) * "
                                             "columns + column, from the bottom left"},
-               "warnings": [one_line(n) for n in notes + verdict]}
+               "warnings": [one_line(n) for n in notes + said + verdict]}
         for name, entry in out["properties"].items():
             for n, after in entry.get("after_passes", {}).items():
                 after["mean_interval"] = after_intervals.get((name, int(n)))
