@@ -766,3 +766,26 @@ def test_a_lone_longer_row_after_the_first_rows_and_ghost_cells_before_a_bad_val
     (tmp_path / "ghost.csv").write_text("\n".join(ghost) + "\n")
     with pytest.raises(InputError, match=r"line 9: 'abc' in column 'x' is not a number"):
         import_csv(tmp_path / "ghost.csv", tmp_path / "ghost.h5", width=0.09, height=0.95)
+
+
+def test_import_does_not_replace_a_simulated_run_without_force(tmp_path, capsys):
+    """A finished CFD-DEM or generated run is hours of work: import replaces an earlier
+    import's file, not such a run, unless --force; the run is left as it was."""
+    from cfbmarkov.cli import main
+    from cfbmarkov.synthetic import RiserFlow, write_run
+
+    run = write_run(tmp_path / "run.h5", RiserFlow(columns=2, rows=4), 5, 0.2, seed=1)
+    before = run.read_bytes()
+    csv = tmp_path / "t.csv"
+    csv.write_text("t,id,x,y\n0,1,0.01,0.1\n0.025,1,0.01,0.12\n0.05,1,0.01,0.14\n")
+    argv = ["import", str(csv), "--width", "0.09", "--height", "0.95", "-o", str(run)]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "not an earlier import" in err and "--force" in err
+    assert run.read_bytes() == before
+    again = tmp_path / "imported.h5"
+    assert main(argv[:-1] + [str(again)]) == 0
+    assert main(argv[:-1] + [str(again)]) == 0          # an import replaces an import
+    assert main(argv + ["--force"]) == 0
+    with Trajectories(run) as t:
+        assert t.n_particles == 1

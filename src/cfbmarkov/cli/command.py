@@ -81,7 +81,10 @@ def build_parser() -> argparse.ArgumentParser:
                                    "another format, an empty folder, ...; never a FIFO, "
                                    "device or socket)"
                                    + ("; or one that holds a finished run, which keeps no "
-                                      "checkpoint" if name == "simulate" else ""))
+                                      "checkpoint" if name == "simulate" else
+                                      "; or a simulated or generated run (an earlier "
+                                      "import's file is replaced without it)"
+                                      if name == "import" else ""))
     return p
 
 
@@ -321,6 +324,8 @@ def _run_claimed(args) -> int:
             from cfbmarkov._outputs import claim_output
 
             kind, inputs = OUTPUTS[args.command]
+            if args.command == "import" and not getattr(args, "force", False):
+                _refuse_replacing_a_run(args.output)
             named = [getattr(args, name, None) for name in inputs]   # a list: several runs
             named = [v for n in named for v in (n if isinstance(n, list) else [n])]
             with claim_output(args.output, args.command, kind, named,
@@ -329,6 +334,29 @@ def _run_claimed(args) -> int:
         return int(args.func(args) or 0)
     finally:
         _interrupt.check()
+
+
+def _refuse_replacing_a_run(output) -> None:
+    """``import`` replaces an earlier import's file, not a run it did not write: a CFD-DEM
+    simulation (hours of computing) or a generated run is refused without --force."""
+    from cfbmarkov._outputs import describe
+
+    path = Path(os.fspath(output))
+    if not path.is_file() or describe(path) != "trajectory":
+        return
+    import h5py
+
+    try:
+        with h5py.File(path, "r") as f:
+            source = f.attrs.get("source", "")
+    except (OSError, RuntimeError):
+        return
+    source = source.decode() if isinstance(source, bytes) else str(source)
+    if source.startswith("import"):
+        return
+    raise InputError(f"{path}: exists and holds a trajectory file of source '{source}' (a "
+                     "simulated or generated run, not an earlier import); import does not "
+                     "replace it without --force: give another output name, or add --force")
 
 
 #: the verbs whose output folder is published whole (written aside, renamed into place)
