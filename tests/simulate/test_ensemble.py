@@ -9,9 +9,11 @@ import sys
 
 import h5py
 import numpy as np
+import pytest
 
 from cfbmarkov.cli import main
 from cfbmarkov.config import load_case
+from cfbmarkov.errors import InputError
 from cfbmarkov.simulate.ensemble import member_case, member_paths, member_seeds
 from cfbmarkov.simulate.run import simulate
 from cfbmarkov.trajectories import Trajectories
@@ -208,6 +210,10 @@ def test_cpu_ensemble_resumes_the_unfinished_members(tmp_path):
     simulate_ensemble(case, tmp_path / "part.h5", 2, checkpoint_every=0.00025, resume=True,
                       progress=False)
     assert part[0].stat().st_mtime_ns == stamp
+    # a resume with no member and no checkpoint (a mistyped -o) starts nothing
+    with pytest.raises(InputError, match=r"nothing to resume: none of the 2 members of "):
+        simulate_ensemble(case, tmp_path / "typo.h5", 2, resume=True, progress=False)
+    assert not list(tmp_path.glob("typo*"))
     for a, b in zip(full, part):
         for x, y in zip(_arrays(a), _arrays(b)):
             assert np.array_equal(x, y)

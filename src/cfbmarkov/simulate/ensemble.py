@@ -134,6 +134,12 @@ def simulate_ensemble(case: CaseConfig, output: str | Path, members: int | None,
             return _simulate_gpu(case, output, paths, seeds, until, checkpoint_every, resume,
                                  mode, threads, stop_after_frames, label)
     end = case.output.end_time if until is None else float(until)
+    if resume and members is not None and not any(
+            p.exists() or p.with_name(p.name + ".parts").exists() for p in paths):
+        # as a single run's --resume: a mistyped -o must not start every member afresh
+        raise InputError(f"nothing to resume: none of the {len(paths)} members of {output} "
+                         f"({paths[0].name}, ...) nor their checkpoints exist; start the "
+                         "ensemble again without --resume")
     for m, (path, seed) in enumerate(zip(paths, seeds)):
         mcase = member_case(case, seed)
         parts = path.with_name(path.name + ".parts")
